@@ -1,0 +1,1 @@
+"""The ``rbstab`` command line: a thin click layer over :mod:`rbstab` (no physics here)."""

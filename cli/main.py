@@ -1,0 +1,26 @@
+"""``rbstab`` command group: one module per subcommand, heavy imports inside commands."""
+
+import click
+
+from rbstab import __version__
+
+from .run import run
+from .show import show
+from .validate import validate
+
+
+@click.group()
+@click.version_option(__version__, prog_name="rbstab")
+def cli() -> None:
+    """Lyapunov stability of constrained and embedded rigid bodies.
+
+    \b
+    rbstab run configs/paper/case3_embedded.yaml     # -> results/case3_embedded.h5
+    rbstab show results/case3_embedded.h5
+    rbstab validate configs/paper/*.yaml
+    """
+
+
+cli.add_command(run)
+cli.add_command(validate)
+cli.add_command(show)

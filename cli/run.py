@@ -1,0 +1,48 @@
+"""``rbstab run``: integrate configs and write one HDF5 result per config."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ._common import command_line, load_configs
+from .options import method_option, output_option, set_option
+
+
+@click.command("run")
+@click.argument("configs", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@output_option("results", "Folder for the <name>.h5 result files.")
+@set_option
+@method_option
+def run(configs, output, overrides, method) -> None:
+    """Run CONFIG... and write OUTPUT/<name>.h5 for each.
+
+    Every config is validated before the first one runs. Exits with status 1 when a run
+    failed (gimbal lock, solver failure, non-finite state); its file is still written with
+    status "failed" and the reason.
+    """
+    from rbstab.io.hdf5 import write_result
+    from rbstab.simulate import simulate
+
+    if method is not None:
+        overrides = (*overrides, f"simulation.method={method}")
+    loaded = load_configs(configs, overrides)
+    out = Path(output)
+    failed = 0
+    for config in loaded:
+        result = simulate(config)
+        path = write_result(result, out / f"{config.name}.h5", command_line=command_line())
+        s = result.summary
+        max_e = max(s["max_abs_constraint_error"])
+        click.echo(
+            f"{config.name}: {result.status} ({config.variant}, {result.wall_time:.2f} s) "
+            f"v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
+            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E| {max_e:.3g} m, "
+            f"rate check {s['lyapunov_rate_check']} -> {path}"
+        )
+        if not result.ok:
+            failed += 1
+            click.echo(f"  {config.name}: {result.message}", err=True)
+    if failed:
+        raise click.ClickException(f"{failed} of {len(loaded)} runs failed")

@@ -1,0 +1,228 @@
+"""Run result files: netCDF-4 flavoured HDF5 written with h5netcdf, read by xarray.
+
+Layout of ``<name>.h5``
+-----------------------
+- dimensions ``time`` (samples, coordinate in s) and ``axis`` (``x``, ``y``, ``z``);
+- one variable per output quantity (``theta``, ``omega``, ``position``, ``velocity``,
+  ``controller_state`` (embedded only), ``constraint_error``, ``constraint_rate``,
+  ``constraint_force``, ``force_h``, ``torque_n``, ``lyapunov``, ``lyapunov_rate``,
+  ``lyapunov_rate_numerical`` and the terms of v), each with ``units`` and
+  ``description`` attributes;
+- global attributes: ``rbstab_format``, ``name``, ``variant``, ``status``, ``message``,
+  ``config`` (the resolved configuration as YAML text), ``config_hash``,
+  ``rbstab_version``, ``git_commit``, ``command_line``, ``created``, ``wall_time``,
+  ``solver_*`` statistics and ``summary_*`` figures (:func:`rbstab.summary.summarize`).
+
+Open with ``xarray.open_dataset(path, engine="h5netcdf")``. Files are written to a
+temporary name in the target folder and renamed into place, so an interrupted write
+never leaves a half-written result under the final name.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import functools
+import hashlib
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from .. import __version__
+from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
+from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..simulate import RunResult
+
+__all__ = [
+    "FORMAT",
+    "VARIABLE_UNITS",
+    "VARIABLE_DESCRIPTIONS",
+    "write_result",
+    "read_attributes",
+    "read_summary",
+    "config_hash",
+    "NotAResultFile",
+]
+
+#: Value of the ``rbstab_format`` global attribute of every result file.
+FORMAT = "rbstab-run-1"
+
+#: Units of every variable of a result file.
+VARIABLE_UNITS = {**BLOCK_UNITS, **OUTPUT_UNITS, "lyapunov_rate_numerical": "W"}
+#: Description of every variable of a result file.
+VARIABLE_DESCRIPTIONS = {
+    **BLOCK_DESCRIPTIONS,
+    **OUTPUT_DESCRIPTIONS,
+    "lyapunov_rate_numerical": "dv/dt by differentiating v along the dense-output samples "
+    "(quintic spline); compare with lyapunov_rate",
+}
+
+
+class NotAResultFile(ValueError):
+    """Raised when a file is not an rbstab run result."""
+
+
+@functools.lru_cache(maxsize=1)
+def _git_commit() -> str:
+    """Commit of the project checkout this package runs from, or ``"unknown"``."""
+    here = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5
+        )
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    commit = out.stdout.strip()
+    return commit if out.returncode == 0 and commit else "unknown"
+
+
+def config_hash(config_yaml: str) -> str:
+    """SHA-256 hex digest of the resolved configuration's YAML text."""
+    return hashlib.sha256(config_yaml.encode()).hexdigest()
+
+
+def _attr_value(value: Any) -> Any:
+    if isinstance(value, (list, tuple)):
+        return np.asarray(value, dtype=float)
+    return value
+
+
+def write_result(result: "RunResult", path: str | os.PathLike, *, command_line: str | None = None) -> Path:
+    """Write one run to ``path`` atomically (temporary file + rename).
+
+    Parameters
+    ----------
+    result : RunResult
+        The run (:func:`rbstab.simulate.simulate`).
+    path : path-like
+        Final file name; its folder is created if missing.
+    command_line : str, optional
+        Recorded in the ``command_line`` attribute (default: this process's argv).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    OSError
+        If the folder cannot be created or written; the final name is then untouched.
+    """
+    import h5netcdf
+    import h5py
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    config_yaml = result.config.to_yaml()
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        with h5netcdf.File(tmp, "w") as f:
+            n = len(result.time)
+            f.dimensions = {"time": n, "axis": 3}
+            t = f.create_variable("time", ("time",), data=result.time)
+            t.attrs["units"] = "s"
+            t.attrs["description"] = "sample time, evenly spaced dense output of the solver"
+            ax = f.create_variable("axis", ("axis",), dtype=h5py.string_dtype())
+            ax[:] = np.array(["x", "y", "z"], dtype=object)
+            ax.attrs["description"] = "vector component; frame given by each variable"
+            for key, values in result.outputs.items():
+                dims = ("time", "axis") if values.ndim == 2 else ("time",)
+                var = f.create_variable(key, dims, data=values)
+                var.attrs["units"] = VARIABLE_UNITS[key]
+                var.attrs["description"] = VARIABLE_DESCRIPTIONS[key]
+            attrs = {
+                "rbstab_format": FORMAT,
+                "name": result.name,
+                "variant": result.config.variant,
+                "status": result.status,
+                "message": result.message,
+                "config": config_yaml,
+                "config_hash": config_hash(config_yaml),
+                "rbstab_version": __version__,
+                "git_commit": _git_commit(),
+                "command_line": command_line if command_line is not None else " ".join(sys.argv),
+                "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "wall_time": float(result.wall_time),
+            }
+            attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
+            attrs["solver_status"] = int(result.solver.get("solver_status", -1))
+            attrs["solver_message"] = result.message
+            attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
+            f.attrs.update(attrs)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.ndarray):
+        return value.item() if value.shape in ((), (1,)) else value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def read_attributes(path: str | os.PathLike) -> dict[str, Any]:
+    """Global attributes of a result file as plain Python values.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    NotAResultFile
+        If it is not an HDF5 file written by rbstab.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such result file: {path}")
+    try:
+        with h5py.File(path, "r") as f:
+            attrs = {k: _plain(v) for k, v in f.attrs.items()}
+    except OSError as exc:
+        raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
+    if attrs.get("rbstab_format") != FORMAT:
+        raise NotAResultFile(f"{path}: not an rbstab run result (no rbstab_format = {FORMAT!r} attribute)")
+    return attrs
+
+
+def read_summary(path: str | os.PathLike) -> dict[str, Any]:
+    """Identity, status, solver statistics and summary figures of a result file.
+
+    Returns
+    -------
+    dict
+        ``name``, ``variant``, ``status``, ``message``, ``config_hash``, ``wall_time``,
+        ``solver`` (dict) and ``summary`` (dict, keys of
+        :func:`rbstab.summary.summarize`).
+
+    Raises
+    ------
+    FileNotFoundError, NotAResultFile
+        See :func:`read_attributes`.
+    """
+    attrs = read_attributes(path)
+    return {
+        "name": attrs["name"],
+        "variant": attrs["variant"],
+        "status": attrs["status"],
+        "message": attrs["message"],
+        "config_hash": attrs["config_hash"],
+        "wall_time": attrs["wall_time"],
+        "created": attrs["created"],
+        "solver": {k[len("solver_"):]: v for k, v in attrs.items() if k.startswith("solver_")},
+        "summary": {k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")},
+    }

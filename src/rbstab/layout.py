@@ -1,0 +1,82 @@
+"""State layouts: the one place that says where each state block lives in ``y``.
+
+Every state block is a 3-vector. A layout is an ordered tuple of block names; the
+integrators, writers and variants address the state only through a layout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["StateLayout", "BLOCK_UNITS", "BLOCK_DESCRIPTIONS"]
+
+#: Units of each state block (also the HDF5 ``units`` attribute).
+BLOCK_UNITS = {
+    "theta": "rad",
+    "omega": "rad s-1",
+    "position": "m",
+    "velocity": "m s-1",
+    "controller_state": "m",
+}
+
+#: Description of each state block (also the HDF5 ``description`` attribute).
+BLOCK_DESCRIPTIONS = {
+    "theta": "Euler angles Theta, A = Rx(t1) Ry(t2) Rz(t3) (eq 2)",
+    "omega": "angular velocity Omega in the body frame (eq 1)",
+    "position": "centre-of-mass position X in the inertial frame (eq 1)",
+    "velocity": "centre-of-mass velocity V in the inertial frame (eq 1)",
+    "controller_state": "embedded controller state D in the inertial frame (eq 22)",
+}
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Ordered 3-vector blocks of a state vector.
+
+    Parameters
+    ----------
+    blocks : tuple of str
+        Block names, each a key of :data:`BLOCK_UNITS`.
+    """
+
+    blocks: tuple[str, ...]
+
+    def __post_init__(self) -> None:
+        unknown = [b for b in self.blocks if b not in BLOCK_UNITS]
+        if unknown:
+            raise ValueError(f"unknown state blocks {unknown}")
+
+    @property
+    def size(self) -> int:
+        """Number of scalar states."""
+        return 3 * len(self.blocks)
+
+    def slice(self, block: str) -> slice:
+        """Slice of ``block`` in the last axis of a state array."""
+        i = self.blocks.index(block)
+        return slice(3 * i, 3 * i + 3)
+
+    def split(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        """Views of each block: y shape (..., size) -> {name: shape (..., 3)}."""
+        return {b: y[..., 3 * i : 3 * i + 3] for i, b in enumerate(self.blocks)}
+
+    def join(self, **blocks: np.ndarray) -> np.ndarray:
+        """Concatenate blocks (each shape (..., 3)) into shape (..., size), in layout order.
+
+        Raises
+        ------
+        KeyError
+            If a block of the layout is missing.
+        """
+        return np.concatenate([np.asarray(blocks[b], dtype=float) for b in self.blocks], axis=-1)
+
+    def state_names(self) -> list[str]:
+        """Scalar state names such as ``theta_1`` ... in layout order."""
+        return [f"{b}_{k}" for b in self.blocks for k in (1, 2, 3)]
+
+
+FULL_BODY = StateLayout(("theta", "omega", "position", "velocity"))
+EMBEDDED = StateLayout(("theta", "omega", "position", "velocity", "controller_state"))
+REDUCED = StateLayout(("theta", "omega"))

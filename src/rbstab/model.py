@@ -1,0 +1,124 @@
+"""Frozen physical inputs of a run: the rigid body and the gains (Table 1, eqs 22-24, 39, 40).
+
+These are plain data; validation happens once, when a configuration is loaded
+(:mod:`rbstab.config`). The core trusts what it finds here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from .kinematics import hat, matvec
+
+__all__ = ["RigidBody", "Gains", "gyroscopic", "torque_n", "force_h"]
+
+
+@dataclass(frozen=True, eq=False)
+class RigidBody:
+    """One rigid body (Table 1).
+
+    Attributes
+    ----------
+    mass : float
+        m [kg], > 0.
+    inertia : ndarray, shape (3, 3)
+        J [kg m^2] about the centre of mass, body frame, symmetric positive definite.
+    attachment_point : ndarray, shape (3,)
+        R [m], the point C in the body frame.
+    gravity : ndarray, shape (3,)
+        g [m/s^2] in the inertial frame; the weight is ``G = mass * g`` [N].
+    """
+
+    mass: float
+    inertia: np.ndarray
+    attachment_point: np.ndarray
+    gravity: np.ndarray
+
+    @cached_property
+    def weight(self) -> np.ndarray:
+        """G = m g [N], inertial frame, shape (3,)."""
+        return self.mass * np.asarray(self.gravity, dtype=float)
+
+    @cached_property
+    def inertia_inv(self) -> np.ndarray:
+        """J^-1 [1/(kg m^2)], shape (3, 3)."""
+        return np.linalg.inv(self.inertia)
+
+    @cached_property
+    def r_hat(self) -> np.ndarray:
+        """hat(R) [m], shape (3, 3)."""
+        return hat(self.attachment_point)
+
+    @cached_property
+    def pivot_inertia(self) -> np.ndarray:
+        """J_p = J - m hat(R)^2 [kg m^2], inertia about C (eq 21 corrected), shape (3, 3)."""
+        return self.inertia - self.mass * self.r_hat @ self.r_hat
+
+    @cached_property
+    def pivot_inertia_inv(self) -> np.ndarray:
+        """J_p^-1, shape (3, 3)."""
+        return np.linalg.inv(self.pivot_inertia)
+
+
+@dataclass(frozen=True, eq=False)
+class Gains:
+    """Feedback and constraint gains, each symmetric positive definite, shape (3, 3).
+
+    Attributes
+    ----------
+    k_t, l_t : ndarray
+        Translational stiffness [N/m] and damping [N s/m] of H (eq 24).
+    k_r, l_r : ndarray
+        Rotational stiffness [N m/rad] and damping [N m s/rad] of N (eq 23).
+    k_c, l_c : ndarray or None
+        Constraint stiffness [N/m] and damping [N s/m] (eqs 22, 40).
+    k_d, l_d : ndarray or None
+        Embedded-controller stiffness [N/m] and damping [N s/m] (eq 22).
+    k_s : float or None
+        Sliding-mode force magnitude K_s [N] (eq 39).
+    boundary_layer : float
+        Sliding boundary-layer width phi [m]; 0 means a pure sign function.
+    """
+
+    k_t: np.ndarray
+    l_t: np.ndarray
+    k_r: np.ndarray
+    l_r: np.ndarray
+    k_c: np.ndarray | None = None
+    l_c: np.ndarray | None = None
+    k_d: np.ndarray | None = None
+    l_d: np.ndarray | None = None
+    k_s: float | None = None
+    boundary_layer: float = 0.0
+
+    @cached_property
+    def l_d_inv(self) -> np.ndarray:
+        """L_d^-1 [m/(N s)], shape (3, 3)."""
+        return np.linalg.inv(self.l_d)
+
+
+def gyroscopic(inertia: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """f(Omega) = -Omega x (J Omega) [N m], body frame, shape like ``omega`` (eq 1)."""
+    return -np.cross(omega, matvec(inertia, omega))
+
+
+def torque_n(b: np.ndarray, theta: np.ndarray, omega: np.ndarray, gains: Gains) -> np.ndarray:
+    """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23).
+
+    Parameters
+    ----------
+    b : ndarray, shape (..., 3, 3)
+        Euler-rate matrix B(theta).
+    theta, omega : ndarray, shape (..., 3)
+        Euler angles [rad] and body angular velocity [rad/s].
+    """
+    k_theta = matvec(gains.k_r, theta)
+    return -np.einsum("...ji,...j->...i", b, k_theta) - matvec(gains.l_r, omega)
+
+
+def force_h(x: np.ndarray, v: np.ndarray, gains: Gains) -> np.ndarray:
+    """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24)."""
+    return -matvec(gains.k_t, x) - matvec(gains.l_t, v)

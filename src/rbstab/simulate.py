@@ -1,0 +1,188 @@
+"""The scipy core: integrate one validated run configuration (the reference path).
+
+``simulate(config)`` calls :func:`scipy.integrate.solve_ivp` on the variant's
+right-hand side, samples the dense output on an even grid, evaluates every output
+quantity through the variant protocol and returns a :class:`RunResult`. A failed run
+(solver failure, gimbal lock, non-finite state) is data: ``status == "failed"`` with a
+message, never an exception.
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .kinematics import GIMBAL_LOCK_ANGLE
+from .summary import numerical_rate, summarize
+from .variants import Variant
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .config import RunConfig
+
+__all__ = ["RunResult", "simulate", "solve", "gimbal_lock_event", "evaluate_outputs"]
+
+
+@dataclass
+class RunResult:
+    """Outcome of one run.
+
+    Attributes
+    ----------
+    config : RunConfig
+        The validated configuration that was run.
+    time : ndarray, shape (n_samples,)
+        Sample times [s], evenly spaced on [0, t_end].
+    outputs : dict of str -> ndarray
+        Every variable of the result file, shape (n_samples, 3) or (n_samples,): state
+        blocks, constraint quantities, controls, ``lyapunov``, ``lyapunov_rate``,
+        ``lyapunov_rate_numerical`` and the terms of v. Rows after a failure are NaN.
+    status : str
+        ``"success"`` or ``"failed"``.
+    message : str
+        The solver's message, or why the run failed.
+    solver : dict
+        ``nfev``, ``njev``, ``nlu`` (ints) and ``solver_status`` (scipy's int status).
+    wall_time : float
+        Integration plus post-processing time [s].
+    summary : dict
+        See :func:`rbstab.summary.summarize`.
+    """
+
+    config: "RunConfig"
+    time: np.ndarray
+    outputs: dict[str, np.ndarray]
+    status: str
+    message: str
+    solver: dict = field(default_factory=dict)
+    wall_time: float = 0.0
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "success"
+
+
+def gimbal_lock_event(margin: float):
+    """Terminal solve_ivp event: zero when |theta_2| reaches pi/2 - ``margin`` [rad] (eq 5).
+
+    theta is ``y[0:3]`` in every state layout.
+    """
+
+    def event(t: float, y: np.ndarray) -> float:
+        return GIMBAL_LOCK_ANGLE - margin - abs(y[1])
+
+    event.terminal = True
+    event.direction = -1
+    return event
+
+
+def _gimbal_message(margin: float, t: float) -> str:
+    return (
+        f"gimbal lock: |theta_2| reached pi/2 - {margin:g} rad at t = {t:.6g} s; "
+        "B(theta) is singular there (eq 5), so the Euler-angle model stops"
+    )
+
+
+def solve(variant: Variant, y0: np.ndarray, settings) -> tuple[np.ndarray, np.ndarray, str, str, dict]:
+    """Integrate ``variant`` from ``y0`` with :func:`scipy.integrate.solve_ivp`.
+
+    Parameters
+    ----------
+    variant : Variant
+        Right-hand side provider.
+    y0 : ndarray, shape (n_state,)
+        Initial state in ``variant.layout``.
+    settings : SimulationSettings
+        ``t_end`` [s], ``n_samples``, ``method``, ``rtol``, ``atol``, ``max_step`` [s],
+        ``gimbal_margin`` [rad].
+
+    Returns
+    -------
+    time : ndarray, shape (n_samples,)
+    states : ndarray, shape (n_samples, n_state)
+        Dense-output samples; NaN after a failure.
+    status, message : str
+    solver : dict
+        ``nfev``, ``njev``, ``nlu``, ``solver_status``.
+    """
+    from scipy.integrate import solve_ivp
+
+    t_eval = np.linspace(0.0, settings.t_end, settings.n_samples)
+    states = np.full((settings.n_samples, variant.layout.size), np.nan)
+    with np.errstate(all="ignore"):
+        try:
+            sol = solve_ivp(
+                variant.rhs,
+                (0.0, settings.t_end),
+                y0,
+                method=settings.method,
+                t_eval=t_eval,
+                events=[gimbal_lock_event(settings.gimbal_margin)],
+                rtol=settings.rtol,
+                atol=settings.atol,
+                max_step=settings.max_step,
+            )
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
+            return t_eval, states, "failed", f"solver error: {exc}", {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
+    n = sol.y.shape[1]
+    states[:n] = sol.y.T
+    solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
+    if sol.status == 1:
+        return t_eval, states, "failed", _gimbal_message(settings.gimbal_margin, float(sol.t_events[0][0])), solver
+    if sol.status != 0:
+        return t_eval, states, "failed", f"solver failed: {sol.message}", solver
+    if not np.all(np.isfinite(states)):
+        bad = int(np.argmin(np.all(np.isfinite(states), axis=1)))
+        states[bad:] = np.nan
+        return t_eval, states, "failed", f"non-finite state at t = {t_eval[bad]:.6g} s", solver
+    return t_eval, states, "success", str(sol.message), solver
+
+
+def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
+    """Every output variable along sampled ``states`` (shape (n, n_state)) at ``time`` (n,).
+
+    Adds ``lyapunov_rate_numerical`` [W], the derivative of v along the samples
+    (:func:`rbstab.summary.numerical_rate`), to :meth:`Variant.evaluate`.
+    """
+    with np.errstate(all="ignore"):
+        outputs = variant.evaluate(states)
+    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+    return outputs
+
+
+def simulate(config: "RunConfig") -> RunResult:
+    """Run one validated configuration through the scipy core.
+
+    Parameters
+    ----------
+    config : RunConfig
+        From :func:`rbstab.config.load_config` (already validated).
+
+    Returns
+    -------
+    RunResult
+        Never raises for a physical or numerical failure: those are ``status="failed"``.
+    """
+    start = _time.perf_counter()
+    variant = config.make_variant()
+    y0 = variant.initial_state(config.initial_state)
+    time, states, status, message, solver = solve(variant, y0, config.simulation)
+    outputs = evaluate_outputs(variant, time, states)
+    summary = summarize(time, outputs)
+    return RunResult(
+        config=config,
+        time=time,
+        outputs=outputs,
+        status=status,
+        message=message,
+        solver=solver,
+        wall_time=_time.perf_counter() - start,
+        summary=summary,
+    )

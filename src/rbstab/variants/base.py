@@ -1,0 +1,278 @@
+"""The controller-variant protocol shared by the integrators and the writers.
+
+A variant is one way of holding the point C of the body (section 5). The integrators
+and the HDF5 writer talk only to this protocol, never to a variant by name:
+
+- ``layout``: the state blocks (:mod:`rbstab.layout`);
+- ``initial_state``: the state vector from the configured initial blocks;
+- ``rhs(t, y)``: the right-hand side, for one state (shape (n_state,)) or a stack
+  (shape (..., n_state));
+- ``evaluate(y)``: every output quantity along a stack of states (constraint error E and
+  rate F, constraint force Lambda, controls H and N, the Lyapunov function v, its terms
+  and its analytic rate dv/dt).
+
+All physics follows ``docs/physics.md`` (the consistent restatement of eqs 1-46).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from functools import cached_property
+from typing import ClassVar
+
+import numpy as np
+
+from ..kinematics import euler_rate_matrix, matTvec, matvec, quadratic_form, rotation_matrix
+from ..layout import FULL_BODY, StateLayout
+from ..model import Gains, RigidBody, force_h, gyroscopic, torque_n
+
+__all__ = ["Variant", "FullBodyVariant", "OUTPUT_UNITS", "OUTPUT_DESCRIPTIONS", "LYAPUNOV_TERMS"]
+
+#: Names of the terms of v, in the order they are summed.
+LYAPUNOV_TERMS = (
+    "lyapunov_translational",
+    "lyapunov_rotational",
+    "lyapunov_constraint",
+    "lyapunov_gravity",
+)
+
+#: Units of every output quantity other than the state blocks.
+OUTPUT_UNITS = {
+    "constraint_error": "m",
+    "constraint_rate": "m s-1",
+    "constraint_force": "N",
+    "force_h": "N",
+    "torque_n": "N m",
+    "lyapunov": "J",
+    "lyapunov_rate": "W",
+    "lyapunov_translational": "J",
+    "lyapunov_rotational": "J",
+    "lyapunov_constraint": "J",
+    "lyapunov_gravity": "J",
+}
+
+#: Descriptions of every output quantity other than the state blocks.
+OUTPUT_DESCRIPTIONS = {
+    "constraint_error": "E = X + A R - R, displacement of the point C, inertial frame (eq 4)",
+    "constraint_rate": "F = dE/dt = V - A hat(R) Omega, velocity of C, inertial frame (eq 4)",
+    "constraint_force": "Lambda, force applied at C, inertial frame (eqs 20, 22, 39, 40)",
+    "force_h": "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)",
+    "torque_n": "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)",
+    "lyapunov": "Lyapunov function v, the sum of the lyapunov_* terms (eqs 28-46)",
+    "lyapunov_rate": "analytic dv/dt (eqs 29, 37, 43, 46)",
+    "lyapunov_translational": "v_t = V'MV/2 + X'K_t X/2 (eq 25)",
+    "lyapunov_rotational": "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25)",
+    "lyapunov_constraint": "energy stored in the constraint controller (eqs 41, 44; "
+    "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent)",
+    "lyapunov_gravity": "-X'G plus the constant h that makes v zero at the equilibrium (eq 30)",
+}
+
+
+class Variant(ABC):
+    """One controller variant for the point C (the protocol; see module docstring).
+
+    Parameters
+    ----------
+    body : RigidBody
+        The rigid body (Table 1).
+    gains : Gains
+        Gains; those in ``required_gains`` are not None.
+    """
+
+    #: Registry name (the config value of ``controller.variant``).
+    name: ClassVar[str]
+    #: Layout of the integrated state.
+    layout: ClassVar[StateLayout]
+    #: Gains that must be configured for this variant.
+    required_gains: ClassVar[tuple[str, ...]] = ("k_t", "l_t", "k_r", "l_r")
+    #: Whether the right-hand side is smooth (False for the pure sign function).
+    smooth: ClassVar[bool] = True
+    #: Paper equation of the constraint law, for documentation and reports.
+    equation: ClassVar[str] = ""
+
+    def __init__(self, body: RigidBody, gains: Gains) -> None:
+        self.body = body
+        self.gains = gains
+
+    # -- state ---------------------------------------------------------------
+    def initial_state(self, blocks: dict[str, np.ndarray]) -> np.ndarray:
+        """State vector, shape (layout.size,), from initial blocks (each shape (3,)).
+
+        Blocks the layout does not hold (e.g. ``position`` for ``permanent``) are ignored.
+        """
+        return self.layout.join(**{b: blocks[b] for b in self.layout.blocks})
+
+    # -- dynamics ------------------------------------------------------------
+    @abstractmethod
+    def quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        """Everything the right-hand side and the outputs need, for y shape (..., n_state).
+
+        Returns a dict holding at least the state blocks ``theta``, ``omega``,
+        ``position``, ``velocity`` (reconstructed where not integrated), and
+        ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``force_h``,
+        ``torque_n`` (each shape (..., 3)) and the time derivative ``state_rate`` of y.
+        """
+
+    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
+        """dy/dt, shape like ``y`` ((n_state,) or (..., n_state)); ``t`` [s] is unused."""
+        return self.quantities(y)["state_rate"]
+
+    # -- Lyapunov function ---------------------------------------------------
+    @abstractmethod
+    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Energy stored in the constraint law [J], shape (...)."""
+
+    @abstractmethod
+    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Power dissipated by the constraint law [W] (>= 0), shape (...)."""
+
+    def lyapunov_terms(self, q: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The terms of v [J], each shape (...) (see :data:`LYAPUNOV_TERMS`)."""
+        terms = self._raw_lyapunov_terms(q)
+        terms["lyapunov_gravity"] = terms["lyapunov_gravity"] + self.lyapunov_offset
+        return terms
+
+    def _raw_lyapunov_terms(self, q: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """The terms of v without the constant h."""
+        body, gains = self.body, self.gains
+        x, v = q["position"], q["velocity"]
+        theta, omega = q["theta"], q["omega"]
+        return {
+            "lyapunov_translational": 0.5 * body.mass * np.sum(v * v, axis=-1)
+            + 0.5 * quadratic_form(x, gains.k_t),
+            "lyapunov_rotational": 0.5 * quadratic_form(omega, body.inertia)
+            + 0.5 * quadratic_form(theta, gains.k_r),
+            "lyapunov_constraint": self.constraint_energy(q),
+            "lyapunov_gravity": -x @ body.weight,
+        }
+
+    def lyapunov_rate(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Analytic dv/dt [W], shape (...) (eqs 29, 37, 43, 46): never positive."""
+        gains = self.gains
+        return (
+            -quadratic_form(q["velocity"], gains.l_t)
+            - quadratic_form(q["omega"], gains.l_r)
+            - self.constraint_dissipation(q)
+        )
+
+    def evaluate(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        """All outputs along states ``y`` of shape (n, n_state).
+
+        Returns
+        -------
+        dict
+            The state blocks, ``constraint_error``, ``constraint_rate``,
+            ``constraint_force``, ``force_h``, ``torque_n`` (shape (n, 3)), and
+            ``lyapunov``, ``lyapunov_rate`` and the terms of v (shape (n,)).
+        """
+        q = self.quantities(y)
+        terms = self.lyapunov_terms(q)
+        out = {k: q[k] for k in ("theta", "omega", "position", "velocity")}
+        if "controller_state" in q:
+            out["controller_state"] = q["controller_state"]
+        for k in ("constraint_error", "constraint_rate", "constraint_force", "force_h", "torque_n"):
+            out[k] = q[k]
+        out["lyapunov"] = sum(terms[k] for k in LYAPUNOV_TERMS)
+        out["lyapunov_rate"] = self.lyapunov_rate(q)
+        out.update(terms)
+        return out
+
+    def lyapunov(self, y: np.ndarray) -> np.ndarray:
+        """v [J] along states ``y`` of shape (..., n_state); shape (...)."""
+        terms = self.lyapunov_terms(self.quantities(y))
+        return sum(terms[k] for k in LYAPUNOV_TERMS)
+
+    # -- equilibrium -----------------------------------------------------------
+    @property
+    def _configuration_blocks(self) -> tuple[str, ...]:
+        return tuple(b for b in self.layout.blocks if b in ("theta", "position", "controller_state"))
+
+    def _potential(self, p: np.ndarray) -> float:
+        """Stored energy without the constant h, at rest, for configuration vector p."""
+        terms = self._raw_lyapunov_terms(self.quantities(self._rest_state(p)))
+        return float(sum(terms[k] for k in LYAPUNOV_TERMS))
+
+    def _rest_state(self, p: np.ndarray) -> np.ndarray:
+        """State at rest (zero velocities) with configuration blocks from vector ``p``."""
+        blocks = {b: np.zeros(3) for b in self.layout.blocks}
+        for i, b in enumerate(self._configuration_blocks):
+            blocks[b] = p[3 * i : 3 * i + 3]
+        return self.layout.join(**blocks)
+
+    def _rest_acceleration(self, p: np.ndarray) -> np.ndarray:
+        """Rates of omega, velocity (and D) at rest: zero exactly at an equilibrium."""
+        rate = self.layout.split(self.rhs(0.0, self._rest_state(p)))
+        return np.concatenate(
+            [rate[b] for b in ("omega", "velocity", "controller_state") if b in self.layout.blocks]
+        )
+
+    @cached_property
+    def _equilibrium(self) -> tuple[np.ndarray, float]:
+        n = 3 * len(self._configuration_blocks)
+        if not np.any(self.body.weight):
+            return self._rest_state(np.zeros(n)), 0.0
+        from scipy.optimize import minimize, root
+
+        if self.smooth:
+            # the minimum of the stored energy, polished to a rest point of the dynamics
+            p = minimize(self._potential, np.zeros(n), method="BFGS").x
+            polished = root(self._rest_acceleration, p, method="hybr", options={"xtol": 1e-13})
+            if np.linalg.norm(polished.fun) < np.linalg.norm(self._rest_acceleration(p)):
+                p = polished.x
+        else:
+            p = minimize(
+                self._potential,
+                np.zeros(n),
+                method="Nelder-Mead",
+                options={"xatol": 1e-12, "fatol": 1e-14, "maxiter": 20000 * n, "maxfev": 20000 * n},
+            ).x
+        return self._rest_state(p), -self._potential(p)
+
+    @property
+    def equilibrium(self) -> np.ndarray:
+        """Equilibrium state, shape (n_state,): the local minimum of the stored energy nearest
+        the origin (zero velocities). Without gravity it is the origin."""
+        return self._equilibrium[0]
+
+    @cached_property
+    def lyapunov_offset(self) -> float:
+        """The constant h [J] that makes v zero at :attr:`equilibrium` (eq 30)."""
+        return self._equilibrium[1]
+
+
+class FullBodyVariant(Variant):
+    """Base of the variants that integrate the 12 body states (eq 1) under a force Lambda.
+
+    Subclasses give the constraint force law :meth:`constraint_law`.
+    """
+
+    layout: ClassVar[StateLayout] = FULL_BODY
+
+    @abstractmethod
+    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Lambda [N], inertial frame, shape (..., 3); may add extra rates to ``q``."""
+
+    def quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        body, gains = self.body, self.gains
+        q = self.layout.split(np.asarray(y, dtype=float))
+        theta, omega, x, v = q["theta"], q["omega"], q["position"], q["velocity"]
+        a = rotation_matrix(theta)
+        b = euler_rate_matrix(theta)
+        r = body.attachment_point
+        q["constraint_error"] = x + matvec(a, r) - r
+        q["constraint_rate"] = v + matvec(a, np.cross(omega, r))
+        q["torque_n"] = torque_n(b, theta, omega, gains)
+        q["force_h"] = force_h(x, v, gains)
+        lam = self.constraint_law(q)
+        q["constraint_force"] = lam
+        torque = gyroscopic(body.inertia, omega) + q["torque_n"] + np.cross(r, matTvec(a, lam))
+        rates = {
+            "theta": matvec(b, omega),
+            "omega": matvec(body.inertia_inv, torque),
+            "position": v,
+            "velocity": (body.weight + q["force_h"] + lam) / body.mass,
+        }
+        if "controller_state" in self.layout.blocks:
+            rates["controller_state"] = q["controller_rate"]
+        q["state_rate"] = self.layout.join(**rates)
+        return q

@@ -1,0 +1,28 @@
+"""``free``: no constraint, Lambda = 0; with gravity the body settles at X_e = K_t^-1 G (section 5.1)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import FullBodyVariant
+
+__all__ = ["Free"]
+
+
+class Free(FullBodyVariant):
+    """Free rigid body under the feedback N, H (eqs 1, 23, 24, 29, 30).
+
+    v = v_t + v_r - X'G + G'K_t^-1 G / 2 and dv/dt = -V'L_t V - Omega'L_r Omega.
+    """
+
+    name = "free"
+    equation = "eqs 1, 23, 24, 29, 30"
+
+    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        return np.zeros_like(q["constraint_error"])
+
+    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        return np.zeros(q["theta"].shape[:-1])
+
+    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        return np.zeros(q["theta"].shape[:-1])

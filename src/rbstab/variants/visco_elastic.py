@@ -1,0 +1,30 @@
+"""``visco_elastic``: the constraint imposed by a spring-damper at C (eqs 40-43)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kinematics import matvec, quadratic_form
+from .base import FullBodyVariant
+
+__all__ = ["ViscoElastic"]
+
+
+class ViscoElastic(FullBodyVariant):
+    """Lambda = -K_c E - L_c F (eq 40).
+
+    v = v_t + v_r + E'K_c E/2 (eqs 41, 42); dv/dt = -V'L_t V - Omega'L_r Omega - F'L_c F (eq 43).
+    """
+
+    name = "visco_elastic"
+    required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")
+    equation = "eq 40"
+
+    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        return -matvec(self.gains.k_c, q["constraint_error"]) - matvec(self.gains.l_c, q["constraint_rate"])
+
+    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        return 0.5 * quadratic_form(q["constraint_error"], self.gains.k_c)
+
+    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        return quadratic_form(q["constraint_rate"], self.gains.l_c)

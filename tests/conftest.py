@@ -1,0 +1,58 @@
+"""Shared fixtures: the paper's body and gains (physics-notes.md, Table 1)."""
+
+from __future__ import annotations
+
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rbstab.model import Gains, RigidBody
+
+ROOT = Path(__file__).resolve().parents[1]
+PAPER_CONFIGS = sorted((ROOT / "configs" / "paper").glob("*.yaml"))
+
+D = np.diag
+
+
+def paper_body(gravity=(0.0, 0.0, 0.0)) -> RigidBody:
+    return RigidBody(41.0, D([10.0, 8.0, 0.4]), np.array([0.15, 0.10, -0.42]), np.array(gravity, float))
+
+
+def paper_gains(**changes) -> Gains:
+    base = dict(
+        k_t=D([4100.0, 4100, 3280]),
+        l_t=D([200.0, 200, 140]),
+        k_r=D([400.0, 400, 320]),
+        l_r=D([60.0, 60, 42]),
+        k_c=D([12300.0, 12300, 9840]),
+        l_c=D([600.0, 600, 420]),
+        k_d=D([12300.0, 12300, 9840]),
+        l_d=D([1200.0, 1200, 840]),
+        k_s=2000.0,
+        boundary_layer=0.005,
+    )
+    base.update(changes)
+    return Gains(**base)
+
+
+def initial_blocks(omega=(16.0, 32.0, -16.0), theta=(0.0, 0.0, 0.0)) -> dict:
+    return {
+        "theta": np.array(theta, float),
+        "omega": np.array(omega, float),
+        "position": np.zeros(3),
+        "velocity": np.zeros(3),
+        "controller_state": np.zeros(3),
+    }
+
+
+def settings(**kw):
+    base = dict(t_end=2.0, n_samples=2001, method="DOP853", rtol=1e-8, atol=1e-10, max_step=np.inf, gimbal_margin=1e-3)
+    base.update(kw)
+    return types.SimpleNamespace(**base)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20261121)
