@@ -30,10 +30,10 @@ def load_configs(paths: Sequence[str], overrides: Sequence[str]):
             try:
                 configs.append(load_config(path, overrides))
             except ConfigError as exc:
-                problems.append(f"{path}:\n{_indent(str(exc))}")
+                problems.append(str(exc) if exc.source else f"in {path}:\n{_indent(str(exc))}")
         for w in caught:
             if issubclass(w.category, PhysicalPlausibilityWarning):
-                click.echo(f"warning: {path}: {w.message}", err=True)
+                click.echo(f"warning: {w.message}", err=True)
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     if problems:

@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .kinematics import hat, matvec
+from .kinematics import cross, hat, matvec
 
 __all__ = ["RigidBody", "Gains", "gyroscopic", "torque_n", "force_h"]
 
@@ -102,7 +102,7 @@ class Gains:
 
 def gyroscopic(inertia: np.ndarray, omega: np.ndarray) -> np.ndarray:
     """f(Omega) = -Omega x (J Omega) [N m], body frame, shape like ``omega`` (eq 1)."""
-    return -np.cross(omega, matvec(inertia, omega))
+    return -cross(omega, matvec(inertia, omega))
 
 
 def torque_n(b: np.ndarray, theta: np.ndarray, omega: np.ndarray, gains: Gains) -> np.ndarray:

@@ -22,7 +22,7 @@ from .variants import Variant
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
 
-__all__ = ["RunResult", "simulate", "solve", "gimbal_lock_event", "evaluate_outputs"]
+__all__ = ["RunResult", "RunTimeout", "simulate", "solve", "gimbal_lock_event", "evaluate_outputs"]
 
 
 @dataclass
@@ -90,7 +90,26 @@ def _gimbal_message(margin: float, t: float) -> str:
     )
 
 
-def solve(variant: Variant, y0: np.ndarray, settings) -> tuple[np.ndarray, np.ndarray, str, str, dict]:
+class RunTimeout(Exception):
+    """Raised inside the right-hand side when a run exceeds its wall-time budget."""
+
+
+def _with_deadline(rhs, timeout: float | None):
+    if timeout is None:
+        return rhs
+    deadline = _time.perf_counter() + timeout
+
+    def timed_rhs(t, y):
+        if _time.perf_counter() > deadline:
+            raise RunTimeout(f"timeout: the run exceeded {timeout:g} s of wall time at t = {t:.6g} s")
+        return rhs(t, y)
+
+    return timed_rhs
+
+
+def solve(
+    variant: Variant, y0: np.ndarray, settings, timeout: float | None = None
+) -> tuple[np.ndarray, np.ndarray, str, str, dict]:
     """Integrate ``variant`` from ``y0`` with :func:`scipy.integrate.solve_ivp`.
 
     Parameters
@@ -102,6 +121,8 @@ def solve(variant: Variant, y0: np.ndarray, settings) -> tuple[np.ndarray, np.nd
     settings : SimulationSettings
         ``t_end`` [s], ``n_samples``, ``method``, ``rtol``, ``atol``, ``max_step`` [s],
         ``gimbal_margin`` [rad].
+    timeout : float, optional
+        Wall-time budget [s]; past it the run stops with status ``"failed"``.
 
     Returns
     -------
@@ -119,7 +140,7 @@ def solve(variant: Variant, y0: np.ndarray, settings) -> tuple[np.ndarray, np.nd
     with np.errstate(all="ignore"):
         try:
             sol = solve_ivp(
-                variant.rhs,
+                _with_deadline(variant.rhs, timeout),
                 (0.0, settings.t_end),
                 y0,
                 method=settings.method,
@@ -129,6 +150,8 @@ def solve(variant: Variant, y0: np.ndarray, settings) -> tuple[np.ndarray, np.nd
                 atol=settings.atol,
                 max_step=settings.max_step,
             )
+        except RunTimeout as exc:
+            return t_eval, states, "failed", str(exc), {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
         except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
             return t_eval, states, "failed", f"solver error: {exc}", {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
     n = sol.y.shape[1]
@@ -157,13 +180,15 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> 
     return outputs
 
 
-def simulate(config: "RunConfig") -> RunResult:
+def simulate(config: "RunConfig", timeout: float | None = None) -> RunResult:
     """Run one validated configuration through the scipy core.
 
     Parameters
     ----------
     config : RunConfig
         From :func:`rbstab.config.load_config` (already validated).
+    timeout : float, optional
+        Wall-time budget of the integration [s]; past it the run fails with a message.
 
     Returns
     -------
@@ -173,7 +198,7 @@ def simulate(config: "RunConfig") -> RunResult:
     start = _time.perf_counter()
     variant = config.make_variant()
     y0 = variant.initial_state(config.initial_state)
-    time, states, status, message, solver = solve(variant, y0, config.simulation)
+    time, states, status, message, solver = solve(variant, y0, config.simulation, timeout)
     outputs = evaluate_outputs(variant, time, states)
     summary = summarize(time, outputs)
     return RunResult(

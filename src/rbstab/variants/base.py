@@ -22,7 +22,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..kinematics import euler_rate_matrix, matTvec, matvec, quadratic_form, rotation_matrix
+from ..kinematics import cross, euler_rate_matrix, matTvec, matvec, quadratic_form, rotation_matrix
 from ..layout import FULL_BODY, StateLayout
 from ..model import Gains, RigidBody, force_h, gyroscopic, torque_n
 
@@ -260,12 +260,12 @@ class FullBodyVariant(Variant):
         b = euler_rate_matrix(theta)
         r = body.attachment_point
         q["constraint_error"] = x + matvec(a, r) - r
-        q["constraint_rate"] = v + matvec(a, np.cross(omega, r))
+        q["constraint_rate"] = v + matvec(a, cross(omega, r))
         q["torque_n"] = torque_n(b, theta, omega, gains)
         q["force_h"] = force_h(x, v, gains)
         lam = self.constraint_law(q)
         q["constraint_force"] = lam
-        torque = gyroscopic(body.inertia, omega) + q["torque_n"] + np.cross(r, matTvec(a, lam))
+        torque = gyroscopic(body.inertia, omega) + q["torque_n"] + cross(r, matTvec(a, lam))
         rates = {
             "theta": matvec(b, omega),
             "omega": matvec(body.inertia_inv, torque),

@@ -13,7 +13,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..kinematics import euler_rate_matrix, matTvec, matvec, rotation_matrix
+from ..kinematics import cross, euler_rate_matrix, matTvec, matvec, rotation_matrix
 from ..layout import FULL_BODY, REDUCED, StateLayout
 from ..model import force_h, gyroscopic, torque_n
 from .base import FullBodyVariant, Variant
@@ -44,7 +44,7 @@ class Permanent(Variant):
         a = rotation_matrix(theta)
         b = euler_rate_matrix(theta)
         a_r = matvec(a, r)
-        omega_x_r = np.cross(omega, r)
+        omega_x_r = cross(omega, r)
         x = r - a_r
         v = -matvec(a, omega_x_r)  # A hat(R) Omega
         q["position"], q["velocity"] = x, v
@@ -54,9 +54,9 @@ class Permanent(Variant):
         q["force_h"] = h = force_h(x, v, gains)
         j_p = body.pivot_inertia
         applied = body.weight + h
-        torque = -np.cross(omega, matvec(j_p, omega)) + q["torque_n"] - np.cross(r, matTvec(a, applied))
+        torque = -cross(omega, matvec(j_p, omega)) + q["torque_n"] - cross(r, matTvec(a, applied))
         omega_dot = matvec(body.pivot_inertia_inv, torque)
-        accel = matvec(a, np.cross(r, omega_dot) - np.cross(omega, omega_x_r))
+        accel = matvec(a, cross(r, omega_dot) - cross(omega, omega_x_r))
         q["constraint_force"] = body.mass * accel - applied
         q["state_rate"] = self.layout.join(theta=matvec(b, omega), omega=omega_dot)
         return q
@@ -98,7 +98,7 @@ class PermanentFullState(FullBodyVariant):
         rhs = (
             matvec(a_r, matvec(j_inv, gyroscopic(body.inertia, omega) + q["torque_n"]))
             - (body.weight + q["force_h"]) / body.mass
-            - matvec(a, np.cross(omega, np.cross(omega, body.attachment_point)))
+            - matvec(a, cross(omega, cross(omega, body.attachment_point)))
         )
         return np.linalg.solve(m_c, rhs[..., None])[..., 0]
 

@@ -1,0 +1,193 @@
+"""The command line end to end: paper configs -> HDF5 files read back with xarray."""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+
+from conftest import PAPER_CONFIGS, ROOT
+from rbstab.io.hdf5 import read_summary
+from rbstab_cli.main import cli
+
+VECTOR_VARIABLES = [
+    "theta", "omega", "position", "velocity", "constraint_error", "constraint_rate",
+    "constraint_force", "force_h", "torque_n",
+]
+SCALAR_VARIABLES = [
+    "lyapunov", "lyapunov_rate", "lyapunov_rate_numerical", "lyapunov_translational",
+    "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity",
+]
+
+
+@pytest.fixture(scope="module")
+def paper_results(tmp_path_factory):
+    out = tmp_path_factory.mktemp("results")
+    result = CliRunner().invoke(cli, ["run", *map(str, PAPER_CONFIGS), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    return out, result.output
+
+
+def test_paper_configs_exist():
+    names = sorted(p.stem for p in PAPER_CONFIGS)
+    assert names == ["case1_permanent", "case2_visco_elastic", "case3_embedded"]
+
+
+def test_run_writes_one_file_per_paper_case(paper_results):
+    out, output = paper_results
+    for stem in ("case1_permanent", "case2_visco_elastic", "case3_embedded"):
+        assert (out / f"{stem}.h5").is_file()
+        assert f"{stem}: success" in output
+    assert not list(out.glob("*.tmp")) and not list(out.glob(".*"))
+
+
+@pytest.mark.parametrize("stem", ["case1_permanent", "case2_visco_elastic", "case3_embedded"])
+def test_result_opens_in_xarray_with_units_and_descriptions(paper_results, stem):
+    out, _ = paper_results
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ds = xr.open_dataset(out / f"{stem}.h5", engine="h5netcdf")
+    with ds:
+        assert set(ds.dims) == {"time", "axis"}
+        assert list(ds.axis.values) == ["x", "y", "z"]
+        assert ds.time.attrs["units"] == "s"
+        for name in VECTOR_VARIABLES:
+            assert ds[name].dims == ("time", "axis"), name
+        for name in SCALAR_VARIABLES:
+            assert ds[name].dims == ("time",), name
+        for name, var in ds.data_vars.items():
+            assert var.attrs["units"] and var.attrs["description"], name
+        assert ("controller_state" in ds) == (stem == "case3_embedded")
+        assert ds.sizes["time"] == 2001
+        for key in ("config", "rbstab_version", "git_commit", "command_line", "created", "solver_nfev", "wall_time"):
+            assert key in ds.attrs, key
+        # the Lyapunov trace: dv/dt <= 0 everywhere, v non-increasing, analytic == numerical
+        rate = ds.lyapunov_rate.values
+        v = ds.lyapunov.values
+        assert rate.max() <= 1e-9 * np.abs(rate).max()
+        assert np.diff(v).max() <= 1e-9 * v[0]
+        assert v[-1] < 1e-3 * v[0]
+        assert ds.attrs["summary_lyapunov_rate_check"] == "pass"
+        np.testing.assert_allclose(ds.lyapunov_rate_numerical, rate, atol=1e-3 * np.abs(rate).max())
+        # the sum of the terms is v
+        terms = sum(ds[k].values for k in ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity"))
+        np.testing.assert_allclose(terms, v, rtol=1e-12, atol=1e-9)
+
+
+def test_summary_attributes_match_the_data(paper_results):
+    out, _ = paper_results
+    path = out / "case3_embedded.h5"
+    info = read_summary(path)
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        np.testing.assert_allclose(info["summary"]["max_abs_constraint_error"], np.abs(ds.constraint_error).max("time"))
+        np.testing.assert_allclose(info["summary"]["final_theta"], ds.theta[-1])
+        assert info["summary"]["max_lyapunov_rate"] == pytest.approx(float(ds.lyapunov_rate.max()))
+    assert info["status"] == "success" and info["variant"] == "embedded"
+
+
+def test_case1_pivot_stays_fixed(paper_results):
+    out, _ = paper_results
+    with xr.open_dataset(out / "case1_permanent.h5", engine="h5netcdf") as ds:
+        assert float(np.abs(ds.constraint_error).max()) < 1e-12
+        assert float(np.abs(ds.constraint_force).max()) > 100.0  # the pivot does work to hold C
+
+
+def test_show_prints_the_summary(paper_results):
+    out, _ = paper_results
+    result = CliRunner().invoke(cli, ["show", str(out / "case2_visco_elastic.h5")])
+    assert result.exit_code == 0, result.output
+    assert "visco_elastic" in result.output and "max_abs_constraint_error" in result.output
+
+
+def test_show_rejects_a_file_that_is_not_a_result(tmp_path):
+    bogus = tmp_path / "x.h5"
+    bogus.write_bytes(b"not hdf5")
+    result = CliRunner().invoke(cli, ["show", str(bogus), str(tmp_path / "missing.h5")])
+    assert result.exit_code != 0
+    assert "not an HDF5 file" in result.output and "no such result file" in result.output
+    assert "Traceback" not in result.output
+
+
+def test_validate_accepts_every_shipped_config():
+    configs = sorted((ROOT / "configs").glob("*/*.yaml"))
+    configs = [c for c in configs if c.parent.name in ("paper", "examples")]
+    result = CliRunner().invoke(cli, ["validate", *map(str, configs)])
+    assert result.exit_code == 0, result.output
+    assert result.output.count("ok:") == len(configs)
+
+
+def _digest(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_bad_config_exits_nonzero_without_traceback_and_keeps_results(tmp_path):
+    config = PAPER_CONFIGS[0]
+    good = CliRunner().invoke(cli, ["run", str(config), "-o", str(tmp_path), "--set", "simulation.t_end=0.05", "--set", "simulation.n_samples=51"])
+    assert good.exit_code == 0, good.output
+    written = tmp_path / f"{config.stem}.h5"
+    before = _digest(written)
+    bad = CliRunner().invoke(cli, ["run", str(config), "-o", str(tmp_path), "--set", "body.mass=-1"])
+    assert bad.exit_code != 0
+    assert "body.mass" in bad.output and "-1" in bad.output
+    assert "Traceback" not in bad.output and bad.exception is None or isinstance(bad.exception, SystemExit)
+    assert _digest(written) == before
+
+
+def test_one_bad_config_means_nothing_runs(tmp_path):
+    runner = CliRunner()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text((PAPER_CONFIGS[0]).read_text().replace("variant: permanent", "variant: permanant"))
+    result = runner.invoke(cli, ["run", str(PAPER_CONFIGS[1]), str(bad), "-o", str(tmp_path / "out")])
+    assert result.exit_code != 0
+    assert "permanant" in result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_gimbal_lock_run_is_written_as_failed_and_exits_nonzero(tmp_path):
+    result = CliRunner().invoke(
+        cli,
+        [
+            "run", str(PAPER_CONFIGS[1]), "-o", str(tmp_path), "--set", "name=locked",
+            "--set", "initial_state.theta=[0, 1.5, 0]", "--set", "initial_state.omega=[0, 40, 0]",
+            "--set", "controller.k_r=[1, 1, 1]", "--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=51",
+        ],
+    )
+    assert result.exit_code == 1
+    assert "gimbal lock" in result.output
+    info = read_summary(tmp_path / "locked.h5")
+    assert info["status"] == "failed" and "gimbal lock" in info["message"]
+
+
+def test_method_option_and_set_override(tmp_path):
+    result = CliRunner().invoke(
+        cli,
+        ["run", str(PAPER_CONFIGS[2]), "-o", str(tmp_path), "--method", "Radau", "--set", "name=radau",
+         "--set", "simulation.t_end=0.1", "--set", "simulation.n_samples=11", "--set", "simulation.rtol=1e-6"],
+    )
+    assert result.exit_code == 0, result.output
+    with xr.open_dataset(tmp_path / "radau.h5", engine="h5netcdf") as ds:
+        assert "method: Radau" in ds.attrs["config"]
+        assert ds.sizes["time"] == 11
+
+
+def test_interrupted_write_leaves_no_file(tmp_path, monkeypatch):
+    import h5netcdf
+
+    from rbstab.config import load_config
+    from rbstab.io.hdf5 import write_result
+    from rbstab.simulate import simulate
+
+    config = load_config(PAPER_CONFIGS[1], ["simulation.t_end=0.02", "simulation.n_samples=5"])
+    result = simulate(config)
+
+    def boom(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(h5netcdf.File, "create_variable", boom)
+    with pytest.raises(KeyboardInterrupt):
+        write_result(result, tmp_path / "x.h5")
+    assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,718 @@
+"""Tests of rbstab.config: schema, error messages, overrides, round trip, shipped configs."""
+
+import copy
+import math
+import pickle
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rbstab.config import (
+    ConfigError,
+    PhysicalPlausibilityWarning,
+    RunConfig,
+    SimulationSettings,
+    apply_overrides,
+    config_from_mapping,
+    get_dotted,
+    load_config,
+    set_dotted,
+)
+from rbstab.layout import BLOCK_UNITS
+from rbstab.variants import VARIANTS
+
+REPO = Path(__file__).resolve().parents[1]
+SHIPPED = sorted((REPO / "configs" / "paper").glob("*.yaml")) + sorted(
+    (REPO / "configs" / "examples").glob("*.yaml")
+)
+
+# A physically plausible body (3 <= 4 + 5 ...), so no warning unless a test asks for one.
+BASE = {
+    "name": "base",
+    "body": {"mass": 41.0, "inertia": [3.0, 4.0, 5.0], "attachment_point": [0.15, 0.10, -0.42]},
+    "controller": {
+        "variant": "embedded",
+        "k_t": [4100, 4100, 3280],
+        "l_t": [200, 200, 140],
+        "k_r": [400, 400, 320],
+        "l_r": [60, 60, 42],
+        "k_c": [12300, 12300, 9840],
+        "l_c": [600, 600, 420],
+        "k_d": [12300, 12300, 9840],
+        "l_d": [1200, 1200, 840],
+        "k_s": 2000.0,
+    },
+    "initial_state": {"omega": [16, 32, -16]},
+}
+
+
+@pytest.fixture(autouse=True)
+def _plausibility_warnings_are_errors():
+    """An unexpected PhysicalPlausibilityWarning fails the test (pytest.warns still works)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", PhysicalPlausibilityWarning)
+        yield
+
+
+def base(**sections):
+    """Deep copy of BASE with sections updated: base(body={"mass": 0})."""
+    data = copy.deepcopy(BASE)
+    for section, values in sections.items():
+        if isinstance(values, dict) and isinstance(data.get(section), dict):
+            data[section].update(values)
+        else:
+            data[section] = values
+    return data
+
+
+def problems(data, **kwargs):
+    with pytest.raises(ConfigError) as info:
+        config_from_mapping(data, **kwargs)
+    return info.value.errors
+
+
+def single_problem(data, **kwargs):
+    errors = problems(data, **kwargs)
+    assert len(errors) == 1, errors
+    return errors[0]
+
+
+def write(tmp_path, text, name="cfg.yaml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+# -- shipped configurations -------------------------------------------------------------------
+
+
+def test_shipped_configs_exist():
+    names = {p.relative_to(REPO / "configs").as_posix() for p in SHIPPED}
+    assert {
+        "paper/case1_permanent.yaml",
+        "paper/case2_visco_elastic.yaml",
+        "paper/case3_embedded.yaml",
+        "examples/free_gravity.yaml",
+        "examples/sliding.yaml",
+    } <= names
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_config_loads(path):
+    # Table 1's inertia (10, 8, 0.4) violates the triangle inequality: a warning, not an error.
+    with pytest.warns(PhysicalPlausibilityWarning, match="triangle inequality"):
+        cfg = load_config(path)
+    assert cfg.name == path.stem
+    assert cfg.variant in VARIANTS
+    variant = cfg.make_variant()
+    for gain in type(variant).required_gains:
+        assert getattr(cfg.gains, gain) is not None
+    y0 = variant.initial_state(cfg.initial_state)
+    assert y0.shape == (variant.layout.size,)
+    np.testing.assert_array_equal(cfg.initial_state["omega"], [16, 32, -16])
+    assert cfg.simulation.t_end == 2.0
+
+
+def test_paper_case_values():
+    with pytest.warns(PhysicalPlausibilityWarning):
+        case1 = load_config(REPO / "configs/paper/case1_permanent.yaml")
+        case2 = load_config(REPO / "configs/paper/case2_visco_elastic.yaml")
+        case3 = load_config(REPO / "configs/paper/case3_embedded.yaml")
+    assert case1.variant == "permanent"
+    assert case1.body.mass == 41.0
+    np.testing.assert_array_equal(case1.body.inertia, np.diag([10, 8, 0.4]))
+    np.testing.assert_array_equal(case1.body.attachment_point, [0.15, 0.10, -0.42])
+    np.testing.assert_array_equal(case1.body.gravity, [0, 0, -10])
+    np.testing.assert_array_equal(case1.gains.l_t, np.diag([210, 210, 140]))
+    np.testing.assert_array_equal(case1.gains.l_r, np.diag([60, 60, 42]))
+    assert case1.simulation == SimulationSettings(t_end=2.0, n_samples=2001, method="DOP853")
+
+    assert case2.variant == "visco_elastic"
+    np.testing.assert_array_equal(case2.body.gravity, [0, 0, 0])
+    np.testing.assert_array_equal(case2.gains.l_t, np.diag([200, 200, 140]))
+    np.testing.assert_array_equal(case2.gains.k_c, case2.gains.k_t)
+    np.testing.assert_array_equal(case2.gains.l_c, case2.gains.l_t)
+
+    assert case3.variant == "embedded"
+    np.testing.assert_array_equal(case3.gains.k_c, np.diag([12300, 12300, 9840]))
+    np.testing.assert_array_equal(case3.gains.k_d, case3.gains.k_c)
+    np.testing.assert_array_equal(case3.gains.l_d, 2 * case3.gains.l_c)
+    for key in ("k_t", "l_t", "k_r", "l_r"):
+        np.testing.assert_array_equal(getattr(case3.gains, key), getattr(case2.gains, key))
+
+
+def test_sliding_example_has_boundary_layer():
+    with pytest.warns(PhysicalPlausibilityWarning):
+        cfg = load_config(REPO / "configs/examples/sliding.yaml")
+    assert cfg.gains.k_s > 0
+    assert cfg.gains.boundary_layer == 0.005
+
+
+# -- the result --------------------------------------------------------------------------------
+
+
+def test_valid_mapping_gives_frozen_runconfig():
+    cfg = config_from_mapping(BASE)
+    assert isinstance(cfg, RunConfig)
+    assert (cfg.name, cfg.variant) == ("base", "embedded")
+    np.testing.assert_array_equal(cfg.gains.k_t, np.diag([4100, 4100, 3280]))
+    assert cfg.gains.k_t.shape == (3, 3)
+    assert set(cfg.initial_state) == set(BLOCK_UNITS)
+    np.testing.assert_array_equal(cfg.initial_state["theta"], [0, 0, 0])
+    np.testing.assert_array_equal(cfg.initial_state["controller_state"], [0, 0, 0])
+    np.testing.assert_array_equal(cfg.body.gravity, [0, 0, 0])
+    assert cfg.simulation == SimulationSettings()
+    assert cfg.simulation.max_step == math.inf
+    assert cfg.warnings == ()
+    with pytest.raises(AttributeError):
+        cfg.name = "other"
+    with pytest.raises(ValueError):
+        cfg.gains.k_t[0, 0] = 1.0  # read-only arrays
+    with pytest.raises(ValueError):
+        cfg.initial_state["omega"][0] = 1.0
+
+
+def test_input_mapping_not_modified():
+    data = base()
+    snapshot = copy.deepcopy(data)
+    cfg = config_from_mapping(data)
+    assert data == snapshot
+    cfg.resolved["controller"]["k_t"][0] = -1
+    assert data == snapshot
+
+
+def test_initial_state_keys_map_to_layout_blocks():
+    cfg = config_from_mapping(base(initial_state={"x": [1, 2, 3], "v": [4, 5, 6], "d": [7, 8, 9]}))
+    np.testing.assert_array_equal(cfg.initial_state["position"], [1, 2, 3])
+    np.testing.assert_array_equal(cfg.initial_state["velocity"], [4, 5, 6])
+    np.testing.assert_array_equal(cfg.initial_state["controller_state"], [7, 8, 9])
+
+
+def test_full_matrix_gain_and_inertia():
+    k = [[4100, 10, 0], [10, 4100, 0], [0, 0, 3280]]
+    j = [[3.0, 0.1, 0.0], [0.1, 4.0, 0.0], [0.0, 0.0, 5.0]]
+    cfg = config_from_mapping(base(controller={"k_t": k}, body={"inertia": j}))
+    np.testing.assert_array_equal(cfg.gains.k_t, k)
+    np.testing.assert_array_equal(cfg.body.inertia, j)
+    assert cfg.resolved["controller"]["k_t"] == k
+
+
+def test_empty_optional_sections_mean_defaults():
+    cfg = config_from_mapping(base(initial_state=None, simulation=None))
+    assert cfg.simulation == SimulationSettings()
+    np.testing.assert_array_equal(cfg.initial_state["omega"], [0, 0, 0])
+
+
+def test_default_name(tmp_path):
+    data = base()
+    del data["name"]
+    assert config_from_mapping(data, default_name="from_default").name == "from_default"
+    assert "name" in single_problem(data)  # no name and no default
+    path = write(tmp_path, yaml.safe_dump(data), name="my_case.yaml")
+    assert load_config(path).name == "my_case"
+
+
+def test_unused_gains_accepted_and_ignored_for_variant_sweep():
+    """One base config with every gain serves all variants; each keeps only what it uses."""
+    for name, cls in VARIANTS.items():
+        cfg = config_from_mapping(base(controller={"variant": name}))
+        assert cfg.variant == name
+        for gain in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s"):
+            assert (getattr(cfg.gains, gain) is not None) == (gain in cls.required_gains)
+        # resolved keeps the config as written, so it still re-loads for another variant
+        assert cfg.resolved["controller"]["k_c"] == [12300, 12300, 9840]
+        assert isinstance(cfg.make_variant(), cls)
+
+
+# -- error messages ------------------------------------------------------------------------------
+
+
+def test_unknown_key_did_you_mean():
+    line = single_problem(base(controller={"k_tt": [1, 2, 3]}))
+    assert line.startswith("config key 'controller.k_tt': unknown key")
+    assert "did you mean 'controller.k_t'?" in line
+    assert "(allowed: variant, k_t, l_t, k_r, l_r," in line
+
+
+def test_unknown_key_in_wrong_section_and_top_level():
+    line = single_problem(base(simulation={"mass": 3}))
+    assert "config key 'simulation.mass': unknown key" in line
+    assert "did you mean 'body.mass'?" in line
+    line = single_problem(base(gains={}))
+    assert "config key 'gains': unknown key" in line
+    assert "allowed: name, body, controller, initial_state, simulation" in line
+
+
+def test_missing_key():
+    data = base()
+    del data["body"]["mass"]
+    assert single_problem(data) == "config key 'body.mass': missing; expected a number > 0 (kg)"
+    data = base()
+    del data["controller"]
+    assert single_problem(data).startswith("config key 'controller': missing; expected a mapping")
+
+
+@pytest.mark.parametrize(
+    "section, key, value, found, detail",
+    [
+        ("body", "attachment_point", [0.1, 0.2], "[0.1, 0.2]", "2 entries, not 3"),
+        ("controller", "k_t", [1, 2], "[1, 2]", "2 entries, not 3"),
+        ("controller", "l_t", [[1, 0, 0], [0, 1, 0]], "[[1, 0, 0], [0, 1, 0]]", "a 2x3 list"),
+        ("body", "inertia", [[1, 0], [0, 1], [0, 0]], "[[1, 0], [0, 1], [0, 0]]", "a 3x2 list"),
+        ("initial_state", "omega", 16, "16", "a number, not a list"),
+    ],
+)
+def test_wrong_shape(section, key, value, found, detail):
+    line = single_problem(base(**{section: {key: value}}))
+    assert f"config key '{section}.{key}': found {found}; expected " in line
+    assert "3 numbers" in line
+    assert detail in line
+
+
+def test_wrong_shape_gain_message_lists_allowed_forms():
+    line = single_problem(base(controller={"k_t": [1, 2]}))
+    assert line.startswith(
+        "config key 'controller.k_t': found [1, 2]; expected 3 numbers (a diagonal) "
+        "or a 3x3 list of lists, symmetric positive definite (N/m)"
+    )
+
+
+def test_wrong_type():
+    line = single_problem(base(body={"mass": "heavy"}))
+    assert line == (
+        "config key 'body.mass': found 'heavy'; expected a number > 0 (kg) (a string, not a number)"
+    )
+    line = single_problem(base(simulation={"rtol": "1e-6"}))
+    assert "found '1e-6'" in line and "remove the quotes" in line
+    line = single_problem(base(initial_state={"theta": [0, "a", 0]}))
+    assert "config key 'initial_state.theta': found [0, 'a', 0]" in line
+    assert "entry [1] is a string, not a number" in line
+    line = single_problem(base(body={"mass": True}))
+    assert "found true" in line and "a boolean, not a number" in line
+    line = single_problem(base(simulation={"n_samples": 20.5}))
+    assert "config key 'simulation.n_samples': found 20.5; expected an integer >= 2" in line
+
+
+def test_non_finite_numbers_from_yaml(tmp_path):
+    data = base()
+    text = yaml.safe_dump(data).replace("mass: 41.0", "mass: .inf")
+    text = text.replace("k_s: 2000.0", "k_s: .nan")
+    text += "simulation:\n  t_end: .nan\n"
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, text))
+    errors = info.value.errors
+    assert errors == [
+        "config key 'body.mass': found inf; expected a number > 0 (kg) (not a finite number)",
+        "config key 'controller.k_s': found nan; expected a number > 0 (N) (not a finite number)",
+        "config key 'simulation.t_end': found nan; expected a number > 0 (s) (not a finite number)",
+    ]
+    line = single_problem(base(initial_state={"omega": [1.0, math.inf, 0.0]}))
+    assert "found [1.0, inf, 0.0]" in line and "entry [1] is not a finite number" in line
+
+
+@pytest.mark.parametrize("mass", [0, -41.0])
+def test_mass_not_positive(mass):
+    line = single_problem(base(body={"mass": mass}))
+    assert line == f"config key 'body.mass': found {mass!r}; expected a number > 0 (kg)"
+
+
+def test_gain_not_symmetric():
+    k = [[1, 2, 0], [0, 1, 0], [0, 0, 1]]
+    line = single_problem(base(controller={"k_r": k}))
+    assert "config key 'controller.k_r': found [[1, 2, 0], [0, 1, 0], [0, 0, 1]]" in line
+    assert "symmetric positive definite (N m/rad)" in line
+    assert "not symmetric: [0][1] = 2 but [1][0] = 0" in line
+
+
+def test_gain_not_positive_definite():
+    line = single_problem(base(controller={"l_r": [60, -60, 42]}))
+    assert "config key 'controller.l_r': found [60, -60, 42]" in line
+    assert "symmetric positive definite" in line
+    assert "not positive definite: diagonal [1] = -60" in line
+    # symmetric, positive diagonal, but indefinite: eigenvalues 3 and -1
+    line = single_problem(base(controller={"k_t": [[1, 2, 0], [2, 1, 0], [0, 0, 1]]}))
+    assert "config key 'controller.k_t'" in line
+    assert "not positive definite: smallest eigenvalue -1" in line
+    line = single_problem(base(body={"inertia": [3.0, 0.0, 5.0]}))
+    assert "config key 'body.inertia': found [3.0, 0.0, 5.0]" in line
+    assert "not positive definite" in line
+
+
+@pytest.mark.parametrize("theta_2", [1.6, -1.6, math.pi / 2])
+def test_theta_2_outside_half_pi(theta_2):
+    line = single_problem(base(initial_state={"theta": [0.0, theta_2, 0.0]}))
+    assert f"config key 'initial_state.theta': found [0.0, {theta_2!r}, 0.0]" in line
+    assert "theta_2 in (-pi/2, pi/2)" in line
+    assert "gimbal lock" in line
+
+
+def test_theta_2_inside_gimbal_margin():
+    theta = [0.0, math.pi / 2 - 5e-4, 0.0]
+    line = single_problem(base(initial_state={"theta": theta}))
+    assert "config key 'initial_state.theta'" in line
+    assert "theta_2 in (-pi/2 + gimbal_margin, pi/2 - gimbal_margin) = (-1.5698, 1.5698)" in line
+    assert "gimbal_margin = 0.001" in line
+    data = base(initial_state={"theta": theta}, simulation={"gimbal_margin": 1e-4})
+    cfg = config_from_mapping(data)
+    assert cfg.initial_state["theta"][1] == theta[1]
+
+
+def test_gain_required_by_variant_missing():
+    data = base()
+    del data["controller"]["k_c"]
+    line = single_problem(data)
+    assert line.startswith("config key 'controller.k_c': missing; expected 3 numbers (a diagonal)")
+    assert "required by variant 'embedded'" in line
+    data = base(controller={"variant": "sliding"})
+    del data["controller"]["k_s"]
+    assert single_problem(data) == (
+        "config key 'controller.k_s': missing; expected a number > 0 (N) "
+        "(required by variant 'sliding')"
+    )
+    # the same mapping is fine for a variant that does not use k_s
+    assert config_from_mapping({**data, "controller": {**data["controller"], "variant": "free"}})
+
+
+def test_t_end_not_positive():
+    for t_end in (0, -1.0):
+        line = single_problem(base(simulation={"t_end": t_end}))
+        assert line == f"config key 'simulation.t_end': found {t_end!r}; expected a number > 0 (s)"
+
+
+def test_unknown_solver_method():
+    line = single_problem(base(simulation={"method": "dop853"}))
+    assert "config key 'simulation.method': found 'dop853'" in line
+    assert "expected one of" in line and "DOP853" in line and "Radau" in line and "LSODA" in line
+    assert "did you mean 'DOP853'?" in line
+
+
+def test_every_scipy_method_accepted():
+    from scipy.integrate._ivp.ivp import METHODS
+
+    for method in METHODS:
+        assert config_from_mapping(base(simulation={"method": method})).simulation.method == method
+
+
+def test_unknown_variant():
+    line = single_problem(base(controller={"variant": "embeded"}))
+    assert "config key 'controller.variant': found 'embeded'" in line
+    assert "expected one of free, permanent, sliding, visco_elastic, embedded" in line
+    assert "did you mean 'embedded'?" in line
+
+
+@pytest.mark.parametrize("name", ["my case", "a/b", "", "..", 12])
+def test_bad_name(name):
+    line = single_problem(base(name=name))
+    assert line.startswith(f"config key 'name': found {name!r}; expected a name of letters, digits")
+
+
+def test_bad_default_name_from_file(tmp_path):
+    data = base()
+    del data["name"]
+    path = write(tmp_path, yaml.safe_dump(data), name="my case.yaml")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert "config key 'name': found 'my case'" in str(info.value)
+    assert "set 'name:' in the config" in str(info.value)
+
+
+def test_other_simulation_ranges():
+    for key, value in [("n_samples", 1), ("atol", 0), ("max_step", -1), ("gimbal_margin", 0.5)]:
+        line = single_problem(base(simulation={key: value}))
+        assert line.startswith(f"config key 'simulation.{key}': found {value!r}; expected a")
+    line = single_problem(base(simulation={"gimbal_margin": 0.5}))
+    assert line.endswith("expected a number in (0, 0.5) (rad)")
+    line = single_problem(base(controller={"boundary_layer": -0.1}))
+    assert line.startswith(
+        "config key 'controller.boundary_layer': found -0.1; expected a number >= 0"
+    )
+
+
+def test_section_not_a_mapping():
+    line = single_problem(base(body=[41.0]))
+    assert line.startswith(
+        "config key 'body': found [41.0]; expected a mapping with keys mass, inertia"
+    )
+
+
+def test_all_problems_reported_at_once():
+    data = base(
+        body={"mass": -1, "inertia": [1, 2]},
+        controller={"k_tt": 1, "l_c": [[1, 2, 0], [0, 1, 0], [0, 0, 1]]},
+        simulation={"t_end": 0, "method": "euler"},
+        initial_state={"theta": [0, 2, 0]},
+        name="a b",
+    )
+    del data["controller"]["l_d"]
+    errors = problems(data)
+    keys = [e.split("'")[1] for e in errors]
+    assert sorted(keys) == sorted(
+        [
+            "name",
+            "body.mass",
+            "body.inertia",
+            "controller.k_tt",
+            "controller.l_c",
+            "controller.l_d",
+            "simulation.t_end",
+            "simulation.method",
+            "initial_state.theta",
+        ]
+    )
+
+
+def test_config_error_format_and_pickle(tmp_path):
+    path = write(tmp_path, yaml.safe_dump(base(body={"mass": 0}, simulation={"t_end": 0})))
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    err = info.value
+    assert isinstance(err, ValueError)
+    assert err.source == str(path)
+    assert str(err).splitlines() == [f"in {path}:"] + err.errors
+    assert len(err.errors) == 2
+    clone = pickle.loads(pickle.dumps(err))
+    assert (clone.errors, clone.source, str(clone)) == (err.errors, err.source, str(err))
+
+
+def test_long_found_value_truncated():
+    line = single_problem(base(initial_state={"omega": list(range(50))}))
+    assert "found [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, ...]; expected" in line
+    line = single_problem(base(name="x y" * 100))
+    found = line.split("found ", 1)[1].split("; expected")[0]
+    assert len(found) == 80 and found.startswith("'x yx y") and found.endswith("...")
+
+
+# -- files -----------------------------------------------------------------------------------------
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found: .*nope.yaml"):
+        load_config(tmp_path / "nope.yaml")
+
+
+def test_yaml_syntax_error(tmp_path):
+    path = write(tmp_path, "body:\n  mass: [41\n")
+    with pytest.raises(ConfigError) as info:
+        load_config(path)
+    assert str(info.value).startswith(f"in {path}:\nYAML syntax error at line")
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("", "the configuration is empty; expected a mapping"),
+        ("- 1\n- 2\n", "top level: found [1, 2]; expected a mapping"),
+    ],
+)
+def test_top_level_not_a_mapping(tmp_path, text, message):
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, text))
+    assert message in str(info.value)
+    assert "with keys name, body, controller, initial_state, simulation" in str(info.value)
+
+
+def test_duplicate_key_is_an_error(tmp_path):
+    text = yaml.safe_dump(base(), sort_keys=False).replace("  k_t:", "  k_r: [1, 1, 1]\n  k_t:", 1)
+    with pytest.raises(ConfigError, match=r"found the key 'k_r' twice \(first at line \d+\)"):
+        load_config(write(tmp_path, text))
+
+
+def test_yaml_exponent_without_dot_is_a_float(tmp_path):
+    text = yaml.safe_dump(base()) + "simulation:\n  rtol: 1e-6\n  atol: 2E-9\n  n_samples: 11\n"
+    cfg = load_config(write(tmp_path, text))
+    assert (cfg.simulation.rtol, cfg.simulation.atol, cfg.simulation.n_samples) == (1e-6, 2e-9, 11)
+
+
+# -- warnings --------------------------------------------------------------------------------------
+
+
+def test_triangle_inequality_warning():
+    data = base(body={"inertia": [10.0, 8.0, 0.4]})
+    match = r"body.inertia.*triangle inequality.*10 > 8 \+ 0.4"
+    with pytest.warns(PhysicalPlausibilityWarning, match=match):
+        cfg = config_from_mapping(data)
+    assert len(cfg.warnings) == 1 and "triangle inequality" in cfg.warnings[0]
+
+
+def test_triangle_inequality_warning_for_full_matrix():
+    # diag(10, 8, 0.4) rotated about z: not diagonal, same principal moments
+    c, s = math.cos(0.3), math.sin(0.3)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    j = (rot @ np.diag([10.0, 8.0, 0.4]) @ rot.T).tolist()
+    j = [[0.5 * (j[i][k] + j[k][i]) for k in range(3)] for i in range(3)]
+    with pytest.warns(PhysicalPlausibilityWarning, match="triangle inequality"):
+        config_from_mapping(base(body={"inertia": j}))
+
+
+def test_triangle_equality_does_not_warn():
+    # a flat plate has j3 = j1 + j2 exactly: physical, no warning (the fixture makes it an error)
+    cfg = config_from_mapping(base(body={"inertia": [1.0, 2.0, 3.0]}))
+    assert cfg.warnings == ()
+
+
+# -- round trip ------------------------------------------------------------------------------------
+
+
+def assert_same_config(a: RunConfig, b: RunConfig):
+    for field in ("name", "variant", "simulation", "warnings"):
+        assert getattr(a, field) == getattr(b, field)
+    assert a.resolved == b.resolved
+    for field in ("mass", "inertia", "attachment_point", "gravity"):
+        np.testing.assert_array_equal(getattr(a.body, field), getattr(b.body, field))
+    for field in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "boundary_layer"):
+        x, y = getattr(a.gains, field), getattr(b.gains, field)
+        assert (x is None) == (y is None)
+        if x is not None:
+            np.testing.assert_array_equal(x, y)
+    assert a.initial_state.keys() == b.initial_state.keys()
+    for block in a.initial_state:
+        np.testing.assert_array_equal(a.initial_state[block], b.initial_state[block])
+
+
+@pytest.mark.parametrize("max_step", [None, 0.01])
+def test_round_trip(max_step):
+    data = base(controller={"k_t": [[4100, 10, 0], [10, 4100, 0], [0, 0, 3280]]})
+    if max_step is not None:
+        data["simulation"] = {"max_step": max_step}
+    cfg = config_from_mapping(data)
+    resolved = cfg.resolved
+    assert list(resolved) == ["name", "body", "controller", "initial_state", "simulation"]
+    assert resolved["controller"]["l_t"] == [200, 200, 140]  # 3 numbers stay 3 numbers
+    assert resolved["simulation"] == {
+        "t_end": 2.0,
+        "n_samples": 2001,
+        "method": "DOP853",
+        "rtol": 1e-8,
+        "atol": 1e-10,
+        "max_step": max_step,  # inf is written as null
+        "gimbal_margin": 1e-3,
+    }
+    assert resolved["initial_state"]["d"] == [0.0, 0.0, 0.0]
+    assert_same_config(config_from_mapping(resolved), cfg)
+    reread = yaml.safe_load(cfg.to_yaml())
+    assert reread == resolved
+    assert_same_config(config_from_mapping(reread), cfg)
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
+def test_shipped_config_round_trip(path, tmp_path):
+    with pytest.warns(PhysicalPlausibilityWarning):
+        cfg = load_config(path)
+        again = load_config(write(tmp_path, cfg.to_yaml(), name="other_stem.yaml"))
+    assert_same_config(again, cfg)
+
+
+def test_explicit_infinite_max_step(tmp_path):
+    text = yaml.safe_dump(base()) + "simulation:\n  max_step: .inf\n"
+    cfg = load_config(write(tmp_path, text))
+    assert cfg.simulation.max_step == math.inf
+    assert cfg.resolved["simulation"]["max_step"] is None
+
+
+# -- overrides and dotted paths --------------------------------------------------------------
+
+
+def test_apply_overrides():
+    data = base()
+    snapshot = copy.deepcopy(data)
+    out = apply_overrides(
+        data,
+        [
+            "controller.k_t=[1,2,3]",
+            "simulation.t_end=1.5",
+            "controller.variant=free",
+            "initial_state.omega.0=5",
+            "simulation.rtol = 1e-6",
+            "name=other",
+        ],
+    )
+    assert data == snapshot  # a deep copy
+    assert out["controller"]["k_t"] == [1, 2, 3]
+    assert out["simulation"] == {"t_end": 1.5, "rtol": 1e-6}
+    assert out["controller"]["variant"] == "free"
+    assert out["initial_state"]["omega"] == [5, 32, -16]
+    assert out["name"] == "other"
+    cfg = config_from_mapping(out)
+    assert (cfg.variant, cfg.simulation.t_end, cfg.simulation.rtol) == ("free", 1.5, 1e-6)
+    np.testing.assert_array_equal(cfg.gains.k_t, np.diag([1, 2, 3]))
+
+
+def test_load_config_with_overrides(tmp_path):
+    path = write(tmp_path, yaml.safe_dump(base()))
+    cfg = load_config(path, ["initial_state.omega.1=0.5", "controller.variant=visco_elastic"])
+    assert cfg.initial_state["omega"][1] == 0.5
+    assert cfg.variant == "visco_elastic"
+    assert cfg.resolved["initial_state"]["omega"] == [16, 0.5, -16]
+
+
+def test_override_index_into_schema_default():
+    """theta is absent from BASE: indexing it starts from its default [0, 0, 0]."""
+    out = apply_overrides(BASE, ["initial_state.theta.1=0.5", "body.gravity.2=-9.81"])
+    assert out["initial_state"]["theta"] == [0.0, 0.5, 0.0]
+    assert out["body"]["gravity"] == [0.0, 0.0, -9.81]
+    cfg = config_from_mapping(out)
+    np.testing.assert_array_equal(cfg.initial_state["theta"], [0.0, 0.5, 0.0])
+
+
+def test_override_creating_unknown_key_fails_validation(tmp_path):
+    path = write(tmp_path, yaml.safe_dump(base()))
+    with pytest.raises(ConfigError) as info:
+        load_config(path, ["controller.k_tt=[1,2,3]", "simulation.t_end=-1"])
+    errors = info.value.errors
+    assert len(errors) == 2
+    assert "config key 'controller.k_tt': unknown key; did you mean 'controller.k_t'?" in errors[0]
+    assert errors[0].endswith("[from override 'controller.k_tt=[1,2,3]']")
+    assert errors[1].startswith("config key 'simulation.t_end': found -1;")
+    assert errors[1].endswith("[from override 'simulation.t_end=-1']")
+
+
+@pytest.mark.parametrize(
+    "override, message",
+    [
+        ("simulation.t_end", "no '='"),
+        ("=3", "malformed key path ''"),
+        ("controller..k_t=1", "malformed key path"),
+        ("initial_state.omega.3=1", "index 3 out of range for 'initial_state.omega' (a list of 3)"),
+        ("initial_state.omega.x=1", "'initial_state.omega' is a list"),
+        ("controller.variant.x=1", "'controller.variant' is a string"),
+        ("body.mass.0=1", "'body.mass' is a number"),
+        ("extra.list.0=1", "'extra.list' is not set, so it has no index 0"),
+        ("controller.k_t=[1,", "not valid YAML"),
+    ],
+)
+def test_bad_override(override, message, tmp_path):
+    with pytest.raises(ConfigError) as info:
+        apply_overrides(BASE, [override])
+    (line,) = info.value.errors
+    assert line.startswith(f"override {override!r}: ")
+    assert message in line
+    with pytest.raises(ConfigError) as info:
+        load_config(write(tmp_path, yaml.safe_dump(base())), ["simulation.t_end=1", override])
+    assert info.value.source is not None and len(info.value.errors) == 1
+
+
+def test_bad_overrides_all_reported():
+    with pytest.raises(ConfigError) as info:
+        apply_overrides(BASE, ["a", "initial_state.omega.9=1", "simulation.t_end=3"])
+    assert len(info.value.errors) == 2
+
+
+def test_set_and_get_dotted():
+    data = {"a": {"b": [1, {"c": 2}]}}
+    assert get_dotted(data, "a.b.1.c") == 2
+    assert get_dotted(data, "a.b.0") == 1
+    set_dotted(data, "a.b.1.c", 3)
+    set_dotted(data, "x.y", 4)  # creates the mapping x
+    set_dotted(data, "a.b.0", [5])
+    assert data == {"a": {"b": [[5], {"c": 3}]}, "x": {"y": 4}}
+    with pytest.raises(KeyError):
+        get_dotted(data, "a.z")
+    with pytest.raises(KeyError):
+        get_dotted(data, "a.b.7")
+    with pytest.raises(ConfigError, match="out of range"):
+        set_dotted(data, "a.b.2", 1)
+    with pytest.raises(ConfigError, match="'x.y' is a number"):
+        set_dotted(data, "x.y.z", 1)
