@@ -70,16 +70,25 @@ class NotAResultFile(ValueError):
 
 @functools.lru_cache(maxsize=1)
 def _git_commit() -> str:
-    """Commit of the project checkout this package runs from, or ``"unknown"``."""
-    here = Path(__file__).resolve().parent
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5
-        )
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    commit = out.stdout.strip()
-    return commit if out.returncode == 0 and commit else "unknown"
+    """Commit of the rbstab checkout in use, or ``"unknown"``.
+
+    Looks where the package is imported from (an editable install), then in the working
+    directory when it is an rbstab checkout (``pip install .`` run from a clone).
+    """
+    candidates = [Path(__file__).resolve().parent]
+    if (Path.cwd() / "src" / "rbstab").is_dir():
+        candidates.append(Path.cwd())
+    for where in candidates:
+        try:
+            out = subprocess.run(
+                ["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True, timeout=5
+            )
+        except (OSError, subprocess.SubprocessError):
+            continue
+        commit = out.stdout.strip()
+        if out.returncode == 0 and commit:
+            return commit
+    return "unknown"
 
 
 def config_hash(config_yaml: str) -> str:
