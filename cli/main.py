@@ -4,8 +4,10 @@ import click
 
 from rbstab import __version__
 
+from .report import report
 from .run import run
 from .show import show
+from .sweep import sweep
 from .validate import validate
 
 
@@ -24,3 +26,5 @@ def cli() -> None:
 cli.add_command(run)
 cli.add_command(validate)
 cli.add_command(show)
+cli.add_command(report)
+cli.add_command(sweep)

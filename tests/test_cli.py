@@ -191,3 +191,16 @@ def test_interrupted_write_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         write_result(result, tmp_path / "x.h5")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_that_fails_at_once_has_no_rate_check(tmp_path):
+    result = CliRunner().invoke(
+        cli,
+        ["run", str(PAPER_CONFIGS[1]), "-o", str(tmp_path), "--set", "name=instant",
+         "--set", "initial_state.theta=[0, 1.5695, 0]", "--set", "initial_state.omega=[0, 50, 0]",
+         "--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=51"],
+    )
+    assert result.exit_code == 1
+    info = read_summary(tmp_path / "instant.h5")
+    assert info["status"] == "failed"
+    assert info["summary"]["lyapunov_rate_check"] == "n/a"

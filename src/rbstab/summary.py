@@ -10,11 +10,14 @@ import numpy as np
 
 from .layout import BLOCK_UNITS
 
-__all__ = ["numerical_rate", "summarize", "LYAPUNOV_RATE_TOLERANCE"]
+__all__ = ["numerical_rate", "summarize", "LYAPUNOV_RATE_TOLERANCE", "MIN_CHECK_SAMPLES"]
 
 #: Relative tolerance of the check "analytic dv/dt agrees with the numerical derivative
 #: of v": max |analytic - numerical| <= tol * max |analytic|.
 LYAPUNOV_RATE_TOLERANCE = 1e-3
+
+#: Fewest finite samples for which the rate check means something (a quintic spline).
+MIN_CHECK_SAMPLES = 6
 
 
 def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -66,7 +69,7 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
     Returns
     -------
     dict
-        Plain floats and lists: ``t_final`` [s], ``final_<block>`` (3 floats each, for every state block
+        Plain floats and lists: ``t_final`` [s] (time of the last finite sample), ``final_<block>`` (3 floats each, for every state block
         in ``outputs``, reconstructed ones included),
         ``max_abs_constraint_error`` [m] (3 floats, per axis), ``lyapunov_initial``,
         ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W], ``max_lyapunov_increase`` [J]
@@ -74,7 +77,9 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
         ``lyapunov_rate_mismatch`` [W] (max |analytic - numerical dv/dt|),
         ``lyapunov_rate_mismatch_relative`` (divided by max |analytic dv/dt|),
         ``lyapunov_rate_check`` (``"pass"`` when the relative mismatch is at most
-        :data:`LYAPUNOV_RATE_TOLERANCE`, else ``"fail"``).
+        :data:`LYAPUNOV_RATE_TOLERANCE`, ``"fail"`` when it is larger, ``"n/a"`` when
+        fewer than :data:`MIN_CHECK_SAMPLES` finite samples exist, e.g. a run that failed
+        at once).
     """
     i = _last_finite(outputs["lyapunov"])
     v = outputs["lyapunov"][: i + 1]
@@ -90,7 +95,12 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
     summary["lyapunov_final"] = float(v[-1])
     summary["max_lyapunov_rate"] = float(np.max(rate))
     summary["max_lyapunov_increase"] = float(np.max(v - np.minimum.accumulate(v)))
-    mismatch = float(np.max(np.abs(rate - num))) if len(v) > 1 else 0.0
+    if len(v) < MIN_CHECK_SAMPLES:
+        summary["lyapunov_rate_mismatch"] = float("nan")
+        summary["lyapunov_rate_mismatch_relative"] = float("nan")
+        summary["lyapunov_rate_check"] = "n/a"
+        return summary
+    mismatch = float(np.max(np.abs(rate - num)))
     scale = float(np.max(np.abs(rate))) or 1.0
     summary["lyapunov_rate_mismatch"] = mismatch
     summary["lyapunov_rate_mismatch_relative"] = mismatch / scale

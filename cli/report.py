@@ -1,0 +1,78 @@
+"""``rbstab report``: tables and figures comparing run files and sweep folders."""
+
+from __future__ import annotations
+
+import click
+
+# Defaults repeated here (not imported) so that ``rbstab --help`` does not import the
+# report package; tests/test_report.py checks they equal rbstab.report's.
+_SETTLE_E = 0.005
+_SETTLE_OMEGA = 0.05
+_METRICS = ("max_abs_constraint_error", "lyapunov_final")
+
+
+@click.command("report")
+@click.argument("inputs", nargs=-1, required=True, type=click.Path())
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(file_okay=False),
+    default=None,
+    help="Report folder [default: results/reports/<name>: the run's name or the folder's name for "
+    "one input, comparison-<hash of the inputs> for several]. An existing report there is replaced.",
+)
+@click.option(
+    "--format",
+    "formats",
+    type=click.Choice(["html", "md"]),
+    multiple=True,
+    default=("html",),
+    show_default=True,
+    help="Page format: index.html and/or index.md (summary.md and summary.csv are always written). Repeatable.",
+)
+@click.option(
+    "--metric",
+    "metrics",
+    multiple=True,
+    metavar="NAME",
+    help="Summary figure plotted against the varied parameters of sweeps. Repeatable "
+    f"[default: {', '.join(_METRICS)}]. An unknown name lists the allowed ones.",
+)
+@click.option(
+    "--settle-e",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=_SETTLE_E,
+    show_default=True,
+    metavar="M",
+    help="Settling threshold on |E|, the norm of the constraint error [m].",
+)
+@click.option(
+    "--settle-omega",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=_SETTLE_OMEGA,
+    show_default=True,
+    metavar="RAD_PER_S",
+    help="Settling threshold on |Omega|, the norm of the angular velocity [rad/s].",
+)
+def report(inputs, output, formats, metrics, settle_e, settle_omega) -> None:
+    """Compare INPUT... (run files *.h5, sweep folders, folders of run files).
+
+    Writes index.html (tables, the paper's figures per run, overlays of the runs, sweep
+    plots, the comparison with the paper's printed values), summary.md, summary.csv and
+    figures/*.png. Every input is checked before anything is written.
+    """
+    from rbstab.report import ReportError, ReportInputError, ReportOptions, SettleThresholds, build_report
+
+    options = ReportOptions(
+        formats=tuple(dict.fromkeys(formats)),
+        metrics=tuple(metrics) if metrics else _METRICS,
+        settle=SettleThresholds(e=settle_e, omega=settle_omega),
+    )
+    try:
+        folder = build_report(inputs, output, options)
+    except ReportInputError as exc:
+        raise click.ClickException("cannot build the report:\n" + "\n".join(f"  {p}" for p in exc.problems))
+    except ReportError as exc:
+        raise click.ClickException(str(exc))
+    page = "index.html" if "html" in options.formats else "index.md"
+    click.echo(f"report: {folder / page}")

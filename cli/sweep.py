@@ -1,0 +1,127 @@
+"""``rbstab sweep``: run a parameter sweep (grid x zip x random) locally or on Dask."""
+
+from __future__ import annotations
+
+import click
+
+from ._common import command_line
+from .options import output_option, set_option
+
+
+def _indent(text: str) -> str:
+    return "\n".join("  " + line for line in text.splitlines())
+
+
+@click.command("sweep")
+@click.argument("spec", type=click.Path(dir_okay=False))
+@output_option("results/sweeps", "Parent folder; the sweep writes OUTPUT/<name>/.")
+@click.option(
+    "-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
+    help="Worker processes on this machine  [default: all CPUs].",
+)
+@click.option(
+    "--executor", type=click.Choice(["local", "dask"]), default=None,
+    help="Where runs execute: local processes, or an existing Dask cluster (needs "
+    '--scheduler and pip install "rbstab[dask]")  [default: local].',
+)
+@click.option(
+    "--scheduler", metavar="ADDRESS", default=None,
+    help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --executor dask).",
+)
+@set_option
+@click.option(
+    "--timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
+    help="Per-run wall-time budget; a run past it is recorded as failed.",
+)
+@click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
+@click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
+@click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
+def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, retry_failed, dry_run, progress) -> None:
+    """Run the sweep SPEC.yaml; write OUTPUT/<name>/ (sweep.yaml, runs/*.h5, index.csv).
+
+    Every run's config is validated before anything runs. Running the same command again
+    skips the runs whose result file exists and matches their config, and finishes the
+    rest. --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the
+    spec itself (e.g. --set sweep.random.n=20).
+
+    Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
+    1 for an invalid spec (nothing is run); 130 when interrupted.
+    """
+    from rbstab.sweep import (
+        ExecutorError,
+        SweepBusyError,
+        SweepSpecError,
+        expand,
+        load_spec,
+        run_sweep,
+    )
+    from rbstab.sweep.spec import warning_digest
+
+    if scheduler and executor == "local":
+        raise click.UsageError("--scheduler is for --executor dask")
+    executor = executor or ("dask" if scheduler else "local")
+    if executor == "dask" and not scheduler:
+        raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
+    try:
+        loaded = load_spec(spec, overrides)
+        runs = expand(loaded)
+    except SweepSpecError as exc:
+        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
+    for line in warning_digest(runs):
+        click.echo(f"warning: {line}", err=True)
+
+    if dry_run:
+        click.echo(f"{loaded.name}: {len(runs)} runs (dry run: nothing run or written)")
+        for run in runs:
+            params = ", ".join(f"{k}={v}" for k, v in run.params.items())
+            click.echo(f"  {run.run_id}  base={run.base}" + (f"  {params}" if params else ""))
+        return
+
+    try:
+        outcome = run_sweep(
+            loaded,
+            output,
+            runs=runs,
+            executor=executor,
+            jobs=jobs,
+            scheduler=scheduler,
+            timeout=timeout,
+            retry_failed=retry_failed,
+            progress=progress,
+            command_line=command_line(),
+            log=lambda message: click.echo(message, err=True),
+        )
+    except (SweepBusyError, ExecutorError) as exc:
+        raise click.ClickException(str(exc))
+    except KeyboardInterrupt:
+        click.echo(
+            f"\ninterrupted: finished runs are saved and the index is up to date; "
+            f"run the same command again to resume",
+            err=True,
+        )
+        raise SystemExit(130)
+
+    c = outcome.counts
+    pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0
+    click.echo(
+        f"{outcome.name}: {outcome.n_runs} runs ({outcome.n_skipped} skipped, {outcome.n_executed} run now): "
+        f"{c.get('success', 0)} success, {c.get('failed', 0)} failed, {c.get('error', 0)} error, "
+        f"{c.get('pending', 0)} pending; converged {outcome.n_converged} ({pct:.1f}%)"
+    )
+    click.echo(f"  index   {outcome.index_path}")
+    click.echo(f"  summary {outcome.summary_path}")
+    for run_id, status, message in outcome.problems[:20]:
+        click.echo(f"  {run_id}: {status}: {message}", err=True)
+    if len(outcome.problems) > 20:
+        click.echo(f"  ... and {len(outcome.problems) - 20} more (see the index)", err=True)
+    if outcome.tracebacks:
+        run_id, text = next(iter(outcome.tracebacks.items()))
+        click.echo(f"traceback of {run_id} (a bug? please report it):\n{text}", err=True)
+    if outcome.stale_files:
+        click.echo(
+            f"note: {len(outcome.stale_files)} result file(s) in {outcome.directory / 'runs'} are not "
+            "runs of this spec (left in place)",
+            err=True,
+        )
+    if outcome.n_failed:
+        raise SystemExit(min(outcome.n_failed, 100))

@@ -1,0 +1,404 @@
+"""Build a report folder from run files and sweep folders (what ``rbstab report`` calls).
+
+Order of work, so that bad input never leaves anything behind:
+
+1. validate the options (metric names, thresholds, formats);
+2. read and check every input (:func:`rbstab.report.load.load_inputs`);
+3. check the output folder: it may be absent, empty, or hold an earlier report
+   (``report.json``), which is then replaced; anything else is refused;
+4. write everything into a temporary folder beside the target and rename it into place.
+
+Layout of the report folder::
+
+    index.html            the page (--format html, default): tables, figures, notes
+    index.md              the same page as markdown (--format md)
+    summary.md            the tables of the page
+    summary.csv           one row per run (direct runs and the runs of every sweep)
+    sweep_<name>.csv      per sweep: index.csv plus the chosen metrics
+    figures/*.png         every figure
+    report.json           what the report was built from (inputs, options, version)
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
+from .paper import PAPER_DOCS, compare_with_paper
+from .render import Section, Table, render_html, render_markdown, render_tables_markdown
+from .tables import (
+    DEFAULT_METRICS,
+    SettleThresholds,
+    differing_parameters,
+    format_value,
+    metric_column,
+    metric_label,
+    runs_table,
+    sweep_table,
+    validate_metrics,
+)
+
+__all__ = ["ReportOptions", "ReportError", "build_report", "default_report_name", "REPORTS_ROOT", "MAX_TABLE_ROWS"]
+
+#: Parent of the default report folders.
+REPORTS_ROOT = Path("results") / "reports"
+#: Rows of a sweep's index shown on the page (the CSV always has all).
+MAX_TABLE_ROWS = 500
+#: Marker file of a report folder.
+MANIFEST = "report.json"
+FORMATS = ("html", "md")
+
+
+class ReportError(ValueError):
+    """Raised for options or an output folder that a report cannot use."""
+
+
+@dataclass(frozen=True)
+class ReportOptions:
+    """Options of a report.
+
+    Attributes
+    ----------
+    formats : tuple of str
+        Page formats: ``"html"`` (``index.html``) and/or ``"md"`` (``index.md``).
+    metrics : tuple of str
+        Metrics plotted against the varied parameters of sweeps
+        (:func:`rbstab.report.tables.allowed_metrics`).
+    settle : SettleThresholds
+        Thresholds of the settling time (|E| [m], |Omega| [rad/s]).
+    """
+
+    formats: tuple[str, ...] = ("html",)
+    metrics: tuple[str, ...] = DEFAULT_METRICS
+    settle: SettleThresholds = field(default_factory=SettleThresholds)
+
+
+def default_report_name(inputs: ReportInputs) -> str:
+    """Folder name of a report under ``results/reports/``.
+
+    One input: a run file gives its run name, a folder its folder name. Several inputs:
+    ``comparison-<8 hex digits>``, the start of the SHA-256 of the sorted resolved input
+    paths (the same inputs always give the same name).
+    """
+    if len(inputs.paths) == 1:
+        p = inputs.paths[0]
+        if p.is_file() and inputs.runs:
+            return safe_filename(inputs.runs[0].name)
+        return safe_filename(p.name)
+    digest = hashlib.sha256("\n".join(sorted(str(p) for p in inputs.paths)).encode()).hexdigest()[:8]
+    return f"comparison-{digest}"
+
+
+def _check_output(target: Path) -> None:
+    if target.exists() and not target.is_dir():
+        raise ReportError(f"{target}: exists and is not a folder")
+    if target.is_dir() and any(target.iterdir()) and not (target / MANIFEST).is_file():
+        raise ReportError(
+            f"{target}: folder exists, is not empty and is not an rbstab report (no {MANIFEST}); "
+            "choose another -o"
+        )
+
+
+# -- tables ---------------------------------------------------------------------------
+
+def _f(value, digits: int = 4) -> str:
+    return format_value(value, digits)
+
+
+def _vec(row, prefix: str) -> str:
+    values = [row[f"{prefix}_{i}"] for i in (1, 2, 3)]
+    return "-" if all(not np.isfinite(v) for v in values) else _f(values)
+
+
+def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[Section]:
+    rows = df.to_dict("records")
+    s = Section("Runs", "runs")
+    s.blocks.append(
+        "One row per run; values read back from the result files (summary attributes written by "
+        "the run). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
+    )
+    s.blocks.append(Table(
+        "Runs: identity, solver statistics, status",
+        ["run", "file", "variant", "status", "t_final [s]", "method", "nfev", "njev", "nlu", "wall time [s]", "message"],
+        [[r["run"], Path(r["file"]).name, r["variant"], r["status"], _f(r["t_final"]), str(r["method"]),
+          _f(r["nfev"]), _f(r["njev"]), _f(r["nlu"]), _f(r["wall_time"], 3), r["message"] if r["status"] != "success" else ""]
+         for r in rows],
+    ))
+    if params:
+        s.blocks.append(Table(
+            "Parameters that differ between the runs (resolved configurations)",
+            ["run", *params],
+            [[r["run"], *(_f(r[p], 6) for p in params)] for r in rows],
+        ))
+    s.blocks.append(Table(
+        "Final rotational state (at t_final)",
+        ["run", "Theta [rad]", "Omega [rad/s]"],
+        [[r["run"], *(_vec(r, f"final_{b}") for b in ("theta", "omega"))] for r in rows],
+    ))
+    has_d = any(np.isfinite(r["final_controller_state_1"]) for r in rows)
+    blocks = ("position", "velocity", "controller_state") if has_d else ("position", "velocity")
+    s.blocks.append(Table(
+        "Final translational state (at t_final)",
+        ["run", "X [m]", "V [m/s]", *(["D [m]"] if has_d else [])],
+        [[r["run"], *(_vec(r, f"final_{b}") for b in blocks)] for r in rows],
+    ))
+    s.blocks.append(Table(
+        "Constraint error and Lyapunov function",
+        ["run", "max |E| per axis [m]", "settling time [s]", "v(0) [J]", "v(t_end) [J]", "max dv/dt [W]",
+         "max |analytic - numerical dv/dt| [W]", "relative", "rate check"],
+        [[r["run"], _vec(r, "max_abs_constraint_error"),
+          "not settled" if not np.isfinite(r["settling_time"]) else _f(r["settling_time"]),
+          _f(r["lyapunov_initial"]), _f(r["lyapunov_final"]), _f(r["max_lyapunov_rate"]),
+          _f(r["lyapunov_rate_mismatch"]), _f(r["lyapunov_rate_mismatch_relative"], 3), str(r["lyapunov_rate_check"])]
+         for r in rows],
+    ))
+    return [s]
+
+
+def _paper_section(runs: Sequence[RunData]) -> Section | None:
+    comparisons = compare_with_paper(runs)
+    if not comparisons:
+        return None
+    s = Section("Comparison with the paper", "paper")
+    s.blocks.append(
+        "Runs named after a paper case (and of its variant) beside the values printed in section 6 of "
+        "the paper. They do not match, and rbstab does not tune anything to make them match: the printed "
+        "paper has typos in B (eq 1) and eq 21 and omits parameters, so its printed numbers cannot be "
+        f"reached by the consistent equations. The differences are explained in {PAPER_DOCS}."
+    )
+    for comp in comparisons:
+        sub = Section(f"{comp.case.title}: {comp.run.label}", f"paper-{safe_filename(comp.run.label)}", level=3)
+        sub.blocks.append(f"Paper: {comp.case.claim}.")
+        if comp.rows:
+            sub.blocks.append(Table(
+                f"{comp.run.label} against the printed values (difference = ours - printed)",
+                ["quantity", "units", "printed", "ours", "difference"],
+                [[r["quantity"], r["units"], _f(r["printed"]), _f(r["ours"]), _f(r["difference"], 3)] for r in comp.rows],
+            ))
+        if comp.notes:
+            sub.blocks.append(comp.notes)
+        s.blocks.append(sub)
+    return s
+
+
+def _truthy(value) -> bool:
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, float, np.number)):
+        return bool(np.isfinite(value) and value != 0)
+    return str(value).strip().lower() in ("true", "1", "yes")
+
+
+def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, settle: SettleThresholds) -> Section:
+    s = Section(f"Sweep {sweep.name}", f"sweep-{safe_filename(sweep.name)}")
+    n = len(table)
+    ok = table["status"].astype(str) == "success"
+    settled_col = "report:settled"
+    facts = [
+        f"folder: {sweep.path}",
+        f"{n} runs: " + ", ".join(f"{count} {status}" for status, count in table["status"].astype(str).value_counts().items()),
+        "parameters: " + (", ".join(sweep.parameters) or "none found in index.csv"),
+        "varied: " + (", ".join(f"{p} ({table[p].astype(str).nunique()} values)" for p in sweep.varied) or "none"),
+    ]
+    if "converged" in table.columns:
+        stable = int(sum(_truthy(v) and st for v, st in zip(table["converged"], ok)))
+        facts.append(f"stable (status success and converged, as the sweep recorded it): {stable} of {n} = {stable / n:.0%}")
+    settled = int(table[settled_col].sum())
+    facts.append(
+        f"settled (|E| <= {settle.e:g} m and |Omega| <= {settle.omega:g} rad/s until t_end): "
+        f"{settled} of {n} = {settled / n:.0%}"
+    )
+    missing = sum(r is None for r in sweep.runs)
+    if missing:
+        facts.append(f"{missing} rows of index.csv have no result file: their metrics are blank")
+    s.blocks.append(facts)
+    failed = table[~ok]
+    if len(failed):
+        s.blocks.append(Table(
+            f"Failed runs of {sweep.name}",
+            ["run_id", *sweep.varied, "status", "message"],
+            [[str(r["run_id"]), *(_f(r[p], 6) for p in sweep.varied), str(r["status"]), str(r["message"])]
+             for r in failed.to_dict("records")],
+        ))
+    else:
+        s.blocks.append("No run failed.")
+    if not sweep.varied:
+        s.blocks.append("No parameter varies between the runs of this sweep: no metric plots.")
+    s.blocks.extend(figures)
+    shown = table.head(MAX_TABLE_ROWS)
+    metric_cols = [metric_column(m) for m in metrics]
+    cols = ["run_id", *sweep.varied, "status", *metric_cols, settled_col]
+    if "converged" in table.columns:
+        cols.insert(cols.index("status") + 1, "converged")
+    headers = ["run_id", *sweep.varied, "status", *(["converged"] if "converged" in table.columns else []),
+               *(metric_label(m) for m in metrics), "settled"]
+    note = f"sweep_{safe_filename(sweep.name)}.csv holds every column of index.csv plus these metrics"
+    if n > MAX_TABLE_ROWS:
+        note = f"first {MAX_TABLE_ROWS} of {n} runs; " + note
+    s.blocks.append(Table(
+        f"Index of {sweep.name} (metrics read back from the run files)",
+        headers,
+        [[_f(r[c]) if not isinstance(r[c], str) else r[c] for c in cols] for r in shown.to_dict("records")],
+        note=note,
+    ))
+    return s
+
+
+# -- the report -------------------------------------------------------------------------
+
+def build_report(
+    inputs: Sequence[str | os.PathLike],
+    output: str | os.PathLike | None = None,
+    options: ReportOptions | None = None,
+) -> Path:
+    """Build a report folder from run files and sweep folders.
+
+    Parameters
+    ----------
+    inputs : sequence of path-like
+        Run files (``*.h5``), sweep folders (``sweep.yaml`` + ``index.csv``) and plain
+        folders of run files, in any mix.
+    output : path-like, optional
+        Report folder; default ``results/reports/<name>`` (:func:`default_report_name`).
+        If it exists it must be empty or an earlier report, which is replaced.
+    options : ReportOptions, optional
+
+    Returns
+    -------
+    Path
+        The report folder.
+
+    Raises
+    ------
+    ReportInputError
+        If an input is missing, not an rbstab result, an empty folder or a broken sweep
+        (every problem listed); nothing is written.
+    ReportError
+        If an option is invalid or the output folder cannot be used; nothing is written.
+    """
+    options = options or ReportOptions()
+    try:
+        metrics = validate_metrics(options.metrics)
+    except ValueError as exc:
+        raise ReportError(str(exc)) from None
+    bad = [f for f in options.formats if f not in FORMATS]
+    if bad or not options.formats:
+        raise ReportError(f"unknown format {bad}; allowed: {', '.join(FORMATS)}")
+    data = load_inputs(inputs)
+    target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data)
+    _check_output(target)
+
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
+    try:
+        umask = os.umask(0)
+        os.umask(umask)
+        tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; a report is an ordinary folder
+        _write(data, tmp, target.name, options, metrics)
+        old = None
+        if target.exists():
+            old = target.parent / f".{target.name}.old-{os.getpid()}"
+            os.replace(target, old)
+        os.replace(tmp, target)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return target
+
+
+def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, metrics: Sequence[str]) -> None:
+    import pandas as pd
+
+    from .figures import comparison_figures, run_figures, sweep_figures
+
+    (folder / "figures").mkdir()
+    settle = options.settle
+    sections: list[Section] = []
+    runs = data.runs
+    all_runs = data.all_runs
+    params = differing_parameters(runs)
+    if runs:
+        df_runs = runs_table(runs, settle, params)
+        sections += _runs_sections(runs, df_runs, params)
+        paper = _paper_section(runs)
+        if paper is not None:
+            sections.append(paper)
+        cmp = Section("Comparison figures" if len(runs) > 1 else "Constraint error and angular velocity",
+                      "comparison")
+        cmp.blocks.extend(comparison_figures(runs, folder, settle))
+        sections.append(cmp)
+
+        per_run = Section("Figures of each run", "figures")
+        for run in runs:
+            sub = Section(f"{run.label} ({run.variant}, {run.status})", f"run-{safe_filename(run.label)}", level=3)
+            if not run.ok:
+                sub.blocks.append(f"FAILED: {run.message}")
+            sub.blocks.extend(run_figures(run, folder))
+            per_run.blocks.append(sub)
+        sections.append(per_run)
+    for sweep in data.sweeps:
+        table = sweep_table(sweep, metrics, settle)
+        table.to_csv(folder / f"sweep_{safe_filename(sweep.name)}.csv", index=False)
+        figs = sweep_figures(sweep, table, metrics, folder)
+        sections.append(_sweep_section(sweep, table, metrics, figs, settle))
+
+    # summary.csv: every run, direct and swept, one row each
+    all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
+    pd.DataFrame(runs_table(all_runs, settle, all_params) if all_runs else []).to_csv(folder / "summary.csv", index=False)
+
+    sections = _flatten(sections)
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    title = f"rbstab report: {name}"
+    intro = [
+        f"Created {created} by rbstab {__version__} from {len(data.paths)} input(s): "
+        + ", ".join(str(p) for p in data.paths) + ".",
+        f"Settling time: the first sample time after which |E| <= {settle.e:g} m and |Omega| <= "
+        f"{settle.omega:g} rad/s (Euclidean norms) hold until the end of the run; 'not settled' when the "
+        "last sample is outside (always for a failed run). Tables: summary.csv (every run, full precision), "
+        "summary.md.",
+    ]
+    if "html" in options.formats:
+        (folder / "index.html").write_text(render_html(title, intro, sections), encoding="utf-8")
+    if "md" in options.formats:
+        (folder / "index.md").write_text(render_markdown(title, intro, sections), encoding="utf-8")
+    (folder / "summary.md").write_text(render_tables_markdown(title, intro, sections), encoding="utf-8")
+    manifest = {
+        "rbstab_report": 1,
+        "rbstab_version": __version__,
+        "created": created,
+        "inputs": [str(p) for p in data.paths],
+        "runs": [str(r.path) for r in runs],
+        "sweeps": [str(s.path) for s in data.sweeps],
+        "formats": list(options.formats),
+        "metrics": list(metrics),
+        "settle_e": settle.e,
+        "settle_omega": settle.omega,
+        "figures": sorted(str(p.relative_to(folder)) for p in (folder / "figures").glob("*.png")),
+    }
+    (folder / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
+
+
+def _flatten(sections: Sequence[Section]) -> list[Section]:
+    """Sub-sections stored as blocks become sections of their own, in document order."""
+    out: list[Section] = []
+    for s in sections:
+        out.append(Section(s.title, s.anchor, [], s.level))
+        for block in s.blocks:
+            if isinstance(block, Section):
+                out.extend(_flatten([block]))
+            else:
+                out[-1].blocks.append(block)
+    return out

@@ -1,0 +1,602 @@
+"""Read and validate the inputs of a report: run files and sweep folders.
+
+Everything a report needs is read here, before anything is written:
+
+- a **run file** is an HDF5 result of ``rbstab run`` (``rbstab_format`` attribute, see
+  :mod:`rbstab.io.hdf5`); its identity, status, solver statistics and summary figures
+  come from :func:`rbstab.io.hdf5.read_summary`, its resolved configuration from the
+  ``config`` attribute, and its time series are read on demand (:meth:`RunData.series`);
+- a **sweep folder** holds ``sweep.yaml`` (the sweep specification) and ``index.csv``
+  (one row per run: ``run_id``, the varied parameters, ``status``, ``message``,
+  ``wall_time``, flattened summary figures, ``converged``) beside one result file per run;
+- any other **folder** is read as a set of run files (its ``*.h5``, not recursive).
+
+:func:`load_inputs` checks every input and raises one :class:`ReportInputError` listing
+every problem, so the caller can refuse the whole report before creating anything.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = [
+    "ReportInputError",
+    "RunData",
+    "SweepData",
+    "ReportInputs",
+    "load_inputs",
+    "load_run",
+    "load_sweep",
+    "flatten_config",
+    "is_sweep_folder",
+    "RUN_FILE_COLUMNS",
+]
+
+#: Column names of ``index.csv`` that may hold a run's result file (relative to the sweep
+#: folder), tried in this order before ``<run_id>.h5``.
+RUN_FILE_COLUMNS = ("file", "path", "result", "result_file", "filename", "output")
+
+#: ``index.csv`` columns that are bookkeeping, never a varied parameter.
+_BOOKKEEPING = {
+    "run_id", "run", "id", "name", "status", "message", "wall_time", "converged",
+    "config_hash", "created", "error", "seed", "index", "run_index", "base", *RUN_FILE_COLUMNS,
+}
+#: Prefixes of ``index.csv`` columns holding summary figures or solver statistics.
+_SUMMARY_PREFIXES = (
+    "summary", "solver", "t_final", "final_", "max_abs_constraint_error", "lyapunov_",
+    "max_lyapunov", "nfev", "njev", "nlu", "settling",
+)
+#: Keys of ``sweep.yaml`` that may map parameter names to their values.
+_SPEC_PARAMETER_KEYS = ("parameters", "params", "grid", "vary", "sweep", "axes", "zip", "product", "values")
+
+
+class ReportInputError(ValueError):
+    """Raised when inputs of a report are missing or unreadable.
+
+    Attributes
+    ----------
+    problems : list of str
+        One line per bad input (the message joins them).
+    """
+
+    def __init__(self, problems: Sequence[str]) -> None:
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))
+
+
+def flatten_config(config: Any, prefix: str = "") -> dict[str, Any]:
+    """Flatten nested mappings into dotted keys; lists (vectors, matrices) stay leaves.
+
+    Parameters
+    ----------
+    config : dict or scalar
+        A resolved configuration as parsed by ``yaml.safe_load``.
+    prefix : str
+        Dotted prefix of ``config`` (used by the recursion).
+
+    Returns
+    -------
+    dict
+        ``{"controller.k_t": [[...]], "simulation.t_end": 2.0, ...}``.
+    """
+    if isinstance(config, dict):
+        out: dict[str, Any] = {}
+        for key, value in config.items():
+            out.update(flatten_config(value, f"{prefix}.{key}" if prefix else str(key)))
+        return out
+    return {prefix: config}
+
+
+@dataclass
+class RunData:
+    """One run result file, as the report sees it.
+
+    Attributes
+    ----------
+    path : Path
+        The HDF5 file.
+    label : str
+        Name shown in tables and legends: the run's ``name`` attribute, made unique
+        among the report's runs (:func:`load_inputs`).
+    name, variant, status, message : str
+        The file's global attributes.
+    wall_time : float
+        Integration plus post-processing time [s].
+    solver : dict
+        ``solver_*`` attributes without the prefix (``nfev``, ``njev``, ``nlu``,
+        ``status``, ``message``).
+    summary : dict
+        ``summary_*`` attributes without the prefix (:func:`rbstab.summary.summarize`);
+        vectors are lists of 3 floats.
+    config : dict
+        The resolved configuration (``config`` attribute parsed as YAML).
+    attrs : dict
+        Every global attribute as a plain Python value.
+    sweep : str or None
+        Name of the sweep folder the run belongs to, None for a run given directly.
+    """
+
+    path: Path
+    label: str
+    name: str
+    variant: str
+    status: str
+    message: str
+    wall_time: float
+    solver: dict
+    summary: dict
+    config: dict
+    attrs: dict
+    sweep: str | None = None
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def ok(self) -> bool:
+        """True when the run reached its end time (status ``"success"``)."""
+        return self.status == "success"
+
+    @property
+    def flat_config(self) -> dict[str, Any]:
+        """:func:`flatten_config` of :attr:`config`."""
+        if "flat" not in self._cache:
+            self._cache["flat"] = flatten_config(self.config)
+        return self._cache["flat"]
+
+    def series(self, *names: str) -> dict[str, np.ndarray]:
+        """Time series of the run, read from the file (and cached).
+
+        Parameters
+        ----------
+        *names : str
+            Variable names (``theta``, ``omega``, ``position``, ``velocity``,
+            ``controller_state``, ``constraint_error``, ``lyapunov``, ``lyapunov_rate``,
+            ``lyapunov_rate_numerical``, ...). ``time`` is always included.
+
+        Returns
+        -------
+        dict of str -> ndarray
+            ``time`` shape (n,) [s], 3-vectors shape (n, 3), scalars shape (n,), in the
+            units of :meth:`units`; NaN rows after a failure. A name the file does not
+            hold (e.g. ``controller_state`` outside ``embedded``) is left out.
+        """
+        import h5py
+
+        wanted = ["time", *names]
+        missing = [n for n in wanted if n not in self._cache]
+        if missing:
+            with h5py.File(self.path, "r") as f:
+                for n in missing:
+                    if n in f:
+                        self._cache[n] = np.asarray(f[n][...], dtype=float)
+                        units = f[n].attrs.get("units", "")
+                        self._cache[f"units:{n}"] = units.decode() if isinstance(units, bytes) else str(units)
+                    else:
+                        self._cache[n] = None
+        return {n: self._cache[n] for n in wanted if self._cache[n] is not None}
+
+    def drop_series(self) -> None:
+        """Forget the time series read so far (other cached values stay)."""
+        for key in [k for k in self._cache if isinstance(k, str) and k != "flat"]:
+            del self._cache[key]
+
+    def units(self, name: str) -> str:
+        """Units attribute of variable ``name`` as stored in the file (e.g. ``"rad s-1"``)."""
+        self.series(name)
+        return self._cache.get(f"units:{name}", "")
+
+
+@dataclass
+class SweepData:
+    """One sweep folder.
+
+    Attributes
+    ----------
+    path : Path
+        The folder (holds ``sweep.yaml`` and ``index.csv``).
+    name : str
+        The folder's name.
+    spec : dict
+        ``sweep.yaml`` parsed.
+    index : pandas.DataFrame
+        ``index.csv``, one row per run, in file order.
+    runs : list of (RunData or None)
+        The result file of each row of ``index`` (same order); None where the row's file
+        is missing (e.g. a run that crashed before writing).
+    parameters : list of str
+        Swept parameters (see :func:`load_sweep`): a column of ``index``, or a list-valued
+        key whose entries were split into columns.
+    varied : list of str
+        The parameters that take more than one value.
+    axes : dict of str -> pandas.Series
+        Value of each parameter for each row of ``index`` (numbers, or text for a list).
+    """
+
+    path: Path
+    name: str
+    spec: dict
+    index: Any
+    runs: list
+    parameters: list[str]
+    varied: list[str]
+    axes: dict = field(default_factory=dict)
+
+    @property
+    def run_ids(self) -> list[str]:
+        """``run_id`` of each row of :attr:`index`."""
+        return [str(r) for r in self.index["run_id"]]
+
+
+@dataclass
+class ReportInputs:
+    """Everything a report is built from.
+
+    Attributes
+    ----------
+    runs : list of RunData
+        Runs given directly (files, or the ``*.h5`` of a plain folder), in input order.
+    sweeps : list of SweepData
+        Sweep folders, in input order.
+    paths : list of Path
+        The inputs as given (resolved), for the record.
+    """
+
+    runs: list[RunData]
+    sweeps: list[SweepData]
+    paths: list[Path]
+
+    @property
+    def all_runs(self) -> list[RunData]:
+        """Direct runs followed by the runs of every sweep (files present only)."""
+        return self.runs + [r for s in self.sweeps for r in s.runs if r is not None]
+
+
+def is_sweep_folder(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a folder with ``sweep.yaml`` and ``index.csv``."""
+    p = Path(path)
+    return p.is_dir() and (p / "sweep.yaml").is_file() and (p / "index.csv").is_file()
+
+
+def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
+    """Read identity, summary and configuration of one result file (no time series).
+
+    Parameters
+    ----------
+    path : path-like
+        An HDF5 result written by ``rbstab run`` or a sweep.
+    sweep : str, optional
+        Name of the sweep the run belongs to.
+
+    Returns
+    -------
+    RunData
+        With ``label`` = the run's ``name`` attribute.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    rbstab.io.hdf5.NotAResultFile
+        If it is not an rbstab run result, or its ``config`` attribute is not YAML, or it
+        lacks the time series a report draws.
+    """
+    import h5py
+    import yaml
+
+    from ..io.hdf5 import NotAResultFile, read_attributes
+
+    path = Path(path)
+    attrs = read_attributes(path)
+    try:
+        config = yaml.safe_load(attrs.get("config", "")) or {}
+    except yaml.YAMLError as exc:
+        raise NotAResultFile(f"{path}: the config attribute is not valid YAML ({exc})") from None
+    if not isinstance(config, dict):
+        raise NotAResultFile(f"{path}: the config attribute is not a YAML mapping")
+    required = ("time", "theta", "omega", "constraint_error", "lyapunov", "lyapunov_rate")
+    with h5py.File(path, "r") as f:
+        absent = [n for n in required if n not in f]
+    if absent:
+        raise NotAResultFile(f"{path}: rbstab result without the variables {absent}")
+    missing_attrs = [k for k in ("name", "variant", "status") if k not in attrs]
+    if missing_attrs:
+        raise NotAResultFile(f"{path}: rbstab result without the attributes {missing_attrs}")
+    return RunData(
+        path=path,
+        label=str(attrs["name"]),
+        name=str(attrs["name"]),
+        variant=str(attrs["variant"]),
+        status=str(attrs["status"]),
+        message=str(attrs.get("message", "")),
+        wall_time=float(attrs.get("wall_time", float("nan"))),
+        solver={k[len("solver_"):]: v for k, v in attrs.items() if k.startswith("solver_")},
+        summary={k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")},
+        config=config,
+        attrs=attrs,
+        sweep=sweep,
+    )
+
+
+def _raw_parameter_columns(index, spec: dict) -> list[str]:
+    """Columns of ``index`` that hold swept parameters (see :func:`load_sweep`)."""
+    columns = [str(c) for c in index.columns]
+    several_bases = "base" in columns and index["base"].astype(str).nunique() > 1
+    base = ["base"] if several_bases else []
+    # 1. the keys the sweep specification varies (grid, zip, random params, ...)
+    named: list[str] = []
+
+    def visit(node: Any) -> None:
+        if isinstance(node, dict):
+            for key, value in node.items():
+                if key in _SPEC_PARAMETER_KEYS and isinstance(value, dict):
+                    named.extend(str(k) for k in value)
+                visit(value)
+        elif isinstance(node, list):
+            for item in node:
+                visit(item)
+
+    visit(spec)
+    from_spec = [c for c in columns if c in named or _group_key(c) in named]
+    if from_spec:
+        return from_spec + base
+    # 2. the layout of rbstab.sweep.index: run_id, <bookkeeping>, <parameters>, status, ...
+    if columns[:1] == ["run_id"] and "status" in columns:
+        between = columns[1 : columns.index("status")]
+        return [c for c in between if c not in _BOOKKEEPING] + base
+
+    # 3. otherwise every column that is neither bookkeeping nor a summary figure
+    def is_summary(c: str) -> bool:
+        return c.startswith(_SUMMARY_PREFIXES) or c in _BOOKKEEPING
+
+    dotted = [c for c in columns if "." in c and not is_summary(c)]
+    return (dotted or [c for c in columns if not is_summary(c)]) + base
+
+
+def _group_key(column: str) -> str:
+    """``controller.k_c.2`` -> ``controller.k_c``; ``body.mass:scale`` -> ``body.mass``."""
+    column = column.removesuffix(":scale")
+    return re.sub(r"(\.\d+)+$", "", column)
+
+
+def _parameter_axes(index, spec: dict) -> dict[str, Any]:
+    """One value per run for each swept parameter (list entries grouped back together).
+
+    A list-valued key swept as a whole (``controller.k_c`` -> columns ``controller.k_c.0``
+    .. ``.2``) is one parameter: the single varying entry if only one varies, the whole
+    list as text (``"[4100, 4100, 3280]"``) for a grid or zip over lists, each varying
+    entry on its own for a random draw (``random.params`` of the spec). A ``<key>:scale`` column (the
+    factor of a ``scale_uniform`` draw) stands for its key.
+    """
+    import pandas as pd
+
+    random = spec.get("random") if isinstance(spec.get("random"), dict) else {}
+    random_keys = set(random.get("params") or {}) if isinstance(random.get("params") or {}, dict) else set()
+    groups: dict[str, list[str]] = {}
+    for col in _raw_parameter_columns(index, spec):
+        groups.setdefault(_group_key(col), []).append(col)
+    axes: dict[str, Any] = {}
+    for key, cols in groups.items():
+        scale = [c for c in cols if c.endswith(":scale")]
+        if scale:
+            axes[scale[0]] = index[scale[0]]
+            continue
+        varying = [c for c in cols if index[c].astype(str).nunique(dropna=False) > 1]
+        if len(cols) == 1:
+            axes[cols[0]] = index[cols[0]]
+        elif len(varying) <= 1:
+            name = varying[0] if varying else cols[0]
+            axes[name] = index[name]
+        elif key in random_keys:
+            for c in varying:  # entries drawn independently: one parameter each
+                axes[c] = index[c]
+        else:
+            text = ["[" + ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in row) + "]"
+                    for row in index[cols].itertuples(index=False)]
+            axes[key] = pd.Series(text, index=index.index, name=key)
+    return axes
+
+
+def _find_run_file(folder: Path, row: dict, run_id: str, by_name: dict[str, Path]) -> Path | None:
+    file_columns = [c for c in RUN_FILE_COLUMNS if c in row]
+    if file_columns:  # the index says where the file is; an empty cell means no file
+        for col in file_columns:
+            value = row.get(col)
+            if isinstance(value, str) and value.strip():
+                p = Path(value)
+                p = p if p.is_absolute() else folder / p
+                if p.is_file():
+                    return p
+        return None
+    for candidate in (folder / f"{run_id}.h5", folder / "runs" / f"{run_id}.h5"):
+        if candidate.is_file():
+            return candidate
+    return by_name.get(run_id)
+
+
+def load_sweep(path: str | os.PathLike) -> SweepData:
+    """Read a sweep folder: ``sweep.yaml``, ``index.csv`` and the result file of each row.
+
+    The result file of a row is the file named by its ``file`` column (or another of
+    :data:`RUN_FILE_COLUMNS`; relative to the folder; an empty cell: no file, e.g. a
+    run whose worker raised or that is still pending). Without such a column:
+    ``<run_id>.h5`` or ``runs/<run_id>.h5``, else the file whose ``name`` attribute is the
+    ``run_id``. A row without a file keeps ``None`` (its status and message still come
+    from ``index.csv``).
+
+    Parameter columns are those whose key the sweep specification varies (a mapping
+    under ``grid``, ``zip``, ``params``, ...; ``controller.k_c.2`` and
+    ``body.mass:scale`` count for ``controller.k_c`` and ``body.mass``); failing that,
+    in the layout of :mod:`rbstab.sweep.index`, the non-bookkeeping columns between
+    ``run_id`` and ``status``; failing that, the dotted columns that are not summary
+    figures. ``base`` is a parameter when the sweep has several base configs. Entries of one list-valued key (``controller.k_c.0`` .. ``.2``) are
+    grouped back into one parameter (:func:`_parameter_axes`).
+
+    Raises
+    ------
+    ReportInputError
+        If ``sweep.yaml`` or ``index.csv`` is missing or unreadable, ``index.csv`` has no
+        ``run_id`` or ``status`` column or no row, or a result file is not an rbstab
+        result.
+    """
+    import pandas as pd
+    import yaml
+
+    from ..io.hdf5 import NotAResultFile, read_attributes
+
+    folder = Path(path)
+    problems: list[str] = []
+    try:
+        spec = yaml.safe_load((folder / "sweep.yaml").read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise ReportInputError([f"{folder}: cannot read sweep.yaml ({exc})"]) from None
+    if not isinstance(spec, dict):
+        raise ReportInputError([f"{folder}/sweep.yaml: not a YAML mapping"])
+    try:
+        index = pd.read_csv(folder / "index.csv", keep_default_na=True)
+    except (OSError, ValueError, pd.errors.ParserError) as exc:
+        raise ReportInputError([f"{folder}: cannot read index.csv ({exc})"]) from None
+    for col in ("run_id", "status"):
+        if col not in index.columns:
+            problems.append(f"{folder}/index.csv: no '{col}' column (columns: {', '.join(map(str, index.columns))})")
+    if not problems and len(index) == 0:
+        problems.append(f"{folder}/index.csv: no runs")
+    if problems:
+        raise ReportInputError(problems)
+    if "message" not in index.columns:
+        index["message"] = ""
+    index["message"] = index["message"].fillna("").astype(str)
+    index["run_id"] = index["run_id"].astype(str)
+
+    by_name: dict[str, Path] = {}
+    runs: list[RunData | None] = []
+    rows = index.to_dict("records")
+    ids = [str(r["run_id"]) for r in rows]
+    has_file_column = any(c in index.columns for c in RUN_FILE_COLUMNS)
+    if not has_file_column and any(_find_run_file(folder, r, i, {}) is None for r, i in zip(rows, ids)):
+        for p in sorted(folder.rglob("*.h5")):
+            try:
+                by_name.setdefault(str(read_attributes(p)["name"]), p)
+            except (OSError, NotAResultFile, KeyError):
+                continue
+    for row, run_id in zip(rows, ids):
+        file = _find_run_file(folder, row, run_id, by_name)
+        if file is None:
+            runs.append(None)
+            continue
+        try:
+            runs.append(load_run(file, sweep=folder.name))
+        except (FileNotFoundError, NotAResultFile) as exc:
+            problems.append(str(exc))
+    if problems:
+        raise ReportInputError(problems)
+    axes = _parameter_axes(index, spec)
+    varied = [c for c, v in axes.items() if v.astype(str).nunique(dropna=False) > 1]
+    return SweepData(folder, folder.name, spec, index, runs, list(axes), varied, axes)
+
+
+def _unique_labels(runs: Iterable[RunData]) -> None:
+    """Make ``label`` unique: repeated names get their parent folder, then a counter."""
+    runs = list(runs)
+    names = [r.name for r in runs]
+    for run in runs:
+        if names.count(run.name) > 1:
+            run.label = f"{run.path.parent.name}/{run.name}" if run.sweep is None else f"{run.sweep}/{run.name}"
+    seen: dict[str, int] = {}
+    for run in runs:
+        n = seen.get(run.label, 0)
+        seen[run.label] = n + 1
+        if n:
+            run.label = f"{run.label}#{n + 1}"
+
+
+def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
+    """Validate and read every input of a report; nothing is written.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        Run files (``*.h5``), sweep folders (``sweep.yaml`` + ``index.csv``) and plain
+        folders of run files, in any mix. Repeated paths are read once.
+
+    Returns
+    -------
+    ReportInputs
+
+    Raises
+    ------
+    ReportInputError
+        Listing every input that does not exist, is not an rbstab result, is an empty
+        folder or an unreadable sweep; raised only after all inputs were checked.
+    """
+    from ..io.hdf5 import NotAResultFile
+
+    if not paths:
+        raise ReportInputError(["no input given: pass run files (*.h5) and/or sweep folders"])
+    problems: list[str] = []
+    runs: list[RunData] = []
+    sweeps: list[SweepData] = []
+    seen: set[Path] = set()
+    resolved: list[Path] = []
+    for raw in paths:
+        p = Path(raw)
+        key = p.resolve()
+        if key in seen:
+            continue
+        seen.add(key)
+        resolved.append(key)
+        if not p.exists():
+            problems.append(f"{p}: no such file or folder")
+        elif p.is_dir():
+            if (p / "sweep.yaml").is_file() or (p / "index.csv").is_file():
+                if not is_sweep_folder(p):
+                    lacking = "index.csv" if (p / "sweep.yaml").is_file() else "sweep.yaml"
+                    problems.append(f"{p}: incomplete sweep folder (no {lacking})")
+                    continue
+                try:
+                    sweeps.append(load_sweep(p))
+                except ReportInputError as exc:
+                    problems.extend(exc.problems)
+                continue
+            files = sorted(p.glob("*.h5"))
+            if not files:
+                inner = sorted(q.name for q in p.iterdir() if is_sweep_folder(q))
+                if inner:
+                    problems.append(
+                        f"{p}: not a sweep folder and no result files (*.h5) in it; it holds the "
+                        f"sweep folders {', '.join(inner)}: pass those"
+                    )
+                else:
+                    problems.append(
+                        f"{p}: empty folder: it holds no result files (*.h5) and is not a sweep "
+                        "folder (sweep.yaml + index.csv)"
+                    )
+            for file in files:
+                if file.resolve() in seen:
+                    continue
+                seen.add(file.resolve())
+                try:
+                    runs.append(load_run(file))
+                except (FileNotFoundError, NotAResultFile) as exc:
+                    problems.append(str(exc))
+        else:
+            try:
+                runs.append(load_run(p))
+            except (FileNotFoundError, NotAResultFile) as exc:
+                problems.append(str(exc))
+    if problems:
+        raise ReportInputError(problems)
+    _unique_labels(runs)
+    for sweep in sweeps:
+        _unique_labels([r for r in sweep.runs if r is not None])
+    return ReportInputs(runs, sweeps, resolved)
+
+
+def safe_filename(text: str) -> str:
+    """``text`` reduced to ``[A-Za-z0-9_.-]`` for use in a file name."""
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", text).strip("_") or "run"

@@ -1,0 +1,202 @@
+"""The report page as a small document model, rendered to HTML and to markdown.
+
+The same :class:`Section` list renders to ``index.html`` (self-contained: CSS inline,
+figures beside it under ``figures/`` with relative links), ``index.md`` and, tables
+only, ``summary.md``, so the page and the markdown show the same tables.
+"""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+from .figures import FigureFile
+
+__all__ = ["Table", "Section", "render_html", "render_markdown", "render_tables_markdown"]
+
+
+@dataclass
+class Table:
+    """A table of text cells.
+
+    Attributes
+    ----------
+    title : str
+    columns : list of str
+        Header cells (with units, e.g. ``"t_final [s]"``).
+    rows : list of list of str
+        Already formatted cells, ``len(columns)`` each.
+    note : str
+        Shown under the table (e.g. "first 500 of 1200 rows").
+    """
+
+    title: str
+    columns: list[str]
+    rows: list[list[str]]
+    note: str = ""
+
+
+@dataclass
+class Section:
+    """A heading and its content, in order.
+
+    Attributes
+    ----------
+    title : str
+    anchor : str
+        HTML id (letters, digits, ``-``).
+    blocks : list
+        ``str`` (a paragraph), :class:`Table`, :class:`rbstab.report.figures.FigureFile`,
+        or ``list`` of str (a bullet list).
+    level : int
+        2 for top-level sections, 3 below.
+    """
+
+    title: str
+    anchor: str
+    blocks: list = field(default_factory=list)
+    level: int = 2
+
+
+_CSS = """
+body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 2em auto;
+       max-width: 1250px; padding: 0 1em; color: #222; line-height: 1.45; }
+h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
+h2 { border-bottom: 1px solid #bbb; padding-bottom: .15em; margin-top: 2em; }
+.scroll { overflow-x: auto; margin: .6em 0 1.2em 0; }
+table { border-collapse: collapse; font-size: 13px; }
+caption { text-align: left; font-weight: 600; padding: .3em 0; }
+th, td { border: 1px solid #ccc; padding: 3px 7px; text-align: right; white-space: nowrap; vertical-align: top; }
+th { background: #f0f0f0; }
+td:first-child, th:first-child { text-align: left; }
+td.text { text-align: left; white-space: normal; min-width: 14em; }
+th.text { text-align: left; }
+tr:nth-child(even) td { background: #fafafa; }
+.note { color: #555; font-size: 13px; }
+figure { margin: 1em 0 2em 0; }
+figure img { max-width: 100%; border: 1px solid #ddd; }
+figcaption { font-size: 13px; color: #444; }
+nav ul { columns: 2; }
+.failed { color: #b00; font-weight: 600; }
+"""
+
+
+def _is_text(text: str) -> bool:
+    """Prose (left-aligned, wrapped) rather than a number or a vector."""
+    return len(text) > 40 or (" " in text.strip() and not text.startswith(("[", "diag(")))
+
+
+def _cell(text: str) -> str:
+    escaped = html.escape(text)
+    if text in ("failed", "error"):
+        return f'<td class="failed">{escaped}</td>'
+    if _is_text(text):
+        return f'<td class="text">{escaped}</td>'
+    return f"<td>{escaped}</td>"
+
+
+def _html_table(table: Table) -> str:
+    prose = [any(_is_text(row[i]) for row in table.rows) for i in range(len(table.columns))]
+    head = "".join(
+        (f'<th class="text">{html.escape(c)}</th>' if p else f"<th>{html.escape(c)}</th>")
+        for c, p in zip(table.columns, prose)
+    )
+    body = "\n".join("<tr>" + "".join(_cell(c) for c in row) + "</tr>" for row in table.rows)
+    note = f'<p class="note">{html.escape(table.note)}</p>' if table.note else ""
+    return (
+        f'<div class="scroll"><table><caption>{html.escape(table.title)}</caption>\n'
+        f"<thead><tr>{head}</tr></thead>\n<tbody>\n{body}\n</tbody></table></div>{note}"
+    )
+
+
+def _html_block(block) -> str:
+    if isinstance(block, Table):
+        return _html_table(block)
+    if isinstance(block, FigureFile):
+        src = html.escape(block.path, quote=True)
+        return (
+            f'<figure><a href="{src}"><img src="{src}" alt="{html.escape(block.title, quote=True)}"></a>'
+            f"<figcaption><b>{html.escape(block.title)}.</b> {html.escape(block.caption)}</figcaption></figure>"
+        )
+    if isinstance(block, list):
+        return "<ul>" + "".join(f"<li>{html.escape(item)}</li>" for item in block) + "</ul>"
+    return f"<p>{html.escape(str(block))}</p>"
+
+
+def render_html(title: str, intro: Sequence[str], sections: Sequence[Section]) -> str:
+    """A complete, self-contained HTML page.
+
+    Parameters
+    ----------
+    title : str
+        Page title and top heading.
+    intro : sequence of str
+        Paragraphs under the title.
+    sections : sequence of Section
+
+    Returns
+    -------
+    str
+        HTML5 text; figures are ``<img>`` with the relative ``FigureFile.path``.
+    """
+    toc = "".join(
+        f'<li><a href="#{s.anchor}">{html.escape(s.title)}</a></li>' for s in sections if s.level == 2
+    )
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>{html.escape(title)}</title>",
+        f"<style>{_CSS}</style></head><body>",
+        f"<h1>{html.escape(title)}</h1>",
+        *(f"<p>{html.escape(p)}</p>" for p in intro),
+        f"<nav><ul>{toc}</ul></nav>",
+    ]
+    for s in sections:
+        parts.append(f'<h{s.level} id="{s.anchor}">{html.escape(s.title)}</h{s.level}>')
+        parts.extend(_html_block(b) for b in s.blocks)
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
+
+
+def _md_escape(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def _md_table(table: Table) -> str:
+    lines = [f"**{table.title}**", ""]
+    lines.append("| " + " | ".join(_md_escape(c) for c in table.columns) + " |")
+    lines.append("|" + "|".join("---" for _ in table.columns) + "|")
+    lines.extend("| " + " | ".join(_md_escape(c) for c in row) + " |" for row in table.rows)
+    if table.note:
+        lines += ["", f"_{table.note}_"]
+    return "\n".join(lines)
+
+
+def _md_block(block) -> str:
+    if isinstance(block, Table):
+        return _md_table(block)
+    if isinstance(block, FigureFile):
+        return f"![{block.title}]({block.path})\n\n_{block.title}._ {block.caption}"
+    if isinstance(block, list):
+        return "\n".join(f"- {item}" for item in block)
+    return str(block)
+
+
+def render_markdown(title: str, intro: Sequence[str], sections: Sequence[Section]) -> str:
+    """The page as markdown (``index.md``): same content as :func:`render_html`."""
+    parts = [f"# {title}", *intro]
+    for s in sections:
+        parts.append(f"{'#' * s.level} {s.title}")
+        parts.extend(_md_block(b) for b in s.blocks)
+    return "\n\n".join(parts) + "\n"
+
+
+def render_tables_markdown(title: str, intro: Sequence[str], sections: Sequence[Section]) -> str:
+    """Only the tables (and paragraphs) of the page, as markdown (``summary.md``)."""
+    kept = [
+        Section(s.title, s.anchor, [b for b in s.blocks if not isinstance(b, FigureFile)], s.level)
+        for s in sections
+    ]
+    kept = [s for s in kept if s.blocks]
+    return render_markdown(title, intro, kept)

@@ -1,0 +1,365 @@
+"""Tables of a report: one row per run, figures read back from the result files.
+
+Every figure in these tables is either a summary attribute of the result file
+(:func:`rbstab.summary.summarize`, written by the run) or, for the settling time, a
+direct function of the stored time series (:func:`settling_time`). Nothing is
+recomputed from the physics.
+
+Vector figures are split into components ``_1``, ``_2``, ``_3`` (the file's ``axis``
+coordinate x, y, z; for Euler angles the rotations about x, y', z'').
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .load import RunData, SweepData
+
+__all__ = [
+    "SettleThresholds",
+    "DEFAULT_SETTLE_E",
+    "DEFAULT_SETTLE_OMEGA",
+    "DEFAULT_METRICS",
+    "SCALAR_SUMMARY_METRICS",
+    "VECTOR_SUMMARY_METRICS",
+    "allowed_metrics",
+    "validate_metrics",
+    "metric_value",
+    "metric_label",
+    "settling_time",
+    "run_settling_time",
+    "differing_parameters",
+    "format_value",
+    "runs_table",
+    "sweep_table",
+    "metric_column",
+]
+
+#: Default threshold on |E| (Euclidean norm) for the settling time [m].
+DEFAULT_SETTLE_E = 0.005
+#: Default threshold on |Omega| (Euclidean norm) for the settling time [rad/s].
+DEFAULT_SETTLE_OMEGA = 0.05
+
+#: Scalar summary figures usable as ``--metric`` (name -> (symbol, units)).
+SCALAR_SUMMARY_METRICS = {
+    "t_final": ("t_final", "s"),
+    "lyapunov_initial": ("v(0)", "J"),
+    "lyapunov_final": ("v(t_end)", "J"),
+    "max_lyapunov_rate": ("max dv/dt", "W"),
+    "max_lyapunov_increase": ("max rise of v", "J"),
+    "lyapunov_rate_mismatch": ("max |dv/dt analytic - numerical|", "W"),
+    "lyapunov_rate_mismatch_relative": ("relative dv/dt mismatch", "1"),
+}
+#: Vector summary figures usable as ``--metric`` (name -> (symbol, units)); ``NAME`` is
+#: the largest |component|, ``NAME_1`` .. ``NAME_3`` the components.
+VECTOR_SUMMARY_METRICS = {
+    "max_abs_constraint_error": ("max |E|", "m"),
+    "final_theta": ("final Theta", "rad"),
+    "final_omega": ("final Omega", "rad/s"),
+    "final_position": ("final X", "m"),
+    "final_velocity": ("final V", "m/s"),
+    "final_controller_state": ("final D", "m"),
+}
+#: Figures of a run that are not summary attributes (name -> (symbol, units)).
+OTHER_METRICS = {
+    "settling_time": ("settling time", "s"),
+    "wall_time": ("wall time", "s"),
+    "nfev": ("right-hand side evaluations", "1"),
+}
+#: Metrics plotted against the varied parameters of a sweep when no ``--metric`` is given.
+DEFAULT_METRICS = ("max_abs_constraint_error", "lyapunov_final")
+
+
+@dataclass(frozen=True)
+class SettleThresholds:
+    """Thresholds of the settling time.
+
+    Attributes
+    ----------
+    e : float
+        On |E|, the Euclidean norm of the constraint error [m] (> 0).
+    omega : float
+        On |Omega|, the Euclidean norm of the angular velocity [rad/s] (> 0).
+    """
+
+    e: float = DEFAULT_SETTLE_E
+    omega: float = DEFAULT_SETTLE_OMEGA
+
+    def __post_init__(self) -> None:
+        if not (self.e > 0 and self.omega > 0):
+            raise ValueError(f"settling thresholds must be positive, got e={self.e}, omega={self.omega}")
+
+
+def allowed_metrics() -> list[str]:
+    """Every name accepted by ``--metric``, sorted."""
+    names = set(SCALAR_SUMMARY_METRICS) | set(OTHER_METRICS)
+    for key in VECTOR_SUMMARY_METRICS:
+        names |= {key, f"{key}_1", f"{key}_2", f"{key}_3"}
+    return sorted(names)
+
+
+def validate_metrics(names: Sequence[str]) -> list[str]:
+    """Check metric names; return them without repeats, in order.
+
+    Raises
+    ------
+    ValueError
+        Naming the unknown metrics and listing the allowed ones.
+    """
+    allowed = allowed_metrics()
+    unknown = [n for n in names if n not in allowed]
+    if unknown:
+        raise ValueError(f"unknown metric {', '.join(map(repr, unknown))}; allowed: {', '.join(allowed)}")
+    return list(dict.fromkeys(names))
+
+
+def _split_metric(name: str) -> tuple[str, int | None]:
+    if name in VECTOR_SUMMARY_METRICS:
+        return name, None
+    base, _, comp = name.rpartition("_")
+    if base in VECTOR_SUMMARY_METRICS and comp in ("1", "2", "3"):
+        return base, int(comp) - 1
+    return name, None
+
+
+def metric_label(name: str) -> str:
+    """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
+    base, comp = _split_metric(name)
+    if base in VECTOR_SUMMARY_METRICS:
+        symbol, units = VECTOR_SUMMARY_METRICS[base]
+        symbol = f"{symbol}_{comp + 1}" if comp is not None else f"{symbol} (largest component)"
+    else:
+        symbol, units = {**SCALAR_SUMMARY_METRICS, **OTHER_METRICS}[base]
+    return f"{symbol} [{units}]" if units != "1" else symbol
+
+
+def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresholds: SettleThresholds) -> float:
+    """First sample time after which |E| and |Omega| stay under their thresholds.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times [s].
+    error : ndarray, shape (n, 3)
+        Constraint error E [m].
+    omega : ndarray, shape (n, 3)
+        Angular velocity Omega [rad/s].
+    thresholds : SettleThresholds
+        Bounds on the Euclidean norms |E| [m] and |Omega| [rad/s].
+
+    Returns
+    -------
+    float
+        The earliest ``time[i]`` such that ``|E| <= e`` and ``|Omega| <= omega`` at every
+        sample from ``i`` to the end [s]; NaN when the last sample is outside the bounds
+        or not finite (a failed run never settles). Resolution: the sample spacing.
+    """
+    with np.errstate(invalid="ignore"):
+        inside = (np.linalg.norm(error, axis=1) <= thresholds.e) & (np.linalg.norm(omega, axis=1) <= thresholds.omega)
+    if len(inside) == 0 or not inside[-1]:
+        return float("nan")
+    outside = np.flatnonzero(~inside)
+    i = int(outside[-1]) + 1 if outside.size else 0
+    return float(time[i])
+
+
+def run_settling_time(run: RunData, thresholds: SettleThresholds) -> float:
+    """:func:`settling_time` of a run's stored ``constraint_error`` and ``omega`` [s].
+
+    NaN for a failed run (its trajectory stops before ``t_end``). Cached per run and
+    thresholds; the series of a sweep's run are not kept in memory.
+    """
+    if not run.ok:
+        return float("nan")
+    key = ("settling_time", thresholds.e, thresholds.omega)
+    if key not in run._cache:
+        s = run.series("constraint_error", "omega")
+        run._cache[key] = settling_time(s["time"], s["constraint_error"], s["omega"], thresholds)
+        if run.sweep is not None:
+            run.drop_series()  # a sweep may hold thousands of runs: keep only the figure
+    return run._cache[key]
+
+
+def metric_value(run: RunData | None, name: str, thresholds: SettleThresholds | None = None) -> float:
+    """Value of metric ``name`` (:func:`allowed_metrics`) for one run, NaN if unavailable.
+
+    Summary metrics come from the file's ``summary_*`` attributes; ``settling_time``
+    from :func:`run_settling_time`; ``wall_time`` and ``nfev`` from the attributes.
+    """
+    if run is None:
+        return float("nan")
+    base, comp = _split_metric(name)
+    if base == "settling_time":
+        return run_settling_time(run, thresholds or SettleThresholds())
+    if base == "wall_time":
+        return float(run.wall_time)
+    if base == "nfev":
+        return float(run.solver.get("nfev", np.nan))
+    value = run.summary.get(base)
+    if value is None:
+        return float("nan")
+    if isinstance(value, (list, tuple, np.ndarray)):
+        arr = np.asarray(value, dtype=float)
+        return float(arr[comp]) if comp is not None else float(np.max(np.abs(arr)))
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+def _canonical(value: Any) -> str:
+    return repr(value)
+
+
+def differing_parameters(runs: Sequence[RunData], exclude: Sequence[str] = ("name",)) -> list[str]:
+    """Dotted configuration keys whose values differ between ``runs``.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+    exclude : sequence of str
+        Keys never reported (default: ``name``, which the run label already shows).
+
+    Returns
+    -------
+    list of str
+        Keys of :func:`rbstab.report.load.flatten_config` (a key absent from some runs
+        counts as differing), in first-seen order; empty for fewer than two runs.
+    """
+    if len(runs) < 2:
+        return []
+    keys: dict[str, None] = {}
+    for run in runs:
+        keys.update(dict.fromkeys(run.flat_config))
+    out = []
+    for key in keys:
+        if key in exclude:
+            continue
+        values = {_canonical(run.flat_config.get(key, "<absent>")) for run in runs}
+        if len(values) > 1:
+            out.append(key)
+    return out
+
+
+def format_value(value: Any, digits: int = 4) -> str:
+    """Compact text of a table cell: floats with ``digits`` significant digits, diagonal
+    matrices as ``diag(a, b, c)``, vectors as ``[a, b, c]``, None/NaN as ``-``."""
+    if value is None:
+        return "-"
+    if isinstance(value, (bool, np.bool_)):
+        return str(bool(value))
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return "-" if not np.isfinite(value) else f"{value:.{digits}g}"
+    if isinstance(value, (list, tuple, np.ndarray)):
+        try:
+            arr = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            return "[" + ", ".join(format_value(v, digits) for v in value) + "]"
+        if arr.ndim == 2 and arr.shape[0] == arr.shape[1] and np.all(arr == np.diag(np.diag(arr))):
+            return "diag(" + ", ".join(format_value(v, digits) for v in np.diag(arr)) + ")"
+        if arr.ndim == 2:
+            return "[" + "; ".join(", ".join(format_value(v, digits) for v in row) for row in arr) + "]"
+        return "[" + ", ".join(format_value(v, digits) for v in arr) + "]"
+    return str(value)
+
+
+def _vector(run: RunData, key: str) -> list[float]:
+    value = run.summary.get(key)
+    if value is None:
+        return [float("nan")] * 3
+    return [float(v) for v in np.asarray(value, dtype=float).reshape(-1)[:3]]
+
+
+def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters: Sequence[str] | None = None):
+    """One row per run: identity, differing parameters, final state, constraint and
+    Lyapunov figures, solver statistics.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+    thresholds : SettleThresholds
+        For the ``settling_time`` column.
+    parameters : sequence of str, optional
+        Dotted configuration keys to show (default :func:`differing_parameters`).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns (in order): ``run``, ``file``, ``sweep``, ``variant``, ``status``,
+        ``message``, the ``parameters`` (raw configuration values), ``t_final`` [s],
+        ``final_theta_1..3`` [rad], ``final_omega_1..3`` [rad/s],
+        ``final_position_1..3`` [m], ``final_velocity_1..3`` [m/s],
+        ``final_controller_state_1..3`` [m] (NaN outside ``embedded``),
+        ``max_abs_constraint_error_1..3`` [m], ``settling_time`` [s] (NaN: not settled),
+        ``lyapunov_initial`` [J], ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W],
+        ``lyapunov_rate_mismatch`` [W], ``lyapunov_rate_mismatch_relative``,
+        ``lyapunov_rate_check``, ``method``, ``nfev``, ``njev``, ``nlu``,
+        ``wall_time`` [s]. Values as stored in the files (full precision).
+    """
+    import pandas as pd
+
+    if parameters is None:
+        parameters = differing_parameters(runs)
+    rows = []
+    for run in runs:
+        row: dict[str, Any] = {
+            "run": run.label,
+            "file": str(run.path),
+            "sweep": run.sweep or "",
+            "variant": run.variant,
+            "status": run.status,
+            "message": run.message,
+        }
+        for key in parameters:
+            row[key] = run.flat_config.get(key)
+        row["t_final"] = float(run.summary.get("t_final", np.nan))
+        for block in ("theta", "omega", "position", "velocity", "controller_state"):
+            for i, v in enumerate(_vector(run, f"final_{block}"), start=1):
+                row[f"final_{block}_{i}"] = v
+        for i, v in enumerate(_vector(run, "max_abs_constraint_error"), start=1):
+            row[f"max_abs_constraint_error_{i}"] = v
+        row["settling_time"] = run_settling_time(run, thresholds)
+        for key in ("lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch",
+                    "lyapunov_rate_mismatch_relative"):
+            row[key] = float(run.summary.get(key, np.nan))
+        row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
+        row["method"] = run.flat_config.get("simulation.method", "")
+        for key in ("nfev", "njev", "nlu"):
+            row[key] = run.solver.get(key)
+        row["wall_time"] = run.wall_time
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def sweep_table(sweep: SweepData, metrics: Sequence[str], thresholds: SettleThresholds):
+    """The sweep's ``index.csv`` with the chosen metrics read back from each run file.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``index.csv`` columns first, then the grouped list parameters of
+        :attr:`SweepData.axes` not already a column, then ``report:<metric>`` for each
+        metric (NaN for rows without a file) and ``report:settled`` (bool: success and
+        a finite :func:`run_settling_time`).
+    """
+    table = sweep.index.copy()
+    for name, values in sweep.axes.items():
+        if name not in table.columns:
+            table[name] = list(values)
+    for name in metrics:
+        table[metric_column(name)] = [metric_value(run, name, thresholds) for run in sweep.runs]
+    table["report:settled"] = [
+        bool(run is not None and run.ok and np.isfinite(run_settling_time(run, thresholds))) for run in sweep.runs
+    ]
+    return table
+
+
+def metric_column(name: str) -> str:
+    """Column of :func:`sweep_table` holding metric ``name``: ``report:<name>``."""
+    return f"report:{name}"

@@ -1,0 +1,76 @@
+"""Parameter sweeps: grids, zipped lists and seeded random samples of run configurations,
+executed in parallel on this machine or on a Dask cluster, resumable.
+
+Library entry points (the ``rbstab sweep`` command is a thin layer over them)::
+
+    from rbstab.sweep import load_spec, expand, run_sweep
+
+    spec = load_spec("configs/sweeps/gains.yaml", overrides=["simulation.t_end=1"])
+    runs = expand(spec)                        # every run validated; SweepSpecError if not
+    outcome = run_sweep(spec, "results/sweeps", runs=runs, jobs=4)
+    # -> results/sweeps/<name>/{sweep.yaml, runs/<run_id>.h5, index.csv, sweep_summary.json}
+
+Modules: :mod:`~rbstab.sweep.spec` (spec loading, validation, expansion, run ids),
+:mod:`~rbstab.sweep.worker` (the unit of work: a chunk of runs -> records; engine hook),
+:mod:`~rbstab.sweep.executors` (local process pool, Dask), :mod:`~rbstab.sweep.runner`
+(resume, execution, output folder) and :mod:`~rbstab.sweep.index` (``index.csv``,
+``sweep_summary.json``, the convergence definition).
+"""
+
+from .executors import EXECUTORS, DaskExecutor, Executor, ExecutorError, LocalExecutor, default_jobs, make_executor
+from .index import STATUSES, is_converged
+from .runner import (
+    DEFAULT_OUTPUT,
+    INDEX_FILE,
+    RUNS_DIR,
+    SPEC_FILE,
+    SUMMARY_FILE,
+    SweepBusyError,
+    SweepOutcome,
+    rebuild_index,
+    run_sweep,
+)
+from .spec import (
+    DEFAULT_LYAPUNOV_RATIO,
+    DISTRIBUTIONS,
+    PlannedRun,
+    SweepSpec,
+    SweepSpecError,
+    expand,
+    load_spec,
+    spec_from_mapping,
+)
+from .worker import ENGINES, RunTask, WorkerOptions, run_chunk
+
+__all__ = [
+    "load_spec",
+    "spec_from_mapping",
+    "expand",
+    "run_sweep",
+    "rebuild_index",
+    "SweepSpec",
+    "PlannedRun",
+    "SweepOutcome",
+    "SweepSpecError",
+    "SweepBusyError",
+    "ExecutorError",
+    "Executor",
+    "LocalExecutor",
+    "DaskExecutor",
+    "make_executor",
+    "default_jobs",
+    "run_chunk",
+    "RunTask",
+    "WorkerOptions",
+    "ENGINES",
+    "EXECUTORS",
+    "is_converged",
+    "STATUSES",
+    "DISTRIBUTIONS",
+    "DEFAULT_LYAPUNOV_RATIO",
+    "DEFAULT_OUTPUT",
+    "SPEC_FILE",
+    "INDEX_FILE",
+    "SUMMARY_FILE",
+    "RUNS_DIR",
+]

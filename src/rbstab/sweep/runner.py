@@ -1,0 +1,429 @@
+"""Run a sweep: plan, skip what is done, execute the rest, rebuild the index from the files.
+
+Output folder ``<output>/<name>/`` (Hydra-like, it describes itself)::
+
+    sweep.yaml           the resolved spec (bases inline, --set applied) + provenance
+    runs/<run_id>.h5     one result file per run, the format of ``rbstab run``
+    index.csv            one row per run (see :mod:`rbstab.sweep.index`)
+    sweep_summary.json   counts, fraction converged
+
+Resume: a run is skipped when ``runs/<run_id>.h5`` exists, is a readable rbstab result,
+and its ``config_hash`` attribute equals the hash of the run's resolved config (with
+``retry_failed``, only if its status is also ``success``). Every other run is executed
+and its file replaced.
+
+Nothing is lost when the sweep is killed (even with SIGKILL): each worker writes its
+run's file to a temporary name and renames it into place when complete, so a final name
+always holds a whole file; the index is rebuilt from the files at the end of every
+invocation; temporary files of killed writers are removed by the next invocation. Only
+one invocation at a time may write a sweep folder (a lock file, ``.lock``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import os
+import sys
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .. import __version__
+from .executors import Executor, make_executor
+from .index import index_rows, summarize_rows, write_index, write_summary, write_text_atomic
+from .spec import PlannedRun, SweepSpec, expand
+from .worker import ENGINES, RunTask, WorkerOptions, run_chunk, write_bytes_atomic
+
+__all__ = [
+    "run_sweep",
+    "rebuild_index",
+    "SweepOutcome",
+    "SweepBusyError",
+    "DEFAULT_OUTPUT",
+    "SPEC_FILE",
+    "INDEX_FILE",
+    "SUMMARY_FILE",
+    "RUNS_DIR",
+]
+
+#: Default parent folder of sweep folders.
+DEFAULT_OUTPUT = "results/sweeps"
+SPEC_FILE = "sweep.yaml"
+INDEX_FILE = "index.csv"
+SUMMARY_FILE = "sweep_summary.json"
+RUNS_DIR = "runs"
+LOCK_FILE = ".lock"
+
+
+class SweepBusyError(RuntimeError):
+    """Another process is writing the same sweep folder."""
+
+
+@dataclass
+class SweepOutcome:
+    """What a sweep invocation did and where the sweep stands.
+
+    Attributes
+    ----------
+    name : str
+    directory : Path
+        The sweep folder.
+    n_runs : int
+        Runs in the spec.
+    n_skipped : int
+        Runs whose result file was already there and current.
+    n_executed : int
+        Runs executed by this invocation.
+    counts : dict of str to int
+        Runs per status over the whole sweep (``success``, ``failed``, ``error``,
+        ``pending``), from the index.
+    n_converged : int
+    problems : list of (run_id, status, message)
+        Every run of the sweep that did not succeed.
+    tracebacks : dict of str to str
+        run_id -> traceback for runs with status ``error`` in this invocation.
+    stale_files : list of str
+        Result files in ``runs/`` that are not runs of this spec (left in place).
+    executor : str
+        Description of the executor used (empty when nothing ran).
+    """
+
+    name: str
+    directory: Path
+    n_runs: int
+    n_skipped: int = 0
+    n_executed: int = 0
+    counts: dict = field(default_factory=dict)
+    n_converged: int = 0
+    problems: list = field(default_factory=list)
+    tracebacks: dict = field(default_factory=dict)
+    stale_files: list = field(default_factory=list)
+    executor: str = ""
+
+    @property
+    def n_failed(self) -> int:
+        """Runs that failed or raised (the CLI's exit status, capped at 100)."""
+        return self.counts.get("failed", 0) + self.counts.get("error", 0)
+
+    @property
+    def index_path(self) -> Path:
+        return self.directory / INDEX_FILE
+
+    @property
+    def summary_path(self) -> Path:
+        return self.directory / SUMMARY_FILE
+
+
+@contextlib.contextmanager
+def _lock(directory: Path):
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows: no lock
+        yield
+        return
+    path = directory / LOCK_FILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            raise SweepBusyError(
+                f"another rbstab sweep (pid {holder}) is writing {directory}; wait for it to finish "
+                "or choose another output folder"
+            ) from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
+
+
+def _remove_temporaries(*folders: Path) -> int:
+    """Remove ``.<name>.<random>.tmp`` files left by killed writers (under the lock)."""
+    n = 0
+    for folder in folders:
+        for path in folder.glob(".*.tmp"):
+            with contextlib.suppress(OSError):
+                path.unlink()
+                n += 1
+    return n
+
+
+def _dump_yaml(data: Any) -> str:
+    from ..config import _Dumper  # flow-style lists, the style of the result files' config
+
+    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True)
+
+
+def _spec_document(spec: SweepSpec, runs: Sequence[PlannedRun], command_line: str | None) -> dict:
+    doc = spec.to_mapping()
+    doc["generated"] = {
+        "by": f"rbstab {__version__}",
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "command_line": command_line if command_line is not None else " ".join(sys.argv),
+        "spec_file": str(Path(spec.source).resolve()) if spec.source else None,
+        "base_files": [b.source for b in spec.bases],
+        "overrides": list(spec.overrides),
+        "n_runs": len(runs),
+        "run_id": "r<index>-<first 8 hex of sha256 of the run's resolved config without its name>",
+        "note": "re-runnable: rbstab sweep <this file> (the overrides are already applied to base)",
+    }
+    return doc
+
+
+def _read_attrs(path: Path) -> dict | None:
+    from ..io.hdf5 import NotAResultFile, read_attributes
+
+    try:
+        return read_attributes(path)
+    except (FileNotFoundError, NotAResultFile, OSError, KeyError):
+        return None
+
+
+def _scan(runs: Sequence[PlannedRun], runs_dir: Path, retry_failed: bool) -> tuple[dict, list]:
+    """(run_id -> attrs of a current result file, runs to execute)."""
+    done: dict[str, dict] = {}
+    todo: list[PlannedRun] = []
+    for run in runs:
+        path = runs_dir / f"{run.run_id}.h5"
+        attrs = _read_attrs(path) if path.exists() else None
+        current = attrs is not None and attrs.get("config_hash") == run.config_hash
+        if current and not (retry_failed and attrs.get("status") != "success"):
+            done[run.run_id] = attrs
+        else:
+            todo.append(run)
+    return done, todo
+
+
+def _chunks(tasks: list[RunTask], size: int) -> list[list[RunTask]]:
+    return [tasks[i : i + size] for i in range(0, len(tasks), size)]
+
+
+def _progress_bar(total: int, name: str, enabled: bool | None):
+    from tqdm.auto import tqdm
+
+    return tqdm(
+        total=total,
+        desc=name,
+        unit="run",
+        file=sys.stderr,
+        disable=(None if enabled is None else not enabled),
+        dynamic_ncols=True,
+        smoothing=0.05,
+    )
+
+
+def run_sweep(
+    spec: SweepSpec,
+    output: str | os.PathLike = DEFAULT_OUTPUT,
+    *,
+    runs: Sequence[PlannedRun] | None = None,
+    executor: str | Executor = "local",
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    timeout: float | None = None,
+    retry_failed: bool = False,
+    chunk_size: int = 1,
+    engine: str = "scipy",
+    progress: bool | None = None,
+    command_line: str | None = None,
+    log: Callable[[str], None] | None = None,
+) -> SweepOutcome:
+    """Run every run of ``spec`` that has no current result file, then rebuild the index.
+
+    Parameters
+    ----------
+    spec : SweepSpec
+        From :func:`rbstab.sweep.load_spec`.
+    output : path-like
+        Parent folder; the sweep writes ``<output>/<spec.name>/``.
+    runs : sequence of PlannedRun, optional
+        ``expand(spec)`` if already computed.
+    executor : {"local", "dask"} or Executor
+        Where the runs execute (see :mod:`rbstab.sweep.executors`).
+    jobs : int, optional
+        Local processes (default: all CPUs); ignored by Dask.
+    scheduler : str, optional
+        Dask scheduler address (``tcp://HOST:PORT``), required for ``"dask"``.
+    timeout : float, optional
+        Per-run wall-time budget [s]; a run past it is recorded as failed.
+    retry_failed : bool
+        Also re-execute runs whose current result file has status ``failed``.
+    chunk_size : int
+        Runs per unit of work sent to a worker (1 for the scipy engine; a batched engine
+        wants hundreds).
+    engine : str
+        Key of :data:`rbstab.sweep.worker.ENGINES`.
+    progress : bool, optional
+        Progress bar on stderr (done / failed / remaining, ETA); default: when stderr is a
+        terminal.
+    command_line : str, optional
+        Recorded in ``sweep.yaml`` and in every result file (default: ``sys.argv``).
+    log : callable, optional
+        Receives one-line status messages (the CLI prints them).
+
+    Returns
+    -------
+    SweepOutcome
+
+    Raises
+    ------
+    SweepSpecError
+        If a run's configuration is invalid (nothing is written).
+    SweepBusyError
+        If another process is writing the same sweep folder.
+    ExecutorError
+        If the executor cannot start (``distributed`` missing, scheduler unreachable).
+    KeyboardInterrupt
+        Re-raised after the index has been written for what finished.
+    """
+    say = log or (lambda message: None)
+    if runs is None:
+        runs = expand(spec)
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    if command_line is None:
+        command_line = " ".join(sys.argv)
+    if engine not in ENGINES:
+        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
+    # the executor first: a missing package or an unreachable scheduler writes nothing
+    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
+    directory = Path(output) / spec.name
+    runs_dir = directory / RUNS_DIR
+    outcome = SweepOutcome(spec.name, directory, len(runs))
+    with ex:
+        runs_dir.mkdir(parents=True, exist_ok=True)
+        _run_locked(spec, runs, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
+                    chunk_size=chunk_size, progress=progress, say=say,
+                    options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine))
+    return outcome
+
+
+def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
+                options) -> None:
+    with _lock(directory):
+        removed = _remove_temporaries(runs_dir, directory)
+        if removed:
+            say(f"removed {removed} temporary file(s) left by an interrupted invocation")
+        doc = _spec_document(spec, runs, options.command_line)
+        spec_path = directory / SPEC_FILE
+        if spec_path.exists():
+            with contextlib.suppress(Exception):
+                old = yaml.safe_load(spec_path.read_text(encoding="utf-8")) or {}
+                old.pop("generated", None)
+                new = {k: v for k, v in doc.items() if k != "generated"}
+                if yaml.safe_load(_dump_yaml(new)) != old:
+                    say(f"note: the spec differs from the one in {spec_path}; runs whose config changed are rerun")
+        write_text_atomic(spec_path, _dump_yaml(doc))
+
+        ids = {r.run_id for r in runs}
+        outcome.stale_files = sorted(p.name for p in runs_dir.glob("*.h5") if p.stem not in ids)
+        attrs, todo = _scan(runs, runs_dir, retry_failed)
+        outcome.n_skipped = len(attrs)
+        errors: dict[str, str] = {}
+        if not todo:
+            say(f"{spec.name}: all {len(runs)} runs already done; rebuilding the index")
+        try:
+            if todo:
+                _execute(spec, todo, runs_dir, attrs, errors, outcome, ex, chunk_size=chunk_size,
+                         progress=progress, say=say, options=options)
+        finally:
+            # files finished while the pool shut down (e.g. after Ctrl-C) count too
+            _collect_finished(todo, runs_dir, attrs, errors)
+            _finish(spec, runs, attrs, errors, outcome)
+
+
+def _collect_finished(todo: Sequence[PlannedRun], runs_dir: Path, attrs: dict, errors: dict) -> None:
+    for run in todo:
+        if run.run_id in attrs:
+            continue
+        path = runs_dir / f"{run.run_id}.h5"
+        a = _read_attrs(path) if path.exists() else None
+        if a is not None and a.get("config_hash") == run.config_hash:
+            attrs[run.run_id] = a
+            errors.pop(run.run_id, None)
+
+
+def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chunk_size, progress, say,
+             options) -> None:
+    tasks = [RunTask(r.run_id, r.config.resolved, str((runs_dir / f"{r.run_id}.h5").resolve())) for r in todo]
+    chunks = _chunks(tasks, chunk_size)
+    if ex.return_bytes:
+        options = WorkerOptions(options.timeout, options.command_line, options.engine, return_bytes=True)
+    by_id = {r.run_id: r for r in todo}
+    n_ok = n_bad = 0
+    ex.plan(len(chunks))  # the caller closes the executor
+    outcome.executor = ex.describe()
+    say(
+        f"{outcome.name}: {outcome.n_runs} runs, {outcome.n_skipped} already done, "
+        f"{len(todo)} to run on {outcome.executor}"
+    )
+    bar = _progress_bar(len(todo), spec.name, progress)
+    try:
+        for chunk, records, exc in ex.imap_unordered(run_chunk, chunks, options):
+            if exc is not None:
+                records = [
+                    {"run_id": t.run_id, "path": t.path, "status": "error",
+                     "message": f"{type(exc).__name__}: {exc}"}
+                    for t in chunk
+                ]
+            for rec in records:
+                rid = rec["run_id"]
+                if rec.get("data") is not None:
+                    write_bytes_atomic(rec["path"], rec["data"])
+                path = Path(rec["path"])
+                a = _read_attrs(path) if path.exists() else None
+                # the worker wrote it from this run's config; after an error (e.g. a
+                # worker that died after writing) only a file with the run's hash counts
+                if a is not None and a.get("name") == rid and (
+                    rec["status"] != "error" or a.get("config_hash") == by_id[rid].config_hash
+                ):
+                    attrs[rid] = a
+                    errors.pop(rid, None)
+                else:
+                    errors[rid] = rec.get("message") or "no result file was written"
+                    if "traceback" in rec:
+                        outcome.tracebacks[rid] = rec["traceback"]
+                outcome.n_executed += 1
+                if rec["status"] == "success" and rid in attrs:
+                    n_ok += 1
+                else:
+                    n_bad += 1
+            bar.set_postfix_str(f"done {n_ok}, failed {n_bad}, remaining {len(todo) - n_ok - n_bad}", refresh=False)
+            bar.update(len(records))
+    finally:
+        bar.close()
+
+
+def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
+    rows = index_rows(runs, attrs, errors, spec.lyapunov_ratio)
+    write_index(outcome.directory / INDEX_FILE, rows)
+    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio)
+    write_summary(outcome.directory / SUMMARY_FILE, summary)
+    outcome.counts = dict(summary["status"])
+    outcome.n_converged = summary["n_converged"]
+    outcome.problems = [(r["run_id"], r["status"], r["message"]) for r in rows if r["status"] != "success"]
+
+
+def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, runs: Sequence[PlannedRun] | None = None) -> SweepOutcome:
+    """Rewrite ``index.csv`` and ``sweep_summary.json`` from the result files, running nothing.
+
+    Files whose config does not match the run's current config count as ``pending``.
+    """
+    if runs is None:
+        runs = expand(spec)
+    directory = Path(output) / spec.name
+    if not directory.is_dir():
+        raise FileNotFoundError(f"no sweep folder {directory}")
+    outcome = SweepOutcome(spec.name, directory, len(runs))
+    with _lock(directory):
+        attrs, _ = _scan(runs, directory / RUNS_DIR, retry_failed=False)
+        outcome.n_skipped = len(attrs)
+        _finish(spec, runs, attrs, {}, outcome)
+    return outcome
+

@@ -1,0 +1,463 @@
+"""Parameter sweeps: spec expansion and validation, end-to-end runs, resume, Dask.
+
+Runs are short (t_end = 0.2 s, 201 samples) so that the whole file stays fast.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from rbstab.io.hdf5 import config_hash, read_attributes
+from rbstab.sweep import (
+    SweepBusyError,
+    SweepSpecError,
+    expand,
+    load_spec,
+    run_chunk,
+    run_sweep,
+    spec_from_mapping,
+)
+from rbstab.sweep.executors import ExecutorError
+from rbstab.sweep.index import is_converged
+from rbstab.sweep.spec import resolved_hash
+from rbstab.sweep.worker import RunTask, WorkerOptions
+from rbstab_cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE1 = ROOT / "configs" / "paper" / "case1_permanent.yaml"
+CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
+SHORT = ["simulation.t_end=0.2", "simulation.n_samples=201"]
+# theta_2 close to pi/2 and a fast spin about axis 2: gimbal lock within milliseconds
+LOCKING_THETA = [0.0, 1.5, 0.0]
+LOCKING_OMEGA = [0.0, 30.0, 0.0]
+
+pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
+
+
+def case3_data(**sim) -> dict:
+    data = yaml.safe_load(CASE3.read_text())
+    data["simulation"].update({"t_end": 0.2, "n_samples": 201, **sim})
+    return data
+
+
+def write_spec(tmp_path: Path, spec: dict, name: str = "spec.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    return path
+
+
+def data_equal(a: Path, b: Path) -> None:
+    """Every variable and every attribute but provenance/timing equal, bit for bit."""
+    with h5py.File(a, "r") as fa, h5py.File(b, "r") as fb:
+        assert set(fa) == set(fb)
+        for key in fa:
+            x, y = fa[key][()], fb[key][()]
+            assert x.dtype == y.dtype and x.shape == y.shape, key
+            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), key
+        skip = {"created", "command_line", "wall_time"}
+        assert set(fa.attrs) == set(fb.attrs)
+        for key in set(fa.attrs) - skip:
+            x, y = np.asarray(fa.attrs[key]), np.asarray(fb.attrs[key])
+            assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), key
+
+
+# -- spec expansion ---------------------------------------------------------------------------
+
+
+def full_spec() -> dict:
+    return {
+        "name": "expansion",
+        "base": case3_data(),
+        "grid": {
+            "controller.k_c": [[4100, 4100, 3280], [12300, 12300, 9840], [36900, 36900, 29520]],
+            "controller.variant": ["visco_elastic", "embedded"],
+        },
+        "zip": {"initial_state.omega.0": [10.0, 20.0], "initial_state.theta.2": [0.0, 0.1]},
+        "random": {
+            "n": 4,
+            "seed": 7,
+            "params": {
+                "body.mass": {"uniform": [20.5, 61.5]},
+                "initial_state.v": {"normal": {"mean": [0.0, 1.0, -1.0], "std": 0.5}},
+            },
+        },
+    }
+
+
+def test_grid_zip_random_count_order_and_ids():
+    spec = spec_from_mapping(full_spec())
+    runs = expand(spec)
+    assert spec.n_runs == len(runs) == 4 * 3 * 2 * 2
+    ids = [r.run_id for r in runs]
+    assert len(set(ids)) == len(ids)
+    assert all(len(i) == len("r0000-") + 8 and i.startswith(f"r{n:04d}-") for n, i in enumerate(ids))
+    assert all(r.config.name == r.run_id for r in runs)
+    # order: random sample slowest, then grid (last key fastest), zip fastest
+    assert [r.params["initial_state.omega.0"] for r in runs[:4]] == [10.0, 20.0, 10.0, 20.0]
+    assert [r.params["controller.variant"] for r in runs[:4]] == ["visco_elastic"] * 2 + ["embedded"] * 2
+    assert len({r.params["body.mass"] for r in runs[:12]}) == 1
+    assert runs[12].params["body.mass"] != runs[0].params["body.mass"]
+    # the varied values reach the validated configs
+    for r in runs:
+        assert r.config.variant == r.params["controller.variant"]
+        assert r.config.resolved["controller"]["k_c"] == r.params["controller.k_c"]
+        assert r.config.body.mass == r.params["body.mass"]
+        assert r.config.initial_state["velocity"].tolist() == r.params["initial_state.v"]
+        assert r.config.initial_state["omega"][0] == r.params["initial_state.omega.0"]
+        assert r.config.initial_state["omega"][1:].tolist() == [32.0, -16.0]  # untouched entries
+        assert r.config.initial_state["theta"][2] == r.params["initial_state.theta.2"]
+    # the id hash names the resolved config without its name
+    for r in runs[:3]:
+        assert r.run_id.endswith(resolved_hash(r.config.resolved)[:8])
+        assert r.config_hash == config_hash(r.config.to_yaml())
+
+
+def test_random_reproducible_from_seed_and_prefix_stable():
+    a = expand(spec_from_mapping(full_spec()))
+    b = expand(spec_from_mapping(full_spec()))
+    assert [r.run_id for r in a] == [r.run_id for r in b]
+    assert [r.params for r in a] == [r.params for r in b]
+    other = full_spec()
+    other["random"]["seed"] = 8
+    c = expand(spec_from_mapping(other))
+    assert [r.params["body.mass"] for r in c] != [r.params["body.mass"] for r in a]
+    # more samples append runs: the first ones keep their values and ids
+    more = full_spec()
+    more["random"]["n"] = 6
+    d = expand(spec_from_mapping(more))
+    assert len(d) == 6 * 12
+    assert [r.run_id for r in d[: len(a)]] == [r.run_id for r in a]
+
+
+def test_distributions_bounds_shapes_and_moments():
+    spec = {
+        "name": "dists",
+        "base": case3_data(),
+        "random": {
+            "n": 400,
+            "seed": 1,
+            "params": {
+                "body.mass": {"log_uniform": [20.0, 80.0]},
+                "body.inertia": {"scale_uniform": [0.5, 1.5]},
+                "initial_state.omega": {"uniform": [[10, 20, -30], [12, 40, -20]]},
+                "initial_state.v": {"normal": {"mean": [0.0, 1.0, -1.0], "std": [0.1, 0.2, 0.3]}},
+                "controller.variant": {"choice": ["visco_elastic", "embedded"]},
+            },
+        },
+    }
+    runs = expand(spec_from_mapping(spec))
+    mass = np.array([r.params["body.mass"] for r in runs])
+    factor = np.array([r.params["body.inertia:scale"] for r in runs])
+    inertia = np.array([r.params["body.inertia"] for r in runs])
+    omega = np.array([r.params["initial_state.omega"] for r in runs])
+    v = np.array([r.params["initial_state.v"] for r in runs])
+    assert np.all((mass >= 20) & (mass <= 80))
+    assert np.mean(np.log(mass)) == pytest.approx(np.log(40.0), abs=4 * np.log(4) / np.sqrt(12 * 400))
+    # one factor scales the whole inertia: its shape is kept
+    assert factor.shape == (400,) and np.all((factor >= 0.5) & (factor <= 1.5))
+    np.testing.assert_allclose(inertia, factor[:, None] * np.array([10.0, 8.0, 0.4]), rtol=1e-15)
+    assert np.all(omega >= [10, 20, -30]) and np.all(omega <= [12, 40, -20])
+    # sample means within 4 standard errors
+    assert np.all(np.abs(omega.mean(axis=0) - [11, 30, -25]) <= 4 * np.array([2, 20, 10]) / np.sqrt(12 * 400))
+    assert np.all(np.abs(v.mean(axis=0) - [0, 1, -1]) <= 4 * np.array([0.1, 0.2, 0.3]) / np.sqrt(400))
+    np.testing.assert_allclose(v.std(axis=0), [0.1, 0.2, 0.3], rtol=0.2)
+    variants = {r.config.variant for r in runs}
+    assert variants == {"visco_elastic", "embedded"}
+
+
+def test_dotted_keys_into_default_lists_and_matrices():
+    base = case3_data()
+    del base["initial_state"]["omega"]  # omega left at its default (zeros)
+    base["controller"]["k_t"] = [[4100, 0, 0], [0, 4100, 0], [0, 0, 3280]]
+    spec = {
+        "name": "dotted",
+        "base": base,
+        "grid": {"initial_state.omega.1": [5.0, 7.0], "controller.k_t.2.2": [3000, 3500]},
+    }
+    runs = expand(spec_from_mapping(spec))
+    assert len(runs) == 4
+    assert runs[3].config.initial_state["omega"].tolist() == [0.0, 7.0, 0.0]
+    assert runs[3].config.gains.k_t[2, 2] == 3500 and runs[3].config.gains.k_t[0, 0] == 4100
+    assert runs[0].params == {"initial_state.omega.1": 5.0, "controller.k_t.2.2": 3000}
+
+
+def test_bad_combination_is_reported_with_run_id_and_key(tmp_path):
+    spec = {
+        "name": "bad",
+        "base": str(CASE3),
+        "grid": {"controller.variant": ["embedded", "sliding"], "body.mass": [41.0, -1.0]},
+    }
+    with pytest.raises(SweepSpecError) as info:
+        expand(spec_from_mapping(spec))
+    text = str(info.value)
+    assert "3 of 4 runs have an invalid configuration; nothing was run" in text
+    # sliding needs k_s, which the base lacks; mass -1 is invalid for both variants
+    assert "run r0001 (base case3_embedded; controller.variant='embedded', body.mass=-1.0)" in text
+    assert "config key 'body.mass': found -1.0; expected a number > 0 (kg)" in text
+    assert "run r0002 (base case3_embedded; controller.variant='sliding', body.mass=41.0)" in text
+    assert "config key 'controller.k_s': missing" in text
+    assert "run r0000" not in text
+
+    # through the CLI: exit 1, no traceback, nothing written
+    path = write_spec(tmp_path, spec)
+    result = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 1
+    assert "invalid sweep spec" in result.output and "controller.k_s" in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize(
+    "change, expected",
+    [
+        ({"zip": {"body.mass": [30, 40], "initial_state.omega.0": [1, 2, 3]}},
+         "the lists have different lengths (body.mass: 2, initial_state.omega.0: 3)"),
+        ({"grid": {"body.mass": 41}}, "sweep key 'grid.body.mass': found 41 (a number); expected a list of values"),
+        ({"grid": {"body.mass": []}}, "sweep key 'grid.body.mass': found []; expected a non-empty list"),
+        ({"random": {"n": 2, "params": {"body.mass": {"gauss": [1, 2]}}}},
+         "unknown distribution 'gauss' (allowed: uniform, normal, log_uniform, scale_uniform, choice)"),
+        ({"random": {"n": 2, "params": {"body.mass": {"uniform": [5, 1]}}}}, "lo > hi"),
+        ({"random": {"n": 2, "params": {"body.mass": {"normal": {"mean": 1}}}}},
+         "expected normal: {mean: m, std: s}"),
+        ({"random": {"n": -1}}, "sweep key 'random.n': found -1; expected an integer >= 0"),
+        ({"grids": {}}, "sweep key 'grids': unknown key; did you mean 'grid'?"),
+        ({"grid": {"initial_state.omega": [[1, 2, 3]]}, "zip": {"initial_state.omega.0": [1]}},
+         "sweep key 'zip.initial_state.omega.0': overlaps 'grid.initial_state.omega'"),
+        ({"name": "a b"}, "sweep key 'name': found 'a b'; expected letters, digits"),
+        ({"base": "missing.yaml"}, "config file not found"),
+        ({"convergence": {"lyapunov_ratio": 2}}, "'convergence.lyapunov_ratio': found 2; expected a number in (0, 1)"),
+    ],
+)
+def test_invalid_spec_messages(tmp_path, change, expected):
+    spec = {"name": "s", "base": str(CASE3), **change}
+    path = write_spec(tmp_path, spec)
+    with pytest.raises(SweepSpecError) as info:
+        load_spec(path)
+    assert expected in str(info.value)
+    assert str(path) in str(info.value)
+
+
+def test_overrides_apply_to_bases_and_spec(tmp_path):
+    spec = {"name": "ov", "base": [str(CASE1), str(CASE3)], "grid": {"controller.k_r": [[400, 400, 320]]}}
+    path = write_spec(tmp_path, spec)
+    loaded = load_spec(path, ["simulation.t_end=0.3", "sweep.grid.body.mass=[30, 50]", "sweep.name=renamed"])
+    runs = expand(loaded)
+    assert loaded.name == "renamed" and len(runs) == 4
+    assert [r.base for r in runs] == ["case1_permanent"] * 2 + ["case3_embedded"] * 2
+    assert {r.config.simulation.t_end for r in runs} == {0.3}
+    assert [r.config.body.mass for r in runs] == [30.0, 50.0, 30.0, 50.0]
+    with pytest.raises(SweepSpecError, match="the sweep varies 'controller.k_r'"):
+        load_spec(path, ["controller.k_r=[1, 1, 1]"])
+
+
+def test_shipped_example_specs():
+    gains = expand(load_spec(ROOT / "configs" / "sweeps" / "gains.yaml"))
+    assert len(gains) == 6
+    assert [(r.config.variant, r.params["controller.k_c"][0]) for r in gains[:2]] == [
+        ("visco_elastic", 4100), ("embedded", 4100)
+    ]
+    robust = expand(load_spec(ROOT / "configs" / "sweeps" / "robustness.yaml"))
+    assert len(robust) == 200
+    assert {r.base for r in robust} == {"case1_permanent", "case3_embedded"}
+    for a, b in zip(robust[::2], robust[1::2]):  # paired: the same factors for both cases
+        assert (a.base, b.base) == ("case1_permanent", "case3_embedded")
+        assert a.params == b.params
+        assert 0.5 <= a.params["body.mass:scale"] <= 1.5
+        assert a.config.body.mass == 41.0 * a.params["body.mass:scale"]
+        assert a.config.gains.k_r.tolist() == b.config.gains.k_r.tolist()  # gains fixed
+
+
+def test_dry_run_lists_runs_and_writes_nothing(tmp_path):
+    path = write_spec(tmp_path, {"name": "dry", "base": str(CASE3), "grid": {"body.mass": [30.0, 50.0]}})
+    result = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "out"), "--dry-run"])
+    assert result.exit_code == 0, result.output
+    ids = [r.run_id for r in expand(load_spec(path))]
+    assert f"{ids[1]}  base=case3_embedded  body.mass=50.0" in result.output
+    assert "warning: 2 of 2 runs: body.inertia" in result.output  # one digest line, not one per run
+    assert not (tmp_path / "out").exists()
+
+
+def test_worker_turns_exceptions_into_records(tmp_path):
+    bad = RunTask("r0000-deadbeef", {"name": "r0000-deadbeef", "body": {}}, str(tmp_path / "x.h5"))
+    (record,) = run_chunk([bad], WorkerOptions())
+    assert record["status"] == "error" and "ConfigError" in record["message"]
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_converged_definition():
+    assert is_converged("success", 100.0, 0.09, 1e-3)
+    assert not is_converged("success", 100.0, 0.11, 1e-3)
+    assert not is_converged("failed", 100.0, 0.0, 1e-3)
+    assert not is_converged("success", 100.0, float("nan"), 1e-3)
+
+
+# -- end to end -------------------------------------------------------------------------------
+
+
+def test_sweep_end_to_end_rerun_and_failure(tmp_path):
+    spec = {
+        "name": "e2e",
+        "base": str(CASE3),
+        "grid": {"controller.variant": ["visco_elastic", "embedded"]},
+        "zip": {
+            "initial_state.theta": [[0.0, 0.0, 0.0], LOCKING_THETA, [0.0, 0.0, 0.0]],
+            "initial_state.omega": [[16.0, 32.0, -16.0], LOCKING_OMEGA, [8.0, 16.0, -8.0]],
+        },
+    }
+    path = write_spec(tmp_path, spec)
+    out = tmp_path / "out"
+    args = ["sweep", str(path), "-o", str(out), "-j", "2", "--no-progress", *sum((["--set", s] for s in SHORT), [])]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 2, result.output  # two runs hit gimbal lock (one per variant)
+    folder = out / "e2e"
+    index = pd.read_csv(folder / "index.csv")
+    assert len(index) == 6 and list(index["run_index"]) == list(range(6))
+    failed = index[index["status"] == "failed"]
+    assert list(failed["run_index"]) == [1, 4]
+    assert failed["message"].str.contains("gimbal lock").all()
+    assert (index.loc[index["status"] != "failed", "status"] == "success").all()
+    assert not index["converged"].any()  # 0.2 s is too short for v to fall by 1e-3
+    assert index["converged"].dtype == bool
+    for column in ("controller.variant", "initial_state.omega.1", "max_abs_constraint_error_x",
+                   "lyapunov_final", "wall_time", "solver_nfev", "config_hash"):
+        assert column in index.columns
+    assert "initial_state.omega.1" in index.columns[: list(index.columns).index("status")]
+    summary = json.loads((folder / "sweep_summary.json").read_text())
+    assert summary["status"] == {"success": 4, "failed": 2, "error": 0, "pending": 0}
+    assert summary["n_runs"] == 6 and summary["fraction_converged"] == 0.0
+    # every run file: the format of `rbstab run`, named by the run id, hash of its config
+    runs = expand(load_spec(path, SHORT))
+    for run, row in zip(runs, index.itertuples()):
+        attrs = read_attributes(folder / row.file)
+        assert attrs["name"] == run.run_id == row.run_id
+        assert attrs["config_hash"] == run.config_hash == row.config_hash
+        assert attrs["status"] == row.status
+        assert attrs["summary_max_abs_constraint_error"][0] == row.max_abs_constraint_error_x
+    # the resolved spec is re-loadable and gives the same runs
+    again = expand(load_spec(folder / "sweep.yaml"))
+    assert [r.run_id for r in again] == [r.run_id for r in runs]
+    import xarray as xr
+
+    ds = pd.read_csv(folder / "index.csv").set_index("run_id").to_xarray()
+    assert isinstance(ds, xr.Dataset) and ds.sizes["run_id"] == 6
+
+    # rerun: everything skipped, files untouched, same exit status
+    stamps = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in (folder / "runs").glob("*.h5")}
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 2
+    assert "6 skipped, 0 run now" in result.output
+    assert stamps == {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in (folder / "runs").glob("*.h5")}
+    pd.testing.assert_frame_equal(pd.read_csv(folder / "index.csv"), index)
+
+
+def test_resume_reruns_only_stale_or_corrupt_files_and_timeout(tmp_path):
+    spec = spec_from_mapping(
+        {"name": "resume", "base": str(CASE3), "grid": {"initial_state.omega.0": [10.0, 12.0, 14.0]}},
+        overrides=SHORT,
+    )
+    first = run_sweep(spec, tmp_path, jobs=1, progress=False)
+    assert first.counts["success"] == 3 and first.n_executed == 3
+    runs_dir = tmp_path / "resume" / "runs"
+    names = sorted(p.name for p in runs_dir.glob("*.h5"))
+    reference = tmp_path / "reference.h5"
+    reference.write_bytes((runs_dir / names[2]).read_bytes())
+    (runs_dir / names[0]).write_bytes((runs_dir / names[1]).read_bytes())  # other config
+    (runs_dir / names[2]).write_bytes(b"not an HDF5 file")  # corrupt
+    (runs_dir / ".r0001-x.h5.abc.tmp").write_bytes(b"partial")  # left by a killed writer
+    second = run_sweep(spec, tmp_path, jobs=1, progress=False)
+    assert (second.n_skipped, second.n_executed) == (1, 2)
+    assert second.counts["success"] == 3
+    assert not list(runs_dir.glob(".*.tmp"))
+    data_equal(runs_dir / names[2], reference)
+    # --retry-failed with a tiny per-run timeout: a failed run is data, the sweep goes on
+    third = run_sweep(spec, tmp_path, jobs=1, progress=False, retry_failed=True, timeout=1e-9)
+    assert third.n_skipped == 3  # all succeeded before: nothing to retry
+    other = spec_from_mapping(
+        {"name": "timeout", "base": str(CASE3), "grid": {"initial_state.omega.0": [10.0, 12.0]}},
+        overrides=SHORT,
+    )
+    timed = run_sweep(other, tmp_path, jobs=2, progress=False, timeout=1e-9)
+    assert timed.counts == {"success": 0, "failed": 2, "error": 0, "pending": 0}
+    assert all("timeout" in message for _, _, message in timed.problems)
+
+
+def test_busy_folder_is_refused(tmp_path):
+    from rbstab.sweep.runner import _lock
+
+    spec = spec_from_mapping({"name": "busy", "base": str(CASE3)}, overrides=SHORT)
+    (tmp_path / "busy").mkdir()
+    with _lock(tmp_path / "busy"):
+        with pytest.raises(SweepBusyError, match="another rbstab sweep"):
+            run_sweep(spec, tmp_path, jobs=1, progress=False)
+
+
+# -- Dask ---------------------------------------------------------------------------------------
+
+
+def test_dask_executor_gives_identical_results(tmp_path):
+    pytest.importorskip("distributed", reason='the dask executor needs "distributed" (pip install ".[dask]")')
+    from distributed import LocalCluster
+
+    spec = {
+        "name": "dask",
+        "base": str(CASE3),
+        "grid": {"controller.variant": ["visco_elastic", "embedded"]},
+        "zip": {"initial_state.theta": [[0.0, 0.0, 0.0], LOCKING_THETA],
+                "initial_state.omega": [[16.0, 32.0, -16.0], LOCKING_OMEGA]},
+    }
+    path = write_spec(tmp_path, spec)
+    sets = sum((["--set", s] for s in SHORT), [])
+    local = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "local"), "-j", "2", "--no-progress", *sets])
+    assert local.exit_code == 2, local.output
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        result = CliRunner().invoke(
+            cli, ["sweep", str(path), "-o", str(tmp_path / "dask"), "--scheduler", cluster.scheduler_address,
+                  "--no-progress", *sets],
+        )
+    assert result.exit_code == 2, result.output
+    assert "Dask scheduler" in result.output
+    a = sorted((tmp_path / "local" / "dask" / "runs").glob("*.h5"))
+    b = sorted((tmp_path / "dask" / "dask" / "runs").glob("*.h5"))
+    assert [p.name for p in a] == [p.name for p in b] and len(a) == 4
+    for x, y in zip(a, b):
+        data_equal(x, y)
+    ia = pd.read_csv(tmp_path / "local" / "dask" / "index.csv").drop(columns=["wall_time"])
+    ib = pd.read_csv(tmp_path / "dask" / "dask" / "index.csv").drop(columns=["wall_time"])
+    pd.testing.assert_frame_equal(ia, ib)
+
+
+def test_dask_missing_gives_install_hint(monkeypatch):
+    from rbstab.sweep.executors import DaskExecutor
+
+    monkeypatch.setitem(sys.modules, "distributed", None)
+    with pytest.raises(ExecutorError, match=r'pip install "rbstab\[dask\]"'):
+        DaskExecutor("tcp://127.0.0.1:1")
+
+
+def test_dask_unreachable_scheduler_is_a_clean_cli_error(tmp_path):
+    pytest.importorskip("distributed", reason='the dask executor needs "distributed" (pip install ".[dask]")')
+    path = write_spec(tmp_path, {"name": "nosched", "base": str(CASE3)})
+    from rbstab.sweep import executors
+
+    original = executors.DaskExecutor.__init__
+
+    def quick(self, address=None, **kw):
+        original(self, address, connect_timeout=1.0)
+
+    import unittest.mock as mock
+
+    with mock.patch.object(executors.DaskExecutor, "__init__", quick):
+        result = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"])
+    assert result.exit_code == 1
+    assert "cannot connect to the Dask scheduler at tcp://127.0.0.1:9" in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "o").exists()
