@@ -175,7 +175,7 @@ def test_method_option_and_set_override(tmp_path):
 
 
 def test_interrupted_write_leaves_no_file(tmp_path, monkeypatch):
-    import h5netcdf
+    import h5py
 
     from rbstab.config import load_config
     from rbstab.io.hdf5 import write_result
@@ -187,7 +187,7 @@ def test_interrupted_write_leaves_no_file(tmp_path, monkeypatch):
     def boom(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(h5netcdf.File, "create_variable", boom)
+    monkeypatch.setattr(h5py.Group, "create_dataset", boom)
     with pytest.raises(KeyboardInterrupt):
         write_result(result, tmp_path / "x.h5")
     assert list(tmp_path.iterdir()) == []

@@ -10,6 +10,7 @@ message, never an exception.
 from __future__ import annotations
 
 import time as _time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -22,7 +23,21 @@ from .variants import Variant
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
 
-__all__ = ["RunResult", "RunTimeout", "simulate", "solve", "gimbal_lock_event", "evaluate_outputs"]
+__all__ = [
+    "RunResult",
+    "RunTimeout",
+    "ENGINES",
+    "simulate",
+    "simulate_many",
+    "solve",
+    "gimbal_lock_event",
+    "evaluate_outputs",
+]
+
+#: Integration engines: ``scipy`` (the reference, one solve_ivp call per run, any
+#: method) and ``batch`` (:mod:`rbstab.batch`, many runs per vectorised integration,
+#: RK23/RK45/DOP853; other methods fall back to scipy).
+ENGINES = ("scipy", "batch")
 
 
 @dataclass
@@ -180,6 +195,20 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> 
     return outputs
 
 
+def _result(config, variant, time, states, status, message, solver, wall_time) -> RunResult:
+    outputs = evaluate_outputs(variant, time, states)
+    return RunResult(
+        config=config,
+        time=time,
+        outputs=outputs,
+        status=status,
+        message=message,
+        solver=solver,
+        wall_time=wall_time,
+        summary=summarize(time, outputs),
+    )
+
+
 def simulate(config: "RunConfig", timeout: float | None = None) -> RunResult:
     """Run one validated configuration through the scipy core.
 
@@ -199,15 +228,73 @@ def simulate(config: "RunConfig", timeout: float | None = None) -> RunResult:
     variant = config.make_variant()
     y0 = variant.initial_state(config.initial_state)
     time, states, status, message, solver = solve(variant, y0, config.simulation, timeout)
-    outputs = evaluate_outputs(variant, time, states)
-    summary = summarize(time, outputs)
-    return RunResult(
-        config=config,
-        time=time,
-        outputs=outputs,
-        status=status,
-        message=message,
-        solver=solver,
-        wall_time=_time.perf_counter() - start,
-        summary=summary,
-    )
+    result = _result(config, variant, time, states, status, message, solver, 0.0)
+    result.wall_time = _time.perf_counter() - start
+    return result
+
+
+def _batch_key(config: "RunConfig") -> str:
+    """Configs with equal keys differ at most in name and initial state: one batch."""
+    resolved = {k: v for k, v in config.resolved.items() if k not in ("name", "initial_state")}
+    return repr(resolved)
+
+
+def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chunk_size: int = 512) -> Iterator[tuple[int, RunResult]]:
+    """Run many validated configurations; yields ``(index into configs, RunResult)``.
+
+    With ``engine="batch"``, configurations that differ only in ``name`` and
+    ``initial_state`` and use RK23, RK45 or DOP853 are integrated together by
+    :func:`rbstab.batch.integrate_batch` (per-run step-size control; each run takes the
+    steps scipy would take alone), ``chunk_size`` runs at a time; everything else goes
+    through :func:`simulate`. Results are yielded as each chunk finishes, so at most one
+    chunk of trajectories (``chunk_size * n_samples * n_state`` floats) is held at once.
+    Each result's ``wall_time`` is its share of the chunk's integration plus its own
+    post-processing [s].
+
+    Raises
+    ------
+    ValueError
+        For an unknown engine (allowed: :data:`ENGINES`) or ``chunk_size < 1``.
+    """
+    if engine not in ENGINES:
+        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
+    from .batch import SUPPORTED_METHODS, integrate_batch
+
+    groups: dict[str, list[int]] = {}
+    for i, config in enumerate(configs):
+        if engine == "batch" and config.simulation.method in SUPPORTED_METHODS:
+            groups.setdefault(_batch_key(config), []).append(i)
+        else:
+            yield i, simulate(config)
+    for members in groups.values():
+        first = configs[members[0]]
+        variant = first.make_variant()
+        sim = first.simulation
+        for lo in range(0, len(members), chunk_size):
+            chunk = members[lo : lo + chunk_size]
+            start = _time.perf_counter()
+            y0 = np.stack([variant.initial_state(configs[i].initial_state) for i in chunk])
+            sol = integrate_batch(
+                variant,
+                y0,
+                sim.t_end,
+                sim.n_samples,
+                method=sim.method,
+                rtol=sim.rtol,
+                atol=sim.atol,
+                max_step=sim.max_step,
+                gimbal_margin=sim.gimbal_margin,
+            )
+            share = (_time.perf_counter() - start) / len(chunk)
+            for k, i in enumerate(chunk):
+                t0 = _time.perf_counter()
+                ok = int(sol.status[k]) == 0
+                solver = {"nfev": int(sol.nfev[k]), "njev": 0, "nlu": 0, "solver_status": 0 if ok else -1}
+                result = _result(
+                    configs[i], variant, sol.t, sol.y[k], "success" if ok else "failed",
+                    sol.message[k], solver, 0.0,
+                )
+                result.wall_time = share + _time.perf_counter() - t0
+                yield i, result
