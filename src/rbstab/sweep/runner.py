@@ -155,9 +155,9 @@ def _remove_temporaries(*folders: Path) -> int:
 
 
 def _dump_yaml(data: Any) -> str:
-    from ..config import _Dumper  # flow-style lists, the style of the result files' config
+    from ..config import dump_yaml  # flow-style lists, the style of the result files' config
 
-    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True)
+    return dump_yaml(data)
 
 
 def _spec_document(spec: SweepSpec, runs: Sequence[PlannedRun], command_line: str | None) -> dict:

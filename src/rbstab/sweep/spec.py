@@ -186,7 +186,7 @@ def _overlapping(a: str, b: str) -> bool:
 
 def _parse_yaml(text: str) -> Any:
     # The project's loader: 1e-8 is a float, a duplicate key is an error.
-    from ..config import _parse_yaml as parse
+    from ..config import parse_yaml as parse
 
     return parse(text)
 

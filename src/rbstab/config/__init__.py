@@ -1,0 +1,71 @@
+"""Run configuration: a YAML file -> a validated, frozen :class:`RunConfig`.
+
+Validation happens here, once, at the boundary; the core (:mod:`rbstab.model`, the
+variants, the integrator) trusts what it receives. Every problem in a configuration is
+reported at once, one line each: the dotted key, the value found, what is allowed and,
+in parentheses, what is wrong with it, e.g. (one line)::
+
+    config key 'controller.k_t': found [1, 2]; expected 3 numbers (a diagonal) or a 3x3
+    list of lists, symmetric positive definite (N/m) (2 entries, not 3)
+
+Schema (the keys are public; units in brackets)::
+
+    name: case3_embedded            # optional, default: the file stem; [A-Za-z0-9_.-]+
+    body:
+      mass: 41.0                    # m [kg] > 0, required
+      inertia: [10.0, 8.0, 0.4]     # J [kg m^2]: 3 principal moments or a 3x3 list; SPD; required
+      attachment_point: [0.15, 0.10, -0.42]  # R [m], body frame, required
+      gravity: [0.0, 0.0, 0.0]      # g [m/s^2], inertial frame, default zeros
+    controller:
+      variant: embedded             # a key of rbstab.variants.VARIANTS, required
+      k_t: [4100, 4100, 3280]       # gains k_t l_t k_r l_r k_c l_c k_d l_d: 3 numbers (a
+      ...                           # diagonal) or a 3x3 list; SPD; required when the
+                                    # variant's ``required_gains`` lists them
+      k_s: 500.0                    # K_s [N] > 0 (sliding, eq 39)
+      boundary_layer: 0.0           # phi [m] >= 0, default 0 (pure sign function)
+    initial_state:                  # each key 3 numbers, default zeros
+      theta: [0, 0, 0]              # [rad], |theta_2| < pi/2 - gimbal_margin
+      omega: [16, 32, -16]          # [rad/s], body frame
+      x: [0, 0, 0]                  # [m]   -> state block 'position'
+      v: [0, 0, 0]                  # [m/s] -> state block 'velocity'
+      d: [0, 0, 0]                  # [m]   -> state block 'controller_state' (embedded)
+    simulation:
+      t_end: 2.0                    # [s] > 0
+      n_samples: 2001               # integer >= 2
+      method: DOP853                # a scipy solve_ivp method
+      rtol: 1.0e-8                  # > 0
+      atol: 1.0e-10                 # > 0
+      max_step: .inf                # [s] > 0 (null means inf)
+      gimbal_margin: 1.0e-3         # [rad] in (0, 0.5)
+
+Gains the variant does not use (and ``initial_state.d`` for variants without a controller
+state) are validated, kept in :attr:`RunConfig.resolved`, and otherwise ignored, so one
+base configuration can serve a sweep over variants.
+
+YAML is read with a :class:`yaml.SafeLoader` subclass that differs in two ways: ``1e-8``
+is a float (PyYAML follows YAML 1.1 and reads it as a string), and a key given twice in
+one mapping is an error instead of silently keeping the last value.
+"""
+
+from .errors import ConfigError, PhysicalPlausibilityWarning
+from .loader import RunConfig, config_from_mapping, load_config
+from .paths import apply_overrides, get_dotted, set_dotted
+from .schema import GAIN_NAMES, GAIN_UNITS, INITIAL_STATE_BLOCKS, SimulationSettings
+from .yaml_io import dump_yaml, parse_yaml
+
+__all__ = [
+    "ConfigError",
+    "PhysicalPlausibilityWarning",
+    "RunConfig",
+    "SimulationSettings",
+    "load_config",
+    "config_from_mapping",
+    "apply_overrides",
+    "set_dotted",
+    "get_dotted",
+    "parse_yaml",
+    "dump_yaml",
+    "GAIN_NAMES",
+    "GAIN_UNITS",
+    "INITIAL_STATE_BLOCKS",
+]

@@ -1,0 +1,245 @@
+"""The validated, frozen run configuration and the functions that build it."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import ValidationError
+
+from ..model import Gains, RigidBody
+from ..variants import VARIANTS, Variant
+from .errors import ConfigError, PhysicalPlausibilityWarning
+from .paths import apply_overrides, plain_tree
+from .schema import (
+    GAIN_NAMES,
+    INITIAL_STATE_BLOCKS,
+    TOP_LEVEL,
+    RunSchema,
+    SimulationSettings,
+    problem_line,
+    short_repr,
+)
+from .yaml_io import dump_yaml, parse_yaml
+
+__all__ = ["RunConfig", "config_from_mapping", "load_config"]
+
+
+@dataclass(frozen=True, eq=False)
+class RunConfig:
+    """A validated run: everything the integrator needs, read-only.
+
+    Attributes
+    ----------
+    name : str
+        Run name, ``[A-Za-z0-9_.-]+`` (used as a file name).
+    variant : str
+        Key of :data:`rbstab.variants.VARIANTS`.
+    body : RigidBody
+        Mass [kg], inertia [kg m^2] (3x3), attachment point R [m], gravity g [m/s^2].
+    gains : Gains
+        The gains the variant uses (its ``required_gains``, and ``boundary_layer`` for
+        sliding), each 3x3; gains configured but unused are None here (see ``resolved``).
+    initial_state : dict of str to ndarray, shape (3,)
+        Keyed by the state blocks of :mod:`rbstab.layout` (``theta``, ``omega``,
+        ``position``, ``velocity``, ``controller_state``), all five always present.
+    simulation : SimulationSettings
+    resolved : dict
+        The whole configuration as plain Python with every default filled in and gains as
+        written; ``config_from_mapping(resolved)`` rebuilds an identical RunConfig.
+        ``max_step`` is None when infinite.
+    warnings : tuple of str
+        Physical-plausibility warnings (also emitted as :class:`PhysicalPlausibilityWarning`).
+    """
+
+    name: str
+    variant: str
+    body: RigidBody
+    gains: Gains
+    initial_state: dict[str, np.ndarray]
+    simulation: SimulationSettings
+    resolved: dict
+    warnings: tuple[str, ...] = ()
+
+    def to_yaml(self) -> str:
+        """``resolved`` as YAML (keys in schema order, lists in flow style)."""
+        return dump_yaml(self.resolved)
+
+    def make_variant(self) -> Variant:
+        """The variant object, ``VARIANTS[variant](body, gains)``."""
+        return VARIANTS[self.variant](self.body, self.gains)
+
+
+def _array(value: Any) -> np.ndarray:
+    """Read-only float array; a 3-list of numbers is a diagonal when ``value`` is a matrix."""
+    out = np.array(value, dtype=float)
+    out.setflags(write=False)
+    return out
+
+
+def _matrix(value: Any) -> np.ndarray:
+    return _array(np.diag(value) if np.ndim(value) == 1 else value)
+
+
+def _inertia_warnings(inertia: np.ndarray) -> list[str]:
+    diagonal = np.diag(inertia)  # keep the user's j1, j2, j3 labels when J is diagonal
+    is_diagonal = np.array_equal(inertia, np.diag(diagonal))
+    moments = diagonal if is_diagonal else np.linalg.eigvalsh(inertia)
+    j = [float(x) for x in moments]
+    for i in range(3):
+        others = [j[k] for k in range(3) if k != i]
+        if j[i] > sum(others) * (1 + 1e-12):
+            return [
+                f"body.inertia: principal moments ({', '.join(f'{x:g}' for x in j)}) kg m^2 "
+                f"violate the triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + "
+                f"{others[1]:g}) that every real rigid body satisfies; the equations of "
+                "motion still hold, but no physical body has this inertia"
+            ]
+    return []
+
+
+def _build(
+    data: Any,
+    *,
+    default_name: str | None,
+    source: str | None,
+    overrides: Sequence[str] = (),
+) -> RunConfig:
+    if not isinstance(data, Mapping):
+        what = "the configuration is empty" if data is None else f"top level: found {short_repr(data)}"
+        raise ConfigError([f"{what}; expected {TOP_LEVEL}"], source)
+    data = plain_tree(data)
+    name_defaulted = "name" not in data and default_name is not None
+    if name_defaulted:
+        data["name"] = default_name
+    try:
+        run = RunSchema.model_validate(data)
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors(include_url=False):
+            key, text = problem_line(err, name_defaulted)
+            related = [o for o in overrides if _related(o.partition("=")[0].strip(), key)]
+            lines.append(text + "".join(f" [from override {o!r}]" for o in related))
+        raise ConfigError(lines, source) from None
+
+    ctrl = run.controller
+    used = VARIANTS[ctrl.variant].required_gains
+    gains = Gains(
+        **{g: _matrix(getattr(ctrl, g)) for g in GAIN_NAMES if g in used},
+        k_s=float(ctrl.k_s) if "k_s" in used else None,
+        boundary_layer=float(ctrl.boundary_layer) if "k_s" in used else 0.0,
+    )
+    body = RigidBody(
+        mass=float(run.body.mass),
+        inertia=_matrix(run.body.inertia),
+        attachment_point=_array(run.body.attachment_point),
+        gravity=_array(run.body.gravity),
+    )
+    sim = run.simulation
+    simulation = SimulationSettings(
+        t_end=float(sim.t_end),
+        n_samples=sim.n_samples,
+        method=sim.method,
+        rtol=float(sim.rtol),
+        atol=float(sim.atol),
+        max_step=float(sim.max_step),
+        gimbal_margin=float(sim.gimbal_margin),
+    )
+    dump = run.model_dump()
+    dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
+    if math.isinf(sim.max_step):
+        dump["simulation"]["max_step"] = None
+    found_warnings = tuple(_inertia_warnings(body.inertia))
+    for message in found_warnings:
+        warnings.warn(
+            f"{source}: {message}" if source else message, PhysicalPlausibilityWarning, stacklevel=3
+        )
+    return RunConfig(
+        name=run.name,
+        variant=ctrl.variant,
+        body=body,
+        gains=gains,
+        initial_state={
+            block: _array(getattr(run.initial_state, key))
+            for key, block in INITIAL_STATE_BLOCKS.items()
+        },
+        simulation=simulation,
+        resolved=plain_tree(dump),
+        warnings=found_warnings,
+    )
+
+
+def _related(a: str, b: str) -> bool:
+    """Whether one dotted key is the other or lies inside it."""
+    return a == b or a.startswith(b + ".") or b.startswith(a + ".")
+
+
+def config_from_mapping(
+    data: Mapping, *, default_name: str | None = None, source: str | None = None
+) -> RunConfig:
+    """Validate a configuration mapping (the parsed YAML) into a :class:`RunConfig`.
+
+    Parameters
+    ----------
+    data : Mapping
+        The configuration (see the module docstring for the schema). Not modified.
+    default_name : str, optional
+        Name used when ``data`` has no ``name``.
+    source : str, optional
+        Where ``data`` comes from, for messages.
+
+    Raises
+    ------
+    ConfigError
+        Listing every problem found.
+
+    Warns
+    -----
+    PhysicalPlausibilityWarning
+        For a configuration no real body has (inertia violating the triangle inequality).
+    """
+    return _build(data, default_name=default_name, source=source)
+
+
+def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
+    """Read a YAML configuration file, apply ``key.path=value`` overrides, validate it.
+
+    Parameters
+    ----------
+    path : str or Path
+        The YAML file; its stem is the default ``name``.
+    overrides : sequence of str
+        Applied in order with :func:`apply_overrides` before validation.
+
+    Raises
+    ------
+    ConfigError
+        For a missing or unreadable file, a YAML syntax error, a top level that is not a
+        mapping, a malformed override, or any invalid value (all listed at once; lines
+        about an overridden key name the override).
+
+    Warns
+    -----
+    PhysicalPlausibilityWarning
+        See :func:`config_from_mapping`.
+    """
+    path = Path(path)
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError([f"config file not found: {source}"]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError([f"cannot read the config file: {exc}"], source) from None
+    try:
+        data = parse_yaml(text)
+        if isinstance(data, Mapping):
+            data = apply_overrides(data, overrides)
+    except ConfigError as exc:
+        raise ConfigError(exc.errors, source) from None
+    return _build(data, default_name=path.stem, source=source, overrides=overrides)

@@ -1,0 +1,511 @@
+"""The configuration schema: value checks, pydantic models, and their error messages.
+
+Each check takes the raw value and returns a plain-Python copy or raises
+:class:`Invalid` with a short detail; what is *allowed* is the field's description.
+:func:`problem_line` turns one pydantic error into our one-line message format.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import numbers
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Annotated, Any
+
+import numpy as np
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+)
+from pydantic_core import PydanticCustomError
+
+from ..layout import BLOCK_UNITS
+from ..variants import VARIANTS
+
+__all__ = [
+    "GAIN_UNITS",
+    "GAIN_NAMES",
+    "INITIAL_STATE_BLOCKS",
+    "SimulationSettings",
+    "RunSchema",
+    "TOP_LEVEL",
+    "kind_of",
+    "short_repr",
+    "field_at",
+    "problem_line",
+]
+
+#: Matrix gains of ``controller`` (:class:`rbstab.model.Gains`), with their units.
+GAIN_UNITS = {
+    "k_t": "N/m",
+    "l_t": "N s/m",
+    "k_r": "N m/rad",
+    "l_r": "N m s/rad",
+    "k_c": "N/m",
+    "l_c": "N s/m",
+    "k_d": "N/m",
+    "l_d": "N s/m",
+}
+GAIN_NAMES = tuple(GAIN_UNITS)
+
+#: ``initial_state`` config key -> state block name of :mod:`rbstab.layout`.
+INITIAL_STATE_BLOCKS = {
+    "theta": "theta",
+    "omega": "omega",
+    "x": "position",
+    "v": "velocity",
+    "d": "controller_state",
+}
+
+_NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
+_SYMMETRY_RTOL = 1e-12
+# Used only if scipy moves its private registry (scipy.integrate._ivp.ivp.METHODS).
+_FALLBACK_METHODS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+
+
+class Invalid(Exception):
+    def __init__(self, detail: str = "", expected: str | None = None) -> None:
+        super().__init__(detail)
+        self.detail = detail
+        self.expected = expected
+
+
+def kind_of(value: Any) -> str:
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, str):
+        return "a string"
+    if isinstance(value, numbers.Real):
+        return "a number"
+    if isinstance(value, Mapping):
+        return "a mapping"
+    if isinstance(value, (list, tuple)):
+        return "a list"
+    return f"a {type(value).__name__}"
+
+
+def _as_number(value: Any, *, allow_inf: bool = False) -> int | float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        detail = f"{kind_of(value)}, not a number"
+        if isinstance(value, str):
+            try:
+                float(value)
+                detail += "; remove the quotes"
+            except ValueError:
+                pass
+        raise Invalid(detail)
+    number = int(value) if isinstance(value, numbers.Integral) else float(value)
+    if math.isnan(number) or (math.isinf(number) and not allow_inf):
+        raise Invalid("not a finite number")
+    return number
+
+
+def _number(
+    *,
+    gt: float | None = None,
+    ge: float | None = None,
+    lt: float | None = None,
+    allow_inf: bool = False,
+    integer: bool = False,
+) -> Callable[[Any], int | float]:
+    def check(value: Any) -> int | float:
+        if integer and (isinstance(value, bool) or not isinstance(value, numbers.Integral)):
+            raise Invalid(f"{kind_of(value)}, not an integer")
+        number = _as_number(value, allow_inf=allow_inf)
+        if (
+            (gt is not None and not number > gt)
+            or (ge is not None and not number >= ge)
+            or (lt is not None and not number < lt)
+        ):
+            raise Invalid()  # the field's description says what is allowed
+        return number
+
+    return check
+
+
+def _entry(value: Any, where: str) -> int | float:
+    try:
+        return _as_number(value)
+    except Invalid as exc:
+        raise Invalid(f"entry {where} is {exc.detail}") from None
+
+
+def _vector(value: Any) -> list[int | float]:
+    if not isinstance(value, (list, tuple)):
+        raise Invalid(f"{kind_of(value)}, not a list")
+    if len(value) != 3:
+        raise Invalid(f"{len(value)} entries, not 3")
+    return [_entry(x, f"[{i}]") for i, x in enumerate(value)]
+
+
+def _spd_matrix(value: Any) -> list:
+    """3 numbers (a positive diagonal) or a symmetric positive definite 3x3 list of lists."""
+    if not isinstance(value, (list, tuple)):
+        raise Invalid(f"{kind_of(value)}, not a list")
+    is_row = [isinstance(row, (list, tuple)) for row in value]
+    if not any(is_row):
+        diagonal = _vector(value)
+        bad = [f"[{i}] = {x:g}" for i, x in enumerate(diagonal) if not x > 0]
+        if bad:
+            raise Invalid(f"not positive definite: diagonal {', '.join(bad)}; each must be > 0")
+        return diagonal
+    if not all(is_row):
+        raise Invalid("it mixes numbers and lists")
+    lengths = sorted({len(row) for row in value})
+    if len(value) != 3 or lengths != [3]:
+        raise Invalid(f"a {len(value)}x{'/'.join(map(str, lengths))} list of lists")
+    rows = [[_entry(x, f"[{i}][{j}]") for j, x in enumerate(row)] for i, row in enumerate(value)]
+    matrix = np.array(rows, dtype=float)
+    asymmetry = np.abs(matrix - matrix.T)
+    if asymmetry.max() > _SYMMETRY_RTOL * np.abs(matrix).max():
+        i, j = np.unravel_index(np.argmax(asymmetry), matrix.shape)
+        raise Invalid(
+            f"not symmetric: [{i}][{j}] = {matrix[i, j]:g} but [{j}][{i}] = {matrix[j, i]:g}"
+        )
+    smallest = np.linalg.eigvalsh(matrix)[0]
+    if not smallest > 0:
+        raise Invalid(f"not positive definite: smallest eigenvalue {smallest:g}")
+    return rows
+
+
+def _theta(value: Any) -> list[int | float]:
+    """Euler angles; the margin to gimbal lock is checked with the simulation section."""
+    theta = _vector(value)
+    if not abs(theta[1]) < math.pi / 2:
+        raise Invalid(
+            "B(theta) is singular at |theta_2| = pi/2 (gimbal lock, eq 1)",
+            "3 numbers (rad) with theta_2 in (-pi/2, pi/2)",
+        )
+    return theta
+
+
+def _optional(check: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    return lambda value: None if value is None else check(value)
+
+
+def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
+    match = difflib.get_close_matches(word, list(choices), n=1)
+    return f"did you mean '{prefix}{match[0]}'?" if match else ""
+
+
+def _name(value: Any) -> str:
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string")
+    if not _NAME_PATTERN.fullmatch(value) or set(value) == {"."}:
+        raise Invalid()
+    return value
+
+
+def _variant(value: Any) -> str:
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string")
+    if value not in VARIANTS:
+        raise Invalid(_did_you_mean(value, list(VARIANTS)))
+    return value
+
+
+def _solver_methods() -> tuple[str, ...]:
+    try:
+        from scipy.integrate._ivp.ivp import METHODS  # lazy: scipy is slow to import
+    except ImportError:  # pragma: no cover - scipy moved its private registry
+        return _FALLBACK_METHODS
+    return tuple(METHODS)
+
+
+def _method(value: Any) -> str:
+    methods = _solver_methods()
+    expected = f"one of {', '.join(methods)} (scipy solve_ivp methods)"
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string", expected)
+    if value not in methods:
+        by_case = {m.lower(): m for m in methods}
+        hint = f"did you mean '{by_case[value.lower()]}'?" if value.lower() in by_case else ""
+        raise Invalid(hint or _did_you_mean(value, methods), expected)
+    return value
+
+
+def _max_step(value: Any) -> float:
+    """null means inf (that is how :attr:`RunConfig.resolved` writes inf)."""
+    return math.inf if value is None else _number(gt=0, allow_inf=True)(value)
+
+
+def _checked(check: Callable[[Any], Any]) -> BeforeValidator:
+    def validate(value: Any) -> Any:
+        try:
+            return check(value)
+        except Invalid as exc:
+            ctx = {"detail": exc.detail}
+            if exc.expected:
+                ctx["expected"] = exc.expected
+            raise PydanticCustomError("rbstab_invalid", "invalid value {detail}", ctx) from None
+
+    return BeforeValidator(validate)
+
+
+@dataclass(frozen=True)
+class SimulationSettings:
+    """Integration settings of one run (``simulation`` section).
+
+    Attributes
+    ----------
+    t_end : float
+        Final time [s], > 0; the run starts at t = 0.
+    n_samples : int
+        Number of output samples on [0, t_end], >= 2.
+    method : str
+        scipy ``solve_ivp`` method.
+    rtol, atol : float
+        Relative and absolute tolerances of the solver, > 0.
+    max_step : float
+        Largest solver step [s], > 0; ``inf`` for no limit.
+    gimbal_margin : float
+        [rad] in (0, 0.5): the run stops when |theta_2| >= pi/2 - gimbal_margin.
+    """
+
+    t_end: float = 2.0
+    n_samples: int = 2001
+    method: str = "DOP853"
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    max_step: float = math.inf
+    gimbal_margin: float = 1e-3
+
+
+# -- schema --------------------------------------------------------------------------------
+
+_VECTOR = Annotated[Any, _checked(_vector)]
+_OPTIONAL_SPD = Annotated[Any, _checked(_optional(_spd_matrix))]
+_ZERO = (0.0, 0.0, 0.0)
+
+
+def _gain(name: str) -> Any:
+    return Field(
+        None,
+        validate_default=True,
+        description="3 numbers (a diagonal) or a 3x3 list of lists, "
+        f"symmetric positive definite ({GAIN_UNITS[name]})",
+    )
+
+
+def _mapping_of(model: type[BaseModel]) -> str:
+    return f"a mapping with keys {', '.join(model.model_fields)}"
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class _Body(_Section):
+    mass: Annotated[Any, _checked(_number(gt=0))] = Field(description="a number > 0 (kg)")
+    inertia: Annotated[Any, _checked(_spd_matrix)] = Field(
+        description="3 numbers (principal moments) or a 3x3 list of lists, "
+        "symmetric positive definite (kg m^2)"
+    )
+    attachment_point: _VECTOR = Field(description="3 numbers (R, body frame, m)")
+    gravity: _VECTOR = Field(_ZERO, description="3 numbers (g, inertial frame, m/s^2)")
+
+
+class _Controller(_Section):
+    # ``variant`` first: the gain validators read it from ``info.data``.
+    variant: Annotated[Any, _checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
+    k_t: _OPTIONAL_SPD = _gain("k_t")
+    l_t: _OPTIONAL_SPD = _gain("l_t")
+    k_r: _OPTIONAL_SPD = _gain("k_r")
+    l_r: _OPTIONAL_SPD = _gain("l_r")
+    k_c: _OPTIONAL_SPD = _gain("k_c")
+    l_c: _OPTIONAL_SPD = _gain("l_c")
+    k_d: _OPTIONAL_SPD = _gain("k_d")
+    l_d: _OPTIONAL_SPD = _gain("l_d")
+    k_s: Annotated[Any, _checked(_optional(_number(gt=0)))] = Field(
+        None, validate_default=True, description="a number > 0 (N)"
+    )
+    boundary_layer: Annotated[Any, _checked(_number(ge=0))] = Field(
+        0.0, description="a number >= 0 (m; 0 = pure sign function)"
+    )
+
+    @field_validator(*GAIN_NAMES, "k_s", mode="after")
+    @classmethod
+    def _required_by_variant(cls, value: Any, info: ValidationInfo) -> Any:
+        variant = info.data.get("variant")  # absent if the variant itself is invalid
+        required = variant is not None and info.field_name in VARIANTS[variant].required_gains
+        if value is None and required:
+            raise PydanticCustomError(
+                "rbstab_missing", "missing", {"detail": f"required by variant '{variant}'"}
+            )
+        return value
+
+
+class _InitialState(_Section):
+    theta: Annotated[Any, _checked(_theta)] = Field(
+        _ZERO, description=f"3 numbers ({BLOCK_UNITS['theta']})"
+    )
+    omega: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['omega']}, body frame)")
+    x: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['position']})")
+    v: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['velocity']})")
+    d: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['controller_state']})")
+
+
+_DEFAULT_SIMULATION = SimulationSettings()
+
+
+class _Simulation(_Section):
+    t_end: Annotated[Any, _checked(_number(gt=0))] = Field(
+        _DEFAULT_SIMULATION.t_end, description="a number > 0 (s)"
+    )
+    n_samples: Annotated[Any, _checked(_number(ge=2, integer=True))] = Field(
+        _DEFAULT_SIMULATION.n_samples, description="an integer >= 2"
+    )
+    method: Annotated[Any, _checked(_method)] = Field(
+        _DEFAULT_SIMULATION.method, description="a scipy solve_ivp method name"
+    )
+    rtol: Annotated[Any, _checked(_number(gt=0))] = Field(
+        _DEFAULT_SIMULATION.rtol, description="a number > 0"
+    )
+    atol: Annotated[Any, _checked(_number(gt=0))] = Field(
+        _DEFAULT_SIMULATION.atol, description="a number > 0"
+    )
+    max_step: Annotated[Any, _checked(_max_step)] = Field(
+        _DEFAULT_SIMULATION.max_step, description="a number > 0 (s), .inf or null for no limit"
+    )
+    gimbal_margin: Annotated[Any, _checked(_number(gt=0, lt=0.5))] = Field(
+        _DEFAULT_SIMULATION.gimbal_margin, description="a number in (0, 0.5) (rad)"
+    )
+
+
+class RunSchema(_Section):
+    name: Annotated[Any, _checked(_name)] = Field(
+        description="a name of letters, digits, '_', '.' and '-' (it becomes a file name)"
+    )
+    body: _Body = Field(description=_mapping_of(_Body))
+    controller: _Controller = Field(description=_mapping_of(_Controller))
+    initial_state: _InitialState = Field(
+        default_factory=_InitialState, description=_mapping_of(_InitialState)
+    )
+    # validate_default: the theta check below must also run when the section is absent.
+    simulation: _Simulation = Field(
+        default_factory=_Simulation, validate_default=True, description=_mapping_of(_Simulation)
+    )
+
+    @field_validator("initial_state", "simulation", mode="before")
+    @classmethod
+    def _empty_section(cls, value: Any) -> Any:
+        return {} if value is None else value  # "simulation:" with every line commented out
+
+    @field_validator("simulation", mode="after")
+    @classmethod
+    def _theta_clear_of_gimbal_lock(cls, value: _Simulation, info: ValidationInfo) -> _Simulation:
+        state = info.data.get("initial_state")
+        if state is None:
+            return value
+        limit = math.pi / 2 - value.gimbal_margin
+        if not abs(state.theta[1]) < limit:
+            raise PydanticCustomError(
+                "rbstab_invalid",
+                "theta_2 too close to gimbal lock",
+                {
+                    "key": "initial_state.theta",
+                    "found": short_repr(state.theta),
+                    "expected": "3 numbers (rad) with theta_2 in (-pi/2 + gimbal_margin, "
+                    f"pi/2 - gimbal_margin) = ({-limit:.6g}, {limit:.6g})",
+                    "detail": "B(theta) is singular at |theta_2| = pi/2 (gimbal lock, eq 1); "
+                    f"gimbal_margin = {value.gimbal_margin:g}",
+                },
+            )
+        return value
+
+
+_SECTIONS = tuple(RunSchema.model_fields)
+TOP_LEVEL = _mapping_of(RunSchema)
+
+
+# -- pydantic errors -> our lines ----------------------------------------------------------
+
+
+def short_repr(value: Any, limit: int = 80) -> str:
+    """Short YAML-flavoured repr of a found value, truncated to ``limit`` characters."""
+
+    def rep(v: Any, depth: int = 0) -> str:
+        if v is None:
+            return "null"
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, np.ndarray):
+            v = v.tolist()
+        if isinstance(v, np.generic):
+            v = v.item()
+        if depth > 3:
+            return "..."
+        if isinstance(v, (list, tuple)):
+            items = [rep(x, depth + 1) for x in v[:10]] + (["..."] if len(v) > 10 else [])
+            return "[" + ", ".join(items) + "]"
+        if isinstance(v, Mapping):
+            items = [f"{rep(k, depth + 1)}: {rep(x, depth + 1)}" for k, x in list(v.items())[:10]]
+            return "{" + ", ".join(items + (["..."] if len(v) > 10 else [])) + "}"
+        return repr(v)
+
+    text = rep(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def field_at(loc: Sequence[Any]) -> tuple[type[BaseModel] | None, Any]:
+    """(model holding the last key of ``loc``, FieldInfo of that key or None)."""
+    model: type[BaseModel] | None = RunSchema
+    for i, part in enumerate(loc):
+        if model is None or part not in model.model_fields:
+            return (model if i == len(loc) - 1 else None), None
+        info = model.model_fields[part]
+        if i == len(loc) - 1:
+            return model, info
+        ann = info.annotation
+        model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
+    return None, None
+
+
+def _other_section_hint(key: str, section: str) -> str:
+    for name in _SECTIONS:
+        ann = RunSchema.model_fields[name].annotation
+        if isinstance(ann, type) and issubclass(ann, BaseModel) and name != section:
+            if key in ann.model_fields:
+                return f"did you mean '{name}.{key}'?"
+    return ""
+
+
+def problem_line(err: Mapping[str, Any], name_defaulted: bool) -> tuple[str, str]:
+    """(dotted key, message line) for one pydantic error."""
+    loc = tuple(err["loc"])
+    ctx = err.get("ctx") or {}
+    key = ctx.get("key") or ".".join(str(p) for p in loc)
+    model, info = field_at(loc)
+    expected = ctx.get("expected") or (info.description if info is not None else None) or ""
+    detail = ctx.get("detail", "")
+    head = f"config key '{key}'"
+
+    if err["type"] in ("extra_forbidden", "invalid_key"):
+        allowed = list(model.model_fields) if model is not None else []
+        word = str(loc[-1])
+        section = str(loc[-2]) if len(loc) > 1 else ""
+        hint = _did_you_mean(word, allowed, f"{section}." if section else "")
+        hint = hint or _other_section_hint(word, section)
+        hint = f"; {hint}" if hint else ""
+        return key, f"{head}: unknown key{hint} (allowed: {', '.join(allowed)})"
+    if err["type"] in ("missing", "rbstab_missing"):
+        text = f"{head}: missing; expected {expected}"
+        return key, text + (f" ({detail})" if detail else "")
+    found = ctx.get("found") or short_repr(err.get("input"))
+    if not expected:  # a pydantic error this module does not anticipate
+        expected, detail = "a valid value", err.get("msg", "")
+    if err["type"] == "model_type" and not detail:
+        detail = f"{kind_of(err.get('input'))}, not a mapping"
+    if key == "name" and name_defaulted:
+        detail = "; ".join(filter(None, [detail, "the default name; set 'name:' in the config"]))
+    text = f"{head}: found {found}; expected {expected}"
+    return key, text + (f" ({detail})" if detail else "")

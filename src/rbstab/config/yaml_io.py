@@ -1,0 +1,73 @@
+"""YAML reading and writing for configurations and sweep specs.
+
+Reading uses a :class:`yaml.SafeLoader` subclass that differs in two ways: ``1e-8`` is a
+float (PyYAML follows YAML 1.1 and reads it as a string), and a key given twice in one
+mapping is an error instead of silently keeping the last value. Writing keeps lists
+(vectors, matrices) on one line.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import yaml
+
+from .errors import ConfigError
+
+__all__ = ["parse_yaml", "dump_yaml"]
+
+
+class _Loader(yaml.SafeLoader):
+    """SafeLoader reading ``1e-8`` as a float and refusing duplicate keys."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: dict[Any, int] = {}
+        for key_node, _ in node.value:
+            if not isinstance(key_node, yaml.ScalarNode) or key_node.tag.endswith(":merge"):
+                continue  # '<<' merge keys may repeat keys on purpose
+            key = self.construct_object(key_node)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    "while reading a mapping",
+                    node.start_mark,
+                    f"found the key {key!r} twice (first at line {seen[key] + 1})",
+                    key_node.start_mark,
+                )
+            seen[key] = key_node.start_mark.line
+        return super().construct_mapping(node, deep=deep)
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"),
+    list("-+0123456789."),
+)
+
+
+class _Dumper(yaml.SafeDumper):
+    """SafeDumper writing lists (vectors, matrices) on one line: ``[0.15, 0.1, -0.42]``."""
+
+    def represent_list(self, data: list) -> yaml.SequenceNode:
+        return self.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
+
+
+_Dumper.add_representer(list, _Dumper.represent_list)
+
+
+def parse_yaml(text: str) -> Any:
+    """Parse YAML text; a syntax error becomes a ConfigError line."""
+    try:
+        return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = exc.problem or exc.context or "invalid YAML"
+        raise ConfigError([f"YAML syntax error{where}: {problem}"]) from None
+    except yaml.YAMLError as exc:
+        raise ConfigError([f"YAML syntax error: {exc}"]) from None
+
+
+def dump_yaml(data: Any) -> str:
+    """YAML text of plain-Python ``data``: keys in insertion order, lists in flow style."""
+    return yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True)
