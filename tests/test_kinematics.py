@@ -5,7 +5,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rbstab.kinematics import euler_rate_matrix, hat, rotation_matrix
+from rbstab.kinematics import (
+    as_column,
+    cross_columns,
+    euler_rate_matrix,
+    from_columns,
+    hat,
+    matTvec,
+    matTvec_columns,
+    matvec,
+    matvec_columns,
+    rotation_and_rate,
+    rotation_and_rate_columns,
+    rotation_matrix,
+    to_columns,
+)
 
 
 def _elementary(theta):
@@ -74,3 +88,51 @@ def test_stacked_inputs_match_single_inputs(fn, rng):
     for xi, si in zip(x, stacked):
         np.testing.assert_array_equal(fn(xi), si)
     assert fn(x.reshape(7, 1, 3)).shape == (7, 1, 3, 3)
+
+
+def test_rotation_and_rate_is_rotation_matrix_and_euler_rate_matrix(rng):
+    theta = _random_angles(rng, 20)
+    for th in (theta, theta[0], theta.reshape(4, 5, 3)):
+        a, b = rotation_and_rate(th)
+        np.testing.assert_array_equal(a, rotation_matrix(th))
+        np.testing.assert_array_equal(b, euler_rate_matrix(th))
+        # the columns form holds the same matrices, entries first
+        a_c, b_c = rotation_and_rate_columns(np.moveaxis(th, -1, 0))
+        np.testing.assert_array_equal(np.moveaxis(a_c, (0, 1), (-2, -1)), a)
+        np.testing.assert_array_equal(np.moveaxis(b_c, (0, 1), (-2, -1)), b)
+
+
+@pytest.mark.parametrize("m", [1, 3, 7])
+def test_columns_helpers_match_the_stacked_rows_helpers(m, rng):
+    """m = 3 guards against a (3,) constant broadcasting along the wrong axis of (3, m)."""
+    theta = _random_angles(rng, m)
+    w, u = rng.normal(size=(2, m, 3))
+    r, k = rng.normal(size=3), rng.normal(size=(3, 3))
+    a_c, _ = rotation_and_rate_columns(theta.T)
+    a = rotation_matrix(theta)
+    np.testing.assert_allclose(matvec_columns(a_c, w.T).T, matvec(a, w), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(matTvec_columns(a_c, w.T).T, matTvec(a, w), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(matvec_columns(a_c, r).T, matvec(a, r), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(matvec_columns(k, w.T).T, matvec(k, w), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(matTvec_columns(k, w.T).T, matTvec(k, w), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(cross_columns(w.T, u.T).T, np.cross(w, u), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(cross_columns(w.T, r).T, np.cross(w, r), rtol=1e-14, atol=1e-15)
+    np.testing.assert_array_equal((w.T + as_column(r, w.T)).T, w + r)
+    np.testing.assert_array_equal(w[0] + as_column(r, w[0]), w[0] + r)
+    # one vector / one matrix: the columns form is the plain form
+    np.testing.assert_allclose(matvec_columns(a[0], w[0]), a[0] @ w[0], rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(matTvec_columns(a[0], w[0]), a[0].T @ w[0], rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(cross_columns(w[0], u[0]), np.cross(w[0], u[0]), rtol=1e-14, atol=1e-15)
+
+
+def test_to_columns_and_back_round_trip(rng):
+    y = rng.normal(size=(2, 3, 5))
+    yc = to_columns(y)
+    assert yc.shape == (5, 6) and yc.flags.c_contiguous
+    np.testing.assert_array_equal(yc[:, 4], y[1, 1])
+    back = from_columns(yc, y.shape[:-1])
+    assert back.flags.c_contiguous
+    np.testing.assert_array_equal(back, y)
+    np.testing.assert_array_equal(from_columns(to_columns(y[0, 0]), ()), y[0, 0])
+    m = rng.normal(size=(3, 3, 6))
+    np.testing.assert_array_equal(from_columns(m, (2, 3))[1, 2], m[:, :, 5])

@@ -148,3 +148,39 @@ def test_gimbal_lock_stops_the_run_with_a_reason():
     assert "gimbal lock" in message
     assert np.isnan(states[-1]).all()
     assert np.abs(states[np.isfinite(states[:, 1]), 1]).max() < np.pi / 2
+
+
+def _with_full_state(name):
+    if name == "permanent_full_state":
+        return Permanent(paper_body((0.0, 0.0, -10.0)), paper_gains()).full_state_variant()
+    return _variant(name, (0.0, 0.0, -10.0))
+
+
+@pytest.mark.parametrize("batch", [(1,), (3,), (2, 3)])
+@pytest.mark.parametrize("name", ALL + ["permanent_full_state"])
+def test_stacks_of_any_shape_match_row_by_row(name, batch, rng):
+    """rhs and every quantity of a stack equal those of its rows; a stack of 3 rows would
+    catch a constant 3-vector broadcast along the wrong axis."""
+    variant = _with_full_state(name)
+    y = _random_states(variant, rng, n=int(np.prod(batch))).reshape(batch + (variant.layout.size,))
+    stacked_rate = variant.rhs(0.0, y)
+    stacked = variant.quantities(y)
+    assert stacked_rate.shape == y.shape
+    for index in np.ndindex(*batch):
+        np.testing.assert_allclose(variant.rhs(0.0, y[index]), stacked_rate[index], rtol=1e-13, atol=1e-12)
+        single = variant.quantities(y[index])
+        assert single.keys() == stacked.keys()
+        for key, value in single.items():
+            assert stacked[key][index].shape == value.shape, key
+            np.testing.assert_allclose(stacked[key][index], value, rtol=1e-13, atol=1e-12, err_msg=key)
+
+
+@pytest.mark.parametrize("name", ALL + ["permanent_full_state"])
+def test_rhs_is_the_state_rate_of_the_outputs_path(name, rng):
+    """rhs skips output-only quantities but runs the same dynamics as quantities/evaluate."""
+    variant = _with_full_state(name)
+    for y in (_random_states(variant, rng, n=6), _random_states(variant, rng, n=1)[0]):
+        rate = variant.rhs(0.0, y)
+        np.testing.assert_array_equal(rate, variant.quantities(y)["state_rate"])
+        np.testing.assert_array_equal(rate, variant.quantities(y, outputs=False)["state_rate"])
+        assert rate.flags.c_contiguous

@@ -1,7 +1,10 @@
 """State layouts: the one place that says where each state block lives in ``y``.
 
 Every state block is a 3-vector. A layout is an ordered tuple of block names; the
-integrators, writers and variants address the state only through a layout.
+integrators, writers and variants address the state only through a layout, in the
+stacked-rows form (``split``, ``join``: blocks along the last axis) or, inside the
+variants' right-hand side, the columns form of :mod:`rbstab.kinematics`
+(``split_columns``, ``join_columns``: blocks along the first axis).
 """
 
 from __future__ import annotations
@@ -71,6 +74,22 @@ class StateLayout:
             If a block of the layout is missing.
         """
         return np.concatenate([np.asarray(blocks[b], dtype=float) for b in self.blocks], axis=-1)
+
+    def split_columns(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        """Views of each block of a state in columns form (:mod:`rbstab.kinematics`):
+        y shape (size,) or (size, m) -> {name: shape (3,) or (3, m)}."""
+        return {b: y[3 * i : 3 * i + 3] for i, b in enumerate(self.blocks)}
+
+    def join_columns(self, **blocks: np.ndarray) -> np.ndarray:
+        """Concatenate blocks in columns form (each shape (3,) or (3, m)) into shape
+        (size,) or (size, m), in layout order.
+
+        Raises
+        ------
+        KeyError
+            If a block of the layout is missing.
+        """
+        return np.concatenate([blocks[b] for b in self.blocks], axis=0)
 
     def state_names(self) -> list[str]:
         """Scalar state names such as ``theta_1`` ... in layout order."""

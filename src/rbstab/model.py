@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .kinematics import cross, hat, matvec
+from .kinematics import cross_columns, hat, matTvec_columns
 
 __all__ = ["RigidBody", "Gains", "gyroscopic", "torque_n", "force_h"]
 
@@ -101,24 +101,36 @@ class Gains:
 
 
 def gyroscopic(inertia: np.ndarray, omega: np.ndarray) -> np.ndarray:
-    """f(Omega) = -Omega x (J Omega) [N m], body frame, shape like ``omega`` (eq 1)."""
-    return -cross(omega, matvec(inertia, omega))
+    """f(Omega) = -Omega x (J Omega) [N m], body frame (eq 1).
+
+    ``omega`` [rad/s] in columns form (:mod:`rbstab.kinematics`): shape (3,) or (3, m);
+    the result has the same shape.
+    """
+    return -cross_columns(omega, inertia @ omega)
 
 
 def torque_n(b: np.ndarray, theta: np.ndarray, omega: np.ndarray, gains: Gains) -> np.ndarray:
     """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23).
 
+    Columns form (:mod:`rbstab.kinematics`).
+
     Parameters
     ----------
-    b : ndarray, shape (..., 3, 3)
-        Euler-rate matrix B(theta).
-    theta, omega : ndarray, shape (..., 3)
+    b : ndarray, shape (3, 3) or (3, 3, m)
+        Euler-rate matrix B(theta), entries first.
+    theta, omega : ndarray, shape (3,) or (3, m)
         Euler angles [rad] and body angular velocity [rad/s].
+
+    Returns
+    -------
+    ndarray, shape (3,) or (3, m)
     """
-    k_theta = matvec(gains.k_r, theta)
-    return -np.einsum("...ji,...j->...i", b, k_theta) - matvec(gains.l_r, omega)
+    return -matTvec_columns(b, gains.k_r @ theta) - gains.l_r @ omega
 
 
 def force_h(x: np.ndarray, v: np.ndarray, gains: Gains) -> np.ndarray:
-    """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24)."""
-    return -matvec(gains.k_t, x) - matvec(gains.l_t, v)
+    """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24).
+
+    ``x`` [m], ``v`` [m/s] and the result in columns form: shape (3,) or (3, m).
+    """
+    return -(gains.k_t @ x) - gains.l_t @ v

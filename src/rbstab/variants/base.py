@@ -12,6 +12,14 @@ and the HDF5 writer talk only to this protocol, never to a variant by name:
   and its analytic rate dv/dt).
 
 All physics follows ``docs/physics.md`` (the consistent restatement of eqs 1-46).
+
+The dynamics live in one method per variant, :meth:`Variant.quantities_columns`, which
+works in the columns form of :mod:`rbstab.kinematics` (a stack of m states is the
+(n_state, m) array whose columns are the states, so each numpy call acts on whole
+rows). ``rhs`` calls it with ``outputs=False`` (only what the state rate needs) and
+``quantities``/``evaluate`` with ``outputs=True``; both convert at the boundary to the
+stacked rows (..., n_state) that the integrators, writers and the Lyapunov functions
+use.
 """
 
 from __future__ import annotations
@@ -22,7 +30,15 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..kinematics import cross, euler_rate_matrix, matTvec, matvec, quadratic_form, rotation_matrix
+from ..kinematics import (
+    as_column,
+    from_columns,
+    matTvec_columns,
+    matvec_columns,
+    quadratic_form,
+    rotation_and_rate_columns,
+    to_columns,
+)
 from ..layout import FULL_BODY, StateLayout
 from ..model import Gains, RigidBody, force_h, gyroscopic, torque_n
 
@@ -104,18 +120,39 @@ class Variant(ABC):
 
     # -- dynamics ------------------------------------------------------------
     @abstractmethod
-    def quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
+    def quantities_columns(self, y: np.ndarray, outputs: bool = True) -> dict[str, np.ndarray]:
+        """The dynamics: the state rate and, with ``outputs``, every output quantity.
+
+        Columns form (:mod:`rbstab.kinematics`): ``y`` has shape (n_state,) (one state) or
+        (n_state, m) (m states as columns); vectors in the result have shape (3,) or
+        (3, m), matrices (3, 3) or (3, 3, m).
+
+        Returns a dict holding the state blocks ``theta``, ``omega``, ``position``,
+        ``velocity`` (reconstructed where not integrated), ``force_h``, ``torque_n`` and
+        the time derivative ``state_rate`` of y (shape like ``y``); with ``outputs`` also
+        ``constraint_error``, ``constraint_rate`` and ``constraint_force``. Without
+        ``outputs`` (the right-hand side) quantities that only the outputs need may be
+        skipped.
+        """
+
+    def quantities(self, y: np.ndarray, outputs: bool = True) -> dict[str, np.ndarray]:
         """Everything the right-hand side and the outputs need, for y shape (..., n_state).
 
         Returns a dict holding at least the state blocks ``theta``, ``omega``,
         ``position``, ``velocity`` (reconstructed where not integrated), and
         ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``force_h``,
-        ``torque_n`` (each shape (..., 3)) and the time derivative ``state_rate`` of y.
+        ``torque_n`` (each shape (..., 3)) and the time derivative ``state_rate`` of y
+        (see :meth:`quantities_columns`; here in stacked rows, C-contiguous).
         """
+        y = np.asarray(y, dtype=float)
+        q = self.quantities_columns(to_columns(y), outputs)
+        return {k: from_columns(value, y.shape[:-1]) for k, value in q.items()}
 
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         """dy/dt, shape like ``y`` ((n_state,) or (..., n_state)); ``t`` [s] is unused."""
-        return self.quantities(y)["state_rate"]
+        y = np.asarray(y, dtype=float)
+        rate = self.quantities_columns(to_columns(y), outputs=False)["state_rate"]
+        return from_columns(rate, y.shape[:-1])
 
     # -- Lyapunov function ---------------------------------------------------
     @abstractmethod
@@ -243,36 +280,60 @@ class Variant(ABC):
 class FullBodyVariant(Variant):
     """Base of the variants that integrate the 12 body states (eq 1) under a force Lambda.
 
-    Subclasses give the constraint force law :meth:`constraint_law`.
+    Subclasses give the constraint force law :meth:`constraint_law` and list in
+    :attr:`constraint_inputs` the constraint quantities it reads.
     """
 
     layout: ClassVar[StateLayout] = FULL_BODY
+    #: Which of ``constraint_error`` (E) and ``constraint_rate`` (F) the constraint law
+    #: reads; the right-hand side computes only these (the outputs compute both).
+    constraint_inputs: ClassVar[tuple[str, ...]] = ("constraint_error", "constraint_rate")
 
     @abstractmethod
-    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        """Lambda [N], inertial frame, shape (..., 3); may add extra rates to ``q``."""
+    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray | None:
+        """Lambda [N], inertial frame, or None when there is no constraint force.
 
-    def quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
+        ``q`` is the columns-form dict being built by :meth:`quantities_columns` (state
+        blocks, ``rotation_matrix``, ``euler_rate_matrix``, ``torque_n``, ``force_h`` and
+        those of E, F listed in :attr:`constraint_inputs`); returns shape (3,) or (3, m)
+        and may add extra columns-form rates to ``q`` (``controller_rate``).
+        """
+
+    def quantities_columns(self, y: np.ndarray, outputs: bool = True) -> dict[str, np.ndarray]:
+        """Eq 1 under Lambda, in columns form (see :meth:`Variant.quantities_columns`).
+
+        dTheta/dt = B Omega, J dOmega/dt = f(Omega) + N + hat(R) A' Lambda,
+        dX/dt = V, m dV/dt = G + H + Lambda; E = X + A R - R, F = V + A (Omega x R) (eq 4).
+        """
         body, gains = self.body, self.gains
-        q = self.layout.split(np.asarray(y, dtype=float))
+        q = self.layout.split_columns(y)
         theta, omega, x, v = q["theta"], q["omega"], q["position"], q["velocity"]
-        a = rotation_matrix(theta)
-        b = euler_rate_matrix(theta)
+        a, b = rotation_and_rate_columns(theta)
+        q["rotation_matrix"], q["euler_rate_matrix"] = a, b
         r = body.attachment_point
-        q["constraint_error"] = x + matvec(a, r) - r
-        q["constraint_rate"] = v + matvec(a, cross(omega, r))
+        needed = ("constraint_error", "constraint_rate") if outputs else self.constraint_inputs
+        if "constraint_error" in needed:
+            q["constraint_error"] = x + matvec_columns(a, r) - as_column(r, x)
+        if "constraint_rate" in needed:
+            # Omega x R = hat(R)' Omega: one product with a constant matrix
+            q["constraint_rate"] = v + matvec_columns(a, body.r_hat.T @ omega)
         q["torque_n"] = torque_n(b, theta, omega, gains)
         q["force_h"] = force_h(x, v, gains)
         lam = self.constraint_law(q)
-        q["constraint_force"] = lam
-        torque = gyroscopic(body.inertia, omega) + q["torque_n"] + cross(r, matTvec(a, lam))
+        torque = gyroscopic(body.inertia, omega) + q["torque_n"]
+        force = as_column(body.weight, x) + q["force_h"]
+        if lam is not None:
+            torque += body.r_hat @ matTvec_columns(a, lam)  # R x A' Lambda
+            force += lam
+        if outputs:
+            q["constraint_force"] = np.zeros_like(x) if lam is None else lam
         rates = {
-            "theta": matvec(b, omega),
-            "omega": matvec(body.inertia_inv, torque),
+            "theta": matvec_columns(b, omega),
+            "omega": body.inertia_inv @ torque,
             "position": v,
-            "velocity": (body.weight + q["force_h"] + lam) / body.mass,
+            "velocity": force / body.mass,
         }
         if "controller_state" in self.layout.blocks:
             rates["controller_state"] = q["controller_rate"]
-        q["state_rate"] = self.layout.join(**rates)
+        q["state_rate"] = self.layout.join_columns(**rates)
         return q

@@ -6,7 +6,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..kinematics import matvec, quadratic_form
+from ..kinematics import quadratic_form
 from ..layout import EMBEDDED, StateLayout
 from .base import FullBodyVariant
 
@@ -27,11 +27,12 @@ class Embedded(FullBodyVariant):
     equation = "eq 22"
 
     def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Lambda [N] and, into ``q``, dD/dt [m/s] (eq 22); columns form, inertial frame."""
         g = self.gains
         d = q["controller_state"]
-        spring = matvec(g.k_c, q["constraint_error"] - d)
-        q["controller_rate"] = matvec(g.l_d_inv, spring - matvec(g.k_d, d))
-        return -spring - matvec(g.l_c, q["constraint_rate"])
+        spring = g.k_c @ (q["constraint_error"] - d)  # K_c (E - D)
+        q["controller_rate"] = g.l_d_inv @ (spring - g.k_d @ d)
+        return -spring - g.l_c @ q["constraint_rate"]
 
     def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
         g = self.gains

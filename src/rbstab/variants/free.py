@@ -17,9 +17,11 @@ class Free(FullBodyVariant):
 
     name = "free"
     equation = "eqs 1, 23, 24, 29, 30"
+    constraint_inputs = ()
 
-    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros_like(q["constraint_error"])
+    def constraint_law(self, q: dict[str, np.ndarray]) -> None:
+        """No constraint force (Lambda = 0)."""
+        return None
 
     def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
         return np.zeros(q["theta"].shape[:-1])

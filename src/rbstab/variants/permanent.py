@@ -13,7 +13,13 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..kinematics import cross, euler_rate_matrix, matTvec, matvec, rotation_matrix
+from ..kinematics import (
+    as_column,
+    cross_columns,
+    matTvec_columns,
+    matvec_columns,
+    rotation_and_rate_columns,
+)
 from ..layout import FULL_BODY, REDUCED, StateLayout
 from ..model import force_h, gyroscopic, torque_n
 from .base import FullBodyVariant, Variant
@@ -36,29 +42,37 @@ class Permanent(Variant):
     layout: ClassVar[StateLayout] = REDUCED
     equation = "eqs 20, 21"
 
-    def quantities(self, y: np.ndarray) -> dict[str, np.ndarray]:
+    def quantities_columns(self, y: np.ndarray, outputs: bool = True) -> dict[str, np.ndarray]:
+        """Eqs 20, 21 (corrected) and eq 32 in columns form (see
+        :meth:`Variant.quantities_columns`). Without ``outputs`` E, F (zero by
+        construction) and Lambda are skipped: the state rate does not need them."""
         body, gains = self.body, self.gains
-        q = self.layout.split(np.asarray(y, dtype=float))
+        q = self.layout.split_columns(y)
         theta, omega = q["theta"], q["omega"]
-        r = body.attachment_point
-        a = rotation_matrix(theta)
-        b = euler_rate_matrix(theta)
-        a_r = matvec(a, r)
-        omega_x_r = cross(omega, r)
-        x = r - a_r
-        v = -matvec(a, omega_x_r)  # A hat(R) Omega
+        r, r_hat = body.attachment_point, body.r_hat
+        a, b = rotation_and_rate_columns(theta)
+        q["rotation_matrix"], q["euler_rate_matrix"] = a, b
+        a_r = matvec_columns(a, r)
+        omega_x_r = r_hat.T @ omega  # Omega x R = hat(R)' Omega
+        x = as_column(r, a_r) - a_r  # X = R - A R
+        v = -matvec_columns(a, omega_x_r)  # V = A hat(R) Omega
         q["position"], q["velocity"] = x, v
-        q["constraint_error"] = x + a_r - r
-        q["constraint_rate"] = v + matvec(a, omega_x_r)
         q["torque_n"] = torque_n(b, theta, omega, gains)
         q["force_h"] = h = force_h(x, v, gains)
-        j_p = body.pivot_inertia
-        applied = body.weight + h
-        torque = -cross(omega, matvec(j_p, omega)) + q["torque_n"] - cross(r, matTvec(a, applied))
-        omega_dot = matvec(body.pivot_inertia_inv, torque)
-        accel = matvec(a, cross(r, omega_dot) - cross(omega, omega_x_r))
-        q["constraint_force"] = body.mass * accel - applied
-        q["state_rate"] = self.layout.join(theta=matvec(b, omega), omega=omega_dot)
+        applied = as_column(body.weight, h) + h  # G + H [N], inertial frame
+        torque = (
+            -cross_columns(omega, body.pivot_inertia @ omega)
+            + q["torque_n"]
+            - r_hat @ matTvec_columns(a, applied)
+        )
+        omega_dot = body.pivot_inertia_inv @ torque
+        if outputs:
+            q["constraint_error"] = x + a_r - as_column(r, x)
+            q["constraint_rate"] = v + matvec_columns(a, omega_x_r)
+            # dV/dt = A (R x dOmega/dt) - A (Omega x (Omega x R))
+            accel = matvec_columns(a, r_hat @ omega_dot - cross_columns(omega, omega_x_r))
+            q["constraint_force"] = body.mass * accel - applied
+        q["state_rate"] = self.layout.join_columns(theta=matvec_columns(b, omega), omega=omega_dot)
         return q
 
     def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
@@ -87,20 +101,22 @@ class PermanentFullState(FullBodyVariant):
 
     name = "permanent_full_state"
     equation = "eq 15"
+    constraint_inputs = ()
 
     def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Lambda [N] of eq 15 (columns form), solved state by state."""
         body = self.body
-        theta, omega = q["theta"], q["omega"]
-        a = rotation_matrix(theta)
-        a_r = a @ body.r_hat
-        j_inv = body.inertia_inv
-        m_c = np.eye(3) / body.mass + a_r @ j_inv @ np.swapaxes(a_r, -1, -2)
+        omega, a = q["omega"], q["rotation_matrix"]
+        r_hat, j_inv = body.r_hat, body.inertia_inv
         rhs = (
-            matvec(a_r, matvec(j_inv, gyroscopic(body.inertia, omega) + q["torque_n"]))
-            - (body.weight + q["force_h"]) / body.mass
-            - matvec(a, cross(omega, cross(omega, body.attachment_point)))
+            matvec_columns(a, r_hat @ (j_inv @ (gyroscopic(body.inertia, omega) + q["torque_n"])))
+            - (as_column(body.weight, omega) + q["force_h"]) / body.mass
+            - matvec_columns(a, cross_columns(omega, cross_columns(omega, body.attachment_point)))
         )
-        return np.linalg.solve(m_c, rhs[..., None])[..., 0]
+        a_r = np.moveaxis(a, (0, 1), (-2, -1)) @ r_hat  # A hat(R), stacked rows (..., 3, 3)
+        m_c = np.eye(3) / body.mass + a_r @ j_inv @ np.swapaxes(a_r, -1, -2)
+        lam = np.linalg.solve(m_c, np.moveaxis(rhs, 0, -1)[..., None])[..., 0]
+        return np.moveaxis(lam, -1, 0)
 
     def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
         return np.zeros(q["theta"].shape[:-1])

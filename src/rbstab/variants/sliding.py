@@ -29,12 +29,14 @@ class Sliding(FullBodyVariant):
     name = "sliding"
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_s")
     equation = "eq 39"
+    constraint_inputs = ("constraint_error",)
 
     def __init__(self, body, gains) -> None:
         super().__init__(body, gains)
         self.smooth = gains.boundary_layer > 0
 
     def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+        """Lambda [N], inertial frame, columns form (eq 39)."""
         e = q["constraint_error"]
         phi = self.gains.boundary_layer
         return -self.gains.k_s * (np.tanh(e / phi) if phi > 0 else np.sign(e))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import matvec, quadratic_form
+from ..kinematics import quadratic_form
 from .base import FullBodyVariant
 
 __all__ = ["ViscoElastic"]
@@ -21,7 +21,8 @@ class ViscoElastic(FullBodyVariant):
     equation = "eq 40"
 
     def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return -matvec(self.gains.k_c, q["constraint_error"]) - matvec(self.gains.l_c, q["constraint_rate"])
+        """Lambda [N], inertial frame, columns form (eq 40)."""
+        return -(self.gains.k_c @ q["constraint_error"]) - self.gains.l_c @ q["constraint_rate"]
 
     def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
         return 0.5 * quadratic_form(q["constraint_error"], self.gains.k_c)
