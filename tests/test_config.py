@@ -716,3 +716,24 @@ def test_set_and_get_dotted():
         set_dotted(data, "a.b.2", 1)
     with pytest.raises(ConfigError, match="'x.y' is a number"):
         set_dotted(data, "x.y.z", 1)
+
+
+def test_yaml_text_does_not_depend_on_the_emitter():
+    """Config hashes (resume) must not change with PyYAML's C or Python emitter."""
+    import yaml
+
+    from rbstab.config import dump_yaml
+
+    class PythonDumper(yaml.SafeDumper):
+        def represent_list(self, data):
+            return self.represent_sequence("tag:yaml.org,2002:seq", data, flow_style=True)
+
+    PythonDumper.add_representer(list, PythonDumper.represent_list)
+    rng = np.random.default_rng(3)
+    for path in SHIPPED:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            data = load_config(path).resolved
+        data["body"]["mass"] = float(rng.lognormal(3, 4))
+        data["name"] = "r0001-ünïcode"
+        assert dump_yaml(data) == yaml.dump(data, Dumper=PythonDumper, sort_keys=False, allow_unicode=True)

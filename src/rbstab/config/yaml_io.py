@@ -45,7 +45,13 @@ _Loader.add_implicit_resolver(
 )
 
 
-class _Dumper(yaml.SafeDumper):
+# libyaml's emitter when PyYAML was built with it (the PyPI wheels are): the same text as
+# the pure-Python emitter (checked on random configurations), about 3x faster, which
+# matters when a sweep hashes and writes thousands of configurations.
+_SafeDumperBase = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+class _Dumper(_SafeDumperBase):
     """SafeDumper writing lists (vectors, matrices) on one line: ``[0.15, 0.1, -0.42]``."""
 
     def represent_list(self, data: list) -> yaml.SequenceNode:
