@@ -1,11 +1,15 @@
 """Benchmark: sweep throughput (runs per second) with -j 1 and -j 2, and parallel efficiency.
 
+(``benchmarks/throughput.py`` is the issue-5 benchmark against one-by-one solve_ivp; this
+one compares process counts, engines and storage modes of ``rbstab sweep``.)
+
 A sweep of ``--runs`` runs (default 200) of Case 3 of the paper (embedded, eq 22; the
 settings of ``configs/paper/case3_embedded.yaml``: t_end = 2 s, 2001 samples, DOP853,
 rtol = 1e-8, atol = 1e-10), the initial Omega drawn per run from N((16, 32, -16), 2^2)
 rad/s, goes through :func:`rbstab.sweep.run_sweep` on the local executor, once per ``-j``
 value, each time into a fresh folder (nothing is skipped). A run is the whole unit of
-work: scipy integration, output evaluation and the HDF5 file.
+work: integration (``--engine``: the sweep's default, batch, or scipy), output evaluation
+and the HDF5 file (``--store full|summary``).
 
 Prints per ``-j``: the wall time of the sweep (pool start-up and index included), runs
 per second, the mean wall time of one run inside its worker (integration and outputs; the
@@ -16,6 +20,7 @@ processes competing for the CPUs show up as a longer mean run time at ``-j 2`` t
 Usage::
 
     python benchmarks/sweep_throughput.py [--runs 200] [--jobs 1 2] [--t-end 2.0]
+                                          [--engine batch|scipy] [--store full|summary]
                                           [--keep DIR]
 """
 
@@ -38,6 +43,8 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=200, help="runs in the sweep (default 200)")
     parser.add_argument("--jobs", type=int, nargs="+", default=[1, 2], help="process counts (default 1 2)")
     parser.add_argument("--t-end", type=float, default=None, help="override simulation.t_end [s]")
+    parser.add_argument("--engine", default=None, choices=["batch", "scipy"], help="default: the sweep's (batch)")
+    parser.add_argument("--store", default="full", choices=["full", "summary"])
     parser.add_argument("--keep", default=None, help="write the sweeps under DIR and keep them")
     args = parser.parse_args()
 
@@ -74,14 +81,14 @@ def main() -> None:
             out = parent / f"j{jobs}"
             shutil.rmtree(out, ignore_errors=True)
             start = time.perf_counter()
-            outcome = run_sweep(spec, out, runs=runs, jobs=jobs, progress=False)
+            outcome = run_sweep(spec, out, runs=runs, jobs=jobs, engine=args.engine, store=args.store, progress=False)
             wall = time.perf_counter() - start
             index = pd.read_csv(outcome.index_path)
             rates[jobs] = len(runs) / wall
             efficiency = (rates[jobs] / rates[args.jobs[0]]) * args.jobs[0] / jobs
             print(
-                f"-j {jobs}: {wall:7.2f} s, {rates[jobs]:6.3f} runs/s, mean run {index['wall_time'].mean():.3f} s "
-                f"in its worker, {outcome.counts.get('success', 0)} success / {outcome.n_failed} failed, "
+                f"-j {jobs} ({outcome.engine}): {wall:7.2f} s, {rates[jobs]:6.3f} runs/s, mean run "
+                f"{index['wall_time'].mean():.3f} s in its worker, {outcome.counts.get('success', 0)} success / {outcome.n_failed} failed, "
                 f"parallel efficiency {efficiency:.2f} (load average now "
                 f"{os.getloadavg()[0]:.2f})"
             )

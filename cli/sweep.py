@@ -31,18 +31,35 @@ def _indent(text: str) -> str:
 @set_option
 @click.option(
     "--timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
-    help="Per-run wall-time budget; a run past it is recorded as failed.",
+    help="Per-run wall-time budget; a run past it is recorded as failed (scipy engine only).",
+)
+@click.option(
+    "--engine", type=click.Choice(["batch", "scipy"]), default=None,
+    help="batch: integrate runs that differ only in their initial state together, taking the "
+    "steps scipy takes (RK23/RK45/DOP853; other methods go through scipy); scipy: one "
+    "solve_ivp call per run, the reference  [default: batch; scipy with --timeout].",
+)
+@click.option(
+    "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
+    help="Most runs per unit of work sent to a worker  [default: 512 for batch, 1 for scipy].",
+)
+@click.option(
+    "--store", type=click.Choice(["full", "summary"]), default="full", show_default=True,
+    help="Result files with every variable at every sample, or (summary) the variables a "
+    "report draws at <= 201 samples; summary figures and the index are the same.",
 )
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
-def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, retry_failed, dry_run, progress) -> None:
+def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, chunk_size, store, retry_failed, dry_run,
+          progress) -> None:
     """Run the sweep SPEC.yaml; write OUTPUT/<name>/ (sweep.yaml, runs/*.h5, index.csv).
 
     Every run's config is validated before anything runs. Running the same command again
     skips the runs whose result file exists and matches their config, and finishes the
     rest. --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the
-    spec itself (e.g. --set sweep.random.n=20).
+    spec itself (e.g. --set sweep.random.n=20). Runs that differ only in their initial
+    state are integrated together (--engine batch, the default; see docs/performance.md).
 
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
     1 for an invalid spec (nothing is run); 130 when interrupted.
@@ -55,17 +72,30 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, retry_fai
         load_spec,
         run_sweep,
     )
+    from rbstab.sweep.executors import LocalExecutor
     from rbstab.sweep.spec import warning_digest
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
+    if engine == "batch" and timeout is not None:
+        raise click.UsageError(
+            "--timeout needs --engine scipy: the batch engine integrates many runs together and has "
+            "no per-run wall-time budget"
+        )
     executor = executor or ("dask" if scheduler else "local")
     if executor == "dask" and not scheduler:
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
+    ex = executor
+    if executor == "local" and not dry_run:
+        # start the workers now: they import numpy, scipy and h5py while the runs are validated
+        ex = LocalExecutor(jobs)
+        ex.start()
     try:
         loaded = load_spec(spec, overrides)
         runs = expand(loaded)
     except SweepSpecError as exc:
+        if not isinstance(ex, str):
+            ex.close()
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
     for line in warning_digest(runs):
         click.echo(f"warning: {line}", err=True)
@@ -82,11 +112,14 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, retry_fai
             loaded,
             output,
             runs=runs,
-            executor=executor,
+            executor=ex,
             jobs=jobs,
             scheduler=scheduler,
             timeout=timeout,
             retry_failed=retry_failed,
+            engine=engine,
+            chunk_size=chunk_size,
+            store=store,
             progress=progress,
             command_line=command_line(),
             log=lambda message: click.echo(message, err=True),

@@ -44,6 +44,11 @@ __all__ = [
     "VARIABLE_UNITS",
     "VARIABLE_DESCRIPTIONS",
     "write_result",
+    "write_run",
+    "result_attributes",
+    "STORE_MODES",
+    "SUMMARY_VARIABLES",
+    "summary_stride",
     "read_attributes",
     "read_summary",
     "config_hash",
@@ -102,7 +107,171 @@ def _attr_value(value: Any) -> Any:
     return value
 
 
-def write_result(result: "RunResult", path: str | os.PathLike, *, command_line: str | None = None) -> Path:
+#: What a result file stores (``rbstab sweep --store``): ``full``, every variable at every
+#: sample (``rbstab run`` always writes this); ``summary``, the same format with the
+#: variables a report draws (:data:`SUMMARY_VARIABLES`) at every ``store_stride``-th sample
+#: (at most :data:`SUMMARY_MAX_SAMPLES`), the summary figures computed from every sample.
+STORE_MODES = ("full", "summary")
+#: Variables of a ``summary`` file (those the run has): the state blocks, E and v with its rates.
+SUMMARY_VARIABLES = (
+    "theta", "omega", "position", "velocity", "controller_state",
+    "constraint_error", "lyapunov", "lyapunov_rate", "lyapunov_rate_numerical",
+)
+#: Most samples a ``summary`` file keeps.
+SUMMARY_MAX_SAMPLES = 201
+
+
+def summary_stride(n_samples: int) -> int:
+    """Sample stride of a ``summary`` file: keeps ``time[::stride]``, at most
+    :data:`SUMMARY_MAX_SAMPLES` samples (for 2001 samples, every 10th: t = 0, 0.01, ... 2 s)."""
+    return max(1, -(-(int(n_samples) - 1) // (SUMMARY_MAX_SAMPLES - 1)))
+
+
+def result_attributes(
+    result: "RunResult", *, command_line: str | None = None, store: str = "full", config_yaml: str | None = None
+) -> dict[str, Any]:
+    """The global attributes of ``result``'s file, as written (see the module docstring).
+
+    ``config_yaml`` is ``result.config.to_yaml()`` when the caller already has it.
+    """
+    config_yaml = result.config.to_yaml() if config_yaml is None else config_yaml
+    attrs = {
+        "rbstab_format": FORMAT,
+        "name": result.name,
+        "variant": result.config.variant,
+        "status": result.status,
+        "message": result.message,
+        "config": config_yaml,
+        "config_hash": config_hash(config_yaml),
+        "rbstab_version": __version__,
+        "git_commit": _git_commit(),
+        "command_line": command_line if command_line is not None else " ".join(sys.argv),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "wall_time": float(result.wall_time),
+    }
+    attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
+    attrs["solver_status"] = int(result.solver.get("solver_status", -1))
+    attrs["solver_message"] = result.message
+    attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
+    if store == "summary":
+        attrs["store"] = "summary"
+        attrs["store_stride"] = summary_stride(len(result.time))
+    return attrs
+
+
+class _Writer:
+    """The HDF5 calls of :func:`write_result` through h5py's low-level API.
+
+    Exactly what ``h5py.File(path, "w", track_order=True)``, ``create_dataset(name,
+    data=...)``, ``make_scale``, ``dims[i].attach_scale`` and ``attrs[key] = value`` write
+    (same types, dataspaces and property lists), without the high-level layer's
+    per-call bookkeeping, which cost most of the ~25 ms a file took.
+    """
+
+    _types: dict = {}
+
+    def __init__(self, h5py) -> None:
+        self.h5py = h5py
+
+    def types(self, dtype: np.dtype):
+        """(file type, memory type) as h5py's ``attrs.create`` makes them for ``dtype``."""
+        h5t = self.h5py.h5t
+        key = dtype.str if dtype.kind != "O" else "vlen-str"
+        if key not in self._types:
+            self._types[key] = (h5t.py_create(dtype, logical=True), h5t.py_create(dtype))
+        return self._types[key]
+
+    def attr(self, oid, name: str, value: Any) -> None:
+        h5py = self.h5py
+        if isinstance(value, str):
+            data = np.array(value, dtype=h5py.string_dtype())
+        else:
+            data = np.asarray(value)
+            if data.dtype.kind in "US":
+                data = data.astype(h5py.string_dtype())
+        htype, mtype = self.types(data.dtype)
+        attr = h5py.h5a.create(oid, name.encode(), htype, h5py.h5s.create_simple(data.shape))
+        attr.write(data, mtype=mtype)
+        attr.close()
+
+    def dataset(self, parent, name: str, data: np.ndarray, dtype=None):
+        h5py = self.h5py
+        h5p = h5py.h5p
+        dcpl = h5p.create(h5p.DATASET_CREATE)
+        dcpl.set_obj_track_times(False)
+        dcpl.set_attr_creation_order(0)
+        htype = self.types(np.dtype(dtype) if dtype is not None else data.dtype)[0]
+        dset = h5py.h5d.create(parent, name.encode(), htype, h5py.h5s.create_simple(data.shape), dcpl=dcpl)
+        dset.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
+        return dset
+
+
+def _write_file(path: str, time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
+    import h5py
+
+    w = _Writer(h5py)
+    h5ds = h5py.h5ds
+    # netCDF-4 conventions through HDF5 dimension scales: the file h5netcdf would write
+    with h5py.File(path, "w", track_order=True) as f:
+        root = f.id
+        t = w.dataset(root, "time", np.ascontiguousarray(time, dtype=float))
+        h5ds.set_scale(t, b"time")
+        w.attr(t, "units", "s")
+        w.attr(t, "description", "sample time, evenly spaced dense output of the solver")
+        axis = w.dataset(root, "axis", np.array(["x", "y", "z"], dtype=object), dtype=h5py.string_dtype())
+        h5ds.set_scale(axis, b"axis")
+        w.attr(axis, "description", "vector component; frame given by each variable")
+        for key, values in outputs.items():
+            var = w.dataset(root, key, np.ascontiguousarray(values, dtype=float))
+            h5ds.attach_scale(var, t, 0)
+            if var.rank == 2:
+                h5ds.attach_scale(var, axis, 1)
+            w.attr(var, "units", VARIABLE_UNITS[key])
+            w.attr(var, "description", VARIABLE_DESCRIPTIONS[key])
+            var.close()
+        t.close()
+        axis.close()
+        for key, value in attrs.items():
+            w.attr(root, key, value)
+
+
+def write_run(
+    result: "RunResult",
+    path: str | os.PathLike,
+    *,
+    command_line: str | None = None,
+    store: str = "full",
+    config_yaml: str | None = None,
+) -> dict[str, Any]:
+    """:func:`write_result`, returning the file's global attributes as
+    :func:`read_attributes` would read them back (so a caller need not reopen the file)."""
+    if store not in STORE_MODES:
+        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    attrs = result_attributes(result, command_line=command_line, store=store, config_yaml=config_yaml)
+    time, outputs = result.time, result.outputs
+    if store == "summary":
+        stride = attrs["store_stride"]
+        time = time[::stride]
+        outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    umask = os.umask(0)
+    os.umask(umask)
+    os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600; a result file follows the umask
+    os.close(fd)
+    try:
+        _write_file(tmp, time, outputs, attrs)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
+
+
+def write_result(
+    result: "RunResult", path: str | os.PathLike, *, command_line: str | None = None, store: str = "full"
+) -> Path:
     """Write one run to ``path`` atomically (temporary file + rename).
 
     Parameters
@@ -113,6 +282,8 @@ def write_result(result: "RunResult", path: str | os.PathLike, *, command_line: 
         Final file name; its folder is created if missing.
     command_line : str, optional
         Recorded in the ``command_line`` attribute (default: this process's argv).
+    store : {"full", "summary"}
+        See :data:`STORE_MODES`.
 
     Returns
     -------
@@ -124,60 +295,8 @@ def write_result(result: "RunResult", path: str | os.PathLike, *, command_line: 
     OSError
         If the folder cannot be created or written; the final name is then untouched.
     """
-    import h5py
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    config_yaml = result.config.to_yaml()
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600; a result file follows the umask
-    os.close(fd)
-    try:
-        # netCDF-4 conventions through HDF5 dimension scales, written with h5py directly:
-        # the same file h5netcdf would write, several times faster (h5netcdf's per-variable
-        # bookkeeping cost ~0.1 s per file).
-        with h5py.File(tmp, "w", track_order=True) as f:
-            time = f.create_dataset("time", data=np.asarray(result.time, dtype=float))
-            time.make_scale("time")
-            time.attrs["units"] = "s"
-            time.attrs["description"] = "sample time, evenly spaced dense output of the solver"
-            axis = f.create_dataset("axis", data=np.array(["x", "y", "z"], dtype=object), dtype=h5py.string_dtype())
-            axis.make_scale("axis")
-            axis.attrs["description"] = "vector component; frame given by each variable"
-            for key, values in result.outputs.items():
-                var = f.create_dataset(key, data=np.asarray(values, dtype=float))
-                var.dims[0].attach_scale(time)
-                if var.ndim == 2:
-                    var.dims[1].attach_scale(axis)
-                var.attrs["units"] = VARIABLE_UNITS[key]
-                var.attrs["description"] = VARIABLE_DESCRIPTIONS[key]
-            attrs = {
-                "rbstab_format": FORMAT,
-                "name": result.name,
-                "variant": result.config.variant,
-                "status": result.status,
-                "message": result.message,
-                "config": config_yaml,
-                "config_hash": config_hash(config_yaml),
-                "rbstab_version": __version__,
-                "git_commit": _git_commit(),
-                "command_line": command_line if command_line is not None else " ".join(sys.argv),
-                "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                "wall_time": float(result.wall_time),
-            }
-            attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
-            attrs["solver_status"] = int(result.solver.get("solver_status", -1))
-            attrs["solver_message"] = result.message
-            attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
-            for key, value in attrs.items():
-                f.attrs[key] = value
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    write_run(result, path, command_line=command_line, store=store)
+    return Path(path)
 
 
 def _plain(value: Any) -> Any:

@@ -74,6 +74,10 @@ class Executor:
     def plan(self, n_items: int) -> None:
         """Told how many items will come before the first :meth:`imap_unordered`."""
 
+    def parallelism(self) -> int | None:
+        """How many items run at once, if known (the runner sizes batched chunks by it)."""
+        return None
+
     def imap_unordered(
         self, fn: Callable[..., Any], items: Iterable[Any], *args: Any
     ) -> Iterator[tuple[Any, Any, BaseException | None]]:  # pragma: no cover - overridden
@@ -127,12 +131,19 @@ def _call(fn: Callable[..., Any], item: Any, *args: Any) -> Any:
         _busy = False
 
 
+def _warm() -> None:
+    """A no-op task: submitting one per worker starts the workers."""
+
+
 def _mp_context():
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     ctx = multiprocessing.get_context(method)
     if method == "forkserver":
         # Import the heavy modules once in the fork server (no effect if it already runs).
-        ctx.set_forkserver_preload(["rbstab.sweep.worker", "rbstab.simulate", "rbstab.io.hdf5", "h5netcdf"])
+        ctx.set_forkserver_preload([
+            "rbstab.sweep.worker", "rbstab.simulate", "rbstab.batch", "rbstab.config", "rbstab.io.hdf5",
+            "h5py", "h5netcdf", "scipy.integrate", "scipy.interpolate",
+        ])
     return ctx
 
 
@@ -164,13 +175,40 @@ class LocalExecutor(Executor):
         self.max_in_flight = max_in_flight or 2 * jobs
         self._pool: ProcessPoolExecutor | None = None
         self._workers = jobs
+        self._starter: threading.Thread | None = None
 
     def describe(self) -> str:
         return f"{self._workers} local process{'es' if self._workers != 1 else ''}"
 
+    def parallelism(self) -> int | None:
+        return self.jobs
+
     def plan(self, n_items: int) -> None:
         """Start no more processes than there are items."""
         self._workers = max(1, min(self.jobs, n_items))
+
+    def start(self) -> None:
+        """Start the worker processes now, in a background thread, and return at once.
+
+        The fork server imports numpy, scipy, h5py and rbstab and the workers start while
+        the caller goes on (e.g. validating the sweep's runs), instead of after it.
+        """
+        if self._pool is not None or self._starter is not None:
+            return
+
+        def spawn() -> None:
+            pool = self._new_pool()
+            for _ in range(self.jobs):
+                pool.submit(_warm)
+            self._pool = pool
+
+        self._starter = threading.Thread(target=spawn, daemon=True, name="rbstab-pool-start")
+        self._starter.start()
+
+    def _join_starter(self) -> None:
+        if self._starter is not None:
+            self._starter.join()
+            self._starter = None
 
     def _new_pool(self) -> ProcessPoolExecutor:
         return ProcessPoolExecutor(
@@ -184,6 +222,7 @@ class LocalExecutor(Executor):
         pending = iter(items)
         in_flight: dict = {}
         exhausted = False
+        self._join_starter()
         if self._pool is None:
             self._pool = self._new_pool()
         while True:
@@ -218,6 +257,7 @@ class LocalExecutor(Executor):
                 self._pool = self._new_pool()
 
     def close(self) -> None:
+        self._join_starter()
         if self._pool is not None:
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
@@ -283,6 +323,13 @@ class DaskExecutor(Executor):
 
     def plan(self, n_items: int) -> None:
         pass
+
+    def parallelism(self) -> int | None:
+        try:
+            workers = self.client.scheduler_info().get("workers", {})
+            return sum(w.get("nthreads", 1) for w in workers.values()) or None
+        except Exception:  # pragma: no cover - a hint only
+            return None
 
     def imap_unordered(self, fn, items, *args):
         distributed = self._distributed

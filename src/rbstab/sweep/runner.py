@@ -22,7 +22,9 @@ one invocation at a time may write a sweep folder (a lock file, ``.lock``).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import datetime as _dt
+import math
 import os
 import sys
 from collections.abc import Callable, Sequence
@@ -36,7 +38,7 @@ from .. import __version__
 from .executors import Executor, make_executor
 from .index import index_rows, summarize_rows, write_index, write_summary, write_text_atomic
 from .spec import PlannedRun, SweepSpec, expand
-from .worker import ENGINES, RunTask, WorkerOptions, run_chunk, write_bytes_atomic
+from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk, write_bytes_atomic
 
 __all__ = [
     "run_sweep",
@@ -90,6 +92,18 @@ class SweepOutcome:
         Result files in ``runs/`` that are not runs of this spec (left in place).
     executor : str
         Description of the executor used (empty when nothing ran).
+    engine : str
+        The engine used (see :func:`run_sweep`).
+    n_chunks : int
+        Units of work sent to the executor.
+    timing : dict of str to float
+        Seconds summed over the runs executed, as reported by the workers: ``config``
+        (building the run's configuration), ``integration``, ``postprocess`` (outputs,
+        numerical rate, summary), ``config_yaml`` (``config.to_yaml()`` for the file's
+        ``config`` and ``config_hash`` attributes) and ``write`` (the HDF5 file).
+    worker_peak_rss : int or None
+        Largest peak resident set size of a worker process [bytes], as reported by the
+        workers (None when unknown).
     """
 
     name: str
@@ -103,6 +117,10 @@ class SweepOutcome:
     tracebacks: dict = field(default_factory=dict)
     stale_files: list = field(default_factory=list)
     executor: str = ""
+    engine: str = ""
+    n_chunks: int = 0
+    timing: dict = field(default_factory=dict)
+    worker_peak_rss: int | None = None
 
     @property
     def n_failed(self) -> int:
@@ -204,6 +222,50 @@ def _chunks(tasks: list[RunTask], size: int) -> list[list[RunTask]]:
     return [tasks[i : i + size] for i in range(0, len(tasks), size)]
 
 
+def _batch_chunks(todo: Sequence[PlannedRun], tasks: list[RunTask], size: int, workers: int | None) -> list[list[RunTask]]:
+    """Chunks for the batch engine: runs of one batch group together, evenly split.
+
+    Runs that differ only in name and initial state (one base, the same grid point) go to
+    the same chunks whatever their place in the run list, so that each chunk is one
+    batch. A chunk holds at most ``size`` runs, and at most ``ceil(n / workers)`` so
+    that every worker gets a share of a small sweep; a group is split into chunks of
+    nearly equal length.
+    """
+    from ..simulate import batch_key
+
+    groups: dict[str, list[RunTask]] = {}
+    for run, task in zip(todo, tasks):
+        groups.setdefault(batch_key(run.config), []).append(task)
+    if workers and workers > 1:
+        size = min(size, max(1, math.ceil(len(tasks) / workers)))
+    chunks = []
+    for members in groups.values():
+        n = math.ceil(len(members) / size)
+        bounds = [round(i * len(members) / n) for i in range(n + 1)]
+        chunks += [members[a:b] for a, b in zip(bounds, bounds[1:])]
+    return chunks
+
+
+def resolve_engine(engine: str | None, timeout: float | None) -> str:
+    """The engine a sweep uses: ``engine``, or by default ``batch`` (``scipy`` with a timeout).
+
+    Raises
+    ------
+    ValueError
+        For an unknown engine, or ``batch`` with a timeout (it has no per-run budget).
+    """
+    if engine is None:
+        return "scipy" if timeout is not None else "batch"
+    if engine not in ENGINES:
+        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
+    if engine == "batch" and timeout is not None:
+        raise ValueError(
+            "--timeout needs --engine scipy: the batch engine integrates many runs together "
+            "and has no per-run wall-time budget"
+        )
+    return engine
+
+
 def _progress_bar(total: int, name: str, enabled: bool | None):
     from tqdm.auto import tqdm
 
@@ -228,8 +290,9 @@ def run_sweep(
     scheduler: str | None = None,
     timeout: float | None = None,
     retry_failed: bool = False,
-    chunk_size: int = 1,
-    engine: str = "scipy",
+    chunk_size: int | None = None,
+    engine: str | None = None,
+    store: str = "full",
     progress: bool | None = None,
     command_line: str | None = None,
     log: Callable[[str], None] | None = None,
@@ -251,14 +314,24 @@ def run_sweep(
     scheduler : str, optional
         Dask scheduler address (``tcp://HOST:PORT``), required for ``"dask"``.
     timeout : float, optional
-        Per-run wall-time budget [s]; a run past it is recorded as failed.
+        Per-run wall-time budget [s]; a run past it is recorded as failed. Only with the
+        scipy engine (the default engine then).
     retry_failed : bool
         Also re-execute runs whose current result file has status ``failed``.
-    chunk_size : int
-        Runs per unit of work sent to a worker (1 for the scipy engine; a batched engine
-        wants hundreds).
-    engine : str
-        Key of :data:`rbstab.sweep.worker.ENGINES`.
+    chunk_size : int, optional
+        Most runs per unit of work sent to a worker (default
+        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 512 for batch).
+        For the batch engine, runs of one batch group are kept together and a chunk
+        holds at most ``ceil(runs / workers)`` runs.
+    engine : {"batch", "scipy"}, optional
+        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``batch``, or ``scipy`` when
+        ``timeout`` is given (see :func:`resolve_engine`). ``batch`` integrates runs
+        that differ only in their initial state together (RK23/RK45/DOP853; other
+        methods go through scipy), taking the steps scipy takes.
+    store : {"full", "summary"}
+        What each result file holds (:data:`rbstab.io.hdf5.STORE_MODES`): every variable
+        at every sample, or the variables a report draws at most 201 samples (summary
+        figures from every sample either way).
     progress : bool, optional
         Progress bar on stderr (done / failed / remaining, ETA); default: when stderr is a
         terminal.
@@ -285,22 +358,28 @@ def run_sweep(
     say = log or (lambda message: None)
     if runs is None:
         runs = expand(spec)
+    from ..io.hdf5 import STORE_MODES
+
+    engine = resolve_engine(engine, timeout)
+    if chunk_size is None:
+        chunk_size = DEFAULT_CHUNK_SIZE[engine]
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    if store not in STORE_MODES:
+        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
     if command_line is None:
         command_line = " ".join(sys.argv)
-    if engine not in ENGINES:
-        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
     # the executor first: a missing package or an unreachable scheduler writes nothing
     ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
     directory = Path(output) / spec.name
     runs_dir = directory / RUNS_DIR
-    outcome = SweepOutcome(spec.name, directory, len(runs))
+    outcome = SweepOutcome(spec.name, directory, len(runs), engine=engine)
     with ex:
         runs_dir.mkdir(parents=True, exist_ok=True)
         _run_locked(spec, runs, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
                     chunk_size=chunk_size, progress=progress, say=say,
-                    options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine))
+                    options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
+                                          store=store))
     return outcome
 
 
@@ -351,17 +430,23 @@ def _collect_finished(todo: Sequence[PlannedRun], runs_dir: Path, attrs: dict, e
 
 def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chunk_size, progress, say,
              options) -> None:
-    tasks = [RunTask(r.run_id, r.config.resolved, str((runs_dir / f"{r.run_id}.h5").resolve())) for r in todo]
-    chunks = _chunks(tasks, chunk_size)
+    folder = str(runs_dir.resolve())
+    tasks = [RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5")) for r in todo]
+    if options.engine == "batch" and chunk_size > 1:
+        chunks = _batch_chunks(todo, tasks, chunk_size, ex.parallelism())
+    else:
+        chunks = _chunks(tasks, chunk_size)
     if ex.return_bytes:
-        options = WorkerOptions(options.timeout, options.command_line, options.engine, return_bytes=True)
+        options = dataclasses.replace(options, return_bytes=True)
     by_id = {r.run_id: r for r in todo}
     n_ok = n_bad = 0
     ex.plan(len(chunks))  # the caller closes the executor
     outcome.executor = ex.describe()
+    outcome.n_chunks = len(chunks)
+    per_chunk = "" if chunk_size == 1 else f" in {len(chunks)} chunk{'s' if len(chunks) != 1 else ''}"
     say(
         f"{outcome.name}: {outcome.n_runs} runs, {outcome.n_skipped} already done, "
-        f"{len(todo)} to run on {outcome.executor}"
+        f"{len(todo)} to run on {outcome.executor} ({options.engine} engine{per_chunk})"
     )
     bar = _progress_bar(len(todo), spec.name, progress)
     try:
@@ -377,7 +462,16 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
                 if rec.get("data") is not None:
                     write_bytes_atomic(rec["path"], rec["data"])
                 path = Path(rec["path"])
-                a = _read_attrs(path) if path.exists() else None
+                if not path.exists():
+                    a = None
+                elif rec.get("attrs") is not None and rec["status"] != "error":
+                    a = rec["attrs"]  # what the worker just wrote: no need to reopen the file
+                else:
+                    a = _read_attrs(path)
+                for key, seconds in (rec.get("timing") or {}).items():
+                    outcome.timing[key] = outcome.timing.get(key, 0.0) + seconds
+                if rec.get("worker_peak_rss"):
+                    outcome.worker_peak_rss = max(outcome.worker_peak_rss or 0, rec["worker_peak_rss"])
                 # the worker wrote it from this run's config; after an error (e.g. a
                 # worker that died after writing) only a file with the run's hash counts
                 if a is not None and a.get("name") == rid and (

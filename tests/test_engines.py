@@ -1,0 +1,314 @@
+"""The batch engine against the scipy reference: every variant, grouping, failures, sweeps.
+
+``simulate_many(engine="batch")`` integrates runs that differ only in their initial state
+together (:mod:`rbstab.batch`); ``simulate`` is one ``solve_ivp`` call per run. Both use
+the variant's own right-hand side (there is no second model), so what is compared here is
+the integration: the batched runs must give the scipy trajectories within a tolerance
+scaled by rtol (in practice they agree to round-off: the same steps are taken).
+
+Runs are short (t_end = 0.3 s, 301 samples) so that the file stays fast.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from rbstab import simulate as simulate_module
+from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
+from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
+from rbstab.simulate import numerical_rates, simulate, simulate_many
+from rbstab.summary import numerical_rate
+from rbstab.sweep import expand, run_sweep, spec_from_mapping
+from rbstab.sweep.runner import resolve_engine
+from rbstab.sweep.worker import RunTask, WorkerOptions, _group_configs, run_chunk
+from rbstab_cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIGS = sorted((ROOT / "configs" / "paper").glob("*.yaml")) + sorted((ROOT / "configs" / "examples").glob("*.yaml"))
+CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
+SHORT = ["simulation.t_end=0.3", "simulation.n_samples=301", "simulation.rtol=1e-6", "simulation.atol=1e-8"]
+SPINS = [[16.0, 32.0, -16.0], [20.0, 25.0, -10.0], [5.0, -12.0, 30.0], [-14.0, 36.0, 3.0]]
+# theta_2 close to pi/2 and a fast spin about axis 2: gimbal lock within milliseconds
+LOCKING = {"theta": [0.0, 1.5, 0.0], "omega": [0.0, 30.0, 0.0]}
+
+pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
+
+
+def base_data(path: Path, overrides=()) -> dict:
+    return apply_overrides(parse_yaml(path.read_text()), [*SHORT, *overrides])
+
+
+def configs_with_spins(data: dict, spins=SPINS, **initial) -> list:
+    out = []
+    for k, omega in enumerate(spins):
+        d = copy.deepcopy(data)
+        d["name"] = f"run{k}"
+        d.setdefault("initial_state", {})["omega"] = omega
+        d["initial_state"].update(initial)
+        out.append(config_from_mapping(d))
+    return out
+
+
+def max_diff(a, b) -> float:
+    return float(np.nanmax(np.abs(a - b))) if np.isfinite(b).any() else 0.0
+
+
+def assert_close(batch, ref, rtol, sensitivity=None):
+    """Every output of ``batch`` within 50 rtol (relative to its scale) of ``ref``; or, for
+    a discontinuous right-hand side, within 10x of how far scipy itself moves when the
+    initial state moves by one ulp (``sensitivity``, a second scipy result)."""
+    assert batch.status == ref.status, (batch.message, ref.message)
+    assert batch.message == ref.message
+    for key, value in ref.outputs.items():
+        scale = max(1.0, float(np.nanmax(np.abs(value))))
+        tol = 50 * rtol * scale
+        if sensitivity is not None:
+            tol = max(tol, 10 * max_diff(sensitivity.outputs[key], value))
+        assert np.array_equal(np.isnan(batch.outputs[key]), np.isnan(value)), key
+        assert max_diff(batch.outputs[key], value) <= tol, (key, max_diff(batch.outputs[key], value), tol)
+
+
+# -- every variant ---------------------------------------------------------------------------
+
+
+VARIANT_CASES = [(p, ()) for p in CONFIGS] + [
+    (ROOT / "configs" / "examples" / "sliding.yaml", ("controller.boundary_layer=0.0",)),  # pure sign law
+    (CASE3, ("simulation.method=RK45",)),
+    (CASE3, ("simulation.method=RK23",)),
+]
+
+
+@pytest.mark.parametrize("path, overrides", VARIANT_CASES,
+                         ids=[f"{p.stem}{'-' + o[0] if o else ''}" for p, o in VARIANT_CASES])
+def test_batch_agrees_with_scipy_for_every_variant(path, overrides):
+    data = base_data(path, overrides)
+    smooth = config_from_mapping(data).make_variant().smooth
+    configs = configs_with_spins(data, SPINS if smooth else SPINS[:2])
+    rtol = configs[0].simulation.rtol
+    got = dict(simulate_many(configs, engine="batch"))
+    assert sorted(got) == list(range(len(configs)))
+    for i, config in enumerate(configs):
+        ref = simulate(config)
+        assert ref.ok, ref.message
+        sensitivity = None
+        if not smooth:  # the pure sign law chatters: round-off decides the switches
+            moved = copy.deepcopy(config.resolved)
+            moved["initial_state"]["omega"] = np.nextafter(config.initial_state["omega"], np.inf).tolist()
+            sensitivity = simulate(config_from_mapping(moved))
+        assert_close(got[i], ref, rtol, sensitivity)
+        assert got[i].summary["lyapunov_rate_check"] == ref.summary["lyapunov_rate_check"]
+        assert got[i].name == config.name and got[i].config is config
+        assert set(got[i].timing) == {"integration", "postprocess"}
+
+
+def test_groups_by_everything_but_initial_state_and_implicit_methods_fall_back(monkeypatch):
+    import rbstab.batch as batch
+
+    data = base_data(CASE3)
+    stiff = apply_overrides(data, ["controller.k_c=[20000, 20000, 15000]"])
+    radau = apply_overrides(data, ["simulation.method=Radau"])
+    configs = configs_with_spins(data, SPINS[:3]) + configs_with_spins(stiff, SPINS[:2]) + configs_with_spins(radau, SPINS[:1])
+    calls, solo = [], []
+    real_batch, real_simulate = batch.integrate_batch, simulate_module.simulate
+    monkeypatch.setattr(batch, "integrate_batch", lambda v, y0, *a, **k: calls.append(len(y0)) or real_batch(v, y0, *a, **k))
+    monkeypatch.setattr(simulate_module, "simulate", lambda c, *a, **k: solo.append(c.name) or real_simulate(c, *a, **k))
+    got = dict(simulate_many(configs, engine="batch", chunk_size=2))
+    assert sorted(calls) == [1, 2, 2]  # gains differ: two groups; the first in chunks of 2
+    assert solo == ["run0"] and configs[5].simulation.method == "Radau"
+    assert got[5].ok and got[5].solver["njev"] > 0  # the scipy path (an implicit method)
+    assert all(r.ok for r in got.values())
+    assert simulate_module.batch_key(configs[0]) == simulate_module.batch_key(configs[1])
+    assert simulate_module.batch_key(configs[0]) != simulate_module.batch_key(configs[3])
+
+
+def test_scipy_engine_of_simulate_many_is_simulate():
+    configs = configs_with_spins(base_data(CASE3), SPINS[:2])
+    for i, result in simulate_many(configs, engine="scipy"):
+        ref = simulate(configs[i])
+        assert np.array_equal(result.outputs["theta"], ref.outputs["theta"])
+    with pytest.raises(ValueError, match="engine"):
+        list(simulate_many(configs, engine="numba"))
+
+
+def test_gimbal_lock_inside_a_batch_fails_alone_with_the_scipy_message():
+    data = base_data(CASE3)
+    configs = configs_with_spins(data, SPINS[:3])
+    locking = copy.deepcopy(data)
+    locking["name"] = "locking"
+    locking["initial_state"].update(LOCKING)
+    configs.insert(1, config_from_mapping(locking))
+    got = dict(simulate_many(configs, engine="batch"))
+    ref = simulate(configs[1])
+    assert ref.status == "failed" and ref.message.startswith("gimbal lock: |theta_2| reached pi/2")
+    assert got[1].status == "failed" and got[1].message.startswith("gimbal lock: |theta_2| reached pi/2")
+    t_ref = float(ref.message.split("at t = ")[1].split(" s")[0])
+    t_got = float(got[1].message.split("at t = ")[1].split(" s")[0])
+    assert t_got == pytest.approx(t_ref, rel=1e-4)
+    assert np.isnan(got[1].outputs["theta"][-1]).all() and np.isnan(ref.outputs["theta"][-1]).all()
+    assert got[1].summary["t_final"] == ref.summary["t_final"]
+    assert [got[i].status for i in (0, 2, 3)] == ["success"] * 3
+
+
+def test_a_run_gets_the_same_bits_whatever_its_batch():
+    configs = configs_with_spins(base_data(CASE3), SPINS)
+    together = dict(simulate_many(configs, engine="batch"))
+    alone = dict(simulate_many(configs[2:3], engine="batch"))
+    pair = dict(simulate_many(configs[1:3], engine="batch"))
+    for other in (alone[0], pair[1]):
+        for key, value in together[2].outputs.items():
+            assert np.array_equal(other.outputs[key], value), key
+
+
+def test_numerical_rates_equal_numerical_rate_row_by_row():
+    t = np.linspace(0.0, 1.0, 101)
+    rng = np.random.default_rng(0)
+    v = np.cumsum(rng.standard_normal((5, 101)), axis=1)
+    v[3, 60:] = np.nan  # a failed run's tail
+    got = numerical_rates(t, v)
+    for i in range(5):
+        assert np.array_equal(got[i], numerical_rate(t, v[i]), equal_nan=True)
+    short = numerical_rates(t[:4], v[:, :4])
+    assert np.array_equal(short[0], numerical_rate(t[:4], v[0, :4]))
+
+
+# -- the sweep engine ------------------------------------------------------------------------
+
+
+def sweep_spec(n: int, name: str = "eng", extra: dict | None = None):
+    data = {
+        "name": name,
+        "base": str(CASE3),
+        "random": {"n": n, "seed": 5,
+                   "params": {"initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}},
+        **(extra or {}),
+    }
+    return spec_from_mapping(data, overrides=SHORT)
+
+
+def test_group_configs_equal_validated_configs():
+    runs = expand(sweep_spec(4))
+    tasks = [RunTask(r.run_id, r.config.resolved, "x.h5") for r in runs]
+    configs, errors = _group_configs(tasks)
+    assert not errors
+    for config, run in zip(configs, runs):
+        assert config.to_yaml() == run.config.to_yaml()
+        assert config.name == run.run_id
+        for block, value in run.config.initial_state.items():
+            assert np.array_equal(config.initial_state[block], value)
+            assert not config.initial_state[block].flags.writeable
+
+
+def test_batch_and_scipy_sweeps_give_the_same_index(tmp_path):
+    spec = sweep_spec(5, extra={"grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]}})
+    runs = expand(spec)
+    a = run_sweep(spec, tmp_path / "scipy", runs=runs, jobs=2, engine="scipy", progress=False)
+    b = run_sweep(spec, tmp_path / "batch", runs=runs, jobs=2, progress=False)
+    assert (a.engine, b.engine) == ("scipy", "batch")
+    assert b.n_chunks == 2  # one per gain, each kept together
+    ia, ib = pd.read_csv(a.index_path), pd.read_csv(b.index_path)
+    assert list(ia.columns) == list(ib.columns)
+    assert (ia["status"] == "success").all() and list(ia["status"]) == list(ib["status"])
+    for col in ("run_id", "config_hash", "converged", "lyapunov_rate_check", "file"):
+        assert list(ia[col]) == list(ib[col]), col
+    numeric = [c for c in ia.columns if c.startswith(("final_", "lyapunov_", "max_", "t_final"))
+               and ia[c].dtype.kind == "f"]
+    assert numeric
+    for col in numeric:
+        np.testing.assert_allclose(ib[col], ia[col], rtol=1e-4, atol=1e-9, err_msg=col)
+    assert set(b.timing) == {"config", "integration", "postprocess", "config_yaml", "write"}
+    assert b.worker_peak_rss is None or b.worker_peak_rss > 10 * 2**20
+
+
+def test_batch_resume_and_summary_store(tmp_path):
+    spec4, spec7 = sweep_spec(4, "res"), sweep_spec(7, "res")
+    first = run_sweep(spec4, tmp_path / "a", jobs=2, store="summary", progress=False)
+    assert first.counts["success"] == 4
+    again = run_sweep(spec7, tmp_path / "a", jobs=2, store="summary", progress=False)
+    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 3, 7)
+    clean = run_sweep(spec7, tmp_path / "b", jobs=1, chunk_size=7, store="summary", progress=False)
+    full = run_sweep(spec7, tmp_path / "c", jobs=2, progress=False)
+    runs = expand(spec7)
+    for run in runs:
+        a = tmp_path / "a" / "res" / "runs" / f"{run.run_id}.h5"
+        b = tmp_path / "b" / "res" / "runs" / f"{run.run_id}.h5"
+        c = tmp_path / "c" / "res" / "runs" / f"{run.run_id}.h5"
+        with h5py.File(a) as fa, h5py.File(b) as fb, h5py.File(c) as fc:
+            for key in fa:  # resumed in other chunks: the same bits
+                assert np.array_equal(fa[key][()], fb[key][()]), key
+            assert set(fa) == {"time", "axis", *SUMMARY_VARIABLES}
+            stride = summary_stride(301)
+            assert fa["time"].shape == (301 // stride + 1,)
+            assert np.array_equal(fa["lyapunov"][()], fc["lyapunov"][()][::stride])
+        sa, sc = read_attributes(a), read_attributes(c)
+        assert sa["store"] == "summary" and "store" not in sc
+        assert {k: v for k, v in sa.items() if k.startswith("summary_")} == \
+            {k: v for k, v in sc.items() if k.startswith("summary_")}
+    ia = pd.read_csv(tmp_path / "a" / "res" / "index.csv").drop(columns=["wall_time"])
+    ic = pd.read_csv(tmp_path / "c" / "res" / "index.csv").drop(columns=["wall_time"])
+    pd.testing.assert_frame_equal(ia, ic)
+    # a summary file is a result file for show and report
+    path = tmp_path / "a" / "res" / "runs" / f"{runs[0].run_id}.h5"
+    shown = CliRunner().invoke(cli, ["show", str(path)])
+    assert shown.exit_code == 0 and "lyapunov_final" in shown.output
+    from rbstab.report.load import load_run
+
+    run = load_run(path)
+    assert run.series("lyapunov_rate_numerical")["time"].shape == (301 // summary_stride(301) + 1,)
+    assert read_summary(path)["summary"] == read_summary(tmp_path / "c" / "res" / "runs" / f"{runs[0].run_id}.h5")["summary"]
+
+
+def test_worker_batch_engine_isolates_failures(tmp_path):
+    runs = expand(sweep_spec(3))
+    tasks = [RunTask(r.run_id, r.config.resolved, str(tmp_path / f"{r.run_id}.h5")) for r in runs]
+    locking = copy.deepcopy(runs[1].config.resolved)
+    locking["initial_state"].update(LOCKING)
+    tasks[1] = RunTask(runs[1].run_id, locking, tasks[1].path)
+    bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(tmp_path / "bad.h5"))
+    unwritable = RunTask(runs[2].run_id, runs[2].config.resolved, str(tmp_path / "file" / "x.h5"))
+    (tmp_path / "file").write_text("not a folder")
+    records = {r["run_id"] + r["path"][-6:]: r for r in run_chunk([*tasks, bad, unwritable], WorkerOptions(engine="batch"))}
+    by_path = {r["path"]: r for r in records.values()}
+    assert by_path[tasks[0].path]["status"] == "success"
+    assert by_path[tasks[1].path]["status"] == "failed"
+    assert by_path[tasks[1].path]["message"].startswith("gimbal lock")
+    assert by_path[tasks[2].path]["status"] == "success"
+    assert by_path[bad.path]["status"] == "error" and "ConfigError" in by_path[bad.path]["message"]
+    assert by_path[unwritable.path]["status"] == "error"
+    assert by_path[tasks[0].path]["attrs"] == read_attributes(tasks[0].path)
+
+
+def test_engine_choice_and_timeout(tmp_path):
+    assert resolve_engine(None, None) == "batch"
+    assert resolve_engine(None, 5.0) == "scipy"
+    with pytest.raises(ValueError, match="--timeout needs --engine scipy"):
+        resolve_engine("batch", 5.0)
+    spec_path = tmp_path / "s.yaml"
+    spec_path.write_text(yaml.safe_dump({"name": "t", "base": str(CASE3), "random": {"n": 1, "seed": 0, "params": {
+        "initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 1}}}}}))
+    args = ["sweep", str(spec_path), "-o", str(tmp_path / "out"), "--no-progress", "--set", "simulation.t_end=0.05",
+            "--set", "simulation.n_samples=11"]
+    refused = CliRunner().invoke(cli, [*args, "--engine", "batch", "--timeout", "5"])
+    assert refused.exit_code == 2 and "--timeout needs --engine scipy" in refused.output
+    ok = CliRunner().invoke(cli, [*args, "--timeout", "30"])
+    assert ok.exit_code == 0, ok.output
+    assert "scipy engine" in ok.output
+    ok = CliRunner().invoke(cli, [*args, "--store", "summary", "--chunk-size", "4", "-o", str(tmp_path / "o2")])
+    assert ok.exit_code == 0 and "batch engine" in ok.output
+
+
+def test_write_run_returns_what_read_attributes_reads(tmp_path):
+    config = configs_with_spins(base_data(CASE3), SPINS[:1])[0]
+    result = simulate(config)
+    for store in ("full", "summary"):
+        attrs = write_run(result, tmp_path / f"{store}.h5", store=store, command_line="x")
+        assert attrs == read_attributes(tmp_path / f"{store}.h5")
+    with pytest.raises(ValueError, match="store"):
+        write_run(result, tmp_path / "x.h5", store="some")
