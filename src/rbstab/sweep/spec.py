@@ -68,6 +68,9 @@ from typing import Any
 
 import numpy as np
 
+from ..config import ConfigError
+from ..config.schema import kind_of as _kind
+
 __all__ = [
     "SweepSpec",
     "SweepSpecError",
@@ -97,25 +100,13 @@ _NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 
 
-class SweepSpecError(ValueError):
+class SweepSpecError(ConfigError):
     """An invalid sweep spec, override or run combination.
 
-    Attributes
-    ----------
-    errors : list of str
-        One line per problem, each naming the key, the value found and what is allowed.
-    source : str or None
-        The spec file, if known; ``str()`` then starts with ``in <source>:``.
+    Same shape as :class:`rbstab.config.ConfigError`: ``errors`` (one line per problem,
+    each naming the key, the value found and what is allowed) and ``source`` (the spec
+    file, if known; ``str()`` then starts with ``in <source>:``).
     """
-
-    def __init__(self, errors: Sequence[str], source: str | None = None) -> None:
-        super().__init__(list(errors), source)
-        self.errors = list(errors)
-        self.source = source
-
-    def __str__(self) -> str:
-        header = [f"in {self.source}:"] if self.source else []
-        return "\n".join(header + self.errors)
 
 
 # -- small helpers ---------------------------------------------------------------------------
@@ -124,22 +115,6 @@ class SweepSpecError(ValueError):
 def _short(value: Any, limit: int = 80) -> str:
     text = json.dumps(value, default=str) if not isinstance(value, str) else repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _kind(value: Any) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, numbers.Real):
-        return "a number"
-    if isinstance(value, Mapping):
-        return "a mapping"
-    if isinstance(value, (list, tuple)):
-        return "a list"
-    return f"a {type(value).__name__}"
 
 
 def _is_number(value: Any) -> bool:
@@ -242,7 +217,7 @@ class Distribution:
 
 def _bounds(where: str, kind: str, value: Any, errors: list[str], *, positive: bool = False):
     expected = (
-        f"[lo, hi] with lo <= hi, each a number or a list of numbers"
+        "[lo, hi] with lo <= hi, each a number or a list of numbers"
         + (", all > 0" if positive else "")
     )
     if not isinstance(value, (list, tuple)) or len(value) != 2:
