@@ -26,13 +26,13 @@ import hashlib
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .. import __version__
+from .atomic import atomic_path
 from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
 from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
 
@@ -247,25 +247,14 @@ def write_run(
     :func:`read_attributes` would read them back (so a caller need not reopen the file)."""
     if store not in STORE_MODES:
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     attrs = result_attributes(result, command_line=command_line, store=store, config_yaml=config_yaml)
     time, outputs = result.time, result.outputs
     if store == "summary":
         stride = attrs["store_stride"]
         time = time[::stride]
         outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.fchmod(fd, 0o666 & ~umask)  # mkstemp makes 0600; a result file follows the umask
-    os.close(fd)
-    try:
-        _write_file(tmp, time, outputs, attrs)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp:
+        _write_file(str(tmp), time, outputs, attrs)
     return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
 
 

@@ -27,13 +27,13 @@ import datetime as _dt
 import io
 import json
 import math
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["is_converged", "index_rows", "write_index", "write_summary", "summarize_rows", "write_text_atomic", "STATUSES"]
+from ..io.atomic import write_text_atomic
+
+__all__ = ["is_converged", "index_rows", "write_index", "write_summary", "summarize_rows", "STATUSES"]
 
 #: Values of the ``status`` column.
 STATUSES = ("success", "failed", "error", "pending")
@@ -145,28 +145,6 @@ def _cell(value: Any) -> Any:
     if isinstance(value, (list, dict)):
         return json.dumps(value)
     return value
-
-
-def file_mode() -> int:
-    """Permissions of a new file under the current umask (mkstemp would give 0600)."""
-    umask = os.umask(0)
-    os.umask(umask)
-    return 0o666 & ~umask
-
-
-def write_text_atomic(path: Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file in its folder and a rename."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        os.fchmod(fd, file_mode())
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def write_index(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:

@@ -36,9 +36,10 @@ import yaml
 
 from .. import __version__
 from .executors import Executor, make_executor
-from .index import index_rows, summarize_rows, write_index, write_summary, write_text_atomic
+from ..io.atomic import write_bytes_atomic, write_text_atomic
+from .index import index_rows, summarize_rows, write_index, write_summary
 from .spec import PlannedRun, SweepSpec, expand
-from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk, write_bytes_atomic
+from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk
 
 __all__ = [
     "run_sweep",

@@ -29,7 +29,6 @@ resume and the index work the same, and both return the file's attributes in the
 from __future__ import annotations
 
 import dataclasses
-import os
 import sys
 import tempfile
 import time as _time
@@ -42,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["RunTask", "WorkerOptions", "run_chunk", "ENGINES", "DEFAULT_CHUNK_SIZE", "write_bytes_atomic"]
+__all__ = ["RunTask", "WorkerOptions", "run_chunk", "ENGINES", "DEFAULT_CHUNK_SIZE"]
 
 
 @dataclass(frozen=True)
@@ -79,7 +78,7 @@ class WorkerOptions:
         Write each file in a private temporary folder and return its bytes in the record
         (``record["data"]``) instead of writing ``task.path``: for workers that do not
         share the sweep's filesystem (Dask). The parent writes them with
-        :func:`write_bytes_atomic`.
+        :func:`rbstab.io.atomic.write_bytes_atomic`.
     store : str
         ``"full"`` or ``"summary"`` (:data:`rbstab.io.hdf5.STORE_MODES`).
     """
@@ -270,21 +269,3 @@ def _peak_rss() -> int | None:
         return None
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return int(peak) if sys.platform == "darwin" else int(peak) * 1024
-
-
-def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in its folder and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.fchmod(fd, 0o666 & ~umask)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
