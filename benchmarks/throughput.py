@@ -327,14 +327,15 @@ def main() -> None:
               + f"; max |final state| {np.abs(ref).max():.3g}")
 
         # where (b)'s time goes
-        chunk = None
+        chunk = share = None
         for store in args.store:
             out = parent / f"child-{store}"
             shutil.rmtree(out, ignore_errors=True)
             info = run_child(n, out, args, store)
             t = info["timing"]
             chunk = chunk or max(1, -(-n // max(info["n_chunks"], 1)))
-            share, _ = rhs_share(chunk, args.method) if store == args.store[0] else (share, None)
+            if share is None:  # the right-hand side's share does not depend on the store
+                share, _ = rhs_share(chunk, args.method)
             busy = sum(t.values())
             other = info["run_sweep"] - busy / args.jobs
             print(f"time split of (b) --store {store} (instrumented run: {info['wall']:.2f} s wall, "

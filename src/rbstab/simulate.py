@@ -83,10 +83,12 @@ class RunResult:
 
     @property
     def name(self) -> str:
+        """The run's name (``config.name``), also its result file's stem."""
         return self.config.name
 
     @property
     def ok(self) -> bool:
+        """Whether the run reached ``t_end`` (``status == "success"``)."""
         return self.status == "success"
 
 

@@ -25,7 +25,7 @@ from .schema import (
     problem_line,
     short_repr,
 )
-from .yaml_io import dump_yaml, parse_yaml
+from .yaml_io import dump_yaml, read_yaml_file
 
 __all__ = ["RunConfig", "config_from_mapping", "load_config"]
 
@@ -230,14 +230,8 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
     """
     path = Path(path)
     source = str(path)
+    data = read_yaml_file(path, "config file")
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError([f"config file not found: {source}"]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError([f"cannot read the config file: {exc}"], source) from None
-    try:
-        data = parse_yaml(text)
         if isinstance(data, Mapping):
             data = apply_overrides(data, overrides)
     except ConfigError as exc:

@@ -78,6 +78,7 @@ class Invalid(Exception):
 
 
 def kind_of(value: Any) -> str:
+    """What a found value is, for messages: "null", "a boolean", "a string", "a number"..."""
     if value is None:
         return "null"
     if isinstance(value, bool):
@@ -382,6 +383,8 @@ class _Simulation(_Section):
 
 
 class RunSchema(_Section):
+    """The whole run configuration (pydantic model; the public result is ``RunConfig``)."""
+
     name: Annotated[Any, _checked(_name)] = Field(
         description="a name of letters, digits, '_', '.' and '-' (it becomes a file name)"
     )

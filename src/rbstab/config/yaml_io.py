@@ -9,13 +9,14 @@ mapping is an error instead of silently keeping the last value. Writing keeps li
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any
 
 import yaml
 
 from .errors import ConfigError
 
-__all__ = ["parse_yaml", "dump_yaml"]
+__all__ = ["parse_yaml", "read_yaml_file", "dump_yaml"]
 
 
 class _Loader(yaml.SafeLoader):
@@ -72,6 +73,33 @@ def parse_yaml(text: str) -> Any:
         raise ConfigError([f"YAML syntax error{where}: {problem}"]) from None
     except yaml.YAMLError as exc:
         raise ConfigError([f"YAML syntax error: {exc}"]) from None
+
+
+def read_yaml_file(path: str | Path, what: str = "config file") -> Any:
+    """Read and parse a YAML file (a config or a sweep spec).
+
+    Parameters
+    ----------
+    path : str or Path
+    what : str
+        What the file is, for messages ("config file", "sweep spec").
+
+    Raises
+    ------
+    ConfigError
+        For a missing or unreadable file or a YAML syntax error; ``source`` is ``path``.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError([f"{what} not found: {path}"]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError([f"cannot read the {what}: {exc}"], str(path)) from None
+    try:
+        return parse_yaml(text)
+    except ConfigError as exc:
+        raise ConfigError(exc.errors, str(path)) from None
 
 
 def dump_yaml(data: Any) -> str:

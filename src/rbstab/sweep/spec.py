@@ -715,17 +715,13 @@ def load_spec(path: str | Path, overrides: Sequence[str] = ()) -> SweepSpec:
     """
     from ..config import ConfigError
 
+    from ..config.yaml_io import read_yaml_file
+
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SweepSpecError([f"sweep spec not found: {path}"]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SweepSpecError([f"cannot read the sweep spec: {exc}"], str(path)) from None
-    try:
-        data = _parse_yaml(text)
+        data = read_yaml_file(path, "sweep spec")
     except ConfigError as exc:
-        raise SweepSpecError(exc.errors, str(path)) from None
+        raise SweepSpecError(exc.errors, exc.source) from None
     return spec_from_mapping(data, source=str(path), default_name=path.stem, overrides=overrides)
 
 
