@@ -392,6 +392,10 @@ def test_unknown_solver_method():
 def test_every_scipy_method_accepted():
     from scipy.integrate._ivp.ivp import METHODS
 
+    from rbstab.config.schema import SOLVER_METHODS
+
+    # validation lists scipy's methods without importing scipy.integrate: the list must be scipy's
+    assert set(SOLVER_METHODS) == set(METHODS)
     for method in METHODS:
         assert config_from_mapping(base(simulation={"method": method})).simulation.method == method
 
@@ -737,3 +741,55 @@ def test_yaml_text_does_not_depend_on_the_emitter():
         data["body"]["mass"] = float(rng.lognormal(3, 4))
         data["name"] = "r0001-ünïcode"
         assert dump_yaml(data) == yaml.dump(data, Dumper=PythonDumper, sort_keys=False, allow_unicode=True)
+
+
+def test_with_initial_state_equals_full_validation():
+    """The sweep's fast path (only the initial state checked) gives what full validation gives."""
+    rng = np.random.default_rng(1)
+    config = config_from_mapping(base())
+    for i in range(60):
+        state = {"omega": list(rng.normal(0, 5, 3)), "theta": [0.1, float(rng.uniform(-1.5, 1.5)), 0]}
+        if i % 3 == 0:
+            state["x"] = [1, 2, 3]
+        if i % 5 == 0:
+            state = None
+        fast = config.with_initial_state(state, name=f"r{i}")
+        full = config_from_mapping({**config.resolved, "initial_state": state, "name": f"r{i}"})
+        assert fast.resolved == full.resolved and list(fast.resolved) == list(full.resolved)
+        assert fast.to_yaml() == full.to_yaml()
+        for block, value in full.initial_state.items():
+            assert np.array_equal(fast.initial_state[block], value) and not fast.initial_state[block].flags.writeable
+
+
+@pytest.mark.parametrize("state, name, key", [
+    ({"omega": [1, 2]}, None, "initial_state.omega"),
+    ({"theta": [0, 1.5705, 0]}, None, "initial_state.theta"),
+    ({"q": 1}, None, "initial_state.q"),
+    ({}, "a b", "name"),
+])
+def test_with_initial_state_errors_name_the_key(state, name, key):
+    with pytest.raises(ConfigError) as info:
+        config_from_mapping(base()).with_initial_state(state, name=name)
+    assert f"config key '{key}'" in str(info.value)
+
+
+def test_config_yaml_by_sections_is_the_whole_dump():
+    """RunConfig.to_yaml caches the text of unchanged sections; it must be dump_yaml's text."""
+    from rbstab.config import dump_yaml
+
+    rng = np.random.default_rng(4)
+    for path in SHIPPED:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            config = load_config(path)
+        for i in range(3):
+            if i:
+                data = copy.deepcopy(config.resolved)
+                data["body"]["mass"] = float(rng.lognormal(3, 4))
+                data["initial_state"]["omega"] = [float(x) for x in rng.normal(0, 1e3, 3)]
+                data["simulation"]["max_step"] = None if i == 1 else 0.5
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    config = config_from_mapping(data)
+            assert config.to_yaml() == dump_yaml(config.resolved)
+            assert config.to_yaml() == config.to_yaml()  # from the cache

