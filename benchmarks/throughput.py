@@ -8,9 +8,9 @@ invocation on this machine:
 (a) **baseline**: one ``scipy.integrate.solve_ivp`` call per run (``t_eval`` at the 2001
     samples), with a plain numpy right-hand side written below (:func:`baseline_rhs`: no
     compilation, no batching; checked against the project's model at random states);
-(b) the same N runs through ``rbstab sweep SPEC -j JOBS --store STORE --no-progress``
-    (the default engine, batch), timed from process start to exit, for each ``--store``
-    (default: ``summary`` then ``full``).
+(b) the same N runs through ``rbstab sweep SPEC -j JOBS --store STORE --layout LAYOUT
+    --no-progress`` (the default engine, batch), timed from process start to exit, for each
+    ``--setting STORE:LAYOUT`` (default: ``summary:chunk``, ``full:chunk``, ``summary:run``).
 
 The time split comes from a second, identical sweep in an instrumented process that does
 what the command does (workers started before planning, ``expand``, ``run_sweep``).
@@ -28,7 +28,7 @@ the engine is numpy), and the wall time and memory of a ``--memory-n`` (10,000) 
 
 Usage::
 
-    python benchmarks/throughput.py [--n 1000] [--jobs 2] [--store summary full]
+    python benchmarks/throughput.py [--n 1000] [--jobs 2] [--setting STORE:LAYOUT ...]
                                     [--baseline-n N] [--ref-n 100] [--memory-n 10000]
                                     [--skip-single] [--keep DIR]
 
@@ -136,9 +136,17 @@ def mib(n_bytes) -> str:
     return "n/a" if not n_bytes else f"{n_bytes / 2**20:.0f} MiB"
 
 
-def run_cli_sweep(spec_path: Path, out: Path, args, store: str) -> float:
+def parse_setting(text: str) -> tuple[str, str]:
+    """``"STORE:LAYOUT"`` -> (store, layout), e.g. ``"summary:chunk"``."""
+    store, _, layout = text.partition(":")
+    if store not in ("summary", "full") or layout not in ("run", "chunk"):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected STORE:LAYOUT, STORE summary|full, LAYOUT run|chunk")
+    return store, layout
+
+
+def run_cli_sweep(spec_path: Path, out: Path, args, store: str, layout: str) -> float:
     cmd = [str(RBSTAB), "sweep", str(spec_path), "-o", str(out), "-j", str(args.jobs), "--store", store,
-           "--no-progress", *sum((["--set", o] for o in overrides(args.method)), [])]
+           "--layout", layout, "--no-progress", *sum((["--set", o] for o in overrides(args.method)), [])]
     if args.chunk_size:
         cmd += ["--chunk-size", str(args.chunk_size)]
     start = time.perf_counter()
@@ -149,10 +157,10 @@ def run_cli_sweep(spec_path: Path, out: Path, args, store: str) -> float:
     return wall
 
 
-def run_child(n: int, out: Path, args, store: str) -> dict:
+def run_child(n: int, out: Path, args, store: str, layout: str) -> dict:
     """The sweep in a fresh, instrumented process: what ``rbstab sweep`` does, with timings."""
     cmd = [sys.executable, __file__, "--child", str(n), "--child-out", str(out), "--jobs", str(args.jobs),
-           "--store", store, "--method", args.method, "--t0", repr(time.time())]
+           "--setting", f"{store}:{layout}", "--method", args.method, "--t0", repr(time.time())]
     if args.chunk_size:
         cmd += ["--chunk-size", str(args.chunk_size)]
     start = time.perf_counter()
@@ -180,7 +188,7 @@ def child(args) -> None:
         runs = expand(spec)
     planned = time.time()
     outcome = run_sweep(spec, args.child_out, runs=runs, executor=executor, store=args.store,
-                        chunk_size=args.chunk_size, progress=False, command_line="benchmark")
+                        layout=args.layout, chunk_size=args.chunk_size, progress=False, command_line="benchmark")
     done = time.time()
     print(json.dumps({
         "startup": started - args.t0, "imports": imported - started, "planning": planned - imported,
@@ -245,7 +253,10 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--n", type=int, default=1000, help="runs (default 1000)")
     p.add_argument("--jobs", type=int, default=2, help="worker processes of the sweep (default 2)")
-    p.add_argument("--store", nargs="+", default=["summary", "full"], choices=["summary", "full"])
+    p.add_argument("--setting", nargs="+", type=parse_setting, metavar="STORE:LAYOUT",
+                   default=[("summary", "chunk"), ("full", "chunk"), ("summary", "run")],
+                   help="sweep --store and --layout pairs to time (default: summary:chunk full:chunk "
+                   "summary:run); the first is also the memory sweep's")
     p.add_argument("--method", default="DOP853", choices=["DOP853", "RK45"])
     p.add_argument("--chunk-size", type=int, default=None, help="sweep --chunk-size (default: the sweep's)")
     p.add_argument("--baseline-n", type=int, default=None, help="baseline runs timed (default: all N)")
@@ -258,7 +269,7 @@ def main() -> None:
     p.add_argument("--t0", type=float, default=None, help=argparse.SUPPRESS)
     args = p.parse_args()
     if args.child is not None:
-        args.store = args.store[0]
+        args.store, args.layout = args.setting[0]
         return child(args)
 
     import yaml
@@ -310,35 +321,35 @@ def main() -> None:
         err_a = np.abs(finals_a[:n_ref] - ref).max()
         subset = "" if n_ref == n else f" (first {n_ref} of {n} runs)"
 
-        # (b) the sweep, per store
+        # (b) the sweep, per store and layout
         results = {}
-        for store in args.store:
-            out = parent / f"cli-{store}"
+        for store, layout in args.setting:
+            out = parent / f"cli-{store}-{layout}"
             shutil.rmtree(out, ignore_errors=True)
-            wall_b = run_cli_sweep(spec_path, out, args, store)
+            wall_b = run_cli_sweep(spec_path, out, args, store, layout)
             finals_b = final_states(out / "throughput" / "index.csv")
             err_b = np.abs(finals_b[:n_ref] - ref).max()
             rate_b = n / wall_b
-            results[store] = (rate_b, err_b)
-            print(f"(b) rbstab sweep -j {args.jobs} --store {store}: {n} runs in {wall_b:.2f} s (process start "
-                  f"to exit) = {rate_b:.1f} runs/s; ratio (b)/(a) = {rate_b / rate_a:.1f}")
+            results[f"{store}:{layout}"] = (rate_b, err_b)
+            print(f"(b) rbstab sweep -j {args.jobs} --store {store} --layout {layout}: {n} runs in {wall_b:.2f} s "
+                  f"(process start to exit) = {rate_b:.1f} runs/s; ratio (b)/(a) = {rate_b / rate_a:.1f}")
         print(f"max |final state - reference (rtol 1e-10)|{subset}: (a) {err_a:.2e}, "
               + ", ".join(f"(b, {s}) {e:.2e}" for s, (_, e) in results.items())
               + f"; max |final state| {np.abs(ref).max():.3g}")
 
         # where (b)'s time goes
         chunk = share = None
-        for store in args.store:
-            out = parent / f"child-{store}"
+        for store, layout in args.setting:
+            out = parent / f"child-{store}-{layout}"
             shutil.rmtree(out, ignore_errors=True)
-            info = run_child(n, out, args, store)
+            info = run_child(n, out, args, store, layout)
             t = info["timing"]
             chunk = chunk or max(1, -(-n // max(info["n_chunks"], 1)))
             if share is None:  # the right-hand side's share does not depend on the store
                 share, _ = rhs_share(chunk, args.method)
             busy = sum(t.values())
             other = info["run_sweep"] - busy / args.jobs
-            print(f"time split of (b) --store {store} (instrumented run: {info['wall']:.2f} s wall, "
+            print(f"time split of (b) --store {store} --layout {layout} (instrumented run: {info['wall']:.2f} s wall, "
                   f"{n / info['wall']:.1f} runs/s; {info['n_chunks']} chunks on {info['executor']}):")
             print(f"  process start-up + interpreter  {info['startup']:6.2f} s wall")
             print(f"  imports                         {info['imports']:6.2f} s wall")
@@ -373,11 +384,11 @@ def main() -> None:
 
         # memory of a large sweep
         if args.memory_n:
-            store = args.store[0]
+            store, layout = args.setting[0]
             out = parent / "memory"
             shutil.rmtree(out, ignore_errors=True)
-            info = run_child(args.memory_n, out, args, store)
-            print(f"{args.memory_n}-run sweep (--store {store}, 2001 samples per run): {info['wall']:.1f} s wall, "
+            info = run_child(args.memory_n, out, args, store, layout)
+            print(f"{args.memory_n}-run sweep (--store {store} --layout {layout}, 2001 samples per run): {info['wall']:.1f} s wall, "
                   f"{args.memory_n / info['wall']:.1f} runs/s, {info['n_chunks']} chunks; peak RSS: sweep parent "
                   f"{mib(info['parent_peak_rss'])}, largest worker {mib(info['worker_peak_rss'])}; result files "
                   f"{info['disk'] / 2**30:.2f} GiB")

@@ -41,18 +41,24 @@ def _indent(text: str) -> str:
 )
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
-    help="Most runs per unit of work sent to a worker  [default: 512 for batch, 1 for scipy].",
+    help="Most runs per unit of work sent to a worker  [default: 512 for batch or --layout chunk, "
+    "1 for scipy].",
 )
 @click.option(
     "--store", type=click.Choice(["full", "summary"]), default="full", show_default=True,
     help="Result files with every variable at every sample, or (summary) the variables a "
     "report draws at <= 201 samples; summary figures and the index are the same.",
 )
+@click.option(
+    "--layout", type=click.Choice(["run", "chunk"]), default="run", show_default=True,
+    help="One result file per run (runs/<run_id>.h5), or one per chunk of runs "
+    "(runs/chunk-*.h5, a 'run' dimension; far faster to write and fewer files for big sweeps).",
+)
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
-def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, chunk_size, store, retry_failed, dry_run,
-          progress) -> None:
+def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, chunk_size, store, layout, retry_failed,
+          dry_run, progress) -> None:
     """Run the sweep SPEC.yaml; write OUTPUT/<name>/ (sweep.yaml, runs/*.h5, index.csv).
 
     Every run's config is validated before anything runs. Running the same command again
@@ -120,6 +126,7 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
             engine=engine,
             chunk_size=chunk_size,
             store=store,
+            layout=layout,
             progress=progress,
             command_line=command_line(),
             log=lambda message: click.echo(message, err=True),

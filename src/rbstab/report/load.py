@@ -9,7 +9,10 @@ Everything a report needs is read here, before anything is written:
 - a **sweep folder** holds ``sweep.yaml`` (the sweep specification) and ``index.csv``
   (one row per run: ``run_id``, the varied parameters, ``status``, ``message``,
   ``wall_time``, flattened summary figures, ``converged``) beside one result file per run;
-- any other **folder** is read as a set of run files (its ``*.h5``, not recursive).
+- any other **folder** is read as a set of run files (its ``*.h5``, not recursive);
+- a **chunk file** (``rbstab sweep --layout chunk``, :mod:`rbstab.io.chunk`) holds many
+  runs; each is read as a run (:func:`load_chunk_runs`), given directly, in a folder or
+  through a sweep's ``index.csv`` (its ``file`` and ``file_row`` columns).
 
 :func:`load_inputs` checks every input and raises one :class:`ReportInputError` listing
 every problem, so the caller can refuse the whole report before creating anything.
@@ -17,6 +20,7 @@ every problem, so the caller can refuse the whole report before creating anythin
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Iterable, Sequence
@@ -33,6 +37,7 @@ __all__ = [
     "ReportInputs",
     "load_inputs",
     "load_run",
+    "load_chunk_runs",
     "load_sweep",
     "flatten_config",
     "is_sweep_folder",
@@ -46,7 +51,7 @@ RUN_FILE_COLUMNS = ("file", "path", "result", "result_file", "filename", "output
 #: ``index.csv`` columns that are bookkeeping, never a varied parameter.
 _BOOKKEEPING = {
     "run_id", "run", "id", "name", "status", "message", "wall_time", "converged",
-    "config_hash", "created", "error", "seed", "index", "run_index", "base", *RUN_FILE_COLUMNS,
+    "config_hash", "created", "error", "seed", "index", "run_index", "base", "file_row", *RUN_FILE_COLUMNS,
 }
 #: Prefixes of ``index.csv`` columns holding summary figures or solver statistics.
 _SUMMARY_PREFIXES = (
@@ -121,6 +126,8 @@ class RunData:
         Every global attribute as a plain Python value.
     sweep : str or None
         Name of the sweep folder the run belongs to, None for a run given directly.
+    row : int or None
+        The run's row in a chunk file (:mod:`rbstab.io.chunk`); None for a run file.
     """
 
     path: Path
@@ -135,6 +142,7 @@ class RunData:
     config: dict
     attrs: dict
     sweep: str | None = None
+    row: int | None = None
     _cache: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -174,7 +182,8 @@ class RunData:
             with h5py.File(self.path, "r") as f:
                 for n in missing:
                     if n in f:
-                        self._cache[n] = np.asarray(f[n][...], dtype=float)
+                        whole = self.row is None or n == "time"
+                        self._cache[n] = np.asarray(f[n][...] if whole else f[n][self.row], dtype=float)
                         units = f[n].attrs.get("units", "")
                         self._cache[f"units:{n}"] = units.decode() if isinstance(units, bytes) else str(units)
                     else:
@@ -287,31 +296,65 @@ def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
         lacks the time series a report draws.
     """
     import h5py
-    import yaml
 
-    from ..io.hdf5 import NotAResultFile, read_attributes
+    from ..io.hdf5 import read_attributes
 
     path = Path(path)
     attrs = read_attributes(path)
+    with h5py.File(path, "r") as f:
+        absent = [n for n in _REQUIRED_SERIES if n not in f]
+    return _run_data(path, attrs, absent, sweep)
+
+
+#: Time series a report draws; a result file without one of them is refused.
+_REQUIRED_SERIES = ("time", "theta", "omega", "constraint_error", "lyapunov", "lyapunov_rate")
+
+
+def load_chunk_runs(path: str | os.PathLike, sweep: str | None = None) -> list[RunData]:
+    """Every run of a chunk file (:mod:`rbstab.io.chunk`), in row order (no time series).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    rbstab.io.hdf5.NotAResultFile
+        If it is not a chunk file, a run's ``config`` is not YAML, or it lacks the time
+        series a report draws.
+    """
+    import h5py
+
+    from ..io.chunk import read_chunk_rows
+
+    path = Path(path)
+    rows = read_chunk_rows(path)
+    with h5py.File(path, "r") as f:
+        absent = [n for n in _REQUIRED_SERIES if n not in f]
+    return [_run_data(path, attrs, absent, sweep, row=attrs["row"]) for attrs in rows]
+
+
+def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row: int | None = None) -> RunData:
+    import yaml
+
+    from ..io.hdf5 import NotAResultFile
+
+    where = f"{path}" if row is None else f"{path} (run {attrs.get('name')})"
     try:
         config = yaml.safe_load(attrs.get("config", "")) or {}
     except yaml.YAMLError as exc:
-        raise NotAResultFile(f"{path}: the config attribute is not valid YAML ({exc})") from None
+        raise NotAResultFile(f"{where}: the config attribute is not valid YAML ({exc})") from None
     if not isinstance(config, dict):
-        raise NotAResultFile(f"{path}: the config attribute is not a YAML mapping")
-    required = ("time", "theta", "omega", "constraint_error", "lyapunov", "lyapunov_rate")
-    with h5py.File(path, "r") as f:
-        absent = [n for n in required if n not in f]
+        raise NotAResultFile(f"{where}: the config attribute is not a YAML mapping")
     if absent:
         raise NotAResultFile(f"{path}: rbstab result without the variables {absent}")
-    missing_attrs = [k for k in ("name", "variant", "status") if k not in attrs]
+    missing_attrs = [k for k in ("name", "status") if k not in attrs]
     if missing_attrs:
-        raise NotAResultFile(f"{path}: rbstab result without the attributes {missing_attrs}")
+        raise NotAResultFile(f"{where}: rbstab result without the attributes {missing_attrs}")
+    variant = attrs.get("variant") or (config.get("controller") or {}).get("variant", "")
     return RunData(
         path=path,
         label=str(attrs["name"]),
         name=str(attrs["name"]),
-        variant=str(attrs["variant"]),
+        variant=str(variant),
         status=str(attrs["status"]),
         message=str(attrs.get("message", "")),
         wall_time=float(attrs.get("wall_time", float("nan"))),
@@ -320,6 +363,7 @@ def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
         config=config,
         attrs=attrs,
         sweep=sweep,
+        row=row,
     )
 
 
@@ -484,15 +528,31 @@ def load_sweep(path: str | os.PathLike) -> SweepData:
                 by_name.setdefault(str(read_attributes(p)["name"]), p)
             except (OSError, NotAResultFile, KeyError):
                 continue
+    chunks: dict[Path, list[RunData] | None] = {}
     for row, run_id in zip(rows, ids):
         file = _find_run_file(folder, row, run_id, by_name)
         if file is None:
             runs.append(None)
             continue
+        file_row = row.get("file_row")
         try:
-            runs.append(load_run(file, sweep=folder.name))
+            if file_row is None or (isinstance(file_row, float) and math.isnan(file_row)):
+                runs.append(load_run(file, sweep=folder.name))
+                continue
+            if file not in chunks:
+                chunks[file] = None
+                chunks[file] = load_chunk_runs(file, sweep=folder.name)
         except (FileNotFoundError, NotAResultFile) as exc:
             problems.append(str(exc))
+            continue
+        in_file = chunks[file]
+        i = int(file_row)
+        if in_file is None:
+            continue  # the file's problem is listed once
+        if not (0 <= i < len(in_file)) or in_file[i].name != run_id:
+            problems.append(f"{file}: row {i} is not run {run_id} (index.csv and the chunk file disagree)")
+            continue
+        runs.append(in_file[i])
     if problems:
         raise ReportInputError(problems)
     axes = _parameter_axes(index, spec)
@@ -581,12 +641,12 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
                     continue
                 seen.add(file.resolve())
                 try:
-                    runs.append(load_run(file))
+                    runs.extend(_load_file(file))
                 except (FileNotFoundError, NotAResultFile) as exc:
                     problems.append(str(exc))
         else:
             try:
-                runs.append(load_run(p))
+                runs.extend(_load_file(p))
             except (FileNotFoundError, NotAResultFile) as exc:
                 problems.append(str(exc))
     if problems:
@@ -595,6 +655,13 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
     for sweep in sweeps:
         _unique_labels([r for r in sweep.runs if r is not None])
     return ReportInputs(runs, sweeps, resolved)
+
+
+def _load_file(path: Path) -> list[RunData]:
+    """The run of a run file, or every run of a chunk file."""
+    from ..io.chunk import is_chunk_file
+
+    return load_chunk_runs(path) if is_chunk_file(path) else [load_run(path)]
 
 
 def safe_filename(text: str) -> str:

@@ -14,7 +14,8 @@ xarray) has the columns, in order:
 - the ``summary_*`` figures of the file without the prefix, 3-vectors as ``_x``, ``_y``,
   ``_z`` (``max_abs_constraint_error_x``, ``final_omega_z``, ``lyapunov_final``, ...);
 - ``solver_nfev``, ``solver_njev``, ``solver_nlu``, ``solver_status``;
-- ``config_hash`` and ``file`` (relative to the sweep folder).
+- ``config_hash`` and ``file`` (relative to the sweep folder); with ``--layout chunk``
+  also ``file_row``, the run's row in that chunk file (:mod:`rbstab.io.chunk`).
 
 ``sweep_summary.json`` holds the counts per status, the number and fraction of converged
 runs (also per base), and the convergence definition.
@@ -106,7 +107,11 @@ def index_rows(
             for key in _SOLVER:
                 row[f"solver_{key}"] = a.get(f"solver_{key}")
             row["config_hash"] = a.get("config_hash")
-            row["file"] = f"runs/{run.run_id}.h5"
+            if "row" in a:  # a row of a chunk file
+                row["file"] = f"runs/{a['file']}"
+                row["file_row"] = a["row"]
+            else:
+                row["file"] = f"runs/{run.run_id}.h5"
         elif run.run_id in errors:
             row.update(status="error", converged=False, message=errors[run.run_id])
         else:
@@ -119,6 +124,8 @@ def _columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     head = ["run_id", "run_index", "base"]
     middle = ["status", "converged", "message", "wall_time"]
     tail = [f"solver_{k}" for k in _SOLVER] + ["config_hash", "file"]
+    if any("file_row" in row for row in rows):
+        tail.append("file_row")
     fixed = set(head + middle + tail)
     params: list[str] = []
     summary: list[str] = []

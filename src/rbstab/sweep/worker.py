@@ -8,7 +8,7 @@ status and message; an unexpected exception is a record with status ``"error"``.
 
 Engines
 -------
-``ENGINES`` maps an engine name to a function ``(tasks, options) -> records``:
+``ENGINES`` maps an engine name to a function ``(tasks, options, sink) -> records``:
 
 - ``scipy`` (the reference): the tasks of a chunk one after the other through
   :func:`rbstab.simulate.simulate`, one ``solve_ivp`` call each; any method, per-run
@@ -21,9 +21,14 @@ Engines
   validated every run when it was planned, and the other runs of a group take the
   group's validated config with their own name and initial state. No ``timeout``.
 
-Both write one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``), so
-resume and the index work the same, and both return the file's attributes in the record
-(``record["attrs"]``), so the parent need not reopen every file.
+Layouts
+-------
+Both engines hand each finished run to a sink, ``SINKS[options.layout]``: ``run`` writes
+one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
+writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
+into place when the whole chunk is done. Either way the record carries the run's
+attributes as the parent would read them back (``record["attrs"]``), so the parent need
+not reopen any file, and resume and the index work the same.
 """
 
 from __future__ import annotations
@@ -81,6 +86,9 @@ class WorkerOptions:
         :func:`rbstab.io.atomic.write_bytes_atomic`.
     store : str
         ``"full"`` or ``"summary"`` (:data:`rbstab.io.hdf5.STORE_MODES`).
+    layout : str
+        ``"run"``: one result file per run (``task.path``); ``"chunk"``: one file for
+        the runs of a chunk (:mod:`rbstab.io.chunk`) beside them. Key of :data:`SINKS`.
     """
 
     timeout: float | None = None
@@ -88,6 +96,7 @@ class WorkerOptions:
     engine: str = "scipy"
     return_bytes: bool = False
     store: str = "full"
+    layout: str = "run"
 
 
 def _config(task: RunTask):
@@ -110,32 +119,102 @@ def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:
     }
 
 
-def _write(task: RunTask, result, options: WorkerOptions) -> dict[str, Any]:
-    """Write ``result``'s file (or its bytes); the record of a finished run."""
-    from ..io.hdf5 import write_run
+class _RunFiles:
+    """Where finished runs go with ``layout="run"``: one file per run (``task.path``)."""
 
-    record: dict[str, Any] = {"run_id": task.run_id, "path": task.path}
-    t0 = _time.perf_counter()
-    config_yaml = result.config.to_yaml()  # the config attribute and its hash
-    t1 = _time.perf_counter()
-    if options.return_bytes:
-        with tempfile.TemporaryDirectory(prefix="rbstab-") as tmp:
-            path = Path(tmp) / Path(task.path).name
-            attrs = write_run(result, path, command_line=options.command_line, store=options.store,
+    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions) -> None:
+        self.options = options
+
+    def __enter__(self) -> "_RunFiles":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    def add(self, task: RunTask, result) -> dict[str, Any]:
+        """Write ``result``'s file (or its bytes); the record of a finished run."""
+        from ..io.hdf5 import write_run
+
+        options = self.options
+        record: dict[str, Any] = {"run_id": task.run_id, "path": task.path}
+        t0 = _time.perf_counter()
+        config_yaml = result.config.to_yaml()  # the config attribute and its hash
+        t1 = _time.perf_counter()
+        if options.return_bytes:
+            with tempfile.TemporaryDirectory(prefix="rbstab-") as tmp:
+                path = Path(tmp) / Path(task.path).name
+                attrs = write_run(result, path, command_line=options.command_line, store=options.store,
+                                  config_yaml=config_yaml)
+                record["data"] = path.read_bytes()
+        else:
+            attrs = write_run(result, task.path, command_line=options.command_line, store=options.store,
                               config_yaml=config_yaml)
-            record["data"] = path.read_bytes()
-    else:
-        attrs = write_run(result, task.path, command_line=options.command_line, store=options.store,
-                          config_yaml=config_yaml)
+        return _finished(record, result, attrs, t1 - t0, _time.perf_counter() - t1)
+
+    def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
+        return _error_record(task, exc)
+
+
+def _finished(record: dict[str, Any], result, attrs: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
     timing = dict(result.timing)
-    timing["config_yaml"] = t1 - t0
-    timing["write"] = _time.perf_counter() - t1
+    timing["config_yaml"] = yaml_time
+    timing["write"] = write_time
     record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=attrs,
                   timing=timing)
     return record
 
 
-def _run_one(task: RunTask, options: WorkerOptions) -> dict[str, Any]:
+class _ChunkFile:
+    """Where finished runs go with ``layout="chunk"``: one file for the chunk
+    (:class:`rbstab.io.chunk.ChunkWriter`), ``runs/chunk-<first run id>-<random>.h5`` in
+    the folder of the tasks' paths. Records name the chunk file as their ``path``; their
+    ``attrs`` are the run's row (:func:`rbstab.io.chunk.read_chunk_rows`)."""
+
+    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions) -> None:
+        from ..io.chunk import ChunkWriter, chunk_file_name
+
+        self.options = options
+        name = chunk_file_name(tasks[0].run_id)
+        self.final = str(Path(tasks[0].path).parent / name)
+        self._tmp = tempfile.TemporaryDirectory(prefix="rbstab-") if options.return_bytes else None
+        where = Path(self._tmp.name) / name if self._tmp else Path(self.final)
+        self.writer = ChunkWriter(where, len(tasks), store=options.store, command_line=options.command_line)
+        self.records: list[dict[str, Any]] = []
+
+    def __enter__(self) -> "_ChunkFile":
+        self.writer.__enter__()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            self.writer.__exit__(exc_type, exc, tb)
+            if self._tmp is not None and exc_type is None and self.records:
+                self.records[0]["data"] = self.writer.path.read_bytes()
+        finally:
+            if self._tmp is not None:
+                self._tmp.cleanup()
+
+    def add(self, task: RunTask, result) -> dict[str, Any]:
+        t0 = _time.perf_counter()
+        config_yaml = result.config.to_yaml()
+        t1 = _time.perf_counter()
+        row = self.writer.add(result, config_yaml)
+        record = _finished({"run_id": task.run_id, "path": self.final}, result, row, t1 - t0,
+                           _time.perf_counter() - t1)
+        self.records.append(record)
+        return record
+
+    def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
+        record = _error_record(task, exc)
+        self.writer.add_error(task.run_id, record["message"])
+        return record
+
+
+#: ``layout`` -> how a worker stores the runs of a chunk.
+SINKS = {"run": _RunFiles, "chunk": _ChunkFile}
+
+
+def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
     from ..simulate import simulate
 
     try:
@@ -143,19 +222,22 @@ def _run_one(task: RunTask, options: WorkerOptions) -> dict[str, Any]:
         config = _config(task)
         config_time = _time.perf_counter() - t0
         result = simulate(config, timeout=options.timeout)
-        record = _write(task, result, options)
-        record["timing"]["config"] = config_time
-        return record
-    except Exception as exc:  # a bug or an I/O problem: data, not a crash of the sweep
-        return _error_record(task, exc)
+    except Exception as exc:  # a bug: data, not a crash of the sweep
+        return sink.error(task, exc)
+    try:
+        record = sink.add(task, result)
+    except Exception as exc:  # an I/O problem: this run's error
+        return sink.error(task, exc)
+    record["timing"]["config"] = config_time
+    return record
 
 
-def _scipy_engine(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str, Any]]:
-    return [_run_one(task, options) for task in tasks]
+def _scipy_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
+    return [_run_one(task, options, sink) for task in tasks]
 
 
-def _group_configs(tasks: Sequence[RunTask]) -> tuple[list, list[dict[str, Any]]]:
-    """RunConfigs of ``tasks`` (None where it failed) and error records.
+def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict[str, Any]]]:
+    """RunConfigs of ``tasks`` (None where it failed) and error records (``sink.error``).
 
     One ``config_from_mapping`` per group of tasks whose resolved configs differ only in
     ``name`` and ``initial_state``; the others of the group are that config with their
@@ -186,11 +268,11 @@ def _group_configs(tasks: Sequence[RunTask]) -> tuple[list, list[dict[str, Any]]
             configs.append(config)
         except Exception as exc:
             configs.append(None)
-            errors.append(_error_record(task, exc))
+            errors.append(sink.error(task, exc) if sink is not None else _error_record(task, exc))
     return configs, errors
 
 
-def _batch_engine(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str, Any]]:
+def _batch_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """Integrate the batchable runs of the chunk together (see the module docstring)."""
     from ..batch import SUPPORTED_METHODS
     from ..simulate import simulate_many
@@ -198,7 +280,7 @@ def _batch_engine(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict
     if options.timeout is not None:
         raise ValueError("the batch engine has no per-run timeout; use the scipy engine for --timeout")
     t0 = _time.perf_counter()
-    configs, records = _group_configs(tasks)
+    configs, records = _group_configs(tasks, sink)
     batch = [i for i, c in enumerate(configs) if c is not None and c.simulation.method in SUPPORTED_METHODS]
     others = [i for i, c in enumerate(configs) if c is not None and c.simulation.method not in SUPPORTED_METHODS]
     config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
@@ -208,16 +290,16 @@ def _batch_engine(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict
             i = batch[j]
             done.add(i)
             try:
-                record = _write(tasks[i], result, options)
+                record = sink.add(tasks[i], result)
                 record["timing"]["config"] = config_time
             except Exception as exc:  # one file that cannot be written is that run's error
-                record = _error_record(tasks[i], exc)
+                record = sink.error(tasks[i], exc)
             records.append(record)
     except Exception:
         # an exception of the batch as a whole (a bug): every run it had not finished
         # goes through the scipy engine alone, so no run is lost to another's problem
         others += [i for i in batch if i not in done]
-    records += _scipy_engine([tasks[i] for i in sorted(others)], options)
+    records += _scipy_engine([tasks[i] for i in sorted(others)], options, sink)
     return records
 
 
@@ -254,7 +336,11 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str
         config's YAML text for the file) and ``write`` (the HDF5 file));
         ``worker_peak_rss``, the worker process's peak resident set size [bytes].
     """
-    records = ENGINES[options.engine](tasks, options)
+    try:
+        with SINKS[options.layout](tasks, options) as sink:
+            records = ENGINES[options.engine](tasks, options, sink)
+    except Exception as exc:  # the chunk's file could not be written: each of its runs is an error
+        records = [_error_record(task, exc) for task in tasks]
     rss = _peak_rss()
     for record in records:
         record["worker_peak_rss"] = rss

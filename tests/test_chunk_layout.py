@@ -1,0 +1,187 @@
+"""Sweeps with ``--layout chunk``: one HDF5 file per chunk of runs (rbstab.io.chunk).
+
+The chunk layout must hold exactly what the run layout holds (same bits, same index),
+resume from either, keep failures and errors per run, and be readable by xarray, the
+report and ``rbstab show``.
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+from click.testing import CliRunner
+
+from rbstab.io.chunk import CHUNK_FORMAT, ChunkWriter, read_chunk_rows, read_chunk_series
+from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, summary_stride
+from rbstab.sweep import expand, run_chunk, run_sweep, spec_from_mapping
+from rbstab.sweep.worker import RunTask, WorkerOptions
+from rbstab_cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
+SHORT = ["simulation.t_end=0.2", "simulation.n_samples=201"]
+LOCKING = {"theta": [0.0, 1.5, 0.0], "omega": [0.0, 30.0, 0.0]}
+
+pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
+
+
+def spec(n: int, name: str = "chk", grid: bool = False, seed: int = 7):
+    data = {
+        "name": name,
+        "base": str(CASE3),
+        "random": {"n": n, "seed": seed,
+                   "params": {"initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}},
+    }
+    if grid:
+        data["grid"] = {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]}
+    return spec_from_mapping(data, overrides=SHORT)
+
+
+def chunk_files(folder: Path) -> list[Path]:
+    return sorted((folder / "runs").glob("chunk-*.h5"))
+
+
+def test_chunk_layout_holds_what_run_files_hold(tmp_path):
+    s = spec(3, grid=True)
+    runs = expand(s)
+    by_run = run_sweep(s, tmp_path / "run", runs=runs, jobs=2, progress=False)
+    by_chunk = run_sweep(s, tmp_path / "chunk", runs=runs, jobs=2, chunk_size=2, layout="chunk", progress=False)
+    assert by_chunk.counts["success"] == by_run.counts["success"] == 6
+    files = chunk_files(by_chunk.directory)
+    assert len(files) == by_chunk.n_chunks == 4  # 2 gains x 3 runs, at most 2 runs per chunk
+    assert not list((by_chunk.directory / "runs").glob("r*.h5"))
+
+    ir = pd.read_csv(by_run.index_path)
+    ic = pd.read_csv(by_chunk.index_path)
+    assert list(ic.columns) == [*ir.columns, "file_row"]
+    same = [c for c in ir.columns if c not in ("wall_time", "file")]
+    pd.testing.assert_frame_equal(ir[same], ic[same])
+    assert all(f.startswith("runs/chunk-") for f in ic["file"])
+
+    for entry in ic.itertuples():
+        path, row = by_chunk.directory / entry.file, int(entry.file_row)
+        run_file = by_run.directory / "runs" / f"{entry.run_id}.h5"
+        attrs = read_attributes(run_file)
+        chunk_row = read_chunk_rows(path)[row]
+        assert chunk_row["name"] == entry.run_id and chunk_row["rbstab_format"] == CHUNK_FORMAT
+        for key in ("variant", "status", "message", "config", "config_hash", "solver_nfev", "solver_status"):
+            assert chunk_row[key] == attrs[key], key
+        assert {k: v for k, v in chunk_row.items() if k.startswith("summary_")} == \
+            {k: v for k, v in attrs.items() if k.startswith("summary_")}
+        with h5py.File(run_file, "r") as fr, h5py.File(path, "r") as fc:
+            variables = [k for k in fr if k not in ("time", "axis")]
+            assert set(variables) <= set(fc)
+            assert np.array_equal(fr["time"][()], fc["time"][()])
+            for key in variables:  # the same bits
+                assert np.array_equal(fr[key][()], fc[key][row]), key
+                assert fc[key].attrs["units"] == fr[key].attrs["units"]
+
+
+def test_chunk_file_opens_in_xarray_with_a_run_dimension(tmp_path):
+    xr = pytest.importorskip("xarray")
+    s = spec(5)
+    out = run_sweep(s, tmp_path, jobs=1, layout="chunk", store="summary", progress=False)
+    (path,) = chunk_files(out.directory)
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        stride = summary_stride(201)
+        assert dict(ds.sizes) == {"run": 5, "time": len(range(0, 201, stride)), "axis": 3}
+        assert set(SUMMARY_VARIABLES) - {"controller_state"} <= set(ds.data_vars)
+        assert ds["lyapunov"].dims == ("run", "time")
+        assert ds["summary_final_omega"].dims == ("run", "axis")
+        assert list(ds["run"].values) == [r.run_id for r in expand(s)]
+        assert ds.attrs["store"] == "summary" and ds["omega"].attrs["units"] == "rad s-1"
+        series = read_chunk_series(path, 2, ["lyapunov"])
+        assert np.array_equal(series["lyapunov"], ds["lyapunov"].values[2])
+
+
+def test_chunk_resume_and_layout_switch(tmp_path):
+    small, large = spec(4, "res"), spec(7, "res")
+    first = run_sweep(small, tmp_path, jobs=2, layout="chunk", progress=False)
+    assert first.counts["success"] == 4 and len(chunk_files(first.directory)) == 2
+    again = run_sweep(large, tmp_path, jobs=2, layout="chunk", progress=False)
+    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 3, 7)
+    # a lost chunk file: only its runs run again
+    lost = chunk_files(again.directory)[0]
+    n_lost = len(read_chunk_rows(lost))
+    lost.unlink()
+    redo = run_sweep(large, tmp_path, jobs=2, layout="chunk", progress=False)
+    assert (redo.n_skipped, redo.n_executed) == (7 - n_lost, n_lost)
+    # results of either layout count for the other
+    switched = run_sweep(large, tmp_path, jobs=2, layout="run", progress=False)
+    assert (switched.n_skipped, switched.n_executed) == (7, 0)
+    # a chunk file holding no run of the spec is reported as stale, never read as a result
+    other = run_sweep(spec(2, "res2", seed=8), tmp_path, jobs=1, layout="chunk", progress=False)
+    stray = chunk_files(other.directory)[0]
+    stray.rename(again.directory / "runs" / stray.name)
+    again = run_sweep(large, tmp_path, jobs=1, layout="chunk", progress=False)
+    assert again.stale_files == [stray.name] and again.n_executed == 0
+
+
+def test_chunk_worker_keeps_failures_and_errors_per_run(tmp_path):
+    runs = expand(spec(3))
+    folder = tmp_path / "runs"
+    tasks = [RunTask(r.run_id, r.config.resolved, str(folder / f"{r.run_id}.h5")) for r in runs]
+    locking = copy.deepcopy(runs[1].config.resolved)
+    locking["initial_state"].update(LOCKING)
+    tasks[1] = RunTask(runs[1].run_id, locking, tasks[1].path)
+    bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(folder / "r9999-deadbeef.h5"))
+    for engine in ("batch", "scipy"):
+        records = run_chunk([*tasks, bad], WorkerOptions(engine=engine, layout="chunk"))
+        status = {r["run_id"]: r["status"] for r in records}
+        assert status == {runs[0].run_id: "success", runs[1].run_id: "failed", runs[2].run_id: "success",
+                          bad.run_id: "error"}
+        (path,) = {r["path"] for r in records if r["status"] != "error"}
+        rows = {row["name"]: row for row in read_chunk_rows(path)}
+        assert rows[bad.run_id]["status"] == "error" and "ConfigError" in rows[bad.run_id]["message"]
+        assert rows[runs[1].run_id]["message"].startswith("gimbal lock")
+        ok = next(r for r in records if r["run_id"] == runs[0].run_id)
+        assert ok["attrs"] == rows[runs[0].run_id]
+        with h5py.File(path, "r") as f:  # the error row holds no data
+            assert np.isnan(f["lyapunov"][rows[bad.run_id]["row"]]).all()
+        Path(path).unlink()
+
+
+def test_chunk_writer_is_atomic(tmp_path):
+    target = tmp_path / "chunk-x.h5"
+    with pytest.raises(RuntimeError, match="boom"):
+        with ChunkWriter(target, 2) as writer:
+            writer.add_error("r0", "no result")
+            raise RuntimeError("boom")
+    assert not target.exists() and not list(tmp_path.iterdir())
+    with pytest.raises(ValueError, match="1 rows added, 2 announced"):
+        with ChunkWriter(target, 2) as writer:
+            writer.add_error("r0", "no result")
+    assert not target.exists()
+
+
+def test_report_and_show_read_chunk_sweeps(tmp_path):
+    s = spec(3)
+    out = run_sweep(s, tmp_path / "sweeps", jobs=1, layout="chunk", progress=False)
+    run_layout = run_sweep(s, tmp_path / "plain", jobs=1, progress=False)
+    from rbstab.report.load import load_inputs
+
+    inputs = load_inputs([out.directory])
+    (sweep,) = inputs.sweeps
+    assert [r.name for r in sweep.runs] == sweep.run_ids
+    reference = load_inputs([run_layout.directory]).sweeps[0]
+    for a, b in zip(sweep.runs, reference.runs):
+        assert a.config == b.config and a.summary == b.summary and a.status == b.status
+        sa, sb = a.series("lyapunov", "omega"), b.series("lyapunov", "omega")
+        for key in sb:
+            assert np.array_equal(sa[key], sb[key]), key
+    (path,) = chunk_files(out.directory)
+    direct = load_inputs([path]).runs
+    assert [r.name for r in direct] == sweep.run_ids
+
+    report = CliRunner().invoke(cli, ["report", str(out.directory), "-o", str(tmp_path / "report")])
+    assert report.exit_code == 0, report.output
+    assert (tmp_path / "report" / "index.html").is_file()
+    shown = CliRunner().invoke(cli, ["show", str(path)])
+    assert shown.exit_code == 0, shown.output
+    assert "chunk file: 3 runs" in shown.output
+    assert all(run_id in shown.output for run_id in sweep.run_ids)
