@@ -70,16 +70,7 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
     1 for an invalid spec (nothing is run); 130 when interrupted.
     """
-    from rbstab.sweep import (
-        ExecutorError,
-        SweepBusyError,
-        SweepSpecError,
-        expand,
-        load_spec,
-        run_sweep,
-    )
     from rbstab.sweep.executors import LocalExecutor
-    from rbstab.sweep.spec import warning_digest
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
@@ -96,6 +87,9 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
         # start the workers now: they import numpy, scipy and h5py while the runs are validated
         ex = LocalExecutor(jobs)
         ex.start()
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError, expand, load_spec, run_sweep
+    from rbstab.sweep.spec import warning_digest
+
     try:
         loaded = load_spec(spec, overrides)
         runs = expand(loaded)

@@ -17,30 +17,35 @@ Modules: :mod:`~rbstab.sweep.spec` (spec loading, validation, expansion, run ids
 ``sweep_summary.json``, the convergence definition).
 """
 
-from .executors import EXECUTORS, DaskExecutor, Executor, ExecutorError, LocalExecutor, default_jobs, make_executor
-from .index import STATUSES, is_converged
-from .runner import (
-    DEFAULT_OUTPUT,
-    INDEX_FILE,
-    RUNS_DIR,
-    SPEC_FILE,
-    SUMMARY_FILE,
-    SweepBusyError,
-    SweepOutcome,
-    rebuild_index,
-    run_sweep,
-)
-from .spec import (
-    DEFAULT_LYAPUNOV_RATIO,
-    DISTRIBUTIONS,
-    PlannedRun,
-    SweepSpec,
-    SweepSpecError,
-    expand,
-    load_spec,
-    spec_from_mapping,
-)
-from .worker import ENGINES, RunTask, WorkerOptions, run_chunk
+import importlib
+
+#: Public name -> the submodule defining it. Imported on first use (PEP 562), so that
+#: ``rbstab sweep`` can start its worker processes (:mod:`.executors`) before it imports
+#: the rest (pydantic, the config schema): they import numpy and scipy meanwhile.
+_SOURCES = {
+    **dict.fromkeys(["EXECUTORS", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "default_jobs",
+                     "make_executor"], "executors"),
+    **dict.fromkeys(["STATUSES", "is_converged"], "index"),
+    **dict.fromkeys(["DEFAULT_OUTPUT", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
+                     "SweepBusyError", "SweepOutcome", "rebuild_index", "run_sweep"], "runner"),
+    **dict.fromkeys(["DEFAULT_LYAPUNOV_RATIO", "DISTRIBUTIONS", "PlannedRun", "SweepSpec", "SweepSpecError",
+                     "expand", "load_spec", "spec_from_mapping"], "spec"),
+    **dict.fromkeys(["ENGINES", "RunTask", "WorkerOptions", "run_chunk"], "worker"),
+}
+
+
+def __getattr__(name: str):
+    module = _SOURCES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
 
 __all__ = [
     "load_spec",
@@ -73,4 +78,5 @@ __all__ = [
     "INDEX_FILE",
     "SUMMARY_FILE",
     "RUNS_DIR",
+    "LAYOUTS",
 ]

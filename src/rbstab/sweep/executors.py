@@ -142,7 +142,7 @@ def _mp_context():
         # Import the heavy modules once in the fork server (no effect if it already runs).
         ctx.set_forkserver_preload([
             "rbstab.sweep.worker", "rbstab.simulate", "rbstab.batch", "rbstab.config", "rbstab.io.hdf5",
-            "h5py", "h5netcdf", "scipy.integrate", "scipy.interpolate",
+            "rbstab.io.chunk", "h5py", "scipy.integrate", "scipy.interpolate",
         ])
     return ctx
 
