@@ -185,3 +185,20 @@ def test_report_and_show_read_chunk_sweeps(tmp_path):
     assert shown.exit_code == 0, shown.output
     assert "chunk file: 3 runs" in shown.output
     assert all(run_id in shown.output for run_id in sweep.run_ids)
+
+
+def test_chunk_bytes_for_workers_without_the_sweep_folder(tmp_path):
+    """Dask workers return the chunk file's bytes; the parent writes them once."""
+    runs = expand(spec(3))
+    folder = tmp_path / "runs"
+    tasks = [RunTask(r.run_id, r.config.resolved, str(folder / f"{r.run_id}.h5")) for r in runs]
+    records = run_chunk(tasks, WorkerOptions(engine="batch", layout="chunk", return_bytes=True))
+    assert not folder.exists()  # nothing written where the worker runs
+    (path,) = {r["path"] for r in records}
+    with_data = [r for r in records if r.get("data") is not None]
+    assert len(with_data) == 1
+    folder.mkdir()
+    Path(path).write_bytes(with_data[0]["data"])
+    rows = read_chunk_rows(path)
+    assert [row["name"] for row in rows] == [r.run_id for r in runs]
+    assert [r["attrs"] for r in records] == rows
