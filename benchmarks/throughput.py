@@ -176,12 +176,13 @@ def run_child(n: int, out: Path, args, store: str, layout: str) -> dict:
 def child(args) -> None:
     """Entry of the instrumented sweep process (``--child N``)."""
     started = time.time()
-    from rbstab.sweep import expand, run_sweep, spec_from_mapping
     from rbstab.sweep.executors import LocalExecutor
 
-    imported = time.time()
     executor = LocalExecutor(args.jobs)
-    executor.start()  # as the CLI does: the workers start while the runs are validated
+    executor.start()  # as the CLI does: the workers start while the rest is imported and the runs validated
+    from rbstab.sweep import expand, run_sweep, spec_from_mapping
+
+    imported = time.time()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         spec = spec_from_mapping(spec_mapping(args.child, args.method), overrides=overrides(args.method))
