@@ -125,6 +125,7 @@ class ChunkWriter:
         self._time: np.ndarray | None = None
         self._stride = 1
         self._variables: dict[str, tuple[int, ...]] = {}
+        self._datasets: dict[str, Any] = {}
         self._written = 0
         self.attrs: dict[str, Any] = {  # the file's global attributes
             "rbstab_format": CHUNK_FORMAT,
@@ -197,19 +198,18 @@ class ChunkWriter:
         for key in keys:
             shape = (self.n_runs, nt, *np.shape(result.outputs[key])[1:])
             self._variables[key] = shape
-            self._file.create_dataset(key, shape=shape, dtype=float, fillvalue=np.nan,
-                                      chunks=(1, *shape[1:]))
+            # HDF5 chunks of WRITE_BLOCK runs: each flush writes whole chunks
+            self._datasets[key] = self._file.create_dataset(
+                key, shape=shape, dtype=float, fillvalue=np.nan, chunks=(min(WRITE_BLOCK, self.n_runs), *shape[1:]))
 
     def _flush(self) -> None:
         if not self._pending:
             return
         lo, hi = self._written, self._written + len(self._pending)
         for key, shape in self._variables.items():
-            block = np.full((hi - lo, *shape[1:]), np.nan)
-            for i, outputs in enumerate(self._pending):
-                if outputs is not None and key in outputs:
-                    block[i] = outputs[key]
-            self._file[key][lo:hi] = block
+            missing = np.full(shape[1:], np.nan)
+            block = np.stack([missing if o is None or key not in o else o[key] for o in self._pending])
+            self._datasets[key][lo:hi] = block
         self._written = hi
         self._pending = []
 
