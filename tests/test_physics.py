@@ -55,7 +55,7 @@ def test_analytic_lyapunov_rate_is_the_derivative_of_v_along_the_flow(name, grav
     f = variant.rhs(0.0, y)
     h = 1e-7
     numerical = (variant.lyapunov(y + h * f) - variant.lyapunov(y - h * f)) / (2 * h)
-    analytic = variant.lyapunov_rate(variant.quantities(y))
+    analytic = variant.evaluate(y)["lyapunov_rate"]
     np.testing.assert_allclose(analytic, numerical, rtol=1e-5, atol=1e-5 * np.abs(analytic).max())
     assert np.all(analytic <= 0.0)
 
@@ -184,3 +184,29 @@ def test_rhs_is_the_state_rate_of_the_outputs_path(name, rng):
         np.testing.assert_array_equal(rate, variant.quantities(y)["state_rate"])
         np.testing.assert_array_equal(rate, variant.quantities(y, outputs=False)["state_rate"])
         assert rate.flags.c_contiguous
+
+
+@pytest.mark.parametrize("name, sign_law", [(n, False) for n in ALL + ["permanent_full_state"]] + [("sliding", True)])
+def test_a_state_gets_the_same_bits_whatever_else_is_in_its_stack(name, sign_law, rng):
+    """evaluate of a block of runs (k, n, n_state) gives each run bit for bit what it gets
+    alone and in a differently composed block, and rhs of a stack gives each row what it
+    gets in another stack: the columns form is elementwise (a matrix product would not be:
+    BLAS and einsum kernels round differently for different shapes and positions)."""
+    variant = _with_full_state(name) if not sign_law else _variant(name, (0.0, 0.0, -10.0), boundary_layer=0.0)
+    runs = _random_states(variant, rng, n=5 * 37).reshape(5, 37, variant.layout.size)
+    runs[4, 30:] = np.nan  # a failed run's tail
+    block = variant.evaluate(runs)
+    other = variant.evaluate(runs[[3, 1, 4]])
+    for k in range(5):
+        alone = variant.evaluate(runs[k])
+        assert alone.keys() == block.keys()
+        for key, value in alone.items():
+            assert value.shape == block[key][k].shape, key
+            assert np.array_equal(block[key][k], value, equal_nan=True), (key, k)
+    for j, k in enumerate([3, 1, 4]):
+        for key, value in other.items():
+            assert np.array_equal(value[j], block[key][k], equal_nan=True), (key, k)
+    stack = runs[:4].reshape(-1, variant.layout.size)
+    rates = variant.rhs(0.0, stack)
+    for rows in ([5, 77], [77, 5, 0], list(range(3, 40)), [120, 121]):
+        np.testing.assert_array_equal(variant.rhs(0.0, stack[rows]), rates[rows])

@@ -6,18 +6,28 @@ Two array forms
 stack of shape ``(..., 3)``, a matrix ``(3, 3)`` or ``(..., 3, 3)``. :func:`hat`,
 :func:`rotation_matrix`, :func:`euler_rate_matrix`, :func:`rotation_and_rate`,
 :func:`cross`, :func:`matvec`, :func:`matTvec` and :func:`quadratic_form` take and
-return this form, so the same code serves a single state and the post-processing of a
-whole trajectory.
+return this form.
 
-*Columns* (the right-hand side's working form, the ``*_columns`` functions): a stack of
-m vectors is the ``(3, m)`` array whose columns are the vectors, so a constant matrix
-acts on the whole stack as one product ``K @ X`` and each component ``X[i]`` is one
-contiguous row; a stack of m matrices is a ``(3, 3, m)`` array with ``M[i, j]`` the row
-of (i, j) entries. One vector is still ``(3,)`` and one matrix ``(3, 3)``: for a single
-state both forms are the same arrays. The variants integrate in this form (it makes
-each numpy call act on whole rows instead of on strided triples, see
-``benchmarks/rhs.py``) and convert to stacked rows at their public boundary
-(:func:`to_columns`, :func:`from_columns`).
+*Columns* (the variants' working form, the ``*_columns`` functions and
+:class:`ConstantMatrix`): a vector is the sequence of its three components
+``(x0, x1, x2)``; for **one state** each component is a Python float, for a **stack** of
+m states each is an array of shape (m,) (row i of the (3, m) array whose columns are the
+vectors; such a (3, m) array is accepted as input too). A matrix is the nested sequence
+of its entries, ``M[i][j]`` a component (a (3, 3, m) array is accepted as input). The
+functions return tuples of components, and apply every operation elementwise (``+``,
+``-``, ``*``, ``/`` on components, and cos, sin), never a matrix product, so:
+
+- one model serves both integrators: for a single state (scipy's ``solve_ivp``) the
+  arithmetic is plain Python floats, which costs far less than numpy's per-call overhead
+  on (3,) arrays; for a stack each operation is one numpy call on whole rows;
+- a state gets the same bits whatever else is in its stack (a matrix product hands
+  different shapes to different BLAS kernels, which round differently), and the same
+  bits as alone wherever ``math.cos``/``math.sin`` and numpy's cos/sin agree (both are
+  the C library's on common builds);
+- a constant matrix (a gain, an inertia) is applied through :class:`ConstantMatrix`,
+  which skips its zero entries (a diagonal gain costs three products).
+
+:func:`to_columns` and :func:`from_columns` convert between the two forms.
 
 Conventions
 -----------
@@ -28,6 +38,9 @@ Conventions
 """
 
 from __future__ import annotations
+
+import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -42,11 +55,25 @@ __all__ = [
     "quadratic_form",
     "to_columns",
     "from_columns",
-    "as_column",
+    "ConstantVector",
+    "ConstantMatrix",
     "rotation_and_rate_columns",
+    "rate_matvec_columns",
+    "rate_matTvec_columns",
     "cross_columns",
     "matvec_columns",
     "matTvec_columns",
+    "add_columns",
+    "sub_columns",
+    "neg_columns",
+    "scale_columns",
+    "div_columns",
+    "dot_columns",
+    "add_constant_columns",
+    "sub_constant_columns",
+    "dot_constant_columns",
+    "quadratic_form_columns",
+    "zeros_columns",
     "GIMBAL_LOCK_ANGLE",
 ]
 
@@ -79,52 +106,59 @@ def hat(r: np.ndarray) -> np.ndarray:
     return out
 
 
-# -- A(theta) and B(theta) from one evaluation of sin and cos -----------------------
-def _fill_rotation(out: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Write the entries of ``A = Rx(t1) Ry(t2) Rz(t3)`` (eq 2) into ``out[i, j]``.
+# -- A(theta) and B(theta): the one place that defines their entries -----------------
+def _rotation_entries(c, s) -> tuple:
+    """Entries of ``A = Rx(t1) Ry(t2) Rz(t3)`` (eq 2), ``A[i][j]``.
 
-    ``c``, ``s``: cos and sin of the three angles in columns form, shape (3, ...);
-    ``out``: shape (3, 3, ...).
+    ``c``, ``s``: cos and sin of the three angles, each a sequence of 3 components
+    (floats, or arrays of one shape).
     """
     c1, c2, c3 = c
     s1, s2, s3 = s
     s1s2, c1s2 = s1 * s2, c1 * s2
-    out[0, 0] = c2 * c3
-    out[0, 1] = -c2 * s3
-    out[0, 2] = s2
-    out[1, 0] = c1 * s3 + s1s2 * c3
-    out[1, 1] = c1 * c3 - s1s2 * s3
-    out[1, 2] = -s1 * c2
-    out[2, 0] = s1 * s3 - c1s2 * c3
-    out[2, 1] = s1 * c3 + c1s2 * s3
-    out[2, 2] = c1 * c2
-    return out
+    return (
+        (c2 * c3, -(c2 * s3), s2),
+        (c1 * s3 + s1s2 * c3, c1 * c3 - s1s2 * s3, -(s1 * c2)),
+        (s1 * s3 - c1s2 * c3, s1 * c3 + c1s2 * s3, c1 * c2),
+    )
 
 
-def _fill_rate(out: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Write the entries of ``B(theta)`` (eq 1, middle row corrected) into ``out[i, j]``.
-
-    ``c``, ``s``: cos and sin of the three angles (only t2, t3 enter), shape (3, ...);
-    ``out``: shape (3, 3, ...).
-    """
+def _rate_entries(c, s) -> tuple:
+    """Entries of ``B(theta)`` (eq 1, middle row corrected), ``B[i][j]``; the structural
+    zeros and the one of B are the Python floats 0.0 and 1.0. Only t2, t3 enter."""
     c2, c3 = c[1], c[2]
     s2, s3 = s[1], s[2]
     c3_c2, s3_c2 = c3 / c2, s3 / c2
-    out[0, 0] = c3_c2
-    out[0, 1] = -s3_c2
-    out[0, 2] = 0.0
-    out[1, 0] = s3
-    out[1, 1] = c3
-    out[1, 2] = 0.0
-    out[2, 0] = -s2 * c3_c2
-    out[2, 1] = s2 * s3_c2
-    out[2, 2] = 1.0
+    return (
+        (c3_c2, -s3_c2, 0.0),
+        (s3, c3, 0.0),
+        (-(s2 * c3_c2), s2 * s3_c2, 1.0),
+    )
+
+
+def _cos_sin(theta) -> tuple:
+    """cos and sin of three angles in columns form: ``math`` for floats (one state),
+    one numpy call each for a stack."""
+    t1, t2, t3 = _parts(theta)
+    if isinstance(t1, float):
+        return (math.cos(t1), math.cos(t2), math.cos(t3)), (math.sin(t1), math.sin(t2), math.sin(t3))
+    theta = np.asarray(theta, dtype=float)
+    return _parts(np.cos(theta)), _parts(np.sin(theta))
+
+
+def _stacked_matrix(entries, shape: tuple[int, ...]) -> np.ndarray:
+    """Nested entries (each broadcastable to ``shape``) -> array ``shape + (3, 3)``."""
+    out = np.empty(shape + (3, 3))
+    for i, row in enumerate(entries):
+        for j, value in enumerate(row):
+            out[..., i, j] = value
     return out
 
 
-def _rows_of_entries(m: np.ndarray) -> np.ndarray:
-    """Matrices with entries first, shape (3, 3, ...) -> stacked rows, shape (..., 3, 3)."""
-    return np.ascontiguousarray(np.moveaxis(m, (0, 1), (-2, -1)))
+def _stacked_entries(theta: np.ndarray, entries) -> np.ndarray:
+    theta = np.asarray(theta, dtype=float)
+    t = np.moveaxis(theta, -1, 0)
+    return _stacked_matrix(entries(np.cos(t), np.sin(t)), theta.shape[:-1])
 
 
 def rotation_matrix(theta: np.ndarray) -> np.ndarray:
@@ -140,9 +174,7 @@ def rotation_matrix(theta: np.ndarray) -> np.ndarray:
     ndarray, shape (3, 3) or (..., 3, 3)
         Orthonormal with determinant 1; ``A.T`` maps inertial to body vectors.
     """
-    theta = np.moveaxis(np.asarray(theta, dtype=float), -1, 0)
-    a = _fill_rotation(np.empty((3,) + theta.shape), np.cos(theta), np.sin(theta))
-    return _rows_of_entries(a)
+    return _stacked_entries(theta, _rotation_entries)
 
 
 def euler_rate_matrix(theta: np.ndarray) -> np.ndarray:
@@ -162,9 +194,7 @@ def euler_rate_matrix(theta: np.ndarray) -> np.ndarray:
     ndarray, shape (3, 3) or (..., 3, 3)
         Singular (infinite entries) at ``|theta_2| = pi/2``, the gimbal lock.
     """
-    theta = np.moveaxis(np.asarray(theta, dtype=float), -1, 0)
-    b = _fill_rate(np.empty((3,) + theta.shape), np.cos(theta), np.sin(theta))
-    return _rows_of_entries(b)
+    return _stacked_entries(theta, _rate_entries)
 
 
 def rotation_and_rate(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -183,8 +213,10 @@ def rotation_and_rate(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Rotation body -> inertial and Euler-rate matrix, stacked rows.
     """
     theta = np.asarray(theta, dtype=float)
-    a, b = rotation_and_rate_columns(np.moveaxis(theta, -1, 0))
-    return _rows_of_entries(a), _rows_of_entries(b)
+    t = np.moveaxis(theta, -1, 0)
+    c, s = np.cos(t), np.sin(t)
+    shape = theta.shape[:-1]
+    return _stacked_matrix(_rotation_entries(c, s), shape), _stacked_matrix(_rate_entries(c, s), shape)
 
 
 def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -220,25 +252,57 @@ def quadratic_form(x: np.ndarray, m: np.ndarray, y: np.ndarray | None = None) ->
 
 
 # -- columns form (see the module docstring) -----------------------------------------
-def to_columns(y: np.ndarray) -> np.ndarray:
-    """Stacked rows -> columns: shape (n,) stays (n,); (..., n) -> contiguous (n, m).
-
-    The leading dimensions are flattened (m = their product); :func:`from_columns`
-    restores them.
-    """
-    y = np.asarray(y, dtype=float)
-    if y.ndim == 1:
-        return y
-    return np.ascontiguousarray(y.reshape(-1, y.shape[-1]).T)
+def _is_stack(x) -> bool:
+    """Whether the vector ``x`` is a stack in array form, a (3, m) ndarray (fast path)."""
+    return isinstance(x, np.ndarray) and x.ndim == 2
 
 
-def from_columns(x: np.ndarray, batch_shape: tuple[int, ...]) -> np.ndarray:
-    """Columns -> stacked rows, the inverse of :func:`to_columns`.
+def _parts(x) -> Sequence:
+    """The 3 components of a vector in columns form (indexing an array is much cheaper
+    than iterating it)."""
+    if isinstance(x, np.ndarray):
+        return x[0], x[1], x[2]
+    return x
+
+
+def _pack(c0, c1, c2):
+    """A vector from its components: a tuple for one state (floats), a (3, m) array for a
+    stack (so that the vector-level operations that follow are one numpy call each)."""
+    if type(c0) is np.ndarray:
+        return np.array((c0, c1, c2))
+    return (c0, c1, c2)
+
+
+def to_columns(y: np.ndarray):
+    """Stacked rows -> columns form.
 
     Parameters
     ----------
-    x : ndarray, shape (n,) or (n, m), or matrices (3, 3) or (3, 3, m)
-        Columns of vectors of any length n, or matrices with entries first.
+    y : array_like, shape (n,) or (..., n)
+        One vector (e.g. a state) or a stack.
+
+    Returns
+    -------
+    list of n floats, or ndarray of shape (n, m)
+        For one vector its components as Python floats; for a stack the C-contiguous
+        (n, m) array whose rows are the components (the leading dimensions flattened,
+        m their product; :func:`from_columns` restores them).
+    """
+    y = np.asarray(y, dtype=float)
+    if y.ndim == 1:
+        return y.tolist()
+    return np.ascontiguousarray(y.reshape(-1, y.shape[-1]).T)
+
+
+def from_columns(x, batch_shape: tuple[int, ...]) -> np.ndarray:
+    """Columns form -> stacked rows, the inverse of :func:`to_columns`.
+
+    Parameters
+    ----------
+    x : sequence of components, or nested sequence (a matrix)
+        A vector of any length n (components floats, arrays of shape (m,), or scalars
+        standing for a constant component; or an (n, m) array) or a 3x3 matrix of such
+        entries (or a (3, 3, m) array).
     batch_shape : tuple of int
         The leading dimensions of the stacked rows (``()`` for one vector), product m.
 
@@ -246,72 +310,302 @@ def from_columns(x: np.ndarray, batch_shape: tuple[int, ...]) -> np.ndarray:
     -------
     ndarray, shape batch_shape + (n,) or batch_shape + (3, 3), C-contiguous.
     """
+    first = x[0]
+    if isinstance(first, Sequence) or np.ndim(first) == 2:  # a matrix of entries
+        out = _stacked_matrix(x, (math.prod(batch_shape),) if batch_shape else ())
+        return out.reshape(batch_shape + (3, 3))
     if not batch_shape:
-        return x
-    if x.ndim == 2:
-        return np.ascontiguousarray(x.T).reshape(batch_shape + x.shape[:1])
-    return _rows_of_entries(x).reshape(batch_shape + x.shape[:2])
+        return np.array(x, dtype=float)
+    m, n = math.prod(batch_shape), len(x)
+    if isinstance(x, np.ndarray) and (n > 3 or m <= 1024):
+        out = np.ascontiguousarray(x.T)  # one transposed copy: cheapest for a state
+    else:  # a long (3, m) stack: three strided writes are several times cheaper
+        out = np.empty((m, n))
+        for i, component in enumerate(x):
+            out[:, i] = component
+    return out.reshape(batch_shape + (n,))
 
 
-def as_column(r: np.ndarray, like: np.ndarray) -> np.ndarray:
-    """Constant vector ``r`` (shape (3,)) shaped to broadcast against columns ``like``.
-
-    ``like`` of shape (3,) gives ``r``; of shape (3, m) gives ``r[:, None]``. Adding a
-    (3,) array to a (3, m) stack directly would broadcast along the wrong axis (silently
-    so when m == 3).
-    """
-    return r.reshape(r.shape + (1,) * (like.ndim - 1))
-
-
-def rotation_and_rate_columns(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(A(theta), B(theta))`` of a columns stack, from one sin and one cos call (eqs 1, 2).
+class ConstantVector(tuple):
+    """A constant 3-vector (R, G) for the columns form: the tuple of its 3 floats, which
+    also carries its (3, 1) array ``column`` for stacks in array form.
 
     Parameters
     ----------
-    theta : ndarray, shape (3,) or (3, ...)
-        Euler angles [rad] in columns form; ``|theta_2| < pi/2`` (eq 5).
+    values : iterable of 3 numbers
+    """
+
+    def __new__(cls, values) -> "ConstantVector":
+        obj = super().__new__(cls, (float(v) for v in values))
+        if len(obj) != 3:
+            raise ValueError(f"a constant vector has 3 components, got {len(obj)}")
+        obj.column = np.array(obj).reshape(3, 1)
+        obj.column.setflags(write=False)
+        obj.is_zero = not any(obj)
+        return obj
+
+
+class ConstantMatrix:
+    """A constant 3x3 matrix (a gain, an inertia) that acts on vectors in columns form.
+
+    Products skip the zero entries: component i of ``M x`` is the sum of ``M[i, j] x_j``
+    over the nonzero entries of row i, in column order, for one state (floats) and for a
+    stack alike, so each state's result depends only on that state. A diagonal matrix
+    costs three multiplications (for a stack in array form, one with its diagonal
+    repeated to the stack's (3, m) shape: numpy broadcasts a (3, 1) column slowly).
+
+    Parameters
+    ----------
+    matrix : array_like, shape (3, 3)
+    """
+
+    __slots__ = ("matrix", "diagonal", "_rows", "_diagonal_column", "_repeated")
+
+    #: Stack sizes up to which the repeated diagonal is kept (at most 8 sizes at once).
+    _CACHE_MAX_M = 8192
+
+    def __init__(self, matrix) -> None:
+        m = np.array(matrix, dtype=float)
+        if m.shape != (3, 3):
+            raise ValueError(f"a constant matrix has shape (3, 3), got {m.shape}")
+        m.setflags(write=False)
+        self.matrix = m
+        #: The diagonal as floats when every off-diagonal entry is zero, else None.
+        self.diagonal = (
+            tuple(float(d) for d in np.diag(m)) if not np.any(m - np.diag(np.diag(m))) else None
+        )
+        self._rows = tuple(tuple((j, float(m[i, j])) for j in range(3) if m[i, j] != 0.0) for i in range(3))
+        self._diagonal_column = np.diag(m).reshape(3, 1).copy()
+        self._repeated: dict[int, np.ndarray] = {}
+
+    def __repr__(self) -> str:
+        return f"ConstantMatrix({self.matrix.tolist()})"
+
+    def _diagonal_repeated(self, m: int) -> np.ndarray:
+        """The diagonal as a (3, m) array (kept for small m)."""
+        out = self._repeated.get(m)
+        if out is None:
+            out = np.repeat(self._diagonal_column, m, axis=1)
+            if m <= self._CACHE_MAX_M:
+                if len(self._repeated) >= 8:
+                    self._repeated.clear()
+                self._repeated[m] = out
+        return out
+
+    def apply(self, x):
+        """``M x`` for a vector ``x`` in columns form."""
+        d = self.diagonal
+        if d is not None:
+            if type(x) is tuple:
+                x0, x1, x2 = x
+                return (d[0] * x0, d[1] * x1, d[2] * x2)
+            if _is_stack(x):
+                return self._diagonal_repeated(x.shape[1]) * x
+            x0, x1, x2 = _parts(x)
+            return (d[0] * x0, d[1] * x1, d[2] * x2)
+        x = _parts(x)
+        out = []
+        for row in self._rows:
+            acc = None
+            for j, k in row:
+                acc = k * x[j] if acc is None else acc + k * x[j]
+            out.append(0.0 * x[0] if acc is None else acc)
+        return _pack(*out)
+
+
+def rotation_and_rate_columns(theta) -> tuple[tuple, tuple]:
+    """``(A(theta), B(theta))`` in columns form, from one cos and one sin per angle (eqs 1, 2).
+
+    Parameters
+    ----------
+    theta : vector in columns form
+        Euler angles [rad] (3 floats for one state, a (3, m) array or 3 arrays (m,) for
+        a stack); ``|theta_2| < pi/2`` (eq 5).
 
     Returns
     -------
-    a, b : ndarray, shape (3, 3) or (3, 3, ...)
+    a, b : nested tuples of components
         ``A`` (body -> inertial, eq 2) and ``B`` (``d(theta)/dt = B omega``, eq 1,
-        middle row corrected), entries first: ``a[i, j]`` is the (i, j) entry of every
-        matrix of the stack. Apply them with :func:`matvec_columns`,
-        :func:`matTvec_columns`.
+        middle row corrected): ``a[i][j]`` is the (i, j) entry (of every matrix of the
+        stack). ``b``'s structural zeros and one are the floats 0.0 and 1.0. Apply
+        ``a`` with :func:`matvec_columns`, :func:`matTvec_columns`, ``b`` with
+        :func:`rate_matvec_columns`, :func:`rate_matTvec_columns`.
     """
-    c, s = np.cos(theta), np.sin(theta)
-    shape = (3, 3) + theta.shape[1:]
-    return _fill_rotation(np.empty(shape), c, s), _fill_rate(np.empty(shape), c, s)
+    c, s = _cos_sin(theta)
+    return _rotation_entries(c, s), _rate_entries(c, s)
 
 
-def cross_columns(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a x b`` in columns form: a, b shape (3,) or (3, ...) (broadcast); a constant
-    (3,) operand may be paired with a stack."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+# In the helpers below a vector is a tuple for one state (the fast test ``type(x) is
+# tuple`` comes first, so that float arithmetic pays for no other check), a (3, m) array
+# for a stack in array form, or any other sequence of 3 components (e.g. a constant
+# vector, or 3 arrays (m,)). Results are tuples for one state and (3, m) arrays for
+# stacks (``_pack``).
+def rate_matvec_columns(b, x):
+    """``B x`` for ``b`` from :func:`rotation_and_rate_columns`, skipping B's structural
+    zeros and one (``dTheta/dt = B Omega``, eq 1)."""
+    (b00, b01, _), (b10, b11, _), (b20, b21, _) = b
+    x0, x1, x2 = x if type(x) is tuple else _parts(x)
+    return _pack(b00 * x0 + b01 * x1, b10 * x0 + b11 * x1, b20 * x0 + b21 * x1 + x2)
 
 
-def matvec_columns(mat: np.ndarray, x: np.ndarray) -> np.ndarray:
+def rate_matTvec_columns(b, x):
+    """``B' x`` for ``b`` from :func:`rotation_and_rate_columns`, skipping B's structural
+    zeros and one."""
+    (b00, b01, _), (b10, b11, _), (b20, b21, _) = b
+    x0, x1, x2 = x if type(x) is tuple else _parts(x)
+    return _pack(b00 * x0 + b10 * x1 + b20 * x2, b01 * x0 + b11 * x1 + b21 * x2, x2)
+
+
+def cross_columns(a, b):
+    """``a x b`` in columns form (either operand may be a constant vector)."""
+    a0, a1, a2 = a if type(a) is tuple else _parts(a)
+    b0, b1, b2 = b if type(b) is tuple else _parts(b)
+    return _pack(a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0)
+
+
+def matvec_columns(mat, x):
     """``mat x`` in columns form.
 
     Parameters
     ----------
-    mat : ndarray, shape (3, 3) or (3, 3, m)
-        One matrix (a constant, or the matrix of one state) or a stack, entries first.
-    x : ndarray, shape (3,) or (3, m)
-        One vector or a stack; a single vector may be paired with a stack of matrices
-        and a single matrix with a stack of vectors.
+    mat : nested sequence, ``mat[i][j]`` a component
+        One matrix or a stack (e.g. ``a`` of :func:`rotation_and_rate_columns`), or a
+        (3, 3) / (3, 3, m) array.
+    x : vector in columns form
+        One vector or a stack; a constant vector may be paired with a stack of matrices
+        and one matrix with a stack of vectors.
 
     Returns
     -------
-    ndarray, shape (3,) or (3, m)
+    vector in columns form (a tuple for one state, a (3, m) array for a stack)
     """
-    if mat.ndim == 2 and x.ndim <= 2:
-        return mat @ x
-    return np.einsum("ij...,j...->i...", mat, x)
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = mat
+    x0, x1, x2 = x if type(x) is tuple else _parts(x)
+    return _pack(
+        m00 * x0 + m01 * x1 + m02 * x2,
+        m10 * x0 + m11 * x1 + m12 * x2,
+        m20 * x0 + m21 * x1 + m22 * x2,
+    )
 
 
-def matTvec_columns(mat: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``mat' x`` in columns form; shapes as :func:`matvec_columns`."""
-    if mat.ndim == 2 and x.ndim <= 2:
-        return mat.T @ x
-    return np.einsum("ji...,j...->i...", mat, x)
+def matTvec_columns(mat, x):
+    """``mat' x`` in columns form; arguments as :func:`matvec_columns`."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = mat
+    x0, x1, x2 = x if type(x) is tuple else _parts(x)
+    return _pack(
+        m00 * x0 + m10 * x1 + m20 * x2,
+        m01 * x0 + m11 * x1 + m21 * x2,
+        m02 * x0 + m12 * x1 + m22 * x2,
+    )
+
+
+def add_columns(a, b):
+    """``a + b`` in columns form (one numpy call for two stacks in array form)."""
+    if type(a) is not tuple or type(b) is not tuple:
+        if _is_stack(a) and _is_stack(b):
+            return a + b
+        a, b = _parts(a), _parts(b)
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a0 + b0, a1 + b1, a2 + b2)
+
+
+def sub_columns(a, b):
+    """``a - b`` in columns form (one numpy call for two stacks in array form)."""
+    if type(a) is not tuple or type(b) is not tuple:
+        if _is_stack(a) and _is_stack(b):
+            return a - b
+        a, b = _parts(a), _parts(b)
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return (a0 - b0, a1 - b1, a2 - b2)
+
+
+def neg_columns(a):
+    """``-a`` in columns form."""
+    if type(a) is not tuple:
+        if _is_stack(a):
+            return -a
+        a = _parts(a)
+    a0, a1, a2 = a
+    return (-a0, -a1, -a2)
+
+
+def scale_columns(s: float, a):
+    """``s a`` for a float ``s``, in columns form."""
+    if type(a) is not tuple:
+        if _is_stack(a):
+            return s * a
+        a = _parts(a)
+    a0, a1, a2 = a
+    return (s * a0, s * a1, s * a2)
+
+
+def div_columns(a, s: float):
+    """``a / s`` for a float ``s``, in columns form."""
+    if type(a) is not tuple:
+        if _is_stack(a):
+            return a / s
+        a = _parts(a)
+    a0, a1, a2 = a
+    return (a0 / s, a1 / s, a2 / s)
+
+
+def add_constant_columns(x, c: ConstantVector):
+    """``x + c`` for a constant vector ``c`` in columns form (a zero ``c`` costs nothing)."""
+    if c.is_zero:
+        return x
+    if _is_stack(x):
+        return x + c.column
+    x0, x1, x2 = _parts(x)
+    return (x0 + c[0], x1 + c[1], x2 + c[2])
+
+
+def sub_constant_columns(x, c: ConstantVector):
+    """``x - c`` for a constant vector ``c`` in columns form (see :func:`add_constant_columns`)."""
+    if c.is_zero:
+        return x
+    if _is_stack(x):
+        return x - c.column
+    x0, x1, x2 = _parts(x)
+    return (x0 - c[0], x1 - c[1], x2 - c[2])
+
+
+def dot_columns(a, b):
+    """``a . b`` in columns form, summed in component order: one component (a float for
+    one state, an array (m,) for a stack)."""
+    if type(a) is not tuple or type(b) is not tuple:
+        if _is_stack(a) and _is_stack(b):
+            p = a * b  # the same products, in one call
+            return p[0] + p[1] + p[2]
+        a, b = _parts(a), _parts(b)
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    return a0 * b0 + a1 * b1 + a2 * b2
+
+
+def dot_constant_columns(x, c):
+    """``x . c`` for a constant vector ``c`` (3 floats), summed in component order over
+    the nonzero components of ``c``; the float 0.0 when ``c`` is zero."""
+    terms = [xi * ci for xi, ci in zip(_parts(x), c) if ci]
+    if not terms:
+        return 0.0
+    acc = terms[0]
+    for t in terms[1:]:
+        acc = acc + t
+    return acc
+
+
+def quadratic_form_columns(x, m: ConstantMatrix, y=None):
+    """``x' M y`` (``y`` defaults to ``x``) for a constant matrix, in columns form: one
+    component, ``x . (M y)`` summed in component order."""
+    return dot_columns(x, m.apply(x if y is None else y))
+
+
+def zeros_columns(like):
+    """A zero vector in columns form shaped like the vector ``like``."""
+    if _is_stack(like):
+        return np.zeros(like.shape)
+    c = like[0]
+    zero = 0.0 if isinstance(c, float) else np.zeros(np.shape(c))
+    return (zero, zero, zero)

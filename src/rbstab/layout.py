@@ -4,7 +4,7 @@ Every state block is a 3-vector. A layout is an ordered tuple of block names; th
 integrators, writers and variants address the state only through a layout, in the
 stacked-rows form (``split``, ``join``: blocks along the last axis) or, inside the
 variants' right-hand side, the columns form of :mod:`rbstab.kinematics`
-(``split_columns``, ``join_columns``: blocks along the first axis).
+(``split_columns``, ``join_columns``: a state as the sequence of its components).
 """
 
 from __future__ import annotations
@@ -75,21 +75,29 @@ class StateLayout:
         """
         return np.concatenate([np.asarray(blocks[b], dtype=float) for b in self.blocks], axis=-1)
 
-    def split_columns(self, y: np.ndarray) -> dict[str, np.ndarray]:
-        """Views of each block of a state in columns form (:mod:`rbstab.kinematics`):
-        y shape (size,) or (size, m) -> {name: shape (3,) or (3, m)}."""
-        return {b: y[3 * i : 3 * i + 3] for i, b in enumerate(self.blocks)}
+    def split_columns(self, y) -> dict:
+        """Each block of a state in columns form (:mod:`rbstab.kinematics`): ``y`` a list
+        of ``size`` floats (one state) -> {name: tuple of its 3 floats}; ``y`` an (size,
+        m) array (a stack) -> {name: (3, m) view}."""
+        if isinstance(y, np.ndarray):
+            return {b: y[3 * i : 3 * i + 3] for i, b in enumerate(self.blocks)}
+        return {b: tuple(y[3 * i : 3 * i + 3]) for i, b in enumerate(self.blocks)}
 
-    def join_columns(self, **blocks: np.ndarray) -> np.ndarray:
-        """Concatenate blocks in columns form (each shape (3,) or (3, m)) into shape
-        (size,) or (size, m), in layout order.
+    def join_columns(self, **blocks):
+        """A state in columns form, in layout order, from its blocks (vectors in columns
+        form): an (size, m) array when every block is a (3, m) array, else the list of
+        the ``size`` components; :func:`rbstab.kinematics.from_columns` makes stacked
+        rows of either.
 
         Raises
         ------
         KeyError
             If a block of the layout is missing.
         """
-        return np.concatenate([blocks[b] for b in self.blocks], axis=0)
+        parts = [blocks[b] for b in self.blocks]
+        if all(isinstance(p, np.ndarray) and p.ndim == 2 for p in parts):
+            return np.concatenate(parts)
+        return [c for p in parts for c in p]
 
     def state_names(self) -> list[str]:
         """Scalar state names such as ``theta_1`` ... in layout order."""

@@ -8,10 +8,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from types import SimpleNamespace
 
 import numpy as np
 
-from .kinematics import cross_columns, hat, matTvec_columns
+from .kinematics import (
+    ConstantMatrix,
+    ConstantVector,
+    cross_columns,
+    hat,
+    neg_columns,
+    rate_matTvec_columns,
+    sub_columns,
+)
 
 __all__ = ["RigidBody", "Gains", "gyroscopic", "torque_n", "force_h"]
 
@@ -62,6 +71,23 @@ class RigidBody:
         """J_p^-1, shape (3, 3)."""
         return np.linalg.inv(self.pivot_inertia)
 
+    @cached_property
+    def columns(self) -> SimpleNamespace:
+        """The body's constants prepared for the columns form (:mod:`rbstab.kinematics`),
+        computed once: ``mass`` (float), ``attachment_point`` R and ``weight`` G
+        (:class:`~rbstab.kinematics.ConstantVector`), and ``inertia``, ``inertia_inv``,
+        ``pivot_inertia``, ``pivot_inertia_inv``
+        (:class:`~rbstab.kinematics.ConstantMatrix`)."""
+        return SimpleNamespace(
+            mass=float(self.mass),
+            attachment_point=ConstantVector(self.attachment_point),
+            weight=ConstantVector(self.weight),
+            inertia=ConstantMatrix(self.inertia),
+            inertia_inv=ConstantMatrix(self.inertia_inv),
+            pivot_inertia=ConstantMatrix(self.pivot_inertia),
+            pivot_inertia_inv=ConstantMatrix(self.pivot_inertia_inv),
+        )
+
 
 @dataclass(frozen=True, eq=False)
 class Gains:
@@ -99,38 +125,64 @@ class Gains:
         """L_d^-1 [m/(N s)], shape (3, 3)."""
         return np.linalg.inv(self.l_d)
 
+    @cached_property
+    def columns(self) -> SimpleNamespace:
+        """The configured gains as :class:`~rbstab.kinematics.ConstantMatrix` (columns
+        form, computed once): ``k_t``, ``l_t``, ``k_r``, ``l_r``, and those of ``k_c``,
+        ``l_c``, ``k_d``, ``l_d``, ``l_d_inv`` that are set (None otherwise); ``k_s``
+        and ``boundary_layer`` as floats (``k_s`` None when unset)."""
+        def op(m):
+            return None if m is None else ConstantMatrix(m)
 
-def gyroscopic(inertia: np.ndarray, omega: np.ndarray) -> np.ndarray:
+        return SimpleNamespace(
+            k_t=op(self.k_t),
+            l_t=op(self.l_t),
+            k_r=op(self.k_r),
+            l_r=op(self.l_r),
+            k_c=op(self.k_c),
+            l_c=op(self.l_c),
+            k_d=op(self.k_d),
+            l_d=op(self.l_d),
+            l_d_inv=None if self.l_d is None else ConstantMatrix(self.l_d_inv),
+            k_s=None if self.k_s is None else float(self.k_s),
+            boundary_layer=float(self.boundary_layer),
+        )
+
+
+def gyroscopic(inertia: ConstantMatrix, omega):
     """f(Omega) = -Omega x (J Omega) [N m], body frame (eq 1).
 
-    ``omega`` [rad/s] in columns form (:mod:`rbstab.kinematics`): shape (3,) or (3, m);
-    the result has the same shape.
+    ``inertia``: J (``RigidBody.columns.inertia``); ``omega`` [rad/s] and the result in
+    columns form (:mod:`rbstab.kinematics`).
     """
-    return -cross_columns(omega, inertia @ omega)
+    return neg_columns(cross_columns(omega, inertia.apply(omega)))
 
 
-def torque_n(b: np.ndarray, theta: np.ndarray, omega: np.ndarray, gains: Gains) -> np.ndarray:
+def torque_n(b, theta, omega, gains: Gains):
     """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23).
 
     Columns form (:mod:`rbstab.kinematics`).
 
     Parameters
     ----------
-    b : ndarray, shape (3, 3) or (3, 3, m)
-        Euler-rate matrix B(theta), entries first.
-    theta, omega : ndarray, shape (3,) or (3, m)
+    b : nested tuple
+        Euler-rate matrix B(theta) from :func:`~rbstab.kinematics.rotation_and_rate_columns`.
+    theta, omega : vectors in columns form
         Euler angles [rad] and body angular velocity [rad/s].
+    gains : Gains
 
     Returns
     -------
-    ndarray, shape (3,) or (3, m)
+    vector in columns form
     """
-    return -matTvec_columns(b, gains.k_r @ theta) - gains.l_r @ omega
+    g = gains.columns
+    return sub_columns(neg_columns(rate_matTvec_columns(b, g.k_r.apply(theta))), g.l_r.apply(omega))
 
 
-def force_h(x: np.ndarray, v: np.ndarray, gains: Gains) -> np.ndarray:
+def force_h(x, v, gains: Gains):
     """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24).
 
-    ``x`` [m], ``v`` [m/s] and the result in columns form: shape (3,) or (3, m).
+    ``x`` [m], ``v`` [m/s] and the result in columns form (:mod:`rbstab.kinematics`).
     """
-    return -(gains.k_t @ x) - gains.l_t @ v
+    g = gains.columns
+    return sub_columns(neg_columns(g.k_t.apply(x)), g.l_t.apply(v))

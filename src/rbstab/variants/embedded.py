@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import numpy as np
-
-from ..kinematics import quadratic_form
+from ..kinematics import neg_columns, quadratic_form_columns, sub_columns
 from ..layout import EMBEDDED, StateLayout
 from .base import FullBodyVariant
 
@@ -26,19 +24,21 @@ class Embedded(FullBodyVariant):
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d")
     equation = "eq 22"
 
-    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+    def constraint_law(self, q: dict):
         """Lambda [N] and, into ``q``, dD/dt [m/s] (eq 22); columns form, inertial frame."""
-        g = self.gains
+        g = self.gains.columns
         d = q["controller_state"]
-        spring = g.k_c @ (q["constraint_error"] - d)  # K_c (E - D)
-        q["controller_rate"] = g.l_d_inv @ (spring - g.k_d @ d)
-        return -spring - g.l_c @ q["constraint_rate"]
+        spring = g.k_c.apply(sub_columns(q["constraint_error"], d))  # K_c (E - D)
+        q["controller_rate"] = g.l_d_inv.apply(sub_columns(spring, g.k_d.apply(d)))
+        return sub_columns(neg_columns(spring), g.l_c.apply(q["constraint_rate"]))
 
-    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        g = self.gains
+    def constraint_energy(self, q: dict):
+        g = self.gains.columns
         d = q["controller_state"]
-        return 0.5 * quadratic_form(q["constraint_error"] - d, g.k_c) + 0.5 * quadratic_form(d, g.k_d)
+        return 0.5 * quadratic_form_columns(sub_columns(q["constraint_error"], d), g.k_c) + 0.5 * quadratic_form_columns(
+            d, g.k_d
+        )
 
-    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        g = self.gains
-        return quadratic_form(q["constraint_rate"], g.l_c) + quadratic_form(q["controller_rate"], g.l_d)
+    def constraint_dissipation(self, q: dict):
+        g = self.gains.columns
+        return quadratic_form_columns(q["constraint_rate"], g.l_c) + quadratic_form_columns(q["controller_rate"], g.l_d)

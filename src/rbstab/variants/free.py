@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
 from .base import FullBodyVariant
 
 __all__ = ["Free"]
@@ -19,12 +17,12 @@ class Free(FullBodyVariant):
     equation = "eqs 1, 23, 24, 29, 30"
     constraint_inputs = ()
 
-    def constraint_law(self, q: dict[str, np.ndarray]) -> None:
+    def constraint_law(self, q: dict) -> None:
         """No constraint force (Lambda = 0)."""
         return None
 
-    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_energy(self, q: dict) -> float:
+        return 0.0
 
-    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_dissipation(self, q: dict) -> float:
+        return 0.0

@@ -14,11 +14,19 @@ from typing import ClassVar
 import numpy as np
 
 from ..kinematics import (
-    as_column,
+    add_columns,
+    add_constant_columns,
     cross_columns,
+    div_columns,
+    from_columns,
     matTvec_columns,
     matvec_columns,
+    neg_columns,
+    rate_matvec_columns,
     rotation_and_rate_columns,
+    scale_columns,
+    sub_columns,
+    sub_constant_columns,
 )
 from ..layout import FULL_BODY, REDUCED, StateLayout
 from ..model import force_h, gyroscopic, torque_n
@@ -42,44 +50,45 @@ class Permanent(Variant):
     layout: ClassVar[StateLayout] = REDUCED
     equation = "eqs 20, 21"
 
-    def quantities_columns(self, y: np.ndarray, outputs: bool = True) -> dict[str, np.ndarray]:
+    def quantities_columns(self, y, outputs: bool = True, state_rate: bool = True) -> dict:
         """Eqs 20, 21 (corrected) and eq 32 in columns form (see
         :meth:`Variant.quantities_columns`). Without ``outputs`` E, F (zero by
         construction) and Lambda are skipped: the state rate does not need them."""
-        body, gains = self.body, self.gains
+        body = self.body.columns
         q = self.layout.split_columns(y)
         theta, omega = q["theta"], q["omega"]
-        r, r_hat = body.attachment_point, body.r_hat
+        r = body.attachment_point
         a, b = rotation_and_rate_columns(theta)
         q["rotation_matrix"], q["euler_rate_matrix"] = a, b
         a_r = matvec_columns(a, r)
-        omega_x_r = r_hat.T @ omega  # Omega x R = hat(R)' Omega
-        x = as_column(r, a_r) - a_r  # X = R - A R
-        v = -matvec_columns(a, omega_x_r)  # V = A hat(R) Omega
+        omega_x_r = cross_columns(omega, r)  # Omega x R = hat(R)' Omega
+        x = neg_columns(sub_constant_columns(a_r, r))  # X = R - A R
+        a_w = matvec_columns(a, omega_x_r)
+        v = neg_columns(a_w)  # V = A hat(R) Omega = -A (Omega x R)
         q["position"], q["velocity"] = x, v
-        q["torque_n"] = torque_n(b, theta, omega, gains)
-        q["force_h"] = h = force_h(x, v, gains)
-        applied = as_column(body.weight, h) + h  # G + H [N], inertial frame
-        torque = (
-            -cross_columns(omega, body.pivot_inertia @ omega)
-            + q["torque_n"]
-            - r_hat @ matTvec_columns(a, applied)
+        q["torque_n"] = torque_n(b, theta, omega, self.gains)
+        q["force_h"] = force_h(x, v, self.gains)
+        applied = add_constant_columns(q["force_h"], body.weight)  # G + H [N], inertial frame
+        torque = sub_columns(
+            add_columns(gyroscopic(body.pivot_inertia, omega), q["torque_n"]),
+            cross_columns(r, matTvec_columns(a, applied)),  # R x A'(G + H)
         )
-        omega_dot = body.pivot_inertia_inv @ torque
+        omega_dot = body.pivot_inertia_inv.apply(torque)
         if outputs:
-            q["constraint_error"] = x + a_r - as_column(r, x)
-            q["constraint_rate"] = v + matvec_columns(a, omega_x_r)
+            q["constraint_error"] = sub_constant_columns(add_columns(x, a_r), r)
+            q["constraint_rate"] = add_columns(v, a_w)
             # dV/dt = A (R x dOmega/dt) - A (Omega x (Omega x R))
-            accel = matvec_columns(a, r_hat @ omega_dot - cross_columns(omega, omega_x_r))
-            q["constraint_force"] = body.mass * accel - applied
-        q["state_rate"] = self.layout.join_columns(theta=matvec_columns(b, omega), omega=omega_dot)
+            accel = matvec_columns(a, sub_columns(cross_columns(r, omega_dot), cross_columns(omega, omega_x_r)))
+            q["constraint_force"] = sub_columns(scale_columns(body.mass, accel), applied)  # m dV/dt - G - H
+        if state_rate:
+            q["state_rate"] = self.layout.join_columns(theta=rate_matvec_columns(b, omega), omega=omega_dot)
         return q
 
-    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_energy(self, q: dict) -> float:
+        return 0.0
 
-    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_dissipation(self, q: dict) -> float:
+        return 0.0
 
     def full_state(self, y: np.ndarray) -> np.ndarray:
         """The 12-state vector (Theta, Omega, X, V) of reduced states y, shape (..., 12)."""
@@ -103,23 +112,27 @@ class PermanentFullState(FullBodyVariant):
     equation = "eq 15"
     constraint_inputs = ()
 
-    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+    def constraint_law(self, q: dict) -> tuple:
         """Lambda [N] of eq 15 (columns form), solved state by state."""
-        body = self.body
+        body, cols = self.body, self.body.columns
         omega, a = q["omega"], q["rotation_matrix"]
-        r_hat, j_inv = body.r_hat, body.inertia_inv
-        rhs = (
-            matvec_columns(a, r_hat @ (j_inv @ (gyroscopic(body.inertia, omega) + q["torque_n"])))
-            - (as_column(body.weight, omega) + q["force_h"]) / body.mass
-            - matvec_columns(a, cross_columns(omega, cross_columns(omega, body.attachment_point)))
+        r = cols.attachment_point
+        j_inv_moment = cols.inertia_inv.apply(add_columns(gyroscopic(cols.inertia, omega), q["torque_n"]))
+        applied = add_constant_columns(q["force_h"], cols.weight)  # G + H
+        rhs = sub_columns(
+            sub_columns(matvec_columns(a, cross_columns(r, j_inv_moment)), div_columns(applied, cols.mass)),
+            matvec_columns(a, cross_columns(omega, cross_columns(omega, r))),  # A hat(Omega)^2 R
         )
-        a_r = np.moveaxis(a, (0, 1), (-2, -1)) @ r_hat  # A hat(R), stacked rows (..., 3, 3)
-        m_c = np.eye(3) / body.mass + a_r @ j_inv @ np.swapaxes(a_r, -1, -2)
-        lam = np.linalg.solve(m_c, np.moveaxis(rhs, 0, -1)[..., None])[..., 0]
-        return np.moveaxis(lam, -1, 0)
+        shape = np.shape(omega[0])  # () for one state, (m,) for a stack
+        a_r = from_columns(a, shape) @ body.r_hat  # A hat(R), stacked rows (..., 3, 3)
+        m_c = np.eye(3) / body.mass + a_r @ body.inertia_inv @ np.swapaxes(a_r, -1, -2)
+        lam = np.linalg.solve(m_c, from_columns(rhs, shape)[..., None])[..., 0]
+        if not shape:
+            return tuple(float(c) for c in lam)
+        return (lam[:, 0], lam[:, 1], lam[:, 2])
 
-    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_energy(self, q: dict) -> float:
+        return 0.0
 
-    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_dissipation(self, q: dict) -> float:
+        return 0.0

@@ -2,17 +2,37 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .base import FullBodyVariant
 
 __all__ = ["Sliding"]
 
-_LOG2 = np.log(2.0)
+_LOG2 = math.log(2.0)
 
 
-def _log_cosh(u: np.ndarray) -> np.ndarray:
-    """log(cosh(u)) without overflow."""
+def _tanh(u):
+    return math.tanh(u) if isinstance(u, float) else np.tanh(u)
+
+
+def _sign(u):
+    """sgn(u) (0 at 0, NaN for NaN), for a float or an array."""
+    if not isinstance(u, float):
+        return np.sign(u)
+    if u > 0.0:
+        return 1.0
+    if u < 0.0:
+        return -1.0
+    return u * 0.0  # 0.0, or NaN for NaN
+
+
+def _log_cosh(u):
+    """log(cosh(u)) without overflow, for a float or an array."""
+    if isinstance(u, float):
+        a = abs(u)
+        return a + math.log1p(math.exp(-2.0 * a)) - _LOG2
     a = np.abs(u)
     return a + np.log1p(np.exp(-2.0 * a)) - _LOG2
 
@@ -35,18 +55,21 @@ class Sliding(FullBodyVariant):
         super().__init__(body, gains)
         self.smooth = gains.boundary_layer > 0
 
-    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+    def constraint_law(self, q: dict) -> tuple:
         """Lambda [N], inertial frame, columns form (eq 39)."""
-        e = q["constraint_error"]
-        phi = self.gains.boundary_layer
-        return -self.gains.k_s * (np.tanh(e / phi) if phi > 0 else np.sign(e))
-
-    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        e = q["constraint_error"]
-        phi = self.gains.boundary_layer
+        g = self.gains.columns
+        k_s, phi = g.k_s, g.boundary_layer
         if phi > 0:
-            return self.gains.k_s * phi * np.sum(_log_cosh(e / phi), axis=-1)
-        return self.gains.k_s * np.sum(np.abs(e), axis=-1)
+            return tuple(-k_s * _tanh(e / phi) for e in q["constraint_error"])
+        return tuple(-k_s * _sign(e) for e in q["constraint_error"])
 
-    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return np.zeros(q["theta"].shape[:-1])
+    def constraint_energy(self, q: dict):
+        g = self.gains.columns
+        k_s, phi = g.k_s, g.boundary_layer
+        e0, e1, e2 = q["constraint_error"]
+        if phi > 0:
+            return k_s * phi * (_log_cosh(e0 / phi) + _log_cosh(e1 / phi) + _log_cosh(e2 / phi))
+        return k_s * (abs(e0) + abs(e1) + abs(e2))
+
+    def constraint_dissipation(self, q: dict) -> float:
+        return 0.0

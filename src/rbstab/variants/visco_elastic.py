@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import numpy as np
-
-from ..kinematics import quadratic_form
+from ..kinematics import neg_columns, quadratic_form_columns, sub_columns
 from .base import FullBodyVariant
 
 __all__ = ["ViscoElastic"]
@@ -20,12 +18,13 @@ class ViscoElastic(FullBodyVariant):
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")
     equation = "eq 40"
 
-    def constraint_law(self, q: dict[str, np.ndarray]) -> np.ndarray:
+    def constraint_law(self, q: dict):
         """Lambda [N], inertial frame, columns form (eq 40)."""
-        return -(self.gains.k_c @ q["constraint_error"]) - self.gains.l_c @ q["constraint_rate"]
+        g = self.gains.columns
+        return sub_columns(neg_columns(g.k_c.apply(q["constraint_error"])), g.l_c.apply(q["constraint_rate"]))
 
-    def constraint_energy(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return 0.5 * quadratic_form(q["constraint_error"], self.gains.k_c)
+    def constraint_energy(self, q: dict):
+        return 0.5 * quadratic_form_columns(q["constraint_error"], self.gains.columns.k_c)
 
-    def constraint_dissipation(self, q: dict[str, np.ndarray]) -> np.ndarray:
-        return quadratic_form(q["constraint_rate"], self.gains.l_c)
+    def constraint_dissipation(self, q: dict):
+        return quadratic_form_columns(q["constraint_rate"], self.gains.columns.l_c)
