@@ -22,15 +22,23 @@ sweep in an instrumented process: start-up and imports, planning, the workers' c
 integration -- split into right-hand side and solver bookkeeping by an instrumented
 chunk -- post-processing and file writing, and the parent's share), the peak resident
 set size of the sweep's parent and of its largest worker (``getrusage`` ``ru_maxrss``),
-the end-to-end time of ``rbstab run configs/paper/case3_embedded.yaml`` (best of 3), its
-cold-start time (first run with an empty bytecode cache; rbstab has no compilation cache:
-the engine is numpy), and the wall time and memory of a ``--memory-n`` (10,000) run sweep.
+the end-to-end time of ``rbstab run configs/paper/case3_embedded.yaml`` (best of 3 with the
+bytecode cached), its cold-start time (first run with an empty bytecode cache; rbstab has no
+compilation cache: the engine is numpy), and the wall time and memory of a ``--memory-n`` (10,000) run sweep.
+
+Every timed subprocess keeps Python's bytecode in one private cache (:func:`bytecode_env`),
+filled by an untimed sweep of a few runs before the first timing, as on any machine where
+rbstab ran before; only the cold start begins from an empty one.
 
 Usage::
 
     python benchmarks/throughput.py [--n 1000] [--jobs 2] [--setting STORE:LAYOUT ...]
-                                    [--baseline-n N] [--ref-n 100] [--memory-n 10000]
+                                    [--baseline-n N] [--rounds 3] [--ref-n 100] [--memory-n 10000]
                                     [--skip-single] [--keep DIR]
+
+The host's speed drifts over minutes, so (a) is timed in ``--rounds`` slices, each followed
+by one timing of every (b) setting: (a)'s rate is over all its runs, (b)'s is the median of
+its rounds (each round is printed).
 
 ``--baseline-n`` times only that many baseline runs (the rate is per run, so a smaller
 number is a quick look; the default is all N). ``--memory-n 0`` skips the large sweep.
@@ -150,7 +158,7 @@ def run_cli_sweep(spec_path: Path, out: Path, args, store: str, layout: str) -> 
     if args.chunk_size:
         cmd += ["--chunk-size", str(args.chunk_size)]
     start = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=args.env)
     wall = time.perf_counter() - start
     if proc.returncode != 0:
         sys.exit(f"rbstab sweep failed ({proc.returncode}):\n{proc.stderr}")
@@ -164,7 +172,7 @@ def run_child(n: int, out: Path, args, store: str, layout: str) -> dict:
     if args.chunk_size:
         cmd += ["--chunk-size", str(args.chunk_size)]
     start = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=args.env)
     wall = time.perf_counter() - start
     if proc.returncode != 0:
         sys.exit(f"instrumented sweep failed:\n{proc.stderr}")
@@ -233,6 +241,16 @@ def rhs_share(n_runs: int, method: str) -> tuple[float, float]:
     return spent[0] / total, total / n_runs
 
 
+def bytecode_env(cache: str) -> dict:
+    """The environment of the timed subprocesses: Python's bytecode cache in ``cache``
+    (``PYTHONPYCACHEPREFIX``), written as Python normally does even where
+    ``PYTHONDONTWRITEBYTECODE`` is set (as in some CI images, where an editable install's
+    modules would otherwise be compiled again by every process)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPYCACHEPREFIX"] = cache
+    return env
+
+
 def single_run(env=None) -> float:
     out = Path(tempfile.mkdtemp(prefix="rbstab-single-"))
     try:
@@ -261,6 +279,7 @@ def main() -> None:
     p.add_argument("--method", default="DOP853", choices=["DOP853", "RK45"])
     p.add_argument("--chunk-size", type=int, default=None, help="sweep --chunk-size (default: the sweep's)")
     p.add_argument("--baseline-n", type=int, default=None, help="baseline runs timed (default: all N)")
+    p.add_argument("--rounds", type=int, default=3, help="slices of (a) interleaved with timings of (b) (default 3)")
     p.add_argument("--ref-n", type=int, default=100, help="runs compared with the tight reference (default 100)")
     p.add_argument("--memory-n", type=int, default=10000, help="runs of the memory sweep (0: skip)")
     p.add_argument("--skip-single", action="store_true", help="skip the single-run and cold-start timings")
@@ -281,6 +300,7 @@ def main() -> None:
     n = args.n
     parent = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="rbstab-throughput-"))
     parent.mkdir(parents=True, exist_ok=True)
+    args.env = bytecode_env(str(parent / "pycache"))
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -298,19 +318,40 @@ def main() -> None:
         print(f"baseline right-hand side vs the project's model at 20 random states: max |difference| "
               f"{rhs_check:.1e}")
 
-        # (a) the baseline
+        # (a) and (b), interleaved: the machine's speed drifts over minutes (shared host),
+        # so (a)'s runs are timed in --rounds slices with one timing of each (b) setting
+        # after every slice; (a)'s rate is over all its runs, (b)'s the median of its rounds
         n_base = min(args.baseline_n or n, n)
+        rounds = max(1, min(args.rounds, n_base))
         t_rhs = time.perf_counter()
         for _ in range(2000):
             baseline_rhs(0.0, y0[0])
         us_rhs = (time.perf_counter() - t_rhs) / 2000 * 1e6
+        warm_spec = parent / "warm-up.yaml"  # an untimed sweep of a few runs fills the bytecode
+        warm_spec.write_text(yaml.safe_dump(spec_mapping(2 * args.jobs, args.method), sort_keys=False))
+        run_cli_sweep(warm_spec, parent / "warm-up", args, *args.setting[0])  # cache, as any earlier use
+        shutil.rmtree(parent / "warm-up", ignore_errors=True)
         finals_a = np.empty((n_base, 15))
         nfev = 0
-        start = time.perf_counter()
-        for i in range(n_base):
-            finals_a[i], k = solo(y0[i], args.method, 1e-6, 1e-8, 2.0, 2001)
-            nfev += k
-        wall_a = time.perf_counter() - start
+        wall_a = 0.0
+        walls_b: dict[str, list[float]] = {f"{s}:{l}": [] for s, l in args.setting}
+        finals_b: dict[str, np.ndarray] = {}
+        for r, part in enumerate(np.array_split(np.arange(n_base), rounds)):
+            start = time.perf_counter()
+            for i in part:
+                finals_a[i], k = solo(y0[i], args.method, 1e-6, 1e-8, 2.0, 2001)
+                nfev += k
+            slice_a = time.perf_counter() - start
+            wall_a += slice_a
+            line = [f"round {r + 1}/{rounds}: (a) {len(part) / slice_a:.2f} runs/s"]
+            for store, layout in args.setting:
+                key = f"{store}:{layout}"
+                out = parent / f"cli-{store}-{layout}"
+                shutil.rmtree(out, ignore_errors=True)
+                walls_b[key].append(run_cli_sweep(spec_path, out, args, store, layout))
+                finals_b[key] = final_states(out / "throughput" / "index.csv")
+                line.append(f"(b, {key}) {n / walls_b[key][-1]:.1f} runs/s")
+            print("  " + ", ".join(line))
         rate_a = n_base / wall_a
         print(f"(a) solve_ivp one by one: {n_base} runs in {wall_a:.1f} s = {rate_a:.2f} runs/s "
               f"({1e3 / rate_a:.0f} ms per run, {nfev / n_base:.0f} RHS evaluations per run, "
@@ -322,18 +363,17 @@ def main() -> None:
         err_a = np.abs(finals_a[:n_ref] - ref).max()
         subset = "" if n_ref == n else f" (first {n_ref} of {n} runs)"
 
-        # (b) the sweep, per store and layout
         results = {}
         for store, layout in args.setting:
-            out = parent / f"cli-{store}-{layout}"
-            shutil.rmtree(out, ignore_errors=True)
-            wall_b = run_cli_sweep(spec_path, out, args, store, layout)
-            finals_b = final_states(out / "throughput" / "index.csv")
-            err_b = np.abs(finals_b[:n_ref] - ref).max()
+            key = f"{store}:{layout}"
+            wall_b = float(np.median(walls_b[key]))
+            err_b = np.abs(finals_b[key][:n_ref] - ref).max()
             rate_b = n / wall_b
-            results[f"{store}:{layout}"] = (rate_b, err_b)
+            results[key] = (rate_b, err_b)
             print(f"(b) rbstab sweep -j {args.jobs} --store {store} --layout {layout}: {n} runs in {wall_b:.2f} s "
-                  f"(process start to exit) = {rate_b:.1f} runs/s; ratio (b)/(a) = {rate_b / rate_a:.1f}")
+                  f"(process start to exit, median of {len(walls_b[key])}: "
+                  f"{', '.join(f'{w:.2f}' for w in walls_b[key])} s) = {rate_b:.1f} runs/s; "
+                  f"ratio (b)/(a) = {rate_b / rate_a:.1f}")
         print(f"max |final state - reference (rtol 1e-10)|{subset}: (a) {err_a:.2e}, "
               + ", ".join(f"(b, {s}) {e:.2e}" for s, (_, e) in results.items())
               + f"; max |final state| {np.abs(ref).max():.3g}")
@@ -375,13 +415,15 @@ def main() -> None:
 
         # single runs
         if not args.skip_single:
+            # cold: a second, empty bytecode cache, so every module (numpy, scipy, h5py,
+            # rbstab) is compiled first; warm: the benchmark's cache, filled
             with tempfile.TemporaryDirectory(prefix="rbstab-pycache-") as cache:
-                env = dict(os.environ, PYTHONPYCACHEPREFIX=cache)
-                cold = single_run(env)
-            warm = min(single_run() for _ in range(3))
+                cold = single_run(bytecode_env(cache))
+            warm = min(single_run(args.env) for _ in range(3))
             print(f"rbstab run configs/paper/case3_embedded.yaml (rtol 1e-8, scipy engine), process start to "
-                  f"file written: {warm:.2f} s (best of 3); cold start (empty bytecode cache, "
-                  f"PYTHONPYCACHEPREFIX): {cold:.2f} s. No compilation cache exists: the engine is numpy.")
+                  f"file written: {warm:.2f} s (best of 3, bytecode cached); cold start (empty bytecode cache: "
+                  f"every module of numpy, scipy, h5py and rbstab compiled first): {cold:.2f} s. "
+                  f"No compilation cache exists: the engine is numpy.")
 
         # memory of a large sweep
         if args.memory_n:
