@@ -10,7 +10,10 @@ invocation on this machine:
     compilation, no batching; checked against the project's model at random states);
 (b) the same N runs through ``rbstab sweep SPEC -j JOBS --store STORE --layout LAYOUT
     --no-progress`` (the default engine, batch), timed from process start to exit, for each
-    ``--setting STORE:LAYOUT`` (default: ``summary:chunk``, ``full:chunk``, ``summary:run``).
+    ``--setting STORE:LAYOUT`` (default: ``summary:chunk``, ``full:chunk``, ``summary:run``);
+    and through the library call behind it, ``expand`` + ``run_sweep`` on a
+    ``LocalExecutor(JOBS)`` that ran a sweep before (its workers started: a Python
+    session's second sweep), with the first setting.
 
 The time split comes from a second, identical sweep in an instrumented process that does
 what the command does (workers started before planning, ``expand``, ``run_sweep``).
@@ -165,6 +168,22 @@ def run_cli_sweep(spec_path: Path, out: Path, args, store: str, layout: str) -> 
     return wall
 
 
+def run_library_sweep(n: int, out: Path, args, store: str, layout: str, executor) -> float:
+    """(b) through the library call behind ``rbstab sweep`` in this process, on ``executor``
+    (started and used before: a session's second sweep): plan the N runs (``expand``),
+    then ``run_sweep``; wall seconds."""
+    from rbstab.sweep import expand, run_sweep, spec_from_mapping
+
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        spec = spec_from_mapping(spec_mapping(n, args.method), overrides=overrides(args.method))
+        runs = expand(spec)
+    run_sweep(spec, out, runs=runs, executor=executor, store=store, layout=layout, chunk_size=args.chunk_size,
+              progress=False, command_line="benchmark")
+    return time.perf_counter() - start
+
+
 def run_child(n: int, out: Path, args, store: str, layout: str) -> dict:
     """The sweep in a fresh, instrumented process: what ``rbstab sweep`` does, with timings."""
     cmd = [sys.executable, __file__, "--child", str(n), "--child-out", str(out), "--jobs", str(args.jobs),
@@ -196,8 +215,9 @@ def child(args) -> None:
         spec = spec_from_mapping(spec_mapping(args.child, args.method), overrides=overrides(args.method))
         runs = expand(spec)
     planned = time.time()
-    outcome = run_sweep(spec, args.child_out, runs=runs, executor=executor, store=args.store,
-                        layout=args.layout, chunk_size=args.chunk_size, progress=False, command_line="benchmark")
+    with executor:
+        outcome = run_sweep(spec, args.child_out, runs=runs, executor=executor, store=args.store,
+                            layout=args.layout, chunk_size=args.chunk_size, progress=False, command_line="benchmark")
     done = time.time()
     print(json.dumps({
         "startup": started - args.t0, "imports": imported - started, "planning": planned - imported,
@@ -214,7 +234,6 @@ def rhs_share(n_runs: int, method: str) -> tuple[float, float]:
     for one chunk of ``n_runs`` Case 3 runs, measured in this process."""
     from rbstab.batch import integrate_batch
     from rbstab.config import load_config
-    from rbstab.simulate import _PairedRhs
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -222,7 +241,6 @@ def rhs_share(n_runs: int, method: str) -> tuple[float, float]:
     rng = np.random.default_rng(1)
     y0 = np.zeros((n_runs, variant.layout.size))
     y0[:, 3:6] = rng.normal([16, 32, -16], 2, (n_runs, 3))
-    paired = _PairedRhs(variant)
     spent = [0.0]
 
     class Timed:
@@ -231,7 +249,7 @@ def rhs_share(n_runs: int, method: str) -> tuple[float, float]:
         @staticmethod
         def rhs(t, y):
             t0 = time.perf_counter()
-            out = paired.rhs(t, y)
+            out = variant.rhs(t, y)
             spent[0] += time.perf_counter() - t0
             return out
 
@@ -296,6 +314,7 @@ def main() -> None:
 
     from rbstab.config import load_config
     from rbstab.sweep import expand, spec_from_mapping
+    from rbstab.sweep.executors import LocalExecutor
 
     n = args.n
     parent = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="rbstab-throughput-"))
@@ -331,6 +350,12 @@ def main() -> None:
         warm_spec.write_text(yaml.safe_dump(spec_mapping(2 * args.jobs, args.method), sort_keys=False))
         run_cli_sweep(warm_spec, parent / "warm-up", args, *args.setting[0])  # cache, as any earlier use
         shutil.rmtree(parent / "warm-up", ignore_errors=True)
+        lib_store, lib_layout = args.setting[0]
+        lib_key = f"library {lib_store}:{lib_layout}"
+        library = LocalExecutor(args.jobs)
+        library.start()
+        run_library_sweep(2 * args.jobs, parent / "warm-up", args, lib_store, lib_layout, library)
+        shutil.rmtree(parent / "warm-up", ignore_errors=True)
         finals_a = np.empty((n_base, 15))
         nfev = 0
         wall_a = 0.0
@@ -351,7 +376,13 @@ def main() -> None:
                 walls_b[key].append(run_cli_sweep(spec_path, out, args, store, layout))
                 finals_b[key] = final_states(out / "throughput" / "index.csv")
                 line.append(f"(b, {key}) {n / walls_b[key][-1]:.1f} runs/s")
+            out = parent / "library"
+            shutil.rmtree(out, ignore_errors=True)
+            walls_b.setdefault(lib_key, []).append(run_library_sweep(n, out, args, lib_store, lib_layout, library))
+            finals_b[lib_key] = final_states(out / "throughput" / "index.csv")
+            line.append(f"(b, {lib_key}) {n / walls_b[lib_key][-1]:.1f} runs/s")
             print("  " + ", ".join(line))
+        library.close()
         rate_a = n_base / wall_a
         print(f"(a) solve_ivp one by one: {n_base} runs in {wall_a:.1f} s = {rate_a:.2f} runs/s "
               f"({1e3 / rate_a:.0f} ms per run, {nfev / n_base:.0f} RHS evaluations per run, "
@@ -364,15 +395,20 @@ def main() -> None:
         subset = "" if n_ref == n else f" (first {n_ref} of {n} runs)"
 
         results = {}
-        for store, layout in args.setting:
-            key = f"{store}:{layout}"
-            wall_b = float(np.median(walls_b[key]))
+        for key, walls in walls_b.items():
+            wall_b = float(np.median(walls))
             err_b = np.abs(finals_b[key][:n_ref] - ref).max()
             rate_b = n / wall_b
             results[key] = (rate_b, err_b)
-            print(f"(b) rbstab sweep -j {args.jobs} --store {store} --layout {layout}: {n} runs in {wall_b:.2f} s "
-                  f"(process start to exit, median of {len(walls_b[key])}: "
-                  f"{', '.join(f'{w:.2f}' for w in walls_b[key])} s) = {rate_b:.1f} runs/s; "
+            if key == lib_key:
+                what = (f"run_sweep(executor=LocalExecutor({args.jobs}), store={lib_store!r}, layout={lib_layout!r}) "
+                        f"after an earlier sweep on the same executor (workers started; planning included)")
+            else:
+                store, layout = key.split(":")
+                what = (f"rbstab sweep -j {args.jobs} --store {store} --layout {layout} "
+                        f"(process start to exit)")
+            print(f"(b) {what}: {n} runs in {wall_b:.2f} s (median of {len(walls)}: "
+                  f"{', '.join(f'{w:.2f}' for w in walls)} s) = {rate_b:.1f} runs/s; "
                   f"ratio (b)/(a) = {rate_b / rate_a:.1f}")
         print(f"max |final state - reference (rtol 1e-10)|{subset}: (a) {err_a:.2e}, "
               + ", ".join(f"(b, {s}) {e:.2e}" for s, (_, e) in results.items())

@@ -134,6 +134,9 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
             err=True,
         )
         raise SystemExit(130)
+    finally:
+        if not isinstance(ex, str):
+            ex.close()
 
     c = outcome.counts
     pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0

@@ -202,3 +202,21 @@ def test_chunk_bytes_for_workers_without_the_sweep_folder(tmp_path):
     rows = read_chunk_rows(path)
     assert [row["name"] for row in rows] == [r.run_id for r in runs]
     assert [r["attrs"] for r in records] == rows
+
+
+def test_an_executor_passed_in_stays_open_for_the_next_sweep(tmp_path):
+    """run_sweep closes an executor it made, never one it was given: a session's second
+    sweep finds the workers started (and gives the same results)."""
+    from rbstab.sweep.executors import LocalExecutor
+
+    with LocalExecutor(2) as ex:
+        first = run_sweep(spec(4, "warm1"), tmp_path, executor=ex, layout="chunk", store="summary", progress=False)
+        pool = ex._pool
+        assert pool is not None  # still running
+        second = run_sweep(spec(4, "warm2"), tmp_path, executor=ex, layout="chunk", store="summary", progress=False)
+        assert ex._pool is pool  # the same worker processes
+    assert ex._pool is None  # closed by its owner
+    assert first.counts == second.counts == {"success": 4, "failed": 0, "error": 0, "pending": 0}
+    a = pd.read_csv(tmp_path / "warm1" / "index.csv")
+    b = pd.read_csv(tmp_path / "warm2" / "index.csv")
+    np.testing.assert_array_equal(a["final_omega_x"], b["final_omega_x"])

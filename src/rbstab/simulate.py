@@ -327,28 +327,6 @@ def _results_of_block(configs, variant, sol, block: range, chunk, share) -> list
     return results
 
 
-class _PairedRhs:
-    """``variant``'s right-hand side evaluated on at least two rows.
-
-    numpy hands a (3, 3) @ (3, 1) product to a different BLAS kernel than (3, 3) @ (3, m)
-    for m >= 2, which rounds differently; a run left alone in its batch (the last one
-    still stepping) would then take slightly different bits from the same run in company.
-    Evaluating a lone row twice makes every run's trajectory independent of the other
-    runs of its chunk, so a sweep gives the same bits whatever its chunking, -j or resume.
-    """
-
-    def __init__(self, variant) -> None:
-        self.variant = variant
-        self.layout = variant.layout
-        self.name = variant.name
-
-    def rhs(self, t, y):
-        if y.ndim == 2 and y.shape[0] == 1:
-            t2 = np.concatenate([t, t]) if np.ndim(t) == 2 else t
-            return self.variant.rhs(t2, np.concatenate([y, y]))[:1]
-        return self.variant.rhs(t, y)
-
-
 def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chunk_size: int = 512) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
 
@@ -388,7 +366,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chun
             start = _time.perf_counter()
             y0 = np.stack([variant.initial_state(configs[i].initial_state) for i in chunk])
             sol = integrate_batch(
-                _PairedRhs(variant),
+                variant,
                 y0,
                 sim.t_end,
                 sim.n_samples,

@@ -353,7 +353,10 @@ def run_sweep(
     runs : sequence of PlannedRun, optional
         ``expand(spec)`` if already computed.
     executor : {"local", "dask"} or Executor
-        Where the runs execute (see :mod:`rbstab.sweep.executors`).
+        Where the runs execute (see :mod:`rbstab.sweep.executors`). An executor made
+        from a name is closed when the sweep ends; an :class:`Executor` passed in is
+        not (the caller closes it, e.g. ``with LocalExecutor(2) as ex:``), so several
+        sweeps can share its started workers.
     jobs : int, optional
         Local processes (default: all CPUs); ignored by Dask.
     scheduler : str, optional
@@ -423,11 +426,14 @@ def run_sweep(
     if command_line is None:
         command_line = " ".join(sys.argv)
     # the executor first: a missing package or an unreachable scheduler writes nothing
-    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if isinstance(executor, str) else executor
+    owned = isinstance(executor, str)
+    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if owned else executor
     directory = Path(output) / spec.name
     runs_dir = directory / RUNS_DIR
     outcome = SweepOutcome(spec.name, directory, len(runs), engine=engine)
-    with ex:
+    # an executor made here is closed here; one passed in belongs to the caller, whose
+    # next sweep finds its workers started (numpy, scipy, h5py and rbstab imported)
+    with ex if owned else contextlib.nullcontext(ex):
         runs_dir.mkdir(parents=True, exist_ok=True)
         _run_locked(spec, runs, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
                     chunk_size=chunk_size, progress=progress, say=say,
