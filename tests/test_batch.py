@@ -92,6 +92,21 @@ def test_batch_matches_solo_solve_ivp(variant, method):
 
 
 @pytest.mark.parametrize("method", ["RK45", "DOP853"])
+def test_samples_of_a_run_do_not_depend_on_its_company(method):
+    """Runs whose steps hold different numbers of samples (the dense output is evaluated
+    for sorted rows, a few samples at a time): each run's samples are bit for bit those
+    it gets integrated alone."""
+    variant = make_variant("embedded")
+    y0 = initial_states(variant, 6)
+    y0[:, variant.layout.slice("omega")] *= np.array([1.0, 3.0, 0.3, 2.0, 0.6, 1.5])[:, None]
+    together = integrate_batch(variant, y0, 0.05, 301, method=method, rtol=1e-6, atol=1e-8)
+    for i in range(6):
+        alone = integrate_batch(variant, y0[i : i + 1], 0.05, 301, method=method, rtol=1e-6, atol=1e-8)
+        np.testing.assert_array_equal(together.y[i], alone.y[0])
+        np.testing.assert_array_equal(together.y_final[i], alone.y_final[0])
+
+
+@pytest.mark.parametrize("method", ["RK45", "DOP853"])
 def test_many_samples_per_step(method):
     """Dense sampling far finer than the steps (several samples per step, some steps
     with none): every sample comes from the interpolant of the step holding it."""

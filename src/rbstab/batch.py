@@ -288,6 +288,11 @@ def iter_chunks(n: int, chunk_size: int) -> Iterator[np.ndarray]:
         yield np.arange(start, min(start + chunk_size, n))
 
 
+#: Samples per row evaluated together when a step's dense output is written: the
+#: temporaries (SAMPLE_BLOCK x rows x n_state floats) stay in the CPU caches.
+SAMPLE_BLOCK = 4
+
+
 class _Dense:
     """Dense-output interpolants of one step for a subset of the runs.
 
@@ -320,12 +325,15 @@ class _Dense:
     def __call__(self, rows: np.ndarray | None, x: np.ndarray) -> np.ndarray:
         """States at normalised times ``x = (t - t_old) / h`` (shape (p,)) of subset
         ``rows`` (shape (p,); None: every row once, in order); returns shape (p, n)."""
-        xc = x[:, None]
         if rows is None:
-            coef, y_old, h = self.coef, self.y_old, self.h
-        else:
-            coef = np.take(self.coef, rows, axis=1)  # one gather, (J, p, n)
-            y_old, h = self.y_old[rows], self.h[rows]
+            return self.evaluate(self.coef, self.y_old, self.h, x[:, None])
+        # one gather, (J, p, n)
+        return self.evaluate(np.take(self.coef, rows, axis=1), self.y_old[rows], self.h[rows], x[:, None])
+
+    def evaluate(self, coef: np.ndarray, y_old: np.ndarray, h: np.ndarray, xc: np.ndarray) -> np.ndarray:
+        """The interpolant with coefficients ``coef`` (J, p, n) of p rows (``y_old`` (p, n),
+        ``h`` (p,)) at ``xc``, shape (p, 1) or (k, p, 1) (k times per row); returns ``xc``'s
+        leading shape + (n,). scipy's operations in scipy's order, elementwise."""
         if self.is_dop853:
             # scipy: y = 0; for each coefficient (reversed): y += F; y *= x or (1 - x)
             one_minus = 1 - xc
@@ -388,21 +396,38 @@ class _DenseStep:
         return _Dense(self.tab, self.K, self.t_old, self.h, self.y_old, self.y_new, self.f_old, self.f_new)
 
     def write_samples(self, dense: _Dense, ts: np.ndarray, out_y: np.ndarray, hi=None) -> None:
-        """Evaluate and store samples lo .. hi-1 of every row (vectorised gather)."""
+        """Evaluate and store samples lo .. hi-1 of every row.
+
+        The rows are sorted by their number of samples in this step (most first; one
+        gather of the coefficients), so the rows that have a j-th sample are a prefix;
+        samples are then evaluated :data:`SAMPLE_BLOCK` at a time per row on that prefix
+        (:meth:`_Dense.evaluate`, the same operations as one at a time), a handful of
+        values beyond a row's last sample computed and not stored.
+        """
         lo = self.lo
         counts = (self.hi if hi is None else hi) - lo
-        if np.all(counts == 1):  # the common case: one sample in every step
-            x = (ts[lo] - self.t_old) / self.h
-            out_y[self.gidx, lo] = dense(None, x)
-            return
         total = int(counts.sum())
         if not total:
             return
-        rows = np.repeat(np.arange(lo.size), counts)
-        starts = np.cumsum(counts) - counts
-        sidx = lo[rows] + (np.arange(total) - starts[rows])
-        x = (ts[sidx] - self.t_old[rows]) / self.h[rows]
-        out_y[self.gidx[rows], sidx] = dense(rows, x)
+        if counts.size > 1 and np.any(counts != counts[0]):
+            order = np.argsort(-counts, kind="stable")
+            counts, lo = counts[order], lo[order]
+            coef = np.take(dense.coef, order, axis=1)
+            y_old, h, t_old, gidx = dense.y_old[order], dense.h[order], dense.t_old[order], self.gidx[order]
+        else:
+            coef, y_old, h, t_old, gidx = dense.coef, dense.y_old, dense.h, dense.t_old, self.gidx
+        last = len(ts) - 1
+        for k0 in range(0, int(counts[0]), SAMPLE_BLOCK):
+            p = int(np.count_nonzero(counts > k0))  # rows with a sample k0: a prefix
+            k = np.arange(k0, min(k0 + SAMPLE_BLOCK, int(counts[0])))[:, None]
+            s = lo[:p] + k  # (block, p) sample indices
+            x = (ts[np.minimum(s, last)] - t_old[:p]) / h[:p]
+            y = dense.evaluate(coef[:, :p], y_old[:p], h[:p], x[:, :, None])
+            valid = k < counts[:p]
+            if valid.all():
+                out_y[gidx[:p], s] = y
+            else:
+                out_y[np.broadcast_to(gidx[:p], s.shape)[valid], s[valid]] = y[valid]
 
 
 def _locate_crossing(dense: _Dense, rows: np.ndarray, sign: np.ndarray, limit: float) -> np.ndarray:
