@@ -27,9 +27,10 @@ A run of the batch therefore takes the same steps as
 ``solve_ivp(variant.rhs, (0, t_end), y0[i], method=..., rtol=..., atol=...,
 dense_output=True)`` and its samples agree with that solution's ``.sol(t)`` to round-off
 (about 1e-14 relative in the tests), not merely to the tolerance. The results are not
-bit-identical: the stage sums are one BLAS gemv over the whole batch instead of one
-per run (and the variant's own stacked arithmetic may round differently), so they
-differ in the summation order. Caveat: DOP853's error estimate is a strongly cancelling
+bit-identical to the solo solve: the stage sums are one ``einsum`` over the whole batch
+(:func:`_lincomb`) instead of scipy's per-run products, which may sum in another order.
+They are bit-identical to the same run integrated alone or in any other batch (every
+operation acts on each run's rows alone). Caveat: DOP853's error estimate is a strongly cancelling
 sum, so at loose tolerances a few ulps in the stages can move a step size by ~1e-7
 relative or flip an accept/reject decision that sits on the threshold; the run then
 follows a slightly different, equally valid step sequence and agrees with the solo
