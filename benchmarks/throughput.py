@@ -229,9 +229,9 @@ def child(args) -> None:
     }))
 
 
-def rhs_share(n_runs: int, method: str) -> tuple[float, float]:
-    """(share of the batch integration spent in the right-hand side, integration s per run)
-    for one chunk of ``n_runs`` Case 3 runs, measured in this process."""
+def rhs_share(n_runs: int, method: str) -> float:
+    """Share of the batch integration spent in the right-hand side, for one chunk of
+    ``n_runs`` Case 3 runs, measured in this process."""
     from rbstab.batch import integrate_batch
     from rbstab.config import load_config
 
@@ -255,8 +255,7 @@ def rhs_share(n_runs: int, method: str) -> tuple[float, float]:
 
     start = time.perf_counter()
     integrate_batch(Timed, y0, 2.0, 2001, method=method, rtol=1e-6, atol=1e-8)
-    total = time.perf_counter() - start
-    return spent[0] / total, total / n_runs
+    return spent[0] / (time.perf_counter() - start)
 
 
 def bytecode_env(cache: str) -> dict:
@@ -423,7 +422,7 @@ def main() -> None:
             t = info["timing"]
             chunk = chunk or max(1, -(-n // max(info["n_chunks"], 1)))
             if share is None:  # the right-hand side's share does not depend on the store
-                share, _ = rhs_share(chunk, args.method)
+                share = rhs_share(chunk, args.method)
             busy = sum(t.values())
             other = info["run_sweep"] - busy / args.jobs
             print(f"time split of (b) --store {store} --layout {layout} (instrumented run: {info['wall']:.2f} s wall, "

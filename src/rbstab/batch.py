@@ -396,7 +396,7 @@ class _DenseStep:
     def dense(self) -> _Dense:
         return _Dense(self.tab, self.K, self.t_old, self.h, self.y_old, self.y_new, self.f_old, self.f_new)
 
-    def write_samples(self, dense: _Dense, ts: np.ndarray, out_y: np.ndarray, hi=None) -> None:
+    def write_samples(self, dense: _Dense, ts: np.ndarray, out_y: np.ndarray) -> None:
         """Evaluate and store samples lo .. hi-1 of every row.
 
         The rows are sorted by their number of samples in this step (most first; one
@@ -406,9 +406,8 @@ class _DenseStep:
         values beyond a row's last sample computed and not stored.
         """
         lo = self.lo
-        counts = (self.hi if hi is None else hi) - lo
-        total = int(counts.sum())
-        if not total:
+        counts = self.hi - lo
+        if not counts.any():
             return
         if counts.size > 1 and np.any(counts != counts[0]):
             order = np.argsort(-counts, kind="stable")

@@ -245,9 +245,11 @@ def simulate(config: "RunConfig", timeout: float | None = None) -> RunResult:
 
 
 def batch_key(config: "RunConfig") -> str:
-    """Configs with equal keys differ at most in name and initial state: one batch."""
-    resolved = {k: v for k, v in config.resolved.items() if k not in ("name", "initial_state")}
-    return repr(resolved)
+    """Configs with equal keys differ at most in name and initial state: one batch
+    (:func:`rbstab.config.group_key` of ``config.resolved``)."""
+    from .config import group_key
+
+    return group_key(config.resolved)
 
 
 #: Runs whose outputs :func:`simulate_many` evaluates together before yielding them (the
@@ -289,7 +291,8 @@ def _results_of_block(configs, variant, sol, block: range, chunk, share) -> list
 
     The block's samples are evaluated :data:`EVALUATE_RUNS` runs per call, the numerical
     rate of v for the whole block in one spline solve, the summaries all at once; a run's
-    outputs are views of the block's arrays (C-contiguous). Everything is elementwise or
+    outputs are views of the arrays of its :meth:`Variant.evaluate` call (vectors
+    strided, see there). Everything is elementwise or
     per run, so a run gets the same bits whatever else is in its block or chunk.
     """
     t0 = _time.perf_counter()

@@ -48,7 +48,7 @@ one mapping is an error instead of silently keeping the last value.
 """
 
 from .errors import ConfigError, PhysicalPlausibilityWarning
-from .loader import RunConfig, config_from_mapping, load_config
+from .loader import PER_RUN_SECTIONS, RunConfig, config_from_mapping, group_key, load_config
 from .paths import apply_overrides, get_dotted, set_dotted
 from .schema import GAIN_NAMES, GAIN_UNITS, INITIAL_STATE_BLOCKS, SimulationSettings
 from .yaml_io import dump_yaml, parse_yaml
@@ -60,6 +60,8 @@ __all__ = [
     "SimulationSettings",
     "load_config",
     "config_from_mapping",
+    "group_key",
+    "PER_RUN_SECTIONS",
     "apply_overrides",
     "set_dotted",
     "get_dotted",

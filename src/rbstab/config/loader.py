@@ -30,7 +30,29 @@ from .schema import (
 )
 from .yaml_io import dump_yaml_sections, read_yaml_file
 
-__all__ = ["RunConfig", "config_from_mapping", "load_config"]
+__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS", "group_key"]
+
+#: Top-level sections in which the runs of one group may differ (a sweep's runs that share
+#: everything else are validated once, integrated as one batch and written with cached YAML).
+PER_RUN_SECTIONS = ("name", "initial_state")
+
+
+def group_key(resolved: Mapping) -> str:
+    """Key of a configuration mapping without its :data:`PER_RUN_SECTIONS`.
+
+    Parameters
+    ----------
+    resolved : Mapping
+        A configuration as a plain mapping (``RunConfig.resolved``, or the data of a run
+        before validation).
+
+    Returns
+    -------
+    str
+        Equal for two mappings exactly when they differ at most in ``name`` and
+        ``initial_state`` (the ``repr`` of the rest, in key order).
+    """
+    return repr({k: v for k, v in resolved.items() if k not in PER_RUN_SECTIONS})
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,7 +93,7 @@ class RunConfig:
 
     def to_yaml(self) -> str:
         """``resolved`` as YAML (keys in schema order, lists in flow style)."""
-        return dump_yaml_sections(self.resolved, fresh=("name", "initial_state"))
+        return dump_yaml_sections(self.resolved, fresh=PER_RUN_SECTIONS)
 
     def with_initial_state(self, initial_state: Any, *, name: str | None = None, source: str | None = None) -> "RunConfig":
         """This configuration with another ``initial_state`` section, validated.

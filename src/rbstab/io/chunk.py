@@ -327,7 +327,29 @@ def _is_per_run(key: str) -> bool:
 
 
 def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.ndarray | None]:
-    """``time`` and the variables ``names`` of run ``row`` of a chunk file (None if absent)."""
+    """The time series of one run of a chunk file.
+
+    Parameters
+    ----------
+    path : path-like
+        A chunk file (:func:`is_chunk_file`).
+    row : int
+        The run's row (``file_row`` in the sweep's ``index.csv``).
+    names : iterable of str
+        Output variables (:data:`rbstab.io.hdf5.VARIABLE_UNITS` keys).
+
+    Returns
+    -------
+    dict
+        ``time``: sample times [s], shape (n,); each name: its values, shape (n,) or
+        (n, 3) in the variable's frame, or None when the file does not hold it (e.g.
+        ``store = "summary"``); ``units:<name>``: its units (str) for each name held.
+
+    Raises
+    ------
+    OSError
+        If ``path`` cannot be opened as HDF5.
+    """
     import h5py
 
     out: dict[str, Any] = {}

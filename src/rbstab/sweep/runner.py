@@ -238,9 +238,12 @@ def _current(run: PlannedRun, runs_dir: Path, chunk_rows: Mapping[str, list[dict
     return max(current, key=lambda a: str(a.get("created", ""))) if current else None
 
 
-def _scan(runs: Sequence[PlannedRun], runs_dir: Path, retry_failed: bool) -> tuple[dict, list]:
-    """(run_id -> attrs of its current result, runs to execute)."""
-    chunk_rows = _chunk_rows(runs_dir)
+def _scan(runs: Sequence[PlannedRun], runs_dir: Path, retry_failed: bool,
+          chunk_rows: Mapping[str, list[dict]] | None = None) -> tuple[dict, list]:
+    """(run_id -> attrs of its current result, runs to execute); ``chunk_rows`` as
+    :func:`_chunk_rows` gives them (read here when not given)."""
+    if chunk_rows is None:
+        chunk_rows = _chunk_rows(runs_dir)
     done: dict[str, dict] = {}
     todo: list[PlannedRun] = []
     for run in runs:
@@ -252,12 +255,12 @@ def _scan(runs: Sequence[PlannedRun], runs_dir: Path, retry_failed: bool) -> tup
     return done, todo
 
 
-def _stale_files(runs: Sequence[PlannedRun], runs_dir: Path) -> list[str]:
+def _stale_files(runs: Sequence[PlannedRun], runs_dir: Path, chunk_rows: Mapping[str, list[dict]]) -> list[str]:
     """Result files in ``runs_dir`` that hold no run of ``runs`` (run files by name, chunk
-    files by their rows)."""
+    files by their rows, ``chunk_rows`` as :func:`_chunk_rows` gives them)."""
     ids = {r.run_id for r in runs}
     stale = [p.name for p in runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
-    used = {row["file"] for rows in _chunk_rows(runs_dir).values() for row in rows if row["name"] in ids}
+    used = {row["file"] for rows in chunk_rows.values() for row in rows if row["name"] in ids}
     stale += [p.name for p in runs_dir.glob(CHUNK_GLOB) if p.name not in used]
     return sorted(stale)
 
@@ -459,8 +462,9 @@ def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, c
                     say(f"note: the spec differs from the one in {spec_path}; runs whose config changed are rerun")
         write_text_atomic(spec_path, _dump_yaml(doc))
 
-        outcome.stale_files = _stale_files(runs, runs_dir)
-        attrs, todo = _scan(runs, runs_dir, retry_failed)
+        chunk_rows = _chunk_rows(runs_dir)  # every chunk file read once
+        outcome.stale_files = _stale_files(runs, runs_dir, chunk_rows)
+        attrs, todo = _scan(runs, runs_dir, retry_failed, chunk_rows)
         outcome.n_skipped = len(attrs)
         errors: dict[str, str] = {}
         if not todo:

@@ -873,7 +873,7 @@ def _plan_run(
     validated config: a run that differs from an earlier one only there is validated by
     :meth:`RunConfig.with_initial_state` (same result, ~10x cheaper).
     """
-    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, group_key
 
     data = _own_sections(base.data, [*params, *factors])
     problems: list[str] = []
@@ -894,7 +894,7 @@ def _plan_run(
         return None, problems
     data["name"] = "sweep-run"  # replaced by the run id below
     source = f"base '{base.label}'"
-    group = repr({k: v for k, v in data.items() if k not in ("name", "initial_state")})
+    group = group_key(data)
     try:
         with warnings.catch_warnings():
             # kept in config.warnings; the CLI prints a digest instead of one per run

@@ -33,7 +33,6 @@ not reopen any file, and resume and the index work the same.
 
 from __future__ import annotations
 
-import dataclasses
 import sys
 import tempfile
 import time as _time
@@ -43,8 +42,6 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 __all__ = ["RunTask", "WorkerOptions", "run_chunk", "ENGINES", "DEFAULT_CHUNK_SIZE"]
 
@@ -240,31 +237,25 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     """RunConfigs of ``tasks`` (None where it failed) and error records (``sink.error``).
 
     One ``config_from_mapping`` per group of tasks whose resolved configs differ only in
-    ``name`` and ``initial_state``; the others of the group are that config with their
-    own name, initial state and resolved mapping (``dataclasses.replace``, as
-    :func:`rbstab.sweep.spec.expand` names its runs). Each task's config was validated
-    when the sweep was planned.
+    ``name`` and ``initial_state`` (:func:`rbstab.config.group_key`); the others of the
+    group are that config with their own name and initial state
+    (:meth:`rbstab.config.RunConfig.with_initial_state`, as the sweep planned them).
     """
-    from ..config import INITIAL_STATE_BLOCKS
+    from ..config import PhysicalPlausibilityWarning, group_key
 
     validated: dict[str, Any] = {}
     configs: list = []
     errors: list[dict[str, Any]] = []
     for task in tasks:
-        key = repr({k: v for k, v in task.config.items() if k not in ("name", "initial_state")})
+        key = group_key(task.config)
         try:
             first = validated.get(key)
             if first is None:
                 config = validated[key] = _config(task)
             else:
-                initial = task.config["initial_state"]
-                state = {}
-                for name, block in INITIAL_STATE_BLOCKS.items():
-                    value = np.array(initial[name], dtype=float)
-                    value.setflags(write=False)
-                    state[block] = value
-                config = dataclasses.replace(first, name=task.config["name"], initial_state=state,
-                                             resolved=task.config)
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+                    config = first.with_initial_state(task.config["initial_state"], name=task.config["name"])
             configs.append(config)
         except Exception as exc:
             configs.append(None)
