@@ -29,6 +29,33 @@ OMEGA0 = np.array([16.0, 32.0, -16.0])
 VARIANT_NAMES = ("free", "permanent", "sliding", "visco_elastic", "embedded")
 
 
+
+def test_rk_tableaus_are_scipys():
+    """rbstab.rk_tableaus (the batch engine's copy, so workers need not import
+    scipy.integrate) holds exactly the installed scipy's numbers and messages."""
+    from scipy.integrate._ivp import dop853_coefficients
+    from scipy.integrate._ivp import rk
+    from scipy.integrate._ivp.base import OdeSolver
+    from scipy.integrate._ivp.ivp import MESSAGES
+
+    from rbstab import rk_tableaus
+
+    for method in SUPPORTED_METHODS:
+        ours, theirs = rk_tableaus.TABLEAUS[method], getattr(rk, method)
+        for key in ("order", "error_estimator_order", "n_stages"):
+            assert getattr(ours, key) == getattr(theirs, key), (method, key)
+        keys = ["C", "A", "B"] + (["E3", "E5", "D"] if method == "DOP853" else ["E", "P"])
+        for key in keys:
+            np.testing.assert_array_equal(getattr(ours, key), getattr(theirs, key), err_msg=f"{method}.{key}")
+        assert set(vars(ours)) == {"order", "error_estimator_order", "n_stages", *keys}
+    for key in ("A", "C"):
+        np.testing.assert_array_equal(getattr(rk_tableaus.DOP853_EXTENDED, key), getattr(dop853_coefficients, key))
+    assert rk_tableaus.DOP853_EXTENDED.N_STAGES_EXTENDED == dop853_coefficients.N_STAGES_EXTENDED
+    assert rk_tableaus.DOP853_EXTENDED.INTERPOLATOR_POWER == dop853_coefficients.INTERPOLATOR_POWER
+    assert (rk_tableaus.SAFETY, rk_tableaus.MIN_FACTOR, rk_tableaus.MAX_FACTOR) == (rk.SAFETY, rk.MIN_FACTOR, rk.MAX_FACTOR)
+    assert rk_tableaus.SUCCESS_MESSAGE == MESSAGES[0]
+    assert rk_tableaus.TOO_SMALL_STEP_MESSAGE == OdeSolver.TOO_SMALL_STEP
+
 def make_variant(name: str):
     gravity = np.array([0.0, 0.0, -10.0]) if name in ("permanent", "free") else np.zeros(3)
     body = RigidBody(41.0, D([10.0, 8.0, 0.4]), np.array([0.15, 0.10, -0.42]), gravity)

@@ -24,7 +24,7 @@ from click.testing import CliRunner
 from rbstab import simulate as simulate_module
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
-from rbstab.simulate import numerical_rates, simulate, simulate_many
+from rbstab.simulate import simulate, simulate_many
 from rbstab.summary import numerical_rate
 from rbstab.sweep import expand, run_sweep, spec_from_mapping
 from rbstab.sweep.runner import resolve_engine
@@ -169,15 +169,33 @@ def test_a_run_gets_the_same_bits_whatever_its_batch():
             assert np.array_equal(other.outputs[key], value), key
 
 
-def test_numerical_rates_equal_numerical_rate_row_by_row():
+def test_numerical_rate_is_exact_for_degree_6_and_of_6th_order():
+    """The 7-point stencils differentiate polynomials of degree <= 6 exactly on any grid
+    (here non-uniform), and the error of a smooth signal falls as h^6."""
+    rng = np.random.default_rng(1)
+    t = np.sort(rng.uniform(0.0, 2.0, 40))
+    coefficients = rng.standard_normal(7)
+    poly = np.polynomial.Polynomial(coefficients)
+    np.testing.assert_allclose(numerical_rate(t, poly(t)), poly.deriv()(t), rtol=0, atol=1e-8)
+    errors = []
+    for n in (101, 201):
+        t = np.linspace(0.0, 2.0, n)
+        errors.append(np.abs(numerical_rate(t, np.sin(5 * t)) - 5 * np.cos(5 * t)).max())
+    assert errors[0] / errors[1] > 2**6 * 0.7, errors
+
+
+def test_numerical_rate_of_rows_equals_numerical_rate_row_by_row():
     t = np.linspace(0.0, 1.0, 101)
     rng = np.random.default_rng(0)
     v = np.cumsum(rng.standard_normal((5, 101)), axis=1)
     v[3, 60:] = np.nan  # a failed run's tail
-    got = numerical_rates(t, v)
+    v[4, 1:] = np.nan  # one finite sample: no derivative
+    got = numerical_rate(t, v)
     for i in range(5):
         assert np.array_equal(got[i], numerical_rate(t, v[i]), equal_nan=True)
-    short = numerical_rates(t[:4], v[:, :4])
+    assert np.isfinite(got[3, :60]).all() and np.isnan(got[3, 60:]).all()
+    assert np.isnan(got[4]).all()
+    short = numerical_rate(t[:4], v[:, :4])
     assert np.array_equal(short[0], numerical_rate(t[:4], v[0, :4]))
 
 

@@ -10,7 +10,8 @@ the steps it would take alone under :func:`scipy.integrate.solve_ivp`.
 What is mirrored from scipy (``scipy.integrate._ivp.rk``, per run)
 --------------------------------------------------------------------
 - the tableaus themselves (``RK23``, ``RK45``, ``DOP853`` class attributes and
-  ``dop853_coefficients``: no coefficient is copied here);
+  ``dop853_coefficients``), copied in :mod:`rbstab.rk_tableaus` so that sweep workers
+  never import ``scipy.integrate`` (a test checks them against scipy's, bit for bit);
 - the initial step (``common.select_initial_step``), the tolerance validation
   (``rtol`` raised to ``100 eps`` with a warning), the RMS error norm of
   ``error / (atol + rtol * max(|y|, |y_new|))``, DOP853's combined 5th/3rd-order error
@@ -75,11 +76,15 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.integrate._ivp import dop853_coefficients
-from scipy.integrate._ivp.base import OdeSolver
-from scipy.integrate._ivp.common import EPS
-from scipy.integrate._ivp.ivp import MESSAGES
-from scipy.integrate._ivp.rk import DOP853, MAX_FACTOR, MIN_FACTOR, RK23, RK45, SAFETY
+from .rk_tableaus import (
+    DOP853_EXTENDED,
+    MAX_FACTOR,
+    MIN_FACTOR,
+    SAFETY,
+    SUCCESS_MESSAGE,
+    TABLEAUS,
+    TOO_SMALL_STEP_MESSAGE,
+)
 
 __all__ = [
     "BatchSolution",
@@ -94,13 +99,8 @@ __all__ = [
 #: Methods accepted by :func:`integrate_batch` (scipy's explicit Runge-Kutta pairs).
 SUPPORTED_METHODS = ("RK23", "RK45", "DOP853")
 
-#: scipy's message for a run that reached ``t_end``.
-SUCCESS_MESSAGE = MESSAGES[0]
-
-#: scipy's message for a step size below ``10 * spacing(t)``.
-TOO_SMALL_STEP_MESSAGE = OdeSolver.TOO_SMALL_STEP
-
-_SOLVERS = {"RK23": RK23, "RK45": RK45, "DOP853": DOP853}
+#: Machine epsilon of float64 (scipy's ``common.EPS``).
+EPS = float(np.finfo(float).eps)
 
 #: Index of theta_2 in every state layout (theta is y[..., 0:3]).
 _THETA_2 = 1
@@ -161,13 +161,13 @@ class BatchSolution:
 
 
 # ---------------------------------------------------------------------------------
-# tableaus (taken from scipy, never copied)
+# tableaus (scipy's numbers, from rbstab.rk_tableaus)
 # ---------------------------------------------------------------------------------
 class _Tableau:
     """The coefficients of one of scipy's explicit RK solvers, in the form used here."""
 
     def __init__(self, method: str) -> None:
-        solver = _SOLVERS[method]
+        solver = TABLEAUS[method]
         self.method = method
         self.n_stages = solver.n_stages
         self.A = np.asarray(solver.A, dtype=float)
@@ -183,10 +183,10 @@ class _Tableau:
             self.E3 = np.asarray(solver.E3, dtype=float)
             self.E53 = np.stack([self.E5, self.E3])
             self.D = np.asarray(solver.D, dtype=float)
-            self.n_k = dop853_coefficients.N_STAGES_EXTENDED
-            a_full = dop853_coefficients.A
+            self.n_k = DOP853_EXTENDED.N_STAGES_EXTENDED
+            a_full = DOP853_EXTENDED.A
             self.extra = [
-                (s, a_full[s, :s].copy(), float(dop853_coefficients.C[s]))
+                (s, a_full[s, :s].copy(), float(DOP853_EXTENDED.C[s]))
                 for s in range(self.n_stages + 1, self.n_k)
             ]
         else:
@@ -197,7 +197,7 @@ class _Tableau:
 
 
 def _tableau(method: str) -> _Tableau:
-    if not isinstance(method, str) or method not in _SOLVERS:
+    if not isinstance(method, str) or method not in TABLEAUS:
         raise ValueError(
             f"unsupported method {method!r} for batch integration; supported: "
             f"{', '.join(SUPPORTED_METHODS)}"
@@ -313,7 +313,7 @@ class _Dense:
         if tab.is_dop853:
             hc = h[:, None]
             delta_y = y_new - y_old
-            F = np.empty((dop853_coefficients.INTERPOLATOR_POWER, md, n))
+            F = np.empty((DOP853_EXTENDED.INTERPOLATOR_POWER, md, n))
             F[0] = delta_y
             F[1] = hc * f_old - delta_y
             F[2] = 2 * delta_y - hc * (f_new + f_old)

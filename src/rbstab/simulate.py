@@ -30,7 +30,6 @@ __all__ = [
     "simulate",
     "simulate_many",
     "batch_key",
-    "numerical_rates",
     "solve",
     "gimbal_lock_event",
     "evaluate_outputs",
@@ -253,7 +252,7 @@ def batch_key(config: "RunConfig") -> str:
 
 
 #: Runs whose outputs :func:`simulate_many` evaluates together before yielding them (the
-#: numerical rate of v is one spline solve for all of them, the summaries are computed for
+#: numerical rate of v is one finite-difference pass for all of them, the summaries are computed for
 #: all at once); bounds the memory of outputs held at once to this many runs.
 POSTPROCESS_BLOCK = 32
 
@@ -263,34 +262,11 @@ POSTPROCESS_BLOCK = 32
 EVALUATE_RUNS = 4
 
 
-def numerical_rates(time: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """:func:`rbstab.summary.numerical_rate` of every row of ``values`` (shape (m, n)).
-
-    Rows that are finite throughout share one quintic-spline solve (the same spline, the
-    same numbers: scipy solves each right-hand side column of the collocation system
-    independently); rows with a NaN tail (failed runs) go one by one.
-    """
-    from scipy.interpolate import make_interp_spline
-
-    values = np.asarray(values, dtype=float)
-    out = np.empty_like(values)
-    finite = np.all(np.isfinite(values), axis=1)
-    whole = np.flatnonzero(finite) if len(time) >= 6 else np.array([], dtype=int)
-    if whole.size > 1:
-        spline = make_interp_spline(time, values[whole].T, k=5)
-        out[whole] = spline.derivative()(time).T
-    else:
-        whole = np.array([], dtype=int)
-    for i in np.setdiff1d(np.arange(len(values)), whole):
-        out[i] = numerical_rate(time, values[i])
-    return out
-
-
 def _results_of_block(configs, variant, sol, block: range, chunk, share) -> list[tuple[int, RunResult]]:
     """Post-process runs ``block`` (a range of indices into the batch ``sol``) into RunResults.
 
     The block's samples are evaluated :data:`EVALUATE_RUNS` runs per call, the numerical
-    rate of v for the whole block in one spline solve, the summaries all at once; a run's
+    rate of v for the whole block in one finite-difference pass, the summaries all at once; a run's
     outputs are views of the arrays of its :meth:`Variant.evaluate` call (vectors
     strided, see there). Everything is elementwise or
     per run, so a run gets the same bits whatever else is in its block or chunk.
@@ -300,7 +276,7 @@ def _results_of_block(configs, variant, sol, block: range, chunk, share) -> list
     with np.errstate(all="ignore"):
         for lo in range(block.start, block.stop, EVALUATE_RUNS):
             parts.append(variant.evaluate(sol.y[lo : min(lo + EVALUATE_RUNS, block.stop)]))
-    rates = numerical_rates(sol.t, np.concatenate([p["lyapunov"] for p in parts]))
+    rates = numerical_rate(sol.t, np.concatenate([p["lyapunov"] for p in parts]))
     summaries = []
     lo = 0
     for part in parts:

@@ -11,43 +11,125 @@ import numpy as np
 
 from .layout import BLOCK_UNITS
 
-__all__ = ["numerical_rate", "summarize", "summarize_many", "LYAPUNOV_RATE_TOLERANCE", "MIN_CHECK_SAMPLES"]
+__all__ = [
+    "numerical_rate",
+    "stencil_weights",
+    "summarize",
+    "summarize_many",
+    "LYAPUNOV_RATE_TOLERANCE",
+    "MIN_CHECK_SAMPLES",
+    "RATE_STENCIL",
+]
 
 #: Relative tolerance of the check "analytic dv/dt agrees with the numerical derivative
 #: of v": max |analytic - numerical| <= tol * max |analytic|.
 LYAPUNOV_RATE_TOLERANCE = 1e-3
 
-#: Fewest finite samples for which the rate check means something (a quintic spline).
+#: Fewest finite samples for which the rate check means something.
 MIN_CHECK_SAMPLES = 6
 
+#: Samples per finite-difference stencil of :func:`numerical_rate` (6th order).
+RATE_STENCIL = 7
 
-def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """Derivative of sampled ``values`` along ``time`` by a quintic interpolating spline.
+
+def stencil_weights(time: np.ndarray, width: int = RATE_STENCIL) -> tuple[np.ndarray, np.ndarray]:
+    """Finite-difference weights of d/dt at every sample (Fornberg's algorithm).
+
+    Sample i uses the ``w = min(width, n)`` consecutive samples ``first[i] .. first[i] +
+    w - 1`` nearest to it (centred inside, one-sided at the ends); the weights
+    differentiate every polynomial of degree < w exactly, so the derivative is of order
+    w - 1 in the sample spacing (6 for the default 7 points), on any strictly increasing
+    grid.
 
     Parameters
     ----------
     time : ndarray, shape (n,)
-        Strictly increasing sample times [s], n >= 6 for the quintic (fewer: lower degree).
-    values : ndarray, shape (n,)
-        Samples taken from the solver's dense output (e.g. v [J]).
+        Strictly increasing sample times [s], n >= 2.
+    width : int
+        Stencil points, >= 2.
 
     Returns
     -------
-    ndarray, shape (n,)
-        d(values)/dt [units of values per s]; NaN where ``values`` is NaN (a failed run's
-        tail).
-    """
-    from scipy.interpolate import make_interp_spline
+    first : ndarray of int, shape (n,)
+    weights : ndarray, shape (n, w)
+        d/dt at sample i is ``sum_j weights[i, j] * values[first[i] + j]`` [1/s].
 
-    out = np.full_like(values, np.nan, dtype=float)
-    ok = np.isfinite(values)
-    n_ok = int(np.argmin(ok)) if not ok.all() else len(values)  # finite prefix
-    if n_ok < 2:
-        return out
-    k = min(5, n_ok - 1)
-    spline = make_interp_spline(time[:n_ok], values[:n_ok], k=k)
-    out[:n_ok] = spline.derivative()(time[:n_ok])
-    return out
+    References
+    ----------
+    B. Fornberg, "Generation of finite difference formulas on arbitrarily spaced grids",
+    Math. Comp. 51 (1988) 699-706.
+    """
+    time = np.asarray(time, dtype=float)
+    n = len(time)
+    w = min(int(width), n)
+    if w < 2:
+        raise ValueError(f"a derivative needs at least 2 samples, got {n}")
+    first = np.clip(np.arange(n) - w // 2, 0, n - w)
+    # node offsets from each sample, in units of the mean spacing (numbers of order 1)
+    h = (time[-1] - time[0]) / (n - 1)
+    x = (time[first[:, None] + np.arange(w)] - time[:, None]) / h
+    # Fornberg's recursion for derivative orders 0 and 1, vectorised over the n samples
+    c0 = np.zeros((w, n))
+    c1 = np.zeros((w, n))
+    c0[0] = 1.0
+    p1 = np.ones(n)
+    x_prev = x[:, 0]
+    for i in range(1, w):
+        p2 = np.ones(n)
+        x_i = x[:, i]
+        for j in range(i):
+            d = x_i - x[:, j]
+            p2 = p2 * d
+            if j == i - 1:
+                c1[i] = p1 * (c0[i - 1] - x_prev * c1[i - 1]) / p2
+                c0[i] = -p1 * x_prev * c0[i - 1] / p2
+            c1[j] = (x_i * c1[j] - c0[j]) / d
+            c0[j] = x_i * c0[j] / d
+        p1 = p2
+        x_prev = x_i
+    return first, c1.T / h
+
+
+def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Derivative of sampled ``values`` along ``time`` by finite differences.
+
+    Each sample's derivative comes from the :data:`RATE_STENCIL` (7) samples nearest to
+    it (:func:`stencil_weights`: exact for polynomials of degree <= 6, so of 6th order in
+    the spacing; one-sided at the ends). It is independent of the model: it sees only the
+    samples, so it checks the analytic ``lyapunov_rate`` (eq 25).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Strictly increasing sample times [s].
+    values : ndarray, shape (n,) or (m, n)
+        Samples taken from the solver's dense output (e.g. v [J]), one run per row.
+
+    Returns
+    -------
+    ndarray, the shape of ``values``
+        d(values)/dt [units of values per s]; NaN where ``values`` is NaN (a failed run's
+        tail: each row uses its finite prefix) and for a row of fewer than 2 finite
+        samples. Every row gets the same bits as it would alone.
+    """
+    time = np.asarray(time, dtype=float)
+    values = np.asarray(values, dtype=float)
+    rows = values.reshape(-1, values.shape[-1]) if values.ndim else values.reshape(1, 1)
+    out = np.full(rows.shape, np.nan)
+    n = rows.shape[1]
+    finite = np.isfinite(rows)
+    n_ok = np.where(finite.all(axis=1), n, np.argmin(finite, axis=1))  # finite prefix
+    for length in np.unique(n_ok):
+        if length < 2:
+            continue
+        which = np.flatnonzero(n_ok == length)
+        part = rows[which, :length]
+        first, weights = stencil_weights(time[:length])
+        acc = weights[:, 0] * part[:, first]
+        for j in range(1, weights.shape[1]):
+            acc += weights[:, j] * part[:, first + j]
+        out[which, :length] = acc
+    return out.reshape(values.shape)
 
 
 def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:

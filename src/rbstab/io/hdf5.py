@@ -65,7 +65,7 @@ VARIABLE_DESCRIPTIONS = {
     **BLOCK_DESCRIPTIONS,
     **OUTPUT_DESCRIPTIONS,
     "lyapunov_rate_numerical": "dv/dt by differentiating v along the dense-output samples "
-    "(quintic spline); compare with lyapunov_rate",
+    "(7-point finite differences); compare with lyapunov_rate",
 }
 
 
