@@ -71,11 +71,13 @@ numpy's per-call overhead (paper Case 3, DOP853, rtol 1e-6, 201 samples: chunks 
 
 from __future__ import annotations
 
+import mmap
 import warnings
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
+
 from .rk_tableaus import (
     DOP853_EXTENDED,
     MAX_FACTOR,
@@ -292,6 +294,30 @@ def iter_chunks(n: int, chunk_size: int) -> Iterator[np.ndarray]:
 #: Samples per row evaluated together when a step's dense output is written: the
 #: temporaries (SAMPLE_BLOCK x rows x n_state floats) stay in the CPU caches.
 SAMPLE_BLOCK = 4
+
+
+#: Sample buffers of at least this many bytes are mapped by :func:`_nan_buffer`.
+_MAPPED_BUFFER_BYTES = 1 << 22
+
+
+def _nan_buffer(shape: tuple[int, ...]) -> np.ndarray:
+    """``np.full(shape, np.nan)``, for a batch's samples (120 MB for 500 runs of Case 3).
+
+    Where the platform has ``MAP_POPULATE`` (Linux), a large buffer is an anonymous
+    mapping whose pages the kernel supplies in one system call, instead of one page
+    fault per 4 KiB on first touch or, with numpy's transparent-huge-page advice, a
+    synchronous memory compaction: on the 2-core benchmark machine ``np.full`` of 120 MB
+    took 0.02 to 0.45 s (0.12 s without the advice), this a steady 0.07 s. The mapping is
+    released with the array.
+    """
+    n_bytes = int(np.prod(shape)) * 8
+    populate = getattr(mmap, "MAP_POPULATE", 0)
+    if n_bytes < _MAPPED_BUFFER_BYTES or not populate:
+        return np.full(shape, np.nan)
+    memory = mmap.mmap(-1, n_bytes, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS | populate)
+    out = np.frombuffer(memory, dtype=float).reshape(shape)
+    out.fill(np.nan)
+    return out
 
 
 class _Dense:
@@ -551,7 +577,7 @@ def integrate_batch(
         limit = np.pi / 2 - gimbal_margin
 
     ts = np.linspace(0.0, t_end, n_samples)
-    out_y = np.full((n_runs, n_samples, n), np.nan)
+    out_y = _nan_buffer((n_runs, n_samples, n))
     out_y[:, 0] = y0
     status = np.zeros(n_runs, dtype=int)
     message = [""] * n_runs
