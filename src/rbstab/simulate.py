@@ -313,7 +313,9 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chun
     ``initial_state`` and use RK23, RK45 or DOP853 are integrated together by
     :func:`rbstab.batch.integrate_batch` (per-run step-size control; each run takes the
     steps scipy would take alone), ``chunk_size`` runs at a time; everything else goes
-    through :func:`simulate`. Results are yielded as each chunk finishes, so at most one
+    through :func:`simulate`. The batch's right-hand side is :func:`rbstab.traced.traced_rhs`
+    of the group's variant (generated from the model, the same bits as ``variant.rhs``) where
+    the model can be traced, ``variant.rhs`` otherwise. Results are yielded as each chunk finishes, so at most one
     chunk of trajectories (``chunk_size * n_samples * n_state`` floats) and the outputs
     of :data:`POSTPROCESS_BLOCK` runs are held at once. Each result's ``wall_time`` is its
     share of the chunk's integration plus its own post-processing [s] (split in
@@ -329,6 +331,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chun
     if chunk_size < 1:
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
     from .batch import SUPPORTED_METHODS, integrate_batch
+    from .traced import traced_rhs
 
     groups: dict[str, list[int]] = {}
     for i, config in enumerate(configs):
@@ -339,13 +342,15 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chun
     for members in groups.values():
         first = configs[members[0]]
         variant = first.make_variant()
+        # the same bits as variant.rhs, ~0.6x its time per call (None: not traceable)
+        fun = traced_rhs(variant) or variant.rhs
         sim = first.simulation
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
             start = _time.perf_counter()
             y0 = np.stack([variant.initial_state(configs[i].initial_state) for i in chunk])
             sol = integrate_batch(
-                variant,
+                fun,
                 y0,
                 sim.t_end,
                 sim.n_samples,

@@ -313,7 +313,22 @@ def resolve_engine(engine: str | None, timeout: float | None) -> str:
     return engine
 
 
+class _NoBar:
+    """What :func:`_progress_bar` returns when the bar is off (tqdm not even imported)."""
+
+    def set_postfix_str(self, *args, **kwargs) -> None:
+        pass
+
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
 def _progress_bar(total: int, name: str, enabled: bool | None):
+    if enabled is False:
+        return _NoBar()
     from tqdm.auto import tqdm
 
     return tqdm(
