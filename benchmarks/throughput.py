@@ -231,13 +231,16 @@ def child(args) -> None:
 
 def rhs_share(n_runs: int, method: str) -> float:
     """Share of the batch integration spent in the right-hand side, for one chunk of
-    ``n_runs`` Case 3 runs, measured in this process."""
+    ``n_runs`` Case 3 runs, measured in this process (the right-hand side the sweep uses:
+    :func:`rbstab.traced.traced_rhs` of the variant)."""
     from rbstab.batch import integrate_batch
     from rbstab.config import load_config
+    from rbstab.traced import traced_rhs
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         variant = load_config(CASE3).make_variant()
+    fun = traced_rhs(variant) or variant.rhs
     rng = np.random.default_rng(1)
     y0 = np.zeros((n_runs, variant.layout.size))
     y0[:, 3:6] = rng.normal([16, 32, -16], 2, (n_runs, 3))
@@ -249,7 +252,7 @@ def rhs_share(n_runs: int, method: str) -> float:
         @staticmethod
         def rhs(t, y):
             t0 = time.perf_counter()
-            out = variant.rhs(t, y)
+            out = fun(t, y)
             spent[0] += time.perf_counter() - t0
             return out
 
