@@ -1,15 +1,14 @@
-"""Experiment (issue 5): a compiled right-hand side generated from the model by tracing.
+"""Experiment (issue 5): the traced right-hand side compiled with numba.
 
-Not used by rbstab: this measures what the next step of issue 5 would buy. It runs a
-variant's :meth:`~rbstab.variants.base.Variant.quantities_columns` once on the one-state
-(float) path with symbolic "floats" that record every arithmetic operation and every
-``cos``/``sin``, so the model itself is the only definition of the dynamics; writes the
-recorded tape as one flat Python function over the rows of a stack; compiles it with
-numba (``njit``, no fastmath: no reassociation, no FMA contraction) when numba is
-installed; and checks it against the numpy paths bit for bit and times both.
+rbstab's batch engine uses :func:`rbstab.traced.traced_rhs`: the model's
+``quantities_columns`` traced once on its float path and written as straight-line numpy
+code. This measures the next step, not taken: the same tape (:func:`rbstab.traced._trace`)
+written as one loop over the rows of a stack and compiled with numba (``njit``, no
+fastmath: no reassociation, no FMA contraction; ``error_model="numpy"``: x / 0 is inf, as
+in numpy), checked against the numpy paths bit for bit and timed against both.
 
 Prints the number of operations per evaluation, numba's import and compile time, whether
-the compiled kernel gives the same bits as the numpy stack path and the float path, and
+the compiled kernel gives the same bits as the model's stack path and float path, and
 microseconds per call for one state and for ``--rows`` states.
 
 Usage::
@@ -23,90 +22,38 @@ from __future__ import annotations
 import argparse
 import math
 import time
-import types
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-import rbstab.kinematics as kinematics
 from rbstab.config import load_config
+from rbstab.traced import _Sym, _trace, traced_rhs
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-class _Tape:
-    """The operations recorded while the model runs on :class:`_Sym` values."""
-
-    def __init__(self) -> None:
-        self.lines: list[str] = []
-        self.count = 0
-
-    def new(self) -> str:
-        self.count += 1
-        return f"t{self.count}"
-
-
-TAPE = _Tape()
+_INFIX = {"add": "+", "subtract": "-", "multiply": "*", "divide": "/"}
 
 
 def _term(x) -> str:
     return x.name if isinstance(x, _Sym) else repr(float(x))
 
 
-class _Sym(float):
-    """A float that records each operation on it (so the model's ``isinstance(x, float)``
-    one-state path runs); its value is meaningless."""
-
-    def __new__(cls, name: str) -> "_Sym":
-        obj = float.__new__(cls, 0.0)
-        obj.name = name
-        return obj
-
-    def _op(self, other, op: str, reflected: bool = False) -> "_Sym":
-        out = TAPE.new()
-        a, b = (_term(other), self.name) if reflected else (self.name, _term(other))
-        TAPE.lines.append(f"{out} = {a} {op} {b}")
-        return _Sym(out)
-
-    def __add__(self, o): return self._op(o, "+")
-    def __radd__(self, o): return self._op(o, "+", True)
-    def __sub__(self, o): return self._op(o, "-")
-    def __rsub__(self, o): return self._op(o, "-", True)
-    def __mul__(self, o): return self._op(o, "*")
-    def __rmul__(self, o): return self._op(o, "*", True)
-    def __truediv__(self, o): return self._op(o, "/")
-    def __rtruediv__(self, o): return self._op(o, "/", True)
-
-    def __neg__(self) -> "_Sym":
-        out = TAPE.new()
-        TAPE.lines.append(f"{out} = -{self.name}")
-        return _Sym(out)
-
-
-def _recording(function: str):
-    def record(x):
-        out = TAPE.new()
-        TAPE.lines.append(f"{out} = math.{function}({_term(x)})")
-        return _Sym(out)
-
-    return record
-
-
-def trace_rhs(variant) -> str:
-    """Source of ``kernel(Y, OUT)``: OUT[i] = the state rate at Y[i], for every row i."""
-    n = variant.layout.size
-    saved = kinematics.math
-    kinematics.math = types.SimpleNamespace(cos=_recording("cos"), sin=_recording("sin"))
-    try:
-        rate = list(variant.quantities_columns([_Sym(f"y{j}") for j in range(n)], outputs=False)["state_rate"])
-    finally:
-        kinematics.math = saved
+def loop_source(variant) -> tuple[str, int]:
+    """Source of ``kernel(Y, OUT)``: OUT[i] = the state rate at Y[i], for every row i;
+    and the number of operations."""
+    ops, outputs = _trace(variant)
     lines = ["def kernel(Y, OUT):", "    for i in range(Y.shape[0]):"]
-    lines += [f"        y{j} = Y[i, {j}]" for j in range(n)]
-    lines += ["        " + line for line in TAPE.lines]
-    lines += [f"        OUT[i, {j}] = {_term(r)}" for j, r in enumerate(rate)]
-    return "\n".join(lines)
+    lines += [f"        y{j} = Y[i, {j}]" for j in range(variant.layout.size)]
+    for result, ufunc, operands in ops:
+        if ufunc in _INFIX:
+            text = f" {_INFIX[ufunc]} ".join(_term(x) for x in operands)
+        elif ufunc == "negative":
+            text = f"-{_term(operands[0])}"
+        else:
+            text = f"math.{ufunc}({_term(operands[0])})"
+        lines.append(f"        {result} = {text}")
+    lines += [f"        OUT[i, {j}] = {_term(x)}" for j, x in enumerate(outputs)]
+    return "\n".join(lines), len(ops)
 
 
 def per_call(fn, repeat: int) -> float:
@@ -124,11 +71,10 @@ def main() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         variant = load_config(args.config).make_variant()
-    if variant.name == "sliding":
-        raise SystemExit("sliding: tanh is not traced by this experiment")
-    source = trace_rhs(variant)
-    print(f"{variant.name}: {len(TAPE.lines)} operations per right-hand-side evaluation "
-          f"({variant.layout.size} states)")
+    if traced_rhs(variant) is None:
+        raise SystemExit(f"{variant.name}: the model cannot be traced (rbstab uses variant.rhs)")
+    source, n_ops = loop_source(variant)
+    print(f"{variant.name}: {n_ops} operations per right-hand-side evaluation ({variant.layout.size} states)")
     namespace = {"math": math}
     exec(source, namespace)
     rng = np.random.default_rng(0)
@@ -144,7 +90,7 @@ def main() -> None:
         return
     imported = time.perf_counter() - start
     start = time.perf_counter()
-    kernel = numba.njit(namespace["kernel"])
+    kernel = numba.njit(error_model="numpy")(namespace["kernel"])
     kernel(y, out)
     compiled = time.perf_counter() - start
     print(f"numba {numba.__version__}: import {imported:.2f} s, compile {compiled:.2f} s")
