@@ -176,7 +176,7 @@ def traced_rhs(variant, *, seed: int = 0) -> Callable[[np.ndarray, np.ndarray], 
         source, n_registers = _source(ops, outputs, n)
         namespace = dict(_UFUNCS)
         exec(compile(source, f"<traced rhs of {variant.name}>", "exec"), namespace)
-    except (TracingError, TypeError, ValueError, ArithmeticError):
+    except Exception:  # whatever the model does to a traced value: use variant.rhs
         return None
     kernel = namespace["kernel"]
 
@@ -193,5 +193,4 @@ def traced_rhs(variant, *, seed: int = 0) -> Callable[[np.ndarray, np.ndarray], 
     with np.errstate(all="ignore"):
         if not np.array_equal(rhs(0.0, y), variant.rhs(0.0, y), equal_nan=True):
             return None
-    rhs.source = source
     return rhs
