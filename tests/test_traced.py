@@ -65,6 +65,28 @@ def test_a_trace_that_misses_an_operation_is_rejected(monkeypatch):
 def test_registers_are_reused():
     variant = make_variant("embedded")
     ops, outputs = traced._trace(variant)
-    source, n_registers = traced._source(ops, outputs, variant.layout.size)
+    source, n_registers, constants, rows = traced._source(ops, outputs, variant.layout.size)
     assert len(ops) > 150
     assert n_registers < len(ops) // 4
+    assert len(rows) == variant.layout.size and constants
+
+
+def test_a_constant_rate_component_is_reproduced(monkeypatch):
+    """A state-rate component that does not depend on the state (a number in the tape's
+    outputs, not a register) comes out as that number for every row."""
+    variant = make_variant("embedded")
+    original = type(variant).quantities_columns
+
+    def constant_last(self, state, outputs=True):
+        q = original(self, state, outputs=outputs)
+        rate = list(q["state_rate"])
+        rate[-1] = 0.25
+        return {**q, "state_rate": tuple(rate)}
+
+    monkeypatch.setattr(type(variant), "quantities_columns", constant_last)
+    fun = traced_rhs(variant)
+    assert fun is not None
+    y = np.random.default_rng(3).normal(0.0, 0.5, (5, variant.layout.size))
+    out = fun(0.0, y)
+    assert np.array_equal(out, variant.rhs(0.0, y))
+    assert np.all(out[:, -1] == 0.25)

@@ -353,14 +353,16 @@ class _Dense:
         """States at normalised times ``x = (t - t_old) / h`` (shape (p,)) of subset
         ``rows`` (shape (p,); None: every row once, in order); returns shape (p, n)."""
         if rows is None:
-            return self.evaluate(self.coef, self.y_old, self.h, x[:, None])
+            return self.evaluate(self.coef, self.y_old, self.h[:, None], x[:, None])
         # one gather, (J, p, n)
-        return self.evaluate(np.take(self.coef, rows, axis=1), self.y_old[rows], self.h[rows], x[:, None])
+        return self.evaluate(np.take(self.coef, rows, axis=1), self.y_old[rows], self.h[rows, None], x[:, None])
 
     def evaluate(self, coef: np.ndarray, y_old: np.ndarray, h: np.ndarray, xc: np.ndarray) -> np.ndarray:
-        """The interpolant with coefficients ``coef`` (J, p, n) of p rows (``y_old`` (p, n),
-        ``h`` (p,)) at ``xc``, shape (p, 1) or (k, p, 1) (k times per row); returns ``xc``'s
-        leading shape + (n,). scipy's operations in scipy's order, elementwise."""
+        """The interpolant with coefficients ``coef`` (J, ...) at ``xc``; ``y_old``, ``h``
+        (the step of each row; unused by DOP853) and ``xc`` broadcast against
+        ``coef[0]``: for p rows (J, p, n), (p, n), (p, 1), (p, 1) or (k, p, 1) (k times
+        per row), or transposed (J, n, p), (n, p), (p,), (k, 1, p). Returns the shape of
+        the broadcast. scipy's operations in scipy's order, elementwise."""
         if self.is_dop853:
             # scipy: y = 0; for each coefficient (reversed): y += F; y *= x or (1 - x)
             one_minus = 1 - xc
@@ -376,7 +378,7 @@ class _Dense:
         for j in range(1, coef.shape[0]):
             p = p * xc
             acc += coef[j] * p
-        y = h[:, None] * acc
+        y = h * acc
         y += y_old
         return y
 
@@ -422,38 +424,55 @@ class _DenseStep:
     def dense(self) -> _Dense:
         return _Dense(self.tab, self.K, self.t_old, self.h, self.y_old, self.y_new, self.f_old, self.f_new)
 
-    def write_samples(self, dense: _Dense, ts: np.ndarray, out_y: np.ndarray) -> None:
+    def write_samples(self, dense: _Dense, samples: "_Samples") -> None:
         """Evaluate and store samples lo .. hi-1 of every row.
 
-        The rows are sorted by their number of samples in this step (most first; one
-        gather of the coefficients), so the rows that have a j-th sample are a prefix;
-        samples are then evaluated :data:`SAMPLE_BLOCK` at a time per row on that prefix
-        (:meth:`_Dense.evaluate`, the same operations as one at a time), a handful of
-        values beyond a row's last sample computed and not stored.
+        The rows are sorted by their number of samples in this step (most first), so the
+        rows that have a j-th sample are a prefix. The coefficients are gathered in that
+        order and transposed once, to (J, n, rows): the interpolant is then evaluated
+        :data:`SAMPLE_BLOCK` samples per row at a time on the prefix with the rows as the
+        contiguous axis (:meth:`_Dense.evaluate`, the same operations as one at a time,
+        ~2x faster than with the 15-long state axis innermost), and each block is stored
+        with one scatter of whole sample rows; the few values beyond a row's last sample
+        go to the buffer's spare row.
         """
         lo = self.lo
         counts = self.hi - lo
-        if not counts.any():
+        n_max = int(counts.max())
+        if n_max <= 0:
             return
-        if counts.size > 1 and np.any(counts != counts[0]):
-            order = np.argsort(-counts, kind="stable")
-            counts, lo = counts[order], lo[order]
-            coef = np.take(dense.coef, order, axis=1)
-            y_old, h, t_old, gidx = dense.y_old[order], dense.h[order], dense.t_old[order], self.gidx[order]
-        else:
-            coef, y_old, h, t_old, gidx = dense.coef, dense.y_old, dense.h, dense.t_old, self.gidx
+        order = np.argsort(-counts, kind="stable") if np.any(counts != n_max) else slice(None)
+        counts, lo = counts[order], lo[order]
+        coef = np.take(dense.coef, order, axis=1) if isinstance(order, np.ndarray) else dense.coef
+        coef = np.ascontiguousarray(coef.transpose(0, 2, 1))  # (J, n, rows)
+        y_old = np.ascontiguousarray(dense.y_old[order].T)  # (n, rows)
+        h, t_old = dense.h[order], dense.t_old[order]
+        first = self.gidx[order] * samples.n_samples + lo  # flat row of each row's sample lo
+        ts = samples.ts
         last = len(ts) - 1
-        for k0 in range(0, int(counts[0]), SAMPLE_BLOCK):
+        for k0 in range(0, n_max, SAMPLE_BLOCK):
             p = int(np.count_nonzero(counts > k0))  # rows with a sample k0: a prefix
-            k = np.arange(k0, min(k0 + SAMPLE_BLOCK, int(counts[0])))[:, None]
-            s = lo[:p] + k  # (block, p) sample indices
-            x = (ts[np.minimum(s, last)] - t_old[:p]) / h[:p]
-            y = dense.evaluate(coef[:, :p], y_old[:p], h[:p], x[:, :, None])
-            valid = k < counts[:p]
-            if valid.all():
-                out_y[gidx[:p], s] = y
-            else:
-                out_y[np.broadcast_to(gidx[:p], s.shape)[valid], s[valid]] = y[valid]
+            k_end = min(k0 + SAMPLE_BLOCK, n_max)
+            k = np.arange(k0, k_end)[:, None]
+            x = (ts[np.minimum(lo[:p] + k, last)] - t_old[:p]) / h[:p]  # (block, p)
+            y = dense.evaluate(coef[:, :, :p], y_old[:, :p], h[:p], x[:, None, :])  # (block, n, p)
+            flat_rows = first[:p] + k
+            if k_end > counts[p - 1]:  # some rows have fewer samples than the block
+                flat_rows = np.where(k < counts[:p], flat_rows, samples.spare)
+            samples.flat[flat_rows] = y.transpose(0, 2, 1)
+
+
+class _Samples:
+    """The sample buffer of a batch: ``y`` (n_runs, n_samples, n), NaN until written, a
+    view of ``flat`` (n_runs * n_samples + 1, n) whose last row (``spare``) takes the
+    values a block evaluates beyond a row's last sample in a step."""
+
+    def __init__(self, ts: np.ndarray, n_runs: int, n: int) -> None:
+        self.ts = ts
+        self.n_samples = len(ts)
+        self.spare = n_runs * self.n_samples
+        self.flat = _nan_buffer((self.spare + 1, n))
+        self.y = self.flat[: self.spare].reshape(n_runs, self.n_samples, n)
 
 
 def _locate_crossing(dense: _Dense, rows: np.ndarray, sign: np.ndarray, limit: float) -> np.ndarray:
@@ -577,7 +596,8 @@ def integrate_batch(
         limit = np.pi / 2 - gimbal_margin
 
     ts = np.linspace(0.0, t_end, n_samples)
-    out_y = _nan_buffer((n_runs, n_samples, n))
+    samples = _Samples(ts, n_runs, n)
+    out_y = samples.y
     out_y[:, 0] = y0
     status = np.zeros(n_runs, dtype=int)
     message = [""] * n_runs
@@ -685,7 +705,7 @@ def integrate_batch(
                     K[s] = fun(t_s, dy)
             if pending is not None:
                 pending.complete(fun)
-                pending.write_samples(pending.dense(), ts, out_y)
+                pending.write_samples(pending.dense(), samples)
                 pending = None
             y_new = _lincomb(tab.B, K2[:n_stages]).reshape(m, n)
             y_new *= hc
@@ -754,11 +774,11 @@ def integrate_batch(
                 y_stop[k_lock] = dense(lock_rows, x_lock)
                 last_sample[k_lock] = np.searchsorted(ts, t_lock, side="right")
                 step.hi = last_sample[d]
-                step.write_samples(dense, ts, out_y)
+                step.write_samples(dense, samples)
             elif tab.extra:
                 pending = step  # finished by the next attempt (or after the loop)
             else:
-                step.write_samples(step.dense(), ts, out_y)
+                step.write_samples(step.dense(), samples)
         next_sample = last_sample
 
         # -- advance accepted runs --------------------------------------------------------
@@ -802,7 +822,7 @@ def integrate_batch(
     if pending is not None:
         with np.errstate(all="ignore"):
             pending.complete(fun)
-        pending.write_samples(pending.dense(), ts, out_y)
+        pending.write_samples(pending.dense(), samples)
     return sol
 
 

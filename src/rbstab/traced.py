@@ -3,12 +3,16 @@
 :meth:`~rbstab.variants.base.Variant.quantities_columns` is the only definition of the
 dynamics. :func:`traced_rhs` runs it once on its one-state (float) path with symbolic
 floats that record every ``+ - * /``, negation and ``cos``/``sin`` (the model's constants
-stay numbers), and writes the recorded tape as one Python function of the state columns
-in which each operation is one numpy ufunc call writing into a preallocated row of
-registers, reused after a value's last use. That is the model's own stack path without
-its Python bookkeeping (helper calls, ``isinstance`` dispatch, temporaries): the same
-operations on the same operands in the same order, so the same bits, for about 0.6x its
-time per call on a 500-run batch (paper Case 3: ~225 us against ~320 us).
+stay numbers), and writes the recorded tape as one Python function in which each
+operation is one numpy ufunc call writing into a row of a register matrix: the state's
+components are copied into its first rows (one transposed copy, so every operand is a
+contiguous row), a row is reused after its value's last use, constants are 0-d arrays
+(numpy takes them faster than Python floats), and the rate is gathered from its rows at
+the end. That is the model's own stack path without its Python bookkeeping (helper
+calls, ``isinstance`` dispatch, temporaries, strided state columns): the same operations
+on the same operands in the same order, so the same bits, for about half its time per
+call on a 500-run batch (paper Case 3: median ~260 us against ~410 us, best 143 against
+313 us, on the 2-core development machine).
 
 Every function is checked when it is built: at random states it must give exactly the
 bits of ``variant.rhs``. A model that cannot be traced (a branch on the state, an
@@ -106,15 +110,16 @@ def _trace(variant) -> tuple[list, list]:
     return tape.ops, rate
 
 
-def _operand(x, registers: dict[str, str]) -> str:
-    if isinstance(x, _Sym):
-        return registers.get(x.name, x.name)
-    value = float(x)
-    return repr(value) if math.isfinite(value) else f"float({str(value)!r})"
+def _source(ops: list, outputs: list, n: int) -> tuple[str, int, dict[float, str], list]:
+    """Python source of ``kernel(R)``, R the rows of the register matrix W (shape
+    (n_registers, m)).
 
-
-def _source(ops: list, outputs: list, n: int) -> tuple[str, int]:
-    """Python source of ``kernel(Y, W, OUT)`` and the number of registers (rows of W)."""
+    On entry rows 0 .. n-1 of W hold the state components ``y0 .. y{n-1}``; every
+    operation writes one row, reusing a row after its value's last use. Returns the source,
+    the number of registers, the constants (value -> name; the caller binds each name to a
+    0-d array, which numpy takes ~0.5 us faster per call than a Python float) and, per
+    state-rate component, the row that holds it at the end or the number it equals.
+    """
     last_use: dict[str, int] = {}
     for i, (_, _, operands) in enumerate(ops):
         for x in operands:
@@ -123,14 +128,21 @@ def _source(ops: list, outputs: list, n: int) -> tuple[str, int]:
     for x in outputs:
         if isinstance(x, _Sym):
             last_use[x.name] = len(ops)
-    registers: dict[str, str] = {}
-    free: list[str] = []
-    n_registers = 0
+    registers: dict[str, str] = {f"y{j}": f"r{j}" for j in range(n)}
+    free: list[str] = [f"r{j}" for j in reversed(range(n)) if f"y{j}" not in last_use]
+    n_registers = n
+    constants: dict[float, str] = {}
+
+    def operand(x) -> str:
+        if isinstance(x, _Sym):
+            return registers[x.name]
+        return constants.setdefault(float(x), f"c{len(constants)}")
+
     body = []
     for i, (result, ufunc, operands) in enumerate(ops):
-        args = [_operand(x, registers) for x in operands]
+        args = [operand(x) for x in operands]
         for x in {x.name for x in operands if isinstance(x, _Sym)}:
-            if last_use[x] == i and x in registers:
+            if last_use[x] == i:
                 free.append(registers[x])  # its register may take this op's result
         if result not in last_use:
             continue  # never used (e.g. a quantity only the outputs need)
@@ -141,13 +153,9 @@ def _source(ops: list, outputs: list, n: int) -> tuple[str, int]:
             n_registers += 1
         registers[result] = register
         body.append(f"    _{ufunc}({', '.join(args)}, {register})")
-    lines = ["def kernel(Y, W, OUT):"]
-    if n_registers:
-        lines.append(f"    {', '.join(f'r{k}' for k in range(n_registers))}, = W")
-    lines += [f"    y{j} = Y[:, {j}]" for j in range(n)]
-    lines += body
-    lines += [f"    OUT[:, {j}] = {_operand(x, registers)}" for j, x in enumerate(outputs)]
-    return "\n".join(lines) + "\n", n_registers
+    lines = ["def kernel(R):", f"    {', '.join(f'r{k}' for k in range(n_registers))}, = R", *body, ""]
+    rows = [int(registers[x.name][1:]) if isinstance(x, _Sym) else float(x) for x in outputs]
+    return "\n".join(lines), n_registers, constants, rows
 
 
 _UFUNCS = {f"_{name}": getattr(np, name) for name in ("add", "subtract", "multiply", "divide", "negative", "cos", "sin")}
@@ -173,19 +181,26 @@ def traced_rhs(variant, *, seed: int = 0) -> Callable[[np.ndarray, np.ndarray], 
     n = variant.layout.size
     try:
         ops, outputs = _trace(variant)
-        source, n_registers = _source(ops, outputs, n)
+        source, n_registers, constants, rows = _source(ops, outputs, n)
         namespace = dict(_UFUNCS)
+        namespace.update((name, np.array(value)) for value, name in constants.items())
         exec(compile(source, f"<traced rhs of {variant.name}>", "exec"), namespace)
     except Exception:  # whatever the model does to a traced value: use variant.rhs
         return None
     kernel = namespace["kernel"]
+    from_register = np.array([r if isinstance(r, int) else 0 for r in rows], dtype=np.intp)
+    numbers = [(j, r) for j, r in enumerate(rows) if not isinstance(r, int)]
 
     def rhs(t, y):
         y = np.asarray(y, dtype=float)
         if y.ndim != 2 or y.shape[1] != n:
             return variant.rhs(t, y)
-        out = np.empty_like(y)
-        kernel(y, np.empty((n_registers, len(y))), out)
+        registers = np.empty((n_registers, len(y)))
+        registers[:n] = y.T  # the state components as contiguous rows
+        kernel(registers)
+        out = np.take(registers, from_register, axis=0).T.copy()
+        for j, value in numbers:
+            out[:, j] = value
         return out
 
     rng = np.random.default_rng(seed)
