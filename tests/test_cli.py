@@ -204,3 +204,45 @@ def test_a_run_that_fails_at_once_has_no_rate_check(tmp_path):
     info = read_summary(tmp_path / "instant.h5")
     assert info["status"] == "failed"
     assert info["summary"]["lyapunov_rate_check"] == "n/a"
+
+
+def _console_script(*args: str, cwd=None):
+    """The installed ``rbstab`` entry point (``rbstab_cli.main:main``) in a subprocess."""
+    import subprocess
+    import sys
+
+    code = "import sys; from rbstab_cli.main import main; sys.argv[0] = 'rbstab'; main()"
+    return subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=120,
+                          cwd=cwd)
+
+
+def test_console_script_passes_on_exit_status_and_flushes_output(tmp_path):
+    """main() ends the process with os._exit after the command: the exit status and
+    everything printed must still come through."""
+    version = _console_script("--version")
+    assert version.returncode == 0 and "rbstab, version" in version.stdout
+
+    missing = _console_script("validate", str(tmp_path / "missing.yaml"))
+    assert missing.returncode != 0
+    assert "config file not found" in missing.stderr and "Traceback" not in missing.stderr
+
+    out = tmp_path / "out"
+    run = _console_script("run", str(ROOT / "configs" / "paper" / "case1_permanent.yaml"), "-o", str(out),
+                          "--set", "simulation.t_end=0.1", "--set", "simulation.n_samples=21")
+    assert run.returncode == 0, run.stderr
+    assert "case1_permanent" in run.stdout
+    summary = read_summary(out / "case1_permanent.h5")
+    assert summary["status"] == "success" and summary["summary"]["t_final"] == pytest.approx(0.1)
+
+
+def test_fork_server_exit_hook_is_inert_elsewhere():
+    import atexit
+
+    from rbstab.sweep import _forkserver
+
+    assert not _forkserver.in_fork_server()
+    before = atexit._ncallbacks()
+    import importlib
+
+    importlib.reload(_forkserver)
+    assert atexit._ncallbacks() == before

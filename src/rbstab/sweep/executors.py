@@ -142,9 +142,11 @@ def _mp_context():
         # Import the heavy modules once in the fork server (no effect if it already runs).
         # Not scipy: the batch engine and the post-processing need none of it (its import
         # costs ~0.7 s); the scipy engine imports solve_ivp when a chunk needs it.
+        # rbstab.sweep._forkserver first: the fork server then exits without Python's
+        # teardown when the parent has gone (~0.1 s sooner).
         ctx.set_forkserver_preload([
-            "rbstab.sweep.worker", "rbstab.simulate", "rbstab.batch", "rbstab.config", "rbstab.io.hdf5",
-            "rbstab.io.chunk", "h5py",
+            "rbstab.sweep._forkserver", "rbstab.sweep.worker", "rbstab.simulate", "rbstab.batch",
+            "rbstab.traced", "rbstab.config", "rbstab.io.hdf5", "rbstab.io.chunk", "h5py",
         ])
     return ctx
 
