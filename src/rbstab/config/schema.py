@@ -98,6 +98,8 @@ def kind_of(value: Any) -> str:
 
 
 def _as_number(value: Any, *, allow_inf: bool = False) -> int | float:
+    if type(value) is float and math.isfinite(value):  # the common case, without the ABC checks
+        return value
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         detail = f"{kind_of(value)}, not a number"
         if isinstance(value, str):

@@ -143,15 +143,8 @@ def _columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 
 def _cell(value: Any) -> Any:
-    if value is None:
-        return ""
-    if isinstance(value, bool):
-        return "True" if value else "False"
-    if isinstance(value, float):
-        return repr(value)
-    if isinstance(value, (list, dict)):
-        return json.dumps(value)
-    return value
+    # csv writes None as "", a float as its repr and anything else as str()
+    return json.dumps(value) if isinstance(value, (list, dict)) else value
 
 
 def write_index(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
