@@ -90,3 +90,25 @@ def test_a_constant_rate_component_is_reproduced(monkeypatch):
     out = fun(0.0, y)
     assert np.array_equal(out, variant.rhs(0.0, y))
     assert np.all(out[:, -1] == 0.25)
+
+
+def test_signed_zero_constants_stay_apart(monkeypatch):
+    """0.0 and -0.0 compare equal; as constants of the generated code they must still be
+    two numbers (x * 0.0 and x * -0.0 differ in the sign of the zero)."""
+    variant = make_variant("embedded")
+    original = type(variant).quantities_columns
+
+    def signed_zeros(self, state, outputs=True):
+        q = original(self, state, outputs=outputs)
+        rate = list(q["state_rate"])
+        rate[-1] = rate[-1] * 0.0
+        rate[-2] = rate[-2] * -0.0
+        return {**q, "state_rate": tuple(rate)}
+
+    monkeypatch.setattr(type(variant), "quantities_columns", signed_zeros)
+    fun = traced_rhs(variant)
+    assert fun is not None
+    y = np.random.default_rng(5).normal(0.0, 0.5, (64, variant.layout.size))
+    out, model = fun(0.0, y), variant.rhs(0.0, y)
+    assert np.array_equal(np.signbit(out), np.signbit(model)) and np.array_equal(out, model)
+    assert np.signbit(out[:, -2]).any() and np.signbit(out[:, -1]).any()

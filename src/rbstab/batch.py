@@ -442,10 +442,9 @@ class _DenseStep:
         n_max = int(counts.max())
         if n_max <= 0:
             return
-        order = np.argsort(-counts, kind="stable") if np.any(counts != n_max) else slice(None)
+        order = np.argsort(-counts, kind="stable")
         counts, lo = counts[order], lo[order]
-        coef = np.take(dense.coef, order, axis=1) if isinstance(order, np.ndarray) else dense.coef
-        coef = np.ascontiguousarray(coef.transpose(0, 2, 1))  # (J, n, rows)
+        coef = np.ascontiguousarray(np.take(dense.coef, order, axis=1).transpose(0, 2, 1))  # (J, n, rows)
         y_old = np.ascontiguousarray(dense.y_old[order].T)  # (n, rows)
         h, t_old = dense.h[order], dense.t_old[order]
         first = self.gidx[order] * samples.n_samples + lo  # flat row of each row's sample lo

@@ -343,7 +343,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chun
     for members in groups.values():
         first = configs[members[0]]
         variant = first.make_variant()
-        # the same bits as variant.rhs, ~0.6x its time per call (None: not traceable)
+        # the same bits as variant.rhs, about half its time per call (None: not traceable)
         fun = traced_rhs(variant) or variant.rhs
         sim = first.simulation
         for lo in range(0, len(members), chunk_size):

@@ -110,14 +110,15 @@ def _trace(variant) -> tuple[list, list]:
     return tape.ops, rate
 
 
-def _source(ops: list, outputs: list, n: int) -> tuple[str, int, dict[float, str], list]:
+def _source(ops: list, outputs: list, n: int) -> tuple[str, int, dict[str, float], list]:
     """Python source of ``kernel(R)``, R the rows of the register matrix W (shape
     (n_registers, m)).
 
     On entry rows 0 .. n-1 of W hold the state components ``y0 .. y{n-1}``; every
     operation writes one row, reusing a row after its value's last use. Returns the source,
-    the number of registers, the constants (value -> name; the caller binds each name to a
-    0-d array, which numpy takes ~0.5 us faster per call than a Python float) and, per
+    the number of registers, the constants (name -> value; the caller binds each name to a
+    0-d array, which numpy takes ~0.5 us faster per call than a Python float; one name per
+    ``repr``, so 0.0 and -0.0, equal as dict keys, stay two constants) and, per
     state-rate component, the row that holds it at the end or the number it equals.
     """
     last_use: dict[str, int] = {}
@@ -131,12 +132,16 @@ def _source(ops: list, outputs: list, n: int) -> tuple[str, int, dict[float, str
     registers: dict[str, str] = {f"y{j}": f"r{j}" for j in range(n)}
     free: list[str] = [f"r{j}" for j in reversed(range(n)) if f"y{j}" not in last_use]
     n_registers = n
-    constants: dict[float, str] = {}
+    names: dict[str, str] = {}  # repr(value) -> name
+    constants: dict[str, float] = {}  # name -> value
 
     def operand(x) -> str:
         if isinstance(x, _Sym):
             return registers[x.name]
-        return constants.setdefault(float(x), f"c{len(constants)}")
+        value = float(x)
+        name = names.setdefault(repr(value), f"c{len(names)}")
+        constants[name] = value
+        return name
 
     body = []
     for i, (result, ufunc, operands) in enumerate(ops):
@@ -183,7 +188,7 @@ def traced_rhs(variant, *, seed: int = 0) -> Callable[[np.ndarray, np.ndarray], 
         ops, outputs = _trace(variant)
         source, n_registers, constants, rows = _source(ops, outputs, n)
         namespace = dict(_UFUNCS)
-        namespace.update((name, np.array(value)) for value, name in constants.items())
+        namespace.update((name, np.array(value)) for name, value in constants.items())
         exec(compile(source, f"<traced rhs of {variant.name}>", "exec"), namespace)
     except Exception:  # whatever the model does to a traced value: use variant.rhs
         return None
