@@ -31,32 +31,5 @@ cli.add_command(sweep)
 
 
 def main() -> None:
-    """The ``rbstab`` console script: :func:`cli`, then an immediate process exit.
-
-    Once the command has finished (its files closed and renamed into place, its output
-    printed), the interpreter's teardown only frees memory: unloading numpy, h5py and
-    pydantic and running the libraries' exit hooks takes ~0.1 s, a noticeable share of a
-    one-shot sweep or run. So the exit status of the command is passed to ``os._exit``
-    after flushing stdout and stderr. An exception click does not handle (a bug) still
-    exits through Python, with its traceback.
-    """
-    import os
-    import sys
-
-    try:
-        cli.main(prog_name="rbstab")  # standalone: always ends in SystemExit
-    except SystemExit as exc:
-        code = exc.code
-    else:  # pragma: no cover - click's standalone mode always exits
-        code = 0
-    if code is None:
-        code = 0
-    elif not isinstance(code, int):
-        print(code, file=sys.stderr)  # what Python prints for sys.exit("message")
-        code = 1
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except Exception:  # a closed or broken pipe: nothing more to say
-            pass
-    os._exit(code)
+    """The ``rbstab`` console script."""
+    cli.main(prog_name="rbstab")

@@ -23,6 +23,7 @@ def run(configs, output, overrides, method) -> None:
     status "failed" and the reason.
     """
     from rbstab.io.hdf5 import write_result
+    from rbstab.jit import ensure_compiled
     from rbstab.simulate import simulate
 
     if method is not None:
@@ -30,6 +31,7 @@ def run(configs, output, overrides, method) -> None:
     loaded = load_configs(configs, overrides)
     out = Path(output)
     failed = 0
+    ensure_compiled(say=lambda line: click.echo(line, err=True))
     for config in loaded:
         result = simulate(config)
         path = write_result(result, out / f"{config.name}.h5", command_line=command_line())

@@ -34,14 +34,14 @@ def _indent(text: str) -> str:
     help="Per-run wall-time budget; a run past it is recorded as failed (scipy engine only).",
 )
 @click.option(
-    "--engine", type=click.Choice(["batch", "scipy"]), default=None,
-    help="batch: integrate runs that differ only in their initial state together, taking the "
-    "steps scipy takes (RK23/RK45/DOP853; other methods go through scipy); scipy: one "
-    "solve_ivp call per run, the reference  [default: batch; scipy with --timeout].",
+    "--engine", type=click.Choice(["compiled", "scipy"]), default=None,
+    help="compiled: scipy's RK23/RK45/DOP853 compiled with the model, the steps scipy takes "
+    "(other methods and the pure sign law go through scipy); scipy: one solve_ivp call per "
+    "run, the reference  [default: compiled; scipy with --timeout].",
 )
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
-    help="Most runs per unit of work sent to a worker  [default: 512 for batch or --layout chunk, "
+    help="Most runs per unit of work sent to a worker  [default: 256 for compiled or --layout chunk, "
     "1 for scipy].",
 )
 @click.option(
@@ -64,8 +64,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
     Every run's config is validated before anything runs. Running the same command again
     skips the runs whose result file exists and matches their config, and finishes the
     rest. --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the
-    spec itself (e.g. --set sweep.random.n=20). Runs that differ only in their initial
-    state are integrated together (--engine batch, the default; see docs/performance.md).
+    spec itself (e.g. --set sweep.random.n=20). Runs are integrated by the compiled
+    engine (--engine compiled, the default; see docs/performance.md).
 
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
     1 for an invalid spec (nothing is run); 130 when interrupted.
@@ -74,11 +74,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
-    if engine == "batch" and timeout is not None:
-        raise click.UsageError(
-            "--timeout needs --engine scipy: the batch engine integrates many runs together and has "
-            "no per-run wall-time budget"
-        )
+    if engine == "compiled" and timeout is not None:
+        raise click.UsageError("--timeout needs --engine scipy: the compiled engine has no per-run wall-time budget")
     executor = executor or ("dask" if scheduler else "local")
     if executor == "dask" and not scheduler:
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
@@ -107,6 +104,9 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
             click.echo(f"  {run.run_id}  base={run.base}" + (f"  {params}" if params else ""))
         return
 
+    from rbstab.jit import ensure_compiled
+
+    ensure_compiled(say=lambda line: click.echo(line, err=True))  # once, before any worker starts
     try:
         outcome = run_sweep(
             loaded,

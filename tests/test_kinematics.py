@@ -5,30 +5,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from numba import njit
+
 from rbstab.kinematics import (
-    ConstantMatrix,
-    ConstantVector,
-    add_columns,
-    add_constant_columns,
-    cross_columns,
-    dot_constant_columns,
+    add,
+    cross,
+    dot,
     euler_rate_matrix,
-    from_columns,
     hat,
     matTvec,
-    matTvec_columns,
     matvec,
-    matvec_columns,
+    neg,
     quadratic_form,
-    quadratic_form_columns,
-    rate_matTvec_columns,
-    rate_matvec_columns,
     rotation_and_rate,
-    rotation_and_rate_columns,
     rotation_matrix,
-    sub_columns,
-    sub_constant_columns,
-    to_columns,
+    scale,
+    sub,
 )
 
 
@@ -106,100 +98,20 @@ def test_rotation_and_rate_is_rotation_matrix_and_euler_rate_matrix(rng):
         a, b = rotation_and_rate(th)
         np.testing.assert_array_equal(a, rotation_matrix(th))
         np.testing.assert_array_equal(b, euler_rate_matrix(th))
-        # the columns form holds the same matrices, entry by entry
-        a_c, b_c = rotation_and_rate_columns(to_columns(th))
-        np.testing.assert_array_equal(from_columns(a_c, th.shape[:-1]), a)
-        np.testing.assert_array_equal(from_columns(b_c, th.shape[:-1]), b)
 
 
-def _rows(x, m):
-    """Columns-form vector -> stacked rows (m, 3) (or (3,) for one vector, m = None)."""
-    return from_columns(x, () if m is None else (m,))
+@njit
+def _compiled_algebra(a, b, m):
+    return (add(a, b), sub(a, b), neg(a), scale(2.5, a), dot(a, b), cross(a, b), matvec(m, a), matTvec(m, a),
+            quadratic_form(a, m))
 
 
-@pytest.mark.parametrize("m", [None, 1, 3, 7])
-def test_columns_helpers_match_the_stacked_rows_helpers(m, rng):
-    """One state (floats, m = None) and stacks; m = 3 guards against a constant 3-vector
-    broadcast along the wrong axis."""
-    n = 1 if m is None else m
-    theta = _random_angles(rng, n)
-    w, u = rng.normal(size=(2, n, 3))
-    r, k = rng.normal(size=3), rng.normal(size=(3, 3))
-    if m is None:
-        theta, w, u = theta[0], w[0], u[0]
-    cols = to_columns  # floats for one vector, (3, m) rows for a stack
-    a_c, b_c = rotation_and_rate_columns(cols(theta))
-    a, b = rotation_and_rate(theta)
-    r_c = ConstantVector(r)
-    close = dict(rtol=1e-14, atol=1e-15)
-    np.testing.assert_allclose(_rows(matvec_columns(a_c, cols(w)), m), matvec(a, w), **close)
-    np.testing.assert_allclose(_rows(matTvec_columns(a_c, cols(w)), m), matTvec(a, w), **close)
-    np.testing.assert_allclose(_rows(matvec_columns(a_c, r_c), m), matvec(a, r), **close)
-    np.testing.assert_allclose(_rows(rate_matvec_columns(b_c, cols(w)), m), matvec(b, w), **close)
-    np.testing.assert_allclose(_rows(rate_matTvec_columns(b_c, cols(w)), m), matTvec(b, w), **close)
-    np.testing.assert_allclose(_rows(ConstantMatrix(k).apply(cols(w)), m), matvec(k, w), **close)
-    np.testing.assert_allclose(_rows(cross_columns(cols(w), cols(u)), m), np.cross(w, u), **close)
-    np.testing.assert_allclose(_rows(cross_columns(cols(w), r_c), m), np.cross(w, r), **close)
-    np.testing.assert_array_equal(_rows(add_columns(cols(w), r_c), m), w + r)
-    np.testing.assert_array_equal(_rows(sub_columns(cols(w), cols(u)), m), w - u)
-    np.testing.assert_array_equal(_rows(add_constant_columns(cols(w), ConstantVector((r[0], 0.0, r[2]))), m), w + r * [1, 0, 1])
-    np.testing.assert_array_equal(_rows(sub_constant_columns(cols(w), ConstantVector(r)), m), w - r)
-    w_c = cols(w)
-    assert add_constant_columns(w_c, ConstantVector((0, 0, 0))) is w_c  # a zero constant costs nothing
-    np.testing.assert_allclose(dot_constant_columns(cols(w), r_c), w @ r, **close)
-    assert dot_constant_columns(cols(w), (0.0, 0.0, 0.0)) == 0.0
-    np.testing.assert_allclose(quadratic_form_columns(cols(w), ConstantMatrix(k)), quadratic_form(w, k), **close)
-    if m is None:  # one state: plain float arithmetic
-        assert all(isinstance(c, float) for c in matvec_columns(a_c, cols(w)))
-
-
-def test_constant_matrix_skips_zero_entries_and_diagonals_are_exact(rng):
-    w = to_columns(rng.normal(size=(5, 3)))
-    diag = ConstantMatrix(np.diag([2.0, 0.0, -3.0]))
-    assert diag.diagonal == (2.0, 0.0, -3.0)
-    np.testing.assert_array_equal(np.array(diag.apply(w)), np.diag([2.0, 0.0, -3.0]) @ w)
-    sparse = np.array([[0.0, 1.5, 0.0], [0.0, 0.0, 0.0], [2.0, 0.0, -1.0]])
-    op = ConstantMatrix(sparse)
-    assert op.diagonal is None
-    got = op.apply(w)
-    np.testing.assert_array_equal(got[0], 1.5 * w[1])
-    np.testing.assert_array_equal(got[1], np.zeros(5))
-    np.testing.assert_array_equal(got[2], 2.0 * w[0] + -1.0 * w[2])
-    with pytest.raises(ValueError, match="shape"):
-        ConstantMatrix(np.eye(2))
-
-
-def test_columns_of_a_stack_do_not_depend_on_the_other_states(rng):
-    """Every columns operation is elementwise: a state's bits are the same alone (as
-    floats) and in any stack."""
-    theta = _random_angles(rng, 6)
-    w = rng.normal(size=(6, 3))
-    k = ConstantMatrix(rng.normal(size=(3, 3)))
-
-    def chain(th, om, shape):
-        a, b = rotation_and_rate_columns(to_columns(th))
-        out = k.apply(cross_columns(matTvec_columns(a, rate_matvec_columns(b, to_columns(om))), to_columns(om)))
-        return from_columns(out, shape)
-
-    whole = chain(theta, w, (6,))
-    part = chain(theta[2:5], w[2:5], (3,))
-    alone = chain(theta[3], w[3], ())
-    np.testing.assert_array_equal(part, whole[2:5])
-    np.testing.assert_array_equal(alone, whole[3])
-
-
-def test_to_columns_and_back_round_trip(rng):
-    y = rng.normal(size=(2, 3, 5))
-    yc = to_columns(y)
-    assert yc.shape == (5, 6) and yc.flags.c_contiguous
-    np.testing.assert_array_equal(yc[:, 4], y[1, 1])
-    back = from_columns(yc, y.shape[:-1])
-    assert back.flags.c_contiguous
-    np.testing.assert_array_equal(back, y)
-    one = to_columns(y[0, 0])
-    assert isinstance(one, list) and all(isinstance(c, float) for c in one)
-    np.testing.assert_array_equal(from_columns(one, ()), y[0, 0])
-    m = rng.normal(size=(3, 3, 6))
-    np.testing.assert_array_equal(from_columns(m, (2, 3))[1, 2], m[:, :, 5])
-    # constant components (scalars) of a stack are broadcast
-    np.testing.assert_array_equal(from_columns((np.arange(4.0), 0.0, 1.0), (4,))[:, 1:], [[0.0, 1.0]] * 4)
+def test_compiled_vector_algebra_is_numpys(rng):
+    """The compiled 3-vector helpers of the physics against numpy's own operations."""
+    for _ in range(20):
+        a, b = rng.normal(size=(2, 3))
+        m = rng.normal(size=(3, 3))
+        got = _compiled_algebra(tuple(a), tuple(b), m)
+        expected = (a + b, a - b, -a, 2.5 * a, a @ b, np.cross(a, b), m @ a, m.T @ a, a @ m @ a)
+        for g, e in zip(got, expected):
+            np.testing.assert_allclose(np.array(g), e, rtol=1e-14, atol=1e-14)

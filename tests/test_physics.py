@@ -7,7 +7,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from conftest import initial_blocks, paper_body, paper_gains, settings
-from rbstab.kinematics import matvec, rotation_matrix
+from reference import Model, permanent_full_state_rhs
+from rbstab.kinematics import rotation_matrix
 from rbstab.layout import FULL_BODY
 from rbstab.simulate import evaluate_outputs, solve
 from rbstab.summary import numerical_rate
@@ -39,7 +40,7 @@ def test_torque_free_body_conserves_energy_and_angular_momentum():
     energy = 0.5 * np.einsum("ni,ij,nj->n", q["omega"], body.inertia, q["omega"]) + 0.5 * body.mass * np.sum(
         q["velocity"] ** 2, axis=1
     )
-    momentum = matvec(rotation_matrix(q["theta"]), matvec(body.inertia, q["omega"]))
+    momentum = np.einsum("nij,nj->ni", rotation_matrix(q["theta"]), q["omega"] @ body.inertia.T)
     np.testing.assert_allclose(energy, energy[0], rtol=1e-9)
     np.testing.assert_allclose(momentum, np.broadcast_to(momentum[0], momentum.shape), atol=1e-9 * np.abs(momentum[0]).max())
     # the body really tumbles: a test that a frozen body would pass is worthless
@@ -111,20 +112,24 @@ def test_free_equilibrium_is_K_t_inverse_G():
 
 @pytest.mark.parametrize("gravity", GRAVITY)
 def test_permanent_reduced_and_full_state_formulations_agree(gravity):
-    """The 6-state reduced system (eq 21) and the 12-state body with Lambda of eq 15."""
+    """The 6-state reduced system (eq 21, compiled) and the 12-state body with Lambda of
+    eq 15 (plain numpy, tests/reference.py)."""
     reduced = Permanent(paper_body(gravity), paper_gains(l_t=np.diag([210.0, 210, 140])))
-    full = reduced.full_state_variant()
+    full_rhs, full_force = permanent_full_state_rhs(reduced.body, reduced.gains)
     y0 = reduced.initial_state(initial_blocks())
     t = np.linspace(0, 1.0, 201)
     kw = dict(method="DOP853", rtol=1e-11, atol=1e-12, t_eval=t)
     sol_r = solve_ivp(reduced.rhs, (0, 1.0), y0, **kw)
-    sol_f = solve_ivp(full.rhs, (0, 1.0), reduced.full_state(y0), **kw)
+    sol_f = solve_ivp(full_rhs, (0, 1.0), reduced.full_state(y0), **kw)
     np.testing.assert_allclose(sol_f.y.T, reduced.full_state(sol_r.y.T), atol=1e-7)
     # in the 12-state formulation nothing pins C by construction: it stays put by physics
-    assert np.abs(full.evaluate(sol_f.y.T)["constraint_error"]).max() < 1e-8
+    y_f = sol_f.y.T
+    r = reduced.body.attachment_point
+    point_c = y_f[:, 6:9] + np.einsum("nij,j->ni", rotation_matrix(y_f[:, 0:3]), r) - r
+    assert np.abs(point_c).max() < 1e-8
     # and the two constraint forces agree
     lam_r = reduced.evaluate(sol_r.y.T)["constraint_force"]
-    lam_f = full.evaluate(sol_f.y.T)["constraint_force"]
+    lam_f = np.array([full_force(y) for y in y_f])
     np.testing.assert_allclose(lam_f, lam_r, atol=1e-6 * np.abs(lam_r).max())
 
 
@@ -133,10 +138,10 @@ def test_permanent_reconstruction_is_kinematically_consistent():
     variant = Permanent(paper_body((0, 0, -10.0)), paper_gains(l_t=np.diag([210.0, 210, 140])))
     time, states, status, _, _ = solve(variant, variant.initial_state(initial_blocks()), settings(t_end=0.5, n_samples=501))
     assert status == "success"
-    q = variant.quantities(states)
+    q = variant.evaluate(states)
     x_dot = np.stack([numerical_rate(time, q["position"][:, k]) for k in range(3)], axis=1)
     np.testing.assert_allclose(x_dot, q["velocity"], atol=1e-5 * np.abs(q["velocity"]).max())
-    point_c = q["position"] + matvec(rotation_matrix(q["theta"]), variant.body.attachment_point)
+    point_c = q["position"] + np.einsum("nij,j->ni", rotation_matrix(q["theta"]), variant.body.attachment_point)
     np.testing.assert_allclose(point_c, np.broadcast_to(variant.body.attachment_point, point_c.shape), atol=1e-14)
 
 
@@ -150,63 +155,35 @@ def test_gimbal_lock_stops_the_run_with_a_reason():
     assert np.abs(states[np.isfinite(states[:, 1]), 1]).max() < np.pi / 2
 
 
-def _with_full_state(name):
-    if name == "permanent_full_state":
-        return Permanent(paper_body((0.0, 0.0, -10.0)), paper_gains()).full_state_variant()
-    return _variant(name, (0.0, 0.0, -10.0))
+@pytest.mark.parametrize("gravity", GRAVITY)
+@pytest.mark.parametrize("name", ALL + ["sliding_sign_law"])
+def test_compiled_rhs_is_the_plain_numpy_model(name, gravity, rng):
+    """The compiled right-hand side of every variant against an independent plain-numpy
+    transcription of physics-notes.md (tests/reference.py), at random states."""
+    phi = 0.0 if name == "sliding_sign_law" else 0.005
+    name = name.replace("_sign_law", "")
+    variant = _variant(name, gravity, boundary_layer=phi)
+    reference = Model(name, variant.body, variant.gains)
+    y = _random_states(variant, rng, n=20)
+    compiled = variant.rhs(0.0, y)
+    for yi, fi in zip(y, compiled):
+        expected = reference.rhs(0.0, yi)
+        np.testing.assert_allclose(fi, expected, rtol=1e-12, atol=1e-10 * np.abs(expected).max())
 
 
 @pytest.mark.parametrize("batch", [(1,), (3,), (2, 3)])
-@pytest.mark.parametrize("name", ALL + ["permanent_full_state"])
+@pytest.mark.parametrize("name", ALL)
 def test_stacks_of_any_shape_match_row_by_row(name, batch, rng):
-    """rhs and every quantity of a stack equal those of its rows; a stack of 3 rows would
-    catch a constant 3-vector broadcast along the wrong axis."""
-    variant = _with_full_state(name)
+    """rhs and every output of a stack equal those of its rows, bit for bit."""
+    variant = _variant(name, (0.0, 0.0, -10.0))
     y = _random_states(variant, rng, n=int(np.prod(batch))).reshape(batch + (variant.layout.size,))
     stacked_rate = variant.rhs(0.0, y)
-    stacked = variant.quantities(y)
+    stacked = variant.evaluate(y)
     assert stacked_rate.shape == y.shape
     for index in np.ndindex(*batch):
-        np.testing.assert_allclose(variant.rhs(0.0, y[index]), stacked_rate[index], rtol=1e-13, atol=1e-12)
-        single = variant.quantities(y[index])
+        np.testing.assert_array_equal(variant.rhs(0.0, y[index]), stacked_rate[index])
+        single = variant.evaluate(y[index])
         assert single.keys() == stacked.keys()
         for key, value in single.items():
             assert stacked[key][index].shape == value.shape, key
-            np.testing.assert_allclose(stacked[key][index], value, rtol=1e-13, atol=1e-12, err_msg=key)
-
-
-@pytest.mark.parametrize("name", ALL + ["permanent_full_state"])
-def test_rhs_is_the_state_rate_of_the_outputs_path(name, rng):
-    """rhs skips output-only quantities but runs the same dynamics as quantities/evaluate."""
-    variant = _with_full_state(name)
-    for y in (_random_states(variant, rng, n=6), _random_states(variant, rng, n=1)[0]):
-        rate = variant.rhs(0.0, y)
-        np.testing.assert_array_equal(rate, variant.quantities(y)["state_rate"])
-        np.testing.assert_array_equal(rate, variant.quantities(y, outputs=False)["state_rate"])
-        assert rate.flags.c_contiguous
-
-
-@pytest.mark.parametrize("name, sign_law", [(n, False) for n in ALL + ["permanent_full_state"]] + [("sliding", True)])
-def test_a_state_gets_the_same_bits_whatever_else_is_in_its_stack(name, sign_law, rng):
-    """evaluate of a block of runs (k, n, n_state) gives each run bit for bit what it gets
-    alone and in a differently composed block, and rhs of a stack gives each row what it
-    gets in another stack: the columns form is elementwise (a matrix product would not be:
-    BLAS and einsum kernels round differently for different shapes and positions)."""
-    variant = _with_full_state(name) if not sign_law else _variant(name, (0.0, 0.0, -10.0), boundary_layer=0.0)
-    runs = _random_states(variant, rng, n=5 * 37).reshape(5, 37, variant.layout.size)
-    runs[4, 30:] = np.nan  # a failed run's tail
-    block = variant.evaluate(runs)
-    other = variant.evaluate(runs[[3, 1, 4]])
-    for k in range(5):
-        alone = variant.evaluate(runs[k])
-        assert alone.keys() == block.keys()
-        for key, value in alone.items():
-            assert value.shape == block[key][k].shape, key
-            assert np.array_equal(block[key][k], value, equal_nan=True), (key, k)
-    for j, k in enumerate([3, 1, 4]):
-        for key, value in other.items():
-            assert np.array_equal(value[j], block[key][k], equal_nan=True), (key, k)
-    stack = runs[:4].reshape(-1, variant.layout.size)
-    rates = variant.rhs(0.0, stack)
-    for rows in ([5], [5, 77], [77, 5, 0], list(range(3, 40)), [120, 121]):  # [5]: a run left alone
-        np.testing.assert_array_equal(variant.rhs(0.0, stack[rows]), rates[rows])
+            np.testing.assert_array_equal(stacked[key][index], value, err_msg=key)

@@ -1,28 +1,22 @@
-"""Frozen physical inputs of a run: the rigid body and the gains (Table 1, eqs 22-24, 39, 40).
+"""Frozen physical inputs of a run (Table 1, eqs 22-24, 39, 40) and the feedback (eqs 23, 24).
 
-These are plain data; validation happens once, when a configuration is loaded
-(:mod:`rbstab.config`). The core trusts what it finds here.
+:class:`RigidBody` and :class:`Gains` are plain data; validation happens once, when a
+configuration is loaded (:mod:`rbstab.config`), and the core trusts what it finds here.
+:func:`parameters` packs both into one record of :data:`PARAMETERS`, the runtime argument of
+every compiled function: one compiled kernel per variant serves every body and every gain.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from types import SimpleNamespace
 
 import numpy as np
 
-from .kinematics import (
-    ConstantMatrix,
-    ConstantVector,
-    cross_columns,
-    hat,
-    neg_columns,
-    rate_matTvec_columns,
-    sub_columns,
-)
+from .jit import jit
+from .kinematics import cross, hat, matTvec, matvec, neg, sub
 
-__all__ = ["RigidBody", "Gains", "gyroscopic", "torque_n", "force_h"]
+__all__ = ["RigidBody", "Gains", "PARAMETERS", "parameters", "gyroscopic", "torque_n", "force_h"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -71,27 +65,10 @@ class RigidBody:
         """J_p^-1, shape (3, 3)."""
         return np.linalg.inv(self.pivot_inertia)
 
-    @cached_property
-    def columns(self) -> SimpleNamespace:
-        """The body's constants prepared for the columns form (:mod:`rbstab.kinematics`),
-        computed once: ``mass`` (float), ``attachment_point`` R and ``weight`` G
-        (:class:`~rbstab.kinematics.ConstantVector`), and ``inertia``, ``inertia_inv``,
-        ``pivot_inertia``, ``pivot_inertia_inv``
-        (:class:`~rbstab.kinematics.ConstantMatrix`)."""
-        return SimpleNamespace(
-            mass=float(self.mass),
-            attachment_point=ConstantVector(self.attachment_point),
-            weight=ConstantVector(self.weight),
-            inertia=ConstantMatrix(self.inertia),
-            inertia_inv=ConstantMatrix(self.inertia_inv),
-            pivot_inertia=ConstantMatrix(self.pivot_inertia),
-            pivot_inertia_inv=ConstantMatrix(self.pivot_inertia_inv),
-        )
-
 
 @dataclass(frozen=True, eq=False)
 class Gains:
-    """Feedback and constraint gains, each symmetric positive definite, shape (3, 3).
+    """Feedback and constraint gains, each symmetric, shape (3, 3).
 
     Attributes
     ----------
@@ -125,64 +102,86 @@ class Gains:
         """L_d^-1 [m/(N s)], shape (3, 3)."""
         return np.linalg.inv(self.l_d)
 
-    @cached_property
-    def columns(self) -> SimpleNamespace:
-        """The configured gains as :class:`~rbstab.kinematics.ConstantMatrix` (columns
-        form, computed once): ``k_t``, ``l_t``, ``k_r``, ``l_r``, and those of ``k_c``,
-        ``l_c``, ``k_d``, ``l_d``, ``l_d_inv`` that are set (None otherwise); ``k_s``
-        and ``boundary_layer`` as floats (``k_s`` None when unset)."""
-        def op(m):
-            return None if m is None else ConstantMatrix(m)
 
-        return SimpleNamespace(
-            k_t=op(self.k_t),
-            l_t=op(self.l_t),
-            k_r=op(self.k_r),
-            l_r=op(self.l_r),
-            k_c=op(self.k_c),
-            l_c=op(self.l_c),
-            k_d=op(self.k_d),
-            l_d=op(self.l_d),
-            l_d_inv=None if self.l_d is None else ConstantMatrix(self.l_d_inv),
-            k_s=None if self.k_s is None else float(self.k_s),
-            boundary_layer=float(self.boundary_layer),
-        )
+_MATRIX = (np.float64, (3, 3))
+_VECTOR = (np.float64, (3,))
+
+#: One run's physical parameters as a numpy record (the argument ``p`` of every compiled
+#: function; fields read as ``p.mass``, ``p.k_t``): the body (SI units, frames as in
+#: :class:`RigidBody`), the quantities derived from it once (J^-1, J_p = J - m hat(R)^2 and
+#: its inverse, G = m g), every gain (zero where the variant has none), L_d^-1, K_s,
+#: the boundary layer phi, and the constant h [J] that makes v zero at the equilibrium.
+PARAMETERS = np.dtype(
+    [
+        ("mass", np.float64),
+        ("inertia", *_MATRIX),
+        ("inertia_inv", *_MATRIX),
+        ("pivot_inertia", *_MATRIX),
+        ("pivot_inertia_inv", *_MATRIX),
+        ("attachment_point", *_VECTOR),
+        ("weight", *_VECTOR),
+        ("k_t", *_MATRIX),
+        ("l_t", *_MATRIX),
+        ("k_r", *_MATRIX),
+        ("l_r", *_MATRIX),
+        ("k_c", *_MATRIX),
+        ("l_c", *_MATRIX),
+        ("k_d", *_MATRIX),
+        ("l_d", *_MATRIX),
+        ("l_d_inv", *_MATRIX),
+        ("k_s", np.float64),
+        ("boundary_layer", np.float64),
+        ("lyapunov_offset", np.float64),
+    ],
+    align=True,
+)
 
 
-def gyroscopic(inertia: ConstantMatrix, omega):
-    """f(Omega) = -Omega x (J Omega) [N m], body frame (eq 1).
+def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0) -> np.ndarray:
+    """The record of :data:`PARAMETERS` for ``body`` and ``gains``: a 0-d structured array.
 
-    ``inertia``: J (``RigidBody.columns.inertia``); ``omega`` [rad/s] and the result in
-    columns form (:mod:`rbstab.kinematics`).
+    Gains that are None (not used by the variant) are zero; ``lyapunov_offset`` is h [J].
     """
-    return neg_columns(cross_columns(omega, inertia.apply(omega)))
+    p = np.zeros((), dtype=PARAMETERS)
+    p["mass"] = body.mass
+    p["inertia"] = body.inertia
+    p["inertia_inv"] = body.inertia_inv
+    p["pivot_inertia"] = body.pivot_inertia
+    p["pivot_inertia_inv"] = body.pivot_inertia_inv
+    p["attachment_point"] = body.attachment_point
+    p["weight"] = body.weight
+    for name in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d"):
+        value = getattr(gains, name)
+        if value is not None:
+            p[name] = value
+    if gains.l_d is not None:
+        p["l_d_inv"] = gains.l_d_inv
+    p["k_s"] = 0.0 if gains.k_s is None else gains.k_s
+    p["boundary_layer"] = gains.boundary_layer
+    p["lyapunov_offset"] = lyapunov_offset
+    return p
 
 
-def torque_n(b, theta, omega, gains: Gains):
+# -- the feedback, compiled (3-vectors are tuples, see rbstab.kinematics) ---------------------
+@jit(inline="always")
+def gyroscopic(inertia, omega):
+    """f(Omega) = -Omega x (J Omega) [N m], body frame (eq 1); ``inertia`` J (3, 3)."""
+    return neg(cross(omega, matvec(inertia, omega)))
+
+
+@jit(inline="always")
+def torque_n(b, theta, omega, p):
     """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23).
 
-    Columns form (:mod:`rbstab.kinematics`).
-
-    Parameters
-    ----------
-    b : nested tuple
-        Euler-rate matrix B(theta) from :func:`~rbstab.kinematics.rotation_and_rate_columns`.
-    theta, omega : vectors in columns form
-        Euler angles [rad] and body angular velocity [rad/s].
-    gains : Gains
-
-    Returns
-    -------
-    vector in columns form
+    ``b``: B(theta); ``theta`` [rad], ``omega`` [rad/s]; ``p``: a :data:`PARAMETERS` record.
     """
-    g = gains.columns
-    return sub_columns(neg_columns(rate_matTvec_columns(b, g.k_r.apply(theta))), g.l_r.apply(omega))
+    return sub(neg(matTvec(b, matvec(p.k_r, theta))), matvec(p.l_r, omega))
 
 
-def force_h(x, v, gains: Gains):
+@jit(inline="always")
+def force_h(x, v, p):
     """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24).
 
-    ``x`` [m], ``v`` [m/s] and the result in columns form (:mod:`rbstab.kinematics`).
+    ``x`` [m], ``v`` [m/s]; ``p``: a :data:`PARAMETERS` record.
     """
-    g = gains.columns
-    return sub_columns(neg_columns(g.k_t.apply(x)), g.l_t.apply(v))
+    return sub(neg(matvec(p.k_t, x)), matvec(p.l_t, v))

@@ -1,10 +1,18 @@
-"""The scipy core: integrate one validated run configuration (the reference path).
+"""Integrate validated run configurations: one (:func:`simulate`) or many (:func:`simulate_many`).
 
-``simulate(config)`` calls :func:`scipy.integrate.solve_ivp` on the variant's
-right-hand side, samples the dense output on an even grid, evaluates every output
-quantity through the variant protocol and returns a :class:`RunResult`. A failed run
-(solver failure, gimbal lock, non-finite state) is data: ``status == "failed"`` with a
-message, never an exception.
+Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
+
+- ``compiled`` (the default): :mod:`rbstab.engine`, scipy's RK23, RK45 and DOP853
+  compiled with the model, the steps ``solve_ivp`` takes; every run of a call may have its
+  own variant, body, gains and settings.
+- ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA, of the
+  pure sign law of ``sliding`` and of a per-run wall-time budget):
+  :func:`scipy.integrate.solve_ivp` on the compiled right-hand side.
+
+Both sample the dense output on an even grid, evaluate every output quantity with the
+compiled ``output_row`` and return a :class:`RunResult`. A failed run (solver failure,
+gimbal lock, non-finite state, step limit) is data: ``status == "failed"`` with a message,
+never an exception.
 """
 
 from __future__ import annotations
@@ -29,16 +37,16 @@ __all__ = [
     "ENGINES",
     "simulate",
     "simulate_many",
-    "batch_key",
     "solve",
     "gimbal_lock_event",
     "evaluate_outputs",
+    "uses_compiled_engine",
 ]
 
-#: Integration engines: ``scipy`` (the reference, one solve_ivp call per run, any
-#: method) and ``batch`` (:mod:`rbstab.batch`, many runs per vectorised integration,
-#: RK23/RK45/DOP853; other methods fall back to scipy).
-ENGINES = ("scipy", "batch")
+#: Integration engines: ``compiled`` (:mod:`rbstab.engine`, RK23/RK45/DOP853; other
+#: methods and the pure sign law go through scipy) and ``scipy`` (the reference, one
+#: ``solve_ivp`` call per run, any method).
+ENGINES = ("compiled", "scipy")
 
 
 @dataclass
@@ -105,13 +113,6 @@ def gimbal_lock_event(margin: float):
     return event
 
 
-def _gimbal_message(margin: float, t: float) -> str:
-    return (
-        f"gimbal lock: |theta_2| reached pi/2 - {margin:g} rad at t = {t:.6g} s; "
-        "B(theta) is singular there (eq 5), so the Euler-angle model stops"
-    )
-
-
 class RunTimeout(Exception):
     """Raised inside the right-hand side when a run exceeds its wall-time budget."""
 
@@ -157,6 +158,8 @@ def solve(
     """
     from scipy.integrate import solve_ivp
 
+    from .engine import status_message
+
     t_eval = np.linspace(0.0, settings.t_end, settings.n_samples)
     states = np.full((settings.n_samples, variant.layout.size), np.nan)
     with np.errstate(all="ignore"):
@@ -180,7 +183,7 @@ def solve(
     states[:n] = sol.y.T
     solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
     if sol.status == 1:
-        return t_eval, states, "failed", _gimbal_message(settings.gimbal_margin, float(sol.t_events[0][0])), solver
+        return t_eval, states, "failed", status_message(1, float(sol.t_events[0][0]), settings.gimbal_margin), solver
     if sol.status != 0:
         return t_eval, states, "failed", f"solver failed: {sol.message}", solver
     if not np.all(np.isfinite(states)):
@@ -196,172 +199,156 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> 
     Adds ``lyapunov_rate_numerical`` [W], the derivative of v along the samples
     (:func:`rbstab.summary.numerical_rate`), to :meth:`Variant.evaluate`.
     """
-    with np.errstate(all="ignore"):
-        outputs = variant.evaluate(states)
+    outputs = variant.evaluate(states)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
     return outputs
 
 
-def _result(config, variant, time, states, status, message, solver, wall_time) -> RunResult:
-    outputs = evaluate_outputs(variant, time, states)
-    return RunResult(
-        config=config,
-        time=time,
-        outputs=outputs,
-        status=status,
-        message=message,
-        solver=solver,
-        wall_time=wall_time,
-        summary=summarize(time, outputs),
-    )
+def uses_compiled_engine(config: "RunConfig", engine: str = "compiled") -> bool:
+    """Whether ``config`` runs on the compiled engine with ``engine`` (see the module docstring)."""
+    from .engine import METHODS
+
+    if engine not in ENGINES:
+        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
+    sliding_sign_law = config.variant == "sliding" and not config.gains.boundary_layer
+    return engine == "compiled" and config.simulation.method in METHODS and not sliding_sign_law
 
 
-def simulate(config: "RunConfig", timeout: float | None = None) -> RunResult:
-    """Run one validated configuration through the scipy core.
+def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = "compiled") -> RunResult:
+    """Run one validated configuration.
 
     Parameters
     ----------
     config : RunConfig
         From :func:`rbstab.config.load_config` (already validated).
     timeout : float, optional
-        Wall-time budget of the integration [s]; past it the run fails with a message.
+        Wall-time budget of the integration [s]; past it the run fails with a message
+        (the scipy engine is used for a run with a budget).
+    engine : {"compiled", "scipy"}
+        See the module docstring.
 
     Returns
     -------
     RunResult
         Never raises for a physical or numerical failure: those are ``status="failed"``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown engine.
     """
+    if timeout is None and uses_compiled_engine(config, engine):
+        return next(simulate_many([config], engine=engine))[1]
     start = _time.perf_counter()
     variant = config.make_variant()
     y0 = variant.initial_state(config.initial_state)
     time, states, status, message, solver = solve(variant, y0, config.simulation, timeout)
     solved = _time.perf_counter()
-    result = _result(config, variant, time, states, status, message, solver, 0.0)
+    outputs = evaluate_outputs(variant, time, states)
+    result = RunResult(config=config, time=time, outputs=outputs, status=status, message=message,
+                       solver=solver, summary=summarize(time, outputs))
     end = _time.perf_counter()
     result.wall_time = end - start
     result.timing = {"integration": solved - start, "postprocess": end - solved}
     return result
 
 
-def batch_key(config: "RunConfig") -> str:
-    """Configs with equal keys differ at most in name and initial state: one batch
-    (:func:`rbstab.config.group_key` of ``config.resolved``)."""
-    from .config import group_key
-
-    return group_key(config.resolved)
-
-
-#: Runs whose outputs :func:`simulate_many` evaluates together before yielding them (the
-#: numerical rate of v is one finite-difference pass for all of them, the summaries are computed for
-#: all at once); bounds the memory of outputs held at once to this many runs.
+#: Runs whose outputs :func:`simulate_many` evaluates together before yielding them; bounds
+#: the memory of outputs held at once (36 columns per sample) to this many runs.
 POSTPROCESS_BLOCK = 32
 
-#: Runs per :meth:`Variant.evaluate` call inside a post-processing block: each numpy
-#: operation then acts on ``EVALUATE_RUNS * n_samples`` values, enough to make numpy's
-#: per-call overhead small and few enough for the temporaries to stay in the CPU caches.
-EVALUATE_RUNS = 4
+
+def _settings_rows(configs) -> np.ndarray:
+    return np.array([[c.simulation.t_end, c.simulation.rtol, c.simulation.atol, c.simulation.max_step,
+                      c.simulation.gimbal_margin] for c in configs], dtype=float)
 
 
-def _results_of_block(configs, variant, sol, block: range, chunk, share) -> list[tuple[int, RunResult]]:
-    """Post-process runs ``block`` (a range of indices into the batch ``sol``) into RunResults.
+def _chunk_results(configs, variants, sol, share: float) -> Iterator[tuple[int, RunResult]]:
+    """RunResults of one integrated chunk, post-processed :data:`POSTPROCESS_BLOCK` runs at a time."""
+    from .engine import status_message
+    from .variants.base import N_OUTPUTS, split_outputs
+    from .variants.kernels import run_outputs
 
-    The block's samples are evaluated :data:`EVALUATE_RUNS` runs per call, the numerical
-    rate of v for the whole block in one finite-difference pass, the summaries all at once; a run's
-    outputs are views of the arrays of its :meth:`Variant.evaluate` call (vectors
-    strided, see there). Everything is elementwise or
-    per run, so a run gets the same bits whatever else is in its block or chunk.
-    """
-    t0 = _time.perf_counter()
-    parts = []
-    with np.errstate(all="ignore"):
-        for lo in range(block.start, block.stop, EVALUATE_RUNS):
-            parts.append(variant.evaluate(sol.y[lo : min(lo + EVALUATE_RUNS, block.stop)]))
-    rates = numerical_rate(sol.t, np.concatenate([p["lyapunov"] for p in parts]))
-    summaries = []
-    lo = 0
-    for part in parts:
-        part["lyapunov_rate_numerical"] = rates[lo : lo + len(part["lyapunov"])]
-        lo += len(part["lyapunov"])
-        summaries.extend(summarize_many(sol.t, part))
-    per_run = (_time.perf_counter() - t0) / len(block)
-    results = []
-    j = 0
-    for part in parts:
-        for b in range(len(part["lyapunov"])):
-            k = block.start + j
-            ok = int(sol.status[k]) == 0
-            result = RunResult(
-                config=configs[chunk[k]],
-                time=sol.t,
-                outputs={key: value[b] for key, value in part.items()},
-                status="success" if ok else "failed",
-                message=sol.message[k],
-                solver={"nfev": int(sol.nfev[k]), "njev": 0, "nlu": 0, "solver_status": 0 if ok else -1},
+    k, n_samples, _ = sol.samples.shape
+    codes = np.array([v.code for v in variants], dtype=np.int64)
+    params = np.concatenate([v.parameters for v in variants])
+    for lo in range(0, k, POSTPROCESS_BLOCK):
+        t0 = _time.perf_counter()
+        hi = min(lo + POSTPROCESS_BLOCK, k)
+        rows = np.empty((hi - lo, n_samples, N_OUTPUTS))
+        with np.errstate(all="ignore"):
+            run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], rows)
+        block = {}
+        for j in range(lo, hi):
+            block[j] = split_outputs(rows[j - lo], (n_samples,), variants[j].layout)
+        time = np.linspace(0.0, configs[lo].simulation.t_end, n_samples)
+        lyapunov = np.stack([block[j]["lyapunov"] for j in range(lo, hi)])
+        rates = numerical_rate(time, lyapunov)  # one finite-difference pass for the block
+        for j in range(lo, hi):
+            block[j]["lyapunov_rate_numerical"] = rates[j - lo]
+        per_run = (_time.perf_counter() - t0) / (hi - lo)
+        for j in range(lo, hi):
+            config = configs[j]
+            time = np.linspace(0.0, config.simulation.t_end, n_samples)
+            status = int(sol.status[j])
+            outputs = block.pop(j)
+            yield j, RunResult(
+                config=config,
+                time=time,
+                outputs=outputs,
+                status="success" if status == 0 else "failed",
+                message=status_message(status, float(sol.t_stop[j]), config.simulation.gimbal_margin),
+                solver={"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": status,
+                        "n_steps": int(sol.n_steps[j])},
                 wall_time=share + per_run,
-                summary=summaries[j],
+                summary=summarize(time, outputs),
                 timing={"integration": share, "postprocess": per_run},
             )
-            results.append((chunk[k], result))
-            j += 1
-    return results
 
 
-def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "batch", chunk_size: int = 512) -> Iterator[tuple[int, RunResult]]:
+def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
+                  chunk_size: int = 512) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
 
-    With ``engine="batch"``, configurations that differ only in ``name`` and
-    ``initial_state`` and use RK23, RK45 or DOP853 are integrated together by
-    :func:`rbstab.batch.integrate_batch` (per-run step-size control; each run takes the
-    steps scipy would take alone), ``chunk_size`` runs at a time; everything else goes
-    through :func:`simulate`. The batch's right-hand side is
-    :func:`rbstab.traced.traced_rhs` of the group's variant (generated from the model, the
-    same bits as ``variant.rhs``; traced once per group, ~8 ms) where the model can be
-    traced, ``variant.rhs`` otherwise. Results are yielded as each chunk finishes, so at most one
-    chunk of trajectories (``chunk_size * n_samples * n_state`` floats) and the outputs
-    of :data:`POSTPROCESS_BLOCK` runs are held at once. Each result's ``wall_time`` is its
-    share of the chunk's integration plus its own post-processing [s] (split in
-    ``timing``).
+    With ``engine="compiled"`` every run that the compiled engine takes
+    (:func:`uses_compiled_engine`) is integrated by :func:`rbstab.engine.integrate_runs`,
+    ``chunk_size`` runs per call, whatever its variant, body, gains and settings (a call
+    takes runs of one method, sample count and state size); the others go through
+    :func:`simulate` one by one. A run's result does not depend on the other runs of the
+    call. At most one chunk of trajectories (``chunk_size * n_samples * n_state`` floats) and the outputs of
+    :data:`POSTPROCESS_BLOCK` runs are held at once. Each result's ``wall_time`` is its share
+    of the chunk's integration plus its own post-processing [s] (split in ``timing``).
 
     Raises
     ------
     ValueError
         For an unknown engine (allowed: :data:`ENGINES`) or ``chunk_size < 1``.
     """
-    if engine not in ENGINES:
-        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
+    from .engine import integrate_runs
+
     if chunk_size < 1:
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
-    from .batch import SUPPORTED_METHODS, integrate_batch
-    from .traced import traced_rhs
-
-    groups: dict[str, list[int]] = {}
+    groups: dict[tuple, list[int]] = {}
     for i, config in enumerate(configs):
-        if engine == "batch" and config.simulation.method in SUPPORTED_METHODS:
-            groups.setdefault(batch_key(config), []).append(i)
+        if uses_compiled_engine(config, engine):
+            size = config.make_variant().layout.size
+            groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
         else:
-            yield i, simulate(config)
-    for members in groups.values():
-        first = configs[members[0]]
-        variant = first.make_variant()
-        # the same bits as variant.rhs, about half its time per call (None: not traceable)
-        fun = traced_rhs(variant) or variant.rhs
-        sim = first.simulation
+            yield i, simulate(config, engine="scipy")
+    for (method, n_samples, _), members in groups.items():
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
             start = _time.perf_counter()
-            y0 = np.stack([variant.initial_state(configs[i].initial_state) for i in chunk])
-            sol = integrate_batch(
-                fun,
-                y0,
-                sim.t_end,
-                sim.n_samples,
-                method=sim.method,
-                rtol=sim.rtol,
-                atol=sim.atol,
-                max_step=sim.max_step,
-                gimbal_margin=sim.gimbal_margin,
+            chunk_configs = [configs[i] for i in chunk]
+            variants = [c.make_variant() for c in chunk_configs]
+            sol = integrate_runs(
+                [v.code for v in variants],
+                np.concatenate([v.parameters for v in variants]),
+                np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, chunk_configs)]),
+                _settings_rows(chunk_configs),
+                method=method,
+                n_samples=n_samples,
             )
             share = (_time.perf_counter() - start) / len(chunk)
-            for lo_b in range(0, len(chunk), POSTPROCESS_BLOCK):
-                block = range(lo_b, min(lo_b + POSTPROCESS_BLOCK, len(chunk)))
-                yield from _results_of_block(configs, variant, sol, block, chunk, share)
+            for j, result in _chunk_results(chunk_configs, variants, sol, share):
+                yield chunk[j], result

@@ -269,46 +269,37 @@ def _chunks(tasks: list[RunTask], size: int) -> list[list[RunTask]]:
     return [tasks[i : i + size] for i in range(0, len(tasks), size)]
 
 
-def _batch_chunks(todo: Sequence[PlannedRun], tasks: list[RunTask], size: int, workers: int | None) -> list[list[RunTask]]:
-    """Chunks for the batch engine: runs of one batch group together, evenly split.
+def _even_chunks(tasks: list[RunTask], size: int, workers: int | None) -> list[list[RunTask]]:
+    """Chunks of at most ``size`` runs, and at most ``ceil(n / workers)`` so that every
+    worker gets a share of a small sweep, split into chunks of nearly equal length.
 
-    Runs that differ only in name and initial state (one base, the same grid point) go to
-    the same chunks whatever their place in the run list, so that each chunk is one
-    batch. A chunk holds at most ``size`` runs, and at most ``ceil(n / workers)`` so
-    that every worker gets a share of a small sweep; a group is split into chunks of
-    nearly equal length.
+    Any runs share a chunk: the compiled engine integrates runs of different variants,
+    bodies and gains together.
     """
-    from ..simulate import batch_key
-
-    groups: dict[str, list[RunTask]] = {}
-    for run, task in zip(todo, tasks):
-        groups.setdefault(batch_key(run.config), []).append(task)
+    if not tasks:
+        return []
     if workers and workers > 1:
         size = min(size, max(1, math.ceil(len(tasks) / workers)))
-    chunks = []
-    for members in groups.values():
-        n = math.ceil(len(members) / size)
-        bounds = [round(i * len(members) / n) for i in range(n + 1)]
-        chunks += [members[a:b] for a, b in zip(bounds, bounds[1:])]
-    return chunks
+    n = math.ceil(len(tasks) / size)
+    bounds = [round(i * len(tasks) / n) for i in range(n + 1)]
+    return [tasks[a:b] for a, b in zip(bounds, bounds[1:])]
 
 
 def resolve_engine(engine: str | None, timeout: float | None) -> str:
-    """The engine a sweep uses: ``engine``, or by default ``batch`` (``scipy`` with a timeout).
+    """The engine a sweep uses: ``engine``, or by default ``compiled`` (``scipy`` with a timeout).
 
     Raises
     ------
     ValueError
-        For an unknown engine, or ``batch`` with a timeout (it has no per-run budget).
+        For an unknown engine, or ``compiled`` with a timeout (it has no per-run budget).
     """
     if engine is None:
-        return "scipy" if timeout is not None else "batch"
+        return "scipy" if timeout is not None else "compiled"
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    if engine == "batch" and timeout is not None:
+    if engine == "compiled" and timeout is not None:
         raise ValueError(
-            "--timeout needs --engine scipy: the batch engine integrates many runs together "
-            "and has no per-run wall-time budget"
+            "--timeout needs --engine scipy: the compiled engine has no per-run wall-time budget"
         )
     return engine
 
@@ -386,14 +377,13 @@ def run_sweep(
         Also re-execute runs whose current result file has status ``failed``.
     chunk_size : int, optional
         Most runs per unit of work sent to a worker (default
-        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 512 for batch).
-        For the batch engine, runs of one batch group are kept together and a chunk
-        holds at most ``ceil(runs / workers)`` runs.
-    engine : {"batch", "scipy"}, optional
-        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``batch``, or ``scipy`` when
-        ``timeout`` is given (see :func:`resolve_engine`). ``batch`` integrates runs
-        that differ only in their initial state together (RK23/RK45/DOP853; other
-        methods go through scipy), taking the steps scipy takes.
+        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 256 for compiled).
+        For the compiled engine a chunk holds at most ``ceil(runs / workers)`` runs.
+    engine : {"compiled", "scipy"}, optional
+        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``, or ``scipy``
+        when ``timeout`` is given (see :func:`resolve_engine`). ``compiled`` integrates
+        every run with scipy's RK23/RK45/DOP853 compiled with the model (other methods
+        and the pure sign law go through scipy), taking the steps scipy takes.
     store : {"full", "summary"}
         What each result file holds (:data:`rbstab.io.hdf5.STORE_MODES`): every variable
         at every sample, or the variables a report draws at most 201 samples (summary
@@ -402,8 +392,8 @@ def run_sweep(
         One result file per run (``runs/<run_id>.h5``, the format of ``rbstab run``), or
         one per chunk of runs (``runs/chunk-*.h5``, :mod:`rbstab.io.chunk`: far fewer
         files and ~10 ms less writing per run; a chunk killed midway is rerun whole).
-        With ``"chunk"`` the default ``chunk_size`` is the batch engine's for either
-        engine, and chunks group runs that differ only in their initial state.
+        With ``"chunk"`` the default ``chunk_size`` is the compiled engine's for either
+        engine.
     progress : bool, optional
         Progress bar on stderr (done / failed / remaining, ETA); default: when stderr is a
         terminal.
@@ -436,7 +426,7 @@ def run_sweep(
     if layout not in LAYOUTS:
         raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
     if chunk_size is None:
-        chunk_size = DEFAULT_CHUNK_SIZE["batch" if layout == "chunk" else engine]
+        chunk_size = DEFAULT_CHUNK_SIZE["compiled" if layout == "chunk" else engine]
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     if store not in STORE_MODES:
@@ -510,8 +500,8 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
              options) -> None:
     folder = str(runs_dir.resolve())
     tasks = [RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5")) for r in todo]
-    if (options.engine == "batch" or options.layout == "chunk") and chunk_size > 1:
-        chunks = _batch_chunks(todo, tasks, chunk_size, ex.parallelism())
+    if (options.engine == "compiled" or options.layout == "chunk") and chunk_size > 1:
+        chunks = _even_chunks(tasks, chunk_size, ex.parallelism())
     else:
         chunks = _chunks(tasks, chunk_size)
     if ex.return_bytes:

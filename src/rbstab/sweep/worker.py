@@ -13,13 +13,13 @@ Engines
 - ``scipy`` (the reference): the tasks of a chunk one after the other through
   :func:`rbstab.simulate.simulate`, one ``solve_ivp`` call each; any method, per-run
   ``timeout``.
-- ``batch``: :func:`rbstab.simulate.simulate_many` (:mod:`rbstab.batch`): the runs of a
-  chunk that share variant, body, gains and settings (they differ only in name and
-  initial state) and use RK23, RK45 or DOP853 are integrated together, each with the
-  steps scipy would take alone; the other tasks of the chunk (implicit methods) go
-  through the scipy engine. Configurations are validated once per group: the sweep
-  validated every run when it was planned, and the other runs of a group take the
-  group's validated config with their own name and initial state. No ``timeout``.
+- ``compiled``: :func:`rbstab.simulate.simulate_many` (:mod:`rbstab.engine`): every run
+  of the chunk that uses RK23, RK45 or DOP853 is integrated by the compiled engine,
+  whatever its variant, body and gains; the others (implicit methods, the pure sign law
+  of ``sliding``) go through scipy. Configurations are validated once per group of runs
+  that differ only in name and initial state: the sweep validated every run when it was
+  planned, and the other runs of a group take the group's validated config with their
+  own name and initial state. No ``timeout``.
 
 Layouts
 -------
@@ -263,21 +263,20 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     return configs, errors
 
 
-def _batch_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
-    """Integrate the batchable runs of the chunk together (see the module docstring)."""
-    from ..batch import SUPPORTED_METHODS
-    from ..simulate import simulate_many
+def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
+    """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
+    from ..simulate import simulate_many, uses_compiled_engine
 
     if options.timeout is not None:
-        raise ValueError("the batch engine has no per-run timeout; use the scipy engine for --timeout")
+        raise ValueError("the compiled engine has no per-run timeout; use the scipy engine for --timeout")
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)
-    batch = [i for i, c in enumerate(configs) if c is not None and c.simulation.method in SUPPORTED_METHODS]
-    others = [i for i, c in enumerate(configs) if c is not None and c.simulation.method not in SUPPORTED_METHODS]
+    batch = [i for i, c in enumerate(configs) if c is not None and uses_compiled_engine(c)]
+    others = [i for i, c in enumerate(configs) if c is not None and not uses_compiled_engine(c)]
     config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
     done: set[int] = set()
     try:
-        for j, result in simulate_many([configs[i] for i in batch], engine="batch", chunk_size=max(len(batch), 1)):
+        for j, result in simulate_many([configs[i] for i in batch], chunk_size=max(len(batch), 1)):
             i = batch[j]
             done.add(i)
             try:
@@ -297,14 +296,14 @@ def _batch_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> lis
 #: engine name -> ``(tasks, options) -> list of records`` (one record per task, any order).
 ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, Any]]]] = {
     "scipy": _scipy_engine,
-    "batch": _batch_engine,
+    "compiled": _compiled_engine,
 }
 
-#: Default runs per chunk of each engine: one run per unit of work for scipy; batches of
-#: a few hundred amortise numpy's per-call overhead (Case 3: ~4 ms per run at 256, ~3 at
-#: 512, little gain beyond) while keeping a chunk's trajectories (512 x 2001 x 15 floats,
-#: 120 MB) small.
-DEFAULT_CHUNK_SIZE = {"scipy": 1, "batch": 512}
+#: Default runs per chunk of each engine: one run per unit of work for scipy; for the
+#: compiled engine enough runs that the per-chunk costs (a task's round trip, opening a
+#: file) are small, and few enough that a chunk's trajectories (256 x 2001 x 15 floats,
+#: 60 MB) stay small and both workers get work early.
+DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256}
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str, Any]]:

@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from .base import LYAPUNOV_TERMS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS, FullBodyVariant, Variant
+from .base import LYAPUNOV_TERMS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS, Variant
 from .embedded import Embedded
 from .free import Free
 from .permanent import Permanent
@@ -21,7 +21,6 @@ VARIANTS: dict[str, type[Variant]] = {
 __all__ = [
     "VARIANTS",
     "Variant",
-    "FullBodyVariant",
     "Free",
     "Permanent",
     "Sliding",

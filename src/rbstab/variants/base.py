@@ -1,60 +1,46 @@
-"""The controller-variant protocol shared by the integrators and the writers.
+"""The controller-variant protocol, and the body of eq 1 that four of the variants share.
 
 A variant is one way of holding the point C of the body (section 5). The integrators
-and the HDF5 writer talk only to this protocol, never to a variant by name:
+and the writers talk only to :class:`Variant`, never to a variant by name:
 
-- ``layout``: the state blocks (:mod:`rbstab.layout`);
+- ``layout``: the state blocks (:mod:`rbstab.layout`); ``code``: the variant's number in
+  the compiled kernels (:mod:`rbstab.variants.kernels`);
 - ``initial_state``: the state vector from the configured initial blocks;
 - ``rhs(t, y)``: the right-hand side, for one state (shape (n_state,)) or a stack
   (shape (..., n_state));
 - ``evaluate(y)``: every output quantity along a stack of states (constraint error E and
   rate F, constraint force Lambda, controls H and N, the Lyapunov function v, its terms
-  and its analytic rate dv/dt).
+  and its analytic rate dv/dt);
+- ``parameters``: the run's :data:`rbstab.model.PARAMETERS` record, the runtime argument
+  of the compiled kernels.
 
-All physics follows ``docs/physics.md`` (the consistent restatement of eqs 1-46).
-
-The dynamics live in one method per variant, :meth:`Variant.quantities_columns`, which
-works in the columns form of :mod:`rbstab.kinematics`: a vector is the tuple of its 3
-components, Python floats for one state and arrays of shape (m,) for a stack of m
-states, and every operation is elementwise. ``rhs`` calls it with ``outputs=False``
-(only what the state rate needs) and ``quantities``/``evaluate`` with ``outputs=True``;
-both convert at the boundary to the stacked rows (..., n_state) that the integrators and
-writers use. The Lyapunov function and its rate (``lyapunov_terms``, ``lyapunov_rate``,
-``constraint_energy``, ``constraint_dissipation``) read the columns-form quantities too.
-So the same code gives the single-state right-hand side of ``solve_ivp`` (float
-arithmetic, no numpy per-call overhead), the batched right-hand side and the outputs of
-a whole block of runs, and a state gets the same bits whatever else shares its stack.
+The physics is compiled code (:mod:`rbstab.jit`), written once, next to
+``docs/physics.md``: this module holds eq 1 under a constraint force Lambda and the terms
+of v that every variant has (eq 25); each variant's module holds its constraint law, the
+energy it stores and the power it dissipates.
 """
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
 from functools import cached_property
 from typing import ClassVar
 
 import numpy as np
 
-from ..kinematics import (
-    add_columns,
-    add_constant_columns,
-    cross_columns,
-    div_columns,
-    dot_columns,
-    dot_constant_columns,
-    from_columns,
-    matTvec_columns,
-    matvec_columns,
-    quadratic_form_columns,
-    rate_matvec_columns,
-    rotation_and_rate_columns,
-    sub_constant_columns,
-    to_columns,
-    zeros_columns,
-)
+from ..jit import jit
+from ..kinematics import add, cross, dot, matTvec, matvec, quadratic_form, scale
 from ..layout import FULL_BODY, StateLayout
-from ..model import Gains, RigidBody, force_h, gyroscopic, torque_n
+from ..model import Gains, RigidBody, gyroscopic, parameters
 
-__all__ = ["Variant", "FullBodyVariant", "OUTPUT_UNITS", "OUTPUT_DESCRIPTIONS", "LYAPUNOV_TERMS"]
+__all__ = [
+    "Variant",
+    "OUTPUT_UNITS",
+    "OUTPUT_DESCRIPTIONS",
+    "LYAPUNOV_TERMS",
+    "OUTPUT_VECTORS",
+    "OUTPUT_SCALARS",
+    "N_OUTPUTS",
+]
 
 #: Names of the terms of v, in the order they are summed.
 LYAPUNOV_TERMS = (
@@ -63,6 +49,24 @@ LYAPUNOV_TERMS = (
     "lyapunov_constraint",
     "lyapunov_gravity",
 )
+
+#: The vector outputs of the compiled ``outputs`` kernel, 3 columns each, in order.
+OUTPUT_VECTORS = (
+    "theta",
+    "omega",
+    "position",
+    "velocity",
+    "controller_state",
+    "constraint_error",
+    "constraint_rate",
+    "constraint_force",
+    "force_h",
+    "torque_n",
+)
+#: The scalar outputs after the vectors, one column each, in order.
+OUTPUT_SCALARS = (*LYAPUNOV_TERMS, "lyapunov", "lyapunov_rate")
+#: Columns of one row of outputs.
+N_OUTPUTS = 3 * len(OUTPUT_VECTORS) + len(OUTPUT_SCALARS)
 
 #: Units of every output quantity other than the state blocks.
 OUTPUT_UNITS = {
@@ -96,29 +100,53 @@ OUTPUT_DESCRIPTIONS = {
 }
 
 
-#: The vector outputs of :meth:`Variant.evaluate` after the state blocks, in order.
-_OUTPUT_VECTORS = ("constraint_error", "constraint_rate", "constraint_force", "force_h", "torque_n")
+# -- compiled physics shared by the variants ----------------------------------------------
+@jit(inline="always")
+def body_rates(omega, v, a, b, torque_n, force_h, constraint_force, p):
+    """Eq 1 under the force Lambda at C; returns (dTheta/dt, dOmega/dt, dX/dt, dV/dt).
+
+    dTheta/dt = B Omega
+    J dOmega/dt = f(Omega) + N + hat(R) A' Lambda
+    dX/dt = V
+    m dV/dt = G + H + Lambda
+    """
+    r = p.attachment_point
+    torque = add(add(gyroscopic(p.inertia, omega), torque_n), cross(r, matTvec(a, constraint_force)))
+    force = add(add(p.weight, force_h), constraint_force)
+    return matvec(b, omega), matvec(p.inertia_inv, torque), v, scale(1.0 / p.mass, force)
 
 
-def _component_array(c, shape: tuple[int, ...]) -> np.ndarray:
-    """One component in columns form (a float, an array (m,), or a constant scalar for a
-    stack) as an array of ``shape`` (stacked rows; a 0-d float for one state)."""
-    if not shape:
-        return np.float64(c)
-    if np.ndim(c) == 0:
-        return np.full(shape, float(c))
-    return c.reshape(shape)
+@jit(inline="always")
+def constraint_error(x, a, p):
+    """E = X + A R - R [m], inertial frame (eq 4)."""
+    r = p.attachment_point
+    ar = matvec(a, r)
+    return (x[0] + ar[0] - r[0], x[1] + ar[1] - r[1], x[2] + ar[2] - r[2])
 
 
-def _vector_rows(x, shape: tuple[int, ...]) -> np.ndarray:
-    """A vector in columns form as stacked rows of ``shape + (3,)``: the transposed view
-    of a (3, m) array (no copy), else :func:`~rbstab.kinematics.from_columns`."""
-    if isinstance(x, np.ndarray) and x.ndim == 2 and shape:
-        return x.T.reshape(shape + (3,))
-    return from_columns(x, shape)
+@jit(inline="always")
+def constraint_rate(omega, v, a, p):
+    """F = dE/dt = V + A (Omega x R) = V - A hat(R) Omega [m/s], inertial frame (eq 4)."""
+    return add(v, matvec(a, cross(omega, p.attachment_point)))
 
 
-class Variant(ABC):
+@jit(inline="always")
+def body_energy(theta, omega, x, v, p):
+    """v_t, v_r (eq 25) and the gravity term -X'G + h [J]."""
+    translational = 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(x, p.k_t)
+    rotational = 0.5 * quadratic_form(omega, p.inertia) + 0.5 * quadratic_form(theta, p.k_r)
+    gravity = -dot(x, p.weight) + p.lyapunov_offset
+    return translational, rotational, gravity
+
+
+@jit(inline="always")
+def body_dissipation(omega, v, p):
+    """Power dissipated by the feedback, V'L_t V + Omega'L_r Omega [W] (eq 29)."""
+    return quadratic_form(v, p.l_t) + quadratic_form(omega, p.l_r)
+
+
+# -- the protocol -----------------------------------------------------------------------------
+class Variant:
     """One controller variant for the point C (the protocol; see module docstring).
 
     Parameters
@@ -131,18 +159,23 @@ class Variant(ABC):
 
     #: Registry name (the config value of ``controller.variant``).
     name: ClassVar[str]
+    #: Number of the variant in the compiled kernels (:mod:`rbstab.variants.kernels`).
+    code: ClassVar[int]
     #: Layout of the integrated state.
-    layout: ClassVar[StateLayout]
+    layout: ClassVar[StateLayout] = FULL_BODY
     #: Gains that must be configured for this variant.
     required_gains: ClassVar[tuple[str, ...]] = ("k_t", "l_t", "k_r", "l_r")
-    #: Whether the right-hand side is smooth (False for the pure sign function).
-    smooth: ClassVar[bool] = True
     #: Paper equation of the constraint law, for documentation and reports.
     equation: ClassVar[str] = ""
 
     def __init__(self, body: RigidBody, gains: Gains) -> None:
         self.body = body
         self.gains = gains
+
+    @property
+    def smooth(self) -> bool:
+        """Whether the right-hand side is smooth (False for the pure sign law of sliding)."""
+        return True
 
     # -- state ---------------------------------------------------------------
     def initial_state(self, blocks: dict[str, np.ndarray]) -> np.ndarray:
@@ -152,131 +185,54 @@ class Variant(ABC):
         """
         return self.layout.join(**{b: blocks[b] for b in self.layout.blocks})
 
-    # -- dynamics ------------------------------------------------------------
-    @abstractmethod
-    def quantities_columns(self, y, outputs: bool = True, state_rate: bool = True) -> dict:
-        """The dynamics: the state rate and, with ``outputs``, every output quantity.
+    @cached_property
+    def parameters(self) -> np.ndarray:
+        """This run's :data:`~rbstab.model.PARAMETERS` record, shape (1,), with h."""
+        return parameters(self.body, self.gains, self.lyapunov_offset)[None]
 
-        Columns form (:mod:`rbstab.kinematics`): ``y`` is the state's components, a list
-        of ``layout.size`` floats (one state, :func:`~rbstab.kinematics.to_columns` of a
-        (n_state,) array) or an (n_state, m) array (m states as columns); every vector in
-        the result is a tuple of 3 components (floats, or arrays (m,)), every matrix a
-        nested tuple of entries.
+    @cached_property
+    def _parameters_without_offset(self) -> np.ndarray:
+        return parameters(self.body, self.gains, 0.0)[None]
 
-        Returns a dict holding the state blocks ``theta``, ``omega``, ``position``,
-        ``velocity`` (reconstructed where not integrated), ``rotation_matrix`` A,
-        ``euler_rate_matrix`` B, ``force_h``, ``torque_n`` and, with ``state_rate``, the
-        time derivative ``state_rate`` of y (``layout.size`` components); with
-        ``outputs`` also ``constraint_error``, ``constraint_rate`` and
-        ``constraint_force``. Without ``outputs`` (the right-hand side) quantities that
-        only the outputs need may be skipped; without ``state_rate`` (the outputs) the
-        parts of the state rate that the outputs do not need may be skipped.
-        """
-
-    def quantities(self, y: np.ndarray, outputs: bool = True) -> dict[str, np.ndarray]:
-        """Everything the right-hand side and the outputs need, for y shape (..., n_state).
-
-        Returns a dict holding at least the state blocks ``theta``, ``omega``,
-        ``position``, ``velocity`` (reconstructed where not integrated), and
-        ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``force_h``,
-        ``torque_n`` (each shape (..., 3)), ``rotation_matrix`` and
-        ``euler_rate_matrix`` (shape (..., 3, 3)) and the time derivative ``state_rate``
-        of y (see :meth:`quantities_columns`; here in stacked rows, C-contiguous).
-        """
-        y = np.asarray(y, dtype=float)
-        q = self.quantities_columns(to_columns(y), outputs)
-        return {k: from_columns(value, y.shape[:-1]) for k, value in q.items()}
-
+    # -- dynamics and outputs (compiled kernels) -------------------------------
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """dy/dt, shape like ``y`` ((n_state,) or (..., n_state)); ``t`` [s] is unused.
+        """dy/dt, shape like ``y`` ((n_state,) or (..., n_state)); ``t`` [s] is unused."""
+        from .kernels import state_rates
 
-        One state is computed in Python floats (solve_ivp's call), a stack with one numpy
-        call per operation on whole rows (the batch engine's); both run
-        :meth:`quantities_columns`.
-        """
         y = np.asarray(y, dtype=float)
-        if y.ndim == 1:
-            return np.array(self.quantities_columns(y.tolist(), outputs=False)["state_rate"])
-        rate = self.quantities_columns(to_columns(y), outputs=False)["state_rate"]
-        return from_columns(rate, y.shape[:-1])
+        flat = np.ascontiguousarray(y.reshape(-1, self.layout.size))
+        out = np.empty_like(flat)
+        state_rates(self.code, flat, self._parameters_without_offset, out)
+        return out.reshape(y.shape)
 
-    # -- Lyapunov function ---------------------------------------------------
-    # Each of these reads the columns-form quantities of :meth:`quantities_columns`
-    # (with ``outputs``) and returns one component: a float for one state, an array (m,)
-    # (or a constant scalar) for a stack.
-    @abstractmethod
-    def constraint_energy(self, q: dict):
-        """Energy stored in the constraint law [J] (columns form, see above)."""
+    def _output_rows(self, y: np.ndarray, params: np.ndarray) -> np.ndarray:
+        from .kernels import output_rows
 
-    @abstractmethod
-    def constraint_dissipation(self, q: dict):
-        """Power dissipated by the constraint law [W] (>= 0) (columns form, see above)."""
-
-    def lyapunov_terms(self, q: dict) -> dict:
-        """The terms of v [J] (see :data:`LYAPUNOV_TERMS`), columns form (see above)."""
-        terms = self._raw_lyapunov_terms(q)
-        terms["lyapunov_gravity"] = terms["lyapunov_gravity"] + self.lyapunov_offset
-        return terms
-
-    def _raw_lyapunov_terms(self, q: dict) -> dict:
-        """The terms of v without the constant h (eq 25 and the constraint energy)."""
-        body, gains = self.body.columns, self.gains.columns
-        x, v = q["position"], q["velocity"]
-        theta, omega = q["theta"], q["omega"]
-        return {
-            "lyapunov_translational": 0.5 * body.mass * dot_columns(v, v)
-            + 0.5 * quadratic_form_columns(x, gains.k_t),
-            "lyapunov_rotational": 0.5 * quadratic_form_columns(omega, body.inertia)
-            + 0.5 * quadratic_form_columns(theta, gains.k_r),
-            "lyapunov_constraint": self.constraint_energy(q),
-            "lyapunov_gravity": -dot_constant_columns(x, body.weight),
-        }
-
-    def lyapunov_rate(self, q: dict):
-        """Analytic dv/dt [W] (eqs 29, 37, 43, 46), columns form (see above): never positive."""
-        gains = self.gains.columns
-        return (
-            -quadratic_form_columns(q["velocity"], gains.l_t)
-            - quadratic_form_columns(q["omega"], gains.l_r)
-            - self.constraint_dissipation(q)
-        )
+        flat = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(-1, self.layout.size))
+        out = np.empty((len(flat), N_OUTPUTS))
+        with np.errstate(all="ignore"):
+            output_rows(self.code, flat, params, out)
+        return out
 
     def evaluate(self, y: np.ndarray) -> dict[str, np.ndarray]:
         """All outputs along states ``y`` of shape (n, n_state), or (..., n_state).
 
-        Elementwise throughout (:mod:`rbstab.kinematics`), so the outputs of a state do
-        not depend on the other states of ``y``: a block of runs stacked as (k, n,
-        n_state) gives each run the bits it gets alone.
-
         Returns
         -------
         dict
-            The state blocks, ``constraint_error``, ``constraint_rate``,
-            ``constraint_force``, ``force_h``, ``torque_n`` (shape (n, 3)), and
-            ``lyapunov``, ``lyapunov_rate`` and the terms of v (shape (n,)); leading
-            dimensions those of ``y``. For a stack the vectors are transposed views of
-            the columns-form arrays (strided, not C-contiguous: a copy costs more than
-            the rest of the evaluation, and a writer copies anyway); the scalars are
-            C-contiguous.
+            The state blocks of the layout plus ``position`` and ``velocity`` (reconstructed
+            for ``permanent``), ``constraint_error``, ``constraint_rate``,
+            ``constraint_force``, ``force_h``, ``torque_n`` (shape (..., 3)), and
+            ``lyapunov``, ``lyapunov_rate`` and the terms of v (shape (...)); a state's
+            outputs do not depend on the other states of ``y``.
         """
         y = np.asarray(y, dtype=float)
-        shape = y.shape[:-1]
-        q = self.quantities_columns(to_columns(y), outputs=True, state_rate=False)
-        terms = self.lyapunov_terms(q)
-        vectors = ("theta", "omega", "position", "velocity", "controller_state", *_OUTPUT_VECTORS)
-        out = {k: _vector_rows(q[k], shape) for k in vectors if k in q}
-        out["lyapunov"] = _component_array(sum(terms[k] for k in LYAPUNOV_TERMS), shape)
-        out["lyapunov_rate"] = _component_array(self.lyapunov_rate(q), shape)
-        for k in LYAPUNOV_TERMS:
-            out[k] = _component_array(terms[k], shape)
-        return out
+        return split_outputs(self._output_rows(y, self.parameters), y.shape[:-1], self.layout)
 
     def lyapunov(self, y: np.ndarray) -> np.ndarray:
         """v [J] along states ``y`` of shape (..., n_state); shape (...)."""
         y = np.asarray(y, dtype=float)
-        q = self.quantities_columns(to_columns(y), outputs=True, state_rate=False)
-        terms = self.lyapunov_terms(q)
-        return _component_array(sum(terms[k] for k in LYAPUNOV_TERMS), y.shape[:-1])
+        return self._output_rows(y, self.parameters)[:, _LYAPUNOV_COLUMN].reshape(y.shape[:-1])
 
     # -- equilibrium -----------------------------------------------------------
     @property
@@ -285,9 +241,7 @@ class Variant(ABC):
 
     def _potential(self, p: np.ndarray) -> float:
         """Stored energy without the constant h, at rest, for configuration vector p."""
-        q = self.quantities_columns(self._rest_state(p).tolist(), outputs=True, state_rate=False)
-        terms = self._raw_lyapunov_terms(q)
-        return float(sum(terms[k] for k in LYAPUNOV_TERMS))
+        return float(self._output_rows(self._rest_state(p), self._parameters_without_offset)[0, _LYAPUNOV_COLUMN])
 
     def _rest_state(self, p: np.ndarray) -> np.ndarray:
         """State at rest (zero velocities) with configuration blocks from vector ``p``."""
@@ -337,63 +291,21 @@ class Variant(ABC):
         return self._equilibrium[1]
 
 
-class FullBodyVariant(Variant):
-    """Base of the variants that integrate the 12 body states (eq 1) under a force Lambda.
+_LYAPUNOV_COLUMN = 3 * len(OUTPUT_VECTORS) + OUTPUT_SCALARS.index("lyapunov")
 
-    Subclasses give the constraint force law :meth:`constraint_law` and list in
-    :attr:`constraint_inputs` the constraint quantities it reads.
+
+def split_outputs(rows: np.ndarray, shape: tuple[int, ...], layout: StateLayout) -> dict[str, np.ndarray]:
+    """Named outputs from rows of the ``outputs`` kernel, shape (m, N_OUTPUTS).
+
+    ``shape``: the leading shape to restore (m == prod(shape)); ``controller_state`` is kept
+    only where ``layout`` integrates it. Vectors are views (..., 3) of ``rows``.
     """
-
-    layout: ClassVar[StateLayout] = FULL_BODY
-    #: Which of ``constraint_error`` (E) and ``constraint_rate`` (F) the constraint law
-    #: reads; the right-hand side computes only these (the outputs compute both).
-    constraint_inputs: ClassVar[tuple[str, ...]] = ("constraint_error", "constraint_rate")
-
-    @abstractmethod
-    def constraint_law(self, q: dict):
-        """Lambda [N], inertial frame, or None when there is no constraint force.
-
-        ``q`` is the columns-form dict being built by :meth:`quantities_columns` (state
-        blocks, ``rotation_matrix``, ``euler_rate_matrix``, ``torque_n``, ``force_h`` and
-        those of E, F listed in :attr:`constraint_inputs`); returns a vector (3
-        components) and may add extra columns-form rates to ``q`` (``controller_rate``).
-        """
-
-    def quantities_columns(self, y, outputs: bool = True, state_rate: bool = True) -> dict:
-        """Eq 1 under Lambda, in columns form (see :meth:`Variant.quantities_columns`).
-
-        dTheta/dt = B Omega, J dOmega/dt = f(Omega) + N + hat(R) A' Lambda,
-        dX/dt = V, m dV/dt = G + H + Lambda; E = X + A R - R, F = V + A (Omega x R) (eq 4).
-        """
-        body = self.body.columns
-        q = self.layout.split_columns(y)
-        theta, omega, x, v = q["theta"], q["omega"], q["position"], q["velocity"]
-        a, b = rotation_and_rate_columns(theta)
-        q["rotation_matrix"], q["euler_rate_matrix"] = a, b
-        r = body.attachment_point
-        needed = ("constraint_error", "constraint_rate") if outputs else self.constraint_inputs
-        if "constraint_error" in needed:
-            q["constraint_error"] = sub_constant_columns(add_columns(x, matvec_columns(a, r)), r)
-        if "constraint_rate" in needed:
-            q["constraint_rate"] = add_columns(v, matvec_columns(a, cross_columns(omega, r)))
-        q["torque_n"] = torque_n(b, theta, omega, self.gains)
-        q["force_h"] = force_h(x, v, self.gains)
-        lam = self.constraint_law(q)
-        if outputs:
-            q["constraint_force"] = zeros_columns(x) if lam is None else lam
-        if state_rate:
-            torque = add_columns(gyroscopic(body.inertia, omega), q["torque_n"])
-            force = add_constant_columns(q["force_h"], body.weight)  # G + H
-            if lam is not None:
-                torque = add_columns(torque, cross_columns(r, matTvec_columns(a, lam)))  # + R x A' Lambda
-                force = add_columns(force, lam)
-            rates = {
-                "theta": rate_matvec_columns(b, omega),
-                "omega": body.inertia_inv.apply(torque),
-                "position": v,
-                "velocity": div_columns(force, body.mass),
-            }
-            if "controller_state" in q:
-                rates["controller_state"] = q["controller_rate"]
-            q["state_rate"] = self.layout.join_columns(**rates)
-        return q
+    out = {}
+    for i, name in enumerate(OUTPUT_VECTORS):
+        if name == "controller_state" and name not in layout.blocks:
+            continue
+        out[name] = rows[:, 3 * i : 3 * i + 3].reshape(shape + (3,))
+    base = 3 * len(OUTPUT_VECTORS)
+    for i, name in enumerate(OUTPUT_SCALARS):
+        out[name] = rows[:, base + i].reshape(shape)
+    return out

@@ -4,14 +4,35 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-from ..kinematics import neg_columns, quadratic_form_columns, sub_columns
+from ..jit import jit
+from ..kinematics import matvec, neg, quadratic_form, sub
 from ..layout import EMBEDDED, StateLayout
-from .base import FullBodyVariant
+from .base import Variant
 
 __all__ = ["Embedded"]
 
 
-class Embedded(FullBodyVariant):
+@jit(inline="always")
+def constraint_force(e, f, d, p):
+    """Lambda = -K_c (E - D) - L_c F [N] and dD/dt = L_d^-1 (K_c (E - D) - K_d D) [m/s] (eq 22)."""
+    spring = matvec(p.k_c, sub(e, d))  # K_c (E - D)
+    d_rate = matvec(p.l_d_inv, sub(spring, matvec(p.k_d, d)))
+    return sub(neg(spring), matvec(p.l_c, f)), d_rate
+
+
+@jit(inline="always")
+def constraint_energy(e, d, p):
+    """(E-D)'K_c(E-D)/2 + D'K_d D/2 [J] (eqs 44, 45)."""
+    return 0.5 * quadratic_form(sub(e, d), p.k_c) + 0.5 * quadratic_form(d, p.k_d)
+
+
+@jit(inline="always")
+def constraint_dissipation(f, d_rate, p):
+    """F'L_c F + dD/dt' L_d dD/dt [W] (eq 46)."""
+    return quadratic_form(f, p.l_c) + quadratic_form(d_rate, p.l_d)
+
+
+class Embedded(Variant):
     """dD/dt = L_d^-1 (K_c (E - D) - K_d D),  Lambda = -K_c (E - D) - L_c F (eq 22).
 
     15 states: the body's 12 and D [m] (inertial frame).
@@ -20,25 +41,7 @@ class Embedded(FullBodyVariant):
     """
 
     name = "embedded"
+    code = 4
     layout: ClassVar[StateLayout] = EMBEDDED
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d")
     equation = "eq 22"
-
-    def constraint_law(self, q: dict):
-        """Lambda [N] and, into ``q``, dD/dt [m/s] (eq 22); columns form, inertial frame."""
-        g = self.gains.columns
-        d = q["controller_state"]
-        spring = g.k_c.apply(sub_columns(q["constraint_error"], d))  # K_c (E - D)
-        q["controller_rate"] = g.l_d_inv.apply(sub_columns(spring, g.k_d.apply(d)))
-        return sub_columns(neg_columns(spring), g.l_c.apply(q["constraint_rate"]))
-
-    def constraint_energy(self, q: dict):
-        g = self.gains.columns
-        d = q["controller_state"]
-        return 0.5 * quadratic_form_columns(sub_columns(q["constraint_error"], d), g.k_c) + 0.5 * quadratic_form_columns(
-            d, g.k_d
-        )
-
-    def constraint_dissipation(self, q: dict):
-        g = self.gains.columns
-        return quadratic_form_columns(q["constraint_rate"], g.l_c) + quadratic_form_columns(q["controller_rate"], g.l_d)

@@ -2,27 +2,35 @@
 
 from __future__ import annotations
 
-from .base import FullBodyVariant
+from ..jit import jit
+from ..kinematics import ZERO
+from .base import Variant
 
 __all__ = ["Free"]
 
 
-class Free(FullBodyVariant):
+@jit(inline="always")
+def constraint_force(e, f, d, p):
+    """Lambda = 0 [N]; no controller state (dD/dt = 0)."""
+    return ZERO, ZERO
+
+
+@jit(inline="always")
+def constraint_energy(e, d, p):
+    return 0.0
+
+
+@jit(inline="always")
+def constraint_dissipation(f, d_rate, p):
+    return 0.0
+
+
+class Free(Variant):
     """Free rigid body under the feedback N, H (eqs 1, 23, 24, 29, 30).
 
     v = v_t + v_r - X'G + G'K_t^-1 G / 2 and dv/dt = -V'L_t V - Omega'L_r Omega.
     """
 
     name = "free"
+    code = 0
     equation = "eqs 1, 23, 24, 29, 30"
-    constraint_inputs = ()
-
-    def constraint_law(self, q: dict) -> None:
-        """No constraint force (Lambda = 0)."""
-        return None
-
-    def constraint_energy(self, q: dict) -> float:
-        return 0.0
-
-    def constraint_dissipation(self, q: dict) -> float:
-        return 0.0

@@ -4,40 +4,64 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
-from .base import FullBodyVariant
+from ..jit import jit
+from ..kinematics import ZERO
+from .base import Variant
 
 __all__ = ["Sliding"]
 
 _LOG2 = math.log(2.0)
 
 
-def _tanh(u):
-    return math.tanh(u) if isinstance(u, float) else np.tanh(u)
-
-
-def _sign(u):
-    """sgn(u) (0 at 0, NaN for NaN), for a float or an array."""
-    if not isinstance(u, float):
-        return np.sign(u)
+@jit(inline="always")
+def sign(u):
+    """sgn(u): -1, 0 or 1 (NaN for NaN)."""
     if u > 0.0:
         return 1.0
     if u < 0.0:
         return -1.0
-    return u * 0.0  # 0.0, or NaN for NaN
+    return u * 0.0
 
 
-def _log_cosh(u):
-    """log(cosh(u)) without overflow, for a float or an array."""
-    if isinstance(u, float):
-        a = abs(u)
-        return a + math.log1p(math.exp(-2.0 * a)) - _LOG2
-    a = np.abs(u)
-    return a + np.log1p(np.exp(-2.0 * a)) - _LOG2
+@jit(inline="always")
+def log_cosh(u):
+    """log(cosh(u)) without overflow."""
+    a = abs(u)
+    return a + math.log1p(math.exp(-2.0 * a)) - _LOG2
 
 
-class Sliding(FullBodyVariant):
+@jit(inline="always")
+def switching(e, phi):
+    """sgn(e) for phi = 0, tanh(e / phi) for a boundary layer phi > 0 [m]."""
+    if phi > 0.0:
+        return math.tanh(e / phi)
+    return sign(e)
+
+
+@jit(inline="always")
+def constraint_force(e, f, d, p):
+    """Lambda = -K_s sgn(E) [N], componentwise, inertial frame (eq 39); sgn -> tanh(E/phi)
+    with a boundary layer phi > 0. No controller state."""
+    phi = p.boundary_layer
+    lam = (-p.k_s * switching(e[0], phi), -p.k_s * switching(e[1], phi), -p.k_s * switching(e[2], phi))
+    return lam, ZERO
+
+
+@jit(inline="always")
+def constraint_energy(e, d, p):
+    """The potential of Lambda [J]: K_s |E|_1, or K_s phi sum log cosh(E_i / phi)."""
+    phi = p.boundary_layer
+    if phi > 0.0:
+        return p.k_s * phi * (log_cosh(e[0] / phi) + log_cosh(e[1] / phi) + log_cosh(e[2] / phi))
+    return p.k_s * (abs(e[0]) + abs(e[1]) + abs(e[2]))
+
+
+@jit(inline="always")
+def constraint_dissipation(f, d_rate, p):
+    return 0.0
+
+
+class Sliding(Variant):
     """Lambda = -K_s sgn(E) (eq 39); with a boundary layer phi > 0, sgn(E) -> tanh(E/phi).
 
     The force derives from the potential K_s sum|E_i| (phi = 0) or
@@ -47,29 +71,11 @@ class Sliding(FullBodyVariant):
     """
 
     name = "sliding"
+    code = 2
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_s")
     equation = "eq 39"
-    constraint_inputs = ("constraint_error",)
 
-    def __init__(self, body, gains) -> None:
-        super().__init__(body, gains)
-        self.smooth = gains.boundary_layer > 0
-
-    def constraint_law(self, q: dict) -> tuple:
-        """Lambda [N], inertial frame, columns form (eq 39)."""
-        g = self.gains.columns
-        k_s, phi = g.k_s, g.boundary_layer
-        if phi > 0:
-            return tuple(-k_s * _tanh(e / phi) for e in q["constraint_error"])
-        return tuple(-k_s * _sign(e) for e in q["constraint_error"])
-
-    def constraint_energy(self, q: dict):
-        g = self.gains.columns
-        k_s, phi = g.k_s, g.boundary_layer
-        e0, e1, e2 = q["constraint_error"]
-        if phi > 0:
-            return k_s * phi * (_log_cosh(e0 / phi) + _log_cosh(e1 / phi) + _log_cosh(e2 / phi))
-        return k_s * (abs(e0) + abs(e1) + abs(e2))
-
-    def constraint_dissipation(self, q: dict) -> float:
-        return 0.0
+    @property
+    def smooth(self) -> bool:
+        """False for the pure sign law (boundary_layer 0)."""
+        return self.gains.boundary_layer > 0

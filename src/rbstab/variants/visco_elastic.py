@@ -2,29 +2,38 @@
 
 from __future__ import annotations
 
-from ..kinematics import neg_columns, quadratic_form_columns, sub_columns
-from .base import FullBodyVariant
+from ..jit import jit
+from ..kinematics import ZERO, matvec, neg, quadratic_form, sub
+from .base import Variant
 
 __all__ = ["ViscoElastic"]
 
 
-class ViscoElastic(FullBodyVariant):
+@jit(inline="always")
+def constraint_force(e, f, d, p):
+    """Lambda = -K_c E - L_c F [N], inertial frame (eq 40); no controller state."""
+    return sub(neg(matvec(p.k_c, e)), matvec(p.l_c, f)), ZERO
+
+
+@jit(inline="always")
+def constraint_energy(e, d, p):
+    """E'K_c E / 2 [J] (eqs 41, 42)."""
+    return 0.5 * quadratic_form(e, p.k_c)
+
+
+@jit(inline="always")
+def constraint_dissipation(f, d_rate, p):
+    """F'L_c F [W] (eq 43)."""
+    return quadratic_form(f, p.l_c)
+
+
+class ViscoElastic(Variant):
     """Lambda = -K_c E - L_c F (eq 40).
 
     v = v_t + v_r + E'K_c E/2 (eqs 41, 42); dv/dt = -V'L_t V - Omega'L_r Omega - F'L_c F (eq 43).
     """
 
     name = "visco_elastic"
+    code = 3
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")
     equation = "eq 40"
-
-    def constraint_law(self, q: dict):
-        """Lambda [N], inertial frame, columns form (eq 40)."""
-        g = self.gains.columns
-        return sub_columns(neg_columns(g.k_c.apply(q["constraint_error"])), g.l_c.apply(q["constraint_rate"]))
-
-    def constraint_energy(self, q: dict):
-        return 0.5 * quadratic_form_columns(q["constraint_error"], self.gains.columns.k_c)
-
-    def constraint_dissipation(self, q: dict):
-        return quadratic_form_columns(q["constraint_rate"], self.gains.columns.l_c)

@@ -2,12 +2,12 @@
 
 A copy of the numbers in ``scipy/integrate/_ivp/rk.py`` and ``dop853_coefficients.py``
 (scipy 1.17.1), so that the batch engine
-(:mod:`rbstab.batch`), which takes the steps scipy takes, runs in sweep workers that never
+(:mod:`rbstab.engine`), which takes the steps scipy takes, runs in sweep workers that never
 import ``scipy.integrate`` (importing it pulls in scipy.special, .linalg, .sparse and
 .optimize: about 0.7 s of every sweep's start-up). Nothing else is here: the arithmetic
-is in :mod:`rbstab.batch`, the reference integrator is scipy's ``solve_ivp``.
+is in :mod:`rbstab.engine.rk`, the reference integrator is scipy's ``solve_ivp``.
 
-``tests/test_batch.py::test_rk_tableaus_are_scipys`` checks every number, bit for bit,
+``tests/test_engine.py::test_rk_tableaus_are_scipys`` checks every number, bit for bit,
 against the installed scipy.
 
 Per method (``RK23``, ``RK45``, ``DOP853``), a :class:`types.SimpleNamespace` with the

@@ -1,0 +1,136 @@
+"""The compiled engine: many runs, each with its own variant, parameters and settings.
+
+:func:`integrate_runs` integrates runs with scipy's explicit Runge-Kutta pairs (RK23,
+RK45, DOP853) compiled with the model (:mod:`rbstab.engine.rk`,
+:mod:`rbstab.engine.integrate`): the same error norm, initial step, step-size control,
+dense output and gimbal-lock event as ``solve_ivp``, so a run takes the steps
+``solve_ivp`` would take and agrees with it to the tolerance's scale. A run's result does
+not depend on the other runs of its call. Implicit methods (Radau, BDF, LSODA) are not
+here: :func:`rbstab.simulate.simulate` runs them through ``solve_ivp`` with the same
+compiled right-hand side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .tableaus import DOP853_EXTENDED, SUCCESS_MESSAGE, TABLEAUS, TOO_SMALL_STEP_MESSAGE
+
+__all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "tableau", "integrate_runs", "status_message", "warm_up"]
+
+#: The methods of the compiled engine.
+METHODS = tuple(TABLEAUS)
+
+#: Accepted steps after which a run stops as failed (a run that would never finish).
+DEFAULT_MAX_STEPS = 10_000_000
+
+_EMPTY_1 = np.zeros(0)
+_EMPTY_2 = np.zeros((0, 0))
+
+
+def tableau(method: str) -> tuple:
+    """The compiled engine's tableau tuple for ``method`` (see :mod:`rbstab.engine.rk`).
+
+    Raises
+    ------
+    KeyError
+        For a method not in :data:`METHODS`.
+    """
+    t = TABLEAUS[method]
+    if method == "DOP853":
+        return (True, t.error_estimator_order, t.n_stages, DOP853_EXTENDED.A, t.B, DOP853_EXTENDED.C,
+                _EMPTY_1, t.E3, t.E5, _EMPTY_2, t.D)
+    return (False, t.error_estimator_order, t.n_stages, t.A, t.B, t.C, t.E, _EMPTY_1, _EMPTY_1, t.P, _EMPTY_2)
+
+
+@dataclass
+class ChunkSolution:
+    """Samples of k runs and how each ended.
+
+    Attributes
+    ----------
+    samples : ndarray, shape (k, n_samples, n_state)
+        The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
+    status : ndarray of int, shape (k,)
+        0 reached t_end; 1 gimbal lock; -1 step too small; -2 non-finite; -3 step limit.
+    t_stop : ndarray, shape (k,)
+        Where each run stopped [s] (the event time for gimbal lock).
+    nfev, n_steps : ndarray of int, shape (k,)
+        Right-hand-side evaluations and accepted steps.
+    """
+
+    samples: np.ndarray
+    status: np.ndarray
+    t_stop: np.ndarray
+    nfev: np.ndarray
+    n_steps: np.ndarray
+
+
+def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
+                   max_steps: int = DEFAULT_MAX_STEPS) -> ChunkSolution:
+    """Integrate k runs of one method and sample count.
+
+    Parameters
+    ----------
+    codes : array_like of int, shape (k,)
+        Variant codes (``Variant.code``); every run's state has the same size.
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,)
+    y0 : ndarray, shape (k, n_state)
+        Initial states.
+    settings : ndarray, shape (k, 5)
+        Per run: t_end [s], rtol, atol, max_step [s], gimbal_margin [rad].
+    method : str
+        One of :data:`METHODS`.
+    n_samples : int
+        Samples per run, evenly spaced on [0, t_end] (>= 2).
+    max_steps : int
+        Accepted steps after which a run stops (status -3).
+    """
+    from .integrate import integrate_chunk
+
+    codes = np.ascontiguousarray(codes, dtype=np.int64)
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    k, n = y0.shape
+    samples = np.empty((k, n_samples, n))
+    status = np.empty(k, dtype=np.int64)
+    t_stop = np.empty(k)
+    nfev = np.empty(k, dtype=np.int64)
+    n_steps = np.empty(k, dtype=np.int64)
+    with np.errstate(all="ignore"):
+        integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings, dtype=float),
+                        max_steps, tableau(method), samples, status, t_stop, nfev, n_steps)
+    return ChunkSolution(samples, status, t_stop, nfev, n_steps)
+
+
+def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS) -> str:
+    """The message of a run's end (scipy's words where scipy has them)."""
+    if status == 0:
+        return SUCCESS_MESSAGE
+    if status == 1:
+        return (
+            f"gimbal lock: |theta_2| reached pi/2 - {gimbal_margin:g} rad at t = {t_stop:.6g} s; "
+            "B(theta) is singular there (eq 5), so the Euler-angle model stops"
+        )
+    if status == -1:
+        return f"solver failed: {TOO_SMALL_STEP_MESSAGE} (at t = {t_stop:.6g} s)"
+    if status == -2:
+        return f"non-finite step size or state at t = {t_stop:.6g} s"
+    return f"step limit: {max_steps} steps taken by t = {t_stop:.6g} s"
+
+
+def warm_up() -> None:
+    """Compile (or load from the cache) every kernel a run uses, on a tiny input."""
+    from ..model import PARAMETERS
+    from ..variants.base import N_OUTPUTS
+    from ..variants.kernels import STATE_SIZE, output_rows, state_rates
+
+    params = np.zeros(1, dtype=PARAMETERS)
+    for n in sorted(set(STATE_SIZE)):
+        y = np.zeros((1, n))
+        state_rates(0, y, params, np.empty_like(y))
+        output_rows(0, y, params, np.empty((1, N_OUTPUTS)))
+    settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
+    for method in METHODS:
+        integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)

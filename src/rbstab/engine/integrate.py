@@ -1,0 +1,166 @@
+"""One run from t = 0 to t_end, sampled on an even grid, as compiled code (scipy's driver).
+
+:func:`integrate_run` is what ``solve_ivp(..., t_eval=linspace(0, t_end, n), events=[gimbal
+lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
+``_step_impl``), sample the step's interpolant at the grid times it covers, and stop at the
+gimbal-lock event, located on the interpolant. :func:`integrate_chunk` runs many runs, each
+with its own variant, parameters and settings, one after the other in one call.
+
+Status codes (:data:`STATUS_MESSAGES` in :mod:`rbstab.engine`): 0 reached t_end, 1 gimbal
+lock (the event time is returned), -1 step size below the spacing of floats (scipy's
+failure), -2 non-finite step size or state, -3 step limit reached.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..jit import jit
+from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..variants.kernels import state_rate
+from .rk import dense_coefficients, dense_value, error_norm, initial_step, rk_step
+
+__all__ = ["integrate_run", "integrate_chunk", "sample_time"]
+
+SAFETY = 0.9
+MIN_FACTOR = 0.2
+MAX_FACTOR = 10.0
+
+SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT = 0, 1, -1, -2, -3
+
+
+@jit
+def sample_time(j, n, t_end):
+    """The j-th of n evenly spaced times on [0, t_end], as ``numpy.linspace`` computes it."""
+    if j == n - 1:
+        return t_end
+    return j * (t_end / (n - 1))
+
+
+@jit
+def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, tableau, K, y_new, scale, work):
+    """One accepted step from (t, y) with rate f (scipy's ``_step_impl``).
+
+    Returns (status, t_new, h, next h_abs, attempts); y_new and its rate K[n_stages] hold
+    the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing accepted).
+    """
+    error_exponent = -1.0 / (tableau[1] + 1)
+    min_step = 10 * abs(np.nextafter(t, np.inf) - t)
+    h_abs = min(max(h_abs, min_step), max_step)
+    rejected = False
+    attempts = 0
+    while True:
+        if not math.isfinite(h_abs):
+            return NOT_FINITE, t, 0.0, h_abs, attempts
+        if h_abs < min_step:
+            return TOO_SMALL_STEP, t, 0.0, h_abs, attempts
+        t_new = min(t + h_abs, t_end)
+        h = t_new - t
+        h_abs = abs(h)
+        rk_step(code, p, y, f, h, tableau, K, y_new, work)
+        attempts += 1
+        for i in range(y.shape[0]):
+            scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
+        norm = error_norm(K, h, scale, tableau)
+        if norm < 1:
+            factor = MAX_FACTOR if norm == 0 else min(MAX_FACTOR, SAFETY * norm**error_exponent)
+            if rejected:
+                factor = min(1.0, factor)
+            return SUCCESS, t_new, h, h_abs * factor, attempts
+        # a NaN norm rejects the step with the smallest factor, as scipy's max() does
+        factor = SAFETY * norm**error_exponent
+        h_abs *= factor if factor > MIN_FACTOR else MIN_FACTOR
+        rejected = True
+
+
+@jit
+def _gimbal(y, limit):
+    """The event function: zero when |theta_2| reaches ``limit`` (decreasing through 0)."""
+    return limit - abs(y[1])
+
+
+@jit
+def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
+    """Time in [t_old, t_old + h] where the interpolant's |theta_2| reaches ``limit``
+    (bisection to the spacing of floats; the event is positive at t_old, <= 0 at the end)."""
+    lo, hi = 0.0, 1.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid <= lo or mid >= hi:
+            break
+        dense_value(mid, h, y_old, Q, dop853, work)
+        if _gimbal(work, limit) > 0:
+            lo = mid
+        else:
+            hi = mid
+    return t_old + hi * h, hi
+
+
+@jit
+def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, tableau, samples):
+    """Integrate one run and fill ``samples`` (n_samples, n_state) at linspace(0, t_end).
+
+    Rows after the run stopped are NaN. Returns (status, t_stop, nfev, n_steps).
+    """
+    n = y0.shape[0]
+    n_samples = samples.shape[0]
+    dop853 = tableau[0]
+    K = np.empty((max(tableau[3].shape[0], tableau[2] + 1), n))
+    Q = np.empty((7 if dop853 else tableau[9].shape[1], n))
+    y = y0.copy()
+    f = np.empty(n)
+    y_new = np.empty(n)
+    scale = np.empty(n)
+    work = np.empty(n)
+    samples[:, :] = np.nan
+    limit = GIMBAL_LOCK_ANGLE - gimbal_margin
+    state_rate(code, y, p, f)
+    h_abs = initial_step(code, p, y, f, t_end, max_step, tableau[1], rtol, atol, y_new, work, scale)
+    nfev = 2
+    t = 0.0
+    j = 0  # next sample
+    n_steps = 0
+    while t < t_end:
+        if n_steps >= max_steps:
+            return STEP_LIMIT, t, nfev, n_steps
+        status, t_new, h, h_abs, attempts = step(
+            code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, tableau, K, y_new, scale, work
+        )
+        nfev += attempts * tableau[2]
+        if status != SUCCESS:
+            return status, t, nfev, n_steps
+        n_steps += 1
+        f_new = K[tableau[2]]
+        t_stop = t_new
+        event = _gimbal(y, limit) >= 0 and _gimbal(y_new, limit) <= 0
+        if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+            nfev += dense_coefficients(code, p, y, y_new, f_new, h, tableau, K, Q, work)
+        if event:
+            t_stop, _ = _locate_event(t, h, y, Q, dop853, limit, work)
+        while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
+            x = (sample_time(j, n_samples, t_end) - t) / h
+            dense_value(x, h, y, Q, dop853, samples[j])
+            j += 1
+        if event:
+            return GIMBAL_LOCK, t_stop, nfev, n_steps
+        t = t_new
+        y[:] = y_new
+        f[:] = f_new
+    return SUCCESS, t, nfev, n_steps
+
+
+@jit
+def integrate_chunk(codes, params, y0, settings, max_steps, tableau, samples, status, t_stop, nfev, n_steps):
+    """:func:`integrate_run` for every run k of a chunk.
+
+    ``codes`` (k,) variant codes; ``params`` (k,) PARAMETERS records; ``y0`` (k, n_state);
+    ``settings`` (k, 5): t_end, rtol, atol, max_step, gimbal_margin; ``samples`` (k,
+    n_samples, n_state); ``status``, ``t_stop``, ``nfev``, ``n_steps`` (k,) are filled.
+    """
+    for k in range(codes.shape[0]):
+        s = settings[k]
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(
+            codes[k], params[k], y0[k], s[0], s[1], s[2], s[3], s[4], max_steps, tableau, samples[k]
+        )

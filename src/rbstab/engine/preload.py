@@ -1,0 +1,13 @@
+"""Imported by the sweep workers' fork server: load the compiled kernels once, before the
+workers are forked from it (:func:`rbstab.sweep.executors._mp_context`).
+
+Only from a warm cache: a cold one is compiled by the command before it starts workers
+(:func:`rbstab.jit.ensure_compiled`); here a cold cache is left to the workers.
+"""
+
+from ..jit import cache_is_warm
+
+if cache_is_warm():
+    from . import warm_up
+
+    warm_up()

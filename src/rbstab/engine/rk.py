@@ -1,0 +1,176 @@
+"""scipy's explicit Runge-Kutta pairs (RK23, RK45, DOP853) as compiled code, one run at a time.
+
+Each function follows ``scipy/integrate/_ivp/rk.py`` and ``common.py`` (scipy 1.17), so a
+run takes the steps ``solve_ivp`` takes on the same right-hand side, up to rounding:
+:func:`initial_step` is ``select_initial_step``, :func:`rk_step` is ``rk_step``,
+:func:`error_norm` is ``_estimate_error_norm`` (DOP853's with its 3rd- and 5th-order
+estimates), :func:`dense_coefficients` and :func:`dense_value` are ``_dense_output_impl``
+and the ``DenseOutput`` classes. The right-hand side is the variant's compiled
+:func:`~rbstab.variants.kernels.state_rate` (autonomous: time does not enter).
+
+A tableau travels as the tuple :data:`Tableau` built by :func:`rbstab.engine.tableau`:
+``(dop853, error_order, n_stages, A, B, C, E, E3, E5, P, D)``, with A and C extended to
+DOP853's 16 stages (its dense output's 3 extra stages), unused arrays empty.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..jit import jit
+from ..variants.kernels import state_rate
+
+__all__ = ["rms_norm", "initial_step", "rk_step", "error_norm", "dense_coefficients", "dense_value"]
+
+
+@jit
+def rms_norm(x, scale):
+    """RMS norm of x / scale (scipy's ``norm``)."""
+    total = 0.0
+    for i in range(x.shape[0]):
+        total += (x[i] / scale[i]) ** 2
+    return math.sqrt(total) / math.sqrt(x.shape[0])
+
+
+@jit
+def initial_step(code, p, y0, f0, t_bound, max_step, error_order, rtol, atol, y1, f1, scale):
+    """scipy's ``select_initial_step`` from t = 0 (Hairer, Norsett & Wanner, II.4).
+
+    ``y1``, ``f1``, ``scale``: work arrays of the state's shape. One right-hand-side call.
+    """
+    n = y0.shape[0]
+    for i in range(n):
+        scale[i] = atol + abs(y0[i]) * rtol
+    d0 = rms_norm(y0, scale)
+    d1 = rms_norm(f0, scale)
+    h0 = 1e-6 if (d0 < 1e-5 or d1 < 1e-5) else 0.01 * d0 / d1
+    h0 = min(h0, t_bound)
+    for i in range(n):
+        y1[i] = y0[i] + h0 * f0[i]
+    state_rate(code, y1, p, f1)
+    for i in range(n):
+        f1[i] = f1[i] - f0[i]
+    d2 = rms_norm(f1, scale) / h0
+    if d1 <= 1e-15 and d2 <= 1e-15:
+        h1 = max(1e-6, h0 * 1e-3)
+    else:
+        h1 = (0.01 / max(d1, d2)) ** (1.0 / (error_order + 1))
+    return min(100 * h0, h1, t_bound, max_step)
+
+
+@jit
+def _stage_state(y, h, a, K, s, out):
+    """out = y + (sum_{j<s} a[j] K[j]) h."""
+    for i in range(y.shape[0]):
+        acc = 0.0
+        for j in range(s):
+            acc += K[j, i] * a[j]
+        out[i] = y[i] + acc * h
+
+
+@jit
+def rk_step(code, p, y, f, h, tableau, K, y_new, work):
+    """One step from y (rate f) of size h: y_new and its rate in K[n_stages] (scipy's rk_step).
+
+    ``K``: (n_stages + 1 [+ 3 for DOP853], n) stage rates; ``work``: a state-sized array.
+    """
+    n_stages, A, B = tableau[2], tableau[3], tableau[4]
+    K[0, :] = f
+    for s in range(1, n_stages):
+        _stage_state(y, h, A[s], K, s, work)
+        state_rate(code, work, p, K[s])
+    for i in range(y.shape[0]):
+        acc = 0.0
+        for j in range(n_stages):
+            acc += K[j, i] * B[j]
+        y_new[i] = y[i] + h * acc
+    state_rate(code, y_new, p, K[n_stages])
+
+
+@jit
+def error_norm(K, h, scale, tableau):
+    """The scaled RMS norm of the local error estimate (scipy's ``_estimate_error_norm``)."""
+    dop853, n_stages, E, E3, E5 = tableau[0], tableau[2], tableau[6], tableau[7], tableau[8]
+    n = scale.shape[0]
+    if not dop853:
+        total = 0.0
+        for i in range(n):
+            acc = 0.0
+            for j in range(n_stages + 1):
+                acc += K[j, i] * E[j]
+            total += (acc * h / scale[i]) ** 2
+        return math.sqrt(total) / math.sqrt(n)
+    err5_2 = 0.0
+    err3_2 = 0.0
+    for i in range(n):
+        e5 = 0.0
+        e3 = 0.0
+        for j in range(n_stages + 1):
+            e5 += K[j, i] * E5[j]
+            e3 += K[j, i] * E3[j]
+        err5_2 += (e5 / scale[i]) ** 2
+        err3_2 += (e3 / scale[i]) ** 2
+    if err5_2 == 0.0 and err3_2 == 0.0:
+        return 0.0
+    denom = err5_2 + 0.01 * err3_2
+    return abs(h) * err5_2 / math.sqrt(denom * n)
+
+
+@jit
+def dense_coefficients(code, p, y_old, y_new, f_new, h, tableau, K, Q, work):
+    """The interpolant of the step from y_old to y_new into ``Q`` (rows of coefficients).
+
+    RK23/RK45: Q = (K' P)' (order + 1 rows); DOP853: its 3 extra stages (3 right-hand-side
+    calls) and the 7 rows F of scipy's ``Dop853DenseOutput``.
+    """
+    dop853, n_stages, A, C, P, D = tableau[0], tableau[2], tableau[3], tableau[5], tableau[9], tableau[10]
+    n = y_old.shape[0]
+    if not dop853:
+        for r in range(P.shape[1]):
+            for i in range(n):
+                acc = 0.0
+                for j in range(n_stages + 1):
+                    acc += K[j, i] * P[j, r]
+                Q[r, i] = acc
+        return 0
+    for s in range(n_stages + 1, A.shape[0]):
+        _stage_state(y_old, h, A[s], K, s, work)
+        state_rate(code, work, p, K[s])
+    for i in range(n):
+        delta = y_new[i] - y_old[i]
+        Q[0, i] = delta
+        Q[1, i] = h * K[0, i] - delta
+        Q[2, i] = 2 * delta - h * (f_new[i] + K[0, i])
+        for r in range(D.shape[0]):
+            acc = 0.0
+            for j in range(D.shape[1]):
+                acc += D[r, j] * K[j, i]
+            Q[3 + r, i] = h * acc
+    return A.shape[0] - n_stages - 1
+
+
+@jit
+def dense_value(x, h, y_old, Q, dop853, out):
+    """The interpolant at x = (t - t_old) / h in [0, 1] into ``out``.
+
+    RK23/RK45: y_old + h sum_r Q[r] x^(r+1); DOP853: scipy's nested product, from the
+    last row, alternately times x and (1 - x).
+    """
+    n = y_old.shape[0]
+    if dop853:
+        x1 = 1.0 - x
+        for i in range(n):
+            acc = ((((((Q[6, i] * x + Q[5, i]) * x1 + Q[4, i]) * x + Q[3, i]) * x1 + Q[2, i]) * x + Q[1, i]) * x1
+                   + Q[0, i]) * x
+            out[i] = acc + y_old[i]
+        return
+    rows = Q.shape[0]
+    for i in range(n):
+        acc = 0.0
+        power = 1.0
+        for r in range(rows):
+            power *= x
+            acc += Q[r, i] * power
+        out[i] = y_old[i] + h * acc

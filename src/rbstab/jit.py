@@ -1,0 +1,96 @@
+"""The one place rbstab compiles code: numba's ``njit`` with an on-disk cache.
+
+Every compiled function of rbstab is decorated with :func:`jit` (``numba.njit`` with
+``cache=True``). Numba keys a cached function on its own source file only, so a change to
+a function it calls in another file would leave a stale kernel in the cache; rbstab
+therefore keeps its cache in a folder named after a digest of every source file that
+compiles code (and numba's version): ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if that variable
+is set, else ``$XDG_CACHE_HOME/rbstab/numba-<digest>`` (``~/.cache``). A new version of
+the code compiles once, into a new folder.
+
+:func:`ensure_compiled` compiles the entry points (the integrator and the outputs) the first
+time they are needed by a command, printing one line that says so (numba compiles them in
+~10-20 s; later processes load them from the cache in ~0.5 s).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import numba
+from numba.core import config as _numba_config
+
+__all__ = ["jit", "CACHE_DIR", "cache_is_warm", "ensure_compiled"]
+
+_PACKAGE = Path(__file__).resolve().parent
+_MARKER = "from .jit import jit"
+_MARKER_UP = "from ..jit import jit"
+_WARM_FILE = "warm"
+
+
+def _source_digest() -> str:
+    digest = hashlib.sha256(numba.__version__.encode())
+    for path in sorted(_PACKAGE.rglob("*.py")):
+        text = path.read_bytes()
+        if path.name == "jit.py" or _MARKER.encode() in text or _MARKER_UP.encode() in text:
+            digest.update(str(path.relative_to(_PACKAGE)).encode())
+            digest.update(text)
+    return digest.hexdigest()[:16]
+
+
+def _cache_dir() -> Path:
+    base = os.environ.get("NUMBA_CACHE_DIR")
+    digest = _source_digest()
+    if base:
+        return Path(base) / f"rbstab-{digest}"
+    home = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+    return home / "rbstab" / f"numba-{digest}"
+
+
+#: Folder of rbstab's compiled kernels (see the module docstring).
+CACHE_DIR: Path = _cache_dir()
+_numba_config.CACHE_DIR = str(CACHE_DIR)
+
+
+def jit(*args, **kwargs):
+    """``numba.njit(..., cache=True)``: compile a function of plain numbers and arrays.
+
+    Used bare (``@jit``) or with numba's options. The physics' small functions are
+    ``@jit(inline="always")``: numba then inlines them into the kernels that call them
+    (LLVM does not inline across numba's functions, and a right-hand side made of calls
+    costs twice as much).
+    """
+    kwargs.setdefault("cache", True)
+    if args and callable(args[0]):
+        return numba.njit(**kwargs)(args[0])
+    return numba.njit(*args, **kwargs)
+
+
+def cache_is_warm() -> bool:
+    """Whether this version's kernels have been compiled into :data:`CACHE_DIR`."""
+    return (CACHE_DIR / _WARM_FILE).exists()
+
+
+def ensure_compiled(say=None) -> None:
+    """Compile the engine's entry points into the cache unless that was done before.
+
+    ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
+    stderr; nothing is said when the cache is warm.
+    """
+    if cache_is_warm():
+        return
+    import time
+
+    if say is not None:
+        say(f"rbstab: compiling the engine once (10-30 s); cached in {CACHE_DIR}")
+    start = time.perf_counter()
+    from .engine import warm_up
+
+    warm_up()
+    try:
+        CACHE_DIR.mkdir(parents=True, exist_ok=True)
+        (CACHE_DIR / _WARM_FILE).write_text(f"{time.perf_counter() - start:.1f} s\n")
+    except OSError:  # a read-only cache still works, it only compiles again next time
+        pass
