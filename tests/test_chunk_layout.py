@@ -53,7 +53,7 @@ def test_chunk_layout_holds_what_run_files_hold(tmp_path):
     by_chunk = run_sweep(s, tmp_path / "chunk", runs=runs, jobs=2, chunk_size=2, layout="chunk", progress=False)
     assert by_chunk.counts["success"] == by_run.counts["success"] == 6
     files = chunk_files(by_chunk.directory)
-    assert len(files) == by_chunk.n_chunks == 4  # 2 gains x 3 runs, at most 2 runs per chunk
+    assert len(files) == by_chunk.n_chunks == 3  # 6 runs (2 gains x 3), at most 2 runs per chunk
     assert not list((by_chunk.directory / "runs").glob("r*.h5"))
 
     ir = pd.read_csv(by_run.index_path)
@@ -130,7 +130,7 @@ def test_chunk_worker_keeps_failures_and_errors_per_run(tmp_path):
     locking["initial_state"].update(LOCKING)
     tasks[1] = RunTask(runs[1].run_id, locking, tasks[1].path)
     bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(folder / "r9999-deadbeef.h5"))
-    for engine in ("batch", "scipy"):
+    for engine in ("compiled", "scipy"):
         records = run_chunk([*tasks, bad], WorkerOptions(engine=engine, layout="chunk"))
         status = {r["run_id"]: r["status"] for r in records}
         assert status == {runs[0].run_id: "success", runs[1].run_id: "failed", runs[2].run_id: "success",
@@ -192,7 +192,7 @@ def test_chunk_bytes_for_workers_without_the_sweep_folder(tmp_path):
     runs = expand(spec(3))
     folder = tmp_path / "runs"
     tasks = [RunTask(r.run_id, r.config.resolved, str(folder / f"{r.run_id}.h5")) for r in runs]
-    records = run_chunk(tasks, WorkerOptions(engine="batch", layout="chunk", return_bytes=True))
+    records = run_chunk(tasks, WorkerOptions(engine="compiled", layout="chunk", return_bytes=True))
     assert not folder.exists()  # nothing written where the worker runs
     (path,) = {r["path"] for r in records}
     with_data = [r for r in records if r.get("data") is not None]

@@ -1,9 +1,9 @@
-"""The batch engine against the scipy reference: every variant, grouping, failures, sweeps.
+"""The compiled engine against the scipy reference: every variant, mixed chunks, failures, sweeps.
 
-``simulate_many(engine="batch")`` integrates runs that differ only in their initial state
-together (:mod:`rbstab.batch`); ``simulate`` is one ``solve_ivp`` call per run. Both use
-the variant's own right-hand side (there is no second model), so what is compared here is
-the integration: the batched runs must give the scipy trajectories within a tolerance
+``simulate_many`` integrates runs with the compiled engine (:mod:`rbstab.engine`);
+``simulate(config, engine="scipy")`` is one ``solve_ivp`` call per run. Both use the
+variant's compiled right-hand side (there is no second model), so what is compared here is
+the integration: the compiled runs must give the scipy trajectories within a tolerance
 scaled by rtol (in practice they agree to round-off: the same steps are taken).
 
 Runs are short (t_end = 0.3 s, 301 samples) so that the file stays fast.
@@ -89,66 +89,74 @@ VARIANT_CASES = [(p, ()) for p in CONFIGS] + [
 
 @pytest.mark.parametrize("path, overrides", VARIANT_CASES,
                          ids=[f"{p.stem}{'-' + o[0] if o else ''}" for p, o in VARIANT_CASES])
-def test_batch_agrees_with_scipy_for_every_variant(path, overrides):
+def test_compiled_agrees_with_scipy_for_every_variant(path, overrides):
     data = base_data(path, overrides)
     smooth = config_from_mapping(data).make_variant().smooth
     configs = configs_with_spins(data, SPINS if smooth else SPINS[:2])
     rtol = configs[0].simulation.rtol
-    got = dict(simulate_many(configs, engine="batch"))
+    got = dict(simulate_many(configs, engine="compiled"))
     assert sorted(got) == list(range(len(configs)))
     for i, config in enumerate(configs):
-        ref = simulate(config)
+        ref = simulate(config, engine="scipy")
         assert ref.ok, ref.message
         sensitivity = []
         if not smooth:  # the pure sign law chatters: round-off decides the switches
             for direction in (np.inf, -np.inf):
                 moved = copy.deepcopy(config.resolved)
                 moved["initial_state"]["omega"] = np.nextafter(config.initial_state["omega"], direction).tolist()
-                sensitivity.append(simulate(config_from_mapping(moved)))
+                sensitivity.append(simulate(config_from_mapping(moved), engine="scipy"))
         assert_close(got[i], ref, rtol, sensitivity)
         assert got[i].summary["lyapunov_rate_check"] == ref.summary["lyapunov_rate_check"]
         assert got[i].name == config.name and got[i].config is config
         assert set(got[i].timing) == {"integration", "postprocess"}
 
 
-def test_groups_by_everything_but_initial_state_and_implicit_methods_fall_back(monkeypatch):
-    import rbstab.batch as batch
+def test_runs_of_any_parameters_share_a_chunk_and_implicit_methods_fall_back(monkeypatch):
+    """Runs that differ in gains, body and variant are integrated in one call, each with
+    the bits it gets alone; Radau and the pure sign law go through scipy."""
+    import rbstab.engine as engine
 
     data = base_data(CASE3)
-    stiff = apply_overrides(data, ["controller.k_c=[20000, 20000, 15000]"])
+    stiff = apply_overrides(data, ["controller.k_c=[20000, 20000, 15000]", "body.mass=30"])
+    visco = apply_overrides(base_data(ROOT / "configs" / "paper" / "case2_visco_elastic.yaml"), [])
     radau = apply_overrides(data, ["simulation.method=Radau"])
-    configs = configs_with_spins(data, SPINS[:3]) + configs_with_spins(stiff, SPINS[:2]) + configs_with_spins(radau, SPINS[:1])
+    configs = (configs_with_spins(data, SPINS[:2]) + configs_with_spins(stiff, SPINS[:2])
+               + configs_with_spins(visco, SPINS[:1]) + configs_with_spins(radau, SPINS[:1]))
     calls, solo = [], []
-    real_batch, real_simulate = batch.integrate_batch, simulate_module.simulate
-    monkeypatch.setattr(batch, "integrate_batch", lambda v, y0, *a, **k: calls.append(len(y0)) or real_batch(v, y0, *a, **k))
+    real_integrate, real_simulate = engine.integrate_runs, simulate_module.simulate
+    monkeypatch.setattr(engine, "integrate_runs", lambda c, *a, **k: calls.append(len(c)) or real_integrate(c, *a, **k))
     monkeypatch.setattr(simulate_module, "simulate", lambda c, *a, **k: solo.append(c.name) or real_simulate(c, *a, **k))
-    got = dict(simulate_many(configs, engine="batch", chunk_size=2))
-    assert sorted(calls) == [1, 2, 2]  # gains differ: two groups; the first in chunks of 2
+    got = dict(simulate_many(configs, chunk_size=3))
+    # two state sizes (15 embedded, 12 visco_elastic): chunks of at most 3 per size
+    assert sorted(calls) == [1, 1, 3]
     assert solo == ["run0"] and configs[5].simulation.method == "Radau"
     assert got[5].ok and got[5].solver["njev"] > 0  # the scipy path (an implicit method)
     assert all(r.ok for r in got.values())
-    assert simulate_module.batch_key(configs[0]) == simulate_module.batch_key(configs[1])
-    assert simulate_module.batch_key(configs[0]) != simulate_module.batch_key(configs[3])
+    monkeypatch.undo()
+    for i in range(5):
+        alone = dict(simulate_many([configs[i]]))[0]
+        for key, value in got[i].outputs.items():
+            assert np.array_equal(alone.outputs[key], value), (i, key)
 
 
 def test_scipy_engine_of_simulate_many_is_simulate():
     configs = configs_with_spins(base_data(CASE3), SPINS[:2])
     for i, result in simulate_many(configs, engine="scipy"):
-        ref = simulate(configs[i])
+        ref = simulate(configs[i], engine="scipy")
         assert np.array_equal(result.outputs["theta"], ref.outputs["theta"])
     with pytest.raises(ValueError, match="engine"):
         list(simulate_many(configs, engine="numba"))
 
 
-def test_gimbal_lock_inside_a_batch_fails_alone_with_the_scipy_message():
+def test_gimbal_lock_inside_a_chunk_fails_alone_with_the_scipy_message():
     data = base_data(CASE3)
     configs = configs_with_spins(data, SPINS[:3])
     locking = copy.deepcopy(data)
     locking["name"] = "locking"
     locking["initial_state"].update(LOCKING)
     configs.insert(1, config_from_mapping(locking))
-    got = dict(simulate_many(configs, engine="batch"))
-    ref = simulate(configs[1])
+    got = dict(simulate_many(configs, engine="compiled"))
+    ref = simulate(configs[1], engine="scipy")
     assert ref.status == "failed" and ref.message.startswith("gimbal lock: |theta_2| reached pi/2")
     assert got[1].status == "failed" and got[1].message.startswith("gimbal lock: |theta_2| reached pi/2")
     t_ref = float(ref.message.split("at t = ")[1].split(" s")[0])
@@ -159,11 +167,11 @@ def test_gimbal_lock_inside_a_batch_fails_alone_with_the_scipy_message():
     assert [got[i].status for i in (0, 2, 3)] == ["success"] * 3
 
 
-def test_a_run_gets_the_same_bits_whatever_its_batch():
+def test_a_run_gets_the_same_bits_whatever_its_chunk():
     configs = configs_with_spins(base_data(CASE3), SPINS)
-    together = dict(simulate_many(configs, engine="batch"))
-    alone = dict(simulate_many(configs[2:3], engine="batch"))
-    pair = dict(simulate_many(configs[1:3], engine="batch"))
+    together = dict(simulate_many(configs, engine="compiled"))
+    alone = dict(simulate_many(configs[2:3], engine="compiled"))
+    pair = dict(simulate_many(configs[1:3], engine="compiled"))
     for other in (alone[0], pair[1]):
         for key, value in together[2].outputs.items():
             assert np.array_equal(other.outputs[key], value), key
@@ -226,12 +234,12 @@ def test_group_configs_equal_validated_configs():
             assert not config.initial_state[block].flags.writeable
 
 
-def test_batch_and_scipy_sweeps_give_the_same_index(tmp_path):
+def test_compiled_and_scipy_sweeps_give_the_same_index(tmp_path):
     spec = sweep_spec(5, extra={"grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]}})
     runs = expand(spec)
     a = run_sweep(spec, tmp_path / "scipy", runs=runs, jobs=2, engine="scipy", progress=False)
     b = run_sweep(spec, tmp_path / "batch", runs=runs, jobs=2, progress=False)
-    assert (a.engine, b.engine) == ("scipy", "batch")
+    assert (a.engine, b.engine) == ("scipy", "compiled")
     assert b.n_chunks == 2  # one per gain, each kept together
     ia, ib = pd.read_csv(a.index_path), pd.read_csv(b.index_path)
     assert list(ia.columns) == list(ib.columns)
@@ -247,7 +255,7 @@ def test_batch_and_scipy_sweeps_give_the_same_index(tmp_path):
     assert b.worker_peak_rss is None or b.worker_peak_rss > 10 * 2**20
 
 
-def test_batch_resume_and_summary_store(tmp_path):
+def test_compiled_resume_and_summary_store(tmp_path):
     spec4, spec7 = sweep_spec(4, "res"), sweep_spec(7, "res")
     first = run_sweep(spec4, tmp_path / "a", jobs=2, store="summary", progress=False)
     assert first.counts["success"] == 4
@@ -285,7 +293,7 @@ def test_batch_resume_and_summary_store(tmp_path):
     assert read_summary(path)["summary"] == read_summary(tmp_path / "c" / "res" / "runs" / f"{runs[0].run_id}.h5")["summary"]
 
 
-def test_worker_batch_engine_isolates_failures(tmp_path):
+def test_worker_compiled_engine_isolates_failures(tmp_path):
     runs = expand(sweep_spec(3))
     tasks = [RunTask(r.run_id, r.config.resolved, str(tmp_path / f"{r.run_id}.h5")) for r in runs]
     locking = copy.deepcopy(runs[1].config.resolved)
@@ -294,7 +302,7 @@ def test_worker_batch_engine_isolates_failures(tmp_path):
     bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(tmp_path / "bad.h5"))
     unwritable = RunTask(runs[2].run_id, runs[2].config.resolved, str(tmp_path / "file" / "x.h5"))
     (tmp_path / "file").write_text("not a folder")
-    records = {r["run_id"] + r["path"][-6:]: r for r in run_chunk([*tasks, bad, unwritable], WorkerOptions(engine="batch"))}
+    records = {r["run_id"] + r["path"][-6:]: r for r in run_chunk([*tasks, bad, unwritable], WorkerOptions(engine="compiled"))}
     by_path = {r["path"]: r for r in records.values()}
     assert by_path[tasks[0].path]["status"] == "success"
     assert by_path[tasks[1].path]["status"] == "failed"
@@ -306,22 +314,22 @@ def test_worker_batch_engine_isolates_failures(tmp_path):
 
 
 def test_engine_choice_and_timeout(tmp_path):
-    assert resolve_engine(None, None) == "batch"
+    assert resolve_engine(None, None) == "compiled"
     assert resolve_engine(None, 5.0) == "scipy"
     with pytest.raises(ValueError, match="--timeout needs --engine scipy"):
-        resolve_engine("batch", 5.0)
+        resolve_engine("compiled", 5.0)
     spec_path = tmp_path / "s.yaml"
     spec_path.write_text(yaml.safe_dump({"name": "t", "base": str(CASE3), "random": {"n": 1, "seed": 0, "params": {
         "initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 1}}}}}))
     args = ["sweep", str(spec_path), "-o", str(tmp_path / "out"), "--no-progress", "--set", "simulation.t_end=0.05",
             "--set", "simulation.n_samples=11"]
-    refused = CliRunner().invoke(cli, [*args, "--engine", "batch", "--timeout", "5"])
+    refused = CliRunner().invoke(cli, [*args, "--engine", "compiled", "--timeout", "5"])
     assert refused.exit_code == 2 and "--timeout needs --engine scipy" in refused.output
     ok = CliRunner().invoke(cli, [*args, "--timeout", "30"])
     assert ok.exit_code == 0, ok.output
     assert "scipy engine" in ok.output
     ok = CliRunner().invoke(cli, [*args, "--store", "summary", "--chunk-size", "4", "-o", str(tmp_path / "o2")])
-    assert ok.exit_code == 0 and "batch engine" in ok.output
+    assert ok.exit_code == 0 and "compiled engine" in ok.output
 
 
 def test_write_run_returns_what_read_attributes_reads(tmp_path):

@@ -55,7 +55,8 @@ _numba_config.CACHE_DIR = str(CACHE_DIR)
 
 
 def jit(*args, **kwargs):
-    """``numba.njit(..., cache=True)``: compile a function of plain numbers and arrays.
+    """``numba.njit(..., cache=True, error_model="numpy")``: compile a function of plain
+    numbers and arrays (a division by zero gives inf or NaN, as in numpy).
 
     Used bare (``@jit``) or with numba's options. The physics' small functions are
     ``@jit(inline="always")``: numba then inlines them into the kernels that call them
@@ -63,6 +64,7 @@ def jit(*args, **kwargs):
     costs twice as much).
     """
     kwargs.setdefault("cache", True)
+    kwargs.setdefault("error_model", "numpy")  # x / 0 is inf or NaN, as in numpy: no exception
     if args and callable(args[0]):
         return numba.njit(**kwargs)(args[0])
     return numba.njit(*args, **kwargs)

@@ -124,13 +124,16 @@ def warm_up() -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input."""
     from ..model import PARAMETERS
     from ..variants.base import N_OUTPUTS
-    from ..variants.kernels import STATE_SIZE, output_rows, state_rates
+    from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
 
     params = np.zeros(1, dtype=PARAMETERS)
-    for n in sorted(set(STATE_SIZE)):
+    params["mass"] = 1.0
+    for name in ("inertia", "inertia_inv", "pivot_inertia", "pivot_inertia_inv"):
+        params[name] = np.eye(3)
+    for code, n in enumerate(STATE_SIZE):
         y = np.zeros((1, n))
-        state_rates(0, y, params, np.empty_like(y))
-        output_rows(0, y, params, np.empty((1, N_OUTPUTS)))
+        state_rates(code, y, params, np.empty_like(y))
+        run_outputs(np.array([code]), params, y[None], np.empty((1, 1, N_OUTPUTS)))
     settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
     for method in METHODS:
         integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)

@@ -206,13 +206,12 @@ class Variant:
         return out.reshape(y.shape)
 
     def _output_rows(self, y: np.ndarray, params: np.ndarray) -> np.ndarray:
-        from .kernels import output_rows
+        from .kernels import run_outputs
 
-        flat = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(-1, self.layout.size))
-        out = np.empty((len(flat), N_OUTPUTS))
-        with np.errstate(all="ignore"):
-            output_rows(self.code, flat, params, out)
-        return out
+        flat = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(1, -1, self.layout.size))
+        out = np.empty(flat.shape[:2] + (N_OUTPUTS,))
+        run_outputs(np.array([self.code]), params, flat, out)
+        return out[0]
 
     def evaluate(self, y: np.ndarray) -> dict[str, np.ndarray]:
         """All outputs along states ``y`` of shape (n, n_state), or (..., n_state).

@@ -7,7 +7,7 @@ modules; this module only puts it together:
 
 - :func:`state_rate`: dy/dt of one state (what the integrators call);
 - :func:`output_row`: every output of one state (E, F, Lambda, H, N, v, its terms, dv/dt);
-- :func:`state_rates`, :func:`output_rows`: the same over rows of states, from Python.
+- :func:`state_rates`, :func:`run_outputs`: the same over many states, from Python.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from . import embedded, free, permanent, sliding, visco_elastic
 from .base import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
 
 __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row",
-           "state_rates", "output_rows", "run_outputs", "STATE_SIZE"]
+           "state_rates", "run_outputs", "STATE_SIZE"]
 
 FREE, PERMANENT, SLIDING, VISCO_ELASTIC, EMBEDDED = 0, 1, 2, 3, 4
 #: Scalar states of each variant, by code.
@@ -131,14 +131,6 @@ def state_rates(code, y, params, out):
     """dy/dt of every row of ``y`` (m, n_state) into ``out``; ``params`` has 1 or m records."""
     for k in range(y.shape[0]):
         state_rate(code, y[k], params[min(k, params.shape[0] - 1)], out[k])
-
-
-@jit
-def output_rows(code, y, params, out):
-    """Outputs of every row of ``y`` (m, n_state) into ``out`` (m, N_OUTPUTS); ``params``
-    has 1 or m records."""
-    for k in range(y.shape[0]):
-        output_row(code, y[k], params[min(k, params.shape[0] - 1)], out[k])
 
 
 @jit
