@@ -14,6 +14,7 @@ from rbstab.config import (
     ConfigError,
     PhysicalPlausibilityWarning,
     RunConfig,
+    SemiDefiniteGainWarning,
     SimulationSettings,
     apply_overrides,
     config_from_mapping,
@@ -276,8 +277,11 @@ def test_wrong_shape_gain_message_lists_allowed_forms():
     line = single_problem(base(controller={"k_t": [1, 2]}))
     assert line.startswith(
         "config key 'controller.k_t': found [1, 2]; expected 3 numbers (a diagonal) "
-        "or a 3x3 list of lists, symmetric positive definite (N/m)"
+        "or a 3x3 list of lists, symmetric positive semi-definite (N/m)"
     )
+    # L_d is inverted (eq 22): it alone must be definite
+    line = single_problem(base(controller={"l_d": [1, 2]}))
+    assert "or a 3x3 list of lists, symmetric positive definite (N s/m)" in line
 
 
 def test_wrong_type():
@@ -306,7 +310,7 @@ def test_non_finite_numbers_from_yaml(tmp_path):
     errors = info.value.errors
     assert errors == [
         "config key 'body.mass': found inf; expected a number > 0 (kg) (not a finite number)",
-        "config key 'controller.k_s': found nan; expected a number > 0 (N) (not a finite number)",
+        "config key 'controller.k_s': found nan; expected a number >= 0 (N) (not a finite number)",
         "config key 'simulation.t_end': found nan; expected a number > 0 (s) (not a finite number)",
     ]
     line = single_problem(base(initial_state={"omega": [1.0, math.inf, 0.0]}))
@@ -323,22 +327,148 @@ def test_gain_not_symmetric():
     k = [[1, 2, 0], [0, 1, 0], [0, 0, 1]]
     line = single_problem(base(controller={"k_r": k}))
     assert "config key 'controller.k_r': found [[1, 2, 0], [0, 1, 0], [0, 0, 1]]" in line
-    assert "symmetric positive definite (N m/rad)" in line
+    assert "symmetric positive semi-definite (N m/rad)" in line
     assert "not symmetric: [0][1] = 2 but [1][0] = 0" in line
 
 
-def test_gain_not_positive_definite():
+def test_gain_not_positive_semi_definite():
     line = single_problem(base(controller={"l_r": [60, -60, 42]}))
     assert "config key 'controller.l_r': found [60, -60, 42]" in line
-    assert "symmetric positive definite" in line
-    assert "not positive definite: diagonal [1] = -60" in line
+    assert "symmetric positive semi-definite (N m s/rad)" in line
+    assert "not positive semi-definite: diagonal [1] = -60; each must be >= 0" in line
     # symmetric, positive diagonal, but indefinite: eigenvalues 3 and -1
     line = single_problem(base(controller={"k_t": [[1, 2, 0], [2, 1, 0], [0, 0, 1]]}))
     assert "config key 'controller.k_t'" in line
-    assert "not positive definite: smallest eigenvalue -1" in line
+    assert "not positive semi-definite: smallest eigenvalue -1" in line
+    # negative definite
+    line = single_problem(base(controller={"k_r": [-1, -2, -3]}))
+    assert "diagonal [0] = -1, [1] = -2, [2] = -3; each must be >= 0" in line
+    line = single_problem(base(controller={"k_c": [[-2, 1, 0], [1, -2, 0], [0, 0, -1]]}))
+    assert "config key 'controller.k_c'" in line and "smallest eigenvalue -3" in line
+    line = single_problem(base(controller={"k_s": -1.0}))
+    assert line == "config key 'controller.k_s': found -1.0; expected a number >= 0 (N)"
+
+
+def test_inertia_and_l_d_must_be_positive_definite():
+    # the equations invert J (and J_p) and L_d (eq 22): singular ones are errors
     line = single_problem(base(body={"inertia": [3.0, 0.0, 5.0]}))
     assert "config key 'body.inertia': found [3.0, 0.0, 5.0]" in line
-    assert "not positive definite" in line
+    assert "not positive definite: diagonal [1] = 0; each must be > 0" in line
+    line = single_problem(base(controller={"l_d": [0, 0, 0]}))
+    assert "config key 'controller.l_d': found [0, 0, 0]" in line
+    assert "symmetric positive definite (N s/m)" in line
+    assert "diagonal [0] = 0, [1] = 0, [2] = 0; each must be > 0" in line
+    assert "L_d is inverted in dD/dt = L_d^-1" in line
+    line = single_problem(base(controller={"l_d": [[1, 1, 0], [1, 1, 0], [0, 0, 1]]}))
+    assert "not positive definite: smallest eigenvalue" in line and "L_d is inverted" in line
+    # for every variant, so that one base config serves a sweep over variants
+    line = single_problem(base(controller={"variant": "free", "l_d": [0, 1, 1]}))
+    assert "config key 'controller.l_d'" in line
+
+
+ZERO = [0, 0, 0]
+ALL_ZERO = {g: ZERO for g in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d")}
+
+
+@pytest.mark.parametrize("variant", sorted(VARIANTS))
+def test_zero_gains_are_accepted_with_a_note(variant):
+    # a torque-free body (free), a passive pendulum (permanent): valid physics
+    data = base(controller={"variant": variant, **ALL_ZERO, "k_s": 0})
+    with pytest.warns(SemiDefiniteGainWarning, match="v is then not a strict Lyapunov function"):
+        cfg = config_from_mapping(data)
+    used = VARIANTS[variant].required_gains
+    for gain in used:
+        if gain == "l_d":
+            continue
+        value = getattr(cfg.gains, gain)
+        assert np.all(np.asarray(value) == 0), gain
+    (note,) = cfg.warnings
+    keys = note.partition(":")[0].split(", ")  # the key sweeps' digest groups by
+    assert keys == [f"controller.{g}" for g in used if g != "l_d"]
+    assert "asymptotic stability is not implied" in note
+    for g in used:
+        if g != "l_d":
+            assert f"{g} = 0" in note
+
+
+def test_singular_gain_note_names_the_directions():
+    # eigenvalues 0, 2, 2: no damping along (1, -1, 0)/sqrt(2)
+    l_r = [[1, 1, 0], [1, 1, 0], [0, 0, 2]]
+    with pytest.warns(SemiDefiniteGainWarning) as caught:
+        cfg = config_from_mapping(base(controller={"l_r": l_r}))
+    assert len(caught) == 1
+    assert cfg.warnings[0].startswith("controller.l_r: positive semi-definite, not definite")
+    assert "l_r has no stiffness or damping along (-0.7071, 0.7071, 0)" in cfg.warnings[0]
+    np.testing.assert_array_equal(cfg.gains.l_r, l_r)
+    # a a' + b b' with a = (0.1, 0.3, 0.7), b = (0.2, -0.5, 0.3), written with decimals: exactly
+    # singular (null vector a x b), but its zero eigenvalue computes as about -1e-17
+    k_t = [[0.05, -0.07, 0.13], [-0.07, 0.34, 0.06], [0.13, 0.06, 0.58]]
+    assert np.linalg.eigvalsh(np.array(k_t))[0] < 0
+    with pytest.warns(SemiDefiniteGainWarning, match="controller.k_t"):
+        config_from_mapping(base(controller={"k_t": k_t}))
+
+
+def test_definite_gains_and_unused_singular_gains_give_no_note():
+    # the fixture turns any PhysicalPlausibilityWarning (SemiDefiniteGainWarning included)
+    # into an error: no note for positive definite gains, nor for singular unused ones
+    assert issubclass(SemiDefiniteGainWarning, PhysicalPlausibilityWarning)
+    cfg = config_from_mapping(base(controller={"variant": "free", "k_c": ZERO, "k_d": ZERO, "k_s": 0}))
+    assert cfg.warnings == ()
+
+
+@pytest.mark.parametrize(
+    "variant, gains, key, detail",
+    [
+        # free: X_e = K_t^-1 G (eq 30) does not exist
+        ("free", {"k_t": [4100, 4100, 0]}, "controller.k_t", "410 N along (0, 0, -1)"),
+        ("free", {"k_t": ZERO}, "controller.k_t", "410 N along (0, 0, -1)"),
+        # visco_elastic: K_t + K_c
+        ("visco_elastic", {"k_t": ZERO, "k_c": [1, 1, 0]}, "controller.k_t", "K_t + K_c must resist"),
+        # embedded: K_c in series with K_d, so K_d = 0 along z leaves z free
+        ("embedded", {"k_t": ZERO, "k_d": [1, 1, 0]}, "controller.k_t", "in series with K_d"),
+        # sliding: the force K_s sgn(E) must carry 410 N (strictly with a boundary layer)
+        ("sliding", {"k_t": ZERO, "k_s": 400.0, "boundary_layer": 0.0}, "controller.k_s", "K_s >= 410 N"),
+        ("sliding", {"k_t": ZERO, "k_s": 410.0, "boundary_layer": 0.01}, "controller.k_s", "K_s > 410 N"),
+    ],
+)
+def test_gravity_needs_gains_that_hold_the_weight(variant, gains, key, detail):
+    data = base(body={"gravity": [0, 0, -10]}, controller={"variant": variant, **gains})
+    line = single_problem(data)
+    assert line.startswith(f"config key '{key}': found ")
+    assert "expected gains that hold the weight" in line
+    assert "G = (0, 0, -410) N" in line and "there is no equilibrium" in line
+    assert detail in line
+
+
+@pytest.mark.parametrize(
+    "variant, gains",
+    [
+        ("free", {"k_t": [0, 0, 3280]}),  # singular, but stiff along the weight
+        ("free", {"k_t": [[1, 1, 0], [1, 1, 0], [0, 0, 1]]}),
+        ("visco_elastic", {"k_t": ZERO}),  # K_c holds it
+        ("embedded", {"k_t": ZERO}),  # K_c in series with K_d holds it
+        ("sliding", {"k_t": ZERO, "k_s": 410.0, "boundary_layer": 0.0}),
+        ("sliding", {"k_t": ZERO, "k_s": 411.0, "boundary_layer": 0.01}),
+        ("permanent", ALL_ZERO),  # the pivot holds it: a passive pendulum
+    ],
+)
+def test_singular_gains_that_hold_the_weight_are_accepted(variant, gains):
+    data = base(body={"gravity": [0, 0, -10]}, controller={"variant": variant, **gains})
+    with pytest.warns(SemiDefiniteGainWarning):
+        cfg = config_from_mapping(data)
+    assert cfg.variant == variant
+
+
+def test_unheld_weight_names_the_override(tmp_path):
+    path = write(tmp_path, yaml.safe_dump(base(controller={"variant": "free"})))
+    overrides = ["controller.k_t=[1, 1, 0]", "body.gravity=[0, 0, -10]", "simulation.t_end=1"]
+    with pytest.raises(ConfigError) as info:
+        load_config(path, overrides)
+    (line,) = info.value.errors
+    assert "config key 'controller.k_t'" in line
+    assert "[from override 'controller.k_t=[1, 1, 0]']" in line
+    assert "[from override 'body.gravity=[0, 0, -10]']" in line
+    assert "t_end" not in line
 
 
 @pytest.mark.parametrize("theta_2", [1.6, -1.6, math.pi / 2])
@@ -369,7 +499,7 @@ def test_gain_required_by_variant_missing():
     data = base(controller={"variant": "sliding"})
     del data["controller"]["k_s"]
     assert single_problem(data) == (
-        "config key 'controller.k_s': missing; expected a number > 0 (N) "
+        "config key 'controller.k_s': missing; expected a number >= 0 (N) "
         "(required by variant 'sliding')"
     )
     # the same mapping is fine for a variant that does not use k_s

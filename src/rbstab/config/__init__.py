@@ -19,9 +19,11 @@ Schema (the keys are public; units in brackets)::
     controller:
       variant: embedded             # a key of rbstab.variants.VARIANTS, required
       k_t: [4100, 4100, 3280]       # gains k_t l_t k_r l_r k_c l_c k_d l_d: 3 numbers (a
-      ...                           # diagonal) or a 3x3 list; SPD; required when the
-                                    # variant's ``required_gains`` lists them
-      k_s: 500.0                    # K_s [N] > 0 (sliding, eq 39)
+      ...                           # diagonal) or a 3x3 list; symmetric positive
+                                    # semi-definite (zeros allowed), l_d definite (it is
+                                    # inverted, eq 22); required when the variant's
+                                    # ``required_gains`` lists them
+      k_s: 500.0                    # K_s [N] >= 0 (sliding, eq 39)
       boundary_layer: 0.0           # phi [m] >= 0, default 0 (pure sign function)
     initial_state:                  # each key 3 numbers, default zeros
       theta: [0, 0, 0]              # [rad], |theta_2| < pi/2 - gimbal_margin
@@ -42,12 +44,17 @@ Gains the variant does not use (and ``initial_state.d`` for variants without a c
 state) are validated, kept in :attr:`RunConfig.resolved`, and otherwise ignored, so one
 base configuration can serve a sweep over variants.
 
+A singular (semi-definite or zero) gain the variant uses is valid physics, with a note
+(:class:`SemiDefiniteGainWarning`): v is then not a strict Lyapunov function. With gravity,
+gains that leave a direction in which nothing holds the weight (e.g. ``free`` with K_t
+singular along g) are an error: there is no equilibrium (:mod:`rbstab.config.physics`).
+
 YAML is read with a :class:`yaml.SafeLoader` subclass that differs in two ways: ``1e-8``
 is a float (PyYAML follows YAML 1.1 and reads it as a string), and a key given twice in
 one mapping is an error instead of silently keeping the last value.
 """
 
-from .errors import ConfigError, PhysicalPlausibilityWarning
+from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .loader import PER_RUN_SECTIONS, RunConfig, config_from_mapping, group_key, load_config
 from .paths import apply_overrides, get_dotted, set_dotted
 from .schema import GAIN_NAMES, GAIN_UNITS, INITIAL_STATE_BLOCKS, SimulationSettings
@@ -56,6 +63,7 @@ from .yaml_io import dump_yaml, parse_yaml
 __all__ = [
     "ConfigError",
     "PhysicalPlausibilityWarning",
+    "SemiDefiniteGainWarning",
     "RunConfig",
     "SimulationSettings",
     "load_config",

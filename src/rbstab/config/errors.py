@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-__all__ = ["ConfigError", "PhysicalPlausibilityWarning"]
+__all__ = ["ConfigError", "PhysicalPlausibilityWarning", "SemiDefiniteGainWarning"]
 
 
 class ConfigError(ValueError):
@@ -30,4 +30,15 @@ class ConfigError(ValueError):
 
 
 class PhysicalPlausibilityWarning(UserWarning):
-    """A configuration the equations accept but no real rigid body has (e.g. the inertia)."""
+    """A configuration the equations accept but that deserves a note: no real rigid body
+    has it (e.g. the inertia), or see the subclasses."""
+
+
+class SemiDefiniteGainWarning(PhysicalPlausibilityWarning):
+    """A gain that is positive semi-definite but singular (e.g. zero): valid physics (a
+    torque-free body, a passive pendulum), but v is then not a strict Lyapunov function and
+    asymptotic stability is not implied.
+
+    A subclass of :class:`PhysicalPlausibilityWarning`, so whatever filters or collects
+    those (the CLI, sweeps' digest) treats these notes alike.
+    """

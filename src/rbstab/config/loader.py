@@ -15,7 +15,8 @@ from pydantic import ValidationError
 
 from ..model import Gains, RigidBody
 from ..variants import VARIANTS, Variant
-from .errors import ConfigError, PhysicalPlausibilityWarning
+from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
+from .physics import inertia_warnings, semidefinite_notes, unheld_weight
 from .paths import apply_overrides, plain_tree
 from .schema import (
     GAIN_NAMES,
@@ -79,7 +80,9 @@ class RunConfig:
         written; ``config_from_mapping(resolved)`` rebuilds an identical RunConfig.
         ``max_step`` is None when infinite.
     warnings : tuple of str
-        Physical-plausibility warnings (also emitted as :class:`PhysicalPlausibilityWarning`).
+        Physical-plausibility warnings and notes (also emitted as
+        :class:`PhysicalPlausibilityWarning`, :class:`SemiDefiniteGainWarning` for
+        singular gains).
     """
 
     name: str
@@ -157,23 +160,6 @@ def _matrix(value: Any) -> np.ndarray:
     return _array(np.diag(value) if np.ndim(value) == 1 else value)
 
 
-def _inertia_warnings(inertia: np.ndarray) -> list[str]:
-    diagonal = np.diag(inertia)  # keep the user's j1, j2, j3 labels when J is diagonal
-    is_diagonal = np.array_equal(inertia, np.diag(diagonal))
-    moments = diagonal if is_diagonal else np.linalg.eigvalsh(inertia)
-    j = [float(x) for x in moments]
-    for i in range(3):
-        others = [j[k] for k in range(3) if k != i]
-        if j[i] > sum(others) * (1 + 1e-12):
-            return [
-                f"body.inertia: principal moments ({', '.join(f'{x:g}' for x in j)}) kg m^2 "
-                f"violate the triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + "
-                f"{others[1]:g}) that every real rigid body satisfies; the equations of "
-                "motion still hold, but no physical body has this inertia"
-            ]
-    return []
-
-
 def _build(
     data: Any,
     *,
@@ -221,15 +207,25 @@ def _build(
         max_step=float(sim.max_step),
         gimbal_margin=float(sim.gimbal_margin),
     )
+    used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
+    unheld = unheld_weight(ctrl.variant, body.mass, body.gravity, used_gains, gains.boundary_layer)
+    if unheld is not None:
+        key, detail = unheld
+        found = short_repr(getattr(ctrl, key.partition(".")[2]))
+        line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
+        inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
+        related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
+        raise ConfigError([line + "".join(f" [from override {o!r}]" for o in related)], source)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
     if math.isinf(sim.max_step):
         dump["simulation"]["max_step"] = None
-    found_warnings = tuple(_inertia_warnings(body.inertia))
-    for message in found_warnings:
-        warnings.warn(
-            f"{source}: {message}" if source else message, PhysicalPlausibilityWarning, stacklevel=3
-        )
+    notes = [(m, PhysicalPlausibilityWarning) for m in inertia_warnings(body.inertia)]
+    as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
+    notes += [(m, SemiDefiniteGainWarning) for m in semidefinite_notes(as_written)]
+    for message, category in notes:
+        warnings.warn(f"{source}: {message}" if source else message, category, stacklevel=3)
+    found_warnings = tuple(message for message, _ in notes)
     return RunConfig(
         name=run.name,
         variant=ctrl.variant,
@@ -273,6 +269,9 @@ def config_from_mapping(
     -----
     PhysicalPlausibilityWarning
         For a configuration no real body has (inertia violating the triangle inequality).
+    SemiDefiniteGainWarning
+        For a gain the variant uses that is positive semi-definite but singular (zero
+        included): v is then not a strict Lyapunov function.
     """
     return _build(data, default_name=default_name, source=source)
 
@@ -296,7 +295,7 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
 
     Warns
     -----
-    PhysicalPlausibilityWarning
+    PhysicalPlausibilityWarning, SemiDefiniteGainWarning
         See :func:`config_from_mapping`.
     """
     path = Path(path)

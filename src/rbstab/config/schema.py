@@ -28,8 +28,10 @@ from pydantic_core import PydanticCustomError
 
 from ..layout import BLOCK_UNITS
 from ..variants import VARIANTS
+from .physics import SINGULAR_RTOL
 
 __all__ = [
+    "DEFINITE_GAINS",
     "GAIN_UNITS",
     "GAIN_NAMES",
     "INITIAL_STATE_BLOCKS",
@@ -153,17 +155,13 @@ def _vector(value: Any) -> list[int | float]:
     return [_entry(x, f"[{i}]") for i, x in enumerate(value)]
 
 
-def _spd_matrix(value: Any) -> list:
-    """3 numbers (a positive diagonal) or a symmetric positive definite 3x3 list of lists."""
+def _symmetric_matrix(value: Any) -> tuple[list, np.ndarray | None]:
+    """(the value as plain numbers, its eigenvalues or None for a diagonal given as 3 numbers)."""
     if not isinstance(value, (list, tuple)):
         raise Invalid(f"{kind_of(value)}, not a list")
     is_row = [isinstance(row, (list, tuple)) for row in value]
     if not any(is_row):
-        diagonal = _vector(value)
-        bad = [f"[{i}] = {x:g}" for i, x in enumerate(diagonal) if not x > 0]
-        if bad:
-            raise Invalid(f"not positive definite: diagonal {', '.join(bad)}; each must be > 0")
-        return diagonal
+        return _vector(value), None
     if not all(is_row):
         raise Invalid("it mixes numbers and lists")
     lengths = sorted({len(row) for row in value})
@@ -177,10 +175,44 @@ def _spd_matrix(value: Any) -> list:
         raise Invalid(
             f"not symmetric: [{i}][{j}] = {matrix[i, j]:g} but [{j}][{i}] = {matrix[j, i]:g}"
         )
-    smallest = np.linalg.eigvalsh(matrix)[0]
-    if not smallest > 0:
-        raise Invalid(f"not positive definite: smallest eigenvalue {smallest:g}")
-    return rows
+    return rows, np.linalg.eigvalsh(matrix)
+
+
+def _spd_matrix(value: Any, why: str = "") -> list:
+    """3 numbers (a positive diagonal) or a symmetric positive definite 3x3 list of lists.
+
+    For the matrices the equations invert (the inertia J, the damper L_d of eq 22);
+    ``why`` says so in the message of a singular one.
+    """
+    numbers, eigenvalues = _symmetric_matrix(value)
+    reason = f"; {why}" if why else ""
+    if eigenvalues is None:
+        bad = [f"[{i}] = {x:g}" for i, x in enumerate(numbers) if not x > 0]
+        if bad:
+            raise Invalid(f"not positive definite: diagonal {', '.join(bad)}; each must be > 0{reason}")
+    elif not eigenvalues[0] > 0:
+        raise Invalid(f"not positive definite: smallest eigenvalue {eigenvalues[0]:g}{reason}")
+    return numbers
+
+
+def _psd_matrix(value: Any) -> list:
+    """3 numbers (a diagonal >= 0) or a symmetric positive semi-definite 3x3 list of lists.
+
+    Zero eigenvalues are allowed (a gain of zero: no spring, no damper), down to
+    -``SINGULAR_RTOL`` times the largest magnitude (the rounding of a singular matrix
+    written with decimals); a negative one is not (a negative spring or damper feeds
+    energy in, and v is no Lyapunov function).
+    """
+    numbers, eigenvalues = _symmetric_matrix(value)
+    if eigenvalues is None:
+        bad = [f"[{i}] = {x:g}" for i, x in enumerate(numbers) if not x >= 0]
+        if bad:
+            raise Invalid(
+                f"not positive semi-definite: diagonal {', '.join(bad)}; each must be >= 0"
+            )
+    elif eigenvalues[0] < -SINGULAR_RTOL * np.abs(eigenvalues).max():
+        raise Invalid(f"not positive semi-definite: smallest eigenvalue {eigenvalues[0]:g}")
+    return numbers
 
 
 def _theta(value: Any) -> list[int | float]:
@@ -286,16 +318,30 @@ class SimulationSettings:
 # -- schema --------------------------------------------------------------------------------
 
 _VECTOR = Annotated[Any, _checked(_vector)]
-_OPTIONAL_SPD = Annotated[Any, _checked(_optional(_spd_matrix))]
 _ZERO = (0.0, 0.0, 0.0)
+
+#: Gains the equations invert, with the reason: these must be positive definite. Every
+#: other gain may be positive semi-definite (zero included: no spring or damper there).
+DEFINITE_GAINS = {
+    "l_d": "L_d is inverted in dD/dt = L_d^-1 (K_c (E - D) - K_d D) (eq 22)",
+}
+
+
+def _gain_type(name: str) -> Any:
+    if name in DEFINITE_GAINS:
+        check = lambda value: _spd_matrix(value, DEFINITE_GAINS[name])  # noqa: E731
+    else:
+        check = _psd_matrix
+    return Annotated[Any, _checked(_optional(check))]
 
 
 def _gain(name: str) -> Any:
+    kind = "definite" if name in DEFINITE_GAINS else "semi-definite"
     return Field(
         None,
         validate_default=True,
         description="3 numbers (a diagonal) or a 3x3 list of lists, "
-        f"symmetric positive definite ({GAIN_UNITS[name]})",
+        f"symmetric positive {kind} ({GAIN_UNITS[name]})",
     )
 
 
@@ -320,16 +366,16 @@ class _Body(_Section):
 class _Controller(_Section):
     # ``variant`` first: the gain validators read it from ``info.data``.
     variant: Annotated[Any, _checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
-    k_t: _OPTIONAL_SPD = _gain("k_t")
-    l_t: _OPTIONAL_SPD = _gain("l_t")
-    k_r: _OPTIONAL_SPD = _gain("k_r")
-    l_r: _OPTIONAL_SPD = _gain("l_r")
-    k_c: _OPTIONAL_SPD = _gain("k_c")
-    l_c: _OPTIONAL_SPD = _gain("l_c")
-    k_d: _OPTIONAL_SPD = _gain("k_d")
-    l_d: _OPTIONAL_SPD = _gain("l_d")
-    k_s: Annotated[Any, _checked(_optional(_number(gt=0)))] = Field(
-        None, validate_default=True, description="a number > 0 (N)"
+    k_t: _gain_type("k_t") = _gain("k_t")
+    l_t: _gain_type("l_t") = _gain("l_t")
+    k_r: _gain_type("k_r") = _gain("k_r")
+    l_r: _gain_type("l_r") = _gain("l_r")
+    k_c: _gain_type("k_c") = _gain("k_c")
+    l_c: _gain_type("l_c") = _gain("l_c")
+    k_d: _gain_type("k_d") = _gain("k_d")
+    l_d: _gain_type("l_d") = _gain("l_d")
+    k_s: Annotated[Any, _checked(_optional(_number(ge=0)))] = Field(
+        None, validate_default=True, description="a number >= 0 (N)"
     )
     boundary_layer: Annotated[Any, _checked(_number(ge=0))] = Field(
         0.0, description="a number >= 0 (m; 0 = pure sign function)"

@@ -1,0 +1,135 @@
+"""The summary's rate check: analytic dv/dt against the numerical derivative of v.
+
+It passes when max |analytic - numerical| <= 1e-3 P, P = max(max |analytic|, E / T)
+(E the run's energy scale, T its duration; docs/physics.md). The floor E / T keeps a
+conservative run (zero gains: analytic dv/dt = 0) from failing on the noise of the
+numerical derivative; a wrong analytic rate must still fail.
+"""
+
+import copy
+import warnings
+
+import numpy as np
+import pytest
+
+from rbstab.config import PhysicalPlausibilityWarning, config_from_mapping, load_config
+from rbstab.simulate import simulate
+from rbstab.summary import LYAPUNOV_RATE_TOLERANCE, numerical_rate, summarize
+
+from conftest import ROOT
+
+TERMS = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
+
+ZERO = [0.0, 0.0, 0.0]
+TUMBLING = {
+    "name": "tumbling",
+    "body": {"mass": 41.0, "inertia": [10.0, 8.0, 0.4], "attachment_point": [0.15, 0.10, -0.42]},
+    "controller": {
+        "variant": "free",
+        **{g: ZERO for g in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d")},
+        "l_d": [1200.0, 1200.0, 840.0],
+        "k_s": 0.0,
+    },
+    "initial_state": {"omega": [16.0, 32.0, -16.0], "v": [0.5, -0.2, 0.1]},
+    "simulation": {"t_end": 1.0, "n_samples": 1001},  # rtol 1e-8, DOP853: the defaults
+}
+
+
+def conservative_run(variant, gravity=ZERO):
+    data = copy.deepcopy(TUMBLING)
+    data["controller"]["variant"] = variant
+    data["body"]["gravity"] = list(gravity)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Table 1's inertia, and the zero gains' note
+        return simulate(config_from_mapping(data))
+
+
+def energy_scale(outputs):
+    return np.max(sum(np.abs(outputs[k]) for k in TERMS))
+
+
+@pytest.mark.parametrize(
+    "variant, gravity",
+    [
+        ("free", ZERO),  # torque-free tumbling
+        ("visco_elastic", ZERO),
+        ("embedded", ZERO),
+        ("sliding", ZERO),  # K_s = 0
+        ("permanent", ZERO),  # spinning top about a fixed point, no gravity
+        ("permanent", [0.0, 0.0, -10.0]),  # passive pendulum
+    ],
+)
+def test_a_conservative_run_passes_the_rate_check(variant, gravity):
+    run = conservative_run(variant, gravity)
+    assert run.status == "success"
+    out, s = run.outputs, run.summary
+    v = out["lyapunov"]
+    assert np.ptp(v) < 1e-6 * np.max(np.abs(v))  # conserved: v is energy here
+    assert np.max(np.abs(out["lyapunov_rate"])) < 1e-8  # the analytic dv/dt: 0 up to rounding
+    # the numerical derivative is noise far above that: without the floor the check fails
+    mismatch = s["lyapunov_rate_mismatch"]
+    assert mismatch > 1e3 * np.max(np.abs(out["lyapunov_rate"]))
+    assert s["lyapunov_rate_check"] == "pass"
+    reference = energy_scale(out) / run.time[-1]  # E / T [W]
+    assert s["lyapunov_rate_mismatch_relative"] == pytest.approx(mismatch / reference, rel=1e-12)
+    assert s["lyapunov_rate_mismatch_relative"] < 0.5 * LYAPUNOV_RATE_TOLERANCE
+
+
+def with_rate(run, rate):
+    return summarize(run.time, {**run.outputs, "lyapunov_rate": rate})
+
+
+def test_a_wrong_analytic_rate_of_a_conservative_run_fails():
+    run = conservative_run("free")
+    out = run.outputs
+    assert run.summary["lyapunov_rate_check"] == "pass"
+    # a variant whose dv/dt claims a damping L_r its dynamics does not apply
+    omega = out["omega"]
+    l_r = np.array([60.0, 60.0, 42.0])
+    assert with_rate(run, -np.sum(l_r * omega**2, axis=1))["lyapunov_rate_check"] == "fail"
+    # the floor is tol E / T, no more: a bias of twice that fails, of a third passes
+    floor = LYAPUNOV_RATE_TOLERANCE * energy_scale(out) / run.time[-1]
+    assert run.summary["lyapunov_rate_mismatch"] < floor / 3
+    bias = np.full_like(out["lyapunov_rate"], 2 * floor)
+    assert with_rate(run, out["lyapunov_rate"] + bias)["lyapunov_rate_check"] == "fail"
+    small = with_rate(run, out["lyapunov_rate"] + bias / 6)
+    assert small["lyapunov_rate_check"] == "pass"
+
+
+def test_the_floor_does_not_weaken_the_check_of_a_damped_run():
+    with pytest.warns(PhysicalPlausibilityWarning):  # Table 1's inertia
+        config = load_config(
+            ROOT / "configs/paper/case3_embedded.yaml", ["simulation.t_end=1", "simulation.n_samples=1001"]
+        )
+    run = simulate(config)
+    out, s = run.outputs, run.summary
+    peak = np.max(np.abs(out["lyapunov_rate"]))
+    assert energy_scale(out) / run.time[-1] < 0.1 * peak  # the floor is inactive here
+    assert s["lyapunov_rate_check"] == "pass"
+    assert s["lyapunov_rate_mismatch_relative"] == pytest.approx(s["lyapunov_rate_mismatch"] / peak)
+    # an analytic rate 1 % off fails
+    assert with_rate(run, 1.01 * out["lyapunov_rate"])["lyapunov_rate_check"] == "fail"
+
+
+def test_floor_on_synthetic_samples():
+    # v constant (E = 100 J) plus noise of 1e-7 J over T = 2 s; analytic dv/dt = 0
+    rng = np.random.default_rng(5)
+    time = np.linspace(0.0, 2.0, 401)
+    v = 100.0 + 1e-7 * rng.standard_normal(time.size)
+    outputs = {
+        "lyapunov": v[None],
+        "lyapunov_rate": np.zeros((1, time.size)),
+        "lyapunov_rate_numerical": numerical_rate(time, v)[None],
+        "lyapunov_rotational": v[None],
+        "lyapunov_translational": np.zeros((1, time.size)),
+        "constraint_error": np.zeros((1, time.size, 3)),
+    }
+    s = summarize(time, {k: x[0] for k, x in outputs.items()})
+    assert s["lyapunov_rate_mismatch"] > 0
+    assert s["lyapunov_rate_mismatch_relative"] == pytest.approx(s["lyapunov_rate_mismatch"] / 50.0)
+    assert s["lyapunov_rate_check"] == "pass"
+    # the terms' magnitudes, not v: 1e4 J that cancel to v = 100 J raise the floor 200x
+    outputs["lyapunov_gravity"] = np.full((1, time.size), -1e4)
+    outputs["lyapunov_rotational"] = v[None] + 1e4
+    s2 = summarize(time, {k: x[0] for k, x in outputs.items()})
+    assert s2["lyapunov_rate_mismatch_relative"] == pytest.approx(s["lyapunov_rate_mismatch_relative"] / 201, rel=1e-6)
