@@ -20,13 +20,12 @@ import numpy as np
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
+from . import tableaus
 from .rk import dense_coefficients, dense_value, error_norm, initial_step, rk_step
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time"]
 
-SAFETY = 0.9
-MIN_FACTOR = 0.2
-MAX_FACTOR = 10.0
+SAFETY, MIN_FACTOR, MAX_FACTOR = float(tableaus.SAFETY), float(tableaus.MIN_FACTOR), float(tableaus.MAX_FACTOR)
 
 SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT = 0, 1, -1, -2, -3
 

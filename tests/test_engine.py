@@ -1,0 +1,96 @@
+"""The compiled engine step by step against scipy: tableaus, step counts, failures that end."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from conftest import initial_blocks, paper_body, paper_gains
+from rbstab.engine import METHODS, integrate_runs, tableaus
+from rbstab.variants import VARIANTS
+
+GRAVITY = {"free": (0.0, 0.0, -10.0), "permanent": (0.0, 0.0, -10.0)}
+
+
+def test_rk_tableaus_are_scipys():
+    """rbstab.engine.tableaus (so workers need not import scipy.integrate) holds exactly the
+    installed scipy's numbers and messages."""
+    from scipy.integrate._ivp import dop853_coefficients, rk
+    from scipy.integrate._ivp.base import OdeSolver
+    from scipy.integrate._ivp.ivp import MESSAGES
+
+    for method in METHODS:
+        ours, theirs = tableaus.TABLEAUS[method], getattr(rk, method)
+        for key in ("order", "error_estimator_order", "n_stages"):
+            assert getattr(ours, key) == getattr(theirs, key), (method, key)
+        keys = ["C", "A", "B"] + (["E3", "E5", "D"] if method == "DOP853" else ["E", "P"])
+        for key in keys:
+            np.testing.assert_array_equal(getattr(ours, key), getattr(theirs, key), err_msg=f"{method}.{key}")
+    for key in ("A", "C"):
+        np.testing.assert_array_equal(getattr(tableaus.DOP853_EXTENDED, key), getattr(dop853_coefficients, key))
+    assert (tableaus.SAFETY, tableaus.MIN_FACTOR, tableaus.MAX_FACTOR) == (rk.SAFETY, rk.MIN_FACTOR, rk.MAX_FACTOR)
+    assert tableaus.SUCCESS_MESSAGE == MESSAGES[0]
+    assert tableaus.TOO_SMALL_STEP_MESSAGE == OdeSolver.TOO_SMALL_STEP
+
+
+def _variant(name):
+    return VARIANTS[name](paper_body(GRAVITY.get(name, (0.0, 0.0, 0.0))), paper_gains())
+
+
+def _settings(k, t_end=0.5, rtol=1e-6, atol=1e-8, max_step=np.inf, margin=1e-3):
+    return np.tile([[t_end, rtol, atol, max_step, margin]], (k, 1))
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("name", sorted(VARIANTS))
+def test_same_steps_and_samples_as_solve_ivp(name, method):
+    """Each run takes the right-hand-side evaluations solve_ivp takes (same error norm,
+    initial step and step control) and samples the same dense output, to the tolerance's scale."""
+    variant = _variant(name)
+    spins = [(16.0, 32.0, -16.0), (3.0, -7.0, 11.0)]
+    y0 = np.stack([variant.initial_state(initial_blocks(omega=w)) for w in spins])
+    t = np.linspace(0.0, 0.5, 101)
+    sol = integrate_runs([variant.code] * 2, np.repeat(variant.parameters, 2), y0, _settings(2), method=method,
+                         n_samples=len(t))
+    for k in range(2):
+        ref = solve_ivp(variant.rhs, (0.0, 0.5), y0[k], method=method, t_eval=t, rtol=1e-6, atol=1e-8)
+        assert sol.status[k] == 0 and ref.status == 0
+        if name == "sliding":  # tanh(E / 5 mm) is stiff: round-off decides a few step rejections
+            assert abs(sol.nfev[k] - ref.nfev) <= 0.03 * ref.nfev, (sol.nfev[k], ref.nfev)
+        else:
+            assert sol.nfev[k] == ref.nfev, (sol.nfev[k], ref.nfev)
+        scale = np.abs(ref.y).max()
+        np.testing.assert_allclose(sol.samples[k], ref.y.T, atol=10 * 1e-6 * scale)
+
+
+def test_max_step_is_honoured_like_scipy():
+    variant = _variant("embedded")
+    y0 = variant.initial_state(initial_blocks())[None]
+    sol = integrate_runs([variant.code], variant.parameters, y0, _settings(1, max_step=1e-3), method="RK45",
+                         n_samples=11)
+    ref = solve_ivp(variant.rhs, (0.0, 0.5), y0[0], method="RK45", rtol=1e-6, atol=1e-8, max_step=1e-3)
+    assert sol.n_steps[0] >= 500 and sol.nfev[0] == ref.nfev
+
+
+@pytest.mark.parametrize("bad", [np.nan, 1e200])
+def test_non_finite_runs_end_failed_and_the_others_do_not_notice(bad):
+    """A NaN initial state or an overflowing one ends as a failure (no endless loop), and the
+    run beside it gets the bits it gets alone."""
+    variant = _variant("visco_elastic")
+    good = variant.initial_state(initial_blocks())
+    broken = good.copy()
+    broken[3] = bad
+    sol = integrate_runs([variant.code] * 2, np.repeat(variant.parameters, 2), np.stack([broken, good]),
+                         _settings(2), method="DOP853", n_samples=11)
+    alone = integrate_runs([variant.code], variant.parameters, good[None], _settings(1), method="DOP853", n_samples=11)
+    assert sol.status[0] in (-1, -2) and sol.status[1] == 0
+    assert np.isnan(sol.samples[0, -1]).all()
+    assert np.array_equal(sol.samples[1], alone.samples[0])
+
+
+def test_step_limit_ends_a_run():
+    variant = _variant("embedded")
+    y0 = variant.initial_state(initial_blocks())[None]
+    sol = integrate_runs([variant.code], variant.parameters, y0, _settings(1), method="RK23", n_samples=11, max_steps=50)
+    assert sol.status[0] == -3 and sol.n_steps[0] == 50 and 0 < sol.t_stop[0] < 0.5
