@@ -142,6 +142,27 @@ def parameter_columns(runs: Iterable[Any]) -> dict[str, str]:
     return names
 
 
+def config_key_of(entry: str) -> str:
+    """The config key of a parameter entry: ``controller.k_c.2`` -> ``controller.k_c``,
+    ``body.inertia.0:scale`` -> ``body.inertia``."""
+    return re.sub(r"(\.\d+)+$", "", entry.removesuffix(":scale"))
+
+
+def read_parameters(folder: str | os.PathLike, index=None) -> dict[str, str]:
+    """Parameter column -> dotted config key (of the entry) of a sweep folder, from
+    ``sweep_summary.json`` (the columns between ``base`` and ``variant`` of the index,
+    mapped to themselves, when it is missing)."""
+    try:
+        data = json.loads((Path(folder) / SUMMARY_FILE).read_text(encoding="utf-8"))
+        parameters = data.get("parameters")
+        if isinstance(parameters, dict):
+            return {str(k): str(v) for k, v in parameters.items()}
+    except (OSError, ValueError):
+        pass
+    index = read_index(folder) if index is None else index
+    return {c: c for c in _parameter_set(index)}
+
+
 # -- rows and the index ---------------------------------------------------------------------------
 
 

@@ -721,7 +721,15 @@ def load_spec(path: str | Path, overrides: Sequence[str] = ()) -> SweepSpec:
         data = read_yaml_file(path, "sweep spec")
     except ConfigError as exc:
         raise SweepSpecError(exc.errors, exc.source) from None
+    if is_run_config(data):  # a config varied from the command line (--grid, --random, ...)
+        data = {"base": path.name}
     return spec_from_mapping(data, source=str(path), default_name=path.stem, overrides=overrides)
+
+
+def is_run_config(data: Any) -> bool:
+    """Whether a parsed YAML file is a run config rather than a sweep spec (no ``base``,
+    and a ``body`` or ``controller`` section)."""
+    return isinstance(data, Mapping) and "base" not in data and ("body" in data or "controller" in data)
 
 
 # -- expansion --------------------------------------------------------------------------------
