@@ -12,8 +12,7 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   identifier name (``k_c_0`` for ``controller.k_c.0``, see
   :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
 - per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
-  ``config`` (the resolved configuration without its name, canonical JSON, which is also
-  YAML), ``config_hash`` (SHA-256 of ``config``) and the summary figures of
+  ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash`` (SHA-256 of ``config``) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
   ``units`` and ``long_name``;
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
@@ -118,7 +117,7 @@ PER_RUN = {
     "solver_njev": ("1", "Jacobian evaluations"),
     "solver_nlu": ("1", "LU decompositions"),
     "solver_status": ("1", "solve_ivp status (0 success, -1 failure, 1 stopped by an event)"),
-    "config": ("", "resolved configuration without its name, canonical JSON (also YAML)"),
+    "config": ("", "resolved configuration without its name, canonical JSON"),
     "config_hash": ("", "SHA-256 of config"),
 }
 _COORDS = ("run_id", "base", "variant")
@@ -293,6 +292,7 @@ class ChunkWriter:
         out = {"run": ident.index, "run_id": ident.run_id, "base": ident.base, **ident.coords}
         out.update(self.values[i] or {})
         out["store"] = self.store
+        out["created"] = self.attrs["created"]
         out["file"] = self.path.name
         out["file_row"] = i
         return out

@@ -100,7 +100,7 @@ def _git_commit() -> str:
 def canonical_config(resolved) -> str:
     """A resolved configuration without its ``name`` as canonical JSON (sorted keys, no spaces).
 
-    JSON is YAML, so ``yaml.safe_load`` reads it back; :func:`config_hash` hashes it.
+    ``json.loads`` reads it back; :func:`config_hash` hashes it.
     """
     body = {k: v for k, v in resolved.items() if k != "name"}
     return json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)

@@ -20,6 +20,7 @@ every problem, so the caller can refuse the whole report before creating anythin
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -333,9 +334,10 @@ def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row
     from ..io.hdf5 import NotAResultFile
 
     where = f"{path}" if row is None else f"{path} (run {attrs.get('name')})"
-    try:
-        config = yaml.safe_load(attrs.get("config", "")) or {}
-    except yaml.YAMLError as exc:
+    text = attrs.get("config", "") or ""
+    try:  # a store file's config is JSON (rbstab.io.hdf5.canonical_config), a run file's YAML
+        config = (json.loads(text) if text.lstrip().startswith("{") else yaml.safe_load(text)) or {}
+    except (ValueError, yaml.YAMLError) as exc:
         raise NotAResultFile(f"{where}: the config attribute is not valid YAML ({exc})") from None
     if not isinstance(config, dict):
         raise NotAResultFile(f"{where}: the config attribute is not a YAML mapping")
