@@ -23,7 +23,7 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   ``git_commit``, ``command_line``, ``created``, ``store`` (``store_stride``), ``sweep``.
 
 A file is written to a temporary name and renamed when complete; trace rows are written
-in blocks of :data:`WRITE_BLOCK` runs, so a writer holds at most that many runs' traces.
+in blocks of about :data:`WRITE_BYTES`, so a writer holds at most that much of its traces.
 :func:`read_chunk_rows` gives each run's per-run values (what resume and the index use),
 :func:`read_chunk_series` one run's traces.
 """
@@ -84,7 +84,10 @@ STORES = ("full", "thinned", "summary")
 DEFAULT_STORE = "thinned"
 #: Variables of a ``thinned`` store (the state blocks, E, v and its rates).
 THINNED_VARIABLES = SUMMARY_VARIABLES
-#: Runs buffered before their trace rows are written (bounds a writer's memory).
+#: Bytes of traces buffered before they are written (bounds a writer's memory; writing
+#: few large blocks is what makes a store file cheap per run).
+WRITE_BYTES = 32 * 2**20
+#: Fewest runs per written block (and HDF5 chunk along ``run``).
 WRITE_BLOCK = 32
 _AXES = ("x", "y", "z")
 
@@ -218,6 +221,8 @@ class ChunkWriter:
         self._time: np.ndarray | None = None
         self._stride = 1
         self._traces: dict[str, tuple[int, ...]] = {}
+        self._datasets: dict[str, Any] = {}
+        self._block = WRITE_BLOCK
         self.attrs: dict[str, Any] = {
             "rbstab_format": CHUNK_FORMAT,
             "rbstab_version": __version__,
@@ -233,8 +238,18 @@ class ChunkWriter:
 
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
-        self._file.dimensions["run"] = len(self.ids)
-        self._file.dimensions["axis"] = 3
+        import h5py
+
+        self._str = h5py.string_dtype()
+        f = self._file
+        f.dimensions["run"] = len(self.ids)
+        f.dimensions["axis"] = 3
+        # coordinates first: a variable created later attaches to them once (h5netcdf
+        # re-attaches every variable of a dimension whose coordinate comes after them)
+        run = f.create_variable("run", ("run",), data=np.array([r.index for r in self.identity], dtype=np.int64))
+        run.attrs.update(long_name="position of the run in the sweep's run list")
+        axis = f.create_variable("axis", ("axis",), data=np.array(_AXES, dtype=object), dtype=self._str)
+        axis.attrs.update(long_name="vector component; frame given by each variable")
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
@@ -282,7 +297,7 @@ class ChunkWriter:
         self.values[i] = values
         if self.store != "summary":
             self._pending.append((i, traces))
-            if len(self._pending) >= WRITE_BLOCK:
+            if len(self._pending) >= self._block:
                 self._flush()
         return self.row(i)
 
@@ -319,6 +334,9 @@ class ChunkWriter:
             var.attrs.update(units=VARIABLE_UNITS[name], long_name=name.replace("_", " "),
                              description=VARIABLE_DESCRIPTIONS[name])
             self._traces[name] = (len(self._time), 3)[:rank]
+            self._datasets[name] = var._h5ds  # rows written through h5py: h5netcdf adds ~1 ms a write
+        per_run = 8 * sum(int(np.prod(shape)) for shape in self._traces.values()) or 1
+        self._block = max(WRITE_BLOCK, WRITE_BYTES // per_run)
 
     def _traces_of(self, run_id: str, result: "RunResult") -> dict[str, np.ndarray]:
         time = np.asarray(result.time, dtype=float)[:: self._stride]
@@ -338,7 +356,7 @@ class ChunkWriter:
         for name, shape in self._traces.items():
             missing = np.full(shape, np.nan)
             block = np.stack([missing if o is None or name not in o else o[name] for _, o in self._pending])
-            var = self._file.variables[name]
+            var = self._datasets[name]
             if rows == list(range(rows[0], rows[-1] + 1)):
                 var[rows[0] : rows[-1] + 1] = block
             else:
@@ -352,22 +370,13 @@ class ChunkWriter:
         if missing:
             raise ValueError(f"{self.path.name}: no result for {len(missing)} run(s), e.g. {missing[0]}")
         self._flush()
-        import h5py
-
-        self._str = h5py.string_dtype()
         f = self._file
-        run = f.create_variable("run", ("run",), data=np.array([r.index for r in self.identity], dtype=np.int64))
-        run.attrs.update(long_name="position of the run in the sweep's run list")
-        axis = f.create_variable("axis", ("axis",), data=np.array(_AXES, dtype=object), dtype=self._str)
-        axis.attrs.update(long_name="vector component; frame given by each variable")
         columns = self._columns()
+        self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         for name, values in columns.items():
             self._write_column(name, values)
-        coords = " ".join([*_COORDS, *self.parameters])
-        for name in f.variables:
-            if name not in ("run", "axis", "time", *columns) or name in (*_COORDS, *self.parameters):
-                continue
-            f.variables[name].attrs["coordinates"] = coords
+        for name in self._traces:
+            f.variables[name].attrs["coordinates"] = self._coordinates
         f.attrs.update(self.attrs)
 
     def _columns(self) -> dict[str, list]:
@@ -380,15 +389,19 @@ class ChunkWriter:
         return {name: [r.get(name) for r in rows] for name in names}
 
     def _write_column(self, name: str, values: list) -> None:
-        f = self._file
+        """A ``(run,)`` variable through h5py (h5netcdf's ``create_variable`` costs ~3 ms,
+        most of a store file's writing): a dataset with the ``run`` dimension scale attached,
+        which is what netCDF-4 and h5netcdf read as a variable of dimension ``run``."""
+        h5 = self._file._h5file
         if name in _TEXT or any(isinstance(v, str) for v in values):
             data = np.array(["" if v is None else str(v) for v in values], dtype=object)
-            var = f.create_variable(name, ("run",), data=data, dtype=self._str)
+            var = h5.create_dataset(name, data=data, dtype=self._str)
         else:
             data = np.array([np.nan if v is None else v for v in values], dtype=float)
             if name.startswith("solver_") and np.all(np.isfinite(data)):
                 data = data.astype(np.int64)
-            var = f.create_variable(name, ("run",), data=data)
+            var = h5.create_dataset(name, data=data, fillvalue=np.nan if data.dtype.kind == "f" else None)
+        var.dims[0].attach_scale(h5["run"])
         units, long_name = figure_attributes(name)
         if name in self.parameters:
             var.attrs["config_key"] = self.parameters[name]
@@ -396,6 +409,8 @@ class ChunkWriter:
         var.attrs["long_name"] = long_name
         if units:
             var.attrs["units"] = units
+        if name not in _COORDS and name not in self.parameters:
+            var.attrs["coordinates"] = self._coordinates
 
 
 def is_chunk_file(path: str | os.PathLike) -> bool:
