@@ -4,12 +4,36 @@ from __future__ import annotations
 
 import click
 
+from rbstab.sweep.worker import ENGINES
+
 from ._common import command_line
 from .options import output_option, set_option
 
 
 def _indent(text: str) -> str:
     return "\n".join("  " + line for line in text.splitlines())
+
+
+def _sweep_overrides(grid, zipped, random, n, seed) -> list[str]:
+    """The command-line sweep options as ``sweep.*`` overrides of the spec."""
+    out = [f"sweep.grid.{key}=[{values}]" for key, values in map(_key_value, grid)]
+    out += [f"sweep.zip.{key}=[{values}]" for key, values in map(_key_value, zipped)]
+    for key, text in map(_key_value, random):
+        name, sep, rest = text.partition(":")
+        dist = text if text.lstrip().startswith("{") or not sep else f"{{{name.strip()}: {rest}}}"
+        out.append(f"sweep.random.params.{key}={dist}")
+    if n is not None:
+        out.append(f"sweep.random.n={n}")
+    if seed is not None:
+        out.append(f"sweep.random.seed={seed}")
+    return out
+
+
+def _key_value(text: str) -> tuple[str, str]:
+    key, sep, value = text.partition("=")
+    if not sep or not key.strip():
+        raise click.UsageError(f"{text!r}: expected KEY=VALUES, e.g. body.mass=30,41,52")
+    return key.strip(), value
 
 
 @click.command("sweep")
@@ -29,15 +53,25 @@ def _indent(text: str) -> str:
     help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --executor dask).",
 )
 @set_option
+@click.option("--grid", "grid", multiple=True, metavar="KEY=V1,V2,...",
+              help="Vary KEY over the values (YAML, comma-separated; lists in brackets), as a grid level. "
+              "Repeatable: the Cartesian product.")
+@click.option("--zip", "zipped", multiple=True, metavar="KEY=V1,V2,...",
+              help="Vary KEY together with the other --zip keys (lists of equal length).")
+@click.option("--random", "random", multiple=True, metavar="KEY=DISTRIBUTION",
+              help="Draw KEY from a distribution of the spec files, e.g. body.mass=uniform:[30,50], "
+              "controller.k_c=scale_uniform:[0.5,2], initial_state.omega='normal:{mean: [16,32,-16], std: 4}'.")
+@click.option("-n", "n_random", type=click.IntRange(min=0), default=None, metavar="N",
+              help="Random samples (sweep.random.n).")
+@click.option("--seed", type=click.IntRange(min=0), default=None, help="Seed of the random samples.")
 @click.option(
     "--timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
     help="Per-run wall-time budget; a run past it is recorded as failed (scipy engine only).",
 )
 @click.option(
-    "--engine", type=click.Choice(["compiled", "scipy"]), default=None,
-    help="compiled: scipy's RK23/RK45/DOP853 compiled with the model, the steps scipy takes "
-    "(other methods and the pure sign law go through scipy); scipy: one solve_ivp call per "
-    "run, the reference  [default: compiled; scipy with --timeout].",
+    "--engine", type=click.Choice(list(ENGINES)), default=None,
+    help="How runs are integrated (see docs/performance.md); scipy: one solve_ivp call per run, "
+    f"the reference  [default: {next(iter(k for k in ENGINES if k != 'scipy'))}; scipy with --timeout].",
 )
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
@@ -45,27 +79,33 @@ def _indent(text: str) -> str:
     "1 for scipy].",
 )
 @click.option(
-    "--store", type=click.Choice(["full", "summary"]), default="full", show_default=True,
-    help="Result files with every variable at every sample, or (summary) the variables a "
-    "report draws at <= 201 samples; summary figures and the index are the same.",
+    "--store", type=click.Choice(["full", "thinned", "summary"]), default="thinned", show_default=True,
+    help="Traces kept per run: every variable at every sample (full), the state, E and v at "
+    "<= 201 samples (thinned), or none (summary); summary figures and the index are the same.",
 )
 @click.option(
-    "--layout", type=click.Choice(["run", "chunk"]), default="run", show_default=True,
-    help="One result file per run (runs/<run_id>.h5), or one per chunk of runs "
-    "(runs/chunk-*.h5, a 'run' dimension; far faster to write and fewer files for big sweeps).",
+    "--layout", type=click.Choice(["chunk", "run"]), default="chunk", show_default=True,
+    help="Store files of many runs along a 'run' dimension (runs/chunk-*.h5, netCDF-4), or one "
+    "result file per run (runs/<run_id>.h5, the format of rbstab run).",
 )
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
-def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, chunk_size, store, layout, retry_failed,
-          dry_run, progress) -> None:
-    """Run the sweep SPEC.yaml; write OUTPUT/<name>/ (sweep.yaml, runs/*.h5, index.csv).
+def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, random, n_random, seed, timeout, engine,
+          chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
+    """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
+
+    SPEC is a sweep spec, or a run config to vary from the command line:
+
+    \b
+    rbstab sweep case3.yaml --grid body.mass=30,41,52 --grid controller.variant=visco_elastic,embedded
+    rbstab sweep case3.yaml --random controller.k_c=scale_uniform:[0.5,2] -n 100 --seed 1
 
     Every run's config is validated before anything runs. Running the same command again
-    skips the runs whose result file exists and matches their config, and finishes the
-    rest. --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the
-    spec itself (e.g. --set sweep.random.n=20). Runs are integrated by the compiled
-    engine (--engine compiled, the default; see docs/performance.md).
+    skips the runs whose result exists and matches their config, and finishes the rest.
+    --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the spec
+    itself (e.g. --set sweep.random.n=20). The resolved spec is written to
+    OUTPUT/<name>/sweep.yaml: `rbstab sweep OUTPUT/<name>/sweep.yaml` reruns or resumes it.
 
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
     1 for an invalid spec (nothing is run); 130 when interrupted.
@@ -74,8 +114,11 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
-    if engine == "compiled" and timeout is not None:
-        raise click.UsageError("--timeout needs --engine scipy: the compiled engine has no per-run wall-time budget")
+    if engine not in (None, "scipy") and timeout is not None:
+        raise click.UsageError(
+            f"--timeout needs --engine scipy: the {engine} engine integrates many runs together and has "
+            "no per-run wall-time budget"
+        )
     executor = executor or ("dask" if scheduler else "local")
     if executor == "dask" and not scheduler:
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
@@ -87,6 +130,7 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, timeout, engine, c
     from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError, expand, load_spec, run_sweep
     from rbstab.sweep.spec import warning_digest
 
+    overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     try:
         loaded = load_spec(spec, overrides)
         runs = expand(loaded)

@@ -8,6 +8,7 @@ report and ``rbstab show``.
 from __future__ import annotations
 
 import copy
+import json
 from pathlib import Path
 
 import h5py
@@ -16,7 +17,9 @@ import pandas as pd
 import pytest
 from click.testing import CliRunner
 
-from rbstab.io.chunk import CHUNK_FORMAT, ChunkWriter, read_chunk_rows, read_chunk_series
+import yaml
+
+from rbstab.io.chunk import ChunkWriter, StoreRow, read_chunk_rows, read_chunk_series, summary_columns
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, summary_stride
 from rbstab.sweep import expand, run_chunk, run_sweep, spec_from_mapping
 from rbstab.sweep.worker import RunTask, WorkerOptions
@@ -49,17 +52,17 @@ def chunk_files(folder: Path) -> list[Path]:
 def test_chunk_layout_holds_what_run_files_hold(tmp_path):
     s = spec(3, grid=True)
     runs = expand(s)
-    by_run = run_sweep(s, tmp_path / "run", runs=runs, jobs=2, progress=False)
+    by_run = run_sweep(s, tmp_path / "run", runs=runs, jobs=2, progress=False, layout="run")
     by_chunk = run_sweep(s, tmp_path / "chunk", runs=runs, jobs=2, chunk_size=2, layout="chunk", progress=False)
     assert by_chunk.counts["success"] == by_run.counts["success"] == 6
     files = chunk_files(by_chunk.directory)
-    assert len(files) == by_chunk.n_chunks == 3  # 6 runs (2 gains x 3), at most 2 runs per chunk
+    assert len(files) == by_chunk.n_chunks == 3  # 6 runs of any kind, at most 2 per chunk
     assert not list((by_chunk.directory / "runs").glob("r*.h5"))
 
     ir = pd.read_csv(by_run.index_path)
     ic = pd.read_csv(by_chunk.index_path)
-    assert list(ic.columns) == [*ir.columns, "file_row"]
-    same = [c for c in ir.columns if c not in ("wall_time", "file")]
+    assert list(ic.columns) == list(ir.columns)
+    same = [c for c in ir.columns if c not in ("wall_time", "file", "file_row")]
     pd.testing.assert_frame_equal(ir[same], ic[same])
     assert all(f.startswith("runs/chunk-") for f in ic["file"])
 
@@ -68,11 +71,14 @@ def test_chunk_layout_holds_what_run_files_hold(tmp_path):
         run_file = by_run.directory / "runs" / f"{entry.run_id}.h5"
         attrs = read_attributes(run_file)
         chunk_row = read_chunk_rows(path)[row]
-        assert chunk_row["name"] == entry.run_id and chunk_row["rbstab_format"] == CHUNK_FORMAT
-        for key in ("variant", "status", "message", "config", "config_hash", "solver_nfev", "solver_status"):
+        assert chunk_row["run_id"] == entry.run_id and chunk_row["run"] == entry.run
+        for key in ("variant", "status", "message", "config_hash", "solver_nfev", "solver_status"):
             assert chunk_row[key] == attrs[key], key
-        assert {k: v for k, v in chunk_row.items() if k.startswith("summary_")} == \
-            {k: v for k, v in attrs.items() if k.startswith("summary_")}
+        config = yaml.safe_load(attrs["config"])
+        del config["name"]
+        assert json.loads(chunk_row["config"]) == config
+        summary = summary_columns({k[8:]: v for k, v in attrs.items() if k.startswith("summary_")})
+        assert {k: chunk_row[k] for k in summary} == summary
         with h5py.File(run_file, "r") as fr, h5py.File(path, "r") as fc:
             variables = [k for k in fr if k not in ("time", "axis")]
             assert set(variables) <= set(fc)
@@ -85,16 +91,20 @@ def test_chunk_layout_holds_what_run_files_hold(tmp_path):
 def test_chunk_file_opens_in_xarray_with_a_run_dimension(tmp_path):
     xr = pytest.importorskip("xarray")
     s = spec(5)
-    out = run_sweep(s, tmp_path, jobs=1, layout="chunk", store="summary", progress=False)
+    out = run_sweep(s, tmp_path, jobs=1, layout="chunk", store="thinned", progress=False)
     (path,) = chunk_files(out.directory)
+    runs = expand(s)
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         stride = summary_stride(201)
         assert dict(ds.sizes) == {"run": 5, "time": len(range(0, 201, stride)), "axis": 3}
         assert set(SUMMARY_VARIABLES) - {"controller_state"} <= set(ds.data_vars)
         assert ds["lyapunov"].dims == ("run", "time")
-        assert ds["summary_final_omega"].dims == ("run", "axis")
-        assert list(ds["run"].values) == [r.run_id for r in expand(s)]
-        assert ds.attrs["store"] == "summary" and ds["omega"].attrs["units"] == "rad s-1"
+        assert ds["final_omega_x"].dims == ("run",)
+        assert ds["final_omega_x"].attrs["units"] == "rad s-1" and ds["final_omega_x"].attrs["long_name"]
+        assert list(ds["run"].values) == [r.index for r in runs]
+        assert list(ds["run_id"].values) == [r.run_id for r in runs]
+        assert ds["omega_0"].attrs["config_key"] == "initial_state.omega.0" and "omega_0" in ds.coords
+        assert ds.attrs["store"] == "thinned" and ds["omega"].attrs["units"] == "rad s-1"
         series = read_chunk_series(path, 2, ["lyapunov"])
         assert np.array_equal(series["lyapunov"], ds["lyapunov"].values[2])
 
@@ -125,36 +135,37 @@ def test_chunk_resume_and_layout_switch(tmp_path):
 def test_chunk_worker_keeps_failures_and_errors_per_run(tmp_path):
     runs = expand(spec(3))
     folder = tmp_path / "runs"
-    tasks = [RunTask(r.run_id, r.config.resolved, str(folder / f"{r.run_id}.h5")) for r in runs]
+    tasks = [RunTask(r.run_id, r.config.resolved, str(folder / f"{r.run_id}.h5"), r.index) for r in runs]
     locking = copy.deepcopy(runs[1].config.resolved)
     locking["initial_state"].update(LOCKING)
-    tasks[1] = RunTask(runs[1].run_id, locking, tasks[1].path)
-    bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(folder / "r9999-deadbeef.h5"))
+    tasks[1] = RunTask(runs[1].run_id, locking, tasks[1].path, 1)
+    bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(folder / "r9999-deadbeef.h5"), 3)
     for engine in ("compiled", "scipy"):
         records = run_chunk([*tasks, bad], WorkerOptions(engine=engine, layout="chunk"))
         status = {r["run_id"]: r["status"] for r in records}
         assert status == {runs[0].run_id: "success", runs[1].run_id: "failed", runs[2].run_id: "success",
                           bad.run_id: "error"}
         (path,) = {r["path"] for r in records if r["status"] != "error"}
-        rows = {row["name"]: row for row in read_chunk_rows(path)}
+        rows = {row["run_id"]: row for row in read_chunk_rows(path)}
         assert rows[bad.run_id]["status"] == "error" and "ConfigError" in rows[bad.run_id]["message"]
         assert rows[runs[1].run_id]["message"].startswith("gimbal lock")
         ok = next(r for r in records if r["run_id"] == runs[0].run_id)
-        assert ok["attrs"] == rows[runs[0].run_id]
+        assert ok["attrs"] == {k: v for k, v in rows[runs[0].run_id].items() if k != "config"} | {
+            "config": ok["attrs"]["config"]}
         with h5py.File(path, "r") as f:  # the error row holds no data
-            assert np.isnan(f["lyapunov"][rows[bad.run_id]["row"]]).all()
+            assert np.isnan(f["lyapunov"][rows[bad.run_id]["file_row"]]).all()
         Path(path).unlink()
 
 
 def test_chunk_writer_is_atomic(tmp_path):
     target = tmp_path / "chunk-x.h5"
     with pytest.raises(RuntimeError, match="boom"):
-        with ChunkWriter(target, 2) as writer:
+        with ChunkWriter(target, [StoreRow(0, "r0"), StoreRow(1, "r1")]) as writer:
             writer.add_error("r0", "no result")
             raise RuntimeError("boom")
     assert not target.exists() and not list(tmp_path.iterdir())
-    with pytest.raises(ValueError, match="1 rows added, 2 announced"):
-        with ChunkWriter(target, 2) as writer:
+    with pytest.raises(ValueError, match="no result for 1 run"):
+        with ChunkWriter(target, [StoreRow(0, "r0"), StoreRow(1, "r1")]) as writer:
             writer.add_error("r0", "no result")
     assert not target.exists()
 
@@ -162,7 +173,7 @@ def test_chunk_writer_is_atomic(tmp_path):
 def test_report_and_show_read_chunk_sweeps(tmp_path):
     s = spec(3)
     out = run_sweep(s, tmp_path / "sweeps", jobs=1, layout="chunk", progress=False)
-    run_layout = run_sweep(s, tmp_path / "plain", jobs=1, progress=False)
+    run_layout = run_sweep(s, tmp_path / "plain", jobs=1, progress=False, layout="run")
     from rbstab.report.load import load_inputs
 
     inputs = load_inputs([out.directory])
@@ -170,7 +181,8 @@ def test_report_and_show_read_chunk_sweeps(tmp_path):
     assert [r.name for r in sweep.runs] == sweep.run_ids
     reference = load_inputs([run_layout.directory]).sweeps[0]
     for a, b in zip(sweep.runs, reference.runs):
-        assert a.config == b.config and a.summary == b.summary and a.status == b.status
+        assert a.config == {k: v for k, v in b.config.items() if k != "name"}
+        assert a.summary == b.summary and a.status == b.status
         sa, sb = a.series("lyapunov", "omega"), b.series("lyapunov", "omega")
         for key in sb:
             assert np.array_equal(sa[key], sb[key]), key
@@ -183,7 +195,9 @@ def test_report_and_show_read_chunk_sweeps(tmp_path):
     assert (tmp_path / "report" / "index.html").is_file()
     shown = CliRunner().invoke(cli, ["show", str(path)])
     assert shown.exit_code == 0, shown.output
-    assert "chunk file: 3 runs" in shown.output
+    assert "store file: 3 runs" in shown.output
+    shown = CliRunner().invoke(cli, ["show", str(out.directory)])
+    assert shown.exit_code == 0 and "3 success" in shown.output
     assert all(run_id in shown.output for run_id in sweep.run_ids)
 
 
@@ -200,8 +214,8 @@ def test_chunk_bytes_for_workers_without_the_sweep_folder(tmp_path):
     folder.mkdir()
     Path(path).write_bytes(with_data[0]["data"])
     rows = read_chunk_rows(path)
-    assert [row["name"] for row in rows] == [r.run_id for r in runs]
-    assert [r["attrs"] for r in records] == rows
+    assert [row["run_id"] for row in rows] == [r.run_id for r in runs]
+    assert [r["attrs"]["config_hash"] for r in records] == [row["config_hash"] for row in rows]
 
 
 def test_an_executor_passed_in_stays_open_for_the_next_sweep(tmp_path):
@@ -220,3 +234,36 @@ def test_an_executor_passed_in_stays_open_for_the_next_sweep(tmp_path):
     a = pd.read_csv(tmp_path / "warm1" / "index.csv")
     b = pd.read_csv(tmp_path / "warm2" / "index.csv")
     np.testing.assert_array_equal(a["final_omega_x"], b["final_omega_x"])
+
+
+def test_open_sweep_gives_the_runs_and_the_grid_with_missing_runs_as_nan(tmp_path):
+    xr = pytest.importorskip("xarray")
+    from rbstab import open_sweep
+    from rbstab.sweep import rebuild_index
+
+    s = spec_from_mapping({"name": "grid", "base": str(CASE3),
+                           "grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]],
+                                    "controller.variant": ["visco_elastic", "embedded"]}}, overrides=SHORT)
+    out = run_sweep(s, tmp_path, jobs=2, chunk_size=1, progress=False)
+    files = chunk_files(out.directory)
+    assert len(files) == 4
+    with xr.open_mfdataset(files, engine="h5netcdf") as ds:  # default arguments: combined by the run coordinate
+        assert list(ds["run"].values) == [0, 1, 2, 3] and {"k_c_0", "variant", "run_id"} <= set(ds.coords)
+    index = pd.read_csv(out.index_path)
+    ds = open_sweep(out.directory)
+    assert ds.sizes["run"] == 4 and list(ds["run_id"].values) == list(index["run_id"])
+    assert hasattr(ds["lyapunov"].data, "dask")  # lazy
+    for name in ("lyapunov_final", "max_abs_constraint_error_x", "k_c_0", "status", "converged"):
+        assert list(ds[name].values) == list(index[name]), name
+    first = read_chunk_rows(files[0])[0]["run"]
+    files[0].unlink()
+    rebuild_index(s, tmp_path)
+    grid = open_sweep(out.directory, grid=True)
+    assert grid["lyapunov_final"].dims == ("k_c_0", "variant")
+    assert list(grid["k_c_0"].values) == [12300, 20000]
+    assert list(grid["variant"].values) == ["visco_elastic", "embedded"]
+    i, j = divmod(first, 2)
+    assert grid["status"].values[i, j] == "pending" and np.isnan(grid["lyapunov_final"].values[i, j])
+    ok = index.loc[index["run"] == 3].iloc[0]
+    assert grid["lyapunov_final"].values[1, 1] == ok["lyapunov_final"]
+    assert grid["lyapunov"].dims == ("time", "k_c_0", "variant") or "k_c_0" in grid["lyapunov"].dims

@@ -26,6 +26,7 @@ from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
 from rbstab.simulate import simulate, simulate_many
 from rbstab.summary import numerical_rate
+from rbstab.sweep.folder import row_from_attributes
 from rbstab.sweep import expand, run_sweep, spec_from_mapping
 from rbstab.sweep.runner import resolve_engine
 from rbstab.sweep.worker import RunTask, WorkerOptions, _group_configs, run_chunk
@@ -237,10 +238,10 @@ def test_group_configs_equal_validated_configs():
 def test_compiled_and_scipy_sweeps_give_the_same_index(tmp_path):
     spec = sweep_spec(5, extra={"grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]}})
     runs = expand(spec)
-    a = run_sweep(spec, tmp_path / "scipy", runs=runs, jobs=2, engine="scipy", progress=False)
-    b = run_sweep(spec, tmp_path / "batch", runs=runs, jobs=2, progress=False)
+    a = run_sweep(spec, tmp_path / "scipy", runs=runs, jobs=2, engine="scipy", progress=False, layout="run")
+    b = run_sweep(spec, tmp_path / "compiled", runs=runs, jobs=2, progress=False, layout="run")
     assert (a.engine, b.engine) == ("scipy", "compiled")
-    assert b.n_chunks == 2  # one per gain, each kept together
+    assert b.n_chunks == 2  # consecutive runs, one chunk per worker
     ia, ib = pd.read_csv(a.index_path), pd.read_csv(b.index_path)
     assert list(ia.columns) == list(ib.columns)
     assert (ia["status"] == "success").all() and list(ia["status"]) == list(ib["status"])
@@ -257,12 +258,12 @@ def test_compiled_and_scipy_sweeps_give_the_same_index(tmp_path):
 
 def test_compiled_resume_and_summary_store(tmp_path):
     spec4, spec7 = sweep_spec(4, "res"), sweep_spec(7, "res")
-    first = run_sweep(spec4, tmp_path / "a", jobs=2, store="summary", progress=False)
+    first = run_sweep(spec4, tmp_path / "a", jobs=2, store="thinned", layout="run", progress=False)
     assert first.counts["success"] == 4
-    again = run_sweep(spec7, tmp_path / "a", jobs=2, store="summary", progress=False)
+    again = run_sweep(spec7, tmp_path / "a", jobs=2, store="thinned", layout="run", progress=False)
     assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 3, 7)
-    clean = run_sweep(spec7, tmp_path / "b", jobs=1, chunk_size=7, store="summary", progress=False)
-    full = run_sweep(spec7, tmp_path / "c", jobs=2, progress=False)
+    clean = run_sweep(spec7, tmp_path / "b", jobs=1, chunk_size=7, store="thinned", layout="run", progress=False)
+    full = run_sweep(spec7, tmp_path / "c", jobs=2, store="full", layout="run", progress=False)
     runs = expand(spec7)
     for run in runs:
         a = tmp_path / "a" / "res" / "runs" / f"{run.run_id}.h5"
@@ -276,7 +277,7 @@ def test_compiled_resume_and_summary_store(tmp_path):
             assert fa["time"].shape == (301 // stride + 1,)
             assert np.array_equal(fa["lyapunov"][()], fc["lyapunov"][()][::stride])
         sa, sc = read_attributes(a), read_attributes(c)
-        assert sa["store"] == "summary" and "store" not in sc
+        assert sa["store"] == "thinned" and "store" not in sc
         assert {k: v for k, v in sa.items() if k.startswith("summary_")} == \
             {k: v for k, v in sc.items() if k.startswith("summary_")}
     ia = pd.read_csv(tmp_path / "a" / "res" / "index.csv").drop(columns=["wall_time"])
@@ -302,7 +303,8 @@ def test_worker_compiled_engine_isolates_failures(tmp_path):
     bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(tmp_path / "bad.h5"))
     unwritable = RunTask(runs[2].run_id, runs[2].config.resolved, str(tmp_path / "file" / "x.h5"))
     (tmp_path / "file").write_text("not a folder")
-    records = {r["run_id"] + r["path"][-6:]: r for r in run_chunk([*tasks, bad, unwritable], WorkerOptions(engine="compiled"))}
+    options = WorkerOptions(engine="compiled", layout="run", store="full")
+    records = {r["run_id"] + r["path"][-6:]: r for r in run_chunk([*tasks, bad, unwritable], options)}
     by_path = {r["path"]: r for r in records.values()}
     assert by_path[tasks[0].path]["status"] == "success"
     assert by_path[tasks[1].path]["status"] == "failed"
@@ -310,7 +312,8 @@ def test_worker_compiled_engine_isolates_failures(tmp_path):
     assert by_path[tasks[2].path]["status"] == "success"
     assert by_path[bad.path]["status"] == "error" and "ConfigError" in by_path[bad.path]["message"]
     assert by_path[unwritable.path]["status"] == "error"
-    assert by_path[tasks[0].path]["attrs"] == read_attributes(tasks[0].path)
+    assert by_path[tasks[0].path]["attrs"] == row_from_attributes(read_attributes(tasks[0].path),
+                                                                  Path(tasks[0].path).name)
 
 
 def test_engine_choice_and_timeout(tmp_path):

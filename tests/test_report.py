@@ -22,6 +22,7 @@ import yaml
 from click.testing import CliRunner
 
 from conftest import PAPER_CONFIGS, ROOT
+from rbstab.io.chunk import read_chunk_rows
 from rbstab.io.hdf5 import read_summary
 from rbstab.report import (
     DEFAULT_METRICS,
@@ -127,12 +128,12 @@ def paper_report(paper_runs, tmp_path_factory) -> Path:
     return folder
 
 
-def _sweep(folder: Path, name: str, grid: dict, n_failed: int) -> Path:
+def _sweep(folder: Path, name: str, grid: dict, n_failed: int, *options: str) -> Path:
     """Run ``rbstab sweep`` on a grid over case 2 (0.5 s, 201 samples); its folder."""
     spec = folder / f"{name}.yaml"
     spec.write_text(yaml.safe_dump({"name": name, "base": str(ROOT / "configs" / "paper" / "case2_visco_elastic.yaml"),
                                     "grid": grid}, sort_keys=False))
-    result = _invoke("sweep", spec, "-o", folder / "sweeps", "-j", "2", "--no-progress", *SHORT)
+    result = _invoke("sweep", spec, "-o", folder / "sweeps", "-j", "2", "--no-progress", *SHORT, *options)
     assert isinstance(result.exception, (SystemExit, type(None))), result.exception  # no crash
     assert result.exit_code == n_failed, (result.output, result.exception)  # exit status: number of failed runs
     assert (folder / "sweeps" / name / "index.csv").is_file()
@@ -143,20 +144,20 @@ def _sweep(folder: Path, name: str, grid: dict, n_failed: int) -> Path:
 def sweeps(tmp_path_factory) -> dict[str, Path]:
     """Two small sweeps of case 2 (``rbstab sweep``), each with one gimbal-lock failure.
 
-    ``grid``: theta_2(0) in {0, GIMBAL_THETA_2} x omega_2(0) in {32, -32} rad/s; only
-    (GIMBAL_THETA_2, +32) fails. ``line``: theta_2(0) in {0, 0.3, GIMBAL_THETA_2} at
+    ``grid`` (store files): theta_2(0) in {0, GIMBAL_THETA_2} x omega_2(0) in {32, -32} rad/s; only
+    (GIMBAL_THETA_2, +32) fails. ``line`` (a file per run): theta_2(0) in {0, 0.3, GIMBAL_THETA_2} at
     omega_2 = 32. ``with_error``: ``line`` plus a row as ``rbstab sweep`` writes it for a
     run whose worker raised (status ``error``, no file), added to its index.csv by hand.
     """
     root = tmp_path_factory.mktemp("sweeps")
     grid = _sweep(root, "grid", {"initial_state.theta.1": [0.0, GIMBAL_THETA_2],
                                  "initial_state.omega.1": [32.0, -32.0]}, n_failed=1)
-    line = _sweep(root, "line", {"initial_state.theta.1": [0.0, 0.3, GIMBAL_THETA_2]}, n_failed=1)
+    line = _sweep(root, "line", {"initial_state.theta.1": [0.0, 0.3, GIMBAL_THETA_2]}, 1, "--layout", "run")
     with_error = root / "with_error"
     shutil.copytree(line, with_error)
     index = pd.read_csv(with_error / "index.csv", dtype=str, keep_default_na=False)
     extra = {c: "" for c in index.columns}
-    extra.update({"run_id": "r9999-deadbeef", "index": "3", "base": index["base"][0], "initial_state.theta.1": "0.6",
+    extra.update({"run_id": "r9999-deadbeef", "run": "3", "base": index["base"][0], "theta_1": "0.6",
                   "status": "error", "converged": "False", "message": "worker raised MemoryError"})
     pd.concat([index, pd.DataFrame([extra])]).to_csv(with_error / "index.csv", index=False)
     return {"grid": grid, "line": line, "with_error": with_error}
@@ -164,9 +165,9 @@ def sweeps(tmp_path_factory) -> dict[str, Path]:
 
 def _run_id(sweep: Path, theta_2: float, omega_2: float | None = None) -> str:
     index = pd.read_csv(sweep / "index.csv")
-    hit = index["initial_state.theta.1"] == theta_2
+    hit = index["theta_1"] == theta_2
     if omega_2 is not None:
-        hit &= index["initial_state.omega.1"] == omega_2
+        hit &= index["omega_1"] == omega_2
     (run_id,) = index.loc[hit, "run_id"]
     return run_id
 
@@ -294,15 +295,16 @@ def test_sweep_report_lists_failures_plots_metrics_and_the_stable_fraction(sweep
     assert figures == [
         "sweep_grid_heatmap_max_abs_constraint_error.png",
         "sweep_grid_heatmap_settling_time.png",
-        "sweep_with_error_initial_state.theta.1.png",
+        "sweep_with_error_theta_1.png",
     ]
     for name in figures:
         _assert_png(out / "figures" / name)
-    # metrics in the sweep table are read back from the run files
+    # metrics in the sweep table are those of the store files (the index's columns)
     table = pd.read_csv(out / "sweep_grid.csv", engine="python")
     for row in table.to_dict("records"):
-        s = read_summary(sweeps["grid"] / row["file"])["summary"]
-        assert row["report:max_abs_constraint_error"] == max(s["max_abs_constraint_error"])
+        s = read_chunk_rows(sweeps["grid"] / row["file"])[row["file_row"]]
+        if row["status"] == "success":
+            assert row["report:max_abs_constraint_error"] == max(s[f"max_abs_constraint_error_{a}"] for a in "xyz")
     line = pd.read_csv(out / "sweep_with_error.csv")
     assert len(line) == 4
     assert np.isnan(line.loc[line["run_id"] == "r9999-deadbeef", "report:max_abs_constraint_error"]).all()
@@ -313,8 +315,8 @@ def test_sweep_report_lists_failures_plots_metrics_and_the_stable_fraction(sweep
 def test_sweep_parameters_are_the_varied_columns_of_the_index(sweeps):
     inputs = load_inputs([sweeps["grid"], sweeps["with_error"]])
     grid, line = inputs.sweeps
-    assert grid.varied == ["initial_state.theta.1", "initial_state.omega.1"]
-    assert line.varied == ["initial_state.theta.1"]
+    assert grid.varied == ["theta_1", "omega_1"]
+    assert line.varied == ["theta_1"]
     assert [r is None for r in line.runs] == [False, False, False, True]
     assert inputs.runs == []
 
@@ -323,19 +325,19 @@ def test_list_parameters_are_grouped_for_grids_and_split_for_random_draws():
     from rbstab.report.load import _parameter_axes
 
     index = pd.DataFrame({
-        "run_id": ["a", "b", "c", "d"], "run_index": [0, 1, 2, 3], "base": ["case3"] * 4,
-        "controller.k_c.0": [4100, 4100, 12300, 12300], "controller.k_c.1": [4100, 4100, 12300, 12300],
-        "controller.k_c.2": [3280, 3280, 9840, 9840],
-        "initial_state.omega.0": [1.0, 2.0, 3.0, 4.0], "initial_state.omega.1": [5.0, 6.0, 7.0, 8.0],
-        "initial_state.omega.2": [-16.0] * 4,
-        "body.mass": [40.0, 41.0, 42.0, 43.0], "body.mass:scale": [0.97, 1.0, 1.02, 1.05],
-        "status": ["success"] * 4, "converged": [True] * 4, "lyapunov_final": [1.0] * 4,
+        "run_id": ["a", "b", "c", "d"], "run": [0, 1, 2, 3], "base": ["case3"] * 4,
+        "k_c_0": [4100, 4100, 12300, 12300], "k_c_1": [4100, 4100, 12300, 12300],
+        "k_c_2": [3280, 3280, 9840, 9840],
+        "omega_0": [1.0, 2.0, 3.0, 4.0], "omega_1": [5.0, 6.0, 7.0, 8.0],
+        "omega_2": [-16.0] * 4,
+        "mass": [40.0, 41.0, 42.0, 43.0], "mass_scale": [0.97, 1.0, 1.02, 1.05],
+        "variant": ["embedded"] * 4, "status": ["success"] * 4, "converged": [True] * 4, "lyapunov_final": [1.0] * 4,
     })
-    spec = {"grid": {"controller.k_c": [[4100, 4100, 3280], [12300, 12300, 9840]]},
-            "random": {"n": 2, "params": {"initial_state.omega": {"normal": {"mean": 0, "std": 1}},
-                                          "body.mass": {"scale_uniform": [0.5, 1.5]}}}}
-    axes = _parameter_axes(index, spec)
-    assert list(axes) == ["controller.k_c", "initial_state.omega.0", "initial_state.omega.1", "body.mass:scale"]
+    parameters = {"k_c_0": "controller.k_c.0", "k_c_1": "controller.k_c.1", "k_c_2": "controller.k_c.2",
+                  "omega_0": "initial_state.omega.0", "omega_1": "initial_state.omega.1",
+                  "omega_2": "initial_state.omega.2", "mass": "body.mass", "mass_scale": "body.mass:scale"}
+    axes = _parameter_axes(index, parameters, {"initial_state.omega", "body.mass"})
+    assert list(axes) == ["controller.k_c", "omega_0", "omega_1", "mass_scale"]
     assert list(axes["controller.k_c"]) == ["[4100, 4100, 3280]"] * 2 + ["[12300, 12300, 9840]"] * 2
 
 
@@ -346,7 +348,7 @@ def test_every_summary_figure_is_an_allowed_metric(paper_runs):
     for key, value in summary.items():
         if isinstance(value, str):
             continue
-        names = [key] + ([f"{key}_{i}" for i in (1, 2, 3)] if isinstance(value, list) else [])
+        names = [key] + ([f"{key}_{i}" for i in "xyz"] if isinstance(value, list) else [])
         assert validate_metrics(names) == names
     assert set(DEFAULT_METRICS) <= set(allowed_metrics())
 
@@ -354,7 +356,7 @@ def test_every_summary_figure_is_an_allowed_metric(paper_runs):
 def test_unknown_metric_is_refused_with_the_allowed_names_and_nothing_written(paper_runs, tmp_path):
     out = _clean_error(_invoke("report", paper_runs[0], "-o", tmp_path / "r", "--metric", "max_e"),
                        "unknown metric 'max_e'", "lyapunov_final", "settling_time")
-    assert "max_abs_constraint_error_3" in out
+    assert "max_abs_constraint_error_z" in out
     assert not (tmp_path / "r").exists()
 
 

@@ -16,7 +16,8 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab.io.hdf5 import config_hash, read_attributes
+from rbstab.io.chunk import read_chunk_rows
+from rbstab.io.hdf5 import canonical_config, config_hash, read_attributes
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,
@@ -27,7 +28,7 @@ from rbstab.sweep import (
     spec_from_mapping,
 )
 from rbstab.sweep.executors import ExecutorError
-from rbstab.sweep.index import is_converged
+from rbstab.sweep.folder import is_converged
 from rbstab.sweep.spec import resolved_hash
 from rbstab.sweep.worker import RunTask, WorkerOptions
 from rbstab_cli.main import cli
@@ -118,7 +119,8 @@ def test_grid_zip_random_count_order_and_ids():
     # the id hash names the resolved config without its name
     for r in runs[:3]:
         assert r.run_id.endswith(resolved_hash(r.config.resolved)[:8])
-        assert r.config_hash == config_hash(r.config.to_yaml())
+        assert r.config_hash == config_hash(canonical_config(r.config.resolved))
+        assert r.config_hash.startswith(r.run_id.split("-")[1])
 
 
 def test_random_reproducible_from_seed_and_prefix_stable():
@@ -320,28 +322,29 @@ def test_sweep_end_to_end_rerun_and_failure(tmp_path):
     assert result.exit_code == 2, result.output  # two runs hit gimbal lock (one per variant)
     folder = out / "e2e"
     index = pd.read_csv(folder / "index.csv")
-    assert len(index) == 6 and list(index["run_index"]) == list(range(6))
+    assert len(index) == 6 and list(index["run"]) == list(range(6))
     failed = index[index["status"] == "failed"]
-    assert list(failed["run_index"]) == [1, 4]
+    assert list(failed["run"]) == [1, 4]
     assert failed["message"].str.contains("gimbal lock").all()
     assert (index.loc[index["status"] != "failed", "status"] == "success").all()
     assert not index["converged"].any()  # 0.2 s is too short for v to fall by 1e-3
     assert index["converged"].dtype == bool
-    for column in ("controller.variant", "initial_state.omega.1", "max_abs_constraint_error_x",
-                   "lyapunov_final", "wall_time", "solver_nfev", "config_hash"):
+    for column in ("variant", "omega_1", "theta_0", "max_abs_constraint_error_x",
+                   "lyapunov_final", "wall_time", "solver_nfev", "config_hash", "file_row"):
         assert column in index.columns
-    assert "initial_state.omega.1" in index.columns[: list(index.columns).index("status")]
+    assert "omega_1" in index.columns[: list(index.columns).index("status")]
     summary = json.loads((folder / "sweep_summary.json").read_text())
     assert summary["status"] == {"success": 4, "failed": 2, "error": 0, "pending": 0}
     assert summary["n_runs"] == 6 and summary["fraction_converged"] == 0.0
-    # every run file: the format of `rbstab run`, named by the run id, hash of its config
+    assert summary["parameters"]["omega_1"] == "initial_state.omega.1"
+    # every row of a store file: the run id, hash of its config, the index's values
     runs = expand(load_spec(path, SHORT))
     for run, row in zip(runs, index.itertuples()):
-        attrs = read_attributes(folder / row.file)
-        assert attrs["name"] == run.run_id == row.run_id
-        assert attrs["config_hash"] == run.config_hash == row.config_hash
-        assert attrs["status"] == row.status
-        assert attrs["summary_max_abs_constraint_error"][0] == row.max_abs_constraint_error_x
+        stored = read_chunk_rows(folder / row.file)[row.file_row]
+        assert stored["run_id"] == run.run_id == row.run_id and stored["run"] == run.index
+        assert stored["config_hash"] == run.config_hash == row.config_hash
+        assert stored["status"] == row.status
+        assert stored["max_abs_constraint_error_x"] == row.max_abs_constraint_error_x
     # the resolved spec is re-loadable and gives the same runs
     again = expand(load_spec(folder / "sweep.yaml"))
     assert [r.run_id for r in again] == [r.run_id for r in runs]
@@ -364,7 +367,7 @@ def test_resume_reruns_only_stale_or_corrupt_files_and_timeout(tmp_path):
         {"name": "resume", "base": str(CASE3), "grid": {"initial_state.omega.0": [10.0, 12.0, 14.0]}},
         overrides=SHORT,
     )
-    first = run_sweep(spec, tmp_path, jobs=1, progress=False)
+    first = run_sweep(spec, tmp_path, jobs=1, progress=False, layout="run")
     assert first.counts["success"] == 3 and first.n_executed == 3
     runs_dir = tmp_path / "resume" / "runs"
     names = sorted(p.name for p in runs_dir.glob("*.h5"))
@@ -373,13 +376,13 @@ def test_resume_reruns_only_stale_or_corrupt_files_and_timeout(tmp_path):
     (runs_dir / names[0]).write_bytes((runs_dir / names[1]).read_bytes())  # other config
     (runs_dir / names[2]).write_bytes(b"not an HDF5 file")  # corrupt
     (runs_dir / ".r0001-x.h5.abc.tmp").write_bytes(b"partial")  # left by a killed writer
-    second = run_sweep(spec, tmp_path, jobs=1, progress=False)
+    second = run_sweep(spec, tmp_path, jobs=1, progress=False, layout="run")
     assert (second.n_skipped, second.n_executed) == (1, 2)
     assert second.counts["success"] == 3
     assert not list(runs_dir.glob(".*.tmp"))
     data_equal(runs_dir / names[2], reference)
     # --retry-failed with a tiny per-run timeout: a failed run is data, the sweep goes on
-    third = run_sweep(spec, tmp_path, jobs=1, progress=False, retry_failed=True, timeout=1e-9)
+    third = run_sweep(spec, tmp_path, jobs=1, progress=False, retry_failed=True, timeout=1e-9, layout="run")
     assert third.n_skipped == 3  # all succeeded before: nothing to retry
     other = spec_from_mapping(
         {"name": "timeout", "base": str(CASE3), "grid": {"initial_state.omega.0": [10.0, 12.0]}},
@@ -425,14 +428,14 @@ def test_dask_executor_gives_identical_results(tmp_path):
         )
     assert result.exit_code == 2, result.output
     assert "Dask scheduler" in result.output
-    a = sorted((tmp_path / "local" / "dask" / "runs").glob("*.h5"))
-    b = sorted((tmp_path / "dask" / "dask" / "runs").glob("*.h5"))
-    assert [p.name for p in a] == [p.name for p in b] and len(a) == 4
-    for x, y in zip(a, b):
-        data_equal(x, y)
-    ia = pd.read_csv(tmp_path / "local" / "dask" / "index.csv").drop(columns=["wall_time"])
-    ib = pd.read_csv(tmp_path / "dask" / "dask" / "index.csv").drop(columns=["wall_time"])
+    # store files written by the parent from the workers' bytes: the same runs, the same bits
+    ia = pd.read_csv(tmp_path / "local" / "dask" / "index.csv").drop(columns=["wall_time", "file"])
+    ib = pd.read_csv(tmp_path / "dask" / "dask" / "index.csv").drop(columns=["wall_time", "file"])
     pd.testing.assert_frame_equal(ia, ib)
+    from rbstab import open_sweep
+
+    da, db = open_sweep(tmp_path / "local" / "dask"), open_sweep(tmp_path / "dask" / "dask")
+    assert da.sizes["run"] == 4 and np.array_equal(da.lyapunov.values, db.lyapunov.values, equal_nan=True)
 
 
 def test_dask_missing_gives_install_hint(monkeypatch):

@@ -43,7 +43,8 @@ def test_sigkill_then_resume_equals_clean_run(tmp_path):
         )
     )
     overrides = ["--set", "simulation.t_end=0.3", "--set", "simulation.n_samples=201"]
-    command = [str(RBSTAB), "sweep", str(spec_path), "-o", str(tmp_path / "killed"), "-j", "2", "--no-progress", *overrides]
+    command = [str(RBSTAB), "sweep", str(spec_path), "-o", str(tmp_path / "killed"), "-j", "2", "--no-progress",
+               "--layout", "run", *overrides]
     runs_dir = tmp_path / "killed" / "kill" / "runs"
 
     proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -72,7 +73,7 @@ def test_sigkill_then_resume_equals_clean_run(tmp_path):
 
     spec = load_spec(spec_path, [o for o in overrides if o != "--set"])
     runs = expand(spec)
-    clean = run_sweep(spec, tmp_path / "clean", runs=runs, jobs=2, chunk_size=3, progress=False)
+    clean = run_sweep(spec, tmp_path / "clean", runs=runs, jobs=2, chunk_size=3, progress=False, layout="run")
     assert clean.counts["success"] == 10
     index = pd.read_csv(tmp_path / "killed" / "kill" / "index.csv")
     assert list(index["run_id"]) == [r.run_id for r in runs]
@@ -80,3 +81,48 @@ def test_sigkill_then_resume_equals_clean_run(tmp_path):
     assert not list(runs_dir.glob(".*.tmp"))
     for run in runs:
         data_equal(runs_dir / f"{run.run_id}.h5", tmp_path / "clean" / "kill" / "runs" / f"{run.run_id}.h5")
+
+
+def test_sigkill_of_the_default_store_then_resume_equals_clean_run(tmp_path):
+    """Store files (the default layout) are written whole or not at all: a sweep killed
+    while chunks are in flight keeps the finished chunks, and the next invocation runs the
+    rest; the index and the stored values equal a clean run's."""
+    spec_path = tmp_path / "killc.yaml"
+    spec_path.write_text(yaml.safe_dump({
+        "name": "killc", "base": str(CASE3),
+        "random": {"n": 12, "seed": 3, "params": {"initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}},
+    }))
+    overrides = ["--set", "simulation.t_end=0.3", "--set", "simulation.n_samples=201"]
+    command = [str(RBSTAB), "sweep", str(spec_path), "-o", str(tmp_path / "killed"), "-j", "2", "--no-progress",
+               "--chunk-size", "2", *overrides]
+    runs_dir = tmp_path / "killed" / "killc" / "runs"
+    proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if runs_dir.is_dir() and len(list(runs_dir.glob("chunk-*.h5"))) >= 1:
+                break
+            time.sleep(0.01)
+        assert proc.poll() is None, f"the sweep ended before it could be killed: {proc.stderr.read().decode()}"
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            proc.wait(timeout=30)
+        proc.stderr.close()
+    time.sleep(0.5)
+    from rbstab.io.chunk import read_chunk_rows
+
+    finished = sorted(runs_dir.glob("chunk-*.h5"))
+    assert 1 <= len(finished) < 6
+    for path in finished:  # a final name holds a whole, readable store file
+        assert all(row["status"] == "success" for row in read_chunk_rows(path))
+    resumed = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    spec = load_spec(spec_path, [o for o in overrides if o != "--set"])
+    runs = expand(spec)
+    clean = run_sweep(spec, tmp_path / "clean", runs=runs, jobs=2, chunk_size=5, progress=False)
+    assert clean.counts["success"] == 12
+    a = pd.read_csv(tmp_path / "killed" / "killc" / "index.csv").drop(columns=["wall_time", "file", "file_row"])
+    b = pd.read_csv(tmp_path / "clean" / "killc" / "index.csv").drop(columns=["wall_time", "file", "file_row"])
+    pd.testing.assert_frame_equal(a, b)
+    assert not list(runs_dir.glob(".*.tmp"))

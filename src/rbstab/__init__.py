@@ -6,3 +6,15 @@ of five controller variants -> HDF5 results with Lyapunov traces.
 """
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str):
+    # rbstab.open_sweep, imported on first use (xarray, pandas): ``import rbstab`` stays light
+    if name == "open_sweep":
+        from .sweep.folder import open_sweep
+
+        return open_sweep
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["open_sweep", "__version__"]

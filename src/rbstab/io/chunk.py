@@ -1,41 +1,43 @@
-"""Chunk files: many runs of a sweep in one HDF5 file (``rbstab sweep --layout chunk``).
+"""Sweep store files: many runs of a sweep in one netCDF-4 file with a ``run`` dimension.
 
-A run file (:mod:`rbstab.io.hdf5`) costs ~10 ms to write whatever its size (HDF5's cost
-per object), more than integrating the run; a sweep of 10,000 runs also makes 10,000
-files. With ``--layout chunk`` each unit of work a worker executes (a chunk: up to a few
-hundred runs that differ only in their initial state) is written as one file
-``runs/chunk-<first run_id>-<random>.h5``:
+The default store of ``rbstab sweep`` (``--layout chunk``). Each unit of work a worker
+executes (a chunk of up to a few hundred runs, any runs) is written as one file
+``runs/chunk-<first run_id>-<random>.h5`` by h5netcdf, so it is a netCDF-4 file (HDF5
+with dimension scales) that ``ncdump``, ``xarray.open_dataset(p, engine="h5netcdf")``
+and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read:
 
-- dimensions ``run`` (the run ids, a coordinate), ``time`` (samples [s]) and ``axis``
-  (``x``, ``y``, ``z``);
-- every output variable of a run file as ``(run, time[, axis])`` with the same name,
-  ``units`` and ``description`` (for ``store = "summary"`` the same subset and stride);
-  rows after a failure are NaN, a run that raised (status ``error``) is NaN throughout;
-- per run ``(run,)`` or ``(run, axis)``: ``status``, ``message``, ``config`` (the resolved
-  configuration as YAML, as in a run file), ``config_hash``, ``wall_time``,
-  ``solver_*`` and ``summary_*`` (the run file's attributes of those names);
+- dimension ``run``, its coordinate the run's position in the sweep's run list (int,
+  increasing within a file, so ``open_mfdataset`` orders files by it); coordinates along
+  ``run``: ``run_id``, ``base``, ``variant`` and every varied parameter under its
+  identifier name (``k_c_0`` for ``controller.k_c.0``, see
+  :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
+- per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
+  ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash`` (SHA-256 of ``config``) and the summary figures of
+  :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
+  ``units`` and ``long_name``;
+- traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
+  time[, axis])``; ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
+  every ``store_stride``-th sample (at most 201); ``summary`` none (no ``time``
+  dimension). A run that failed has NaN after its last sample; one that raised is NaN.
 - global attributes ``rbstab_format`` (:data:`CHUNK_FORMAT`), ``rbstab_version``,
-  ``git_commit``, ``command_line``, ``created``, ``store`` (and ``store_stride``),
-  ``n_runs``.
+  ``git_commit``, ``command_line``, ``created``, ``store`` (``store_stride``), ``sweep``.
 
-Open with ``xarray.open_dataset(path, engine="h5netcdf")``, a whole sweep with
-``xarray.open_mfdataset(sorted(glob("runs/chunk-*.h5")), combine="nested",
-concat_dim="run", engine="h5netcdf")``. :func:`read_chunk_rows` gives each run's
-attributes in the form :func:`rbstab.io.hdf5.read_attributes` gives a run file's (what
-the sweep index and resume use), :func:`read_chunk_series` a run's time series.
-
-A chunk file is written like a run file: to a temporary name, renamed when complete;
-rows are written in blocks of :data:`WRITE_BLOCK` runs, so a worker holds at most that
-many runs' outputs.
+A file is written to a temporary name and renamed when complete; trace rows are written
+in blocks of about :data:`WRITE_BYTES`, so a writer holds at most that much of its traces.
+:func:`read_chunk_rows` gives each run's per-run values (what resume and the index use),
+:func:`read_chunk_series` one run's traces.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 import sys
 import uuid
+from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -44,14 +46,13 @@ import numpy as np
 from .. import __version__
 from .atomic import atomic_path
 from .hdf5 import (
-    STORE_MODES,
     SUMMARY_VARIABLES,
     VARIABLE_DESCRIPTIONS,
     VARIABLE_UNITS,
     NotAResultFile,
+    canonical_config,
     _git_commit,
     _plain,
-    result_attributes,
     summary_stride,
 )
 
@@ -60,29 +61,116 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "CHUNK_FORMAT",
+    "STORES",
+    "DEFAULT_STORE",
+    "THINNED_VARIABLES",
+    "StoreRow",
     "ChunkWriter",
     "chunk_file_name",
     "is_chunk_file",
     "read_chunk_rows",
     "read_chunk_series",
+    "summary_columns",
+    "SUMMARY_FIGURES",
+    "canonical_config",
     "WRITE_BLOCK",
 ]
 
-#: Value of the ``rbstab_format`` attribute of a chunk file.
-CHUNK_FORMAT = "rbstab-chunk-1"
-#: Runs buffered before their rows are written (bounds a writer's memory).
+#: Value of the ``rbstab_format`` attribute of a store file.
+CHUNK_FORMAT = "rbstab-sweep-2"
+#: What a store file holds per run besides the per-run values (``rbstab sweep --store``).
+STORES = ("full", "thinned", "summary")
+#: ``--store`` default: the traces a report draws at <= 201 samples (see docs/sweeps.md).
+DEFAULT_STORE = "thinned"
+#: Variables of a ``thinned`` store (the state blocks, E, v and its rates).
+THINNED_VARIABLES = SUMMARY_VARIABLES
+#: Bytes of traces buffered before they are written (bounds a writer's memory; writing
+#: few large blocks is what makes a store file cheap per run).
+WRITE_BYTES = 32 * 2**20
+#: Fewest runs per written block (and HDF5 chunk along ``run``).
 WRITE_BLOCK = 32
-#: Per-run attributes of a run file stored as ``(run,)`` variables of text (with
-#: ``wall_time``, ``solver_*`` and ``summary_*``: :func:`_is_per_run`).
-_TEXT = ("variant", "status", "message", "config", "config_hash", "solver_message")
-_PER_RUN_DESCRIPTIONS = {
-    "variant": "controller variant (controller.variant)",
-    "status": "success, failed (gimbal lock, solver failure, non-finite state) or error (the worker raised)",
-    "message": "the solver's message, or why the run failed",
-    "config": "the run's resolved configuration (YAML), as in a run file",
-    "config_hash": "SHA-256 of config",
-    "wall_time": "integration plus post-processing time (s)",
+_AXES = ("x", "y", "z")
+
+#: Summary figures (:func:`rbstab.summary.summarize`): name -> (units, long name).
+SUMMARY_FIGURES = {
+    "t_final": ("s", "time of the last finite sample"),
+    "final_theta": ("rad", "Euler angles Theta at t_final"),
+    "final_omega": ("rad s-1", "angular velocity Omega at t_final (body frame)"),
+    "final_position": ("m", "position X of C at t_final"),
+    "final_velocity": ("m s-1", "velocity V of C at t_final"),
+    "final_controller_state": ("m", "controller state D at t_final"),
+    "max_abs_constraint_error": ("m", "max |E_i| over the samples"),
+    "lyapunov_initial": ("J", "v(0)"),
+    "lyapunov_final": ("J", "v(t_end)"),
+    "max_lyapunov_rate": ("W", "max dv/dt"),
+    "max_lyapunov_increase": ("J", "largest rise of v above its running minimum"),
+    "lyapunov_rate_mismatch": ("W", "max |analytic - numerical dv/dt|"),
+    "lyapunov_rate_mismatch_relative": ("1", "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),
+    "lyapunov_rate_check": ("", "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
 }
+#: Per-run values other than summary figures: name -> (units, long name).
+PER_RUN = {
+    "run_id": ("", "run id r<index>-<first 8 hex of config_hash>"),
+    "base": ("", "label of the run's base configuration"),
+    "variant": ("", "controller variant (controller.variant)"),
+    "status": ("", "success, failed (gimbal lock, solver failure, non-finite state, timeout) or error"),
+    "message": ("", "the solver's message, or why the run failed"),
+    "wall_time": ("s", "integration plus post-processing time"),
+    "solver_nfev": ("1", "right-hand side evaluations"),
+    "solver_njev": ("1", "Jacobian evaluations"),
+    "solver_nlu": ("1", "LU decompositions"),
+    "solver_status": ("1", "solve_ivp status (0 success, -1 failure, 1 stopped by an event)"),
+    "config": ("", "resolved configuration without its name, canonical JSON"),
+    "config_hash": ("", "SHA-256 of config"),
+}
+_COORDS = ("run_id", "base", "variant")
+_TEXT = {"run_id", "base", "variant", "status", "message", "config", "config_hash", "lyapunov_rate_check"}
+_SOLVER = ("nfev", "njev", "nlu", "status")
+
+
+def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """Summary figures as flat columns: 3-vectors as ``<name>_x``, ``_y``, ``_z``."""
+    out: dict[str, Any] = {}
+    for key, value in summary.items():
+        if isinstance(value, (list, tuple, np.ndarray)):
+            for axis, v in zip(_AXES, value):
+                out[f"{key}_{axis}"] = float(v)
+        else:
+            out[key] = value
+    return out
+
+
+def figure_attributes(column: str) -> tuple[str, str]:
+    """(units, long name) of a per-run column (a summary figure component or :data:`PER_RUN`)."""
+    if column in PER_RUN:
+        return PER_RUN[column]
+    if column in SUMMARY_FIGURES:
+        return SUMMARY_FIGURES[column]
+    base, _, axis = column.rpartition("_")
+    if base in SUMMARY_FIGURES and axis in _AXES:
+        units, name = SUMMARY_FIGURES[base]
+        return units, f"{name}, {axis} component"
+    return "", column
+
+
+@dataclass(frozen=True)
+class StoreRow:
+    """Identity of one run in a store file.
+
+    Attributes
+    ----------
+    index : int
+        Position in the sweep's run list (the ``run`` coordinate).
+    run_id : str
+    base : str
+    coords : dict
+        Parameter coordinate name -> value (a number or a string).
+    """
+
+    index: int
+    run_id: str
+    base: str = ""
+    coords: dict = field(default_factory=dict)
 
 
 def chunk_file_name(first_run_id: str) -> str:
@@ -91,59 +179,77 @@ def chunk_file_name(first_run_id: str) -> str:
 
 
 class ChunkWriter:
-    """Write the runs of one chunk into one file (module docstring), atomically.
+    """Write the runs of one chunk into one store file (module docstring), atomically.
 
-    Use as a context manager: rows are added with :meth:`add` (a finished run) or
-    :meth:`add_error` (a run that raised); leaving the block without an exception
-    writes the per-run variables and renames the file into place; an exception removes
-    the temporary file and leaves ``path`` untouched.
+    Use as a context manager: :meth:`add` a finished run (any status) or
+    :meth:`add_error` a run that raised, once per row; leaving the block without an
+    exception writes the per-run values and renames the file into place; an exception
+    removes the temporary file.
 
     Parameters
     ----------
     path : path-like
         Final file name (:func:`chunk_file_name` in the sweep's ``runs/`` folder).
-    n_runs : int
-        Rows of the file (the chunk's runs); every row must be added.
-    store : {"full", "summary"}
-        What each row holds (:data:`rbstab.io.hdf5.STORE_MODES`).
+    rows : sequence of StoreRow
+        The chunk's runs, any order (the file holds them by increasing ``index``).
+    store : {"full", "thinned", "summary"}
+        See :data:`STORES`.
+    parameters : mapping, optional
+        Coordinate name -> dotted config key, for the ``config_key`` attributes.
     command_line : str, optional
         The ``command_line`` attribute (default: this process's argv).
+    sweep : str, optional
+        The ``sweep`` attribute (the sweep's name).
     """
 
-    def __init__(self, path: str | os.PathLike, n_runs: int, *, store: str = "full",
-                 command_line: str | None = None) -> None:
-        if store not in STORE_MODES:
-            raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
+    def __init__(self, path: str | os.PathLike, rows: Sequence[StoreRow], *, store: str = DEFAULT_STORE,
+                 parameters: Mapping[str, str] | None = None, command_line: str | None = None,
+                 sweep: str = "") -> None:
+        if store not in STORES:
+            raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
         self.path = Path(path)
-        self.n_runs = int(n_runs)
         self.store = store
-        self.command_line = command_line if command_line is not None else " ".join(sys.argv)
-        self.rows: list[dict[str, Any]] = []  # per-row attributes, in row order
-        self._pending: list[dict[str, np.ndarray] | None] = []  # outputs not yet written
+        self.parameters = dict(parameters or {})
+        ordered = sorted(rows, key=lambda r: r.index)
+        self.ids = [r.run_id for r in ordered]
+        self.position = {r.run_id: i for i, r in enumerate(ordered)}
+        self.identity = ordered
+        self.values: list[dict[str, Any] | None] = [None] * len(ordered)
+        self._pending: list[tuple[int, dict[str, np.ndarray] | None]] = []
         self._stack = ExitStack()
         self._file = None
         self._time: np.ndarray | None = None
         self._stride = 1
-        self._variables: dict[str, tuple[int, ...]] = {}
+        self._traces: dict[str, tuple[int, ...]] = {}
         self._datasets: dict[str, Any] = {}
-        self._written = 0
-        self.attrs: dict[str, Any] = {  # the file's global attributes
+        self._block = WRITE_BLOCK
+        self.attrs: dict[str, Any] = {
             "rbstab_format": CHUNK_FORMAT,
             "rbstab_version": __version__,
             "git_commit": _git_commit(),
-            "command_line": self.command_line,
+            "command_line": command_line if command_line is not None else " ".join(sys.argv),
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds"),
             "store": store,
-            "n_runs": self.n_runs,
+            "sweep": sweep,
         }
 
-    # -- context manager ------------------------------------------------------------------------
-
     def __enter__(self) -> "ChunkWriter":
-        import h5py
+        import h5netcdf
 
         tmp = self._stack.enter_context(atomic_path(self.path))
-        self._file = self._stack.enter_context(h5py.File(tmp, "w", track_order=True))
+        self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
+        import h5py
+
+        self._str = h5py.string_dtype()
+        f = self._file
+        f.dimensions["run"] = len(self.ids)
+        f.dimensions["axis"] = 3
+        # coordinates first: a variable created later attaches to them once (h5netcdf
+        # re-attaches every variable of a dimension whose coordinate comes after them)
+        run = f.create_variable("run", ("run",), data=np.array([r.index for r in self.identity], dtype=np.int64))
+        run.attrs.update(long_name="position of the run in the sweep's run list")
+        axis = f.create_variable("axis", ("axis",), data=np.array(_AXES, dtype=object), dtype=self._str)
+        axis.attrs.update(long_name="vector component; frame given by each variable")
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
@@ -155,119 +261,160 @@ class ChunkWriter:
             raise
         return self._stack.__exit__(exc_type, exc, tb)
 
-    # -- rows -----------------------------------------------------------------------------------
+    # -- rows ---------------------------------------------------------------------------------
 
-    def add(self, result: "RunResult", config_yaml: str | None = None) -> dict[str, Any]:
-        """Add a finished run (any status); returns its row attributes (:func:`read_chunk_rows`)."""
-        attrs = result_attributes(result, command_line=self.command_line, store=self.store,
-                                  config_yaml=config_yaml)
-        if self._time is None:
-            self._start(result)
-        outputs = {k: result.outputs[k][:: self._stride] for k in self._variables if k in result.outputs}
-        return self._add_row(attrs, outputs)
+    def add(self, run_id: str, result: "RunResult", config_text: str | None = None) -> dict[str, Any]:
+        """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it)."""
+        from .hdf5 import config_hash
 
-    def add_error(self, run_id: str, message: str, config_yaml: str = "", config_hash: str = "") -> dict[str, Any]:
-        """Add a run that raised before it had a result (status ``error``, NaN data)."""
-        attrs = {"name": run_id, "status": "error", "message": message, "config": config_yaml,
-                 "config_hash": config_hash, "wall_time": 0.0}
-        return self._add_row(attrs, None)
+        text = canonical_config(result.config.resolved) if config_text is None else config_text
+        values: dict[str, Any] = {
+            "variant": result.config.variant,
+            "status": result.status,
+            "message": result.message,
+            "wall_time": float(result.wall_time),
+        }
+        values.update({f"solver_{k}": result.solver.get(k) for k in _SOLVER[:-1]})
+        values["solver_status"] = int(result.solver.get("solver_status", -1))
+        values["config"] = text
+        values["config_hash"] = config_hash(text)
+        values.update(summary_columns(result.summary))
+        traces = None
+        if self.store != "summary":
+            if self._time is None:
+                self._start(result)
+            traces = self._traces_of(run_id, result)
+        return self._add(run_id, values, traces)
 
-    def _add_row(self, attrs: dict[str, Any], outputs: dict[str, np.ndarray] | None) -> dict[str, Any]:
-        if len(self.rows) >= self.n_runs:
-            raise ValueError(f"{self.path.name}: more than the {self.n_runs} rows announced")
-        row = {k: _plain(np.asarray(v)) if isinstance(v, (list, tuple, np.ndarray)) else v for k, v in attrs.items()}
-        row.update(self.attrs)  # as read_chunk_rows gives it back
-        row["row"] = len(self.rows)
-        row["file"] = self.path.name
-        self.rows.append(row)
-        self._pending.append(outputs)
-        if len(self._pending) >= WRITE_BLOCK:
-            self._flush()
-        return dict(row)
+    def add_error(self, run_id: str, message: str) -> dict[str, Any]:
+        """Add a run that raised before it had a result (status ``error``, no values)."""
+        return self._add(run_id, {"status": "error", "message": message, "wall_time": 0.0}, None)
+
+    def _add(self, run_id: str, values: dict[str, Any], traces) -> dict[str, Any]:
+        i = self.position.get(run_id)
+        if i is None or self.values[i] is not None:
+            raise ValueError(f"{self.path.name}: run {run_id!r} is not a row of this file or was added twice")
+        self.values[i] = values
+        if self.store != "summary":
+            self._pending.append((i, traces))
+            if len(self._pending) >= self._block:
+                self._flush()
+        return self.row(i)
+
+    def row(self, i: int) -> dict[str, Any]:
+        """Row ``i`` as :func:`read_chunk_rows` reads it back."""
+        ident = self.identity[i]
+        out = {"run": ident.index, "run_id": ident.run_id, "base": ident.base, **ident.coords}
+        out.update(self.values[i] or {})
+        out["store"] = self.store
+        out["created"] = self.attrs["created"]
+        out["file"] = self.path.name
+        out["file_row"] = i
+        return out
+
+    # -- traces -------------------------------------------------------------------------------
 
     def _start(self, result: "RunResult") -> None:
-        """Create the dimensions and the (run, time[, axis]) variables from the first result."""
         time = np.asarray(result.time, dtype=float)
-        keys = [k for k in result.outputs if self.store == "full" or k in SUMMARY_VARIABLES]
-        if self.store == "summary":
+        names = [k for k in result.outputs if self.store == "full" or k in THINNED_VARIABLES]
+        if self.store == "thinned":
             self._stride = summary_stride(len(time))
-        self._time = time[:: self._stride]
-        if self.store == "summary":
             self.attrs["store_stride"] = self._stride
-        nt = len(self._time)
-        for key in keys:
-            shape = (self.n_runs, nt, *np.shape(result.outputs[key])[1:])
-            self._variables[key] = shape
-            # HDF5 chunks of WRITE_BLOCK runs: each flush writes whole chunks
-            self._datasets[key] = self._file.create_dataset(
-                key, shape=shape, dtype=float, fillvalue=np.nan, chunks=(min(WRITE_BLOCK, self.n_runs), *shape[1:]))
+        self._time = time[:: self._stride]
+        f = self._file
+        f.dimensions["time"] = len(self._time)
+        t = f.create_variable("time", ("time",), data=self._time)
+        t.attrs.update(units="s", long_name="time", description="sample time, evenly spaced dense output")
+        block = min(WRITE_BLOCK, len(self.ids))
+        for name in names:
+            rank = np.ndim(result.outputs[name])
+            dims = ("run", "time", "axis")[: rank + 1]
+            shape = (block, len(self._time), 3)[: rank + 1]
+            var = f.create_variable(name, dims, dtype=float, fillvalue=np.nan, chunks=shape)
+            var.attrs.update(units=VARIABLE_UNITS[name], long_name=name.replace("_", " "),
+                             description=VARIABLE_DESCRIPTIONS[name])
+            self._traces[name] = (len(self._time), 3)[:rank]
+            self._datasets[name] = var._h5ds  # rows written through h5py: h5netcdf adds ~1 ms a write
+        per_run = 8 * sum(int(np.prod(shape)) for shape in self._traces.values()) or 1
+        self._block = max(WRITE_BLOCK, WRITE_BYTES // per_run)
+
+    def _traces_of(self, run_id: str, result: "RunResult") -> dict[str, np.ndarray]:
+        time = np.asarray(result.time, dtype=float)[:: self._stride]
+        if len(time) != len(self._time) or not np.array_equal(time, self._time):
+            raise ValueError(
+                f"run {run_id}: its sample times differ from the other runs of {self.path.name}; "
+                "a sweep that varies simulation.t_end or n_samples needs --store summary or --layout run"
+            )
+        return {k: result.outputs[k][:: self._stride] for k in self._traces if k in result.outputs}
 
     def _flush(self) -> None:
-        if not self._pending:
+        if not self._pending or not self._traces:
+            self._pending = []
             return
-        lo, hi = self._written, self._written + len(self._pending)
-        for key, shape in self._variables.items():
-            missing = np.full(shape[1:], np.nan)
-            block = np.stack([missing if o is None or key not in o else o[key] for o in self._pending])
-            self._datasets[key][lo:hi] = block
-        self._written = hi
+        self._pending.sort(key=lambda p: p[0])
+        rows = [i for i, _ in self._pending]
+        for name, shape in self._traces.items():
+            missing = np.full(shape, np.nan)
+            block = np.stack([missing if o is None or name not in o else o[name] for _, o in self._pending])
+            var = self._datasets[name]
+            if rows == list(range(rows[0], rows[-1] + 1)):
+                var[rows[0] : rows[-1] + 1] = block
+            else:
+                var[rows] = block
         self._pending = []
 
-    def _finish(self) -> None:
-        import h5py
+    # -- the per-run values -------------------------------------------------------------------
 
-        if len(self.rows) != self.n_runs:
-            raise ValueError(f"{self.path.name}: {len(self.rows)} rows added, {self.n_runs} announced")
+    def _finish(self) -> None:
+        missing = [self.ids[i] for i, v in enumerate(self.values) if v is None]
+        if missing:
+            raise ValueError(f"{self.path.name}: no result for {len(missing)} run(s), e.g. {missing[0]}")
         self._flush()
         f = self._file
-        text = h5py.string_dtype()
-        run = f.create_dataset("run", data=np.array([r["name"] for r in self.rows], dtype=object), dtype=text)
-        run.make_scale("run")
-        run.attrs["description"] = "run id (the run's name; the file stem of a run file)"
-        time = f.create_dataset("time", data=self._time if self._time is not None else np.zeros(0))
-        time.make_scale("time")
-        time.attrs["units"] = "s"
-        time.attrs["description"] = "sample time, evenly spaced dense output of the solver"
-        axis = f.create_dataset("axis", data=np.array(["x", "y", "z"], dtype=object), dtype=text)
-        axis.make_scale("axis")
-        axis.attrs["description"] = "vector component; frame given by each variable"
-        for key in self._variables:
-            var = f[key]
-            var.dims[0].attach_scale(run)
-            var.dims[1].attach_scale(time)
-            if var.ndim == 3:
-                var.dims[2].attach_scale(axis)
-            var.attrs["units"] = VARIABLE_UNITS[key]
-            var.attrs["description"] = VARIABLE_DESCRIPTIONS[key]
-        for key in self._per_run_keys():
-            values = [r.get(key) for r in self.rows]
-            if key in _TEXT or any(isinstance(v, str) for v in values):
-                data = np.array(["" if v is None else str(v) for v in values], dtype=object)
-                var = f.create_dataset(key, data=data, dtype=text)
-            else:
-                width = max((len(v) for v in values if isinstance(v, list)), default=0)
-                fill = [np.nan] * width if width else np.nan
-                data = np.array([fill if v is None else v for v in values], dtype=float)
-                if key.startswith("solver_") and np.all(np.isfinite(data)):
-                    data = data.astype(np.int64)
-                var = f.create_dataset(key, data=data)
-                if var.ndim == 2 and var.shape[1] == 3:
-                    var.dims[1].attach_scale(axis)
-            var.dims[0].attach_scale(run)
-            if key in _PER_RUN_DESCRIPTIONS:
-                var.attrs["description"] = _PER_RUN_DESCRIPTIONS[key]
-        for key, value in self.attrs.items():
-            f.attrs[key] = value
+        columns = self._columns()
+        self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
+        for name, values in columns.items():
+            self._write_column(name, values)
+        for name in self._traces:
+            f.variables[name].attrs["coordinates"] = self._coordinates
+        f.attrs.update(self.attrs)
 
-    def _per_run_keys(self) -> list[str]:
-        keys: dict[str, None] = {}
-        for row in self.rows:
-            keys.update(dict.fromkeys(k for k in row if _is_per_run(k)))
-        return list(keys)
+    def _columns(self) -> dict[str, list]:
+        names: dict[str, None] = dict.fromkeys(_COORDS)
+        names.update(dict.fromkeys(self.parameters))
+        for ident, values in zip(self.identity, self.values):
+            names.update(dict.fromkeys(ident.coords))
+            names.update(dict.fromkeys(values))
+        rows = [{"run_id": i.run_id, "base": i.base, **i.coords, **v} for i, v in zip(self.identity, self.values)]
+        return {name: [r.get(name) for r in rows] for name in names}
+
+    def _write_column(self, name: str, values: list) -> None:
+        """A ``(run,)`` variable through h5py (h5netcdf's ``create_variable`` costs ~3 ms,
+        most of a store file's writing): a dataset with the ``run`` dimension scale attached,
+        which is what netCDF-4 and h5netcdf read as a variable of dimension ``run``."""
+        h5 = self._file._h5file
+        if name in _TEXT or any(isinstance(v, str) for v in values):
+            data = np.array(["" if v is None else str(v) for v in values], dtype=object)
+            var = h5.create_dataset(name, data=data, dtype=self._str)
+        else:
+            data = np.array([np.nan if v is None else v for v in values], dtype=float)
+            if name.startswith("solver_") and np.all(np.isfinite(data)):
+                data = data.astype(np.int64)
+            var = h5.create_dataset(name, data=data, fillvalue=np.nan if data.dtype.kind == "f" else None)
+        var.dims[0].attach_scale(h5["run"])
+        units, long_name = figure_attributes(name)
+        if name in self.parameters:
+            var.attrs["config_key"] = self.parameters[name]
+            long_name = self.parameters[name]
+        var.attrs["long_name"] = long_name
+        if units:
+            var.attrs["units"] = units
+        if name not in _COORDS and name not in self.parameters:
+            var.attrs["coordinates"] = self._coordinates
 
 
 def is_chunk_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a readable chunk file (``rbstab_format`` = :data:`CHUNK_FORMAT`)."""
+    """Whether ``path`` is a readable store file (``rbstab_format`` = :data:`CHUNK_FORMAT`)."""
     import h5py
 
     try:
@@ -278,21 +425,22 @@ def is_chunk_file(path: str | os.PathLike) -> bool:
 
 
 def read_chunk_rows(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """Each run's attributes, as :func:`rbstab.io.hdf5.read_attributes` reads a run file's.
+    """Each run's per-run values, in row order.
 
     Returns
     -------
     list of dict
-        In row order: ``name`` (the run id), ``status``, ``message``, ``config``,
-        ``config_hash``, ``wall_time``, ``solver_*``, ``summary_*`` (3-vectors as lists),
-        the file's global attributes, and ``file`` (the file name) and ``row``.
+        ``run`` (index), ``run_id``, ``base``, the parameter coordinates, ``variant``,
+        ``status``, ``message``, ``wall_time``, ``solver_*``, ``config``, ``config_hash``,
+        the summary columns (:func:`summary_columns`), ``store``, ``created``, ``file``
+        (the file name) and ``file_row``.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     NotAResultFile
-        If it is not an rbstab chunk file.
+        If it is not an rbstab store file.
     """
     import h5py
 
@@ -301,38 +449,38 @@ def read_chunk_rows(path: str | os.PathLike) -> list[dict[str, Any]]:
         raise FileNotFoundError(f"no such result file: {path}")
     try:
         with h5py.File(path, "r") as f:
-            glob = {k: _plain(v) for k, v in f.attrs.items()}
-            if glob.get("rbstab_format") != CHUNK_FORMAT:
-                raise NotAResultFile(f"{path}: not an rbstab chunk file (no rbstab_format = {CHUNK_FORMAT!r})")
-            ids = [_plain(x) for x in f["run"][...]]
-            columns: dict[str, list] = {}
-            for key in f:
-                if _is_per_run(key):
-                    values = f[key][...]
-                    columns[key] = values.tolist() if values.ndim == 2 else [_plain(x) for x in values]
+            if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
+                raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
+            store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
+            columns = {k: _column(f[k]) for k in f if f[k].ndim == 1 and k not in ("axis", "time")
+                       and f[k].shape[0] == f["run"].shape[0]}
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
+    n = len(columns["run"])
     rows = []
-    for i, run_id in enumerate(ids):
-        row = dict(glob)
-        row.update({k: v[i] for k, v in columns.items()})
-        row.update(name=run_id, row=i, file=path.name)
+    for i in range(n):
+        row = {k: v[i] for k, v in columns.items()}
+        row.update(store=store, created=created, file=path.name, file_row=i)
         rows.append(row)
     return rows
 
 
-def _is_per_run(key: str) -> bool:
-    """Whether variable ``key`` of a chunk file is a per-run attribute (not a time series)."""
-    return key in _TEXT or key == "wall_time" or key.startswith(("solver_", "summary_"))
+def _column(dataset) -> list:
+    values = dataset[...]
+    if values.dtype.kind in "OS":
+        return [x.decode() if isinstance(x, bytes) else str(x) for x in values]
+    out = values.tolist()
+    if values.dtype.kind == "f":
+        return [None if isinstance(x, float) and math.isnan(x) else x for x in out]
+    return out
 
 
 def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.ndarray | None]:
-    """The time series of one run of a chunk file.
+    """The traces of one run of a store file.
 
     Parameters
     ----------
     path : path-like
-        A chunk file (:func:`is_chunk_file`).
     row : int
         The run's row (``file_row`` in the sweep's ``index.csv``).
     names : iterable of str
@@ -341,22 +489,16 @@ def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.
     Returns
     -------
     dict
-        ``time``: sample times [s], shape (n,); each name: its values, shape (n,) or
-        (n, 3) in the variable's frame, or None when the file does not hold it (e.g.
-        ``store = "summary"``); ``units:<name>``: its units (str) for each name held.
-
-    Raises
-    ------
-    OSError
-        If ``path`` cannot be opened as HDF5.
+        ``time`` [s], shape (n,) (None for a summary store); each name: shape (n,) or
+        (n, 3), or None when the file does not hold it; ``units:<name>`` for each held.
     """
     import h5py
 
     out: dict[str, Any] = {}
     with h5py.File(path, "r") as f:
-        out["time"] = np.asarray(f["time"][...], dtype=float)
+        out["time"] = np.asarray(f["time"][...], dtype=float) if "time" in f else None
         for name in names:
-            if name in f and f[name].ndim >= 2 and f[name].shape[0] > row and name != "time":
+            if name in f and name != "time" and f[name].ndim >= 2 and f[name].shape[0] > row:
                 out[name] = np.asarray(f[name][row], dtype=float)
                 units = f[name].attrs.get("units", "")
                 out[f"units:{name}"] = units.decode() if isinstance(units, bytes) else str(units)

@@ -23,6 +23,7 @@ from __future__ import annotations
 import datetime as _dt
 import functools
 import hashlib
+import json
 import os
 import subprocess
 import sys
@@ -96,9 +97,20 @@ def _git_commit() -> str:
     return "unknown"
 
 
-def config_hash(config_yaml: str) -> str:
-    """SHA-256 hex digest of the resolved configuration's YAML text."""
-    return hashlib.sha256(config_yaml.encode()).hexdigest()
+def canonical_config(resolved) -> str:
+    """A resolved configuration without its ``name`` as canonical JSON (sorted keys, no spaces).
+
+    ``json.loads`` reads it back; :func:`config_hash` hashes it.
+    """
+    body = {k: v for k, v in resolved.items() if k != "name"}
+    return json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)
+
+
+def config_hash(text: str) -> str:
+    """SHA-256 hex digest of ``text``; a run's ``config_hash`` is that of its
+    :func:`canonical_config` (so it does not depend on its name or on YAML formatting,
+    and the run id of a sweep run is ``r<index>-<config_hash[:8]>``)."""
+    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _attr_value(value: Any) -> Any:
@@ -108,21 +120,22 @@ def _attr_value(value: Any) -> Any:
 
 
 #: What a result file stores (``rbstab sweep --store``): ``full``, every variable at every
-#: sample (``rbstab run`` always writes this); ``summary``, the same format with the
+#: sample (``rbstab run`` always writes this); ``thinned``, the same format with the
 #: variables a report draws (:data:`SUMMARY_VARIABLES`) at every ``store_stride``-th sample
-#: (at most :data:`SUMMARY_MAX_SAMPLES`), the summary figures computed from every sample.
-STORE_MODES = ("full", "summary")
-#: Variables of a ``summary`` file (those the run has): the state blocks, E and v with its rates.
+#: (at most :data:`SUMMARY_MAX_SAMPLES`); ``summary``, the attributes only (no time
+#: series). The summary figures are computed from every sample in each case.
+STORE_MODES = ("full", "thinned", "summary")
+#: Variables of a ``thinned`` file (those the run has): the state blocks, E and v with its rates.
 SUMMARY_VARIABLES = (
     "theta", "omega", "position", "velocity", "controller_state",
     "constraint_error", "lyapunov", "lyapunov_rate", "lyapunov_rate_numerical",
 )
-#: Most samples a ``summary`` file keeps.
+#: Most samples a ``thinned`` file keeps.
 SUMMARY_MAX_SAMPLES = 201
 
 
 def summary_stride(n_samples: int) -> int:
-    """Sample stride of a ``summary`` file: keeps ``time[::stride]``, at most
+    """Sample stride of a ``thinned`` file: keeps ``time[::stride]``, at most
     :data:`SUMMARY_MAX_SAMPLES` samples (for 2001 samples, every 10th: t = 0, 0.01, ... 2 s)."""
     return max(1, -(-(int(n_samples) - 1) // (SUMMARY_MAX_SAMPLES - 1)))
 
@@ -142,7 +155,7 @@ def result_attributes(
         "status": result.status,
         "message": result.message,
         "config": config_yaml,
-        "config_hash": config_hash(config_yaml),
+        "config_hash": config_hash(canonical_config(result.config.resolved)),
         "rbstab_version": __version__,
         "git_commit": _git_commit(),
         "command_line": command_line if command_line is not None else " ".join(sys.argv),
@@ -153,8 +166,9 @@ def result_attributes(
     attrs["solver_status"] = int(result.solver.get("solver_status", -1))
     attrs["solver_message"] = result.message
     attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
-    if store == "summary":
-        attrs["store"] = "summary"
+    if store != "full":
+        attrs["store"] = store
+    if store == "thinned":
         attrs["store_stride"] = summary_stride(len(result.time))
     return attrs
 
@@ -249,10 +263,12 @@ def write_run(
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
     attrs = result_attributes(result, command_line=command_line, store=store, config_yaml=config_yaml)
     time, outputs = result.time, result.outputs
-    if store == "summary":
+    if store == "thinned":
         stride = attrs["store_stride"]
         time = time[::stride]
         outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
+    elif store == "summary":
+        time, outputs = time[:0], {}
     with atomic_path(path) as tmp:
         _write_file(str(tmp), time, outputs, attrs)
     return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
@@ -271,7 +287,7 @@ def write_result(
         Final file name; its folder is created if missing.
     command_line : str, optional
         Recorded in the ``command_line`` attribute (default: this process's argv).
-    store : {"full", "summary"}
+    store : {"full", "thinned", "summary"}
         See :data:`STORE_MODES`.
 
     Returns

@@ -353,6 +353,16 @@ def _use_log(values: np.ndarray) -> bool:
     return v.size > 1 and np.all(v > 0) and v.max() / v.min() > 100
 
 
+def _groups(table, exclude: str) -> np.ndarray:
+    """A label per run from the columns ``base`` and ``variant`` that vary (and are not
+    ``exclude``, the plotted parameter): the colour groups of a sweep's scatter plots."""
+    columns = [c for c in ("base", "variant") if c != exclude and c in table.columns
+               and table[c].astype(str).nunique() > 1]
+    if not columns:
+        return np.full(len(table), "", dtype=object)
+    return table[columns].astype(str).agg(" / ".join, axis=1).to_numpy(dtype=object)
+
+
 def sweep_figures(sweep: SweepData, table, metrics: Sequence[str], folder: Path) -> list[FigureFile]:
     """Metrics of a sweep against its varied parameters, written to ``folder/figures/``.
 
@@ -373,8 +383,9 @@ def sweep_figures(sweep: SweepData, table, metrics: Sequence[str], folder: Path)
         grid) one heatmap per metric (``sweep_<name>_heatmap_<metric>.png``, failed cells
         hatched); otherwise, for each
         varied parameter, ``sweep_<name>_<parameter>.png`` with one panel per metric
-        (successful runs as dots, failed runs as red crosses on the lower edge). Empty
-        when no parameter varies.
+        (successful runs as dots coloured by base / variant where those vary, failed runs
+        as red crosses on the lower edge). Empty when no parameter varies. ``converged``
+        as a metric gives a map of 1 (converged) and 0.
     """
     stem = f"sweep_{safe_filename(sweep.name)}"
     failed = (table["status"].astype(str) != "success").to_numpy()
@@ -445,7 +456,11 @@ def sweep_figures(sweep: SweepData, table, metrics: Sequence[str], folder: Path)
             ok = ~failed
             order = np.argsort(x[ok], kind="stable")
             style = "o-" if len(sweep.varied) == 1 else "o"
-            ax.plot(x[ok][order], y[ok][order], style, ms=4, color="C0", label="success")
+            groups = _groups(table, exclude=param)
+            for k, label in enumerate(dict.fromkeys(groups[ok][order])):
+                mine = groups[ok][order] == label
+                ax.plot(x[ok][order][mine], y[ok][order][mine], style, ms=4, color=f"C{k % 10}",
+                        label=label or "success")
             if failed.any():
                 trans = blended_transform_factory(ax.transData, ax.transAxes)
                 ax.plot(x[failed], np.full(failed.sum(), 0.03), "x", color="red", ms=8, mew=2,

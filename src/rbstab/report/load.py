@@ -20,6 +20,7 @@ every problem, so the caller can refuse the whole report before creating anythin
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -41,26 +42,7 @@ __all__ = [
     "load_sweep",
     "flatten_config",
     "is_sweep_folder",
-    "RUN_FILE_COLUMNS",
 ]
-
-#: Column names of ``index.csv`` that may hold a run's result file (relative to the sweep
-#: folder), tried in this order before ``<run_id>.h5``.
-RUN_FILE_COLUMNS = ("file", "path", "result", "result_file", "filename", "output")
-
-#: ``index.csv`` columns that are bookkeeping, never a varied parameter.
-_BOOKKEEPING = {
-    "run_id", "run", "id", "name", "status", "message", "wall_time", "converged",
-    "config_hash", "created", "error", "seed", "index", "run_index", "base", "file_row", *RUN_FILE_COLUMNS,
-}
-#: Prefixes of ``index.csv`` columns holding summary figures or solver statistics.
-_SUMMARY_PREFIXES = (
-    "summary", "solver", "t_final", "final_", "max_abs_constraint_error", "lyapunov_",
-    "max_lyapunov", "nfev", "njev", "nlu", "settling",
-)
-#: Keys of ``sweep.yaml`` that may map parameter names to their values.
-_SPEC_PARAMETER_KEYS = ("parameters", "params", "grid", "vary", "sweep", "axes", "zip", "product", "values")
-
 
 class ReportInputError(ValueError):
     """Raised when inputs of a report are missing or unreadable.
@@ -267,9 +249,11 @@ class ReportInputs:
 
 
 def is_sweep_folder(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a folder with ``sweep.yaml`` and ``index.csv``."""
-    p = Path(path)
-    return p.is_dir() and (p / "sweep.yaml").is_file() and (p / "index.csv").is_file()
+    """True when ``path`` is a folder with ``sweep.yaml`` and ``index.csv``
+    (:func:`rbstab.sweep.folder.is_sweep_folder`)."""
+    from ..sweep.folder import is_sweep_folder as check
+
+    return check(path)
 
 
 def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
@@ -311,25 +295,37 @@ _REQUIRED_SERIES = ("time", "theta", "omega", "constraint_error", "lyapunov", "l
 
 
 def load_chunk_runs(path: str | os.PathLike, sweep: str | None = None) -> list[RunData]:
-    """Every run of a chunk file (:mod:`rbstab.io.chunk`), in row order (no time series).
+    """Every run of a sweep store file (:mod:`rbstab.io.chunk`), in row order (no time series).
+
+    A store without traces (``--store summary``) gives runs whose :meth:`RunData.series`
+    is empty: their figures and settling times are not drawn.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` does not exist.
     rbstab.io.hdf5.NotAResultFile
-        If it is not a chunk file, a run's ``config`` is not YAML, or it lacks the time
-        series a report draws.
+        If it is not a store file, or a run's ``config`` is not YAML.
     """
-    import h5py
-
     from ..io.chunk import read_chunk_rows
 
     path = Path(path)
-    rows = read_chunk_rows(path)
-    with h5py.File(path, "r") as f:
-        absent = [n for n in _REQUIRED_SERIES if n not in f]
-    return [_run_data(path, attrs, absent, sweep, row=attrs["row"]) for attrs in rows]
+    return [_run_data(path, _store_attributes(row), [], sweep, row=row["file_row"]) for row in read_chunk_rows(path)]
+
+
+def _store_attributes(row: dict) -> dict:
+    """A store file's row in the form of a run file's attributes (``name``, ``summary_*``...)."""
+    from ..io.chunk import SUMMARY_FIGURES
+
+    attrs = {k: v for k, v in row.items()}
+    attrs["name"] = row["run_id"]
+    for key in SUMMARY_FIGURES:
+        parts = [row.get(f"{key}_{a}") for a in "xyz"]
+        if key in row:
+            attrs[f"summary_{key}"] = float("nan") if row[key] is None else row[key]
+        elif any(p is not None for p in parts):
+            attrs[f"summary_{key}"] = [float("nan") if p is None else p for p in parts]
+    return attrs
 
 
 def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row: int | None = None) -> RunData:
@@ -338,9 +334,10 @@ def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row
     from ..io.hdf5 import NotAResultFile
 
     where = f"{path}" if row is None else f"{path} (run {attrs.get('name')})"
-    try:
-        config = yaml.safe_load(attrs.get("config", "")) or {}
-    except yaml.YAMLError as exc:
+    text = attrs.get("config", "") or ""
+    try:  # a store file's config is JSON (rbstab.io.hdf5.canonical_config), a run file's YAML
+        config = (json.loads(text) if text.lstrip().startswith("{") else yaml.safe_load(text)) or {}
+    except (ValueError, yaml.YAMLError) as exc:
         raise NotAResultFile(f"{where}: the config attribute is not valid YAML ({exc})") from None
     if not isinstance(config, dict):
         raise NotAResultFile(f"{where}: the config attribute is not a YAML mapping")
@@ -367,73 +364,33 @@ def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row
     )
 
 
-def _raw_parameter_columns(index, spec: dict) -> list[str]:
-    """Columns of ``index`` that hold swept parameters (see :func:`load_sweep`)."""
-    columns = [str(c) for c in index.columns]
-    several_bases = "base" in columns and index["base"].astype(str).nunique() > 1
-    base = ["base"] if several_bases else []
-    # 1. the keys the sweep specification varies (grid, zip, random params, ...)
-    named: list[str] = []
-
-    def visit(node: Any) -> None:
-        if isinstance(node, dict):
-            for key, value in node.items():
-                if key in _SPEC_PARAMETER_KEYS and isinstance(value, dict):
-                    named.extend(str(k) for k in value)
-                visit(value)
-        elif isinstance(node, list):
-            for item in node:
-                visit(item)
-
-    visit(spec)
-    from_spec = [c for c in columns if c in named or _group_key(c) in named]
-    if from_spec:
-        return from_spec + base
-    # 2. the layout of rbstab.sweep.index: run_id, <bookkeeping>, <parameters>, status, ...
-    if columns[:1] == ["run_id"] and "status" in columns:
-        between = columns[1 : columns.index("status")]
-        return [c for c in between if c not in _BOOKKEEPING] + base
-
-    # 3. otherwise every column that is neither bookkeeping nor a summary figure
-    def is_summary(c: str) -> bool:
-        return c.startswith(_SUMMARY_PREFIXES) or c in _BOOKKEEPING
-
-    dotted = [c for c in columns if "." in c and not is_summary(c)]
-    return (dotted or [c for c in columns if not is_summary(c)]) + base
-
-
-def _group_key(column: str) -> str:
-    """``controller.k_c.2`` -> ``controller.k_c``; ``body.mass:scale`` -> ``body.mass``."""
-    column = column.removesuffix(":scale")
-    return re.sub(r"(\.\d+)+$", "", column)
-
-
-def _parameter_axes(index, spec: dict) -> dict[str, Any]:
+def _parameter_axes(index, parameters: dict[str, str], random_keys: set[str]) -> dict[str, Any]:
     """One value per run for each swept parameter (list entries grouped back together).
 
-    A list-valued key swept as a whole (``controller.k_c`` -> columns ``controller.k_c.0``
-    .. ``.2``) is one parameter: the single varying entry if only one varies, the whole
-    list as text (``"[4100, 4100, 3280]"``) for a grid or zip over lists, each varying
-    entry on its own for a random draw (``random.params`` of the spec). A ``<key>:scale`` column (the
-    factor of a ``scale_uniform`` draw) stands for its key.
+    ``parameters`` maps the index's parameter columns to their dotted config keys
+    (:func:`rbstab.sweep.folder.read_parameters`). The entries of one list-valued key
+    (``k_c_0`` .. ``k_c_2`` of ``controller.k_c``) are one parameter: the single varying
+    entry if only one varies, the whole list as text (``[4100, 4100, 3280]``) for a grid
+    or zip over lists, each varying entry on its own for a random draw. A scale factor
+    column (``mass_scale``) stands for its key.
     """
     import pandas as pd
 
-    random = spec.get("random") if isinstance(spec.get("random"), dict) else {}
-    random_keys = set(random.get("params") or {}) if isinstance(random.get("params") or {}, dict) else set()
+    from ..sweep.folder import config_key_of
+
     groups: dict[str, list[str]] = {}
-    for col in _raw_parameter_columns(index, spec):
-        groups.setdefault(_group_key(col), []).append(col)
+    for column, key in parameters.items():
+        if column in index.columns:
+            groups.setdefault(config_key_of(key), []).append(column)
     axes: dict[str, Any] = {}
     for key, cols in groups.items():
-        scale = [c for c in cols if c.endswith(":scale")]
+        scale = [c for c in cols if parameters[c].endswith(":scale")]
         if scale:
-            axes[scale[0]] = index[scale[0]]
+            for c in scale:
+                axes[c] = index[c]
             continue
         varying = [c for c in cols if index[c].astype(str).nunique(dropna=False) > 1]
-        if len(cols) == 1:
-            axes[cols[0]] = index[cols[0]]
-        elif len(varying) <= 1:
+        if len(cols) == 1 or len(varying) <= 1:
             name = varying[0] if varying else cols[0]
             axes[name] = index[name]
         elif key in random_keys:
@@ -443,43 +400,22 @@ def _parameter_axes(index, spec: dict) -> dict[str, Any]:
             text = ["[" + ", ".join(f"{v:g}" if isinstance(v, float) else str(v) for v in row) + "]"
                     for row in index[cols].itertuples(index=False)]
             axes[key] = pd.Series(text, index=index.index, name=key)
+    for name in ("variant", "base"):
+        if name in index.columns and name not in axes and index[name].astype(str).nunique() > 1:
+            axes[name] = index[name]
     return axes
 
 
-def _find_run_file(folder: Path, row: dict, run_id: str, by_name: dict[str, Path]) -> Path | None:
-    file_columns = [c for c in RUN_FILE_COLUMNS if c in row]
-    if file_columns:  # the index says where the file is; an empty cell means no file
-        for col in file_columns:
-            value = row.get(col)
-            if isinstance(value, str) and value.strip():
-                p = Path(value)
-                p = p if p.is_absolute() else folder / p
-                if p.is_file():
-                    return p
-        return None
-    for candidate in (folder / f"{run_id}.h5", folder / "runs" / f"{run_id}.h5"):
-        if candidate.is_file():
-            return candidate
-    return by_name.get(run_id)
-
-
 def load_sweep(path: str | os.PathLike) -> SweepData:
-    """Read a sweep folder: ``sweep.yaml``, ``index.csv`` and the result file of each row.
+    """Read a sweep folder through :mod:`rbstab.sweep.folder`: ``sweep.yaml``, ``index.csv``
+    and the stored result of each row.
 
-    The result file of a row is the file named by its ``file`` column (or another of
-    :data:`RUN_FILE_COLUMNS`; relative to the folder; an empty cell: no file, e.g. a
-    run whose worker raised or that is still pending). Without such a column:
-    ``<run_id>.h5`` or ``runs/<run_id>.h5``, else the file whose ``name`` attribute is the
-    ``run_id``. A row without a file keeps ``None`` (its status and message still come
-    from ``index.csv``).
-
-    Parameter columns are those whose key the sweep specification varies (a mapping
-    under ``grid``, ``zip``, ``params``, ...; ``controller.k_c.2`` and
-    ``body.mass:scale`` count for ``controller.k_c`` and ``body.mass``); failing that,
-    in the layout of :mod:`rbstab.sweep.index`, the non-bookkeeping columns between
-    ``run_id`` and ``status``; failing that, the dotted columns that are not summary
-    figures. ``base`` is a parameter when the sweep has several base configs. Entries of one list-valued key (``controller.k_c.0`` .. ``.2``) are
-    grouped back into one parameter (:func:`_parameter_axes`).
+    The result of a row is the file its ``file`` column names (relative to the folder) at
+    its ``file_row`` (a store file) or the whole file (layout "run"); an empty cell (a run
+    whose worker raised, or that is pending) keeps ``None``, its status and message coming
+    from ``index.csv``. The parameters are the index's parameter columns
+    (``sweep_summary.json``'s ``parameters``), grouped by config key
+    (:func:`_parameter_axes`), plus ``variant`` and ``base`` where they vary.
 
     Raises
     ------
@@ -488,74 +424,47 @@ def load_sweep(path: str | os.PathLike) -> SweepData:
         ``run_id`` or ``status`` column or no row, or a result file is not an rbstab
         result.
     """
-    import pandas as pd
-    import yaml
-
-    from ..io.hdf5 import NotAResultFile, read_attributes
+    from ..io.hdf5 import NotAResultFile
+    from ..sweep.folder import read_index, read_parameters, read_spec
 
     folder = Path(path)
+    try:
+        spec = read_spec(folder)
+        index = read_index(folder)
+    except (OSError, ValueError) as exc:
+        raise ReportInputError([f"{folder}: {exc}"]) from None
+    if len(index) == 0:
+        raise ReportInputError([f"{folder}/index.csv: no runs"])
     problems: list[str] = []
-    try:
-        spec = yaml.safe_load((folder / "sweep.yaml").read_text()) or {}
-    except (OSError, yaml.YAMLError) as exc:
-        raise ReportInputError([f"{folder}: cannot read sweep.yaml ({exc})"]) from None
-    if not isinstance(spec, dict):
-        raise ReportInputError([f"{folder}/sweep.yaml: not a YAML mapping"])
-    try:
-        index = pd.read_csv(folder / "index.csv", keep_default_na=True)
-    except (OSError, ValueError, pd.errors.ParserError) as exc:
-        raise ReportInputError([f"{folder}: cannot read index.csv ({exc})"]) from None
-    for col in ("run_id", "status"):
-        if col not in index.columns:
-            problems.append(f"{folder}/index.csv: no '{col}' column (columns: {', '.join(map(str, index.columns))})")
-    if not problems and len(index) == 0:
-        problems.append(f"{folder}/index.csv: no runs")
-    if problems:
-        raise ReportInputError(problems)
-    if "message" not in index.columns:
-        index["message"] = ""
-    index["message"] = index["message"].fillna("").astype(str)
-    index["run_id"] = index["run_id"].astype(str)
-
-    by_name: dict[str, Path] = {}
     runs: list[RunData | None] = []
-    rows = index.to_dict("records")
-    ids = [str(r["run_id"]) for r in rows]
-    has_file_column = any(c in index.columns for c in RUN_FILE_COLUMNS)
-    if not has_file_column and any(_find_run_file(folder, r, i, {}) is None for r, i in zip(rows, ids)):
-        for p in sorted(folder.rglob("*.h5")):
-            try:
-                by_name.setdefault(str(read_attributes(p)["name"]), p)
-            except (OSError, NotAResultFile, KeyError):
-                continue
-    chunks: dict[Path, list[RunData] | None] = {}
-    for row, run_id in zip(rows, ids):
-        file = _find_run_file(folder, row, run_id, by_name)
-        if file is None:
+    files: dict[Path, list[RunData] | None] = {}
+    for row in index.to_dict("records"):
+        file, file_row = row.get("file"), row.get("file_row")
+        if not isinstance(file, str) or not file.strip():
             runs.append(None)
             continue
-        file_row = row.get("file_row")
+        p = folder / file
         try:
             if file_row is None or (isinstance(file_row, float) and math.isnan(file_row)):
-                runs.append(load_run(file, sweep=folder.name))
+                runs.append(load_run(p, sweep=folder.name))
                 continue
-            if file not in chunks:
-                chunks[file] = None
-                chunks[file] = load_chunk_runs(file, sweep=folder.name)
+            if p not in files:
+                files[p] = None
+                files[p] = load_chunk_runs(p, sweep=folder.name)
         except (FileNotFoundError, NotAResultFile) as exc:
             problems.append(str(exc))
             continue
-        in_file = chunks[file]
-        i = int(file_row)
+        in_file, i = files[p], int(file_row)
         if in_file is None:
             continue  # the file's problem is listed once
-        if not (0 <= i < len(in_file)) or in_file[i].name != run_id:
-            problems.append(f"{file}: row {i} is not run {run_id} (index.csv and the chunk file disagree)")
+        if not (0 <= i < len(in_file)) or in_file[i].name != row["run_id"]:
+            problems.append(f"{p}: row {i} is not run {row['run_id']} (index.csv and the store file disagree)")
             continue
         runs.append(in_file[i])
     if problems:
         raise ReportInputError(problems)
-    axes = _parameter_axes(index, spec)
+    random = spec.get("random") if isinstance(spec.get("random"), dict) else {}
+    axes = _parameter_axes(index, read_parameters(folder, index), set((random or {}).get("params") or {}))
     varied = [c for c, v in axes.items() if v.astype(str).nunique(dropna=False) > 1]
     return SweepData(folder, folder.name, spec, index, runs, list(axes), varied, axes)
 
@@ -658,7 +567,7 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
 
 
 def _load_file(path: Path) -> list[RunData]:
-    """The run of a run file, or every run of a chunk file."""
+    """The run of a run file, or every run of a store file."""
     from ..io.chunk import is_chunk_file
 
     return load_chunk_runs(path) if is_chunk_file(path) else [load_run(path)]

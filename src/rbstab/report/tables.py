@@ -55,7 +55,9 @@ SCALAR_SUMMARY_METRICS = {
     "lyapunov_rate_mismatch_relative": ("relative dv/dt mismatch", "1"),
 }
 #: Vector summary figures usable as ``--metric`` (name -> (symbol, units)); ``NAME`` is
-#: the largest |component|, ``NAME_1`` .. ``NAME_3`` the components.
+#: the largest |component|, ``NAME_x``, ``NAME_y``, ``NAME_z`` the components (the names of
+#: the sweep's ``index.csv`` columns and dataset variables; ``NAME_1`` .. ``_3`` are accepted
+#: as the old spelling).
 VECTOR_SUMMARY_METRICS = {
     "max_abs_constraint_error": ("max |E|", "m"),
     "final_theta": ("final Theta", "rad"),
@@ -68,8 +70,13 @@ VECTOR_SUMMARY_METRICS = {
 OTHER_METRICS = {
     "settling_time": ("settling time", "s"),
     "wall_time": ("wall time", "s"),
-    "nfev": ("right-hand side evaluations", "1"),
+    "solver_nfev": ("right-hand side evaluations", "1"),
+    "converged": ("converged (1) or not (0)", "1"),
 }
+#: Old metric names -> current ones.
+METRIC_ALIASES = {"nfev": "solver_nfev", **{
+    f"{key}_{i}": f"{key}_{axis}" for key in VECTOR_SUMMARY_METRICS for i, axis in zip("123", "xyz")}}
+_AXES = ("x", "y", "z")
 #: Metrics plotted against the varied parameters of a sweep when no ``--metric`` is given.
 DEFAULT_METRICS = ("max_abs_constraint_error", "lyapunov_final")
 
@@ -98,7 +105,7 @@ def allowed_metrics() -> list[str]:
     """Every name accepted by ``--metric``, sorted."""
     names = set(SCALAR_SUMMARY_METRICS) | set(OTHER_METRICS)
     for key in VECTOR_SUMMARY_METRICS:
-        names |= {key, f"{key}_1", f"{key}_2", f"{key}_3"}
+        names |= {key, *(f"{key}_{axis}" for axis in _AXES)}
     return sorted(names)
 
 
@@ -111,6 +118,7 @@ def validate_metrics(names: Sequence[str]) -> list[str]:
         Naming the unknown metrics and listing the allowed ones.
     """
     allowed = allowed_metrics()
+    names = [METRIC_ALIASES.get(n, n) for n in names]
     unknown = [n for n in names if n not in allowed]
     if unknown:
         raise ValueError(f"unknown metric {', '.join(map(repr, unknown))}; allowed: {', '.join(allowed)}")
@@ -121,8 +129,8 @@ def _split_metric(name: str) -> tuple[str, int | None]:
     if name in VECTOR_SUMMARY_METRICS:
         return name, None
     base, _, comp = name.rpartition("_")
-    if base in VECTOR_SUMMARY_METRICS and comp in ("1", "2", "3"):
-        return base, int(comp) - 1
+    if base in VECTOR_SUMMARY_METRICS and comp in _AXES:
+        return base, _AXES.index(comp)
     return name, None
 
 
@@ -131,7 +139,7 @@ def metric_label(name: str) -> str:
     base, comp = _split_metric(name)
     if base in VECTOR_SUMMARY_METRICS:
         symbol, units = VECTOR_SUMMARY_METRICS[base]
-        symbol = f"{symbol}_{comp + 1}" if comp is not None else f"{symbol} (largest component)"
+        symbol = f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"
     else:
         symbol, units = {**SCALAR_SUMMARY_METRICS, **OTHER_METRICS}[base]
     return f"{symbol} [{units}]" if units != "1" else symbol
@@ -178,7 +186,9 @@ def run_settling_time(run: RunData, thresholds: SettleThresholds) -> float:
     key = ("settling_time", thresholds.e, thresholds.omega)
     if key not in run._cache:
         s = run.series("constraint_error", "omega")
-        run._cache[key] = settling_time(s["time"], s["constraint_error"], s["omega"], thresholds)
+        held = all(n in s for n in ("time", "constraint_error", "omega"))  # not in a summary store
+        run._cache[key] = settling_time(s["time"], s["constraint_error"], s["omega"], thresholds) if held \
+            else float("nan")
         if run.sweep is not None:
             run.drop_series()  # a sweep may hold thousands of runs: keep only the figure
     return run._cache[key]
@@ -197,8 +207,10 @@ def metric_value(run: RunData | None, name: str, thresholds: SettleThresholds | 
         return run_settling_time(run, thresholds or SettleThresholds())
     if base == "wall_time":
         return float(run.wall_time)
-    if base == "nfev":
+    if base == "solver_nfev":
         return float(run.solver.get("nfev", np.nan))
+    if base == "converged":
+        return float("nan")  # a sweep's definition: read from its index (sweep_table)
     value = run.summary.get(base)
     if value is None:
         return float("nan")
@@ -353,11 +365,25 @@ def sweep_table(sweep: SweepData, metrics: Sequence[str], thresholds: SettleThre
         if name not in table.columns:
             table[name] = list(values)
     for name in metrics:
-        table[metric_column(name)] = [metric_value(run, name, thresholds) for run in sweep.runs]
+        table[metric_column(name)] = _index_metric(table, name, sweep, thresholds)
     table["report:settled"] = [
         bool(run is not None and run.ok and np.isfinite(run_settling_time(run, thresholds))) for run in sweep.runs
     ]
     return table
+
+
+def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThresholds):
+    """A metric of every run of a sweep: the index column of that name (the same names),
+    the largest |component| of a vector's columns, or read from the runs (settling time)."""
+    if name == "converged":
+        return table["converged"].astype(str).eq("True").astype(float).where(table["status"] == "success")
+    if name in table.columns:
+        return table[name].astype(float).where(table["status"] == "success")
+    base, comp = _split_metric(name)
+    columns = [f"{base}_{axis}" for axis in _AXES]
+    if base in VECTOR_SUMMARY_METRICS and comp is None and all(c in table.columns for c in columns):
+        return table[columns].astype(float).abs().max(axis=1, skipna=False).where(table["status"] == "success")
+    return [metric_value(run, name, thresholds) for run in sweep.runs]
 
 
 def metric_column(name: str) -> str:

@@ -8,13 +8,15 @@ Library entry points (the ``rbstab sweep`` command is a thin layer over them)::
     spec = load_spec("configs/sweeps/gains.yaml", overrides=["simulation.t_end=1"])
     runs = expand(spec)                        # every run validated; SweepSpecError if not
     outcome = run_sweep(spec, "results/sweeps", runs=runs, jobs=4)
-    # -> results/sweeps/<name>/{sweep.yaml, runs/<run_id>.h5, index.csv, sweep_summary.json}
+    # -> results/sweeps/<name>/{sweep.yaml, runs/chunk-*.h5, index.csv, sweep_summary.json}
+    ds = open_sweep("results/sweeps/gains_case3", grid=True)   # xarray, variant x k_c_0
 
 Modules: :mod:`~rbstab.sweep.spec` (spec loading, validation, expansion, run ids),
 :mod:`~rbstab.sweep.worker` (the unit of work: a chunk of runs -> records; engine hook),
 :mod:`~rbstab.sweep.executors` (local process pool, Dask), :mod:`~rbstab.sweep.runner`
-(resume, execution, output folder) and :mod:`~rbstab.sweep.index` (``index.csv``,
-``sweep_summary.json``, the convergence definition).
+(resume, execution) and :mod:`~rbstab.sweep.folder` (the folder's format: file names,
+parameter names, ``index.csv``, ``sweep_summary.json``, the convergence definition, and
+the reader :func:`open_sweep`).
 """
 
 import importlib
@@ -25,9 +27,9 @@ import importlib
 _SOURCES = {
     **dict.fromkeys(["EXECUTORS", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "default_jobs",
                      "make_executor"], "executors"),
-    **dict.fromkeys(["STATUSES", "is_converged"], "index"),
-    **dict.fromkeys(["DEFAULT_OUTPUT", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
-                     "SweepBusyError", "SweepOutcome", "rebuild_index", "run_sweep"], "runner"),
+    **dict.fromkeys(["STATUSES", "is_converged", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
+                     "open_sweep", "parameter_name", "read_index"], "folder"),
+    **dict.fromkeys(["DEFAULT_OUTPUT", "SweepBusyError", "SweepOutcome", "rebuild_index", "run_sweep"], "runner"),
     **dict.fromkeys(["DEFAULT_LYAPUNOV_RATIO", "DISTRIBUTIONS", "PlannedRun", "SweepSpec", "SweepSpecError",
                      "expand", "load_spec", "spec_from_mapping"], "spec"),
     **dict.fromkeys(["ENGINES", "RunTask", "WorkerOptions", "run_chunk"], "worker"),
@@ -50,6 +52,9 @@ def __dir__() -> list[str]:
 __all__ = [
     "load_spec",
     "spec_from_mapping",
+    "open_sweep",
+    "read_index",
+    "parameter_name",
     "expand",
     "run_sweep",
     "rebuild_index",

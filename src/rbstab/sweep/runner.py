@@ -3,16 +3,19 @@
 Output folder ``<output>/<name>/`` (Hydra-like, it describes itself)::
 
     sweep.yaml           the resolved spec (bases inline, --set applied) + provenance
-    runs/<run_id>.h5     one result file per run, the format of ``rbstab run`` (layout "run")
-    runs/chunk-*.h5      or one file per chunk of runs (layout "chunk", :mod:`rbstab.io.chunk`)
-    index.csv            one row per run (see :mod:`rbstab.sweep.index`)
+    runs/chunk-*.h5      store files, one per chunk of runs (layout "chunk", the default,
+                         :mod:`rbstab.io.chunk`)
+    runs/<run_id>.h5     or one result file per run, the format of ``rbstab run`` (layout "run")
+    index.csv            one row per run
     sweep_summary.json   counts, fraction converged
 
-Resume: a run is skipped when a result of it is on disk (its file ``runs/<run_id>.h5`` or
-a row of a chunk file) whose ``config_hash`` equals the hash of the run's resolved config
+The names and columns are those of :mod:`rbstab.sweep.folder`, which also reads the folder.
+
+Resume: a run is skipped when a result of it is on disk (a row of a store file or its file
+``runs/<run_id>.h5``) whose ``config_hash`` equals the hash of the run's resolved config
 (with ``retry_failed``, only if its status is also ``success``); of several, the newest
-counts. Every other run is executed and its file replaced (layout "run") or written to a
-new chunk file (layout "chunk"; a killed chunk is rerun whole).
+counts. Every other run is executed and written to a new store file (a killed chunk is
+rerun whole) or its file replaced (layout "run").
 
 Nothing is lost when the sweep is killed (even with SIGKILL): each worker writes its
 run's file to a temporary name and renames it into place when complete, so a final name
@@ -39,9 +42,30 @@ import yaml
 from .. import __version__
 from .executors import Executor, make_executor
 from ..io.atomic import write_bytes_atomic, write_text_atomic
-from .index import index_rows, summarize_rows, write_index, write_summary
+from .folder import (
+    CHUNK_GLOB,
+    DEFAULT_LAYOUT,
+    INDEX_FILE,
+    LAYOUTS,
+    LOCK_FILE,
+    RUNS_DIR,
+    SPEC_FILE,
+    SUMMARY_FILE,
+    current_rows,
+    index_rows,
+    parameter_columns,
+    run_coords,
+    summarize_rows,
+    write_index,
+    write_summary,
+)
 from .spec import PlannedRun, SweepSpec, expand
+from ..io.chunk import DEFAULT_STORE, STORES
 from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk
+
+#: Runs per store file (and unit of work) by default: writing costs little per run, and a
+#: chunk of 512 Case 3 runs holds ~120 MB of full traces in a worker before they are written.
+STORE_CHUNK_SIZE = 512
 
 __all__ = [
     "run_sweep",
@@ -58,15 +82,6 @@ __all__ = [
 
 #: Default parent folder of sweep folders.
 DEFAULT_OUTPUT = "results/sweeps"
-SPEC_FILE = "sweep.yaml"
-INDEX_FILE = "index.csv"
-SUMMARY_FILE = "sweep_summary.json"
-RUNS_DIR = "runs"
-LOCK_FILE = ".lock"
-#: Chunk files in ``runs/`` (layout "chunk").
-CHUNK_GLOB = "chunk-*.h5"
-#: How a sweep stores its runs: one file per run, or one per chunk (:mod:`rbstab.io.chunk`).
-LAYOUTS = ("run", "chunk")
 
 
 class SweepBusyError(RuntimeError):
@@ -202,80 +217,10 @@ def _spec_document(spec: SweepSpec, runs: Sequence[PlannedRun], command_line: st
     return doc
 
 
-def _read_attrs(path: Path) -> dict | None:
-    from ..io.hdf5 import NotAResultFile, read_attributes
-
-    try:
-        return read_attributes(path)
-    except (FileNotFoundError, NotAResultFile, OSError, KeyError):
-        return None
-
-
-def _chunk_rows(runs_dir: Path) -> dict[str, list[dict]]:
-    """run_id -> its rows in the chunk files of ``runs_dir`` (unreadable files are ignored)."""
-    from ..io.chunk import read_chunk_rows
-    from ..io.hdf5 import NotAResultFile
-
-    rows: dict[str, list[dict]] = {}
-    for path in sorted(runs_dir.glob(CHUNK_GLOB)):
-        try:
-            for row in read_chunk_rows(path):
-                rows.setdefault(row["name"], []).append(row)
-        except (FileNotFoundError, NotAResultFile, OSError, KeyError):
-            continue
-    return rows
-
-
-def _current(run: PlannedRun, runs_dir: Path, chunk_rows: Mapping[str, list[dict]]) -> dict | None:
-    """Attributes of the newest result of ``run`` on disk made from its current config, or None."""
-    candidates = list(chunk_rows.get(run.run_id, ()))
-    path = runs_dir / f"{run.run_id}.h5"
-    if path.exists():
-        attrs = _read_attrs(path)
-        if attrs is not None:
-            candidates.append(attrs)
-    current = [a for a in candidates if a.get("config_hash") == run.config_hash and a.get("status") != "error"]
-    return max(current, key=lambda a: str(a.get("created", ""))) if current else None
-
-
-def _scan(runs: Sequence[PlannedRun], runs_dir: Path, retry_failed: bool,
-          chunk_rows: Mapping[str, list[dict]] | None = None) -> tuple[dict, list]:
-    """(run_id -> attrs of its current result, runs to execute); ``chunk_rows`` as
-    :func:`_chunk_rows` gives them (read here when not given)."""
-    if chunk_rows is None:
-        chunk_rows = _chunk_rows(runs_dir)
-    done: dict[str, dict] = {}
-    todo: list[PlannedRun] = []
-    for run in runs:
-        attrs = _current(run, runs_dir, chunk_rows)
-        if attrs is not None and not (retry_failed and attrs.get("status") != "success"):
-            done[run.run_id] = attrs
-        else:
-            todo.append(run)
-    return done, todo
-
-
-def _stale_files(runs: Sequence[PlannedRun], runs_dir: Path, chunk_rows: Mapping[str, list[dict]]) -> list[str]:
-    """Result files in ``runs_dir`` that hold no run of ``runs`` (run files by name, chunk
-    files by their rows, ``chunk_rows`` as :func:`_chunk_rows` gives them)."""
-    ids = {r.run_id for r in runs}
-    stale = [p.name for p in runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
-    used = {row["file"] for rows in chunk_rows.values() for row in rows if row["name"] in ids}
-    stale += [p.name for p in runs_dir.glob(CHUNK_GLOB) if p.name not in used]
-    return sorted(stale)
-
-
-def _chunks(tasks: list[RunTask], size: int) -> list[list[RunTask]]:
-    return [tasks[i : i + size] for i in range(0, len(tasks), size)]
-
-
-def _even_chunks(tasks: list[RunTask], size: int, workers: int | None) -> list[list[RunTask]]:
-    """Chunks of at most ``size`` runs, and at most ``ceil(n / workers)`` so that every
-    worker gets a share of a small sweep, split into chunks of nearly equal length.
-
-    Any runs share a chunk: the compiled engine integrates runs of different variants,
-    bodies and gains together.
-    """
+def _chunks(tasks: list[RunTask], size: int, workers: int | None) -> list[list[RunTask]]:
+    """Consecutive runs in run-list order, any runs together: chunks of at most ``size``
+    runs, and at most ``ceil(n / workers)`` so that every worker gets a share of a small
+    sweep, of nearly equal length."""
     if not tasks:
         return []
     if workers and workers > 1:
@@ -283,6 +228,18 @@ def _even_chunks(tasks: list[RunTask], size: int, workers: int | None) -> list[l
     n = math.ceil(len(tasks) / size)
     bounds = [round(i * len(tasks) / n) for i in range(n + 1)]
     return [tasks[a:b] for a, b in zip(bounds, bounds[1:])]
+
+
+def _check_time_grids(runs: Sequence[PlannedRun], store: str, layout: str) -> None:
+    """Traces in a store file share one time axis: refuse a sweep whose runs differ in it."""
+    if layout != "chunk" or store == "summary":
+        return
+    grids = {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs}
+    if len(grids) > 1:
+        raise ValueError(
+            f"the runs have {len(grids)} different sample grids (simulation.t_end, n_samples); "
+            f"a store file with traces ('--store {store}') needs one: use --store summary or --layout run"
+        )
 
 
 def resolve_engine(engine: str | None, timeout: float | None) -> str:
@@ -345,8 +302,8 @@ def run_sweep(
     retry_failed: bool = False,
     chunk_size: int | None = None,
     engine: str | None = None,
-    store: str = "full",
-    layout: str = "run",
+    store: str = DEFAULT_STORE,
+    layout: str = DEFAULT_LAYOUT,
     progress: bool | None = None,
     command_line: str | None = None,
     log: Callable[[str], None] | None = None,
@@ -420,17 +377,16 @@ def run_sweep(
     say = log or (lambda message: None)
     if runs is None:
         runs = expand(spec)
-    from ..io.hdf5 import STORE_MODES
-
     engine = resolve_engine(engine, timeout)
     if layout not in LAYOUTS:
         raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
     if chunk_size is None:
-        chunk_size = DEFAULT_CHUNK_SIZE["compiled" if layout == "chunk" else engine]
+        chunk_size = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    if store not in STORE_MODES:
-        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
+    if store not in STORES:
+        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
+    _check_time_grids(runs, store, layout)
     if command_line is None:
         command_line = " ".join(sys.argv)
     # the executor first: a missing package or an unreachable scheduler writes nothing
@@ -446,7 +402,8 @@ def run_sweep(
         _run_locked(spec, runs, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
                     chunk_size=chunk_size, progress=progress, say=say,
                     options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
-                                          store=store, layout=layout))
+                                          store=store, layout=layout, parameters=parameter_columns(runs),
+                                          sweep=spec.name))
     return outcome
 
 
@@ -467,9 +424,10 @@ def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, c
                     say(f"note: the spec differs from the one in {spec_path}; runs whose config changed are rerun")
         write_text_atomic(spec_path, _dump_yaml(doc))
 
-        chunk_rows = _chunk_rows(runs_dir)  # every chunk file read once
-        outcome.stale_files = _stale_files(runs, runs_dir, chunk_rows)
-        attrs, todo = _scan(runs, runs_dir, retry_failed, chunk_rows)
+        attrs, outcome.stale_files = current_rows(runs, runs_dir)
+        if retry_failed:
+            attrs = {k: v for k, v in attrs.items() if v.get("status") == "success"}
+        todo = [run for run in runs if run.run_id not in attrs]
         outcome.n_skipped = len(attrs)
         errors: dict[str, str] = {}
         if not todo:
@@ -488,22 +446,18 @@ def _collect_finished(todo: Sequence[PlannedRun], runs_dir: Path, attrs: dict, e
     missing = [run for run in todo if run.run_id not in attrs]
     if not missing:
         return
-    chunk_rows = _chunk_rows(runs_dir)
-    for run in missing:
-        a = _current(run, runs_dir, chunk_rows)
-        if a is not None:
-            attrs[run.run_id] = a
-            errors.pop(run.run_id, None)
+    found, _ = current_rows(missing, runs_dir)
+    for run_id, row in found.items():
+        attrs[run_id] = row
+        errors.pop(run_id, None)
 
 
 def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chunk_size, progress, say,
              options) -> None:
     folder = str(runs_dir.resolve())
-    tasks = [RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5")) for r in todo]
-    if (options.engine == "compiled" or options.layout == "chunk") and chunk_size > 1:
-        chunks = _even_chunks(tasks, chunk_size, ex.parallelism())
-    else:
-        chunks = _chunks(tasks, chunk_size)
+    tasks = [RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
+                     {name: value for name, (_, value) in run_coords(r.params).items()}) for r in todo]
+    chunks = _chunks(tasks, chunk_size, ex.parallelism())
     if ex.return_bytes:
         options = dataclasses.replace(options, return_bytes=True)
     by_id = {r.run_id: r for r in todo}
@@ -535,14 +489,14 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
                 elif rec.get("attrs") is not None and rec["status"] != "error":
                     a = rec["attrs"]  # what the worker just wrote: no need to reopen the file
                 else:
-                    a = _read_attrs(path)
+                    a = current_rows([by_id[rid]], runs_dir)[0].get(rid)
                 for key, seconds in (rec.get("timing") or {}).items():
                     outcome.timing[key] = outcome.timing.get(key, 0.0) + seconds
                 if rec.get("worker_peak_rss"):
                     outcome.worker_peak_rss = max(outcome.worker_peak_rss or 0, rec["worker_peak_rss"])
                 # the worker wrote it from this run's config; after an error (e.g. a
                 # worker that died after writing) only a file with the run's hash counts
-                if a is not None and a.get("name") == rid and (
+                if a is not None and a.get("run_id") == rid and (
                     rec["status"] != "error" or a.get("config_hash") == by_id[rid].config_hash
                 ):
                     attrs[rid] = a
@@ -565,7 +519,7 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
     rows = index_rows(runs, attrs, errors, spec.lyapunov_ratio)
     write_index(outcome.directory / INDEX_FILE, rows)
-    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio)
+    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameter_columns(runs))
     write_summary(outcome.directory / SUMMARY_FILE, summary)
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
@@ -584,7 +538,7 @@ def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *
         raise FileNotFoundError(f"no sweep folder {directory}")
     outcome = SweepOutcome(spec.name, directory, len(runs))
     with _lock(directory):
-        attrs, _ = _scan(runs, directory / RUNS_DIR, retry_failed=False)
+        attrs, _ = current_rows(runs, directory / RUNS_DIR)
         outcome.n_skipped = len(attrs)
         _finish(spec, runs, attrs, {}, outcome)
     return outcome

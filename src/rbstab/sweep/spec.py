@@ -54,7 +54,6 @@ from __future__ import annotations
 import copy
 import dataclasses
 import functools
-import hashlib
 import itertools
 import json
 import math
@@ -722,7 +721,15 @@ def load_spec(path: str | Path, overrides: Sequence[str] = ()) -> SweepSpec:
         data = read_yaml_file(path, "sweep spec")
     except ConfigError as exc:
         raise SweepSpecError(exc.errors, exc.source) from None
+    if is_run_config(data):  # a config varied from the command line (--grid, --random, ...)
+        data = {"base": path.name}
     return spec_from_mapping(data, source=str(path), default_name=path.stem, overrides=overrides)
+
+
+def is_run_config(data: Any) -> bool:
+    """Whether a parsed YAML file is a run config rather than a sweep spec (no ``base``,
+    and a ``body`` or ``controller`` section)."""
+    return isinstance(data, Mapping) and "base" not in data and ("body" in data or "controller" in data)
 
 
 # -- expansion --------------------------------------------------------------------------------
@@ -756,17 +763,17 @@ class PlannedRun:
 
     @functools.cached_property
     def config_hash(self) -> str:
-        """SHA-256 of ``config.to_yaml()``: the ``config_hash`` attribute of its result file."""
-        from ..io.hdf5 import config_hash
-
-        return config_hash(self.config.to_yaml())
+        """SHA-256 of the resolved config without its name (:func:`resolved_hash`): the
+        ``config_hash`` of its stored result."""
+        return resolved_hash(self.config.resolved)
 
 
 def resolved_hash(resolved: Mapping) -> str:
-    """SHA-256 hex digest of a resolved configuration without its ``name`` (canonical JSON)."""
-    body = {k: v for k, v in resolved.items() if k != "name"}
-    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)
-    return hashlib.sha256(text.encode()).hexdigest()
+    """SHA-256 hex digest of a resolved configuration without its ``name`` (canonical JSON,
+    :func:`rbstab.io.hdf5.canonical_config`)."""
+    from ..io.hdf5 import canonical_config, config_hash
+
+    return config_hash(canonical_config(resolved))
 
 
 def run_id(index: int, n_runs: int, digest: str) -> str:
@@ -906,12 +913,15 @@ def _plan_run(
                 first = known.with_initial_state(data.get("initial_state"), source=source)
     except ConfigError as exc:
         return None, exc.errors
-    rid = run_id(index, spec.n_runs, resolved_hash(first.resolved))
+    digest = resolved_hash(first.resolved)
+    rid = run_id(index, spec.n_runs, digest)
     # only the name changes: no need to validate again
     config = dataclasses.replace(first, name=rid, resolved={**first.resolved, "name": rid})
     ordered = {k: params[k] for k in spec.varied_keys if k in params}
     ordered.update({k: v for k, v in params.items() if k not in ordered})
-    return PlannedRun(index, rid, base.label, ordered, config), []
+    run = PlannedRun(index, rid, base.label, ordered, config)
+    run.__dict__["config_hash"] = digest  # the name is not part of it
+    return run, []
 
 
 def expand(spec: SweepSpec) -> list["PlannedRun"]:

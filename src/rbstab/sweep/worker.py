@@ -39,7 +39,7 @@ import time as _time
 import traceback
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -57,11 +57,20 @@ class RunTask:
         The resolved configuration (``RunConfig.resolved``, ``name == run_id``).
     path : str
         Final result file (``<sweep>/runs/<run_id>.h5``).
+    index : int
+        Position in the sweep's run list (the ``run`` coordinate of the store).
+    base : str
+        Label of its base configuration.
+    coords : dict
+        Parameter coordinate name -> value (:func:`rbstab.sweep.folder.run_coords`).
     """
 
     run_id: str
     config: dict
     path: str
+    index: int = 0
+    base: str = ""
+    coords: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -82,18 +91,24 @@ class WorkerOptions:
         share the sweep's filesystem (Dask). The parent writes them with
         :func:`rbstab.io.atomic.write_bytes_atomic`.
     store : str
-        ``"full"`` or ``"summary"`` (:data:`rbstab.io.hdf5.STORE_MODES`).
+        ``"full"``, ``"thinned"`` or ``"summary"`` (:data:`rbstab.io.chunk.STORES`).
     layout : str
-        ``"run"``: one result file per run (``task.path``); ``"chunk"``: one file for
-        the runs of a chunk (:mod:`rbstab.io.chunk`) beside them. Key of :data:`SINKS`.
+        ``"chunk"``: one store file for the runs of a chunk (:mod:`rbstab.io.chunk`);
+        ``"run"``: one result file per run (``task.path``). Key of :data:`SINKS`.
+    parameters : dict
+        Parameter coordinate name -> dotted config key (the store's ``config_key``).
+    sweep : str
+        The sweep's name (an attribute of each store file).
     """
 
     timeout: float | None = None
     command_line: str | None = None
     engine: str = "scipy"
     return_bytes: bool = False
-    store: str = "full"
-    layout: str = "run"
+    store: str = "thinned"
+    layout: str = "chunk"
+    parameters: dict = field(default_factory=dict)
+    sweep: str = ""
 
 
 def _config(task: RunTask):
@@ -131,6 +146,7 @@ class _RunFiles:
     def add(self, task: RunTask, result) -> dict[str, Any]:
         """Write ``result``'s file (or its bytes); the record of a finished run."""
         from ..io.hdf5 import write_run
+        from .folder import row_from_attributes
 
         options = self.options
         record: dict[str, Any] = {"run_id": task.run_id, "path": task.path}
@@ -146,36 +162,40 @@ class _RunFiles:
         else:
             attrs = write_run(result, task.path, command_line=options.command_line, store=options.store,
                               config_yaml=config_yaml)
-        return _finished(record, result, attrs, t1 - t0, _time.perf_counter() - t1)
+        row = row_from_attributes(attrs, Path(task.path).name)
+        return _finished(record, result, row, t1 - t0, _time.perf_counter() - t1)
 
     def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
         return _error_record(task, exc)
 
 
-def _finished(record: dict[str, Any], result, attrs: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
+def _finished(record: dict[str, Any], result, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
     timing = dict(result.timing)
     timing["config_yaml"] = yaml_time
     timing["write"] = write_time
-    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=attrs,
+    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=row,
                   timing=timing)
     return record
 
 
 class _ChunkFile:
-    """Where finished runs go with ``layout="chunk"``: one file for the chunk
+    """Where finished runs go with ``layout="chunk"``: one store file for the chunk
     (:class:`rbstab.io.chunk.ChunkWriter`), ``runs/chunk-<first run id>-<random>.h5`` in
-    the folder of the tasks' paths. Records name the chunk file as their ``path``; their
+    the folder of the tasks' paths. Records name the store file as their ``path``; their
     ``attrs`` are the run's row (:func:`rbstab.io.chunk.read_chunk_rows`)."""
 
     def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions) -> None:
-        from ..io.chunk import ChunkWriter, chunk_file_name
+        from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name
 
         self.options = options
-        name = chunk_file_name(tasks[0].run_id)
-        self.final = str(Path(tasks[0].path).parent / name)
+        first = min(tasks, key=lambda t: t.index)
+        name = chunk_file_name(first.run_id)
+        self.final = str(Path(first.path).parent / name)
         self._tmp = tempfile.TemporaryDirectory(prefix="rbstab-") if options.return_bytes else None
         where = Path(self._tmp.name) / name if self._tmp else Path(self.final)
-        self.writer = ChunkWriter(where, len(tasks), store=options.store, command_line=options.command_line)
+        rows = [StoreRow(t.index, t.run_id, t.base, t.coords) for t in tasks]
+        self.writer = ChunkWriter(where, rows, store=options.store, parameters=options.parameters,
+                                  command_line=options.command_line, sweep=options.sweep)
         self.records: list[dict[str, Any]] = []
 
     def __enter__(self) -> "_ChunkFile":
@@ -192,10 +212,12 @@ class _ChunkFile:
                 self._tmp.cleanup()
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
+        from ..io.hdf5 import canonical_config
+
         t0 = _time.perf_counter()
-        config_yaml = result.config.to_yaml()
+        text = canonical_config(result.config.resolved)
         t1 = _time.perf_counter()
-        row = self.writer.add(result, config_yaml)
+        row = self.writer.add(task.run_id, result, text)
         record = _finished({"run_id": task.run_id, "path": self.final}, result, row, t1 - t0,
                            _time.perf_counter() - t1)
         self.records.append(record)

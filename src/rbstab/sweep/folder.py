@@ -1,0 +1,568 @@
+"""The sweep folder's format: file names, parameter names, index columns, and the reader.
+
+Every part of rbstab that writes or reads a sweep folder goes through this module: the
+runner (planning, resume, the index), ``rbstab show DIR``, ``rbstab report`` and
+:func:`open_sweep`. ::
+
+    <output>/<name>/
+      sweep.yaml           the resolved spec (bases inline, overrides applied) + provenance
+      runs/chunk-*.h5      store files, one per chunk of runs (layout "chunk", the default;
+                           format: :mod:`rbstab.io.chunk`)
+      runs/<run_id>.h5     or one result file per run (layout "run", :mod:`rbstab.io.hdf5`)
+      index.csv            one row per run, the columns of :func:`index_columns`
+      sweep_summary.json   counts per status, converged fraction (overall and per base)
+
+Parameter names
+---------------
+A varied config key becomes a coordinate (and an ``index.csv`` column) named by
+:func:`parameter_name`: the key's field name, with list indices appended by ``_``::
+
+    body.mass -> mass             controller.variant -> variant
+    controller.k_c.0 -> k_c_0     controller.k_t.2.2 -> k_t_2_2
+    initial_state.omega -> omega_0, omega_1, omega_2 (a whole 3-vector, per component)
+    body.mass:scale -> mass_scale (the factor of a scale_uniform draw)
+
+Every field name of the config schema is unique across its sections, so the map is one to
+one; each coordinate's ``config_key`` attribute (and ``sweep_summary.json``'s
+``parameters``) gives the dotted key back.
+"""
+
+from __future__ import annotations
+
+import csv
+import functools
+import datetime as _dt
+import io
+import json
+import math
+import os
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..io.atomic import write_text_atomic
+
+__all__ = [
+    "SPEC_FILE",
+    "INDEX_FILE",
+    "SUMMARY_FILE",
+    "RUNS_DIR",
+    "LOCK_FILE",
+    "CHUNK_GLOB",
+    "LAYOUTS",
+    "DEFAULT_LAYOUT",
+    "STATUSES",
+    "parameter_name",
+    "parameter_columns",
+    "run_coords",
+    "row_from_attributes",
+    "index_rows",
+    "index_columns",
+    "write_index",
+    "read_index",
+    "summarize_rows",
+    "write_summary",
+    "is_converged",
+    "is_sweep_folder",
+    "read_spec",
+    "current_rows",
+    "open_sweep",
+]
+
+SPEC_FILE = "sweep.yaml"
+INDEX_FILE = "index.csv"
+SUMMARY_FILE = "sweep_summary.json"
+RUNS_DIR = "runs"
+LOCK_FILE = ".lock"
+#: Store files in ``runs/`` (layout "chunk").
+CHUNK_GLOB = "chunk-*.h5"
+#: How a sweep stores its runs: store files of many runs (default), or one file per run.
+LAYOUTS = ("chunk", "run")
+DEFAULT_LAYOUT = "chunk"
+#: Values of the ``status`` column.
+STATUSES = ("success", "failed", "error", "pending")
+_SOLVER = ("solver_nfev", "solver_njev", "solver_nlu", "solver_status")
+_HEAD = ("run_id", "run", "base")
+_MIDDLE = ("variant", "status", "converged", "message", "wall_time")
+_TAIL = (*_SOLVER, "config_hash", "file", "file_row")
+
+
+# -- names ----------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=4096)
+def parameter_name(key: str) -> str:
+    """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``."""
+    key, scale = (key[: -len(":scale")], True) if key.endswith(":scale") else (key, False)
+    parts = key.split(".")
+    fields = [i for i, p in enumerate(parts) if not p.isdigit()]
+    last = fields[-1] if fields else 0
+    name = "_".join(parts[last:])
+    name = re.sub(r"\W", "_", name)
+    if not name or name[0].isdigit():
+        name = f"p_{name}"
+    return f"{name}_scale" if scale else name
+
+
+def _flat_values(key: str, value: Any, suffix: str, out: dict[str, tuple[str, Any]]) -> None:
+    if isinstance(value, (list, tuple)):
+        for i, v in enumerate(value):
+            _flat_values(f"{key}.{i}", v, suffix, out)
+    else:
+        out[parameter_name(key + suffix)] = (key + suffix, value)
+
+
+def run_coords(params: Mapping[str, Any]) -> dict[str, tuple[str, Any]]:
+    """Coordinate name -> (dotted key of the entry, value) of a run's varied values.
+
+    Lists are split per entry (``controller.k_c`` -> ``k_c_0`` .. ``k_c_2``); a
+    ``scale_uniform`` factor ``body.mass:scale`` is ``mass_scale``, per entry for list
+    bounds (``body.inertia.0:scale`` -> ``inertia_0_scale``).
+    """
+    out: dict[str, tuple[str, Any]] = {}
+    for key, value in params.items():
+        base, scale = (key[: -len(":scale")], ":scale") if key.endswith(":scale") else (key, "")
+        _flat_values(base, value, scale, out)
+    return out
+
+
+def parameter_columns(runs: Iterable[Any]) -> dict[str, str]:
+    """Coordinate name -> dotted config key (of the entry) of every varied value of ``runs``.
+
+    Raises
+    ------
+    ValueError
+        If two different keys would get one name (not possible with the config schema's
+        field names, whose names are unique across sections; checked all the same).
+    """
+    names: dict[str, str] = {}
+    for run in runs:
+        for name, (key, _) in run_coords(run.params).items():
+            if names.setdefault(name, key) != key:
+                raise ValueError(f"parameters {names[name]!r} and {key!r} would both be named {name!r}")
+    return names
+
+
+def config_key_of(entry: str) -> str:
+    """The config key of a parameter entry: ``controller.k_c.2`` -> ``controller.k_c``,
+    ``body.inertia.0:scale`` -> ``body.inertia``."""
+    return re.sub(r"(\.\d+)+$", "", entry.removesuffix(":scale"))
+
+
+def read_parameters(folder: str | os.PathLike, index=None) -> dict[str, str]:
+    """Parameter column -> dotted config key (of the entry) of a sweep folder, from
+    ``sweep_summary.json`` (the columns between ``base`` and ``variant`` of the index,
+    mapped to themselves, when it is missing)."""
+    try:
+        data = json.loads((Path(folder) / SUMMARY_FILE).read_text(encoding="utf-8"))
+        parameters = data.get("parameters")
+        if isinstance(parameters, dict):
+            return {str(k): str(v) for k, v in parameters.items()}
+    except (OSError, ValueError):
+        pass
+    index = read_index(folder) if index is None else index
+    return {c: c for c in _parameter_set(index)}
+
+
+# -- rows and the index ---------------------------------------------------------------------------
+
+
+def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
+    """A run file's global attributes (:func:`rbstab.io.hdf5.read_attributes`) as an index row."""
+    from ..io.chunk import summary_columns
+
+    row = {k: attrs.get(k) for k in ("variant", "status", "message", "wall_time")}
+    row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}))
+    row.update({k: attrs.get(k) for k in _SOLVER})
+    row.update(config_hash=attrs.get("config_hash"), created=attrs.get("created"), file=file, file_row=None)
+    row["run_id"] = attrs.get("name")
+    return row
+
+
+def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
+    """Whether a run converged: it succeeded and ``v(t_end) <= ratio * v(0)``.
+
+    v is the variant's Lyapunov function, zero at the equilibrium, so this says that the
+    run lost all but ``ratio`` of its initial "energy" within ``t_end``. A run that failed
+    (gimbal lock, solver failure, timeout) never converged.
+    """
+    if status != "success":
+        return False
+    try:
+        v0, v1 = float(lyapunov_initial), float(lyapunov_final)
+    except (TypeError, ValueError):
+        return False
+    return math.isfinite(v0) and math.isfinite(v1) and v1 <= ratio * v0
+
+
+def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
+               ratio: float) -> list[dict[str, Any]]:
+    """One index row per run of ``runs`` (:class:`~rbstab.sweep.spec.PlannedRun`), in run order.
+
+    Parameters
+    ----------
+    rows : mapping run_id -> its current stored row (:func:`current_rows`, or a worker's record)
+    errors : mapping run_id -> message
+        Runs whose worker raised (no result): status ``error``.
+    ratio : float
+        ``convergence.lyapunov_ratio`` (:func:`is_converged`).
+    """
+    out = []
+    for run in runs:
+        row: dict[str, Any] = {"run_id": run.run_id, "run": run.index, "base": run.base}
+        row.update({name: value for name, (_, value) in run_coords(run.params).items()})
+        row["variant"] = run.config.variant
+        stored = rows.get(run.run_id)
+        if stored is not None:
+            row.update({k: v for k, v in stored.items() if k not in row and k not in ("config", "created", "store")})
+            row["file"] = f"{RUNS_DIR}/{stored['file']}" if stored.get("file") else None
+            row["converged"] = is_converged(row.get("status", ""), row.get("lyapunov_initial"),
+                                            row.get("lyapunov_final"), ratio)
+        elif run.run_id in errors:
+            row.update(status="error", converged=False, message=errors[run.run_id])
+        else:
+            row.update(status="pending", converged=False, message="not run yet (rerun the sweep to finish it)")
+        out.append(row)
+    return out
+
+
+def index_columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """Column order of ``index.csv``: run_id, run, base, the parameters, variant, status,
+    converged, message, wall_time, the summary columns, solver_*, config_hash, file, file_row."""
+    fixed = set(_HEAD + _MIDDLE + _TAIL)
+    params: dict[str, None] = {}
+    summary: dict[str, None] = {}
+    for row in rows:
+        in_params = True
+        for key in row:
+            if key == "status":
+                in_params = False
+            if key not in fixed:
+                (params if in_params else summary)[key] = None
+    from ..io.chunk import SUMMARY_FIGURES
+
+    order = {name: i for i, name in enumerate(SUMMARY_FIGURES)}
+    ranked = sorted(summary, key=lambda c: (order.get(re.sub(r"_[xyz]$", "", c), len(order)), c))
+    return [*_HEAD, *params, *_MIDDLE, *ranked, *_TAIL]
+
+
+def _cell(value: Any) -> Any:
+    return json.dumps(value) if isinstance(value, (list, dict)) else value
+
+
+def write_index(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
+    """Write ``rows`` as ``index.csv`` (columns of :func:`index_columns`), atomically."""
+    columns = index_columns(rows)
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([_cell(row.get(c)) for c in columns])
+    return write_text_atomic(path, buf.getvalue())
+
+
+def read_index(folder: str | os.PathLike):
+    """``index.csv`` of a sweep folder as a pandas DataFrame (``message`` as text).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the folder has no index.
+    ValueError
+        If it cannot be parsed or lacks ``run_id``/``status``.
+    """
+    import pandas as pd
+
+    path = Path(folder) / INDEX_FILE
+    try:
+        index = pd.read_csv(path, keep_default_na=True)
+    except pd.errors.ParserError as exc:
+        raise ValueError(f"{path}: cannot read ({exc})") from None
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"{path}: empty") from None
+    missing = [c for c in ("run_id", "status") if c not in index.columns]
+    if missing:
+        raise ValueError(f"{path}: no column {', '.join(missing)} (columns: {', '.join(map(str, index.columns))})")
+    index["message"] = index["message"].fillna("").astype(str) if "message" in index else ""
+    index["run_id"] = index["run_id"].astype(str)
+    return index
+
+
+def _counts(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    status = {s: 0 for s in STATUSES}
+    for row in rows:
+        status[row["status"]] = status.get(row["status"], 0) + 1
+    n = len(rows)
+    converged = sum(1 for r in rows if r.get("converged"))
+    return {"n_runs": n, "status": status, "n_converged": converged,
+            "fraction_converged": converged / n if n else 0.0}
+
+
+def summarize_rows(rows: Sequence[Mapping[str, Any]], *, name: str, ratio: float,
+                   parameters: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The content of ``sweep_summary.json``: counts, converged fraction, per base, parameters."""
+    out: dict[str, Any] = {"name": name, **_counts(rows)}
+    out["convergence"] = {
+        "lyapunov_ratio": ratio,
+        "definition": "converged = status == 'success' and lyapunov_final <= lyapunov_ratio * lyapunov_initial",
+    }
+    bases = list(dict.fromkeys(r["base"] for r in rows))
+    if len(bases) > 1:
+        out["by_base"] = {b: _counts([r for r in rows if r["base"] == b]) for b in bases}
+    out["parameters"] = dict(parameters or {})
+    out["wall_time_total"] = sum(float(r["wall_time"]) for r in rows if r.get("wall_time") is not None)
+    out["updated"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    out["index"] = INDEX_FILE
+    out["spec"] = SPEC_FILE
+    return out
+
+
+def write_summary(path: Path, summary: Mapping[str, Any]) -> Path:
+    """Write ``summary`` as indented JSON, atomically."""
+    return write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
+
+
+# -- reading a folder -----------------------------------------------------------------------------
+
+
+def is_sweep_folder(path: str | os.PathLike) -> bool:
+    """True when ``path`` is a folder with ``sweep.yaml`` and ``index.csv``."""
+    p = Path(path)
+    return p.is_dir() and (p / SPEC_FILE).is_file() and (p / INDEX_FILE).is_file()
+
+
+def read_spec(folder: str | os.PathLike) -> dict:
+    """``sweep.yaml`` of a sweep folder, parsed (the resolved spec and its ``generated`` block).
+
+    Raises
+    ------
+    OSError, ValueError
+        If it is missing, not YAML or not a mapping.
+    """
+    import yaml
+
+    path = Path(folder) / SPEC_FILE
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
+    except yaml.YAMLError as exc:
+        raise ValueError(f"{path}: not valid YAML ({exc})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{path}: not a YAML mapping")
+    return data
+
+
+def _chunk_rows(runs_dir: Path) -> dict[str, list[dict]]:
+    """run_id -> its rows in the store files of ``runs_dir`` (unreadable files are ignored)."""
+    from ..io.chunk import read_chunk_rows
+    from ..io.hdf5 import NotAResultFile
+
+    rows: dict[str, list[dict]] = {}
+    for path in sorted(runs_dir.glob(CHUNK_GLOB)):
+        try:
+            for row in read_chunk_rows(path):
+                rows.setdefault(row["run_id"], []).append(row)
+        except (FileNotFoundError, NotAResultFile, OSError, KeyError):
+            continue
+    return rows
+
+
+def _run_file_row(path: Path) -> dict | None:
+    from ..io.hdf5 import NotAResultFile, read_attributes
+
+    try:
+        return row_from_attributes(read_attributes(path), path.name)
+    except (FileNotFoundError, NotAResultFile, OSError, KeyError):
+        return None
+
+
+def current_rows(runs: Sequence[Any], runs_dir: Path) -> tuple[dict[str, dict], list[str]]:
+    """(run_id -> the newest stored row made from the run's current config, stale file names).
+
+    A row counts when its ``config_hash`` is the run's (:attr:`PlannedRun.config_hash`) and
+    its status is not ``error``; store files are read once, run files only for runs of
+    ``runs``. Stale files hold no run of ``runs`` (left in place by the caller).
+    """
+    chunk_rows = _chunk_rows(runs_dir)
+    current: dict[str, dict] = {}
+    for run in runs:
+        candidates = list(chunk_rows.get(run.run_id, ()))
+        path = runs_dir / f"{run.run_id}.h5"
+        if path.exists():
+            row = _run_file_row(path)
+            if row is not None:
+                candidates.append(row)
+        good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
+        if good:
+            current[run.run_id] = max(good, key=lambda r: str(r.get("created", "")))
+    ids = {r.run_id for r in runs}
+    stale = [p.name for p in runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
+    used = {row["file"] for rows in chunk_rows.values() for row in rows if row["run_id"] in ids}
+    stale += [p.name for p in runs_dir.glob(CHUNK_GLOB) if p.name not in used]
+    return current, sorted(stale)
+
+
+# -- the sweep as one dataset ---------------------------------------------------------------------
+
+
+def open_sweep(path: str | os.PathLike, grid: bool = False):
+    """Open a sweep folder as one :class:`xarray.Dataset` over its runs.
+
+    Parameters
+    ----------
+    path : path-like
+        A sweep folder (``sweep.yaml`` and ``index.csv``).
+    grid : bool
+        Reshape the ``run`` dimension to the sweep's axes, in run-list order: ``sample``
+        (random samples), ``base`` (several bases), one per grid key (named by the first
+        entry whose values tell its levels apart, e.g. ``k_c_0`` for a grid over
+        ``controller.k_c`` lists, the other entries staying as coordinates; else by the
+        key's :func:`parameter_name` with the grid level as value) and ``zip``; axes of length 1 are dropped. Runs without
+        a result are NaN with their ``status`` (``pending``, ``error``).
+
+    Returns
+    -------
+    xarray.Dataset
+        Every run of the index along ``run`` (the run's position in the run list), with
+        coordinates ``run_id``, ``base``, ``variant`` and the varied parameters
+        (:func:`parameter_name`); the per-run values and summary figures of the store
+        (``units``, ``long_name``), ``converged`` and, for a store with traces,
+        ``(run, time[, axis])`` variables. Store files are opened lazily (dask arrays, a
+        chunk per file); a sweep with layout "run" gives the summaries of ``index.csv``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a sweep folder.
+    """
+    folder = Path(path)
+    if not is_sweep_folder(folder):
+        raise FileNotFoundError(f"{folder}: not a sweep folder (no {SPEC_FILE} and {INDEX_FILE})")
+    index = read_index(folder)
+    ds = _from_index(index)
+    stored = _from_store(folder, index)
+    if stored is not None:
+        ds = stored.reindex(run=ds["run"].values).assign(
+            {k: ds[k] for k in ds.data_vars if k not in stored.data_vars or k in ("status", "message", "converged")}
+        ).assign_coords({k: ds[k] for k in ds.coords if k != "run"})
+    spec = read_spec(folder)
+    ds.attrs.update(sweep=spec.get("name", folder.name), lyapunov_ratio=(spec.get("convergence") or {}).get(
+        "lyapunov_ratio"), folder=str(folder))
+    return _as_grid(ds, spec) if grid else ds
+
+
+def _from_index(index):
+    """The index as a Dataset over ``run``: per-run values with units and long names
+    (built column by column: ``DataFrame.to_xarray`` costs ~1 s for 10,000 runs)."""
+    import xarray as xr
+
+    from ..io.chunk import figure_attributes
+
+    table = index.drop(columns=[c for c in ("file", "file_row") if c in index.columns])
+    coords = {c for c in table.columns if c in ("run_id", "base", "variant") or c in _parameter_set(index)}
+    variables = {}
+    for name in table.columns:
+        if name == "run":
+            continue
+        values = table[name].to_numpy()
+        if name == "converged":
+            values = table[name].astype(str).eq("True").to_numpy()
+        elif values.dtype == object:
+            values = table[name].fillna("").astype(str).to_numpy(dtype=object) if name in (
+                "status", "message", "run_id", "base", "variant", "lyapunov_rate_check", "config_hash") else values
+        units, long_name = figure_attributes(name)
+        variables[name] = xr.Variable(("run",), values, {"long_name": long_name, **({"units": units} if units else {})})
+    run = table["run"].to_numpy()
+    return xr.Dataset({k: v for k, v in variables.items() if k not in coords},
+                      coords={"run": run, **{k: v for k, v in variables.items() if k in coords}})
+
+
+def _parameter_set(index) -> list[str]:
+    """Parameter columns of an index: those between ``base`` and ``variant``."""
+    columns = list(index.columns)
+    start = columns.index("base") + 1 if "base" in columns else 0
+    stop = columns.index("variant") if "variant" in columns else start
+    return columns[start:stop]
+
+
+def _from_store(folder: Path, index):
+    """The current rows of the store files (lazy), concatenated along ``run``, or None."""
+    import numpy as np
+    import xarray as xr
+
+    if "file_row" not in index.columns:
+        return None
+    rows = index.dropna(subset=["file_row"])
+    rows = rows[rows["file"].astype(str).str.contains("chunk-", regex=False)]
+    if rows.empty:
+        return None
+    parts = []
+    per_run = set(index.columns) - {"run"}
+    for file, group in rows.groupby("file", sort=True):
+        # the per-run values come from the index (the same names): only the traces are read
+        part = xr.open_dataset(folder / str(file), engine="h5netcdf", chunks={}, drop_variables=per_run | {"config"})
+        if not any("run" in v.dims for v in part.data_vars.values()):
+            return None  # a store without traces
+        parts.append(part.isel(run=np.sort(group["file_row"].astype(int).to_numpy())))
+    ds = parts[0] if len(parts) == 1 else xr.concat(
+        parts, dim="run", data_vars="minimal", coords="minimal", compat="override", join="outer")
+    return ds.sortby("run")
+
+
+def _grid_level(key: str, values: Sequence[Any]) -> tuple[str, list]:
+    """(axis name, label per level) of a grid key (see :func:`open_sweep`)."""
+    flat = [run_coords({key: v}) for v in values]
+    names = list(flat[0]) if all(f.keys() == flat[0].keys() for f in flat) else []
+    varying = [n for n in names if len({repr(f[n][1]) for f in flat}) > 1]
+    for name in varying:  # the first entry that tells the levels apart names the axis
+        labels = [f[name][1] for f in flat]
+        if len(set(map(repr, labels))) == len(labels):
+            return name, labels
+    if not isinstance(values[0], (list, tuple, dict)) and len(set(map(repr, values))) == len(values):
+        return parameter_name(key), list(values)
+    return parameter_name(key), list(range(len(values)))
+
+
+def _grid_axes(spec: Mapping[str, Any]) -> list[tuple[str, list]]:
+    """(dimension, labels) of the sweep's axes in run-list order (slowest first)."""
+    axes: list[tuple[str, list]] = []
+    n = int((spec.get("random") or {}).get("n") or 0)
+    if n:
+        axes.append(("sample", list(range(n))))
+    bases = spec.get("base")
+    if isinstance(bases, list) and len(bases) > 1:
+        axes.append(("base", [str((b or {}).get("name", i)) for i, b in enumerate(bases)]))
+    for key, values in (spec.get("grid") or {}).items():
+        axes.append(_grid_level(key, values))
+    zipped = spec.get("zip") or {}
+    if zipped:
+        axes.append(("zip", list(range(len(next(iter(zipped.values())))))))
+    return axes
+
+
+def _as_grid(ds, spec: Mapping[str, Any]):
+    import numpy as np
+    import pandas as pd
+    import xarray as xr
+
+    axes = _grid_axes(spec)
+    shape = [len(labels) for _, labels in axes]
+    n = int(np.prod(shape)) if shape else 1
+    if ds.sizes["run"] != n:
+        raise ValueError(f"the sweep has {ds.sizes['run']} runs, its spec's axes {n}")
+    position = np.unravel_index(ds["run"].to_numpy(), shape) if shape else ()
+    levels = {name: np.asarray(labels, dtype=object)[pos] for (name, labels), pos in zip(axes, position)}
+    keep = [(name, labels) for name, labels in axes if len(labels) > 1]
+    if not keep:
+        return ds
+    dims = [name for name, _ in keep]
+    clash = [d for d in dims if d in ds.coords or d in ds.data_vars]
+    ds = ds.drop_vars(clash)
+    midx = pd.MultiIndex.from_arrays([pd.Index(list(levels[d])) for d in dims], names=dims)
+    ds = ds.assign_coords(run_index=("run", ds["run"].to_numpy()))
+    ds = ds.assign_coords(xr.Coordinates.from_pandas_multiindex(midx, "run"))
+    out = ds.unstack("run")
+    for name, labels in keep:  # the spec's order of levels, not sorted
+        out = out.reindex({name: [x for x in labels]})
+    out["status"] = out["status"].fillna("pending")
+    return out
