@@ -923,3 +923,32 @@ def test_config_yaml_by_sections_is_the_whole_dump():
                     config = config_from_mapping(data)
             assert config.to_yaml() == dump_yaml(config.resolved)
             assert config.to_yaml() == config.to_yaml()  # from the cache
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[1] / "configs").glob("*/*.yaml")))
+def test_from_resolved_rebuilds_the_validated_config(path):
+    """RunConfig.from_resolved (the sweep workers' path) gives what validation gives."""
+    import dataclasses
+
+    import warnings as _warnings
+
+    from rbstab.config import RunConfig, load_config
+
+    if "sweeps" in path.parts:
+        pytest.skip("a sweep spec")
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore")
+        config = load_config(path)
+    rebuilt = RunConfig.from_resolved(config.resolved)
+    for field in dataclasses.fields(RunConfig):
+        a, b = getattr(config, field.name), getattr(rebuilt, field.name)
+        if field.name == "warnings":
+            continue
+        if field.name in ("body", "gains"):
+            for f in dataclasses.fields(a):
+                assert np.array_equal(np.asarray(getattr(a, f.name), dtype=float), np.asarray(getattr(b, f.name), dtype=float),
+                                      equal_nan=True), f.name
+        elif field.name == "initial_state":
+            assert all(np.array_equal(a[k], b[k]) for k in a)
+        else:
+            assert a == b, field.name

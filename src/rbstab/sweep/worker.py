@@ -258,26 +258,20 @@ def _scipy_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> lis
 def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict[str, Any]]]:
     """RunConfigs of ``tasks`` (None where it failed) and error records (``sink.error``).
 
-    One ``config_from_mapping`` per group of tasks whose resolved configs differ only in
-    ``name`` and ``initial_state`` (:func:`rbstab.config.group_key`); the others of the
-    group are that config with their own name and initial state
-    (:meth:`rbstab.config.RunConfig.with_initial_state`, as the sweep planned them).
+    The sweep validated every run when it planned it: each task's resolved config is
+    rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`);
+    one that does not rebuild is validated, for the message of what is wrong with it.
     """
-    from ..config import PhysicalPlausibilityWarning, group_key
+    from ..config import RunConfig
 
-    validated: dict[str, Any] = {}
     configs: list = []
     errors: list[dict[str, Any]] = []
     for task in tasks:
-        key = group_key(task.config)
         try:
-            first = validated.get(key)
-            if first is None:
-                config = validated[key] = _config(task)
-            else:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-                    config = first.with_initial_state(task.config["initial_state"], name=task.config["name"])
+            try:
+                config = RunConfig.from_resolved(task.config)
+            except Exception:
+                config = _config(task)
             configs.append(config)
         except Exception as exc:
             configs.append(None)
