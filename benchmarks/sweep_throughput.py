@@ -9,7 +9,7 @@ rtol = 1e-8, atol = 1e-10), the initial Omega drawn per run from N((16, 32, -16)
 rad/s, goes through :func:`rbstab.sweep.run_sweep` on the local executor, once per ``-j``
 value, each time into a fresh folder (nothing is skipped). A run is the whole unit of
 work: integration (``--engine``: the sweep's default, batch, or scipy), output evaluation
-and the HDF5 file (``--store full|summary``).
+and the store files (``--store full|thinned|summary``).
 
 Prints per ``-j``: the wall time of the sweep (pool start-up and index included), runs
 per second, the mean wall time of one run inside its worker (integration and outputs; the
@@ -20,7 +20,7 @@ processes competing for the CPUs show up as a longer mean run time at ``-j 2`` t
 Usage::
 
     python benchmarks/sweep_throughput.py [--runs 200] [--jobs 1 2] [--t-end 2.0]
-                                          [--engine batch|scipy] [--store full|summary]
+                                          [--engine NAME] [--store full|thinned|summary]
                                           [--keep DIR]
 """
 
@@ -44,7 +44,7 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, nargs="+", default=[1, 2], help="process counts (default 1 2)")
     parser.add_argument("--t-end", type=float, default=None, help="override simulation.t_end [s]")
     parser.add_argument("--engine", default=None, choices=["batch", "scipy"], help="default: the sweep's (batch)")
-    parser.add_argument("--store", default="full", choices=["full", "summary"])
+    parser.add_argument("--store", default="thinned", choices=["full", "thinned", "summary"])
     parser.add_argument("--keep", default=None, help="write the sweeps under DIR and keep them")
     args = parser.parse_args()
 
