@@ -485,8 +485,44 @@ def _parameter_set(index) -> list[str]:
     return columns[start:stop]
 
 
+class _Trace:
+    """One trace variable of a store file, read on demand (what dask needs: shape, dtype,
+    ``__getitem__``); the file is opened per read, so the object pickles."""
+
+    def __init__(self, path: Path, name: str, shape: tuple, dtype) -> None:
+        self.path, self.name, self.shape, self.dtype, self.ndim = path, name, shape, dtype, len(shape)
+
+    def __getitem__(self, key):
+        import h5py
+
+        with h5py.File(self.path, "r") as f:
+            return f[self.name][key]
+
+
+def _store_traces(path: Path) -> tuple[dict, dict, Any]:
+    """(name -> _Trace, name -> attributes, time) of a store file's ``(run, time[, axis])`` variables."""
+    import h5py
+
+    traces, attrs, time = {}, {}, None
+    with h5py.File(path, "r") as f:
+        if "time" in f:
+            time = f["time"][...]
+        for name, var in f.items():
+            if var.ndim >= 2 and name not in ("run", "time", "axis"):
+                traces[name] = _Trace(path, name, var.shape, var.dtype)
+                attrs[name] = {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in var.attrs.items()
+                               if k in ("units", "long_name", "description")}
+    return traces, attrs, time
+
+
 def _from_store(folder: Path, index):
-    """The current rows of the store files (lazy), concatenated along ``run``, or None."""
+    """The traces of the current rows of the store files, lazily (dask arrays, one chunk
+    per file), over ``run``; None for a store without traces or layout "run".
+
+    The per-run values come from the index (the same names); the store files are read
+    with h5py for their traces' shapes only (opening each with xarray costs ~0.2 s).
+    """
+    import dask.array as da
     import numpy as np
     import xarray as xr
 
@@ -496,17 +532,36 @@ def _from_store(folder: Path, index):
     rows = rows[rows["file"].astype(str).str.contains("chunk-", regex=False)]
     if rows.empty:
         return None
-    parts = []
-    per_run = set(index.columns) - {"run"}
+    files: list[tuple[dict, np.ndarray]] = []
+    attrs: dict[str, dict] = {}
+    shapes: dict[str, tuple] = {}
+    runs, time = [], None
     for file, group in rows.groupby("file", sort=True):
-        # the per-run values come from the index (the same names): only the traces are read
-        part = xr.open_dataset(folder / str(file), engine="h5netcdf", chunks={}, drop_variables=per_run | {"config"})
-        if not any("run" in v.dims for v in part.data_vars.values()):
-            return None  # a store without traces
-        parts.append(part.isel(run=np.sort(group["file_row"].astype(int).to_numpy())))
-    ds = parts[0] if len(parts) == 1 else xr.concat(
-        parts, dim="run", data_vars="minimal", coords="minimal", compat="override", join="outer")
-    return ds.sortby("run")
+        traces, file_attrs, file_time = _store_traces(folder / str(file))
+        if not traces:
+            return None
+        time = file_time if time is None else time
+        order = np.argsort(group["file_row"].to_numpy())
+        files.append((traces, group["file_row"].astype(int).to_numpy()[order]))
+        runs.append(group["run"].to_numpy()[order])
+        attrs.update(file_attrs)
+        shapes.update({name: trace.shape[1:] for name, trace in traces.items()})
+    run = np.concatenate(runs)
+    order = np.argsort(run, kind="stable")
+    data = {}
+    for name, shape in shapes.items():
+        parts = []
+        for traces, take in files:  # a variable a file lacks (controller_state of embedded only) is NaN
+            trace = traces.get(name)
+            parts.append(da.full((len(take), *shape), np.nan) if trace is None else
+                         da.from_array(trace, chunks=trace.shape, name=False, asarray=True)[take])
+        array = da.concatenate(parts, axis=0)[order]
+        dims = ("run", "time", "axis")[: array.ndim]
+        data[name] = xr.Variable(dims, array, attrs.get(name, {}))
+    coords = {"run": run[order], "axis": ["x", "y", "z"]}
+    if time is not None:
+        coords["time"] = xr.Variable(("time",), time, {"units": "s", "long_name": "time"})
+    return xr.Dataset(data, coords=coords)
 
 
 def _grid_level(key: str, values: Sequence[Any]) -> tuple[str, list]:
