@@ -4,7 +4,7 @@ Every compiled function of rbstab is decorated with :func:`jit` (``numba.njit`` 
 ``cache=True``). Numba keys a cached function on its own source file only, so a change to
 a function it calls in another file would leave a stale kernel in the cache; rbstab
 therefore keeps its cache in a folder named after a digest of every source file that
-compiles code (and numba's version): ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if that variable
+compiles code, their folder and numba's version: ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if that variable
 is set, else ``$XDG_CACHE_HOME/rbstab/numba-<digest>`` (``~/.cache``). A new version of
 the code compiles once, into a new folder.
 
@@ -31,7 +31,9 @@ _WARM_FILE = "warm"
 
 
 def _source_digest() -> str:
-    digest = hashlib.sha256(numba.__version__.encode())
+    # numba files its cache under each source's folder path, so a copy of rbstab elsewhere
+    # (an installed one beside a checkout) is another cache: the path is part of the digest
+    digest = hashlib.sha256(numba.__version__.encode() + str(_PACKAGE).encode())
     for path in sorted(_PACKAGE.rglob("*.py")):
         text = path.read_bytes()
         if path.name == "jit.py" or _MARKER.encode() in text or _MARKER_UP.encode() in text:
