@@ -128,7 +128,7 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         ex = LocalExecutor(jobs)
         ex.start()
     from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError, expand, load_spec, run_sweep
-    from rbstab.sweep.spec import warning_digest
+    from rbstab.sweep.plan import warning_digest
 
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     try:

@@ -29,7 +29,7 @@ from rbstab.sweep import (
 )
 from rbstab.sweep.executors import ExecutorError
 from rbstab.sweep.folder import is_converged
-from rbstab.sweep.spec import resolved_hash
+from rbstab.sweep.plan import resolved_hash
 from rbstab.sweep.worker import RunTask, WorkerOptions
 from rbstab_cli.main import cli
 
@@ -223,20 +223,29 @@ def test_bad_combination_is_reported_with_run_id_and_key(tmp_path):
     [
         ({"zip": {"body.mass": [30, 40], "initial_state.omega.0": [1, 2, 3]}},
          "the lists have different lengths (body.mass: 2, initial_state.omega.0: 3)"),
-        ({"grid": {"body.mass": 41}}, "sweep key 'grid.body.mass': found 41 (a number); expected a list of values"),
+        ({"grid": {"body.mass": 41}}, "sweep key 'grid.body.mass': found 41; expected a non-empty list of values"),
         ({"grid": {"body.mass": []}}, "sweep key 'grid.body.mass': found []; expected a non-empty list"),
         ({"random": {"n": 2, "params": {"body.mass": {"gauss": [1, 2]}}}},
-         "unknown distribution 'gauss' (allowed: uniform, normal, log_uniform, scale_uniform, choice)"),
+         "sweep key 'random.params.body.mass.gauss': unknown key (allowed: uniform, normal, log_uniform, scale_uniform, choice)"),
         ({"random": {"n": 2, "params": {"body.mass": {"uniform": [5, 1]}}}}, "lo > hi"),
         ({"random": {"n": 2, "params": {"body.mass": {"normal": {"mean": 1}}}}},
-         "expected normal: {mean: m, std: s}"),
+         "sweep key 'random.params.body.mass.normal.std': missing; expected a number >= 0"),
         ({"random": {"n": -1}}, "sweep key 'random.n': found -1; expected an integer >= 0"),
         ({"grids": {}}, "sweep key 'grids': unknown key; did you mean 'grid'?"),
         ({"grid": {"initial_state.omega": [[1, 2, 3]]}, "zip": {"initial_state.omega.0": [1]}},
-         "sweep key 'zip.initial_state.omega.0': overlaps 'grid.initial_state.omega'"),
+         "sweep key 'zip.initial_state.omega.0': found 'initial_state.omega.0'; expected a key varied in one place only (overlaps 'grid.initial_state.omega'"),
         ({"name": "a b"}, "sweep key 'name': found 'a b'; expected letters, digits"),
         ({"base": "missing.yaml"}, "config file not found"),
         ({"convergence": {"lyapunov_ratio": 2}}, "'convergence.lyapunov_ratio': found 2; expected a number in (0, 1)"),
+        ({"grid": {"a..b": [1]}}, "sweep key 'grid.a..b': found 'a..b'; expected a dotted config key"),
+        ({"random": {"n": 2, "params": {"body.mass": {"uniform": [1, 2], "choice": [1]}}}},
+         "sweep key 'random.params.body.mass': found {'uniform': [1, 2], 'choice': [1]}; expected a mapping with "
+         "exactly one distribution"),
+        ({"random": {"n": 2}}, "sweep key 'random.params': found {}; expected at least one parameter"),
+        ({"random": {"n": 2, "params": {"body.mass": {"normal": {"mean": [1, 2], "std": [1, 2, 3]}}}}},
+         "mean has shape (2,) and std (3,), which do not broadcast"),
+        ({"random": {"n": 2, "params": {"body.mass": {"log_uniform": [0, 2]}}}}, "all > 0 (lo <= 0)"),
+        ({"random": {"seeds": 1}}, "sweep key 'random.seeds': unknown key; did you mean 'random.seed'?"),
     ],
 )
 def test_invalid_spec_messages(tmp_path, change, expected):

@@ -59,7 +59,8 @@ from .folder import (
     write_index,
     write_summary,
 )
-from .spec import PlannedRun, SweepSpec, expand
+from .plan import PlannedRun, expand
+from .spec import SweepSpec
 from ..io.chunk import DEFAULT_STORE, STORES
 from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk
 
