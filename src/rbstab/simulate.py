@@ -278,14 +278,21 @@ def _chunk_results(configs, variants, sol, share: float) -> Iterator[tuple[int, 
         rows = np.empty((hi - lo, n_samples, N_OUTPUTS))
         with np.errstate(all="ignore"):
             run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], rows)
-        block = {}
+        block, summaries = {}, {}
+        # the runs of a chunk share the state size, so the same named outputs; runs with
+        # the same sample times get their numerical dv/dt and summaries at once (the same
+        # numbers as each alone)
+        by_t_end: dict[float, list[int]] = {}
         for j in range(lo, hi):
-            block[j] = split_outputs(rows[j - lo], (n_samples,), variants[j].layout)
-        time = np.linspace(0.0, configs[lo].simulation.t_end, n_samples)
-        lyapunov = np.stack([block[j]["lyapunov"] for j in range(lo, hi)])
-        rates = numerical_rate(time, lyapunov)  # one finite-difference pass for the block
-        for j in range(lo, hi):
-            block[j]["lyapunov_rate_numerical"] = rates[j - lo]
+            by_t_end.setdefault(configs[j].simulation.t_end, []).append(j)
+        for t_end, members in by_t_end.items():
+            part = rows if len(members) == hi - lo else rows[[j - lo for j in members]]
+            outputs = split_outputs(part.reshape(-1, N_OUTPUTS), (len(members), n_samples), variants[lo].layout)
+            time = np.linspace(0.0, t_end, n_samples)
+            outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+            for i, (j, summary) in enumerate(zip(members, summarize_many(time, outputs))):
+                block[j] = {key: value[i] for key, value in outputs.items()}
+                summaries[j] = summary
         per_run = (_time.perf_counter() - t0) / (hi - lo)
         for j in range(lo, hi):
             config = configs[j]
@@ -301,7 +308,7 @@ def _chunk_results(configs, variants, sol, share: float) -> Iterator[tuple[int, 
                 solver={"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": status,
                         "n_steps": int(sol.n_steps[j])},
                 wall_time=share + per_run,
-                summary=summarize(time, outputs),
+                summary=summaries.pop(j),
                 timing={"integration": share, "postprocess": per_run},
             )
 
