@@ -263,15 +263,13 @@ def _settings_rows(configs) -> np.ndarray:
                       c.simulation.gimbal_margin] for c in configs], dtype=float)
 
 
-def _chunk_results(configs, variants, sol, share: float) -> Iterator[tuple[int, RunResult]]:
+def _chunk_results(configs, variants, codes, params, sol, share: float) -> Iterator[tuple[int, RunResult]]:
     """RunResults of one integrated chunk, post-processed :data:`POSTPROCESS_BLOCK` runs at a time."""
     from .engine import status_message
     from .variants.base import N_OUTPUTS, split_outputs
     from .variants.kernels import run_outputs
 
     k, n_samples, _ = sol.samples.shape
-    codes = np.array([v.code for v in variants], dtype=np.int64)
-    params = np.concatenate([v.parameters for v in variants])
     for lo in range(0, k, POSTPROCESS_BLOCK):
         t0 = _time.perf_counter()
         hi = min(lo + POSTPROCESS_BLOCK, k)
@@ -348,14 +346,16 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             start = _time.perf_counter()
             chunk_configs = [configs[i] for i in chunk]
             variants = [c.make_variant() for c in chunk_configs]
+            codes = np.array([v.code for v in variants], dtype=np.int64)
+            params = np.concatenate([v.parameters for v in variants])
             sol = integrate_runs(
-                [v.code for v in variants],
-                np.concatenate([v.parameters for v in variants]),
+                codes,
+                params,
                 np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, chunk_configs)]),
                 _settings_rows(chunk_configs),
                 method=method,
                 n_samples=n_samples,
             )
             share = (_time.perf_counter() - start) / len(chunk)
-            for j, result in _chunk_results(chunk_configs, variants, sol, share):
+            for j, result in _chunk_results(chunk_configs, variants, codes, params, sol, share):
                 yield chunk[j], result
