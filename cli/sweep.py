@@ -133,15 +133,15 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     try:
         loaded = load_spec(spec, overrides)
-        runs = expand(loaded)
+        runs = expand(loaded) if dry_run else None  # else planned as the runs go
     except SweepSpecError as exc:
         if not isinstance(ex, str):
             ex.close()
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
-    for line in warning_digest(runs):
-        click.echo(f"warning: {line}", err=True)
 
     if dry_run:
+        for line in warning_digest(runs):
+            click.echo(f"warning: {line}", err=True)
         click.echo(f"{loaded.name}: {len(runs)} runs (dry run: nothing run or written)")
         for run in runs:
             params = ", ".join(f"{k}={v}" for k, v in run.params.items())
@@ -171,6 +171,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         )
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
+    except SweepSpecError as exc:
+        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
     except KeyboardInterrupt:
         click.echo(
             f"\ninterrupted: finished runs are saved and the index is up to date; "
@@ -182,6 +184,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         if not isinstance(ex, str):
             ex.close()
 
+    for line in outcome.warnings:
+        click.echo(f"warning: {line}", err=True)
     c = outcome.counts
     pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0
     click.echo(

@@ -473,3 +473,38 @@ def test_dask_unreachable_scheduler_is_a_clean_cli_error(tmp_path):
     assert "cannot connect to the Dask scheduler at tcp://127.0.0.1:9" in result.output
     assert "Traceback" not in result.output
     assert not (tmp_path / "o").exists()
+
+
+def test_runs_are_planned_as_they_run_and_a_late_invalid_run_stops_the_sweep(tmp_path, monkeypatch):
+    """Past the runs planned ahead, an invalid run stops the submission of chunks: the runs
+    before it are saved, the error names it, and the fixed spec resumes from them."""
+    import rbstab.sweep.runner as runner
+
+    monkeypatch.setattr(runner, "PLAN_AHEAD", 2)
+    masses = [41.0, 42.0, 43.0, 44.0, -1.0, 46.0]
+    spec = {"name": "late", "base": str(CASE3), "grid": {"body.mass": masses}}
+    loaded = spec_from_mapping(spec, overrides=SHORT)
+    with pytest.raises(SweepSpecError) as info:
+        run_sweep(loaded, tmp_path, jobs=1, chunk_size=2, progress=False)
+    text = str(info.value)
+    assert "1 of 6 runs have an invalid configuration; the runs before them that finished are saved" in text
+    assert "run r0004 (base case3_embedded; body.mass=-1.0)" in text
+    index = pd.read_csv(tmp_path / "late" / "index.csv")
+    assert list(index["status"]) == ["success"] * 4 + ["pending"]  # r0005 planned too, not run
+    fixed = spec_from_mapping({**spec, "grid": {"body.mass": masses[:4] + [45.0, 46.0]}}, overrides=SHORT)
+    again = run_sweep(fixed, tmp_path, jobs=1, chunk_size=2, progress=False)
+    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 2, 6)
+
+
+def test_parameter_columns_and_time_grids_come_from_the_spec():
+    from rbstab.sweep.folder import parameter_columns
+    from rbstab.sweep.plan import parameter_columns_of, time_grids_of
+
+    for path in ("gains.yaml", "robustness.yaml"):
+        loaded = load_spec(ROOT / "configs" / "sweeps" / path)
+        runs = expand(loaded)
+        assert list(parameter_columns_of(loaded).items()) == list(parameter_columns(runs).items())
+        assert len(time_grids_of(loaded)) == len({(r.config.simulation.t_end, r.config.simulation.n_samples)
+                                                  for r in runs}) == 1
+    varied = spec_from_mapping({"name": "t", "base": str(CASE3), "grid": {"simulation.t_end": [0.1, 0.2]}})
+    assert len(time_grids_of(varied)) > 1

@@ -376,6 +376,34 @@ def _run_file_row(path: Path) -> dict | None:
         return None
 
 
+class StoredRows:
+    """What a sweep's ``runs/`` folder holds, read once: the rows of its store files (run
+    files are read per run, when asked for)."""
+
+    def __init__(self, runs_dir: Path) -> None:
+        self.runs_dir = runs_dir
+        self.chunk_rows = _chunk_rows(runs_dir)
+
+    def current(self, run: Any) -> dict | None:
+        """The newest stored row made from ``run``'s current config (its ``config_hash``,
+        :attr:`PlannedRun.config_hash`) with a status other than ``error``, or None."""
+        candidates = list(self.chunk_rows.get(run.run_id, ()))
+        path = self.runs_dir / f"{run.run_id}.h5"
+        if path.exists():
+            row = _run_file_row(path)
+            if row is not None:
+                candidates.append(row)
+        good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
+        return max(good, key=lambda r: str(r.get("created", ""))) if good else None
+
+    def stale(self, ids: set[str]) -> list[str]:
+        """Result files that hold no run of ``ids`` (left in place by the caller)."""
+        stale = [p.name for p in self.runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
+        used = {row["file"] for rows in self.chunk_rows.values() for row in rows if row["run_id"] in ids}
+        stale += [p.name for p in self.runs_dir.glob(CHUNK_GLOB) if p.name not in used]
+        return sorted(stale)
+
+
 def current_rows(runs: Sequence[Any], runs_dir: Path) -> tuple[dict[str, dict], list[str]]:
     """(run_id -> the newest stored row made from the run's current config, stale file names).
 
@@ -383,23 +411,9 @@ def current_rows(runs: Sequence[Any], runs_dir: Path) -> tuple[dict[str, dict], 
     its status is not ``error``; store files are read once, run files only for runs of
     ``runs``. Stale files hold no run of ``runs`` (left in place by the caller).
     """
-    chunk_rows = _chunk_rows(runs_dir)
-    current: dict[str, dict] = {}
-    for run in runs:
-        candidates = list(chunk_rows.get(run.run_id, ()))
-        path = runs_dir / f"{run.run_id}.h5"
-        if path.exists():
-            row = _run_file_row(path)
-            if row is not None:
-                candidates.append(row)
-        good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
-        if good:
-            current[run.run_id] = max(good, key=lambda r: str(r.get("created", "")))
-    ids = {r.run_id for r in runs}
-    stale = [p.name for p in runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
-    used = {row["file"] for rows in chunk_rows.values() for row in rows if row["run_id"] in ids}
-    stale += [p.name for p in runs_dir.glob(CHUNK_GLOB) if p.name not in used]
-    return current, sorted(stale)
+    stored = StoredRows(runs_dir)
+    current = {run.run_id: row for run in runs if (row := stored.current(run)) is not None}
+    return current, stored.stale({r.run_id for r in runs})
 
 
 # -- the sweep as one dataset ---------------------------------------------------------------------

@@ -15,7 +15,7 @@ import functools
 import itertools
 import json
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -24,7 +24,9 @@ import numpy as np
 from .schema import numeric_array
 from .spec import Base, SweepSpec, SweepSpecError
 
-__all__ = ["PlannedRun", "expand", "run_id", "resolved_hash", "warning_digest"]
+__all__ = ["PlannedRun", "InvalidRun", "plan_runs", "expand", "invalid_report", "parameter_columns_of", "time_grids_of",
+           "run_id",
+           "resolved_hash", "warning_digest"]
 
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 
@@ -251,6 +253,54 @@ def _plan_run(
     return run, []
 
 
+@dataclass(frozen=True)
+class InvalidRun:
+    """A run of the run list whose configuration is invalid (see :func:`plan_runs`)."""
+
+    index: int
+    base: str
+    params: dict
+    problems: list
+
+
+def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
+    """Every run of ``spec`` in run-list order, validated one after the other: a
+    :class:`PlannedRun`, or an :class:`InvalidRun` naming its problems.
+
+    Lazy: a sweep can start running its first runs while later ones are planned.
+    """
+    samples = spec.random.iter_samples() if spec.random.n else iter([{}])
+    scaled = {d.key for d in spec.random.params if d.kind == "scale_uniform"}
+    grid_points = list(itertools.product(*spec.grid.values())) if spec.grid else [()]
+    n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
+    cache: dict = {}
+    validated: dict = {}
+    index = 0
+    for sample in samples:
+        for base, point, z in itertools.product(spec.bases, grid_points, range(n_zip)):
+            params: dict[str, Any] = dict(zip(spec.grid, copy.deepcopy(point)))
+            params.update({k: copy.deepcopy(v[z]) for k, v in spec.zip.items()})
+            params.update({k: v for k, v in sample.items() if k not in scaled})
+            factors = {k: v for k, v in sample.items() if k in scaled}
+            shown = dict(params)  # what the user varied, for a message
+            run, problems = _plan_run(spec, base, params, factors, index, cache, validated)
+            yield run if run is not None else InvalidRun(index, base.label, shown, problems)
+            index += 1
+
+
+def invalid_report(spec: SweepSpec, invalid: Sequence[InvalidRun], outcome: str = "nothing was run") -> list[str]:
+    """The lines of the :class:`SweepSpecError` for ``invalid`` runs: a header, then each run
+    (index, base, varied values) with its problems; at most ten runs are listed."""
+    width = max(4, len(str(max(spec.n_runs - 1, 0))))
+    lines = [f"{len(invalid)} of {spec.n_runs} runs have an invalid configuration; {outcome}"]
+    for bad in invalid[:_MAX_LISTED]:
+        head = f"run r{bad.index:0{width}d} (base {bad.base}" + (f"; {_describe(bad.params)})" if bad.params else ")")
+        lines += [f"{head}: {line}" for line in bad.problems]
+    if len(invalid) > _MAX_LISTED:
+        lines.append(f"... and {len(invalid) - _MAX_LISTED} more invalid runs")
+    return lines
+
+
 def expand(spec: SweepSpec) -> list["PlannedRun"]:
     """Every run of ``spec``, each configuration validated.
 
@@ -270,35 +320,74 @@ def expand(spec: SweepSpec) -> list["PlannedRun"]:
     Physical-plausibility warnings are not emitted here; each run's ``config.warnings``
     holds them (:func:`warning_digest` summarises them).
     """
-    samples = spec.random.samples() if spec.random.n else [{}]
-    scaled = {d.key for d in spec.random.params if d.kind == "scale_uniform"}
-    grid_points = list(itertools.product(*spec.grid.values())) if spec.grid else [()]
-    n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
-    width = max(4, len(str(max(spec.n_runs - 1, 0))))
     runs: list[PlannedRun] = []
-    bad: list[str] = []
-    n_bad = 0
-    cache: dict = {}
-    validated: dict = {}
-    combinations = itertools.product(samples, spec.bases, grid_points, range(n_zip))
-    for index, (sample, base, point, z) in enumerate(combinations):
-        params: dict[str, Any] = dict(zip(spec.grid, copy.deepcopy(point)))
-        params.update({k: copy.deepcopy(v[z]) for k, v in spec.zip.items()})
-        params.update({k: v for k, v in sample.items() if k not in scaled})
-        factors = {k: v for k, v in sample.items() if k in scaled}
-        run, problems = _plan_run(spec, base, params, factors, index, cache, validated)
-        if run is not None:
-            runs.append(run)
-            continue
-        n_bad += 1
-        if n_bad <= _MAX_LISTED:
-            head = f"run r{index:0{width}d} (base {base.label}" + (f"; {_describe(params)})" if params else ")")
-            bad += [f"{head}: {line}" for line in problems]
-    if n_bad:
-        header = f"{n_bad} of {spec.n_runs} runs have an invalid configuration; nothing was run"
-        more = [f"... and {n_bad - _MAX_LISTED} more invalid runs"] if n_bad > _MAX_LISTED else []
-        raise SweepSpecError([header, *bad, *more], spec.source)
+    invalid: list[InvalidRun] = []
+    for run in plan_runs(spec):
+        (invalid if isinstance(run, InvalidRun) else runs).append(run)
+    if invalid:
+        raise SweepSpecError(invalid_report(spec, invalid), spec.source)
     return runs
+
+
+def _representatives(spec: SweepSpec, key: str) -> list[Any]:
+    """Values of ``key`` of every shape the sweep may give it (for the parameter columns)."""
+    if key in spec.grid:
+        return spec.grid[key]
+    if key in spec.zip:
+        return spec.zip[key]
+    d = next(d for d in spec.random.params if d.key == key)
+    if d.kind == "choice":
+        return list(d.args[0])
+    return [d.draw(np.random.default_rng(0))]
+
+
+def parameter_columns_of(spec: SweepSpec) -> dict[str, str]:
+    """Coordinate name -> dotted config key of every value ``spec`` varies, from the spec
+    alone (the names :func:`rbstab.sweep.folder.parameter_columns` gives for its runs), so
+    that every store file of a sweep has the same columns however its runs are planned.
+    """
+    from .folder import parameter_columns
+
+    cache: dict = {}
+    params_list: list[dict] = []
+    scaled = [d.key for d in spec.random.params if d.kind == "scale_uniform"] if spec.random.n else []
+    for key in spec.varied_keys:
+        for value in _representatives(spec, key):
+            if key in scaled:
+                for base in spec.bases:
+                    scaled_value, _ = _scaled(base, key, value, cache)
+                    params_list.append({key: scaled_value if scaled_value is not None else value})
+            else:
+                params_list.append({key: value})
+    for key in scaled:
+        for value in _representatives(spec, key):
+            params_list.append({f"{key}:scale": value})
+    return parameter_columns(_Params(p) for p in params_list)
+
+
+_TIME_GRID_KEYS = ("simulation.t_end", "simulation.n_samples")
+
+
+def time_grids_of(spec: SweepSpec) -> set:
+    """The distinct sample grids ``(t_end, n_samples)`` the runs of ``spec`` may have, from
+    the spec alone: each base's, and a marker per value of a varied key that sets either
+    (more than one element: the runs do not share one time axis)."""
+    grids: set = set()
+    for base in spec.bases:
+        resolved, _ = _resolved_base(base)
+        if resolved is not None:
+            grids.add((resolved["simulation"]["t_end"], resolved["simulation"]["n_samples"]))
+    for key in spec.varied_keys:
+        if any(key == k or k.startswith(key + ".") or key.startswith(k + ".") for k in _TIME_GRID_KEYS):
+            values = _representatives(spec, key)
+            random = key not in spec.grid and key not in spec.zip
+            grids.update((key, i) for i in range(2 if random else len({repr(v) for v in values})))
+    return grids
+
+
+@dataclass(frozen=True)
+class _Params:
+    params: dict
 
 
 def warning_digest(runs: Sequence[PlannedRun]) -> list[str]:

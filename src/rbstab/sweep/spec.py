@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -174,8 +174,13 @@ class RandomSpec:
 
         Sample ``i`` is the same for every ``n > i``.
         """
+        return list(self.iter_samples())
+
+    def iter_samples(self) -> Iterator[dict[str, Any]]:
+        """:meth:`samples`, one at a time."""
         rng = np.random.default_rng(self.seed)
-        return [{d.key: d.draw(rng) for d in self.params} for _ in range(self.n)]
+        for _ in range(self.n):
+            yield {d.key: d.draw(rng) for d in self.params}
 
 
 @dataclass(frozen=True)
