@@ -494,6 +494,7 @@ def test_runs_are_planned_as_they_run_and_a_late_invalid_run_stops_the_sweep(tmp
     fixed = spec_from_mapping({**spec, "grid": {"body.mass": masses[:4] + [45.0, 46.0]}}, overrides=SHORT)
     again = run_sweep(fixed, tmp_path, jobs=1, chunk_size=2, progress=False)
     assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 2, 6)
+    assert again.stale_files == []  # the store files this sweep wrote are its own
 
 
 def test_parameter_columns_and_time_grids_come_from_the_spec():

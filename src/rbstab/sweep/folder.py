@@ -382,6 +382,7 @@ class StoredRows:
 
     def __init__(self, runs_dir: Path) -> None:
         self.runs_dir = runs_dir
+        self.files = sorted(p.name for p in runs_dir.glob("*.h5"))  # what was there before this invocation
         self.chunk_rows = _chunk_rows(runs_dir)
 
     def current(self, run: Any) -> dict | None:
@@ -397,11 +398,11 @@ class StoredRows:
         return max(good, key=lambda r: str(r.get("created", ""))) if good else None
 
     def stale(self, ids: set[str]) -> list[str]:
-        """Result files that hold no run of ``ids`` (left in place by the caller)."""
-        stale = [p.name for p in self.runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
+        """Result files found when this was made that hold no run of ``ids`` (left in place
+        by the caller)."""
         used = {row["file"] for rows in self.chunk_rows.values() for row in rows if row["run_id"] in ids}
-        stale += [p.name for p in self.runs_dir.glob(CHUNK_GLOB) if p.name not in used]
-        return sorted(stale)
+        return [name for name in self.files
+                if (name not in used if name.startswith("chunk-") else Path(name).stem not in ids)]
 
 
 def current_rows(runs: Sequence[Any], runs_dir: Path) -> tuple[dict[str, dict], list[str]]:
