@@ -31,6 +31,20 @@ def _parse_axes(texts, configs):
     return axes
 
 
+def _check_boundary_layer(configs, boundary_layer) -> None:
+    """--boundary-layer against every config (only the pure sign law takes it)."""
+    from rbstab.analysis.analyze import analysed_config
+
+    problems = []
+    for config in configs:
+        try:
+            analysed_config(config, boundary_layer)
+        except ValueError as exc:
+            problems.append(f"{config.name}: {exc}")
+    if problems:
+        raise click.ClickException("\n".join(problems))
+
+
 def _check_sweeps(paths) -> None:
     from rbstab.sweep.folder import is_sweep_folder
 
@@ -90,6 +104,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")
     loaded = load_configs(configs, overrides)
     axes = _parse_axes(basin, loaded)
+    _check_boundary_layer(loaded, boundary_layer)
     _check_sweeps(sweeps)
     say = (lambda line: click.echo(line, err=True)) if as_json else click.echo
     out = Path(output)

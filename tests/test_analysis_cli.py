@@ -23,12 +23,20 @@ def _invoke(*args):
     return CliRunner().invoke(cli, ["analyze", *args], catch_exceptions=False)
 
 
+def _strict(text: str) -> dict:
+    """A JSON record, refusing NaN and Infinity (not JSON)."""
+    def refuse(name):
+        raise ValueError(f"{name} in a JSON record")
+
+    return json.loads(text, parse_constant=refuse)
+
+
 def test_json_records_and_files(tmp_path):
     out = tmp_path / "analysis"
     result = _invoke(CASE1, CASE3, "-o", str(out), "--json", "--samples", "500", "--basin",
                      "initial_state.omega.0=-30:30:3", "--basin", "initial_state.omega.1=-30:30:3", "-j", "1")
     assert result.exit_code == 0, result.output
-    records = [json.loads(line) for line in result.stdout.splitlines()]
+    records = [_strict(line) for line in result.stdout.splitlines()]
     assert [r["name"] for r in records] == ["case1_permanent", "case3_embedded"]
     for r in records:
         assert {"name", "variant", "equilibrium", "eigenvalues", "verdict"} <= set(r)
@@ -54,7 +62,7 @@ def test_sign_law_says_the_linearisation_does_not_exist(tmp_path):
     result = _invoke(SLIDING, "--set", "controller.boundary_layer=0", "-o", str(tmp_path), "--json",
                      "--no-certificate", "--no-simulation", "--boundary-layer", "0.002")
     assert result.exit_code == 0, result.output
-    record = json.loads(result.stdout)
+    record = _strict(result.stdout)
     assert record["analysed_boundary_layer"] == 0.002
     assert "linearisation does not exist" in record["notes"][0]
     assert "linearisation does not exist" in result.stderr
@@ -66,6 +74,7 @@ def test_sign_law_says_the_linearisation_does_not_exist(tmp_path):
     (["--basin", "initial_state.omega.0=1:-1:3", "--basin", "initial_state.omega.1=-1:1:3"], "lo < hi"),
     (["--set", "controller.k_r=[1, 2]"], "controller.k_r"),
     (["--boundary-layer", "0.001"], "not the pure sign law"),
+    ([SLIDING, "--boundary-layer", "0.001"], "case1_permanent: --boundary-layer"),  # checked before any runs
     (["--robustness", "."], "not a sweep folder"),
 ])
 def test_bad_input_is_a_clear_error_and_writes_nothing(tmp_path, args, message):
@@ -131,7 +140,7 @@ def test_robustness_of_a_sweep(pendulum_sweep, tmp_path):
     assert group.n_disagree > 0
     cli_result = _invoke("--robustness", str(pendulum_sweep), "-o", str(tmp_path), "--json")
     assert cli_result.exit_code == 0, cli_result.output
-    record = json.loads(cli_result.stdout)
+    record = _strict(cli_result.stdout)
     assert record["kind"] == "robustness" and record["groups"][0]["n_stable"] == group.n_stable
     ds = read_analysis(tmp_path / "pendulum.robustness.analysis.nc")
     assert ds.attrs["kind"] == "robustness" and ds["auc"].sizes["parameter"] >= 2
@@ -153,3 +162,15 @@ def test_report_pages(tmp_path, pendulum_sweep):
             "analysis_case3_embedded_sampled_rate.png", "robustness_pendulum.png"} <= figures
     manifest = json.loads((report / "report.json").read_text())
     assert len(manifest["analyses"]) == 2
+
+
+def test_unstable_configuration_is_reported_not_refused(tmp_path):
+    result = _invoke(CASE1, "-o", str(tmp_path), "--json", "--samples", "100", "--set", "name=pendulum",
+                     "--set", "body.attachment_point=[0, 0, -0.42]", "--set", "controller.k_t=[0, 0, 0]",
+                     "--set", "controller.l_t=[0, 0, 0]", "--set", "controller.k_r=[100, 100, 100]")
+    assert result.exit_code == 0, result.output  # the verdict is data
+    record = _strict(result.stdout)
+    assert record["verdict"] == "unstable" and record["eigenvalues"][0][0] > 0
+    assert record["certificate"]["holds"] is False and record["certificate"]["sublevel"] == 0.0
+    assert "fastest-growing mode" in result.stderr
+    assert read_analysis(tmp_path / "pendulum.analysis.nc").attrs["verdict"] == "unstable"

@@ -41,7 +41,8 @@ def _mode_lines(lin) -> list[str]:
 def _settling_line(analysis) -> str:
     s = analysis.settling
     tau = analysis.linearisation.slowest_time_constant
-    head = f"  slowest mode: tau = {_g(tau)} s"
+    head = f"  slowest mode: tau = {_g(tau)} s" if tau > 0 else \
+        f"  fastest-growing mode: e-folding time {_g(-tau)} s" if np.isfinite(tau) else "  slowest mode: undamped"
     if s is None:
         return head
     if s["status"] != "success":

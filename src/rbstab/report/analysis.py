@@ -348,6 +348,19 @@ def _robustness_section(ds, path: Path, folder: Path) -> Section:
     return s
 
 
+def _two_parameters(values: np.ndarray, order: Sequence[int]) -> list[int]:
+    """The first varying parameter in ``order`` and the next one not (almost) a function of
+    it (|correlation| < 0.99: a scale factor and the value it scales are one parameter)."""
+    varying = [j for j in order if np.unique(values[:, j]).size > 1]
+    if not varying:
+        return []
+    first = varying[0]
+    for j in varying[1:]:
+        if abs(np.corrcoef(values[:, first], values[:, j])[0, 1]) < 0.99:
+            return [first, j]
+    return [first]
+
+
 def _robustness_figure(ds, folder: Path) -> FigureFile:
     from matplotlib.figure import Figure
 
@@ -361,8 +374,8 @@ def _robustness_figure(ds, folder: Path) -> FigureFile:
     for ax, (i, g) in zip(axes, enumerate(groups)):
         auc = ds["auc"].values[i]
         order = [j for j in np.argsort(-np.abs(2 * np.nan_to_num(auc, nan=0.5) - 1))]
-        varying = [j for j in order if np.unique(values[run_group == g, j]).size > 1][:2]
         mine = run_group == g
+        varying = _two_parameters(values[mine], order)
         if len(varying) == 0:
             ax.text(0.5, 0.5, "no parameter varies", ha="center", transform=ax.transAxes)
             continue
@@ -376,8 +389,9 @@ def _robustness_figure(ds, folder: Path) -> FigureFile:
         ax.set_title(g, fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-    fig.suptitle(f"sweep {ds.attrs.get('sweep')}: runs over the two parameters that separate them best", fontsize=10)
+    fig.suptitle(f"sweep {ds.attrs.get('sweep')}: stable and unstable runs", fontsize=10)
     return FigureFile(_save(fig, folder, f"robustness_{safe_filename(str(ds.attrs.get('sweep')))}"),
                       f"{ds.attrs.get('sweep')}: stable and unstable runs",
-                      "Each run of each group over the two varied parameters with the strongest separation "
-                      "(|2 AUC - 1|; the first varied ones when every run is stable).")
+                      "Each run of each group over the varied parameter with the strongest separation "
+                      "(|2 AUC - 1|) and the next strongest that is not a function of it (a scale factor and the "
+                      "value it scales are one parameter); the first varied ones when every run is stable.")
