@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from .basin import DEFAULT_RATIO, DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES, BasinAxis, BasinMap, basin_map, \
-    time_to_converge
+from .basin import DEFAULT_RATIO, BasinAxis, BasinMap, basin_map, time_to_converge
+from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .linearise import Linearisation, linearise
 
@@ -78,9 +78,16 @@ class Analysis:
         return self.linearisation.verdict
 
     @property
+    def layout(self):
+        """The analysed variant's :class:`~rbstab.layout.StateLayout`."""
+        from ..variants import VARIANTS
+
+        return VARIANTS[self.analysed.variant].layout
+
+    @property
     def state_names(self) -> list[str]:
-        """``theta_1`` ... of the analysed variant's state layout."""
-        return self.analysed.make_variant().layout.state_names()
+        """``theta_1`` ... of :attr:`layout`."""
+        return self.layout.state_names()
 
     @property
     def linear_settling_time(self) -> float:

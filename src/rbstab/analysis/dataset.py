@@ -104,7 +104,7 @@ def _provenance(config, command_line: str | None) -> dict[str, Any]:
 
 def _linearisation_variables(analysis) -> dict:
     lin = analysis.linearisation
-    layout = analysis.analysed.make_variant().layout
+    layout = analysis.layout
     s = lin.eigenvalues
     omega_n, zeta, tau = lin.natural_frequency, lin.damping_ratio, lin.time_constant
     mixed = "mixed: (units of state) s-1 / (units of state_wrt), see state_units"
@@ -150,7 +150,7 @@ def _certificate_variables(analysis) -> dict:
     c = analysis.certificate
     if c is None:
         return {}
-    layout = analysis.analysed.make_variant().layout
+    layout = analysis.layout
     per_unit = "mixed: per unit of state and of state_wrt (see state_units)"
     return {
         "lyapunov_equilibrium": _var((), c.lyapunov_equilibrium, "J", "v at the equilibrium"),
@@ -230,7 +230,7 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
     file (module docstring); each variable a (dims, data, attrs) triple."""
     from ..layout import BLOCK_UNITS
 
-    layout = analysis.analysed.make_variant().layout
+    layout = analysis.layout
     names = layout.state_names()
     units = [BLOCK_UNITS[b] for b in layout.blocks for _ in range(3)]
     basin, basin_coords = _basin_variables(analysis)

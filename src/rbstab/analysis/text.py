@@ -94,7 +94,7 @@ def _basin_lines(analysis) -> list[str]:
 def describe(analysis) -> list[str]:
     """Lines summarising an :class:`~rbstab.analysis.Analysis`."""
     lin = analysis.linearisation
-    layout = analysis.analysed.make_variant().layout
+    layout = analysis.layout
     lines = [f"{analysis.name} ({analysis.variant}): {lin.verdict} (tolerance |Re s| <= {_g(lin.tolerance, 2)} 1/s)"]
     lines += [f"  note: {n}" for n in analysis.notes]
     lines.append(f"  equilibrium: {format_state(layout, lin.equilibrium)}")
