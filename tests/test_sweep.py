@@ -309,6 +309,7 @@ def test_converged_definition():
     assert not is_converged("success", 100.0, 0.11, 1e-3)
     assert not is_converged("failed", 100.0, 0.0, 1e-3)
     assert not is_converged("success", 100.0, float("nan"), 1e-3)
+    assert not is_converged("success", 100.0, -50.0, 1e-3)  # fell below the equilibrium's v: not there
 
 
 # -- end to end -------------------------------------------------------------------------------

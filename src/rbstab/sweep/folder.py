@@ -181,11 +181,14 @@ def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
 
 
 def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
-    """Whether a run converged: it succeeded and ``v(t_end) <= ratio * v(0)``.
+    """Whether a run converged: it succeeded and ``|v(t_end)| <= ratio * |v(0)|``.
 
     v is the variant's Lyapunov function, zero at the equilibrium, so this says that the
-    run lost all but ``ratio`` of its initial "energy" within ``t_end``. A run that failed
-    (gimbal lock, solver failure, timeout) never converged.
+    run lost all but ``ratio`` of its initial "energy" within ``t_end``. The magnitudes: v
+    is zero only at the equilibrium when it is a Lyapunov function there, and a run that
+    ends with v far below zero (an unstable body falling to lower potential energy, where
+    the gravity term makes v negative) has not converged. A run that failed (gimbal lock,
+    solver failure, timeout) never converged.
     """
     if status != "success":
         return False
@@ -193,7 +196,7 @@ def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio:
         v0, v1 = float(lyapunov_initial), float(lyapunov_final)
     except (TypeError, ValueError):
         return False
-    return math.isfinite(v0) and math.isfinite(v1) and v1 <= ratio * v0
+    return math.isfinite(v0) and math.isfinite(v1) and abs(v1) <= ratio * abs(v0)
 
 
 def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
