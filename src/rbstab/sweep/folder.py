@@ -215,7 +215,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     for run in runs:
         row: dict[str, Any] = {"run_id": run.run_id, "run": run.index, "base": run.base}
         row.update({name: value for name, (_, value) in run_coords(run.params).items()})
-        row["variant"] = run.config.variant
+        row["variant"] = run.variant
         stored = rows.get(run.run_id)
         if stored is not None:
             row.update({k: v for k, v in stored.items() if k not in row and k not in ("config", "created", "store")})

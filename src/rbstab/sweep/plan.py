@@ -62,11 +62,41 @@ class PlannedRun:
     params: dict
     config: Any
 
+    @property
+    def variant(self) -> str:
+        """The run's controller variant."""
+        return self.config.variant
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """Physical-plausibility warnings of its config (``config.warnings``)."""
+        return self.config.warnings
+
+    def entry(self) -> "RunEntry":
+        """What the index needs of this run, without its configuration (a sweep keeps one
+        per run until its index is written)."""
+        return RunEntry(self.index, self.run_id, self.base, self.params, self.variant, self.config_hash,
+                        self.warnings)
+
     @functools.cached_property
     def config_hash(self) -> str:
         """SHA-256 of the resolved config without its name (:func:`resolved_hash`): the
         ``config_hash`` of its stored result."""
         return resolved_hash(self.config.resolved)
+
+
+@dataclass(frozen=True)
+class RunEntry:
+    """A planned run without its configuration: index, ``run_id``, ``base``, ``params``,
+    ``variant``, ``config_hash`` and ``warnings`` as in :class:`PlannedRun`."""
+
+    index: int
+    run_id: str
+    base: str
+    params: dict
+    variant: str
+    config_hash: str
+    warnings: tuple = ()
 
 
 def resolved_hash(resolved: Mapping) -> str:
@@ -399,7 +429,7 @@ def warning_digest(runs: Sequence[PlannedRun]) -> list[str]:
     first: dict[str, str] = {}
     count: dict[str, int] = {}
     for run in runs:
-        for message in run.config.warnings:
+        for message in run.warnings:
             key = message.partition(":")[0]
             first.setdefault(key, message)
             count[key] = count.get(key, 0) + 1

@@ -61,7 +61,7 @@ from .folder import (
     write_index,
     write_summary,
 )
-from .plan import (InvalidRun, PlannedRun, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
+from .plan import (InvalidRun, PlannedRun, RunEntry, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
                    warning_digest)
 from .spec import SweepSpec, SweepSpecError
 from ..io.chunk import DEFAULT_STORE, STORES
@@ -471,7 +471,7 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
             say(f"removed {removed} temporary file(s) left by an interrupted invocation")
         _write_spec_document(spec, directory, options.command_line, say)
         stored = StoredRows(runs_dir)
-        planned: list[PlannedRun] = []
+        planned: list[RunEntry] = []  # every run, without its config (memory: ~1 KB a run)
         invalid: list[InvalidRun] = []
         rest = plan if plan is not None else iter(())
 
@@ -480,7 +480,7 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
                 if isinstance(run, InvalidRun):
                     invalid.append(run)
                     return
-                planned.append(run)
+                planned.append(run.entry())
                 yield run
 
         attrs: dict[str, dict] = {}
@@ -490,7 +490,10 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
                      chunk_size=chunk_size, progress=progress, say=say, options=options)
         finally:
             for run in rest:  # what was not planned yet: pending in the index, or invalid
-                (invalid if isinstance(run, InvalidRun) else planned).append(run)
+                if isinstance(run, InvalidRun):
+                    invalid.append(run)
+                else:
+                    planned.append(run.entry())
             # files finished while the pool shut down (e.g. after Ctrl-C) count too
             _collect_finished(planned, runs_dir, attrs, errors)
             outcome.stale_files = stored.stale({r.run_id for r in planned})
@@ -532,7 +535,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
     ``chunk_size``: (most runs per chunk, chunks per worker at least; see :func:`_chunk_length`).
     """
     folder = str(runs_dir.resolve())
-    by_id: dict[str, PlannedRun] = {}
+    by_id: dict[str, RunEntry] = {}  # the runs sent and not back yet
     bar = _progress_bar(spec.n_runs, spec.name, progress)
 
     def tasks() -> Iterator[RunTask]:
@@ -543,7 +546,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
                 outcome.n_skipped += 1
                 bar.update(1)
                 continue
-            by_id[r.run_id] = r
+            by_id[r.run_id] = r.entry()
             yield RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
                           {name: value for name, (_, value) in run_coords(r.params).items()})
 
@@ -566,16 +569,16 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
                     for t in chunk
                 ]
             for rec in records:
-                _record(rec, by_id[rec["run_id"]], runs_dir, attrs, errors, outcome, counts)
+                _record(rec, by_id.pop(rec["run_id"]), runs_dir, attrs, errors, outcome, counts)
             bar.set_postfix_str(f"done {counts['ok']}, failed {counts['bad']}", refresh=False)
             bar.update(len(records))
     finally:
         bar.close()
-    if not by_id:
+    if outcome.n_executed == 0 and outcome.n_skipped == outcome.n_runs:
         say(f"{spec.name}: all {outcome.n_runs} runs already done; rebuilding the index")
 
 
-def _record(rec: dict, run: PlannedRun, runs_dir: Path, attrs: dict, errors: dict, outcome: SweepOutcome,
+def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict, outcome: SweepOutcome,
             counts: dict) -> None:
     """Take a worker's record of ``run``: its stored row into ``attrs``, or its error."""
     rid = rec["run_id"]
