@@ -73,15 +73,15 @@ STORE_CHUNK_SIZE = 512
 
 #: Chunks per worker a sweep is cut into at least (when chunks of STORE_CHUNK_SIZE runs
 #: would give fewer): the first chunks run while the later runs are planned.
-CHUNKS_PER_WORKER = 4
+CHUNKS_PER_WORKER = 2
 
 #: Fewest runs per chunk when a sweep is split into CHUNKS_PER_WORKER chunks per worker
 #: (a chunk is a store file: more of them cost time to write and to open).
-MIN_SPLIT_CHUNK = 32
+MIN_SPLIT_CHUNK = 64
 
 #: Runs planned before anything is written: an invalid run among them stops the sweep with
 #: nothing run (later ones stop it after the runs before them).
-PLAN_AHEAD = 1024
+PLAN_AHEAD = 256
 
 __all__ = [
     "run_sweep",
