@@ -97,12 +97,22 @@ def _git_commit() -> str:
     return "unknown"
 
 
+#: ``simulation`` keys that bound how long a run may take, not what it computes: not part
+#: of its identity (:func:`canonical_config`), so changing them reruns nothing (a run they
+#: stopped is ``failed``: ``rbstab sweep --retry-failed`` reruns it).
+RUN_LIMIT_KEYS = ("max_steps", "max_wall_time")
+
+
 def canonical_config(resolved) -> str:
-    """A resolved configuration without its ``name`` as canonical JSON (sorted keys, no spaces).
+    """A resolved configuration without its ``name`` and run limits (:data:`RUN_LIMIT_KEYS`)
+    as canonical JSON (sorted keys, no spaces).
 
     ``json.loads`` reads it back; :func:`config_hash` hashes it.
     """
     body = {k: v for k, v in resolved.items() if k != "name"}
+    sim = body.get("simulation")
+    if isinstance(sim, dict) and any(k in sim for k in RUN_LIMIT_KEYS):
+        body["simulation"] = {k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS}
     return json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)
 
 
