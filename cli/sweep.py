@@ -66,12 +66,13 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--seed", type=click.IntRange(min=0), default=None, help="Seed of the random samples.")
 @click.option(
     "--timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
-    help="Per-run wall-time budget; a run past it is recorded as failed (scipy engine only).",
+    help="Per-run wall-time limit, instead of each config's simulation.max_wall_time; a run past it "
+    "is recorded as failed.",
 )
 @click.option(
     "--engine", type=click.Choice(list(ENGINES)), default=None,
     help="How runs are integrated (see docs/performance.md); scipy: one solve_ivp call per run, "
-    f"the reference  [default: {next(iter(k for k in ENGINES if k != 'scipy'))}; scipy with --timeout].",
+    f"the reference  [default: {next(iter(k for k in ENGINES if k != 'scipy'))}].",
 )
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
@@ -114,11 +115,6 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
-    if engine not in (None, "scipy") and timeout is not None:
-        raise click.UsageError(
-            f"--timeout needs --engine scipy: the {engine} engine integrates many runs together and has "
-            "no per-run wall-time budget"
-        )
     executor = executor or ("dask" if scheduler else "local")
     if executor == "dask" and not scheduler:
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")

@@ -242,22 +242,19 @@ def _check_time_grids(runs: Sequence[PlannedRun], store: str, layout: str) -> No
         )
 
 
-def resolve_engine(engine: str | None, timeout: float | None) -> str:
-    """The engine a sweep uses: ``engine``, or by default ``compiled`` (``scipy`` with a timeout).
+def resolve_engine(engine: str | None, timeout: float | None = None) -> str:
+    """The engine a sweep uses: ``engine``, by default ``compiled`` (both engines take a
+    per-run ``timeout``).
 
     Raises
     ------
     ValueError
-        For an unknown engine, or ``compiled`` with a timeout (it has no per-run budget).
+        For an unknown engine.
     """
     if engine is None:
-        return "scipy" if timeout is not None else "compiled"
+        return "compiled"
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    if engine == "compiled" and timeout is not None:
-        raise ValueError(
-            "--timeout needs --engine scipy: the compiled engine has no per-run wall-time budget"
-        )
     return engine
 
 
@@ -328,8 +325,8 @@ def run_sweep(
     scheduler : str, optional
         Dask scheduler address (``tcp://HOST:PORT``), required for ``"dask"``.
     timeout : float, optional
-        Per-run wall-time budget [s]; a run past it is recorded as failed. Only with the
-        scipy engine (the default engine then).
+        Per-run wall-time limit [s], instead of each run's ``simulation.max_wall_time``; a
+        run past it is recorded as failed.
     retry_failed : bool
         Also re-execute runs whose current result file has status ``failed``.
     chunk_size : int, optional
@@ -337,8 +334,8 @@ def run_sweep(
         :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 256 for compiled).
         For the compiled engine a chunk holds at most ``ceil(runs / workers)`` runs.
     engine : {"compiled", "scipy"}, optional
-        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``, or ``scipy``
-        when ``timeout`` is given (see :func:`resolve_engine`). ``compiled`` integrates
+        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``
+        (:func:`resolve_engine`). ``compiled`` integrates
         every run with scipy's RK23/RK45/DOP853 compiled with the model (other methods
         and the pure sign law go through scipy), taking the steps scipy takes.
     store : {"full", "summary"}
