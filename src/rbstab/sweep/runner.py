@@ -53,6 +53,8 @@ from .folder import (
     SUMMARY_FILE,
     current_rows,
     index_rows,
+    read_spec,
+    set_aside_damaged,
     parameter_columns,
     run_coords,
     summarize_rows,
@@ -113,6 +115,9 @@ class SweepOutcome:
         run_id -> traceback for runs with status ``error`` in this invocation.
     stale_files : list of str
         Result files in ``runs/`` that are not runs of this spec (left in place).
+    damaged : list of (str, str)
+        Result files whose checksums did not match, as (file name, reason): renamed
+        ``<name>.damaged`` and their runs rerun.
     executor : str
         Description of the executor used (empty when nothing ran).
     engine : str
@@ -139,6 +144,7 @@ class SweepOutcome:
     problems: list = field(default_factory=list)
     tracebacks: dict = field(default_factory=dict)
     stale_files: list = field(default_factory=list)
+    damaged: list = field(default_factory=list)
     executor: str = ""
     engine: str = ""
     n_chunks: int = 0
@@ -414,14 +420,16 @@ def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, c
         spec_path = directory / SPEC_FILE
         if spec_path.exists():
             with contextlib.suppress(Exception):
-                old = yaml.safe_load(spec_path.read_text(encoding="utf-8")) or {}
+                old = read_spec(directory)  # within the YAML limits
                 old.pop("generated", None)
                 new = {k: v for k, v in doc.items() if k != "generated"}
                 if yaml.safe_load(_dump_yaml(new)) != old:
                     say(f"note: the spec differs from the one in {spec_path}; runs whose config changed are rerun")
         write_text_atomic(spec_path, _dump_yaml(doc))
 
-        attrs, outcome.stale_files = current_rows(runs, runs_dir)
+        attrs, outcome.stale_files = current_rows(runs, runs_dir, verify=True, damaged=outcome.damaged)
+        for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
+            say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
         if retry_failed:
             attrs = {k: v for k, v in attrs.items() if v.get("status") == "success"}
         todo = [run for run in runs if run.run_id not in attrs]
