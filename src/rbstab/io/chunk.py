@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import __version__
-from .atomic import atomic_path
+from .atomic import as_os_error, atomic_path, check_free_space
 from .hdf5 import (
     SUMMARY_VARIABLES,
     VARIABLE_DESCRIPTIONS,
@@ -93,6 +93,9 @@ THINNED_VARIABLES = SUMMARY_VARIABLES
 WRITE_BYTES = 32 * 2**20
 #: Fewest runs per written block (and HDF5 chunk along ``run``).
 WRITE_BLOCK = 32
+#: Free space [bytes] a writer keeps beyond what it is about to hand to HDF5 (its metadata,
+#: another writer on the same disk): HDF5 must never meet a full disk, see :meth:`ChunkWriter._room`.
+SPACE_MARGIN = 8 * 2**20
 _AXES = ("x", "y", "z")
 
 #: Summary figures (:func:`rbstab.summary.summarize`): name -> (units, long name).
@@ -240,6 +243,8 @@ class ChunkWriter:
     def __enter__(self) -> "ChunkWriter":
         import h5netcdf
 
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._room(0)
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
         import h5py
@@ -262,9 +267,23 @@ class ChunkWriter:
             if exc_type is None:
                 self._finish()
         except BaseException:
+            self._datasets.clear()
             self._stack.__exit__(*sys.exc_info())
             raise
-        return self._stack.__exit__(exc_type, exc, tb)
+        self._datasets.clear()
+        try:
+            return self._stack.__exit__(exc_type, exc, tb)
+        except RuntimeError as error:  # HDF5's close failed: an I/O error with its errno
+            raise as_os_error(error, self.path) from None
+
+    def _room(self, n_bytes: int) -> None:
+        """Raise OSError(ENOSPC) before handing ``n_bytes`` to HDF5 unless the disk has room.
+
+        HDF5 that meets a full disk leaves the file half-open inside the library, which then
+        crashes the process at exit (a segmentation fault): a writer checks first, keeping
+        :data:`SPACE_MARGIN` for the file's metadata and for other writers.
+        """
+        check_free_space(self.path.parent, n_bytes + SPACE_MARGIN, f"the store file {self.path.name}")
 
     # -- rows ---------------------------------------------------------------------------------
 
@@ -362,6 +381,7 @@ class ChunkWriter:
             return
         self._pending.sort(key=lambda p: p[0])
         rows = [i for i, _ in self._pending]
+        self._room(len(rows) * 8 * sum(int(np.prod(shape)) for shape in self._traces.values()))
         for name, shape in self._traces.items():
             missing = np.full(shape, np.nan)
             block = np.stack([missing if o is None or name not in o else o[name] for _, o in self._pending])
@@ -381,6 +401,7 @@ class ChunkWriter:
         self._flush()
         f = self._file
         columns = self._columns()
+        self._room(sum(len(str(v)) + 8 for values in columns.values() for v in values))
         self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         for name, values in columns.items():
             self._write_column(name, values)

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import __version__
-from .atomic import atomic_path
+from .atomic import write_bytes_atomic
 from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
 from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
 
@@ -240,13 +240,19 @@ class _Writer:
         return dset
 
 
-def _write_file(path: str, time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
+def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any]) -> bytes:
+    """The bytes of a result file, built in memory (HDF5's ``core`` driver).
+
+    HDF5 never writes to the disk itself: a full disk or a failing device then shows up
+    as an ordinary ``OSError`` of the caller's write, with nothing half-open inside HDF5
+    (whose clean-up at exit crashes the process after a failed write to a file).
+    """
     import h5py
 
     w = _Writer(h5py)
     h5ds = h5py.h5ds
     # netCDF-4 conventions through HDF5 dimension scales: the file h5netcdf would write
-    with h5py.File(path, "w", track_order=True) as f:
+    with h5py.File(f"rbstab-{id(attrs)}.h5", "w", driver="core", backing_store=False, track_order=True) as f:
         root = f.id
         t = w.dataset(root, "time", np.ascontiguousarray(time, dtype=float))
         h5ds.set_scale(t, b"time")
@@ -270,6 +276,8 @@ def _write_file(path: str, time: np.ndarray, outputs: dict[str, np.ndarray], att
         from .integrity import DIGEST_ATTR, content_digest
 
         w.attr(root, DIGEST_ATTR, content_digest(f))
+        f.flush()
+        return f.id.get_file_image()
 
 
 def write_run(
@@ -292,8 +300,7 @@ def write_run(
         outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
     elif store == "summary":
         time, outputs = time[:0], {}
-    with atomic_path(path) as tmp:
-        _write_file(str(tmp), time, outputs, attrs)
+    write_bytes_atomic(path, _file_image(time, outputs, attrs))
     return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
 
 
@@ -321,7 +328,9 @@ def write_result(
     Raises
     ------
     OSError
-        If the folder cannot be created or written; the final name is then untouched.
+        If the folder cannot be created or written (a full disk, a read-only folder, a
+        name too long): one message with the errno; the final name is then untouched and
+        no temporary file is left.
     """
     write_run(result, path, command_line=command_line, store=store)
     return Path(path)
