@@ -109,7 +109,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
     OUTPUT/<name>/sweep.yaml: `rbstab sweep OUTPUT/<name>/sweep.yaml` reruns or resumes it.
 
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
-    1 for an invalid spec (nothing is run); 130 when interrupted.
+    1 for an invalid spec (nothing is run) or a fault of the machine (full disk, read-only
+    folder: one line); 130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
     from rbstab.sweep.executors import LocalExecutor
 
@@ -167,13 +168,13 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         )
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (rbstab_cli.main.Terminated)
         click.echo(
             f"\ninterrupted: finished runs are saved and the index is up to date; "
             f"run the same command again to resume",
             err=True,
         )
-        raise SystemExit(130)
+        raise SystemExit(getattr(exc, "exit_code", 130))
     finally:
         if not isinstance(ex, str):
             ex.close()

@@ -91,9 +91,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         os.replace(tmp, path)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
-        if exc.filename:
-            raise
-        raise OSError(exc.errno, exc.strerror, str(path)) from None  # name the file
+        raise OSError(exc.errno, exc.strerror, str(path)) from None  # the file meant, not its temporary
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

@@ -29,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as _dt
+import errno
 import math
 import os
 import sys
@@ -374,8 +375,13 @@ def run_sweep(
         If another process is writing the same sweep folder.
     ExecutorError
         If the executor cannot start (``distributed`` missing, scheduler unreachable).
+    OSError
+        When a file cannot be written for want of space or of a writable disk (ENOSPC,
+        EDQUOT, EROFS): the workers are stopped and the index written for what finished
+        (if it can be); rerunning resumes.
     KeyboardInterrupt
-        Re-raised after the index has been written for what finished.
+        Re-raised (SIGTERM too, as the CLI handles it) after the workers were stopped
+        and the index written for exactly the files on disk.
     """
     say = log or (lambda message: None)
     if runs is None:
@@ -441,8 +447,14 @@ def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, c
             if todo:
                 _execute(spec, todo, runs_dir, attrs, errors, outcome, ex, chunk_size=chunk_size,
                          progress=progress, say=say, options=options)
+        except BaseException:
+            # Ctrl-C, SIGTERM, a full disk: stop every worker first, so that the index
+            # written below lists exactly the files on disk (nothing is written after it)
+            ex.abort()
+            _remove_temporaries(runs_dir, directory)
+            raise
         finally:
-            # files finished while the pool shut down (e.g. after Ctrl-C) count too
+            # files finished while the pool shut down count too
             _collect_finished(todo, runs_dir, attrs, errors)
             _finish(spec, runs, attrs, errors, outcome)
 
@@ -478,6 +490,7 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
     bar = _progress_bar(len(todo), spec.name, progress)
     try:
         for chunk, records, exc in ex.imap_unordered(run_chunk, chunks, options):
+            _stop_on_machine_fault(records or ())
             if exc is not None:
                 records = [
                     {"run_id": t.run_id, "path": t.path, "status": "error",
@@ -519,6 +532,18 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
             bar.update(len(records))
     finally:
         bar.close()
+
+
+#: errno of a record that stops the sweep: every later write would fail the same way.
+_MACHINE_FAULTS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
+
+
+def _stop_on_machine_fault(records) -> None:
+    """Raise the OSError of a record whose file could not be written for want of space
+    or of a writable disk (the runs it lists stay pending; rerunning resumes)."""
+    for rec in records:
+        if rec.get("errno") in _MACHINE_FAULTS:
+            raise OSError(rec["errno"], os.strerror(rec["errno"]), str(Path(rec["path"]).parent))
 
 
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:

@@ -121,14 +121,20 @@ def _config(task: RunTask):
 
 
 def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:
-    return {
+    """The record of a run that raised; an I/O failure (a full disk) carries its ``errno``
+    and no traceback (it is the machine's fault, not a bug)."""
+    record = {
         "run_id": task.run_id,
         "path": task.path,
         "status": "error",
         "message": f"{type(exc).__name__}: {exc}",
-        "traceback": traceback.format_exc(),
         "wall_time": 0.0,
     }
+    if isinstance(exc, OSError) and exc.errno is not None:
+        record["errno"] = exc.errno
+    else:
+        record["traceback"] = traceback.format_exc()
+    return record
 
 
 class _RunFiles:
