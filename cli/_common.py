@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import os
 import shlex
 import sys
+import tempfile
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 
 import click
 
@@ -50,3 +53,35 @@ def load_configs(paths: Sequence[str], overrides: Sequence[str]):
 
 def _indent(text: str) -> str:
     return "\n".join("  " + line for line in text.splitlines())
+
+
+def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
+    """Make sure results can be written to ``folder`` before any work starts.
+
+    Creates it, removes temporaries left there by killed writers, writes and removes a
+    probe file, and checks each file name against the file system's limit. Raises
+    ``click.ClickException`` with one line (a file in the way, a read-only or foreign
+    folder, a name too long).
+    """
+    from rbstab.io.atomic import describe_os_error, remove_stale_temporaries
+
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        if not folder.is_dir():
+            raise FileExistsError(17, "exists and is not a folder", str(folder))
+        removed = remove_stale_temporaries(folder)
+        if removed:
+            click.echo(f"removed {removed} temporary file(s) left in {folder} by interrupted runs", err=True)
+        fd, probe = tempfile.mkstemp(prefix=".rbstab-probe-", suffix=".tmp", dir=folder)
+        os.close(fd)
+        os.unlink(probe)
+        limit = os.pathconf(folder, "PC_NAME_MAX")
+    except OSError as exc:
+        raise click.ClickException(describe_os_error(exc)) from None
+    for name in names:
+        longest = len(f".{name}.{2**22}@0000.abcdefgh.tmp".encode())  # its temporary while written
+        if longest > limit:
+            raise click.ClickException(
+                f"cannot write {folder / name}: the name is too long for this file system "
+                f"({longest} bytes with its temporary suffix, at most {limit}); shorten the run's name"
+            )

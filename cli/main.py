@@ -1,4 +1,13 @@
-"""``rbstab`` command group: one module per subcommand, heavy imports inside commands."""
+"""``rbstab`` command group: one module per subcommand, heavy imports inside commands.
+
+Exit status of every command: 0 done; 1 invalid input, a failed run or a fault of the
+machine (full disk, read-only or missing output folder), reported in one line without a
+traceback; 2 a usage error; 130 interrupted by Ctrl-C (SIGINT), 143 by SIGTERM, after
+what was finished has been saved (``rbstab sweep``: the number of failed runs, at most 100,
+when runs failed).
+"""
+
+import signal
 
 import click
 
@@ -12,7 +21,34 @@ from .sweep import sweep
 from .validate import validate
 
 
-@click.group()
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C (everything that cleans up after an interrupt runs),
+    with the exit status 128 + 15."""
+
+    exit_code = 143
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated()
+
+
+class _Group(click.Group):
+    """The command group, turning faults into one line and interrupts into 130 / 143."""
+
+    def invoke(self, ctx: click.Context):
+        from rbstab.io.atomic import describe_os_error
+
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            click.echo("\ninterrupted: results finished before are saved and complete; run the same "
+                       "command again to finish", err=True)
+            ctx.exit(getattr(exc, "exit_code", 130))
+        except OSError as exc:  # a full disk, a read-only folder...: in words, not a traceback
+            raise click.ClickException(describe_os_error(exc)) from None
+
+
+@click.group(cls=_Group)
 @click.version_option(__version__, prog_name="rbstab")
 def cli() -> None:
     """Lyapunov stability of constrained and embedded rigid bodies.
@@ -34,5 +70,6 @@ cli.add_command(analyze)
 
 
 def main() -> None:
-    """The ``rbstab`` console script."""
+    """The ``rbstab`` console script (SIGTERM is handled like Ctrl-C)."""
+    signal.signal(signal.SIGTERM, _terminate)
     cli.main(prog_name="rbstab")

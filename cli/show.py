@@ -35,7 +35,7 @@ def _show_chunk(path: str) -> None:
     """One line per run of a store file (``rbstab sweep``, layout chunk)."""
     from rbstab.io.chunk import read_chunk_rows
 
-    rows = read_chunk_rows(path)
+    rows = read_chunk_rows(path, data=True)  # every checksum verified
     first = rows[0] if rows else {}
     click.echo(f"{path}")
     click.echo(f"  store file: {len(rows)} runs, store {first.get('store', '?')}, created {first.get('created', '?')}")
@@ -79,7 +79,7 @@ def show(files) -> None:
                 _show_chunk(path)
                 continue
             info = read_summary(path)
-        except (FileNotFoundError, NotAResultFile) as exc:
+        except (OSError, ValueError) as exc:  # FileNotFoundError, NotAResultFile, DamagedResultError ...
             click.echo(f"error: {exc}", err=True)
             bad += 1
             continue

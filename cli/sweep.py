@@ -66,12 +66,13 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--seed", type=click.IntRange(min=0), default=None, help="Seed of the random samples.")
 @click.option(
     "--timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
-    help="Per-run wall-time budget; a run past it is recorded as failed (scipy engine only).",
+    help="Per-run wall-time limit, instead of each config's simulation.max_wall_time; a run past it "
+    "is recorded as failed.",
 )
 @click.option(
     "--engine", type=click.Choice(list(ENGINES)), default=None,
     help="How runs are integrated (see docs/performance.md); scipy: one solve_ivp call per run, "
-    f"the reference  [default: {next(iter(k for k in ENGINES if k != 'scipy'))}; scipy with --timeout].",
+    f"the reference  [default: {next(iter(k for k in ENGINES if k != 'scipy'))}].",
 )
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
@@ -108,17 +109,13 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
     OUTPUT/<name>/sweep.yaml: `rbstab sweep OUTPUT/<name>/sweep.yaml` reruns or resumes it.
 
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
-    1 for an invalid spec (nothing is run); 130 when interrupted.
+    1 for an invalid spec (nothing is run) or a fault of the machine (full disk, read-only
+    folder: one line); 130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
     from rbstab.sweep.executors import LocalExecutor
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
-    if engine not in (None, "scipy") and timeout is not None:
-        raise click.UsageError(
-            f"--timeout needs --engine scipy: the {engine} engine integrates many runs together and has "
-            "no per-run wall-time budget"
-        )
     executor = executor or ("dask" if scheduler else "local")
     if executor == "dask" and not scheduler:
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
@@ -173,13 +170,13 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (rbstab_cli.main.Terminated)
         click.echo(
             f"\ninterrupted: finished runs are saved and the index is up to date; "
             f"run the same command again to resume",
             err=True,
         )
-        raise SystemExit(130)
+        raise SystemExit(getattr(exc, "exit_code", 130))
     finally:
         if not isinstance(ex, str):
             ex.close()

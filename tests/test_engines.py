@@ -334,19 +334,20 @@ def test_worker_compiled_engine_isolates_failures(tmp_path):
 
 def test_engine_choice_and_timeout(tmp_path):
     assert resolve_engine(None, None) == "compiled"
-    assert resolve_engine(None, 5.0) == "scipy"
-    with pytest.raises(ValueError, match="--timeout needs --engine scipy"):
-        resolve_engine("compiled", 5.0)
+    assert resolve_engine(None, 5.0) == "compiled"  # both engines take a per-run wall-time limit
+    assert resolve_engine("scipy", 5.0) == "scipy"
+    with pytest.raises(ValueError, match="engine"):
+        resolve_engine("fast", None)
     spec_path = tmp_path / "s.yaml"
     spec_path.write_text(yaml.safe_dump({"name": "t", "base": str(CASE3), "random": {"n": 1, "seed": 0, "params": {
         "initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 1}}}}}))
     args = ["sweep", str(spec_path), "-o", str(tmp_path / "out"), "--no-progress", "--set", "simulation.t_end=0.05",
             "--set", "simulation.n_samples=11"]
-    refused = CliRunner().invoke(cli, [*args, "--engine", "compiled", "--timeout", "5"])
-    assert refused.exit_code == 2 and "--timeout needs --engine scipy" in refused.output
-    ok = CliRunner().invoke(cli, [*args, "--timeout", "30"])
+    ok = CliRunner().invoke(cli, [*args, "--engine", "scipy", "--timeout", "30"])
     assert ok.exit_code == 0, ok.output
     assert "scipy engine" in ok.output
+    ok = CliRunner().invoke(cli, [*args, "--timeout", "30", "-o", str(tmp_path / "o1")])
+    assert ok.exit_code == 0 and "compiled engine" in ok.output, ok.output
     ok = CliRunner().invoke(cli, [*args, "--store", "summary", "--chunk-size", "4", "-o", str(tmp_path / "o2")])
     assert ok.exit_code == 0 and "compiled engine" in ok.output
 

@@ -36,6 +36,7 @@ from rbstab.report import (
 )
 from rbstab.report.paper import PAPER_CASES, compare_with_paper
 from rbstab.report.tables import settling_time, validate_metrics
+from rbstab.sweep.folder import write_summary
 from rbstab_cli import report as report_cli
 from rbstab_cli.main import cli
 
@@ -160,6 +161,8 @@ def sweeps(tmp_path_factory) -> dict[str, Path]:
     extra.update({"run_id": "r9999-deadbeef", "run": "3", "base": index["base"][0], "theta_1": "0.6",
                   "status": "error", "converged": "False", "message": "worker raised MemoryError"})
     pd.concat([index, pd.DataFrame([extra])]).to_csv(with_error / "index.csv", index=False)
+    summary = with_error / "sweep_summary.json"  # its checksum of the index, updated as rbstab would
+    write_summary(summary, json.loads(summary.read_text()))
     return {"grid": grid, "line": line, "with_error": with_error}
 
 

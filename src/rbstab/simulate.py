@@ -5,14 +5,19 @@ Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
 - ``compiled`` (the default): :mod:`rbstab.engine`, scipy's RK23, RK45 and DOP853
   compiled with the model, the steps ``solve_ivp`` takes; every run of a call may have its
   own variant, body, gains and settings.
-- ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA, of the
-  pure sign law of ``sliding`` and of a per-run wall-time budget):
-  :func:`scipy.integrate.solve_ivp` on the compiled right-hand side.
+- ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA and of
+  the pure sign law of ``sliding``): :func:`scipy.integrate.solve_ivp` on the compiled
+  right-hand side.
 
 Both sample the dense output on an even grid, evaluate every output quantity with the
 compiled ``output_row`` and return a :class:`RunResult`. A failed run (solver failure,
 gimbal lock, non-finite state, step limit) is data: ``status == "failed"`` with a message,
 never an exception.
+
+Every run ends: on either engine a run stops as ``failed`` after
+``simulation.max_steps`` accepted steps or ``simulation.max_wall_time`` seconds of
+integration (the ``timeout`` argument overrides the latter), with the reason as its
+message.
 """
 
 from __future__ import annotations
@@ -113,21 +118,45 @@ def gimbal_lock_event(margin: float):
     return event
 
 
-class RunTimeout(Exception):
-    """Raised inside the right-hand side when a run exceeds its wall-time budget."""
+class RunLimit(Exception):
+    """Raised inside ``solve_ivp``'s callbacks when a run reaches one of its limits."""
+
+    def __init__(self, status: int, t: float) -> None:
+        super().__init__(status, t)
+        self.status = status
+        self.t = t
 
 
-def _with_deadline(rhs, timeout: float | None):
-    if timeout is None:
+class RunTimeout(RunLimit):
+    """The run exceeded its wall-time limit (``simulation.max_wall_time`` or ``timeout``)."""
+
+
+def _with_deadline(rhs, timeout: float):
+    """``rhs`` that raises :class:`RunTimeout` once ``timeout`` seconds have passed."""
+    if timeout == np.inf:
         return rhs
     deadline = _time.perf_counter() + timeout
 
     def timed_rhs(t, y):
         if _time.perf_counter() > deadline:
-            raise RunTimeout(f"timeout: the run exceeded {timeout:g} s of wall time at t = {t:.6g} s")
+            raise RunTimeout(-4, t)
         return rhs(t, y)
 
     return timed_rhs
+
+
+def _step_counter(max_steps: int):
+    """A solve_ivp event that never fires and raises :class:`RunLimit` at step ``max_steps + 1``:
+    ``solve_ivp`` evaluates its events once at t = 0 and once after every accepted step."""
+    calls = [0]
+
+    def event(t: float, y: np.ndarray) -> float:
+        calls[0] += 1
+        if calls[0] > max_steps + 1:
+            raise RunLimit(-3, t)
+        return 1.0
+
+    return event
 
 
 def solve(
@@ -145,7 +174,8 @@ def solve(
         ``t_end`` [s], ``n_samples``, ``method``, ``rtol``, ``atol``, ``max_step`` [s],
         ``gimbal_margin`` [rad].
     timeout : float, optional
-        Wall-time budget [s]; past it the run stops with status ``"failed"``.
+        Wall-time limit [s]; default ``settings.max_wall_time``. Past it, or after
+        ``settings.max_steps`` steps, the run stops with status ``"failed"``.
 
     Returns
     -------
@@ -158,10 +188,15 @@ def solve(
     """
     from scipy.integrate import solve_ivp
 
+    from .config.schema import SimulationSettings
     from .engine import status_message
 
     t_eval = np.linspace(0.0, settings.t_end, settings.n_samples)
     states = np.full((settings.n_samples, variant.layout.size), np.nan)
+    max_steps = int(getattr(settings, "max_steps", SimulationSettings.max_steps))
+    if timeout is None:
+        timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
+    no_solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
     with np.errstate(all="ignore"):
         try:
             sol = solve_ivp(
@@ -170,17 +205,19 @@ def solve(
                 y0,
                 method=settings.method,
                 t_eval=t_eval,
-                events=[gimbal_lock_event(settings.gimbal_margin)],
+                events=[gimbal_lock_event(settings.gimbal_margin), _step_counter(max_steps)],
                 rtol=settings.rtol,
                 atol=settings.atol,
                 max_step=settings.max_step,
             )
-        except RunTimeout as exc:
-            return t_eval, states, "failed", str(exc), {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
-        except (ValueError, np.linalg.LinAlgError, FloatingPointError) as exc:
-            return t_eval, states, "failed", f"solver error: {exc}", {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
-    n = sol.y.shape[1]
-    states[:n] = sol.y.T
+        except RunLimit as exc:
+            message = status_message(exc.status, exc.t, settings.gimbal_margin, max_steps, timeout)
+            return t_eval, states, "failed", message, no_solver
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            return t_eval, states, "failed", f"solver error: {exc}", no_solver
+    y = np.asarray(sol.y, dtype=float)  # a list when the first step failed
+    n = y.shape[1] if y.ndim == 2 else 0
+    states[:n] = y.T[:n]
     solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
     if sol.status == 1:
         return t_eval, states, "failed", status_message(1, float(sol.t_events[0][0]), settings.gimbal_margin), solver
@@ -222,23 +259,24 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
     config : RunConfig
         From :func:`rbstab.config.load_config` (already validated).
     timeout : float, optional
-        Wall-time budget of the integration [s]; past it the run fails with a message
-        (the scipy engine is used for a run with a budget).
+        Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``;
+        past it the run fails with a message.
     engine : {"compiled", "scipy"}
         See the module docstring.
 
     Returns
     -------
     RunResult
-        Never raises for a physical or numerical failure: those are ``status="failed"``.
+        Never raises for a physical or numerical failure, nor for a run past its limits:
+        those are ``status="failed"``.
 
     Raises
     ------
     ValueError
         For an unknown engine.
     """
-    if timeout is None and uses_compiled_engine(config, engine):
-        return next(simulate_many([config], engine=engine))[1]
+    if uses_compiled_engine(config, engine):
+        return next(simulate_many([config], engine=engine, timeout=timeout))[1]
     start = _time.perf_counter()
     variant = config.make_variant()
     y0 = variant.initial_state(config.initial_state)
@@ -258,12 +296,15 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
 POSTPROCESS_BLOCK = 32
 
 
-def _settings_rows(configs) -> np.ndarray:
+def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
+    """The compiled engine's settings of each run (:func:`rbstab.engine.integrate_runs`)."""
     return np.array([[c.simulation.t_end, c.simulation.rtol, c.simulation.atol, c.simulation.max_step,
-                      c.simulation.gimbal_margin] for c in configs], dtype=float)
+                      c.simulation.gimbal_margin, c.simulation.max_steps,
+                      c.simulation.max_wall_time if timeout is None else timeout] for c in configs], dtype=float)
 
 
-def _chunk_results(configs, variants, codes, params, sol, share: float) -> Iterator[tuple[int, RunResult]]:
+def _chunk_results(configs, variants, codes, params, sol, share: float,
+                   settings: np.ndarray) -> Iterator[tuple[int, RunResult]]:
     """RunResults of one integrated chunk, post-processed :data:`POSTPROCESS_BLOCK` runs at a time."""
     from .engine import status_message
     from .variants.base import N_OUTPUTS, split_outputs
@@ -302,7 +343,8 @@ def _chunk_results(configs, variants, codes, params, sol, share: float) -> Itera
                 time=time,
                 outputs=outputs,
                 status="success" if status == 0 else "failed",
-                message=status_message(status, float(sol.t_stop[j]), config.simulation.gimbal_margin),
+                message=status_message(status, float(sol.t_stop[j]), config.simulation.gimbal_margin,
+                                       int(settings[j, 5]), float(settings[j, 6])),
                 solver={"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": status,
                         "n_steps": int(sol.n_steps[j])},
                 wall_time=share + per_run,
@@ -312,7 +354,7 @@ def _chunk_results(configs, variants, codes, params, sol, share: float) -> Itera
 
 
 def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
-                  chunk_size: int = 512) -> Iterator[tuple[int, RunResult]]:
+                  chunk_size: int = 512, timeout: float | None = None) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
 
     With ``engine="compiled"`` every run that the compiled engine takes
@@ -323,6 +365,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     call. At most one chunk of trajectories (``chunk_size * n_samples * n_state`` floats) and the outputs of
     :data:`POSTPROCESS_BLOCK` runs are held at once. Each result's ``wall_time`` is its share
     of the chunk's integration plus its own post-processing [s] (split in ``timing``).
+    ``timeout`` [s], if given, replaces each run's ``simulation.max_wall_time``.
 
     Raises
     ------
@@ -339,7 +382,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             size = config.make_variant().layout.size
             groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
         else:
-            yield i, simulate(config, engine="scipy")
+            yield i, simulate(config, timeout, engine="scipy")
     for (method, n_samples, _), members in groups.items():
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
@@ -348,14 +391,15 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             variants = [c.make_variant() for c in chunk_configs]
             codes = np.array([v.code for v in variants], dtype=np.int64)
             params = np.concatenate([v.parameters for v in variants])
+            settings = _settings_rows(chunk_configs, timeout)
             sol = integrate_runs(
                 codes,
                 params,
                 np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, chunk_configs)]),
-                _settings_rows(chunk_configs),
+                settings,
                 method=method,
                 n_samples=n_samples,
             )
             share = (_time.perf_counter() - start) / len(chunk)
-            for j, result in _chunk_results(chunk_configs, variants, codes, params, sol, share):
+            for j, result in _chunk_results(chunk_configs, variants, codes, params, sol, share, settings):
                 yield chunk[j], result

@@ -37,8 +37,17 @@ Schema (the keys are public; units in brackets)::
       method: DOP853                # a scipy solve_ivp method
       rtol: 1.0e-8                  # > 0
       atol: 1.0e-10                 # > 0
-      max_step: .inf                # [s] > 0 (null means inf)
+      max_step: .inf                # [s] > 0 (null means inf); t_end / max_step <= max_steps
       gimbal_margin: 1.0e-3         # [rad] in (0, 0.5)
+      max_steps: 1000000            # solver steps after which the run fails, in [1, 1e9]
+      max_wall_time: 600            # [s] of integration after which the run fails (null: none)
+
+Limits (docs/reliability.md): every number is at most 1e12 in magnitude; the mass and the
+eigenvalues of the matrices the equations invert (inertia, l_d) are at least 1e-12;
+``name`` has at most 200 characters; ``n_samples`` at most 1e7 (~800 bytes each in
+memory); samples are at least 1e-12 s apart. ``max_steps`` and ``max_wall_time`` bound
+how long a run may take, not what it computes: they are not part of the run's
+``config_hash`` (a run stopped by them is ``failed``; ``--retry-failed`` reruns it).
 
 Gains the variant does not use (and ``initial_state.d`` for variants without a controller
 state) are validated, kept in :attr:`RunConfig.resolved`, and otherwise ignored, so one

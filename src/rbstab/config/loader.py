@@ -165,6 +165,7 @@ class RunConfig:
             boundary_layer=float(ctrl.get("boundary_layer", 0.0)) if "k_s" in used else 0.0,
         )
         max_step = sim["max_step"]
+        wall = sim.get("max_wall_time", SimulationSettings.max_wall_time)  # absent in files of rbstab < 0.2
         return cls(
             name=resolved["name"],
             variant=ctrl["variant"],
@@ -176,6 +177,8 @@ class RunConfig:
                 t_end=float(sim["t_end"]), n_samples=int(sim["n_samples"]), method=sim["method"],
                 rtol=float(sim["rtol"]), atol=float(sim["atol"]),
                 max_step=math.inf if max_step is None else float(max_step), gimbal_margin=float(sim["gimbal_margin"]),
+                max_steps=int(sim.get("max_steps", SimulationSettings.max_steps)),
+                max_wall_time=math.inf if wall is None else float(wall),
             ),
             resolved=resolved,
         )
@@ -221,7 +224,7 @@ def _build(
         for err in exc.errors(include_url=False):
             key, text = problem_line(err, name_defaulted)
             related = [o for o in overrides if _related(o.partition("=")[0].strip(), key)]
-            lines.append(text + "".join(f" [from override {o!r}]" for o in related))
+            lines.append(text + "".join(f" [from override {_short_override(o)}]" for o in related))
         raise ConfigError(lines, source) from None
 
     ctrl = run.controller
@@ -246,6 +249,8 @@ def _build(
         atol=float(sim.atol),
         max_step=float(sim.max_step),
         gimbal_margin=float(sim.gimbal_margin),
+        max_steps=int(sim.max_steps),
+        max_wall_time=float(sim.max_wall_time),
     )
     used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
     unheld = unheld_weight(ctrl.variant, body.mass, body.gravity, used_gains, gains.boundary_layer)
@@ -255,11 +260,12 @@ def _build(
         line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
         inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
         related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
-        raise ConfigError([line + "".join(f" [from override {o!r}]" for o in related)], source)
+        raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
-    if math.isinf(sim.max_step):
-        dump["simulation"]["max_step"] = None
+    for key in ("max_step", "max_wall_time"):
+        if math.isinf(getattr(sim, key)):
+            dump["simulation"][key] = None
     notes = [(m, PhysicalPlausibilityWarning) for m in inertia_warnings(body.inertia)]
     as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
     notes += [(m, SemiDefiniteGainWarning) for m in semidefinite_notes(as_written)]
@@ -279,6 +285,11 @@ def _build(
         resolved=plain_tree(dump),
         warnings=found_warnings,
     )
+
+
+def _short_override(override: str, limit: int = 80) -> str:
+    text = repr(override)
+    return text if len(text) <= limit else text[: limit - 4] + "...'"
 
 
 def _related(a: str, b: str) -> bool:

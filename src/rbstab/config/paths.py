@@ -48,8 +48,14 @@ def _parts(path: str) -> list[str]:
     return parts
 
 
+def _is_index(part: str) -> bool:
+    """Whether a key path component is a list index: ASCII digits only (``str.isdigit``
+    also takes '²' and '١', which ``int`` refuses or reads as another number)."""
+    return part.isascii() and part.isdigit()
+
+
 def _index(node: list, part: str, where: str) -> int:
-    if not part.isdigit():
+    if not _is_index(part):
         raise _PathError(f"'{where}' is a list; index it with 0..{len(node) - 1}, not {part!r}")
     i = int(part)
     if i >= len(node):
@@ -74,7 +80,7 @@ def _walk(data: Any, parts: list[str], *, create: bool) -> Any:
                 if not create:
                     raise _PathError(f"'{where}' is not set")
                 default = _schema_default(parts[: depth + 1])
-                if default is None and parts[depth + 1].isdigit():
+                if default is None and _is_index(parts[depth + 1]):
                     raise _PathError(
                         f"'{where}' is not set, so it has no index {parts[depth + 1]}; "
                         "set the whole list"

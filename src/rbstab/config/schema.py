@@ -25,6 +25,7 @@ from pydantic import (
     Field,
     ValidationInfo,
     field_validator,
+    model_validator,
 )
 from pydantic_core import PydanticCustomError
 
@@ -39,6 +40,14 @@ __all__ = [
     "INITIAL_STATE_BLOCKS",
     "SimulationSettings",
     "SOLVER_METHODS",
+    "MAX_MAGNITUDE",
+    "MIN_INVERTED",
+    "MAX_NAME_LENGTH",
+    "MAX_SAMPLES",
+    "BYTES_PER_SAMPLE",
+    "MIN_SAMPLE_SPACING",
+    "MAX_STEPS_LIMIT",
+    "run_memory_estimate",
     "RunSchema",
     "TOP_LEVEL",
     "kind_of",
@@ -70,6 +79,38 @@ INITIAL_STATE_BLOCKS = {
 }
 
 _NAME_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
+
+# -- documented limits (docs/reliability.md): values no run can mean ---------------------------
+
+#: Largest magnitude of any number of a configuration. The right-hand side multiplies up
+#: to three such numbers and divides by a mass or an inertia (>= MIN_INVERTED), so with
+#: these limits no term overflows a float (1e12^3 / 1e-12 = 1e48); 1e12 s is 31,700 years.
+MAX_MAGNITUDE = 1e12
+#: Smallest mass [kg] and smallest eigenvalue of the matrices the equations invert (the
+#: inertia J [kg m^2], the damper L_d [N s/m]); below it their inverse overflows the dynamics.
+MIN_INVERTED = 1e-12
+#: Longest run ``name`` (it becomes ``<name>.h5`` and a hidden temporary ``.<name>.h5.*.tmp``,
+#: within the 255 bytes most file systems allow).
+MAX_NAME_LENGTH = 200
+#: Memory a run holds per output sample [bytes] (the state, 36 output columns and their
+#: post-processing; measured ~750 on Case 3).
+BYTES_PER_SAMPLE = 800
+#: Most output samples of a run (~7.5 GiB of memory at :data:`BYTES_PER_SAMPLE`).
+MAX_SAMPLES = 10_000_000
+#: Closest sample spacing t_end / (n_samples - 1) [s]: closer samples are not distinct
+#: times to the integrator and the numerical dv/dt divides by their spacing.
+MIN_SAMPLE_SPACING = 1e-12
+#: Largest ``simulation.max_steps``.
+MAX_STEPS_LIMIT = 1_000_000_000
+
+
+def run_memory_estimate(n_samples: int) -> int:
+    """Memory [bytes] a run of ``n_samples`` output samples holds (:data:`BYTES_PER_SAMPLE` each)."""
+    return int(n_samples) * BYTES_PER_SAMPLE
+
+
+def _gib(n_bytes: float) -> str:
+    return f"{n_bytes / 2**30:.3g} GiB" if n_bytes >= 2**30 else f"{n_bytes / 2**20:.3g} MiB"
 _SYMMETRY_RTOL = 1e-12
 #: The ``method`` names of :func:`scipy.integrate.solve_ivp` (``scipy.integrate._ivp.ivp.METHODS``;
 #: ``tests/test_config.py`` checks the two agree). Listed here so that validating a
@@ -103,7 +144,7 @@ def kind_of(value: Any) -> str:
 
 def _as_number(value: Any, *, allow_inf: bool = False) -> int | float:
     kind = type(value)
-    if (kind is float and math.isfinite(value)) or kind is int:  # the common cases, without ABC checks
+    if (kind is float or kind is int) and -MAX_MAGNITUDE <= value <= MAX_MAGNITUDE:  # without the ABC checks
         return value
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         detail = f"{kind_of(value)}, not a number"
@@ -114,10 +155,21 @@ def _as_number(value: Any, *, allow_inf: bool = False) -> int | float:
             except ValueError:
                 pass
         raise Invalid(detail)
-    number = int(value) if isinstance(value, numbers.Integral) else float(value)
+    if isinstance(value, numbers.Integral):
+        if abs(value) > MAX_MAGNITUDE:
+            raise Invalid(_too_large(f"{float(value):.3g}" if abs(value) < 1e300 else f"an integer of {len(str(abs(value)))} digits"))
+        return int(value)
+    number = float(value)
     if math.isnan(number) or (math.isinf(number) and not allow_inf):
         raise Invalid("not a finite number")
+    if math.isfinite(number) and abs(number) > MAX_MAGNITUDE:
+        raise Invalid(_too_large(f"{number:.3g}"))
     return number
+
+
+def _too_large(found: str) -> str:
+    return (f"{found}, beyond {MAX_MAGNITUDE:g} in magnitude, the largest a configuration takes: "
+            "larger values overflow the dynamics (docs/reliability.md)")
 
 
 def _number(
@@ -125,9 +177,13 @@ def _number(
     gt: float | None = None,
     ge: float | None = None,
     lt: float | None = None,
+    le: float | None = None,
     allow_inf: bool = False,
     integer: bool = False,
+    why: Callable[[Any], str] | None = None,
 ) -> Callable[[Any], int | float]:
+    """A check of a number in bounds; ``why(value)`` explains a value out of them."""
+
     def check(value: Any) -> int | float:
         if integer and (isinstance(value, bool) or not isinstance(value, numbers.Integral)):
             raise Invalid(f"{kind_of(value)}, not an integer")
@@ -136,8 +192,9 @@ def _number(
             (gt is not None and not number > gt)
             or (ge is not None and not number >= ge)
             or (lt is not None and not number < lt)
+            or (le is not None and not number <= le)
         ):
-            raise Invalid()  # the field's description says what is allowed
+            raise Invalid(why(number) if why is not None else "")  # the description says what is allowed
         return number
 
     return check
@@ -193,8 +250,14 @@ def _spd_matrix(value: Any, why: str = "") -> list:
         bad = [f"[{i}] = {x:g}" for i, x in enumerate(numbers) if not x > 0]
         if bad:
             raise Invalid(f"not positive definite: diagonal {', '.join(bad)}; each must be > 0{reason}")
+        smallest = min(numbers)
     elif not eigenvalues[0] > 0:
         raise Invalid(f"not positive definite: smallest eigenvalue {eigenvalues[0]:g}{reason}")
+    else:
+        smallest = eigenvalues[0]
+    if smallest < MIN_INVERTED:
+        raise Invalid(f"smallest eigenvalue {smallest:g} is below {MIN_INVERTED:g}: the equations invert this "
+                      "matrix, and its inverse would overflow the dynamics (docs/reliability.md)")
     return numbers
 
 
@@ -240,12 +303,15 @@ def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
 
 def _valid_name(value: Any) -> bool:
     """Whether ``value`` is a valid run ``name`` (see :func:`_name`)."""
-    return isinstance(value, str) and bool(_NAME_PATTERN.fullmatch(value)) and set(value) != {"."}
+    return (isinstance(value, str) and len(value) <= MAX_NAME_LENGTH and bool(_NAME_PATTERN.fullmatch(value))
+            and set(value) != {"."})
 
 
 def _name(value: Any) -> str:
     if not isinstance(value, str):
         raise Invalid(f"{kind_of(value)}, not a string")
+    if len(value) > MAX_NAME_LENGTH:
+        raise Invalid(f"{len(value)} characters; at most {MAX_NAME_LENGTH}")
     if not _NAME_PATTERN.fullmatch(value) or set(value) == {"."}:
         raise Invalid()
     return value
@@ -274,6 +340,16 @@ def _method(value: Any) -> str:
 def _max_step(value: Any) -> float:
     """null means inf (that is how :attr:`RunConfig.resolved` writes inf)."""
     return math.inf if value is None else _number(gt=0, allow_inf=True)(value)
+
+
+def _max_wall_time(value: Any) -> float:
+    """null means inf (no wall-time limit; the step limit still ends the run)."""
+    return math.inf if value is None else _number(gt=0, allow_inf=True)(value)
+
+
+def _samples_memory(n: Any) -> str:
+    return (f"a run holds ~{BYTES_PER_SAMPLE} bytes per sample: {n} samples would need "
+            f"~{_gib(run_memory_estimate(n))}, at most {MAX_SAMPLES} (~{_gib(run_memory_estimate(MAX_SAMPLES))}) are allowed")
 
 
 def _checked(check: Callable[[Any], Any]) -> BeforeValidator:
@@ -307,6 +383,11 @@ class SimulationSettings:
         Largest solver step [s], > 0; ``inf`` for no limit.
     gimbal_margin : float
         [rad] in (0, 0.5): the run stops when |theta_2| >= pi/2 - gimbal_margin.
+    max_steps : int
+        Accepted solver steps after which the run stops as ``failed`` (every engine).
+    max_wall_time : float
+        Wall time [s] of the integration after which the run stops as ``failed`` (every
+        engine); ``inf`` for none (the step limit still ends it).
     """
 
     t_end: float = 2.0
@@ -316,6 +397,8 @@ class SimulationSettings:
     atol: float = 1e-10
     max_step: float = math.inf
     gimbal_margin: float = 1e-3
+    max_steps: int = 1_000_000
+    max_wall_time: float = 600.0
 
 
 # -- schema --------------------------------------------------------------------------------
@@ -413,8 +496,8 @@ class _Simulation(_Section):
     t_end: Annotated[Any, _checked(_number(gt=0))] = Field(
         _DEFAULT_SIMULATION.t_end, description="a number > 0 (s)"
     )
-    n_samples: Annotated[Any, _checked(_number(ge=2, integer=True))] = Field(
-        _DEFAULT_SIMULATION.n_samples, description="an integer >= 2"
+    n_samples: Annotated[Any, _checked(_number(ge=2, le=MAX_SAMPLES, integer=True, why=_samples_memory))] = Field(
+        _DEFAULT_SIMULATION.n_samples, description=f"an integer in [2, {MAX_SAMPLES}]"
     )
     method: Annotated[Any, _checked(_method)] = Field(
         _DEFAULT_SIMULATION.method, description="a scipy solve_ivp method name"
@@ -431,6 +514,37 @@ class _Simulation(_Section):
     gimbal_margin: Annotated[Any, _checked(_number(gt=0, lt=0.5))] = Field(
         _DEFAULT_SIMULATION.gimbal_margin, description="a number in (0, 0.5) (rad)"
     )
+    max_steps: Annotated[Any, _checked(_number(ge=1, le=MAX_STEPS_LIMIT, integer=True))] = Field(
+        _DEFAULT_SIMULATION.max_steps, description=f"an integer in [1, {MAX_STEPS_LIMIT}] (solver steps)"
+    )
+    max_wall_time: Annotated[Any, _checked(_max_wall_time)] = Field(
+        _DEFAULT_SIMULATION.max_wall_time, description="a number > 0 (s), .inf or null for no limit"
+    )
+
+    @model_validator(mode="after")
+    def _run_can_end(self) -> "_Simulation":
+        """Settings no run can meet: samples closer than MIN_SAMPLE_SPACING, or a max_step
+        that needs more steps than max_steps to reach t_end."""
+        spacing = self.t_end / (self.n_samples - 1)
+        if spacing < MIN_SAMPLE_SPACING:
+            raise PydanticCustomError("rbstab_invalid", "samples too close", {
+                "key": "simulation.t_end",
+                "found": short_repr(self.t_end),
+                "expected": f"t_end >= (n_samples - 1) * {MIN_SAMPLE_SPACING:g} s = "
+                            f"{(self.n_samples - 1) * MIN_SAMPLE_SPACING:.6g} s",
+                "detail": f"{self.n_samples} samples would be {spacing:.3g} s apart, closer than "
+                          f"{MIN_SAMPLE_SPACING:g} s; shorten n_samples or lengthen t_end",
+            })
+        needed = self.t_end / self.max_step
+        if needed > self.max_steps:
+            raise PydanticCustomError("rbstab_invalid", "max_step too small", {
+                "key": "simulation.max_step",
+                "found": short_repr(self.max_step),
+                "expected": f"max_step >= t_end / max_steps = {self.t_end / self.max_steps:.6g} s",
+                "detail": f"reaching t_end = {self.t_end:g} s takes at least {needed:.3g} steps of max_step, "
+                          f"more than simulation.max_steps = {self.max_steps}",
+            })
+        return self
 
 
 class RunSchema(_Section):
@@ -569,9 +683,9 @@ def problem_line(
         allowed = list(model.model_fields) if model is not None else []
         word = str(loc[-1])
         section = str(loc[-2]) if len(loc) > 1 else ""
-        hint = _did_you_mean(word, allowed, f"{section}." if section else "")
-        if root is None or root is RunSchema:
-            hint = hint or _other_section_hint(word, section)
+        # a key of another section spelled exactly is surely meant; else the closest here
+        other = _other_section_hint(word, section) if root is None or root is RunSchema else ""
+        hint = other or _did_you_mean(word, allowed, f"{section}." if section else "")
         hint = f"; {hint}" if hint else ""
         return key, f"{head}: unknown key{hint} (allowed: {', '.join(allowed)})"
     if err["type"] in ("missing", "rbstab_missing"):

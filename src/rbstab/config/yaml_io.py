@@ -1,14 +1,20 @@
 """YAML reading and writing for configurations and sweep specs.
 
-Reading uses a :class:`yaml.SafeLoader` subclass that differs in two ways: ``1e-8`` is a
-float (PyYAML follows YAML 1.1 and reads it as a string), and a key given twice in one
-mapping is an error instead of silently keeping the last value. Writing keeps lists
-(vectors, matrices) on one line.
+Reading uses a :class:`yaml.SafeLoader` subclass that differs in three ways: ``1e-8`` is a
+float (PyYAML follows YAML 1.1 and reads it as a string), a key given twice in one
+mapping is an error instead of silently keeping the last value, and the document is
+bounded before any Python object is built from it (:data:`MAX_YAML_BYTES` of text,
+:data:`MAX_YAML_DEPTH` levels of nesting, :data:`MAX_YAML_NODES` values once aliases are
+expanded, no recursive alias), so that a small file cannot make a large object (a
+"billion laughs" file of nested aliases) or a deep one. Files are read only when they
+are regular files (not ``/dev/zero``, a FIFO or a folder), and at most
+:data:`MAX_YAML_BYTES` of them. Writing keeps lists (vectors, matrices) on one line.
 """
 
 from __future__ import annotations
 
 import re
+import stat
 from collections.abc import Container, Mapping
 from pathlib import Path
 from typing import Any
@@ -17,11 +23,72 @@ import yaml
 
 from .errors import ConfigError
 
-__all__ = ["parse_yaml", "read_yaml_file", "dump_yaml", "dump_yaml_sections"]
+__all__ = [
+    "parse_yaml",
+    "read_yaml_file",
+    "read_text_limited",
+    "dump_yaml",
+    "dump_yaml_sections",
+    "MAX_YAML_BYTES",
+    "MAX_YAML_DEPTH",
+    "MAX_YAML_NODES",
+]
+
+#: Largest YAML text read (a config is ~1 kB; a sweep spec with long inline lists ~100 kB).
+MAX_YAML_BYTES = 4 * 2**20
+#: Deepest nesting of mappings and lists (a config has 3 levels, a sweep spec ~6).
+MAX_YAML_DEPTH = 32
+#: Most values (scalars, lists, mappings) of a document with every alias expanded.
+MAX_YAML_NODES = 200_000
+
+
+class _LimitError(yaml.MarkedYAMLError):
+    """A document past one of the limits (reported like a syntax error, with its line)."""
 
 
 class _Loader(yaml.SafeLoader):
-    """SafeLoader reading ``1e-8`` as a float and refusing duplicate keys."""
+    """SafeLoader reading ``1e-8`` as a float, refusing duplicate keys and bounding the
+    document (module docstring) while it is composed, before anything is constructed."""
+
+    def __init__(self, stream) -> None:
+        super().__init__(stream)
+        self._depth = 0
+        # id(node) -> (values with aliases expanded, nesting height), filled bottom-up as
+        # each node is completed; an alias to a node not in it refers to an ancestor.
+        self._measure: dict[int, tuple[int, int]] = {}
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            node = super().compose_node(parent, index)
+            if id(node) not in self._measure:
+                raise _LimitError(None, None, f"the alias *{event.anchor} refers to a value that contains it "
+                                  "(a recursive structure)", event.start_mark)
+            return node
+        mark = self.peek_event().start_mark
+        self._depth += 1
+        if self._depth > MAX_YAML_DEPTH:
+            raise _LimitError(None, None, f"nested deeper than {MAX_YAML_DEPTH} levels", mark)
+        try:
+            node = super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+        self._measure[id(node)] = self._size(node, mark)
+        return node
+
+    def _size(self, node: yaml.Node, mark) -> tuple[int, int]:
+        if isinstance(node, yaml.ScalarNode):
+            return 1, 1
+        children = node.value if isinstance(node, yaml.SequenceNode) else [n for kv in node.value for n in kv]
+        measures = [self._measure[id(child)] for child in children]
+        size = 1 + sum(m[0] for m in measures)
+        height = 1 + max((m[1] for m in measures), default=0)
+        if size > MAX_YAML_NODES:
+            raise _LimitError(None, None, f"more than {MAX_YAML_NODES} values once aliases are expanded", mark)
+        if height > MAX_YAML_DEPTH:
+            raise _LimitError(None, None, f"nested deeper than {MAX_YAML_DEPTH} levels once aliases are "
+                              "expanded", mark)
+        return size, height
 
     def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
         seen: dict[Any, int] = {}
@@ -64,9 +131,21 @@ _Dumper.add_representer(list, _Dumper.represent_list)
 
 
 def parse_yaml(text: str) -> Any:
-    """Parse YAML text; a syntax error becomes a ConfigError line."""
+    """Parse YAML text within the limits of the module docstring.
+
+    Raises
+    ------
+    ConfigError
+        One line for a syntax error, a document past a limit, or a value its tag cannot
+        take (``!!float abc``, ``!!timestamp 2020-13-01``).
+    """
+    if len(text) > MAX_YAML_BYTES:
+        raise ConfigError([f"YAML text of {len(text)} characters; at most {MAX_YAML_BYTES} are read"])
     try:
         return yaml.load(text, Loader=_Loader)  # noqa: S506 - _Loader is a SafeLoader
+    except _LimitError as exc:
+        mark = exc.problem_mark
+        raise ConfigError([f"YAML refused at line {mark.line + 1}, column {mark.column + 1}: {exc.problem}"]) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -74,6 +153,45 @@ def parse_yaml(text: str) -> Any:
         raise ConfigError([f"YAML syntax error{where}: {problem}"]) from None
     except yaml.YAMLError as exc:
         raise ConfigError([f"YAML syntax error: {exc}"]) from None
+    except (ValueError, TypeError, OverflowError) as exc:  # a tagged value its constructor refuses
+        raise ConfigError([f"YAML value error: {exc}"]) from None
+
+
+def read_text_limited(path: str | Path, what: str, limit: int = MAX_YAML_BYTES) -> str:
+    """The UTF-8 text of a regular file of at most ``limit`` bytes.
+
+    Only regular files are read: a device (``/dev/zero``), a FIFO or a folder is refused
+    before it is opened for reading, and at most ``limit + 1`` bytes are read, so no
+    input makes the reader block or grow.
+
+    Raises
+    ------
+    ConfigError
+        For a missing, unreadable, non-regular or larger file, or one that is not UTF-8
+        (``source`` is ``path``).
+    """
+    path = Path(path)
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        raise ConfigError([f"{what} not found: {path}"]) from None
+    except OSError as exc:
+        raise ConfigError([f"cannot read the {what}: {exc.strerror or exc}"], str(path)) from None
+    if not stat.S_ISREG(info.st_mode):
+        kind = "a folder" if stat.S_ISDIR(info.st_mode) else "not a regular file (a device, FIFO or socket)"
+        raise ConfigError([f"the {what} {path} is {kind}; expected a YAML file"], str(path))
+    if info.st_size > limit:
+        raise ConfigError([f"the {what} is {info.st_size} bytes; at most {limit} are read"], str(path))
+    try:
+        with open(path, "rb") as f:
+            data = f.read(limit + 1)
+        if len(data) > limit:  # grew since stat()
+            raise ConfigError([f"the {what} is more than {limit} bytes; at most {limit} are read"], str(path))
+        return data.decode("utf-8")
+    except OSError as exc:
+        raise ConfigError([f"cannot read the {what}: {exc.strerror or exc}"], str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError([f"the {what} is not UTF-8 text ({exc.reason} at byte {exc.start})"], str(path)) from None
 
 
 def read_yaml_file(path: str | Path, what: str = "config file") -> Any:
@@ -88,15 +206,10 @@ def read_yaml_file(path: str | Path, what: str = "config file") -> Any:
     Raises
     ------
     ConfigError
-        For a missing or unreadable file or a YAML syntax error; ``source`` is ``path``.
+        For a missing, unreadable or non-regular file, one past the limits of the module
+        docstring, or a YAML syntax error; ``source`` is ``path``.
     """
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ConfigError([f"{what} not found: {path}"]) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError([f"cannot read the {what}: {exc}"], str(path)) from None
+    text = read_text_limited(path, what)
     try:
         return parse_yaml(text)
     except ConfigError as exc:

@@ -54,7 +54,8 @@ class ChunkSolution:
     samples : ndarray, shape (k, n_samples, n_state)
         The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
     status : ndarray of int, shape (k,)
-        0 reached t_end; 1 gimbal lock; -1 step too small; -2 non-finite; -3 step limit.
+        0 reached t_end; 1 gimbal lock; -1 step too small; -2 non-finite; -3 step limit;
+        -4 wall-time limit.
     t_stop : ndarray, shape (k,)
         Where each run stopped [s] (the event time for gimbal lock).
     nfev, n_steps : ndarray of int, shape (k,)
@@ -69,7 +70,7 @@ class ChunkSolution:
 
 
 def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
-                   max_steps: int = DEFAULT_MAX_STEPS) -> ChunkSolution:
+                   max_steps: int = DEFAULT_MAX_STEPS, max_wall_time: float = np.inf) -> ChunkSolution:
     """Integrate k runs of one method and sample count.
 
     Parameters
@@ -79,32 +80,39 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,)
     y0 : ndarray, shape (k, n_state)
         Initial states.
-    settings : ndarray, shape (k, 5)
-        Per run: t_end [s], rtol, atol, max_step [s], gimbal_margin [rad].
+    settings : ndarray, shape (k, 5) or (k, 7)
+        Per run: t_end [s], rtol, atol, max_step [s], gimbal_margin [rad], and optionally
+        max_steps and max_wall_time [s] (default: the arguments of those names).
     method : str
         One of :data:`METHODS`.
     n_samples : int
         Samples per run, evenly spaced on [0, t_end] (>= 2).
     max_steps : int
-        Accepted steps after which a run stops (status -3).
+        Accepted steps after which a run stops (status -3), for 5-column ``settings``.
+    max_wall_time : float
+        Seconds after which a run stops (status -4; inf: none), for 5-column ``settings``.
     """
     from .integrate import integrate_chunk
 
     codes = np.ascontiguousarray(codes, dtype=np.int64)
     y0 = np.ascontiguousarray(y0, dtype=float)
     k, n = y0.shape
+    settings = np.asarray(settings, dtype=float)
+    if settings.shape[1] == 5:
+        settings = np.column_stack([settings, np.full(k, float(max_steps)), np.full(k, float(max_wall_time))])
     samples = np.empty((k, n_samples, n))
     status = np.empty(k, dtype=np.int64)
     t_stop = np.empty(k)
     nfev = np.empty(k, dtype=np.int64)
     n_steps = np.empty(k, dtype=np.int64)
     with np.errstate(all="ignore"):
-        integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings, dtype=float),
-                        max_steps, tableau(method), samples, status, t_stop, nfev, n_steps)
+        integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings),
+                        tableau(method), samples, status, t_stop, nfev, n_steps)
     return ChunkSolution(samples, status, t_stop, nfev, n_steps)
 
 
-def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS) -> str:
+def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,
+                   max_wall_time: float = np.inf) -> str:
     """The message of a run's end (scipy's words where scipy has them)."""
     if status == 0:
         return SUCCESS_MESSAGE
@@ -117,7 +125,9 @@ def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: 
         return f"solver failed: {TOO_SMALL_STEP_MESSAGE} (at t = {t_stop:.6g} s)"
     if status == -2:
         return f"non-finite step size or state at t = {t_stop:.6g} s"
-    return f"step limit: {max_steps} steps taken by t = {t_stop:.6g} s"
+    if status == -3:
+        return f"step limit: {max_steps} steps taken (simulation.max_steps), reaching only t = {t_stop:.6g} s"
+    return f"timeout: the run exceeded {max_wall_time:g} s of wall time at t = {t_stop:.6g} s"
 
 
 def warm_up() -> None:

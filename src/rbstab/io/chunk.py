@@ -12,7 +12,8 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   identifier name (``k_c_0`` for ``controller.k_c.0``, see
   :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
 - per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
-  ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash`` (SHA-256 of ``config``) and the summary figures of
+  ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash``
+  (SHA-256 of ``config`` without its run limits, :func:`rbstab.io.hdf5.canonical_config`) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
   ``units`` and ``long_name``;
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
@@ -24,6 +25,9 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
 
 A file is written to a temporary name and renamed when complete; trace rows are written
 in blocks of about :data:`WRITE_BYTES`, so a writer holds at most that much of its traces.
+Every numeric variable carries a Fletcher-32 checksum and the file the SHA-256 of its
+attributes and text (``rbstab_digest``); :func:`read_chunk_rows` verifies the digest and
+the per-run values, :func:`rbstab.io.integrity.verify_file` everything.
 :func:`read_chunk_rows` gives each run's per-run values (what resume and the index use),
 :func:`read_chunk_series` one run's traces.
 """
@@ -44,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import __version__
-from .atomic import atomic_path
+from .atomic import as_os_error, atomic_path, check_free_space
 from .hdf5 import (
     SUMMARY_VARIABLES,
     VARIABLE_DESCRIPTIONS,
@@ -89,6 +93,9 @@ THINNED_VARIABLES = SUMMARY_VARIABLES
 WRITE_BYTES = 32 * 2**20
 #: Fewest runs per written block (and HDF5 chunk along ``run``).
 WRITE_BLOCK = 32
+#: Free space [bytes] a writer keeps beyond what it is about to hand to HDF5 (its metadata,
+#: another writer on the same disk): HDF5 must never meet a full disk, see :meth:`ChunkWriter._room`.
+SPACE_MARGIN = 8 * 2**20
 _AXES = ("x", "y", "z")
 
 #: Summary figures (:func:`rbstab.summary.summarize`): name -> (units, long name).
@@ -121,7 +128,7 @@ PER_RUN = {
     "solver_nlu": ("1", "LU decompositions"),
     "solver_status": ("1", "solve_ivp status (0 success, -1 failure, 1 stopped by an event)"),
     "config": ("", "resolved configuration without its name, canonical JSON"),
-    "config_hash": ("", "SHA-256 of config"),
+    "config_hash": ("", "SHA-256 of config without simulation.max_steps and max_wall_time"),
 }
 _COORDS = ("run_id", "base", "variant")
 _TEXT = {"run_id", "base", "variant", "status", "message", "config", "config_hash", "lyapunov_rate_check"}
@@ -236,6 +243,8 @@ class ChunkWriter:
     def __enter__(self) -> "ChunkWriter":
         import h5netcdf
 
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._room(0)
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
         import h5py
@@ -246,7 +255,8 @@ class ChunkWriter:
         f.dimensions["axis"] = 3
         # coordinates first: a variable created later attaches to them once (h5netcdf
         # re-attaches every variable of a dimension whose coordinate comes after them)
-        run = f.create_variable("run", ("run",), data=np.array([r.index for r in self.identity], dtype=np.int64))
+        run = f.create_variable("run", ("run",), data=np.array([r.index for r in self.identity], dtype=np.int64),
+                                fletcher32=True)
         run.attrs.update(long_name="position of the run in the sweep's run list")
         axis = f.create_variable("axis", ("axis",), data=np.array(_AXES, dtype=object), dtype=self._str)
         axis.attrs.update(long_name="vector component; frame given by each variable")
@@ -257,17 +267,35 @@ class ChunkWriter:
             if exc_type is None:
                 self._finish()
         except BaseException:
+            self._datasets.clear()
             self._stack.__exit__(*sys.exc_info())
             raise
-        return self._stack.__exit__(exc_type, exc, tb)
+        self._datasets.clear()
+        try:
+            return self._stack.__exit__(exc_type, exc, tb)
+        except RuntimeError as error:  # HDF5's close failed: an I/O error with its errno
+            raise as_os_error(error, self.path) from None
+
+    def _room(self, n_bytes: int) -> None:
+        """Raise OSError(ENOSPC) before handing ``n_bytes`` to HDF5 unless the disk has room.
+
+        HDF5 that meets a full disk leaves the file half-open inside the library, which then
+        crashes the process at exit (a segmentation fault): a writer checks first, keeping
+        :data:`SPACE_MARGIN` for the file's metadata and for other writers.
+        """
+        check_free_space(self.path.parent, n_bytes + SPACE_MARGIN, f"the store file {self.path.name}")
 
     # -- rows ---------------------------------------------------------------------------------
 
     def add(self, run_id: str, result: "RunResult", config_text: str | None = None) -> dict[str, Any]:
-        """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it)."""
+        """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
+
+        ``config_text``: ``canonical_config(result.config.resolved)`` if the caller has it.
+        """
         from .hdf5 import config_hash
 
-        text = canonical_config(result.config.resolved) if config_text is None else config_text
+        resolved = result.config.resolved
+        identity = canonical_config(resolved) if config_text is None else config_text
         values: dict[str, Any] = {
             "variant": result.config.variant,
             "status": result.status,
@@ -276,8 +304,8 @@ class ChunkWriter:
         }
         values.update({f"solver_{k}": result.solver.get(k) for k in _SOLVER[:-1]})
         values["solver_status"] = int(result.solver.get("solver_status", -1))
-        values["config"] = text
-        values["config_hash"] = config_hash(text)
+        values["config"] = canonical_config(resolved, limits=True)
+        values["config_hash"] = config_hash(identity)
         values.update(summary_columns(result.summary))
         traces = None
         if self.store != "summary":
@@ -323,14 +351,14 @@ class ChunkWriter:
         self._time = time[:: self._stride]
         f = self._file
         f.dimensions["time"] = len(self._time)
-        t = f.create_variable("time", ("time",), data=self._time)
+        t = f.create_variable("time", ("time",), data=self._time, fletcher32=bool(len(self._time)))
         t.attrs.update(units="s", long_name="time", description="sample time, evenly spaced dense output")
         block = min(WRITE_BLOCK, len(self.ids))
         for name in names:
             rank = np.ndim(result.outputs[name])
             dims = ("run", "time", "axis")[: rank + 1]
             shape = (block, len(self._time), 3)[: rank + 1]
-            var = f.create_variable(name, dims, dtype=float, fillvalue=np.nan, chunks=shape)
+            var = f.create_variable(name, dims, dtype=float, fillvalue=np.nan, chunks=shape, fletcher32=True)
             var.attrs.update(units=VARIABLE_UNITS[name], long_name=name.replace("_", " "),
                              description=VARIABLE_DESCRIPTIONS[name])
             self._traces[name] = (len(self._time), 3)[:rank]
@@ -353,6 +381,7 @@ class ChunkWriter:
             return
         self._pending.sort(key=lambda p: p[0])
         rows = [i for i, _ in self._pending]
+        self._room(len(rows) * 8 * sum(int(np.prod(shape)) for shape in self._traces.values()))
         for name, shape in self._traces.items():
             missing = np.full(shape, np.nan)
             block = np.stack([missing if o is None or name not in o else o[name] for _, o in self._pending])
@@ -372,12 +401,17 @@ class ChunkWriter:
         self._flush()
         f = self._file
         columns = self._columns()
+        self._room(sum(len(str(v)) + 8 for values in columns.values() for v in values))
         self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         for name, values in columns.items():
             self._write_column(name, values)
         for name in self._traces:
             f.variables[name].attrs["coordinates"] = self._coordinates
         f.attrs.update(self.attrs)
+        from .integrity import DIGEST_ATTR, content_digest
+
+        f.flush()
+        f.attrs[DIGEST_ATTR] = content_digest(f._h5file)
 
     def _columns(self) -> dict[str, list]:
         names: dict[str, None] = dict.fromkeys(_COORDS)
@@ -400,7 +434,8 @@ class ChunkWriter:
             data = np.array([np.nan if v is None else v for v in values], dtype=float)
             if name.startswith("solver_") and np.all(np.isfinite(data)):
                 data = data.astype(np.int64)
-            var = h5.create_dataset(name, data=data, fillvalue=np.nan if data.dtype.kind == "f" else None)
+            var = h5.create_dataset(name, data=data, fillvalue=np.nan if data.dtype.kind == "f" else None,
+                                    fletcher32=True)
         var.dims[0].attach_scale(h5["run"])
         units, long_name = figure_attributes(name)
         if name in self.parameters:
@@ -424,8 +459,10 @@ def is_chunk_file(path: str | os.PathLike) -> bool:
         return False
 
 
-def read_chunk_rows(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """Each run's per-run values, in row order.
+def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict[str, Any]]:
+    """Each run's per-run values, in row order, from a verified store file.
+
+    ``data``: also verify the checksums of every trace (reads the whole file).
 
     Returns
     -------
@@ -441,21 +478,33 @@ def read_chunk_rows(path: str | os.PathLike) -> list[dict[str, Any]]:
         If ``path`` does not exist.
     NotAResultFile
         If it is not an rbstab store file.
+    rbstab.io.integrity.DamagedResultError
+        If its checksums do not match (the digest of its text and attributes, the
+        Fletcher-32 checksums of the per-run values; ``data``: of the traces too).
     """
     import h5py
+
+    from .integrity import DamagedResultError, verify_open_file
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such result file: {path}")
     try:
-        with h5py.File(path, "r") as f:
-            if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
-                raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
-            store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
-            columns = {k: _column(f[k]) for k in f if f[k].ndim == 1 and k not in ("axis", "time")
-                       and f[k].shape[0] == f["run"].shape[0]}
+        f = h5py.File(path, "r")
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
+    with f:
+        if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
+            raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
+        verify_open_file(f, path, data=data)
+        store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
+        try:
+            columns = {k: _column(f[k]) for k in f if f[k].ndim == 1 and k not in ("axis", "time")
+                       and "run" in f and f[k].shape[0] == f["run"].shape[0]}
+        except OSError as exc:  # a Fletcher-32 checksum that does not match
+            raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
+    if "run" not in columns or "run_id" not in columns:
+        raise NotAResultFile(f"{path}: a sweep store file without its 'run' and 'run_id' variables")
     n = len(columns["run"])
     rows = []
     for i in range(n):

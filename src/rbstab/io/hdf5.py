@@ -15,7 +15,9 @@ Layout of ``<name>.h5``
 
 Open with ``xarray.open_dataset(path, engine="h5netcdf")``. Files are written to a
 temporary name in the target folder and renamed into place, so an interrupted write
-never leaves a half-written result under the final name.
+never leaves a half-written result under the final name. Every numeric variable carries a
+Fletcher-32 checksum and the file the SHA-256 of its attributes and text
+(``rbstab_digest``), verified by :func:`read_summary` (:mod:`rbstab.io.integrity`).
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import __version__
-from .atomic import atomic_path
+from .atomic import write_bytes_atomic
 from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
 from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
 
@@ -97,12 +99,23 @@ def _git_commit() -> str:
     return "unknown"
 
 
-def canonical_config(resolved) -> str:
-    """A resolved configuration without its ``name`` as canonical JSON (sorted keys, no spaces).
+#: ``simulation`` keys that bound how long a run may take, not what it computes: not part
+#: of its identity (:func:`canonical_config`), so changing them reruns nothing (a run they
+#: stopped is ``failed``: ``rbstab sweep --retry-failed`` reruns it).
+RUN_LIMIT_KEYS = ("max_steps", "max_wall_time")
 
-    ``json.loads`` reads it back; :func:`config_hash` hashes it.
+
+def canonical_config(resolved, *, limits: bool = False) -> str:
+    """A resolved configuration without its ``name`` as canonical JSON (sorted keys, no
+    spaces), and without the run limits (:data:`RUN_LIMIT_KEYS`) unless ``limits``.
+
+    ``json.loads`` reads it back; :func:`config_hash` of the text without the limits is the
+    run's identity (a store file's ``config`` column holds the text with them).
     """
     body = {k: v for k, v in resolved.items() if k != "name"}
+    sim = body.get("simulation")
+    if not limits and isinstance(sim, dict) and any(k in sim for k in RUN_LIMIT_KEYS):
+        body["simulation"] = {k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS}
     return json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)
 
 
@@ -209,24 +222,37 @@ class _Writer:
         attr.close()
 
     def dataset(self, parent, name: str, data: np.ndarray, dtype=None):
+        """A dataset of ``data``; numeric ones chunked with a Fletcher-32 checksum."""
+        from .integrity import fletcher32_chunks
+
         h5py = self.h5py
         h5p = h5py.h5p
         dcpl = h5p.create(h5p.DATASET_CREATE)
         dcpl.set_obj_track_times(False)
         dcpl.set_attr_creation_order(0)
+        chunks = fletcher32_chunks(data.shape, data.dtype.itemsize) if data.dtype.kind in "fiu" else None
+        if chunks is not None:
+            dcpl.set_chunk(chunks)
+            dcpl.set_fletcher32()
         htype = self.types(np.dtype(dtype) if dtype is not None else data.dtype)[0]
         dset = h5py.h5d.create(parent, name.encode(), htype, h5py.h5s.create_simple(data.shape), dcpl=dcpl)
         dset.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
         return dset
 
 
-def _write_file(path: str, time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
+def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any]) -> bytes:
+    """The bytes of a result file, built in memory (HDF5's ``core`` driver).
+
+    HDF5 never writes to the disk itself: a full disk or a failing device then shows up
+    as an ordinary ``OSError`` of the caller's write, with nothing half-open inside HDF5
+    (whose clean-up at exit crashes the process after a failed write to a file).
+    """
     import h5py
 
     w = _Writer(h5py)
     h5ds = h5py.h5ds
     # netCDF-4 conventions through HDF5 dimension scales: the file h5netcdf would write
-    with h5py.File(path, "w", track_order=True) as f:
+    with h5py.File(f"rbstab-{id(attrs)}.h5", "w", driver="core", backing_store=False, track_order=True) as f:
         root = f.id
         t = w.dataset(root, "time", np.ascontiguousarray(time, dtype=float))
         h5ds.set_scale(t, b"time")
@@ -247,6 +273,11 @@ def _write_file(path: str, time: np.ndarray, outputs: dict[str, np.ndarray], att
         axis.close()
         for key, value in attrs.items():
             w.attr(root, key, value)
+        from .integrity import DIGEST_ATTR, content_digest
+
+        w.attr(root, DIGEST_ATTR, content_digest(f))
+        f.flush()
+        return f.id.get_file_image()
 
 
 def write_run(
@@ -269,8 +300,7 @@ def write_run(
         outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
     elif store == "summary":
         time, outputs = time[:0], {}
-    with atomic_path(path) as tmp:
-        _write_file(str(tmp), time, outputs, attrs)
+    write_bytes_atomic(path, _file_image(time, outputs, attrs))
     return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
 
 
@@ -298,7 +328,9 @@ def write_result(
     Raises
     ------
     OSError
-        If the folder cannot be created or written; the final name is then untouched.
+        If the folder cannot be created or written (a full disk, a read-only folder, a
+        name too long): one message with the errno; the final name is then untouched and
+        no temporary file is left.
     """
     write_run(result, path, command_line=command_line, store=store)
     return Path(path)
@@ -314,8 +346,20 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def read_attributes(path: str | os.PathLike) -> dict[str, Any]:
-    """Global attributes of a result file as plain Python values.
+#: Attributes every result file has (:func:`read_summary` refuses a file without one).
+REQUIRED_ATTRIBUTES = ("name", "variant", "status", "message", "config_hash", "wall_time", "created")
+
+
+def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool = False) -> dict[str, Any]:
+    """Global attributes of a result file as plain Python values (without its checksum).
+
+    Parameters
+    ----------
+    path : path-like
+    verify : bool
+        Check the file's digest of its attributes and text (:mod:`rbstab.io.integrity`).
+    data : bool
+        Also check the Fletcher-32 checksums of every variable (reads the whole file).
 
     Raises
     ------
@@ -323,15 +367,21 @@ def read_attributes(path: str | os.PathLike) -> dict[str, Any]:
         If ``path`` does not exist.
     NotAResultFile
         If it is not an HDF5 file written by rbstab.
+    rbstab.io.integrity.DamagedResultError
+        If ``verify`` and its checksums do not match (a subclass of NotAResultFile).
     """
     import h5py
+
+    from .integrity import DIGEST_ATTR, verify_open_file
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such result file: {path}")
     try:
         with h5py.File(path, "r") as f:
-            attrs = {k: _plain(v) for k, v in f.attrs.items()}
+            attrs = {k: _plain(v) for k, v in f.attrs.items() if k != DIGEST_ATTR}
+            if attrs.get("rbstab_format") == FORMAT and verify:
+                verify_open_file(f, path, data=data)
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
     if attrs.get("rbstab_format") != FORMAT:
@@ -340,7 +390,8 @@ def read_attributes(path: str | os.PathLike) -> dict[str, Any]:
 
 
 def read_summary(path: str | os.PathLike) -> dict[str, Any]:
-    """Identity, status, solver statistics and summary figures of a result file.
+    """Identity, status, solver statistics and summary figures of a verified result file
+    (every checksum checked, :mod:`rbstab.io.integrity`).
 
     Returns
     -------
@@ -351,10 +402,14 @@ def read_summary(path: str | os.PathLike) -> dict[str, Any]:
 
     Raises
     ------
-    FileNotFoundError, NotAResultFile
-        See :func:`read_attributes`.
+    FileNotFoundError, NotAResultFile, DamagedResultError
+        See :func:`read_attributes`; NotAResultFile also for a file without one of
+        :data:`REQUIRED_ATTRIBUTES`.
     """
-    attrs = read_attributes(path)
+    attrs = read_attributes(path, data=True)
+    missing = [k for k in REQUIRED_ATTRIBUTES if k not in attrs]
+    if missing:
+        raise NotAResultFile(f"{path}: an rbstab result without the attributes {', '.join(missing)}")
     return {
         "name": attrs["name"],
         "variant": attrs["variant"],

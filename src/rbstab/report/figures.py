@@ -96,8 +96,25 @@ def _new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float 
 
 def _save(fig, folder: Path, name: str) -> str:
     rel = f"figures/{name}.png"
-    fig.savefig(folder / rel, format="png", dpi=DPI)
+    try:
+        fig.savefig(folder / rel, format="png", dpi=DPI)
+    except ValueError:  # a text from the data (a run's name with '$') that is not valid mathtext
+        _plain_texts(fig)
+        fig.savefig(folder / rel, format="png", dpi=DPI)
     return rel
+
+
+def _plain_texts(fig) -> None:
+    """Show every text of ``fig`` that mathtext cannot parse as it is written."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    for text in fig.findobj(Text):
+        try:
+            text.get_window_extent(renderer)
+        except ValueError:
+            text.set_parse_math(False)
 
 
 def _colours(n: int) -> list:

@@ -284,7 +284,7 @@ def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
     from ..io.hdf5 import read_attributes
 
     path = Path(path)
-    attrs = read_attributes(path)
+    attrs = read_attributes(path, data=True)  # every checksum verified
     with h5py.File(path, "r") as f:
         absent = [n for n in _REQUIRED_SERIES if n not in f]
     return _run_data(path, attrs, absent, sweep)
@@ -310,7 +310,8 @@ def load_chunk_runs(path: str | os.PathLike, sweep: str | None = None) -> list[R
     from ..io.chunk import read_chunk_rows
 
     path = Path(path)
-    return [_run_data(path, _store_attributes(row), [], sweep, row=row["file_row"]) for row in read_chunk_rows(path)]
+    rows = read_chunk_rows(path, data=True)  # every checksum verified
+    return [_run_data(path, _store_attributes(row), [], sweep, row=row["file_row"]) for row in rows]
 
 
 def _store_attributes(row: dict) -> dict:

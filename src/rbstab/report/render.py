@@ -8,6 +8,7 @@ only, ``summary.md``, so the page and the markdown show the same tables.
 from __future__ import annotations
 
 import html
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -159,17 +160,30 @@ def render_html(title: str, intro: Sequence[str], sections: Sequence[Section]) -
     return "\n".join(parts) + "\n"
 
 
+#: Characters of text from the inputs (run names, messages, config strings) that markdown
+#: would read as HTML, a code span, emphasis or a table cell's end: written as entities
+#: (``&``, ``<``, ``>``) or escaped with a backslash, so that a page shows them as text.
+_MD_ESCAPES = str.maketrans({
+    "&": "&amp;", "<": "&lt;", ">": "&gt;", "\\": "\\\\", "`": "\\`", "|": "\\|", "*": "\\*",
+    "\n": " ", "\r": " ",
+})
+#: A ``]`` that would close a link or image (``](``, ``][``) or define one (``]:``); a
+#: bracket alone (a vector ``[1, 2, 3]``) stays as it is.
+_MD_LINK = re.compile(r"\](?=[(\[:])")
+
+
 def _md_escape(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
+    """``text`` as literal markdown text (:data:`_MD_ESCAPES`, :data:`_MD_LINK`)."""
+    return _MD_LINK.sub(r"\\]", str(text).translate(_MD_ESCAPES))
 
 
 def _md_table(table: Table) -> str:
-    lines = [f"**{table.title}**", ""]
+    lines = [f"**{_md_escape(table.title)}**", ""]
     lines.append("| " + " | ".join(_md_escape(c) for c in table.columns) + " |")
     lines.append("|" + "|".join("---" for _ in table.columns) + "|")
     lines.extend("| " + " | ".join(_md_escape(c) for c in row) + " |" for row in table.rows)
     if table.note:
-        lines += ["", f"_{table.note}_"]
+        lines += ["", f"_{_md_escape(table.note)}_"]
     return "\n".join(lines)
 
 
@@ -177,17 +191,19 @@ def _md_block(block) -> str:
     if isinstance(block, Table):
         return _md_table(block)
     if isinstance(block, FigureFile):
-        return f"![{block.title}]({block.path})\n\n_{block.title}._ {block.caption}"
+        path = block.path.replace("(", "%28").replace(")", "%29").replace(" ", "%20")
+        return f"![{_md_escape(block.title)}]({path})\n\n_{_md_escape(block.title)}._ {_md_escape(block.caption)}"
     if isinstance(block, list):
-        return "\n".join(f"- {item}" for item in block)
-    return str(block)
+        return "\n".join(f"- {_md_escape(item)}" for item in block)
+    return _md_escape(str(block))
 
 
 def render_markdown(title: str, intro: Sequence[str], sections: Sequence[Section]) -> str:
-    """The page as markdown (``index.md``): same content as :func:`render_html`."""
-    parts = [f"# {title}", *intro]
+    """The page as markdown (``index.md``): same content as :func:`render_html`, every text
+    escaped (:data:`_MD_ESCAPES`): no name or message from the inputs becomes HTML or a link."""
+    parts = [f"# {_md_escape(title)}", *(_md_escape(p) for p in intro)]
     for s in sections:
-        parts.append(f"{'#' * s.level} {s.title}")
+        parts.append(f"{'#' * s.level} {_md_escape(s.title)}")
         parts.extend(_md_block(b) for b in s.blocks)
     return "\n\n".join(parts) + "\n"
 

@@ -7,14 +7,21 @@ same bit for bit (up to the ``created`` and ``command_line`` attributes).
 
 - :class:`LocalExecutor`: :class:`concurrent.futures.ProcessPoolExecutor` with the
   ``forkserver`` start method (``spawn`` where that is missing): no worker inherits the
-  parent's h5py state or threads. At most ``2 * jobs`` items are in flight. A worker that
-  dies (killed, out of memory) fails only the items in flight, as data, and the pool is
-  restarted for the rest. Workers whose parent was killed finish the run in progress
-  (its file is written) and exit, instead of lingering.
+  parent's h5py state or threads. At most ``2 * jobs`` items are in flight, and processes
+  start as items need them: never more than the items (chunks), whatever ``jobs``. A
+  worker that dies (killed, out of memory) fails only the items in flight, as data, and
+  the pool is restarted for the rest. Each worker holds the read end of a pipe whose
+  write end only the parent holds: when the parent is gone (killed, even while it is a
+  zombie nobody reaped) the pipe reads end-of-file, and the worker finishes the run in
+  progress (its file is written) and exits, instead of lingering. :meth:`abort` (on
+  Ctrl-C or SIGTERM) ends the workers at once, so that nothing is written after it.
 - :class:`DaskExecutor`: a ``distributed.Client`` connected to an existing scheduler;
   the workers return each file's bytes and the parent writes them, so no shared
   filesystem is needed. ``distributed`` is imported only here (``pip install
-  "rbstab[dask]"``).
+  "rbstab[dask]"``). Connecting gives up after a few seconds (:data:`DASK_CONNECT_TIMEOUT`)
+  with a message naming the address, whatever answers there (nothing, an HTTP server, a
+  wrong scheme), and a sweep whose scheduler has had no worker for
+  :data:`DASK_NO_WORKERS_GRACE` seconds stops with a message instead of waiting forever.
 """
 
 from __future__ import annotations
@@ -41,6 +48,10 @@ __all__ = [
 
 #: Executor names accepted by :func:`make_executor` (the CLI's ``--executor``).
 EXECUTORS = ("local", "dask")
+#: Seconds to wait for a Dask scheduler to answer.
+DASK_CONNECT_TIMEOUT = 5.0
+#: Seconds a sweep waits on a Dask scheduler without any worker before it stops.
+DASK_NO_WORKERS_GRACE = 30.0
 
 
 class ExecutorError(RuntimeError):
@@ -87,6 +98,11 @@ class Executor:
     def close(self) -> None:
         pass
 
+    def abort(self) -> None:
+        """Stop at once (Ctrl-C, SIGTERM): items in flight are dropped, nothing is written
+        after this returns. Default: :meth:`close`."""
+        self.close()
+
     def __enter__(self):
         return self
 
@@ -96,39 +112,34 @@ class Executor:
 
 # -- local processes ------------------------------------------------------------------------
 
-_busy = False
+_idle = threading.Event()
+_idle.set()
 
 
-def _parent_alive(pid: int) -> bool:
+def _watch_parent(lifeline) -> None:
+    """Exit when the parent is gone: ``lifeline`` (the read end of a pipe only the parent
+    can write) reads end-of-file once every copy of the write end is closed, which the
+    kernel does when the parent exits, reaped or not (``os.kill(ppid, 0)`` succeeds on a
+    zombie, and with the forkserver the parent is not even this process's parent)."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # pragma: no cover - pid reused by another user's process
-        return False
-    return True
+        while True:
+            lifeline.recv_bytes()  # the parent never writes: returns only by raising
+    except (EOFError, OSError):
+        pass
+    _idle.wait()  # let the run in progress finish and write its file
+    os._exit(0)
 
 
-def _watch_parent(pid: int) -> None:
-    while True:
-        time.sleep(0.5)
-        if not _parent_alive(pid):
-            while _busy:  # let the run in progress finish and write its file
-                time.sleep(0.05)
-            os._exit(0)
-
-
-def _init_worker(parent_pid: int) -> None:
-    threading.Thread(target=_watch_parent, args=(parent_pid,), daemon=True, name="rbstab-parent-watch").start()
+def _init_worker(lifeline) -> None:
+    threading.Thread(target=_watch_parent, args=(lifeline,), daemon=True, name="rbstab-parent-watch").start()
 
 
 def _call(fn: Callable[..., Any], item: Any, *args: Any) -> Any:
-    global _busy
-    _busy = True
+    _idle.clear()
     try:
         return fn(item, *args)
     finally:
-        _busy = False
+        _idle.set()
 
 
 def _warm() -> None:
@@ -180,6 +191,8 @@ class LocalExecutor(Executor):
         self._pool: ProcessPoolExecutor | None = None
         self._workers = jobs
         self._starter: threading.Thread | None = None
+        # the workers' lifeline: they hold the read end, only this process the write end
+        self._lifeline, self._lifeline_w = multiprocessing.Pipe(duplex=False)
 
     def describe(self) -> str:
         return f"{self._workers} local process{'es' if self._workers != 1 else ''}"
@@ -192,18 +205,18 @@ class LocalExecutor(Executor):
         self._workers = max(1, min(self.jobs, n_items))
 
     def start(self) -> None:
-        """Start the worker processes now, in a background thread, and return at once.
+        """Start the fork server and one worker now, in a background thread, and return at once.
 
-        The fork server imports numpy, h5py and rbstab and the workers start while
-        the caller goes on (e.g. validating the sweep's runs), instead of after it.
+        The fork server imports numpy, h5py and rbstab while the caller goes on (e.g.
+        validating the sweep's runs), instead of after it; the other workers fork from it
+        in a few milliseconds when items need them (never more than the items).
         """
         if self._pool is not None or self._starter is not None:
             return
 
         def spawn() -> None:
             pool = self._new_pool()
-            for _ in range(self.jobs):
-                pool.submit(_warm)
+            pool.submit(_warm)
             self._pool = pool
 
         self._starter = threading.Thread(target=spawn, daemon=True, name="rbstab-pool-start")
@@ -215,11 +228,12 @@ class LocalExecutor(Executor):
             self._starter = None
 
     def _new_pool(self) -> ProcessPoolExecutor:
+        # processes start on demand (forkserver), one per item in flight at most
         return ProcessPoolExecutor(
             max_workers=self._workers,
             mp_context=_mp_context(),
             initializer=_init_worker,
-            initargs=(os.getpid(),),
+            initargs=(self._lifeline,),
         )
 
     def imap_unordered(self, fn, items, *args):
@@ -266,6 +280,23 @@ class LocalExecutor(Executor):
             self._pool.shutdown(wait=True, cancel_futures=True)
             self._pool = None
 
+    def abort(self) -> None:
+        """End the workers now (SIGTERM to each; their partial files are temporaries, which
+        the caller removes), then shut the pool down."""
+        self._join_starter()
+        pool, self._pool = self._pool, None
+        if pool is None:
+            return
+        processes = list((getattr(pool, "_processes", None) or {}).values())
+        for process in processes:
+            try:
+                process.terminate()
+            except (OSError, AttributeError):  # pragma: no cover - already gone
+                pass
+        for process in processes:
+            process.join(timeout=5)
+        pool.shutdown(wait=True, cancel_futures=True)
+
 
 # -- Dask -----------------------------------------------------------------------------------
 
@@ -289,29 +320,33 @@ class DaskExecutor(Executor):
     address : str
         Scheduler address, e.g. ``tcp://10.0.0.5:8786``.
     connect_timeout : float
-        Seconds to wait for the scheduler.
+        Seconds to wait for the scheduler (:data:`DASK_CONNECT_TIMEOUT`).
     client : distributed.Client, optional
         Use this client instead of connecting (it is not closed by :meth:`close`).
+    no_workers_grace : float
+        Seconds without any worker after which :meth:`imap_unordered` gives up
+        (:data:`DASK_NO_WORKERS_GRACE`).
 
     Raises
     ------
     ExecutorError
-        If ``distributed`` is not installed or the scheduler cannot be reached.
+        If ``distributed`` is not installed, or no Dask scheduler answers at ``address``
+        within ``connect_timeout`` (nothing listens, another protocol answers, a wrong
+        scheme): one message naming the address.
     """
 
     name = "dask"
     return_bytes = True
 
-    def __init__(self, address: str | None = None, *, connect_timeout: float = 30.0, client=None) -> None:
+    def __init__(self, address: str | None = None, *, connect_timeout: float = DASK_CONNECT_TIMEOUT, client=None,
+                 no_workers_grace: float = DASK_NO_WORKERS_GRACE) -> None:
         self._distributed = _import_distributed()
         self._own_client = client is None
+        self.no_workers_grace = no_workers_grace
         if client is None:
             if not address:
                 raise ExecutorError("the dask executor needs a scheduler address: --scheduler tcp://HOST:PORT")
-            try:
-                client = self._distributed.Client(address, timeout=connect_timeout, set_as_default=False)
-            except (OSError, TimeoutError) as exc:
-                raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: {exc}") from None
+            client = _connect(self._distributed, address, connect_timeout)
         self.client = client
         self.address = address or getattr(client, "scheduler", None) and client.scheduler.address
         self._futures: list = []
@@ -335,7 +370,21 @@ class DaskExecutor(Executor):
         except Exception:  # pragma: no cover - a hint only
             return None
 
+    def _n_workers(self) -> int | None:
+        try:
+            return len(self.client.scheduler_info().get("workers", {}))
+        except Exception:  # the scheduler itself is gone: as_completed raises soon
+            return None
+
     def imap_unordered(self, fn, items, *args):
+        """See :meth:`Executor.imap_unordered`.
+
+        Raises
+        ------
+        ExecutorError
+            When the scheduler has had no worker for ``no_workers_grace`` seconds (all
+            died, or none ever came) with items still to do.
+        """
         distributed = self._distributed
         by_future = {}
         token = uuid.uuid4().hex[:8]
@@ -344,16 +393,40 @@ class DaskExecutor(Executor):
             future = self.client.submit(fn, item, *args, key=key, pure=False, retries=0)
             by_future[future] = item
         self._futures = list(by_future)
-        for future in distributed.as_completed(list(by_future), loop=self.client.loop):
-            item = by_future.pop(future)
-            try:
-                result = future.result()
-            except Exception as exc:  # KilledWorker, CommClosedError, ...
-                yield item, None, exc
-            else:
-                yield item, result, None
-            finally:
-                future.release()
+        pending = distributed.as_completed(list(by_future), loop=self.client.loop)
+        idle_since = None
+        while not pending.is_empty():
+            batch = pending.next_batch(block=False)
+            if not batch:
+                idle_since = self._check_workers(idle_since)
+                time.sleep(0.2)
+                continue
+            idle_since = None
+            for future in batch:
+                item = by_future.pop(future)
+                try:
+                    result = future.result()
+                except Exception as exc:  # KilledWorker, CommClosedError, ...
+                    yield item, None, exc
+                else:
+                    yield item, result, None
+                finally:
+                    future.release()
+
+    def _check_workers(self, idle_since: float | None) -> float | None:
+        """Track how long the scheduler has had no worker; raise past the grace period."""
+        if self._n_workers() != 0:
+            return None
+        now = time.monotonic()
+        if idle_since is None:
+            return now
+        if now - idle_since > self.no_workers_grace:
+            raise ExecutorError(
+                f"no workers left on the Dask scheduler at {self.address}: none for "
+                f"{self.no_workers_grace:g} s with runs still to do; start workers (dask worker {self.address}) "
+                "and run the same command again to resume"
+            )
+        return idle_since
 
     def close(self) -> None:
         if self._futures:
@@ -364,6 +437,61 @@ class DaskExecutor(Executor):
             self._futures = []
         if self._own_client:
             self.client.close()
+
+
+def _probe_tcp(address: str, timeout: float) -> None:
+    """For ``tcp://HOST:PORT``: one plain connection first, so that a refused port or an
+    unknown host is reported at once (the client retries those until its timeout)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        return  # malformed: the client says what is wrong
+    if parts.scheme != "tcp" or not host or port is None:
+        return
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except (ConnectionRefusedError, socket.gaierror) as exc:
+        reason = "connection refused (no scheduler listens there)" if isinstance(exc, ConnectionRefusedError) else (
+            f"unknown host ({exc.strerror or exc})")
+        raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
+    except OSError:
+        return  # a timeout or another failure: the client's attempt reports it
+
+
+def _connect(distributed, address: str, timeout: float):
+    """A ``distributed.Client`` of ``address``, or ExecutorError within ``timeout`` (+1) s.
+
+    ``Client(timeout=...)`` bounds the TCP connection only: a server of another protocol
+    (an HTTP dashboard) accepts it and never answers the handshake, so the client is made
+    in a daemon thread that is abandoned past the deadline.
+    """
+    hint = "a Dask scheduler address is tcp://HOST:PORT (port 8786 by default, not the dashboard's http port)"
+    _probe_tcp(address, timeout)
+    box: dict = {}
+
+    def connect() -> None:
+        try:
+            box["client"] = distributed.Client(address, timeout=timeout, set_as_default=False)
+        except BaseException as exc:  # reported below
+            box["error"] = exc
+
+    thread = threading.Thread(target=connect, daemon=True, name="rbstab-dask-connect")
+    thread.start()
+    thread.join(timeout + 1.0)
+    if "client" in box:
+        return box["client"]
+    error = box.get("error")
+    if error is None:
+        raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: no Dask scheduler answered "
+                            f"within {timeout:g} s ({hint})")
+    if isinstance(error, (ValueError, TypeError)):  # an unknown scheme, a malformed address
+        raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: not a valid address ({error}); "
+                            f"{hint}")
+    raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: {error}")
 
 
 def make_executor(name: str = "local", *, jobs: int | None = None, scheduler: str | None = None) -> Executor:

@@ -25,6 +25,15 @@ A varied config key becomes a coordinate (and an ``index.csv`` column) named by
 Every field name of the config schema is unique across its sections, so the map is one to
 one; each coordinate's ``config_key`` attribute (and ``sweep_summary.json``'s
 ``parameters``) gives the dotted key back.
+
+Checksums
+---------
+Store and run files carry checksums (:mod:`rbstab.io.integrity`), and
+``sweep_summary.json`` the SHA-256 of the ``index.csv`` written with it
+(``index_sha256``). Resume verifies every file it counts (:func:`current_rows` with
+``verify``): a damaged file is renamed ``<name>.damaged`` by the runner and its runs are
+rerun. :func:`read_index` (``rbstab show DIR``, ``rbstab report``, :func:`open_sweep`)
+refuses an index that does not match its checksum.
 """
 
 from __future__ import annotations
@@ -32,6 +41,7 @@ from __future__ import annotations
 import csv
 import functools
 import datetime as _dt
+import hashlib
 import io
 import json
 import math
@@ -68,6 +78,9 @@ __all__ = [
     "read_spec",
     "current_rows",
     "open_sweep",
+    "DAMAGED_SUFFIX",
+    "verify_index",
+    "set_aside_damaged",
 ]
 
 SPEC_FILE = "sweep.yaml"
@@ -82,6 +95,8 @@ LAYOUTS = ("chunk", "run")
 DEFAULT_LAYOUT = "chunk"
 #: Values of the ``status`` column.
 STATUSES = ("success", "failed", "error", "pending")
+#: Suffix given to a damaged result file found on resume (it is then no longer read).
+DAMAGED_SUFFIX = ".damaged"
 _SOLVER = ("solver_nfev", "solver_njev", "solver_nlu", "solver_status")
 _HEAD = ("run_id", "run", "base")
 _MIDDLE = ("variant", "status", "converged", "message", "wall_time")
@@ -265,7 +280,44 @@ def write_index(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
     return write_text_atomic(path, buf.getvalue())
 
 
-def read_index(folder: str | os.PathLike):
+def verify_index(folder: str | os.PathLike) -> bool:
+    """Check ``index.csv`` against ``index_sha256`` of ``sweep_summary.json``.
+
+    Returns
+    -------
+    bool
+        True when checked; False when the summary has no checksum (written before they
+        existed) or is missing.
+
+    Raises
+    ------
+    rbstab.io.integrity.DamagedResultError
+        If the index does not match (damaged, or an invocation killed between writing the
+        two files: rerunning the sweep rebuilds both).
+    """
+    from ..io.integrity import DamagedResultError
+
+    folder = Path(folder)
+    try:
+        expected = json.loads((folder / SUMMARY_FILE).read_text(encoding="utf-8")).get("index_sha256")
+    except (OSError, ValueError, AttributeError):
+        return False
+    if not isinstance(expected, str):
+        return False
+    try:
+        actual = hashlib.sha256((folder / INDEX_FILE).read_bytes()).hexdigest()
+    except OSError:
+        return False  # reported by the reader
+    if actual != expected:
+        raise DamagedResultError(
+            f"{folder / INDEX_FILE}: does not match its checksum in {SUMMARY_FILE} (damaged, or an "
+            f"invocation was killed between writing the two); rebuild both with: rbstab sweep "
+            f"{folder / SPEC_FILE} -o {folder.parent}"
+        )
+    return True
+
+
+def read_index(folder: str | os.PathLike, *, verify: bool = True):
     """``index.csv`` of a sweep folder as a pandas DataFrame (``message`` as text).
 
     Raises
@@ -274,10 +326,15 @@ def read_index(folder: str | os.PathLike):
         If the folder has no index.
     ValueError
         If it cannot be parsed or lacks ``run_id``/``status``.
+    rbstab.io.integrity.DamagedResultError
+        If ``verify`` and it does not match its checksum (:func:`verify_index`; a
+        ValueError).
     """
     import pandas as pd
 
     path = Path(folder) / INDEX_FILE
+    if verify:
+        verify_index(folder)
     try:
         index = pd.read_csv(path, keep_default_na=True)
     except pd.errors.ParserError as exc:
@@ -322,7 +379,12 @@ def summarize_rows(rows: Sequence[Mapping[str, Any]], *, name: str, ratio: float
 
 
 def write_summary(path: Path, summary: Mapping[str, Any]) -> Path:
-    """Write ``summary`` as indented JSON, atomically."""
+    """Write ``summary`` as indented JSON, atomically, with the SHA-256 of the ``index.csv``
+    beside it (``index_sha256``, :func:`verify_index`)."""
+    summary = dict(summary)
+    index = Path(path).parent / INDEX_FILE
+    if index.is_file():
+        summary["index_sha256"] = hashlib.sha256(index.read_bytes()).hexdigest()
     return write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
 
 
@@ -343,50 +405,68 @@ def read_spec(folder: str | os.PathLike) -> dict:
     OSError, ValueError
         If it is missing, not YAML or not a mapping.
     """
-    import yaml
+    from ..config import ConfigError
+    from ..config.yaml_io import parse_yaml, read_text_limited
 
     path = Path(folder) / SPEC_FILE
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8")) or {}
-    except yaml.YAMLError as exc:
-        raise ValueError(f"{path}: not valid YAML ({exc})") from None
+        data = parse_yaml(read_text_limited(path, "sweep spec")) or {}
+    except ConfigError as exc:
+        raise ValueError(f"{path}: {'; '.join(exc.errors)}") from None
     if not isinstance(data, dict):
         raise ValueError(f"{path}: not a YAML mapping")
     return data
 
 
-def _chunk_rows(runs_dir: Path) -> dict[str, list[dict]]:
-    """run_id -> its rows in the store files of ``runs_dir`` (unreadable files are ignored)."""
+def _chunk_rows(runs_dir: Path, verify: bool = False, damaged: list | None = None) -> dict[str, list[dict]]:
+    """run_id -> its rows in the store files of ``runs_dir`` (unreadable files are ignored;
+    damaged ones are listed in ``damaged`` as (file name, reason))."""
     from ..io.chunk import read_chunk_rows
     from ..io.hdf5 import NotAResultFile
+    from ..io.integrity import DamagedResultError
 
     rows: dict[str, list[dict]] = {}
     for path in sorted(runs_dir.glob(CHUNK_GLOB)):
         try:
-            for row in read_chunk_rows(path):
+            for row in read_chunk_rows(path, data=verify):
                 rows.setdefault(row["run_id"], []).append(row)
+        except DamagedResultError as exc:
+            if damaged is not None:
+                damaged.append((path.name, str(exc)))
         except (FileNotFoundError, NotAResultFile, OSError, KeyError):
             continue
     return rows
 
 
-def _run_file_row(path: Path) -> dict | None:
+def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None) -> dict | None:
     from ..io.hdf5 import NotAResultFile, read_attributes
+    from ..io.integrity import DamagedResultError
 
     try:
-        return row_from_attributes(read_attributes(path), path.name)
+        return row_from_attributes(read_attributes(path, data=verify), path.name)
+    except DamagedResultError as exc:
+        if damaged is not None:
+            damaged.append((path.name, str(exc)))
+        return None
     except (FileNotFoundError, NotAResultFile, OSError, KeyError):
         return None
 
 
 class StoredRows:
     """What a sweep's ``runs/`` folder holds, read once: the rows of its store files (run
-    files are read per run, when asked for)."""
+    files are read per run, when asked for).
 
-    def __init__(self, runs_dir: Path) -> None:
+    A file's digest of its text and attributes is always checked; with ``verify`` every
+    checksum of its numbers too (the whole file is read). A damaged file counts for
+    nothing and is appended to ``damaged`` as (file name, reason).
+    """
+
+    def __init__(self, runs_dir: Path, *, verify: bool = False, damaged: list | None = None) -> None:
         self.runs_dir = runs_dir
+        self.verify = verify
+        self.damaged = damaged if damaged is not None else []
         self.files = sorted(p.name for p in runs_dir.glob("*.h5"))  # what was there before this invocation
-        self.chunk_rows = _chunk_rows(runs_dir)
+        self.chunk_rows = _chunk_rows(runs_dir, verify, self.damaged)
 
     def current(self, run: Any) -> dict | None:
         """The newest stored row made from ``run``'s current config (its ``config_hash``,
@@ -394,30 +474,47 @@ class StoredRows:
         candidates = list(self.chunk_rows.get(run.run_id, ()))
         path = self.runs_dir / f"{run.run_id}.h5"
         if path.exists():
-            row = _run_file_row(path)
+            row = _run_file_row(path, self.verify, self.damaged)
             if row is not None:
                 candidates.append(row)
         good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
         return max(good, key=lambda r: str(r.get("created", ""))) if good else None
 
     def stale(self, ids: set[str]) -> list[str]:
-        """Result files found when this was made that hold no run of ``ids`` (left in place
-        by the caller)."""
+        """Result files found when this was made that hold no run of ``ids`` and are not
+        damaged (left in place by the caller)."""
         used = {row["file"] for rows in self.chunk_rows.values() for row in rows if row["run_id"] in ids}
-        return [name for name in self.files
-                if (name not in used if name.startswith("chunk-") else Path(name).stem not in ids)]
+        bad = {name for name, _ in self.damaged}
+        return [name for name in self.files if name not in bad
+                and (name not in used if name.startswith("chunk-") else Path(name).stem not in ids)]
 
 
-def current_rows(runs: Sequence[Any], runs_dir: Path) -> tuple[dict[str, dict], list[str]]:
+def current_rows(runs: Sequence[Any], runs_dir: Path, *, verify: bool = False,
+                 damaged: list | None = None) -> tuple[dict[str, dict], list[str]]:
     """(run_id -> the newest stored row made from the run's current config, stale file names).
 
     A row counts when its ``config_hash`` is the run's (:attr:`PlannedRun.config_hash`) and
     its status is not ``error``; store files are read once, run files only for runs of
-    ``runs``. Stale files hold no run of ``runs`` (left in place by the caller).
+    ``runs``. Stale files hold no run of ``runs`` (left in place by the caller). Checks as
+    :class:`StoredRows`.
     """
-    stored = StoredRows(runs_dir)
+    stored = StoredRows(runs_dir, verify=verify, damaged=damaged)
     current = {run.run_id: row for run in runs if (row := stored.current(run)) is not None}
     return current, stored.stale({r.run_id for r in runs})
+
+
+def set_aside_damaged(runs_dir: Path, damaged: Sequence[tuple[str, str]]) -> list[str]:
+    """Rename each damaged file of ``runs_dir`` to ``<name>.damaged`` (no reader counts it
+    then); returns the new names. Call it holding the sweep's lock."""
+    out = []
+    for name, _ in damaged:
+        target = runs_dir / (name + DAMAGED_SUFFIX)
+        try:
+            os.replace(runs_dir / name, target)
+        except OSError:
+            continue
+        out.append(target.name)
+    return out
 
 
 # -- the sweep as one dataset ---------------------------------------------------------------------
@@ -452,6 +549,10 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
     ------
     FileNotFoundError
         If ``path`` is not a sweep folder.
+    rbstab.io.integrity.DamagedResultError
+        If the index or a store file's text and attributes do not match their checksums;
+        the traces' checksums are checked when they are read (computing a damaged chunk
+        raises it).
     """
     folder = Path(path)
     if not is_sweep_folder(folder):
@@ -513,16 +614,27 @@ class _Trace:
     def __getitem__(self, key):
         import h5py
 
+        from ..io.integrity import DamagedResultError
+
         with h5py.File(self.path, "r") as f:
-            return f[self.name][key]
+            try:
+                return f[self.name][key]
+            except OSError as exc:  # a Fletcher-32 checksum that does not match
+                raise DamagedResultError(
+                    f"{self.path}: damaged: the data of '{self.name}' fail their checksum ({exc}); rerun the "
+                    "sweep to redo its runs"
+                ) from None
 
 
 def _store_traces(path: Path) -> tuple[dict, dict, Any]:
     """(name -> _Trace, name -> attributes, time) of a store file's ``(run, time[, axis])`` variables."""
     import h5py
 
+    from ..io.integrity import verify_open_file
+
     traces, attrs, time = {}, {}, None
     with h5py.File(path, "r") as f:
+        verify_open_file(f, path, data=False)  # the numbers are checked as they are read
         if "time" in f:
             time = f["time"][...]
         for name, var in f.items():

@@ -30,6 +30,7 @@ import contextlib
 import dataclasses
 import itertools
 import datetime as _dt
+import errno
 import math
 import os
 import sys
@@ -55,6 +56,8 @@ from .folder import (
     SUMMARY_FILE,
     current_rows,
     index_rows,
+    read_spec,
+    set_aside_damaged,
     parameter_columns,
     run_coords,
     summarize_rows,
@@ -129,6 +132,9 @@ class SweepOutcome:
         run_id -> traceback for runs with status ``error`` in this invocation.
     stale_files : list of str
         Result files in ``runs/`` that are not runs of this spec (left in place).
+    damaged : list of (str, str)
+        Result files whose checksums did not match, as (file name, reason): renamed
+        ``<name>.damaged`` and their runs rerun.
     executor : str
         Description of the executor used (empty when nothing ran).
     engine : str
@@ -158,6 +164,7 @@ class SweepOutcome:
     problems: list = field(default_factory=list)
     tracebacks: dict = field(default_factory=dict)
     stale_files: list = field(default_factory=list)
+    damaged: list = field(default_factory=list)
     executor: str = ""
     engine: str = ""
     n_chunks: int = 0
@@ -271,22 +278,19 @@ def _check_time_grids(grids: set, store: str, layout: str) -> None:
         )
 
 
-def resolve_engine(engine: str | None, timeout: float | None) -> str:
-    """The engine a sweep uses: ``engine``, or by default ``compiled`` (``scipy`` with a timeout).
+def resolve_engine(engine: str | None, timeout: float | None = None) -> str:
+    """The engine a sweep uses: ``engine``, by default ``compiled`` (both engines take a
+    per-run ``timeout``).
 
     Raises
     ------
     ValueError
-        For an unknown engine, or ``compiled`` with a timeout (it has no per-run budget).
+        For an unknown engine.
     """
     if engine is None:
-        return "scipy" if timeout is not None else "compiled"
+        return "compiled"
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    if engine == "compiled" and timeout is not None:
-        raise ValueError(
-            "--timeout needs --engine scipy: the compiled engine has no per-run wall-time budget"
-        )
     return engine
 
 
@@ -357,8 +361,8 @@ def run_sweep(
     scheduler : str, optional
         Dask scheduler address (``tcp://HOST:PORT``), required for ``"dask"``.
     timeout : float, optional
-        Per-run wall-time budget [s]; a run past it is recorded as failed. Only with the
-        scipy engine (the default engine then).
+        Per-run wall-time limit [s], instead of each run's ``simulation.max_wall_time``; a
+        run past it is recorded as failed.
     retry_failed : bool
         Also re-execute runs whose current result file has status ``failed``.
     chunk_size : int, optional
@@ -366,8 +370,8 @@ def run_sweep(
         :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 256 for compiled).
         For the compiled engine a chunk holds at most ``ceil(runs / workers)`` runs.
     engine : {"compiled", "scipy"}, optional
-        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``, or ``scipy``
-        when ``timeout`` is given (see :func:`resolve_engine`). ``compiled`` integrates
+        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``
+        (:func:`resolve_engine`). ``compiled`` integrates
         every run with scipy's RK23/RK45/DOP853 compiled with the model (other methods
         and the pure sign law go through scipy), taking the steps scipy takes.
     store : {"full", "summary"}
@@ -400,8 +404,13 @@ def run_sweep(
         If another process is writing the same sweep folder.
     ExecutorError
         If the executor cannot start (``distributed`` missing, scheduler unreachable).
+    OSError
+        When a file cannot be written for want of space or of a writable disk (ENOSPC,
+        EDQUOT, EROFS): the workers are stopped and the index written for what finished
+        (if it can be); rerunning resumes.
     KeyboardInterrupt
-        Re-raised after the index has been written for what finished.
+        Re-raised (SIGTERM too, as the CLI handles it) after the workers were stopped
+        and the index written for exactly the files on disk.
     """
     say = log or (lambda message: None)
     engine = resolve_engine(engine, timeout)
@@ -470,7 +479,9 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
         if removed:
             say(f"removed {removed} temporary file(s) left by an interrupted invocation")
         _write_spec_document(spec, directory, options.command_line, say)
-        stored = StoredRows(runs_dir)
+        stored = StoredRows(runs_dir, verify=True, damaged=outcome.damaged)
+        for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
+            say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
         planned: list[RunEntry] = []  # every run, without its config (memory: ~1 KB a run)
         invalid: list[InvalidRun] = []
         rest = plan if plan is not None else iter(())
@@ -488,13 +499,19 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
         try:
             _execute(spec, runs_in_order(), stored, runs_dir, attrs, errors, outcome, ex, retry_failed=retry_failed,
                      chunk_size=chunk_size, progress=progress, say=say, options=options)
+        except BaseException:
+            # Ctrl-C, SIGTERM, a full disk: stop every worker first, so that the index
+            # written below lists exactly the files on disk (nothing is written after it)
+            ex.abort()
+            _remove_temporaries(runs_dir, directory)
+            raise
         finally:
             for run in rest:  # what was not planned yet: pending in the index, or invalid
                 if isinstance(run, InvalidRun):
                     invalid.append(run)
                 else:
                     planned.append(run.entry())
-            # files finished while the pool shut down (e.g. after Ctrl-C) count too
+            # files finished while the pool shut down count too
             _collect_finished(planned, runs_dir, attrs, errors)
             outcome.stale_files = stored.stale({r.run_id for r in planned})
             outcome.warnings = warning_digest(planned)
@@ -509,7 +526,7 @@ def _write_spec_document(spec: SweepSpec, directory: Path, command_line: str | N
     spec_path = directory / SPEC_FILE
     if spec_path.exists():
         with contextlib.suppress(Exception):
-            old = yaml.safe_load(spec_path.read_text(encoding="utf-8")) or {}
+            old = read_spec(directory)  # within the YAML limits
             old.pop("generated", None)
             new = {k: v for k, v in doc.items() if k != "generated"}
             if yaml.safe_load(_dump_yaml(new)) != old:
@@ -561,6 +578,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
     counts = {"ok": 0, "bad": 0}
     try:
         for chunk, records, exc in ex.imap_unordered(run_chunk, _chunked(tasks(), size), options):
+            _stop_on_machine_fault(records or ())
             outcome.n_chunks += 1
             if exc is not None:
                 records = [
@@ -606,6 +624,18 @@ def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict,
             outcome.tracebacks[rid] = rec["traceback"]
     outcome.n_executed += 1
     counts["ok" if rec["status"] == "success" and rid in attrs else "bad"] += 1
+
+
+#: errno of a record that stops the sweep: every later write would fail the same way.
+_MACHINE_FAULTS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
+
+
+def _stop_on_machine_fault(records) -> None:
+    """Raise the OSError of a record whose file could not be written for want of space
+    or of a writable disk (the runs it lists stay pending; rerunning resumes)."""
+    for rec in records:
+        if rec.get("errno") in _MACHINE_FAULTS:
+            raise OSError(rec["errno"], os.strerror(rec["errno"]), str(Path(rec["path"]).parent))
 
 
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:

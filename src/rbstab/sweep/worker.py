@@ -19,7 +19,7 @@ Engines
   of ``sliding``) go through scipy. Configurations are validated once per group of runs
   that differ only in name and initial state: the sweep validated every run when it was
   planned, and the other runs of a group take the group's validated config with their
-  own name and initial state. No ``timeout``.
+  own name and initial state.
 
 Layouts
 -------
@@ -121,14 +121,20 @@ def _config(task: RunTask):
 
 
 def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:
-    return {
+    """The record of a run that raised; an I/O failure (a full disk) carries its ``errno``
+    and no traceback (it is the machine's fault, not a bug)."""
+    record = {
         "run_id": task.run_id,
         "path": task.path,
         "status": "error",
         "message": f"{type(exc).__name__}: {exc}",
-        "traceback": traceback.format_exc(),
         "wall_time": 0.0,
     }
+    if isinstance(exc, OSError) and exc.errno is not None:
+        record["errno"] = exc.errno
+    else:
+        record["traceback"] = traceback.format_exc()
+    return record
 
 
 class _RunFiles:
@@ -283,8 +289,6 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
     """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
     from ..simulate import simulate_many, uses_compiled_engine
 
-    if options.timeout is not None:
-        raise ValueError("the compiled engine has no per-run timeout; use the scipy engine for --timeout")
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)
     batch = [i for i, c in enumerate(configs) if c is not None and uses_compiled_engine(c)]
@@ -292,7 +296,8 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
     config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
     done: set[int] = set()
     try:
-        for j, result in simulate_many([configs[i] for i in batch], chunk_size=max(len(batch), 1)):
+        for j, result in simulate_many([configs[i] for i in batch], chunk_size=max(len(batch), 1),
+                                       timeout=options.timeout):
             i = batch[j]
             done.add(i)
             try:
