@@ -25,8 +25,11 @@ def _run_lines(rows) -> None:
         v = f"{_fmt(r.get('lyapunov_initial', ''))} -> {_fmt(r.get('lyapunov_final', ''))}"
         e = [r.get(f"max_abs_constraint_error_{a}") for a in "xyz"]
         e = _fmt(max(abs(float(x)) for x in e)) if all(isinstance(x, (int, float)) for x in e) else ""
+        switchings = [r.get(f"switching_count_{a}") for a in "xyz"]  # the pure sign law of sliding
+        located = (f"  {int(sum(switchings))} switchings"
+                   if all(isinstance(x, (int, float)) and x == x for x in switchings) else "")
         click.echo(f"  {r['run_id']:<20} {r['status']:<8} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
-                   f"{e:>11}  {r.get('lyapunov_rate_check', '')}")
+                   f"{e:>11}  {r.get('lyapunov_rate_check', '')}{located}")
         if r["status"] != "success":
             click.echo(f"    {r.get('message', '')}")
 

@@ -5,9 +5,13 @@ Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
 - ``compiled`` (the default): :mod:`rbstab.engine`, scipy's RK23, RK45 and DOP853
   compiled with the model, the steps ``solve_ivp`` takes; every run of a call may have its
   own variant, body, gains and settings.
-- ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA and of
-  the pure sign law of ``sliding``): :func:`scipy.integrate.solve_ivp` on the compiled
-  right-hand side.
+- ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA):
+  :func:`scipy.integrate.solve_ivp` on the compiled right-hand side.
+
+The pure sign law of ``sliding`` (``boundary_layer: 0``), whose right-hand side jumps, is
+routed by both engines to the event-driven integrator :mod:`rbstab.engine.switching`
+(switchings located, Filippov sliding, see docs/sliding.md); its result also holds the
+located events (``RunResult.switching``) and the switching figures in its summary.
 
 Both sample the dense output on an even grid, evaluate every output quantity with the
 compiled ``output_row`` and return a :class:`RunResult`. A failed run (solver failure,
@@ -46,11 +50,13 @@ __all__ = [
     "gimbal_lock_event",
     "evaluate_outputs",
     "uses_compiled_engine",
+    "is_sign_law",
+    "simulate_sign_law",
 ]
 
 #: Integration engines: ``compiled`` (:mod:`rbstab.engine`, RK23/RK45/DOP853; other
-#: methods and the pure sign law go through scipy) and ``scipy`` (the reference, one
-#: ``solve_ivp`` call per run, any method).
+#: methods go through scipy) and ``scipy`` (the reference, one ``solve_ivp`` call per run,
+#: any method). The pure sign law takes :mod:`rbstab.engine.switching` with either.
 ENGINES = ("compiled", "scipy")
 
 
@@ -81,6 +87,8 @@ class RunResult:
     timing : dict
         Where ``wall_time`` went [s]: ``integration`` (for a batched run, its share of
         the batch) and ``postprocess`` (output evaluation, numerical rate, summary).
+    switching : Switchings or None
+        The located events of a pure-sign-law run (:mod:`rbstab.engine.switching`), else None.
     """
 
     config: "RunConfig"
@@ -92,6 +100,7 @@ class RunResult:
     wall_time: float = 0.0
     summary: dict = field(default_factory=dict)
     timing: dict = field(default_factory=dict)
+    switching: object = None
 
     @property
     def name(self) -> str:
@@ -247,8 +256,34 @@ def uses_compiled_engine(config: "RunConfig", engine: str = "compiled") -> bool:
 
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    sliding_sign_law = config.variant == "sliding" and not config.gains.boundary_layer
-    return engine == "compiled" and config.simulation.method in METHODS and not sliding_sign_law
+    return engine == "compiled" and config.simulation.method in METHODS and not is_sign_law(config)
+
+
+def is_sign_law(config: "RunConfig") -> bool:
+    """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0)."""
+    return config.variant == "sliding" and not config.gains.boundary_layer
+
+
+def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunResult:
+    """Run a pure-sign-law configuration with :mod:`rbstab.engine.switching` (see
+    :func:`simulate`; ``timeout`` [s] replaces ``simulation.max_wall_time``); the result's
+    ``switching`` holds the located events."""
+    from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
+
+    start = _time.perf_counter()
+    variant = config.make_variant()
+    solution = integrate_sign_law(variant, variant.initial_state(config.initial_state), config.simulation,
+                                  timeout=timeout)
+    solved = _time.perf_counter()
+    outputs, checked = sign_law_outputs(variant, solution)
+    summary = {**summarize(solution.time, outputs, checked), **switching_summary(solution)}
+    message = solution.message + switching_message(solution, config.simulation.method)
+    result = RunResult(config=config, time=solution.time, outputs=outputs, status=solution.status, message=message,
+                       solver=solution.solver, summary=summary, switching=solution.switchings)
+    end = _time.perf_counter()
+    result.wall_time = end - start
+    result.timing = {"integration": solved - start, "postprocess": end - solved}
+    return result
 
 
 def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = "compiled") -> RunResult:
@@ -275,7 +310,10 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
     ValueError
         For an unknown engine.
     """
-    if uses_compiled_engine(config, engine):
+    compiled = uses_compiled_engine(config, engine)  # checks the engine's name
+    if is_sign_law(config):
+        return simulate_sign_law(config, timeout)
+    if compiled:
         return next(simulate_many([config], engine=engine, timeout=timeout))[1]
     start = _time.perf_counter()
     variant = config.make_variant()

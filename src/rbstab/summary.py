@@ -13,6 +13,7 @@ from .layout import BLOCK_UNITS
 
 __all__ = [
     "numerical_rate",
+    "piecewise_numerical_rate",
     "stencil_weights",
     "summarize",
     "summarize_many",
@@ -138,7 +139,45 @@ def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
     return out.reshape(values.shape)
 
 
-def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
+def piecewise_numerical_rate(time: np.ndarray, values: np.ndarray, breaks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`numerical_rate` of ``values`` on each smooth piece between ``breaks`` alone.
+
+    Where a run's right-hand side switches (the pure sign law of ``sliding``), v is smooth
+    only between switchings; a stencil across one compares unlike things. Each sample's
+    stencil here takes only samples of its own piece (one-sided at the piece's ends).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Strictly increasing sample times [s].
+    values : ndarray, shape (n,)
+        Samples (e.g. v [J]); NaN after a failure.
+    breaks : ndarray, shape (k,)
+        Times where the right-hand side switches [s]; a sample at a break belongs to the
+        piece before it.
+
+    Returns
+    -------
+    rate : ndarray, shape (n,)
+        d(values)/dt per piece; on a piece of one sample, the plain :func:`numerical_rate`.
+    checked : ndarray of bool, shape (n,)
+        Samples whose stencil has all :data:`RATE_STENCIL` points on their piece (and finite):
+        the ones whose rate has the stencil's full order, those a rate check should compare.
+    """
+    time = np.asarray(time, dtype=float)
+    values = np.asarray(values, dtype=float)
+    rate = numerical_rate(time, values)
+    checked = np.zeros(len(time), dtype=bool)
+    piece = np.searchsorted(np.sort(np.asarray(breaks, dtype=float)), time, side="left")
+    edges = np.flatnonzero(np.diff(piece)) + 1
+    for lo, hi in zip(np.r_[0, edges], np.r_[edges, len(time)]):
+        if hi - lo >= 2:
+            rate[lo:hi] = numerical_rate(time[lo:hi], values[lo:hi])
+        checked[lo:hi] = hi - lo >= RATE_STENCIL
+    return rate, checked & np.isfinite(rate)
+
+
+def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> dict:
     """Summary figures of a run.
 
     Parameters
@@ -165,6 +204,10 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
         :data:`LYAPUNOV_RATE_TOLERANCE`, ``"fail"`` when it is larger, ``"n/a"`` when
         fewer than :data:`MIN_CHECK_SAMPLES` finite samples exist, e.g. a run that failed
         at once).
+    checked : ndarray of bool, shape (n,), optional
+        The samples the rate check compares (default: all), e.g. those whose numerical rate
+        lies on one smooth piece (:func:`piecewise_numerical_rate`); given, the summary also
+        holds ``lyapunov_rate_checked``, the fraction of the samples compared.
 
     Notes
     -----
@@ -173,10 +216,11 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
     derivative; a mismatch below tol E / T changes v by less than tol E over the whole
     run. See docs/physics.md for the measured noise.
     """
-    return summarize_many(time, {k: v[None] for k, v in outputs.items()})[0]
+    return summarize_many(time, {k: v[None] for k, v in outputs.items()},
+                          None if checked is None else np.asarray(checked, dtype=bool)[None])[0]
 
 
-def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray]) -> list[dict]:
+def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> list[dict]:
     """:func:`summarize` of k runs sampled at the same times, at once.
 
     Parameters
@@ -185,6 +229,8 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray]) -> list[dic
         Sample times [s].
     outputs : dict
         The runs' variables with a leading run axis: shape (k, n, 3) or (k, n).
+    checked : ndarray of bool, shape (k, n), optional
+        See :func:`summarize`.
 
     Returns
     -------
@@ -200,16 +246,18 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray]) -> list[dic
     out: list = [None] * k
     if whole.size:
         part = outputs if whole.size == k else {key: value[whole] for key, value in outputs.items()}
-        for j, summary in zip(whole, _summaries(time, part)):
+        for j, summary in zip(whole, _summaries(time, part, None if checked is None else checked[whole])):
             out[j] = summary
     for j in np.flatnonzero(last != n - 1):  # failed runs: their finite samples only
         i = int(last[j])
-        out[j] = _summaries(time[: i + 1], {key: value[j : j + 1, : i + 1] for key, value in outputs.items()})[0]
+        out[j] = _summaries(time[: i + 1], {key: value[j : j + 1, : i + 1] for key, value in outputs.items()},
+                            None if checked is None else checked[j : j + 1, : i + 1])[0]
     return out
 
 
-def _summaries(time: np.ndarray, outputs: dict[str, np.ndarray]) -> list[dict]:
-    """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays)."""
+def _summaries(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> list[dict]:
+    """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays);
+    the rate check over the ``checked`` samples (k, n) only, when given."""
     v = outputs["lyapunov"]
     rate = outputs["lyapunov_rate"]
     n = v.shape[1]
@@ -222,8 +270,12 @@ def _summaries(time: np.ndarray, outputs: dict[str, np.ndarray]) -> list[dict]:
     initial, final = v[:, 0].tolist(), v[:, n - 1].tolist()
     max_rate = np.max(rate, axis=1).tolist()
     increase = np.max(v - np.minimum.accumulate(v, axis=1), axis=1).tolist()
+    n_checked = [n] * v.shape[0] if checked is None else np.sum(checked, axis=1).tolist()
     if n >= MIN_CHECK_SAMPLES:
-        mismatch = np.max(np.abs(rate - outputs["lyapunov_rate_numerical"]), axis=1).tolist()
+        difference = np.abs(rate - outputs["lyapunov_rate_numerical"])
+        if checked is not None:
+            difference = np.where(checked, difference, 0.0)
+        mismatch = np.max(difference, axis=1).tolist()
         scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0])).tolist()
     summaries = []
     for j in range(v.shape[0]):
@@ -235,7 +287,9 @@ def _summaries(time: np.ndarray, outputs: dict[str, np.ndarray]) -> list[dict]:
         summary["lyapunov_final"] = final[j]
         summary["max_lyapunov_rate"] = max_rate[j]
         summary["max_lyapunov_increase"] = increase[j]
-        if n < MIN_CHECK_SAMPLES:
+        if checked is not None:
+            summary["lyapunov_rate_checked"] = n_checked[j] / n
+        if n < MIN_CHECK_SAMPLES or n_checked[j] < MIN_CHECK_SAMPLES:
             summary["lyapunov_rate_mismatch"] = float("nan")
             summary["lyapunov_rate_mismatch_relative"] = float("nan")
             summary["lyapunov_rate_check"] = "n/a"

@@ -147,3 +147,6 @@ def warm_up() -> None:
     settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
     for method in METHODS:
         integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)
+    from .switching import warm_up as warm_up_switching
+
+    warm_up_switching(params)

@@ -114,6 +114,14 @@ SUMMARY_FIGURES = {
     "lyapunov_rate_mismatch": ("W", "max |analytic - numerical dv/dt|"),
     "lyapunov_rate_mismatch_relative": ("1", "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),
     "lyapunov_rate_check": ("", "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
+    "lyapunov_rate_checked": ("1", "fraction of the samples the rate check compares (pure sign law: on one smooth piece)"),
+    # runs of the pure sign law of sliding (rbstab.engine.switching.SWITCHING_FIGURES)
+    "switching_count": ("1", "crossings of E_i = 0 located"),
+    "sliding_time": ("s", "time C slid on E_i = 0 (equivalent force)"),
+    "sliding_starts": ("1", "times sliding on E_i = 0 started"),
+    "min_switching_interval": ("s", "shortest time between two crossings of E_i = 0"),
+    "chattering": ("N s-1", "total variation of Lambda_i from its jumps, per second"),
+    "switching_resolution": ("m", "switching resolution: excursions smaller than this start sliding"),
 }
 #: Per-run values other than summary figures: name -> (units, long name).
 PER_RUN = {

@@ -8,6 +8,11 @@ Layout of ``<name>.h5``
   ``constraint_force``, ``force_h``, ``torque_n``, ``lyapunov``, ``lyapunov_rate``,
   ``lyapunov_rate_numerical`` and the terms of v), each with ``units`` and
   ``description`` attributes;
+- for a run of the pure sign law of ``sliding``: the variable ``sliding_mode`` (sigma of
+  each sample) and, on a dimension ``switching`` (the located events in time order),
+  ``switching_time`` [s], ``switching_axis`` (0, 1, 2: the component of E),
+  ``switching_kind`` (0 crossing, 1 sliding starts, 2 sliding ends) and
+  ``switching_constraint_rate`` (F_i at the event) [m/s] (:mod:`rbstab.engine.switching`);
 - global attributes: ``rbstab_format``, ``name``, ``variant``, ``status``, ``message``,
   ``config`` (the resolved configuration as YAML text), ``config_hash``,
   ``rbstab_version``, ``git_commit``, ``command_line``, ``created``, ``wall_time``,
@@ -51,6 +56,7 @@ __all__ = [
     "result_attributes",
     "STORE_MODES",
     "SUMMARY_VARIABLES",
+    "SWITCHING_VARIABLES",
     "summary_stride",
     "read_attributes",
     "read_summary",
@@ -62,13 +68,25 @@ __all__ = [
 FORMAT = "rbstab-run-1"
 
 #: Units of every variable of a result file.
-VARIABLE_UNITS = {**BLOCK_UNITS, **OUTPUT_UNITS, "lyapunov_rate_numerical": "W"}
+VARIABLE_UNITS = {**BLOCK_UNITS, **OUTPUT_UNITS, "lyapunov_rate_numerical": "W", "sliding_mode": "1"}
 #: Description of every variable of a result file.
 VARIABLE_DESCRIPTIONS = {
     **BLOCK_DESCRIPTIONS,
     **OUTPUT_DESCRIPTIONS,
     "lyapunov_rate_numerical": "dv/dt by differentiating v along the dense-output samples "
-    "(7-point finite differences); compare with lyapunov_rate",
+    "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "
+    "compare with lyapunov_rate",
+    "sliding_mode": "pure sign law: sigma standing for sgn(E) on the sample's piece, +-1 the side of E_i = 0, "
+    "0 where C slides on it (equivalent force)",
+}
+
+#: Variables of the ``switching`` dimension (the located events of a pure-sign-law run):
+#: name -> (``Switchings`` field, units, description).
+SWITCHING_VARIABLES = {
+    "switching_time": ("time", "s", "time of the event, located to the solver's resolution"),
+    "switching_axis": ("axis", "1", "component i of E (0, 1, 2: inertial x, y, z)"),
+    "switching_kind": ("kind", "1", "0 crossing of E_i = 0, 1 sliding on it starts, 2 sliding ends"),
+    "switching_constraint_rate": ("rate", "m s-1", "F_i at the event (before the impulse of a sliding start)"),
 }
 
 
@@ -240,7 +258,24 @@ class _Writer:
         return dset
 
 
-def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any]) -> bytes:
+def _write_events(w, root, switching) -> None:
+    """The ``switching`` dimension (event number) and its variables (:data:`SWITCHING_VARIABLES`)."""
+    h5ds = w.h5py.h5ds
+    scale = w.dataset(root, "switching", np.arange(len(switching.time), dtype=np.int64))
+    h5ds.set_scale(scale, b"switching")
+    w.attr(scale, "description", "number of the located event of the pure sign law, in time order")
+    for key, (name, units, description) in SWITCHING_VARIABLES.items():
+        data = np.ascontiguousarray(getattr(switching, name))
+        var = w.dataset(root, key, data if data.dtype.kind == "i" else data.astype(float))
+        h5ds.attach_scale(var, scale, 0)
+        w.attr(var, "units", units)
+        w.attr(var, "description", description)
+        var.close()
+    scale.close()
+
+
+def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any],
+                switching=None) -> bytes:
     """The bytes of a result file, built in memory (HDF5's ``core`` driver).
 
     HDF5 never writes to the disk itself: a full disk or a failing device then shows up
@@ -271,6 +306,8 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
             var.close()
         t.close()
         axis.close()
+        if switching is not None:
+            _write_events(w, root, switching)
         for key, value in attrs.items():
             w.attr(root, key, value)
         from .integrity import DIGEST_ATTR, content_digest
@@ -294,13 +331,14 @@ def write_run(
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
     attrs = result_attributes(result, command_line=command_line, store=store, config_yaml=config_yaml)
     time, outputs = result.time, result.outputs
+    switching = getattr(result, "switching", None) if store != "summary" else None
     if store == "thinned":
         stride = attrs["store_stride"]
         time = time[::stride]
         outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
     elif store == "summary":
         time, outputs = time[:0], {}
-    write_bytes_atomic(path, _file_image(time, outputs, attrs))
+    write_bytes_atomic(path, _file_image(time, outputs, attrs, switching))
     return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
 
 

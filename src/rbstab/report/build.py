@@ -164,7 +164,25 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
           _f(r["lyapunov_rate_mismatch"]), _f(r["lyapunov_rate_mismatch_relative"], 3), str(r["lyapunov_rate_check"])]
          for r in rows],
     ))
+    switching = _switching_table(runs)
+    if switching is not None:
+        s.blocks.append(switching)
     return [s]
+
+
+def _switching_table(runs: Sequence[RunData]) -> Table | None:
+    """Per axis of E, the switching figures of the runs of the pure sign law (None if none)."""
+    rows = [r for r in runs if "switching_count" in r.summary]
+    if not rows:
+        return None
+    keys = ("switching_count", "sliding_time", "sliding_starts", "min_switching_interval", "chattering")
+    return Table(
+        "Pure sign law (eq 39): switchings located per axis of E (docs/sliding.md)",
+        ["run", "crossings", "sliding time [s]", "sliding starts", "shortest interval [s]", "chattering [N/s]",
+         "resolution [m]", "rate-checked samples"],
+        [[r.label, *(_f(r.summary[k]) for k in keys), _f(r.summary.get("switching_resolution")),
+          _f(r.summary.get("lyapunov_rate_checked"), 3)] for r in rows],
+    )
 
 
 def _paper_section(runs: Sequence[RunData]) -> Section | None:

@@ -23,7 +23,7 @@ import numpy as np
 from .load import RunData, SweepData, safe_filename
 from .tables import SettleThresholds, metric_column, metric_label
 
-__all__ = ["FigureFile", "run_figures", "comparison_figures", "sweep_figures", "DPI"]
+__all__ = ["FigureFile", "run_figures", "switching_figure", "comparison_figures", "sweep_figures", "DPI"]
 
 #: Resolution of the PNG files [dots per inch].
 DPI = 110
@@ -86,11 +86,11 @@ def _label(run: RunData, var: str, component: int | None = None) -> str:
     return f"{WORDS[var]} ${sym}$ [{_units_text(run.units(var))}]"
 
 
-def _new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float = 2.4):
+def _new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float = 2.4, sharex: bool = True):
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(width, row_height * rows + 0.6), dpi=DPI, layout="constrained")
-    axes = fig.subplots(rows, cols, sharex=True, squeeze=False)
+    axes = fig.subplots(rows, cols, sharex=sharex, squeeze=False)
     return fig, axes
 
 
@@ -159,7 +159,8 @@ def run_figures(run: RunData, folder: Path) -> list[FigureFile]:
         ``<label>_rotational.png`` (Theta [rad], Omega [rad/s] against t [s]; cf. the
         paper's Figs 3, 4, 6), ``<label>_translational.png`` (X [m], V [m/s], D [m] for
         ``embedded``, E [m]; Figs 5, 7), ``<label>_lyapunov.png`` (v [J]; analytic and
-        numerical dv/dt [W] overlaid; their difference [W]).
+        numerical dv/dt [W] overlaid; their difference [W]); for a run of the pure sign
+        law, also ``<label>_switching.png`` (:func:`switching_figure`).
     """
     stem = safe_filename(run.label)
     out = []
@@ -234,7 +235,49 @@ def run_figures(run: RunData, folder: Path) -> list[FigureFile]:
     out.append(FigureFile(_save(fig, folder, f"{stem}_lyapunov"), f"{run.label}: Lyapunov function",
                           "v, its analytic rate dv/dt (solid) and the numerical derivative of v along the samples "
                           "(dashed), and their difference (cf. the paper's Figs 3, 4, 6)."))
-    return out
+    switching = switching_figure(run, folder)
+    return out + ([switching] if switching else [])
+
+
+def switching_figure(run: RunData, folder: Path) -> FigureFile | None:
+    """The located events of a pure-sign-law run (None for other runs): per axis of E, the
+    crossings of E_i = 0 against time with the sliding intervals shaded, and the histogram
+    of the intervals between successive crossings (log scale) -- the chattering."""
+    s = run.series("switching_time", "switching_axis", "switching_kind")
+    if "switching_time" not in s:
+        return None
+    t, axis, kind = s["switching_time"], s["switching_axis"].astype(int), s["switching_kind"].astype(int)
+    t_final = float(run.summary.get("t_final", np.nan))
+    fig, axes = _new_figure(1, 2, width=13.0, row_height=3.2, sharex=False)
+    raster, histogram = axes[0]
+    for i in range(3):
+        crossings = t[(axis == i) & (kind == 0)]
+        raster.vlines(crossings, i - 0.35, i + 0.35, color=f"C{i}", lw=0.4)
+        starts, ends = t[(axis == i) & (kind == 1)], t[(axis == i) & (kind == 2)]
+        for a, b in zip(starts, np.r_[ends, np.full(len(starts) - len(ends), t_final)]):
+            raster.axvspan(a, b, ymin=(i + 0.1) / 3, ymax=(i + 0.9) / 3, color=f"C{i}", alpha=0.25, lw=0)
+        gaps = np.diff(crossings)
+        if gaps.size and np.all(gaps > 0):
+            bins = np.logspace(np.log10(gaps.min()), np.log10(gaps.max()) + 1e-9, 40)
+            histogram.hist(gaps, bins=bins, histtype="step", color=f"C{i}",
+                           label=f"$E_{i + 1}$: {crossings.size} crossings")
+    raster.set_yticks([0, 1, 2], ["$E_1$", "$E_2$", "$E_3$"])
+    raster.set_ylim(-0.5, 2.5)
+    raster.set_xlabel("time $t$ [s]")
+    raster.set_title("crossings of $E_i = 0$ (lines), sliding on it (shaded)", fontsize=9)
+    histogram.set_xscale("log")
+    histogram.set_xlabel("interval between successive crossings [s]")
+    histogram.set_ylabel("count")
+    if histogram.get_legend_handles_labels()[0]:
+        histogram.legend(fontsize=8)
+    for ax in (raster, histogram):
+        ax.grid(alpha=0.3)
+    resolution = run.summary.get("switching_resolution", float("nan"))
+    fig.suptitle(f"{run.label} ({run.variant}, pure sign law): switchings, resolution {resolution:g} m", fontsize=11)
+    return FigureFile(_save(fig, folder, f"{safe_filename(run.label)}_switching"), f"{run.label}: switchings",
+                      "Located crossings of each surface E_i = 0 against time, the intervals where C slid on it "
+                      "(equivalent force), and the histogram of the intervals between successive crossings "
+                      "(the chattering; see docs/sliding.md).")
 
 
 def _overlay(runs: Sequence[RunData], variables: Sequence[str], folder: Path, name: str, title: str) -> str:

@@ -53,6 +53,8 @@ SCALAR_SUMMARY_METRICS = {
     "max_lyapunov_increase": ("max rise of v", "J"),
     "lyapunov_rate_mismatch": ("max |dv/dt analytic - numerical|", "W"),
     "lyapunov_rate_mismatch_relative": ("relative dv/dt mismatch", "1"),
+    "lyapunov_rate_checked": ("fraction of samples rate-checked", "1"),
+    "switching_resolution": ("switching resolution", "m"),
 }
 #: Vector summary figures usable as ``--metric`` (name -> (symbol, units)); ``NAME`` is
 #: the largest |component|, ``NAME_x``, ``NAME_y``, ``NAME_z`` the components (the names of
@@ -65,6 +67,12 @@ VECTOR_SUMMARY_METRICS = {
     "final_position": ("final X", "m"),
     "final_velocity": ("final V", "m/s"),
     "final_controller_state": ("final D", "m"),
+    # runs of the pure sign law of sliding (rbstab.engine.switching)
+    "switching_count": ("crossings of E_i = 0", "1"),
+    "sliding_time": ("sliding time", "s"),
+    "sliding_starts": ("sliding starts", "1"),
+    "min_switching_interval": ("shortest interval between crossings", "s"),
+    "chattering": ("chattering (total variation of Lambda_i)", "N/s"),
 }
 #: Figures of a run that are not summary attributes (name -> (symbol, units)).
 OTHER_METRICS = {

@@ -5,7 +5,9 @@ the body and gains a runtime :data:`~rbstab.model.PARAMETERS` record, so runs of
 different variants and parameters share a chunk. The physics lives in the variants'
 modules; this module only puts it together:
 
-- :func:`state_rate`: dy/dt of one state (what the integrators call);
+- :func:`state_rate`: dy/dt of one state (what the integrators call); codes from
+  ``sliding.MODE_CODES`` on are the pure sign law of ``sliding`` in a mode (sgn(E) -> sigma,
+  :mod:`rbstab.engine.switching`);
 - :func:`output_row`: every output of one state (E, F, Lambda, H, N, v, its terms, dv/dt);
 - :func:`state_rates`, :func:`run_outputs`: the same over many states, from Python.
 """
@@ -98,6 +100,9 @@ def state_rate(code, y, p, dy):
         theta, omega, x, v, a, b, n, h, lam, omega_dot = permanent.quantities(y, p)
         _put(dy, 0, matvec(b, omega))
         _put(dy, 3, omega_dot)
+        return
+    if code >= sliding.MODE_CODES:  # the pure sign law in a mode (rbstab.engine.switching)
+        sliding.mode_rate(y, p, sliding.mode_of(code), dy)
         return
     theta, omega, x, v, d, a, b, n, h, e, f = body_state(y, p)
     lam, d_rate = constraint_force(code, e, f, d, p)
