@@ -28,7 +28,7 @@ def run(configs, output, overrides, method) -> None:
     from rbstab.io.hdf5 import write_result
     from rbstab.jit import ensure_compiled
     from rbstab.resources import memory_problem
-    from rbstab.simulate import simulate
+    from rbstab.simulate import is_sign_law, simulate
 
     if method is not None:
         overrides = (*overrides, f"simulation.method={method}")
@@ -42,7 +42,7 @@ def run(configs, output, overrides, method) -> None:
     out = Path(output)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
     failed = written = 0
-    ensure_compiled(say=lambda line: click.echo(line, err=True))
+    ensure_compiled(say=lambda line: click.echo(line, err=True), sign_law=any(is_sign_law(c) for c in loaded))
     for config in loaded:
         result = simulate(config)
         try:

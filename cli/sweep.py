@@ -147,7 +147,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
 
     from rbstab.jit import ensure_compiled
 
-    ensure_compiled(say=lambda line: click.echo(line, err=True))  # once, before any worker starts
+    # once, before any worker starts; the sign law's integrator too (a run of it may come)
+    ensure_compiled(say=lambda line: click.echo(line, err=True), sign_law=True)
     try:
         outcome = run_sweep(
             loaded,

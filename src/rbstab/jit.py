@@ -72,29 +72,60 @@ def jit(*args, **kwargs):
     return numba.njit(*args, **kwargs)
 
 
-def cache_is_warm() -> bool:
-    """Whether this version's kernels have been compiled into :data:`CACHE_DIR`."""
-    return (CACHE_DIR / _WARM_FILE).exists()
+#: Kernel groups, each compiled (and marked warm in the cache) as a whole: the engine's
+#: right-hand side, integrator and outputs; the sign law's event-driven integrator, which
+#: only pure-sign-law runs need (parts of :func:`rbstab.engine.warm_up`).
+GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",)}
 
 
-def ensure_compiled(say=None) -> None:
-    """Compile the engine's entry points into the cache unless that was done before.
+def cache_is_warm(group: str = "engine") -> bool:
+    """Whether this version's kernels of ``group`` (:data:`GROUPS`) are in :data:`CACHE_DIR`."""
+    return (CACHE_DIR / (_WARM_FILE if group == "engine" else f"{_WARM_FILE}-{group}")).exists()
+
+
+def _start_warm_up(parts: str):
+    """A process running :func:`rbstab.engine.warm_up` (``parts``), or None if it cannot start."""
+    import subprocess
+    import sys
+
+    code = f"from rbstab.engine import warm_up; warm_up({parts!r})"
+    here = str(Path(__file__).resolve().parents[1])  # this rbstab, whatever the child's sys.path
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [here, os.environ.get("PYTHONPATH")]))}
+    try:
+        return subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def ensure_compiled(say=None, *, sign_law: bool = False) -> None:
+    """Compile the engine's kernels into the cache unless that was done before.
 
     ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
-    stderr; nothing is said when the cache is warm.
+    stderr; nothing is said when the cache is warm. ``sign_law``: also the sign law's
+    integrator (:data:`GROUPS`). The parts are compiled in two processes at once (numba
+    compiles on one core; each writes its own kernels into the cache folder).
     """
-    if cache_is_warm():
+    cold = [g for g in ("engine", "sign_law") if (g == "engine" or sign_law) and not cache_is_warm(g)]
+    if not cold:
         return
     import time
 
     if say is not None:
-        say(f"rbstab: compiling the engine once (10-30 s); cached in {CACHE_DIR}")
+        say(f"rbstab: compiling the engine once (~30-60 s on 2 cores); cached in {CACHE_DIR}")
     start = time.perf_counter()
     from .engine import warm_up
 
-    warm_up()
+    parts = [p for g in cold for p in GROUPS[g]]
+    here, there = parts[:1], parts[1:]
+    helper = _start_warm_up(",".join(there)) if there and (os.cpu_count() or 1) > 1 else None
+    warm_up(",".join(here if helper is not None else parts))
+    if helper is not None and helper.wait() != 0:
+        warm_up(",".join(there))  # the second process failed: compile its parts here
     try:
         CACHE_DIR.mkdir(parents=True, exist_ok=True)
-        (CACHE_DIR / _WARM_FILE).write_text(f"{time.perf_counter() - start:.1f} s\n")
+        for group in cold:
+            marker = _WARM_FILE if group == "engine" else f"{_WARM_FILE}-{group}"
+            (CACHE_DIR / marker).write_text(f"{time.perf_counter() - start:.1f} s\n")
     except OSError:  # a read-only cache still works, it only compiles again next time
         pass

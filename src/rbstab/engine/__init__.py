@@ -130,23 +130,34 @@ def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: 
     return f"timeout: the run exceeded {max_wall_time:g} s of wall time at t = {t_stop:.6g} s"
 
 
-def warm_up() -> None:
-    """Compile (or load from the cache) every kernel a run uses, on a tiny input."""
+def warm_up(parts: str = "rates,outputs,switching") -> None:
+    """Compile (or load from the cache) every kernel a run uses, on a tiny input.
+
+    ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
+    integrator), ``outputs`` (every output at the samples) and ``switching`` (the sign
+    law's event-driven integrator, :mod:`rbstab.engine.switching`);
+    :func:`rbstab.jit.ensure_compiled` compiles some in a second process at the same time.
+    """
     from ..model import PARAMETERS
     from ..variants.base import N_OUTPUTS
     from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
 
+    wanted = set(parts.split(","))
     params = np.zeros(1, dtype=PARAMETERS)
     params["mass"] = 1.0
     for name in ("inertia", "inertia_inv", "pivot_inertia", "pivot_inertia_inv"):
         params[name] = np.eye(3)
+    if "switching" in wanted:
+        from .switching import warm_up as warm_up_switching
+
+        warm_up_switching(params)
     for code, n in enumerate(STATE_SIZE):
         y = np.zeros((1, n))
-        state_rates(code, y, params, np.empty_like(y))
-        run_outputs(np.array([code]), params, y[None], np.empty((1, 1, N_OUTPUTS)))
-    settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
-    for method in METHODS:
-        integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)
-    from .switching import warm_up as warm_up_switching
-
-    warm_up_switching(params)
+        if "rates" in wanted:
+            state_rates(code, y, params, np.empty_like(y))
+        if "outputs" in wanted:
+            run_outputs(np.array([code]), params, y[None], np.empty((1, 1, N_OUTPUTS)))
+    if "rates" in wanted:
+        settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
+        for method in METHODS:
+            integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)

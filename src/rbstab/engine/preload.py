@@ -5,9 +5,10 @@ Only from a warm cache: a cold one is compiled by the command before it starts w
 (:func:`rbstab.jit.ensure_compiled`); here a cold cache is left to the workers.
 """
 
-from ..jit import cache_is_warm
+from ..jit import GROUPS, cache_is_warm
 
-if cache_is_warm():
+_warm = [part for group, parts in GROUPS.items() if cache_is_warm(group) for part in parts]
+if _warm:
     from . import warm_up
 
-    warm_up()
+    warm_up(",".join(_warm))
