@@ -408,10 +408,10 @@ class ChunkWriter:
         for name in self._traces:
             f.variables[name].attrs["coordinates"] = self._coordinates
         f.attrs.update(self.attrs)
-        from .integrity import DIGEST_ATTR, content_digest
+        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, sign
 
         f.flush()
-        f.attrs[DIGEST_ATTR] = content_digest(f._h5file)
+        f.attrs[DIGEST_ATTR], f.attrs[DATA_DIGEST_ATTR] = sign(f._h5file)
 
     def _columns(self) -> dict[str, list]:
         names: dict[str, None] = dict.fromkeys(_COORDS)
@@ -484,7 +484,7 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
     """
     import h5py
 
-    from .integrity import DamagedResultError, verify_open_file
+    from .integrity import DamagedResultError, reading, verify_open_file
 
     path = Path(path)
     if not path.is_file():
@@ -493,14 +493,15 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
         f = h5py.File(path, "r")
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
-    with f:
+    with reading(path), f:
         if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
         store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
         try:
-            columns = {k: _column(f[k]) for k in f if f[k].ndim == 1 and k not in ("axis", "time")
-                       and "run" in f and f[k].shape[0] == f["run"].shape[0]}
+            n_runs = f["run"].shape[0] if "run" in f else -1
+            datasets = {k: f[k] for k in f if k not in ("axis", "time")}
+            columns = {k: _column(d) for k, d in datasets.items() if d.ndim == 1 and d.shape[0] == n_runs}
         except OSError as exc:  # a Fletcher-32 checksum that does not match
             raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
     if "run" not in columns or "run_id" not in columns:

@@ -273,9 +273,12 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         axis.close()
         for key, value in attrs.items():
             w.attr(root, key, value)
-        from .integrity import DIGEST_ATTR, content_digest
+        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, sign
 
-        w.attr(root, DIGEST_ATTR, content_digest(f))
+        f.flush()
+        content, data = sign(f)
+        w.attr(root, DIGEST_ATTR, content)
+        w.attr(root, DATA_DIGEST_ATTR, data)
         f.flush()
         return f.id.get_file_image()
 
@@ -372,18 +375,19 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     """
     import h5py
 
-    from .integrity import DIGEST_ATTR, verify_open_file
+    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, reading, verify_open_file
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no such result file: {path}")
     try:
-        with h5py.File(path, "r") as f:
-            attrs = {k: _plain(v) for k, v in f.attrs.items() if k != DIGEST_ATTR}
-            if attrs.get("rbstab_format") == FORMAT and verify:
-                verify_open_file(f, path, data=data)
+        f = h5py.File(path, "r")
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
+    with reading(path), f:
+        attrs = {k: _plain(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
+        if attrs.get("rbstab_format") == FORMAT and verify:
+            verify_open_file(f, path, data=data)
     if attrs.get("rbstab_format") != FORMAT:
         raise NotAResultFile(f"{path}: not an rbstab run result (no rbstab_format = {FORMAT!r} attribute)")
     return attrs
