@@ -408,10 +408,11 @@ class ChunkWriter:
         for name in self._traces:
             f.variables[name].attrs["coordinates"] = self._coordinates
         f.attrs.update(self.attrs)
-        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, sign
+        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest, data_digest
 
         f.flush()
-        f.attrs[DIGEST_ATTR], f.attrs[DATA_DIGEST_ATTR] = sign(f._h5file)
+        f.attrs[DIGEST_ATTR] = content_digest(f._h5file)
+        f.attrs[DATA_DIGEST_ATTR] = data_digest(f._h5file, self.path)
 
     def _columns(self) -> dict[str, list]:
         names: dict[str, None] = dict.fromkeys(_COORDS)
