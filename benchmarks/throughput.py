@@ -118,9 +118,19 @@ def spec(kind: str, n: int) -> dict:
 
 
 def timed(cmd, env=None) -> tuple[float, subprocess.CompletedProcess]:
-    start = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    return time.perf_counter() - start, proc
+    """Wall time from the command's start to its exit, as a shell sees it.
+
+    The output goes to files, not pipes: a pipe's reader would also wait for the sweep's
+    fork server (it holds the parent's stdout) to finish its teardown after the command
+    has exited.
+    """
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        start = time.perf_counter()
+        proc = subprocess.run(cmd, stdout=out, stderr=err, text=True, env=env)
+        wall = time.perf_counter() - start
+        out.seek(0), err.seek(0)
+        proc.stdout, proc.stderr = out.read(), err.read()
+    return wall, proc
 
 
 def sweep(kind: str, n: int, jobs: int, folder: Path, extra=()) -> tuple[float, int]:

@@ -13,6 +13,7 @@ import click
 
 from rbstab import __version__
 
+from .analyze import analyze
 from .report import report
 from .run import run
 from .show import show
@@ -56,6 +57,7 @@ def cli() -> None:
     rbstab run configs/paper/case3_embedded.yaml     # -> results/case3_embedded.h5
     rbstab show results/case3_embedded.h5
     rbstab validate configs/paper/*.yaml
+    rbstab analyze configs/paper/case3_embedded.yaml  # -> results/analysis/case3_embedded.analysis.nc
     """
 
 
@@ -64,6 +66,7 @@ cli.add_command(validate)
 cli.add_command(show)
 cli.add_command(report)
 cli.add_command(sweep)
+cli.add_command(analyze)
 
 
 def main() -> None:

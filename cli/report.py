@@ -55,10 +55,11 @@ _METRICS = ("max_abs_constraint_error", "lyapunov_final")
     help="Settling threshold on |Omega|, the norm of the angular velocity [rad/s].",
 )
 def report(inputs, output, formats, metrics, settle_e, settle_omega) -> None:
-    """Compare INPUT... (run files *.h5, sweep folders, folders of run files).
+    """Compare INPUT... (run files *.h5, sweep folders, folders of run files, analysis files *.analysis.nc).
 
     Writes index.html (tables, the paper's figures per run, overlays of the runs, sweep
-    plots, the comparison with the paper's printed values), summary.md, summary.csv and
+    plots, the comparison with the paper's printed values, the stability analyses of
+    rbstab analyze), summary.md, summary.csv and
     figures/*.png. Every input is checked before anything is written.
     """
     from rbstab.report import ReportError, ReportInputError, ReportOptions, SettleThresholds, build_report

@@ -125,20 +125,20 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         ex = LocalExecutor(jobs)
         ex.start()
     from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError, expand, load_spec, run_sweep
-    from rbstab.sweep.spec import warning_digest
+    from rbstab.sweep.plan import warning_digest
 
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     try:
         loaded = load_spec(spec, overrides)
-        runs = expand(loaded)
+        runs = expand(loaded) if dry_run else None  # else planned as the runs go
     except SweepSpecError as exc:
         if not isinstance(ex, str):
             ex.close()
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
-    for line in warning_digest(runs):
-        click.echo(f"warning: {line}", err=True)
 
     if dry_run:
+        for line in warning_digest(runs):
+            click.echo(f"warning: {line}", err=True)
         click.echo(f"{loaded.name}: {len(runs)} runs (dry run: nothing run or written)")
         for run in runs:
             params = ", ".join(f"{k}={v}" for k, v in run.params.items())
@@ -168,6 +168,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         )
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
+    except SweepSpecError as exc:
+        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (rbstab_cli.main.Terminated)
         click.echo(
             f"\ninterrupted: finished runs are saved and the index is up to date; "
@@ -179,6 +181,8 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
         if not isinstance(ex, str):
             ex.close()
 
+    for line in outcome.warnings:
+        click.echo(f"warning: {line}", err=True)
     c = outcome.counts
     pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0
     click.echo(

@@ -168,6 +168,22 @@ def test_gimbal_lock_inside_a_chunk_fails_alone_with_the_scipy_message():
     assert [got[i].status for i in (0, 2, 3)] == ["success"] * 3
 
 
+def test_runs_of_other_durations_in_a_chunk_get_their_own_time_axis():
+    """A chunk takes runs of any t_end: each run's numerical dv/dt and summary are those it
+    gets alone (they use its own sample times)."""
+    data = base_data(CASE3)
+    short = apply_overrides(data, ["simulation.t_end=0.5"])  # same sample count: one chunk
+    configs = configs_with_spins(data, SPINS[:2]) + configs_with_spins(short, SPINS[:2])
+    together = dict(simulate_many(configs, chunk_size=4))
+    for i, config in enumerate(configs):
+        alone = dict(simulate_many([config]))[0]
+        assert together[i].time[-1] == config.simulation.t_end
+        for key in ("lyapunov", "lyapunov_rate_numerical"):
+            assert np.array_equal(alone.outputs[key], together[i].outputs[key]), (i, key)
+        assert alone.summary == together[i].summary
+        assert together[i].summary["lyapunov_rate_check"] == "pass"
+
+
 def test_a_run_gets_the_same_bits_whatever_its_chunk():
     configs = configs_with_spins(base_data(CASE3), SPINS)
     together = dict(simulate_many(configs, engine="compiled"))

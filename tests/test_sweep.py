@@ -29,7 +29,7 @@ from rbstab.sweep import (
 )
 from rbstab.sweep.executors import ExecutorError
 from rbstab.sweep.folder import is_converged
-from rbstab.sweep.spec import resolved_hash
+from rbstab.sweep.plan import resolved_hash
 from rbstab.sweep.worker import RunTask, WorkerOptions
 from rbstab_cli.main import cli
 
@@ -223,20 +223,29 @@ def test_bad_combination_is_reported_with_run_id_and_key(tmp_path):
     [
         ({"zip": {"body.mass": [30, 40], "initial_state.omega.0": [1, 2, 3]}},
          "the lists have different lengths (body.mass: 2, initial_state.omega.0: 3)"),
-        ({"grid": {"body.mass": 41}}, "sweep key 'grid.body.mass': found 41 (a number); expected a list of values"),
+        ({"grid": {"body.mass": 41}}, "sweep key 'grid.body.mass': found 41; expected a non-empty list of values"),
         ({"grid": {"body.mass": []}}, "sweep key 'grid.body.mass': found []; expected a non-empty list"),
         ({"random": {"n": 2, "params": {"body.mass": {"gauss": [1, 2]}}}},
-         "unknown distribution 'gauss' (allowed: uniform, normal, log_uniform, scale_uniform, choice)"),
+         "sweep key 'random.params.body.mass.gauss': unknown key (allowed: uniform, normal, log_uniform, scale_uniform, choice)"),
         ({"random": {"n": 2, "params": {"body.mass": {"uniform": [5, 1]}}}}, "lo > hi"),
         ({"random": {"n": 2, "params": {"body.mass": {"normal": {"mean": 1}}}}},
-         "expected normal: {mean: m, std: s}"),
+         "sweep key 'random.params.body.mass.normal.std': missing; expected a number >= 0"),
         ({"random": {"n": -1}}, "sweep key 'random.n': found -1; expected an integer >= 0"),
         ({"grids": {}}, "sweep key 'grids': unknown key; did you mean 'grid'?"),
         ({"grid": {"initial_state.omega": [[1, 2, 3]]}, "zip": {"initial_state.omega.0": [1]}},
-         "sweep key 'zip.initial_state.omega.0': overlaps 'grid.initial_state.omega'"),
+         "sweep key 'zip.initial_state.omega.0': found 'initial_state.omega.0'; expected a key varied in one place only (overlaps 'grid.initial_state.omega'"),
         ({"name": "a b"}, "sweep key 'name': found 'a b'; expected letters, digits"),
         ({"base": "missing.yaml"}, "config file not found"),
         ({"convergence": {"lyapunov_ratio": 2}}, "'convergence.lyapunov_ratio': found 2; expected a number in (0, 1)"),
+        ({"grid": {"a..b": [1]}}, "sweep key 'grid.a..b': found 'a..b'; expected a dotted config key"),
+        ({"random": {"n": 2, "params": {"body.mass": {"uniform": [1, 2], "choice": [1]}}}},
+         "sweep key 'random.params.body.mass': found {'uniform': [1, 2], 'choice': [1]}; expected a mapping with "
+         "exactly one distribution"),
+        ({"random": {"n": 2}}, "sweep key 'random.params': found {}; expected at least one parameter"),
+        ({"random": {"n": 2, "params": {"body.mass": {"normal": {"mean": [1, 2], "std": [1, 2, 3]}}}}},
+         "mean has shape (2,) and std (3,), which do not broadcast"),
+        ({"random": {"n": 2, "params": {"body.mass": {"log_uniform": [0, 2]}}}}, "all > 0 (lo <= 0)"),
+        ({"random": {"seeds": 1}}, "sweep key 'random.seeds': unknown key; did you mean 'random.seed'?"),
     ],
 )
 def test_invalid_spec_messages(tmp_path, change, expected):
@@ -300,6 +309,7 @@ def test_converged_definition():
     assert not is_converged("success", 100.0, 0.11, 1e-3)
     assert not is_converged("failed", 100.0, 0.0, 1e-3)
     assert not is_converged("success", 100.0, float("nan"), 1e-3)
+    assert not is_converged("success", 100.0, -50.0, 1e-3)  # fell below the equilibrium's v: not there
 
 
 # -- end to end -------------------------------------------------------------------------------
@@ -464,3 +474,39 @@ def test_dask_unreachable_scheduler_is_a_clean_cli_error(tmp_path):
     assert "cannot connect to the Dask scheduler at tcp://127.0.0.1:9" in result.output
     assert "Traceback" not in result.output
     assert not (tmp_path / "o").exists()
+
+
+def test_runs_are_planned_as_they_run_and_a_late_invalid_run_stops_the_sweep(tmp_path, monkeypatch):
+    """Past the runs planned ahead, an invalid run stops the submission of chunks: the runs
+    before it are saved, the error names it, and the fixed spec resumes from them."""
+    import rbstab.sweep.runner as runner
+
+    monkeypatch.setattr(runner, "PLAN_AHEAD", 2)
+    masses = [41.0, 42.0, 43.0, 44.0, -1.0, 46.0]
+    spec = {"name": "late", "base": str(CASE3), "grid": {"body.mass": masses}}
+    loaded = spec_from_mapping(spec, overrides=SHORT)
+    with pytest.raises(SweepSpecError) as info:
+        run_sweep(loaded, tmp_path, jobs=1, chunk_size=2, progress=False)
+    text = str(info.value)
+    assert "1 of 6 runs have an invalid configuration; the runs before them that finished are saved" in text
+    assert "run r0004 (base case3_embedded; body.mass=-1.0)" in text
+    index = pd.read_csv(tmp_path / "late" / "index.csv")
+    assert list(index["status"]) == ["success"] * 4 + ["pending"]  # r0005 planned too, not run
+    fixed = spec_from_mapping({**spec, "grid": {"body.mass": masses[:4] + [45.0, 46.0]}}, overrides=SHORT)
+    again = run_sweep(fixed, tmp_path, jobs=1, chunk_size=2, progress=False)
+    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 2, 6)
+    assert again.stale_files == []  # the store files this sweep wrote are its own
+
+
+def test_parameter_columns_and_time_grids_come_from_the_spec():
+    from rbstab.sweep.folder import parameter_columns
+    from rbstab.sweep.plan import parameter_columns_of, time_grids_of
+
+    for path in ("gains.yaml", "robustness.yaml"):
+        loaded = load_spec(ROOT / "configs" / "sweeps" / path)
+        runs = expand(loaded)
+        assert list(parameter_columns_of(loaded).items()) == list(parameter_columns(runs).items())
+        assert len(time_grids_of(loaded)) == len({(r.config.simulation.t_end, r.config.simulation.n_samples)
+                                                  for r in runs}) == 1
+    varied = spec_from_mapping({"name": "t", "base": str(CASE3), "grid": {"simulation.t_end": [0.1, 0.2]}})
+    assert len(time_grids_of(varied)) > 1

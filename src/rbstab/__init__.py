@@ -14,7 +14,11 @@ def __getattr__(name: str):
         from .sweep.folder import open_sweep
 
         return open_sweep
+    if name == "analyze":  # rbstab.analyze(config): the stability analysis (rbstab.analysis)
+        from .analysis import analyze
+
+        return analyze
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-__all__ = ["open_sweep", "__version__"]
+__all__ = ["open_sweep", "analyze", "__version__"]

@@ -303,29 +303,35 @@ def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
                       c.simulation.max_wall_time if timeout is None else timeout] for c in configs], dtype=float)
 
 
-def _chunk_results(configs, variants, sol, share: float, settings: np.ndarray) -> Iterator[tuple[int, RunResult]]:
+def _chunk_results(configs, variants, codes, params, sol, share: float,
+                   settings: np.ndarray) -> Iterator[tuple[int, RunResult]]:
     """RunResults of one integrated chunk, post-processed :data:`POSTPROCESS_BLOCK` runs at a time."""
     from .engine import status_message
     from .variants.base import N_OUTPUTS, split_outputs
     from .variants.kernels import run_outputs
 
     k, n_samples, _ = sol.samples.shape
-    codes = np.array([v.code for v in variants], dtype=np.int64)
-    params = np.concatenate([v.parameters for v in variants])
     for lo in range(0, k, POSTPROCESS_BLOCK):
         t0 = _time.perf_counter()
         hi = min(lo + POSTPROCESS_BLOCK, k)
         rows = np.empty((hi - lo, n_samples, N_OUTPUTS))
         with np.errstate(all="ignore"):
             run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], rows)
-        block = {}
+        block, summaries = {}, {}
+        # the runs of a chunk share the state size, so the same named outputs; runs with
+        # the same sample times get their numerical dv/dt and summaries at once (the same
+        # numbers as each alone)
+        by_t_end: dict[float, list[int]] = {}
         for j in range(lo, hi):
-            block[j] = split_outputs(rows[j - lo], (n_samples,), variants[j].layout)
-        time = np.linspace(0.0, configs[lo].simulation.t_end, n_samples)
-        lyapunov = np.stack([block[j]["lyapunov"] for j in range(lo, hi)])
-        rates = numerical_rate(time, lyapunov)  # one finite-difference pass for the block
-        for j in range(lo, hi):
-            block[j]["lyapunov_rate_numerical"] = rates[j - lo]
+            by_t_end.setdefault(configs[j].simulation.t_end, []).append(j)
+        for t_end, members in by_t_end.items():
+            part = rows if len(members) == hi - lo else rows[[j - lo for j in members]]
+            outputs = split_outputs(part.reshape(-1, N_OUTPUTS), (len(members), n_samples), variants[lo].layout)
+            time = np.linspace(0.0, t_end, n_samples)
+            outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+            for i, (j, summary) in enumerate(zip(members, summarize_many(time, outputs))):
+                block[j] = {key: value[i] for key, value in outputs.items()}
+                summaries[j] = summary
         per_run = (_time.perf_counter() - t0) / (hi - lo)
         for j in range(lo, hi):
             config = configs[j]
@@ -342,7 +348,7 @@ def _chunk_results(configs, variants, sol, share: float, settings: np.ndarray) -
                 solver={"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": status,
                         "n_steps": int(sol.n_steps[j])},
                 wall_time=share + per_run,
-                summary=summarize(time, outputs),
+                summary=summaries.pop(j),
                 timing={"integration": share, "postprocess": per_run},
             )
 
@@ -383,15 +389,17 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             start = _time.perf_counter()
             chunk_configs = [configs[i] for i in chunk]
             variants = [c.make_variant() for c in chunk_configs]
+            codes = np.array([v.code for v in variants], dtype=np.int64)
+            params = np.concatenate([v.parameters for v in variants])
             settings = _settings_rows(chunk_configs, timeout)
             sol = integrate_runs(
-                [v.code for v in variants],
-                np.concatenate([v.parameters for v in variants]),
+                codes,
+                params,
                 np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, chunk_configs)]),
                 settings,
                 method=method,
                 n_samples=n_samples,
             )
             share = (_time.perf_counter() - start) / len(chunk)
-            for j, result in _chunk_results(chunk_configs, variants, sol, share, settings):
+            for j, result in _chunk_results(chunk_configs, variants, codes, params, sol, share, settings):
                 yield chunk[j], result

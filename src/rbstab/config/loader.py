@@ -196,7 +196,11 @@ def _array(value: Any) -> np.ndarray:
 
 
 def _matrix(value: Any) -> np.ndarray:
-    return _array(np.diag(value) if np.ndim(value) == 1 else value)
+    out = np.array(value, dtype=float)
+    if out.ndim == 1:  # 3 numbers: a diagonal
+        out = np.diag(out)
+    out.setflags(write=False)
+    return out
 
 
 def _build(

@@ -18,8 +18,18 @@ class _PathError(Exception):
     pass
 
 
+_SCALARS = (float, int, str, bool, type(None))
+
+
 def plain_tree(value: Any) -> Any:
     """Deep copy with mappings as dicts, sequences as lists, numpy values as Python ones."""
+    kind = type(value)
+    if kind in _SCALARS:  # the common cases first, without the ABC checks
+        return value
+    if kind is dict:
+        return {k: plain_tree(v) for k, v in value.items()}
+    if kind is list:
+        return [plain_tree(v) for v in value]
     if isinstance(value, Mapping):
         return {k: plain_tree(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):

@@ -11,6 +11,8 @@ import difflib
 import math
 import numbers
 import re
+import types
+import typing
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any
@@ -141,7 +143,8 @@ def kind_of(value: Any) -> str:
 
 
 def _as_number(value: Any, *, allow_inf: bool = False) -> int | float:
-    if type(value) is float and -MAX_MAGNITUDE <= value <= MAX_MAGNITUDE:  # the common case, without the ABC checks
+    kind = type(value)
+    if (kind is float or kind is int) and -MAX_MAGNITUDE <= value <= MAX_MAGNITUDE:  # without the ABC checks
         return value
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         detail = f"{kind_of(value)}, not a number"
@@ -205,7 +208,7 @@ def _entry(value: Any, where: str) -> int | float:
 
 
 def _vector(value: Any) -> list[int | float]:
-    if not isinstance(value, (list, tuple)):
+    if type(value) is not list and not isinstance(value, (list, tuple)):
         raise Invalid(f"{kind_of(value)}, not a list")
     if len(value) != 3:
         raise Invalid(f"{len(value)} entries, not 3")
@@ -621,17 +624,33 @@ def short_repr(value: Any, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def field_at(loc: Sequence[Any]) -> tuple[type[BaseModel] | None, Any]:
-    """(model holding the last key of ``loc``, FieldInfo of that key or None)."""
-    model: type[BaseModel] | None = RunSchema
-    for i, part in enumerate(loc):
+def field_at(loc: Sequence[Any], root: type[BaseModel] | None = None) -> tuple[type[BaseModel] | None, Any]:
+    """(model holding the last key of ``loc``, FieldInfo of that key or None).
+
+    ``root`` is the model ``loc`` starts in (default :class:`RunSchema`). A ``dict``
+    field's keys are free: the part after it names an entry, and the walk goes on in the
+    model of its values (``random.params.<key>.uniform``).
+    """
+    model: type[BaseModel] | None = RunSchema if root is None else root
+    parts = list(loc)
+    i = 0
+    while i < len(parts):
+        part = parts[i]
         if model is None or part not in model.model_fields:
-            return (model if i == len(loc) - 1 else None), None
+            return (model if i == len(parts) - 1 else None), None
         info = model.model_fields[part]
-        if i == len(loc) - 1:
+        if i == len(parts) - 1:
             return model, info
         ann = info.annotation
+        if typing.get_origin(ann) is dict:  # skip the entry's key
+            ann = typing.get_args(ann)[1]
+            i += 1
+            if i == len(parts) - 1:
+                return None, info
+        if typing.get_origin(ann) in (typing.Union, types.UnionType):  # Optional[Model]
+            ann = next((a for a in typing.get_args(ann) if a is not type(None)), None)
         model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
+        i += 1
     return None, None
 
 
@@ -644,22 +663,29 @@ def _other_section_hint(key: str, section: str) -> str:
     return ""
 
 
-def problem_line(err: Mapping[str, Any], name_defaulted: bool) -> tuple[str, str]:
-    """(dotted key, message line) for one pydantic error."""
-    loc = tuple(err["loc"])
+def problem_line(
+    err: Mapping[str, Any], name_defaulted: bool, *, root: type[BaseModel] | None = None, what: str = "config key"
+) -> tuple[str, str]:
+    """(dotted key, message line) for one pydantic error.
+
+    ``root`` is the validated model (default :class:`RunSchema`; the sweep spec passes
+    its own) and ``what`` the line's first words (``"sweep key"`` for a spec).
+    """
+    loc = tuple(part for part in err["loc"] if part != "[key]")  # a dict key's own error
     ctx = err.get("ctx") or {}
     key = ctx.get("key") or ".".join(str(p) for p in loc)
-    model, info = field_at(loc)
+    model, info = field_at(loc, root)
     expected = ctx.get("expected") or (info.description if info is not None else None) or ""
     detail = ctx.get("detail", "")
-    head = f"config key '{key}'"
+    head = f"{what} '{key}'"
 
     if err["type"] in ("extra_forbidden", "invalid_key"):
         allowed = list(model.model_fields) if model is not None else []
         word = str(loc[-1])
         section = str(loc[-2]) if len(loc) > 1 else ""
         # a key of another section spelled exactly is surely meant; else the closest here
-        hint = _other_section_hint(word, section) or _did_you_mean(word, allowed, f"{section}." if section else "")
+        other = _other_section_hint(word, section) if root is None or root is RunSchema else ""
+        hint = other or _did_you_mean(word, allowed, f"{section}." if section else "")
         hint = f"; {hint}" if hint else ""
         return key, f"{head}: unknown key{hint} (allowed: {', '.join(allowed)})"
     if err["type"] in ("missing", "rbstab_missing"):

@@ -15,6 +15,7 @@ Layout of the report folder::
     summary.md            the tables of the page
     summary.csv           one row per run (direct runs and the runs of every sweep)
     sweep_<name>.csv      per sweep: index.csv plus the chosen metrics
+    (analysis files of ``rbstab analyze`` add their sections: rbstab.report.analysis)
     figures/*.png         every figure
     report.json           what the report was built from (inputs, options, version)
 """
@@ -295,8 +296,13 @@ def build_report(
     bad = [f for f in options.formats if f not in FORMATS]
     if bad or not options.formats:
         raise ReportError(f"unknown format {bad}; allowed: {', '.join(FORMATS)}")
-    data = load_inputs(inputs)
-    target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data)
+    from .analysis import default_name, split_inputs
+
+    analyses, inputs = split_inputs(inputs)  # analysis files (rbstab analyze) and the rest
+    data = load_inputs(inputs) if inputs or not analyses else ReportInputs([], [], [])
+    data.paths.extend(p.resolve() for p in analyses)
+    name = default_name(analyses) if not inputs else None
+    target = Path(output) if output is not None else REPORTS_ROOT / (name or default_report_name(data))
     _check_output(target)
 
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -305,7 +311,7 @@ def build_report(
         umask = os.umask(0)
         os.umask(umask)
         tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; a report is an ordinary folder
-        _write(data, tmp, target.name, options, metrics)
+        _write(data, tmp, target.name, options, metrics, analyses)
         old = None
         if target.exists():
             old = target.parent / f".{target.name}.old-{os.getpid()}"
@@ -319,9 +325,11 @@ def build_report(
     return target
 
 
-def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, metrics: Sequence[str]) -> None:
+def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, metrics: Sequence[str],
+           analyses: Sequence[Path] = ()) -> None:
     import pandas as pd
 
+    from .analysis import analysis_sections
     from .figures import comparison_figures, run_figures, sweep_figures
 
     (folder / "figures").mkdir()
@@ -354,6 +362,7 @@ def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, 
         table.to_csv(folder / f"sweep_{safe_filename(sweep.name)}.csv", index=False)
         figs = sweep_figures(sweep, table, metrics, folder)
         sections.append(_sweep_section(sweep, table, metrics, figs, settle))
+    sections += analysis_sections(analyses, folder)
 
     # summary.csv: every run, direct and swept, one row each
     all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
@@ -382,6 +391,7 @@ def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, 
         "inputs": [str(p) for p in data.paths],
         "runs": [str(r.path) for r in runs],
         "sweeps": [str(s.path) for s in data.sweeps],
+        "analyses": [str(p) for p in analyses],
         "formats": list(options.formats),
         "metrics": list(metrics),
         "settle_e": settle.e,

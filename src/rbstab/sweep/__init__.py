@@ -11,7 +11,9 @@ Library entry points (the ``rbstab sweep`` command is a thin layer over them)::
     # -> results/sweeps/<name>/{sweep.yaml, runs/chunk-*.h5, index.csv, sweep_summary.json}
     ds = open_sweep("results/sweeps/gains_case3", grid=True)   # xarray, variant x k_c_0
 
-Modules: :mod:`~rbstab.sweep.spec` (spec loading, validation, expansion, run ids),
+Modules: :mod:`~rbstab.sweep.schema` (the spec's pydantic schema), :mod:`~rbstab.sweep.spec`
+(spec loading, the frozen spec), :mod:`~rbstab.sweep.plan` (expansion into validated runs,
+run ids),
 :mod:`~rbstab.sweep.worker` (the unit of work: a chunk of runs -> records; engine hook),
 :mod:`~rbstab.sweep.executors` (local process pool, Dask), :mod:`~rbstab.sweep.runner`
 (resume, execution) and :mod:`~rbstab.sweep.folder` (the folder's format: file names,
@@ -30,8 +32,9 @@ _SOURCES = {
     **dict.fromkeys(["STATUSES", "is_converged", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
                      "open_sweep", "parameter_name", "read_index"], "folder"),
     **dict.fromkeys(["DEFAULT_OUTPUT", "SweepBusyError", "SweepOutcome", "rebuild_index", "run_sweep"], "runner"),
-    **dict.fromkeys(["DEFAULT_LYAPUNOV_RATIO", "DISTRIBUTIONS", "PlannedRun", "SweepSpec", "SweepSpecError",
-                     "expand", "load_spec", "spec_from_mapping"], "spec"),
+    **dict.fromkeys(["DEFAULT_LYAPUNOV_RATIO", "DISTRIBUTIONS", "SweepSpec", "SweepSpecError", "load_spec",
+                     "spec_from_mapping"], "spec"),
+    **dict.fromkeys(["PlannedRun", "expand"], "plan"),
     **dict.fromkeys(["ENGINES", "RunTask", "WorkerOptions", "run_chunk"], "worker"),
 }
 

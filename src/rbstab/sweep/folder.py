@@ -196,11 +196,14 @@ def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
 
 
 def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
-    """Whether a run converged: it succeeded and ``v(t_end) <= ratio * v(0)``.
+    """Whether a run converged: it succeeded and ``|v(t_end)| <= ratio * |v(0)|``.
 
     v is the variant's Lyapunov function, zero at the equilibrium, so this says that the
-    run lost all but ``ratio`` of its initial "energy" within ``t_end``. A run that failed
-    (gimbal lock, solver failure, timeout) never converged.
+    run lost all but ``ratio`` of its initial "energy" within ``t_end``. The magnitudes: v
+    is zero only at the equilibrium when it is a Lyapunov function there, and a run that
+    ends with v far below zero (an unstable body falling to lower potential energy, where
+    the gravity term makes v negative) has not converged. A run that failed (gimbal lock,
+    solver failure, timeout) never converged.
     """
     if status != "success":
         return False
@@ -208,7 +211,7 @@ def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio:
         v0, v1 = float(lyapunov_initial), float(lyapunov_final)
     except (TypeError, ValueError):
         return False
-    return math.isfinite(v0) and math.isfinite(v1) and v1 <= ratio * v0
+    return math.isfinite(v0) and math.isfinite(v1) and abs(v1) <= ratio * abs(v0)
 
 
 def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
@@ -227,7 +230,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     for run in runs:
         row: dict[str, Any] = {"run_id": run.run_id, "run": run.index, "base": run.base}
         row.update({name: value for name, (_, value) in run_coords(run.params).items()})
-        row["variant"] = run.config.variant
+        row["variant"] = run.variant
         stored = rows.get(run.run_id)
         if stored is not None:
             row.update({k: v for k, v in stored.items() if k not in row and k not in ("config", "created", "store")})
@@ -449,35 +452,55 @@ def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None)
         return None
 
 
+class StoredRows:
+    """What a sweep's ``runs/`` folder holds, read once: the rows of its store files (run
+    files are read per run, when asked for).
+
+    A file's digest of its text and attributes is always checked; with ``verify`` every
+    checksum of its numbers too (the whole file is read). A damaged file counts for
+    nothing and is appended to ``damaged`` as (file name, reason).
+    """
+
+    def __init__(self, runs_dir: Path, *, verify: bool = False, damaged: list | None = None) -> None:
+        self.runs_dir = runs_dir
+        self.verify = verify
+        self.damaged = damaged if damaged is not None else []
+        self.files = sorted(p.name for p in runs_dir.glob("*.h5"))  # what was there before this invocation
+        self.chunk_rows = _chunk_rows(runs_dir, verify, self.damaged)
+
+    def current(self, run: Any) -> dict | None:
+        """The newest stored row made from ``run``'s current config (its ``config_hash``,
+        :attr:`PlannedRun.config_hash`) with a status other than ``error``, or None."""
+        candidates = list(self.chunk_rows.get(run.run_id, ()))
+        path = self.runs_dir / f"{run.run_id}.h5"
+        if path.exists():
+            row = _run_file_row(path, self.verify, self.damaged)
+            if row is not None:
+                candidates.append(row)
+        good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
+        return max(good, key=lambda r: str(r.get("created", ""))) if good else None
+
+    def stale(self, ids: set[str]) -> list[str]:
+        """Result files found when this was made that hold no run of ``ids`` and are not
+        damaged (left in place by the caller)."""
+        used = {row["file"] for rows in self.chunk_rows.values() for row in rows if row["run_id"] in ids}
+        bad = {name for name, _ in self.damaged}
+        return [name for name in self.files if name not in bad
+                and (name not in used if name.startswith("chunk-") else Path(name).stem not in ids)]
+
+
 def current_rows(runs: Sequence[Any], runs_dir: Path, *, verify: bool = False,
                  damaged: list | None = None) -> tuple[dict[str, dict], list[str]]:
     """(run_id -> the newest stored row made from the run's current config, stale file names).
 
     A row counts when its ``config_hash`` is the run's (:attr:`PlannedRun.config_hash`) and
     its status is not ``error``; store files are read once, run files only for runs of
-    ``runs``. Stale files hold no run of ``runs`` (left in place by the caller). A file's
-    digest of its text and attributes is always checked; with ``verify`` every checksum of
-    its numbers too (the whole file is read). A damaged file counts for nothing and is
-    appended to ``damaged`` as (file name, reason).
+    ``runs``. Stale files hold no run of ``runs`` (left in place by the caller). Checks as
+    :class:`StoredRows`.
     """
-    chunk_rows = _chunk_rows(runs_dir, verify, damaged)
-    current: dict[str, dict] = {}
-    for run in runs:
-        candidates = list(chunk_rows.get(run.run_id, ()))
-        path = runs_dir / f"{run.run_id}.h5"
-        if path.exists():
-            row = _run_file_row(path, verify, damaged)
-            if row is not None:
-                candidates.append(row)
-        good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
-        if good:
-            current[run.run_id] = max(good, key=lambda r: str(r.get("created", "")))
-    ids = {r.run_id for r in runs}
-    stale = [p.name for p in runs_dir.glob("*.h5") if not p.name.startswith("chunk-") and p.stem not in ids]
-    used = {row["file"] for rows in chunk_rows.values() for row in rows if row["run_id"] in ids}
-    stale += [p.name for p in runs_dir.glob(CHUNK_GLOB) if p.name not in used]
-    bad = {name for name, _ in damaged or ()}
-    return current, sorted(name for name in stale if name not in bad)
+    stored = StoredRows(runs_dir, verify=verify, damaged=damaged)
+    current = {run.run_id: row for run in runs if (row := stored.current(run)) is not None}
+    return current, stored.stale({r.run_id for r in runs})
 
 
 def set_aside_damaged(runs_dir: Path, damaged: Sequence[tuple[str, str]]) -> list[str]:

@@ -28,12 +28,13 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import itertools
 import datetime as _dt
 import errno
 import math
 import os
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +46,7 @@ from .executors import Executor, make_executor
 from ..io.atomic import write_bytes_atomic, write_text_atomic
 from .folder import (
     CHUNK_GLOB,
+    StoredRows,
     DEFAULT_LAYOUT,
     INDEX_FILE,
     LAYOUTS,
@@ -62,13 +64,27 @@ from .folder import (
     write_index,
     write_summary,
 )
-from .spec import PlannedRun, SweepSpec, expand
+from .plan import (InvalidRun, PlannedRun, RunEntry, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
+                   warning_digest)
+from .spec import SweepSpec, SweepSpecError
 from ..io.chunk import DEFAULT_STORE, STORES
 from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk
 
 #: Runs per store file (and unit of work) by default: writing costs little per run, and a
 #: chunk of 512 Case 3 runs holds ~120 MB of full traces in a worker before they are written.
 STORE_CHUNK_SIZE = 512
+
+#: Chunks per worker a sweep is cut into at least (when chunks of STORE_CHUNK_SIZE runs
+#: would give fewer): the first chunks run while the later runs are planned.
+CHUNKS_PER_WORKER = 2
+
+#: Fewest runs per chunk when a sweep is split into CHUNKS_PER_WORKER chunks per worker
+#: (a chunk is a store file: more of them cost time to write and to open).
+MIN_SPLIT_CHUNK = 64
+
+#: Runs planned before anything is written: an invalid run among them stops the sweep with
+#: nothing run (later ones stop it after the runs before them).
+PLAN_AHEAD = 256
 
 __all__ = [
     "run_sweep",
@@ -133,6 +149,9 @@ class SweepOutcome:
     worker_peak_rss : int or None
         Largest peak resident set size of a worker process [bytes], as reported by the
         workers (None when unknown).
+    warnings : list of str
+        Physical-plausibility warnings of the runs, one line per config key
+        (:func:`rbstab.sweep.plan.warning_digest`).
     """
 
     name: str
@@ -151,6 +170,7 @@ class SweepOutcome:
     n_chunks: int = 0
     timing: dict = field(default_factory=dict)
     worker_peak_rss: int | None = None
+    warnings: list = field(default_factory=list)
 
     @property
     def n_failed(self) -> int:
@@ -208,7 +228,7 @@ def _dump_yaml(data: Any) -> str:
     return dump_yaml(data)
 
 
-def _spec_document(spec: SweepSpec, runs: Sequence[PlannedRun], command_line: str | None) -> dict:
+def _spec_document(spec: SweepSpec, command_line: str | None) -> dict:
     doc = spec.to_mapping()
     doc["generated"] = {
         "by": f"rbstab {__version__}",
@@ -217,31 +237,40 @@ def _spec_document(spec: SweepSpec, runs: Sequence[PlannedRun], command_line: st
         "spec_file": str(Path(spec.source).resolve()) if spec.source else None,
         "base_files": [b.source for b in spec.bases],
         "overrides": list(spec.overrides),
-        "n_runs": len(runs),
+        "n_runs": spec.n_runs,
         "run_id": "r<index>-<first 8 hex of sha256 of the run's resolved config without its name>",
         "note": "re-runnable: rbstab sweep <this file> (the overrides are already applied to base)",
     }
     return doc
 
 
-def _chunks(tasks: list[RunTask], size: int, workers: int | None) -> list[list[RunTask]]:
-    """Consecutive runs in run-list order, any runs together: chunks of at most ``size``
-    runs, and at most ``ceil(n / workers)`` so that every worker gets a share of a small
-    sweep, of nearly equal length."""
-    if not tasks:
-        return []
+def _chunk_length(n_runs: int, size: int, per_worker: int, workers: int | None) -> int:
+    """Runs per chunk: at most ``size``, and small enough that each worker gets
+    ``per_worker`` chunks (:data:`CHUNKS_PER_WORKER` with the default size: the workers
+    start while the later runs are still being planned, and finish together)."""
     if workers and workers > 1:
-        size = min(size, max(1, math.ceil(len(tasks) / workers)))
-    n = math.ceil(len(tasks) / size)
-    bounds = [round(i * len(tasks) / n) for i in range(n + 1)]
-    return [tasks[a:b] for a, b in zip(bounds, bounds[1:])]
+        split = math.ceil(n_runs / (per_worker * workers))
+        # but not below MIN_SPLIT_CHUNK runs, unless the workers would not all get one
+        size = min(size, max(split, min(MIN_SPLIT_CHUNK, math.ceil(n_runs / workers))))
+    return max(1, size)
 
 
-def _check_time_grids(runs: Sequence[PlannedRun], store: str, layout: str) -> None:
+def _chunked(runs: Iterator, size: int) -> Iterator[list]:
+    """Consecutive runs in run-list order, any runs together, ``size`` at a time."""
+    chunk: list = []
+    for run in runs:
+        chunk.append(run)
+        if len(chunk) == size:
+            yield chunk
+            chunk = []
+    if chunk:
+        yield chunk
+
+
+def _check_time_grids(grids: set, store: str, layout: str) -> None:
     """Traces in a store file share one time axis: refuse a sweep whose runs differ in it."""
     if layout != "chunk" or store == "summary":
         return
-    grids = {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs}
     if len(grids) > 1:
         raise ValueError(
             f"the runs have {len(grids)} different sample grids (simulation.t_end, n_samples); "
@@ -384,18 +413,20 @@ def run_sweep(
         and the index written for exactly the files on disk.
     """
     say = log or (lambda message: None)
-    if runs is None:
-        runs = expand(spec)
     engine = resolve_engine(engine, timeout)
     if layout not in LAYOUTS:
         raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    chunks_per_worker = CHUNKS_PER_WORKER if chunk_size is None else 1
     if chunk_size is None:
         chunk_size = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     if store not in STORES:
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
-    _check_time_grids(runs, store, layout)
+    head, plan = _start_plan(spec, runs)
+    grids = {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs} if runs is not None \
+        else time_grids_of(spec)
+    _check_time_grids(grids, store, layout)
     if command_line is None:
         command_line = " ".join(sys.argv)
     # the executor first: a missing package or an unreachable scheduler writes nothing
@@ -403,50 +434,71 @@ def run_sweep(
     ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if owned else executor
     directory = Path(output) / spec.name
     runs_dir = directory / RUNS_DIR
-    outcome = SweepOutcome(spec.name, directory, len(runs), engine=engine)
+    outcome = SweepOutcome(spec.name, directory, spec.n_runs, engine=engine)
     # an executor made here is closed here; one passed in belongs to the caller, whose
     # next sweep finds its workers started (numpy, scipy, h5py and rbstab imported)
     with ex if owned else contextlib.nullcontext(ex):
         runs_dir.mkdir(parents=True, exist_ok=True)
-        _run_locked(spec, runs, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
-                    chunk_size=chunk_size, progress=progress, say=say,
+        _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
+                    chunk_size=(chunk_size, chunks_per_worker), progress=progress, say=say,
                     options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
-                                          store=store, layout=layout, parameters=parameter_columns(runs),
+                                          store=store, layout=layout, parameters=parameter_columns_of(spec),
                                           sweep=spec.name))
     return outcome
 
 
-def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
+def _start_plan(spec: SweepSpec, runs: Sequence[PlannedRun] | None) -> tuple[list, Iterator | None]:
+    """(the runs planned before anything is written, the iterator of the others or None).
+
+    ``runs`` given: all of them, planned. Otherwise the first :data:`PLAN_AHEAD` runs of
+    :func:`plan_runs`; if one of those is invalid, the whole run list is checked and
+    :class:`SweepSpecError` lists every invalid run (nothing is written or run).
+    """
+    if runs is not None:
+        return list(runs), None
+    plan = plan_runs(spec)
+    head = list(itertools.islice(plan, PLAN_AHEAD))
+    invalid = [r for r in head if isinstance(r, InvalidRun)]
+    if invalid:
+        invalid += [r for r in plan if isinstance(r, InvalidRun)]
+        raise SweepSpecError(invalid_report(spec, invalid), spec.source)
+    return head, plan
+
+
+def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
                 options) -> None:
+    """Plan, skip what is done, execute the rest and write the index, holding the lock.
+
+    Runs are planned as the executor asks for more chunks, so the workers start on the
+    first runs while the parent plans the others. An invalid run after the first
+    :data:`PLAN_AHEAD` stops the submission of further chunks; the rest of the run list is
+    still planned (for the index and the message), then :class:`SweepSpecError` is raised.
+    """
     with _lock(directory):
         removed = _remove_temporaries(runs_dir, directory)
         if removed:
             say(f"removed {removed} temporary file(s) left by an interrupted invocation")
-        doc = _spec_document(spec, runs, options.command_line)
-        spec_path = directory / SPEC_FILE
-        if spec_path.exists():
-            with contextlib.suppress(Exception):
-                old = read_spec(directory)  # within the YAML limits
-                old.pop("generated", None)
-                new = {k: v for k, v in doc.items() if k != "generated"}
-                if yaml.safe_load(_dump_yaml(new)) != old:
-                    say(f"note: the spec differs from the one in {spec_path}; runs whose config changed are rerun")
-        write_text_atomic(spec_path, _dump_yaml(doc))
-
-        attrs, outcome.stale_files = current_rows(runs, runs_dir, verify=True, damaged=outcome.damaged)
+        _write_spec_document(spec, directory, options.command_line, say)
+        stored = StoredRows(runs_dir, verify=True, damaged=outcome.damaged)
         for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
             say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
-        if retry_failed:
-            attrs = {k: v for k, v in attrs.items() if v.get("status") == "success"}
-        todo = [run for run in runs if run.run_id not in attrs]
-        outcome.n_skipped = len(attrs)
+        planned: list[RunEntry] = []  # every run, without its config (memory: ~1 KB a run)
+        invalid: list[InvalidRun] = []
+        rest = plan if plan is not None else iter(())
+
+        def runs_in_order() -> Iterator[PlannedRun]:
+            for run in itertools.chain(head, rest):
+                if isinstance(run, InvalidRun):
+                    invalid.append(run)
+                    return
+                planned.append(run.entry())
+                yield run
+
+        attrs: dict[str, dict] = {}
         errors: dict[str, str] = {}
-        if not todo:
-            say(f"{spec.name}: all {len(runs)} runs already done; rebuilding the index")
         try:
-            if todo:
-                _execute(spec, todo, runs_dir, attrs, errors, outcome, ex, chunk_size=chunk_size,
-                         progress=progress, say=say, options=options)
+            _execute(spec, runs_in_order(), stored, runs_dir, attrs, errors, outcome, ex, retry_failed=retry_failed,
+                     chunk_size=chunk_size, progress=progress, say=say, options=options)
         except BaseException:
             # Ctrl-C, SIGTERM, a full disk: stop every worker first, so that the index
             # written below lists exactly the files on disk (nothing is written after it)
@@ -454,13 +506,36 @@ def _run_locked(spec, runs, ex, directory, runs_dir, outcome, *, retry_failed, c
             _remove_temporaries(runs_dir, directory)
             raise
         finally:
+            for run in rest:  # what was not planned yet: pending in the index, or invalid
+                if isinstance(run, InvalidRun):
+                    invalid.append(run)
+                else:
+                    planned.append(run.entry())
             # files finished while the pool shut down count too
-            _collect_finished(todo, runs_dir, attrs, errors)
-            _finish(spec, runs, attrs, errors, outcome)
+            _collect_finished(planned, runs_dir, attrs, errors)
+            outcome.stale_files = stored.stale({r.run_id for r in planned})
+            outcome.warnings = warning_digest(planned)
+            _finish(spec, planned, attrs, errors, outcome)
+        if invalid:
+            done = "the runs before them that finished are saved; fix the spec and run it again to resume"
+            raise SweepSpecError(invalid_report(spec, invalid, done), spec.source)
 
 
-def _collect_finished(todo: Sequence[PlannedRun], runs_dir: Path, attrs: dict, errors: dict) -> None:
-    missing = [run for run in todo if run.run_id not in attrs]
+def _write_spec_document(spec: SweepSpec, directory: Path, command_line: str | None, say) -> None:
+    doc = _spec_document(spec, command_line)
+    spec_path = directory / SPEC_FILE
+    if spec_path.exists():
+        with contextlib.suppress(Exception):
+            old = read_spec(directory)  # within the YAML limits
+            old.pop("generated", None)
+            new = {k: v for k, v in doc.items() if k != "generated"}
+            if yaml.safe_load(_dump_yaml(new)) != old:
+                say(f"note: the spec differs from the one in {spec_path}; runs whose config changed are rerun")
+    write_text_atomic(spec_path, _dump_yaml(doc))
+
+
+def _collect_finished(runs: Sequence[PlannedRun], runs_dir: Path, attrs: dict, errors: dict) -> None:
+    missing = [run for run in runs if run.run_id not in attrs]
     if not missing:
         return
     found, _ = current_rows(missing, runs_dir)
@@ -469,28 +544,42 @@ def _collect_finished(todo: Sequence[PlannedRun], runs_dir: Path, attrs: dict, e
         errors.pop(run_id, None)
 
 
-def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chunk_size, progress, say,
-             options) -> None:
+def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor, *, retry_failed, chunk_size,
+             progress, say, options) -> None:
+    """Skip the runs of ``runs`` (an iterator) with a current result, run the others in
+    chunks on ``ex`` and record each finished run in ``attrs`` (or ``errors``).
+
+    ``chunk_size``: (most runs per chunk, chunks per worker at least; see :func:`_chunk_length`).
+    """
     folder = str(runs_dir.resolve())
-    tasks = [RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
-                     {name: value for name, (_, value) in run_coords(r.params).items()}) for r in todo]
-    chunks = _chunks(tasks, chunk_size, ex.parallelism())
+    by_id: dict[str, RunEntry] = {}  # the runs sent and not back yet
+    bar = _progress_bar(spec.n_runs, spec.name, progress)
+
+    def tasks() -> Iterator[RunTask]:
+        for r in runs:
+            row = stored.current(r)
+            if row is not None and (not retry_failed or row.get("status") == "success"):
+                attrs[r.run_id] = row
+                outcome.n_skipped += 1
+                bar.update(1)
+                continue
+            by_id[r.run_id] = r.entry()
+            yield RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
+                          {name: value for name, (_, value) in run_coords(r.params).items()})
+
+    size = _chunk_length(spec.n_runs, *chunk_size, ex.parallelism())
     if ex.return_bytes:
         options = dataclasses.replace(options, return_bytes=True)
-    by_id = {r.run_id: r for r in todo}
-    n_ok = n_bad = 0
-    ex.plan(len(chunks))  # the caller closes the executor
+    ex.plan(math.ceil(spec.n_runs / size))  # the caller closes the executor
     outcome.executor = ex.describe()
-    outcome.n_chunks = len(chunks)
-    per_chunk = "" if chunk_size == 1 else f" in {len(chunks)} chunk{'s' if len(chunks) != 1 else ''}"
-    say(
-        f"{outcome.name}: {outcome.n_runs} runs, {outcome.n_skipped} already done, "
-        f"{len(todo)} to run on {outcome.executor} ({options.engine} engine{per_chunk})"
-    )
-    bar = _progress_bar(len(todo), spec.name, progress)
+    per_chunk = "" if size == 1 else f", chunks of up to {size} runs"
+    say(f"{outcome.name}: {outcome.n_runs} runs on {outcome.executor} ({options.engine} engine{per_chunk}); "
+        "runs with a current result are skipped")
+    counts = {"ok": 0, "bad": 0}
     try:
-        for chunk, records, exc in ex.imap_unordered(run_chunk, chunks, options):
+        for chunk, records, exc in ex.imap_unordered(run_chunk, _chunked(tasks(), size), options):
             _stop_on_machine_fault(records or ())
+            outcome.n_chunks += 1
             if exc is not None:
                 records = [
                     {"run_id": t.run_id, "path": t.path, "status": "error",
@@ -498,40 +587,43 @@ def _execute(spec, todo, runs_dir, attrs, errors, outcome, ex: Executor, *, chun
                     for t in chunk
                 ]
             for rec in records:
-                rid = rec["run_id"]
-                if rec.get("data") is not None:
-                    write_bytes_atomic(rec["path"], rec["data"])
-                path = Path(rec["path"])
-                if not path.exists():
-                    a = None
-                elif rec.get("attrs") is not None and rec["status"] != "error":
-                    a = rec["attrs"]  # what the worker just wrote: no need to reopen the file
-                else:
-                    a = current_rows([by_id[rid]], runs_dir)[0].get(rid)
-                for key, seconds in (rec.get("timing") or {}).items():
-                    outcome.timing[key] = outcome.timing.get(key, 0.0) + seconds
-                if rec.get("worker_peak_rss"):
-                    outcome.worker_peak_rss = max(outcome.worker_peak_rss or 0, rec["worker_peak_rss"])
-                # the worker wrote it from this run's config; after an error (e.g. a
-                # worker that died after writing) only a file with the run's hash counts
-                if a is not None and a.get("run_id") == rid and (
-                    rec["status"] != "error" or a.get("config_hash") == by_id[rid].config_hash
-                ):
-                    attrs[rid] = a
-                    errors.pop(rid, None)
-                else:
-                    errors[rid] = rec.get("message") or "no result file was written"
-                    if "traceback" in rec:
-                        outcome.tracebacks[rid] = rec["traceback"]
-                outcome.n_executed += 1
-                if rec["status"] == "success" and rid in attrs:
-                    n_ok += 1
-                else:
-                    n_bad += 1
-            bar.set_postfix_str(f"done {n_ok}, failed {n_bad}, remaining {len(todo) - n_ok - n_bad}", refresh=False)
+                _record(rec, by_id.pop(rec["run_id"]), runs_dir, attrs, errors, outcome, counts)
+            bar.set_postfix_str(f"done {counts['ok']}, failed {counts['bad']}", refresh=False)
             bar.update(len(records))
     finally:
         bar.close()
+    if outcome.n_executed == 0 and outcome.n_skipped == outcome.n_runs:
+        say(f"{spec.name}: all {outcome.n_runs} runs already done; rebuilding the index")
+
+
+def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict, outcome: SweepOutcome,
+            counts: dict) -> None:
+    """Take a worker's record of ``run``: its stored row into ``attrs``, or its error."""
+    rid = rec["run_id"]
+    if rec.get("data") is not None:
+        write_bytes_atomic(rec["path"], rec["data"])
+    path = Path(rec["path"])
+    if not path.exists():
+        a = None
+    elif rec.get("attrs") is not None and rec["status"] != "error":
+        a = rec["attrs"]  # what the worker just wrote: no need to reopen the file
+    else:
+        a = current_rows([run], runs_dir)[0].get(rid)
+    for key, seconds in (rec.get("timing") or {}).items():
+        outcome.timing[key] = outcome.timing.get(key, 0.0) + seconds
+    if rec.get("worker_peak_rss"):
+        outcome.worker_peak_rss = max(outcome.worker_peak_rss or 0, rec["worker_peak_rss"])
+    # the worker wrote it from this run's config; after an error (e.g. a worker that
+    # died after writing) only a file with the run's hash counts
+    if a is not None and a.get("run_id") == rid and (rec["status"] != "error" or a.get("config_hash") == run.config_hash):
+        attrs[rid] = a
+        errors.pop(rid, None)
+    else:
+        errors[rid] = rec.get("message") or "no result file was written"
+        if "traceback" in rec:
+            outcome.tracebacks[rid] = rec["traceback"]
+    outcome.n_executed += 1
+    counts["ok" if rec["status"] == "success" and rid in attrs else "bad"] += 1
 
 
 #: errno of a record that stops the sweep: every later write would fail the same way.

@@ -27,11 +27,11 @@ STATE_SIZE = (12, 6, 12, 12, 15)
 
 
 @jit(inline="always")
-def constrained_body(constraint_force, y, p):
-    """Eq 1 with the constraint law ``constraint_force`` (a variant's) at the 12- or
-    15-state y (D = y[12:15] when there).
+def body_state(y, p):
+    """The body's state and the feedback at the 12- or 15-state y (D = y[12:15] when there).
 
-    Returns (theta, omega, x, v, d, a, b, n, h, e, f, lam, d_rate).
+    Returns (theta, omega, x, v, d, a, b, n, h, e, f): A, B (eqs 2, 5), N, H (eqs 23, 24),
+    the constraint error E and rate F (eqs 7, 8).
     """
     theta, omega, x, v = vector(y, 0), vector(y, 3), vector(y, 6), vector(y, 9)
     d = vector(y, 12) if y.shape[0] == 15 else ZERO
@@ -40,8 +40,44 @@ def constrained_body(constraint_force, y, p):
     f = constraint_rate(omega, v, a, p)
     n = torque_n(b, theta, omega, p)
     h = force_h(x, v, p)
-    lam, d_rate = constraint_force(e, f, d, p)
-    return theta, omega, x, v, d, a, b, n, h, e, f, lam, d_rate
+    return theta, omega, x, v, d, a, b, n, h, e, f
+
+
+@jit(inline="always")
+def constraint_force(code, e, f, d, p):
+    """(Lambda, dD/dt) of the constraint law of variant ``code`` (not ``permanent``), from
+    the variant's module."""
+    if code == EMBEDDED:
+        return embedded.constraint_force(e, f, d, p)
+    if code == VISCO_ELASTIC:
+        return visco_elastic.constraint_force(e, f, d, p)
+    if code == SLIDING:
+        return sliding.constraint_force(e, f, d, p)
+    return free.constraint_force(e, f, d, p)
+
+
+@jit(inline="always")
+def constraint_energy(code, e, d, p):
+    """The energy [J] stored by the constraint of variant ``code`` (not ``permanent``)."""
+    if code == EMBEDDED:
+        return embedded.constraint_energy(e, d, p)
+    if code == VISCO_ELASTIC:
+        return visco_elastic.constraint_energy(e, d, p)
+    if code == SLIDING:
+        return sliding.constraint_energy(e, d, p)
+    return free.constraint_energy(e, d, p)
+
+
+@jit(inline="always")
+def constraint_dissipation(code, f, d_rate, p):
+    """The power [W] dissipated by the constraint of variant ``code`` (not ``permanent``)."""
+    if code == EMBEDDED:
+        return embedded.constraint_dissipation(f, d_rate, p)
+    if code == VISCO_ELASTIC:
+        return visco_elastic.constraint_dissipation(f, d_rate, p)
+    if code == SLIDING:
+        return sliding.constraint_dissipation(f, d_rate, p)
+    return free.constraint_dissipation(f, d_rate, p)
 
 
 @jit(inline="always")
@@ -51,9 +87,20 @@ def _put(out, i, x):
     out[i + 2] = x[2]
 
 
-@jit(inline="always")
-def _constrained_rate(constraint_force, y, p, dy):
-    theta, omega, x, v, d, a, b, n, h, e, f, lam, d_rate = constrained_body(constraint_force, y, p)
+@jit
+def state_rate(code, y, p, dy):
+    """dy/dt of one state ``y`` of the variant ``code`` into ``dy`` (same shape).
+
+    The body's equations (eq 1) are written once; only the constraint law depends on the
+    variant (:func:`constraint_force`). ``permanent`` is the reduced system (eq 15).
+    """
+    if code == PERMANENT:
+        theta, omega, x, v, a, b, n, h, lam, omega_dot = permanent.quantities(y, p)
+        _put(dy, 0, matvec(b, omega))
+        _put(dy, 3, omega_dot)
+        return
+    theta, omega, x, v, d, a, b, n, h, e, f = body_state(y, p)
+    lam, d_rate = constraint_force(code, e, f, d, p)
     theta_dot, omega_dot, x_dot, v_dot = body_rates(omega, v, a, b, n, h, lam, p)
     _put(dy, 0, theta_dot)
     _put(dy, 3, omega_dot)
@@ -61,23 +108,6 @@ def _constrained_rate(constraint_force, y, p, dy):
     _put(dy, 9, v_dot)
     if y.shape[0] == 15:
         _put(dy, 12, d_rate)
-
-
-@jit
-def state_rate(code, y, p, dy):
-    """dy/dt of one state ``y`` of the variant ``code`` into ``dy`` (same shape)."""
-    if code == PERMANENT:
-        theta, omega, x, v, a, b, n, h, lam, omega_dot = permanent.quantities(y, p)
-        _put(dy, 0, matvec(b, omega))
-        _put(dy, 3, omega_dot)
-    elif code == EMBEDDED:
-        _constrained_rate(embedded.constraint_force, y, p, dy)
-    elif code == VISCO_ELASTIC:
-        _constrained_rate(visco_elastic.constraint_force, y, p, dy)
-    elif code == SLIDING:
-        _constrained_rate(sliding.constraint_force, y, p, dy)
-    else:
-        _constrained_rate(free.constraint_force, y, p, dy)
 
 
 @jit(inline="always")
@@ -92,15 +122,6 @@ def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation):
     out[35] = -(body_dissipation(omega, v, p) + constraint_dissipation)
 
 
-@jit(inline="always")
-def _constrained_outputs(constraint_force, constraint_energy, constraint_dissipation, y, p, out):
-    """Outputs of a full-body variant, given its module's constraint law, energy and dissipation."""
-    theta, omega, x, v, d, a, b, n, h, e, f, lam, d_rate = constrained_body(constraint_force, y, p)
-    for i, block in enumerate((theta, omega, x, v, d, e, f, lam, h, n)):
-        _put(out, 3 * i, block)
-    _lyapunov(out, theta, omega, x, v, p, constraint_energy(e, d, p), constraint_dissipation(f, d_rate, p))
-
-
 @jit
 def output_row(code, y, p, out):
     """Every output of one state into ``out`` (length N_OUTPUTS, order of
@@ -109,21 +130,15 @@ def output_row(code, y, p, out):
         theta, omega, x, v, a, b, n, h, lam, omega_dot = permanent.quantities(y, p)
         e = constraint_error(x, a, p)
         f = constraint_rate(omega, v, a, p)
-        for i, block in enumerate((theta, omega, x, v, ZERO, e, f, lam, h, n)):
-            _put(out, 3 * i, block)
-        _lyapunov(out, theta, omega, x, v, p, 0.0, 0.0)
-    elif code == EMBEDDED:
-        m = embedded
-        _constrained_outputs(m.constraint_force, m.constraint_energy, m.constraint_dissipation, y, p, out)
-    elif code == VISCO_ELASTIC:
-        m = visco_elastic
-        _constrained_outputs(m.constraint_force, m.constraint_energy, m.constraint_dissipation, y, p, out)
-    elif code == SLIDING:
-        m = sliding
-        _constrained_outputs(m.constraint_force, m.constraint_energy, m.constraint_dissipation, y, p, out)
+        d, energy, dissipation = ZERO, 0.0, 0.0
     else:
-        m = free
-        _constrained_outputs(m.constraint_force, m.constraint_energy, m.constraint_dissipation, y, p, out)
+        theta, omega, x, v, d, a, b, n, h, e, f = body_state(y, p)
+        lam, d_rate = constraint_force(code, e, f, d, p)
+        energy = constraint_energy(code, e, d, p)
+        dissipation = constraint_dissipation(code, f, d_rate, p)
+    for i, block in enumerate((theta, omega, x, v, d, e, f, lam, h, n)):
+        _put(out, 3 * i, block)
+    _lyapunov(out, theta, omega, x, v, p, energy, dissipation)
 
 
 @jit

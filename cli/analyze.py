@@ -1,0 +1,134 @@
+"""``rbstab analyze``: equilibrium, linearisation, Lyapunov certificate, basin map, robustness."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import click
+
+from ._common import command_line, load_configs
+from .options import output_option, set_option
+
+
+def _parse_axes(texts, configs):
+    """Basin axes per config (parsed against each variant's states); ClickException if invalid."""
+    if not texts:
+        return {}
+    if len(texts) != 2:
+        raise click.UsageError(f"--basin: give it exactly twice (two axes of the slice), found {len(texts)}")
+    from rbstab.analysis import BasinAxis
+
+    axes, problems = {}, []
+    for config in configs:
+        layout = config.make_variant().layout
+        try:
+            axes[config.name] = [BasinAxis.parse(t, layout) for t in texts]
+        except ValueError as exc:
+            problems.append(f"{config.name}: {exc}")
+    if problems:
+        raise click.ClickException("invalid --basin\n" + "\n".join(problems))
+    return axes
+
+
+def _check_boundary_layer(configs, boundary_layer) -> None:
+    """--boundary-layer against every config (only the pure sign law takes it)."""
+    from rbstab.analysis.analyze import analysed_config
+
+    problems = []
+    for config in configs:
+        try:
+            analysed_config(config, boundary_layer)
+        except ValueError as exc:
+            problems.append(f"{config.name}: {exc}")
+    if problems:
+        raise click.ClickException("\n".join(problems))
+
+
+def _check_sweeps(paths) -> None:
+    from rbstab.sweep.folder import is_sweep_folder
+
+    bad = [p for p in paths if not is_sweep_folder(p)]
+    if bad:
+        raise click.ClickException("--robustness: not a sweep folder (sweep.yaml + index.csv): " + ", ".join(bad))
+
+
+@click.command("analyze")
+@click.argument("configs", nargs=-1, type=click.Path(dir_okay=False))
+@output_option("results/analysis", "Folder for the <name>.analysis.nc files.")
+@click.option("--json", "as_json", is_flag=True,
+              help="Print one JSON object per config (and per --robustness sweep) to stdout; the text goes to stderr.")
+@click.option("--basin", "basin", multiple=True, metavar="KEY=LO:HI:N",
+              help="An axis of the basin map, twice, e.g. --basin initial_state.omega.0=-60:60:41 "
+              "--basin initial_state.omega.1=-60:60:41 (one simulation per grid point).")
+@click.option("--robustness", "sweeps", multiple=True, type=click.Path(file_okay=False), metavar="SWEEP_DIR",
+              help="A sweep folder of perturbed parameters: stable fraction and separating parameters. Repeatable.")
+@set_option
+@click.option("--boundary-layer", type=float, default=None, metavar="PHI",
+              help="phi [m] analysed in place of the pure sign law of sliding (boundary_layer 0)  [default: 1e-3].")
+@click.option("--samples", type=click.IntRange(min=1), default=10_000, show_default=True, metavar="N",
+              help="States sampled for the certificate's dv/dt check.")
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of that sampling.")
+@click.option("--no-certificate", is_flag=True, help="Skip the Lyapunov certificate.")
+@click.option("--no-simulation", is_flag=True, help="Skip the simulation from the configured initial state.")
+@click.option("--ratio", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=1e-3,
+              show_default=True, help="Converged: |v| <= RATIO |v(0)| from then on (basin map, settling time).")
+@click.option("--basin-samples", type=click.IntRange(min=2), default=201, show_default=True, metavar="N",
+              help="Samples per basin run (the time-to-converge resolution is t_end / (N - 1)).")
+@click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Local processes for the basin map  [default: all CPUs].")
+@click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
+              show_default=True, help="Confidence level of the Wilson interval (--robustness).")
+def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
+            no_simulation, ratio, basin_samples, jobs, confidence) -> None:
+    """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
+
+    \b
+    Per config: the equilibrium and rest check, the eigenvalues of the Jacobian there
+    (damping ratio, natural frequency, time constant, verdict), the Lyapunov certificate
+    (Hessians of v and dv/dt, dv/dt <= 0 on sampled states, a sublevel set of v as a
+    sampling-based inner estimate of the region of attraction) and, with --basin, the
+    basin of attraction over a 2-D slice of initial states by simulation.
+    With --robustness SWEEP_DIR: the stable fraction of a sweep's runs with its Wilson
+    interval, and the parameters that separate stable from unstable runs.
+    Every input is checked before anything runs. Method and limits: docs/analysis.md.
+    """
+    from rbstab.analysis import analyze as run_analysis
+    from rbstab.analysis import robustness, write_analysis
+    from rbstab.analysis.dataset import analysis_path
+    from rbstab.analysis.text import describe, describe_robustness
+    from rbstab.jit import ensure_compiled
+    from rbstab.sweep.executors import default_jobs
+
+    if not configs and not sweeps:
+        raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")
+    loaded = load_configs(configs, overrides)
+    axes = _parse_axes(basin, loaded)
+    _check_boundary_layer(loaded, boundary_layer)
+    _check_sweeps(sweeps)
+    say = (lambda line: click.echo(line, err=True)) if as_json else click.echo
+    out = Path(output)
+    ensure_compiled(say=lambda line: click.echo(line, err=True))
+    for config in loaded:
+        try:
+            result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,
+                                  samples=samples, seed=seed, simulate=not no_simulation,
+                                  basin=axes.get(config.name), basin_samples=basin_samples, ratio=ratio,
+                                  jobs=jobs or default_jobs())
+        except ValueError as exc:
+            raise click.ClickException(f"{config.name}: {exc}")
+        path = write_analysis(result, analysis_path(out, config.name), command_line=command_line())
+        for line in describe(result):
+            say(line)
+        say(f"  -> {path}")
+        if as_json:
+            click.echo(json.dumps({"kind": "configuration", **result.to_json()}))
+    for folder in sweeps:
+        result = robustness(folder, confidence=confidence)
+        path = write_analysis(result, analysis_path(out, f"{result.sweep}.robustness"), command_line=command_line())
+        for line in describe_robustness(result):
+            say(line)
+        say(f"  -> {path}")
+        if as_json:
+            click.echo(json.dumps({"kind": "robustness", **result.to_json()}))
+

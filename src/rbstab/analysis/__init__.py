@@ -1,0 +1,41 @@
+"""Stability analysis of a configuration's equilibrium (``rbstab analyze``).
+
+- :mod:`~rbstab.analysis.derivatives`: central differences of the compiled model with
+  Richardson extrapolation (Jacobians, Hessians, rates along the flow);
+- :mod:`~rbstab.analysis.linearise`: equilibrium, rest check, Jacobian, eigenvalues,
+  modes and verdict;
+- :mod:`~rbstab.analysis.certificate`: the Lyapunov certificate and the sampling-based
+  sublevel-set estimate of the region of attraction;
+- :mod:`~rbstab.analysis.basin`: the basin of attraction over a 2-D slice, by simulation;
+- :mod:`~rbstab.analysis.robustness`: stable fraction and separating parameters of a sweep;
+- :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;
+- :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record.
+
+Method and limits: ``docs/analysis.md``.
+"""
+
+from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, analyze
+from .basin import BasinAxis, BasinMap, basin_map
+from .certificate import Certificate, certify
+from .dataset import is_analysis_file, read_analysis, write_analysis
+from .linearise import Linearisation, linearise
+from .robustness import Robustness, robustness, wilson_interval
+
+__all__ = [
+    "analyze",
+    "Analysis",
+    "DEFAULT_BOUNDARY_LAYER",
+    "linearise",
+    "Linearisation",
+    "certify",
+    "Certificate",
+    "basin_map",
+    "BasinAxis",
+    "BasinMap",
+    "robustness",
+    "Robustness",
+    "wilson_interval",
+    "write_analysis",
+    "read_analysis",
+    "is_analysis_file",
+]

@@ -1,0 +1,284 @@
+"""``rbstab.analyze(config)``: every analysis of one configuration, as one result object.
+
+Order of work: the configuration analysed (the pure sign law of ``sliding`` replaced by
+a boundary layer, said in the notes), its equilibrium and linearisation
+(:mod:`~rbstab.analysis.linearise`), the Lyapunov certificate
+(:mod:`~rbstab.analysis.certificate`), one simulation from the configured initial state
+for the settling time, and the basin map (:mod:`~rbstab.analysis.basin`) if asked for.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time as _time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .basin import DEFAULT_RATIO, BasinAxis, BasinMap, basin_map, time_to_converge
+from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
+from .certificate import DEFAULT_SAMPLES, Certificate, certify
+from .linearise import Linearisation, linearise
+
+__all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config"]
+
+#: phi [m] put in place of the pure sign law (boundary_layer 0) of ``sliding``.
+DEFAULT_BOUNDARY_LAYER = 1e-3
+
+
+@dataclass
+class Analysis:
+    """Everything :func:`analyze` found for one configuration.
+
+    Attributes
+    ----------
+    config : RunConfig
+        The configuration as given.
+    analysed : RunConfig
+        The configuration analysed (``config``, or it with a boundary layer, see notes).
+    linearisation : Linearisation
+    certificate : Certificate or None
+        None when not asked for.
+    settling : dict or None
+        The simulation from the configured initial state: ``status``, ``message``,
+        ``time_to_converge`` [s] (NaN when not converged), ``lyapunov_initial`` [J],
+        ``lyapunov_final`` [J], ``t_end`` [s], ``ratio``; None when not asked for.
+    basin : BasinMap or None
+    notes : list of str
+        What the reader must know (a substituted law, an equilibrium outside the
+        domain, the configuration's warnings).
+    timing : dict of str -> float
+        Seconds per part.
+    """
+
+    config: Any
+    analysed: Any
+    linearisation: Linearisation
+    certificate: Certificate | None = None
+    settling: dict | None = None
+    basin: BasinMap | None = None
+    notes: list[str] = field(default_factory=list)
+    timing: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def variant(self) -> str:
+        return self.config.variant
+
+    @property
+    def verdict(self) -> str:
+        """The linearisation's verdict (:func:`rbstab.analysis.linearise.verdict`)."""
+        return self.linearisation.verdict
+
+    @property
+    def layout(self):
+        """The analysed variant's :class:`~rbstab.layout.StateLayout`."""
+        from ..variants import VARIANTS
+
+        return VARIANTS[self.analysed.variant].layout
+
+    @property
+    def state_names(self) -> list[str]:
+        """``theta_1`` ... of :attr:`layout`."""
+        return self.layout.state_names()
+
+    @property
+    def linear_settling_time(self) -> float:
+        """Time [s] the slowest mode alone takes to bring v down by the convergence ratio:
+        v ~ exp(-2 t / tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
+        tau = self.linearisation.slowest_time_constant
+        ratio = self.settling["ratio"] if self.settling else DEFAULT_RATIO
+        return 0.5 * tau * math.log(1.0 / ratio) if self.verdict == "asymptotically stable" else float("nan")
+
+    def basin_inside(self) -> dict[str, int] | None:
+        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
+        if self.basin is None or self.certificate is None:
+            return None
+        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``--json`` record: ``name``, ``variant``, ``equilibrium``, ``eigenvalues``
+        ([re, im] pairs, real part descending), ``verdict`` and the rest of the analysis."""
+        from .dataset import json_record
+
+        return json_record(self)
+
+    def to_dataset(self):
+        """The analysis as an :class:`xarray.Dataset` (the file's content, :mod:`~rbstab.analysis.dataset`)."""
+        from .dataset import analysis_dataset
+
+        return analysis_dataset(self)
+
+
+def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, list[str]]:
+    """The configuration to analyse and the notes that say why it differs from ``config``.
+
+    The pure sign law of ``sliding`` (boundary_layer 0) has no derivative at E = 0: its
+    right-hand side has no linearisation and v no Hessian there. Its boundary-layer law,
+    sgn(E) -> tanh(E / phi), is analysed instead, with phi = ``boundary_layer`` (default
+    :data:`DEFAULT_BOUNDARY_LAYER`). For every other configuration ``boundary_layer`` must
+    be None or the configured value.
+
+    Raises
+    ------
+    ValueError
+        For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
+    """
+    from ..config import PhysicalPlausibilityWarning, config_from_mapping
+
+    sign_law = config.variant == "sliding" and not config.gains.boundary_layer
+    if boundary_layer is not None and not (boundary_layer > 0 and math.isfinite(boundary_layer)):
+        raise ValueError(f"--boundary-layer: found {boundary_layer}; expected a width phi > 0 [m]")
+    if not sign_law:
+        if boundary_layer is not None and boundary_layer != config.gains.boundary_layer:
+            raise ValueError(f"--boundary-layer: {config.name} is not the pure sign law of sliding "
+                             "(boundary_layer 0); change its law with --set controller.boundary_layer=...")
+        return config, []
+    phi = DEFAULT_BOUNDARY_LAYER if boundary_layer is None else float(boundary_layer)
+    resolved = dict(config.resolved, controller=dict(config.resolved["controller"], boundary_layer=phi))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+        analysed = config_from_mapping(resolved)
+    note = (f"{config.name} uses the pure sign law Lambda = -K_s sgn(E) (boundary_layer 0): the right-hand "
+            "side is not differentiable at E = 0, so the linearisation does not exist there (and v = "
+            f"... + K_s |E|_1 has no Hessian). Analysed instead: the boundary-layer law tanh(E / phi), phi = "
+            f"{phi:g} m, whose stiffness at E = 0 is K_s / phi; every figure below is of that law.")
+    return analysed, [note]
+
+
+def _settling(config, variant, ratio: float) -> dict:
+    """Simulate ``config`` from its initial state: when |v| first stays below ratio * |v(0)| (:func:`~rbstab.analysis.basin.time_to_converge`)."""
+    from ..simulate import simulate
+
+    result = simulate(config)
+    v = result.outputs["lyapunov"]
+    return {
+        "status": result.status,
+        "message": result.message,
+        "time_to_converge": time_to_converge(result.time, v, ratio) if result.ok else float("nan"),
+        "lyapunov_initial": float(v[0]),
+        "lyapunov_final": float(v[-1]),
+        "t_end": float(config.simulation.t_end),
+        "ratio": float(ratio),
+    }
+
+
+def _domain_notes(linearisation: Linearisation, config) -> list[str]:
+    from ..kinematics import GIMBAL_LOCK_ANGLE
+
+    notes = []
+    limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
+    theta_2 = float(linearisation.equilibrium[1])
+    if abs(theta_2) >= limit:
+        notes.append(f"the equilibrium has theta_2 = {theta_2:.6g} rad, outside the model's domain |theta_2| < "
+                     f"pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): the Euler angles are singular on the way "
+                     "there, and no run reaches it")
+    if not linearisation.is_rest_point:
+        worst = float(np.abs(linearisation.rest_residual).max())
+        notes.append(f"the equilibrium is not a rest point: max |dy/dt| there is {worst:.3g}, above the "
+                     f"tolerance {linearisation.rest_tolerance:.3g} (the equilibrium search did not converge)")
+    return notes
+
+
+def analyze(
+    config,
+    *,
+    boundary_layer: float | None = None,
+    certificate: bool = True,
+    samples: int = DEFAULT_SAMPLES,
+    seed: int = 0,
+    simulate: bool = True,
+    basin: Sequence[str | BasinAxis] | None = None,
+    basin_samples: int = DEFAULT_BASIN_SAMPLES,
+    ratio: float = DEFAULT_RATIO,
+    jobs: int = 1,
+) -> Analysis:
+    """Analyse the stability of one configuration's equilibrium.
+
+    Parameters
+    ----------
+    config : RunConfig or path-like
+        A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
+    boundary_layer : float, optional
+        phi [m] analysed in place of the pure sign law of ``sliding`` (default
+        :data:`DEFAULT_BOUNDARY_LAYER`); see :func:`analysed_config`.
+    certificate : bool
+        Compute the Lyapunov certificate (:func:`rbstab.analysis.certificate.certify`).
+    samples : int
+        States sampled for the certificate's dv/dt check (>= 1).
+    seed : int
+        Of that sampling.
+    simulate : bool
+        Simulate from the configured initial state for the settling time.
+    basin : two str or BasinAxis, optional
+        The slice of the basin map, e.g. ``["initial_state.omega.0=-60:60:41",
+        "initial_state.omega.1=-60:60:41"]`` (:meth:`BasinAxis.parse`).
+    basin_samples : int
+        Samples per basin run.
+    ratio : float
+        Convergence: |v(t)| <= ratio * |v(0)| from then on, 0 < ratio < 1.
+    jobs : int
+        Local processes for the basin map.
+
+    Returns
+    -------
+    Analysis
+
+    Raises
+    ------
+    ConfigError
+        For an invalid configuration file.
+    ValueError
+        For an invalid option (the message names it, the value found and what is allowed).
+    """
+    from ..config import load_config
+
+    if isinstance(config, (str, os.PathLike)):
+        config = load_config(config)
+    _check_options(samples, basin_samples, ratio, jobs)
+    timing: dict[str, float] = {}
+    t0 = _time.perf_counter()
+    analysed, notes = analysed_config(config, boundary_layer)
+    variant = analysed.make_variant()
+    axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a, variant.layout) for a in basin or ()]
+    if basin is not None and len(axes) != 2:
+        raise ValueError(f"--basin: expected exactly two axes, found {len(axes)}")
+    lin = linearise(variant)
+    notes += _domain_notes(lin, analysed) + list(config.warnings)
+    t1 = _time.perf_counter()
+    timing["linearisation"] = t1 - t0
+    result = Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes, timing=timing)
+    if certificate:
+        result.certificate = certify(variant, lin, gimbal_margin=analysed.simulation.gimbal_margin,
+                                     n_samples=samples, seed=seed)
+        timing["certificate"] = _time.perf_counter() - t1
+    if simulate:
+        t2 = _time.perf_counter()
+        result.settling = _settling(analysed, variant, ratio)
+        timing["simulation"] = _time.perf_counter() - t2
+    if axes:
+        t3 = _time.perf_counter()
+        result.basin = basin_map(analysed, axes, variant, ratio=ratio, n_samples=basin_samples, jobs=jobs)
+        timing["basin"] = _time.perf_counter() - t3
+    return result
+
+
+def _check_options(samples: int, basin_samples: int, ratio: float, jobs: int) -> None:
+    problems = []
+    if int(samples) < 1:
+        problems.append(f"--samples: found {samples}; expected an integer >= 1")
+    if int(basin_samples) < 2:
+        problems.append(f"--basin-samples: found {basin_samples}; expected an integer >= 2")
+    if not 0 < ratio < 1:
+        problems.append(f"--ratio: found {ratio}; expected 0 < ratio < 1")
+    if int(jobs) < 1:
+        problems.append(f"--jobs: found {jobs}; expected an integer >= 1")
+    if problems:
+        raise ValueError("; ".join(problems))

@@ -1,0 +1,309 @@
+"""The basin of attraction by simulation over a 2-D slice of initial states.
+
+Two initial-state entries (``initial_state.omega.0`` ...) vary over even grids; every
+other entry keeps the configuration's value. Each grid point is one run of the compiled
+engine (:func:`rbstab.simulate.simulate_many`, many runs per compiled call; the chunks
+go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 1``), and
+is classified as a sweep classifies its runs (:func:`rbstab.sweep.folder.is_converged`),
+with |v| in place of v:
+
+- ``converged`` (0): the run reached t_end and |v| <= ratio * |v(0)| from some time on;
+- ``not converged`` (1): it reached t_end with more of v left;
+- ``failed`` (2): gimbal lock (|theta_2| reached pi/2 - gimbal_margin, eq 5), a solver
+  failure, a non-finite state, or an initial state outside the domain.
+
+|v|, because v is zero at the equilibrium but negative elsewhere when the equilibrium is
+not its minimum (an inverted pendulum falling to a lower potential would otherwise count
+as converged); where v is positive definite this is the sweeps' criterion. The bound has
+:data:`ROUND_OFF` J added, so that a run started at the equilibrium, where v(0) is zero
+up to round-off, converges. The time to converge is the first sample time from which the
+bound holds [s] (its resolution: the sample spacing t_end / (n_samples - 1)).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES",
+           "DEFAULT_RATIO"]
+
+#: Outcome codes of a grid point (the ``flag_values`` of the file's ``basin_outcome``).
+OUTCOMES = ("converged", "not converged", "failed")
+#: Samples per basin run (the time-to-converge resolution is t_end / (DEFAULT_SAMPLES - 1)).
+DEFAULT_SAMPLES = 201
+#: Converged: |v| <= DEFAULT_RATIO * |v(0)| (the sweeps' default ``lyapunov_ratio``).
+DEFAULT_RATIO = 1e-3
+#: Added to the bound ratio * |v(0)| [J]: round-off of v at the equilibrium.
+ROUND_OFF = 1e-12
+_AXIS = re.compile(r"^\s*(?P<key>[^=]+?)\s*=\s*(?P<lo>[^:]+):(?P<hi>[^:]+):(?P<n>[^:]+)\s*$")
+
+
+@dataclass(frozen=True)
+class BasinAxis:
+    """One axis of the slice: an initial-state entry over an even grid.
+
+    Attributes
+    ----------
+    key : str
+        ``initial_state.<block>.<0|1|2>`` (block ``theta``, ``omega``, ``x``, ``v``, ``d``).
+    values : ndarray, shape (n,)
+        The grid (units of the block, :attr:`units`).
+    """
+
+    key: str
+    values: np.ndarray
+
+    @classmethod
+    def parse(cls, text: str, layout=None) -> "BasinAxis":
+        """From ``KEY=lo:hi:n`` (``initial_state.omega.0=-60:60:41``).
+
+        Parameters
+        ----------
+        text : str
+        layout : StateLayout, optional
+            The variant's state layout: the key's block must be one of its states.
+
+        Raises
+        ------
+        ValueError
+            Naming the text, what is wrong and what is allowed.
+        """
+        from ..config import INITIAL_STATE_BLOCKS
+
+        match = _AXIS.match(text)
+        if not match:
+            raise ValueError(f"--basin {text!r}: expected KEY=lo:hi:n, e.g. initial_state.omega.0=-60:60:41")
+        key = match["key"]
+        parts = key.split(".")
+        allowed = ", ".join(f"initial_state.{k}.0..2" for k in INITIAL_STATE_BLOCKS)
+        if len(parts) != 3 or parts[0] != "initial_state" or parts[1] not in INITIAL_STATE_BLOCKS \
+                or parts[2] not in ("0", "1", "2"):
+            raise ValueError(f"--basin {text!r}: key {key!r} is not an initial-state entry; allowed: {allowed}")
+        if layout is not None and INITIAL_STATE_BLOCKS[parts[1]] not in layout.blocks:
+            states = ", ".join(k for k, b in INITIAL_STATE_BLOCKS.items() if b in layout.blocks)
+            raise ValueError(f"--basin {text!r}: {key!r} is not a state of this variant (its states: {states})")
+        try:
+            lo, hi, n = float(match["lo"]), float(match["hi"]), int(match["n"])
+        except ValueError:
+            raise ValueError(f"--basin {text!r}: lo and hi must be numbers and n an integer") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi) or n < 2:
+            raise ValueError(f"--basin {text!r}: expected finite lo < hi and n >= 2 points, found "
+                             f"lo={lo:g}, hi={hi:g}, n={n}")
+        return cls(key, np.linspace(lo, hi, n))
+
+    @property
+    def block(self) -> str:
+        """The state block (``theta`` ... ``controller_state``)."""
+        from ..config import INITIAL_STATE_BLOCKS
+
+        return INITIAL_STATE_BLOCKS[self.key.split(".")[1]]
+
+    @property
+    def index(self) -> int:
+        """The component (0, 1, 2)."""
+        return int(self.key.split(".")[2])
+
+    @property
+    def units(self) -> str:
+        from ..layout import BLOCK_UNITS
+
+        return BLOCK_UNITS[self.block]
+
+    @property
+    def label(self) -> str:
+        """``omega_1 [rad s-1]`` (component numbered from 1, as in the paper)."""
+        return f"{self.block}_{self.index + 1} [{self.units}]"
+
+
+@dataclass(frozen=True)
+class BasinMap:
+    """Outcome of every grid point of a slice (see the module docstring).
+
+    Attributes
+    ----------
+    axes : (BasinAxis, BasinAxis)
+        First axis along rows, second along columns.
+    outcome : ndarray of int8, shape (n0, n1)
+        Index into :data:`OUTCOMES`.
+    time_to_converge : ndarray, shape (n0, n1)
+        [s]; NaN where not converged.
+    lyapunov_initial, lyapunov_final : ndarray, shape (n0, n1)
+        v(0), v(t_end) [J] (NaN where the run did not reach t_end).
+    initial_states : ndarray, shape (n0, n1, n_state)
+        The initial state of each point, in the variant's layout.
+    ratio : float
+        The convergence ratio.
+    t_end : float
+        [s]
+    messages : dict of str -> int
+        How many points failed with each message (gimbal lock, ...).
+    """
+
+    axes: tuple[BasinAxis, BasinAxis]
+    outcome: np.ndarray
+    time_to_converge: np.ndarray
+    lyapunov_initial: np.ndarray
+    lyapunov_final: np.ndarray
+    initial_states: np.ndarray
+    ratio: float
+    t_end: float
+    messages: dict
+
+    def counts(self, mask: np.ndarray | None = None) -> dict[str, int]:
+        """Points per outcome (inside ``mask`` if given)."""
+        outcome = self.outcome if mask is None else self.outcome[mask]
+        return {name: int(np.sum(outcome == i)) for i, name in enumerate(OUTCOMES)}
+
+
+def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> float:
+    """First sample time from which |v| stays <= ratio * |v(0)| + :data:`ROUND_OFF` [s];
+    NaN if |v(t_end)| is above (module docstring).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        [s]
+    lyapunov : ndarray, shape (n,)
+        v [J] at ``time`` (NaN after a failure: never converged).
+    ratio : float
+    """
+    bound = ratio * abs(lyapunov[0]) + ROUND_OFF
+    above = ~(np.abs(lyapunov) <= bound)  # NaN counts as above
+    if above[-1]:
+        return float("nan")
+    last = np.flatnonzero(above)
+    return float(time[last[-1] + 1]) if last.size else float(time[0])
+
+
+def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
+    """The ``initial_state`` section of every grid point, row-major (first axis slowest)."""
+    from ..config import set_dotted
+
+    base = config.resolved["initial_state"]
+    out = []
+    for a in axes[0].values:
+        for b in axes[1].values:
+            section = {k: list(v) for k, v in base.items()}
+            data = {"initial_state": section}
+            set_dotted(data, axes[0].key, float(a))
+            set_dotted(data, axes[1].key, float(b))
+            out.append(section)
+    return out
+
+
+def _run_block(items: list, ratio: float) -> list[tuple]:
+    """Run (index, RunConfig) items with the compiled engine; one tuple per item:
+    (index, outcome, time to converge, v(t_end), message)."""
+    from ..simulate import simulate_many
+
+    configs = [c for _, c in items]
+    rows = []
+    for j, result in simulate_many(configs, chunk_size=max(len(configs), 1)):
+        v = result.outputs["lyapunov"]
+        t = time_to_converge(result.time, v, ratio) if result.ok else np.nan
+        outcome = 0 if np.isfinite(t) else (1 if result.ok else 2)
+        rows.append((items[j][0], outcome, t, float(v[-1]), "" if result.ok else result.message.split(" at t =")[0]))
+    return rows
+
+
+def _blocks(items: list, jobs: int) -> list[list]:
+    """Contiguous blocks, 4 per job (both workers busy to the end), of at least 32 runs."""
+    size = max(32, -(-len(items) // (4 * jobs)))
+    return [items[i : i + size] for i in range(0, len(items), size)]
+
+
+def basin_map(
+    config,
+    axes: Sequence[BasinAxis],
+    variant=None,
+    *,
+    ratio: float = DEFAULT_RATIO,
+    n_samples: int = DEFAULT_SAMPLES,
+    jobs: int = 1,
+) -> BasinMap:
+    """Simulate every point of the slice spanned by ``axes`` (module docstring).
+
+    Parameters
+    ----------
+    config : RunConfig
+        The configuration whose initial state the slice passes through; its variant,
+        body, gains and simulation settings are used for every run (``n_samples``
+        replaced).
+    axes : two BasinAxis
+        Different keys.
+    variant : Variant, optional
+        ``config.make_variant()`` if not given (its v gives ``lyapunov_initial``).
+    ratio : float
+        Convergence ratio (0 < ratio < 1).
+    n_samples : int
+        Samples per run (>= 2).
+    jobs : int
+        Local processes (1: in this process).
+
+    Raises
+    ------
+    ValueError
+        For two equal keys.
+    """
+    import warnings
+
+    from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+
+    if len(axes) != 2 or axes[0].key == axes[1].key:
+        raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
+    variant = variant if variant is not None else config.make_variant()
+    resolved = dict(config.resolved, simulation=dict(config.resolved["simulation"], n_samples=int(n_samples)))
+    with warnings.catch_warnings():  # the config's warnings were shown when it was loaded
+        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+        base = config_from_mapping(resolved)
+    shape = (len(axes[0].values), len(axes[1].values))
+    sections = _grid_states(config, axes)
+    items, states = [], []
+    outcome = np.full(shape[0] * shape[1], 2, dtype=np.int8)
+    messages: dict[str, int] = {}
+    for i, section in enumerate(sections):
+        blocks = {b: np.asarray(section[k], float) for k, b in INITIAL_STATE_BLOCKS.items()}
+        states.append(variant.initial_state(blocks))
+        try:
+            items.append((i, base.with_initial_state(section, name=f"{config.name}-basin-{i}")))
+        except ConfigError as exc:
+            text = f"initial state outside the domain: {exc.errors[0]}" if exc.errors else "invalid initial state"
+            messages[text] = messages.get(text, 0) + 1
+    states = np.array(states)
+    t_conv = np.full(len(sections), np.nan)
+    v_final = np.full(len(sections), np.nan)
+    for rows in _execute(items, ratio, jobs):
+        for index, code, t, v1, message in rows:
+            outcome[index], t_conv[index], v_final[index] = code, t, v1
+            if message:
+                messages[message] = messages.get(message, 0) + 1
+    return BasinMap(
+        axes=(axes[0], axes[1]),
+        outcome=outcome.reshape(shape),
+        time_to_converge=t_conv.reshape(shape),
+        lyapunov_initial=variant.lyapunov(states).reshape(shape),
+        lyapunov_final=v_final.reshape(shape),
+        initial_states=states.reshape(*shape, -1),
+        ratio=ratio,
+        t_end=config.simulation.t_end,
+        messages=messages,
+    )
+
+
+def _execute(items: list, ratio: float, jobs: int):
+    """Yield the rows of :func:`_run_block` for every block of ``items``."""
+    if jobs <= 1 or len(items) < 64:
+        yield _run_block(items, ratio)
+        return
+    from ..sweep.executors import LocalExecutor
+
+    with LocalExecutor(jobs) as executor:
+        executor.plan(len(items))
+        for block, rows, exc in executor.imap_unordered(_run_block, _blocks(items, jobs), ratio):
+            if exc is not None:  # a worker that died: its points are failed runs, with the reason
+                rows = [(i, 2, np.nan, np.nan, f"worker error: {exc}") for i, _ in block]
+            yield rows

@@ -1,0 +1,351 @@
+"""The Lyapunov certificate of an equilibrium: v there, its Hessian, the Hessian of dv/dt,
+dv/dt <= 0 on sampled states, and a sublevel set of v as an inner estimate of the region
+of attraction.
+
+v is the variant's Lyapunov function as the runs record it (eqs 25, 30, 31, 41, 44; zero
+at the equilibrium by the constant h), and the analytic dv/dt its ``lyapunov_rate``
+(eqs 29, 37, 43, 46). Local part, at the equilibrium y_e:
+
+- v(y_e) = 0 and the Hessian H_v of v positive definite (v has a strict minimum);
+- the Hessian H_r of dv/dt: with dv/dt <= 0 and zero at y_e it is negative
+  semi-definite. Its generalised eigenvalues mu (H_r w = mu H_v w) [1/s] say how: all
+  mu < 0, negative definite (v is a strict Lyapunov function near y_e); some mu = 0,
+  semi-definite, and asymptotic stability rests on LaSalle's invariance principle. Its
+  local form is checked: no mode of the linearisation A may stay where dv/dt vanishes
+  to second order (the Popov-Belevitch-Hautus test, rank [A - sI; H_r] = n for every
+  eigenvalue s of A).
+
+Sampled part: states y = y_e + S z around y_e, with S = H_v^(-1/2) (so that v ~ |z|^2/2)
+and |z|^2/2 log-uniform over six decades up to 1.5 times the level of the domain
+boundary (below). At each, dv/dt is computed twice: the analytic rate, and the rate of v
+along the right-hand side f from v alone, d/ds v(y + s f) at s = 0 (central differences,
+:func:`rbstab.analysis.derivatives.directional_derivative`), so a sign error in either
+formula shows. The sublevel estimate is the largest c such that no sampled state with
+v < c has a numerical dv/dt > 0 or lies outside the model's domain, and c is at most the
+least v on the domain boundary |theta_2| = pi/2 - gimbal_margin (eq 5; minimised there
+over the other coordinates, at rest: the kinetic terms of v are >= 0). By LaSalle,
+{v <= c} is then an inner estimate of the region of attraction, valid as far as the
+sampling is dense: it is labelled sampling-based, with its sample size.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..kinematics import GIMBAL_LOCK_ANGLE
+from .derivatives import directional_derivative, hessian, jacobian
+
+__all__ = ["Certificate", "certify", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES", "RATE_DEFINITENESS"]
+
+#: Eigenvalues of a scaled Hessian within this of zero (relative to the largest) are zero.
+DEFINITE_RTOL = 1e-8
+#: A sampled dv/dt is positive when above this times the state's power scale (and its error).
+RATE_RTOL = 1e-8
+#: Sampled states of the dv/dt check.
+DEFAULT_SAMPLES = 10_000
+#: How the Hessian of dv/dt may be, in the order of preference.
+RATE_DEFINITENESS = ("negative definite", "negative semi-definite", "indefinite")
+#: Decades of v spanned by the samples, below the top level.
+_DECADES = 6.0
+#: The samples reach this times the level of the domain boundary.
+_REACH = 1.5
+#: Bound names of the sublevel estimate.
+BOUNDS = ("domain boundary", "dv/dt > 0 at a sampled state", "sampled state outside the domain",
+          "non-finite value at a sampled state", "v not positive definite")
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """The Lyapunov certificate of one equilibrium (module docstring).
+
+    Attributes
+    ----------
+    lyapunov_equilibrium : float
+        v(y_e) [J] (zero up to round-off).
+    lyapunov_hessian : ndarray, shape (n, n)
+        H_v [J per unit of each state squared].
+    hessian_min_eigenvalue : float
+        Smallest eigenvalue of H_v as it stands (mixed units).
+    positive_definite : bool
+        H_v positive definite (decided on the Jacobi-scaled matrix, :data:`DEFINITE_RTOL`).
+    rate_hessian : ndarray, shape (n, n)
+        H_r, the Hessian of the analytic dv/dt [W per unit squared].
+    rate_eigenvalues : ndarray, shape (n,)
+        Generalised eigenvalues mu of (H_r, H_v), ascending [1/s] (NaN if H_v is not
+        positive definite).
+    rate_definiteness : str
+        One of :data:`RATE_DEFINITENESS`.
+    lasalle_observable : bool
+        The PBH test: no mode of the linearisation stays where dv/dt vanishes.
+    n_samples : int
+        Sampled states.
+    sample_lyapunov, sample_rate, sample_rate_analytic : ndarray, shape (n_samples,)
+        v [J], numerical and analytic dv/dt [W] at each sample (NaN outside the domain).
+    sample_outside : ndarray of bool, shape (n_samples,)
+        Samples outside the domain (|theta_2| >= pi/2 - gimbal_margin).
+    worst_state : ndarray, shape (n,)
+        The sample inside the domain with the largest numerical dv/dt relative to its
+        power scale.
+    worst_rate : float
+        Its numerical dv/dt [W].
+    worst_lyapunov : float
+        Its v [J].
+    rate_mismatch : float
+        Largest |numerical - analytic dv/dt| over the samples, relative to each state's
+        power scale (|analytic| + rho v, rho the spectral radius of the linearisation).
+    boundary_level : float
+        The least v on the domain boundary [J].
+    sublevel : float
+        c of the inner estimate {v <= c} [J] (0 when there is none).
+    sublevel_bound : str
+        What limits c (one of :data:`BOUNDS`).
+    samples_inside : int
+        Samples with v <= c.
+    """
+
+    lyapunov_equilibrium: float
+    lyapunov_hessian: np.ndarray
+    hessian_min_eigenvalue: float
+    positive_definite: bool
+    rate_hessian: np.ndarray
+    rate_eigenvalues: np.ndarray
+    rate_definiteness: str
+    lasalle_observable: bool
+    n_samples: int
+    sample_lyapunov: np.ndarray
+    sample_rate: np.ndarray
+    sample_rate_analytic: np.ndarray
+    sample_outside: np.ndarray
+    worst_state: np.ndarray
+    worst_rate: float
+    worst_lyapunov: float
+    rate_mismatch: float
+    boundary_level: float
+    sublevel: float
+    sublevel_bound: str
+
+    @property
+    def samples_inside(self) -> int:
+        return int(np.sum(self.sample_lyapunov <= self.sublevel))
+
+    @property
+    def argument(self) -> str:
+        """How asymptotic stability follows: ``"strict Lyapunov function"``, ``"LaSalle"``
+        or ``"none"`` (the certificate does not hold)."""
+        if not self.holds:
+            return "none"
+        return "strict Lyapunov function" if self.rate_definiteness == RATE_DEFINITENESS[0] else "LaSalle"
+
+    @property
+    def holds(self) -> bool:
+        """v positive definite, dv/dt negative (semi-)definite with the PBH test passed,
+        and a non-empty sublevel estimate."""
+        rate_ok = self.rate_definiteness == RATE_DEFINITENESS[0] or (
+            self.rate_definiteness == RATE_DEFINITENESS[1] and self.lasalle_observable)
+        return bool(self.positive_definite and rate_ok and self.sublevel > 0)
+
+
+def _scaled_eigenvalues(matrix: np.ndarray) -> np.ndarray:
+    """Eigenvalues of D^-1/2 M D^-1/2, D = |diag M| (zeros kept), relative to the largest."""
+    d = np.sqrt(np.abs(np.diag(matrix)))
+    d = np.where(d > 0, d, 1.0)
+    w = np.linalg.eigvalsh(matrix / np.outer(d, d))
+    return w / max(np.abs(w).max(), np.finfo(float).tiny)
+
+
+def _rate_definiteness(mu: np.ndarray) -> str:
+    scale = max(float(np.abs(mu).max()), np.finfo(float).tiny)
+    if np.any(mu > DEFINITE_RTOL * scale):
+        return RATE_DEFINITENESS[2]
+    if np.all(mu < -DEFINITE_RTOL * scale):
+        return RATE_DEFINITENESS[0]
+    return RATE_DEFINITENESS[1]
+
+
+def _pbh_observable(jac: np.ndarray, rate_hessian: np.ndarray, root: np.ndarray, eigenvalues: np.ndarray) -> bool:
+    """rank [A_z - sI; Q_z] = n for every eigenvalue s, in the coordinates z = S^-1 (y - y_e)
+    where v ~ |z|^2 / 2 (so both blocks are in 1/s)."""
+    a_z = np.linalg.solve(root, jac @ root)
+    q_z = -0.5 * root.T @ rate_hessian @ root
+    scale = max(float(np.abs(eigenvalues).max()), float(np.abs(q_z).max()), np.finfo(float).tiny)
+    n = len(jac)
+    for s in eigenvalues:
+        stacked = np.vstack([a_z - s * np.eye(n), q_z])
+        if np.linalg.svd(stacked, compute_uv=False)[-1] <= 1e-7 * scale:
+            return False
+    return True
+
+
+def _configuration_indices(layout) -> np.ndarray:
+    """Indices of the configuration coordinates (theta, position, controller_state)."""
+    blocks = [layout.slice(b) for b in layout.blocks if b in ("theta", "position", "controller_state")]
+    return np.concatenate([np.arange(s.start, s.stop) for s in blocks])
+
+
+#: Steps of the Richardson tables of a Newton step (its direction need not be exact: the
+#: value it reaches is evaluated as it is).
+_NEWTON_LEVELS = 10
+
+
+def _newton_minimum(f, q: np.ndarray, iterations: int = 30) -> float:
+    """Least value of a smooth scalar ``f`` (vectorised, (k, n) -> (k,)) near ``q``: Newton
+    steps on the extrapolated gradient and Hessian, halved until ``f`` decreases."""
+    value = float(f(q[None])[0])
+    for _ in range(iterations):
+        gradient = jacobian(lambda x: f(x)[:, None], q, 0.1, _NEWTON_LEVELS)[0][0]
+        curvature = hessian(f, q, 0.1, _NEWTON_LEVELS)[0]
+        try:
+            step = -np.linalg.solve(curvature, gradient)
+            if gradient @ step >= 0:  # not a descent direction: the Hessian is not positive definite
+                raise np.linalg.LinAlgError
+        except np.linalg.LinAlgError:
+            step = -gradient / max(float(np.abs(np.diag(curvature)).max()), 1.0)
+        for _ in range(40):
+            trial = float(f((q + step)[None])[0])
+            if trial < value:
+                break
+            step = step / 2
+        else:
+            return value
+        converged = value - trial <= 1e-12 * max(abs(value), 1.0)
+        q, value = q + step, trial
+        if converged:
+            break
+    return value
+
+
+def boundary_level(variant, y_e: np.ndarray, hess: np.ndarray, limit: float) -> float:
+    """The least v [J] on the domain boundary theta_2 = +-limit, at rest, minimised over the
+    other configuration coordinates (Newton steps from the quadratic model's minimiser)."""
+    free = np.array([i for i in _configuration_indices(variant.layout) if i != 1])
+    levels = []
+    for side in (limit, -limit):
+
+        def v_on_boundary(q, side=side):
+            y = np.tile(y_e, (len(q), 1))
+            y[:, 1] = side
+            y[:, free] = q
+            return variant.lyapunov(y)
+
+        if not len(free):
+            levels.append(float(v_on_boundary(np.zeros((1, 0)))[0]))
+            continue
+        start = y_e[free] - np.linalg.solve(hess[np.ix_(free, free)], hess[free, 1] * (side - y_e[1]))
+        with np.errstate(all="ignore"):
+            levels.append(_newton_minimum(v_on_boundary, start))
+    return min(levels)
+
+
+def _samples(y_e: np.ndarray, root: np.ndarray, top: float, n: int, rng) -> np.ndarray:
+    """n states y_e + S z, |z|^2/2 log-uniform over :data:`_DECADES` decades below ``top``."""
+    u = rng.standard_normal((n, len(y_e)))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    level = top * 10.0 ** (-_DECADES * rng.random(n))
+    z = np.sqrt(2.0 * level)[:, None] * u
+    return y_e + z @ root.T
+
+
+def certify(
+    variant,
+    linearisation,
+    *,
+    gimbal_margin: float,
+    n_samples: int = DEFAULT_SAMPLES,
+    seed: int = 0,
+) -> Certificate:
+    """The certificate of ``variant``'s equilibrium (module docstring).
+
+    Parameters
+    ----------
+    variant : rbstab.variants.Variant
+        Smooth (``variant.smooth``).
+    linearisation : rbstab.analysis.linearise.Linearisation
+        Of ``variant`` (its equilibrium, Jacobian and eigenvalues).
+    gimbal_margin : float
+        [rad]: the domain is |theta_2| < pi/2 - gimbal_margin (eq 5).
+    n_samples : int
+        States sampled for the dv/dt check (>= 1).
+    seed : int
+        Of the sampling (numpy's default generator).
+    """
+    y_e = linearisation.equilibrium
+    h_v, _ = hessian(variant.lyapunov, y_e)
+    h_r, _ = hessian(lambda y: variant.evaluate(y)["lyapunov_rate"], y_e)
+    positive = bool(np.all(np.diag(h_v) > 0) and _scaled_eigenvalues(h_v)[0] > DEFINITE_RTOL)
+    v_e = float(variant.lyapunov(y_e))
+    limit = GIMBAL_LOCK_ANGLE - gimbal_margin
+    nan = np.full(0, np.nan)
+    common = dict(lyapunov_equilibrium=v_e, lyapunov_hessian=h_v, hessian_min_eigenvalue=float(np.linalg.eigvalsh(h_v)[0]),
+                  positive_definite=positive, rate_hessian=h_r)
+    if not positive:
+        return Certificate(**common, rate_eigenvalues=np.full(len(y_e), np.nan),
+                           rate_definiteness=_rate_definiteness(np.linalg.eigvalsh(h_r)), lasalle_observable=False,
+                           n_samples=0, sample_lyapunov=nan, sample_rate=nan, sample_rate_analytic=nan,
+                           sample_outside=np.zeros(0, bool), worst_state=np.full(len(y_e), np.nan),
+                           worst_rate=np.nan, worst_lyapunov=np.nan, rate_mismatch=np.nan,
+                           boundary_level=np.nan, sublevel=0.0, sublevel_bound=BOUNDS[4])
+    w, q = np.linalg.eigh(h_v)
+    root = q @ np.diag(1.0 / np.sqrt(w)) @ q.T  # S = H_v^(-1/2)
+    mu = np.linalg.eigvalsh(root @ h_r @ root)  # H_r w = mu H_v w
+    observable = _pbh_observable(linearisation.jacobian, h_r, root, linearisation.eigenvalues)
+    level = boundary_level(variant, y_e, h_v, limit)
+    sampled = _sampled_rates(variant, linearisation, _samples(y_e, root, _REACH * level, n_samples,
+                                                               np.random.default_rng(seed)), limit)
+    sublevel, bound = _sublevel(level, sampled)
+    return Certificate(**common, rate_eigenvalues=mu, rate_definiteness=_rate_definiteness(mu),
+                       lasalle_observable=observable, n_samples=n_samples, boundary_level=level,
+                       sublevel=sublevel, sublevel_bound=bound, **{k: v for k, v in sampled.items()
+                                                                  if not k.startswith("_")})
+
+
+def _sampled_rates(variant, linearisation, y: np.ndarray, limit: float) -> dict:
+    """v, numerical and analytic dv/dt at the states ``y`` (NaN outside the domain), the
+    worst state and the rate mismatch (fields of :class:`Certificate`)."""
+    outside = np.abs(y[:, 1]) >= limit
+    inside = ~outside
+    with np.errstate(all="ignore"):
+        out = variant.evaluate(y)
+        v = np.array(out["lyapunov"])
+        analytic = np.where(inside, out["lyapunov_rate"], np.nan)
+        rate = np.full(len(y), np.nan)
+        error = np.full(len(y), np.nan)
+        rho = max(float(np.abs(linearisation.eigenvalues).max()), 1e-3)
+        if inside.any():
+            f = variant.rhs(0.0, y[inside])
+            rate[inside], error[inside] = directional_derivative(variant.lyapunov, y[inside], f, 1.0 / rho)
+        power = np.abs(analytic) + rho * np.abs(v)
+        relative = rate / np.where(power > 0, power, 1.0)
+    positive = inside & (rate > np.maximum(10.0 * error, RATE_RTOL * power))
+    invalid = inside & ~(np.isfinite(rate) & np.isfinite(v))
+    finite = inside & np.isfinite(relative)
+    worst = int(np.argmax(np.where(finite, relative, -np.inf))) if finite.any() else 0
+    return {
+        "sample_lyapunov": v,
+        "sample_rate": rate,
+        "sample_rate_analytic": analytic,
+        "sample_outside": outside,
+        "worst_state": y[worst] if finite.any() else np.full(y.shape[1], np.nan),
+        "worst_rate": float(rate[worst]) if finite.any() else np.nan,
+        "worst_lyapunov": float(v[worst]) if finite.any() else np.nan,
+        "rate_mismatch": float(np.nanmax(np.abs(rate - analytic)[finite] / np.where(power > 0, power, 1.0)[finite]))
+        if finite.any() else np.nan,
+        "_positive": positive,
+        "_invalid": invalid,
+    }
+
+
+def _sublevel(level: float, sampled: dict) -> tuple[float, str]:
+    """(c, what bounds it): the least v of the states that bound the estimate."""
+    v = sampled["sample_lyapunov"]
+    candidates = [(level, BOUNDS[0])]
+    for mask, name in ((sampled["_positive"], BOUNDS[1]), (sampled["sample_outside"], BOUNDS[2]),
+                       (sampled["_invalid"], BOUNDS[3])):
+        values = v[mask & np.isfinite(v)]
+        if values.size:
+            candidates.append((float(values.min()), name))
+        elif np.any(mask & ~np.isfinite(v)):
+            candidates.append((0.0, name))
+    c, bound = min(candidates, key=lambda item: item[0])
+    return max(c, 0.0), bound

@@ -1,0 +1,455 @@
+"""Analysis files: the results of :func:`rbstab.analyze` and of :func:`rbstab.analysis.robustness`
+as netCDF-4 (HDF5) files, their reader, and the ``--json`` record.
+
+The conventions of the run results (:mod:`rbstab.io.hdf5`): every variable has ``units``
+(CF/UDUNITS spelling) and ``long_name`` (and ``description`` where a formula helps),
+3-vectors are split by state block over the ``axis`` dimension (x, y, z), and the global
+attributes say what the file is and where it came from (``rbstab_format``, ``name``,
+``config``, ``config_hash``, ``rbstab_version``, ``git_commit``, ``command_line``,
+``created``). Open with ``xarray.open_dataset(path, engine="h5netcdf")`` or
+:func:`read_analysis`.
+
+Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
+
+    dims   state, state_wrt (the state variables, for matrices), mode (eigenvalues, real
+           part descending), rate_mode, sample, axis, basin_x, basin_y
+    equilibrium_<block>(axis), rest_residual_<block>(axis)
+    jacobian(state, state_wrt), jacobian_error, eigenvalue_real(mode), eigenvalue_imag,
+    natural_frequency, damping_ratio, time_constant; eigenvalue_tolerance, rest_tolerance,
+    slowest_time_constant, time_to_converge, linear_settling_time (scalars)
+    certificate: lyapunov_hessian, rate_hessian (state, state_wrt), rate_eigenvalue
+    (rate_mode), sample_lyapunov, sample_rate, sample_rate_analytic, sample_outside (sample),
+    worst_state_<block>(axis), sublevel, boundary_level, ... (scalars)
+    basin: basin_outcome (flag_values 0 1 2: converged, not converged, failed),
+    basin_time_to_converge, basin_lyapunov_initial, basin_lyapunov_final (basin_x, basin_y)
+    global attributes: verdict, notes, certificate_argument, sublevel_bound, ...
+
+Layout of ``<sweep>.robustness.analysis.nc`` (``kind = "robustness"``): per ``group`` (base
+configuration) the stable fraction and its Wilson interval; per (group, parameter) the
+AUC, the best threshold, its side and balanced accuracy, the stable and unstable ranges;
+per ``run`` its group, whether it was stable and its parameter values.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .. import __version__
+
+__all__ = [
+    "FORMAT",
+    "SUFFIX",
+    "analysis_content",
+    "analysis_dataset",
+    "robustness_content",
+    "robustness_dataset",
+    "json_record",
+    "write_analysis",
+    "read_analysis",
+    "is_analysis_file",
+    "analysis_path",
+]
+
+#: Value of the ``rbstab_format`` attribute of an analysis file.
+FORMAT = "rbstab-analysis-1"
+#: File name suffix of analysis files (``<name>.analysis.nc``); not ``*.h5``, so that a
+#: folder of run files and analyses reads as both.
+SUFFIX = ".analysis.nc"
+
+
+def _rate_units(units: str) -> str:
+    """Units of d/dt of a quantity in ``units``: ``rad`` -> ``rad s-1``, ``m s-1`` -> ``m s-2``."""
+    return units[: -len("s-1")] + "s-2" if units.endswith("s-1") else f"{units} s-1"
+
+
+def _var(dims, data, units: str, long_name: str, description: str = "") -> tuple:
+    """(dims, data, attrs) of one variable of a file."""
+    attrs = {"units": units, "long_name": long_name}
+    if description:
+        attrs["description"] = description
+    return tuple(dims), np.asarray(data), attrs
+
+
+def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = False) -> dict:
+    """``<prefix>_<block>(axis)`` variables of a state vector ``y`` in ``layout``."""
+    from ..layout import BLOCK_UNITS
+
+    out = {}
+    for block, values in layout.split(np.asarray(y, dtype=float)).items():
+        units = _rate_units(BLOCK_UNITS[block]) if rate else BLOCK_UNITS[block]
+        out[f"{prefix}_{block}"] = _var(("axis",), values, units, f"{long_name}: {block}")
+    return out
+
+
+def _provenance(config, command_line: str | None) -> dict[str, Any]:
+    from ..io.hdf5 import _git_commit, canonical_config, config_hash
+
+    return {
+        "rbstab_format": FORMAT,
+        "config": config.to_yaml(),
+        "config_hash": config_hash(canonical_config(config.resolved)),
+        "rbstab_version": __version__,
+        "git_commit": _git_commit(),
+        "command_line": command_line if command_line is not None else " ".join(sys.argv),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def _linearisation_variables(analysis) -> dict:
+    lin = analysis.linearisation
+    layout = analysis.layout
+    s = lin.eigenvalues
+    omega_n, zeta, tau = lin.natural_frequency, lin.damping_ratio, lin.time_constant
+    mixed = "mixed: (units of state) s-1 / (units of state_wrt), see state_units"
+    return {
+        **_blocks("equilibrium", layout, lin.equilibrium, "equilibrium state y_e"),
+        **_blocks("rest_residual", layout, lin.rest_residual, "dy/dt at the equilibrium (zero at a rest point)",
+                  rate=True),
+        "rest_tolerance": _var((), lin.rest_tolerance, "1", "bound on |dy/dt| of the rest check (SI rates)"),
+        "jacobian": _var(("state", "state_wrt"), lin.jacobian, mixed, "Jacobian A = d(dy/dt)/dy at the equilibrium",
+                         "central differences of the compiled right-hand side, extrapolated to step zero"),
+        "jacobian_error": _var(("state", "state_wrt"), lin.jacobian_error, mixed,
+                               "error estimate of each entry of the Jacobian (Richardson table)"),
+        "eigenvalue_real": _var(("mode",), s.real, "s-1", "real part of the eigenvalue s of A"),
+        "eigenvalue_imag": _var(("mode",), s.imag, "rad s-1", "imaginary part of the eigenvalue s of A"),
+        "natural_frequency": _var(("mode",), omega_n, "rad s-1", "natural frequency |s|"),
+        "damping_ratio": _var(("mode",), zeta, "1", "damping ratio -Re(s)/|s|"),
+        "time_constant": _var(("mode",), tau, "s", "time constant -1/Re(s)",
+                              "negative for a growing mode, infinite on the imaginary axis"),
+        "eigenvalue_tolerance": _var((), lin.tolerance, "s-1", "|Re(s)| at most this is marginal"),
+        "slowest_time_constant": _var((), lin.slowest_time_constant, "s",
+                                      "time constant of the eigenvalue with the largest real part"),
+        "linear_settling_time": _var((), analysis.linear_settling_time, "s",
+                                     "time the slowest mode alone takes to bring v down by the ratio",
+                                     "tau ln(1/ratio) / 2, as v ~ exp(-2 t / tau)"),
+    }
+
+
+def _settling_variables(analysis) -> dict:
+    s = analysis.settling
+    if s is None:
+        return {}
+    return {
+        "time_to_converge": _var((), s["time_to_converge"], "s",
+                                 "time to converge of the simulation from the configured initial state",
+                                 "first sample time from which |v| <= ratio |v(0)| (NaN: not converged)"),
+        "simulation_lyapunov_initial": _var((), s["lyapunov_initial"], "J", "v(0) of the simulation"),
+        "simulation_lyapunov_final": _var((), s["lyapunov_final"], "J", "v(t_end) of the simulation"),
+        "convergence_ratio": _var((), s["ratio"], "1", "converged: |v| <= ratio |v(0)| from then on"),
+    }
+
+
+def _certificate_variables(analysis) -> dict:
+    c = analysis.certificate
+    if c is None:
+        return {}
+    layout = analysis.layout
+    per_unit = "mixed: per unit of state and of state_wrt (see state_units)"
+    return {
+        "lyapunov_equilibrium": _var((), c.lyapunov_equilibrium, "J", "v at the equilibrium"),
+        "lyapunov_hessian": _var(("state", "state_wrt"), c.lyapunov_hessian, f"J, {per_unit}",
+                                 "Hessian of the Lyapunov function v at the equilibrium"),
+        "hessian_min_eigenvalue": _var((), c.hessian_min_eigenvalue, "1",
+                                       "smallest eigenvalue of the Hessian of v (mixed units)"),
+        "rate_hessian": _var(("state", "state_wrt"), c.rate_hessian, f"W, {per_unit}",
+                             "Hessian of the analytic dv/dt at the equilibrium"),
+        "rate_eigenvalue": _var(("rate_mode",), c.rate_eigenvalues, "s-1",
+                                "generalised eigenvalue mu of (Hessian of dv/dt, Hessian of v)",
+                                "all mu < 0: negative definite; some mu = 0: semi-definite (LaSalle)"),
+        "sample_lyapunov": _var(("sample",), c.sample_lyapunov, "J", "v at a sampled state"),
+        "sample_rate": _var(("sample",), c.sample_rate, "W", "dv/dt at a sampled state, d/ds v(y + s f) at s = 0",
+                            "from v alone along the right-hand side f; NaN outside the domain"),
+        "sample_rate_analytic": _var(("sample",), c.sample_rate_analytic, "W", "analytic dv/dt at a sampled state"),
+        "sample_outside": _var(("sample",), c.sample_outside.astype(np.int8), "1",
+                               "sampled state outside the domain |theta_2| < pi/2 - gimbal_margin (1)"),
+        **_blocks("worst_state", layout, c.worst_state, "sampled state with the largest relative dv/dt"),
+        "worst_rate": _var((), c.worst_rate, "W", "dv/dt at the worst sampled state"),
+        "worst_lyapunov": _var((), c.worst_lyapunov, "J", "v at the worst sampled state"),
+        "rate_mismatch": _var((), c.rate_mismatch, "1",
+                              "largest |numerical - analytic dv/dt| relative to the power scale"),
+        "boundary_level": _var((), c.boundary_level, "J", "least v on the domain boundary |theta_2| = pi/2 - margin"),
+        "sublevel": _var((), c.sublevel, "J", "c of the sampling-based inner estimate {v <= c} of the region "
+                         "of attraction"),
+    }
+
+
+def _basin_variables(analysis) -> tuple[dict, dict]:
+    b = analysis.basin
+    if b is None:
+        return {}, {}
+    dims = ("basin_x", "basin_y")
+    coords = {}
+    for dim, axis in zip(dims, b.axes):
+        coords[dim] = _var((dim,), axis.values, axis.units, f"initial {axis.block}_{axis.index + 1}")
+        coords[dim][2]["config_key"] = axis.key
+    outcome = _var(dims, b.outcome.astype(np.int8), "1", "outcome of the run from this initial state")
+    outcome[2].update(flag_values=np.array([0, 1, 2], dtype=np.int8), flag_meanings="converged not_converged failed")
+    return {
+        "basin_outcome": outcome,
+        "basin_time_to_converge": _var(dims, b.time_to_converge, "s", "time to converge (|v| <= ratio |v(0)| "
+                                       "from then on)"),
+        "basin_lyapunov_initial": _var(dims, b.lyapunov_initial, "J", "v at the initial state"),
+        "basin_lyapunov_final": _var(dims, b.lyapunov_final, "J", "v at t_end"),
+    }, coords
+
+
+def _text_attributes(analysis) -> dict[str, Any]:
+    lin, c, s, b = analysis.linearisation, analysis.certificate, analysis.settling, analysis.basin
+    attrs: dict[str, Any] = {
+        "kind": "configuration",
+        "name": analysis.name,
+        "variant": analysis.variant,
+        "verdict": lin.verdict,
+        "rest_point": int(lin.is_rest_point),
+        "notes": "\n".join(analysis.notes),
+    }
+    if analysis.analysed is not analysis.config:
+        attrs["analysed_boundary_layer"] = float(analysis.analysed.gains.boundary_layer)
+    if c is not None:
+        attrs.update(certificate_holds=int(c.holds), certificate_argument=c.argument,
+                     rate_definiteness=c.rate_definiteness, positive_definite=int(c.positive_definite),
+                     lasalle_observable=int(c.lasalle_observable), sublevel_bound=c.sublevel_bound,
+                     n_samples=int(c.n_samples), sublevel_estimate="sampling-based")
+    if s is not None:
+        attrs.update(simulation_status=s["status"], simulation_message=s["message"], t_end=s["t_end"])
+    if b is not None:
+        attrs.update(basin_ratio=b.ratio, basin_t_end=b.t_end,
+                     basin_failures="\n".join(f"{n}: {m}" for m, n in b.messages.items()))
+    return attrs
+
+
+def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, dict, dict]:
+    """(coordinates, variables, global attributes) of an :class:`rbstab.analysis.Analysis`'s
+    file (module docstring); each variable a (dims, data, attrs) triple."""
+    from ..layout import BLOCK_UNITS
+
+    layout = analysis.layout
+    names = layout.state_names()
+    units = [BLOCK_UNITS[b] for b in layout.blocks for _ in range(3)]
+    basin, basin_coords = _basin_variables(analysis)
+    data = {**_linearisation_variables(analysis), **_settling_variables(analysis),
+            **_certificate_variables(analysis), **basin}
+    coords = {
+        "state": _var(("state",), np.array(names, dtype=object), "1", "state variable"),
+        "state_wrt": _var(("state_wrt",), np.array(names, dtype=object), "1", "state variable (derivative with "
+                          "respect to)"),
+        "state_units": _var(("state",), np.array(units, dtype=object), "1", "units of each state variable"),
+        "mode": _var(("mode",), np.arange(len(names)), "1", "eigenvalue index, real part descending"),
+        "axis": _var(("axis",), np.array(["x", "y", "z"], dtype=object), "1", "vector component"),
+        **basin_coords,
+    }
+    attrs = {**_provenance(analysis.analysed, command_line), **_text_attributes(analysis)}
+    if analysis.analysed is not analysis.config:
+        attrs["config_as_given"] = analysis.config.to_yaml()
+    return coords, data, attrs
+
+
+def analysis_dataset(analysis, command_line: str | None = None):
+    """The :class:`xarray.Dataset` of an :class:`rbstab.analysis.Analysis` (what its file holds)."""
+    return _to_xarray(*analysis_content(analysis, command_line))
+
+
+def robustness_content(result, command_line: str | None = None) -> tuple[dict, dict, dict]:
+    """(coordinates, variables, global attributes) of a
+    :class:`rbstab.analysis.robustness.Robustness`'s file."""
+    groups = result.groups
+    parameters = list(dict.fromkeys(p for g in groups for p in g.parameters)) or list(result.runs["values"])
+    shape = (len(groups), len(parameters))
+    table = {k: np.full(shape, np.nan) for k in ("auc", "threshold", "balanced_accuracy", "stable_min",
+                                                  "stable_max", "unstable_min", "unstable_max")}
+    side = np.full(shape, "", dtype=object)
+    for i, g in enumerate(groups):
+        for s in g.separations:
+            j = parameters.index(s.parameter)
+            values = (s.auc, s.threshold, s.balanced_accuracy, *s.stable_range, *s.unstable_range)
+            for key, value in zip(table, values):
+                table[key][i, j] = value
+            side[i, j] = s.stable_side
+    gp = ("group", "parameter")
+    data = {
+        "n_runs": _var(("group",), [g.n_runs for g in groups], "1", "runs with a result"),
+        "n_stable": _var(("group",), [g.n_stable for g in groups], "1", "runs that converged"),
+        "n_excluded": _var(("group",), [g.n_excluded for g in groups], "1", "runs without a result"),
+        "n_disagree": _var(("group",), [g.n_disagree for g in groups], "1",
+                           "runs whose stability differs from the sweep's converged (v(t_end) < 0)"),
+        "stable_fraction": _var(("group",), [g.fraction for g in groups], "1", "stable fraction"),
+        "stable_fraction_low": _var(("group",), [g.interval[0] for g in groups], "1", "Wilson interval, lower"),
+        "stable_fraction_high": _var(("group",), [g.interval[1] for g in groups], "1", "Wilson interval, upper"),
+        "auc": _var(gp, table["auc"], "1", "P(value of a stable run > value of an unstable run)"),
+        "threshold": _var(gp, table["threshold"], "1", "best single threshold (units of the parameter)"),
+        "stable_side": _var(gp, side, "1", "side of the threshold where the stable runs lie"),
+        "balanced_accuracy": _var(gp, table["balanced_accuracy"], "1", "balanced accuracy of the threshold"),
+        **{k: _var(gp, table[k], "1", k.replace("_", " ") + " value (units of the parameter)")
+           for k in ("stable_min", "stable_max", "unstable_min", "unstable_max")},
+        "run_group": _var(("run",), np.asarray(result.runs["base"], dtype=object), "1", "group of the run"),
+        "run_stable": _var(("run",), np.asarray(result.runs["stable"], dtype=np.int8), "1", "run converged (1)"),
+        "run_value": _var(("run", "parameter"), np.stack([result.runs["values"][p] for p in parameters], axis=1)
+                          if parameters else np.zeros((len(result.runs["base"]), 0)), "1",
+                          "parameter value of the run (units of the parameter)"),
+    }
+    coords = {"group": _var(("group",), np.array([g.base for g in groups], dtype=object), "1", "base configuration"),
+              "parameter": _var(("parameter",), np.array(parameters, dtype=object), "1", "swept parameter")}
+    attrs = dict(
+        rbstab_format=FORMAT, kind="robustness", name=f"{result.sweep}.robustness", sweep=result.sweep,
+        folder=result.folder, confidence=result.confidence, rbstab_version=__version__,
+        lyapunov_ratio=result.ratio,
+        stability="status success and |v(t_end)| <= lyapunov_ratio |v(0)| in the sweep's simulation",
+        command_line=command_line if command_line is not None else " ".join(sys.argv),
+        created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    )
+    return coords, data, attrs
+
+
+def robustness_dataset(result, command_line: str | None = None):
+    """The :class:`xarray.Dataset` of a :class:`rbstab.analysis.robustness.Robustness`."""
+    return _to_xarray(*robustness_content(result, command_line))
+
+
+def _to_xarray(coords: dict, variables: dict, attrs: dict):
+    import xarray as xr
+
+    return xr.Dataset({k: xr.Variable(*v) for k, v in variables.items()},
+                      coords={k: xr.Variable(*v) for k, v in coords.items()}, attrs=attrs)
+
+
+def _write_netcdf(path: Path, coords: dict, variables: dict, attrs: dict) -> None:
+    """A netCDF-4 file through h5netcdf (without xarray, whose import costs ~0.4 s)."""
+    import h5netcdf
+    import h5py
+
+    text = h5py.string_dtype()
+    with h5netcdf.File(path, "w") as f:
+        for name, (dims, data, _) in {**coords, **variables}.items():
+            for dim, size in zip(dims, data.shape):
+                if dim not in f.dimensions:
+                    f.dimensions[dim] = size
+        # coordinates first: a variable created later attaches to them once
+        for name, (dims, data, var_attrs) in {**coords, **variables}.items():
+            if data.dtype == object or data.dtype.kind == "U":
+                var = f.create_variable(name, dims, data=data.astype(object), dtype=text)
+            elif data.dtype == bool:
+                var = f.create_variable(name, dims, data=data.astype(np.int8))
+            else:
+                var = f.create_variable(name, dims, data=data)
+            var.attrs.update(var_attrs)
+        f.attrs.update(attrs)
+
+
+def analysis_path(folder: str | os.PathLike, name: str) -> Path:
+    """``<folder>/<name>.analysis.nc``."""
+    return Path(folder) / f"{name}{SUFFIX}"
+
+
+def write_analysis(result, path: str | os.PathLike, *, command_line: str | None = None) -> Path:
+    """Write an Analysis or a Robustness to ``path`` atomically (temporary file + rename).
+
+    Raises
+    ------
+    OSError
+        If the folder cannot be created or written; ``path`` is then untouched.
+    """
+    from ..io.atomic import atomic_path
+    from .robustness import Robustness
+
+    content = robustness_content(result, command_line) if isinstance(result, Robustness) else \
+        analysis_content(result, command_line)
+    with atomic_path(path) as tmp:
+        _write_netcdf(tmp, *content)
+    return Path(path)
+
+
+def is_analysis_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a file written by :func:`write_analysis`."""
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        return False
+    try:
+        with h5py.File(path, "r") as f:
+            value = f.attrs.get("rbstab_format")
+    except OSError:
+        return False
+    value = value.decode() if isinstance(value, bytes) else value
+    return value == FORMAT
+
+
+def read_analysis(path: str | os.PathLike):
+    """An analysis file as an :class:`xarray.Dataset` (loaded into memory).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    ValueError
+        If it is not an analysis file.
+    """
+    import xarray as xr
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no such analysis file: {path}")
+    if not is_analysis_file(path):
+        raise ValueError(f"{path}: not an rbstab analysis file (no rbstab_format = {FORMAT!r} attribute)")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        return ds.load()
+
+
+def _finite(value) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _floats(values) -> list:
+    return [_finite(v) for v in np.asarray(values, dtype=float).ravel()]
+
+
+def json_record(analysis) -> dict[str, Any]:
+    """The ``--json`` record of an analysis: plain JSON (non-finite numbers are null)."""
+    lin = analysis.linearisation
+    record: dict[str, Any] = {
+        "name": analysis.name,
+        "variant": analysis.variant,
+        "verdict": lin.verdict,
+        "state": analysis.state_names,
+        "equilibrium": _floats(lin.equilibrium),
+        "eigenvalues": [[float(s.real), float(s.imag)] for s in lin.eigenvalues],
+        "tolerance": lin.tolerance,
+        "rest_point": lin.is_rest_point,
+        "rest_residual": float(np.abs(lin.rest_residual).max()),
+        "natural_frequency": _floats(lin.natural_frequency),
+        "damping_ratio": _floats(lin.damping_ratio),
+        "time_constant": _floats(lin.time_constant),
+        "slowest_time_constant": _finite(lin.slowest_time_constant),
+        "linear_settling_time": _finite(analysis.linear_settling_time),
+        "notes": list(analysis.notes),
+    }
+    if analysis.analysed is not analysis.config:
+        record["analysed_boundary_layer"] = float(analysis.analysed.gains.boundary_layer)
+    if analysis.settling is not None:
+        s = analysis.settling
+        record["simulation"] = {"status": s["status"], "time_to_converge": _finite(s["time_to_converge"]),
+                                "ratio": s["ratio"], "t_end": s["t_end"]}
+    c = analysis.certificate
+    if c is not None:
+        record["certificate"] = {
+            "holds": c.holds, "argument": c.argument, "lyapunov_equilibrium": c.lyapunov_equilibrium,
+            "positive_definite": c.positive_definite, "hessian_min_eigenvalue": c.hessian_min_eigenvalue,
+            "rate_definiteness": c.rate_definiteness, "lasalle_observable": c.lasalle_observable,
+            "n_samples": c.n_samples, "worst_rate": _finite(c.worst_rate), "worst_lyapunov": _finite(c.worst_lyapunov),
+            "worst_state": _floats(c.worst_state), "rate_mismatch": _finite(c.rate_mismatch),
+            "boundary_level": _finite(c.boundary_level), "sublevel": c.sublevel, "sublevel_bound": c.sublevel_bound,
+            "sublevel_estimate": "sampling-based",
+        }
+    if analysis.basin is not None:
+        b = analysis.basin
+        record["basin"] = {"axes": [a.key for a in b.axes], "shape": list(b.outcome.shape), "counts": b.counts(),
+                           "inside_estimate": analysis.basin_inside(), "ratio": b.ratio}
+    return record

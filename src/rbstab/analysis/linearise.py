@@ -1,0 +1,195 @@
+"""The equilibrium, the rest check, the Jacobian there and its eigenvalues (modes, verdict).
+
+The equilibrium is the variant's (:attr:`rbstab.variants.Variant.equilibrium`: the
+minimum of the stored energy nearest the origin, polished to a rest point; the origin
+without gravity). The Jacobian is that of the right-hand side the integrators use
+(``Variant.rhs``, the compiled kernels of :mod:`rbstab.variants.kernels`) in the
+variant's own state (the reduced 6-state (Theta, Omega) system for ``permanent``, eq 21),
+by central differences extrapolated to step zero (:mod:`rbstab.analysis.derivatives`).
+
+Per eigenvalue s (python-control's ``damp`` conventions):
+
+- natural frequency ``omega_n = |s|`` [rad/s];
+- damping ratio ``zeta = -Re(s) / |s|`` (1 for a real stable mode, < 0 when unstable);
+- time constant ``tau = -1 / Re(s)`` [s] (the e-folding time of the mode; negative for a
+  growing mode, infinite on the imaginary axis).
+
+Verdict (Lyapunov's indirect method): ``asymptotically stable`` when every Re(s) < -tol,
+``unstable`` when some Re(s) > tol, else ``marginal`` (the linearisation cannot decide:
+a centre-manifold question, e.g. a zero stiffness), with tol = :data:`EIGENVALUE_RTOL`
+times the spectral radius (at least 1 s^-1 times it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .derivatives import jacobian
+
+__all__ = [
+    "Linearisation",
+    "linearise",
+    "modes",
+    "verdict",
+    "rest_tolerance",
+    "EIGENVALUE_RTOL",
+    "REST_RTOL",
+    "VERDICTS",
+]
+
+#: Eigenvalues with |Re(s)| at most this times max(1, spectral radius) [1/s] are marginal.
+EIGENVALUE_RTOL = 1e-7
+#: A rest point: every |dy/dt| at most this times the acceleration scale (:func:`rest_tolerance`).
+REST_RTOL = 1e-9
+#: The verdicts of :func:`verdict`.
+VERDICTS = ("asymptotically stable", "marginal", "unstable")
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """The linearised dynamics at the equilibrium, dy/dt ~ A (y - y_e).
+
+    Attributes
+    ----------
+    equilibrium : ndarray, shape (n,)
+        y_e in the variant's state layout (units per block, :data:`rbstab.layout.BLOCK_UNITS`).
+    rest_residual : ndarray, shape (n,)
+        dy/dt at y_e (zero at a rest point).
+    rest_tolerance : float
+        The bound the residual is held to (:func:`rest_tolerance`).
+    jacobian : ndarray, shape (n, n)
+        A = d(dy/dt)/dy at y_e [mixed SI units, row units / column units].
+    jacobian_error : ndarray, shape (n, n)
+        Error estimate of each entry of A (Richardson table).
+    eigenvalues : ndarray of complex, shape (n,)
+        Of A [1/s], sorted by real part, descending (then by imaginary part).
+    tolerance : float
+        |Re(s)| below which a mode is marginal [1/s].
+    """
+
+    equilibrium: np.ndarray
+    rest_residual: np.ndarray
+    rest_tolerance: float
+    jacobian: np.ndarray
+    jacobian_error: np.ndarray
+    eigenvalues: np.ndarray
+    tolerance: float
+
+    @property
+    def is_rest_point(self) -> bool:
+        """Whether every |dy/dt| at y_e is within :attr:`rest_tolerance`."""
+        return bool(np.all(np.abs(self.rest_residual) <= self.rest_tolerance))
+
+    @property
+    def verdict(self) -> str:
+        """One of :data:`VERDICTS` (see the module docstring)."""
+        return verdict(self.eigenvalues, self.tolerance)
+
+    @property
+    def natural_frequency(self) -> np.ndarray:
+        """|s| [rad/s] per eigenvalue."""
+        return modes(self.eigenvalues)[0]
+
+    @property
+    def damping_ratio(self) -> np.ndarray:
+        """-Re(s)/|s| per eigenvalue (NaN for s = 0)."""
+        return modes(self.eigenvalues)[1]
+
+    @property
+    def time_constant(self) -> np.ndarray:
+        """-1/Re(s) [s] per eigenvalue (inf on the imaginary axis, < 0 when growing)."""
+        return modes(self.eigenvalues)[2]
+
+    @property
+    def slowest_time_constant(self) -> float:
+        """tau of the eigenvalue with the largest real part [s]."""
+        return float(self.time_constant[0])
+
+
+def modes(eigenvalues: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(natural frequency [rad/s], damping ratio, time constant [s]) per eigenvalue.
+
+    See the module docstring; ``eigenvalues`` complex, shape (n,).
+    """
+    s = np.asarray(eigenvalues, dtype=complex)
+    omega_n = np.abs(s)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zeta = np.where(omega_n > 0, -s.real / np.where(omega_n > 0, omega_n, 1.0), np.nan)
+        tau = np.where(s.real != 0, -1.0 / np.where(s.real != 0, s.real, 1.0), np.inf)
+    return omega_n, zeta, tau
+
+
+def verdict(eigenvalues: np.ndarray, tolerance: float) -> str:
+    """``asymptotically stable``, ``unstable`` or ``marginal`` (module docstring).
+
+    Parameters
+    ----------
+    eigenvalues : ndarray of complex, shape (n,)
+        [1/s]
+    tolerance : float
+        [1/s], >= 0.
+    """
+    real = np.asarray(eigenvalues).real
+    if np.any(real > tolerance):
+        return "unstable"
+    if np.all(real < -tolerance):
+        return "asymptotically stable"
+    return "marginal"
+
+
+def sort_eigenvalues(eigenvalues: np.ndarray) -> np.ndarray:
+    """By real part descending, then imaginary part descending (the ``--json`` order)."""
+    s = np.asarray(eigenvalues, dtype=complex)
+    return s[np.lexsort((-s.imag, -s.real))]
+
+
+def rest_tolerance(jac: np.ndarray, equilibrium: np.ndarray, gravity: np.ndarray) -> float:
+    """REST_RTOL times the acceleration scale max(1, |A|_inf |y_e|_inf, |g|) [SI rates].
+
+    |A| |y_e| is the size of the rates that moving the state from the origin to y_e
+    changes; |g| that of the weight an equilibrium with gravity balances.
+    """
+    scale = max(1.0, float(np.abs(jac).sum(axis=1).max() * np.abs(equilibrium).max()),
+                float(np.linalg.norm(gravity)))
+    return REST_RTOL * scale
+
+
+def linearise(variant) -> Linearisation:
+    """Equilibrium, rest check, Jacobian and eigenvalues of ``variant``.
+
+    Parameters
+    ----------
+    variant : rbstab.variants.Variant
+        With a smooth right-hand side (``variant.smooth``; the pure sign law of
+        ``sliding`` has no Jacobian at E = 0).
+
+    Returns
+    -------
+    Linearisation
+
+    Raises
+    ------
+    ValueError
+        For a variant whose right-hand side is not smooth.
+    """
+    if not variant.smooth:
+        raise ValueError(
+            f"{variant.name}: the right-hand side is not differentiable (the pure sign law, "
+            "boundary_layer 0): there is no linearisation; analyse a boundary-layer law"
+        )
+    y_e = np.asarray(variant.equilibrium, dtype=float)
+    residual = variant.rhs(0.0, y_e)
+    jac, error = jacobian(lambda y: variant.rhs(0.0, y), y_e)
+    eigenvalues = sort_eigenvalues(np.linalg.eigvals(jac))
+    radius = float(np.abs(eigenvalues).max()) if eigenvalues.size else 0.0
+    return Linearisation(
+        equilibrium=y_e,
+        rest_residual=residual,
+        rest_tolerance=rest_tolerance(jac, y_e, variant.body.gravity),
+        jacobian=jac,
+        jacobian_error=error,
+        eigenvalues=eigenvalues,
+        tolerance=EIGENVALUE_RTOL * max(1.0, radius),
+    )

@@ -1,0 +1,274 @@
+"""Robustness from a sweep of perturbed parameters: the stable fraction with its confidence
+interval, and the parameters that separate stable from unstable runs.
+
+The sweep folder is read through :func:`rbstab.open_sweep`; a run is *stable* when it
+reached t_end and |v(t_end)| <= lyapunov_ratio |v(0)| (+ 1e-12 J of round-off), with the
+sweep's ratio: stability as seen in simulation over the sweep's t_end, not a proof. This
+is the sweep's own ``converged`` (:func:`rbstab.sweep.folder.is_converged`) with |v| in
+place of v, as in :mod:`rbstab.analysis.basin`: where the equilibrium is not the minimum
+of v (an inverted pendulum held up by too weak a K_r), a run that falls to a lower
+potential ends with v(t_end) < 0 and the sweep counts it as converged; the runs where the
+two differ are counted. Runs without a result (``error``, ``pending``) are left out and
+counted. Each base configuration of the sweep is a group of its own.
+
+Per group:
+
+- the stable fraction k/n with the Wilson score interval at the chosen confidence
+  (E. B. Wilson, J. Am. Stat. Assoc. 22 (1927) 209-212; it stays inside [0, 1] and is
+  not degenerate at k = 0 or k = n, unlike the normal approximation);
+- per varied parameter, how well it alone separates stable from unstable runs: the area
+  under the ROC curve, AUC = P(value of a stable run > value of an unstable run), from
+  the Mann-Whitney U statistic (0.5: no separation; 0 or 1: complete), and the best
+  single threshold (stable below or above it) with its balanced accuracy.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
+           "DEFAULT_CONFIDENCE"]
+
+#: Confidence level of the Wilson interval.
+DEFAULT_CONFIDENCE = 0.95
+#: Coordinates of a sweep dataset that are not parameters.
+_NOT_PARAMETERS = ("run", "run_id", "base", "variant", "time", "axis")
+
+
+def wilson_interval(k: int, n: int, confidence: float = DEFAULT_CONFIDENCE) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion k/n.
+
+    Parameters
+    ----------
+    k, n : int
+        Successes and trials, 0 <= k <= n; n = 0 gives (0, 1).
+    confidence : float
+        In (0, 1).
+    """
+    from statistics import NormalDist
+
+    if n == 0:
+        return 0.0, 1.0
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    p = k / n
+    denominator = 1.0 + z * z / n
+    centre = (p + z * z / (2 * n)) / denominator
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator
+    low = 0.0 if k == 0 else max(0.0, float(centre - half))
+    high = 1.0 if k == n else min(1.0, float(centre + half))
+    return low, high
+
+
+@dataclass(frozen=True)
+class Separation:
+    """How one parameter separates stable from unstable runs of a group.
+
+    Attributes
+    ----------
+    parameter : str
+        The sweep's coordinate name (``mass``, ``mass_scale``, ``k_c_0``...).
+    auc : float
+        P(stable value > unstable value) (ties count half).
+    threshold : float
+        The best single threshold (midway between two observed values).
+    stable_side : str
+        ``"below"`` or ``"above"``: where the stable runs lie.
+    balanced_accuracy : float
+        Mean of the fractions of stable and of unstable runs on their side.
+    stable_range, unstable_range : (float, float)
+        Smallest and largest value among the stable, the unstable runs.
+    """
+
+    parameter: str
+    auc: float
+    threshold: float
+    stable_side: str
+    balanced_accuracy: float
+    stable_range: tuple[float, float]
+    unstable_range: tuple[float, float]
+
+    @property
+    def strength(self) -> float:
+        """|2 AUC - 1|: 0 no separation, 1 complete."""
+        return abs(2.0 * self.auc - 1.0)
+
+
+def _auc(s: np.ndarray, u: np.ndarray) -> float:
+    """P(S > U) + P(S = U) / 2 over all pairs: the Mann-Whitney U statistic / (n_s n_u)."""
+    u = np.sort(u)
+    below = np.searchsorted(u, s, side="left")
+    ties = np.searchsorted(u, s, side="right") - below
+    return float((below.sum() + 0.5 * ties.sum()) / (len(s) * len(u)))
+
+
+def separation(parameter: str, values: np.ndarray, stable: np.ndarray) -> Separation | None:
+    """The :class:`Separation` of one parameter; None without both stable and unstable runs."""
+    values = np.asarray(values, dtype=float)
+    stable = np.asarray(stable, dtype=bool)
+    s, u = values[stable], values[~stable]
+    if not len(s) or not len(u):
+        return None
+    auc = _auc(s, u)
+    order = np.argsort(values, kind="stable")
+    x, y = values[order], stable[order]
+    # stable fraction below and unstable fraction above each cut between distinct values
+    cuts = np.flatnonzero(np.diff(x) > 0)
+    stable_below = np.cumsum(y)[cuts] / len(s)
+    unstable_below = np.cumsum(~y)[cuts] / len(u)
+    below = 0.5 * (stable_below + 1.0 - unstable_below)  # stable below the cut
+    above = 0.5 * (1.0 - stable_below + unstable_below)
+    if cuts.size:
+        k = int(np.argmax(np.maximum(below, above)))
+        side = "below" if below[k] >= above[k] else "above"
+        threshold, accuracy = 0.5 * (x[cuts[k]] + x[cuts[k] + 1]), float(max(below[k], above[k]))
+    else:
+        side, threshold, accuracy = "below", float(x[0]), 0.5
+    return Separation(parameter, auc, float(threshold), side, accuracy, (float(s.min()), float(s.max())),
+                      (float(u.min()), float(u.max())))
+
+
+@dataclass(frozen=True)
+class RobustnessGroup:
+    """The runs of one base configuration.
+
+    Attributes
+    ----------
+    base : str
+    n_runs, n_stable : int
+        Runs with a result, and those that converged.
+    n_excluded : int
+        Runs without a result (error, pending).
+    n_disagree : int
+        Runs whose stability here differs from the sweep's ``converged`` (v(t_end) < 0).
+    interval : (float, float)
+        Wilson interval of the stable fraction.
+    separations : list of Separation
+        Per varied parameter, strongest first (empty when every run is stable, or none is).
+    parameters : list of str
+        The parameters that vary in the group.
+    """
+
+    base: str
+    n_runs: int
+    n_stable: int
+    n_excluded: int
+    n_disagree: int
+    interval: tuple[float, float]
+    separations: list[Separation]
+    parameters: list[str]
+
+    @property
+    def fraction(self) -> float:
+        return self.n_stable / self.n_runs if self.n_runs else float("nan")
+
+
+@dataclass(frozen=True)
+class Robustness:
+    """Robustness of a sweep (module docstring).
+
+    Attributes
+    ----------
+    sweep : str
+        The sweep's name.
+    folder : str
+    ratio : float
+        The sweep's convergence ratio (the default 1e-3 if it has none).
+    confidence : float
+    groups : list of RobustnessGroup
+    runs : dict
+        Per run with a result: ``base`` (str array), ``stable`` (bool array) and
+        ``values`` (parameter -> float array), for the figures.
+    """
+
+    sweep: str
+    folder: str
+    ratio: float
+    confidence: float
+    groups: list[RobustnessGroup]
+    runs: dict = field(default_factory=dict)
+
+    def to_json(self) -> dict:
+        """The ``--json`` record: the sweep, and per group the counts, the stable fraction,
+        its interval and the separations (strongest first)."""
+        return {
+            "sweep": self.sweep,
+            "folder": self.folder,
+            "confidence": self.confidence,
+            "groups": [
+                {"base": g.base, "n_runs": g.n_runs, "n_stable": g.n_stable, "n_excluded": g.n_excluded,
+                 "n_disagree": g.n_disagree,
+                 "stable_fraction": g.fraction if g.n_runs else None, "interval": list(g.interval),
+                 "separations": [{"parameter": s.parameter, "auc": s.auc, "threshold": s.threshold,
+                                  "stable_side": s.stable_side, "balanced_accuracy": s.balanced_accuracy}
+                                 for s in g.separations]}
+                for g in self.groups
+            ],
+        }
+
+    def to_dataset(self):
+        """As an :class:`xarray.Dataset` (:func:`rbstab.analysis.dataset.robustness_dataset`)."""
+        from .dataset import robustness_dataset
+
+        return robustness_dataset(self)
+
+
+def _numeric_parameters(ds) -> list[str]:
+    names = []
+    for name in ds.coords:
+        if name in _NOT_PARAMETERS or ds[name].dims != ("run",):
+            continue
+        if np.issubdtype(ds[name].dtype, np.number):
+            names.append(str(name))
+    return names
+
+
+def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) -> Robustness:
+    """Robustness of the sweep folder ``path`` (module docstring).
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a sweep folder.
+    ValueError
+        For a confidence outside (0, 1).
+    """
+    from ..sweep.folder import open_sweep
+
+    if not 0 < confidence < 1:
+        raise ValueError(f"--confidence: found {confidence}; expected 0 < confidence < 1")
+    ds = open_sweep(path)
+    from .basin import DEFAULT_RATIO, ROUND_OFF
+
+    status = ds["status"].values.astype(str)
+    has_result = np.isin(status, ["success", "failed"])
+    ratio = ds.attrs.get("lyapunov_ratio")
+    ratio = float(ratio) if ratio is not None and np.isfinite(float(ratio)) else DEFAULT_RATIO
+    v0 = np.asarray(ds["lyapunov_initial"].values, dtype=float)
+    v1 = np.asarray(ds["lyapunov_final"].values, dtype=float)
+    with np.errstate(invalid="ignore"):
+        stable = (status == "success") & (np.abs(v1) <= ratio * np.abs(v0) + ROUND_OFF)
+    disagree = has_result & (stable != (np.asarray(ds["converged"].values, dtype=bool) & (status == "success")))
+    base = ds["base"].values.astype(str) if "base" in ds.coords else np.full(ds.sizes["run"], ds.attrs["sweep"])
+    parameters = _numeric_parameters(ds)
+    values = {p: np.asarray(ds[p].values, dtype=float) for p in parameters}
+    groups = []
+    for name in dict.fromkeys(base):
+        member = base == name
+        ok = member & has_result
+        varied = [p for p in parameters if np.unique(values[p][ok]).size > 1]
+        found = [separation(p, values[p][ok], stable[ok]) for p in varied]
+        n, k = int(ok.sum()), int(stable[ok].sum())
+        groups.append(RobustnessGroup(
+            base=str(name), n_runs=n, n_stable=k, n_excluded=int((member & ~has_result).sum()),
+            n_disagree=int((member & disagree).sum()),
+            interval=wilson_interval(k, n, confidence),
+            separations=sorted((s for s in found if s is not None), key=lambda s: -s.strength),
+            parameters=varied,
+        ))
+    runs = {"base": base[has_result], "stable": stable[has_result],
+            "values": {p: v[has_result] for p, v in values.items()}}
+    return Robustness(sweep=str(ds.attrs.get("sweep", "")), folder=str(path), ratio=ratio,
+                      confidence=confidence, groups=groups, runs=runs)

@@ -1,0 +1,131 @@
+"""Plain-text summaries of an analysis and of a robustness result (what ``rbstab analyze`` prints)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["describe", "describe_robustness", "format_eigenvalue", "format_state"]
+
+
+def _g(value, digits: int = 4) -> str:
+    value = float(value)
+    if not np.isfinite(value):
+        return "inf" if value > 0 else "-inf" if value < 0 else "-"
+    return f"{value:.{digits}g}"
+
+
+def format_eigenvalue(s: complex) -> str:
+    """``-3.024 + 7.556i`` (``-148.7`` when real)."""
+    if s.imag == 0:
+        return _g(s.real)
+    return f"{_g(s.real)} {'+' if s.imag > 0 else '-'} {_g(abs(s.imag))}i"
+
+
+def format_state(layout, y: np.ndarray) -> str:
+    """``theta (0, 0, 0) rad, omega (0, 0, 0) rad s-1, ...``."""
+    from ..layout import BLOCK_UNITS
+
+    parts = []
+    for block, values in layout.split(np.asarray(y, dtype=float)).items():
+        parts.append(f"{block} ({', '.join(_g(v, 6) for v in values + 0.0)}) {BLOCK_UNITS[block]}")
+    return ", ".join(parts)
+
+
+def _mode_lines(lin) -> list[str]:
+    lines = [f"  {'eigenvalue s [1/s]':<26}{'omega_n [rad/s]':>16}{'zeta':>9}{'tau [s]':>11}"]
+    for s, wn, zeta, tau in zip(lin.eigenvalues, lin.natural_frequency, lin.damping_ratio, lin.time_constant):
+        lines.append(f"  {format_eigenvalue(s):<26}{_g(wn):>16}{_g(zeta, 3):>9}{_g(tau):>11}")
+    return lines
+
+
+def _settling_line(analysis) -> str:
+    s = analysis.settling
+    tau = analysis.linearisation.slowest_time_constant
+    head = f"  slowest mode: tau = {_g(tau)} s" if tau > 0 else \
+        f"  fastest-growing mode: e-folding time {_g(-tau)} s" if np.isfinite(tau) else "  slowest mode: undamped"
+    if s is None:
+        return head
+    if s["status"] != "success":
+        return f"{head}; the simulation from the configured initial state failed: {s['message']}"
+    if not np.isfinite(s["time_to_converge"]):
+        return f"{head}; the simulation from the configured initial state did not converge (|v| <= {s['ratio']:g} |v(0)|) " \
+               f"by t_end = {_g(s['t_end'])} s"
+    return (f"{head}; the simulation from the configured initial state converged (|v| <= {s['ratio']:g} |v(0)| from "
+            f"then on) at {_g(s['time_to_converge'])} s (the slowest mode alone: {_g(analysis.linear_settling_time)} s)")
+
+
+def _certificate_lines(c) -> list[str]:
+    if c is None:
+        return []
+    head = f"  certificate: {'holds (' + c.argument + ')' if c.holds else 'does not hold'}"
+    lines = [head, f"    v(y_e) = {_g(c.lyapunov_equilibrium)} J; Hessian of v "
+             f"{'positive definite' if c.positive_definite else 'NOT positive definite'} (smallest eigenvalue "
+             f"{_g(c.hessian_min_eigenvalue)})"]
+    if not c.positive_definite:
+        return lines + ["    no sublevel estimate: v has no strict minimum at the equilibrium"]
+    zero = int(np.sum(np.abs(c.rate_eigenvalues) <= 1e-8 * np.abs(c.rate_eigenvalues).max()))
+    lines.append(f"    Hessian of dv/dt {c.rate_definiteness} ({zero} of {len(c.rate_eigenvalues)} generalised "
+                 f"eigenvalues zero); LaSalle's condition (PBH test) {'holds' if c.lasalle_observable else 'FAILS'}")
+    lines.append(f"    {c.n_samples} sampled states: largest dv/dt {_g(c.worst_rate)} W at v = {_g(c.worst_lyapunov)} J; "
+                 f"|numerical - analytic dv/dt| <= {_g(c.rate_mismatch, 2)} of the power scale")
+    lines.append(f"    region of attraction contains {{v <= {_g(c.sublevel)} J}} (sampling-based inner estimate, "
+                 f"{c.n_samples} samples, bounded by: {c.sublevel_bound}; domain boundary at {_g(c.boundary_level)} J)")
+    return lines
+
+
+def _basin_lines(analysis) -> list[str]:
+    b = analysis.basin
+    if b is None:
+        return []
+    counts = b.counts()
+    keys = " x ".join(f"{a.key} ({len(a.values)})" for a in b.axes)
+    lines = [f"  basin over {keys}: " + ", ".join(f"{n} {k}" for k, n in counts.items())]
+    for message, n in b.messages.items():
+        lines.append(f"    {n} failed: {message}")
+    inside = analysis.basin_inside()
+    if inside is not None:
+        total = sum(inside.values())
+        verdict = "all converged" if inside["converged"] == total else \
+            ", ".join(f"{n} {k}" for k, n in inside.items()) + " (the estimate is NOT inside the basin map)"
+        lines.append(f"    inside the sublevel estimate: {total} points, {verdict}")
+    return lines
+
+
+def describe(analysis) -> list[str]:
+    """Lines summarising an :class:`~rbstab.analysis.Analysis`."""
+    lin = analysis.linearisation
+    layout = analysis.layout
+    lines = [f"{analysis.name} ({analysis.variant}): {lin.verdict} (tolerance |Re s| <= {_g(lin.tolerance, 2)} 1/s)"]
+    lines += [f"  note: {n}" for n in analysis.notes]
+    lines.append(f"  equilibrium: {format_state(layout, lin.equilibrium)}")
+    rest = "yes" if lin.is_rest_point else "NO"
+    lines.append(f"  rest point: {rest} (max |dy/dt| {_g(np.abs(lin.rest_residual).max(), 3)} <= "
+                 f"{_g(lin.rest_tolerance, 3)})")
+    lines += _mode_lines(lin)
+    lines.append(_settling_line(analysis))
+    lines += _certificate_lines(analysis.certificate)
+    lines += _basin_lines(analysis)
+    return lines
+
+
+def describe_robustness(result) -> list[str]:
+    """Lines summarising a :class:`~rbstab.analysis.robustness.Robustness`."""
+    lines = [f"robustness of sweep {result.sweep} ({result.folder}); stable: the run reached t_end with "
+             f"|v(t_end)| <= {_g(result.ratio)} |v(0)|"]
+    for g in result.groups:
+        lo, hi = g.interval
+        excluded = f", {g.n_excluded} without a result left out" if g.n_excluded else ""
+        if g.n_disagree:
+            excluded += (f"; {g.n_disagree} differ from the sweep's 'converged' (v(t_end) < 0: they fell below "
+                         "the equilibrium's v, which is then not its minimum)")
+        lines.append(f"  {g.base}: {g.n_stable} of {g.n_runs} stable = {g.fraction:.1%} "
+                     f"({result.confidence:.0%} Wilson interval {lo:.1%} - {hi:.1%}){excluded}")
+        if not g.separations:
+            reason = "every run is stable" if g.n_stable == g.n_runs else "no run is stable" \
+                if g.n_stable == 0 else "no parameter varies"
+            lines.append(f"    no separating parameter: {reason}")
+        for s in g.separations:
+            lines.append(f"    {s.parameter}: AUC {s.auc:.3f}; stable {s.stable_side} {_g(s.threshold, 6)} "
+                         f"(balanced accuracy {s.balanced_accuracy:.1%}); stable {_g(s.stable_range[0])} .. "
+                         f"{_g(s.stable_range[1])}, unstable {_g(s.unstable_range[0])} .. {_g(s.unstable_range[1])}")
+    return lines

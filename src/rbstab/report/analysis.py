@@ -1,0 +1,397 @@
+"""Report pages of analysis files (``rbstab analyze`` -> ``*.analysis.nc``).
+
+Per configuration: the verdict and notes, the equilibrium and rest check, the eigenvalue
+table and the pole plot, the slowest time constant beside the simulation's time to
+converge, the certificate table and the sampled dv/dt against v, and the basin map with
+the sublevel-set contour. Per robustness file: the stable fraction with its interval per
+group, the separating parameters and a figure of the runs over the two strongest.
+
+The files are read with :func:`rbstab.analysis.dataset.read_analysis` (the module that
+writes them); nothing here knows their layout beyond the variable names it documents.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .figures import DPI, FigureFile, _save
+from .load import ReportInputError, safe_filename
+from .render import Section, Table
+from .tables import format_value
+
+__all__ = ["split_inputs", "analysis_sections", "default_name"]
+
+#: Colours of the basin outcomes (converged, not converged, failed).
+_OUTCOME_COLOURS = ("#4daf4a", "#ff9f1c", "#d62728")
+
+
+def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
+    """(analysis files, the other inputs) of a report.
+
+    An analysis file given directly goes to the first list; a plain folder (not a sweep)
+    gives its ``*.analysis.nc`` files, and stays an input of its own only if it also
+    holds run files (``*.h5``).
+    """
+    from ..analysis.dataset import SUFFIX, is_analysis_file
+    from ..sweep.folder import is_sweep_folder
+
+    analyses: list[Path] = []
+    others: list = []
+    for raw in paths:
+        p = Path(raw)
+        if p.is_file() and is_analysis_file(p):
+            analyses.append(p)
+        elif p.is_dir() and not is_sweep_folder(p) and any(p.glob(f"*{SUFFIX}")):
+            analyses.extend(sorted(p.glob(f"*{SUFFIX}")))
+            if any(p.glob("*.h5")):
+                others.append(raw)
+        else:
+            others.append(raw)
+    return list(dict.fromkeys(analyses)), others
+
+
+def default_name(analyses: Sequence[Path]) -> str | None:
+    """The report's folder name for a single analysis file (its name), else None."""
+    from ..analysis.dataset import SUFFIX
+
+    if len(analyses) == 1:
+        return safe_filename(analyses[0].name.removesuffix(SUFFIX))
+    return None
+
+
+def _read(paths: Sequence[Path]) -> list:
+    from ..analysis.dataset import read_analysis
+
+    datasets, problems = [], []
+    for p in paths:
+        try:
+            datasets.append(read_analysis(p))
+        except (OSError, ValueError) as exc:
+            problems.append(f"{p}: {exc}")
+    if problems:
+        raise ReportInputError(problems)
+    return datasets
+
+
+def analysis_sections(paths: Sequence[Path], folder: Path) -> list[Section]:
+    """The sections of every analysis file, figures written to ``folder/figures/``.
+
+    Raises
+    ------
+    ReportInputError
+        If a file cannot be read.
+    """
+    sections = []
+    for path, ds in zip(paths, _read(paths)):
+        if ds.attrs.get("kind") == "robustness":
+            sections.append(_robustness_section(ds, path, folder))
+        else:
+            sections.append(_configuration_section(ds, path, folder))
+    return sections
+
+
+# -- one configuration -------------------------------------------------------------------------------
+
+
+def _f(value, digits: int = 4) -> str:
+    return format_value(value, digits)
+
+
+def _scalar(ds, name: str) -> float:
+    return float(ds[name].values) if name in ds else float("nan")
+
+
+def _eigenvalues(ds) -> np.ndarray:
+    return ds["eigenvalue_real"].values + 1j * ds["eigenvalue_imag"].values
+
+
+def _state_text(ds, prefix: str) -> str:
+    parts = []
+    for name in ds.data_vars:
+        if name.startswith(f"{prefix}_") and ds[name].dims == ("axis",):
+            block = name[len(prefix) + 1:]
+            values = ", ".join(_f(v, 6) for v in ds[name].values + 0.0)
+            parts.append(f"{block} ({values}) {ds[name].attrs.get('units', '')}")
+    return "; ".join(parts)
+
+
+def _facts(ds) -> list[str]:
+    a = ds.attrs
+    facts = [f"variant: {a.get('variant')}; verdict of the linearisation: {a.get('verdict')} "
+             f"(modes with |Re s| <= {_f(_scalar(ds, 'eigenvalue_tolerance'), 2)} 1/s count as marginal)",
+             f"equilibrium: {_state_text(ds, 'equilibrium')}",
+             f"rest check: {'passed' if a.get('rest_point') else 'FAILED'} (max |dy/dt| "
+             f"{_f(max(abs(float(ds[n].values.max())) for n in ds.data_vars if n.startswith('rest_residual_')), 3)} "
+             f"<= {_f(_scalar(ds, 'rest_tolerance'), 3)})"]
+    if "time_to_converge" in ds:
+        ttc = _scalar(ds, "time_to_converge")
+        simulated = f"{_f(ttc)} s" if np.isfinite(ttc) else f"not converged by t_end ({a.get('simulation_status')})"
+        facts.append(f"slowest mode: tau = {_f(_scalar(ds, 'slowest_time_constant'))} s (alone it would take "
+                     f"{_f(_scalar(ds, 'linear_settling_time'))} s to bring v down by the ratio "
+                     f"{_f(_scalar(ds, 'convergence_ratio'))}); simulation from the configured initial state: "
+                     f"converged at {simulated}")
+    facts += [f"note: {n}" for n in str(a.get("notes", "")).splitlines() if n]
+    return facts
+
+
+def _eigen_table(ds) -> Table:
+    rows = []
+    for k, s in enumerate(_eigenvalues(ds)):
+        rows.append([str(k + 1), _f(s.real, 6), _f(s.imag, 6), _f(ds["natural_frequency"].values[k]),
+                     _f(ds["damping_ratio"].values[k], 3), _f(ds["time_constant"].values[k])])
+    return Table("Eigenvalues of the Jacobian at the equilibrium (real part descending)",
+                 ["mode", "Re s [1/s]", "Im s [rad/s]", "omega_n [rad/s]", "zeta", "tau [s]"], rows,
+                 note="omega_n = |s|, zeta = -Re s / |s|, tau = -1 / Re s (negative: a growing mode).")
+
+
+def _certificate_table(ds) -> Table | None:
+    if "lyapunov_hessian" not in ds:
+        return None
+    a = ds.attrs
+    mu = ds["rate_eigenvalue"].values
+    finite = mu[np.isfinite(mu)]
+    zero = int(np.sum(np.abs(finite) <= 1e-8 * np.abs(finite).max())) if finite.size else 0
+    rows = [
+        ["v at the equilibrium [J]", _f(_scalar(ds, "lyapunov_equilibrium"))],
+        ["Hessian of v", "positive definite" if a.get("positive_definite") else "NOT positive definite"],
+        ["smallest eigenvalue of the Hessian of v (mixed units)", _f(_scalar(ds, "hessian_min_eigenvalue"))],
+        ["Hessian of dv/dt", str(a.get("rate_definiteness"))],
+        ["generalised eigenvalues mu of (H_dv/dt, H_v) [1/s]",
+         f"{_f(finite.min())} .. {_f(finite.max())}, {zero} zero of {len(mu)}" if finite.size else "-"],
+        ["LaSalle's condition (PBH test on the linearisation)", "holds" if a.get("lasalle_observable") else "fails"],
+        ["sampled states", str(a.get("n_samples"))],
+        ["largest relative dv/dt among them [W]", f"{_f(_scalar(ds, 'worst_rate'))} at v = "
+                                                  f"{_f(_scalar(ds, 'worst_lyapunov'))} J"],
+        ["|numerical - analytic dv/dt| / power scale", _f(_scalar(ds, "rate_mismatch"), 2)],
+        ["least v on the domain boundary |theta_2| = pi/2 - margin [J]", _f(_scalar(ds, "boundary_level"))],
+        ["sublevel estimate c of {v <= c} [J] (sampling-based)", _f(_scalar(ds, "sublevel"))],
+        ["c bounded by", str(a.get("sublevel_bound"))],
+        ["certificate", f"holds ({a.get('certificate_argument')})" if a.get("certificate_holds") else "does not hold"],
+    ]
+    return Table("Lyapunov certificate", ["quantity", "value"], rows,
+                 note="The sublevel set is an inner estimate of the region of attraction only as far as the "
+                      "sampling is dense: no sampled state with v < c has dv/dt > 0 or lies outside the domain.")
+
+
+def _pole_figure(ds, folder: Path, stem: str, name: str) -> FigureFile:
+    from matplotlib.figure import Figure
+
+    s = _eigenvalues(ds)
+    tol = _scalar(ds, "eigenvalue_tolerance")
+    fig = Figure(figsize=(7.5, 4.2), dpi=DPI, layout="constrained")
+    ax = fig.subplots()
+    ax.axvspan(-tol, tol, color="0.85", zorder=0)
+    ax.axvline(0.0, color="0.4", lw=0.8)
+    ax.axhline(0.0, color="0.4", lw=0.8)
+    stable = s.real < -tol
+    ax.plot(s.real[stable], s.imag[stable], "x", color="C0", ms=8, mew=2, label="stable")
+    if (~stable).any():
+        ax.plot(s.real[~stable], s.imag[~stable], "x", color="C3", ms=9, mew=2, label="marginal or unstable")
+    if s.real.min() < 0 and np.abs(s).max() > 20 * np.abs(s).min():
+        ax.set_xscale("symlog", linthresh=max(1.0, float(np.abs(s.real[s.real != 0]).min(initial=1.0))))
+    ax.set_xlabel("Re s [1/s]")
+    ax.set_ylabel("Im s [rad/s]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(f"{name}: poles of the linearisation ({ds.attrs.get('verdict')})", fontsize=10)
+    return FigureFile(_save(fig, folder, f"{stem}_poles"), f"{name}: pole plot",
+                      "Eigenvalues of the Jacobian at the equilibrium; grey band: |Re s| within the tolerance "
+                      "(marginal). A symmetric-log real axis where the poles span decades.")
+
+
+def _rate_figure(ds, folder: Path, stem: str, name: str) -> FigureFile | None:
+    if "sample_lyapunov" not in ds or ds.sizes.get("sample", 0) == 0:
+        return None
+    from matplotlib.figure import Figure
+
+    v = ds["sample_lyapunov"].values
+    rate = ds["sample_rate"].values
+    inside = ds["sample_outside"].values == 0
+    c = _scalar(ds, "sublevel")
+    fig = Figure(figsize=(7.5, 4.0), dpi=DPI, layout="constrained")
+    ax = fig.subplots()
+    ok = inside & np.isfinite(rate) & (v > 0)
+    ax.plot(v[ok], -rate[ok], ".", ms=2, color="C0", alpha=0.5, label="-dv/dt at a sampled state")
+    positive = ok & (rate > 0)
+    if positive.any():
+        ax.plot(v[positive], rate[positive], ".", ms=4, color="C3", label="dv/dt > 0 (as |dv/dt|)")
+    if c > 0:
+        ax.axvline(c, color="k", ls="--", lw=1.0, label=f"sublevel estimate c = {c:.4g} J")
+    ax.set_xscale("log")
+    if (-rate[ok] > 0).any():
+        ax.set_yscale("log")
+    ax.set_xlabel("v [J]")
+    ax.set_ylabel("-dv/dt [W] (d/ds v(y + s f), from v alone)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    ax.set_title(f"{name}: dv/dt on {ds.attrs.get('n_samples')} sampled states", fontsize=10)
+    return FigureFile(_save(fig, folder, f"{stem}_sampled_rate"), f"{name}: sampled dv/dt",
+                      "The rate of v along the right-hand side at each sampled state (computed from v alone), "
+                      "against v there; states with dv/dt = 0 (at rest) are off the logarithmic axis.")
+
+
+def _basin_figure(ds, folder: Path, stem: str, name: str) -> FigureFile:
+    from matplotlib.colors import ListedColormap
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Patch
+
+    x, y = ds["basin_x"], ds["basin_y"]
+    outcome = ds["basin_outcome"].values.T  # rows: y
+    ttc = ds["basin_time_to_converge"].values.T
+    v0 = ds["basin_lyapunov_initial"].values.T
+    c = _scalar(ds, "sublevel")
+    fig = Figure(figsize=(11.0, 4.6), dpi=DPI, layout="constrained")
+    ax1, ax2 = fig.subplots(1, 2, sharex=True, sharey=True)
+    ax1.pcolormesh(x.values, y.values, outcome, cmap=ListedColormap(_OUTCOME_COLOURS), vmin=-0.5, vmax=2.5,
+                   shading="nearest")
+    mesh = ax2.pcolormesh(x.values, y.values, ttc, cmap="viridis", shading="nearest")
+    fig.colorbar(mesh, ax=ax2, label="time to converge [s]")
+    handles = [Patch(color=col, label=lab) for col, lab in zip(_OUTCOME_COLOURS, ("converged", "not converged",
+                                                                                 "failed"))]
+    for ax in (ax1, ax2):
+        if c > 0 and np.nanmin(v0) < c < np.nanmax(v0):
+            ax.contour(x.values, y.values, v0, levels=[c], colors="k", linewidths=1.5)
+        ax.set_xlabel(f"{x.attrs.get('config_key')} [{x.attrs.get('units')}]")
+        ax.grid(alpha=0.2)
+    ax1.set_ylabel(f"{y.attrs.get('config_key')} [{y.attrs.get('units')}]")
+    handles.append(Patch(facecolor="none", edgecolor="k", label=f"v = {c:.4g} J (sublevel estimate)"))
+    ax1.legend(handles=handles, fontsize=8, loc="upper right")
+    fig.suptitle(f"{name}: basin of attraction (converged: |v| <= {ds.attrs.get('basin_ratio')} |v(0)| by "
+                 f"t_end = {ds.attrs.get('basin_t_end')} s)", fontsize=10)
+    return FigureFile(_save(fig, folder, f"{stem}_basin"), f"{name}: basin map",
+                      "Outcome of the simulation from each initial state of the slice (left) and its time to "
+                      "converge (right); black: the contour v = c of the certificate's sublevel estimate "
+                      "(absent when the slice lies wholly inside or outside it).")
+
+
+def _basin_facts(ds) -> list[str]:
+    outcome = ds["basin_outcome"].values
+    v0 = ds["basin_lyapunov_initial"].values
+    c = _scalar(ds, "sublevel")
+    names = ("converged", "not converged", "failed")
+    facts = [f"{outcome.size} runs over {ds['basin_x'].attrs.get('config_key')} x "
+             f"{ds['basin_y'].attrs.get('config_key')}: "
+             + ", ".join(f"{int(np.sum(outcome == i))} {n}" for i, n in enumerate(names))]
+    facts += [f"failed: {line}" for line in str(ds.attrs.get("basin_failures", "")).splitlines() if line]
+    if np.isfinite(c):
+        inside = v0 <= c
+        bad = int(np.sum(inside & (outcome != 0)))
+        facts.append(f"{int(inside.sum())} points inside the sublevel estimate {{v <= {c:.4g} J}}: "
+                     + ("all converged (the estimate lies inside the basin map)" if not bad else
+                        f"{bad} did NOT converge (the estimate is not inside the basin map)"))
+    return facts
+
+
+def _configuration_section(ds, path: Path, folder: Path) -> Section:
+    name = str(ds.attrs.get("name", path.name))
+    stem = f"analysis_{safe_filename(name)}"
+    s = Section(f"Stability analysis: {name}", f"analysis-{safe_filename(name)}")
+    s.blocks.append(f"From {path}. Method and limits: docs/analysis.md.")
+    s.blocks.append(_facts(ds))
+    s.blocks.append(_eigen_table(ds))
+    s.blocks.append(_pole_figure(ds, folder, stem, name))
+    table = _certificate_table(ds)
+    if table is not None:
+        s.blocks.append(table)
+        figure = _rate_figure(ds, folder, stem, name)
+        if figure is not None:
+            s.blocks.append(figure)
+    if "basin_outcome" in ds:
+        s.blocks.append(_basin_facts(ds))
+        s.blocks.append(_basin_figure(ds, folder, stem, name))
+    return s
+
+
+# -- robustness ----------------------------------------------------------------------------------------
+
+
+def _robustness_section(ds, path: Path, folder: Path) -> Section:
+    a = ds.attrs
+    s = Section(f"Robustness: sweep {a.get('sweep')}", f"robustness-{safe_filename(str(a.get('sweep')))}")
+    s.blocks.append(f"From {path} (sweep folder {a.get('folder')}). Stable: {a.get('stability')}; "
+                    f"interval: Wilson score at {float(a.get('confidence', 0.95)):.0%}.")
+    groups = [str(g) for g in ds["group"].values]
+    s.blocks.append(Table("Stable fraction per base configuration",
+                          ["group", "runs", "stable", "fraction", "interval", "without a result",
+                           "differ from the sweep's converged"],
+                          [[g, str(int(ds["n_runs"].values[i])), str(int(ds["n_stable"].values[i])),
+                            f"{float(ds['stable_fraction'].values[i]):.1%}",
+                            f"{float(ds['stable_fraction_low'].values[i]):.1%} - "
+                            f"{float(ds['stable_fraction_high'].values[i]):.1%}",
+                            str(int(ds["n_excluded"].values[i])), str(int(ds["n_disagree"].values[i]))]
+                           for i, g in enumerate(groups)],
+                          note="The sweep's converged is v(t_end) <= ratio v(0); it differs where v(t_end) < 0, a "
+                               "run that fell below the equilibrium's v (then not the minimum of v)."))
+    rows = []
+    for i, g in enumerate(groups):
+        for j, p in enumerate(ds["parameter"].values):
+            auc = float(ds["auc"].values[i, j])
+            if np.isfinite(auc):
+                rows.append([g, str(p), _f(auc, 3), f"{ds['stable_side'].values[i, j]} {_f(ds['threshold'].values[i, j], 6)}",
+                             f"{float(ds['balanced_accuracy'].values[i, j]):.1%}",
+                             f"{_f(ds['stable_min'].values[i, j])} .. {_f(ds['stable_max'].values[i, j])}",
+                             f"{_f(ds['unstable_min'].values[i, j])} .. {_f(ds['unstable_max'].values[i, j])}"])
+    rows.sort(key=lambda r: (r[0], -abs(2 * float(r[2]) - 1)))
+    if rows:
+        s.blocks.append(Table("Parameters that separate stable from unstable runs (strongest first)",
+                              ["group", "parameter", "AUC", "stable side of threshold", "balanced accuracy",
+                               "stable range", "unstable range"], rows,
+                              note="AUC = P(value of a stable run > value of an unstable run): 0.5 no separation, "
+                                   "0 or 1 complete."))
+    else:
+        s.blocks.append("No parameter separates stable from unstable runs: every group is all stable or all unstable.")
+    s.blocks.append(_robustness_figure(ds, folder))
+    return s
+
+
+def _two_parameters(values: np.ndarray, order: Sequence[int]) -> list[int]:
+    """The first varying parameter in ``order`` and the next one not (almost) a function of
+    it (|correlation| < 0.99: a scale factor and the value it scales are one parameter)."""
+    varying = [j for j in order if np.unique(values[:, j]).size > 1]
+    if not varying:
+        return []
+    first = varying[0]
+    for j in varying[1:]:
+        if abs(np.corrcoef(values[:, first], values[:, j])[0, 1]) < 0.99:
+            return [first, j]
+    return [first]
+
+
+def _robustness_figure(ds, folder: Path) -> FigureFile:
+    from matplotlib.figure import Figure
+
+    groups = [str(g) for g in ds["group"].values]
+    parameters = [str(p) for p in ds["parameter"].values]
+    fig = Figure(figsize=(5.0 * len(groups), 4.2), dpi=DPI, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, len(groups), squeeze=False)[0])
+    run_group = ds["run_group"].values.astype(str)
+    stable = ds["run_stable"].values.astype(bool)
+    values = ds["run_value"].values
+    for ax, (i, g) in zip(axes, enumerate(groups)):
+        auc = ds["auc"].values[i]
+        order = [j for j in np.argsort(-np.abs(2 * np.nan_to_num(auc, nan=0.5) - 1))]
+        mine = run_group == g
+        varying = _two_parameters(values[mine], order)
+        if len(varying) == 0:
+            ax.text(0.5, 0.5, "no parameter varies", ha="center", transform=ax.transAxes)
+            continue
+        xj = varying[0]
+        yv = values[:, varying[1]] if len(varying) > 1 else np.zeros(len(values))
+        for flag, colour, label in ((True, "C0", "stable"), (False, "C3", "unstable")):
+            pick = mine & (stable == flag)
+            ax.plot(values[pick, xj], yv[pick], "o" if flag else "x", color=colour, ms=4, label=f"{label} ({pick.sum()})")
+        ax.set_xlabel(parameters[xj])
+        ax.set_ylabel(parameters[varying[1]] if len(varying) > 1 else "")
+        ax.set_title(g, fontsize=10)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"sweep {ds.attrs.get('sweep')}: stable and unstable runs", fontsize=10)
+    return FigureFile(_save(fig, folder, f"robustness_{safe_filename(str(ds.attrs.get('sweep')))}"),
+                      f"{ds.attrs.get('sweep')}: stable and unstable runs",
+                      "Each run of each group over the varied parameter with the strongest separation "
+                      "(|2 AUC - 1|) and the next strongest that is not a function of it (a scale factor and the "
+                      "value it scales are one parameter); the first varied ones when every run is stable.")

@@ -1,0 +1,176 @@
+"""``rbstab analyze`` end to end: JSON records, analysis files, errors, robustness of a sweep, report pages."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+from conftest import ROOT
+
+from rbstab.analysis import read_analysis, robustness, wilson_interval
+from rbstab.analysis.robustness import separation
+from rbstab_cli.main import cli
+
+CASE1 = str(ROOT / "configs/paper/case1_permanent.yaml")
+CASE3 = str(ROOT / "configs/paper/case3_embedded.yaml")
+SLIDING = str(ROOT / "configs/examples/sliding.yaml")
+
+
+def _invoke(*args):
+    return CliRunner().invoke(cli, ["analyze", *args], catch_exceptions=False)
+
+
+def _strict(text: str) -> dict:
+    """A JSON record, refusing NaN and Infinity (not JSON)."""
+    def refuse(name):
+        raise ValueError(f"{name} in a JSON record")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_records_and_files(tmp_path):
+    out = tmp_path / "analysis"
+    result = _invoke(CASE1, CASE3, "-o", str(out), "--json", "--samples", "500", "--basin",
+                     "initial_state.omega.0=-30:30:3", "--basin", "initial_state.omega.1=-30:30:3", "-j", "1")
+    assert result.exit_code == 0, result.output
+    records = [_strict(line) for line in result.stdout.splitlines()]
+    assert [r["name"] for r in records] == ["case1_permanent", "case3_embedded"]
+    for r in records:
+        assert {"name", "variant", "equilibrium", "eigenvalues", "verdict"} <= set(r)
+        assert r["verdict"] == "asymptotically stable" and r["certificate"]["holds"]
+        real = [re for re, _ in r["eigenvalues"]]
+        assert real == sorted(real, reverse=True) and len(real) == len(r["equilibrium"])
+        assert r["basin"]["shape"] == [3, 3]
+    assert len(records[0]["equilibrium"]) == 6 and records[0]["equilibrium"][0] != 0  # reduced state, gravity
+    assert "asymptotically stable" in result.stderr  # the text goes to stderr with --json
+    ds = read_analysis(out / "case3_embedded.analysis.nc")
+    assert ds.attrs["verdict"] == "asymptotically stable" and ds.attrs["rbstab_format"] == "rbstab-analysis-1"
+    for name, var in ds.data_vars.items():
+        assert "units" in var.attrs and "long_name" in var.attrs, name
+    assert ds["equilibrium_omega"].attrs["units"] == "rad s-1"
+    assert ds["basin_outcome"].shape == (3, 3) and ds["basin_x"].attrs["config_key"] == "initial_state.omega.0"
+    s = ds["eigenvalue_real"].values + 1j * ds["eigenvalue_imag"].values
+    np.testing.assert_allclose(s, [complex(*e) for e in records[1]["eigenvalues"]])
+    with xr.open_dataset(out / "case1_permanent.analysis.nc", engine="h5netcdf") as plain:  # a netCDF-4 file
+        assert plain.sizes["state"] == 6
+
+
+def test_sign_law_says_the_linearisation_does_not_exist(tmp_path):
+    result = _invoke(SLIDING, "--set", "controller.boundary_layer=0", "-o", str(tmp_path), "--json",
+                     "--no-certificate", "--no-simulation", "--boundary-layer", "0.002")
+    assert result.exit_code == 0, result.output
+    record = _strict(result.stdout)
+    assert record["analysed_boundary_layer"] == 0.002
+    assert "linearisation does not exist" in record["notes"][0]
+    assert "linearisation does not exist" in result.stderr
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--basin", "initial_state.omega.0=-1:1:3"], "exactly twice"),
+    (["--basin", "initial_state.x.0=-1:1:3", "--basin", "initial_state.omega.0=-1:1:3"], "not a state of this variant"),
+    (["--basin", "initial_state.omega.0=1:-1:3", "--basin", "initial_state.omega.1=-1:1:3"], "lo < hi"),
+    (["--set", "controller.k_r=[1, 2]"], "controller.k_r"),
+    (["--boundary-layer", "0.001"], "not the pure sign law"),
+    ([SLIDING, "--boundary-layer", "0.001"], "case1_permanent: --boundary-layer"),  # checked before any runs
+    (["--robustness", "."], "not a sweep folder"),
+])
+def test_bad_input_is_a_clear_error_and_writes_nothing(tmp_path, args, message):
+    result = CliRunner().invoke(cli, ["analyze", CASE1, "-o", str(tmp_path / "out"), *args])
+    assert result.exit_code != 0
+    assert message in result.output
+    assert "Traceback" not in result.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_wilson_interval_and_separation():
+    lo, hi = wilson_interval(7, 10, 0.95)  # the textbook example: 0.3968 .. 0.8922
+    assert lo == pytest.approx(0.39677, abs=1e-4) and hi == pytest.approx(0.89221, abs=1e-4)
+    assert wilson_interval(0, 20) == (0.0, pytest.approx(0.16113, abs=1e-4))
+    assert wilson_interval(20, 20)[1] == 1.0
+    rng = np.random.default_rng(3)
+    x = rng.uniform(0, 1, 200)
+    stable = x > 0.4
+    s = separation("k", x, stable)
+    assert s.auc == 1.0 and s.stable_side == "above" and s.balanced_accuracy == 1.0
+    assert x[~stable].max() < s.threshold < x[stable].min()
+    noise = separation("noise", rng.uniform(0, 1, 200), stable)
+    assert abs(noise.auc - 0.5) < 0.15 and noise.strength < 0.3
+    # AUC against the brute force over all pairs
+    a, b = x[stable], x[~stable]
+    brute = np.mean((a[:, None] > b[None, :]) + 0.5 * (a[:, None] == b[None, :]))
+    assert separation("k", np.round(x, 1), stable).auc == pytest.approx(
+        np.mean((np.round(a, 1)[:, None] > np.round(b, 1)[None, :]) + 0.5 * (np.round(a, 1)[:, None] ==
+                                                                             np.round(b, 1)[None, :])))
+    assert brute == 1.0
+
+
+@pytest.fixture(scope="module")
+def pendulum_sweep(tmp_path_factory):
+    """A sweep over K_r of the pinned inverted pendulum: unstable below k_r = m g L = 172 N m/rad."""
+    from rbstab.config import load_config
+    from rbstab.sweep import run_sweep, spec_from_mapping
+
+    base = load_config(CASE1, ["body.attachment_point=[0, 0, -0.42]", "controller.k_t=[0, 0, 0]",
+                               "controller.l_t=[0, 0, 0]", "initial_state.omega=[0.5, 0.5, 0]",
+                               "simulation.t_end=10", "simulation.n_samples=101"]).resolved
+    spec = spec_from_mapping({"name": "pendulum", "base": base, "grid": {}, "zip": {},
+                              "random": {"n": 24, "seed": 1, "params": {
+                                  "controller.k_r": {"scale_uniform": [0.1, 1.5]},
+                                  "body.mass": {"scale_uniform": [0.9, 1.1]}}}})
+    folder = tmp_path_factory.mktemp("sweeps")
+    run_sweep(spec, folder, jobs=1, progress=False)
+    return folder / "pendulum"
+
+
+def test_robustness_of_a_sweep(pendulum_sweep, tmp_path):
+    result = robustness(pendulum_sweep)
+    (group,) = result.groups
+    assert group.n_runs == 24 and 0 < group.n_stable < 24
+    lo, hi = group.interval
+    assert lo < group.fraction < hi
+    best = group.separations[0]
+    assert best.parameter in ("k_r_scale", "k_r_0", "k_r_1", "k_r_2") and best.stable_side == "above"
+    assert best.auc > 0.9
+    # the linearisation agrees: k_r above m g L (172 N m/rad for m = 41 kg) holds the pendulum up
+    assert best.balanced_accuracy > 0.9
+    # the sweep's own 'converged' (|v(t_end)| <= ratio |v(0)|) does not count the fallen pendulums (v < 0)
+    assert group.n_disagree == 0
+    cli_result = _invoke("--robustness", str(pendulum_sweep), "-o", str(tmp_path), "--json")
+    assert cli_result.exit_code == 0, cli_result.output
+    record = _strict(cli_result.stdout)
+    assert record["kind"] == "robustness" and record["groups"][0]["n_stable"] == group.n_stable
+    ds = read_analysis(tmp_path / "pendulum.robustness.analysis.nc")
+    assert ds.attrs["kind"] == "robustness" and ds["auc"].sizes["parameter"] >= 2
+
+
+def test_report_pages(tmp_path, pendulum_sweep):
+    out = tmp_path / "analysis"
+    assert _invoke(CASE3, "-o", str(out), "--samples", "300", "-j", "1", "--basin", "initial_state.omega.0=-20:20:3",
+                   "--basin", "initial_state.omega.1=-20:20:3", "--robustness", str(pendulum_sweep)).exit_code == 0
+    report = tmp_path / "report"
+    result = CliRunner().invoke(cli, ["report", str(out), "-o", str(report), "--format", "html", "--format", "md"])
+    assert result.exit_code == 0, result.output
+    page = (report / "index.md").read_text()
+    for text in ("Stability analysis: case3_embedded", "Eigenvalues of the Jacobian", "Lyapunov certificate",
+                 "basin map", "Robustness: sweep pendulum", "Parameters that separate"):
+        assert text in page, text
+    figures = {p.name for p in (report / "figures").glob("*.png")}
+    assert {"analysis_case3_embedded_poles.png", "analysis_case3_embedded_basin.png",
+            "analysis_case3_embedded_sampled_rate.png", "robustness_pendulum.png"} <= figures
+    manifest = json.loads((report / "report.json").read_text())
+    assert len(manifest["analyses"]) == 2
+
+
+def test_unstable_configuration_is_reported_not_refused(tmp_path):
+    result = _invoke(CASE1, "-o", str(tmp_path), "--json", "--samples", "100", "--set", "name=pendulum",
+                     "--set", "body.attachment_point=[0, 0, -0.42]", "--set", "controller.k_t=[0, 0, 0]",
+                     "--set", "controller.l_t=[0, 0, 0]", "--set", "controller.k_r=[100, 100, 100]")
+    assert result.exit_code == 0, result.output  # the verdict is data
+    record = _strict(result.stdout)
+    assert record["verdict"] == "unstable" and record["eigenvalues"][0][0] > 0
+    assert record["certificate"]["holds"] is False and record["certificate"]["sublevel"] == 0.0
+    assert "fastest-growing mode" in result.stderr
+    assert read_analysis(tmp_path / "pendulum.analysis.nc").attrs["verdict"] == "unstable"
