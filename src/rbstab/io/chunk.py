@@ -483,18 +483,10 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
         If its checksums do not match (the digest of its text and attributes, the
         Fletcher-32 checksums of the per-run values; ``data``: of the traces too).
     """
-    import h5py
-
-    from .integrity import DamagedResultError, reading, verify_open_file
+    from .integrity import DamagedResultError, open_result, verify_open_file
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no such result file: {path}")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
-    with reading(path), f:
+    with open_result(path) as f:
         if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)

@@ -374,18 +374,10 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     rbstab.io.integrity.DamagedResultError
         If ``verify`` and its checksums do not match (a subclass of NotAResultFile).
     """
-    import h5py
-
-    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, reading, verify_open_file
+    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, open_result, verify_open_file
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no such result file: {path}")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
-    with reading(path), f:
+    with open_result(path) as f:
         attrs = {k: _plain(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
         if attrs.get("rbstab_format") == FORMAT and verify:
             verify_open_file(f, path, data=data)

@@ -48,6 +48,7 @@ __all__ = [
     "fletcher32_chunks",
     "VERIFY_BLOCK_BYTES",
     "reading",
+    "open_result",
 ]
 
 #: Root attribute holding the file's :func:`content_digest` (hex SHA-256).
@@ -299,6 +300,23 @@ def verify_file(path: str | os.PathLike, *, data: bool = True) -> bool:
     DamagedResultError
         If a checksum does not match.
     """
+    with open_result(path) as f:
+        return verify_open_file(f, path, data=data)
+
+
+@contextmanager
+def open_result(path: str | os.PathLike) -> Iterator[Any]:
+    """An rbstab file open for reading (an ``h5py.File``), its reads wrapped in :func:`reading`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    NotAResultFile
+        If it is not an HDF5 file.
+    DamagedResultError
+        For what h5py raises on a damaged file while the block reads it.
+    """
     import h5py
 
     path = Path(path)
@@ -309,4 +327,4 @@ def verify_file(path: str | os.PathLike, *, data: bool = True) -> bool:
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
     with reading(path), f:
-        return verify_open_file(f, path, data=data)
+        yield f
