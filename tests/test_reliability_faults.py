@@ -128,6 +128,18 @@ def test_full_disk_stops_a_sweep_with_an_exact_index(tmp_path, monkeypatch):
     assert again.n_skipped == 3 and again.counts["success"] == 6
 
 
+def test_an_unwritable_index_is_an_os_error_and_the_results_stay(tmp_path):
+    """(It crashed the sweep with a traceback; the CLI now says it in one line, exit 1.)"""
+    spec = _spec(n=2)
+    (tmp_path / "faults" / "index.csv").mkdir(parents=True)  # something in the index's way
+    with pytest.raises(IsADirectoryError, match="index.csv"):
+        run_sweep(spec, tmp_path, executor=SerialExecutor(), progress=False)
+    (tmp_path / "faults" / "index.csv").rmdir()
+    again = run_sweep(spec, tmp_path, executor=SerialExecutor(), progress=False)
+    assert again.n_skipped == 2 and again.counts["success"] == 2
+    _no_temporaries(tmp_path)
+
+
 def test_output_folder_faults_are_one_line_before_any_run(tmp_path, monkeypatch):
     import rbstab_cli._common as common
 
