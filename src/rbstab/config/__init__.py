@@ -44,7 +44,7 @@ Schema (the keys are public; units in brackets)::
 
 Limits (docs/reliability.md): every number is at most 1e12 in magnitude; the mass and the
 eigenvalues of the matrices the equations invert (inertia, l_d) are at least 1e-12;
-``name`` has at most 200 characters; ``n_samples`` at most 1e7 (~800 bytes each in
+``name`` has at most 200 characters; ``n_samples`` at most 1e7 (~1400 bytes each in
 memory); samples are at least 1e-12 s apart. ``max_steps`` and ``max_wall_time`` bound
 how long a run may take, not what it computes: they are not part of the run's
 ``config_hash`` (a run stopped by them is ``failed``; ``--retry-failed`` reruns it).

@@ -92,10 +92,11 @@ MIN_INVERTED = 1e-12
 #: Longest run ``name`` (it becomes ``<name>.h5`` and a hidden temporary ``.<name>.h5.*.tmp``,
 #: within the 255 bytes most file systems allow).
 MAX_NAME_LENGTH = 200
-#: Memory a run holds per output sample [bytes] (the state, 36 output columns and their
-#: post-processing; measured ~750 on Case 3).
-BYTES_PER_SAMPLE = 800
-#: Most output samples of a run (~7.5 GiB of memory at :data:`BYTES_PER_SAMPLE`).
+#: Memory a run holds per output sample [bytes] at its peak, when its file is written (the
+#: state, 36 output columns, their post-processing and the file's image; measured ~1320 on
+#: Case 3 with 10^6 samples).
+BYTES_PER_SAMPLE = 1400
+#: Most output samples of a run (~13 GiB of memory at :data:`BYTES_PER_SAMPLE`).
 MAX_SAMPLES = 10_000_000
 #: Closest sample spacing t_end / (n_samples - 1) [s]: closer samples are not distinct
 #: times to the integrator and the numerical dv/dt divides by their spacing.

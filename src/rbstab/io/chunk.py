@@ -416,10 +416,11 @@ class ChunkWriter:
         for name in self._traces:
             f.variables[name].attrs["coordinates"] = self._coordinates
         f.attrs.update(self.attrs)
-        from .integrity import DIGEST_ATTR, content_digest
+        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest, data_digest
 
         f.flush()
         f.attrs[DIGEST_ATTR] = content_digest(f._h5file)
+        f.attrs[DATA_DIGEST_ATTR] = data_digest(f._h5file, self.path)
 
     def _columns(self) -> dict[str, list]:
         names: dict[str, None] = dict.fromkeys(_COORDS)
@@ -490,25 +491,18 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
         If its checksums do not match (the digest of its text and attributes, the
         Fletcher-32 checksums of the per-run values; ``data``: of the traces too).
     """
-    import h5py
-
-    from .integrity import DamagedResultError, verify_open_file
+    from .integrity import DamagedResultError, open_result, verify_open_file
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no such result file: {path}")
-    try:
-        f = h5py.File(path, "r")
-    except OSError as exc:
-        raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
-    with f:
+    with open_result(path) as f:
         if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
         store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
         try:
-            columns = {k: _column(f[k]) for k in f if f[k].ndim == 1 and k not in ("axis", "time")
-                       and "run" in f and f[k].shape[0] == f["run"].shape[0]}
+            n_runs = f["run"].shape[0] if "run" in f else -1
+            datasets = {k: f[k] for k in f if k not in ("axis", "time")}
+            columns = {k: _column(d) for k, d in datasets.items() if d.ndim == 1 and d.shape[0] == n_runs}
         except OSError as exc:  # a Fletcher-32 checksum that does not match
             raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
     if "run" not in columns or "run_id" not in columns:

@@ -310,9 +310,13 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
             _write_events(w, root, switching)
         for key, value in attrs.items():
             w.attr(root, key, value)
-        from .integrity import DIGEST_ATTR, content_digest
+        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest, data_digest_of
 
+        f.flush()
         w.attr(root, DIGEST_ATTR, content_digest(f))
+        numbers = {"time": np.ascontiguousarray(time, dtype=float)}
+        numbers.update({k: np.ascontiguousarray(v, dtype=float) for k, v in outputs.items()})
+        w.attr(root, DATA_DIGEST_ATTR, data_digest_of(numbers))
         f.flush()
         return f.id.get_file_image()
 
@@ -408,20 +412,13 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     rbstab.io.integrity.DamagedResultError
         If ``verify`` and its checksums do not match (a subclass of NotAResultFile).
     """
-    import h5py
-
-    from .integrity import DIGEST_ATTR, verify_open_file
+    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, open_result, verify_open_file
 
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no such result file: {path}")
-    try:
-        with h5py.File(path, "r") as f:
-            attrs = {k: _plain(v) for k, v in f.attrs.items() if k != DIGEST_ATTR}
-            if attrs.get("rbstab_format") == FORMAT and verify:
-                verify_open_file(f, path, data=data)
-    except OSError as exc:
-        raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
+    with open_result(path) as f:
+        attrs = {k: _plain(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
+        if attrs.get("rbstab_format") == FORMAT and verify:
+            verify_open_file(f, path, data=data)
     if attrs.get("rbstab_format") != FORMAT:
         raise NotAResultFile(f"{path}: not an rbstab run result (no rbstab_format = {FORMAT!r} attribute)")
     return attrs

@@ -6,22 +6,29 @@ copy, an editor) are found before they are used:
 
 - **numbers**: every numeric dataset is written with HDF5's Fletcher-32 filter, a checksum
   of each chunk that HDF5 verifies on every read of it: a damaged chunk raises instead of
-  returning wrong numbers, in every reader (h5py, h5netcdf, xarray, netCDF-C);
+  returning wrong numbers, in every reader (h5py, h5netcdf, xarray, netCDF-C); and the
+  SHA-256 of every numeric dataset's values, :func:`data_digest`, is the root attribute
+  :data:`DATA_DIGEST_ATTR` (a damaged chunk *address* can make HDF5 read zeros past the
+  end of the file, whose Fletcher-32 sum is zero too: found by random bit flips);
 - **everything else**: the text (a store's ``config``, ``status``, ``message`` columns, the
   ``axis`` labels), every attribute (a run file's status, config and summary figures, the
-  units) and the structure (each dataset's name, type, shape and filter) lie outside
-  those chunks (HDF5 keeps strings in a heap without checksums); their SHA-256, the
-  :func:`content_digest`, is the root attribute :data:`DIGEST_ATTR`.
+  units) and the structure (each dataset's type, shape, chunks, filters and where its
+  chunks are) lie outside those chunks (HDF5 keeps strings in a heap without
+  checksums); their SHA-256, the :func:`content_digest`, is the root attribute
+  :data:`DIGEST_ATTR`.
 
-:func:`verify_file` checks both: the digest, then every chunk of every numeric dataset
-(read block by block, at most :data:`VERIFY_BLOCK_BYTES` at a time). A file written
-before checksums existed (no :data:`DIGEST_ATTR`) is accepted as unverified.
+:func:`verify_file` checks the content digest and, with ``data``, reads every numeric
+dataset block by block (at most :data:`VERIFY_BLOCK_BYTES` at a time: Fletcher-32 checked
+by HDF5) and checks the data digest. A file written before checksums existed (no
+:data:`DIGEST_ATTR`) is accepted as unverified.
 """
 
 from __future__ import annotations
 
 import hashlib
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -31,27 +38,54 @@ from .hdf5 import NotAResultFile
 
 __all__ = [
     "DIGEST_ATTR",
+    "DATA_DIGEST_ATTR",
     "DamagedResultError",
     "content_digest",
+    "data_digest",
+    "data_digest_of",
     "verify_file",
     "verify_open_file",
     "fletcher32_chunks",
     "VERIFY_BLOCK_BYTES",
+    "reading",
+    "open_result",
 ]
 
 #: Root attribute holding the file's :func:`content_digest` (hex SHA-256).
 DIGEST_ATTR = "rbstab_digest"
+#: Root attribute holding the file's :func:`data_digest` (hex SHA-256).
+DATA_DIGEST_ATTR = "rbstab_data_digest"
 #: Most bytes of a dataset read at once by :func:`verify_file`.
 VERIFY_BLOCK_BYTES = 32 * 2**20
 #: Attributes left out of the digest: the digest itself, and the bookkeeping of dimension
 #: scales (object references, whose values are file addresses). Names starting with
 #: ``_`` (netCDF's ``_Netcdf4Dimid``, ``_FillValue`` ...) are left out as well.
-_BOOKKEEPING = frozenset({DIGEST_ATTR, "DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME"})
+_BOOKKEEPING = frozenset({DIGEST_ATTR, DATA_DIGEST_ATTR, "DIMENSION_LIST", "REFERENCE_LIST", "CLASS", "NAME"})
 
 
 class DamagedResultError(NotAResultFile):
     """A result or store file whose checksums do not match its content: it was changed
     after rbstab wrote it. Its runs must not be used (a sweep reruns them)."""
+
+
+@contextmanager
+def reading(path: str | os.PathLike) -> Iterator[None]:
+    """Turn what h5py raises on a damaged file into :class:`DamagedResultError`.
+
+    Wrap the reads of a file that opened as HDF5: a changed byte in its metadata makes
+    h5py raise ``RuntimeError``, ``KeyError``, ``OSError``... instead of returning.
+    """
+    try:
+        yield
+    except (DamagedResultError, FileNotFoundError):
+        raise
+    except NotAResultFile:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError, IndexError, AttributeError,
+            UnicodeDecodeError) as exc:
+        raise DamagedResultError(
+            f"{path}: damaged: its HDF5 structure cannot be read ({type(exc).__name__}: {exc})"
+        ) from None
 
 
 def fletcher32_chunks(shape: tuple[int, ...], itemsize: int = 8, target: int = 2**20) -> tuple[int, ...] | None:
@@ -76,6 +110,50 @@ def _canonical(value: Any) -> bytes:
     return array.dtype.str.encode() + repr(array.shape).encode() + np.ascontiguousarray(array).tobytes()
 
 
+def _structure(dataset) -> str:
+    """What HDF5 needs to decode a dataset's numbers: its type (HDF5's encoding), shape,
+    chunks, filters, and how many chunks are stored and their bytes (a chunk HDF5 believes
+    unwritten would read as its fill value, with no checksum to fail)."""
+    dcpl = dataset.id.get_create_plist()
+    filters = [dcpl.get_filter(i)[0] for i in range(dcpl.get_nfilters())] if dataset.chunks else []
+    return (f"{dataset.id.get_type().encode().hex()} shape={dataset.shape} chunks={dataset.chunks} "
+            f"filters={filters} stored={_chunk_places(dataset)} bytes={dataset.id.get_storage_size()}")
+
+
+def _chunk_places(dataset) -> list:
+    """(offset in the dataset, address in the file, size, filter mask) of each stored chunk:
+    a chunk address changed to a place past the end of the file reads as zeros, whose
+    Fletcher-32 checksum is zero too."""
+    if not dataset.chunks:
+        return []
+    places: list = []
+    record = lambda info: places.append((info.chunk_offset, info.byte_offset, info.size, info.filter_mask))  # noqa: E731
+    try:
+        dataset.id.chunk_iter(record)  # HDF5 >= 1.14: one pass over the chunk index
+    except AttributeError:  # pragma: no cover - older HDF5: one lookup per chunk
+        places = []
+        for i in range(dataset.id.get_num_chunks()):
+            record(dataset.id.get_chunk_info(i))
+    return places
+
+
+def _attribute(obj, key: str) -> Any:
+    """An attribute's value through h5py's low-level API (twice as fast as ``obj.attrs[key]``,
+    which matters for files of ~100 attributes); strings come back as bytes."""
+    import h5py
+
+    aid = h5py.h5a.open(obj.id, key.encode())
+    try:
+        shape = aid.shape
+        if shape is None:  # an empty (null) dataspace
+            return obj.attrs[key]
+        value = np.empty(shape, dtype=aid.dtype)
+        aid.read(value)
+        return value
+    finally:
+        aid.close()
+
+
 def content_digest(f) -> str:
     """SHA-256 (hex) of what the Fletcher-32 chunks do not cover (module docstring).
 
@@ -84,6 +162,8 @@ def content_digest(f) -> str:
     f : h5py.File
         An open file (rbstab's files are flat: datasets at the root).
     """
+    import h5py
+
     h = hashlib.sha256()
 
     def feed(tag: str, value: Any) -> None:
@@ -92,36 +172,79 @@ def content_digest(f) -> str:
     def attributes(obj, where: str) -> None:
         for key in sorted(obj.attrs):
             if key not in _BOOKKEEPING and not key.startswith("_"):
-                feed(f"{where}@{key}", obj.attrs[key])
+                feed(f"{where}@{key}", _attribute(obj, key))
 
     attributes(f, "/")
     for name in sorted(f):
         obj = f[name]
-        if not hasattr(obj, "dtype"):  # a group: rbstab writes none
-            feed(f"/{name}", "group")
+        if not isinstance(obj, h5py.Dataset):  # a group or a named type: rbstab writes none
+            feed(f"/{name}", type(obj).__name__)
             continue
-        feed(f"/{name}", f"{obj.dtype.str} {obj.shape} fletcher32={bool(obj.fletcher32)}")
+        feed(f"/{name}", _structure(obj))
         attributes(obj, f"/{name}")
         if obj.dtype.kind in "OSU":
             feed(f"/{name}=", obj[...])
     return h.hexdigest()
 
 
-def _read_all(dataset, name: str, path: str) -> None:
-    """Read every chunk of a numeric dataset (HDF5 checks Fletcher-32 on each)."""
-    try:
-        if dataset.chunks is None or dataset.size == 0:
-            dataset[...]
-            return
-        rows = max(1, VERIFY_BLOCK_BYTES // max(1, dataset.nbytes // max(dataset.shape[0], 1)))
+def _blocks(dataset):
+    """The values of a dataset, block by block (whole chunks, ~VERIFY_BLOCK_BYTES each)."""
+    if not dataset.shape or dataset.size == 0:
+        yield dataset[()]
+        return
+    rows = max(1, VERIFY_BLOCK_BYTES // max(1, dataset.nbytes // dataset.shape[0]))
+    if dataset.chunks:
         rows = max(dataset.chunks[0], rows - rows % dataset.chunks[0])
-        for lo in range(0, dataset.shape[0], rows):
-            dataset[lo : lo + rows]
-    except OSError as exc:
-        raise DamagedResultError(
-            f"{path}: damaged: the data of '{name}' fail their checksum ({exc}); the file was changed "
-            "after rbstab wrote it"
-        ) from None
+    for lo in range(0, dataset.shape[0], rows):
+        yield dataset[lo : lo + rows]
+
+
+def _digest_values(named) -> str:
+    """SHA-256 of ``(name, dtype, shape, blocks of values)`` in the order given."""
+    h = hashlib.sha256()
+    for name, dtype, shape, blocks in named:
+        h.update(f"{name}\x1e{np.dtype(dtype).str}{tuple(shape)}\x1d".encode())
+        for block in blocks:
+            h.update(np.ascontiguousarray(block, dtype=dtype).tobytes())
+    return h.hexdigest()
+
+
+def data_digest(f, path: str | os.PathLike = "") -> str:
+    """SHA-256 (hex) of the values of every numeric dataset, by name, as HDF5 decodes them.
+
+    Reads every chunk (so HDF5 checks each one's Fletcher-32 sum), at most
+    :data:`VERIFY_BLOCK_BYTES` at a time.
+
+    Raises
+    ------
+    DamagedResultError
+        When a chunk fails its Fletcher-32 checksum.
+    """
+    import h5py
+
+    def checked(dataset, name):
+        try:
+            yield from _blocks(dataset)
+        except OSError as exc:
+            raise DamagedResultError(
+                f"{path}: damaged: the data of '{name}' fail their checksum ({exc}); the file was changed "
+                "after rbstab wrote it"
+            ) from None
+
+    def named():
+        for name in sorted(f):
+            dataset = f[name]
+            if isinstance(dataset, h5py.Dataset) and dataset.dtype.kind not in "OSU":
+                yield name, dataset.dtype, dataset.shape, checked(dataset, name)
+
+    return _digest_values(named())
+
+
+def data_digest_of(arrays) -> str:
+    """:func:`data_digest` of the numeric arrays a writer is about to store (a mapping name ->
+    array, the strings left out as the file's are): the same value, without reading back."""
+    return _digest_values((name, np.asarray(arrays[name]).dtype, np.shape(arrays[name]), [arrays[name]])
+                          for name in sorted(arrays) if np.asarray(arrays[name]).dtype.kind not in "OSU")
 
 
 def verify_open_file(f, path: str | os.PathLike, *, data: bool = True) -> bool:
@@ -132,7 +255,7 @@ def verify_open_file(f, path: str | os.PathLike, *, data: bool = True) -> bool:
     stored = stored.decode() if isinstance(stored, bytes) else str(stored)
     try:
         actual = content_digest(f)
-    except (OSError, KeyError, ValueError, TypeError) as exc:
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError, AttributeError, IndexError) as exc:
         raise DamagedResultError(f"{path}: damaged: cannot read its attributes or text ({exc})") from None
     if actual != stored:
         raise DamagedResultError(
@@ -140,10 +263,14 @@ def verify_open_file(f, path: str | os.PathLike, *, data: bool = True) -> bool:
             f"({DIGEST_ATTR}); the file was changed after rbstab wrote it"
         )
     if data:
-        for name in sorted(f):
-            obj = f[name]
-            if hasattr(obj, "dtype") and obj.dtype.kind not in "OSU":
-                _read_all(obj, name, str(path))
+        expected = f.attrs.get(DATA_DIGEST_ATTR)
+        actual = data_digest(f, path)
+        expected = expected.decode() if isinstance(expected, bytes) else expected
+        if expected is not None and actual != str(expected):
+            raise DamagedResultError(
+                f"{path}: damaged: its numbers do not match their checksum ({DATA_DIGEST_ATTR}); the file was "
+                "changed after rbstab wrote it"
+            )
     return True
 
 
@@ -173,6 +300,23 @@ def verify_file(path: str | os.PathLike, *, data: bool = True) -> bool:
     DamagedResultError
         If a checksum does not match.
     """
+    with open_result(path) as f:
+        return verify_open_file(f, path, data=data)
+
+
+@contextmanager
+def open_result(path: str | os.PathLike) -> Iterator[Any]:
+    """An rbstab file open for reading (an ``h5py.File``), its reads wrapped in :func:`reading`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` does not exist.
+    NotAResultFile
+        If it is not an HDF5 file.
+    DamagedResultError
+        For what h5py raises on a damaged file while the block reads it.
+    """
     import h5py
 
     path = Path(path)
@@ -182,5 +326,5 @@ def verify_file(path: str | os.PathLike, *, data: bool = True) -> bool:
         f = h5py.File(path, "r")
     except OSError as exc:
         raise NotAResultFile(f"{path}: not an HDF5 file ({exc})") from None
-    with f:
-        return verify_open_file(f, path, data=data)
+    with reading(path), f:
+        yield f

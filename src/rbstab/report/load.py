@@ -284,8 +284,10 @@ def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
     from ..io.hdf5 import read_attributes
 
     path = Path(path)
+    from ..io.integrity import reading
+
     attrs = read_attributes(path, data=True)  # every checksum verified
-    with h5py.File(path, "r") as f:
+    with reading(path), h5py.File(path, "r") as f:
         absent = [n for n in _REQUIRED_SERIES if n not in f]
     return _run_data(path, attrs, absent, sweep)
 

@@ -205,18 +205,26 @@ class LocalExecutor(Executor):
         self._workers = max(1, min(self.jobs, n_items))
 
     def start(self) -> None:
-        """Start the fork server and one worker now, in a background thread, and return at once.
+        """Start the fork server now, in a background thread, and return at once.
 
-        The fork server imports numpy, h5py and rbstab while the caller goes on (e.g.
-        validating the sweep's runs), instead of after it; the other workers fork from it
-        in a few milliseconds when items need them (never more than the items).
+        The fork server imports numpy, h5py and rbstab and loads the compiled kernels while
+        the caller goes on (e.g. validating the sweep's runs), instead of after it; the
+        workers fork from it in a few milliseconds when items need them (never more than
+        the items in flight). Where there is no fork server (``spawn``), one worker is
+        started instead.
         """
         if self._pool is not None or self._starter is not None:
             return
 
         def spawn() -> None:
+            ctx = _mp_context()
             pool = self._new_pool()
-            pool.submit(_warm)
+            if ctx.get_start_method() == "forkserver":
+                from multiprocessing import forkserver
+
+                forkserver.ensure_running()
+            else:  # pragma: no cover - platforms without forkserver
+                pool.submit(_warm)
             self._pool = pool
 
         self._starter = threading.Thread(target=spawn, daemon=True, name="rbstab-pool-start")

@@ -1,0 +1,63 @@
+"""Every run ends: runs that would never finish end as ``failed`` with the reason, on
+both engines, and a sweep records them and goes on (docs/reliability.md)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+
+from rbstab.config import config_from_mapping
+from rbstab.simulate import simulate, solve
+from rbstab.sweep import run_sweep, spec_from_mapping
+
+from conftest import ROOT, settings
+from test_reliability_faults import SerialExecutor
+
+CASE3 = yaml.safe_load((ROOT / "configs" / "paper" / "case3_embedded.yaml").read_text())
+#: Omega of 1e12 rad/s: allowed (at the magnitude limit), but the steps it needs are ~1e-13 s.
+RUNAWAY = [1e12, 0.0, 0.0]
+
+
+def _config(omega=(16.0, 32.0, -16.0), **simulation):
+    data = {**CASE3, "initial_state": {**CASE3.get("initial_state", {}), "omega": list(omega)},
+            "simulation": {**CASE3.get("simulation", {}), "t_end": 0.5, "n_samples": 51, **simulation}}
+    return config_from_mapping(data)
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_run_that_cannot_reach_t_end_stops_at_its_step_limit(engine):
+    result = simulate(_config(RUNAWAY, max_steps=200), engine=engine)
+    assert result.status == "failed"
+    assert result.message.startswith("step limit: 200 steps taken (simulation.max_steps), reaching only t = ")
+    assert float(result.message.rsplit("t = ", 1)[1].split()[0]) < 1e-6  # far from t_end
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_run_past_its_wall_time_limit_stops(engine):
+    result = simulate(_config(RUNAWAY, max_wall_time=0.05), engine=engine)
+    assert result.status == "failed" and result.message.startswith("timeout: the run exceeded 0.05 s of wall time")
+    assert result.wall_time < 2.0
+    ok = simulate(_config(), engine=engine, timeout=60.0)  # a budget a run meets changes nothing
+    assert ok.ok and ok.summary == simulate(_config(), engine=engine).summary
+
+
+def test_a_first_step_failure_is_a_failed_run():
+    """A right-hand side that is NaN at once: scipy fails before its first sample
+    (``sol.y`` is then an empty list, which raised AttributeError)."""
+    variant = _config().make_variant()
+    y0 = variant.initial_state(_config().initial_state)
+    y0[3] = np.nan
+    time, states, status, message, _ = solve(variant, y0, settings(t_end=0.5, n_samples=51, method="RK45"))
+    assert status == "failed" and states.shape == (51, y0.size) and np.isnan(states).all()
+
+
+def test_a_sweep_records_a_runaway_run_and_goes_on(tmp_path):
+    base = {**CASE3, "simulation": {**CASE3.get("simulation", {}), "t_end": 0.2, "n_samples": 21,
+                                    "max_steps": 500}}
+    spec = spec_from_mapping({"name": "runaway", "base": base,
+                              "grid": {"initial_state.omega": [[16, 32, -16], RUNAWAY, [10, 20, -10]]}})
+    outcome = run_sweep(spec, tmp_path, executor=SerialExecutor(), progress=False)
+    assert outcome.counts == {"success": 2, "failed": 1, "error": 0, "pending": 0}
+    (run_id, status, message), = outcome.problems
+    assert status == "failed" and message.startswith("step limit: 500 steps")
