@@ -510,3 +510,16 @@ def test_parameter_columns_and_time_grids_come_from_the_spec():
                                                   for r in runs}) == 1
     varied = spec_from_mapping({"name": "t", "base": str(CASE3), "grid": {"simulation.t_end": [0.1, 0.2]}})
     assert len(time_grids_of(varied)) > 1
+
+
+def test_sweep_size_and_base_files_are_bounded(tmp_path):
+    """A spec of more than MAX_RUNS runs is refused before anything is planned (with the
+    memory it would take), and a base that is not a regular file is refused in words."""
+    from rbstab.sweep.spec import MAX_RUNS
+
+    huge = {"name": "huge", "base": str(CASE3),
+            "random": {"n": MAX_RUNS + 1, "params": {"initial_state.omega": {"uniform": [0, 1]}}}}
+    with pytest.raises(SweepSpecError, match=f"the sweep has {MAX_RUNS + 1} runs .*; at most {MAX_RUNS}"):
+        spec_from_mapping(huge)
+    with pytest.raises(SweepSpecError, match="sweep key 'base': found '/dev/zero'; .*not a regular file"):
+        spec_from_mapping({"name": "dev", "base": "/dev/zero"})

@@ -258,15 +258,25 @@ class _Writer:
         return dset
 
 
+def _event_arrays(switching) -> dict[str, np.ndarray]:
+    """The ``switching`` dimension's arrays as stored: the event numbers and each variable
+    of :data:`SWITCHING_VARIABLES` (integers as they are, the rest as floats)."""
+    out = {"switching": np.arange(len(switching.time), dtype=np.int64)}
+    for key, (name, _, _) in SWITCHING_VARIABLES.items():
+        data = np.ascontiguousarray(getattr(switching, name))
+        out[key] = data if data.dtype.kind == "i" else data.astype(float)
+    return out
+
+
 def _write_events(w, root, switching) -> None:
     """The ``switching`` dimension (event number) and its variables (:data:`SWITCHING_VARIABLES`)."""
     h5ds = w.h5py.h5ds
-    scale = w.dataset(root, "switching", np.arange(len(switching.time), dtype=np.int64))
+    arrays = _event_arrays(switching)
+    scale = w.dataset(root, "switching", arrays["switching"])
     h5ds.set_scale(scale, b"switching")
     w.attr(scale, "description", "number of the located event of the pure sign law, in time order")
     for key, (name, units, description) in SWITCHING_VARIABLES.items():
-        data = np.ascontiguousarray(getattr(switching, name))
-        var = w.dataset(root, key, data if data.dtype.kind == "i" else data.astype(float))
+        var = w.dataset(root, key, arrays[key])
         h5ds.attach_scale(var, scale, 0)
         w.attr(var, "units", units)
         w.attr(var, "description", description)
@@ -316,6 +326,8 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         w.attr(root, DIGEST_ATTR, content_digest(f))
         numbers = {"time": np.ascontiguousarray(time, dtype=float)}
         numbers.update({k: np.ascontiguousarray(v, dtype=float) for k, v in outputs.items()})
+        if switching is not None:
+            numbers.update(_event_arrays(switching))
         w.attr(root, DATA_DIGEST_ATTR, data_digest_of(numbers))
         f.flush()
         return f.id.get_file_image()

@@ -80,7 +80,17 @@ __all__ = [
     "load_spec",
     "spec_from_mapping",
     "is_run_config",
+    "MAX_RUNS",
 ]
+
+
+#: Most runs of one sweep: the parent keeps an entry and an index row per run (~3 KB,
+#: :data:`BYTES_PER_RUN`) until the index is written.
+MAX_RUNS = 1_000_000
+
+#: Memory the parent holds per run of a sweep [bytes] (its entry and index row; measured
+#: ~2-3 KB for Case 3 sweeps).
+BYTES_PER_RUN = 3000
 
 
 def _plain(value: Any) -> Any:
@@ -284,21 +294,15 @@ def _read_base(entry: Any, where: str, spec_dir: Path, errors: list[str]) -> Bas
         data = copy.deepcopy(dict(entry))
         label = data.get("name") if isinstance(data.get("name"), str) else "base"
         return Base(label, data, None)
+    from ..config.yaml_io import read_yaml_file
+
     path = Path(entry).expanduser()
     if not path.is_absolute():
         path = spec_dir / path
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        errors.append(f"sweep key '{where}': found {entry!r}; config file not found: {path}")
-        return None
-    except (OSError, UnicodeDecodeError) as exc:
-        errors.append(f"sweep key '{where}': cannot read {path}: {exc}")
-        return None
-    try:
-        data = _parse_yaml(text)
+    try:  # within the YAML reader's limits (regular files, size, depth, aliases)
+        data = read_yaml_file(path, "config file")
     except ConfigError as exc:
-        errors += [f"sweep key '{where}': {path}: {line}" for line in exc.errors]
+        errors += [f"sweep key '{where}': found {entry!r}; {line}" for line in exc.errors]
         return None
     if not isinstance(data, Mapping):
         errors.append(f"sweep key '{where}': {path}: found {_kind(data)}; expected a config mapping")
@@ -382,6 +386,13 @@ def spec_from_mapping(
     errors += _overridden_sweep_keys(schema, base_overrides)
     if errors:
         raise SweepSpecError(errors, source)
+    n_runs = len(bases) * math.prod(len(v) for v in schema.grid.values()) * max(int(schema.random.n), 1) * (
+        len(next(iter(schema.zip.values()))) if schema.zip else 1)
+    if n_runs > MAX_RUNS:
+        raise SweepSpecError([
+            f"the sweep has {n_runs} runs (bases x grid points x zip entries x random.n); at most {MAX_RUNS} "
+            f"(its index alone would hold ~{n_runs * BYTES_PER_RUN / 2**30:.3g} GiB in memory): split it into "
+            "several sweeps"], source)
     random = RandomSpec(
         int(schema.random.n), int(schema.random.seed),
         tuple(Distribution.from_schema(key, d) for key, d in schema.random.params.items()),
