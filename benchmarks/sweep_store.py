@@ -82,7 +82,7 @@ def write(n: int, folder: str) -> dict:
     pool = [simulate(base.with_initial_state({"omega": [16 + i, 32, -16]})) for i in range(16)]
     directory = Path(folder) / spec.name
     (directory / RUNS_DIR).mkdir(parents=True)
-    parameters = parameter_columns(runs)
+    parameters = parameter_columns(r.params for r in runs)
     rows = {}
     t0 = time.perf_counter()
     for lo in range(0, n, 512):

@@ -142,8 +142,9 @@ def run_coords(params: Mapping[str, Any]) -> dict[str, tuple[str, Any]]:
     return out
 
 
-def parameter_columns(runs: Iterable[Any]) -> dict[str, str]:
-    """Coordinate name -> dotted config key (of the entry) of every varied value of ``runs``.
+def parameter_columns(params: Iterable[Mapping[str, Any]]) -> dict[str, str]:
+    """Coordinate name -> dotted config key (of the entry) of every varied value in
+    ``params``, the varied values of runs (``PlannedRun.params``: dotted key -> value).
 
     Raises
     ------
@@ -152,8 +153,8 @@ def parameter_columns(runs: Iterable[Any]) -> dict[str, str]:
         field names, whose names are unique across sections; checked all the same).
     """
     names: dict[str, str] = {}
-    for run in runs:
-        for name, (key, _) in run_coords(run.params).items():
+    for values in params:
+        for name, (key, _) in run_coords(values).items():
             if names.setdefault(name, key) != key:
                 raise ValueError(f"parameters {names[name]!r} and {key!r} would both be named {name!r}")
     return names

@@ -392,7 +392,7 @@ def parameter_columns_of(spec: SweepSpec) -> dict[str, str]:
     for key in scaled:
         for value in _representatives(spec, key):
             params_list.append({f"{key}:scale": value})
-    return parameter_columns(_Params(p) for p in params_list)
+    return parameter_columns(params_list)
 
 
 _TIME_GRID_KEYS = ("simulation.t_end", "simulation.n_samples")
@@ -413,11 +413,6 @@ def time_grids_of(spec: SweepSpec) -> set:
             random = key not in spec.grid and key not in spec.zip
             grids.update((key, i) for i in range(2 if random else len({repr(v) for v in values})))
     return grids
-
-
-@dataclass(frozen=True)
-class _Params:
-    params: dict
 
 
 def warning_digest(runs: Sequence[PlannedRun]) -> list[str]:

@@ -641,7 +641,7 @@ def _stop_on_machine_fault(records) -> None:
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
     rows = index_rows(runs, attrs, errors, spec.lyapunov_ratio)
     write_index(outcome.directory / INDEX_FILE, rows)
-    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameter_columns(runs))
+    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameter_columns(r.params for r in runs))
     write_summary(outcome.directory / SUMMARY_FILE, summary)
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]

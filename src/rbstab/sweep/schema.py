@@ -53,15 +53,13 @@ def numeric_array(value: Any) -> np.ndarray | None:
         return np.asarray(float(value))
     if not isinstance(value, (list, tuple)) or not value:
         return None
-    flat, stack = [], [value]
-    while stack:
+    stack = [value]
+    while stack:  # every leaf a finite number (not a bool)
         item = stack.pop()
         if isinstance(item, (list, tuple)):
             stack.extend(item)
         elif isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
             return None
-        else:
-            flat.append(item)
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):  # ragged
@@ -88,7 +86,7 @@ def _values(value: Any) -> list:
     return list(value)
 
 
-def _broadcast(what: str, a: np.ndarray, b: np.ndarray, names: str, expected: str) -> None:
+def _broadcast(a: np.ndarray, b: np.ndarray, names: str, expected: str) -> None:
     try:
         np.broadcast_shapes(a.shape, b.shape)
     except ValueError:
@@ -104,7 +102,7 @@ def _bounds(*, positive: bool):
         lo, hi = (numeric_array(v) for v in value)
         if lo is None or hi is None:
             raise Invalid("lo and hi must be finite numbers or lists of them", expected)
-        _broadcast("bounds", lo, hi, "lo and hi", expected)
+        _broadcast(lo, hi, "lo and hi", expected)
         if np.any(lo > hi):
             raise Invalid("lo > hi", expected)
         if positive and np.any(lo <= 0):
@@ -112,6 +110,12 @@ def _bounds(*, positive: bool):
         return [lo.tolist(), hi.tolist()]
 
     return check
+
+
+def _string(value: Any) -> str:
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string")
+    return value
 
 
 def _choices(value: Any) -> list:
@@ -243,7 +247,7 @@ class SweepSchema(_Section):
 
     name: Annotated[Any, _checked(_name)] = Field(
         description="letters, digits, '_', '.' and '-' (it becomes a folder name)")
-    description: Annotated[Any, _checked(_optional(lambda v: _string(v)))] = Field("", description="a string")
+    description: Annotated[Any, _checked(_optional(_string))] = Field("", description="a string")
     base: Annotated[Any, _checked(_base)] = Field(description=_BASE_EXPECTED)
     grid: dict[DottedKey, Annotated[Any, _checked(_values)]] = Field(
         default_factory=dict, description="a mapping of dotted config key -> list of values")
@@ -278,12 +282,6 @@ class SweepSchema(_Section):
         """(section, dotted key) of every varied key: grid, zip, then random (when n > 0)."""
         out = [("grid", k) for k in self.grid] + [("zip", k) for k in self.zip]
         return out + ([("random.params", k) for k in self.random.params] if self.random.n else [])
-
-
-def _string(value: Any) -> str:
-    if not isinstance(value, str):
-        raise Invalid(f"{kind_of(value)}, not a string")
-    return value
 
 
 def validate_spec(data: Any, source: str | None = None) -> SweepSchema:

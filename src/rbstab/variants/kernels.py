@@ -47,8 +47,9 @@ def body_state(y, p):
 
 @jit(inline="always")
 def constraint_force(code, e, f, d, p):
-    """(Lambda, dD/dt) of the constraint law of variant ``code`` (not ``permanent``), from
-    the variant's module."""
+    """(Lambda [N], inertial frame; dD/dt [m/s], zero without D) of the constraint law of
+    variant ``code`` (not ``permanent``) at E [m], F [m/s], D [m]: the variant module's
+    ``constraint_force`` (eqs 22, 39, 40)."""
     if code == EMBEDDED:
         return embedded.constraint_force(e, f, d, p)
     if code == VISCO_ELASTIC:
