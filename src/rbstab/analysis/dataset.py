@@ -5,8 +5,9 @@ The conventions of the run results (:mod:`rbstab.io.hdf5`): every variable has `
 (CF/UDUNITS spelling) and ``long_name`` (and ``description`` where a formula helps),
 3-vectors are split by state block over the ``axis`` dimension (x, y, z), and the global
 attributes say what the file is and where it came from (``rbstab_format``, ``name``,
-``config``, ``config_hash``, ``rbstab_version``, ``git_commit``, ``command_line``,
-``created``). Open with ``xarray.open_dataset(path, engine="h5netcdf")`` or
+``config``, ``config_hash`` and :func:`rbstab.io.metadata.provenance_attributes`:
+``Conventions``, ``rbstab_version``, ``git_commit``, ``git_dirty``, library versions,
+``command_line``, ``created``). Open with ``xarray.open_dataset(path, engine="h5netcdf")`` or
 :func:`read_analysis`.
 
 Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
@@ -32,16 +33,13 @@ per ``run`` its group, whether it was stable and its parameter values.
 
 from __future__ import annotations
 
-import datetime as _dt
 import math
 import os
-import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .. import __version__
 
 __all__ = [
     "FORMAT",
@@ -89,16 +87,14 @@ def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = Fal
 
 
 def _provenance(config, command_line: str | None) -> dict[str, Any]:
-    from ..io.hdf5 import _git_commit, canonical_config, config_hash
+    from ..io.hdf5 import canonical_config, config_hash
+    from ..io.metadata import provenance_attributes
 
     return {
         "rbstab_format": FORMAT,
         "config": config.to_yaml(),
         "config_hash": config_hash(canonical_config(config.resolved)),
-        "rbstab_version": __version__,
-        "git_commit": _git_commit(),
-        "command_line": command_line if command_line is not None else " ".join(sys.argv),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        **provenance_attributes(f"rbstab analyze {config.name}: stability analysis", command_line=command_line),
     }
 
 
@@ -296,13 +292,13 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
     }
     coords = {"group": _var(("group",), np.array([g.base for g in groups], dtype=object), "1", "base configuration"),
               "parameter": _var(("parameter",), np.array(parameters, dtype=object), "1", "swept parameter")}
+    from ..io.metadata import provenance_attributes
+
     attrs = dict(
         rbstab_format=FORMAT, kind="robustness", name=f"{result.sweep}.robustness", sweep=result.sweep,
-        folder=result.folder, confidence=result.confidence, rbstab_version=__version__,
-        lyapunov_ratio=result.ratio,
+        folder=result.folder, confidence=result.confidence, lyapunov_ratio=result.ratio,
         stability="status success and |v(t_end)| <= lyapunov_ratio |v(0)| in the sweep's simulation",
-        command_line=command_line if command_line is not None else " ".join(sys.argv),
-        created=_dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        **provenance_attributes(f"rbstab analyze --robustness {result.sweep}", command_line=command_line),
     )
     return coords, data, attrs
 

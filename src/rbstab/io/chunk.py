@@ -15,13 +15,15 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash``
   (SHA-256 of ``config`` without its run limits, :func:`rbstab.io.hdf5.canonical_config`) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
-  ``units`` and ``long_name``;
+  ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`);
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
   time[, axis])``; ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
   every ``store_stride``-th sample (at most 201); ``summary`` none (no ``time``
   dimension). A run that failed has NaN after its last sample; one that raised is NaN.
-- global attributes ``rbstab_format`` (:data:`CHUNK_FORMAT`), ``rbstab_version``,
-  ``git_commit``, ``command_line``, ``created``, ``store`` (``store_stride``), ``sweep``.
+- global attributes ``rbstab_format`` (:data:`CHUNK_FORMAT`), the provenance
+  (:func:`rbstab.io.metadata.provenance_attributes`: ``Conventions``, ``title``,
+  ``history``, ``command_line``, ``created``, ``rbstab_version``, ``git_commit``,
+  ``git_dirty``, library versions), ``store`` (``store_stride``), ``sweep``.
 
 A file is written to a temporary name and renamed when complete; trace rows are written
 in blocks of about :data:`WRITE_BYTES`, so a writer holds at most that much of its traces.
@@ -47,18 +49,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import __version__
 from .atomic import as_os_error, atomic_path, check_free_space
 from .hdf5 import (
     SUMMARY_VARIABLES,
-    VARIABLE_DESCRIPTIONS,
-    VARIABLE_UNITS,
     NotAResultFile,
     canonical_config,
-    _git_commit,
     _plain,
     summary_stride,
 )
+from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..simulate import RunResult
@@ -98,46 +97,6 @@ WRITE_BLOCK = 32
 SPACE_MARGIN = 8 * 2**20
 _AXES = ("x", "y", "z")
 
-#: Summary figures (:func:`rbstab.summary.summarize`): name -> (units, long name).
-SUMMARY_FIGURES = {
-    "t_final": ("s", "time of the last finite sample"),
-    "final_theta": ("rad", "Euler angles Theta at t_final"),
-    "final_omega": ("rad s-1", "angular velocity Omega at t_final (body frame)"),
-    "final_position": ("m", "position X of C at t_final"),
-    "final_velocity": ("m s-1", "velocity V of C at t_final"),
-    "final_controller_state": ("m", "controller state D at t_final"),
-    "max_abs_constraint_error": ("m", "max |E_i| over the samples"),
-    "lyapunov_initial": ("J", "v(0)"),
-    "lyapunov_final": ("J", "v(t_end)"),
-    "max_lyapunov_rate": ("W", "max dv/dt"),
-    "max_lyapunov_increase": ("J", "largest rise of v above its running minimum"),
-    "lyapunov_rate_mismatch": ("W", "max |analytic - numerical dv/dt|"),
-    "lyapunov_rate_mismatch_relative": ("1", "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),
-    "lyapunov_rate_check": ("", "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
-    "lyapunov_rate_checked": ("1", "fraction of the samples the rate check compares (pure sign law: on one smooth piece)"),
-    # runs of the pure sign law of sliding (rbstab.engine.switching.SWITCHING_FIGURES)
-    "switching_count": ("1", "crossings of E_i = 0 located"),
-    "sliding_time": ("s", "time C slid on E_i = 0 (equivalent force)"),
-    "sliding_starts": ("1", "times sliding on E_i = 0 started"),
-    "min_switching_interval": ("s", "shortest time between two crossings of E_i = 0"),
-    "chattering": ("N s-1", "total variation of Lambda_i from its jumps, per second"),
-    "switching_resolution": ("m", "switching resolution: excursions smaller than this start sliding"),
-}
-#: Per-run values other than summary figures: name -> (units, long name).
-PER_RUN = {
-    "run_id": ("", "run id r<index>-<first 8 hex of config_hash>"),
-    "base": ("", "label of the run's base configuration"),
-    "variant": ("", "controller variant (controller.variant)"),
-    "status": ("", "success, failed (gimbal lock, solver failure, non-finite state, timeout) or error"),
-    "message": ("", "the solver's message, or why the run failed"),
-    "wall_time": ("s", "integration plus post-processing time"),
-    "solver_nfev": ("1", "right-hand side evaluations"),
-    "solver_njev": ("1", "Jacobian evaluations"),
-    "solver_nlu": ("1", "LU decompositions"),
-    "solver_status": ("1", "solve_ivp status (0 success, -1 failure, 1 stopped by an event)"),
-    "config": ("", "resolved configuration without its name, canonical JSON"),
-    "config_hash": ("", "SHA-256 of config without simulation.max_steps and max_wall_time"),
-}
 _COORDS = ("run_id", "base", "variant")
 _TEXT = {"run_id", "base", "variant", "status", "message", "config", "config_hash", "lyapunov_rate_check"}
 _SOLVER = ("nfev", "njev", "nlu", "status")
@@ -238,12 +197,11 @@ class ChunkWriter:
         self._traces: dict[str, tuple[int, ...]] = {}
         self._datasets: dict[str, Any] = {}
         self._block = WRITE_BLOCK
+        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds")
         self.attrs: dict[str, Any] = {
             "rbstab_format": CHUNK_FORMAT,
-            "rbstab_version": __version__,
-            "git_commit": _git_commit(),
-            "command_line": command_line if command_line is not None else " ".join(sys.argv),
-            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds"),
+            **provenance_attributes(f"rbstab sweep {sweep or '(unnamed)'}: store file of its runs",
+                                    command_line=command_line, created=created),
             "store": store,
             "sweep": sweep,
         }
@@ -265,9 +223,9 @@ class ChunkWriter:
         # re-attaches every variable of a dimension whose coordinate comes after them)
         run = f.create_variable("run", ("run",), data=np.array([r.index for r in self.identity], dtype=np.int64),
                                 fletcher32=True)
-        run.attrs.update(long_name="position of the run in the sweep's run list")
+        run.attrs.update(variable_attributes("run"))
         axis = f.create_variable("axis", ("axis",), data=np.array(_AXES, dtype=object), dtype=self._str)
-        axis.attrs.update(long_name="vector component; frame given by each variable")
+        axis.attrs.update(variable_attributes("axis"))
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
@@ -360,15 +318,14 @@ class ChunkWriter:
         f = self._file
         f.dimensions["time"] = len(self._time)
         t = f.create_variable("time", ("time",), data=self._time, fletcher32=bool(len(self._time)))
-        t.attrs.update(units="s", long_name="time", description="sample time, evenly spaced dense output")
+        t.attrs.update(variable_attributes("time"))
         block = min(WRITE_BLOCK, len(self.ids))
         for name in names:
             rank = np.ndim(result.outputs[name])
             dims = ("run", "time", "axis")[: rank + 1]
             shape = (block, len(self._time), 3)[: rank + 1]
             var = f.create_variable(name, dims, dtype=float, fillvalue=np.nan, chunks=shape, fletcher32=True)
-            var.attrs.update(units=VARIABLE_UNITS[name], long_name=name.replace("_", " "),
-                             description=VARIABLE_DESCRIPTIONS[name])
+            var.attrs.update(variable_attributes(name))
             self._traces[name] = (len(self._time), 3)[:rank]
             self._datasets[name] = var._h5ds  # rows written through h5py: h5netcdf adds ~1 ms a write
         per_run = 8 * sum(int(np.prod(shape)) for shape in self._traces.values()) or 1

@@ -6,17 +6,20 @@ Layout of ``<name>.h5``
 - one variable per output quantity (``theta``, ``omega``, ``position``, ``velocity``,
   ``controller_state`` (embedded only), ``constraint_error``, ``constraint_rate``,
   ``constraint_force``, ``force_h``, ``torque_n``, ``lyapunov``, ``lyapunov_rate``,
-  ``lyapunov_rate_numerical`` and the terms of v), each with ``units`` and
-  ``description`` attributes;
+  ``lyapunov_rate_numerical`` and the terms of v), each with ``units``, ``long_name``
+  and ``description`` attributes (:mod:`rbstab.io.metadata`);
 - for a run of the pure sign law of ``sliding``: the variable ``sliding_mode`` (sigma of
   each sample) and, on a dimension ``switching`` (the located events in time order),
   ``switching_time`` [s], ``switching_axis`` (0, 1, 2: the component of E),
   ``switching_kind`` (0 crossing, 1 sliding starts, 2 sliding ends) and
   ``switching_constraint_rate`` (F_i at the event) [m/s] (:mod:`rbstab.engine.switching`);
 - global attributes: ``rbstab_format``, ``name``, ``variant``, ``status``, ``message``,
-  ``config`` (the resolved configuration as YAML text), ``config_hash``,
-  ``rbstab_version``, ``git_commit``, ``command_line``, ``created``, ``wall_time``,
-  ``solver_*`` statistics and ``summary_*`` figures (:func:`rbstab.summary.summarize`).
+  ``config`` (the resolved configuration as YAML text), ``config_hash``, the provenance
+  (:func:`rbstab.io.metadata.provenance_attributes`: ``Conventions = "CF-1.10"``,
+  ``title``, ``history``, ``command_line``, ``created``, ``rbstab_version``,
+  ``git_commit``, ``git_dirty``, the versions of Python, numpy, scipy, h5py, HDF5, numba
+  ...), ``wall_time``, ``solver_*`` statistics, ``summary_*`` figures
+  (:func:`rbstab.summary.summarize`) and ``units_of_summary`` (their units, JSON).
 
 Open with ``xarray.open_dataset(path, engine="h5netcdf")``. Files are written to a
 temporary name in the target folder and renamed into place, so an interrupted write
@@ -27,22 +30,23 @@ Fletcher-32 checksum and the file the SHA-256 of its attributes and text
 
 from __future__ import annotations
 
-import datetime as _dt
-import functools
 import hashlib
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import __version__
 from .atomic import write_bytes_atomic
-from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
-from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
+from .metadata import (
+    VARIABLE_DESCRIPTIONS,
+    VARIABLE_UNITS,
+    git_state,
+    provenance_attributes,
+    summary_units,
+    variable_attributes,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..simulate import RunResult
@@ -67,26 +71,13 @@ __all__ = [
 #: Value of the ``rbstab_format`` global attribute of every result file.
 FORMAT = "rbstab-run-1"
 
-#: Units of every variable of a result file.
-VARIABLE_UNITS = {**BLOCK_UNITS, **OUTPUT_UNITS, "lyapunov_rate_numerical": "W", "sliding_mode": "1"}
-#: Description of every variable of a result file.
-VARIABLE_DESCRIPTIONS = {
-    **BLOCK_DESCRIPTIONS,
-    **OUTPUT_DESCRIPTIONS,
-    "lyapunov_rate_numerical": "dv/dt by differentiating v along the dense-output samples "
-    "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "
-    "compare with lyapunov_rate",
-    "sliding_mode": "pure sign law: sigma standing for sgn(E) on the sample's piece, +-1 the side of E_i = 0, "
-    "0 where C slides on it (equivalent force)",
-}
-
 #: Variables of the ``switching`` dimension (the located events of a pure-sign-law run):
-#: name -> (``Switchings`` field, units, description).
+#: name -> ``Switchings`` field (units and names in :mod:`rbstab.io.metadata`).
 SWITCHING_VARIABLES = {
-    "switching_time": ("time", "s", "time of the event, located to the solver's resolution"),
-    "switching_axis": ("axis", "1", "component i of E (0, 1, 2: inertial x, y, z)"),
-    "switching_kind": ("kind", "1", "0 crossing of E_i = 0, 1 sliding on it starts, 2 sliding ends"),
-    "switching_constraint_rate": ("rate", "m s-1", "F_i at the event (before the impulse of a sliding start)"),
+    "switching_time": "time",
+    "switching_axis": "axis",
+    "switching_kind": "kind",
+    "switching_constraint_rate": "rate",
 }
 
 
@@ -94,27 +85,9 @@ class NotAResultFile(ValueError):
     """Raised when a file is not an rbstab run result."""
 
 
-@functools.lru_cache(maxsize=1)
 def _git_commit() -> str:
-    """Commit of the rbstab checkout in use, or ``"unknown"``.
-
-    Looks where the package is imported from (an editable install), then in the working
-    directory when it is an rbstab checkout (``pip install .`` run from a clone).
-    """
-    candidates = [Path(__file__).resolve().parent]
-    if (Path.cwd() / "src" / "rbstab").is_dir():
-        candidates.append(Path.cwd())
-    for where in candidates:
-        try:
-            out = subprocess.run(
-                ["git", "rev-parse", "HEAD"], cwd=where, capture_output=True, text=True, timeout=5
-            )
-        except (OSError, subprocess.SubprocessError):
-            continue
-        commit = out.stdout.strip()
-        if out.returncode == 0 and commit:
-            return commit
-    return "unknown"
+    """Commit of the rbstab checkout in use, or ``"unknown"`` (:func:`rbstab.io.metadata.git_state`)."""
+    return git_state()[0]
 
 
 #: ``simulation`` keys that bound how long a run may take, not what it computes: not part
@@ -187,16 +160,15 @@ def result_attributes(
         "message": result.message,
         "config": config_yaml,
         "config_hash": config_hash(canonical_config(result.config.resolved)),
-        "rbstab_version": __version__,
-        "git_commit": _git_commit(),
-        "command_line": command_line if command_line is not None else " ".join(sys.argv),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        **provenance_attributes(f"rbstab run {result.name} ({result.config.variant} controller)",
+                                command_line=command_line),
         "wall_time": float(result.wall_time),
     }
     attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
     attrs["solver_status"] = int(result.solver.get("solver_status", -1))
     attrs["solver_message"] = result.message
     attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
+    attrs["units_of_summary"] = summary_units(result.summary)
     if store != "full":
         attrs["store"] = store
     if store == "thinned":
@@ -258,11 +230,17 @@ class _Writer:
         return dset
 
 
+def _describe(w, var, name: str) -> None:
+    """The ``units``, ``long_name`` and ``description`` attributes of variable ``name``."""
+    for key, value in variable_attributes(name).items():
+        w.attr(var, key, value)
+
+
 def _event_arrays(switching) -> dict[str, np.ndarray]:
     """The ``switching`` dimension's arrays as stored: the event numbers and each variable
     of :data:`SWITCHING_VARIABLES` (integers as they are, the rest as floats)."""
     out = {"switching": np.arange(len(switching.time), dtype=np.int64)}
-    for key, (name, _, _) in SWITCHING_VARIABLES.items():
+    for key, name in SWITCHING_VARIABLES.items():
         data = np.ascontiguousarray(getattr(switching, name))
         out[key] = data if data.dtype.kind == "i" else data.astype(float)
     return out
@@ -274,12 +252,11 @@ def _write_events(w, root, switching) -> None:
     arrays = _event_arrays(switching)
     scale = w.dataset(root, "switching", arrays["switching"])
     h5ds.set_scale(scale, b"switching")
-    w.attr(scale, "description", "number of the located event of the pure sign law, in time order")
-    for key, (name, units, description) in SWITCHING_VARIABLES.items():
+    _describe(w, scale, "switching")
+    for key in SWITCHING_VARIABLES:
         var = w.dataset(root, key, arrays[key])
         h5ds.attach_scale(var, scale, 0)
-        w.attr(var, "units", units)
-        w.attr(var, "description", description)
+        _describe(w, var, key)
         var.close()
     scale.close()
 
@@ -301,18 +278,16 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         root = f.id
         t = w.dataset(root, "time", np.ascontiguousarray(time, dtype=float))
         h5ds.set_scale(t, b"time")
-        w.attr(t, "units", "s")
-        w.attr(t, "description", "sample time, evenly spaced dense output of the solver")
+        _describe(w, t, "time")
         axis = w.dataset(root, "axis", np.array(["x", "y", "z"], dtype=object), dtype=h5py.string_dtype())
         h5ds.set_scale(axis, b"axis")
-        w.attr(axis, "description", "vector component; frame given by each variable")
+        _describe(w, axis, "axis")
         for key, values in outputs.items():
             var = w.dataset(root, key, np.ascontiguousarray(values, dtype=float))
             h5ds.attach_scale(var, t, 0)
             if var.rank == 2:
                 h5ds.attach_scale(var, axis, 1)
-            w.attr(var, "units", VARIABLE_UNITS[key])
-            w.attr(var, "description", VARIABLE_DESCRIPTIONS[key])
+            _describe(w, var, key)
             var.close()
         t.close()
         axis.close()
