@@ -9,6 +9,18 @@ import click
 _SETTLE_E = 0.005
 _SETTLE_OMEGA = 0.05
 _METRICS = ("max_abs_constraint_error", "lyapunov_final")
+_FIGURE_FORMATS = ("png", "pdf", "svg")
+_DPI = 110
+_DPI_RANGE = (50, 600)
+
+
+def _figure_formats(ctx, param, values) -> tuple[str, ...]:
+    """``--figure-format png,pdf`` (repeatable): the formats, each once, in order."""
+    formats = [f.strip().lower() for value in values for f in value.split(",") if f.strip()]
+    bad = [f for f in formats if f not in _FIGURE_FORMATS]
+    if bad:
+        raise click.BadParameter(f"{', '.join(bad)}: expected a comma list of {', '.join(_FIGURE_FORMATS)}")
+    return tuple(dict.fromkeys(formats)) or ("png",)
 
 
 @click.command("report")
@@ -19,7 +31,14 @@ _METRICS = ("max_abs_constraint_error", "lyapunov_final")
     type=click.Path(file_okay=False),
     default=None,
     help="Report folder [default: results/reports/<name>: the run's name or the folder's name for "
-    "one input, comparison-<hash of the inputs> for several]. An existing report there is replaced.",
+    "one input, their names joined by _vs_ for several]. An existing report there is replaced.",
+)
+@click.option(
+    "--title",
+    default=None,
+    metavar="TEXT",
+    help="Title of the page [default: what the report compares, e.g. 'rbstab report: case1_permanent "
+    "and case3_embedded'].",
 )
 @click.option(
     "--format",
@@ -29,6 +48,22 @@ _METRICS = ("max_abs_constraint_error", "lyapunov_final")
     default=("html",),
     show_default=True,
     help="Page format: index.html and/or index.md (summary.md and summary.csv are always written). Repeatable.",
+)
+@click.option(
+    "--figure-format",
+    "figure_formats",
+    multiple=True,
+    metavar="LIST",
+    callback=_figure_formats,
+    help="Figure files: a comma list of png, pdf, svg (e.g. png,pdf); repeatable [default: png]. "
+    "The page shows the PNG (the SVG if only SVG and PDF are asked).",
+)
+@click.option(
+    "--dpi",
+    type=click.IntRange(*_DPI_RANGE),
+    default=_DPI,
+    show_default=True,
+    help="Resolution of the PNG figures [dots per inch]; PDF and SVG are vector files.",
 )
 @click.option(
     "--metric",
@@ -54,13 +89,13 @@ _METRICS = ("max_abs_constraint_error", "lyapunov_final")
     metavar="RAD_PER_S",
     help="Settling threshold on |Omega|, the norm of the angular velocity [rad/s].",
 )
-def report(inputs, output, formats, metrics, settle_e, settle_omega) -> None:
+def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega) -> None:
     """Compare INPUT... (run files *.h5, sweep folders, folders of run files, analysis files *.analysis.nc).
 
     Writes index.html (tables, the paper's figures per run, overlays of the runs, sweep
     plots, the comparison with the paper's printed values, the stability analyses of
     rbstab analyze), summary.md, summary.csv and
-    figures/*.png. Every input is checked before anything is written.
+    figures/*.png (or .pdf, .svg). Every input is checked before anything is written.
     """
     from rbstab.report import ReportError, ReportInputError, ReportOptions, SettleThresholds, build_report
 
@@ -68,6 +103,9 @@ def report(inputs, output, formats, metrics, settle_e, settle_omega) -> None:
         formats=tuple(dict.fromkeys(formats)),
         metrics=tuple(metrics) if metrics else _METRICS,
         settle=SettleThresholds(e=settle_e, omega=settle_omega),
+        title=title,
+        figure_formats=figure_formats,
+        dpi=dpi,
     )
     try:
         folder = build_report(inputs, output, options)

@@ -34,6 +34,8 @@ from rbstab.report import (
     default_report_name,
     load_inputs,
 )
+from rbstab.report.build import DPI_RANGE
+from rbstab.report.figures import DPI, FIGURE_FORMATS
 from rbstab.report.paper import PAPER_CASES, compare_with_paper
 from rbstab.report.tables import settling_time, validate_metrics
 from rbstab.sweep.folder import write_summary
@@ -181,8 +183,11 @@ def test_paper_report_files_exist_and_every_image_is_a_valid_png(paper_report):
     for name in ("index.html", "index.md", "summary.md", "summary.csv", "report.json"):
         assert (paper_report / name).is_file(), name
     parser = _images(paper_report / "index.html")
-    # per run: rotational, translational, Lyapunov; comparison: 3 overlays + norms
-    assert len(parser.src) == 3 * 3 + 4
+    # per run: rotational, translational, Lyapunov, forces, phase; comparison: 3 overlays + norms
+    assert len(parser.src) == 3 * 5 + 4
+    for case in PAPER_CASES:
+        for kind in ("rotational", "translational", "lyapunov", "forces", "phase"):
+            assert f"figures/{case}_{kind}.png" in parser.src, (case, kind)
     assert len(set(parser.src)) == len(parser.src)
     for src in parser.src:
         assert not src.startswith(("/", "file:", "http")), src  # relative: the folder can move
@@ -446,9 +451,11 @@ def test_default_report_name(paper_runs, sweeps):
     assert default_report_name(load_inputs([paper_runs[0]])) == "case1_permanent"
     assert default_report_name(load_inputs([sweeps["grid"]])) == "grid"
     several = default_report_name(load_inputs(paper_runs))
-    assert several.startswith("comparison-") and len(several) == len("comparison-") + 8
+    assert several == "case1_permanent_vs_case2_visco_elastic_vs_case3_embedded"  # named after the inputs
     assert several == default_report_name(load_inputs(paper_runs[::-1]))  # order does not matter
-    assert several != default_report_name(load_inputs(paper_runs[:2]))
+    assert default_report_name(load_inputs(paper_runs[:2])) == "case1_permanent_vs_case2_visco_elastic"
+    mixed = default_report_name(load_inputs([paper_runs[2], sweeps["grid"]]))
+    assert mixed == "case3_embedded_vs_grid"
 
 
 def test_load_inputs_raises_one_error_listing_every_problem(tmp_path):
@@ -476,6 +483,8 @@ def test_cli_defaults_are_the_library_defaults():
     assert report_cli._SETTLE_E == DEFAULT_SETTLE_E
     assert report_cli._SETTLE_OMEGA == DEFAULT_SETTLE_OMEGA
     assert report_cli._METRICS == DEFAULT_METRICS
+    assert report_cli._FIGURE_FORMATS == FIGURE_FORMATS
+    assert report_cli._DPI == DPI and report_cli._DPI_RANGE == DPI_RANGE
 
 
 def test_cli_start_up_imports_no_plotting_or_table_library():

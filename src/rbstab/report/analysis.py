@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import DPI, FigureFile, _save
+from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
 from .render import Section, Table
 from .tables import format_value
 
-__all__ = ["split_inputs", "analysis_sections", "default_name"]
+__all__ = ["split_inputs", "analysis_sections"]
 
 #: Colours of the basin outcomes (converged, not converged, failed).
 _OUTCOME_COLOURS = ("#4daf4a", "#ff9f1c", "#d62728")
@@ -54,15 +54,6 @@ def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
     return list(dict.fromkeys(analyses)), others
 
 
-def default_name(analyses: Sequence[Path]) -> str | None:
-    """The report's folder name for a single analysis file (its name), else None."""
-    from ..analysis.dataset import SUFFIX
-
-    if len(analyses) == 1:
-        return safe_filename(analyses[0].name.removesuffix(SUFFIX))
-    return None
-
-
 def _read(paths: Sequence[Path]) -> list:
     from ..analysis.dataset import read_analysis
 
@@ -77,8 +68,8 @@ def _read(paths: Sequence[Path]) -> list:
     return datasets
 
 
-def analysis_sections(paths: Sequence[Path], folder: Path) -> list[Section]:
-    """The sections of every analysis file, figures written to ``folder/figures/``.
+def analysis_sections(paths: Sequence[Path], out: FigureWriter) -> list[Section]:
+    """The sections of every analysis file, figures written by ``out``.
 
     Raises
     ------
@@ -88,9 +79,9 @@ def analysis_sections(paths: Sequence[Path], folder: Path) -> list[Section]:
     sections = []
     for path, ds in zip(paths, _read(paths)):
         if ds.attrs.get("kind") == "robustness":
-            sections.append(_robustness_section(ds, path, folder))
+            sections.append(_robustness_section(ds, path, out))
         else:
-            sections.append(_configuration_section(ds, path, folder))
+            sections.append(_configuration_section(ds, path, out))
     return sections
 
 
@@ -177,7 +168,7 @@ def _certificate_table(ds) -> Table | None:
                       "sampling is dense: no sampled state with v < c has dv/dt > 0 or lies outside the domain.")
 
 
-def _pole_figure(ds, folder: Path, stem: str, name: str) -> FigureFile:
+def _pole_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:
     from matplotlib.figure import Figure
 
     s = _eigenvalues(ds)
@@ -198,12 +189,12 @@ def _pole_figure(ds, folder: Path, stem: str, name: str) -> FigureFile:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     ax.set_title(f"{name}: poles of the linearisation ({ds.attrs.get('verdict')})", fontsize=10)
-    return FigureFile(_save(fig, folder, f"{stem}_poles"), f"{name}: pole plot",
-                      "Eigenvalues of the Jacobian at the equilibrium; grey band: |Re s| within the tolerance "
-                      "(marginal). A symmetric-log real axis where the poles span decades.")
+    return out.save(fig, f"{stem}_poles", f"{name}: pole plot",
+                    "Eigenvalues of the Jacobian at the equilibrium; grey band: |Re s| within the tolerance "
+                    "(marginal). A symmetric-log real axis where the poles span decades.")
 
 
-def _rate_figure(ds, folder: Path, stem: str, name: str) -> FigureFile | None:
+def _rate_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile | None:
     if "sample_lyapunov" not in ds or ds.sizes.get("sample", 0) == 0:
         return None
     from matplotlib.figure import Figure
@@ -229,12 +220,12 @@ def _rate_figure(ds, folder: Path, stem: str, name: str) -> FigureFile | None:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     ax.set_title(f"{name}: dv/dt on {ds.attrs.get('n_samples')} sampled states", fontsize=10)
-    return FigureFile(_save(fig, folder, f"{stem}_sampled_rate"), f"{name}: sampled dv/dt",
-                      "The rate of v along the right-hand side at each sampled state (computed from v alone), "
-                      "against v there; states with dv/dt = 0 (at rest) are off the logarithmic axis.")
+    return out.save(fig, f"{stem}_sampled_rate", f"{name}: sampled dv/dt",
+                    "The rate of v along the right-hand side at each sampled state (computed from v alone), "
+                    "against v there; states with dv/dt = 0 (at rest) are off the logarithmic axis.")
 
 
-def _basin_figure(ds, folder: Path, stem: str, name: str) -> FigureFile:
+def _basin_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:
     from matplotlib.colors import ListedColormap
     from matplotlib.figure import Figure
     from matplotlib.patches import Patch
@@ -262,10 +253,10 @@ def _basin_figure(ds, folder: Path, stem: str, name: str) -> FigureFile:
     ax1.legend(handles=handles, fontsize=8, loc="upper right")
     fig.suptitle(f"{name}: basin of attraction (converged: |v| <= {ds.attrs.get('basin_ratio')} |v(0)| by "
                  f"t_end = {ds.attrs.get('basin_t_end')} s)", fontsize=10)
-    return FigureFile(_save(fig, folder, f"{stem}_basin"), f"{name}: basin map",
-                      "Outcome of the simulation from each initial state of the slice (left) and its time to "
-                      "converge (right); black: the contour v = c of the certificate's sublevel estimate "
-                      "(absent when the slice lies wholly inside or outside it).")
+    return out.save(fig, f"{stem}_basin", f"{name}: basin map",
+                    "Outcome of the simulation from each initial state of the slice (left) and its time to "
+                    "converge (right); black: the contour v = c of the certificate's sublevel estimate "
+                    "(absent when the slice lies wholly inside or outside it).")
 
 
 def _basin_facts(ds) -> list[str]:
@@ -286,30 +277,30 @@ def _basin_facts(ds) -> list[str]:
     return facts
 
 
-def _configuration_section(ds, path: Path, folder: Path) -> Section:
+def _configuration_section(ds, path: Path, out: FigureWriter) -> Section:
     name = str(ds.attrs.get("name", path.name))
     stem = f"analysis_{safe_filename(name)}"
     s = Section(f"Stability analysis: {name}", f"analysis-{safe_filename(name)}")
     s.blocks.append(f"From {path}. Method and limits: docs/analysis.md.")
     s.blocks.append(_facts(ds))
     s.blocks.append(_eigen_table(ds))
-    s.blocks.append(_pole_figure(ds, folder, stem, name))
+    s.blocks.append(_pole_figure(ds, out, stem, name))
     table = _certificate_table(ds)
     if table is not None:
         s.blocks.append(table)
-        figure = _rate_figure(ds, folder, stem, name)
+        figure = _rate_figure(ds, out, stem, name)
         if figure is not None:
             s.blocks.append(figure)
     if "basin_outcome" in ds:
         s.blocks.append(_basin_facts(ds))
-        s.blocks.append(_basin_figure(ds, folder, stem, name))
+        s.blocks.append(_basin_figure(ds, out, stem, name))
     return s
 
 
 # -- robustness ----------------------------------------------------------------------------------------
 
 
-def _robustness_section(ds, path: Path, folder: Path) -> Section:
+def _robustness_section(ds, path: Path, out: FigureWriter) -> Section:
     a = ds.attrs
     s = Section(f"Robustness: sweep {a.get('sweep')}", f"robustness-{safe_filename(str(a.get('sweep')))}")
     s.blocks.append(f"From {path} (sweep folder {a.get('folder')}). Stable: {a.get('stability')}; "
@@ -344,7 +335,7 @@ def _robustness_section(ds, path: Path, folder: Path) -> Section:
                                    "0 or 1 complete."))
     else:
         s.blocks.append("No parameter separates stable from unstable runs: every group is all stable or all unstable.")
-    s.blocks.append(_robustness_figure(ds, folder))
+    s.blocks.append(_robustness_figure(ds, out))
     return s
 
 
@@ -361,7 +352,7 @@ def _two_parameters(values: np.ndarray, order: Sequence[int]) -> list[int]:
     return [first]
 
 
-def _robustness_figure(ds, folder: Path) -> FigureFile:
+def _robustness_figure(ds, out: FigureWriter) -> FigureFile:
     from matplotlib.figure import Figure
 
     groups = [str(g) for g in ds["group"].values]
@@ -390,8 +381,8 @@ def _robustness_figure(ds, folder: Path) -> FigureFile:
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.suptitle(f"sweep {ds.attrs.get('sweep')}: stable and unstable runs", fontsize=10)
-    return FigureFile(_save(fig, folder, f"robustness_{safe_filename(str(ds.attrs.get('sweep')))}"),
-                      f"{ds.attrs.get('sweep')}: stable and unstable runs",
-                      "Each run of each group over the varied parameter with the strongest separation "
-                      "(|2 AUC - 1|) and the next strongest that is not a function of it (a scale factor and the "
-                      "value it scales are one parameter); the first varied ones when every run is stable.")
+    return out.save(fig, f"robustness_{safe_filename(str(ds.attrs.get('sweep')))}",
+                    f"{ds.attrs.get('sweep')}: stable and unstable runs",
+                    "Each run of each group over the varied parameter with the strongest separation "
+                    "(|2 AUC - 1|) and the next strongest that is not a function of it (a scale factor and the "
+                    "value it scales are one parameter); the first varied ones when every run is stable.")

@@ -16,7 +16,7 @@ Layout of the report folder::
     summary.csv           one row per run (direct runs and the runs of every sweep)
     sweep_<name>.csv      per sweep: index.csv plus the chosen metrics
     (analysis files of ``rbstab analyze`` add their sections: rbstab.report.analysis)
-    figures/*.png         every figure
+    figures/*.png|pdf|svg every figure, in each format asked (--figure-format)
     report.json           what the report was built from (inputs, options, version)
 """
 
@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from .figures import DPI, FIGURE_FORMATS, FigureWriter
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
 from .render import Section, Table, render_html, render_markdown, render_tables_markdown
@@ -50,7 +51,17 @@ from .tables import (
     validate_metrics,
 )
 
-__all__ = ["ReportOptions", "ReportError", "build_report", "default_report_name", "REPORTS_ROOT", "MAX_TABLE_ROWS"]
+__all__ = [
+    "ReportOptions",
+    "ReportError",
+    "build_report",
+    "default_report_name",
+    "report_title",
+    "REPORTS_ROOT",
+    "MAX_TABLE_ROWS",
+    "FIGURE_FORMATS",
+    "DPI_RANGE",
+]
 
 #: Parent of the default report folders.
 REPORTS_ROOT = Path("results") / "reports"
@@ -59,6 +70,10 @@ MAX_TABLE_ROWS = 500
 #: Marker file of a report folder.
 MANIFEST = "report.json"
 FORMATS = ("html", "md")
+#: Resolutions allowed for the PNG files (``--dpi``) [dots per inch].
+DPI_RANGE = (50, 600)
+#: Longest default folder name made of the inputs' names (longer: the first two and a hash).
+MAX_NAME = 80
 
 
 class ReportError(ValueError):
@@ -78,27 +93,81 @@ class ReportOptions:
         (:func:`rbstab.report.tables.allowed_metrics`).
     settle : SettleThresholds
         Thresholds of the settling time (|E| [m], |Omega| [rad/s]).
+    title : str or None
+        Title of the page; None: what the report compares (:func:`report_title`).
+    figure_formats : tuple of str
+        Figure files, of :data:`FIGURE_FORMATS` (``png``, ``pdf``, ``svg``).
+    dpi : int
+        Resolution of the PNG files [dots per inch], within :data:`DPI_RANGE`.
     """
 
     formats: tuple[str, ...] = ("html",)
     metrics: tuple[str, ...] = DEFAULT_METRICS
     settle: SettleThresholds = field(default_factory=SettleThresholds)
+    title: str | None = None
+    figure_formats: tuple[str, ...] = ("png",)
+    dpi: int = DPI
 
 
-def default_report_name(inputs: ReportInputs) -> str:
-    """Folder name of a report under ``results/reports/``.
+def _input_name(path: Path, runs: Sequence[RunData]) -> str:
+    """A file name for one input: a folder's name, an analysis file's name without
+    ``.nc``, the run name of a run file, the stem of a store file."""
+    from ..analysis.dataset import SUFFIX
 
-    One input: a run file gives its run name, a folder its folder name. Several inputs:
-    ``comparison-<8 hex digits>``, the start of the SHA-256 of the sorted resolved input
-    paths (the same inputs always give the same name).
+    if path.is_dir():
+        return safe_filename(path.resolve().name)
+    if path.name.endswith(SUFFIX):
+        return safe_filename(path.name.removesuffix(".nc"))
+    mine = [r.name for r in runs if r.path.resolve() == path.resolve()]
+    return safe_filename(mine[0] if len(mine) == 1 else path.stem)
+
+
+def default_report_name(inputs: ReportInputs, given: Sequence[str | os.PathLike] | None = None) -> str:
+    """Folder name of a report under ``results/reports/``, made of the inputs' names.
+
+    Each input (``given``, default ``inputs.paths``) is named as :func:`_input_name` says
+    (``case3_embedded`` for ``results/case3_embedded.h5``, ``gains_case3`` for a sweep
+    folder); one input gives its name, several their sorted names joined by ``_vs_``
+    (``case1_permanent_vs_case2_visco_elastic``). When that is longer than
+    :data:`MAX_NAME` characters or names repeat: the first two names, the number of the
+    others and the start of the SHA-256 of the sorted resolved paths
+    (``a_vs_b_and_4_more-1f2e3d4c``). The same inputs in any order give the same name.
     """
-    if len(inputs.paths) == 1:
-        p = inputs.paths[0]
-        if p.is_file() and inputs.runs:
-            return safe_filename(inputs.runs[0].name)
-        return safe_filename(p.name)
-    digest = hashlib.sha256("\n".join(sorted(str(p) for p in inputs.paths)).encode()).hexdigest()[:8]
-    return f"comparison-{digest}"
+    paths = [Path(p) for p in (given if given is not None else inputs.paths)]
+    names = sorted(_input_name(p, inputs.runs) for p in dict.fromkeys(p.resolve() for p in paths))
+    if len(names) == 1:
+        return names[0]
+    joined = "_vs_".join(names)
+    if len(joined) <= MAX_NAME and len(set(names)) == len(names):
+        return joined
+    digest = hashlib.sha256("\n".join(sorted(str(p.resolve()) for p in paths)).encode()).hexdigest()[:8]
+    more = f"_and_{len(names) - 2}_more" if len(names) > 2 else ""
+    return f"{names[0][:32]}_vs_{names[1][:32]}{more}-{digest}"
+
+
+def _enumerate(items: Sequence[str], limit: int = 4) -> str:
+    """``a``, ``a and b``, ``a, b and c``; past ``limit`` items ``a, b, c and 5 more``."""
+    items = list(items)
+    if len(items) > limit:
+        items = [*items[: limit - 1], f"{len(items) - limit + 1} more"]
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
+def report_title(inputs: ReportInputs, analyses: Sequence[Path] = ()) -> str:
+    """The default title of a report: what it compares, e.g. ``rbstab report:
+    case1_permanent, case2_visco_elastic and case3_embedded``, ``rbstab report: sweep
+    gains_case3``, ``rbstab report: stability analyses of case1_permanent and ...``."""
+    from ..analysis.dataset import SUFFIX
+
+    parts = []
+    if inputs.runs:
+        parts.append(_enumerate([r.label for r in inputs.runs]))
+    if inputs.sweeps:
+        parts.append(("sweeps " if len(inputs.sweeps) > 1 else "sweep ") + _enumerate([s.name for s in inputs.sweeps]))
+    if analyses:
+        names = [p.name.removesuffix(SUFFIX) for p in analyses]
+        parts.append(f"stability analys{'e' if len(names) > 1 else 'i'}s of {_enumerate(names)}")
+    return "rbstab report: " + ("; ".join(parts) or "no inputs")
 
 
 def _check_output(target: Path) -> None:
@@ -276,6 +345,20 @@ def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, set
 
 # -- the report -------------------------------------------------------------------------
 
+def _check_options(options: ReportOptions) -> None:
+    """Raise ReportError for a page format, figure format or resolution that is not allowed."""
+    bad = [f for f in options.formats if f not in FORMATS]
+    if bad or not options.formats:
+        raise ReportError(f"unknown format {bad}; allowed: {', '.join(FORMATS)}")
+    bad = [f for f in options.figure_formats if f not in FIGURE_FORMATS]
+    if bad or not options.figure_formats:
+        raise ReportError(f"unknown figure format {bad}; allowed: {', '.join(FIGURE_FORMATS)}")
+    if not (isinstance(options.dpi, (int, np.integer)) and DPI_RANGE[0] <= options.dpi <= DPI_RANGE[1]):
+        raise ReportError(f"dpi: found {options.dpi!r}; expected a whole number from {DPI_RANGE[0]} to {DPI_RANGE[1]}")
+    if options.title is not None and not options.title.strip():
+        raise ReportError("title: found an empty title; give some text or leave it out")
+
+
 def build_report(
     inputs: Sequence[str | os.PathLike],
     output: str | os.PathLike | None = None,
@@ -289,8 +372,9 @@ def build_report(
         Run files (``*.h5``), sweep folders (``sweep.yaml`` + ``index.csv``) and plain
         folders of run files, in any mix.
     output : path-like, optional
-        Report folder; default ``results/reports/<name>`` (:func:`default_report_name`).
-        If it exists it must be empty or an earlier report, which is replaced.
+        Report folder; default ``results/reports/<name>``, ``<name>`` made of the inputs'
+        names (:func:`default_report_name`). If it exists it must be empty or an earlier
+        report, which is replaced.
     options : ReportOptions, optional
 
     Returns
@@ -311,16 +395,14 @@ def build_report(
         metrics = validate_metrics(options.metrics)
     except ValueError as exc:
         raise ReportError(str(exc)) from None
-    bad = [f for f in options.formats if f not in FORMATS]
-    if bad or not options.formats:
-        raise ReportError(f"unknown format {bad}; allowed: {', '.join(FORMATS)}")
-    from .analysis import default_name, split_inputs
+    _check_options(options)
+    from .analysis import split_inputs
 
-    analyses, inputs = split_inputs(inputs)  # analysis files (rbstab analyze) and the rest
+    given = list(inputs)
+    analyses, inputs = split_inputs(given)  # analysis files (rbstab analyze) and the rest
     data = load_inputs(inputs) if inputs or not analyses else ReportInputs([], [], [])
     data.paths.extend(p.resolve() for p in analyses)
-    name = default_name(analyses) if not inputs else None
-    target = Path(output) if output is not None else REPORTS_ROOT / (name or default_report_name(data))
+    target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data, given)
     _check_output(target)
 
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -329,7 +411,7 @@ def build_report(
         umask = os.umask(0)
         os.umask(umask)
         tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; a report is an ordinary folder
-        _write(data, tmp, target.name, options, metrics, analyses)
+        _write(data, tmp, options, metrics, analyses)
         old = None
         if target.exists():
             old = target.parent / f".{target.name}.old-{os.getpid()}"
@@ -343,53 +425,67 @@ def build_report(
     return target
 
 
-def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, metrics: Sequence[str],
+def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Sequence[str],
            analyses: Sequence[Path] = ()) -> None:
-    import pandas as pd
-
+    """Every file of the report into ``folder`` (module docstring)."""
     from .analysis import analysis_sections
-    from .figures import comparison_figures, run_figures, sweep_figures
 
     (folder / "figures").mkdir()
-    settle = options.settle
-    sections: list[Section] = []
-    runs = data.runs
-    all_runs = data.all_runs
-    params = differing_parameters(runs)
-    if runs:
-        df_runs = runs_table(runs, settle, params)
-        sections += _runs_sections(runs, df_runs, params)
-        paper = _paper_section(runs)
-        if paper is not None:
-            sections.append(paper)
-        cmp = Section("Comparison figures" if len(runs) > 1 else "Constraint error and angular velocity",
-                      "comparison")
-        cmp.blocks.extend(comparison_figures(runs, folder, settle))
-        sections.append(cmp)
-
-        per_run = Section("Figures of each run", "figures")
-        for run in runs:
-            sub = Section(f"{run.label} ({run.variant}, {run.status})", f"run-{safe_filename(run.label)}", level=3)
-            if not run.ok:
-                sub.blocks.append(f"FAILED: {run.message}")
-            sub.blocks.extend(run_figures(run, folder))
-            per_run.blocks.append(sub)
-        sections.append(per_run)
+    out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
+    params = differing_parameters(data.runs)
+    sections = _direct_run_sections(data.runs, params, out, options.settle) if data.runs else []
     for sweep in data.sweeps:
-        table = sweep_table(sweep, metrics, settle)
-        table.to_csv(folder / f"sweep_{safe_filename(sweep.name)}.csv", index=False)
-        figs = sweep_figures(sweep, table, metrics, folder)
-        sections.append(_sweep_section(sweep, table, metrics, figs, settle))
-    sections += analysis_sections(analyses, folder)
+        sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
+    sections += analysis_sections(analyses, out)
+    _write_summary_csv(data, params, folder, options.settle)
+    title = options.title or report_title(data, analyses)
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    _write_pages(folder, title, _intro(data, created, options.settle), _flatten(sections), options.formats)
+    _write_manifest(folder, data, analyses, options, metrics, title, created)
 
-    # summary.csv: every run, direct and swept, one row each
+
+def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: FigureWriter,
+                         settle: SettleThresholds) -> list[Section]:
+    """Tables, the comparison with the paper, comparison figures and each run's figures."""
+    from .figures import comparison_figures, run_figures
+
+    sections = _runs_sections(runs, runs_table(runs, settle, params), params)
+    paper = _paper_section(runs)
+    if paper is not None:
+        sections.append(paper)
+    cmp = Section("Comparison figures" if len(runs) > 1 else "Constraint error and angular velocity", "comparison")
+    cmp.blocks.extend(comparison_figures(runs, out, settle))
+    per_run = Section("Figures of each run", "figures")
+    for run in runs:
+        sub = Section(f"{run.label} ({run.variant}, {run.status})", f"run-{safe_filename(run.label)}", level=3)
+        if not run.ok:
+            sub.blocks.append(f"FAILED: {run.message}")
+        sub.blocks.extend(run_figures(run, out))
+        per_run.blocks.append(sub)
+    return [*sections, cmp, per_run]
+
+
+def _sweep_section_with_files(sweep: SweepData, metrics: Sequence[str], out: FigureWriter,
+                              settle: SettleThresholds) -> Section:
+    """A sweep's section, its ``sweep_<name>.csv`` and its figures."""
+    from .sweep_figures import sweep_figures
+
+    table = sweep_table(sweep, metrics, settle)
+    table.to_csv(out.folder / f"sweep_{safe_filename(sweep.name)}.csv", index=False)
+    return _sweep_section(sweep, table, metrics, sweep_figures(sweep, table, metrics, out), settle)
+
+
+def _write_summary_csv(data: ReportInputs, params: Sequence[str], folder: Path, settle: SettleThresholds) -> None:
+    """``summary.csv``: every run, direct and swept, one row each."""
+    import pandas as pd
+
+    all_runs = data.all_runs
     all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
     pd.DataFrame(runs_table(all_runs, settle, all_params) if all_runs else []).to_csv(folder / "summary.csv", index=False)
 
-    sections = _flatten(sections)
-    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    title = f"rbstab report: {name}"
-    intro = [
+
+def _intro(data: ReportInputs, created: str, settle: SettleThresholds) -> list[str]:
+    return [
         f"Created {created} by rbstab {__version__} from {len(data.paths)} input(s): "
         + ", ".join(str(p) for p in data.paths) + ".",
         f"Settling time: the first sample time after which |E| <= {settle.e:g} m and |Omega| <= "
@@ -397,24 +493,38 @@ def _write(data: ReportInputs, folder: Path, name: str, options: ReportOptions, 
         "last sample is outside (always for a failed run). Tables: summary.csv (every run, full precision), "
         "summary.md.",
     ]
-    if "html" in options.formats:
+
+
+def _write_pages(folder: Path, title: str, intro: Sequence[str], sections: Sequence[Section],
+                 formats: Sequence[str]) -> None:
+    if "html" in formats:
         (folder / "index.html").write_text(render_html(title, intro, sections), encoding="utf-8")
-    if "md" in options.formats:
+    if "md" in formats:
         (folder / "index.md").write_text(render_markdown(title, intro, sections), encoding="utf-8")
     (folder / "summary.md").write_text(render_tables_markdown(title, intro, sections), encoding="utf-8")
+
+
+def _write_manifest(folder: Path, data: ReportInputs, analyses: Sequence[Path], options: ReportOptions,
+                    metrics: Sequence[str], title: str, created: str) -> None:
+    from ..io.metadata import provenance_attributes
+
     manifest = {
         "rbstab_report": 1,
         "rbstab_version": __version__,
         "created": created,
+        "title": title,
         "inputs": [str(p) for p in data.paths],
-        "runs": [str(r.path) for r in runs],
+        "runs": [str(r.path) for r in data.runs],
         "sweeps": [str(s.path) for s in data.sweeps],
         "analyses": [str(p) for p in analyses],
         "formats": list(options.formats),
+        "figure_formats": list(dict.fromkeys(options.figure_formats)),
+        "dpi": int(options.dpi),
         "metrics": list(metrics),
-        "settle_e": settle.e,
-        "settle_omega": settle.omega,
-        "figures": sorted(str(p.relative_to(folder)) for p in (folder / "figures").glob("*.png")),
+        "settle_e": options.settle.e,
+        "settle_omega": options.settle.omega,
+        "figures": sorted(str(p.relative_to(folder)) for p in (folder / "figures").iterdir()),
+        "provenance": provenance_attributes(title, created=created),
     }
     (folder / MANIFEST).write_text(json.dumps(manifest, indent=2) + "\n", encoding="utf-8")
 

@@ -1,32 +1,50 @@
 """Figures of a report (matplotlib, Agg canvas: no display needed, no pyplot state).
 
-Per run, the figures of the paper (Figs 3-7): rotational states Theta, Omega; translational
-states X, V (and D for ``embedded``) with the constraint error E; the Lyapunov function v
-with its analytic and numerical rates. For several runs the same quantities overlaid,
-one colour per run, and the norms |E|, |Omega| against the settling thresholds. For a
-sweep, the chosen metrics against each varied parameter (a heatmap where two vary).
+Per run, the figures of the paper (Figs 3-7) and more: rotational states Theta, Omega;
+translational states X, V (and D for ``embedded``) with the constraint error E; the
+Lyapunov function v with its terms (log scale) and its analytic and numerical rates; the
+forces Lambda, H and the torque N; phase portraits (E_i against F_i, Theta_i against
+Omega_i). For several runs the same quantities overlaid, one colour per run, and the
+norms |E|, |Omega| against the settling thresholds. Sweep plots:
+:mod:`rbstab.report.sweep_figures`.
 
-Every function writes PNG files and returns :class:`FigureFile` records (file name
-relative to the report folder, title, caption). Units on the axes are the ``units``
-attributes stored in the result files.
+Every figure is written by a :class:`FigureWriter` (formats PNG, PDF, SVG; resolution)
+and described by a :class:`FigureFile` (files, title, caption). Units on the axes are
+the ``units`` attributes stored in the result files. A quantity that spans more than two
+decades is drawn on a logarithmic axis (symmetric-logarithmic when it changes sign),
+:func:`set_scale`.
 """
 
 from __future__ import annotations
 
-import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .load import RunData, SweepData, safe_filename
-from .tables import SettleThresholds, metric_column, metric_label
+from .. import __version__
+from .load import RunData, safe_filename
+from .tables import SettleThresholds
 
-__all__ = ["FigureFile", "run_figures", "switching_figure", "comparison_figures", "sweep_figures", "DPI"]
+__all__ = [
+    "FigureFile",
+    "FigureWriter",
+    "FIGURE_FORMATS",
+    "DPI",
+    "run_figures",
+    "switching_figure",
+    "comparison_figures",
+    "set_scale",
+]
 
-#: Resolution of the PNG files [dots per inch].
+#: Default resolution of the raster (PNG) files [dots per inch].
 DPI = 110
+#: Figure file formats (``--figure-format``); the page shows PNG, or SVG when only it is asked.
+FIGURE_FORMATS = ("png", "pdf", "svg")
+#: A quantity is drawn on a logarithmic axis when its largest magnitude is more than this
+#: times the magnitude a quarter of its samples stay under (it spans more than two decades).
+LOG_SPAN = 100.0
 
 #: Mathtext symbol of each plotted variable (the vector; components use :data:`COMPONENTS`).
 SYMBOLS = {
@@ -36,6 +54,10 @@ SYMBOLS = {
     "velocity": "V",
     "controller_state": "D",
     "constraint_error": "E",
+    "constraint_rate": "F",
+    "constraint_force": r"\Lambda",
+    "force_h": "H",
+    "torque_n": "N",
     "lyapunov": "v",
     "lyapunov_rate": r"\dot v",
 }
@@ -47,11 +69,22 @@ WORDS = {
     "velocity": "COM velocity",
     "controller_state": "controller state",
     "constraint_error": "constraint error",
+    "constraint_rate": "constraint rate",
+    "constraint_force": "constraint force",
+    "force_h": "feedback force",
+    "torque_n": "feedback torque",
     "lyapunov": "Lyapunov function",
     "lyapunov_rate": "Lyapunov rate",
 }
 #: Mathtext symbol of the components of a variable, where it differs from :data:`SYMBOLS`.
 COMPONENTS = {"theta": r"\theta"}
+#: The terms of v (:data:`rbstab.variants.LYAPUNOV_TERMS`) and their legend symbols.
+LYAPUNOV_TERMS = {
+    "lyapunov_translational": "$v_t$ translational",
+    "lyapunov_rotational": "$v_r$ rotational",
+    "lyapunov_constraint": "$v_c$ constraint controller",
+    "lyapunov_gravity": "$v_g$ gravity",
+}
 _LINESTYLES = ("-", "--", ":")
 #: A constraint error below this [m] is drawn on a +-1 mm axis and labelled round-off.
 ROUND_OFF_E = 1e-9
@@ -59,49 +92,68 @@ ROUND_OFF_E = 1e-9
 
 @dataclass(frozen=True)
 class FigureFile:
-    """One PNG of the report.
+    """One figure of the report.
 
     Attributes
     ----------
     path : str
-        File name relative to the report folder (``figures/<name>.png``).
+        The file the page shows, relative to the report folder (``figures/<name>.png``).
     title : str
         Short title (HTML/markdown heading and alt text).
     caption : str
         What the figure shows, one or two sentences.
+    files : tuple of str
+        Every file of the figure, one per format asked (``figures/<name>.pdf`` ...).
     """
 
     path: str
     title: str
     caption: str
+    files: tuple[str, ...] = ()
 
 
-def _units_text(units: str) -> str:
-    """CF-style units (``rad s-1``) as they read on an axis (``rad/s``)."""
-    return {"rad s-1": "rad/s", "m s-1": "m/s", "s-1": "1/s"}.get(units, units)
+@dataclass(frozen=True)
+class FigureWriter:
+    """Where and how the figures of a report are written.
 
+    Attributes
+    ----------
+    folder : Path
+        Report folder; files go to ``folder/figures/`` (which must exist).
+    formats : tuple of str
+        Of :data:`FIGURE_FORMATS`. The page shows the PNG (or the SVG when SVG but not
+        PNG is asked); with PDF alone a PNG is written for the page as well.
+    dpi : int
+        Resolution of the PNG files [dots per inch]; PDF and SVG are vector files.
+    """
 
-def _label(run: RunData, var: str, component: int | None = None) -> str:
-    sym = SYMBOLS[var] if component is None else f"{COMPONENTS.get(var, SYMBOLS[var])}_{component + 1}"
-    return f"{WORDS[var]} ${sym}$ [{_units_text(run.units(var))}]"
+    folder: Path
+    formats: tuple[str, ...] = ("png",)
+    dpi: int = DPI
 
+    @property
+    def page_format(self) -> str:
+        """Format of the file the page shows."""
+        return "svg" if "svg" in self.formats and "png" not in self.formats else "png"
 
-def _new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float = 2.4, sharex: bool = True):
-    from matplotlib.figure import Figure
+    def save(self, fig, name: str, title: str, caption: str) -> FigureFile:
+        """Write ``fig`` as ``figures/<name>.<format>`` in every format; its record."""
+        formats = list(dict.fromkeys([*self.formats, self.page_format]))
+        files = tuple(f"figures/{name}.{fmt}" for fmt in formats)
+        for rel, fmt in zip(files, formats):
+            self._savefig(fig, self.folder / rel, fmt)
+        return FigureFile(f"figures/{name}.{self.page_format}", title, caption,
+                          tuple(f for f, fmt in zip(files, formats) if fmt in self.formats))
 
-    fig = Figure(figsize=(width, row_height * rows + 0.6), dpi=DPI, layout="constrained")
-    axes = fig.subplots(rows, cols, sharex=sharex, squeeze=False)
-    return fig, axes
-
-
-def _save(fig, folder: Path, name: str) -> str:
-    rel = f"figures/{name}.png"
-    try:
-        fig.savefig(folder / rel, format="png", dpi=DPI)
-    except ValueError:  # a text from the data (a run's name with '$') that is not valid mathtext
-        _plain_texts(fig)
-        fig.savefig(folder / rel, format="png", dpi=DPI)
-    return rel
+    def _savefig(self, fig, path: Path, fmt: str) -> None:
+        meta = {"Software": f"rbstab {__version__}"} if fmt == "png" else {"Creator": f"rbstab {__version__}"}
+        if fmt == "pdf":
+            meta["CreationDate"] = None  # the same figure gives the same bytes
+        try:
+            fig.savefig(path, format=fmt, dpi=self.dpi, metadata=meta)
+        except ValueError:  # a text from the data (a run's name with '$') that is not valid mathtext
+            _plain_texts(fig)
+            fig.savefig(path, format=fmt, dpi=self.dpi, metadata=meta)
 
 
 def _plain_texts(fig) -> None:
@@ -117,7 +169,32 @@ def _plain_texts(fig) -> None:
             text.set_parse_math(False)
 
 
-def _colours(n: int) -> list:
+# -- helpers ----------------------------------------------------------------------------------------
+
+def units_text(units: str) -> str:
+    """CF-style units (``rad s-1``) as they read on an axis (``rad/s``)."""
+    return {"rad s-1": "rad/s", "m s-1": "m/s", "s-1": "1/s", "N m": "N m", "N s-1": "N/s"}.get(units, units)
+
+
+def _symbol(var: str, component: int | None = None) -> str:
+    return SYMBOLS[var] if component is None else f"{COMPONENTS.get(var, SYMBOLS[var])}_{component + 1}"
+
+
+def _label(run: RunData, var: str, component: int | None = None) -> str:
+    return f"{WORDS[var]} ${_symbol(var, component)}$ [{units_text(run.units(var))}]"
+
+
+def new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float = 2.4, sharex: bool = True):
+    """A constrained-layout figure and its (rows, cols) array of axes."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, row_height * rows + 0.6), dpi=DPI, layout="constrained")
+    axes = fig.subplots(rows, cols, sharex=sharex, squeeze=False)
+    return fig, axes
+
+
+def colours(n: int) -> list:
+    """``n`` distinguishable colours (tab10, tab20, then viridis)."""
     from matplotlib import colormaps
 
     if n <= 10:
@@ -125,6 +202,53 @@ def _colours(n: int) -> list:
     if n <= 20:
         return [colormaps["tab20"](i) for i in range(n)]
     return [colormaps["viridis"](x) for x in np.linspace(0, 0.95, n)]
+
+
+def set_scale(ax, values, axis: str = "y") -> str:
+    """Put ``ax``'s ``axis`` on a logarithmic scale when ``values`` span decades.
+
+    A quantity spans decades when its largest magnitude is more than :data:`LOG_SPAN`
+    times the first quartile of its (non-zero, if none is negative) magnitudes. Then
+    ``"log"`` when no value is negative (zeros are not drawn), else ``"symlog"``
+    (:func:`_symlog`); otherwise ``"linear"`` (the axis is left as it is). Returns the scale.
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    magnitude = np.abs(v)
+    signed = bool(np.any(v < 0))
+    base = magnitude if signed else magnitude[magnitude > 0]
+    if base.size < 2 or base.max() <= LOG_SPAN * float(np.percentile(base, 25)):
+        return "linear"
+    if not signed:
+        (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
+        return "log"
+    _symlog(ax, v, axis)
+    return "symlog"
+
+
+def _symlog(ax, values: np.ndarray, axis: str) -> None:
+    """Symmetric-log scale: linear within a power of ten near the 5th percentile of the
+    magnitudes (at least 1e-6 of the peak); labelled at 0 and at powers of ten inside the
+    values' range, at most 5 decades each side."""
+    import math
+
+    magnitude = np.abs(values)
+    peak = float(magnitude.max())
+    low = math.floor(math.log10(max(float(np.percentile(magnitude, 5)), 1e-6 * peak)))
+    top = math.floor(math.log10(peak))
+    decades = list(range(top, low, -max(1, math.ceil((top - low) / 5))))
+    ticks = [-(10.0 ** k) for k in decades if -(10.0 ** k) >= values.min()] + [0.0]
+    ticks += [10.0 ** k for k in reversed(decades) if 10.0 ** k <= values.max()]
+    target = ax.yaxis if axis == "y" else ax.xaxis
+    (ax.set_yscale if axis == "y" else ax.set_xscale)("symlog", linthresh=10.0 ** low, linscale=0.5)
+    target.set_ticks(ticks)
+    target.set_minor_locator(_no_ticks())
+
+
+def _no_ticks():
+    from matplotlib.ticker import NullLocator
+
+    return NullLocator()
 
 
 def _mark_failure(ax, run: RunData) -> None:
@@ -144,123 +268,193 @@ def _marker(values: np.ndarray) -> str | None:
     return "o" if finite < 20 else None
 
 
-def run_figures(run: RunData, folder: Path) -> list[FigureFile]:
-    """The paper's figures for one run, written to ``folder/figures/``.
+def _status(run: RunData) -> str:
+    return "" if run.ok else f" - FAILED (last sample t = {run.summary.get('t_final', float('nan')):.4g} s)"
 
-    Parameters
-    ----------
-    run : RunData
-    folder : Path
-        Report folder (``figures/`` must exist).
+
+def _suptitle(fig, run: RunData, what: str) -> None:
+    fig.suptitle(f"{run.label} ({run.variant}): {what}{_status(run)}", fontsize=11)
+
+
+def _finish_time_axes(axes, run: RunData, legend: bool = True, **legend_kw) -> None:
+    """Grid, legend titled with the run, failure mark and the time label of a column of panels."""
+    for ax in axes:
+        if legend:
+            ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8, **legend_kw)
+        ax.grid(alpha=0.3, which="both")
+        _mark_failure(ax, run)
+    axes[-1].set_xlabel("time $t$ [s]")
+
+
+def _vector_panels(axes, run: RunData, names: Sequence[str], scale: bool = False) -> dict:
+    """Each 3-vector of ``names`` in its own panel, components as solid, dashed, dotted lines."""
+    s = run.series(*names)
+    for ax, var in zip(axes, names):
+        for k in range(3):
+            ax.plot(s["time"], s[var][:, k], ls=_LINESTYLES[k], marker=_marker(s[var]), label=f"${_symbol(var, k)}$")
+        ax.set_ylabel(_label(run, var), fontsize=9)
+        if scale:
+            set_scale(ax, s[var])
+    _finish_time_axes(axes, run, ncols=3)
+    return s
+
+
+# -- per run ----------------------------------------------------------------------------------------
+
+def run_figures(run: RunData, out: FigureWriter) -> list[FigureFile]:
+    """The figures of one run.
 
     Returns
     -------
     list of FigureFile
-        ``<label>_rotational.png`` (Theta [rad], Omega [rad/s] against t [s]; cf. the
-        paper's Figs 3, 4, 6), ``<label>_translational.png`` (X [m], V [m/s], D [m] for
-        ``embedded``, E [m]; Figs 5, 7), ``<label>_lyapunov.png`` (v [J]; analytic and
-        numerical dv/dt [W] overlaid; their difference [W]); for a run of the pure sign
-        law, also ``<label>_switching.png`` (:func:`switching_figure`).
+        ``<label>_rotational`` (Theta [rad], Omega [rad/s] against t [s]; cf. the paper's
+        Figs 3, 4, 6), ``<label>_translational`` (X [m], V [m/s], D [m] for ``embedded``,
+        E [m]; Figs 5, 7), ``<label>_lyapunov`` (v [J] and its terms, log scale; analytic
+        and numerical dv/dt [W]; their difference [W]), ``<label>_forces`` (Lambda [N],
+        H [N], N [N m]), ``<label>_phase`` (E_i against F_i, Theta_i against Omega_i) and,
+        for a run of the pure sign law, ``<label>_switching`` (:func:`switching_figure`).
+        A figure whose variables the file does not hold (a thinned store) is left out.
     """
-    stem = safe_filename(run.label)
-    out = []
-    status = "" if run.ok else f" - FAILED (last sample t = {run.summary.get('t_final', float('nan')):.4g} s)"
+    makers = (_rotational_figure, _translational_figure, _lyapunov_figure, _forces_figure, _phase_figure,
+              switching_figure)
+    return [f for f in (make(run, out) for make in makers) if f is not None]
 
-    # rotational states
-    s = run.series("theta", "omega")
-    fig, axes = _new_figure(2)
-    for ax, var in zip(axes[:, 0], ("theta", "omega")):
-        for k in range(3):
-            ax.plot(s["time"], s[var][:, k], ls=_LINESTYLES[k], marker=_marker(s[var]),
-                    label=f"${COMPONENTS.get(var, SYMBOLS[var])}_{k + 1}$")
-        ax.set_ylabel(_label(run, var))
-        ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8, ncols=3)
-        ax.grid(alpha=0.3)
-        _mark_failure(ax, run)
-    axes[-1, 0].set_xlabel("time $t$ [s]")
-    fig.suptitle(f"{run.label} ({run.variant}): rotational states{status}", fontsize=11)
-    out.append(FigureFile(_save(fig, folder, f"{stem}_rotational"), f"{run.label}: rotational states",
-                          "Euler angles Theta and body angular velocity Omega against time (cf. the paper's Figs 3, 4, 6)."))
 
-    # translational states and constraint error
-    names = ["position", "velocity"] + (["controller_state"] if "controller_state" in run.series("controller_state") else [])
-    names.append("constraint_error")
-    s = run.series(*names)
-    fig, axes = _new_figure(len(names))
-    for ax, var in zip(axes[:, 0], names):
-        for k in range(3):
-            ax.plot(s["time"], s[var][:, k], ls=_LINESTYLES[k], marker=_marker(s[var]),
-                    label=f"${COMPONENTS.get(var, SYMBOLS[var])}_{k + 1}$")
-        ax.set_ylabel(_label(run, var), fontsize=9)
-        ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8, ncols=3)
-        ax.grid(alpha=0.3)
-        _mark_failure(ax, run)
-    peak = float(np.nanmax(np.abs(s["constraint_error"]))) if np.isfinite(s["constraint_error"]).any() else np.nan
-    if peak <= ROUND_OFF_E:
-        # E is zero up to round-off (permanent): show it on a physical scale, say so
-        ax = axes[-1, 0]
-        ax.set_ylim(-1e-3, 1e-3)
-        ax.text(0.02, 0.1, f"max |E| = {peak:.2g} m: zero to round-off (axis limits +-1 mm)",
-                transform=ax.transAxes, fontsize=8, color="0.3")
-    axes[-1, 0].set_xlabel("time $t$ [s]")
+def _rotational_figure(run: RunData, out: FigureWriter) -> FigureFile:
+    fig, axes = new_figure(2)
+    _vector_panels(axes[:, 0], run, ("theta", "omega"))
+    _suptitle(fig, run, "rotational states")
+    return out.save(fig, f"{safe_filename(run.label)}_rotational", f"{run.label}: rotational states",
+                    "Euler angles Theta and body angular velocity Omega against time (cf. the paper's Figs 3, 4, 6).")
+
+
+def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
+    names = ["position", "velocity", "controller_state", "constraint_error"]
+    names = [n for n in names if n in run.series(*names)]
+    fig, axes = new_figure(len(names))
+    s = _vector_panels(axes[:, 0], run, names)
+    e = s["constraint_error"]
+    peak = float(np.nanmax(np.abs(e))) if np.isfinite(e).any() else np.nan
+    if peak <= ROUND_OFF_E:  # E is zero up to round-off (permanent): a physical scale, said so
+        axes[-1, 0].set_ylim(-1e-3, 1e-3)
+        axes[-1, 0].text(0.02, 0.1, f"max |E| = {peak:.2g} m: zero to round-off (axis limits +-1 mm)",
+                         transform=axes[-1, 0].transAxes, fontsize=8, color="0.3")
+    _suptitle(fig, run, "translational states and constraint error")
     extra = " (X, V reconstructed from Theta, Omega: C is fixed, E = 0)" if run.variant == "permanent" else ""
-    fig.suptitle(f"{run.label} ({run.variant}): translational states and constraint error{status}", fontsize=11)
-    out.append(FigureFile(_save(fig, folder, f"{stem}_translational"), f"{run.label}: translational states and constraint",
-                          "Centre-of-mass position X and velocity V (inertial frame), "
-                          + ("controller state D, " if "controller_state" in names else "")
-                          + f"and the constraint error E = X + A R - R against time (cf. the paper's Figs 5, 7){extra}."))
+    return out.save(fig, f"{safe_filename(run.label)}_translational", f"{run.label}: translational states and constraint",
+                    "Centre-of-mass position X and velocity V (inertial frame), "
+                    + ("controller state D, " if "controller_state" in names else "")
+                    + f"and the constraint error E = X + A R - R against time (cf. the paper's Figs 5, 7){extra}.")
 
-    # Lyapunov function and its rates
-    s = run.series("lyapunov", "lyapunov_rate", "lyapunov_rate_numerical")
-    fig, axes = _new_figure(3)
+
+def _lyapunov_terms_panel(ax, run: RunData) -> None:
+    """v (black) and its non-zero terms on a log axis; a term that takes negative values
+    (gravity) is drawn as its magnitude, labelled |v_g|."""
+    s = run.series("lyapunov", *LYAPUNOV_TERMS)
     t = s["time"]
-    axes[0, 0].plot(t, s["lyapunov"], color="k", marker=_marker(s["lyapunov"]), label="$v$")
-    axes[0, 0].set_ylabel(_label(run, "lyapunov"))
-    axes[1, 0].plot(t, s["lyapunov_rate"], color="C0", lw=2.2, alpha=0.6, marker=_marker(s["lyapunov_rate"]),
-                    label=r"$\dot v$ analytic")
-    axes[2, 0].set_ylabel(rf"analytic $-$ numerical [{_units_text(run.units('lyapunov_rate'))}]", fontsize=9)
+    drawn = [s["lyapunov"]]
+    ax.plot(t, s["lyapunov"], color="k", lw=1.8, marker=_marker(s["lyapunov"]), label="$v$")
+    for i, (name, label) in enumerate(LYAPUNOV_TERMS.items()):
+        if name not in s or not np.nanmax(np.abs(s[name]), initial=0.0) > 0:
+            continue
+        term = s[name]
+        if np.nanmin(term) < 0:
+            term, label = np.abs(term), label.replace("$v_", "$|v_").replace("$ ", "|$ ", 1) + " (changes sign)"
+        ax.plot(t, term, color=f"C{i}", lw=1.0, ls=_LINESTYLES[i % 3], label=label)
+        drawn.append(term)
+    values = np.concatenate(drawn)
+    values = values[np.isfinite(values)]
+    if values.size and values.min() >= 0 and values.max() > 0:
+        ax.set_yscale("log")  # v >= 0: always on a log axis (zeros are not drawn)
+    else:
+        set_scale(ax, values)
+    ax.set_ylabel(_label(run, "lyapunov"), fontsize=9)
+
+
+def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
+    s = run.series("lyapunov_rate", "lyapunov_rate_numerical")
+    t = s["time"]
+    fig, axes = new_figure(3, row_height=2.6)
+    _lyapunov_terms_panel(axes[0, 0], run)
+    rate, diff = axes[1, 0], axes[2, 0]
+    rate.plot(t, s["lyapunov_rate"], color="C0", lw=2.2, alpha=0.6, marker=_marker(s["lyapunov_rate"]),
+              label=r"$\dot v$ analytic")
     if "lyapunov_rate_numerical" in s:
-        axes[1, 0].plot(t, s["lyapunov_rate_numerical"], color="C3", ls="--", lw=1.0,
-                        marker=_marker(s["lyapunov_rate_numerical"]), label=r"$\dot v$ numerical")
-        axes[2, 0].plot(t, s["lyapunov_rate"] - s["lyapunov_rate_numerical"], color="C3", lw=0.9,
-                        label=r"$\dot v_{analytic} - \dot v_{numerical}$")
-    axes[1, 0].set_ylabel(_label(run, "lyapunov_rate"))
-    for ax in axes[:, 0]:
-        ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8)
+        rate.plot(t, s["lyapunov_rate_numerical"], color="C3", ls="--", lw=1.0,
+                  marker=_marker(s["lyapunov_rate_numerical"]), label=r"$\dot v$ numerical")
+        diff.plot(t, s["lyapunov_rate"] - s["lyapunov_rate_numerical"], color="C3", lw=0.9,
+                  label=r"$\dot v_{analytic} - \dot v_{numerical}$")
+    set_scale(rate, s["lyapunov_rate"])
+    rate.set_ylabel(_label(run, "lyapunov_rate"), fontsize=9)
+    diff.set_ylabel(rf"analytic $-$ numerical [{units_text(run.units('lyapunov_rate'))}]", fontsize=9)
+    _finish_time_axes(axes[:, 0], run, ncols=2)
+    _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
+    return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
+                    "v and its non-zero terms (translational, rotational, constraint controller, gravity; "
+                    "logarithmic axis, a term that changes sign as its magnitude), its analytic rate dv/dt (solid) and the numerical derivative of v along "
+                    "the samples (dashed; symmetric-logarithmic axis where it spans decades), and their difference "
+                    "(cf. the paper's Figs 3, 4, 6).")
+
+
+def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
+    names = ("constraint_force", "force_h", "torque_n")
+    if not all(n in run.series(*names) for n in names):
+        return None
+    fig, axes = new_figure(3)
+    _vector_panels(axes[:, 0], run, names, scale=True)
+    _suptitle(fig, run, "constraint force and feedback")
+    return out.save(fig, f"{safe_filename(run.label)}_forces", f"{run.label}: forces and torque",
+                    "The constraint force Lambda at C and the translational feedback H (inertial frame, "
+                    "eqs 20-24, 39, 40) and the rotational feedback torque N (body frame, eq 23) against time; "
+                    "a symmetric-logarithmic axis where a quantity spans more than two decades.")
+
+
+def _phase_row(axes, run: RunData, x_var: str, y_var: str) -> None:
+    s = run.series(x_var, y_var)
+    for k, ax in enumerate(axes):
+        x, y = s[x_var][:, k], s[y_var][:, k]
+        ok = np.isfinite(x) & np.isfinite(y)
+        ax.plot(x[ok], y[ok], color=f"C{k}", lw=0.9)
+        if ok.any():
+            ax.plot(x[ok][0], y[ok][0], "o", color="green", ms=5, label="start")
+            ax.plot(x[ok][-1], y[ok][-1], "s", color="k", ms=5, label="end")
+        ax.set_xlabel(_label(run, x_var, k), fontsize=8)
+        ax.set_ylabel(_label(run, y_var, k), fontsize=8)
         ax.grid(alpha=0.3)
-        _mark_failure(ax, run)
-    axes[-1, 0].set_xlabel("time $t$ [s]")
-    check = run.summary.get("lyapunov_rate_check", "?")
-    fig.suptitle(f"{run.label} ({run.variant}): Lyapunov function and its rate (check: {check}){status}", fontsize=11)
-    out.append(FigureFile(_save(fig, folder, f"{stem}_lyapunov"), f"{run.label}: Lyapunov function",
-                          "v, its analytic rate dv/dt (solid) and the numerical derivative of v along the samples "
-                          "(dashed), and their difference (cf. the paper's Figs 3, 4, 6)."))
-    switching = switching_figure(run, folder)
-    return out + ([switching] if switching else [])
+    axes[0].legend(fontsize=8, title=run.label, title_fontsize=8)
 
 
-def switching_figure(run: RunData, folder: Path) -> FigureFile | None:
+def _phase_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
+    held = run.series("constraint_error", "constraint_rate", "theta", "omega")
+    e = held.get("constraint_error")
+    constraint = "constraint_rate" in held and e is not None and np.nanmax(np.abs(e), initial=0.0) > ROUND_OFF_E
+    rows = [("theta", "omega")] + ([("constraint_error", "constraint_rate")] if constraint else [])
+    fig, axes = new_figure(len(rows), 3, width=12.0, row_height=3.4, sharex=False)
+    for row, (x_var, y_var) in zip(axes, rows):
+        _phase_row(row, run, x_var, y_var)
+    _suptitle(fig, run, "phase portraits")
+    note = "" if constraint else " E is zero to round-off (or not stored): no E-F portraits."
+    return out.save(fig, f"{safe_filename(run.label)}_phase", f"{run.label}: phase portraits",
+                    "Each Euler angle Theta_i against the body angular velocity Omega_i"
+                    + (" and each component of the constraint error E_i against its rate F_i" if constraint else "")
+                    + f", from the start (green circle) to the last sample (black square).{note}")
+
+
+def switching_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
     """The located events of a pure-sign-law run (None for other runs): per axis of E, the
     crossings of E_i = 0 against time with the sliding intervals shaded, and the histogram
     of the intervals between successive crossings (log scale) -- the chattering."""
     s = run.series("switching_time", "switching_axis", "switching_kind")
     if "switching_time" not in s:
         return None
-    t, axis, kind = s["switching_time"], s["switching_axis"].astype(int), s["switching_kind"].astype(int)
-    t_final = float(run.summary.get("t_final", np.nan))
-    fig, axes = _new_figure(1, 2, width=13.0, row_height=3.2, sharex=False)
+    fig, axes = new_figure(1, 2, width=13.0, row_height=3.2, sharex=False)
     raster, histogram = axes[0]
     for i in range(3):
-        crossings = t[(axis == i) & (kind == 0)]
-        raster.vlines(crossings, i - 0.35, i + 0.35, color=f"C{i}", lw=0.4)
-        starts, ends = t[(axis == i) & (kind == 1)], t[(axis == i) & (kind == 2)]
-        for a, b in zip(starts, np.r_[ends, np.full(len(starts) - len(ends), t_final)]):
-            raster.axvspan(a, b, ymin=(i + 0.1) / 3, ymax=(i + 0.9) / 3, color=f"C{i}", alpha=0.25, lw=0)
+        crossings = _switching_raster(raster, run, s, i)
         gaps = np.diff(crossings)
         if gaps.size and np.all(gaps > 0):
             bins = np.logspace(np.log10(gaps.min()), np.log10(gaps.max()) + 1e-9, 40)
-            histogram.hist(gaps, bins=bins, histtype="step", color=f"C{i}",
-                           label=f"$E_{i + 1}$: {crossings.size} crossings")
+            histogram.hist(gaps, bins=bins, histtype="step", color=f"C{i}", label=f"$E_{i + 1}$: {crossings.size} crossings")
     raster.set_yticks([0, 1, 2], ["$E_1$", "$E_2$", "$E_3$"])
     raster.set_ylim(-0.5, 2.5)
     raster.set_xlabel("time $t$ [s]")
@@ -274,272 +468,120 @@ def switching_figure(run: RunData, folder: Path) -> FigureFile | None:
         ax.grid(alpha=0.3)
     resolution = run.summary.get("switching_resolution", float("nan"))
     fig.suptitle(f"{run.label} ({run.variant}, pure sign law): switchings, resolution {resolution:g} m", fontsize=11)
-    return FigureFile(_save(fig, folder, f"{safe_filename(run.label)}_switching"), f"{run.label}: switchings",
-                      "Located crossings of each surface E_i = 0 against time, the intervals where C slid on it "
-                      "(equivalent force), and the histogram of the intervals between successive crossings "
-                      "(the chattering; see docs/sliding.md).")
+    return out.save(fig, f"{safe_filename(run.label)}_switching", f"{run.label}: switchings",
+                    "Located crossings of each surface E_i = 0 against time, the intervals where C slid on it "
+                    "(equivalent force), and the histogram of the intervals between successive crossings "
+                    "(the chattering; see docs/sliding.md).")
 
 
-def _overlay(runs: Sequence[RunData], variables: Sequence[str], folder: Path, name: str, title: str) -> str:
-    colours = _colours(len(runs))
-    fig, axes = _new_figure(len(variables), 3, width=13.0, row_height=2.5)
+def _switching_raster(ax, run: RunData, s: dict, i: int) -> np.ndarray:
+    """Axis ``i``'s crossings (lines) and sliding intervals (shaded); returns the crossing times."""
+    t, axis, kind = s["switching_time"], s["switching_axis"].astype(int), s["switching_kind"].astype(int)
+    crossings = t[(axis == i) & (kind == 0)]
+    ax.vlines(crossings, i - 0.35, i + 0.35, color=f"C{i}", lw=0.4)
+    starts, ends = t[(axis == i) & (kind == 1)], t[(axis == i) & (kind == 2)]
+    t_final = float(run.summary.get("t_final", np.nan))
+    for a, b in zip(starts, np.r_[ends, np.full(len(starts) - len(ends), t_final)]):
+        ax.axvspan(a, b, ymin=(i + 0.1) / 3, ymax=(i + 0.9) / 3, color=f"C{i}", alpha=0.25, lw=0)
+    return crossings
+
+
+# -- several runs -----------------------------------------------------------------------------------
+
+def _overlay(runs: Sequence[RunData], variables: Sequence[str], out: FigureWriter, name: str, title: str,
+             caption: str) -> FigureFile:
+    fig, axes = new_figure(len(variables), 3, width=13.0, row_height=2.5)
     for r, var in enumerate(variables):
-        for run, colour in zip(runs, colours):
+        for run, colour in zip(runs, colours(len(runs))):
             s = run.series(var)
-            if var not in s:
-                continue
-            for k in range(3):
+            for k in range(3 if var in s else 0):
                 axes[r, k].plot(s["time"], s[var][:, k], color=colour, lw=1.2, label=run.label)
         for k in range(3):
-            ax = axes[r, k]
-            ax.set_ylabel(_label(runs[0], var, k), fontsize=9)
-            ax.grid(alpha=0.3)
+            axes[r, k].set_ylabel(_label(runs[0], var, k), fontsize=9)
+            axes[r, k].grid(alpha=0.3)
     for k in range(3):
         axes[-1, k].set_xlabel("time $t$ [s]")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncols=min(len(runs), 4), fontsize=9)
     fig.suptitle(title, fontsize=11)
-    return _save(fig, folder, name)
+    return out.save(fig, name, f"Comparison: {title[0].lower()}{title[1:]}", caption)
 
 
-def comparison_figures(runs: Sequence[RunData], folder: Path, thresholds: SettleThresholds) -> list[FigureFile]:
-    """Overlays of several runs (one colour per run), written to ``folder/figures/``.
+def _compare_lyapunov(runs: Sequence[RunData], out: FigureWriter) -> FigureFile:
+    fig, axes = new_figure(2, width=11.0, row_height=2.8)
+    v, rate = axes[0, 0], axes[1, 0]
+    for run, colour in zip(runs, colours(len(runs))):
+        s = run.series("lyapunov", "lyapunov_rate", "lyapunov_rate_numerical")
+        v.plot(s["time"], s["lyapunov"], color=colour, label=run.label)
+        rate.plot(s["time"], s["lyapunov_rate"], color=colour, label=f"{run.label} analytic")
+        if "lyapunov_rate_numerical" in s:
+            rate.plot(s["time"], s["lyapunov_rate_numerical"], color=colour, ls="--", lw=0.9, label=f"{run.label} numerical")
+    v_all = np.concatenate([r.series("lyapunov")["lyapunov"] for r in runs])
+    v_all = v_all[np.isfinite(v_all)]
+    if v_all.size and np.all(v_all > 0):
+        v.set_yscale("log")
+    set_scale(rate, np.concatenate([r.series("lyapunov_rate")["lyapunov_rate"] for r in runs]))
+    v.set_ylabel(_label(runs[0], "lyapunov"))
+    rate.set_ylabel(_label(runs[0], "lyapunov_rate"))
+    for ax in (v, rate):
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8, ncols=2 if len(runs) > 3 else 1, loc="upper right")
+    rate.set_xlabel("time $t$ [s]")
+    fig.suptitle("Lyapunov function and its rate (analytic solid, numerical dashed)", fontsize=11)
+    return out.save(fig, "compare_lyapunov", "Comparison: Lyapunov function",
+                    "v (log scale where every v is positive) and dv/dt of every run (symmetric-log scale where it "
+                    "spans decades); the numerical rate (dashed) should lie on the analytic one.")
+
+
+def _norms_figure(runs: Sequence[RunData], out: FigureWriter, thresholds: SettleThresholds) -> FigureFile:
+    fig, axes = new_figure(2, width=11.0, row_height=2.8)
+    limits = {"constraint_error": thresholds.e, "omega": thresholds.omega}
+    for run, colour in zip(runs, colours(len(runs))):
+        s = run.series(*limits)
+        for ax, (var, limit) in zip(axes[:, 0], limits.items()):
+            ax.plot(s["time"], np.maximum(np.linalg.norm(s[var], axis=1), limit * 1e-4), color=colour, label=run.label)
+    for ax, (var, limit) in zip(axes[:, 0], limits.items()):
+        ax.set_yscale("log")
+        ax.axhline(limit, color="k", ls="--", lw=0.9, label=f"threshold {limit:g} {units_text(runs[0].units(var))}")
+        ax.set_ylabel(f"$|{SYMBOLS[var]}|$ [{units_text(runs[0].units(var))}]")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8, loc="upper right")
+    axes[-1, 0].set_xlabel("time $t$ [s]")
+    fig.suptitle("Norms of the constraint error and of the angular velocity (settling thresholds dashed)", fontsize=11)
+    return out.save(fig, "norms", "Constraint error and angular velocity norms",
+                    f"|E| and |Omega| (Euclidean norms, log scale; values below {thresholds.e * 1e-4:g} m and "
+                    f"{thresholds.omega * 1e-4:g} rad/s drawn at those floors). A run has settled once both stay "
+                    "under the dashed thresholds.")
+
+
+def comparison_figures(runs: Sequence[RunData], out: FigureWriter, thresholds: SettleThresholds) -> list[FigureFile]:
+    """Overlays of several runs (one colour per run).
 
     Parameters
     ----------
     runs : sequence of RunData
         At least one; the overlays of states are drawn for two or more.
-    folder : Path
-        Report folder.
+    out : FigureWriter
     thresholds : SettleThresholds
         Drawn on the norms figure.
 
     Returns
     -------
     list of FigureFile
-        ``compare_rotational.png`` (Theta_k [rad], Omega_k [rad/s], one column per
-        component), ``compare_translational.png`` (X_k [m], V_k [m/s], E_k [m]),
-        ``compare_lyapunov.png`` (v [J], log scale when positive; dv/dt [W] analytic
-        solid / numerical dashed),
-        and ``norms.png`` (|E| [m] and |Omega| [rad/s], log scale, with the settling
-        thresholds), which is also drawn for a single run.
+        ``compare_rotational`` (Theta_k [rad], Omega_k [rad/s], one column per component),
+        ``compare_translational`` (X_k [m], V_k [m/s], E_k [m]), ``compare_lyapunov``
+        (v [J], log scale when positive; dv/dt [W] analytic solid / numerical dashed), and
+        ``norms`` (|E| [m] and |Omega| [rad/s], log scale, with the settling thresholds),
+        which is also drawn for a single run.
     """
-    out = []
-    if len(runs) >= 2:
-        out.append(FigureFile(_overlay(runs, ("theta", "omega"), folder, "compare_rotational", "Rotational states"),
-                              "Comparison: rotational states", "Theta and Omega of every run, one column per component."))
-        out.append(FigureFile(_overlay(runs, ("position", "velocity", "constraint_error"), folder, "compare_translational",
-                                       "Translational states and constraint error"),
-                              "Comparison: translational states and constraint error",
-                              "X, V and the constraint error E of every run, one column per component."))
-        colours = _colours(len(runs))
-        fig, axes = _new_figure(2, width=11.0, row_height=2.8)
-        for run, colour in zip(runs, colours):
-            s = run.series("lyapunov", "lyapunov_rate", "lyapunov_rate_numerical")
-            axes[0, 0].plot(s["time"], s["lyapunov"], color=colour, label=run.label)
-            axes[1, 0].plot(s["time"], s["lyapunov_rate"], color=colour, label=f"{run.label} analytic")
-            if "lyapunov_rate_numerical" in s:
-                axes[1, 0].plot(s["time"], s["lyapunov_rate_numerical"], color=colour, ls="--", lw=0.9,
-                                label=f"{run.label} numerical")
-        axes[0, 0].set_ylabel(_label(runs[0], "lyapunov"))
-        v_all = np.concatenate([r.series("lyapunov")["lyapunov"] for r in runs])
-        v_all = v_all[np.isfinite(v_all)]
-        if v_all.size and np.all(v_all > 0):
-            axes[0, 0].set_yscale("log")
-        axes[1, 0].set_ylabel(_label(runs[0], "lyapunov_rate"))
-        for ax in axes[:, 0]:
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=8, ncols=2 if len(runs) > 3 else 1, loc="upper right")
-        axes[-1, 0].set_xlabel("time $t$ [s]")
-        fig.suptitle("Lyapunov function and its rate (analytic solid, numerical dashed)", fontsize=11)
-        out.append(FigureFile(_save(fig, folder, "compare_lyapunov"), "Comparison: Lyapunov function",
-                              "v (log scale where every v is positive) and dv/dt of every run; the numerical rate (dashed) "
-                              "should lie on the analytic one."))
-    # norms against the settling thresholds
-    colours = _colours(len(runs))
-    fig, axes = _new_figure(2, width=11.0, row_height=2.8)
-    floor = {0: thresholds.e * 1e-4, 1: thresholds.omega * 1e-4}
-    for run, colour in zip(runs, colours):
-        s = run.series("constraint_error", "omega")
-        for row, var in enumerate(("constraint_error", "omega")):
-            norm = np.linalg.norm(s[var], axis=1)
-            axes[row, 0].plot(s["time"], np.maximum(norm, floor[row]), color=colour, label=run.label)
-    for row, (var, limit) in enumerate((("constraint_error", thresholds.e), ("omega", thresholds.omega))):
-        ax = axes[row, 0]
-        ax.set_yscale("log")
-        ax.axhline(limit, color="k", ls="--", lw=0.9, label=f"threshold {limit:g} {_units_text(runs[0].units(var))}")
-        ax.set_ylabel(f"$|{SYMBOLS[var]}|$ [{_units_text(runs[0].units(var))}]")
-        ax.grid(alpha=0.3, which="both")
-        ax.legend(fontsize=8, loc="upper right")
-    axes[-1, 0].set_xlabel("time $t$ [s]")
-    fig.suptitle("Norms of the constraint error and of the angular velocity (settling thresholds dashed)", fontsize=11)
-    out.append(FigureFile(_save(fig, folder, "norms"), "Constraint error and angular velocity norms",
-                          f"|E| and |Omega| (Euclidean norms, log scale; values below {floor[0]:g} m and "
-                          f"{floor[1]:g} rad/s drawn at those floors). A run has settled once both stay under "
-                          "the dashed thresholds."))
-    return out
-
-
-def _axis_values(values) -> tuple[np.ndarray, list[str] | None]:
-    """Numeric positions of parameter values and, if categorical, their tick labels."""
-    import pandas as pd
-
-    num = pd.to_numeric(pd.Series(values), errors="coerce")
-    if num.notna().all():
-        return num.to_numpy(dtype=float), None
-    cats = list(dict.fromkeys(str(v) for v in values))
-    cats.sort(key=_natural_key)
-    pos = {c: i for i, c in enumerate(cats)}
-    return np.array([pos[str(v)] for v in values], dtype=float), cats
-
-
-def _natural_key(text: str) -> tuple:
-    """Sort key: the numbers in ``text`` (so ``[4100, ...]`` sorts before ``[12300, ...]``)."""
-    import re
-
-    numbers = re.findall(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?", text)
-    return (tuple(float(n) for n in numbers), text)
-
-
-def _is_grid(x: np.ndarray, y: np.ndarray) -> bool:
-    """True when the (x, y) pairs are distinct and fill at least half of their grid."""
-    pairs = set(zip(x.tolist(), y.tolist()))
-    cells = len(set(x.tolist())) * len(set(y.tolist()))
-    return len(pairs) == len(x) and cells <= 2500 and len(pairs) >= 0.5 * cells
-
-
-def _use_log(values: np.ndarray) -> bool:
-    v = values[np.isfinite(values)]
-    return v.size > 1 and np.all(v > 0) and v.max() / v.min() > 100
-
-
-def _groups(table, exclude: str) -> np.ndarray:
-    """A label per run from the columns ``base`` and ``variant`` that vary (and are not
-    ``exclude``, the plotted parameter): the colour groups of a sweep's scatter plots."""
-    columns = [c for c in ("base", "variant") if c != exclude and c in table.columns
-               and table[c].astype(str).nunique() > 1]
-    if not columns:
-        return np.full(len(table), "", dtype=object)
-    return table[columns].astype(str).agg(" / ".join, axis=1).to_numpy(dtype=object)
-
-
-def sweep_figures(sweep: SweepData, table, metrics: Sequence[str], folder: Path) -> list[FigureFile]:
-    """Metrics of a sweep against its varied parameters, written to ``folder/figures/``.
-
-    Parameters
-    ----------
-    sweep : SweepData
-    table : pandas.DataFrame
-        :func:`rbstab.report.tables.sweep_table` of the sweep (one row per run).
-    metrics : sequence of str
-        Metric names (:func:`rbstab.report.tables.allowed_metrics`).
-    folder : Path
-        Report folder.
-
-    Returns
-    -------
-    list of FigureFile
-        With two varied parameters on a grid (distinct pairs filling at least half of the
-        grid) one heatmap per metric (``sweep_<name>_heatmap_<metric>.png``, failed cells
-        hatched); otherwise, for each
-        varied parameter, ``sweep_<name>_<parameter>.png`` with one panel per metric
-        (successful runs as dots coloured by base / variant where those vary, failed runs
-        as red crosses on the lower edge). Empty when no parameter varies. ``converged``
-        as a metric gives a map of 1 (converged) and 0.
-    """
-    stem = f"sweep_{safe_filename(sweep.name)}"
-    failed = (table["status"].astype(str) != "success").to_numpy()
-    out = []
-    grid2 = None
-    if len(sweep.varied) == 2:
-        x, xcats = _axis_values(table[sweep.varied[0]])
-        y, ycats = _axis_values(table[sweep.varied[1]])
-        if _is_grid(x, y):
-            grid2 = (x, xcats, y, ycats)
-    if grid2 is not None:
-        p1, p2 = sweep.varied
-        x, xcats, y, ycats = grid2
-        xs, ys = np.unique(x), np.unique(y)
-        from matplotlib.colors import LogNorm
-        from matplotlib.patches import Rectangle
-
-        for name in metrics:
-            col = metric_column(name)
-            grid = np.full((len(ys), len(xs)), np.nan)
-            present = set(zip(x.tolist(), y.tolist()))
-            bad = np.zeros_like(grid, dtype=bool)
-            for xi, yi, val, f in zip(x, y, table[col].to_numpy(dtype=float), failed):
-                i, j = int(np.searchsorted(ys, yi)), int(np.searchsorted(xs, xi))
-                if f:
-                    bad[i, j] = True
-                else:
-                    grid[i, j] = val
-            fig, axes = _new_figure(1, width=8.0, row_height=5.0)
-            ax = axes[0, 0]
-            norm = LogNorm() if _use_log(grid.ravel()) else None
-            mesh = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis", norm=norm)
-            if np.isfinite(grid).any():
-                fig.colorbar(mesh, ax=ax, label=metric_label(name))
-            undefined = "not settled" if name == "settling_time" else "n/a"
-            for i in range(len(ys)):
-                for j in range(len(xs)):
-                    if bad[i, j]:
-                        ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="red", lw=0))
-                        ax.text(j, i, "failed", ha="center", va="center", color="red", fontsize=8,
-                                bbox={"facecolor": "white", "edgecolor": "none", "alpha": 0.85})
-                    elif grid.size > 144:
-                        continue
-                    elif np.isfinite(grid[i, j]):
-                        r, g, b, _ = mesh.cmap(mesh.norm(grid[i, j]))
-                        ink = "k" if 0.299 * r + 0.587 * g + 0.114 * b > 0.5 else "w"
-                        ax.text(j, i, f"{grid[i, j]:.3g}", ha="center", va="center", fontsize=8, color=ink)
-                    elif (xs[j], ys[i]) in present:
-                        ax.text(j, i, undefined, ha="center", va="center", fontsize=8, color="0.3")
-            ax.set_xticks(range(len(xs)), xcats if xcats else [f"{v:g}" for v in xs], rotation=30, fontsize=8)
-            ax.set_yticks(range(len(ys)), ycats if ycats else [f"{v:g}" for v in ys], fontsize=8)
-            ax.set_xlabel(p1)
-            ax.set_ylabel(p2)
-            fig.suptitle(f"sweep {sweep.name}: {metric_label(name)}", fontsize=11)
-            out.append(FigureFile(_save(fig, folder, f"{stem}_heatmap_{safe_filename(name)}"),
-                                  f"{sweep.name}: {name} over {p1} and {p2}",
-                                  f"{metric_label(name)} for each pair of values of {p1} and {p2}; "
-                                  "hatched red cells: failed runs; 'n/a' or 'not settled': the metric is undefined "
-                                  "for that run; blank: no run."))
-        return out
-    from matplotlib.transforms import blended_transform_factory
-
-    for param in sweep.varied:
-        x, cats = _axis_values(table[param])
-        fig, axes = _new_figure(len(metrics), width=9.0, row_height=2.6)
-        for ax, name in zip(axes[:, 0], metrics):
-            y = table[metric_column(name)].to_numpy(dtype=float)
-            ok = ~failed
-            order = np.argsort(x[ok], kind="stable")
-            style = "o-" if len(sweep.varied) == 1 else "o"
-            groups = _groups(table, exclude=param)
-            for k, label in enumerate(dict.fromkeys(groups[ok][order])):
-                mine = groups[ok][order] == label
-                ax.plot(x[ok][order][mine], y[ok][order][mine], style, ms=4, color=f"C{k % 10}",
-                        label=label or "success")
-            if failed.any():
-                trans = blended_transform_factory(ax.transData, ax.transAxes)
-                ax.plot(x[failed], np.full(failed.sum(), 0.03), "x", color="red", ms=8, mew=2,
-                        transform=trans, label="failed", clip_on=False)
-            if _use_log(y[ok]):
-                ax.set_yscale("log")
-            ax.set_ylabel(metric_label(name), fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=8, loc="best")
-            if cats:
-                ax.set_xticks(range(len(cats)), cats, rotation=20, fontsize=8)
-        axes[-1, 0].set_xlabel(param)
-        others = [p for p in sweep.varied if p != param]
-        note = f" (other varied parameters mixed: {', '.join(others)})" if others else ""
-        title = textwrap.fill(f"sweep {sweep.name}: metrics against {param}{note}", width=110)
-        fig.suptitle(title, fontsize=11 if "\n" not in title else 9)
-        out.append(FigureFile(_save(fig, folder, f"{stem}_{safe_filename(param)}"),
-                              f"{sweep.name}: metrics against {param}",
-                              f"{', '.join(metrics)} against {param}{note}; red crosses on the lower edge: failed runs "
-                              "(status failed, error or pending). A successful run without a value (e.g. not settled) "
-                              "has no point."))
-    return out
+    if len(runs) < 2:
+        return [_norms_figure(runs, out, thresholds)]
+    return [
+        _overlay(runs, ("theta", "omega"), out, "compare_rotational", "Rotational states",
+                 "Theta and Omega of every run, one column per component."),
+        _overlay(runs, ("position", "velocity", "constraint_error"), out, "compare_translational",
+                 "Translational states and constraint error",
+                 "X, V and the constraint error E of every run, one column per component."),
+        _compare_lyapunov(runs, out),
+        _norms_figure(runs, out, thresholds),
+    ]

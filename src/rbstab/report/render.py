@@ -78,6 +78,7 @@ tr:nth-child(even) td { background: #fafafa; }
 figure { margin: 1em 0 2em 0; }
 figure img { max-width: 100%; border: 1px solid #ddd; }
 figcaption { font-size: 13px; color: #444; }
+.files a { margin-right: .4em; }
 nav ul { columns: 2; }
 .failed { color: #b00; font-weight: 600; }
 """
@@ -111,14 +112,25 @@ def _html_table(table: Table) -> str:
     )
 
 
+def _format_name(path: str) -> str:
+    """``PNG``, ``PDF``, ``SVG``: the format of a figure file, as a link's text."""
+    return html.escape(path.rpartition(".")[2].upper())
+
+
+def _md_path(path: str) -> str:
+    return path.replace("(", "%28").replace(")", "%29").replace(" ", "%20")
+
+
 def _html_block(block) -> str:
     if isinstance(block, Table):
         return _html_table(block)
     if isinstance(block, FigureFile):
         src = html.escape(block.path, quote=True)
+        links = " ".join(f'<a href="{html.escape(f, quote=True)}">{_format_name(f)}</a>' for f in block.files)
+        files = f' <span class="files">Files: {links}</span>' if block.files and block.files != (block.path,) else ""
         return (
             f'<figure><a href="{src}"><img src="{src}" alt="{html.escape(block.title, quote=True)}"></a>'
-            f"<figcaption><b>{html.escape(block.title)}.</b> {html.escape(block.caption)}</figcaption></figure>"
+            f"<figcaption><b>{html.escape(block.title)}.</b> {html.escape(block.caption)}{files}</figcaption></figure>"
         )
     if isinstance(block, list):
         return "<ul>" + "".join(f"<li>{html.escape(item)}</li>" for item in block) + "</ul>"
@@ -191,8 +203,10 @@ def _md_block(block) -> str:
     if isinstance(block, Table):
         return _md_table(block)
     if isinstance(block, FigureFile):
-        path = block.path.replace("(", "%28").replace(")", "%29").replace(" ", "%20")
-        return f"![{_md_escape(block.title)}]({path})\n\n_{_md_escape(block.title)}._ {_md_escape(block.caption)}"
+        links = " ".join(f"[{_format_name(f)}]({_md_path(f)})" for f in block.files)
+        files = f" Files: {links}" if block.files and block.files != (block.path,) else ""
+        return (f"![{_md_escape(block.title)}]({_md_path(block.path)})\n\n"
+                f"_{_md_escape(block.title)}._ {_md_escape(block.caption)}{files}")
     if isinstance(block, list):
         return "\n".join(f"- {_md_escape(item)}" for item in block)
     return _md_escape(str(block))

@@ -1,0 +1,236 @@
+"""Report figures: formats and resolution, the per-run figures (forces, terms of v, phase
+portraits), logarithmic scales, the page title and the default folder name."""
+
+from __future__ import annotations
+
+import html.parser
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from conftest import ROOT
+from rbstab.report import ReportError, ReportOptions, build_report, default_report_name, load_inputs
+from rbstab.report.figures import FigureWriter, run_figures, set_scale
+from rbstab_cli.main import cli
+
+SHORT = ["--set", "simulation.n_samples=201", "--set", "simulation.t_end=0.5"]
+PAPER = ROOT / "configs" / "paper"
+
+pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
+
+
+def _ok(*args):
+    result = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=True)
+    assert result.exit_code == 0, (result.output, result.exception)
+    return result
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory) -> dict[str, Path]:
+    """case 1 (permanent, gravity: a term of v changes sign) and case 3 (embedded), 0.5 s."""
+    out = tmp_path_factory.mktemp("runs")
+    _ok("run", PAPER / "case1_permanent.yaml", PAPER / "case3_embedded.yaml", "-o", out, *SHORT)
+    return {"case1": out / "case1_permanent.h5", "case3": out / "case3_embedded.h5"}
+
+
+class _Page(html.parser.HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.src, self.href, self.title, self.h1 = [], [], [], []
+        self._in = None
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        self._in = tag
+        if tag == "img":
+            self.src.append(attrs["src"])
+        if tag == "a":
+            self.href.append(attrs["href"])
+
+    def handle_data(self, data):
+        if self._in in ("title", "h1"):
+            getattr(self, self._in).append(data)
+
+    def handle_endtag(self, tag):
+        self._in = None
+
+
+def _page(folder: Path) -> _Page:
+    page = _Page()
+    page.feed((folder / "index.html").read_text(encoding="utf-8"))
+    return page
+
+
+# -- formats and resolution --------------------------------------------------------------------------
+
+def test_every_figure_in_every_format_asked_at_the_resolution_asked(runs, tmp_path):
+    from PIL import Image
+
+    out = tmp_path / "fig"
+    _ok("report", runs["case3"], "-o", out, "--figure-format", "png,pdf", "--figure-format", "svg", "--dpi", "220")
+    stems = sorted({p.stem for p in (out / "figures").iterdir()})
+    assert {f"case3_embedded_{k}" for k in ("rotational", "translational", "lyapunov", "forces", "phase")} <= set(stems)
+    page = _page(out)
+    for stem in stems:
+        png, pdf, svg = (out / "figures" / f"{stem}.{ext}" for ext in ("png", "pdf", "svg"))
+        assert pdf.read_bytes()[:5] == b"%PDF-" and b"<svg" in svg.read_bytes()[:2000]
+        with Image.open(png) as im:
+            assert round(im.info["dpi"][0]) == 220
+        assert f"figures/{stem}.png" in page.src  # the page shows the PNG and links every file
+        assert {f"figures/{stem}.{ext}" for ext in ("png", "pdf", "svg")} <= set(page.href)
+    manifest = json.loads((out / "report.json").read_text())
+    assert manifest["figure_formats"] == ["png", "pdf", "svg"] and manifest["dpi"] == 220
+    assert len(manifest["figures"]) == 3 * len(stems)
+    assert manifest["provenance"]["Conventions"] == "CF-1.10"
+
+
+def _one_figure():
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4.0, 3.0))
+    fig.subplots().plot([0, 1], [1, 0])
+    return fig
+
+
+def test_resolution_scales_the_png(tmp_path):
+    from PIL import Image
+
+    widths = {}
+    for dpi in (60, 120):
+        written = FigureWriter(_figures(tmp_path / str(dpi)), dpi=dpi).save(_one_figure(), "f", "t", "c")
+        with Image.open(tmp_path / str(dpi) / written.path) as im:
+            widths[dpi] = im.size[0]
+    assert widths == {60: 240, 120: 480}  # 4 inches
+
+
+def test_pdf_alone_still_gives_the_page_an_image(tmp_path):
+    from rbstab.report.render import Section, render_html, render_markdown
+
+    written = FigureWriter(_figures(tmp_path), formats=("pdf",)).save(_one_figure(), "f", "t", "c")
+    assert written.path == "figures/f.png" and written.files == ("figures/f.pdf",)
+    assert (tmp_path / written.path).is_file() and (tmp_path / "figures/f.pdf").read_bytes()[:5] == b"%PDF-"
+    page = _Page()
+    page.feed(render_html("t", [], [Section("s", "s", [written])]))
+    assert page.src == ["figures/f.png"] and "figures/f.pdf" in page.href
+    assert "[PDF](figures/f.pdf)" in render_markdown("t", [], [Section("s", "s", [written])])
+    svg = FigureWriter(_figures(tmp_path / "svg"), formats=("svg", "pdf")).save(_one_figure(), "f", "t", "c")
+    assert svg.path == "figures/f.svg" and svg.files == ("figures/f.svg", "figures/f.pdf")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--figure-format", "png,gif"], "gif"),
+    (["--dpi", "10"], "10"),
+    (["--dpi", "5000"], "5000"),
+])
+def test_bad_figure_options_are_refused_before_anything_is_written(runs, tmp_path, args, message):
+    result = CliRunner().invoke(cli, ["report", str(runs["case3"]), "-o", str(tmp_path / "r"), *args])
+    assert result.exit_code == 2 and message in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "r").exists()
+
+
+def test_library_refuses_bad_figure_options(runs, tmp_path):
+    for options in (ReportOptions(figure_formats=("jpg",)), ReportOptions(dpi=1), ReportOptions(title="  ")):
+        with pytest.raises(ReportError):
+            build_report([runs["case3"]], tmp_path / "r", options)
+    assert not (tmp_path / "r").exists()
+
+
+# -- title and folder ----------------------------------------------------------------------------------
+
+@pytest.fixture
+def no_rendering(monkeypatch):
+    """Figures are drawn but not rendered to files (what a test of the page needs, faster)."""
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: None)
+
+
+def test_title_is_what_the_report_compares_unless_given(runs, tmp_path, no_rendering):
+    default = build_report([runs["case3"], runs["case1"]], tmp_path / "a")
+    page = _page(default)
+    expected = "rbstab report: case3_embedded and case1_permanent"
+    assert page.title == [expected] and page.h1 == [expected]
+    given = build_report([runs["case3"]], tmp_path / "b", ReportOptions(title="Figure 7 & friends"))
+    assert _page(given).title == ["Figure 7 & friends"]
+    assert json.loads((given / "report.json").read_text())["title"] == "Figure 7 & friends"
+
+
+def test_default_folder_is_named_after_the_inputs(runs, tmp_path, monkeypatch, no_rendering):
+    monkeypatch.chdir(tmp_path)
+    _ok("report", runs["case1"], runs["case3"])
+    assert (tmp_path / "results/reports/case1_permanent_vs_case3_embedded/index.html").is_file()
+    # the same name twice, or too long a name: the first two names and a hash of the paths
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "case3_embedded.h5").write_bytes(runs["case3"].read_bytes())
+    twice = default_report_name(load_inputs([runs["case3"], other / "case3_embedded.h5"]))
+    assert twice.startswith("case3_embedded_vs_case3_embedded-") and len(twice.rsplit("-", 1)[1]) == 8
+    folders = [tmp_path / f"{'x' * 30}{i}" for i in range(4)]
+    for folder in folders:
+        folder.mkdir()
+        (folder / "r.h5").write_bytes(runs["case1"].read_bytes())
+    long = default_report_name(load_inputs(folders))
+    assert long.startswith(f"{'x' * 30}0_vs_{'x' * 30}1_and_2_more-") and len(long) < 100
+
+
+# -- the figures of a run --------------------------------------------------------------------------------
+
+def test_run_figures_show_forces_terms_of_v_on_a_log_axis_and_phase_portraits(runs, tmp_path, monkeypatch):
+    import matplotlib.figure
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    inputs = load_inputs([runs["case1"], runs["case3"]])
+    by_name = {r.name: r for r in inputs.runs}
+    captions = {}
+    for run in inputs.runs:
+        captions.update({f.path: f.caption for f in run_figures(run, FigureWriter(tmp_path))})
+    assert all(isinstance(f, matplotlib.figure.Figure) for f in saved.values())
+    lyapunov = saved["case1_permanent_lyapunov"].axes[0]
+    assert lyapunov.get_yscale() == "log"  # v and its terms over decades
+    labels = [line.get_label() for line in lyapunov.get_lines()]
+    assert "$v$" in labels and any("|v_g|" in label for label in labels)  # gravity changes sign: |v_g|
+    forces = saved["case3_embedded_forces"].axes
+    assert [ax.get_ylabel().split(" $")[0] for ax in forces] == ["constraint force", "feedback force", "feedback torque"]
+    assert {ax.get_yscale() for ax in forces} <= {"symlog", "linear"}
+    lam = by_name["case3_embedded"].series("constraint_force")["constraint_force"]
+    np.testing.assert_array_equal(forces[0].get_lines()[0].get_ydata(), lam[:, 0])  # the stored values, drawn
+    assert len(saved["case3_embedded_phase"].axes) == 6  # Theta-Omega and E-F, per component
+    assert len(saved["case1_permanent_phase"].axes) == 3  # permanent: E = 0, no E-F portraits
+    assert "E_i against its rate F_i" in captions["figures/case3_embedded_phase.png"]
+
+
+def test_a_thinned_store_run_has_the_figures_its_file_allows(tmp_path, no_rendering):
+    spec = tmp_path / "s.yaml"
+    spec.write_text(f"name: s\nbase: {PAPER / 'case3_embedded.yaml'}\ngrid:\n  body.mass: [40, 41]\n")
+    _ok("sweep", spec, "-o", tmp_path / "sweeps", "-j", "1", "--no-progress", *SHORT)
+    (chunk,) = sorted((tmp_path / "sweeps" / "s" / "runs").glob("chunk-*.h5"))
+    run = load_inputs([chunk]).runs[0]
+    kinds = [f.path.split("_", 1)[1] for f in run_figures(run, FigureWriter(_figures(tmp_path)))]
+    assert kinds == ["rotational.png", "translational.png", "lyapunov.png", "phase.png"]  # no forces stored
+
+
+def _figures(folder: Path) -> Path:
+    (folder / "figures").mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+# -- scales ----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("values, scale", [
+    (np.exp(-np.linspace(0, 10, 200)) * 1e4, "log"),  # positive, over four decades
+    (np.r_[0.0, np.exp(-np.linspace(0, 10, 200))], "log"),  # zeros are not drawn on it
+    (np.exp(-np.linspace(0, 10, 200)) * np.cos(np.linspace(0, 40, 200)), "symlog"),  # a decaying oscillation
+    (np.sin(np.linspace(0, 20, 200)), "linear"),  # no decay
+    (np.linspace(1.0, 50.0, 200), "linear"),  # less than two decades
+    (np.zeros(10), "linear"),
+    (np.full(10, np.nan), "linear"),
+])
+def test_set_scale_uses_a_log_axis_only_where_values_span_decades(values, scale):
+    from matplotlib.figure import Figure
+
+    ax = Figure().subplots()
+    ax.plot(values)
+    assert set_scale(ax, values) == scale
+    assert ax.get_yscale() == scale
