@@ -241,6 +241,7 @@ def _symlog(ax, values: np.ndarray, axis: str) -> None:
     ticks += [10.0 ** k for k in reversed(decades) if 10.0 ** k <= values.max()]
     target = ax.yaxis if axis == "y" else ax.xaxis
     (ax.set_yscale if axis == "y" else ax.set_xscale)("symlog", linthresh=10.0 ** low, linscale=0.5)
+    ax.autoscale_view()  # margins in the new scale, before the ticks fix the view
     target.set_ticks(ticks)
     target.set_minor_locator(_no_ticks())
 
