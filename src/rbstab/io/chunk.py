@@ -418,7 +418,9 @@ class ChunkWriter:
         self._flush()
         f = self._file
         columns = self._columns()
-        self._room(sum(len(str(v)) + 8 for values in columns.values() for v in values))
+        # 8 bytes a value, plus the text (the config column is most of it)
+        self._room(sum(8 * len(values) + sum(len(v) for v in values if isinstance(v, str))
+                       for values in columns.values()))
         self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         for name, values in columns.items():
             self._write_column(name, values)
