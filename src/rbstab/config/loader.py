@@ -282,7 +282,7 @@ def _build(
             for key, block in INITIAL_STATE_BLOCKS.items()
         },
         simulation=simulation,
-        resolved=dump,  # model_dump gives plain dicts, lists and scalars
+        resolved=plain_tree(dump),
         warnings=found_warnings,
     )
 
