@@ -41,8 +41,7 @@ import numpy as np
 
 from .. import __version__
 from .atomic import write_bytes_atomic
-from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
-from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
+from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
 
 if TYPE_CHECKING:  # pragma: no cover
     from ..simulate import RunResult

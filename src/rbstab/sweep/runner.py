@@ -55,6 +55,7 @@ from .folder import (
     SPEC_FILE,
     SUMMARY_FILE,
     current_rows,
+    index_part,
     index_rows,
     read_spec,
     set_aside_damaged,
@@ -540,7 +541,7 @@ def _collect_finished(runs: Sequence[PlannedRun], runs_dir: Path, attrs: dict, e
         return
     found, _ = current_rows(missing, runs_dir)
     for run_id, row in found.items():
-        attrs[run_id] = row
+        attrs[run_id] = index_part(row)
         errors.pop(run_id, None)
 
 
@@ -559,7 +560,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
         for r in runs:
             row = stored.current(r)
             if row is not None and (not retry_failed or row.get("status") == "success"):
-                attrs[r.run_id] = row
+                attrs[r.run_id] = index_part(row)
                 outcome.n_skipped += 1
                 bar.update(1)
                 continue
@@ -616,7 +617,7 @@ def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict,
     # the worker wrote it from this run's config; after an error (e.g. a worker that
     # died after writing) only a file with the run's hash counts
     if a is not None and a.get("run_id") == rid and (rec["status"] != "error" or a.get("config_hash") == run.config_hash):
-        attrs[rid] = a
+        attrs[rid] = index_part(a)
         errors.pop(rid, None)
     else:
         errors[rid] = rec.get("message") or "no result file was written"

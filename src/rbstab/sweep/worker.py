@@ -176,10 +176,13 @@ class _RunFiles:
 
 
 def _finished(record: dict[str, Any], result, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
+    from .folder import index_part
+
     timing = dict(result.timing)
     timing["config_yaml"] = yaml_time
     timing["write"] = write_time
-    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=row,
+    # the row as the index takes it: the config text stays in the file, not in the parent
+    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=index_part(row),
                   timing=timing)
     return record
 
