@@ -214,14 +214,18 @@ def _python_command(function: str) -> str:
     return f"rbstab.{function}() in {' '.join(sys.argv) or 'python'}"
 
 
-def _differences(stored: Mapping, new: Mapping, prefix: str = "", limit: int = 3) -> list[str]:
-    """``key: stored -> new`` for the first ``limit`` leaves that differ (``name`` aside)."""
+def _differences(stored: Mapping | list, new: Mapping | list, prefix: str = "", limit: int = 3) -> list[str]:
+    """``key: stored -> new`` for the first ``limit`` leaves that differ (``name`` aside);
+    lists of one length are compared item by item (``initial_state.omega.0: 16.0 -> 5``)."""
     out: list[str] = []
+    if isinstance(stored, list):
+        stored, new = dict(enumerate(stored)), dict(enumerate(new))
     for key in dict.fromkeys([*stored, *new]):
         if not prefix and key == "name":
             continue
         a, b = stored.get(key), new.get(key)
-        if isinstance(a, Mapping) and isinstance(b, Mapping):
+        nested = isinstance(a, Mapping) and isinstance(b, Mapping)
+        if nested or (isinstance(a, list) and isinstance(b, list) and len(a) == len(b)):
             out += _differences(a, b, f"{prefix}{key}.", limit - len(out))
         elif a != b:
             out.append(f"{prefix}{key}: {a!r} -> {b!r}")
