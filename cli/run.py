@@ -46,6 +46,10 @@ def _check_targets(loaded, out: Path, overwrite: bool) -> dict[str, str]:
     return how
 
 
+#: check_overwrite's answer -> the "replaced" field of --json: what was there before.
+_REPLACED = {"new": None, "identical": "identical", "replace": "other"}
+
+
 def _report(config, path: Path, mode: str) -> dict:
     """Print the run's line (or JSON object) from its file's attributes; return them."""
     from rbstab.io.hdf5 import read_attributes
@@ -56,7 +60,7 @@ def _report(config, path: Path, mode: str) -> dict:
     if console.json:
         console.emit({"name": config.name, "path": str(path), "variant": config.variant, "status": attrs["status"],
                       "message": attrs["message"], "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
-                      "file": mode, "summary": s})
+                      "replaced": _REPLACED[mode], "summary": s})
     console.out(
         f"{config.name}: {attrs['status']} ({config.variant}, {attrs['wall_time']:.2f} s) "
         f"v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
@@ -79,6 +83,9 @@ def _report(config, path: Path, mode: str) -> dict:
 @console_options
 def run(configs, output, overrides, method, overwrite, as_json) -> None:
     """Run CONFIG... and write OUTPUT/<name>.h5 for each.
+
+    With --json: one object per config ("name", "path", "status", "message", "summary",
+    "replaced": null, "identical" or "other").
 
     Every config is validated, and the output folder checked, before the first one runs.
     A result file made from another configuration (another config_hash) is not replaced

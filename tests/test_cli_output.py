@@ -126,7 +126,7 @@ def test_run_json_is_one_object_per_config(tmp_path):
     objects = json_lines(result.stdout)
     assert [o["name"] for o in objects] == ["case1_permanent", "case3_embedded"]
     first = objects[0]
-    assert first["status"] == "success" and first["file"] == "new" and first["path"].endswith("case1_permanent.h5")
+    assert first["status"] == "success" and first["replaced"] is None and first["path"].endswith("case1_permanent.h5")
     assert first["summary"]["lyapunov_initial"] > 0 and len(first["summary"]["final_theta"]) == 3
     assert "case1_permanent: success" in result.stderr  # the text went to stderr
 

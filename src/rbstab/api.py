@@ -4,10 +4,11 @@
 
     import rbstab
 
-    config = rbstab.load_config("configs/paper/case3_embedded.yaml", overrides={"simulation.t_end": 1.0})
+    config = rbstab.load_config("configs/paper/case3_embedded.yaml", overrides={"name": "case3_short",
+                                                                                "simulation.t_end": 1.0})
     ds = rbstab.simulate(config)               # xarray.Dataset: a result file's content, in memory
     ds.lyapunov.plot(yscale="log")             # v [J] against time [s]
-    path = rbstab.run(config, "results")       # results/case3_embedded.h5 (rbstab run)
+    path = rbstab.run(config, "results")       # results/case3_short.h5 (rbstab run)
     ds = rbstab.open_result(path)              # the same Dataset, read back and verified
     sw = rbstab.sweep("configs/sweeps/gains.yaml", grid=True)   # rbstab sweep, then open_sweep
     rbstab.report([path], "results/reports/case3")              # rbstab report
