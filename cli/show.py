@@ -106,7 +106,7 @@ def _show_sweep(path: str) -> None:
         console.emit(info)
     n = info["n_runs"]
     console.out(f"{path}")
-    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{k} {v}" for k, v in info["status"].items()))
+    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{v} {k}" for k, v in info["status"].items()))
     console.out(f"  converged  {info['n_converged']} of {n} ({100.0 * info['n_converged'] / max(n, 1):.1f}%; "
                 f"v(t_end) <= {info['lyapunov_ratio']} v(0))")
     for column, p in info["parameters"].items():
