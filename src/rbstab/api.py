@@ -114,7 +114,8 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Ov
         ``["simulation.t_end=1.5", "initial_state.omega.0=5"]`` (values parsed as YAML, as
         ``rbstab run --set``) or ``{"simulation.t_end": 1.5, "controller.k_t": [1, 2, 3]}``.
     name : str, optional
-        The run's name when ``source`` has none (a mapping without ``name``: ``"run"``).
+        The name of a mapping that has none (default ``"run"``); a file's default name is
+        its stem.
 
     Returns
     -------
@@ -203,6 +204,11 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = "compiled"
         For an invalid configuration or override.
     ValueError
         For an unknown engine.
+
+    Notes
+    -----
+    The first run on a machine compiles the engine (~30-60 s on 2 cores), cached for
+    every later run and process (:mod:`rbstab.jit`).
     """
     from .io.hdf5 import result_dataset
 

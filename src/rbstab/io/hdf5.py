@@ -18,7 +18,10 @@ Layout of ``<name>.h5``
   ``rbstab_version``, ``git_commit``, ``command_line``, ``created``, ``wall_time``,
   ``solver_*`` statistics and ``summary_*`` figures (:func:`rbstab.summary.summarize`).
 
-Open with ``xarray.open_dataset(path, engine="h5netcdf")``. Files are written to a
+Open with ``xarray.open_dataset(path, engine="h5netcdf")``, or :func:`read_dataset`
+(checksums verified first); :func:`result_dataset` gives the same Dataset for a run in
+memory, from the same tables (:func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
+:func:`result_attributes`). Files are written to a
 temporary name in the target folder and renamed into place, so an interrupted write
 never leaves a half-written result under the final name. Every numeric variable carries a
 Fletcher-32 checksum and the file the SHA-256 of its attributes and text
