@@ -146,6 +146,8 @@ def _expand(path: str) -> list[str]:
     from rbstab.sweep.folder import is_sweep_folder
 
     folder = Path(path)
+    if not folder.exists():
+        raise ValueError(f"no such result file or folder: {path}" + _did_you_mean(folder))
     if not folder.is_dir() or is_sweep_folder(folder):
         return [path]
     inside = sorted(str(p) for p in folder.iterdir() if is_sweep_folder(p) or (p.suffix == ".h5" and p.is_file()))
@@ -153,6 +155,16 @@ def _expand(path: str) -> list[str]:
         raise ValueError(f"{path}: a folder, but not a sweep folder (no sweep.yaml and index.csv) and without "
                          "result files (*.h5) or sweep folders in it")
     return inside
+
+
+def _did_you_mean(missing: Path) -> str:
+    """``"; did you mean X?"`` naming the closest entry of its folder, or ``""``."""
+    import difflib
+
+    parent = missing.parent
+    names = [p.name for p in parent.iterdir()] if parent.is_dir() else []
+    close = difflib.get_close_matches(missing.name, names, n=1, cutoff=0.6)
+    return f"; did you mean {parent / close[0]}?" if close else ""
 
 
 def _show(path: str) -> None:

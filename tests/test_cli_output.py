@@ -177,6 +177,10 @@ def test_show_summarises_a_sweep_folder(sweep_folder):
 def test_show_a_folder_of_sweeps_and_a_folder_of_nothing(sweep_folder, tmp_path):
     parent = invoke("show", sweep_folder)
     assert parent.exit_code == 0 and "sweep      case3_embedded" in parent.stdout
+    typo = invoke("show", sweep_folder / "case3_embeded")
+    assert typo.exit_code == 1
+    assert f"no such result file or folder: {sweep_folder / 'case3_embeded'}; did you mean " \
+           f"{sweep_folder / 'case3_embedded'}?" in typo.stderr
     empty = invoke("show", tmp_path)
     assert empty.exit_code == 1
     assert "not a sweep folder (no sweep.yaml and index.csv) and without result files" in empty.stderr
