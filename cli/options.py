@@ -57,9 +57,9 @@ def _no_warn_codes(ctx, param, values):
 
 def console_options(command):
     """``-q/--quiet``, ``-v/--verbose`` and ``--no-warn CODE`` on a command (the decorator
-    just above its ``def``: they come last in its ``--help``). The command finds its :class:`~rbstab_cli.console.Console`
-    with :func:`~rbstab_cli.console.get_console`; Python warnings with a code raised while
-    it runs go to it."""
+    just above its ``def``: they come last in its ``--help``). The command finds its
+    :class:`~rbstab_cli.console.Console` with :func:`~rbstab_cli.console.get_console`;
+    Python warnings with a code raised while it runs go to it."""
     import functools
 
     @functools.wraps(command)
