@@ -293,7 +293,8 @@ def test_dry_run_lists_runs_and_writes_nothing(tmp_path):
     assert result.exit_code == 0, result.output
     ids = [r.run_id for r in expand(load_spec(path))]
     assert f"{ids[1]}  base=case3_embedded  body.mass=50.0" in result.output
-    assert "warning: 2 of 2 runs: body.inertia" in result.output  # one digest line, not one per run
+    # one digest line, not one per run, with its code
+    assert result.output.count("warning: W001 body.inertia") == 1 and "(2 of 2 runs)" in result.output
     assert not (tmp_path / "out").exists()
 
 

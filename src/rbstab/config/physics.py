@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from ..warning_codes import coded
+
 __all__ = ["inertia_warnings", "semidefinite_notes", "unheld_weight", "SINGULAR_RTOL"]
 
 #: An eigenvalue at most this times the largest eigenvalue magnitude counts as zero (also
@@ -36,7 +38,8 @@ def _fmt(vector) -> str:
 
 
 def inertia_warnings(inertia: np.ndarray) -> list[str]:
-    """Warning lines for an inertia that violates the triangle inequality j_i <= j_k + j_l.
+    """Warning lines (code ``W001``, :mod:`rbstab.warning_codes`) for an inertia that violates
+    the triangle inequality j_i <= j_k + j_l.
 
     Parameters
     ----------
@@ -50,12 +53,11 @@ def inertia_warnings(inertia: np.ndarray) -> list[str]:
     for i in range(3):
         others = [j[k] for k in range(3) if k != i]
         if j[i] > sum(others) * (1 + 1e-12):
-            return [
-                f"body.inertia: principal moments ({', '.join(f'{x:g}' for x in j)}) kg m^2 "
-                f"violate the triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + "
-                f"{others[1]:g}) that every real rigid body satisfies; the equations of "
-                "motion still hold, but no physical body has this inertia"
-            ]
+            return [coded(
+                "W001",
+                f"body.inertia: principal moments ({', '.join(f'{x:g}' for x in j)}) kg m^2 violate the "
+                f"triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + {others[1]:g}); no real body has them",
+            )]
     return []
 
 
@@ -86,7 +88,8 @@ def semidefinite_notes(gains: Mapping[str, Any]) -> list[str]:
     Returns
     -------
     list of str
-        Empty, or one line ``"controller.k_t, controller.l_r: ..."``: with a singular
+        Empty, or one line ``"W002 controller.k_t, controller.l_r: ..."`` (its code,
+        :mod:`rbstab.warning_codes`): with a singular
         stiffness v is not positive definite (it does not grow in that direction), with a
         singular damper dv/dt misses that direction; either way v is not a strict
         Lyapunov function and asymptotic stability is not implied.
@@ -110,10 +113,11 @@ def semidefinite_notes(gains: Mapping[str, Any]) -> list[str]:
     if not singular:
         return []
     keys = ", ".join(f"controller.{k}" for k in singular)
-    return [
+    return [coded(
+        "W002",
         f"{keys}: positive semi-definite, not definite ({'; '.join(singular.values())}); "
-        "v is then not a strict Lyapunov function (asymptotic stability is not implied)"
-    ]
+        "v is then not a strict Lyapunov function (asymptotic stability is not implied)",
+    )]
 
 
 def _sliding_capacity(null: np.ndarray, weight: np.ndarray) -> float:

@@ -18,7 +18,10 @@ Layout of ``<name>.h5``
   ``rbstab_version``, ``git_commit``, ``command_line``, ``created``, ``wall_time``,
   ``solver_*`` statistics and ``summary_*`` figures (:func:`rbstab.summary.summarize`).
 
-Open with ``xarray.open_dataset(path, engine="h5netcdf")``. Files are written to a
+Open with ``xarray.open_dataset(path, engine="h5netcdf")``, or :func:`read_dataset`
+(checksums verified first); :func:`result_dataset` gives the same Dataset for a run in
+memory, from the same tables (:func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
+:func:`result_attributes`). Files are written to a
 temporary name in the target folder and renamed into place, so an interrupted write
 never leaves a half-written result under the final name. Every numeric variable carries a
 Fletcher-32 checksum and the file the SHA-256 of its attributes and text
@@ -52,6 +55,11 @@ __all__ = [
     "VARIABLE_DESCRIPTIONS",
     "write_result",
     "write_run",
+    "result_dataset",
+    "read_dataset",
+    "variable_attributes",
+    "COORDINATE_ATTRIBUTES",
+    "AXIS_LABELS",
     "result_attributes",
     "STORE_MODES",
     "SUMMARY_VARIABLES",
@@ -66,6 +74,8 @@ __all__ = [
 #: Value of the ``rbstab_format`` global attribute of every result file.
 FORMAT = "rbstab-run-1"
 
+#: Labels of the ``axis`` dimension (vector components).
+AXIS_LABELS = ("x", "y", "z")
 #: Units of every variable of a result file.
 VARIABLE_UNITS = {**BLOCK_UNITS, **OUTPUT_UNITS, "lyapunov_rate_numerical": "W", "sliding_mode": "1"}
 #: Description of every variable of a result file.
@@ -87,6 +97,30 @@ SWITCHING_VARIABLES = {
     "switching_kind": ("kind", "1", "0 crossing of E_i = 0, 1 sliding on it starts, 2 sliding ends"),
     "switching_constraint_rate": ("rate", "m s-1", "F_i at the event (before the impulse of a sliding start)"),
 }
+
+
+#: Attributes of the dimension coordinates (HDF5 dimension scales) of a result file.
+COORDINATE_ATTRIBUTES = {
+    "time": {"units": "s", "description": "sample time, evenly spaced dense output of the solver"},
+    "axis": {"description": "vector component; frame given by each variable"},
+    "switching": {"description": "number of the located event of the pure sign law, in time order"},
+}
+
+
+def variable_attributes(key: str) -> dict[str, str]:
+    """The attributes of the variable ``key`` of a result file, as written: ``units`` and
+    ``description`` (:data:`VARIABLE_UNITS`, :data:`VARIABLE_DESCRIPTIONS`,
+    :data:`SWITCHING_VARIABLES`). The writer and :func:`result_dataset` both take them here.
+
+    Raises
+    ------
+    KeyError
+        For a name that is not a variable of a result file.
+    """
+    if key in SWITCHING_VARIABLES:
+        _, units, description = SWITCHING_VARIABLES[key]
+        return {"units": units, "description": description}
+    return {"units": VARIABLE_UNITS[key], "description": VARIABLE_DESCRIPTIONS[key]}
 
 
 class NotAResultFile(ValueError):
@@ -273,12 +307,13 @@ def _write_events(w, root, switching) -> None:
     arrays = _event_arrays(switching)
     scale = w.dataset(root, "switching", arrays["switching"])
     h5ds.set_scale(scale, b"switching")
-    w.attr(scale, "description", "number of the located event of the pure sign law, in time order")
-    for key, (name, units, description) in SWITCHING_VARIABLES.items():
+    for name, value in COORDINATE_ATTRIBUTES["switching"].items():
+        w.attr(scale, name, value)
+    for key in SWITCHING_VARIABLES:
         var = w.dataset(root, key, arrays[key])
         h5ds.attach_scale(var, scale, 0)
-        w.attr(var, "units", units)
-        w.attr(var, "description", description)
+        for name, value in variable_attributes(key).items():
+            w.attr(var, name, value)
         var.close()
     scale.close()
 
@@ -300,18 +335,19 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         root = f.id
         t = w.dataset(root, "time", np.ascontiguousarray(time, dtype=float))
         h5ds.set_scale(t, b"time")
-        w.attr(t, "units", "s")
-        w.attr(t, "description", "sample time, evenly spaced dense output of the solver")
-        axis = w.dataset(root, "axis", np.array(["x", "y", "z"], dtype=object), dtype=h5py.string_dtype())
+        for name, value in COORDINATE_ATTRIBUTES["time"].items():
+            w.attr(t, name, value)
+        axis = w.dataset(root, "axis", np.array(AXIS_LABELS, dtype=object), dtype=h5py.string_dtype())
         h5ds.set_scale(axis, b"axis")
-        w.attr(axis, "description", "vector component; frame given by each variable")
+        for name, value in COORDINATE_ATTRIBUTES["axis"].items():
+            w.attr(axis, name, value)
         for key, values in outputs.items():
             var = w.dataset(root, key, np.ascontiguousarray(values, dtype=float))
             h5ds.attach_scale(var, t, 0)
             if var.rank == 2:
                 h5ds.attach_scale(var, axis, 1)
-            w.attr(var, "units", VARIABLE_UNITS[key])
-            w.attr(var, "description", VARIABLE_DESCRIPTIONS[key])
+            for name, value in variable_attributes(key).items():
+                w.attr(var, name, value)
             var.close()
         t.close()
         axis.close()
@@ -387,6 +423,60 @@ def write_result(
     """
     write_run(result, path, command_line=command_line, store=store)
     return Path(path)
+
+
+def result_dataset(result: "RunResult", *, command_line: str | None = None):
+    """What ``result``'s file holds (store ``full``), as an in-memory :class:`xarray.Dataset`.
+
+    The variables, dimensions, coordinates and attributes of the file :func:`write_result`
+    writes (the same tables: :func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
+    :func:`result_attributes`), without writing it and without the checksums of a file.
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimensions ``time`` (coordinate [s]) and ``axis`` (``x``, ``y``, ``z``); vectors
+        ``(time, axis)``, scalars ``(time,)``, each with ``units`` and ``description``; a
+        pure-sign-law run also has the ``switching`` dimension and its variables.
+    """
+    import xarray as xr
+
+    coords = {
+        "time": ("time", np.asarray(result.time, dtype=float), dict(COORDINATE_ATTRIBUTES["time"])),
+        "axis": ("axis", np.array(AXIS_LABELS), dict(COORDINATE_ATTRIBUTES["axis"])),
+    }
+    variables = {
+        key: (("time", "axis")[: np.ndim(values)], np.asarray(values, dtype=float), variable_attributes(key))
+        for key, values in result.outputs.items()
+    }
+    if getattr(result, "switching", None) is not None:
+        arrays = _event_arrays(result.switching)
+        coords["switching"] = ("switching", arrays.pop("switching"), dict(COORDINATE_ATTRIBUTES["switching"]))
+        variables.update({key: ("switching", data, variable_attributes(key)) for key, data in arrays.items()})
+    return xr.Dataset(variables, coords, attrs=result_attributes(result, command_line=command_line))
+
+
+def read_dataset(path: str | os.PathLike):
+    """A verified result file as an in-memory :class:`xarray.Dataset` (the file is closed).
+
+    Every checksum is checked first (:func:`read_attributes` with ``data``); the file's
+    own checksum attributes are left out (what :func:`result_dataset` gives for its run).
+
+    Raises
+    ------
+    FileNotFoundError, NotAResultFile, DamagedResultError
+        See :func:`read_attributes`.
+    """
+    import xarray as xr
+
+    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, reading
+
+    read_attributes(path, data=True)
+    with reading(path), xr.open_dataset(path, engine="h5netcdf") as ds:
+        ds = ds.load()
+    for key in (DIGEST_ATTR, DATA_DIGEST_ATTR):
+        ds.attrs.pop(key, None)
+    return ds
 
 
 def _plain(value: Any) -> Any:
