@@ -296,15 +296,17 @@ class ChunkWriter:
 
     # -- rows ---------------------------------------------------------------------------------
 
-    def add(self, run_id: str, result: "RunResult", config_text: str | None = None) -> dict[str, Any]:
+    def add(self, run_id: str, result: "RunResult", config_hash: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
-        ``config_text``: ``canonical_config(result.config.resolved)`` if the caller has it.
+        ``config_hash``: the run's :func:`rbstab.io.hdf5.config_hash` of its canonical config
+        if the caller has it (a sweep's plan computed it for the run id); else computed here.
         """
-        from .hdf5 import config_hash
+        from .hdf5 import config_hash as hash_of
 
         resolved = result.config.resolved
-        identity = canonical_config(resolved) if config_text is None else config_text
+        if config_hash is None:
+            config_hash = hash_of(canonical_config(resolved))
         values: dict[str, Any] = {
             "variant": result.config.variant,
             "status": result.status,
@@ -314,7 +316,7 @@ class ChunkWriter:
         values.update({f"solver_{k}": result.solver.get(k) for k in _SOLVER[:-1]})
         values["solver_status"] = int(result.solver.get("solver_status", -1))
         values["config"] = canonical_config(resolved, limits=True)
-        values["config_hash"] = config_hash(identity)
+        values["config_hash"] = config_hash
         values.update(summary_columns(result.summary))
         traces = None
         if self.store != "summary":
@@ -439,11 +441,9 @@ class ChunkWriter:
         store), else by reading the file back."""
         from .integrity import data_digest, data_digest_of
 
-        h5 = self._file._h5file
-        numeric = [name for name in h5 if h5[name].dtype.kind not in "OSU"]
-        if all(name in self._numbers for name in numeric):
-            return data_digest_of({name: self._numbers[name] for name in numeric})
-        return data_digest(h5, self.path)
+        if all(name in self._numbers for name in self._traces):  # every numeric variable is there
+            return data_digest_of(self._numbers)
+        return data_digest(self._file._h5file, self.path)
 
     def _columns(self) -> dict[str, list]:
         names: dict[str, None] = dict.fromkeys(_COORDS)
