@@ -154,10 +154,11 @@ def _mp_context():
         # and load the compiled kernels there (rbstab.engine.preload: ~0.5 s from numba's
         # cache), so that every worker forked from it starts with them. Not scipy: the
         # compiled engine and the post-processing need none of it (its import costs
-        # ~0.7 s); the scipy engine imports solve_ivp when a chunk needs it.
+        # ~0.7 s); the scipy engine imports solve_ivp when a chunk needs it. Every module a
+        # worker of the compiled engine uses (rbstab.config loads its validator lazily).
         ctx.set_forkserver_preload([
-            "rbstab.sweep.worker", "rbstab.simulate", "rbstab.config", "rbstab.io.hdf5", "rbstab.io.chunk",
-            "h5py", "rbstab.engine.preload",
+            "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulate", "rbstab.config.loader",
+            "rbstab.io.hdf5", "rbstab.io.chunk", "rbstab.io.integrity", "h5py", "h5netcdf", "rbstab.engine.preload",
         ])
     return ctx
 
