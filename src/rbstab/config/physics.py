@@ -189,21 +189,34 @@ def unheld_weight(
     if diagonal.min() > 0 and np.count_nonzero(k_t) == 3:
         return None  # K_t alone holds any weight (the common case, checked cheaply)
     if variant == "sliding":
-        null = _null_space(k_t)
-        if null.shape[1] == 0:
-            return None
-        need = _sliding_capacity(null, weight)
-        k_s = float(gains["k_s"])
-        strict = boundary_layer > 0
-        if (need < k_s) if strict else (need <= k_s * (1 + 1e-12)):
-            return None
-        relation = ">" if strict else ">="
-        return "controller.k_s", (
-            f"with gravity and K_t singular along {' and '.join(_fmt(u) for u in null.T)}, the "
-            f"sliding force must carry the weight G = {_fmt(weight)} N there: K_s {relation} "
-            f"{need:.6g} N is needed; otherwise the body falls without end and there is no "
-            "equilibrium"
-        )
+        return _sliding_unheld(k_t, float(gains["k_s"]), weight, boundary_layer)
+    return _springs_unheld(variant, gains, weight, size)
+
+
+def _sliding_unheld(k_t: np.ndarray, k_s: float, weight: np.ndarray, boundary_layer: float) -> tuple[str, str] | None:
+    """:func:`unheld_weight` of ``sliding``: along the null space of K_t the force
+    K_s sgn(E) must carry G (strictly with a boundary layer)."""
+    null = _null_space(k_t)
+    if null.shape[1] == 0:
+        return None
+    need = _sliding_capacity(null, weight)
+    strict = boundary_layer > 0
+    if (need < k_s) if strict else (need <= k_s * (1 + 1e-12)):
+        return None
+    relation = ">" if strict else ">="
+    return "controller.k_s", (
+        f"with gravity and K_t singular along {' and '.join(_fmt(u) for u in null.T)}, the "
+        f"sliding force must carry the weight G = {_fmt(weight)} N there: K_s {relation} "
+        f"{need:.6g} N is needed; otherwise the body falls without end and there is no "
+        "equilibrium"
+    )
+
+
+def _springs_unheld(variant: str, gains: Mapping[str, np.ndarray | float | None], weight: np.ndarray,
+                    size: float) -> tuple[str, str] | None:
+    """:func:`unheld_weight` of ``free``, ``visco_elastic`` and ``embedded``: the part of
+    (G, 0) in the null space of the translational stiffness."""
+    k_t = gains["k_t"]
     if variant == "free":
         stiffness, what = k_t, "K_t"
     elif variant == "visco_elastic":

@@ -367,24 +367,23 @@ def run_sweep(
     retry_failed : bool
         Also re-execute runs whose current result file has status ``failed``.
     chunk_size : int, optional
-        Most runs per unit of work sent to a worker (default
-        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 256 for compiled).
-        For the compiled engine a chunk holds at most ``ceil(runs / workers)`` runs.
+        Most runs per unit of work sent to a worker (and per store file): default
+        :data:`STORE_CHUNK_SIZE` with ``layout="chunk"``, else
+        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE` (1 for scipy, 256 for compiled);
+        by default a sweep is cut into at least :data:`CHUNKS_PER_WORKER` chunks per worker.
     engine : {"compiled", "scipy"}, optional
         Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``
         (:func:`resolve_engine`). ``compiled`` integrates
         every run with scipy's RK23/RK45/DOP853 compiled with the model (other methods
         and the pure sign law go through scipy), taking the steps scipy takes.
-    store : {"full", "summary"}
-        What each result file holds (:data:`rbstab.io.hdf5.STORE_MODES`): every variable
-        at every sample, or the variables a report draws at most 201 samples (summary
-        figures from every sample either way).
-    layout : {"run", "chunk"}
-        One result file per run (``runs/<run_id>.h5``, the format of ``rbstab run``), or
-        one per chunk of runs (``runs/chunk-*.h5``, :mod:`rbstab.io.chunk`: far fewer
-        files and ~10 ms less writing per run; a chunk killed midway is rerun whole).
-        With ``"chunk"`` the default ``chunk_size`` is the compiled engine's for either
-        engine.
+    store : {"thinned", "full", "summary"}
+        What the files hold besides the per-run values (:data:`rbstab.io.chunk.STORES`):
+        the variables a report draws at <= 201 samples (default), every variable at every
+        sample, or no traces (summary figures from every sample in each case).
+    layout : {"chunk", "run"}
+        One store file per chunk of runs (default: ``runs/chunk-*.h5``,
+        :mod:`rbstab.io.chunk`; a chunk killed midway is rerun whole), or one result file
+        per run (``runs/<run_id>.h5``, the format of ``rbstab run``).
     progress : bool, optional
         Progress bar on stderr (done / failed / remaining, ETA); default: when stderr is a
         terminal.
@@ -415,15 +414,7 @@ def run_sweep(
     """
     say = log or (lambda message: None)
     engine = resolve_engine(engine, timeout)
-    if layout not in LAYOUTS:
-        raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
-    chunks_per_worker = CHUNKS_PER_WORKER if chunk_size is None else 1
-    if chunk_size is None:
-        chunk_size = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
-    if chunk_size < 1:
-        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    if store not in STORES:
-        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
+    chunking = _chunking(chunk_size, engine, store, layout)
     head, plan = _start_plan(spec, runs)
     grids = {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs} if runs is not None \
         else time_grids_of(spec)
@@ -441,11 +432,26 @@ def run_sweep(
     with ex if owned else contextlib.nullcontext(ex):
         runs_dir.mkdir(parents=True, exist_ok=True)
         _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
-                    chunk_size=(chunk_size, chunks_per_worker), progress=progress, say=say,
+                    chunk_size=chunking, progress=progress, say=say,
                     options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
                                           store=store, layout=layout, parameters=parameter_columns_of(spec),
                                           sweep=spec.name))
     return outcome
+
+
+def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> tuple[int, int]:
+    """(most runs per chunk, chunks per worker at least) of :func:`run_sweep`'s arguments,
+    which it checks; ValueError names the one not allowed."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    if store not in STORES:
+        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
+    if chunk_size is None:
+        default = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
+        return default, CHUNKS_PER_WORKER
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    return chunk_size, 1
 
 
 def _start_plan(spec: SweepSpec, runs: Sequence[PlannedRun] | None) -> tuple[list, Iterator | None]:
