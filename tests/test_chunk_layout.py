@@ -285,3 +285,15 @@ def test_store_data_digest_matches_what_the_file_holds(tmp_path, monkeypatch, st
         assert f.attrs[DATA_DIGEST_ATTR] == data_digest(f, path)
         numbers = [k for k in f if f[k].dtype.kind == "f" and f[k].ndim >= 2]
         assert numbers or store == "summary"
+
+
+def test_open_sweep_loads_no_compiler_nor_validator(tmp_path):
+    """Reading a sweep needs neither numba (its start-up is ~0.5 s) nor pydantic."""
+    import subprocess
+    import sys
+
+    out = run_sweep(spec(2), tmp_path, jobs=1, layout="chunk", progress=False)
+    code = ("import sys, rbstab; ds = rbstab.open_sweep(sys.argv[1]); assert ds.sizes['run'] == 2; "
+            "print(sorted(m for m in ('numba', 'pydantic', 'scipy.integrate') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code, str(out.directory)], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"
