@@ -71,8 +71,8 @@ def write(n: int, folder: str) -> dict:
     from rbstab.io.chunk import ChunkWriter, StoreRow, chunk_file_name
     from rbstab.simulate import simulate
     from rbstab.sweep import expand, spec_from_mapping
-    from rbstab.sweep.folder import (INDEX_FILE, RUNS_DIR, SPEC_FILE, index_rows, parameter_columns,
-                                     run_coords, write_index)
+    from rbstab.sweep.folder import (RUNS_DIR, SPEC_FILE, parameter_columns, write_sweep_index,
+                                     run_coords)
     from rbstab.sweep.runner import _dump_yaml, _spec_document
 
     spec = spec_from_mapping(spec_mapping(n))
@@ -93,11 +93,11 @@ def write(n: int, folder: str) -> dict:
             for k, run in enumerate(chunk):
                 rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], run.config_hash)
     t1 = time.perf_counter()
-    write_index(directory / INDEX_FILE, index_rows(runs, rows, {}, spec.lyapunov_ratio))
+    write_sweep_index(directory, runs, rows, {}, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameters)
     (directory / SPEC_FILE).write_text(_dump_yaml(_spec_document(spec, "benchmark")))
     t2 = time.perf_counter()
     size = sum(p.stat().st_size for p in (directory / RUNS_DIR).iterdir())
-    return {"store files (thinned)": t1 - t0, "index.csv + sweep.yaml": t2 - t1,
+    return {"store files (thinned)": t1 - t0, "index, summary, sweep.yaml": t2 - t1,
             "MB on disk": size / 2**20, "peak MB": _peak_mb()}
 
 

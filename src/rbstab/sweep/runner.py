@@ -54,16 +54,13 @@ from .folder import (
     RUNS_DIR,
     SPEC_FILE,
     SUMMARY_FILE,
+    IndexRows,
     current_rows,
-    index_part,
-    index_rows,
     read_spec,
     set_aside_damaged,
+    write_sweep_index,
     parameter_columns,
     run_coords,
-    summarize_rows,
-    write_index,
-    write_summary,
 )
 from .plan import (InvalidRun, PlannedRun, RunEntry, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
                    warning_digest)
@@ -501,7 +498,7 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
                 planned.append(run.entry())
                 yield run
 
-        attrs: dict[str, dict] = {}
+        attrs = IndexRows()  # run_id -> its row for the index
         errors: dict[str, str] = {}
         try:
             _execute(spec, runs_in_order(), stored, runs_dir, attrs, errors, outcome, ex, retry_failed=retry_failed,
@@ -547,7 +544,7 @@ def _collect_finished(runs: Sequence[PlannedRun], runs_dir: Path, attrs: dict, e
         return
     found, _ = current_rows(missing, runs_dir)
     for run_id, row in found.items():
-        attrs[run_id] = index_part(row)
+        attrs[run_id] = row
         errors.pop(run_id, None)
 
 
@@ -566,7 +563,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
         for r in runs:
             row = stored.current(r)
             if row is not None and (not retry_failed or row.get("status") == "success"):
-                attrs[r.run_id] = index_part(row)
+                attrs[r.run_id] = row
                 outcome.n_skipped += 1
                 bar.update(1)
                 continue
@@ -623,7 +620,7 @@ def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict,
     # the worker wrote it from this run's config; after an error (e.g. a worker that
     # died after writing) only a file with the run's hash counts
     if a is not None and a.get("run_id") == rid and (rec["status"] != "error" or a.get("config_hash") == run.config_hash):
-        attrs[rid] = index_part(a)
+        attrs[rid] = a
         errors.pop(rid, None)
     else:
         errors[rid] = rec.get("message") or "no result file was written"
@@ -646,13 +643,11 @@ def _stop_on_machine_fault(records) -> None:
 
 
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
-    rows = index_rows(runs, attrs, errors, spec.lyapunov_ratio)
-    write_index(outcome.directory / INDEX_FILE, rows)
-    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameter_columns(r.params for r in runs))
-    write_summary(outcome.directory / SUMMARY_FILE, summary)
+    summary, outcome.problems = write_sweep_index(
+        outcome.directory, runs, attrs, errors, name=spec.name, ratio=spec.lyapunov_ratio,
+        parameters=parameter_columns(r.params for r in runs))
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
-    outcome.problems = [(r["run_id"], r["status"], r["message"]) for r in rows if r["status"] != "success"]
 
 
 def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, runs: Sequence[PlannedRun] | None = None) -> SweepOutcome:
