@@ -8,7 +8,7 @@ Prints, per run and in total, with the peak resident memory of the process of ea
 1. planning: ``expand`` of a spec in which every run is a different config (mass, inertia,
    K_c, L_c, K_t scaled, random Omega): pydantic validation, run ids, config hashes;
 2. writing the default store (``--store thinned``, store files of 512 runs) from Case 3
-   results: canonical config + hash, summary columns, traces; and the index;
+   results: the config column (canonical JSON; its hash comes from the plan, as in a sweep), summary columns, traces; and the index;
 3. ``rbstab.open_sweep`` of that folder, summaries loaded (``lyapunov_final``, ``status``).
 
 The results written are 16 simulated Case 3 runs reused for every row (the integration is
@@ -69,11 +69,10 @@ def plan(n: int) -> dict:
 def write(n: int, folder: str) -> dict:
     from rbstab.config import load_config
     from rbstab.io.chunk import ChunkWriter, StoreRow, chunk_file_name
-    from rbstab.io.hdf5 import canonical_config
     from rbstab.simulate import simulate
     from rbstab.sweep import expand, spec_from_mapping
-    from rbstab.sweep.folder import (INDEX_FILE, RUNS_DIR, SPEC_FILE, index_rows, parameter_columns,
-                                     run_coords, write_index)
+    from rbstab.sweep.folder import (RUNS_DIR, SPEC_FILE, parameter_columns, write_sweep_index,
+                                     run_coords)
     from rbstab.sweep.runner import _dump_yaml, _spec_document
 
     spec = spec_from_mapping(spec_mapping(n))
@@ -92,13 +91,13 @@ def write(n: int, folder: str) -> dict:
         path = directory / RUNS_DIR / chunk_file_name(chunk[0].run_id)
         with ChunkWriter(path, stored, store="thinned", parameters=parameters, sweep=spec.name) as writer:
             for k, run in enumerate(chunk):
-                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], canonical_config(run.config.resolved))
+                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], run.config_hash)
     t1 = time.perf_counter()
-    write_index(directory / INDEX_FILE, index_rows(runs, rows, {}, spec.lyapunov_ratio))
+    write_sweep_index(directory, runs, rows, {}, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameters)
     (directory / SPEC_FILE).write_text(_dump_yaml(_spec_document(spec, "benchmark")))
     t2 = time.perf_counter()
     size = sum(p.stat().st_size for p in (directory / RUNS_DIR).iterdir())
-    return {"store files (thinned)": t1 - t0, "index.csv + sweep.yaml": t2 - t1,
+    return {"store files (thinned)": t1 - t0, "index, summary, sweep.yaml": t2 - t1,
             "MB on disk": size / 2**20, "peak MB": _peak_mb()}
 
 

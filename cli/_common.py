@@ -1,4 +1,4 @@
-"""Helpers for the subcommands: config loading with user-facing errors, warnings to stderr."""
+"""Helpers for the subcommands: config loading with user-facing errors and warnings, output folders."""
 
 from __future__ import annotations
 
@@ -18,27 +18,60 @@ def command_line() -> str:
     return " ".join(shlex.quote(a) for a in sys.argv)
 
 
+def load_one(path: str, overrides: Sequence[str]):
+    """``(config, error, warnings)`` of one config file: the RunConfig or None, the
+    ConfigError or None, and its coded warning lines (:mod:`rbstab.warning_codes`)."""
+    from rbstab.api import load_config
+    from rbstab.config import ConfigError, PhysicalPlausibilityWarning
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", PhysicalPlausibilityWarning)
+        try:
+            config = load_config(path, overrides)
+        except ConfigError as exc:
+            return None, exc, []
+    for w in caught:
+        if not issubclass(w.category, PhysicalPlausibilityWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return config, None, list(config.warnings)
+
+
+def config_error_text(path: str, error) -> str:
+    """A ConfigError as the CLI prints it: ``in <file>:`` and one line per problem."""
+    return str(error) if error.source else f"in {path}:\n{_indent(str(error))}"
+
+
+def show_config_warnings(found: dict[str, list[str]], n_configs: int) -> None:
+    """Each distinct warning once, with the configs it concerns: ``found`` maps a config's
+    name to its warning lines."""
+    from .console import get_console
+
+    names: dict[str, list[str]] = {}
+    for name, lines in found.items():
+        for line in lines:
+            names.setdefault(line, []).append(name)
+    console = get_console()
+    for line, which in names.items():
+        where = "" if n_configs == 1 else which[0] if len(which) == 1 else f"{len(which)} of {n_configs} configs"
+        console.warn(line, where)
+
+
 def load_configs(paths: Sequence[str], overrides: Sequence[str]):
     """Load and validate every config before anything runs.
 
-    Prints warnings (e.g. an impossible inertia) to stderr; raises ``click.ClickException``
-    listing every invalid file, so the CLI exits non-zero without a traceback.
+    Shows each distinct warning once (e.g. an impossible inertia, ``W001``) on stderr;
+    raises ``click.ClickException`` listing every invalid file, so the CLI exits non-zero
+    without a traceback.
     """
-    from rbstab.config import ConfigError, PhysicalPlausibilityWarning, load_config
-
-    configs, problems = [], []
+    configs, problems, found = [], [], {}
     for path in paths:
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", PhysicalPlausibilityWarning)
-            try:
-                configs.append(load_config(path, overrides))
-            except ConfigError as exc:
-                problems.append(str(exc) if exc.source else f"in {path}:\n{_indent(str(exc))}")
-        for w in caught:
-            if issubclass(w.category, PhysicalPlausibilityWarning):
-                click.echo(f"warning: {w.message}", err=True)
-            else:
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        config, error, lines = load_one(path, overrides)
+        if error is not None:
+            problems.append(config_error_text(path, error))
+            continue
+        configs.append(config)
+        found[config.name] = lines
+    show_config_warnings(found, len(paths))
     if problems:
         raise click.ClickException("invalid configuration\n" + "\n".join(problems))
     names = [c.name for c in configs]
@@ -71,7 +104,9 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
             raise FileExistsError(17, "exists and is not a folder", str(folder))
         removed = remove_stale_temporaries(folder)
         if removed:
-            click.echo(f"removed {removed} temporary file(s) left in {folder} by interrupted runs", err=True)
+            from .console import get_console
+
+            get_console().info(f"removed {removed} temporary file(s) left in {folder} by interrupted runs")
         fd, probe = tempfile.mkstemp(prefix=".rbstab-probe-", suffix=".tmp", dir=folder)
         os.close(fd)
         os.unlink(probe)

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import click
 
 from ._common import command_line, load_configs
-from .options import output_option, set_option
+from .console import get_console
+from .options import console_options, json_option, output_option, set_option
 
 
 def _parse_axes(texts, configs):
@@ -56,8 +56,7 @@ def _check_sweeps(paths) -> None:
 @click.command("analyze")
 @click.argument("configs", nargs=-1, type=click.Path(dir_okay=False))
 @output_option("results/analysis", "Folder for the <name>.analysis.nc files.")
-@click.option("--json", "as_json", is_flag=True,
-              help="Print one JSON object per config (and per --robustness sweep) to stdout; the text goes to stderr.")
+@json_option
 @click.option("--basin", "basin", multiple=True, metavar="KEY=LO:HI:N",
               help="An axis of the basin map, twice, e.g. --basin initial_state.omega.0=-60:60:41 "
               "--basin initial_state.omega.1=-60:60:41 (one simulation per grid point).")
@@ -79,6 +78,7 @@ def _check_sweeps(paths) -> None:
               help="Local processes for the basin map  [default: all CPUs].")
 @click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
               show_default=True, help="Confidence level of the Wilson interval (--robustness).")
+@console_options
 def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
             no_simulation, ratio, basin_samples, jobs, confidence) -> None:
     """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
@@ -92,6 +92,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     With --robustness SWEEP_DIR: the stable fraction of a sweep's runs with its Wilson
     interval, and the parameters that separate stable from unstable runs.
     Every input is checked before anything runs. Method and limits: docs/analysis.md.
+    With --json: one object per config ("kind": "configuration") and per sweep ("robustness").
     """
     from rbstab.analysis import analyze as run_analysis
     from rbstab.analysis import robustness, write_analysis
@@ -106,9 +107,10 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)
     _check_sweeps(sweeps)
-    say = (lambda line: click.echo(line, err=True)) if as_json else click.echo
+    console = get_console()
+    say = console.out
     out = Path(output)
-    ensure_compiled(say=lambda line: click.echo(line, err=True))
+    ensure_compiled(say=console.info)
     for config in loaded:
         try:
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,
@@ -122,7 +124,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             say(line)
         say(f"  -> {path}")
         if as_json:
-            click.echo(json.dumps({"kind": "configuration", **result.to_json()}))
+            console.emit({"kind": "configuration", **result.to_json()})
     for folder in sweeps:
         result = robustness(folder, confidence=confidence)
         path = write_analysis(result, analysis_path(out, f"{result.sweep}.robustness"), command_line=command_line())
@@ -130,5 +132,5 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             say(line)
         say(f"  -> {path}")
         if as_json:
-            click.echo(json.dumps({"kind": "robustness", **result.to_json()}))
+            console.emit({"kind": "robustness", **result.to_json()})
 

@@ -33,3 +33,54 @@ def output_option(default: str, help_text: str):
         show_default=True,
         help=help_text,
     )
+
+
+json_option = click.option(
+    "--json",
+    "as_json",
+    is_flag=True,
+    help="Print one JSON object per item to stdout (one line each); the text goes to stderr.",
+)
+
+
+def _no_warn_codes(ctx, param, values):
+    """--no-warn values, upper-cased; a code that is not registered is a usage error."""
+    from rbstab.warning_codes import WARNING_CODES
+
+    codes = [v.strip().upper() for v in values if v.strip()]
+    bad = [v for v in codes if v != "ALL" and v not in WARNING_CODES]
+    if bad:
+        raise click.BadParameter(f"found {', '.join(bad)}; expected a warning code ({', '.join(WARNING_CODES)}) "
+                                 "or all (README, section Warnings)")
+    return tuple(codes)
+
+
+def console_options(command):
+    """``-q/--quiet``, ``-v/--verbose`` and ``--no-warn CODE`` on a command (the decorator
+    just above its ``def``: they come last in its ``--help``). The command finds its
+    :class:`~rbstab_cli.console.Console` with :func:`~rbstab_cli.console.get_console`;
+    Python warnings with a code raised while it runs go to it."""
+    import functools
+
+    @functools.wraps(command)
+    def wrapper(*args, quiet: int, verbose: int, no_warn: tuple, **kwargs):
+        from .console import CONSOLE_KEY, Console
+
+        console = Console(verbose - quiet, no_warn, json=kwargs.get("as_json", False))
+        click.get_current_context().meta[CONSOLE_KEY] = console
+        with console.catching_warnings():
+            return command(*args, **kwargs)
+
+    options = [
+        click.option("-q", "--quiet", count=True,
+                     help="Print less: -q only warnings and errors, -qq only errors (and --json output)."),
+        click.option("-v", "--verbose", count=True,
+                     help="Print more: each warning's explanation, every run, solver statistics."),
+        click.option("--no-warn", "no_warn", multiple=True, metavar="CODE", callback=_no_warn_codes,
+                     envvar="RBSTAB_NO_WARN",
+                     help="Silence the warnings of CODE (e.g. W001; all: every one). Repeatable; "
+                     "also $RBSTAB_NO_WARN (codes separated by spaces). Codes: README, section Warnings."),
+    ]
+    for option in reversed(options):
+        wrapper = option(wrapper)
+    return wrapper

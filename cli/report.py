@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import click
 
+from .console import get_console
+from .options import console_options
+
 # Defaults repeated here (not imported) so that ``rbstab --help`` does not import the
 # report package; tests/test_report.py checks they equal rbstab.report's.
 _SETTLE_E = 0.005
@@ -89,6 +92,7 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     metavar="RAD_PER_S",
     help="Settling threshold on |Omega|, the norm of the angular velocity [rad/s].",
 )
+@console_options
 def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega) -> None:
     """Compare INPUT... (run files *.h5, sweep folders, folders of run files, analysis files *.analysis.nc).
 
@@ -114,4 +118,4 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
     except ReportError as exc:
         raise click.ClickException(str(exc))
     page = "index.html" if "html" in options.formats else "index.md"
-    click.echo(f"report: {folder / page}")
+    get_console().out(f"report: {folder / page}")

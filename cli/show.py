@@ -1,8 +1,13 @@
-"""``rbstab show``: print the summary of result files."""
+"""``rbstab show``: print the summary of result files, store files and sweep folders."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import click
+
+from .console import get_console
+from .options import console_options, json_option
 
 
 def _fmt(value) -> str:
@@ -13,14 +18,17 @@ def _fmt(value) -> str:
     return str(value)
 
 
-#: Most runs listed for a sweep folder (the index has all).
-_MAX_LISTED = 50
+#: Runs of a sweep listed by default (-v: all; the index has all).
+_MAX_LISTED = 20
+#: Index columns whose spread a sweep's summary gives (min, median, max).
+_METRICS = ("lyapunov_final", "max_abs_constraint_error", "max_lyapunov_rate", "wall_time")
 
 
 def _run_lines(rows) -> None:
     """One line per run: id, status, v(0) -> v(t_end), max dv/dt, max |E_i|, rate check."""
-    click.echo(f"  {'run':<20} {'status':<8} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
-               f"{'max|E| [m]':>11}  rate check")
+    out = get_console().out
+    out(f"  {'run':<20} {'status':<8} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
+        f"{'max|E| [m]':>11}  rate check")
     for r in rows:
         v = f"{_fmt(r.get('lyapunov_initial', ''))} -> {_fmt(r.get('lyapunov_final', ''))}"
         e = [r.get(f"max_abs_constraint_error_{a}") for a in "xyz"]
@@ -28,71 +36,179 @@ def _run_lines(rows) -> None:
         switchings = [r.get(f"switching_count_{a}") for a in "xyz"]  # the pure sign law of sliding
         located = (f"  {int(sum(switchings))} switchings"
                    if all(isinstance(x, (int, float)) and x == x for x in switchings) else "")
-        click.echo(f"  {r['run_id']:<20} {r['status']:<8} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
-                   f"{e:>11}  {r.get('lyapunov_rate_check', '')}{located}")
+        out(f"  {r['run_id']:<20} {r['status']:<8} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
+            f"{e:>11}  {r.get('lyapunov_rate_check', '')}{located}")
         if r["status"] != "success":
-            click.echo(f"    {r.get('message', '')}")
+            out(f"    {r.get('message', '')}")
 
 
 def _show_chunk(path: str) -> None:
     """One line per run of a store file (``rbstab sweep``, layout chunk)."""
     from rbstab.io.chunk import read_chunk_rows
 
+    console = get_console()
     rows = read_chunk_rows(path, data=True)  # every checksum verified
     first = rows[0] if rows else {}
-    click.echo(f"{path}")
-    click.echo(f"  store file: {len(rows)} runs, store {first.get('store', '?')}, created {first.get('created', '?')}")
+    if console.json:
+        console.emit({"path": path, "kind": "store", "n_runs": len(rows), "store": first.get("store"), "runs": rows})
+    console.out(f"{path}")
+    console.out(f"  store file: {len(rows)} runs, store {first.get('store', '?')}, created {first.get('created', '?')}")
     _run_lines(rows)
 
 
-def _show_sweep(path: str) -> None:
-    """Counts per status and one line per run (the first :data:`_MAX_LISTED`) of a sweep folder."""
-    from rbstab.sweep.folder import read_index, read_spec
+def _spread(index, column: str) -> dict | None:
+    """min, median, max of a numeric column over the runs that have it (None if none)."""
+    values = index[column].dropna() if column in index else None
+    if values is None or values.empty or values.dtype.kind not in "fi":
+        return None
+    return {"min": float(values.min()), "median": float(values.median()), "max": float(values.max())}
 
-    index = read_index(path)
-    counts = index["status"].value_counts().to_dict()
-    click.echo(f"{path}")
-    click.echo(f"  sweep {read_spec(path).get('name', '?')}: {len(index)} runs, "
-               + ", ".join(f"{n} {s}" for s, n in counts.items())
-               + f"; converged {int(index['converged'].astype(str).eq('True').sum())}")
-    rows = index.head(_MAX_LISTED).to_dict("records")
+
+def _parameter_values(index, column: str) -> dict:
+    """The values a varied parameter takes: up to 6 listed, else its range."""
+    values = list(dict.fromkeys(index[column].dropna().tolist()))
+    if len(values) <= 6 or not all(isinstance(v, (int, float)) for v in values):
+        return {"values": values[:6], "n_values": len(values)}
+    return {"min": min(values), "max": max(values), "n_values": len(values)}
+
+
+def sweep_overview(path: str) -> dict:
+    """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
+    from rbstab.sweep.folder import read_index, read_parameters, read_spec
+
+    index = read_index(path)  # checksum verified
+    if "max_abs_constraint_error_x" in index:
+        index["max_abs_constraint_error"] = index[[f"max_abs_constraint_error_{a}" for a in "xyz"]].abs().max(axis=1)
+    spec = read_spec(path)
+    converged = int(index["converged"].astype(str).eq("True").sum()) if "converged" in index else 0
+    counts = {s: int(n) for s, n in index["status"].value_counts().items()}
+    return {
+        "path": path, "kind": "sweep", "name": spec.get("name", Path(path).name), "n_runs": len(index),
+        "status": counts, "n_converged": converged,
+        "lyapunov_ratio": (spec.get("convergence") or {}).get("lyapunov_ratio"),
+        "parameters": {column: {"key": key, **_parameter_values(index, column)}
+                       for column, key in read_parameters(path, index).items() if column in index},
+        "metrics": {m: s for m in _METRICS if (s := _spread(index, m)) is not None},
+        "created": (spec.get("generated") or {}).get("created"),
+        "index": index,
+    }
+
+
+def _show_sweep(path: str) -> None:
+    """A sweep folder: counts per status, converged fraction, varied parameters, the spread
+    of the main figures, the first runs (every run with -v)."""
+    from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES
+
+    console = get_console()
+    info = sweep_overview(path)
+    index = info.pop("index")
+    if console.json:
+        console.emit(info)
+    n = info["n_runs"]
+    console.out(f"{path}")
+    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{v} {k}" for k, v in info["status"].items()))
+    console.out(f"  converged  {info['n_converged']} of {n} ({100.0 * info['n_converged'] / max(n, 1):.1f}%; "
+                f"v(t_end) <= {info['lyapunov_ratio']} v(0))")
+    for column, p in info["parameters"].items():
+        shown = (", ".join(_fmt(v) for v in p["values"]) + (" ..." if p["n_values"] > len(p["values"]) else "")
+                 if "values" in p else f"{_fmt(p['min'])} .. {_fmt(p['max'])}")
+        console.out(f"  varied     {column} ({p['key']}): {shown}  [{p['n_values']} values]")
+    units = {**{k: u for k, (u, _) in SUMMARY_FIGURES.items()}, **{k: u for k, (u, _) in PER_RUN.items()}}
+    for metric, s in info["metrics"].items():
+        console.out(f"  {metric:<26} [{units.get(metric, '')}] min {_fmt(s['min'])}, median {_fmt(s['median'])}, "
+                    f"max {_fmt(s['max'])}")
+    listed = n if console.verbosity >= 1 else _MAX_LISTED
+    rows = index.head(listed).to_dict("records")
     _run_lines([{k: ("" if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows])
-    if len(index) > _MAX_LISTED:
-        click.echo(f"  ... and {len(index) - _MAX_LISTED} more runs (see index.csv, or rbstab.open_sweep)")
+    if n > listed:
+        console.out(f"  ... and {n - listed} more runs (-v lists them; index.csv, rbstab.open_sweep)")
+
+
+def _show_result(path: str) -> None:
+    """A run's result file: identity, status, solver statistics, summary figures."""
+    from rbstab.io.hdf5 import read_summary
+
+    console = get_console()
+    info = read_summary(path)  # every checksum verified
+    if console.json:
+        console.emit({"path": path, "kind": "run", **info})
+    console.out(f"{path}")
+    console.out(f"  name       {info['name']}  (variant {info['variant']})")
+    console.out(f"  status     {info['status']}: {info['message']}")
+    console.out(f"  created    {info['created']}, wall time {_fmt(info['wall_time'])} s")
+    console.out("  solver     " + ", ".join(f"{k} {v}" for k, v in info["solver"].items() if k != "message"))
+    for key, value in info["summary"].items():
+        console.out(f"  {key:<32} {_fmt(value)}")
+
+
+def _expand(path: str) -> list[str]:
+    """A folder that is not a sweep folder stands for the sweep folders and result files in it."""
+    from rbstab.sweep.folder import is_sweep_folder
+
+    folder = Path(path)
+    if not folder.exists():
+        raise ValueError(f"no such result file or folder: {path}" + _did_you_mean(folder))
+    if not folder.is_dir() or is_sweep_folder(folder):
+        return [path]
+    inside = sorted(str(p) for p in folder.iterdir() if is_sweep_folder(p) or (p.suffix == ".h5" and p.is_file()))
+    if not inside:
+        raise ValueError(f"{path}: a folder, but not a sweep folder (no sweep.yaml and index.csv) and without "
+                         "result files (*.h5) or sweep folders in it")
+    return inside
+
+
+def _did_you_mean(missing: Path) -> str:
+    """``"; did you mean X?"`` naming the closest entry of its folder, or ``""``."""
+    import difflib
+
+    parent = missing.parent
+    names = [p.name for p in parent.iterdir()] if parent.is_dir() else []
+    close = difflib.get_close_matches(missing.name, names, n=1, cutoff=0.6)
+    return f"; did you mean {parent / close[0]}?" if close else ""
+
+
+def _show(path: str) -> None:
+    from rbstab.io.chunk import is_chunk_file
+    from rbstab.sweep.folder import is_sweep_folder
+
+    if is_sweep_folder(path):
+        _show_sweep(path)
+    elif is_chunk_file(path):
+        _show_chunk(path)
+    else:
+        _show_result(path)
 
 
 @click.command("show")
 @click.argument("files", nargs=-1, required=True, type=click.Path())
-def show(files) -> None:
-    """Print status, solver statistics and summary figures of FILE.h5... or sweep folders.
+@json_option
+@console_options
+def show(files, as_json) -> None:
+    """Print status, solver statistics and summary figures of FILE.h5..., store files and sweep folders.
 
-    A store file of a sweep, or a sweep folder, is shown as one line per run.
+    A sweep folder (sweep.yaml + index.csv) is summarised: runs per status, converged
+    fraction, the varied parameters, the spread of the main figures and its first runs
+    (-v: all). A folder of sweeps or of result files (e.g. results/) shows each of them.
+    With --json: one object per file or sweep ("kind": run, store, sweep or error).
     """
-    from rbstab.io.chunk import is_chunk_file
-    from rbstab.io.hdf5 import NotAResultFile, read_summary
-    from rbstab.sweep.folder import is_sweep_folder
-
-    bad = 0
-    for path in files:
+    console = get_console()
+    bad = shown = 0
+    for given in files:
         try:
-            if is_sweep_folder(path):
-                _show_sweep(path)
-                continue
-            if is_chunk_file(path):
-                _show_chunk(path)
-                continue
-            info = read_summary(path)
-        except (OSError, ValueError) as exc:  # FileNotFoundError, NotAResultFile, DamagedResultError ...
+            paths = _expand(given)
+        except ValueError as exc:
+            paths, bad = [], bad + 1
             click.echo(f"error: {exc}", err=True)
-            bad += 1
-            continue
-        click.echo(f"{path}")
-        click.echo(f"  name       {info['name']}  (variant {info['variant']})")
-        click.echo(f"  status     {info['status']}: {info['message']}")
-        click.echo(f"  created    {info['created']}, wall time {_fmt(info['wall_time'])} s")
-        solver = ", ".join(f"{k} {v}" for k, v in info["solver"].items() if k != "message")
-        click.echo(f"  solver     {solver}")
-        for key, value in info["summary"].items():
-            click.echo(f"  {key:<32} {_fmt(value)}")
+            if console.json:
+                console.emit({"path": given, "kind": "error", "error": str(exc)})
+        for path in paths:
+            shown += 1
+            try:
+                _show(path)
+            except (OSError, ValueError) as exc:  # FileNotFoundError, NotAResultFile, DamagedResultError ...
+                click.echo(f"error: {exc}", err=True)
+                if console.json:
+                    console.emit({"path": path, "kind": "error", "error": str(exc)})
+                bad += 1
     if bad:
-        raise click.ClickException(f"{bad} of {len(files)} files could not be read")
+        raise click.ClickException(f"{bad} of {max(shown, len(files))} inputs could not be read")

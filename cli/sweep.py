@@ -7,7 +7,8 @@ import click
 from rbstab.sweep.worker import ENGINES
 
 from ._common import command_line
-from .options import output_option, set_option
+from .console import get_console
+from .options import console_options, output_option, set_option
 
 
 def _indent(text: str) -> str:
@@ -52,6 +53,10 @@ def _key_value(text: str) -> tuple[str, str]:
     "--scheduler", metavar="ADDRESS", default=None,
     help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --executor dask).",
 )
+@click.option(
+    "--connect-timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
+    help="How long to wait for the Dask scheduler before giving up with a message naming it  [default: 5].",
+)
 @set_option
 @click.option("--grid", "grid", multiple=True, metavar="KEY=V1,V2,...",
               help="Vary KEY over the values (YAML, comma-separated; lists in brackets), as a grid level. "
@@ -92,8 +97,9 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
-def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, random, n_random, seed, timeout, engine,
-          chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
+@console_options
+def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
+          timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
     SPEC is a sweep spec, or a run config to vary from the command line:
@@ -109,8 +115,9 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
     OUTPUT/<name>/sweep.yaml: `rbstab sweep OUTPUT/<name>/sweep.yaml` reruns or resumes it.
 
     Exit status: 0 when every run succeeded, else the number of failed runs (at most 100);
-    1 for an invalid spec (nothing is run) or a fault of the machine (full disk, read-only
-    folder: one line); 130 when interrupted by Ctrl-C, 143 by SIGTERM.
+    1 for an invalid spec (nothing is run), an unreachable Dask scheduler (within
+    --connect-timeout) or a fault of the machine (full disk, read-only folder: one line);
+    130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
     from rbstab.sweep.executors import LocalExecutor
 
@@ -119,92 +126,89 @@ def sweep(spec, output, jobs, executor, scheduler, overrides, grid, zipped, rand
     executor = executor or ("dask" if scheduler else "local")
     if executor == "dask" and not scheduler:
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
-    ex = executor
-    if executor == "local" and not dry_run:
-        # start the workers now: they import numpy, scipy and h5py while the runs are validated
-        ex = LocalExecutor(jobs)
-        ex.start()
-    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError, expand, load_spec, run_sweep
-    from rbstab.sweep.plan import warning_digest
-
+    if connect_timeout is not None and executor != "dask":
+        raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
+    if dry_run:
+        return _dry_run(spec, overrides)
+    # start local workers now: they import numpy, scipy and h5py while the runs are validated
+    ex = LocalExecutor(jobs) if executor == "local" else executor
+    if executor == "local":
+        ex.start()
     try:
-        loaded = load_spec(spec, overrides)
-        runs = expand(loaded) if dry_run else None  # else planned as the runs go
-    except SweepSpecError as exc:
+        outcome = _execute(spec, output, ex, jobs=jobs, scheduler=scheduler, connect_timeout=connect_timeout,
+                           overrides=overrides, timeout=timeout, retry_failed=retry_failed, engine=engine,
+                           chunk_size=chunk_size, store=store, layout=layout,
+                           progress=False if get_console().verbosity < 0 else progress)
+    finally:
         if not isinstance(ex, str):
             ex.close()
-        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
+    _say_outcome(outcome)
+    if outcome.n_failed:
+        raise SystemExit(min(outcome.n_failed, 100))
 
-    if dry_run:
-        for line in warning_digest(runs):
-            click.echo(f"warning: {line}", err=True)
-        click.echo(f"{loaded.name}: {len(runs)} runs (dry run: nothing run or written)")
-        for run in runs:
-            params = ", ".join(f"{k}={v}" for k, v in run.params.items())
-            click.echo(f"  {run.run_id}  base={run.base}" + (f"  {params}" if params else ""))
-        return
 
-    from rbstab.jit import ensure_compiled
+def _dry_run(spec, overrides) -> None:
+    """--dry-run: validate the spec, list its runs, write nothing."""
+    from rbstab.sweep import SweepSpecError, expand, load_spec
+    from rbstab.sweep.plan import warning_digest
 
-    # once, before any worker starts; the sign law's integrator too (a run of it may come)
-    ensure_compiled(say=lambda line: click.echo(line, err=True), sign_law=True)
+    console = get_console()
     try:
-        outcome = run_sweep(
-            loaded,
-            output,
-            runs=runs,
-            executor=ex,
-            jobs=jobs,
-            scheduler=scheduler,
-            timeout=timeout,
-            retry_failed=retry_failed,
-            engine=engine,
-            chunk_size=chunk_size,
-            store=store,
-            layout=layout,
-            progress=progress,
-            command_line=command_line(),
-            log=lambda message: click.echo(message, err=True),
-        )
+        loaded = load_spec(spec, overrides)
+        runs = expand(loaded)
+    except SweepSpecError as exc:
+        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
+    for line in warning_digest(runs):
+        console.warn(line)
+    console.out(f"{loaded.name}: {len(runs)} runs (dry run: nothing run or written)")
+    for run in runs:
+        params = ", ".join(f"{k}={v}" for k, v in run.params.items())
+        console.out(f"  {run.run_id}  base={run.base}" + (f"  {params}" if params else ""))
+
+
+def _execute(spec, output, ex, **options):
+    """:func:`rbstab.api.execute_sweep`, its exceptions as one-line CLI errors."""
+    from rbstab.api import execute_sweep
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError
+
+    try:
+        return execute_sweep(spec, output, executor=ex, command_line=command_line(), log=get_console().info,
+                             **options)
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (rbstab_cli.main.Terminated)
-        click.echo(
-            f"\ninterrupted: finished runs are saved and the index is up to date; "
-            f"run the same command again to resume",
-            err=True,
-        )
+        click.echo("\ninterrupted: finished runs are saved and the index is up to date; "
+                   "run the same command again to resume", err=True)
         raise SystemExit(getattr(exc, "exit_code", 130))
-    finally:
-        if not isinstance(ex, str):
-            ex.close()
 
+
+def _say_outcome(outcome) -> None:
+    """The sweep's warnings, counts, files and problems."""
+    from rbstab.warning_codes import coded
+
+    console = get_console()
     for line in outcome.warnings:
-        click.echo(f"warning: {line}", err=True)
+        console.warn(line)
     c = outcome.counts
     pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0
-    click.echo(
+    console.out(
         f"{outcome.name}: {outcome.n_runs} runs ({outcome.n_skipped} skipped, {outcome.n_executed} run now): "
         f"{c.get('success', 0)} success, {c.get('failed', 0)} failed, {c.get('error', 0)} error, "
         f"{c.get('pending', 0)} pending; converged {outcome.n_converged} ({pct:.1f}%)"
     )
-    click.echo(f"  index   {outcome.index_path}")
-    click.echo(f"  summary {outcome.summary_path}")
-    for run_id, status, message in outcome.problems[:20]:
+    console.out(f"  index   {outcome.index_path}")
+    console.out(f"  summary {outcome.summary_path}")
+    shown = len(outcome.problems) if console.verbosity >= 1 else 20
+    for run_id, status, message in outcome.problems[:shown]:
         click.echo(f"  {run_id}: {status}: {message}", err=True)
-    if len(outcome.problems) > 20:
-        click.echo(f"  ... and {len(outcome.problems) - 20} more (see the index)", err=True)
+    if len(outcome.problems) > shown:
+        click.echo(f"  ... and {len(outcome.problems) - shown} more (-v lists them; see the index)", err=True)
     if outcome.tracebacks:
         run_id, text = next(iter(outcome.tracebacks.items()))
         click.echo(f"traceback of {run_id} (a bug? please report it):\n{text}", err=True)
     if outcome.stale_files:
-        click.echo(
-            f"note: {len(outcome.stale_files)} result file(s) in {outcome.directory / 'runs'} are not "
-            "runs of this spec (left in place)",
-            err=True,
-        )
-    if outcome.n_failed:
-        raise SystemExit(min(outcome.n_failed, 100))
+        console.warn(coded("W004", f"{len(outcome.stale_files)} result file(s) in {outcome.directory / 'runs'} are "
+                                   "not runs of this spec (left in place)"))

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import click
 
-from ._common import load_configs
-from .options import set_option
+from ._common import config_error_text, load_one, show_config_warnings
+from .console import get_console
+from .options import console_options, json_option, set_option
 
 
 def _is_spec(path: str) -> bool:
@@ -19,31 +20,67 @@ def _is_spec(path: str) -> bool:
     return isinstance(data, dict) and "base" in data
 
 
+def _check_spec(path: str, overrides) -> dict:
+    """One JSON-able record of a sweep spec: valid or not, its runs, its warnings."""
+    from rbstab.sweep import SweepSpecError, expand, load_spec
+    from rbstab.sweep.plan import warning_digest
+
+    try:
+        loaded = load_spec(path, overrides)
+        runs = expand(loaded)
+    except SweepSpecError as exc:
+        return {"path": path, "kind": "sweep", "valid": False, "errors": list(exc.errors)}
+    return {"path": path, "kind": "sweep", "valid": True, "name": loaded.name, "n_runs": len(runs),
+            "warnings": warning_digest(runs)}
+
+
+def _check_config(path: str, overrides) -> dict:
+    """One JSON-able record of a run config: valid or not, its settings, its warnings."""
+    config, error, lines = load_one(path, overrides)
+    if config is None:
+        return {"path": path, "kind": "config", "valid": False, "errors": list(error.errors),
+                "text": config_error_text(path, error)}
+    sim = config.simulation
+    return {"path": path, "kind": "config", "valid": True, "name": config.name, "variant": config.variant,
+            "t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
+
+
+def _say(record: dict) -> None:
+    console = get_console()
+    if not record["valid"]:
+        return
+    if record["kind"] == "sweep":
+        console.out(f"ok: sweep {record['name']} ({record['n_runs']} runs)")
+        for line in record["warnings"]:
+            console.warn(line, record["name"])
+        return
+    console.out(f"ok: {record['name']} ({record['variant']}, t_end {record['t_end']:g} s, "
+                f"{record['n_samples']} samples, {record['method']})")
+
+
 @click.command("validate")
 @click.argument("configs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @set_option
-def validate(configs, overrides) -> None:
+@json_option
+@console_options
+def validate(configs, overrides, as_json) -> None:
     """Validate CONFIG... and sweep specs (with --set overrides applied); exit non-zero if any is invalid.
 
     A sweep spec (a file with a ``base`` key) is expanded: every run's config is validated.
+    With --json: one object per file, with "path", "kind" (config or sweep), "valid" and
+    either "errors" or "name", the settings and "warnings".
     """
-    specs = [c for c in configs if _is_spec(c)]
-    problems = []
-    for path in specs:
-        from rbstab.sweep import SweepSpecError, expand, load_spec
-
-        try:
-            loaded = load_spec(path, overrides)
-            runs = expand(loaded)
-        except SweepSpecError as exc:
-            problems.append(f"invalid sweep spec {path}\n" + "\n".join("  " + e for e in exc.errors))
-            continue
-        click.echo(f"ok: sweep {loaded.name} ({len(runs)} runs)")
-    for config in load_configs([c for c in configs if c not in specs], overrides) if len(specs) < len(configs) else ():
-        sim = config.simulation
-        click.echo(
-            f"ok: {config.name} ({config.variant}, t_end {sim.t_end:g} s, "
-            f"{sim.n_samples} samples, {sim.method})"
-        )
+    console = get_console()
+    records = [_check_spec(p, overrides) if _is_spec(p) else _check_config(p, overrides) for p in configs]
+    configs_found = {r["name"]: r["warnings"] for r in records if r["kind"] == "config" and r["valid"]}
+    show_config_warnings(configs_found, sum(r["kind"] == "config" for r in records))
+    for record in records:
+        _say(record)
+        if console.json:
+            console.emit({k: v for k, v in record.items() if k != "text"})
+    bad_configs = [r["text"] for r in records if not r["valid"] and r["kind"] == "config"]
+    problems = (["invalid configuration", *bad_configs] if bad_configs else []) + [
+        f"invalid sweep spec {r['path']}\n" + "\n".join("  " + e for e in r["errors"])
+        for r in records if not r["valid"] and r["kind"] == "sweep"]
     if problems:
         raise click.ClickException("\n".join(problems))

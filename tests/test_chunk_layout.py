@@ -150,8 +150,8 @@ def test_chunk_worker_keeps_failures_and_errors_per_run(tmp_path):
         assert rows[bad.run_id]["status"] == "error" and "ConfigError" in rows[bad.run_id]["message"]
         assert rows[runs[1].run_id]["message"].startswith("gimbal lock")
         ok = next(r for r in records if r["run_id"] == runs[0].run_id)
-        assert ok["attrs"] == {k: v for k, v in rows[runs[0].run_id].items() if k != "config"} | {
-            "config": ok["attrs"]["config"]}
+        # the record carries the row as the index takes it (no config text, creation time, store)
+        assert ok["attrs"] == {k: v for k, v in rows[runs[0].run_id].items() if k not in ("config", "created", "store")}
         with h5py.File(path, "r") as f:  # the error row holds no data
             assert np.isnan(f["lyapunov"][rows[bad.run_id]["file_row"]]).all()
         Path(path).unlink()
@@ -267,3 +267,33 @@ def test_open_sweep_gives_the_runs_and_the_grid_with_missing_runs_as_nan(tmp_pat
     ok = index.loc[index["run"] == 3].iloc[0]
     assert grid["lyapunov_final"].values[1, 1] == ok["lyapunov_final"]
     assert grid["lyapunov"].dims == ("time", "k_c_0", "variant") or "k_c_0" in grid["lyapunov"].dims
+
+
+@pytest.mark.parametrize("store, block_bytes", [("thinned", None), ("summary", None), ("full", None), ("full", 1)])
+def test_store_data_digest_matches_what_the_file_holds(tmp_path, monkeypatch, store, block_bytes):
+    """The writer's data digest (from the arrays it wrote when each variable went in one
+    block, else read back) equals the digest of the numbers as HDF5 decodes them."""
+    from rbstab.io import chunk
+    from rbstab.io.integrity import DATA_DIGEST_ATTR, data_digest
+
+    if block_bytes is not None:  # every trace written in several blocks
+        monkeypatch.setattr(chunk, "WRITE_BYTES", block_bytes)
+        monkeypatch.setattr(chunk, "WRITE_BLOCK", 2)
+    out = run_sweep(spec(5), tmp_path, jobs=1, layout="chunk", store=store, progress=False)
+    (path,) = chunk_files(out.directory)
+    with h5py.File(path, "r") as f:
+        assert f.attrs[DATA_DIGEST_ATTR] == data_digest(f, path)
+        numbers = [k for k in f if f[k].dtype.kind == "f" and f[k].ndim >= 2]
+        assert numbers or store == "summary"
+
+
+def test_open_sweep_loads_no_compiler_nor_validator(tmp_path):
+    """Reading a sweep needs neither numba (its start-up is ~0.5 s) nor pydantic."""
+    import subprocess
+    import sys
+
+    out = run_sweep(spec(2), tmp_path, jobs=1, layout="chunk", progress=False)
+    code = ("import sys, rbstab; ds = rbstab.open_sweep(sys.argv[1]); assert ds.sizes['run'] == 2; "
+            "print(sorted(m for m in ('numba', 'pydantic', 'scipy.integrate') if m in sys.modules))")
+    done = subprocess.run([sys.executable, "-c", code, str(out.directory)], capture_output=True, text=True, check=True)
+    assert done.stdout.strip() == "[]"

@@ -383,7 +383,9 @@ def test_zero_gains_are_accepted_with_a_note(variant):
         value = getattr(cfg.gains, gain)
         assert np.all(np.asarray(value) == 0), gain
     (note,) = cfg.warnings
-    keys = note.partition(":")[0].split(", ")  # the key sweeps' digest groups by
+    code, _, keys = note.partition(":")[0].partition(" ")  # the code, then the keys sweeps' digest groups by
+    assert code == "W002"
+    keys = keys.split(", ")
     assert keys == [f"controller.{g}" for g in used if g != "l_d"]
     assert "asymptotic stability is not implied" in note
     for g in used:
@@ -397,7 +399,7 @@ def test_singular_gain_note_names_the_directions():
     with pytest.warns(SemiDefiniteGainWarning) as caught:
         cfg = config_from_mapping(base(controller={"l_r": l_r}))
     assert len(caught) == 1
-    assert cfg.warnings[0].startswith("controller.l_r: positive semi-definite, not definite")
+    assert cfg.warnings[0].startswith("W002 controller.l_r: positive semi-definite, not definite")
     assert "l_r has no stiffness or damping along (-0.7071, 0.7071, 0)" in cfg.warnings[0]
     np.testing.assert_array_equal(cfg.gains.l_r, l_r)
     # a a' + b b' with a = (0.1, 0.3, 0.7), b = (0.2, -0.5, 0.3), written with decimals: exactly

@@ -26,7 +26,7 @@ from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
 from rbstab.simulate import simulate, simulate_many
 from rbstab.summary import numerical_rate
-from rbstab.sweep.folder import row_from_attributes
+from rbstab.sweep.folder import index_part, row_from_attributes
 from rbstab.sweep import expand, run_sweep, spec_from_mapping
 from rbstab.sweep.runner import resolve_engine
 from rbstab.sweep.worker import RunTask, WorkerOptions, _group_configs, run_chunk
@@ -328,8 +328,8 @@ def test_worker_compiled_engine_isolates_failures(tmp_path):
     assert by_path[tasks[2].path]["status"] == "success"
     assert by_path[bad.path]["status"] == "error" and "ConfigError" in by_path[bad.path]["message"]
     assert by_path[unwritable.path]["status"] == "error"
-    assert by_path[tasks[0].path]["attrs"] == row_from_attributes(read_attributes(tasks[0].path),
-                                                                  Path(tasks[0].path).name)
+    assert by_path[tasks[0].path]["attrs"] == index_part(row_from_attributes(read_attributes(tasks[0].path),
+                                                                             Path(tasks[0].path).name))
 
 
 def test_engine_choice_and_timeout(tmp_path):

@@ -92,7 +92,7 @@ def test_full_disk_during_run_is_one_line_and_keeps_what_was_there(tmp_path, mon
 
     monkeypatch.setattr(Path, "write_bytes", full_disk)
     result = CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(out), "--set", "simulation.t_end=0.3",
-                                      "--set", "simulation.n_samples=21"])
+                                      "--set", "simulation.n_samples=21", "--overwrite"])
     assert result.exit_code == 1
     errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
     assert len(errors) == 1 and "No space left on device" in errors[0] and "0 of 1 results written" in errors[0]

@@ -293,7 +293,8 @@ def test_dry_run_lists_runs_and_writes_nothing(tmp_path):
     assert result.exit_code == 0, result.output
     ids = [r.run_id for r in expand(load_spec(path))]
     assert f"{ids[1]}  base=case3_embedded  body.mass=50.0" in result.output
-    assert "warning: 2 of 2 runs: body.inertia" in result.output  # one digest line, not one per run
+    # one digest line, not one per run, with its code
+    assert result.output.count("warning: W001 body.inertia") == 1 and "(2 of 2 runs)" in result.output
     assert not (tmp_path / "out").exists()
 
 
@@ -523,3 +524,19 @@ def test_sweep_size_and_base_files_are_bounded(tmp_path):
         spec_from_mapping(huge)
     with pytest.raises(SweepSpecError, match="sweep key 'base': found '/dev/zero'; .*not a regular file"):
         spec_from_mapping({"name": "dev", "base": "/dev/zero"})
+
+
+def test_index_rows_keep_what_the_index_takes():
+    from rbstab.sweep.folder import IndexRows
+
+    rows = IndexRows()
+    a = {"run_id": "r0", "status": "success", "lyapunov_final": 1.5, "config": "{...}", "created": "t", "store": "s"}
+    b = {"run_id": "r1", "status": "failed", "lyapunov_final": None, "config": "{...}", "created": "t", "store": "s"}
+    rows["r0"], rows["r1"] = a, b
+    rows["r2"] = {"run_id": "r2", "status": "error", "message": "boom"}
+    assert rows["r0"] == {"run_id": "r0", "status": "success", "lyapunov_final": 1.5}
+    assert rows.get("r1") == {"run_id": "r1", "status": "failed", "lyapunov_final": None}
+    assert rows.get("r9") is None and "r2" in rows and len(rows) == 3 and list(rows) == ["r0", "r1", "r2"]
+    assert rows.column_sets() == [("run_id", "status", "lyapunov_final"), ("run_id", "status", "message")]
+    rows.pop("r0")
+    assert "r0" not in rows and len(rows) == 2

@@ -13,7 +13,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["StateLayout", "BLOCK_UNITS", "BLOCK_DESCRIPTIONS"]
+__all__ = [
+    "StateLayout",
+    "BLOCK_UNITS",
+    "BLOCK_DESCRIPTIONS",
+    "LYAPUNOV_TERMS",
+    "OUTPUT_VECTORS",
+    "OUTPUT_SCALARS",
+    "N_OUTPUTS",
+    "OUTPUT_UNITS",
+    "OUTPUT_DESCRIPTIONS",
+]
 
 #: Units of each state block (also the HDF5 ``units`` attribute).
 BLOCK_UNITS = {
@@ -31,6 +41,65 @@ BLOCK_DESCRIPTIONS = {
     "position": "centre-of-mass position X in the inertial frame (eq 1)",
     "velocity": "centre-of-mass velocity V in the inertial frame (eq 1)",
     "controller_state": "embedded controller state D in the inertial frame (eq 22)",
+}
+
+
+# -- the outputs of a run (rbstab.variants computes them; files and readers name them) --------
+#: Names of the terms of v, in the order they are summed.
+LYAPUNOV_TERMS = (
+    "lyapunov_translational",
+    "lyapunov_rotational",
+    "lyapunov_constraint",
+    "lyapunov_gravity",
+)
+
+#: The vector outputs of the compiled ``outputs`` kernel, 3 columns each, in order.
+OUTPUT_VECTORS = (
+    "theta",
+    "omega",
+    "position",
+    "velocity",
+    "controller_state",
+    "constraint_error",
+    "constraint_rate",
+    "constraint_force",
+    "force_h",
+    "torque_n",
+)
+#: The scalar outputs after the vectors, one column each, in order.
+OUTPUT_SCALARS = (*LYAPUNOV_TERMS, "lyapunov", "lyapunov_rate")
+#: Columns of one row of outputs.
+N_OUTPUTS = 3 * len(OUTPUT_VECTORS) + len(OUTPUT_SCALARS)
+
+#: Units of every output quantity other than the state blocks.
+OUTPUT_UNITS = {
+    "constraint_error": "m",
+    "constraint_rate": "m s-1",
+    "constraint_force": "N",
+    "force_h": "N",
+    "torque_n": "N m",
+    "lyapunov": "J",
+    "lyapunov_rate": "W",
+    "lyapunov_translational": "J",
+    "lyapunov_rotational": "J",
+    "lyapunov_constraint": "J",
+    "lyapunov_gravity": "J",
+}
+
+#: Descriptions of every output quantity other than the state blocks.
+OUTPUT_DESCRIPTIONS = {
+    "constraint_error": "E = X + A R - R, displacement of the point C, inertial frame (eq 4)",
+    "constraint_rate": "F = dE/dt = V - A hat(R) Omega, velocity of C, inertial frame (eq 4)",
+    "constraint_force": "Lambda, force applied at C, inertial frame (eqs 20, 22, 39, 40)",
+    "force_h": "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)",
+    "torque_n": "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)",
+    "lyapunov": "Lyapunov function v, the sum of the lyapunov_* terms (eqs 28-46)",
+    "lyapunov_rate": "analytic dv/dt (eqs 29, 37, 43, 46)",
+    "lyapunov_translational": "v_t = V'MV/2 + X'K_t X/2 (eq 25)",
+    "lyapunov_rotational": "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25)",
+    "lyapunov_constraint": "energy stored in the constraint controller (eqs 41, 44; "
+    "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent)",
+    "lyapunov_gravity": "-X'G plus the constant h that makes v zero at the equilibrium (eq 30)",
 }
 
 

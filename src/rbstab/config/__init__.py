@@ -64,10 +64,25 @@ one mapping is an error instead of silently keeping the last value.
 """
 
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
-from .loader import PER_RUN_SECTIONS, RunConfig, config_from_mapping, group_key, load_config
-from .paths import apply_overrides, get_dotted, set_dotted
-from .schema import GAIN_NAMES, GAIN_UNITS, INITIAL_STATE_BLOCKS, SimulationSettings
 from .yaml_io import dump_yaml, parse_yaml
+
+# The validator (pydantic) and RunConfig (numba's model) are imported on first use, so that
+# what only reads files (rbstab.open_sweep, rbstab show) does not load the compiler.
+_LAZY = {
+    "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "group_key", "load_config"),
+    "paths": ("apply_overrides", "get_dotted", "set_dotted"),
+    "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
+}
+
+
+def __getattr__(name: str):
+    import importlib
+
+    for module, names in _LAZY.items():
+        if name in names:
+            return getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = [
     "ConfigError",

@@ -213,20 +213,7 @@ def _build(
     if not isinstance(data, Mapping):
         what = "the configuration is empty" if data is None else f"top level: found {short_repr(data)}"
         raise ConfigError([f"{what}; expected {TOP_LEVEL}"], source)
-    data = plain_tree(data)
-    name_defaulted = "name" not in data and default_name is not None
-    if name_defaulted:
-        data["name"] = default_name
-    try:
-        run = RunSchema.model_validate(data)
-    except ValidationError as exc:
-        lines = []
-        for err in exc.errors(include_url=False):
-            key, text = problem_line(err, name_defaulted)
-            related = [o for o in overrides if _related(o.partition("=")[0].strip(), key)]
-            lines.append(text + "".join(f" [from override {_short_override(o)}]" for o in related))
-        raise ConfigError(lines, source) from None
-
+    run = _validated(plain_tree(data), default_name, source, overrides)
     ctrl = run.controller
     used = VARIANTS[ctrl.variant].required_gains
     gains = Gains(
@@ -253,14 +240,7 @@ def _build(
         max_wall_time=float(sim.max_wall_time),
     )
     used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
-    unheld = unheld_weight(ctrl.variant, body.mass, body.gravity, used_gains, gains.boundary_layer)
-    if unheld is not None:
-        key, detail = unheld
-        found = short_repr(getattr(ctrl, key.partition(".")[2]))
-        line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
-        inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
-        related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
-        raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
+    _check_weight(ctrl, body, gains, used_gains, source, overrides)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
     for key in ("max_step", "max_wall_time"):
@@ -285,6 +265,37 @@ def _build(
         resolved=plain_tree(dump),
         warnings=found_warnings,
     )
+
+
+def _validated(data: dict, default_name: str | None, source: str | None, overrides: Sequence[str]) -> RunSchema:
+    """``data`` (a plain tree, ``name`` set from ``default_name`` if absent) through the
+    schema; ConfigError lists every problem, each with the overrides that touch its key."""
+    name_defaulted = "name" not in data and default_name is not None
+    if name_defaulted:
+        data["name"] = default_name
+    try:
+        return RunSchema.model_validate(data)
+    except ValidationError as exc:
+        lines = []
+        for err in exc.errors(include_url=False):
+            key, text = problem_line(err, name_defaulted)
+            related = [o for o in overrides if _related(o.partition("=")[0].strip(), key)]
+            lines.append(text + "".join(f" [from override {_short_override(o)}]" for o in related))
+        raise ConfigError(lines, source) from None
+
+
+def _check_weight(ctrl, body: RigidBody, gains: Gains, used_gains: dict, source: str | None,
+                  overrides: Sequence[str]) -> None:
+    """ConfigError when the gains leave the weight unheld (no equilibrium, :func:`unheld_weight`)."""
+    unheld = unheld_weight(ctrl.variant, body.mass, body.gravity, used_gains, gains.boundary_layer)
+    if unheld is None:
+        return
+    key, detail = unheld
+    found = short_repr(getattr(ctrl, key.partition(".")[2]))
+    line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
+    inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
+    related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
+    raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
 
 
 def _short_override(override: str, limit: int = 80) -> str:

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from ..warning_codes import coded
+
 __all__ = ["inertia_warnings", "semidefinite_notes", "unheld_weight", "SINGULAR_RTOL"]
 
 #: An eigenvalue at most this times the largest eigenvalue magnitude counts as zero (also
@@ -36,7 +38,8 @@ def _fmt(vector) -> str:
 
 
 def inertia_warnings(inertia: np.ndarray) -> list[str]:
-    """Warning lines for an inertia that violates the triangle inequality j_i <= j_k + j_l.
+    """Warning lines (code ``W001``, :mod:`rbstab.warning_codes`) for an inertia that violates
+    the triangle inequality j_i <= j_k + j_l.
 
     Parameters
     ----------
@@ -50,12 +53,11 @@ def inertia_warnings(inertia: np.ndarray) -> list[str]:
     for i in range(3):
         others = [j[k] for k in range(3) if k != i]
         if j[i] > sum(others) * (1 + 1e-12):
-            return [
-                f"body.inertia: principal moments ({', '.join(f'{x:g}' for x in j)}) kg m^2 "
-                f"violate the triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + "
-                f"{others[1]:g}) that every real rigid body satisfies; the equations of "
-                "motion still hold, but no physical body has this inertia"
-            ]
+            return [coded(
+                "W001",
+                f"body.inertia: principal moments ({', '.join(f'{x:g}' for x in j)}) kg m^2 violate the "
+                f"triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + {others[1]:g}); no real body has them",
+            )]
     return []
 
 
@@ -86,7 +88,8 @@ def semidefinite_notes(gains: Mapping[str, Any]) -> list[str]:
     Returns
     -------
     list of str
-        Empty, or one line ``"controller.k_t, controller.l_r: ..."``: with a singular
+        Empty, or one line ``"W002 controller.k_t, controller.l_r: ..."`` (its code,
+        :mod:`rbstab.warning_codes`): with a singular
         stiffness v is not positive definite (it does not grow in that direction), with a
         singular damper dv/dt misses that direction; either way v is not a strict
         Lyapunov function and asymptotic stability is not implied.
@@ -110,10 +113,11 @@ def semidefinite_notes(gains: Mapping[str, Any]) -> list[str]:
     if not singular:
         return []
     keys = ", ".join(f"controller.{k}" for k in singular)
-    return [
+    return [coded(
+        "W002",
         f"{keys}: positive semi-definite, not definite ({'; '.join(singular.values())}); "
-        "v is then not a strict Lyapunov function (asymptotic stability is not implied)"
-    ]
+        "v is then not a strict Lyapunov function (asymptotic stability is not implied)",
+    )]
 
 
 def _sliding_capacity(null: np.ndarray, weight: np.ndarray) -> float:
@@ -185,21 +189,34 @@ def unheld_weight(
     if diagonal.min() > 0 and np.count_nonzero(k_t) == 3:
         return None  # K_t alone holds any weight (the common case, checked cheaply)
     if variant == "sliding":
-        null = _null_space(k_t)
-        if null.shape[1] == 0:
-            return None
-        need = _sliding_capacity(null, weight)
-        k_s = float(gains["k_s"])
-        strict = boundary_layer > 0
-        if (need < k_s) if strict else (need <= k_s * (1 + 1e-12)):
-            return None
-        relation = ">" if strict else ">="
-        return "controller.k_s", (
-            f"with gravity and K_t singular along {' and '.join(_fmt(u) for u in null.T)}, the "
-            f"sliding force must carry the weight G = {_fmt(weight)} N there: K_s {relation} "
-            f"{need:.6g} N is needed; otherwise the body falls without end and there is no "
-            "equilibrium"
-        )
+        return _sliding_unheld(k_t, float(gains["k_s"]), weight, boundary_layer)
+    return _springs_unheld(variant, gains, weight, size)
+
+
+def _sliding_unheld(k_t: np.ndarray, k_s: float, weight: np.ndarray, boundary_layer: float) -> tuple[str, str] | None:
+    """:func:`unheld_weight` of ``sliding``: along the null space of K_t the force
+    K_s sgn(E) must carry G (strictly with a boundary layer)."""
+    null = _null_space(k_t)
+    if null.shape[1] == 0:
+        return None
+    need = _sliding_capacity(null, weight)
+    strict = boundary_layer > 0
+    if (need < k_s) if strict else (need <= k_s * (1 + 1e-12)):
+        return None
+    relation = ">" if strict else ">="
+    return "controller.k_s", (
+        f"with gravity and K_t singular along {' and '.join(_fmt(u) for u in null.T)}, the "
+        f"sliding force must carry the weight G = {_fmt(weight)} N there: K_s {relation} "
+        f"{need:.6g} N is needed; otherwise the body falls without end and there is no "
+        "equilibrium"
+    )
+
+
+def _springs_unheld(variant: str, gains: Mapping[str, np.ndarray | float | None], weight: np.ndarray,
+                    size: float) -> tuple[str, str] | None:
+    """:func:`unheld_weight` of ``free``, ``visco_elastic`` and ``embedded``: the part of
+    (G, 0) in the null space of the translational stiffness."""
+    k_t = gains["k_t"]
     if variant == "free":
         stiffness, what = k_t, "K_t"
     elif variant == "visco_elastic":

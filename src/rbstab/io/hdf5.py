@@ -21,7 +21,10 @@ Layout of ``<name>.h5``
   ...), ``wall_time``, ``solver_*`` statistics, ``summary_*`` figures
   (:func:`rbstab.summary.summarize`) and ``units_of_summary`` (their units, JSON).
 
-Open with ``xarray.open_dataset(path, engine="h5netcdf")``. Files are written to a
+Open with ``xarray.open_dataset(path, engine="h5netcdf")``, or :func:`read_dataset`
+(checksums verified first); :func:`result_dataset` gives the same Dataset for a run in
+memory, from the same tables (:func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
+:func:`result_attributes`). Files are written to a
 temporary name in the target folder and renamed into place, so an interrupted write
 never leaves a half-written result under the final name. Every numeric variable carries a
 Fletcher-32 checksum and the file the SHA-256 of its attributes and text
@@ -57,6 +60,11 @@ __all__ = [
     "VARIABLE_DESCRIPTIONS",
     "write_result",
     "write_run",
+    "result_dataset",
+    "read_dataset",
+    "variable_attributes",
+    "COORDINATE_ATTRIBUTES",
+    "AXIS_LABELS",
     "result_attributes",
     "STORE_MODES",
     "SUMMARY_VARIABLES",
@@ -71,6 +79,9 @@ __all__ = [
 #: Value of the ``rbstab_format`` global attribute of every result file.
 FORMAT = "rbstab-run-1"
 
+#: Labels of the ``axis`` dimension (vector components).
+AXIS_LABELS = ("x", "y", "z")
+
 #: Variables of the ``switching`` dimension (the located events of a pure-sign-law run):
 #: name -> ``Switchings`` field (units and names in :mod:`rbstab.io.metadata`).
 SWITCHING_VARIABLES = {
@@ -79,6 +90,10 @@ SWITCHING_VARIABLES = {
     "switching_kind": "kind",
     "switching_constraint_rate": "rate",
 }
+
+
+#: Attributes of the dimension coordinates (HDF5 dimension scales) of a result file.
+COORDINATE_ATTRIBUTES = {name: variable_attributes(name) for name in ("time", "axis", "switching")}
 
 
 class NotAResultFile(ValueError):
@@ -279,7 +294,7 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         t = w.dataset(root, "time", np.ascontiguousarray(time, dtype=float))
         h5ds.set_scale(t, b"time")
         _describe(w, t, "time")
-        axis = w.dataset(root, "axis", np.array(["x", "y", "z"], dtype=object), dtype=h5py.string_dtype())
+        axis = w.dataset(root, "axis", np.array(AXIS_LABELS, dtype=object), dtype=h5py.string_dtype())
         h5ds.set_scale(axis, b"axis")
         _describe(w, axis, "axis")
         for key, values in outputs.items():
@@ -363,6 +378,61 @@ def write_result(
     """
     write_run(result, path, command_line=command_line, store=store)
     return Path(path)
+
+
+def result_dataset(result: "RunResult", *, command_line: str | None = None):
+    """What ``result``'s file holds (store ``full``), as an in-memory :class:`xarray.Dataset`.
+
+    The variables, dimensions, coordinates and attributes of the file :func:`write_result`
+    writes (the same tables: :func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
+    :func:`result_attributes`), without writing it and without the checksums of a file.
+
+    Returns
+    -------
+    xarray.Dataset
+        Dimensions ``time`` (coordinate [s]) and ``axis`` (``x``, ``y``, ``z``); vectors
+        ``(time, axis)``, scalars ``(time,)``, each with ``units``, ``long_name`` and
+        ``description`` (:mod:`rbstab.io.metadata`); a
+        pure-sign-law run also has the ``switching`` dimension and its variables.
+    """
+    import xarray as xr
+
+    coords = {
+        "time": ("time", np.asarray(result.time, dtype=float), dict(COORDINATE_ATTRIBUTES["time"])),
+        "axis": ("axis", np.array(AXIS_LABELS), dict(COORDINATE_ATTRIBUTES["axis"])),
+    }
+    variables = {
+        key: (("time", "axis")[: np.ndim(values)], np.asarray(values, dtype=float), variable_attributes(key))
+        for key, values in result.outputs.items()
+    }
+    if getattr(result, "switching", None) is not None:
+        arrays = _event_arrays(result.switching)
+        coords["switching"] = ("switching", arrays.pop("switching"), dict(COORDINATE_ATTRIBUTES["switching"]))
+        variables.update({key: ("switching", data, variable_attributes(key)) for key, data in arrays.items()})
+    return xr.Dataset(variables, coords, attrs=result_attributes(result, command_line=command_line))
+
+
+def read_dataset(path: str | os.PathLike):
+    """A verified result file as an in-memory :class:`xarray.Dataset` (the file is closed).
+
+    Every checksum is checked first (:func:`read_attributes` with ``data``); the file's
+    own checksum attributes are left out (what :func:`result_dataset` gives for its run).
+
+    Raises
+    ------
+    FileNotFoundError, NotAResultFile, DamagedResultError
+        See :func:`read_attributes`.
+    """
+    import xarray as xr
+
+    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, reading
+
+    read_attributes(path, data=True)
+    with reading(path), xr.open_dataset(path, engine="h5netcdf") as ds:
+        ds = ds.load()
+    for key in (DIGEST_ATTR, DATA_DIGEST_ATTR):
+        ds.attrs.pop(key, None)
+    return ds
 
 
 def _plain(value: Any) -> Any:

@@ -105,9 +105,18 @@ def _canonical(value: Any) -> bytes:
         return b"s" + value.encode("utf-8", "surrogateescape")
     array = np.asarray(value)
     if array.dtype.kind in "OSU":
-        return b"a" + repr(array.shape).encode() + b"".join(
-            _canonical(x) + b"\x1f" for x in array.ravel().tolist())
+        return b"a" + repr(array.shape).encode() + b"".join(_text_item(x) for x in array.ravel().tolist())
     return array.dtype.str.encode() + repr(array.shape).encode() + np.ascontiguousarray(array).tobytes()
+
+
+def _text_item(x: Any) -> bytes:
+    """``_canonical(x) + b"\\x1f"`` for an element of a text array (bytes decode and encode
+    back to themselves under surrogateescape, so they are taken as they are)."""
+    if type(x) is bytes:
+        return b"s" + x + b"\x1f"
+    if type(x) is str:
+        return b"s" + x.encode("utf-8", "surrogateescape") + b"\x1f"
+    return _canonical(x) + b"\x1f"
 
 
 def _structure(dataset) -> str:

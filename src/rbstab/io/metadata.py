@@ -25,8 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS
-from ..variants import OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
+from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
 
 __all__ = [
     "CONVENTIONS",

@@ -18,9 +18,9 @@ same bit for bit (up to the ``created`` and ``command_line`` attributes).
 - :class:`DaskExecutor`: a ``distributed.Client`` connected to an existing scheduler;
   the workers return each file's bytes and the parent writes them, so no shared
   filesystem is needed. ``distributed`` is imported only here (``pip install
-  "rbstab[dask]"``). Connecting gives up after a few seconds (:data:`DASK_CONNECT_TIMEOUT`)
-  with a message naming the address, whatever answers there (nothing, an HTTP server, a
-  wrong scheme), and a sweep whose scheduler has had no worker for
+  "rbstab[dask]"``). Connecting gives up after :data:`DASK_CONNECT_TIMEOUT` seconds
+  (``rbstab sweep --connect-timeout``) with a message naming the address, whatever
+  answers there (nothing, an HTTP server, a wrong scheme), and a sweep whose scheduler has had no worker for
   :data:`DASK_NO_WORKERS_GRACE` seconds stops with a message instead of waiting forever.
 """
 
@@ -154,10 +154,11 @@ def _mp_context():
         # and load the compiled kernels there (rbstab.engine.preload: ~0.5 s from numba's
         # cache), so that every worker forked from it starts with them. Not scipy: the
         # compiled engine and the post-processing need none of it (its import costs
-        # ~0.7 s); the scipy engine imports solve_ivp when a chunk needs it.
+        # ~0.7 s); the scipy engine imports solve_ivp when a chunk needs it. Every module a
+        # worker of the compiled engine uses (rbstab.config loads its validator lazily).
         ctx.set_forkserver_preload([
-            "rbstab.sweep.worker", "rbstab.simulate", "rbstab.config", "rbstab.io.hdf5", "rbstab.io.chunk",
-            "h5py", "rbstab.engine.preload",
+            "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulate", "rbstab.config.loader",
+            "rbstab.io.hdf5", "rbstab.io.chunk", "rbstab.io.integrity", "h5py", "h5netcdf", "rbstab.engine.preload",
         ])
     return ctx
 
@@ -462,34 +463,38 @@ def _probe_tcp(address: str, timeout: float) -> None:
         return
     try:
         socket.create_connection((host, port), timeout=timeout).close()
-    except (ConnectionRefusedError, socket.gaierror) as exc:
-        reason = "connection refused (no scheduler listens there)" if isinstance(exc, ConnectionRefusedError) else (
-            f"unknown host ({exc.strerror or exc})")
+    except (ConnectionRefusedError, socket.gaierror, TimeoutError) as exc:
+        reason = ("connection refused (no scheduler listens there)" if isinstance(exc, ConnectionRefusedError) else
+                  f"no answer within {timeout:g} s (the host is unreachable, or a firewall drops the connection)"
+                  if isinstance(exc, TimeoutError) else f"unknown host ({exc.strerror or exc})")
         raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
     except OSError:
-        return  # a timeout or another failure: the client's attempt reports it
+        return  # another failure: the client's attempt reports it
 
 
 def _connect(distributed, address: str, timeout: float):
-    """A ``distributed.Client`` of ``address``, or ExecutorError within ``timeout`` (+1) s.
+    """A ``distributed.Client`` of ``address``, or ExecutorError within ``timeout`` s.
 
     ``Client(timeout=...)`` bounds the TCP connection only: a server of another protocol
     (an HTTP dashboard) accepts it and never answers the handshake, so the client is made
-    in a daemon thread that is abandoned past the deadline.
+    in a daemon thread that is abandoned past the deadline. The probe's time counts
+    against the same deadline.
     """
     hint = "a Dask scheduler address is tcp://HOST:PORT (port 8786 by default, not the dashboard's http port)"
+    deadline = time.monotonic() + timeout
     _probe_tcp(address, timeout)
+    left = max(deadline - time.monotonic(), 0.1)
     box: dict = {}
 
     def connect() -> None:
         try:
-            box["client"] = distributed.Client(address, timeout=timeout, set_as_default=False)
+            box["client"] = distributed.Client(address, timeout=left, set_as_default=False)
         except BaseException as exc:  # reported below
             box["error"] = exc
 
     thread = threading.Thread(target=connect, daemon=True, name="rbstab-dask-connect")
     thread.start()
-    thread.join(timeout + 1.0)
+    thread.join(left)
     if "client" in box:
         return box["client"]
     error = box.get("error")
@@ -502,8 +507,10 @@ def _connect(distributed, address: str, timeout: float):
     raise ExecutorError(f"cannot connect to the Dask scheduler at {address}: {error}")
 
 
-def make_executor(name: str = "local", *, jobs: int | None = None, scheduler: str | None = None) -> Executor:
-    """An executor by name (``"local"`` or ``"dask"``).
+def make_executor(name: str = "local", *, jobs: int | None = None, scheduler: str | None = None,
+                  connect_timeout: float = DASK_CONNECT_TIMEOUT) -> Executor:
+    """An executor by name (``"local"`` or ``"dask"``); ``connect_timeout`` [s] bounds the
+    wait for the Dask scheduler (``rbstab sweep --connect-timeout``).
 
     Raises
     ------
@@ -513,5 +520,5 @@ def make_executor(name: str = "local", *, jobs: int | None = None, scheduler: st
     if name == "local":
         return LocalExecutor(jobs)
     if name == "dask":
-        return DaskExecutor(scheduler)
+        return DaskExecutor(scheduler, connect_timeout=connect_timeout)
     raise ExecutorError(f"--executor: found {name!r}; expected one of {', '.join(EXECUTORS)}")

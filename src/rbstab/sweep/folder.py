@@ -42,16 +42,15 @@ import csv
 import functools
 import datetime as _dt
 import hashlib
-import io
 import json
 import math
 import os
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, MutableMapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..io.atomic import write_text_atomic
+from ..io.atomic import atomic_path, write_text_atomic
 
 __all__ = [
     "SPEC_FILE",
@@ -101,6 +100,8 @@ _SOLVER = ("solver_nfev", "solver_njev", "solver_nlu", "solver_status")
 _HEAD = ("run_id", "run", "base")
 _MIDDLE = ("variant", "status", "converged", "message", "wall_time")
 _TAIL = (*_SOLVER, "config_hash", "file", "file_row")
+#: Values of a stored row that the index leaves out (the config text is most of a row's bytes).
+NOT_IN_INDEX = ("config", "created", "store")
 
 
 # -- names ----------------------------------------------------------------------------------------
@@ -196,6 +197,50 @@ def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
     return row
 
 
+class IndexRows(MutableMapping):
+    """run_id -> the run's row as the index takes it (:func:`index_part`), held compactly.
+
+    What a sweep keeps of each finished run until it writes the index: the row's values as
+    a tuple, its column names shared by every row that has the same (a dict per row costs
+    ~10 KB with its ~60 entries; this ~2 KB). Reading a row gives a new dict.
+    """
+
+    def __init__(self) -> None:
+        self._columns: dict[tuple, tuple] = {}
+        self._rows: dict[str, tuple[tuple, tuple]] = {}
+
+    def __setitem__(self, run_id: str, row: Mapping[str, Any]) -> None:
+        row = index_part(row)
+        names = tuple(row)
+        self._rows[run_id] = (self._columns.setdefault(names, names), tuple(row.values()))
+
+    def __getitem__(self, run_id: str) -> dict[str, Any]:
+        names, values = self._rows[run_id]
+        return dict(zip(names, values))
+
+    def __delitem__(self, run_id: str) -> None:
+        del self._rows[run_id]
+
+    def __iter__(self):
+        return iter(self._rows)
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def __contains__(self, run_id: object) -> bool:
+        return run_id in self._rows
+
+    def column_sets(self) -> list[tuple]:
+        """The distinct column-name tuples of the rows (few: one per kind of row)."""
+        return list(self._columns)
+
+
+def index_part(row: Mapping[str, Any]) -> dict[str, Any]:
+    """A stored row without what the index leaves out (:data:`NOT_IN_INDEX`): what a sweep
+    keeps of each finished run until it writes the index (~1.5 KB a run less)."""
+    return {k: v for k, v in row.items() if k not in NOT_IN_INDEX}
+
+
 def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
     """Whether a run converged: it succeeded and ``|v(t_end)| <= ratio * |v(0)|``.
 
@@ -227,14 +272,19 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     ratio : float
         ``convergence.lyapunov_ratio`` (:func:`is_converged`).
     """
-    out = []
+    return list(iter_index_rows(runs, rows, errors, ratio))
+
+
+def iter_index_rows(runs: Iterable[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
+                    ratio: float) -> Iterator[dict[str, Any]]:
+    """:func:`index_rows`, one at a time."""
     for run in runs:
         row: dict[str, Any] = {"run_id": run.run_id, "run": run.index, "base": run.base}
         row.update({name: value for name, (_, value) in run_coords(run.params).items()})
         row["variant"] = run.variant
         stored = rows.get(run.run_id)
         if stored is not None:
-            row.update({k: v for k, v in stored.items() if k not in row and k not in ("config", "created", "store")})
+            row.update({k: v for k, v in stored.items() if k not in row and k not in NOT_IN_INDEX})
             row["file"] = f"{RUNS_DIR}/{stored['file']}" if stored.get("file") else None
             row["converged"] = is_converged(row.get("status", ""), row.get("lyapunov_initial"),
                                             row.get("lyapunov_final"), ratio)
@@ -242,8 +292,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
             row.update(status="error", converged=False, message=errors[run.run_id])
         else:
             row.update(status="pending", converged=False, message="not run yet (rerun the sweep to finish it)")
-        out.append(row)
-    return out
+        yield row
 
 
 def index_columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -270,15 +319,43 @@ def _cell(value: Any) -> Any:
     return json.dumps(value) if isinstance(value, (list, dict)) else value
 
 
-def write_index(path: Path, rows: Sequence[Mapping[str, Any]]) -> Path:
-    """Write ``rows`` as ``index.csv`` (columns of :func:`index_columns`), atomically."""
-    columns = index_columns(rows)
-    buf = io.StringIO()
-    writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(columns)
-    for row in rows:
-        writer.writerow([_cell(row.get(c)) for c in columns])
-    return write_text_atomic(path, buf.getvalue())
+def write_index(path: Path, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> Path:
+    """Write ``rows`` as ``index.csv``, row by row, atomically; ``columns`` default to
+    :func:`index_columns` of the rows."""
+    if columns is None:
+        rows = list(rows)
+        columns = index_columns(rows)
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as f:
+        writer = csv.writer(f, lineterminator="\n")
+        writer.writerow(columns)
+        for row in rows:
+            writer.writerow([_cell(row.get(c)) for c in columns])
+    return Path(path)
+
+
+def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping[str, Mapping[str, Any]],
+                      errors: Mapping[str, str], *, name: str, ratio: float,
+                      parameters: Mapping[str, str]) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
+    """Write ``index.csv`` and ``sweep_summary.json`` of ``runs`` (in run order); returns
+    the summary and the (run_id, status, message) of each run that did not succeed.
+
+    ``rows``: run_id -> stored row (:func:`index_rows`); each is removed once its index row
+    is made, which is kept compactly (:class:`IndexRows`) until it is written: a sweep's
+    memory at its end stays ~2 KB a run, not a dict of ~60 entries per run twice over.
+    """
+    index = IndexRows()
+    slim: list[dict[str, Any]] = []
+    problems = []
+    for row in iter_index_rows(runs, rows, errors, ratio):
+        rows.pop(row["run_id"], None)
+        index[row["run_id"]] = row
+        slim.append({k: row.get(k) for k in ("base", "status", "converged", "wall_time")})
+        if row["status"] != "success":
+            problems.append((row["run_id"], row["status"], row["message"]))
+    write_index(directory / INDEX_FILE, (index[run.run_id] for run in runs), index_columns(index.column_sets()))
+    summary = summarize_rows(slim, name=name, ratio=ratio, parameters=parameters)
+    write_summary(directory / SUMMARY_FILE, summary)
+    return summary, problems
 
 
 def verify_index(folder: str | os.PathLike) -> bool:

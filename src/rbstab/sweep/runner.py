@@ -54,15 +54,13 @@ from .folder import (
     RUNS_DIR,
     SPEC_FILE,
     SUMMARY_FILE,
+    IndexRows,
     current_rows,
-    index_rows,
     read_spec,
     set_aside_damaged,
+    write_sweep_index,
     parameter_columns,
     run_coords,
-    summarize_rows,
-    write_index,
-    write_summary,
 )
 from .plan import (InvalidRun, PlannedRun, RunEntry, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
                    warning_digest)
@@ -366,24 +364,23 @@ def run_sweep(
     retry_failed : bool
         Also re-execute runs whose current result file has status ``failed``.
     chunk_size : int, optional
-        Most runs per unit of work sent to a worker (default
-        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE`: 1 for scipy, 256 for compiled).
-        For the compiled engine a chunk holds at most ``ceil(runs / workers)`` runs.
+        Most runs per unit of work sent to a worker (and per store file): default
+        :data:`STORE_CHUNK_SIZE` with ``layout="chunk"``, else
+        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE` (1 for scipy, 256 for compiled);
+        by default a sweep is cut into at least :data:`CHUNKS_PER_WORKER` chunks per worker.
     engine : {"compiled", "scipy"}, optional
         Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``
         (:func:`resolve_engine`). ``compiled`` integrates
         every run with scipy's RK23/RK45/DOP853 compiled with the model (other methods
         and the pure sign law go through scipy), taking the steps scipy takes.
-    store : {"full", "summary"}
-        What each result file holds (:data:`rbstab.io.hdf5.STORE_MODES`): every variable
-        at every sample, or the variables a report draws at most 201 samples (summary
-        figures from every sample either way).
-    layout : {"run", "chunk"}
-        One result file per run (``runs/<run_id>.h5``, the format of ``rbstab run``), or
-        one per chunk of runs (``runs/chunk-*.h5``, :mod:`rbstab.io.chunk`: far fewer
-        files and ~10 ms less writing per run; a chunk killed midway is rerun whole).
-        With ``"chunk"`` the default ``chunk_size`` is the compiled engine's for either
-        engine.
+    store : {"thinned", "full", "summary"}
+        What the files hold besides the per-run values (:data:`rbstab.io.chunk.STORES`):
+        the variables a report draws at <= 201 samples (default), every variable at every
+        sample, or no traces (summary figures from every sample in each case).
+    layout : {"chunk", "run"}
+        One store file per chunk of runs (default: ``runs/chunk-*.h5``,
+        :mod:`rbstab.io.chunk`; a chunk killed midway is rerun whole), or one result file
+        per run (``runs/<run_id>.h5``, the format of ``rbstab run``).
     progress : bool, optional
         Progress bar on stderr (done / failed / remaining, ETA); default: when stderr is a
         terminal.
@@ -414,15 +411,7 @@ def run_sweep(
     """
     say = log or (lambda message: None)
     engine = resolve_engine(engine, timeout)
-    if layout not in LAYOUTS:
-        raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
-    chunks_per_worker = CHUNKS_PER_WORKER if chunk_size is None else 1
-    if chunk_size is None:
-        chunk_size = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
-    if chunk_size < 1:
-        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
-    if store not in STORES:
-        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
+    chunking = _chunking(chunk_size, engine, store, layout)
     head, plan = _start_plan(spec, runs)
     grids = {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs} if runs is not None \
         else time_grids_of(spec)
@@ -440,11 +429,26 @@ def run_sweep(
     with ex if owned else contextlib.nullcontext(ex):
         runs_dir.mkdir(parents=True, exist_ok=True)
         _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
-                    chunk_size=(chunk_size, chunks_per_worker), progress=progress, say=say,
+                    chunk_size=chunking, progress=progress, say=say,
                     options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
                                           store=store, layout=layout, parameters=parameter_columns_of(spec),
                                           sweep=spec.name))
     return outcome
+
+
+def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> tuple[int, int]:
+    """(most runs per chunk, chunks per worker at least) of :func:`run_sweep`'s arguments,
+    which it checks; ValueError names the one not allowed."""
+    if layout not in LAYOUTS:
+        raise ValueError(f"layout: found {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    if store not in STORES:
+        raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
+    if chunk_size is None:
+        default = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
+        return default, CHUNKS_PER_WORKER
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
+    return chunk_size, 1
 
 
 def _start_plan(spec: SweepSpec, runs: Sequence[PlannedRun] | None) -> tuple[list, Iterator | None]:
@@ -494,7 +498,7 @@ def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_fai
                 planned.append(run.entry())
                 yield run
 
-        attrs: dict[str, dict] = {}
+        attrs = IndexRows()  # run_id -> its row for the index
         errors: dict[str, str] = {}
         try:
             _execute(spec, runs_in_order(), stored, runs_dir, attrs, errors, outcome, ex, retry_failed=retry_failed,
@@ -565,7 +569,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
                 continue
             by_id[r.run_id] = r.entry()
             yield RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
-                          {name: value for name, (_, value) in run_coords(r.params).items()})
+                          {name: value for name, (_, value) in run_coords(r.params).items()}, r.config_hash)
 
     size = _chunk_length(spec.n_runs, *chunk_size, ex.parallelism())
     if ex.return_bytes:
@@ -639,13 +643,11 @@ def _stop_on_machine_fault(records) -> None:
 
 
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
-    rows = index_rows(runs, attrs, errors, spec.lyapunov_ratio)
-    write_index(outcome.directory / INDEX_FILE, rows)
-    summary = summarize_rows(rows, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameter_columns(r.params for r in runs))
-    write_summary(outcome.directory / SUMMARY_FILE, summary)
+    summary, outcome.problems = write_sweep_index(
+        outcome.directory, runs, attrs, errors, name=spec.name, ratio=spec.lyapunov_ratio,
+        parameters=parameter_columns(r.params for r in runs))
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
-    outcome.problems = [(r["run_id"], r["status"], r["message"]) for r in rows if r["status"] != "success"]
 
 
 def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, runs: Sequence[PlannedRun] | None = None) -> SweepOutcome:

@@ -63,6 +63,8 @@ class RunTask:
         Label of its base configuration.
     coords : dict
         Parameter coordinate name -> value (:func:`rbstab.sweep.folder.run_coords`).
+    config_hash : str
+        The config's hash as the plan computed it ("": the worker computes it).
     """
 
     run_id: str
@@ -71,6 +73,7 @@ class RunTask:
     index: int = 0
     base: str = ""
     coords: dict = field(default_factory=dict)
+    config_hash: str = ""
 
 
 @dataclass(frozen=True)
@@ -176,10 +179,13 @@ class _RunFiles:
 
 
 def _finished(record: dict[str, Any], result, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
+    from .folder import index_part
+
     timing = dict(result.timing)
     timing["config_yaml"] = yaml_time
     timing["write"] = write_time
-    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=row,
+    # the row as the index takes it: the config text stays in the file, not in the parent
+    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=index_part(row),
                   timing=timing)
     return record
 
@@ -218,14 +224,10 @@ class _ChunkFile:
                 self._tmp.cleanup()
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
-        from ..io.hdf5 import canonical_config
-
         t0 = _time.perf_counter()
-        text = canonical_config(result.config.resolved)
-        t1 = _time.perf_counter()
-        row = self.writer.add(task.run_id, result, text)
-        record = _finished({"run_id": task.run_id, "path": self.final}, result, row, t1 - t0,
-                           _time.perf_counter() - t1)
+        row = self.writer.add(task.run_id, result, task.config_hash or None)
+        record = _finished({"run_id": task.run_id, "path": self.final}, result, row, 0.0,
+                           _time.perf_counter() - t0)
         self.records.append(record)
         return record
 

@@ -1,0 +1,104 @@
+"""The codes of rbstab's warnings: one registry.
+
+A warning is something rbstab goes on with but the user should know. Each kind has a code,
+and its message starts with it, wherever the message goes: a Python warning (emitted with
+its category when a config is loaded), ``RunConfig.warnings``, the digest of a sweep, the
+notes of an analysis. For example::
+
+    W001 body.inertia: principal moments (10, 8, 0.4) kg m^2 violate the triangle
+    inequality (j1 = 10 > 8 + 0.4); no real body has them
+
+The command line shows each warning once per command, as one line on stderr (with ``-v``
+followed by the explanation below), and ``--no-warn CODE`` (repeatable; ``--no-warn all``)
+silences it. From Python::
+
+    import warnings
+    warnings.filterwarnings("ignore", message=r".*\\bW001\\b")   # or by category:
+    warnings.filterwarnings("ignore", category=rbstab.config.PhysicalPlausibilityWarning)
+
+The README's "Warnings" section lists the same codes (a test keeps the two in step).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+__all__ = ["WarningCode", "WARNING_CODES", "coded", "code_of", "split_code"]
+
+
+@dataclass(frozen=True)
+class WarningCode:
+    """One kind of warning.
+
+    Attributes
+    ----------
+    code : str
+        ``W`` and three digits.
+    subject : str
+        What it is about (a config key, or the part of rbstab).
+    title : str
+        One line: what it means.
+    explanation : str
+        What to do about it (shown by ``-v``).
+    """
+
+    code: str
+    subject: str
+    title: str
+    explanation: str
+
+
+#: Every warning rbstab gives, by code.
+WARNING_CODES: dict[str, WarningCode] = {
+    w.code: w
+    for w in (
+        WarningCode(
+            "W001", "body.inertia", "the inertia violates the triangle inequality j_i <= j_k + j_l",
+            "every real rigid body satisfies it; the equations of motion still hold, so rbstab runs it "
+            "(the paper's Table 1 inertia (10, 8, 0.4) is such a case, see docs/physics.md)",
+        ),
+        WarningCode(
+            "W002", "controller.<gain>", "a gain the variant uses is positive semi-definite, not definite",
+            "valid physics (a torque-free body, a passive pendulum), but v is then not a strict Lyapunov "
+            "function and asymptotic stability is not implied (docs/physics.md)",
+        ),
+        WarningCode(
+            "W003", "simulation.n_samples", "a run holds a large amount of memory",
+            "it fits in the memory available; lower simulation.n_samples to make it smaller",
+        ),
+        WarningCode(
+            "W004", "rbstab sweep", "result files in the sweep's runs/ folder are not runs of its spec",
+            "left in place and not in the index: runs of an earlier version of the spec, or files copied "
+            "there; remove them, or sweep into another folder (-o)",
+        ),
+    )
+}
+
+_CODE = re.compile(r"\b(W\d{3})\b")
+
+
+def coded(code: str, text: str) -> str:
+    """``"<code> <text>"``: a warning message with its code (which must be registered)."""
+    if code not in WARNING_CODES:
+        raise KeyError(f"unregistered warning code {code!r}")
+    return f"{code} {text}"
+
+
+def code_of(text: str) -> str | None:
+    """The first registered code in ``text``, or None."""
+    for match in _CODE.finditer(text):
+        if match.group(1) in WARNING_CODES:
+            return match.group(1)
+    return None
+
+
+def split_code(text: str) -> tuple[str | None, str, str]:
+    """``(code, before, message)``: ``text`` cut at its code, e.g.
+    ``"case1.yaml: W001 body.inertia: ..."`` -> ``("W001", "case1.yaml: ", "W001 body.inertia: ...")``;
+    ``(None, "", text)`` without one."""
+    code = code_of(text)
+    if code is None:
+        return None, "", text
+    at = text.index(code)
+    return code, text[:at], text[at:]
