@@ -17,7 +17,7 @@ from rbstab.io.hdf5 import NotAResultFile
 CASE1, CASE2, CASE3 = PAPER_CONFIGS
 SHORT = {"simulation.t_end": 0.2, "simulation.n_samples": 21}
 #: Global attributes that differ between two writes of one run.
-MOMENTARY = ("created", "command_line", "wall_time")
+MOMENTARY = ("created", "command_line", "history", "wall_time")
 
 
 def test_import_is_light_and_lists_the_api():
