@@ -20,9 +20,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-netCDF4 = pytest.importorskip(
-    "netCDF4", reason="netCDF4 (the Python binding of netCDF-C) is not installed: pip install -e '.[test]'"
-)
+try:  # any ImportError: not installed, or a wheel whose libnetcdf does not load
+    import netCDF4
+except ImportError as exc:
+    pytest.skip(f"netCDF4 (the Python binding of netCDF-C) cannot be imported ({exc}): pip install -e '.[test]'",
+                allow_module_level=True)
 
 from rbstab.config import load_config  # noqa: E402
 from rbstab.io.chunk import ChunkWriter, StoreRow  # noqa: E402
