@@ -329,9 +329,11 @@ class ChunkWriter:
             rank = np.ndim(result.outputs[name])
             shape = (len(self.ids), len(self._time), 3)[: rank + 1]
             # through h5py with the dimension scales attached (what netCDF-4 reads as a
-            # variable of those dimensions): h5netcdf's create_variable costs ~5 ms each
+            # variable of those dimensions): h5netcdf's create_variable costs ~5 ms each;
+            # track_order: netCDF-C lists attributes in HDF5's creation order (as written)
             var = h5.create_dataset(name, shape=shape, dtype=float, fillvalue=np.nan,
-                                    chunks=(block, len(self._time), 3)[: rank + 1], fletcher32=True)
+                                    chunks=(block, len(self._time), 3)[: rank + 1], fletcher32=True,
+                                    track_order=True)
             for axis, scale in enumerate(scales[: rank + 1]):
                 var.dims[axis].attach_scale(scale)
             var.attrs.update(variable_attributes(name))
@@ -414,17 +416,18 @@ class ChunkWriter:
     def _write_column(self, name: str, values: list) -> None:
         """A ``(run,)`` variable through h5py (h5netcdf's ``create_variable`` costs ~3 ms,
         most of a store file's writing): a dataset with the ``run`` dimension scale attached,
-        which is what netCDF-4 and h5netcdf read as a variable of dimension ``run``."""
+        which is what netCDF-4 and h5netcdf read as a variable of dimension ``run``
+        (tests/test_netcdf_c.py)."""
         h5 = self._file._h5file
         if name in _TEXT or any(isinstance(v, str) for v in values):
             data = np.array(["" if v is None else str(v) for v in values], dtype=object)
-            var = h5.create_dataset(name, data=data, dtype=self._str)
+            var = h5.create_dataset(name, data=data, dtype=self._str, track_order=True)
         else:
             data = np.array([np.nan if v is None else v for v in values], dtype=float)
             if name.startswith("solver_") and np.all(np.isfinite(data)):
                 data = data.astype(np.int64)
             var = h5.create_dataset(name, data=data, fillvalue=np.nan if data.dtype.kind == "f" else None,
-                                    fletcher32=True)
+                                    fletcher32=True, track_order=True)
             self._numbers[name] = data
         var.dims[0].attach_scale(h5["run"])
         units, long_name = figure_attributes(name)

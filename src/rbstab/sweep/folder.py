@@ -108,6 +108,7 @@ NOT_IN_INDEX = ("config", "created", "store")
 
 
 @functools.lru_cache(maxsize=4096)
+@functools.lru_cache(maxsize=4096)  # the same keys for every run of a sweep
 def parameter_name(key: str) -> str:
     """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``."""
     key, scale = (key[: -len(":scale")], True) if key.endswith(":scale") else (key, False)
@@ -333,6 +334,10 @@ def write_index(path: Path, rows: Iterable[Mapping[str, Any]], columns: Sequence
     return Path(path)
 
 
+#: What :func:`summarize_rows` reads of a row.
+_SLIM = ("base", "status", "converged", "wall_time")
+
+
 def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping[str, Mapping[str, Any]],
                       errors: Mapping[str, str], *, name: str, ratio: float,
                       parameters: Mapping[str, str]) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
@@ -349,7 +354,7 @@ def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping
     for row in iter_index_rows(runs, rows, errors, ratio):
         rows.pop(row["run_id"], None)
         index[row["run_id"]] = row
-        slim.append({k: row.get(k) for k in ("base", "status", "converged", "wall_time")})
+        slim.append({k: row.get(k) for k in _SLIM})
         if row["status"] != "success":
             problems.append((row["run_id"], row["status"], row["message"]))
     write_index(directory / INDEX_FILE, (index[run.run_id] for run in runs), index_columns(index.column_sets()))

@@ -85,10 +85,11 @@ class PlannedRun:
         return resolved_hash(self.config.resolved)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class RunEntry:
     """A planned run without its configuration: index, ``run_id``, ``base``, ``params``,
-    ``variant``, ``config_hash`` and ``warnings`` as in :class:`PlannedRun`."""
+    ``variant``, ``config_hash`` and ``warnings`` as in :class:`PlannedRun` (slots: a
+    sweep keeps one per run)."""
 
     index: int
     run_id: str

@@ -1,0 +1,292 @@
+"""netCDF-C reads rbstab's files: sweep store files (``runs/chunk-*.h5``) and run files.
+
+The files are written through h5py and h5netcdf; they are meant to be netCDF-4, which the
+netCDF-C library (that of ``ncdump``, NCO, CDO, R's ncdf4, Julia's NCDatasets, ...) reads.
+netCDF-C is reached here through its Python binding ``netCDF4`` (whose wheels bundle
+libnetcdf): every variable with the dimensions, attributes and values that h5py and
+h5netcdf read, the Fletcher-32 checksums honoured, and xarray's ``netcdf4`` engine giving
+the same Dataset as its ``h5netcdf`` engine. The ``ncdump`` binary is used when on PATH.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+
+try:  # any ImportError: not installed, or a wheel whose libnetcdf does not load
+    import netCDF4
+except ImportError as exc:
+    pytest.skip(f"netCDF4 (the Python binding of netCDF-C) cannot be imported ({exc}): pip install -e '.[test]'",
+                allow_module_level=True)
+
+from rbstab.config import load_config  # noqa: E402
+from rbstab.io.chunk import ChunkWriter, StoreRow  # noqa: E402
+from rbstab.io.hdf5 import write_result  # noqa: E402
+from rbstab.simulate import simulate  # noqa: E402
+from rbstab.sweep import run_sweep, spec_from_mapping  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
+SLIDING = ROOT / "configs" / "examples" / "sliding.yaml"
+SHORT = ["simulation.t_end=0.2", "simulation.n_samples=201"]
+#: HDF5 bookkeeping of dimension scales and netCDF-C's own attributes, which netCDF-C
+#: does not show as attributes.
+HIDDEN = {"CLASS", "NAME", "REFERENCE_LIST", "DIMENSION_LIST", "_Netcdf4Dimid", "_Netcdf4Coordinates",
+          "_NCProperties"}
+
+pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
+
+
+def _plain(value):
+    """An attribute or element as a comparable Python value (text as str)."""
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.ndarray) and value.dtype.kind in "OSU":
+        return [_plain(x) for x in value.ravel().tolist()]
+    return value
+
+
+def _same(a, b) -> bool:
+    a, b = _plain(a), _plain(b)
+    if isinstance(a, (str, list)) or isinstance(b, (str, list)):
+        return a == b
+    # netCDF attributes are 1-D: a scalar written by h5py reads as itself or as one element
+    return np.array_equal(np.atleast_1d(a), np.atleast_1d(b), equal_nan=True)
+
+
+def _h5_attrs(obj) -> dict:
+    return {k: obj.attrs[k] for k in obj.attrs if k not in HIDDEN}
+
+
+def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
+    """netCDF-C opens ``path`` as netCDF-4 and reads every variable as h5py does: on the
+    dimensions of the HDF5 dimension scales attached to it, with the same shapes, types,
+    attributes and values (NaN where NaN), text as str, Fletcher-32 on every non-empty numeric variable; xarray's ``netcdf4`` engine
+    gives the Dataset its ``h5netcdf`` engine gives. ``attribute_order``: also the order
+    the attributes were written in (netCDF-C numbers them by HDF5's creation order, which
+    only a dataset made with ``track_order`` keeps)."""
+    import xarray as xr
+
+    with h5py.File(path, "r") as h5, netCDF4.Dataset(path) as nc:
+        nc.set_auto_mask(False)
+        assert nc.data_model == "NETCDF4"
+        names = [k for k in h5 if isinstance(h5[k], h5py.Dataset)]
+        assert sorted(nc.variables) == sorted(names)
+        scales = {k: h5[k].shape[0] for k in names if h5[k].is_scale}
+        assert {k: len(d) for k, d in nc.dimensions.items()} == scales
+        expected = _h5_attrs(h5)
+        assert list(nc.ncattrs()) == list(expected) or not attribute_order
+        assert sorted(nc.ncattrs()) == sorted(expected)
+        for key, value in expected.items():
+            assert _same(nc.getncattr(key), value), f"global attribute {key}"
+        for name in names:
+            var, ds = nc.variables[name], h5[name]
+            # a dimension's coordinate is its scale; any other dataset has scales attached
+            dims = (name,) if ds.is_scale else tuple(
+                d[0].name.rpartition("/")[2] if len(d) else f"(no scale on axis {i})" for i, d in enumerate(ds.dims))
+            assert var.dimensions == dims, name
+            assert var.shape == ds.shape, name
+            expected = _h5_attrs(ds)
+            if attribute_order:
+                assert list(var.ncattrs()) == list(expected), name
+            assert sorted(var.ncattrs()) == sorted(expected), name
+            for key, value in expected.items():
+                assert _same(var.getncattr(key), value), f"{name}:{key}"
+            if ds.dtype.kind in "OS":  # variable-length UTF-8 text: NC_STRING
+                assert var.dtype is str, name
+                assert _plain(np.asarray(var[...], dtype=object)) == _plain(ds[...]), name
+            else:
+                assert var.dtype == ds.dtype, name
+                np.testing.assert_array_equal(var[...], ds[...], err_msg=name)  # NaN equals NaN
+                assert var.filters()["fletcher32"] or ds.size == 0, name
+    with xr.open_dataset(path, engine="h5netcdf") as a, xr.open_dataset(path, engine="netcdf4") as b:
+        xr.testing.assert_identical(a.load(), b.load())
+
+
+# -- store files ------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def sweeps(tmp_path_factory):
+    """A 4-run sweep (a vector parameter on a grid x a random one) in each store, 2 files each."""
+    out = tmp_path_factory.mktemp("netcdf_c")
+    spec = {"name": "ncc", "base": str(CASE3),
+            "grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]},
+            "random": {"n": 2, "seed": 3, "params": {"initial_state.omega.0": {"uniform": [10, 20]}}}}
+    return {store: run_sweep(spec_from_mapping({**spec, "name": f"ncc_{store}"}, overrides=SHORT), out, jobs=1,
+                             chunk_size=2, layout="chunk", store=store, progress=False)
+            for store in ("thinned", "full", "summary")}
+
+
+def _files(outcome) -> list[Path]:
+    return sorted((outcome.directory / "runs").glob("chunk-*.h5"))
+
+
+@pytest.mark.parametrize("store", ["thinned", "full", "summary"])
+def test_netcdf_c_reads_each_store_file(sweeps, store):
+    files = _files(sweeps[store])
+    assert len(files) == 2
+    index = pd.read_csv(sweeps[store].index_path)
+    params = ["k_c_0", "k_c_1", "k_c_2", "omega_0"]
+    for path in files:
+        assert_netcdf_c_reads(path)
+        with netCDF4.Dataset(path) as nc:
+            n = len(nc.dimensions["run"])
+            sizes = {"run": n, "axis": 3, **({} if store == "summary" else {"time": 201})}
+            assert {k: len(d) for k, d in nc.dimensions.items()} == sizes
+            assert not any(d.isunlimited() for d in nc.dimensions.values())
+            assert nc.getncattr("store") == store and nc.getncattr("rbstab_format") == "rbstab-sweep-2"
+            # the traces (h5py datasets with dimension scales attached) on their dimensions
+            traces = [k for k, v in nc.variables.items() if "time" in v.dimensions and k != "time"]
+            if store == "summary":
+                assert not traces
+            else:
+                assert nc["theta"].dimensions == ("run", "time", "axis")
+                assert nc["lyapunov"].dimensions == ("run", "time")
+                assert ("constraint_force" in traces) == (store == "full")
+                assert nc["lyapunov"].ncattrs() == ["units", "long_name", "description", "coordinates"]
+                assert nc["lyapunov"].units == "J" and nc["time"].units == "s"
+                assert nc["time"][-1] == pytest.approx(0.2)
+                assert np.isfinite(nc["theta"][...]).all()
+            # per-run variables and coordinates, with units and long_name
+            for name in ("run_id", "base", "variant", *params, "status", "message", "config", "lyapunov_final",
+                         "final_omega_x", "solver_nfev"):
+                assert nc[name].dimensions == ("run",), name
+            assert nc["run"].dtype == np.int64
+            assert nc["lyapunov_final"].units == "J" and nc["lyapunov_final"].long_name == "v(t_end)"
+            assert nc["final_omega_x"].units == "rad s-1"
+            assert nc["final_omega_x"].long_name.endswith(", x component")
+            assert nc["k_c_0"].config_key == "controller.k_c.0"
+            for name in ("lyapunov_final", "status", *(traces[:1])):
+                assert set(nc[name].coordinates.split()) == {"run_id", "base", "variant", *params}
+            # the values index.csv holds for the same runs; text readable
+            rows = index.set_index("run_id").loc[list(nc["run_id"][...])]
+            assert list(nc["run"][...]) == list(rows["run"])
+            assert list(nc["status"][...]) == ["success"] * n
+            for name in ("lyapunov_final", "k_c_0", "omega_0", "solver_nfev"):
+                np.testing.assert_allclose(nc[name][...], rows[name].to_numpy(), rtol=1e-12, err_msg=name)
+            with h5py.File(path, "r") as h5:
+                configs = [json.loads(c) for c in nc["config"][...]]
+                assert configs == [json.loads(c) for c in h5["config"].asstr()[...]]
+            assert configs[0]["controller"]["variant"] == "embedded"
+
+
+def test_xarray_netcdf4_engine_combines_the_store_files(sweeps):
+    import xarray as xr
+
+    out = sweeps["thinned"]
+    index = pd.read_csv(out.index_path)
+    with xr.open_mfdataset(_files(out), engine="netcdf4") as ds:  # default arguments
+        assert list(ds["run"].values) == [0, 1, 2, 3]
+        assert {"run_id", "k_c_0", "omega_0"} <= set(ds.coords)
+        assert ds["lyapunov"].dims == ("run", "time")
+        assert list(ds["run_id"].values) == list(index["run_id"])
+        np.testing.assert_array_equal(ds["lyapunov_final"].values, index["lyapunov_final"].to_numpy())
+
+
+def test_netcdf_c_reads_failed_and_error_rows_and_non_ascii_text(tmp_path):
+    ok = simulate(load_config(CASE3, SHORT))
+    locked = simulate(load_config(CASE3, [*SHORT, "initial_state.theta=[0, 1.5, 0]", "initial_state.omega=[0, 30, 0]"]))
+    assert (ok.status, locked.status) == ("success", "failed")
+    rows = [StoreRow(i, f"r000{i}-x", "Fall β", {"omega_1": w}) for i, w in enumerate([32.0, 30.0, 31.0])]
+    message = "ConfigError: Ω ≠ 0 — «bad»"
+    path = tmp_path / "chunk-r0000-x-0.h5"
+    with ChunkWriter(path, rows, store="full", parameters={"omega_1": "initial_state.omega.1"},
+                     sweep="démo Ω") as writer:
+        writer.add("r0000-x", ok)
+        writer.add_error("r0002-x", message)
+        writer.add("r0001-x", locked)
+    assert_netcdf_c_reads(path)
+    with netCDF4.Dataset(path) as nc:
+        assert nc.getncattr("sweep") == "démo Ω"
+        assert list(nc["base"][...]) == ["Fall β"] * 3
+        assert list(nc["status"][...]) == ["success", "failed", "error"]
+        assert nc["message"][2] == message and nc["message"][1].startswith("gimbal lock")
+        assert list(nc["omega_1"][...]) == [32.0, 30.0, 31.0]
+        v = np.ma.filled(nc["lyapunov"][...], np.nan)
+        assert np.isfinite(v[0]).all() and np.isnan(v[2]).all()  # the error row holds no data
+        assert np.isfinite(v[1, 0]) and np.isnan(v[1, -1])  # NaN after the failed run's last sample
+        assert np.isnan(nc["lyapunov_final"][2])
+
+
+def test_netcdf_c_refuses_a_damaged_chunk(sweeps, tmp_path):
+    """Fletcher-32 is checked by netCDF-C too: a changed byte in a trace or a per-run
+    value raises instead of reading wrong numbers."""
+    for name in ("lyapunov", "lyapunov_final"):
+        path = tmp_path / f"{name}.h5"
+        shutil.copyfile(_files(sweeps["thinned"])[0], path)
+        with h5py.File(path, "r") as h5:
+            where = h5[name].id.get_chunk_info(0)
+        with open(path, "r+b") as f:
+            f.seek(where.byte_offset + where.size // 2)
+            byte = f.read(1)[0]
+            f.seek(-1, 1)
+            f.write(bytes([byte ^ 0xFF]))
+        with netCDF4.Dataset(path) as nc:
+            nc["theta"][...]  # untouched variables still read
+            with pytest.raises(RuntimeError, match="HDF error"):
+                nc[name][...]
+
+
+# -- run files ------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("store", ["full", "thinned", "summary"])
+def test_netcdf_c_reads_a_run_file(tmp_path, store):
+    result = simulate(load_config(CASE3, SHORT))
+    path = write_result(result, tmp_path / "case3.h5", store=store)
+    # run files are written without attribute creation order: netCDF-C lists a variable's
+    # attributes in HDF5's own order (the values are the same)
+    assert_netcdf_c_reads(path, attribute_order=False)
+    with netCDF4.Dataset(path) as nc:
+        assert nc.getncattr("status") == "success" and nc.getncattr("variant") == "embedded"
+        np.testing.assert_array_equal(nc.getncattr("summary_final_omega"), result.summary["final_omega"])
+        if store == "summary":  # a dimension of length 0 is netCDF's unlimited dimension
+            assert len(nc.dimensions["time"]) == 0 and "theta" not in nc.variables
+            return
+        assert {k: len(d) for k, d in nc.dimensions.items()} == {"time": 201, "axis": 3}
+        assert nc["theta"].dimensions == ("time", "axis") and nc["lyapunov"].dimensions == ("time",)
+        assert nc["lyapunov"].units == "J" and nc["time"].units == "s"
+        assert list(nc["axis"][...]) == ["x", "y", "z"]
+        np.testing.assert_array_equal(nc["lyapunov"][...], result.outputs["lyapunov"])
+        np.testing.assert_array_equal(nc["omega"][...], result.outputs["omega"])
+
+
+def test_netcdf_c_reads_a_sign_law_run_file_with_its_switchings(tmp_path):
+    result = simulate(load_config(SLIDING, ["controller.boundary_layer=0", "simulation.t_end=0.1",
+                                            "simulation.n_samples=101"]))
+    assert len(result.switching.time) >= 1
+    path = write_result(result, tmp_path / "sliding.h5")
+    assert_netcdf_c_reads(path, attribute_order=False)
+    with netCDF4.Dataset(path) as nc:
+        assert len(nc.dimensions["switching"]) == len(result.switching.time)
+        assert nc["switching_time"].dimensions == ("switching",) and nc["switching_time"].units == "s"
+        assert nc["sliding_mode"].dimensions == ("time", "axis")
+        np.testing.assert_array_equal(nc["switching_time"][...], result.switching.time)
+
+
+# -- ncdump ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.skipif(shutil.which("ncdump") is None, reason="no ncdump on PATH (netCDF-C's tools, e.g. apt-get install netcdf-bin)")
+def test_ncdump_prints_a_store_file_and_a_run_file(sweeps, tmp_path):
+    store = _files(sweeps["thinned"])[0]
+    header = subprocess.run(["ncdump", "-h", str(store)], capture_output=True, text=True, check=True).stdout
+    for line in ("run = 2 ;", "time = 201 ;", "axis = 3 ;", "double theta(run, time, axis) ;",
+                 "double lyapunov(run, time) ;", "string run_id(run) ;", "double lyapunov_final(run) ;",
+                 'string lyapunov_final:units = "J" ;', "string :rbstab_format = \"rbstab-sweep-2\" ;"):
+        assert line in header, line
+    data = subprocess.run(["ncdump", "-v", "run_id,status", str(store)], capture_output=True, text=True,
+                          check=True).stdout
+    with h5py.File(store, "r") as h5:
+        assert all(f'"{r}"' in data for r in h5["run_id"].asstr()[...])
+    run = write_result(simulate(load_config(CASE3, SHORT)), tmp_path / "case3.h5")
+    header = subprocess.run(["ncdump", "-h", str(run)], capture_output=True, text=True, check=True).stdout
+    assert "double theta(time, axis) ;" in header and "string :rbstab_format = \"rbstab-run-1\" ;" in header
