@@ -2,7 +2,8 @@
 
 The default store of ``rbstab sweep`` (``--layout chunk``). Each unit of work a worker
 executes (a chunk of up to a few hundred runs, any runs) is written as one file
-``runs/chunk-<first run_id>-<random>.h5`` by h5netcdf, so it is a netCDF-4 file (HDF5
+``runs/chunk-<first run_id>-<random>.h5`` (the file, its dimensions and coordinates by
+h5netcdf, the variables by h5py with the dimension scales attached), a netCDF-4 file (HDF5
 with dimension scales) that ``ncdump``, ``xarray.open_dataset(p, engine="h5netcdf")``
 and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read:
 
