@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import socket
+import threading
 import types
 from pathlib import Path
 
@@ -56,3 +58,30 @@ def settings(**kw):
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261121)
+
+
+@pytest.fixture
+def silent_server():
+    """``tcp://127.0.0.1:PORT`` of a server that accepts connections and never says a word
+    (no Dask scheduler: an HTTP server, say)."""
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(8)
+    server.settimeout(0.1)
+    stop, accepted = threading.Event(), []
+
+    def serve():
+        while not stop.is_set():
+            try:
+                accepted.append(server.accept()[0])
+            except OSError:
+                continue
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    stop.set()
+    thread.join()
+    for conn in accepted:
+        conn.close()
+    server.close()

@@ -197,37 +197,11 @@ def test_python_dash_m_rbstab():
     assert "rbstab, version" in version.stdout
 
 
-@pytest.fixture
-def silent_scheduler():
-    """A TCP server that accepts connections and never answers (no Dask scheduler)."""
-    server = socket.socket()
-    server.bind(("127.0.0.1", 0))
-    server.listen(8)
-    server.settimeout(0.1)
-    stop, accepted = threading.Event(), []
-
-    def serve():
-        while not stop.is_set():
-            try:
-                accepted.append(server.accept()[0])
-            except OSError:
-                continue
-
-    thread = threading.Thread(target=serve, daemon=True)
-    thread.start()
-    yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
-    stop.set()
-    thread.join()
-    for conn in accepted:
-        conn.close()
-    server.close()
-
-
-def test_connect_timeout_reaches_the_dask_executor(tmp_path, silent_scheduler):
+def test_connect_timeout_reaches_the_dask_executor(tmp_path, silent_server):
     pytest.importorskip("distributed")
-    result = invoke("sweep", CASE3, "-o", tmp_path / "o", "--scheduler", silent_scheduler, "--connect-timeout", "0.5")
+    result = invoke("sweep", CASE3, "-o", tmp_path / "o", "--scheduler", silent_server, "--connect-timeout", "0.5")
     assert result.exit_code == 1
-    assert f"cannot connect to the Dask scheduler at {silent_scheduler}: no Dask scheduler answered within 0.5 s" \
+    assert f"cannot connect to the Dask scheduler at {silent_server}: no Dask scheduler answered within 0.5 s" \
         in result.stderr
     assert "Traceback" not in result.output and not (tmp_path / "o").exists()
 

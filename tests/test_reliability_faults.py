@@ -16,7 +16,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -343,33 +342,6 @@ def test_workers_exit_when_the_parent_dies_unreaped(tmp_path):
 
 
 # -- Dask -----------------------------------------------------------------------------------
-
-
-@pytest.fixture
-def silent_server():
-    """A TCP server that accepts connections and never says a word (an HTTP server, say)."""
-    server = socket.socket()
-    server.bind(("127.0.0.1", 0))
-    server.listen(8)
-    accepted = []
-    stop = threading.Event()
-
-    def serve():
-        server.settimeout(0.1)
-        while not stop.is_set():
-            try:
-                accepted.append(server.accept()[0])
-            except OSError:
-                continue
-
-    thread = threading.Thread(target=serve, daemon=True)
-    thread.start()
-    yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
-    stop.set()
-    thread.join()
-    for conn in accepted:
-        conn.close()
-    server.close()
 
 
 def test_dask_addresses_that_never_answer_fail_fast_naming_them(silent_server):
