@@ -34,7 +34,7 @@ import errno
 import math
 import os
 import sys
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,7 +45,6 @@ from .. import __version__
 from .executors import Executor, make_executor
 from ..io.atomic import write_bytes_atomic, write_text_atomic
 from .folder import (
-    CHUNK_GLOB,
     StoredRows,
     DEFAULT_LAYOUT,
     INDEX_FILE,
