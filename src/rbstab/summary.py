@@ -7,6 +7,8 @@ everywhere.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .layout import BLOCK_UNITS
@@ -96,6 +98,19 @@ def stencil_weights(time: np.ndarray, width: int = RATE_STENCIL) -> tuple[np.nda
     return first, c1.T / h
 
 
+def _stencil_weights_of(time: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`stencil_weights` of ``time``, computed once per grid (a sweep's runs share one)."""
+    return _cached_weights(time.tobytes())
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_weights(grid: bytes) -> tuple[np.ndarray, np.ndarray]:
+    first, weights = stencil_weights(np.frombuffer(grid, dtype=float))
+    first.setflags(write=False)
+    weights.setflags(write=False)
+    return first, weights
+
+
 def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Derivative of sampled ``values`` along ``time`` by finite differences.
 
@@ -130,8 +145,8 @@ def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
         if length < 2:
             continue
         which = np.flatnonzero(n_ok == length)
-        part = rows[which, :length]
-        first, weights = stencil_weights(time[:length])
+        part = np.ascontiguousarray(rows[which, :length])  # outputs are strided columns: gather from a copy
+        first, weights = _stencil_weights_of(time[:length])
         acc = weights[:, 0] * part[:, first]
         for j in range(1, weights.shape[1]):
             acc += weights[:, j] * part[:, first + j]
