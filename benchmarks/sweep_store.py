@@ -91,7 +91,7 @@ def write(n: int, folder: str) -> dict:
         path = directory / RUNS_DIR / chunk_file_name(chunk[0].run_id)
         with ChunkWriter(path, stored, store="thinned", parameters=parameters, sweep=spec.name) as writer:
             for k, run in enumerate(chunk):
-                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], run.config_hash)
+                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], config_hash=run.config_hash)
     t1 = time.perf_counter()
     write_sweep_index(directory, runs, rows, {}, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameters)
     (directory / SPEC_FILE).write_text(_dump_yaml(_spec_document(spec, "benchmark")))

@@ -31,6 +31,27 @@ pytestmark = [
 RBSTAB = Path(sys.executable).with_name("rbstab")
 
 
+def kill_when_written(command: list[str], runs_dir: Path, pattern: str, count: int, poll: float) -> list[Path]:
+    """Start ``command`` in its own process group, SIGKILL the whole group (parent and
+    workers, wherever they are) once ``count`` files match ``pattern`` in ``runs_dir``;
+    returns the files under a final name after the kill."""
+    proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if runs_dir.is_dir() and len(list(runs_dir.glob(pattern))) >= count:
+                break
+            time.sleep(poll)
+        assert proc.poll() is None, f"the sweep ended before it could be killed: {proc.stderr.read().decode()}"
+        os.killpg(proc.pid, signal.SIGKILL)
+    finally:
+        if proc.poll() is None:
+            proc.wait(timeout=30)
+        proc.stderr.close()
+    time.sleep(0.5)
+    return sorted(runs_dir.glob(pattern))
+
+
 def test_sigkill_then_resume_equals_clean_run(tmp_path):
     spec_path = tmp_path / "kill.yaml"
     spec_path.write_text(
@@ -47,21 +68,7 @@ def test_sigkill_then_resume_equals_clean_run(tmp_path):
                "--layout", "run", *overrides]
     runs_dir = tmp_path / "killed" / "kill" / "runs"
 
-    proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if runs_dir.is_dir() and len(list(runs_dir.glob("*.h5"))) >= 3:
-                break
-            time.sleep(0.02)
-        assert proc.poll() is None, f"the sweep ended before it could be killed: {proc.stderr.read().decode()}"
-        os.killpg(proc.pid, signal.SIGKILL)  # the parent and its workers, wherever they are
-    finally:
-        if proc.poll() is None:
-            proc.wait(timeout=30)
-        proc.stderr.close()
-    time.sleep(0.5)
-    finished = sorted(runs_dir.glob("*.h5"))
+    finished = kill_when_written(command, runs_dir, "*.h5", 3, poll=0.02)
     assert 3 <= len(finished) < 10
     for path in finished:  # whatever is under a final name is a whole, readable result
         assert read_attributes(path)["status"] == "success"
@@ -96,23 +103,9 @@ def test_sigkill_of_the_default_store_then_resume_equals_clean_run(tmp_path):
     command = [str(RBSTAB), "sweep", str(spec_path), "-o", str(tmp_path / "killed"), "-j", "2", "--no-progress",
                "--chunk-size", "2", *overrides]
     runs_dir = tmp_path / "killed" / "killc" / "runs"
-    proc = subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if runs_dir.is_dir() and len(list(runs_dir.glob("chunk-*.h5"))) >= 1:
-                break
-            time.sleep(0.01)
-        assert proc.poll() is None, f"the sweep ended before it could be killed: {proc.stderr.read().decode()}"
-        os.killpg(proc.pid, signal.SIGKILL)
-    finally:
-        if proc.poll() is None:
-            proc.wait(timeout=30)
-        proc.stderr.close()
-    time.sleep(0.5)
     from rbstab.io.chunk import read_chunk_rows
 
-    finished = sorted(runs_dir.glob("chunk-*.h5"))
+    finished = kill_when_written(command, runs_dir, "chunk-*.h5", 1, poll=0.01)
     assert 1 <= len(finished) < 6
     for path in finished:  # a final name holds a whole, readable store file
         assert all(row["status"] == "success" for row in read_chunk_rows(path))

@@ -255,7 +255,7 @@ class ChunkWriter:
 
     # -- rows ---------------------------------------------------------------------------------
 
-    def add(self, run_id: str, result: "RunResult", config_hash: str | None = None) -> dict[str, Any]:
+    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
         ``config_hash``: the run's :func:`rbstab.io.hdf5.config_hash` of its canonical config

@@ -341,12 +341,37 @@ _SLIM = ("base", "status", "converged", "wall_time")
 def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping[str, Mapping[str, Any]],
                       errors: Mapping[str, str], *, name: str, ratio: float,
                       parameters: Mapping[str, str]) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
-    """Write ``index.csv`` and ``sweep_summary.json`` of ``runs`` (in run order); returns
-    the summary and the (run_id, status, message) of each run that did not succeed.
+    """Write ``index.csv`` and ``sweep_summary.json`` of ``runs`` (in run order), atomically.
 
-    ``rows``: run_id -> stored row (:func:`index_rows`); each is removed once its index row
-    is made, which is kept compactly (:class:`IndexRows`) until it is written: a sweep's
-    memory at its end stays ~2 KB a run, not a dict of ~60 entries per run twice over.
+    Each index row is made, kept compactly (:class:`IndexRows`) and streamed to the file:
+    a sweep's memory at its end stays ~2 KB a run, not a dict of ~60 entries per run twice.
+
+    Parameters
+    ----------
+    directory : Path
+        The sweep folder.
+    runs : sequence of PlannedRun or RunEntry
+        Every run of the run list, in order.
+    rows : mutable mapping run_id -> stored row
+        As :func:`index_rows` takes it; **emptied** as the index is made (each row is
+        removed once its index row exists).
+    errors : mapping run_id -> message
+        Runs whose worker raised (status ``error``).
+    name, ratio, parameters
+        The sweep's name, ``convergence.lyapunov_ratio`` and parameter columns (name ->
+        config key), for the summary (:func:`summarize_rows`).
+
+    Returns
+    -------
+    summary : dict
+        What ``sweep_summary.json`` holds.
+    problems : list of (run_id, status, message)
+        Every run that did not succeed.
+
+    Raises
+    ------
+    OSError
+        If a file cannot be written (the old files are left as they were).
     """
     index = IndexRows()
     slim: list[dict[str, Any]] = []

@@ -225,7 +225,7 @@ class _ChunkFile:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         t0 = _time.perf_counter()
-        row = self.writer.add(task.run_id, result, task.config_hash or None)
+        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None)
         record = _finished({"run_id": task.run_id, "path": self.final}, result, row, 0.0,
                            _time.perf_counter() - t0)
         self.records.append(record)
