@@ -269,6 +269,27 @@ def test_open_sweep_gives_the_runs_and_the_grid_with_missing_runs_as_nan(tmp_pat
     assert grid["lyapunov"].dims == ("time", "k_c_0", "variant") or "k_c_0" in grid["lyapunov"].dims
 
 
+def test_open_sweep_traces_match_each_file_for_any_selection_of_runs(tmp_path):
+    """The lazy traces over several store files give each run's own rows, for slices,
+    scattered and reversed selections, and a single run."""
+    from rbstab import open_sweep
+    from rbstab.io.chunk import StoreTrace
+
+    out = run_sweep(spec(5), tmp_path, jobs=1, chunk_size=2, layout="chunk", store="full", progress=False)
+    assert len(chunk_files(out.directory)) == 3
+    index = pd.read_csv(out.index_path).sort_values("run")
+    own = np.stack([read_chunk_series(out.directory / r.file, int(r.file_row), ["omega"])["omega"]
+                    for r in index.itertuples()])
+    ds = open_sweep(out.directory)
+    np.testing.assert_array_equal(ds["omega"].values, own)
+    np.testing.assert_array_equal(ds["omega"].isel(run=[4, 0, 2]).values, own[[4, 0, 2]])
+    segments = [(str(out.directory / r.file), [int(r.file_row)]) for r in index.itertuples()]
+    direct = StoreTrace("omega", segments[::-1], own.shape[1:])  # one segment a run, in reverse
+    np.testing.assert_array_equal(direct[:], own[::-1])
+    np.testing.assert_array_equal(direct[1], own[3])
+    np.testing.assert_array_equal(direct[[3, 1], 5, 1:], own[[1, 3], 5, 1:])
+
+
 @pytest.mark.parametrize("store, block_bytes", [("thinned", None), ("summary", None), ("full", None), ("full", 1)])
 def test_store_data_digest_matches_what_the_file_holds(tmp_path, monkeypatch, store, block_bytes):
     """The writer's data digest (from the arrays it wrote when each variable went in one

@@ -233,6 +233,24 @@ def test_a_damaged_store_is_refused_by_readers_and_rerun_on_resume(tmp_path):
     assert float(open_sweep(folder)["lyapunov"].max()) < 1e5  # the values of rerun runs
 
 
+def test_open_sweep_checks_a_store_file_s_text_when_its_traces_are_read(tmp_path):
+    """open_sweep lists the store files; a file whose text was changed (no HDF5 checksum
+    covers it) is refused by the content digest when its traces are first read."""
+    run_sweep(_spec(), tmp_path, executor=SerialExecutor(), chunk_size=3, progress=False)
+    folder = tmp_path / "faults"
+    files = sorted((folder / "runs").glob("chunk-*.h5"))
+    text = bytearray(files[1].read_bytes())
+    at = text.find(b"success")  # the status column's text, in HDF5's heap
+    assert at > 0
+    text[at] = ord("S")
+    files[1].write_bytes(bytes(text))
+    ds = open_sweep(folder)
+    first = ds["lyapunov"].isel(run=slice(0, 3)).values  # the intact file's runs
+    assert np.isfinite(first).all()
+    with pytest.raises(DamagedResultError, match="attributes, text or structure"):
+        ds["lyapunov"].values  # noqa: B018
+
+
 def test_a_damaged_run_file_and_index_are_refused(tmp_path):
     assert CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(tmp_path), *SHORT]).exit_code == 0
     path = tmp_path / "case1_permanent.h5"

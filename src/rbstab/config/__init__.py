@@ -80,7 +80,9 @@ def __getattr__(name: str):
 
     for module, names in _LAZY.items():
         if name in names:
-            return getattr(importlib.import_module(f"{__name__}.{module}"), name)
+            value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+            globals()[name] = value  # once: `from .config import x` in a loop stays cheap
+            return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

@@ -42,7 +42,7 @@ import math
 import os
 import sys
 import uuid
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -74,6 +74,8 @@ __all__ = [
     "is_chunk_file",
     "read_chunk_rows",
     "read_chunk_series",
+    "StoreTrace",
+    "store_trace_shapes",
     "summary_columns",
     "SUMMARY_FIGURES",
     "canonical_config",
@@ -541,3 +543,123 @@ def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.
             else:
                 out[name] = None
     return out
+
+
+#: Store files whose text, attributes and structure this process verified, by (path,
+#: modification time, size): :class:`StoreTrace` checks each file once, on its first read.
+_VERIFIED: set[tuple[str, int, int]] = set()
+
+
+def _verified_once(f, path: str) -> None:
+    from .integrity import verify_open_file
+
+    stat = os.stat(path)
+    key = (path, stat.st_mtime_ns, stat.st_size)
+    if key not in _VERIFIED:
+        verify_open_file(f, path, data=False)  # the numbers: Fletcher-32, as they are read
+        _VERIFIED.add(key)
+
+
+class StoreTrace:
+    """One trace variable over the rows of many store files, read on demand.
+
+    What :func:`dask.array.from_array` needs (``shape``, ``dtype``, ``ndim``,
+    ``__getitem__``); it holds only file names and row numbers, so it pickles to other
+    processes. Run ``i`` along the first axis is row ``rows[j]`` of segment ``(path,
+    rows)`` number s, where ``i = sum of the earlier segments' lengths + j``. A file's
+    checksums of text, attributes and structure are verified on its first read in a
+    process, its numbers (Fletcher-32) on every read; a file without the variable (the
+    ``controller_state`` of a variant without one) gives NaN.
+
+    Parameters
+    ----------
+    name : str
+        The variable.
+    segments : sequence of (str, ndarray of int)
+        Store file path and the file rows (``file_row``) it contributes, in order.
+    tail : tuple of int
+        The shape of one run's trace: ``(n_time,)`` or ``(n_time, 3)``.
+
+    Raises (on a read)
+    ------------------
+    rbstab.io.integrity.DamagedResultError
+        When a file's checksums do not match.
+    """
+
+    dtype = np.dtype(float)
+
+    def __init__(self, name: str, segments: Sequence[tuple[str, np.ndarray]], tail: tuple[int, ...]) -> None:
+        self.name = name
+        self.segments = [(str(path), np.asarray(rows, dtype=np.int64)) for path, rows in segments]
+        self.bounds = np.cumsum([0] + [len(rows) for _, rows in self.segments])
+        self.shape = (int(self.bounds[-1]), *tail)
+        self.ndim = len(self.shape)
+
+    @property
+    def chunks(self) -> tuple[tuple[int, ...], ...]:
+        """One dask chunk per segment along the runs, whole traces."""
+        return (tuple(len(rows) for _, rows in self.segments), *((n,) for n in self.shape[1:]))
+
+    def __getitem__(self, key):
+        key = key if isinstance(key, tuple) else (key,)
+        positions = np.arange(self.shape[0])[key[0]]
+        scalar = np.ndim(positions) == 0
+        positions = np.atleast_1d(positions)
+        out = np.full((len(positions), *self.shape[1:]), np.nan)
+        segment = np.searchsorted(self.bounds, positions, side="right") - 1
+        for s in np.unique(segment):
+            at = np.flatnonzero(segment == s)
+            path, rows = self.segments[s]
+            out[at] = self._read(path, rows[positions[at] - self.bounds[s]])
+        out = out[(slice(None), *key[1:])]
+        return out[0] if scalar else out
+
+    def _read(self, path: str, rows: np.ndarray) -> np.ndarray:
+        import h5py
+
+        from .integrity import DamagedResultError, reading
+
+        order = np.argsort(rows, kind="stable")
+        wanted, inverse = np.unique(rows[order], return_inverse=True)
+        with reading(path), h5py.File(path, "r") as f:
+            _verified_once(f, path)
+            if self.name not in f:
+                return np.full((len(rows), *self.shape[1:]), np.nan)
+            dataset = f[self.name]
+            try:
+                if wanted[-1] - wanted[0] + 1 == len(wanted):  # a contiguous block
+                    block = dataset[int(wanted[0]) : int(wanted[-1]) + 1]
+                else:
+                    block = dataset[wanted]
+            except OSError as exc:  # a Fletcher-32 checksum that does not match
+                raise DamagedResultError(
+                    f"{path}: damaged: the data of '{self.name}' fail their checksum ({exc}); rerun the "
+                    "sweep to redo its runs"
+                ) from None
+        out = np.empty((len(rows), *self.shape[1:]))
+        out[order] = block[inverse]
+        return out
+
+
+def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tuple[int, ...]], np.ndarray | None]:
+    """(trace variable -> shape of one run's trace, ``time`` or None) of store files, the
+    variables of any of them, from their structure only (nothing verified:
+    :class:`StoreTrace` checks a file when it reads it). A variable's shape is probed in the
+    first file that has it; the others are only listed."""
+    from .integrity import open_result
+
+    shapes: dict[str, tuple[int, ...]] = {}
+    probed = {"run", "time", "axis"}
+    time = None
+    for path in paths:
+        with open_result(path) as f:
+            if time is None and "time" in f:
+                time = np.asarray(f["time"][...], dtype=float)
+            for name in f:
+                if name in probed:
+                    continue
+                probed.add(name)
+                shape = f[name].shape
+                if len(shape) >= 2 and time is not None and shape[1] == len(time):
+                    shapes[name] = tuple(shape[1:])
+    return shapes, time

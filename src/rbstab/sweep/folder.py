@@ -712,91 +712,42 @@ def _parameter_set(index) -> list[str]:
     return columns[start:stop]
 
 
-class _Trace:
-    """One trace variable of a store file, read on demand (what dask needs: shape, dtype,
-    ``__getitem__``); the file is opened per read, so the object pickles."""
-
-    def __init__(self, path: Path, name: str, shape: tuple, dtype) -> None:
-        self.path, self.name, self.shape, self.dtype, self.ndim = path, name, shape, dtype, len(shape)
-
-    def __getitem__(self, key):
-        import h5py
-
-        from ..io.integrity import DamagedResultError
-
-        with h5py.File(self.path, "r") as f:
-            try:
-                return f[self.name][key]
-            except OSError as exc:  # a Fletcher-32 checksum that does not match
-                raise DamagedResultError(
-                    f"{self.path}: damaged: the data of '{self.name}' fail their checksum ({exc}); rerun the "
-                    "sweep to redo its runs"
-                ) from None
-
-
-def _store_traces(path: Path) -> tuple[dict, dict, Any]:
-    """(name -> _Trace, name -> attributes, time) of a store file's ``(run, time[, axis])`` variables."""
-    import h5py
-
-    from ..io.integrity import verify_open_file
-
-    traces, attrs, time = {}, {}, None
-    with h5py.File(path, "r") as f:
-        verify_open_file(f, path, data=False)  # the numbers are checked as they are read
-        if "time" in f:
-            time = f["time"][...]
-        for name, var in f.items():
-            if var.ndim >= 2 and name not in ("run", "time", "axis"):
-                traces[name] = _Trace(path, name, var.shape, var.dtype)
-                attrs[name] = {k: (v.decode() if isinstance(v, bytes) else str(v)) for k, v in var.attrs.items()
-                               if k in ("units", "long_name", "description")}
-    return traces, attrs, time
-
-
 def _from_store(folder: Path, index):
-    """The traces of the current rows of the store files, lazily (dask arrays, one chunk
-    per file), over ``run``; None for a store without traces or layout "run".
+    """The traces of the current rows of the store files, lazily (dask arrays, a chunk per
+    stretch of runs from one file), over ``run``; None for a store without traces or layout
+    "run".
 
-    The per-run values come from the index (the same names); the store files are read
-    with h5py for their traces' shapes only (opening each with xarray costs ~0.2 s).
+    The per-run values come from the index (the same names), the units and long names from
+    :mod:`rbstab.io.metadata`; the store files are only listed here (names and shapes) and
+    verified when their traces are read (:class:`rbstab.io.chunk.StoreTrace`).
     """
     import dask.array as da
     import numpy as np
     import xarray as xr
 
+    from ..io.chunk import StoreTrace, store_trace_shapes
+    from ..io.metadata import LONG_NAMES, variable_attributes
+
     if "file_row" not in index.columns:
         return None
     rows = index.dropna(subset=["file_row"])
-    rows = rows[rows["file"].astype(str).str.contains("chunk-", regex=False)]
+    rows = rows[rows["file"].astype(str).str.contains("chunk-", regex=False)].sort_values("run", kind="stable")
     if rows.empty:
         return None
-    files: list[tuple[dict, np.ndarray]] = []
-    attrs: dict[str, dict] = {}
-    shapes: dict[str, tuple] = {}
-    runs, time = [], None
-    for file, group in rows.groupby("file", sort=True):
-        traces, file_attrs, file_time = _store_traces(folder / str(file))
-        if not traces:
-            return None
-        time = file_time if time is None else time
-        order = np.argsort(group["file_row"].to_numpy())
-        files.append((traces, group["file_row"].astype(int).to_numpy()[order]))
-        runs.append(group["run"].to_numpy()[order])
-        attrs.update(file_attrs)
-        shapes.update({name: trace.shape[1:] for name, trace in traces.items()})
-    run = np.concatenate(runs)
-    order = np.argsort(run, kind="stable")
+    files = rows["file"].astype(str).to_numpy()
+    file_rows = rows["file_row"].astype(np.int64).to_numpy()
+    cuts = np.flatnonzero(files[1:] != files[:-1]) + 1
+    segments = [(str(folder / files[lo]), file_rows[lo:hi]) for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(files)])]
+    shapes, time = store_trace_shapes(folder / name for name in sorted(set(files)))
+    if not shapes:
+        return None
     data = {}
-    for name, shape in shapes.items():
-        parts = []
-        for traces, take in files:  # a variable a file lacks (controller_state of embedded only) is NaN
-            trace = traces.get(name)
-            parts.append(da.full((len(take), *shape), np.nan) if trace is None else
-                         da.from_array(trace, chunks=trace.shape, name=False, asarray=True)[take])
-        array = da.concatenate(parts, axis=0)[order]
-        dims = ("run", "time", "axis")[: array.ndim]
-        data[name] = xr.Variable(dims, array, attrs.get(name, {}))
-    coords = {"run": run[order], "axis": ["x", "y", "z"]}
+    for name, tail in shapes.items():
+        trace = StoreTrace(name, segments, tail)
+        array = da.from_array(trace, chunks=trace.chunks, name=False, asarray=True, meta=np.empty((0,) * trace.ndim))
+        attrs = variable_attributes(name) if name in LONG_NAMES else {}
+        data[name] = xr.Variable(("run", "time", "axis")[: trace.ndim], array, attrs)
+    coords = {"run": rows["run"].to_numpy(), "axis": ["x", "y", "z"]}
     if time is not None:
         coords["time"] = xr.Variable(("time",), time, {"units": "s", "long_name": "time"})
     return xr.Dataset(data, coords=coords)
