@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -119,43 +119,58 @@ def _text_item(x: Any) -> bytes:
     return _canonical(x) + b"\x1f"
 
 
-def _structure(dataset) -> str:
-    """What HDF5 needs to decode a dataset's numbers: its type (HDF5's encoding), shape,
-    chunks, filters, and how many chunks are stored and their bytes (a chunk HDF5 believes
-    unwritten would read as its fill value, with no checksum to fail)."""
-    dcpl = dataset.id.get_create_plist()
-    filters = [dcpl.get_filter(i)[0] for i in range(dcpl.get_nfilters())] if dataset.chunks else []
-    return (f"{dataset.id.get_type().encode().hex()} shape={dataset.shape} chunks={dataset.chunks} "
-            f"filters={filters} stored={_chunk_places(dataset)} bytes={dataset.id.get_storage_size()}")
+def _structure(dsid) -> str:
+    """What HDF5 needs to decode a dataset's numbers (``dsid``: its h5py low-level id): its
+    type (HDF5's encoding), shape, chunks, filters, and how many chunks are stored and
+    their bytes (a chunk HDF5 believes unwritten would read as its fill value, with no
+    checksum to fail)."""
+    import h5py
+
+    dcpl = dsid.get_create_plist()
+    chunks = dcpl.get_chunk() if dcpl.get_layout() == h5py.h5d.CHUNKED else None
+    filters = [dcpl.get_filter(i)[0] for i in range(dcpl.get_nfilters())] if chunks else []
+    return (f"{dsid.get_type().encode().hex()} shape={dsid.shape} chunks={chunks} "
+            f"filters={filters} stored={_chunk_places(dsid, chunks)} bytes={dsid.get_storage_size()}")
 
 
-def _chunk_places(dataset) -> list:
+def _chunk_places(dsid, chunks) -> list:
     """(offset in the dataset, address in the file, size, filter mask) of each stored chunk:
     a chunk address changed to a place past the end of the file reads as zeros, whose
     Fletcher-32 checksum is zero too."""
-    if not dataset.chunks:
+    if not chunks:
         return []
     places: list = []
     record = lambda info: places.append((info.chunk_offset, info.byte_offset, info.size, info.filter_mask))  # noqa: E731
     try:
-        dataset.id.chunk_iter(record)  # HDF5 >= 1.14: one pass over the chunk index
+        dsid.chunk_iter(record)  # HDF5 >= 1.14: one pass over the chunk index
     except AttributeError:  # pragma: no cover - older HDF5: one lookup per chunk
         places = []
-        for i in range(dataset.id.get_num_chunks()):
-            record(dataset.id.get_chunk_info(i))
+        for i in range(dsid.get_num_chunks()):
+            record(dsid.get_chunk_info(i))
     return places
 
 
-def _attribute(obj, key: str) -> Any:
-    """An attribute's value through h5py's low-level API (twice as fast as ``obj.attrs[key]``,
-    which matters for files of ~100 attributes); strings come back as bytes."""
+def _attribute_names(oid) -> list[str]:
+    """The attribute names of an object (its h5py low-level id), sorted."""
     import h5py
 
-    aid = h5py.h5a.open(obj.id, key.encode())
+    names: list[str] = []
+    h5py.h5a.iterate(oid, lambda name: names.append(name.decode("utf-8", "surrogateescape")))
+    return sorted(names)
+
+
+def _attribute(oid, key: str) -> Any:
+    """An attribute's value through h5py's low-level API (``oid``: the object's id; twice as
+    fast as ``obj.attrs[key]``, which matters for files of ~100 attributes); strings come
+    back as bytes."""
+    import h5py
+
+    aid = h5py.h5a.open(oid, key.encode("utf-8", "surrogateescape"))
     try:
         shape = aid.shape
         if shape is None:  # an empty (null) dataspace
-            return obj.attrs[key]
+            owner = h5py.Group(oid) if isinstance(oid, h5py.h5g.GroupID) else h5py.Dataset(oid)
+            return owner.attrs[key]
         value = np.empty(shape, dtype=aid.dtype)
         aid.read(value)
         return value
@@ -163,13 +178,30 @@ def _attribute(obj, key: str) -> Any:
         aid.close()
 
 
-def content_digest(f) -> str:
+def _text(dsid) -> np.ndarray:
+    """The values of a text dataset (its low-level id), as ``dataset[...]`` gives them."""
+    import h5py
+
+    if dsid.shape is None or 0 in dsid.shape:
+        return h5py.Dataset(dsid)[...]
+    value = np.empty(dsid.shape, dtype=dsid.dtype)
+    dsid.read(h5py.h5s.ALL, h5py.h5s.ALL, value)
+    return value
+
+
+def content_digest(f, texts: Mapping[str, Any] | None = None) -> str:
     """SHA-256 (hex) of what the Fletcher-32 chunks do not cover (module docstring).
 
     Parameters
     ----------
     f : h5py.File
         An open file (rbstab's files are flat: datasets at the root).
+    texts : mapping, optional
+        Text dataset name -> the array of str just written to it: a writer's digest takes
+        the text from there instead of reading it back (the same bytes: HDF5 stores str
+        as UTF-8); readers leave it out.
+
+    Through h5py's low-level API (its high-level objects cost about as much as the reads).
     """
     import h5py
 
@@ -178,21 +210,22 @@ def content_digest(f) -> str:
     def feed(tag: str, value: Any) -> None:
         h.update(tag.encode() + b"\x1e" + _canonical(value) + b"\x1d")
 
-    def attributes(obj, where: str) -> None:
-        for key in sorted(obj.attrs):
+    def attributes(oid, where: str) -> None:
+        for key in _attribute_names(oid):
             if key not in _BOOKKEEPING and not key.startswith("_"):
-                feed(f"{where}@{key}", _attribute(obj, key))
+                feed(f"{where}@{key}", _attribute(oid, key))
 
-    attributes(f, "/")
+    root = f["/"].id
+    attributes(root, "/")
     for name in sorted(f):
-        obj = f[name]
-        if not isinstance(obj, h5py.Dataset):  # a group or a named type: rbstab writes none
-            feed(f"/{name}", type(obj).__name__)
+        oid = h5py.h5o.open(root, name.encode("utf-8", "surrogateescape"))
+        if not isinstance(oid, h5py.h5d.DatasetID):  # a group or a named type: rbstab writes none
+            feed(f"/{name}", "Group" if isinstance(oid, h5py.h5g.GroupID) else "Datatype")
             continue
-        feed(f"/{name}", _structure(obj))
-        attributes(obj, f"/{name}")
-        if obj.dtype.kind in "OSU":
-            feed(f"/{name}=", obj[...])
+        feed(f"/{name}", _structure(oid))
+        attributes(oid, f"/{name}")
+        if oid.dtype.kind in "OSU":
+            feed(f"/{name}=", texts[name] if texts is not None and name in texts else _text(oid))
     return h.hexdigest()
 
 
