@@ -650,17 +650,17 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
         coordinates ``run_id``, ``base``, ``variant`` and the varied parameters
         (:func:`parameter_name`); the per-run values and summary figures of the store
         (``units``, ``long_name``), ``converged`` and, for a store with traces,
-        ``(run, time[, axis])`` variables. Store files are opened lazily (dask arrays, a
-        chunk per file); a sweep with layout "run" gives the summaries of ``index.csv``.
+        ``(run, time[, axis])`` variables. Store files are read lazily (dask arrays, a
+        chunk per stretch of runs from one file, :class:`rbstab.io.chunk.StoreTrace`); a sweep with layout "run" gives the summaries of ``index.csv``.
 
     Raises
     ------
     FileNotFoundError
         If ``path`` is not a sweep folder.
     rbstab.io.integrity.DamagedResultError
-        If the index or a store file's text and attributes do not match their checksums;
-        the traces' checksums are checked when they are read (computing a damaged chunk
-        raises it).
+        If the index does not match its checksum; a store file's checksums (its text,
+        attributes and structure, then each chunk of the traces) are checked when its
+        traces are first read: computing traces of a damaged file raises it.
     """
     folder = Path(path)
     if not is_sweep_folder(folder):
