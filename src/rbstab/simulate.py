@@ -352,9 +352,9 @@ def _chunk_results(configs, variants, codes, params, sol, share: float,
     for lo in range(0, k, POSTPROCESS_BLOCK):
         t0 = _time.perf_counter()
         hi = min(lo + POSTPROCESS_BLOCK, k)
-        rows = np.empty((hi - lo, n_samples, N_OUTPUTS))
+        columns = np.empty((N_OUTPUTS, hi - lo, n_samples))
         with np.errstate(all="ignore"):
-            run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], rows)
+            run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], columns)
         block, summaries = {}, {}
         # the runs of a chunk share the state size, so the same named outputs; runs with
         # the same sample times get their numerical dv/dt and summaries at once (the same
@@ -363,8 +363,8 @@ def _chunk_results(configs, variants, codes, params, sol, share: float,
         for j in range(lo, hi):
             by_t_end.setdefault(configs[j].simulation.t_end, []).append(j)
         for t_end, members in by_t_end.items():
-            part = rows if len(members) == hi - lo else rows[[j - lo for j in members]]
-            outputs = split_outputs(part.reshape(-1, N_OUTPUTS), (len(members), n_samples), variants[lo].layout)
+            part = columns if len(members) == hi - lo else columns[:, [j - lo for j in members]]
+            outputs = split_outputs(part, variants[lo].layout)
             time = np.linspace(0.0, t_end, n_samples)
             outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
             for i, (j, summary) in enumerate(zip(members, summarize_many(time, outputs))):

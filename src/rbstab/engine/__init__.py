@@ -156,7 +156,7 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
         if "rates" in wanted:
             state_rates(code, y, params, np.empty_like(y))
         if "outputs" in wanted:
-            run_outputs(np.array([code]), params, y[None], np.empty((1, 1, N_OUTPUTS)))
+            run_outputs(np.array([code]), params, y[None], np.empty((N_OUTPUTS, 1, 1)))
     if "rates" in wanted:
         settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
         for method in METHODS:

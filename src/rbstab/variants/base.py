@@ -156,13 +156,15 @@ class Variant:
         state_rates(self.code, flat, self._parameters_without_offset, out)
         return out.reshape(y.shape)
 
-    def _output_rows(self, y: np.ndarray, params: np.ndarray) -> np.ndarray:
+    def _output_columns(self, y: np.ndarray, params: np.ndarray) -> np.ndarray:
+        """Every output along states ``y`` (..., n_state): shape (N_OUTPUTS, ...)."""
         from .kernels import run_outputs
 
-        flat = np.ascontiguousarray(np.asarray(y, dtype=float).reshape(1, -1, self.layout.size))
-        out = np.empty(flat.shape[:2] + (N_OUTPUTS,))
+        y = np.asarray(y, dtype=float)
+        flat = np.ascontiguousarray(y.reshape(1, -1, self.layout.size))
+        out = np.empty((N_OUTPUTS, 1, flat.shape[1]))
         run_outputs(np.array([self.code]), params, flat, out)
-        return out[0]
+        return out.reshape((N_OUTPUTS,) + y.shape[:-1])
 
     def evaluate(self, y: np.ndarray) -> dict[str, np.ndarray]:
         """All outputs along states ``y`` of shape (n, n_state), or (..., n_state).
@@ -176,13 +178,11 @@ class Variant:
             ``lyapunov``, ``lyapunov_rate`` and the terms of v (shape (...)); a state's
             outputs do not depend on the other states of ``y``.
         """
-        y = np.asarray(y, dtype=float)
-        return split_outputs(self._output_rows(y, self.parameters), y.shape[:-1], self.layout)
+        return split_outputs(self._output_columns(y, self.parameters), self.layout)
 
     def lyapunov(self, y: np.ndarray) -> np.ndarray:
         """v [J] along states ``y`` of shape (..., n_state); shape (...)."""
-        y = np.asarray(y, dtype=float)
-        return self._output_rows(y, self.parameters)[:, _LYAPUNOV_COLUMN].reshape(y.shape[:-1])
+        return self._output_columns(y, self.parameters)[_LYAPUNOV_COLUMN]
 
     # -- equilibrium -----------------------------------------------------------
     @property
@@ -191,7 +191,7 @@ class Variant:
 
     def _potential(self, p: np.ndarray) -> float:
         """Stored energy without the constant h, at rest, for configuration vector p."""
-        return float(self._output_rows(self._rest_state(p), self._parameters_without_offset)[0, _LYAPUNOV_COLUMN])
+        return float(self._output_columns(self._rest_state(p), self._parameters_without_offset)[_LYAPUNOV_COLUMN])
 
     def _rest_state(self, p: np.ndarray) -> np.ndarray:
         """State at rest (zero velocities) with configuration blocks from vector ``p``."""
@@ -244,18 +244,18 @@ class Variant:
 _LYAPUNOV_COLUMN = 3 * len(OUTPUT_VECTORS) + OUTPUT_SCALARS.index("lyapunov")
 
 
-def split_outputs(rows: np.ndarray, shape: tuple[int, ...], layout: StateLayout) -> dict[str, np.ndarray]:
-    """Named outputs from rows of the ``outputs`` kernel, shape (m, N_OUTPUTS).
+def split_outputs(columns: np.ndarray, layout: StateLayout) -> dict[str, np.ndarray]:
+    """Named outputs from the ``outputs`` kernel's columns, shape (N_OUTPUTS, ...).
 
-    ``shape``: the leading shape to restore (m == prod(shape)); ``controller_state`` is kept
-    only where ``layout`` integrates it. Vectors are views (..., 3) of ``rows``.
+    ``controller_state`` is kept only where ``layout`` integrates it. Vectors are views
+    (..., 3) and scalars views (...) of ``columns`` (not contiguous along the 3 axes).
     """
     out = {}
     for i, name in enumerate(OUTPUT_VECTORS):
         if name == "controller_state" and name not in layout.blocks:
             continue
-        out[name] = rows[:, 3 * i : 3 * i + 3].reshape(shape + (3,))
+        out[name] = np.moveaxis(columns[3 * i : 3 * i + 3], 0, -1)
     base = 3 * len(OUTPUT_VECTORS)
     for i, name in enumerate(OUTPUT_SCALARS):
-        out[name] = rows[:, base + i].reshape(shape)
+        out[name] = columns[base + i]
     return out

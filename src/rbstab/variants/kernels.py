@@ -157,7 +157,8 @@ def state_rates(code, y, params, out):
 @jit
 def run_outputs(codes, params, samples, out):
     """Outputs of k runs: ``samples`` (k, n_samples, n_state) of runs with variant
-    ``codes`` (k,) and ``params`` (k,) into ``out`` (k, n_samples, N_OUTPUTS)."""
+    ``codes`` (k,) and ``params`` (k,) into ``out`` (N_OUTPUTS, k, n_samples), an output
+    by row: each output of a run is contiguous in time, as the summaries read it."""
     for k in range(samples.shape[0]):
         for j in range(samples.shape[1]):
-            output_row(codes[k], samples[k, j], params[k], out[k, j])
+            output_row(codes[k], samples[k, j], params[k], out[:, k, j])
