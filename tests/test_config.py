@@ -956,3 +956,45 @@ def test_from_resolved_rebuilds_the_validated_config(path):
             assert all(np.array_equal(a[k], b[k]) for k in a)
         else:
             assert a == b, field.name
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[1] / "configs").glob("paper/*.yaml")))
+def test_resolved_is_plain_and_shares_nothing_with_the_input(path):
+    """``RunConfig.resolved`` (hashed, dumped, sent to workers) holds only dicts, lists, str,
+    numbers, bools and None, and no container of the mapping it was made from (changing
+    that mapping afterwards changes nothing); nor does ``with_initial_state``'s."""
+    import numpy as np
+    import yaml
+
+    from rbstab.config import config_from_mapping
+
+    data = yaml.safe_load(path.read_text())
+    data["initial_state"] = {"omega": np.array([1.0, 2.0, 3.0]), "theta": (0.1, 0.0, 0.0)}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = config_from_mapping(data)
+        moved = config.with_initial_state({"omega": [4.0, 5.0, 6.0]})
+
+    def containers(tree):
+        if isinstance(tree, dict):
+            yield tree
+            for v in tree.values():
+                yield from containers(v)
+        elif isinstance(tree, list):
+            yield tree
+            for v in tree:
+                yield from containers(v)
+        else:
+            assert type(tree) in (str, int, float, bool, type(None)), repr(tree)
+
+    resolved = {id(c) for tree in (config.resolved, moved.resolved) for c in containers(tree)}
+    inputs = set()
+    stack = [data]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, (dict, list)):
+            inputs.add(id(node))
+            stack.extend(node.values() if isinstance(node, dict) else node)
+    assert resolved and not inputs & resolved
+    assert config.resolved["initial_state"]["omega"] == [1.0, 2.0, 3.0]
+    assert moved.resolved["initial_state"]["omega"] == [4.0, 5.0, 6.0]

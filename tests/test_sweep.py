@@ -540,3 +540,31 @@ def test_index_rows_keep_what_the_index_takes():
     assert rows.column_sets() == [("run_id", "status", "lyapunov_final"), ("run_id", "status", "message")]
     rows.pop("r0")
     assert "r0" not in rows and len(rows) == 2
+
+
+@pytest.mark.parametrize("vary", ["initial_state", "controller"])
+def test_planned_configs_equal_a_whole_validation_of_each_run(vary):
+    """Whether runs share their base's validation (only the initial state varies) or are
+    validated one by one, each planned config is what validating that run alone gives:
+    the same resolved mapping, hash and physics."""
+    import warnings
+
+    from rbstab.config import config_from_mapping
+
+    params = {"initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}
+    if vary == "controller":
+        params["controller.k_t"] = {"scale_uniform": [0.5, 2.0]}
+    spec = spec_from_mapping({"name": "p", "base": [str(CASE3), str(CASE1)],
+                              "grid": {"initial_state.theta.0": [0.0, 0.1]},
+                              "random": {"n": 3, "seed": 2, "params": params}})
+    runs = expand(spec)
+    assert len(runs) == 12 and {r.variant for r in runs} == {"embedded", "permanent"}
+    for run in runs:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            alone = config_from_mapping(run.config.resolved)
+        assert alone.resolved == run.config.resolved
+        assert resolved_hash(alone.resolved) == run.config_hash
+        assert np.array_equal(alone.gains.k_t, run.config.gains.k_t)
+        assert all(np.array_equal(alone.initial_state[k], run.config.initial_state[k]) for k in alone.initial_state)
+        assert alone.warnings == run.config.warnings

@@ -69,7 +69,7 @@ from .yaml_io import dump_yaml, parse_yaml
 # The validator (pydantic) and RunConfig (numba's model) are imported on first use, so that
 # what only reads files (rbstab.open_sweep, rbstab show) does not load the compiler.
 _LAZY = {
-    "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "group_key", "load_config"),
+    "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "load_config"),
     "paths": ("apply_overrides", "get_dotted", "set_dotted"),
     "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
 }
@@ -94,7 +94,6 @@ __all__ = [
     "SimulationSettings",
     "load_config",
     "config_from_mapping",
-    "group_key",
     "PER_RUN_SECTIONS",
     "apply_overrides",
     "set_dotted",

@@ -31,29 +31,11 @@ from .schema import (
 )
 from .yaml_io import dump_yaml_sections, read_yaml_file
 
-__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS", "group_key"]
+__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS"]
 
-#: Top-level sections in which the runs of one group may differ (a sweep's runs that share
-#: everything else are validated once, integrated as one batch and written with cached YAML).
+#: Top-level sections in which the runs of a sweep's base may differ and still share one
+#: validation (:meth:`RunConfig.with_initial_state`; :func:`rbstab.sweep.plan.plan_runs`).
 PER_RUN_SECTIONS = ("name", "initial_state")
-
-
-def group_key(resolved: Mapping) -> str:
-    """Key of a configuration mapping without its :data:`PER_RUN_SECTIONS`.
-
-    Parameters
-    ----------
-    resolved : Mapping
-        A configuration as a plain mapping (``RunConfig.resolved``, or the data of a run
-        before validation).
-
-    Returns
-    -------
-    str
-        Equal for two mappings exactly when they differ at most in ``name`` and
-        ``initial_state`` (the ``repr`` of the rest, in key order).
-    """
-    return repr({k: v for k, v in resolved.items() if k not in PER_RUN_SECTIONS})
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,7 +118,7 @@ class RunConfig:
         resolved = dict(self.resolved)
         if name is not None:
             resolved["name"] = name
-        resolved["initial_state"] = plain_tree(state.model_dump())
+        resolved["initial_state"] = state.model_dump()  # plain: the validators give lists of numbers
         return dataclasses.replace(
             self,
             name=resolved["name"],
@@ -262,7 +244,7 @@ def _build(
             for key, block in INITIAL_STATE_BLOCKS.items()
         },
         simulation=simulation,
-        resolved=plain_tree(dump),
+        resolved=dump,  # plain dicts, lists, str and numbers (the validators make new lists; tested)
         warnings=found_warnings,
     )
 

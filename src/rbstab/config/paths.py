@@ -66,7 +66,7 @@ def _index(node: list, part: str, where: str) -> int:
 def _schema_default(parts: Sequence[str]) -> list | None:
     """A copy of the schema default of a list-valued key (``initial_state.theta``), else None."""
     _, info = field_at(parts)
-    default = info.default if info is not None else None
+    default = info.get_default(call_default_factory=True) if info is not None else None
     return list(default) if isinstance(default, (list, tuple)) else None
 
 

@@ -46,10 +46,11 @@ def inertia_warnings(inertia: np.ndarray) -> list[str]:
     inertia : ndarray, shape (3, 3)
         J [kg m^2], symmetric positive definite.
     """
-    diagonal = np.diag(inertia)  # keep the user's j1, j2, j3 labels when J is diagonal
-    is_diagonal = np.array_equal(inertia, np.diag(diagonal))
-    moments = diagonal if is_diagonal else np.linalg.eigvalsh(inertia)
-    j = [float(x) for x in moments]
+    rows = np.asarray(inertia, dtype=float).tolist()  # plain floats: this runs for every run of a sweep
+    if all(rows[i][k] == 0.0 for i in range(3) for k in range(3) if i != k):
+        j = [rows[0][0], rows[1][1], rows[2][2]]  # diagonal: keep the user's j1, j2, j3 labels
+    else:
+        j = [float(x) for x in np.linalg.eigvalsh(inertia)]
     for i in range(3):
         others = [j[k] for k in range(3) if k != i]
         if j[i] > sum(others) * (1 + 1e-12):
@@ -98,7 +99,7 @@ def semidefinite_notes(gains: Mapping[str, Any]) -> list[str]:
     for key, gain in gains.items():
         if gain is None:
             continue
-        if np.ndim(gain) == 0:
+        if not isinstance(gain, (list, tuple)) and np.ndim(gain) == 0:
             if float(gain) == 0.0:
                 singular[key] = f"{key} = 0"
             continue

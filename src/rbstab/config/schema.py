@@ -405,7 +405,10 @@ class SimulationSettings:
 # -- schema --------------------------------------------------------------------------------
 
 _VECTOR = Annotated[Any, _checked(_vector)]
-_ZERO = (0.0, 0.0, 0.0)
+def _zero() -> list[float]:
+    """The default of a 3-vector: a new list each time (defaults are not validated, and a
+    resolved configuration is plain lists)."""
+    return [0.0, 0.0, 0.0]
 
 #: Gains the equations invert, with the reason: these must be positive definite. Every
 #: other gain may be positive semi-definite (zero included: no spring or damper there).
@@ -447,7 +450,7 @@ class _Body(_Section):
         "symmetric positive definite (kg m^2)"
     )
     attachment_point: _VECTOR = Field(description="3 numbers (R, body frame, m)")
-    gravity: _VECTOR = Field(_ZERO, description="3 numbers (g, inertial frame, m/s^2)")
+    gravity: _VECTOR = Field(default_factory=_zero, description="3 numbers (g, inertial frame, m/s^2)")
 
 
 class _Controller(_Section):
@@ -482,12 +485,12 @@ class _Controller(_Section):
 
 class _InitialState(_Section):
     theta: Annotated[Any, _checked(_theta)] = Field(
-        _ZERO, description=f"3 numbers ({BLOCK_UNITS['theta']})"
+        default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['theta']})"
     )
-    omega: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['omega']}, body frame)")
-    x: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['position']})")
-    v: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['velocity']})")
-    d: _VECTOR = Field(_ZERO, description=f"3 numbers ({BLOCK_UNITS['controller_state']})")
+    omega: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['omega']}, body frame)")
+    x: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['position']})")
+    v: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['velocity']})")
+    d: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['controller_state']})")
 
 
 _DEFAULT_SIMULATION = SimulationSettings()

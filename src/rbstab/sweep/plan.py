@@ -196,6 +196,8 @@ def _scaled(base: Base, key: str, factor: Any, cache: dict) -> tuple[Any, str | 
     arr, problem = _scale_base(base, key, cache)
     if problem:
         return None, problem
+    if type(factor) is float:  # one factor (the common case): it scales any base value
+        return (arr * factor).tolist(), None
     f = np.asarray(factor, dtype=float)
     try:
         np.broadcast_shapes(arr.shape, f.shape)
@@ -229,15 +231,16 @@ def _own_path(data: dict, key: str, fresh: set) -> None:
 
 
 def _plan_run(
-    spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict
+    spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict | None
 ) -> tuple["PlannedRun | None", list[str]]:
     """Set the varied values on a copy of ``base``, validate, name the run by its id.
 
-    ``validated`` maps a configuration without ``name`` and ``initial_state`` to its
-    validated config: a run that differs from an earlier one only there is validated by
+    ``validated`` (None: every run is validated whole) maps a base's label to the validated
+    config of its first run, when the sweep varies nothing outside ``initial_state``: the
+    base's other runs differ from it only there and are validated by
     :meth:`RunConfig.with_initial_state` (same result, ~10x cheaper).
     """
-    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, group_key
+    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 
     data = dict(base.data)
     fresh: set = set()
@@ -261,14 +264,15 @@ def _plan_run(
         return None, problems
     data["name"] = "sweep-run"  # replaced by the run id below
     source = f"base '{base.label}'"
-    group = group_key(data)
     try:
         with warnings.catch_warnings():
             # kept in config.warnings; the CLI prints a digest instead of one per run
             warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-            known = validated.get(group)
+            known = None if validated is None else validated.get(base.label)
             if known is None:
-                first = validated[group] = config_from_mapping(data, source=source)
+                first = config_from_mapping(data, source=source)
+                if validated is not None:
+                    validated[base.label] = first
             else:
                 first = known.with_initial_state(data.get("initial_state"), source=source)
     except ConfigError as exc:
@@ -304,8 +308,12 @@ def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
     scaled = {d.key for d in spec.random.params if d.kind == "scale_uniform"}
     grid_points = list(itertools.product(*spec.grid.values())) if spec.grid else [()]
     n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
+    from ..config import PER_RUN_SECTIONS
+
     cache: dict = {}
-    validated: dict = {}
+    # runs of a base that differ only in their initial state share its validation
+    per_run_only = all(key.split(".")[0] in PER_RUN_SECTIONS for key in spec.varied_keys)
+    validated: dict | None = {} if per_run_only else None
     index = 0
     for sample in samples:
         for base, point, z in itertools.product(spec.bases, grid_points, range(n_zip)):

@@ -149,14 +149,13 @@ class Distribution:
         """
         if self.kind in ("uniform", "scale_uniform"):
             lo, hi = self.args
-            return _plain(rng.uniform(lo, hi, size=np.broadcast_shapes(lo.shape, hi.shape)))
+            return _plain(rng.uniform(lo, hi, size=_shape(lo, hi)))
         if self.kind == "log_uniform":
             lo, hi = self.args
-            shape = np.broadcast_shapes(lo.shape, hi.shape)
-            return _plain(np.exp(rng.uniform(np.log(lo), np.log(hi), size=shape)))
+            return _plain(np.exp(rng.uniform(np.log(lo), np.log(hi), size=_shape(lo, hi))))
         if self.kind == "normal":
             mean, std = self.args
-            return _plain(rng.normal(mean, std, size=np.broadcast_shapes(mean.shape, std.shape)))
+            return _plain(rng.normal(mean, std, size=_shape(mean, std)))
         (values,) = self.args
         return copy.deepcopy(values[int(rng.integers(len(values)))])
 
@@ -167,6 +166,11 @@ class Distribution:
         if self.kind == "choice":
             return {"choice": copy.deepcopy(list(self.args[0]))}
         return {self.kind: [_plain(self.args[0]), _plain(self.args[1])]}
+
+def _shape(a: np.ndarray, b: np.ndarray) -> tuple[int, ...]:
+    """The broadcast shape of two parameters of a distribution (drawn for every sample)."""
+    return a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape)
+
 
 # -- the spec ---------------------------------------------------------------------------------
 
