@@ -107,7 +107,6 @@ NOT_IN_INDEX = ("config", "created", "store")
 # -- names ----------------------------------------------------------------------------------------
 
 
-@functools.lru_cache(maxsize=4096)
 @functools.lru_cache(maxsize=4096)  # the same keys for every run of a sweep
 def parameter_name(key: str) -> str:
     """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``."""
