@@ -494,3 +494,20 @@ def test_cli_start_up_imports_no_plotting_or_table_library():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_settling_times_of_a_store_read_a_file_at_a_time_equal_a_run_at_a_time(sweeps):
+    """settle_store_runs (each store file's traces read once) gives each run the settling
+    time run_settling_time computes from that run's own series."""
+    from rbstab.report.load import load_sweep
+    from rbstab.report.tables import run_settling_time, settle_store_runs
+
+    thresholds = SettleThresholds(e=0.5, omega=5.0)
+    bulk = load_sweep(sweeps["grid"])
+    alone = load_sweep(sweeps["grid"])
+    assert any(run is not None and run.row is not None for run in bulk.runs)
+    settle_store_runs(bulk.runs, thresholds)
+    got = [run_settling_time(run, thresholds) for run in bulk.runs if run is not None]
+    want = [run_settling_time(run, thresholds) for run in alone.runs if run is not None]
+    np.testing.assert_array_equal(got, want)
+    assert np.isfinite(got).sum() >= 1 and np.isnan(got).sum() >= 1  # one settles, the failed one not

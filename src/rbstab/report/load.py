@@ -474,10 +474,12 @@ def load_sweep(path: str | os.PathLike) -> SweepData:
 
 def _unique_labels(runs: Iterable[RunData]) -> None:
     """Make ``label`` unique: repeated names get their parent folder, then a counter."""
+    from collections import Counter
+
     runs = list(runs)
-    names = [r.name for r in runs]
+    names = Counter(r.name for r in runs)  # (not list.count: quadratic in a sweep's runs)
     for run in runs:
-        if names.count(run.name) > 1:
+        if names[run.name] > 1:
             run.label = f"{run.path.parent.name}/{run.name}" if run.sweep is None else f"{run.sweep}/{run.name}"
     seen: dict[str, int] = {}
     for run in runs:
