@@ -318,3 +318,15 @@ def test_open_sweep_loads_no_compiler_nor_validator(tmp_path):
             "print(sorted(m for m in ('numba', 'pydantic', 'scipy.integrate') if m in sys.modules))")
     done = subprocess.run([sys.executable, "-c", code, str(out.directory)], capture_output=True, text=True, check=True)
     assert done.stdout.strip() == "[]"
+
+
+def test_read_chunk_series_of_every_row_stacks_each_row(tmp_path):
+    """row=None reads every run of a store file at once, the rows as one at a time."""
+    out = run_sweep(spec(3), tmp_path, jobs=1, layout="chunk", store="thinned", progress=False)
+    (path,) = chunk_files(out.directory)
+    every = read_chunk_series(path, None, ["omega", "lyapunov"])
+    for row in range(3):
+        one = read_chunk_series(path, row, ["omega", "lyapunov"])
+        np.testing.assert_array_equal(every["omega"][row], one["omega"])
+        np.testing.assert_array_equal(every["lyapunov"][row], one["lyapunov"])
+    assert every["omega"].shape[0] == 3 and every["units:omega"] == one["units:omega"]

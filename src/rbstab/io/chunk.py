@@ -32,7 +32,7 @@ Every numeric variable carries a Fletcher-32 checksum and the file the SHA-256 o
 attributes and text (``rbstab_digest``); :func:`read_chunk_rows` verifies the digest and
 the per-run values, :func:`rbstab.io.integrity.verify_file` everything.
 :func:`read_chunk_rows` gives each run's per-run values (what resume and the index use),
-:func:`read_chunk_series` one run's traces.
+:func:`read_chunk_series` one run's traces (or all runs').
 """
 
 from __future__ import annotations
@@ -559,14 +559,15 @@ def _column(dataset) -> list:
     return out
 
 
-def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.ndarray | None]:
-    """The traces of one run of a store file.
+def read_chunk_series(path: str | os.PathLike, row: int | None, names) -> dict[str, np.ndarray | None]:
+    """The traces of one run of a store file, or of all its runs.
 
     Parameters
     ----------
     path : path-like
-    row : int
-        The run's row (``file_row`` in the sweep's ``index.csv``).
+    row : int or None
+        The run's row (``file_row`` in the sweep's ``index.csv``); None: every row, read
+        at once (what a reader of many runs of the file wants).
     names : iterable of str
         Output variables (:data:`rbstab.io.hdf5.VARIABLE_UNITS` keys).
 
@@ -574,7 +575,8 @@ def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.
     -------
     dict
         ``time`` [s], shape (n,) (None for a summary store); each name: shape (n,) or
-        (n, 3), or None when the file does not hold it; ``units:<name>`` for each held.
+        (n, 3) (row None: (runs, n) or (runs, n, 3)), or None when the file does not hold
+        it; ``units:<name>`` for each held.
     """
     import h5py
 
@@ -582,8 +584,8 @@ def read_chunk_series(path: str | os.PathLike, row: int, names) -> dict[str, np.
     with h5py.File(path, "r") as f:
         out["time"] = np.asarray(f["time"][...], dtype=float) if "time" in f else None
         for name in names:
-            if name in f and name != "time" and f[name].ndim >= 2 and f[name].shape[0] > row:
-                out[name] = np.asarray(f[name][row], dtype=float)
+            if name in f and name != "time" and f[name].ndim >= 2 and (row is None or f[name].shape[0] > row):
+                out[name] = np.asarray(f[name][...] if row is None else f[name][row], dtype=float)
                 units = f[name].attrs.get("units", "")
                 out[f"units:{name}"] = units.decode() if isinstance(units, bytes) else str(units)
             else:
@@ -691,7 +693,14 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
     """(trace variable -> shape of one run's trace, ``time`` or None) of store files, the
     variables of any of them, from their structure only (nothing verified:
     :class:`StoreTrace` checks a file when it reads it). A variable's shape is probed in the
-    first file that has it; the others are only listed."""
+    first file that has it; the others are only listed.
+
+    Raises
+    ------
+    FileNotFoundError, rbstab.io.hdf5.NotAResultFile, rbstab.io.integrity.DamagedResultError
+        For a missing file, one that is not HDF5, or one whose structure cannot be read
+        (:func:`rbstab.io.integrity.open_result`).
+    """
     from .integrity import open_result
 
     shapes: dict[str, tuple[int, ...]] = {}

@@ -211,9 +211,11 @@ def settle_store_runs(runs: Sequence[RunData | None], thresholds: SettleThreshol
     """Compute :func:`run_settling_time` of the successful runs held in sweep store files
     (``run.row`` set) a file at a time: each file's ``time``, ``constraint_error`` and
     ``omega`` are read once for all its runs (a run at a time, reopening the file, costs
-    ~3 ms a run); the figures land in each run's cache, the traces are not kept. Runs of
-    a store without traces are left to :func:`run_settling_time` (NaN)."""
-    import h5py
+    ~3 ms a run, :func:`rbstab.io.chunk.read_chunk_series` of every row); the figures
+    [s] land in each run's cache, the traces are not kept. Runs of a store without traces
+    are left to :func:`run_settling_time` (NaN). The files were verified when the report
+    loaded them (:func:`rbstab.report.load.load_chunk_runs`); OSError if one is gone."""
+    from ..io.chunk import read_chunk_series
 
     key = _settling_key(thresholds)
     by_file: dict = {}
@@ -221,14 +223,11 @@ def settle_store_runs(runs: Sequence[RunData | None], thresholds: SettleThreshol
         if run is not None and run.ok and run.row is not None and key not in run._cache:
             by_file.setdefault(run.path, []).append(run)
     for path, members in by_file.items():
-        with h5py.File(path, "r") as f:
-            if not all(name in f for name in ("time", "constraint_error", "omega")):
-                continue
-            time = np.asarray(f["time"][...], dtype=float)
-            error = np.asarray(f["constraint_error"][...], dtype=float)
-            omega = np.asarray(f["omega"][...], dtype=float)
+        s = read_chunk_series(path, None, ("constraint_error", "omega"))
+        if any(s[name] is None for name in ("time", "constraint_error", "omega")):
+            continue
         for run in members:
-            run._cache[key] = settling_time(time, error[run.row], omega[run.row], thresholds)
+            run._cache[key] = settling_time(s["time"], s["constraint_error"][run.row], s["omega"][run.row], thresholds)
 
 
 def metric_value(run: RunData | None, name: str, thresholds: SettleThresholds | None = None) -> float:
