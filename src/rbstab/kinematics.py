@@ -55,49 +55,49 @@ ZERO = (0.0, 0.0, 0.0)
 
 
 # -- 3-vector algebra (compiled; vectors are tuples, matrices M[i][j]) ----------------
-@jit(inline="always")
+@jit(forceinline=True)
 def vector(y, i):
     """The 3-vector (y[i], y[i+1], y[i+2]) of an array ``y``."""
     return (y[i], y[i + 1], y[i + 2])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def add(a, b):
     """a + b."""
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def sub(a, b):
     """a - b."""
     return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def neg(a):
     """-a."""
     return (-a[0], -a[1], -a[2])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def scale(s, a):
     """s a for a scalar s."""
     return (s * a[0], s * a[1], s * a[2])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def dot(a, b):
     """a' b."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def cross(a, b):
     """a x b = hat(a) b."""
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def matvec(m, x):
     """M x for a 3x3 matrix M (array or tuple of rows)."""
     return (
@@ -107,7 +107,7 @@ def matvec(m, x):
     )
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def matTvec(m, x):
     """M' x for a 3x3 matrix M (array or tuple of rows)."""
     return (
@@ -117,14 +117,14 @@ def matTvec(m, x):
     )
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def quadratic_form(x, m):
     """x' M x."""
     return dot(x, matvec(m, x))
 
 
 # -- A(theta) and B(theta): the one place that defines their entries -------------------
-@jit(inline="always")
+@jit(forceinline=True)
 def rotation_and_rate_of(theta):
     """A(theta) = Rx Ry Rz (eq 2) and the Euler-rate matrix B(theta), dtheta/dt = B omega
     (eq 1 as corrected in docs/physics.md: middle row [s3, c3, 0]); tuples of rows."""

@@ -163,13 +163,13 @@ def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0) -> n
 
 
 # -- the feedback, compiled (3-vectors are tuples, see rbstab.kinematics) ---------------------
-@jit(inline="always")
+@jit(forceinline=True)
 def gyroscopic(inertia, omega):
     """f(Omega) = -Omega x (J Omega) [N m], body frame (eq 1); ``inertia`` J (3, 3)."""
     return neg(cross(omega, matvec(inertia, omega)))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def torque_n(b, theta, omega, p):
     """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23).
 
@@ -178,7 +178,7 @@ def torque_n(b, theta, omega, p):
     return sub(neg(matTvec(b, matvec(p.k_r, theta))), matvec(p.l_r, omega))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def force_h(x, v, p):
     """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24).
 

@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # -- compiled physics shared by the variants ----------------------------------------------
-@jit(inline="always")
+@jit(forceinline=True)
 def body_rates(omega, v, a, b, torque_n, force_h, constraint_force, p):
     """Eq 1 under the force Lambda at C; returns (dTheta/dt, dOmega/dt, dX/dt, dV/dt).
 
@@ -67,7 +67,7 @@ def body_rates(omega, v, a, b, torque_n, force_h, constraint_force, p):
     return matvec(b, omega), matvec(p.inertia_inv, torque), v, scale(1.0 / p.mass, force)
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_error(x, a, p):
     """E = X + A R - R [m], inertial frame (eq 4)."""
     r = p.attachment_point
@@ -75,13 +75,13 @@ def constraint_error(x, a, p):
     return (x[0] + ar[0] - r[0], x[1] + ar[1] - r[1], x[2] + ar[2] - r[2])
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_rate(omega, v, a, p):
     """F = dE/dt = V + A (Omega x R) = V - A hat(R) Omega [m/s], inertial frame (eq 4)."""
     return add(v, matvec(a, cross(omega, p.attachment_point)))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def body_energy(theta, omega, x, v, p):
     """v_t, v_r (eq 25) and the gravity term -X'G + h [J]."""
     translational = 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(x, p.k_t)
@@ -90,7 +90,7 @@ def body_energy(theta, omega, x, v, p):
     return translational, rotational, gravity
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def body_dissipation(omega, v, p):
     """Power dissipated by the feedback, V'L_t V + Omega'L_r Omega [W] (eq 29)."""
     return quadratic_form(v, p.l_t) + quadratic_form(omega, p.l_r)

@@ -9,18 +9,18 @@ from .base import Variant
 __all__ = ["Free"]
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_force(e, f, d, p):
     """Lambda = 0 [N]; no controller state (dD/dt = 0)."""
     return ZERO, ZERO
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_energy(e, d, p):
     return 0.0
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_dissipation(f, d_rate, p):
     return 0.0
 

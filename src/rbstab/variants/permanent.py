@@ -22,7 +22,7 @@ from .base import Variant
 __all__ = ["Permanent", "quantities"]
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def quantities(y, p):
     """Eqs 20, 21 (corrected) and eq 32 at the reduced state y = (Theta, Omega).
 

@@ -32,7 +32,7 @@ __all__ = ["Sliding", "MODE_CODES", "MODE_COLUMNS", "mode_code", "mode_of", "mod
 _LOG2 = math.log(2.0)
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def sign(u):
     """sgn(u): -1, 0 or 1 (NaN for NaN)."""
     if u > 0.0:
@@ -42,14 +42,14 @@ def sign(u):
     return u * 0.0
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def log_cosh(u):
     """log(cosh(u)) without overflow."""
     a = abs(u)
     return a + math.log1p(math.exp(-2.0 * a)) - _LOG2
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def switching(e, phi):
     """sgn(e) for phi = 0, tanh(e / phi) for a boundary layer phi > 0 [m]."""
     if phi > 0.0:
@@ -57,7 +57,7 @@ def switching(e, phi):
     return sign(e)
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_force(e, f, d, p):
     """Lambda = -K_s sgn(E) [N], componentwise, inertial frame (eq 39); sgn -> tanh(E/phi)
     with a boundary layer phi > 0. No controller state."""
@@ -66,7 +66,7 @@ def constraint_force(e, f, d, p):
     return lam, ZERO
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_energy(e, d, p):
     """The potential of Lambda [J]: K_s |E|_1, or K_s phi sum log cosh(E_i / phi)."""
     phi = p.boundary_layer
@@ -75,13 +75,13 @@ def constraint_energy(e, d, p):
     return p.k_s * (abs(e[0]) + abs(e[1]) + abs(e[2]))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_dissipation(f, d_rate, p):
     return 0.0
 
 
 # -- the pure sign law in modes (see the module docstring) -------------------------------------
-@jit(inline="always")
+@jit(forceinline=True)
 def inverse_mass_at_c(a, lam, p):
     """W Lambda [m/s^2]: the acceleration of C that a force Lambda [N] at C adds (eq 1),
     Lambda/m + A((J^-1 (R x A'Lambda)) x R); inertial frame."""
@@ -90,14 +90,14 @@ def inverse_mass_at_c(a, lam, p):
     return add(scale(1.0 / p.mass, lam), matvec(a, cross(omega_dot, r)))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_acceleration(omega, omega_dot, v_dot, a, p):
     """dF/dt = dV/dt + A (dOmega/dt x R) + A (Omega x (Omega x R)) [m/s^2], inertial frame."""
     r = p.attachment_point
     return add(v_dot, matvec(a, add(cross(omega_dot, r), cross(omega, cross(omega, r)))))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def _masked_column(column, on, k):
     """Column k of W where axes k and i are both ``on``, of the identity elsewhere."""
     return (column[0] if on[0] and on[k] else (1.0 if k == 0 else 0.0),
@@ -105,7 +105,7 @@ def _masked_column(column, on, k):
             column[2] if on[2] and on[k] else (1.0 if k == 2 else 0.0))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def solve_on(on, a, b, p):
     """x with (W x)_i = b_i on the axes i where ``on[i]``, and x_i = 0 elsewhere: the force
     at C [N] that changes the acceleration (or, as an impulse, the rate) of C by b along
@@ -123,20 +123,20 @@ def solve_on(on, a, b, p):
 MODE_CODES = 5
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def mode_code(mode):
     """The ``state_rate`` code of ``mode`` (sigma, 3 numbers in {-1, 0, 1})."""
     return MODE_CODES + int(mode[0] + 1) + 3 * int(mode[1] + 1) + 9 * int(mode[2] + 1)
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def mode_of(code):
     """sigma (a 3-tuple of -1.0, 0.0, 1.0) of a mode code (:func:`mode_code`)."""
     k = code - MODE_CODES
     return (float(k % 3 - 1), float(k // 3 % 3 - 1), float(k // 9 - 1))
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def mode_force(omega, v, a, b, n, h, mode, p):
     """Lambda [N] in ``mode``: -K_s sigma_i where sigma_i = +-1, the equivalent force that
     keeps dF_i/dt = 0 where sigma_i = 0 (eq 39 with sgn(E) -> sigma; not clipped: the

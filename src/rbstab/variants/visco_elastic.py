@@ -9,19 +9,19 @@ from .base import Variant
 __all__ = ["ViscoElastic"]
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_force(e, f, d, p):
     """Lambda = -K_c E - L_c F [N], inertial frame (eq 40); no controller state."""
     return sub(neg(matvec(p.k_c, e)), matvec(p.l_c, f)), ZERO
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_energy(e, d, p):
     """E'K_c E / 2 [J] (eqs 41, 42)."""
     return 0.5 * quadratic_form(e, p.k_c)
 
 
-@jit(inline="always")
+@jit(forceinline=True)
 def constraint_dissipation(f, d_rate, p):
     """F'L_c F [W] (eq 43)."""
     return quadratic_form(f, p.l_c)
