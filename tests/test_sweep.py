@@ -540,6 +540,37 @@ def test_index_rows_keep_what_the_index_takes():
     assert rows.column_sets() == [("run_id", "status", "lyapunov_final"), ("run_id", "status", "message")]
     rows.pop("r0")
     assert "r0" not in rows and len(rows) == 2
+    for columns in (("status", "run_id", "message", "lyapunov_final"), ("message",)):
+        for run_id in rows:  # a row's cells are its values by column, None where it has none
+            assert rows.cells(run_id, columns) == tuple(rows[run_id].get(c) for c in columns)
+
+
+def test_index_file_writes_each_cell_as_the_rows_give_it(tmp_path):
+    """write_index of rows (one with a list value, written as its JSON) reads back as the rows."""
+    import csv
+
+    from rbstab.sweep.folder import write_index
+
+    rows = [{"run_id": "r0", "k": 1.25, "flag": True, "message": "a, \"quoted\" text"},
+            {"run_id": "r1", "k": [1, 2], "message": None}]
+    write_index(tmp_path / "index.csv", rows, ["run_id", "k", "flag", "message"])
+    with open(tmp_path / "index.csv", newline="") as f:
+        read = list(csv.reader(f))
+    assert read == [["run_id", "k", "flag", "message"], ["r0", "1.25", "True", 'a, "quoted" text'],
+                    ["r1", "[1, 2]", "", ""]]
+
+
+def test_run_coordinates_name_every_entry():
+    """Vectors, matrices and scale factors of a run's varied values as coordinates."""
+    from rbstab.sweep.folder import run_coords
+
+    coords = run_coords({"controller.k_c": [1.0, 2.0, 3.0], "body.inertia": [[1, 0, 0], [0, 2, 0], [0, 0, 3]],
+                         "body.mass": 41.0, "body.mass:scale": 1.1, "body.inertia.0:scale": 0.5})
+    assert coords["k_c_0"] == ("controller.k_c.0", 1.0) and coords["k_c_2"] == ("controller.k_c.2", 3.0)
+    assert coords["inertia_1_1"] == ("body.inertia.1.1", 2) and coords["inertia_2_0"] == ("body.inertia.2.0", 0)
+    assert coords["mass"] == ("body.mass", 41.0) and coords["mass_scale"] == ("body.mass:scale", 1.1)
+    assert coords["inertia_0_scale"] == ("body.inertia.0:scale", 0.5)
+    assert len(coords) == 3 + 9 + 3
 
 
 @pytest.mark.parametrize("vary", ["initial_state", "controller"])

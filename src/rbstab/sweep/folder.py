@@ -44,9 +44,10 @@ import datetime as _dt
 import hashlib
 import json
 import math
+import operator
 import os
 import re
-from collections.abc import Iterable, Iterator, Mapping, MutableMapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -121,8 +122,18 @@ def parameter_name(key: str) -> str:
     return f"{name}_scale" if scale else name
 
 
+@functools.lru_cache(maxsize=4096)
+def _entries(key: str, n: int, suffix: str) -> tuple[tuple[str, str], ...]:
+    """(coordinate name, dotted key) of each entry of a list of ``n`` numbers at ``key``."""
+    return tuple((parameter_name(f"{key}.{i}{suffix}"), f"{key}.{i}{suffix}") for i in range(n))
+
+
 def _flat_values(key: str, value: Any, suffix: str, out: dict[str, tuple[str, Any]]) -> None:
     if isinstance(value, (list, tuple)):
+        if not any(isinstance(v, (list, tuple)) for v in value):  # a vector: names cached
+            for (name, entry), v in zip(_entries(key, len(value), suffix), value):
+                out[name] = (entry, v)
+            return
         for i, v in enumerate(value):
             _flat_values(f"{key}.{i}", v, suffix, out)
     else:
@@ -208,15 +219,28 @@ class IndexRows(MutableMapping):
     def __init__(self) -> None:
         self._columns: dict[tuple, tuple] = {}
         self._rows: dict[str, tuple[tuple, tuple]] = {}
+        self._picks: dict[tuple, tuple[tuple, Callable[[tuple], tuple]]] = {}
 
     def __setitem__(self, run_id: str, row: Mapping[str, Any]) -> None:
         row = index_part(row)
         names = tuple(row)
-        self._rows[run_id] = (self._columns.setdefault(names, names), tuple(row.values()))
+        # the values end with a None: the value of a column the row does not have
+        self._rows[run_id] = (self._columns.setdefault(names, names), (*row.values(), None))
 
     def __getitem__(self, run_id: str) -> dict[str, Any]:
         names, values = self._rows[run_id]
         return dict(zip(names, values))
+
+    def cells(self, run_id: str, columns: tuple[str, ...]) -> tuple:
+        """The row's values in the order of ``columns`` (None where it has none): what
+        ``[row.get(c) for c in columns]`` gives, without making the row."""
+        names, values = self._rows[run_id]
+        known = self._picks.get(names)  # (columns, their getter) of the last call
+        if known is None or (known[0] is not columns and known[0] != columns):
+            where = {name: i for i, name in enumerate(names)}
+            get = operator.itemgetter(*(where.get(c, len(names)) for c in columns))
+            known = self._picks[names] = (columns, get if len(columns) > 1 else lambda v: (get(v),))
+        return known[1](values)
 
     def __delitem__(self, run_id: str) -> None:
         del self._rows[run_id]
@@ -315,6 +339,9 @@ def index_columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     return [*_HEAD, *params, *_MIDDLE, *ranked, *_TAIL]
 
 
+_PLAIN_CELLS = frozenset({str, float, int, bool, type(None)})
+
+
 def _cell(value: Any) -> Any:
     return json.dumps(value) if isinstance(value, (list, dict)) else value
 
@@ -325,11 +352,21 @@ def write_index(path: Path, rows: Iterable[Mapping[str, Any]], columns: Sequence
     if columns is None:
         rows = list(rows)
         columns = index_columns(rows)
+    return _write_cells(path, columns, ([row.get(c) for c in columns] for row in rows))
+
+
+def _write_cells(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
+    """``index.csv`` of rows given as their values in the order of ``columns``; a list or a
+    dict is written as its JSON."""
     with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as f:
         writer = csv.writer(f, lineterminator="\n")
         writer.writerow(columns)
-        for row in rows:
-            writer.writerow([_cell(row.get(c)) for c in columns])
+        plain = _PLAIN_CELLS
+        for cells in rows:
+            if all(type(v) in plain for v in cells):
+                writer.writerow(cells)
+            else:
+                writer.writerow([_cell(v) for v in cells])
     return Path(path)
 
 
@@ -381,7 +418,8 @@ def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping
         slim.append({k: row.get(k) for k in _SLIM})
         if row["status"] != "success":
             problems.append((row["run_id"], row["status"], row["message"]))
-    write_index(directory / INDEX_FILE, (index[run.run_id] for run in runs), index_columns(index.column_sets()))
+    columns = tuple(index_columns(index.column_sets()))
+    _write_cells(directory / INDEX_FILE, columns, (index.cells(run.run_id, columns) for run in runs))
     summary = summarize_rows(slim, name=name, ratio=ratio, parameters=parameters)
     write_summary(directory / SUMMARY_FILE, summary)
     return summary, problems
