@@ -65,6 +65,7 @@ __all__ = [
     "STATUSES",
     "parameter_name",
     "parameter_columns",
+    "coordinate_columns",
     "run_coords",
     "row_from_attributes",
     "index_rows",
@@ -164,9 +165,15 @@ def parameter_columns(params: Iterable[Mapping[str, Any]]) -> dict[str, str]:
         If two different keys would get one name (not possible with the config schema's
         field names, whose names are unique across sections; checked all the same).
     """
+    return coordinate_columns(run_coords(values) for values in params)
+
+
+def coordinate_columns(coords: Iterable[Mapping[str, tuple[str, Any]]]) -> dict[str, str]:
+    """:func:`parameter_columns` of runs' coordinates (:func:`run_coords` of each, e.g.
+    ``PlannedRun.coords``); ValueError as there."""
     names: dict[str, str] = {}
-    for values in params:
-        for name, (key, _) in run_coords(values).items():
+    for run in coords:
+        for name, (key, _) in run.items():
             if names.setdefault(name, key) != key:
                 raise ValueError(f"parameters {names[name]!r} and {key!r} would both be named {name!r}")
     return names
@@ -304,7 +311,7 @@ def iter_index_rows(runs: Iterable[Any], rows: Mapping[str, Mapping[str, Any]], 
     """:func:`index_rows`, one at a time."""
     for run in runs:
         row: dict[str, Any] = {"run_id": run.run_id, "run": run.index, "base": run.base}
-        row.update({name: value for name, (_, value) in run_coords(run.params).items()})
+        row.update({name: value for name, (_, value) in run.coords.items()})
         row["variant"] = run.variant
         stored = rows.get(run.run_id)
         if stored is not None:
@@ -363,7 +370,7 @@ def _write_cells(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any
         writer.writerow(columns)
         plain = _PLAIN_CELLS
         for cells in rows:
-            if all(type(v) in plain for v in cells):
+            if plain.issuperset(map(type, cells)):
                 writer.writerow(cells)
             else:
                 writer.writerow([_cell(v) for v in cells])

@@ -75,8 +75,18 @@ class PlannedRun:
     def entry(self) -> "RunEntry":
         """What the index needs of this run, without its configuration (a sweep keeps one
         per run until its index is written)."""
-        return RunEntry(self.index, self.run_id, self.base, self.params, self.variant, self.config_hash,
-                        self.warnings)
+        coords = self.coords
+        layout = _shared_layout(tuple((name, key) for name, (key, _) in coords.items()))
+        return RunEntry(self.index, self.run_id, self.base, layout, tuple(v for _, v in coords.values()),
+                        self.variant, self.config_hash, self.warnings)
+
+    @functools.cached_property
+    def coords(self) -> dict[str, tuple[str, Any]]:
+        """Parameter coordinate name -> (dotted key of the entry, value) of its varied
+        values (:func:`rbstab.sweep.folder.run_coords` of ``params``)."""
+        from .folder import run_coords
+
+        return run_coords(self.params)
 
     @functools.cached_property
     def config_hash(self) -> str:
@@ -87,17 +97,30 @@ class PlannedRun:
 
 @dataclass(frozen=True, slots=True)
 class RunEntry:
-    """A planned run without its configuration: index, ``run_id``, ``base``, ``params``,
-    ``variant``, ``config_hash`` and ``warnings`` as in :class:`PlannedRun` (slots: a
-    sweep keeps one per run)."""
+    """A planned run without its configuration: index, ``run_id``, ``base``, ``variant``,
+    ``config_hash``, ``warnings`` and :attr:`coords` as in :class:`PlannedRun` (slots: a
+    sweep keeps one per run; the coordinates as a tuple of values beside their names and
+    keys, which the runs that vary the same entries share)."""
 
     index: int
     run_id: str
     base: str
-    params: dict
+    layout: tuple  # ((coordinate name, dotted key), ...)
+    values: tuple
     variant: str
     config_hash: str
     warnings: tuple = ()
+
+    @property
+    def coords(self) -> dict[str, tuple[str, Any]]:
+        """Coordinate name -> (dotted key, value), as :attr:`PlannedRun.coords`."""
+        return {name: (key, value) for (name, key), value in zip(self.layout, self.values)}
+
+
+@functools.lru_cache(maxsize=1024)
+def _shared_layout(layout: tuple) -> tuple:
+    """One object for equal coordinate layouts (the runs of a sweep have a few)."""
+    return layout
 
 
 def resolved_hash(resolved: Mapping) -> str:

@@ -58,8 +58,7 @@ from .folder import (
     read_spec,
     set_aside_damaged,
     write_sweep_index,
-    parameter_columns,
-    run_coords,
+    coordinate_columns,
 )
 from .plan import (InvalidRun, PlannedRun, RunEntry, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
                    warning_digest)
@@ -568,7 +567,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
                 continue
             by_id[r.run_id] = r.entry()
             yield RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
-                          {name: value for name, (_, value) in run_coords(r.params).items()}, r.config_hash)
+                          {name: value for name, (_, value) in r.coords.items()}, r.config_hash)
 
     size = _chunk_length(spec.n_runs, *chunk_size, ex.parallelism())
     if ex.return_bytes:
@@ -644,7 +643,7 @@ def _stop_on_machine_fault(records) -> None:
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
     summary, outcome.problems = write_sweep_index(
         outcome.directory, runs, attrs, errors, name=spec.name, ratio=spec.lyapunov_ratio,
-        parameters=parameter_columns(r.params for r in runs))
+        parameters=coordinate_columns(r.coords for r in runs))
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
 
