@@ -60,23 +60,29 @@ def initial_step(code, p, y0, f0, t_bound, max_step, error_order, rtol, atol, y1
     return min(100 * h0, h1, t_bound, max_step)
 
 
-@jit
-def _stage_state(y, h, a, K, s, out):
-    """out = y + (sum_{j<s} a[j] K[j]) h.
+@jit(forceinline=True)
+def _weighted_sum(w, K, s, out):
+    """out = sum_{j<s} w[j] K[j], the weighted sum of the first s stage rates (rows of K).
 
-    Every sum of stage rates here is taken a stage at a time over the whole state (the
-    rows of K are contiguous): the state's sums are then independent chains that the
-    processor overlaps and LLVM vectorises, in the order of additions of a sum per element
-    (the same bits). Integration ~10 % faster than one element's sum at a time.
+    Taken a stage at a time over the whole state (the rows of K are contiguous): the
+    elements' sums are then independent chains that the processor overlaps and LLVM
+    vectorises, each in the order j = 0, 1, ... (the same bits as one element's sum at a
+    time, which made the integration ~10 % slower).
     """
-    n = y.shape[0]
+    n = out.shape[0]
     for i in range(n):
         out[i] = 0.0
     for j in range(s):
-        c = a[j]
+        c = w[j]
         for i in range(n):
             out[i] += K[j, i] * c
-    for i in range(n):
+
+
+@jit
+def _stage_state(y, h, a, K, s, out):
+    """out = y + (sum_{j<s} a[j] K[j]) h."""
+    _weighted_sum(a, K, s, out)
+    for i in range(y.shape[0]):
         out[i] = y[i] + out[i] * h
 
 
@@ -91,15 +97,7 @@ def rk_step(code, p, y, f, h, tableau, K, y_new, work):
     for s in range(1, n_stages):
         _stage_state(y, h, A[s], K, s, work)
         state_rate(code, work, p, K[s])
-    n = y.shape[0]
-    for i in range(n):
-        y_new[i] = 0.0
-    for j in range(n_stages):
-        c = B[j]
-        for i in range(n):
-            y_new[i] += K[j, i] * c
-    for i in range(n):
-        y_new[i] = y[i] + h * y_new[i]
+    _stage_state(y, h, B, K, n_stages, y_new)
     state_rate(code, y_new, p, K[n_stages])
 
 
@@ -143,12 +141,7 @@ def dense_coefficients(code, p, y_old, y_new, f_new, h, tableau, K, Q, work):
     n = y_old.shape[0]
     if not dop853:
         for r in range(P.shape[1]):
-            for i in range(n):
-                Q[r, i] = 0.0
-            for j in range(n_stages + 1):
-                c = P[j, r]
-                for i in range(n):
-                    Q[r, i] += K[j, i] * c
+            _weighted_sum(P[:, r], K, n_stages + 1, Q[r])
         return 0
     for s in range(n_stages + 1, A.shape[0]):
         _stage_state(y_old, h, A[s], K, s, work)
@@ -159,12 +152,7 @@ def dense_coefficients(code, p, y_old, y_new, f_new, h, tableau, K, Q, work):
         Q[1, i] = h * K[0, i] - delta
         Q[2, i] = 2 * delta - h * (f_new[i] + K[0, i])
     for r in range(D.shape[0]):
-        for i in range(n):
-            Q[3 + r, i] = 0.0
-        for j in range(D.shape[1]):
-            c = D[r, j]
-            for i in range(n):
-                Q[3 + r, i] += c * K[j, i]
+        _weighted_sum(D[r], K, D.shape[1], Q[3 + r])
         for i in range(n):
             Q[3 + r, i] = h * Q[3 + r, i]
     return A.shape[0] - n_stages - 1

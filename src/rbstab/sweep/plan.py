@@ -74,7 +74,11 @@ class PlannedRun:
 
     def entry(self) -> "RunEntry":
         """What the index needs of this run, without its configuration (a sweep keeps one
-        per run until its index is written)."""
+        per run until its index is written); made once (the runner asks twice a run)."""
+        return self._entry
+
+    @functools.cached_property
+    def _entry(self) -> "RunEntry":
         coords = self.coords
         layout = _shared_layout(tuple((name, key) for name, (key, _) in coords.items()))
         return RunEntry(self.index, self.run_id, self.base, layout, tuple(v for _, v in coords.values()),
