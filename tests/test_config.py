@@ -929,6 +929,35 @@ def test_config_yaml_by_sections_is_the_whole_dump():
             assert config.to_yaml() == config.to_yaml()  # from the cache
 
 
+def test_from_resolved_like_shares_only_equal_sections():
+    """from_resolved(like=...) shares body, gains and settings with a config whose body,
+    controller and simulation sections are equal, and gives what a rebuild alone gives."""
+    import warnings as _warnings
+
+    from rbstab.config import RunConfig, load_config
+
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("ignore")
+        base = load_config(Path(__file__).resolve().parents[1] / "configs" / "paper" / "case3_embedded.yaml")
+    first = RunConfig.from_resolved(base.resolved)
+    spun = base.with_initial_state({"omega": [1.0, 2.0, 3.0]}, name="spun")
+    heavy = RunConfig.from_resolved({**base.resolved, "body": {**base.resolved["body"], "mass": 50.0}})
+    shared = RunConfig.from_resolved(spun.resolved, like=[heavy, first])  # the first equal one
+    assert shared.body is first.body and shared.gains is first.gains and shared.simulation is first.simulation
+    alone = RunConfig.from_resolved(spun.resolved)
+    assert shared.name == alone.name == "spun" and shared.resolved is spun.resolved
+    assert all(np.array_equal(shared.initial_state[k], alone.initial_state[k]) for k in alone.initial_state)
+    assert shared.initial_state["omega"].tolist() == [1.0, 2.0, 3.0]
+    for key in ("body.mass=30", "controller.l_c=[1, 2, 3]", "simulation.rtol=1e-7"):
+        section, rest = key.split(".", 1)
+        name, value = rest.split("=")
+        data = {**spun.resolved, section: {**spun.resolved[section], name: yaml.safe_load(value)}}
+        other = RunConfig.from_resolved(data, like=[first])
+        assert other.body is not first.body and other.gains is not first.gains, key
+        assert other.simulation is not first.simulation, key
+        assert other.resolved[section][name] == yaml.safe_load(value)
+
+
 @pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[1] / "configs").glob("*/*.yaml")))
 def test_from_resolved_rebuilds_the_validated_config(path):
     """RunConfig.from_resolved (the sweep workers' path) gives what validation gives."""

@@ -251,6 +251,28 @@ def test_group_configs_equal_validated_configs():
             assert not config.initial_state[block].flags.writeable
 
 
+def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch):
+    """A worker's runs that differ only in initial state share one variant (its parameters
+    and equilibrium computed once), and each gets the bits it gets alone; gravity makes the
+    equilibrium a computed one."""
+    spec = sweep_spec(5, extra={"grid": {"body.gravity": [[0.0, 0.0, 0.0], [0.0, 0.0, -9.81]]}})
+    runs = expand(spec)
+    tasks = [RunTask(r.run_id, r.config.resolved, "x.h5") for r in runs]
+    configs, errors = _group_configs(tasks)
+    assert not errors
+    made = []
+    real = type(configs[0]).make_variant
+    monkeypatch.setattr(type(configs[0]), "make_variant", lambda self: made.append(self.name) or real(self))
+    got = dict(simulate_many(configs))
+    assert len(made) == 2  # one variant per gravity
+    monkeypatch.undo()
+    for i, run in enumerate(runs):
+        alone = dict(simulate_many([run.config]))[0]
+        assert alone.summary["lyapunov_final"] == got[i].summary["lyapunov_final"]
+        for key, value in alone.outputs.items():
+            assert np.array_equal(got[i].outputs[key], value, equal_nan=True), (i, key)
+
+
 def test_compiled_and_scipy_sweeps_give_the_same_index(tmp_path):
     spec = sweep_spec(5, extra={"grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]}})
     runs = expand(spec)

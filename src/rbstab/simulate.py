@@ -391,8 +391,30 @@ def _chunk_results(configs, variants, codes, params, sol, share: float,
             )
 
 
+def _variant_of(config: "RunConfig", shared: dict) -> Variant:
+    """``config.make_variant()``, one for the configs that share their body and gains objects
+    (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``): its parameters record
+    and equilibrium are computed once for them."""
+    key = (config.variant, config.body, config.gains)  # identity: both are eq=False dataclasses
+    variant = shared.get(key)
+    if variant is None:
+        variant = shared[key] = config.make_variant()
+    return variant
+
+
+def _parameter_rows(variants: Sequence[Variant]) -> np.ndarray:
+    """The variants' :data:`~rbstab.model.PARAMETERS` records, shape (k,) (a record at a time:
+    ``numpy.concatenate`` of structured arrays costs ~40 us a record)."""
+    from .model import PARAMETERS
+
+    rows = np.empty(len(variants), dtype=PARAMETERS)
+    for i, variant in enumerate(variants):
+        rows[i] = variant.parameters[0]
+    return rows
+
+
 def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
-                  chunk_size: int = 512, timeout: float | None = None) -> Iterator[tuple[int, RunResult]]:
+                  chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
 
     With ``engine="compiled"`` every run that the compiled engine takes
@@ -400,10 +422,12 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     ``chunk_size`` runs per call, whatever its variant, body, gains and settings (a call
     takes runs of one method, sample count and state size); the others go through
     :func:`simulate` one by one. A run's result does not depend on the other runs of the
-    call. At most one chunk of trajectories (``chunk_size * n_samples * n_state`` floats) and the outputs of
-    :data:`POSTPROCESS_BLOCK` runs are held at once. Each result's ``wall_time`` is its share
-    of the chunk's integration plus its own post-processing [s] (split in ``timing``).
-    ``timeout`` [s], if given, replaces each run's ``simulation.max_wall_time``.
+    call. The calls of a kind of run fill one buffer of trajectories (``chunk_size *
+    n_samples * n_state`` floats), which the outputs of each run then leave; at most
+    ``max(chunk_size, POSTPROCESS_BLOCK)`` runs' outputs are held at once. Each result's
+    ``wall_time`` is its share of its call's integration plus its own post-processing [s]
+    (split in ``timing``). ``timeout`` [s], if given, replaces each run's
+    ``simulation.max_wall_time``.
 
     Raises
     ------
@@ -415,20 +439,22 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     if chunk_size < 1:
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
     groups: dict[tuple, list[int]] = {}
+    shared: dict[tuple, Variant] = {}
     for i, config in enumerate(configs):
         if uses_compiled_engine(config, engine):
-            size = config.make_variant().layout.size
+            size = _variant_of(config, shared).layout.size
             groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
         else:
             yield i, simulate(config, timeout, engine="scipy")
-    for (method, n_samples, _), members in groups.items():
+    for (method, n_samples, size), members in groups.items():
+        buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
             start = _time.perf_counter()
             chunk_configs = [configs[i] for i in chunk]
-            variants = [c.make_variant() for c in chunk_configs]
+            variants = [_variant_of(c, shared) for c in chunk_configs]
             codes = np.array([v.code for v in variants], dtype=np.int64)
-            params = np.concatenate([v.parameters for v in variants])
+            params = _parameter_rows(variants)
             settings = _settings_rows(chunk_configs, timeout)
             sol = integrate_runs(
                 codes,
@@ -437,6 +463,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
                 settings,
                 method=method,
                 n_samples=n_samples,
+                out=buffer,
             )
             share = (_time.perf_counter() - start) / len(chunk)
             for j, result in _chunk_results(chunk_configs, variants, codes, params, sol, share, settings):

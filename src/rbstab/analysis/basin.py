@@ -202,7 +202,7 @@ def _run_block(items: list, ratio: float) -> list[tuple]:
 
     configs = [c for _, c in items]
     rows = []
-    for j, result in simulate_many(configs, chunk_size=max(len(configs), 1)):
+    for j, result in simulate_many(configs):
         v = result.outputs["lyapunov"]
         t = time_to_converge(result.time, v, ratio) if result.ok else np.nan
         outcome = 0 if np.isfinite(t) else (1 if result.ok else 2)

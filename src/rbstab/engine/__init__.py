@@ -70,7 +70,8 @@ class ChunkSolution:
 
 
 def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
-                   max_steps: int = DEFAULT_MAX_STEPS, max_wall_time: float = np.inf) -> ChunkSolution:
+                   max_steps: int = DEFAULT_MAX_STEPS, max_wall_time: float = np.inf,
+                   out: np.ndarray | None = None) -> ChunkSolution:
     """Integrate k runs of one method and sample count.
 
     Parameters
@@ -91,6 +92,11 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
         Accepted steps after which a run stops (status -3), for 5-column ``settings``.
     max_wall_time : float
         Seconds after which a run stops (status -4; inf: none), for 5-column ``settings``.
+    out : ndarray, shape (>= k, n_samples, n_state), optional
+        Where the samples go (its first k rows, returned as ``samples``): a buffer the
+        caller reuses for call after call. A fresh array of this size is paged in by the
+        operating system as the runs fill it, which cost ~20 % of the integration of
+        Case 3 at 2001 samples (~0.2 ms a run).
     """
     from .integrate import integrate_chunk
 
@@ -100,7 +106,10 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     settings = np.asarray(settings, dtype=float)
     if settings.shape[1] == 5:
         settings = np.column_stack([settings, np.full(k, float(max_steps)), np.full(k, float(max_wall_time))])
-    samples = np.empty((k, n_samples, n))
+    samples = np.empty((k, n_samples, n)) if out is None else out[:k]
+    if samples.shape != (k, n_samples, n) or samples.dtype != np.float64 or not samples.flags.c_contiguous:
+        raise ValueError(f"out: found shape {samples.shape[1:]} of {samples.dtype}; expected a C-contiguous "
+                         f"float64 array of shape (>= {k}, {n_samples}, {n})")
     status = np.empty(k, dtype=np.int64)
     t_stop = np.empty(k)
     nfev = np.empty(k, dtype=np.int64)

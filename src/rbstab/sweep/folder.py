@@ -618,15 +618,16 @@ class StoredRows:
         self.verify = verify
         self.damaged = damaged if damaged is not None else []
         self.files = sorted(p.name for p in runs_dir.glob("*.h5"))  # what was there before this invocation
+        self._names = frozenset(self.files)
         self.chunk_rows = _chunk_rows(runs_dir, verify, self.damaged)
 
     def current(self, run: Any) -> dict | None:
         """The newest stored row made from ``run``'s current config (its ``config_hash``,
         :attr:`PlannedRun.config_hash`) with a status other than ``error``, or None."""
         candidates = list(self.chunk_rows.get(run.run_id, ()))
-        path = self.runs_dir / f"{run.run_id}.h5"
-        if path.exists():
-            row = _run_file_row(path, self.verify, self.damaged)
+        name = f"{run.run_id}.h5"
+        if name in self._names:  # the folder listed once, not a path and a stat a run
+            row = _run_file_row(self.runs_dir / name, self.verify, self.damaged)
             if row is not None:
                 candidates.append(row)
         good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]

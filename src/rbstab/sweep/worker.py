@@ -263,21 +263,30 @@ def _scipy_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> lis
     return [_run_one(task, options, sink) for task in tasks]
 
 
+#: Distinct configs a worker compares each run's config with, to share their objects.
+SHARED_CONFIGS = 8
+
+
 def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict[str, Any]]]:
     """RunConfigs of ``tasks`` (None where it failed) and error records (``sink.error``).
 
     The sweep validated every run when it planned it: each task's resolved config is
-    rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`);
-    one that does not rebuild is validated, for the message of what is wrong with it.
+    rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`,
+    sharing the body, gains and settings of one of the last :data:`SHARED_CONFIGS` distinct
+    configs where they are the same: a grid's inner axis); one that does not rebuild is
+    validated, for the message of what is wrong with it.
     """
     from ..config import RunConfig
 
     configs: list = []
     errors: list[dict[str, Any]] = []
+    recent: list = []  # distinct rebuilt configs, the latest first
     for task in tasks:
         try:
             try:
-                config = RunConfig.from_resolved(task.config)
+                config = RunConfig.from_resolved(task.config, like=recent)
+                if not recent or config.body is not recent[0].body:
+                    recent = [config, *(c for c in recent[: SHARED_CONFIGS - 1] if c.body is not config.body)]
             except Exception:
                 config = _config(task)
             configs.append(config)
@@ -298,8 +307,7 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
     config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
     done: set[int] = set()
     try:
-        for j, result in simulate_many([configs[i] for i in batch], chunk_size=max(len(batch), 1),
-                                       timeout=options.timeout):
+        for j, result in simulate_many([configs[i] for i in batch], timeout=options.timeout):
             i = batch[j]
             done.add(i)
             try:
