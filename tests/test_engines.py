@@ -209,6 +209,21 @@ def test_numerical_rate_is_exact_for_degree_6_and_of_6th_order():
     assert errors[0] / errors[1] > 2**6 * 0.7, errors
 
 
+def test_numerical_rate_is_the_stencil_sum_in_order():
+    """The compiled stencil gives the bits of sum_j w[i, j] v[first[i] + j] taken in the order
+    j = 0, 1, ... (numpy, a term at a time), at the ends (one-sided) as in the middle."""
+    from rbstab.summary import stencil_weights
+
+    rng = np.random.default_rng(2)
+    t = np.sort(rng.uniform(0.0, 2.0, 60))
+    v = rng.standard_normal((3, 60)) * 10.0 ** rng.uniform(-3, 3, (3, 1))
+    first, weights = stencil_weights(t)
+    expected = weights[:, 0] * v[:, first]
+    for j in range(1, weights.shape[1]):
+        expected += weights[:, j] * v[:, first + j]
+    assert np.array_equal(numerical_rate(t, v), expected)
+
+
 def test_numerical_rate_of_rows_equals_numerical_rate_row_by_row():
     t = np.linspace(0.0, 1.0, 101)
     rng = np.random.default_rng(0)

@@ -143,7 +143,8 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
     ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
-    integrator), ``outputs`` (every output at the samples) and ``switching`` (the sign
+    integrator), ``outputs`` (every output at the samples and the numerical dv/dt,
+    :func:`rbstab.summary.numerical_rate`) and ``switching`` (the sign
     law's event-driven integrator, :mod:`rbstab.engine.switching`);
     :func:`rbstab.jit.ensure_compiled` compiles some in a second process at the same time.
     """
@@ -166,6 +167,10 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
             state_rates(code, y, params, np.empty_like(y))
         if "outputs" in wanted:
             run_outputs(np.array([code]), params, y[None], np.empty((N_OUTPUTS, 1, 1)))
+    if "outputs" in wanted:
+        from ..summary import numerical_rate
+
+        numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
     if "rates" in wanted:
         settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
         for method in METHODS:
