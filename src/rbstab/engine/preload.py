@@ -2,13 +2,14 @@
 workers are forked from it (:func:`rbstab.sweep.executors._mp_context`).
 
 Only from a warm cache: a cold one is compiled by the command before it starts workers
-(:func:`rbstab.jit.ensure_compiled`); here a cold cache is left to the workers.
+(:func:`rbstab.jit.ensure_compiled`); here a cold cache is left to the workers. Only the
+engine's kernels: the sign law's (``switching``, ~0.1 s more on the way to the first run)
+are loaded by a worker when a run needs them.
 """
 
 from ..jit import GROUPS, cache_is_warm
 
-_warm = [part for group, parts in GROUPS.items() if cache_is_warm(group) for part in parts]
-if _warm:
+if cache_is_warm("engine"):
     from . import warm_up
 
-    warm_up(",".join(_warm))
+    warm_up(",".join(GROUPS["engine"]))
