@@ -94,3 +94,23 @@ def test_step_limit_ends_a_run():
     y0 = variant.initial_state(initial_blocks())[None]
     sol = integrate_runs([variant.code], variant.parameters, y0, _settings(1), method="RK23", n_samples=11, max_steps=50)
     assert sol.status[0] == -3 and sol.n_steps[0] == 50 and 0 < sol.t_stop[0] < 0.5
+
+
+def test_samples_into_a_given_buffer():
+    """integrate_runs(out=...) fills the first rows of the caller's buffer (the bits of a new
+    array) and refuses a buffer that cannot hold the samples, naming ``out``."""
+    variant = _variant("embedded")
+    y0 = variant.initial_state(initial_blocks())[None]
+    fresh = integrate_runs([variant.code], variant.parameters, y0, _settings(1), method="DOP853", n_samples=11)
+    buffer = np.full((3, 11, y0.shape[1]), 7.0)
+    sol = integrate_runs([variant.code], variant.parameters, y0, _settings(1), method="DOP853", n_samples=11,
+                         out=buffer)
+    assert np.shares_memory(sol.samples, buffer) and sol.samples.shape == (1, 11, y0.shape[1])
+    assert np.array_equal(sol.samples, fresh.samples) and (buffer[1:] == 7.0).all()
+    read_only = buffer.copy()
+    read_only.setflags(write=False)
+    for bad in (np.empty((1, 12, y0.shape[1])), np.empty((0, 11, y0.shape[1])), buffer.astype(np.float32),
+                read_only, buffer[:, ::2], [[0.0]]):
+        with pytest.raises(ValueError, match="out: found"):
+            integrate_runs([variant.code], variant.parameters, y0, _settings(1), method="DOP853", n_samples=11,
+                           out=bad)

@@ -268,8 +268,8 @@ def test_group_configs_equal_validated_configs():
 
 def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch):
     """A worker's runs that differ only in initial state share one variant (its parameters
-    and equilibrium computed once), and each gets the bits it gets alone; gravity makes the
-    equilibrium a computed one."""
+    and equilibrium computed once), and each gets the bits it gets alone, also through calls
+    that reuse one buffer of trajectories; gravity makes the equilibrium a computed one."""
     spec = sweep_spec(5, extra={"grid": {"body.gravity": [[0.0, 0.0, 0.0], [0.0, 0.0, -9.81]]}})
     runs = expand(spec)
     tasks = [RunTask(r.run_id, r.config.resolved, "x.h5") for r in runs]
@@ -278,7 +278,7 @@ def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch)
     made = []
     real = type(configs[0]).make_variant
     monkeypatch.setattr(type(configs[0]), "make_variant", lambda self: made.append(self.name) or real(self))
-    got = dict(simulate_many(configs))
+    got = dict(simulate_many(configs, chunk_size=3))  # 4 compiled calls into one buffer
     assert len(made) == 2  # one variant per gravity
     monkeypatch.undo()
     for i, run in enumerate(runs):

@@ -330,7 +330,8 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
 
 
 #: Runs whose outputs :func:`simulate_many` evaluates together before yielding them; bounds
-#: the memory of outputs held at once (36 columns per sample) to this many runs.
+#: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
+#: default number of runs per compiled call (the trajectories held at once).
 POSTPROCESS_BLOCK = 32
 
 
@@ -423,8 +424,8 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     takes runs of one method, sample count and state size); the others go through
     :func:`simulate` one by one. A run's result does not depend on the other runs of the
     call. The calls of a kind of run fill one buffer of trajectories (``chunk_size *
-    n_samples * n_state`` floats), which the outputs of each run then leave; at most
-    ``max(chunk_size, POSTPROCESS_BLOCK)`` runs' outputs are held at once. Each result's
+    n_samples * n_state`` floats; nothing a result holds points into it), and the outputs
+    are evaluated :data:`POSTPROCESS_BLOCK` runs at a time. Each result's
     ``wall_time`` is its share of its call's integration plus its own post-processing [s]
     (split in ``timing``). ``timeout`` [s], if given, replaces each run's
     ``simulation.max_wall_time``.

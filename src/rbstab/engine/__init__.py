@@ -94,9 +94,13 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
         Seconds after which a run stops (status -4; inf: none), for 5-column ``settings``.
     out : ndarray, shape (>= k, n_samples, n_state), optional
         Where the samples go (its first k rows, returned as ``samples``): a buffer the
-        caller reuses for call after call. A fresh array of this size is paged in by the
-        operating system as the runs fill it, which cost ~20 % of the integration of
-        Case 3 at 2001 samples (~0.2 ms a run).
+        caller reuses for call after call, so that a worker holds one (default: a new
+        array).
+
+    Raises
+    ------
+    ValueError
+        If ``out`` is not a writable C-contiguous float64 array of that shape.
     """
     from .integrate import integrate_chunk
 
@@ -106,10 +110,7 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     settings = np.asarray(settings, dtype=float)
     if settings.shape[1] == 5:
         settings = np.column_stack([settings, np.full(k, float(max_steps)), np.full(k, float(max_wall_time))])
-    samples = np.empty((k, n_samples, n)) if out is None else out[:k]
-    if samples.shape != (k, n_samples, n) or samples.dtype != np.float64 or not samples.flags.c_contiguous:
-        raise ValueError(f"out: found shape {samples.shape[1:]} of {samples.dtype}; expected a C-contiguous "
-                         f"float64 array of shape (>= {k}, {n_samples}, {n})")
+    samples = np.empty((k, n_samples, n)) if out is None else _sample_buffer(out, (k, n_samples, n))
     status = np.empty(k, dtype=np.int64)
     t_stop = np.empty(k)
     nfev = np.empty(k, dtype=np.int64)
@@ -118,6 +119,17 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
         integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings),
                         tableau(method), samples, status, t_stop, nfev, n_steps)
     return ChunkSolution(samples, status, t_stop, nfev, n_steps)
+
+
+def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:
+    """The first ``shape[0]`` rows of ``out`` (see :func:`integrate_runs`); ValueError if it
+    cannot hold them."""
+    if not (isinstance(out, np.ndarray) and out.dtype == np.float64 and out.flags.c_contiguous
+            and out.flags.writeable and out.ndim == 3 and out.shape[0] >= shape[0] and out.shape[1:] == shape[1:]):
+        found = f"shape {out.shape} of {out.dtype}" if isinstance(out, np.ndarray) else type(out).__name__
+        raise ValueError(f"out: found {found}; expected a writable C-contiguous float64 array of shape "
+                         f"(>= {shape[0]}, {shape[1]}, {shape[2]})")
+    return out[: shape[0]]
 
 
 def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,

@@ -286,7 +286,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
             try:
                 config = RunConfig.from_resolved(task.config, like=recent)
                 if not recent or config.body is not recent[0].body:
-                    recent = [config, *(c for c in recent[: SHARED_CONFIGS - 1] if c.body is not config.body)]
+                    recent = [config, *[c for c in recent if c.body is not config.body][: SHARED_CONFIGS - 1]]
             except Exception:
                 config = _config(task)
             configs.append(config)
@@ -332,8 +332,8 @@ ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, A
 
 #: Default runs per chunk of each engine: one run per unit of work for scipy; for the
 #: compiled engine enough runs that the per-chunk costs (a task's round trip, opening a
-#: file) are small, and few enough that a chunk's trajectories (256 x 2001 x 15 floats,
-#: 60 MB) stay small and both workers get work early.
+#: file) are small, and few enough that both workers get work early (the engine holds
+#: the trajectories of 32 runs at a time, whatever the chunk).
 DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256}
 
 
