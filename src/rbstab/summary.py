@@ -146,7 +146,7 @@ def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
         if length < 2:
             continue
         which = np.flatnonzero(n_ok == length)
-        part = np.ascontiguousarray(rows[which, :length])
+        part = np.ascontiguousarray(rows[which, :length])  # one C-contiguous layout for the kernel
         first, weights = _stencil_weights_of(time[:length])
         acc = np.empty_like(part)
         _apply_stencil(part, first, weights, acc)
@@ -157,7 +157,8 @@ def numerical_rate(time: np.ndarray, values: np.ndarray) -> np.ndarray:
 @jit
 def _apply_stencil(part, first, weights, out):
     """out[r, i] = sum_j weights[i, j] part[r, first[i] + j] for the rows r of ``part``
-    (m, n), the terms added in the order j = 0, 1, ... (compiled: ~1.4x as fast as numpy, the same bits)."""
+    (m, n), the terms added in the order j = 0, 1, ... (compiled: ~1.4x as fast as
+    numpy's term-at-a-time sum, the same bits)."""
     for r in range(part.shape[0]):
         for i in range(part.shape[1]):
             acc = weights[i, 0] * part[r, first[i]]

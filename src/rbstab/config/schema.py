@@ -405,6 +405,8 @@ class SimulationSettings:
 # -- schema --------------------------------------------------------------------------------
 
 _VECTOR = Annotated[Any, _checked(_vector)]
+
+
 def _zero() -> list[float]:
     """The default of a 3-vector: a new list each time (defaults are not validated, and a
     resolved configuration is plain lists)."""

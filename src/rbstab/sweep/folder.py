@@ -696,7 +696,8 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
         (:func:`parameter_name`); the per-run values and summary figures of the store
         (``units``, ``long_name``), ``converged`` and, for a store with traces,
         ``(run, time[, axis])`` variables. Store files are read lazily (dask arrays, a
-        chunk per stretch of runs from one file, :class:`rbstab.io.chunk.StoreTrace`); a sweep with layout "run" gives the summaries of ``index.csv``.
+        chunk per stretch of runs from one file, :class:`rbstab.io.chunk.StoreTrace`); a
+        sweep with layout "run" gives the summaries of ``index.csv``.
 
     Raises
     ------

@@ -167,6 +167,7 @@ class Distribution:
             return {"choice": copy.deepcopy(list(self.args[0]))}
         return {self.kind: [_plain(self.args[0]), _plain(self.args[1])]}
 
+
 def _shape(a: np.ndarray, b: np.ndarray) -> tuple[int, ...]:
     """The broadcast shape of two parameters of a distribution (drawn for every sample)."""
     return a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape)
