@@ -300,8 +300,10 @@ def _alive(pids) -> list[int]:
 
 def _sweep_process(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path, list[str]]:
     spec = tmp_path / f"{name}.yaml"
+    # 64 runs of ~20-50 ms on 2 workers: still running well after the test's signal (~0.4 s
+    # after the second file; 16 runs could all finish before it on a fast moment)
     spec.write_text(yaml.safe_dump({"name": name, "base": str(CASE3), "random": {
-        "n": 16, "seed": 9, "params": {"initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}}}))
+        "n": 64, "seed": 9, "params": {"initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}}}))
     command = [str(RBSTAB), "sweep", str(spec), "-o", str(tmp_path / "out"), "-j", "2", "--no-progress",
                "--engine", "scipy", "--chunk-size", "1", "--set", "simulation.t_end=0.5", "--set",
                "simulation.n_samples=51"]
