@@ -8,8 +8,8 @@ Prints, per run and in total, with the peak resident memory of the process of ea
 1. planning: ``expand`` of a spec in which every run is a different config (mass, inertia,
    K_c, L_c, K_t scaled, random Omega): pydantic validation, run ids, config hashes;
 2. writing the default store (``--store thinned``, store files of 512 runs) from Case 3
-   results: the config column (canonical JSON; its hash comes from the plan, as in a
-   sweep), summary columns, traces (wall and CPU time; each run's parameter coordinates
+   results: the config column (canonical JSON: the text and its hash come from the plan,
+   as in a sweep), summary columns, traces (wall and CPU time; each run's parameter coordinates
    come with its task from the parent, as in a sweep, and are timed in 1.); and the index;
 3. ``rbstab.open_sweep`` of that folder, summaries loaded (``lyapunov_final``, ``status``).
 
@@ -97,7 +97,8 @@ def write(n: int, folder: str) -> dict:
         with ChunkWriter(path, stored[lo : lo + 512], store="thinned", parameters=parameters,
                          sweep=spec.name) as writer:
             for k, run in enumerate(chunk):
-                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], config_hash=run.config_hash)
+                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], config_hash=run.config_hash,
+                                              config_text=run.config_text)
     t1 = time.perf_counter()
     cpu = time.process_time() - c0
     write_sweep_index(directory, runs, rows, {}, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameters)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import h5py
@@ -16,8 +17,9 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from rbstab.config import load_config
 from rbstab.io.chunk import read_chunk_rows
-from rbstab.io.hdf5 import canonical_config, config_hash, read_attributes
+from rbstab.io.hdf5 import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash, read_attributes
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,
@@ -121,6 +123,27 @@ def test_grid_zip_random_count_order_and_ids():
         assert r.run_id.endswith(resolved_hash(r.config.resolved)[:8])
         assert r.config_hash == config_hash(canonical_config(r.config.resolved))
         assert r.config_hash.startswith(r.run_id.split("-")[1])
+        # the store file's config text, encoded by the plan with the hash
+        assert r.config_text == canonical_config(r.config.resolved, limits=True)
+        assert json.loads(r.config_text)["simulation"]["max_steps"] == r.config.simulation.max_steps
+
+
+def test_canonical_configs_are_the_two_canonical_texts():
+    """The pair the plan encodes at once is each text as canonical_config encodes it alone:
+    with and without run limits, limits absent, and a section sorted after ``simulation``."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
+        config = load_config(CASE3)
+    cases = [config.resolved,
+             {**config.resolved, "simulation": {k: v for k, v in config.resolved["simulation"].items()
+                                                if k not in RUN_LIMIT_KEYS}},
+             {**config.resolved, "zeta": {"a": [1.5, float("nan")]}},
+             {**config.resolved, "simulation": {**config.resolved["simulation"], "max_wall_time": 0.1 + 0.2}}]
+    for resolved in cases:
+        identity, text = canonical_configs(resolved)
+        assert identity == canonical_config(resolved)
+        assert text == canonical_config(resolved, limits=True)
+    assert canonical_configs(cases[0])[0] != canonical_configs(cases[0])[1]
 
 
 def test_random_reproducible_from_seed_and_prefix_stable():
@@ -578,7 +601,6 @@ def test_planned_configs_equal_a_whole_validation_of_each_run(vary):
     """Whether runs share their base's validation (only the initial state varies) or are
     validated one by one, each planned config is what validating that run alone gives:
     the same resolved mapping, hash and physics."""
-    import warnings
 
     from rbstab.config import config_from_mapping
 

@@ -104,22 +104,25 @@ _AXES = ("x", "y", "z")
 _COORDS = ("run_id", "base", "variant")
 _TEXT = {"run_id", "base", "variant", "status", "message", "config", "config_hash", "lyapunov_rate_check"}
 _SOLVER = ("nfev", "njev", "nlu", "status")
+_NUMBERS = {float, int, type(None)}
 
 
-def _put_attributes(obj_id, attrs: Mapping[str, Any]) -> None:
+def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = None) -> None:
     """Add attributes to an HDF5 group or dataset (its h5py id: ``obj.id``) that does not
     have them yet, as ``h5py``'s ``attrs[key] = value`` stores them: str as
     variable-length UTF-8, int and float as 64-bit scalars, anything else through
     ``attrs``. Through h5py's low-level API: ``attrs[...] =`` writes a temporary attribute
     and renames it, several times the cost (~55 against ~8 us an attribute; a store file
-    has ~200)."""
+    has ~200).
+
+    ``written``: key -> the array written, for the str, int and float values (what
+    :func:`rbstab.io.integrity.content_digest` would read back).
+    """
     import h5py
 
-    str_type = h5py.h5t.py_create(h5py.string_dtype(), logical=True)
-    scalar = h5py.h5s.create(h5py.h5s.SCALAR)
     for key, value in attrs.items():
         if isinstance(value, str):
-            tid, data = str_type, np.array(value, dtype=h5py.string_dtype())
+            tid, data = _STR_TYPE[0], np.array(value, dtype=h5py.string_dtype())
         elif type(value) in (int, float):
             data = np.array(value, dtype=np.int64 if type(value) is int else np.float64)
             tid = h5py.h5t.py_create(data.dtype)
@@ -127,11 +130,25 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any]) -> None:
             h5py.AttributeManager(h5py.Group(obj_id) if isinstance(obj_id, h5py.h5g.GroupID) else
                                   h5py.Dataset(obj_id))[key] = value
             continue
-        aid = h5py.h5a.create(obj_id, key.encode(), tid, scalar)
+        aid = h5py.h5a.create(obj_id, key.encode(), tid, _SCALAR[0])
         try:
             aid.write(data)
         finally:
             aid.close()
+        if written is not None:
+            written[key] = data
+
+
+def _h5_constants() -> None:
+    """The string type and scalar space of :func:`_put_attributes` (made once, on first use)."""
+    import h5py
+
+    _STR_TYPE.append(h5py.h5t.py_create(h5py.string_dtype(), logical=True))
+    _SCALAR.append(h5py.h5s.create(h5py.h5s.SCALAR))
+
+
+_STR_TYPE: list = []
+_SCALAR: list = []
 
 
 def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
@@ -230,6 +247,7 @@ class ChunkWriter:
         self._datasets: dict[str, Any] = {}
         self._numbers: dict[str, np.ndarray] = {}  # numeric variables written whole, for the digest
         self._texts: dict[str, np.ndarray] = {}  # text variables as written, for the digest
+        self._written: dict[str, dict] = {}  # object path -> attributes as written, for the digest
         self._block = WRITE_BLOCK
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds")
         self.attrs: dict[str, Any] = {
@@ -249,6 +267,8 @@ class ChunkWriter:
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
         import h5py
 
+        if not _STR_TYPE:
+            _h5_constants()
         self._str = h5py.string_dtype()
         f = self._file
         f.dimensions["run"] = len(self.ids)
@@ -288,11 +308,14 @@ class ChunkWriter:
 
     # -- rows ---------------------------------------------------------------------------------
 
-    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None) -> dict[str, Any]:
+    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None,
+            config_text: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
-        ``config_hash``: the run's :func:`rbstab.io.hdf5.config_hash` of its canonical config
-        if the caller has it (a sweep's plan computed it for the run id); else computed here.
+        ``config_hash``: the run's :func:`rbstab.io.hdf5.config_hash` of its canonical config,
+        and ``config_text``, its :func:`~rbstab.io.hdf5.canonical_config` with the run limits
+        (the ``config`` column), if the caller has them (a sweep's plan computed them); else
+        computed here.
         """
         from .hdf5 import config_hash as hash_of
 
@@ -307,7 +330,7 @@ class ChunkWriter:
         }
         values.update({f"solver_{k}": result.solver.get(k) for k in _SOLVER[:-1]})
         values["solver_status"] = int(result.solver.get("solver_status", -1))
-        values["config"] = canonical_config(resolved, limits=True)
+        values["config"] = canonical_config(resolved, limits=True) if config_text is None else config_text
         values["config_hash"] = config_hash
         values.update(summary_columns(result.summary))
         traces = None
@@ -370,7 +393,7 @@ class ChunkWriter:
                                     track_order=True)
             for axis, scale in enumerate(scales[: rank + 1]):
                 var.dims[axis].attach_scale(scale)
-            _put_attributes(var.id, variable_attributes(name))
+            _put_attributes(var.id, variable_attributes(name), self._written.setdefault(f"/{name}", {}))
             self._traces[name] = (len(self._time), 3)[:rank]
             self._datasets[name] = var
         per_run = 8 * sum(int(np.prod(shape)) for shape in self._traces.values()) or 1
@@ -393,8 +416,11 @@ class ChunkWriter:
         rows = [i for i, _ in self._pending]
         self._room(len(rows) * 8 * sum(int(np.prod(shape)) for shape in self._traces.values()))
         for name, shape in self._traces.items():
-            missing = np.full(shape, np.nan)
-            block = np.stack([missing if o is None or name not in o else o[name] for _, o in self._pending])
+            # C-contiguous (a run's vectors are strided views of the outputs): HDF5 and the
+            # data digest then take the block as it is, without a copy each (~40 % of them)
+            block = np.empty((len(rows), *shape))
+            for r, (_, o) in enumerate(self._pending):
+                block[r] = np.nan if o is None or name not in o else o[name]
             var = self._datasets[name]
             if rows == list(range(rows[0], rows[-1] + 1)):
                 var[rows[0] : rows[-1] + 1] = block
@@ -421,13 +447,13 @@ class ChunkWriter:
         for name, values in columns.items():
             self._write_column(name, values)
         for name in self._traces:
-            _put_attributes(self._datasets[name].id, {"coordinates": self._coordinates})
+            _put_attributes(self._datasets[name].id, {"coordinates": self._coordinates}, self._written[f"/{name}"])
         h5 = f._h5file
-        _put_attributes(h5["/"].id, self.attrs)
+        _put_attributes(h5["/"].id, self.attrs, self._written.setdefault("/", {}))
         from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest
 
         f.flush()
-        _put_attributes(h5["/"].id, {DIGEST_ATTR: content_digest(h5, self._texts),
+        _put_attributes(h5["/"].id, {DIGEST_ATTR: content_digest(h5, self._texts, self._written),
                                      DATA_DIGEST_ATTR: self._data_digest()})
 
     def _data_digest(self) -> str:
@@ -441,13 +467,23 @@ class ChunkWriter:
         return data_digest(self._file._h5file, self.path)
 
     def _columns(self) -> dict[str, list]:
+        """Name -> a value per row: ``run_id``, ``base``, the coordinates, then the values
+        (a value of the same name as a coordinate wins; None where a row has neither)."""
         names: dict[str, None] = dict.fromkeys(_COORDS)
         names.update(dict.fromkeys(self.parameters))
+        seen: set = set()  # key sets met (the rows of a file have a few)
         for ident, values in zip(self.identity, self.values):
-            names.update(dict.fromkeys(ident.coords))
-            names.update(dict.fromkeys(values))
-        rows = [{"run_id": i.run_id, "base": i.base, **i.coords, **v} for i, v in zip(self.identity, self.values)]
-        return {name: [r.get(name) for r in rows] for name in names}
+            keys = (tuple(ident.coords), tuple(values))
+            if keys not in seen:
+                seen.add(keys)
+                names.update(dict.fromkeys(keys[0]))
+                names.update(dict.fromkeys(keys[1]))
+        columns: dict[str, list] = {"run_id": [i.run_id for i in self.identity], "base": [i.base for i in self.identity]}
+        for name in names:
+            if name not in columns:
+                columns[name] = [v[name] if name in v else i.coords.get(name)
+                                 for i, v in zip(self.identity, self.values)]
+        return {name: columns[name] for name in names}
 
     def _write_column(self, name: str, values: list) -> None:
         """A ``(run,)`` variable: a dataset with the ``run`` dimension scale attached, which is
@@ -461,7 +497,7 @@ class ChunkWriter:
         dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
         # netCDF-C lists attributes in HDF5's creation order (as written)
         dcpl.set_attr_creation_order(h5py.h5p.CRT_ORDER_TRACKED | h5py.h5p.CRT_ORDER_INDEXED)
-        if name in _TEXT or any(issubclass(t, str) for t in set(map(type, values))):
+        if name in _TEXT or any(issubclass(t, str) for t in set(map(type, values)) - _NUMBERS):
             data = np.array(["" if v is None else str(v) for v in values], dtype=self._str)
             tid = h5py.h5t.py_create(self._str, logical=True)
             self._texts[name] = data
@@ -487,7 +523,7 @@ class ChunkWriter:
             attrs["units"] = units
         if name not in _COORDS and name not in self.parameters:
             attrs["coordinates"] = self._coordinates
-        _put_attributes(dsid, attrs)
+        _put_attributes(dsid, attrs, self._written.setdefault(f"/{name}", {}))
 
 
 def is_chunk_file(path: str | os.PathLike) -> bool:

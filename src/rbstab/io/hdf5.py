@@ -122,7 +122,31 @@ def canonical_config(resolved, *, limits: bool = False) -> str:
     sim = body.get("simulation")
     if not limits and isinstance(sim, dict) and any(k in sim for k in RUN_LIMIT_KEYS):
         body["simulation"] = {k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS}
-    return json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=True)
+    return _canonical_json(body)
+
+
+#: The encoder of :func:`canonical_config` (one instance: ``json.dumps`` with arguments builds
+#: an encoder a call).
+_CANONICAL = json.JSONEncoder(sort_keys=True, separators=(",", ":"), allow_nan=True)
+_canonical_json = _CANONICAL.encode
+
+
+def canonical_configs(resolved) -> tuple[str, str]:
+    """``(canonical_config(resolved), canonical_config(resolved, limits=True))``, the same
+    texts, for little more than the cost of one: the text with the limits is encoded,
+    and when ``simulation`` is its last section (the keys are sorted: ``body``,
+    ``controller``, ``initial_state``, ``simulation``) that section is replaced by its
+    encoding without them. A sweep's plan takes both (the hash and the text a store file
+    holds), so a worker does not encode the config again."""
+    full = canonical_config(resolved, limits=True)
+    sim = resolved.get("simulation")
+    if not isinstance(sim, dict) or not any(k in sim for k in RUN_LIMIT_KEYS):
+        return full, full
+    tail = '"simulation":' + _canonical_json(sim) + "}"
+    if not full.endswith(tail):
+        return canonical_config(resolved), full
+    short = _canonical_json({k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS})
+    return full[: -len(tail)] + '"simulation":' + short + "}", full
 
 
 def config_hash(text: str) -> str:

@@ -189,7 +189,8 @@ def _text(dsid) -> np.ndarray:
     return value
 
 
-def content_digest(f, texts: Mapping[str, Any] | None = None) -> str:
+def content_digest(f, texts: Mapping[str, Any] | None = None,
+                   attributes: Mapping[str, Mapping[str, Any]] | None = None) -> str:
     """SHA-256 (hex) of what the Fletcher-32 chunks do not cover (module docstring).
 
     Parameters
@@ -200,6 +201,10 @@ def content_digest(f, texts: Mapping[str, Any] | None = None) -> str:
         Text dataset name -> the array of str just written to it: a writer's digest takes
         the text from there instead of reading it back (the same bytes: HDF5 stores str
         as UTF-8); readers leave it out.
+    attributes : mapping, optional
+        Object path (``"/"``, ``"/<dataset>"``) -> attribute name -> the array just
+        written (a variable-length str, an int64 or float64 scalar): likewise taken instead
+        of read back. Which attributes there are is always read from the file.
 
     Through h5py's low-level API (its high-level objects cost about as much as the reads).
     """
@@ -210,20 +215,21 @@ def content_digest(f, texts: Mapping[str, Any] | None = None) -> str:
     def feed(tag: str, value: Any) -> None:
         h.update(tag.encode() + b"\x1e" + _canonical(value) + b"\x1d")
 
-    def attributes(oid, where: str) -> None:
+    def attributes_of(oid, where: str) -> None:
+        known = attributes.get(where, {}) if attributes is not None else {}
         for key in _attribute_names(oid):
             if key not in _BOOKKEEPING and not key.startswith("_"):
-                feed(f"{where}@{key}", _attribute(oid, key))
+                feed(f"{where}@{key}", known[key] if key in known else _attribute(oid, key))
 
     root = f["/"].id
-    attributes(root, "/")
+    attributes_of(root, "/")
     for name in sorted(f):
         oid = h5py.h5o.open(root, name.encode("utf-8", "surrogateescape"))
         if not isinstance(oid, h5py.h5d.DatasetID):  # a group or a named type: rbstab writes none
             feed(f"/{name}", "Group" if isinstance(oid, h5py.h5g.GroupID) else "Datatype")
             continue
         feed(f"/{name}", _structure(oid))
-        attributes(oid, f"/{name}")
+        attributes_of(oid, f"/{name}")
         if oid.dtype.kind in "OSU":
             feed(f"/{name}=", texts[name] if texts is not None and name in texts else _text(oid))
     return h.hexdigest()
@@ -247,7 +253,7 @@ def _digest_values(named) -> str:
     for name, dtype, shape, blocks in named:
         h.update(f"{name}\x1e{np.dtype(dtype).str}{tuple(shape)}\x1d".encode())
         for block in blocks:
-            h.update(np.ascontiguousarray(block, dtype=dtype).tobytes())
+            h.update(np.ascontiguousarray(block, dtype=dtype))  # its buffer: no copy when contiguous
     return h.hexdigest()
 
 

@@ -98,6 +98,14 @@ class PlannedRun:
         ``config_hash`` of its stored result."""
         return resolved_hash(self.config.resolved)
 
+    @functools.cached_property
+    def config_text(self) -> str:
+        """The resolved config without its name, with its run limits, as canonical JSON
+        (:func:`rbstab.io.hdf5.canonical_config`): a store file's ``config`` column."""
+        from ..io.hdf5 import canonical_config
+
+        return canonical_config(self.config.resolved, limits=True)
+
 
 @dataclass(frozen=True, slots=True)
 class RunEntry:
@@ -304,14 +312,18 @@ def _plan_run(
                 first = known.with_initial_state(data.get("initial_state"), source=source)
     except ConfigError as exc:
         return None, exc.errors
-    digest = resolved_hash(first.resolved)
+    from ..io.hdf5 import canonical_configs, config_hash
+
+    identity, text = canonical_configs(first.resolved)
+    digest = config_hash(identity)
     rid = run_id(index, spec.n_runs, digest)
     # only the name changes: no need to validate again
     config = dataclasses.replace(first, name=rid, resolved={**first.resolved, "name": rid})
     ordered = {k: params[k] for k in spec.varied_keys if k in params}
     ordered.update({k: v for k, v in params.items() if k not in ordered})
     run = PlannedRun(index, rid, base.label, ordered, config)
-    run.__dict__["config_hash"] = digest  # the name is not part of it
+    run.__dict__["config_hash"] = digest  # the name is not part of them
+    run.__dict__["config_text"] = text
     return run, []
 
 

@@ -570,7 +570,7 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
                 continue
             by_id[r.run_id] = r.entry()
             yield RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
-                          {name: value for name, (_, value) in r.coords.items()}, r.config_hash)
+                          {name: value for name, (_, value) in r.coords.items()}, r.config_hash, r.config_text)
 
     size = _chunk_length(spec.n_runs, *chunk_size, ex.parallelism())
     if ex.return_bytes:

@@ -65,6 +65,8 @@ class RunTask:
         Parameter coordinate name -> value (:func:`rbstab.sweep.folder.run_coords`).
     config_hash : str
         The config's hash as the plan computed it ("": the worker computes it).
+    config_text : str
+        The store file's ``config`` text as the plan encoded it ("": the worker encodes it).
     """
 
     run_id: str
@@ -74,6 +76,7 @@ class RunTask:
     base: str = ""
     coords: dict = field(default_factory=dict)
     config_hash: str = ""
+    config_text: str = ""
 
 
 @dataclass(frozen=True)
@@ -225,7 +228,8 @@ class _ChunkFile:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         t0 = _time.perf_counter()
-        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None)
+        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None,
+                              config_text=task.config_text or None)
         record = _finished({"run_id": task.run_id, "path": self.final}, result, row, 0.0,
                            _time.perf_counter() - t0)
         self.records.append(record)
