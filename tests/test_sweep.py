@@ -19,7 +19,8 @@ from click.testing import CliRunner
 
 from rbstab.config import load_config
 from rbstab.io.chunk import read_chunk_rows
-from rbstab.io.hdf5 import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash, read_attributes
+from rbstab.io.hdf5 import (RUN_LIMIT_KEYS, SECTION_MEMO, canonical_config, canonical_configs, config_hash,
+                             read_attributes)
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,
@@ -139,11 +140,17 @@ def test_canonical_configs_are_the_two_canonical_texts():
                                                 if k not in RUN_LIMIT_KEYS}},
              {**config.resolved, "zeta": {"a": [1.5, float("nan")]}},
              {**config.resolved, "simulation": {**config.resolved["simulation"], "max_wall_time": 0.1 + 0.2}}]
-    for resolved in cases:
-        identity, text = canonical_configs(resolved)
-        assert identity == canonical_config(resolved)
-        assert text == canonical_config(resolved, limits=True)
+    memo: dict = {}
+    for resolved in cases * 2:  # the second time from the memo, for the shared sections
+        expected = canonical_config(resolved), canonical_config(resolved, limits=True)
+        assert canonical_configs(resolved) == expected
+        assert canonical_configs(resolved, memo) == expected
     assert canonical_configs(cases[0])[0] != canonical_configs(cases[0])[1]
+    # a memo never outgrows its bound, and a new object of the same content is encoded
+    for k in range(3 * SECTION_MEMO):
+        resolved = {**config.resolved, "initial_state": {**config.resolved["initial_state"], "omega": [k, 0.5, 1]}}
+        assert canonical_configs(resolved, memo)[0] == canonical_config(resolved)
+    assert len(memo) <= SECTION_MEMO
 
 
 def test_random_reproducible_from_seed_and_prefix_stable():

@@ -356,17 +356,18 @@ def _chunk_results(configs, variants, codes, params, sol, share: float,
         columns = np.empty((N_OUTPUTS, hi - lo, n_samples))
         with np.errstate(all="ignore"):
             run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], columns)
-        block, summaries = {}, {}
+        block, summaries, times = {}, {}, {}
         # the runs of a chunk share the state size, so the same named outputs; runs with
         # the same sample times get their numerical dv/dt and summaries at once (the same
-        # numbers as each alone)
+        # numbers as each alone), and one array of those times
         by_t_end: dict[float, list[int]] = {}
         for j in range(lo, hi):
             by_t_end.setdefault(configs[j].simulation.t_end, []).append(j)
         for t_end, members in by_t_end.items():
             part = columns if len(members) == hi - lo else columns[:, [j - lo for j in members]]
             outputs = split_outputs(part, variants[lo].layout)
-            time = np.linspace(0.0, t_end, n_samples)
+            time = times[t_end] = np.linspace(0.0, t_end, n_samples)
+            time.flags.writeable = False  # shared by the runs' results
             outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
             for i, (j, summary) in enumerate(zip(members, summarize_many(time, outputs))):
                 block[j] = {key: value[i] for key, value in outputs.items()}
@@ -374,12 +375,11 @@ def _chunk_results(configs, variants, codes, params, sol, share: float,
         per_run = (_time.perf_counter() - t0) / (hi - lo)
         for j in range(lo, hi):
             config = configs[j]
-            time = np.linspace(0.0, config.simulation.t_end, n_samples)
             status = int(sol.status[j])
             outputs = block.pop(j)
             yield j, RunResult(
                 config=config,
-                time=time,
+                time=times[config.simulation.t_end],
                 outputs=outputs,
                 status="success" if status == 0 else "failed",
                 message=status_message(status, float(sol.t_stop[j]), config.simulation.gimbal_margin,

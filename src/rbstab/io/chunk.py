@@ -156,11 +156,15 @@ def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in summary.items():
         if isinstance(value, (list, tuple, np.ndarray)):
-            for axis, v in zip(_AXES, value):
-                out[f"{key}_{axis}"] = float(v)
+            names = _AXIS_NAMES.get(key) or _AXIS_NAMES.setdefault(key, tuple(f"{key}_{a}" for a in _AXES))
+            for name, v in zip(names, value):
+                out[name] = float(v)
         else:
             out[key] = value
     return out
+
+
+_AXIS_NAMES: dict[str, tuple[str, str, str]] = {}  # a vector figure's name -> its columns' names
 
 
 def figure_attributes(column: str) -> tuple[str, str]:
@@ -242,12 +246,14 @@ class ChunkWriter:
         self._stack = ExitStack()
         self._file = None
         self._time: np.ndarray | None = None
+        self._checked_time: np.ndarray | None = None  # a read-only time array found equal to _time
         self._stride = 1
         self._traces: dict[str, tuple[int, ...]] = {}
         self._datasets: dict[str, Any] = {}
         self._numbers: dict[str, np.ndarray] = {}  # numeric variables written whole, for the digest
         self._texts: dict[str, np.ndarray] = {}  # text variables as written, for the digest
         self._written: dict[str, dict] = {}  # object path -> attributes as written, for the digest
+        self._kinds: dict[str, tuple] = {}  # dtype kind -> (HDF5 type, creation properties) of a column
         self._block = WRITE_BLOCK
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="microseconds")
         self.attrs: dict[str, Any] = {
@@ -400,13 +406,20 @@ class ChunkWriter:
         self._block = max(WRITE_BLOCK, WRITE_BYTES // per_run)
 
     def _traces_of(self, run_id: str, result: "RunResult") -> dict[str, np.ndarray]:
-        time = np.asarray(result.time, dtype=float)[:: self._stride]
-        if len(time) != len(self._time) or not np.array_equal(time, self._time):
+        if result.time is not self._checked_time:  # runs of a chunk share their sample times
+            self._check_time(run_id, result.time)
+        return {k: result.outputs[k][:: self._stride] for k in self._traces if k in result.outputs}
+
+    def _check_time(self, run_id: str, time) -> None:
+        time = np.asarray(time, dtype=float)
+        sampled = time[:: self._stride]
+        if len(sampled) != len(self._time) or not np.array_equal(sampled, self._time):
             raise ValueError(
                 f"run {run_id}: its sample times differ from the other runs of {self.path.name}; "
                 "a sweep that varies simulation.t_end or n_samples needs --store summary or --layout run"
             )
-        return {k: result.outputs[k][:: self._stride] for k in self._traces if k in result.outputs}
+        if not time.flags.writeable:  # an array no one changes: the next run with it is not checked again
+            self._checked_time = time
 
     def _flush(self) -> None:
         if not self._pending or not self._traces:
@@ -485,6 +498,28 @@ class ChunkWriter:
                                  for i, v in zip(self.identity, self.values)]
         return {name: columns[name] for name in names}
 
+    def _column_kind(self, dtype: np.dtype) -> tuple:
+        """(HDF5 type, dataset creation properties) of a ``(run,)`` variable of ``dtype``,
+        made once a file for each kind (text, float, int): chunked with Fletcher-32 for
+        numbers, NaN the fill value of floats; attributes in creation order (netCDF-C lists
+        them in HDF5's creation order, as written)."""
+        import h5py
+
+        kind = dtype.kind
+        if kind not in self._kinds:
+            dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+            dcpl.set_attr_creation_order(h5py.h5p.CRT_ORDER_TRACKED | h5py.h5p.CRT_ORDER_INDEXED)
+            if kind == "O":
+                tid = h5py.h5t.py_create(self._str, logical=True)
+            else:
+                tid = h5py.h5t.py_create(dtype)
+                dcpl.set_chunk(fletcher32_chunks((len(self.ids),)))
+                dcpl.set_fletcher32()
+                if kind == "f":
+                    dcpl.set_fill_value(np.array(np.nan))
+            self._kinds[kind] = tid, dcpl
+        return self._kinds[kind]
+
     def _write_column(self, name: str, values: list) -> None:
         """A ``(run,)`` variable: a dataset with the ``run`` dimension scale attached, which is
         what netCDF-4 and h5netcdf read as a variable of dimension ``run``
@@ -494,23 +529,15 @@ class ChunkWriter:
         import h5py
 
         h5 = self._file._h5file
-        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
-        # netCDF-C lists attributes in HDF5's creation order (as written)
-        dcpl.set_attr_creation_order(h5py.h5p.CRT_ORDER_TRACKED | h5py.h5p.CRT_ORDER_INDEXED)
         if name in _TEXT or any(issubclass(t, str) for t in set(map(type, values)) - _NUMBERS):
             data = np.array(["" if v is None else str(v) for v in values], dtype=self._str)
-            tid = h5py.h5t.py_create(self._str, logical=True)
             self._texts[name] = data
         else:
             data = np.array(values, dtype=float)  # None -> NaN
             if name.startswith("solver_") and np.all(np.isfinite(data)):
                 data = data.astype(np.int64)
-            tid = h5py.h5t.py_create(data.dtype)
-            dcpl.set_chunk(fletcher32_chunks(data.shape))
-            dcpl.set_fletcher32()
-            if data.dtype.kind == "f":
-                dcpl.set_fill_value(np.array(np.nan))
             self._numbers[name] = data
+        tid, dcpl = self._column_kind(data.dtype)
         dsid = h5py.h5d.create(h5.id, name.encode(), tid, h5py.h5s.create_simple(data.shape), dcpl=dcpl)
         dsid.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
         h5py.h5ds.attach_scale(dsid, self._run_scale, 0)

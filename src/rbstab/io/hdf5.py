@@ -33,6 +33,7 @@ Fletcher-32 checksum and the file the SHA-256 of its attributes and text
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -131,22 +132,62 @@ _CANONICAL = json.JSONEncoder(sort_keys=True, separators=(",", ":"), allow_nan=T
 _canonical_json = _CANONICAL.encode
 
 
-def canonical_configs(resolved) -> tuple[str, str]:
-    """``(canonical_config(resolved), canonical_config(resolved, limits=True))``, the same
-    texts, for little more than the cost of one: the text with the limits is encoded,
-    and when ``simulation`` is its last section (the keys are sorted: ``body``,
-    ``controller``, ``initial_state``, ``simulation``) that section is replaced by its
-    encoding without them. A sweep's plan takes both (the hash and the text a store file
-    holds), so a worker does not encode the config again."""
-    full = canonical_config(resolved, limits=True)
+def canonical_configs(resolved, memo: dict | None = None) -> tuple[str, str]:
+    """``(canonical_config(resolved), canonical_config(resolved, limits=True))``: the same
+    texts, for about the cost of one. A sweep's plan takes both (the run's hash and the text
+    its store file holds), so a worker does not encode the config again.
+
+    ``memo``: a dict a caller keeps while it encodes many configs that share section
+    objects which no one changes (a sweep's plan: the runs of a base share its ``body``,
+    ``controller`` and ``simulation`` where they are not varied): a section met again (the
+    same object) is not encoded again; it holds the last :data:`SECTION_MEMO` sections.
+    Without it, the text with the limits is encoded once and its ``simulation`` section
+    (the last, keys being sorted) replaced by its encoding without them.
+    """
     sim = resolved.get("simulation")
-    if not isinstance(sim, dict) or not any(k in sim for k in RUN_LIMIT_KEYS):
+    limited = isinstance(sim, dict) and any(k in sim for k in RUN_LIMIT_KEYS)
+    keys = sorted(k for k in resolved if k != "name") if all(type(k) is str for k in resolved) else None
+    if memo is None or keys is None:
+        full = canonical_config(resolved, limits=True)
+        if not limited:
+            return full, full
+        tail = '"simulation":' + _canonical_json(sim) + "}"
+        if not full.endswith(tail):
+            return canonical_config(resolved), full
+        short = _canonical_json({k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS})
+        return full[: -len(tail)] + '"simulation":' + short + "}", full
+    # "{key:value,...}" in sorted key order, as json.dumps(sort_keys=True) joins them
+    parts = [f"{_key_json(k)}:{_section_json(resolved[k], memo)}" for k in keys]
+    full = "{" + ",".join(parts) + "}"
+    if not limited:
         return full, full
-    tail = '"simulation":' + _canonical_json(sim) + "}"
-    if not full.endswith(tail):
-        return canonical_config(resolved), full
-    short = _canonical_json({k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS})
-    return full[: -len(tail)] + '"simulation":' + short + "}", full
+    parts[keys.index("simulation")] = '"simulation":' + _section_json(sim, memo, short=True)
+    return "{" + ",".join(parts) + "}", full
+
+
+#: A key's JSON (a config has a few keys, met again in every run).
+_key_json = functools.lru_cache(maxsize=256)(_canonical_json)
+
+#: Sections a :func:`canonical_configs` memo holds (the oldest is dropped).
+SECTION_MEMO = 32
+
+
+def _section_json(value, memo: dict, short: bool = False) -> str:
+    """A section's canonical JSON (``short``: a ``simulation`` section without its run
+    limits), from ``memo`` when the same object was encoded before."""
+    key = (id(value), short)
+    hit = memo.get(key)
+    if hit is not None and hit[0] is value:
+        return hit[1]
+    if short:
+        text = _canonical_json({k: v for k, v in value.items() if k not in RUN_LIMIT_KEYS})
+    else:
+        text = _canonical_json(value)
+    if isinstance(value, (dict, list)):  # containers only: the memo holds the object, so its id stays its own
+        if len(memo) >= SECTION_MEMO:
+            del memo[next(iter(memo))]
+        memo[key] = (value, text)
+    return text
 
 
 def config_hash(text: str) -> str:

@@ -265,6 +265,11 @@ def _own_path(data: dict, key: str, fresh: set) -> None:
         node = child
 
 
+#: Key of the planning cache under which :func:`rbstab.io.hdf5.canonical_configs` keeps the
+#: canonical JSON of the sections it met.
+_SECTION_TEXTS = ("canonical JSON of sections",)
+
+
 def _plan_run(
     spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict | None
 ) -> tuple["PlannedRun | None", list[str]]:
@@ -314,7 +319,9 @@ def _plan_run(
         return None, exc.errors
     from ..io.hdf5 import canonical_configs, config_hash
 
-    identity, text = canonical_configs(first.resolved)
+    # the runs of a base share the objects of its sections that are not varied: each
+    # of them is encoded once (the cache lives for one planning pass)
+    identity, text = canonical_configs(first.resolved, cache.setdefault(_SECTION_TEXTS, {}))
     digest = config_hash(identity)
     rid = run_id(index, spec.n_runs, digest)
     # only the name changes: no need to validate again
