@@ -167,6 +167,15 @@ def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
 _AXIS_NAMES: dict[str, tuple[str, str, str]] = {}  # a vector figure's name -> its columns' names
 
 
+def _column_bytes(values: list) -> int:
+    """About the bytes of a ``(run,)`` column: 8 a value, plus its text (the types are
+    looked at first: most columns hold none)."""
+    n = 8 * len(values)
+    if set(map(type, values)) - _NUMBERS:
+        n += sum(len(v) for v in values if isinstance(v, str))
+    return n
+
+
 def figure_attributes(column: str) -> tuple[str, str]:
     """(units, long name) of a per-run column (a summary figure component or :data:`PER_RUN`)."""
     if column in PER_RUN:
@@ -453,8 +462,7 @@ class ChunkWriter:
         f = self._file
         columns = self._columns()
         # 8 bytes a value, plus the text (the config column is most of it)
-        self._room(sum(8 * len(values) + sum(len(v) for v in values if isinstance(v, str))
-                       for values in columns.values()))
+        self._room(sum(map(_column_bytes, columns.values())))
         self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         self._run_scale = f._h5file["run"].id
         for name, values in columns.items():

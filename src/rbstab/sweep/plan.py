@@ -319,9 +319,11 @@ def _plan_run(
         return None, exc.errors
     from ..io.hdf5 import canonical_configs, config_hash
 
-    # the runs of a base share the objects of its sections that are not varied: each
-    # of them is encoded once (the cache lives for one planning pass)
-    identity, text = canonical_configs(first.resolved, cache.setdefault(_SECTION_TEXTS, {}))
+    # runs that differ only in their initial state share their base's other sections (the
+    # same objects): each is encoded once (the cache lives for one planning pass); the
+    # sections of runs validated whole are new objects, encoded in one piece
+    memo = None if validated is None else cache.setdefault(_SECTION_TEXTS, {})
+    identity, text = canonical_configs(first.resolved, memo)
     digest = config_hash(identity)
     rid = run_id(index, spec.n_runs, digest)
     # only the name changes: no need to validate again
