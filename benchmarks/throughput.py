@@ -11,7 +11,9 @@ Case 3 of the paper (embedded, eq 22; ``configs/paper/case3_embedded.yaml``: DOP
   ``initial-state`` (Omega ~ N((16, 32, -16), 4^2)), ``parameter`` (mass and inertia x
   U(0.5, 1.5), K_c and L_c x U(0.5, 2), K_t x U(0.7, 1.4), random Omega: every run a
   different config) and ``variants`` (the five variants x random Omega); ratio = N x
-  baseline per-run time / sweep wall time.
+  baseline per-run time / sweep wall time. The machine (a shared VM) changes speed by up
+  to 1.6x within minutes: each sweep is also compared with the baseline of its moment,
+  ``--local-n`` baseline runs just before and just after it (``local`` column).
 - **accuracy**: the largest difference of the final states of 50 runs, the compiled engine's
   and the baseline's, from an rtol 1e-10 reference.
 - **run**: ``rbstab run configs/paper/case3_embedded.yaml`` warm (best of 3) and cold (an empty
@@ -21,7 +23,8 @@ Case 3 of the paper (embedded, eq 22; ``configs/paper/case3_embedded.yaml``: DOP
 
 Usage::
 
-    python benchmarks/throughput.py [--n 1000 10000] [--jobs 2] [--baseline-n 30] [--memory-n 100000]
+    python benchmarks/throughput.py [--n 1000 10000] [--jobs 2] [--baseline-n 30] [--local-n 5]
+                                    [--memory-n 100000]
 """
 
 from __future__ import annotations
@@ -183,27 +186,38 @@ def accuracy(n=50) -> tuple[float, float]:
     return worst_c, worst_b
 
 
+def baseline_time(n: int) -> float:
+    """Seconds a run of the baseline takes now: the mean of ``n`` runs."""
+    start = time.perf_counter()
+    for w in omegas(n):
+        baseline_run(w)
+    return (time.perf_counter() - start) / n
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--n", type=int, nargs="+", default=[1000, 10000])
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--baseline-n", type=int, default=30)
+    parser.add_argument("--local-n", type=int, default=5)
     parser.add_argument("--memory-n", type=int, default=100_000)
     args = parser.parse_args()
 
     run_case3()  # warm the compile cache (compiles once if it is cold) and the bytecode caches
-    start = time.perf_counter()
-    for w in omegas(args.baseline_n):
-        baseline_run(w)
-    per_run = (time.perf_counter() - start) / args.baseline_n
+    per_run = baseline_time(args.baseline_n)
     print(f"baseline: solve_ivp + numpy rhs, {per_run * 1e3:.1f} ms per run ({args.baseline_n} runs, one core)")
-    print(f"{'sweep':<15} {'N':>7} {'wall [s]':>9} {'runs/s':>8} {'ratio':>7}")
+    print(f"{'sweep':<15} {'N':>7} {'wall [s]':>9} {'runs/s':>8} {'ratio':>7} {'local baseline':>15} {'local':>6}")
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
+        before = baseline_time(args.local_n)
         for n in args.n:
             for kind in ("initial-state", "parameter", "variants"):
                 wall, runs = sweep(kind, n, args.jobs, folder)
-                print(f"{kind:<15} {runs:>7} {wall:>9.2f} {runs / wall:>8.0f} {runs * per_run / wall:>6.0f}x", flush=True)
+                after = baseline_time(args.local_n)
+                local = (before + after) / 2
+                print(f"{kind:<15} {runs:>7} {wall:>9.2f} {runs / wall:>8.0f} {runs * per_run / wall:>6.0f}x "
+                      f"{local * 1e3:>12.1f} ms {runs * local / wall:>5.0f}x", flush=True)
+                before = after
         warm = min(run_case3() for _ in range(3))
         with tempfile.TemporaryDirectory() as cache:
             cold = run_case3(dict(os.environ, NUMBA_CACHE_DIR=cache))

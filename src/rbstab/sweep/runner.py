@@ -591,8 +591,9 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
                      "message": f"{type(exc).__name__}: {exc}"}
                     for t in chunk
                 ]
+            present: dict[str, bool] = {}  # path -> whether the file exists (a chunk's runs share one)
             for rec in records:
-                _record(rec, by_id.pop(rec["run_id"]), runs_dir, attrs, errors, outcome, counts)
+                _record(rec, by_id.pop(rec["run_id"]), runs_dir, attrs, errors, outcome, counts, present)
             bar.set_postfix_str(f"done {counts['ok']}, failed {counts['bad']}", refresh=False)
             bar.update(len(records))
     finally:
@@ -602,13 +603,20 @@ def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor,
 
 
 def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict, outcome: SweepOutcome,
-            counts: dict) -> None:
-    """Take a worker's record of ``run``: its stored row into ``attrs``, or its error."""
+            counts: dict, present: dict[str, bool] | None = None) -> None:
+    """Take a worker's record of ``run``: its stored row into ``attrs``, or its error.
+
+    ``present``: path -> whether that file exists, for the records of one chunk (its runs
+    share a store file: one ``stat`` a chunk instead of one a run)."""
     rid = rec["run_id"]
+    present = {} if present is None else present
     if rec.get("data") is not None:
         write_bytes_atomic(rec["path"], rec["data"])
-    path = Path(rec["path"])
-    if not path.exists():
+        present[rec["path"]] = True
+    exists = present.get(rec["path"])
+    if exists is None:
+        exists = present[rec["path"]] = os.path.exists(rec["path"])
+    if not exists:
         a = None
     elif rec.get("attrs") is not None and rec["status"] != "error":
         a = rec["attrs"]  # what the worker just wrote: no need to reopen the file
