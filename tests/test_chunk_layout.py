@@ -170,6 +170,28 @@ def test_chunk_writer_is_atomic(tmp_path):
     assert not target.exists()
 
 
+def test_chunk_writer_refuses_traces_of_another_shape(tmp_path):
+    """A run whose trace has another shape than the file's is refused by name (not spread
+    over the row), and nothing is left behind."""
+    import dataclasses
+    import warnings
+
+    from rbstab.config import load_config
+    from rbstab.simulate import simulate
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
+        config = load_config(CASE3, ["simulation.n_samples=101", "simulation.t_end=0.1"])
+    good = simulate(config)
+    bad = dataclasses.replace(good, outputs={**good.outputs, "theta": good.outputs["theta"][0]})
+    target = tmp_path / "chunk-x.h5"
+    with pytest.raises(ValueError, match=r"run r1: 'theta' has shape \(3,\)"):
+        with ChunkWriter(target, [StoreRow(0, "r0"), StoreRow(1, "r1")], store="full") as writer:
+            writer.add("r0", good)
+            writer.add("r1", bad)
+    assert not target.exists() and not list(tmp_path.iterdir())
+
+
 def test_report_and_show_read_chunk_sweeps(tmp_path):
     s = spec(3)
     out = run_sweep(s, tmp_path / "sweeps", jobs=1, layout="chunk", progress=False)

@@ -153,6 +153,24 @@ def test_canonical_configs_are_the_two_canonical_texts():
     assert len(memo) <= SECTION_MEMO
 
 
+def test_canonical_configs_memo_encodes_a_shared_section_once(monkeypatch):
+    """Runs that share their sections' objects (an initial-state sweep) encode each once,
+    however many runs with their own initial state come between."""
+    import rbstab.io.hdf5 as hdf5
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
+        resolved = load_config(CASE3).resolved
+    encoded = []
+    encode = hdf5._canonical_json
+    monkeypatch.setattr(hdf5, "_canonical_json", lambda value: encoded.append(id(value)) or encode(value))
+    memo: dict = {}
+    for k in range(5 * SECTION_MEMO):
+        run = {**resolved, "initial_state": {**resolved["initial_state"], "omega": [k, 0.5, 1.0]}}
+        assert canonical_configs(run, memo) == (canonical_config(run), canonical_config(run, limits=True))
+    assert encoded.count(id(resolved["body"])) == 1 and encoded.count(id(resolved["controller"])) == 1
+
+
 def test_random_reproducible_from_seed_and_prefix_stable():
     a = expand(spec_from_mapping(full_spec()))
     b = expand(spec_from_mapping(full_spec()))

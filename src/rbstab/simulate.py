@@ -69,7 +69,9 @@ class RunResult:
     config : RunConfig
         The validated configuration that was run.
     time : ndarray, shape (n_samples,)
-        Sample times [s], evenly spaced on [0, t_end].
+        Sample times [s], evenly spaced on [0, t_end]. From :func:`simulate_many`'s
+        compiled engine, a read-only array that the results of a block of runs with the
+        same ``t_end`` share (copy it to change it).
     outputs : dict of str -> ndarray
         Every variable of the result file, shape (n_samples, 3) or (n_samples,): state
         blocks, constraint quantities, controls, ``lyapunov``, ``lyapunov_rate``,
@@ -425,7 +427,8 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     :func:`simulate` one by one. A run's result does not depend on the other runs of the
     call. The calls of a kind of run fill one buffer of trajectories (``chunk_size *
     n_samples * n_state`` floats; nothing a result holds points into it), and the outputs
-    are evaluated :data:`POSTPROCESS_BLOCK` runs at a time. Each result's
+    are evaluated :data:`POSTPROCESS_BLOCK` runs at a time (the runs of a block with the
+    same ``t_end`` share one read-only ``time`` array). Each result's
     ``wall_time`` is its share of its call's integration plus its own post-processing [s]
     (split in ``timing``). ``timeout`` [s], if given, replaces each run's
     ``simulation.max_wall_time``.

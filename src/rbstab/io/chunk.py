@@ -38,6 +38,7 @@ the per-run values, :func:`rbstab.io.integrity.verify_file` everything.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import math
 import os
 import sys
@@ -120,9 +121,10 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
     """
     import h5py
 
+    str_type, scalar = _h5_constants()
     for key, value in attrs.items():
         if isinstance(value, str):
-            tid, data = _STR_TYPE[0], np.array(value, dtype=h5py.string_dtype())
+            tid, data = str_type, np.array(value, dtype=h5py.string_dtype())
         elif type(value) in (int, float):
             data = np.array(value, dtype=np.int64 if type(value) is int else np.float64)
             tid = h5py.h5t.py_create(data.dtype)
@@ -130,7 +132,7 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
             h5py.AttributeManager(h5py.Group(obj_id) if isinstance(obj_id, h5py.h5g.GroupID) else
                                   h5py.Dataset(obj_id))[key] = value
             continue
-        aid = h5py.h5a.create(obj_id, key.encode(), tid, _SCALAR[0])
+        aid = h5py.h5a.create(obj_id, key.encode(), tid, scalar)
         try:
             aid.write(data)
         finally:
@@ -139,16 +141,12 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
             written[key] = data
 
 
-def _h5_constants() -> None:
-    """The string type and scalar space of :func:`_put_attributes` (made once, on first use)."""
+@functools.cache
+def _h5_constants() -> tuple:
+    """(variable-length UTF-8 string type, scalar space) of :func:`_put_attributes`, made once."""
     import h5py
 
-    _STR_TYPE.append(h5py.h5t.py_create(h5py.string_dtype(), logical=True))
-    _SCALAR.append(h5py.h5s.create(h5py.h5s.SCALAR))
-
-
-_STR_TYPE: list = []
-_SCALAR: list = []
+    return h5py.h5t.py_create(h5py.string_dtype(), logical=True), h5py.h5s.create(h5py.h5s.SCALAR)
 
 
 def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
@@ -282,8 +280,6 @@ class ChunkWriter:
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
         import h5py
 
-        if not _STR_TYPE:
-            _h5_constants()
         self._str = h5py.string_dtype()
         f = self._file
         f.dimensions["run"] = len(self.ids)
@@ -427,7 +423,9 @@ class ChunkWriter:
                 f"run {run_id}: its sample times differ from the other runs of {self.path.name}; "
                 "a sweep that varies simulation.t_end or n_samples needs --store summary or --layout run"
             )
-        if not time.flags.writeable:  # an array no one changes: the next run with it is not checked again
+        # a read-only array (simulate_many's runs of a block share one, never changed) is
+        # not compared again for the next run that has it
+        if not time.flags.writeable:
             self._checked_time = time
 
     def _flush(self) -> None:
@@ -441,8 +439,14 @@ class ChunkWriter:
             # C-contiguous (a run's vectors are strided views of the outputs): HDF5 and the
             # data digest then take the block as it is, without a copy each (~40 % of them)
             block = np.empty((len(rows), *shape))
-            for r, (_, o) in enumerate(self._pending):
-                block[r] = np.nan if o is None or name not in o else o[name]
+            for r, (i, o) in enumerate(self._pending):
+                if o is None or name not in o:
+                    block[r] = np.nan
+                elif np.shape(o[name]) == shape:
+                    block[r] = o[name]
+                else:
+                    raise ValueError(f"run {self.ids[i]}: '{name}' has shape {np.shape(o[name])}; "
+                                     f"the other runs of {self.path.name} have {shape}")
             var = self._datasets[name]
             if rows == list(range(rows[0], rows[-1] + 1)):
                 var[rows[0] : rows[-1] + 1] = block

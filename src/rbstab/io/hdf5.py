@@ -140,7 +140,8 @@ def canonical_configs(resolved, memo: dict | None = None) -> tuple[str, str]:
     ``memo``: a dict a caller keeps while it encodes many configs that share section
     objects which no one changes (a sweep's plan: the runs of a base share its ``body``,
     ``controller`` and ``simulation`` where they are not varied): a section met again (the
-    same object) is not encoded again; it holds the last :data:`SECTION_MEMO` sections.
+    same object) is not encoded again; it holds the :data:`SECTION_MEMO` sections met
+    most recently.
     Without it, the text with the limits is encoded once and its ``simulation`` section
     (the last, keys being sorted) replaced by its encoding without them.
     """
@@ -168,7 +169,7 @@ def canonical_configs(resolved, memo: dict | None = None) -> tuple[str, str]:
 #: A key's JSON (a config has a few keys, met again in every run).
 _key_json = functools.lru_cache(maxsize=256)(_canonical_json)
 
-#: Sections a :func:`canonical_configs` memo holds (the oldest is dropped).
+#: Sections a :func:`canonical_configs` memo holds (the least recently met is dropped).
 SECTION_MEMO = 32
 
 
@@ -178,6 +179,7 @@ def _section_json(value, memo: dict, short: bool = False) -> str:
     key = (id(value), short)
     hit = memo.get(key)
     if hit is not None and hit[0] is value:
+        memo[key] = memo.pop(key)  # the newest again: the shared sections stay, each run's own go
         return hit[1]
     if short:
         text = _canonical_json({k: v for k, v in value.items() if k not in RUN_LIMIT_KEYS})

@@ -265,20 +265,18 @@ def _own_path(data: dict, key: str, fresh: set) -> None:
         node = child
 
 
-#: Key of the planning cache under which :func:`rbstab.io.hdf5.canonical_configs` keeps the
-#: canonical JSON of the sections it met.
-_SECTION_TEXTS = ("canonical JSON of sections",)
-
-
 def _plan_run(
-    spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict | None
+    spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict | None,
+    texts: dict | None = None,
 ) -> tuple["PlannedRun | None", list[str]]:
     """Set the varied values on a copy of ``base``, validate, name the run by its id.
 
     ``validated`` (None: every run is validated whole) maps a base's label to the validated
     config of its first run, when the sweep varies nothing outside ``initial_state``: the
     base's other runs differ from it only there and are validated by
-    :meth:`RunConfig.with_initial_state` (same result, ~10x cheaper).
+    :meth:`RunConfig.with_initial_state` (same result, ~10x cheaper). ``texts``: the
+    :func:`rbstab.io.hdf5.canonical_configs` memo of the planning pass, where the runs
+    share their base's sections (``validated`` given).
     """
     from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 
@@ -320,10 +318,9 @@ def _plan_run(
     from ..io.hdf5 import canonical_configs, config_hash
 
     # runs that differ only in their initial state share their base's other sections (the
-    # same objects): each is encoded once (the cache lives for one planning pass); the
-    # sections of runs validated whole are new objects, encoded in one piece
-    memo = None if validated is None else cache.setdefault(_SECTION_TEXTS, {})
-    identity, text = canonical_configs(first.resolved, memo)
+    # same objects): each is encoded once; the sections of runs validated whole are new
+    # objects, encoded in one piece
+    identity, text = canonical_configs(first.resolved, texts if validated is not None else None)
     digest = config_hash(identity)
     rid = run_id(index, spec.n_runs, digest)
     # only the name changes: no need to validate again
@@ -362,6 +359,7 @@ def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
     # runs of a base that differ only in their initial state share its validation
     per_run_only = all(key.split(".")[0] in PER_RUN_SECTIONS for key in spec.varied_keys)
     validated: dict | None = {} if per_run_only else None
+    texts: dict = {}  # canonical JSON of the shared sections (rbstab.io.hdf5.canonical_configs)
     index = 0
     for sample in samples:
         for base, point, z in itertools.product(spec.bases, grid_points, range(n_zip)):
@@ -370,7 +368,7 @@ def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
             params.update({k: v for k, v in sample.items() if k not in scaled})
             factors = {k: v for k, v in sample.items() if k in scaled}
             shown = dict(params)  # what the user varied, for a message
-            run, problems = _plan_run(spec, base, params, factors, index, cache, validated)
+            run, problems = _plan_run(spec, base, params, factors, index, cache, validated, texts)
             yield run if run is not None else InvalidRun(index, base.label, shown, problems)
             index += 1
 
