@@ -62,7 +62,7 @@ def _report(config, path: Path, mode: str) -> dict:
                       "message": attrs["message"], "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
                       "replaced": _REPLACED[mode], "summary": s})
     console.out(
-        f"{config.name}: {attrs['status']} ({config.variant}, {attrs['wall_time']:.2f} s) "
+        f"{config.name}: {attrs['status']} ({config.variant}, {attrs['wall_time']:.3g} s) "
         f"v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
         f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E| {max(s['max_abs_constraint_error']):.3g} m, "
         f"rate check {s['lyapunov_rate_check']} -> {path}"
