@@ -229,7 +229,8 @@ class IndexRows(MutableMapping):
         self._picks: dict[tuple, tuple[tuple, Callable[[tuple], tuple]]] = {}
 
     def __setitem__(self, run_id: str, row: Mapping[str, Any]) -> None:
-        row = index_part(row)
+        if any(key in row for key in NOT_IN_INDEX):  # most rows come without (a worker's record)
+            row = index_part(row)
         names = tuple(row)
         # the values end with a None: the value of a column the row does not have
         self._rows[run_id] = (self._columns.setdefault(names, names), (*row.values(), None))
