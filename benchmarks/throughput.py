@@ -202,6 +202,8 @@ def main() -> None:
     parser.add_argument("--local-n", type=int, default=5)
     parser.add_argument("--memory-n", type=int, default=100_000)
     args = parser.parse_args()
+    if args.baseline_n < 1 or args.local_n < 1:
+        parser.error("--baseline-n and --local-n: at least 1 run each")
 
     run_case3()  # warm the compile cache (compiles once if it is cold) and the bytecode caches
     per_run = baseline_time(args.baseline_n)

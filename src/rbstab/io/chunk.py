@@ -154,22 +154,22 @@ def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in summary.items():
         if isinstance(value, (list, tuple, np.ndarray)):
-            names = _AXIS_NAMES.get(key) or _AXIS_NAMES.setdefault(key, tuple(f"{key}_{a}" for a in _AXES))
-            for name, v in zip(names, value):
-                out[name] = float(v)
+            for axis, v in zip(_AXES, value):
+                out[f"{key}_{axis}"] = float(v)
         else:
             out[key] = value
     return out
 
 
-_AXIS_NAMES: dict[str, tuple[str, str, str]] = {}  # a vector figure's name -> its columns' names
+def _has_text(values: list) -> bool:
+    """Whether a ``(run,)`` column holds a str (its types looked at once: most hold numbers)."""
+    return any(issubclass(t, str) for t in set(map(type, values)) - _NUMBERS)
 
 
 def _column_bytes(values: list) -> int:
-    """About the bytes of a ``(run,)`` column: 8 a value, plus its text (the types are
-    looked at first: most columns hold none)."""
+    """About the bytes of a ``(run,)`` column: 8 a value, plus its text."""
     n = 8 * len(values)
-    if set(map(type, values)) - _NUMBERS:
+    if _has_text(values):
         n += sum(len(v) for v in values if isinstance(v, str))
     return n
 
@@ -541,7 +541,7 @@ class ChunkWriter:
         import h5py
 
         h5 = self._file._h5file
-        if name in _TEXT or any(issubclass(t, str) for t in set(map(type, values)) - _NUMBERS):
+        if name in _TEXT or _has_text(values):
             data = np.array(["" if v is None else str(v) for v in values], dtype=self._str)
             self._texts[name] = data
         else:
