@@ -34,6 +34,38 @@ def test_rk_tableaus_are_scipys():
     assert tableaus.TOO_SMALL_STEP_MESSAGE == OdeSolver.TOO_SMALL_STEP
 
 
+def test_method_tables_hold_each_tableau_zero_padded():
+    """The compiled engine's per-method tables (rbstab.engine.rk) are the tableaus of
+    rbstab.engine.tableaus, each in its method's row, zero beyond it."""
+    from rbstab.engine import method_number, rk
+
+    def row(table, method, expected):
+        got = table[method_number(method)]
+        window = tuple(slice(0, n) for n in expected.shape)
+        np.testing.assert_array_equal(got[window], expected, err_msg=method)
+        rest = got.copy()
+        rest[window] = 0.0
+        assert not rest.any(), method
+
+    assert rk.METHODS == METHODS and METHODS[rk.DOP853] == "DOP853"
+    for method in METHODS:
+        t, m = tableaus.TABLEAUS[method], method_number(method)
+        assert (rk.N_STAGES[m], rk.ERROR_ORDER[m]) == (t.n_stages, t.error_estimator_order)
+        row(rk.RK_B, method, t.B)
+        if method == "DOP853":
+            row(rk.RK_A, method, tableaus.DOP853_EXTENDED.A)
+            assert (rk.STAGE_ROWS[m], rk.INTERPOLANT_ROWS[m]) == (16, 7)
+            for ours, theirs in ((rk.DOP853_E3, t.E3), (rk.DOP853_E5, t.E5), (rk.DOP853_D, t.D)):
+                np.testing.assert_array_equal(ours, theirs)
+        else:
+            row(rk.RK_A, method, t.A)
+            row(rk.RK_E, method, t.E)
+            row(rk.RK_P, method, t.P)
+            assert (rk.STAGE_ROWS[m], rk.INTERPOLANT_ROWS[m]) == (t.n_stages + 1, t.P.shape[1])
+    with pytest.raises(ValueError, match="method: found 'Radau'"):
+        method_number("Radau")
+
+
 def _variant(name):
     return VARIANTS[name](paper_body(GRAVITY.get(name, (0.0, 0.0, 0.0))), paper_gains())
 

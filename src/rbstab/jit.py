@@ -4,8 +4,9 @@ Every compiled function of rbstab is decorated with :func:`jit` (``numba.njit`` 
 ``cache=True``). Numba keys a cached function on its own source file only, so a change to
 a function it calls in another file would leave a stale kernel in the cache; rbstab
 therefore keeps its cache in a folder named after a digest of every source file that
-compiles code, their folder and numba's version: ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if that variable
-is set, else ``$XDG_CACHE_HOME/rbstab/numba-<digest>`` (``~/.cache``). A new version of
+compiles code (and of ``engine/tableaus.py``, whose numbers the kernels compile in as
+constants), their folder and numba's version: ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if
+that variable is set, else ``$XDG_CACHE_HOME/rbstab/numba-<digest>`` (``~/.cache``). A new version of
 the code compiles once, into a new folder.
 
 :func:`ensure_compiled` compiles the entry points (the integrator and the outputs) the first
@@ -28,6 +29,8 @@ _PACKAGE = Path(__file__).resolve().parent
 _MARKER = "from .jit import jit"
 _MARKER_UP = "from ..jit import jit"
 _WARM_FILE = "warm"
+#: Files without compiled code whose module constants the kernels compile in.
+_COMPILED_IN = ("engine/tableaus.py",)
 
 
 def _source_digest() -> str:
@@ -36,7 +39,9 @@ def _source_digest() -> str:
     digest = hashlib.sha256(numba.__version__.encode() + str(_PACKAGE).encode())
     for path in sorted(_PACKAGE.rglob("*.py")):
         text = path.read_bytes()
-        if path.name == "jit.py" or _MARKER.encode() in text or _MARKER_UP.encode() in text:
+        name = path.relative_to(_PACKAGE).as_posix()
+        compiles = _MARKER.encode() in text or _MARKER_UP.encode() in text
+        if path.name == "jit.py" or name in _COMPILED_IN or compiles:
             digest.update(str(path.relative_to(_PACKAGE)).encode())
             digest.update(text)
     return digest.hexdigest()[:16]

@@ -16,33 +16,30 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .tableaus import DOP853_EXTENDED, SUCCESS_MESSAGE, TABLEAUS, TOO_SMALL_STEP_MESSAGE
+from .tableaus import SUCCESS_MESSAGE, TABLEAUS, TOO_SMALL_STEP_MESSAGE
 
-__all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "tableau", "integrate_runs", "status_message", "warm_up"]
+__all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message", "warm_up"]
 
-#: The methods of the compiled engine.
+#: The methods of the compiled engine (in the order of their numbers, :func:`method_number`).
 METHODS = tuple(TABLEAUS)
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).
 DEFAULT_MAX_STEPS = 10_000_000
 
-_EMPTY_1 = np.zeros(0)
-_EMPTY_2 = np.zeros((0, 0))
 
 
-def tableau(method: str) -> tuple:
-    """The compiled engine's tableau tuple for ``method`` (see :mod:`rbstab.engine.rk`).
+def method_number(method: str) -> int:
+    """The compiled engine's number of ``method``: its index in :data:`METHODS`, the rows of
+    its tableau in :mod:`rbstab.engine.rk`'s tables.
 
     Raises
     ------
-    KeyError
+    ValueError
         For a method not in :data:`METHODS`.
     """
-    t = TABLEAUS[method]
-    if method == "DOP853":
-        return (True, t.error_estimator_order, t.n_stages, DOP853_EXTENDED.A, t.B, DOP853_EXTENDED.C,
-                _EMPTY_1, t.E3, t.E5, _EMPTY_2, t.D)
-    return (False, t.error_estimator_order, t.n_stages, t.A, t.B, t.C, t.E, _EMPTY_1, _EMPTY_1, t.P, _EMPTY_2)
+    if method not in METHODS:
+        raise ValueError(f"method: found {method!r}; the compiled engine has {', '.join(METHODS)}")
+    return METHODS.index(method)
 
 
 @dataclass
@@ -117,7 +114,7 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     n_steps = np.empty(k, dtype=np.int64)
     with np.errstate(all="ignore"):
         integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings),
-                        tableau(method), samples, status, t_stop, nfev, n_steps)
+                        method_number(method), samples, status, t_stop, nfev, n_steps)
     return ChunkSolution(samples, status, t_stop, nfev, n_steps)
 
 

@@ -28,7 +28,8 @@ from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
 from . import tableaus
-from .rk import dense_coefficients, dense_value, error_norm, initial_step, rk_step
+from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
+                 error_norm, initial_step, rk_step)
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY"]
 
@@ -90,13 +91,13 @@ def sample_time(j, n, t_end):
 
 
 @jit
-def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, tableau, K, y_new, scale, work):
+def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work):
     """One accepted step from (t, y) with rate f (scipy's ``_step_impl``).
 
     Returns (status, t_new, h, next h_abs, attempts); y_new and its rate K[n_stages] hold
     the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing accepted).
     """
-    error_exponent = -1.0 / (tableau[1] + 1)
+    error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
     min_step = 10 * abs(np.nextafter(t, np.inf) - t)
     h_abs = min(max(h_abs, min_step), max_step)
     rejected = False
@@ -109,11 +110,11 @@ def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, tableau, K, y_new
         t_new = min(t + h_abs, t_end)
         h = t_new - t
         h_abs = abs(h)
-        rk_step(code, p, y, f, h, tableau, K, y_new, work)
+        rk_step(code, p, y, f, h, method, K, y_new, work)
         attempts += 1
         for i in range(y.shape[0]):
             scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
-        norm = error_norm(K, h, scale, tableau)
+        norm = error_norm(K, h, scale, method)
         if norm < 1:
             factor = MAX_FACTOR if norm == 0 else min(MAX_FACTOR, SAFETY * norm**error_exponent)
             if rejected:
@@ -149,7 +150,7 @@ def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
 
 
 @jit
-def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, tableau,
+def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, method,
                   samples):
     """Integrate one run and fill ``samples`` (n_samples, n_state) at linspace(0, t_end).
 
@@ -160,9 +161,9 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     n_samples = samples.shape[0]
-    dop853 = tableau[0]
-    K = np.empty((max(tableau[3].shape[0], tableau[2] + 1), n))
-    Q = np.empty((7 if dop853 else tableau[9].shape[1], n))
+    dop853 = method == DOP853
+    K = np.empty((STAGE_ROWS[method], n))
+    Q = np.empty((INTERPOLANT_ROWS[method], n))
     y = y0.copy()
     f = np.empty(n)
     y_new = np.empty(n)
@@ -171,7 +172,7 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
     samples[:, :] = np.nan
     limit = GIMBAL_LOCK_ANGLE - gimbal_margin
     state_rate(code, y, p, f)
-    h_abs = initial_step(code, p, y, f, t_end, max_step, tableau[1], rtol, atol, y_new, work, scale)
+    h_abs = initial_step(code, p, y, f, t_end, max_step, ERROR_ORDER[method], rtol, atol, y_new, work, scale)
     nfev = 2
     t = 0.0
     j = 0  # next sample
@@ -182,17 +183,17 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps
         status, t_new, h, h_abs, attempts = step(
-            code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, tableau, K, y_new, scale, work
+            code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work
         )
-        nfev += attempts * tableau[2]
+        nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps
         n_steps += 1
-        f_new = K[tableau[2]]
+        f_new = K[N_STAGES[method]]
         t_stop = t_new
         event = _gimbal(y, limit) >= 0 and _gimbal(y_new, limit) <= 0
         if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-            nfev += dense_coefficients(code, p, y, y_new, f_new, h, tableau, K, Q, work)
+            nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, K, Q, work)
         if event:
             t_stop, _ = _locate_event(t, h, y, Q, dop853, limit, work)
         while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
@@ -208,10 +209,11 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
 
 
 @jit
-def integrate_chunk(codes, params, y0, settings, tableau, samples, status, t_stop, nfev, n_steps):
+def integrate_chunk(codes, params, y0, settings, method, samples, status, t_stop, nfev, n_steps):
     """:func:`integrate_run` for every run k of a chunk.
 
     ``codes`` (k,) variant codes; ``params`` (k,) PARAMETERS records; ``y0`` (k, n_state);
+    ``method`` the method's number (:data:`rbstab.engine.rk.METHODS`);
     ``settings`` (k, 7): t_end, rtol, atol, max_step, gimbal_margin, max_steps,
     max_wall_time; ``samples`` (k, n_samples, n_state); ``status``, ``t_stop``, ``nfev``,
     ``n_steps`` (k,) are filled.
@@ -219,5 +221,5 @@ def integrate_chunk(codes, params, y0, settings, tableau, samples, status, t_sto
     for k in range(codes.shape[0]):
         s = settings[k]
         status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(
-            codes[k], params[k], y0[k], s[0], s[1], s[2], s[3], s[4], int(s[5]), s[6], tableau, samples[k]
+            codes[k], params[k], y0[k], s[0], s[1], s[2], s[3], s[4], int(s[5]), s[6], method, samples[k]
         )

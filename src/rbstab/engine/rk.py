@@ -8,9 +8,12 @@ estimates), :func:`dense_coefficients` and :func:`dense_value` are ``_dense_outp
 and the ``DenseOutput`` classes. The right-hand side is the variant's compiled
 :func:`~rbstab.variants.kernels.state_rate` (autonomous: time does not enter).
 
-A tableau travels as the tuple :data:`Tableau` built by :func:`rbstab.engine.tableau`:
-``(dop853, error_order, n_stages, A, B, C, E, E3, E5, P, D)``, with A and C extended to
-DOP853's 16 stages (its dense output's 3 extra stages), unused arrays empty.
+A method travels as its number, its index in :data:`METHODS`; its tableau is the rows of
+that number in the module's tables (:data:`RK_A`, ...), built from
+:mod:`rbstab.engine.tableaus`. Numba compiles global arrays in as constants, so a step
+passes and reference-counts none of them: handed down every call as a tuple of arrays,
+the tableau made numba reference-count each of its arrays in every step and stage, and
+the integration took ~10 % longer (A/B, Case 3).
 """
 
 from __future__ import annotations
@@ -21,8 +24,43 @@ import numpy as np
 
 from ..jit import jit
 from ..variants.kernels import state_rate
+from .tableaus import DOP853_EXTENDED, TABLEAUS
 
-__all__ = ["rms_norm", "initial_step", "rk_step", "error_norm", "dense_coefficients", "dense_value"]
+__all__ = ["METHODS", "DOP853", "rms_norm", "initial_step", "rk_step", "error_norm", "dense_coefficients",
+           "dense_value"]
+
+#: The methods, in the order of their numbers.
+METHODS = tuple(TABLEAUS)
+#: DOP853's number (its error estimate and dense output differ from the other two's).
+DOP853 = METHODS.index("DOP853")
+
+
+def _stacked(arrays, shape: tuple) -> np.ndarray:
+    """The arrays, each zero-padded to ``shape``, stacked along a first axis (a method's row)."""
+    out = np.zeros((len(arrays), *shape))
+    for i, a in enumerate(arrays):
+        out[(i, *(slice(0, n) for n in np.shape(a)))] = a
+    return out
+
+
+_T = [TABLEAUS[m] for m in METHODS]
+#: Stages of a step (scipy's ``n_stages``) and the order of the error estimate, by method.
+N_STAGES = np.array([t.n_stages for t in _T])
+ERROR_ORDER = np.array([t.error_estimator_order for t in _T])
+#: Rows of stage rates a step holds: the step's stages, the new state's rate (FSAL) and
+#: DOP853's 3 dense-output stages.
+STAGE_ROWS = np.array([max(t.n_stages + 1, DOP853_EXTENDED.N_STAGES_EXTENDED if m == "DOP853" else 0)
+                       for m, t in zip(METHODS, _T)])
+#: Rows of a step's interpolant coefficients: RK23/RK45 their P's columns, DOP853 7.
+INTERPOLANT_ROWS = np.array([DOP853_EXTENDED.INTERPOLATOR_POWER if m == "DOP853" else t.P.shape[1]
+                             for m, t in zip(METHODS, _T)])
+#: A (DOP853's extended to its 16 stages), B, and RK23/RK45's E and P, by method, zero-padded.
+RK_A = _stacked([DOP853_EXTENDED.A if m == "DOP853" else t.A for m, t in zip(METHODS, _T)], (16, 16))
+RK_B = _stacked([t.B for t in _T], (max(N_STAGES),))
+RK_E = _stacked([getattr(t, "E", np.zeros(0)) for t in _T], (max(N_STAGES) + 1,))
+RK_P = _stacked([getattr(t, "P", np.zeros((0, 0))) for t in _T], (max(N_STAGES) + 1, max(INTERPOLANT_ROWS)))
+#: DOP853's 3rd- and 5th-order error estimates and its dense output's D.
+DOP853_E3, DOP853_E5, DOP853_D = TABLEAUS["DOP853"].E3, TABLEAUS["DOP853"].E5, TABLEAUS["DOP853"].D
 
 
 @jit
@@ -87,26 +125,27 @@ def _stage_state(y, h, a, K, s, out):
 
 
 @jit
-def rk_step(code, p, y, f, h, tableau, K, y_new, work):
+def rk_step(code, p, y, f, h, method, K, y_new, work):
     """One step from y (rate f) of size h: y_new and its rate in K[n_stages] (scipy's rk_step).
 
-    ``K``: (n_stages + 1 [+ 3 for DOP853], n) stage rates; ``work``: a state-sized array.
+    ``K``: (:data:`STAGE_ROWS`, n) stage rates; ``work``: a state-sized array.
     """
-    n_stages, A, B = tableau[2], tableau[3], tableau[4]
+    n_stages = N_STAGES[method]
     K[0, :] = f
     for s in range(1, n_stages):
-        _stage_state(y, h, A[s], K, s, work)
+        _stage_state(y, h, RK_A[method, s], K, s, work)
         state_rate(code, work, p, K[s])
-    _stage_state(y, h, B, K, n_stages, y_new)
+    _stage_state(y, h, RK_B[method], K, n_stages, y_new)
     state_rate(code, y_new, p, K[n_stages])
 
 
 @jit
-def error_norm(K, h, scale, tableau):
+def error_norm(K, h, scale, method):
     """The scaled RMS norm of the local error estimate (scipy's ``_estimate_error_norm``)."""
-    dop853, n_stages, E, E3, E5 = tableau[0], tableau[2], tableau[6], tableau[7], tableau[8]
+    n_stages = N_STAGES[method]
+    E, E3, E5 = RK_E[method], DOP853_E3, DOP853_E5
     n = scale.shape[0]
-    if not dop853:
+    if method != DOP853:
         total = 0.0
         for i in range(n):
             acc = 0.0
@@ -131,20 +170,20 @@ def error_norm(K, h, scale, tableau):
 
 
 @jit
-def dense_coefficients(code, p, y_old, y_new, f_new, h, tableau, K, Q, work):
+def dense_coefficients(code, p, y_old, y_new, f_new, h, method, K, Q, work):
     """The interpolant of the step from y_old to y_new into ``Q`` (rows of coefficients).
 
-    RK23/RK45: Q = (K' P)' (order + 1 rows); DOP853: its 3 extra stages (3 right-hand-side
+    RK23/RK45: Q = (K' P)' (order rows); DOP853: its 3 extra stages (3 right-hand-side
     calls) and the 7 rows F of scipy's ``Dop853DenseOutput``.
     """
-    dop853, n_stages, A, C, P, D = tableau[0], tableau[2], tableau[3], tableau[5], tableau[9], tableau[10]
+    n_stages, D = N_STAGES[method], DOP853_D
     n = y_old.shape[0]
-    if not dop853:
-        for r in range(P.shape[1]):
-            _weighted_sum(P[:, r], K, n_stages + 1, Q[r])
+    if method != DOP853:
+        for r in range(INTERPOLANT_ROWS[method]):
+            _weighted_sum(RK_P[method, :, r], K, n_stages + 1, Q[r])
         return 0
-    for s in range(n_stages + 1, A.shape[0]):
-        _stage_state(y_old, h, A[s], K, s, work)
+    for s in range(n_stages + 1, STAGE_ROWS[method]):
+        _stage_state(y_old, h, RK_A[method, s], K, s, work)
         state_rate(code, work, p, K[s])
     for i in range(n):
         delta = y_new[i] - y_old[i]
@@ -155,7 +194,7 @@ def dense_coefficients(code, p, y_old, y_new, f_new, h, tableau, K, Q, work):
         _weighted_sum(D[r], K, D.shape[1], Q[3 + r])
         for i in range(n):
             Q[3 + r, i] = h * Q[3 + r, i]
-    return A.shape[0] - n_stages - 1
+    return STAGE_ROWS[method] - n_stages - 1
 
 
 @jit

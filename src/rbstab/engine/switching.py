@@ -41,7 +41,7 @@ from ..variants.kernels import state_rate
 from ..variants.sliding import mode_code, mode_quantities, stop_at_c
 from .integrate import (CLOCK_EVERY, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, sample_time, step,
                         wall_clock)
-from .rk import dense_coefficients, dense_value, initial_step
+from .rk import DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 
 __all__ = [
     "RESOLUTION",
@@ -356,7 +356,7 @@ def _fill_samples(samples, modes, j, t, h, t_stop, t_end, y_old, Q, dop853, mode
 # -- the driver (compiled) -----------------------------------------------------------------------
 @jit
 def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, resolution,
-                        tableau, samples, modes, events, jumps):
+                        method, samples, modes, events, jumps):
     """Integrate one sign-law run, filling ``samples`` (n, 12) at linspace(0, t_end, n),
     the mode of each sample into ``modes`` (n, 3), the events into ``events`` (rows
     time, axis, kind, F_i; at most its length, then the run stops) and the summed jumps
@@ -368,9 +368,9 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
     """
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
-    dop853 = tableau[0]
-    K = np.empty((max(tableau[3].shape[0], tableau[2] + 1), n))
-    Q = np.empty((7 if dop853 else tableau[9].shape[1], n))
+    dop853 = method == DOP853
+    K = np.empty((STAGE_ROWS[method], n))
+    Q = np.empty((INTERPOLANT_ROWS[method], n))
     y, f, y_new, scale, work = y0.copy(), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
     g, dg = np.empty((4, 4)), np.empty((4, 4))
     samples[:, :] = np.nan
@@ -382,7 +382,8 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
         if mode[i] == 0.0:
             n_events = _log(events, n_events, 0.0, i, SLIDING_STARTS, 0.0)
     state_rate(mode_code(mode), y, p, f)
-    h_abs = initial_step(mode_code(mode), p, y, f, t_end, max_step, tableau[1], rtol, atol, y_new, work, scale)
+    h_abs = initial_step(mode_code(mode), p, y, f, t_end, max_step, ERROR_ORDER[method], rtol, atol, y_new, work,
+                         scale)
     nfev, n_steps, n_pieces, t, j = 2, 0, 1, 0.0, 0
     while t < t_end:
         if n_steps >= max_steps:
@@ -390,13 +391,13 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, n_pieces, n_events
         code = mode_code(mode)
-        status, t_new, h, h_abs, attempts = step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, tableau, K,
+        status, t_new, h, h_abs, attempts = step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K,
                                                  y_new, scale, work)
-        nfev += attempts * tableau[2]
+        nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, n_pieces, n_events
         n_steps += 1
-        nfev += dense_coefficients(code, p, y, y_new, K[tableau[2]], h, tableau, K, Q, work)
+        nfev += dense_coefficients(code, p, y, y_new, K[N_STAGES[method]], h, method, K, Q, work)
         _event_values(y, p, mode, limit, g[0], dg[0])
         x, index = first_event(p, mode, limit, h, y, Q, dop853, work, g, dg)
         t_stop = t_new if index < 0 else t + x * h
@@ -404,7 +405,7 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
         if index < 0:
             t = t_new
             y[:] = y_new
-            f[:] = K[tableau[2]]
+            f[:] = K[N_STAGES[method]]
             continue
         dense_value(x, h, y, Q, dop853, work)  # the state at the event
         t = t_stop
@@ -426,14 +427,15 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
 def warm_up(params: np.ndarray) -> None:
     """Compile (or load from the cache) the sign-law engine and its outputs on a tiny run
     (:func:`rbstab.engine.warm_up` calls it); ``params``: a PARAMETERS array of shape (1,)."""
-    from . import METHODS, tableau
+    from . import METHODS, method_number
     from ..variants.sliding import mode_rows
 
     y0 = np.zeros(12)
     y0[9] = 1.0
     samples, modes, events, jumps = np.empty((2, 12)), np.empty((2, 3)), np.empty((4, 4)), np.empty(3)
     for method in METHODS:
-        integrate_switching(params[0], y0, 1e-3, 1e-3, 1e-6, np.inf, 1e-3, 1000, np.inf, RESOLUTION, tableau(method),
+        integrate_switching(params[0], y0, 1e-3, 1e-3, 1e-6, np.inf, 1e-3, 1000, np.inf, RESOLUTION,
+                            method_number(method),
                             samples, modes, events, jumps)
     mode_rows(samples, params, modes, np.empty((2, 12)))
 
@@ -471,7 +473,7 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     SignLawSolution
         A failure (gimbal lock, solver failure, switching or step limit, timeout) is data.
     """
-    from . import status_message, tableau
+    from . import method_number, status_message
 
     n = int(settings.n_samples)
     samples = np.empty((n, 12))
@@ -485,7 +487,7 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
         status, t_stop, nfev, n_steps, n_pieces, n_events = integrate_switching(
             variant._parameters_without_offset[0], np.ascontiguousarray(y0, dtype=float), float(settings.t_end),
             float(settings.rtol), float(settings.atol), float(settings.max_step), float(settings.gimbal_margin),
-            max_steps, max_wall_time, float(resolution), tableau(method), samples, modes, events, jumps)
+            max_steps, max_wall_time, float(resolution), method_number(method), samples, modes, events, jumps)
     log = events[: min(n_events, max_switchings)]
     switchings = Switchings(log[:, 0].copy(), log[:, 1].astype(np.int64), log[:, 2].astype(np.int64), log[:, 3].copy())
     if status == SWITCHING_LIMIT:
