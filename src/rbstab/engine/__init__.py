@@ -27,7 +27,6 @@ METHODS = tuple(TABLEAUS)
 DEFAULT_MAX_STEPS = 10_000_000
 
 
-
 def method_number(method: str) -> int:
     """The compiled engine's number of ``method``: its index in :data:`METHODS`, the rows of
     its tableau in :mod:`rbstab.engine.rk`'s tables.

@@ -55,7 +55,8 @@ STAGE_ROWS = np.array([max(t.n_stages + 1, DOP853_EXTENDED.N_STAGES_EXTENDED if 
 INTERPOLANT_ROWS = np.array([DOP853_EXTENDED.INTERPOLATOR_POWER if m == "DOP853" else t.P.shape[1]
                              for m, t in zip(METHODS, _T)])
 #: A (DOP853's extended to its 16 stages), B, and RK23/RK45's E and P, by method, zero-padded.
-RK_A = _stacked([DOP853_EXTENDED.A if m == "DOP853" else t.A for m, t in zip(METHODS, _T)], (16, 16))
+RK_A = _stacked([DOP853_EXTENDED.A if m == "DOP853" else t.A for m, t in zip(METHODS, _T)],
+                (max(STAGE_ROWS),) * 2)
 RK_B = _stacked([t.B for t in _T], (max(N_STAGES),))
 RK_E = _stacked([getattr(t, "E", np.zeros(0)) for t in _T], (max(N_STAGES) + 1,))
 RK_P = _stacked([getattr(t, "P", np.zeros((0, 0))) for t in _T], (max(N_STAGES) + 1, max(INTERPOLANT_ROWS)))

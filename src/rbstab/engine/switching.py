@@ -41,7 +41,8 @@ from ..variants.kernels import state_rate
 from ..variants.sliding import mode_code, mode_quantities, stop_at_c
 from .integrate import (CLOCK_EVERY, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, sample_time, step,
                         wall_clock)
-from .rk import DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
+from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
+                 initial_step)
 
 __all__ = [
     "RESOLUTION",
