@@ -16,20 +16,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .tableaus import SUCCESS_MESSAGE, TABLEAUS, TOO_SMALL_STEP_MESSAGE
+from .tableaus import METHODS, SUCCESS_MESSAGE, TOO_SMALL_STEP_MESSAGE
 
 __all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message", "warm_up"]
-
-#: The methods of the compiled engine (in the order of their numbers, :func:`method_number`).
-METHODS = tuple(TABLEAUS)
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).
 DEFAULT_MAX_STEPS = 10_000_000
 
 
 def method_number(method: str) -> int:
-    """The compiled engine's number of ``method``: its index in :data:`METHODS`, the rows of
-    its tableau in :mod:`rbstab.engine.rk`'s tables.
+    """The compiled engine's number of ``method`` (``"RK23"``, ``"RK45"`` or ``"DOP853"``):
+    its index in :data:`METHODS` (:mod:`rbstab.engine.tableaus`), the rows of its tableau
+    in :mod:`rbstab.engine.rk`'s tables.
 
     Raises
     ------

@@ -24,13 +24,11 @@ import numpy as np
 
 from ..jit import jit
 from ..variants.kernels import state_rate
-from .tableaus import DOP853_EXTENDED, TABLEAUS
+from .tableaus import DOP853_EXTENDED, METHODS, TABLEAUS
 
 __all__ = ["METHODS", "DOP853", "rms_norm", "initial_step", "rk_step", "error_norm", "dense_coefficients",
            "dense_value"]
 
-#: The methods, in the order of their numbers.
-METHODS = tuple(TABLEAUS)
 #: DOP853's number (its error estimate and dense output differ from the other two's).
 DOP853 = METHODS.index("DOP853")
 

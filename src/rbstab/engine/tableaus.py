@@ -127,3 +127,5 @@ DOP853 = SimpleNamespace(
 
 #: method name -> its tableau.
 TABLEAUS = {"RK23": RK23, "RK45": RK45, "DOP853": DOP853}
+#: The compiled engine's methods, in the order of their numbers (a method's index here).
+METHODS = tuple(TABLEAUS)
