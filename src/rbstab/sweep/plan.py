@@ -2,9 +2,9 @@
 
 The run list's order and the run ids are defined in :mod:`rbstab.sweep.spec`. Each run's
 configuration is its base with the varied values set, validated by the config schema
-(:func:`rbstab.config.config_from_mapping`); a run that differs from an earlier one of the
-same base only in its initial state reuses that validation
-(:meth:`rbstab.config.RunConfig.with_initial_state`).
+(:func:`rbstab.config.config_from_mapping`) for the first run of each base; its later runs,
+which differ from it only at the varied keys, are checked there only
+(:meth:`rbstab.config.RunConfig.with_values`: the same result, the same messages).
 """
 
 from __future__ import annotations
@@ -266,17 +266,16 @@ def _own_path(data: dict, key: str, fresh: set) -> None:
 
 
 def _plan_run(
-    spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict | None,
+    spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict,
     texts: dict | None = None,
 ) -> tuple["PlannedRun | None", list[str]]:
     """Set the varied values on a copy of ``base``, validate, name the run by its id.
 
-    ``validated`` (None: every run is validated whole) maps a base's label to the validated
-    config of its first run, when the sweep varies nothing outside ``initial_state``: the
-    base's other runs differ from it only there and are validated by
-    :meth:`RunConfig.with_initial_state` (same result, ~10x cheaper). ``texts``: the
-    :func:`rbstab.io.hdf5.canonical_configs` memo of the planning pass, where the runs
-    share their base's sections (``validated`` given).
+    ``validated`` maps a base's label to the validated config of its first valid run; the
+    base's other runs differ from it only at the varied keys and are validated by
+    :meth:`RunConfig.with_values` (the same result; only the fields of the varied keys
+    checked). ``texts``: the :func:`rbstab.io.hdf5.canonical_configs` memo of the
+    planning pass (the runs of a base share the sections no varied key is in).
     """
     from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 
@@ -306,21 +305,18 @@ def _plan_run(
         with warnings.catch_warnings():
             # kept in config.warnings; the CLI prints a digest instead of one per run
             warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-            known = None if validated is None else validated.get(base.label)
+            known = validated.get(base.label)
             if known is None:
-                first = config_from_mapping(data, source=source)
-                if validated is not None:
-                    validated[base.label] = first
+                first = validated[base.label] = config_from_mapping(data, source=source)
             else:
-                first = known.with_initial_state(data.get("initial_state"), source=source)
+                first = known.with_values(data, spec.varied_keys, source=source)
     except ConfigError as exc:
         return None, exc.errors
     from ..io.hdf5 import canonical_configs, config_hash
 
-    # runs that differ only in their initial state share their base's other sections (the
-    # same objects): each is encoded once; the sections of runs validated whole are new
-    # objects, encoded in one piece
-    identity, text = canonical_configs(first.resolved, texts if validated is not None else None)
+    # the runs of a base share the sections no varied key is in (the same objects): each
+    # is encoded once
+    identity, text = canonical_configs(first.resolved, texts)
     digest = config_hash(identity)
     rid = run_id(index, spec.n_runs, digest)
     # only the name changes: no need to validate again
@@ -353,12 +349,8 @@ def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
     scaled = {d.key for d in spec.random.params if d.kind == "scale_uniform"}
     grid_points = list(itertools.product(*spec.grid.values())) if spec.grid else [()]
     n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
-    from ..config import PER_RUN_SECTIONS
-
     cache: dict = {}
-    # runs of a base that differ only in their initial state share its validation
-    per_run_only = all(key.split(".")[0] in PER_RUN_SECTIONS for key in spec.varied_keys)
-    validated: dict | None = {} if per_run_only else None
+    validated: dict = {}  # base label -> its first valid run's config, which the others start from
     texts: dict = {}  # canonical JSON of the shared sections (rbstab.io.hdf5.canonical_configs)
     index = 0
     for sample in samples:
