@@ -145,7 +145,9 @@ class RunConfig:
         Keys in the ``body`` section, the gains of ``controller`` (not ``variant``) and
         ``initial_state`` take this path; any other key, a value that fails its check or
         a gain this configuration leaves unset goes through full validation, with its
-        messages.
+        messages. The warnings and notes of the checks made again are emitted; the
+        result's ``warnings`` holds them all (those of the sections not checked again are
+        this configuration's, not emitted a second time).
 
         Raises
         ------
