@@ -27,6 +27,7 @@ from .schema import (
     RunSchema,
     _InitialState,
     _valid_name,
+    _zero,
     SimulationSettings,
     _Body,
     _Controller,
@@ -40,6 +41,8 @@ __all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS"
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
 PER_RUN_SECTIONS = ("name", "initial_state")
+#: The dotted keys of every field of ``initial_state`` (:meth:`RunConfig.with_initial_state`).
+_INITIAL_STATE_KEYS = tuple(f"initial_state.{key}" for key in _InitialState.model_fields)
 #: The sections that :meth:`RunConfig.from_resolved` compares to share a rebuilt config's objects.
 _SHARED_SECTIONS = ("body", "controller", "simulation")
 
@@ -90,9 +93,9 @@ class RunConfig:
         """This configuration with another ``initial_state`` section, validated.
 
         What ``config_from_mapping`` gives for ``resolved`` with ``initial_state`` (and
-        ``name``) replaced, at a fraction of the cost: only the new section is checked
-        (with the gimbal-lock margin of ``simulation``). Sweeps use it for runs that differ
-        only in their initial state.
+        ``name``) replaced, at a fraction of the cost: :meth:`with_values` of the new
+        section's fields (checked with the gimbal-lock margin of ``simulation``). The basin
+        analysis uses it for its samples.
 
         Parameters
         ----------
@@ -109,28 +112,13 @@ class RunConfig:
         ConfigError
             With the lines full validation would give.
         """
-        state = None
-        try:
-            state = _InitialState.model_validate({} if initial_state is None else initial_state)
-        except ValidationError:
-            pass
-        limit = math.pi / 2 - self.simulation.gimbal_margin
-        if state is None or not abs(state.theta[1]) < limit or (name is not None and not _valid_name(name)):
-            # the messages of a full validation (and the same result if it passes)
-            data = {**self.resolved, "initial_state": initial_state}
-            if name is not None:
-                data["name"] = name
-            return _build(data, default_name=None, source=source)
-        resolved = dict(self.resolved)
-        if name is not None:
-            resolved["name"] = name
-        resolved["initial_state"] = state.model_dump()  # plain: the validators give lists of numbers
-        return dataclasses.replace(
-            self,
-            name=resolved["name"],
-            initial_state={block: _array(getattr(state, key)) for key, block in INITIAL_STATE_BLOCKS.items()},
-            resolved=resolved,
-        )
+        section = {} if initial_state is None else initial_state
+        data = {**self.resolved, "name": self.name if name is None else name, "initial_state": initial_state}
+        if not isinstance(section, Mapping) or not set(section) <= set(_InitialState.model_fields):
+            return _build(data, default_name=None, source=source)  # its message
+        # absent keys at the schema's default, so that every field is one with_values checks
+        data["initial_state"] = {**{key: _zero() for key in _InitialState.model_fields}, **section}
+        return self.with_values(data, _INITIAL_STATE_KEYS, source=source)
 
     def with_values(self, data: Mapping, keys: Iterable[str], *, source: str | None = None) -> "RunConfig":
         """The configuration of ``data``, a mapping that differs from the one this
@@ -318,7 +306,7 @@ def _build(
 
 
 def _emit_notes(body: RigidBody, gains_as_written: Mapping[str, Any], source: str | None, *,
-                stacklevel: int = 3) -> tuple[str, ...]:
+                stacklevel: int) -> tuple[str, ...]:
     """Warn of the physical-plausibility problems of ``body`` and the singular gains of
     ``gains_as_written`` (the gains the variant uses, as validated); returns their lines.
     ``stacklevel``: that of ``warnings.warn``, naming the caller of the public function."""
