@@ -137,6 +137,16 @@ class RunConfig:
         result's ``warnings`` holds them all (those of the sections not checked again are
         this configuration's, not emitted a second time).
 
+        Parameters
+        ----------
+        data : Mapping
+            The whole configuration as in a YAML file, ``name`` included (not modified).
+        keys : iterable of str
+            The dotted keys at which ``data`` may differ, e.g. ``"body.mass"``,
+            ``"controller.k_c.1"`` (a sweep's varied keys).
+        source : str, optional
+            Where ``data`` comes from, for messages.
+
         Raises
         ------
         ConfigError
