@@ -192,6 +192,44 @@ def test_chunk_writer_refuses_traces_of_another_shape(tmp_path):
     assert not target.exists() and not list(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("store", ["thinned", "full"])
+def test_chunk_writer_keeps_no_view_of_a_run_it_holds(tmp_path, store):
+    """A run's outputs are views of a block shared with other runs (simulate_many's
+    post-processing); the writer copies what it keeps until its next write, so the block is
+    freed when the caller drops it (a view would pin it: ~300 MB a 512-run file)."""
+    import dataclasses
+    import gc
+    import warnings
+    import weakref
+
+    from rbstab.config import load_config
+    from rbstab.simulate import simulate
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
+        config = load_config(CASE3, ["simulation.n_samples=101", "simulation.t_end=0.1"])
+    result = simulate(config)
+    rows = [StoreRow(0, "r0"), StoreRow(1, "r1")]
+    with ChunkWriter(tmp_path / "chunk-x.h5", rows, store=store) as writer:
+        columns = [np.asarray(v, dtype=float).reshape(len(result.time), -1) for v in result.outputs.values()]
+        block = np.concatenate(columns, axis=1)  # every output of the run side by side
+        edges = np.cumsum([0] + [c.shape[1] for c in columns])
+        shared = dataclasses.replace(result, outputs={
+            k: block[:, lo:hi].reshape(np.shape(v)) for (k, v), lo, hi in zip(result.outputs.items(), edges, edges[1:])})
+        assert all(np.shares_memory(v, block) for v in shared.outputs.values())
+        alive = weakref.ref(block)
+        writer.add("r0", shared)
+        del block, shared
+        gc.collect()
+        assert alive() is None
+        writer.add("r1", result)
+    for row in (0, 1):  # what was kept is the run's trace
+        series = read_chunk_series(tmp_path / "chunk-x.h5", row, ["lyapunov", "theta"])
+        step = round((len(result.time) - 1) / (len(series["time"]) - 1))
+        for name in ("lyapunov", "theta"):
+            np.testing.assert_array_equal(series[name], result.outputs[name][::step])
+
+
 def test_report_and_show_read_chunk_sweeps(tmp_path):
     s = spec(3)
     out = run_sweep(s, tmp_path / "sweeps", jobs=1, layout="chunk", progress=False)
