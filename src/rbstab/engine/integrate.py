@@ -82,7 +82,7 @@ else:  # pragma: no cover - other platforms: through the interpreter
         return now
 
 
-@jit
+@jit(forceinline=True)
 def sample_time(j, n, t_end):
     """The j-th of n evenly spaced times on [0, t_end], as ``numpy.linspace`` computes it."""
     if j == n - 1:
@@ -126,7 +126,7 @@ def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new,
         rejected = True
 
 
-@jit
+@jit(forceinline=True)
 def _gimbal(y, limit):
     """The event function: zero when |theta_2| reaches ``limit`` (decreasing through 0)."""
     return limit - abs(y[1])
