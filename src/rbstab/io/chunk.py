@@ -249,7 +249,8 @@ class ChunkWriter:
         self.position = {r.run_id: i for i, r in enumerate(ordered)}
         self.identity = ordered
         self.values: list[dict[str, Any] | None] = [None] * len(ordered)
-        self._pending: list[tuple[int, dict[str, np.ndarray] | None]] = []
+        self._pending: list[int] = []  # rows whose traces are in the buffer's first rows, in that order
+        self._buffer: dict[str, np.ndarray] = {}  # variable -> (rows, *trace shape), written at each flush
         self._stack = ExitStack()
         self._file = None
         self._time: np.ndarray | None = None
@@ -344,24 +345,31 @@ class ChunkWriter:
         values["config"] = canonical_config(resolved, limits=True) if config_text is None else config_text
         values["config_hash"] = config_hash
         values.update(summary_columns(result.summary))
-        traces = None
+        i = self._row_of(run_id)
         if self.store != "summary":
             if self._time is None:
                 self._start(result)
-            traces = self._traces_of(run_id, result)
-        return self._add(run_id, values, traces)
+            self._keep_traces(run_id, result)
+        return self._add(i, values)
 
     def add_error(self, run_id: str, message: str) -> dict[str, Any]:
         """Add a run that raised before it had a result (status ``error``, no values)."""
-        return self._add(run_id, {"status": "error", "message": message, "wall_time": 0.0}, None)
+        i = self._row_of(run_id)
+        if self._traces:  # its traces are NaN (before the first result: the fill value)
+            self._keep_traces(run_id, None)
+        return self._add(i, {"status": "error", "message": message, "wall_time": 0.0})
 
-    def _add(self, run_id: str, values: dict[str, Any], traces) -> dict[str, Any]:
+    def _row_of(self, run_id: str) -> int:
         i = self.position.get(run_id)
         if i is None or self.values[i] is not None:
             raise ValueError(f"{self.path.name}: run {run_id!r} is not a row of this file or was added twice")
+        return i
+
+    def _add(self, i: int, values: dict[str, Any]) -> dict[str, Any]:
+        """Row ``i`` takes ``values``; its traces, if any, are in the buffer's next row."""
         self.values[i] = values
-        if self.store != "summary":
-            self._pending.append((i, traces))
+        if self._traces:
+            self._pending.append(i)
             if len(self._pending) >= self._block:
                 self._flush()
         return self.row(i)
@@ -409,15 +417,31 @@ class ChunkWriter:
             self._datasets[name] = var
         per_run = 8 * sum(int(np.prod(shape)) for shape in self._traces.values()) or 1
         self._block = max(WRITE_BLOCK, WRITE_BYTES // per_run)
+        rows = min(self._block, len(self.ids))
+        self._buffer = {name: np.empty((rows, *shape)) for name, shape in self._traces.items()}
 
-    def _traces_of(self, run_id: str, result: "RunResult") -> dict[str, np.ndarray]:
-        if result.time is not self._checked_time:  # runs of a chunk share their sample times
+    def _keep_traces(self, run_id: str, result: "RunResult | None") -> None:
+        """Copy a run's traces (every ``store_stride``-th sample; NaN for None or a variable
+        it lacks) into the buffer's next row, written at the next flush.
+
+        Copied, not held: a result's outputs are views of its post-processing block (36
+        outputs of 32 runs, ~18 MB), which a view held until the flush would keep alive (a
+        512-run file's pending rows pinned ~300 MB instead of the WRITE_BYTES of their
+        traces); and copied once, into the block that is written.
+        """
+        if result is not None and result.time is not self._checked_time:  # a chunk's runs share their times
             self._check_time(run_id, result.time)
-        # copies (C order): a result's outputs are views of its post-processing block (36
-        # outputs of 32 runs, ~18 MB), which a view held until the flush would keep alive:
-        # a 512-run file's pending rows pinned ~300 MB instead of the WRITE_BYTES of their traces
-        return {k: np.array(result.outputs[k][:: self._stride], order="C") for k in self._traces
-                if k in result.outputs}
+        slot = len(self._pending)
+        for name, shape in self._traces.items():
+            row = self._buffer[name][slot]
+            if result is None or name not in result.outputs:
+                row[...] = np.nan
+                continue
+            trace = np.asarray(result.outputs[name])[:: self._stride]
+            if trace.shape != shape:
+                raise ValueError(f"run {run_id}: '{name}' has shape {trace.shape}; "
+                                 f"the other runs of {self.path.name} have {shape}")
+            row[...] = trace
 
     def _check_time(self, run_id: str, time) -> None:
         time = np.asarray(time, dtype=float)
@@ -436,21 +460,13 @@ class ChunkWriter:
         if not self._pending or not self._traces:
             self._pending = []
             return
-        self._pending.sort(key=lambda p: p[0])
-        rows = [i for i, _ in self._pending]
+        order = sorted(range(len(self._pending)), key=self._pending.__getitem__)
+        rows = [self._pending[slot] for slot in order]
         self._room(len(rows) * 8 * sum(int(np.prod(shape)) for shape in self._traces.values()))
-        for name, shape in self._traces.items():
-            # C-contiguous (a run's vectors are strided views of the outputs): HDF5 and the
-            # data digest then take the block as it is, without a copy each (~40 % of them)
-            block = np.empty((len(rows), *shape))
-            for r, (i, o) in enumerate(self._pending):
-                if o is None or name not in o:
-                    block[r] = np.nan
-                elif np.shape(o[name]) == shape:
-                    block[r] = o[name]
-                else:
-                    raise ValueError(f"run {self.ids[i]}: '{name}' has shape {np.shape(o[name])}; "
-                                     f"the other runs of {self.path.name} have {shape}")
+        in_order = order == list(range(len(order)))  # the runs came in row order (as a rule)
+        for name in self._traces:
+            # C-contiguous: HDF5 and the data digest take the block as it is
+            block = self._buffer[name][: len(rows)] if in_order else self._buffer[name][order]
             var = self._datasets[name]
             if rows == list(range(rows[0], rows[-1] + 1)):
                 var[rows[0] : rows[-1] + 1] = block
