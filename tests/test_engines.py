@@ -194,6 +194,23 @@ def test_a_run_gets_the_same_bits_whatever_its_chunk():
             assert np.array_equal(other.outputs[key], value), key
 
 
+def test_outputs_not_full_are_the_full_outputs_but_those_left_out():
+    """simulate_many(full=False) (a sweep that stores no more than a thinned store) gives
+    every output but LEFT_OUT, each with the bits of the full outputs, and the same
+    summaries, for every variant."""
+    from rbstab.layout import LEFT_OUT
+
+    configs = [c for path in CONFIGS for c in configs_with_spins(base_data(path), SPINS[:1])]
+    assert {c.variant for c in configs} >= {"free", "permanent", "sliding", "visco_elastic", "embedded"}
+    full = dict(simulate_many(configs))
+    lean = dict(simulate_many(configs, full=False))
+    for i, config in enumerate(configs):
+        assert set(lean[i].outputs) == set(full[i].outputs) - set(LEFT_OUT), config.variant
+        for key, value in lean[i].outputs.items():
+            assert np.array_equal(value, full[i].outputs[key], equal_nan=True), (config.variant, key)
+        assert lean[i].summary == full[i].summary
+
+
 def test_numerical_rate_is_exact_for_degree_6_and_of_6th_order():
     """The 7-point stencils differentiate polynomials of degree <= 6 exactly on any grid
     (here non-uniform), and the error of a smooth signal falls as h^6."""

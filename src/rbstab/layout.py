@@ -21,6 +21,7 @@ __all__ = [
     "OUTPUT_VECTORS",
     "OUTPUT_SCALARS",
     "N_OUTPUTS",
+    "LEFT_OUT",
     "OUTPUT_UNITS",
     "OUTPUT_DESCRIPTIONS",
 ]
@@ -66,6 +67,10 @@ OUTPUT_VECTORS = (
     "force_h",
     "torque_n",
 )
+#: The outputs that neither the summary figures nor a ``thinned`` store read: left out of
+#: the outputs of a sweep that stores no more (``full`` False in
+#: :func:`rbstab.variants.kernels.run_outputs`).
+LEFT_OUT = ("constraint_rate", "constraint_force", "force_h", "torque_n")
 #: The scalar outputs after the vectors, one column each, in order.
 OUTPUT_SCALARS = (*LYAPUNOV_TERMS, "lyapunov", "lyapunov_rate")
 #: Columns of one row of outputs.

@@ -172,7 +172,7 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
         if "rates" in wanted:
             state_rates(code, y, params, np.empty_like(y))
         if "outputs" in wanted:
-            run_outputs(np.array([code]), params, y[None], np.empty((N_OUTPUTS, 1, 1)))
+            run_outputs(np.array([code]), params, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
     if "outputs" in wanted:
         from ..summary import numerical_rate
 

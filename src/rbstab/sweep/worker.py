@@ -311,7 +311,9 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
     config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
     done: set[int] = set()
     try:
-        for j, result in simulate_many([configs[i] for i in batch], timeout=options.timeout):
+        # a thinned or summary store keeps none of the outputs LEFT_OUT: not computed
+        full = options.store == "full"
+        for j, result in simulate_many([configs[i] for i in batch], timeout=options.timeout, full=full):
             i = batch[j]
             done.add(i)
             try:

@@ -31,6 +31,7 @@ from ..jit import jit
 from ..kinematics import add, cross, dot, matTvec, matvec, quadratic_form, scale
 from ..layout import (  # the output tables live with the layout: files and readers need no compiler
     FULL_BODY,
+    LEFT_OUT,
     LYAPUNOV_TERMS,
     N_OUTPUTS,
     OUTPUT_DESCRIPTIONS,
@@ -163,7 +164,7 @@ class Variant:
         y = np.asarray(y, dtype=float)
         flat = np.ascontiguousarray(y.reshape(1, -1, self.layout.size))
         out = np.empty((N_OUTPUTS, 1, flat.shape[1]))
-        run_outputs(np.array([self.code]), params, flat, out)
+        run_outputs(np.array([self.code]), params, flat, out, True)
         return out.reshape((N_OUTPUTS,) + y.shape[:-1])
 
     def evaluate(self, y: np.ndarray) -> dict[str, np.ndarray]:
@@ -244,15 +245,17 @@ class Variant:
 _LYAPUNOV_COLUMN = 3 * len(OUTPUT_VECTORS) + OUTPUT_SCALARS.index("lyapunov")
 
 
-def split_outputs(columns: np.ndarray, layout: StateLayout) -> dict[str, np.ndarray]:
+def split_outputs(columns: np.ndarray, layout: StateLayout, full: bool = True) -> dict[str, np.ndarray]:
     """Named outputs from the ``outputs`` kernel's columns, shape (N_OUTPUTS, ...).
 
-    ``controller_state`` is kept only where ``layout`` integrates it. Vectors are views
-    (..., 3) and scalars views (...) of ``columns`` (not contiguous along the 3 axes).
+    ``controller_state`` is kept only where ``layout`` integrates it; ``full`` False: the
+    columns of ``run_outputs(..., full=False)``, without :data:`~rbstab.layout.LEFT_OUT`.
+    Vectors are views (..., 3) and scalars views (...) of ``columns`` (not contiguous
+    along the 3 axes).
     """
     out = {}
     for i, name in enumerate(OUTPUT_VECTORS):
-        if name == "controller_state" and name not in layout.blocks:
+        if (name == "controller_state" and name not in layout.blocks) or (not full and name in LEFT_OUT):
             continue
         out[name] = np.moveaxis(columns[3 * i : 3 * i + 3], 0, -1)
     base = 3 * len(OUTPUT_VECTORS)
