@@ -133,3 +133,52 @@ def test_floor_on_synthetic_samples():
     outputs["lyapunov_rotational"] = v[None] + 1e4
     s2 = summarize(time, {k: x[0] for k, x in outputs.items()})
     assert s2["lyapunov_rate_mismatch_relative"] == pytest.approx(s["lyapunov_rate_mismatch_relative"] / 201, rel=1e-6)
+
+
+def numpy_figures(time, outputs, checked=None):
+    """The summary figures by numpy's reductions over whole arrays (the reference of the
+    compiled one-pass kernel): (max |E| by axis, max dv/dt, largest rise of v above its
+    running minimum, mismatch, reference power P) of each row."""
+    v, rate = outputs["lyapunov"], outputs["lyapunov_rate"]
+    error = np.abs(outputs["constraint_error"])
+    difference = np.abs(rate - outputs["lyapunov_rate_numerical"])
+    if checked is not None:
+        difference = np.where(checked, difference, 0.0)
+    energy = np.max(sum(np.abs(outputs[k]) for k in TERMS), axis=1)
+    power = np.maximum(np.max(np.abs(rate), axis=1), energy / (time[-1] - time[0]))
+    return (np.max(error, axis=1), np.max(rate, axis=1), np.max(v - np.minimum.accumulate(v, axis=1), axis=1),
+            np.max(difference, axis=1), np.where(power == 0.0, 1.0, power))
+
+
+@pytest.mark.parametrize("with_checked", [False, True])
+def test_summary_figures_are_numpys_reductions(with_checked):
+    """summarize_many's figures (one compiled pass over each run's samples) are, bit for
+    bit, numpy's reductions: NaN propagated by max, v's running minimum, the magnitudes of
+    v's terms summed in order, the unchecked samples' mismatch counted as 0."""
+    from rbstab.summary import summarize_many
+
+    rng = np.random.default_rng(3)
+    k, n = 7, 50
+    time = np.linspace(0.0, 2.0, n)
+    outputs = {key: rng.normal(size=(k, n)) * 10.0 ** rng.integers(-3, 4) for key in TERMS}
+    outputs["lyapunov"] = sum(outputs[key] for key in TERMS)
+    outputs["lyapunov"][2] = np.sort(outputs["lyapunov"][2])[::-1]  # non-increasing: no rise
+    outputs["lyapunov_rate"] = rng.normal(size=(k, n))
+    outputs["lyapunov_rate"][4] = 0.0  # P from the energy scale alone
+    outputs["lyapunov_rate_numerical"] = outputs["lyapunov_rate"] + 1e-4 * rng.normal(size=(k, n))
+    outputs["constraint_error"] = rng.normal(size=(k, n, 3))
+    outputs["constraint_error"][1, 7, 2] = np.nan  # a NaN inside the finite samples of v
+    outputs["lyapunov_rate"][3, 11] = np.nan
+    checked = rng.random((k, n)) < 0.8 if with_checked else None
+    error, max_rate, rise, mismatch, power = numpy_figures(time, outputs, checked)
+    for j, summary in enumerate(summarize_many(time, outputs, checked)):
+        np.testing.assert_array_equal(summary["max_abs_constraint_error"], error[j])
+        np.testing.assert_array_equal(summary["max_lyapunov_rate"], max_rate[j])
+        np.testing.assert_array_equal(summary["max_lyapunov_increase"], rise[j])
+        np.testing.assert_array_equal(summary["lyapunov_rate_mismatch"], mismatch[j])
+        np.testing.assert_array_equal(summary["lyapunov_rate_mismatch_relative"], mismatch[j] / power[j])
+        assert summary["lyapunov_initial"] == outputs["lyapunov"][j, 0]
+        assert summary["lyapunov_final"] == outputs["lyapunov"][j, -1]
+        n_checked = n if checked is None else int(checked[j].sum())
+        assert summary.get("lyapunov_rate_checked", 1.0) == n_checked / n
+    assert np.isnan(error[1, 2]) and np.isnan(max_rate[3]) and rise[2] == 0.0
