@@ -121,6 +121,25 @@ def test_non_finite_runs_end_failed_and_the_others_do_not_notice(bad):
     assert np.array_equal(sol.samples[1], alone.samples[0])
 
 
+def test_a_reused_sample_buffer_holds_each_runs_samples_and_nan_after_a_stop():
+    """The rows a run does not reach (after a gimbal lock) are NaN and every other row is
+    its own sample, whatever the buffer held before (a worker reuses one buffer)."""
+    variant = _variant("embedded")
+    good = variant.initial_state(initial_blocks())
+    locking = variant.initial_state(initial_blocks(theta=[0.0, 1.5, 0.0], omega=[0.0, 30.0, 0.0]))
+    y0 = np.stack([locking, good])
+    fresh = integrate_runs([variant.code] * 2, np.repeat(variant.parameters, 2), y0, _settings(2), method="DOP853",
+                           n_samples=51)
+    buffer = np.full((3, 51, good.size), 7.0)
+    used = integrate_runs([variant.code] * 2, np.repeat(variant.parameters, 2), y0, _settings(2), method="DOP853",
+                          n_samples=51, out=buffer)
+    assert used.status.tolist() == [1, 0] and np.shares_memory(used.samples, buffer)
+    stop = int(np.argmax(np.isnan(fresh.samples[0, :, 0])))
+    assert 0 < stop < 51 and np.isnan(used.samples[0, stop:]).all()
+    np.testing.assert_array_equal(used.samples, fresh.samples)
+    assert not (used.samples == 7.0).any()
+
+
 def test_step_limit_ends_a_run():
     variant = _variant("embedded")
     y0 = variant.initial_state(initial_blocks())[None]

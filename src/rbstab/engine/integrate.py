@@ -158,6 +158,15 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
     seconds (TIMEOUT; inf for none). Rows after the run stopped are NaN. Returns
     (status, t_stop, nfev, n_steps).
     """
+    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps,
+                                                 max_wall_time, method, samples)
+    samples[filled:, :] = np.nan  # only the rows after a stop: a run that ends writes each row once
+    return status, t_stop, nfev, n_steps
+
+
+@jit(forceinline=True)
+def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, method, samples):
+    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled."""
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     n_samples = samples.shape[0]
@@ -169,7 +178,6 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
     y_new = np.empty(n)
     scale = np.empty(n)
     work = np.empty(n)
-    samples[:, :] = np.nan
     limit = GIMBAL_LOCK_ANGLE - gimbal_margin
     state_rate(code, y, p, f)
     h_abs = initial_step(code, p, y, f, t_end, max_step, ERROR_ORDER[method], rtol, atol, y_new, work, scale)
@@ -179,15 +187,15 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
     n_steps = 0
     while t < t_end:
         if n_steps >= max_steps:
-            return STEP_LIMIT, t, nfev, n_steps
+            return STEP_LIMIT, t, nfev, n_steps, j
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
-            return TIMEOUT, t, nfev, n_steps
+            return TIMEOUT, t, nfev, n_steps, j
         status, t_new, h, h_abs, attempts = step(
             code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work
         )
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
-            return status, t, nfev, n_steps
+            return status, t, nfev, n_steps, j
         n_steps += 1
         f_new = K[N_STAGES[method]]
         t_stop = t_new
@@ -201,11 +209,11 @@ def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
             dense_value(x, h, y, Q, dop853, samples[j])
             j += 1
         if event:
-            return GIMBAL_LOCK, t_stop, nfev, n_steps
+            return GIMBAL_LOCK, t_stop, nfev, n_steps, j
         t = t_new
         y[:] = y_new
         f[:] = f_new
-    return SUCCESS, t, nfev, n_steps
+    return SUCCESS, t, nfev, n_steps, j
 
 
 @jit
