@@ -345,7 +345,7 @@ def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
 
 
 def _chunk_results(configs, variants, codes, params, sol, share: float, settings: np.ndarray,
-                   full: bool = True) -> Iterator[tuple[int, RunResult]]:
+                   full: bool) -> Iterator[tuple[int, RunResult]]:
     """RunResults of one integrated chunk, post-processed :data:`POSTPROCESS_BLOCK` runs at a
     time; every output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`."""
     from .engine import status_message

@@ -267,7 +267,7 @@ def _own_path(data: dict, key: str, fresh: set) -> None:
 
 def _plan_run(
     spec: SweepSpec, base: Base, params: dict, factors: dict, index: int, cache: dict, validated: dict,
-    texts: dict | None = None,
+    texts: dict,
 ) -> tuple["PlannedRun | None", list[str]]:
     """Set the varied values on a copy of ``base``, validate, name the run by its id.
 
