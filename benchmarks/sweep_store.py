@@ -13,8 +13,10 @@ Prints, per run and in total, with the peak resident memory of the process of ea
    come with its task from the parent, as in a sweep, and are timed in 1.); and the index;
 3. ``rbstab.open_sweep`` of that folder, summaries loaded (``lyapunov_final``, ``status``).
 
-The results written are 16 simulated Case 3 runs reused for every row (the integration is
-not what is measured); every row has its own run id, parameters and config.
+The results written are a block of 32 simulated Case 3 runs (what the compiled engine
+hands a worker's store file at once, :func:`rbstab.simulate.simulate_blocks`) reused for
+every 32 rows (the integration is not what is measured); every row has its own run id,
+parameters and config.
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ def plan(n: int) -> dict:
 def write(n: int, folder: str) -> dict:
     from rbstab.config import load_config
     from rbstab.io.chunk import ChunkWriter, StoreRow, chunk_file_name
-    from rbstab.simulate import simulate
+    from rbstab.simulate import simulate_blocks
     from rbstab.sweep import expand, spec_from_mapping
     from rbstab.sweep.folder import (RUNS_DIR, SPEC_FILE, parameter_columns, write_sweep_index,
                                      run_coords)
@@ -80,7 +82,8 @@ def write(n: int, folder: str) -> dict:
     spec = spec_from_mapping(spec_mapping(n))
     runs = expand(spec)
     base = load_config(CASE3)
-    pool = [simulate(base.with_initial_state({"omega": [16 + i, 32, -16]})) for i in range(16)]
+    (_, pool), = simulate_blocks([base.with_initial_state({"omega": [16 + i, 32, -16]}) for i in range(32)],
+                                 full=False)
     directory = Path(folder) / spec.name
     (directory / RUNS_DIR).mkdir(parents=True)
     parameters = parameter_columns(r.params for r in runs)
@@ -96,9 +99,13 @@ def write(n: int, folder: str) -> dict:
         path = directory / RUNS_DIR / chunk_file_name(chunk[0].run_id)
         with ChunkWriter(path, stored[lo : lo + 512], store="thinned", parameters=parameters,
                          sweep=spec.name) as writer:
-            for k, run in enumerate(chunk):
-                rows[run.run_id] = writer.add(run.run_id, pool[k % len(pool)], config_hash=run.config_hash,
-                                              config_text=run.config_text)
+            for b in range(0, len(chunk), len(pool)):
+                part = chunk[b : b + len(pool)]
+                block = pool if len(part) == len(pool) else _head(pool, len(part))
+                ids = [run.run_id for run in part]
+                added = writer.add_block(ids, block, config_hashes=[run.config_hash for run in part],
+                                         config_texts=[run.config_text for run in part])
+                rows.update(zip(ids, added))
     t1 = time.perf_counter()
     cpu = time.process_time() - c0
     write_sweep_index(directory, runs, rows, {}, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameters)
@@ -107,6 +114,16 @@ def write(n: int, folder: str) -> dict:
     size = sum(p.stat().st_size for p in (directory / RUNS_DIR).iterdir())
     return {"store files (thinned)": t1 - t0, "  of which CPU": cpu, "index, summary, sweep.yaml": t2 - t1,
             "MB on disk": size / 2**20, "peak MB": _peak_mb()}
+
+
+def _head(block, k: int):
+    """The first k runs of a RunBlock."""
+    import dataclasses
+
+    return dataclasses.replace(
+        block, configs=block.configs[:k], outputs={n: v[:k] for n, v in block.outputs.items()},
+        summaries={n: v[:k] for n, v in block.summaries.items()},
+        **{name: getattr(block, name)[:k] for name in ("status", "message", "solver", "wall_time", "timing", "switching")})
 
 
 def open_(folder: str) -> dict:

@@ -192,6 +192,97 @@ def test_chunk_writer_refuses_traces_of_another_shape(tmp_path):
     assert not target.exists() and not list(tmp_path.iterdir())
 
 
+def _case3_block(k: int, n_samples: int = 101, t_end: float = 0.1):
+    """(configs, RunBlock) of k short Case 3 runs of different initial Omega."""
+    import warnings
+
+    from rbstab.config import load_config
+    from rbstab.simulate import simulate_blocks
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
+        config = load_config(CASE3, [f"simulation.n_samples={n_samples}", f"simulation.t_end={t_end}"])
+    configs = [config.with_initial_state({"omega": [16.0 + j, 32.0, -16.0]}) for j in range(k)]
+    (indices, block), = simulate_blocks(configs)
+    assert indices == list(range(k))
+    return configs, block
+
+
+@pytest.mark.parametrize("store", ["thinned", "full", "summary"])
+def test_chunk_writer_block_of_runs_writes_what_each_run_alone_writes(tmp_path, monkeypatch, store):
+    """add_block (a block's traces copied at once, its values kept as columns) gives the
+    file and the rows that add of each run gives, also for a block whose rows are not
+    consecutive and one that does not fit in what is left of the write buffer."""
+    from rbstab.io import chunk
+
+    monkeypatch.setattr(chunk, "WRITE_BYTES", 1)  # a buffer of WRITE_BLOCK rows: flushes inside a block
+    monkeypatch.setattr(chunk, "WRITE_BLOCK", 4)
+    _, block = _case3_block(6)
+    ids = [f"r{i}" for i in range(7)]
+    rows = [StoreRow(i, ids[i], "case3", {"omega_0": 16.0 + i}) for i in range(7)]
+    order = [[5, 0, 3], [1, 2, 4]]  # run j of the block is row order[...]
+    with ChunkWriter(tmp_path / "chunk-a.h5", rows, store=store) as writer:
+        by_block = []
+        for first, part in zip((0, 3), order):  # runs 0-2 of the block, then 3-5
+            by_block += writer.add_block([ids[i] for i in part], _block_part(block, [first, first + 1, first + 2]))
+        writer.add_error(ids[6], "it raised")
+    with ChunkWriter(tmp_path / "chunk-b.h5", rows, store=store) as writer:
+        by_run = [writer.add(ids[i], block.result(j)) for j, i in enumerate(order[0] + order[1])]
+        writer.add_error(ids[6], "it raised")
+    drop = ("file", "created", "wall_time")
+    assert [{k: v for k, v in r.items() if k not in drop} for r in by_block] == \
+        [{k: v for k, v in r.items() if k not in drop} for r in by_run]
+    read = [read_chunk_rows(tmp_path / f"chunk-{x}.h5", data=True) for x in "ab"]
+    assert [{k: v for k, v in r.items() if k not in drop} for r in read[0]] == \
+        [{k: v for k, v in r.items() if k not in drop} for r in read[1]]
+    assert [r["run_id"] for r in read[0]] == ids and read[0][6]["status"] == "error"
+    names = ["lyapunov", "theta", "constraint_error"]
+    a, b = (read_chunk_series(tmp_path / f"chunk-{x}.h5", None, names) for x in "ab")
+    for name in names:
+        if store == "summary":
+            assert a[name] is None and b[name] is None
+            continue
+        np.testing.assert_array_equal(a[name], b[name])
+        assert np.isnan(a[name][6]).all()
+        stride = round((len(block.time) - 1) / (len(a["time"]) - 1))
+        for j, i in enumerate(order[0] + order[1]):
+            np.testing.assert_array_equal(a[name][i], block.outputs[name][j, ::stride])
+
+
+def _block_part(block, js):
+    """The runs ``js`` of a RunBlock, as a RunBlock."""
+    import dataclasses
+
+    return dataclasses.replace(
+        block, configs=[block.configs[j] for j in js], outputs={n: v[js] for n, v in block.outputs.items()},
+        summaries={n: [v[j] for j in js] for n, v in block.summaries.items()},
+        **{k: [getattr(block, k)[j] for j in js] for k in ("status", "message", "solver", "wall_time", "timing",
+                                                           "switching")})
+
+
+def test_chunk_writer_block_that_is_refused_adds_none_of_its_runs(tmp_path):
+    """A block with a run that is not a row, a run given twice or traces of another shape
+    raises ValueError and adds none of its runs: they can still be added one by one."""
+    import dataclasses
+
+    _, block = _case3_block(2)
+    rows = [StoreRow(0, "r0"), StoreRow(1, "r1")]
+    bad = dataclasses.replace(block, outputs={**block.outputs, "theta": block.outputs["theta"][:, :50]})
+    with ChunkWriter(tmp_path / "chunk-x.h5", rows, store="full") as writer:
+        writer.add("r0", block.result(0))
+        with pytest.raises(ValueError, match="r0"):
+            writer.add_block(["r1", "r0"], block)  # r0 is there already
+        with pytest.raises(ValueError, match="twice"):
+            writer.add_block(["r1", "r1"], block)
+        with pytest.raises(ValueError, match=r"run r1: 'theta' has shape"):
+            writer.add_block(["r1"], _block_part(bad, [1]))
+        writer.add("r1", block.result(1))
+    read = read_chunk_rows(tmp_path / "chunk-x.h5", data=True)
+    assert [r["status"] for r in read] == ["success", "success"]
+    series = read_chunk_series(tmp_path / "chunk-x.h5", None, ["theta"])
+    np.testing.assert_array_equal(series["theta"], block.outputs["theta"])
+
+
 @pytest.mark.parametrize("store", ["thinned", "full"])
 def test_chunk_writer_keeps_no_view_of_a_run_it_holds(tmp_path, store):
     """A run's outputs are views of a block shared with other runs (simulate_many's
@@ -390,3 +481,29 @@ def test_read_chunk_series_of_every_row_stacks_each_row(tmp_path):
         np.testing.assert_array_equal(every["omega"][row], one["omega"])
         np.testing.assert_array_equal(every["lyapunov"][row], one["lyapunov"])
     assert every["omega"].shape[0] == 3 and every["units:omega"] == one["units:omega"]
+
+
+def test_worker_stores_a_block_its_sink_refuses_run_by_run():
+    """A block the sink cannot take at once is stored a run at a time; the one run that
+    cannot be written is that run's error, the others are stored."""
+    from rbstab.sweep.worker import _add_block
+
+    _, block = _case3_block(3)
+    tasks = [RunTask(f"r{j}", {}, f"r{j}.h5", j) for j in range(3)]
+
+    class Sink:
+        def add_block(self, tasks, block):
+            raise ValueError("not at once")
+
+        def add(self, task, result):
+            if task.run_id == "r1":
+                raise OSError("disk full")
+            assert result.outputs["lyapunov"] is not None and result.config is block.configs[int(task.run_id[1])]
+            return {"run_id": task.run_id, "status": result.status, "timing": {}}
+
+        def error(self, task, exc):
+            return {"run_id": task.run_id, "status": "error", "message": str(exc)}
+
+    records = _add_block(Sink(), tasks, block, config_time=0.5)
+    assert [(r["run_id"], r["status"]) for r in records] == [("r0", "success"), ("r1", "error"), ("r2", "success")]
+    assert records[0]["timing"]["config"] == 0.5 and "timing" not in records[1]

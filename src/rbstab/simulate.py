@@ -1,4 +1,5 @@
-"""Integrate validated run configurations: one (:func:`simulate`) or many (:func:`simulate_many`).
+"""Integrate validated run configurations: one (:func:`simulate`) or many (:func:`simulate_many`,
+or :func:`simulate_blocks`, their results as blocks of runs).
 
 Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
 
@@ -34,7 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .summary import numerical_rate, summarize, summarize_many
+from .summary import numerical_rate, summarize, summary_table
 from .variants import Variant
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -46,6 +47,8 @@ __all__ = [
     "ENGINES",
     "simulate",
     "simulate_many",
+    "simulate_blocks",
+    "RunBlock",
     "solve",
     "gimbal_lock_event",
     "evaluate_outputs",
@@ -113,6 +116,60 @@ class RunResult:
     def ok(self) -> bool:
         """Whether the run reached ``t_end`` (``status == "success"``)."""
         return self.status == "success"
+
+
+@dataclass
+class RunBlock:
+    """Outcomes of k runs that share their sample times, as columns: what
+    :func:`simulate_blocks` gives and a store file takes at once
+    (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); :meth:`result` is one run's
+    :class:`RunResult` (views of the block's arrays).
+
+    Attributes
+    ----------
+    configs : list of RunConfig, length k
+    time : ndarray, shape (n_samples,)
+        The runs' sample times [s] (read-only when the block comes from the compiled engine).
+    outputs : dict of str -> ndarray
+        :attr:`RunResult.outputs` with a leading run axis: shape (k, n_samples, 3) or
+        (k, n_samples).
+    summaries : dict of str -> list
+        :func:`rbstab.summary.summary_table`: figure -> its k values.
+    status, message : list of str
+    solver, timing : list of dict
+    wall_time : list of float
+    switching : list
+        Each run's :attr:`RunResult.switching`.
+    """
+
+    configs: list
+    time: np.ndarray
+    outputs: dict[str, np.ndarray]
+    summaries: dict[str, list]
+    status: list[str]
+    message: list[str]
+    solver: list[dict]
+    wall_time: list[float]
+    timing: list[dict]
+    switching: list
+
+    def __len__(self) -> int:
+        return len(self.configs)
+
+    def result(self, j: int) -> RunResult:
+        """Run ``j`` of the block as a :class:`RunResult` (its outputs are views)."""
+        return RunResult(config=self.configs[j], time=self.time,
+                         outputs={key: value[j] for key, value in self.outputs.items()},
+                         status=self.status[j], message=self.message[j], solver=self.solver[j],
+                         wall_time=self.wall_time[j], summary={key: v[j] for key, v in self.summaries.items()},
+                         timing=self.timing[j], switching=self.switching[j])
+
+    @classmethod
+    def of(cls, result: RunResult) -> "RunBlock":
+        """A block of one run (its outputs as views with a leading axis of 1)."""
+        return cls([result.config], result.time, {key: np.asarray(value)[None] for key, value in result.outputs.items()},
+                   {key: [value] for key, value in result.summary.items()}, [result.status], [result.message],
+                   [result.solver], [result.wall_time], [result.timing], [result.switching])
 
 
 def gimbal_lock_event(margin: float):
@@ -344,10 +401,11 @@ def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
                       c.simulation.max_wall_time if timeout is None else timeout] for c in configs], dtype=float)
 
 
-def _chunk_results(configs, variants, codes, params, sol, share: float, settings: np.ndarray,
-                   full: bool) -> Iterator[tuple[int, RunResult]]:
-    """RunResults of one integrated chunk, post-processed :data:`POSTPROCESS_BLOCK` runs at a
-    time; every output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`."""
+def _chunk_blocks(configs, variants, codes, params, sol, share: float, settings: np.ndarray,
+                  full: bool) -> Iterator[tuple[list[int], RunBlock]]:
+    """(runs of the chunk, their RunBlock) of one integrated chunk, post-processed
+    :data:`POSTPROCESS_BLOCK` runs at a time (a block per ``t_end`` of those runs); every
+    output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`."""
     from .engine import status_message
     from .variants.base import N_OUTPUTS, split_outputs
     from .variants.kernels import run_outputs
@@ -359,39 +417,36 @@ def _chunk_results(configs, variants, codes, params, sol, share: float, settings
         columns = np.empty((N_OUTPUTS, hi - lo, n_samples))
         with np.errstate(all="ignore"):
             run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], columns, full)
-        block, summaries, times = {}, {}, {}
         # the runs of a chunk share the state size, so the same named outputs; runs with
         # the same sample times get their numerical dv/dt and summaries at once (the same
         # numbers as each alone), and one array of those times
         by_t_end: dict[float, list[int]] = {}
         for j in range(lo, hi):
             by_t_end.setdefault(configs[j].simulation.t_end, []).append(j)
+        parts = []
         for t_end, members in by_t_end.items():
             part = columns if len(members) == hi - lo else columns[:, [j - lo for j in members]]
             outputs = split_outputs(part, variants[lo].layout, full)
-            time = times[t_end] = np.linspace(0.0, t_end, n_samples)
+            time = np.linspace(0.0, t_end, n_samples)
             time.flags.writeable = False  # shared by the runs' results
             outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-            for i, (j, summary) in enumerate(zip(members, summarize_many(time, outputs))):
-                block[j] = {key: value[i] for key, value in outputs.items()}
-                summaries[j] = summary
+            parts.append((members, time, outputs, summary_table(time, outputs)))
         per_run = (_time.perf_counter() - t0) / (hi - lo)
-        for j in range(lo, hi):
-            config = configs[j]
-            status = int(sol.status[j])
-            outputs = block.pop(j)
-            yield j, RunResult(
-                config=config,
-                time=times[config.simulation.t_end],
+        for members, time, outputs, summaries in parts:
+            status = [int(sol.status[j]) for j in members]
+            yield members, RunBlock(
+                configs=[configs[j] for j in members],
+                time=time,
                 outputs=outputs,
-                status="success" if status == 0 else "failed",
-                message=status_message(status, float(sol.t_stop[j]), config.simulation.gimbal_margin,
-                                       int(settings[j, 5]), float(settings[j, 6])),
-                solver={"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": status,
-                        "n_steps": int(sol.n_steps[j])},
-                wall_time=share + per_run,
-                summary=summaries.pop(j),
-                timing={"integration": share, "postprocess": per_run},
+                summaries=summaries,
+                status=["success" if code == 0 else "failed" for code in status],
+                message=[status_message(code, float(sol.t_stop[j]), configs[j].simulation.gimbal_margin,
+                                        int(settings[j, 5]), float(settings[j, 6])) for code, j in zip(status, members)],
+                solver=[{"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": code,
+                         "n_steps": int(sol.n_steps[j])} for code, j in zip(status, members)],
+                wall_time=[share + per_run] * len(members),
+                timing=[{"integration": share, "postprocess": per_run} for _ in members],
+                switching=[None] * len(members),
             )
 
 
@@ -422,20 +477,32 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
                   full: bool = True) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
 
+    :func:`simulate_blocks`, a run at a time (the arguments and errors are its).
+    """
+    for indices, block in simulate_blocks(configs, engine=engine, chunk_size=chunk_size, timeout=timeout, full=full):
+        for j, i in enumerate(indices):
+            yield i, block.result(j)
+
+
+def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
+                    chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
+                    full: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
+    """Run many validated configurations; yields ``(indices into configs, RunBlock)``.
+
     With ``engine="compiled"`` every run that the compiled engine takes
     (:func:`uses_compiled_engine`) is integrated by :func:`rbstab.engine.integrate_runs`,
     ``chunk_size`` runs per call, whatever its variant, body, gains and settings (a call
     takes runs of one method, sample count and state size); the others go through
-    :func:`simulate` one by one. A run's result does not depend on the other runs of the
-    call. The calls of a kind of run fill one buffer of trajectories (``chunk_size *
-    n_samples * n_state`` floats; nothing a result holds points into it), and the outputs
-    (with ``full`` False all but :data:`rbstab.layout.LEFT_OUT`, which neither the summary
-    nor a thinned store reads: ~20 % less time; the runs that go through :func:`simulate`
-    have every output) are evaluated :data:`POSTPROCESS_BLOCK` runs at a time (the runs of a block with the
-    same ``t_end`` share one read-only ``time`` array). Each result's
-    ``wall_time`` is its share of its call's integration plus its own post-processing [s]
-    (split in ``timing``). ``timeout`` [s], if given, replaces each run's
-    ``simulation.max_wall_time``.
+    :func:`simulate` one by one (a block of one run each). A run's result does not depend
+    on the other runs of the call. The calls of a kind of run fill one buffer of
+    trajectories (``chunk_size * n_samples * n_state`` floats; nothing a result holds
+    points into it), and the outputs (with ``full`` False all but
+    :data:`rbstab.layout.LEFT_OUT`, which neither the summary nor a thinned store reads:
+    ~20 % less time; the runs that go through :func:`simulate` have every output) are
+    evaluated :data:`POSTPROCESS_BLOCK` runs at a time: a block is those of them with the
+    same ``t_end`` (one read-only ``time`` array). Each run's ``wall_time`` is its share
+    of its call's integration plus its own post-processing [s] (split in ``timing``).
+    ``timeout`` [s], if given, replaces each run's ``simulation.max_wall_time``.
 
     Raises
     ------
@@ -453,7 +520,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             size = _variant_of(config, shared).layout.size
             groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
         else:
-            yield i, simulate(config, timeout, engine="scipy")
+            yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
     for (method, n_samples, size), members in groups.items():
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
         for lo in range(0, len(members), chunk_size):
@@ -474,5 +541,5 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
                 out=buffer,
             )
             share = (_time.perf_counter() - start) / len(chunk)
-            for j, result in _chunk_results(chunk_configs, variants, codes, params, sol, share, settings, full):
-                yield chunk[j], result
+            for runs, block in _chunk_blocks(chunk_configs, variants, codes, params, sol, share, settings, full):
+                yield [chunk[j] for j in runs], block

@@ -20,6 +20,7 @@ __all__ = [
     "stencil_weights",
     "summarize",
     "summarize_many",
+    "summary_table",
     "LYAPUNOV_RATE_TOLERANCE",
     "MIN_CHECK_SAMPLES",
     "RATE_STENCIL",
@@ -265,69 +266,77 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np
     list of k dicts
         The same figures (the same numbers) as :func:`summarize` of each run alone.
     """
+    table = summary_table(time, outputs, checked)
+    return [{key: values[j] for key, values in table.items()} for j in range(outputs["lyapunov"].shape[0])]
+
+
+def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> dict[str, list]:
+    """:func:`summarize_many` as columns: figure -> its k values (a 3-vector figure: k lists
+    of 3 floats), the figures in :func:`summarize`'s order; the same numbers."""
     lyapunov = outputs["lyapunov"]
     k, n = lyapunov.shape
     finite = np.isfinite(lyapunov)
     # index of the last finite sample of each run (0 when there is none)
     last = np.where(finite.any(axis=1), n - 1 - np.argmax(finite[:, ::-1], axis=1), 0)
     whole = np.flatnonzero(last == n - 1)
-    out: list = [None] * k
+    if whole.size == k:
+        return _table(time, outputs, checked)
+    parts = []  # (runs, their table)
     if whole.size:
-        part = outputs if whole.size == k else {key: value[whole] for key, value in outputs.items()}
-        for j, summary in zip(whole, _summaries(time, part, None if checked is None else checked[whole])):
-            out[j] = summary
+        parts.append((whole, _table(time, {key: value[whole] for key, value in outputs.items()},
+                                    None if checked is None else checked[whole])))
     for j in np.flatnonzero(last != n - 1):  # failed runs: their finite samples only
         i = int(last[j])
-        out[j] = _summaries(time[: i + 1], {key: value[j : j + 1, : i + 1] for key, value in outputs.items()},
-                            None if checked is None else checked[j : j + 1, : i + 1])[0]
-    return out
+        parts.append(([j], _table(time[: i + 1], {key: value[j : j + 1, : i + 1] for key, value in outputs.items()},
+                                  None if checked is None else checked[j : j + 1, : i + 1])))
+    table: dict[str, list] = {key: [None] * k for key in parts[0][1]}
+    for runs, part in parts:
+        for key, values in part.items():
+            column = table[key]
+            for j, value in zip(runs, values):
+                column[j] = value
+    return table
 
 
-def _summaries(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> list[dict]:
-    """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays);
-    the rate check over the ``checked`` samples (k, n) only, when given."""
+def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> dict[str, list]:
+    """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays), as
+    columns; the rate check over the ``checked`` samples (k, n) only, when given."""
     v = outputs["lyapunov"]
     rate = outputs["lyapunov_rate"]
-    n = v.shape[1]
-    t_final = float(time[n - 1])
-    finals = {b: outputs[b][:, n - 1].tolist() for b in BLOCK_UNITS if b in outputs}
+    k, n = v.shape
+    table: dict[str, list] = {"t_final": [float(time[n - 1])] * k}
+    for b in BLOCK_UNITS:
+        if b in outputs:
+            table[f"final_{b}"] = outputs[b][:, n - 1].tolist()
     error = np.abs(outputs["constraint_error"])
     # per axis: a reduction over the samples of one strided column is many times faster
     # than numpy's reduction of (k, n, 3) over its middle axis
-    max_error = np.stack([np.max(error[:, :, i], axis=1) for i in range(3)], axis=1).tolist()
-    initial, final = v[:, 0].tolist(), v[:, n - 1].tolist()
-    max_rate = np.max(rate, axis=1).tolist()
-    increase = np.max(v - np.minimum.accumulate(v, axis=1), axis=1).tolist()
-    n_checked = [n] * v.shape[0] if checked is None else np.sum(checked, axis=1).tolist()
+    table["max_abs_constraint_error"] = np.stack([np.max(error[:, :, i], axis=1) for i in range(3)], axis=1).tolist()
+    table["lyapunov_initial"] = v[:, 0].tolist()
+    table["lyapunov_final"] = v[:, n - 1].tolist()
+    table["max_lyapunov_rate"] = np.max(rate, axis=1).tolist()
+    table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1).tolist()
+    n_checked = [n] * k if checked is None else np.sum(checked, axis=1).tolist()
+    if checked is not None:
+        table["lyapunov_rate_checked"] = [c / n for c in n_checked]
+    nan = float("nan")
+    mismatch, relative, verdict = [nan] * k, [nan] * k, ["n/a"] * k
     if n >= MIN_CHECK_SAMPLES:
         difference = np.abs(rate - outputs["lyapunov_rate_numerical"])
         if checked is not None:
             difference = np.where(checked, difference, 0.0)
-        mismatch = np.max(difference, axis=1).tolist()
+        largest = np.max(difference, axis=1).tolist()
         scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0])).tolist()
-    summaries = []
-    for j in range(v.shape[0]):
-        summary: dict = {"t_final": t_final}
-        for b, values in finals.items():
-            summary[f"final_{b}"] = values[j]
-        summary["max_abs_constraint_error"] = max_error[j]
-        summary["lyapunov_initial"] = initial[j]
-        summary["lyapunov_final"] = final[j]
-        summary["max_lyapunov_rate"] = max_rate[j]
-        summary["max_lyapunov_increase"] = increase[j]
-        if checked is not None:
-            summary["lyapunov_rate_checked"] = n_checked[j] / n
-        if n < MIN_CHECK_SAMPLES or n_checked[j] < MIN_CHECK_SAMPLES:
-            summary["lyapunov_rate_mismatch"] = float("nan")
-            summary["lyapunov_rate_mismatch_relative"] = float("nan")
-            summary["lyapunov_rate_check"] = "n/a"
-        else:
-            scale = scales[j] or 1.0
-            summary["lyapunov_rate_mismatch"] = mismatch[j]
-            summary["lyapunov_rate_mismatch_relative"] = mismatch[j] / scale
-            summary["lyapunov_rate_check"] = "pass" if mismatch[j] <= LYAPUNOV_RATE_TOLERANCE * scale else "fail"
-        summaries.append(summary)
-    return summaries
+        for j in range(k):
+            if n_checked[j] >= MIN_CHECK_SAMPLES:
+                scale = scales[j] or 1.0
+                mismatch[j] = largest[j]
+                relative[j] = largest[j] / scale
+                verdict[j] = "pass" if largest[j] <= LYAPUNOV_RATE_TOLERANCE * scale else "fail"
+    table["lyapunov_rate_mismatch"] = mismatch
+    table["lyapunov_rate_mismatch_relative"] = relative
+    table["lyapunov_rate_check"] = verdict
+    return table
 
 
 def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:

@@ -79,6 +79,7 @@ __all__ = [
     "StoreTrace",
     "store_trace_shapes",
     "summary_columns",
+    "summary_table_columns",
     "SUMMARY_FIGURES",
     "canonical_config",
     "WRITE_BLOCK",
@@ -161,6 +162,19 @@ def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
+def summary_table_columns(table: Mapping[str, Sequence]) -> dict[str, list]:
+    """:func:`summary_columns` of k runs at once, from :func:`rbstab.summary.summary_table`
+    (figure -> k values): column -> k values."""
+    out: dict[str, list] = {}
+    for key, values in table.items():
+        if len(values) and isinstance(values[0], (list, tuple, np.ndarray)):
+            for a, axis in enumerate(_AXES):
+                out[f"{key}_{axis}"] = [float(v[a]) for v in values]
+        else:
+            out[key] = list(values)
+    return out
+
+
 def _has_text(values: list) -> bool:
     """Whether a ``(run,)`` column holds a str (its types looked at once: most hold numbers)."""
     return any(issubclass(t, str) for t in set(map(type, values)) - _NUMBERS)
@@ -215,8 +229,10 @@ def chunk_file_name(first_run_id: str) -> str:
 class ChunkWriter:
     """Write the runs of one chunk into one store file (module docstring), atomically.
 
-    Use as a context manager: :meth:`add` a finished run (any status) or
-    :meth:`add_error` a run that raised, once per row; leaving the block without an
+    Use as a context manager: :meth:`add` a finished run (any status), :meth:`add_block`
+    finished runs that share their sample times (:class:`rbstab.simulate.RunBlock`: their
+    traces copied at once, their values kept as columns) or :meth:`add_error` a run that
+    raised, once per row; leaving the block without an
     exception writes the per-run values and renames the file into place; an exception
     removes the temporary file.
 
@@ -248,7 +264,8 @@ class ChunkWriter:
         self.ids = [r.run_id for r in ordered]
         self.position = {r.run_id: i for i, r in enumerate(ordered)}
         self.identity = ordered
-        self.values: list[dict[str, Any] | None] = [None] * len(ordered)
+        self._blocks: list[tuple[list[int], dict[str, list]]] = []  # (rows, column -> a value a row) added
+        self._where: list[tuple[int, int] | None] = [None] * len(ordered)  # row -> (block, position) once added
         self._pending: list[int] = []  # rows whose traces are in the buffer's first rows, in that order
         self._buffer: dict[str, np.ndarray] = {}  # variable -> (rows, *trace shape), written at each flush
         self._stack = ExitStack()
@@ -329,56 +346,88 @@ class ChunkWriter:
         (the ``config`` column), if the caller has them (a sweep's plan computed them); else
         computed here.
         """
-        from .hdf5 import config_hash as hash_of
+        from ..simulate import RunBlock
 
-        resolved = result.config.resolved
-        if config_hash is None:
-            config_hash = hash_of(canonical_config(resolved))
-        values: dict[str, Any] = {
-            "variant": result.config.variant,
-            "status": result.status,
-            "message": result.message,
-            "wall_time": float(result.wall_time),
-        }
-        values.update({f"solver_{k}": result.solver.get(k) for k in _SOLVER[:-1]})
-        values["solver_status"] = int(result.solver.get("solver_status", -1))
-        values["config"] = canonical_config(resolved, limits=True) if config_text is None else config_text
-        values["config_hash"] = config_hash
-        values.update(summary_columns(result.summary))
-        i = self._row_of(run_id)
+        return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
+                              config_texts=[config_text])[0]
+
+    def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None,
+                  config_texts: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
+        """Add finished runs that share their sample times (a :class:`rbstab.simulate.RunBlock`,
+        ``run_ids[j]`` its run j); returns their rows, as :meth:`add` does each.
+
+        ``config_hashes``, ``config_texts``: as :meth:`add`'s, a value a run (None or ""
+        where the caller has none). Raises ValueError, with no run added, for a run that is
+        not a row of the file or was added already, or traces of another shape or sample
+        times than the file's.
+        """
+        rows = [self._row_of(run_id) for run_id in run_ids]
+        if len(set(rows)) != len(rows):
+            raise ValueError(f"{self.path.name}: a run is given twice in one block: {list(run_ids)}")
+        values = self._block_values(block, config_hashes, config_texts)
         if self.store != "summary":
             if self._time is None:
-                self._start(result)
-            self._keep_traces(run_id, result)
-        return self._add(i, values)
+                self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()})
+            self._keep_traces(run_ids, rows, block)
+        return self._add(rows, values)
+
+    def _block_values(self, block, config_hashes, config_texts) -> dict[str, list]:
+        """The per-run values of a block's runs, as columns."""
+        from .hdf5 import config_hash as hash_of
+
+        configs = block.configs
+        k = len(configs)
+        hashes = list(config_hashes) if config_hashes is not None else [None] * k
+        texts = list(config_texts) if config_texts is not None else [None] * k
+        for j, config in enumerate(configs):
+            if not texts[j]:
+                texts[j] = canonical_config(config.resolved, limits=True)
+            if not hashes[j]:
+                hashes[j] = hash_of(canonical_config(config.resolved))
+        values: dict[str, list] = {
+            "variant": [c.variant for c in configs],
+            "status": list(block.status),
+            "message": list(block.message),
+            "wall_time": [float(w) for w in block.wall_time],
+        }
+        for key in _SOLVER[:-1]:
+            values[f"solver_{key}"] = [solver.get(key) for solver in block.solver]
+        values["solver_status"] = [int(solver.get("solver_status", -1)) for solver in block.solver]
+        values["config"] = texts
+        values["config_hash"] = hashes
+        values.update(summary_table_columns(block.summaries))
+        return values
 
     def add_error(self, run_id: str, message: str) -> dict[str, Any]:
         """Add a run that raised before it had a result (status ``error``, no values)."""
         i = self._row_of(run_id)
         if self._traces:  # its traces are NaN (before the first result: the fill value)
-            self._keep_traces(run_id, None)
-        return self._add(i, {"status": "error", "message": message, "wall_time": 0.0})
+            self._keep_traces([run_id], [i], None)
+        return self._add([i], {"status": ["error"], "message": [message], "wall_time": [0.0]})[0]
 
     def _row_of(self, run_id: str) -> int:
         i = self.position.get(run_id)
-        if i is None or self.values[i] is not None:
+        if i is None or self._where[i] is not None:
             raise ValueError(f"{self.path.name}: run {run_id!r} is not a row of this file or was added twice")
         return i
 
-    def _add(self, i: int, values: dict[str, Any]) -> dict[str, Any]:
-        """Row ``i`` takes ``values``; its traces, if any, are in the buffer's next row."""
-        self.values[i] = values
-        if self._traces:
-            self._pending.append(i)
-            if len(self._pending) >= self._block:
-                self._flush()
-        return self.row(i)
+    def _add(self, rows: list[int], values: dict[str, list]) -> list[dict[str, Any]]:
+        """Rows ``rows`` take ``values`` (column -> a value a row); their traces, if any,
+        are in the buffer already."""
+        b = len(self._blocks)
+        self._blocks.append((rows, values))
+        for position, i in enumerate(rows):
+            self._where[i] = (b, position)
+        return [self.row(i) for i in rows]
 
     def row(self, i: int) -> dict[str, Any]:
         """Row ``i`` as :func:`read_chunk_rows` reads it back."""
         ident = self.identity[i]
         out = {"run": ident.index, "run_id": ident.run_id, "base": ident.base, **ident.coords}
-        out.update(self.values[i] or {})
+        if self._where[i] is not None:
+            b, position = self._where[i]
+            for name, values in self._blocks[b][1].items():
+                out[name] = values[position]
         out["store"] = self.store
         out["created"] = self.attrs["created"]
         out["file"] = self.path.name
@@ -387,9 +436,11 @@ class ChunkWriter:
 
     # -- traces -------------------------------------------------------------------------------
 
-    def _start(self, result: "RunResult") -> None:
-        time = np.asarray(result.time, dtype=float)
-        names = [k for k in result.outputs if self.store == "full" or k in THINNED_VARIABLES]
+    def _start(self, time, ranks: Mapping[str, int]) -> None:
+        """Create the trace variables: ``time`` the runs' sample times, ``ranks`` output
+        name -> 0 (a scalar a sample) or 1 (a 3-vector)."""
+        time = np.asarray(time, dtype=float)
+        names = [k for k in ranks if self.store == "full" or k in THINNED_VARIABLES]
         if self.store == "thinned":
             self._stride = summary_stride(len(time))
             self.attrs["store_stride"] = self._stride
@@ -402,7 +453,7 @@ class ChunkWriter:
         h5 = f._h5file
         scales = [h5["run"], h5["time"], h5["axis"]]
         for name in names:
-            rank = np.ndim(result.outputs[name])
+            rank = ranks[name]
             shape = (len(self.ids), len(self._time), 3)[: rank + 1]
             # through h5py with the dimension scales attached (what netCDF-4 reads as a
             # variable of those dimensions): h5netcdf's create_variable costs ~5 ms each;
@@ -420,28 +471,40 @@ class ChunkWriter:
         rows = min(self._block, len(self.ids))
         self._buffer = {name: np.empty((rows, *shape)) for name, shape in self._traces.items()}
 
-    def _keep_traces(self, run_id: str, result: "RunResult | None") -> None:
-        """Copy a run's traces (every ``store_stride``-th sample; NaN for None or a variable
-        it lacks) into the buffer's next row, written at the next flush.
+    def _keep_traces(self, run_ids: Sequence[str], rows: list[int], block) -> None:
+        """Copy runs' traces (every ``store_stride``-th sample; NaN for a None block or a
+        variable it lacks) into the buffer's next rows, written at a flush (checked first:
+        ValueError, nothing copied, for traces of another shape or sample times).
 
         Copied, not held: a result's outputs are views of its post-processing block (36
         outputs of 32 runs, ~18 MB), which a view held until the flush would keep alive (a
         512-run file's pending rows pinned ~300 MB instead of the WRITE_BYTES of their
-        traces); and copied once, into the block that is written.
+        traces); and copied once, a block of runs at a time, into the block that is written.
         """
-        if result is not None and result.time is not self._checked_time:  # a chunk's runs share their times
-            self._check_time(run_id, result.time)
-        slot = len(self._pending)
+        if block is not None and block.time is not self._checked_time:  # a chunk's runs share their times
+            self._check_time(run_ids[0], block.time)
+        traces: dict[str, np.ndarray | None] = {}
         for name, shape in self._traces.items():
-            row = self._buffer[name][slot]
-            if result is None or name not in result.outputs:
-                row[...] = np.nan
-                continue
-            trace = np.asarray(result.outputs[name])[:: self._stride]
-            if trace.shape != shape:
-                raise ValueError(f"run {run_id}: '{name}' has shape {trace.shape}; "
-                                 f"the other runs of {self.path.name} have {shape}")
-            row[...] = trace
+            value = block.outputs.get(name) if block is not None else None
+            if value is not None:
+                value = np.asarray(value)[:, :: self._stride]
+                if value.shape[1:] != shape:
+                    raise ValueError(f"run {run_ids[0]}: '{name}' has shape {value.shape[1:]}; "
+                                     f"the other runs of {self.path.name} have {shape}")
+            traces[name] = value
+        capacity = len(next(iter(self._buffer.values())))
+        for lo in range(0, len(rows), capacity):
+            hi = min(lo + capacity, len(rows))
+            if len(self._pending) + hi - lo > capacity:
+                self._flush()
+            slot = len(self._pending)
+            for name, value in traces.items():
+                into = self._buffer[name][slot : slot + hi - lo]
+                if value is None:
+                    into[...] = np.nan
+                else:
+                    into[...] = value[lo:hi]
+            self._pending.extend(rows[lo:hi])
 
     def _check_time(self, run_id: str, time) -> None:
         time = np.asarray(time, dtype=float)
@@ -479,7 +542,7 @@ class ChunkWriter:
     # -- the per-run values -------------------------------------------------------------------
 
     def _finish(self) -> None:
-        missing = [self.ids[i] for i, v in enumerate(self.values) if v is None]
+        missing = [self.ids[i] for i, where in enumerate(self._where) if where is None]
         if missing:
             raise ValueError(f"{self.path.name}: no result for {len(missing)} run(s), e.g. {missing[0]}")
         self._flush()
@@ -517,17 +580,29 @@ class ChunkWriter:
         names: dict[str, None] = dict.fromkeys(_COORDS)
         names.update(dict.fromkeys(self.parameters))
         seen: set = set()  # key sets met (the rows of a file have a few)
-        for ident, values in zip(self.identity, self.values):
-            keys = (tuple(ident.coords), tuple(values))
+        for ident, (b, _) in zip(self.identity, self._where):
+            keys = (tuple(ident.coords), tuple(self._blocks[b][1]))
             if keys not in seen:
                 seen.add(keys)
                 names.update(dict.fromkeys(keys[0]))
                 names.update(dict.fromkeys(keys[1]))
+        coordinates = {name for ident in self.identity for name in ident.coords}
         columns: dict[str, list] = {"run_id": [i.run_id for i in self.identity], "base": [i.base for i in self.identity]}
+        # (rows, values, the rows' span if they are consecutive) of each block added
+        blocks = [(rows, values, slice(rows[0], rows[-1] + 1) if rows == list(range(rows[0], rows[-1] + 1)) else None)
+                  for rows, values in self._blocks]
         for name in names:
-            if name not in columns:
-                columns[name] = [v[name] if name in v else i.coords.get(name)
-                                 for i, v in zip(self.identity, self.values)]
+            if name in columns:
+                continue
+            column = [i.coords.get(name) for i in self.identity] if name in coordinates else [None] * len(self.ids)
+            for rows, values, span in blocks:
+                if name in values:
+                    if span is not None:
+                        column[span] = values[name]
+                    else:
+                        for i, value in zip(rows, values[name]):
+                            column[i] = value
+            columns[name] = column
         return {name: columns[name] for name in names}
 
     def _column_kind(self, dtype: np.dtype) -> tuple:

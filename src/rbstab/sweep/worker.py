@@ -13,7 +13,7 @@ Engines
 - ``scipy`` (the reference): the tasks of a chunk one after the other through
   :func:`rbstab.simulate.simulate`, one ``solve_ivp`` call each; any method, per-run
   ``timeout``.
-- ``compiled``: :func:`rbstab.simulate.simulate_many` (:mod:`rbstab.engine`): every run
+- ``compiled``: :func:`rbstab.simulate.simulate_blocks` (:mod:`rbstab.engine`): every run
   of the chunk that uses RK23, RK45 or DOP853 is integrated by the compiled engine,
   whatever its variant, body and gains; the others (implicit methods, the pure sign law
   of ``sliding``) go through scipy. Configurations are validated once per group of runs
@@ -23,7 +23,8 @@ Engines
 
 Layouts
 -------
-Both engines hand each finished run to a sink, ``SINKS[options.layout]``: ``run`` writes
+Both engines hand each finished run (the compiled engine a block of runs,
+:class:`rbstab.simulate.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
 one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
 writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
 into place when the whole chunk is done. Either way the record carries the run's
@@ -161,7 +162,7 @@ class _RunFiles:
         from .folder import row_from_attributes
 
         options = self.options
-        record: dict[str, Any] = {"run_id": task.run_id, "path": task.path}
+        record = _result_record(task, task.path, result)
         t0 = _time.perf_counter()
         config_yaml = result.config.to_yaml()  # the config attribute and its hash
         t1 = _time.perf_counter()
@@ -175,22 +176,33 @@ class _RunFiles:
             attrs = write_run(result, task.path, command_line=options.command_line, store=options.store,
                               config_yaml=config_yaml)
         row = row_from_attributes(attrs, Path(task.path).name)
-        return _finished(record, result, row, t1 - t0, _time.perf_counter() - t1)
+        return _finished(record, result.timing, row, t1 - t0, _time.perf_counter() - t1)
+
+    def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
+        """:meth:`add` of each run of a :class:`rbstab.simulate.RunBlock` (``tasks[j]`` its run
+        j); a file that cannot be written is that run's error."""
+        return _each_run(self, tasks, block)
 
     def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
         return _error_record(task, exc)
 
 
-def _finished(record: dict[str, Any], result, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
+def _finished(record: dict[str, Any], timing: dict, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
+    """``record`` (``run_id``, ``path``, ``status``, ``message``, ``wall_time``) of a
+    written run, with its row as the index takes it and its ``timing``."""
     from .folder import index_part
 
-    timing = dict(result.timing)
+    timing = dict(timing)
     timing["config_yaml"] = yaml_time
     timing["write"] = write_time
     # the row as the index takes it: the config text stays in the file, not in the parent
-    record.update(status=result.status, message=result.message, wall_time=result.wall_time, attrs=index_part(row),
-                  timing=timing)
+    record.update(attrs=index_part(row), timing=timing)
     return record
+
+
+def _result_record(task: RunTask, path: str, result) -> dict[str, Any]:
+    return {"run_id": task.run_id, "path": path, "status": result.status, "message": result.message,
+            "wall_time": result.wall_time}
 
 
 class _ChunkFile:
@@ -230,10 +242,26 @@ class _ChunkFile:
         t0 = _time.perf_counter()
         row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None,
                               config_text=task.config_text or None)
-        record = _finished({"run_id": task.run_id, "path": self.final}, result, row, 0.0,
+        record = _finished(_result_record(task, self.final, result), result.timing, row, 0.0,
                            _time.perf_counter() - t0)
         self.records.append(record)
         return record
+
+    def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
+        """The runs of a :class:`rbstab.simulate.RunBlock` (``tasks[j]`` its run j) into the
+        file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); their records."""
+        t0 = _time.perf_counter()
+        rows = self.writer.add_block([t.run_id for t in tasks], block,
+                                     config_hashes=[t.config_hash for t in tasks],
+                                     config_texts=[t.config_text for t in tasks])
+        share = (_time.perf_counter() - t0) / len(tasks)
+        records = []
+        for j, (task, row) in enumerate(zip(tasks, rows)):
+            record = {"run_id": task.run_id, "path": self.final, "status": block.status[j],
+                      "message": block.message[j], "wall_time": block.wall_time[j]}
+            records.append(_finished(record, block.timing[j], row, 0.0, share))
+        self.records += records
+        return records
 
     def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
         record = _error_record(task, exc)
@@ -302,7 +330,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
 
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
-    from ..simulate import simulate_many, uses_compiled_engine
+    from ..simulate import simulate_blocks, uses_compiled_engine
 
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)
@@ -313,20 +341,40 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
     try:
         # a thinned or summary store keeps none of the outputs LEFT_OUT: not computed
         full = options.store == "full"
-        for j, result in simulate_many([configs[i] for i in batch], timeout=options.timeout, full=full):
-            i = batch[j]
-            done.add(i)
-            try:
-                record = sink.add(tasks[i], result)
-                record["timing"]["config"] = config_time
-            except Exception as exc:  # one file that cannot be written is that run's error
-                record = sink.error(tasks[i], exc)
-            records.append(record)
+        for members, block in simulate_blocks([configs[i] for i in batch], timeout=options.timeout, full=full):
+            chunk = [batch[j] for j in members]
+            done.update(chunk)
+            records += _add_block(sink, [tasks[i] for i in chunk], block, config_time)
     except Exception:
         # an exception of the batch as a whole (a bug): every run it had not finished
         # goes through the scipy engine alone, so no run is lost to another's problem
         others += [i for i in batch if i not in done]
     records += _scipy_engine([tasks[i] for i in sorted(others)], options, sink)
+    return records
+
+
+def _each_run(sink, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
+    """``sink.add`` of each run of a block (``tasks[j]`` its run j); one that cannot be
+    written is that run's error (``sink.error``)."""
+    records = []
+    for j, task in enumerate(tasks):
+        try:
+            records.append(sink.add(task, block.result(j)))
+        except Exception as exc:
+            records.append(sink.error(task, exc))
+    return records
+
+
+def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> list[dict[str, Any]]:
+    """The records of a block's runs, stored by ``sink``; if the block cannot be stored at
+    once, each run alone (one that cannot be written is that run's error)."""
+    try:
+        records = sink.add_block(tasks, block)
+    except Exception:  # the sink added none of them (ChunkWriter.add_block checks first)
+        records = _each_run(sink, tasks, block)
+    for record in records:
+        if "timing" in record:
+            record["timing"]["config"] = config_time
     return records
 
 
