@@ -9,10 +9,13 @@ installed rbstab alone (``rbstab.open_sweep`` needed ``dask`` and raised
 from __future__ import annotations
 
 import ast
+import functools
 import importlib.metadata as metadata
-import re
 import sys
 from pathlib import Path
+
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = [ROOT / "src" / "rbstab", ROOT / "cli"]
@@ -45,26 +48,28 @@ def _third_party(modules: dict[str, Path]) -> dict[str, Path]:
     return {m: p for m, p in modules.items() if m not in sys.stdlib_module_names and m not in LOCAL}
 
 
-def _requirement_name(text: str) -> str:
-    return re.split(r"[\s<>=!~;\[(]", text, maxsplit=1)[0].lower().replace("_", "-")
-
-
 def _requirements() -> tuple[set[str], dict[str, set[str]]]:
-    """(the distributions of a plain install, extra -> its distributions) of rbstab."""
+    """(the distributions of a plain install, extra -> its distributions) of rbstab, from
+    its installed metadata (``Requires-Dist``)."""
     core: set[str] = set()
     extras: dict[str, set[str]] = {}
-    for text in metadata.requires("rbstab") or []:
-        name = _requirement_name(text)
-        marker = re.search(r"extra\s*==\s*['\"]([^'\"]+)['\"]", text)
-        if marker:
-            extras.setdefault(marker.group(1), set()).add(name)
-        else:
+    for req in map(Requirement, metadata.requires("rbstab") or []):
+        name = canonicalize_name(req.name)
+        if req.marker is None or req.marker.evaluate({"extra": ""}):
             core.add(name)
+        for extra in metadata.metadata("rbstab").get_all("Provides-Extra") or []:
+            if req.marker is not None and req.marker.evaluate({"extra": extra}):
+                extras.setdefault(extra, set()).add(name)
     return core, extras
 
 
+@functools.cache
+def _module_distributions() -> dict[str, list[str]]:
+    return metadata.packages_distributions()
+
+
 def _distributions(module: str) -> set[str]:
-    return {d.lower().replace("_", "-") for d in metadata.packages_distributions().get(module, [])}
+    return {canonicalize_name(d) for d in _module_distributions().get(module, [])}
 
 
 def test_the_scan_finds_the_imports_it_must_check():
