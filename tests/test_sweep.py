@@ -593,6 +593,43 @@ def test_index_rows_keep_what_the_index_takes():
             assert rows.cells(run_id, columns) == tuple(rows[run_id].get(c) for c in columns)
 
 
+def test_sweep_index_is_the_rows_of_their_definition(tmp_path):
+    """write_sweep_index (rows taken by position from the compact stored rows) writes what
+    index_rows (a dict per row) and write_index give: runs of two kinds of stored rows
+    (another variant, a row with a file, converged or not), an error and a pending run, and
+    planned runs as well as their entries; the stored rows are emptied as it goes."""
+    from rbstab.sweep.folder import IndexRows, index_rows, write_index, write_sweep_index
+
+    runs = expand(spec_from_mapping({"name": "ix", "base": str(CASE3), "grid": {
+        "controller.variant": ["embedded", "visco_elastic"], "body.mass": [40.0, 41.0, 42.0]}}))
+
+    def stored_rows() -> IndexRows:
+        rows = IndexRows()
+        for k, run in enumerate(runs[:4]):  # r4 an error, r5 pending
+            row = {"run": run.index, "run_id": run.run_id, "base": run.base, "variant": run.variant,
+                   "status": "success" if k != 2 else "failed", "message": f"m{k}, with a comma",
+                   "wall_time": 0.5 + k, "lyapunov_initial": 10.0, "lyapunov_final": [0.1, 5.0, None, 0.05][k],
+                   "config": "{}", "created": "t"}
+            if run.variant == "embedded":
+                row["final_d_x"] = 0.25 * k
+            row["file"] = f"chunk-{k}.h5" if k % 2 else None
+            rows[run.run_id] = row
+        return rows
+
+    errors = {runs[4].run_id: "ValueError: boom"}
+    expected_rows = index_rows(runs, stored_rows(), errors, 0.01)
+    write_index(tmp_path / "expected.csv", expected_rows)
+    for given in (runs, [r.entry() for r in runs]):
+        rows = stored_rows()
+        summary, problems = write_sweep_index(tmp_path, given, rows, errors, name="ix", ratio=0.01,
+                                              parameters={"mass": "body.mass"})
+        assert (tmp_path / "index.csv").read_bytes() == (tmp_path / "expected.csv").read_bytes()
+        assert len(rows) == 0
+        assert summary["status"] == {"success": 3, "failed": 1, "error": 1, "pending": 1}
+        assert summary["n_converged"] == sum(bool(r["converged"]) for r in expected_rows) == 2
+        assert problems == [(r["run_id"], r["status"], r["message"]) for r in expected_rows if r["status"] != "success"]
+
+
 def test_index_file_writes_each_cell_as_the_rows_give_it(tmp_path):
     """write_index of rows (one with a list value, written as its JSON) reads back as the rows."""
     import csv
