@@ -593,23 +593,23 @@ def test_index_rows_keep_what_the_index_takes():
             assert rows.cells(run_id, columns) == tuple(rows[run_id].get(c) for c in columns)
 
 
-def test_sweep_index_is_the_rows_of_their_definition(tmp_path):
-    """write_sweep_index (rows taken by position from the compact stored rows) writes what
-    index_rows (a dict per row) and write_index give: runs of two kinds of stored rows
-    (another variant, a row with a file, converged or not), an error and a pending run, and
-    planned runs as well as their entries; the stored rows are emptied as it goes."""
+def test_sweep_index_rows_are_the_runs_and_their_stored_rows(tmp_path):
+    """An index row is the run (id, index, base, coordinates, variant), its stored row but
+    what the index leaves out, its file under runs/ and whether it converged; a run without
+    a stored row is an error (with the worker's message) or pending. write_sweep_index
+    writes those rows as write_index does, from planned runs or their entries, from stored
+    rows held compactly or as dicts, and empties the stored rows as it goes."""
     from rbstab.sweep.folder import IndexRows, index_rows, write_index, write_sweep_index
 
     runs = expand(spec_from_mapping({"name": "ix", "base": str(CASE3), "grid": {
         "controller.variant": ["embedded", "visco_elastic"], "body.mass": [40.0, 41.0, 42.0]}}))
 
-    def stored_rows() -> IndexRows:
-        rows = IndexRows()
+    def stored_rows(held) -> dict:
+        rows = held()
         for k, run in enumerate(runs[:4]):  # r4 an error, r5 pending
-            row = {"run": run.index, "run_id": run.run_id, "base": run.base, "variant": run.variant,
-                   "status": "success" if k != 2 else "failed", "message": f"m{k}, with a comma",
-                   "wall_time": 0.5 + k, "lyapunov_initial": 10.0, "lyapunov_final": [0.1, 5.0, None, 0.05][k],
-                   "config": "{}", "created": "t"}
+            row = {"run": run.index, "run_id": run.run_id, "variant": "stale", "status": "success" if k != 2 else "failed",
+                   "message": f"m{k}, with a comma", "wall_time": 0.5 + k, "lyapunov_initial": 10.0,
+                   "lyapunov_final": [0.1, 5.0, None, 0.05][k], "config": "{}", "created": "t"}
             if run.variant == "embedded":
                 row["final_d_x"] = 0.25 * k
             row["file"] = f"chunk-{k}.h5" if k % 2 else None
@@ -617,17 +617,26 @@ def test_sweep_index_is_the_rows_of_their_definition(tmp_path):
         return rows
 
     errors = {runs[4].run_id: "ValueError: boom"}
-    expected_rows = index_rows(runs, stored_rows(), errors, 0.01)
-    write_index(tmp_path / "expected.csv", expected_rows)
-    for given in (runs, [r.entry() for r in runs]):
-        rows = stored_rows()
-        summary, problems = write_sweep_index(tmp_path, given, rows, errors, name="ix", ratio=0.01,
+    rows = index_rows(runs, stored_rows(dict), errors, 0.01)
+    assert [r["run_id"] for r in rows] == [r.run_id for r in runs] and [r["run"] for r in rows] == list(range(6))
+    assert [r["mass"] for r in rows] == [40.0, 41.0, 42.0] * 2
+    assert [r["variant"] for r in rows] == [r.variant for r in runs]  # the run's, not the stored row's
+    assert [r["status"] for r in rows] == ["success", "success", "failed", "success", "error", "pending"]
+    assert [r["converged"] for r in rows] == [True, False, False, True, False, False]
+    assert [r.get("file") for r in rows] == [None, "runs/chunk-1.h5", None, "runs/chunk-3.h5", None, None]
+    assert [r.get("final_d_x") for r in rows] == [0.0, 0.25, 0.5, None, None, None]
+    assert rows[4]["message"] == "ValueError: boom" and rows[5]["message"].startswith("not run yet")
+    assert not any("config" in r or "created" in r for r in rows)
+    write_index(tmp_path / "expected.csv", rows)
+    for given, held in ((runs, IndexRows), ([r.entry() for r in runs], IndexRows), (runs, dict)):
+        stored = stored_rows(held)
+        summary, problems = write_sweep_index(tmp_path, given, stored, errors, name="ix", ratio=0.01,
                                               parameters={"mass": "body.mass"})
         assert (tmp_path / "index.csv").read_bytes() == (tmp_path / "expected.csv").read_bytes()
-        assert len(rows) == 0
+        assert len(stored) == 0
         assert summary["status"] == {"success": 3, "failed": 1, "error": 1, "pending": 1}
-        assert summary["n_converged"] == sum(bool(r["converged"]) for r in expected_rows) == 2
-        assert problems == [(r["run_id"], r["status"], r["message"]) for r in expected_rows if r["status"] != "success"]
+        assert summary["n_converged"] == 2
+        assert problems == [(r["run_id"], r["status"], r["message"]) for r in rows if r["status"] != "success"]
 
 
 def test_index_file_writes_each_cell_as_the_rows_give_it(tmp_path):
