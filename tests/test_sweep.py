@@ -585,12 +585,10 @@ def test_index_rows_keep_what_the_index_takes():
     assert rows["r0"] == {"run_id": "r0", "status": "success", "lyapunov_final": 1.5}
     assert rows.get("r1") == {"run_id": "r1", "status": "failed", "lyapunov_final": None}
     assert rows.get("r9") is None and "r2" in rows and len(rows) == 3 and list(rows) == ["r0", "r1", "r2"]
-    assert rows.column_sets() == [("run_id", "status", "lyapunov_final"), ("run_id", "status", "message")]
+    assert rows.parts("r1") == (("run_id", "status", "lyapunov_final"), ("r1", "failed", None, None))
+    assert rows.parts("r0")[0] is rows.parts("r1")[0]  # the rows of a kind share their names
     rows.pop("r0")
-    assert "r0" not in rows and len(rows) == 2
-    for columns in (("status", "run_id", "message", "lyapunov_final"), ("message",)):
-        for run_id in rows:  # a row's cells are its values by column, None where it has none
-            assert rows.cells(run_id, columns) == tuple(rows[run_id].get(c) for c in columns)
+    assert "r0" not in rows and len(rows) == 2 and rows.parts("r0") is None
 
 
 def test_sweep_index_rows_are_the_runs_and_their_stored_rows(tmp_path):

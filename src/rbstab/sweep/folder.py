@@ -226,7 +226,6 @@ class IndexRows(MutableMapping):
     def __init__(self) -> None:
         self._columns: dict[tuple, tuple] = {}
         self._rows: dict[str, tuple[tuple, tuple]] = {}
-        self._picks: dict[tuple, tuple[tuple, Callable[[tuple], tuple]]] = {}
 
     def __setitem__(self, run_id: str, row: Mapping[str, Any]) -> None:
         if any(key in row for key in NOT_IN_INDEX):  # most rows come without (a worker's record)
@@ -238,17 +237,6 @@ class IndexRows(MutableMapping):
     def __getitem__(self, run_id: str) -> dict[str, Any]:
         names, values = self._rows[run_id]
         return dict(zip(names, values))
-
-    def cells(self, run_id: str, columns: tuple[str, ...]) -> tuple:
-        """The row's values in the order of ``columns`` (None where it has none): what
-        ``[row.get(c) for c in columns]`` gives, without making the row."""
-        names, values = self._rows[run_id]
-        known = self._picks.get(names)  # (columns, their getter) of the last call
-        if known is None or (known[0] is not columns and known[0] != columns):
-            where = {name: i for i, name in enumerate(names)}
-            get = operator.itemgetter(*(where.get(c, len(names)) for c in columns))
-            known = self._picks[names] = (columns, get if len(columns) > 1 else lambda v: (get(v),))
-        return known[1](values)
 
     def parts(self, run_id: str) -> tuple[tuple, tuple] | None:
         """(column names, values ending with a None) of a row as held, or None: what
@@ -266,10 +254,6 @@ class IndexRows(MutableMapping):
 
     def __contains__(self, run_id: object) -> bool:
         return run_id in self._rows
-
-    def column_sets(self) -> list[tuple]:
-        """The distinct column-name tuples of the rows (few: one per kind of row)."""
-        return list(self._columns)
 
 
 def index_part(row: Mapping[str, Any]) -> dict[str, Any]:
