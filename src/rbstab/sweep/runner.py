@@ -652,11 +652,11 @@ def _stop_on_machine_fault(records) -> None:
 
 
 def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
-    # the runs' coordinate layouts, each once (the runs of a sweep share a few)
-    layouts = dict.fromkeys((r if isinstance(r, RunEntry) else r.entry()).layout for r in runs)
+    # one run of each coordinate layout (the runs of a sweep share a few) gives the columns
+    kinds = {e.layout: e for e in (r if isinstance(r, RunEntry) else r.entry() for r in runs)}
     summary, outcome.problems = write_sweep_index(
         outcome.directory, runs, attrs, errors, name=spec.name, ratio=spec.lyapunov_ratio,
-        parameters=coordinate_columns({name: (key, None) for name, key in layout} for layout in layouts))
+        parameters=coordinate_columns(e.coords for e in kinds.values()))
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
 
