@@ -17,6 +17,7 @@ import socket
 import subprocess
 import sys
 import time
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 import h5py
@@ -359,6 +360,66 @@ def test_workers_exit_when_the_parent_dies_unreaped(tmp_path):
     assert not _alive(workers)
     proc.wait()
     proc.stderr.close()
+
+
+# -- local workers that die ---------------------------------------------------------------
+
+
+def _die_on(item, die, marker_dir):
+    """A worker's task: its process exits at once on an item of ``die`` (the first time
+    only if ``marker_dir`` is given), as a killed or crashed worker does."""
+    marker = Path(marker_dir) / str(item) if marker_dir else None
+    if item in die and not (marker and marker.exists()):
+        if marker:
+            marker.touch()
+        os._exit(3)
+    return -item
+
+
+def _local_results(die, marker_dir=None, n=6) -> tuple[dict, dict]:
+    from rbstab.sweep.executors import LocalExecutor
+
+    results, errors = {}, {}
+    with LocalExecutor(1, max_in_flight=1) as ex:  # one item at a time: a deterministic order
+        for item, result, exc in ex.imap_unordered(_die_on, range(n), die, marker_dir):
+            (results if exc is None else errors)[item] = result if exc is None else exc
+    return results, errors
+
+
+def test_a_worker_dying_fails_its_run_and_the_pool_goes_on():
+    results, errors = _local_results({2})
+    assert results == {0: 0, 1: -1, 3: -3, 4: -4, 5: -5}
+    assert list(errors) == [2] and isinstance(errors[2], BrokenProcessPool)
+
+
+def test_a_pool_that_dies_before_finishing_anything_is_tried_once_more(tmp_path):
+    results, errors = _local_results({0}, tmp_path)  # the first worker dies at its first item only
+    assert results == {i: -i for i in range(6)} and not errors
+    with pytest.raises(ExecutorError, match="died twice in a row before finishing anything"):
+        _local_results({0})
+
+
+def test_a_script_without_the_main_guard_is_told_so(tmp_path):
+    """Every local worker runs the caller's script again before it takes work: a sweep at a
+    script's top level used to fail every run with a traceback per worker, and exit 0."""
+    body = (f"import rbstab\n"
+            f"spec = {{'name': 's', 'base': {str(CASE3)!r}, 'grid': {{'body.mass': [30.0, 50.0]}}}}\n"
+            f"{{}}ds = rbstab.sweep(spec, 'out', overrides={{'simulation.t_end': 0.2}}, jobs=2)\n"
+            f"{{}}print(sorted(set(ds.status.values)))\n")
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()  # one output folder each
+    guarded = tmp_path / "a" / "guarded.py"
+    guarded.write_text(body.replace("{}ds", "if __name__ == '__main__':\n    ds").replace("{}print", "    print"))
+    unguarded = tmp_path / "b" / "unguarded.py"
+    unguarded.write_text(body.replace("{}", ""))
+    ok = subprocess.run([sys.executable, guarded.name], cwd=guarded.parent, capture_output=True, text=True,
+                        timeout=300)
+    assert ok.returncode == 0 and ok.stdout.strip() == "['success']", ok.stderr
+    bad = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
+                         timeout=300)
+    assert bad.returncode != 0
+    assert f"{unguarded.name} starts a sweep at its top level" in bad.stderr
+    assert 'ExecutorError: the local worker processes died twice in a row' in bad.stderr
+    assert "SweepBusyError" not in bad.stderr
 
 
 # -- Dask -----------------------------------------------------------------------------------

@@ -10,7 +10,11 @@ same bit for bit (up to the ``created`` and ``command_line`` attributes).
   parent's h5py state or threads. At most ``2 * jobs`` items are in flight, and processes
   start as items need them: never more than the items (chunks), whatever ``jobs``. A
   worker that dies (killed, out of memory) fails only the items in flight, as data, and
-  the pool is restarted for the rest. Each worker holds the read end of a pipe whose
+  the pool is restarted for the rest. A pool that dies before finishing any item has
+  its items taken once more by the next; if that one dies too, the workers cannot run
+  at all and :class:`ExecutorError` says so (the usual cause: a script that calls
+  ``rbstab.sweep`` without the ``__main__`` guard, which every new worker runs again,
+  :func:`_refuse_in_bootstrap`). Each worker holds the read end of a pipe whose
   write end only the parent holds: when the parent is gone (killed, even while it is a
   zombie nobody reaped) the pipe reads end-of-file, and the worker finishes the run in
   progress (its file is written) and exits, instead of lingering. :meth:`abort` (on
@@ -28,6 +32,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 import threading
 import time
 import uuid
@@ -55,7 +60,7 @@ DASK_NO_WORKERS_GRACE = 30.0
 
 
 class ExecutorError(RuntimeError):
-    """An executor cannot start: ``distributed`` missing, scheduler unreachable, bad -j."""
+    """An executor cannot start or run: ``distributed`` missing, scheduler unreachable, bad -j, workers dying."""
 
 
 def default_jobs() -> int:
@@ -142,6 +147,32 @@ def _call(fn: Callable[..., Any], item: Any, *args: Any) -> Any:
         _idle.set()
 
 
+def _refuse_in_bootstrap() -> None:
+    """Exit with one line if this process is a new worker still importing the parent's script.
+
+    A worker started with ``forkserver`` or ``spawn`` first runs the parent's ``__main__``
+    script again (as ``__mp_main__``, the standard library's ``prepare`` step); a script
+    that starts a sweep at its top level, outside ``if __name__ == "__main__":``, would
+    start another sweep in every worker. ``multiprocessing`` marks that phase with the
+    current process's ``_inheriting`` flag (what its own check,
+    ``multiprocessing.spawn._check_not_importing_main``, reads).
+
+    Raises
+    ------
+    SystemExit
+        (code 1) in such a worker, after one line on stderr naming the script; the parent
+        sees its workers die and stops (:meth:`LocalExecutor.imap_unordered`).
+    """
+    if getattr(multiprocessing.current_process(), "_inheriting", False):
+        script = sys.argv[0] if sys.argv and sys.argv[0] else "the main script"
+        sys.stderr.write(
+            f"rbstab: {script} starts a sweep at its top level, and every worker process runs it again "
+            "before it can take work; put the call under if __name__ == \"__main__\": (as for any use of "
+            "local worker processes)\n")
+        sys.stderr.flush()
+        raise SystemExit(1)
+
+
 def _warm() -> None:
     """A no-op task: submitting one per worker starts the workers."""
 
@@ -184,6 +215,7 @@ class LocalExecutor(Executor):
     return_bytes = False
 
     def __init__(self, jobs: int | None = None, *, max_in_flight: int | None = None) -> None:
+        _refuse_in_bootstrap()
         jobs = default_jobs() if jobs is None else int(jobs)
         if jobs < 1:
             raise ExecutorError(f"-j/--jobs: found {jobs}; expected a number of processes >= 1")
@@ -246,42 +278,75 @@ class LocalExecutor(Executor):
         )
 
     def imap_unordered(self, fn, items, *args):
+        """See :meth:`Executor.imap_unordered`.
+
+        A pool that dies (a worker killed or crashed) fails the items in flight, as data,
+        and a new pool takes the rest; if it died before finishing any item, the new pool
+        takes its items in flight once more instead.
+
+        Raises
+        ------
+        ExecutorError
+            When two pools in a row die before finishing any item (their items in flight
+            are yielded as errors first; the rest are not started).
+        """
         pending = iter(items)
+        again: list = []  # the items of a pool that died before finishing any, to submit first
         in_flight: dict = {}
         exhausted = False
         self._join_starter()
         if self._pool is None:
             self._pool = self._new_pool()
+        finished = False  # whether an item of the current pool finished
+        retried = False  # whether the current pool took the items of one that finished none
         while True:
-            while not exhausted and len(in_flight) < self.max_in_flight:
-                try:
-                    item = next(pending)
-                except StopIteration:
-                    exhausted = True
-                    break
+            while len(in_flight) < self.max_in_flight and (again or not exhausted):
+                if again:
+                    item = again.pop(0)
+                else:
+                    try:
+                        item = next(pending)
+                    except StopIteration:
+                        exhausted = True
+                        break
                 in_flight[self._pool.submit(_call, fn, item, *args)] = item
             if not in_flight:
                 return
             done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
-            broken = False
+            broken = []
             for future in done:
                 item = in_flight.pop(future)
                 try:
-                    yield item, future.result(), None
-                except BrokenProcessPool as exc:
-                    broken = True
-                    yield item, None, exc
+                    result = future.result()
+                except BrokenProcessPool:
+                    broken.append(item)
+                    continue
                 except Exception as exc:  # pickling problems and the like
-                    yield item, None, exc
+                    result, error = None, exc
+                else:
+                    error = None
+                finished = True
+                yield item, result, error
             if broken:
-                # every item in flight died with the pool: report them, start a new pool
-                for future, item in list(in_flight.items()):
-                    yield item, None, BrokenProcessPool(
-                        "a worker process died (killed or crashed) while this run was in flight"
-                    )
+                lost = broken + list(in_flight.values())
                 in_flight.clear()
                 self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = None
+                if not finished and not retried:
+                    again[:0] = lost  # a pool that finished nothing: its items once more
+                    retried = True
+                else:
+                    for item in lost:
+                        yield item, None, BrokenProcessPool(
+                            "a worker process died (killed or crashed) while this run was in flight")
+                    if not finished:
+                        raise ExecutorError(
+                            "the local worker processes died twice in a row before finishing anything (see "
+                            "the messages above); from a Python script, call rbstab.sweep under "
+                            "if __name__ == \"__main__\": (each new worker runs the script again)")
+                    retried = False
                 self._pool = self._new_pool()
+                finished = False
 
     def close(self) -> None:
         self._join_starter()
