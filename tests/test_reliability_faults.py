@@ -420,6 +420,8 @@ def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     assert f"{unguarded.name} starts a sweep at its top level" in bad.stderr
     assert 'ExecutorError: the local worker processes died twice in a row' in bad.stderr
     assert "SweepBusyError" not in bad.stderr
+    index = pd.read_csv(unguarded.parent / "out" / "s" / "index.csv")
+    assert set(index.status) == {"pending"}  # nothing ran: the same script, guarded, resumes
 
 
 # -- Dask -----------------------------------------------------------------------------------

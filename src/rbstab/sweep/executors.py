@@ -287,8 +287,8 @@ class LocalExecutor(Executor):
         Raises
         ------
         ExecutorError
-            When two pools in a row die before finishing any item (their items in flight
-            are yielded as errors first; the rest are not started).
+            When two pools in a row die before finishing any item (the items not finished
+            are not yielded: for a sweep they stay pending).
         """
         pending = iter(items)
         again: list = []  # the items of a pool that died before finishing any, to submit first
@@ -332,19 +332,18 @@ class LocalExecutor(Executor):
                 in_flight.clear()
                 self._pool.shutdown(wait=False, cancel_futures=True)
                 self._pool = None
-                if not finished and not retried:
+                if not finished and retried:
+                    raise ExecutorError(
+                        "the local worker processes died twice in a row before finishing anything (see the "
+                        "messages above); from a Python script, call rbstab.sweep under "
+                        "if __name__ == \"__main__\": (each new worker runs the script again)")
+                if not finished:
                     again[:0] = lost  # a pool that finished nothing: its items once more
-                    retried = True
                 else:
                     for item in lost:
                         yield item, None, BrokenProcessPool(
                             "a worker process died (killed or crashed) while this run was in flight")
-                    if not finished:
-                        raise ExecutorError(
-                            "the local worker processes died twice in a row before finishing anything (see "
-                            "the messages above); from a Python script, call rbstab.sweep under "
-                            "if __name__ == \"__main__\": (each new worker runs the script again)")
-                    retried = False
+                retried = not finished
                 self._pool = self._new_pool()
                 finished = False
 
