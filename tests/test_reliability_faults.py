@@ -421,7 +421,12 @@ def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     assert 'ExecutorError: the local worker processes died twice in a row' in bad.stderr
     assert "SweepBusyError" not in bad.stderr
     index = pd.read_csv(unguarded.parent / "out" / "s" / "index.csv")
-    assert set(index.status) == {"pending"}  # nothing ran: the same script, guarded, resumes
+    assert set(index.status) == {"pending"}  # nothing ran
+    unguarded.write_text(guarded.read_text())  # the script mended: it runs the pending runs
+    mended = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
+                            timeout=300)
+    assert mended.returncode == 0 and mended.stdout.strip() == "['success']", mended.stderr
+    assert set(pd.read_csv(unguarded.parent / "out" / "s" / "index.csv").status) == {"success"}
 
 
 # -- Dask -----------------------------------------------------------------------------------
