@@ -18,8 +18,10 @@ from rbstab import __version__
 from .analyze import analyze
 from .report import report
 from .run import run
+from .sensitivity import sensitivity
 from .show import show
 from .sweep import sweep
+from .tune import tune
 from .validate import validate
 
 
@@ -73,6 +75,8 @@ cli.add_command(show)
 cli.add_command(report)
 cli.add_command(sweep)
 cli.add_command(analyze)
+cli.add_command(sensitivity)
+cli.add_command(tune)
 
 
 def main() -> None:

@@ -34,7 +34,7 @@ import numpy as np
 from ..config import ConfigError
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
-           "value_at", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
+           "value_at", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
 
 
 class StudyInputError(ConfigError):
@@ -306,8 +306,8 @@ def check_metrics(names: Sequence[str], *, option: str = "--metric") -> None:
         if name == "converged" or name in known or (stem in known and axis in ("x", "y", "z")):
             continue
         close = difflib.get_close_matches(name, [*known, "converged"], n=1)
-        hint = f"; did you mean '{close[0]}'?" if close else ""
-        errors.append(f"{option} {name!r}: not a summary figure{hint} Allowed: converged, "
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        errors.append(f"{option} {name!r}: not a summary figure{hint}; allowed: converged, "
                       f"{', '.join(known)} (3-vectors also as <name>_x, _y, _z)")
     if errors:
         raise StudyInputError(errors)
@@ -333,6 +333,16 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
     if errors:
         raise StudyInputError(errors)
     return out
+
+
+def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
+    """The figures of the base configuration (one run in this process,
+    :func:`figure_columns`): the columns a study's metrics are chosen from."""
+    from ..simulate import simulate_many
+    from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO
+
+    (_, result), = simulate_many([config], engine=engine or "compiled", full=False)
+    return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
 
 
 def figure_columns(summary: Mapping[str, Any], status: str, ratio: float) -> dict[str, float]:
@@ -385,7 +395,7 @@ def _plain(value: Any) -> Any:
 
 
 def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | None = None,
-               executor: Any = None, engine: str | None = None, store: str = "summary",
+               executor: Any = None, scheduler: str | None = None, engine: str | None = None, store: str = "summary",
                log=None, progress: bool | None = None, command_line: str | None = None):
     """Run every row of a design table as one run of a sweep; return their summary figures.
 
@@ -399,9 +409,9 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
         The sweep folder (written as by ``rbstab sweep``: ``sweep.yaml``, ``runs/``,
         ``index.csv``); its name is the sweep's. Running the same design again skips
         the runs whose result is there (a resume).
-    jobs, executor, engine, store, log, progress, command_line
+    jobs, executor, scheduler, engine, store, log, progress, command_line
         As for :func:`rbstab.sweep.run_sweep` (``executor``: "local", "dask" with a
-        started executor, or an Executor object, not closed here).
+        ``scheduler`` address, or an Executor object, not closed here).
 
     Returns
     -------
@@ -423,7 +433,8 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     mapping = {"name": folder.name, "base": dict(base), "zip": design_mappings(design)}
     spec = spec_from_mapping(mapping)
     ensure_compiled(say=log, sign_law=True)
-    run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, log=log, engine=engine, store=store,
+    run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
+              engine=engine, store=store,
               progress=progress, command_line=command_line)
     ds = open_sweep(folder)
     figures = _figure_names()

@@ -41,11 +41,12 @@ from typing import Any
 
 import numpy as np
 
-from .design import (StudyInputError, Varied, check_metrics, expand_metrics, figure_columns, parse_vary, run_design,
+from .files import KINDS
+from .design import (StudyInputError, Varied, check_metrics, expand_metrics, nominal_figures, parse_vary, run_design,
                      vary_mapping)
 
 __all__ = ["METHODS", "DEFAULT_METRICS", "FILE", "SWEEP_FOLDER", "SensitivityDesign", "plan_sensitivity",
-           "analyze_results", "sensitivity_analysis", "read_sensitivity", "is_sensitivity_file", "metric_records"]
+           "analyze_results", "sensitivity_analysis", "read_sensitivity", "metric_records"]
 
 #: Sensitivity methods.
 METHODS = ("sobol", "morris")
@@ -54,7 +55,7 @@ METHODS = ("sobol", "morris")
 DEFAULT_METRICS = ("max_abs_constraint_error", "lyapunov_final", "max_lyapunov_rate", "converged")
 
 #: The study's result file and its sweep folder, inside ``<output>/<name>/``.
-FILE = "sensitivity.nc"
+FILE = KINDS["sensitivity"]
 SWEEP_FOLDER = "sweep"
 
 #: Levels of the Morris grid.
@@ -176,16 +177,6 @@ def _sample(problem: dict, n: int, method: str, seed: int) -> np.ndarray:
     return morris.sample(problem, n, num_levels=MORRIS_LEVELS, seed=seed)
 
 
-def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
-    """The summary figures of the base configuration (one run in this process): the
-    columns a study's metrics are chosen from."""
-    from ..simulate import simulate_many
-    from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO
-
-    (_, result), = simulate_many([config], engine=engine or "compiled", full=False)
-    return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
-
-
 def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 200,
                     conf_level: float = 0.95):
     """The indices of every metric of ``results`` (:func:`run_design`'s Dataset, one run per
@@ -249,7 +240,8 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
                          metrics: Sequence[str] | None = None, seed: int = 0,
                          output: str | os.PathLike = "results/studies", name: str | None = None,
                          num_resamples: int = 200, conf_level: float = 0.95, jobs: int | None = None,
-                         executor: Any = None, engine: str | None = None, log=None, progress: bool | None = None,
+                         executor: Any = None, scheduler: str | None = None, engine: str | None = None, log=None,
+                         progress: bool | None = None,
                          command_line: str | None = None):
     """Run a sensitivity study end to end (``rbstab sensitivity``).
 
@@ -266,7 +258,7 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
         Default: the config's name.
     num_resamples, conf_level
         Bootstrap resamples and level of the confidence intervals.
-    jobs, executor, engine, log, progress, command_line
+    jobs, executor, scheduler, engine, log, progress, command_line
         As for :func:`rbstab.studies.design.run_design`.
 
     Returns
@@ -290,10 +282,12 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
     say = log or (lambda text: None)
     say(f"{plan.method}: {len(plan.factors)} factors, {len(plan.design)} runs -> {folder / SWEEP_FOLDER}")
     results = run_design(config.resolved, plan.design, folder / SWEEP_FOLDER, jobs=jobs, executor=executor,
-                         engine=engine, log=log, progress=progress, command_line=command_line)
+                         scheduler=scheduler, engine=engine, log=log, progress=progress, command_line=command_line)
     ds = analyze_results(plan, results, num_resamples=num_resamples, conf_level=conf_level)
+    from .files import write_study_file
+
     ds.attrs.update(_attributes(plan, results, num_resamples, conf_level, command_line))
-    path = write_sensitivity(ds, folder / FILE)
+    path = write_study_file(ds, folder / FILE)
     ds.attrs["path"] = str(path)
     return ds
 
@@ -319,54 +313,17 @@ def _attributes(plan: SensitivityDesign, results, num_resamples: int, conf_level
     }
 
 
-def write_sensitivity(ds, path: str | os.PathLike) -> Path:
-    """Write a study's Dataset to ``path`` atomically (netCDF-4 by h5netcdf)."""
-    from ..io.atomic import atomic_path
-
-    with atomic_path(path) as tmp:
-        ds.drop_attrs(deep=False).assign_attrs({k: v for k, v in ds.attrs.items() if k != "path"}).to_netcdf(
-            tmp, engine="h5netcdf", invalid_netcdf=False)
-    return Path(path)
-
-
-def is_sensitivity_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a sensitivity study's file (or a study folder holding one)."""
-    p = Path(path)
-    p = p / FILE if p.is_dir() else p
-    if not p.is_file() or p.suffix != ".nc":
-        return False
-    try:
-        import h5py
-
-        with h5py.File(p, "r") as f:
-            value = f.attrs.get("rbstab_study")
-    except OSError:
-        return False
-    return (value.decode() if isinstance(value, bytes) else value) == "sensitivity"
-
-
 def read_sensitivity(path: str | os.PathLike):
     """Read a study's ``sensitivity.nc`` (or the study folder) into memory.
 
     Raises
     ------
-    FileNotFoundError
-        If there is no such file.
-    ValueError
-        If it is not a sensitivity study's file.
+    FileNotFoundError, ValueError
+        If there is no such file or it is not a sensitivity study's.
     """
-    import xarray as xr
+    from .files import read_study_file
 
-    p = Path(path)
-    p = p / FILE if p.is_dir() else p
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: no such file")
-    if not is_sensitivity_file(p):
-        raise ValueError(f"{p}: not a sensitivity study's file (rbstab sensitivity)")
-    with xr.open_dataset(p, engine="h5netcdf") as ds:
-        out = ds.load()
-    out.attrs["path"] = str(p)
-    return out
+    return read_study_file(path, "sensitivity")
 
 
 def metric_records(ds) -> list[dict]:
