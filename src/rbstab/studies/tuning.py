@@ -373,7 +373,9 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         Seed of the sampler (offset by the trials already in the study, so a resumed
         study does not repeat the first suggestions).
     storage : str, optional
-        Optuna storage URL (default ``sqlite:///<output>/<name>/study.db``).
+        Optuna storage URL (default ``sqlite:///<output>/<name>/study.db``), or
+        ``"memory"``: the study lives in this process only (no resume; each trial costs
+        ~10 ms of Optuna's time instead of ~150 ms with SQLite on a slow disk).
     output, name
         The study writes ``<output>/<name>/``; ``name`` (default: the config's name) is
         also the study's name in the storage.
@@ -452,6 +454,8 @@ def _storage(url: str):
     the machine may lose the last trials, never corrupt the file)."""
     import optuna
 
+    if url == "memory":
+        return None
     if not url.startswith("sqlite:///"):
         return url
     import sqlite3
