@@ -78,7 +78,7 @@ def main() -> None:
     print(f"{'study':<44} {'size':>14} {'wall [s]':>9}  rate")
     for name, size, elapsed, rate in rows:
         print(f"{name:<44} {size:>14} {elapsed:9.2f}  {rate}")
-    print(f"targets: sobol N = 1024 < 60 s on 2 cores; tune 100 trials < 30 s on 2 cores")
+    print("targets: sobol N = 1024 < 60 s on 2 cores; tune 100 trials < 30 s on 2 cores")
 
 
 def _tune_in_process(trials: int, tmp: Path) -> tuple:

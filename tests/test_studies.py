@@ -12,11 +12,11 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from rbstab_cli.main import cli
 
 import rbstab
 from rbstab.simulate import simulate_many
 from rbstab.studies import StudyInputError, read_sensitivity, read_tuning, sensitivity_analysis, tune
-from rbstab_cli.main import cli
 
 FREE = {
     "name": "free_study",

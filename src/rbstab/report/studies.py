@@ -104,7 +104,7 @@ def _sensitivity_table(ds) -> Table:
 
 
 def _sensitivity_figure(ds, out: FigureWriter, name: str) -> FigureFile:
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
 
     sobol = ds.attrs["method"] == "sobol"
     metrics = ds["metric"].values.tolist()
@@ -164,7 +164,7 @@ def _tuning_section(ds, out: FigureWriter) -> Section:
 
 
 def _objective_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
 
     trial = ds["trial"].values
     feasible = ds["feasible"].values.astype(bool)
@@ -192,7 +192,7 @@ def _objective_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFil
 
 
 def _pareto_figure(ds, out: FigureWriter, name: str, objectives, best: Sequence[int]) -> FigureFile:
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
 
     (a, _), (b, _) = objectives
     feasible = ds["feasible"].values.astype(bool)

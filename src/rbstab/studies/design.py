@@ -22,6 +22,7 @@ summary figures.
 
 from __future__ import annotations
 
+import difflib
 import os
 import re
 from collections.abc import Mapping, Sequence
@@ -30,8 +31,17 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 
-from ..config import ConfigError
+from ..config import ConfigError, parse_yaml
+from ..config.schema import RunSchema
+from ..io.chunk import SUMMARY_FIGURES, summary_columns
+from ..jit import ensure_compiled
+from ..simulate import simulate_many
+from ..sweep.folder import is_converged, open_sweep
+from ..sweep.runner import run_sweep
+from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, DistributionSchema
+from ..sweep.spec import Distribution, spec_from_mapping
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
            "value_at", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
@@ -141,7 +151,7 @@ class Varied:
             pick = np.minimum((u[:, 0] * len(values)).astype(int), len(values) - 1)
             return np.array([[values[i]] for i in pick], dtype=object)
         if self.kind == "normal":
-            from scipy.stats import norm
+            from scipy.stats import norm  # scipy.stats: ~0.3 s to import, only for normal factors
 
             mean, std = (np.broadcast_to(a, self.factor_shape).ravel() for a in self.args)
             return norm.ppf(np.clip(u, 1e-12, 1 - 1e-12), mean, std)
@@ -174,9 +184,6 @@ def parse_vary(texts: Sequence[str] | Mapping[str, Any], base: Mapping, *, optio
         another, has an invalid distribution, one not ``allowed``, or bounds whose shape
         does not fit the value (checked again per run when the runs are planned).
     """
-    from ..config import parse_yaml
-    from ..sweep.schema import DISTRIBUTIONS
-
     allowed = tuple(allowed or DISTRIBUTIONS)
     entries: list[tuple[str, str, Any]] = []
     errors: list[str] = []
@@ -216,11 +223,6 @@ def parse_vary(texts: Sequence[str] | Mapping[str, Any], base: Mapping, *, optio
 def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, allowed: Sequence[str],
                 errors: list[str]) -> Varied | None:
     """One entry of :func:`parse_vary`, or None with its problems appended to ``errors``."""
-    from pydantic import ValidationError
-
-    from ..sweep.schema import DistributionSchema
-    from ..sweep.spec import Distribution
-
     kind = next(iter(value)) if isinstance(value, Mapping) and len(value) == 1 else None
     if kind is not None and kind not in allowed:
         errors.append(f"{option} {shown!r}: distribution {kind!r} is not allowed here; expected one of "
@@ -257,8 +259,6 @@ def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, al
 
 def vary_mapping(varied: Sequence[Varied]) -> dict[str, dict]:
     """The varied keys as a sweep spec writes random parameters: key -> ``{kind: args}``."""
-    from ..sweep.spec import Distribution
-
     return {v.key: Distribution(v.key, v.kind, v.args).to_mapping() for v in varied}
 
 
@@ -271,8 +271,6 @@ def _numeric(value: Any) -> bool:
 
 def _settable(base: Mapping, key: str) -> bool:
     """Whether ``key`` names a field of the config schema that the base leaves unset."""
-    from ..config.schema import RunSchema
-
     section, _, field = key.partition(".")
     model = RunSchema.model_fields.get(section)
     annotation = getattr(model, "annotation", None) if model else None
@@ -284,8 +282,6 @@ def _settable(base: Mapping, key: str) -> bool:
 
 
 def _figure_names() -> dict[str, tuple[str, str]]:
-    from ..io.chunk import SUMMARY_FIGURES
-
     return {k: v for k, v in SUMMARY_FIGURES.items() if k not in METRICS_NOT_FIGURES}
 
 
@@ -297,8 +293,6 @@ def check_metrics(names: Sequence[str], *, option: str = "--metric") -> None:
     ``lyapunov_rate_check``, and ``converged`` (1 when the run succeeded and v(t_end) <=
     lyapunov_ratio v(0), else 0).
     """
-    import difflib
-
     known = _figure_names()
     errors = []
     for name in names:
@@ -338,9 +332,6 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
 def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
     """The figures of the base configuration (one run in this process,
     :func:`figure_columns`): the columns a study's metrics are chosen from."""
-    from ..simulate import simulate_many
-    from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO
-
     (_, result), = simulate_many([config], engine=engine or "compiled", full=False)
     return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
 
@@ -348,9 +339,6 @@ def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
 def figure_columns(summary: Mapping[str, Any], status: str, ratio: float) -> dict[str, float]:
     """A run's numeric summary figures as flat columns (as a sweep's index has them) and
     ``converged`` (0 or 1)."""
-    from ..io.chunk import summary_columns
-    from ..sweep.folder import is_converged
-
     columns = {k: float(v) for k, v in summary_columns(summary).items()
                if k not in METRICS_NOT_FIGURES and isinstance(v, (int, float, np.number))}
     columns["converged"] = float(is_converged(status, summary.get("lyapunov_initial"),
@@ -426,9 +414,6 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     rbstab.sweep.SweepBusyError, rbstab.sweep.ExecutorError
         As :func:`rbstab.sweep.run_sweep`.
     """
-    from ..jit import ensure_compiled
-    from ..sweep import open_sweep, run_sweep, spec_from_mapping
-
     folder = Path(folder)
     mapping = {"name": folder.name, "base": dict(base), "zip": design_mappings(design)}
     spec = spec_from_mapping(mapping)

@@ -6,6 +6,11 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import h5py
+import xarray as xr
+
+from ..io.atomic import atomic_path
+
 __all__ = ["study_kind", "read_study_file", "write_study_file", "KINDS"]
 
 #: Study kind -> its file in the study folder.
@@ -27,8 +32,6 @@ def study_kind(path: str | os.PathLike) -> str | None:
     if not p.is_file() or p.suffix != ".nc":
         return None
     try:
-        import h5py
-
         with h5py.File(p, "r") as f:
             value = f.attrs.get("rbstab_study")
     except OSError:
@@ -48,8 +51,6 @@ def read_study_file(path: str | os.PathLike, kind: str):
     ValueError
         If it is not a study file of ``kind``.
     """
-    import xarray as xr
-
     p = _file(path, kind)
     if not p.is_file():
         raise FileNotFoundError(f"{p}: no such file")
@@ -64,8 +65,6 @@ def read_study_file(path: str | os.PathLike, kind: str):
 def write_study_file(ds, path: str | os.PathLike) -> Path:
     """Write a study's Dataset to ``path`` atomically (netCDF-4 by h5netcdf); its
     ``path`` attribute, if any, is left out."""
-    from ..io.atomic import atomic_path
-
     with atomic_path(path) as tmp:
         out = ds.copy(deep=False)
         out.attrs = {k: v for k, v in ds.attrs.items() if k != "path"}

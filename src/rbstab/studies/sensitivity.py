@@ -40,10 +40,22 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
+import xarray as xr
 
-from .files import KINDS
-from .design import (StudyInputError, Varied, check_metrics, expand_metrics, nominal_figures, parse_vary, run_design,
-                     vary_mapping)
+from ..config import dump_yaml
+from ..io.metadata import provenance_attributes
+from .design import (
+    StudyInputError,
+    Varied,
+    check_metrics,
+    expand_metrics,
+    nominal_figures,
+    parse_vary,
+    run_design,
+    vary_mapping,
+)
+from .files import KINDS, read_study_file, write_study_file
 
 __all__ = ["METHODS", "DEFAULT_METRICS", "FILE", "SWEEP_FOLDER", "SensitivityDesign", "plan_sensitivity",
            "analyze_results", "sensitivity_analysis", "read_sensitivity", "metric_records"]
@@ -135,8 +147,6 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
     StudyInputError
         Listing every invalid option (naming the option, the value and what is allowed).
     """
-    import pandas as pd
-
     errors: list[str] = []
     if method not in METHODS:
         errors.append(f"--method {method!r}: expected one of {', '.join(METHODS)}")
@@ -167,7 +177,7 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
 
 
 def _sample(problem: dict, n: int, method: str, seed: int) -> np.ndarray:
-    # SALib: an optional heavy dependency of studies only, imported when one runs
+    # SALib (with its own imports of scipy.stats, ~0.5 s) only when a study runs
     if method == "sobol":
         from SALib.sample import sobol
 
@@ -196,8 +206,6 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
     StudyInputError
         If a metric is not a figure of these runs.
     """
-    import xarray as xr
-
     names = expand_metrics(plan.metrics, list(results.data_vars))
     indices = INDICES[plan.method]
     table = {k: np.full((len(names), len(plan.factors)), np.nan) for k in indices}
@@ -224,7 +232,7 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
 
 
 def _analyze(plan: SensitivityDesign, y: np.ndarray, num_resamples: int, conf_level: float) -> dict:
-    # SALib: see _sample
+    # SALib: imported when a study runs (see _sample)
     if plan.method == "sobol":
         from SALib.analyze import sobol
 
@@ -284,8 +292,6 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
     results = run_design(config.resolved, plan.design, folder / SWEEP_FOLDER, jobs=jobs, executor=executor,
                          scheduler=scheduler, engine=engine, log=log, progress=progress, command_line=command_line)
     ds = analyze_results(plan, results, num_resamples=num_resamples, conf_level=conf_level)
-    from .files import write_study_file
-
     ds.attrs.update(_attributes(plan, results, num_resamples, conf_level, command_line))
     path = write_study_file(ds, folder / FILE)
     ds.attrs["path"] = str(path)
@@ -294,9 +300,6 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
 
 def _attributes(plan: SensitivityDesign, results, num_resamples: int, conf_level: float,
                 command_line: str | None) -> dict:
-    from ..config import dump_yaml
-    from ..io.metadata import provenance_attributes
-
     return {
         **provenance_attributes(f"rbstab {plan.method} sensitivity study of {plan.base.name}", command_line=command_line),
         "rbstab_study": "sensitivity",
@@ -321,8 +324,6 @@ def read_sensitivity(path: str | os.PathLike):
     FileNotFoundError, ValueError
         If there is no such file or it is not a sensitivity study's.
     """
-    from .files import read_study_file
-
     return read_study_file(path, "sensitivity")
 
 

@@ -30,15 +30,35 @@ import json
 import math
 import os
 import re
+import sqlite3
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
+import xarray as xr
 
-from .files import KINDS
-from .design import StudyInputError, Varied, check_metrics, figure_columns, nominal_figures, parse_vary, vary_mapping
+from ..config import ConfigError, config_from_mapping, dump_yaml
+from ..config.paths import set_dotted
+from ..io.atomic import write_text_atomic
+from ..io.chunk import figure_attributes
+from ..io.metadata import provenance_attributes
+from ..jit import ensure_compiled
+from ..simulate import simulate_many
+from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO
+from .design import (
+    StudyInputError,
+    Varied,
+    check_metrics,
+    design_mappings,
+    figure_columns,
+    nominal_figures,
+    parse_vary,
+    vary_mapping,
+)
+from .files import KINDS, read_study_file, write_study_file
 
 __all__ = ["SAMPLERS", "Objective", "Constraint", "parse_constraint", "TuningProblem", "TuningResult",
            "plan_tuning", "tune", "read_tuning", "FILE", "BEST_FILE", "TRIALS_FILE", "STORAGE_FILE"]
@@ -157,11 +177,6 @@ class TuningProblem:
         rbstab.config.ConfigError
             If the values give an invalid configuration.
         """
-        import pandas as pd
-
-        from ..config import config_from_mapping
-        from ..config.paths import set_dotted
-        from .design import design_mappings
 
         settings = {k: v[0] for k, v in design_mappings(pd.DataFrame({k: [x] for k, x in values.items()})).items()}
         out = []
@@ -175,9 +190,6 @@ class TuningProblem:
     def evaluate(self, values: Mapping[str, Any]) -> tuple[dict[str, float], int]:
         """(the trial's figures: each metric of the objectives and constraints over the batch,
         the number of failed runs)."""
-        from ..simulate import simulate_many
-        from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO
-
         figures, failed = [], 0
         for _, result in simulate_many(self.configs(values), engine=self.engine, full=False):
             figures.append(figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO))
@@ -275,10 +287,6 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
 
 def _bodies(varied: Sequence[Varied], n: int, seed: int) -> list[dict]:
     """``n`` draws of the ``--over`` distributions, key -> value each."""
-    import pandas as pd
-
-    from .design import design_mappings
-
     rng = np.random.default_rng(seed)
     columns: dict[str, Any] = {}
     for v in varied:
@@ -290,8 +298,6 @@ def _bodies(varied: Sequence[Varied], n: int, seed: int) -> list[dict]:
 
 def _check_corners(problem: TuningProblem) -> None:
     """Refuse a search box whose lower or upper corner gives an invalid configuration."""
-    from ..config import ConfigError
-
     errors = []
     for corner in (0, 1):
         values: dict[str, Any] = {}
@@ -389,14 +395,12 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     StudyInputError
         For invalid options, or a stored study of this name made with other settings.
     """
-    import optuna
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
     problem = plan_tuning(config, vary, minimize=minimize, maximize=maximize, subject_to=subject_to, over=over,
                           over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler, engine=engine)
     if not (isinstance(trials, int) and trials >= 1):
         raise StudyInputError([f"--trials {trials!r}: expected an integer >= 1"])
-    from ..jit import ensure_compiled
-
     ensure_compiled(say=log, sign_law=True)
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = name or config.name
@@ -430,7 +434,7 @@ def _check_scalar_metrics(problem: TuningProblem, available: Mapping[str, float]
 
 def _open_study(problem: TuningProblem, name: str, storage: str):
     """The study ``name`` in ``storage``: made, or loaded when its settings match."""
-    import optuna
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
     directions = [o.direction for o in problem.objectives]
     try:
@@ -452,14 +456,12 @@ def _storage(url: str):
     """Optuna's storage at ``url``; an SQLite file in write-ahead-log mode, synchronised at
     checkpoints (a commit costs no fsync: ~15 ms less per write on a slow disk; a crash of
     the machine may lose the last trials, never corrupt the file)."""
-    import optuna
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
     if url == "memory":
         return None
     if not url.startswith("sqlite:///"):
         return url
-    import sqlite3
-
     path = url[len("sqlite:///"):]
 
     def connect():
@@ -472,7 +474,7 @@ def _storage(url: str):
 
 
 def _sampler(kind: str, seed: int):
-    import optuna
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
     if kind == "cmaes":
         return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
@@ -482,8 +484,6 @@ def _sampler(kind: str, seed: int):
 def _objective(problem: TuningProblem):
     """Optuna's objective: a trial's values; NaN (a failed trial) when a run failed or
     the values give an invalid configuration."""
-    from ..config import ConfigError
-
     def objective(trial):
         values = problem.suggest(trial)
         record: dict[str, Any] = {"values": values}
@@ -517,8 +517,6 @@ def trials_table(problem: TuningProblem, study):
     """Every trial as a row: ``trial``, ``state``, one column per objective metric and
     constraint metric (the batch's value), ``feasible``, the absolute values (design
     columns) and ``message``."""
-    import pandas as pd
-
     rows = []
     metrics = list(problem._badness())
     columns = [c for v in problem.varied for c in v.columns]
@@ -551,9 +549,6 @@ def best_trials(problem: TuningProblem, table) -> list[int]:
 
 
 def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, command_line: str | None) -> TuningResult:
-    from ..config import dump_yaml
-    from ..io.atomic import write_text_atomic
-
     table = trials_table(problem, study)
     best = best_trials(problem, table)
     write_text_atomic(folder / TRIALS_FILE, table.to_csv(index=False))
@@ -586,12 +581,6 @@ def _plain(value: Any) -> Any:
 
 def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], path: Path,
                    command_line: str | None) -> None:
-    import xarray as xr
-
-    from ..config import dump_yaml
-    from ..io.chunk import figure_attributes
-    from ..io.metadata import provenance_attributes
-    from .files import write_study_file
 
     data = {}
     for column in table.columns:
@@ -624,6 +613,4 @@ def read_tuning(path: str | os.PathLike):
     FileNotFoundError, ValueError
         If there is no such file or it is not a tuning study's.
     """
-    from .files import read_study_file
-
     return read_study_file(path, "tuning")
