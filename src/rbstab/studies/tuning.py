@@ -25,7 +25,9 @@ NeurIPS 2011. N. Hansen, "The CMA evolution strategy: a tutorial", arXiv:1604.00
 
 from __future__ import annotations
 
+import contextlib
 import copy
+import fcntl
 import json
 import math
 import os
@@ -437,9 +439,9 @@ def _open_study(problem: TuningProblem, name: str, storage: str):
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
     directions = [o.direction for o in problem.objectives]
+    opened = _storage(storage)
     try:
-        study = optuna.create_study(study_name=name, storage=_storage(storage), directions=directions,
-                                    load_if_exists=True)
+        study = optuna.create_study(study_name=name, storage=opened, directions=directions, load_if_exists=True)
     except ValueError as exc:  # e.g. other directions than the stored study's
         raise StudyInputError([f"study {name!r} in {storage}: {exc}; give another --name or -o"]) from None
     stored = study.user_attrs.get("settings")
@@ -455,22 +457,55 @@ def _open_study(problem: TuningProblem, name: str, storage: str):
 def _storage(url: str):
     """Optuna's storage at ``url``; an SQLite file in write-ahead-log mode, synchronised at
     checkpoints (a commit costs no fsync: ~15 ms less per write on a slow disk; a crash of
-    the machine may lose the last trials, never corrupt the file)."""
+    the machine may lose the last trials, never corrupt the file). ``"memory"``: None (an
+    in-memory study).
+
+    Raises
+    ------
+    StudyInputError
+        If no storage can be opened at ``url`` (the message names it).
+    """
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
+    import sqlalchemy.exc
 
     if url == "memory":
         return None
+    kwargs = {}
+    if url.startswith("sqlite:///"):
+        path = url[len("sqlite:///"):]
+
+        def connect():
+            connection = sqlite3.connect(path, timeout=60, check_same_thread=False)
+            connection.execute("PRAGMA journal_mode=WAL")
+            connection.execute("PRAGMA synchronous=NORMAL")
+            return connection
+
+        kwargs = {"engine_kwargs": {"creator": connect}}
+    try:
+        with _creation_lock(url):
+            return optuna.storages.RDBStorage(url, **kwargs)
+    except sqlalchemy.exc.SQLAlchemyError as exc:
+        raise StudyInputError([f"--storage {url!r}: cannot open it ({str(exc).splitlines()[0]})"]) from None
+    except (ValueError, ImportError) as exc:
+        raise StudyInputError([f"--storage {url!r}: {exc}; expected an Optuna storage URL, e.g. "
+                               "sqlite:///study.db or postgresql://user@host/db"]) from None
+
+
+@contextlib.contextmanager
+def _creation_lock(url: str):
+    """Hold ``<file>.lock`` beside an SQLite file while its storage is opened: two processes
+    that start one study at once would both make its tables (Optuna does not guard that)."""
     if not url.startswith("sqlite:///"):
-        return url
-    path = url[len("sqlite:///"):]
-
-    def connect():
-        connection = sqlite3.connect(path, timeout=60, check_same_thread=False)
-        connection.execute("PRAGMA journal_mode=WAL")
-        connection.execute("PRAGMA synchronous=NORMAL")
-        return connection
-
-    return optuna.storages.RDBStorage(url, engine_kwargs={"creator": connect})
+        yield
+        return
+    path = Path(url[len("sqlite:///"):] + ".lock")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def _sampler(kind: str, seed: int):
@@ -553,7 +588,9 @@ def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, co
     best = best_trials(problem, table)
     write_text_atomic(folder / TRIALS_FILE, table.to_csv(index=False))
     best_params: dict = {}
-    if best:
+    if not best:  # no feasible trial (yet): no best configuration, nor one of an earlier run
+        (folder / BEST_FILE).unlink(missing_ok=True)
+    else:
         row = table.loc[best[0]]
         best_params = {c: _plain(row[c]) for v in problem.varied for c in v.columns}
         config = problem.configs(best_params)[0] if not problem.bodies else _nominal(problem, best_params)
