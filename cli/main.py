@@ -64,7 +64,7 @@ def cli() -> None:
     rbstab analyze configs/paper/case3_embedded.yaml  # -> results/analysis/case3_embedded.analysis.nc
 
     Every command takes -q/-v (less/more output) and --no-warn CODE (warning codes:
-    README, section Warnings); run, show, validate and analyze take --json. Also
+    README, section Warnings); run, show, validate, analyze, sensitivity and tune take --json. Also
     "python -m rbstab". Shell completion (bash): eval "$(_RBSTAB_COMPLETE=bash_source rbstab)".
     """
 
