@@ -44,7 +44,7 @@ from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, DistributionSc
 from ..sweep.spec import Distribution, spec_from_mapping
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
-           "value_at", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
+           "value_at", "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
 
 
 class StudyInputError(ConfigError):
@@ -276,6 +276,24 @@ def _settable(base: Mapping, key: str) -> bool:
     annotation = getattr(model, "annotation", None) if model else None
     fields = getattr(annotation, "model_fields", {})
     return field.split(".")[0] in fields
+
+
+_NAME = re.compile(r"^[A-Za-z0-9_.-]+$")
+
+
+def study_folder(output: str | os.PathLike, name: str | None, config, *, option: str = "--name") -> Path:
+    """``<output>/<name>`` of a study (``name`` default: the config's name).
+
+    Raises
+    ------
+    StudyInputError
+        For a name that is not letters, digits, ``_``, ``.`` and ``-`` (it names a folder).
+    """
+    name = config.name if name is None else name
+    if not isinstance(name, str) or not _NAME.match(name) or name in (".", ".."):
+        raise StudyInputError([f"{option} {name!r}: expected a name of letters, digits, '_', '.' and '-' "
+                               "(it names the study's folder)"])
+    return Path(output) / name
 
 
 # -- metrics ---------------------------------------------------------------------------------------

@@ -36,7 +36,6 @@ import json
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -53,6 +52,7 @@ from .design import (
     nominal_figures,
     parse_vary,
     run_design,
+    study_folder,
     vary_mapping,
 )
 from .files import KINDS, read_study_file, write_study_file
@@ -284,9 +284,9 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
         If a sampled run gives an invalid configuration (e.g. a negative mass drawn from a
         normal distribution; nothing is run).
     """
+    folder = study_folder(output, name, config)
     plan = plan_sensitivity(config, vary, n=n, method=method, metrics=metrics, seed=seed)
     expand_metrics(plan.metrics, list(nominal_figures(config, engine)))  # a figure these runs have
-    folder = Path(output) / (name or config.name)
     say = log or (lambda text: None)
     say(f"{plan.method}: {len(plan.factors)} factors, {len(plan.design)} runs -> {folder / SWEEP_FOLDER}")
     results = run_design(config.resolved, plan.design, folder / SWEEP_FOLDER, jobs=jobs, executor=executor,

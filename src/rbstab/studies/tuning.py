@@ -58,6 +58,7 @@ from .design import (
     figure_columns,
     nominal_figures,
     parse_vary,
+    study_folder,
     vary_mapping,
 )
 from .files import KINDS, read_study_file, write_study_file
@@ -399,14 +400,14 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     """
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
+    folder = study_folder(output, name, config)
     problem = plan_tuning(config, vary, minimize=minimize, maximize=maximize, subject_to=subject_to, over=over,
                           over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler, engine=engine)
     if not (isinstance(trials, int) and trials >= 1):
         raise StudyInputError([f"--trials {trials!r}: expected an integer >= 1"])
     ensure_compiled(say=log, sign_law=True)
     _check_scalar_metrics(problem, nominal_figures(config, engine))
-    name = name or config.name
-    folder = Path(output) / name
+    name = folder.name
     folder.mkdir(parents=True, exist_ok=True)
     storage = storage or f"sqlite:///{(folder / STORAGE_FILE).resolve()}"
     optuna.logging.set_verbosity(optuna.logging.ERROR)
