@@ -61,7 +61,7 @@ NAME = re.compile(r"(?<![\w/.\-])(?P<name>rbstab(?:_cli)?(?:\.[A-Za-z_]\w*)+)(?!
 SHORT_MODULES = tuple(sorted(({p.stem for p in PACKAGE.glob("[!_]*.py")} | set(SUBPACKAGES)) - {"sweep", "config"}))
 SHORT_NAME = re.compile(rf"(?<![\w/.\-])(?P<name>(?:{'|'.join(SHORT_MODULES)})(?:\.[A-Za-z_]\w*)+)(?![\w/\-])")
 #: A class name (two capitals or more, ``RunResult``), maybe with an attribute (``ChunkWriter.add_block``).
-CLASS_NAME = re.compile(r"(?<![\w.])(?P<name>[A-Z][a-z0-9]+(?:[A-Z][A-Za-z0-9]*)+)(?:\.(?P<attr>[A-Za-z_]\w*))?(?![\w(])")
+CLASS_NAME = re.compile(r"(?<![\w.])(?P<name>[A-Z][a-z0-9]+(?:[A-Z][A-Za-z0-9]*)+)(?:\.(?P<attr>[A-Za-z_]\w*))?(?!\w)")
 #: Classes of other libraries that pages name (Dask's).
 OTHER_CLASSES = ("LocalCluster",)
 #: What a file name ends with: ``summary.csv`` is a file, not a name in ``rbstab.summary``.
