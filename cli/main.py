@@ -83,9 +83,8 @@ def main() -> None:
     every handler and clears every module (reference counting frees what it frees), but
     its cyclic garbage collections (~50 ms each, over the objects of numba, numpy, pydantic
     and h5py) skip them; objects left in reference cycles go with the process, as Python
-    allows. Those collections took ~0.2 s of ``rbstab run``'s ~0.9 s (measured: median
-    0.94 -> 0.74 s of 15 runs; docs/performance.md). Results are closed and renamed into
-    place by their ``with`` blocks long before.
+    allows. Those collections take ~0.2 s of ``rbstab run``'s ~0.9 s (docs/performance.md).
+    Results are closed and renamed into place by their ``with`` blocks long before.
     """
     signal.signal(signal.SIGTERM, _terminate)
     atexit.register(gc.freeze)
