@@ -17,10 +17,10 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab.config import load_config
+from rbstab.config import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash, load_config
+from rbstab.config.identity import SECTION_MEMO
 from rbstab.io.chunk import read_chunk_rows
-from rbstab.io.hdf5 import (RUN_LIMIT_KEYS, SECTION_MEMO, canonical_config, canonical_configs, config_hash,
-                             read_attributes)
+from rbstab.io.hdf5 import read_attributes
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,
@@ -156,14 +156,14 @@ def test_canonical_configs_are_the_two_canonical_texts():
 def test_canonical_configs_memo_encodes_a_shared_section_once(monkeypatch):
     """Runs that share their sections' objects (an initial-state sweep) encode each once,
     however many runs with their own initial state come between."""
-    import rbstab.io.hdf5 as hdf5
+    import rbstab.config.identity as identity
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # W001 of Case 3's inertia
         resolved = load_config(CASE3).resolved
     encoded = []
-    encode = hdf5._canonical_json
-    monkeypatch.setattr(hdf5, "_canonical_json", lambda value: encoded.append(id(value)) or encode(value))
+    encode = identity._canonical_json
+    monkeypatch.setattr(identity, "_canonical_json", lambda value: encoded.append(id(value)) or encode(value))
     memo: dict = {}
     for k in range(5 * SECTION_MEMO):
         run = {**resolved, "initial_state": {**resolved["initial_state"], "omega": [k, 0.5, 1.0]}}

@@ -272,7 +272,7 @@ def check_overwrite(config: "RunConfig", path: str | os.PathLike, *, overwrite: 
         If a file of another configuration (or not a readable result) is there and not
         ``overwrite``: the message names the keys that differ.
     """
-    from .io.hdf5 import canonical_config, config_hash
+    from .config import canonical_config, config_hash
 
     path = Path(path)
     if not path.exists():

@@ -338,7 +338,7 @@ def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row
 
     where = f"{path}" if row is None else f"{path} (run {attrs.get('name')})"
     text = attrs.get("config", "") or ""
-    try:  # a store file's config is JSON (rbstab.io.hdf5.canonical_config), a run file's YAML
+    try:  # a store file's config is JSON (rbstab.config.canonical_config), a run file's YAML
         config = (json.loads(text) if text.lstrip().startswith("{") else yaml.safe_load(text)) or {}
     except (ValueError, yaml.YAMLError) as exc:
         raise NotAResultFile(f"{where}: the config attribute is not valid YAML ({exc})") from None
