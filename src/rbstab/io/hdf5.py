@@ -71,6 +71,8 @@ __all__ = [
     "summary_stride",
     "read_attributes",
     "read_summary",
+    "read_format",
+    "is_run_file",
     "NotAResultFile",
 ]
 
@@ -414,6 +416,36 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
+
+
+def read_format(path: str | os.PathLike) -> str | None:
+    """The ``rbstab_format`` attribute of an HDF5 file (every file rbstab writes has one:
+    :data:`FORMAT`, a store file's :data:`rbstab.io.chunk.CHUNK_FORMAT`, an analysis
+    file's :data:`rbstab.analysis.dataset.FORMAT`); None for an HDF5 file without it.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    NotAResultFile
+        If it is not an HDF5 file.
+    rbstab.io.integrity.DamagedResultError
+        If its attributes cannot be read (a damaged file).
+    """
+    from .integrity import open_result
+
+    with open_result(path) as f:
+        value = _plain(f.attrs.get("rbstab_format"))
+    return value if value is None else str(value)
+
+
+def is_run_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a run's result file (``rbstab_format`` = :data:`FORMAT`);
+    False for anything else, a folder or a file that cannot be read included."""
+    try:
+        return read_format(path) == FORMAT
+    except (OSError, ValueError):
+        return False
 
 
 #: Attributes every result file has (:func:`read_summary` refuses a file without one).
