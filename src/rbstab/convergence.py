@@ -32,6 +32,10 @@ DEFAULT_LYAPUNOV_RATIO = 1e-3
 ROUND_OFF = 1e-12
 
 
+#: Types of one value (the fast path of :func:`converged`: a sweep's index asks once a run).
+_SCALARS = frozenset({float, int, bool, str, type(None), np.float64, np.float32, np.int64})
+
+
 def converged(success: Any, lyapunov_initial: Any, lyapunov_final: Any,
               ratio: float = DEFAULT_LYAPUNOV_RATIO) -> Any:
     """Whether runs converged (module docstring), element by element.
@@ -52,8 +56,7 @@ def converged(success: Any, lyapunov_initial: Any, lyapunov_final: Any,
         A Python bool for scalars (as a sweep's index and JSON records take it), else an
         array of the broadcast shape.
     """
-    if isinstance(lyapunov_initial, (float, int, str, type(None))) and \
-            isinstance(lyapunov_final, (float, int, str, type(None))):
+    if type(lyapunov_initial) in _SCALARS and type(lyapunov_final) in _SCALARS:
         try:
             v0, v1 = float(lyapunov_initial), float(lyapunov_final)
         except (TypeError, ValueError):
