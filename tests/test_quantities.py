@@ -2,7 +2,7 @@
 
 Each output's offset and size in :data:`rbstab.layout.OUTPUTS` must be the columns the
 compiled ``outputs`` kernel fills with that quantity: checked by computing every output
-independently (in numpy, from the state and the paper's formulas) at random states of
+independently (the plain-numpy model of ``reference.py`` and the paper's v) at random states of
 every variant and reading it back from the columns the table names. Every variable of a
 run file, and every summary figure, takes its units and long name from the table.
 """
@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 from conftest import paper_body, paper_gains
+from reference import Model, hat, permanent_full_state_rhs, rotation
 from rbstab.config import load_config
 from rbstab.io.hdf5 import read_attributes, write_result
-from rbstab.layout import LEFT_OUT, N_OUTPUTS, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_CODES, display_units
+from rbstab.layout import LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_CODES, display_units
 from rbstab.simulate import simulate
 from rbstab.variants import VARIANTS
 from rbstab.variants.kernels import run_outputs
@@ -30,59 +31,37 @@ GRAVITY = (0.0, 0.0, -9.81)
 pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
 
 
-def _rotation(theta):
-    """A = Rx(t1) Ry(t2) Rz(t3) (eq 2), written out here, not taken from rbstab."""
-    c, s = np.cos(theta), np.sin(theta)
-    rx = np.array([[1, 0, 0], [0, c[0], -s[0]], [0, s[0], c[0]]])
-    ry = np.array([[c[1], 0, s[1]], [0, 1, 0], [-s[1], 0, c[1]]])
-    rz = np.array([[c[2], -s[2], 0], [s[2], c[2], 0], [0, 0, 1]])
-    return rx @ ry @ rz
-
-
 def _expected(variant, y):
-    """Every output of state ``y`` from the paper's formulas (numpy), by name; the
-    Euler-rate matrix B from the right-hand side (dTheta/dt = B Omega), not from outputs."""
+    """Every output of state ``y`` by name, from the plain-numpy model of ``reference.py``
+    (A, B, E, F, N, H, Lambda, dD/dt) and the paper's v and dv/dt (eqs 25, 29-46)."""
     body, g = variant.body, variant.gains
+    model = Model(variant.name, body, g)
     blocks = variant.layout.split(y)
     theta, omega = blocks["theta"], blocks["omega"]
-    a, r = _rotation(theta), body.attachment_point
+    a, r = rotation(theta), body.attachment_point
     if "position" in blocks:
         x, v = blocks["position"], blocks["velocity"]
     else:  # permanent: C fixed, X = R - A R, V = A hat(R) Omega (eq 32)
-        x, v = r - a @ r, -a @ np.cross(omega, r)
+        x, v = r - a @ r, a @ hat(r) @ omega
     d = blocks.get("controller_state", np.zeros(3))
-    b = np.column_stack([variant.rhs(0.0, variant.layout.join(**{**blocks, "omega": e}))[:3] for e in np.eye(3)])
-    e = x + a @ r - r
-    f = v - a @ np.cross(r, omega)
-    weight = body.mass * body.gravity
+    e, f = x + a @ r - r, v - a @ hat(r) @ omega
+    n, h = model.controls(theta, omega, x, v)
+    if variant.name == "permanent":  # Lambda that holds C, solved from eq 15
+        lam, d_rate = permanent_full_state_rhs(body, g)[1](np.concatenate([theta, omega, x, v])), np.zeros(3)
+    else:
+        lam, d_rate = model.constraint(e, f, d)
+    stored = {"visco_elastic": 0.5 * e @ g.k_c @ e,  # eqs 41, 42
+              "embedded": 0.5 * (e - d) @ g.k_c @ (e - d) + 0.5 * d @ g.k_d @ d,  # eqs 44, 45
+              "sliding": g.k_s * g.boundary_layer * np.sum(np.log(np.cosh(e / g.boundary_layer)))}
+    dissipated = {"visco_elastic": f @ g.l_c @ f, "embedded": f @ g.l_c @ f + d_rate @ g.l_d @ d_rate}  # eqs 43, 46
     out = {"theta": theta, "omega": omega, "position": x, "velocity": v, "controller_state": d,
-           "constraint_error": e, "constraint_rate": f,
-           "force_h": -g.k_t @ x - g.l_t @ v, "torque_n": -b.T @ g.k_r @ theta - g.l_r @ omega,
+           "constraint_error": e, "constraint_rate": f, "constraint_force": lam, "force_h": h, "torque_n": n,
            "lyapunov_translational": 0.5 * body.mass * v @ v + 0.5 * x @ g.k_t @ x,
            "lyapunov_rotational": 0.5 * omega @ body.inertia @ omega + 0.5 * theta @ g.k_r @ theta,
-           "lyapunov_gravity": -x @ weight + variant.lyapunov_offset}
-    dissipation = v @ g.l_t @ v + omega @ g.l_r @ omega
-    if variant.name == "visco_elastic":  # eqs 40-43
-        out["constraint_force"] = -g.k_c @ e - g.l_c @ f
-        out["lyapunov_constraint"] = 0.5 * e @ g.k_c @ e
-        dissipation += f @ g.l_c @ f
-    elif variant.name == "embedded":  # eqs 22, 44-46
-        d_rate = variant.rhs(0.0, y)[12:15]
-        out["constraint_force"] = -g.k_c @ (e - d) - g.l_c @ f
-        out["lyapunov_constraint"] = 0.5 * (e - d) @ g.k_c @ (e - d) + 0.5 * d @ g.k_d @ d
-        dissipation += f @ g.l_c @ f + d_rate @ g.l_d @ d_rate
-    elif variant.name == "sliding":  # eq 39 with the boundary layer phi
-        phi = g.boundary_layer
-        out["constraint_force"] = -g.k_s * np.tanh(e / phi)
-        out["lyapunov_constraint"] = g.k_s * phi * np.sum(np.log(np.cosh(e / phi)))
-    elif variant.name == "free":
-        out["constraint_force"] = np.zeros(3)
-        out["lyapunov_constraint"] = 0.0
-    else:  # permanent: Lambda holds C (eq 20); checked there through E = F = 0
-        out["lyapunov_constraint"] = 0.0
-    terms = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
-    out["lyapunov"] = sum(out[t] for t in terms)
-    out["lyapunov_rate"] = -dissipation
+           "lyapunov_constraint": stored.get(variant.name, 0.0),
+           "lyapunov_gravity": -x @ (body.mass * body.gravity) + variant.lyapunov_offset,
+           "lyapunov_rate": -(v @ g.l_t @ v + omega @ g.l_r @ omega + dissipated.get(variant.name, 0.0))}
+    out["lyapunov"] = sum(out[t] for t in LYAPUNOV_TERMS)
     return out
 
 
@@ -95,13 +74,11 @@ def test_each_output_is_where_the_table_says_the_kernel_writes_it(name, rng):
     assert np.all(np.isfinite(out)), "a column of the outputs is not written"
     for j, y in enumerate(states):
         expected = _expected(variant, y)
+        assert set(expected) == set(OUTPUTS)
         for q in OUTPUTS.values():
-            if q.name in expected:
-                got = out[q.columns, 0, j].reshape(np.shape(expected[q.name]))
-                scale = max(1.0, float(np.max(np.abs(expected[q.name]))))
-                np.testing.assert_allclose(got, expected[q.name], rtol=1e-9, atol=1e-9 * scale, err_msg=q.name)
-        if name == "permanent":  # the pinned point C does not move
-            np.testing.assert_allclose(out[OUTPUTS["constraint_error"].columns, 0, j], 0.0, atol=1e-12)
+            got = out[q.columns, 0, j].reshape(np.shape(expected[q.name]))
+            scale = max(1.0, float(np.max(np.abs(expected[q.name]))))
+            np.testing.assert_allclose(got, expected[q.name], rtol=1e-9, atol=1e-9 * scale, err_msg=q.name)
     lean = np.full_like(out, np.nan)
     run_outputs(np.array([variant.code]), variant.parameters, states[None], lean, False)
     left_out = np.zeros(N_OUTPUTS, dtype=bool)

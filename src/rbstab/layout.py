@@ -222,7 +222,7 @@ def _final(block: str, long_name: str) -> Quantity:
 
 
 #: The summary figures (:func:`rbstab.summary.summarize` and, for runs of the pure sign law,
-#: :func:`rbstab.engine.switching.switching_figures`), in the order files list them; units
+#: :func:`rbstab.engine.switching.switching_summary`), in the order files list them; units
 #: None: a text figure. A run file holds them as ``summary_<name>`` attributes, a store
 #: file as variables along ``run`` (3-vectors as ``<name>_x``, ``_y``, ``_z``).
 SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
