@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..layout import LYAPUNOV_TERMS, QUANTITIES
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, display_units
 from .load import RunData, safe_filename
 from .tables import SettleThresholds
 
@@ -132,6 +132,10 @@ def _plain_texts(fig) -> None:
 
 
 # -- helpers ----------------------------------------------------------------------------------------
+
+#: CF units (``rad s-1``) as they read on an axis (``rad/s``): :func:`rbstab.layout.display_units`.
+units_text = display_units
+
 
 def _symbol(var: str, component: int | None = None) -> str:
     """Mathtext symbol of quantity ``var`` (:data:`rbstab.layout.QUANTITIES`) or of its component."""
