@@ -43,7 +43,6 @@ import functools
 import datetime as _dt
 import hashlib
 import json
-import math
 import operator
 import os
 import re
@@ -51,6 +50,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMappin
 from pathlib import Path
 from typing import Any
 
+from ..convergence import converged
 from ..io.atomic import atomic_path, write_text_atomic
 
 __all__ = [
@@ -74,7 +74,6 @@ __all__ = [
     "read_index",
     "summarize_rows",
     "write_summary",
-    "is_converged",
     "is_sweep_folder",
     "read_spec",
     "current_rows",
@@ -262,25 +261,6 @@ def index_part(row: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in row.items() if k not in NOT_IN_INDEX}
 
 
-def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
-    """Whether a run converged: it succeeded and ``|v(t_end)| <= ratio * |v(0)|``.
-
-    v is the variant's Lyapunov function, zero at the equilibrium, so this says that the
-    run lost all but ``ratio`` of its initial "energy" within ``t_end``. The magnitudes: v
-    is zero only at the equilibrium when it is a Lyapunov function there, and a run that
-    ends with v far below zero (an unstable body falling to lower potential energy, where
-    the gravity term makes v negative) has not converged. A run that failed (gimbal lock,
-    solver failure, timeout) never converged.
-    """
-    if status != "success":
-        return False
-    try:
-        v0, v1 = float(lyapunov_initial), float(lyapunov_final)
-    except (TypeError, ValueError):
-        return False
-    return math.isfinite(v0) and math.isfinite(v1) and abs(v1) <= ratio * abs(v0)
-
-
 def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
                ratio: float) -> list[dict[str, Any]]:
     """One index row per run of ``runs`` (:class:`~rbstab.sweep.spec.PlannedRun`), in run order.
@@ -288,7 +268,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     A row is the run's ``run_id``, ``run`` (its index), ``base``, coordinates and
     ``variant``, then its stored row's values but those the index leaves out
     (:data:`NOT_IN_INDEX`), then ``file`` (under ``runs/``) and ``converged``
-    (:func:`is_converged`); a run without a stored row has ``status`` ``error`` (its
+    (:func:`rbstab.convergence.converged`); a run without a stored row has ``status`` ``error`` (its
     message from ``errors``) or ``pending``, and is not converged.
 
     Parameters
@@ -297,7 +277,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     errors : mapping run_id -> message
         Runs whose worker raised (no result): status ``error``.
     ratio : float
-        ``convergence.lyapunov_ratio`` (:func:`is_converged`).
+        ``convergence.lyapunov_ratio`` (:func:`rbstab.convergence.converged`).
     """
     return list(iter_index_rows(runs, rows, errors, ratio))
 
@@ -342,9 +322,9 @@ class _IndexRowMaker:
             return self._kind(run.layout, None)[0], (*head, status, False, message, None)
         stored_names, stored = held
         names, keep, file, status, initial, final = self._kind(run.layout, stored_names)
-        converged = is_converged(stored[status] if status is not None else "", stored[initial], stored[final],
-                                 self.ratio)
-        return names, (*head, *keep(stored), f"{RUNS_DIR}/{stored[file]}" if stored[file] else None, converged, None)
+        reached = converged(status is not None and stored[status] == "success", stored[initial], stored[final],
+                            self.ratio)
+        return names, (*head, *keep(stored), f"{RUNS_DIR}/{stored[file]}" if stored[file] else None, reached, None)
 
     def _kind(self, layout: tuple, stored_names: tuple | None) -> tuple:
         """(column names, getter of the stored values kept, positions of the stored file,

@@ -101,8 +101,8 @@ class PlannedRun:
     @functools.cached_property
     def config_text(self) -> str:
         """The resolved config without its name, with its run limits, as canonical JSON
-        (:func:`rbstab.io.hdf5.canonical_config`): a store file's ``config`` column."""
-        from ..io.hdf5 import canonical_config
+        (:func:`rbstab.config.canonical_config`): a store file's ``config`` column."""
+        from ..config import canonical_config
 
         return canonical_config(self.config.resolved, limits=True)
 
@@ -137,8 +137,8 @@ def _shared_layout(layout: tuple) -> tuple:
 
 def resolved_hash(resolved: Mapping) -> str:
     """SHA-256 hex digest of a resolved configuration without its ``name`` (canonical JSON,
-    :func:`rbstab.io.hdf5.canonical_config`)."""
-    from ..io.hdf5 import canonical_config, config_hash
+    :func:`rbstab.config.canonical_config`)."""
+    from ..config import canonical_config, config_hash
 
     return config_hash(canonical_config(resolved))
 
@@ -274,7 +274,7 @@ def _plan_run(
     ``validated`` maps a base's label to the validated config of its first valid run; the
     base's other runs differ from it only at the varied keys and are validated by
     :meth:`RunConfig.with_values` (the same result; only the fields of the varied keys
-    checked). ``texts``: the :func:`rbstab.io.hdf5.canonical_configs` memo of the
+    checked). ``texts``: the :func:`rbstab.config.canonical_configs` memo of the
     planning pass (the runs of a base share the sections no varied key is in).
     """
     from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
@@ -312,7 +312,7 @@ def _plan_run(
                 first = known.with_values(data, spec.varied_keys, source=source)
     except ConfigError as exc:
         return None, exc.errors
-    from ..io.hdf5 import canonical_configs, config_hash
+    from ..config import canonical_configs, config_hash
 
     # the runs of a base share the sections no varied key is in (the same objects): each
     # is encoded once
@@ -351,7 +351,7 @@ def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
     n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
     cache: dict = {}
     validated: dict = {}  # base label -> its first valid run's config, which the others start from
-    texts: dict = {}  # canonical JSON of the shared sections (rbstab.io.hdf5.canonical_configs)
+    texts: dict = {}  # canonical JSON of the shared sections (rbstab.config.canonical_configs)
     index = 0
     for sample in samples:
         for base, point, z in itertools.product(spec.bases, grid_points, range(n_zip)):
