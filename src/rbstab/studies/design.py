@@ -35,12 +35,13 @@ from pydantic import ValidationError
 
 from ..config import ConfigError, parse_yaml
 from ..config.schema import RunSchema
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..io.chunk import SUMMARY_FIGURES, summary_columns
 from ..jit import ensure_compiled
 from ..simulate import simulate_many
-from ..sweep.folder import is_converged, open_sweep
+from ..sweep.folder import open_sweep
 from ..sweep.runner import run_sweep
-from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, DistributionSchema
+from ..sweep.schema import DISTRIBUTIONS, DistributionSchema
 from ..sweep.spec import Distribution, spec_from_mapping
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
@@ -359,7 +360,7 @@ def figure_columns(summary: Mapping[str, Any], status: str, ratio: float) -> dic
     ``converged`` (0 or 1)."""
     columns = {k: float(v) for k, v in summary_columns(summary).items()
                if k not in METRICS_NOT_FIGURES and isinstance(v, (int, float, np.number))}
-    columns["converged"] = float(is_converged(status, summary.get("lyapunov_initial"),
+    columns["converged"] = float(converged(status == "success", summary.get("lyapunov_initial"),
                                               summary.get("lyapunov_final"), ratio))
     return columns
 

@@ -44,12 +44,12 @@ import xarray as xr
 
 from ..config import ConfigError, config_from_mapping, dump_yaml
 from ..config.paths import set_dotted
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
 from ..jit import ensure_compiled
 from ..simulate import simulate_many
-from ..sweep.schema import DEFAULT_LYAPUNOV_RATIO
 from .design import (
     StudyInputError,
     Varied,
