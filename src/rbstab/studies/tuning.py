@@ -330,7 +330,7 @@ class TuningResult:
     storage : str
         The Optuna storage URL.
     n_trials : int
-        Complete trials of the study (all processes, all sessions).
+        Complete trials of the study (by every process, this run and earlier ones).
     n_failed : int
         Trials that failed (a failed run, an invalid configuration, an interrupt).
     best_values : list of float
