@@ -14,6 +14,8 @@ stays light)::
     sw = rbstab.sweep("configs/sweeps/gains.yaml", grid=True)   # or rbstab.open_sweep(folder)
     rbstab.report([path])                         # results/reports/case3_embedded/
     a = rbstab.analyze(config)                    # stability analysis (rbstab.analysis)
+    s = rbstab.sensitivity_analysis(config, ["body.mass=uniform:[30,50]"], n=256)  # rbstab.studies
+    t = rbstab.tune(config, ["controller.k_c=scale_uniform:[0.25,4]"], minimize=["lyapunov_final"], trials=100)
 
 ``simulate``, ``sweep`` and ``report`` are also the names of subpackages
 (:mod:`rbstab.simulate`, :mod:`rbstab.sweep`, :mod:`rbstab.report`): ``rbstab.simulate``
@@ -34,6 +36,7 @@ _SOURCES = {
                     "api"),
     "open_sweep": "sweep.folder",
     "analyze": "analysis",
+    **dict.fromkeys(["sensitivity_analysis", "tune"], "studies"),
     **dict.fromkeys(["ConfigError", "RunConfig", "PhysicalPlausibilityWarning"], "config"),
     "WARNING_CODES": "warning_codes",
 }
