@@ -16,6 +16,7 @@ import click
 from rbstab import __version__
 
 from .analyze import analyze
+from .animate import animate
 from .report import report
 from .run import run
 from .show import show
@@ -81,6 +82,7 @@ cli.add_command(show)
 cli.add_command(report)
 cli.add_command(sweep)
 cli.add_command(analyze)
+cli.add_command(animate)
 
 
 def main() -> None:
