@@ -11,10 +11,10 @@ from .options import console_options
 
 # Defaults repeated here (not imported) so that ``rbstab --help`` does not import the
 # report package; tests/test_animate.py checks they equal rbstab.report.animate's.
-_FPS = 25.0
+_FPS = 20.0
 _SPEED = 0.25
 _VIEW = (-60.0, 22.0)
-_DPI = 100
+_DPI = 80
 
 
 def _view(ctx, param, value) -> tuple[float, float]:

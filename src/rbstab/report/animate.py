@@ -25,7 +25,6 @@ a web font), a page, a GIF or an MP4 (:func:`write_animation`), a still PNG
 
 from __future__ import annotations
 
-import math
 import re
 import shutil
 from collections.abc import Sequence
@@ -44,7 +43,10 @@ __all__ = [
     "BodyShape",
     "Scene",
     "ANIMATION_SUFFIXES",
-    "REPORT_FRAMES",
+    "DEFAULT_VIEW",
+    "FPS",
+    "SPEED",
+    "DPI",
     "box_sides",
     "body_shape",
     "box_corners",
@@ -63,8 +65,9 @@ __all__ = [
 
 #: File kinds ``rbstab animate -o`` writes.
 ANIMATION_SUFFIXES = (".html", ".gif", ".mp4")
-#: Frames of an animation in a report (thinned from the samples, evenly in time).
-REPORT_FRAMES = 120
+#: Playback: frames per second, and the run's time per second of playback (0.25: a 2 s run
+#: plays in 8 s); resolution of the frames [dots per inch] of a 6.4 x 4.8 inch figure.
+FPS, SPEED, DPI = 20.0, 0.25, 80
 #: A side of the box that the inertia cannot give (a moment above the sum of the other two:
 #: no uniform body has it) is drawn this fraction of the longest side.
 THIN_SIDE = 0.04
@@ -254,7 +257,7 @@ def _interpolate(t: np.ndarray, samples: np.ndarray, times: np.ndarray) -> np.nd
     return np.stack([np.interp(times, t, samples[:, i]) for i in range(samples.shape[1])], axis=1)
 
 
-def scene(run: RunData, n_frames: int | None = None, fps: float = 25.0, speed: float = 0.25) -> Scene:
+def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> Scene:
     """The :class:`Scene` of a run, from its stored series interpolated to the frame times.
 
     Parameters
@@ -340,8 +343,8 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
     if run_id is None:
         if len(runs) == 1 and runs[0] is not None:
             return runs[0]
-        raise ReportInputError([f"{path} holds {len(ids)} runs: choose one with --run ID "
-                                f"(e.g. {', '.join(ids[:3])}; rbstab show {path} lists them)"])
+        raise ReportInputError([(f"{path} holds {len(ids)} runs: choose one with --run ID "
+                                 f"(e.g. {', '.join(ids[:3])}; rbstab show {path} lists them)")])
     if run_id not in ids:
         close = difflib.get_close_matches(run_id, ids, n=3, cutoff=0.5)
         hint = f"; did you mean {', '.join(close)}?" if close else f" (it holds {len(ids)} runs; rbstab show {path} lists them)"
@@ -357,6 +360,8 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
 #: Colours of the body axes x_b, y_b, z_b, of C and E, of the anchor and of the COM.
 AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")
 C_COLOUR, ANCHOR_COLOUR, COM_COLOUR = "crimson", "black", "0.35"
+#: JPEG quality of the frames of an HTML player (Pillow's scale, 1-95).
+JPEG_QUALITY = 55
 #: Default view (azimuth, elevation) [degrees].
 DEFAULT_VIEW = (-60.0, 22.0)
 
@@ -496,7 +501,7 @@ class FrameRenderer:
         return np.asarray(canvas.buffer_rgba()).copy()
 
 
-def draw_animation(sc: Scene, fps: float = 25.0, view: tuple[float, float] = DEFAULT_VIEW,
+def draw_animation(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFAULT_VIEW,
                    size: tuple[float, float] = (6.4, 4.8), dpi: int = 80):
     """A matplotlib ``FuncAnimation`` of the scene (Agg canvas; no display needed).
 
@@ -552,16 +557,23 @@ def _offline(snippet: str) -> str:
     return _ICON.sub(lambda m: _BUTTONS.get(m.group(1), m.group(1).replace("fa-", "")), snippet)
 
 
-def animation_html(sc: Scene, fps: float = 25.0, view: tuple[float, float] = DEFAULT_VIEW,
-                   size: tuple[float, float] = (6.4, 4.8), dpi: int = 80) -> str:
+def animation_html(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFAULT_VIEW,
+                   size: tuple[float, float] = (6.0, 4.5), dpi: int = 80, quality: int = JPEG_QUALITY) -> str:
     """An HTML snippet that plays the scene offline: matplotlib's ``to_jshtml`` player
-    (play/pause, a time slider), its frames embedded as JPEG (Pillow's quality 75), its
-    buttons as text."""
-    import matplotlib
+    (``HTMLWriter`` with its frames embedded; play/pause, a time slider), the frames as
+    JPEG of ``quality`` (1-95; about 15 kB a frame at the defaults), the buttons as text.
+    """
+    import tempfile
+
+    from matplotlib.animation import HTMLWriter
 
     anim = draw_animation(sc, fps, view, size, dpi)
-    with matplotlib.rc_context({"animation.frame_format": "jpeg", "animation.embed_limit": 200.0}):
-        return _offline(anim.to_jshtml(fps=fps, default_mode="loop"))
+    writer = HTMLWriter(fps=fps, embed_frames=True, default_mode="loop", embed_limit=1000.0)
+    writer.frame_format = "jpeg"
+    with tempfile.TemporaryDirectory() as folder:
+        page = Path(folder) / "animation.html"
+        anim.save(str(page), writer=writer, dpi=dpi, savefig_kwargs={"pil_kwargs": {"quality": quality, "optimize": True}})
+        return _offline(page.read_text(encoding="utf-8"))
 
 
 def check_output(path: str | Path) -> str:
@@ -595,8 +607,8 @@ def _page(sc: Scene, snippet: str) -> str:
             f"{snippet}\n{notes}</body></html>\n")
 
 
-def write_animation(sc: Scene, path: str | Path, fps: float = 25.0, view: tuple[float, float] = DEFAULT_VIEW,
-                    dpi: int = 100) -> Path:
+def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[float, float] = DEFAULT_VIEW,
+                    dpi: int = DPI) -> Path:
     """Write the scene to ``path``: ``.html`` (a page with the player, :func:`animation_html`),
     ``.gif`` (Pillow) or ``.mp4`` (ffmpeg); the file appears whole or not at all.
 
