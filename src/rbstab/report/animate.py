@@ -12,7 +12,8 @@ pure functions of arrays, then drawn with matplotlib (``mpl_toolkits.mplot3d``,
 - the body axes: the columns of A, drawn from X;
 - the point C of the body, C = X + A R, and its anchor R, the place of C at X = 0,
   Theta = 0 (the origin of E = X + A R - R, eq 4; every variant defines E so):
-  the segment from the anchor to C is the constraint error E (:func:`attachment_point`);
+  the segment from the anchor to C is the constraint error E (:func:`attachment_point`;
+  X between the samples from eq 4, :func:`scene`);
 - the trace of the COM; the time, v(t) and |E| in a corner; a failed run is drawn up to its
   last finite sample, with its message.
 
@@ -260,6 +261,11 @@ def _interpolate(t: np.ndarray, samples: np.ndarray, times: np.ndarray) -> np.nd
 def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> Scene:
     """The :class:`Scene` of a run, from its stored series interpolated to the frame times.
 
+    Theta and E are interpolated linearly in time; X follows from eq 4, X = R + E - A R,
+    so that C = X + A R lies at the stored E from its anchor R at every frame (at a pinned
+    body's anchor) and X is the stored X at the sample times (between them it differs from
+    the linear interpolation of X by that of A R, O(dt^2 (|dOmega/dt| + |Omega|^2) |R|)).
+
     Parameters
     ----------
     run : RunData
@@ -295,14 +301,15 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
     t = s["time"][keep]
     frames = frame_times(t[0], t[-1], n_frames or playback_frames(t[-1] - t[0], fps, speed))
     shape = body_shape(run.config)
-    theta = _interpolate(t, s["theta"][keep], frames)
-    position = _interpolate(t, s["position"][keep], frames)
-    rotation = rotation_matrix(theta)
+    r = shape.attachment_point
+    rotation = rotation_matrix(_interpolate(t, s["theta"][keep], frames))
+    error = _interpolate(t, s["constraint_error"][keep], frames)
+    position = r + error - rotation @ r  # eq 4 for X: C sits at R + E, the stored E, at every frame
     return Scene(
         time=frames, rotation=rotation, position=position,
-        point_c=attachment_point(position, rotation, shape.attachment_point),
-        anchor=shape.attachment_point.copy(),
-        constraint_error=_interpolate(t, s["constraint_error"][keep], frames),
+        point_c=attachment_point(position, rotation, r),
+        anchor=r.copy(),
+        constraint_error=error,
         lyapunov=_interpolate(t, s["lyapunov"][keep], frames),
         corners=box_corners(position, rotation, shape), shape=shape,
         trace=s["position"][keep], trace_time=t,
