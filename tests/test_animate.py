@@ -227,7 +227,7 @@ def test_animate_picks_a_run_of_a_store_file_with_run(tmp_path):
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["-o", "x.avi"], "found the suffix '.avi'; expected one of .html, .gif, .mp4"),
+    (["-o", "x.avi"], "found the suffix '.avi'; expected one of .html, .gif, .mp4, .png"),
     (["--view", "1,2,3"], "--view': found '1,2,3'; expected two numbers AZIMUTH,ELEVATION"),
     (["--fps", "0"], "--fps"),
 ])
@@ -261,8 +261,8 @@ def test_the_report_embeds_one_animation_per_run_and_can_leave_them_out(runs, tm
     assert not re.search(r'<(link|script)[^>]*(href|src)="https?:', page)
     assert "index.html plays it" in (tmp_path / "r" / "index.md").read_text()
     assert "animation" not in (tmp_path / "r" / "summary.md").read_text()
-    result = _invoke("report", *inputs, "-o", tmp_path / "r", "--no-animations")
+    result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r", "--no-animations")
     assert result.exit_code == 0, result.output
     assert '<figure class="animation">' not in (tmp_path / "r" / "index.html").read_text()
-    result = _invoke("report", *inputs, "-o", tmp_path / "r", "--animation-frames", "1")
+    result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r", "--animation-frames", "1")
     assert result.exit_code == 2 and "expected 0 (no animations) or 2 to 500" in result.output

@@ -61,11 +61,12 @@ __all__ = [
     "animation_html",
     "write_animation",
     "write_still",
+    "nearest_frame",
     "check_output",
 ]
 
-#: File kinds ``rbstab animate -o`` writes.
-ANIMATION_SUFFIXES = (".html", ".gif", ".mp4")
+#: File kinds ``rbstab animate -o`` writes (``.png``: one frame, a still).
+ANIMATION_SUFFIXES = (".html", ".gif", ".mp4", ".png")
 #: Playback: frames per second, and the run's time per second of playback (0.25: a 2 s run
 #: plays in 8 s); resolution of the frames [dots per inch] of a 6.4 x 4.8 inch figure.
 FPS, SPEED, DPI = 20.0, 0.25, 80
@@ -366,7 +367,7 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
 
 #: Colours of the body axes x_b, y_b, z_b, of C and E, of the anchor and of the COM.
 AXIS_COLOURS = ("tab:red", "tab:green", "tab:blue")
-C_COLOUR, ANCHOR_COLOUR, COM_COLOUR = "crimson", "black", "0.35"
+C_COLOUR, ANCHOR_COLOUR, COM_COLOUR = "darkorange", "black", "0.35"
 #: JPEG quality of the frames of an HTML player (Pillow's scale, 1-95).
 JPEG_QUALITY = 55
 #: Default view (azimuth, elevation) [degrees].
@@ -584,7 +585,7 @@ def animation_html(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
 
 
 def check_output(path: str | Path) -> str:
-    """The kind of an output file (``html``, ``gif``, ``mp4``) from its suffix.
+    """The kind of an output file (``html``, ``gif``, ``mp4``, ``png``) from its suffix.
 
     Raises
     ------
@@ -615,9 +616,10 @@ def _page(sc: Scene, snippet: str) -> str:
 
 
 def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[float, float] = DEFAULT_VIEW,
-                    dpi: int = DPI) -> Path:
+                    dpi: int = DPI, at: float | None = None) -> Path:
     """Write the scene to ``path``: ``.html`` (a page with the player, :func:`animation_html`),
-    ``.gif`` (Pillow) or ``.mp4`` (ffmpeg); the file appears whole or not at all.
+    ``.gif`` (Pillow), ``.mp4`` (ffmpeg) or ``.png`` (the frame nearest the time ``at`` [s],
+    the last without it; :func:`write_still`); the file appears whole or not at all.
 
     Raises
     ------
@@ -637,6 +639,8 @@ def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[f
     try:
         if kind == "html":
             Path(tmp).write_text(_page(sc, animation_html(sc, fps, view, dpi=dpi)), encoding="utf-8")
+        elif kind == "png":
+            write_still(sc, tmp, nearest_frame(sc, at), view, dpi)
         else:
             from matplotlib.animation import FFMpegWriter, PillowWriter
 
@@ -650,8 +654,13 @@ def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[f
     return path
 
 
+def nearest_frame(sc: Scene, at: float | None) -> int:
+    """Index of the frame nearest the time ``at`` [s] (the last frame for None)."""
+    return len(sc.time) - 1 if at is None else int(np.abs(sc.time - at).argmin())
+
+
 def write_still(sc: Scene, path: str | Path, frame: int = -1, view: tuple[float, float] = DEFAULT_VIEW,
-                dpi: int = 100) -> Path:
+                dpi: int = DPI) -> Path:
     """Frame ``frame`` of the scene (the last by default) as a PNG, drawn whole."""
     fig, artists = _figure(sc, view, (6.4, 4.8), dpi)
     artists.update(range(len(sc.time))[frame])

@@ -498,8 +498,8 @@ def _animation(run: RunData, frames: int) -> Animation | str:
     return Animation(
         f"{run.label}: the motion", f"{len(sc.time)} frames evenly over {span}, interpolated from the stored "
         "trajectory: the uniform box with the body's mass and principal moments, its axes x_b (red), y_b "
-        "(green), z_b (blue), the point C = X + A R (red dot), its anchor R where E = 0 (black cross), the "
-        "constraint error E between them (red segment) and the COM's trace; slider and buttons under the view."
+        "(green), z_b (blue), the point C = X + A R (orange dot), its anchor R where E = 0 (black cross), the "
+        "constraint error E between them (orange segment) and the COM's trace; slider and buttons under the view."
         + (f" The run {run.status} at t = {sc.t_failed:.4g} s: the animation stops there." if sc.t_failed is not None
            else ""),
         animation_html(sc),
