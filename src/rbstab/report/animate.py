@@ -294,7 +294,9 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
     if missing:
         raise AnimationError(f"{run.label}: no stored trajectory to animate (the file lacks {', '.join(missing)}; "
                              "a sweep's --store summary keeps none)")
-    finite = np.isfinite(s["time"]) & np.all(np.isfinite(s["theta"]), axis=1) & np.all(np.isfinite(s["position"]), axis=1)
+    finite = np.isfinite(s["time"]) & np.isfinite(s["lyapunov"])
+    for name in ("theta", "position", "constraint_error"):
+        finite &= np.all(np.isfinite(s[name]), axis=1)
     last = int(np.flatnonzero(finite)[-1]) if finite.any() else -1
     if last < 1 or not finite[: last + 1].all():
         raise AnimationError(f"{run.label}: fewer than 2 finite samples: nothing to animate")
@@ -381,14 +383,16 @@ def _corner_text(sc: Scene, k: int) -> str:
     return f"t = {sc.time[k]:6.3f} s\nv = {sc.lyapunov[k]:.4g} J\n|E| = {e_text}"
 
 
-def _notes(sc: Scene) -> list[str]:
-    """Lines under the view: a failure and its time, a box side the inertia cannot give."""
+def _notes(sc: Scene) -> list[tuple[str, str]]:
+    """Lines under the view and their colours: a failure and its time (red), a box side the
+    inertia cannot give (grey)."""
     notes = []
     if sc.t_failed is not None:
-        notes.append(f"{sc.status} at t = {sc.t_failed:.4g} s: {sc.message}")
+        notes.append((f"{sc.status} at t = {sc.t_failed:.4g} s: {sc.message}", "#b00000"))
     if sc.shape.thin.any():
         which = ", ".join(f"{'xyz'[i]}_b" for i in np.flatnonzero(sc.shape.thin))
-        notes.append(f"the inertia has no uniform box (a moment exceeds the sum of the other two): side along {which} drawn thin")
+        notes.append((f"the inertia has no uniform box (a moment exceeds the sum of the other two): side along "
+                      f"{which} drawn thin", "0.3"))
     return notes
 
 
@@ -448,7 +452,7 @@ def _figure(sc: Scene, view: tuple[float, float], size: tuple[float, float], dpi
     fig = Figure(figsize=size, dpi=dpi)
     FigureCanvasAgg(fig)
     notes = _notes(sc)
-    bottom = 0.08 + 0.045 * sum(len(textwrap.wrap(n, 95)) for n in notes)
+    bottom = 0.08 + 0.045 * sum(len(textwrap.wrap(n, 95)) for n, _ in notes)
     ax = fig.add_axes((-0.03, bottom, 0.8, 0.93 - bottom), projection="3d")
     centre, half = scene_limits(sc)
     for axis, c in zip("xyz", centre):
@@ -462,12 +466,11 @@ def _figure(sc: Scene, view: tuple[float, float], size: tuple[float, float], dpi
     artists = _Artists(ax, sc)
     artists.update(0)
     fig.legend(loc="center right", fontsize=7, frameon=False, bbox_to_anchor=(0.995, 0.55))
-    fig.text(0.5, 0.975, f"{sc.label} ({sc.variant})", ha="center", va="top", fontsize=10)
+    fig.text(0.5, 0.975, f"{sc.label} ({sc.variant})", ha="center", va="top", fontsize=10, parse_math=False)
     y = bottom - 0.02
-    for note in notes:
+    for note, colour in notes:  # a run's name and message are shown as written (parse_math off)
         wrapped = "\n".join(textwrap.wrap(note, 95))
-        fig.text(0.02, y, wrapped, ha="left", va="top", fontsize=7,
-                 color="#b00000" if note.startswith(sc.status) and sc.t_failed is not None else "0.3")
+        fig.text(0.02, y, wrapped, ha="left", va="top", fontsize=7, color=colour, parse_math=False)
         y -= 0.045 * wrapped.count("\n") + 0.045
     return fig, artists
 
@@ -513,7 +516,7 @@ def draw_animation(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
                    size: tuple[float, float] = (6.4, 4.8), dpi: int = 80):
     """A matplotlib ``FuncAnimation`` of the scene (Agg canvas; no display needed).
 
-    Its figure shows the frames of a :class:`FrameRenderer` as one image, so that a writer
+    Its figure shows the frames of a :class:`FrameRenderer` as they are, so that a writer
     (``to_jshtml``, ``PillowWriter``, ``FFMpegWriter``) saves each frame without drawing the
     3D view's fixed parts again; save it at the figure's ``dpi``.
 
@@ -534,18 +537,31 @@ def draw_animation(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
     matplotlib.animation.FuncAnimation
     """
     from matplotlib.animation import FuncAnimation
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.artist import Artist
     from matplotlib.figure import Figure
 
+    class Pixels(Artist):
+        """A frame's pixels, drawn as they are (no resampling: the figure has the frame's size)."""
+
+        def __init__(self) -> None:
+            super().__init__()
+            self.pixels = np.zeros((1, 1, 4), dtype=np.uint8)
+
+        def draw(self, renderer) -> None:
+            gc = renderer.new_gc()
+            renderer.draw_image(gc, 0, 0, self.pixels)
+            gc.restore()
+
     renderer = FrameRenderer(sc, view, size, dpi)
-    fig = Figure(figsize=size, dpi=dpi)
-    FigureCanvasAgg(fig)
-    image = fig.figimage(renderer.render(0), origin="upper")
+    fig = Figure(figsize=size, dpi=dpi)  # its canvas draws only when saved: one draw per frame
+    image = Pixels()
+    fig.add_artist(image)
 
     def show(k: int) -> list:
-        image.set_data(renderer.render(k))
+        image.pixels = np.ascontiguousarray(renderer.render(k)[::-1])  # rows from the bottom
         return [image]
 
+    show(0)
     return FuncAnimation(fig, show, frames=len(sc.time), interval=1000.0 / fps, blit=False, repeat=True)
 
 
@@ -609,7 +625,7 @@ def _page(sc: Scene, snippet: str) -> str:
     import html
 
     title = html.escape(f"{sc.label} ({sc.variant})")
-    notes = "".join(f"<p>{html.escape(n)}</p>" for n in _notes(sc))
+    notes = "".join(f"<p>{html.escape(n)}</p>" for n, _ in _notes(sc))
     return (f'<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8"><title>{title}</title></head>\n'
             f'<body style="font-family: system-ui, sans-serif">\n<h1 style="font-size: 1.2em">{title}</h1>\n'
             f"{snippet}\n{notes}</body></html>\n")
