@@ -12,8 +12,10 @@ the three paper cases with animations < 30 s and < 10 MB. Prints one table:
   size of the folder (page and figures) and of ``index.html``;
 - **report, case 3 alone**: what a Case 3 page weighs.
 
-The runs are made first (``rbstab run configs/paper/*.yaml`` into a temporary folder). The
-load average is printed with the figures: on a shared machine the wall times grow with it.
+The runs are made first (``rbstab run configs/paper/*.yaml`` into a temporary folder). Each
+row gives the wall time and the CPU time (user + system) of the command, and the load
+average is printed with them: on a shared machine the wall times grow with the load, the
+CPU times much less.
 
 Usage::
 
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -36,16 +39,21 @@ CASES = sorted((ROOT / "configs" / "paper").glob("*.yaml"))
 RBSTAB = str(Path(sys.executable).parent / "rbstab")
 
 
-def _command(args: list[str], repeat: int) -> float:
-    """Best wall time [s] of ``rbstab ARGS`` over ``repeat`` runs."""
-    best = float("inf")
+def _command(args: list[str], repeat: int) -> tuple[float, float]:
+    """Best wall time [s] of ``rbstab ARGS`` over ``repeat`` runs, and the CPU time [s] (user +
+    system) of that run."""
+    best = (float("inf"), float("nan"))
     for _ in range(repeat):
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
         env = {k: v for k, v in os.environ.items() if k != "RBSTAB_ANIMATION_FRAMES"}  # the defaults
         done = subprocess.run([RBSTAB, *args], capture_output=True, text=True, env=env)
-        best = min(best, time.perf_counter() - start)
+        wall = time.perf_counter() - start
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if done.returncode != 0:
             raise SystemExit(f"rbstab {' '.join(args)} failed:\n{done.stderr}")
+        cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+        best = min(best, (wall, cpu))
     return best
 
 
@@ -66,22 +74,29 @@ def main() -> None:
         rows = []
         for kind in ("html", "gif"):
             out = tmp / f"case3.{kind}"
-            seconds = _command(["animate", case3, "-o", str(out)], args.repeat)
-            rows.append((f"animate case3 {kind}", seconds, _megabytes(out), "< 15 s" if kind == "html" else ""))
+            times = _command(["animate", case3, "-o", str(out)], args.repeat)
+            rows.append((f"animate case3 {kind}", *times, _megabytes(out), "< 15 s" if kind == "html" else ""))
         for label, extra in (("report, 3 cases, animations", []), ("report, 3 cases, --no-animations", ["--no-animations"])):
             out = tmp / "report"
-            seconds = _command(["report", *runs, "-o", str(out), *extra], args.repeat)
-            rows.append((label, seconds, _megabytes(out), "< 30 s, < 10 MB" if not extra else ""))
-            rows.append(("  of which index.html", float("nan"), _megabytes(out / "index.html"), ""))
+            times = _command(["report", *runs, "-o", str(out), *extra], args.repeat)
+            rows.append((label, *times, _megabytes(out), "< 30 s, < 10 MB" if not extra else ""))
+            rows.append(("  of which index.html", NAN, NAN, _megabytes(out / "index.html"), ""))
         out = tmp / "report3"
-        seconds = _command(["report", case3, "-o", str(out)], args.repeat)
-        rows.append(("report, case 3 alone", seconds, _megabytes(out), ""))
-        rows.append(("  of which index.html", float("nan"), _megabytes(out / "index.html"), ""))
-    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores; best of {args.repeat}")
-    print(f"{'what':<36} {'wall [s]':>9} {'size [MB]':>10}  target")
-    for label, seconds, size, target in rows:
-        wall = "" if seconds != seconds else f"{seconds:.2f}"
-        print(f"{label:<36} {wall:>9} {size:>10.2f}  {target}")
+        times = _command(["report", case3, "-o", str(out)], args.repeat)
+        rows.append(("report, case 3 alone", *times, _megabytes(out), ""))
+        rows.append(("  of which index.html", NAN, NAN, _megabytes(out / "index.html"), ""))
+    print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall times grow with it); "
+          f"best of {args.repeat}")
+    print(f"{'what':<36} {'wall [s]':>9} {'CPU [s]':>8} {'size [MB]':>10}  target")
+    for label, wall, cpu, size, target in rows:
+        print(f"{label:<36} {_number(wall):>9} {_number(cpu):>8} {size:>10.2f}  {target}")
+
+
+NAN = float("nan")
+
+
+def _number(value: float) -> str:
+    return "" if value != value else f"{value:.2f}"
 
 
 if __name__ == "__main__":

@@ -162,7 +162,7 @@ def test_a_few_frames_of_each_variant_render_and_differ(runs, name, tmp_path):
     sc = scene(pick_run(runs[name]), n_frames=3)
     renderer = FrameRenderer(sc, dpi=40)
     first, last = renderer.render(0), renderer.render(2)
-    assert first.shape == (192, 256, 4) and first.dtype == np.uint8
+    assert first.shape == (180, 240, 4) and first.dtype == np.uint8
     assert (first[..., :3] < 250).any()  # something drawn
     assert np.abs(first.astype(int) - last.astype(int)).sum() > 0  # the body moved
     still = write_still(sc, tmp_path / "still.png", frame=1, dpi=40)
@@ -204,7 +204,7 @@ def test_animate_writes_a_gif_and_names_what_an_mp4_lacks(runs, tmp_path):
     result = _invoke("animate", runs["gimbal"], "-o", gif, "--fps", "10", "--speed", "0.01", "--dpi", "40")
     assert result.exit_code == 0, result.output
     with Image.open(gif) as im:
-        assert im.n_frames >= 2 and im.size == (256, 192)
+        assert im.n_frames >= 2 and im.size == (240, 180)
     result = _invoke("animate", runs["gimbal"], "-o", tmp_path / "gimbal.mp4", env={"PATH": str(tmp_path)})
     assert result.exit_code == 1 and "Traceback" not in result.output
     assert result.output.strip().splitlines() == [
@@ -249,7 +249,10 @@ def test_cli_defaults_are_the_library_defaults():
 
 # -- in the report -----------------------------------------------------------------------------------
 
-def test_the_report_embeds_one_animation_per_run_and_can_leave_them_out(runs, tmp_path):
+def test_the_report_embeds_one_animation_per_run_and_can_leave_them_out(runs, tmp_path, monkeypatch):
+    from rbstab.report.figures import FigureWriter
+
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: None)  # figures drawn, not saved: faster
     inputs = [runs["case1_permanent"], runs["gimbal"]]
     result = _invoke("report", *inputs, "-o", tmp_path / "r", "--animation-frames", "3", "--format", "html",
                      "--format", "md")

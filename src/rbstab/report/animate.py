@@ -47,6 +47,7 @@ __all__ = [
     "DEFAULT_VIEW",
     "FPS",
     "SPEED",
+    "SIZE",
     "DPI",
     "box_sides",
     "body_shape",
@@ -68,8 +69,8 @@ __all__ = [
 #: File kinds ``rbstab animate -o`` writes (``.png``: one frame, a still).
 ANIMATION_SUFFIXES = (".html", ".gif", ".mp4", ".png")
 #: Playback: frames per second, and the run's time per second of playback (0.25: a 2 s run
-#: plays in 8 s); resolution of the frames [dots per inch] of a 6.4 x 4.8 inch figure.
-FPS, SPEED, DPI = 20.0, 0.25, 80
+#: plays in 8 s); size of a frame [inches] and its resolution [dots per inch] (480 x 360 pixels).
+FPS, SPEED, SIZE, DPI = 20.0, 0.25, (6.0, 4.5), 80
 #: A side of the box that the inertia cannot give (a moment above the sum of the other two:
 #: no uniform body has it) is drawn this fraction of the longest side.
 THIN_SIDE = 0.04
@@ -489,7 +490,7 @@ class FrameRenderer:
     """
 
     def __init__(self, sc: Scene, view: tuple[float, float] = DEFAULT_VIEW,
-                 size: tuple[float, float] = (6.4, 4.8), dpi: int = 80) -> None:
+                 size: tuple[float, float] = SIZE, dpi: int = 80) -> None:
         self.figure, self.artists = _figure(sc, view, size, dpi)
         self._moving = self.artists.update(0)
         for artist in self._moving:
@@ -513,7 +514,7 @@ class FrameRenderer:
 
 
 def draw_animation(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFAULT_VIEW,
-                   size: tuple[float, float] = (6.4, 4.8), dpi: int = 80):
+                   size: tuple[float, float] = SIZE, dpi: int = 80):
     """A matplotlib ``FuncAnimation`` of the scene (Agg canvas; no display needed).
 
     Its figure shows the frames of a :class:`FrameRenderer` as they are, so that a writer
@@ -582,10 +583,11 @@ def _offline(snippet: str) -> str:
 
 
 def animation_html(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFAULT_VIEW,
-                   size: tuple[float, float] = (6.0, 4.5), dpi: int = 80, quality: int = JPEG_QUALITY) -> str:
+                   size: tuple[float, float] = SIZE, dpi: int = 80, quality: int = JPEG_QUALITY) -> str:
     """An HTML snippet that plays the scene offline: matplotlib's ``to_jshtml`` player
     (``HTMLWriter`` with its frames embedded; play/pause, a time slider), the frames as
-    JPEG of ``quality`` (1-95; about 15 kB a frame at the defaults), the buttons as text.
+    JPEG of ``quality`` (1-95; about 22 kB a frame in the page at the defaults), the buttons as
+    text.
     """
     import tempfile
 
@@ -678,7 +680,7 @@ def nearest_frame(sc: Scene, at: float | None) -> int:
 def write_still(sc: Scene, path: str | Path, frame: int = -1, view: tuple[float, float] = DEFAULT_VIEW,
                 dpi: int = DPI) -> Path:
     """Frame ``frame`` of the scene (the last by default) as a PNG, drawn whole."""
-    fig, artists = _figure(sc, view, (6.4, 4.8), dpi)
+    fig, artists = _figure(sc, view, SIZE, dpi)
     artists.update(range(len(sc.time))[frame])
     fig.savefig(path, format="png", dpi=dpi, metadata={"Software": f"rbstab {__version__}"})
     return Path(path)
