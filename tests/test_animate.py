@@ -21,6 +21,8 @@ from rbstab.report.animate import (
     FPS,
     SPEED,
     FrameRenderer,
+    body_shape,
+    box_corners,
     box_sides,
     pick_run,
     playback_frames,
@@ -141,6 +143,23 @@ def test_the_box_edges_are_the_columns_of_a_and_its_moments_are_the_bodys(runs, 
     assert thin.tolist() == [True, False, False]
     np.testing.assert_allclose(found[1:], np.sqrt(6 * np.array([10 + 0.4 - 8, 10 + 8 - 0.4]) / 41), rtol=1e-12)
     assert 0 < found[0] < 0.1 * found[2]
+
+
+def test_an_inertia_matrix_gives_the_uniform_box_with_that_inertia(rng):
+    """A full J = Q diag(j) Q': the box's edges are along the principal axes Q, and the inertia
+    of the uniform box with those edges, sum m (s_j^2 + s_k^2) / 12 u_i u_i', is J again."""
+    q = _rotation(rng.uniform(-1.0, 1.0, (1, 3)))[0]
+    sides, mass = rng.uniform(0.1, 2.0, 3), rng.uniform(1.0, 100.0)
+    moments = mass / 12 * (np.sum(sides**2) - sides**2)
+    inertia = q @ np.diag(moments) @ q.T
+    shape = body_shape({"body": {"mass": mass, "inertia": inertia.tolist(), "attachment_point": [0.1, 0.2, 0.3]}})
+    corners = box_corners(np.zeros((1, 3)), np.eye(3)[None], shape)[0]
+    edges = np.array([corners[4] - corners[0], corners[2] - corners[0], corners[1] - corners[0]])
+    lengths = np.linalg.norm(edges, axis=1)
+    units = edges / lengths[:, None]
+    box = sum(mass / 12 * (np.sum(lengths**2) - lengths[i] ** 2) * np.outer(units[i], units[i]) for i in range(3))
+    np.testing.assert_allclose(box, inertia, rtol=1e-10, atol=1e-12 * np.abs(inertia).max())
+    np.testing.assert_allclose(np.sort(lengths), np.sort(sides), rtol=1e-10)
 
 
 def test_the_scene_limits_hold_every_frame_with_equal_axes(runs):

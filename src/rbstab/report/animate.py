@@ -43,6 +43,7 @@ __all__ = [
     "AnimationError",
     "BodyShape",
     "Scene",
+    "FrameRenderer",
     "ANIMATION_SUFFIXES",
     "DEFAULT_VIEW",
     "FPS",
