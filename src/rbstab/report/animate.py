@@ -14,8 +14,8 @@ pure functions of arrays, then drawn with matplotlib (``mpl_toolkits.mplot3d``,
   Theta = 0 (the origin of E = X + A R - R, eq 4; every variant defines E so):
   the segment from the anchor to C is the constraint error E (:func:`attachment_point`;
   X between the samples from eq 4, :func:`scene`);
-- the trace of the COM; the time, v(t) and |E| in a corner; a failed run is drawn up to its
-  last finite sample, with its message.
+- the trace of the COM, the direction of gravity; the time, v(t) and |E| in a corner; a
+  failed run is drawn up to its last finite sample, with its message.
 
 The scene's limits are fixed over the animation and its axes are equal
 (:func:`scene_limits`). Outputs: an HTML snippet that plays offline (:func:`animation_html`,
@@ -29,7 +29,7 @@ from __future__ import annotations
 import re
 import shutil
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -234,6 +234,8 @@ class Scene:
         The run's.
     t_failed : float or None
         Time of the last finite sample of a failed run; None for a successful run.
+    gravity : ndarray, shape (3,)
+        g [m/s^2], inertial frame (``body.gravity``; zero when absent).
     """
 
     time: np.ndarray
@@ -252,6 +254,7 @@ class Scene:
     status: str = "success"
     message: str = ""
     t_failed: float | None = None
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def _interpolate(t: np.ndarray, samples: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -320,6 +323,7 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
         trace=s["position"][keep], trace_time=t,
         label=run.label, variant=run.variant, status=run.status, message=run.message,
         t_failed=None if run.ok else float(t[-1]),
+        gravity=np.asarray((run.config.get("body") or {}).get("gravity") or np.zeros(3), dtype=float).reshape(3),
     )
 
 
@@ -416,6 +420,8 @@ class _Artists:
         self.com = ax.plot([], [], [], "o", color=COM_COLOUR, ms=4, label="COM X")[0]
         a = sc.anchor
         ax.plot([a[0]], [a[1]], [a[2]], "x", color=ANCHOR_COLOUR, ms=9, mew=2, label="anchor of C (E = 0)")
+        if np.any(sc.gravity):
+            _gravity_arrow(ax, sc.gravity)
         self.error = ax.plot([], [], [], color=C_COLOUR, lw=2.5, label="E (anchor to C)")[0]
         self.c = ax.plot([], [], [], "o", color=C_COLOUR, ms=6, label="C = X + A R")[0]
         self.text = ax.text2D(0.01, 0.99, "", transform=ax.transAxes, va="top", ha="left", family="monospace",
@@ -441,6 +447,16 @@ class _Artists:
         self.c.set_data_3d([c[0]], [c[1]], [c[2]])
         self.text.set_text(_corner_text(sc, k))
         return [self.box, *self.axes, self.trace, self.com, self.error, self.c, self.text]
+
+
+def _gravity_arrow(ax, gravity: np.ndarray) -> None:
+    """An arrow along g in a top corner of the view (its direction only; fixed)."""
+    (x0, x1), (y0, y1), (z0, z1) = ax.get_xlim(), ax.get_ylim(), ax.get_zlim()
+    length = 0.2 * (x1 - x0)
+    u = gravity / np.linalg.norm(gravity)
+    start = np.array([x0 + 0.1 * (x1 - x0), y1 - 0.1 * (y1 - y0), z1 - 0.05 * (z1 - z0)]) - np.clip(u, 0, None) * length
+    ax.quiver(*start, *(u * length), color="tab:purple", lw=1.5, arrow_length_ratio=0.3,
+              label=f"g = {np.linalg.norm(gravity):.3g} m/s$^2$")
 
 
 def _figure(sc: Scene, view: tuple[float, float], size: tuple[float, float], dpi: int):
