@@ -249,6 +249,8 @@ def test_animate_picks_a_run_of_a_store_file_with_run(tmp_path):
     (["-o", "x.avi"], "found the suffix '.avi'; expected one of .html, .gif, .mp4, .png"),
     (["--view", "1,2,3"], "--view': found '1,2,3'; expected two numbers AZIMUTH,ELEVATION"),
     (["--fps", "0"], "--fps"),
+    (["--speed", "1e-5"], "speed 1e-05 at 20 frames/s gives 1000001 frames for the 0.5 s of case1_permanent; "
+                          "at most 5000"),
 ])
 def test_animate_refuses_bad_options_in_one_line(runs, args, fragment, tmp_path):
     result = _invoke("animate", runs["case1_permanent"], *args)

@@ -72,6 +72,8 @@ ANIMATION_SUFFIXES = (".html", ".gif", ".mp4", ".png")
 #: Playback: frames per second, and the run's time per second of playback (0.25: a 2 s run
 #: plays in 8 s); size of a frame [inches] and its resolution [dots per inch] (480 x 360 pixels).
 FPS, SPEED, SIZE, DPI = 20.0, 0.25, (6.0, 4.5), 80
+#: Most frames of one animation.
+MAX_FRAMES = 5000
 #: A side of the box that the inertia cannot give (a moment above the sum of the other two:
 #: no uniform body has it) is drawn this fraction of the longest side.
 THIN_SIDE = 0.04
@@ -292,7 +294,7 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
     ------
     AnimationError
         If the run has no stored trajectory (a ``summary`` store) or fewer than 2 finite
-        samples.
+        samples, or the frames would be more than :data:`MAX_FRAMES`.
     """
     s = run.series("theta", "position", "constraint_error", "lyapunov")
     missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
@@ -307,7 +309,11 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
         raise AnimationError(f"{run.label}: fewer than 2 finite samples: nothing to animate")
     keep = slice(0, last + 1)
     t = s["time"][keep]
-    frames = frame_times(t[0], t[-1], n_frames or playback_frames(t[-1] - t[0], fps, speed))
+    count = n_frames or playback_frames(t[-1] - t[0], fps, speed)
+    if count > MAX_FRAMES:
+        raise AnimationError(f"speed {speed:g} at {fps:g} frames/s gives {count} frames for the {t[-1] - t[0]:.4g} s "
+                             f"of {run.label}; at most {MAX_FRAMES}: raise the speed or lower the frame rate")
+    frames = frame_times(t[0], t[-1], count)
     shape = body_shape(run.config)
     r = shape.attachment_point
     rotation = rotation_matrix(_interpolate(t, s["theta"][keep], frames))
