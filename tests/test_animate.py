@@ -271,20 +271,24 @@ def test_cli_defaults_are_the_library_defaults():
 # -- in the report -----------------------------------------------------------------------------------
 
 def test_the_report_embeds_one_animation_per_run_and_can_leave_them_out(runs, tmp_path, monkeypatch):
+    from rbstab.report import build
     from rbstab.report.figures import FigureWriter
 
     monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: None)  # figures drawn, not saved: faster
-    inputs = [runs["case1_permanent"], runs["gimbal"]]
+    monkeypatch.setattr(build, "MAX_ANIMATIONS", 1)  # the first run animated, the second told how
+    inputs = [runs["gimbal"], runs["case1_permanent"]]
     result = _invoke("report", *inputs, "-o", tmp_path / "r", "--animation-frames", "3", "--format", "html",
                      "--format", "md")
     assert result.exit_code == 0, result.output
     page = (tmp_path / "r" / "index.html").read_text()
-    assert page.count('<figure class="animation">') == 2
-    assert page.count("data:image/jpeg;base64,") == 2 * 3
-    assert "The run failed at t = " in page
+    assert page.count('<figure class="animation">') == 1
+    assert page.count("data:image/jpeg;base64,") == 3
+    assert "The run failed at t = " in page  # the gimbal run's, animated up to its failure
+    assert f"No animation: the page animates the first 1 runs (rbstab animate {runs['case1_permanent']} " in page
     assert not re.search(r'<(link|script)[^>]*(href|src)="https?:', page)
     assert "index.html plays it" in (tmp_path / "r" / "index.md").read_text()
-    assert "animation" not in (tmp_path / "r" / "summary.md").read_text()
+    summary = (tmp_path / "r" / "summary.md").read_text()
+    assert "index.html plays it" not in summary and "base64" not in summary  # tables and words only
     result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r", "--no-animations")
     assert result.exit_code == 0, result.output
     assert '<figure class="animation">' not in (tmp_path / "r" / "index.html").read_text()

@@ -64,6 +64,7 @@ __all__ = [
     "DPI_RANGE",
     "ANIMATION_FRAMES",
     "ANIMATION_FRAMES_RANGE",
+    "MAX_ANIMATIONS",
 ]
 
 #: Parent of the default report folders.
@@ -78,6 +79,8 @@ DPI_RANGE = (50, 600)
 #: Frames of the animation of each run (``--animation-frames``), evenly in time: at the
 #: default size about 20 kB each in the page.
 ANIMATION_FRAMES = 100
+#: Runs given directly that the page animates (the first ones; about 2 MB each at the default).
+MAX_ANIMATIONS = 12
 #: Frames an animation of a report may have (``--animation-frames``; 0: no animations).
 ANIMATION_FRAMES_RANGE = (2, 500)
 #: Longest default folder name made of the inputs' names (longer: the first two and a hash).
@@ -109,7 +112,8 @@ class ReportOptions:
         Resolution of the PNG files [dots per inch], within :data:`DPI_RANGE`.
     animation_frames : int
         Frames of the animation of each run given directly (evenly in time, embedded in
-        ``index.html``), within :data:`ANIMATION_FRAMES_RANGE`; 0: no animations.
+        ``index.html``; the first :data:`MAX_ANIMATIONS` runs), within
+        :data:`ANIMATION_FRAMES_RANGE`; 0: no animations.
     """
 
     formats: tuple[str, ...] = ("html",)
@@ -474,12 +478,15 @@ def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: Fi
     cmp = Section("Comparison figures" if len(runs) > 1 else "Constraint error and angular velocity", "comparison")
     cmp.blocks.extend(comparison_figures(runs, out, settle))
     per_run = Section("Figures of each run", "figures")
-    for run in runs:
+    for i, run in enumerate(runs):
         sub = Section(f"{run.label} ({run.variant}, {run.status})", f"run-{safe_filename(run.label)}", level=3)
         if not run.ok:
             sub.blocks.append(f"FAILED: {run.message}")
-        if frames:
+        if frames and i < MAX_ANIMATIONS:
             sub.blocks.append(_animation(run, frames))
+        elif frames:
+            sub.blocks.append(f"No animation: the page animates the first {MAX_ANIMATIONS} runs "
+                              f"(rbstab animate {run.path}{'' if run.row is None else ' --run ' + run.name} animates this one).")
         sub.blocks.extend(run_figures(run, out))
         per_run.blocks.append(sub)
     return [*sections, cmp, per_run]
