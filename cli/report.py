@@ -101,7 +101,7 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     show_default=True,
     metavar="N",
     envvar="RBSTAB_ANIMATION_FRAMES",
-    help="Frames of the 3D animation of each run given directly, embedded in index.html (about 20 kB "
+    help="Frames of the 3D animation of each run given directly, embedded in index.html (about 22 kB "
     f"each; {_ANIMATION_FRAMES_RANGE[0]} to {_ANIMATION_FRAMES_RANGE[1]}; 0: none, as --no-animations). "
     "Also $RBSTAB_ANIMATION_FRAMES.",
 )

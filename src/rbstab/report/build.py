@@ -77,7 +77,7 @@ FORMATS = ("html", "md")
 #: Resolutions allowed for the PNG files (``--dpi``) [dots per inch].
 DPI_RANGE = (50, 600)
 #: Frames of the animation of each run (``--animation-frames``), evenly in time: at the
-#: default size about 20 kB each in the page.
+#: default size about 22 kB each in the page.
 ANIMATION_FRAMES = 100
 #: Runs given directly that the page animates (the first ones; about 2 MB each at the default).
 MAX_ANIMATIONS = 12
@@ -506,7 +506,8 @@ def _animation(run: RunData, frames: int) -> Animation | str:
         f"{run.label}: the motion", f"{len(sc.time)} frames evenly over {span}, interpolated from the stored "
         "trajectory: the uniform box with the body's mass and principal moments, its axes x_b (red), y_b "
         "(green), z_b (blue), the point C = X + A R (orange dot), its anchor R where E = 0 (black cross), the "
-        "constraint error E between them (orange segment) and the COM's trace; slider and buttons under the view."
+        "constraint error E between them (orange segment), the COM's trace and the direction of gravity "
+        "(purple, when not zero); slider and buttons under the view."
         + (f" The run {run.status} at t = {sc.t_failed:.4g} s: the animation stops there." if sc.t_failed is not None
            else ""),
         animation_html(sc),
