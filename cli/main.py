@@ -16,6 +16,7 @@ import click
 from rbstab import __version__
 
 from .analyze import analyze
+from .animate import animate
 from .report import report
 from .run import run
 from .sensitivity import sensitivity
@@ -85,6 +86,7 @@ cli.add_command(sweep)
 cli.add_command(analyze)
 cli.add_command(sensitivity)
 cli.add_command(tune)
+cli.add_command(animate)
 
 
 def main() -> None:

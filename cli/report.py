@@ -15,6 +15,8 @@ _METRICS = ("max_abs_constraint_error", "lyapunov_final")
 _FIGURE_FORMATS = ("png", "pdf", "svg")
 _DPI = 110
 _DPI_RANGE = (50, 600)
+_ANIMATION_FRAMES = 100
+_ANIMATION_FRAMES_RANGE = (2, 500)
 
 
 def _figure_formats(ctx, param, values) -> tuple[str, ...]:
@@ -92,12 +94,30 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     metavar="RAD_PER_S",
     help="Settling threshold on |Omega|, the norm of the angular velocity [rad/s].",
 )
+@click.option(
+    "--animation-frames",
+    type=click.IntRange(0, _ANIMATION_FRAMES_RANGE[1]),
+    default=_ANIMATION_FRAMES,
+    show_default=True,
+    metavar="N",
+    envvar="RBSTAB_ANIMATION_FRAMES",
+    help="Frames of the 3D animation of each run given directly, embedded in index.html (about 22 kB "
+    f"each; {_ANIMATION_FRAMES_RANGE[0]} to {_ANIMATION_FRAMES_RANGE[1]}; 0: none, as --no-animations). "
+    "Also $RBSTAB_ANIMATION_FRAMES.",
+)
+@click.option(
+    "--no-animations",
+    "no_animations",
+    is_flag=True,
+    help="Leave the animations out (a smaller page, built faster).",
+)
 @console_options
-def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega) -> None:
+def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega,
+           animation_frames, no_animations) -> None:
     """Compare INPUT... (run files *.h5, sweep folders, folders of run files, analysis files *.analysis.nc).
 
-    Writes index.html (tables, the paper's figures per run, overlays of the runs, sweep
-    plots, the comparison with the paper's printed values, the stability analyses of
+    Writes index.html (tables, the paper's figures and a 3D animation per run, overlays of
+    the runs, sweep plots, the comparison with the paper's printed values, the stability analyses of
     rbstab analyze), summary.md, summary.csv and
     figures/*.png (or .pdf, .svg). Every input is checked before anything is written.
     """
@@ -110,7 +130,11 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
         title=title,
         figure_formats=figure_formats,
         dpi=dpi,
+        animation_frames=0 if no_animations else animation_frames,
     )
+    if options.animation_frames == 1:
+        raise click.BadParameter(f"found 1; expected 0 (no animations) or {_ANIMATION_FRAMES_RANGE[0]} to "
+                                 f"{_ANIMATION_FRAMES_RANGE[1]}", param_hint="--animation-frames")
     try:
         folder = build_report(inputs, output, options)
     except ReportInputError as exc:

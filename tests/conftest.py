@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import socket
 import threading
 import types
@@ -13,6 +14,9 @@ import pytest
 from rbstab.model import Gains, RigidBody
 
 ROOT = Path(__file__).resolve().parents[1]
+#: ``rbstab report`` draws an animation of each run (seconds each); the tests that do not look
+#: at them leave them out (tests/test_animate.py asks for them with --animation-frames).
+os.environ.setdefault("RBSTAB_ANIMATION_FRAMES", "0")
 PAPER_CONFIGS = sorted((ROOT / "configs" / "paper").glob("*.yaml"))
 
 D = np.diag

@@ -4,6 +4,8 @@
 - :mod:`~rbstab.report.tables`: one row per run, metrics, settling time;
 - :mod:`~rbstab.report.paper`: the paper's printed results and the comparison;
 - :mod:`~rbstab.report.figures`: matplotlib figures (Agg canvas);
+- :mod:`~rbstab.report.animate`: the 3D animation of a run (``rbstab animate``, the page's
+  animations);
 - :mod:`~rbstab.report.render`: the page as HTML and markdown;
 - :mod:`~rbstab.report.build`: :func:`build_report`, which ties them together.
 

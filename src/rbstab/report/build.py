@@ -10,7 +10,8 @@ Order of work, so that bad input never leaves anything behind:
 
 Layout of the report folder::
 
-    index.html            the page (--format html, default): tables, figures, notes
+    index.html            the page (--format html, default): tables, figures, notes, and an
+                          animation of each run given directly, its frames embedded
     index.md              the same page as markdown (--format md)
     summary.md            the tables of the page
     summary.csv           one row per run (direct runs and the runs of every sweep)
@@ -38,7 +39,7 @@ from .. import __version__
 from .figures import DPI, FIGURE_FORMATS, FigureWriter
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
-from .render import Section, Table, render_html, render_markdown, render_tables_markdown
+from .render import Animation, Section, Table, render_html, render_markdown, render_tables_markdown
 from .tables import (
     DEFAULT_METRICS,
     SettleThresholds,
@@ -61,6 +62,9 @@ __all__ = [
     "MAX_TABLE_ROWS",
     "FIGURE_FORMATS",
     "DPI_RANGE",
+    "ANIMATION_FRAMES",
+    "ANIMATION_FRAMES_RANGE",
+    "MAX_ANIMATIONS",
 ]
 
 #: Parent of the default report folders.
@@ -72,6 +76,13 @@ MANIFEST = "report.json"
 FORMATS = ("html", "md")
 #: Resolutions allowed for the PNG files (``--dpi``) [dots per inch].
 DPI_RANGE = (50, 600)
+#: Frames of the animation of each run (``--animation-frames``), evenly in time: at the
+#: default size about 22 kB each in the page.
+ANIMATION_FRAMES = 100
+#: Runs given directly that the page animates (the first ones; about 2 MB each at the default).
+MAX_ANIMATIONS = 12
+#: Frames an animation of a report may have (``--animation-frames``; 0: no animations).
+ANIMATION_FRAMES_RANGE = (2, 500)
 #: Longest default folder name made of the inputs' names (longer: the first two and a hash).
 MAX_NAME = 80
 
@@ -99,6 +110,10 @@ class ReportOptions:
         Figure files, of :data:`FIGURE_FORMATS` (``png``, ``pdf``, ``svg``).
     dpi : int
         Resolution of the PNG files [dots per inch], within :data:`DPI_RANGE`.
+    animation_frames : int
+        Frames of the animation of each run given directly (evenly in time, embedded in
+        ``index.html``; the first :data:`MAX_ANIMATIONS` runs), within
+        :data:`ANIMATION_FRAMES_RANGE`; 0: no animations.
     """
 
     formats: tuple[str, ...] = ("html",)
@@ -107,6 +122,7 @@ class ReportOptions:
     title: str | None = None
     figure_formats: tuple[str, ...] = ("png",)
     dpi: int = DPI
+    animation_frames: int = ANIMATION_FRAMES
 
 
 def _input_name(path: Path, runs: Sequence[RunData]) -> str:
@@ -357,6 +373,10 @@ def _check_options(options: ReportOptions) -> None:
         raise ReportError(f"unknown figure format {bad}; allowed: {', '.join(FIGURE_FORMATS)}")
     if not (isinstance(options.dpi, (int, np.integer)) and DPI_RANGE[0] <= options.dpi <= DPI_RANGE[1]):
         raise ReportError(f"dpi: found {options.dpi!r}; expected a whole number from {DPI_RANGE[0]} to {DPI_RANGE[1]}")
+    frames, (low, high) = options.animation_frames, ANIMATION_FRAMES_RANGE
+    if not (isinstance(frames, (int, np.integer)) and (frames == 0 or low <= frames <= high)):
+        raise ReportError(f"animation_frames: found {frames!r}; expected 0 (no animations) or a whole number "
+                          f"from {low} to {high}")
     if options.title is not None and not options.title.strip():
         raise ReportError("title: found an empty title; give some text or leave it out")
 
@@ -438,7 +458,8 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     (folder / "figures").mkdir()
     out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
     params = differing_parameters(data.runs)
-    sections = _direct_run_sections(data.runs, params, out, options.settle) if data.runs else []
+    frames = options.animation_frames if "html" in options.formats else 0
+    sections = _direct_run_sections(data.runs, params, out, options.settle, frames) if data.runs else []
     for sweep in data.sweeps:
         sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
     sections += analysis_sections(analyses, out)
@@ -451,8 +472,9 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
 
 
 def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: FigureWriter,
-                         settle: SettleThresholds) -> list[Section]:
-    """Tables, the comparison with the paper, comparison figures and each run's figures."""
+                         settle: SettleThresholds, frames: int = 0) -> list[Section]:
+    """Tables, the comparison with the paper, comparison figures and each run's animation
+    (``frames`` > 0) and figures."""
     from .figures import comparison_figures, run_figures
 
     sections = _runs_sections(runs, runs_table(runs, settle, params), params)
@@ -462,13 +484,40 @@ def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: Fi
     cmp = Section("Comparison figures" if len(runs) > 1 else "Constraint error and angular velocity", "comparison")
     cmp.blocks.extend(comparison_figures(runs, out, settle))
     per_run = Section("Figures of each run", "figures")
-    for run in runs:
+    for i, run in enumerate(runs):
         sub = Section(f"{run.label} ({run.variant}, {run.status})", f"run-{safe_filename(run.label)}", level=3)
         if not run.ok:
             sub.blocks.append(f"FAILED: {run.message}")
+        if frames and i < MAX_ANIMATIONS:
+            sub.blocks.append(_animation(run, frames))
+        elif frames:
+            sub.blocks.append(f"No animation: the page animates the first {MAX_ANIMATIONS} runs "
+                              f"(rbstab animate {run.path}{'' if run.row is None else ' --run ' + run.name} animates this one).")
         sub.blocks.extend(run_figures(run, out))
         per_run.blocks.append(sub)
     return [*sections, cmp, per_run]
+
+
+def _animation(run: RunData, frames: int) -> Animation | str:
+    """The animation of a run (:mod:`rbstab.report.animate`), or a line saying why there is none."""
+    # late: rbstab.report.animate imports numba (through rbstab.kinematics), heavy for a report without animations
+    from .animate import AnimationError, animation_html, scene
+
+    try:
+        sc = scene(run, n_frames=frames)
+    except AnimationError as exc:
+        return f"No animation: {exc}"
+    span = f"t = {sc.time[0]:.4g} to {sc.time[-1]:.4g} s"
+    return Animation(
+        f"{run.label}: the motion", f"{len(sc.time)} frames evenly over {span}, interpolated from the stored "
+        "trajectory: the uniform box with the body's mass and principal moments, its axes x_b (red), y_b "
+        "(green), z_b (blue), the point C = X + A R (orange dot), its anchor R where E = 0 (black cross), the "
+        "constraint error E between them (orange segment), the COM's trace and the direction of gravity "
+        "(purple, when not zero); slider and buttons under the view."
+        + (f" The run {run.status} at t = {sc.t_failed:.4g} s: the animation stops there." if sc.t_failed is not None
+           else ""),
+        animation_html(sc),
+    )
 
 
 def _sweep_section_with_files(sweep: SweepData, metrics: Sequence[str], out: FigureWriter,
@@ -526,6 +575,7 @@ def _write_manifest(folder: Path, data: ReportInputs, analyses: Sequence[Path], 
         "formats": list(options.formats),
         "figure_formats": list(dict.fromkeys(options.figure_formats)),
         "dpi": int(options.dpi),
+        "animation_frames": int(options.animation_frames) if "html" in options.formats else 0,
         "metrics": list(metrics),
         "settle_e": options.settle.e,
         "settle_omega": options.settle.omega,

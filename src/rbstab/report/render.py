@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 from .figures import FigureFile
 
-__all__ = ["Table", "Section", "render_html", "render_markdown", "render_tables_markdown"]
+__all__ = ["Table", "Section", "Animation", "render_html", "render_markdown", "render_tables_markdown"]
 
 
 @dataclass
@@ -38,6 +38,23 @@ class Table:
     note: str = ""
 
 
+@dataclass(frozen=True)
+class Animation:
+    """An animation embedded in the page (:func:`rbstab.report.animate.animation_html`).
+
+    Attributes
+    ----------
+    title : str
+    caption : str
+    html : str
+        The player, frames included (self-contained; shown by ``index.html`` only).
+    """
+
+    title: str
+    caption: str
+    html: str
+
+
 @dataclass
 class Section:
     """A heading and its content, in order.
@@ -49,7 +66,7 @@ class Section:
         HTML id (letters, digits, ``-``).
     blocks : list
         ``str`` (a paragraph), :class:`Table`, :class:`rbstab.report.figures.FigureFile`,
-        or ``list`` of str (a bullet list).
+        :class:`Animation`, or ``list`` of str (a bullet list).
     level : int
         2 for top-level sections, 3 below.
     """
@@ -81,6 +98,7 @@ figcaption { font-size: 13px; color: #444; }
 .files a { margin-right: .4em; }
 nav ul { columns: 2; }
 .failed { color: #b00; font-weight: 600; }
+figure.animation .anim-buttons button { min-width: 2.6em; }
 """
 
 
@@ -132,6 +150,9 @@ def _html_block(block) -> str:
             f'<figure><a href="{src}"><img src="{src}" alt="{html.escape(block.title, quote=True)}"></a>'
             f"<figcaption><b>{html.escape(block.title)}.</b> {html.escape(block.caption)}{files}</figcaption></figure>"
         )
+    if isinstance(block, Animation):
+        return (f'<figure class="animation">{block.html}'
+                f"<figcaption><b>{html.escape(block.title)}.</b> {html.escape(block.caption)}</figcaption></figure>")
     if isinstance(block, list):
         return "<ul>" + "".join(f"<li>{html.escape(item)}</li>" for item in block) + "</ul>"
     return f"<p>{html.escape(str(block))}</p>"
@@ -207,6 +228,8 @@ def _md_block(block) -> str:
         files = f" Files: {links}" if block.files and block.files != (block.path,) else ""
         return (f"![{_md_escape(block.title)}]({_md_path(block.path)})\n\n"
                 f"_{_md_escape(block.title)}._ {_md_escape(block.caption)}{files}")
+    if isinstance(block, Animation):
+        return f"_{_md_escape(block.title)}._ {_md_escape(block.caption)} (an animation: index.html plays it)"
     if isinstance(block, list):
         return "\n".join(f"- {_md_escape(item)}" for item in block)
     return _md_escape(str(block))
@@ -225,7 +248,7 @@ def render_markdown(title: str, intro: Sequence[str], sections: Sequence[Section
 def render_tables_markdown(title: str, intro: Sequence[str], sections: Sequence[Section]) -> str:
     """Only the tables (and paragraphs) of the page, as markdown (``summary.md``)."""
     kept = [
-        Section(s.title, s.anchor, [b for b in s.blocks if not isinstance(b, FigureFile)], s.level)
+        Section(s.title, s.anchor, [b for b in s.blocks if not isinstance(b, (FigureFile, Animation))], s.level)
         for s in sections
     ]
     kept = [s for s in kept if s.blocks]
