@@ -496,8 +496,26 @@ def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None)
         if damaged is not None:
             damaged.append((path.name, str(exc)))
         return None
-    except (FileNotFoundError, NotAResultFile, OSError, KeyError):
+    except (FileNotFoundError, KeyError):
         return None
+    except (NotAResultFile, OSError, ValueError) as exc:
+        if damaged is not None and _unopenable(path):
+            damaged.append((path.name, f"{path}: cannot be read as a result file ({exc})"))
+        return None  # else an HDF5 file that is not rbstab's: left alone
+
+
+def _unopenable(path: Path) -> bool:
+    """Whether ``path`` cannot be opened as an HDF5 file (truncated, emptied, overwritten):
+    a damaged result, where an HDF5 file of another program is not one."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r"):
+            return False
+    except FileNotFoundError:
+        return False
+    except (OSError, ValueError):
+        return True
 
 
 def _store_frames(runs_dir: Path, names: Sequence[str], verify: bool, damaged: list) -> list:
@@ -517,7 +535,8 @@ def _store_frames(runs_dir: Path, names: Sequence[str], verify: bool, damaged: l
         except FileNotFoundError:
             continue
         except (NotAResultFile, OSError, KeyError, ValueError) as exc:
-            damaged.append((name, f"{runs_dir / name}: cannot be read as a store file ({exc})"))
+            if _unopenable(runs_dir / name):  # truncated, emptied: damaged; else not rbstab's: left alone
+                damaged.append((name, f"{runs_dir / name}: cannot be read as a store file ({exc})"))
     return frames
 
 

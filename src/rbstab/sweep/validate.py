@@ -25,7 +25,7 @@ __all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report"]
 
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 #: Flagged runs validated one by one (for the count of invalid runs); beyond it, the runs
-#: the column checks flag are counted as invalid.
+#: the column checks flag are counted as invalid when every one validated so far was.
 _MAX_CONFIRMED = 2000
 _MATRICES = {"inertia", "k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d"}
 
@@ -140,16 +140,23 @@ class _Fields:
         matrix = name in _MATRICES
         if matrix and self._diagonal(section, name):
             return self._build_diagonal(section, name)
+        from ..config.schema import field_rule
+
+        rule = field_rule(section, name) or ("number",)
+        shape = (3, 3) if matrix else (3,) if rule[0] in ("vector", "theta") else ()
         for t in self.templates:
             value = t.get(section, {}).get(name)
             has.append(value is not None)
-            arr = np.asarray(value if value is not None else np.nan, dtype=float)
+            try:
+                arr = np.asarray(value if value is not None else np.nan, dtype=float)
+            except (TypeError, ValueError):  # not numbers: the schema refuses it
+                return None
             if matrix and arr.ndim == 1:
                 arr = np.diag(arr)
-            per_template.append(arr)
-        shapes = {a.shape for a in per_template if a.ndim}
-        shape = shapes.pop() if len(shapes) == 1 else (3, 3) if matrix else ()
-        stacked = np.stack([np.broadcast_to(a, shape) if a.ndim == 0 else a for a in per_template])
+            if arr.shape not in (shape, ()):
+                return None
+            per_template.append(np.broadcast_to(arr, shape))
+        stacked = np.stack(per_template)
         values = stacked[self.template].copy()
         present = np.asarray(has)[self.template]
         prefix = f"{section}.{name}"
@@ -332,25 +339,28 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
     return flagged
 
 
-def _templates(spec: SweepSpec, columns, base_index, template, first_of) -> tuple[list, list, list]:
-    """(resolved template configs (None for an invalid one), their warnings, invalid
-    (run, problems) of the templates that none of their first runs makes valid)."""
-    out, notes, invalid = [], [], []
-    for t, first in enumerate(first_of):
-        rows = np.flatnonzero(template == t)[:4]
-        config, problems = None, []
-        for i in rows:
-            config, found = _validate_row(spec, columns, base_index, int(i))
+def _templates(spec: SweepSpec, columns, base_index, template, first_of) -> tuple[list, list, dict, np.ndarray]:
+    """(resolved template configs (None for an invalid one), their warnings, invalid run ->
+    its problems, the runs counted invalid). A template is the first run of its kind that
+    the schema accepts; a kind none of whose first :data:`_MAX_CONFIRMED` runs is valid
+    counts every run invalid."""
+    out, notes, invalid = [], [], {}
+    counted = np.zeros(len(template), dtype=bool)
+    for t in range(len(first_of)):
+        rows = np.flatnonzero(template == t)
+        config = None
+        for i in rows[:_MAX_CONFIRMED]:
+            config, problems = _validate_row(spec, columns, base_index, int(i))
             if config is not None:
                 break
-            problems.append((int(i), found))
+            invalid[int(i)] = problems
+            counted[i] = True
         if config is None:
-            invalid.append((t, problems))
+            counted[rows] = True
             out.append(None), notes.append(())
             continue
-        resolved = {k: v for k, v in config.resolved.items() if k != "name"}
-        out.append(resolved), notes.append(config.warnings)
-    return out, notes, invalid
+        out.append({k: v for k, v in config.resolved.items() if k != "name"}), notes.append(config.warnings)
+    return out, notes, invalid, counted
 
 
 def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray,
@@ -363,23 +373,22 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
         Listing the invalid runs (:func:`invalid_report`).
     """
     n = len(base_index)
-    templates, notes, bad_templates = _templates(spec, columns, base_index, template, first_of)
-    invalid_rows: dict[int, list[str]] = {}
-    counted = np.zeros(n, dtype=bool)
-    for t, problems in bad_templates:
-        counted |= template == t
-        invalid_rows.update({i: p for i, p in problems})
+    templates, notes, invalid_rows, counted = _templates(spec, columns, base_index, template, first_of)
     valid = [t if t is not None else {} for t in templates]
     fields = _Fields(columns, valid, template)
     variants = [t.get("controller", {}).get("variant", "") for t in valid]  # per template
     flagged = (_field_flags(fields, n) | _joint_flags(fields, variants, n)) & ~counted
     candidates = np.flatnonzero(flagged)
-    for i in candidates[:_MAX_CONFIRMED]:
+    exact = True  # whether every run the checks flagged so far is invalid
+    for k, i in enumerate(candidates):
+        if k >= _MAX_CONFIRMED and exact:  # the checks flag invalid runs only: count the rest
+            counted[candidates[k:]] = True
+            break
         config, problems = _validate_row(spec, columns, base_index, int(i))
         if config is None:
             invalid_rows[int(i)] = problems
             counted[i] = True
-    counted[candidates[_MAX_CONFIRMED:]] = True
+        exact = exact and config is None
     n_invalid = int(counted.sum())
     if n_invalid:
         listed = sorted(invalid_rows)[:_MAX_LISTED]
