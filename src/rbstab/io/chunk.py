@@ -659,6 +659,10 @@ class ChunkWriter:
             else:
                 tid = h5py.h5t.py_create(dtype)
                 dcpl.set_chunk(fletcher32_chunks((len(self.ids),)))
+                # numbers a store's runs share (run order, solver counts, t_final, the
+                # templates) take next to no room: a summary store's bytes a run
+                dcpl.set_shuffle()
+                dcpl.set_deflate(1)
                 dcpl.set_fletcher32()
                 if kind == "f":
                     dcpl.set_fill_value(np.array(np.nan))
