@@ -338,13 +338,31 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     order = index_columns([dict.fromkeys([*head.columns, *done.columns])],
                           parameters=[c for c in coords if c not in fixed])
     index = index[[c for c in order if c in index.columns]]
-    with atomic_path(directory / INDEX_FILE) as tmp:
-        index.to_csv(tmp, index=False, lineterminator="\n")
+    _write_csv(directory / INDEX_FILE, index)
     summary = summarize_columns(index, name=name, ratio=ratio, parameters=table.parameters())
     write_summary(directory / SUMMARY_FILE, summary)
     bad = status != "success"
     problems = list(zip(ids[bad], status[bad], message[bad]))
     return summary, problems
+
+
+def _write_csv(path: Path, index) -> None:
+    """``index`` (a DataFrame) as CSV, atomically: by pyarrow's writer (numbers formatted in
+    C, ~10x pandas' speed; they read back as the same floats), pandas' for columns pyarrow
+    does not take (lists); booleans as ``True``/``False``, absent values empty."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    index = index.assign(**{c: np.where(index[c].to_numpy(), "True", "False")
+                            for c in index.columns if index[c].dtype == bool})
+    with atomic_path(path) as tmp:
+        try:
+            table = pa.Table.from_pandas(index, preserve_index=False)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            index.to_csv(tmp, index=False, lineterminator="\n")
+            return
+        pa_csv.write_csv(table, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
 
 
 def verify_index(folder: str | os.PathLike) -> bool:

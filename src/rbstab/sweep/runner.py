@@ -65,6 +65,11 @@ from .worker import DEFAULT_CHUNK_SIZE, ENGINES, WorkerOptions, run_table_chunk
 #: structure) and ~0.3 ms a run.
 STORE_CHUNK_SIZE = 512
 
+#: Runs per store file of a summary store by default: a file's variables cost ~0.25 MB
+#: whatever its runs (their headers, attributes and chunk indexes), ~0.5 KB a run without
+#: traces; the runs' outputs are not kept beyond a block of 32.
+SUMMARY_CHUNK_SIZE = 8192
+
 #: Chunks per worker a sweep is cut into at least (when chunks of STORE_CHUNK_SIZE runs
 #: would give fewer), so that the workers finish together. (One chunk per worker, fewer
 #: store files, measured no better: 1000 Case 3 runs on 2 workers, 5 alternating runs
@@ -424,6 +429,8 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
     if chunk_size is None:
         default = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
+        if layout == "chunk" and store == "summary":
+            default = SUMMARY_CHUNK_SIZE
         return default, CHUNKS_PER_WORKER
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")

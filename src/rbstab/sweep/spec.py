@@ -22,14 +22,16 @@ A sweep spec names a base configuration and the keys to vary::
       lyapunov_ratio: 1.0e-3             # converged: success and v(t_end) <= ratio * v(0)
 
 Keys are the dotted paths of :func:`rbstab.config.set_dotted` (``initial_state.omega.1``
-indexes into the list). The run list is the product base x grid x zip x random; its order
+indexes into the list). A ``table:`` (a CSV or Parquet file, a DataFrame or a mapping of
+columns named by dotted keys, ``initial_state.omega[1]``, ``body.inertia[0,2]``) gives runs
+row by row. The run list is the product base x grid x zip x table x random; its order
 (and so each run's index) is: random sample (slowest), base, grid keys in the order
-written (the last one fastest), zip entry (fastest). Random samples come first so that
+written (the last one fastest), zip entry, table row (fastest). Random samples come first so that
 raising ``random.n`` appends runs and keeps the ids of the earlier ones.
 
-Random distributions (all drawn from ``numpy.random.default_rng(seed)``, sample by
-sample and, within a sample, parameter by parameter in the order written, so the first
-k samples do not depend on ``n`` nor on how the runs are executed):
+Random distributions (each key drawn from its own stream of ``seed``,
+:func:`rbstab.sweep.table.random_stream`, all samples in one call, so the first k samples
+do not depend on ``n``, on the other keys nor on how the runs are executed):
 
 - ``uniform: [lo, hi]`` -- lo, hi numbers or lists (one draw per component);
 - ``normal: {mean: m, std: s}`` -- m, s numbers or lists (broadcast together), s >= 0;
@@ -43,15 +45,15 @@ The shape of a drawn value is the broadcast shape of the distribution's numbers:
 lists to draw vectors.
 
 Run ids are ``r<index>-<h>``: ``index`` the zero-padded position in the run list (4 digits,
-more for larger sweeps) and ``h`` the first 8 hex digits of the SHA-256 of the run's
-resolved configuration without its name (canonical JSON). The same spec gives the same ids
+more for larger sweeps) and ``h`` the first 8 hex digits of the run's ``config_hash``, a
+digest of its base configuration and its values (:mod:`rbstab.sweep.table`). The same spec gives the same ids
 on every invocation and every machine; a changed base, grid value or sample changes ``h``.
 Each run's config ``name`` is its run id.
 
 The spec is validated by the pydantic models of :mod:`rbstab.sweep.schema` (the checks and
 message format of the config schema); this module reads the base configs, applies the
-``--set`` overrides and builds the frozen :class:`SweepSpec`. :mod:`rbstab.sweep.plan`
-expands it into validated runs.
+``--set`` overrides and builds the frozen :class:`SweepSpec`. :mod:`rbstab.sweep.table`
+plans it as a validated table of runs.
 """
 
 from __future__ import annotations

@@ -24,6 +24,7 @@ indexing, random samples by one numpy call per key. No Python object is made per
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -251,7 +252,7 @@ class RunTable:
     def n(self) -> int:
         return len(self.template)
 
-    @property
+    @functools.cached_property
     def base_labels(self) -> np.ndarray:
         """The base label of each run, shape (n,) (object)."""
         return np.asarray([b.label for b in self.spec.bases], dtype=object)[self.base_index]
@@ -285,6 +286,10 @@ class RunTable:
                     out[parameter_name(entry)] = (entry, values[(slice(None), *idx)])
         return out
 
+    @functools.cached_property
+    def _coords(self) -> dict[str, tuple[str, np.ndarray]]:
+        return self.coords()
+
     def parameters(self) -> dict[str, str]:
         """Coordinate name -> dotted key of the entry (the store's ``config_key``)."""
         return {name: key for name, (key, _) in self.coords().items()}
@@ -299,7 +304,7 @@ class RunTable:
         """The runs ``rows`` (positions, increasing) as a worker receives them; the
         templates they use only, renumbered."""
         used, local = np.unique(self.template[rows], return_inverse=True)
-        coords = {name: values[rows] for name, (_, values) in self.coords().items()}
+        coords = {name: values[rows] for name, (_, values) in self._coords.items()}
         return TableSlice(
             templates=tuple(self.templates[t] for t in used), keys=self.keys,
             columns={k: v[rows] for k, v in self.columns.items()}, template=local.astype(np.int32),
@@ -328,8 +333,8 @@ class RunTable:
                 shown = ", ".join(distinct[:6]) + (", ..." if len(distinct) > 6 else "")
                 lines.append(f"  {name} ({key}): {shown}")
             else:
-                lines.append(f"  {name} ({key}): {values.min():.6g} .. {values.max():.6g}, "
-                             f"{len(np.unique(values[:1_000_000]))} distinct")
+                distinct = f", {len(np.unique(values))} distinct" if len(values) <= 100_000 else ""
+                lines.append(f"  {name} ({key}): {values.min():.6g} .. {values.max():.6g}{distinct}")
         n = self.n
         rows = range(n) if every or n <= 2 * head else [*range(head), -1, *range(n - head, n)]
         shown = {**self.columns, **{f"{k}:scale": v for k, v in self.scales.items()}}
