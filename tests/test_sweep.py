@@ -17,9 +17,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab.config import load_config
 from rbstab.io.chunk import read_chunk_rows
-from rbstab.io.hdf5 import read_attributes
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,

@@ -33,7 +33,6 @@ Fletcher-32 checksum and the file the SHA-256 of its attributes and text
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import os

@@ -38,16 +38,14 @@ refuses an index that does not match its checksum.
 
 from __future__ import annotations
 
-import csv
 import functools
 import datetime as _dt
 import hashlib
 import json
 import math
-import operator
 import os
 import re
-from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 

@@ -11,11 +11,15 @@ Output folder ``<output>/<name>/`` (Hydra-like, it describes itself)::
 
 The names and columns are those of :mod:`rbstab.sweep.folder`, which also reads the folder.
 
+The runs are a table (:func:`rbstab.sweep.table.plan_table`, every run validated before
+anything is written); the workers receive slices of it and return their runs' index rows
+as columns, from which the index is written.
+
 Resume: a run is skipped when a result of it is on disk (a row of a store file or its file
-``runs/<run_id>.h5``) whose ``config_hash`` equals the hash of the run's resolved config
-(with ``retry_failed``, only if its status is also ``success``); of several, the newest
-counts. Every other run is executed and written to a new store file (a killed chunk is
-rerun whole) or its file replaced (layout "run").
+``runs/<run_id>.h5``) with its run id and ``config_hash`` (with ``retry_failed``, only if
+its status is also ``success``); of several, the newest counts. Every other run is
+executed and written to a new store file (a killed chunk is rerun whole) or its file
+replaced (layout "run").
 
 Nothing is lost when the sweep is killed (even with SIGKILL): each worker writes its
 run's file to a temporary name and renames it into place when complete, so a final name
