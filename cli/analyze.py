@@ -46,11 +46,18 @@ def _check_boundary_layer(configs, boundary_layer) -> None:
 
 
 def _check_sweeps(paths) -> None:
-    from rbstab.sweep.folder import is_sweep_folder
+    """Every ``--robustness`` path a sweep folder (:func:`rbstab.kinds.kind_of`), or one line each."""
+    from rbstab.io.hdf5 import NotAResultFile
+    from rbstab.kinds import SWEEP, kind_of
 
-    bad = [p for p in paths if not is_sweep_folder(p)]
-    if bad:
-        raise click.ClickException("--robustness: not a sweep folder (sweep.yaml + index.csv): " + ", ".join(bad))
+    problems = []
+    for path in paths:
+        try:
+            kind_of(path, (SWEEP,))
+        except (FileNotFoundError, NotAResultFile) as exc:
+            problems.append(f"--robustness: {exc}")
+    if problems:
+        raise click.ClickException("\n".join(problems))
 
 
 @click.command("analyze")

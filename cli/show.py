@@ -142,15 +142,15 @@ def _show_result(path: str) -> None:
 
 
 def _expand(path: str) -> list[str]:
-    """A folder that is not a sweep folder stands for the sweep folders and result files in it."""
-    from rbstab.sweep.folder import is_sweep_folder
+    """A plain folder (not a sweep folder) stands for the sweep folders and result files in it."""
+    from rbstab.kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder
 
     folder = Path(path)
     if not folder.exists():
         raise ValueError(f"no such result file or folder: {path}" + _did_you_mean(folder))
-    if not folder.is_dir() or is_sweep_folder(folder):
+    if not is_plain_folder(folder):
         return [path]
-    inside = sorted(str(p) for p in folder.iterdir() if is_sweep_folder(p) or (p.suffix == ".h5" and p.is_file()))
+    inside = [str(p) for p in inputs_in(folder, (RUN, STORE, SWEEP))]
     if not inside:
         raise ValueError(f"{path}: a folder, but not a sweep folder (no sweep.yaml and index.csv) and without "
                          "result files (*.h5) or sweep folders in it")
@@ -168,15 +168,11 @@ def _did_you_mean(missing: Path) -> str:
 
 
 def _show(path: str) -> None:
-    from rbstab.io.chunk import is_chunk_file
-    from rbstab.sweep.folder import is_sweep_folder
+    """``path`` shown as its kind says (:func:`rbstab.kinds.kind_of`)."""
+    from rbstab.kinds import RUN, STORE, SWEEP, kind_of
 
-    if is_sweep_folder(path):
-        _show_sweep(path)
-    elif is_chunk_file(path):
-        _show_chunk(path)
-    else:
-        _show_result(path)
+    show_kind = {RUN: _show_result, STORE: _show_chunk, SWEEP: _show_sweep}
+    show_kind[kind_of(path, tuple(show_kind))](path)
 
 
 def _show_run(path: str, run_id: str) -> None:

@@ -194,10 +194,6 @@ def _execute(spec, output, ex, **options):
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
-    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (rbstab_cli.main.Terminated)
-        click.echo("\ninterrupted: finished runs are saved and the index is up to date; "
-                   "run the same command again to resume", err=True)
-        raise SystemExit(getattr(exc, "exit_code", 130))
 
 
 def _say_outcome(outcome) -> None:

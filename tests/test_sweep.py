@@ -28,7 +28,6 @@ from rbstab.sweep import (
     spec_from_mapping,
 )
 from rbstab.sweep.executors import ExecutorError
-from rbstab.sweep.folder import is_converged
 from rbstab.sweep.worker import RunTask, WorkerOptions
 from rbstab_cli.main import cli
 
@@ -308,11 +307,21 @@ def test_worker_turns_exceptions_into_records(tmp_path):
 
 
 def test_converged_definition():
-    assert is_converged("success", 100.0, 0.09, 1e-3)
-    assert not is_converged("success", 100.0, 0.11, 1e-3)
-    assert not is_converged("failed", 100.0, 0.0, 1e-3)
-    assert not is_converged("success", 100.0, float("nan"), 1e-3)
-    assert not is_converged("success", 100.0, -50.0, 1e-3)  # fell below the equilibrium's v: not there
+    """The index's ``converged`` column is rbstab.convergence.converged of the stored row."""
+    from rbstab.sweep.folder import iter_index_rows
+
+    class Run:
+        index, base, values, variant, layout = 0, "b", (), "embedded", ()
+
+        def __init__(self, run_id):
+            self.run_id = run_id
+
+    cases = {"r0": ("success", 100.0, 0.09), "r1": ("success", 100.0, 0.11), "r2": ("failed", 100.0, 0.0),
+             "r3": ("success", 100.0, float("nan")), "r4": ("success", 100.0, -50.0)}
+    rows = {k: {"run_id": k, "status": st, "lyapunov_initial": v0, "lyapunov_final": v1, "file": f"{k}.h5"}
+            for k, (st, v0, v1) in cases.items()}
+    got = [row["converged"] for row in iter_index_rows([Run(k) for k in cases], rows, {}, 1e-3)]
+    assert got == [True, False, False, False, False]  # r4 fell below the equilibrium's v: not there
 
 
 # -- end to end -------------------------------------------------------------------------------

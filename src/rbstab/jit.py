@@ -4,8 +4,8 @@ Every compiled function of rbstab is decorated with :func:`jit` (``numba.njit`` 
 ``cache=True``). Numba keys a cached function on its own source file only, so a change to
 a function it calls in another file would leave a stale kernel in the cache; rbstab
 therefore keeps its cache in a folder named after a digest of every source file that
-compiles code (and of ``engine/tableaus.py``, whose numbers the kernels compile in as
-constants), their folder and numba's version: ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if
+compiles code (and of ``engine/tableaus.py`` and ``layout.py``, whose numbers the kernels
+compile in as constants), their folder and numba's version: ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if
 that variable is set, else ``$XDG_CACHE_HOME/rbstab/numba-<digest>`` (``~/.cache``). A new version of
 the code compiles once, into a new folder.
 
@@ -30,7 +30,7 @@ _MARKER = "from .jit import jit"
 _MARKER_UP = "from ..jit import jit"
 _WARM_FILE = "warm"
 #: Files without compiled code whose module constants the kernels compile in.
-_COMPILED_IN = ("engine/tableaus.py",)
+_COMPILED_IN = ("engine/tableaus.py", "layout.py")
 
 
 def _source_digest() -> str:

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from .basin import DEFAULT_RATIO, BasinAxis, BasinMap, basin_map, time_to_converge
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .linearise import Linearisation, linearise
@@ -94,7 +95,7 @@ class Analysis:
         """Time [s] the slowest mode alone takes to bring v down by the convergence ratio:
         v ~ exp(-2 t / tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
         tau = self.linearisation.slowest_time_constant
-        ratio = self.settling["ratio"] if self.settling else DEFAULT_RATIO
+        ratio = self.settling["ratio"] if self.settling else DEFAULT_LYAPUNOV_RATIO
         return 0.5 * tau * math.log(1.0 / ratio) if self.verdict == "asymptotically stable" else float("nan")
 
     def basin_inside(self) -> dict[str, int] | None:
@@ -197,7 +198,7 @@ def analyze(
     simulate: bool = True,
     basin: Sequence[str | BasinAxis] | None = None,
     basin_samples: int = DEFAULT_BASIN_SAMPLES,
-    ratio: float = DEFAULT_RATIO,
+    ratio: float = DEFAULT_LYAPUNOV_RATIO,
     jobs: int = 1,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.

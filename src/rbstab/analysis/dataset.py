@@ -87,7 +87,7 @@ def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = Fal
 
 
 def _provenance(config, command_line: str | None) -> dict[str, Any]:
-    from ..io.hdf5 import canonical_config, config_hash
+    from ..config import canonical_config, config_hash
     from ..io.metadata import provenance_attributes
 
     return {

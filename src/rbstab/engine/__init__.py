@@ -16,13 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .tableaus import METHODS, SUCCESS_MESSAGE, TOO_SMALL_STEP_MESSAGE
+from .status import DEFAULT_MAX_STEPS, status_message
+from .tableaus import METHODS
 
 __all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message", "warm_up"]
-
-#: Accepted steps after which a run stops as failed (a run that would never finish).
-DEFAULT_MAX_STEPS = 10_000_000
-
 
 def method_number(method: str) -> int:
     """The compiled engine's number of ``method`` (``"RK23"``, ``"RK45"`` or ``"DOP853"``):
@@ -48,8 +45,8 @@ class ChunkSolution:
     samples : ndarray, shape (k, n_samples, n_state)
         The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
     status : ndarray of int, shape (k,)
-        0 reached t_end; 1 gimbal lock; -1 step too small; -2 non-finite; -3 step limit;
-        -4 wall-time limit.
+        How each run ended (:mod:`rbstab.engine.status`: 0 reached t_end, 1 gimbal lock,
+        negative a failure).
     t_stop : ndarray, shape (k,)
         Where each run stopped [s] (the event time for gimbal lock).
     nfev, n_steps : ndarray of int, shape (k,)
@@ -83,9 +80,9 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     n_samples : int
         Samples per run, evenly spaced on [0, t_end] (>= 2).
     max_steps : int
-        Accepted steps after which a run stops (status -3), for 5-column ``settings``.
+        Accepted steps after which a run stops (STEP_LIMIT), for 5-column ``settings``.
     max_wall_time : float
-        Seconds after which a run stops (status -4; inf: none), for 5-column ``settings``.
+        Seconds after which a run stops (TIMEOUT; inf: none), for 5-column ``settings``.
     out : ndarray, shape (>= k, n_samples, n_state), optional
         Where the samples go (its first k rows, returned as ``samples``): a buffer the
         caller reuses for call after call, so that a worker holds one (default: a new
@@ -124,25 +121,6 @@ def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:
         raise ValueError(f"out: found {found}; expected a writable C-contiguous float64 array of shape "
                          f"(>= {shape[0]}, {shape[1]}, {shape[2]})")
     return out[: shape[0]]
-
-
-def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,
-                   max_wall_time: float = np.inf) -> str:
-    """The message of a run's end (scipy's words where scipy has them)."""
-    if status == 0:
-        return SUCCESS_MESSAGE
-    if status == 1:
-        return (
-            f"gimbal lock: |theta_2| reached pi/2 - {gimbal_margin:g} rad at t = {t_stop:.6g} s; "
-            "B(theta) is singular there (eq 5), so the Euler-angle model stops"
-        )
-    if status == -1:
-        return f"solver failed: {TOO_SMALL_STEP_MESSAGE} (at t = {t_stop:.6g} s)"
-    if status == -2:
-        return f"non-finite step size or state at t = {t_stop:.6g} s"
-    if status == -3:
-        return f"step limit: {max_steps} steps taken (simulation.max_steps), reaching only t = {t_stop:.6g} s"
-    return f"timeout: the run exceeded {max_wall_time:g} s of wall time at t = {t_stop:.6g} s"
 
 
 def warm_up(parts: str = "rates,outputs,switching") -> None:

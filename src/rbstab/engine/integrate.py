@@ -6,10 +6,8 @@ lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
 gimbal-lock event, located on the interpolant. :func:`integrate_chunk` runs many runs, each
 with its own variant, parameters and settings, one after the other in one call.
 
-Status codes (:func:`rbstab.engine.status_message`): 0 reached t_end, 1 gimbal lock (the
-event time is returned), -1 step size below the spacing of floats (scipy's failure), -2
-non-finite step size or state, -3 step limit reached, -4 wall-time limit reached (checked
-every :data:`CLOCK_EVERY` steps).
+A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
+checked every :data:`CLOCK_EVERY` steps).
 """
 
 from __future__ import annotations
@@ -30,12 +28,12 @@ from ..variants.kernels import state_rate
 from . import tableaus
 from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
                  error_norm, initial_step, rk_step)
+from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = float(tableaus.SAFETY), float(tableaus.MIN_FACTOR), float(tableaus.MAX_FACTOR)
 
-SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT = 0, 1, -1, -2, -3, -4
 
 #: Steps between two readings of the clock for the wall-time limit (a reading costs ~0.3 us,
 #: a step of DOP853 on the embedded body ~6 us).

@@ -39,10 +39,10 @@ from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
 from ..variants.sliding import mode_code, mode_quantities, stop_at_c
-from .integrate import (CLOCK_EVERY, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, sample_time, step,
-                        wall_clock)
+from .integrate import CLOCK_EVERY, sample_time, step, wall_clock
 from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
                  initial_step)
+from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, SWITCHING_LIMIT, TIMEOUT, status_message
 
 __all__ = [
     "RESOLUTION",
@@ -52,7 +52,6 @@ __all__ = [
     "SLIDING_STARTS",
     "SLIDING_ENDS",
     "EVENT_KINDS",
-    "SWITCHING_LIMIT",
     "Switchings",
     "SignLawSolution",
     "integrate_sign_law",
@@ -75,8 +74,6 @@ X_TOLERANCE = 4 * np.finfo(float).eps
 #: Event kinds (``Switchings.kind``) and their names.
 CROSSING, SLIDING_STARTS, SLIDING_ENDS = 0, 1, 2
 EVENT_KINDS = ("crossing", "sliding starts", "sliding ends")
-#: Status code beyond the compiled engine's (:mod:`rbstab.engine.integrate`): too many events.
-SWITCHING_LIMIT = -5
 
 
 @dataclass
@@ -474,7 +471,7 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     SignLawSolution
         A failure (gimbal lock, solver failure, switching or step limit, timeout) is data.
     """
-    from . import method_number, status_message
+    from . import method_number
 
     n = int(settings.n_samples)
     samples = np.empty((n, 12))
@@ -491,11 +488,8 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
             max_steps, max_wall_time, float(resolution), method_number(method), samples, modes, events, jumps)
     log = events[: min(n_events, max_switchings)]
     switchings = Switchings(log[:, 0].copy(), log[:, 1].astype(np.int64), log[:, 2].astype(np.int64), log[:, 3].copy())
-    if status == SWITCHING_LIMIT:
-        message = (f"switching limit: {max_switchings} events located by t = {t_stop:.6g} s (the switchings "
-                   f"accumulate without reaching the resolution {resolution:g} m)")
-    else:
-        message = status_message(int(status), t_stop, settings.gimbal_margin, max_steps, max_wall_time)
+    message = status_message(int(status), t_stop, settings.gimbal_margin, max_steps, max_wall_time,
+                             max_switchings=max_switchings, resolution=resolution)
     solver = {"nfev": int(nfev), "njev": 0, "nlu": 0, "solver_status": int(status), "n_steps": int(n_steps),
               "n_pieces": int(n_pieces)}
     time = np.linspace(0.0, float(settings.t_end), n)
@@ -510,7 +504,7 @@ def _per_axis(switchings: Switchings, kind: int) -> list[np.ndarray]:
 
 def switching_summary(solution: SignLawSolution) -> dict:
     """The switching figures of a sign-law run, for its summary (plain floats and 3-lists,
-    one value per axis of E; units and meaning in ``rbstab.io.chunk.SUMMARY_FIGURES``):
+    one value per axis of E; units and meaning in ``rbstab.layout.SUMMARY_FIGURES``):
     ``switching_count``, ``sliding_time`` [s], ``sliding_starts``,
     ``min_switching_interval`` [s] (NaN below two crossings), ``chattering`` [N/s] (the
     total variation of Lambda_i from its jumps, per second) and ``switching_resolution`` [m]."""

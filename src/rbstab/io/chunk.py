@@ -14,7 +14,7 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
 - per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
   ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash``
-  (SHA-256 of ``config`` without its run limits, :func:`rbstab.io.hdf5.canonical_config`) and the summary figures of
+  (SHA-256 of ``config`` without its run limits, :func:`rbstab.config.canonical_config`) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
   ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`);
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
@@ -52,11 +52,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..config import canonical_config, config_hash
 from .atomic import as_os_error, atomic_path, check_free_space
 from .hdf5 import (
     SUMMARY_VARIABLES,
     NotAResultFile,
-    canonical_config,
     _plain,
     summary_stride,
 )
@@ -85,7 +85,6 @@ __all__ = [
     "summary_table_columns",
     "store_bytes_per_run",
     "SUMMARY_FIGURES",
-    "canonical_config",
     "WRITE_BLOCK",
 ]
 
@@ -374,8 +373,8 @@ class ChunkWriter:
             config_text: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
-        ``config_hash``: the run's :func:`rbstab.io.hdf5.config_hash` of its canonical config,
-        and ``config_text``, its :func:`~rbstab.io.hdf5.canonical_config` with the run limits
+        ``config_hash``: the run's :func:`rbstab.config.config_hash` of its canonical config,
+        and ``config_text``, its :func:`~rbstab.config.canonical_config` with the run limits
         (the ``config`` column), if the caller has them (a sweep's plan computed them); else
         computed here.
         """
@@ -407,8 +406,6 @@ class ChunkWriter:
     def _block_values(self, block, config_hashes, config_texts) -> dict[str, list]:
         """The per-run values of a block's runs, as columns; without templates, each run's
         configuration as text (the ``config`` column)."""
-        from .hdf5 import config_hash as hash_of
-
         configs = block.configs
         k = len(configs)
         hashes = list(config_hashes) if config_hashes is not None else [None] * k
@@ -417,7 +414,7 @@ class ChunkWriter:
             if not texts[j] and "run_templates" not in self.attrs:
                 texts[j] = canonical_config(config.resolved, limits=True)
             if not hashes[j]:
-                hashes[j] = hash_of(canonical_config(config.resolved))
+                hashes[j] = config_hash(canonical_config(config.resolved))
         values: dict[str, list] = {
             "variant": [c.variant for c in configs],
             "status": list(block.status),

@@ -33,14 +33,13 @@ Fletcher-32 checksum and the file the SHA-256 of its attributes and text
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..config import canonical_config, config_hash
 from .atomic import write_bytes_atomic
 from .metadata import (
     VARIABLE_DESCRIPTIONS,
@@ -72,7 +71,8 @@ __all__ = [
     "summary_stride",
     "read_attributes",
     "read_summary",
-    "config_hash",
+    "read_format",
+    "is_run_file",
     "NotAResultFile",
 ]
 
@@ -103,39 +103,6 @@ class NotAResultFile(ValueError):
 def _git_commit() -> str:
     """Commit of the rbstab checkout in use, or ``"unknown"`` (:func:`rbstab.io.metadata.git_state`)."""
     return git_state()[0]
-
-
-#: ``simulation`` keys that bound how long a run may take, not what it computes: not part
-#: of its identity (:func:`canonical_config`), so changing them reruns nothing (a run they
-#: stopped is ``failed``: ``rbstab sweep --retry-failed`` reruns it).
-RUN_LIMIT_KEYS = ("max_steps", "max_wall_time")
-
-
-def canonical_config(resolved, *, limits: bool = False) -> str:
-    """A resolved configuration without its ``name`` as canonical JSON (sorted keys, no
-    spaces), and without the run limits (:data:`RUN_LIMIT_KEYS`) unless ``limits``.
-
-    ``json.loads`` reads it back; :func:`config_hash` of the text without the limits is the
-    run's identity (a store file's ``config`` column holds the text with them).
-    """
-    body = {k: v for k, v in resolved.items() if k != "name"}
-    sim = body.get("simulation")
-    if not limits and isinstance(sim, dict) and any(k in sim for k in RUN_LIMIT_KEYS):
-        body["simulation"] = {k: v for k, v in sim.items() if k not in RUN_LIMIT_KEYS}
-    return _canonical_json(body)
-
-
-#: The encoder of :func:`canonical_config` (one instance: ``json.dumps`` with arguments builds
-#: an encoder a call).
-_CANONICAL = json.JSONEncoder(sort_keys=True, separators=(",", ":"), allow_nan=True)
-_canonical_json = _CANONICAL.encode
-
-
-def config_hash(text: str) -> str:
-    """SHA-256 hex digest of ``text``; a run's ``config_hash`` is that of its
-    :func:`canonical_config` (so it does not depend on its name or on YAML formatting,
-    and the run id of a sweep run is ``r<index>-<config_hash[:8]>``)."""
-    return hashlib.sha256(text.encode()).hexdigest()
 
 
 def _attr_value(value: Any) -> Any:
@@ -453,6 +420,36 @@ def _plain(value: Any) -> Any:
     if isinstance(value, np.generic):
         return value.item()
     return value
+
+
+def read_format(path: str | os.PathLike) -> str | None:
+    """The ``rbstab_format`` attribute of an HDF5 file (every file rbstab writes has one:
+    :data:`FORMAT`, a store file's :data:`rbstab.io.chunk.CHUNK_FORMAT`, an analysis
+    file's :data:`rbstab.analysis.dataset.FORMAT`); None for an HDF5 file without it.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``path`` is not a file.
+    NotAResultFile
+        If it is not an HDF5 file.
+    rbstab.io.integrity.DamagedResultError
+        If its attributes cannot be read (a damaged file).
+    """
+    from .integrity import open_result
+
+    with open_result(path) as f:
+        value = _plain(f.attrs.get("rbstab_format"))
+    return value if value is None else str(value)
+
+
+def is_run_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a run's result file (``rbstab_format`` = :data:`FORMAT`);
+    False for anything else, a folder or a file that cannot be read included."""
+    try:
+        return read_format(path) == FORMAT
+    except (OSError, ValueError):
+        return False
 
 
 #: Attributes every result file has (:func:`read_summary` refuses a file without one).

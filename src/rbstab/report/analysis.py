@@ -36,18 +36,18 @@ def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
     gives its ``*.analysis.nc`` files, and stays an input of its own only if it also
     holds run files (``*.h5``).
     """
-    from ..analysis.dataset import SUFFIX, is_analysis_file
-    from ..sweep.folder import is_sweep_folder
+    from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 
     analyses: list[Path] = []
     others: list = []
     for raw in paths:
         p = Path(raw)
-        if p.is_file() and is_analysis_file(p):
+        found = inputs_in(p, (ANALYSIS,)) if is_plain_folder(p) else []
+        if ANALYSIS.can_open(p):
             analyses.append(p)
-        elif p.is_dir() and not is_sweep_folder(p) and any(p.glob(f"*{SUFFIX}")):
-            analyses.extend(sorted(p.glob(f"*{SUFFIX}")))
-            if any(p.glob("*.h5")):
+        elif found:
+            analyses.extend(found)
+            if inputs_in(p, (RUN, STORE)):
                 others.append(raw)
         else:
             others.append(raw)

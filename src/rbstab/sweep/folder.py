@@ -42,13 +42,13 @@ import functools
 import datetime as _dt
 import hashlib
 import json
-import math
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from ..convergence import converged
 from ..io.atomic import atomic_path, write_text_atomic
 
 __all__ = [
@@ -71,7 +71,6 @@ __all__ = [
     "read_index",
     "summarize_columns",
     "write_summary",
-    "is_converged",
     "is_sweep_folder",
     "read_spec",
     "StoredRuns",
@@ -219,23 +218,6 @@ def index_part(row: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in row.items() if k not in NOT_IN_INDEX}
 
 
-def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
-    """Whether a run converged: it succeeded and ``|v(t_end)| <= ratio * |v(0)|``.
-
-    v is the variant's Lyapunov function, zero at the equilibrium, so this says that the
-    run lost all but ``ratio`` of its initial "energy" within ``t_end``. The magnitudes: v
-    is zero only at the equilibrium when it is a Lyapunov function there, and a run that
-    ends with v far below zero (an unstable body falling to lower potential energy, where
-    the gravity term makes v negative) has not converged. A run that failed (gimbal lock,
-    solver failure, timeout) never converged.
-    """
-    if status != "success":
-        return False
-    try:
-        v0, v1 = float(lyapunov_initial), float(lyapunov_final)
-    except (TypeError, ValueError):
-        return False
-    return math.isfinite(v0) and math.isfinite(v1) and abs(v1) <= ratio * abs(v0)
 
 
 #: ``message`` of a run not run yet.
@@ -321,11 +303,9 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     message = done["message"].astype(object).where(~missing, _PENDING).to_numpy(dtype=object, copy=True)
     message[failed] = ids[failed].map(errors).to_numpy()
     done = done.assign(status=status, message=message)
-    v0 = pd.to_numeric(done.get("lyapunov_initial"), errors="coerce") if "lyapunov_initial" in done else np.nan
-    v1 = pd.to_numeric(done.get("lyapunov_final"), errors="coerce") if "lyapunov_final" in done else np.nan
-    with np.errstate(invalid="ignore"):
-        converged = (status == "success") & np.isfinite(v0) & np.isfinite(v1) & (np.abs(v1) <= ratio * np.abs(v0))
-    done["converged"] = np.asarray(converged, dtype=bool)
+    v0 = pd.to_numeric(done["lyapunov_initial"], errors="coerce") if "lyapunov_initial" in done else np.nan
+    v1 = pd.to_numeric(done["lyapunov_final"], errors="coerce") if "lyapunov_final" in done else np.nan
+    done["converged"] = np.broadcast_to(converged(status == "success", v0, v1, ratio), (n,)).astype(bool)
     if "file" in done:
         done["file"] = done["file"].where(done["file"].isna(), RUNS_DIR + "/" + done["file"].astype(str))
     index = pd.concat([head, done.reset_index(drop=True)], axis=1)

@@ -486,7 +486,7 @@ def plan_table(spec: SweepSpec) -> RunTable:
 def _identities(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(config_hash, run_id) of every run (module docstring), as bytes arrays."""
-    from ..io.hdf5 import canonical_config
+    from ..config import canonical_config
 
     n = len(base_index)
     keys = [k for k in columns if k not in _LIMIT_KEYS]

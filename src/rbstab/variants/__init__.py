@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from .base import LYAPUNOV_TERMS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS, Variant
+from .base import LYAPUNOV_TERMS, Variant
 from .embedded import Embedded
 from .free import Free
 from .permanent import Permanent
@@ -27,6 +27,4 @@ __all__ = [
     "ViscoElastic",
     "Embedded",
     "LYAPUNOV_TERMS",
-    "OUTPUT_UNITS",
-    "OUTPUT_DESCRIPTIONS",
 ]

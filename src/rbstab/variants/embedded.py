@@ -2,11 +2,8 @@
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 from ..jit import jit
 from ..kinematics import matvec, neg, quadratic_form, sub
-from ..layout import EMBEDDED, StateLayout
 from .base import Variant
 
 __all__ = ["Embedded"]
@@ -41,7 +38,5 @@ class Embedded(Variant):
     """
 
     name = "embedded"
-    code = 4
-    layout: ClassVar[StateLayout] = EMBEDDED
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d")
     equation = "eq 22"

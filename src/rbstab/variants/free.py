@@ -32,5 +32,4 @@ class Free(Variant):
     """
 
     name = "free"
-    code = 0
     equation = "eqs 1, 23, 24, 29, 30"

@@ -9,13 +9,11 @@ same trajectory.
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
 from ..jit import jit
 from ..kinematics import add, cross, matTvec, matvec, neg, rotation_and_rate_of, scale, sub, vector
-from ..layout import FULL_BODY, REDUCED, StateLayout
+from ..layout import FULL_BODY
 from ..model import force_h, gyroscopic, torque_n
 from .base import Variant
 
@@ -60,8 +58,6 @@ class Permanent(Variant):
     """
 
     name = "permanent"
-    code = 1
-    layout: ClassVar[StateLayout] = REDUCED
     equation = "eqs 20, 21"
 
     def full_state(self, y: np.ndarray) -> np.ndarray:

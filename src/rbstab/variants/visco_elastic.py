@@ -34,6 +34,5 @@ class ViscoElastic(Variant):
     """
 
     name = "visco_elastic"
-    code = 3
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")
     equation = "eq 40"
