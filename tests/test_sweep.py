@@ -306,21 +306,20 @@ def test_worker_turns_exceptions_into_records(tmp_path):
     assert not (tmp_path / "x.h5").exists()
 
 
-def test_converged_definition():
+def test_converged_definition(tmp_path):
     """The index's ``converged`` column is rbstab.convergence.converged of the stored row."""
-    from rbstab.sweep.folder import iter_index_rows
+    from rbstab.sweep import plan_table
+    from rbstab.sweep.folder import read_index, write_table_index
 
-    class Run:
-        index, base, values, variant, layout = 0, "b", (), "embedded", ()
-
-        def __init__(self, run_id):
-            self.run_id = run_id
-
-    cases = {"r0": ("success", 100.0, 0.09), "r1": ("success", 100.0, 0.11), "r2": ("failed", 100.0, 0.0),
-             "r3": ("success", 100.0, float("nan")), "r4": ("success", 100.0, -50.0)}
-    rows = {k: {"run_id": k, "status": st, "lyapunov_initial": v0, "lyapunov_final": v1, "file": f"{k}.h5"}
-            for k, (st, v0, v1) in cases.items()}
-    got = [row["converged"] for row in iter_index_rows([Run(k) for k in cases], rows, {}, 1e-3)]
+    table = plan_table(spec_from_mapping({"name": "c", "base": str(CASE3),
+                                          "grid": {"body.mass": [40.0, 41.0, 42.0, 43.0, 44.0]}}))
+    stored = pd.DataFrame({"run": range(5), "run_id": table.ids(),
+                           "status": ["success", "success", "failed", "success", "success"],
+                           "lyapunov_initial": [100.0] * 5, "lyapunov_final": [0.09, 0.11, 0.0, float("nan"), -50.0],
+                           "message": [""] * 5, "file": [f"r{k}.h5" for k in range(5)]})
+    write_table_index(tmp_path, table, stored, {}, name="c", ratio=1e-3)
+    (tmp_path / "sweep.yaml").write_text("name: c\n")
+    got = list(read_index(tmp_path)["converged"])
     assert got == [True, False, False, False, False]  # r4 fell below the equilibrium's v: not there
 
 

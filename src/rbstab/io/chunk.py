@@ -13,10 +13,12 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   identifier name (``k_c_0`` for ``controller.k_c.0``, see
   :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
 - per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
-  ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash``
-  (SHA-256 of ``config`` without its run limits, :func:`rbstab.config.canonical_config`) and the summary figures of
+  ``config_hash`` (the run's identity) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
-  ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`);
+  ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`); the configurations
+  once, as the ``run_templates`` attribute (canonical JSON), with each run's ``template``
+  (a sweep's files; :func:`resolved_config` rebuilds a run's), or, for a writer given no
+  templates, ``config`` (each run's resolved configuration, canonical JSON);
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
   time[, axis])``; ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
   every ``store_stride``-th sample (at most 201); ``summary`` none (no ``time``

@@ -30,9 +30,9 @@ Checksums
 ---------
 Store and run files carry checksums (:mod:`rbstab.io.integrity`), and
 ``sweep_summary.json`` the SHA-256 of the ``index.csv`` written with it
-(``index_sha256``). Resume verifies every file it counts (:func:`current_rows` with
-``verify``): a damaged file is renamed ``<name>.damaged`` by the runner and its runs are
-rerun. :func:`read_index` (``rbstab show DIR``, ``rbstab report``, :func:`open_sweep`)
+(``index_sha256``). Resume verifies every file it counts (:class:`StoredRuns` with
+``verify``): a damaged file (checksums that fail, or a file that cannot be opened) is
+renamed ``<name>.damaged`` by the runner and its runs are rerun. :func:`read_index` (``rbstab show DIR``, ``rbstab report``, :func:`open_sweep`)
 refuses an index that does not match its checksum.
 """
 
