@@ -303,9 +303,9 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     message = done["message"].astype(object).where(~missing, _PENDING).to_numpy(dtype=object, copy=True)
     message[failed] = ids[failed].map(errors).to_numpy()
     done = done.assign(status=status, message=message)
-    v0 = pd.to_numeric(done["lyapunov_initial"], errors="coerce") if "lyapunov_initial" in done else np.nan
-    v1 = pd.to_numeric(done["lyapunov_final"], errors="coerce") if "lyapunov_final" in done else np.nan
-    done["converged"] = np.broadcast_to(converged(status == "success", v0, v1, ratio), (n,)).astype(bool)
+    v0, v1 = (pd.to_numeric(done[c], errors="coerce").to_numpy(dtype=float) if c in done else np.full(n, np.nan)
+              for c in ("lyapunov_initial", "lyapunov_final"))
+    done["converged"] = np.asarray(converged(status == "success", v0, v1, ratio), dtype=bool)
     if "file" in done:
         done["file"] = done["file"].where(done["file"].isna(), RUNS_DIR + "/" + done["file"].astype(str))
     index = pd.concat([head, done.reset_index(drop=True)], axis=1)
