@@ -1,22 +1,21 @@
-"""Costs of a sweep outside the integration, for a 10,000-run Case 3 parameter sweep.
+"""Costs of a sweep outside the integration, and the parent's share of a real sweep.
 
-    python benchmarks/sweep_store.py [N]          # default N = 10000
+    python benchmarks/sweep_store.py [N_SWEEP] [N_STORE] [N_PLAN]
+        # defaults 100000, 1000000, 1000000
 
-Prints, per run and in total, with the peak resident memory of the process of each phase
-(each phase runs in its own forked process):
+The sweep is the Case 3 parameter sweep of docs/sweeps.md (mass, K_c, L_c and K_t scaled,
+a random Omega). Each phase runs in its own forked process and prints its figures with
+the peak resident memory of that process:
 
-1. planning: ``expand`` of a spec in which every run is a different config (mass, inertia,
-   K_c, L_c, K_t scaled, random Omega): pydantic validation, run ids, config hashes;
-2. writing the default store (``--store thinned``, store files of 512 runs) from Case 3
-   results: the config column (canonical JSON: the text and its hash come from the plan,
-   as in a sweep), summary columns, traces (wall and CPU time; each run's parameter coordinates
-   come with its task from the parent, as in a sweep, and are timed in 1.); and the index;
-3. ``rbstab.open_sweep`` of that folder, summaries loaded (``lyapunov_final``, ``status``).
-
-The results written are a block of 32 simulated Case 3 runs (what the compiled engine
-hands a worker's store file at once, :func:`rbstab.simulate.simulate_blocks`) reused for
-every 32 rows (the integration is not what is measured); every row has its own run id,
-parameters and config.
+1. ``rbstab sweep ... --dry-run`` of N_PLAN runs: planning and validating the run table
+   (:func:`rbstab.sweep.plan_table`) and the dry run's listing;
+2. the sweep of N_SWEEP runs, ``--store summary -j 2``, integrated for real: wall time,
+   the parent's CPU per run, the workers' time per run (integration, post-processing,
+   writing, as they report it), the wall time against N x (a worker's time a run) / 2, the
+   peak memory of the parent and of a worker, and the store's bytes per run;
+3. a summary store of N_STORE runs written through the sweep's own path (run table,
+   workers' chunk function, store files, index) with the integration replaced by a block
+   of 32 simulated Case 3 runs reused for every 32 rows, then ``rbstab.open_sweep`` of it.
 """
 
 from __future__ import annotations
@@ -37,9 +36,9 @@ def spec_mapping(n: int) -> dict:
     return {
         "name": "store_bench",
         "base": str(CASE3),
+        "overrides": [],
         "random": {"n": n, "seed": 1, "params": {
             "body.mass": {"scale_uniform": [0.5, 1.5]},
-            "body.inertia": {"scale_uniform": [0.5, 1.5]},
             "controller.k_c": {"scale_uniform": [0.5, 2.0]},
             "controller.l_c": {"scale_uniform": [0.5, 2.0]},
             "controller.k_t": {"scale_uniform": [0.7, 1.4]},
@@ -48,94 +47,138 @@ def spec_mapping(n: int) -> dict:
     }
 
 
-def _peak_mb() -> float:
+def _spec(n: int):
+    from rbstab.sweep import spec_from_mapping
+
+    data = spec_mapping(n)
+    data.pop("overrides")
+    return spec_from_mapping(data, overrides=["simulation.rtol=1e-6"])
+
+
+def _peak_mib() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def plan(n: int) -> dict:
-    from rbstab.sweep import expand, spec_from_mapping
+def _cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 
-    spec = spec_from_mapping(spec_mapping(n))
-    t0 = time.perf_counter()
-    runs = expand(spec)
+
+def dry_run(n: int) -> dict:
+    from rbstab.sweep.table import plan_table
+
+    spec = _spec(n)
+    t0, c0 = time.perf_counter(), _cpu()
+    table = plan_table(spec)
     t1 = time.perf_counter()
-    hashes = [r.config_hash for r in runs]
-    t2 = time.perf_counter()
-    from rbstab.sweep.folder import run_coords
-
-    coords = [run_coords(r.params) for r in runs]
-    t3 = time.perf_counter()
-    assert len(set(hashes)) == n and len(coords) == n
-    return {"expand (validate, ids, hashes)": t1 - t0, "config_hash (cached)": t2 - t1,
-            "parameter coordinates": t3 - t2, "peak MB": _peak_mb()}
+    lines = table.describe()
+    t2, c2 = time.perf_counter(), _cpu()
+    assert table.n == n and len(lines) > 10
+    return {"plan and validate": (t1 - t0, "s"), "listing": (t2 - t1, "s"),
+            "CPU of both": (c2 - c0, "s (target <= 10)"), "peak": (_peak_mib(), "MiB (target <= 1024)")}
 
 
-def write(n: int, folder: str) -> dict:
+def sweep(n: int, folder: str) -> dict:
+    from rbstab.jit import ensure_compiled
+    from rbstab.sweep import run_sweep
+    from rbstab.sweep.executors import LocalExecutor
+
+    ensure_compiled()
+    spec = _spec(n)
+    with LocalExecutor(2) as ex:
+        ex.start()
+        c0, t0 = _cpu(), time.perf_counter()
+        outcome = run_sweep(spec, folder, executor=ex, store="summary", progress=False)
+        wall, cpu = time.perf_counter() - t0, _cpu() - c0
+    worker = sum(outcome.timing.values()) / max(outcome.n_executed, 1)
+    size = sum(p.stat().st_size for p in (Path(folder) / spec.name / "runs").iterdir())
+    return {"runs executed": (outcome.n_executed, ""), "wall": (wall, "s"),
+            "parent CPU a run": (1e3 * cpu / n, "ms (target <= 0.05)"),
+            "worker time a run": (1e3 * worker, "ms"),
+            "wall / (N x worker time / 2)": (wall / (n * worker / 2), "(target <= 1.25 + start-up)"),
+            "parent peak": (_peak_mib(), "MiB"), "worker peak": ((outcome.worker_peak_rss or 0) / 2**20, "MiB"),
+            "store bytes a run": (size / n, "B (target <= 600)")}
+
+
+class _Serial:
+    """An executor that runs each item in this process (for the replayed store)."""
+
+    name = "serial"
+    return_bytes = False
+
+    def describe(self) -> str:
+        return "this process"
+
+    def plan(self, n_items: int) -> None:
+        pass
+
+    def parallelism(self) -> int:
+        return 1
+
+    def imap_unordered(self, fn, items, *args):
+        for item in items:
+            yield item, fn(item, *args), None
+
+    def close(self) -> None:
+        pass
+
+    def abort(self) -> None:
+        pass
+
+
+def _replay_engine(pool):
+    """An engine that hands the sink ``pool`` (a RunBlock of 32 runs) for every 32 tasks."""
+    import dataclasses
+
+    def head(k: int):
+        return dataclasses.replace(
+            pool, configs=pool.configs[:k], outputs={n: v[:k] for n, v in pool.outputs.items()},
+            summaries={n: v[:k] for n, v in pool.summaries.items()},
+            **{name: getattr(pool, name)[:k] for name in ("status", "message", "solver", "wall_time", "timing",
+                                                           "switching")})
+
+    def engine(tasks, options, sink):
+        records = []
+        for lo in range(0, len(tasks), len(pool.configs)):
+            part = tasks[lo:lo + len(pool.configs)]
+            records += sink.add_block(part, pool if len(part) == len(pool.configs) else head(len(part)))
+        return records
+
+    return engine
+
+
+def store(n: int, folder: str) -> dict:
     from rbstab.config import load_config
-    from rbstab.io.chunk import ChunkWriter, StoreRow, chunk_file_name
     from rbstab.simulate import simulate_blocks
-    from rbstab.sweep import expand, spec_from_mapping
-    from rbstab.sweep.folder import (RUNS_DIR, SPEC_FILE, parameter_columns, write_sweep_index,
-                                     run_coords)
-    from rbstab.sweep.runner import _dump_yaml, _spec_document
+    from rbstab.sweep import run_sweep
+    from rbstab.sweep.worker import ENGINES
 
-    spec = spec_from_mapping(spec_mapping(n))
-    runs = expand(spec)
     base = load_config(CASE3)
     (_, pool), = simulate_blocks([base.with_initial_state({"omega": [16 + i, 32, -16]}) for i in range(32)],
                                  full=False)
-    directory = Path(folder) / spec.name
-    (directory / RUNS_DIR).mkdir(parents=True)
-    parameters = parameter_columns(r.params for r in runs)
-    rows = {}
-    # each run's coordinates come with its task, from the parent (timed in planning)
-    stored = [StoreRow(r.index, r.run_id, r.base, {k: v for k, (_, v) in run_coords(r.params).items()})
-              for r in runs]
-    ChunkWriter(directory / "x.h5", stored[:1])  # the provenance (git, versions), once a process
+    ENGINES["replay"] = _replay_engine(pool)
+    spec = _spec(n)
     t0 = time.perf_counter()
-    c0 = time.process_time()
-    for lo in range(0, n, 512):
-        chunk = runs[lo : lo + 512]
-        path = directory / RUNS_DIR / chunk_file_name(chunk[0].run_id)
-        with ChunkWriter(path, stored[lo : lo + 512], store="thinned", parameters=parameters,
-                         sweep=spec.name) as writer:
-            for b in range(0, len(chunk), len(pool)):
-                part = chunk[b : b + len(pool)]
-                block = pool if len(part) == len(pool) else _head(pool, len(part))
-                ids = [run.run_id for run in part]
-                added = writer.add_block(ids, block, config_hashes=[run.config_hash for run in part],
-                                         config_texts=[run.config_text for run in part])
-                rows.update(zip(ids, added))
+    run_sweep(spec, folder, executor=_Serial(), engine="replay", store="summary", chunk_size=10_000,
+              progress=False)
     t1 = time.perf_counter()
-    cpu = time.process_time() - c0
-    write_sweep_index(directory, runs, rows, {}, name=spec.name, ratio=spec.lyapunov_ratio, parameters=parameters)
-    (directory / SPEC_FILE).write_text(_dump_yaml(_spec_document(spec, "benchmark")))
-    t2 = time.perf_counter()
-    size = sum(p.stat().st_size for p in (directory / RUNS_DIR).iterdir())
-    return {"store files (thinned)": t1 - t0, "  of which CPU": cpu, "index, summary, sweep.yaml": t2 - t1,
-            "MB on disk": size / 2**20, "peak MB": _peak_mb()}
-
-
-def _head(block, k: int):
-    """The first k runs of a RunBlock."""
-    import dataclasses
-
-    return dataclasses.replace(
-        block, configs=block.configs[:k], outputs={n: v[:k] for n, v in block.outputs.items()},
-        summaries={n: v[:k] for n, v in block.summaries.items()},
-        **{name: getattr(block, name)[:k] for name in ("status", "message", "solver", "wall_time", "timing", "switching")})
+    size = sum(p.stat().st_size for p in (Path(folder) / spec.name / "runs").iterdir())
+    return {"written (no integration)": (t1 - t0, "s"), "store bytes a run": (size / n, "B"),
+            "peak": (_peak_mib(), "MiB")}
 
 
 def open_(folder: str) -> dict:
     import rbstab
 
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), _cpu()
     ds = rbstab.open_sweep(Path(folder) / "store_bench")
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), _cpu()
     summary = ds[["lyapunov_final", "max_abs_constraint_error_x", "status", "converged"]].load()
     t2 = time.perf_counter()
     assert summary.sizes["run"] > 0
-    return {"open_sweep": t1 - t0, "load 4 summary variables": t2 - t1, "peak MB": _peak_mb()}
+    return {"open_sweep": (t1 - t0, "s (target <= 2 at 10^6 runs)"), "  its CPU": (c1 - c0, "s"),
+            "load 4 summary variables": (t2 - t1, "s"),
+            "peak": (_peak_mib(), "MiB")}
 
 
 def _child(queue, fn, args) -> None:
@@ -153,22 +196,20 @@ def in_process(fn, *args) -> dict:
     return out
 
 
-def show(title: str, figures: dict, n: int) -> None:
-    print(title)
-    for key, value in figures.items():
-        if key in ("peak MB", "MB on disk"):
-            print(f"  {key:<34} {value:10.0f}")
-        else:
-            print(f"  {key:<34} {value:8.2f} s  {1e3 * value / n:7.3f} ms/run")
+def show(title: str, figures: dict) -> None:
+    print(title, flush=True)
+    for key, (value, unit) in figures.items():
+        print(f"  {key:<32} {value:12.4g} {unit}", flush=True)
 
 
 def main() -> None:
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 10_000
-    print(f"{n} runs, Case 3 parameter sweep (every run a different config)")
-    show("planning (parent)", in_process(plan, n), n)
+    n_sweep, n_store, n_plan = (int(a) for a in (sys.argv[1:] + ["100000", "1000000", "1000000"][len(sys.argv) - 1:]))
+    show(f"dry run, {n_plan} runs", in_process(dry_run, n_plan))
     with tempfile.TemporaryDirectory() as folder:
-        show("writing the default store", in_process(write, n, folder), n)
-        show("open_sweep", in_process(open_, folder), n)
+        show(f"sweep, {n_sweep} runs, --store summary -j 2", in_process(sweep, n_sweep, folder))
+    with tempfile.TemporaryDirectory() as folder:
+        show(f"summary store of {n_store} runs (integration replayed)", in_process(store, n_store, folder))
+        show("open_sweep of it", in_process(open_, folder))
 
 
 if __name__ == "__main__":

@@ -175,17 +175,38 @@ def _show(path: str) -> None:
     show_kind[kind_of(path, tuple(show_kind))](path)
 
 
+def _show_run(path: str, run_id: str) -> None:
+    """The resolved configuration of one run of a sweep folder, rebuilt from its result."""
+    from rbstab.config import dump_yaml
+    from rbstab.sweep.folder import is_sweep_folder, resolved_config
+
+    if not is_sweep_folder(path):
+        raise ValueError(f"{path}: --run needs a sweep folder (sweep.yaml and index.csv)")
+    try:
+        config = resolved_config(path, run_id)
+    except KeyError as exc:
+        raise ValueError(exc.args[0]) from None
+    console = get_console()
+    if console.json:
+        console.emit({"path": path, "kind": "config", "run_id": run_id, "config": config})
+    console.out(f"# {path}: run {run_id} (rbstab run of this file repeats it)")
+    console.out(dump_yaml(config).rstrip())
+
+
 @click.command("show")
 @click.argument("files", nargs=-1, required=True, type=click.Path())
+@click.option("--run", "run_id", metavar="ID", default=None,
+              help="With a sweep folder: print the resolved configuration of run ID (rebuilt from its result).")
 @json_option
 @console_options
-def show(files, as_json) -> None:
+def show(files, run_id, as_json) -> None:
     """Print status, solver statistics and summary figures of FILE.h5..., store files and sweep folders.
 
     A sweep folder (sweep.yaml + index.csv) is summarised: runs per status, converged
     fraction, the varied parameters, the spread of the main figures and its first runs
     (-v: all). A folder of sweeps or of result files (e.g. results/) shows each of them.
     With --json: one object per file or sweep ("kind": run, store, sweep or error).
+    --run ID prints a sweep run's configuration as YAML (a config file for rbstab run).
     """
     console = get_console()
     bad = shown = 0
@@ -200,7 +221,7 @@ def show(files, as_json) -> None:
         for path in paths:
             shown += 1
             try:
-                _show(path)
+                _show(path) if run_id is None else _show_run(path, run_id)
             except (OSError, ValueError) as exc:  # FileNotFoundError, NotAResultFile, DamagedResultError ...
                 click.echo(f"error: {exc}", err=True)
                 if console.json:

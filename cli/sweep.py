@@ -69,6 +69,9 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("-n", "n_random", type=click.IntRange(min=0), default=None, metavar="N",
               help="Random samples (sweep.random.n).")
 @click.option("--seed", type=click.IntRange(min=0), default=None, help="Seed of the random samples.")
+@click.option("--table", "table", type=click.Path(dir_okay=False), default=None, metavar="FILE",
+              help="Runs given row by row: a CSV or Parquet file whose columns are dotted config keys "
+              "(body.mass, initial_state.omega[1], body.inertia[0,0]); unlisted entries come from the base.")
 @click.option(
     "--timeout", type=click.FloatRange(min=0, min_open=True), default=None, metavar="SECONDS",
     help="Per-run wall-time limit, instead of each config's simulation.max_wall_time; a run past it "
@@ -99,7 +102,7 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
 @console_options
 def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
-          timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
+          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
     SPEC is a sweep spec, or a run config to vary from the command line:
@@ -107,6 +110,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     \b
     rbstab sweep case3.yaml --grid body.mass=30,41,52 --grid controller.variant=visco_elastic,embedded
     rbstab sweep case3.yaml --random controller.k_c=scale_uniform:[0.5,2] -n 100 --seed 1
+    rbstab sweep case3.yaml --table design.csv          # one run per row
 
     Every run's config is validated before anything runs. Running the same command again
     skips the runs whose result exists and matches their config, and finishes the rest.
@@ -129,8 +133,13 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     if connect_timeout is not None and executor != "dask":
         raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
+    if table is not None:
+        import json
+        import os
+
+        overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
-        return _dry_run(spec, overrides)
+        return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)
     # start local workers now: they import numpy, scipy and h5py while the runs are validated
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
@@ -148,23 +157,29 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         raise SystemExit(min(outcome.n_failed, 100))
 
 
-def _dry_run(spec, overrides) -> None:
-    """--dry-run: validate the spec, list its runs, write nothing."""
-    from rbstab.sweep import SweepSpecError, expand, load_spec
-    from rbstab.sweep.plan import warning_digest
+def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> None:
+    """--dry-run: plan and validate every run, print the count, the varied keys with their
+    ranges, the first and last runs (all with -v), the estimated store size and wall time;
+    write nothing."""
+    from rbstab.sweep import SweepSpecError, default_jobs, load_spec
+    from rbstab.sweep.table import estimate, plan_table
 
     console = get_console()
     try:
         loaded = load_spec(spec, overrides)
-        runs = expand(loaded)
+        table = plan_table(loaded)
     except SweepSpecError as exc:
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
-    for line in warning_digest(runs):
+    for line in table.warnings:
         console.warn(line)
-    console.out(f"{loaded.name}: {len(runs)} runs (dry run: nothing run or written)")
-    for run in runs:
-        params = ", ".join(f"{k}={v}" for k, v in run.params.items())
-        console.out(f"  {run.run_id}  base={run.base}" + (f"  {params}" if params else ""))
+    workers = jobs or default_jobs()
+    size, seconds = estimate(table, store, workers)
+    console.out(f"{loaded.name}: {table.n} runs (dry run: nothing run or written)")
+    console.out(f"  store ~{size / 2**20:.3g} MiB (--store {store}, --layout {layout}); "
+                f"wall time ~{seconds:.3g} s on {workers} worker(s) after the engine's start-up")
+    console.out("varied:" if table.keys else "varied: nothing")
+    for line in table.describe(every=console.verbosity >= 1):
+        console.out(line)
 
 
 def _execute(spec, output, ex, **options):

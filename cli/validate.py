@@ -22,16 +22,15 @@ def _is_spec(path: str) -> bool:
 
 def _check_spec(path: str, overrides) -> dict:
     """One JSON-able record of a sweep spec: valid or not, its runs, its warnings."""
-    from rbstab.sweep import SweepSpecError, expand, load_spec
-    from rbstab.sweep.plan import warning_digest
+    from rbstab.sweep import SweepSpecError, load_spec, plan_table
 
     try:
         loaded = load_spec(path, overrides)
-        runs = expand(loaded)
+        table = plan_table(loaded)
     except SweepSpecError as exc:
         return {"path": path, "kind": "sweep", "valid": False, "errors": list(exc.errors)}
-    return {"path": path, "kind": "sweep", "valid": True, "name": loaded.name, "n_runs": len(runs),
-            "warnings": warning_digest(runs)}
+    return {"path": path, "kind": "sweep", "valid": True, "name": loaded.name, "n_runs": table.n,
+            "warnings": list(table.warnings)}
 
 
 def _check_config(path: str, overrides) -> dict:

@@ -52,8 +52,8 @@ def chunk_files(folder: Path) -> list[Path]:
 def test_chunk_layout_holds_what_run_files_hold(tmp_path):
     s = spec(3, grid=True)
     runs = expand(s)
-    by_run = run_sweep(s, tmp_path / "run", runs=runs, jobs=2, progress=False, layout="run")
-    by_chunk = run_sweep(s, tmp_path / "chunk", runs=runs, jobs=2, chunk_size=2, layout="chunk", progress=False)
+    by_run = run_sweep(s, tmp_path / "run", jobs=2, progress=False, layout="run")
+    by_chunk = run_sweep(s, tmp_path / "chunk", jobs=2, chunk_size=2, layout="chunk", progress=False)
     assert by_chunk.counts["success"] == by_run.counts["success"] == 6
     files = chunk_files(by_chunk.directory)
     assert len(files) == by_chunk.n_chunks == 3  # 6 runs of any kind, at most 2 per chunk

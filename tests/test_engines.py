@@ -308,8 +308,8 @@ def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch)
 def test_compiled_and_scipy_sweeps_give_the_same_index(tmp_path):
     spec = sweep_spec(5, extra={"grid": {"controller.k_c": [[12300, 12300, 9840], [20000, 20000, 15000]]}})
     runs = expand(spec)
-    a = run_sweep(spec, tmp_path / "scipy", runs=runs, jobs=2, engine="scipy", progress=False, layout="run")
-    b = run_sweep(spec, tmp_path / "compiled", runs=runs, jobs=2, progress=False, layout="run")
+    a = run_sweep(spec, tmp_path / "scipy", jobs=2, engine="scipy", progress=False, layout="run")
+    b = run_sweep(spec, tmp_path / "compiled", jobs=2, progress=False, layout="run")
     assert (a.engine, b.engine) == ("scipy", "compiled")
     assert b.n_chunks == 2  # consecutive runs, one chunk per worker
     ia, ib = pd.read_csv(a.index_path), pd.read_csv(b.index_path)

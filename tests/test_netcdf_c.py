@@ -156,7 +156,7 @@ def test_netcdf_c_reads_each_store_file(sweeps, store):
                 assert nc["time"][-1] == pytest.approx(0.2)
                 assert np.isfinite(nc["theta"][...]).all()
             # per-run variables and coordinates, with units and long_name
-            for name in ("run_id", "base", "variant", *params, "status", "message", "config", "lyapunov_final",
+            for name in ("run_id", "base", "variant", *params, "status", "message", "template", "lyapunov_final",
                          "final_omega_x", "solver_nfev"):
                 assert nc[name].dimensions == ("run",), name
             assert nc["run"].dtype == np.int64
@@ -172,10 +172,11 @@ def test_netcdf_c_reads_each_store_file(sweeps, store):
             assert list(nc["status"][...]) == ["success"] * n
             for name in ("lyapunov_final", "k_c_0", "omega_0", "solver_nfev"):
                 np.testing.assert_allclose(nc[name][...], rows[name].to_numpy(), rtol=1e-12, err_msg=name)
+            # the configurations once, as an attribute: the same text as h5py reads
             with h5py.File(path, "r") as h5:
-                configs = [json.loads(c) for c in nc["config"][...]]
-                assert configs == [json.loads(c) for c in h5["config"].asstr()[...]]
-            assert configs[0]["controller"]["variant"] == "embedded"
+                templates = json.loads(nc.getncattr("run_templates"))
+                assert templates == json.loads(h5.attrs["run_templates"])
+            assert templates[int(nc["template"][0])]["controller"]["variant"] == "embedded"
 
 
 def test_xarray_netcdf4_engine_combines_the_store_files(sweeps):

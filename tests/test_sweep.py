@@ -17,10 +17,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab.config import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash, load_config
-from rbstab.config.identity import SECTION_MEMO
 from rbstab.io.chunk import read_chunk_rows
-from rbstab.io.hdf5 import read_attributes
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,
@@ -31,7 +28,6 @@ from rbstab.sweep import (
     spec_from_mapping,
 )
 from rbstab.sweep.executors import ExecutorError
-from rbstab.sweep.plan import resolved_hash
 from rbstab.sweep.worker import RunTask, WorkerOptions
 from rbstab_cli.main import cli
 
@@ -118,56 +114,14 @@ def test_grid_zip_random_count_order_and_ids():
         assert r.config.initial_state["omega"][0] == r.params["initial_state.omega.0"]
         assert r.config.initial_state["omega"][1:].tolist() == [32.0, -16.0]  # untouched entries
         assert r.config.initial_state["theta"][2] == r.params["initial_state.theta.2"]
-    # the id hash names the resolved config without its name
-    for r in runs[:3]:
-        assert r.run_id.endswith(resolved_hash(r.config.resolved)[:8])
-        assert r.config_hash == config_hash(canonical_config(r.config.resolved))
-        assert r.config_hash.startswith(r.run_id.split("-")[1])
-        # the store file's config text, encoded by the plan with the hash
-        assert r.config_text == canonical_config(r.config.resolved, limits=True)
-        assert json.loads(r.config_text)["simulation"]["max_steps"] == r.config.simulation.max_steps
-
-
-def test_canonical_configs_are_the_two_canonical_texts():
-    """The pair the plan encodes at once is each text as canonical_config encodes it alone:
-    with and without run limits, limits absent, and a section sorted after ``simulation``."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
-        config = load_config(CASE3)
-    cases = [config.resolved,
-             {**config.resolved, "simulation": {k: v for k, v in config.resolved["simulation"].items()
-                                                if k not in RUN_LIMIT_KEYS}},
-             {**config.resolved, "zeta": {"a": [1.5, float("nan")]}},
-             {**config.resolved, "simulation": {**config.resolved["simulation"], "max_wall_time": 0.1 + 0.2}}]
-    memo: dict = {}
-    for resolved in cases * 2:  # the second time from the memo, for the shared sections
-        expected = canonical_config(resolved), canonical_config(resolved, limits=True)
-        assert canonical_configs(resolved) == expected
-        assert canonical_configs(resolved, memo) == expected
-    assert canonical_configs(cases[0])[0] != canonical_configs(cases[0])[1]
-    # a memo never outgrows its bound, and a new object of the same content is encoded
-    for k in range(3 * SECTION_MEMO):
-        resolved = {**config.resolved, "initial_state": {**config.resolved["initial_state"], "omega": [k, 0.5, 1]}}
-        assert canonical_configs(resolved, memo)[0] == canonical_config(resolved)
-    assert len(memo) <= SECTION_MEMO
-
-
-def test_canonical_configs_memo_encodes_a_shared_section_once(monkeypatch):
-    """Runs that share their sections' objects (an initial-state sweep) encode each once,
-    however many runs with their own initial state come between."""
-    import rbstab.config.identity as identity
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # W001 of Case 3's inertia
-        resolved = load_config(CASE3).resolved
-    encoded = []
-    encode = identity._canonical_json
-    monkeypatch.setattr(identity, "_canonical_json", lambda value: encoded.append(id(value)) or encode(value))
-    memo: dict = {}
-    for k in range(5 * SECTION_MEMO):
-        run = {**resolved, "initial_state": {**resolved["initial_state"], "omega": [k, 0.5, 1.0]}}
-        assert canonical_configs(run, memo) == (canonical_config(run), canonical_config(run, limits=True))
-    assert encoded.count(id(resolved["body"])) == 1 and encoded.count(id(resolved["controller"])) == 1
+    # the id ends with the first 8 hex digits of the run's identity (its base and its values)
+    for r in runs:
+        assert len(r.config_hash) == 32 and r.config_hash.startswith(r.run_id.split("-")[1])
+    # the same values give the same identity; another base value another one
+    assert [r.config_hash for r in runs] == [r.config_hash for r in expand(spec_from_mapping(full_spec()))]
+    other = full_spec()
+    other["base"]["body"]["mass"] = 40.0
+    assert not {r.config_hash for r in runs} & {r.config_hash for r in expand(spec_from_mapping(other))}
 
 
 def test_random_reproducible_from_seed_and_prefix_stable():
@@ -352,21 +306,20 @@ def test_worker_turns_exceptions_into_records(tmp_path):
     assert not (tmp_path / "x.h5").exists()
 
 
-def test_converged_definition():
+def test_converged_definition(tmp_path):
     """The index's ``converged`` column is rbstab.convergence.converged of the stored row."""
-    from rbstab.sweep.folder import iter_index_rows
+    from rbstab.sweep import plan_table
+    from rbstab.sweep.folder import read_index, write_table_index
 
-    class Run:
-        index, base, values, variant, layout = 0, "b", (), "embedded", ()
-
-        def __init__(self, run_id):
-            self.run_id = run_id
-
-    cases = {"r0": ("success", 100.0, 0.09), "r1": ("success", 100.0, 0.11), "r2": ("failed", 100.0, 0.0),
-             "r3": ("success", 100.0, float("nan")), "r4": ("success", 100.0, -50.0)}
-    rows = {k: {"run_id": k, "status": st, "lyapunov_initial": v0, "lyapunov_final": v1, "file": f"{k}.h5"}
-            for k, (st, v0, v1) in cases.items()}
-    got = [row["converged"] for row in iter_index_rows([Run(k) for k in cases], rows, {}, 1e-3)]
+    table = plan_table(spec_from_mapping({"name": "c", "base": str(CASE3),
+                                          "grid": {"body.mass": [40.0, 41.0, 42.0, 43.0, 44.0]}}))
+    stored = pd.DataFrame({"run": range(5), "run_id": table.ids(),
+                           "status": ["success", "success", "failed", "success", "success"],
+                           "lyapunov_initial": [100.0] * 5, "lyapunov_final": [0.09, 0.11, 0.0, float("nan"), -50.0],
+                           "message": [""] * 5, "file": [f"r{k}.h5" for k in range(5)]})
+    write_table_index(tmp_path, table, stored, {}, name="c", ratio=1e-3)
+    (tmp_path / "sweep.yaml").write_text("name: c\n")
+    got = list(read_index(tmp_path)["converged"])
     assert got == [True, False, False, False, False]  # r4 fell below the equilibrium's v: not there
 
 
@@ -534,40 +487,35 @@ def test_dask_unreachable_scheduler_is_a_clean_cli_error(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
-def test_runs_are_planned_as_they_run_and_a_late_invalid_run_stops_the_sweep(tmp_path, monkeypatch):
-    """Past the runs planned ahead, an invalid run stops the submission of chunks: the runs
-    before it are saved, the error names it, and the fixed spec resumes from them."""
-    import rbstab.sweep.runner as runner
-
-    monkeypatch.setattr(runner, "PLAN_AHEAD", 2)
+def test_a_late_invalid_run_stops_the_sweep_before_anything_runs(tmp_path):
+    """The whole run table is validated before anything is written: an invalid run at the
+    end of the list stops the sweep with nothing run; the fixed spec runs every run."""
     masses = [41.0, 42.0, 43.0, 44.0, -1.0, 46.0]
     spec = {"name": "late", "base": str(CASE3), "grid": {"body.mass": masses}}
     loaded = spec_from_mapping(spec, overrides=SHORT)
     with pytest.raises(SweepSpecError) as info:
         run_sweep(loaded, tmp_path, jobs=1, chunk_size=2, progress=False)
     text = str(info.value)
-    assert "1 of 6 runs have an invalid configuration; the runs before them that finished are saved" in text
-    assert "run r0004 (base case3_embedded; body.mass=-1.0)" in text
-    index = pd.read_csv(tmp_path / "late" / "index.csv")
-    assert list(index["status"]) == ["success"] * 4 + ["pending"]  # r0005 planned too, not run
+    assert "1 of 6 runs have an invalid configuration; nothing was run" in text
+    assert "run r0004 (base case3_embedded; body.mass=-1.0): config key 'body.mass': found -1.0" in text
+    assert not (tmp_path / "late").exists()
     fixed = spec_from_mapping({**spec, "grid": {"body.mass": masses[:4] + [45.0, 46.0]}}, overrides=SHORT)
     again = run_sweep(fixed, tmp_path, jobs=1, chunk_size=2, progress=False)
-    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (4, 2, 6)
-    assert again.stale_files == []  # the store files this sweep wrote are its own
+    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (0, 6, 6)
+    assert again.stale_files == []
 
 
-def test_parameter_columns_and_time_grids_come_from_the_spec():
+def test_parameter_columns_and_time_grids_come_from_the_table():
+    from rbstab.sweep import plan_table
     from rbstab.sweep.folder import parameter_columns
-    from rbstab.sweep.plan import parameter_columns_of, time_grids_of
 
     for path in ("gains.yaml", "robustness.yaml"):
         loaded = load_spec(ROOT / "configs" / "sweeps" / path)
-        runs = expand(loaded)
-        assert list(parameter_columns_of(loaded).items()) == list(parameter_columns(r.params for r in runs).items())
-        assert len(time_grids_of(loaded)) == len({(r.config.simulation.t_end, r.config.simulation.n_samples)
-                                                  for r in runs}) == 1
+        runs, table = expand(loaded), plan_table(loaded)
+        assert list(table.parameters().items()) == list(parameter_columns(r.params for r in runs).items())
+        assert table.time_grids() == {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs}
     varied = spec_from_mapping({"name": "t", "base": str(CASE3), "grid": {"simulation.t_end": [0.1, 0.2]}})
-    assert len(time_grids_of(varied)) > 1
+    assert len(plan_table(varied).time_grids()) == 2
 
 
 def test_sweep_size_and_base_files_are_bounded(tmp_path):
@@ -583,82 +531,43 @@ def test_sweep_size_and_base_files_are_bounded(tmp_path):
         spec_from_mapping({"name": "dev", "base": "/dev/zero"})
 
 
-def test_index_rows_keep_what_the_index_takes():
-    from rbstab.sweep.folder import IndexRows
+def test_sweep_index_is_the_table_and_the_stored_rows(tmp_path):
+    """An index row is the run (id, index, base, parameters, variant from the table), its
+    stored row but what the index leaves out, its file under runs/ and whether it
+    converged; a run without a stored row is an error (with the worker's message) or
+    pending. Text with commas and quotes reads back as written."""
+    from rbstab.sweep import plan_table
+    from rbstab.sweep.folder import read_index, write_table_index
 
-    rows = IndexRows()
-    a = {"run_id": "r0", "status": "success", "lyapunov_final": 1.5, "config": "{...}", "created": "t", "store": "s"}
-    b = {"run_id": "r1", "status": "failed", "lyapunov_final": None, "config": "{...}", "created": "t", "store": "s"}
-    rows["r0"], rows["r1"] = a, b
-    rows["r2"] = {"run_id": "r2", "status": "error", "message": "boom"}
-    assert rows["r0"] == {"run_id": "r0", "status": "success", "lyapunov_final": 1.5}
-    assert rows.get("r1") == {"run_id": "r1", "status": "failed", "lyapunov_final": None}
-    assert rows.get("r9") is None and "r2" in rows and len(rows) == 3 and list(rows) == ["r0", "r1", "r2"]
-    assert rows.parts("r1") == (("run_id", "status", "lyapunov_final"), ("r1", "failed", None, None))
-    assert rows.parts("r0")[0] is rows.parts("r1")[0]  # the rows of a kind share their names
-    rows.pop("r0")
-    assert "r0" not in rows and len(rows) == 2 and rows.parts("r0") is None
-
-
-def test_sweep_index_rows_are_the_runs_and_their_stored_rows(tmp_path):
-    """An index row is the run (id, index, base, coordinates, variant), its stored row but
-    what the index leaves out, its file under runs/ and whether it converged; a run without
-    a stored row is an error (with the worker's message) or pending. write_sweep_index
-    writes those rows as write_index does, from planned runs or their entries, from stored
-    rows held compactly or as dicts, and empties the stored rows as it goes."""
-    from rbstab.sweep.folder import IndexRows, index_rows, write_index, write_sweep_index
-
-    runs = expand(spec_from_mapping({"name": "ix", "base": str(CASE3), "grid": {
+    table = plan_table(spec_from_mapping({"name": "ix", "base": str(CASE3), "grid": {
         "controller.variant": ["embedded", "visco_elastic"], "body.mass": [40.0, 41.0, 42.0]}}))
-
-    def stored_rows(held) -> dict:
-        rows = held()
-        for k, run in enumerate(runs[:4]):  # r4 an error, r5 pending
-            row = {"run": run.index, "run_id": run.run_id, "variant": "stale", "status": "success" if k != 2 else "failed",
-                   "message": f"m{k}, with a comma", "wall_time": 0.5 + k, "lyapunov_initial": 10.0,
-                   "lyapunov_final": [0.1, 5.0, None, 0.05][k], "config": "{}", "created": "t"}
-            if run.variant == "embedded":
-                row["final_d_x"] = 0.25 * k
-            row["file"] = f"chunk-{k}.h5" if k % 2 else None
-            rows[run.run_id] = row
-        return rows
-
-    errors = {runs[4].run_id: "ValueError: boom"}
-    rows = index_rows(runs, stored_rows(dict), errors, 0.01)
-    assert [r["run_id"] for r in rows] == [r.run_id for r in runs] and [r["run"] for r in rows] == list(range(6))
-    assert [r["mass"] for r in rows] == [40.0, 41.0, 42.0] * 2
-    assert [r["variant"] for r in rows] == [r.variant for r in runs]  # the run's, not the stored row's
-    assert [r["status"] for r in rows] == ["success", "success", "failed", "success", "error", "pending"]
-    assert [r["converged"] for r in rows] == [True, False, False, True, False, False]
-    assert [r.get("file") for r in rows] == [None, "runs/chunk-1.h5", None, "runs/chunk-3.h5", None, None]
-    assert [r.get("final_d_x") for r in rows] == [0.0, 0.25, 0.5, None, None, None]
-    assert rows[4]["message"] == "ValueError: boom" and rows[5]["message"].startswith("not run yet")
-    assert not any("config" in r or "created" in r for r in rows)
-    write_index(tmp_path / "expected.csv", rows)
-    for given, held in ((runs, IndexRows), ([r.entry() for r in runs], IndexRows), (runs, dict)):
-        stored = stored_rows(held)
-        summary, problems = write_sweep_index(tmp_path, given, stored, errors, name="ix", ratio=0.01,
-                                              parameters={"mass": "body.mass"})
-        assert (tmp_path / "index.csv").read_bytes() == (tmp_path / "expected.csv").read_bytes()
-        assert len(stored) == 0
-        assert summary["status"] == {"success": 3, "failed": 1, "error": 1, "pending": 1}
-        assert summary["n_converged"] == 2
-        assert problems == [(r["run_id"], r["status"], r["message"]) for r in rows if r["status"] != "success"]
-
-
-def test_index_file_writes_each_cell_as_the_rows_give_it(tmp_path):
-    """write_index of rows (one with a list value, written as its JSON) reads back as the rows."""
-    import csv
-
-    from rbstab.sweep.folder import write_index
-
-    rows = [{"run_id": "r0", "k": 1.25, "flag": True, "message": "a, \"quoted\" text"},
-            {"run_id": "r1", "k": [1, 2], "message": None}]
-    write_index(tmp_path / "index.csv", rows, ["run_id", "k", "flag", "message"])
-    with open(tmp_path / "index.csv", newline="") as f:
-        read = list(csv.reader(f))
-    assert read == [["run_id", "k", "flag", "message"], ["r0", "1.25", "True", 'a, "quoted" text'],
-                    ["r1", "[1, 2]", "", ""]]
+    ids = table.ids()
+    stored = pd.DataFrame({
+        "run": [0, 1, 2, 3], "run_id": ids[:4], "variant": ["stale"] * 4,
+        "status": ["success", "success", "failed", "success"],
+        "message": [f'm{k}, with a "quoted" comma' for k in range(4)], "wall_time": [0.5, 1.5, 2.5, 3.5],
+        "lyapunov_initial": [10.0] * 4, "lyapunov_final": [0.1, 5.0, None, 0.05],
+        "final_d_x": [0.0, 0.25, 0.5, None], "config": ["{}"] * 4, "created": ["t"] * 4,
+        "file": [None, "chunk-1.h5", None, "chunk-3.h5"], "file_row": [None, 0, None, 1]})
+    summary, problems = write_table_index(tmp_path, table, stored, {ids[4]: "ValueError: boom"}, name="ix",
+                                          ratio=0.01)
+    (tmp_path / "sweep.yaml").write_text("name: ix\n")
+    index = read_index(tmp_path)
+    assert list(index["run_id"]) == ids and list(index["run"]) == list(range(6))
+    assert list(index["mass"]) == [40.0, 41.0, 42.0] * 2
+    assert list(index["variant"]) == ["embedded"] * 3 + ["visco_elastic"] * 3  # the table's, not the stored row's
+    assert list(index["status"]) == ["success", "success", "failed", "success", "error", "pending"]
+    assert list(index["converged"]) == [True, False, False, True, False, False]
+    assert list(index["file"].fillna("")) == ["", "runs/chunk-1.h5", "", "runs/chunk-3.h5", "", ""]
+    assert list(index["message"][:2]) == ['m0, with a "quoted" comma', 'm1, with a "quoted" comma']
+    assert index["message"][4] == "ValueError: boom" and index["message"][5].startswith("not run yet")
+    assert "config" not in index and "created" not in index
+    assert list(index.columns[:4]) == ["run_id", "run", "base", "mass"] and index.columns[4] == "variant"
+    assert summary["status"] == {"success": 3, "failed": 1, "error": 1, "pending": 1}
+    assert summary["n_converged"] == 2 and summary["parameters"] == {"variant": "controller.variant",
+                                                                      "mass": "body.mass"}
+    assert problems == [(ids[k], s, m) for k, s, m in zip(range(2, 6), ["failed", "success", "error", "pending"],
+                                                          index["message"][2:]) if s != "success"]
 
 
 def test_run_coordinates_name_every_entry():
@@ -695,7 +604,6 @@ def test_planned_configs_equal_a_whole_validation_of_each_run(vary):
             warnings.simplefilter("ignore")
             alone = config_from_mapping(run.config.resolved)
         assert alone.resolved == run.config.resolved
-        assert resolved_hash(alone.resolved) == run.config_hash
         assert np.array_equal(alone.gains.k_t, run.config.gains.k_t)
         assert all(np.array_equal(alone.initial_state[k], run.config.initial_state[k]) for k in alone.initial_state)
         assert alone.warnings == run.config.warnings

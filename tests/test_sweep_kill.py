@@ -80,7 +80,7 @@ def test_sigkill_then_resume_equals_clean_run(tmp_path):
 
     spec = load_spec(spec_path, [o for o in overrides if o != "--set"])
     runs = expand(spec)
-    clean = run_sweep(spec, tmp_path / "clean", runs=runs, jobs=2, chunk_size=3, progress=False, layout="run")
+    clean = run_sweep(spec, tmp_path / "clean", jobs=2, chunk_size=3, progress=False, layout="run")
     assert clean.counts["success"] == 10
     index = pd.read_csv(tmp_path / "killed" / "kill" / "index.csv")
     assert list(index["run_id"]) == [r.run_id for r in runs]
@@ -113,7 +113,7 @@ def test_sigkill_of_the_default_store_then_resume_equals_clean_run(tmp_path):
     assert resumed.returncode == 0, resumed.stderr
     spec = load_spec(spec_path, [o for o in overrides if o != "--set"])
     runs = expand(spec)
-    clean = run_sweep(spec, tmp_path / "clean", runs=runs, jobs=2, chunk_size=5, progress=False)
+    clean = run_sweep(spec, tmp_path / "clean", jobs=2, chunk_size=5, progress=False)
     assert clean.counts["success"] == 12
     a = pd.read_csv(tmp_path / "killed" / "killc" / "index.csv").drop(columns=["wall_time", "file", "file_row"])
     b = pd.read_csv(tmp_path / "clean" / "killc" / "index.csv").drop(columns=["wall_time", "file", "file_row"])

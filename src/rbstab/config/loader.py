@@ -127,8 +127,8 @@ class RunConfig:
         What ``config_from_mapping(data)`` gives, at a fraction of the cost: only the fields
         that hold ``keys`` are checked, each with the schema's own check of that field, and
         the checks that join fields are made again (the weight held, the margin to gimbal
-        lock, the physical-plausibility warnings and notes). A sweep plans the runs of a
-        base after its first this way (:func:`rbstab.sweep.plan.plan_runs`).
+        lock, the physical-plausibility warnings and notes). The basin analysis checks
+        its samples this way (:meth:`with_initial_state`).
 
         Keys in the ``body`` section, the gains of ``controller`` (not ``variant``) and
         ``initial_state`` take this path; any other key, a value that fails its check or

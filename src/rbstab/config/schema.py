@@ -54,6 +54,7 @@ __all__ = [
     "short_repr",
     "field_at",
     "problem_line",
+    "field_rule",
 ]
 
 #: Matrix gains of ``controller`` (:class:`rbstab.model.Gains`), with their units.
@@ -198,6 +199,7 @@ def _number(
             raise Invalid(why(number) if why is not None else "")  # the description says what is allowed
         return number
 
+    check.rule = ("number", {"gt": gt, "ge": ge, "lt": lt, "le": le, "allow_inf": allow_inf, "integer": integer})
     return check
 
 
@@ -294,7 +296,17 @@ def _theta(value: Any) -> list[int | float]:
 
 
 def _optional(check: Callable[[Any], Any]) -> Callable[[Any], Any]:
-    return lambda value: None if value is None else check(value)
+    optional = lambda value: None if value is None else check(value)  # noqa: E731
+    optional.rule = getattr(check, "rule", None)
+    return optional
+
+
+# The constraint each check stands for, in a form a batched check of many values reads
+# (rbstab.sweep.table validates a sweep's columns with them): read by :func:`field_rule`.
+_vector.rule = ("vector",)
+_theta.rule = ("theta",)
+_spd_matrix.rule = ("matrix", "definite")
+_psd_matrix.rule = ("matrix", "semi-definite")
 
 
 def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
@@ -348,6 +360,10 @@ def _max_wall_time(value: Any) -> float:
     return math.inf if value is None else _number(gt=0, allow_inf=True)(value)
 
 
+_max_step.rule = _max_wall_time.rule = ("number", {"gt": 0, "ge": None, "lt": None, "le": None, "allow_inf": True,
+                                                   "integer": False})
+
+
 def _samples_memory(n: Any) -> str:
     return (f"a run holds ~{BYTES_PER_SAMPLE} bytes per sample: {n} samples would need "
             f"~{_gib(run_memory_estimate(n))}, at most {MAX_SAMPLES} (~{_gib(run_memory_estimate(MAX_SAMPLES))}) are allowed")
@@ -363,6 +379,7 @@ def _checked(check: Callable[[Any], Any]) -> BeforeValidator:
                 ctx["expected"] = exc.expected
             raise PydanticCustomError("rbstab_invalid", "invalid value {detail}", ctx) from None
 
+    validate.rule = getattr(check, "rule", None)
     return BeforeValidator(validate)
 
 
@@ -422,6 +439,7 @@ DEFINITE_GAINS = {
 def _gain_type(name: str) -> Any:
     if name in DEFINITE_GAINS:
         check = lambda value: _spd_matrix(value, DEFINITE_GAINS[name])  # noqa: E731
+        check.rule = _spd_matrix.rule
     else:
         check = _psd_matrix
     return Annotated[Any, _checked(_optional(check))]
@@ -599,6 +617,20 @@ class RunSchema(_Section):
 
 _SECTIONS = tuple(RunSchema.model_fields)
 TOP_LEVEL = _mapping_of(RunSchema)
+
+
+def field_rule(section: str, name: str) -> tuple | None:
+    """The constraint of the schema's field ``section.name`` in a form a batched check reads:
+    ``("number", bounds)`` (``gt``, ``ge``, ``lt``, ``le``, ``allow_inf``, ``integer``),
+    ``("vector",)``, ``("theta",)``, ``("matrix", "definite" | "semi-definite")``, or None
+    (a field checked another way: names, variants, methods). The same check functions the
+    schema validates a field with carry them."""
+    model = RunSchema.model_fields.get(section)
+    fields = getattr(model.annotation, "model_fields", {}) if model is not None else {}
+    field = fields.get(name)
+    if field is None:
+        return None
+    return next((getattr(m.func, "rule", None) for m in field.metadata if isinstance(m, BeforeValidator)), None)
 
 
 # -- pydantic errors -> our lines ----------------------------------------------------------

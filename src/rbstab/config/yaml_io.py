@@ -4,9 +4,10 @@ Reading uses a :class:`yaml.SafeLoader` subclass that differs in three ways: ``1
 float (PyYAML follows YAML 1.1 and reads it as a string), a key given twice in one
 mapping is an error instead of silently keeping the last value, and the document is
 bounded before any Python object is built from it (:data:`MAX_YAML_BYTES` of text,
-:data:`MAX_YAML_DEPTH` levels of nesting, :data:`MAX_YAML_NODES` values once aliases are
-expanded, no recursive alias), so that a small file cannot make a large object (a
-"billion laughs" file of nested aliases) or a deep one. Files are read only when they
+:data:`MAX_YAML_DEPTH` levels of nesting, at most as many values once aliases are expanded
+as the text has characters or :data:`MAX_YAML_NODES` if more, no recursive alias), so that
+a small file cannot make a large object (a "billion laughs" file of nested aliases) or a
+deep one, while a spec that spells out 10,000 runs is read. Files are read only when they
 are regular files (not ``/dev/zero``, a FIFO or a folder), and at most
 :data:`MAX_YAML_BYTES` of them. Writing keeps lists (vectors, matrices) on one line.
 """
@@ -38,7 +39,9 @@ __all__ = [
 MAX_YAML_BYTES = 4 * 2**20
 #: Deepest nesting of mappings and lists (a config has 3 levels, a sweep spec ~6).
 MAX_YAML_DEPTH = 32
-#: Most values (scalars, lists, mappings) of a document with every alias expanded.
+#: Most values (scalars, lists, mappings) of a document with every alias expanded, beyond
+#: the values its text spells out (a value takes at least one character: a document
+#: without aliases never reaches its length in characters). Aliases may add this many.
 MAX_YAML_NODES = 200_000
 
 
@@ -53,6 +56,7 @@ class _Loader(yaml.SafeLoader):
     def __init__(self, stream) -> None:
         super().__init__(stream)
         self._depth = 0
+        self._limit = max(MAX_YAML_NODES, len(stream) if isinstance(stream, str) else 0)
         # id(node) -> (values with aliases expanded, nesting height), filled bottom-up as
         # each node is completed; an alias to a node not in it refers to an ancestor.
         self._measure: dict[int, tuple[int, int]] = {}
@@ -83,8 +87,8 @@ class _Loader(yaml.SafeLoader):
         measures = [self._measure[id(child)] for child in children]
         size = 1 + sum(m[0] for m in measures)
         height = 1 + max((m[1] for m in measures), default=0)
-        if size > MAX_YAML_NODES:
-            raise _LimitError(None, None, f"more than {MAX_YAML_NODES} values once aliases are expanded", mark)
+        if size > self._limit:
+            raise _LimitError(None, None, f"more than {self._limit} values once aliases are expanded", mark)
         if height > MAX_YAML_DEPTH:
             raise _LimitError(None, None, f"nested deeper than {MAX_YAML_DEPTH} levels once aliases are "
                               "expanded", mark)

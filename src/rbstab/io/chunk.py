@@ -13,10 +13,12 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   identifier name (``k_c_0`` for ``controller.k_c.0``, see
   :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
 - per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
-  ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash``
-  (SHA-256 of ``config`` without its run limits, :func:`rbstab.config.canonical_config`) and the summary figures of
+  ``config_hash`` (the run's identity) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
-  ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`);
+  ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`); the configurations
+  once, as the ``run_templates`` attribute (canonical JSON), with each run's ``template``
+  (a sweep's files; :func:`resolved_config` rebuilds a run's), or, for a writer given no
+  templates, ``config`` (each run's resolved configuration, canonical JSON);
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
   time[, axis])``; ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
   every ``store_stride``-th sample (at most 201); ``summary`` none (no ``time``
@@ -39,6 +41,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import json
 import math
 import os
 import sys
@@ -76,10 +79,13 @@ __all__ = [
     "is_chunk_file",
     "read_chunk_rows",
     "read_chunk_series",
+    "read_chunk_columns",
+    "resolved_config",
     "StoreTrace",
     "store_trace_shapes",
     "summary_columns",
     "summary_table_columns",
+    "store_bytes_per_run",
     "SUMMARY_FIGURES",
     "WRITE_BLOCK",
 ]
@@ -149,6 +155,25 @@ def _h5_constants() -> tuple:
     return h5py.h5t.py_create(h5py.string_dtype(), logical=True), h5py.h5s.create(h5py.h5s.SCALAR)
 
 
+#: Bytes a run takes in a store file beside its traces (its per-run values, the index's
+#: columns; measured on Case 3 parameter sweeps, benchmarks/sweep_store.py).
+VALUE_BYTES = 600
+#: Trace values a sample of a thinned store holds (the 5 state blocks, E: 3 each; v, dv/dt
+#: analytic and numerical) and of a full store (every output variable).
+_THINNED_VALUES, _FULL_VALUES = 18, 40
+
+
+def store_bytes_per_run(store: str, n_samples):
+    """Bytes a run takes in a store file of kind ``store`` (:data:`STORES`) with
+    ``n_samples`` output samples (a number or an array of them), roughly."""
+    samples = np.asarray(n_samples, dtype=float)
+    if store == "summary":
+        return VALUE_BYTES + 0 * samples
+    if store == "thinned":
+        return VALUE_BYTES + 8 * _THINNED_VALUES * np.minimum(samples, 201)
+    return VALUE_BYTES + 8 * _FULL_VALUES * samples
+
+
 def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
     """Summary figures as flat columns: 3-vectors as ``<name>_x``, ``_y``, ``_z``."""
     out: dict[str, Any] = {}
@@ -212,12 +237,15 @@ class StoreRow:
     base : str
     coords : dict
         Parameter coordinate name -> value (a number or a string).
+    template : int
+        Its configuration's template among the writer's ``templates`` (-1: none).
     """
 
     index: int
     run_id: str
     base: str = ""
     coords: dict = field(default_factory=dict)
+    template: int = -1
 
 
 def chunk_file_name(first_run_id: str) -> str:
@@ -249,11 +277,16 @@ class ChunkWriter:
         The ``command_line`` attribute (default: this process's argv).
     sweep : str, optional
         The ``sweep`` attribute (the sweep's name).
+    templates : sequence of dict, optional
+        Resolved configurations (without ``name``) the rows' configurations start from:
+        stored once, as the ``run_templates`` attribute (canonical JSON), with a
+        ``template`` variable; a run's configuration is its template with its numeric
+        parameter coordinates set at their ``config_key`` (:func:`resolved_config`).
     """
 
     def __init__(self, path: str | os.PathLike, rows: Sequence[StoreRow], *, store: str = DEFAULT_STORE,
                  parameters: Mapping[str, str] | None = None, command_line: str | None = None,
-                 sweep: str = "") -> None:
+                 sweep: str = "", templates: Sequence[Mapping] = ()) -> None:
         if store not in STORES:
             raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
         self.path = Path(path)
@@ -287,6 +320,8 @@ class ChunkWriter:
             "store": store,
             "sweep": sweep,
         }
+        if templates:
+            self.attrs["run_templates"] = "[" + ",".join(canonical_config(t, limits=True) for t in templates) + "]"
 
     def __enter__(self) -> "ChunkWriter":
         import h5netcdf
@@ -371,13 +406,14 @@ class ChunkWriter:
         return self._add(rows, values)
 
     def _block_values(self, block, config_hashes, config_texts) -> dict[str, list]:
-        """The per-run values of a block's runs, as columns."""
+        """The per-run values of a block's runs, as columns; without templates, each run's
+        configuration as text (the ``config`` column)."""
         configs = block.configs
         k = len(configs)
         hashes = list(config_hashes) if config_hashes is not None else [None] * k
         texts = list(config_texts) if config_texts is not None else [None] * k
         for j, config in enumerate(configs):
-            if not texts[j]:
+            if not texts[j] and "run_templates" not in self.attrs:
                 texts[j] = canonical_config(config.resolved, limits=True)
             if not hashes[j]:
                 hashes[j] = config_hash(canonical_config(config.resolved))
@@ -390,7 +426,8 @@ class ChunkWriter:
         for key in _SOLVER[:-1]:
             values[f"solver_{key}"] = [solver.get(key) for solver in block.solver]
         values["solver_status"] = [int(solver.get("solver_status", -1)) for solver in block.solver]
-        values["config"] = texts
+        if "run_templates" not in self.attrs:
+            values["config"] = texts
         values["config_hash"] = hashes
         values.update(summary_table_columns(block.summaries))
         return values
@@ -585,6 +622,9 @@ class ChunkWriter:
                 names.update(dict.fromkeys(keys[1]))
         coordinates = {name for ident in self.identity for name in ident.coords}
         columns: dict[str, list] = {"run_id": [i.run_id for i in self.identity], "base": [i.base for i in self.identity]}
+        if "run_templates" in self.attrs:
+            columns["template"] = [i.template for i in self.identity]
+            names["template"] = None
         # (rows, values, the rows' span if they are consecutive) of each block added
         blocks = [(rows, values, slice(rows[0], rows[-1] + 1) if rows == list(range(rows[0], rows[-1] + 1)) else None)
                   for rows, values in self._blocks]
@@ -618,6 +658,10 @@ class ChunkWriter:
             else:
                 tid = h5py.h5t.py_create(dtype)
                 dcpl.set_chunk(fletcher32_chunks((len(self.ids),)))
+                # numbers a store's runs share (run order, solver counts, t_final, the
+                # templates) take next to no room: a summary store's bytes a run
+                dcpl.set_shuffle()
+                dcpl.set_deflate(1)
                 dcpl.set_fletcher32()
                 if kind == "f":
                     dcpl.set_fill_value(np.array(np.nan))
@@ -699,21 +743,97 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
         store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
+        text = _plain(f.attrs.get("run_templates"))
+        templates = json.loads(text) if text else None
         try:
             n_runs = f["run"].shape[0] if "run" in f else -1
             datasets = {k: f[k] for k in f if k not in ("axis", "time")}
             columns = {k: _column(d) for k, d in datasets.items() if d.ndim == 1 and d.shape[0] == n_runs}
+            keys = {k: _plain(d.attrs["config_key"]) for k, d in datasets.items()
+                    if k in columns and "config_key" in d.attrs}
         except OSError as exc:  # a Fletcher-32 checksum that does not match
             raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
     if "run" not in columns or "run_id" not in columns:
         raise NotAResultFile(f"{path}: a sweep store file without its 'run' and 'run_id' variables")
     n = len(columns["run"])
+    if templates is not None and "config" not in columns:
+        columns["config"] = [_config_text(templates, columns, keys, i) for i in range(n)]
     rows = []
     for i in range(n):
         row = {k: v[i] for k, v in columns.items()}
         row.update(store=store, created=created, file=path.name, file_row=i)
         rows.append(row)
     return rows
+
+
+def read_chunk_columns(path: str | os.PathLike, *, data: bool = False):
+    """The per-run values of a verified store file as a pandas DataFrame, a row a run in
+    file order: the columns of :func:`read_chunk_rows` (but ``config`` and ``store``),
+    read as whole columns (what resume and the index read of many files).
+
+    Raises
+    ------
+    As :func:`read_chunk_rows`.
+    """
+    import pandas as pd
+
+    from .integrity import DamagedResultError, open_result, verify_open_file
+
+    path = Path(path)
+    with open_result(path) as f:
+        if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
+            raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
+        verify_open_file(f, path, data=data)
+        created = _plain(f.attrs.get("created"))
+        try:
+            n_runs = f["run"].shape[0] if "run" in f else -1
+            columns = {}
+            for k in f:
+                d = f[k]
+                if k in ("axis", "time", "config") or d.ndim != 1 or d.shape[0] != n_runs:
+                    continue
+                columns[k] = d.asstr()[...] if d.dtype.kind in "OS" else d[...]
+        except OSError as exc:  # a Fletcher-32 checksum that does not match
+            raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
+    if "run" not in columns or "run_id" not in columns:
+        raise NotAResultFile(f"{path}: a sweep store file without its 'run' and 'run_id' variables")
+    frame = pd.DataFrame(columns)
+    frame["created"] = created
+    frame["file"] = path.name
+    frame["file_row"] = np.arange(n_runs)
+    return frame
+
+
+def _config_text(templates: list, columns: Mapping[str, list], keys: Mapping[str, str], i: int) -> str:
+    """Canonical JSON of row ``i``'s configuration without its name (:func:`resolved_config`)."""
+    return canonical_config(_resolved(templates, columns, keys, i), limits=True)
+
+
+def _resolved(templates: list, columns: Mapping[str, list], keys: Mapping[str, str], i: int) -> dict:
+    from ..config import set_dotted
+
+    template = json.loads(json.dumps(templates[int(columns["template"][i])]))
+    for name, key in keys.items():
+        value = columns[name][i]
+        if not key.endswith(":scale") and not isinstance(value, str) and value is not None:
+            set_dotted(template, key, value)
+    template["name"] = columns["run_id"][i]
+    return template
+
+
+def resolved_config(path: str | os.PathLike, row: int) -> dict:
+    """The resolved configuration of row ``row`` of a store file (``name``: its run id):
+    the file's template of the run (``run_templates``) with its numeric parameter
+    coordinates set at their ``config_key``; ``RunConfig.from_resolved`` or
+    :func:`rbstab.config.config_from_mapping` make it a run configuration again.
+
+    Raises
+    ------
+    FileNotFoundError, NotAResultFile, DamagedResultError
+        As :func:`read_chunk_rows`; IndexError for a row the file does not have.
+    """
+    rows = read_chunk_rows(path)
+    return json.loads(rows[row]["config"]) | {"name": rows[row]["run_id"]}
 
 
 def _column(dataset) -> list:

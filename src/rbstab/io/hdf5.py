@@ -303,12 +303,16 @@ def write_run(
     command_line: str | None = None,
     store: str = "full",
     config_yaml: str | None = None,
+    config_hash: str | None = None,
 ) -> dict[str, Any]:
     """:func:`write_result`, returning the file's global attributes as
-    :func:`read_attributes` would read them back (so a caller need not reopen the file)."""
+    :func:`read_attributes` would read them back (so a caller need not reopen the file).
+    ``config_hash``: the run's identity in a sweep (default: the hash of its config)."""
     if store not in STORE_MODES:
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORE_MODES)}")
     attrs = result_attributes(result, command_line=command_line, store=store, config_yaml=config_yaml)
+    if config_hash:
+        attrs["config_hash"] = config_hash
     time, outputs = result.time, result.outputs
     switching = getattr(result, "switching", None) if store != "summary" else None
     if store == "thinned":

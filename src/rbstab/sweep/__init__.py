@@ -3,17 +3,18 @@ executed in parallel on this machine or on a Dask cluster, resumable.
 
 Library entry points (the ``rbstab sweep`` command is a thin layer over them)::
 
-    from rbstab.sweep import load_spec, expand, run_sweep
+    from rbstab.sweep import load_spec, plan_table, run_sweep
 
     spec = load_spec("configs/sweeps/gains.yaml", overrides=["simulation.t_end=1"])
-    runs = expand(spec)                        # every run validated; SweepSpecError if not
-    outcome = run_sweep(spec, "results/sweeps", runs=runs, jobs=4)
+    table = plan_table(spec)                   # every run validated; SweepSpecError if not
+    outcome = run_sweep(spec, "results/sweeps", table=table, jobs=4)
     # -> results/sweeps/<name>/{sweep.yaml, runs/chunk-*.h5, index.csv, sweep_summary.json}
     ds = open_sweep("results/sweeps/gains_case3", grid=True)   # xarray, variant x k_c_0
 
 Modules: :mod:`~rbstab.sweep.schema` (the spec's pydantic schema), :mod:`~rbstab.sweep.spec`
-(spec loading, the frozen spec), :mod:`~rbstab.sweep.plan` (expansion into validated runs,
-run ids),
+(spec loading, the frozen spec), :mod:`~rbstab.sweep.table` (the run table: planning,
+run ids), :mod:`~rbstab.sweep.validate` (validation of its columns), :mod:`~rbstab.sweep.plan`
+(the runs one by one, for small sweeps),
 :mod:`~rbstab.sweep.worker` (the unit of work: a chunk of runs -> records; engine hook),
 :mod:`~rbstab.sweep.executors` (local process pool, Dask), :mod:`~rbstab.sweep.runner`
 (resume, execution) and :mod:`~rbstab.sweep.folder` (the folder's format: file names,
@@ -30,11 +31,12 @@ _SOURCES = {
     **dict.fromkeys(["EXECUTORS", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "default_jobs",
                      "make_executor"], "executors"),
     **dict.fromkeys(["STATUSES", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
-                     "open_sweep", "parameter_name", "read_index"], "folder"),
+                     "open_sweep", "parameter_name", "read_index", "resolved_config"], "folder"),
     **dict.fromkeys(["DEFAULT_OUTPUT", "SweepBusyError", "SweepOutcome", "rebuild_index", "run_sweep"], "runner"),
     **dict.fromkeys(["DEFAULT_LYAPUNOV_RATIO", "DISTRIBUTIONS", "SweepSpec", "SweepSpecError", "load_spec",
                      "spec_from_mapping"], "spec"),
     **dict.fromkeys(["PlannedRun", "expand"], "plan"),
+    **dict.fromkeys(["RunTable", "plan_table"], "table"),
     **dict.fromkeys(["ENGINES", "RunTask", "WorkerOptions", "run_chunk"], "worker"),
 }
 
@@ -59,6 +61,9 @@ __all__ = [
     "read_index",
     "parameter_name",
     "expand",
+    "plan_table",
+    "RunTable",
+    "resolved_config",
     "run_sweep",
     "rebuild_index",
     "SweepSpec",

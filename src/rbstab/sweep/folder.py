@@ -30,23 +30,21 @@ Checksums
 ---------
 Store and run files carry checksums (:mod:`rbstab.io.integrity`), and
 ``sweep_summary.json`` the SHA-256 of the ``index.csv`` written with it
-(``index_sha256``). Resume verifies every file it counts (:func:`current_rows` with
-``verify``): a damaged file is renamed ``<name>.damaged`` by the runner and its runs are
-rerun. :func:`read_index` (``rbstab show DIR``, ``rbstab report``, :func:`open_sweep`)
+(``index_sha256``). Resume verifies every file it counts (:class:`StoredRuns` with
+``verify``): a damaged file (checksums that fail, or a file that cannot be opened) is
+renamed ``<name>.damaged`` by the runner and its runs are rerun. :func:`read_index` (``rbstab show DIR``, ``rbstab report``, :func:`open_sweep`)
 refuses an index that does not match its checksum.
 """
 
 from __future__ import annotations
 
-import csv
 import functools
 import datetime as _dt
 import hashlib
 import json
-import operator
 import os
 import re
-from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -68,15 +66,15 @@ __all__ = [
     "coordinate_columns",
     "run_coords",
     "row_from_attributes",
-    "index_rows",
     "index_columns",
-    "write_index",
+    "write_table_index",
     "read_index",
-    "summarize_rows",
+    "summarize_columns",
     "write_summary",
     "is_sweep_folder",
     "read_spec",
-    "current_rows",
+    "StoredRuns",
+    "resolved_config",
     "open_sweep",
     "DAMAGED_SUFFIX",
     "verify_index",
@@ -102,7 +100,7 @@ _HEAD = ("run_id", "run", "base")
 _MIDDLE = ("variant", "status", "converged", "message", "wall_time")
 _TAIL = (*_SOLVER, "config_hash", "file", "file_row")
 #: Values of a stored row that the index leaves out (the config text is most of a row's bytes).
-NOT_IN_INDEX = ("config", "created", "store")
+NOT_IN_INDEX = ("config", "created", "store", "template")
 
 
 # -- names ----------------------------------------------------------------------------------------
@@ -214,176 +212,32 @@ def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
     return row
 
 
-class IndexRows(MutableMapping):
-    """run_id -> the run's row as the index takes it (:func:`index_part`), held compactly.
-
-    What a sweep keeps of each finished run until it writes the index: the row's values as
-    a tuple, its column names shared by every row that has the same (a dict per row costs
-    ~10 KB with its ~60 entries; this ~2 KB). Reading a row gives a new dict.
-    """
-
-    def __init__(self) -> None:
-        self._columns: dict[tuple, tuple] = {}
-        self._rows: dict[str, tuple[tuple, tuple]] = {}
-
-    def __setitem__(self, run_id: str, row: Mapping[str, Any]) -> None:
-        if any(key in row for key in NOT_IN_INDEX):  # most rows come without (a worker's record)
-            row = index_part(row)
-        names = tuple(row)
-        # the values end with a None: the value of a column the row does not have
-        self._rows[run_id] = (self._columns.setdefault(names, names), (*row.values(), None))
-
-    def __getitem__(self, run_id: str) -> dict[str, Any]:
-        names, values = self._rows[run_id]
-        return dict(zip(names, values))
-
-    def parts(self, run_id: str) -> tuple[tuple, tuple] | None:
-        """(column names, values ending with a None) of a row as held, or None: what
-        :func:`write_sweep_index` reads without making the row's dict."""
-        return self._rows.get(run_id)
-
-    def __delitem__(self, run_id: str) -> None:
-        del self._rows[run_id]
-
-    def __iter__(self):
-        return iter(self._rows)
-
-    def __len__(self) -> int:
-        return len(self._rows)
-
-    def __contains__(self, run_id: object) -> bool:
-        return run_id in self._rows
-
-
 def index_part(row: Mapping[str, Any]) -> dict[str, Any]:
     """A stored row without what the index leaves out (:data:`NOT_IN_INDEX`): what a sweep
     keeps of each finished run until it writes the index (~1.5 KB a run less)."""
     return {k: v for k, v in row.items() if k not in NOT_IN_INDEX}
 
 
-def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
-               ratio: float) -> list[dict[str, Any]]:
-    """One index row per run of ``runs`` (:class:`~rbstab.sweep.spec.PlannedRun`), in run order.
-
-    A row is the run's ``run_id``, ``run`` (its index), ``base``, coordinates and
-    ``variant``, then its stored row's values but those the index leaves out
-    (:data:`NOT_IN_INDEX`), then ``file`` (under ``runs/``) and ``converged``
-    (:func:`rbstab.convergence.converged`); a run without a stored row has ``status`` ``error`` (its
-    message from ``errors``) or ``pending``, and is not converged.
-
-    Parameters
-    ----------
-    rows : mapping run_id -> its current stored row (:func:`current_rows`, or a worker's record)
-    errors : mapping run_id -> message
-        Runs whose worker raised (no result): status ``error``.
-    ratio : float
-        ``convergence.lyapunov_ratio`` (:func:`rbstab.convergence.converged`).
-    """
-    return list(iter_index_rows(runs, rows, errors, ratio))
-
-
-def iter_index_rows(runs: Iterable[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
-                    ratio: float) -> Iterator[dict[str, Any]]:
-    """:func:`index_rows`, one at a time."""
-    made = _IndexRowMaker(ratio)
-    for run in runs:
-        names, values = made.row(run, rows, errors)
-        yield dict(zip(names, values))
 
 
 #: ``message`` of a run not run yet.
 _PENDING = "not run yet (rerun the sweep to finish it)"
 
 
-class _IndexRowMaker:
-    """Index rows (:func:`index_rows`) as (column names, values ending with a None), the
-    names shared by the rows of a kind (coordinate layout x stored columns), each row's
-    values taken by position: no dict per row (a 10,000-run sweep's index took ~0.8 s
-    through a dict per row, ~0.55 s this way, 0.36 s of it csv's formatting)."""
-
-    def __init__(self, ratio: float) -> None:
-        self.ratio = ratio
-        self._kinds: dict[tuple, tuple] = {}
-        self._names: dict[tuple, tuple] = {}
-        self._pickers: dict[tuple, Callable[[tuple], tuple]] = {}
-
-    def row(self, run: Any, rows: Mapping[str, Any], errors: Mapping[str, str]) -> tuple[tuple, tuple]:
-        """(column names, values) of the row of ``run`` (a RunEntry, or a PlannedRun: its entry)."""
-        if not hasattr(run, "layout"):
-            run = run.entry()
-        head = (run.run_id, run.index, run.base, *run.values, run.variant)
-        if isinstance(rows, IndexRows):
-            held = rows.parts(run.run_id)
-        else:
-            stored = rows.get(run.run_id)
-            held = None if stored is None else (tuple(stored), (*stored.values(), None))
-        if held is None:
-            status, message = ("error", errors[run.run_id]) if run.run_id in errors else ("pending", _PENDING)
-            return self._kind(run.layout, None)[0], (*head, status, False, message, None)
-        stored_names, stored = held
-        names, keep, file, status, initial, final = self._kind(run.layout, stored_names)
-        reached = converged(status is not None and stored[status] == "success", stored[initial], stored[final],
-                            self.ratio)
-        return names, (*head, *keep(stored), f"{RUNS_DIR}/{stored[file]}" if stored[file] else None, reached, None)
-
-    def _kind(self, layout: tuple, stored_names: tuple | None) -> tuple:
-        """(column names, getter of the stored values kept, positions of the stored file,
-        status, lyapunov_initial and lyapunov_final: the values' trailing None's where
-        absent, None for status) of the rows of ``layout`` and ``stored_names`` (None: no
-        stored row)."""
-        kind = self._kinds.get((layout, stored_names))
-        if kind is not None:
-            return kind
-        head = ("run_id", "run", "base", *(name for name, _ in layout), "variant")
-        if stored_names is None:
-            names = (*head, "status", "converged", "message")
-            kind = (self._names.setdefault(names, names),)
-        else:
-            left = {*head, *NOT_IN_INDEX, "file", "converged"}
-            keep = [i for i, key in enumerate(stored_names) if key not in left]
-            names = (*head, *(stored_names[i] for i in keep), "file", "converged")
-            where = {key: i for i, key in enumerate(stored_names)}
-            missing = len(stored_names)  # the values' trailing None
-            kind = (self._names.setdefault(names, names), _getter(keep), where.get("file", missing),
-                    where.get("status"), where.get("lyapunov_initial", missing), where.get("lyapunov_final", missing))
-        self._kinds[layout, stored_names] = kind
-        return kind
-
-    def column_sets(self) -> list[tuple]:
-        """The distinct column-name tuples of the rows made."""
-        return list(self._names)
-
-    def picker(self, names: tuple, columns: tuple) -> Callable[[tuple], tuple]:
-        """A getter of a row's values in the order of ``columns`` (None where it has none)."""
-        got = self._pickers.get((names, columns))
-        if got is None:
-            where = {name: i for i, name in enumerate(names)}
-            got = self._pickers[names, columns] = _getter([where.get(c, len(names)) for c in columns])
-        return got
-
-
-def _getter(positions: Sequence[int]) -> Callable[[tuple], tuple]:
-    """``lambda values: tuple(values[i] for i in positions)``, as one itemgetter."""
-    if len(positions) > 1:
-        return operator.itemgetter(*positions)
-    if positions:
-        get = operator.itemgetter(positions[0])
-        return lambda values: (get(values),)
-    return lambda values: ()
-
-
-def index_columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+def index_columns(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str] | None = None) -> list[str]:
     """Column order of ``index.csv``: run_id, run, base, the parameters, variant, status,
-    converged, message, wall_time, the summary columns, solver_*, config_hash, file, file_row."""
+    converged, message, wall_time, the summary columns, solver_*, config_hash, file, file_row.
+
+    ``parameters``: the parameter columns (default: the keys of a row before ``status``)."""
     fixed = set(_HEAD + _MIDDLE + _TAIL)
-    params: dict[str, None] = {}
+    params: dict[str, None] = dict.fromkeys(parameters or ())
     summary: dict[str, None] = {}
     for row in rows:
-        in_params = True
+        in_params = parameters is None
         for key in row:
             if key == "status":
                 in_params = False
-            if key not in fixed:
+            if key not in fixed and key not in params:
                 (params if in_params else summary)[key] = None
     from ..io.chunk import SUMMARY_FIGURES
 
@@ -392,64 +246,30 @@ def index_columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
     return [*_HEAD, *params, *_MIDDLE, *ranked, *_TAIL]
 
 
-_PLAIN_CELLS = frozenset({str, float, int, bool, type(None)})
+#: Index columns of integers (written without a decimal point; empty where absent).
+_INTEGERS = ("run", "file_row", "solver_nfev", "solver_njev", "solver_nlu", "solver_status")
 
 
-def _cell(value: Any) -> Any:
-    return json.dumps(value) if isinstance(value, (list, dict)) else value
-
-
-def write_index(path: Path, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> Path:
-    """Write ``rows`` as ``index.csv``, row by row, atomically; ``columns`` default to
-    :func:`index_columns` of the rows."""
-    if columns is None:
-        rows = list(rows)
-        columns = index_columns(rows)
-    return _write_cells(path, columns, ([row.get(c) for c in columns] for row in rows))
-
-
-def _write_cells(path: Path, columns: Sequence[str], rows: Iterable[Sequence[Any]]) -> Path:
-    """``index.csv`` of rows given as their values in the order of ``columns``; a list or a
-    dict is written as its JSON."""
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as f:
-        writer = csv.writer(f, lineterminator="\n")
-        writer.writerow(columns)
-        plain = _PLAIN_CELLS
-        for cells in rows:
-            if plain.issuperset(map(type, cells)):
-                writer.writerow(cells)
-            else:
-                writer.writerow([_cell(v) for v in cells])
-    return Path(path)
-
-
-#: What :func:`summarize_rows` reads of a row.
-_SLIM = ("base", "status", "converged", "wall_time")
-
-
-def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping[str, Mapping[str, Any]],
-                      errors: Mapping[str, str], *, name: str, ratio: float,
-                      parameters: Mapping[str, str]) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
-    """Write ``index.csv`` and ``sweep_summary.json`` of ``runs`` (in run order), atomically.
-
-    Each index row is made as a tuple of values beside column names its kind of row shares
-    (:class:`_IndexRowMaker`, the rows of :func:`index_rows` without a dict per row) and
-    streamed to the file: a sweep's memory at its end stays ~2 KB a run.
+def write_table_index(directory: Path, table, results, errors: Mapping[str, str], *, name: str,
+                      ratio: float) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
+    """Write ``index.csv`` and ``sweep_summary.json`` of a sweep's runs, atomically, from columns.
 
     Parameters
     ----------
     directory : Path
         The sweep folder.
-    runs : sequence of PlannedRun or RunEntry
-        Every run of the run list, in order.
-    rows : mutable mapping run_id -> stored row
-        As :func:`index_rows` takes it; **emptied** as the index is made (each row is
-        removed once its index row exists).
+    table : rbstab.sweep.table.RunTable
+        Every run of the run list: ``run_id``, ``run``, ``base``, the parameters and
+        ``variant`` come from it.
+    results : pandas.DataFrame
+        The stored rows of the runs that have one (a worker's :class:`ChunkResult` frames
+        and the current rows found on disk), with a ``run`` column (position in the run
+        list; the last row of a run counts).
     errors : mapping run_id -> message
-        Runs whose worker raised (status ``error``).
-    name, ratio, parameters
-        The sweep's name, ``convergence.lyapunov_ratio`` and parameter columns (name ->
-        config key), for the summary (:func:`summarize_rows`).
+        Runs whose worker raised and left no row: status ``error``; the other runs without
+        a row are ``pending``.
+    name, ratio
+        The sweep's name and ``convergence.lyapunov_ratio``.
 
     Returns
     -------
@@ -463,24 +283,64 @@ def write_sweep_index(directory: Path, runs: Sequence[Any], rows: MutableMapping
     OSError
         If a file cannot be written (the old files are left as they were).
     """
-    made = _IndexRowMaker(ratio)
-    parts: list[tuple[tuple, tuple]] = []  # each run's (column names, values), in run order
-    slim: list[dict[str, Any]] = []
-    problems = []
-    for run in runs:
-        names, values = made.row(run, rows, errors)
-        if run.run_id in rows:  # (not pop: IndexRows would make the row's dict to return it)
-            del rows[run.run_id]
-        parts.append((names, values))
-        slim.append(dict(zip(_SLIM, made.picker(names, _SLIM)(values))))
-        status = slim[-1]["status"]
-        if status != "success":
-            problems.append((run.run_id, status, made.picker(names, ("message",))(values)[0]))
-    columns = tuple(index_columns(made.column_sets()))
-    _write_cells(directory / INDEX_FILE, columns, (made.picker(names, columns)(values) for names, values in parts))
-    summary = summarize_rows(slim, name=name, ratio=ratio, parameters=parameters)
+    import numpy as np
+    import pandas as pd
+
+    n = table.n
+    ids = pd.Series(table.run_id.astype(str))
+    coords = table.coords()
+    head = pd.DataFrame({"run_id": ids, "run": np.arange(n), "base": table.base_labels,
+                         **{c: values for c, (_, values) in coords.items()}, "variant": table.variant})
+    if len(results):
+        kept = [c for c in results.columns if c not in head.columns and c not in NOT_IN_INDEX and c != "converged"]
+        done = results.drop_duplicates("run", keep="last").set_index("run")[kept].reindex(np.arange(n))
+    else:
+        done = pd.DataFrame({"status": pd.Series([None] * n, dtype=object), "message": ""}, index=np.arange(n))
+    status = done["status"].astype(object)
+    missing = status.isna().to_numpy()
+    failed = missing & ids.isin(list(errors)).to_numpy()
+    status = status.where(~missing, "pending").where(~failed, "error").to_numpy(dtype=object, copy=True)
+    message = done["message"].astype(object).where(~missing, _PENDING).to_numpy(dtype=object, copy=True)
+    message[failed] = ids[failed].map(errors).to_numpy()
+    done = done.assign(status=status, message=message)
+    v0, v1 = (pd.to_numeric(done[c], errors="coerce").to_numpy(dtype=float) if c in done else np.full(n, np.nan)
+              for c in ("lyapunov_initial", "lyapunov_final"))
+    done["converged"] = np.asarray(converged(status == "success", v0, v1, ratio), dtype=bool)
+    if "file" in done:
+        done["file"] = done["file"].where(done["file"].isna(), RUNS_DIR + "/" + done["file"].astype(str))
+    index = pd.concat([head, done.reset_index(drop=True)], axis=1)
+    for column in _INTEGERS:
+        if column in index and index[column].dtype.kind != "i":
+            index[column] = pd.to_numeric(index[column], errors="coerce").round().astype("Int64")
+    fixed = {*_HEAD, *_MIDDLE, *_TAIL}
+    order = index_columns([dict.fromkeys([*head.columns, *done.columns])],
+                          parameters=[c for c in coords if c not in fixed])
+    index = index[[c for c in order if c in index.columns]]
+    _write_csv(directory / INDEX_FILE, index)
+    summary = summarize_columns(index, name=name, ratio=ratio, parameters=table.parameters())
     write_summary(directory / SUMMARY_FILE, summary)
+    bad = status != "success"
+    problems = list(zip(ids[bad], status[bad], message[bad]))
     return summary, problems
+
+
+def _write_csv(path: Path, index) -> None:
+    """``index`` (a DataFrame) as CSV, atomically: by pyarrow's writer (numbers formatted in
+    C, ~10x pandas' speed; they read back as the same floats), pandas' for columns pyarrow
+    does not take (lists); booleans as ``True``/``False``, absent values empty."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.csv as pa_csv
+
+    index = index.assign(**{c: np.where(index[c].to_numpy(), "True", "False")
+                            for c in index.columns if index[c].dtype == bool})
+    with atomic_path(path) as tmp:
+        try:
+            table = pa.Table.from_pandas(index, preserve_index=False)
+        except (pa.ArrowInvalid, pa.ArrowTypeError):
+            index.to_csv(tmp, index=False, lineterminator="\n")
+            return
+        pa_csv.write_csv(table, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
 
 
 def verify_index(folder: str | os.PathLike) -> bool:
@@ -539,7 +399,7 @@ def read_index(folder: str | os.PathLike, *, verify: bool = True):
     if verify:
         verify_index(folder)
     try:
-        index = pd.read_csv(path, keep_default_na=True)
+        index = pd.read_csv(path, keep_default_na=True, dtype={"run_id": str, "config_hash": str})
     except pd.errors.ParserError as exc:
         raise ValueError(f"{path}: cannot read ({exc})") from None
     except pd.errors.EmptyDataError:
@@ -552,29 +412,30 @@ def read_index(folder: str | os.PathLike, *, verify: bool = True):
     return index
 
 
-def _counts(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    status = {s: 0 for s in STATUSES}
-    for row in rows:
-        status[row["status"]] = status.get(row["status"], 0) + 1
-    n = len(rows)
-    converged = sum(1 for r in rows if r.get("converged"))
-    return {"n_runs": n, "status": status, "n_converged": converged,
-            "fraction_converged": converged / n if n else 0.0}
+def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str, str] | None = None) -> dict:
+    """The content of ``sweep_summary.json`` of an index (a DataFrame with ``base``,
+    ``status``, ``converged`` and ``wall_time`` columns): counts, converged fraction,
+    per base, parameters (name -> config key)."""
+    import pandas as pd
 
+    def counts(frame) -> dict[str, Any]:
+        status = {s: 0 for s in STATUSES}
+        status.update({str(k): int(v) for k, v in frame["status"].value_counts().items()})
+        n, converged = len(frame), int(frame["converged"].sum())
+        return {"n_runs": n, "status": status, "n_converged": converged,
+                "fraction_converged": converged / n if n else 0.0}
 
-def summarize_rows(rows: Sequence[Mapping[str, Any]], *, name: str, ratio: float,
-                   parameters: Mapping[str, str] | None = None) -> dict[str, Any]:
-    """The content of ``sweep_summary.json``: counts, converged fraction, per base, parameters."""
-    out: dict[str, Any] = {"name": name, **_counts(rows)}
+    out: dict[str, Any] = {"name": name, **counts(index)}
     out["convergence"] = {
         "lyapunov_ratio": ratio,
         "definition": "converged = status == 'success' and lyapunov_final <= lyapunov_ratio * lyapunov_initial",
     }
-    bases = list(dict.fromkeys(r["base"] for r in rows))
+    bases = list(dict.fromkeys(index["base"]))
     if len(bases) > 1:
-        out["by_base"] = {b: _counts([r for r in rows if r["base"] == b]) for b in bases}
+        out["by_base"] = {b: counts(index[index["base"] == b]) for b in bases}
     out["parameters"] = dict(parameters or {})
-    out["wall_time_total"] = sum(float(r["wall_time"]) for r in rows if r.get("wall_time") is not None)
+    wall = pd.to_numeric(index["wall_time"], errors="coerce") if "wall_time" in index else pd.Series([], dtype=float)
+    out["wall_time_total"] = float(wall.sum())
     out["updated"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     out["index"] = INDEX_FILE
     out["spec"] = SPEC_FILE
@@ -621,26 +482,6 @@ def read_spec(folder: str | os.PathLike) -> dict:
     return data
 
 
-def _chunk_rows(runs_dir: Path, verify: bool = False, damaged: list | None = None) -> dict[str, list[dict]]:
-    """run_id -> its rows in the store files of ``runs_dir`` (unreadable files are ignored;
-    damaged ones are listed in ``damaged`` as (file name, reason))."""
-    from ..io.chunk import read_chunk_rows
-    from ..io.hdf5 import NotAResultFile
-    from ..io.integrity import DamagedResultError
-
-    rows: dict[str, list[dict]] = {}
-    for path in sorted(runs_dir.glob(CHUNK_GLOB)):
-        try:
-            for row in read_chunk_rows(path, data=verify):
-                rows.setdefault(row["run_id"], []).append(row)
-        except DamagedResultError as exc:
-            if damaged is not None:
-                damaged.append((path.name, str(exc)))
-        except (FileNotFoundError, NotAResultFile, OSError, KeyError):
-            continue
-    return rows
-
-
 def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None) -> dict | None:
     from ..io.hdf5 import NotAResultFile, read_attributes
     from ..io.integrity import DamagedResultError
@@ -651,60 +492,105 @@ def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None)
         if damaged is not None:
             damaged.append((path.name, str(exc)))
         return None
-    except (FileNotFoundError, NotAResultFile, OSError, KeyError):
+    except (FileNotFoundError, KeyError):
         return None
+    except (NotAResultFile, OSError, ValueError) as exc:
+        if damaged is not None and _unopenable(path):
+            damaged.append((path.name, f"{path}: cannot be read as a result file ({exc})"))
+        return None  # else an HDF5 file that is not rbstab's: left alone
 
 
-class StoredRows:
-    """What a sweep's ``runs/`` folder holds, read once: the rows of its store files (run
-    files are read per run, when asked for).
+def _unopenable(path: Path) -> bool:
+    """Whether ``path`` cannot be opened as an HDF5 file (truncated, emptied, overwritten):
+    a damaged result, where an HDF5 file of another program is not one."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r"):
+            return False
+    except FileNotFoundError:
+        return False
+    except (OSError, ValueError):
+        return True
+
+
+def _store_frames(runs_dir: Path, names: Sequence[str], verify: bool, damaged: list) -> list:
+    """The rows of the store files ``names`` of ``runs_dir`` as DataFrames; a file that
+    fails its checksums, or that cannot be opened as one (truncated, emptied), is listed in
+    ``damaged`` as (file name, reason)."""
+    from ..io.chunk import read_chunk_columns
+    from ..io.hdf5 import NotAResultFile
+    from ..io.integrity import DamagedResultError
+
+    frames = []
+    for name in names:
+        try:
+            frames.append(read_chunk_columns(runs_dir / name, data=verify))
+        except DamagedResultError as exc:
+            damaged.append((name, str(exc)))
+        except FileNotFoundError:
+            continue
+        except (NotAResultFile, OSError, KeyError, ValueError) as exc:
+            if _unopenable(runs_dir / name):  # truncated, emptied: damaged; else not rbstab's: left alone
+                damaged.append((name, f"{runs_dir / name}: cannot be read as a store file ({exc})"))
+    return frames
+
+
+class StoredRuns:
+    """What a sweep's ``runs/`` folder holds, read once as columns (:attr:`frame`).
 
     A file's digest of its text and attributes is always checked; with ``verify`` every
-    checksum of its numbers too (the whole file is read). A damaged file counts for
+    checksum of its numbers too (the whole file is read). A damaged store file (checksums
+    that fail, or a file that cannot be opened at all: truncated, emptied) counts for
     nothing and is appended to ``damaged`` as (file name, reason).
     """
 
-    def __init__(self, runs_dir: Path, *, verify: bool = False, damaged: list | None = None) -> None:
+    def __init__(self, runs_dir: Path, *, verify: bool = False, damaged: list | None = None,
+                 skip: set | frozenset = frozenset()) -> None:
+        import pandas as pd
+
         self.runs_dir = runs_dir
-        self.verify = verify
         self.damaged = damaged if damaged is not None else []
-        self.files = sorted(p.name for p in runs_dir.glob("*.h5"))  # what was there before this invocation
-        self._names = frozenset(self.files)
-        self.chunk_rows = _chunk_rows(runs_dir, verify, self.damaged)
+        # what was there before this invocation (but the files of ``skip``, read before)
+        self.files = sorted(p.name for p in runs_dir.glob("*.h5") if p.name not in skip)
+        chunks = [n for n in self.files if n.startswith("chunk-")]
+        frames = _store_frames(runs_dir, chunks, verify, self.damaged)
+        singles = [r for n in self.files if not n.startswith("chunk-")
+                   if (r := _run_file_row(runs_dir / n, verify, self.damaged)) is not None]
+        if singles:
+            frames.append(pd.DataFrame.from_records(singles))
+        self.frame = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
+            {"run_id": [], "config_hash": [], "status": [], "created": [], "file": []})
 
-    def current(self, run: Any) -> dict | None:
-        """The newest stored row made from ``run``'s current config (its ``config_hash``,
-        :attr:`PlannedRun.config_hash`) with a status other than ``error``, or None."""
-        candidates = list(self.chunk_rows.get(run.run_id, ()))
-        name = f"{run.run_id}.h5"
-        if name in self._names:  # the folder listed once, not a path and a stat a run
-            row = _run_file_row(self.runs_dir / name, self.verify, self.damaged)
-            if row is not None:
-                candidates.append(row)
-        good = [r for r in candidates if r.get("config_hash") == run.config_hash and r.get("status") != "error"]
-        return max(good, key=lambda r: str(r.get("created", ""))) if good else None
+    def current(self, table, *, success_only: bool = False):
+        """The newest stored row of each run of ``table`` made from its current
+        configuration (its ``config_hash``) with a status other than ``error``
+        (``success_only``: ``success``), with a ``run`` column (its position); a DataFrame."""
+        import numpy as np
+        import pandas as pd
 
-    def stale(self, ids: set[str]) -> list[str]:
-        """Result files found when this was made that hold no run of ``ids`` and are not
+        frame = self.frame
+        if frame.empty:
+            return frame.assign(run=pd.Series([], dtype=np.int64))
+        position = pd.Index(table.run_id.astype(str)).get_indexer(frame["run_id"].astype(str))
+        hashes = table.config_hash.astype(str)
+        ok = (position >= 0) & (frame["status"].to_numpy() != "error")
+        if success_only:
+            ok &= frame["status"].to_numpy() == "success"
+        ok[ok] = hashes[position[ok]] == frame["config_hash"].astype(str).to_numpy()[ok]
+        found = frame[ok].assign(run=position[ok])
+        return found.sort_values("created", kind="stable").drop_duplicates("run", keep="last")
+
+    def stale(self, table) -> list[str]:
+        """Result files found when this was made that hold no run of ``table`` and are not
         damaged (left in place by the caller)."""
-        used = {row["file"] for rows in self.chunk_rows.values() for row in rows if row["run_id"] in ids}
+        import pandas as pd
+
+        ids = pd.Index(table.run_id.astype(str))
+        frame = self.frame
+        used = set(frame.loc[ids.get_indexer(frame["run_id"].astype(str)) >= 0, "file"]) if len(frame) else set()
         bad = {name for name, _ in self.damaged}
-        return [name for name in self.files if name not in bad
-                and (name not in used if name.startswith("chunk-") else Path(name).stem not in ids)]
-
-
-def current_rows(runs: Sequence[Any], runs_dir: Path, *, verify: bool = False,
-                 damaged: list | None = None) -> tuple[dict[str, dict], list[str]]:
-    """(run_id -> the newest stored row made from the run's current config, stale file names).
-
-    A row counts when its ``config_hash`` is the run's (:attr:`PlannedRun.config_hash`) and
-    its status is not ``error``; store files are read once, run files only for runs of
-    ``runs``. Stale files hold no run of ``runs`` (left in place by the caller). Checks as
-    :class:`StoredRows`.
-    """
-    stored = StoredRows(runs_dir, verify=verify, damaged=damaged)
-    current = {run.run_id: row for run in runs if (row := stored.current(run)) is not None}
-    return current, stored.stale({r.run_id for r in runs})
+        return [name for name in self.files if name not in bad and name not in used]
 
 
 def set_aside_damaged(runs_dir: Path, damaged: Sequence[tuple[str, str]]) -> list[str]:
@@ -719,6 +605,40 @@ def set_aside_damaged(runs_dir: Path, damaged: Sequence[tuple[str, str]]) -> lis
             continue
         out.append(target.name)
     return out
+
+
+def resolved_config(folder: str | os.PathLike, run_id: str) -> dict:
+    """The resolved configuration of run ``run_id`` of a sweep folder (``name``: the run id),
+    rebuilt from its result: a store file's template of the run with its parameters set
+    (:func:`rbstab.io.chunk.resolved_config`), or a run file's ``config`` attribute.
+    ``rbstab.config.config_from_mapping`` makes it a run configuration again (``rbstab run``
+    of it repeats the run).
+
+    Raises
+    ------
+    KeyError
+        If the index has no run ``run_id``, or the run has no result on disk.
+    FileNotFoundError, ValueError
+        As :func:`read_index`; a damaged store file as :func:`rbstab.io.chunk.read_chunk_rows`.
+    """
+    import yaml
+
+    from ..io.chunk import resolved_config as from_store
+    from ..io.hdf5 import read_attributes
+
+    folder = Path(folder)
+    index = read_index(folder)
+    row = index[index["run_id"] == run_id]
+    if row.empty:
+        raise KeyError(f"{folder}: no run {run_id!r} in its index")
+    file, file_row = row["file"].iloc[0], row["file_row"].iloc[0] if "file_row" in row else None
+    if not isinstance(file, str) or not file:
+        raise KeyError(f"{folder}: run {run_id!r} has no result on disk (status {row['status'].iloc[0]})")
+    if file_row is not None and file_row == file_row:  # not NaN: a row of a store file
+        return from_store(folder / file, int(file_row))
+    config = yaml.safe_load(read_attributes(folder / file)["config"])
+    config["name"] = run_id
+    return config
 
 
 # -- the sweep as one dataset ---------------------------------------------------------------------

@@ -11,11 +11,15 @@ Output folder ``<output>/<name>/`` (Hydra-like, it describes itself)::
 
 The names and columns are those of :mod:`rbstab.sweep.folder`, which also reads the folder.
 
+The runs are a table (:func:`rbstab.sweep.table.plan_table`, every run validated before
+anything is written); the workers receive slices of it and return their runs' index rows
+as columns, from which the index is written.
+
 Resume: a run is skipped when a result of it is on disk (a row of a store file or its file
-``runs/<run_id>.h5``) whose ``config_hash`` equals the hash of the run's resolved config
-(with ``retry_failed``, only if its status is also ``success``); of several, the newest
-counts. Every other run is executed and written to a new store file (a killed chunk is
-rerun whole) or its file replaced (layout "run").
+``runs/<run_id>.h5``) with its run id and ``config_hash`` (with ``retry_failed``, only if
+its status is also ``success``); of several, the newest counts. Every other run is
+executed and written to a new store file (a killed chunk is rerun whole) or its file
+replaced (layout "run").
 
 Nothing is lost when the sweep is killed (even with SIGKILL): each worker writes its
 run's file to a temporary name and renames it into place when complete, so a final name
@@ -28,13 +32,12 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import itertools
 import datetime as _dt
 import errno
 import math
 import os
 import sys
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -43,9 +46,8 @@ import yaml
 
 from .. import __version__
 from .executors import Executor, make_executor
-from ..io.atomic import write_bytes_atomic, write_text_atomic
+from ..io.atomic import atomic_path, write_bytes_atomic, write_text_atomic
 from .folder import (
-    StoredRows,
     DEFAULT_LAYOUT,
     INDEX_FILE,
     LAYOUTS,
@@ -53,37 +55,34 @@ from .folder import (
     RUNS_DIR,
     SPEC_FILE,
     SUMMARY_FILE,
-    IndexRows,
-    current_rows,
+    StoredRuns,
     read_spec,
     set_aside_damaged,
-    write_sweep_index,
-    coordinate_columns,
+    write_table_index,
 )
-from .plan import (InvalidRun, PlannedRun, RunEntry, expand, invalid_report, parameter_columns_of, plan_runs, time_grids_of,
-                   warning_digest)
-from .spec import SweepSpec, SweepSpecError
+from .spec import SweepSpec
 from ..io.chunk import DEFAULT_STORE, STORES
-from .worker import DEFAULT_CHUNK_SIZE, ENGINES, RunTask, WorkerOptions, run_chunk
+from .worker import DEFAULT_CHUNK_SIZE, ENGINES, WorkerOptions, run_table_chunk
 
 #: Runs per store file (and unit of work) by default: a store file costs ~0.1 s to create
 #: and close whatever its runs (~60 variables with their attributes, the digest of its
-#: structure) and ~0.3 ms a run; the first chunks run while the later runs are planned.
+#: structure) and ~0.3 ms a run.
 STORE_CHUNK_SIZE = 512
 
+#: Runs per store file of a summary store by default: a file's variables cost ~0.25 MB
+#: whatever its runs (their headers, attributes and chunk indexes), ~0.5 KB a run without
+#: traces; the runs' outputs are not kept beyond a block of 32.
+SUMMARY_CHUNK_SIZE = 8192
+
 #: Chunks per worker a sweep is cut into at least (when chunks of STORE_CHUNK_SIZE runs
-#: would give fewer): the first chunks run while the later runs are planned. (One chunk
-#: per worker, fewer store files, measured no better: 1000 Case 3 runs on 2 workers, 5
-#: alternating runs each, initial-state a little faster, parameter a little slower.)
+#: would give fewer), so that the workers finish together. (One chunk per worker, fewer
+#: store files, measured no better: 1000 Case 3 runs on 2 workers, 5 alternating runs
+#: each, initial-state a little faster, parameter a little slower.)
 CHUNKS_PER_WORKER = 2
 
 #: Fewest runs per chunk when a sweep is split into CHUNKS_PER_WORKER chunks per worker
 #: (a chunk is a store file: more of them cost time to write and to open).
 MIN_SPLIT_CHUNK = 64
-
-#: Runs planned before anything is written: an invalid run among them stops the sweep with
-#: nothing run (later ones stop it after the runs before them).
-PLAN_AHEAD = 256
 
 __all__ = [
     "run_sweep",
@@ -150,7 +149,7 @@ class SweepOutcome:
         workers (None when unknown).
     warnings : list of str
         Physical-plausibility warnings of the runs, one line per config key
-        (:func:`rbstab.sweep.plan.warning_digest`).
+        (:attr:`rbstab.sweep.table.RunTable.warnings`).
     """
 
     name: str
@@ -254,18 +253,6 @@ def _chunk_length(n_runs: int, size: int, per_worker: int, workers: int | None) 
     return max(1, size)
 
 
-def _chunked(runs: Iterator, size: int) -> Iterator[list]:
-    """Consecutive runs in run-list order, any runs together, ``size`` at a time."""
-    chunk: list = []
-    for run in runs:
-        chunk.append(run)
-        if len(chunk) == size:
-            yield chunk
-            chunk = []
-    if chunk:
-        yield chunk
-
-
 def _check_time_grids(grids: set, store: str, layout: str) -> None:
     """Traces in a store file share one time axis: refuse a sweep whose runs differ in it."""
     if layout != "chunk" or store == "summary":
@@ -326,7 +313,7 @@ def run_sweep(
     spec: SweepSpec,
     output: str | os.PathLike = DEFAULT_OUTPUT,
     *,
-    runs: Sequence[PlannedRun] | None = None,
+    table=None,
     executor: str | Executor = "local",
     jobs: int | None = None,
     scheduler: str | None = None,
@@ -348,8 +335,8 @@ def run_sweep(
         From :func:`rbstab.sweep.load_spec`.
     output : path-like
         Parent folder; the sweep writes ``<output>/<spec.name>/``.
-    runs : sequence of PlannedRun, optional
-        ``expand(spec)`` if already computed.
+    table : rbstab.sweep.table.RunTable, optional
+        ``plan_table(spec)`` if already computed (every run validated).
     executor : {"local", "dask"} or Executor
         Where the runs execute (see :mod:`rbstab.sweep.executors`). An executor made
         from a name is closed when the sweep ends; an :class:`Executor` passed in is
@@ -397,7 +384,7 @@ def run_sweep(
     Raises
     ------
     SweepSpecError
-        If a run's configuration is invalid (nothing is written).
+        If a run's configuration is invalid (nothing is run or written).
     SweepBusyError
         If another process is writing the same sweep folder.
     ExecutorError
@@ -410,13 +397,13 @@ def run_sweep(
         Re-raised (SIGTERM too, as the CLI handles it) after the workers were stopped
         and the index written for exactly the files on disk.
     """
+    from .table import plan_table
+
     say = log or (lambda message: None)
     engine = resolve_engine(engine, timeout)
     chunking = _chunking(chunk_size, engine, store, layout)
-    head, plan = _start_plan(spec, runs)
-    grids = {(r.config.simulation.t_end, r.config.simulation.n_samples) for r in runs} if runs is not None \
-        else time_grids_of(spec)
-    _check_time_grids(grids, store, layout)
+    table = plan_table(spec) if table is None else table
+    _check_time_grids(table.time_grids(), store, layout)
     if command_line is None:
         command_line = " ".join(sys.argv)
     # the executor first: a missing package or an unreachable scheduler writes nothing
@@ -429,10 +416,10 @@ def run_sweep(
     # next sweep finds its workers started (numpy, scipy, h5py and rbstab imported)
     with ex if owned else contextlib.nullcontext(ex):
         runs_dir.mkdir(parents=True, exist_ok=True)
-        _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
+        _run_locked(spec, table, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
                     chunk_size=chunking, progress=progress, say=say,
                     options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
-                                          store=store, layout=layout, parameters=parameter_columns_of(spec),
+                                          store=store, layout=layout, parameters=table.parameters(),
                                           sweep=spec.name))
     return outcome
 
@@ -446,88 +433,62 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
     if chunk_size is None:
         default = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
+        if layout == "chunk" and store == "summary":
+            default = SUMMARY_CHUNK_SIZE
         return default, CHUNKS_PER_WORKER
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
     return chunk_size, 1
 
 
-def _start_plan(spec: SweepSpec, runs: Sequence[PlannedRun] | None) -> tuple[list, Iterator | None]:
-    """(the runs planned before anything is written, the iterator of the others or None).
-
-    ``runs`` given: all of them, planned. Otherwise the first :data:`PLAN_AHEAD` runs of
-    :func:`plan_runs`; if one of those is invalid, the whole run list is checked and
-    :class:`SweepSpecError` lists every invalid run (nothing is written or run).
-    """
-    if runs is not None:
-        return list(runs), None
-    plan = plan_runs(spec)
-    head = list(itertools.islice(plan, PLAN_AHEAD))
-    invalid = [r for r in head if isinstance(r, InvalidRun)]
-    if invalid:
-        invalid += [r for r in plan if isinstance(r, InvalidRun)]
-        raise SweepSpecError(invalid_report(spec, invalid), spec.source)
-    return head, plan
-
-
-def _run_locked(spec, head, plan, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
+def _run_locked(spec, table, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
                 options) -> None:
-    """Plan, skip what is done, execute the rest and write the index, holding the lock.
+    """Skip what is done, execute the rest and write the index, holding the lock."""
+    import numpy as np
 
-    Runs are planned as the executor asks for more chunks, so the workers start on the
-    first runs while the parent plans the others. An invalid run after the first
-    :data:`PLAN_AHEAD` stops the submission of further chunks; the rest of the run list is
-    still planned (for the index and the message), then :class:`SweepSpecError` is raised.
-    """
     with _lock(directory):
         removed = _remove_temporaries(runs_dir, directory)
         if removed:
             say(f"removed {removed} temporary file(s) left by an interrupted invocation")
         _write_spec_document(spec, directory, options.command_line, say)
-        stored = StoredRows(runs_dir, verify=True, damaged=outcome.damaged)
+        stored = StoredRuns(runs_dir, verify=True, damaged=outcome.damaged)
         for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
             say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
-        planned: list[RunEntry] = []  # every run, without its config (memory: ~1 KB a run)
-        invalid: list[InvalidRun] = []
-        rest = plan if plan is not None else iter(())
-
-        def runs_in_order() -> Iterator[PlannedRun]:
-            for run in itertools.chain(head, rest):
-                if isinstance(run, InvalidRun):
-                    invalid.append(run)
-                    return
-                planned.append(run.entry())
-                yield run
-
-        attrs = IndexRows()  # run_id -> its row for the index
-        errors: dict[str, str] = {}
+        current = stored.current(table, success_only=retry_failed)
+        done = np.zeros(table.n, dtype=bool)
+        done[current["run"].to_numpy()] = True
+        outcome.n_skipped = int(done.sum())
+        results, errors = [current], {}
+        stopped = False
         try:
-            _execute(spec, runs_in_order(), stored, runs_dir, attrs, errors, outcome, ex, retry_failed=retry_failed,
+            _execute(spec, table, np.flatnonzero(~done), runs_dir, results, errors, outcome, ex,
                      chunk_size=chunk_size, progress=progress, say=say, options=options)
         except BaseException:
             # Ctrl-C, SIGTERM, a full disk: stop every worker first, so that the index
             # written below lists exactly the files on disk (nothing is written after it)
             ex.abort()
             _remove_temporaries(runs_dir, directory)
+            stopped = True
             raise
         finally:
-            for run in rest:  # what was not planned yet: pending in the index, or invalid
-                if isinstance(run, InvalidRun):
-                    invalid.append(run)
-                else:
-                    planned.append(run.entry())
-            # files finished while the pool shut down count too
-            _collect_finished(planned, runs_dir, attrs, errors)
-            outcome.stale_files = stored.stale({r.run_id for r in planned})
-            outcome.warnings = warning_digest(planned)
-            _finish(spec, planned, attrs, errors, outcome)
-        if invalid:
-            done = "the runs before them that finished are saved; fix the spec and run it again to resume"
-            raise SweepSpecError(invalid_report(spec, invalid, done), spec.source)
+            if errors or stopped:  # files finished while the pool shut down, or by a worker that then raised
+                late = StoredRuns(runs_dir, damaged=[], skip=set(stored.files)).current(table)
+                results.append(late)
+                for rid in late["run_id"]:
+                    errors.pop(rid, None)
+            outcome.stale_files = stored.stale(table)
+            outcome.warnings = list(table.warnings)
+            _finish(spec, table, results, errors, outcome)
 
 
 def _write_spec_document(spec: SweepSpec, directory: Path, command_line: str | None, say) -> None:
     doc = _spec_document(spec, command_line)
+    if spec.table is not None and spec.table.source is None:  # given in memory: kept beside the spec
+        import pandas as pd
+
+        with atomic_path(directory / DESIGN_FILE) as tmp:
+            pd.DataFrame(spec.table.columns).to_csv(tmp, index=False)
+        doc["table"] = DESIGN_FILE
     spec_path = directory / SPEC_FILE
     if spec_path.exists():
         with contextlib.suppress(Exception):
@@ -539,142 +500,96 @@ def _write_spec_document(spec: SweepSpec, directory: Path, command_line: str | N
     write_text_atomic(spec_path, _dump_yaml(doc))
 
 
-def _collect_finished(runs: Sequence[PlannedRun], runs_dir: Path, attrs: dict, errors: dict) -> None:
-    missing = [run for run in runs if run.run_id not in attrs]
-    if not missing:
-        return
-    found, _ = current_rows(missing, runs_dir)
-    for run_id, row in found.items():
-        attrs[run_id] = row
-        errors.pop(run_id, None)
-
-
-def _execute(spec, runs, stored, runs_dir, attrs, errors, outcome, ex: Executor, *, retry_failed, chunk_size,
-             progress, say, options) -> None:
-    """Skip the runs of ``runs`` (an iterator) with a current result, run the others in
-    chunks on ``ex`` and record each finished run in ``attrs`` (or ``errors``).
-
-    ``chunk_size``: (most runs per chunk, chunks per worker at least; see :func:`_chunk_length`).
-    """
+def _execute(spec, table, todo, runs_dir, results, errors, outcome, ex: Executor, *, chunk_size, progress, say,
+             options) -> None:
+    """Run the runs at positions ``todo`` of ``table`` in chunks on ``ex``; append each
+    chunk's rows to ``results`` (a list of DataFrames) or its runs' messages to ``errors``."""
     folder = str(runs_dir.resolve())
-    by_id: dict[str, RunEntry] = {}  # the runs sent and not back yet
     bar = _progress_bar(spec.n_runs, spec.name, progress)
-
-    def tasks() -> Iterator[RunTask]:
-        for r in runs:
-            row = stored.current(r)
-            if row is not None and (not retry_failed or row.get("status") == "success"):
-                attrs[r.run_id] = row
-                outcome.n_skipped += 1
-                bar.update(1)
-                continue
-            by_id[r.run_id] = r.entry()
-            yield RunTask(r.run_id, r.config.resolved, os.path.join(folder, f"{r.run_id}.h5"), r.index, r.base,
-                          {name: value for name, (_, value) in r.coords.items()}, r.config_hash, r.config_text)
-
+    bar.update(outcome.n_skipped)
     size = _chunk_length(spec.n_runs, *chunk_size, ex.parallelism())
     if ex.return_bytes:
         options = dataclasses.replace(options, return_bytes=True)
-    ex.plan(math.ceil(spec.n_runs / size))  # the caller closes the executor
+    n_chunks = math.ceil(len(todo) / size)
+    ex.plan(n_chunks)  # the caller closes the executor
     outcome.executor = ex.describe()
     per_chunk = "" if size == 1 else f", chunks of up to {size} runs"
     say(f"{outcome.name}: {outcome.n_runs} runs on {outcome.executor} ({options.engine} engine{per_chunk}); "
         "runs with a current result are skipped")
+    parts = (table.slice(todo[lo:lo + size]) for lo in range(0, len(todo), size))
     counts = {"ok": 0, "bad": 0}
     try:
-        for chunk, records, exc in ex.imap_unordered(run_chunk, _chunked(tasks(), size), options):
-            _stop_on_machine_fault(records or ())
+        for part, result, exc in ex.imap_unordered(run_table_chunk, parts, options, folder):
             outcome.n_chunks += 1
+            outcome.n_executed += len(part)
             if exc is not None:
-                records = [
-                    {"run_id": t.run_id, "path": t.path, "status": "error",
-                     "message": f"{type(exc).__name__}: {exc}"}
-                    for t in chunk
-                ]
-            present: dict[str, bool] = {}  # path -> whether the file exists (a chunk's runs share one)
-            for rec in records:
-                _record(rec, by_id.pop(rec["run_id"]), runs_dir, attrs, errors, outcome, counts, present)
+                errors.update({rid: f"{type(exc).__name__}: {exc}" for rid in part.run_id})
+                counts["bad"] += len(part)
+            else:
+                _take(result, part, results, errors, outcome, counts)
             bar.set_postfix_str(f"done {counts['ok']}, failed {counts['bad']}", refresh=False)
-            bar.update(len(records))
+            bar.update(len(part))
     finally:
         bar.close()
     if outcome.n_executed == 0 and outcome.n_skipped == outcome.n_runs:
         say(f"{spec.name}: all {outcome.n_runs} runs already done; rebuilding the index")
 
 
-def _record(rec: dict, run: RunEntry, runs_dir: Path, attrs: dict, errors: dict, outcome: SweepOutcome,
-            counts: dict, present: dict[str, bool] | None = None) -> None:
-    """Take a worker's record of ``run``: its stored row into ``attrs``, or its error.
-
-    ``present``: path -> whether that file exists, for the records of one chunk (its runs
-    share a store file: one ``stat`` a chunk instead of one a run)."""
-    rid = rec["run_id"]
-    present = {} if present is None else present
-    if rec.get("data") is not None:
-        write_bytes_atomic(rec["path"], rec["data"])
-        present[rec["path"]] = True
-    exists = present.get(rec["path"])
-    if exists is None:
-        exists = present[rec["path"]] = os.path.exists(rec["path"])
-    if not exists:
-        a = None
-    elif rec.get("attrs") is not None and rec["status"] != "error":
-        a = rec["attrs"]  # what the worker just wrote: no need to reopen the file
-    else:
-        a = current_rows([run], runs_dir)[0].get(rid)
-    for key, seconds in (rec.get("timing") or {}).items():
+def _take(result, part, results: list, errors: dict, outcome: SweepOutcome, counts: dict) -> None:
+    """A worker's :class:`~rbstab.sweep.worker.ChunkResult` of ``part``: its files written
+    (bytes from a remote worker), its rows into ``results``, its runs that raised into ``errors``."""
+    if result.errno in _MACHINE_FAULTS:
+        raise OSError(result.errno, os.strerror(result.errno), result.path)
+    for path, data in result.data.items():
+        write_bytes_atomic(path, data)
+    frame = result.frame
+    position = dict(zip(part.run_id.tolist(), part.index.tolist()))
+    frame["run"] = frame["run_id"].map(position)
+    raised = (frame["status"] == "error").to_numpy()
+    errors.update(zip(frame["run_id"][raised], frame["message"][raised].fillna("").replace("", "no result file was written")))
+    results.append(frame[~raised])
+    outcome.tracebacks.update(result.tracebacks)
+    for key, seconds in result.timing.items():
         outcome.timing[key] = outcome.timing.get(key, 0.0) + seconds
-    if rec.get("worker_peak_rss"):
-        outcome.worker_peak_rss = max(outcome.worker_peak_rss or 0, rec["worker_peak_rss"])
-    # the worker wrote it from this run's config; after an error (e.g. a worker that
-    # died after writing) only a file with the run's hash counts
-    if a is not None and a.get("run_id") == rid and (rec["status"] != "error" or a.get("config_hash") == run.config_hash):
-        attrs[rid] = a
-        errors.pop(rid, None)
-    else:
-        errors[rid] = rec.get("message") or "no result file was written"
-        if "traceback" in rec:
-            outcome.tracebacks[rid] = rec["traceback"]
-    outcome.n_executed += 1
-    counts["ok" if rec["status"] == "success" and rid in attrs else "bad"] += 1
+    if result.worker_peak_rss:
+        outcome.worker_peak_rss = max(outcome.worker_peak_rss or 0, result.worker_peak_rss)
+    ok = int((frame["status"] == "success").sum())
+    counts["ok"] += ok
+    counts["bad"] += len(frame) - ok
 
 
-#: errno of a record that stops the sweep: every later write would fail the same way.
+#: errno of a result that stops the sweep: every later write would fail the same way.
 _MACHINE_FAULTS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
 
-
-def _stop_on_machine_fault(records) -> None:
-    """Raise the OSError of a record whose file could not be written for want of space
-    or of a writable disk (the runs it lists stay pending; rerunning resumes)."""
-    for rec in records:
-        if rec.get("errno") in _MACHINE_FAULTS:
-            raise OSError(rec["errno"], os.strerror(rec["errno"]), str(Path(rec["path"]).parent))
+#: An in-memory design table is written beside ``sweep.yaml`` under this name.
+DESIGN_FILE = "table.csv"
 
 
-def _finish(spec: SweepSpec, runs, attrs, errors, outcome: SweepOutcome) -> None:
-    # one run of each coordinate layout (the runs of a sweep share a few) gives the columns
-    kinds = {e.layout: e for e in (r if isinstance(r, RunEntry) else r.entry() for r in runs)}
-    summary, outcome.problems = write_sweep_index(
-        outcome.directory, runs, attrs, errors, name=spec.name, ratio=spec.lyapunov_ratio,
-        parameters=coordinate_columns(e.coords for e in kinds.values()))
+def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepOutcome) -> None:
+    import pandas as pd
+
+    frames = [f for f in results if len(f)]
+    summary, outcome.problems = write_table_index(
+        outcome.directory, table, pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(), errors,
+        name=spec.name, ratio=spec.lyapunov_ratio)
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
 
 
-def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, runs: Sequence[PlannedRun] | None = None) -> SweepOutcome:
+def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, table=None) -> SweepOutcome:
     """Rewrite ``index.csv`` and ``sweep_summary.json`` from the result files, running nothing.
 
     Files whose config does not match the run's current config count as ``pending``.
     """
-    if runs is None:
-        runs = expand(spec)
+    from .table import plan_table
+
+    table = plan_table(spec) if table is None else table
     directory = Path(output) / spec.name
     if not directory.is_dir():
         raise FileNotFoundError(f"no sweep folder {directory}")
-    outcome = SweepOutcome(spec.name, directory, len(runs))
+    outcome = SweepOutcome(spec.name, directory, table.n)
     with _lock(directory):
-        attrs, _ = current_rows(runs, directory / RUNS_DIR)
-        outcome.n_skipped = len(attrs)
-        _finish(spec, runs, attrs, {}, outcome)
+        current = StoredRuns(directory / RUNS_DIR).current(table)
+        outcome.n_skipped = len(current)
+        _finish(spec, table, [current], {}, outcome)
     return outcome
-

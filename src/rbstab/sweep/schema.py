@@ -129,7 +129,7 @@ def _numbers(value: Any) -> Any:
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True)
 
 
 def _invalid(key: str, found: Any, expected: str, detail: str = "") -> PydanticCustomError:
@@ -251,6 +251,8 @@ class SweepSchema(_Section):
     zip: dict[DottedKey, Annotated[Any, _checked(_values)]] = Field(
         default_factory=dict, description="a mapping of dotted config key -> list of values, all of one length")
     random: RandomSchema = Field(default_factory=RandomSchema, description="a mapping with keys n, seed, params")
+    table: Any = Field(None, description="a CSV or Parquet file (relative to the spec file) whose columns are "
+                       "dotted config keys, one run a row")
     convergence: ConvergenceSchema = Field(
         default_factory=ConvergenceSchema, description="a mapping with the key lyapunov_ratio")
     generated: Any = Field(None, description="provenance written by rbstab (ignored)")

@@ -22,14 +22,16 @@ A sweep spec names a base configuration and the keys to vary::
       lyapunov_ratio: 1.0e-3             # converged: success and v(t_end) <= ratio * v(0)
 
 Keys are the dotted paths of :func:`rbstab.config.set_dotted` (``initial_state.omega.1``
-indexes into the list). The run list is the product base x grid x zip x random; its order
+indexes into the list). A ``table:`` (a CSV or Parquet file, a DataFrame or a mapping of
+columns named by dotted keys, ``initial_state.omega[1]``, ``body.inertia[0,2]``) gives runs
+row by row. The run list is the product base x grid x zip x table x random; its order
 (and so each run's index) is: random sample (slowest), base, grid keys in the order
-written (the last one fastest), zip entry (fastest). Random samples come first so that
+written (the last one fastest), zip entry, table row (fastest). Random samples come first so that
 raising ``random.n`` appends runs and keeps the ids of the earlier ones.
 
-Random distributions (all drawn from ``numpy.random.default_rng(seed)``, sample by
-sample and, within a sample, parameter by parameter in the order written, so the first
-k samples do not depend on ``n`` nor on how the runs are executed):
+Random distributions (each key drawn from its own stream of ``seed``,
+:func:`rbstab.sweep.table.random_stream`, all samples in one call, so the first k samples
+do not depend on ``n``, on the other keys nor on how the runs are executed):
 
 - ``uniform: [lo, hi]`` -- lo, hi numbers or lists (one draw per component);
 - ``normal: {mean: m, std: s}`` -- m, s numbers or lists (broadcast together), s >= 0;
@@ -43,22 +45,22 @@ The shape of a drawn value is the broadcast shape of the distribution's numbers:
 lists to draw vectors.
 
 Run ids are ``r<index>-<h>``: ``index`` the zero-padded position in the run list (4 digits,
-more for larger sweeps) and ``h`` the first 8 hex digits of the SHA-256 of the run's
-resolved configuration without its name (canonical JSON). The same spec gives the same ids
+more for larger sweeps) and ``h`` the first 8 hex digits of the run's ``config_hash``, a
+digest of its base configuration and its values (:mod:`rbstab.sweep.table`). The same spec gives the same ids
 on every invocation and every machine; a changed base, grid value or sample changes ``h``.
 Each run's config ``name`` is its run id.
 
 The spec is validated by the pydantic models of :mod:`rbstab.sweep.schema` (the checks and
 message format of the config schema); this module reads the base configs, applies the
-``--set`` overrides and builds the frozen :class:`SweepSpec`. :mod:`rbstab.sweep.plan`
-expands it into validated runs.
+``--set`` overrides and builds the frozen :class:`SweepSpec`. :mod:`rbstab.sweep.table`
+plans it as a validated table of runs.
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -81,16 +83,18 @@ __all__ = [
     "spec_from_mapping",
     "is_run_config",
     "MAX_RUNS",
+    "DesignTable",
+    "read_design_table",
 ]
 
 
-#: Most runs of one sweep: the parent keeps an entry and an index row per run (~3 KB,
-#: :data:`BYTES_PER_RUN`) until the index is written.
+#: Most runs of one sweep: the parent holds the run table and the index's columns
+#: (~:data:`BYTES_PER_RUN` a run) until the index is written.
 MAX_RUNS = 1_000_000
 
-#: Memory the parent holds per run of a sweep [bytes] (its entry and index row; measured
-#: ~2-3 KB for Case 3 sweeps).
-BYTES_PER_RUN = 3000
+#: Memory the parent holds per run of a sweep [bytes] (its row of the run table and of
+#: the index's columns; measured ~0.5 KB for Case 3 parameter sweeps).
+BYTES_PER_RUN = 600
 
 
 def _plain(value: Any) -> Any:
@@ -142,23 +146,6 @@ class Distribution:
             return cls(key, kind, (tuple(copy.deepcopy(value)),))
         return cls(key, kind, tuple(np.asarray(v, dtype=float) for v in value))
 
-    def draw(self, rng: np.random.Generator) -> Any:
-        """One sample: a float, a list of floats, or (choice) one of the listed values.
-
-        For ``scale_uniform`` this is the factor, not the scaled value.
-        """
-        if self.kind in ("uniform", "scale_uniform"):
-            lo, hi = self.args
-            return _plain(rng.uniform(lo, hi, size=_shape(lo, hi)))
-        if self.kind == "log_uniform":
-            lo, hi = self.args
-            return _plain(np.exp(rng.uniform(np.log(lo), np.log(hi), size=_shape(lo, hi))))
-        if self.kind == "normal":
-            mean, std = self.args
-            return _plain(rng.normal(mean, std, size=_shape(mean, std)))
-        (values,) = self.args
-        return copy.deepcopy(values[int(rng.integers(len(values)))])
-
     def to_mapping(self) -> dict:
         """The YAML form, e.g. ``{"uniform": [lo, hi]}``."""
         if self.kind == "normal":
@@ -168,12 +155,27 @@ class Distribution:
         return {self.kind: [_plain(self.args[0]), _plain(self.args[1])]}
 
 
-def _shape(a: np.ndarray, b: np.ndarray) -> tuple[int, ...]:
-    """The broadcast shape of two parameters of a distribution (drawn for every sample)."""
-    return a.shape if a.shape == b.shape else np.broadcast_shapes(a.shape, b.shape)
-
-
 # -- the spec ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DesignTable:
+    """``table``: one run per row, a column per dotted config key (entry).
+
+    Attributes
+    ----------
+    columns : dict of str to ndarray
+        Dotted key (``initial_state.omega.1``, ``body.inertia.0.2``) -> values, shape (rows,).
+    source : str or None
+        The CSV or Parquet file it was read from (None: given as a DataFrame or mapping).
+    """
+
+    columns: dict
+    source: str | None = None
+
+    @property
+    def n_rows(self) -> int:
+        return len(next(iter(self.columns.values())))
 
 
 @dataclass(frozen=True)
@@ -183,19 +185,6 @@ class RandomSpec:
     n: int = 0
     seed: int = 0
     params: tuple[Distribution, ...] = ()
-
-    def samples(self) -> list[dict[str, Any]]:
-        """The ``n`` samples, each ``{key: drawn value}`` (scale_uniform: the factor).
-
-        Sample ``i`` is the same for every ``n > i``.
-        """
-        return list(self.iter_samples())
-
-    def iter_samples(self) -> Iterator[dict[str, Any]]:
-        """:meth:`samples`, one at a time."""
-        rng = np.random.default_rng(self.seed)
-        for _ in range(self.n):
-            yield {d.key: d.draw(rng) for d in self.params}
 
 
 @dataclass(frozen=True)
@@ -233,6 +222,8 @@ class SweepSpec:
     zip : dict of str to list
         Dotted key -> its values; all lists have the same length.
     random : RandomSpec
+    table : DesignTable or None
+        Runs given row by row (``table:``, ``--table FILE``).
     lyapunov_ratio : float
         Convergence threshold (see :data:`DEFAULT_LYAPUNOV_RATIO`).
     description : str
@@ -247,6 +238,7 @@ class SweepSpec:
     grid: dict = field(default_factory=dict)
     zip: dict = field(default_factory=dict)
     random: RandomSpec = field(default_factory=RandomSpec)
+    table: DesignTable | None = None
     lyapunov_ratio: float = DEFAULT_LYAPUNOV_RATIO
     description: str = ""
     source: str | None = None
@@ -254,18 +246,20 @@ class SweepSpec:
 
     @property
     def varied_keys(self) -> list[str]:
-        """Every dotted key the sweep varies: grid, then zip, then random keys."""
-        keys = list(self.grid) + list(self.zip)
+        """Every dotted key the sweep varies: grid, zip, table, then random keys."""
+        keys = list(self.grid) + list(self.zip) + (list(self.table.columns) if self.table is not None else [])
         if self.random.n:
             keys += [d.key for d in self.random.params]
         return keys
 
     @property
     def n_runs(self) -> int:
-        """Number of runs: bases x grid points x zip entries x random samples."""
+        """Number of runs: bases x grid points x zip entries x table rows x random samples."""
         n = len(self.bases) * math.prod(len(v) for v in self.grid.values())
         if self.zip:
             n *= len(next(iter(self.zip.values())))
+        if self.table is not None:
+            n *= self.table.n_rows
         return n * max(self.random.n, 1)
 
     def to_mapping(self) -> dict:
@@ -284,6 +278,8 @@ class SweepSpec:
         out["base"] = bases[0] if len(bases) == 1 else bases
         out["grid"] = copy.deepcopy(self.grid)
         out["zip"] = copy.deepcopy(self.zip)
+        if self.table is not None:
+            out["table"] = self.table.source
         out["random"] = {
             "n": self.random.n,
             "seed": self.random.seed,
@@ -374,7 +370,10 @@ def spec_from_mapping(
         Listing every problem found (nothing is run or written for an invalid spec).
     """
     if isinstance(data, Mapping):
-        data = copy.deepcopy(dict(data))
+        given_table = data.get("table")  # a DataFrame or arrays: not copied
+        data = copy.deepcopy({k: v for k, v in data.items() if k != "table"})
+        if given_table is not None:
+            data["table"] = given_table
         errors: list[str] = []
         for o in (o for o in overrides if o.strip().startswith("sweep.")):
             try:
@@ -391,13 +390,17 @@ def spec_from_mapping(
     errors += _overridden_sweep_keys(schema, base_overrides)
     if errors:
         raise SweepSpecError(errors, source)
+    table = _design_table(schema, source)
+    errors = _overlapping_table_keys(schema, table, base_overrides)
+    if errors:
+        raise SweepSpecError(errors, source)
     n_runs = len(bases) * math.prod(len(v) for v in schema.grid.values()) * max(int(schema.random.n), 1) * (
-        len(next(iter(schema.zip.values()))) if schema.zip else 1)
+        len(next(iter(schema.zip.values()))) if schema.zip else 1) * (table.n_rows if table is not None else 1)
     if n_runs > MAX_RUNS:
         raise SweepSpecError([
-            f"the sweep has {n_runs} runs (bases x grid points x zip entries x random.n); at most {MAX_RUNS} "
-            f"(its index alone would hold ~{n_runs * BYTES_PER_RUN / 2**30:.3g} GiB in memory): split it into "
-            "several sweeps"], source)
+            f"the sweep has {n_runs} runs (bases x grid points x zip entries x table rows x random.n); at most "
+            f"{MAX_RUNS} (its run table and index would hold ~{n_runs * BYTES_PER_RUN / 2**30:.3g} GiB in memory): "
+            "split it into several sweeps"], source)
     random = RandomSpec(
         int(schema.random.n), int(schema.random.seed),
         tuple(Distribution.from_schema(key, d) for key, d in schema.random.params.items()),
@@ -408,11 +411,83 @@ def spec_from_mapping(
         grid=copy.deepcopy(dict(schema.grid)),
         zip=copy.deepcopy(dict(schema.zip)),
         random=random,
+        table=table,
         lyapunov_ratio=float(schema.convergence.lyapunov_ratio),
         description=schema.description or "",
         source=source,
         overrides=tuple(overrides),
     )
+
+
+def read_design_table(path: str | Path):
+    """A design table file as a pandas DataFrame: CSV (``.csv``, ``.csv.gz``, ...) or
+    Parquet (``.parquet``, ``.pq``; needs pyarrow).
+
+    Raises
+    ------
+    SweepSpecError
+        For a missing or unreadable file, or one of another kind.
+    """
+    import pandas as pd  # heavy: only for a sweep with a table
+
+    path = Path(path)
+    where = "table"
+    try:
+        if path.suffix.lower() in (".parquet", ".pq"):
+            return pd.read_parquet(path)
+        if ".csv" in path.suffixes or path.suffix.lower() == ".csv":
+            return pd.read_csv(path)
+    except ImportError as exc:
+        raise SweepSpecError([f"sweep key '{where}': reading {path} needs {exc.name or 'pyarrow'}: "
+                              "pip install pyarrow"]) from None
+    except FileNotFoundError:
+        raise SweepSpecError([f"sweep key '{where}': found {str(path)!r}; no such file"]) from None
+    except (OSError, ValueError) as exc:
+        raise SweepSpecError([f"sweep key '{where}': cannot read {path}: {exc}"]) from None
+    raise SweepSpecError([f"sweep key '{where}': found {str(path)!r}; expected a .csv or .parquet file"])
+
+
+def _design_table(schema: SweepSchema, source: str | None) -> DesignTable | None:
+    """The ``table`` entry (a file path relative to the spec, a DataFrame or a mapping of
+    columns) as a :class:`DesignTable`."""
+    from .table import table_columns
+
+    given = schema.table
+    if given is None:
+        return None
+    if isinstance(given, (str, Path)):
+        path = Path(given).expanduser()
+        if not path.is_absolute():
+            path = (Path(source).resolve().parent if source else Path.cwd()) / path
+        try:
+            return DesignTable(table_columns(read_design_table(path)), str(path))
+        except SweepSpecError as exc:
+            raise SweepSpecError(exc.errors, source) from None
+    if not (hasattr(given, "columns") or isinstance(given, Mapping)):
+        raise SweepSpecError([f"sweep key 'table': found {_kind(given)}; expected a CSV or Parquet file path, "
+                              "a pandas DataFrame or a mapping of column name -> values"], source)
+    try:
+        return DesignTable(table_columns(given), None)
+    except SweepSpecError as exc:
+        raise SweepSpecError(exc.errors, source) from None
+
+
+def _overlapping_table_keys(schema: SweepSchema, table: DesignTable | None, overrides: Sequence[str]) -> list[str]:
+    """A table column that overlaps a key varied elsewhere, or an override."""
+    if table is None:
+        return []
+    errors = []
+    for key in table.columns:
+        for section, other in schema.varied():
+            if key == other or key.startswith(other + ".") or other.startswith(key + "."):
+                errors.append(f"sweep key 'table': column '{key}' overlaps '{section}.{other}': a key is varied "
+                              "in one place only")
+        for o in overrides:
+            okey = o.partition("=")[0].strip()
+            if okey == key or okey.startswith(key + ".") or key.startswith(okey + "."):
+                errors.append(f"override {o!r}: the sweep's table varies '{key}', which would replace the "
+                              "override; drop the override or the column")
+    return errors
 
 
 def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) -> tuple[list[Base], list[str]]:

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RunTask", "WorkerOptions", "run_chunk", "ENGINES", "DEFAULT_CHUNK_SIZE"]
+__all__ = ["RunTask", "WorkerOptions", "run_chunk", "run_table_chunk", "ChunkResult", "ENGINES", "DEFAULT_CHUNK_SIZE"]
 
 
 @dataclass(frozen=True)
@@ -65,9 +65,11 @@ class RunTask:
     coords : dict
         Parameter coordinate name -> value (:func:`rbstab.sweep.folder.run_coords`).
     config_hash : str
-        The config's hash as the plan computed it ("": the worker computes it).
+        The run's identity as the plan computed it ("": the hash of its config).
     config_text : str
-        The store file's ``config`` text as the plan encoded it ("": the worker encodes it).
+        The store file's ``config`` text ("": encoded by the writer, or none with templates).
+    template : int
+        Its template among the chunk's (:class:`rbstab.sweep.table.TableSlice`), -1 for none.
     """
 
     run_id: str
@@ -78,6 +80,7 @@ class RunTask:
     coords: dict = field(default_factory=dict)
     config_hash: str = ""
     config_text: str = ""
+    template: int = -1
 
 
 @dataclass(frozen=True)
@@ -147,7 +150,7 @@ def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:
 class _RunFiles:
     """Where finished runs go with ``layout="run"``: one file per run (``task.path``)."""
 
-    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions) -> None:
+    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> None:
         self.options = options
 
     def __enter__(self) -> "_RunFiles":
@@ -170,11 +173,11 @@ class _RunFiles:
             with tempfile.TemporaryDirectory(prefix="rbstab-") as tmp:
                 path = Path(tmp) / Path(task.path).name
                 attrs = write_run(result, path, command_line=options.command_line, store=options.store,
-                                  config_yaml=config_yaml)
+                                  config_yaml=config_yaml, config_hash=task.config_hash or None)
                 record["data"] = path.read_bytes()
         else:
             attrs = write_run(result, task.path, command_line=options.command_line, store=options.store,
-                              config_yaml=config_yaml)
+                              config_yaml=config_yaml, config_hash=task.config_hash or None)
         row = row_from_attributes(attrs, Path(task.path).name)
         return _finished(record, result.timing, row, t1 - t0, _time.perf_counter() - t1)
 
@@ -211,7 +214,7 @@ class _ChunkFile:
     the folder of the tasks' paths. Records name the store file as their ``path``; their
     ``attrs`` are the run's row (:func:`rbstab.io.chunk.read_chunk_rows`)."""
 
-    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions) -> None:
+    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> None:
         from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name
 
         self.options = options
@@ -220,9 +223,9 @@ class _ChunkFile:
         self.final = str(Path(first.path).parent / name)
         self._tmp = tempfile.TemporaryDirectory(prefix="rbstab-") if options.return_bytes else None
         where = Path(self._tmp.name) / name if self._tmp else Path(self.final)
-        rows = [StoreRow(t.index, t.run_id, t.base, t.coords) for t in tasks]
+        rows = [StoreRow(t.index, t.run_id, t.base, t.coords, t.template) for t in tasks]
         self.writer = ChunkWriter(where, rows, store=options.store, parameters=options.parameters,
-                                  command_line=options.command_line, sweep=options.sweep)
+                                  command_line=options.command_line, sweep=options.sweep, templates=templates)
         self.records: list[dict[str, Any]] = []
 
     def __enter__(self) -> "_ChunkFile":
@@ -391,13 +394,16 @@ ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, A
 DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256}
 
 
-def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str, Any]]:
+def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> list[dict[str, Any]]:
     """Execute a chunk of runs; the function every executor submits.
 
     Parameters
     ----------
     tasks : sequence of RunTask
     options : WorkerOptions
+    templates : sequence of dict
+        The configurations the tasks start from (``RunTask.template``), stored once in a
+        store file instead of each run's configuration.
 
     Returns
     -------
@@ -412,7 +418,7 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str
         ``worker_peak_rss``, the worker process's peak resident set size [bytes].
     """
     try:
-        with SINKS[options.layout](tasks, options) as sink:
+        with SINKS[options.layout](tasks, options, templates) as sink:
             records = ENGINES[options.engine](tasks, options, sink)
     except Exception as exc:  # the chunk's file could not be written: each of its runs is an error
         records = [_error_record(task, exc) for task in tasks]
@@ -430,3 +436,76 @@ def _peak_rss() -> int | None:
         return None
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return int(peak) if sys.platform == "darwin" else int(peak) * 1024
+
+
+@dataclass
+class ChunkResult:
+    """What a worker returns for a slice of a sweep's run table (:func:`run_table_chunk`).
+
+    Attributes
+    ----------
+    frame : pandas.DataFrame
+        A row per run, its index row as stored: ``run_id``, ``status``, ``message``,
+        ``wall_time``, the summary columns, ``solver_*``, ``config_hash``, ``created``,
+        ``file`` and ``file_row`` (None where no file was written).
+    data : dict of str to bytes
+        Final path -> the file's bytes (``WorkerOptions.return_bytes``).
+    tracebacks : dict of str to str
+        run_id -> traceback of a run that raised.
+    errno : int or None
+        An I/O error's errno that stops the sweep (a full disk), else None.
+    path : str
+        The folder's path of a written file, for a run without one.
+    timing : dict of str to float
+        Seconds summed over the runs (see :class:`rbstab.sweep.SweepOutcome`).
+    worker_peak_rss : int or None
+    """
+
+    frame: Any
+    data: dict
+    tracebacks: dict
+    errno: int | None
+    path: str
+    timing: dict
+    worker_peak_rss: int | None
+
+
+def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResult:
+    """Run the runs of a :class:`rbstab.sweep.table.TableSlice` (each configuration built
+    here from its template and its row) and return their index rows as columns.
+
+    ``folder``: the sweep's ``runs/`` folder (store files and run files go there).
+    """
+    import os
+
+    import pandas as pd
+
+    from ..sweep.folder import NOT_IN_INDEX
+
+    tasks = [RunTask(rid, part.resolved(j), os.path.join(folder, f"{rid}.h5"), int(part.index[j]), str(part.base[j]),
+                     {name: _scalar(values[j]) for name, values in part.coords.items()}, str(part.config_hash[j]),
+                     "", int(part.template[j]))
+             for j, rid in enumerate(part.run_id)]
+    records = run_chunk(tasks, options, part.templates)
+    rows, data, tracebacks, timing, errno = [], {}, {}, {}, None
+    for rec in records:
+        row = {k: v for k, v in (rec.get("attrs") or {}).items() if k not in NOT_IN_INDEX and k != "created"}
+        row.update(run_id=rec["run_id"], status=rec["status"], message=rec.get("message") or "")
+        if rec.get("attrs") is None:
+            row.update(file=None, file_row=None)
+        row["created"] = (rec.get("attrs") or {}).get("created")
+        rows.append(row)
+        if rec.get("data") is not None:
+            data[rec["path"]] = rec["data"]
+        if "traceback" in rec:
+            tracebacks[rec["run_id"]] = rec["traceback"]
+        errno = errno or rec.get("errno")
+        for key, seconds in (rec.get("timing") or {}).items():
+            timing[key] = timing.get(key, 0.0) + seconds
+    frame = pd.DataFrame.from_records(rows)
+    rss = records[0].get("worker_peak_rss") if records else None
+    return ChunkResult(frame, data, tracebacks, errno, folder, timing, rss)
+
+
+def _scalar(value: Any) -> Any:
+    return value.item() if hasattr(value, "item") else value

@@ -1,0 +1,444 @@
+"""Validation of a sweep's runs as columns (see :mod:`rbstab.sweep.table`).
+
+Each template (the first run of a base and combination of non-numeric values) is
+validated by the config schema. Every numeric field the varied keys touch is then
+assembled as an array over the runs and checked at once against the constraint the
+schema declares for it (:func:`rbstab.config.schema.field_rule`), with the joint checks
+made on the columns. The runs these checks flag are validated one by one by the schema,
+whose messages name the run, the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import warnings
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .spec import Base, SweepSpec, SweepSpecError
+
+__all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report"]
+
+_MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
+#: Flagged runs validated one by one (for the count of invalid runs); beyond it, the runs
+#: the column checks flag are counted as invalid when every one validated so far was.
+_MAX_CONFIRMED = 2000
+_MATRICES = {"inertia", "k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d"}
+
+
+def _short(value: Any, limit: int = 40) -> str:
+    if isinstance(value, np.ndarray | np.generic):
+        value = value.tolist()
+    text = json.dumps(value, default=str) if not isinstance(value, str) else repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _plain(value: Any) -> Any:
+    return value.tolist() if isinstance(value, np.ndarray | np.generic) else value
+
+
+def _expand_diagonal(data: dict, key: str) -> None:
+    """Before setting a matrix entry ``key.i.j``: a matrix written as 3 numbers (a
+    diagonal) becomes the 3x3 list of lists it stands for."""
+    parts = key.split(".")
+    if len(parts) != 4 or parts[1] not in _MATRICES or not (parts[2].isdigit() and parts[3].isdigit()):
+        return
+    section = data.get(parts[0])
+    value = section.get(parts[1]) if isinstance(section, dict) else None
+    if isinstance(value, list) and len(value) == 3 and not any(isinstance(v, list) for v in value):
+        section[parts[1]] = np.diag(np.asarray(value, dtype=float)).tolist()
+
+
+def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: str) -> dict:
+    """The configuration mapping of one run as written: ``base`` with the varied values set
+    (a list index into a list the base leaves at its default starts from the default).
+
+    Raises
+    ------
+    ConfigError
+        If a key cannot be set (it indexes into a value that is not a list).
+    """
+    from ..config import set_dotted
+
+    data = copy.deepcopy(base.data)
+    for key, value in zip(keys, values):
+        _expand_diagonal(data, key)
+        set_dotted(data, key, _plain(value))
+    data["name"] = name
+    return data
+
+
+def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:
+    """(the value of ``key`` in ``base`` as a float array, None) or (None, problem): what a
+    ``scale_uniform`` factor scales (the schema's default where the base leaves it unset)."""
+    from ..config import get_dotted
+    from .schema import numeric_array
+
+    try:
+        value = get_dotted(base.data, key)
+    except KeyError:
+        value = _default(base, key)
+        if value is None:
+            return None, (f"random.params.{key}: scale_uniform needs a base value, but '{key}' is not set in "
+                          f"base '{base.label}' and has no default")
+    arr = numeric_array(value)
+    if arr is None:
+        return None, (f"random.params.{key}: scale_uniform needs a number or a list of numbers to scale, but "
+                      f"base '{base.label}' has {_short(value, 80)}")
+    return arr, None
+
+
+def _default(base: Base, key: str) -> Any:
+    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+        try:
+            return get_dotted(config_from_mapping(base.data, default_name=base.label).resolved, key)
+        except (ConfigError, KeyError):
+            return None
+
+
+def _validate_row(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray, i: int):
+    """(RunConfig, []) or (None, problems) of run ``i`` validated by the config schema."""
+    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+
+    base = spec.bases[int(base_index[i])]
+    try:
+        data = row_mapping(base, list(columns), [columns[k][i] for k in columns], "sweep-run")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+            return config_from_mapping(data, source=f"base '{base.label}'"), []
+    except ConfigError as exc:
+        return None, exc.errors
+
+
+class _Fields:
+    """Numeric config fields over the runs, ``(n, *shape)``: the templates' values with the
+    varied entries set (built when first asked for)."""
+
+    def __init__(self, columns: Mapping[str, np.ndarray], templates: Sequence[Mapping], template: np.ndarray) -> None:
+        self.columns, self.templates, self.template = columns, templates, template
+        self._cache: dict[tuple[str, str], tuple[np.ndarray, np.ndarray] | None] = {}
+
+    def varied(self, section: str, name: str) -> bool:
+        prefix = f"{section}.{name}"
+        return any(k == prefix or k.startswith(prefix + ".") for k in self.columns)
+
+    def get(self, section: str, name: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """(values (n, *shape), mask of the runs that have the field) or None."""
+        if (section, name) not in self._cache:
+            self._cache[section, name] = self._build(section, name)
+        return self._cache[section, name]
+
+    def _build(self, section: str, name: str):
+        per_template, has = [], []
+        matrix = name in _MATRICES
+        if matrix and self._diagonal(section, name):
+            return self._build_diagonal(section, name)
+        from ..config.schema import field_rule
+
+        rule = field_rule(section, name) or ("number",)
+        shape = (3, 3) if matrix else (3,) if rule[0] in ("vector", "theta") else ()
+        for t in self.templates:
+            value = t.get(section, {}).get(name)
+            has.append(value is not None)
+            try:
+                arr = np.asarray(value if value is not None else np.nan, dtype=float)
+            except (TypeError, ValueError):  # not numbers: the schema refuses it
+                return None
+            if matrix and arr.ndim == 1:
+                arr = np.diag(arr)
+            if arr.shape not in (shape, ()):
+                return None
+            per_template.append(np.broadcast_to(arr, shape))
+        stacked = np.stack(per_template)
+        values = stacked[self.template].copy()
+        present = np.asarray(has)[self.template]
+        prefix = f"{section}.{name}"
+        for key, col in self.columns.items():
+            if not (key == prefix or key.startswith(prefix + ".")) or col.dtype == object:
+                continue
+            idx = tuple(int(p) for p in key[len(prefix) + 1:].split(".") if p)
+            col = col.astype(float)
+            if matrix and len(idx) == 0 and col.ndim == 2:
+                col = col[:, :, None] * np.eye(3)
+            elif matrix and len(idx) == 1 and col.ndim == 1:
+                idx = (idx[0], idx[0])  # an entry of a diagonal written as 3 numbers
+            try:
+                values[(slice(None), *idx)] = col
+            except (ValueError, IndexError):
+                return None
+        return values, present
+
+
+    def _diagonal(self, section: str, name: str) -> bool:
+        """Whether a matrix field is a diagonal (3 numbers) in every template and every
+        varied value of it: then held as (n, 3)."""
+        if any(isinstance(t.get(section, {}).get(name), list) and any(isinstance(r, list) for r in
+               t[section][name]) for t in self.templates):
+            return False
+        prefix = f"{section}.{name}"
+        for key, col in self.columns.items():
+            if key == prefix and (col.dtype == object or col.ndim != 2):
+                return False
+            if key.startswith(prefix + ".") and (col.dtype == object or col.ndim != 1 or key.count(".") != 2):
+                return False
+        return True
+
+    def _build_diagonal(self, section: str, name: str):
+        values = [t.get(section, {}).get(name) for t in self.templates]
+        stacked = np.array([v if v is not None else [np.nan] * 3 for v in values], dtype=float)
+        out = stacked[self.template]
+        prefix = f"{section}.{name}"
+        for key, col in self.columns.items():
+            if key == prefix:
+                out = col.astype(float)
+            elif key.startswith(prefix + "."):
+                out = out.copy() if out.base is not None else out
+                out[:, int(key.rsplit(".", 1)[1])] = col
+        return out, np.array([v is not None for v in values])[self.template]
+
+
+def full_matrices(values: np.ndarray) -> np.ndarray:
+    """Matrices (n, 3, 3) of a field held as diagonals (n, 3) or as matrices."""
+    return values[:, :, None] * np.eye(3) if values.ndim == 2 else values
+
+
+def _number_bad(values: np.ndarray, bounds: Mapping[str, Any], integer_column: bool) -> np.ndarray:
+    from ..config.schema import MAX_MAGNITUDE
+
+    v = values.reshape(len(values), -1)
+    with np.errstate(invalid="ignore"):
+        bad = np.isnan(v) | (np.abs(v) > MAX_MAGNITUDE) & np.isfinite(v)
+        if not bounds["allow_inf"]:
+            bad |= np.isinf(v)
+        for op, limit in (("gt", np.greater), ("ge", np.greater_equal), ("lt", np.less), ("le", np.less_equal)):
+            if bounds[op] is not None:
+                bad |= ~limit(v, bounds[op])
+    bad = bad.any(axis=1)
+    if bounds["integer"] and not integer_column:
+        bad[:] = True
+    return bad
+
+
+def _matrix_bad(values: np.ndarray, kind: str) -> np.ndarray:
+    from ..config.schema import MAX_MAGNITUDE, MIN_INVERTED
+
+    flat = values.reshape(len(values), -1)
+    bad = ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
+    if values.ndim == 2:  # diagonals
+        smallest = values.min(axis=1)
+        return bad | ((smallest < MIN_INVERTED) if kind == "definite" else (smallest < 0))
+    good = np.where(bad[:, None, None], np.eye(3), values)
+    scale = np.abs(good).max(axis=(1, 2))
+    bad |= (np.abs(good - good.transpose(0, 2, 1)).max(axis=(1, 2)) > 1e-12 * scale)
+    smallest = np.linalg.eigvalsh((good + good.transpose(0, 2, 1)) / 2)[:, 0]
+    bad |= (smallest < MIN_INVERTED) if kind == "definite" else (smallest < 0)
+    return bad
+
+
+def _rule_bad(rule: tuple, values: np.ndarray, integer_column: bool) -> np.ndarray:
+    """The runs whose values break the schema's constraint ``rule`` (field_rule)."""
+    from ..config.schema import MAX_MAGNITUDE
+
+    if rule[0] == "number":
+        return _number_bad(values, rule[1], integer_column)
+    if rule[0] == "matrix":
+        return _matrix_bad(values, rule[1])
+    flat = values.reshape(len(values), -1)
+    bad = ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
+    if rule[0] == "theta":
+        bad |= ~(np.abs(values[:, 1]) < math.pi / 2)
+    return bad
+
+
+def _field_flags(fields: _Fields, n: int) -> np.ndarray:
+    """Runs a varied numeric field's own constraint flags."""
+    from ..config.schema import field_rule
+
+    flagged = np.zeros(n, dtype=bool)
+    touched = {tuple(k.split(".")[:2]) for k, v in fields.columns.items() if v.dtype != object and "." in k}
+    for section, name in touched:
+        rule = field_rule(section, name)
+        got = fields.get(section, name)
+        if got is None:  # entries that do not fit the field's shape: the schema decides
+            flagged[:] = True
+            continue
+        if rule is None:
+            continue
+        values, present = got
+        integer = all(v.dtype.kind == "i" for k, v in fields.columns.items() if k.startswith(f"{section}.{name}"))
+        flagged |= present & _rule_bad(rule, values, integer)
+    return flagged
+
+
+def _stiffness(variant: str, get) -> np.ndarray | None:
+    k_t = get("k_t")
+    if variant in ("free", "sliding"):
+        return k_t
+    if variant == "visco_elastic":
+        return k_t + get("k_c")
+    if variant == "embedded":
+        k_c, k_d = get("k_c"), get("k_d")
+        return np.block([[k_t + k_c, -k_c], [-k_c, k_c + k_d]])
+    return None
+
+
+def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray:
+    """Runs the schema's joint checks may refuse (gimbal-lock margin, samples and steps
+    that let a run end, the weight held); the schema decides."""
+    from ..config.schema import MIN_SAMPLE_SPACING
+    from ..config.physics import SINGULAR_RTOL
+
+    flagged = np.zeros(n, dtype=bool)
+    if fields.varied("initial_state", "theta") or fields.varied("simulation", "gimbal_margin"):
+        theta, margin = fields.get("initial_state", "theta"), fields.get("simulation", "gimbal_margin")
+        if theta is None or margin is None:
+            return np.ones(n, dtype=bool)
+        with np.errstate(invalid="ignore"):
+            flagged |= ~(np.abs(theta[0][:, 1]) < math.pi / 2 - margin[0])
+    if any(fields.varied("simulation", k) for k in ("t_end", "n_samples", "max_step", "max_steps")):
+        got = [fields.get("simulation", k) for k in ("t_end", "n_samples", "max_step", "max_steps")]
+        if any(g is None for g in got):
+            return np.ones(n, dtype=bool)
+        (t_end, _), (samples, _), (step, _), (steps, _) = got
+        with np.errstate(invalid="ignore", divide="ignore"):
+            flagged |= ~(t_end / (samples - 1) >= MIN_SAMPLE_SPACING) | (t_end / np.where(np.isnan(step), np.inf, step) > steps)
+    weight_keys = ("k_t", "k_c", "k_d", "k_s", "boundary_layer")
+    if any(fields.varied("body", k) for k in ("mass", "gravity")) or any(fields.varied("controller", k) for k in weight_keys):
+        gravity = fields.get("body", "gravity")
+        pulls = np.ones(n, dtype=bool) if gravity is None else np.any(gravity[0] != 0, axis=1)
+        for variant in sorted(set(variants)):
+            rows = np.isin(fields.template, [t for t, v in enumerate(variants) if v == variant]) & pulls
+            if variant == "permanent" or not rows.any():
+                continue
+
+            k_t = fields.get("controller", "k_t")
+            if k_t is not None and k_t[0].ndim == 2:
+                rows &= ~(k_t[0] > 0).all(axis=1)  # K_t alone holds any weight (unheld_weight's shortcut)
+                if not rows.any():
+                    continue
+
+            def get(name, rows=rows):
+                got = fields.get("controller", name)
+                return np.full((rows.sum(), 3, 3), np.nan) if got is None else full_matrices(got[0][rows])
+
+            stiffness = _stiffness(str(variant), get)
+            if stiffness is None:
+                flagged |= rows
+                continue
+            good = np.nan_to_num(stiffness)
+            eig = np.linalg.eigvalsh((good + good.transpose(0, 2, 1)) / 2)
+            held = eig[:, 0] > SINGULAR_RTOL * np.abs(eig).max(axis=1)
+            flagged[np.flatnonzero(rows)[~held]] = True
+    return flagged
+
+
+def _templates(spec: SweepSpec, columns, base_index, template, first_of) -> tuple[list, list, dict, np.ndarray]:
+    """(resolved template configs (None for an invalid one), their warnings, invalid run ->
+    its problems, the runs counted invalid). A template is the first run of its kind that
+    the schema accepts; a kind none of whose first :data:`_MAX_CONFIRMED` runs is valid
+    counts every run invalid."""
+    out, notes, invalid = [], [], {}
+    counted = np.zeros(len(template), dtype=bool)
+    for t in range(len(first_of)):
+        rows = np.flatnonzero(template == t)
+        config = None
+        for i in rows[:_MAX_CONFIRMED]:
+            config, problems = _validate_row(spec, columns, base_index, int(i))
+            if config is not None:
+                break
+            invalid[int(i)] = problems
+            counted[i] = True
+        if config is None:
+            counted[rows] = True
+            out.append(None), notes.append(())
+            continue
+        out.append({k: v for k, v in config.resolved.items() if k != "name"}), notes.append(config.warnings)
+    return out, notes, invalid, counted
+
+
+def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray,
+                     template: np.ndarray, first_of: np.ndarray) -> tuple[tuple, list[str]]:
+    """Validate every run (module docstring); (templates, warning lines).
+
+    Raises
+    ------
+    SweepSpecError
+        Listing the invalid runs (:func:`invalid_report`).
+    """
+    n = len(base_index)
+    templates, notes, invalid_rows, counted = _templates(spec, columns, base_index, template, first_of)
+    valid = [t if t is not None else {} for t in templates]
+    fields = _Fields(columns, valid, template)
+    variants = [t.get("controller", {}).get("variant", "") for t in valid]  # per template
+    flagged = (_field_flags(fields, n) | _joint_flags(fields, variants, n)) & ~counted
+    candidates = np.flatnonzero(flagged)
+    exact = True  # whether every run the checks flagged so far is invalid
+    for k, i in enumerate(candidates):
+        if k >= _MAX_CONFIRMED and exact:  # the checks flag invalid runs only: count the rest
+            counted[candidates[k:]] = True
+            break
+        config, problems = _validate_row(spec, columns, base_index, int(i))
+        if config is None:
+            invalid_rows[int(i)] = problems
+            counted[i] = True
+        exact = exact and config is None
+    n_invalid = int(counted.sum())
+    if n_invalid:
+        listed = sorted(invalid_rows)[:_MAX_LISTED]
+        raise SweepSpecError(invalid_report(spec, columns, base_index, n_invalid,
+                                            [(i, invalid_rows[i]) for i in listed]), spec.source)
+    return tuple(templates), _warning_lines(spec, fields, notes, template, n)
+
+
+def _warning_lines(spec: SweepSpec, fields: _Fields, notes: Sequence[Sequence[str]], template: np.ndarray,
+                   n: int) -> list[str]:
+    """Physical-plausibility warnings, one line per config key: ``"k of n runs: <the
+    message of the first run with it>"``; the triangle inequality of a varied inertia is
+    checked on the column."""
+    from ..config.physics import inertia_warnings
+
+    counts = np.bincount(template, minlength=len(notes))
+    first: dict[str, str] = {}
+    count: dict[str, int] = {}
+    varied_inertia = fields.varied("body", "inertia")
+    for t, lines in enumerate(notes):
+        for message in lines:
+            key = message.partition(":")[0]
+            if varied_inertia and "body.inertia" in key:
+                continue
+            first.setdefault(key, message)
+            count[key] = count.get(key, 0) + int(counts[t])
+    got = fields.get("body", "inertia") if varied_inertia else None
+    if got is not None:
+        values = got[0]
+        j = np.sort(values, axis=1) if values.ndim == 2 else np.linalg.eigvalsh(np.nan_to_num(values))
+        violate = (j[:, 2] > (j[:, 0] + j[:, 1]) * (1 + 1e-12))
+        if violate.any():
+            i = int(np.flatnonzero(violate)[0])
+            (message,) = inertia_warnings(full_matrices(values[i:i + 1])[0])
+            key = message.partition(":")[0]
+            first[key], count[key] = message, int(violate.sum())
+    return [f"{count[k]} of {n} runs: {first[k]}" for k in first]
+
+
+def invalid_report(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray, n_invalid: int,
+                   listed: Sequence[tuple[int, Sequence[str]]], outcome: str = "nothing was run") -> list[str]:
+    """The lines of the :class:`SweepSpecError` for invalid runs: a header, then each listed
+    run (index, base, varied values) with its problems, the rest counted."""
+    n = len(base_index)
+    width = max(4, len(str(max(n - 1, 0))))
+    lines = [f"{n_invalid} of {n} runs have an invalid configuration; {outcome}"]
+    for i, problems in listed:
+        shown = ", ".join(f"{k}={_short(v[i])}" for k, v in columns.items())
+        head = f"run r{i:0{width}d} (base {spec.bases[int(base_index[i])].label}" + (f"; {shown})" if shown else ")")
+        lines += [f"{head}: {line}" for line in problems]
+    if n_invalid > len(listed):
+        lines.append(f"... and {n_invalid - len(listed)} more invalid runs")
+    return lines

@@ -1,0 +1,238 @@
+"""A sweep as a table of runs: design tables, column validation against the config schema,
+large explicit specs, dry runs, configurations rebuilt from the store, damaged files.
+
+Runs are short (t_end = 0.2 s, 201 samples).
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from rbstab.config import ConfigError, config_from_mapping
+from rbstab.sweep import SweepSpecError, expand, load_spec, plan_table, resolved_config, run_sweep, spec_from_mapping
+from rbstab_cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
+SHORT = ["simulation.t_end=0.2", "simulation.n_samples=201"]
+
+pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibilityWarning")
+
+
+def _validated_alone(resolved: dict):
+    """(config, None) or (None, its problems) of one run validated by the schema alone."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            return config_from_mapping(resolved), None
+        except ConfigError as exc:
+            return None, exc.errors
+
+
+def test_design_table_from_csv_dataframe_and_mapping(tmp_path):
+    """Columns named by dotted keys, vector entries key[i] and matrix entries key[i,j] set
+    those entries; the others come from the base. A CSV file, a DataFrame and a mapping of
+    arrays give the same runs and ids."""
+    design = pd.DataFrame({"body.mass": [30.0, 45.0, 50.0], "body.inertia[0,0]": [9.0, 10.0, 11.0],
+                           "body.inertia[1,1]": [7.0, 8.0, 9.0], "initial_state.omega[1]": [20.0, 30.0, 40.0],
+                           "controller.variant": ["embedded", "visco_elastic", "embedded"]})
+    design.to_csv(tmp_path / "design.csv", index=False)
+    spec = {"name": "design", "base": str(CASE3), "table": "design.csv"}
+    (tmp_path / "spec.yaml").write_text(yaml.safe_dump(spec))
+    from_file = expand(load_spec(tmp_path / "spec.yaml"))
+    from_frame = expand(spec_from_mapping({**spec, "table": design}))
+    from_mapping = expand(spec_from_mapping({**spec, "table": {k: design[k].to_numpy() for k in design}}))
+    assert [r.run_id for r in from_file] == [r.run_id for r in from_frame] == [r.run_id for r in from_mapping]
+    run = from_file[1]
+    assert run.config.body.mass == 45.0 and run.variant == "visco_elastic"
+    assert run.config.body.inertia.tolist() == [[10.0, 0.0, 0.0], [0.0, 8.0, 0.0], [0.0, 0.0, 0.4]]
+    assert run.config.initial_state["omega"].tolist() == [16.0, 30.0, -16.0]
+    assert [r.variant for r in from_file] == ["embedded", "visco_elastic", "embedded"]
+    # from the command line, with a dry run: nothing written
+    result = CliRunner().invoke(cli, ["sweep", str(CASE3), "--table", str(tmp_path / "design.csv"), "--dry-run",
+                                      "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    assert "case3_embedded: 3 runs (dry run" in result.output and "inertia_0_0 (body.inertia.0.0)" in result.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("columns, expected", [
+    ({"body.mass": [1.0], "bad name!": [2.0]}, "column 'bad name!' is not a config key"),
+    ({"body.mass": [1.0, 2.0], "body.inertia[0,0]": [1.0]}, "columns of different lengths"),
+    ({"body.mass": []}, "a table without rows"),
+])
+def test_design_table_errors_name_the_column(columns, expected):
+    with pytest.raises(SweepSpecError, match=expected.replace("(", r"\(").replace("[", r"\[")):
+        spec_from_mapping({"name": "t", "base": str(CASE3), "table": columns})
+    with pytest.raises(SweepSpecError, match="column 'body.mass' overlaps 'grid.body.mass'"):
+        spec_from_mapping({"name": "t", "base": str(CASE3), "table": {"body.mass": [1.0]},
+                           "grid": {"body.mass": [2.0]}})
+
+
+def test_column_validation_refuses_what_the_schema_refuses():
+    """The runs the column checks refuse are exactly those that validating each run alone
+    refuses, with its messages: bounds, finiteness and magnitude, (semi-)definite matrices,
+    the gimbal-lock margin and the weight held by the springs."""
+    rng = np.random.default_rng(3)
+    n = 60
+    mass = rng.choice([41.0, -1.0, 0.0, 2e12, np.nan], size=n, p=[0.6, 0.1, 0.1, 0.1, 0.1])
+    theta_1 = rng.choice([0.0, 1.5, 1.5705, 1.6], size=n)
+    k_t_2_2 = rng.choice([3280.0, 0.0, -5.0], size=n)
+    inertia_0_1 = rng.choice([0.0, 0.5, 100.0], size=n)  # 100: not positive definite
+    table = {"body.mass": mass, "initial_state.theta[1]": theta_1, "controller.k_t[2]": k_t_2_2,
+             "body.inertia[0,1]": inertia_0_1, "body.inertia[1,0]": inertia_0_1}
+    base = yaml.safe_load(CASE3.read_text())
+    base["body"]["gravity"] = [0.0, 0.0, -9.81]  # the weight must be held: K_t = 0 along z is refused
+    spec = spec_from_mapping({"name": "v", "base": base, "table": table})
+    expected = {}
+    labels = {}
+    for i in range(n):
+        data = yaml.safe_load(CASE3.read_text())
+        data["body"]["gravity"] = [0.0, 0.0, -9.81]
+        data["body"]["mass"] = float(mass[i])
+        data["initial_state"]["theta"] = [0.0, float(theta_1[i]), 0.0]
+        data["controller"]["k_t"][2] = float(k_t_2_2[i])
+        data["body"]["inertia"] = [[10.0, inertia_0_1[i], 0.0], [inertia_0_1[i], 8.0, 0.0], [0.0, 0.0, 0.4]]
+        data["name"] = "x"
+        config, problems = _validated_alone(data)
+        if problems:
+            expected[i] = problems
+        labels[i] = f"run r{i:04d} (base case3_embedded"
+    assert 0 < len(expected) < n
+    with pytest.raises(SweepSpecError) as info:
+        plan_table(spec)
+    lines = info.value.errors
+    assert lines[0] == f"{len(expected)} of {n} runs have an invalid configuration; nothing was run"
+    listed = sorted(expected)[:10]
+    for i in listed:
+        mine = [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(labels[i])]
+        assert mine == expected[i], i
+    assert lines[-1] == f"... and {len(expected) - 10} more invalid runs"
+
+
+def test_a_10000_run_zip_spec_is_read_and_planned(tmp_path):
+    """An explicit design of 10,000 runs (mass, inertia matrix, K_c, L_c, K_t, Omega per
+    run), as a design-of-experiments tool writes it, is within the YAML reader's limits;
+    an alias bomb of fewer characters is not."""
+    rng = np.random.default_rng(0)
+    n = 10_000
+    inertia = np.zeros((n, 3, 3))
+    inertia[:, [0, 1, 2], [0, 1, 2]] = rng.uniform([9, 7, 3], [11, 9, 5], size=(n, 3))
+    inertia[:, 0, 1] = inertia[:, 1, 0] = rng.uniform(-0.5, 0.5, size=n)
+
+    def rows(a):
+        return "[" + ", ".join("[" + ", ".join(f"{x:.6g}" for x in r.ravel()) + "]" if r.ndim == 1 else
+                               "[" + ", ".join("[" + ", ".join(f"{x:.6g}" for x in q) + "]" for q in r) + "]"
+                               for r in a) + "]"
+
+    zipped = {"body.mass": "[" + ", ".join(f"{x:.6g}" for x in rng.uniform(30, 50, n)) + "]",
+              "body.inertia": rows(inertia),
+              "controller.k_c": rows(rng.uniform(4000, 13000, (n, 3))),
+              "controller.l_c": rows(rng.uniform(400, 700, (n, 3))),
+              "controller.k_t": rows(rng.uniform(3000, 5000, (n, 3))),
+              "initial_state.omega": rows(rng.normal([16, 32, -16], 4, (n, 3)))}
+    text = f"name: doe\nbase: {CASE3}\nzip:\n" + "".join(f"  {k}: {v}\n" for k, v in zipped.items())
+    (tmp_path / "doe.yaml").write_text(text)
+    spec = load_spec(tmp_path / "doe.yaml")
+    table = plan_table(spec)
+    assert table.n == n and table.columns["body.inertia"].shape == (n, 3, 3)
+    assert len(set(table.ids())) == n
+    bomb = ['a: &a ["lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol", "lol"]']
+    for i in range(1, 7):  # 9^7 ~ 4.8e6 values once expanded, from ~250 bytes
+        bomb.append(f"{chr(97 + i)}: &{chr(97 + i)} [" + ", ".join([f"*{chr(96 + i)}"] * 9) + "]")
+    (tmp_path / "bomb.yaml").write_text("\n".join(bomb))
+    with pytest.raises(SweepSpecError, match="values once aliases are expanded"):
+        load_spec(tmp_path / "bomb.yaml")
+
+
+def test_random_keys_draw_from_their_own_streams():
+    """Each random key has its own stream of the seed: adding a key leaves the others'
+    values as they were, and the first samples do not depend on random.n."""
+    one = {"name": "r", "base": str(CASE3), "random": {"n": 50, "seed": 4, "params": {
+        "body.mass": {"uniform": [30, 50]}}}}
+    two = {**one, "random": {**one["random"], "params": {**one["random"]["params"],
+                                                         "controller.k_c": {"scale_uniform": [0.5, 2]}}}}
+    more = {**two, "random": {**two["random"], "n": 80}}
+    a, b, c = (plan_table(spec_from_mapping(s)) for s in (one, two, more))
+    assert np.array_equal(a.columns["body.mass"], b.columns["body.mass"])
+    assert np.array_equal(b.columns["controller.k_c"], c.columns["controller.k_c"][:50])
+    assert b.ids() == c.ids()[:50]
+
+
+def test_dry_run_prints_ranges_and_the_first_and_last_runs(tmp_path):
+    args = ["sweep", str(CASE3), "--random", "body.mass=uniform:[30,50]", "-n", "2000", "--store", "summary",
+            "--dry-run", "-o", str(tmp_path / "out")]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    assert "case3_embedded: 2000 runs (dry run: nothing run or written)" in result.output
+    assert "mass (body.mass): 30" in result.output and "... 1990 more runs" in result.output
+    assert "store ~" in result.output and "wall time ~" in result.output
+    table = plan_table(load_spec(CASE3, ["sweep.random.params.body.mass={uniform: [30, 50]}", "sweep.random.n=2000"]))
+    ids = table.ids()
+    assert ids[0] in result.output and ids[-1] in result.output and ids[1000] not in result.output
+    every = CliRunner().invoke(cli, [*args, "-v"])
+    assert ids[1000] in every.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture(scope="module")
+def small_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sweeps")
+    spec = spec_from_mapping({"name": "small", "base": str(CASE3), "grid": {
+        "controller.variant": ["visco_elastic", "embedded"], "controller.k_c.2": [3000.0, 3500.0, 4000.0]}},
+        overrides=SHORT)
+    run_sweep(spec, out, jobs=2, chunk_size=2, progress=False)
+    return spec, out / "small"
+
+
+def test_a_runs_config_is_rebuilt_from_the_store(small_sweep):
+    """resolved_config and rbstab show --run give each run's configuration as the plan made
+    it (validated alone it is the same), as YAML a config file takes."""
+    spec, folder = small_sweep
+    runs = expand(spec)
+    for run in runs:
+        rebuilt = resolved_config(folder, run.run_id)
+        assert rebuilt["name"] == run.run_id
+        config, problems = _validated_alone(rebuilt)
+        assert problems is None and config.resolved == run.config.resolved
+    result = CliRunner().invoke(cli, ["show", str(folder), "--run", runs[4].run_id])
+    assert result.exit_code == 0, result.output
+    shown = yaml.safe_load(result.output)
+    assert shown["controller"]["variant"] == "embedded" and shown["controller"]["k_c"][2] == 3500.0
+    bad = CliRunner().invoke(cli, ["show", str(folder), "--run", "r9999-nothere"])
+    assert bad.exit_code == 1 and "no run 'r9999-nothere'" in bad.output and "Traceback" not in bad.output
+
+
+def test_damaged_store_files_of_any_kind_are_set_aside_and_their_runs_redone(tmp_path):
+    """A store file truncated or emptied (a crash, a full disk) is renamed *.damaged and its
+    runs are run again; open_sweep and xarray.open_mfdataset of runs/*.h5 then work."""
+    import xarray as xr
+
+    from rbstab import open_sweep
+
+    spec = spec_from_mapping({"name": "dmg", "base": str(CASE3), "grid": {"body.mass": [40.0, 41.0, 42.0, 43.0,
+                                                                                         44.0, 45.0]}},
+                             overrides=SHORT)
+    first = run_sweep(spec, tmp_path, jobs=2, chunk_size=2, progress=False)
+    assert first.counts["success"] == 6
+    runs = tmp_path / "dmg" / "runs"
+    files = sorted(runs.glob("chunk-*.h5"))
+    assert len(files) == 3
+    files[0].write_bytes(files[0].read_bytes()[:2000])  # truncated
+    files[1].write_bytes(b"")  # emptied
+    again = run_sweep(spec, tmp_path, jobs=2, chunk_size=2, progress=False)
+    assert sorted(name for name, _ in again.damaged) == sorted(p.name for p in files[:2])
+    assert (again.n_skipped, again.n_executed, again.counts["success"]) == (2, 4, 6)
+    assert again.stale_files == []
+    assert sorted(p.name for p in runs.glob("*.damaged")) == sorted(p.name + ".damaged" for p in files[:2])
+    ds = open_sweep(tmp_path / "dmg")
+    assert ds.sizes["run"] == 6 and np.isfinite(ds.lyapunov.values).all()
+    with xr.open_mfdataset(sorted(runs.glob("*.h5")), engine="h5netcdf") as mf:
+        assert mf.sizes["run"] == 6 and sorted(mf["run"].values) == list(range(6))
