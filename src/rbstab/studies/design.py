@@ -434,7 +434,7 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
         As :func:`rbstab.sweep.run_sweep`.
     """
     folder = Path(folder)
-    mapping = {"name": folder.name, "base": dict(base), "zip": design_mappings(design)}
+    mapping = {"name": folder.name, "base": dict(base), "table": design}
     spec = spec_from_mapping(mapping)
     ensure_compiled(say=log, sign_law=True)
     run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
