@@ -14,6 +14,7 @@ import signal
 import click
 
 from rbstab import __version__
+from rbstab.io.atomic import describe_os_error
 
 from .analyze import analyze
 from .report import report
@@ -38,8 +39,6 @@ class _Group(click.Group):
     """The command group, turning faults into one line and interrupts into 130 / 143."""
 
     def invoke(self, ctx: click.Context):
-        from rbstab.io.atomic import describe_os_error
-
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt as exc:

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import difflib
 from pathlib import Path
 
 import click
+
+from rbstab.sweep.folder import is_sweep_folder, read_index, read_parameters, read_spec
 
 from .console import get_console
 from .options import console_options, json_option
@@ -44,7 +47,7 @@ def _run_lines(rows) -> None:
 
 def _show_chunk(path: str) -> None:
     """One line per run of a store file (``rbstab sweep``, layout chunk)."""
-    from rbstab.io.chunk import read_chunk_rows
+    from rbstab.io.chunk import read_chunk_rows  # heavy: numpy
 
     console = get_console()
     rows = read_chunk_rows(path, data=True)  # every checksum verified
@@ -74,8 +77,6 @@ def _parameter_values(index, column: str) -> dict:
 
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
-    from rbstab.sweep.folder import read_index, read_parameters, read_spec
-
     index = read_index(path)  # checksum verified
     if "max_abs_constraint_error_x" in index:
         index["max_abs_constraint_error"] = index[[f"max_abs_constraint_error_{a}" for a in "xyz"]].abs().max(axis=1)
@@ -97,7 +98,7 @@ def sweep_overview(path: str) -> dict:
 def _show_sweep(path: str) -> None:
     """A sweep folder: counts per status, converged fraction, varied parameters, the spread
     of the main figures, the first runs (every run with -v)."""
-    from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES
+    from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES  # heavy: numpy
 
     console = get_console()
     info = sweep_overview(path)
@@ -126,7 +127,7 @@ def _show_sweep(path: str) -> None:
 
 def _show_result(path: str) -> None:
     """A run's result file: identity, status, solver statistics, summary figures."""
-    from rbstab.io.hdf5 import read_summary
+    from rbstab.io.hdf5 import read_summary  # heavy: numpy
 
     console = get_console()
     info = read_summary(path)  # every checksum verified
@@ -143,8 +144,6 @@ def _show_result(path: str) -> None:
 
 def _expand(path: str) -> list[str]:
     """A folder that is not a sweep folder stands for the sweep folders and result files in it."""
-    from rbstab.sweep.folder import is_sweep_folder
-
     folder = Path(path)
     if not folder.exists():
         raise ValueError(f"no such result file or folder: {path}" + _did_you_mean(folder))
@@ -159,8 +158,6 @@ def _expand(path: str) -> list[str]:
 
 def _did_you_mean(missing: Path) -> str:
     """``"; did you mean X?"`` naming the closest entry of its folder, or ``""``."""
-    import difflib
-
     parent = missing.parent
     names = [p.name for p in parent.iterdir()] if parent.is_dir() else []
     close = difflib.get_close_matches(missing.name, names, n=1, cutoff=0.6)
@@ -168,8 +165,7 @@ def _did_you_mean(missing: Path) -> str:
 
 
 def _show(path: str) -> None:
-    from rbstab.io.chunk import is_chunk_file
-    from rbstab.sweep.folder import is_sweep_folder
+    from rbstab.io.chunk import is_chunk_file  # heavy: numpy
 
     if is_sweep_folder(path):
         _show_sweep(path)

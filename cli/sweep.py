@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import click
 
+from rbstab.api import execute_sweep
+from rbstab.sweep.executors import LocalExecutor
 from rbstab.sweep.worker import ENGINES
+from rbstab.warning_codes import coded
 
 from ._common import command_line
 from .console import get_console
@@ -119,8 +122,6 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     --connect-timeout) or a fault of the machine (full disk, read-only folder: one line);
     130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
-    from rbstab.sweep.executors import LocalExecutor
-
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
     executor = executor or ("dask" if scheduler else "local")
@@ -150,8 +151,8 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
 
 def _dry_run(spec, overrides) -> None:
     """--dry-run: validate the spec, list its runs, write nothing."""
-    from rbstab.sweep import SweepSpecError, expand, load_spec
-    from rbstab.sweep.plan import warning_digest
+    from rbstab.sweep import SweepSpecError, expand, load_spec  # heavy: pydantic (the spec's schema)
+    from rbstab.sweep.plan import warning_digest  # heavy: numba, numpy, pydantic, yaml
 
     console = get_console()
     try:
@@ -169,8 +170,7 @@ def _dry_run(spec, overrides) -> None:
 
 def _execute(spec, output, ex, **options):
     """:func:`rbstab.api.execute_sweep`, its exceptions as one-line CLI errors."""
-    from rbstab.api import execute_sweep
-    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: pydantic (the spec's schema)
 
     try:
         return execute_sweep(spec, output, executor=ex, command_line=command_line(), log=get_console().info,
@@ -187,8 +187,6 @@ def _execute(spec, output, ex, **options):
 
 def _say_outcome(outcome) -> None:
     """The sweep's warnings, counts, files and problems."""
-    from rbstab.warning_codes import coded
-
     console = get_console()
     for line in outcome.warnings:
         console.warn(line)

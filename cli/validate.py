@@ -10,8 +10,8 @@ from .options import console_options, json_option, set_option
 
 
 def _is_spec(path: str) -> bool:
-    from rbstab.config import ConfigError
-    from rbstab.config.yaml_io import read_yaml_file
+    from rbstab.config import ConfigError  # heavy: yaml
+    from rbstab.config.yaml_io import read_yaml_file  # heavy: yaml
 
     try:
         data = read_yaml_file(path, "file")
@@ -22,8 +22,8 @@ def _is_spec(path: str) -> bool:
 
 def _check_spec(path: str, overrides) -> dict:
     """One JSON-able record of a sweep spec: valid or not, its runs, its warnings."""
-    from rbstab.sweep import SweepSpecError, expand, load_spec
-    from rbstab.sweep.plan import warning_digest
+    from rbstab.sweep import SweepSpecError, expand, load_spec  # heavy: pydantic (the spec's schema)
+    from rbstab.sweep.plan import warning_digest  # heavy: numba, numpy, pydantic, yaml
 
     try:
         loaded = load_spec(path, overrides)

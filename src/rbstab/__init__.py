@@ -23,6 +23,7 @@ both work.
 """
 
 import importlib
+import inspect
 import sys
 import types
 
@@ -46,8 +47,6 @@ def _callable_module_type(name: str) -> type:
     function = getattr(importlib.import_module(".api", __name__), name)
 
     def signature(self):
-        import inspect
-
         return inspect.signature(function)
 
     return type(f"callable_module_{name}", (types.ModuleType,),

@@ -23,10 +23,14 @@ bound holds [s] (its resolution: the sample spacing t_end / (n_samples - 1)).
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..layout import BLOCK_UNITS
+from ..sweep.executors import LocalExecutor
 
 __all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES",
            "DEFAULT_RATIO"]
@@ -72,7 +76,7 @@ class BasinAxis:
         ValueError
             Naming the text, what is wrong and what is allowed.
         """
-        from ..config import INITIAL_STATE_BLOCKS
+        from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
         match = _AXIS.match(text)
         if not match:
@@ -98,7 +102,7 @@ class BasinAxis:
     @property
     def block(self) -> str:
         """The state block (``theta`` ... ``controller_state``)."""
-        from ..config import INITIAL_STATE_BLOCKS
+        from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
         return INITIAL_STATE_BLOCKS[self.key.split(".")[1]]
 
@@ -109,8 +113,6 @@ class BasinAxis:
 
     @property
     def units(self) -> str:
-        from ..layout import BLOCK_UNITS
-
         return BLOCK_UNITS[self.block]
 
     @property
@@ -181,7 +183,7 @@ def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> fl
 
 def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
     """The ``initial_state`` section of every grid point, row-major (first axis slowest)."""
-    from ..config import set_dotted
+    from ..config import set_dotted  # heavy: yaml
 
     base = config.resolved["initial_state"]
     out = []
@@ -198,7 +200,7 @@ def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
 def _run_block(items: list, ratio: float) -> list[tuple]:
     """Run (index, RunConfig) items with the compiled engine; one tuple per item:
     (index, outcome, time to converge, v(t_end), message)."""
-    from ..simulate import simulate_many
+    from ..simulate import simulate_many  # heavy: numba
 
     configs = [c for _, c in items]
     rows = []
@@ -249,8 +251,7 @@ def basin_map(
     ValueError
         For two equal keys.
     """
-    import warnings
-
+    # heavy: yaml
     from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 
     if len(axes) != 2 or axes[0].key == axes[1].key:
@@ -299,7 +300,6 @@ def _execute(items: list, ratio: float, jobs: int):
     if jobs <= 1 or len(items) < 64:
         yield _run_block(items, ratio)
         return
-    from ..sweep.executors import LocalExecutor
 
     with LocalExecutor(jobs) as executor:
         executor.plan(len(items))

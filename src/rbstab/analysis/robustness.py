@@ -26,8 +26,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
+
+from ..sweep.folder import open_sweep
+from .basin import DEFAULT_RATIO, ROUND_OFF
+from .dataset import robustness_content, robustness_dataset
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
            "DEFAULT_CONFIDENCE"]
@@ -48,8 +53,6 @@ def wilson_interval(k: int, n: int, confidence: float = DEFAULT_CONFIDENCE) -> t
     confidence : float
         In (0, 1).
     """
-    from statistics import NormalDist
-
     if n == 0:
         return 0.0, 1.0
     z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
@@ -210,9 +213,12 @@ class Robustness:
 
     def to_dataset(self):
         """As an :class:`xarray.Dataset` (:func:`rbstab.analysis.dataset.robustness_dataset`)."""
-        from .dataset import robustness_dataset
-
         return robustness_dataset(self)
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.robustness_content`)."""
+        return robustness_content(self, command_line)
 
 
 def _numeric_parameters(ds) -> list[str]:
@@ -235,12 +241,9 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
     ValueError
         For a confidence outside (0, 1).
     """
-    from ..sweep.folder import open_sweep
-
     if not 0 < confidence < 1:
         raise ValueError(f"--confidence: found {confidence}; expected 0 < confidence < 1")
     ds = open_sweep(path)
-    from .basin import DEFAULT_RATIO, ROUND_OFF
 
     status = ds["status"].values.astype(str)
     has_result = np.isin(status, ["success", "failed"])

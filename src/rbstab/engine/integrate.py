@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from llvmlite import ir
@@ -27,19 +28,42 @@ from numba.core.extending import intrinsic
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
-from . import tableaus
 from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
-                 error_norm, initial_step, rk_step)
+                 error_norm, initial_step, method_number, rk_step)
+from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY, SUCCESS_MESSAGE, TOO_SMALL_STEP_MESSAGE
 
-__all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY"]
+__all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "DEFAULT_MAX_STEPS",
+           "status_message", "ChunkSolution", "integrate_runs"]
 
-SAFETY, MIN_FACTOR, MAX_FACTOR = float(tableaus.SAFETY), float(tableaus.MIN_FACTOR), float(tableaus.MAX_FACTOR)
+SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
 
 SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT = 0, 1, -1, -2, -3, -4
 
 #: Steps between two readings of the clock for the wall-time limit (a reading costs ~0.3 us,
 #: a step of DOP853 on the embedded body ~6 us).
 CLOCK_EVERY = 64
+
+#: Accepted steps after which a run stops as failed (a run that would never finish).
+DEFAULT_MAX_STEPS = 10_000_000
+
+
+def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,
+                   max_wall_time: float = np.inf) -> str:
+    """The message of a run's end (scipy's words where scipy has them)."""
+    if status == 0:
+        return SUCCESS_MESSAGE
+    if status == 1:
+        return (
+            f"gimbal lock: |theta_2| reached pi/2 - {gimbal_margin:g} rad at t = {t_stop:.6g} s; "
+            "B(theta) is singular there (eq 5), so the Euler-angle model stops"
+        )
+    if status == -1:
+        return f"solver failed: {TOO_SMALL_STEP_MESSAGE} (at t = {t_stop:.6g} s)"
+    if status == -2:
+        return f"non-finite step size or state at t = {t_stop:.6g} s"
+    if status == -3:
+        return f"step limit: {max_steps} steps taken (simulation.max_steps), reaching only t = {t_stop:.6g} s"
+    return f"timeout: the run exceeded {max_wall_time:g} s of wall time at t = {t_stop:.6g} s"
 
 
 #: ``CLOCK_MONOTONIC`` of ``clock_gettime`` in the C library, where it is known.
@@ -231,3 +255,89 @@ def integrate_chunk(codes, params, y0, settings, method, samples, status, t_stop
         status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(
             codes[k], params[k], y0[k], s[0], s[1], s[2], s[3], s[4], int(s[5]), s[6], method, samples[k]
         )
+
+
+# -- from Python -----------------------------------------------------------------------------------
+@dataclass
+class ChunkSolution:
+    """Samples of k runs and how each ended.
+
+    Attributes
+    ----------
+    samples : ndarray, shape (k, n_samples, n_state)
+        The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
+    status : ndarray of int, shape (k,)
+        0 reached t_end; 1 gimbal lock; -1 step too small; -2 non-finite; -3 step limit;
+        -4 wall-time limit.
+    t_stop : ndarray, shape (k,)
+        Where each run stopped [s] (the event time for gimbal lock).
+    nfev, n_steps : ndarray of int, shape (k,)
+        Right-hand-side evaluations and accepted steps.
+    """
+
+    samples: np.ndarray
+    status: np.ndarray
+    t_stop: np.ndarray
+    nfev: np.ndarray
+    n_steps: np.ndarray
+
+
+def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
+                   max_steps: int = DEFAULT_MAX_STEPS, max_wall_time: float = np.inf,
+                   out: np.ndarray | None = None) -> ChunkSolution:
+    """Integrate k runs of one method and sample count.
+
+    Parameters
+    ----------
+    codes : array_like of int, shape (k,)
+        Variant codes (``Variant.code``); every run's state has the same size.
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,)
+    y0 : ndarray, shape (k, n_state)
+        Initial states.
+    settings : ndarray, shape (k, 5) or (k, 7)
+        Per run: t_end [s], rtol, atol, max_step [s], gimbal_margin [rad], and optionally
+        max_steps and max_wall_time [s] (default: the arguments of those names).
+    method : str
+        One of :data:`METHODS`.
+    n_samples : int
+        Samples per run, evenly spaced on [0, t_end] (>= 2).
+    max_steps : int
+        Accepted steps after which a run stops (status -3), for 5-column ``settings``.
+    max_wall_time : float
+        Seconds after which a run stops (status -4; inf: none), for 5-column ``settings``.
+    out : ndarray, shape (>= k, n_samples, n_state), optional
+        Where the samples go (its first k rows, returned as ``samples``): a buffer the
+        caller reuses for call after call, so that a worker holds one (default: a new
+        array).
+
+    Raises
+    ------
+    ValueError
+        If ``out`` is not a writable C-contiguous float64 array of that shape.
+    """
+    codes = np.ascontiguousarray(codes, dtype=np.int64)
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    k, n = y0.shape
+    settings = np.asarray(settings, dtype=float)
+    if settings.shape[1] == 5:
+        settings = np.column_stack([settings, np.full(k, float(max_steps)), np.full(k, float(max_wall_time))])
+    samples = np.empty((k, n_samples, n)) if out is None else _sample_buffer(out, (k, n_samples, n))
+    status = np.empty(k, dtype=np.int64)
+    t_stop = np.empty(k)
+    nfev = np.empty(k, dtype=np.int64)
+    n_steps = np.empty(k, dtype=np.int64)
+    with np.errstate(all="ignore"):
+        integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings),
+                        method_number(method), samples, status, t_stop, nfev, n_steps)
+    return ChunkSolution(samples, status, t_stop, nfev, n_steps)
+
+
+def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:
+    """The first ``shape[0]`` rows of ``out`` (see :func:`integrate_runs`); ValueError if it
+    cannot hold them."""
+    if not (isinstance(out, np.ndarray) and out.dtype == np.float64 and out.flags.c_contiguous
+            and out.flags.writeable and out.ndim == 3 and out.shape[0] >= shape[0] and out.shape[1:] == shape[1:]):
+        found = f"shape {out.shape} of {out.dtype}" if isinstance(out, np.ndarray) else type(out).__name__
+        raise ValueError(f"out: found {found}; expected a writable C-contiguous float64 array of shape "
+                         f"(>= {shape[0]}, {shape[1]}, {shape[2]})")
+    return out[: shape[0]]

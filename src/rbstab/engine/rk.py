@@ -33,11 +33,26 @@ from ..jit import jit
 from ..variants.kernels import state_rate
 from .tableaus import DOP853_EXTENDED, METHODS, TABLEAUS
 
-__all__ = ["METHODS", "DOP853", "rms_norm", "initial_step", "rk_step", "error_norm", "dense_coefficients",
-           "dense_value"]
+__all__ = ["METHODS", "DOP853", "method_number", "rms_norm", "initial_step", "rk_step", "error_norm",
+           "dense_coefficients", "dense_value"]
 
 #: DOP853's number (its error estimate and dense output differ from the other two's).
 DOP853 = METHODS.index("DOP853")
+
+
+def method_number(method: str) -> int:
+    """The compiled engine's number of ``method`` (``"RK23"``, ``"RK45"`` or ``"DOP853"``):
+    its index in :data:`METHODS` (:mod:`rbstab.engine.tableaus`), the rows of its tableau
+    in :mod:`rbstab.engine.rk`'s tables.
+
+    Raises
+    ------
+    ValueError
+        For a method not in :data:`METHODS`.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method: found {method!r}; the compiled engine has {', '.join(METHODS)}")
+    return METHODS.index(method)
 
 
 def _stacked(arrays, shape: tuple) -> np.ndarray:

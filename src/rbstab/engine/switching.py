@@ -37,12 +37,14 @@ import numpy as np
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..summary import piecewise_numerical_rate
 from ..variants.kernels import state_rate
-from ..variants.sliding import mode_code, mode_quantities, stop_at_c
-from .integrate import (CLOCK_EVERY, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, sample_time, step,
-                        wall_clock)
+from ..variants.sliding import mode_code, mode_quantities, mode_rows, stop_at_c
+from .integrate import (CLOCK_EVERY, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, sample_time,
+                        status_message, step, wall_clock)
 from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
-                 initial_step)
+                 initial_step, method_number)
+from .tableaus import METHODS
 
 __all__ = [
     "RESOLUTION",
@@ -428,9 +430,6 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
 def warm_up(params: np.ndarray) -> None:
     """Compile (or load from the cache) the sign-law engine and its outputs on a tiny run
     (:func:`rbstab.engine.warm_up` calls it); ``params``: a PARAMETERS array of shape (1,)."""
-    from . import METHODS, method_number
-    from ..variants.sliding import mode_rows
-
     y0 = np.zeros(12)
     y0[9] = 1.0
     samples, modes, events, jumps = np.empty((2, 12)), np.empty((2, 3)), np.empty((4, 4)), np.empty(3)
@@ -443,8 +442,6 @@ def warm_up(params: np.ndarray) -> None:
 
 def engine_method(method: str) -> str:
     """The compiled method that integrates a sign-law run configured with ``method``."""
-    from . import METHODS
-
     return method if method in METHODS else "DOP853"
 
 
@@ -474,8 +471,6 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     SignLawSolution
         A failure (gimbal lock, solver failure, switching or step limit, timeout) is data.
     """
-    from . import method_number, status_message
-
     n = int(settings.n_samples)
     samples = np.empty((n, 12))
     modes = np.empty((n, 3))
@@ -561,9 +556,6 @@ def sign_law_outputs(variant, solution: SignLawSolution) -> tuple[dict, np.ndarr
     checked : ndarray of bool, shape (n_samples,)
         Samples whose numerical rate has its full stencil on one piece.
     """
-    from ..summary import piecewise_numerical_rate
-    from ..variants.sliding import mode_rows
-
     outputs = variant.evaluate(solution.states)
     rows = np.empty((len(solution.time), 12))
     with np.errstate(all="ignore"):

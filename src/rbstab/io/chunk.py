@@ -52,14 +52,9 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import (
-    SUMMARY_VARIABLES,
-    NotAResultFile,
-    canonical_config,
-    _plain,
-    summary_stride,
-)
-from .integrity import fletcher32_chunks
+from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, _plain, canonical_config, config_hash as hash_of, summary_stride
+from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
+                        fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -120,7 +115,7 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
     ``written``: key -> the array written, for the str, int and float values (what
     :func:`rbstab.io.integrity.content_digest` would read back).
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     str_type, scalar = _h5_constants()
     for key, value in attrs.items():
@@ -145,7 +140,7 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
 @functools.cache
 def _h5_constants() -> tuple:
     """(variable-length UTF-8 string type, scalar space) of :func:`_put_attributes`, made once."""
-    import h5py
+    import h5py  # heavy: h5py
 
     return h5py.h5t.py_create(h5py.string_dtype(), logical=True), h5py.h5s.create(h5py.h5s.SCALAR)
 
@@ -290,13 +285,13 @@ class ChunkWriter:
         }
 
     def __enter__(self) -> "ChunkWriter":
-        import h5netcdf
+        import h5netcdf  # heavy: h5netcdf
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._room(0)
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
-        import h5py
+        import h5py  # heavy: h5py
 
         self._str = h5py.string_dtype()
         f = self._file
@@ -346,7 +341,7 @@ class ChunkWriter:
         (the ``config`` column), if the caller has them (a sweep's plan computed them); else
         computed here.
         """
-        from ..simulate import RunBlock
+        from ..simulate import RunBlock  # heavy: numba
 
         return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
                               config_texts=[config_text])[0]
@@ -373,8 +368,6 @@ class ChunkWriter:
 
     def _block_values(self, block, config_hashes, config_texts) -> dict[str, list]:
         """The per-run values of a block's runs, as columns."""
-        from .hdf5 import config_hash as hash_of
-
         configs = block.configs
         k = len(configs)
         hashes = list(config_hashes) if config_hashes is not None else [None] * k
@@ -558,7 +551,6 @@ class ChunkWriter:
             _put_attributes(self._datasets[name].id, {"coordinates": self._coordinates}, self._written[f"/{name}"])
         h5 = f._h5file
         _put_attributes(h5["/"].id, self.attrs, self._written.setdefault("/", {}))
-        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest
 
         f.flush()
         _put_attributes(h5["/"].id, {DIGEST_ATTR: content_digest(h5, self._texts, self._written),
@@ -568,8 +560,6 @@ class ChunkWriter:
         """:func:`rbstab.io.integrity.data_digest` of the file: from the arrays written when
         every numeric variable was written whole (one block: a ``thinned`` or ``summary``
         store), else by reading the file back."""
-        from .integrity import data_digest, data_digest_of
-
         if all(name in self._numbers for name in self._traces):  # every numeric variable is there
             return data_digest_of(self._numbers)
         return data_digest(self._file._h5file, self.path)
@@ -610,7 +600,7 @@ class ChunkWriter:
         made once a file for each kind (text, float, int): chunked with Fletcher-32 for
         numbers, NaN the fill value of floats; attributes in creation order (netCDF-C lists
         them in HDF5's creation order, as written)."""
-        import h5py
+        import h5py  # heavy: h5py
 
         kind = dtype.kind
         if kind not in self._kinds:
@@ -633,7 +623,7 @@ class ChunkWriter:
         (tests/test_netcdf_c.py). Through h5py's low-level API: ~0.5 ms a variable, its
         attributes included, against ~1.1 ms with ``create_dataset`` and ``attrs`` and
         ~3 ms with h5netcdf's ``create_variable``."""
-        import h5py
+        import h5py  # heavy: h5py
 
         h5 = self._file._h5file
         if name in _TEXT or _has_text(values):
@@ -662,7 +652,7 @@ class ChunkWriter:
 
 def is_chunk_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a readable store file (``rbstab_format`` = :data:`CHUNK_FORMAT`)."""
-    import h5py
+    import h5py  # heavy: h5py
 
     try:
         with h5py.File(path, "r") as f:
@@ -694,8 +684,6 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
         If its checksums do not match (the digest of its text and attributes, the
         Fletcher-32 checksums of the per-run values; ``data``: of the traces too).
     """
-    from .integrity import DamagedResultError, open_result, verify_open_file
-
     path = Path(path)
     with open_result(path) as f:
         if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
@@ -748,7 +736,7 @@ def read_chunk_series(path: str | os.PathLike, row: int | None, names) -> dict[s
         (n, 3) (row None: (runs, n) or (runs, n, 3)), or None when the file does not hold
         it; ``units:<name>`` for each held.
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     out: dict[str, Any] = {}
     with h5py.File(path, "r") as f:
@@ -769,8 +757,6 @@ _VERIFIED: set[tuple[str, int, int]] = set()
 
 
 def _verified_once(f, path: str) -> None:
-    from .integrity import verify_open_file
-
     stat = os.stat(path)
     key = (path, stat.st_mtime_ns, stat.st_size)
     if key not in _VERIFIED:
@@ -833,9 +819,7 @@ class StoreTrace:
         return out[0] if scalar else out
 
     def _read(self, path: str, rows: np.ndarray) -> np.ndarray:
-        import h5py
-
-        from .integrity import DamagedResultError, reading
+        import h5py  # heavy: h5py
 
         order = np.argsort(rows, kind="stable")
         wanted, inverse = np.unique(rows[order], return_inverse=True)
@@ -871,8 +855,6 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
         For a missing file, one that is not HDF5, or one whose structure cannot be read
         (:func:`rbstab.io.integrity.open_result`).
     """
-    from .integrity import open_result
-
     shapes: dict[str, tuple[int, ...]] = {}
     probed = {"run", "time", "axis"}
     time = None

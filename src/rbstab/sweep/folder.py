@@ -205,7 +205,7 @@ def read_parameters(folder: str | os.PathLike, index=None) -> dict[str, str]:
 
 def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
     """A run file's global attributes (:func:`rbstab.io.hdf5.read_attributes`) as an index row."""
-    from ..io.chunk import summary_columns
+    from ..io.chunk import summary_columns  # heavy: numpy
 
     row = {k: attrs.get(k) for k in ("variant", "status", "message", "wall_time")}
     row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}))
@@ -405,7 +405,7 @@ def index_columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
                 in_params = False
             if key not in fixed:
                 (params if in_params else summary)[key] = None
-    from ..io.chunk import SUMMARY_FIGURES
+    from ..io.chunk import SUMMARY_FIGURES  # heavy: numpy
 
     order = {name: i for i, name in enumerate(SUMMARY_FIGURES)}
     ranked = sorted(summary, key=lambda c: (order.get(re.sub(r"_[xyz]$", "", c), len(order)), c))
@@ -518,7 +518,7 @@ def verify_index(folder: str | os.PathLike) -> bool:
         If the index does not match (damaged, or an invocation killed between writing the
         two files: rerunning the sweep rebuilds both).
     """
-    from ..io.integrity import DamagedResultError
+    from ..io.integrity import DamagedResultError  # heavy: numpy
 
     folder = Path(folder)
     try:
@@ -553,7 +553,7 @@ def read_index(folder: str | os.PathLike, *, verify: bool = True):
         If ``verify`` and it does not match its checksum (:func:`verify_index`; a
         ValueError).
     """
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     path = Path(folder) / INDEX_FILE
     if verify:
@@ -628,8 +628,8 @@ def read_spec(folder: str | os.PathLike) -> dict:
     OSError, ValueError
         If it is missing, not YAML or not a mapping.
     """
-    from ..config import ConfigError
-    from ..config.yaml_io import parse_yaml, read_text_limited
+    from ..config import ConfigError  # heavy: yaml
+    from ..config.yaml_io import parse_yaml, read_text_limited  # heavy: yaml
 
     path = Path(folder) / SPEC_FILE
     try:
@@ -644,9 +644,9 @@ def read_spec(folder: str | os.PathLike) -> dict:
 def _chunk_rows(runs_dir: Path, verify: bool = False, damaged: list | None = None) -> dict[str, list[dict]]:
     """run_id -> its rows in the store files of ``runs_dir`` (unreadable files are ignored;
     damaged ones are listed in ``damaged`` as (file name, reason))."""
-    from ..io.chunk import read_chunk_rows
-    from ..io.hdf5 import NotAResultFile
-    from ..io.integrity import DamagedResultError
+    from ..io.chunk import read_chunk_rows  # heavy: numpy
+    from ..io.hdf5 import NotAResultFile  # heavy: numpy
+    from ..io.integrity import DamagedResultError  # heavy: numpy
 
     rows: dict[str, list[dict]] = {}
     for path in sorted(runs_dir.glob(CHUNK_GLOB)):
@@ -662,8 +662,8 @@ def _chunk_rows(runs_dir: Path, verify: bool = False, damaged: list | None = Non
 
 
 def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None) -> dict | None:
-    from ..io.hdf5 import NotAResultFile, read_attributes
-    from ..io.integrity import DamagedResultError
+    from ..io.hdf5 import NotAResultFile, read_attributes  # heavy: numpy
+    from ..io.integrity import DamagedResultError  # heavy: numpy
 
     try:
         return row_from_attributes(read_attributes(path, data=verify), path.name)
@@ -798,9 +798,9 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
 def _from_index(index):
     """The index as a Dataset over ``run``: per-run values with units and long names
     (built column by column: ``DataFrame.to_xarray`` costs ~1 s for 10,000 runs)."""
-    import xarray as xr
+    import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import figure_attributes
+    from ..io.chunk import figure_attributes  # heavy: numpy
 
     table = index.drop(columns=[c for c in ("file", "file_row") if c in index.columns])
     coords = {c for c in table.columns if c in ("run_id", "base", "variant") or c in _parameter_set(index)}
@@ -838,12 +838,12 @@ def _from_store(folder: Path, index):
     :mod:`rbstab.io.metadata`; the store files are only listed here (names and shapes) and
     verified when their traces are read (:class:`rbstab.io.chunk.StoreTrace`).
     """
-    import dask.array as da
-    import numpy as np
-    import xarray as xr
+    import dask.array as da  # optional: dask
+    import numpy as np  # heavy: numpy
+    import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import StoreTrace, store_trace_shapes
-    from ..io.metadata import LONG_NAMES, variable_attributes
+    from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numpy
+    from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numpy
 
     if "file_row" not in index.columns:
         return None
@@ -902,9 +902,9 @@ def _grid_axes(spec: Mapping[str, Any]) -> list[tuple[str, list]]:
 
 
 def _as_grid(ds, spec: Mapping[str, Any]):
-    import numpy as np
-    import pandas as pd
-    import xarray as xr
+    import numpy as np  # heavy: numpy
+    import pandas as pd  # heavy: pandas
+    import xarray as xr  # heavy: xarray
 
     axes = _grid_axes(spec)
     shape = [len(labels) for _, labels in axes]

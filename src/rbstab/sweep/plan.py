@@ -21,6 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
+from ..io.hdf5 import canonical_config, canonical_configs, config_hash
+from .folder import parameter_columns, run_coords
 from .schema import numeric_array
 from .spec import Base, SweepSpec, SweepSpecError
 
@@ -88,8 +91,6 @@ class PlannedRun:
     def coords(self) -> dict[str, tuple[str, Any]]:
         """Parameter coordinate name -> (dotted key of the entry, value) of its varied
         values (:func:`rbstab.sweep.folder.run_coords` of ``params``)."""
-        from .folder import run_coords
-
         return run_coords(self.params)
 
     @functools.cached_property
@@ -102,8 +103,6 @@ class PlannedRun:
     def config_text(self) -> str:
         """The resolved config without its name, with its run limits, as canonical JSON
         (:func:`rbstab.io.hdf5.canonical_config`): a store file's ``config`` column."""
-        from ..io.hdf5 import canonical_config
-
         return canonical_config(self.config.resolved, limits=True)
 
 
@@ -138,8 +137,6 @@ def _shared_layout(layout: tuple) -> tuple:
 def resolved_hash(resolved: Mapping) -> str:
     """SHA-256 hex digest of a resolved configuration without its ``name`` (canonical JSON,
     :func:`rbstab.io.hdf5.canonical_config`)."""
-    from ..io.hdf5 import canonical_config, config_hash
-
     return config_hash(canonical_config(resolved))
 
 
@@ -150,8 +147,6 @@ def run_id(index: int, n_runs: int, digest: str) -> str:
 
 
 def _base_value(base: Base, key: str, resolved_base: dict | None) -> Any:
-    from ..config import get_dotted
-
     try:
         return get_dotted(base.data, key)
     except KeyError:
@@ -161,8 +156,6 @@ def _base_value(base: Base, key: str, resolved_base: dict | None) -> Any:
 
 
 def _resolved_base(base: Base) -> tuple[dict | None, list[str]]:
-    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         try:
@@ -174,8 +167,6 @@ def _resolved_base(base: Base) -> tuple[dict | None, list[str]]:
 def _set_varied(data: dict, key: str, value: Any, base: Base, cache: dict) -> None:
     """``set_dotted``; a list index into a list the base leaves at its default first copies
     the default list in (e.g. ``initial_state.omega.1`` with no ``omega`` in the base)."""
-    from ..config import ConfigError, get_dotted, set_dotted
-
     try:
         set_dotted(data, key, value)
         return
@@ -277,8 +268,6 @@ def _plan_run(
     checked). ``texts``: the :func:`rbstab.io.hdf5.canonical_configs` memo of the
     planning pass (the runs of a base share the sections no varied key is in).
     """
-    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
-
     data = dict(base.data)
     fresh: set = set()
     problems: list[str] = []
@@ -312,8 +301,6 @@ def _plan_run(
                 first = known.with_values(data, spec.varied_keys, source=source)
     except ConfigError as exc:
         return None, exc.errors
-    from ..io.hdf5 import canonical_configs, config_hash
-
     # the runs of a base share the sections no varied key is in (the same objects): each
     # is encoded once
     identity, text = canonical_configs(first.resolved, texts)
@@ -423,8 +410,6 @@ def parameter_columns_of(spec: SweepSpec) -> dict[str, str]:
     alone (the names :func:`rbstab.sweep.folder.parameter_columns` gives for its runs), so
     that every store file of a sweep has the same columns however its runs are planned.
     """
-    from .folder import parameter_columns
-
     cache: dict = {}
     params_list: list[dict] = []
     scaled = [d.key for d in spec.random.params if d.kind == "scale_uniform"] if spec.random.n else []

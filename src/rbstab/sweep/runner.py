@@ -42,6 +42,7 @@ from typing import Any
 import yaml
 
 from .. import __version__
+from ..config import dump_yaml
 from .executors import Executor, make_executor
 from ..io.atomic import write_bytes_atomic, write_text_atomic
 from .folder import (
@@ -188,7 +189,7 @@ class SweepOutcome:
 @contextlib.contextmanager
 def _lock(directory: Path):
     try:
-        import fcntl
+        import fcntl  # optional: POSIX only
     except ImportError:  # pragma: no cover - Windows: no lock
         yield
         return
@@ -222,8 +223,7 @@ def _remove_temporaries(*folders: Path) -> int:
 
 
 def _dump_yaml(data: Any) -> str:
-    from ..config import dump_yaml  # flow-style lists, the style of the result files' config
-
+    # flow-style lists, the style of the result files' config
     return dump_yaml(data)
 
 
@@ -309,7 +309,7 @@ class _NoBar:
 def _progress_bar(total: int, name: str, enabled: bool | None):
     if enabled is False:
         return _NoBar()
-    from tqdm.auto import tqdm
+    from tqdm.auto import tqdm  # heavy: tqdm
 
     return tqdm(
         total=total,

@@ -65,8 +65,9 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, apply_overrides, parse_yaml as parse, set_dotted
 from ..config.schema import kind_of as _kind
+from ..config.yaml_io import read_yaml_file
 from .schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, SweepSchema, SweepSpecError, validate_spec
 
 __all__ = [
@@ -104,7 +105,6 @@ def _plain(value: Any) -> Any:
 
 def _parse_yaml(text: str) -> Any:
     # The project's loader: 1e-8 is a float, a duplicate key is an error.
-    from ..config import parse_yaml as parse
 
     return parse(text)
 
@@ -299,7 +299,6 @@ def _read_base(entry: Any, where: str, spec_dir: Path, errors: list[str]) -> Bas
         data = copy.deepcopy(dict(entry))
         label = data.get("name") if isinstance(data.get("name"), str) else "base"
         return Base(label, data, None)
-    from ..config.yaml_io import read_yaml_file
 
     path = Path(entry).expanduser()
     if not path.is_absolute():
@@ -319,8 +318,6 @@ def _read_base(entry: Any, where: str, spec_dir: Path, errors: list[str]) -> Bas
 def _set_spec_override(data: dict, override: str) -> None:
     """Apply ``sweep.<path>=value``; ``grid.<key>``, ``zip.<key>`` and ``random.params.<key>``
     take the rest of the path as one (dotted) key."""
-    from ..config import ConfigError, set_dotted
-
     key, sep, text = override.partition("=")
     if not sep:
         raise ConfigError([f"override {override!r}: no '='; expected sweep.key.path=value"])
@@ -417,8 +414,6 @@ def spec_from_mapping(
 
 def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) -> tuple[list[Base], list[str]]:
     """The base configurations, read and with the overrides applied; (bases, problems)."""
-    from ..config import apply_overrides
-
     spec_dir = Path(source).resolve().parent if source else Path.cwd()
     errors: list[str] = []
     bases: list[Base] = []
@@ -464,10 +459,6 @@ def load_spec(path: str | Path, overrides: Sequence[str] = ()) -> SweepSpec:
     SweepSpecError
         For a missing or unreadable file, a YAML syntax error, or any invalid entry.
     """
-    from ..config import ConfigError
-
-    from ..config.yaml_io import read_yaml_file
-
     path = Path(path)
     try:
         data = read_yaml_file(path, "sweep spec")

@@ -44,6 +44,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .folder import index_part, row_from_attributes
+
 __all__ = ["RunTask", "WorkerOptions", "run_chunk", "ENGINES", "DEFAULT_CHUNK_SIZE"]
 
 
@@ -119,7 +121,7 @@ class WorkerOptions:
 
 
 def _config(task: RunTask):
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping
+    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: yaml
 
     with warnings.catch_warnings():
         # shown once, as a digest, when the sweep was planned
@@ -158,8 +160,7 @@ class _RunFiles:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         """Write ``result``'s file (or its bytes); the record of a finished run."""
-        from ..io.hdf5 import write_run
-        from .folder import row_from_attributes
+        from ..io.hdf5 import write_run  # heavy: numpy
 
         options = self.options
         record = _result_record(task, task.path, result)
@@ -190,8 +191,6 @@ class _RunFiles:
 def _finished(record: dict[str, Any], timing: dict, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
     """``record`` (``run_id``, ``path``, ``status``, ``message``, ``wall_time``) of a
     written run, with its row as the index takes it and its ``timing``."""
-    from .folder import index_part
-
     timing = dict(timing)
     timing["config_yaml"] = yaml_time
     timing["write"] = write_time
@@ -212,7 +211,7 @@ class _ChunkFile:
     ``attrs`` are the run's row (:func:`rbstab.io.chunk.read_chunk_rows`)."""
 
     def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions) -> None:
-        from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name
+        from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name  # heavy: numpy
 
         self.options = options
         first = min(tasks, key=lambda t: t.index)
@@ -274,7 +273,7 @@ SINKS = {"run": _RunFiles, "chunk": _ChunkFile}
 
 
 def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
-    from ..simulate import simulate
+    from ..simulate import simulate  # heavy: numba, numpy
 
     try:
         t0 = _time.perf_counter()
@@ -308,7 +307,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     configs where they are the same: a grid's inner axis); one that does not rebuild is
     validated, for the message of what is wrong with it.
     """
-    from ..config import RunConfig
+    from ..config import RunConfig  # heavy: yaml
 
     configs: list = []
     errors: list[dict[str, Any]] = []
@@ -330,7 +329,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
 
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
-    from ..simulate import simulate_blocks, uses_compiled_engine
+    from ..simulate import simulate_blocks, uses_compiled_engine  # heavy: numba, numpy
 
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)
@@ -425,7 +424,7 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions) -> list[dict[str
 def _peak_rss() -> int | None:
     """Peak resident set size of this process [bytes], or None where unknown."""
     try:
-        import resource
+        import resource  # optional: POSIX only
     except ImportError:  # pragma: no cover - Windows
         return None
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
