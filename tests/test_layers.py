@@ -246,3 +246,12 @@ def test_the_cache_digest_changes_with_a_compiled_source(tmp_path, monkeypatch):
     (copy / "layout.py").write_text((copy / "layout.py").read_text() + "\n# changed\n")
     assert jit._source_digest() != before
 
+
+def test_every_module_the_fork_server_preloads_imports():
+    """``set_forkserver_preload`` silently skips a name that fails to import: each must."""
+    import importlib
+
+    from rbstab.sweep.executors import FORKSERVER_PRELOAD
+
+    for name in FORKSERVER_PRELOAD:
+        importlib.import_module(name)
