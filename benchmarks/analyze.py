@@ -1,4 +1,4 @@
-"""Benchmark (issue 14): ``rbstab analyze`` of the paper's cases, and a 41 x 41 basin map of Case 3.
+"""Benchmark: ``rbstab analyze`` of the paper's cases, and a 41 x 41 basin map of Case 3.
 
 Targets: ``rbstab analyze`` of a paper case (no basin) < 2 s warm; a 41 x 41 basin map of
 Case 3 < 30 s on 2 cores. Prints one table:

@@ -1,4 +1,4 @@
-"""Benchmark (issue 15): the pure sign law of ``sliding`` with located switchings.
+"""Benchmark: the pure sign law of ``sliding`` with located switchings.
 
 The 2 s run of ``configs/examples/sliding.yaml`` with ``boundary_layer: 0`` (Lambda =
 -K_s sgn(E), eq 39). Prints:

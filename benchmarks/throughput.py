@@ -1,4 +1,4 @@
-"""Benchmark (issue 12): the default ``rbstab sweep`` against a plain solve_ivp loop, and start-up.
+"""Benchmark: the default ``rbstab sweep`` against a plain solve_ivp loop, and start-up.
 
 Case 3 of the paper (embedded, eq 22; ``configs/paper/case3_embedded.yaml``: DOP853, t_end
 2 s, 2001 samples) at rtol 1e-6, atol 1e-8. Prints one table:
@@ -6,9 +6,8 @@ Case 3 of the paper (embedded, eq 22; ``configs/paper/case3_embedded.yaml``: DOP
 - **baseline**: one ``scipy.integrate.solve_ivp`` per run with the plain numpy right-hand
   side below (:func:`baseline_rhs`, what a researcher writes by hand), one core;
   ``--baseline-n`` runs, per-run time. Also timed: the same with its cross products written
-  with ``np.cross`` (:func:`baseline_rhs_cross`, the issue's wording, ~2x slower on numpy
-  2.x); the ``np.cross`` column is the ratio to that one. Which of the two the targets
-  mean is the issue owner's to decide (docs/performance.md, "The baseline the ratios use").
+  with ``np.cross`` (:func:`baseline_rhs_cross`, ~2x slower on numpy 2.x); the
+  ``np.cross`` column is the ratio to that one (docs/performance.md).
 - **sweeps**, each the default command ``rbstab sweep SPEC -j JOBS --no-progress`` timed from
   process start to exit (default store, warm compile cache), for N in ``--n``:
   ``initial-state`` (Omega ~ N((16, 32, -16), 4^2)), ``parameter`` (mass and inertia x
@@ -93,7 +92,7 @@ def baseline_rhs(t, y, cross=lambda a, b: hat(a) @ b, r_cross=lambda b: R_HAT @ 
 
 
 def baseline_rhs_cross(t, y):
-    """:func:`baseline_rhs` with its cross products written with ``np.cross``, as issue 12 describes it.
+    """:func:`baseline_rhs` with its cross products written with ``np.cross``.
 
     The same values (the same steps); on numpy 2.x ``np.cross`` of two 3-vectors costs ~20 us,
     so a run takes ~2x as long as with the matrix products of :func:`baseline_rhs`.
@@ -135,8 +134,8 @@ def spec(kind: str, n: int) -> dict:
 
 def user_environment(env=None) -> dict:
     """The environment of a timed command: this one without ``PYTHONDONTWRITEBYTECODE``
-    (set on the development machine, not on a user's: Python would compile every module
-    of rbstab from source in each process, ~0.1-0.2 s)."""
+    (where it is set, Python compiles every module of rbstab from source in each process,
+    ~0.1-0.2 s, which a user's installation does not)."""
     return {k: v for k, v in (os.environ if env is None else env).items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
@@ -227,7 +226,7 @@ def main() -> None:
     per_run = baseline_time(args.baseline_n)
     per_run_cross = baseline_time(args.baseline_n, rhs=baseline_rhs_cross)
     print(f"baseline: solve_ivp + numpy rhs, {per_run * 1e3:.1f} ms per run ({args.baseline_n} runs, one core); "
-          f"with np.cross (issue 12's wording), {per_run_cross * 1e3:.1f} ms per run")
+          f"with np.cross, {per_run_cross * 1e3:.1f} ms per run")
     print(f"{'sweep':<15} {'N':>7} {'wall [s]':>9} {'runs/s':>8} {'ratio':>7} {'local baseline':>15} {'local':>6} "
           f"{'np.cross':>9}")
     with tempfile.TemporaryDirectory() as tmp:

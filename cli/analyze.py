@@ -6,9 +6,6 @@ from pathlib import Path
 
 import click
 
-from rbstab.sweep.executors import default_jobs
-from rbstab.sweep.folder import is_sweep_folder
-
 from ._common import command_line, load_configs
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
@@ -49,9 +46,18 @@ def _check_boundary_layer(configs, boundary_layer) -> None:
 
 
 def _check_sweeps(paths) -> None:
-    bad = [p for p in paths if not is_sweep_folder(p)]
-    if bad:
-        raise click.ClickException("--robustness: not a sweep folder (sweep.yaml + index.csv): " + ", ".join(bad))
+    """Every ``--robustness`` path a sweep folder (:func:`rbstab.kinds.kind_of`), or one line each."""
+    from rbstab.io.hdf5 import NotAResultFile  # heavy: numba, numpy, pydantic, yaml
+    from rbstab.kinds import SWEEP, kind_of  # heavy: numba, numpy, pydantic, yaml
+
+    problems = []
+    for path in paths:
+        try:
+            kind_of(path, (SWEEP,))
+        except (FileNotFoundError, NotAResultFile) as exc:
+            problems.append(f"--robustness: {exc}")
+    if problems:
+        raise click.ClickException("\n".join(problems))
 
 
 @click.command("analyze")
@@ -100,6 +106,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
     from rbstab.analysis.text import describe, describe_robustness  # heavy: numba, numpy
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+    from rbstab.sweep.executors import default_jobs  # heavy: multiprocessing (every command's start-up)
 
     if not configs and not sweeps:
         raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")

@@ -35,6 +35,14 @@ def _terminate(signum, frame) -> None:
     raise Terminated()
 
 
+#: What an interrupted command leaves (after "interrupted: "), by subcommand; the default
+#: for the others.
+_AFTER_INTERRUPT = {
+    "sweep": "finished runs are saved and the index is up to date; run the same command again to resume",
+}
+_AFTER_INTERRUPT_DEFAULT = "results finished before are saved and complete; run the same command again to finish"
+
+
 class _Group(click.Group):
     """The command group, turning faults into one line and interrupts into 130 / 143."""
 
@@ -42,8 +50,8 @@ class _Group(click.Group):
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt as exc:
-            click.echo("\ninterrupted: results finished before are saved and complete; run the same "
-                       "command again to finish", err=True)
+            after = _AFTER_INTERRUPT.get(ctx.invoked_subcommand, _AFTER_INTERRUPT_DEFAULT)
+            click.echo(f"\ninterrupted: {after}", err=True)
             ctx.exit(getattr(exc, "exit_code", 130))
         except OSError as exc:  # a full disk, a read-only folder...: in words, not a traceback
             raise click.ClickException(describe_os_error(exc)) from None
@@ -82,9 +90,8 @@ def main() -> None:
     every handler and clears every module (reference counting frees what it frees), but
     its cyclic garbage collections (~50 ms each, over the objects of numba, numpy, pydantic
     and h5py) skip them; objects left in reference cycles go with the process, as Python
-    allows. Those collections took ~0.2 s of ``rbstab run``'s ~0.9 s (measured: median
-    0.94 -> 0.74 s of 15 runs; docs/performance.md). Results are closed and renamed into
-    place by their ``with`` blocks long before.
+    allows. Those collections take ~0.2 s of ``rbstab run``'s ~0.9 s (docs/performance.md).
+    Results are closed and renamed into place by their ``with`` blocks long before.
     """
     signal.signal(signal.SIGTERM, _terminate)
     atexit.register(gc.freeze)

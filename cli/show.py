@@ -7,8 +7,6 @@ from pathlib import Path
 
 import click
 
-from rbstab.sweep.folder import is_sweep_folder, read_index, read_parameters, read_spec
-
 from .console import get_console
 from .options import console_options, json_option
 
@@ -77,6 +75,8 @@ def _parameter_values(index, column: str) -> dict:
 
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
+    from rbstab.sweep.folder import read_index, read_parameters, read_spec  # heavy: numpy
+
     index = read_index(path)  # checksum verified
     if "max_abs_constraint_error_x" in index:
         index["max_abs_constraint_error"] = index[[f"max_abs_constraint_error_{a}" for a in "xyz"]].abs().max(axis=1)
@@ -143,13 +143,15 @@ def _show_result(path: str) -> None:
 
 
 def _expand(path: str) -> list[str]:
-    """A folder that is not a sweep folder stands for the sweep folders and result files in it."""
+    """A plain folder (not a sweep folder) stands for the sweep folders and result files in it."""
+    from rbstab.kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder  # heavy: numba, numpy, pydantic, yaml
+
     folder = Path(path)
     if not folder.exists():
         raise ValueError(f"no such result file or folder: {path}" + _did_you_mean(folder))
-    if not folder.is_dir() or is_sweep_folder(folder):
+    if not is_plain_folder(folder):
         return [path]
-    inside = sorted(str(p) for p in folder.iterdir() if is_sweep_folder(p) or (p.suffix == ".h5" and p.is_file()))
+    inside = [str(p) for p in inputs_in(folder, (RUN, STORE, SWEEP))]
     if not inside:
         raise ValueError(f"{path}: a folder, but not a sweep folder (no sweep.yaml and index.csv) and without "
                          "result files (*.h5) or sweep folders in it")
@@ -165,14 +167,11 @@ def _did_you_mean(missing: Path) -> str:
 
 
 def _show(path: str) -> None:
-    from rbstab.io.chunk import is_chunk_file  # heavy: numpy
+    """``path`` shown as its kind says (:func:`rbstab.kinds.kind_of`)."""
+    from rbstab.kinds import RUN, STORE, SWEEP, kind_of  # heavy: numba, numpy, pydantic, yaml
 
-    if is_sweep_folder(path):
-        _show_sweep(path)
-    elif is_chunk_file(path):
-        _show_chunk(path)
-    else:
-        _show_result(path)
+    show_kind = {RUN: _show_result, STORE: _show_chunk, SWEEP: _show_sweep}
+    show_kind[kind_of(path, tuple(show_kind))](path)
 
 
 @click.command("show")

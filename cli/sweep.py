@@ -5,7 +5,6 @@ from __future__ import annotations
 import click
 
 from rbstab.api import execute_sweep
-from rbstab.sweep.executors import LocalExecutor
 from rbstab.sweep.worker import ENGINES
 from rbstab.warning_codes import coded
 
@@ -132,6 +131,9 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     if dry_run:
         return _dry_run(spec, overrides)
+
+    from rbstab.sweep.executors import LocalExecutor  # heavy: multiprocessing (every command's start-up)
+
     # start local workers now: they import numpy, scipy and h5py while the runs are validated
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
@@ -179,10 +181,6 @@ def _execute(spec, output, ex, **options):
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
         raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
-    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM (rbstab_cli.main.Terminated)
-        click.echo("\ninterrupted: finished runs are saved and the index is up to date; "
-                   "run the same command again to resume", err=True)
-        raise SystemExit(getattr(exc, "exit_code", 130))
 
 
 def _say_outcome(outcome) -> None:

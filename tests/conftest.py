@@ -1,4 +1,4 @@
-"""Shared fixtures: the paper's body and gains (physics-notes.md, Table 1)."""
+"""Shared fixtures: the paper's body and gains (its Table 1)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""An independent plain-numpy formulation of the model, written from physics-notes.md.
+"""An independent plain-numpy formulation of the model, written from the paper (docs/physics.md).
 
 What a researcher would write by hand (3x3 matrices, ``np.cross``): the reference that the
 compiled kernels are checked against, and the naive baseline of ``benchmarks/``. It shares

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from conftest import initial_blocks, paper_body, paper_gains
-from rbstab.engine import METHODS, integrate_runs, tableaus
+from rbstab.engine import METHODS, integrate_runs, status, tableaus
 from rbstab.variants import VARIANTS
 
 GRAVITY = {"free": (0.0, 0.0, -10.0), "permanent": (0.0, 0.0, -10.0)}
@@ -30,8 +30,23 @@ def test_rk_tableaus_are_scipys():
     for key in ("A", "C"):
         np.testing.assert_array_equal(getattr(tableaus.DOP853_EXTENDED, key), getattr(dop853_coefficients, key))
     assert (tableaus.SAFETY, tableaus.MIN_FACTOR, tableaus.MAX_FACTOR) == (rk.SAFETY, rk.MIN_FACTOR, rk.MAX_FACTOR)
-    assert tableaus.SUCCESS_MESSAGE == MESSAGES[0]
-    assert tableaus.TOO_SMALL_STEP_MESSAGE == OdeSolver.TOO_SMALL_STEP
+    assert status.SUCCESS_MESSAGE == MESSAGES[0]
+    assert status.TOO_SMALL_STEP_MESSAGE == OdeSolver.TOO_SMALL_STEP
+
+
+
+def test_status_table_names_every_code_once():
+    """Each code of rbstab.engine.status is a distinct int named as its constant, and its
+    message fills every field of its template."""
+    codes = {name: getattr(status, name) for name, _ in status.STATUSES.values()}
+    assert sorted(codes.values()) == sorted(status.STATUSES) and len(set(codes.values())) == len(codes)
+    assert all(status.STATUSES[code][0] == name for name, code in codes.items())
+    for code in status.STATUSES:
+        text = status.status_message(code, 0.25, 1e-3, 50, 2.0, max_switchings=7, resolution=1e-9)
+        assert "{" not in text and ("0.25" in text) == (code != status.SUCCESS)
+    assert status.status_message(status.STEP_LIMIT, 0.25, 1e-3, 50).startswith("step limit: 50 steps")
+    with pytest.raises(KeyError):
+        status.status_message(99, 0.0, 1e-3)
 
 
 def test_method_tables_hold_each_tableau_zero_padded():

@@ -11,8 +11,9 @@ graph with no cycle, in which no module imports one of a higher layer:
 :mod:`rbstab.warning_codes`. :mod:`rbstab.config` (validated input, built from the model
 and the variants' registry) and :mod:`rbstab.resources` (the memory a run needs) sit
 between the variants and the engine; :mod:`rbstab.summary` (compiled summary figures of a
-run's outputs) sits with the engine. Modules of one layer may import each other (without
-a cycle).
+run's outputs) and :mod:`rbstab.convergence` (the convergence rule) sit with the engine;
+:mod:`rbstab.kinds` (the registry of input kinds, each loaded by its format's module) with
+the sweeps and analyses. Modules of one layer may import each other (without a cycle).
 
 A function-level import is for an optional or heavy dependency only, and says which in a
 comment on its line or the line above.
@@ -35,10 +36,10 @@ LAYERS = [
     ("model", ["rbstab.model"]),
     ("variants", ["rbstab.variants"]),
     ("config", ["rbstab.config", "rbstab.resources"]),
-    ("engine", ["rbstab.engine", "rbstab.summary"]),
+    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence"]),
     ("simulate", ["rbstab.simulate"]),
     ("io", ["rbstab.io"]),
-    ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis"]),
+    ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds"]),
     ("report", ["rbstab.report"]),
     ("api", ["rbstab.api"]),
     ("cli", ["rbstab_cli", "rbstab.__main__"]),

@@ -40,7 +40,7 @@ RTOL = 1e-7
 TIGHT = ["simulation.rtol=1e-12", "simulation.atol=1e-12"]
 
 
-# -- conventions, written here from physics-notes.md (not taken from rbstab) -------------------
+# -- conventions, written here from the paper and docs/physics.md (not taken from rbstab) -------
 
 
 def euler_angles(a: np.ndarray) -> np.ndarray:

@@ -159,7 +159,7 @@ def test_gimbal_lock_stops_the_run_with_a_reason():
 @pytest.mark.parametrize("name", ALL + ["sliding_sign_law"])
 def test_compiled_rhs_is_the_plain_numpy_model(name, gravity, rng):
     """The compiled right-hand side of every variant against an independent plain-numpy
-    transcription of physics-notes.md (tests/reference.py), at random states."""
+    transcription of the paper's equations (tests/reference.py), at random states."""
     phi = 0.0 if name == "sliding_sign_law" else 0.005
     name = name.replace("_sign_law", "")
     variant = _variant(name, gravity, boundary_layer=phi)

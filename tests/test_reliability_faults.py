@@ -347,6 +347,20 @@ def test_ctrl_c_exits_130_with_a_word(tmp_path, monkeypatch):
     assert result.exit_code == 130 and "interrupted" in result.output and "Aborted" not in result.output
 
 
+def test_an_interrupted_sweep_says_once_that_it_can_resume(tmp_path, monkeypatch):
+    """The CLI's one interrupt handler gives a sweep its own words (the index is up to date)."""
+    import rbstab.api
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(rbstab.api, "execute_sweep", interrupted)
+    spec = ROOT / "configs" / "sweeps" / "gains.yaml"
+    result = CliRunner().invoke(cli, ["sweep", str(spec), "-o", str(tmp_path), "--no-progress"])
+    assert result.exit_code == 130 and "Aborted" not in result.output
+    assert result.output.count("interrupted") == 1 and "the index is up to date" in result.output
+
+
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="reads the process tree from /proc")
 def test_workers_exit_when_the_parent_dies_unreaped(tmp_path):
     proc, runs, _ = _sweep_process(tmp_path, "orphan")

@@ -216,7 +216,7 @@ def test_names_samples_and_steps_are_bounded_with_the_reason():
 
 
 def test_limits_are_not_part_of_a_runs_identity():
-    from rbstab.io.hdf5 import canonical_config
+    from rbstab.config import canonical_config
 
     a = config_from_mapping(CASE3_DATA)
     b = config_from_mapping({**CASE3_DATA, "simulation": {**CASE3_DATA.get("simulation", {}), "max_steps": 10,

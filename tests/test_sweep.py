@@ -17,10 +17,10 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab.config import load_config
+from rbstab.config import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash, load_config
+from rbstab.config.identity import SECTION_MEMO
 from rbstab.io.chunk import read_chunk_rows
-from rbstab.io.hdf5 import (RUN_LIMIT_KEYS, SECTION_MEMO, canonical_config, canonical_configs, config_hash,
-                             read_attributes)
+from rbstab.io.hdf5 import read_attributes
 from rbstab.sweep import (
     SweepBusyError,
     SweepSpecError,
@@ -31,7 +31,6 @@ from rbstab.sweep import (
     spec_from_mapping,
 )
 from rbstab.sweep.executors import ExecutorError
-from rbstab.sweep.folder import is_converged
 from rbstab.sweep.plan import resolved_hash
 from rbstab.sweep.worker import RunTask, WorkerOptions
 from rbstab_cli.main import cli
@@ -156,14 +155,14 @@ def test_canonical_configs_are_the_two_canonical_texts():
 def test_canonical_configs_memo_encodes_a_shared_section_once(monkeypatch):
     """Runs that share their sections' objects (an initial-state sweep) encode each once,
     however many runs with their own initial state come between."""
-    import rbstab.io.hdf5 as hdf5
+    import rbstab.config.identity as identity
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # W001 of Case 3's inertia
         resolved = load_config(CASE3).resolved
     encoded = []
-    encode = hdf5._canonical_json
-    monkeypatch.setattr(hdf5, "_canonical_json", lambda value: encoded.append(id(value)) or encode(value))
+    encode = identity._canonical_json
+    monkeypatch.setattr(identity, "_canonical_json", lambda value: encoded.append(id(value)) or encode(value))
     memo: dict = {}
     for k in range(5 * SECTION_MEMO):
         run = {**resolved, "initial_state": {**resolved["initial_state"], "omega": [k, 0.5, 1.0]}}
@@ -354,11 +353,21 @@ def test_worker_turns_exceptions_into_records(tmp_path):
 
 
 def test_converged_definition():
-    assert is_converged("success", 100.0, 0.09, 1e-3)
-    assert not is_converged("success", 100.0, 0.11, 1e-3)
-    assert not is_converged("failed", 100.0, 0.0, 1e-3)
-    assert not is_converged("success", 100.0, float("nan"), 1e-3)
-    assert not is_converged("success", 100.0, -50.0, 1e-3)  # fell below the equilibrium's v: not there
+    """The index's ``converged`` column is rbstab.convergence.converged of the stored row."""
+    from rbstab.sweep.folder import iter_index_rows
+
+    class Run:
+        index, base, values, variant, layout = 0, "b", (), "embedded", ()
+
+        def __init__(self, run_id):
+            self.run_id = run_id
+
+    cases = {"r0": ("success", 100.0, 0.09), "r1": ("success", 100.0, 0.11), "r2": ("failed", 100.0, 0.0),
+             "r3": ("success", 100.0, float("nan")), "r4": ("success", 100.0, -50.0)}
+    rows = {k: {"run_id": k, "status": st, "lyapunov_initial": v0, "lyapunov_final": v1, "file": f"{k}.h5"}
+            for k, (st, v0, v1) in cases.items()}
+    got = [row["converged"] for row in iter_index_rows([Run(k) for k in cases], rows, {}, 1e-3)]
+    assert got == [True, False, False, False, False]  # r4 fell below the equilibrium's v: not there
 
 
 # -- end to end -------------------------------------------------------------------------------

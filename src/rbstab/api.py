@@ -273,7 +273,7 @@ def check_overwrite(config: "RunConfig", path: str | os.PathLike, *, overwrite: 
         If a file of another configuration (or not a readable result) is there and not
         ``overwrite``: the message names the keys that differ.
     """
-    from .io.hdf5 import canonical_config, config_hash  # heavy: numpy
+    from .config import canonical_config, config_hash  # heavy: numba, numpy, pydantic, yaml
 
     path = Path(path)
     if not path.exists():
@@ -348,13 +348,9 @@ def open_result(path: str | os.PathLike) -> "xarray.Dataset":
     rbstab.io.integrity.DamagedResultError
         If its checksums do not match (a subclass of NotAResultFile).
     """
-    from .io.chunk import is_chunk_file  # heavy: numpy
-    from .io.hdf5 import NotAResultFile, read_dataset  # heavy: numpy
+    from .kinds import RUN, open_input  # heavy: numba, numpy, pydantic, yaml
 
-    if Path(path).is_file() and is_chunk_file(path):
-        raise NotAResultFile(f"{path}: a store file of a sweep (many runs); open the sweep folder with "
-                             "rbstab.open_sweep(folder)")
-    return read_dataset(path)
+    return open_input(path, (RUN,))  # another kind is refused, saying what it is and how to read it
 
 
 # -- sweeps -------------------------------------------------------------------------------------

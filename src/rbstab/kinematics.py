@@ -1,4 +1,4 @@
-"""Rigid-body kinematics and 3-vector algebra (paper section 2, physics-notes "Frames").
+"""Rigid-body kinematics and 3-vector algebra (paper section 2; frames and conventions: docs/physics.md).
 
 The physics of rbstab is compiled with numba (:func:`rbstab.jit.jit`). Inside compiled
 code a 3-vector is a tuple ``(x0, x1, x2)`` of floats, so that no operation allocates

@@ -34,7 +34,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .engine import METHODS, integrate_runs, status_message
+from .engine import METHODS, integrate_runs
+from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .model import PARAMETERS
@@ -212,7 +213,7 @@ def _with_deadline(rhs, timeout: float):
 
     def timed_rhs(t, y):
         if _time.perf_counter() > deadline:
-            raise RunTimeout(-4, t)
+            raise RunTimeout(TIMEOUT, t)
         return rhs(t, y)
 
     return timed_rhs
@@ -226,7 +227,7 @@ def _step_counter(max_steps: int):
     def event(t: float, y: np.ndarray) -> float:
         calls[0] += 1
         if calls[0] > max_steps + 1:
-            raise RunLimit(-3, t)
+            raise RunLimit(STEP_LIMIT, t)
         return 1.0
 
     return event
@@ -292,7 +293,8 @@ def solve(
     states[:n] = y.T[:n]
     solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
     if sol.status == 1:
-        return t_eval, states, "failed", status_message(1, float(sol.t_events[0][0]), settings.gimbal_margin), solver
+        message = status_message(GIMBAL_LOCK, float(sol.t_events[0][0]), settings.gimbal_margin)
+        return t_eval, states, "failed", message, solver
     if sol.status != 0:
         return t_eval, states, "failed", f"solver failed: {sol.message}", solver
     if not np.all(np.isfinite(states)):
@@ -435,7 +437,7 @@ def _chunk_blocks(configs, variants, codes, params, sol, share: float, settings:
                 time=time,
                 outputs=outputs,
                 summaries=summaries,
-                status=["success" if code == 0 else "failed" for code in status],
+                status=["success" if code == SUCCESS else "failed" for code in status],
                 message=[status_message(code, float(sol.t_stop[j]), configs[j].simulation.gimbal_margin,
                                         int(settings[j, 5]), float(settings[j, 6])) for code, j in zip(status, members)],
                 solver=[{"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": code,

@@ -19,10 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from ..config import PhysicalPlausibilityWarning, config_from_mapping, load_config
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..simulate import simulate
 from ..variants import VARIANTS
-from .basin import DEFAULT_RATIO, BasinAxis, BasinMap, basin_map, time_to_converge
+from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
@@ -96,7 +98,7 @@ class Analysis:
         """Time [s] the slowest mode alone takes to bring v down by the convergence ratio:
         v ~ exp(-2 t / tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
         tau = self.linearisation.slowest_time_constant
-        ratio = self.settling["ratio"] if self.settling else DEFAULT_RATIO
+        ratio = self.settling["ratio"] if self.settling else DEFAULT_LYAPUNOV_RATIO
         return 0.5 * tau * math.log(1.0 / ratio) if self.verdict == "asymptotically stable" else float("nan")
 
     def basin_inside(self) -> dict[str, int] | None:
@@ -134,8 +136,6 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     ValueError
         For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
     """
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: yaml
-
     sign_law = config.variant == "sliding" and not config.gains.boundary_layer
     if boundary_layer is not None and not (boundary_layer > 0 and math.isfinite(boundary_layer)):
         raise ValueError(f"--boundary-layer: found {boundary_layer}; expected a width phi > 0 [m]")
@@ -196,7 +196,7 @@ def analyze(
     simulate: bool = True,
     basin: Sequence[str | BasinAxis] | None = None,
     basin_samples: int = DEFAULT_BASIN_SAMPLES,
-    ratio: float = DEFAULT_RATIO,
+    ratio: float = DEFAULT_LYAPUNOV_RATIO,
     jobs: int = 1,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
@@ -237,8 +237,6 @@ def analyze(
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
-    from ..config import load_config  # heavy: yaml
-
     if isinstance(config, (str, os.PathLike)):
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)

@@ -4,20 +4,17 @@ Two initial-state entries (``initial_state.omega.0`` ...) vary over even grids; 
 other entry keeps the configuration's value. Each grid point is one run of the compiled
 engine (:func:`rbstab.simulate.simulate_many`, many runs per compiled call; the chunks
 go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 1``), and
-is classified as a sweep classifies its runs (:func:`rbstab.sweep.folder.is_converged`),
-with |v| in place of v:
+is classified by the rule a sweep classifies its runs with
+(:func:`rbstab.convergence.converged`), applied from every sample on:
 
-- ``converged`` (0): the run reached t_end and |v| <= ratio * |v(0)| from some time on;
+- ``converged`` (0): the run reached t_end and |v| <= ratio * |v(0)| (+ round-off) from
+  some time on;
 - ``not converged`` (1): it reached t_end with more of v left;
 - ``failed`` (2): gimbal lock (|theta_2| reached pi/2 - gimbal_margin, eq 5), a solver
   failure, a non-finite state, or an initial state outside the domain.
 
-|v|, because v is zero at the equilibrium but negative elsewhere when the equilibrium is
-not its minimum (an inverted pendulum falling to a lower potential would otherwise count
-as converged); where v is positive definite this is the sweeps' criterion. The bound has
-:data:`ROUND_OFF` J added, so that a run started at the equilibrium, where v(0) is zero
-up to round-off, converges. The time to converge is the first sample time from which the
-bound holds [s] (its resolution: the sample spacing t_end / (n_samples - 1)).
+The time to converge is the first sample time from which the bound holds [s] (its
+resolution: the sample spacing t_end / (n_samples - 1)).
 """
 
 from __future__ import annotations
@@ -29,20 +26,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..layout import BLOCK_UNITS
 from ..sweep.executors import LocalExecutor
 
-__all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES",
-           "DEFAULT_RATIO"]
+__all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
 
 #: Outcome codes of a grid point (the ``flag_values`` of the file's ``basin_outcome``).
 OUTCOMES = ("converged", "not converged", "failed")
 #: Samples per basin run (the time-to-converge resolution is t_end / (DEFAULT_SAMPLES - 1)).
 DEFAULT_SAMPLES = 201
-#: Converged: |v| <= DEFAULT_RATIO * |v(0)| (the sweeps' default ``lyapunov_ratio``).
-DEFAULT_RATIO = 1e-3
-#: Added to the bound ratio * |v(0)| [J]: round-off of v at the equilibrium.
-ROUND_OFF = 1e-12
 _AXIS = re.compile(r"^\s*(?P<key>[^=]+?)\s*=\s*(?P<lo>[^:]+):(?P<hi>[^:]+):(?P<n>[^:]+)\s*$")
 
 
@@ -162,8 +155,9 @@ class BasinMap:
 
 
 def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> float:
-    """First sample time from which |v| stays <= ratio * |v(0)| + :data:`ROUND_OFF` [s];
-    NaN if |v(t_end)| is above (module docstring).
+    """First sample time from which every sample has converged
+    (:func:`rbstab.convergence.converged` with v(0) and the sample's v) [s]; NaN if
+    v(t_end) has not.
 
     Parameters
     ----------
@@ -173,8 +167,7 @@ def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> fl
         v [J] at ``time`` (NaN after a failure: never converged).
     ratio : float
     """
-    bound = ratio * abs(lyapunov[0]) + ROUND_OFF
-    above = ~(np.abs(lyapunov) <= bound)  # NaN counts as above
+    above = ~converged(True, lyapunov[0], lyapunov, ratio)
     if above[-1]:
         return float("nan")
     last = np.flatnonzero(above)
@@ -223,7 +216,7 @@ def basin_map(
     axes: Sequence[BasinAxis],
     variant=None,
     *,
-    ratio: float = DEFAULT_RATIO,
+    ratio: float = DEFAULT_LYAPUNOV_RATIO,
     n_samples: int = DEFAULT_SAMPLES,
     jobs: int = 1,
 ) -> BasinMap:

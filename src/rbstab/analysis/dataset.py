@@ -40,11 +40,10 @@ from typing import Any
 
 import numpy as np
 
+from ..config import canonical_config, config_hash
 from ..io.atomic import atomic_path
-from ..io.hdf5 import canonical_config, config_hash
 from ..io.metadata import provenance_attributes
 from ..layout import BLOCK_UNITS
-
 
 __all__ = [
     "FORMAT",

@@ -2,14 +2,13 @@
 interval, and the parameters that separate stable from unstable runs.
 
 The sweep folder is read through :func:`rbstab.open_sweep`; a run is *stable* when it
-reached t_end and |v(t_end)| <= lyapunov_ratio |v(0)| (+ 1e-12 J of round-off), with the
-sweep's ratio: stability as seen in simulation over the sweep's t_end, not a proof. This
-is the sweep's own ``converged`` (:func:`rbstab.sweep.folder.is_converged`) with |v| in
-place of v, as in :mod:`rbstab.analysis.basin`: where the equilibrium is not the minimum
-of v (an inverted pendulum held up by too weak a K_r), a run that falls to a lower
-potential ends with v(t_end) < 0 and the sweep counts it as converged; the runs where the
-two differ are counted. Runs without a result (``error``, ``pending``) are left out and
-counted. Each base configuration of the sweep is a group of its own.
+converged (:func:`rbstab.convergence.converged`: it reached t_end and |v(t_end)| <=
+lyapunov_ratio |v(0)| + 1e-12 J) with the sweep's ratio: stability as seen in simulation
+over the sweep's t_end, not a proof. The sweep's index records its own ``converged``
+column; the runs where it differs from this reading of the same figures (an index
+written under another rule) are counted. Runs without a result (``error``,
+``pending``) are left out and counted. Each base configuration of the sweep is a group
+of its own.
 
 Per group:
 
@@ -30,8 +29,8 @@ from statistics import NormalDist
 
 import numpy as np
 
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..sweep.folder import open_sweep
-from .basin import DEFAULT_RATIO, ROUND_OFF
 from .dataset import robustness_content, robustness_dataset
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
@@ -145,7 +144,8 @@ class RobustnessGroup:
     n_excluded : int
         Runs without a result (error, pending).
     n_disagree : int
-        Runs whose stability here differs from the sweep's ``converged`` (v(t_end) < 0).
+        Runs whose stability here differs from the ``converged`` the sweep recorded (an index
+        written under another rule).
     interval : (float, float)
         Wilson interval of the stable fraction.
     separations : list of Separation
@@ -178,7 +178,8 @@ class Robustness:
         The sweep's name.
     folder : str
     ratio : float
-        The sweep's convergence ratio (the default 1e-3 if it has none).
+        The sweep's convergence ratio (:data:`rbstab.convergence.DEFAULT_LYAPUNOV_RATIO`
+        if it has none).
     confidence : float
     groups : list of RobustnessGroup
     runs : dict
@@ -244,15 +245,13 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
     if not 0 < confidence < 1:
         raise ValueError(f"--confidence: found {confidence}; expected 0 < confidence < 1")
     ds = open_sweep(path)
-
     status = ds["status"].values.astype(str)
     has_result = np.isin(status, ["success", "failed"])
     ratio = ds.attrs.get("lyapunov_ratio")
-    ratio = float(ratio) if ratio is not None and np.isfinite(float(ratio)) else DEFAULT_RATIO
+    ratio = float(ratio) if ratio is not None and np.isfinite(float(ratio)) else DEFAULT_LYAPUNOV_RATIO
     v0 = np.asarray(ds["lyapunov_initial"].values, dtype=float)
     v1 = np.asarray(ds["lyapunov_final"].values, dtype=float)
-    with np.errstate(invalid="ignore"):
-        stable = (status == "success") & (np.abs(v1) <= ratio * np.abs(v0) + ROUND_OFF)
+    stable = converged(status == "success", v0, v1, ratio)
     disagree = has_result & (stable != (np.asarray(ds["converged"].values, dtype=bool) & (status == "success")))
     base = ds["base"].values.astype(str) if "base" in ds.coords else np.full(ds.sizes["run"], ds.attrs["sweep"])
     parameters = _numeric_parameters(ds)

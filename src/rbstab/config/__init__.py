@@ -49,6 +49,11 @@ memory); samples are at least 1e-12 s apart. ``max_steps`` and ``max_wall_time``
 how long a run may take, not what it computes: they are not part of the run's
 ``config_hash`` (a run stopped by them is ``failed``; ``--retry-failed`` reruns it).
 
+A run's identity is :func:`config_hash` of its :func:`canonical_config` (the resolved
+configuration without ``name`` and the run limits, as canonical JSON;
+:mod:`rbstab.config.identity`): result files store it, and ``rbstab run`` and ``rbstab
+sweep`` do not run again a run whose stored result has it.
+
 Gains the variant does not use (and ``initial_state.d`` for variants without a controller
 state) are validated, kept in :attr:`RunConfig.resolved`, and otherwise ignored, so one
 base configuration can serve a sweep over variants.
@@ -66,6 +71,7 @@ one mapping is an error instead of silently keeping the last value.
 import importlib
 
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
+from .identity import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash
 from .yaml_io import dump_yaml, parse_yaml
 
 # The validator (pydantic) and RunConfig (numba's model) are imported on first use, so that
@@ -100,6 +106,10 @@ __all__ = [
     "get_dotted",
     "parse_yaml",
     "dump_yaml",
+    "canonical_config",
+    "canonical_configs",
+    "config_hash",
+    "RUN_LIMIT_KEYS",
     "GAIN_NAMES",
     "GAIN_UNITS",
     "INITIAL_STATE_BLOCKS",

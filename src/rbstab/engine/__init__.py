@@ -12,8 +12,9 @@ compiled right-hand side.
 
 from __future__ import annotations
 
-from .integrate import DEFAULT_MAX_STEPS, ChunkSolution, integrate_runs, status_message
+from .integrate import ChunkSolution, integrate_runs
 from .rk import method_number
+from .status import DEFAULT_MAX_STEPS, status_message
 from .tableaus import METHODS
 from .warm import GROUPS, ensure_compiled, warm_up
 

@@ -6,10 +6,8 @@ lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
 gimbal-lock event, located on the interpolant. :func:`integrate_chunk` runs many runs, each
 with its own variant, parameters and settings, one after the other in one call.
 
-Status codes (:func:`rbstab.engine.status_message`): 0 reached t_end, 1 gimbal lock (the
-event time is returned), -1 step size below the spacing of floats (scipy's failure), -2
-non-finite step size or state, -3 step limit reached, -4 wall-time limit reached (checked
-every :data:`CLOCK_EVERY` steps).
+A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
+checked every :data:`CLOCK_EVERY` steps).
 """
 
 from __future__ import annotations
@@ -30,41 +28,18 @@ from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
 from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
                  error_norm, initial_step, method_number, rk_step)
-from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY, SUCCESS_MESSAGE, TOO_SMALL_STEP_MESSAGE
+from .status import DEFAULT_MAX_STEPS, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
+from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
-__all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "DEFAULT_MAX_STEPS",
-           "status_message", "ChunkSolution", "integrate_runs"]
+__all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
+           "integrate_runs"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
 
-SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT = 0, 1, -1, -2, -3, -4
 
 #: Steps between two readings of the clock for the wall-time limit (a reading costs ~0.3 us,
 #: a step of DOP853 on the embedded body ~6 us).
 CLOCK_EVERY = 64
-
-#: Accepted steps after which a run stops as failed (a run that would never finish).
-DEFAULT_MAX_STEPS = 10_000_000
-
-
-def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,
-                   max_wall_time: float = np.inf) -> str:
-    """The message of a run's end (scipy's words where scipy has them)."""
-    if status == 0:
-        return SUCCESS_MESSAGE
-    if status == 1:
-        return (
-            f"gimbal lock: |theta_2| reached pi/2 - {gimbal_margin:g} rad at t = {t_stop:.6g} s; "
-            "B(theta) is singular there (eq 5), so the Euler-angle model stops"
-        )
-    if status == -1:
-        return f"solver failed: {TOO_SMALL_STEP_MESSAGE} (at t = {t_stop:.6g} s)"
-    if status == -2:
-        return f"non-finite step size or state at t = {t_stop:.6g} s"
-    if status == -3:
-        return f"step limit: {max_steps} steps taken (simulation.max_steps), reaching only t = {t_stop:.6g} s"
-    return f"timeout: the run exceeded {max_wall_time:g} s of wall time at t = {t_stop:.6g} s"
-
 
 #: ``CLOCK_MONOTONIC`` of ``clock_gettime`` in the C library, where it is known.
 _CLOCK_MONOTONIC = {"linux": 1, "darwin": 6, "freebsd": 4}.get(sys.platform.rstrip("0123456789"))
@@ -267,8 +242,8 @@ class ChunkSolution:
     samples : ndarray, shape (k, n_samples, n_state)
         The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
     status : ndarray of int, shape (k,)
-        0 reached t_end; 1 gimbal lock; -1 step too small; -2 non-finite; -3 step limit;
-        -4 wall-time limit.
+        How each run ended (:mod:`rbstab.engine.status`: 0 reached t_end, 1 gimbal lock,
+        negative a failure).
     t_stop : ndarray, shape (k,)
         Where each run stopped [s] (the event time for gimbal lock).
     nfev, n_steps : ndarray of int, shape (k,)
@@ -302,9 +277,9 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     n_samples : int
         Samples per run, evenly spaced on [0, t_end] (>= 2).
     max_steps : int
-        Accepted steps after which a run stops (status -3), for 5-column ``settings``.
+        Accepted steps after which a run stops (STEP_LIMIT), for 5-column ``settings``.
     max_wall_time : float
-        Seconds after which a run stops (status -4; inf: none), for 5-column ``settings``.
+        Seconds after which a run stops (TIMEOUT; inf: none), for 5-column ``settings``.
     out : ndarray, shape (>= k, n_samples, n_state), optional
         Where the samples go (its first k rows, returned as ``samples``): a buffer the
         caller reuses for call after call, so that a worker holds one (default: a new

@@ -40,10 +40,10 @@ from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..summary import piecewise_numerical_rate
 from ..variants.kernels import state_rate
 from ..variants.sliding import mode_code, mode_quantities, mode_rows, stop_at_c
-from .integrate import (CLOCK_EVERY, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, sample_time,
-                        status_message, step, wall_clock)
+from .integrate import CLOCK_EVERY, sample_time, step, wall_clock
 from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
                  initial_step, method_number)
+from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, SWITCHING_LIMIT, TIMEOUT, status_message
 from .tableaus import METHODS
 
 __all__ = [
@@ -54,7 +54,6 @@ __all__ = [
     "SLIDING_STARTS",
     "SLIDING_ENDS",
     "EVENT_KINDS",
-    "SWITCHING_LIMIT",
     "Switchings",
     "SignLawSolution",
     "integrate_sign_law",
@@ -77,8 +76,6 @@ X_TOLERANCE = 4 * np.finfo(float).eps
 #: Event kinds (``Switchings.kind``) and their names.
 CROSSING, SLIDING_STARTS, SLIDING_ENDS = 0, 1, 2
 EVENT_KINDS = ("crossing", "sliding starts", "sliding ends")
-#: Status code beyond the compiled engine's (:mod:`rbstab.engine.integrate`): too many events.
-SWITCHING_LIMIT = -5
 
 
 @dataclass
@@ -486,11 +483,8 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
             max_steps, max_wall_time, float(resolution), method_number(method), samples, modes, events, jumps)
     log = events[: min(n_events, max_switchings)]
     switchings = Switchings(log[:, 0].copy(), log[:, 1].astype(np.int64), log[:, 2].astype(np.int64), log[:, 3].copy())
-    if status == SWITCHING_LIMIT:
-        message = (f"switching limit: {max_switchings} events located by t = {t_stop:.6g} s (the switchings "
-                   f"accumulate without reaching the resolution {resolution:g} m)")
-    else:
-        message = status_message(int(status), t_stop, settings.gimbal_margin, max_steps, max_wall_time)
+    message = status_message(int(status), t_stop, settings.gimbal_margin, max_steps, max_wall_time,
+                             max_switchings=max_switchings, resolution=resolution)
     solver = {"nfev": int(nfev), "njev": 0, "nlu": 0, "solver_status": int(status), "n_steps": int(n_steps),
               "n_pieces": int(n_pieces)}
     time = np.linspace(0.0, float(settings.t_end), n)

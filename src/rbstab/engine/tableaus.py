@@ -29,12 +29,6 @@ SAFETY = 0.9
 MIN_FACTOR = 0.2
 MAX_FACTOR = 10
 
-#: scipy's ``solve_ivp`` message for a run that reached the end of its interval.
-SUCCESS_MESSAGE = 'The solver successfully reached the end of the integration interval.'
-
-#: scipy's ``OdeSolver.TOO_SMALL_STEP``: a step below 10 * spacing(t).
-TOO_SMALL_STEP_MESSAGE = 'Required step size is less than spacing between numbers.'
-
 RK23 = SimpleNamespace(
     order=3,
     error_estimator_order=2,

@@ -14,7 +14,7 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   :func:`rbstab.sweep.folder.parameter_name`; attribute ``config_key`` gives the key);
 - per run ``(run,)``: ``status``, ``message``, ``wall_time``, ``solver_nfev`` ...,
   ``config`` (the resolved configuration without its name, canonical JSON), ``config_hash``
-  (SHA-256 of ``config`` without its run limits, :func:`rbstab.io.hdf5.canonical_config`) and the summary figures of
+  (SHA-256 of ``config`` without its run limits, :func:`rbstab.config.canonical_config`) and the summary figures of
   :func:`rbstab.summary.summarize`, 3-vectors as ``<name>_x``, ``_y``, ``_z``, each with
   ``long_name`` and (numbers) ``units`` (:mod:`rbstab.io.metadata`);
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
@@ -51,8 +51,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..config import canonical_config, config_hash
+from ..simulate import RunBlock
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, _plain, canonical_config, config_hash as hash_of, summary_stride
+from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, _plain, summary_stride
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
@@ -76,7 +78,6 @@ __all__ = [
     "summary_columns",
     "summary_table_columns",
     "SUMMARY_FIGURES",
-    "canonical_config",
     "WRITE_BLOCK",
 ]
 
@@ -336,13 +337,11 @@ class ChunkWriter:
             config_text: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
-        ``config_hash``: the run's :func:`rbstab.io.hdf5.config_hash` of its canonical config,
-        and ``config_text``, its :func:`~rbstab.io.hdf5.canonical_config` with the run limits
+        ``config_hash``: the run's :func:`rbstab.config.config_hash` of its canonical config,
+        and ``config_text``, its :func:`~rbstab.config.canonical_config` with the run limits
         (the ``config`` column), if the caller has them (a sweep's plan computed them); else
         computed here.
         """
-        from ..simulate import RunBlock  # heavy: numba
-
         return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
                               config_texts=[config_text])[0]
 
@@ -376,7 +375,7 @@ class ChunkWriter:
             if not texts[j]:
                 texts[j] = canonical_config(config.resolved, limits=True)
             if not hashes[j]:
-                hashes[j] = hash_of(canonical_config(config.resolved))
+                hashes[j] = config_hash(canonical_config(config.resolved))
         values: dict[str, list] = {
             "variant": [c.variant for c in configs],
             "status": list(block.status),

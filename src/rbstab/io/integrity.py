@@ -172,8 +172,8 @@ def _attribute(oid, key: str) -> Any:
     try:
         shape = aid.shape
         if shape is None:  # an empty (null) dataspace
-            owner = h5py.Group(oid) if isinstance(oid, h5py.h5g.GroupID) else h5py.Dataset(oid)
-            return owner.attrs[key]
+            holder = h5py.Group(oid) if isinstance(oid, h5py.h5g.GroupID) else h5py.Dataset(oid)
+            return holder.attrs[key]
         value = np.empty(shape, dtype=aid.dtype)
         aid.read(value)
         return value

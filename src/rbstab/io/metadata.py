@@ -133,7 +133,7 @@ SUMMARY_FIGURES = {
     "lyapunov_rate_mismatch_relative": ("1", "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),
     "lyapunov_rate_check": ("", "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
     "lyapunov_rate_checked": ("1", "fraction of the samples the rate check compares (pure sign law: on one smooth piece)"),
-    # runs of the pure sign law of sliding (rbstab.engine.switching.SWITCHING_FIGURES)
+    # runs of the pure sign law of sliding (rbstab.engine.switching.switching_summary)
     "switching_count": ("1", "crossings of E_i = 0 located"),
     "sliding_time": ("s", "time C slid on E_i = 0 (equivalent force)"),
     "sliding_starts": ("1", "times sliding on E_i = 0 started"),

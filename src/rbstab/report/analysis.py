@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.dataset import SUFFIX, is_analysis_file, read_analysis
-from ..sweep.folder import is_sweep_folder
+from ..analysis.dataset import read_analysis
+from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
 from .render import Section, Table
@@ -42,11 +42,12 @@ def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
     others: list = []
     for raw in paths:
         p = Path(raw)
-        if p.is_file() and is_analysis_file(p):
+        found = inputs_in(p, (ANALYSIS,)) if is_plain_folder(p) else []
+        if ANALYSIS.can_open(p):
             analyses.append(p)
-        elif p.is_dir() and not is_sweep_folder(p) and any(p.glob(f"*{SUFFIX}")):
-            analyses.extend(sorted(p.glob(f"*{SUFFIX}")))
-            if any(p.glob("*.h5")):
+        elif found:
+            analyses.extend(found)
+            if inputs_in(p, (RUN, STORE)):
                 others.append(raw)
         else:
             others.append(raw)

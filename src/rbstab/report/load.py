@@ -14,6 +14,8 @@ Everything a report needs is read here, before anything is written:
   runs; each is read as a run (:func:`load_chunk_runs`), given directly, in a folder or
   through a sweep's ``index.csv`` (its ``file`` and ``file_row`` columns).
 
+Which kind an input is, :mod:`rbstab.kinds` says (the registry of input kinds).
+
 :func:`load_inputs` checks every input and raises one :class:`ReportInputError` listing
 every problem, so the caller can refuse the whole report before creating anything.
 """
@@ -31,13 +33,13 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
 
-from ..io.chunk import SUMMARY_FIGURES, is_chunk_file, read_chunk_rows
+from ..io.chunk import SUMMARY_FIGURES, read_chunk_rows
 from ..io.hdf5 import NotAResultFile, read_attributes
 from ..io.integrity import reading
-from ..sweep.folder import config_key_of
-from ..sweep.folder import is_sweep_folder as check
-from ..sweep.folder import read_index, read_parameters, read_spec
+from ..kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of
+from ..sweep.folder import config_key_of, read_index, read_parameters, read_spec
 
 __all__ = [
     "ReportInputError",
@@ -49,7 +51,6 @@ __all__ = [
     "load_chunk_runs",
     "load_sweep",
     "flatten_config",
-    "is_sweep_folder",
 ]
 
 class ReportInputError(ValueError):
@@ -256,12 +257,6 @@ class ReportInputs:
         return self.runs + [r for s in self.sweeps for r in s.runs if r is not None]
 
 
-def is_sweep_folder(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a folder with ``sweep.yaml`` and ``index.csv``
-    (:func:`rbstab.sweep.folder.is_sweep_folder`)."""
-    return check(path)
-
-
 def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
     """Read identity, summary and configuration of one result file (no time series).
 
@@ -331,11 +326,9 @@ def _store_attributes(row: dict) -> dict:
 
 
 def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row: int | None = None) -> RunData:
-    import yaml  # heavy: yaml
-
     where = f"{path}" if row is None else f"{path} (run {attrs.get('name')})"
     text = attrs.get("config", "") or ""
-    try:  # a store file's config is JSON (rbstab.io.hdf5.canonical_config), a run file's YAML
+    try:  # a store file's config is JSON (rbstab.config.canonical_config), a run file's YAML
         config = (json.loads(text) if text.lstrip().startswith("{") else yaml.safe_load(text)) or {}
     except (ValueError, yaml.YAMLError) as exc:
         raise NotAResultFile(f"{where}: the config attribute is not valid YAML ({exc})") from None
@@ -514,20 +507,10 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
         resolved.append(key)
         if not p.exists():
             problems.append(f"{p}: no such file or folder")
-        elif p.is_dir():
-            if (p / "sweep.yaml").is_file() or (p / "index.csv").is_file():
-                if not is_sweep_folder(p):
-                    lacking = "index.csv" if (p / "sweep.yaml").is_file() else "sweep.yaml"
-                    problems.append(f"{p}: incomplete sweep folder (no {lacking})")
-                    continue
-                try:
-                    sweeps.append(load_sweep(p))
-                except ReportInputError as exc:
-                    problems.extend(exc.problems)
-                continue
-            files = sorted(p.glob("*.h5"))
+        elif is_plain_folder(p):
+            files = inputs_in(p, (RUN, STORE))
             if not files:
-                inner = sorted(q.name for q in p.iterdir() if is_sweep_folder(q))
+                inner = [q.name for q in inputs_in(p, (SWEEP,))]
                 if inner:
                     problems.append(
                         f"{p}: not a sweep folder and no result files (*.h5) in it; it holds the "
@@ -543,14 +526,20 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
                     continue
                 seen.add(file.resolve())
                 try:
-                    runs.extend(_load_file(file))
+                    runs.extend(_load_file(file, kind_of(file, (RUN, STORE))))
                 except (FileNotFoundError, NotAResultFile) as exc:
                     problems.append(str(exc))
         else:
             try:
-                runs.extend(_load_file(p))
+                kind = kind_of(p, (RUN, STORE, SWEEP))
+                if kind is SWEEP:
+                    sweeps.append(load_sweep(p))
+                else:
+                    runs.extend(_load_file(p, kind))
             except (FileNotFoundError, NotAResultFile) as exc:
                 problems.append(str(exc))
+            except ReportInputError as exc:
+                problems.extend(exc.problems)
     if problems:
         raise ReportInputError(problems)
     _unique_labels(runs)
@@ -559,9 +548,10 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
     return ReportInputs(runs, sweeps, resolved)
 
 
-def _load_file(path: Path) -> list[RunData]:
-    """The run of a run file, or every run of a store file."""
-    return load_chunk_runs(path) if is_chunk_file(path) else [load_run(path)]
+def _load_file(path: Path, kind) -> list[RunData]:
+    """The run of a run file, or every run of a store file (``kind``: :data:`rbstab.kinds.RUN`
+    or :data:`~rbstab.kinds.STORE`)."""
+    return load_chunk_runs(path) if kind is STORE else [load_run(path)]
 
 
 def safe_filename(text: str) -> str:

@@ -29,7 +29,7 @@ import importlib
 _SOURCES = {
     **dict.fromkeys(["EXECUTORS", "DaskExecutor", "Executor", "ExecutorError", "LocalExecutor", "default_jobs",
                      "make_executor"], "executors"),
-    **dict.fromkeys(["STATUSES", "is_converged", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
+    **dict.fromkeys(["STATUSES", "INDEX_FILE", "RUNS_DIR", "SPEC_FILE", "SUMMARY_FILE", "LAYOUTS",
                      "open_sweep", "parameter_name", "read_index"], "folder"),
     **dict.fromkeys(["DEFAULT_OUTPUT", "SweepBusyError", "SweepOutcome", "rebuild_index", "run_sweep"], "runner"),
     **dict.fromkeys(["DEFAULT_LYAPUNOV_RATIO", "DISTRIBUTIONS", "SweepSpec", "SweepSpecError", "load_spec",
@@ -77,7 +77,6 @@ __all__ = [
     "WorkerOptions",
     "ENGINES",
     "EXECUTORS",
-    "is_converged",
     "STATUSES",
     "DISTRIBUTIONS",
     "DEFAULT_LYAPUNOV_RATIO",

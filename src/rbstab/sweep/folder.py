@@ -43,7 +43,6 @@ import functools
 import datetime as _dt
 import hashlib
 import json
-import math
 import operator
 import os
 import re
@@ -51,7 +50,12 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, MutableMappin
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from ..convergence import converged
 from ..io.atomic import atomic_path, write_text_atomic
+from ..io.integrity import DamagedResultError
+from ..io.metadata import LONG_NAMES, variable_attributes
 
 __all__ = [
     "SPEC_FILE",
@@ -74,7 +78,6 @@ __all__ = [
     "read_index",
     "summarize_rows",
     "write_summary",
-    "is_converged",
     "is_sweep_folder",
     "read_spec",
     "current_rows",
@@ -262,25 +265,6 @@ def index_part(row: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in row.items() if k not in NOT_IN_INDEX}
 
 
-def is_converged(status: str, lyapunov_initial: Any, lyapunov_final: Any, ratio: float) -> bool:
-    """Whether a run converged: it succeeded and ``|v(t_end)| <= ratio * |v(0)|``.
-
-    v is the variant's Lyapunov function, zero at the equilibrium, so this says that the
-    run lost all but ``ratio`` of its initial "energy" within ``t_end``. The magnitudes: v
-    is zero only at the equilibrium when it is a Lyapunov function there, and a run that
-    ends with v far below zero (an unstable body falling to lower potential energy, where
-    the gravity term makes v negative) has not converged. A run that failed (gimbal lock,
-    solver failure, timeout) never converged.
-    """
-    if status != "success":
-        return False
-    try:
-        v0, v1 = float(lyapunov_initial), float(lyapunov_final)
-    except (TypeError, ValueError):
-        return False
-    return math.isfinite(v0) and math.isfinite(v1) and abs(v1) <= ratio * abs(v0)
-
-
 def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], errors: Mapping[str, str],
                ratio: float) -> list[dict[str, Any]]:
     """One index row per run of ``runs`` (:class:`~rbstab.sweep.spec.PlannedRun`), in run order.
@@ -288,7 +272,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     A row is the run's ``run_id``, ``run`` (its index), ``base``, coordinates and
     ``variant``, then its stored row's values but those the index leaves out
     (:data:`NOT_IN_INDEX`), then ``file`` (under ``runs/``) and ``converged``
-    (:func:`is_converged`); a run without a stored row has ``status`` ``error`` (its
+    (:func:`rbstab.convergence.converged`); a run without a stored row has ``status`` ``error`` (its
     message from ``errors``) or ``pending``, and is not converged.
 
     Parameters
@@ -297,7 +281,7 @@ def index_rows(runs: Sequence[Any], rows: Mapping[str, Mapping[str, Any]], error
     errors : mapping run_id -> message
         Runs whose worker raised (no result): status ``error``.
     ratio : float
-        ``convergence.lyapunov_ratio`` (:func:`is_converged`).
+        ``convergence.lyapunov_ratio`` (:func:`rbstab.convergence.converged`).
     """
     return list(iter_index_rows(runs, rows, errors, ratio))
 
@@ -342,9 +326,9 @@ class _IndexRowMaker:
             return self._kind(run.layout, None)[0], (*head, status, False, message, None)
         stored_names, stored = held
         names, keep, file, status, initial, final = self._kind(run.layout, stored_names)
-        converged = is_converged(stored[status] if status is not None else "", stored[initial], stored[final],
-                                 self.ratio)
-        return names, (*head, *keep(stored), f"{RUNS_DIR}/{stored[file]}" if stored[file] else None, converged, None)
+        reached = converged(status is not None and stored[status] == "success", stored[initial], stored[final],
+                            self.ratio)
+        return names, (*head, *keep(stored), f"{RUNS_DIR}/{stored[file]}" if stored[file] else None, reached, None)
 
     def _kind(self, layout: tuple, stored_names: tuple | None) -> tuple:
         """(column names, getter of the stored values kept, positions of the stored file,
@@ -518,8 +502,6 @@ def verify_index(folder: str | os.PathLike) -> bool:
         If the index does not match (damaged, or an invocation killed between writing the
         two files: rerunning the sweep rebuilds both).
     """
-    from ..io.integrity import DamagedResultError  # heavy: numpy
-
     folder = Path(folder)
     try:
         expected = json.loads((folder / SUMMARY_FILE).read_text(encoding="utf-8")).get("index_sha256")
@@ -646,7 +628,6 @@ def _chunk_rows(runs_dir: Path, verify: bool = False, damaged: list | None = Non
     damaged ones are listed in ``damaged`` as (file name, reason))."""
     from ..io.chunk import read_chunk_rows  # heavy: numpy
     from ..io.hdf5 import NotAResultFile  # heavy: numpy
-    from ..io.integrity import DamagedResultError  # heavy: numpy
 
     rows: dict[str, list[dict]] = {}
     for path in sorted(runs_dir.glob(CHUNK_GLOB)):
@@ -663,7 +644,6 @@ def _chunk_rows(runs_dir: Path, verify: bool = False, damaged: list | None = Non
 
 def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None) -> dict | None:
     from ..io.hdf5 import NotAResultFile, read_attributes  # heavy: numpy
-    from ..io.integrity import DamagedResultError  # heavy: numpy
 
     try:
         return row_from_attributes(read_attributes(path, data=verify), path.name)
@@ -839,11 +819,9 @@ def _from_store(folder: Path, index):
     verified when their traces are read (:class:`rbstab.io.chunk.StoreTrace`).
     """
     import dask.array as da  # optional: dask
-    import numpy as np  # heavy: numpy
     import xarray as xr  # heavy: xarray
 
     from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numpy
-    from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numpy
 
     if "file_row" not in index.columns:
         return None
@@ -902,7 +880,6 @@ def _grid_axes(spec: Mapping[str, Any]) -> list[tuple[str, list]]:
 
 
 def _as_grid(ds, spec: Mapping[str, Any]):
-    import numpy as np  # heavy: numpy
     import pandas as pd  # heavy: pandas
     import xarray as xr  # heavy: xarray
 

@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
-from ..io.hdf5 import canonical_config, canonical_configs, config_hash
+from ..config import (ConfigError, PhysicalPlausibilityWarning, canonical_config, canonical_configs,
+                      config_from_mapping, config_hash, get_dotted, set_dotted)
 from .folder import parameter_columns, run_coords
 from .schema import numeric_array
 from .spec import Base, SweepSpec, SweepSpecError
@@ -102,7 +102,7 @@ class PlannedRun:
     @functools.cached_property
     def config_text(self) -> str:
         """The resolved config without its name, with its run limits, as canonical JSON
-        (:func:`rbstab.io.hdf5.canonical_config`): a store file's ``config`` column."""
+        (:func:`rbstab.config.canonical_config`): a store file's ``config`` column."""
         return canonical_config(self.config.resolved, limits=True)
 
 
@@ -136,7 +136,7 @@ def _shared_layout(layout: tuple) -> tuple:
 
 def resolved_hash(resolved: Mapping) -> str:
     """SHA-256 hex digest of a resolved configuration without its ``name`` (canonical JSON,
-    :func:`rbstab.io.hdf5.canonical_config`)."""
+    :func:`rbstab.config.canonical_config`)."""
     return config_hash(canonical_config(resolved))
 
 
@@ -265,7 +265,7 @@ def _plan_run(
     ``validated`` maps a base's label to the validated config of its first valid run; the
     base's other runs differ from it only at the varied keys and are validated by
     :meth:`RunConfig.with_values` (the same result; only the fields of the varied keys
-    checked). ``texts``: the :func:`rbstab.io.hdf5.canonical_configs` memo of the
+    checked). ``texts``: the :func:`rbstab.config.canonical_configs` memo of the
     planning pass (the runs of a base share the sections no varied key is in).
     """
     data = dict(base.data)
@@ -338,7 +338,7 @@ def plan_runs(spec: SweepSpec) -> Iterator["PlannedRun | InvalidRun"]:
     n_zip = len(next(iter(spec.zip.values()))) if spec.zip else 1
     cache: dict = {}
     validated: dict = {}  # base label -> its first valid run's config, which the others start from
-    texts: dict = {}  # canonical JSON of the shared sections (rbstab.io.hdf5.canonical_configs)
+    texts: dict = {}  # canonical JSON of the shared sections (rbstab.config.canonical_configs)
     index = 0
     for sample in samples:
         for base, point, z in itertools.product(spec.bases, grid_points, range(n_zip)):

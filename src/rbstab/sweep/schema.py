@@ -21,13 +21,10 @@ from pydantic_core import PydanticCustomError
 
 from ..config import ConfigError
 from ..config.schema import Invalid, _checked, _name, _number, _optional, kind_of, problem_line, short_repr
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
 
 __all__ = ["SweepSpecError", "SweepSchema", "DistributionSchema", "DISTRIBUTIONS", "DEFAULT_LYAPUNOV_RATIO",
            "validate_spec", "numeric_array"]
-
-#: Default of ``convergence.lyapunov_ratio``: a successful run whose v fell to at most this
-#: fraction of its initial value counts as converged.
-DEFAULT_LYAPUNOV_RATIO = 1e-3
 
 #: Names of the random distributions.
 DISTRIBUTIONS = ("uniform", "normal", "log_uniform", "scale_uniform", "choice")

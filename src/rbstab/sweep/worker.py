@@ -44,8 +44,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from .folder import index_part, row_from_attributes
-
 __all__ = ["RunTask", "WorkerOptions", "run_chunk", "ENGINES", "DEFAULT_CHUNK_SIZE"]
 
 
@@ -161,6 +159,7 @@ class _RunFiles:
     def add(self, task: RunTask, result) -> dict[str, Any]:
         """Write ``result``'s file (or its bytes); the record of a finished run."""
         from ..io.hdf5 import write_run  # heavy: numpy
+        from .folder import row_from_attributes  # heavy: numpy
 
         options = self.options
         record = _result_record(task, task.path, result)
@@ -191,6 +190,8 @@ class _RunFiles:
 def _finished(record: dict[str, Any], timing: dict, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
     """``record`` (``run_id``, ``path``, ``status``, ``message``, ``wall_time``) of a
     written run, with its row as the index takes it and its ``timing``."""
+    from .folder import index_part  # heavy: numpy
+
     timing = dict(timing)
     timing["config_yaml"] = yaml_time
     timing["write"] = write_time

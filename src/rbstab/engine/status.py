@@ -1,0 +1,95 @@
+"""How a run of the compiled engine ended: its status codes and their messages.
+
+As scipy's ``solve_ivp`` keeps a status -> message table beside its solvers, this module
+is the one place that names the codes the compiled integrators return
+(:mod:`rbstab.engine.integrate`, :mod:`rbstab.engine.switching`) and says what each
+means; the codes are plain ints, which compiled code reads as constants.
+
+======  ===================  ==========================================================
+code    name                 the run ...
+======  ===================  ==========================================================
+0       ``SUCCESS``          reached t_end
+1       ``GIMBAL_LOCK``      stopped at the gimbal-lock event (the event time returned)
+-1      ``TOO_SMALL_STEP``   needed a step below the spacing of floats (scipy's failure)
+-2      ``NOT_FINITE``       met a non-finite step size or state
+-3      ``STEP_LIMIT``       took ``simulation.max_steps`` steps
+-4      ``TIMEOUT``          ran past ``simulation.max_wall_time``
+-5      ``SWITCHING_LIMIT``  located its largest number of switchings (pure sign law)
+======  ===================  ==========================================================
+
+A run whose code is not :data:`SUCCESS` has status ``"failed"``, with
+:func:`status_message` as its message.
+"""
+
+from __future__ import annotations
+
+import math
+
+__all__ = [
+    "SUCCESS",
+    "GIMBAL_LOCK",
+    "TOO_SMALL_STEP",
+    "NOT_FINITE",
+    "STEP_LIMIT",
+    "TIMEOUT",
+    "SWITCHING_LIMIT",
+    "STATUSES",
+    "SUCCESS_MESSAGE",
+    "TOO_SMALL_STEP_MESSAGE",
+    "DEFAULT_MAX_STEPS",
+    "status_message",
+]
+
+SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT, SWITCHING_LIMIT = 0, 1, -1, -2, -3, -4, -5
+
+#: Accepted steps after which a run stops as failed (a run that would never finish).
+DEFAULT_MAX_STEPS = 10_000_000
+
+#: scipy's ``solve_ivp`` message for a run that reached the end of its interval.
+SUCCESS_MESSAGE = 'The solver successfully reached the end of the integration interval.'
+
+#: scipy's ``OdeSolver.TOO_SMALL_STEP``: a step below 10 * spacing(t).
+TOO_SMALL_STEP_MESSAGE = 'Required step size is less than spacing between numbers.'
+
+#: code -> (name, message template); the template's fields are the keywords of
+#: :func:`status_message`.
+STATUSES: dict[int, tuple[str, str]] = {
+    SUCCESS: ("SUCCESS", SUCCESS_MESSAGE),
+    GIMBAL_LOCK: ("GIMBAL_LOCK", "gimbal lock: |theta_2| reached pi/2 - {gimbal_margin:g} rad at t = {t_stop:.6g} s; "
+                                 "B(theta) is singular there (eq 5), so the Euler-angle model stops"),
+    TOO_SMALL_STEP: ("TOO_SMALL_STEP", f"solver failed: {TOO_SMALL_STEP_MESSAGE} (at t = {{t_stop:.6g}} s)"),
+    NOT_FINITE: ("NOT_FINITE", "non-finite step size or state at t = {t_stop:.6g} s"),
+    STEP_LIMIT: ("STEP_LIMIT", "step limit: {max_steps} steps taken (simulation.max_steps), reaching only "
+                               "t = {t_stop:.6g} s"),
+    TIMEOUT: ("TIMEOUT", "timeout: the run exceeded {max_wall_time:g} s of wall time at t = {t_stop:.6g} s"),
+    SWITCHING_LIMIT: ("SWITCHING_LIMIT", "switching limit: {max_switchings} events located by t = {t_stop:.6g} s "
+                                         "(the switchings accumulate without reaching the resolution "
+                                         "{resolution:g} m)"),
+}
+
+
+def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,
+                   max_wall_time: float = math.inf, *, max_switchings: int = 0, resolution: float = 0.0) -> str:
+    """The message of a run that ended with ``status`` (scipy's words where scipy has them).
+
+    Parameters
+    ----------
+    status : int
+        A code of :data:`STATUSES`.
+    t_stop : float
+        Where the run stopped [s] (the event time for gimbal lock).
+    gimbal_margin : float
+        ``simulation.gimbal_margin`` [rad].
+    max_steps, max_wall_time : int, float
+        The run's step limit and wall-time limit [s].
+    max_switchings, resolution : int, float
+        The pure sign law's limit of located switchings and its resolution [m].
+
+    Raises
+    ------
+    KeyError
+        For a code not in :data:`STATUSES`.
+    """
+    return STATUSES[int(status)][1].format(
+        t_stop=t_stop, gimbal_margin=gimbal_margin, max_steps=max_steps, max_wall_time=max_wall_time,
+        max_switchings=max_switchings, resolution=resolution)
