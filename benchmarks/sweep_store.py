@@ -14,7 +14,7 @@ Prints, per run and in total, with the peak resident memory of the process of ea
 3. ``rbstab.open_sweep`` of that folder, summaries loaded (``lyapunov_final``, ``status``).
 
 The results written are a block of 32 simulated Case 3 runs (what the compiled engine
-hands a worker's store file at once, :func:`rbstab.simulate.simulate_blocks`) reused for
+hands a worker's store file at once, :func:`rbstab.simulator.simulate_blocks`) reused for
 every 32 rows (the integration is not what is measured); every row has its own run id,
 parameters and config.
 """
@@ -73,7 +73,7 @@ def plan(n: int) -> dict:
 def write(n: int, folder: str) -> dict:
     from rbstab.config import load_config
     from rbstab.io.chunk import ChunkWriter, StoreRow, chunk_file_name
-    from rbstab.simulate import simulate_blocks
+    from rbstab.simulator import simulate_blocks
     from rbstab.sweep import expand, spec_from_mapping
     from rbstab.sweep.folder import (RUNS_DIR, SPEC_FILE, parameter_columns, write_sweep_index,
                                      run_coords)

@@ -97,7 +97,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     with one line; files written before are complete, and no temporary file is left.
     """
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
-    from rbstab.simulate import is_sign_law  # heavy: numba, numpy
+    from rbstab.simulator import is_sign_law  # heavy: numba, numpy
 
     if method is not None:
         overrides = (*overrides, f"simulation.method={method}")

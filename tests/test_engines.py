@@ -24,7 +24,7 @@ from click.testing import CliRunner
 from rbstab import simulate as simulate_module
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
-from rbstab.simulate import simulate, simulate_many
+from rbstab.simulator import simulate, simulate_many
 from rbstab.summary import numerical_rate
 from rbstab.sweep.folder import index_part, row_from_attributes
 from rbstab.sweep import expand, run_sweep, spec_from_mapping

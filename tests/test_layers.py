@@ -37,7 +37,7 @@ LAYERS = [
     ("variants", ["rbstab.variants"]),
     ("config", ["rbstab.config", "rbstab.resources"]),
     ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence"]),
-    ("simulate", ["rbstab.simulate"]),
+    ("simulate", ["rbstab.simulator"]),
     ("io", ["rbstab.io"]),
     ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds"]),
     ("report", ["rbstab.report"]),

@@ -10,8 +10,8 @@
     ds.lyapunov.plot(yscale="log")             # v [J] against time [s]
     path = rbstab.run(config, "results")       # results/case3_short.h5 (rbstab run)
     ds = rbstab.open_result(path)              # the same Dataset, read back and verified
-    sw = rbstab.sweep("configs/sweeps/gains.yaml", grid=True)   # rbstab sweep, then open_sweep
-    rbstab.report([path], "results/reports/case3")              # rbstab report
+    sw = rbstab.sweep_dataset("configs/sweeps/gains.yaml", grid=True)   # rbstab sweep, then open_sweep
+    rbstab.write_report([path], "results/reports/case3")                # rbstab report
 
 Every function validates its input first and raises one exception naming what is wrong:
 :class:`rbstab.config.ConfigError` (a config key, the value found, what is allowed),
@@ -47,7 +47,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
     from .config import RunConfig
-    from .simulate import RunResult
+    from .simulator import RunResult
     from .sweep import SweepOutcome, SweepSpec
 
 __all__ = [
@@ -56,9 +56,9 @@ __all__ = [
     "run",
     "check_overwrite",
     "open_result",
-    "sweep",
+    "sweep_dataset",
     "execute_sweep",
-    "report",
+    "write_report",
     "ResultExistsError",
 ]
 
@@ -168,8 +168,8 @@ def _config(config: Any, overrides: Overrides) -> "RunConfig":
 def _integrate(config: "RunConfig", engine: str, timeout: float | None) -> "RunResult":
     """The run, the compiled kernels made first (once per machine, ~30-60 s, cached)."""
     from .engine import ensure_compiled  # heavy: numba, numpy
-    from .simulate import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
-    from .simulate import simulate as integrate  # heavy: numba, numpy
+    from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
+    from .simulator import simulate as integrate  # heavy: numba, numpy
 
     if uses_compiled_engine(config, engine):
         ensure_compiled(sign_law=is_sign_law(config))
@@ -187,7 +187,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = "compiled"
     overrides : sequence of str or Mapping
         See :func:`load_config`.
     engine : {"compiled", "scipy"}
-        :data:`rbstab.simulate.ENGINES`; Radau, BDF and LSODA always go through scipy.
+        :data:`rbstab.simulator.ENGINES`; Radau, BDF and LSODA always go through scipy.
     timeout : float, optional
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``.
 
@@ -377,8 +377,7 @@ def _sweep_executor(executor: Any, scheduler: str | None, connect_timeout: float
     if executor == "dask":
         if not scheduler:
             raise ValueError("executor 'dask' needs scheduler='tcp://HOST:PORT'")
-        # late: rbstab/__init__.py makes the module rbstab.sweep callable as it is imported
-        from .sweep.executors import DASK_CONNECT_TIMEOUT, make_executor
+        from .sweep.executors import DASK_CONNECT_TIMEOUT, make_executor  # heavy: multiprocessing
 
         timeout = DASK_CONNECT_TIMEOUT if connect_timeout is None else connect_timeout
         return make_executor("dask", scheduler=scheduler, connect_timeout=timeout), True
@@ -444,8 +443,8 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
             ex.close()
 
 
-def sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool = False, **options
-          ) -> "xarray.Dataset":
+def sweep_dataset(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool = False,
+                  **options) -> "xarray.Dataset":
     """Run a sweep and open it: :func:`execute_sweep`, then :func:`open_sweep`.
 
     Parameters
@@ -467,17 +466,17 @@ def sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool
     ------
     See :func:`execute_sweep`.
     """
-    outcome = execute_sweep(spec, output, **options)
-    from .sweep.folder import open_sweep  # late: rbstab/__init__.py makes rbstab.sweep callable
+    from .sweep.folder import open_sweep  # heavy: numpy
 
+    outcome = execute_sweep(spec, output, **options)
     return open_sweep(outcome.directory, grid=grid)
 
 
 # -- reports ------------------------------------------------------------------------------------
 
 
-def report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str | os.PathLike | None = None,
-           **options) -> Path:
+def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str | os.PathLike | None = None,
+                 **options) -> Path:
     """Build a report folder (``rbstab report``): tables, figures, the comparison with the paper.
 
     Parameters
@@ -511,6 +510,6 @@ def report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str 
     known = [f.name for f in dataclasses.fields(ReportOptions)]
     unknown = sorted(set(options) - set(known))
     if unknown:
-        raise TypeError(f"report: unknown option {', '.join(unknown)}; expected some of {', '.join(known)}")
+        raise TypeError(f"write_report: unknown option {', '.join(unknown)}; expected some of {', '.join(known)}")
     paths = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
     return build_report(paths, output, ReportOptions(**options))

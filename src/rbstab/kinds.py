@@ -38,7 +38,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from .analysis.dataset import is_analysis_file, read_analysis
 from .io.chunk import is_chunk_file, read_chunk_rows
 from .io.hdf5 import NotAResultFile, is_run_file, read_dataset, read_format
 from .sweep.folder import INDEX_FILE, SPEC_FILE, is_sweep_folder, open_sweep
@@ -79,12 +78,14 @@ class InputKind:
 def _is_analysis_file(path: Path) -> bool:
     # late import: the rbstab.analysis package imports the compiler (numba, ~0.5 s), which
     # reading run files, stores and sweeps does not need
+    from .analysis.dataset import is_analysis_file
 
     return is_analysis_file(path)
 
 
 def _read_analysis(path: Path):
     # late import: as in _is_analysis_file (numba)
+    from .analysis.dataset import read_analysis
 
     return read_analysis(path)
 

@@ -19,10 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from ..config import PhysicalPlausibilityWarning, config_from_mapping, load_config
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..simulate import simulate
+from ..simulator import simulate
 from ..variants import VARIANTS
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
@@ -146,6 +145,8 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
         return config, []
     phi = DEFAULT_BOUNDARY_LAYER if boundary_layer is None else float(boundary_layer)
     resolved = dict(config.resolved, controller=dict(config.resolved["controller"], boundary_layer=phi))
+    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: pydantic (the validator)
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         analysed = config_from_mapping(resolved)
@@ -238,6 +239,8 @@ def analyze(
         For an invalid option (the message names it, the value found and what is allowed).
     """
     if isinstance(config, (str, os.PathLike)):
+        from ..config import load_config  # heavy: pydantic (the validator)
+
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
     timing: dict[str, float] = {}

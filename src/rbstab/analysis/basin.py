@@ -2,7 +2,7 @@
 
 Two initial-state entries (``initial_state.omega.0`` ...) vary over even grids; every
 other entry keeps the configuration's value. Each grid point is one run of the compiled
-engine (:func:`rbstab.simulate.simulate_many`, many runs per compiled call; the chunks
+engine (:func:`rbstab.simulator.simulate_many`, many runs per compiled call; the chunks
 go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 1``), and
 is classified by the rule a sweep classifies its runs with
 (:func:`rbstab.convergence.converged`), applied from every sample on:
@@ -28,7 +28,6 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..layout import BLOCK_UNITS
-from ..sweep.executors import LocalExecutor
 
 __all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
 
@@ -193,7 +192,7 @@ def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
 def _run_block(items: list, ratio: float) -> list[tuple]:
     """Run (index, RunConfig) items with the compiled engine; one tuple per item:
     (index, outcome, time to converge, v(t_end), message)."""
-    from ..simulate import simulate_many  # heavy: numba
+    from ..simulator import simulate_many  # heavy: numba
 
     configs = [c for _, c in items]
     rows = []
@@ -293,6 +292,8 @@ def _execute(items: list, ratio: float, jobs: int):
     if jobs <= 1 or len(items) < 64:
         yield _run_block(items, ratio)
         return
+
+    from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
 
     with LocalExecutor(jobs) as executor:
         executor.plan(len(items))

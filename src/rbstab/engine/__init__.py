@@ -6,7 +6,7 @@ RK45, DOP853) compiled with the model (:mod:`rbstab.engine.rk`,
 dense output and gimbal-lock event as ``solve_ivp``, so a run takes the steps
 ``solve_ivp`` would take and agrees with it to the tolerance's scale. A run's result does
 not depend on the other runs of its call. Implicit methods (Radau, BDF, LSODA) are not
-here: :func:`rbstab.simulate.simulate` runs them through ``solve_ivp`` with the same
+here: :func:`rbstab.simulator.simulate` runs them through ``solve_ivp`` with the same
 compiled right-hand side.
 """
 

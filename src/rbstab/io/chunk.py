@@ -52,7 +52,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
-from ..simulate import RunBlock
 from .atomic import as_os_error, atomic_path, check_free_space
 from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, _plain, summary_stride
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
@@ -60,7 +59,7 @@ from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, conte
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..simulate import RunResult
+    from ..simulator import RunResult
 
 __all__ = [
     "CHUNK_FORMAT",
@@ -226,7 +225,7 @@ class ChunkWriter:
     """Write the runs of one chunk into one store file (module docstring), atomically.
 
     Use as a context manager: :meth:`add` a finished run (any status), :meth:`add_block`
-    finished runs that share their sample times (:class:`rbstab.simulate.RunBlock`: their
+    finished runs that share their sample times (:class:`rbstab.simulator.RunBlock`: their
     traces copied at once, their values kept as columns) or :meth:`add_error` a run that
     raised, once per row; leaving the block without an
     exception writes the per-run values and renames the file into place; an exception
@@ -342,12 +341,14 @@ class ChunkWriter:
         (the ``config`` column), if the caller has them (a sweep's plan computed them); else
         computed here.
         """
+        from ..simulator import RunBlock  # heavy: numba
+
         return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
                               config_texts=[config_text])[0]
 
     def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None,
                   config_texts: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
-        """Add finished runs that share their sample times (a :class:`rbstab.simulate.RunBlock`,
+        """Add finished runs that share their sample times (a :class:`rbstab.simulator.RunBlock`,
         ``run_ids[j]`` its run j); returns their rows, as :meth:`add` does each.
 
         ``config_hashes``, ``config_texts``: as :meth:`add`'s, a value a run (None or ""

@@ -53,7 +53,7 @@ from .metadata import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..simulate import RunResult
+    from ..simulator import RunResult
 
 __all__ = [
     "FORMAT",
@@ -323,7 +323,7 @@ def write_result(
     Parameters
     ----------
     result : RunResult
-        The run (:func:`rbstab.simulate.simulate`).
+        The run (:func:`rbstab.simulator.simulate`).
     path : path-like
         Final file name; its folder is created if missing.
     command_line : str, optional

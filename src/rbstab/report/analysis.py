@@ -18,7 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.dataset import read_analysis
 from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
@@ -55,6 +54,8 @@ def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
 
 
 def _read(paths: Sequence[Path]) -> list:
+    from ..analysis.dataset import read_analysis  # heavy: numba (the rbstab.analysis package)
+
     datasets, problems = [], []
     for p in paths:
         try:

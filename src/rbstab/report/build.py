@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..analysis.dataset import SUFFIX
 from ..io.metadata import provenance_attributes
 from .analysis import analysis_sections, split_inputs
 from .figures import DPI, FIGURE_FORMATS, FigureWriter, comparison_figures, run_figures
@@ -116,6 +115,8 @@ class ReportOptions:
 def _input_name(path: Path, runs: Sequence[RunData]) -> str:
     """A file name for one input: a folder's name, an analysis file's name without
     ``.nc``, the run name of a run file, the stem of a store file."""
+    from ..analysis.dataset import SUFFIX  # heavy: numba (the rbstab.analysis package)
+
     if path.is_dir():
         return safe_filename(path.resolve().name)
     if path.name.endswith(SUFFIX):
@@ -159,6 +160,8 @@ def report_title(inputs: ReportInputs, analyses: Sequence[Path] = ()) -> str:
     """The default title of a report: what it compares, e.g. ``rbstab report:
     case1_permanent, case2_visco_elastic and case3_embedded``, ``rbstab report: sweep
     gains_case3``, ``rbstab report: stability analyses of case1_permanent and ...``."""
+    from ..analysis.dataset import SUFFIX  # heavy: numba (the rbstab.analysis package)
+
     parts = []
     if inputs.runs:
         parts.append(_enumerate([r.label for r in inputs.runs]))

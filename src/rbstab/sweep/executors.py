@@ -13,7 +13,7 @@ same bit for bit (up to the ``created`` and ``command_line`` attributes).
   the pool is restarted for the rest. A pool that dies before finishing any item has
   its items taken once more by the next; if that one dies too, the workers cannot run
   at all and :class:`ExecutorError` says so (the usual cause: a script that calls
-  ``rbstab.sweep`` without the ``__main__`` guard, which every new worker runs again,
+  ``rbstab.sweep_dataset`` without the ``__main__`` guard, which every new worker runs again,
   :func:`_refuse_in_bootstrap`). Each worker holds the read end of a pipe whose
   write end only the parent holds: when the parent is gone (killed, even while it is a
   zombie nobody reaped) the pipe reads end-of-file, and the worker finishes the run in
@@ -188,7 +188,7 @@ def _warm() -> None:
 #: (:mod:`rbstab.config` loads its validator lazily). The standard library ignores a name
 #: that fails to import: ``tests/test_layers.py`` imports each.
 FORKSERVER_PRELOAD = (
-    "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulate", "rbstab.config.loader",
+    "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulator", "rbstab.config.loader",
     "rbstab.io.hdf5", "rbstab.io.chunk", "rbstab.io.integrity", "h5py", "h5netcdf", "rbstab.engine.preload",
 )
 
@@ -340,7 +340,7 @@ class LocalExecutor(Executor):
                 if not finished and retried:
                     raise ExecutorError(
                         "the local worker processes died twice in a row before finishing anything (see the "
-                        "messages above); from a Python script, call rbstab.sweep under "
+                        "messages above); from a Python script, call rbstab.sweep_dataset under "
                         "if __name__ == \"__main__\": (each new worker runs the script again)")
                 if not finished:
                     again[:0] = lost  # a pool that finished nothing: its items once more

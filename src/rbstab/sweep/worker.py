@@ -11,9 +11,9 @@ Engines
 ``ENGINES`` maps an engine name to a function ``(tasks, options, sink) -> records``:
 
 - ``scipy`` (the reference): the tasks of a chunk one after the other through
-  :func:`rbstab.simulate.simulate`, one ``solve_ivp`` call each; any method, per-run
+  :func:`rbstab.simulator.simulate`, one ``solve_ivp`` call each; any method, per-run
   ``timeout``.
-- ``compiled``: :func:`rbstab.simulate.simulate_blocks` (:mod:`rbstab.engine`): every run
+- ``compiled``: :func:`rbstab.simulator.simulate_blocks` (:mod:`rbstab.engine`): every run
   of the chunk that uses RK23, RK45 or DOP853 is integrated by the compiled engine,
   whatever its variant, body and gains; the others (implicit methods, the pure sign law
   of ``sliding``) go through scipy. Configurations are validated once per group of runs
@@ -24,7 +24,7 @@ Engines
 Layouts
 -------
 Both engines hand each finished run (the compiled engine a block of runs,
-:class:`rbstab.simulate.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
+:class:`rbstab.simulator.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
 one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
 writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
 into place when the whole chunk is done. Either way the record carries the run's
@@ -179,7 +179,7 @@ class _RunFiles:
         return _finished(record, result.timing, row, t1 - t0, _time.perf_counter() - t1)
 
     def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """:meth:`add` of each run of a :class:`rbstab.simulate.RunBlock` (``tasks[j]`` its run
+        """:meth:`add` of each run of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run
         j); a file that cannot be written is that run's error."""
         return _each_run(self, tasks, block)
 
@@ -248,7 +248,7 @@ class _ChunkFile:
         return record
 
     def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """The runs of a :class:`rbstab.simulate.RunBlock` (``tasks[j]`` its run j) into the
+        """The runs of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run j) into the
         file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); their records."""
         t0 = _time.perf_counter()
         rows = self.writer.add_block([t.run_id for t in tasks], block,
@@ -274,7 +274,7 @@ SINKS = {"run": _RunFiles, "chunk": _ChunkFile}
 
 
 def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
-    from ..simulate import simulate  # heavy: numba, numpy
+    from ..simulator import simulate  # heavy: numba, numpy
 
     try:
         t0 = _time.perf_counter()
@@ -330,7 +330,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
 
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
-    from ..simulate import simulate_blocks, uses_compiled_engine  # heavy: numba, numpy
+    from ..simulator import simulate_blocks, uses_compiled_engine  # heavy: numba, numpy
 
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)

@@ -60,7 +60,7 @@ class Sliding(Variant):
     K_s phi sum log cosh(E_i/phi) (phi > 0), so v = v_t + v_r + that potential and
     dv/dt = -V'L_t V - Omega'L_r Omega (for phi = 0 on every smooth piece of the Filippov
     motion: off the surfaces F'Lambda and d(K_s |E|_1)/dt cancel, on a sliding axis both
-    vanish). The pure sign law chatters; :func:`rbstab.simulate.simulate` integrates it
+    vanish). The pure sign law chatters; :func:`rbstab.simulator.simulate` integrates it
     with :mod:`rbstab.engine.switching`, in the modes above (docs/sliding.md).
     """
 
