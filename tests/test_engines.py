@@ -21,7 +21,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab import simulate as simulate_module
+from rbstab import simulator as simulate_module
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
 from rbstab.simulator import simulate, simulate_many
