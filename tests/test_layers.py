@@ -256,3 +256,20 @@ def test_every_module_the_fork_server_preloads_imports():
 
     for name in FORKSERVER_PRELOAD:
         importlib.import_module(name)
+
+
+def test_the_engine_takes_its_settings_as_one_record():
+    """The compiled engine's functions take a run's settings (tolerances, limits, method,
+    sample grid) as one record (:data:`rbstab.engine.settings.SETTINGS`) and its work
+    arrays as one :class:`~rbstab.engine.settings.Work`: none takes 10 parameters."""
+    long = []
+    for module, (path, _) in MODULES.items():
+        if not module.startswith("rbstab.engine"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = node.args
+                count = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs)
+                if count >= 10:
+                    long.append(f"{module}.{node.name}: {count}")
+    assert not long, "engine functions with 10 or more parameters:\n" + "\n".join(long)

@@ -26,8 +26,9 @@ from numba.core.extending import intrinsic
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
-from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
-                 error_norm, initial_step, method_number, rk_step)
+from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
+                 method_number, rk_step)
+from .settings import settings_records, work_arrays
 from .status import DEFAULT_MAX_STEPS, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
@@ -90,12 +91,17 @@ def sample_time(j, n, t_end):
 
 
 @jit
-def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work):
-    """One accepted step from (t, y) with rate f (scipy's ``_step_impl``).
+def step(code, p, s, t, y, f, h_abs, w):
+    """One accepted step from (t, y) with rate f (scipy's ``_step_impl``), with the run's
+    settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`) and work arrays ``w``
+    (:class:`~rbstab.engine.settings.Work`).
 
-    Returns (status, t_new, h, next h_abs, attempts); y_new and its rate K[n_stages] hold
-    the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing accepted).
+    Returns (status, t_new, h, next h_abs, attempts); ``w.y_new`` and its rate
+    ``w.K[n_stages]`` hold the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing
+    accepted).
     """
+    t_end, max_step, rtol, atol, method = s.t_end, s.max_step, s.rtol, s.atol, s.method
+    K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
     error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
     min_step = 10 * abs(np.nextafter(t, np.inf) - t)
     h_abs = min(max(h_abs, min_step), max_step)
@@ -149,49 +155,44 @@ def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
 
 
 @jit
-def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, method,
-                  samples):
-    """Integrate one run and fill ``samples`` (n_samples, n_state) at linspace(0, t_end).
+def integrate_run(code, p, y0, s, samples):
+    """Integrate one run with the settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`)
+    and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end).
 
-    The run stops after ``max_steps`` accepted steps (STEP_LIMIT) or ``max_wall_time``
+    The run stops after ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time``
     seconds (TIMEOUT; inf for none). Rows after the run stopped are NaN. Returns
     (status, t_stop, nfev, n_steps).
     """
-    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps,
-                                                 max_wall_time, method, samples)
+    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, s, samples)
     samples[filled:, :] = np.nan  # only the rows after a stop: a run that ends writes each row once
     return status, t_stop, nfev, n_steps
 
 
 @jit(forceinline=True)
-def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, method, samples):
+def _run(code, p, y0, s, samples):
     """:func:`integrate_run` but the NaN rows; also returns the number of rows filled."""
+    max_wall_time, t_end, method = s.max_wall_time, s.t_end, s.method
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     n_samples = samples.shape[0]
     dop853 = method == DOP853
-    K = np.empty((STAGE_ROWS[method], n))
-    Q = np.empty((INTERPOLANT_ROWS[method], n))
+    w = work_arrays(method, n)
+    K, Q, y_new, work = w.K, w.Q, w.y_new, w.work
     y = y0.copy()
     f = np.empty(n)
-    y_new = np.empty(n)
-    scale = np.empty(n)
-    work = np.empty(n)
-    limit = GIMBAL_LOCK_ANGLE - gimbal_margin
+    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
     state_rate(code, y, p, f)
-    h_abs = initial_step(code, p, y, f, t_end, max_step, ERROR_ORDER[method], rtol, atol, y_new, work, scale)
+    h_abs = initial_step(code, p, s, y, f, w)
     nfev = 2
     t = 0.0
     j = 0  # next sample
     n_steps = 0
     while t < t_end:
-        if n_steps >= max_steps:
+        if n_steps >= s.max_steps:
             return STEP_LIMIT, t, nfev, n_steps, j
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, j
-        status, t_new, h, h_abs, attempts = step(
-            code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work
-        )
+        status, t_new, h, h_abs, attempts = step(code, p, s, t, y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, j
@@ -200,7 +201,7 @@ def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max
         t_stop = t_new
         event = _gimbal(y, limit) >= 0 and _gimbal(y_new, limit) <= 0
         if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-            nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, K, Q, work)
+            nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, w)
         if event:
             t_stop, _ = _locate_event(t, h, y, Q, dop853, limit, work)
         while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
@@ -216,20 +217,15 @@ def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max
 
 
 @jit
-def integrate_chunk(codes, params, y0, settings, method, samples, status, t_stop, nfev, n_steps):
+def integrate_chunk(codes, params, y0, settings, samples, status, t_stop, nfev, n_steps):
     """:func:`integrate_run` for every run k of a chunk.
 
     ``codes`` (k,) variant codes; ``params`` (k,) PARAMETERS records; ``y0`` (k, n_state);
-    ``method`` the method's number (:data:`rbstab.engine.rk.METHODS`);
-    ``settings`` (k, 7): t_end, rtol, atol, max_step, gimbal_margin, max_steps,
-    max_wall_time; ``samples`` (k, n_samples, n_state); ``status``, ``t_stop``, ``nfev``,
-    ``n_steps`` (k,) are filled.
+    ``settings`` (k,) :data:`~rbstab.engine.settings.SETTINGS` records; ``samples``
+    (k, n_samples, n_state); ``status``, ``t_stop``, ``nfev``, ``n_steps`` (k,) are filled.
     """
     for k in range(codes.shape[0]):
-        s = settings[k]
-        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(
-            codes[k], params[k], y0[k], s[0], s[1], s[2], s[3], s[4], int(s[5]), s[6], method, samples[k]
-        )
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(codes[k], params[k], y0[k], settings[k], samples[k])
 
 
 # -- from Python -----------------------------------------------------------------------------------
@@ -302,8 +298,8 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     nfev = np.empty(k, dtype=np.int64)
     n_steps = np.empty(k, dtype=np.int64)
     with np.errstate(all="ignore"):
-        integrate_chunk(codes, np.ascontiguousarray(params), y0, np.ascontiguousarray(settings),
-                        method_number(method), samples, status, t_stop, nfev, n_steps)
+        integrate_chunk(codes, np.ascontiguousarray(params), y0, settings_records(settings, method_number(method)),
+                        samples, status, t_stop, nfev, n_steps)
     return ChunkSolution(samples, status, t_stop, nfev, n_steps)
 
 

@@ -94,11 +94,16 @@ def rms_norm(x, scale):
 
 
 @jit
-def initial_step(code, p, y0, f0, t_bound, max_step, error_order, rtol, atol, y1, f1, scale):
+def initial_step(code, p, s, y0, f0, w):
     """scipy's ``select_initial_step`` from t = 0 (Hairer, Norsett & Wanner, II.4).
 
-    ``y1``, ``f1``, ``scale``: work arrays of the state's shape. One right-hand-side call.
+    ``s``: the run's settings (:data:`rbstab.engine.settings.SETTINGS`: ``t_end``,
+    ``max_step``, ``rtol``, ``atol``, ``method``); ``w``: its work arrays
+    (:class:`rbstab.engine.settings.Work`: ``y_new``, ``work`` and ``scale`` are
+    overwritten). One right-hand-side call.
     """
+    t_bound, max_step, error_order, rtol, atol = s.t_end, s.max_step, ERROR_ORDER[s.method], s.rtol, s.atol
+    y1, f1, scale = w.y_new, w.work, w.scale
     n = y0.shape[0]
     for i in range(n):
         scale[i] = atol + abs(y0[i]) * rtol
@@ -191,12 +196,14 @@ def error_norm(K, h, scale, method):
 
 
 @jit
-def dense_coefficients(code, p, y_old, y_new, f_new, h, method, K, Q, work):
-    """The interpolant of the step from y_old to y_new into ``Q`` (rows of coefficients).
+def dense_coefficients(code, p, y_old, y_new, f_new, h, method, w):
+    """The interpolant of the step from y_old to y_new into ``w.Q`` (rows of coefficients;
+    ``w``: the run's :class:`rbstab.engine.settings.Work`, its stage rates ``w.K``).
 
     RK23/RK45: Q = (K' P)' (order rows); DOP853: its 3 extra stages (3 right-hand-side
     calls) and the 7 rows F of scipy's ``Dop853DenseOutput``.
     """
+    K, Q, work = w.K, w.Q, w.work
     n_stages, D = N_STAGES[method], DOP853_D
     n = y_old.shape[0]
     if method != DOP853:
