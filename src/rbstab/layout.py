@@ -1,111 +1,260 @@
-"""State layouts: the one place that says where each state block lives in ``y``.
+"""The table of quantities and the state layouts: the one place for names, symbols, units
+and where each quantity lives in a state vector and in a row of outputs.
 
-Every state block is a 3-vector. A layout is an ordered tuple of block names; the
-integrators, writers and variants address the state only through a layout, in the
-stacked-rows form (``split``, ``join``: blocks along the last axis) or, inside the
-variants' right-hand side, the columns form of :mod:`rbstab.kinematics`
-(``split_columns``, ``join_columns``: a state as the sequence of its components).
+A plain-data module at the bottom of the layers (no compiled code, no rbstab import):
+
+- :class:`Quantity` and :data:`QUANTITIES`: every quantity rbstab computes, stores or
+  shows, with its symbol, CF units, long name, description and, for the outputs of the
+  compiled ``outputs`` kernel, its offset in a row of outputs (:data:`OUTPUTS`, in order).
+  The file metadata (:mod:`rbstab.io.metadata`), the report's tables and axis labels and
+  the kernels' output offsets (:mod:`rbstab.variants.kernels`) are derived from it;
+- :data:`SUMMARY_FIGURES`: the summary figures of a run (:mod:`rbstab.summary`), the same
+  way;
+- :class:`StateLayout`: where each state block lives in ``y`` (``split``, ``join``: blocks
+  along the last axis); :data:`VARIANT_LAYOUTS`: each controller variant's layout and,
+  by its order, the variant's code in the compiled kernels (:data:`VARIANT_CODES`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import re
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 __all__ = [
-    "StateLayout",
+    "Quantity",
+    "QUANTITIES",
+    "OUTPUTS",
+    "SUMMARY_FIGURES",
+    "STATE_BLOCKS",
     "BLOCK_UNITS",
-    "BLOCK_DESCRIPTIONS",
     "LYAPUNOV_TERMS",
     "OUTPUT_VECTORS",
     "OUTPUT_SCALARS",
     "N_OUTPUTS",
     "LEFT_OUT",
-    "OUTPUT_UNITS",
-    "OUTPUT_DESCRIPTIONS",
+    "display_units",
+    "StateLayout",
+    "FULL_BODY",
+    "EMBEDDED",
+    "REDUCED",
+    "VARIANT_LAYOUTS",
+    "VARIANT_CODES",
+    "STATE_SIZE",
 ]
 
-#: Units of each state block (also the HDF5 ``units`` attribute).
-BLOCK_UNITS = {
-    "theta": "rad",
-    "omega": "rad s-1",
-    "position": "m",
-    "velocity": "m s-1",
-    "controller_state": "m",
-}
 
-#: Description of each state block (also the HDF5 ``description`` attribute).
-BLOCK_DESCRIPTIONS = {
-    "theta": "Euler angles Theta, A = Rx(t1) Ry(t2) Rz(t3) (eq 2)",
-    "omega": "angular velocity Omega in the body frame (eq 1)",
-    "position": "centre-of-mass position X in the inertial frame (eq 1)",
-    "velocity": "centre-of-mass velocity V in the inertial frame (eq 1)",
-    "controller_state": "embedded controller state D in the inertial frame (eq 22)",
-}
+def display_units(units: str | None) -> str:
+    """CF/UDUNITS units as they read on an axis or in a table: a factor with exponent -1
+    goes under a slash (``"rad s-1"`` -> ``"rad/s"``, ``"s-1"`` -> ``"1/s"``); others as
+    they are (``"N m"``, ``"1"``); ``""`` for None (no units)."""
+    if not units:
+        return ""
+    factors = units.split()
+    under = [f[:-2] for f in factors if re.fullmatch(r"[A-Za-z]+-1", f)]
+    if not under:
+        return units
+    over = [f for f in factors if not re.fullmatch(r"[A-Za-z]+-1", f)]
+    return f"{' '.join(over) or '1'}/{' '.join(under)}"
 
 
-# -- the outputs of a run (rbstab.variants computes them; files and readers name them) --------
+@dataclass(frozen=True)
+class Quantity:
+    """One quantity rbstab computes, stores or shows (a row of the table).
+
+    Attributes
+    ----------
+    name : str
+        Its name in the outputs, the files (variable or summary figure) and the reports.
+    symbol : str
+        Plain-text symbol (``"Theta"``, ``"dv/dt"``), as tables and messages write it.
+    units : str or None
+        CF/UDUNITS units (``"rad s-1"``), the files' ``units`` attribute; ``"1"``
+        dimensionless; None: none (text, a coordinate of components).
+    long_name : str
+        CF ``long_name``: what it is, in a few words.
+    description : str
+        Its formula and the paper's equation (the files' ``description`` attribute).
+    tex : str
+        Mathtext symbol of a figure (``r"\\Theta"``); ``component_tex`` that of its
+        components where it differs (``r"\\theta"``: theta_1, theta_2, theta_3).
+    words : str
+        The words a figure's axis says beside the symbol (``"Euler angles"``).
+    size : int
+        Components: 3 for a vector (inertial or body frame, as ``long_name`` says), 1
+        for a scalar.
+    offset : int or None
+        First column in a row of outputs of the compiled ``outputs`` kernel
+        (:data:`OUTPUTS`); None for a quantity that is not one of those outputs.
+    """
+
+    name: str
+    symbol: str
+    units: str | None
+    long_name: str
+    description: str = ""
+    tex: str = ""
+    words: str = ""
+    size: int = 1
+    component_tex: str = ""
+    offset: int | None = None
+
+    @property
+    def display_units(self) -> str:
+        """:attr:`units` as a table or an axis writes them (:func:`display_units`)."""
+        return display_units(self.units)
+
+    @property
+    def columns(self) -> slice:
+        """Its columns in a row of outputs: ``slice(offset, offset + size)``.
+
+        Raises
+        ------
+        ValueError
+            If it is not an output of the ``outputs`` kernel (:attr:`offset` None).
+        """
+        if self.offset is None:
+            raise ValueError(f"{self.name!r} is not an output of the outputs kernel")
+        return slice(self.offset, self.offset + self.size)
+
+
+def _in_order(quantities: tuple[Quantity, ...]) -> tuple[Quantity, ...]:
+    """The quantities with their offsets: each after the previous one's columns."""
+    out, offset = [], 0
+    for q in quantities:
+        out.append(replace(q, offset=offset))
+        offset += q.size
+    return tuple(out)
+
+
+# -- the outputs of a run, in the order of a row of the outputs kernel -------------------------
+#: The outputs of the compiled ``outputs`` kernel (:mod:`rbstab.variants.kernels`), in the
+#: order of a row of outputs: the state blocks, the constraint and feedback vectors, then
+#: the terms of v in the order they are summed, v and dv/dt.
+OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
+    Quantity("theta", "Theta", "rad", "Euler angles Theta",
+             "Euler angles Theta, A = Rx(t1) Ry(t2) Rz(t3) (eq 2)",
+             r"\Theta", "Euler angles", 3, r"\theta"),
+    Quantity("omega", "Omega", "rad s-1", "angular velocity Omega (body frame)",
+             "angular velocity Omega in the body frame (eq 1)", r"\Omega", "angular velocity", 3),
+    Quantity("position", "X", "m", "centre-of-mass position X (inertial frame)",
+             "centre-of-mass position X in the inertial frame (eq 1)", "X", "COM position", 3),
+    Quantity("velocity", "V", "m s-1", "centre-of-mass velocity V (inertial frame)",
+             "centre-of-mass velocity V in the inertial frame (eq 1)", "V", "COM velocity", 3),
+    Quantity("controller_state", "D", "m", "embedded controller state D (inertial frame)",
+             "embedded controller state D in the inertial frame (eq 22)", "D", "controller state", 3),
+    Quantity("constraint_error", "E", "m", "constraint error E (inertial frame)",
+             "E = X + A R - R, displacement of the point C, inertial frame (eq 4)", "E", "constraint error", 3),
+    Quantity("constraint_rate", "F", "m s-1", "constraint error rate F = dE/dt (inertial frame)",
+             "F = dE/dt = V - A hat(R) Omega, velocity of C, inertial frame (eq 4)", "F", "constraint rate", 3),
+    Quantity("constraint_force", "Lambda", "N", "constraint force Lambda at C (inertial frame)",
+             "Lambda, force applied at C, inertial frame (eqs 20, 22, 39, 40)", r"\Lambda", "constraint force", 3),
+    Quantity("force_h", "H", "N", "translational feedback force H (inertial frame)",
+             "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)", "H", "feedback force", 3),
+    Quantity("torque_n", "N", "N m", "rotational feedback torque N (body frame)",
+             "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)", "N", "feedback torque", 3),
+    Quantity("lyapunov_translational", "v_t", "J", "translational term v_t of the Lyapunov function",
+             "v_t = V'MV/2 + X'K_t X/2 (eq 25)", "v_t", "translational"),
+    Quantity("lyapunov_rotational", "v_r", "J", "rotational term v_r of the Lyapunov function",
+             "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25)", "v_r", "rotational"),
+    Quantity("lyapunov_constraint", "v_c", "J", "constraint controller term of the Lyapunov function",
+             "energy stored in the constraint controller (eqs 41, 44; "
+             "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent)",
+             "v_c", "constraint controller"),
+    Quantity("lyapunov_gravity", "v_g", "J", "gravity term of the Lyapunov function",
+             "-X'G plus the constant h that makes v zero at the equilibrium (eq 30)", "v_g", "gravity"),
+    Quantity("lyapunov", "v", "J", "Lyapunov function v",
+             "Lyapunov function v, the sum of the lyapunov_* terms (eqs 28-46)", "v", "Lyapunov function"),
+    Quantity("lyapunov_rate", "dv/dt", "W", "analytic rate dv/dt of the Lyapunov function",
+             "analytic dv/dt (eqs 29, 37, 43, 46)", r"\dot v", "Lyapunov rate"),
+))}
+
+#: Every quantity a run or store file holds as a variable (:data:`OUTPUTS` and the rest).
+QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
+    Quantity("time", "t", "s", "time", "sample time, evenly spaced dense output of the solver", "t", "time"),
+    Quantity("axis", "axis", None, "vector component", "vector component; frame given by each variable"),
+    Quantity("run", "run", "1", "position of the run in the sweep's run list",
+             "index of the run in the sweep's run list (increasing within a store file)"),
+    *OUTPUTS.values(),
+    Quantity("lyapunov_rate_numerical", "dv/dt", "W", "numerical derivative dv/dt of the sampled Lyapunov function",
+             "dv/dt by differentiating v along the dense-output samples "
+             "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "
+             "compare with lyapunov_rate", r"\dot v", "Lyapunov rate"),
+    Quantity("sliding_mode", "sigma", "1", "sign-law mode sigma of each component of E",
+             "pure sign law: sigma standing for sgn(E) on the sample's piece, +-1 the side of E_i = 0, "
+             "0 where C slides on it (equivalent force)", r"\sigma", "sign-law mode", 3),
+    Quantity("switching", "switching", "1", "switching event number",
+             "number of the located event of the pure sign law, in time order"),
+    Quantity("switching_time", "t", "s", "time of the switching event",
+             "time of the event, located to the solver's resolution"),
+    Quantity("switching_axis", "i", "1", "component of E that switched",
+             "component i of E (0, 1, 2: inertial x, y, z)"),
+    Quantity("switching_kind", "kind", "1", "kind of switching event",
+             "0 crossing of E_i = 0, 1 sliding on it starts, 2 sliding ends"),
+    Quantity("switching_constraint_rate", "F_i", "m s-1", "constraint error rate F_i at the switching event",
+             "F_i at the event (before the impulse of a sliding start)"),
+)}
+
+#: The state blocks (3-vectors) a layout may hold, in the order of the outputs.
+STATE_BLOCKS = ("theta", "omega", "position", "velocity", "controller_state")
+#: Units of each state block (CF spelling; the files' ``units`` attribute).
+BLOCK_UNITS = {b: OUTPUTS[b].units for b in STATE_BLOCKS}
 #: Names of the terms of v, in the order they are summed.
-LYAPUNOV_TERMS = (
-    "lyapunov_translational",
-    "lyapunov_rotational",
-    "lyapunov_constraint",
-    "lyapunov_gravity",
-)
-
-#: The vector outputs of the compiled ``outputs`` kernel, 3 columns each, in order.
-OUTPUT_VECTORS = (
-    "theta",
-    "omega",
-    "position",
-    "velocity",
-    "controller_state",
-    "constraint_error",
-    "constraint_rate",
-    "constraint_force",
-    "force_h",
-    "torque_n",
-)
+LYAPUNOV_TERMS = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
+#: The vector outputs (3 columns each), in order.
+OUTPUT_VECTORS = tuple(q.name for q in OUTPUTS.values() if q.size == 3)
+#: The scalar outputs after the vectors, one column each, in order.
+OUTPUT_SCALARS = tuple(q.name for q in OUTPUTS.values() if q.size == 1)
+#: Columns of one row of outputs.
+N_OUTPUTS = sum(q.size for q in OUTPUTS.values())
 #: The outputs that neither the summary figures nor a ``thinned`` store read: left out of
 #: the outputs of a sweep that stores no more (``full`` False in
 #: :func:`rbstab.variants.kernels.run_outputs`).
 LEFT_OUT = ("constraint_rate", "constraint_force", "force_h", "torque_n")
-#: The scalar outputs after the vectors, one column each, in order.
-OUTPUT_SCALARS = (*LYAPUNOV_TERMS, "lyapunov", "lyapunov_rate")
-#: Columns of one row of outputs.
-N_OUTPUTS = 3 * len(OUTPUT_VECTORS) + len(OUTPUT_SCALARS)
 
-#: Units of every output quantity other than the state blocks.
-OUTPUT_UNITS = {
-    "constraint_error": "m",
-    "constraint_rate": "m s-1",
-    "constraint_force": "N",
-    "force_h": "N",
-    "torque_n": "N m",
-    "lyapunov": "J",
-    "lyapunov_rate": "W",
-    "lyapunov_translational": "J",
-    "lyapunov_rotational": "J",
-    "lyapunov_constraint": "J",
-    "lyapunov_gravity": "J",
-}
 
-#: Descriptions of every output quantity other than the state blocks.
-OUTPUT_DESCRIPTIONS = {
-    "constraint_error": "E = X + A R - R, displacement of the point C, inertial frame (eq 4)",
-    "constraint_rate": "F = dE/dt = V - A hat(R) Omega, velocity of C, inertial frame (eq 4)",
-    "constraint_force": "Lambda, force applied at C, inertial frame (eqs 20, 22, 39, 40)",
-    "force_h": "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)",
-    "torque_n": "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)",
-    "lyapunov": "Lyapunov function v, the sum of the lyapunov_* terms (eqs 28-46)",
-    "lyapunov_rate": "analytic dv/dt (eqs 29, 37, 43, 46)",
-    "lyapunov_translational": "v_t = V'MV/2 + X'K_t X/2 (eq 25)",
-    "lyapunov_rotational": "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25)",
-    "lyapunov_constraint": "energy stored in the constraint controller (eqs 41, 44; "
-    "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent)",
-    "lyapunov_gravity": "-X'G plus the constant h that makes v zero at the equilibrium (eq 30)",
-}
+# -- the summary figures of a run (rbstab.summary computes them) --------------------------------
+def _final(block: str, long_name: str) -> Quantity:
+    """The summary figure ``final_<block>``: the state block at the last finite sample."""
+    q = OUTPUTS[block]
+    return Quantity(f"final_{block}", f"final {q.symbol}", q.units, long_name, size=3)
+
+
+#: The summary figures (:func:`rbstab.summary.summarize` and, for runs of the pure sign law,
+#: :func:`rbstab.engine.switching.switching_summary`), in the order files list them; units
+#: None: a text figure. A run file holds them as ``summary_<name>`` attributes, a store
+#: file as variables along ``run`` (3-vectors as ``<name>_x``, ``_y``, ``_z``).
+SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
+    Quantity("t_final", "t_final", "s", "time of the last finite sample"),
+    _final("theta", "Euler angles Theta at t_final"),
+    _final("omega", "angular velocity Omega at t_final (body frame)"),
+    _final("position", "position X of C at t_final"),
+    _final("velocity", "velocity V of C at t_final"),
+    _final("controller_state", "controller state D at t_final"),
+    Quantity("max_abs_constraint_error", "max |E|", "m", "max |E_i| over the samples", size=3),
+    Quantity("lyapunov_initial", "v(0)", "J", "v(0)"),
+    Quantity("lyapunov_final", "v(t_end)", "J", "v(t_end)"),
+    Quantity("max_lyapunov_rate", "max dv/dt", "W", "max dv/dt"),
+    Quantity("max_lyapunov_increase", "max rise of v", "J", "largest rise of v above its running minimum"),
+    Quantity("lyapunov_rate_mismatch", "max |dv/dt analytic - numerical|", "W", "max |analytic - numerical dv/dt|"),
+    Quantity("lyapunov_rate_mismatch_relative", "relative dv/dt mismatch", "1",
+             "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),
+    Quantity("lyapunov_rate_check", "rate check", None,
+             "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
+    Quantity("lyapunov_rate_checked", "fraction of samples rate-checked", "1",
+             "fraction of the samples the rate check compares (pure sign law: on one smooth piece)"),
+    # runs of the pure sign law of sliding
+    Quantity("switching_count", "crossings of E_i = 0", "1", "crossings of E_i = 0 located", size=3),
+    Quantity("sliding_time", "sliding time", "s", "time C slid on E_i = 0 (equivalent force)", size=3),
+    Quantity("sliding_starts", "sliding starts", "1", "times sliding on E_i = 0 started", size=3),
+    Quantity("min_switching_interval", "shortest interval between crossings", "s",
+             "shortest time between two crossings of E_i = 0", size=3),
+    Quantity("chattering", "chattering (total variation of Lambda_i)", "N s-1",
+             "total variation of Lambda_i from its jumps, per second", size=3),
+    Quantity("switching_resolution", "switching resolution", "m",
+             "switching resolution: excursions smaller than this start sliding"),
+)}
 
 
 @dataclass(frozen=True)
@@ -115,13 +264,13 @@ class StateLayout:
     Parameters
     ----------
     blocks : tuple of str
-        Block names, each a key of :data:`BLOCK_UNITS`.
+        Block names, each one of :data:`STATE_BLOCKS`.
     """
 
     blocks: tuple[str, ...]
 
     def __post_init__(self) -> None:
-        unknown = [b for b in self.blocks if b not in BLOCK_UNITS]
+        unknown = [b for b in self.blocks if b not in STATE_BLOCKS]
         if unknown:
             raise ValueError(f"unknown state blocks {unknown}")
 
@@ -149,30 +298,6 @@ class StateLayout:
         """
         return np.concatenate([np.asarray(blocks[b], dtype=float) for b in self.blocks], axis=-1)
 
-    def split_columns(self, y) -> dict:
-        """Each block of a state in columns form (:mod:`rbstab.kinematics`): ``y`` a list
-        of ``size`` floats (one state) -> {name: tuple of its 3 floats}; ``y`` an (size,
-        m) array (a stack) -> {name: (3, m) view}."""
-        if isinstance(y, np.ndarray):
-            return {b: y[3 * i : 3 * i + 3] for i, b in enumerate(self.blocks)}
-        return {b: tuple(y[3 * i : 3 * i + 3]) for i, b in enumerate(self.blocks)}
-
-    def join_columns(self, **blocks):
-        """A state in columns form, in layout order, from its blocks (vectors in columns
-        form): an (size, m) array when every block is a (3, m) array, else the list of
-        the ``size`` components; :func:`rbstab.kinematics.from_columns` makes stacked
-        rows of either.
-
-        Raises
-        ------
-        KeyError
-            If a block of the layout is missing.
-        """
-        parts = [blocks[b] for b in self.blocks]
-        if all(isinstance(p, np.ndarray) and p.ndim == 2 for p in parts):
-            return np.concatenate(parts)
-        return [c for p in parts for c in p]
-
     def state_names(self) -> list[str]:
         """Scalar state names such as ``theta_1`` ... in layout order."""
         return [f"{b}_{k}" for b in self.blocks for k in (1, 2, 3)]
@@ -181,3 +306,17 @@ class StateLayout:
 FULL_BODY = StateLayout(("theta", "omega", "position", "velocity"))
 EMBEDDED = StateLayout(("theta", "omega", "position", "velocity", "controller_state"))
 REDUCED = StateLayout(("theta", "omega"))
+
+#: Each controller variant (the config value ``controller.variant``) and the layout of its
+#: state; a variant's code in the compiled kernels is its position here (:data:`VARIANT_CODES`).
+VARIANT_LAYOUTS = {
+    "free": FULL_BODY,
+    "permanent": REDUCED,
+    "sliding": FULL_BODY,
+    "visco_elastic": FULL_BODY,
+    "embedded": EMBEDDED,
+}
+#: Variant name -> its code in the compiled kernels (:mod:`rbstab.variants.kernels`).
+VARIANT_CODES = {name: code for code, name in enumerate(VARIANT_LAYOUTS)}
+#: Scalar states of each variant, by code.
+STATE_SIZE = tuple(layout.size for layout in VARIANT_LAYOUTS.values())

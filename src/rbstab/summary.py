@@ -2,7 +2,7 @@
 
 The same code serves the scipy path (:mod:`rbstab.simulator`), the batched path (a block of
 runs at once, :func:`summarize_many`) and the writers, so a summary means the same thing
-everywhere.
+everywhere. The figures' units and long names: :data:`rbstab.layout.SUMMARY_FIGURES`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import functools
 import numpy as np
 
 from .jit import jit
-from .layout import BLOCK_UNITS
+from .layout import LYAPUNOV_TERMS, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -30,10 +30,6 @@ __all__ = [
 #: of v": max |analytic - numerical| <= tol * P, where the reference power P is the larger
 #: of max |analytic| and the run's energy scale over its duration (:func:`summarize`).
 LYAPUNOV_RATE_TOLERANCE = 1e-3
-
-#: The terms of v whose magnitudes, summed, give the run's energy scale (the floor of the
-#: rate check); v itself when a run's outputs lack them.
-_ENERGY_TERMS = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
 
 #: Fewest finite samples for which the rate check means something.
 MIN_CHECK_SAMPLES = 6
@@ -305,7 +301,7 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
     rate = outputs["lyapunov_rate"]
     k, n = v.shape
     table: dict[str, list] = {"t_final": [float(time[n - 1])] * k}
-    for b in BLOCK_UNITS:
+    for b in STATE_BLOCKS:
         if b in outputs:
             table[f"final_{b}"] = outputs[b][:, n - 1].tolist()
     error = np.abs(outputs["constraint_error"])
@@ -343,6 +339,6 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
     """E [J] of k runs, shape (k,): the largest over the samples of the summed magnitudes
     of v's terms (|v| when the outputs lack them), the size of what v's rounding and the
     solver's error act on."""
-    terms = [np.abs(outputs[key]) for key in _ENERGY_TERMS if key in outputs]
+    terms = [np.abs(outputs[key]) for key in LYAPUNOV_TERMS if key in outputs]
     magnitude = sum(terms[1:], terms[0]) if terms else np.abs(outputs["lyapunov"])
     return np.max(magnitude, axis=1)

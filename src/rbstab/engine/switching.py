@@ -513,7 +513,7 @@ def _per_axis(switchings: Switchings, kind: int) -> list[np.ndarray]:
 
 def switching_summary(solution: SignLawSolution) -> dict:
     """The switching figures of a sign-law run, for its summary (plain floats and 3-lists,
-    one value per axis of E; units and meaning in ``rbstab.io.chunk.SUMMARY_FIGURES``):
+    one value per axis of E; units and meaning in ``rbstab.layout.SUMMARY_FIGURES``):
     ``switching_count``, ``sliding_time`` [s], ``sliding_starts``,
     ``min_switching_interval`` [s] (NaN below two crossings), ``chattering`` [N/s] (the
     total variation of Lambda_i from its jumps, per second) and ``switching_resolution`` [m]."""

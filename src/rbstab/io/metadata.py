@@ -1,13 +1,15 @@
-"""Metadata of the files rbstab writes: the one place for units, names and provenance.
+"""Metadata of the files rbstab writes: variable attributes and provenance.
 
 Both writers, run files (:mod:`rbstab.io.hdf5`) and sweep store files
 (:mod:`rbstab.io.chunk`), take from here
 
 - each variable's attributes (:func:`variable_attributes`): ``units`` (CF/UDUNITS
   spelling, :data:`VARIABLE_UNITS`), ``long_name`` (:data:`LONG_NAMES`) and
-  ``description`` (the formula and the paper's equation, :data:`VARIABLE_DESCRIPTIONS`);
-- the units and long names of the summary figures (:data:`SUMMARY_FIGURES`) and of a
-  store file's other per-run values (:data:`PER_RUN`);
+  ``description`` (the formula and the paper's equation, :data:`VARIABLE_DESCRIPTIONS`),
+  all from the table of quantities :data:`rbstab.layout.QUANTITIES`;
+- the units and long names of the summary figures (:data:`SUMMARY_FIGURES`, from
+  :data:`rbstab.layout.SUMMARY_FIGURES`) and of a store file's other per-run values
+  (:data:`PER_RUN`);
 - the global attributes that say what made a file (:func:`provenance_attributes`):
   ``Conventions`` (:data:`CONVENTIONS`), ``title``, ``history``, ``source``,
   ``references``, the rbstab version, the git commit with a dirty flag, and the versions
@@ -27,7 +29,8 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from ..layout import BLOCK_DESCRIPTIONS, BLOCK_UNITS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS
+from ..layout import QUANTITIES
+from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
 
 __all__ = [
     "CONVENTIONS",
@@ -50,97 +53,19 @@ CONVENTIONS = "CF-1.10"
 #: The ``references`` global attribute: the paper whose equations rbstab integrates.
 REFERENCES = "On the Dynamics and Lyapunov Stability of Constrained and Embedded Rigid Bodies"
 
-#: Units of every variable of a run or store file (CF/UDUNITS spelling: ``rad s-1``).
-VARIABLE_UNITS = {
-    "time": "s",
-    "run": "1",
-    **BLOCK_UNITS,
-    **OUTPUT_UNITS,
-    "lyapunov_rate_numerical": "W",
-    "sliding_mode": "1",
-    "switching": "1",
-    "switching_time": "s",
-    "switching_axis": "1",
-    "switching_kind": "1",
-    "switching_constraint_rate": "m s-1",
-}
-
+#: Units of every variable of a run or store file (CF/UDUNITS spelling: ``rad s-1``), from
+#: :data:`rbstab.layout.QUANTITIES`.
+VARIABLE_UNITS = {name: q.units for name, q in QUANTITIES.items() if q.units is not None}
 #: What each variable holds, with its formula and the paper's equation.
-VARIABLE_DESCRIPTIONS = {
-    "time": "sample time, evenly spaced dense output of the solver",
-    "axis": "vector component; frame given by each variable",
-    "run": "index of the run in the sweep's run list (increasing within a store file)",
-    **BLOCK_DESCRIPTIONS,
-    **OUTPUT_DESCRIPTIONS,
-    "lyapunov_rate_numerical": "dv/dt by differentiating v along the dense-output samples "
-    "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "
-    "compare with lyapunov_rate",
-    "sliding_mode": "pure sign law: sigma standing for sgn(E) on the sample's piece, +-1 the side of E_i = 0, "
-    "0 where C slides on it (equivalent force)",
-    "switching": "number of the located event of the pure sign law, in time order",
-    "switching_time": "time of the event, located to the solver's resolution",
-    "switching_axis": "component i of E (0, 1, 2: inertial x, y, z)",
-    "switching_kind": "0 crossing of E_i = 0, 1 sliding on it starts, 2 sliding ends",
-    "switching_constraint_rate": "F_i at the event (before the impulse of a sliding start)",
-}
-
+VARIABLE_DESCRIPTIONS = {name: q.description for name, q in QUANTITIES.items()}
 #: Short names of every variable (CF ``long_name``: what a plot's axis says).
-LONG_NAMES = {
-    "time": "time",
-    "axis": "vector component",
-    "run": "position of the run in the sweep's run list",
-    "theta": "Euler angles Theta",
-    "omega": "angular velocity Omega (body frame)",
-    "position": "centre-of-mass position X (inertial frame)",
-    "velocity": "centre-of-mass velocity V (inertial frame)",
-    "controller_state": "embedded controller state D (inertial frame)",
-    "constraint_error": "constraint error E (inertial frame)",
-    "constraint_rate": "constraint error rate F = dE/dt (inertial frame)",
-    "constraint_force": "constraint force Lambda at C (inertial frame)",
-    "force_h": "translational feedback force H (inertial frame)",
-    "torque_n": "rotational feedback torque N (body frame)",
-    "lyapunov": "Lyapunov function v",
-    "lyapunov_rate": "analytic rate dv/dt of the Lyapunov function",
-    "lyapunov_rate_numerical": "numerical derivative dv/dt of the sampled Lyapunov function",
-    "lyapunov_translational": "translational term v_t of the Lyapunov function",
-    "lyapunov_rotational": "rotational term v_r of the Lyapunov function",
-    "lyapunov_constraint": "constraint controller term of the Lyapunov function",
-    "lyapunov_gravity": "gravity term of the Lyapunov function",
-    "sliding_mode": "sign-law mode sigma of each component of E",
-    "switching": "switching event number",
-    "switching_time": "time of the switching event",
-    "switching_axis": "component of E that switched",
-    "switching_kind": "kind of switching event",
-    "switching_constraint_rate": "constraint error rate F_i at the switching event",
-}
+LONG_NAMES = {name: q.long_name for name, q in QUANTITIES.items()}
 
-#: Summary figures (:func:`rbstab.summary.summarize`): name -> (units, long name). A run
-#: file holds them as ``summary_<name>`` global attributes (units in ``units_of_summary``),
-#: a store file as variables along ``run`` (3-vectors as ``<name>_x``, ``_y``, ``_z``).
-SUMMARY_FIGURES = {
-    "t_final": ("s", "time of the last finite sample"),
-    "final_theta": ("rad", "Euler angles Theta at t_final"),
-    "final_omega": ("rad s-1", "angular velocity Omega at t_final (body frame)"),
-    "final_position": ("m", "position X of C at t_final"),
-    "final_velocity": ("m s-1", "velocity V of C at t_final"),
-    "final_controller_state": ("m", "controller state D at t_final"),
-    "max_abs_constraint_error": ("m", "max |E_i| over the samples"),
-    "lyapunov_initial": ("J", "v(0)"),
-    "lyapunov_final": ("J", "v(t_end)"),
-    "max_lyapunov_rate": ("W", "max dv/dt"),
-    "max_lyapunov_increase": ("J", "largest rise of v above its running minimum"),
-    "lyapunov_rate_mismatch": ("W", "max |analytic - numerical dv/dt|"),
-    "lyapunov_rate_mismatch_relative": ("1", "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),
-    "lyapunov_rate_check": ("", "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
-    "lyapunov_rate_checked": ("1", "fraction of the samples the rate check compares (pure sign law: on one smooth piece)"),
-    # runs of the pure sign law of sliding (rbstab.engine.switching.switching_summary)
-    "switching_count": ("1", "crossings of E_i = 0 located"),
-    "sliding_time": ("s", "time C slid on E_i = 0 (equivalent force)"),
-    "sliding_starts": ("1", "times sliding on E_i = 0 started"),
-    "min_switching_interval": ("s", "shortest time between two crossings of E_i = 0"),
-    "chattering": ("N s-1", "total variation of Lambda_i from its jumps, per second"),
-    "switching_resolution": ("m", "switching resolution: excursions smaller than this start sliding"),
-}
+#: Summary figures (:data:`rbstab.layout.SUMMARY_FIGURES`): name -> (units, long name),
+#: units ``""`` for a text figure. A run file holds them as ``summary_<name>`` global
+#: attributes (units in ``units_of_summary``), a store file as variables along ``run``
+#: (3-vectors as ``<name>_x``, ``_y``, ``_z``).
+SUMMARY_FIGURES = {name: (q.units or "", q.long_name) for name, q in SUMMARY_QUANTITIES.items()}
 
 #: A store file's per-run values other than summary figures: name -> (units, long name).
 PER_RUN = {

@@ -9,8 +9,8 @@ norms |E|, |Omega| against the settling thresholds. Sweep plots:
 :mod:`rbstab.report.sweep_figures`.
 
 Every figure is written by a :class:`FigureWriter` (formats PNG, PDF, SVG; resolution)
-and described by a :class:`FigureFile` (files, title, caption). Units on the axes are
-the ``units`` attributes stored in the result files. A quantity that spans more than two
+and described by a :class:`FigureFile` (files, title, caption). The words, symbols and
+units on the axes come from the table of quantities (:data:`rbstab.layout.QUANTITIES`). A quantity that spans more than two
 decades is drawn on a logarithmic axis (symmetric-logarithmic when it changes sign),
 :func:`set_scale`.
 """
@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, display_units
 from .load import RunData, safe_filename
 from .tables import SettleThresholds
 
@@ -47,45 +48,6 @@ FIGURE_FORMATS = ("png", "pdf", "svg")
 #: times the magnitude a quarter of its samples stay under (it spans more than two decades).
 LOG_SPAN = 100.0
 
-#: Mathtext symbol of each plotted variable (the vector; components use :data:`COMPONENTS`).
-SYMBOLS = {
-    "theta": r"\Theta",
-    "omega": r"\Omega",
-    "position": "X",
-    "velocity": "V",
-    "controller_state": "D",
-    "constraint_error": "E",
-    "constraint_rate": "F",
-    "constraint_force": r"\Lambda",
-    "force_h": "H",
-    "torque_n": "N",
-    "lyapunov": "v",
-    "lyapunov_rate": r"\dot v",
-}
-#: Words for each plotted variable (axis labels say both).
-WORDS = {
-    "theta": "Euler angles",
-    "omega": "angular velocity",
-    "position": "COM position",
-    "velocity": "COM velocity",
-    "controller_state": "controller state",
-    "constraint_error": "constraint error",
-    "constraint_rate": "constraint rate",
-    "constraint_force": "constraint force",
-    "force_h": "feedback force",
-    "torque_n": "feedback torque",
-    "lyapunov": "Lyapunov function",
-    "lyapunov_rate": "Lyapunov rate",
-}
-#: Mathtext symbol of the components of a variable, where it differs from :data:`SYMBOLS`.
-COMPONENTS = {"theta": r"\theta"}
-#: The terms of v (:data:`rbstab.variants.LYAPUNOV_TERMS`) and their legend symbols.
-LYAPUNOV_TERMS = {
-    "lyapunov_translational": "$v_t$ translational",
-    "lyapunov_rotational": "$v_r$ rotational",
-    "lyapunov_constraint": "$v_c$ constraint controller",
-    "lyapunov_gravity": "$v_g$ gravity",
-}
 _LINESTYLES = ("-", "--", ":")
 #: A constraint error below this [m] is drawn on a +-1 mm axis and labelled round-off.
 ROUND_OFF_E = 1e-9
@@ -172,17 +134,19 @@ def _plain_texts(fig) -> None:
 
 # -- helpers ----------------------------------------------------------------------------------------
 
-def units_text(units: str) -> str:
-    """CF-style units (``rad s-1``) as they read on an axis (``rad/s``)."""
-    return {"rad s-1": "rad/s", "m s-1": "m/s", "s-1": "1/s", "N m": "N m", "N s-1": "N/s"}.get(units, units)
+#: CF units (``rad s-1``) as they read on an axis (``rad/s``): :func:`rbstab.layout.display_units`.
+units_text = display_units
 
 
 def _symbol(var: str, component: int | None = None) -> str:
-    return SYMBOLS[var] if component is None else f"{COMPONENTS.get(var, SYMBOLS[var])}_{component + 1}"
+    """Mathtext symbol of quantity ``var`` (:data:`rbstab.layout.QUANTITIES`) or of its component."""
+    q = QUANTITIES[var]
+    return q.tex if component is None else f"{q.component_tex or q.tex}_{component + 1}"
 
 
-def _label(run: RunData, var: str, component: int | None = None) -> str:
-    return f"{WORDS[var]} ${_symbol(var, component)}$ [{units_text(run.units(var))}]"
+def _label(var: str, component: int | None = None) -> str:
+    """Axis label of quantity ``var``: words, symbol and units, e.g. ``"time $t$ [s]"``."""
+    return f"{QUANTITIES[var].words} ${_symbol(var, component)}$ [{QUANTITIES[var].display_units}]"
 
 
 def new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float = 2.4, sharex: bool = True):
@@ -283,7 +247,7 @@ def _finish_time_axes(axes, run: RunData, legend: bool = True, **legend_kw) -> N
             ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8, **legend_kw)
         ax.grid(alpha=0.3, which="both")
         _mark_failure(ax, run)
-    axes[-1].set_xlabel("time $t$ [s]")
+    axes[-1].set_xlabel(_label("time"))
 
 
 def _vector_panels(axes, run: RunData, names: Sequence[str], scale: bool = False) -> dict:
@@ -292,7 +256,7 @@ def _vector_panels(axes, run: RunData, names: Sequence[str], scale: bool = False
     for ax, var in zip(axes, names):
         for k in range(3):
             ax.plot(s["time"], s[var][:, k], ls=_LINESTYLES[k], marker=_marker(s[var]), label=f"${_symbol(var, k)}$")
-        ax.set_ylabel(_label(run, var), fontsize=9)
+        ax.set_ylabel(_label(var), fontsize=9)
         if scale:
             set_scale(ax, s[var])
     _finish_time_axes(axes, run, ncols=3)
@@ -353,13 +317,13 @@ def _lyapunov_terms_panel(ax, run: RunData) -> None:
     s = run.series("lyapunov", *LYAPUNOV_TERMS)
     t = s["time"]
     drawn = [s["lyapunov"]]
-    ax.plot(t, s["lyapunov"], color="k", lw=1.8, marker=_marker(s["lyapunov"]), label="$v$")
-    for i, (name, label) in enumerate(LYAPUNOV_TERMS.items()):
+    ax.plot(t, s["lyapunov"], color="k", lw=1.8, marker=_marker(s["lyapunov"]), label=f"${_symbol('lyapunov')}$")
+    for i, name in enumerate(LYAPUNOV_TERMS):
         if name not in s or not np.nanmax(np.abs(s[name]), initial=0.0) > 0:
             continue
-        term = s[name]
+        term, label = s[name], f"${_symbol(name)}$ {QUANTITIES[name].words}"
         if np.nanmin(term) < 0:
-            term, label = np.abs(term), label.replace("$v_", "$|v_").replace("$ ", "|$ ", 1) + " (changes sign)"
+            term, label = np.abs(term), f"$|{_symbol(name)}|$ {QUANTITIES[name].words} (changes sign)"
         ax.plot(t, term, color=f"C{i}", lw=1.0, ls=_LINESTYLES[i % 3], label=label)
         drawn.append(term)
     values = np.concatenate(drawn)
@@ -368,7 +332,7 @@ def _lyapunov_terms_panel(ax, run: RunData) -> None:
         ax.set_yscale("log")  # v >= 0: always on a log axis (zeros are not drawn)
     else:
         set_scale(ax, values)
-    ax.set_ylabel(_label(run, "lyapunov"), fontsize=9)
+    ax.set_ylabel(_label("lyapunov"), fontsize=9)
 
 
 def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
@@ -385,8 +349,8 @@ def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
         diff.plot(t, s["lyapunov_rate"] - s["lyapunov_rate_numerical"], color="C3", lw=0.9,
                   label=r"$\dot v_{analytic} - \dot v_{numerical}$")
     set_scale(rate, s["lyapunov_rate"])
-    rate.set_ylabel(_label(run, "lyapunov_rate"), fontsize=9)
-    diff.set_ylabel(rf"analytic $-$ numerical [{units_text(run.units('lyapunov_rate'))}]", fontsize=9)
+    rate.set_ylabel(_label("lyapunov_rate"), fontsize=9)
+    diff.set_ylabel(rf"analytic $-$ numerical [{QUANTITIES['lyapunov_rate'].display_units}]", fontsize=9)
     _finish_time_axes(axes[:, 0], run, ncols=2)
     _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
     return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
@@ -418,8 +382,8 @@ def _phase_row(axes, run: RunData, x_var: str, y_var: str) -> None:
         if ok.any():
             ax.plot(x[ok][0], y[ok][0], "o", color="green", ms=5, label="start")
             ax.plot(x[ok][-1], y[ok][-1], "s", color="k", ms=5, label="end")
-        ax.set_xlabel(_label(run, x_var, k), fontsize=8)
-        ax.set_ylabel(_label(run, y_var, k), fontsize=8)
+        ax.set_xlabel(_label(x_var, k), fontsize=8)
+        ax.set_ylabel(_label(y_var, k), fontsize=8)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, title=run.label, title_fontsize=8)
 
@@ -457,7 +421,7 @@ def switching_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
             histogram.hist(gaps, bins=bins, histtype="step", color=f"C{i}", label=f"$E_{i + 1}$: {crossings.size} crossings")
     raster.set_yticks([0, 1, 2], ["$E_1$", "$E_2$", "$E_3$"])
     raster.set_ylim(-0.5, 2.5)
-    raster.set_xlabel("time $t$ [s]")
+    raster.set_xlabel(_label("time"))
     raster.set_title("crossings of $E_i = 0$ (lines), sliding on it (shaded)", fontsize=9)
     histogram.set_xscale("log")
     histogram.set_xlabel("interval between successive crossings [s]")
@@ -497,10 +461,10 @@ def _overlay(runs: Sequence[RunData], variables: Sequence[str], out: FigureWrite
             for k in range(3 if var in s else 0):
                 axes[r, k].plot(s["time"], s[var][:, k], color=colour, lw=1.2, label=run.label)
         for k in range(3):
-            axes[r, k].set_ylabel(_label(runs[0], var, k), fontsize=9)
+            axes[r, k].set_ylabel(_label(var, k), fontsize=9)
             axes[r, k].grid(alpha=0.3)
     for k in range(3):
-        axes[-1, k].set_xlabel("time $t$ [s]")
+        axes[-1, k].set_xlabel(_label("time"))
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncols=min(len(runs), 4), fontsize=9)
     fig.suptitle(title, fontsize=11)
@@ -521,12 +485,12 @@ def _compare_lyapunov(runs: Sequence[RunData], out: FigureWriter) -> FigureFile:
     if v_all.size and np.all(v_all > 0):
         v.set_yscale("log")
     set_scale(rate, np.concatenate([r.series("lyapunov_rate")["lyapunov_rate"] for r in runs]))
-    v.set_ylabel(_label(runs[0], "lyapunov"))
-    rate.set_ylabel(_label(runs[0], "lyapunov_rate"))
+    v.set_ylabel(_label("lyapunov"))
+    rate.set_ylabel(_label("lyapunov_rate"))
     for ax in (v, rate):
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8, ncols=2 if len(runs) > 3 else 1, loc="upper right")
-    rate.set_xlabel("time $t$ [s]")
+    rate.set_xlabel(_label("time"))
     fig.suptitle("Lyapunov function and its rate (analytic solid, numerical dashed)", fontsize=11)
     return out.save(fig, "compare_lyapunov", "Comparison: Lyapunov function",
                     "v (log scale where every v is positive) and dv/dt of every run (symmetric-log scale where it "
@@ -542,11 +506,12 @@ def _norms_figure(runs: Sequence[RunData], out: FigureWriter, thresholds: Settle
             ax.plot(s["time"], np.maximum(np.linalg.norm(s[var], axis=1), limit * 1e-4), color=colour, label=run.label)
     for ax, (var, limit) in zip(axes[:, 0], limits.items()):
         ax.set_yscale("log")
-        ax.axhline(limit, color="k", ls="--", lw=0.9, label=f"threshold {limit:g} {units_text(runs[0].units(var))}")
-        ax.set_ylabel(f"$|{SYMBOLS[var]}|$ [{units_text(runs[0].units(var))}]")
+        units = QUANTITIES[var].display_units
+        ax.axhline(limit, color="k", ls="--", lw=0.9, label=f"threshold {limit:g} {units}")
+        ax.set_ylabel(f"$|{_symbol(var)}|$ [{units}]")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8, loc="upper right")
-    axes[-1, 0].set_xlabel("time $t$ [s]")
+    axes[-1, 0].set_xlabel(_label("time"))
     fig.suptitle("Norms of the constraint error and of the angular velocity (settling thresholds dashed)", fontsize=11)
     return out.save(fig, "norms", "Constraint error and angular velocity norms",
                     f"|E| and |Omega| (Euclidean norms, log scale; values below {thresholds.e * 1e-4:g} m and "

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..layout import OUTPUTS
 from .load import RunData
 
 __all__ = [
@@ -98,9 +99,6 @@ PAPER_CASES: dict[str, PrintedCase] = {
     ),
 }
 
-_SYMBOLS = {"theta": "Theta", "omega": "Omega", "position": "X", "velocity": "V"}
-_UNITS = {"theta": "rad", "omega": "rad/s", "position": "m", "velocity": "m/s"}
-
 
 def paper_case(run: RunData) -> PrintedCase | None:
     """The paper case ``run`` reproduces (name and variant both match), or None."""
@@ -175,8 +173,8 @@ def compare_with_paper(runs: Sequence[RunData]) -> list[PaperComparison]:
             for i in range(3):
                 comp.rows.append(
                     {
-                        "quantity": f"{_SYMBOLS[block]}_{i + 1} at t_end",
-                        "units": _UNITS[block],
+                        "quantity": f"{OUTPUTS[block].symbol}_{i + 1} at t_end",
+                        "units": OUTPUTS[block].display_units,
                         "printed": printed[i],
                         "ours": ours[i],
                         "difference": ours[i] - printed[i],
@@ -185,11 +183,12 @@ def compare_with_paper(runs: Sequence[RunData]) -> list[PaperComparison]:
         if case.initial_constraint_violation is not None:
             s = run.series("constraint_error")
             peak, at = signed_peak(s["time"], s["constraint_error"])
+            e = OUTPUTS["constraint_error"]
             for i in range(3):
                 comp.rows.append(
                     {
-                        "quantity": f"E_{i + 1}, largest excursion (at t = {at[i]:.3g} s)",
-                        "units": "m",
+                        "quantity": f"{e.symbol}_{i + 1}, largest excursion (at t = {at[i]:.3g} s)",
+                        "units": e.display_units,
                         "printed": case.initial_constraint_violation[i],
                         "ours": float(peak[i]),
                         "difference": float(peak[i]) - case.initial_constraint_violation[i],

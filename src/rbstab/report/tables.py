@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..io.chunk import read_chunk_series
+from ..layout import STATE_BLOCKS, SUMMARY_FIGURES
 from .load import RunData, SweepData
 
 __all__ = [
@@ -46,36 +47,16 @@ DEFAULT_SETTLE_E = 0.005
 #: Default threshold on |Omega| (Euclidean norm) for the settling time [rad/s].
 DEFAULT_SETTLE_OMEGA = 0.05
 
-#: Scalar summary figures usable as ``--metric`` (name -> (symbol, units)).
+#: Scalar summary figures usable as ``--metric`` (name -> (symbol, units)), from
+#: :data:`rbstab.layout.SUMMARY_FIGURES` (the numbers; not the text of the rate check).
 SCALAR_SUMMARY_METRICS = {
-    "t_final": ("t_final", "s"),
-    "lyapunov_initial": ("v(0)", "J"),
-    "lyapunov_final": ("v(t_end)", "J"),
-    "max_lyapunov_rate": ("max dv/dt", "W"),
-    "max_lyapunov_increase": ("max rise of v", "J"),
-    "lyapunov_rate_mismatch": ("max |dv/dt analytic - numerical|", "W"),
-    "lyapunov_rate_mismatch_relative": ("relative dv/dt mismatch", "1"),
-    "lyapunov_rate_checked": ("fraction of samples rate-checked", "1"),
-    "switching_resolution": ("switching resolution", "m"),
+    name: (q.symbol, q.display_units) for name, q in SUMMARY_FIGURES.items() if q.size == 1 and q.units is not None
 }
 #: Vector summary figures usable as ``--metric`` (name -> (symbol, units)); ``NAME`` is
 #: the largest |component|, ``NAME_x``, ``NAME_y``, ``NAME_z`` the components (the names of
 #: the sweep's ``index.csv`` columns and dataset variables; ``NAME_1`` .. ``_3`` are accepted
 #: as the old spelling).
-VECTOR_SUMMARY_METRICS = {
-    "max_abs_constraint_error": ("max |E|", "m"),
-    "final_theta": ("final Theta", "rad"),
-    "final_omega": ("final Omega", "rad/s"),
-    "final_position": ("final X", "m"),
-    "final_velocity": ("final V", "m/s"),
-    "final_controller_state": ("final D", "m"),
-    # runs of the pure sign law of sliding (rbstab.engine.switching)
-    "switching_count": ("crossings of E_i = 0", "1"),
-    "sliding_time": ("sliding time", "s"),
-    "sliding_starts": ("sliding starts", "1"),
-    "min_switching_interval": ("shortest interval between crossings", "s"),
-    "chattering": ("chattering (total variation of Lambda_i)", "N/s"),
-}
+VECTOR_SUMMARY_METRICS = {name: (q.symbol, q.display_units) for name, q in SUMMARY_FIGURES.items() if q.size == 3}
 #: Figures of a run that are not summary attributes (name -> (symbol, units)).
 OTHER_METRICS = {
     "settling_time": ("settling time", "s"),
@@ -367,7 +348,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         for key in parameters:
             row[key] = run.flat_config.get(key)
         row["t_final"] = float(run.summary.get("t_final", np.nan))
-        for block in ("theta", "omega", "position", "velocity", "controller_state"):
+        for block in STATE_BLOCKS:
             for i, v in enumerate(_vector(run, f"final_{block}"), start=1):
                 row[f"final_{block}_{i}"] = v
         for i, v in enumerate(_vector(run, "max_abs_constraint_error"), start=1):

@@ -6,7 +6,7 @@
 
 from __future__ import annotations
 
-from .base import LYAPUNOV_TERMS, OUTPUT_DESCRIPTIONS, OUTPUT_UNITS, Variant
+from .base import LYAPUNOV_TERMS, Variant
 from .registry import VARIANTS, Embedded, Free, Permanent, Sliding, ViscoElastic
 
 __all__ = [
@@ -18,6 +18,4 @@ __all__ = [
     "ViscoElastic",
     "Embedded",
     "LYAPUNOV_TERMS",
-    "OUTPUT_UNITS",
-    "OUTPUT_DESCRIPTIONS",
 ]

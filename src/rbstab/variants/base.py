@@ -27,29 +27,21 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..layout import (  # the output tables live with the layout: files and readers need no compiler
+from ..layout import (  # the table of outputs lives with the layout: files and readers need no compiler
     FULL_BODY,
     LEFT_OUT,
     LYAPUNOV_TERMS,
     N_OUTPUTS,
-    OUTPUT_DESCRIPTIONS,
-    OUTPUT_SCALARS,
-    OUTPUT_UNITS,
-    OUTPUT_VECTORS,
+    OUTPUTS,
+    VARIANT_CODES,
+    VARIANT_LAYOUTS,
     StateLayout,
 )
 from ..model import Gains, RigidBody, parameters
 from .kernels import run_outputs, state_rates
 
-__all__ = [
-    "Variant",
-    "OUTPUT_UNITS",
-    "OUTPUT_DESCRIPTIONS",
-    "LYAPUNOV_TERMS",
-    "OUTPUT_VECTORS",
-    "OUTPUT_SCALARS",
-    "N_OUTPUTS",
-]
+__all__ = ["Variant", "LYAPUNOV_TERMS", "N_OUTPUTS", "split_outputs"]
+
 
 # -- the protocol -----------------------------------------------------------------------------
 class Variant:
@@ -65,9 +57,10 @@ class Variant:
 
     #: Registry name (the config value of ``controller.variant``).
     name: ClassVar[str]
-    #: Number of the variant in the compiled kernels (:mod:`rbstab.variants.kernels`).
+    #: Number of the variant in the compiled kernels (:mod:`rbstab.variants.kernels`), from
+    #: :data:`rbstab.layout.VARIANT_CODES` by ``name``.
     code: ClassVar[int]
-    #: Layout of the integrated state.
+    #: Layout of the integrated state, from :data:`rbstab.layout.VARIANT_LAYOUTS` by ``name``.
     layout: ClassVar[StateLayout] = FULL_BODY
     #: Gains that must be configured for this variant.
     required_gains: ClassVar[tuple[str, ...]] = ("k_t", "l_t", "k_r", "l_r")
@@ -77,6 +70,12 @@ class Variant:
     def __init__(self, body: RigidBody, gains: Gains) -> None:
         self.body = body
         self.gains = gains
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        """A variant's ``code`` and ``layout`` are those :mod:`rbstab.layout` gives its ``name``."""
+        super().__init_subclass__(**kwargs)
+        cls.code = VARIANT_CODES[cls.name]
+        cls.layout = VARIANT_LAYOUTS[cls.name]
 
     @property
     def smooth(self) -> bool:
@@ -133,7 +132,7 @@ class Variant:
 
     def lyapunov(self, y: np.ndarray) -> np.ndarray:
         """v [J] along states ``y`` of shape (..., n_state); shape (...)."""
-        return self._output_columns(y, self.parameters)[_LYAPUNOV_COLUMN]
+        return self._output_columns(y, self.parameters)[OUTPUTS["lyapunov"].offset]
 
     # -- equilibrium -----------------------------------------------------------
     @property
@@ -142,7 +141,8 @@ class Variant:
 
     def _potential(self, p: np.ndarray) -> float:
         """Stored energy without the constant h, at rest, for configuration vector p."""
-        return float(self._output_columns(self._rest_state(p), self._parameters_without_offset)[_LYAPUNOV_COLUMN])
+        columns = self._output_columns(self._rest_state(p), self._parameters_without_offset)
+        return float(columns[OUTPUTS["lyapunov"].offset])
 
     def _rest_state(self, p: np.ndarray) -> np.ndarray:
         """State at rest (zero velocities) with configuration blocks from vector ``p``."""
@@ -192,11 +192,9 @@ class Variant:
         return self._equilibrium[1]
 
 
-_LYAPUNOV_COLUMN = 3 * len(OUTPUT_VECTORS) + OUTPUT_SCALARS.index("lyapunov")
-
-
 def split_outputs(columns: np.ndarray, layout: StateLayout, full: bool = True) -> dict[str, np.ndarray]:
-    """Named outputs from the ``outputs`` kernel's columns, shape (N_OUTPUTS, ...).
+    """Named outputs from the ``outputs`` kernel's columns, shape (N_OUTPUTS, ...), each
+    from its columns in :data:`rbstab.layout.OUTPUTS`.
 
     ``controller_state`` is kept only where ``layout`` integrates it; ``full`` False: the
     columns of ``run_outputs(..., full=False)``, without :data:`~rbstab.layout.LEFT_OUT`.
@@ -204,11 +202,8 @@ def split_outputs(columns: np.ndarray, layout: StateLayout, full: bool = True) -
     along the 3 axes).
     """
     out = {}
-    for i, name in enumerate(OUTPUT_VECTORS):
+    for name, q in OUTPUTS.items():
         if (name == "controller_state" and name not in layout.blocks) or (not full and name in LEFT_OUT):
             continue
-        out[name] = np.moveaxis(columns[3 * i : 3 * i + 3], 0, -1)
-    base = 3 * len(OUTPUT_VECTORS)
-    for i, name in enumerate(OUTPUT_SCALARS):
-        out[name] = columns[base + i]
+        out[name] = np.moveaxis(columns[q.columns], 0, -1) if q.size == 3 else columns[q.offset]
     return out

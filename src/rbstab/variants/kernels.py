@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from ..jit import jit
 from ..kinematics import ZERO, matvec, rotation_and_rate_of, vector
+from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
 from ..model import force_h, torque_n
 from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
@@ -24,9 +25,29 @@ from .body import body_dissipation, body_energy, body_rates, constraint_error, c
 __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row",
            "state_rates", "run_outputs", "STATE_SIZE"]
 
-FREE, PERMANENT, SLIDING, VISCO_ELASTIC, EMBEDDED = 0, 1, 2, 3, 4
-#: Scalar states of each variant, by code.
-STATE_SIZE = (12, 6, 12, 12, 15)
+#: The variants' codes (:data:`rbstab.layout.VARIANT_CODES`); :data:`STATE_SIZE`: their
+#: scalar states, by code.
+FREE, PERMANENT, SLIDING, VISCO_ELASTIC, EMBEDDED = (
+    VARIANT_CODES[name] for name in ("free", "permanent", "sliding", "visco_elastic", "embedded"))
+
+# First column of each output in a row of outputs (rbstab.layout.OUTPUTS): module-level
+# ints, which numba compiles as constants.
+THETA_AT = OUTPUTS["theta"].offset
+OMEGA_AT = OUTPUTS["omega"].offset
+POSITION_AT = OUTPUTS["position"].offset
+VELOCITY_AT = OUTPUTS["velocity"].offset
+CONTROLLER_STATE_AT = OUTPUTS["controller_state"].offset
+CONSTRAINT_ERROR_AT = OUTPUTS["constraint_error"].offset
+CONSTRAINT_RATE_AT = OUTPUTS["constraint_rate"].offset
+CONSTRAINT_FORCE_AT = OUTPUTS["constraint_force"].offset
+FORCE_H_AT = OUTPUTS["force_h"].offset
+TORQUE_N_AT = OUTPUTS["torque_n"].offset
+TRANSLATIONAL_AT = OUTPUTS["lyapunov_translational"].offset
+ROTATIONAL_AT = OUTPUTS["lyapunov_rotational"].offset
+CONSTRAINT_AT = OUTPUTS["lyapunov_constraint"].offset
+GRAVITY_AT = OUTPUTS["lyapunov_gravity"].offset
+LYAPUNOV_AT = OUTPUTS["lyapunov"].offset
+LYAPUNOV_RATE_AT = OUTPUTS["lyapunov_rate"].offset
 
 
 @jit(forceinline=True)
@@ -118,20 +139,20 @@ def state_rate(code, y, p, dy):
 
 @jit(forceinline=True)
 def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation):
-    """v, its terms and dv/dt into out[30:36]: the body's (eq 25, gravity) plus the constraint's."""
+    """v, its terms and dv/dt into ``out``: the body's (eq 25, gravity) plus the constraint's."""
     translational, rotational, gravity = body_energy(theta, omega, x, v, p)
-    out[30] = translational
-    out[31] = rotational
-    out[32] = constraint
-    out[33] = gravity
-    out[34] = translational + rotational + constraint + gravity
-    out[35] = -(body_dissipation(omega, v, p) + constraint_dissipation)
+    out[TRANSLATIONAL_AT] = translational
+    out[ROTATIONAL_AT] = rotational
+    out[CONSTRAINT_AT] = constraint
+    out[GRAVITY_AT] = gravity
+    out[LYAPUNOV_AT] = translational + rotational + constraint + gravity
+    out[LYAPUNOV_RATE_AT] = -(body_dissipation(omega, v, p) + constraint_dissipation)
 
 
 @jit(forceinline=True)
 def output_row(code, y, p, out, full):
-    """The outputs of one state into ``out`` (length N_OUTPUTS, order of
-    :data:`~rbstab.variants.base.OUTPUT_VECTORS` then ``OUTPUT_SCALARS``): all of them if
+    """The outputs of one state into ``out`` (length N_OUTPUTS, each at its offset in
+    :data:`rbstab.layout.OUTPUTS`): all of them if
     ``full``, else all but :data:`~rbstab.layout.LEFT_OUT` (their entries are not written;
     N and H are then not computed: 20-30 % less time a sample).
 
@@ -151,11 +172,17 @@ def output_row(code, y, p, out, full):
             n, h = torque_n(b, theta, omega, p), force_h(x, v, p)
         else:  # not written below; given a value so that n and h are defined on every path
             n, h = ZERO, ZERO
-    for i, block in enumerate((theta, omega, x, v, d, e)):
-        _put(out, 3 * i, block)
-    if full:  # rbstab.layout.LEFT_OUT: rows 18-29
-        for i, block in enumerate((f, lam, h, n)):
-            _put(out, 18 + 3 * i, block)
+    _put(out, THETA_AT, theta)
+    _put(out, OMEGA_AT, omega)
+    _put(out, POSITION_AT, x)
+    _put(out, VELOCITY_AT, v)
+    _put(out, CONTROLLER_STATE_AT, d)
+    _put(out, CONSTRAINT_ERROR_AT, e)
+    if full:  # rbstab.layout.LEFT_OUT
+        _put(out, CONSTRAINT_RATE_AT, f)
+        _put(out, CONSTRAINT_FORCE_AT, lam)
+        _put(out, FORCE_H_AT, h)
+        _put(out, TORQUE_N_AT, n)
     _lyapunov(out, theta, omega, x, v, p, energy, dissipation)
 
 

@@ -1,20 +1,18 @@
 """The controller variants as classes of the :class:`~rbstab.variants.base.Variant` protocol,
 and their registry.
 
-Each class names a variant (``controller.variant``), its number in the compiled kernels,
-its state layout and the gains it needs; its physics (constraint law, stored energy,
-dissipated power) is compiled code in the variant's own module (:mod:`.free`,
-:mod:`.permanent`, :mod:`.sliding`, :mod:`.visco_elastic`, :mod:`.embedded`), put
-together by :mod:`rbstab.variants.kernels`.
+Each class names a variant (``controller.variant``; its number in the compiled kernels
+and its state layout come from :mod:`rbstab.layout` by that name) and the gains it
+needs; its physics (constraint law, stored energy, dissipated power) is compiled code in
+the variant's own module (:mod:`.free`, :mod:`.permanent`, :mod:`.sliding`,
+:mod:`.visco_elastic`, :mod:`.embedded`), put together by :mod:`rbstab.variants.kernels`.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import numpy as np
 
-from ..layout import EMBEDDED, FULL_BODY, REDUCED, StateLayout
+from ..layout import FULL_BODY
 from .base import Variant
 
 __all__ = ["VARIANTS", "Free", "Permanent", "Sliding", "ViscoElastic", "Embedded"]
@@ -27,7 +25,6 @@ class Free(Variant):
     """
 
     name = "free"
-    code = 0
     equation = "eqs 1, 23, 24, 29, 30"
 
 
@@ -43,8 +40,6 @@ class Permanent(Variant):
     """
 
     name = "permanent"
-    code = 1
-    layout: ClassVar[StateLayout] = REDUCED
     equation = "eqs 20, 21"
 
     def full_state(self, y: np.ndarray) -> np.ndarray:
@@ -65,7 +60,6 @@ class Sliding(Variant):
     """
 
     name = "sliding"
-    code = 2
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_s")
     equation = "eq 39"
 
@@ -82,7 +76,6 @@ class ViscoElastic(Variant):
     """
 
     name = "visco_elastic"
-    code = 3
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")
     equation = "eq 40"
 
@@ -96,8 +89,6 @@ class Embedded(Variant):
     """
 
     name = "embedded"
-    code = 4
-    layout: ClassVar[StateLayout] = EMBEDDED
     required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d")
     equation = "eq 22"
 

@@ -23,6 +23,7 @@ import math
 
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, rotation_and_rate_of, scale, vector
+from ..layout import VARIANT_CODES
 from ..model import force_h, torque_n
 from .body import body_rates, constraint_error, constraint_rate
 
@@ -120,7 +121,7 @@ def solve_on(on, a, b, p):
 
 #: The first mode code: the compiled right-hand side (``kernels.state_rate``) takes the
 #: mode sigma as ``code = MODE_CODES + sum_i (sigma_i + 1) 3^i`` (27 codes after the variants').
-MODE_CODES = 5
+MODE_CODES = len(VARIANT_CODES)
 
 
 @jit(forceinline=True)
