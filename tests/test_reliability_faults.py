@@ -349,12 +349,12 @@ def test_ctrl_c_exits_130_with_a_word(tmp_path, monkeypatch):
 
 def test_an_interrupted_sweep_says_once_that_it_can_resume(tmp_path, monkeypatch):
     """The CLI's one interrupt handler gives a sweep its own words (the index is up to date)."""
-    import rbstab.api
+    import rbstab_cli.sweep
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(rbstab.api, "execute_sweep", interrupted)
+    monkeypatch.setattr(rbstab_cli.sweep, "execute_sweep", interrupted)  # the command's rbstab.api.execute_sweep
     spec = ROOT / "configs" / "sweeps" / "gains.yaml"
     result = CliRunner().invoke(cli, ["sweep", str(spec), "-o", str(tmp_path), "--no-progress"])
     assert result.exit_code == 130 and "Aborted" not in result.output
