@@ -13,7 +13,6 @@ from pathlib import Path
 import click
 
 from rbstab.api import load_config
-from rbstab.io.atomic import describe_os_error, remove_stale_temporaries
 
 from .console import get_console
 
@@ -98,6 +97,8 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
     ``click.ClickException`` with one line (a file in the way, a read-only or foreign
     folder, a name too long).
     """
+    from rbstab.io.atomic import describe_os_error, remove_stale_temporaries  # heavy at start-up: hashlib, socket
+
     try:
         folder.mkdir(parents=True, exist_ok=True)
         if not folder.is_dir():

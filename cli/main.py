@@ -14,7 +14,6 @@ import signal
 import click
 
 from rbstab import __version__
-from rbstab.io.atomic import describe_os_error
 
 from .analyze import analyze
 from .report import report
@@ -47,6 +46,8 @@ class _Group(click.Group):
     """The command group, turning faults into one line and interrupts into 130 / 143."""
 
     def invoke(self, ctx: click.Context):
+        from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
+
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt as exc:

@@ -8,7 +8,6 @@ import click
 
 from rbstab.api import ResultExistsError, check_overwrite
 from rbstab.api import run as run_one
-from rbstab.io.atomic import describe_os_error
 from rbstab.resources import memory_problem
 from rbstab.warning_codes import coded
 
@@ -97,6 +96,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     with one line; files written before are complete, and no temporary file is left.
     """
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+    from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
     from rbstab.simulator import is_sign_law  # heavy: numba, numpy
 
     if method is not None:
