@@ -18,8 +18,10 @@ from rbstab import __version__
 from .analyze import analyze
 from .report import report
 from .run import run
+from .sensitivity import sensitivity
 from .show import show
 from .sweep import sweep
+from .tune import tune
 from .validate import validate
 
 
@@ -70,7 +72,7 @@ def cli() -> None:
     rbstab analyze configs/paper/case3_embedded.yaml  # -> results/analysis/case3_embedded.analysis.nc
 
     Every command takes -q/-v (less/more output) and --no-warn CODE (warning codes:
-    README, section Warnings); run, show, validate and analyze take --json. Also
+    README, section Warnings); run, show, validate, analyze, sensitivity and tune take --json. Also
     "python -m rbstab". Shell completion (bash): eval "$(_RBSTAB_COMPLETE=bash_source rbstab)".
     """
 
@@ -81,6 +83,8 @@ cli.add_command(show)
 cli.add_command(report)
 cli.add_command(sweep)
 cli.add_command(analyze)
+cli.add_command(sensitivity)
+cli.add_command(tune)
 
 
 def main() -> None:

@@ -84,3 +84,25 @@ def console_options(command):
     for option in reversed(options):
         wrapper = option(wrapper)
     return wrapper
+
+
+def study_options(command):
+    """Options of the commands that run studies (``sensitivity``, ``tune``): ``--vary``,
+    ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o`` and ``--json``."""
+    from rbstab.sweep.worker import ENGINES  # as rbstab sweep takes them
+
+    options = [
+        click.option("--vary", "vary", multiple=True, required=True, metavar="KEY=DISTRIBUTION",
+                     help="A varied config key with a sweep distribution, e.g. body.mass=uniform:[30,50], "
+                     "controller.k_c=scale_uniform:[0.5,2] (one factor scaling the whole gain). Repeatable."),
+        click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sampler."),
+        click.option("--name", default=None, help="The study's name and folder OUTPUT/NAME  [default: the config's name]."),
+        set_option,
+        click.option("--engine", type=click.Choice(list(ENGINES)), default=None,
+                     help="How runs are integrated (docs/performance.md)  [default: compiled]."),
+        output_option("results/studies", "Parent folder; the study writes OUTPUT/<name>/."),
+        json_option,
+    ]
+    for option in reversed(options):
+        command = option(command)
+    return command

@@ -39,7 +39,7 @@ LAYERS = [
     ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence"]),
     ("simulate", ["rbstab.simulator"]),
     ("io", ["rbstab.io"]),
-    ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds"]),
+    ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds", "rbstab.studies"]),
     ("report", ["rbstab.report"]),
     ("api", ["rbstab.api"]),
     ("cli", ["rbstab_cli", "rbstab.__main__"]),

@@ -14,6 +14,8 @@ stays light)::
     sw = rbstab.sweep_dataset("configs/sweeps/gains.yaml", grid=True)   # or rbstab.open_sweep(folder)
     rbstab.write_report([path])                   # results/reports/case3_embedded/
     a = rbstab.analyze(config)                    # stability analysis (rbstab.analysis)
+    s = rbstab.sensitivity_analysis(config, ["body.mass=uniform:[30,50]"], n=256)  # rbstab.studies
+    t = rbstab.tune(config, ["controller.k_c=scale_uniform:[0.25,4]"], minimize=["lyapunov_final"], trials=100)
 
 The subpackages hold the parts: :mod:`rbstab.simulator` (one run, :class:`RunResult`),
 :mod:`rbstab.sweep`, :mod:`rbstab.report`, :mod:`rbstab.analysis`, ...
@@ -29,6 +31,7 @@ _SOURCES = {
                      "sweep_dataset", "write_report", "ResultExistsError"], "api"),
     "open_sweep": "sweep.folder",
     "analyze": "analysis",
+    **dict.fromkeys(["sensitivity_analysis", "tune"], "studies"),
     **dict.fromkeys(["ConfigError", "RunConfig", "PhysicalPlausibilityWarning"], "config"),
     "WARNING_CODES": "warning_codes",
 }

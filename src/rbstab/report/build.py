@@ -41,6 +41,7 @@ from .figures import DPI, FIGURE_FORMATS, FigureWriter, comparison_figures, run_
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
 from .render import Section, Table, render_html, render_markdown, render_tables_markdown
+from .studies import split_studies, study_sections
 from .sweep_figures import sweep_figures
 from .tables import (
     DEFAULT_METRICS,
@@ -156,7 +157,7 @@ def _enumerate(items: Sequence[str], limit: int = 4) -> str:
     return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
 
 
-def report_title(inputs: ReportInputs, analyses: Sequence[Path] = ()) -> str:
+def report_title(inputs: ReportInputs, analyses: Sequence[Path] = (), studies: Sequence[Path] = ()) -> str:
     """The default title of a report: what it compares, e.g. ``rbstab report:
     case1_permanent, case2_visco_elastic and case3_embedded``, ``rbstab report: sweep
     gains_case3``, ``rbstab report: stability analyses of case1_permanent and ...``."""
@@ -170,6 +171,8 @@ def report_title(inputs: ReportInputs, analyses: Sequence[Path] = ()) -> str:
     if analyses:
         names = [p.name.removesuffix(SUFFIX) for p in analyses]
         parts.append(f"stability analys{'e' if len(names) > 1 else 'i'}s of {_enumerate(names)}")
+    if studies:
+        parts.append(("studies " if len(studies) > 1 else "study ") + _enumerate([_input_name(p, []) for p in studies]))
     return "rbstab report: " + ("; ".join(parts) or "no inputs")
 
 
@@ -401,9 +404,10 @@ def build_report(
     _check_options(options)
 
     given = list(inputs)
-    analyses, inputs = split_inputs(given)  # analysis files (rbstab analyze) and the rest
-    data = load_inputs(inputs) if inputs or not analyses else ReportInputs([], [], [])
-    data.paths.extend(p.resolve() for p in analyses)
+    studies, inputs = split_studies(given)  # study files and folders (rbstab sensitivity, tune)
+    analyses, inputs = split_inputs(inputs)  # analysis files (rbstab analyze) and the rest
+    data = load_inputs(inputs) if inputs or not (analyses or studies) else ReportInputs([], [], [])
+    data.paths.extend(p.resolve() for p in [*analyses, *studies])
     target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data, given)
     _check_output(target)
 
@@ -413,7 +417,7 @@ def build_report(
         umask = os.umask(0)
         os.umask(umask)
         tmp.chmod(0o777 & ~umask)  # mkdtemp makes it private; a report is an ordinary folder
-        _write(data, tmp, options, metrics, analyses)
+        _write(data, tmp, options, metrics, analyses, studies)
         old = None
         if target.exists():
             old = target.parent / f".{target.name}.old-{os.getpid()}"
@@ -428,7 +432,7 @@ def build_report(
 
 
 def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Sequence[str],
-           analyses: Sequence[Path] = ()) -> None:
+           analyses: Sequence[Path] = (), studies: Sequence[Path] = ()) -> None:
     """Every file of the report into ``folder`` (module docstring)."""
     (folder / "figures").mkdir()
     out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
@@ -437,8 +441,9 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     for sweep in data.sweeps:
         sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
     sections += analysis_sections(analyses, out)
+    sections += study_sections(studies, out)
     _write_summary_csv(data, params, folder, options.settle)
-    title = options.title or report_title(data, analyses)
+    title = options.title or report_title(data, analyses, studies)
     created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     _write_pages(folder, title, _intro(data, created, options.settle), _flatten(sections), options.formats)
     _write_manifest(folder, data, analyses, options, metrics, title, created)

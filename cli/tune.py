@@ -1,0 +1,76 @@
+"""``rbstab tune``: search gains that meet a specification best, by Optuna (rbstab.studies)."""
+
+from __future__ import annotations
+
+import click
+
+from ._common import command_line, load_configs
+from .console import get_console
+from .options import console_options, study_options
+from .sensitivity import study_error
+
+
+@click.command("tune")
+@click.argument("config", type=click.Path(dir_okay=False))
+@click.option("--trials", type=int, required=True, metavar="N",
+              help="Complete trials the study should have (a resumed study runs the missing ones).")
+@click.option("--minimize", "minimize", multiple=True, metavar="METRIC",
+              help="A summary figure to minimize (docs/studies.md). Give one objective, or two for a Pareto front.")
+@click.option("--maximize", "maximize", multiple=True, metavar="METRIC", help="A summary figure to maximize.")
+@click.option("--subject-to", "subject_to", multiple=True, metavar="METRIC<=VALUE",
+              help="A constraint, METRIC<=VALUE or METRIC>=VALUE, e.g. 'max_abs_constraint_error_z<=0.05'. Repeatable.")
+@click.option("--over", "over", multiple=True, metavar="KEY=DISTRIBUTION",
+              help="Uncertain bodies: each trial runs --over-n bodies drawn from these distributions "
+              "(e.g. body.mass=scale_uniform:[0.8,1.2]) and takes their worst case. Repeatable.")
+@click.option("--over-n", "over_n", type=int, default=16, show_default=True, metavar="N",
+              help="Bodies per trial with --over (drawn once, the same for every trial).")
+@click.option("--over-seed", "over_seed", type=int, default=0, show_default=True, help="Seed of the --over draw.")
+@click.option("--quantile", type=float, default=1.0, show_default=True, metavar="Q",
+              help="With --over: the Q-quantile of the bodies' badness instead of the worst case (1).")
+@click.option("--sampler", default="tpe", show_default=True, metavar="tpe|cmaes",
+              help="Optuna's sampler: TPE (constraints, two objectives) or CMA-ES (one objective).")
+@click.option("--storage", default=None, metavar="URL",
+              help="Optuna storage URL, e.g. sqlite:///studies.db or postgresql://...  "
+              "[default: sqlite:///OUTPUT/<name>/study.db].")
+@study_options
+@console_options
+def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, storage,
+         vary, seed, name, overrides, engine, output, as_json) -> None:
+    """Search the --vary keys of CONFIG for the best value of --minimize/--maximize.
+
+    \b
+    rbstab tune configs/paper/case3_embedded.yaml --trials 100 \\
+        --vary controller.k_c=scale_uniform:[0.25,4] --vary controller.l_c=scale_uniform:[0.25,4] \\
+        --minimize lyapunov_final --subject-to 'max_abs_constraint_error_z<=0.1'
+
+    Each trial is one run (with --over, a batch over uncertain bodies). The study is kept in
+    an Optuna storage: the same command again resumes it, and several processes can work on
+    one study. Writes OUTPUT/<name>/best.yaml (`rbstab run` takes it as it is), trials.csv
+    and tuning.nc (`rbstab report OUTPUT/<name>` draws it). Options are checked before
+    anything runs. With --json: the best value, the best parameters and the trial count.
+    Manual: docs/studies.md.
+    """
+    from rbstab.studies import StudyInputError  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
+    from rbstab.studies import tune as run_tuning  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
+
+    (base,) = load_configs([config], overrides)
+    console = get_console()
+    try:
+        result = run_tuning(base, vary, trials=trials, minimize=minimize, maximize=maximize, subject_to=subject_to,
+                            over=over, over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler,
+                            seed=seed, storage=storage, output=output, name=name, engine=engine, log=console.info,
+                            command_line=command_line())
+    except StudyInputError as exc:
+        raise study_error(exc)
+    record = result.record()
+    objectives = ", ".join([*(f"min {m}" for m in minimize), *(f"max {m}" for m in maximize)])
+    console.out(f"{result.name}: {result.n_trials} complete trials ({result.n_failed} failed); {objectives}")
+    if result.best_trial is None:
+        console.out("  no feasible trial")
+    else:
+        console.out(f"  best trial {result.best_trial}: {record['best_value']}")
+        for key, value in result.best_params.items():
+            console.out(f"    {key} = {value:.6g}" if isinstance(value, float) else f"    {key} = {value}")
+    console.out(f"  -> {result.folder}")
+    if as_json:
+        console.emit(record)

@@ -1,0 +1,226 @@
+"""Report pages of studies (``rbstab sensitivity``, ``rbstab tune``).
+
+Sensitivity: the method and its runs, a table of the indices and one bar chart per metric
+(first-order and total Sobol' indices, or Morris mu* beside sigma, with the bootstrap
+confidence intervals as error bars). Tuning: the objectives and constraints, the objective
+against the trial (feasible, infeasible and failed trials; the best so far), the Pareto
+front for two objectives, and the best trials with their parameters.
+
+The files are read with :mod:`rbstab.studies` (the modules that write them).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .figures import DPI, FigureFile, FigureWriter, units_text
+from .load import ReportInputError, safe_filename
+from .render import Section, Table
+from .tables import format_value
+
+__all__ = ["split_studies", "study_sections"]
+
+#: Best trials listed in a tuning section.
+BEST_ROWS = 10
+
+
+def split_studies(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
+    """(study files or folders, the other inputs) of a report."""
+    from ..studies.files import study_kind  # heavy: h5py, xarray
+
+    studies, others = [], []
+    for raw in paths:
+        (studies if study_kind(raw) else others).append(Path(raw) if study_kind(raw) else raw)
+    return studies, others
+
+
+def study_sections(paths: Sequence[Path], out: FigureWriter) -> list[Section]:
+    """The sections of every study, figures written by ``out``.
+
+    Raises
+    ------
+    ReportInputError
+        If a study's file cannot be read.
+    """
+    from ..studies import read_sensitivity, read_tuning  # heavy: h5py, pandas, xarray
+    from ..studies.files import study_kind  # heavy: h5py, xarray
+
+    sections, problems = [], []
+    for path in paths:
+        kind = study_kind(path)
+        try:
+            ds = read_sensitivity(path) if kind == "sensitivity" else read_tuning(path)
+        except (OSError, ValueError) as exc:
+            problems.append(f"{path}: {exc}")
+            continue
+        sections.append(_sensitivity_section(ds, out) if kind == "sensitivity" else _tuning_section(ds, out))
+    if problems:
+        raise ReportInputError(problems)
+    return sections
+
+
+def _f(value, digits: int = 3) -> str:
+    return format_value(value, digits)
+
+
+def _name(ds) -> str:
+    return Path(ds.attrs["path"]).parent.name
+
+
+# -- sensitivity ----------------------------------------------------------------------------------
+
+
+def _sensitivity_section(ds, out: FigureWriter) -> Section:
+    name, method = _name(ds), ds.attrs["method"]
+    s = Section(f"Sensitivity study {name} ({method})", f"sensitivity-{safe_filename(name)}")
+    vary = json.loads(ds.attrs["vary"])
+    s.blocks.append([
+        f"{ds.attrs['n_runs']} runs ({ds.attrs['n_failed']} failed), N = {ds.attrs['n']}, seed {ds.attrs['seed']}; "
+        f"confidence intervals: {ds.attrs['num_resamples']} bootstrap resamples at level {ds.attrs['conf_level']:g}",
+        "varied: " + "; ".join(f"{k} {json.dumps(v)}" for k, v in vary.items()),
+        f"file: {ds.attrs['path']}",
+    ])
+    s.blocks.append(_sensitivity_figure(ds, out, name))
+    s.blocks.append(_sensitivity_table(ds))
+    return s
+
+
+def _sensitivity_table(ds) -> Table:
+    keys = ["S1", "ST"] if ds.attrs["method"] == "sobol" else ["mu_star", "sigma"]
+    rows = []
+    for m, metric in enumerate(ds["metric"].values.tolist()):
+        for i, factor in enumerate(ds["factor"].values.tolist()):
+            cells = [metric, factor]
+            for k in keys:
+                half = ds[f"{k}_conf"].values[m, i] if f"{k}_conf" in ds else None
+                cells.append(_f(ds[k].values[m, i]) + (f" ± {_f(half, 2)}" if half is not None else ""))
+            rows.append(cells)
+    return Table("Indices", ["metric", "factor", *keys], rows)
+
+
+def _sensitivity_figure(ds, out: FigureWriter, name: str) -> FigureFile:
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
+
+    sobol = ds.attrs["method"] == "sobol"
+    metrics = ds["metric"].values.tolist()
+    factors = ds["factor"].values.tolist()
+    columns = min(3, len(metrics))
+    rows = -(-len(metrics) // columns)
+    fig = Figure(figsize=(4.2 * columns, 0.6 + (1.0 + 0.35 * len(factors)) * rows), dpi=DPI, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(rows, columns, squeeze=False).ravel())
+    y = np.arange(len(factors))
+    bars = [("S1", "first order", -0.2), ("ST", "total", 0.2)] if sobol else [("mu_star", "mu*", -0.2),
+                                                                              ("sigma", "sigma", 0.2)]
+    for ax, (m, metric) in zip(axes, enumerate(metrics)):
+        for k, label, shift in bars:
+            err = ds[f"{k}_conf"].values[m] if f"{k}_conf" in ds else None
+            ax.barh(y + shift, ds[k].values[m], height=0.38, xerr=err, capsize=2, label=label)
+        ax.set_yticks(y, factors, fontsize=7)
+        ax.invert_yaxis()
+        units = units_text(str(ds["units"].values[m]))
+        ax.set_title(metric + (f" [{units}]" if units and not sobol else ""), fontsize=9)
+        ax.grid(axis="x", alpha=0.3)
+        if sobol:
+            ax.set_xlim(min(0.0, ax.get_xlim()[0]), max(1.0, ax.get_xlim()[1]))
+    for ax in axes[len(metrics):]:
+        ax.set_visible(False)
+    axes[0].legend(fontsize=7)
+    what = ("first-order (S1) and total (ST) Sobol' indices" if sobol else
+            "Morris mu* (mean absolute elementary effect, per unit of the factor's range) and sigma")
+    return out.save(fig, f"sensitivity_{safe_filename(name)}", f"{name}: {what}",
+                    f"One panel per metric: {what} of each factor, with the bootstrap confidence intervals "
+                    "as error bars.")
+
+
+# -- tuning ----------------------------------------------------------------------------------------
+
+
+def _tuning_section(ds, out: FigureWriter) -> Section:
+    name = _name(ds)
+    objectives = json.loads(ds.attrs["objectives"])
+    constraints = json.loads(ds.attrs["constraints"])
+    best = json.loads(ds.attrs["best"])
+    states = ds["state"].values.astype(str)
+    s = Section(f"Tuning study {name}", f"tuning-{safe_filename(name)}")
+    s.blocks.append([
+        "objectives: " + ", ".join(f"{d} {m}" for m, d in objectives)
+        + ("; subject to " + ", ".join(constraints) if constraints else ""),
+        f"{int((states == 'complete').sum())} complete trials, {int((states == 'fail').sum())} failed, "
+        f"{int(ds['feasible'].values.astype(bool).sum())} feasible"
+        + (f"; each trial a batch of {ds.attrs['bodies']} bodies (quantile {ds.attrs['quantile']:g})"
+           if ds.attrs["bodies"] else ""),
+        f"file: {ds.attrs['path']}",
+    ])
+    s.blocks.append(_objective_figure(ds, out, name, objectives))
+    if len(objectives) == 2:
+        s.blocks.append(_pareto_figure(ds, out, name, objectives, best))
+    s.blocks.append(_best_table(ds, objectives, best))
+    return s
+
+
+def _objective_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
+
+    trial = ds["trial"].values
+    feasible = ds["feasible"].values.astype(bool)
+    complete = ds["state"].values.astype(str) == "complete"
+    fig = Figure(figsize=(7.5, 3.2 * len(objectives)), dpi=DPI, layout="constrained")
+    axes = np.atleast_1d(fig.subplots(len(objectives), 1, squeeze=False).ravel())
+    for ax, (metric, direction) in zip(axes, objectives):
+        value = ds[metric].values.astype(float)
+        ax.plot(trial[feasible], value[feasible], "o", ms=3, color="C0", label="feasible")
+        ax.plot(trial[complete & ~feasible], value[complete & ~feasible], "x", ms=4, color="C3", label="infeasible")
+        best = np.where(feasible, value if direction == "minimize" else -value, np.inf)
+        running = np.minimum.accumulate(best) * (1 if direction == "minimize" else -1)
+        ax.step(trial, np.where(np.isfinite(running), running, np.nan), where="post", color="k", lw=1,
+                label="best so far")
+        if np.all(value[complete] > 0) and np.ptp(value[complete]) > 0 and value[complete].max() > 30 * value[complete].min():
+            ax.set_yscale("log")
+        units = units_text(str(ds[metric].attrs.get("units", "")))
+        ax.set_ylabel(metric + (f" [{units}]" if units else ""), fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("trial")
+    axes[0].legend(fontsize=7)
+    return out.save(fig, f"tuning_{safe_filename(name)}_objective", f"{name}: objective against trial",
+                    "Each trial's objective (the batch's worst case or quantile with --over); black: the best "
+                    "feasible value so far. Failed trials are not drawn.")
+
+
+def _pareto_figure(ds, out: FigureWriter, name: str, objectives, best: Sequence[int]) -> FigureFile:
+    from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
+
+    (a, _), (b, _) = objectives
+    feasible = ds["feasible"].values.astype(bool)
+    fig = Figure(figsize=(6.0, 4.5), dpi=DPI, layout="constrained")
+    ax = fig.subplots()
+    ax.plot(ds[a].values[feasible], ds[b].values[feasible], "o", ms=3, color="0.6", label="feasible trials")
+    front = ds.sel(trial=list(best))
+    ax.plot(front[a].values, front[b].values, "o-", ms=5, color="C0", label="Pareto front")
+    ax.set_xlabel(a)
+    ax.set_ylabel(b)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return out.save(fig, f"tuning_{safe_filename(name)}_pareto", f"{name}: Pareto front",
+                    "The feasible trials over the two objectives; blue: the trials no other trial beats in both.")
+
+
+def _best_table(ds, objectives, best: Sequence[int]) -> Table:
+    parameters = json.loads(ds.attrs["parameters"])
+    metrics = [m for m, _ in objectives]
+    if len(objectives) == 1:
+        metric, direction = objectives[0]
+        ok = ds.isel(trial=np.flatnonzero(ds["feasible"].values.astype(bool)))
+        order = np.argsort(ok[metric].values if direction == "minimize" else -ok[metric].values)[:BEST_ROWS]
+        shown = ok.isel(trial=order)
+    else:
+        shown = ds.sel(trial=list(best)[:BEST_ROWS])
+    rows = [[str(int(t)), *(_f(shown[m].values[i], 5) for m in metrics), *(_f(shown[p].values[i], 5) for p in parameters)]
+            for i, t in enumerate(shown["trial"].values)]
+    title = "Best trials" if len(objectives) == 1 else "Trials of the Pareto front"
+    return Table(title, ["trial", *metrics, *parameters], rows,
+                 note="best.yaml in the study folder holds the first row's values")

@@ -1,0 +1,654 @@
+"""Tuning: search gains (or any numeric config keys) that meet a specification best, by Optuna.
+
+Each trial sets the ``--vary`` keys to values the sampler suggests (TPE by default, CMA-ES
+available) and integrates one run in this process (:func:`rbstab.simulator.simulate_many`:
+no files, ~10 ms for a Case 3 run of 2 s), or, with ``over``, a batch of runs over
+uncertain bodies (one draw of the ``over`` distributions, the same for every trial) whose
+worst case (or a chosen quantile) is the trial's value. Objectives and constraints are
+summary figures of the runs (:func:`rbstab.studies.design.check_metrics`); constraints go
+to the sampler as Optuna constraints (a trial is feasible when every ``metric <= limit``,
+``metric >= limit`` holds).
+
+The study lives in an Optuna storage (default: the SQLite file ``<output>/<name>/study.db``),
+so running the same study again resumes it (``trials`` is the number of complete trials
+the study should reach) and several processes can work on one study at once. Written
+into ``<output>/<name>/``: ``best.yaml`` (the base configuration with the best values:
+``rbstab run best.yaml`` runs it), ``trials.csv`` and ``tuning.nc`` (every trial: number,
+state, objective and constraint values, the absolute values set; :func:`read_tuning`).
+
+References
+----------
+T. Akiba et al., "Optuna: A next-generation hyperparameter optimization framework",
+KDD 2019. J. Bergstra et al., "Algorithms for hyper-parameter optimization" (TPE),
+NeurIPS 2011. N. Hansen, "The CMA evolution strategy: a tutorial", arXiv:1604.00772.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import fcntl
+import json
+import math
+import os
+import re
+import sqlite3
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import xarray as xr
+
+from ..config import ConfigError, config_from_mapping, dump_yaml
+from ..config.paths import set_dotted
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..engine import ensure_compiled
+from ..io.atomic import write_text_atomic
+from ..io.chunk import figure_attributes
+from ..io.metadata import provenance_attributes
+from ..simulator import simulate_many
+from .design import (
+    StudyInputError,
+    Varied,
+    check_metrics,
+    design_mappings,
+    figure_columns,
+    nominal_figures,
+    parse_vary,
+    study_folder,
+    vary_mapping,
+)
+from .files import KINDS, read_study_file, write_study_file
+
+__all__ = ["SAMPLERS", "Objective", "Constraint", "parse_constraint", "TuningProblem", "TuningResult",
+           "plan_tuning", "tune", "read_tuning", "FILE", "BEST_FILE", "TRIALS_FILE", "STORAGE_FILE"]
+
+#: Samplers: Optuna's TPE (default; constraints, several objectives) and CMA-ES (one
+#: objective, no constraints).
+SAMPLERS = ("tpe", "cmaes")
+
+#: Files of a tuning study inside ``<output>/<name>/``.
+FILE = KINDS["tuning"]
+BEST_FILE = "best.yaml"
+TRIALS_FILE = "trials.csv"
+STORAGE_FILE = "study.db"
+
+#: Distributions a search range may have (a range needs bounds).
+RANGES = ("uniform", "log_uniform", "scale_uniform", "choice")
+
+_CONSTRAINT = re.compile(r"^\s*(?P<metric>[A-Za-z_][A-Za-z0-9_]*)\s*(?P<op><=|>=)\s*(?P<limit>\S+)\s*$")
+
+
+@dataclass(frozen=True)
+class Objective:
+    """A metric to minimize or maximize (``direction``)."""
+
+    metric: str
+    direction: str = "minimize"
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """``metric <= limit`` or ``metric >= limit`` (``op``)."""
+
+    metric: str
+    op: str
+    limit: float
+
+    def excess(self, value: float) -> float:
+        """How far ``value`` violates the constraint (<= 0: met), as Optuna takes it."""
+        if not math.isfinite(value):
+            return math.inf
+        return value - self.limit if self.op == "<=" else self.limit - value
+
+    def __str__(self) -> str:
+        return f"{self.metric}{self.op}{self.limit:g}"
+
+
+def parse_constraint(text: str, *, option: str = "--subject-to") -> Constraint:
+    """``"METRIC<=VALUE"`` or ``"METRIC>=VALUE"`` as a :class:`Constraint`.
+
+    Raises
+    ------
+    StudyInputError
+        For another form, a limit that is not a finite number or an unknown metric.
+    """
+    m = _CONSTRAINT.match(str(text))
+    limit = _float(m["limit"]) if m else None
+    if m is None or limit is None:
+        raise StudyInputError([f"{option} {text!r}: expected METRIC<=VALUE or METRIC>=VALUE with a finite number, "
+                               "e.g. 'max_abs_constraint_error_z<=0.05'"])
+    check_metrics([m["metric"]], option=option)
+    return Constraint(m["metric"], m["op"], limit)
+
+
+def _float(text: str) -> float | None:
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+@dataclass(frozen=True)
+class TuningProblem:
+    """What a trial runs and how its value is made (validated by :func:`plan_tuning`).
+
+    Attributes
+    ----------
+    base : RunConfig
+    varied : list of Varied
+        The searched keys (their factors are Optuna's parameters).
+    objectives : tuple of Objective
+    constraints : tuple of Constraint
+    bodies : list of dict
+        Dotted key -> value of each uncertain body of the batch (empty: one run, the base).
+    quantile : float
+        Of the batch's values, the one taken: 1 the worst case (largest for a minimized
+        metric or a ``<=`` constraint, smallest otherwise), q < 1 the q-quantile of badness.
+    engine : str
+    """
+
+    base: Any
+    varied: list[Varied]
+    objectives: tuple[Objective, ...]
+    constraints: tuple[Constraint, ...]
+    bodies: list[dict] = field(default_factory=list)
+    quantile: float = 1.0
+    engine: str = "compiled"
+
+    def suggest(self, trial) -> dict[str, Any]:
+        """The trial's absolute values, design column -> value (Optuna's ``suggest_*``)."""
+        values: dict[str, Any] = {}
+        for v in self.varied:
+            if v.kind == "choice":
+                values[v.columns[0]] = trial.suggest_categorical(v.factors[0], list(v.args[0]))
+                continue
+            f = [trial.suggest_float(name, lo, hi, log=v.kind == "log_uniform")
+                 for name, (lo, hi) in zip(v.factors, v.bounds())]
+            values.update(zip(v.columns, v.from_factors(np.array([f]))[0].tolist()))
+        return values
+
+    def configs(self, values: Mapping[str, Any]) -> list:
+        """The run configs of a trial: the base (or each body of the batch) with ``values``.
+
+        Raises
+        ------
+        rbstab.config.ConfigError
+            If the values give an invalid configuration.
+        """
+
+        settings = {k: v[0] for k, v in design_mappings(pd.DataFrame({k: [x] for k, x in values.items()})).items()}
+        out = []
+        for body in self.bodies or [{}]:
+            data = copy.deepcopy(self.base.resolved)
+            for key, value in {**body, **settings}.items():
+                set_dotted(data, key, value)
+            out.append(config_from_mapping(data, source="<trial>"))
+        return out
+
+    def evaluate(self, values: Mapping[str, Any]) -> tuple[dict[str, float], int]:
+        """(the trial's figures: each metric of the objectives and constraints over the batch,
+        the number of failed runs)."""
+        figures, failed = [], 0
+        for _, result in simulate_many(self.configs(values), engine=self.engine, full=False):
+            figures.append(figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO))
+            failed += result.status != "success"
+        out = {}
+        for metric, worst_is_max in self._badness().items():
+            column = np.array([f.get(metric, np.nan) for f in figures], dtype=float)
+            q = self.quantile if worst_is_max else 1.0 - self.quantile
+            out[metric] = float(np.quantile(column, q)) if np.all(np.isfinite(column)) else math.nan
+        return out, failed
+
+    def _badness(self) -> dict[str, bool]:
+        """metric -> whether larger is worse."""
+        out = {o.metric: o.direction == "minimize" for o in self.objectives}
+        for c in self.constraints:
+            out.setdefault(c.metric, c.op == "<=")
+        return out
+
+    def settings(self) -> dict:
+        """What makes the study this study (stored with it; a resume must match)."""
+        return {"vary": vary_mapping(self.varied), "objectives": [[o.metric, o.direction] for o in self.objectives],
+                "constraints": [str(c) for c in self.constraints], "bodies": len(self.bodies),
+                "quantile": self.quantile}
+
+
+def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Sequence[str] = (),
+                maximize: Sequence[str] = (), subject_to: Sequence[str] = (),
+                over: Sequence[str] | Mapping[str, Any] = (), over_n: int = 16, over_seed: int = 0,
+                quantile: float = 1.0, sampler: str = "tpe", engine: str | None = None) -> TuningProblem:
+    """Validate a tuning study's options (nothing runs but the checks of the configurations
+    at the corners of the search box).
+
+    Parameters
+    ----------
+    config : RunConfig
+        The base configuration.
+    vary : sequence of str or Mapping
+        ``KEY=RANGE``: ``uniform:[lo,hi]``, ``log_uniform:[lo,hi]``, ``scale_uniform:[lo,hi]``
+        (a factor of the base value) or ``choice:[a,b]`` (:func:`parse_vary`).
+    minimize, maximize : sequence of str
+        Metrics (summary figures); one objective, or two for a Pareto front.
+    subject_to : sequence of str
+        ``METRIC<=VALUE`` / ``METRIC>=VALUE`` (:func:`parse_constraint`).
+    over : sequence of str or Mapping
+        ``KEY=DISTRIBUTION`` of the uncertain bodies (any sweep distribution); empty: one run
+        per trial.
+    over_n, over_seed : int
+        Bodies drawn (from ``numpy.random.default_rng(over_seed)``), once for the study.
+    quantile : float
+        In (0, 1]; 1 = the worst case of the batch (see :class:`TuningProblem`).
+    sampler : {"tpe", "cmaes"}
+    engine : str, optional
+        :data:`rbstab.simulator.ENGINES` (default compiled).
+
+    Raises
+    ------
+    StudyInputError
+        Listing every invalid option, naming it, the value found and what is allowed.
+    """
+    errors: list[str] = []
+    objectives = [Objective(m, "minimize") for m in minimize] + [Objective(m, "maximize") for m in maximize]
+    constraints: list[Constraint] = []
+    varied: list[Varied] = []
+    over_varied: list[Varied] = []
+    checks = [
+        lambda: varied.extend(parse_vary(vary, config.resolved, allowed=RANGES)),
+        lambda: check_metrics(list(minimize), option="--minimize"),
+        lambda: check_metrics(list(maximize), option="--maximize"),
+        *[(lambda t=t: constraints.append(parse_constraint(t))) for t in subject_to],
+        *([lambda: over_varied.extend(parse_vary(over, config.resolved, option="--over"))] if over else []),
+    ]
+    for check in checks:
+        try:
+            check()
+        except StudyInputError as exc:
+            errors += exc.errors
+    if not 1 <= len(objectives) <= 2:
+        errors.append(f"--minimize/--maximize: found {len(objectives)} objectives; expected one, or two (a Pareto front)")
+    if sampler not in SAMPLERS:
+        errors.append(f"--sampler {sampler!r}: expected one of {', '.join(SAMPLERS)}")
+    elif sampler == "cmaes" and (len(objectives) > 1 or subject_to or any(v.kind == "choice" for v in varied)):
+        errors.append("--sampler cmaes: takes one objective, no --subject-to and no choice ranges; use --sampler tpe")
+    if not (isinstance(quantile, (int, float)) and 0 < quantile <= 1):
+        errors.append(f"--quantile {quantile!r}: expected a number in (0, 1] (1: the worst case)")
+    if over and not (isinstance(over_n, int) and over_n >= 1):
+        errors.append(f"--over-n {over_n!r}: expected an integer >= 1")
+    if errors:
+        raise StudyInputError(errors)
+    bodies = _bodies(over_varied, over_n, over_seed) if over_varied else []
+    problem = TuningProblem(config, varied, tuple(objectives), tuple(constraints), bodies, float(quantile),
+                            engine or "compiled")
+    _check_corners(problem)
+    return problem
+
+
+def _bodies(varied: Sequence[Varied], n: int, seed: int) -> list[dict]:
+    """``n`` draws of the ``--over`` distributions, key -> value each."""
+    rng = np.random.default_rng(seed)
+    columns: dict[str, Any] = {}
+    for v in varied:
+        values = v.from_unit(rng.random((n, len(v.factors))))
+        columns.update({c: values[:, j] for j, c in enumerate(v.columns)})
+    mappings = design_mappings(pd.DataFrame(columns))
+    return [{k: values[i] for k, values in mappings.items()} for i in range(n)]
+
+
+def _check_corners(problem: TuningProblem) -> None:
+    """Refuse a search box whose lower or upper corner gives an invalid configuration."""
+    errors = []
+    for corner in (0, 1):
+        values: dict[str, Any] = {}
+        for v in problem.varied:
+            if v.kind == "choice":
+                continue
+            f = np.array([[b[corner] for b in v.bounds()]])
+            values.update(zip(v.columns, v.from_factors(f)[0].tolist()))
+        try:
+            problem.configs(values)
+        except ConfigError as exc:
+            where = "lower" if corner == 0 else "upper"
+            errors += [f"--vary: the {where} ends of the ranges give an invalid configuration: {e}" for e in exc.errors]
+    if errors:
+        raise StudyInputError(errors)
+
+
+@dataclass
+class TuningResult:
+    """The outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    name : str
+    folder : Path
+        ``best.yaml``, ``trials.csv``, ``tuning.nc`` (and ``study.db`` by default).
+    storage : str
+        The Optuna storage URL.
+    n_trials : int
+        Complete trials of the study (by every process, this run and earlier ones).
+    n_failed : int
+        Trials that failed (a failed run, an invalid configuration, an interrupt).
+    best_values : list of float
+        The best feasible trial's objective values (empty if no trial is feasible).
+    best_params : dict
+        Its absolute values, design column -> value.
+    best_trial : int or None
+    pareto : list of int
+        Trial numbers of the Pareto front (two objectives; else the best trial).
+    trials : pandas.DataFrame
+        :func:`trials_table`.
+    """
+
+    name: str
+    folder: Path
+    storage: str
+    n_trials: int
+    n_failed: int
+    best_values: list[float]
+    best_params: dict
+    best_trial: int | None
+    pareto: list[int]
+    trials: Any
+
+    def record(self) -> dict:
+        """The ``--json`` object."""
+        return {"study": self.name, "best_value": self.best_values[0] if len(self.best_values) == 1 else
+                self.best_values or None, "best_params": self.best_params, "best_trial": self.best_trial,
+                "n_trials": self.n_trials, "n_failed": self.n_failed, "pareto": self.pareto,
+                "folder": str(self.folder), "storage": self.storage}
+
+
+def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimize: Sequence[str] = (),
+         maximize: Sequence[str] = (), subject_to: Sequence[str] = (), over: Sequence[str] | Mapping[str, Any] = (),
+         over_n: int = 16, over_seed: int = 0, quantile: float = 1.0, sampler: str = "tpe", seed: int = 0,
+         storage: str | None = None, output: str | os.PathLike = "results/studies", name: str | None = None,
+         engine: str | None = None, log=None, command_line: str | None = None) -> TuningResult:
+    """Run (or resume) a tuning study (``rbstab tune``) and write its files.
+
+    Parameters
+    ----------
+    config : RunConfig
+        The base configuration.
+    vary, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, engine
+        See :func:`plan_tuning`.
+    trials : int
+        Complete trials the study should have; a resumed study runs only the missing ones.
+    seed : int
+        Seed of the sampler (offset by the trials already in the study, so a resumed
+        study does not repeat the first suggestions).
+    storage : str, optional
+        Optuna storage URL (default ``sqlite:///<output>/<name>/study.db``), or
+        ``"memory"``: the study lives in this process only (no resume; each trial costs
+        ~10 ms of Optuna's time instead of ~150 ms with SQLite on a slow disk).
+    output, name
+        The study writes ``<output>/<name>/``; ``name`` (default: the config's name) is
+        also the study's name in the storage.
+
+    Returns
+    -------
+    TuningResult
+
+    Raises
+    ------
+    StudyInputError
+        For invalid options, or a stored study of this name made with other settings.
+    """
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
+
+    folder = study_folder(output, name, config)
+    problem = plan_tuning(config, vary, minimize=minimize, maximize=maximize, subject_to=subject_to, over=over,
+                          over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler, engine=engine)
+    if not (isinstance(trials, int) and trials >= 1):
+        raise StudyInputError([f"--trials {trials!r}: expected an integer >= 1"])
+    ensure_compiled(say=log, sign_law=True)
+    _check_scalar_metrics(problem, nominal_figures(config, engine))
+    name = folder.name
+    folder.mkdir(parents=True, exist_ok=True)
+    storage = storage or f"sqlite:///{(folder / STORAGE_FILE).resolve()}"
+    optuna.logging.set_verbosity(optuna.logging.ERROR)
+    study = _open_study(problem, name, storage)
+    done = sum(t.state == optuna.trial.TrialState.COMPLETE for t in study.get_trials(deepcopy=False))
+    study.sampler = _sampler(sampler, seed + len(study.get_trials(deepcopy=False)))
+    if done < trials:
+        (log or (lambda _: None))(f"{name}: {done} complete trials in {storage}; running {trials - done} more")
+        study.optimize(_objective(problem), n_trials=trials - done,
+                       callbacks=[optuna.study.MaxTrialsCallback(trials, states=(optuna.trial.TrialState.COMPLETE,))])
+    return _write_outputs(problem, study, folder, storage, command_line)
+
+
+def _check_scalar_metrics(problem: TuningProblem, available: Mapping[str, float]) -> None:
+    """Refuse an objective or constraint that is no single figure of these runs (a 3-vector
+    figure without its component, a figure the variant does not have)."""
+    errors = []
+    for option, metric in [*((f"--{o.direction}", o.metric) for o in problem.objectives),
+                           *(("--subject-to", c.metric) for c in problem.constraints)]:
+        if metric not in available:
+            parts = [f"{metric}_{a}" for a in "xyz" if f"{metric}_{a}" in available]
+            errors.append(f"{option} {metric!r}: " + (f"a 3-vector; give one component ({', '.join(parts)})" if parts
+                          else f"these runs have no such figure; they have {', '.join(available)}"))
+    if errors:
+        raise StudyInputError(errors)
+
+
+def _open_study(problem: TuningProblem, name: str, storage: str):
+    """The study ``name`` in ``storage``: made, or loaded when its settings match."""
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
+
+    directions = [o.direction for o in problem.objectives]
+    opened = _storage(storage)
+    try:
+        study = optuna.create_study(study_name=name, storage=opened, directions=directions, load_if_exists=True)
+    except ValueError as exc:  # e.g. other directions than the stored study's
+        raise StudyInputError([f"study {name!r} in {storage}: {exc}; give another --name or -o"]) from None
+    stored = study.user_attrs.get("settings")
+    settings = json.loads(json.dumps(problem.settings()))
+    if stored is None:
+        study.set_user_attr("settings", settings)
+    elif stored != settings or [d.name.lower() for d in study.directions] != directions:
+        raise StudyInputError([f"study {name!r} in {storage} was made with other settings ({json.dumps(stored)}); "
+                               "run it with those to resume, or give another --name or -o for a new study"])
+    return study
+
+
+def _storage(url: str):
+    """Optuna's storage at ``url``; an SQLite file in write-ahead-log mode, synchronised at
+    checkpoints (a commit costs no fsync: ~15 ms less per write on a slow disk; a crash of
+    the machine may lose the last trials, never corrupt the file). ``"memory"``: None (an
+    in-memory study).
+
+    Raises
+    ------
+    StudyInputError
+        If no storage can be opened at ``url`` (the message names it).
+    """
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
+    import sqlalchemy.exc  # heavy: sqlalchemy (optuna's storage)
+
+    if url == "memory":
+        return None
+    kwargs = {}
+    if url.startswith("sqlite:///"):
+        path = url[len("sqlite:///"):]
+
+        def connect():
+            connection = sqlite3.connect(path, timeout=60, check_same_thread=False)
+            connection.execute("PRAGMA journal_mode=WAL")
+            connection.execute("PRAGMA synchronous=NORMAL")
+            return connection
+
+        kwargs = {"engine_kwargs": {"creator": connect}}
+    try:
+        with _creation_lock(url):
+            return optuna.storages.RDBStorage(url, **kwargs)
+    except sqlalchemy.exc.SQLAlchemyError as exc:
+        raise StudyInputError([f"--storage {url!r}: cannot open it ({str(exc).splitlines()[0]})"]) from None
+    except (ValueError, ImportError) as exc:
+        raise StudyInputError([f"--storage {url!r}: {exc}; expected an Optuna storage URL, e.g. "
+                               "sqlite:///study.db or postgresql://user@host/db"]) from None
+
+
+@contextlib.contextmanager
+def _creation_lock(url: str):
+    """Hold ``<file>.lock`` beside an SQLite file while its storage is opened: two processes
+    that start one study at once would both make its tables (Optuna does not guard that)."""
+    if not url.startswith("sqlite:///"):
+        yield
+        return
+    path = Path(url[len("sqlite:///"):] + ".lock")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _sampler(kind: str, seed: int):
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
+
+    if kind == "cmaes":
+        return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
+    return optuna.samplers.TPESampler(seed=seed, multivariate=True)
+
+
+def _objective(problem: TuningProblem):
+    """Optuna's objective: a trial's values; NaN (a failed trial) when a run failed or
+    the values give an invalid configuration."""
+    def objective(trial):
+        values = problem.suggest(trial)
+        record: dict[str, Any] = {"values": values}
+        try:
+            record["figures"], failed = problem.evaluate(values)
+        except ConfigError as exc:
+            record["message"], failed = "; ".join(exc.errors), -1
+        else:
+            record["constraints"] = [c.excess(record["figures"][c.metric]) for c in problem.constraints]
+            if failed:
+                record["message"] = f"{failed} run(s) failed"
+        trial.set_user_attr("record", record)  # one write to the storage per trial
+        for constraint, excess in zip(problem.constraints, record.get("constraints", ())):
+            trial.set_constraint(str(constraint), excess)  # feasible when every excess <= 0
+        if failed:
+            return _nan(problem)
+        out = [record["figures"][o.metric] for o in problem.objectives]
+        return out[0] if len(out) == 1 else out
+
+    return objective
+
+
+def _nan(problem: TuningProblem):
+    return math.nan if len(problem.objectives) == 1 else [math.nan] * len(problem.objectives)
+
+
+# -- results ---------------------------------------------------------------------------------------
+
+
+def trials_table(problem: TuningProblem, study):
+    """Every trial as a row: ``trial``, ``state``, one column per objective metric and
+    constraint metric (the batch's value), ``feasible``, the absolute values (design
+    columns) and ``message``."""
+    rows = []
+    metrics = list(problem._badness())
+    columns = [c for v in problem.varied for c in v.columns]
+    for t in study.get_trials(deepcopy=False):
+        record = t.user_attrs.get("record", {})
+        figures, excess = record.get("figures", {}), record.get("constraints", [])
+        row = {"trial": t.number, "state": t.state.name.lower()}
+        row.update({m: figures.get(m, math.nan) for m in metrics})
+        row["feasible"] = bool(t.state.name == "COMPLETE" and all(e <= 0 for e in excess))
+        row.update({c: record.get("values", {}).get(c) for c in columns})
+        row["message"] = record.get("message", "")
+        rows.append(row)
+    return pd.DataFrame(rows, columns=["trial", "state", *metrics, "feasible", *columns, "message"])
+
+
+def best_trials(problem: TuningProblem, table) -> list[int]:
+    """Row positions of the best feasible trials: the best one (one objective) or the
+    Pareto front (two), sorted by the first objective."""
+    ok = table[table["feasible"]]
+    if ok.empty:
+        return []
+    signs = np.array([1.0 if o.direction == "minimize" else -1.0 for o in problem.objectives])
+    values = ok[[o.metric for o in problem.objectives]].to_numpy(dtype=float) * signs
+    if len(signs) == 1:
+        return [int(ok.index[int(np.argmin(values[:, 0]))])]
+    front = [i for i in range(len(values)) if not np.any(np.all(values <= values[i], axis=1)
+                                                         & np.any(values < values[i], axis=1))]
+    front.sort(key=lambda i: values[i, 0])
+    return [int(ok.index[i]) for i in front]
+
+
+def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, command_line: str | None) -> TuningResult:
+    table = trials_table(problem, study)
+    best = best_trials(problem, table)
+    write_text_atomic(folder / TRIALS_FILE, table.to_csv(index=False))
+    best_params: dict = {}
+    if not best:  # no feasible trial (yet): no best configuration, nor one of an earlier run
+        (folder / BEST_FILE).unlink(missing_ok=True)
+    else:
+        row = table.loc[best[0]]
+        best_params = {c: _plain(row[c]) for v in problem.varied for c in v.columns}
+        config = problem.configs(best_params)[0] if not problem.bodies else _nominal(problem, best_params)
+        data = dict(config.resolved)
+        data["name"] = f"{study.study_name}_best"
+        write_text_atomic(folder / BEST_FILE, f"# best trial {int(row['trial'])} of tuning study "
+                                              f"{study.study_name} ({storage})\n" + dump_yaml(data))
+    _write_dataset(problem, study, table, best, folder / FILE, command_line)
+    states = table["state"]
+    return TuningResult(study.study_name, folder, storage, int((states == "complete").sum()),
+                        int((states == "fail").sum()),
+                        [float(table.loc[best[0], o.metric]) for o in problem.objectives] if best else [],
+                        best_params, int(table.loc[best[0], "trial"]) if best else None,
+                        [int(table.loc[i, "trial"]) for i in best], table)
+
+
+def _nominal(problem: TuningProblem, values: Mapping[str, Any]):
+    """The base configuration (the nominal body) with ``values``."""
+    return TuningProblem(problem.base, problem.varied, problem.objectives, problem.constraints).configs(values)[0]
+
+
+def _plain(value: Any) -> Any:
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], path: Path,
+                   command_line: str | None) -> None:
+
+    data = {}
+    for column in table.columns:
+        if column == "trial":
+            continue
+        values = table[column].to_numpy()
+        if values.dtype == object:
+            values = table[column].astype(str).to_numpy()
+        units, long_name = figure_attributes(column)
+        data[column] = xr.Variable(("trial",), values, {"long_name": long_name, **({"units": units} if units else {})})
+    ds = xr.Dataset(data, coords={"trial": table["trial"].to_numpy()})
+    ds.attrs.update(provenance_attributes(f"rbstab tuning study {study.study_name}", command_line=command_line))
+    ds.attrs.update(rbstab_study="tuning", study=study.study_name,
+                    objectives=json.dumps([[o.metric, o.direction] for o in problem.objectives]),
+                    constraints=json.dumps([str(c) for c in problem.constraints]),
+                    parameters=json.dumps([c for v in problem.varied for c in v.columns]),
+                    vary=json.dumps(vary_mapping(problem.varied)), bodies=len(problem.bodies),
+                    quantile=problem.quantile, best=json.dumps([int(table.loc[i, "trial"]) for i in best]),
+                    config=dump_yaml(problem.base.resolved))
+    write_study_file(ds, path)
+
+
+def read_tuning(path: str | os.PathLike):
+    """Read a tuning study's ``tuning.nc`` (or its folder) into memory: an
+    :class:`xarray.Dataset` over ``trial`` (:func:`trials_table`'s columns) with the
+    study's attributes (``objectives``, ``constraints``, ``parameters``, ``best``: JSON).
+
+    Raises
+    ------
+    FileNotFoundError, ValueError
+        If there is no such file or it is not a tuning study's.
+    """
+    return read_study_file(path, "tuning")
