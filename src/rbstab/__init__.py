@@ -37,7 +37,7 @@ _SOURCES = {
 }
 #: Subpackages and modules reachable as attributes (``rbstab.sweep.open_sweep``), imported on
 #: first use like the names above.
-_SUBMODULES = ("analysis", "config", "engine", "io", "report", "simulator", "sweep", "variants")
+_SUBMODULES = ("analysis", "config", "engine", "io", "report", "simulator", "studies", "sweep", "variants")
 
 
 def __getattr__(name: str):
