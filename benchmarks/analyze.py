@@ -57,7 +57,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     from rbstab.analysis import analyze
-    from rbstab.jit import ensure_compiled
+    from rbstab.engine import ensure_compiled
 
     ensure_compiled(say=print)
     rows = []

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 
 from rbstab.config import PhysicalPlausibilityWarning, load_config
+from rbstab.engine import ensure_compiled
 from rbstab.io.chunk import ChunkWriter, StoreRow, read_chunk_rows
 from rbstab.io.hdf5 import _file_image, result_attributes, write_result
 from rbstab.io.integrity import verify_file
-from rbstab.jit import ensure_compiled
-from rbstab.simulate import simulate_many
+from rbstab.simulator import simulate_many
 
 CASE3 = Path(__file__).resolve().parents[1] / "configs" / "paper" / "case3_embedded.yaml"
 N_RUNS = 256

@@ -3,7 +3,7 @@
 Two shapes, as the two integrators call it:
 
 - one state, ``y`` shape (n_state,), as :func:`scipy.integrate.solve_ivp` calls it
-  (rbstab.simulate): microseconds per call;
+  (rbstab.simulator): microseconds per call;
 - a stack, ``y`` shape (m, n_state) with m = ``--rows`` (1024 by default), as the batched
   compiled kernels are called from Python (Variant.rhs): microseconds per call and per row.
 

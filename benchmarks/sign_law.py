@@ -3,7 +3,7 @@
 The 2 s run of ``configs/examples/sliding.yaml`` with ``boundary_layer: 0`` (Lambda =
 -K_s sgn(E), eq 39). Prints:
 
-- **run**: wall time of ``rbstab.simulate`` (warm compile cache, kernels loaded; the best
+- **run**: wall time of ``rbstab.simulator.simulate`` (warm compile cache, kernels loaded; the best
   of ``--repeat``), the located switchings and sliding of each axis, the rate check; and
   ``rbstab run`` of the same config timed from process start to exit;
 - **reference**: the plain sign law (sgn(E) at every stage, no events) integrated by
@@ -58,7 +58,7 @@ def distances(x, x_ref, time):
 
 
 def run_section(repeat: int):
-    from rbstab.simulate import simulate
+    from rbstab.simulator import simulate
 
     simulate(config("controller.boundary_layer=0", "simulation.t_end=0.01", "simulation.n_samples=11"))  # load kernels
     runs = [simulate(config("controller.boundary_layer=0")) for _ in range(repeat)]
@@ -120,7 +120,7 @@ def reference_section(best, steps):
 
 
 def boundary_layer_section(best, phis):
-    from rbstab.simulate import simulate
+    from rbstab.simulator import simulate
 
     ours = best.outputs["position"]
     simulate(config("controller.boundary_layer=0.01", "simulation.t_end=0.01", "simulation.n_samples=11"))  # load

@@ -84,7 +84,7 @@ def main() -> None:
 def _tune_in_process(trials: int, tmp: Path) -> tuple:
     """``rbstab.tune`` in this process with ``storage="memory"`` (after the compile cache is loaded)."""
     import rbstab
-    from rbstab.jit import ensure_compiled
+    from rbstab.engine import ensure_compiled
 
     ensure_compiled()
     config = rbstab.load_config(CASE3)

@@ -149,7 +149,7 @@ def _replay_engine(pool):
 
 def store(n: int, folder: str) -> dict:
     from rbstab.config import load_config
-    from rbstab.simulate import simulate_blocks
+    from rbstab.simulator import simulate_blocks
     from rbstab.sweep import run_sweep
     from rbstab.sweep.worker import ENGINES
 

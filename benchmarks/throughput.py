@@ -182,7 +182,7 @@ def accuracy(n=50) -> tuple[float, float]:
     import warnings
 
     from rbstab.config import load_config
-    from rbstab.simulate import simulate_many
+    from rbstab.simulator import simulate_many
 
     warnings.simplefilter("ignore")
     base = load_config(CASE3, TOLERANCES)

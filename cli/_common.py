@@ -12,6 +12,10 @@ from pathlib import Path
 
 import click
 
+from rbstab.api import load_config
+
+from .console import get_console
+
 
 def command_line() -> str:
     """This process's command line, shell-quoted."""
@@ -21,8 +25,7 @@ def command_line() -> str:
 def load_one(path: str, overrides: Sequence[str]):
     """``(config, error, warnings)`` of one config file: the RunConfig or None, the
     ConfigError or None, and its coded warning lines (:mod:`rbstab.warning_codes`)."""
-    from rbstab.api import load_config
-    from rbstab.config import ConfigError, PhysicalPlausibilityWarning
+    from rbstab.config import ConfigError, PhysicalPlausibilityWarning  # heavy: yaml
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PhysicalPlausibilityWarning)
@@ -44,8 +47,6 @@ def config_error_text(path: str, error) -> str:
 def show_config_warnings(found: dict[str, list[str]], n_configs: int) -> None:
     """Each distinct warning once, with the configs it concerns: ``found`` maps a config's
     name to its warning lines."""
-    from .console import get_console
-
     names: dict[str, list[str]] = {}
     for name, lines in found.items():
         for line in lines:
@@ -96,7 +97,7 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
     ``click.ClickException`` with one line (a file in the way, a read-only or foreign
     folder, a name too long).
     """
-    from rbstab.io.atomic import describe_os_error, remove_stale_temporaries
+    from rbstab.io.atomic import describe_os_error, remove_stale_temporaries  # heavy at start-up: hashlib, socket
 
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -104,8 +105,6 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
             raise FileExistsError(17, "exists and is not a folder", str(folder))
         removed = remove_stale_temporaries(folder)
         if removed:
-            from .console import get_console
-
             get_console().info(f"removed {removed} temporary file(s) left in {folder} by interrupted runs")
         fd, probe = tempfile.mkstemp(prefix=".rbstab-probe-", suffix=".tmp", dir=folder)
         os.close(fd)

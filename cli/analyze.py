@@ -17,7 +17,7 @@ def _parse_axes(texts, configs):
         return {}
     if len(texts) != 2:
         raise click.UsageError(f"--basin: give it exactly twice (two axes of the slice), found {len(texts)}")
-    from rbstab.analysis import BasinAxis
+    from rbstab.analysis import BasinAxis  # heavy: numba, numpy
 
     axes, problems = {}, []
     for config in configs:
@@ -33,7 +33,7 @@ def _parse_axes(texts, configs):
 
 def _check_boundary_layer(configs, boundary_layer) -> None:
     """--boundary-layer against every config (only the pure sign law takes it)."""
-    from rbstab.analysis.analyze import analysed_config
+    from rbstab.analysis.analyze import analysed_config  # heavy: numba, numpy
 
     problems = []
     for config in configs:
@@ -47,8 +47,8 @@ def _check_boundary_layer(configs, boundary_layer) -> None:
 
 def _check_sweeps(paths) -> None:
     """Every ``--robustness`` path a sweep folder (:func:`rbstab.kinds.kind_of`), or one line each."""
-    from rbstab.io.hdf5 import NotAResultFile
-    from rbstab.kinds import SWEEP, kind_of
+    from rbstab.io.hdf5 import NotAResultFile  # heavy: numba, numpy, pydantic, yaml
+    from rbstab.kinds import SWEEP, kind_of  # heavy: numba, numpy, pydantic, yaml
 
     problems = []
     for path in paths:
@@ -101,12 +101,12 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     Every input is checked before anything runs. Method and limits: docs/analysis.md.
     With --json: one object per config ("kind": "configuration") and per sweep ("robustness").
     """
-    from rbstab.analysis import analyze as run_analysis
-    from rbstab.analysis import robustness, write_analysis
-    from rbstab.analysis.dataset import analysis_path
-    from rbstab.analysis.text import describe, describe_robustness
-    from rbstab.jit import ensure_compiled
-    from rbstab.sweep.executors import default_jobs
+    from rbstab.analysis import analyze as run_analysis  # heavy: numba, numpy
+    from rbstab.analysis import robustness, write_analysis  # heavy: numba, numpy
+    from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
+    from rbstab.analysis.text import describe, describe_robustness  # heavy: numba, numpy
+    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+    from rbstab.sweep.executors import default_jobs  # heavy: multiprocessing (every command's start-up)
 
     if not configs and not sweeps:
         raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")

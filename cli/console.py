@@ -22,6 +22,8 @@ from typing import Any
 
 import click
 
+from rbstab.warning_codes import WARNING_CODES, code_of, split_code
+
 #: Key of the command's Console in ``click.Context.meta``.
 CONSOLE_KEY = "rbstab.console"
 
@@ -75,8 +77,6 @@ class Console:
         ``text`` may hold something before its code (``"case1.yaml: W001 ..."``, ``"6 of 6
         runs: W001 ..."``): it goes to the end, in parentheses, with ``where``.
         """
-        from rbstab.warning_codes import WARNING_CODES, split_code
-
         code, before, message = split_code(text)
         if self.silences(code) or self.verbosity < -1 or message in self._seen:
             return
@@ -96,8 +96,6 @@ class Console:
             shown = warnings.showwarning
 
             def show(message, category, filename, lineno, file=None, line=None) -> None:
-                from rbstab.warning_codes import code_of
-
                 if code_of(str(message)) is None:
                     shown(message, category, filename, lineno, file, line)
                 else:

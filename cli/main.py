@@ -49,7 +49,7 @@ class _Group(click.Group):
     """The command group, turning faults into one line and interrupts into 130 / 143."""
 
     def invoke(self, ctx: click.Context):
-        from rbstab.io.atomic import describe_os_error
+        from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
 
         try:
             return super().invoke(ctx)

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import functools
+
 import click
+
+from rbstab.warning_codes import WARNING_CODES
+
+from .console import CONSOLE_KEY, Console
 
 set_option = click.option(
     "--set",
@@ -45,8 +51,6 @@ json_option = click.option(
 
 def _no_warn_codes(ctx, param, values):
     """--no-warn values, upper-cased; a code that is not registered is a usage error."""
-    from rbstab.warning_codes import WARNING_CODES
-
     codes = [v.strip().upper() for v in values if v.strip()]
     bad = [v for v in codes if v != "ALL" and v not in WARNING_CODES]
     if bad:
@@ -60,12 +64,8 @@ def console_options(command):
     just above its ``def``: they come last in its ``--help``). The command finds its
     :class:`~rbstab_cli.console.Console` with :func:`~rbstab_cli.console.get_console`;
     Python warnings with a code raised while it runs go to it."""
-    import functools
-
     @functools.wraps(command)
     def wrapper(*args, quiet: int, verbose: int, no_warn: tuple, **kwargs):
-        from .console import CONSOLE_KEY, Console
-
         console = Console(verbose - quiet, no_warn, json=kwargs.get("as_json", False))
         click.get_current_context().meta[CONSOLE_KEY] = console
         with console.catching_warnings():

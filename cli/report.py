@@ -121,6 +121,7 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
     rbstab analyze), summary.md, summary.csv and
     figures/*.png (or .pdf, .svg). Every input is checked before anything is written.
     """
+    # heavy: numpy
     from rbstab.report import ReportError, ReportInputError, ReportOptions, SettleThresholds, build_report
 
     options = ReportOptions(

@@ -6,6 +6,11 @@ from pathlib import Path
 
 import click
 
+from rbstab.api import ResultExistsError, check_overwrite
+from rbstab.api import run as run_one
+from rbstab.resources import memory_problem
+from rbstab.warning_codes import coded
+
 from ._common import command_line, load_configs, prepare_output
 from .console import get_console
 from .options import console_options, json_option, method_option, output_option, set_option
@@ -13,9 +18,6 @@ from .options import console_options, json_option, method_option, output_option,
 
 def _check_memory(loaded) -> None:
     """Refuse runs that do not fit in memory; warn (W003) about large ones."""
-    from rbstab.resources import memory_problem
-    from rbstab.warning_codes import coded
-
     for config in loaded:
         refusal, note = memory_problem(config.simulation.n_samples, config.name)
         if refusal:
@@ -27,8 +29,6 @@ def _check_memory(loaded) -> None:
 def _check_targets(loaded, out: Path, overwrite: bool) -> dict[str, str]:
     """How each result file is written (``new``, ``identical``, ``replace``); every refusal
     at once as a ClickException, before anything runs."""
-    from rbstab.api import ResultExistsError, check_overwrite
-
     how, refused = {}, []
     for config in loaded:
         try:
@@ -52,7 +52,7 @@ _REPLACED = {"new": None, "identical": "identical", "replace": "other"}
 
 def _report(config, path: Path, mode: str) -> dict:
     """Print the run's line (or JSON object) from its file's attributes; return them."""
-    from rbstab.io.hdf5 import read_attributes
+    from rbstab.io.hdf5 import read_attributes  # heavy: numpy
 
     console = get_console()
     attrs = read_attributes(path, verify=False)
@@ -95,10 +95,9 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     reason. A file that cannot be written (full disk, read-only folder) stops the command
     with one line; files written before are complete, and no temporary file is left.
     """
-    from rbstab.api import run as run_one
-    from rbstab.io.atomic import describe_os_error
-    from rbstab.jit import ensure_compiled
-    from rbstab.simulate import is_sign_law
+    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+    from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
+    from rbstab.simulator import is_sign_law  # heavy: numba, numpy
 
     if method is not None:
         overrides = (*overrides, f"simulation.method={method}")

@@ -51,8 +51,9 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
     OUTPUT/<name>` draws them. Options are checked before anything runs. With --json: one
     object per metric. Manual: docs/studies.md.
     """
+    # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
     from rbstab.studies import StudyInputError, metric_records, sensitivity_analysis
-    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numba, numpy, pydantic, yaml
 
     (base,) = load_configs([config], overrides)
     console = get_console()

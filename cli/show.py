@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 from pathlib import Path
 
 import click
@@ -44,7 +45,7 @@ def _run_lines(rows) -> None:
 
 def _show_chunk(path: str) -> None:
     """One line per run of a store file (``rbstab sweep``, layout chunk)."""
-    from rbstab.io.chunk import read_chunk_rows
+    from rbstab.io.chunk import read_chunk_rows  # heavy: numpy
 
     console = get_console()
     rows = read_chunk_rows(path, data=True)  # every checksum verified
@@ -74,7 +75,7 @@ def _parameter_values(index, column: str) -> dict:
 
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
-    from rbstab.sweep.folder import read_index, read_parameters, read_spec
+    from rbstab.sweep.folder import read_index, read_parameters, read_spec  # heavy: numpy
 
     index = read_index(path)  # checksum verified
     if "max_abs_constraint_error_x" in index:
@@ -97,7 +98,7 @@ def sweep_overview(path: str) -> dict:
 def _show_sweep(path: str) -> None:
     """A sweep folder: counts per status, converged fraction, varied parameters, the spread
     of the main figures, the first runs (every run with -v)."""
-    from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES
+    from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES  # heavy: numpy
 
     console = get_console()
     info = sweep_overview(path)
@@ -126,7 +127,7 @@ def _show_sweep(path: str) -> None:
 
 def _show_result(path: str) -> None:
     """A run's result file: identity, status, solver statistics, summary figures."""
-    from rbstab.io.hdf5 import read_summary
+    from rbstab.io.hdf5 import read_summary  # heavy: numpy
 
     console = get_console()
     info = read_summary(path)  # every checksum verified
@@ -143,7 +144,7 @@ def _show_result(path: str) -> None:
 
 def _expand(path: str) -> list[str]:
     """A plain folder (not a sweep folder) stands for the sweep folders and result files in it."""
-    from rbstab.kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder
+    from rbstab.kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder  # heavy: numba, numpy, pydantic, yaml
 
     folder = Path(path)
     if not folder.exists():
@@ -159,8 +160,6 @@ def _expand(path: str) -> list[str]:
 
 def _did_you_mean(missing: Path) -> str:
     """``"; did you mean X?"`` naming the closest entry of its folder, or ``""``."""
-    import difflib
-
     parent = missing.parent
     names = [p.name for p in parent.iterdir()] if parent.is_dir() else []
     close = difflib.get_close_matches(missing.name, names, n=1, cutoff=0.6)
@@ -169,7 +168,7 @@ def _did_you_mean(missing: Path) -> str:
 
 def _show(path: str) -> None:
     """``path`` shown as its kind says (:func:`rbstab.kinds.kind_of`)."""
-    from rbstab.kinds import RUN, STORE, SWEEP, kind_of
+    from rbstab.kinds import RUN, STORE, SWEEP, kind_of  # heavy: numba, numpy, pydantic, yaml
 
     show_kind = {RUN: _show_result, STORE: _show_chunk, SWEEP: _show_sweep}
     show_kind[kind_of(path, tuple(show_kind))](path)
@@ -177,8 +176,8 @@ def _show(path: str) -> None:
 
 def _show_run(path: str, run_id: str) -> None:
     """The resolved configuration of one run of a sweep folder, rebuilt from its result."""
-    from rbstab.config import dump_yaml
-    from rbstab.sweep.folder import is_sweep_folder, resolved_config
+    from rbstab.config import dump_yaml  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep.folder import is_sweep_folder, resolved_config  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
 
     if not is_sweep_folder(path):
         raise ValueError(f"{path}: --run needs a sweep folder (sweep.yaml and index.csv)")

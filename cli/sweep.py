@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import os
+
 import click
 
 from rbstab.sweep.worker import ENGINES
@@ -123,7 +126,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     --connect-timeout) or a fault of the machine (full disk, read-only folder: one line);
     130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
-    from rbstab.sweep.executors import LocalExecutor
+    from rbstab.sweep.executors import LocalExecutor  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
@@ -134,8 +137,6 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     if table is not None:
-        import json
-        import os
 
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
@@ -161,8 +162,8 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     """--dry-run: plan and validate every run, print the count, the varied keys with their
     ranges, the first and last runs (all with -v), the estimated store size and wall time;
     write nothing."""
-    from rbstab.sweep import SweepSpecError, default_jobs, load_spec
-    from rbstab.sweep.table import estimate, plan_table
+    from rbstab.sweep import SweepSpecError, default_jobs, load_spec  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep.table import estimate, plan_table  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
 
     console = get_console()
     try:
@@ -184,8 +185,8 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
 
 def _execute(spec, output, ex, **options):
     """:func:`rbstab.api.execute_sweep`, its exceptions as one-line CLI errors."""
-    from rbstab.api import execute_sweep
-    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError
+    from rbstab.api import execute_sweep  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
 
     try:
         return execute_sweep(spec, output, executor=ex, command_line=command_line(), log=get_console().info,
@@ -198,7 +199,7 @@ def _execute(spec, output, ex, **options):
 
 def _say_outcome(outcome) -> None:
     """The sweep's warnings, counts, files and problems."""
-    from rbstab.warning_codes import coded
+    from rbstab.warning_codes import coded  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
 
     console = get_console()
     for line in outcome.warnings:

@@ -50,8 +50,8 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     anything runs. With --json: the best value, the best parameters and the trial count.
     Manual: docs/studies.md.
     """
-    from rbstab.studies import StudyInputError
-    from rbstab.studies import tune as run_tuning
+    from rbstab.studies import StudyInputError  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
+    from rbstab.studies import tune as run_tuning  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
 
     (base,) = load_configs([config], overrides)
     console = get_console()

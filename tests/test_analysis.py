@@ -28,7 +28,7 @@ from rbstab.analysis.linearise import modes, verdict
 from rbstab.config import load_config
 from rbstab.kinematics import GIMBAL_LOCK_ANGLE
 from rbstab.model import Gains
-from rbstab.simulate import simulate
+from rbstab.simulator import simulate
 from rbstab.variants import VARIANTS
 
 D = np.diag

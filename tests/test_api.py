@@ -27,21 +27,30 @@ def test_import_is_light_and_lists_the_api():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     heavy, names = out.splitlines()
     assert heavy == "[]"
-    for name in ("load_config", "simulate", "run", "open_result", "sweep", "open_sweep", "report", "analyze"):
+    for name in ("load_config", "simulate", "run", "open_result", "sweep_dataset", "open_sweep", "write_report",
+                 "analyze"):
         assert f"'{name}'" in names, name
 
 
-def test_callable_modules_stay_modules():
-    """rbstab.simulate, .sweep and .report are the subpackages, made callable."""
+def test_functions_are_functions_and_modules_modules():
+    """rbstab.simulate is rbstab.api.simulate; the subpackages are plain modules that keep
+    their names however they are imported."""
     import inspect
+    import types
 
-    import rbstab.sweep.runner as runner  # a dotted import through the callable package
-    from rbstab.simulate import solve
+    import rbstab.api as api
+    import rbstab.sweep.runner as runner
+    from rbstab.simulator import RunResult, solve
 
-    assert callable(rbstab.simulate) and rbstab.simulate.solve is solve
-    assert runner.__name__ == "rbstab.sweep.runner" and rbstab.sweep.load_spec is not None
+    assert rbstab.simulate is api.simulate and inspect.isfunction(rbstab.simulate)
+    assert rbstab.sweep_dataset is api.sweep_dataset and rbstab.write_report is api.write_report
     assert list(inspect.signature(rbstab.simulate).parameters)[:2] == ["config", "overrides"]
-    assert list(inspect.signature(rbstab.report).parameters)[:2] == ["inputs", "output"]
+    assert list(inspect.signature(rbstab.write_report).parameters)[:2] == ["inputs", "output"]
+    for module in (rbstab.simulator, rbstab.sweep, rbstab.report):
+        assert type(module) is types.ModuleType and not callable(module)
+    assert rbstab.simulator.solve is solve and rbstab.simulator.RunResult is RunResult
+    assert runner.__name__ == "rbstab.sweep.runner" and rbstab.sweep.load_spec is not None
+    assert type(rbstab) is types.ModuleType
     with pytest.raises(AttributeError, match="no attribute 'simulat'"):
         rbstab.simulat
 
@@ -150,7 +159,7 @@ def _spec():
 
 
 def test_sweep_returns_the_sweep_as_a_dataset(tmp_path):
-    ds = rbstab.sweep(_spec(), tmp_path, overrides=SHORT, jobs=1, grid=True)
+    ds = rbstab.sweep_dataset(_spec(), tmp_path, overrides=SHORT, jobs=1, grid=True)
     assert ds.sizes["mass"] == 2 and list(ds.mass.values) == [30.0, 50.0]
     assert set(ds.status.values.ravel()) == {"success"}
     assert ds.attrs["folder"] == str(tmp_path / "api_sweep")
@@ -173,10 +182,10 @@ def test_sweep_option_mistakes_are_refused_before_anything_runs(tmp_path):
 
 def test_report_from_python(tmp_path):
     path = rbstab.run(CASE1, tmp_path / "runs", overrides=SHORT)
-    folder = rbstab.report(path, tmp_path / "report", formats=("md",))
+    folder = rbstab.write_report(path, tmp_path / "report", formats=("md",))
     assert (folder / "index.md").is_file() and "case1_permanent" in (folder / "summary.md").read_text()
     with pytest.raises(TypeError, match=r"unknown option colour; expected some of formats, metrics"):
-        rbstab.report(path, tmp_path / "r2", colour="red")
+        rbstab.write_report(path, tmp_path / "r2", colour="red")
 
 
 def test_every_warning_code_is_documented_in_the_readme():

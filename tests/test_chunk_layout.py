@@ -177,7 +177,7 @@ def test_chunk_writer_refuses_traces_of_another_shape(tmp_path):
     import warnings
 
     from rbstab.config import load_config
-    from rbstab.simulate import simulate
+    from rbstab.simulator import simulate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # W001 of Case 3's inertia
@@ -197,7 +197,7 @@ def _case3_block(k: int, n_samples: int = 101, t_end: float = 0.1):
     import warnings
 
     from rbstab.config import load_config
-    from rbstab.simulate import simulate_blocks
+    from rbstab.simulator import simulate_blocks
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # W001 of Case 3's inertia
@@ -294,7 +294,7 @@ def test_chunk_writer_keeps_no_view_of_a_run_it_holds(tmp_path, store):
     import weakref
 
     from rbstab.config import load_config
-    from rbstab.simulate import simulate
+    from rbstab.simulator import simulate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # W001 of Case 3's inertia

@@ -179,7 +179,7 @@ def test_interrupted_write_leaves_no_file(tmp_path, monkeypatch):
 
     from rbstab.config import load_config
     from rbstab.io.hdf5 import write_result
-    from rbstab.simulate import simulate
+    from rbstab.simulator import simulate
 
     config = load_config(PAPER_CONFIGS[1], ["simulation.t_end=0.02", "simulation.n_samples=5"])
     result = simulate(config)

@@ -245,7 +245,7 @@ def test_every_quoted_path_and_name_exists():
     ("`rbstab.io.chunk.NoSuchClass`", "name `rbstab.io.chunk.NoSuchClass`"),
     ("`engine.no_such_function`", "name `rbstab.engine.no_such_function`"),
     ("`PermanentFullState`", "class `PermanentFullState`"),
-    ("`rbstab.simulate.NoSuchRun`", "name `rbstab.simulate.NoSuchRun`"),
+    ("`rbstab.simulator.NoSuchRun`", "name `rbstab.simulator.NoSuchRun`"),
     ("`ChunkWriter.no_such_method`", "class `ChunkWriter.no_such_method`"),
 ])
 def test_a_broken_reference_is_reported_with_its_place(quote, fragment):

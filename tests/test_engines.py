@@ -21,10 +21,10 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from rbstab import simulate as simulate_module
+from rbstab import simulator as simulate_module
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
-from rbstab.simulate import simulate, simulate_many
+from rbstab.simulator import simulate, simulate_many
 from rbstab.summary import numerical_rate
 from rbstab.sweep.folder import index_part, row_from_attributes
 from rbstab.sweep import expand, run_sweep, spec_from_mapping
@@ -115,8 +115,6 @@ def test_compiled_agrees_with_scipy_for_every_variant(path, overrides):
 def test_runs_of_any_parameters_share_a_chunk_and_implicit_methods_fall_back(monkeypatch):
     """Runs that differ in gains, body and variant are integrated in one call, each with
     the bits it gets alone; Radau and the pure sign law go through scipy."""
-    import rbstab.engine as engine
-
     data = base_data(CASE3)
     stiff = apply_overrides(data, ["controller.k_c=[20000, 20000, 15000]", "body.mass=30"])
     visco = apply_overrides(base_data(ROOT / "configs" / "paper" / "case2_visco_elastic.yaml"), [])
@@ -124,8 +122,8 @@ def test_runs_of_any_parameters_share_a_chunk_and_implicit_methods_fall_back(mon
     configs = (configs_with_spins(data, SPINS[:2]) + configs_with_spins(stiff, SPINS[:2])
                + configs_with_spins(visco, SPINS[:1]) + configs_with_spins(radau, SPINS[:1]))
     calls, solo = [], []
-    real_integrate, real_simulate = engine.integrate_runs, simulate_module.simulate
-    monkeypatch.setattr(engine, "integrate_runs", lambda c, *a, **k: calls.append(len(c)) or real_integrate(c, *a, **k))
+    real_integrate, real_simulate = simulate_module.integrate_runs, simulate_module.simulate
+    monkeypatch.setattr(simulate_module, "integrate_runs", lambda c, *a, **k: calls.append(len(c)) or real_integrate(c, *a, **k))
     monkeypatch.setattr(simulate_module, "simulate", lambda c, *a, **k: solo.append(c.name) or real_simulate(c, *a, **k))
     got = dict(simulate_many(configs, chunk_size=3))
     # two state sizes (15 embedded, 12 visco_elastic): chunks of at most 3 per size

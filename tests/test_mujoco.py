@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from rbstab.config import config_from_mapping, load_config
-from rbstab.simulate import simulate
+from rbstab.simulator import simulate
 
 from conftest import ROOT
 

@@ -29,7 +29,7 @@ except ImportError as exc:
 from rbstab.config import load_config  # noqa: E402
 from rbstab.io.chunk import ChunkWriter, StoreRow  # noqa: E402
 from rbstab.io.hdf5 import write_result  # noqa: E402
-from rbstab.simulate import simulate  # noqa: E402
+from rbstab.simulator import simulate  # noqa: E402
 from rbstab.sweep import run_sweep, spec_from_mapping  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,7 +10,7 @@ from conftest import initial_blocks, paper_body, paper_gains, settings
 from reference import Model, permanent_full_state_rhs
 from rbstab.kinematics import rotation_matrix
 from rbstab.layout import FULL_BODY
-from rbstab.simulate import evaluate_outputs, solve
+from rbstab.simulator import evaluate_outputs, solve
 from rbstab.summary import numerical_rate
 from rbstab.variants import VARIANTS, Permanent
 

@@ -24,7 +24,7 @@ from rbstab.io import metadata
 from rbstab.io.chunk import ChunkWriter, StoreRow, read_chunk_rows
 from rbstab.io.hdf5 import read_attributes, read_summary, write_result
 from rbstab.io.integrity import verify_file
-from rbstab.simulate import simulate
+from rbstab.simulator import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SHORT = ["simulation.t_end=0.2", "simulation.n_samples=201"]

@@ -21,7 +21,7 @@ from reference import Model, hat, permanent_full_state_rhs, rotation
 from rbstab.config import load_config
 from rbstab.io.hdf5 import read_attributes, write_result
 from rbstab.layout import LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_CODES, display_units
-from rbstab.simulate import simulate
+from rbstab.simulator import simulate
 from rbstab.variants import VARIANTS
 from rbstab.variants.kernels import run_outputs
 

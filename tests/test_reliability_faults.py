@@ -337,24 +337,24 @@ def test_sigterm_at_a_random_point_leaves_an_exact_index(tmp_path):
 
 
 def test_ctrl_c_exits_130_with_a_word(tmp_path, monkeypatch):
-    import rbstab.simulate
+    import rbstab.simulator
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(rbstab.simulate, "simulate", interrupted)
+    monkeypatch.setattr(rbstab.simulator, "simulate", interrupted)
     result = CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(tmp_path), *SHORT])
     assert result.exit_code == 130 and "interrupted" in result.output and "Aborted" not in result.output
 
 
 def test_an_interrupted_sweep_says_once_that_it_can_resume(tmp_path, monkeypatch):
     """The CLI's one interrupt handler gives a sweep its own words (the index is up to date)."""
-    import rbstab.api
+    import rbstab_cli.sweep
 
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(rbstab.api, "execute_sweep", interrupted)
+    monkeypatch.setattr(rbstab_cli.sweep, "execute_sweep", interrupted)  # the command's rbstab.api.execute_sweep
     spec = ROOT / "configs" / "sweeps" / "gains.yaml"
     result = CliRunner().invoke(cli, ["sweep", str(spec), "-o", str(tmp_path), "--no-progress"])
     assert result.exit_code == 130 and "Aborted" not in result.output
@@ -418,7 +418,7 @@ def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     script's top level used to fail every run with a traceback per worker, and exit 0."""
     body = (f"import rbstab\n"
             f"spec = {{'name': 's', 'base': {str(CASE3)!r}, 'grid': {{'body.mass': [30.0, 50.0]}}}}\n"
-            f"{{}}ds = rbstab.sweep(spec, 'out', overrides={{'simulation.t_end': 0.2}}, jobs=2)\n"
+            f"{{}}ds = rbstab.sweep_dataset(spec, 'out', overrides={{'simulation.t_end': 0.2}}, jobs=2)\n"
             f"{{}}print(sorted(set(ds.status.values)))\n")
     (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()  # one output folder each
     guarded = tmp_path / "a" / "guarded.py"
@@ -483,7 +483,7 @@ def test_report_shows_names_from_files_as_text_in_every_format(tmp_path):
 
     from rbstab.config import load_config
     from rbstab.io.hdf5 import write_result
-    from rbstab.simulate import simulate
+    from rbstab.simulator import simulate
 
     config = load_config(CASE1, ["simulation.t_end=0.2", "simulation.n_samples=21"])
     evil = "<script>alert(1)</script> $\\frac{$ [x](javascript:alert(1)) | `code`"

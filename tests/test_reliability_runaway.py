@@ -8,7 +8,7 @@ import pytest
 import yaml
 
 from rbstab.config import config_from_mapping
-from rbstab.simulate import simulate, solve
+from rbstab.simulator import simulate, solve
 from rbstab.sweep import run_sweep, spec_from_mapping
 
 from conftest import ROOT, settings

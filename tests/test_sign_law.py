@@ -24,7 +24,7 @@ from rbstab.io.hdf5 import read_summary
 from rbstab.jit import jit
 from rbstab.model import Gains, RigidBody
 from rbstab.report.tables import validate_metrics
-from rbstab.simulate import simulate, simulate_many
+from rbstab.simulator import simulate, simulate_many
 from rbstab.variants import Permanent, Sliding
 from rbstab.variants.kernels import SLIDING, state_rate
 from rbstab.variants.sliding import MODE_CODES, mode_code, mode_of, mode_rate, mode_rows, stop_at_c
@@ -301,7 +301,7 @@ def test_a_large_force_slides_on_every_axis_and_is_the_permanent_constraint():
     sol = integrate_sign_law(sliding, y0, settings)
     assert sol.status == "success" and np.all(sol.modes == 0)
     assert list(sol.switchings.kind) == [SLIDING_STARTS] * 3
-    from rbstab.simulate import solve
+    from rbstab.simulator import solve
 
     _, reduced, status, _, _ = solve(pinned, pinned.initial_state(blocks), settings)
     assert status == "success"

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from rbstab_cli.main import cli
 
 import rbstab
-from rbstab.simulate import simulate_many
+from rbstab.simulator import simulate_many
 from rbstab.studies import StudyInputError, read_sensitivity, read_tuning, sensitivity_analysis, tune
 
 FREE = {

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from rbstab.config import PhysicalPlausibilityWarning, config_from_mapping, load_config
-from rbstab.simulate import simulate
+from rbstab.simulator import simulate
 from rbstab.summary import LYAPUNOV_RATE_TOLERANCE, numerical_rate, summarize
 
 from conftest import ROOT

@@ -11,68 +11,37 @@ stays light)::
     ds = rbstab.simulate(config)                  # xarray.Dataset, the result file's content
     path = rbstab.run(config, "results")          # results/case3_embedded.h5
     ds = rbstab.open_result(path)
-    sw = rbstab.sweep("configs/sweeps/gains.yaml", grid=True)   # or rbstab.open_sweep(folder)
-    rbstab.report([path])                         # results/reports/case3_embedded/
+    sw = rbstab.sweep_dataset("configs/sweeps/gains.yaml", grid=True)   # or rbstab.open_sweep(folder)
+    rbstab.write_report([path])                   # results/reports/case3_embedded/
     a = rbstab.analyze(config)                    # stability analysis (rbstab.analysis)
     s = rbstab.sensitivity_analysis(config, ["body.mass=uniform:[30,50]"], n=256)  # rbstab.studies
     t = rbstab.tune(config, ["controller.k_c=scale_uniform:[0.25,4]"], minimize=["lyapunov_final"], trials=100)
 
-``simulate``, ``sweep`` and ``report`` are also the names of subpackages
-(:mod:`rbstab.simulate`, :mod:`rbstab.sweep`, :mod:`rbstab.report`): ``rbstab.simulate``
-is that module, made callable, and calling it calls :func:`rbstab.api.simulate` (likewise
-the others), so ``rbstab.simulate(config)`` and ``from rbstab.simulate import solve``
-both work.
+The subpackages hold the parts: :mod:`rbstab.simulator` (one run, :class:`RunResult`),
+:mod:`rbstab.sweep`, :mod:`rbstab.report`, :mod:`rbstab.analysis`, ...
 """
 
 import importlib
-import sys
-import types
 
 __version__ = "0.1.0"
 
 #: Public name -> the module defining it (PEP 562: imported on first use).
 _SOURCES = {
-    **dict.fromkeys(["load_config", "run", "check_overwrite", "open_result", "execute_sweep", "ResultExistsError"],
-                    "api"),
+    **dict.fromkeys(["load_config", "simulate", "run", "check_overwrite", "open_result", "execute_sweep",
+                     "sweep_dataset", "write_report", "ResultExistsError"], "api"),
     "open_sweep": "sweep.folder",
     "analyze": "analysis",
     **dict.fromkeys(["sensitivity_analysis", "tune"], "studies"),
     **dict.fromkeys(["ConfigError", "RunConfig", "PhysicalPlausibilityWarning"], "config"),
     "WARNING_CODES": "warning_codes",
 }
-#: Submodules that are also functions of :mod:`rbstab.api`: calling the module calls the function.
-_CALLABLE_MODULES = ("simulate", "sweep", "report")
-
-
-def _callable_module_type(name: str) -> type:
-    """A module type whose instances call ``rbstab.api.<name>`` (signature and all)."""
-    function = getattr(importlib.import_module(".api", __name__), name)
-
-    def signature(self):
-        import inspect
-
-        return inspect.signature(function)
-
-    return type(f"callable_module_{name}", (types.ModuleType,),
-                {"__call__": staticmethod(function), "__signature__": property(signature)})
-
-
-class _Package(types.ModuleType):
-    """rbstab itself: a submodule of :data:`_CALLABLE_MODULES` is made callable as the import
-    system sets it on the package (however it was first imported)."""
-
-    def __setattr__(self, name: str, value) -> None:
-        if name in _CALLABLE_MODULES and isinstance(value, types.ModuleType) \
-                and value.__name__ == f"{__name__}.{name}" and not callable(value):
-            value.__class__ = _callable_module_type(name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
+#: Subpackages and modules reachable as attributes (``rbstab.sweep.open_sweep``), imported on
+#: first use like the names above.
+_SUBMODULES = ("analysis", "config", "engine", "io", "report", "simulator", "studies", "sweep", "variants")
 
 
 def __getattr__(name: str):
-    if name in _CALLABLE_MODULES:
+    if name in _SUBMODULES:
         return importlib.import_module(f".{name}", __name__)
     module = _SOURCES.get(name)
     if module is None:
@@ -81,7 +50,7 @@ def __getattr__(name: str):
 
 
 def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__} - {"importlib", "sys", "types"})
+    return sorted({*globals(), *__all__} - {"importlib"})
 
 
-__all__ = [*_SOURCES, *_CALLABLE_MODULES, "__version__"]
+__all__ = [*_SOURCES, "__version__"]

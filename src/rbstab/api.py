@@ -10,8 +10,8 @@
     ds.lyapunov.plot(yscale="log")             # v [J] against time [s]
     path = rbstab.run(config, "results")       # results/case3_short.h5 (rbstab run)
     ds = rbstab.open_result(path)              # the same Dataset, read back and verified
-    sw = rbstab.sweep("configs/sweeps/gains.yaml", grid=True)   # rbstab sweep, then open_sweep
-    rbstab.report([path], "results/reports/case3")              # rbstab report
+    sw = rbstab.sweep_dataset("configs/sweeps/gains.yaml", grid=True)   # rbstab sweep, then open_sweep
+    rbstab.write_report([path], "results/reports/case3")                # rbstab report
 
 Every function validates its input first and raises one exception naming what is wrong:
 :class:`rbstab.config.ConfigError` (a config key, the value found, what is allowed),
@@ -36,6 +36,7 @@ rate ``lyapunov_rate`` [W] and ``lyapunov_rate_numerical`` [W]. Vectors have dim
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 from collections.abc import Mapping, Sequence
@@ -46,7 +47,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
     from .config import RunConfig
-    from .simulate import RunResult
+    from .simulator import RunResult
     from .sweep import SweepOutcome, SweepSpec
 
 __all__ = [
@@ -55,9 +56,9 @@ __all__ = [
     "run",
     "check_overwrite",
     "open_result",
-    "sweep",
+    "sweep_dataset",
     "execute_sweep",
-    "report",
+    "write_report",
     "ResultExistsError",
 ]
 
@@ -93,8 +94,8 @@ def _override_lines(overrides: Overrides) -> list[str]:
     if isinstance(overrides, str):
         return [overrides]
     if isinstance(overrides, Mapping):
-        from .config import dump_yaml
-        from .config.paths import plain_tree
+        from .config import dump_yaml  # heavy: yaml
+        from .config.paths import plain_tree  # heavy: numba, numpy, pydantic, yaml
 
         return [f"{key}={dump_yaml(plain_tree(value)).strip()}" for key, value in overrides.items()]
     return list(overrides)
@@ -135,8 +136,8 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Ov
     rbstab.config.PhysicalPlausibilityWarning
         ``W001``/``W002`` (an inertia no real body has, a singular gain).
     """
-    from .config import RunConfig, apply_overrides, config_from_mapping
-    from .config import load_config as load_file
+    from .config import RunConfig, apply_overrides, config_from_mapping  # heavy: yaml
+    from .config import load_config as load_file  # heavy: yaml
 
     lines = _override_lines(overrides)
     if isinstance(source, RunConfig):
@@ -147,14 +148,14 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Ov
             data["name"] = name
         return config_from_mapping(apply_overrides(data, lines), default_name="run", source="<mapping>")
     if not isinstance(source, (str, os.PathLike)):
-        from .config import ConfigError
+        from .config import ConfigError  # heavy: yaml
 
         raise ConfigError([f"load_config: found {type(source).__name__}; expected a path, a mapping or a RunConfig"])
     return load_file(source, lines)
 
 
 def _config(config: Any, overrides: Overrides) -> "RunConfig":
-    from .config import RunConfig
+    from .config import RunConfig  # heavy: yaml
 
     if isinstance(config, RunConfig) and not overrides:
         return config
@@ -166,9 +167,9 @@ def _config(config: Any, overrides: Overrides) -> "RunConfig":
 
 def _integrate(config: "RunConfig", engine: str, timeout: float | None) -> "RunResult":
     """The run, the compiled kernels made first (once per machine, ~30-60 s, cached)."""
-    from .jit import ensure_compiled
-    from .simulate import is_sign_law, uses_compiled_engine
-    from .simulate import simulate as integrate
+    from .engine import ensure_compiled  # heavy: numba, numpy
+    from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
+    from .simulator import simulate as integrate  # heavy: numba, numpy
 
     if uses_compiled_engine(config, engine):
         ensure_compiled(sign_law=is_sign_law(config))
@@ -186,7 +187,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = "compiled"
     overrides : sequence of str or Mapping
         See :func:`load_config`.
     engine : {"compiled", "scipy"}
-        :data:`rbstab.simulate.ENGINES`; Radau, BDF and LSODA always go through scipy.
+        :data:`rbstab.simulator.ENGINES`; Radau, BDF and LSODA always go through scipy.
     timeout : float, optional
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``.
 
@@ -210,7 +211,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = "compiled"
     The first run on a machine compiles the engine (~30-60 s on 2 cores), cached for
     every later run and process (:mod:`rbstab.jit`).
     """
-    from .io.hdf5 import result_dataset
+    from .io.hdf5 import result_dataset  # heavy: numpy
 
     result = _integrate(_config(config, overrides), engine, timeout)
     return result_dataset(result, command_line=_python_command("simulate"))
@@ -243,8 +244,8 @@ def _differences(stored: Mapping | list, new: Mapping | list, prefix: str = "", 
 
 def _stored_config(path: Path) -> tuple[str | None, dict | None]:
     """(config_hash, resolved config) of an existing result file; (None, None) if unreadable."""
-    from .config import parse_yaml
-    from .io.hdf5 import read_attributes
+    from .config import parse_yaml  # heavy: yaml
+    from .io.hdf5 import read_attributes  # heavy: numpy
 
     try:
         attrs = read_attributes(path)
@@ -272,7 +273,7 @@ def check_overwrite(config: "RunConfig", path: str | os.PathLike, *, overwrite: 
         If a file of another configuration (or not a readable result) is there and not
         ``overwrite``: the message names the keys that differ.
     """
-    from .config import canonical_config, config_hash
+    from .config import canonical_config, config_hash  # heavy: numba, numpy, pydantic, yaml
 
     path = Path(path)
     if not path.exists():
@@ -320,7 +321,7 @@ def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overri
     OSError
         If the file cannot be written (a full disk, a read-only folder).
     """
-    from .io.hdf5 import write_result
+    from .io.hdf5 import write_result  # heavy: numpy
 
     config = _config(config, overrides)
     path = Path(output) / f"{config.name}.h5"
@@ -347,7 +348,7 @@ def open_result(path: str | os.PathLike) -> "xarray.Dataset":
     rbstab.io.integrity.DamagedResultError
         If its checksums do not match (a subclass of NotAResultFile).
     """
-    from .kinds import RUN, open_input
+    from .kinds import RUN, open_input  # heavy: numba, numpy, pydantic, yaml
 
     return open_input(path, (RUN,))  # another kind is refused, saying what it is and how to read it
 
@@ -356,7 +357,7 @@ def open_result(path: str | os.PathLike) -> "xarray.Dataset":
 
 
 def _load_spec(spec: Any, overrides: Overrides) -> "SweepSpec":
-    from .sweep import SweepSpec, load_spec, spec_from_mapping
+    from .sweep import SweepSpec, load_spec, spec_from_mapping  # heavy: pydantic (the spec's schema)
 
     lines = _override_lines(overrides)
     if isinstance(spec, SweepSpec):
@@ -371,13 +372,13 @@ def _load_spec(spec: Any, overrides: Overrides) -> "SweepSpec":
 def _sweep_executor(executor: Any, scheduler: str | None, connect_timeout: float | None):
     """(executor or its name, owned): a Dask executor is connected here, before anything is
     compiled, so that an unreachable scheduler is reported within ``connect_timeout``."""
-    from .sweep.executors import DASK_CONNECT_TIMEOUT, make_executor
-
     if executor is None:
         executor = "dask" if scheduler else "local"
     if executor == "dask":
         if not scheduler:
             raise ValueError("executor 'dask' needs scheduler='tcp://HOST:PORT'")
+        from .sweep.executors import DASK_CONNECT_TIMEOUT, make_executor  # heavy: multiprocessing
+
         timeout = DASK_CONNECT_TIMEOUT if connect_timeout is None else connect_timeout
         return make_executor("dask", scheduler=scheduler, connect_timeout=timeout), True
     if scheduler:
@@ -429,8 +430,8 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
     ValueError
         For options that do not fit together (a scheduler with ``executor="local"``).
     """
-    from .jit import ensure_compiled
-    from .sweep import run_sweep
+    from .engine import ensure_compiled  # heavy: numba, numpy
+    from .sweep import run_sweep  # heavy: numpy, h5py (the sweep's runner and its files)
 
     loaded = _load_spec(spec, overrides)
     ex, owned = _sweep_executor(executor, scheduler, connect_timeout)
@@ -442,8 +443,8 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
             ex.close()
 
 
-def sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool = False, **options
-          ) -> "xarray.Dataset":
+def sweep_dataset(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool = False,
+                  **options) -> "xarray.Dataset":
     """Run a sweep and open it: :func:`execute_sweep`, then :func:`open_sweep`.
 
     Parameters
@@ -465,7 +466,7 @@ def sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool
     ------
     See :func:`execute_sweep`.
     """
-    from .sweep.folder import open_sweep
+    from .sweep.folder import open_sweep  # heavy: numpy
 
     outcome = execute_sweep(spec, output, **options)
     return open_sweep(outcome.directory, grid=grid)
@@ -474,8 +475,8 @@ def sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, grid: bool
 # -- reports ------------------------------------------------------------------------------------
 
 
-def report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str | os.PathLike | None = None,
-           **options) -> Path:
+def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str | os.PathLike | None = None,
+                 **options) -> Path:
     """Build a report folder (``rbstab report``): tables, figures, the comparison with the paper.
 
     Parameters
@@ -504,13 +505,11 @@ def report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str 
     TypeError
         For an unknown option (the message lists the known ones).
     """
-    import dataclasses
-
-    from .report import ReportOptions, build_report
+    from .report import ReportOptions, build_report  # heavy: numpy
 
     known = [f.name for f in dataclasses.fields(ReportOptions)]
     unknown = sorted(set(options) - set(known))
     if unknown:
-        raise TypeError(f"report: unknown option {', '.join(unknown)}; expected some of {', '.join(known)}")
+        raise TypeError(f"write_report: unknown option {', '.join(unknown)}; expected some of {', '.join(known)}")
     paths = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
     return build_report(paths, output, ReportOptions(**options))

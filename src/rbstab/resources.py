@@ -43,7 +43,7 @@ def memory_problem(n_samples: int, name: str = "the run") -> tuple[str | None, s
     exceeds the available memory; ``note`` when it is large (> :data:`LARGE_RUN_BYTES`)
     but fits. Both None for an ordinary run.
     """
-    from .config.schema import BYTES_PER_SAMPLE, run_memory_estimate
+    from .config.schema import BYTES_PER_SAMPLE, run_memory_estimate  # heavy: numba, numpy, pydantic, yaml
 
     need = run_memory_estimate(n_samples)
     if need <= LARGE_RUN_BYTES:

@@ -1,6 +1,6 @@
 """Summary figures of one run, computed from its sampled outputs (one place for all paths).
 
-The same code serves the scipy path (:mod:`rbstab.simulate`), the batched path (a block of
+The same code serves the scipy path (:mod:`rbstab.simulator`), the batched path (a block of
 runs at once, :func:`summarize_many`) and the writers, so a summary means the same thing
 everywhere. The figures' units and long names: :data:`rbstab.layout.SUMMARY_FIGURES`.
 """

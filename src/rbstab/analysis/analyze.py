@@ -20,9 +20,13 @@ from typing import Any
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..simulator import simulate
+from ..variants import VARIANTS
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
+from .dataset import analysis_content, analysis_dataset, json_record
 from .linearise import Linearisation, linearise
 
 __all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config"]
@@ -81,8 +85,6 @@ class Analysis:
     @property
     def layout(self):
         """The analysed variant's :class:`~rbstab.layout.StateLayout`."""
-        from ..variants import VARIANTS
-
         return VARIANTS[self.analysed.variant].layout
 
     @property
@@ -107,15 +109,16 @@ class Analysis:
     def to_json(self) -> dict[str, Any]:
         """The ``--json`` record: ``name``, ``variant``, ``equilibrium``, ``eigenvalues``
         ([re, im] pairs, real part descending), ``verdict`` and the rest of the analysis."""
-        from .dataset import json_record
-
         return json_record(self)
 
     def to_dataset(self):
         """The analysis as an :class:`xarray.Dataset` (the file's content, :mod:`~rbstab.analysis.dataset`)."""
-        from .dataset import analysis_dataset
-
         return analysis_dataset(self)
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
+        return analysis_content(self, command_line)
 
 
 def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, list[str]]:
@@ -132,8 +135,6 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     ValueError
         For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
     """
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping
-
     sign_law = config.variant == "sliding" and not config.gains.boundary_layer
     if boundary_layer is not None and not (boundary_layer > 0 and math.isfinite(boundary_layer)):
         raise ValueError(f"--boundary-layer: found {boundary_layer}; expected a width phi > 0 [m]")
@@ -144,6 +145,8 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
         return config, []
     phi = DEFAULT_BOUNDARY_LAYER if boundary_layer is None else float(boundary_layer)
     resolved = dict(config.resolved, controller=dict(config.resolved["controller"], boundary_layer=phi))
+    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: pydantic (the validator)
+
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         analysed = config_from_mapping(resolved)
@@ -156,8 +159,6 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
 
 def _settling(config, variant, ratio: float) -> dict:
     """Simulate ``config`` from its initial state: when |v| first stays below ratio * |v(0)| (:func:`~rbstab.analysis.basin.time_to_converge`)."""
-    from ..simulate import simulate
-
     result = simulate(config)
     v = result.outputs["lyapunov"]
     return {
@@ -172,8 +173,6 @@ def _settling(config, variant, ratio: float) -> dict:
 
 
 def _domain_notes(linearisation: Linearisation, config) -> list[str]:
-    from ..kinematics import GIMBAL_LOCK_ANGLE
-
     notes = []
     limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
     theta_2 = float(linearisation.equilibrium[1])
@@ -239,9 +238,9 @@ def analyze(
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
-    from ..config import load_config
-
     if isinstance(config, (str, os.PathLike)):
+        from ..config import load_config  # heavy: pydantic (the validator)
+
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
     timing: dict[str, float] = {}

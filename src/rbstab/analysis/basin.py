@@ -2,7 +2,7 @@
 
 Two initial-state entries (``initial_state.omega.0`` ...) vary over even grids; every
 other entry keeps the configuration's value. Each grid point is one run of the compiled
-engine (:func:`rbstab.simulate.simulate_many`, many runs per compiled call; the chunks
+engine (:func:`rbstab.simulator.simulate_many`, many runs per compiled call; the chunks
 go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 1``), and
 is classified by the rule a sweep classifies its runs with
 (:func:`rbstab.convergence.converged`), applied from every sample on:
@@ -20,12 +20,14 @@ resolution: the sample spacing t_end / (n_samples - 1)).
 from __future__ import annotations
 
 import re
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from ..layout import BLOCK_UNITS
 
 __all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
 
@@ -66,7 +68,7 @@ class BasinAxis:
         ValueError
             Naming the text, what is wrong and what is allowed.
         """
-        from ..config import INITIAL_STATE_BLOCKS
+        from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
         match = _AXIS.match(text)
         if not match:
@@ -92,7 +94,7 @@ class BasinAxis:
     @property
     def block(self) -> str:
         """The state block (``theta`` ... ``controller_state``)."""
-        from ..config import INITIAL_STATE_BLOCKS
+        from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
         return INITIAL_STATE_BLOCKS[self.key.split(".")[1]]
 
@@ -103,8 +105,6 @@ class BasinAxis:
 
     @property
     def units(self) -> str:
-        from ..layout import BLOCK_UNITS
-
         return BLOCK_UNITS[self.block]
 
     @property
@@ -175,7 +175,7 @@ def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> fl
 
 def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
     """The ``initial_state`` section of every grid point, row-major (first axis slowest)."""
-    from ..config import set_dotted
+    from ..config import set_dotted  # heavy: yaml
 
     base = config.resolved["initial_state"]
     out = []
@@ -192,7 +192,7 @@ def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
 def _run_block(items: list, ratio: float) -> list[tuple]:
     """Run (index, RunConfig) items with the compiled engine; one tuple per item:
     (index, outcome, time to converge, v(t_end), message)."""
-    from ..simulate import simulate_many
+    from ..simulator import simulate_many  # heavy: numba
 
     configs = [c for _, c in items]
     rows = []
@@ -243,8 +243,7 @@ def basin_map(
     ValueError
         For two equal keys.
     """
-    import warnings
-
+    # heavy: yaml
     from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 
     if len(axes) != 2 or axes[0].key == axes[1].key:
@@ -293,7 +292,8 @@ def _execute(items: list, ratio: float, jobs: int):
     if jobs <= 1 or len(items) < 64:
         yield _run_block(items, ratio)
         return
-    from ..sweep.executors import LocalExecutor
+
+    from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
 
     with LocalExecutor(jobs) as executor:
         executor.plan(len(items))

@@ -40,6 +40,10 @@ from typing import Any
 
 import numpy as np
 
+from ..config import canonical_config, config_hash
+from ..io.atomic import atomic_path
+from ..io.metadata import provenance_attributes
+from ..layout import BLOCK_UNITS
 
 __all__ = [
     "FORMAT",
@@ -77,8 +81,6 @@ def _var(dims, data, units: str, long_name: str, description: str = "") -> tuple
 
 def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = False) -> dict:
     """``<prefix>_<block>(axis)`` variables of a state vector ``y`` in ``layout``."""
-    from ..layout import BLOCK_UNITS
-
     out = {}
     for block, values in layout.split(np.asarray(y, dtype=float)).items():
         units = _rate_units(BLOCK_UNITS[block]) if rate else BLOCK_UNITS[block]
@@ -87,9 +89,6 @@ def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = Fal
 
 
 def _provenance(config, command_line: str | None) -> dict[str, Any]:
-    from ..config import canonical_config, config_hash
-    from ..io.metadata import provenance_attributes
-
     return {
         "rbstab_format": FORMAT,
         "config": config.to_yaml(),
@@ -224,8 +223,6 @@ def _text_attributes(analysis) -> dict[str, Any]:
 def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, dict, dict]:
     """(coordinates, variables, global attributes) of an :class:`rbstab.analysis.Analysis`'s
     file (module docstring); each variable a (dims, data, attrs) triple."""
-    from ..layout import BLOCK_UNITS
-
     layout = analysis.layout
     names = layout.state_names()
     units = [BLOCK_UNITS[b] for b in layout.blocks for _ in range(3)]
@@ -292,7 +289,6 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
     }
     coords = {"group": _var(("group",), np.array([g.base for g in groups], dtype=object), "1", "base configuration"),
               "parameter": _var(("parameter",), np.array(parameters, dtype=object), "1", "swept parameter")}
-    from ..io.metadata import provenance_attributes
 
     attrs = dict(
         rbstab_format=FORMAT, kind="robustness", name=f"{result.sweep}.robustness", sweep=result.sweep,
@@ -309,7 +305,7 @@ def robustness_dataset(result, command_line: str | None = None):
 
 
 def _to_xarray(coords: dict, variables: dict, attrs: dict):
-    import xarray as xr
+    import xarray as xr  # heavy: xarray
 
     return xr.Dataset({k: xr.Variable(*v) for k, v in variables.items()},
                       coords={k: xr.Variable(*v) for k, v in coords.items()}, attrs=attrs)
@@ -317,8 +313,8 @@ def _to_xarray(coords: dict, variables: dict, attrs: dict):
 
 def _write_netcdf(path: Path, coords: dict, variables: dict, attrs: dict) -> None:
     """A netCDF-4 file through h5netcdf (without xarray, whose import costs ~0.4 s)."""
-    import h5netcdf
-    import h5py
+    import h5netcdf  # heavy: h5netcdf
+    import h5py  # heavy: h5py
 
     text = h5py.string_dtype()
     with h5netcdf.File(path, "w") as f:
@@ -344,18 +340,15 @@ def analysis_path(folder: str | os.PathLike, name: str) -> Path:
 
 
 def write_analysis(result, path: str | os.PathLike, *, command_line: str | None = None) -> Path:
-    """Write an Analysis or a Robustness to ``path`` atomically (temporary file + rename).
+    """Write an Analysis or a Robustness to ``path`` atomically (temporary file + rename):
+    the content its ``file_content`` gives (:func:`analysis_content`, :func:`robustness_content`).
 
     Raises
     ------
     OSError
         If the folder cannot be created or written; ``path`` is then untouched.
     """
-    from ..io.atomic import atomic_path
-    from .robustness import Robustness
-
-    content = robustness_content(result, command_line) if isinstance(result, Robustness) else \
-        analysis_content(result, command_line)
+    content = result.file_content(command_line)
     with atomic_path(path) as tmp:
         _write_netcdf(tmp, *content)
     return Path(path)
@@ -363,7 +356,7 @@ def write_analysis(result, path: str | os.PathLike, *, command_line: str | None 
 
 def is_analysis_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a file written by :func:`write_analysis`."""
-    import h5py
+    import h5py  # heavy: h5py
 
     path = Path(path)
     if not path.is_file():
@@ -387,7 +380,7 @@ def read_analysis(path: str | os.PathLike):
     ValueError
         If it is not an analysis file.
     """
-    import xarray as xr
+    import xarray as xr  # heavy: xarray
 
     path = Path(path)
     if not path.is_file():

@@ -25,10 +25,13 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field
+from statistics import NormalDist
 
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from ..sweep.folder import open_sweep
+from .dataset import robustness_content, robustness_dataset
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
            "DEFAULT_CONFIDENCE"]
@@ -49,8 +52,6 @@ def wilson_interval(k: int, n: int, confidence: float = DEFAULT_CONFIDENCE) -> t
     confidence : float
         In (0, 1).
     """
-    from statistics import NormalDist
-
     if n == 0:
         return 0.0, 1.0
     z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
@@ -213,9 +214,12 @@ class Robustness:
 
     def to_dataset(self):
         """As an :class:`xarray.Dataset` (:func:`rbstab.analysis.dataset.robustness_dataset`)."""
-        from .dataset import robustness_dataset
-
         return robustness_dataset(self)
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.robustness_content`)."""
+        return robustness_content(self, command_line)
 
 
 def _numeric_parameters(ds) -> list[str]:
@@ -238,8 +242,6 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
     ValueError
         For a confidence outside (0, 1).
     """
-    from ..sweep.folder import open_sweep
-
     if not 0 < confidence < 1:
         raise ValueError(f"--confidence: found {confidence}; expected 0 < confidence < 1")
     ds = open_sweep(path)

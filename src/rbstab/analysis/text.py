@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..layout import BLOCK_UNITS
+
 __all__ = ["describe", "describe_robustness", "format_eigenvalue", "format_state"]
 
 
@@ -23,8 +25,6 @@ def format_eigenvalue(s: complex) -> str:
 
 def format_state(layout, y: np.ndarray) -> str:
     """``theta (0, 0, 0) rad, omega (0, 0, 0) rad s-1, ...``."""
-    from ..layout import BLOCK_UNITS
-
     parts = []
     for block, values in layout.split(np.asarray(y, dtype=float)).items():
         parts.append(f"{block} ({', '.join(_g(v, 6) for v in values + 0.0)}) {BLOCK_UNITS[block]}")

@@ -68,6 +68,8 @@ is a float (PyYAML follows YAML 1.1 and reads it as a string), and a key given t
 one mapping is an error instead of silently keeping the last value.
 """
 
+import importlib
+
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .identity import RUN_LIMIT_KEYS, canonical_config, canonical_configs, config_hash
 from .yaml_io import dump_yaml, parse_yaml
@@ -82,8 +84,6 @@ _LAZY = {
 
 
 def __getattr__(name: str):
-    import importlib
-
     for module, names in _LAZY.items():
         if name in names:
             value = getattr(importlib.import_module(f"{__name__}.{module}"), name)

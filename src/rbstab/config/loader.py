@@ -196,7 +196,7 @@ class RunConfig:
         shares the ``body``, ``gains`` and ``simulation`` objects of the first of them with
         the same ``body``, ``controller`` and ``simulation`` sections, so that runs that
         differ only in name and initial state share one variant
-        (:func:`rbstab.simulate.simulate_many`). "The same" is Python's ``==``: sections
+        (:func:`rbstab.simulator.simulate_many`). "The same" is Python's ``==``: sections
         that differ only in the sign of a zero (-0.0 == 0.0) count as the same.
 
         Raises

@@ -127,7 +127,7 @@ def _sliding_capacity(null: np.ndarray, weight: np.ndarray) -> float:
     Along u (K_t u = 0) the potential is K_s sum|E_i| - X'G + bounded terms, bounded
     below exactly when G.u <= K_s |u|_1 for every such u (a small linear programme).
     """
-    from scipy.optimize import linprog
+    from scipy.optimize import linprog  # heavy: scipy
 
     k = null.shape[1]
     eye = np.eye(3)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from llvmlite import ir
@@ -25,20 +26,21 @@ from numba.core.extending import intrinsic
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.kernels import state_rate
-from . import tableaus
-from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
-                 error_norm, initial_step, rk_step)
-from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
+from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
+                 method_number, rk_step)
+from .settings import settings_records, work_arrays
+from .status import DEFAULT_MAX_STEPS, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
+from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
-__all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY"]
+__all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
+           "integrate_runs"]
 
-SAFETY, MIN_FACTOR, MAX_FACTOR = float(tableaus.SAFETY), float(tableaus.MIN_FACTOR), float(tableaus.MAX_FACTOR)
+SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
 
 
 #: Steps between two readings of the clock for the wall-time limit (a reading costs ~0.3 us,
 #: a step of DOP853 on the embedded body ~6 us).
 CLOCK_EVERY = 64
-
 
 #: ``CLOCK_MONOTONIC`` of ``clock_gettime`` in the C library, where it is known.
 _CLOCK_MONOTONIC = {"linux": 1, "darwin": 6, "freebsd": 4}.get(sys.platform.rstrip("0123456789"))
@@ -89,12 +91,17 @@ def sample_time(j, n, t_end):
 
 
 @jit
-def step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work):
-    """One accepted step from (t, y) with rate f (scipy's ``_step_impl``).
+def step(code, p, s, t, y, f, h_abs, w):
+    """One accepted step from (t, y) with rate f (scipy's ``_step_impl``), with the run's
+    settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`) and work arrays ``w``
+    (:class:`~rbstab.engine.settings.Work`).
 
-    Returns (status, t_new, h, next h_abs, attempts); y_new and its rate K[n_stages] hold
-    the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing accepted).
+    Returns (status, t_new, h, next h_abs, attempts); ``w.y_new`` and its rate
+    ``w.K[n_stages]`` hold the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing
+    accepted).
     """
+    t_end, max_step, rtol, atol, method = s.t_end, s.max_step, s.rtol, s.atol, s.method
+    K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
     error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
     min_step = 10 * abs(np.nextafter(t, np.inf) - t)
     h_abs = min(max(h_abs, min_step), max_step)
@@ -148,49 +155,44 @@ def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
 
 
 @jit
-def integrate_run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, method,
-                  samples):
-    """Integrate one run and fill ``samples`` (n_samples, n_state) at linspace(0, t_end).
+def integrate_run(code, p, y0, s, samples):
+    """Integrate one run with the settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`)
+    and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end).
 
-    The run stops after ``max_steps`` accepted steps (STEP_LIMIT) or ``max_wall_time``
+    The run stops after ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time``
     seconds (TIMEOUT; inf for none). Rows after the run stopped are NaN. Returns
     (status, t_stop, nfev, n_steps).
     """
-    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps,
-                                                 max_wall_time, method, samples)
+    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, s, samples)
     samples[filled:, :] = np.nan  # only the rows after a stop: a run that ends writes each row once
     return status, t_stop, nfev, n_steps
 
 
 @jit(forceinline=True)
-def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, method, samples):
+def _run(code, p, y0, s, samples):
     """:func:`integrate_run` but the NaN rows; also returns the number of rows filled."""
+    max_wall_time, t_end, method = s.max_wall_time, s.t_end, s.method
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     n_samples = samples.shape[0]
     dop853 = method == DOP853
-    K = np.empty((STAGE_ROWS[method], n))
-    Q = np.empty((INTERPOLANT_ROWS[method], n))
+    w = work_arrays(method, n)
+    K, Q, y_new, work = w.K, w.Q, w.y_new, w.work
     y = y0.copy()
     f = np.empty(n)
-    y_new = np.empty(n)
-    scale = np.empty(n)
-    work = np.empty(n)
-    limit = GIMBAL_LOCK_ANGLE - gimbal_margin
+    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
     state_rate(code, y, p, f)
-    h_abs = initial_step(code, p, y, f, t_end, max_step, ERROR_ORDER[method], rtol, atol, y_new, work, scale)
+    h_abs = initial_step(code, p, s, y, f, w)
     nfev = 2
     t = 0.0
     j = 0  # next sample
     n_steps = 0
     while t < t_end:
-        if n_steps >= max_steps:
+        if n_steps >= s.max_steps:
             return STEP_LIMIT, t, nfev, n_steps, j
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, j
-        status, t_new, h, h_abs, attempts = step(
-            code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K, y_new, scale, work
-        )
+        status, t_new, h, h_abs, attempts = step(code, p, s, t, y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, j
@@ -199,7 +201,7 @@ def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max
         t_stop = t_new
         event = _gimbal(y, limit) >= 0 and _gimbal(y_new, limit) <= 0
         if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-            nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, K, Q, work)
+            nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, w)
         if event:
             t_stop, _ = _locate_event(t, h, y, Q, dop853, limit, work)
         while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
@@ -215,17 +217,98 @@ def _run(code, p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max
 
 
 @jit
-def integrate_chunk(codes, params, y0, settings, method, samples, status, t_stop, nfev, n_steps):
+def integrate_chunk(codes, params, y0, settings, samples, status, t_stop, nfev, n_steps):
     """:func:`integrate_run` for every run k of a chunk.
 
     ``codes`` (k,) variant codes; ``params`` (k,) PARAMETERS records; ``y0`` (k, n_state);
-    ``method`` the method's number (:data:`rbstab.engine.rk.METHODS`);
-    ``settings`` (k, 7): t_end, rtol, atol, max_step, gimbal_margin, max_steps,
-    max_wall_time; ``samples`` (k, n_samples, n_state); ``status``, ``t_stop``, ``nfev``,
-    ``n_steps`` (k,) are filled.
+    ``settings`` (k,) :data:`~rbstab.engine.settings.SETTINGS` records; ``samples``
+    (k, n_samples, n_state); ``status``, ``t_stop``, ``nfev``, ``n_steps`` (k,) are filled.
     """
     for k in range(codes.shape[0]):
-        s = settings[k]
-        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(
-            codes[k], params[k], y0[k], s[0], s[1], s[2], s[3], s[4], int(s[5]), s[6], method, samples[k]
-        )
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(codes[k], params[k], y0[k], settings[k], samples[k])
+
+
+# -- from Python -----------------------------------------------------------------------------------
+@dataclass
+class ChunkSolution:
+    """Samples of k runs and how each ended.
+
+    Attributes
+    ----------
+    samples : ndarray, shape (k, n_samples, n_state)
+        The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
+    status : ndarray of int, shape (k,)
+        How each run ended (:mod:`rbstab.engine.status`: 0 reached t_end, 1 gimbal lock,
+        negative a failure).
+    t_stop : ndarray, shape (k,)
+        Where each run stopped [s] (the event time for gimbal lock).
+    nfev, n_steps : ndarray of int, shape (k,)
+        Right-hand-side evaluations and accepted steps.
+    """
+
+    samples: np.ndarray
+    status: np.ndarray
+    t_stop: np.ndarray
+    nfev: np.ndarray
+    n_steps: np.ndarray
+
+
+def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
+                   max_steps: int = DEFAULT_MAX_STEPS, max_wall_time: float = np.inf,
+                   out: np.ndarray | None = None) -> ChunkSolution:
+    """Integrate k runs of one method and sample count.
+
+    Parameters
+    ----------
+    codes : array_like of int, shape (k,)
+        Variant codes (``Variant.code``); every run's state has the same size.
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,)
+    y0 : ndarray, shape (k, n_state)
+        Initial states.
+    settings : ndarray, shape (k, 5) or (k, 7)
+        Per run: t_end [s], rtol, atol, max_step [s], gimbal_margin [rad], and optionally
+        max_steps and max_wall_time [s] (default: the arguments of those names).
+    method : str
+        One of :data:`METHODS`.
+    n_samples : int
+        Samples per run, evenly spaced on [0, t_end] (>= 2).
+    max_steps : int
+        Accepted steps after which a run stops (STEP_LIMIT), for 5-column ``settings``.
+    max_wall_time : float
+        Seconds after which a run stops (TIMEOUT; inf: none), for 5-column ``settings``.
+    out : ndarray, shape (>= k, n_samples, n_state), optional
+        Where the samples go (its first k rows, returned as ``samples``): a buffer the
+        caller reuses for call after call, so that a worker holds one (default: a new
+        array).
+
+    Raises
+    ------
+    ValueError
+        If ``out`` is not a writable C-contiguous float64 array of that shape.
+    """
+    codes = np.ascontiguousarray(codes, dtype=np.int64)
+    y0 = np.ascontiguousarray(y0, dtype=float)
+    k, n = y0.shape
+    settings = np.asarray(settings, dtype=float)
+    if settings.shape[1] == 5:
+        settings = np.column_stack([settings, np.full(k, float(max_steps)), np.full(k, float(max_wall_time))])
+    samples = np.empty((k, n_samples, n)) if out is None else _sample_buffer(out, (k, n_samples, n))
+    status = np.empty(k, dtype=np.int64)
+    t_stop = np.empty(k)
+    nfev = np.empty(k, dtype=np.int64)
+    n_steps = np.empty(k, dtype=np.int64)
+    with np.errstate(all="ignore"):
+        integrate_chunk(codes, np.ascontiguousarray(params), y0, settings_records(settings, method_number(method)),
+                        samples, status, t_stop, nfev, n_steps)
+    return ChunkSolution(samples, status, t_stop, nfev, n_steps)
+
+
+def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:
+    """The first ``shape[0]`` rows of ``out`` (see :func:`integrate_runs`); ValueError if it
+    cannot hold them."""
+    if not (isinstance(out, np.ndarray) and out.dtype == np.float64 and out.flags.c_contiguous
+            and out.flags.writeable and out.ndim == 3 and out.shape[0] >= shape[0] and out.shape[1:] == shape[1:]):
+        found = f"shape {out.shape} of {out.dtype}" if isinstance(out, np.ndarray) else type(out).__name__
+        raise ValueError(f"out: found {found}; expected a writable C-contiguous float64 array of shape "
+                         f"(>= {shape[0]}, {shape[1]}, {shape[2]})")
+    return out[: shape[0]]

@@ -33,11 +33,26 @@ from ..jit import jit
 from ..variants.kernels import state_rate
 from .tableaus import DOP853_EXTENDED, METHODS, TABLEAUS
 
-__all__ = ["METHODS", "DOP853", "rms_norm", "initial_step", "rk_step", "error_norm", "dense_coefficients",
-           "dense_value"]
+__all__ = ["METHODS", "DOP853", "method_number", "rms_norm", "initial_step", "rk_step", "error_norm",
+           "dense_coefficients", "dense_value"]
 
 #: DOP853's number (its error estimate and dense output differ from the other two's).
 DOP853 = METHODS.index("DOP853")
+
+
+def method_number(method: str) -> int:
+    """The compiled engine's number of ``method`` (``"RK23"``, ``"RK45"`` or ``"DOP853"``):
+    its index in :data:`METHODS` (:mod:`rbstab.engine.tableaus`), the rows of its tableau
+    in :mod:`rbstab.engine.rk`'s tables.
+
+    Raises
+    ------
+    ValueError
+        For a method not in :data:`METHODS`.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method: found {method!r}; the compiled engine has {', '.join(METHODS)}")
+    return METHODS.index(method)
 
 
 def _stacked(arrays, shape: tuple) -> np.ndarray:
@@ -79,11 +94,16 @@ def rms_norm(x, scale):
 
 
 @jit
-def initial_step(code, p, y0, f0, t_bound, max_step, error_order, rtol, atol, y1, f1, scale):
+def initial_step(code, p, s, y0, f0, w):
     """scipy's ``select_initial_step`` from t = 0 (Hairer, Norsett & Wanner, II.4).
 
-    ``y1``, ``f1``, ``scale``: work arrays of the state's shape. One right-hand-side call.
+    ``s``: the run's settings (:data:`rbstab.engine.settings.SETTINGS`: ``t_end``,
+    ``max_step``, ``rtol``, ``atol``, ``method``); ``w``: its work arrays
+    (:class:`rbstab.engine.settings.Work`: ``y_new``, ``work`` and ``scale`` are
+    overwritten). One right-hand-side call.
     """
+    t_bound, max_step, error_order, rtol, atol = s.t_end, s.max_step, ERROR_ORDER[s.method], s.rtol, s.atol
+    y1, f1, scale = w.y_new, w.work, w.scale
     n = y0.shape[0]
     for i in range(n):
         scale[i] = atol + abs(y0[i]) * rtol
@@ -176,12 +196,14 @@ def error_norm(K, h, scale, method):
 
 
 @jit
-def dense_coefficients(code, p, y_old, y_new, f_new, h, method, K, Q, work):
-    """The interpolant of the step from y_old to y_new into ``Q`` (rows of coefficients).
+def dense_coefficients(code, p, y_old, y_new, f_new, h, method, w):
+    """The interpolant of the step from y_old to y_new into ``w.Q`` (rows of coefficients;
+    ``w``: the run's :class:`rbstab.engine.settings.Work`, its stage rates ``w.K``).
 
     RK23/RK45: Q = (K' P)' (order rows); DOP853: its 3 extra stages (3 right-hand-side
     calls) and the 7 rows F of scipy's ``Dop853DenseOutput``.
     """
+    K, Q, work = w.K, w.Q, w.work
     n_stages, D = N_STAGES[method], DOP853_D
     n = y_old.shape[0]
     if method != DOP853:

@@ -31,18 +31,21 @@ See docs/sliding.md for the physics, the resolution and measured figures.
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..summary import piecewise_numerical_rate
 from ..variants.kernels import state_rate
-from ..variants.sliding import mode_code, mode_quantities, stop_at_c
+from ..variants.sliding import mode_code, mode_quantities, mode_rows, stop_at_c
 from .integrate import CLOCK_EVERY, sample_time, step, wall_clock
-from .rk import (DOP853, ERROR_ORDER, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value,
-                 initial_step)
+from .rk import DOP853, N_STAGES, dense_coefficients, dense_value, initial_step, method_number
+from .settings import settings_records, work_arrays
 from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, SWITCHING_LIMIT, TIMEOUT, status_message
+from .tableaus import METHODS
 
 __all__ = [
     "RESOLUTION",
@@ -159,23 +162,30 @@ def _event_values(y, p, mode, limit, g, dg):
     dg[3] = np.nan
 
 
+#: A step's interpolant: size h [s], the state y_old at its start, the coefficients Q
+#: (:func:`rbstab.engine.rk.dense_coefficients`) and whether the method is DOP853.
+Interpolant = namedtuple("Interpolant", ["h", "y_old", "Q", "dop853"])
+
+
 @jit
-def _value(x, p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate):
-    """Event ``index`` (minus its rate when ``rate``) at the fraction x of the step."""
-    dense_value(x, h, y_old, Q, dop853, work)
+def _value(x, p, mode, limit, it, scratch, index, rate):
+    """Event ``index`` (minus its rate when ``rate``) at the fraction x of the step of
+    interpolant ``it``; ``scratch``: (a state, event values g, their rates dg), overwritten."""
+    work, g, dg = scratch
+    dense_value(x, it.h, it.y_old, it.Q, it.dop853, work)
     _event_values(work, p, mode, limit, g, dg)
     return -dg[index] if rate else g[index]
 
 
 @jit
-def _root(p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate, lo, hi):
+def _root(p, mode, limit, it, scratch, index, rate, lo, hi):
     """x in (lo, hi] (fractions of the step) where event ``index`` (minus its rate when
     ``rate``) falls to <= 0, > 0 at lo and <= 0 at hi: the Illinois variant of regula falsi
     (bisection where it stalls), to :data:`X_TOLERANCE`, keeping the bracket; returns its
     upper end, where the event function is <= 0 (the new side of a surface).
-    ``work``, ``g``, ``dg``: scratch arrays."""
-    f_lo = _value(lo, p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate)
-    f_hi = _value(hi, p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate)
+    ``scratch``: as :func:`_value`'s."""
+    f_lo = _value(lo, p, mode, limit, it, scratch, index, rate)
+    f_hi = _value(hi, p, mode, limit, it, scratch, index, rate)
     side = 0
     for _ in range(200):
         if hi - lo <= X_TOLERANCE or f_hi == 0.0:
@@ -185,7 +195,7 @@ def _root(p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate, lo, hi)
             x = 0.5 * (lo + hi)
             if x <= lo or x >= hi:  # the spacing of floats
                 break
-        f_x = _value(x, p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate)
+        f_x = _value(x, p, mode, limit, it, scratch, index, rate)
         if f_x > 0:
             lo, f_lo = x, f_x
             if side < 0:
@@ -200,13 +210,15 @@ def _root(p, mode, limit, h, y_old, Q, dop853, work, g, dg, index, rate, lo, hi)
 
 
 @jit
-def first_event(p, mode, limit, h, y_old, Q, dop853, work, g, dg):
-    """The first event in a step: ``(x, index)`` with x its fraction of the step (-1 if
-    none) and index 0-2 an axis, 3 the gimbal lock. ``g``, ``dg`` (4, 4): rows 0 hold the
-    event values at the step's start (:func:`_event_values`); the rest is scratch."""
+def first_event(p, mode, limit, it, work, g, dg):
+    """The first event in the step of interpolant ``it``: ``(x, index)`` with x its fraction
+    of the step (-1 if none) and index 0-2 an axis, 3 the gimbal lock. ``g``, ``dg`` (4, 4):
+    rows 0 hold the event values at the step's start (:func:`_event_values`); the rest is
+    scratch, as is ``work``."""
+    scratch = (work, g[2], dg[2])
     for k in range(1, SEARCH_POINTS + 1):
         lo, hi = (k - 1) / SEARCH_POINTS, k / SEARCH_POINTS
-        dense_value(hi, h, y_old, Q, dop853, work)
+        dense_value(hi, it.h, it.y_old, it.Q, it.dop853, work)
         _event_values(work, p, mode, limit, g[1], dg[1])
         first, which = 2.0, -1
         for e in range(4):
@@ -214,14 +226,14 @@ def first_event(p, mode, limit, h, y_old, Q, dop853, work, g, dg):
             if k == 1 and g[0, e] <= 0 and dg[0, e] <= 0 and g[1, e] < g[0, e]:
                 x = 0.0  # on the surface, or past it by rounding, and moving on: a crossing now
             elif g[0, e] > 0 >= g[1, e]:
-                x = _root(p, mode, limit, h, y_old, Q, dop853, work, g[2], dg[2], e, False, lo, hi)
+                x = _root(p, mode, limit, it, scratch, e, False, lo, hi)
             elif g[0, e] > 0 and g[1, e] > 0 and dg[0, e] < 0 < dg[1, e]:
                 # a minimum inside: E_i may dip through its surface and back between two points
-                x_min = _root(p, mode, limit, h, y_old, Q, dop853, work, g[2], dg[2], e, True, lo, hi)
-                dense_value(x_min, h, y_old, Q, dop853, work)
+                x_min = _root(p, mode, limit, it, scratch, e, True, lo, hi)
+                dense_value(x_min, it.h, it.y_old, it.Q, it.dop853, work)
                 _event_values(work, p, mode, limit, g[3], dg[3])
                 if g[3, e] <= 0:
-                    x = _root(p, mode, limit, h, y_old, Q, dop853, work, g[2], dg[2], e, False, lo, x_min)
+                    x = _root(p, mode, limit, it, scratch, e, False, lo, x_min)
             if x < first:
                 first, which = x, e
         if which >= 0:
@@ -319,10 +331,11 @@ def _end_inadmissible_sliding(y, p, mode, t, events, n_events):
 
 
 @jit
-def next_piece(p, mode, index, t, y_event, resolution, y, events, n_events, jumps):
+def next_piece(p, mode, index, t, y_event, resolution, y, log, n_events):
     """The mode after event ``index`` (an axis) at ``y_event`` and time t, logged in
-    ``events``; ``y`` receives the next piece's initial state. Returns (mode, longest first
-    step [s], n_events)."""
+    ``log`` = (events, jumps) (:func:`integrate_switching`'s arrays); ``y`` receives the
+    next piece's initial state. Returns (mode, longest first step [s], n_events)."""
+    events, jumps = log
     longest = np.inf
     if mode[index] == 0.0:  # the equivalent force reached K_s
         _, f, lam, _ = mode_quantities(y_event, p, mode)
@@ -340,11 +353,12 @@ def next_piece(p, mode, index, t, y_event, resolution, y, events, n_events, jump
 
 
 @jit
-def _fill_samples(samples, modes, j, t, h, t_stop, t_end, y_old, Q, dop853, mode):
-    """Samples j, j+1, ... at times <= t_stop from the step's interpolant; the next j."""
+def _fill_samples(samples, modes, j, t, t_stop, t_end, it, mode):
+    """Samples j, j+1, ... at times <= t_stop from the interpolant ``it`` of the step from
+    t; the next j."""
     n_samples = samples.shape[0]
     while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
-        dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y_old, Q, dop853, samples[j])
+        dense_value((sample_time(j, n_samples, t_end) - t) / it.h, it.h, it.y_old, it.Q, it.dop853, samples[j])
         for i in range(3):
             modes[j, i] = mode[i]
         j += 1
@@ -353,53 +367,54 @@ def _fill_samples(samples, modes, j, t, h, t_stop, t_end, y_old, Q, dop853, mode
 
 # -- the driver (compiled) -----------------------------------------------------------------------
 @jit
-def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_steps, max_wall_time, resolution,
-                        method, samples, modes, events, jumps):
-    """Integrate one sign-law run, filling ``samples`` (n, 12) at linspace(0, t_end, n),
-    the mode of each sample into ``modes`` (n, 3), the events into ``events`` (rows
-    time, axis, kind, F_i; at most its length, then the run stops) and the summed jumps
-    |Delta Lambda_i| [N] at the events into ``jumps`` (3,). The run stops after
-    ``max_steps`` accepted steps or ``max_wall_time`` seconds (inf for none), as
+def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
+    """Integrate one sign-law run with the settings ``s``
+    (:data:`~rbstab.engine.settings.SETTINGS`) and the switching resolution [m], filling
+    ``samples`` (n, 12) at linspace(0, s.t_end, n), the mode of each sample into ``modes``
+    (n, 3), the events into ``events`` (rows time, axis, kind, F_i; at most its length,
+    then the run stops) and the summed jumps |Delta Lambda_i| [N] at the events into
+    ``jumps`` (3,). The run stops after ``s.max_steps`` accepted steps or
+    ``s.max_wall_time`` seconds (inf for none), as
     :func:`rbstab.engine.integrate.integrate_run` does.
 
     Returns (status, t_stop, nfev, n_steps, n_pieces, n_events).
     """
+    max_wall_time, t_end, method = s.max_wall_time, s.t_end, s.method
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     dop853 = method == DOP853
-    K = np.empty((STAGE_ROWS[method], n))
-    Q = np.empty((INTERPOLANT_ROWS[method], n))
-    y, f, y_new, scale, work = y0.copy(), np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    w = work_arrays(method, n)
+    K, Q, y_new, work = w.K, w.Q, w.y_new, w.work
+    y, f = y0.copy(), np.empty(n)
     g, dg = np.empty((4, 4)), np.empty((4, 4))
     samples[:, :] = np.nan
     modes[:, :] = np.nan
     jumps[:] = 0.0
-    limit = GIMBAL_LOCK_ANGLE - gimbal_margin
+    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
     mode, n_events = initial_mode(y, p, resolution, work), 0
     for i in range(3):
         if mode[i] == 0.0:
             n_events = _log(events, n_events, 0.0, i, SLIDING_STARTS, 0.0)
     state_rate(mode_code(mode), y, p, f)
-    h_abs = initial_step(mode_code(mode), p, y, f, t_end, max_step, ERROR_ORDER[method], rtol, atol, y_new, work,
-                         scale)
+    h_abs = initial_step(mode_code(mode), p, s, y, f, w)
     nfev, n_steps, n_pieces, t, j = 2, 0, 1, 0.0, 0
     while t < t_end:
-        if n_steps >= max_steps:
+        if n_steps >= s.max_steps:
             return STEP_LIMIT, t, nfev, n_steps, n_pieces, n_events
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, n_pieces, n_events
         code = mode_code(mode)
-        status, t_new, h, h_abs, attempts = step(code, p, t, y, f, h_abs, t_end, max_step, rtol, atol, method, K,
-                                                 y_new, scale, work)
+        status, t_new, h, h_abs, attempts = step(code, p, s, t, y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, n_pieces, n_events
         n_steps += 1
-        nfev += dense_coefficients(code, p, y, y_new, K[N_STAGES[method]], h, method, K, Q, work)
+        nfev += dense_coefficients(code, p, y, y_new, K[N_STAGES[method]], h, method, w)
         _event_values(y, p, mode, limit, g[0], dg[0])
-        x, index = first_event(p, mode, limit, h, y, Q, dop853, work, g, dg)
+        it = Interpolant(h, y, Q, dop853)
+        x, index = first_event(p, mode, limit, it, work, g, dg)
         t_stop = t_new if index < 0 else t + x * h
-        j = _fill_samples(samples, modes, j, t, h, t_stop, t_end, y, Q, dop853, mode)
+        j = _fill_samples(samples, modes, j, t, t_stop, t_end, it, mode)
         if index < 0:
             t = t_new
             y[:] = y_new
@@ -411,7 +426,7 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
             return GIMBAL_LOCK, t, nfev, n_steps, n_pieces, n_events
         if n_events >= events.shape[0]:
             return SWITCHING_LIMIT, t, nfev, n_steps, n_pieces, n_events
-        mode, longest, n_events = next_piece(p, mode, index, t, work, resolution, y, events, n_events, jumps)
+        mode, longest, n_events = next_piece(p, mode, index, t, work, resolution, y, (events, jumps), n_events)
         h_abs = min(h_abs, longest)
         n_pieces += 1
         state_rate(mode_code(mode), y, p, f)
@@ -425,23 +440,17 @@ def integrate_switching(p, y0, t_end, rtol, atol, max_step, gimbal_margin, max_s
 def warm_up(params: np.ndarray) -> None:
     """Compile (or load from the cache) the sign-law engine and its outputs on a tiny run
     (:func:`rbstab.engine.warm_up` calls it); ``params``: a PARAMETERS array of shape (1,)."""
-    from . import METHODS, method_number
-    from ..variants.sliding import mode_rows
-
     y0 = np.zeros(12)
     y0[9] = 1.0
     samples, modes, events, jumps = np.empty((2, 12)), np.empty((2, 3)), np.empty((4, 4)), np.empty(3)
     for method in METHODS:
-        integrate_switching(params[0], y0, 1e-3, 1e-3, 1e-6, np.inf, 1e-3, 1000, np.inf, RESOLUTION,
-                            method_number(method),
-                            samples, modes, events, jumps)
+        s = settings_records(np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3, 1000, np.inf]]), method_number(method))
+        integrate_switching(params[0], y0, s[0], RESOLUTION, samples, modes, events, jumps)
     mode_rows(samples, params, modes, np.empty((2, 12)))
 
 
 def engine_method(method: str) -> str:
     """The compiled method that integrates a sign-law run configured with ``method``."""
-    from . import METHODS
-
     return method if method in METHODS else "DOP853"
 
 
@@ -471,8 +480,6 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     SignLawSolution
         A failure (gimbal lock, solver failure, switching or step limit, timeout) is data.
     """
-    from . import method_number
-
     n = int(settings.n_samples)
     samples = np.empty((n, 12))
     modes = np.empty((n, 3))
@@ -481,11 +488,13 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     method = engine_method(settings.method)
     max_steps = int(settings.max_steps)
     max_wall_time = float(settings.max_wall_time if timeout is None else timeout)
+    s = settings_records(np.array([[settings.t_end, settings.rtol, settings.atol, settings.max_step,
+                                    settings.gimbal_margin, max_steps, max_wall_time]], dtype=float),
+                         method_number(method))
     with np.errstate(all="ignore"):
         status, t_stop, nfev, n_steps, n_pieces, n_events = integrate_switching(
-            variant._parameters_without_offset[0], np.ascontiguousarray(y0, dtype=float), float(settings.t_end),
-            float(settings.rtol), float(settings.atol), float(settings.max_step), float(settings.gimbal_margin),
-            max_steps, max_wall_time, float(resolution), method_number(method), samples, modes, events, jumps)
+            variant._parameters_without_offset[0], np.ascontiguousarray(y0, dtype=float), s[0], float(resolution),
+            samples, modes, events, jumps)
     log = events[: min(n_events, max_switchings)]
     switchings = Switchings(log[:, 0].copy(), log[:, 1].astype(np.int64), log[:, 2].astype(np.int64), log[:, 3].copy())
     message = status_message(int(status), t_stop, settings.gimbal_margin, max_steps, max_wall_time,
@@ -555,9 +564,6 @@ def sign_law_outputs(variant, solution: SignLawSolution) -> tuple[dict, np.ndarr
     checked : ndarray of bool, shape (n_samples,)
         Samples whose numerical rate has its full stencil on one piece.
     """
-    from ..summary import piecewise_numerical_rate
-    from ..variants.sliding import mode_rows
-
     outputs = variant.evaluate(solution.states)
     rows = np.empty((len(solution.time), 12))
     with np.errstate(all="ignore"):

@@ -56,17 +56,13 @@ import numpy as np
 
 from ..config import canonical_config, config_hash
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import (
-    SUMMARY_VARIABLES,
-    NotAResultFile,
-    _plain,
-    summary_stride,
-)
-from .integrity import fletcher32_chunks
+from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, _plain, summary_stride
+from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
+                        fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..simulate import RunResult
+    from ..simulator import RunResult
 
 __all__ = [
     "CHUNK_FORMAT",
@@ -125,7 +121,7 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
     ``written``: key -> the array written, for the str, int and float values (what
     :func:`rbstab.io.integrity.content_digest` would read back).
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     str_type, scalar = _h5_constants()
     for key, value in attrs.items():
@@ -150,7 +146,7 @@ def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = Non
 @functools.cache
 def _h5_constants() -> tuple:
     """(variable-length UTF-8 string type, scalar space) of :func:`_put_attributes`, made once."""
-    import h5py
+    import h5py  # heavy: h5py
 
     return h5py.h5t.py_create(h5py.string_dtype(), logical=True), h5py.h5s.create(h5py.h5s.SCALAR)
 
@@ -257,7 +253,7 @@ class ChunkWriter:
     """Write the runs of one chunk into one store file (module docstring), atomically.
 
     Use as a context manager: :meth:`add` a finished run (any status), :meth:`add_block`
-    finished runs that share their sample times (:class:`rbstab.simulate.RunBlock`: their
+    finished runs that share their sample times (:class:`rbstab.simulator.RunBlock`: their
     traces copied at once, their values kept as columns) or :meth:`add_error` a run that
     raised, once per row; leaving the block without an
     exception writes the per-run values and renames the file into place; an exception
@@ -324,13 +320,13 @@ class ChunkWriter:
             self.attrs["run_templates"] = "[" + ",".join(canonical_config(t, limits=True) for t in templates) + "]"
 
     def __enter__(self) -> "ChunkWriter":
-        import h5netcdf
+        import h5netcdf  # heavy: h5netcdf
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._room(0)
         tmp = self._stack.enter_context(atomic_path(self.path))
         self._file = self._stack.enter_context(h5netcdf.File(tmp, "w"))
-        import h5py
+        import h5py  # heavy: h5py
 
         self._str = h5py.string_dtype()
         f = self._file
@@ -380,14 +376,14 @@ class ChunkWriter:
         (the ``config`` column), if the caller has them (a sweep's plan computed them); else
         computed here.
         """
-        from ..simulate import RunBlock
+        from ..simulator import RunBlock  # heavy: numba
 
         return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
                               config_texts=[config_text])[0]
 
     def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None,
                   config_texts: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
-        """Add finished runs that share their sample times (a :class:`rbstab.simulate.RunBlock`,
+        """Add finished runs that share their sample times (a :class:`rbstab.simulator.RunBlock`,
         ``run_ids[j]`` its run j); returns their rows, as :meth:`add` does each.
 
         ``config_hashes``, ``config_texts``: as :meth:`add`'s, a value a run (None or ""
@@ -592,7 +588,6 @@ class ChunkWriter:
             _put_attributes(self._datasets[name].id, {"coordinates": self._coordinates}, self._written[f"/{name}"])
         h5 = f._h5file
         _put_attributes(h5["/"].id, self.attrs, self._written.setdefault("/", {}))
-        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest
 
         f.flush()
         _put_attributes(h5["/"].id, {DIGEST_ATTR: content_digest(h5, self._texts, self._written),
@@ -602,8 +597,6 @@ class ChunkWriter:
         """:func:`rbstab.io.integrity.data_digest` of the file: from the arrays written when
         every numeric variable was written whole (one block: a ``thinned`` or ``summary``
         store), else by reading the file back."""
-        from .integrity import data_digest, data_digest_of
-
         if all(name in self._numbers for name in self._traces):  # every numeric variable is there
             return data_digest_of(self._numbers)
         return data_digest(self._file._h5file, self.path)
@@ -647,7 +640,7 @@ class ChunkWriter:
         made once a file for each kind (text, float, int): chunked with Fletcher-32 for
         numbers, NaN the fill value of floats; attributes in creation order (netCDF-C lists
         them in HDF5's creation order, as written)."""
-        import h5py
+        import h5py  # heavy: h5py
 
         kind = dtype.kind
         if kind not in self._kinds:
@@ -674,7 +667,7 @@ class ChunkWriter:
         (tests/test_netcdf_c.py). Through h5py's low-level API: ~0.5 ms a variable, its
         attributes included, against ~1.1 ms with ``create_dataset`` and ``attrs`` and
         ~3 ms with h5netcdf's ``create_variable``."""
-        import h5py
+        import h5py  # heavy: h5py
 
         h5 = self._file._h5file
         if name in _TEXT or _has_text(values):
@@ -703,7 +696,7 @@ class ChunkWriter:
 
 def is_chunk_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a readable store file (``rbstab_format`` = :data:`CHUNK_FORMAT`)."""
-    import h5py
+    import h5py  # heavy: h5py
 
     try:
         with h5py.File(path, "r") as f:
@@ -735,8 +728,6 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
         If its checksums do not match (the digest of its text and attributes, the
         Fletcher-32 checksums of the per-run values; ``data``: of the traces too).
     """
-    from .integrity import DamagedResultError, open_result, verify_open_file
-
     path = Path(path)
     with open_result(path) as f:
         if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
@@ -775,9 +766,8 @@ def read_chunk_columns(path: str | os.PathLike, *, data: bool = False):
     ------
     As :func:`read_chunk_rows`.
     """
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
-    from .integrity import DamagedResultError, open_result, verify_open_file
 
     path = Path(path)
     with open_result(path) as f:
@@ -810,7 +800,7 @@ def _config_text(templates: list, columns: Mapping[str, list], keys: Mapping[str
 
 
 def _resolved(templates: list, columns: Mapping[str, list], keys: Mapping[str, str], i: int) -> dict:
-    from ..config import set_dotted
+    from ..config import set_dotted  # heavy: pydantic (rbstab.config's schema); reading a store stays light
 
     template = json.loads(json.dumps(templates[int(columns["template"][i])]))
     for name, key in keys.items():
@@ -865,7 +855,7 @@ def read_chunk_series(path: str | os.PathLike, row: int | None, names) -> dict[s
         (n, 3) (row None: (runs, n) or (runs, n, 3)), or None when the file does not hold
         it; ``units:<name>`` for each held.
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     out: dict[str, Any] = {}
     with h5py.File(path, "r") as f:
@@ -886,8 +876,6 @@ _VERIFIED: set[tuple[str, int, int]] = set()
 
 
 def _verified_once(f, path: str) -> None:
-    from .integrity import verify_open_file
-
     stat = os.stat(path)
     key = (path, stat.st_mtime_ns, stat.st_size)
     if key not in _VERIFIED:
@@ -950,9 +938,7 @@ class StoreTrace:
         return out[0] if scalar else out
 
     def _read(self, path: str, rows: np.ndarray) -> np.ndarray:
-        import h5py
-
-        from .integrity import DamagedResultError, reading
+        import h5py  # heavy: h5py
 
         order = np.argsort(rows, kind="stable")
         wanted, inverse = np.unique(rows[order], return_inverse=True)
@@ -988,8 +974,6 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
         For a missing file, one that is not HDF5, or one whose structure cannot be read
         (:func:`rbstab.io.integrity.open_result`).
     """
-    from .integrity import open_result
-
     shapes: dict[str, tuple[int, ...]] = {}
     probed = {"run", "time", "axis"}
     time = None

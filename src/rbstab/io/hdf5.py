@@ -41,6 +41,8 @@ import numpy as np
 
 from ..config import canonical_config, config_hash
 from .atomic import write_bytes_atomic
+from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
+                        fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import (
     VARIABLE_DESCRIPTIONS,
     VARIABLE_UNITS,
@@ -51,7 +53,7 @@ from .metadata import (
 )
 
 if TYPE_CHECKING:  # pragma: no cover
-    from ..simulate import RunResult
+    from ..simulator import RunResult
 
 __all__ = [
     "FORMAT",
@@ -94,10 +96,6 @@ SWITCHING_VARIABLES = {
 
 #: Attributes of the dimension coordinates (HDF5 dimension scales) of a result file.
 COORDINATE_ATTRIBUTES = {name: variable_attributes(name) for name in ("time", "axis", "switching")}
-
-
-class NotAResultFile(ValueError):
-    """Raised when a file is not an rbstab run result."""
 
 
 def _git_commit() -> str:
@@ -201,8 +199,6 @@ class _Writer:
 
     def dataset(self, parent, name: str, data: np.ndarray, dtype=None):
         """A dataset of ``data``; numeric ones chunked with a Fletcher-32 checksum."""
-        from .integrity import fletcher32_chunks
-
         h5py = self.h5py
         h5p = h5py.h5p
         dcpl = h5p.create(h5p.DATASET_CREATE)
@@ -257,7 +253,7 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
     as an ordinary ``OSError`` of the caller's write, with nothing half-open inside HDF5
     (whose clean-up at exit crashes the process after a failed write to a file).
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     w = _Writer(h5py)
     h5ds = h5py.h5ds
@@ -283,8 +279,6 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
             _write_events(w, root, switching)
         for key, value in attrs.items():
             w.attr(root, key, value)
-        from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, content_digest, data_digest_of
-
         f.flush()
         w.attr(root, DIGEST_ATTR, content_digest(f))
         numbers = {"time": np.ascontiguousarray(time, dtype=float)}
@@ -333,7 +327,7 @@ def write_result(
     Parameters
     ----------
     result : RunResult
-        The run (:func:`rbstab.simulate.simulate`).
+        The run (:func:`rbstab.simulator.simulate`).
     path : path-like
         Final file name; its folder is created if missing.
     command_line : str, optional
@@ -372,7 +366,7 @@ def result_dataset(result: "RunResult", *, command_line: str | None = None):
         ``description`` (:mod:`rbstab.io.metadata`); a
         pure-sign-law run also has the ``switching`` dimension and its variables.
     """
-    import xarray as xr
+    import xarray as xr  # heavy: xarray
 
     coords = {
         "time": ("time", np.asarray(result.time, dtype=float), dict(COORDINATE_ATTRIBUTES["time"])),
@@ -400,9 +394,7 @@ def read_dataset(path: str | os.PathLike):
     FileNotFoundError, NotAResultFile, DamagedResultError
         See :func:`read_attributes`.
     """
-    import xarray as xr
-
-    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, reading
+    import xarray as xr  # heavy: xarray
 
     read_attributes(path, data=True)
     with reading(path), xr.open_dataset(path, engine="h5netcdf") as ds:
@@ -436,8 +428,6 @@ def read_format(path: str | os.PathLike) -> str | None:
     rbstab.io.integrity.DamagedResultError
         If its attributes cannot be read (a damaged file).
     """
-    from .integrity import open_result
-
     with open_result(path) as f:
         value = _plain(f.attrs.get("rbstab_format"))
     return value if value is None else str(value)
@@ -476,8 +466,6 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     rbstab.io.integrity.DamagedResultError
         If ``verify`` and its checksums do not match (a subclass of NotAResultFile).
     """
-    from .integrity import DATA_DIGEST_ATTR, DIGEST_ATTR, open_result, verify_open_file
-
     path = Path(path)
     with open_result(path) as f:
         attrs = {k: _plain(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}

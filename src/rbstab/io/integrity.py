@@ -34,9 +34,8 @@ from typing import Any
 
 import numpy as np
 
-from .hdf5 import NotAResultFile
-
 __all__ = [
+    "NotAResultFile",
     "DIGEST_ATTR",
     "DATA_DIGEST_ATTR",
     "DamagedResultError",
@@ -50,6 +49,10 @@ __all__ = [
     "reading",
     "open_result",
 ]
+
+class NotAResultFile(ValueError):
+    """Raised when a file is not an rbstab run result."""
+
 
 #: Root attribute holding the file's :func:`content_digest` (hex SHA-256).
 DIGEST_ATTR = "rbstab_digest"
@@ -124,7 +127,7 @@ def _structure(dsid) -> str:
     type (HDF5's encoding), shape, chunks, filters, and how many chunks are stored and
     their bytes (a chunk HDF5 believes unwritten would read as its fill value, with no
     checksum to fail)."""
-    import h5py
+    import h5py  # heavy: h5py
 
     dcpl = dsid.get_create_plist()
     chunks = dcpl.get_chunk() if dcpl.get_layout() == h5py.h5d.CHUNKED else None
@@ -152,7 +155,7 @@ def _chunk_places(dsid, chunks) -> list:
 
 def _attribute_names(oid) -> list[str]:
     """The attribute names of an object (its h5py low-level id), sorted."""
-    import h5py
+    import h5py  # heavy: h5py
 
     names: list[str] = []
     h5py.h5a.iterate(oid, lambda name: names.append(name.decode("utf-8", "surrogateescape")))
@@ -163,7 +166,7 @@ def _attribute(oid, key: str) -> Any:
     """An attribute's value through h5py's low-level API (``oid``: the object's id; twice as
     fast as ``obj.attrs[key]``, which matters for files of ~100 attributes); strings come
     back as bytes."""
-    import h5py
+    import h5py  # heavy: h5py
 
     aid = h5py.h5a.open(oid, key.encode("utf-8", "surrogateescape"))
     try:
@@ -180,7 +183,7 @@ def _attribute(oid, key: str) -> Any:
 
 def _text(dsid) -> np.ndarray:
     """The values of a text dataset (its low-level id), as ``dataset[...]`` gives them."""
-    import h5py
+    import h5py  # heavy: h5py
 
     if dsid.shape is None or 0 in dsid.shape:
         return h5py.Dataset(dsid)[...]
@@ -208,7 +211,7 @@ def content_digest(f, texts: Mapping[str, Any] | None = None,
 
     Through h5py's low-level API (its high-level objects cost about as much as the reads).
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     h = hashlib.sha256()
 
@@ -268,7 +271,7 @@ def data_digest(f, path: str | os.PathLike = "") -> str:
     DamagedResultError
         When a chunk fails its Fletcher-32 checksum.
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     def checked(dataset, name):
         try:
@@ -365,7 +368,7 @@ def open_result(path: str | os.PathLike) -> Iterator[Any]:
     DamagedResultError
         For what h5py raises on a damaged file while the block reads it.
     """
-    import h5py
+    import h5py  # heavy: h5py
 
     path = Path(path)
     if not path.is_file():

@@ -20,9 +20,11 @@ from __future__ import annotations
 
 import datetime as _dt
 import functools
+import json
 import platform
 import subprocess
 import sys
+from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -103,8 +105,6 @@ def variable_attributes(name: str) -> dict[str, str]:
 def summary_units(names) -> str:
     """The ``units_of_summary`` attribute of a run file: ``{"t_final": "s", ...}`` as JSON
     for the summary figures ``names`` (text figures, such as the rate check, have ``""``)."""
-    import json
-
     return json.dumps({n: SUMMARY_FIGURES.get(n, ("", ""))[0] for n in names}, separators=(",", ":"))
 
 
@@ -141,8 +141,6 @@ def git_state() -> tuple[str, str]:
 
 @functools.lru_cache(maxsize=1)
 def _versions() -> dict[str, str]:
-    from importlib import metadata
-
     out = {"rbstab_version": __version__, "python_version": platform.python_version()}
     for name in LIBRARIES:
         try:
@@ -150,7 +148,7 @@ def _versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             out[f"{name}_version"] = "not installed"
     try:
-        import h5py
+        import h5py  # heavy: h5py
 
         out["hdf5_version"] = h5py.version.hdf5_version
     except ImportError:  # pragma: no cover - h5py is a dependency

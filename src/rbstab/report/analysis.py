@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
 from .render import Section, Table
@@ -36,8 +37,6 @@ def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
     gives its ``*.analysis.nc`` files, and stays an input of its own only if it also
     holds run files (``*.h5``).
     """
-    from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
-
     analyses: list[Path] = []
     others: list = []
     for raw in paths:
@@ -55,7 +54,7 @@ def split_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
 
 
 def _read(paths: Sequence[Path]) -> list:
-    from ..analysis.dataset import read_analysis
+    from ..analysis.dataset import read_analysis  # heavy: numba (the rbstab.analysis package)
 
     datasets, problems = [], []
     for p in paths:
@@ -169,7 +168,7 @@ def _certificate_table(ds) -> Table | None:
 
 
 def _pole_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # heavy: matplotlib
 
     s = _eigenvalues(ds)
     tol = _scalar(ds, "eigenvalue_tolerance")
@@ -197,7 +196,7 @@ def _pole_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:
 def _rate_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile | None:
     if "sample_lyapunov" not in ds or ds.sizes.get("sample", 0) == 0:
         return None
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # heavy: matplotlib
 
     v = ds["sample_lyapunov"].values
     rate = ds["sample_rate"].values
@@ -226,9 +225,9 @@ def _rate_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile | No
 
 
 def _basin_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:
-    from matplotlib.colors import ListedColormap
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Patch
+    from matplotlib.colors import ListedColormap  # heavy: matplotlib
+    from matplotlib.figure import Figure  # heavy: matplotlib
+    from matplotlib.patches import Patch  # heavy: matplotlib
 
     x, y = ds["basin_x"], ds["basin_y"]
     outcome = ds["basin_outcome"].values.T  # rows: y
@@ -353,7 +352,7 @@ def _two_parameters(values: np.ndarray, order: Sequence[int]) -> list[int]:
 
 
 def _robustness_figure(ds, out: FigureWriter) -> FigureFile:
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # heavy: matplotlib
 
     groups = [str(g) for g in ds["group"].values]
     parameters = [str(p) for p in ds["parameter"].values]

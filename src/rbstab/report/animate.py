@@ -26,8 +26,13 @@ a web font), a page, a GIF or an MP4 (:func:`write_animation`), a still PNG
 
 from __future__ import annotations
 
+import difflib
+import html
+import os
 import re
 import shutil
+import tempfile
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -352,9 +357,8 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
         If ``path`` is not a result (:func:`rbstab.report.load.load_inputs`), ``run_id`` is
         missing for several runs, or no run has that id (the closest ids named).
     """
-    import difflib
 
-    from .load import ReportInputError, load_inputs
+    from .load import ReportInputError, load_inputs  # heavy: pydantic or the report's loaders, needed only when a run is animated
 
     inputs = load_inputs([path])
     if inputs.sweeps:
@@ -412,7 +416,7 @@ class _Artists:
     """The artists of one animation and how frame k moves them."""
 
     def __init__(self, ax, sc: Scene) -> None:
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # heavy: mpl_toolkits
 
         self.sc = sc
         self.axes3d = ax
@@ -467,11 +471,10 @@ def _gravity_arrow(ax, gravity: np.ndarray) -> None:
 
 def _figure(sc: Scene, view: tuple[float, float], size: tuple[float, float], dpi: int):
     """The figure, its 3D axes with fixed equal limits, and the artists of the scene."""
-    import textwrap
 
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # heavy: matplotlib
+    from matplotlib.figure import Figure  # heavy: matplotlib
+    from matplotlib.ticker import MaxNLocator  # heavy: matplotlib
 
     fig = Figure(figsize=size, dpi=dpi)
     FigureCanvasAgg(fig)
@@ -560,9 +563,9 @@ def draw_animation(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
     -------
     matplotlib.animation.FuncAnimation
     """
-    from matplotlib.animation import FuncAnimation
-    from matplotlib.artist import Artist
-    from matplotlib.figure import Figure
+    from matplotlib.animation import FuncAnimation  # heavy: matplotlib
+    from matplotlib.artist import Artist  # heavy: matplotlib
+    from matplotlib.figure import Figure  # heavy: matplotlib
 
     class Pixels(Artist):
         """A frame's pixels, drawn as they are (no resampling: the figure has the frame's size)."""
@@ -612,9 +615,8 @@ def animation_html(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
     JPEG of ``quality`` (1-95; about 22 kB a frame in the page at the defaults), the buttons as
     text.
     """
-    import tempfile
 
-    from matplotlib.animation import HTMLWriter
+    from matplotlib.animation import HTMLWriter  # heavy: matplotlib
 
     anim = draw_animation(sc, fps, view, size, dpi)
     writer = HTMLWriter(fps=fps, embed_frames=True, default_mode="loop", embed_limit=1000.0)
@@ -633,7 +635,7 @@ def check_output(path: str | Path) -> str:
     AnimationError
         For another suffix, or ``.mp4`` when ffmpeg is not on PATH (one line naming it).
     """
-    import matplotlib
+    import matplotlib  # heavy: matplotlib
 
     suffix = Path(path).suffix.lower()
     if suffix not in ANIMATION_SUFFIXES:
@@ -647,7 +649,6 @@ def check_output(path: str | Path) -> str:
 
 def _page(sc: Scene, snippet: str) -> str:
     """A page holding the player alone."""
-    import html
 
     title = html.escape(f"{sc.label} ({sc.variant})")
     notes = "".join(f"<p>{html.escape(n)}</p>" for n, _ in _notes(sc))
@@ -669,8 +670,6 @@ def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[f
     OSError
         If the file cannot be written.
     """
-    import os
-    import tempfile
 
     path = Path(path)
     kind = check_output(path)
@@ -683,7 +682,7 @@ def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[f
         elif kind == "png":
             write_still(sc, tmp, nearest_frame(sc, at), view, dpi)
         else:
-            from matplotlib.animation import FFMpegWriter, PillowWriter
+            from matplotlib.animation import FFMpegWriter, PillowWriter  # heavy: matplotlib
 
             writer = PillowWriter(fps=fps) if kind == "gif" else FFMpegWriter(fps=fps)
             draw_animation(sc, fps, view, dpi=dpi).save(tmp, writer=writer, dpi=dpi)

@@ -36,10 +36,14 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from .figures import DPI, FIGURE_FORMATS, FigureWriter
+from ..io.metadata import provenance_attributes
+from .analysis import analysis_sections, split_inputs
+from .figures import DPI, FIGURE_FORMATS, FigureWriter, comparison_figures, run_figures
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
 from .render import Animation, Section, Table, render_html, render_markdown, render_tables_markdown
+from .studies import split_studies, study_sections
+from .sweep_figures import sweep_figures
 from .tables import (
     DEFAULT_METRICS,
     SettleThresholds,
@@ -128,7 +132,7 @@ class ReportOptions:
 def _input_name(path: Path, runs: Sequence[RunData]) -> str:
     """A file name for one input: a folder's name, an analysis file's name without
     ``.nc``, the run name of a run file, the stem of a store file."""
-    from ..analysis.dataset import SUFFIX
+    from ..analysis.dataset import SUFFIX  # heavy: numba (the rbstab.analysis package)
 
     if path.is_dir():
         return safe_filename(path.resolve().name)
@@ -173,7 +177,7 @@ def report_title(inputs: ReportInputs, analyses: Sequence[Path] = (), studies: S
     """The default title of a report: what it compares, e.g. ``rbstab report:
     case1_permanent, case2_visco_elastic and case3_embedded``, ``rbstab report: sweep
     gains_case3``, ``rbstab report: stability analyses of case1_permanent and ...``."""
-    from ..analysis.dataset import SUFFIX
+    from ..analysis.dataset import SUFFIX  # heavy: numba (the rbstab.analysis package)
 
     parts = []
     if inputs.runs:
@@ -418,8 +422,6 @@ def build_report(
     except ValueError as exc:
         raise ReportError(str(exc)) from None
     _check_options(options)
-    from .analysis import split_inputs
-    from .studies import split_studies
 
     given = list(inputs)
     studies, inputs = split_studies(given)  # study files and folders (rbstab sensitivity, tune)
@@ -452,9 +454,6 @@ def build_report(
 def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Sequence[str],
            analyses: Sequence[Path] = (), studies: Sequence[Path] = ()) -> None:
     """Every file of the report into ``folder`` (module docstring)."""
-    from .analysis import analysis_sections
-    from .studies import study_sections
-
     (folder / "figures").mkdir()
     out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
     params = differing_parameters(data.runs)
@@ -475,8 +474,6 @@ def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: Fi
                          settle: SettleThresholds, frames: int = 0) -> list[Section]:
     """Tables, the comparison with the paper, comparison figures and each run's animation
     (``frames`` > 0) and figures."""
-    from .figures import comparison_figures, run_figures
-
     sections = _runs_sections(runs, runs_table(runs, settle, params), params)
     paper = _paper_section(runs)
     if paper is not None:
@@ -523,8 +520,6 @@ def _animation(run: RunData, frames: int) -> Animation | str:
 def _sweep_section_with_files(sweep: SweepData, metrics: Sequence[str], out: FigureWriter,
                               settle: SettleThresholds) -> Section:
     """A sweep's section, its ``sweep_<name>.csv`` and its figures."""
-    from .sweep_figures import sweep_figures
-
     table = sweep_table(sweep, metrics, settle)
     table.to_csv(out.folder / f"sweep_{safe_filename(sweep.name)}.csv", index=False)
     return _sweep_section(sweep, table, metrics, sweep_figures(sweep, table, metrics, out), settle)
@@ -532,7 +527,7 @@ def _sweep_section_with_files(sweep: SweepData, metrics: Sequence[str], out: Fig
 
 def _write_summary_csv(data: ReportInputs, params: Sequence[str], folder: Path, settle: SettleThresholds) -> None:
     """``summary.csv``: every run, direct and swept, one row each."""
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     all_runs = data.all_runs
     all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
@@ -561,8 +556,6 @@ def _write_pages(folder: Path, title: str, intro: Sequence[str], sections: Seque
 
 def _write_manifest(folder: Path, data: ReportInputs, analyses: Sequence[Path], options: ReportOptions,
                     metrics: Sequence[str], title: str, created: str) -> None:
-    from ..io.metadata import provenance_attributes
-
     manifest = {
         "rbstab_report": 1,
         "rbstab_version": __version__,

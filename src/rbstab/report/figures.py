@@ -17,6 +17,7 @@ decades is drawn on a logarithmic axis (symmetric-logarithmic when it changes si
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,8 +121,8 @@ class FigureWriter:
 
 def _plain_texts(fig) -> None:
     """Show every text of ``fig`` that mathtext cannot parse as it is written."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.text import Text
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # heavy: matplotlib
+    from matplotlib.text import Text  # heavy: matplotlib
 
     renderer = FigureCanvasAgg(fig).get_renderer()
     for text in fig.findobj(Text):
@@ -150,7 +151,7 @@ def _label(var: str, component: int | None = None) -> str:
 
 def new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float = 2.4, sharex: bool = True):
     """A constrained-layout figure and its (rows, cols) array of axes."""
-    from matplotlib.figure import Figure
+    from matplotlib.figure import Figure  # heavy: matplotlib
 
     fig = Figure(figsize=(width, row_height * rows + 0.6), dpi=DPI, layout="constrained")
     axes = fig.subplots(rows, cols, sharex=sharex, squeeze=False)
@@ -159,7 +160,7 @@ def new_figure(rows: int, cols: int = 1, width: float = 9.0, row_height: float =
 
 def colours(n: int) -> list:
     """``n`` distinguishable colours (tab10, tab20, then viridis)."""
-    from matplotlib import colormaps
+    from matplotlib import colormaps  # heavy: matplotlib
 
     if n <= 10:
         return [colormaps["tab10"](i) for i in range(n)]
@@ -194,8 +195,6 @@ def _symlog(ax, values: np.ndarray, axis: str) -> None:
     """Symmetric-log scale: linear within a power of ten near the 5th percentile of the
     magnitudes (at least 1e-6 of the peak); labelled at 0 and at powers of ten inside the
     values' range, at most 5 decades each side."""
-    import math
-
     magnitude = np.abs(values)
     peak = float(magnitude.max())
     low = math.floor(math.log10(max(float(np.percentile(magnitude, 5)), 1e-6 * peak)))
@@ -211,7 +210,7 @@ def _symlog(ax, values: np.ndarray, axis: str) -> None:
 
 
 def _no_ticks():
-    from matplotlib.ticker import NullLocator
+    from matplotlib.ticker import NullLocator  # heavy: matplotlib
 
     return NullLocator()
 

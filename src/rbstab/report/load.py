@@ -26,12 +26,20 @@ import json
 import math
 import os
 import re
+from collections import Counter
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import yaml
+
+from ..io.chunk import SUMMARY_FIGURES, read_chunk_rows
+from ..io.hdf5 import NotAResultFile, read_attributes
+from ..io.integrity import reading
+from ..kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of
+from ..sweep.folder import config_key_of, read_index, read_parameters, read_spec
 
 __all__ = [
     "ReportInputError",
@@ -157,7 +165,7 @@ class RunData:
             units of :meth:`units`; NaN rows after a failure. A name the file does not
             hold (e.g. ``controller_state`` outside ``embedded``) is left out.
         """
-        import h5py
+        import h5py  # heavy: h5py
 
         wanted = ["time", *names]
         missing = [n for n in wanted if n not in self._cache]
@@ -272,12 +280,9 @@ def load_run(path: str | os.PathLike, sweep: str | None = None) -> RunData:
         If it is not an rbstab run result, or its ``config`` attribute is not YAML, or it
         lacks the time series a report draws.
     """
-    import h5py
-
-    from ..io.hdf5 import read_attributes
+    import h5py  # heavy: h5py
 
     path = Path(path)
-    from ..io.integrity import reading
 
     attrs = read_attributes(path, data=True)  # every checksum verified
     with reading(path), h5py.File(path, "r") as f:
@@ -302,8 +307,6 @@ def load_chunk_runs(path: str | os.PathLike, sweep: str | None = None) -> list[R
     rbstab.io.hdf5.NotAResultFile
         If it is not a store file, or a run's ``config`` is not YAML.
     """
-    from ..io.chunk import read_chunk_rows
-
     path = Path(path)
     rows = read_chunk_rows(path, data=True)  # every checksum verified
     return [_run_data(path, _store_attributes(row), [], sweep, row=row["file_row"]) for row in rows]
@@ -311,8 +314,6 @@ def load_chunk_runs(path: str | os.PathLike, sweep: str | None = None) -> list[R
 
 def _store_attributes(row: dict) -> dict:
     """A store file's row in the form of a run file's attributes (``name``, ``summary_*``...)."""
-    from ..io.chunk import SUMMARY_FIGURES
-
     attrs = {k: v for k, v in row.items()}
     attrs["name"] = row["run_id"]
     for key in SUMMARY_FIGURES:
@@ -325,10 +326,6 @@ def _store_attributes(row: dict) -> dict:
 
 
 def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row: int | None = None) -> RunData:
-    import yaml
-
-    from ..io.hdf5 import NotAResultFile
-
     where = f"{path}" if row is None else f"{path} (run {attrs.get('name')})"
     text = attrs.get("config", "") or ""
     try:  # a store file's config is JSON (rbstab.config.canonical_config), a run file's YAML
@@ -370,9 +367,7 @@ def _parameter_axes(index, parameters: dict[str, str], random_keys: set[str]) ->
     or zip over lists, each varying entry on its own for a random draw. A scale factor
     column (``mass_scale``) stands for its key.
     """
-    import pandas as pd
-
-    from ..sweep.folder import config_key_of
+    import pandas as pd  # heavy: pandas
 
     groups: dict[str, list[str]] = {}
     for column, key in parameters.items():
@@ -420,9 +415,6 @@ def load_sweep(path: str | os.PathLike) -> SweepData:
         ``run_id`` or ``status`` column or no row, or a result file is not an rbstab
         result.
     """
-    from ..io.hdf5 import NotAResultFile
-    from ..sweep.folder import read_index, read_parameters, read_spec
-
     folder = Path(path)
     try:
         spec = read_spec(folder)
@@ -467,8 +459,6 @@ def load_sweep(path: str | os.PathLike) -> SweepData:
 
 def _unique_labels(runs: Iterable[RunData]) -> None:
     """Make ``label`` unique: repeated names get their parent folder, then a counter."""
-    from collections import Counter
-
     runs = list(runs)
     names = Counter(r.name for r in runs)  # (not list.count: quadratic in a sweep's runs)
     for run in runs:
@@ -501,9 +491,6 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
         Listing every input that does not exist, is not an rbstab result, is an empty
         folder or an unreadable sweep; raised only after all inputs were checked.
     """
-    from ..io.hdf5 import NotAResultFile
-    from ..kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of
-
     if not paths:
         raise ReportInputError(["no input given: pass run files (*.h5) and/or sweep folders"])
     problems: list[str] = []
@@ -564,8 +551,6 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
 def _load_file(path: Path, kind) -> list[RunData]:
     """The run of a run file, or every run of a store file (``kind``: :data:`rbstab.kinds.RUN`
     or :data:`~rbstab.kinds.STORE`)."""
-    from ..kinds import STORE
-
     return load_chunk_runs(path) if kind is STORE else [load_run(path)]
 
 

@@ -31,7 +31,7 @@ BEST_ROWS = 10
 
 def split_studies(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
     """(study files or folders, the other inputs) of a report."""
-    from ..studies.files import study_kind
+    from ..studies.files import study_kind  # heavy: h5py, xarray
 
     studies, others = [], []
     for raw in paths:
@@ -47,8 +47,8 @@ def study_sections(paths: Sequence[Path], out: FigureWriter) -> list[Section]:
     ReportInputError
         If a study's file cannot be read.
     """
-    from ..studies import read_sensitivity, read_tuning
-    from ..studies.files import study_kind
+    from ..studies import read_sensitivity, read_tuning  # heavy: h5py, pandas, xarray
+    from ..studies.files import study_kind  # heavy: h5py, xarray
 
     sections, problems = [], []
     for path in paths:

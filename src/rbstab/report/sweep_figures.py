@@ -26,7 +26,7 @@ MAX_ANNOTATED_CELLS = 144
 
 def _axis_values(values) -> tuple[np.ndarray, list[str] | None]:
     """Numeric positions of parameter values and, if categorical, their tick labels."""
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     num = pd.to_numeric(pd.Series(values), errors="coerce")
     if num.notna().all():
@@ -128,7 +128,7 @@ class _Grid:
 
 
 def _heatmap(sweep: SweepData, g: _Grid, table, name: str, out: FigureWriter) -> FigureFile:
-    from matplotlib.colors import LogNorm
+    from matplotlib.colors import LogNorm  # heavy: matplotlib
 
     failed = (table["status"].astype(str) != "success").to_numpy()
     grid, bad, present = g.cells(table[metric_column(name)].to_numpy(dtype=float), failed)
@@ -152,7 +152,7 @@ def _heatmap(sweep: SweepData, g: _Grid, table, name: str, out: FigureWriter) ->
 
 def _annotate_cells(ax, mesh, grid: np.ndarray, bad: np.ndarray, present: set, undefined: str) -> None:
     """Failed cells hatched and labelled; on small grids every cell's value (or ``undefined``)."""
-    from matplotlib.patches import Rectangle
+    from matplotlib.patches import Rectangle  # heavy: matplotlib
 
     for i, j in np.ndindex(grid.shape):
         if bad[i, j]:
@@ -173,7 +173,7 @@ def _annotate_cells(ax, mesh, grid: np.ndarray, bad: np.ndarray, present: set, u
 
 def _metric_panel(ax, table, param: str, x: np.ndarray, name: str, failed: np.ndarray, style: str) -> None:
     """One metric against one parameter: groups as coloured dots, failed runs as red crosses."""
-    from matplotlib.transforms import blended_transform_factory
+    from matplotlib.transforms import blended_transform_factory  # heavy: matplotlib
 
     y = table[metric_column(name)].to_numpy(dtype=float)
     ok = ~failed

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io.chunk import read_chunk_series
 from ..layout import STATE_BLOCKS, SUMMARY_FIGURES
 from .load import RunData, SweepData
 
@@ -196,8 +197,6 @@ def settle_store_runs(runs: Sequence[RunData | None], thresholds: SettleThreshol
     [s] land in each run's cache, the traces are not kept. Runs of a store without traces
     are left to :func:`run_settling_time` (NaN). The files were verified when the report
     loaded them (:func:`rbstab.report.load.load_chunk_runs`); OSError if one is gone."""
-    from ..io.chunk import read_chunk_series
-
     key = _settling_key(thresholds)
     by_file: dict = {}
     for run in runs:
@@ -331,7 +330,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         ``lyapunov_rate_check``, ``method``, ``nfev``, ``njev``, ``nlu``,
         ``wall_time`` [s]. Values as stored in the files (full precision).
     """
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     if parameters is None:
         parameters = differing_parameters(runs)

@@ -36,9 +36,9 @@ from pydantic import ValidationError
 from ..config import ConfigError, parse_yaml
 from ..config.schema import RunSchema
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from ..engine import ensure_compiled
 from ..io.chunk import SUMMARY_FIGURES, summary_columns
-from ..jit import ensure_compiled
-from ..simulate import simulate_many
+from ..simulator import simulate_many
 from ..sweep.folder import open_sweep
 from ..sweep.runner import run_sweep
 from ..sweep.schema import DISTRIBUTIONS, DistributionSchema

@@ -179,10 +179,10 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
 def _sample(problem: dict, n: int, method: str, seed: int) -> np.ndarray:
     # SALib (with its own imports of scipy.stats, ~0.5 s) only when a study runs
     if method == "sobol":
-        from SALib.sample import sobol
+        from SALib.sample import sobol  # heavy: SALib
 
         return sobol.sample(problem, n, calc_second_order=False, seed=seed)
-    from SALib.sample import morris
+    from SALib.sample import morris  # heavy: SALib
 
     return morris.sample(problem, n, num_levels=MORRIS_LEVELS, seed=seed)
 
@@ -234,11 +234,11 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
 def _analyze(plan: SensitivityDesign, y: np.ndarray, num_resamples: int, conf_level: float) -> dict:
     # SALib: imported when a study runs (see _sample)
     if plan.method == "sobol":
-        from SALib.analyze import sobol
+        from SALib.analyze import sobol  # heavy: SALib
 
         return sobol.analyze(plan.problem, y, calc_second_order=False, num_resamples=num_resamples,
                              conf_level=conf_level, seed=plan.seed)
-    from SALib.analyze import morris
+    from SALib.analyze import morris  # heavy: SALib
 
     return morris.analyze(plan.problem, plan.unit, y, num_resamples=num_resamples, conf_level=conf_level,
                           num_levels=MORRIS_LEVELS, seed=plan.seed)

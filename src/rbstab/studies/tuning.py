@@ -1,7 +1,7 @@
 """Tuning: search gains (or any numeric config keys) that meet a specification best, by Optuna.
 
 Each trial sets the ``--vary`` keys to values the sampler suggests (TPE by default, CMA-ES
-available) and integrates one run in this process (:func:`rbstab.simulate.simulate_many`:
+available) and integrates one run in this process (:func:`rbstab.simulator.simulate_many`:
 no files, ~10 ms for a Case 3 run of 2 s), or, with ``over``, a batch of runs over
 uncertain bodies (one draw of the ``over`` distributions, the same for every trial) whose
 worst case (or a chosen quantile) is the trial's value. Objectives and constraints are
@@ -45,11 +45,11 @@ import xarray as xr
 from ..config import ConfigError, config_from_mapping, dump_yaml
 from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..engine import ensure_compiled
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
-from ..jit import ensure_compiled
-from ..simulate import simulate_many
+from ..simulator import simulate_many
 from .design import (
     StudyInputError,
     Varied,
@@ -245,7 +245,7 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
         In (0, 1]; 1 = the worst case of the batch (see :class:`TuningProblem`).
     sampler : {"tpe", "cmaes"}
     engine : str, optional
-        :data:`rbstab.simulate.ENGINES` (default compiled).
+        :data:`rbstab.simulator.ENGINES` (default compiled).
 
     Raises
     ------
@@ -467,7 +467,7 @@ def _storage(url: str):
         If no storage can be opened at ``url`` (the message names it).
     """
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
-    import sqlalchemy.exc
+    import sqlalchemy.exc  # heavy: sqlalchemy (optuna's storage)
 
     if url == "memory":
         return None

@@ -13,7 +13,7 @@ same bit for bit (up to the ``created`` and ``command_line`` attributes).
   the pool is restarted for the rest. A pool that dies before finishing any item has
   its items taken once more by the next; if that one dies too, the workers cannot run
   at all and :class:`ExecutorError` says so (the usual cause: a script that calls
-  ``rbstab.sweep`` without the ``__main__`` guard, which every new worker runs again,
+  ``rbstab.sweep_dataset`` without the ``__main__`` guard, which every new worker runs again,
   :func:`_refuse_in_bootstrap`). Each worker holds the read end of a pipe whose
   write end only the parent holds: when the parent is gone (killed, even while it is a
   zombie nobody reaped) the pipe reads end-of-file, and the worker finishes the run in
@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import socket
 import sys
 import threading
 import time
@@ -39,7 +40,9 @@ import uuid
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
+from multiprocessing import forkserver
 from typing import Any
+from urllib.parse import urlsplit
 
 __all__ = [
     "Executor",
@@ -177,20 +180,24 @@ def _warm() -> None:
     """A no-op task: submitting one per worker starts the workers."""
 
 
+#: Modules the fork server imports before it forks the workers: the heavy modules, once, and
+#: the compiled kernels (:mod:`rbstab.engine.preload`: ~0.5 s from numba's cache), so that
+#: every worker forked from it starts with them. Not scipy: the compiled engine and the
+#: post-processing need none of it (its import costs ~0.7 s); the scipy engine imports
+#: ``solve_ivp`` when a chunk needs it. Every module a worker of the compiled engine uses
+#: (:mod:`rbstab.config` loads its validator lazily). The standard library ignores a name
+#: that fails to import: ``tests/test_layers.py`` imports each.
+FORKSERVER_PRELOAD = (
+    "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulator", "rbstab.config.loader",
+    "rbstab.io.hdf5", "rbstab.io.chunk", "rbstab.io.integrity", "h5py", "h5netcdf", "rbstab.engine.preload",
+)
+
+
 def _mp_context():
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     ctx = multiprocessing.get_context(method)
     if method == "forkserver":
-        # Import the heavy modules once in the fork server (no effect if it already runs),
-        # and load the compiled kernels there (rbstab.engine.preload: ~0.5 s from numba's
-        # cache), so that every worker forked from it starts with them. Not scipy: the
-        # compiled engine and the post-processing need none of it (its import costs
-        # ~0.7 s); the scipy engine imports solve_ivp when a chunk needs it. Every module a
-        # worker of the compiled engine uses (rbstab.config loads its validator lazily).
-        ctx.set_forkserver_preload([
-            "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulate", "rbstab.config.loader",
-            "rbstab.io.hdf5", "rbstab.io.chunk", "rbstab.io.integrity", "h5py", "h5netcdf", "rbstab.engine.preload",
-        ])
+        ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))  # no effect if the server already runs
     return ctx
 
 
@@ -253,8 +260,6 @@ class LocalExecutor(Executor):
             ctx = _mp_context()
             pool = self._new_pool()
             if ctx.get_start_method() == "forkserver":
-                from multiprocessing import forkserver
-
                 forkserver.ensure_running()
             else:  # pragma: no cover - platforms without forkserver
                 pool.submit(_warm)
@@ -335,7 +340,7 @@ class LocalExecutor(Executor):
                 if not finished and retried:
                     raise ExecutorError(
                         "the local worker processes died twice in a row before finishing anything (see the "
-                        "messages above); from a Python script, call rbstab.sweep under "
+                        "messages above); from a Python script, call rbstab.sweep_dataset under "
                         "if __name__ == \"__main__\": (each new worker runs the script again)")
                 if not finished:
                     again[:0] = lost  # a pool that finished nothing: its items once more
@@ -376,7 +381,7 @@ class LocalExecutor(Executor):
 
 def _import_distributed():
     try:
-        import distributed
+        import distributed  # optional: distributed
     except ImportError:
         raise ExecutorError(
             'the dask executor needs the "distributed" package: pip install "rbstab[dask]" '
@@ -515,9 +520,6 @@ class DaskExecutor(Executor):
 def _probe_tcp(address: str, timeout: float) -> None:
     """For ``tcp://HOST:PORT``: one plain connection first, so that a refused port or an
     unknown host is reported at once (the client retries those until its timeout)."""
-    import socket
-    from urllib.parse import urlsplit
-
     parts = urlsplit(address if "://" in address else f"tcp://{address}")
     try:
         host, port = parts.hostname, parts.port

@@ -202,7 +202,7 @@ def read_parameters(folder: str | os.PathLike, index=None) -> dict[str, str]:
 
 def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
     """A run file's global attributes (:func:`rbstab.io.hdf5.read_attributes`) as an index row."""
-    from ..io.chunk import summary_columns
+    from ..io.chunk import summary_columns  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     row = {k: attrs.get(k) for k in ("variant", "status", "message", "wall_time")}
     row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}))
@@ -239,7 +239,7 @@ def index_columns(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str] |
                 in_params = False
             if key not in fixed and key not in params:
                 (params if in_params else summary)[key] = None
-    from ..io.chunk import SUMMARY_FIGURES
+    from ..io.chunk import SUMMARY_FIGURES  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     order = {name: i for i, name in enumerate(SUMMARY_FIGURES)}
     ranked = sorted(summary, key=lambda c: (order.get(re.sub(r"_[xyz]$", "", c), len(order)), c))
@@ -283,8 +283,8 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     OSError
         If a file cannot be written (the old files are left as they were).
     """
-    import numpy as np
-    import pandas as pd
+    import numpy as np  # heavy: numpy
+    import pandas as pd  # heavy: pandas
 
     n = table.n
     ids = pd.Series(table.run_id.astype(str))
@@ -328,9 +328,9 @@ def _write_csv(path: Path, index) -> None:
     """``index`` (a DataFrame) as CSV, atomically: by pyarrow's writer (numbers formatted in
     C, ~10x pandas' speed; they read back as the same floats), pandas' for columns pyarrow
     does not take (lists); booleans as ``True``/``False``, absent values empty."""
-    import numpy as np
-    import pyarrow as pa
-    import pyarrow.csv as pa_csv
+    import numpy as np  # heavy: numpy
+    import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.csv as pa_csv  # heavy: pyarrow
 
     index = index.assign(**{c: np.where(index[c].to_numpy(), "True", "False")
                             for c in index.columns if index[c].dtype == bool})
@@ -358,7 +358,7 @@ def verify_index(folder: str | os.PathLike) -> bool:
         If the index does not match (damaged, or an invocation killed between writing the
         two files: rerunning the sweep rebuilds both).
     """
-    from ..io.integrity import DamagedResultError
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     folder = Path(folder)
     try:
@@ -393,7 +393,7 @@ def read_index(folder: str | os.PathLike, *, verify: bool = True):
         If ``verify`` and it does not match its checksum (:func:`verify_index`; a
         ValueError).
     """
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     path = Path(folder) / INDEX_FILE
     if verify:
@@ -416,7 +416,7 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
     """The content of ``sweep_summary.json`` of an index (a DataFrame with ``base``,
     ``status``, ``converged`` and ``wall_time`` columns): counts, converged fraction,
     per base, parameters (name -> config key)."""
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     def counts(frame) -> dict[str, Any]:
         status = {s: 0 for s in STATUSES}
@@ -469,8 +469,8 @@ def read_spec(folder: str | os.PathLike) -> dict:
     OSError, ValueError
         If it is missing, not YAML or not a mapping.
     """
-    from ..config import ConfigError
-    from ..config.yaml_io import parse_yaml, read_text_limited
+    from ..config import ConfigError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..config.yaml_io import parse_yaml, read_text_limited  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     path = Path(folder) / SPEC_FILE
     try:
@@ -483,8 +483,8 @@ def read_spec(folder: str | os.PathLike) -> dict:
 
 
 def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None) -> dict | None:
-    from ..io.hdf5 import NotAResultFile, read_attributes
-    from ..io.integrity import DamagedResultError
+    from ..io.hdf5 import NotAResultFile, read_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     try:
         return row_from_attributes(read_attributes(path, data=verify), path.name)
@@ -503,7 +503,7 @@ def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None)
 def _unopenable(path: Path) -> bool:
     """Whether ``path`` cannot be opened as an HDF5 file (truncated, emptied, overwritten):
     a damaged result, where an HDF5 file of another program is not one."""
-    import h5py
+    import h5py  # heavy: h5py
 
     try:
         with h5py.File(path, "r"):
@@ -518,9 +518,9 @@ def _store_frames(runs_dir: Path, names: Sequence[str], verify: bool, damaged: l
     """The rows of the store files ``names`` of ``runs_dir`` as DataFrames; a file that
     fails its checksums, or that cannot be opened as one (truncated, emptied), is listed in
     ``damaged`` as (file name, reason)."""
-    from ..io.chunk import read_chunk_columns
-    from ..io.hdf5 import NotAResultFile
-    from ..io.integrity import DamagedResultError
+    from ..io.chunk import read_chunk_columns  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.hdf5 import NotAResultFile  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     frames = []
     for name in names:
@@ -547,7 +547,7 @@ class StoredRuns:
 
     def __init__(self, runs_dir: Path, *, verify: bool = False, damaged: list | None = None,
                  skip: set | frozenset = frozenset()) -> None:
-        import pandas as pd
+        import pandas as pd  # heavy: pandas
 
         self.runs_dir = runs_dir
         self.damaged = damaged if damaged is not None else []
@@ -566,8 +566,8 @@ class StoredRuns:
         """The newest stored row of each run of ``table`` made from its current
         configuration (its ``config_hash``) with a status other than ``error``
         (``success_only``: ``success``), with a ``run`` column (its position); a DataFrame."""
-        import numpy as np
-        import pandas as pd
+        import numpy as np  # heavy: numpy
+        import pandas as pd  # heavy: pandas
 
         frame = self.frame
         if frame.empty:
@@ -584,7 +584,7 @@ class StoredRuns:
     def stale(self, table) -> list[str]:
         """Result files found when this was made that hold no run of ``table`` and are not
         damaged (left in place by the caller)."""
-        import pandas as pd
+        import pandas as pd  # heavy: pandas
 
         ids = pd.Index(table.run_id.astype(str))
         frame = self.frame
@@ -621,10 +621,10 @@ def resolved_config(folder: str | os.PathLike, run_id: str) -> dict:
     FileNotFoundError, ValueError
         As :func:`read_index`; a damaged store file as :func:`rbstab.io.chunk.read_chunk_rows`.
     """
-    import yaml
+    import yaml  # heavy: yaml
 
-    from ..io.chunk import resolved_config as from_store
-    from ..io.hdf5 import read_attributes
+    from ..io.chunk import resolved_config as from_store  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.hdf5 import read_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     folder = Path(folder)
     index = read_index(folder)
@@ -698,9 +698,9 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
 def _from_index(index):
     """The index as a Dataset over ``run``: per-run values with units and long names
     (built column by column: ``DataFrame.to_xarray`` costs ~1 s for 10,000 runs)."""
-    import xarray as xr
+    import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import figure_attributes
+    from ..io.chunk import figure_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     table = index.drop(columns=[c for c in ("file", "file_row") if c in index.columns])
     coords = {c for c in table.columns if c in ("run_id", "base", "variant") or c in _parameter_set(index)}
@@ -738,12 +738,12 @@ def _from_store(folder: Path, index):
     :mod:`rbstab.io.metadata`; the store files are only listed here (names and shapes) and
     verified when their traces are read (:class:`rbstab.io.chunk.StoreTrace`).
     """
-    import dask.array as da
-    import numpy as np
-    import xarray as xr
+    import dask.array as da  # heavy: dask
+    import numpy as np  # heavy: numpy
+    import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import StoreTrace, store_trace_shapes
-    from ..io.metadata import LONG_NAMES, variable_attributes
+    from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
 
     if "file_row" not in index.columns:
         return None
@@ -802,9 +802,9 @@ def _grid_axes(spec: Mapping[str, Any]) -> list[tuple[str, list]]:
 
 
 def _as_grid(ds, spec: Mapping[str, Any]):
-    import numpy as np
-    import pandas as pd
-    import xarray as xr
+    import numpy as np  # heavy: numpy
+    import pandas as pd  # heavy: pandas
+    import xarray as xr  # heavy: xarray
 
     axes = _grid_axes(spec)
     shape = [len(labels) for _, labels in axes]

@@ -11,6 +11,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from .spec import SweepSpec
+import warnings
+from ..config import PhysicalPlausibilityWarning, config_from_mapping
+from .table import plan_table
 
 __all__ = ["PlannedRun", "expand"]
 
@@ -69,10 +72,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
         If any run's configuration is invalid: one line per problem, naming the run (index,
         base and varied values) and the config key. Nothing is run for an invalid sweep.
     """
-    import warnings
 
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping
-    from .table import plan_table
 
     table = plan_table(spec)
     labels = table.base_labels

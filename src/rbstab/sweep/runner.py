@@ -45,6 +45,7 @@ from typing import Any
 import yaml
 
 from .. import __version__
+from ..config import dump_yaml
 from .executors import Executor, make_executor
 from ..io.atomic import atomic_path, write_bytes_atomic, write_text_atomic
 from .folder import (
@@ -63,6 +64,7 @@ from .folder import (
 from .spec import SweepSpec
 from ..io.chunk import DEFAULT_STORE, STORES
 from .worker import DEFAULT_CHUNK_SIZE, ENGINES, WorkerOptions, run_table_chunk
+from .table import plan_table
 
 #: Runs per store file (and unit of work) by default: a store file costs ~0.1 s to create
 #: and close whatever its runs (~60 variables with their attributes, the digest of its
@@ -187,7 +189,7 @@ class SweepOutcome:
 @contextlib.contextmanager
 def _lock(directory: Path):
     try:
-        import fcntl
+        import fcntl  # optional: POSIX only
     except ImportError:  # pragma: no cover - Windows: no lock
         yield
         return
@@ -221,8 +223,7 @@ def _remove_temporaries(*folders: Path) -> int:
 
 
 def _dump_yaml(data: Any) -> str:
-    from ..config import dump_yaml  # flow-style lists, the style of the result files' config
-
+    # flow-style lists, the style of the result files' config
     return dump_yaml(data)
 
 
@@ -296,7 +297,7 @@ class _NoBar:
 def _progress_bar(total: int, name: str, enabled: bool | None):
     if enabled is False:
         return _NoBar()
-    from tqdm.auto import tqdm
+    from tqdm.auto import tqdm  # heavy: tqdm
 
     return tqdm(
         total=total,
@@ -397,7 +398,6 @@ def run_sweep(
         Re-raised (SIGTERM too, as the CLI handles it) after the workers were stopped
         and the index written for exactly the files on disk.
     """
-    from .table import plan_table
 
     say = log or (lambda message: None)
     engine = resolve_engine(engine, timeout)
@@ -444,7 +444,7 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
 def _run_locked(spec, table, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
                 options) -> None:
     """Skip what is done, execute the rest and write the index, holding the lock."""
-    import numpy as np
+    import numpy as np  # heavy: numpy
 
     with _lock(directory):
         removed = _remove_temporaries(runs_dir, directory)
@@ -484,7 +484,7 @@ def _run_locked(spec, table, ex, directory, runs_dir, outcome, *, retry_failed, 
 def _write_spec_document(spec: SweepSpec, directory: Path, command_line: str | None, say) -> None:
     doc = _spec_document(spec, command_line)
     if spec.table is not None and spec.table.source is None:  # given in memory: kept beside the spec
-        import pandas as pd
+        import pandas as pd  # heavy: pandas
 
         with atomic_path(directory / DESIGN_FILE) as tmp:
             pd.DataFrame(spec.table.columns).to_csv(tmp, index=False)
@@ -566,7 +566,7 @@ DESIGN_FILE = "table.csv"
 
 
 def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepOutcome) -> None:
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
     frames = [f for f in results if len(f)]
     summary, outcome.problems = write_table_index(
@@ -581,7 +581,6 @@ def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *
 
     Files whose config does not match the run's current config count as ``pending``.
     """
-    from .table import plan_table
 
     table = plan_table(spec) if table is None else table
     directory = Path(output) / spec.name

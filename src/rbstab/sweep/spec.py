@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import copy
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -67,8 +68,9 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, apply_overrides, parse_yaml as parse, set_dotted
 from ..config.schema import kind_of as _kind
+from ..config.yaml_io import read_yaml_file
 from .schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, SweepSchema, SweepSpecError, validate_spec
 
 __all__ = [
@@ -85,6 +87,8 @@ __all__ = [
     "MAX_RUNS",
     "DesignTable",
     "read_design_table",
+    "table_columns",
+    "column_key",
 ]
 
 
@@ -108,7 +112,6 @@ def _plain(value: Any) -> Any:
 
 def _parse_yaml(text: str) -> Any:
     # The project's loader: 1e-8 is a float, a duplicate key is an error.
-    from ..config import parse_yaml as parse
 
     return parse(text)
 
@@ -295,7 +298,6 @@ def _read_base(entry: Any, where: str, spec_dir: Path, errors: list[str]) -> Bas
         data = copy.deepcopy(dict(entry))
         label = data.get("name") if isinstance(data.get("name"), str) else "base"
         return Base(label, data, None)
-    from ..config.yaml_io import read_yaml_file
 
     path = Path(entry).expanduser()
     if not path.is_absolute():
@@ -315,8 +317,6 @@ def _read_base(entry: Any, where: str, spec_dir: Path, errors: list[str]) -> Bas
 def _set_spec_override(data: dict, override: str) -> None:
     """Apply ``sweep.<path>=value``; ``grid.<key>``, ``zip.<key>`` and ``random.params.<key>``
     take the rest of the path as one (dotted) key."""
-    from ..config import ConfigError, set_dotted
-
     key, sep, text = override.partition("=")
     if not sep:
         raise ConfigError([f"override {override!r}: no '='; expected sweep.key.path=value"])
@@ -419,6 +419,63 @@ def spec_from_mapping(
     )
 
 
+_COLUMN = re.compile(r"^\s*([A-Za-z_][\w.]*?)\s*(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?\s*$")
+
+
+def column_key(name: str) -> str | None:
+    """The dotted config key of a design-table column name, or None if it is not one:
+    ``body.mass`` -> ``body.mass``, ``initial_state.omega[1]`` -> ``initial_state.omega.1``,
+    ``body.inertia[0,2]`` -> ``body.inertia.0.2``."""
+    m = _COLUMN.match(str(name))
+    if m is None or any(not p for p in m.group(1).split(".")):
+        return None
+    return ".".join(p for p in m.groups() if p is not None)
+
+
+def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
+    """A design table (pandas DataFrame, or a mapping column name -> 1-D values) as dotted
+    config key -> column (float64, int64 or object for text).
+
+    Raises
+    ------
+    SweepSpecError
+        For a column name that is not a config key, columns of different lengths, an
+        empty table or a column that is neither numbers nor text.
+    """
+    columns = {str(k): data[k] for k in data.columns} if hasattr(data, "columns") else dict(data)
+    errors, out, lengths = [], {}, set()
+    for name, values in columns.items():
+        key = column_key(name)
+        if key is None:
+            errors.append(f"sweep key '{where}': column {name!r} is not a config key; expected a dotted key "
+                          "such as 'body.mass', a vector entry 'initial_state.omega[1]' or a matrix entry "
+                          "'body.inertia[0,0]'")
+            continue
+        array = np.asarray(values)
+        if array.ndim != 1:
+            errors.append(f"sweep key '{where}': column {name!r} has shape {array.shape}; expected one value a run")
+            continue
+        if array.dtype.kind == "b" or array.dtype.kind not in "fiuOUS":
+            array = array.astype(object)
+        elif array.dtype.kind in "US":
+            array = array.astype(object)
+        elif array.dtype.kind == "u":
+            array = array.astype(np.int64)
+        if key in out:
+            errors.append(f"sweep key '{where}': columns {name!r} and another both give '{key}'")
+        out[key] = array
+        lengths.add(len(array))
+    if not out and not errors:
+        errors.append(f"sweep key '{where}': found a table without columns; expected columns named by config keys")
+    if len(lengths) > 1:
+        errors.append(f"sweep key '{where}': columns of different lengths {sorted(lengths)}")
+    if lengths == {0}:
+        errors.append(f"sweep key '{where}': found a table without rows; expected one row a run")
+    if errors:
+        raise SweepSpecError(errors)
+    return out
+
+
 def read_design_table(path: str | Path):
     """A design table file as a pandas DataFrame: CSV (``.csv``, ``.csv.gz``, ...) or
     Parquet (``.parquet``, ``.pq``; needs pyarrow).
@@ -450,8 +507,6 @@ def read_design_table(path: str | Path):
 def _design_table(schema: SweepSchema, source: str | None) -> DesignTable | None:
     """The ``table`` entry (a file path relative to the spec, a DataFrame or a mapping of
     columns) as a :class:`DesignTable`."""
-    from .table import table_columns
-
     given = schema.table
     if given is None:
         return None
@@ -492,8 +547,6 @@ def _overlapping_table_keys(schema: SweepSchema, table: DesignTable | None, over
 
 def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) -> tuple[list[Base], list[str]]:
     """The base configurations, read and with the overrides applied; (bases, problems)."""
-    from ..config import apply_overrides
-
     spec_dir = Path(source).resolve().parent if source else Path.cwd()
     errors: list[str] = []
     bases: list[Base] = []
@@ -539,10 +592,6 @@ def load_spec(path: str | Path, overrides: Sequence[str] = ()) -> SweepSpec:
     SweepSpecError
         For a missing or unreadable file, a YAML syntax error, or any invalid entry.
     """
-    from ..config import ConfigError
-
-    from ..config.yaml_io import read_yaml_file
-
     path = Path(path)
     try:
         data = read_yaml_file(path, "sweep spec")

@@ -28,7 +28,6 @@ import functools
 import hashlib
 import json
 import math
-import re
 import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -37,8 +36,14 @@ from typing import Any
 import numpy as np
 
 from .spec import SweepSpec, SweepSpecError
+from ..config import set_dotted
+from .validate import base_value
+from .validate import validate_columns
+from ..config import canonical_config
+from ..io.chunk import store_bytes_per_run
+from .folder import parameter_name
 
-__all__ = ["RunTable", "TableSlice", "plan_table", "table_columns", "column_key", "estimate", "MAX_TEMPLATES",
+__all__ = ["RunTable", "TableSlice", "plan_table", "estimate", "MAX_TEMPLATES",
            "RUN_SECONDS"]
 
 #: Integration time of a run per core [s] for 2 s of simulated time (the paper's Case 3 at
@@ -50,63 +55,6 @@ MAX_TEMPLATES = 4096
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 #: Simulation settings that are not part of a run's identity (io.hdf5.RUN_LIMIT_KEYS).
 _LIMIT_KEYS = ("simulation.max_steps", "simulation.max_wall_time")
-_COLUMN = re.compile(r"^\s*([A-Za-z_][\w.]*?)\s*(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?\s*$")
-
-
-def column_key(name: str) -> str | None:
-    """The dotted config key of a design-table column name, or None if it is not one:
-    ``body.mass`` -> ``body.mass``, ``initial_state.omega[1]`` -> ``initial_state.omega.1``,
-    ``body.inertia[0,2]`` -> ``body.inertia.0.2``."""
-    m = _COLUMN.match(str(name))
-    if m is None or any(not p for p in m.group(1).split(".")):
-        return None
-    return ".".join(p for p in m.groups() if p is not None)
-
-
-def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
-    """A design table (pandas DataFrame, or a mapping column name -> 1-D values) as dotted
-    config key -> column (float64, int64 or object for text).
-
-    Raises
-    ------
-    SweepSpecError
-        For a column name that is not a config key, columns of different lengths, an
-        empty table or a column that is neither numbers nor text.
-    """
-    columns = {str(k): data[k] for k in data.columns} if hasattr(data, "columns") else dict(data)
-    errors, out, lengths = [], {}, set()
-    for name, values in columns.items():
-        key = column_key(name)
-        if key is None:
-            errors.append(f"sweep key '{where}': column {name!r} is not a config key; expected a dotted key "
-                          "such as 'body.mass', a vector entry 'initial_state.omega[1]' or a matrix entry "
-                          "'body.inertia[0,0]'")
-            continue
-        array = np.asarray(values)
-        if array.ndim != 1:
-            errors.append(f"sweep key '{where}': column {name!r} has shape {array.shape}; expected one value a run")
-            continue
-        if array.dtype.kind == "b" or array.dtype.kind not in "fiuOUS":
-            array = array.astype(object)
-        elif array.dtype.kind in "US":
-            array = array.astype(object)
-        elif array.dtype.kind == "u":
-            array = array.astype(np.int64)
-        if key in out:
-            errors.append(f"sweep key '{where}': columns {name!r} and another both give '{key}'")
-        out[key] = array
-        lengths.add(len(array))
-    if not out and not errors:
-        errors.append(f"sweep key '{where}': found a table without columns; expected columns named by config keys")
-    if len(lengths) > 1:
-        errors.append(f"sweep key '{where}': columns of different lengths {sorted(lengths)}")
-    if lengths == {0}:
-        errors.append(f"sweep key '{where}': found a table without rows; expected one row a run")
-    if errors:
-        raise SweepSpecError(errors)
-    return out
-
-
 # -- columns of values ---------------------------------------------------------------------------
 
 
@@ -192,7 +140,6 @@ class TableSlice:
 def build_resolved(template: Mapping, keys: Sequence[str], values: Sequence[Any], name: str) -> dict:
     """``template`` (a resolved configuration) with each dotted key of ``keys`` set to its
     value; the sections it changes are copied, the others shared."""
-    from ..config import set_dotted
 
     out = dict(template)
     out["name"] = name
@@ -273,7 +220,6 @@ class RunTable:
         varied key split per entry (``controller.k_c`` -> ``k_c_0`` ..), then the
         ``scale_uniform`` factors (``mass_scale``), named by
         :func:`rbstab.sweep.folder.parameter_name`."""
-        from .folder import parameter_name
 
         out: dict[str, tuple[str, np.ndarray]] = {}
         for suffix, source in (("", self.columns), (":scale", self.scales)):
@@ -386,7 +332,6 @@ def _scaled_columns(spec: SweepSpec, base_index: np.ndarray, sample: np.ndarray,
                     ) -> tuple[dict, dict]:
     """(key -> scaled values, key -> factors) of the ``scale_uniform`` keys: each base's value
     of the key (its default if unset) times the drawn factors."""
-    from .validate import base_value
 
     values, factors = {}, {}
     for d in (d for d in spec.random.params if d.kind == "scale_uniform"):
@@ -469,7 +414,6 @@ def plan_table(spec: SweepSpec) -> RunTable:
         index, base and varied values), the config key, the value and what is allowed;
         at most ten runs listed, the rest counted. Nothing is run for an invalid sweep.
     """
-    from .validate import validate_columns
 
     columns, scales, base_index = _raw_columns(spec)
     template, first_of = _kinds(columns, base_index)
@@ -486,7 +430,6 @@ def plan_table(spec: SweepSpec) -> RunTable:
 def _identities(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray]:
     """(config_hash, run_id) of every run (module docstring), as bytes arrays."""
-    from ..config import canonical_config
 
     n = len(base_index)
     keys = [k for k in columns if k not in _LIMIT_KEYS]
@@ -542,7 +485,6 @@ def estimate(table: RunTable, store: str, workers: int) -> tuple[float, float]:
     from the bytes a run takes in it (:func:`rbstab.io.chunk.store_bytes_per_run` of each
     template's samples), the time from :data:`RUN_SECONDS` scaled by each run's ``t_end``
     over 2 s and shared by ``workers`` processes."""
-    from ..io.chunk import store_bytes_per_run
 
     t_end = table.setting("t_end")
     size = float(np.sum(store_bytes_per_run(store, table.setting("n_samples"))))

@@ -20,6 +20,17 @@ from typing import Any
 import numpy as np
 
 from .spec import Base, SweepSpec, SweepSpecError
+from ..config import set_dotted
+from ..config import get_dotted
+from .schema import numeric_array
+from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted
+from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+from ..config.schema import MAX_MAGNITUDE
+from ..config.schema import MAX_MAGNITUDE, MIN_INVERTED
+from ..config.schema import field_rule
+from ..config.schema import MIN_SAMPLE_SPACING
+from ..config.physics import SINGULAR_RTOL
+from ..config.physics import inertia_warnings
 
 __all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report"]
 
@@ -62,7 +73,6 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
     ConfigError
         If a key cannot be set (it indexes into a value that is not a list).
     """
-    from ..config import set_dotted
 
     data = copy.deepcopy(base.data)
     for key, value in zip(keys, values):
@@ -75,8 +85,6 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
 def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:
     """(the value of ``key`` in ``base`` as a float array, None) or (None, problem): what a
     ``scale_uniform`` factor scales (the schema's default where the base leaves it unset)."""
-    from ..config import get_dotted
-    from .schema import numeric_array
 
     try:
         value = get_dotted(base.data, key)
@@ -93,7 +101,6 @@ def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:
 
 
 def _default(base: Base, key: str) -> Any:
-    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
@@ -105,7 +112,6 @@ def _default(base: Base, key: str) -> Any:
 
 def _validate_row(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray, i: int):
     """(RunConfig, []) or (None, problems) of run ``i`` validated by the config schema."""
-    from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 
     base = spec.bases[int(base_index[i])]
     try:
@@ -140,7 +146,6 @@ class _Fields:
         matrix = name in _MATRICES
         if matrix and self._diagonal(section, name):
             return self._build_diagonal(section, name)
-        from ..config.schema import field_rule
 
         rule = field_rule(section, name) or ("number",)
         shape = (3, 3) if matrix else (3,) if rule[0] in ("vector", "theta") else ()
@@ -210,7 +215,6 @@ def full_matrices(values: np.ndarray) -> np.ndarray:
 
 
 def _number_bad(values: np.ndarray, bounds: Mapping[str, Any], integer_column: bool) -> np.ndarray:
-    from ..config.schema import MAX_MAGNITUDE
 
     v = values.reshape(len(values), -1)
     with np.errstate(invalid="ignore"):
@@ -227,7 +231,6 @@ def _number_bad(values: np.ndarray, bounds: Mapping[str, Any], integer_column: b
 
 
 def _matrix_bad(values: np.ndarray, kind: str) -> np.ndarray:
-    from ..config.schema import MAX_MAGNITUDE, MIN_INVERTED
 
     flat = values.reshape(len(values), -1)
     bad = ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
@@ -244,7 +247,6 @@ def _matrix_bad(values: np.ndarray, kind: str) -> np.ndarray:
 
 def _rule_bad(rule: tuple, values: np.ndarray, integer_column: bool) -> np.ndarray:
     """The runs whose values break the schema's constraint ``rule`` (field_rule)."""
-    from ..config.schema import MAX_MAGNITUDE
 
     if rule[0] == "number":
         return _number_bad(values, rule[1], integer_column)
@@ -259,7 +261,6 @@ def _rule_bad(rule: tuple, values: np.ndarray, integer_column: bool) -> np.ndarr
 
 def _field_flags(fields: _Fields, n: int) -> np.ndarray:
     """Runs a varied numeric field's own constraint flags."""
-    from ..config.schema import field_rule
 
     flagged = np.zeros(n, dtype=bool)
     touched = {tuple(k.split(".")[:2]) for k, v in fields.columns.items() if v.dtype != object and "." in k}
@@ -292,8 +293,6 @@ def _stiffness(variant: str, get) -> np.ndarray | None:
 def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray:
     """Runs the schema's joint checks may refuse (gimbal-lock margin, samples and steps
     that let a run end, the weight held); the schema decides."""
-    from ..config.schema import MIN_SAMPLE_SPACING
-    from ..config.physics import SINGULAR_RTOL
 
     flagged = np.zeros(n, dtype=bool)
     if fields.varied("initial_state", "theta") or fields.varied("simulation", "gimbal_margin"):
@@ -402,7 +401,6 @@ def _warning_lines(spec: SweepSpec, fields: _Fields, notes: Sequence[Sequence[st
     """Physical-plausibility warnings, one line per config key: ``"k of n runs: <the
     message of the first run with it>"``; the triangle inequality of a varied inertia is
     checked on the column."""
-    from ..config.physics import inertia_warnings
 
     counts = np.bincount(template, minlength=len(notes))
     first: dict[str, str] = {}

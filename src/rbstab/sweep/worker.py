@@ -11,9 +11,9 @@ Engines
 ``ENGINES`` maps an engine name to a function ``(tasks, options, sink) -> records``:
 
 - ``scipy`` (the reference): the tasks of a chunk one after the other through
-  :func:`rbstab.simulate.simulate`, one ``solve_ivp`` call each; any method, per-run
+  :func:`rbstab.simulator.simulate`, one ``solve_ivp`` call each; any method, per-run
   ``timeout``.
-- ``compiled``: :func:`rbstab.simulate.simulate_blocks` (:mod:`rbstab.engine`): every run
+- ``compiled``: :func:`rbstab.simulator.simulate_blocks` (:mod:`rbstab.engine`): every run
   of the chunk that uses RK23, RK45 or DOP853 is integrated by the compiled engine,
   whatever its variant, body and gains; the others (implicit methods, the pure sign law
   of ``sliding``) go through scipy. Configurations are validated once per group of runs
@@ -24,7 +24,7 @@ Engines
 Layouts
 -------
 Both engines hand each finished run (the compiled engine a block of runs,
-:class:`rbstab.simulate.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
+:class:`rbstab.simulator.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
 one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
 writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
 into place when the whole chunk is done. Either way the record carries the run's
@@ -34,6 +34,7 @@ not reopen any file, and resume and the index work the same.
 
 from __future__ import annotations
 
+import os
 import sys
 import tempfile
 import time as _time
@@ -122,7 +123,7 @@ class WorkerOptions:
 
 
 def _config(task: RunTask):
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping
+    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     with warnings.catch_warnings():
         # shown once, as a digest, when the sweep was planned
@@ -161,8 +162,8 @@ class _RunFiles:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         """Write ``result``'s file (or its bytes); the record of a finished run."""
-        from ..io.hdf5 import write_run
-        from .folder import row_from_attributes
+        from ..io.hdf5 import write_run  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
+        from .folder import row_from_attributes  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
         options = self.options
         record = _result_record(task, task.path, result)
@@ -182,7 +183,7 @@ class _RunFiles:
         return _finished(record, result.timing, row, t1 - t0, _time.perf_counter() - t1)
 
     def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """:meth:`add` of each run of a :class:`rbstab.simulate.RunBlock` (``tasks[j]`` its run
+        """:meth:`add` of each run of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run
         j); a file that cannot be written is that run's error."""
         return _each_run(self, tasks, block)
 
@@ -193,7 +194,7 @@ class _RunFiles:
 def _finished(record: dict[str, Any], timing: dict, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
     """``record`` (``run_id``, ``path``, ``status``, ``message``, ``wall_time``) of a
     written run, with its row as the index takes it and its ``timing``."""
-    from .folder import index_part
+    from .folder import index_part  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     timing = dict(timing)
     timing["config_yaml"] = yaml_time
@@ -215,7 +216,7 @@ class _ChunkFile:
     ``attrs`` are the run's row (:func:`rbstab.io.chunk.read_chunk_rows`)."""
 
     def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> None:
-        from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name
+        from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
         self.options = options
         first = min(tasks, key=lambda t: t.index)
@@ -251,7 +252,7 @@ class _ChunkFile:
         return record
 
     def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """The runs of a :class:`rbstab.simulate.RunBlock` (``tasks[j]`` its run j) into the
+        """The runs of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run j) into the
         file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); their records."""
         t0 = _time.perf_counter()
         rows = self.writer.add_block([t.run_id for t in tasks], block,
@@ -277,7 +278,7 @@ SINKS = {"run": _RunFiles, "chunk": _ChunkFile}
 
 
 def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
-    from ..simulate import simulate
+    from ..simulator import simulate  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     try:
         t0 = _time.perf_counter()
@@ -311,7 +312,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     configs where they are the same: a grid's inner axis); one that does not rebuild is
     validated, for the message of what is wrong with it.
     """
-    from ..config import RunConfig
+    from ..config import RunConfig  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     configs: list = []
     errors: list[dict[str, Any]] = []
@@ -333,7 +334,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
 
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
-    from ..simulate import simulate_blocks, uses_compiled_engine
+    from ..simulator import simulate_blocks, uses_compiled_engine  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)
@@ -431,7 +432,7 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Seque
 def _peak_rss() -> int | None:
     """Peak resident set size of this process [bytes], or None where unknown."""
     try:
-        import resource
+        import resource  # optional: POSIX only
     except ImportError:  # pragma: no cover - Windows
         return None
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -476,11 +477,10 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
 
     ``folder``: the sweep's ``runs/`` folder (store files and run files go there).
     """
-    import os
 
-    import pandas as pd
+    import pandas as pd  # heavy: pandas
 
-    from ..sweep.folder import NOT_IN_INDEX
+    from ..sweep.folder import NOT_IN_INDEX  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     tasks = [RunTask(rid, part.resolved(j), os.path.join(folder, f"{rid}.h5"), int(part.index[j]), str(part.base[j]),
                      {name: _scalar(values[j]) for name, values in part.coords.items()}, str(part.config_hash[j]),

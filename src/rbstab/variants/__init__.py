@@ -7,16 +7,7 @@
 from __future__ import annotations
 
 from .base import LYAPUNOV_TERMS, Variant
-from .embedded import Embedded
-from .free import Free
-from .permanent import Permanent
-from .sliding import Sliding
-from .visco_elastic import ViscoElastic
-
-#: name -> variant class (the values allowed for ``controller.variant``).
-VARIANTS: dict[str, type[Variant]] = {
-    cls.name: cls for cls in (Free, Permanent, Sliding, ViscoElastic, Embedded)
-}
+from .registry import VARIANTS, Embedded, Free, Permanent, Sliding, ViscoElastic
 
 __all__ = [
     "VARIANTS",

@@ -27,8 +27,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..jit import jit
-from ..kinematics import add, cross, dot, matTvec, matvec, quadratic_form, scale
 from ..layout import (  # the table of outputs lives with the layout: files and readers need no compiler
     FULL_BODY,
     LEFT_OUT,
@@ -39,53 +37,10 @@ from ..layout import (  # the table of outputs lives with the layout: files and 
     VARIANT_LAYOUTS,
     StateLayout,
 )
-from ..model import Gains, RigidBody, gyroscopic, parameters
+from ..model import Gains, RigidBody, parameters
+from .kernels import run_outputs, state_rates
 
 __all__ = ["Variant", "LYAPUNOV_TERMS", "N_OUTPUTS", "split_outputs"]
-
-# -- compiled physics shared by the variants ----------------------------------------------
-@jit(forceinline=True)
-def body_rates(omega, v, a, b, torque_n, force_h, constraint_force, p):
-    """Eq 1 under the force Lambda at C; returns (dTheta/dt, dOmega/dt, dX/dt, dV/dt).
-
-    dTheta/dt = B Omega
-    J dOmega/dt = f(Omega) + N + hat(R) A' Lambda
-    dX/dt = V
-    m dV/dt = G + H + Lambda
-    """
-    r = p.attachment_point
-    torque = add(add(gyroscopic(p.inertia, omega), torque_n), cross(r, matTvec(a, constraint_force)))
-    force = add(add(p.weight, force_h), constraint_force)
-    return matvec(b, omega), matvec(p.inertia_inv, torque), v, scale(1.0 / p.mass, force)
-
-
-@jit(forceinline=True)
-def constraint_error(x, a, p):
-    """E = X + A R - R [m], inertial frame (eq 4)."""
-    r = p.attachment_point
-    ar = matvec(a, r)
-    return (x[0] + ar[0] - r[0], x[1] + ar[1] - r[1], x[2] + ar[2] - r[2])
-
-
-@jit(forceinline=True)
-def constraint_rate(omega, v, a, p):
-    """F = dE/dt = V + A (Omega x R) = V - A hat(R) Omega [m/s], inertial frame (eq 4)."""
-    return add(v, matvec(a, cross(omega, p.attachment_point)))
-
-
-@jit(forceinline=True)
-def body_energy(theta, omega, x, v, p):
-    """v_t, v_r (eq 25) and the gravity term -X'G + h [J]."""
-    translational = 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(x, p.k_t)
-    rotational = 0.5 * quadratic_form(omega, p.inertia) + 0.5 * quadratic_form(theta, p.k_r)
-    gravity = -dot(x, p.weight) + p.lyapunov_offset
-    return translational, rotational, gravity
-
-
-@jit(forceinline=True)
-def body_dissipation(omega, v, p):
-    """Power dissipated by the feedback, V'L_t V + Omega'L_r Omega [W] (eq 29)."""
-    return quadratic_form(v, p.l_t) + quadratic_form(omega, p.l_r)
 
 
 # -- the protocol -----------------------------------------------------------------------------
@@ -147,8 +102,6 @@ class Variant:
     # -- dynamics and outputs (compiled kernels) -------------------------------
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
         """dy/dt, shape like ``y`` ((n_state,) or (..., n_state)); ``t`` [s] is unused."""
-        from .kernels import state_rates
-
         y = np.asarray(y, dtype=float)
         flat = np.ascontiguousarray(y.reshape(-1, self.layout.size))
         out = np.empty_like(flat)
@@ -157,8 +110,6 @@ class Variant:
 
     def _output_columns(self, y: np.ndarray, params: np.ndarray) -> np.ndarray:
         """Every output along states ``y`` (..., n_state): shape (N_OUTPUTS, ...)."""
-        from .kernels import run_outputs
-
         y = np.asarray(y, dtype=float)
         flat = np.ascontiguousarray(y.reshape(1, -1, self.layout.size))
         out = np.empty((N_OUTPUTS, 1, flat.shape[1]))
@@ -212,7 +163,7 @@ class Variant:
         n = 3 * len(self._configuration_blocks)
         if not np.any(self.body.weight):
             return self._rest_state(np.zeros(n)), 0.0
-        from scipy.optimize import minimize, root
+        from scipy.optimize import minimize, root  # heavy: scipy
 
         if self.smooth:
             # the minimum of the stored energy, polished to a rest point of the dynamics

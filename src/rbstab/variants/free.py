@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from ..jit import jit
 from ..kinematics import ZERO
-from .base import Variant
 
-__all__ = ["Free"]
+__all__ = ["constraint_force", "constraint_energy", "constraint_dissipation"]
 
 
 @jit(forceinline=True)
@@ -23,13 +22,3 @@ def constraint_energy(e, d, p):
 @jit(forceinline=True)
 def constraint_dissipation(f, d_rate, p):
     return 0.0
-
-
-class Free(Variant):
-    """Free rigid body under the feedback N, H (eqs 1, 23, 24, 29, 30).
-
-    v = v_t + v_r - X'G + G'K_t^-1 G / 2 and dv/dt = -V'L_t V - Omega'L_r Omega.
-    """
-
-    name = "free"
-    equation = "eqs 1, 23, 24, 29, 30"

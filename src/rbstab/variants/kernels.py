@@ -20,7 +20,7 @@ from ..kinematics import ZERO, matvec, rotation_and_rate_of, vector
 from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
 from ..model import force_h, torque_n
 from . import embedded, free, permanent, sliding, visco_elastic
-from .base import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
+from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
 
 __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row",
            "state_rates", "run_outputs", "STATE_SIZE"]

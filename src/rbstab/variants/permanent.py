@@ -9,15 +9,11 @@ same trajectory.
 
 from __future__ import annotations
 
-import numpy as np
-
 from ..jit import jit
 from ..kinematics import add, cross, matTvec, matvec, neg, rotation_and_rate_of, scale, sub, vector
-from ..layout import FULL_BODY
 from ..model import force_h, gyroscopic, torque_n
-from .base import Variant
 
-__all__ = ["Permanent", "quantities"]
+__all__ = ["quantities"]
 
 
 @jit(forceinline=True)
@@ -44,23 +40,3 @@ def quantities(y, p):
     acceleration = matvec(a, sub(cross(r, omega_dot), cross(omega, omega_x_r)))
     constraint_force = sub(scale(p.mass, acceleration), applied)
     return theta, omega, x, v, a, b, n, h, constraint_force, omega_dot
-
-
-class Permanent(Variant):
-    """Rigid body rotating about the fixed point C (Euler's equation about C).
-
-    J_p dOmega/dt = -Omega x (J_p Omega) + N - hat(R) A'(G + H),  J_p = J - m hat(R)^2
-    (eq 21, corrected: the paper's extra term hat(R) hat(Omega) Omega is identically zero
-    and its sign of the hat(Omega)^2 R term is inconsistent; see docs/physics.md).
-    Reconstruction: X = R - A R, V = A hat(R) Omega;
-    Lambda = m (A hat(R) dOmega/dt - A hat(Omega)^2 R) - G - H.
-    v = v_t + v_r - X'G + h (eqs 31, 34); dv/dt = -Omega'L_r Omega - V'L_t V (eq 37).
-    """
-
-    name = "permanent"
-    equation = "eqs 20, 21"
-
-    def full_state(self, y: np.ndarray) -> np.ndarray:
-        """The 12-state vector (Theta, Omega, X, V) of reduced states y, shape (..., 12)."""
-        q = self.evaluate(y)
-        return FULL_BODY.join(**{b: q[b] for b in FULL_BODY.blocks})

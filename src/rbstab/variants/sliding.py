@@ -25,9 +25,9 @@ from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, rotation_and_rate_of, scale, vector
 from ..layout import VARIANT_CODES
 from ..model import force_h, torque_n
-from .base import Variant, body_rates, constraint_error, constraint_rate
+from .body import body_rates, constraint_error, constraint_rate
 
-__all__ = ["Sliding", "MODE_CODES", "MODE_COLUMNS", "mode_code", "mode_of", "mode_force", "mode_rate",
+__all__ = ["MODE_CODES", "MODE_COLUMNS", "mode_code", "mode_of", "mode_force", "mode_rate",
            "mode_quantities", "mode_rows", "stop_at_c", "inverse_mass_at_c"]
 
 _LOG2 = math.log(2.0)
@@ -220,24 +220,3 @@ def mode_rows(y, params, modes, out):
         for c in range(4):
             for i in range(3):
                 out[k, 3 * c + i] = columns[c][i]
-
-
-class Sliding(Variant):
-    """Lambda = -K_s sgn(E) (eq 39); with a boundary layer phi > 0, sgn(E) -> tanh(E/phi).
-
-    The force derives from the potential K_s sum|E_i| (phi = 0) or
-    K_s phi sum log cosh(E_i/phi) (phi > 0), so v = v_t + v_r + that potential and
-    dv/dt = -V'L_t V - Omega'L_r Omega (for phi = 0 on every smooth piece of the Filippov
-    motion: off the surfaces F'Lambda and d(K_s |E|_1)/dt cancel, on a sliding axis both
-    vanish). The pure sign law chatters; :func:`rbstab.simulate.simulate` integrates it
-    with :mod:`rbstab.engine.switching`, in the modes above (docs/sliding.md).
-    """
-
-    name = "sliding"
-    required_gains = ("k_t", "l_t", "k_r", "l_r", "k_s")
-    equation = "eq 39"
-
-    @property
-    def smooth(self) -> bool:
-        """False for the pure sign law (boundary_layer 0)."""
-        return self.gains.boundary_layer > 0

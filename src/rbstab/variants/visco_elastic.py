@@ -4,9 +4,8 @@ from __future__ import annotations
 
 from ..jit import jit
 from ..kinematics import ZERO, matvec, neg, quadratic_form, sub
-from .base import Variant
 
-__all__ = ["ViscoElastic"]
+__all__ = ["constraint_force", "constraint_energy", "constraint_dissipation"]
 
 
 @jit(forceinline=True)
@@ -25,14 +24,3 @@ def constraint_energy(e, d, p):
 def constraint_dissipation(f, d_rate, p):
     """F'L_c F [W] (eq 43)."""
     return quadratic_form(f, p.l_c)
-
-
-class ViscoElastic(Variant):
-    """Lambda = -K_c E - L_c F (eq 40).
-
-    v = v_t + v_r + E'K_c E/2 (eqs 41, 42); dv/dt = -V'L_t V - Omega'L_r Omega - F'L_c F (eq 43).
-    """
-
-    name = "visco_elastic"
-    required_gains = ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")
-    equation = "eq 40"

@@ -34,10 +34,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .engine import METHODS, integrate_runs
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
+from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
+from .model import PARAMETERS
 from .summary import numerical_rate, summarize, summary_table
 from .variants import Variant
+from .variants.base import N_OUTPUTS, split_outputs
+from .variants.kernels import run_outputs
 
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
@@ -255,9 +260,9 @@ def solve(
     solver : dict
         ``nfev``, ``njev``, ``nlu``, ``solver_status``.
     """
-    from scipy.integrate import solve_ivp
+    from scipy.integrate import solve_ivp  # heavy: scipy
 
-    from .config.schema import SimulationSettings
+    from .config.schema import SimulationSettings  # heavy: pydantic, yaml
 
     t_eval = np.linspace(0.0, settings.t_end, settings.n_samples)
     states = np.full((settings.n_samples, variant.layout.size), np.nan)
@@ -312,8 +317,6 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> 
 
 def uses_compiled_engine(config: "RunConfig", engine: str = "compiled") -> bool:
     """Whether ``config`` runs on the compiled engine with ``engine`` (see the module docstring)."""
-    from .engine import METHODS
-
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
     return engine == "compiled" and config.simulation.method in METHODS and not is_sign_law(config)
@@ -328,8 +331,6 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     """Run a pure-sign-law configuration with :mod:`rbstab.engine.switching` (see
     :func:`simulate`; ``timeout`` [s] replaces ``simulation.max_wall_time``); the result's
     ``switching`` holds the located events."""
-    from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
-
     start = _time.perf_counter()
     variant = config.make_variant()
     solution = integrate_sign_law(variant, variant.initial_state(config.initial_state), config.simulation,
@@ -407,9 +408,6 @@ def _chunk_blocks(configs, variants, codes, params, sol, share: float, settings:
     """(runs of the chunk, their RunBlock) of one integrated chunk, post-processed
     :data:`POSTPROCESS_BLOCK` runs at a time (a block per ``t_end`` of those runs); every
     output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`."""
-    from .variants.base import N_OUTPUTS, split_outputs
-    from .variants.kernels import run_outputs
-
     k, n_samples, _ = sol.samples.shape
     for lo in range(0, k, POSTPROCESS_BLOCK):
         t0 = _time.perf_counter()
@@ -464,8 +462,6 @@ def _variant_of(config: "RunConfig", shared: dict) -> Variant:
 def _parameter_rows(variants: Sequence[Variant]) -> np.ndarray:
     """The variants' :data:`~rbstab.model.PARAMETERS` records, shape (k,) (a record at a time:
     ``numpy.concatenate`` of structured arrays costs ~40 us a record)."""
-    from .model import PARAMETERS
-
     rows = np.empty(len(variants), dtype=PARAMETERS)
     for i, variant in enumerate(variants):
         rows[i] = variant.parameters[0]
@@ -509,8 +505,6 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     ValueError
         For an unknown engine (allowed: :data:`ENGINES`) or ``chunk_size < 1``.
     """
-    from .engine import integrate_runs
-
     if chunk_size < 1:
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
     groups: dict[tuple, list[int]] = {}

@@ -1,0 +1,50 @@
+"""The settings of a run that travel together through the compiled integrators, and their
+work arrays.
+
+:data:`SETTINGS` is a numpy record (the runtime argument ``s`` of
+:func:`rbstab.engine.integrate.integrate_run`, :func:`rbstab.engine.integrate.step`,
+:func:`rbstab.engine.switching.integrate_switching`, ...): ``t_end`` [s], ``rtol``,
+``atol``, ``max_step`` [s], ``gimbal_margin`` [rad], ``max_steps`` (accepted steps),
+``max_wall_time`` [s] (inf: none) and ``method`` (the method's number,
+:func:`rbstab.engine.rk.method_number`). :class:`Work` holds the arrays one run's steps
+write into.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+
+import numpy as np
+
+from ..jit import jit
+from .rk import INTERPOLANT_ROWS, STAGE_ROWS
+
+__all__ = ["SETTINGS", "settings_records", "Work", "work_arrays"]
+
+#: A run's integration settings (module docstring).
+SETTINGS = np.dtype([("t_end", np.float64), ("rtol", np.float64), ("atol", np.float64), ("max_step", np.float64),
+                     ("gimbal_margin", np.float64), ("max_steps", np.int64), ("max_wall_time", np.float64),
+                     ("method", np.int64)])
+
+
+def settings_records(rows: np.ndarray, method: int) -> np.ndarray:
+    """:data:`SETTINGS` records, shape (k,), of ``rows`` (k, 7): t_end, rtol, atol,
+    max_step, gimbal_margin, max_steps, max_wall_time, each run with ``method``."""
+    records = np.empty(len(rows), dtype=SETTINGS)
+    for i, name in enumerate(SETTINGS.names[:-1]):
+        records[name] = rows[:, i]
+    records["method"] = method
+    return records
+
+
+#: One run's work arrays: ``K`` (STAGE_ROWS[method], n) stage rates, ``Q``
+#: (INTERPOLANT_ROWS[method], n) the step's interpolant, and ``y_new``, ``scale``, ``work``
+#: (n,): the new state, the error's scale and scratch.
+Work = namedtuple("Work", ["K", "Q", "y_new", "scale", "work"])
+
+
+@jit
+def work_arrays(method, n):
+    """:class:`Work` for a state of size n and the method number ``method``."""
+    return Work(np.empty((STAGE_ROWS[method], n)), np.empty((INTERPOLANT_ROWS[method], n)), np.empty(n),
+                np.empty(n), np.empty(n))

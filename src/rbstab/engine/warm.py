@@ -1,0 +1,99 @@
+"""Compiling the engine's kernels into the cache (:mod:`rbstab.jit`) before a command needs them.
+
+:func:`ensure_compiled` compiles the entry points (the integrator and the outputs) the first
+time a command needs them, printing one line that says so (numba compiles them in ~10-20 s;
+later processes load them from the cache in ~0.5 s); :func:`warm_up` compiles (or loads)
+them on a tiny input.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..jit import CACHE_DIR, cache_is_warm, mark_warm
+from ..model import PARAMETERS
+from ..summary import numerical_rate
+from ..variants.base import N_OUTPUTS
+from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
+from .integrate import integrate_runs
+from .switching import warm_up as warm_up_sign_law
+from .tableaus import METHODS
+
+__all__ = ["GROUPS", "warm_up", "ensure_compiled"]
+
+#: Kernel groups, each compiled (and marked warm in the cache) as a whole: the engine's
+#: right-hand side, integrator and outputs; the sign law's event-driven integrator, which
+#: only pure-sign-law runs need (parts of :func:`warm_up`).
+GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",)}
+
+
+def warm_up(parts: str = "rates,outputs,switching") -> None:
+    """Compile (or load from the cache) every kernel a run uses, on a tiny input.
+
+    ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
+    integrator), ``outputs`` (every output at the samples and the numerical dv/dt,
+    :func:`rbstab.summary.numerical_rate`) and ``switching`` (the sign
+    law's event-driven integrator, :mod:`rbstab.engine.switching`);
+    :func:`ensure_compiled` compiles some in a second process at the same time.
+    """
+    wanted = set(parts.split(","))
+    params = np.zeros(1, dtype=PARAMETERS)
+    params["mass"] = 1.0
+    for name in ("inertia", "inertia_inv", "pivot_inertia", "pivot_inertia_inv"):
+        params[name] = np.eye(3)
+    if "switching" in wanted:
+        warm_up_sign_law(params)
+    for code, n in enumerate(STATE_SIZE):
+        y = np.zeros((1, n))
+        if "rates" in wanted:
+            state_rates(code, y, params, np.empty_like(y))
+        if "outputs" in wanted:
+            run_outputs(np.array([code]), params, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
+    if "outputs" in wanted:
+        numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
+    if "rates" in wanted:
+        settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
+        for method in METHODS:
+            integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)
+
+
+def _start_warm_up(parts: str):
+    """A process running :func:`warm_up` (``parts``), or None if it cannot start."""
+    code = f"from rbstab.engine import warm_up; warm_up({parts!r})"
+    here = str(Path(__file__).resolve().parents[2])  # this rbstab, whatever the child's sys.path
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [here, os.environ.get("PYTHONPATH")]))}
+    try:
+        return subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+    except OSError:
+        return None
+
+
+def ensure_compiled(say=None, *, sign_law: bool = False) -> None:
+    """Compile the engine's kernels into the cache unless that was done before.
+
+    ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
+    stderr; nothing is said when the cache is warm. ``sign_law``: also the sign law's
+    integrator (:data:`GROUPS`). The parts are compiled in two processes at once (numba
+    compiles on one core; each writes its own kernels into the cache folder).
+    """
+    cold = [g for g in ("engine", "sign_law") if (g == "engine" or sign_law) and not cache_is_warm(g)]
+    if not cold:
+        return
+    if say is not None:
+        say(f"rbstab: compiling the engine once (~30-60 s on 2 cores); cached in {CACHE_DIR}")
+    start = time.perf_counter()
+    parts = [p for g in cold for p in GROUPS[g]]
+    here, there = parts[:1], parts[1:]
+    helper = _start_warm_up(",".join(there)) if there and (os.cpu_count() or 1) > 1 else None
+    warm_up(",".join(here if helper is not None else parts))
+    if helper is not None and helper.wait() != 0:
+        warm_up(",".join(there))  # the second process failed: compile its parts here
+    for group in cold:
+        mark_warm(group, f"{time.perf_counter() - start:.1f} s\n")
