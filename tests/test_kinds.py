@@ -9,10 +9,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import xarray as xr
 from click.testing import CliRunner
 
 from rbstab.io.hdf5 import NotAResultFile
 from rbstab.kinds import ANALYSIS, KINDS, RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of, open_input
+from rbstab.studies.files import write_study_file
 from rbstab.sweep import run_sweep, spec_from_mapping
 from rbstab_cli.main import cli
 
@@ -39,6 +41,11 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
         f.attrs["rbstab_format"] = "rbstab-future-9"
     text = root / "notes.h5"
     text.write_text("not HDF5")
+    studies = {}
+    for name in ("sensitivity", "tuning"):
+        (root / name).mkdir()
+        studies[name] = write_study_file(xr.Dataset({"x": ("i", np.arange(2.0))}, attrs={"rbstab_study": name}),
+                                         root / name / f"{name}.nc")
     plain = root / "plain"
     plain.mkdir()
     incomplete = root / "incomplete"
@@ -46,7 +53,7 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     shutil.copy(sweep / "sweep.yaml", incomplete / "sweep.yaml")
     return {"run": DATA / "run_file_6596935.h5", "store": DATA / "store_file_6596935.h5", "sweep": sweep,
             "analysis": analysis, "foreign": foreign, "other_format": other_format, "text": text, "plain": plain,
-            "incomplete": incomplete}
+            "incomplete": incomplete, **studies}
 
 
 def test_each_kind_is_recognised_by_its_own_test_only(inputs):
@@ -62,10 +69,14 @@ def test_each_kind_opens_with_its_loader(inputs):
     assert [row["file_row"] for row in open_input(inputs["store"])] == [0, 1]
     assert open_input(inputs["sweep"]).sizes["run"] == 2
     assert open_input(inputs["analysis"]).attrs["rbstab_format"] == "rbstab-analysis-1"
+    for name in ("sensitivity", "tuning"):
+        assert open_input(inputs[name]).attrs["rbstab_study"] == name
+        assert kind_of(inputs[name].parent).name == name  # a study's folder stands for its file
 
 
 @pytest.mark.parametrize("name, message", [
-    ("foreign", "not an rbstab run result, store file of a sweep (many runs), sweep folder or analysis file "
+    ("foreign", "not an rbstab run result, store file of a sweep (many runs), sweep folder, analysis file, "
+                "sensitivity study (its sensitivity.nc or folder) or tuning study (its tuning.nc or folder) "
                 "(an HDF5 file without an rbstab_format attribute)"),
     ("other_format", "rbstab_format 'rbstab-future-9', of no kind this version reads"),
     ("text", "not an HDF5 file"),

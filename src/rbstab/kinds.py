@@ -7,7 +7,9 @@
 - ``sweep``: a sweep folder (``sweep.yaml`` and ``index.csv``), loaded by
   :func:`rbstab.sweep.folder.open_sweep`;
 - ``analysis``: an analysis file (``rbstab analyze``: ``*.analysis.nc``), loaded by
-  :func:`rbstab.analysis.dataset.read_analysis`.
+  :func:`rbstab.analysis.dataset.read_analysis`;
+- ``sensitivity``, ``tuning``: a study's file (``sensitivity.nc``, ``tuning.nc``) or its
+  folder (``rbstab sensitivity``, ``rbstab tune``), loaded by :mod:`rbstab.studies`.
 
 As xarray's backends do, each kind is a ``can_open`` test and a loader (:class:`InputKind`),
 and :func:`kind_of` dispatches: the first kind whose ``can_open`` says yes. ``rbstab show``,
@@ -17,7 +19,7 @@ file rbstab did not write, another kind, a folder that is not a sweep folder).
 
 The ``can_open`` tests and loaders belong to the module that writes each format (the
 run-file writer :mod:`rbstab.io.hdf5`, the store writer :mod:`rbstab.io.chunk`, the sweep
-folder's owner :mod:`rbstab.sweep.folder`, the analysis writer
+folder's reader and writer :mod:`rbstab.sweep.folder`, the analysis writer
 :mod:`rbstab.analysis.dataset`): the file kinds tell themselves apart by their
 ``rbstab_format`` attribute, a sweep folder by its two files. This module only lists
 them, so it sits above the io, sweep and analysis layers and below the report and the CLI
@@ -42,7 +44,7 @@ from .io.chunk import is_chunk_file, read_chunk_rows
 from .io.hdf5 import NotAResultFile, is_run_file, read_dataset, read_format
 from .sweep.folder import INDEX_FILE, SPEC_FILE, is_sweep_folder, open_sweep
 
-__all__ = ["InputKind", "RUN", "STORE", "SWEEP", "ANALYSIS", "KINDS", "kind_of", "open_input", "is_plain_folder",
+__all__ = ["InputKind", "RUN", "STORE", "SWEEP", "ANALYSIS", "SENSITIVITY", "TUNING", "KINDS", "kind_of", "open_input", "is_plain_folder",
            "inputs_in"]
 
 
@@ -98,8 +100,35 @@ SWEEP = InputKind("sweep", "sweep folder", "rbstab show or rbstab.open_sweep rea
                   open_sweep)
 ANALYSIS = InputKind("analysis", "analysis file", "rbstab report shows it", "*.analysis.nc", _is_analysis_file,
                      _read_analysis)
+
+
+def _study_test(name: str) -> Callable[[Path], bool]:
+    def can_open(path: Path) -> bool:
+        from .studies.files import study_kind  # heavy: xarray
+
+        return study_kind(path) == name
+
+    return can_open
+
+
+def _read_sensitivity(path: Path):
+    from .studies import read_sensitivity  # heavy: xarray, pandas
+
+    return read_sensitivity(path)
+
+
+def _read_tuning(path: Path):
+    from .studies import read_tuning  # heavy: xarray, pandas
+
+    return read_tuning(path)
+
+
+SENSITIVITY = InputKind("sensitivity", "sensitivity study (its sensitivity.nc or folder)", "rbstab report draws it",
+                        "sensitivity.nc", _study_test("sensitivity"), _read_sensitivity)
+TUNING = InputKind("tuning", "tuning study (its tuning.nc or folder)", "rbstab report draws it", "tuning.nc",
+                   _study_test("tuning"), _read_tuning)
 #: Every kind, in the order :func:`kind_of` tries them.
-KINDS = (RUN, STORE, SWEEP, ANALYSIS)
+KINDS = (RUN, STORE, SWEEP, ANALYSIS, SENSITIVITY, TUNING)
 
 
 def _a(noun: str) -> str:

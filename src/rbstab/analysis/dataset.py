@@ -42,6 +42,7 @@ import numpy as np
 
 from ..config import canonical_config, config_hash
 from ..io.atomic import atomic_path
+from ..io.hdf5 import read_format
 from ..io.metadata import provenance_attributes
 from ..layout import BLOCK_UNITS
 
@@ -356,18 +357,10 @@ def write_analysis(result, path: str | os.PathLike, *, command_line: str | None 
 
 def is_analysis_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a file written by :func:`write_analysis`."""
-    import h5py  # heavy: h5py
-
-    path = Path(path)
-    if not path.is_file():
-        return False
     try:
-        with h5py.File(path, "r") as f:
-            value = f.attrs.get("rbstab_format")
-    except OSError:
+        return read_format(path) == FORMAT
+    except (OSError, ValueError):
         return False
-    value = value.decode() if isinstance(value, bytes) else value
-    return value == FORMAT
 
 
 def read_analysis(path: str | os.PathLike):

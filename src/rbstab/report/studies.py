@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..kinds import SENSITIVITY, TUNING, kind_of
 from .figures import DPI, FigureFile, FigureWriter, units_text
 from .load import ReportInputError, safe_filename
 from .render import Section, Table
@@ -25,17 +26,18 @@ from .tables import format_value
 
 __all__ = ["split_studies", "study_sections"]
 
+#: The kinds of input this module draws.
+STUDY_KINDS = (SENSITIVITY, TUNING)
 #: Best trials listed in a tuning section.
 BEST_ROWS = 10
 
 
 def split_studies(paths: Sequence[str | os.PathLike]) -> tuple[list[Path], list]:
     """(study files or folders, the other inputs) of a report."""
-    from ..studies.files import study_kind  # heavy: h5py, xarray
-
     studies, others = [], []
     for raw in paths:
-        (studies if study_kind(raw) else others).append(Path(raw) if study_kind(raw) else raw)
+        is_study = Path(raw).exists() and any(k.can_open(Path(raw)) for k in STUDY_KINDS)
+        (studies if is_study else others).append(Path(raw) if is_study else raw)
     return studies, others
 
 
@@ -47,18 +49,15 @@ def study_sections(paths: Sequence[Path], out: FigureWriter) -> list[Section]:
     ReportInputError
         If a study's file cannot be read.
     """
-    from ..studies import read_sensitivity, read_tuning  # heavy: h5py, pandas, xarray
-    from ..studies.files import study_kind  # heavy: h5py, xarray
-
     sections, problems = [], []
     for path in paths:
-        kind = study_kind(path)
         try:
-            ds = read_sensitivity(path) if kind == "sensitivity" else read_tuning(path)
+            kind = kind_of(path, STUDY_KINDS)
+            ds = kind.open(Path(path))
         except (OSError, ValueError) as exc:
             problems.append(f"{path}: {exc}")
             continue
-        sections.append(_sensitivity_section(ds, out) if kind == "sensitivity" else _tuning_section(ds, out))
+        sections.append(_sensitivity_section(ds, out) if kind is SENSITIVITY else _tuning_section(ds, out))
     if problems:
         raise ReportInputError(problems)
     return sections
