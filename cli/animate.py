@@ -56,7 +56,7 @@ def animate(result, run_id, output, fps, speed, view, at, dpi) -> None:
     trace, and the time, v(t) and |E| in a corner, from the stored trajectory (interpolated
     to the frames). A failed run plays up to its failure and says why.
     """
-    from rbstab.report.animate import (  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.report.animate import (  # heavy: numpy, pydantic
         AnimationError,
         check_output,
         nearest_frame,
@@ -64,7 +64,7 @@ def animate(result, run_id, output, fps, speed, view, at, dpi) -> None:
         scene,
         write_animation,
     )
-    from rbstab.report.load import ReportInputError, safe_filename  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.report.load import ReportInputError, safe_filename  # heavy: numpy, pydantic
 
     try:
         run = pick_run(result, run_id)

@@ -176,8 +176,8 @@ def _show(path: str) -> None:
 
 def _show_run(path: str, run_id: str) -> None:
     """The resolved configuration of one run of a sweep folder, rebuilt from its result."""
-    from rbstab.config import dump_yaml  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
-    from rbstab.sweep.folder import is_sweep_folder, resolved_config  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.config import dump_yaml  # heavy: numpy, pydantic
+    from rbstab.sweep.folder import is_sweep_folder, resolved_config  # heavy: numpy, pydantic
 
     if not is_sweep_folder(path):
         raise ValueError(f"{path}: --run needs a sweep folder (sweep.yaml and index.csv)")

@@ -7,7 +7,9 @@ import os
 
 import click
 
+from rbstab.api import execute_sweep
 from rbstab.sweep.worker import ENGINES
+from rbstab.warning_codes import coded
 
 from ._common import command_line
 from .console import get_console
@@ -126,7 +128,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     --connect-timeout) or a fault of the machine (full disk, read-only folder: one line);
     130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
-    from rbstab.sweep.executors import LocalExecutor  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep.executors import LocalExecutor  # heavy: numpy, pydantic
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
@@ -162,8 +164,8 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     """--dry-run: plan and validate every run, print the count, the varied keys with their
     ranges, the first and last runs (all with -v), the estimated store size and wall time;
     write nothing."""
-    from rbstab.sweep import SweepSpecError, default_jobs, load_spec  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
-    from rbstab.sweep.table import estimate, plan_table  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep import SweepSpecError, default_jobs, load_spec  # heavy: numpy, pydantic
+    from rbstab.sweep.table import estimate, plan_table  # heavy: numpy, pydantic
 
     console = get_console()
     try:
@@ -185,8 +187,7 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
 
 def _execute(spec, output, ex, **options):
     """:func:`rbstab.api.execute_sweep`, its exceptions as one-line CLI errors."""
-    from rbstab.api import execute_sweep  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
-    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numpy, pydantic
 
     try:
         return execute_sweep(spec, output, executor=ex, command_line=command_line(), log=get_console().info,
@@ -199,7 +200,6 @@ def _execute(spec, output, ex, **options):
 
 def _say_outcome(outcome) -> None:
     """The sweep's warnings, counts, files and problems."""
-    from rbstab.warning_codes import coded  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
 
     console = get_console()
     for line in outcome.warnings:

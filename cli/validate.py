@@ -10,8 +10,8 @@ from .options import console_options, json_option, set_option
 
 
 def _is_spec(path: str) -> bool:
-    from rbstab.config import ConfigError  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
-    from rbstab.config.yaml_io import read_yaml_file  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.config import ConfigError  # heavy: numpy, pydantic
+    from rbstab.config.yaml_io import read_yaml_file  # heavy: numpy, pydantic
 
     try:
         data = read_yaml_file(path, "file")
@@ -22,7 +22,7 @@ def _is_spec(path: str) -> bool:
 
 def _check_spec(path: str, overrides) -> dict:
     """One JSON-able record of a sweep spec: valid or not, its runs, its warnings."""
-    from rbstab.sweep import SweepSpecError, load_spec, plan_table  # heavy: rbstab's library (numpy and more) is loaded by the commands that use it, not at every start-up
+    from rbstab.sweep import SweepSpecError, load_spec, plan_table  # heavy: numpy, pydantic
 
     try:
         loaded = load_spec(path, overrides)

@@ -202,7 +202,7 @@ def read_parameters(folder: str | os.PathLike, index=None) -> dict[str, str]:
 
 def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
     """A run file's global attributes (:func:`rbstab.io.hdf5.read_attributes`) as an index row."""
-    from ..io.chunk import summary_columns  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.chunk import summary_columns  # heavy: numba, pydantic or h5py
 
     row = {k: attrs.get(k) for k in ("variant", "status", "message", "wall_time")}
     row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}))
@@ -239,7 +239,7 @@ def index_columns(rows: Sequence[Mapping[str, Any]], parameters: Sequence[str] |
                 in_params = False
             if key not in fixed and key not in params:
                 (params if in_params else summary)[key] = None
-    from ..io.chunk import SUMMARY_FIGURES  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.chunk import SUMMARY_FIGURES  # heavy: numba, pydantic or h5py
 
     order = {name: i for i, name in enumerate(SUMMARY_FIGURES)}
     ranked = sorted(summary, key=lambda c: (order.get(re.sub(r"_[xyz]$", "", c), len(order)), c))
@@ -358,7 +358,7 @@ def verify_index(folder: str | os.PathLike) -> bool:
         If the index does not match (damaged, or an invocation killed between writing the
         two files: rerunning the sweep rebuilds both).
     """
-    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py
 
     folder = Path(folder)
     try:
@@ -469,8 +469,8 @@ def read_spec(folder: str | os.PathLike) -> dict:
     OSError, ValueError
         If it is missing, not YAML or not a mapping.
     """
-    from ..config import ConfigError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
-    from ..config.yaml_io import parse_yaml, read_text_limited  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..config import ConfigError  # heavy: numba, pydantic or h5py
+    from ..config.yaml_io import parse_yaml, read_text_limited  # heavy: numba, pydantic or h5py
 
     path = Path(folder) / SPEC_FILE
     try:
@@ -483,8 +483,8 @@ def read_spec(folder: str | os.PathLike) -> dict:
 
 
 def _run_file_row(path: Path, verify: bool = False, damaged: list | None = None) -> dict | None:
-    from ..io.hdf5 import NotAResultFile, read_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
-    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.hdf5 import NotAResultFile, read_attributes  # heavy: numba, pydantic or h5py
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py
 
     try:
         return row_from_attributes(read_attributes(path, data=verify), path.name)
@@ -518,9 +518,9 @@ def _store_frames(runs_dir: Path, names: Sequence[str], verify: bool, damaged: l
     """The rows of the store files ``names`` of ``runs_dir`` as DataFrames; a file that
     fails its checksums, or that cannot be opened as one (truncated, emptied), is listed in
     ``damaged`` as (file name, reason)."""
-    from ..io.chunk import read_chunk_columns  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
-    from ..io.hdf5 import NotAResultFile  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
-    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.chunk import read_chunk_columns  # heavy: numba, pydantic or h5py
+    from ..io.hdf5 import NotAResultFile  # heavy: numba, pydantic or h5py
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py
 
     frames = []
     for name in names:
@@ -623,8 +623,8 @@ def resolved_config(folder: str | os.PathLike, run_id: str) -> dict:
     """
     import yaml  # heavy: yaml
 
-    from ..io.chunk import resolved_config as from_store  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
-    from ..io.hdf5 import read_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.chunk import resolved_config as from_store  # heavy: numba, pydantic or h5py
+    from ..io.hdf5 import read_attributes  # heavy: numba, pydantic or h5py
 
     folder = Path(folder)
     index = read_index(folder)
@@ -700,7 +700,7 @@ def _from_index(index):
     (built column by column: ``DataFrame.to_xarray`` costs ~1 s for 10,000 runs)."""
     import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import figure_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.chunk import figure_attributes  # heavy: numba, pydantic or h5py
 
     table = index.drop(columns=[c for c in ("file", "file_row") if c in index.columns])
     coords = {c for c in table.columns if c in ("run_id", "base", "variant") or c in _parameter_set(index)}
@@ -742,8 +742,8 @@ def _from_store(folder: Path, index):
     import numpy as np  # heavy: numpy
     import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
-    from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numba, pydantic or h5py; opening a sweep folder and rbstab show stay light
+    from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numba, pydantic or h5py
+    from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numba, pydantic or h5py
 
     if "file_row" not in index.columns:
         return None
