@@ -1,4 +1,4 @@
-"""Benchmark (issue 38): ``rbstab animate`` and the report's animations, on the paper's cases.
+"""Benchmark: ``rbstab animate`` and the report's animations, on the paper's cases.
 
 Targets: ``rbstab animate results/case3_embedded.h5 -o case3.html`` < 15 s; the report of
 the three paper cases with animations < 30 s and < 10 MB. Prints one table:

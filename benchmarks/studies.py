@@ -1,4 +1,4 @@
-"""Benchmark (issue 37): a 10-factor Sobol' study and a 100-trial tuning study of Case 3.
+"""Benchmark: a 10-factor Sobol' study and a 100-trial tuning study of Case 3.
 
 Targets: a 10-factor Sobol' study with N = 1024 on Case 3 end to end < 60 s on two cores
 (< 5 s on a GPU); a 100-trial tuning study of two gains < 30 s on two cores. Prints one
@@ -7,7 +7,7 @@ table:
 - **sobol**: ``rbstab sensitivity configs/paper/case3_embedded.yaml -n N`` with ten
   factors (the eight gains scaled in [0.5, 2], the mass in [30, 50] kg, Omega_x(0) in
   [10, 22] rad/s) and the default metrics, from process start to exit, in a fresh folder:
-  N (D + 2) = 12 N runs (first-order and total indices; the issue's 22,528 runs for
+  N (D + 2) = 12 N runs (first-order and total indices; the 22,528 runs quoted for
   N = 1024 count the second-order design N (2D + 2), which the study does not draw);
 - **sobol, resumed**: the same command again (every run is there: design, index, analysis);
 - **tune**: ``rbstab tune configs/paper/case3_embedded.yaml --trials 100`` over K_c and
