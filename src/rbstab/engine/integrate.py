@@ -33,7 +33,7 @@ from .status import DEFAULT_MAX_STEPS, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCC
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED"]
+           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "locate_event"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
 
@@ -174,13 +174,13 @@ def step(code, p, s, t, y, f, h_abs, w):
 
 
 @jit(forceinline=True)
-def _gimbal(y, limit):
+def gimbal_event(y, limit):
     """The event function: zero when |theta_2| reaches ``limit`` (decreasing through 0)."""
     return limit - abs(y[1])
 
 
 @jit
-def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
+def locate_event(t_old, h, y_old, Q, dop853, limit, work):
     """Time in [t_old, t_old + h] where the interpolant's |theta_2| reaches ``limit``
     (bisection to the spacing of floats; the event is positive at t_old, <= 0 at the end)."""
     lo, hi = 0.0, 1.0
@@ -189,7 +189,7 @@ def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
         if mid <= lo or mid >= hi:
             break
         dense_value(mid, h, y_old, Q, dop853, work)
-        if _gimbal(work, limit) > 0:
+        if gimbal_event(work, limit) > 0:
             lo = mid
         else:
             hi = mid
@@ -241,11 +241,11 @@ def _run(code, p, y0, s, samples):
         n_steps += 1
         f_new = K[N_STAGES[method]]
         t_stop = t_new
-        event = _gimbal(y, limit) >= 0 and _gimbal(y_new, limit) <= 0
+        event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
         if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
             nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, w)
         if event:
-            t_stop, _ = _locate_event(t, h, y, Q, dop853, limit, work)
+            t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
         while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
             x = (sample_time(j, n_samples, t_end) - t) / h
             dense_value(x, h, y, Q, dop853, samples[j])
