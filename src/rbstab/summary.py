@@ -31,6 +31,7 @@ __all__ = [
     "stream_sample",
     "stream_finish",
     "stream_table",
+    "short_stencils",
 ]
 
 #: Relative tolerance of the check "analytic dv/dt agrees with the numerical derivative
@@ -437,6 +438,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride):
     if i % stride == 0 and i // stride < trace.shape[0]:
         for c in range(row.shape[0]):
             trace[i // stride, c] = row[c]
+        trace[i // stride, NUMERICAL_RATE_AT] = math.nan  # until its stencil is complete
     w = weights.shape[1]
     start = i - (w - 1)  # the samples whose stencil ends at i start there
     if start >= 0:
@@ -446,21 +448,38 @@ def stream_sample(acc, i, row, first, weights, trace, stride):
 
 
 @jit(forceinline=True)
-def stream_finish(acc, first, weights, trace, stride):
+def stream_finish(acc, first, weights, short, trace, stride):
     """The numerical dv/dt of the last samples of a run that stopped before the end of its
-    grid (n_taken < n): one-sided stencils on its own samples, as :func:`numerical_rate`
-    takes them on a run's finite samples (with the whole grid's weights: the same up to
-    rounding). A run of fewer samples than a stencil gets no rate check."""
+    grid (n_taken < n), one-sided on its own samples as :func:`numerical_rate` takes a
+    run's finite samples: with the whole grid's weights (the same up to rounding), or for a
+    run of fewer samples than a stencil, from ``short`` (w, w, w): ``short[m, :m, :m]`` the
+    weights of :func:`stencil_weights` of the grid's first m samples (the same numbers)."""
     n, w = weights.shape
     taken = int(acc[TAKEN])
-    if taken >= n or taken < w:
-        if taken < w and taken < n:
+    if taken >= n:
+        return
+    if taken < w:
+        if taken < 2:
             acc[MAX_MISMATCH] = math.nan
+            return
+        for i in range(taken):
+            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), trace, stride)
         return
     start = taken - w
     for i in range(max(0, taken - w), taken):
         if first[i] + w - 1 > taken - 1:  # its stencil on the whole grid reaches past the run
             _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), trace, stride)
+
+
+def short_stencils(time: np.ndarray) -> np.ndarray:
+    """The weights :func:`stream_finish` takes for a run of m < w samples, shape (w, w, w):
+    ``[m, :m, :m]`` those of :func:`stencil_weights` of ``time[:m]`` (m >= 2), w the
+    stencil's width on the whole grid ``time``."""
+    w = min(RATE_STENCIL, len(time))
+    short = np.zeros((w, w, w))
+    for m in range(2, w):
+        short[m, :m, :m] = stencil_weights(time[:m])[1]
+    return short
 
 
 def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) -> dict[str, list]:
@@ -499,7 +518,7 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     with np.errstate(all="ignore"):
         scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
     for j in range(k):
-        if taken[j] >= max(MIN_CHECK_SAMPLES, min(RATE_STENCIL, n)) and np.isfinite(acc[j, MAX_MISMATCH]):
+        if taken[j] >= MIN_CHECK_SAMPLES and np.isfinite(acc[j, MAX_MISMATCH]):
             scale = float(scales[j]) or 1.0
             largest = float(acc[j, MAX_MISMATCH])
             mismatch[j] = largest

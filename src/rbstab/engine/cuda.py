@@ -38,7 +38,8 @@ from numba import cuda  # numba-cuda's target where installed (rbstab[cuda]); _c
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import N_OUTPUTS
 from ..model import PARAMETERS
-from ..summary import ACCUMULATOR_SIZE, TAKEN, stencil_weights, stream_finish, stream_sample, stream_start
+from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
+                       stream_sample, stream_start)
 from ..variants.kernels import output_row, state_rate
 from .integrate import REJECTED, attempt_step, gimbal_event, locate_event, sample_time, step_bounds
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
@@ -126,8 +127,8 @@ def kernel(method: int, n_state: int):
     shapes of its thread-local work arrays), compiled on first use and cached on disk.
 
     Launched as ``kernel[blocks, THREADS_PER_BLOCK](codes, params, y0, settings, first,
-    weights, stride, full, counter, limit_ns, status, t_stop, nfev, n_steps, last, acc,
-    trace)``; see :func:`integrate_chunks_cuda` for the arrays.
+    weights, short, stride, full, counter, limit_ns, status, t_stop, nfev, n_steps, last,
+    acc, trace)``; see :func:`integrate_chunks_cuda` for the arrays.
     """
     _cuda()
     from numba import float64  # heavy: numba (this module is imported only by --engine cuda)
@@ -136,7 +137,7 @@ def kernel(method: int, n_state: int):
     dop853 = method == DOP853
     clock_ns = _clock_ns()
 
-    def run_all(codes, params, y0s, settings, first, weights, stride, full, counter, limit_ns,
+    def run_all(codes, params, y0s, settings, first, weights, short, stride, full, counter, limit_ns,
                 status_o, t_stop_o, nfev_o, n_steps_o, last_o, acc_o, trace_o):
         K = cuda.local.array((n_rows, n_state), float64)
         Q = cuda.local.array((q_rows, n_state), float64)
@@ -214,7 +215,7 @@ def kernel(method: int, n_state: int):
                 min_step, h_abs = step_bounds(s, t, h_abs)
                 rejected = False
             # its end: results, and the next run (none after the launch's limit)
-            stream_finish(acc, first, weights, trace, stride)
+            stream_finish(acc, first, weights, short, trace, stride)
             status_o[k] = status
             t_stop_o[k] = t
             nfev_o[k] = nfev
@@ -223,6 +224,14 @@ def kernel(method: int, n_state: int):
                 last_o[k, i] = row[i] if j > 0 else math.nan
             for i in range(ACCUMULATOR_SIZE):
                 acc_o[k, i] = acc[i]
+            # the samples after a stop: the outputs of a NaN state, as the CPU engine's
+            for i in range(n_state):
+                sample[i] = math.nan
+            for i in range(-(-j // stride) * stride, min(n_samples, trace.shape[0] * stride), stride):
+                output_row(code, sample, p, row, full)
+                for c in range(N_OUTPUTS):
+                    trace[i // stride, c] = row[c]
+                trace[i // stride, NUMERICAL_RATE_AT] = math.nan
             if status == TIMEOUT:
                 break
             k = cuda.atomic.add(counter, 0, 1)
@@ -282,7 +291,8 @@ class CudaChunk:
     acc : ndarray, shape (k, ACCUMULATOR_SIZE)
         The streamed summary (:func:`rbstab.summary.stream_table` turns it into figures).
     trace : ndarray, shape (k, n_trace, TRACE_COLUMNS) or None
-        Every ``stride``-th sample's outputs and numerical dv/dt; NaN after a run stopped.
+        Every ``stride``-th sample's outputs and numerical dv/dt; after a run stopped, the
+        outputs of a NaN state (as the CPU engine's).
     seconds : float
         The launch's wall time (kernel and transfers) [s].
     """
@@ -358,17 +368,18 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     limit_ns = np.int64(min(max_wall_time * 1e9, 2**62)) if math.isfinite(max_wall_time) else np.int64(2**62)
     # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
     for t_end in dict.fromkeys(settings["t_end"].tolist()):
-        first, weights = stencil_weights(np.linspace(0.0, t_end, n_samples))
+        grid = np.linspace(0.0, t_end, n_samples)
+        first, weights = stencil_weights(grid)
         group = np.flatnonzero(settings["t_end"] == t_end)
         for lo in range(0, len(group), per_launch):
             runs = group[lo: lo + per_launch]
             start = _time.perf_counter()
             out = _launch(fn, codes[runs], params[runs], y0[runs], settings[runs], first, weights,
-                          stride or n_samples, full, n_trace, limit_ns)
+                          short_stencils(grid), stride or n_samples, full, n_trace, limit_ns)
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _launch(fn, codes, params, y0, settings, first, weights, stride, full, n_trace, limit_ns):
+def _launch(fn, codes, params, y0, settings, first, weights, short, stride, full, n_trace, limit_ns):
     """One launch over the given runs; the host arrays of :class:`CudaChunk`."""
     k = len(codes)
     status = np.full(k, TIMEOUT, dtype=np.int64)  # a run the launch's limit left unstarted
@@ -379,7 +390,7 @@ def _launch(fn, codes, params, y0, settings, first, weights, stride, full, n_tra
     acc = np.zeros((k, ACCUMULATOR_SIZE))
     trace_shape = (k, n_trace, TRACE_COLUMNS) if n_trace else (1, 0, TRACE_COLUMNS)
     outputs = [status, t_stop, nfev, n_steps, last, acc]
-    d_in = [cuda.to_device(a) for a in (codes, params, y0, settings, first, weights)]
+    d_in = [cuda.to_device(a) for a in (codes, params, y0, settings, first, weights, short)]
     d_out = [cuda.to_device(a) for a in outputs]
     d_trace = cuda.device_array(trace_shape)
     counter = cuda.to_device(np.zeros(1, dtype=np.int64))
@@ -388,6 +399,4 @@ def _launch(fn, codes, params, y0, settings, first, weights, stride, full, n_tra
     trace = None
     if n_trace:
         trace = d_trace.copy_to_host(cuda.pinned_array(trace_shape, np.float64))
-        taken = host[5][:, TAKEN]
-        trace[np.arange(n_trace)[None, :] * stride >= taken[:, None]] = np.nan  # rows after a run stopped
     return (*[np.array(a) for a in host[:-1]], np.array(host[-1]), trace)
