@@ -131,11 +131,12 @@ def kernel(method: int, n_state: int):
     acc, trace)``; see :func:`integrate_chunks_cuda` for the arrays.
     """
     _cuda()
-    from numba import float64  # heavy: numba (this module is imported only by --engine cuda)
+    from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
     dop853 = method == DOP853
     clock_ns = _clock_ns()
+    parameters = from_dtype(PARAMETERS)
 
     def run_all(codes, params, y0s, settings, first, weights, short, stride, full, counter, limit_ns,
                 status_o, t_stop_o, nfev_o, n_steps_o, last_o, acc_o, trace_o):
@@ -149,6 +150,7 @@ def kernel(method: int, n_state: int):
         sample = cuda.local.array(n_state, float64)
         row = cuda.local.array(N_OUTPUTS, float64)
         acc = cuda.local.array(ACCUMULATOR_SIZE, float64)
+        record = cuda.local.array(1, parameters)
         w = Work(K, Q, y_new, scale, work)
         n_runs = y0s.shape[0]
         n_samples = first.shape[0]
@@ -158,7 +160,13 @@ def kernel(method: int, n_state: int):
         while k < n_runs:
             # a run: its start
             code = codes[k]
-            p = params[k]
+            # the run's record copied to thread-local memory: its fields are read at every
+            # right-hand side, and the copy reads it from device memory once, coalesced
+            source = params[k: k + 1].view(np.float64)
+            copy = record.view(np.float64)
+            for i in range(copy.shape[0]):
+                copy[i] = source[i]
+            p = record[0]
             s = settings[k]
             trace = trace_o[min(k, trace_o.shape[0] - 1)]
             t_end = s.t_end
