@@ -181,7 +181,7 @@ def kernel(method: int, n_state: int):
             j = 0
             n_steps = 0
             status = SUCCESS
-            min_step, h_abs = step_bounds(s, t, h_abs)
+            h_abs = step_bounds(s, t, h_abs)
             rejected = False
             while t < t_end:
                 passes += 1
@@ -191,7 +191,7 @@ def kernel(method: int, n_state: int):
                 if n_steps >= s.max_steps:
                     status = STEP_LIMIT
                     break
-                outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, min_step, rejected, w)
+                outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, rejected, w)
                 if outcome == REJECTED:
                     nfev += n_stages
                     rejected = True
@@ -220,7 +220,7 @@ def kernel(method: int, n_state: int):
                 for i in range(n_state):
                     y[i] = y_new[i]
                     f[i] = K[n_stages, i]
-                min_step, h_abs = step_bounds(s, t, h_abs)
+                h_abs = step_bounds(s, t, h_abs)
                 rejected = False
             # its end: results, and the next run (none after the launch's limit)
             stream_finish(acc, first, weights, short, trace, stride)
@@ -382,14 +382,15 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
         for lo in range(0, len(group), per_launch):
             runs = group[lo: lo + per_launch]
             start = _time.perf_counter()
-            out = _launch(fn, codes[runs], params[runs], y0[runs], settings[runs], first, weights,
-                          short_stencils(grid), stride or n_samples, full, n_trace, limit_ns)
+            out = _launch(fn, (codes[runs], params[runs], y0[runs], settings[runs]),
+                          (first, weights, short_stencils(grid)), stride or n_samples, full, n_trace, limit_ns)
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _launch(fn, codes, params, y0, settings, first, weights, short, stride, full, n_trace, limit_ns):
-    """One launch over the given runs; the host arrays of :class:`CudaChunk`."""
-    k = len(codes)
+def _launch(fn, runs, stencils, stride, full, n_trace, limit_ns):
+    """One launch over ``runs`` (codes, params, y0, settings) with the grid's ``stencils``
+    (first, weights, short); the host arrays of :class:`CudaChunk`."""
+    k = len(runs[0])
     status = np.full(k, TIMEOUT, dtype=np.int64)  # a run the launch's limit left unstarted
     t_stop = np.zeros(k)
     nfev = np.zeros(k, dtype=np.int64)
@@ -398,7 +399,7 @@ def _launch(fn, codes, params, y0, settings, first, weights, short, stride, full
     acc = np.zeros((k, ACCUMULATOR_SIZE))
     trace_shape = (k, n_trace, TRACE_COLUMNS) if n_trace else (1, 0, TRACE_COLUMNS)
     outputs = [status, t_stop, nfev, n_steps, last, acc]
-    d_in = [cuda.to_device(a) for a in (codes, params, y0, settings, first, weights, short)]
+    d_in = [cuda.to_device(a) for a in (*runs, *stencils)]
     d_out = [cuda.to_device(a) for a in outputs]
     d_trace = cuda.device_array(trace_shape)
     counter = cuda.to_device(np.zeros(1, dtype=np.int64))

@@ -105,21 +105,19 @@ REJECTED = 2
 
 @jit(forceinline=True)
 def step_bounds(s, t, h_abs):
-    """(min_step, h_abs) at the start of a step from t: scipy's ``10 * spacing(t)`` and
-    ``h_abs`` clipped to [min_step, s.max_step]."""
-    min_step = 10 * spacing(t)
-    return min_step, min(max(h_abs, min_step), s.max_step)
+    """``h_abs`` at the start of a step from t, clipped to [min_step, s.max_step], min_step
+    scipy's ``10 * spacing(t)``."""
+    return min(max(h_abs, 10 * spacing(t)), s.max_step)
 
 
 @jit(forceinline=True)
-def attempt_step(code, p, s, t, y, f, h_abs, min_step, rejected, w):
+def attempt_step(code, p, s, t, y, f, h_abs, rejected, w):
     """One attempt of scipy's ``_step_impl`` loop: a step of size ``h_abs`` from (t, y)
     with rate f, accepted or not by its error norm.
 
     ``s``: the run's :data:`~rbstab.engine.settings.SETTINGS`; ``w``: its
-    :class:`~rbstab.engine.settings.Work`; ``min_step``, and ``h_abs`` before the first
-    attempt, from :func:`step_bounds`; ``rejected``: whether an attempt of this step was
-    rejected before. Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
+    :class:`~rbstab.engine.settings.Work`; ``h_abs`` before the first attempt from
+    :func:`step_bounds`; ``rejected``: whether an attempt of this step was rejected before. Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
     and its rate ``w.K[n_stages]`` hold the new state at t_new = t + h), :data:`REJECTED`
     (try again with the next h_abs) or TOO_SMALL_STEP / NOT_FINITE (no right-hand side
     evaluated). The CPU driver (:func:`step`) and the CUDA driver
@@ -127,7 +125,7 @@ def attempt_step(code, p, s, t, y, f, h_abs, min_step, rejected, w):
     """
     if not math.isfinite(h_abs):
         return NOT_FINITE, t, 0.0, h_abs
-    if h_abs < min_step:
+    if h_abs < 10 * spacing(t):
         return TOO_SMALL_STEP, t, 0.0, h_abs
     t_end, rtol, atol, method = s.t_end, s.rtol, s.atol, s.method
     K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
@@ -159,11 +157,11 @@ def step(code, p, s, t, y, f, h_abs, w):
     ``w.K[n_stages]`` hold the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing
     accepted).
     """
-    min_step, h_abs = step_bounds(s, t, h_abs)
+    h_abs = step_bounds(s, t, h_abs)
     rejected = False
     attempts = 0
     while True:
-        outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, min_step, rejected, w)
+        outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, rejected, w)
         if outcome == REJECTED:
             attempts += 1
             rejected = True
