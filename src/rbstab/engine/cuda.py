@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 import time as _time
 from dataclasses import dataclass
 from types import FunctionType
@@ -35,6 +36,7 @@ from typing import Iterator
 import numpy as np
 from numba import cuda  # numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
 
+from ..jit import CACHE_DIR, cache_is_warm, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import N_OUTPUTS
 from ..model import PARAMETERS
@@ -44,6 +46,7 @@ from ..variants.kernels import output_row, state_rate
 from .integrate import REJECTED, attempt_step, gimbal_event, locate_event, sample_time, step_bounds
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
+from .tableaus import METHODS
 from .status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "CudaChunk", "integrate_chunks_cuda",
@@ -246,7 +249,22 @@ def kernel(method: int, n_state: int):
 
     if simulated():
         return cuda.jit(_simulator_function(run_all))
+    from numba.cuda.core import config  # optional: numba-cuda
+
+    # beside the CPU kernels, in the folder of this version of the compiled sources (rbstab.jit)
+    config.CACHE_DIR = str(CACHE_DIR)
     return cuda.jit(cache=True)(run_all)
+
+
+def _say_compiling(method: int, n_state: int) -> None:
+    """One line on stderr the first time this version compiles the kernel of ``method`` and
+    ``n_state`` (numba-cuda then caches it on disk); marks it compiled."""
+    group = f"cuda-{METHODS[method]}-{n_state}"
+    if simulated() or cache_is_warm(group):
+        return
+    print(f"rbstab: compiling the CUDA kernel for {METHODS[method]} with {n_state} states "
+          f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+    mark_warm(group)
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
@@ -301,8 +319,10 @@ class CudaChunk:
     trace : ndarray, shape (k, n_trace, TRACE_COLUMNS) or None
         Every ``stride``-th sample's outputs and numerical dv/dt; after a run stopped, the
         outputs of a NaN state (as the CPU engine's).
+    kernel_seconds : float
+        The kernel's time on the GPU (CUDA events) [s].
     seconds : float
-        The launch's wall time (kernel and transfers) [s].
+        The launch's wall time (transfers, kernel and results to the host) [s].
     """
 
     runs: np.ndarray
@@ -313,6 +333,7 @@ class CudaChunk:
     last: np.ndarray
     acc: np.ndarray
     trace: np.ndarray | None
+    kernel_seconds: float
     seconds: float
 
 
@@ -372,7 +393,9 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     params = np.ascontiguousarray(params, dtype=PARAMETERS)
     n_trace = 0 if stride is None else len(range(0, n_samples, stride))
     per_launch = chunk_runs or max(1, TRACE_BYTES // max(8 * TRACE_COLUMNS * n_trace, 1))
-    fn = kernel(int(methods[0]) if len(methods) else 0, n_state)
+    method = int(methods[0]) if len(methods) else 0
+    _say_compiling(method, n_state)
+    fn = kernel(method, n_state)
     limit_ns = np.int64(min(max_wall_time * 1e9, 2**62)) if math.isfinite(max_wall_time) else np.int64(2**62)
     # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
     for t_end in dict.fromkeys(settings["t_end"].tolist()):
@@ -403,9 +426,14 @@ def _launch(fn, runs, stencils, stride, full, n_trace, limit_ns):
     d_out = [cuda.to_device(a) for a in outputs]
     d_trace = cuda.device_array(trace_shape)
     counter = cuda.to_device(np.zeros(1, dtype=np.int64))
+    start, end = cuda.event(), cuda.event()
+    start.record()
     fn[_blocks(k), THREADS_PER_BLOCK](*d_in, np.int64(stride), bool(full), counter, limit_ns, *d_out, d_trace)
+    end.record()
+    end.synchronize()
+    kernel_seconds = start.elapsed_time(end) / 1e3
     host = [d.copy_to_host(cuda.pinned_array(a.shape, a.dtype)) for d, a in zip(d_out, outputs)]
     trace = None
     if n_trace:
         trace = d_trace.copy_to_host(cuda.pinned_array(trace_shape, np.float64))
-    return (*[np.array(a) for a in host[:-1]], np.array(host[-1]), trace)
+    return (*[np.array(a) for a in host[:-1]], np.array(host[-1]), trace, kernel_seconds)
