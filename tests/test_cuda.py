@@ -132,16 +132,19 @@ def test_simulated_basin_map_is_the_cpu_engines(simulated):
 
 
 # -- compiled for a GPU, without one ------------------------------------------------------------------------
-def _nvvm() -> bool:
+def _compilers() -> bool:
+    """Whether NVVM and NVRTC (the CUDA 12 compiler wheels of numba-cuda[cu12]) are here."""
     try:
+        from cuda.pathfinder import load_nvidia_dynamic_lib
         from numba.cuda.cudadrv import nvvm
 
+        load_nvidia_dynamic_lib("nvrtc")
         return bool(nvvm.is_available())
-    except Exception:  # noqa: BLE001 - no NVVM wheel
+    except Exception:  # noqa: BLE001 - no compiler wheels
         return False
 
 
-@pytest.mark.skipif(not _nvvm(), reason="NVVM (the CUDA compiler wheel nvidia-cuda-nvcc-cu12) is not installed")
+@pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
 def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
     """The whole kernel (every variant's physics, DOP853, outputs, streamed summary) compiles
     for CUDA from the CPU engine's source."""
