@@ -414,7 +414,7 @@ class ChunkWriter:
             if not hashes[j]:
                 hashes[j] = config_hash(canonical_config(config.resolved))
         values: dict[str, list] = {
-            "variant": [c.variant for c in configs],
+            "variant": list(block.variants),
             "status": list(block.status),
             "message": list(block.message),
             "wall_time": [float(w) for w in block.wall_time],
