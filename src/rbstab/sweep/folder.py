@@ -322,8 +322,7 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     order = index_columns([dict.fromkeys([*head.columns, *done.columns])],
                           parameters=[c for c in coords if c not in fixed])
     index = index[[c for c in order if c in index.columns]]
-    _write_csv(directory / INDEX_FILE, index)
-    _write_arrow(directory / INDEX_ARROW_FILE, index)
+    _write_index_files(directory, index)
     summary = summarize_columns(index, name=name, ratio=ratio, parameters=table.parameters())
     write_summary(directory / SUMMARY_FILE, summary)
     bad = status != "success"
@@ -331,23 +330,30 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     return summary, problems
 
 
-def _write_csv(path: Path, index) -> None:
-    """``index`` (a DataFrame) as CSV, atomically: by pyarrow's writer (numbers formatted in
-    C, ~10x pandas' speed; they read back as the same floats), pandas' for columns pyarrow
-    does not take (lists); booleans as ``True``/``False``, absent values empty."""
-    import numpy as np  # heavy: numpy
+def _write_index_files(directory: Path, index) -> None:
+    """``index`` (a DataFrame) as :data:`INDEX_FILE` and :data:`INDEX_ARROW_FILE`,
+    atomically, from one Arrow table. The CSV by pyarrow's writer (numbers formatted in C,
+    ~10x pandas' speed; they read back as the same floats), booleans as ``True``/``False``,
+    absent values empty. An index Arrow does not take (lists in a column) is written by
+    pandas, and has no Arrow file (:func:`open_sweep` then reads the CSV)."""
     import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.compute as pc  # heavy: pyarrow
     import pyarrow.csv as pa_csv  # heavy: pyarrow
 
-    index = index.assign(**{c: np.where(index[c].to_numpy(), "True", "False")
-                            for c in index.columns if index[c].dtype == bool})
-    with atomic_path(path) as tmp:
-        try:
-            table = pa.Table.from_pandas(index, preserve_index=False)
-        except (pa.ArrowInvalid, pa.ArrowTypeError):
+    try:
+        table = pa.Table.from_pandas(index, preserve_index=False).combine_chunks()
+    except (pa.ArrowInvalid, pa.ArrowTypeError):
+        with atomic_path(directory / INDEX_FILE) as tmp:
             index.to_csv(tmp, index=False, lineterminator="\n")
-            return
-        pa_csv.write_csv(table, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
+        (directory / INDEX_ARROW_FILE).unlink(missing_ok=True)
+        return
+    as_text = table
+    for i, field in enumerate(table.schema):
+        if pa.types.is_boolean(field.type):
+            as_text = as_text.set_column(i, field.name, pc.if_else(table.column(i), "True", "False"))
+    with atomic_path(directory / INDEX_FILE) as tmp:
+        pa_csv.write_csv(as_text, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
+    _write_arrow(directory / INDEX_ARROW_FILE, table)
 
 
 #: Text columns of an index that :func:`open_sweep` gives as text ("" where absent).
@@ -356,18 +362,12 @@ _TEXT_COLUMNS = ("status", "message", "run_id", "base", "variant", "lyapunov_rat
 _UNIQUE_TEXT = ("run_id", "config_hash")
 
 
-def _write_arrow(path: Path, index) -> None:
-    """``index`` (a DataFrame) as :data:`INDEX_ARROW_FILE`, atomically; an index that Arrow
-    does not take (lists in a column) removes the file instead (:func:`open_sweep` then
-    reads ``index.csv``)."""
+def _write_arrow(path: Path, table) -> None:
+    """``table`` (the index as a pyarrow Table) as :data:`INDEX_ARROW_FILE`, atomically:
+    uncompressed, the text columns but :data:`_UNIQUE_TEXT` dictionary-encoded."""
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.ipc as ipc  # heavy: pyarrow
 
-    try:
-        table = pa.Table.from_pandas(index, preserve_index=False).combine_chunks()
-    except (pa.ArrowInvalid, pa.ArrowTypeError):
-        path.unlink(missing_ok=True)
-        return
     text = (pa.types.is_string, pa.types.is_large_string)
     columns = [c.dictionary_encode() if any(t(c.type) for t in text) and name not in _UNIQUE_TEXT else c
                for name, c in zip(table.column_names, table.columns)]
@@ -488,14 +488,14 @@ def write_summary(path: Path, summary: Mapping[str, Any]) -> Path:
 
 
 def _sha256(path: Path) -> str:
-    """SHA-256 of a file, read through a memory map (no copy of its bytes)."""
-    import mmap  # heavy: none (not needed at start-up)
-
-    with open(path, "rb") as fh:
-        if os.fstat(fh.fileno()).st_size == 0:
-            return hashlib.sha256(b"").hexdigest()
-        with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mm:
-            return hashlib.sha256(mm).hexdigest()
+    """SHA-256 of a file, read 1 MiB at a time (into one buffer: a large index costs no memory)."""
+    h = hashlib.sha256()
+    buffer = bytearray(2**20)
+    view = memoryview(buffer)
+    with open(path, "rb", buffering=0) as fh:
+        while n := fh.readinto(buffer):
+            h.update(view[:n])
+    return h.hexdigest()
 
 
 # -- reading a folder -----------------------------------------------------------------------------
@@ -760,11 +760,12 @@ def _arrow_columns(folder: Path) -> dict | None:
     path = folder / INDEX_ARROW_FILE
     if not isinstance(expected, str) or not path.is_file():
         return None
-    if _sha256(path) != expected:
+    mapped = pa.memory_map(str(path)).read_buffer()  # the file's pages, hashed and read without a copy
+    if hashlib.sha256(mapped).hexdigest() != expected:
         raise DamagedResultError(
             f"{path}: does not match its checksum in {SUMMARY_FILE} (damaged, or an invocation was killed "
             f"between writing the two); rebuild both with: rbstab sweep {folder / SPEC_FILE} -o {folder.parent}")
-    table = ipc.open_file(pa.memory_map(str(path))).read_all()
+    table = ipc.open_file(mapped).read_all()
     return {name: _arrow_numpy(name, column) for name, column in zip(table.column_names, table.columns)}
 
 
