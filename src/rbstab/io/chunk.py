@@ -374,49 +374,46 @@ class ChunkWriter:
 
     # -- rows ---------------------------------------------------------------------------------
 
-    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None,
-            config_text: str | None = None) -> dict[str, Any]:
+    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
         ``config_hash``: the run's :func:`rbstab.config.config_hash` of its canonical config,
-        and ``config_text``, its :func:`~rbstab.config.canonical_config` with the run limits
-        (the ``config`` column), if the caller has them (a sweep's plan computed them); else
-        computed here.
+        if the caller has it (a sweep's plan computed it); else computed here. A writer
+        without templates stores the run's configuration text (the ``config`` column).
         """
         from ..simulator import RunBlock  # heavy: numba
 
-        return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
-                              config_texts=[config_text])[0]
+        return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash])[0]
 
-    def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None,
-                  config_texts: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
+    def add_block(self, run_ids: Sequence[str], block, *,
+                  config_hashes: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
         """Add finished runs that share their sample times (a :class:`rbstab.simulator.RunBlock`,
         ``run_ids[j]`` its run j); returns their rows, as :meth:`add` does each.
 
-        ``config_hashes``, ``config_texts``: as :meth:`add`'s, a value a run (None or ""
-        where the caller has none). Raises ValueError, with no run added, for a run that is
+        ``config_hashes``: as :meth:`add`'s, a value a run (None or "" where the caller
+        has none). Raises ValueError, with no run added, for a run that is
         not a row of the file or was added already, or traces of another shape or sample
         times than the file's.
         """
         rows = [self._row_of(run_id) for run_id in run_ids]
         if len(set(rows)) != len(rows):
             raise ValueError(f"{self.path.name}: a run is given twice in one block: {list(run_ids)}")
-        values = self._block_values(block, config_hashes, config_texts)
+        values = self._block_values(block, config_hashes)
         if self.store != "summary":
             if self._time is None:
                 self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()})
             self._keep_traces(run_ids, rows, block)
         return self._add(rows, values)
 
-    def _block_values(self, block, config_hashes, config_texts) -> dict[str, list]:
+    def _block_values(self, block, config_hashes) -> dict[str, list]:
         """The per-run values of a block's runs, as columns; without templates, each run's
         configuration as text (the ``config`` column)."""
         configs = block.configs
         k = len(configs)
         hashes = list(config_hashes) if config_hashes is not None else [None] * k
-        texts = list(config_texts) if config_texts is not None else [None] * k
+        texts = [None] * k
         for j, config in enumerate(configs):
-            if not texts[j] and "run_templates" not in self.attrs:
+            if "run_templates" not in self.attrs:
                 texts[j] = canonical_config(config.resolved, limits=True)
             if not hashes[j]:
                 hashes[j] = config_hash(canonical_config(config.resolved))

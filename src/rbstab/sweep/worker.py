@@ -68,8 +68,6 @@ class RunTask:
         Parameter coordinate name -> value (:func:`rbstab.sweep.folder.run_coords`).
     config_hash : str
         The run's identity as the plan computed it ("": the hash of its config).
-    config_text : str
-        The store file's ``config`` text ("": encoded by the writer, or none with templates).
     template : int
         Its template among the chunk's (:class:`rbstab.sweep.table.TableSlice`), -1 for none.
     """
@@ -81,7 +79,6 @@ class RunTask:
     base: str = ""
     coords: dict = field(default_factory=dict)
     config_hash: str = ""
-    config_text: str = ""
     template: int = -1
 
 
@@ -245,8 +242,7 @@ class _ChunkFile:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         t0 = _time.perf_counter()
-        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None,
-                              config_text=task.config_text or None)
+        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None)
         record = _finished(_result_record(task, self.final, result), result.timing, row, 0.0,
                            _time.perf_counter() - t0)
         self.records.append(record)
@@ -257,8 +253,7 @@ class _ChunkFile:
         file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); their records."""
         t0 = _time.perf_counter()
         rows = self.writer.add_block([t.run_id for t in tasks], block,
-                                     config_hashes=[t.config_hash for t in tasks],
-                                     config_texts=[t.config_text for t in tasks])
+                                     config_hashes=[t.config_hash for t in tasks])
         share = (_time.perf_counter() - t0) / len(tasks)
         records = []
         for j, (task, row) in enumerate(zip(tasks, rows)):
@@ -507,7 +502,7 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
     tasks = [RunTask(rid, part.resolved(j) if slow[j] else {}, os.path.join(folder, f"{rid}.h5"),
                      int(part.index[j]), str(part.base[j]),
                      {name: _scalar(values[j]) for name, values in part.coords.items()}, str(part.config_hash[j]),
-                     "", int(part.template[j]))
+                     int(part.template[j]))
              for j, rid in enumerate(part.run_id.tolist())]
     records = run_chunk(tasks, options, part.templates, batch=(batch, fast, build) if len(fast) else None, part=part)
     return _chunk_result(records, folder)
