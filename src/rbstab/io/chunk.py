@@ -160,7 +160,7 @@ def _h5_constants() -> tuple:
 
 #: Bytes a run takes in a store file beside its traces (its per-run values, the index's
 #: columns; measured on Case 3 parameter sweeps, benchmarks/sweep_store.py).
-VALUE_BYTES = 600
+VALUE_BYTES = 350
 #: Trace values a sample of a thinned store holds (the 5 state blocks, E: 3 each; v, dv/dt
 #: analytic and numerical) and of a full store (every output variable).
 _THINNED_VALUES, _FULL_VALUES = 18, 40
