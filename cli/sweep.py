@@ -85,7 +85,8 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option(
     "--engine", type=click.Choice(list(ENGINES)), default=None,
     help="How runs are integrated (see docs/performance.md); scipy: one solve_ivp call per run, "
-    f"the reference  [default: {next(iter(k for k in ENGINES if k != 'scipy'))}].",
+    "the reference; cuda: on an NVIDIA GPU, one thread a run (pip install \"rbstab[cuda]\")  "
+    f"[default: {next(iter(k for k in ENGINES if k != 'scipy'))}].",
 )
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
@@ -138,6 +139,9 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     if connect_timeout is not None and executor != "dask":
         raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
+    if engine == "cuda" and not dry_run:
+        _check_cuda()
+        jobs = jobs or 1  # one process drives the GPU
     if table is not None:
 
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
@@ -183,6 +187,16 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     console.out("varied:" if table.keys else "varied: nothing")
     for line in table.describe(every=console.verbosity >= 1):
         console.out(line)
+
+
+def _check_cuda() -> None:
+    """--engine cuda where it cannot run: one line, before anything starts or is written."""
+    from rbstab.engine.cuda import CudaUnavailable, check_available  # heavy: numba, numba-cuda
+
+    try:
+        check_available()
+    except CudaUnavailable as exc:
+        raise click.ClickException(str(exc))
 
 
 def _execute(spec, output, ex, **options):

@@ -261,7 +261,9 @@ def test_every_module_the_fork_server_preloads_imports():
 def test_the_engine_takes_its_settings_as_one_record():
     """The compiled engine's functions take a run's settings (tolerances, limits, method,
     sample grid) as one record (:data:`rbstab.engine.settings.SETTINGS`) and its work
-    arrays as one :class:`~rbstab.engine.settings.Work`: none takes 10 parameters."""
+    arrays as one :class:`~rbstab.engine.settings.Work`: none takes 10 parameters, but the
+    CUDA kernel, whose parameters are its launch's device arrays (one a column of results)."""
+    kernels = {"rbstab.engine.cuda.run_all"}
     long = []
     for module, (path, _) in MODULES.items():
         if not module.startswith("rbstab.engine"):
@@ -270,6 +272,6 @@ def test_the_engine_takes_its_settings_as_one_record():
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 a = node.args
                 count = len(a.posonlyargs) + len(a.args) + len(a.kwonlyargs)
-                if count >= 10:
+                if count >= 10 and f"{module}.{node.name}" not in kernels:
                     long.append(f"{module}.{node.name}: {count}")
     assert not long, "engine functions with 10 or more parameters:\n" + "\n".join(long)

@@ -34,6 +34,8 @@ __all__ = [
     "OUTPUT_SCALARS",
     "N_OUTPUTS",
     "LEFT_OUT",
+    "SUMMARY_MAX_SAMPLES",
+    "summary_stride",
     "display_units",
     "StateLayout",
     "FULL_BODY",
@@ -212,6 +214,14 @@ N_OUTPUTS = sum(q.size for q in OUTPUTS.values())
 #: the outputs of a sweep that stores no more (``full`` False in
 #: :func:`rbstab.variants.kernels.run_outputs`).
 LEFT_OUT = ("constraint_rate", "constraint_force", "force_h", "torque_n")
+#: Most samples a ``thinned`` trace keeps (a thinned store, :mod:`rbstab.io.chunk`).
+SUMMARY_MAX_SAMPLES = 201
+
+
+def summary_stride(n_samples: int) -> int:
+    """Sample stride of a ``thinned`` trace: it keeps ``time[::stride]``, at most
+    :data:`SUMMARY_MAX_SAMPLES` samples (for 2001 samples, every 10th: t = 0, 0.01, ... 2 s)."""
+    return max(1, -(-(int(n_samples) - 1) // (SUMMARY_MAX_SAMPLES - 1)))
 
 
 # -- the summary figures of a run (rbstab.summary computes them) --------------------------------

@@ -35,13 +35,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .engine import METHODS, RunBatch, integrate_runs
+from .engine import METHODS, RunBatch, integrate_runs, method_number
+from .engine.settings import settings_records
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .layout import VARIANT_LAYOUTS
+from .layout import VARIANT_LAYOUTS, summary_stride
 from .model import PARAMETERS
-from .summary import numerical_rate, summarize, summary_table
+from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.kernels import run_outputs
@@ -67,9 +68,15 @@ __all__ = [
 ]
 
 #: Integration engines: ``compiled`` (:mod:`rbstab.engine`, RK23/RK45/DOP853; other
-#: methods go through scipy) and ``scipy`` (the reference, one ``solve_ivp`` call per run,
-#: any method). The pure sign law takes :mod:`rbstab.engine.switching` with either.
-ENGINES = ("compiled", "scipy")
+#: methods go through scipy), ``scipy`` (the reference, one ``solve_ivp`` call per run,
+#: any method) and ``cuda`` (the compiled engine's steps on an NVIDIA GPU,
+#: :mod:`rbstab.engine.cuda`; other methods go through scipy). The pure sign law takes
+#: :mod:`rbstab.engine.switching`, on the CPU, with any of them.
+ENGINES = ("compiled", "scipy", "cuda")
+#: What :func:`simulate_blocks` keeps of the samples of a ``cuda`` run: every one, every
+#: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store) or none
+#: (the summary figures only).
+KEEP = ("all", "thinned", "none")
 
 
 @dataclass
@@ -149,6 +156,9 @@ class RunBlock:
     wall_time : list of float
     switching : list
         Each run's :attr:`RunResult.switching`.
+    stride : int
+        Samples of the runs' grid (``simulation.n_samples`` on [0, t_end]) from one entry
+        of ``time`` to the next: 1, or a thinned trace of the ``cuda`` engine.
     variants : list of str
         Each run's controller variant (``config.variant``; given where ``configs`` are None).
     """
@@ -163,6 +173,7 @@ class RunBlock:
     wall_time: list[float]
     timing: list[dict]
     switching: list
+    stride: int = 1
     variants: list = None
 
     def __post_init__(self) -> None:
@@ -329,7 +340,7 @@ def uses_compiled_engine(config: "RunConfig", engine: str = "compiled") -> bool:
     """Whether ``config`` runs on the compiled engine with ``engine`` (see the module docstring)."""
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    return engine == "compiled" and config.simulation.method in METHODS and not is_sign_law(config)
+    return engine != "scipy" and config.simulation.method in METHODS and not is_sign_law(config)
 
 
 def is_sign_law(config: "RunConfig") -> bool:
@@ -367,8 +378,8 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
     timeout : float, optional
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``;
         past it the run fails with a message.
-    engine : {"compiled", "scipy"}
-        See the module docstring.
+    engine : {"compiled", "scipy", "cuda"}
+        See :data:`ENGINES`.
 
     Returns
     -------
@@ -498,7 +509,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
 
 def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
                     chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
-                    full: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
+                    full: bool = True, keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
     """Run many validated configurations; yields ``(indices into configs, RunBlock)``.
 
     With ``engine="compiled"`` every run that the compiled engine takes
@@ -516,13 +527,28 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     of its call's integration plus its own post-processing [s] (split in ``timing``).
     ``timeout`` [s], if given, replaces each run's ``simulation.max_wall_time``.
 
+    With ``engine="cuda"`` the same runs go to the GPU (:mod:`rbstab.engine.cuda`), all
+    those of a method and state size in as few launches as their traces allow
+    (``chunk_size`` is not read): a block per launch, its outputs at the samples ``keep``
+    says (:data:`KEEP`; ``stride`` tells which), its summaries computed on the GPU as
+    the runs went, every run's ``wall_time`` its share of the launch. ``timeout``, if
+    given, is each launch's limit; the runs' ``simulation.max_wall_time`` is not read.
+
     Raises
     ------
     ValueError
-        For an unknown engine (allowed: :data:`ENGINES`) or ``chunk_size < 1``.
+        For an unknown engine (allowed: :data:`ENGINES`), ``keep`` or ``chunk_size < 1``.
+    rbstab.engine.cuda.CudaUnavailable
+        With ``engine="cuda"`` where no GPU, driver or numba-cuda is found (before any run).
     """
     if chunk_size < 1:
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
+    if keep not in KEEP:
+        raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
+    if engine == "cuda":
+        from .engine.cuda import check_available  # heavy: numba-cuda (--engine cuda only)
+
+        check_available()
     groups: dict[tuple, list[int]] = {}
     shared: dict[tuple, Variant] = {}
     for i, config in enumerate(configs):
@@ -532,6 +558,10 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
         else:
             yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
     for (method, n_samples, size), members in groups.items():
+        if engine == "cuda":
+            yield from _cuda_blocks([configs[i] for i in members], members, shared, method, n_samples, timeout,
+                                    full, keep)
+            continue
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
@@ -605,3 +635,51 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
             share = (_time.perf_counter() - start) / len(chunk)
             for runs, block in _chunk_blocks([None] * len(chunk), codes, params, sol, share, settings, full):
                 yield [int(chunk[j]) for j in runs], block
+
+
+def _cuda_blocks(configs, positions, shared: dict, method: str, n_samples: int, timeout: float | None, full: bool,
+                 keep: str) -> Iterator[tuple[list[int], RunBlock]]:
+    """:func:`simulate_blocks` of runs of one method, sample count and state size on the
+    GPU (``positions``: their indices in the caller's configs)."""
+    from .engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
+
+    variants = [_variant_of(c, shared) for c in configs]
+    codes = np.array([v.code for v in variants], dtype=np.int64)
+    y0 = np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, configs)])
+    settings = _settings_rows(configs, timeout)
+    stride = {"all": 1, "thinned": summary_stride(n_samples), "none": None}[keep]
+    chunks = integrate_chunks_cuda(codes, _parameter_rows(variants), y0, settings_records(settings, method_number(method)),
+                                   n_samples=n_samples, stride=stride, full=full,
+                                   max_wall_time=np.inf if timeout is None else timeout)
+    for chunk in chunks:
+        runs = chunk.runs.tolist()
+        k = len(runs)
+        t_end = configs[runs[0]].simulation.t_end
+        grid = np.linspace(0.0, t_end, n_samples)
+        layout = variants[runs[0]].layout
+        if chunk.trace is None:
+            time, outputs = grid[:0], {}
+        else:
+            time = grid[::stride]
+            columns = np.moveaxis(chunk.trace, 2, 0)
+            outputs = split_outputs(columns[:N_OUTPUTS], layout, full)
+            outputs["lyapunov_rate_numerical"] = columns[NUMERICAL_RATE_AT]
+        time.flags.writeable = False
+        status = chunk.status.tolist()
+        share = chunk.seconds / k
+        yield [positions[j] for j in runs], RunBlock(
+            configs=[configs[j] for j in runs],
+            time=time,
+            outputs=outputs,
+            summaries=stream_table(grid, chunk.acc, chunk.last, layout),
+            status=["success" if code == SUCCESS else "failed" for code in status],
+            message=[status_message(code, float(chunk.t_stop[i]), configs[j].simulation.gimbal_margin,
+                                    int(settings[j, 5]), np.inf if timeout is None else timeout)
+                     for i, (code, j) in enumerate(zip(status, runs))],
+            solver=[{"nfev": int(chunk.nfev[i]), "njev": 0, "nlu": 0, "solver_status": code,
+                     "n_steps": int(chunk.n_steps[i])} for i, code in enumerate(status)],
+            wall_time=[share] * k,
+            timing=[{"integration": share, "postprocess": 0.0} for _ in runs],
+            switching=[None] * k,
+            stride=stride or 1,
+        )

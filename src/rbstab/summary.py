@@ -8,11 +8,12 @@ everywhere. The figures' units and long names: :data:`rbstab.layout.SUMMARY_FIGU
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, STATE_BLOCKS
+from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -24,6 +25,13 @@ __all__ = [
     "LYAPUNOV_RATE_TOLERANCE",
     "MIN_CHECK_SAMPLES",
     "RATE_STENCIL",
+    "ACCUMULATOR_SIZE",
+    "NUMERICAL_RATE_AT",
+    "stream_start",
+    "stream_sample",
+    "stream_finish",
+    "stream_table",
+    "short_stencils",
 ]
 
 #: Relative tolerance of the check "analytic dv/dt agrees with the numerical derivative
@@ -342,3 +350,181 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
     terms = [np.abs(outputs[key]) for key in LYAPUNOV_TERMS if key in outputs]
     magnitude = sum(terms[1:], terms[0]) if terms else np.abs(outputs["lyapunov"])
     return np.max(magnitude, axis=1)
+
+
+# -- the summary figures as a run goes (the CUDA engine: no run keeps its samples) -----------------
+#: Slots of a streaming summary's accumulator (:func:`stream_sample`, :func:`stream_finish`,
+#: :func:`stream_table`): max |E_i| (3), v(0), max dv/dt, running min of v, largest rise of
+#: v above it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the
+#: samples taken, and the last :data:`RATE_STENCIL` values of v and of dv/dt (rings).
+MAX_ERROR = 0  # 3 slots
+V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN = range(3, 11)
+V_RING = 11
+RATE_RING = V_RING + RATE_STENCIL
+ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
+_ERROR_AT = OUTPUTS["constraint_error"].offset
+_V_AT = OUTPUTS["lyapunov"].offset
+_RATE_AT = OUTPUTS["lyapunov_rate"].offset
+_T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
+#: Column of a streamed trace's row that holds the numerical dv/dt (after the outputs).
+NUMERICAL_RATE_AT = N_OUTPUTS
+
+
+@jit(forceinline=True)
+def _max(a, b):
+    """max(a, b) that keeps a NaN of either, as numpy's max does."""
+    return b if (b > a or b != b) else a
+
+
+@jit(forceinline=True)
+def _min(a, b):
+    """min(a, b) that keeps a NaN of either, as numpy's minimum does."""
+    return b if (b < a or b != b) else a
+
+
+@jit(forceinline=True)
+def stream_start(acc):
+    """Reset the accumulator ``acc`` (:data:`ACCUMULATOR_SIZE`) for a new run."""
+    for i in range(acc.shape[0]):
+        acc[i] = -math.inf
+    acc[TAKEN] = 0.0
+
+
+@jit(forceinline=True)
+def _numerical_rate(acc, start, w):
+    """sum_j w[j] v[start + j], v from the ring, the terms in the order j = 0, 1, ..."""
+    total = w[0] * acc[V_RING + start % RATE_STENCIL]
+    for j in range(1, w.shape[0]):
+        total += w[j] * acc[V_RING + (start + j) % RATE_STENCIL]
+    return total
+
+
+@jit(forceinline=True)
+def _compare(acc, i, numerical, trace, stride):
+    """Take sample i's numerical dv/dt: into the mismatch, and into the trace's row when
+    the trace keeps sample i."""
+    acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], abs(acc[RATE_RING + i % RATE_STENCIL] - numerical))
+    if i % stride == 0 and i // stride < trace.shape[0]:
+        trace[i // stride, NUMERICAL_RATE_AT] = numerical
+
+
+@jit(forceinline=True)
+def stream_sample(acc, i, row, first, weights, trace, stride):
+    """Take sample i (0, 1, ... in order) of a run: ``row`` its outputs (N_OUTPUTS, at the
+    offsets of :data:`rbstab.layout.OUTPUTS`; v's terms, E, v and dv/dt read).
+
+    ``first``, ``weights``: :func:`stencil_weights` of the run's whole sample grid (n,),
+    (n, w), w <= :data:`RATE_STENCIL`; a sample's numerical dv/dt is taken when the last
+    sample of its stencil arrives. ``trace`` (n_trace, N_OUTPUTS + 1): every ``stride``-th
+    sample's row and numerical dv/dt (column :data:`NUMERICAL_RATE_AT`) go there (a trace
+    of 0 rows keeps none). The figures are those of :func:`summary_table`, the same numbers
+    for a run that fills its grid.
+    """
+    v = row[_V_AT]
+    rate = row[_RATE_AT]
+    for a in range(3):
+        acc[MAX_ERROR + a] = _max(acc[MAX_ERROR + a], abs(row[_ERROR_AT + a]))
+    if i == 0:
+        acc[V_INITIAL] = v
+        acc[V_MIN] = v
+    acc[V_MIN] = _min(acc[V_MIN], v)
+    acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
+    acc[MAX_RATE] = _max(acc[MAX_RATE], rate)
+    acc[MAX_ABS_RATE] = _max(acc[MAX_ABS_RATE], abs(rate))
+    acc[ENERGY] = _max(acc[ENERGY], abs(row[_T0]) + abs(row[_T1]) + abs(row[_T2]) + abs(row[_T3]))
+    acc[V_RING + i % RATE_STENCIL] = v
+    acc[RATE_RING + i % RATE_STENCIL] = rate
+    acc[TAKEN] = i + 1
+    if i % stride == 0 and i // stride < trace.shape[0]:
+        for c in range(row.shape[0]):
+            trace[i // stride, c] = row[c]
+        trace[i // stride, NUMERICAL_RATE_AT] = math.nan  # until its stencil is complete
+    w = weights.shape[1]
+    start = i - (w - 1)  # the samples whose stencil ends at i start there
+    if start >= 0:
+        for q in range(max(0, i - w + 1), i + 1):
+            if first[q] == start:
+                _compare(acc, q, _numerical_rate(acc, start, weights[q]), trace, stride)
+
+
+@jit(forceinline=True)
+def stream_finish(acc, first, weights, short, trace, stride):
+    """The numerical dv/dt of the last samples of a run that stopped before the end of its
+    grid (n_taken < n), one-sided on its own samples as :func:`numerical_rate` takes a
+    run's finite samples: with the whole grid's weights (the same up to rounding), or for a
+    run of fewer samples than a stencil, from ``short`` (w, w, w): ``short[m, :m, :m]`` the
+    weights of :func:`stencil_weights` of the grid's first m samples (the same numbers)."""
+    n, w = weights.shape
+    taken = int(acc[TAKEN])
+    if taken >= n:
+        return
+    if taken < w:
+        if taken < 2:
+            acc[MAX_MISMATCH] = math.nan
+            return
+        for i in range(taken):
+            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), trace, stride)
+        return
+    start = taken - w
+    for i in range(max(0, taken - w), taken):
+        if first[i] + w - 1 > taken - 1:  # its stencil on the whole grid reaches past the run
+            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), trace, stride)
+
+
+def short_stencils(time: np.ndarray) -> np.ndarray:
+    """The weights :func:`stream_finish` takes for a run of m < w samples, shape (w, w, w):
+    ``[m, :m, :m]`` those of :func:`stencil_weights` of ``time[:m]`` (m >= 2), w the
+    stencil's width on the whole grid ``time``."""
+    w = min(RATE_STENCIL, len(time))
+    short = np.zeros((w, w, w))
+    for m in range(2, w):
+        short[m, :m, :m] = stencil_weights(time[:m])[1]
+    return short
+
+
+def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) -> dict[str, list]:
+    """:func:`summary_table`'s columns from streamed accumulators.
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        The runs' sample grid [s].
+    acc : ndarray, shape (k, ACCUMULATOR_SIZE)
+        Each run's accumulator after :func:`stream_finish`.
+    last : ndarray, shape (k, N_OUTPUTS)
+        Each run's outputs at its last sample taken (NaN for a run with none).
+    layout : rbstab.layout.StateLayout
+        The runs' state layout (which state blocks have a ``final_`` figure).
+    """
+    k, n = acc.shape[0], len(time)
+    taken = acc[:, TAKEN].astype(np.int64)
+    last_index = np.maximum(taken - 1, 0)
+    table: dict[str, list] = {"t_final": time[last_index].tolist()}
+    for b in STATE_BLOCKS:
+        if b == "controller_state" and b not in layout.blocks:
+            continue
+        q = OUTPUTS[b]
+        table[f"final_{b}"] = last[:, q.offset: q.offset + 3].tolist()
+    none = taken == 0
+    error = np.where(none[:, None], np.nan, acc[:, MAX_ERROR: MAX_ERROR + 3])
+    table["max_abs_constraint_error"] = error.tolist()
+    table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL]).tolist()
+    table["lyapunov_final"] = last[:, _V_AT].tolist()
+    table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE]).tolist()
+    table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE]).tolist()
+    nan = float("nan")
+    mismatch, relative, verdict = [nan] * k, [nan] * k, ["n/a"] * k
+    span = time[last_index] - time[0]
+    with np.errstate(all="ignore"):
+        scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
+    for j in range(k):
+        if taken[j] >= MIN_CHECK_SAMPLES and np.isfinite(acc[j, MAX_MISMATCH]):
+            scale = float(scales[j]) or 1.0
+            largest = float(acc[j, MAX_MISMATCH])
+            mismatch[j] = largest
+            relative[j] = largest / scale
+            verdict[j] = "pass" if largest <= LYAPUNOV_RATE_TOLERANCE * scale else "fail"
+    table["lyapunov_rate_mismatch"] = mismatch
+    table["lyapunov_rate_mismatch_relative"] = relative
+    table["lyapunov_rate_check"] = verdict
+    return table

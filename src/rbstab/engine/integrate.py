@@ -33,7 +33,7 @@ from .status import DEFAULT_MAX_STEPS, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCC
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs"]
+           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "locate_event"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
 
@@ -90,55 +90,95 @@ def sample_time(j, n, t_end):
     return j * (t_end / (n - 1))
 
 
+@jit(forceinline=True)
+def spacing(t):
+    """abs(nextafter(t, inf) - t) [s] for a finite t >= 0: the spacing of floats at t
+    (``numpy.nextafter`` has no CUDA lowering; this is the same number)."""
+    if t < 2.2250738585072014e-308:  # 0 and subnormals: the smallest subnormal
+        return 5e-324
+    return math.ldexp(1.0, math.frexp(t)[1] - 53)
+
+
+#: :func:`attempt_step`'s outcome for a rejected attempt (a step to try again, smaller).
+REJECTED = 2
+
+
+@jit(forceinline=True)
+def step_bounds(s, t, h_abs):
+    """``h_abs`` at the start of a step from t, clipped to [min_step, s.max_step], min_step
+    scipy's ``10 * spacing(t)``."""
+    return min(max(h_abs, 10 * spacing(t)), s.max_step)
+
+
+@jit(forceinline=True)
+def attempt_step(code, p, s, t, y, f, h_abs, rejected, w):
+    """One attempt of scipy's ``_step_impl`` loop: a step of size ``h_abs`` from (t, y)
+    with rate f, accepted or not by its error norm.
+
+    ``s``: the run's :data:`~rbstab.engine.settings.SETTINGS`; ``w``: its
+    :class:`~rbstab.engine.settings.Work`; ``h_abs`` before the first attempt from
+    :func:`step_bounds`; ``rejected``: whether an attempt of this step was rejected before. Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
+    and its rate ``w.K[n_stages]`` hold the new state at t_new = t + h), :data:`REJECTED`
+    (try again with the next h_abs) or TOO_SMALL_STEP / NOT_FINITE (no right-hand side
+    evaluated). The CPU driver (:func:`step`) and the CUDA driver
+    (:mod:`rbstab.engine.cuda`) both take their steps through it.
+    """
+    if not math.isfinite(h_abs):
+        return NOT_FINITE, t, 0.0, h_abs
+    if h_abs < 10 * spacing(t):
+        return TOO_SMALL_STEP, t, 0.0, h_abs
+    t_end, rtol, atol, method = s.t_end, s.rtol, s.atol, s.method
+    K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
+    error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
+    t_new = min(t + h_abs, t_end)
+    h = t_new - t
+    h_abs = abs(h)
+    rk_step(code, p, y, f, h, method, K, y_new, work)
+    for i in range(y.shape[0]):
+        scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
+    norm = error_norm(K, h, scale, method)
+    if norm < 1:
+        factor = MAX_FACTOR if norm == 0 else min(MAX_FACTOR, SAFETY * norm**error_exponent)
+        if rejected:
+            factor = min(1.0, factor)
+        return SUCCESS, t_new, h, h_abs * factor
+    # a NaN norm rejects the step with the smallest factor, as scipy's max() does
+    factor = SAFETY * norm**error_exponent
+    return REJECTED, t, 0.0, h_abs * (factor if factor > MIN_FACTOR else MIN_FACTOR)
+
+
 @jit
 def step(code, p, s, t, y, f, h_abs, w):
     """One accepted step from (t, y) with rate f (scipy's ``_step_impl``), with the run's
     settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`) and work arrays ``w``
-    (:class:`~rbstab.engine.settings.Work`).
+    (:class:`~rbstab.engine.settings.Work`): :func:`attempt_step` until one is accepted.
 
     Returns (status, t_new, h, next h_abs, attempts); ``w.y_new`` and its rate
     ``w.K[n_stages]`` hold the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing
     accepted).
     """
-    t_end, max_step, rtol, atol, method = s.t_end, s.max_step, s.rtol, s.atol, s.method
-    K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
-    error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
-    min_step = 10 * abs(np.nextafter(t, np.inf) - t)
-    h_abs = min(max(h_abs, min_step), max_step)
+    h_abs = step_bounds(s, t, h_abs)
     rejected = False
     attempts = 0
     while True:
-        if not math.isfinite(h_abs):
-            return NOT_FINITE, t, 0.0, h_abs, attempts
-        if h_abs < min_step:
-            return TOO_SMALL_STEP, t, 0.0, h_abs, attempts
-        t_new = min(t + h_abs, t_end)
-        h = t_new - t
-        h_abs = abs(h)
-        rk_step(code, p, y, f, h, method, K, y_new, work)
-        attempts += 1
-        for i in range(y.shape[0]):
-            scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
-        norm = error_norm(K, h, scale, method)
-        if norm < 1:
-            factor = MAX_FACTOR if norm == 0 else min(MAX_FACTOR, SAFETY * norm**error_exponent)
-            if rejected:
-                factor = min(1.0, factor)
-            return SUCCESS, t_new, h, h_abs * factor, attempts
-        # a NaN norm rejects the step with the smallest factor, as scipy's max() does
-        factor = SAFETY * norm**error_exponent
-        h_abs *= factor if factor > MIN_FACTOR else MIN_FACTOR
-        rejected = True
+        outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, rejected, w)
+        if outcome == REJECTED:
+            attempts += 1
+            rejected = True
+            continue
+        if outcome == SUCCESS:
+            attempts += 1
+        return outcome, t_new, h, h_abs, attempts
 
 
 @jit(forceinline=True)
-def _gimbal(y, limit):
+def gimbal_event(y, limit):
     """The event function: zero when |theta_2| reaches ``limit`` (decreasing through 0)."""
     return limit - abs(y[1])
 
 
 @jit
-def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
+def locate_event(t_old, h, y_old, Q, dop853, limit, work):
     """Time in [t_old, t_old + h] where the interpolant's |theta_2| reaches ``limit``
     (bisection to the spacing of floats; the event is positive at t_old, <= 0 at the end)."""
     lo, hi = 0.0, 1.0
@@ -147,7 +187,7 @@ def _locate_event(t_old, h, y_old, Q, dop853, limit, work):
         if mid <= lo or mid >= hi:
             break
         dense_value(mid, h, y_old, Q, dop853, work)
-        if _gimbal(work, limit) > 0:
+        if gimbal_event(work, limit) > 0:
             lo = mid
         else:
             hi = mid
@@ -199,11 +239,11 @@ def _run(code, p, y0, s, samples):
         n_steps += 1
         f_new = K[N_STAGES[method]]
         t_stop = t_new
-        event = _gimbal(y, limit) >= 0 and _gimbal(y_new, limit) <= 0
+        event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
         if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
             nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, w)
         if event:
-            t_stop, _ = _locate_event(t, h, y, Q, dop853, limit, work)
+            t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
         while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
             x = (sample_time(j, n_samples, t_end) - t) / h
             dense_value(x, h, y, Q, dop853, samples[j])

@@ -157,7 +157,8 @@ def rk_step(code, p, y, f, h, method, K, y_new, work):
     ``K``: (:data:`STAGE_ROWS`, n) stage rates; ``work``: a state-sized array.
     """
     n_stages = N_STAGES[method]
-    K[0, :] = f
+    for i in range(f.shape[0]):  # element by element: a slice store needs numba's runtime, absent on CUDA
+        K[0, i] = f[i]
     for s in range(1, n_stages):
         _stage_state(y, h, RK_A[method, s], K, s, work)
         state_rate(code, work, p, K[s])

@@ -401,7 +401,8 @@ class ChunkWriter:
         values = self._block_values(block, config_hashes)
         if self.store != "summary":
             if self._time is None:
-                self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()})
+                self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()},
+                            block.stride)
             self._keep_traces(run_ids, rows, block)
         return self._add(rows, values)
 
@@ -470,14 +471,15 @@ class ChunkWriter:
 
     # -- traces -------------------------------------------------------------------------------
 
-    def _start(self, time, ranks: Mapping[str, int]) -> None:
-        """Create the trace variables: ``time`` the runs' sample times, ``ranks`` output
-        name -> 0 (a scalar a sample) or 1 (a 3-vector)."""
+    def _start(self, time, ranks: Mapping[str, int], grid_stride: int = 1) -> None:
+        """Create the trace variables: ``time`` the runs' sample times (every
+        ``grid_stride``-th of their grid), ``ranks`` output name -> 0 (a scalar a sample)
+        or 1 (a 3-vector)."""
         time = np.asarray(time, dtype=float)
         names = [k for k in ranks if self.store == "full" or k in THINNED_VARIABLES]
         if self.store == "thinned":
             self._stride = summary_stride(len(time))
-            self.attrs["store_stride"] = self._stride
+            self.attrs["store_stride"] = self._stride * grid_stride
         self._time = self._numbers["time"] = time[:: self._stride]
         f = self._file
         f.dimensions["time"] = len(self._time)

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
+from ..layout import SUMMARY_MAX_SAMPLES, summary_stride
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
@@ -120,14 +121,6 @@ SUMMARY_VARIABLES = (
     "theta", "omega", "position", "velocity", "controller_state",
     "constraint_error", "lyapunov", "lyapunov_rate", "lyapunov_rate_numerical",
 )
-#: Most samples a ``thinned`` file keeps.
-SUMMARY_MAX_SAMPLES = 201
-
-
-def summary_stride(n_samples: int) -> int:
-    """Sample stride of a ``thinned`` file: keeps ``time[::stride]``, at most
-    :data:`SUMMARY_MAX_SAMPLES` samples (for 2001 samples, every 10th: t = 0, 0.01, ... 2 s)."""
-    return max(1, -(-(int(n_samples) - 1) // (SUMMARY_MAX_SAMPLES - 1)))
 
 
 def result_attributes(

@@ -75,6 +75,9 @@ STORE_CHUNK_SIZE = 512
 #: whatever its runs (their headers, attributes and chunk indexes), ~0.5 KB a run without
 #: traces; the runs' outputs are not kept beyond a block of 32.
 SUMMARY_CHUNK_SIZE = 8192
+#: Runs per chunk of a ``--store summary`` sweep on the GPU (``--engine cuda``: one launch
+#: a chunk; other stores take ``DEFAULT_CHUNK_SIZE["cuda"]``, their traces in host memory).
+CUDA_SUMMARY_CHUNK_SIZE = 131072
 
 #: Chunks per worker a sweep is cut into at least (when chunks of STORE_CHUNK_SIZE runs
 #: would give fewer), so that the workers finish together. (One chunk per worker, fewer
@@ -266,18 +269,24 @@ def _check_time_grids(grids: set, store: str, layout: str) -> None:
 
 
 def resolve_engine(engine: str | None, timeout: float | None = None) -> str:
-    """The engine a sweep uses: ``engine``, by default ``compiled`` (both engines take a
-    per-run ``timeout``).
+    """The engine a sweep uses: ``engine``, by default ``compiled`` (the CPU engines take a
+    per-run ``timeout``; ``cuda`` takes it as each launch's limit).
 
     Raises
     ------
     ValueError
         For an unknown engine.
+    rbstab.engine.cuda.CudaUnavailable
+        For ``cuda`` where no GPU, driver or numba-cuda is found.
     """
     if engine is None:
         return "compiled"
     if engine not in ENGINES:
         raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
+    if engine == "cuda":
+        from ..engine.cuda import check_available  # heavy: numba-cuda (--engine cuda only)
+
+        check_available()
     return engine
 
 
@@ -434,6 +443,8 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
         default = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
         if layout == "chunk" and store == "summary":
             default = SUMMARY_CHUNK_SIZE
+        if engine == "cuda":  # a launch fills the GPU with one chunk's runs
+            default = CUDA_SUMMARY_CHUNK_SIZE if store == "summary" else DEFAULT_CHUNK_SIZE["cuda"]
         return default, CHUNKS_PER_WORKER
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")

@@ -328,8 +328,13 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     return configs, errors
 
 
+#: The samples a ``cuda`` run brings back for each store (:data:`rbstab.simulator.KEEP`).
+KEEP = {"full": "all", "thinned": "thinned", "summary": "none"}
+
+
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
-    """Integrate the runs of the chunk with the compiled engine (see the module docstring)."""
+    """Integrate the runs of the chunk with the compiled engine (see the module docstring),
+    on the CPU or, for ``options.engine == "cuda"``, on the GPU."""
     from ..simulator import simulate_blocks, uses_compiled_engine  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     t0 = _time.perf_counter()
@@ -341,7 +346,8 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
     try:
         # a thinned or summary store keeps none of the outputs LEFT_OUT: not computed
         full = options.store == "full"
-        for members, block in simulate_blocks([configs[i] for i in batch], timeout=options.timeout, full=full):
+        for members, block in simulate_blocks([configs[i] for i in batch], engine=options.engine,
+                                              timeout=options.timeout, full=full, keep=KEEP[options.store]):
             chunk = [batch[j] for j in members]
             done.update(chunk)
             records += _add_block(sink, [tasks[i] for i in chunk], block, config_time)
@@ -382,13 +388,14 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
 ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, Any]]]] = {
     "scipy": _scipy_engine,
     "compiled": _compiled_engine,
+    "cuda": _compiled_engine,
 }
 
 #: Default runs per chunk of each engine: one run per unit of work for scipy; for the
 #: compiled engine enough runs that the per-chunk costs (a task's round trip, opening a
 #: file) are small, and few enough that both workers get work early (the engine holds
 #: the trajectories of 32 runs at a time, whatever the chunk).
-DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256}
+DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256, "cuda": 8192}
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = (), *,

@@ -1,0 +1,208 @@
+"""Benchmark: the CUDA engine (``--engine cuda``) against the CPU engine, on one NVIDIA GPU.
+
+Case 3 of the paper (``configs/paper/case3_embedded.yaml``: embedded, 15 states), DOP853,
+rtol 1e-6, atol 1e-8, t_end 2 s, 2001 samples. Two sweeps: ``initial-state`` (Omega ~
+N((16, 32, -16), 4^2), one body) and ``parameter`` (mass and inertia x U(0.5, 1.5), K_c and
+L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record). Prints:
+
+- **compile**: the kernel's registers, local memory (stack) and spills a thread, from the
+  compiled kernel, and the occupancy they allow;
+- **kernel** and **end to end** runs/s at each N of ``--n`` (10^4, 10^5, 10^6), with no
+  trace (the summary store's) and with a thinned trace (201 samples a run): kernel time by
+  CUDA events; end to end, from the host's arrays to the results in host memory
+  (:func:`rbstab.engine.cuda.integrate_chunks_cuda`);
+- **sweep**: ``rbstab sweep SPEC --engine cuda --store summary`` from process start to
+  exit at ``--sweep-n`` runs (warm kernel cache), and ``--store thinned`` at a tenth of it;
+- **CPU engine**: runs/s of :func:`rbstab.engine.integrate_runs` on every core of the
+  machine (one process a core), on the parameter sweep;
+- **correctness** on ``--check-n`` runs of each sweep: statuses equal, step counts equal
+  (and the largest difference), the final states' median and largest relative difference
+  from the CPU engine's, beside the CPU engine's own difference from an rtol 1e-11 run.
+
+Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
+
+    python benchmarks/gpu.py [--n 10000 100000 1000000] [--sweep-n 1000000] [--check-n 256]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE3 = str(ROOT / "configs" / "paper" / "case3_embedded.yaml")
+SETTINGS_OVERRIDES = ["simulation.rtol=1e-6", "simulation.atol=1e-8"]
+RBSTAB = str(Path(sys.executable).parent / "rbstab")
+
+
+def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
+    """(codes, params, y0, settings records) of n Case 3 runs of sweep ``kind``."""
+    import rbstab
+    from rbstab.engine import method_number
+    from rbstab.engine.settings import settings_records
+    from rbstab.model import Gains, RigidBody, parameters
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = rbstab.load_config(CASE3, [f"simulation.rtol={rtol}", "simulation.atol=1e-8" if rtol > 1e-9
+                                            else "simulation.atol=1e-13"])
+    variant = config.make_variant()
+    rng = np.random.default_rng(seed)
+    y0 = np.repeat(variant.initial_state(config.initial_state)[None], n, axis=0)
+    y0[:, 3:6] = rng.normal([16, 32, -16], 4, size=(n, 3))
+    base = variant.parameters
+    if kind == "initial-state":
+        params = np.repeat(base, n)
+    else:
+        body, gains = config.body, config.gains
+        params = np.empty(n, dtype=base.dtype)
+        scale = rng.uniform(0.5, 1.5, n)
+        kc, lc, kt = rng.uniform(0.5, 2, n), rng.uniform(0.5, 2, n), rng.uniform(0.7, 1.4, n)
+        for i in range(n):  # the benchmark's own per-run records (the sweep builds them its way)
+            b = RigidBody(body.mass * scale[i], body.inertia * scale[i], body.attachment_point, body.gravity)
+            g = Gains(k_t=gains.k_t * kt[i], l_t=gains.l_t, k_r=gains.k_r, l_r=gains.l_r, k_c=gains.k_c * kc[i],
+                      l_c=gains.l_c * lc[i], k_d=gains.k_d, l_d=gains.l_d)
+            params[i] = parameters(b, g, float(base["lyapunov_offset"][0]))
+    s = config.simulation
+    rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (n, 1))
+    return np.full(n, variant.code), params, y0, settings_records(rows, method_number(s.method)), s.n_samples
+
+
+def gpu_rates(kind: str, n: int, stride):
+    from rbstab.engine.cuda import integrate_chunks_cuda
+
+    codes, params, y0, settings, n_samples = runs(kind, n)
+    start = time.perf_counter()
+    kernel = sum(c.kernel_seconds for c in integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples,
+                                                                  stride=stride))
+    return n / kernel, n / (time.perf_counter() - start)
+
+
+def _cpu_part(args):
+    from rbstab.engine import integrate_runs
+
+    kind, n, seed = args
+    codes, params, y0, settings, n_samples = runs(kind, n, seed)
+    rows = np.column_stack([settings[name] for name in settings.dtype.names[:-1]])
+    start = time.process_time()
+    for lo in range(0, n, 64):
+        integrate_runs(codes[lo:lo + 64], params[lo:lo + 64], y0[lo:lo + 64], rows[lo:lo + 64], method="DOP853",
+                       n_samples=n_samples)
+    return time.process_time() - start
+
+
+def cpu_rate(kind: str, n: int) -> float:
+    cores = os.cpu_count() or 1
+    start = time.perf_counter()
+    with ProcessPoolExecutor(cores) as pool:
+        list(pool.map(_cpu_part, [(kind, n // cores, seed) for seed in range(cores)]))
+    return (n // cores) * cores / (time.perf_counter() - start)
+
+
+def correctness(kind: str, n: int) -> str:
+    from rbstab.engine import integrate_runs
+    from rbstab.engine.cuda import integrate_chunks_cuda
+
+    codes, params, y0, settings, n_samples = runs(kind, n)
+    rows = np.column_stack([settings[name] for name in settings.dtype.names[:-1]])
+    cpu = integrate_runs(codes, params, y0, rows, method="DOP853", n_samples=2)
+    (gpu,) = [c for c in integrate_chunks_cuda(codes, params, y0, settings, n_samples=2, stride=1)]
+    fine_codes, fine_params, fine_y0, fine_settings, _ = runs(kind, n, rtol=1e-11)
+    fine_rows = np.column_stack([fine_settings[name] for name in fine_settings.dtype.names[:-1]])
+    fine = integrate_runs(fine_codes, fine_params, fine_y0, fine_rows, method="DOP853", n_samples=2)
+    from rbstab.layout import OUTPUTS
+
+    state = np.concatenate([np.arange(OUTPUTS[b].offset, OUTPUTS[b].offset + 3)
+                            for b in ("theta", "omega", "position", "velocity", "controller_state")])
+    final_gpu = gpu.trace[:, -1, state]
+    final_cpu, final_fine = cpu.samples[:, -1], fine.samples[:, -1]
+    scale = np.max(np.abs(final_cpu), axis=1)
+    rel = np.max(np.abs(final_gpu - final_cpu), axis=1) / scale
+    own = np.max(np.abs(final_cpu - final_fine), axis=1) / scale
+    steps = np.abs(gpu.n_steps - cpu.n_steps)
+    return (f"statuses equal {int(np.sum(gpu.status == cpu.status))}/{n}; steps equal {int(np.sum(steps == 0))}/{n} "
+            f"(max {int(steps.max())} apart); final states rel. diff median {np.median(rel):.2g}, max {rel.max():.2g}; "
+            f"CPU engine vs rtol 1e-11: median {np.median(own):.2g}, max {own.max():.2g}")
+
+
+def compile_info() -> str:
+    from rbstab.engine.cuda import THREADS_PER_BLOCK, kernel
+    from rbstab.engine.rk import DOP853
+
+    fn = kernel(DOP853, 15)
+    codes, params, y0, settings, n_samples = runs("parameter", 128)
+    from rbstab.engine.cuda import integrate_chunks_cuda
+
+    list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))  # compiles it
+    (sig,) = fn.overloads
+    regs = fn.get_regs_per_thread(sig)
+    local = fn.get_local_mem_per_thread(sig)
+    from numba import cuda
+
+    device = cuda.get_current_device()
+    per_sm = min(device.MAX_REGISTERS_PER_MULTIPROCESSOR // (regs * THREADS_PER_BLOCK),
+                 device.MAX_THREADS_PER_MULTIPROCESSOR // THREADS_PER_BLOCK)
+    occupancy = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
+    return (f"{device.name.decode() if isinstance(device.name, bytes) else device.name}: {regs} registers, "
+            f"{local} B local memory a thread; {per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor "
+            f"(occupancy {occupancy:.0%})")
+
+
+def sweep_seconds(n: int, store: str) -> float:
+    folder = Path(tempfile.mkdtemp())
+    try:
+        cmd = [RBSTAB, "sweep", CASE3, "--random", "body.mass=scale_uniform:[0.5,1.5]",
+               "--random", "controller.k_c=scale_uniform:[0.5,2]", "--random", "controller.l_c=scale_uniform:[0.5,2]",
+               "--random", "controller.k_t=scale_uniform:[0.7,1.4]",
+               "--random", "initial_state.omega=normal:{mean: [16,32,-16], std: 4}", "-n", str(n),
+               "--engine", "cuda", "--store", store, "--no-progress", "-o", str(folder),
+               *[a for o in SETTINGS_OVERRIDES for a in ("--set", o)]]
+        start = time.perf_counter()
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode != 0:
+            raise SystemExit(done.stderr)
+        return time.perf_counter() - start
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--n", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
+    parser.add_argument("--sweep-n", type=int, default=1_000_000)
+    parser.add_argument("--check-n", type=int, default=256)
+    parser.add_argument("--cpu-n", type=int, default=20_000)
+    args = parser.parse_args()
+    from rbstab.engine.cuda import check_available
+
+    check_available()
+    print("compile:", compile_info())
+    print(f"{'sweep':14s} {'N':>9s} {'trace':>8s} {'kernel runs/s':>14s} {'end to end runs/s':>18s}")
+    for kind in ("initial-state", "parameter"):
+        for n in args.n:
+            for stride, label in ((None, "none"), (10, "201")):
+                if stride and n > 100_000:
+                    continue  # 201 samples x 10^6 runs: the traces alone take 61 GB
+                kernel, total = gpu_rates(kind, n, stride)
+                print(f"{kind:14s} {n:9d} {label:>8s} {kernel:14,.0f} {total:18,.0f}")
+    print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")
+    for kind in ("initial-state", "parameter"):
+        print(f"correctness, {kind}, {args.check_n} runs: {correctness(kind, args.check_n)}")
+    sweep_seconds(1000, "summary")  # the kernel cache, warm
+    print(f"rbstab sweep --engine cuda --store summary, N = {args.sweep_n}: {sweep_seconds(args.sweep_n, 'summary'):.1f} s")
+    n = max(args.sweep_n // 10, 1000)
+    print(f"rbstab sweep --engine cuda --store thinned, N = {n}: {sweep_seconds(n, 'thinned'):.1f} s")
+
+
+if __name__ == "__main__":
+    main()

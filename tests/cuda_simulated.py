@@ -1,0 +1,80 @@
+"""The CUDA engine under numba's CUDA simulator against the CPU engine, run by tests/test_cuda.py
+in a process of its own (the simulator is chosen when numba starts: ``NUMBA_ENABLE_CUDASIM=1``).
+
+Prints one JSON object: for each run of every variant and method (runs that reach t_end and
+runs stopped by their step limit), which of its status, message, solver counts, summary
+figures and outputs at the samples differ from the CPU engine's, for each ``keep``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import warnings
+
+import numpy as np
+
+#: One config of each variant (sliding with its boundary layer: on the GPU).
+CONFIGS = ["configs/paper/case1_permanent.yaml", "configs/paper/case2_visco_elastic.yaml",
+           "configs/paper/case3_embedded.yaml", "configs/examples/free_gravity.yaml",
+           "configs/examples/sliding.yaml"]
+
+
+def configs(root: str):
+    """Each config with each method, as it is, stopped by its step limit, and with another
+    t_end (a launch of its own); and a pure-sign-law run (the CPU engine's in both)."""
+    import rbstab
+
+    out = []
+    for path in CONFIGS:
+        for method in ("RK23", "RK45", "DOP853"):
+            for extra in ([], ["simulation.max_steps=12"], ["simulation.t_end=0.3"]):
+                out.append(rbstab.load_config(os.path.join(root, path), [
+                    "simulation.t_end=0.5", "simulation.n_samples=401", f"simulation.method={method}", *extra]))
+    out.append(rbstab.load_config(os.path.join(root, CONFIGS[-1]), [
+        "simulation.t_end=0.05", "simulation.n_samples=51", "controller.boundary_layer=0"]))
+    return out
+
+
+def main() -> None:
+    assert os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
+    warnings.simplefilter("ignore")
+    from rbstab.simulator import simulate_blocks
+
+    runs = configs(sys.argv[1])
+
+    def collect(engine, keep):
+        out = {}
+        for indices, block in simulate_blocks(runs, engine=engine, keep=keep, full=False):
+            for j, i in enumerate(indices):
+                out[i] = (block.result(j), block.stride)
+        return out
+
+    reference = collect("compiled", "all")
+    report = {"variants": sorted({c.variant for c in runs}), "methods": sorted({c.simulation.method for c in runs}),
+              "statuses": sorted({r.status for r, _ in reference.values()})}
+    for keep in ("all", "thinned", "none"):
+        found = collect("cuda", keep)
+        differences = []
+        for i, (ref, _) in reference.items():
+            got, stride = found[i]
+            for what in ("status", "message", "solver"):
+                if getattr(ref, what) != getattr(got, what):
+                    differences.append([i, what, str(getattr(ref, what)), str(getattr(got, what))])
+            for key, value in ref.summary.items():
+                if str(value) != str(got.summary[key]):
+                    differences.append([i, key, str(value), str(got.summary[key])])
+            if keep != "none":
+                for key, value in ref.outputs.items():
+                    a, b = value[::stride], got.outputs[key]
+                    if not np.array_equal(a, b, equal_nan=True):
+                        scale = float(np.nanmax(np.abs(a))) or 1.0
+                        differences.append([i, key, ref.status, float(np.nanmax(np.abs(a - b))) / scale])
+        report[keep] = {"runs": len(found), "strides": sorted({s for _, s in found.values()}),
+                        "differences": differences}
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,203 @@
+"""The CUDA engine (rbstab.engine.cuda) without a GPU: its driver under numba's CUDA simulator
+bit for bit against the CPU engine, its kernel compiled to PTX for sm_90, the streamed
+summary against summary_table, and --engine cuda where no GPU is. Tests that need a real
+GPU skip without one."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import rbstab
+from rbstab.engine import integrate_runs
+from rbstab.layout import N_OUTPUTS
+from rbstab.summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, numerical_rate, short_stencils, stencil_weights,
+                            stream_finish, stream_sample, stream_start, stream_table, summary_table)
+from rbstab.variants.base import split_outputs
+from rbstab.variants.kernels import run_outputs
+
+from conftest import ROOT
+
+numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
+from numba import cuda  # noqa: E402  (numba-cuda's target)
+
+CASE3 = str(ROOT / "configs" / "paper" / "case3_embedded.yaml")
+#: The console script beside this interpreter.
+RBSTAB = os.path.join(os.path.dirname(sys.executable), "rbstab")
+
+
+def _has_gpu() -> bool:
+    try:
+        return bool(cuda.is_available())
+    except Exception:  # noqa: BLE001 - no driver: no GPU
+        return False
+
+
+GPU = _has_gpu()
+
+
+# -- the streamed summary (compiled for the CPU here) -------------------------------------------------
+def _run_columns(config, n_samples):
+    variant = config.make_variant()
+    sol = integrate_runs([variant.code], variant.parameters, variant.initial_state(config.initial_state)[None],
+                         [[config.simulation.t_end, config.simulation.rtol, config.simulation.atol,
+                           config.simulation.max_step, config.simulation.gimbal_margin, config.simulation.max_steps,
+                           np.inf]], method=config.simulation.method, n_samples=n_samples)
+    columns = np.empty((N_OUTPUTS, 1, n_samples))
+    run_outputs(np.array([variant.code]), variant.parameters, sol.samples, columns, False)
+    return variant, columns
+
+
+@pytest.mark.parametrize("overrides", [[], ["simulation.max_steps=40"], ["simulation.max_steps=13"],
+                                       ["simulation.max_steps=3"]], ids=["whole", "stopped", "short", "shorter"])
+def test_streamed_summary_is_summary_table(overrides):
+    """Fed a run's output rows one sample at a time, stream_sample / stream_finish /
+    stream_table give summary_table's figures (the same numbers) and numerical_rate's dv/dt;
+    for a run stopped early, the dv/dt of its first samples up to rounding."""
+    n = 101
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = rbstab.load_config(CASE3, ["simulation.t_end=1.0", f"simulation.n_samples={n}", *overrides])
+    variant, columns = _run_columns(config, n)
+    time = np.linspace(0.0, 1.0, n)
+    outputs = split_outputs(columns, variant.layout, False)
+    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+    expected = summary_table(time, outputs)
+    first, weights = stencil_weights(time)
+    acc = np.empty(ACCUMULATOR_SIZE)
+    trace = np.full((n, N_OUTPUTS + 1), -1.0)
+    stream_start(acc)
+    taken = int(np.isfinite(columns[0, 0]).sum())
+    assert (taken == n) == (not overrides)
+    for i in range(taken):
+        stream_sample(acc, i, np.ascontiguousarray(columns[:, 0, i]), first, weights, trace, 1)
+    stream_finish(acc, first, weights, short_stencils(time), trace, 1)
+    last = columns[:, 0, taken - 1][None]
+    got = stream_table(time, acc[None], last, variant.layout)
+    assert list(got) == list(expected)
+    for key in expected:
+        assert str(got[key]) == str(expected[key]), key
+    rate = outputs["lyapunov_rate_numerical"][0, :taken]
+    streamed = trace[:taken, NUMERICAL_RATE_AT]
+    if taken == n or taken < 7:  # the whole grid's stencils, or the first samples' own (short_stencils)
+        np.testing.assert_array_equal(streamed, rate)
+    else:  # the whole grid's stencils, not the first samples' own: rounding
+        np.testing.assert_allclose(streamed, rate, rtol=0, atol=1e-12 * np.max(np.abs(outputs["lyapunov"][0, :taken])))
+    np.testing.assert_array_equal(trace[:taken, :N_OUTPUTS], columns[:, 0, :taken].T)
+
+
+# -- the driver under the CUDA simulator ------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def simulated():
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+    done = subprocess.run([sys.executable, str(ROOT / "tests" / "cuda_simulated.py"), str(ROOT)], env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.splitlines()[-1])
+
+
+def test_simulated_driver_covers_every_variant_and_method(simulated):
+    assert simulated["variants"] == ["embedded", "free", "permanent", "sliding", "visco_elastic"]
+    assert simulated["methods"] == ["DOP853", "RK23", "RK45"]
+    assert simulated["statuses"] == ["failed", "success"]
+    assert simulated["thinned"]["strides"] == [1, 2] and simulated["all"]["strides"] == [1]  # 1: the sign law (CPU)
+
+
+@pytest.mark.parametrize("keep", ["all", "thinned", "none"])
+def test_simulated_driver_is_the_cpu_engine_bit_for_bit(simulated, keep):
+    """Status, message, nfev, steps, every summary figure and every output at the kept
+    samples equal the CPU engine's, but the numerical dv/dt of a run stopped early (the
+    whole grid's stencils: rounding)."""
+    found = simulated[keep]
+    assert found["runs"] == 46
+    for run, what, status, relative in found["differences"]:
+        assert what == "lyapunov_rate_numerical" and status == "failed", (run, what, status, relative)
+        assert relative < 1e-12
+
+
+# -- compiled for a GPU, without one ------------------------------------------------------------------------
+def _nvvm() -> bool:
+    try:
+        from numba.cuda.cudadrv import nvvm
+
+        return bool(nvvm.is_available())
+    except Exception:  # noqa: BLE001 - no NVVM wheel
+        return False
+
+
+@pytest.mark.skipif(not _nvvm(), reason="NVVM (the CUDA compiler wheel nvidia-cuda-nvcc-cu12) is not installed")
+def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
+    """The whole kernel (every variant's physics, DOP853, outputs, streamed summary) compiles
+    for CUDA from the CPU engine's source."""
+    import numba.cuda.dispatcher
+    from numba import typeof
+
+    from rbstab.engine.cuda import TRACE_COLUMNS, kernel
+    from rbstab.engine.rk import DOP853
+    from rbstab.engine.settings import SETTINGS
+    from rbstab.model import PARAMETERS
+
+    class Device:  # numba-cuda asks the current device's compute capability for called dispatchers
+        compute_capability = (9, 0)
+
+    if not GPU:
+        monkeypatch.setattr(numba.cuda.dispatcher, "get_current_device", lambda: Device())
+    k, n = 4, 51
+    args = (np.zeros(k, np.int64), np.zeros(k, PARAMETERS), np.zeros((k, 15)), np.zeros(k, SETTINGS),
+            np.zeros(n, np.int64), np.zeros((n, 7)), np.zeros((7, 7, 7)), np.int64(5), True,
+            np.zeros(1, np.int64), np.int64(1), np.zeros(k, np.int64), np.zeros(k), np.zeros(k, np.int64),
+            np.zeros(k, np.int64), np.zeros((k, N_OUTPUTS)), np.zeros((k, ACCUMULATOR_SIZE)),
+            np.zeros((k, 11, TRACE_COLUMNS)))
+    ptx, _ = cuda.compile_ptx(kernel(DOP853, 15).py_func, tuple(typeof(a) for a in args), cc=(9, 0))
+    assert ".target sm_90" in ptx and ".entry" in ptx
+    assert "globaltimer" in ptx  # the launch's wall-time limit reads the GPU's clock
+
+
+# -- without a GPU ------------------------------------------------------------------------------------------
+@pytest.mark.skipif(GPU, reason="a GPU is here")
+def test_engine_cuda_without_a_gpu_stops_in_one_line(tmp_path):
+    out = tmp_path / "sweeps"
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
+    done = subprocess.run([RBSTAB, "sweep", CASE3, "--random", "controller.k_c=scale_uniform:[0.5,2]",
+                           "-n", "4", "--engine", "cuda", "-o", str(out)], capture_output=True, text=True, env=env)
+    assert done.returncode == 1
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and "--engine cuda" in lines[0] and 'pip install "rbstab[cuda]"' in lines[0], done.stderr
+    assert "Traceback" not in done.stderr
+    assert not out.exists()
+
+
+def test_simulate_without_a_gpu_raises_cuda_unavailable():
+    from rbstab.engine.cuda import CudaUnavailable
+
+    if GPU:
+        pytest.skip("a GPU is here")
+    with pytest.raises(CudaUnavailable, match="--engine cuda"):
+        rbstab.simulate(CASE3, ["simulation.t_end=0.1"], engine="cuda")
+
+
+# -- on a GPU -----------------------------------------------------------------------------------------------
+@pytest.mark.skipif(not GPU, reason="no NVIDIA GPU here")
+def test_gpu_sweep_agrees_with_the_cpu_engine():
+    """On a real GPU: statuses and step counts equal, final states within the tolerance's
+    scale of the CPU engine's (the GPU's fused multiply-adds and its sin/cos differ in rounding)."""
+    from rbstab.simulator import simulate_blocks
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        configs = [rbstab.load_config(CASE3, ["simulation.t_end=0.5", "simulation.n_samples=101",
+                                              f"initial_state.omega=[{16 + i},32,-16]"]) for i in range(64)]
+    ref = {i: block.result(j) for idx, block in simulate_blocks(configs) for j, i in enumerate(idx)}
+    got = {i: block.result(j) for idx, block in simulate_blocks(configs, engine="cuda") for j, i in enumerate(idx)}
+    for i, r in ref.items():
+        g = got[i]
+        assert r.status == g.status
+        assert abs(r.solver["n_steps"] - g.solver["n_steps"]) <= 2
+        final_r, final_g = np.asarray(r.summary["final_omega"]), np.asarray(g.summary["final_omega"])
+        np.testing.assert_allclose(final_g, final_r, rtol=1e-4, atol=1e-6)
