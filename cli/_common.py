@@ -119,3 +119,14 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
                 f"cannot write {folder / name}: the name is too long for this file system "
                 f"({longest} bytes with its temporary suffix, at most {limit}); shorten the run's name"
             )
+
+
+def check_cuda() -> None:
+    """``--engine cuda`` where it cannot run: one line naming what is missing, before
+    anything starts or is written."""
+    from rbstab.engine.cuda import CudaUnavailable, check_available  # heavy: numba, numba-cuda
+
+    try:
+        check_available()
+    except CudaUnavailable as exc:
+        raise click.ClickException(str(exc))

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ._common import command_line, load_configs
+from ._common import check_cuda, command_line, load_configs
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
 
@@ -83,11 +83,14 @@ def _check_sweeps(paths) -> None:
               help="Samples per basin run (the time-to-converge resolution is t_end / (N - 1)).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
               help="Local processes for the basin map  [default: all CPUs].")
+@click.option("--engine", type=click.Choice(["compiled", "cuda"]), default="compiled", show_default=True,
+              help="The basin map's engine: the CPU's, or cuda: an NVIDIA GPU, one thread a grid point "
+              "(pip install \"rbstab[cuda]\").")
 @click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
               show_default=True, help="Confidence level of the Wilson interval (--robustness).")
 @console_options
 def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
-            no_simulation, ratio, basin_samples, jobs, confidence) -> None:
+            no_simulation, ratio, basin_samples, jobs, engine, confidence) -> None:
     """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
 
     \b
@@ -114,6 +117,8 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)
     _check_sweeps(sweeps)
+    if engine == "cuda" and axes:
+        check_cuda()
     console = get_console()
     say = console.out
     out = Path(output)
@@ -123,7 +128,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,
                                   samples=samples, seed=seed, simulate=not no_simulation,
                                   basin=axes.get(config.name), basin_samples=basin_samples, ratio=ratio,
-                                  jobs=jobs or default_jobs())
+                                  jobs=jobs or default_jobs(), engine=engine)
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         path = write_analysis(result, analysis_path(out, config.name), command_line=command_line())

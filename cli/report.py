@@ -111,9 +111,13 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     is_flag=True,
     help="Leave the animations out (a smaller page, built faster).",
 )
+@click.option(
+    "-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
+    help="Processes drawing the figures and animations of the runs  [default: all CPUs].",
+)
 @console_options
 def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega,
-           animation_frames, no_animations) -> None:
+           animation_frames, no_animations, jobs) -> None:
     """Compare INPUT... (run files *.h5, sweep folders, folders of run files, analysis files *.analysis.nc).
 
     Writes index.html (tables, the paper's figures and a 3D animation per run, overlays of
@@ -123,6 +127,7 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
     """
     # heavy: numpy
     from rbstab.report import ReportError, ReportInputError, ReportOptions, SettleThresholds, build_report
+    from rbstab.sweep.executors import ExecutorError  # heavy: multiprocessing
 
     options = ReportOptions(
         formats=tuple(dict.fromkeys(formats)),
@@ -132,6 +137,7 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
         figure_formats=figure_formats,
         dpi=dpi,
         animation_frames=0 if no_animations else animation_frames,
+        jobs=jobs,  # None: every CPU this process may use
     )
     if options.animation_frames == 1:
         raise click.BadParameter(f"found 1; expected 0 (no animations) or {_ANIMATION_FRAMES_RANGE[0]} to "
@@ -140,7 +146,7 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
         folder = build_report(inputs, output, options)
     except ReportInputError as exc:
         raise click.ClickException("cannot build the report:\n" + "\n".join(f"  {p}" for p in exc.problems))
-    except ReportError as exc:
+    except (ReportError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
     page = "index.html" if "html" in options.formats else "index.md"
     get_console().out(f"report: {folder / page}")

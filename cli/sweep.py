@@ -11,7 +11,7 @@ from rbstab.api import execute_sweep
 from rbstab.sweep.worker import ENGINES
 from rbstab.warning_codes import coded
 
-from ._common import command_line
+from ._common import check_cuda, command_line
 from .console import get_console
 from .options import console_options, output_option, set_option
 
@@ -140,7 +140,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     if engine == "cuda" and not dry_run:
-        _check_cuda()
+        check_cuda()
         jobs = jobs or 1  # one process drives the GPU
     if table is not None:
 
@@ -187,16 +187,6 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     console.out("varied:" if table.keys else "varied: nothing")
     for line in table.describe(every=console.verbosity >= 1):
         console.out(line)
-
-
-def _check_cuda() -> None:
-    """--engine cuda where it cannot run: one line, before anything starts or is written."""
-    from rbstab.engine.cuda import CudaUnavailable, check_available  # heavy: numba, numba-cuda
-
-    try:
-        check_available()
-    except CudaUnavailable as exc:
-        raise click.ClickException(str(exc))
 
 
 def _execute(spec, output, ex, **options):

@@ -3,7 +3,8 @@ in a process of its own (the simulator is chosen when numba starts: ``NUMBA_ENAB
 
 Prints one JSON object: for each run of every variant and method (runs that reach t_end and
 runs stopped by their step limit), which of its status, message, solver counts, summary
-figures and outputs at the samples differ from the CPU engine's, for each ``keep``.
+figures and outputs at the samples differ from the CPU engine's, for each ``keep``; and
+whether a basin map's outcomes, times to converge and v(t_end) equal the CPU engine's.
 """
 
 from __future__ import annotations
@@ -73,7 +74,25 @@ def main() -> None:
                         differences.append([i, key, ref.status, float(np.nanmax(np.abs(a - b))) / scale])
         report[keep] = {"runs": len(found), "strides": sorted({s for _, s in found.values()}),
                         "differences": differences}
+    report["basin"] = basin()
     print(json.dumps(report))
+
+
+def basin() -> dict:
+    """A basin map of Case 3 on the GPU against the CPU engine's (outcomes, times to
+    converge, v(t_end), messages)."""
+    import rbstab
+    from rbstab.analysis.basin import BasinAxis, basin_map
+
+    config = rbstab.load_config(os.path.join(sys.argv[1], "configs/paper/case3_embedded.yaml"),
+                                ["simulation.t_end=0.3"])
+    axes = [BasinAxis.parse("initial_state.omega.0=-60:60:4"), BasinAxis.parse("initial_state.theta.1=0.3:1.6:4")]
+    maps = {engine: basin_map(config, axes, ratio=0.05, n_samples=61, engine=engine) for engine in ("compiled", "cuda")}
+    a, b = maps["compiled"], maps["cuda"]
+    return {"outcomes": sorted(set(a.outcome.ravel().tolist())),
+            "equal": {name: bool(np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True))
+                      for name in ("outcome", "time_to_converge", "lyapunov_final", "lyapunov_initial")},
+            "messages": a.messages == b.messages}
 
 
 if __name__ == "__main__":

@@ -275,6 +275,7 @@ def test_the_report_embeds_one_animation_per_run_and_can_leave_them_out(runs, tm
     from rbstab.report.figures import FigureWriter
 
     monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: None)  # figures drawn, not saved: faster
+    monkeypatch.setattr(build, "_jobs", lambda options: 1)  # drawn here, where the patch holds
     monkeypatch.setattr(build, "MAX_ANIMATIONS", 1)  # the first run animated, the second told how
     inputs = [runs["gimbal"], runs["case1_permanent"]]
     result = _invoke("report", *inputs, "-o", tmp_path / "r", "--animation-frames", "3", "--format", "html",

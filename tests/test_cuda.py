@@ -76,7 +76,7 @@ def test_streamed_summary_is_summary_table(overrides):
     taken = int(np.isfinite(columns[0, 0]).sum())
     assert (taken == n) == (not overrides)
     for i in range(taken):
-        stream_sample(acc, i, np.ascontiguousarray(columns[:, 0, i]), first, weights, trace, 1)
+        stream_sample(acc, i, np.ascontiguousarray(columns[:, 0, i]), first, weights, trace, 1, 1e-3)
     stream_finish(acc, first, weights, short_stencils(time), trace, 1)
     last = columns[:, 0, taken - 1][None]
     got = stream_table(time, acc[None], last, variant.layout)
@@ -121,6 +121,16 @@ def test_simulated_driver_is_the_cpu_engine_bit_for_bit(simulated, keep):
         assert relative < 1e-12
 
 
+def test_simulated_basin_map_is_the_cpu_engines(simulated):
+    """A basin map on the GPU (each run's time to converge streamed): the CPU engine's
+    outcomes (converged, not converged and failed among them), times, v(t_end), messages."""
+    basin = simulated["basin"]
+    assert basin["outcomes"] == [0, 1, 2]
+    assert basin["equal"] == {"outcome": True, "time_to_converge": True, "lyapunov_final": True,
+                              "lyapunov_initial": True}
+    assert basin["messages"]
+
+
 # -- compiled for a GPU, without one ------------------------------------------------------------------------
 def _nvvm() -> bool:
     try:
@@ -150,7 +160,7 @@ def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
         monkeypatch.setattr(numba.cuda.dispatcher, "get_current_device", lambda: Device())
     k, n = 4, 51
     args = (np.zeros(k, np.int64), np.zeros(k, PARAMETERS), np.zeros((k, 15)), np.zeros(k, SETTINGS),
-            np.zeros(n, np.int64), np.zeros((n, 7)), np.zeros((7, 7, 7)), np.int64(5), True,
+            np.zeros(n, np.int64), np.zeros((n, 7)), np.zeros((7, 7, 7)), np.int64(5), True, 1e-3,
             np.zeros(1, np.int64), np.int64(1), np.zeros(k, np.int64), np.zeros(k), np.zeros(k, np.int64),
             np.zeros(k, np.int64), np.zeros((k, N_OUTPUTS)), np.zeros((k, ACCUMULATOR_SIZE)),
             np.zeros((k, 11, TRACE_COLUMNS)))

@@ -142,9 +142,11 @@ def test_library_refuses_bad_figure_options(runs, tmp_path):
 
 @pytest.fixture
 def no_rendering(monkeypatch):
-    """Figures are drawn but not rendered to files, animations left out (what a test of the page needs, faster)."""
+    """Figures are drawn but not rendered to files, animations left out (what a test of the page needs, faster);
+    drawn in this process, where these patches hold (not in worker processes)."""
     monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: None)
     monkeypatch.setattr("rbstab.report.build._animation", lambda run, frames: "")
+    monkeypatch.setattr("rbstab.report.build._jobs", lambda options: 1)
 
 
 def test_title_is_what_the_report_compares_unless_given(runs, tmp_path, no_rendering):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import html.parser
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -270,6 +271,72 @@ def test_paper_comparison_shows_printed_values_differences_and_points_to_the_doc
     for r in c2.rows:
         assert r["difference"] == r["ours"] - r["printed"]
     assert any("case2_visco_elastic" in note for note in comparisons["case3_embedded"].notes)
+
+
+def _normalised_page(folder: Path) -> str:
+    """index.html without what differs from one build to the next: the time it was made and
+    the players' random element ids (matplotlib's HTMLWriter)."""
+    page = (folder / "index.html").read_text()
+    page = re.sub(r"Created \S+ by rbstab", "Created ... by rbstab", page)
+    return re.sub(r"(?<![0-9a-f])[0-9a-f]{32}(?![0-9a-f])", "ID", page)
+
+
+def test_a_report_drawn_by_worker_processes_equals_one_drawn_in_one_process(paper_runs, tmp_path):
+    """-j 2 (the figures and animations drawn in two processes) gives the same figure files,
+    byte for byte, and the same page as -j 1 (every figure drawn in the command's process)."""
+    folders = {}
+    for jobs in (1, 2):
+        folders[jobs] = tmp_path / f"j{jobs}"
+        _ok(_invoke("report", *paper_runs, "-o", folders[jobs], "-j", jobs, "--animation-frames", "3"))
+    one, two = folders[1], folders[2]
+    names = sorted(p.name for p in (one / "figures").iterdir())
+    assert names == sorted(p.name for p in (two / "figures").iterdir()) and len(names) == 3 * 5 + 4
+    for name in names:
+        assert (one / "figures" / name).read_bytes() == (two / "figures" / name).read_bytes(), name
+    assert _normalised_page(one).count("data:image/jpeg;base64,") == 3 * 3
+    assert _normalised_page(one) == _normalised_page(two)
+    assert (one / "summary.csv").read_bytes() == (two / "summary.csv").read_bytes()
+    manifests = [json.loads((f / "report.json").read_text()) for f in (one, two)]
+    assert manifests[0]["figures"] == manifests[1]["figures"]
+
+
+def test_worker_processes_return_results_in_order_and_raise_a_tasks_error():
+    from rbstab.report.workers import Task, draw
+
+    tasks = [Task(pow, (2, i)) for i in range(7)]
+    assert draw(tasks) == draw(tasks, 2) == [2**i for i in range(7)]  # here, and in two processes
+    with pytest.raises(ValueError, match="invalid literal"):
+        draw([Task(pow, (2, 3)), Task(int, ("not a number",))], 2)
+
+
+def test_the_worker_processes_fork_server_imports_each_module_it_preloads():
+    """``set_forkserver_preload`` silently skips a name that fails to import: each must."""
+    import importlib
+
+    from rbstab.report.workers import PRELOAD
+
+    for name in PRELOAD:
+        importlib.import_module(name)
+
+
+def test_on_one_cpu_the_report_is_drawn_in_the_command_s_process(paper_runs, tmp_path, monkeypatch):
+    from rbstab.sweep import executors
+
+    monkeypatch.setattr(executors, "default_jobs", lambda: 1)  # what a machine of one CPU gives
+    monkeypatch.setattr(executors, "LocalExecutor", None)  # no worker process is started
+    _ok(_invoke("report", *paper_runs, "-o", tmp_path / "r", "--animation-frames", "2"))
+    assert len(list((tmp_path / "r" / "figures").iterdir())) == 3 * 5 + 4
+
+
+def test_jobs_must_be_a_positive_number(paper_runs, tmp_path):
+    from rbstab.report import ReportError, ReportOptions, build_report
+
+    for jobs in (0, -1, 1.5, "2"):
+        with pytest.raises(ReportError, match="jobs: found"):
+            build_report(paper_runs[:1], tmp_path / "r", ReportOptions(jobs=jobs))
+    result = _invoke("report", paper_runs[0], "-o", tmp_path / "r", "-j", "0")
+    assert result.exit_code == 2 and "-j" in result.output
+    assert not (tmp_path / "r").exists()
 
 
 def test_a_run_is_a_paper_case_only_with_the_cases_variant(paper_runs, tmp_path):

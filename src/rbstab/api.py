@@ -489,7 +489,10 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
         is replaced, any other non-empty folder refused.
     **options
         Fields of :class:`rbstab.report.ReportOptions` (``formats``, ``metrics``,
-        ``settle``, ``title``, ``figure_formats``, ``dpi``).
+        ``settle``, ``title``, ``figure_formats``, ``dpi``, ``animation_frames``, ``jobs``).
+        With ``jobs`` > 1 (or None: one per CPU) the figures are drawn in that many
+        processes, and a script that calls this needs ``if __name__ == "__main__":``, as
+        for :func:`sweep_dataset`; the default ``jobs=1`` draws them in this process.
 
     Returns
     -------

@@ -5,7 +5,7 @@ Every compiled function of rbstab is decorated with :func:`jit` (``numba.njit`` 
 a function it calls in another file would leave a stale kernel in the cache; rbstab
 therefore keeps its cache in a folder named after a digest of every source file of the
 compiled layers (:data:`COMPILED_LAYERS`: the kinematics, model, variants and engine,
-with the layout and summary modules and this one), their folder and numba's version:
+with the layout, summary and convergence modules and this one), their folder and numba's version:
 ``$NUMBA_CACHE_DIR/rbstab-<digest>`` if that variable is set, else
 ``$XDG_CACHE_HOME/rbstab/numba-<digest>`` (``~/.cache``). A new version of the code
 compiles once, into a new folder.
@@ -30,7 +30,8 @@ _WARM_FILE = "warm"
 #: The compiled layers, relative to the package: every module that compiles code or whose
 #: constants the kernels compile in (``engine/tableaus.py``, ``layout.py``'s offsets) is
 #: one of them or inside one, however it imports :func:`jit`.
-COMPILED_LAYERS = ("jit.py", "layout.py", "kinematics.py", "model.py", "summary.py", "variants", "engine")
+COMPILED_LAYERS = ("jit.py", "layout.py", "kinematics.py", "model.py", "summary.py", "convergence.py", "variants",
+                   "engine")
 
 
 def compiled_sources() -> list[Path]:

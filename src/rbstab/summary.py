@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from .convergence import ROUND_OFF
 from .jit import jit
 from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
 
@@ -26,6 +27,8 @@ __all__ = [
     "MIN_CHECK_SAMPLES",
     "RATE_STENCIL",
     "ACCUMULATOR_SIZE",
+    "LAST_ABOVE",
+    "V_INITIAL",
     "NUMERICAL_RATE_AT",
     "stream_start",
     "stream_sample",
@@ -356,10 +359,12 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: Slots of a streaming summary's accumulator (:func:`stream_sample`, :func:`stream_finish`,
 #: :func:`stream_table`): max |E_i| (3), v(0), max dv/dt, running min of v, largest rise of
 #: v above it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the
-#: samples taken, and the last :data:`RATE_STENCIL` values of v and of dv/dt (rings).
+#: samples taken, the last sample not converged (:func:`rbstab.convergence.converged`
+#: with v(0) and its v; -1 for none), and the last :data:`RATE_STENCIL` values of v and of
+#: dv/dt (rings).
 MAX_ERROR = 0  # 3 slots
-V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN = range(3, 11)
-V_RING = 11
+V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE = range(3, 12)
+V_RING = 12
 RATE_RING = V_RING + RATE_STENCIL
 ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
@@ -388,6 +393,7 @@ def stream_start(acc):
     for i in range(acc.shape[0]):
         acc[i] = -math.inf
     acc[TAKEN] = 0.0
+    acc[LAST_ABOVE] = -1.0
 
 
 @jit(forceinline=True)
@@ -409,7 +415,7 @@ def _compare(acc, i, numerical, trace, stride):
 
 
 @jit(forceinline=True)
-def stream_sample(acc, i, row, first, weights, trace, stride):
+def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     """Take sample i (0, 1, ... in order) of a run: ``row`` its outputs (N_OUTPUTS, at the
     offsets of :data:`rbstab.layout.OUTPUTS`; v's terms, E, v and dv/dt read).
 
@@ -418,7 +424,8 @@ def stream_sample(acc, i, row, first, weights, trace, stride):
     sample of its stencil arrives. ``trace`` (n_trace, N_OUTPUTS + 1): every ``stride``-th
     sample's row and numerical dv/dt (column :data:`NUMERICAL_RATE_AT`) go there (a trace
     of 0 rows keeps none). The figures are those of :func:`summary_table`, the same numbers
-    for a run that fills its grid.
+    for a run that fills its grid. ``ratio``: the convergence ratio of the last sample not
+    converged (what a basin map's time to converge reads).
     """
     v = row[_V_AT]
     rate = row[_RATE_AT]
@@ -429,6 +436,9 @@ def stream_sample(acc, i, row, first, weights, trace, stride):
         acc[V_MIN] = v
     acc[V_MIN] = _min(acc[V_MIN], v)
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
+    v0 = acc[V_INITIAL]
+    if not (math.isfinite(v0) and math.isfinite(v) and abs(v) <= ratio * abs(v0) + ROUND_OFF):
+        acc[LAST_ABOVE] = i
     acc[MAX_RATE] = _max(acc[MAX_RATE], rate)
     acc[MAX_ABS_RATE] = _max(acc[MAX_ABS_RATE], abs(rate))
     acc[ENERGY] = _max(acc[ENERGY], abs(row[_T0]) + abs(row[_T1]) + abs(row[_T2]) + abs(row[_T3]))

@@ -199,6 +199,7 @@ def analyze(
     basin_samples: int = DEFAULT_BASIN_SAMPLES,
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     jobs: int = 1,
+    engine: str = "compiled",
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 
@@ -226,6 +227,8 @@ def analyze(
         Convergence: |v(t)| <= ratio * |v(0)| from then on, 0 < ratio < 1.
     jobs : int
         Local processes for the basin map.
+    engine : {"compiled", "cuda"}
+        The basin map's engine (:func:`rbstab.analysis.basin.basin_map`).
 
     Returns
     -------
@@ -265,7 +268,8 @@ def analyze(
         timing["simulation"] = _time.perf_counter() - t2
     if axes:
         t3 = _time.perf_counter()
-        result.basin = basin_map(analysed, axes, variant, ratio=ratio, n_samples=basin_samples, jobs=jobs)
+        result.basin = basin_map(analysed, axes, variant, ratio=ratio, n_samples=basin_samples, jobs=jobs,
+                                 engine=engine)
         timing["basin"] = _time.perf_counter() - t3
     return result
 

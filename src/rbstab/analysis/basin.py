@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
-from ..layout import BLOCK_UNITS
+from ..layout import BLOCK_UNITS, OUTPUTS
 
 __all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
 
@@ -204,6 +204,37 @@ def _run_block(items: list, ratio: float) -> list[tuple]:
     return rows
 
 
+def _run_on_gpu(items: list, ratio: float) -> list[tuple]:
+    """:func:`_run_block` of items on the GPU: the runs share the base configuration's
+    variant, parameters and settings, and differ only in their initial states."""
+    from ..engine import method_number  # heavy: numba
+    from ..engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
+    from ..engine.settings import settings_records  # heavy: numba
+    from ..engine.status import SUCCESS, status_message  # heavy: numba
+    from ..summary import LAST_ABOVE, TAKEN  # heavy: numba
+
+    configs = [c for _, c in items]
+    variant = configs[0].make_variant()
+    s = configs[0].simulation
+    k, n = len(configs), s.n_samples
+    y0 = np.stack([variant.initial_state(c.initial_state) for c in configs])
+    rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (k, 1))
+    time = np.linspace(0.0, s.t_end, n)
+    out = []
+    for chunk in integrate_chunks_cuda(np.full(k, variant.code), np.repeat(variant.parameters, k), y0,
+                                       settings_records(rows, method_number(s.method)), n_samples=n, ratio=ratio):
+        last_above = chunk.acc[:, LAST_ABOVE].astype(np.int64)
+        whole = chunk.acc[:, TAKEN] == n
+        for i, j in enumerate(chunk.runs.tolist()):
+            ok = chunk.status[i] == SUCCESS
+            t = float(time[last_above[i] + 1]) if ok and last_above[i] < n - 1 else np.nan
+            message = "" if ok else status_message(int(chunk.status[i]), float(chunk.t_stop[i]), s.gimbal_margin,
+                                                   s.max_steps).split(" at t =")[0]
+            v1 = float(chunk.last[i, OUTPUTS["lyapunov"].offset]) if whole[i] else np.nan
+            out.append((items[j][0], 0 if np.isfinite(t) else (1 if ok else 2), t, v1, message))
+    return out
+
+
 def _blocks(items: list, jobs: int) -> list[list]:
     """Contiguous blocks, 4 per job (both workers busy to the end), of at least 32 runs."""
     size = max(32, -(-len(items) // (4 * jobs)))
@@ -218,6 +249,7 @@ def basin_map(
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     n_samples: int = DEFAULT_SAMPLES,
     jobs: int = 1,
+    engine: str = "compiled",
 ) -> BasinMap:
     """Simulate every point of the slice spanned by ``axes`` (module docstring).
 
@@ -237,11 +269,17 @@ def basin_map(
         Samples per run (>= 2).
     jobs : int
         Local processes (1: in this process).
+    engine : {"compiled", "cuda"}
+        The CPU engine, or the GPU (:mod:`rbstab.engine.cuda`: every point in one process,
+        each run's time to converge taken as it goes; the pure sign law and implicit
+        methods stay on the CPU). The same outcomes and times (on a GPU, up to its rounding).
 
     Raises
     ------
     ValueError
         For two equal keys.
+    rbstab.engine.cuda.CudaUnavailable
+        For ``engine="cuda"`` where no GPU, driver or numba-cuda is found.
     """
     # heavy: yaml
     from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
@@ -269,7 +307,7 @@ def basin_map(
     states = np.array(states)
     t_conv = np.full(len(sections), np.nan)
     v_final = np.full(len(sections), np.nan)
-    for rows in _execute(items, ratio, jobs):
+    for rows in _execute(items, ratio, jobs, engine):
         for index, code, t, v1, message in rows:
             outcome[index], t_conv[index], v_final[index] = code, t, v1
             if message:
@@ -287,8 +325,15 @@ def basin_map(
     )
 
 
-def _execute(items: list, ratio: float, jobs: int):
-    """Yield the rows of :func:`_run_block` for every block of ``items``."""
+def _execute(items: list, ratio: float, jobs: int, engine: str = "compiled"):
+    """Yield the rows of :func:`_run_block` (:func:`_run_on_gpu` for ``engine="cuda"``) for
+    every block of ``items``."""
+    if engine == "cuda" and items:
+        from ..simulator import uses_compiled_engine  # heavy: numba
+
+        if uses_compiled_engine(items[0][1], "cuda"):
+            yield _run_on_gpu(items, ratio)
+            return
     if jobs <= 1 or len(items) < 64:
         yield _run_block(items, ratio)
         return

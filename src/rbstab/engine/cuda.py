@@ -36,6 +36,7 @@ from typing import Iterator
 import numpy as np
 from numba import cuda  # numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
 
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..jit import CACHE_DIR, cache_is_warm, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import N_OUTPUTS
@@ -130,8 +131,8 @@ def kernel(method: int, n_state: int):
     shapes of its thread-local work arrays), compiled on first use and cached on disk.
 
     Launched as ``kernel[blocks, THREADS_PER_BLOCK](codes, params, y0, settings, first,
-    weights, short, stride, full, counter, limit_ns, status, t_stop, nfev, n_steps, last,
-    acc, trace)``; see :func:`integrate_chunks_cuda` for the arrays.
+    weights, short, stride, full, ratio, counter, limit_ns, status, t_stop, nfev, n_steps,
+    last, acc, trace)``; see :func:`integrate_chunks_cuda` for the arrays.
     """
     _cuda()
     from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
@@ -141,7 +142,7 @@ def kernel(method: int, n_state: int):
     clock_ns = _clock_ns()
     parameters = from_dtype(PARAMETERS)
 
-    def run_all(codes, params, y0s, settings, first, weights, short, stride, full, counter, limit_ns,
+    def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, counter, limit_ns,
                 status_o, t_stop_o, nfev_o, n_steps_o, last_o, acc_o, trace_o):
         K = cuda.local.array((n_rows, n_state), float64)
         Q = cuda.local.array((q_rows, n_state), float64)
@@ -213,7 +214,7 @@ def kernel(method: int, n_state: int):
                 while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
                     dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
                     output_row(code, sample, p, row, full)
-                    stream_sample(acc, j, row, first, weights, trace, stride)
+                    stream_sample(acc, j, row, first, weights, trace, stride, ratio)
                     j += 1
                 if event:
                     status = GIMBAL_LOCK
@@ -349,7 +350,7 @@ def _blocks(k: int) -> int:
 
 def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride: int | None = None,
                           full: bool = False, max_wall_time: float = math.inf,
-                          chunk_runs: int | None = None) -> Iterator[CudaChunk]:
+                          ratio: float = DEFAULT_LYAPUNOV_RATIO) -> Iterator[CudaChunk]:
     """Integrate k runs of one method and state size on the GPU; yields a
     :class:`CudaChunk` per launch (the runs of one ``t_end`` at a time, in order, as many a launch as
     :data:`TRACE_BYTES` of traces allow).
@@ -370,10 +371,11 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     full : bool
         Every output at the kept samples, or all but :data:`rbstab.layout.LEFT_OUT`.
     max_wall_time : float
-        Seconds after which a launch stops [s]: its runs not finished are TIMEOUT.
-    chunk_runs : int, optional
-        Runs a launch at most (default: as many as :data:`TRACE_BYTES` of traces hold).
-        ``max_wall_time`` holds for each launch.
+        Seconds after which a launch stops [s]: its runs not finished are TIMEOUT. A
+        launch takes as many runs as :data:`TRACE_BYTES` of traces hold.
+    ratio : float
+        The convergence ratio of each run's last sample not converged (the accumulator's
+        ``LAST_ABOVE``: :func:`rbstab.convergence.converged` with v(0) and its v).
 
     Raises
     ------
@@ -392,7 +394,7 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     codes = np.ascontiguousarray(codes, dtype=np.int64)
     params = np.ascontiguousarray(params, dtype=PARAMETERS)
     n_trace = 0 if stride is None else len(range(0, n_samples, stride))
-    per_launch = chunk_runs or max(1, TRACE_BYTES // max(8 * TRACE_COLUMNS * n_trace, 1))
+    per_launch = max(1, TRACE_BYTES // max(8 * TRACE_COLUMNS * n_trace, 1))
     method = int(methods[0]) if len(methods) else 0
     _say_compiling(method, n_state)
     fn = kernel(method, n_state)
@@ -406,13 +408,15 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
             runs = group[lo: lo + per_launch]
             start = _time.perf_counter()
             out = _launch(fn, (codes[runs], params[runs], y0[runs], settings[runs]),
-                          (first, weights, short_stencils(grid)), stride or n_samples, full, n_trace, limit_ns)
+                          (first, weights, short_stencils(grid)), (stride or n_samples, full, ratio), n_trace, limit_ns)
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _launch(fn, runs, stencils, stride, full, n_trace, limit_ns):
+def _launch(fn, runs, stencils, options, n_trace, limit_ns):
     """One launch over ``runs`` (codes, params, y0, settings) with the grid's ``stencils``
-    (first, weights, short); the host arrays of :class:`CudaChunk`."""
+    (first, weights, short) and ``options`` (stride, full, ratio); the host arrays of
+    :class:`CudaChunk`."""
+    stride, full, ratio = options
     k = len(runs[0])
     status = np.full(k, TIMEOUT, dtype=np.int64)  # a run the launch's limit left unstarted
     t_stop = np.zeros(k)
@@ -428,7 +432,8 @@ def _launch(fn, runs, stencils, stride, full, n_trace, limit_ns):
     counter = cuda.to_device(np.zeros(1, dtype=np.int64))
     start, end = cuda.event(), cuda.event()
     start.record()
-    fn[_blocks(k), THREADS_PER_BLOCK](*d_in, np.int64(stride), bool(full), counter, limit_ns, *d_out, d_trace)
+    fn[_blocks(k), THREADS_PER_BLOCK](*d_in, np.int64(stride), bool(full), float(ratio), counter, limit_ns, *d_out,
+                                      d_trace)
     end.record()
     end.synchronize()
     kernel_seconds = start.elapsed_time(end) / 1e3

@@ -7,6 +7,8 @@
 - :mod:`~rbstab.report.animate`: the 3D animation of a run (``rbstab animate``, the page's
   animations);
 - :mod:`~rbstab.report.render`: the page as HTML and markdown;
+- :mod:`~rbstab.report.workers`: the figures and animations drawn in worker processes
+  (``rbstab report -j N``);
 - :mod:`~rbstab.report.build`: :func:`build_report`, which ties them together.
 
 Importing this package is cheap: matplotlib, pandas, h5py and xarray are imported inside

@@ -38,7 +38,7 @@ import numpy as np
 from .. import __version__
 from ..io.metadata import provenance_attributes
 from .analysis import analysis_sections, split_inputs
-from .figures import DPI, FIGURE_FORMATS, FigureWriter, comparison_figures, run_figures
+from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
 from .render import Animation, Section, Table, render_html, render_markdown, render_tables_markdown
@@ -55,6 +55,7 @@ from .tables import (
     sweep_table,
     validate_metrics,
 )
+from .workers import Task, draw
 
 __all__ = [
     "ReportOptions",
@@ -118,6 +119,13 @@ class ReportOptions:
         Frames of the animation of each run given directly (evenly in time, embedded in
         ``index.html``; the first :data:`MAX_ANIMATIONS` runs), within
         :data:`ANIMATION_FRAMES_RANGE`; 0: no animations.
+    jobs : int or None
+        Processes that draw the figures and animations of the runs given directly (at most
+        one per figure or animation; :mod:`rbstab.report.workers`), >= 1; None: as many
+        as the CPUs this process may use (what ``rbstab report`` does without ``-j``).
+        The default 1 draws them in this process. The files are the same whatever the
+        number. From a Python script, a report with more than one job must be built under
+        ``if __name__ == "__main__":`` (each new process runs the script again).
     """
 
     formats: tuple[str, ...] = ("html",)
@@ -127,6 +135,7 @@ class ReportOptions:
     figure_formats: tuple[str, ...] = ("png",)
     dpi: int = DPI
     animation_frames: int = ANIMATION_FRAMES
+    jobs: int | None = 1
 
 
 def _input_name(path: Path, runs: Sequence[RunData]) -> str:
@@ -381,6 +390,8 @@ def _check_options(options: ReportOptions) -> None:
     if not (isinstance(frames, (int, np.integer)) and (frames == 0 or low <= frames <= high)):
         raise ReportError(f"animation_frames: found {frames!r}; expected 0 (no animations) or a whole number "
                           f"from {low} to {high}")
+    if options.jobs is not None and not (isinstance(options.jobs, (int, np.integer)) and options.jobs >= 1):
+        raise ReportError(f"jobs: found {options.jobs!r}; expected a whole number >= 1 (processes), or None (every CPU)")
     if options.title is not None and not options.title.strip():
         raise ReportError("title: found an empty title; give some text or leave it out")
 
@@ -415,6 +426,8 @@ def build_report(
         (every problem listed); nothing is written.
     ReportError
         If an option is invalid or the output folder cannot be used; nothing is written.
+    rbstab.sweep.ExecutorError
+        If the processes drawing the figures die (killed, out of memory); nothing is written.
     """
     options = options or ReportOptions()
     try:
@@ -458,7 +471,7 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
     params = differing_parameters(data.runs)
     frames = options.animation_frames if "html" in options.formats else 0
-    sections = _direct_run_sections(data.runs, params, out, options.settle, frames) if data.runs else []
+    sections = _direct_run_sections(data.runs, params, out, options.settle, frames, _jobs(options)) if data.runs else []
     for sweep in data.sweeps:
         sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
     sections += analysis_sections(analyses, out)
@@ -470,27 +483,42 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     _write_manifest(folder, data, analyses, options, metrics, title, created)
 
 
+def _jobs(options: ReportOptions) -> int:
+    """Processes that draw the figures: ``options.jobs``, or the CPUs this process may use."""
+    if options.jobs is not None:
+        return int(options.jobs)
+    from ..sweep.executors import default_jobs  # heavy: multiprocessing
+
+    return default_jobs()
+
+
 def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: FigureWriter,
-                         settle: SettleThresholds, frames: int = 0) -> list[Section]:
+                         settle: SettleThresholds, frames: int = 0, jobs: int = 1) -> list[Section]:
     """Tables, the comparison with the paper, comparison figures and each run's animation
-    (``frames`` > 0) and figures."""
+    (``frames`` > 0) and figures, these drawn in ``jobs`` processes (:func:`rbstab.report.workers.draw`)."""
     sections = _runs_sections(runs, runs_table(runs, settle, params), params)
     paper = _paper_section(runs)
     if paper is not None:
         sections.append(paper)
+    animated = runs[:MAX_ANIMATIONS] if frames else []
+    # the longest tasks first (comparison ~1 s, animations ~1 s, a run's figure ~0.2 s): the processes end together
+    tasks = [Task(comparison_figures, (runs, out, settle)), *(Task(_animation, (run, frames)) for run in animated),
+             *(Task(make, (run, out)) for run in runs for make in RUN_FIGURES)]
+    drawn = iter(draw(tasks, jobs))
     cmp = Section("Comparison figures" if len(runs) > 1 else "Constraint error and angular velocity", "comparison")
-    cmp.blocks.extend(comparison_figures(runs, out, settle))
+    cmp.blocks.extend(next(drawn))
+    animations = [next(drawn) for _ in animated]
     per_run = Section("Figures of each run", "figures")
     for i, run in enumerate(runs):
         sub = Section(f"{run.label} ({run.variant}, {run.status})", f"run-{safe_filename(run.label)}", level=3)
         if not run.ok:
             sub.blocks.append(f"FAILED: {run.message}")
-        if frames and i < MAX_ANIMATIONS:
-            sub.blocks.append(_animation(run, frames))
+        if i < len(animations):
+            sub.blocks.append(animations[i])
         elif frames:
             sub.blocks.append(f"No animation: the page animates the first {MAX_ANIMATIONS} runs "
                               f"(rbstab animate {run.path}{'' if run.row is None else ' --run ' + run.name} animates this one).")
-        sub.blocks.extend(run_figures(run, out))
+        sub.blocks.extend(f for f in (next(drawn) for _ in RUN_FIGURES) if f is not None)
         per_run.blocks.append(sub)
     return [*sections, cmp, per_run]
 

@@ -35,6 +35,7 @@ __all__ = [
     "FIGURE_FORMATS",
     "DPI",
     "run_figures",
+    "RUN_FIGURES",
     "switching_figure",
     "comparison_figures",
     "set_scale",
@@ -279,9 +280,7 @@ def run_figures(run: RunData, out: FigureWriter) -> list[FigureFile]:
         for a run of the pure sign law, ``<label>_switching`` (:func:`switching_figure`).
         A figure whose variables the file does not hold (a thinned store) is left out.
     """
-    makers = (_rotational_figure, _translational_figure, _lyapunov_figure, _forces_figure, _phase_figure,
-              switching_figure)
-    return [f for f in (make(run, out) for make in makers) if f is not None]
+    return [f for f in (make(run, out) for make in RUN_FIGURES) if f is not None]
 
 
 def _rotational_figure(run: RunData, out: FigureWriter) -> FigureFile:
@@ -448,6 +447,13 @@ def _switching_raster(ax, run: RunData, s: dict, i: int) -> np.ndarray:
     for a, b in zip(starts, np.r_[ends, np.full(len(starts) - len(ends), t_final)]):
         ax.axvspan(a, b, ymin=(i + 0.1) / 3, ymax=(i + 0.9) / 3, color=f"C{i}", alpha=0.25, lw=0)
     return crossings
+
+
+#: The functions that draw the figures of a run, in the page's order (:func:`run_figures`):
+#: each ``make(run, out)`` writes one figure and returns its FigureFile, or None when the
+#: run does not have it.
+RUN_FIGURES = (_rotational_figure, _translational_figure, _lyapunov_figure, _forces_figure, _phase_figure,
+               switching_figure)
 
 
 # -- several runs -----------------------------------------------------------------------------------

@@ -150,13 +150,13 @@ def _call(fn: Callable[..., Any], item: Any, *args: Any) -> Any:
         _idle.set()
 
 
-def _refuse_in_bootstrap() -> None:
+def _refuse_in_bootstrap(task: str = "a sweep") -> None:
     """Exit with one line if this process is a new worker still importing the parent's script.
 
     A worker started with ``forkserver`` or ``spawn`` first runs the parent's ``__main__``
     script again (as ``__mp_main__``, the standard library's ``prepare`` step); a script
-    that starts a sweep at its top level, outside ``if __name__ == "__main__":``, would
-    start another sweep in every worker. ``multiprocessing`` marks that phase with the
+    that starts ``task`` (a sweep, a report) at its top level, outside
+    ``if __name__ == "__main__":``, would start another in every worker. ``multiprocessing`` marks that phase with the
     current process's ``_inheriting`` flag (what its own check,
     ``multiprocessing.spawn._check_not_importing_main``, reads).
 
@@ -169,7 +169,7 @@ def _refuse_in_bootstrap() -> None:
     if getattr(multiprocessing.current_process(), "_inheriting", False):
         script = sys.argv[0] if sys.argv and sys.argv[0] else "the main script"
         sys.stderr.write(
-            f"rbstab: {script} starts a sweep at its top level, and every worker process runs it again "
+            f"rbstab: {script} starts {task} at its top level, and every worker process runs it again "
             "before it can take work; put the call under if __name__ == \"__main__\": (as for any use of "
             "local worker processes)\n")
         sys.stderr.flush()
@@ -193,11 +193,11 @@ FORKSERVER_PRELOAD = (
 )
 
 
-def _mp_context():
+def _mp_context(preload: tuple[str, ...] = FORKSERVER_PRELOAD):
     method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
     ctx = multiprocessing.get_context(method)
     if method == "forkserver":
-        ctx.set_forkserver_preload(list(FORKSERVER_PRELOAD))  # no effect if the server already runs
+        ctx.set_forkserver_preload(list(preload))  # no effect if the server already runs
     return ctx
 
 
@@ -211,6 +211,13 @@ class LocalExecutor(Executor):
     max_in_flight : int, optional
         Items submitted ahead (default ``2 * jobs``): bounds memory for large sweeps and
         keeps Ctrl-C responsive.
+    preload : tuple of str, optional
+        Modules the fork server imports before it forks the workers (default
+        :data:`FORKSERVER_PRELOAD`, what a sweep's workers use); no effect when this
+        process's fork server already runs.
+    task : str, optional
+        What the workers do, as the messages name it (default ``"a sweep"``; the report
+        says ``"a report"``).
 
     Raises
     ------
@@ -221,13 +228,16 @@ class LocalExecutor(Executor):
     name = "local"
     return_bytes = False
 
-    def __init__(self, jobs: int | None = None, *, max_in_flight: int | None = None) -> None:
-        _refuse_in_bootstrap()
+    def __init__(self, jobs: int | None = None, *, max_in_flight: int | None = None,
+                 preload: tuple[str, ...] = FORKSERVER_PRELOAD, task: str = "a sweep") -> None:
+        _refuse_in_bootstrap(task)
         jobs = default_jobs() if jobs is None else int(jobs)
         if jobs < 1:
             raise ExecutorError(f"-j/--jobs: found {jobs}; expected a number of processes >= 1")
         self.jobs = jobs
         self.max_in_flight = max_in_flight or 2 * jobs
+        self.preload = tuple(preload)
+        self.task = task
         self._pool: ProcessPoolExecutor | None = None
         self._workers = jobs
         self._starter: threading.Thread | None = None
@@ -257,7 +267,7 @@ class LocalExecutor(Executor):
             return
 
         def spawn() -> None:
-            ctx = _mp_context()
+            ctx = _mp_context(self.preload)
             pool = self._new_pool()
             if ctx.get_start_method() == "forkserver":
                 forkserver.ensure_running()
@@ -277,7 +287,7 @@ class LocalExecutor(Executor):
         # processes start on demand (forkserver), one per item in flight at most
         return ProcessPoolExecutor(
             max_workers=self._workers,
-            mp_context=_mp_context(),
+            mp_context=_mp_context(self.preload),
             initializer=_init_worker,
             initargs=(self._lifeline,),
         )
@@ -340,7 +350,7 @@ class LocalExecutor(Executor):
                 if not finished and retried:
                     raise ExecutorError(
                         "the local worker processes died twice in a row before finishing anything (see the "
-                        "messages above); from a Python script, call rbstab.sweep_dataset under "
+                        f"messages above); from a Python script, start {self.task} under "
                         "if __name__ == \"__main__\": (each new worker runs the script again)")
                 if not finished:
                     again[:0] = lost  # a pool that finished nothing: its items once more
