@@ -15,7 +15,8 @@ the peak resident memory of that process:
    peak memory of the parent and of a worker, and the store's bytes per run;
 3. a summary store of N_STORE runs written through the sweep's own path (run table,
    workers' chunk function, store files, index) with the integration replaced by a block
-   of 32 simulated Case 3 runs reused for every 32 rows, then ``rbstab.open_sweep`` of it.
+   of 32 simulated Case 3 runs reused for every 32 rows, then ``rbstab.open_sweep`` of it
+   (in a fresh process: its first call, with the imports it makes, and a second call).
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ def dry_run(n: int) -> dict:
 
 
 def sweep(n: int, folder: str) -> dict:
-    from rbstab.jit import ensure_compiled
+    from rbstab.engine import ensure_compiled
     from rbstab.sweep import run_sweep
     from rbstab.sweep.executors import LocalExecutor
 
@@ -171,12 +172,18 @@ def open_(folder: str) -> dict:
     import rbstab
 
     t0, c0 = time.perf_counter(), _cpu()
-    ds = rbstab.open_sweep(Path(folder) / "store_bench")
+    ds = rbstab.open_sweep(Path(folder) / "store_bench")  # its imports (xarray, pyarrow, dask) included
     t1, c1 = time.perf_counter(), _cpu()
     summary = ds[["lyapunov_final", "max_abs_constraint_error_x", "status", "converged"]].load()
     t2 = time.perf_counter()
     assert summary.sizes["run"] > 0
-    return {"open_sweep": (t1 - t0, "s (target <= 2 at 10^6 runs)"), "  its CPU": (c1 - c0, "s"),
+    del ds, summary
+    t3 = time.perf_counter()
+    again = rbstab.open_sweep(Path(folder) / "store_bench")
+    t4 = time.perf_counter()
+    assert again.sizes["run"] > 0
+    return {"open_sweep": (t1 - t0, "s (target <= 2 at 10^6 runs; first call, imports included)"),
+            "  its CPU": (c1 - c0, "s"), "  again (imports done)": (t4 - t3, "s"),
             "load 4 summary variables": (t2 - t1, "s"),
             "peak": (_peak_mib(), "MiB")}
 

@@ -61,6 +61,11 @@ def _same(a, b) -> bool:
     return np.array_equal(np.atleast_1d(a), np.atleast_1d(b), equal_nan=True)
 
 
+def _dimension_only(ds) -> bool:
+    """Whether a dataset is a netCDF dimension that has no variable (netCDF-C's mark)."""
+    return ds.is_scale and str(_plain(ds.attrs.get("NAME", b""))).startswith("This is a netCDF dimension but not")
+
+
 def _h5_attrs(obj) -> dict:
     return {k: obj.attrs[k] for k in obj.attrs if k not in HIDDEN}
 
@@ -77,9 +82,10 @@ def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
     with h5py.File(path, "r") as h5, netCDF4.Dataset(path) as nc:
         nc.set_auto_mask(False)
         assert nc.data_model == "NETCDF4"
-        names = [k for k in h5 if isinstance(h5[k], h5py.Dataset)]
+        datasets = [k for k in h5 if isinstance(h5[k], h5py.Dataset)]
+        names = [k for k in datasets if not _dimension_only(h5[k])]  # a dimension without a variable is no variable
         assert sorted(nc.variables) == sorted(names)
-        scales = {k: h5[k].shape[0] for k in names if h5[k].is_scale}
+        scales = {k: h5[k].shape[0] for k in datasets if h5[k].is_scale}
         assert {k: len(d) for k, d in nc.dimensions.items()} == scales
         expected = _h5_attrs(h5)
         assert list(nc.ncattrs()) == list(expected) or not attribute_order
@@ -99,7 +105,11 @@ def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
             assert sorted(var.ncattrs()) == sorted(expected), name
             for key, value in expected.items():
                 assert _same(var.getncattr(key), value), f"{name}:{key}"
-            if ds.dtype.kind in "OS":  # variable-length UTF-8 text: NC_STRING
+            if ds.dtype == np.dtype("S1") and ds.ndim == 2:  # characters (run, string): NC_CHAR, text by _Encoding
+                assert var.dtype == np.dtype("S1") and var.filters()["fletcher32"], name
+                text = [x.decode() for x in np.ascontiguousarray(ds[...]).view(f"S{ds.shape[1]}").ravel().tolist()]
+                assert _plain(np.asarray(var[...], dtype=object)) == text, name
+            elif ds.dtype.kind in "OS":  # variable-length UTF-8 text: NC_STRING
                 assert var.dtype is str, name
                 assert _plain(np.asarray(var[...], dtype=object)) == _plain(ds[...]), name
             else:
@@ -140,9 +150,11 @@ def test_netcdf_c_reads_each_store_file(sweeps, store):
         with netCDF4.Dataset(path) as nc:
             n = len(nc.dimensions["run"])
             sizes = {"run": n, "axis": 3, **({} if store == "summary" else {"time": 201})}
-            assert {k: len(d) for k, d in nc.dimensions.items()} == sizes
+            # and the text's character dimensions, string<width>
+            assert {k: len(d) for k, d in nc.dimensions.items() if not k.startswith("string")} == sizes
+            assert all(len(d) == int(k[len("string"):]) for k, d in nc.dimensions.items() if k.startswith("string"))
             assert not any(d.isunlimited() for d in nc.dimensions.values())
-            assert nc.getncattr("store") == store and nc.getncattr("rbstab_format") == "rbstab-sweep-2"
+            assert nc.getncattr("store") == store and nc.getncattr("rbstab_format") == "rbstab-sweep-3"
             # the traces (h5py datasets with dimension scales attached) on their dimensions
             traces = [k for k, v in nc.variables.items() if "time" in v.dimensions and k != "time"]
             if store == "summary":
@@ -156,9 +168,10 @@ def test_netcdf_c_reads_each_store_file(sweeps, store):
                 assert nc["time"][-1] == pytest.approx(0.2)
                 assert np.isfinite(nc["theta"][...]).all()
             # per-run variables and coordinates, with units and long_name
-            for name in ("run_id", "base", "variant", *params, "status", "message", "template", "lyapunov_final",
-                         "final_omega_x", "solver_nfev"):
+            for name in (*params, "template", "lyapunov_final", "final_omega_x", "solver_nfev"):
                 assert nc[name].dimensions == ("run",), name
+            for name in ("run_id", "base", "variant", "status", "message"):  # text: characters
+                assert nc[name].dimensions[0] == "run" and nc[name].dimensions[1].startswith("string"), name
             assert nc["run"].dtype == np.int64
             assert nc["lyapunov_final"].units == "J" and nc["lyapunov_final"].long_name == "v(t_end)"
             assert nc["final_omega_x"].units == "rad s-1"
@@ -209,7 +222,8 @@ def test_netcdf_c_reads_failed_and_error_rows_and_non_ascii_text(tmp_path):
         assert nc.getncattr("sweep") == "démo Ω"
         assert list(nc["base"][...]) == ["Fall β"] * 3
         assert list(nc["status"][...]) == ["success", "failed", "error"]
-        assert nc["message"][2] == message and nc["message"][1].startswith("gimbal lock")
+        messages = list(nc["message"][...])
+        assert messages[2] == message and messages[1].startswith("gimbal lock")
         assert list(nc["omega_1"][...]) == [32.0, 30.0, 31.0]
         v = np.ma.filled(nc["lyapunov"][...], np.nan)
         assert np.isfinite(v[0]).all() and np.isnan(v[2]).all()  # the error row holds no data

@@ -51,6 +51,8 @@ def _check_variables(f: h5py.File) -> list[str]:
     """Every variable has a long_name; every numeric one has units (CF 3.1, 3.2)."""
     checked = []
     for name, var in f.items():
+        if _text(var.attrs.get("NAME", "")).startswith("This is a netCDF dimension but not a netCDF variable"):
+            continue  # a dimension without a variable (a text's string<width>): no variable to describe
         assert _text(var.attrs.get("long_name", "")).strip(), f"{name}: no long_name"
         if var.dtype.kind in "fiu":
             assert "units" in var.attrs, f"{name}: no units"

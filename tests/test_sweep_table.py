@@ -236,3 +236,40 @@ def test_damaged_store_files_of_any_kind_are_set_aside_and_their_runs_redone(tmp
     assert ds.sizes["run"] == 6 and np.isfinite(ds.lyapunov.values).all()
     with xr.open_mfdataset(sorted(runs.glob("*.h5")), engine="h5netcdf") as mf:
         assert mf.sizes["run"] == 6 and sorted(mf["run"].values) == list(range(6))
+
+
+def test_open_sweep_maps_index_arrow_and_falls_back_to_the_csv(small_sweep):
+    """open_sweep reads index.arrow (checked against sweep_summary.json) and gives what the
+    CSV gives; without its checksum it reads index.csv; a damaged one is refused."""
+    import json
+    import shutil
+
+    import xarray as xr
+
+    from rbstab import open_sweep
+    from rbstab.io.integrity import DamagedResultError
+    from rbstab.sweep.folder import INDEX_ARROW_FILE, SUMMARY_FILE
+
+    _, folder = small_sweep
+    assert (folder / INDEX_ARROW_FILE).is_file()
+    mapped = open_sweep(folder)
+    copy = folder.parent / "small-csv"
+    shutil.copytree(folder, copy)
+    summary = json.loads((copy / SUMMARY_FILE).read_text())
+    del summary["index_arrow_sha256"]
+    (copy / SUMMARY_FILE).write_text(json.dumps(summary))
+    parsed = open_sweep(copy)
+    xr.testing.assert_identical(mapped.drop_attrs(), parsed.drop_attrs())
+    for name in mapped.variables:  # the CSV reads 3000.0 back as an integer; the Arrow file keeps the float
+        kinds = {mapped[name].dtype.kind, parsed[name].dtype.kind}
+        assert kinds <= {"f", "i"} or mapped[name].dtype == parsed[name].dtype, name
+    assert mapped["run_id"].values.tolist() == parsed["run_id"].values.tolist()
+    grid = open_sweep(folder, grid=True)
+    assert dict(grid.sizes)["k_c_2"] == 3
+    damaged = folder.parent / "small-damaged"
+    shutil.copytree(folder, damaged)
+    data = bytearray((damaged / INDEX_ARROW_FILE).read_bytes())
+    data[len(data) // 2] ^= 1
+    (damaged / INDEX_ARROW_FILE).write_bytes(bytes(data))
+    with pytest.raises(DamagedResultError, match="index.arrow"):
+        open_sweep(damaged)

@@ -1,5 +1,6 @@
 """Integrate validated run configurations: one (:func:`simulate`) or many (:func:`simulate_many`,
-or :func:`simulate_blocks`, their results as blocks of runs).
+or :func:`simulate_blocks`, their results as blocks of runs), or the runs of a
+:class:`rbstab.engine.RunBatch` (:func:`simulate_batch`, no configuration object per run).
 
 Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
 
@@ -34,12 +35,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .engine import METHODS, integrate_runs, method_number
+from .engine import METHODS, RunBatch, integrate_runs, method_number
 from .engine.settings import settings_records
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .layout import summary_stride
+from .layout import VARIANT_LAYOUTS, summary_stride
 from .model import PARAMETERS
 from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
@@ -56,6 +57,7 @@ __all__ = [
     "simulate",
     "simulate_many",
     "simulate_blocks",
+    "simulate_batch",
     "RunBlock",
     "solve",
     "gimbal_lock_event",
@@ -157,6 +159,8 @@ class RunBlock:
     stride : int
         Samples of the runs' grid (``simulation.n_samples`` on [0, t_end]) from one entry
         of ``time`` to the next: 1, or a thinned trace of the ``cuda`` engine.
+    variants : list of str
+        Each run's controller variant (``config.variant``; given where ``configs`` are None).
     """
 
     configs: list
@@ -170,6 +174,11 @@ class RunBlock:
     timing: list[dict]
     switching: list
     stride: int = 1
+    variants: list = None
+
+    def __post_init__(self) -> None:
+        if self.variants is None:
+            self.variants = [c.variant for c in self.configs]
 
     def __len__(self) -> int:
         return len(self.configs)
@@ -402,6 +411,9 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
     return result
 
 
+#: Variant code -> its state layout, its name.
+_LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUTS)
+
 #: Runs whose outputs :func:`simulate_many` evaluates together before yielding them; bounds
 #: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
 #: default number of runs per compiled call (the trajectories held at once).
@@ -415,11 +427,13 @@ def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
                       c.simulation.max_wall_time if timeout is None else timeout] for c in configs], dtype=float)
 
 
-def _chunk_blocks(configs, variants, codes, params, sol, share: float, settings: np.ndarray,
+def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarray,
                   full: bool) -> Iterator[tuple[list[int], RunBlock]]:
     """(runs of the chunk, their RunBlock) of one integrated chunk, post-processed
     :data:`POSTPROCESS_BLOCK` runs at a time (a block per ``t_end`` of those runs); every
-    output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`."""
+    output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`. ``configs``: the
+    runs' RunConfigs, or None each (a :class:`~rbstab.engine.RunBatch`'s runs);
+    ``settings``: their rows (k, 7) of :func:`rbstab.engine.integrate_runs`."""
     k, n_samples, _ = sol.samples.shape
     for lo in range(0, k, POSTPROCESS_BLOCK):
         t0 = _time.perf_counter()
@@ -432,11 +446,11 @@ def _chunk_blocks(configs, variants, codes, params, sol, share: float, settings:
         # numbers as each alone), and one array of those times
         by_t_end: dict[float, list[int]] = {}
         for j in range(lo, hi):
-            by_t_end.setdefault(configs[j].simulation.t_end, []).append(j)
+            by_t_end.setdefault(float(settings[j, 0]), []).append(j)
         parts = []
         for t_end, members in by_t_end.items():
             part = columns if len(members) == hi - lo else columns[:, [j - lo for j in members]]
-            outputs = split_outputs(part, variants[lo].layout, full)
+            outputs = split_outputs(part, _LAYOUTS[int(codes[lo])], full)
             time = np.linspace(0.0, t_end, n_samples)
             time.flags.writeable = False  # shared by the runs' results
             outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
@@ -450,13 +464,14 @@ def _chunk_blocks(configs, variants, codes, params, sol, share: float, settings:
                 outputs=outputs,
                 summaries=summaries,
                 status=["success" if code == SUCCESS else "failed" for code in status],
-                message=[status_message(code, float(sol.t_stop[j]), configs[j].simulation.gimbal_margin,
+                message=[status_message(code, float(sol.t_stop[j]), float(settings[j, 4]),
                                         int(settings[j, 5]), float(settings[j, 6])) for code, j in zip(status, members)],
                 solver=[{"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": code,
                          "n_steps": int(sol.n_steps[j])} for code, j in zip(status, members)],
                 wall_time=[share + per_run] * len(members),
                 timing=[{"integration": share, "postprocess": per_run} for _ in members],
                 switching=[None] * len(members),
+                variants=[_VARIANT_NAMES[int(codes[j])] for j in members],
             )
 
 
@@ -566,8 +581,60 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
                 out=buffer,
             )
             share = (_time.perf_counter() - start) / len(chunk)
-            for runs, block in _chunk_blocks(chunk_configs, variants, codes, params, sol, share, settings, full):
+            for runs, block in _chunk_blocks(chunk_configs, codes, params, sol, share, settings, full):
                 yield [chunk[j] for j in runs], block
+
+
+def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
+                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
+    """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
+    ``(rows of the batch, RunBlock)``.
+
+    What :func:`simulate_blocks` does for the configurations of those runs, with the same
+    results bit for bit, from the batch's arrays (no configuration object): runs of one
+    method, sample count and state size are integrated ``chunk_size`` at a time by
+    :func:`rbstab.engine.integrate_runs` and post-processed :data:`POSTPROCESS_BLOCK` at a
+    time. The blocks' ``configs`` are None.
+
+    Parameters
+    ----------
+    batch : RunBatch
+    rows : sequence of int, optional
+        The runs to integrate (default: every run with ``batch.compiled``).
+    chunk_size : int
+        Runs per compiled call (the trajectories held at once).
+    full : bool
+        Every output (else all but :data:`rbstab.layout.LEFT_OUT`).
+
+    Raises
+    ------
+    ValueError
+        For a run the compiled engine does not take (``batch.compiled`` False), or
+        ``chunk_size < 1``.
+    """
+    if chunk_size < 1:
+        raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
+    rows = np.flatnonzero(batch.compiled) if rows is None else np.asarray(rows, dtype=np.int64)
+    if not np.all(batch.compiled[rows]):
+        bad = int(rows[np.flatnonzero(~batch.compiled[rows])[0]])
+        raise ValueError(f"run {bad} of the batch: the compiled engine does not take it (its method or the "
+                         "pure sign law); run it with simulate()")
+    keys = np.stack([batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]], axis=1)
+    distinct, group = np.unique(keys, axis=0, return_inverse=True) if len(rows) else (keys, rows)
+    for g, (method, n_samples, size) in enumerate(distinct.tolist()):
+        members = rows[group.ravel() == g]
+        buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
+        for lo in range(0, len(members), chunk_size):
+            chunk = members[lo : lo + chunk_size]
+            start = _time.perf_counter()
+            codes = batch.variant[chunk]
+            params = batch.params[chunk]
+            settings = batch.settings_rows(chunk)
+            sol = integrate_runs(codes, params, batch.y0[chunk, :size], settings, method=METHODS[method],
+                                 n_samples=n_samples, out=buffer)
+            share = (_time.perf_counter() - start) / len(chunk)
+            for runs, block in _chunk_blocks([None] * len(chunk), codes, params, sol, share, settings, full):
+                yield [int(chunk[j]) for j in runs], block
 
 
 def _cuda_blocks(configs, positions, shared: dict, method: str, n_samples: int, timeout: float | None, full: bool,

@@ -44,6 +44,7 @@ import functools
 import json
 import math
 import os
+import re
 import sys
 import uuid
 from collections.abc import Iterable, Mapping, Sequence
@@ -66,6 +67,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "CHUNK_FORMAT",
+    "READ_FORMATS",
     "STORES",
     "DEFAULT_STORE",
     "THINNED_VARIABLES",
@@ -86,8 +88,11 @@ __all__ = [
     "WRITE_BLOCK",
 ]
 
-#: Value of the ``rbstab_format`` attribute of a store file.
-CHUNK_FORMAT = "rbstab-sweep-2"
+#: Value of the ``rbstab_format`` attribute of a store file this version writes.
+CHUNK_FORMAT = "rbstab-sweep-3"
+#: Store formats this version reads: ``rbstab-sweep-2`` held text as variable-length
+#: strings, ``rbstab-sweep-3`` as compressed characters.
+READ_FORMATS = ("rbstab-sweep-2", CHUNK_FORMAT)
 #: What a store file holds per run besides the per-run values (``rbstab sweep --store``).
 STORES = ("full", "thinned", "summary")
 #: ``--store`` default: the traces a report draws at <= 201 samples (see docs/sweeps.md).
@@ -108,6 +113,8 @@ _COORDS = ("run_id", "base", "variant")
 _TEXT = {"run_id", "base", "variant", "status", "message", "config", "config_hash", "lyapunov_rate_check"}
 _SOLVER = ("nfev", "njev", "nlu", "status")
 _NUMBERS = {float, int, type(None)}
+#: Names of the character dimensions of text variables.
+_STRING_DIM = re.compile(r"string\d+")
 
 
 def _put_attributes(obj_id, attrs: Mapping[str, Any], written: dict | None = None) -> None:
@@ -153,7 +160,7 @@ def _h5_constants() -> tuple:
 
 #: Bytes a run takes in a store file beside its traces (its per-run values, the index's
 #: columns; measured on Case 3 parameter sweeps, benchmarks/sweep_store.py).
-VALUE_BYTES = 600
+VALUE_BYTES = 350
 #: Trace values a sample of a thinned store holds (the 5 state blocks, E: 3 each; v, dv/dt
 #: analytic and numerical) and of a full store (every output variable).
 _THINNED_VALUES, _FULL_VALUES = 18, 40
@@ -367,34 +374,31 @@ class ChunkWriter:
 
     # -- rows ---------------------------------------------------------------------------------
 
-    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None,
-            config_text: str | None = None) -> dict[str, Any]:
+    def add(self, run_id: str, result: "RunResult", *, config_hash: str | None = None) -> dict[str, Any]:
         """Add a finished run (any status); returns its row (as :func:`read_chunk_rows` gives it).
 
         ``config_hash``: the run's :func:`rbstab.config.config_hash` of its canonical config,
-        and ``config_text``, its :func:`~rbstab.config.canonical_config` with the run limits
-        (the ``config`` column), if the caller has them (a sweep's plan computed them); else
-        computed here.
+        if the caller has it (a sweep's plan computed it); else computed here. A writer
+        without templates stores the run's configuration text (the ``config`` column).
         """
         from ..simulator import RunBlock  # heavy: numba
 
-        return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash],
-                              config_texts=[config_text])[0]
+        return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash])[0]
 
-    def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None,
-                  config_texts: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
+    def add_block(self, run_ids: Sequence[str], block, *,
+                  config_hashes: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
         """Add finished runs that share their sample times (a :class:`rbstab.simulator.RunBlock`,
         ``run_ids[j]`` its run j); returns their rows, as :meth:`add` does each.
 
-        ``config_hashes``, ``config_texts``: as :meth:`add`'s, a value a run (None or ""
-        where the caller has none). Raises ValueError, with no run added, for a run that is
+        ``config_hashes``: as :meth:`add`'s, a value a run (None or "" where the caller
+        has none). Raises ValueError, with no run added, for a run that is
         not a row of the file or was added already, or traces of another shape or sample
         times than the file's.
         """
         rows = [self._row_of(run_id) for run_id in run_ids]
         if len(set(rows)) != len(rows):
             raise ValueError(f"{self.path.name}: a run is given twice in one block: {list(run_ids)}")
-        values = self._block_values(block, config_hashes, config_texts)
+        values = self._block_values(block, config_hashes)
         if self.store != "summary":
             if self._time is None:
                 self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()},
@@ -402,20 +406,20 @@ class ChunkWriter:
             self._keep_traces(run_ids, rows, block)
         return self._add(rows, values)
 
-    def _block_values(self, block, config_hashes, config_texts) -> dict[str, list]:
+    def _block_values(self, block, config_hashes) -> dict[str, list]:
         """The per-run values of a block's runs, as columns; without templates, each run's
         configuration as text (the ``config`` column)."""
         configs = block.configs
         k = len(configs)
         hashes = list(config_hashes) if config_hashes is not None else [None] * k
-        texts = list(config_texts) if config_texts is not None else [None] * k
+        texts = [None] * k
         for j, config in enumerate(configs):
-            if not texts[j] and "run_templates" not in self.attrs:
+            if "run_templates" not in self.attrs:
                 texts[j] = canonical_config(config.resolved, limits=True)
             if not hashes[j]:
                 hashes[j] = config_hash(canonical_config(config.resolved))
         values: dict[str, list] = {
-            "variant": [c.variant for c in configs],
+            "variant": list(block.variants),
             "status": list(block.status),
             "message": list(block.message),
             "wall_time": [float(w) for w in block.wall_time],
@@ -663,6 +667,32 @@ class ChunkWriter:
             self._kinds[kind] = tid, dcpl
         return self._kinds[kind]
 
+    def _characters(self, values: list) -> tuple[np.ndarray, str]:
+        """Text values as characters: an array (run, width) of ``S1`` (UTF-8, NUL-padded,
+        what netCDF calls ``char`` and xarray decodes to str by ``_Encoding``), and the name
+        of its second dimension ``string<width>``, created if new."""
+        encoded = [("" if v is None else str(v)).encode("utf-8") for v in values]
+        width = max(1, max(map(len, encoded), default=1))
+        data = np.array(encoded, dtype=f"S{width}").view("S1").reshape(len(encoded), width)
+        dim = f"string{width}"
+        if dim not in self._file.dimensions:
+            self._file.dimensions[dim] = width
+            self._numbers[dim] = np.zeros(width, dtype=self._file._h5file[dim].dtype)  # the scale's own values
+        return data, dim
+
+    def _character_kind(self, shape: tuple[int, int]) -> tuple:
+        """(HDF5 type, dataset creation properties) of a (run, string) character variable:
+        chunked along ``run``, deflated, with Fletcher-32 (text that runs share takes next
+        to no room)."""
+        import h5py  # heavy: h5py
+
+        dcpl = h5py.h5p.create(h5py.h5p.DATASET_CREATE)
+        dcpl.set_attr_creation_order(h5py.h5p.CRT_ORDER_TRACKED | h5py.h5p.CRT_ORDER_INDEXED)
+        dcpl.set_chunk(fletcher32_chunks(shape, itemsize=1))
+        dcpl.set_deflate(1)
+        dcpl.set_fletcher32()
+        return h5py.h5t.py_create(np.dtype("S1")), dcpl
+
     def _write_column(self, name: str, values: list) -> None:
         """A ``(run,)`` variable: a dataset with the ``run`` dimension scale attached, which is
         what netCDF-4 and h5netcdf read as a variable of dimension ``run``
@@ -672,20 +702,23 @@ class ChunkWriter:
         import h5py  # heavy: h5py
 
         h5 = self._file._h5file
+        chars = None
         if name in _TEXT or _has_text(values):
-            data = np.array(["" if v is None else str(v) for v in values], dtype=self._str)
+            data, chars = self._characters(values)
             self._texts[name] = data
         else:
             data = np.array(values, dtype=float)  # None -> NaN
             if name.startswith("solver_") and np.all(np.isfinite(data)):
                 data = data.astype(np.int64)
             self._numbers[name] = data
-        tid, dcpl = self._column_kind(data.dtype)
+        tid, dcpl = self._column_kind(data.dtype) if chars is None else self._character_kind(data.shape)
         dsid = h5py.h5d.create(h5.id, name.encode(), tid, h5py.h5s.create_simple(data.shape), dcpl=dcpl)
         dsid.write(h5py.h5s.ALL, h5py.h5s.ALL, data)
         h5py.h5ds.attach_scale(dsid, self._run_scale, 0)
+        if chars is not None:
+            h5py.h5ds.attach_scale(dsid, h5[chars].id, 1)
         units, long_name = figure_attributes(name)
-        attrs: dict[str, str] = {}
+        attrs: dict[str, str] = {"_Encoding": "utf-8"} if chars is not None else {}
         if name in self.parameters:
             attrs["config_key"] = long_name = self.parameters[name]
         attrs["long_name"] = long_name
@@ -697,12 +730,12 @@ class ChunkWriter:
 
 
 def is_chunk_file(path: str | os.PathLike) -> bool:
-    """Whether ``path`` is a readable store file (``rbstab_format`` = :data:`CHUNK_FORMAT`)."""
+    """Whether ``path`` is a readable store file (``rbstab_format`` one of :data:`READ_FORMATS`)."""
     import h5py  # heavy: h5py
 
     try:
         with h5py.File(path, "r") as f:
-            return _plain(f.attrs.get("rbstab_format")) == CHUNK_FORMAT
+            return _plain(f.attrs.get("rbstab_format")) in READ_FORMATS
     except (OSError, ValueError):
         return False
 
@@ -732,7 +765,7 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
     """
     path = Path(path)
     with open_result(path) as f:
-        if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
+        if _plain(f.attrs.get("rbstab_format")) not in READ_FORMATS:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
         store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
@@ -741,7 +774,7 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
         try:
             n_runs = f["run"].shape[0] if "run" in f else -1
             datasets = {k: f[k] for k in f if k not in ("axis", "time")}
-            columns = {k: _column(d) for k, d in datasets.items() if d.ndim == 1 and d.shape[0] == n_runs}
+            columns = {k: _column(d) for k, d in datasets.items() if _per_run(d, n_runs)}
             keys = {k: _plain(d.attrs["config_key"]) for k, d in datasets.items()
                     if k in columns and "config_key" in d.attrs}
         except OSError as exc:  # a Fletcher-32 checksum that does not match
@@ -773,7 +806,7 @@ def read_chunk_columns(path: str | os.PathLike, *, data: bool = False):
 
     path = Path(path)
     with open_result(path) as f:
-        if _plain(f.attrs.get("rbstab_format")) != CHUNK_FORMAT:
+        if _plain(f.attrs.get("rbstab_format")) not in READ_FORMATS:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
         created = _plain(f.attrs.get("created"))
@@ -782,9 +815,9 @@ def read_chunk_columns(path: str | os.PathLike, *, data: bool = False):
             columns = {}
             for k in f:
                 d = f[k]
-                if k in ("axis", "time", "config") or d.ndim != 1 or d.shape[0] != n_runs:
+                if k in ("axis", "time", "config") or not _per_run(d, n_runs):
                     continue
-                columns[k] = d.asstr()[...] if d.dtype.kind in "OS" else d[...]
+                columns[k] = _text_values(d) if d.dtype.kind in "OS" else d[...]
         except OSError as exc:  # a Fletcher-32 checksum that does not match
             raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
     if "run" not in columns or "run_id" not in columns:
@@ -828,10 +861,30 @@ def resolved_config(path: str | os.PathLike, row: int) -> dict:
     return json.loads(rows[row]["config"]) | {"name": rows[row]["run_id"]}
 
 
+def _per_run(dataset, n_runs: int) -> bool:
+    """Whether ``dataset`` holds a value a run: shape (run,), or (run, string) characters
+    (not the ``string<width>`` dimensions of those)."""
+    if _STRING_DIM.fullmatch(dataset.name.lstrip("/")):
+        return False
+    chars = dataset.ndim == 2 and dataset.dtype == np.dtype("S1")
+    return (dataset.ndim == 1 or chars) and dataset.shape[0] == n_runs
+
+
+def _text_values(dataset) -> np.ndarray:
+    """A text variable's values as str (objects): variable-length strings, or characters
+    (run, string) of UTF-8."""
+    if dataset.ndim == 2:
+        chars = dataset[...]
+        fixed = np.ascontiguousarray(chars).view(f"S{max(chars.shape[1], 1)}").ravel() if chars.size else (
+            np.zeros(chars.shape[0], dtype="S1"))
+        return np.array([x.decode("utf-8") for x in fixed.tolist()], dtype=object)
+    return dataset.asstr()[...]
+
+
 def _column(dataset) -> list:
+    if dataset.dtype.kind in "OS":
+        return _text_values(dataset).tolist()
     values = dataset[...]
-    if values.dtype.kind in "OS":
-        return [x.decode() if isinstance(x, bytes) else str(x) for x in values]
     out = values.tolist()
     if values.dtype.kind == "f":
         return [None if isinstance(x, float) and math.isnan(x) else x for x in out]
@@ -988,6 +1041,6 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
                     continue
                 probed.add(name)
                 shape = f[name].shape
-                if len(shape) >= 2 and time is not None and shape[1] == len(time):
+                if len(shape) >= 2 and time is not None and shape[1] == len(time) and f[name].dtype.kind == "f":
                     shapes[name] = tuple(shape[1:])
     return shapes, time

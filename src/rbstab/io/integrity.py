@@ -107,6 +107,8 @@ def _canonical(value: Any) -> bytes:
     if isinstance(value, str):
         return b"s" + value.encode("utf-8", "surrogateescape")
     array = np.asarray(value)
+    if array.dtype == np.dtype("S1") and array.ndim == 2:  # characters (run, string): their bytes
+        return b"c" + repr(array.shape).encode() + np.ascontiguousarray(array).tobytes()
     if array.dtype.kind in "OSU":
         return b"a" + repr(array.shape).encode() + b"".join(_text_item(x) for x in array.ravel().tolist())
     return array.dtype.str.encode() + repr(array.shape).encode() + np.ascontiguousarray(array).tobytes()

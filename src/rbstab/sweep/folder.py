@@ -10,6 +10,8 @@ runner (planning, resume, the index), ``rbstab show DIR``, ``rbstab report`` and
                            format: :mod:`rbstab.io.chunk`)
       runs/<run_id>.h5     or one result file per run (layout "run", :mod:`rbstab.io.hdf5`)
       index.csv            one row per run, the columns of :func:`index_columns`
+      index.arrow          the same table as an Arrow IPC file, which :func:`open_sweep`
+                           maps into memory instead of parsing the CSV
       sweep_summary.json   counts per status, converged fraction (overall and per base)
 
 Parameter names
@@ -29,8 +31,8 @@ one; each coordinate's ``config_key`` attribute (and ``sweep_summary.json``'s
 Checksums
 ---------
 Store and run files carry checksums (:mod:`rbstab.io.integrity`), and
-``sweep_summary.json`` the SHA-256 of the ``index.csv`` written with it
-(``index_sha256``). Resume verifies every file it counts (:class:`StoredRuns` with
+``sweep_summary.json`` the SHA-256 of the ``index.csv`` and ``index.arrow`` written with it
+(``index_sha256``, ``index_arrow_sha256``). Resume verifies every file it counts (:class:`StoredRuns` with
 ``verify``): a damaged file (checksums that fail, or a file that cannot be opened) is
 renamed ``<name>.damaged`` by the runner and its runs are rerun. :func:`read_index` (``rbstab show DIR``, ``rbstab report``, :func:`open_sweep`)
 refuses an index that does not match its checksum.
@@ -54,6 +56,7 @@ from ..io.atomic import atomic_path, write_text_atomic
 __all__ = [
     "SPEC_FILE",
     "INDEX_FILE",
+    "INDEX_ARROW_FILE",
     "SUMMARY_FILE",
     "RUNS_DIR",
     "LOCK_FILE",
@@ -83,6 +86,9 @@ __all__ = [
 
 SPEC_FILE = "sweep.yaml"
 INDEX_FILE = "index.csv"
+#: The index as an Arrow IPC file (uncompressed, text of few values dictionary-encoded):
+#: :func:`open_sweep` maps it into memory, numbers without a copy.
+INDEX_ARROW_FILE = "index.arrow"
 SUMMARY_FILE = "sweep_summary.json"
 RUNS_DIR = "runs"
 LOCK_FILE = ".lock"
@@ -316,7 +322,7 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     order = index_columns([dict.fromkeys([*head.columns, *done.columns])],
                           parameters=[c for c in coords if c not in fixed])
     index = index[[c for c in order if c in index.columns]]
-    _write_csv(directory / INDEX_FILE, index)
+    _write_index_files(directory, index)
     summary = summarize_columns(index, name=name, ratio=ratio, parameters=table.parameters())
     write_summary(directory / SUMMARY_FILE, summary)
     bad = status != "success"
@@ -324,23 +330,50 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     return summary, problems
 
 
-def _write_csv(path: Path, index) -> None:
-    """``index`` (a DataFrame) as CSV, atomically: by pyarrow's writer (numbers formatted in
-    C, ~10x pandas' speed; they read back as the same floats), pandas' for columns pyarrow
-    does not take (lists); booleans as ``True``/``False``, absent values empty."""
-    import numpy as np  # heavy: numpy
+def _write_index_files(directory: Path, index) -> None:
+    """``index`` (a DataFrame) as :data:`INDEX_FILE` and :data:`INDEX_ARROW_FILE`,
+    atomically, from one Arrow table. The CSV by pyarrow's writer (numbers formatted in C,
+    ~10x pandas' speed; they read back as the same floats), booleans as ``True``/``False``,
+    absent values empty. An index Arrow does not take (lists in a column) is written by
+    pandas, and has no Arrow file (:func:`open_sweep` then reads the CSV)."""
     import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.compute as pc  # heavy: pyarrow
     import pyarrow.csv as pa_csv  # heavy: pyarrow
 
-    index = index.assign(**{c: np.where(index[c].to_numpy(), "True", "False")
-                            for c in index.columns if index[c].dtype == bool})
-    with atomic_path(path) as tmp:
-        try:
-            table = pa.Table.from_pandas(index, preserve_index=False)
-        except (pa.ArrowInvalid, pa.ArrowTypeError):
+    try:
+        table = pa.Table.from_pandas(index, preserve_index=False).combine_chunks()
+    except (pa.ArrowInvalid, pa.ArrowTypeError):
+        with atomic_path(directory / INDEX_FILE) as tmp:
             index.to_csv(tmp, index=False, lineterminator="\n")
-            return
-        pa_csv.write_csv(table, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
+        (directory / INDEX_ARROW_FILE).unlink(missing_ok=True)
+        return
+    as_text = table
+    for i, field in enumerate(table.schema):
+        if pa.types.is_boolean(field.type):
+            as_text = as_text.set_column(i, field.name, pc.if_else(table.column(i), "True", "False"))
+    with atomic_path(directory / INDEX_FILE) as tmp:
+        pa_csv.write_csv(as_text, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
+    _write_arrow(directory / INDEX_ARROW_FILE, table)
+
+
+#: Text columns of an index that :func:`open_sweep` gives as text ("" where absent).
+_TEXT_COLUMNS = ("status", "message", "run_id", "base", "variant", "lyapunov_rate_check", "config_hash")
+#: Text columns of an index with a value a run (not dictionary-encoded in ``index.arrow``).
+_UNIQUE_TEXT = ("run_id", "config_hash")
+
+
+def _write_arrow(path: Path, table) -> None:
+    """``table`` (the index as a pyarrow Table) as :data:`INDEX_ARROW_FILE`, atomically:
+    uncompressed, the text columns but :data:`_UNIQUE_TEXT` dictionary-encoded."""
+    import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.ipc as ipc  # heavy: pyarrow
+
+    text = (pa.types.is_string, pa.types.is_large_string)
+    columns = [c.dictionary_encode() if any(t(c.type) for t in text) and name not in _UNIQUE_TEXT else c
+               for name, c in zip(table.column_names, table.columns)]
+    table = pa.table(columns, names=table.column_names)
+    with atomic_path(path) as tmp, ipc.new_file(str(tmp), table.schema) as writer:
+        writer.write_table(table)
 
 
 def verify_index(folder: str | os.PathLike) -> bool:
@@ -368,7 +401,7 @@ def verify_index(folder: str | os.PathLike) -> bool:
     if not isinstance(expected, str):
         return False
     try:
-        actual = hashlib.sha256((folder / INDEX_FILE).read_bytes()).hexdigest()
+        actual = _sha256(folder / INDEX_FILE)
     except OSError:
         return False  # reported by the reader
     if actual != expected:
@@ -444,12 +477,25 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
 
 def write_summary(path: Path, summary: Mapping[str, Any]) -> Path:
     """Write ``summary`` as indented JSON, atomically, with the SHA-256 of the ``index.csv``
-    beside it (``index_sha256``, :func:`verify_index`)."""
+    and ``index.arrow`` beside it (``index_sha256``, ``index_arrow_sha256``,
+    :func:`verify_index`)."""
     summary = dict(summary)
-    index = Path(path).parent / INDEX_FILE
-    if index.is_file():
-        summary["index_sha256"] = hashlib.sha256(index.read_bytes()).hexdigest()
+    for name, key in ((INDEX_FILE, "index_sha256"), (INDEX_ARROW_FILE, "index_arrow_sha256")):
+        index = Path(path).parent / name
+        if index.is_file():
+            summary[key] = _sha256(index)
     return write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
+
+
+def _sha256(path: Path) -> str:
+    """SHA-256 of a file, read 1 MiB at a time (into one buffer: a large index costs no memory)."""
+    h = hashlib.sha256()
+    buffer = bytearray(2**20)
+    view = memoryview(buffer)
+    with open(path, "rb", buffering=0) as fh:
+        while n := fh.readinto(buffer):
+            h.update(view[:n])
+    return h.hexdigest()
 
 
 # -- reading a folder -----------------------------------------------------------------------------
@@ -682,9 +728,11 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
     folder = Path(path)
     if not is_sweep_folder(folder):
         raise FileNotFoundError(f"{folder}: not a sweep folder (no {SPEC_FILE} and {INDEX_FILE})")
-    index = read_index(folder)
-    ds = _from_index(index)
-    stored = _from_store(folder, index)
+    columns = _arrow_columns(folder)
+    if columns is None:  # written before index.arrow, or an index Arrow does not take
+        columns = _frame_columns(read_index(folder))
+    ds = _dataset_of(columns)
+    stored = _from_store(folder, columns)
     if stored is not None:
         ds = stored.reindex(run=ds["run"].values).assign(
             {k: ds[k] for k in ds.data_vars if k not in stored.data_vars or k in ("status", "message", "converged")}
@@ -695,44 +743,99 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
     return _as_grid(ds, spec) if grid else ds
 
 
-def _from_index(index):
-    """The index as a Dataset over ``run``: per-run values with units and long names
-    (built column by column: ``DataFrame.to_xarray`` costs ~1 s for 10,000 runs)."""
+def _arrow_columns(folder: Path) -> dict | None:
+    """The columns of :data:`INDEX_ARROW_FILE` as numpy arrays (numbers are views of the
+    memory-mapped file), as :func:`_frame_columns` gives those of ``index.csv``; None when
+    the summary has no checksum of it (a folder written before it, or an index Arrow does
+    not take). DamagedResultError if the file does not match its checksum."""
+    import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.ipc as ipc  # heavy: pyarrow
+
+    from ..io.integrity import DamagedResultError  # heavy: numba, pydantic or h5py
+
+    try:
+        expected = json.loads((folder / SUMMARY_FILE).read_text(encoding="utf-8")).get("index_arrow_sha256")
+    except (OSError, ValueError, AttributeError):
+        return None
+    path = folder / INDEX_ARROW_FILE
+    if not isinstance(expected, str) or not path.is_file():
+        return None
+    mapped = pa.memory_map(str(path)).read_buffer()  # the file's pages, hashed and read without a copy
+    if hashlib.sha256(mapped).hexdigest() != expected:
+        raise DamagedResultError(
+            f"{path}: does not match its checksum in {SUMMARY_FILE} (damaged, or an invocation was killed "
+            f"between writing the two); rebuild both with: rbstab sweep {folder / SPEC_FILE} -o {folder.parent}")
+    table = ipc.open_file(mapped).read_all()
+    return {name: _arrow_numpy(name, column) for name, column in zip(table.column_names, table.columns)}
+
+
+def _arrow_numpy(name: str, column):
+    """One column of ``index.arrow`` as numpy: text as objects (``""`` for an absent value
+    of :data:`_TEXT_COLUMNS`, else NaN), numbers without nulls as views, with nulls as
+    floats with NaN."""
+    import numpy as np  # heavy: numpy
+    import pyarrow as pa  # heavy: pyarrow
+
+    column = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    absent = "" if name in _TEXT_COLUMNS else np.nan
+    if pa.types.is_dictionary(column.type):
+        values = np.array([*column.dictionary.to_pylist(), absent], dtype=object)
+        return values[column.indices.fill_null(-1).to_numpy(zero_copy_only=False)]
+    if pa.types.is_null(column.type):
+        return np.full(len(column), absent, dtype=object if name in _TEXT_COLUMNS else float)
+    values = column.to_numpy(zero_copy_only=False)
+    if values.dtype == object and column.null_count:
+        values[np.equal(values, None)] = absent
+    return values
+
+
+def _frame_columns(index) -> dict:
+    """The columns of an index (a DataFrame of ``index.csv``) as numpy arrays: text of
+    :data:`_TEXT_COLUMNS` as str objects ("" where absent), ``converged`` as bool."""
+    out = {}
+    for name in index.columns:
+        values = index[name].to_numpy()
+        if name == "converged":
+            values = index[name].astype(str).eq("True").to_numpy()
+        elif values.dtype == object and name in _TEXT_COLUMNS:
+            values = index[name].fillna("").astype(str).to_numpy(dtype=object)
+        out[name] = values
+    return out
+
+
+def _dataset_of(columns):
+    """The index's columns (:func:`_frame_columns`) as a Dataset over ``run``: per-run values
+    with units and long names, the parameters, ``run_id``, ``base`` and ``variant`` as
+    coordinates; the arrays as they are (no conversion by xarray)."""
     import xarray as xr  # heavy: xarray
 
     from ..io.chunk import figure_attributes  # heavy: numba, pydantic or h5py
 
-    table = index.drop(columns=[c for c in ("file", "file_row") if c in index.columns])
-    coords = {c for c in table.columns if c in ("run_id", "base", "variant") or c in _parameter_set(index)}
+    names = [c for c in columns if c not in ("file", "file_row")]
+    coords = {c for c in names if c in ("run_id", "base", "variant") or c in _parameter_set(names)}
     variables = {}
-    for name in table.columns:
+    for name in names:
         if name == "run":
             continue
-        values = table[name].to_numpy()
-        if name == "converged":
-            values = table[name].astype(str).eq("True").to_numpy()
-        elif values.dtype == object:
-            values = table[name].fillna("").astype(str).to_numpy(dtype=object) if name in (
-                "status", "message", "run_id", "base", "variant", "lyapunov_rate_check", "config_hash") else values
         units, long_name = figure_attributes(name)
-        variables[name] = xr.Variable(("run",), values, {"long_name": long_name, **({"units": units} if units else {})})
-    run = table["run"].to_numpy()
+        variables[name] = xr.Variable(("run",), columns[name], {"long_name": long_name, **({"units": units} if units else {})},
+                                      fastpath=True)
     return xr.Dataset({k: v for k, v in variables.items() if k not in coords},
-                      coords={"run": run, **{k: v for k, v in variables.items() if k in coords}})
+                      coords={"run": columns["run"], **{k: v for k, v in variables.items() if k in coords}})
 
 
-def _parameter_set(index) -> list[str]:
+def _parameter_set(columns: Sequence[str]) -> list[str]:
     """Parameter columns of an index: those between ``base`` and ``variant``."""
-    columns = list(index.columns)
+    columns = list(columns)
     start = columns.index("base") + 1 if "base" in columns else 0
     stop = columns.index("variant") if "variant" in columns else start
     return columns[start:stop]
 
 
-def _from_store(folder: Path, index):
+def _from_store(folder: Path, columns):
     """The traces of the current rows of the store files, lazily (dask arrays, a chunk per
     stretch of runs from one file), over ``run``; None for a store without traces or layout
-    "run".
+    "run". ``columns``: the index's (:func:`_frame_columns`).
 
     The per-run values come from the index (the same names), the units and long names from
     :mod:`rbstab.io.metadata`; the store files are only listed here (names and shapes) and
@@ -740,31 +843,35 @@ def _from_store(folder: Path, index):
     """
     import dask.array as da  # heavy: dask
     import numpy as np  # heavy: numpy
+    import pandas as pd  # heavy: pandas
     import xarray as xr  # heavy: xarray
 
     from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numba, pydantic or h5py
     from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numba, pydantic or h5py
 
-    if "file_row" not in index.columns:
+    if "file_row" not in columns or "file" not in columns:
         return None
-    rows = index.dropna(subset=["file_row"])
-    rows = rows[rows["file"].astype(str).str.contains("chunk-", regex=False)].sort_values("run", kind="stable")
-    if rows.empty:
+    file_row, file = columns["file_row"], columns["file"]
+    has = ~pd.isna(file_row) & ~pd.isna(file)
+    names = [str(f) for f in pd.unique(file[has]) if "chunk-" in str(f)]
+    if not names:
         return None
-    files = rows["file"].astype(str).to_numpy()
-    file_rows = rows["file_row"].astype(np.int64).to_numpy()
-    cuts = np.flatnonzero(files[1:] != files[:-1]) + 1
-    segments = [(str(folder / files[lo]), file_rows[lo:hi]) for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(files)])]
-    shapes, time = store_trace_shapes(folder / name for name in sorted(set(files)))
+    shapes, time = store_trace_shapes(folder / name for name in sorted(names))
     if not shapes:
         return None
+    keep = np.flatnonzero(has & np.isin(file, names))
+    keep = keep[np.argsort(columns["run"][keep], kind="stable")]
+    files = file[keep].astype(str)
+    file_rows = file_row[keep].astype(np.int64)
+    cuts = np.flatnonzero(files[1:] != files[:-1]) + 1
+    segments = [(str(folder / files[lo]), file_rows[lo:hi]) for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(files)])]
     data = {}
     for name, tail in shapes.items():
         trace = StoreTrace(name, segments, tail)
         array = da.from_array(trace, chunks=trace.chunks, name=False, asarray=True, meta=np.empty((0,) * trace.ndim))
         attrs = variable_attributes(name) if name in LONG_NAMES else {}
         data[name] = xr.Variable(("run", "time", "axis")[: trace.ndim], array, attrs)
-    coords = {"run": rows["run"].to_numpy(), "axis": ["x", "y", "z"]}
+    coords = {"run": columns["run"][keep], "axis": ["x", "y", "z"]}
     if time is not None:
         coords["time"] = xr.Variable(("time",), time, {"units": "s", "long_name": "time"})
     return xr.Dataset(data, coords=coords)

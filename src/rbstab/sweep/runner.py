@@ -408,29 +408,28 @@ def run_sweep(
         and the index written for exactly the files on disk.
     """
 
-    say = log or (lambda message: None)
     engine = resolve_engine(engine, timeout)
     chunking = _chunking(chunk_size, engine, store, layout)
     table = plan_table(spec) if table is None else table
     _check_time_grids(table.time_grids(), store, layout)
-    if command_line is None:
-        command_line = " ".join(sys.argv)
-    # the executor first: a missing package or an unreachable scheduler writes nothing
-    owned = isinstance(executor, str)
-    ex = make_executor(executor, jobs=jobs, scheduler=scheduler) if owned else executor
-    directory = Path(output) / spec.name
-    runs_dir = directory / RUNS_DIR
-    outcome = SweepOutcome(spec.name, directory, spec.n_runs, engine=engine)
-    # an executor made here is closed here; one passed in belongs to the caller, whose
-    # next sweep finds its workers started (numpy, scipy, h5py and rbstab imported)
-    with ex if owned else contextlib.nullcontext(ex):
-        runs_dir.mkdir(parents=True, exist_ok=True)
-        _run_locked(spec, table, ex, directory, runs_dir, outcome, retry_failed=retry_failed,
-                    chunk_size=chunking, progress=progress, say=say,
-                    options=WorkerOptions(timeout=timeout, command_line=command_line, engine=engine,
-                                          store=store, layout=layout, parameters=table.parameters(),
-                                          sweep=spec.name))
+    options = WorkerOptions(timeout=timeout, command_line=" ".join(sys.argv) if command_line is None else command_line,
+                            engine=engine, store=store, layout=layout, parameters=table.parameters(),
+                            sweep=spec.name)
+    outcome = SweepOutcome(spec.name, Path(output) / spec.name, spec.n_runs, engine=engine)
+    with _executor(executor, jobs, scheduler) as ex:
+        (outcome.directory / RUNS_DIR).mkdir(parents=True, exist_ok=True)
+        _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
+                    say=log or (lambda message: None), options=options)
     return outcome
+
+
+def _executor(executor: str | Executor, jobs: int | None, scheduler: str | None):
+    """A context manager giving the sweep's executor: one made from a name (made first: a
+    missing package or an unreachable scheduler writes nothing) is closed when it ends;
+    one passed in belongs to the caller, whose next sweep finds its workers started."""
+    if isinstance(executor, str):
+        return make_executor(executor, jobs=jobs, scheduler=scheduler)
+    return contextlib.nullcontext(executor)
 
 
 def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> tuple[int, int]:
@@ -452,27 +451,16 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
     return chunk_size, 1
 
 
-def _run_locked(spec, table, ex, directory, runs_dir, outcome, *, retry_failed, chunk_size, progress, say,
-                options) -> None:
+def _run_locked(spec, table, ex, outcome, *, retry_failed, chunk_size, progress, say, options) -> None:
     """Skip what is done, execute the rest and write the index, holding the lock."""
-    import numpy as np  # heavy: numpy
-
+    directory = outcome.directory
+    runs_dir = directory / RUNS_DIR
     with _lock(directory):
-        removed = _remove_temporaries(runs_dir, directory)
-        if removed:
-            say(f"removed {removed} temporary file(s) left by an interrupted invocation")
-        _write_spec_document(spec, directory, options.command_line, say)
-        stored = StoredRuns(runs_dir, verify=True, damaged=outcome.damaged)
-        for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
-            say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
-        current = stored.current(table, success_only=retry_failed)
-        done = np.zeros(table.n, dtype=bool)
-        done[current["run"].to_numpy()] = True
-        outcome.n_skipped = int(done.sum())
+        stored, current = _resume(spec, table, outcome, options, retry_failed, say)
         results, errors = [current], {}
         stopped = False
         try:
-            _execute(spec, table, np.flatnonzero(~done), runs_dir, results, errors, outcome, ex,
+            _execute(spec, table, _remaining(table, current), runs_dir, results, errors, outcome, ex,
                      chunk_size=chunk_size, progress=progress, say=say, options=options)
         except BaseException:
             # Ctrl-C, SIGTERM, a full disk: stop every worker first, so that the index
@@ -483,13 +471,45 @@ def _run_locked(spec, table, ex, directory, runs_dir, outcome, *, retry_failed, 
             raise
         finally:
             if errors or stopped:  # files finished while the pool shut down, or by a worker that then raised
-                late = StoredRuns(runs_dir, damaged=[], skip=set(stored.files)).current(table)
-                results.append(late)
-                for rid in late["run_id"]:
-                    errors.pop(rid, None)
+                _take_late(stored, table, runs_dir, results, errors)
             outcome.stale_files = stored.stale(table)
             outcome.warnings = list(table.warnings)
             _finish(spec, table, results, errors, outcome)
+
+
+def _resume(spec, table, outcome, options, retry_failed: bool, say):
+    """(the folder's StoredRuns, the current rows of the table's runs) after removing the
+    temporaries of killed writers, writing ``sweep.yaml`` and setting damaged files aside."""
+    directory = outcome.directory
+    runs_dir = directory / RUNS_DIR
+    removed = _remove_temporaries(runs_dir, directory)
+    if removed:
+        say(f"removed {removed} temporary file(s) left by an interrupted invocation")
+    _write_spec_document(spec, directory, options.command_line, say)
+    stored = StoredRuns(runs_dir, verify=True, damaged=outcome.damaged)
+    for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
+        say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
+    current = stored.current(table, success_only=retry_failed)
+    outcome.n_skipped = len(current)
+    return stored, current
+
+
+def _remaining(table, current):
+    """Positions in ``table`` of the runs without a current row, increasing."""
+    import numpy as np  # heavy: numpy
+
+    done = np.zeros(table.n, dtype=bool)
+    done[current["run"].to_numpy()] = True
+    return np.flatnonzero(~done)
+
+
+def _take_late(stored, table, runs_dir: Path, results: list, errors: dict) -> None:
+    """The rows of files written after the scan (a pool shutting down, a worker that then
+    raised) into ``results``, their runs out of ``errors``."""
+    late = StoredRuns(runs_dir, damaged=[], skip=set(stored.files)).current(table)
+    results.append(late)
+    for rid in late["run_id"]:
+        errors.pop(rid, None)
 
 
 def _write_spec_document(spec: SweepSpec, directory: Path, command_line: str | None, say) -> None:

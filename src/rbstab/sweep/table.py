@@ -40,6 +40,7 @@ from ..config import set_dotted
 from .validate import base_value
 from .validate import validate_columns
 from ..config import canonical_config
+from ..engine.batch import batch_from_table
 from ..io.chunk import store_bytes_per_run
 from .folder import parameter_name
 
@@ -130,6 +131,12 @@ class TableSlice:
 
     def __len__(self) -> int:
         return len(self.index)
+
+    def batch(self, timeout: float | None = None):
+        """The slice's runs as one :class:`rbstab.engine.RunBatch` (parameter records,
+        initial states, variant codes, settings; ``timeout`` [s] replaces each run's
+        ``simulation.max_wall_time``), by :func:`rbstab.engine.batch_from_table`."""
+        return batch_from_table(self.templates, self.keys, self.columns, self.template, timeout=timeout)
 
     def resolved(self, j: int) -> dict:
         """The resolved configuration of run ``j`` of the slice (``name`` = its run id)."""

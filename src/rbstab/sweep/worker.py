@@ -34,6 +34,7 @@ not reopen any file, and resume and the index work the same.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import sys
 import tempfile
@@ -67,8 +68,6 @@ class RunTask:
         Parameter coordinate name -> value (:func:`rbstab.sweep.folder.run_coords`).
     config_hash : str
         The run's identity as the plan computed it ("": the hash of its config).
-    config_text : str
-        The store file's ``config`` text ("": encoded by the writer, or none with templates).
     template : int
         Its template among the chunk's (:class:`rbstab.sweep.table.TableSlice`), -1 for none.
     """
@@ -80,7 +79,6 @@ class RunTask:
     base: str = ""
     coords: dict = field(default_factory=dict)
     config_hash: str = ""
-    config_text: str = ""
     template: int = -1
 
 
@@ -244,8 +242,7 @@ class _ChunkFile:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         t0 = _time.perf_counter()
-        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None,
-                              config_text=task.config_text or None)
+        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None)
         record = _finished(_result_record(task, self.final, result), result.timing, row, 0.0,
                            _time.perf_counter() - t0)
         self.records.append(record)
@@ -256,8 +253,7 @@ class _ChunkFile:
         file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); their records."""
         t0 = _time.perf_counter()
         rows = self.writer.add_block([t.run_id for t in tasks], block,
-                                     config_hashes=[t.config_hash for t in tasks],
-                                     config_texts=[t.config_text for t in tasks])
+                                     config_hashes=[t.config_hash for t in tasks])
         share = (_time.perf_counter() - t0) / len(tasks)
         records = []
         for j, (task, row) in enumerate(zip(tasks, rows)):
@@ -402,7 +398,8 @@ ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, A
 DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256, "cuda": 8192}
 
 
-def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> list[dict[str, Any]]:
+def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = (), *,
+              batch=None, part=None) -> list[dict[str, Any]]:
     """Execute a chunk of runs; the function every executor submits.
 
     Parameters
@@ -424,10 +421,19 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Seque
         spent on ``config``, ``integration``, ``postprocess``, ``config_yaml`` (the
         config's YAML text for the file) and ``write`` (the HDF5 file));
         ``worker_peak_rss``, the worker process's peak resident set size [bytes].
+
+    With ``batch`` (``(RunBatch, rows, seconds a run to build it)``, from
+    :func:`run_table_chunk`), the tasks at those rows are integrated from the batch (their
+    ``config`` unused) and the others by ``options.engine``; ``part``, the table slice
+    of the tasks, builds the configuration of a batch run that has to go alone.
     """
     try:
         with SINKS[options.layout](tasks, options, templates) as sink:
-            records = ENGINES[options.engine](tasks, options, sink)
+            records, alone = _batch_records(tasks, *batch, options, sink, part) if batch is not None else ([], [])
+            fast = set(map(int, batch[1])) - set(alone) if batch is not None else set()
+            rest = [task if j not in alone else dataclasses.replace(task, config=part.resolved(j))
+                    for j, task in enumerate(tasks) if j not in fast]
+            records += ENGINES[options.engine](rest, options, sink)
     except Exception as exc:  # the chunk's file could not be written: each of its runs is an error
         records = [_error_record(task, exc) for task in tasks]
     rss = _peak_rss()
@@ -479,21 +485,72 @@ class ChunkResult:
 
 
 def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResult:
-    """Run the runs of a :class:`rbstab.sweep.table.TableSlice` (each configuration built
-    here from its template and its row) and return their index rows as columns.
+    """Run the runs of a :class:`rbstab.sweep.table.TableSlice` and return their index rows
+    as columns.
+
+    With the compiled engine and store files (``layout="chunk"``), the slice becomes one
+    :class:`rbstab.engine.RunBatch` (:meth:`~rbstab.sweep.table.TableSlice.batch`: the
+    parameter records, initial states and settings of every run at once) integrated by
+    :func:`rbstab.simulator.simulate_batch`; the runs it does not take (implicit methods,
+    the pure sign law), and every run with the scipy engine or one file per run, are built
+    as configurations one by one (from their template and row) and run as :func:`run_chunk`
+    runs them.
 
     ``folder``: the sweep's ``runs/`` folder (store files and run files go there).
     """
+    import numpy as np  # heavy: numpy
 
+    t0 = _time.perf_counter()
+    batch = _table_batch(part, options)
+    fast = np.flatnonzero(batch.compiled) if batch is not None else np.empty(0, dtype=np.int64)
+    build = (_time.perf_counter() - t0) / max(len(fast), 1)
+    slow = np.ones(len(part), dtype=bool)
+    slow[fast] = False
+    tasks = [RunTask(rid, part.resolved(j) if slow[j] else {}, os.path.join(folder, f"{rid}.h5"),
+                     int(part.index[j]), str(part.base[j]),
+                     {name: _scalar(values[j]) for name, values in part.coords.items()}, str(part.config_hash[j]),
+                     int(part.template[j]))
+             for j, rid in enumerate(part.run_id.tolist())]
+    records = run_chunk(tasks, options, part.templates, batch=(batch, fast, build) if len(fast) else None, part=part)
+    return _chunk_result(records, folder)
+
+
+def _table_batch(part, options: WorkerOptions):
+    """The slice's :class:`~rbstab.engine.RunBatch` where the worker integrates it as one
+    (compiled engine, store files), else None; None also for a slice the batch cannot be
+    built from, whose runs then go one by one (each run's problem, if any, its own record)."""
+    if options.engine != "compiled" or options.layout != "chunk" or not len(part):
+        return None
+    try:
+        return part.batch(options.timeout)
+    except Exception:  # a configuration the sweep's validation let through but the batch does not take
+        return None
+
+
+def _batch_records(tasks: Sequence[RunTask], batch, fast, build: float, options: WorkerOptions, sink, part
+                   ) -> tuple[list[dict[str, Any]], list[int]]:
+    """The records of the runs ``fast`` of ``batch`` (``tasks[j]`` run j), integrated by
+    :func:`rbstab.simulator.simulate_batch` and stored by ``sink``; and the runs it did not
+    finish (an exception of the batch as a whole, a bug: they go one by one)."""
+    from ..simulator import simulate_batch  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
+
+    records: list[dict[str, Any]] = []
+    done: set[int] = set()
+    try:
+        for rows, block in simulate_batch(batch, fast, full=options.store == "full"):
+            done.update(rows)
+            records += _add_block(sink, [tasks[j] for j in rows], block, build)
+    except Exception:
+        return records, [int(j) for j in fast if j not in done]
+    return records, []
+
+
+def _chunk_result(records: list[dict[str, Any]], folder: str) -> ChunkResult:
+    """The :class:`ChunkResult` of a chunk's records."""
     import pandas as pd  # heavy: pandas
 
     from ..sweep.folder import NOT_IN_INDEX  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
-    tasks = [RunTask(rid, part.resolved(j), os.path.join(folder, f"{rid}.h5"), int(part.index[j]), str(part.base[j]),
-                     {name: _scalar(values[j]) for name, values in part.coords.items()}, str(part.config_hash[j]),
-                     "", int(part.template[j]))
-             for j, rid in enumerate(part.run_id)]
-    records = run_chunk(tasks, options, part.templates)
     rows, data, tracebacks, timing, errno = [], {}, {}, {}, None
     for rec in records:
         row = {k: v for k, v in (rec.get("attrs") or {}).items() if k not in NOT_IN_INDEX and k != "created"}

@@ -1,0 +1,264 @@
+"""Many runs as one batch of arrays: what an engine needs to integrate them, built from a table.
+
+A sweep's runs are a table (:class:`rbstab.sweep.table.RunTable`): a few validated resolved
+configurations (*templates*) and, per run, its template and the values of the varied dotted
+keys. :func:`batch_from_table` turns a table (or a slice of one) into a :class:`RunBatch`
+with vectorised numpy: one :data:`rbstab.model.PARAMETERS` record per run (the derived
+fields J^-1, J_p and J_p^-1, G and L_d^-1 by batched ``numpy.linalg``), the initial states,
+the variant codes and the integration settings (:data:`rbstab.engine.settings.SETTINGS`).
+No configuration object is made per run; the records are bit for bit those of
+:func:`rbstab.model.parameters` for each run's validated configuration.
+
+A batch depends on no integrator: the compiled CPU engine
+(:func:`rbstab.simulator.simulate_batch`) and any other engine take its arrays as they are.
+
+One part is computed run by run: the constant h of v (``lyapunov_offset``) of a body under
+gravity, which is the minimum of a stored energy found by ``scipy.optimize`` (once per
+distinct parameter record; a sweep over initial states computes it once). Without gravity
+h is 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
+from ..layout import STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
+from ..model import PARAMETERS, Gains, RigidBody
+from ..variants import VARIANTS
+from .settings import SETTINGS
+from .tableaus import METHODS
+
+__all__ = ["RunBatch", "batch_from_table", "MAX_STATE", "NOT_COMPILED"]
+
+#: The largest state of any variant (the second axis of :attr:`RunBatch.y0`).
+MAX_STATE = max(STATE_SIZE)
+#: ``RunBatch.settings["method"]`` of a run whose method is not one of
+#: :data:`rbstab.engine.METHODS` (Radau, BDF, LSODA: integrated by scipy).
+NOT_COMPILED = -1
+
+_SETTING_KEYS = ("t_end", "rtol", "atol", "max_step", "gimbal_margin", "max_steps", "max_wall_time")
+
+
+@dataclass(frozen=True)
+class RunBatch:
+    """n runs as arrays (module docstring); every field has the run axis first.
+
+    Attributes
+    ----------
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (n,)
+        Each run's physical parameters (SI units; body quantities in the body frame,
+        gravity and the weight in the inertial frame); gains a variant does not use are 0.
+    y0 : ndarray of float64, shape (n, MAX_STATE)
+        Initial states: the first ``n_state[i]`` entries of row i are the state of run i in
+        its variant's layout (:data:`rbstab.layout.VARIANT_LAYOUTS`: theta [rad], omega
+        [rad/s] (body frame), position X [m], velocity V [m/s], controller state D [m]),
+        the rest 0.
+    n_state : ndarray of int64, shape (n,)
+        State size of each run (6, 12 or 15).
+    variant : ndarray of int64, shape (n,)
+        Variant code of each run (:data:`rbstab.layout.VARIANT_CODES`).
+    settings : ndarray of :data:`rbstab.engine.settings.SETTINGS`, shape (n,)
+        t_end [s], rtol, atol, max_step [s] (inf: none), gimbal_margin [rad], max_steps,
+        max_wall_time [s] (inf: none) and method (its index in
+        :data:`rbstab.engine.METHODS`, :data:`NOT_COMPILED` for another).
+    n_samples : ndarray of int64, shape (n,)
+        Output samples of each run, evenly spaced on [0, t_end].
+    compiled : ndarray of bool, shape (n,)
+        Whether a compiled engine integrates the run: its method is one of
+        :data:`rbstab.engine.METHODS` and it is not the pure sign law of ``sliding``
+        (``boundary_layer`` 0, integrated by :mod:`rbstab.engine.switching`).
+    """
+
+    params: np.ndarray
+    y0: np.ndarray
+    n_state: np.ndarray
+    variant: np.ndarray
+    settings: np.ndarray
+    n_samples: np.ndarray
+    compiled: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.params)
+
+    def settings_rows(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The settings of ``rows`` as floats, shape (k, 7): t_end, rtol, atol, max_step,
+        gimbal_margin, max_steps, max_wall_time (what
+        :func:`rbstab.engine.integrate_runs` takes)."""
+        s = self.settings[rows]
+        return np.column_stack([s[name].astype(float) for name in _SETTING_KEYS])
+
+
+class _Fields:
+    """Each run's value of every numeric field the batch reads, as written (a 3-list stays
+    shape (3,)), from the templates and the varied keys (:func:`batch_from_table`)."""
+
+    def __init__(self, templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
+                 template: np.ndarray) -> None:
+        self.templates, self.template, self.n = templates, np.asarray(template), len(template)
+        self.varied: dict[tuple[str, str], list[tuple[tuple[int, ...], np.ndarray]]] = {}
+        for key in keys:
+            parts = key.split(".")
+            if len(parts) < 2 or columns[key].dtype == object:
+                continue  # a template's own value (runs share a template's non-numeric values)
+            self.varied.setdefault((parts[0], parts[1]), []).append((tuple(map(int, parts[2:])), columns[key]))
+
+    def get(self, section: str, name: str, default=None, *, shape: tuple | None = None) -> np.ndarray:
+        """The field of every run, shape (n, *shape): ``shape`` (3, 3) makes a matrix of a
+        3-list (its diagonal), as the configuration's loader does; ``default`` for a
+        template without the field (None: a ValueError)."""
+        out = None
+        for t in np.unique(self.template):
+            rows = np.flatnonzero(self.template == t)
+            written = self.templates[int(t)].get(section, {}).get(name, default)
+            if written is None:
+                if default is None:
+                    raise ValueError(f"no {section}.{name} in template {int(t)}")
+                written = default
+            value = np.broadcast_to(np.array(written, dtype=float), (len(rows), *np.shape(written))).copy()
+            for index, column in self.varied.get((section, name), ()):
+                part = np.asarray(column[rows], dtype=float)
+                if index:
+                    value[(slice(None), *index)] = part
+                else:
+                    value = part.copy()
+            if shape == (3, 3) and value.ndim == 2:  # 3 numbers: a diagonal
+                value = value[:, :, None] * np.eye(3)
+            if out is None:
+                out = np.empty((self.n, *value.shape[1:]))
+            out[rows] = value
+        return out
+
+    def text(self, section: str, name: str) -> np.ndarray:
+        """A template's text field (``controller.variant``, ``simulation.method``) of every run."""
+        return np.array([t[section][name] for t in self.templates], dtype=object)[self.template]
+
+
+def _inverse(matrices: np.ndarray) -> np.ndarray:
+    """``numpy.linalg.inv`` of each 3x3 matrix (one LAPACK call per matrix, as for one)."""
+    return np.linalg.inv(matrices) if len(matrices) else matrices.copy()
+
+
+def _hat(r: np.ndarray) -> np.ndarray:
+    """:func:`rbstab.kinematics.hat` of each row of ``r`` (n, 3): shape (n, 3, 3)."""
+    out = np.zeros(r.shape + (3,))
+    x, y, z = r[:, 0], r[:, 1], r[:, 2]
+    out[:, 0, 1], out[:, 0, 2], out[:, 1, 0] = -z, y, z
+    out[:, 1, 2], out[:, 2, 0], out[:, 2, 1] = -x, -y, x
+    return out
+
+
+def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
+                     template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
+    """The :class:`RunBatch` of n runs given as a table.
+
+    Parameters
+    ----------
+    templates : sequence of mapping
+        Validated resolved configurations (``RunConfig.resolved``; ``name`` ignored).
+    keys : sequence of str
+        Dotted config keys set on a run's template, in order (``body.mass``,
+        ``controller.k_c``, ``controller.k_c.0``, ``initial_state.omega`` ...); keys of
+        non-numeric values (object columns) are their template's own.
+    columns : mapping of str to ndarray
+        key -> the runs' values, shape (n, ...).
+    template : array_like of int, shape (n,)
+        Each run's template.
+    timeout : float, optional
+        Wall-time limit of every run [s], instead of ``simulation.max_wall_time``.
+
+    Returns
+    -------
+    RunBatch
+        ``params[i]`` equals, bit for bit, :func:`rbstab.model.parameters` of run i's
+        validated configuration with its ``lyapunov_offset``.
+
+    Raises
+    ------
+    ValueError
+        If a key does not fit its template's value (a configuration the sweep's validation
+        would have refused), or a template lacks a field.
+    """
+    f = _Fields(templates, keys, columns, np.asarray(template, dtype=np.int64))
+    n = f.n
+    if n == 0:
+        return RunBatch(np.zeros(0, PARAMETERS), np.zeros((0, MAX_STATE)), np.zeros(0, np.int64),
+                        np.zeros(0, np.int64), np.zeros(0, SETTINGS), np.zeros(0, np.int64), np.zeros(0, bool))
+    names = f.text("controller", "variant")
+    code = np.array([VARIANT_CODES[v] for v in names], dtype=np.int64)
+    used = {g: np.isin(names, [v for v, cls in VARIANTS.items() if g in cls.required_gains])
+            for g in (*GAIN_NAMES, "k_s")}
+    p = np.zeros(n, dtype=PARAMETERS)
+    mass = f.get("body", "mass")
+    inertia = f.get("body", "inertia", shape=(3, 3))
+    r = f.get("body", "attachment_point")
+    gravity = f.get("body", "gravity")
+    p["mass"], p["inertia"], p["attachment_point"] = mass, inertia, r
+    p["inertia_inv"] = _inverse(inertia)
+    r_hat = _hat(r)
+    p["pivot_inertia"] = pivot = inertia - (mass[:, None, None] * r_hat) @ r_hat
+    p["pivot_inertia_inv"] = _inverse(pivot)
+    p["weight"] = mass[:, None] * gravity
+    for g in GAIN_NAMES:
+        rows = np.flatnonzero(used[g])
+        if len(rows):
+            p[g][rows] = f.get("controller", g, [0.0, 0.0, 0.0], shape=(3, 3))[rows]
+    rows = np.flatnonzero(used["l_d"])
+    p["l_d_inv"][rows] = _inverse(p["l_d"][rows])
+    sliding = used["k_s"]
+    if sliding.any():
+        p["k_s"][sliding] = f.get("controller", "k_s", 0.0)[sliding]
+        p["boundary_layer"][sliding] = f.get("controller", "boundary_layer", 0.0)[sliding]
+    p["lyapunov_offset"] = _offsets(p, names, gravity)
+    method = f.text("simulation", "method")
+    settings = np.zeros(n, dtype=SETTINGS)
+    for name in _SETTING_KEYS:
+        value = f.get("simulation", name, np.inf) if name in ("max_step", "max_wall_time") else f.get("simulation", name)
+        settings[name] = value
+    if timeout is not None:
+        settings["max_wall_time"] = float(timeout)
+    settings["method"] = [METHODS.index(m) if m in METHODS else NOT_COMPILED for m in method]
+    sign_law = sliding & (p["boundary_layer"] == 0)
+    return RunBatch(params=p, y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
+                    variant=code, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
+                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law)
+
+
+def _initial_states(f: _Fields, code: np.ndarray) -> np.ndarray:
+    """The runs' initial states, zero-padded to :data:`MAX_STATE` (:attr:`RunBatch.y0`)."""
+    blocks = {block: f.get("initial_state", key, [0.0, 0.0, 0.0]) for key, block in INITIAL_STATE_BLOCKS.items()}
+    y0 = np.zeros((f.n, MAX_STATE))
+    for c, layout in enumerate(VARIANT_LAYOUTS.values()):
+        rows = np.flatnonzero(code == c)
+        if len(rows):
+            y0[rows, : layout.size] = np.concatenate([blocks[b][rows] for b in layout.blocks], axis=1)
+    return y0
+
+
+def _offsets(p: np.ndarray, names: np.ndarray, gravity: np.ndarray) -> np.ndarray:
+    """h [J] of each run (``Variant.lyapunov_offset``): 0 without gravity, else the
+    variant's equilibrium, once per distinct record."""
+    out = np.zeros(len(p))
+    heavy = np.flatnonzero(np.any(p["weight"] != 0, axis=1))
+    if not len(heavy):
+        return out
+    keys = np.array([p[i].tobytes() + gravity[i].tobytes() + names[i].encode() for i in heavy], dtype=object)
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    found = np.array([_offset(p[heavy[i]], gravity[heavy[i]], names[heavy[i]]) for i in first])
+    out[heavy] = found[inverse.ravel()]
+    return out
+
+
+def _offset(record: np.void, gravity: np.ndarray, name: str) -> float:
+    """``Variant.lyapunov_offset`` of one run's record (the body and the gains its variant uses)."""
+    cls = VARIANTS[name]
+    body = RigidBody(float(record["mass"]), record["inertia"].copy(), record["attachment_point"].copy(),
+                     gravity.copy())
+    used = cls.required_gains
+    gains = Gains(**{g: record[g].copy() for g in GAIN_NAMES if g in used},
+                  k_s=float(record["k_s"]) if "k_s" in used else None,
+                  boundary_layer=float(record["boundary_layer"]) if "k_s" in used else 0.0)
+    return cls(body, gains).lyapunov_offset
