@@ -131,6 +131,38 @@ def test_simulated_basin_map_is_the_cpu_engines(simulated):
     assert basin["messages"]
 
 
+def test_simulated_batch_is_the_cpu_engines(simulated):
+    """A sweep table's batch (5 variants, each run its own record; no config objects) on
+    the GPU: every summary figure and thinned output equal to the CPU engine's."""
+    assert simulated["batch"] == {"runs": 15, "differences": []}
+
+
+@pytest.mark.parametrize("store", ["thinned", "summary"])
+def test_simulated_sweep_writes_the_cpu_engines_store(tmp_path, store):
+    """``rbstab sweep --engine cuda`` (its workers' batch of runs on the GPU, under the
+    simulator) writes the store the CPU engine writes: every variable equal but the wall
+    times."""
+    import xarray  # noqa: F401 - open_sweep's
+
+    spec = [CASE3, "--random", "controller.k_c=scale_uniform:[0.5,2]", "--random", "body.mass=scale_uniform:[0.5,1.5]",
+            "--random", "initial_state.omega=normal:{mean: [16,32,-16], std: 4}", "-n", "6", "--seed", "3",
+            "--set", "simulation.t_end=0.4", "--set", "simulation.n_samples=401", "--store", store, "--no-progress"]
+    stores = {}
+    for engine in ("compiled", "cuda"):
+        env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if engine == "cuda" else "0"}
+        done = subprocess.run([RBSTAB, "sweep", *spec, "--engine", engine, "-o", str(tmp_path / engine)],
+                              capture_output=True, text=True, env=env, timeout=600)
+        assert done.returncode == 0, done.stderr
+        stores[engine] = rbstab.open_sweep(tmp_path / engine / "case3_embedded")
+    cpu, gpu = stores["compiled"], stores["cuda"]
+    assert set(cpu.data_vars) == set(gpu.data_vars) and cpu.sizes == gpu.sizes
+    assert ("time" in cpu.sizes) == (store == "thinned")
+    for name in cpu.data_vars:
+        if name != "wall_time":
+            assert np.array_equal(cpu[name].values, gpu[name].values,
+                                  equal_nan=cpu[name].dtype.kind == "f"), name
+
+
 # -- compiled for a GPU, without one ------------------------------------------------------------------------
 def _compilers() -> bool:
     """Whether NVVM and NVRTC (the CUDA 12 compiler wheels of numba-cuda[cu12]) are here."""

@@ -559,8 +559,12 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
     for (method, n_samples, size), members in groups.items():
         if engine == "cuda":
-            yield from _cuda_blocks([configs[i] for i in members], members, shared, method, n_samples, timeout,
-                                    full, keep)
+            group = [configs[i] for i in members]
+            variants = [_variant_of(c, shared) for c in group]
+            runs = (np.array([v.code for v in variants], dtype=np.int64), _parameter_rows(variants),
+                    np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, group)]),
+                    _settings_rows(group, timeout))
+            yield from _cuda_blocks(runs, group, members, method, n_samples, full, keep)
             continue
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
         for lo in range(0, len(members), chunk_size):
@@ -586,7 +590,8 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
 
 
 def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
-                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
+                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = "compiled",
+                   keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
     ``(rows of the batch, RunBlock)``.
 
@@ -605,6 +610,9 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
         Runs per compiled call (the trajectories held at once).
     full : bool
         Every output (else all but :data:`rbstab.layout.LEFT_OUT`).
+    engine : {"compiled", "cuda"}
+        The CPU engine, or the GPU as :func:`simulate_blocks` runs it (``keep``: the
+        samples that come back, :data:`KEEP`; ``chunk_size`` not read).
 
     Raises
     ------
@@ -623,6 +631,11 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     distinct, group = np.unique(keys, axis=0, return_inverse=True) if len(rows) else (keys, rows)
     for g, (method, n_samples, size) in enumerate(distinct.tolist()):
         members = rows[group.ravel() == g]
+        if engine == "cuda":
+            runs = (batch.variant[members], batch.params[members], batch.y0[members, :size],
+                    batch.settings_rows(members))
+            yield from _cuda_blocks(runs, [None] * len(members), members, METHODS[method], n_samples, full, keep)
+            continue
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
@@ -637,26 +650,25 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
                 yield [int(chunk[j]) for j in runs], block
 
 
-def _cuda_blocks(configs, positions, shared: dict, method: str, n_samples: int, timeout: float | None, full: bool,
+def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: int, full: bool,
                  keep: str) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`simulate_blocks` of runs of one method, sample count and state size on the
-    GPU (``positions``: their indices in the caller's configs)."""
+    """:func:`simulate_blocks` (``configs``: the runs' RunConfigs) or :func:`simulate_batch`
+    (``configs``: None each) of runs of one method, sample count and state size on the
+    GPU. ``runs``: their (codes, params, y0, settings rows (k, 7)); ``positions``: their
+    indices in the caller's runs. A launch stops after the largest ``max_wall_time`` of its
+    runs (``--timeout`` where given)."""
     from .engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
 
-    variants = [_variant_of(c, shared) for c in configs]
-    codes = np.array([v.code for v in variants], dtype=np.int64)
-    y0 = np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, configs)])
-    settings = _settings_rows(configs, timeout)
+    codes, params, y0, settings = runs
     stride = {"all": 1, "thinned": summary_stride(n_samples), "none": None}[keep]
-    chunks = integrate_chunks_cuda(codes, _parameter_rows(variants), y0, settings_records(settings, method_number(method)),
+    chunks = integrate_chunks_cuda(codes, params, y0, settings_records(settings, method_number(method)),
                                    n_samples=n_samples, stride=stride, full=full,
-                                   max_wall_time=np.inf if timeout is None else timeout)
+                                   max_wall_time=float(np.max(settings[:, 6])) if len(settings) else np.inf)
     for chunk in chunks:
-        runs = chunk.runs.tolist()
-        k = len(runs)
-        t_end = configs[runs[0]].simulation.t_end
-        grid = np.linspace(0.0, t_end, n_samples)
-        layout = variants[runs[0]].layout
+        members = chunk.runs.tolist()
+        k = len(members)
+        grid = np.linspace(0.0, float(settings[members[0], 0]), n_samples)
+        layout = _LAYOUTS[int(codes[members[0]])]
         if chunk.trace is None:
             time, outputs = grid[:0], {}
         else:
@@ -667,19 +679,19 @@ def _cuda_blocks(configs, positions, shared: dict, method: str, n_samples: int, 
         time.flags.writeable = False
         status = chunk.status.tolist()
         share = chunk.seconds / k
-        yield [positions[j] for j in runs], RunBlock(
-            configs=[configs[j] for j in runs],
+        yield [int(positions[j]) for j in members], RunBlock(
+            configs=[configs[j] for j in members],
             time=time,
             outputs=outputs,
             summaries=stream_table(grid, chunk.acc, chunk.last, layout),
             status=["success" if code == SUCCESS else "failed" for code in status],
-            message=[status_message(code, float(chunk.t_stop[i]), configs[j].simulation.gimbal_margin,
-                                    int(settings[j, 5]), np.inf if timeout is None else timeout)
-                     for i, (code, j) in enumerate(zip(status, runs))],
+            message=[status_message(code, float(chunk.t_stop[i]), float(settings[j, 4]), int(settings[j, 5]),
+                                    float(settings[j, 6])) for i, (code, j) in enumerate(zip(status, members))],
             solver=[{"nfev": int(chunk.nfev[i]), "njev": 0, "nlu": 0, "solver_status": code,
                      "n_steps": int(chunk.n_steps[i])} for i, code in enumerate(status)],
             wall_time=[share] * k,
-            timing=[{"integration": share, "postprocess": 0.0} for _ in runs],
+            timing=[{"integration": share, "postprocess": 0.0} for _ in members],
             switching=[None] * k,
             stride=stride or 1,
+            variants=[_VARIANT_NAMES[int(codes[j])] for j in members],
         )

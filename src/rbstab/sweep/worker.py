@@ -488,7 +488,7 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
     """Run the runs of a :class:`rbstab.sweep.table.TableSlice` and return their index rows
     as columns.
 
-    With the compiled engine and store files (``layout="chunk"``), the slice becomes one
+    With the compiled or cuda engine and store files (``layout="chunk"``), the slice becomes one
     :class:`rbstab.engine.RunBatch` (:meth:`~rbstab.sweep.table.TableSlice.batch`: the
     parameter records, initial states and settings of every run at once) integrated by
     :func:`rbstab.simulator.simulate_batch`; the runs it does not take (implicit methods,
@@ -517,9 +517,9 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
 
 def _table_batch(part, options: WorkerOptions):
     """The slice's :class:`~rbstab.engine.RunBatch` where the worker integrates it as one
-    (compiled engine, store files), else None; None also for a slice the batch cannot be
+    (compiled or cuda engine, store files), else None; None also for a slice the batch cannot be
     built from, whose runs then go one by one (each run's problem, if any, its own record)."""
-    if options.engine != "compiled" or options.layout != "chunk" or not len(part):
+    if options.engine not in ("compiled", "cuda") or options.layout != "chunk" or not len(part):
         return None
     try:
         return part.batch(options.timeout)
@@ -537,7 +537,8 @@ def _batch_records(tasks: Sequence[RunTask], batch, fast, build: float, options:
     records: list[dict[str, Any]] = []
     done: set[int] = set()
     try:
-        for rows, block in simulate_batch(batch, fast, full=options.store == "full"):
+        for rows, block in simulate_batch(batch, fast, full=options.store == "full", engine=options.engine,
+                                          keep=KEEP[options.store]):
             done.update(rows)
             records += _add_block(sink, [tasks[j] for j in rows], block, build)
     except Exception:
