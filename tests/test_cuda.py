@@ -142,8 +142,6 @@ def test_simulated_sweep_writes_the_cpu_engines_store(tmp_path, store):
     """``rbstab sweep --engine cuda`` (its workers' batch of runs on the GPU, under the
     simulator) writes the store the CPU engine writes: every variable equal but the wall
     times."""
-    import xarray  # noqa: F401 - open_sweep's
-
     spec = [CASE3, "--random", "controller.k_c=scale_uniform:[0.5,2]", "--random", "body.mass=scale_uniform:[0.5,1.5]",
             "--random", "initial_state.omega=normal:{mean: [16,32,-16], std: 4}", "-n", "6", "--seed", "3",
             "--set", "simulation.t_end=0.4", "--set", "simulation.n_samples=401", "--store", store, "--no-progress"]

@@ -506,7 +506,7 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     layout : rbstab.layout.StateLayout
         The runs' state layout (which state blocks have a ``final_`` figure).
     """
-    k, n = acc.shape[0], len(time)
+    k = acc.shape[0]
     taken = acc[:, TAKEN].astype(np.int64)
     last_index = np.maximum(taken - 1, 0)
     table: dict[str, list] = {"t_final": time[last_index].tolist()}

@@ -173,20 +173,37 @@ def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> fl
     return float(time[last[-1] + 1]) if last.size else float(time[0])
 
 
-def _grid_states(config, axes: Sequence[BasinAxis]) -> list[dict]:
-    """The ``initial_state`` section of every grid point, row-major (first axis slowest)."""
-    from ..config import set_dotted  # heavy: yaml
+def _grid_blocks(config, axes: Sequence[BasinAxis]) -> dict[str, np.ndarray]:
+    """The initial-state blocks of every grid point, row-major (first axis slowest): block
+    name -> shape (n0 * n1, 3); the configuration's values but at the axes' entries."""
+    from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
-    base = config.resolved["initial_state"]
-    out = []
-    for a in axes[0].values:
-        for b in axes[1].values:
-            section = {k: list(v) for k, v in base.items()}
-            data = {"initial_state": section}
-            set_dotted(data, axes[0].key, float(a))
-            set_dotted(data, axes[1].key, float(b))
-            out.append(section)
-    return out
+    n = len(axes[0].values) * len(axes[1].values)
+    section = config.resolved["initial_state"]
+    blocks = {b: np.repeat(np.asarray(section[k], dtype=float)[None], n, axis=0) for k, b in INITIAL_STATE_BLOCKS.items()}
+    first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
+    blocks[axes[0].block][:, axes[0].index] = first.ravel()
+    blocks[axes[1].block][:, axes[1].index] = second.ravel()
+    return blocks
+
+
+#: Why a grid point outside the domain of the Euler-angle model is not run.
+OUTSIDE = ("initial state outside the domain: |theta_2| >= pi/2 - simulation.gimbal_margin, where B(theta) is "
+           "singular (gimbal lock, eq 5)")
+
+
+def _point_configs(base, blocks: dict[str, np.ndarray], points: np.ndarray) -> list:
+    """(index, RunConfig) of the grid ``points`` (inside the domain): ``base`` with each
+    point's initial state, rebuilt without validating again (the base was validated, and
+    the grid's values are finite and inside the domain)."""
+    from ..config import INITIAL_STATE_BLOCKS, RunConfig  # heavy: yaml, pydantic
+
+    items = []
+    for i in points.tolist():
+        section = {k: blocks[b][i].tolist() for k, b in INITIAL_STATE_BLOCKS.items()}
+        resolved = {**base.resolved, "name": f"{base.name}-basin-{i}", "initial_state": section}
+        items.append((i, RunConfig.from_resolved(resolved, like=[base])))
+    return items
 
 
 def _run_block(items: list, ratio: float) -> list[tuple]:
@@ -204,34 +221,32 @@ def _run_block(items: list, ratio: float) -> list[tuple]:
     return rows
 
 
-def _run_on_gpu(items: list, ratio: float) -> list[tuple]:
-    """:func:`_run_block` of items on the GPU: the runs share the base configuration's
-    variant, parameters and settings, and differ only in their initial states."""
+def _run_on_gpu(base, variant, states: np.ndarray, points: np.ndarray, ratio: float) -> list[tuple]:
+    """:func:`_run_block`'s rows of the grid ``points`` (initial ``states`` (k, n_state))
+    on the GPU: the runs share ``base``'s variant, parameters and settings."""
     from ..engine import method_number  # heavy: numba
     from ..engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
     from ..engine.settings import settings_records  # heavy: numba
     from ..engine.status import SUCCESS, status_message  # heavy: numba
     from ..summary import LAST_ABOVE, TAKEN  # heavy: numba
 
-    configs = [c for _, c in items]
-    variant = configs[0].make_variant()
-    s = configs[0].simulation
-    k, n = len(configs), s.n_samples
-    y0 = np.stack([variant.initial_state(c.initial_state) for c in configs])
+    s = base.simulation
+    k, n = len(states), s.n_samples
     rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (k, 1))
     time = np.linspace(0.0, s.t_end, n)
     out = []
-    for chunk in integrate_chunks_cuda(np.full(k, variant.code), np.repeat(variant.parameters, k), y0,
+    for chunk in integrate_chunks_cuda(np.full(k, variant.code), np.repeat(variant.parameters, k), states,
                                        settings_records(rows, method_number(s.method)), n_samples=n, ratio=ratio):
         last_above = chunk.acc[:, LAST_ABOVE].astype(np.int64)
-        whole = chunk.acc[:, TAKEN] == n
-        for i, j in enumerate(chunk.runs.tolist()):
-            ok = chunk.status[i] == SUCCESS
-            t = float(time[last_above[i] + 1]) if ok and last_above[i] < n - 1 else np.nan
-            message = "" if ok else status_message(int(chunk.status[i]), float(chunk.t_stop[i]), s.gimbal_margin,
-                                                   s.max_steps).split(" at t =")[0]
-            v1 = float(chunk.last[i, OUTPUTS["lyapunov"].offset]) if whole[i] else np.nan
-            out.append((items[j][0], 0 if np.isfinite(t) else (1 if ok else 2), t, v1, message))
+        ok = chunk.status == SUCCESS
+        t = np.where(ok & (last_above < n - 1), time[np.minimum(last_above + 1, n - 1)], np.nan)
+        code = np.where(np.isfinite(t), 0, np.where(ok, 1, 2))
+        v1 = np.where(chunk.acc[:, TAKEN] == n, chunk.last[:, OUTPUTS["lyapunov"].offset], np.nan)
+        message = [""] * len(ok)
+        for i in np.flatnonzero(~ok).tolist():  # failed runs: few
+            message[i] = status_message(int(chunk.status[i]), float(chunk.t_stop[i]), s.gimbal_margin,
+                                        s.max_steps).split(" at t =")[0]
+        out += zip(points[chunk.runs].tolist(), code.tolist(), t.tolist(), v1.tolist(), message)
     return out
 
 
@@ -281,8 +296,8 @@ def basin_map(
     rbstab.engine.cuda.CudaUnavailable
         For ``engine="cuda"`` where no GPU, driver or numba-cuda is found.
     """
-    # heavy: yaml
-    from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: yaml, pydantic
+    from ..simulator import uses_compiled_engine  # heavy: numba
 
     if len(axes) != 2 or axes[0].key == axes[1].key:
         raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
@@ -292,22 +307,20 @@ def basin_map(
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         base = config_from_mapping(resolved)
     shape = (len(axes[0].values), len(axes[1].values))
-    sections = _grid_states(config, axes)
-    items, states = [], []
-    outcome = np.full(shape[0] * shape[1], 2, dtype=np.int8)
-    messages: dict[str, int] = {}
-    for i, section in enumerate(sections):
-        blocks = {b: np.asarray(section[k], float) for k, b in INITIAL_STATE_BLOCKS.items()}
-        states.append(variant.initial_state(blocks))
-        try:
-            items.append((i, base.with_initial_state(section, name=f"{config.name}-basin-{i}")))
-        except ConfigError as exc:
-            text = f"initial state outside the domain: {exc.errors[0]}" if exc.errors else "invalid initial state"
-            messages[text] = messages.get(text, 0) + 1
-    states = np.array(states)
-    t_conv = np.full(len(sections), np.nan)
-    v_final = np.full(len(sections), np.nan)
-    for rows in _execute(items, ratio, jobs, engine):
+    blocks = _grid_blocks(config, axes)
+    states = variant.layout.join(**{b: blocks[b] for b in variant.layout.blocks})
+    # the one check an initial state of a valid configuration can fail (the grid's values are finite)
+    inside = np.abs(blocks["theta"][:, 1]) < np.pi / 2 - base.simulation.gimbal_margin
+    points = np.flatnonzero(inside)
+    outcome = np.full(len(states), 2, dtype=np.int8)
+    messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}
+    t_conv = np.full(len(states), np.nan)
+    v_final = np.full(len(states), np.nan)
+    if engine == "cuda" and len(points) and uses_compiled_engine(base, "cuda"):
+        results = [_run_on_gpu(base, variant, states[points], points, ratio)]
+    else:
+        results = _execute(_point_configs(base, blocks, points), ratio, jobs)
+    for rows in results:
         for index, code, t, v1, message in rows:
             outcome[index], t_conv[index], v_final[index] = code, t, v1
             if message:
@@ -325,15 +338,8 @@ def basin_map(
     )
 
 
-def _execute(items: list, ratio: float, jobs: int, engine: str = "compiled"):
-    """Yield the rows of :func:`_run_block` (:func:`_run_on_gpu` for ``engine="cuda"``) for
-    every block of ``items``."""
-    if engine == "cuda" and items:
-        from ..simulator import uses_compiled_engine  # heavy: numba
-
-        if uses_compiled_engine(items[0][1], "cuda"):
-            yield _run_on_gpu(items, ratio)
-            return
+def _execute(items: list, ratio: float, jobs: int):
+    """Yield the rows of :func:`_run_block` for every block of ``items``."""
     if jobs <= 1 or len(items) < 64:
         yield _run_block(items, ratio)
         return

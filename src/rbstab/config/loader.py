@@ -3,17 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import warnings
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from pydantic import ValidationError
-from pydantic_core import PydanticCustomError
 
 from ..model import Gains, RigidBody
 from ..variants import VARIANTS, Variant
@@ -25,12 +23,7 @@ from .schema import (
     INITIAL_STATE_BLOCKS,
     TOP_LEVEL,
     RunSchema,
-    _InitialState,
-    _valid_name,
-    _zero,
     SimulationSettings,
-    _Body,
-    _Controller,
     problem_line,
     short_repr,
 )
@@ -41,8 +34,6 @@ __all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS"
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
 PER_RUN_SECTIONS = ("name", "initial_state")
-#: The dotted keys of every field of ``initial_state`` (:meth:`RunConfig.with_initial_state`).
-_INITIAL_STATE_KEYS = tuple(f"initial_state.{key}" for key in _InitialState.model_fields)
 #: The sections that :meth:`RunConfig.from_resolved` compares to share a rebuilt config's objects.
 _SHARED_SECTIONS = ("body", "controller", "simulation")
 
@@ -90,12 +81,9 @@ class RunConfig:
         return dump_yaml_sections(self.resolved, fresh=PER_RUN_SECTIONS)
 
     def with_initial_state(self, initial_state: Any, *, name: str | None = None, source: str | None = None) -> "RunConfig":
-        """This configuration with another ``initial_state`` section, validated.
-
-        What ``config_from_mapping`` gives for ``resolved`` with ``initial_state`` (and
-        ``name``) replaced, at a fraction of the cost: :meth:`with_values` of the new
-        section's fields (checked with the gimbal-lock margin of ``simulation``). The basin
-        analysis uses it for its samples.
+        """This configuration with another ``initial_state`` section, validated (what
+        :func:`config_from_mapping` gives for ``resolved`` with ``initial_state`` and
+        ``name`` replaced).
 
         Parameters
         ----------
@@ -110,79 +98,10 @@ class RunConfig:
         Raises
         ------
         ConfigError
-            With the lines full validation would give.
+            For an invalid section or name.
         """
-        section = {} if initial_state is None else initial_state
         data = {**self.resolved, "name": self.name if name is None else name, "initial_state": initial_state}
-        if not isinstance(section, Mapping) or not set(section) <= set(_InitialState.model_fields):
-            return _build(data, default_name=None, source=source)  # its message
-        # absent keys at the schema's default, so that every field is one with_values checks
-        data["initial_state"] = {**{key: _zero() for key in _InitialState.model_fields}, **section}
-        return self.with_values(data, _INITIAL_STATE_KEYS, source=source)
-
-    def with_values(self, data: Mapping, keys: Iterable[str], *, source: str | None = None) -> "RunConfig":
-        """The configuration of ``data``, a mapping that differs from the one this
-        configuration was validated from only at the dotted ``keys`` and ``name``, validated.
-
-        What ``config_from_mapping(data)`` gives, at a fraction of the cost: only the fields
-        that hold ``keys`` are checked, each with the schema's own check of that field, and
-        the checks that join fields are made again (the weight held, the margin to gimbal
-        lock, the physical-plausibility warnings and notes). The basin analysis checks
-        its samples this way (:meth:`with_initial_state`).
-
-        Keys in the ``body`` section, the gains of ``controller`` (not ``variant``) and
-        ``initial_state`` take this path; any other key, a value that fails its check or
-        a gain this configuration leaves unset goes through full validation, with its
-        messages. The warnings and notes of the checks made again are emitted; the
-        result's ``warnings`` holds them all (those of the sections not checked again are
-        this configuration's, not emitted a second time).
-
-        Parameters
-        ----------
-        data : Mapping
-            The whole configuration as in a YAML file, ``name`` included (not modified).
-        keys : iterable of str
-            The dotted keys at which ``data`` may differ, e.g. ``"body.mass"``,
-            ``"controller.k_c.1"`` (a sweep's varied keys).
-        source : str, optional
-            Where ``data`` comes from, for messages.
-
-        Raises
-        ------
-        ConfigError
-            As :func:`config_from_mapping` raises it.
-        """
-        fields = _changed_fields(tuple(keys))
-        name = data.get("name") if isinstance(data, Mapping) else None
-        changes = None if fields is None or not _valid_name(name) else _checked_fields(data, fields, self.resolved)
-        if changes is None:
-            return _build(data, default_name=None, source=source)
-        resolved = {**self.resolved, "name": name}
-        for section, values in changes.items():
-            resolved[section] = {**self.resolved[section], **values}
-        used = VARIANTS[self.variant].required_gains
-        body, gains = self.body, self.gains
-        if "body" in changes:
-            b = resolved["body"]
-            body = RigidBody(float(b["mass"]), _matrix(b["inertia"]), _array(b["attachment_point"]), _array(b["gravity"]))
-        if "controller" in changes:
-            changed = {g: v for g, v in changes["controller"].items() if g in used or ("k_s" in used and g == "boundary_layer")}
-            gains = dataclasses.replace(gains, **{g: _matrix(v) if g in GAIN_NAMES else float(v) for g, v in changed.items()})
-        initial_state = self.initial_state
-        if "initial_state" in changes:
-            state = resolved["initial_state"]
-            if not abs(state["theta"][1]) < math.pi / 2 - self.simulation.gimbal_margin:
-                return _build(data, default_name=None, source=source)  # its message
-            initial_state = {block: _array(state[key]) for key, block in INITIAL_STATE_BLOCKS.items()}
-        found_warnings = self.warnings
-        if "body" in changes or "controller" in changes:
-            ctrl = resolved["controller"]
-            used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
-            if unheld_weight(self.variant, body.mass, body.gravity, used_gains, gains.boundary_layer) is not None:
-                return _build(data, default_name=None, source=source)  # its message
-            found_warnings = _emit_notes(body, {g: ctrl[g] for g in used_gains}, source, stacklevel=3)
-        return dataclasses.replace(self, name=name, body=body, gains=gains, initial_state=initial_state,
-                                   resolved=resolved, warnings=found_warnings)
+        return _build(data, default_name=None, source=source)
 
     @classmethod
     def from_resolved(cls, resolved: Mapping, *, like: Sequence["RunConfig"] = ()) -> "RunConfig":
@@ -325,51 +244,6 @@ def _emit_notes(body: RigidBody, gains_as_written: Mapping[str, Any], source: st
     for message, category in notes:
         warnings.warn(f"{source}: {message}" if source else message, category, stacklevel=stacklevel)
     return tuple(message for message, _ in notes)
-
-
-#: (section, field) -> the schema's check of the field (its ``BeforeValidator``), for the
-#: sections whose fields :meth:`RunConfig.with_values` checks one at a time.
-_FIELD_CHECKS = {(section, name): field.metadata[0].func
-                 for section, model in (("body", _Body), ("controller", _Controller), ("initial_state", _InitialState))
-                 for name, field in model.model_fields.items() if name != "variant"}
-
-
-@functools.lru_cache(maxsize=64)
-def _changed_fields(keys: tuple[str, ...]) -> dict[str, tuple[str, ...]] | None:
-    """Section -> its fields that hold the dotted ``keys``; None when a key lies elsewhere:
-    another section, a whole section, an unknown field, or ``controller.variant``."""
-    fields: dict[str, dict[str, None]] = {}
-    for key in keys:
-        section, _, rest = key.partition(".")
-        field = rest.partition(".")[0]
-        if (section, field) not in _FIELD_CHECKS:
-            return None
-        fields.setdefault(section, {})[field] = None
-    return {section: tuple(names) for section, names in fields.items()}
-
-
-def _checked_fields(data: Mapping, fields: Mapping[str, Sequence[str]], resolved: Mapping) -> dict[str, dict] | None:
-    """Section -> field -> the field's value in ``data`` through its schema check (the
-    schema's ``BeforeValidator``); None when a check fails, or for a field ``resolved``
-    does not hold (a gain left unset) or that becomes unset: full validation decides those."""
-    out: dict[str, dict] = {}
-    for section, names in fields.items():
-        given = data.get(section)
-        if not isinstance(given, Mapping):
-            return None
-        values = {}
-        for name in names:
-            if name not in given or name not in resolved[section]:
-                return None
-            try:
-                value = _FIELD_CHECKS[section, name](plain_tree(given[name]))
-            except PydanticCustomError:  # its message comes from full validation
-                return None
-            if value is None:
-                return None
-            values[name] = value
-        out[section] = values
-    return out
 
 
 def _validated(data: dict, default_name: str | None, source: str | None, overrides: Sequence[str]) -> RunSchema:
