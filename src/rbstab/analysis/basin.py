@@ -235,7 +235,7 @@ def _run_on_gpu(base, variant, states: np.ndarray, points: np.ndarray, ratio: fl
     rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (k, 1))
     time = np.linspace(0.0, s.t_end, n)
     out = []
-    for chunk in integrate_chunks_cuda(np.full(k, variant.code), np.repeat(variant.parameters, k), states,
+    for chunk in integrate_chunks_cuda(np.full(k, variant.code), variant.parameters, states,
                                        settings_records(rows, method_number(s.method)), n_samples=n, ratio=ratio):
         last_above = chunk.acc[:, LAST_ABOVE].astype(np.int64)
         ok = chunk.status == SUCCESS

@@ -166,7 +166,8 @@ def kernel(method: int, n_state: int):
             code = codes[k]
             # the run's record copied to thread-local memory: its fields are read at every
             # right-hand side, and the copy reads it from device memory once, coalesced
-            source = params[k: k + 1].view(np.float64)
+            shared = min(k, params.shape[0] - 1)  # one record for every run, or a record a run
+            source = params[shared: shared + 1].view(np.float64)
             copy = record.view(np.float64)
             for i in range(copy.shape[0]):
                 copy[i] = source[i]
@@ -359,7 +360,8 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     ----------
     codes : array_like of int, shape (k,)
         Variant codes; no pure-sign-law mode.
-    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,)
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,) or (1,)
+        Each run's record, or one that every run shares (a basin map's).
     y0 : ndarray, shape (k, n_state)
     settings : ndarray of :data:`rbstab.engine.settings.SETTINGS`, shape (k,)
         Every run with the same ``method``; ``max_wall_time`` is not read (see below).
@@ -407,7 +409,7 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
         for lo in range(0, len(group), per_launch):
             runs = group[lo: lo + per_launch]
             start = _time.perf_counter()
-            out = _launch(fn, (codes[runs], params[runs], y0[runs], settings[runs]),
+            out = _launch(fn, (codes[runs], params if len(params) == 1 else params[runs], y0[runs], settings[runs]),
                           (first, weights, short_stencils(grid)), (stride or n_samples, full, ratio), n_trace, limit_ns)
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
