@@ -86,6 +86,15 @@ def console_options(command):
     return wrapper
 
 
+def _usable_engine(ctx, param, value):
+    """``--engine cuda`` where it cannot run: one line, before the command starts."""
+    if value == "cuda":
+        from ._common import check_cuda  # heavy: numba, numba-cuda (--engine cuda only)
+
+        check_cuda()
+    return value
+
+
 def study_options(command):
     """Options of the commands that run studies (``sensitivity``, ``tune``): ``--vary``,
     ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o`` and ``--json``."""
@@ -98,8 +107,9 @@ def study_options(command):
         click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sampler."),
         click.option("--name", default=None, help="The study's name and folder OUTPUT/NAME  [default: the config's name]."),
         set_option,
-        click.option("--engine", type=click.Choice(list(ENGINES)), default=None,
-                     help="How runs are integrated (docs/performance.md)  [default: compiled]."),
+        click.option("--engine", type=click.Choice(list(ENGINES)), default=None, callback=_usable_engine,
+                     help="How runs are integrated (docs/performance.md; cuda: on an NVIDIA GPU)  "
+                     "[default: compiled]."),
         output_option("results/studies", "Parent folder; the study writes OUTPUT/<name>/."),
         json_option,
     ]

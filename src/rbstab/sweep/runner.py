@@ -416,6 +416,7 @@ def run_sweep(
                             engine=engine, store=store, layout=layout, parameters=table.parameters(),
                             sweep=spec.name)
     outcome = SweepOutcome(spec.name, Path(output) / spec.name, spec.n_runs, engine=engine)
+    jobs = 1 if engine == "cuda" and jobs is None else jobs  # one process drives the GPU
     with _executor(executor, jobs, scheduler) as ex:
         (outcome.directory / RUNS_DIR).mkdir(parents=True, exist_ok=True)
         _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
