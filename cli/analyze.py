@@ -113,12 +113,12 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
 
     if not configs and not sweeps:
         raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")
+    if engine == "cuda" and basin:
+        check_cuda()
     loaded = load_configs(configs, overrides)
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)
     _check_sweeps(sweeps)
-    if engine == "cuda" and axes:
-        check_cuda()
     console = get_console()
     say = console.out
     out = Path(output)

@@ -204,11 +204,16 @@ def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
 
 # -- without a GPU ------------------------------------------------------------------------------------------
 @pytest.mark.skipif(GPU, reason="a GPU is here")
-def test_engine_cuda_without_a_gpu_stops_in_one_line(tmp_path):
-    out = tmp_path / "sweeps"
+@pytest.mark.parametrize("command", [
+    ["sweep", CASE3, "--random", "controller.k_c=scale_uniform:[0.5,2]", "-n", "4"],
+    ["analyze", CASE3, "--basin", "initial_state.omega.0=-6:6:3", "--basin", "initial_state.omega.1=-6:6:3"],
+    ["sensitivity", CASE3, "--vary", "body.mass=uniform:[30,50]", "-n", "8"],
+], ids=["sweep", "analyze", "sensitivity"])
+def test_engine_cuda_without_a_gpu_stops_in_one_line(tmp_path, command):
+    out = tmp_path / "out"
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
-    done = subprocess.run([RBSTAB, "sweep", CASE3, "--random", "controller.k_c=scale_uniform:[0.5,2]",
-                           "-n", "4", "--engine", "cuda", "-o", str(out)], capture_output=True, text=True, env=env)
+    done = subprocess.run([RBSTAB, *command, "--engine", "cuda", "-o", str(out)], capture_output=True, text=True,
+                          env=env)
     assert done.returncode == 1
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and "--engine cuda" in lines[0] and 'pip install "rbstab[cuda]"' in lines[0], done.stderr
