@@ -202,6 +202,19 @@ def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
     assert "globaltimer" in ptx  # the launch's wall-time limit reads the GPU's clock
 
 
+def test_kernel_cache_key_is_the_same_in_every_process():
+    """numba-cuda keys its disk cache on a kernel's bytecode and the pickled contents of its
+    closure: they must not change from one process to the next, or every command would
+    compile the kernel again."""
+    script = ("import hashlib; from numba.cuda.serialize import dumps; from rbstab.engine.cuda import kernel\n"
+              "f = kernel(2, 15).py_func\n"
+              "print(hashlib.sha256(f.__code__.co_code + dumps(tuple(c.cell_contents for c in f.__closure__ or ())))"
+              ".hexdigest())")
+    keys = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+            for _ in range(2)}
+    assert len(keys) == 1
+
+
 # -- without a GPU ------------------------------------------------------------------------------------------
 @pytest.mark.skipif(GPU, reason="a GPU is here")
 @pytest.mark.parametrize("command", [

@@ -98,17 +98,18 @@ def check_available() -> None:
 
 # -- the GPU's clock -----------------------------------------------------------------------------------
 def _clock_ns_python():
+    """The simulator's stand-in for :func:`globaltimer` [ns]."""
     return _time.monotonic_ns()
 
 
-@functools.lru_cache(maxsize=1)
-def _clock_ns():
-    """A nanosecond clock device code calls: PTX's ``%globaltimer`` (the simulator: Python's)."""
-    if simulated():
-        return _clock_ns_python
-    from llvmlite import ir  # heavy: llvmlite (with numba)
-    from numba.cuda import types  # optional: numba-cuda
-    from numba.cuda.extending import intrinsic  # optional: numba-cuda
+def _globaltimer_intrinsic():
+    """PTX's ``%globaltimer`` [ns] as a function device code calls (None without numba-cuda)."""
+    try:
+        from llvmlite import ir  # heavy: llvmlite (with numba)
+        from numba.cuda import types  # optional: numba-cuda
+        from numba.cuda.extending import intrinsic  # optional: numba-cuda
+    except ImportError:
+        return None
 
     @intrinsic
     def globaltimer(typingctx):
@@ -122,6 +123,11 @@ def _clock_ns():
         return types.int64(), codegen
 
     return globaltimer
+
+
+#: The kernel's clock, a global of this module: a closure's contents key numba-cuda's disk
+#: cache, and an intrinsic pickles differently in every process.
+globaltimer = _globaltimer_intrinsic()
 
 
 # -- the kernel ---------------------------------------------------------------------------------------
@@ -139,7 +145,6 @@ def kernel(method: int, n_state: int):
 
     n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
     dop853 = method == DOP853
-    clock_ns = _clock_ns()
     parameters = from_dtype(PARAMETERS)
 
     def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, counter, limit_ns,
@@ -158,7 +163,7 @@ def kernel(method: int, n_state: int):
         w = Work(K, Q, y_new, scale, work)
         n_runs = y0s.shape[0]
         n_samples = first.shape[0]
-        deadline = clock_ns() + limit_ns
+        deadline = globaltimer() + limit_ns
         passes = 0
         k = cuda.atomic.add(counter, 0, 1)
         while k < n_runs:
@@ -190,7 +195,7 @@ def kernel(method: int, n_state: int):
             rejected = False
             while t < t_end:
                 passes += 1
-                if passes % CLOCK_EVERY == 0 and clock_ns() > deadline:
+                if passes % CLOCK_EVERY == 0 and globaltimer() > deadline:
                     status = TIMEOUT
                     break
                 if n_steps >= s.max_steps:
@@ -295,6 +300,7 @@ def _simulator_function(function):
     which take numpy's arrays and records, not the simulator's wrappers of them."""
     names = dict(function.__globals__)
     names.update({name: _unwrapping(names[name]) for name in DEVICE_FUNCTIONS})
+    names["globaltimer"] = _clock_ns_python
     return FunctionType(function.__code__, names, function.__name__, function.__defaults__,
                               function.__closure__)
 
