@@ -416,11 +416,12 @@ def _compare(acc, i, numerical, trace, stride):
 
 @jit(forceinline=True)
 def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
-    """Take sample i (0, 1, ... in order) of a run: ``row`` its outputs (N_OUTPUTS, at the
-    offsets of :data:`rbstab.layout.OUTPUTS`; v's terms, E, v and dv/dt read).
+    """Take sample i (0, 1, ... in order) of a run into ``acc`` (:data:`ACCUMULATOR_SIZE`):
+    ``row`` its outputs, shape (N_OUTPUTS,), at the offsets of :data:`rbstab.layout.OUTPUTS`
+    (read: E [m], inertial frame; v [J] and its terms, eq 25; analytic dv/dt [W]).
 
-    ``first``, ``weights``: :func:`stencil_weights` of the run's whole sample grid (n,),
-    (n, w), w <= :data:`RATE_STENCIL`; a sample's numerical dv/dt is taken when the last
+    ``first``, ``weights``: :func:`stencil_weights` of the run's whole sample grid [s],
+    shapes (n,) and (n, w) [1/s], w <= :data:`RATE_STENCIL`; a sample's numerical dv/dt is taken when the last
     sample of its stencil arrives. ``trace`` (n_trace, N_OUTPUTS + 1): every ``stride``-th
     sample's row and numerical dv/dt (column :data:`NUMERICAL_RATE_AT`) go there (a trace
     of 0 rows keeps none). The figures are those of :func:`summary_table`, the same numbers

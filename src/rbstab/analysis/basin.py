@@ -223,7 +223,8 @@ def _run_block(items: list, ratio: float) -> list[tuple]:
 
 def _run_on_gpu(base, variant, states: np.ndarray, points: np.ndarray, ratio: float) -> list[tuple]:
     """:func:`_run_block`'s rows of the grid ``points`` (initial ``states`` (k, n_state))
-    on the GPU: the runs share ``base``'s variant, parameters and settings."""
+    on the GPU: the runs share ``base``'s variant, parameters and settings (a launch stops
+    after its ``simulation.max_wall_time``)."""
     from ..engine import method_number  # heavy: numba
     from ..engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
     from ..engine.settings import settings_records  # heavy: numba
@@ -232,11 +233,12 @@ def _run_on_gpu(base, variant, states: np.ndarray, points: np.ndarray, ratio: fl
 
     s = base.simulation
     k, n = len(states), s.n_samples
-    rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (k, 1))
+    row = np.array([[s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, s.max_wall_time]])
     time = np.linspace(0.0, s.t_end, n)
     out = []
     for chunk in integrate_chunks_cuda(np.full(k, variant.code), variant.parameters, states,
-                                       settings_records(rows, method_number(s.method)), n_samples=n, ratio=ratio):
+                                       settings_records(row, method_number(s.method)).repeat(k), n_samples=n,
+                                       max_wall_time=s.max_wall_time, ratio=ratio):
         last_above = chunk.acc[:, LAST_ABOVE].astype(np.int64)
         ok = chunk.status == SUCCESS
         t = np.where(ok & (last_above < n - 1), time[np.minimum(last_above + 1, n - 1)], np.nan)
@@ -245,7 +247,7 @@ def _run_on_gpu(base, variant, states: np.ndarray, points: np.ndarray, ratio: fl
         message = [""] * len(ok)
         for i in np.flatnonzero(~ok).tolist():  # failed runs: few
             message[i] = status_message(int(chunk.status[i]), float(chunk.t_stop[i]), s.gimbal_margin,
-                                        s.max_steps).split(" at t =")[0]
+                                        s.max_steps, s.max_wall_time).split(" at t =")[0]
         out += zip(points[chunk.runs].tolist(), code.tolist(), t.tolist(), v1.tolist(), message)
     return out
 

@@ -263,15 +263,16 @@ def kernel(method: int, n_state: int):
     return cuda.jit(cache=True)(run_all)
 
 
-def _say_compiling(method: int, n_state: int) -> None:
+def _say_compiling(method: int, n_state: int) -> str | None:
     """One line on stderr the first time this version compiles the kernel of ``method`` and
-    ``n_state`` (numba-cuda then caches it on disk); marks it compiled."""
+    ``n_state`` (numba-cuda then caches it on disk); its group for
+    :func:`rbstab.jit.mark_warm` once the kernel ran, or None when it is there already."""
     group = f"cuda-{METHODS[method]}-{n_state}"
     if simulated() or cache_is_warm(group):
-        return
+        return None
     print(f"rbstab: compiling the CUDA kernel for {METHODS[method]} with {n_state} states "
           f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
-    mark_warm(group)
+    return group
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
@@ -404,26 +405,31 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     n_trace = 0 if stride is None else len(range(0, n_samples, stride))
     per_launch = max(1, TRACE_BYTES // max(8 * TRACE_COLUMNS * n_trace, 1))
     method = int(methods[0]) if len(methods) else 0
-    _say_compiling(method, n_state)
+    compiling = _say_compiling(method, n_state)
     fn = kernel(method, n_state)
     limit_ns = np.int64(min(max_wall_time * 1e9, 2**62)) if math.isfinite(max_wall_time) else np.int64(2**62)
+    pinned: dict = {}  # host buffers the launches of this call copy their results into
     # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
     for t_end in dict.fromkeys(settings["t_end"].tolist()):
         grid = np.linspace(0.0, t_end, n_samples)
-        first, weights = stencil_weights(grid)
+        stencils = (*stencil_weights(grid), short_stencils(grid))
         group = np.flatnonzero(settings["t_end"] == t_end)
         for lo in range(0, len(group), per_launch):
             runs = group[lo: lo + per_launch]
             start = _time.perf_counter()
             out = _launch(fn, (codes[runs], params if len(params) == 1 else params[runs], y0[runs], settings[runs]),
-                          (first, weights, short_stencils(grid)), (stride or n_samples, full, ratio), n_trace, limit_ns)
+                          stencils, (stride or n_samples, full, ratio), n_trace, limit_ns, pinned)
+            if compiling:
+                mark_warm(compiling)
+                compiling = None
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _launch(fn, runs, stencils, options, n_trace, limit_ns):
+def _launch(fn, runs, stencils, options, n_trace, limit_ns, pinned: dict):
     """One launch over ``runs`` (codes, params, y0, settings) with the grid's ``stencils``
     (first, weights, short) and ``options`` (stride, full, ratio); the host arrays of
-    :class:`CudaChunk`."""
+    :class:`CudaChunk`, copied out of the page-locked buffers of ``pinned`` (shape and
+    dtype -> buffer: allocated once, the launches of a call reuse them)."""
     stride, full, ratio = options
     k = len(runs[0])
     status = np.full(k, TIMEOUT, dtype=np.int64)  # a run the launch's limit left unstarted
@@ -445,8 +451,13 @@ def _launch(fn, runs, stencils, options, n_trace, limit_ns):
     end.record()
     end.synchronize()
     kernel_seconds = start.elapsed_time(end) / 1e3
-    host = [d.copy_to_host(cuda.pinned_array(a.shape, a.dtype)) for d, a in zip(d_out, outputs)]
-    trace = None
-    if n_trace:
-        trace = d_trace.copy_to_host(cuda.pinned_array(trace_shape, np.float64))
-    return (*[np.array(a) for a in host[:-1]], np.array(host[-1]), trace, kernel_seconds)
+
+    def to_host(device, shape, dtype):
+        key = (shape, np.dtype(dtype).str)
+        if key not in pinned:
+            pinned[key] = cuda.pinned_array(shape, dtype)
+        return np.array(device.copy_to_host(pinned[key]))
+
+    host = [to_host(d, a.shape, a.dtype) for d, a in zip(d_out, outputs)]
+    trace = to_host(d_trace, trace_shape, np.float64) if n_trace else None
+    return (*host, trace, kernel_seconds)

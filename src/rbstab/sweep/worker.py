@@ -328,8 +328,8 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     return configs, errors
 
 
-#: The samples a ``cuda`` run brings back for each store (:data:`rbstab.simulator.KEEP`).
-KEEP = {"full": "all", "thinned": "thinned", "summary": "none"}
+#: Store -> the samples a ``cuda`` run brings back for it (one of :data:`rbstab.simulator.KEEP`).
+KEEP_OF_STORE = {"full": "all", "thinned": "thinned", "summary": "none"}
 
 
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
@@ -347,7 +347,7 @@ def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> 
         # a thinned or summary store keeps none of the outputs LEFT_OUT: not computed
         full = options.store == "full"
         for members, block in simulate_blocks([configs[i] for i in batch], engine=options.engine,
-                                              timeout=options.timeout, full=full, keep=KEEP[options.store]):
+                                              timeout=options.timeout, full=full, keep=KEEP_OF_STORE[options.store]):
             chunk = [batch[j] for j in members]
             done.update(chunk)
             records += _add_block(sink, [tasks[i] for i in chunk], block, config_time)
@@ -538,7 +538,7 @@ def _batch_records(tasks: Sequence[RunTask], batch, fast, build: float, options:
     done: set[int] = set()
     try:
         for rows, block in simulate_batch(batch, fast, full=options.store == "full", engine=options.engine,
-                                          keep=KEEP[options.store]):
+                                          keep=KEEP_OF_STORE[options.store]):
             done.update(rows)
             records += _add_block(sink, [tasks[j] for j in rows], block, build)
     except Exception:
