@@ -22,6 +22,15 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
 Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
 
     python benchmarks/gpu.py [--n 10000 100000 1000000] [--sweep-n 1000000] [--check-n 256]
+
+``--host-only`` (any machine, no GPU needed) measures what a ``--engine cuda`` sweep costs
+besides the GPU: the same ``rbstab sweep`` command with every launch replaced by a stub
+that returns finished runs at once (its processes load the stub through a
+``sitecustomize`` module in a temporary folder), wall time from process start to exit at
+each ``--sweep-n``, and one worker's seconds a run in a process of its own
+(:func:`rbstab.sweep.worker.run_table_chunk` of a 131072-run slice)::
+
+    python benchmarks/gpu.py --host-only [--sweep-n 100000 1000000] [--jobs N]
 """
 
 from __future__ import annotations
@@ -158,7 +167,73 @@ def compile_info() -> str:
             f"(occupancy {occupancy:.0%})")
 
 
-def sweep_seconds(n: int, store: str) -> float:
+#: The stub of ``--host-only``: every launch of the CUDA engine returns its runs finished
+#: (SUCCESS at t_end, a full accumulator) at once.
+STUB = """
+import os
+if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
+    import numpy as np
+    import rbstab.engine.cuda as cuda
+    from rbstab.layout import N_OUTPUTS
+    from rbstab.summary import ACCUMULATOR_SIZE, TAKEN
+
+    def launches(codes, params, y0, settings, *, n_samples, stride=None, full=False, max_wall_time=np.inf,
+                 ratio=1e-3):
+        n_trace = 0 if stride is None else len(range(0, n_samples, stride))
+        for t_end in dict.fromkeys(settings["t_end"].tolist()):
+            runs = np.flatnonzero(settings["t_end"] == t_end)
+            k = len(runs)
+            acc = np.ones((k, ACCUMULATOR_SIZE))
+            acc[:, TAKEN] = n_samples
+            yield cuda.CudaChunk(runs=runs, status=np.zeros(k, np.int64), t_stop=np.full(k, t_end),
+                                 nfev=np.full(k, 500), n_steps=np.full(k, 40), last=np.ones((k, N_OUTPUTS)), acc=acc,
+                                 trace=None if stride is None else np.ones((k, n_trace, cuda.TRACE_COLUMNS)),
+                                 kernel_seconds=0.0, seconds=0.0)
+
+    cuda.check_available = lambda: None
+    cuda.integrate_chunks_cuda = launches
+"""
+
+
+def host_only(sizes: list[int], jobs: int | None) -> None:
+    """``--host-only``: a ``--engine cuda`` sweep's time with the GPU's part taken away."""
+    with tempfile.TemporaryDirectory() as stub:
+        Path(stub, "sitecustomize.py").write_text(STUB)
+        env = dict(os.environ, RBSTAB_BENCHMARK_STUB_GPU="1",
+                   PYTHONPATH=os.pathsep.join(filter(None, [stub, os.environ.get("PYTHONPATH")])))
+        script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
+                  "print(gpu.worker_seconds(131072))")
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+        print(f"one worker, {131072} runs (run_table_chunk, --store summary): "
+              f"{float(done.stdout.split()[-1]) * 1e6:.1f} us a run")
+        sweep_seconds(1000, "summary", env=env, jobs=jobs)  # the compile cache, warm
+        for n in sizes:
+            wall = sweep_seconds(n, "summary", env=env, jobs=jobs)
+            print(f"rbstab sweep --engine cuda --store summary{f' -j {jobs}' if jobs else ''}, N = {n}, "
+                  f"GPU stubbed: {wall:.1f} s ({wall / n * 1e6:.1f} us a run)")
+
+
+def worker_seconds(n: int) -> float:
+    """Seconds a run of :func:`rbstab.sweep.worker.run_table_chunk` of an n-run slice of the
+    parameter sweep (``--store summary``), after a first slice (imports, caches)."""
+    from rbstab.sweep import spec_from_mapping
+    from rbstab.sweep.table import plan_table
+    from rbstab.sweep.worker import WorkerOptions, run_table_chunk
+
+    spec = spec_from_mapping({"name": "host", "base": CASE3, "random": {"n": n, "seed": 1, "params": {
+        "body.mass": {"scale_uniform": [0.5, 1.5]}, "controller.k_c": {"scale_uniform": [0.5, 2]},
+        "controller.l_c": {"scale_uniform": [0.5, 2]}, "controller.k_t": {"scale_uniform": [0.7, 1.4]},
+        "initial_state.omega": {"normal": {"mean": [16, 32, -16], "std": 4}}}}}, overrides=SETTINGS_OVERRIDES)
+    table = plan_table(spec)
+    options = WorkerOptions(engine="cuda", store="summary", parameters=table.parameters(), sweep="host")
+    with tempfile.TemporaryDirectory() as folder:
+        run_table_chunk(table.slice(np.arange(1000)), options, folder)
+        start = time.perf_counter()
+        run_table_chunk(table.slice(np.arange(n)), options, folder)
+        return (time.perf_counter() - start) / n
+
+
+def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | None = None) -> float:
     folder = Path(tempfile.mkdtemp())
     try:
         cmd = [RBSTAB, "sweep", CASE3, "--random", "body.mass=scale_uniform:[0.5,1.5]",
@@ -166,9 +241,9 @@ def sweep_seconds(n: int, store: str) -> float:
                "--random", "controller.k_t=scale_uniform:[0.7,1.4]",
                "--random", "initial_state.omega=normal:{mean: [16,32,-16], std: 4}", "-n", str(n),
                "--engine", "cuda", "--store", store, "--no-progress", "-o", str(folder),
-               *[a for o in SETTINGS_OVERRIDES for a in ("--set", o)]]
+               *[a for o in SETTINGS_OVERRIDES for a in ("--set", o)], *(["-j", str(jobs)] if jobs else [])]
         start = time.perf_counter()
-        done = subprocess.run(cmd, capture_output=True, text=True)
+        done = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if done.returncode != 0:
             raise SystemExit(done.stderr)
         return time.perf_counter() - start
@@ -179,10 +254,16 @@ def sweep_seconds(n: int, store: str) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
-    parser.add_argument("--sweep-n", type=int, default=1_000_000)
+    parser.add_argument("--sweep-n", type=int, nargs="+", default=[1_000_000])
+    parser.add_argument("--host-only", action="store_true",
+                        help="no GPU: a cuda sweep's time with every launch stubbed (module docstring)")
+    parser.add_argument("--jobs", type=int, default=None, help="-j of the sweeps (default: the sweep's own)")
     parser.add_argument("--check-n", type=int, default=256)
     parser.add_argument("--cpu-n", type=int, default=20_000)
     args = parser.parse_args()
+    if args.host_only:
+        host_only(args.sweep_n, args.jobs)
+        return
     from rbstab.engine.cuda import check_available
 
     check_available()
@@ -199,9 +280,10 @@ def main() -> None:
     for kind in ("initial-state", "parameter"):
         print(f"correctness, {kind}, {args.check_n} runs: {correctness(kind, args.check_n)}")
     sweep_seconds(1000, "summary")  # the kernel cache, warm
-    print(f"rbstab sweep --engine cuda --store summary, N = {args.sweep_n}: {sweep_seconds(args.sweep_n, 'summary'):.1f} s")
-    n = max(args.sweep_n // 10, 1000)
-    print(f"rbstab sweep --engine cuda --store thinned, N = {n}: {sweep_seconds(n, 'thinned'):.1f} s")
+    for n in args.sweep_n:
+        print(f"rbstab sweep --engine cuda --store summary, N = {n}: {sweep_seconds(n, 'summary', jobs=args.jobs):.1f} s")
+        n = max(n // 10, 1000)
+        print(f"rbstab sweep --engine cuda --store thinned, N = {n}: {sweep_seconds(n, 'thinned', jobs=args.jobs):.1f} s")
 
 
 if __name__ == "__main__":

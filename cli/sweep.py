@@ -141,9 +141,11 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
     if engine == "cuda" and not dry_run:
         check_cuda()
-        jobs = jobs or 1  # one process drives the GPU
-    if table is not None:
+    if engine == "cuda":
+        from rbstab.sweep.runner import cuda_jobs  # heavy: numpy
 
+        jobs = jobs or cuda_jobs()
+    if table is not None:
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
         return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)

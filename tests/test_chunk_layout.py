@@ -19,7 +19,8 @@ from click.testing import CliRunner
 
 import yaml
 
-from rbstab.io.chunk import ChunkWriter, StoreRow, read_chunk_rows, read_chunk_series, summary_columns
+from rbstab.io.chunk import (ChunkWriter, StoreRow, read_chunk_columns, read_chunk_rows, read_chunk_series,
+                             summary_columns)
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, summary_stride
 from rbstab.sweep import expand, run_chunk, run_sweep, spec_from_mapping
 from rbstab.sweep.worker import RunTask, WorkerOptions
@@ -141,17 +142,24 @@ def test_chunk_worker_keeps_failures_and_errors_per_run(tmp_path):
     tasks[1] = RunTask(runs[1].run_id, locking, tasks[1].path, 1)
     bad = RunTask("r9999-deadbeef", {"name": "r9999-deadbeef", "body": {}}, str(folder / "r9999-deadbeef.h5"), 3)
     for engine in ("compiled", "scipy"):
-        records = run_chunk([*tasks, bad], WorkerOptions(engine=engine, layout="chunk"))
-        status = {r["run_id"]: r["status"] for r in records}
+        result = run_chunk([*tasks, bad], WorkerOptions(engine=engine, layout="chunk"))
+        status = dict(zip(result.frame["run_id"], result.frame["status"]))
         assert status == {runs[0].run_id: "success", runs[1].run_id: "failed", runs[2].run_id: "success",
                           bad.run_id: "error"}
-        (path,) = {r["path"] for r in records if r["status"] != "error"}
+        assert bad.run_id in result.tracebacks
+        (name,) = set(result.frame["file"])
+        path = folder / name
         rows = {row["run_id"]: row for row in read_chunk_rows(path)}
         assert rows[bad.run_id]["status"] == "error" and "ConfigError" in rows[bad.run_id]["message"]
         assert rows[runs[1].run_id]["message"].startswith("gimbal lock")
-        ok = next(r for r in records if r["run_id"] == runs[0].run_id)
-        # the record carries the row as the index takes it (no config text, creation time, store)
-        assert ok["attrs"] == {k: v for k, v in rows[runs[0].run_id].items() if k not in ("config", "created", "store")}
+        # the result carries each row as the file holds it, but what the index takes from
+        # the table of runs (base, coordinates) and the config text, creation time, store
+        for row in result.frame.to_dict("records"):
+            stored = rows[row["run_id"]]
+            assert set(row) == set(stored) - {"base", "config", "store"}
+            for key, value in row.items():
+                absent = value is None or value != value  # None or NaN: no value (an error row's figures)
+                assert value == stored[key] or (absent and (stored[key] is None or stored[key] != stored[key])), key
         with h5py.File(path, "r") as f:  # the error row holds no data
             assert np.isnan(f["lyapunov"][rows[bad.run_id]["file_row"]]).all()
         Path(path).unlink()
@@ -222,19 +230,35 @@ def test_chunk_writer_block_of_runs_writes_what_each_run_alone_writes(tmp_path, 
     rows = [StoreRow(i, ids[i], "case3", {"omega_0": 16.0 + i}) for i in range(7)]
     order = [[5, 0, 3], [1, 2, 4]]  # run j of the block is row order[...]
     with ChunkWriter(tmp_path / "chunk-a.h5", rows, store=store) as writer:
-        by_block = []
         for first, part in zip((0, 3), order):  # runs 0-2 of the block, then 3-5
-            by_block += writer.add_block([ids[i] for i in part], _block_part(block, [first, first + 1, first + 2]))
+            writer.add_block([ids[i] for i in part], _block_part(block, [first, first + 1, first + 2]))
         writer.add_error(ids[6], "it raised")
+        by_block = writer.columns()
     with ChunkWriter(tmp_path / "chunk-b.h5", rows, store=store) as writer:
         by_run = [writer.add(ids[i], block.result(j)) for j, i in enumerate(order[0] + order[1])]
-        writer.add_error(ids[6], "it raised")
-    drop = ("file", "created", "wall_time")
-    assert [{k: v for k, v in r.items() if k not in drop} for r in by_block] == \
-        [{k: v for k, v in r.items() if k not in drop} for r in by_run]
+        by_run.append(writer.add_error(ids[6], "it raised"))
+    by_run.sort(key=lambda r: r["run"])
+    drop = ("file", "created", "wall_time", "config", "store")
+    # the columns of the rows added as blocks are the rows added one by one ("" or NaN
+    # where a row has no value: the error row's figures)
+    assert set(by_block) - set(drop) == set(by_run[0]) - set(drop)
+
+    def value(v):
+        return "absent" if v is None or v != v or v == "" else v
+
+    for name, column in by_block.items():
+        if name not in drop:
+            assert [value(v) for v in column.tolist()] == [value(r.get(name)) for r in by_run], name
     read = [read_chunk_rows(tmp_path / f"chunk-{x}.h5", data=True) for x in "ab"]
+    drop = ("file", "created", "wall_time")
     assert [{k: v for k, v in r.items() if k not in drop} for r in read[0]] == \
         [{k: v for k, v in r.items() if k not in drop} for r in read[1]]
+    # columns() is what read_chunk_columns reads back
+    back = read_chunk_columns(tmp_path / "chunk-a.h5")
+    assert list(back.columns) == list(by_block)
+    for name in back.columns:
+        assert back[name].tolist() == by_block[name].tolist() or \
+            np.array_equal(back[name].to_numpy(dtype=float), by_block[name], equal_nan=True), name
     assert [r["run_id"] for r in read[0]] == ids and read[0][6]["status"] == "error"
     names = ["lyapunov", "theta", "constraint_error"]
     a, b = (read_chunk_series(tmp_path / f"chunk-{x}.h5", None, names) for x in "ab")
@@ -255,9 +279,10 @@ def _block_part(block, js):
 
     return dataclasses.replace(
         block, configs=[block.configs[j] for j in js], outputs={n: v[js] for n, v in block.outputs.items()},
-        summaries={n: [v[j] for j in js] for n, v in block.summaries.items()},
-        **{k: [getattr(block, k)[j] for j in js] for k in ("status", "message", "solver", "wall_time", "timing",
-                                                           "switching")})
+        summaries={n: v[js] for n, v in block.summaries.items()},
+        solver={n: np.asarray(v)[js] for n, v in block.solver.items()},
+        timing={n: v[js] for n, v in block.timing.items()}, wall_time=block.wall_time[js],
+        **{k: [getattr(block, k)[j] for j in js] for k in ("status", "message", "switching", "variants")})
 
 
 def test_chunk_writer_block_that_is_refused_adds_none_of_its_runs(tmp_path):
@@ -357,16 +382,15 @@ def test_chunk_bytes_for_workers_without_the_sweep_folder(tmp_path):
     runs = expand(spec(3))
     folder = tmp_path / "runs"
     tasks = [RunTask(r.run_id, r.config.resolved, str(folder / f"{r.run_id}.h5")) for r in runs]
-    records = run_chunk(tasks, WorkerOptions(engine="compiled", layout="chunk", return_bytes=True))
+    result = run_chunk(tasks, WorkerOptions(engine="compiled", layout="chunk", return_bytes=True))
     assert not folder.exists()  # nothing written where the worker runs
-    (path,) = {r["path"] for r in records}
-    with_data = [r for r in records if r.get("data") is not None]
-    assert len(with_data) == 1
+    ((path, data),) = result.data.items()
+    assert Path(path).parent == folder and Path(path).name == result.frame["file"][0]
     folder.mkdir()
-    Path(path).write_bytes(with_data[0]["data"])
+    Path(path).write_bytes(data)
     rows = read_chunk_rows(path)
     assert [row["run_id"] for row in rows] == [r.run_id for r in runs]
-    assert [r["attrs"]["config_hash"] for r in records] == [row["config_hash"] for row in rows]
+    assert list(result.frame["config_hash"]) == [row["config_hash"] for row in rows]
 
 
 def test_an_executor_passed_in_stays_open_for_the_next_sweep(tmp_path):

@@ -372,16 +372,19 @@ def test_worker_compiled_engine_isolates_failures(tmp_path):
     unwritable = RunTask(runs[2].run_id, runs[2].config.resolved, str(tmp_path / "file" / "x.h5"))
     (tmp_path / "file").write_text("not a folder")
     options = WorkerOptions(engine="compiled", layout="run", store="full")
-    records = {r["run_id"] + r["path"][-6:]: r for r in run_chunk([*tasks, bad, unwritable], options)}
-    by_path = {r["path"]: r for r in records.values()}
-    assert by_path[tasks[0].path]["status"] == "success"
-    assert by_path[tasks[1].path]["status"] == "failed"
-    assert by_path[tasks[1].path]["message"].startswith("gimbal lock")
-    assert by_path[tasks[2].path]["status"] == "success"
-    assert by_path[bad.path]["status"] == "error" and "ConfigError" in by_path[bad.path]["message"]
-    assert by_path[unwritable.path]["status"] == "error"
-    assert by_path[tasks[0].path]["attrs"] == index_part(row_from_attributes(read_attributes(tasks[0].path),
-                                                                             Path(tasks[0].path).name))
+    result = run_chunk([*tasks, bad, unwritable], options)
+    rows = result.frame.to_dict("records")
+    status = sorted((r["run_id"], r["status"]) for r in rows)  # tasks[2] and unwritable share their run id
+    assert status == sorted([(runs[0].run_id, "success"), (runs[1].run_id, "failed"), (runs[2].run_id, "success"),
+                             (bad.run_id, "error"), (runs[2].run_id, "error")])
+    by_id = {(r["run_id"], r["status"]): r for r in rows}
+    assert by_id[runs[1].run_id, "failed"]["message"].startswith("gimbal lock")
+    assert "ConfigError" in by_id[bad.run_id, "error"]["message"] and pd.isna(by_id[bad.run_id, "error"]["file"])
+    assert not Path(unwritable.path).exists() and by_id[runs[2].run_id, "error"]["message"]
+    # a run file's row is its attributes as the index takes them
+    stored = index_part(row_from_attributes(read_attributes(tasks[0].path), Path(tasks[0].path).name))
+    got = by_id[runs[0].run_id, "success"]
+    assert {k: v for k, v in got.items() if k in stored} == stored
 
 
 def test_engine_choice_and_timeout(tmp_path):

@@ -301,8 +301,9 @@ def test_dry_run_lists_runs_and_writes_nothing(tmp_path):
 
 def test_worker_turns_exceptions_into_records(tmp_path):
     bad = RunTask("r0000-deadbeef", {"name": "r0000-deadbeef", "body": {}}, str(tmp_path / "x.h5"))
-    (record,) = run_chunk([bad], WorkerOptions())
-    assert record["status"] == "error" and "ConfigError" in record["message"]
+    result = run_chunk([bad], WorkerOptions())
+    ((status, message),) = zip(result.frame["status"], result.frame["message"])
+    assert status == "error" and "ConfigError" in message and "ConfigError" in result.tracebacks[bad.run_id]
     assert not (tmp_path / "x.h5").exists()
 
 

@@ -42,7 +42,7 @@ from .engine.switching import integrate_sign_law, sign_law_outputs, switching_me
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import VARIANT_LAYOUTS, summary_stride
 from .model import PARAMETERS
-from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
+from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, table_row
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.kernels import run_outputs
@@ -143,17 +143,21 @@ class RunBlock:
 
     Attributes
     ----------
-    configs : list of RunConfig, length k
+    configs : list of RunConfig (or None each), length k
     time : ndarray, shape (n_samples,)
         The runs' sample times [s] (read-only when the block comes from the compiled engine).
     outputs : dict of str -> ndarray
         :attr:`RunResult.outputs` with a leading run axis: shape (k, n_samples, 3) or
         (k, n_samples).
-    summaries : dict of str -> list
-        :func:`rbstab.summary.summary_table`: figure -> its k values.
+    summaries : dict of str -> ndarray
+        :func:`rbstab.summary.summary_table`: figure -> its k values, shape (k,) or (k, 3).
     status, message : list of str
-    solver, timing : list of dict
-    wall_time : list of float
+    solver : dict of str -> sequence
+        :attr:`RunResult.solver` as columns: key -> its k values.
+    wall_time : ndarray, shape (k,)
+        [s]
+    timing : dict of str -> ndarray
+        :attr:`RunResult.timing` as columns: key -> its k values [s].
     switching : list
         Each run's :attr:`RunResult.switching`.
     stride : int
@@ -166,12 +170,12 @@ class RunBlock:
     configs: list
     time: np.ndarray
     outputs: dict[str, np.ndarray]
-    summaries: dict[str, list]
+    summaries: dict[str, np.ndarray]
     status: list[str]
     message: list[str]
-    solver: list[dict]
-    wall_time: list[float]
-    timing: list[dict]
+    solver: dict[str, Sequence]
+    wall_time: np.ndarray
+    timing: dict[str, np.ndarray]
     switching: list
     stride: int = 1
     variants: list = None
@@ -181,22 +185,30 @@ class RunBlock:
             self.variants = [c.variant for c in self.configs]
 
     def __len__(self) -> int:
-        return len(self.configs)
+        return len(self.status)
 
     def result(self, j: int) -> RunResult:
         """Run ``j`` of the block as a :class:`RunResult` (its outputs are views)."""
         return RunResult(config=self.configs[j], time=self.time,
                          outputs={key: value[j] for key, value in self.outputs.items()},
-                         status=self.status[j], message=self.message[j], solver=self.solver[j],
-                         wall_time=self.wall_time[j], summary={key: v[j] for key, v in self.summaries.items()},
-                         timing=self.timing[j], switching=self.switching[j])
+                         status=self.status[j], message=self.message[j], solver=_row(self.solver, j),
+                         wall_time=float(self.wall_time[j]), summary=table_row(self.summaries, j),
+                         timing=_row(self.timing, j), switching=self.switching[j])
 
     @classmethod
     def of(cls, result: RunResult) -> "RunBlock":
         """A block of one run (its outputs as views with a leading axis of 1)."""
         return cls([result.config], result.time, {key: np.asarray(value)[None] for key, value in result.outputs.items()},
-                   {key: [value] for key, value in result.summary.items()}, [result.status], [result.message],
-                   [result.solver], [result.wall_time], [result.timing], [result.switching])
+                   {key: np.asarray([value], dtype=object if isinstance(value, str) else None)
+                    for key, value in result.summary.items()},
+                   [result.status], [result.message], {key: [value] for key, value in result.solver.items()},
+                   np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
+                   [result.switching])
+
+
+def _row(columns: dict[str, Sequence], j: int) -> dict:
+    """Entry ``j`` of each column, as plain Python values."""
+    return {key: value[j].item() if isinstance(value[j], np.generic) else value[j] for key, value in columns.items()}
 
 
 def gimbal_lock_event(margin: float):
@@ -457,22 +469,36 @@ def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarra
             parts.append((members, time, outputs, summary_table(time, outputs)))
         per_run = (_time.perf_counter() - t0) / (hi - lo)
         for members, time, outputs, summaries in parts:
-            status = [int(sol.status[j]) for j in members]
+            k = len(members)
             yield members, RunBlock(
                 configs=[configs[j] for j in members],
                 time=time,
                 outputs=outputs,
                 summaries=summaries,
-                status=["success" if code == SUCCESS else "failed" for code in status],
-                message=[status_message(code, float(sol.t_stop[j]), float(settings[j, 4]),
-                                        int(settings[j, 5]), float(settings[j, 6])) for code, j in zip(status, members)],
-                solver=[{"nfev": int(sol.nfev[j]), "njev": 0, "nlu": 0, "solver_status": code,
-                         "n_steps": int(sol.n_steps[j])} for code, j in zip(status, members)],
-                wall_time=[share + per_run] * len(members),
-                timing=[{"integration": share, "postprocess": per_run} for _ in members],
-                switching=[None] * len(members),
-                variants=[_VARIANT_NAMES[int(codes[j])] for j in members],
+                **_ends(sol.status[members], sol.t_stop[members], sol.nfev[members], sol.n_steps[members],
+                        settings[members]),
+                wall_time=np.full(k, share + per_run),
+                timing={"integration": np.full(k, share), "postprocess": np.full(k, per_run)},
+                switching=[None] * k,
+                variants=[_VARIANT_NAMES[code] for code in codes[members].tolist()],
             )
+
+
+def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.ndarray, settings: np.ndarray
+          ) -> dict:
+    """A :class:`RunBlock`'s ``status``, ``message`` and ``solver`` of k runs of the compiled
+    engine, from their status codes (:mod:`rbstab.engine.status`), stop times [s],
+    right-hand-side evaluations, steps and settings rows (k, 7)."""
+    status = np.asarray(status, dtype=np.int64)
+    ok = status == SUCCESS
+    message = np.full(len(status), status_message(SUCCESS, 0.0, 0.0), dtype=object)
+    for j in np.flatnonzero(~ok).tolist():  # failed runs: few
+        message[j] = status_message(int(status[j]), float(t_stop[j]), float(settings[j, 4]), int(settings[j, 5]),
+                                    float(settings[j, 6]))
+    return {"status": np.where(ok, "success", "failed").tolist(), "message": message.tolist(),
+            "solver": {"nfev": np.asarray(nfev, dtype=np.int64), "njev": np.zeros(len(status), dtype=np.int64),
+                       "nlu": np.zeros(len(status), dtype=np.int64), "solver_status": status,
+                       "n_steps": np.asarray(n_steps, dtype=np.int64)}}
 
 
 def _variant_of(config: "RunConfig", shared: dict) -> Variant:
@@ -628,7 +654,10 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
         raise ValueError(f"run {bad} of the batch: the compiled engine does not take it (its method or the "
                          "pure sign law); run it with simulate()")
     keys = np.stack([batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]], axis=1)
-    distinct, group = np.unique(keys, axis=0, return_inverse=True) if len(rows) else (keys, rows)
+    if len(rows) and np.all(keys == keys[0]):  # as a rule: one group
+        distinct, group = keys[:1], np.zeros(len(rows), dtype=np.int64)
+    else:
+        distinct, group = np.unique(keys, axis=0, return_inverse=True) if len(rows) else (keys, rows)
     for g, (method, n_samples, size) in enumerate(distinct.tolist()):
         members = rows[group.ravel() == g]
         if engine == "cuda":
@@ -677,21 +706,16 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
             outputs = split_outputs(columns[:N_OUTPUTS], layout, full)
             outputs["lyapunov_rate_numerical"] = columns[NUMERICAL_RATE_AT]
         time.flags.writeable = False
-        status = chunk.status.tolist()
         share = chunk.seconds / k
-        yield [int(positions[j]) for j in members], RunBlock(
+        yield np.asarray(positions)[chunk.runs].tolist(), RunBlock(
             configs=[configs[j] for j in members],
             time=time,
             outputs=outputs,
             summaries=stream_table(grid, chunk.acc, chunk.last, layout),
-            status=["success" if code == SUCCESS else "failed" for code in status],
-            message=[status_message(code, float(chunk.t_stop[i]), float(settings[j, 4]), int(settings[j, 5]),
-                                    float(settings[j, 6])) for i, (code, j) in enumerate(zip(status, members))],
-            solver=[{"nfev": int(chunk.nfev[i]), "njev": 0, "nlu": 0, "solver_status": code,
-                     "n_steps": int(chunk.n_steps[i])} for i, code in enumerate(status)],
-            wall_time=[share] * k,
-            timing=[{"integration": share, "postprocess": 0.0} for _ in members],
+            **_ends(chunk.status, chunk.t_stop, chunk.nfev, chunk.n_steps, settings[chunk.runs]),
+            wall_time=np.full(k, share),
+            timing={"integration": np.full(k, share), "postprocess": np.zeros(k)},
             switching=[None] * k,
             stride=stride or 1,
-            variants=[_VARIANT_NAMES[int(codes[j])] for j in members],
+            variants=[_VARIANT_NAMES[code] for code in codes[chunk.runs].tolist()],
         )

@@ -274,12 +274,21 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np
         The same figures (the same numbers) as :func:`summarize` of each run alone.
     """
     table = summary_table(time, outputs, checked)
-    return [{key: values[j] for key, values in table.items()} for j in range(outputs["lyapunov"].shape[0])]
+    return [table_row(table, j) for j in range(outputs["lyapunov"].shape[0])]
 
 
-def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> dict[str, list]:
-    """:func:`summarize_many` as columns: figure -> its k values (a 3-vector figure: k lists
-    of 3 floats), the figures in :func:`summarize`'s order; the same numbers."""
+def table_row(table: dict[str, np.ndarray], j: int) -> dict:
+    """Run ``j`` of a summary table (:func:`summary_table`, :func:`stream_table`) as
+    :func:`summarize` gives it: plain floats, lists of 3 floats and strings."""
+    return {key: values[j].tolist() if isinstance(values[j], np.ndarray | np.generic) else values[j]
+            for key, values in table.items()}
+
+
+def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None
+                  ) -> dict[str, np.ndarray]:
+    """:func:`summarize_many` as columns: figure -> its k values, shape (k,) or (k, 3) for
+    a 3-vector figure (floats; ``lyapunov_rate_check`` an object array of str), the
+    figures in :func:`summarize`'s order; the same numbers (:func:`table_row` gives run j's)."""
     lyapunov = outputs["lyapunov"]
     k, n = lyapunov.shape
     finite = np.isfinite(lyapunov)
@@ -296,54 +305,57 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
         i = int(last[j])
         parts.append(([j], _table(time[: i + 1], {key: value[j : j + 1, : i + 1] for key, value in outputs.items()},
                                   None if checked is None else checked[j : j + 1, : i + 1])))
-    table: dict[str, list] = {key: [None] * k for key in parts[0][1]}
+    table = {key: np.empty((k, *value.shape[1:]), dtype=value.dtype) for key, value in parts[0][1].items()}
     for runs, part in parts:
         for key, values in part.items():
-            column = table[key]
-            for j, value in zip(runs, values):
-                column[j] = value
+            table[key][runs] = values
     return table
 
 
-def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> dict[str, list]:
+def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None
+           ) -> dict[str, np.ndarray]:
     """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays), as
     columns; the rate check over the ``checked`` samples (k, n) only, when given."""
     v = outputs["lyapunov"]
     rate = outputs["lyapunov_rate"]
     k, n = v.shape
-    table: dict[str, list] = {"t_final": [float(time[n - 1])] * k}
+    table: dict[str, np.ndarray] = {"t_final": np.full(k, float(time[n - 1]))}
     for b in STATE_BLOCKS:
         if b in outputs:
-            table[f"final_{b}"] = outputs[b][:, n - 1].tolist()
+            table[f"final_{b}"] = outputs[b][:, n - 1].copy()
     error = np.abs(outputs["constraint_error"])
     # per axis: a reduction over the samples of one strided column is many times faster
     # than numpy's reduction of (k, n, 3) over its middle axis
-    table["max_abs_constraint_error"] = np.stack([np.max(error[:, :, i], axis=1) for i in range(3)], axis=1).tolist()
-    table["lyapunov_initial"] = v[:, 0].tolist()
-    table["lyapunov_final"] = v[:, n - 1].tolist()
-    table["max_lyapunov_rate"] = np.max(rate, axis=1).tolist()
-    table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1).tolist()
-    n_checked = [n] * k if checked is None else np.sum(checked, axis=1).tolist()
+    table["max_abs_constraint_error"] = np.stack([np.max(error[:, :, i], axis=1) for i in range(3)], axis=1)
+    table["lyapunov_initial"] = v[:, 0].copy()
+    table["lyapunov_final"] = v[:, n - 1].copy()
+    table["max_lyapunov_rate"] = np.max(rate, axis=1)
+    table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1)
+    n_checked = np.full(k, n) if checked is None else np.sum(checked, axis=1)
     if checked is not None:
-        table["lyapunov_rate_checked"] = [c / n for c in n_checked]
-    nan = float("nan")
-    mismatch, relative, verdict = [nan] * k, [nan] * k, ["n/a"] * k
+        table["lyapunov_rate_checked"] = n_checked / n
+    largest = scales = np.full(k, np.nan)
     if n >= MIN_CHECK_SAMPLES:
         difference = np.abs(rate - outputs["lyapunov_rate_numerical"])
         if checked is not None:
             difference = np.where(checked, difference, 0.0)
-        largest = np.max(difference, axis=1).tolist()
-        scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0])).tolist()
-        for j in range(k):
-            if n_checked[j] >= MIN_CHECK_SAMPLES:
-                scale = scales[j] or 1.0
-                mismatch[j] = largest[j]
-                relative[j] = largest[j] / scale
-                verdict[j] = "pass" if largest[j] <= LYAPUNOV_RATE_TOLERANCE * scale else "fail"
-    table["lyapunov_rate_mismatch"] = mismatch
-    table["lyapunov_rate_mismatch_relative"] = relative
-    table["lyapunov_rate_check"] = verdict
+        largest = np.max(difference, axis=1)
+        scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0]))
+    table.update(_rate_check(largest, scales, n_checked >= MIN_CHECK_SAMPLES))
     return table
+
+
+def _rate_check(largest: np.ndarray, scales: np.ndarray, enough: np.ndarray) -> dict[str, np.ndarray]:
+    """``lyapunov_rate_mismatch``, ``_relative`` and ``lyapunov_rate_check`` of k runs: the
+    largest |analytic - numerical dv/dt| [W], the reference power [W] (0 is taken as 1) and
+    whether the run has enough samples compared (else NaN, NaN and ``"n/a"``)."""
+    scale = np.where(scales == 0.0, 1.0, scales)
+    with np.errstate(invalid="ignore"):
+        verdict = np.where(largest <= LYAPUNOV_RATE_TOLERANCE * scale, "pass", "fail").astype(object)
+    verdict[~enough] = "n/a"
+    return {"lyapunov_rate_mismatch": np.where(enough, largest, np.nan),
+            "lyapunov_rate_mismatch_relative": np.where(enough, largest / scale, np.nan),
+            "lyapunov_rate_check": verdict}
 
 
 def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
@@ -493,7 +505,7 @@ def short_stencils(time: np.ndarray) -> np.ndarray:
     return short
 
 
-def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) -> dict[str, list]:
+def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) -> dict[str, np.ndarray]:
     """:func:`summary_table`'s columns from streamed accumulators.
 
     Parameters
@@ -507,35 +519,23 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     layout : rbstab.layout.StateLayout
         The runs' state layout (which state blocks have a ``final_`` figure).
     """
-    k = acc.shape[0]
     taken = acc[:, TAKEN].astype(np.int64)
     last_index = np.maximum(taken - 1, 0)
-    table: dict[str, list] = {"t_final": time[last_index].tolist()}
+    table: dict[str, np.ndarray] = {"t_final": time[last_index]}
     for b in STATE_BLOCKS:
         if b == "controller_state" and b not in layout.blocks:
             continue
         q = OUTPUTS[b]
-        table[f"final_{b}"] = last[:, q.offset: q.offset + 3].tolist()
+        table[f"final_{b}"] = last[:, q.offset: q.offset + 3].copy()
     none = taken == 0
-    error = np.where(none[:, None], np.nan, acc[:, MAX_ERROR: MAX_ERROR + 3])
-    table["max_abs_constraint_error"] = error.tolist()
-    table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL]).tolist()
-    table["lyapunov_final"] = last[:, _V_AT].tolist()
-    table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE]).tolist()
-    table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE]).tolist()
-    nan = float("nan")
-    mismatch, relative, verdict = [nan] * k, [nan] * k, ["n/a"] * k
+    table["max_abs_constraint_error"] = np.where(none[:, None], np.nan, acc[:, MAX_ERROR: MAX_ERROR + 3])
+    table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL])
+    table["lyapunov_final"] = last[:, _V_AT].copy()
+    table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
+    table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
     span = time[last_index] - time[0]
     with np.errstate(all="ignore"):
         scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
-    for j in range(k):
-        if taken[j] >= MIN_CHECK_SAMPLES and np.isfinite(acc[j, MAX_MISMATCH]):
-            scale = float(scales[j]) or 1.0
-            largest = float(acc[j, MAX_MISMATCH])
-            mismatch[j] = largest
-            relative[j] = largest / scale
-            verdict[j] = "pass" if largest <= LYAPUNOV_RATE_TOLERANCE * scale else "fail"
-    table["lyapunov_rate_mismatch"] = mismatch
-    table["lyapunov_rate_mismatch_relative"] = relative
-    table["lyapunov_rate_check"] = verdict
+    largest = acc[:, MAX_MISMATCH]
+    table.update(_rate_check(largest, scales, (taken >= MIN_CHECK_SAMPLES) & np.isfinite(largest)))
     return table

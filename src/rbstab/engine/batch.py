@@ -99,6 +99,10 @@ class _Fields:
     def __init__(self, templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
                  template: np.ndarray) -> None:
         self.templates, self.template, self.n = templates, np.asarray(template), len(template)
+        present = np.unique(self.template)
+        # (template, its runs) of each template the runs use
+        self.groups = [(int(t), np.flatnonzero(self.template == t)) if len(present) > 1 else (int(t), np.arange(self.n))
+                       for t in present]
         self.varied: dict[tuple[str, str], list[tuple[tuple[int, ...], np.ndarray]]] = {}
         for key in keys:
             parts = key.split(".")
@@ -111,9 +115,8 @@ class _Fields:
         3-list (its diagonal), as the configuration's loader does; ``default`` for a
         template without the field (None: a ValueError)."""
         out = None
-        for t in np.unique(self.template):
-            rows = np.flatnonzero(self.template == t)
-            written = self.templates[int(t)].get(section, {}).get(name, default)
+        for t, rows in self.groups:
+            written = self.templates[t].get(section, {}).get(name, default)
             if written is None:
                 if default is None:
                     raise ValueError(f"no {section}.{name} in template {int(t)}")
@@ -134,7 +137,11 @@ class _Fields:
 
     def text(self, section: str, name: str) -> np.ndarray:
         """A template's text field (``controller.variant``, ``simulation.method``) of every run."""
-        return np.array([t[section][name] for t in self.templates], dtype=object)[self.template]
+        return self.of_templates([t[section][name] for t in self.templates], dtype=object)
+
+    def of_templates(self, values: Sequence, dtype=None) -> np.ndarray:
+        """Each run's entry of ``values`` (a value a template)."""
+        return np.asarray(values, dtype=dtype)[self.template]
 
 
 def _inverse(matrices: np.ndarray) -> np.ndarray:
@@ -188,7 +195,7 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
         return RunBatch(np.zeros(0, PARAMETERS), np.zeros((0, MAX_STATE)), np.zeros(0, np.int64),
                         np.zeros(0, np.int64), np.zeros(0, SETTINGS), np.zeros(0, np.int64), np.zeros(0, bool))
     names = f.text("controller", "variant")
-    code = np.array([VARIANT_CODES[v] for v in names], dtype=np.int64)
+    code = f.of_templates([VARIANT_CODES[t["controller"]["variant"]] for t in templates], dtype=np.int64)
     used = {g: np.isin(names, [v for v, cls in VARIANTS.items() if g in cls.required_gains])
             for g in (*GAIN_NAMES, "k_s")}
     p = np.zeros(n, dtype=PARAMETERS)
@@ -213,14 +220,14 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
         p["k_s"][sliding] = f.get("controller", "k_s", 0.0)[sliding]
         p["boundary_layer"][sliding] = f.get("controller", "boundary_layer", 0.0)[sliding]
     p["lyapunov_offset"] = _offsets(p, names, gravity)
-    method = f.text("simulation", "method")
     settings = np.zeros(n, dtype=SETTINGS)
     for name in _SETTING_KEYS:
         value = f.get("simulation", name, np.inf) if name in ("max_step", "max_wall_time") else f.get("simulation", name)
         settings[name] = value
     if timeout is not None:
         settings["max_wall_time"] = float(timeout)
-    settings["method"] = [METHODS.index(m) if m in METHODS else NOT_COMPILED for m in method]
+    settings["method"] = f.of_templates([METHODS.index(m) if m in METHODS else NOT_COMPILED
+                                         for m in (t["simulation"]["method"] for t in templates)])
     sign_law = sliding & (p["boundary_layer"] == 0)
     return RunBatch(params=p, y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
                     variant=code, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),

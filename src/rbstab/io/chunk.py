@@ -72,6 +72,7 @@ __all__ = [
     "DEFAULT_STORE",
     "THINNED_VARIABLES",
     "StoreRow",
+    "StoreRows",
     "ChunkWriter",
     "chunk_file_name",
     "is_chunk_file",
@@ -189,30 +190,25 @@ def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def summary_table_columns(table: Mapping[str, Sequence]) -> dict[str, list]:
+def summary_table_columns(table: Mapping[str, Sequence]) -> dict[str, np.ndarray]:
     """:func:`summary_columns` of k runs at once, from :func:`rbstab.summary.summary_table`
-    (figure -> k values): column -> k values."""
-    out: dict[str, list] = {}
+    (figure -> k values, shape (k,) or (k, 3)): column -> its k values, shape (k,)."""
+    out: dict[str, np.ndarray] = {}
     for key, values in table.items():
-        if len(values) and isinstance(values[0], (list, tuple, np.ndarray)):
+        values = np.asarray(values)
+        if values.ndim == 2:
             for a, axis in enumerate(_AXES):
-                out[f"{key}_{axis}"] = [float(v[a]) for v in values]
+                out[f"{key}_{axis}"] = values[:, a]
         else:
-            out[key] = list(values)
+            out[key] = values
     return out
 
 
-def _has_text(values: list) -> bool:
+def _has_text(values: np.ndarray) -> bool:
     """Whether a ``(run,)`` column holds a str (its types looked at once: most hold numbers)."""
-    return any(issubclass(t, str) for t in set(map(type, values)) - _NUMBERS)
-
-
-def _column_bytes(values: list) -> int:
-    """About the bytes of a ``(run,)`` column: 8 a value, plus its text."""
-    n = 8 * len(values)
-    if _has_text(values):
-        n += sum(len(v) for v in values if isinstance(v, str))
-    return n
+    if values.dtype.kind in "US":
+        return True
+    return values.dtype.kind == "O" and any(issubclass(t, str) for t in set(map(type, values.tolist())) - _NUMBERS)
 
 
 def figure_attributes(column: str) -> tuple[str, str]:
@@ -251,6 +247,84 @@ class StoreRow:
     template: int = -1
 
 
+@dataclass(frozen=True)
+class StoreRows:
+    """Identity of the runs of a store file, as columns (k runs, any order).
+
+    Attributes
+    ----------
+    index : ndarray of int, shape (k,)
+        Position of each run in the sweep's run list (the ``run`` coordinate).
+    run_id, base : ndarray of object (str), shape (k,)
+    coords : dict of str to ndarray, shape (k,)
+        Parameter coordinate name -> each run's value (a number or a string; None or NaN
+        where a run has none).
+    template : ndarray of int, shape (k,)
+        Each run's template among the writer's ``templates`` (-1: none).
+    """
+
+    index: np.ndarray
+    run_id: np.ndarray
+    base: np.ndarray
+    coords: dict
+    template: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    @classmethod
+    def of(cls, rows: Sequence[StoreRow]) -> "StoreRows":
+        """The columns of ``rows``."""
+        names = dict.fromkeys(name for r in rows for name in r.coords)
+        return cls(np.array([r.index for r in rows], dtype=np.int64), _objects([r.run_id for r in rows]),
+                   _objects([r.base for r in rows]),
+                   {name: _objects([r.coords.get(name) for r in rows]) for name in names},
+                   np.array([r.template for r in rows], dtype=np.int64))
+
+    def ordered(self) -> "StoreRows":
+        """The same runs by increasing ``index`` (a file's row order)."""
+        order = np.argsort(self.index, kind="stable")
+        if np.all(order == np.arange(len(order))):
+            return self
+        return StoreRows(self.index[order], self.run_id[order], self.base[order],
+                         {name: values[order] for name, values in self.coords.items()}, self.template[order])
+
+
+def _objects(values: Sequence) -> np.ndarray:
+    """``values`` as a 1-d object array (whatever they are: str, numbers, None)."""
+    out = np.empty(len(values), dtype=object)
+    out[:] = values
+    return out
+
+
+def _merged(n: int, parts: Sequence[tuple[Any, np.ndarray]]) -> np.ndarray:
+    """A column of n rows from ``parts`` (rows, their values), later parts winning: an
+    object array (None where no part gives a value) if any part holds text, else float
+    (NaN where none does)."""
+    text = any(_has_text(np.asarray(values)) for _, values in parts)
+    column = np.full(n, None, dtype=object) if text else np.full(n, np.nan)
+    for rows, values in parts:
+        column[rows] = values if text else np.asarray(values, dtype=float)
+    return column
+
+
+def _as_stored(name: str, values: np.ndarray) -> np.ndarray:
+    """A ``(run,)`` column as a store file holds it: text as str (an object array, "" for
+    None), numbers as float (None -> NaN), solver counts as int where every run has one."""
+    if name in _TEXT or _has_text(values):
+        text = np.asarray(values, dtype=object)
+        return np.where(text == None, "", text)  # noqa: E711
+    data = np.asarray(values, dtype=float)
+    if name.startswith("solver_") and np.all(np.isfinite(data)):
+        data = data.astype(np.int64)
+    return data
+
+
+def _plain_value(value: Any) -> Any:
+    """A numpy scalar as the Python number it holds; anything else as it is."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def chunk_file_name(first_run_id: str) -> str:
     """``chunk-<first_run_id>-<8 random hex>.h5``: unique, sorted by run order."""
     return f"chunk-{first_run_id}-{uuid.uuid4().hex[:8]}.h5"
@@ -287,7 +361,7 @@ class ChunkWriter:
         parameter coordinates set at their ``config_key`` (:func:`resolved_config`).
     """
 
-    def __init__(self, path: str | os.PathLike, rows: Sequence[StoreRow], *, store: str = DEFAULT_STORE,
+    def __init__(self, path: str | os.PathLike, rows: Sequence[StoreRow] | StoreRows, *, store: str = DEFAULT_STORE,
                  parameters: Mapping[str, str] | None = None, command_line: str | None = None,
                  sweep: str = "", templates: Sequence[Mapping] = ()) -> None:
         if store not in STORES:
@@ -295,12 +369,13 @@ class ChunkWriter:
         self.path = Path(path)
         self.store = store
         self.parameters = dict(parameters or {})
-        ordered = sorted(rows, key=lambda r: r.index)
-        self.ids = [r.run_id for r in ordered]
-        self.position = {r.run_id: i for i, r in enumerate(ordered)}
-        self.identity = ordered
-        self._blocks: list[tuple[list[int], dict[str, list]]] = []  # (rows, column -> a value a row) added
-        self._where: list[tuple[int, int] | None] = [None] * len(ordered)  # row -> (block, position) once added
+        self.identity = (rows if isinstance(rows, StoreRows) else StoreRows.of(rows)).ordered()
+        self.ids = self.identity.run_id
+        self.position = dict(zip(self.ids.tolist(), range(len(self.ids))))
+        n = len(self.ids)
+        self._blocks: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []  # (rows, column -> a value a row) added
+        self._block_of = np.full(n, -1, dtype=np.int64)  # row -> its block once added
+        self._place = np.zeros(n, dtype=np.int64)  # row -> its position in its block
         self._pending: list[int] = []  # rows whose traces are in the buffer's first rows, in that order
         self._buffer: dict[str, np.ndarray] = {}  # variable -> (rows, *trace shape), written at each flush
         self._stack = ExitStack()
@@ -341,7 +416,7 @@ class ChunkWriter:
         f.dimensions["axis"] = 3
         # coordinates first: a variable created later attaches to them once (h5netcdf
         # re-attaches every variable of a dimension whose coordinate comes after them)
-        self._numbers["run"] = np.array([r.index for r in self.identity], dtype=np.int64)
+        self._numbers["run"] = self.identity.index
         run = f.create_variable("run", ("run",), data=self._numbers["run"], fletcher32=True)
         run.attrs.update(variable_attributes("run"))
         self._texts["axis"] = np.array(_AXES, dtype=object)
@@ -383,50 +458,49 @@ class ChunkWriter:
         """
         from ..simulator import RunBlock  # heavy: numba
 
-        return self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash])[0]
+        self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash])
+        return self.row(self.position[run_id])
 
-    def add_block(self, run_ids: Sequence[str], block, *,
-                  config_hashes: Sequence[str | None] | None = None) -> list[dict[str, Any]]:
+    def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None) -> None:
         """Add finished runs that share their sample times (a :class:`rbstab.simulator.RunBlock`,
-        ``run_ids[j]`` its run j); returns their rows, as :meth:`add` does each.
+        ``run_ids[j]`` its run j), as :meth:`add` adds each; :meth:`columns` gives their rows.
 
         ``config_hashes``: as :meth:`add`'s, a value a run (None or "" where the caller
         has none). Raises ValueError, with no run added, for a run that is
         not a row of the file or was added already, or traces of another shape or sample
         times than the file's.
         """
-        rows = [self._row_of(run_id) for run_id in run_ids]
-        if len(set(rows)) != len(rows):
-            raise ValueError(f"{self.path.name}: a run is given twice in one block: {list(run_ids)}")
+        rows = self._rows_of(run_ids)
         values = self._block_values(block, config_hashes)
         if self.store != "summary":
             if self._time is None:
                 self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()},
                             block.stride)
-            self._keep_traces(run_ids, rows, block)
-        return self._add(rows, values)
+            self._keep_traces(run_ids, rows.tolist(), block)
+        self._add(rows, values)
 
-    def _block_values(self, block, config_hashes) -> dict[str, list]:
+    def _block_values(self, block, config_hashes) -> dict[str, np.ndarray]:
         """The per-run values of a block's runs, as columns; without templates, each run's
         configuration as text (the ``config`` column)."""
-        configs = block.configs
-        k = len(configs)
-        hashes = list(config_hashes) if config_hashes is not None else [None] * k
-        texts = [None] * k
-        for j, config in enumerate(configs):
-            if "run_templates" not in self.attrs:
-                texts[j] = canonical_config(config.resolved, limits=True)
+        k = len(block)
+        hashes = _objects(list(config_hashes) if config_hashes is not None else [None] * k)
+        texts = _objects([None] * k)
+        templates = "run_templates" in self.attrs
+        for j in [j for j, h in enumerate(hashes.tolist()) if not h] if templates else range(k):
+            resolved = block.configs[j].resolved
+            if not templates:
+                texts[j] = canonical_config(resolved, limits=True)
             if not hashes[j]:
-                hashes[j] = config_hash(canonical_config(config.resolved))
-        values: dict[str, list] = {
-            "variant": list(block.variants),
-            "status": list(block.status),
-            "message": list(block.message),
-            "wall_time": [float(w) for w in block.wall_time],
+                hashes[j] = config_hash(canonical_config(resolved))
+        values: dict[str, np.ndarray] = {
+            "variant": _objects(block.variants),
+            "status": _objects(block.status),
+            "message": _objects(block.message),
+            "wall_time": np.asarray(block.wall_time, dtype=float),
         }
         for key in _SOLVER[:-1]:
-            values[f"solver_{key}"] = [solver.get(key) for solver in block.solver]
-        values["solver_status"] = [int(solver.get("solver_status", -1)) for solver in block.solver]
+            values[f"solver_{key}"] = np.asarray(block.solver.get(key, [None] * k), dtype=float)
+        values["solver_status"] = np.asarray(block.solver.get("solver_status", [-1] * k), dtype=np.int64)
         if "run_templates" not in self.attrs:
             values["config"] = texts
         values["config_hash"] = hashes
@@ -435,39 +509,59 @@ class ChunkWriter:
 
     def add_error(self, run_id: str, message: str) -> dict[str, Any]:
         """Add a run that raised before it had a result (status ``error``, no values)."""
-        i = self._row_of(run_id)
+        rows = self._rows_of([run_id])
         if self._traces:  # its traces are NaN (before the first result: the fill value)
-            self._keep_traces([run_id], [i], None)
-        return self._add([i], {"status": ["error"], "message": [message], "wall_time": [0.0]})[0]
+            self._keep_traces([run_id], rows.tolist(), None)
+        self._add(rows, {"status": _objects(["error"]), "message": _objects([message]), "wall_time": np.zeros(1)})
+        return self.row(int(rows[0]))
 
-    def _row_of(self, run_id: str) -> int:
-        i = self.position.get(run_id)
-        if i is None or self._where[i] is not None:
-            raise ValueError(f"{self.path.name}: run {run_id!r} is not a row of this file or was added twice")
-        return i
+    def _rows_of(self, run_ids: Sequence[str]) -> np.ndarray:
+        """The rows of ``run_ids``; ValueError for one not a row, added already or given twice."""
+        try:
+            rows = np.fromiter((self.position[r] for r in run_ids), dtype=np.int64, count=len(run_ids))
+        except KeyError as exc:
+            raise ValueError(f"{self.path.name}: run {exc.args[0]!r} is not a row of this file") from None
+        added = rows[self._block_of[rows] >= 0]
+        if len(added):
+            raise ValueError(f"{self.path.name}: run {self.ids[added[0]]!r} was added twice")
+        if len(np.unique(rows)) != len(rows):
+            raise ValueError(f"{self.path.name}: a run is given twice in one block: {list(run_ids)}")
+        return rows
 
-    def _add(self, rows: list[int], values: dict[str, list]) -> list[dict[str, Any]]:
+    def _add(self, rows: np.ndarray, values: dict[str, np.ndarray]) -> None:
         """Rows ``rows`` take ``values`` (column -> a value a row); their traces, if any,
         are in the buffer already."""
-        b = len(self._blocks)
+        self._block_of[rows] = len(self._blocks)
+        self._place[rows] = np.arange(len(rows))
         self._blocks.append((rows, values))
-        for position, i in enumerate(rows):
-            self._where[i] = (b, position)
-        return [self.row(i) for i in rows]
 
     def row(self, i: int) -> dict[str, Any]:
         """Row ``i`` as :func:`read_chunk_rows` reads it back."""
-        ident = self.identity[i]
-        out = {"run": ident.index, "run_id": ident.run_id, "base": ident.base, **ident.coords}
-        if self._where[i] is not None:
-            b, position = self._where[i]
+        ident = self.identity
+        out = {"run": int(ident.index[i]), "run_id": ident.run_id[i], "base": ident.base[i],
+               **{name: _plain_value(values[i]) for name, values in ident.coords.items()}}
+        b = self._block_of[i]
+        if b >= 0:
             for name, values in self._blocks[b][1].items():
-                out[name] = values[position]
+                out[name] = _plain_value(values[self._place[i]])
         out["store"] = self.store
         out["created"] = self.attrs["created"]
         out["file"] = self.path.name
         out["file_row"] = i
         return out
+
+    def columns(self) -> dict[str, np.ndarray]:
+        """The rows added so far as columns (a value a row of the file, in row order; NaN or
+        None where a row has none yet): what :func:`read_chunk_columns` reads back (``run``,
+        ``run_id``, ``base``, the coordinates, the per-run values but ``config``,
+        ``created``, ``file``, ``file_row``)."""
+        columns = {"run": self.identity.index}
+        columns.update((k, _as_stored(k, v)) for k, v in self._columns().items() if k != "config")
+        n = len(self.ids)
+        columns["created"] = np.full(n, self.attrs["created"], dtype=object)
+        columns["file"] = np.full(n, self.path.name, dtype=object)
+        columns["file_row"] = np.arange(n)
+        return columns
 
     # -- traces -------------------------------------------------------------------------------
 
@@ -578,18 +672,17 @@ class ChunkWriter:
     # -- the per-run values -------------------------------------------------------------------
 
     def _finish(self) -> None:
-        missing = [self.ids[i] for i, where in enumerate(self._where) if where is None]
-        if missing:
-            raise ValueError(f"{self.path.name}: no result for {len(missing)} run(s), e.g. {missing[0]}")
+        missing = np.flatnonzero(self._block_of < 0)
+        if len(missing):
+            raise ValueError(f"{self.path.name}: no result for {len(missing)} run(s), e.g. {self.ids[missing[0]]}")
         self._flush()
         f = self._file
-        columns = self._columns()
-        # 8 bytes a value, plus the text (the config column is most of it)
-        self._room(sum(map(_column_bytes, columns.values())))
+        columns = {name: self._variable(name, values) for name, values in self._columns().items()}
+        self._room(sum(data.nbytes for data, _ in columns.values()))
         self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         self._run_scale = f._h5file["run"].id
-        for name, values in columns.items():
-            self._write_column(name, values)
+        for name, (data, chars) in columns.items():
+            self._write_column(name, data, chars)
         for name in self._traces:
             _put_attributes(self._datasets[name].id, {"coordinates": self._coordinates}, self._written[f"/{name}"])
         h5 = f._h5file
@@ -607,39 +700,39 @@ class ChunkWriter:
             return data_digest_of(self._numbers)
         return data_digest(self._file._h5file, self.path)
 
-    def _columns(self) -> dict[str, list]:
+    def _columns(self) -> dict[str, np.ndarray]:
         """Name -> a value per row: ``run_id``, ``base``, the coordinates, then the values
-        (a value of the same name as a coordinate wins; None where a row has neither)."""
+        (a value of the same name as a coordinate wins; None or NaN where a row has neither)."""
+        ident = self.identity
         names: dict[str, None] = dict.fromkeys(_COORDS)
         names.update(dict.fromkeys(self.parameters))
-        seen: set = set()  # key sets met (the rows of a file have a few)
-        for ident, (b, _) in zip(self.identity, self._where):
-            keys = (tuple(ident.coords), tuple(self._blocks[b][1]))
-            if keys not in seen:
-                seen.add(keys)
-                names.update(dict.fromkeys(keys[0]))
-                names.update(dict.fromkeys(keys[1]))
-        coordinates = {name for ident in self.identity for name in ident.coords}
-        columns: dict[str, list] = {"run_id": [i.run_id for i in self.identity], "base": [i.base for i in self.identity]}
+        names.update(dict.fromkeys(ident.coords))
+        first_row = [int(rows.min()) if len(rows) else 0 for rows, _ in self._blocks]
+        for b in sorted(range(len(self._blocks)), key=first_row.__getitem__):  # the values' names in row order
+            names.update(dict.fromkeys(self._blocks[b][1]))
+        columns: dict[str, np.ndarray] = {"run_id": ident.run_id, "base": ident.base}
         if "run_templates" in self.attrs:
-            columns["template"] = [i.template for i in self.identity]
+            columns["template"] = ident.template
             names["template"] = None
-        # (rows, values, the rows' span if they are consecutive) of each block added
-        blocks = [(rows, values, slice(rows[0], rows[-1] + 1) if rows == list(range(rows[0], rows[-1] + 1)) else None)
-                  for rows, values in self._blocks]
+        n = len(self.ids)
         for name in names:
             if name in columns:
                 continue
-            column = [i.coords.get(name) for i in self.identity] if name in coordinates else [None] * len(self.ids)
-            for rows, values, span in blocks:
-                if name in values:
-                    if span is not None:
-                        column[span] = values[name]
-                    else:
-                        for i, value in zip(rows, values[name]):
-                            column[i] = value
-            columns[name] = column
+            parts = [(slice(None), ident.coords[name])] if name in ident.coords else []
+            parts += [(rows, values[name]) for rows, values in self._blocks if name in values]
+            columns[name] = _merged(n, parts)
         return {name: columns[name] for name in names}
+
+    def _variable(self, name: str, values: np.ndarray) -> tuple[np.ndarray, str | None]:
+        """The data of a ``(run,)`` variable (:func:`_as_stored`; text as characters,
+        :meth:`_characters`) and the name of its character dimension (None for numbers)."""
+        data = _as_stored(name, values)
+        if data.dtype == object:
+            data, chars = self._characters(data)
+            self._texts[name] = data
+            return data, chars
+        self._numbers[name] = data
+        return data, None
 
     def _column_kind(self, dtype: np.dtype) -> tuple:
         """(HDF5 type, dataset creation properties) of a ``(run,)`` variable of ``dtype``,
@@ -667,13 +760,17 @@ class ChunkWriter:
             self._kinds[kind] = tid, dcpl
         return self._kinds[kind]
 
-    def _characters(self, values: list) -> tuple[np.ndarray, str]:
-        """Text values as characters: an array (run, width) of ``S1`` (UTF-8, NUL-padded,
+    def _characters(self, values: np.ndarray) -> tuple[np.ndarray, str]:
+        """Text values (str) as characters: an array (run, width) of ``S1`` (UTF-8, NUL-padded,
         what netCDF calls ``char`` and xarray decodes to str by ``_Encoding``), and the name
         of its second dimension ``string<width>``, created if new."""
-        encoded = [("" if v is None else str(v)).encode("utf-8") for v in values]
-        width = max(1, max(map(len, encoded), default=1))
-        data = np.array(encoded, dtype=f"S{width}").view("S1").reshape(len(encoded), width)
+        text = np.asarray(values, dtype=object).astype(str)
+        try:
+            encoded = text.astype(bytes)  # ASCII (as a rule): numpy's cast, many times faster
+        except UnicodeEncodeError:
+            encoded = np.char.encode(text, "utf-8")
+        width = max(1, encoded.dtype.itemsize)
+        data = encoded.astype(f"S{width}").view("S1").reshape(len(encoded), width)
         dim = f"string{width}"
         if dim not in self._file.dimensions:
             self._file.dimensions[dim] = width
@@ -693,24 +790,15 @@ class ChunkWriter:
         dcpl.set_fletcher32()
         return h5py.h5t.py_create(np.dtype("S1")), dcpl
 
-    def _write_column(self, name: str, values: list) -> None:
-        """A ``(run,)`` variable: a dataset with the ``run`` dimension scale attached, which is
-        what netCDF-4 and h5netcdf read as a variable of dimension ``run``
-        (tests/test_netcdf_c.py). Through h5py's low-level API: ~0.5 ms a variable, its
-        attributes included, against ~1.1 ms with ``create_dataset`` and ``attrs`` and
-        ~3 ms with h5netcdf's ``create_variable``."""
+    def _write_column(self, name: str, data: np.ndarray, chars: str | None) -> None:
+        """A ``(run,)`` variable (``data`` from :meth:`_variable`): a dataset with the ``run``
+        dimension scale attached, which is what netCDF-4 and h5netcdf read as a variable of
+        dimension ``run`` (tests/test_netcdf_c.py). Through h5py's low-level API: ~0.5 ms a
+        variable, its attributes included, against ~1.1 ms with ``create_dataset`` and
+        ``attrs`` and ~3 ms with h5netcdf's ``create_variable``."""
         import h5py  # heavy: h5py
 
         h5 = self._file._h5file
-        chars = None
-        if name in _TEXT or _has_text(values):
-            data, chars = self._characters(values)
-            self._texts[name] = data
-        else:
-            data = np.array(values, dtype=float)  # None -> NaN
-            if name.startswith("solver_") and np.all(np.isfinite(data)):
-                data = data.astype(np.int64)
-            self._numbers[name] = data
         tid, dcpl = self._column_kind(data.dtype) if chars is None else self._character_kind(data.shape)
         dsid = h5py.h5d.create(h5.id, name.encode(), tid, h5py.h5s.create_simple(data.shape), dcpl=dcpl)
         dsid.write(h5py.h5s.ALL, h5py.h5s.ALL, data)

@@ -46,7 +46,7 @@ import yaml
 
 from .. import __version__
 from ..config import dump_yaml
-from .executors import Executor, make_executor
+from .executors import Executor, default_jobs, make_executor
 from ..io.atomic import atomic_path, write_bytes_atomic, write_text_atomic
 from .folder import (
     DEFAULT_LAYOUT,
@@ -78,6 +78,11 @@ SUMMARY_CHUNK_SIZE = 8192
 #: Runs per chunk of a ``--store summary`` sweep on the GPU (``--engine cuda``: one launch
 #: a chunk; other stores take ``DEFAULT_CHUNK_SIZE["cuda"]``, their traces in host memory).
 CUDA_SUMMARY_CHUNK_SIZE = 131072
+
+#: Worker processes of a ``--engine cuda`` sweep by default (at most the CPU count): the
+#: GPU integrates a run in ~0.5 us, its worker spends ~15-20 us a run on the host (the
+#: batch's records, the store file and its rows), so several workers share one GPU.
+CUDA_JOBS = 4
 
 #: Chunks per worker a sweep is cut into at least (when chunks of STORE_CHUNK_SIZE runs
 #: would give fewer), so that the workers finish together. (One chunk per worker, fewer
@@ -416,12 +421,18 @@ def run_sweep(
                             engine=engine, store=store, layout=layout, parameters=table.parameters(),
                             sweep=spec.name)
     outcome = SweepOutcome(spec.name, Path(output) / spec.name, spec.n_runs, engine=engine)
-    jobs = 1 if engine == "cuda" and jobs is None else jobs  # one process drives the GPU
+    jobs = cuda_jobs() if engine == "cuda" and jobs is None else jobs
     with _executor(executor, jobs, scheduler) as ex:
         (outcome.directory / RUNS_DIR).mkdir(parents=True, exist_ok=True)
         _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
                     say=log or (lambda message: None), options=options)
     return outcome
+
+
+def cuda_jobs() -> int:
+    """Worker processes of a ``--engine cuda`` sweep by default: :data:`CUDA_JOBS`, at most
+    the CPU count (:func:`rbstab.sweep.executors.default_jobs`)."""
+    return min(CUDA_JOBS, default_jobs())
 
 
 def _executor(executor: str | Executor, jobs: int | None, scheduler: str | None):
@@ -575,8 +586,8 @@ def _take(result, part, results: list, errors: dict, outcome: SweepOutcome, coun
     for path, data in result.data.items():
         write_bytes_atomic(path, data)
     frame = result.frame
-    position = dict(zip(part.run_id.tolist(), part.index.tolist()))
-    frame["run"] = frame["run_id"].map(position)
+    if "run" not in frame:  # rows of run files: their position from the run ids
+        frame["run"] = frame["run_id"].map(dict(zip(part.run_id.tolist(), part.index.tolist())))
     raised = (frame["status"] == "error").to_numpy()
     errors.update(zip(frame["run_id"][raised], frame["message"][raised].fillna("").replace("", "no result file was written")))
     results.append(frame[~raised])

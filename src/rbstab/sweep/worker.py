@@ -1,7 +1,8 @@
-"""The unit of work an executor runs: a chunk of runs in, a list of records out.
+"""The unit of work an executor runs: a chunk of runs in, their index rows out.
 
-:func:`run_chunk` is the one function every executor (local process pool, Dask) calls, so
-a run gives the same bits wherever it executes. Each run is simulated and its result file
+:func:`run_table_chunk` is the one function every executor (local process pool, Dask)
+calls, so a run gives the same bits wherever it executes; :func:`run_chunk` runs tasks
+given one by one. Each run is simulated and its result file
 written by the worker itself, so a sweep whose parent dies loses no finished run. A
 failed run (solver failure, gimbal lock, non-finite state, timeout) is a record with its
 status and message; an unexpected exception is a record with status ``"error"``.
@@ -27,14 +28,14 @@ Both engines hand each finished run (the compiled engine a block of runs,
 :class:`rbstab.simulator.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
 one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
 writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
-into place when the whole chunk is done. Either way the record carries the run's
-attributes as the parent would read them back (``record["attrs"]``), so the parent need
-not reopen any file, and resume and the index work the same.
+into place when the whole chunk is done. Either way a chunk's result
+(:class:`ChunkResult`) carries its runs' index rows as the parent would read them back
+from the files (a store file's rows are its columns, :meth:`rbstab.io.chunk.ChunkWriter.columns`),
+so the parent need not reopen any file, and resume and the index work the same.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import sys
 import tempfile
@@ -149,8 +150,9 @@ def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:
 class _RunFiles:
     """Where finished runs go with ``layout="run"``: one file per run (``task.path``)."""
 
-    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> None:
+    def __init__(self, rows, options: WorkerOptions, templates: Sequence[dict] = (), folder: str = "") -> None:
         self.options = options
+        self.folder = folder
 
     def __enter__(self) -> "_RunFiles":
         return self
@@ -161,7 +163,7 @@ class _RunFiles:
     def add(self, task: RunTask, result) -> dict[str, Any]:
         """Write ``result``'s file (or its bytes); the record of a finished run."""
         from ..io.hdf5 import write_run  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-        from .folder import row_from_attributes  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
+        from .folder import index_part, row_from_attributes  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
         options = self.options
         record = _result_record(task, task.path, result)
@@ -177,10 +179,12 @@ class _RunFiles:
         else:
             attrs = write_run(result, task.path, command_line=options.command_line, store=options.store,
                               config_yaml=config_yaml, config_hash=task.config_hash or None)
-        row = row_from_attributes(attrs, Path(task.path).name)
-        return _finished(record, result.timing, row, t1 - t0, _time.perf_counter() - t1)
+        # the row as the index takes it: the config text stays in the file, not in the parent
+        record["attrs"] = index_part(row_from_attributes(attrs, Path(task.path).name))
+        record["timing"] = {**result.timing, "config_yaml": t1 - t0, "write": _time.perf_counter() - t1}
+        return record
 
-    def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
+    def add_tasks(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
         """:meth:`add` of each run of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run
         j); a file that cannot be written is that run's error."""
         return _each_run(self, tasks, block)
@@ -188,18 +192,8 @@ class _RunFiles:
     def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
         return _error_record(task, exc)
 
-
-def _finished(record: dict[str, Any], timing: dict, row: dict, yaml_time: float, write_time: float) -> dict[str, Any]:
-    """``record`` (``run_id``, ``path``, ``status``, ``message``, ``wall_time``) of a
-    written run, with its row as the index takes it and its ``timing``."""
-    from .folder import index_part  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
-    timing = dict(timing)
-    timing["config_yaml"] = yaml_time
-    timing["write"] = write_time
-    # the row as the index takes it: the config text stays in the file, not in the parent
-    record.update(attrs=index_part(row), timing=timing)
-    return record
+    def result(self, records: list[dict[str, Any]]) -> "ChunkResult":
+        return _chunk_result(records, self.folder)
 
 
 def _result_record(task: RunTask, path: str, result) -> dict[str, Any]:
@@ -207,25 +201,33 @@ def _result_record(task: RunTask, path: str, result) -> dict[str, Any]:
             "wall_time": result.wall_time}
 
 
+#: Columns of a store file's rows that the index takes from the table of runs instead.
+_FROM_TABLE = ("base", "template", "config", "store")
+
+
 class _ChunkFile:
     """Where finished runs go with ``layout="chunk"``: one store file for the chunk
-    (:class:`rbstab.io.chunk.ChunkWriter`), ``runs/chunk-<first run id>-<random>.h5`` in
-    the folder of the tasks' paths. Records name the store file as their ``path``; their
-    ``attrs`` are the run's row (:func:`rbstab.io.chunk.read_chunk_rows`)."""
+    (:class:`rbstab.io.chunk.ChunkWriter`), ``chunk-<first run id>-<random>.h5`` in
+    ``folder``. Its index rows are the file's columns (:meth:`ChunkWriter.columns`), so a
+    block of runs goes in and out as columns; the records of runs added one by one carry
+    only their timing, a traceback or an errno."""
 
-    def __init__(self, tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> None:
-        from ..io.chunk import ChunkWriter, StoreRow, chunk_file_name  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
+    def __init__(self, rows, options: WorkerOptions, templates: Sequence[dict] = (), folder: str = "") -> None:
+        import numpy as np  # heavy: numpy
+
+        from ..io.chunk import ChunkWriter, chunk_file_name  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
         self.options = options
-        first = min(tasks, key=lambda t: t.index)
-        name = chunk_file_name(first.run_id)
-        self.final = str(Path(first.path).parent / name)
+        self.rows = rows
+        self.folder = folder
+        name = chunk_file_name(str(rows.run_id[int(np.argmin(rows.index))]))
+        self.final = str(Path(folder) / name)
         self._tmp = tempfile.TemporaryDirectory(prefix="rbstab-") if options.return_bytes else None
         where = Path(self._tmp.name) / name if self._tmp else Path(self.final)
-        rows = [StoreRow(t.index, t.run_id, t.base, t.coords, t.template) for t in tasks]
         self.writer = ChunkWriter(where, rows, store=options.store, parameters=options.parameters,
                                   command_line=options.command_line, sweep=options.sweep, templates=templates)
-        self.records: list[dict[str, Any]] = []
+        self.timing: dict[str, float] = {}
+        self.data: dict[str, bytes] = {}
 
     def __enter__(self) -> "_ChunkFile":
         self.writer.__enter__()
@@ -234,39 +236,55 @@ class _ChunkFile:
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
             self.writer.__exit__(exc_type, exc, tb)
-            if self._tmp is not None and exc_type is None and self.records:
-                self.records[0]["data"] = self.writer.path.read_bytes()
+            if self._tmp is not None and exc_type is None:
+                self.data[self.final] = self.writer.path.read_bytes()
         finally:
             if self._tmp is not None:
                 self._tmp.cleanup()
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         t0 = _time.perf_counter()
-        row = self.writer.add(task.run_id, result, config_hash=task.config_hash or None)
-        record = _finished(_result_record(task, self.final, result), result.timing, row, 0.0,
-                           _time.perf_counter() - t0)
-        self.records.append(record)
+        self.writer.add(task.run_id, result, config_hash=task.config_hash or None)
+        record = _result_record(task, self.final, result)
+        record["timing"] = {**result.timing, "config_yaml": 0.0, "write": _time.perf_counter() - t0}
         return record
 
-    def add_block(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """The runs of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run j) into the
-        file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); their records."""
+    def add_block(self, run_ids: Sequence[str], block, config_hashes: Sequence[str], config_time: float) -> None:
+        """The runs of a :class:`rbstab.simulator.RunBlock` (``run_ids[j]`` its run j) into
+        the file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); ``config_time``:
+        seconds a run spent on its configuration."""
+        import numpy as np  # heavy: numpy
+
         t0 = _time.perf_counter()
-        rows = self.writer.add_block([t.run_id for t in tasks], block,
-                                     config_hashes=[t.config_hash for t in tasks])
-        share = (_time.perf_counter() - t0) / len(tasks)
-        records = []
-        for j, (task, row) in enumerate(zip(tasks, rows)):
-            record = {"run_id": task.run_id, "path": self.final, "status": block.status[j],
-                      "message": block.message[j], "wall_time": block.wall_time[j]}
-            records.append(_finished(record, block.timing[j], row, 0.0, share))
-        self.records += records
-        return records
+        self.writer.add_block(run_ids, block, config_hashes=config_hashes)
+        timing = {key: float(np.sum(values)) for key, values in block.timing.items()}
+        timing.update(config=config_time * len(block), config_yaml=0.0, write=_time.perf_counter() - t0)
+        for key, seconds in timing.items():
+            self.timing[key] = self.timing.get(key, 0.0) + seconds
+
+    def add_tasks(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
+        """:meth:`add_block` of a block's runs, ``tasks[j]`` its run j."""
+        self.add_block([t.run_id for t in tasks], block, [t.config_hash for t in tasks], 0.0)
+        return []
 
     def error(self, task: RunTask, exc: BaseException) -> dict[str, Any]:
         record = _error_record(task, exc)
         self.writer.add_error(task.run_id, record["message"])
         return record
+
+    def result(self, records: list[dict[str, Any]]) -> "ChunkResult":
+        """The chunk's :class:`ChunkResult` once the file is written: its rows from the file's
+        columns; tracebacks, errnos and timing from ``records``."""
+        import pandas as pd  # heavy: pandas
+
+        columns = self.writer.columns()
+        frame = pd.DataFrame({name: values for name, values in columns.items()
+                              if name not in _FROM_TABLE and name not in self.rows.coords})
+        out = _chunk_result(records, self.folder, frame=frame)
+        for key, seconds in self.timing.items():
+            out.timing[key] = out.timing.get(key, 0.0) + seconds
+        out.data.update(self.data)
+        return out
 
 
 #: ``layout`` -> how a worker stores the runs of a chunk.
@@ -375,7 +393,7 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     """The records of a block's runs, stored by ``sink``; if the block cannot be stored at
     once, each run alone (one that cannot be written is that run's error)."""
     try:
-        records = sink.add_block(tasks, block)
+        records = sink.add_tasks(tasks, block)
     except Exception:  # the sink added none of them (ChunkWriter.add_block checks first)
         records = _each_run(sink, tasks, block)
     for record in records:
@@ -398,13 +416,14 @@ ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, A
 DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256, "cuda": 8192}
 
 
-def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = (), *,
-              batch=None, part=None) -> list[dict[str, Any]]:
-    """Execute a chunk of runs; the function every executor submits.
+def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> "ChunkResult":
+    """Execute a chunk of runs given one by one (see :func:`run_table_chunk` for a slice
+    of a sweep's table of runs, what the executors run).
 
     Parameters
     ----------
     tasks : sequence of RunTask
+        Their files go into the folder of ``tasks[0].path``.
     options : WorkerOptions
     templates : sequence of dict
         The configurations the tasks start from (``RunTask.template``), stored once in a
@@ -412,34 +431,34 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Seque
 
     Returns
     -------
-    list of dict
-        One record per task: ``run_id``, ``path``, ``status`` (``"success"``,
-        ``"failed"`` or ``"error"``), ``message``, ``wall_time`` [s], and ``data`` (the
-        file's bytes) when ``options.return_bytes``; ``traceback`` for an error;
-        for a written file ``attrs`` (its global attributes, as
-        :func:`rbstab.io.hdf5.read_attributes` returns them) and ``timing`` (seconds
-        spent on ``config``, ``integration``, ``postprocess``, ``config_yaml`` (the
-        config's YAML text for the file) and ``write`` (the HDF5 file));
-        ``worker_peak_rss``, the worker process's peak resident set size [bytes].
-
-    With ``batch`` (``(RunBatch, rows, seconds a run to build it)``, from
-    :func:`run_table_chunk`), the tasks at those rows are integrated from the batch (their
-    ``config`` unused) and the others by ``options.engine``; ``part``, the table slice
-    of the tasks, builds the configuration of a batch run that has to go alone.
+    ChunkResult
+        A row per task, any order.
     """
+    from ..io.chunk import StoreRow, StoreRows  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
+
+    rows = StoreRows.of([StoreRow(t.index, t.run_id, t.base, t.coords, t.template) for t in tasks])
+    folder = str(Path(tasks[0].path).parent) if tasks else ""
+    return _execute(rows, tasks, options, templates, folder)
+
+
+def _execute(rows, tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict], folder: str,
+             batch=None, part=None) -> "ChunkResult":
+    """The runs of a chunk (``rows``, :class:`rbstab.io.chunk.StoreRows`) into ``folder``:
+    ``tasks`` by ``options.engine``; with ``batch`` (``(RunBatch, rows of the slice ``part``,
+    seconds a run to build it)``), those rows from the batch first."""
     try:
-        with SINKS[options.layout](tasks, options, templates) as sink:
-            records, alone = _batch_records(tasks, *batch, options, sink, part) if batch is not None else ([], [])
-            fast = set(map(int, batch[1])) - set(alone) if batch is not None else set()
-            rest = [task if j not in alone else dataclasses.replace(task, config=part.resolved(j))
-                    for j, task in enumerate(tasks) if j not in fast]
-            records += ENGINES[options.engine](rest, options, sink)
+        with SINKS[options.layout](rows, options, templates, folder) as sink:
+            records: list[dict[str, Any]] = []
+            if batch is not None:
+                alone = _batch_into(sink, *batch, options, part)
+                tasks = [*tasks, *(_task(part, j, folder, resolved=True) for j in alone)]
+            records += ENGINES[options.engine](tasks, options, sink)
+        result = sink.result(records)
     except Exception as exc:  # the chunk's file could not be written: each of its runs is an error
-        records = [_error_record(task, exc) for task in tasks]
-    rss = _peak_rss()
-    for record in records:
-        record["worker_peak_rss"] = rss
-    return records
+        records = [_error_record(RunTask(rid, {}, os.path.join(folder, f"{rid}.h5")), exc) for rid in rows.run_id]
+        result = _chunk_result(records, folder)
+    result.worker_peak_rss = _peak_rss()
+    return result
 
 
 def _peak_rss() -> int | None:
@@ -486,19 +505,22 @@ class ChunkResult:
 
 def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResult:
     """Run the runs of a :class:`rbstab.sweep.table.TableSlice` and return their index rows
-    as columns.
+    as columns: the function every executor submits, so a run gives the same bits wherever
+    it executes.
 
     With the compiled or cuda engine and store files (``layout="chunk"``), the slice becomes one
     :class:`rbstab.engine.RunBatch` (:meth:`~rbstab.sweep.table.TableSlice.batch`: the
     parameter records, initial states and settings of every run at once) integrated by
-    :func:`rbstab.simulator.simulate_batch`; the runs it does not take (implicit methods,
-    the pure sign law), and every run with the scipy engine or one file per run, are built
-    as configurations one by one (from their template and row) and run as :func:`run_chunk`
-    runs them.
+    :func:`rbstab.simulator.simulate_batch` and written as columns: nothing is made per run.
+    The runs it does not take (implicit methods, the pure sign law), and every run with the
+    scipy engine or one file per run, are built as configurations one by one (from their
+    template and row) and run as :func:`run_chunk` runs them.
 
     ``folder``: the sweep's ``runs/`` folder (store files and run files go there).
     """
     import numpy as np  # heavy: numpy
+
+    from ..io.chunk import StoreRows  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     t0 = _time.perf_counter()
     batch = _table_batch(part, options)
@@ -506,13 +528,18 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
     build = (_time.perf_counter() - t0) / max(len(fast), 1)
     slow = np.ones(len(part), dtype=bool)
     slow[fast] = False
-    tasks = [RunTask(rid, part.resolved(j) if slow[j] else {}, os.path.join(folder, f"{rid}.h5"),
-                     int(part.index[j]), str(part.base[j]),
-                     {name: _scalar(values[j]) for name, values in part.coords.items()}, str(part.config_hash[j]),
-                     int(part.template[j]))
-             for j, rid in enumerate(part.run_id.tolist())]
-    records = run_chunk(tasks, options, part.templates, batch=(batch, fast, build) if len(fast) else None, part=part)
-    return _chunk_result(records, folder)
+    tasks = [_task(part, j, folder, resolved=True) for j in np.flatnonzero(slow).tolist()]
+    rows = StoreRows(np.asarray(part.index, dtype=np.int64), np.asarray(part.run_id, dtype=object),
+                     np.asarray(part.base, dtype=object), dict(part.coords), np.asarray(part.template, dtype=np.int64))
+    return _execute(rows, tasks, options, part.templates, folder, (batch, fast, build) if len(fast) else None, part)
+
+
+def _task(part, j: int, folder: str, *, resolved: bool) -> RunTask:
+    """Run ``j`` of a table slice as a :class:`RunTask` (its configuration built if ``resolved``)."""
+    rid = str(part.run_id[j])
+    return RunTask(rid, part.resolved(j) if resolved else {}, os.path.join(folder, f"{rid}.h5"), int(part.index[j]),
+                   str(part.base[j]), {name: _scalar(values[j]) for name, values in part.coords.items()},
+                   str(part.config_hash[j]), int(part.template[j]))
 
 
 def _table_batch(part, options: WorkerOptions):
@@ -527,39 +554,42 @@ def _table_batch(part, options: WorkerOptions):
         return None
 
 
-def _batch_records(tasks: Sequence[RunTask], batch, fast, build: float, options: WorkerOptions, sink, part
-                   ) -> tuple[list[dict[str, Any]], list[int]]:
-    """The records of the runs ``fast`` of ``batch`` (``tasks[j]`` run j), integrated by
-    :func:`rbstab.simulator.simulate_batch` and stored by ``sink``; and the runs it did not
-    finish (an exception of the batch as a whole, a bug: they go one by one)."""
+def _batch_into(sink, batch, fast, build: float, options: WorkerOptions, part) -> list[int]:
+    """The runs ``fast`` of ``batch`` (rows of the slice ``part``), integrated by
+    :func:`rbstab.simulator.simulate_batch` and stored by ``sink`` (a :class:`_ChunkFile`)
+    as blocks; returns the runs it did not finish (an exception of the batch as a whole, a
+    bug: they go one by one)."""
+    import numpy as np  # heavy: numpy
+
     from ..simulator import simulate_batch  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
-    records: list[dict[str, Any]] = []
-    done: set[int] = set()
+    done = np.zeros(len(part), dtype=bool)
     try:
         for rows, block in simulate_batch(batch, fast, full=options.store == "full", engine=options.engine,
                                           keep=KEEP_OF_STORE[options.store]):
-            done.update(rows)
-            records += _add_block(sink, [tasks[j] for j in rows], block, build)
+            sink.add_block(part.run_id[rows], block, part.config_hash[rows], build)
+            done[rows] = True
     except Exception:
-        return records, [int(j) for j in fast if j not in done]
-    return records, []
+        return [int(j) for j in fast if not done[j]]
+    return []
 
 
-def _chunk_result(records: list[dict[str, Any]], folder: str) -> ChunkResult:
-    """The :class:`ChunkResult` of a chunk's records."""
+def _chunk_result(records: list[dict[str, Any]], folder: str, frame=None) -> ChunkResult:
+    """The :class:`ChunkResult` of a chunk's records (its rows from their ``attrs``, unless
+    ``frame`` gives them)."""
     import pandas as pd  # heavy: pandas
 
     from ..sweep.folder import NOT_IN_INDEX  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
 
     rows, data, tracebacks, timing, errno = [], {}, {}, {}, None
     for rec in records:
-        row = {k: v for k, v in (rec.get("attrs") or {}).items() if k not in NOT_IN_INDEX and k != "created"}
-        row.update(run_id=rec["run_id"], status=rec["status"], message=rec.get("message") or "")
-        if rec.get("attrs") is None:
-            row.update(file=None, file_row=None)
-        row["created"] = (rec.get("attrs") or {}).get("created")
-        rows.append(row)
+        if frame is None:
+            row = {k: v for k, v in (rec.get("attrs") or {}).items() if k not in NOT_IN_INDEX and k != "created"}
+            row.update(run_id=rec["run_id"], status=rec["status"], message=rec.get("message") or "")
+            if rec.get("attrs") is None:
+                row.update(file=None, file_row=None)
+            row["created"] = (rec.get("attrs") or {}).get("created")
+            rows.append(row)
         if rec.get("data") is not None:
             data[rec["path"]] = rec["data"]
         if "traceback" in rec:
@@ -567,9 +597,9 @@ def _chunk_result(records: list[dict[str, Any]], folder: str) -> ChunkResult:
         errno = errno or rec.get("errno")
         for key, seconds in (rec.get("timing") or {}).items():
             timing[key] = timing.get(key, 0.0) + seconds
-    frame = pd.DataFrame.from_records(rows)
-    rss = records[0].get("worker_peak_rss") if records else None
-    return ChunkResult(frame, data, tracebacks, errno, folder, timing, rss)
+    if frame is None:
+        frame = pd.DataFrame.from_records(rows)
+    return ChunkResult(frame, data, tracebacks, errno, folder, timing, None)
 
 
 def _scalar(value: Any) -> Any:
