@@ -402,7 +402,8 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     return records
 
 
-#: engine name -> ``(tasks, options) -> list of records`` (one record per task, any order).
+#: engine name -> ``(tasks, options, sink) -> list of records`` (what a run's row does not
+#: carry: its timing, a traceback, an errno; any order).
 ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, Any]]]] = {
     "scipy": _scipy_engine,
     "compiled": _compiled_engine,
