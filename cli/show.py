@@ -66,11 +66,12 @@ def _spread(index, column: str) -> dict | None:
 
 
 def _parameter_values(index, column: str) -> dict:
-    """The values a varied parameter takes: up to 6 listed, else its range."""
-    values = list(dict.fromkeys(index[column].dropna().tolist()))
-    if len(values) <= 6 or not all(isinstance(v, (int, float)) for v in values):
-        return {"values": values[:6], "n_values": len(values)}
-    return {"min": min(values), "max": max(values), "n_values": len(values)}
+    """The values a varied parameter takes (an index column): the first 6 distinct ones
+    in run order, or its range (min, max) for a numeric column of more; and how many."""
+    values = index[column].dropna().unique()  # in order of appearance
+    if len(values) <= 6 or values.dtype.kind not in "biuf":
+        return {"values": values[:6].tolist(), "n_values": len(values)}
+    return {"min": values.min().item(), "max": values.max().item(), "n_values": len(values)}
 
 
 def sweep_overview(path: str) -> dict:

@@ -174,6 +174,23 @@ def test_show_summarises_a_sweep_folder(sweep_folder):
     assert info["metrics"]["lyapunov_final"]["min"] <= info["metrics"]["lyapunov_final"]["max"]
 
 
+def test_show_lists_a_parameters_values_in_run_order_or_gives_its_range():
+    import numpy as np
+    import pandas as pd
+
+    from rbstab_cli.show import _parameter_values
+
+    index = pd.DataFrame({"mass": [52.0, 30.0, np.nan, 52.0, 41.0, 30.0, 41.0], "n": [3, 1, 2, 1, 2, 3, 3],
+                          "variant": ["b", "a", "b", "c", "d", "e", "f"], "k": np.arange(7.0)[::-1]})
+    assert _parameter_values(index, "mass") == {"values": [52.0, 30.0, 41.0], "n_values": 3}
+    assert _parameter_values(index, "n") == {"values": [3, 1, 2], "n_values": 3}
+    assert _parameter_values(index, "variant") == {"values": ["b", "a", "c", "d", "e", "f"], "n_values": 6}
+    assert _parameter_values(index, "k") == {"min": 0.0, "max": 6.0, "n_values": 7}
+    wide = pd.DataFrame({"base": pd.Series(list("gfedcba"), dtype="str")})
+    assert _parameter_values(wide, "base") == {"values": list("gfedcb"), "n_values": 7}
+    assert all(type(v) is float for v in _parameter_values(index, "k").values() if v != 7)
+
+
 def test_show_a_folder_of_sweeps_and_a_folder_of_nothing(sweep_folder, tmp_path):
     parent = invoke("show", sweep_folder)
     assert parent.exit_code == 0 and "sweep      case3_embedded" in parent.stdout

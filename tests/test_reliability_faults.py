@@ -262,10 +262,16 @@ def test_a_damaged_run_file_and_index_are_refused(tmp_path):
     with pytest.raises(DamagedResultError, match="attributes, text or structure"):
         read_summary(path)
     run_sweep(_spec(n=2), tmp_path, executor=SerialExecutor(), progress=False)
-    index = tmp_path / "faults" / "index.csv"
+    folder = tmp_path / "faults"
+    arrow = bytearray((folder / "index.arrow").read_bytes())  # what rbstab show reads
+    (folder / "index.arrow").write_bytes(bytes(arrow.replace(b"success", b"failed\0", 1)))
+    shown = CliRunner().invoke(cli, ["show", str(folder)])
+    assert shown.exit_code == 1 and "index.arrow: does not match its checksum" in shown.output
+    (folder / "index.arrow").unlink()  # a folder written before index.arrow: the CSV is read
+    index = folder / "index.csv"
     index.write_text(index.read_text().replace("success", "failed", 1))
-    shown = CliRunner().invoke(cli, ["show", str(index.parent)])
-    assert shown.exit_code == 1 and "does not match its checksum" in shown.output
+    shown = CliRunner().invoke(cli, ["show", str(folder)])
+    assert shown.exit_code == 1 and "index.csv: does not match its checksum" in shown.output
 
 
 def test_show_refuses_a_file_with_only_some_attributes(tmp_path):

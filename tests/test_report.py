@@ -151,7 +151,8 @@ def sweeps(tmp_path_factory) -> dict[str, Path]:
     ``grid`` (store files): theta_2(0) in {0, GIMBAL_THETA_2} x omega_2(0) in {32, -32} rad/s; only
     (GIMBAL_THETA_2, +32) fails. ``line`` (a file per run): theta_2(0) in {0, 0.3, GIMBAL_THETA_2} at
     omega_2 = 32. ``with_error``: ``line`` plus a row as ``rbstab sweep`` writes it for a
-    run whose worker raised (status ``error``, no file), added to its index.csv by hand.
+    run whose worker raised (status ``error``, no file), added to its index.csv by hand
+    (without index.arrow: a folder as written before it).
     """
     root = tmp_path_factory.mktemp("sweeps")
     grid = _sweep(root, "grid", {"initial_state.theta.1": [0.0, GIMBAL_THETA_2],
@@ -164,6 +165,7 @@ def sweeps(tmp_path_factory) -> dict[str, Path]:
     extra.update({"run_id": "r9999-deadbeef", "run": "3", "base": index["base"][0], "theta_1": "0.6",
                   "status": "error", "converged": "False", "message": "worker raised MemoryError"})
     pd.concat([index, pd.DataFrame([extra])]).to_csv(with_error / "index.csv", index=False)
+    (with_error / "index.arrow").unlink()
     summary = with_error / "sweep_summary.json"  # its checksum of the index, updated as rbstab would
     write_summary(summary, json.loads(summary.read_text()))
     return {"grid": grid, "line": line, "with_error": with_error}

@@ -307,6 +307,7 @@ def test_worker_turns_exceptions_into_records(tmp_path):
     assert not (tmp_path / "x.h5").exists()
 
 
+@pytest.mark.filterwarnings("error::pandas.errors.Pandas4Warning")
 def test_converged_definition(tmp_path):
     """The index's ``converged`` column is rbstab.convergence.converged of the stored row."""
     from rbstab.sweep import plan_table

@@ -273,3 +273,107 @@ def test_open_sweep_maps_index_arrow_and_falls_back_to_the_csv(small_sweep):
     (damaged / INDEX_ARROW_FILE).write_bytes(bytes(data))
     with pytest.raises(DamagedResultError, match="index.arrow"):
         open_sweep(damaged)
+
+
+@pytest.fixture(scope="module")
+def index_folders(tmp_path_factory):
+    """Sweep folders whose index has every kind of value: a real sweep with a failed run
+    (gimbal lock: rate check "n/a", no controller state for visco_elastic, whole-number
+    floats); one of runs that succeeded, failed, raised (error) or were not run
+    (pending), with quoted text and absent files; one whose runs have no message."""
+    from rbstab.sweep.folder import write_table_index
+
+    out = tmp_path_factory.mktemp("indexes")
+    spec = spec_from_mapping({"name": "mixed", "base": str(CASE3), "grid": {
+        "initial_state.theta": [[0.0, 1.5, 0.0], [0.0, 0.0, 0.0]], "initial_state.omega": [[0.0, 30.0, 0.0]],
+        "controller.variant": ["visco_elastic", "embedded"]}}, overrides=SHORT)
+    outcome = run_sweep(spec, out, jobs=1, chunk_size=2, progress=False)
+    assert outcome.counts["failed"] >= 1 and outcome.counts["success"] >= 1
+    table = plan_table(spec_from_mapping({"name": "ix", "base": str(CASE3), "grid": {
+        "controller.variant": ["embedded", "visco_elastic"], "body.mass": [40.0, 41.0, 42.0]}}))
+    ids = table.ids()
+    stored = pd.DataFrame({
+        "run": [0, 1, 2, 3], "run_id": ids[:4], "status": ["success", "success", "failed", "success"],
+        "message": ['m0, "quoted"', "", "n/a", "NA"], "wall_time": [0.5, 1.5, 2.5, 3.5],
+        "lyapunov_initial": [10.0] * 4, "lyapunov_final": [0.1, 5.0, None, 0.05],
+        "lyapunov_rate_check": ["pass", "", "n/a", None], "file": [None] * 4, "file_row": [None] * 4})
+    written = out / "ix"
+    written.mkdir()
+    write_table_index(written, table, stored, {ids[4]: "ValueError: boom"}, name="ix", ratio=0.01)
+    (written / "sweep.yaml").write_text("name: ix\n")
+    quiet = out / "quiet"  # no message at all: an empty column of the CSV
+    quiet.mkdir()
+    write_table_index(quiet, table, pd.DataFrame({"run": range(6), "run_id": ids, "status": "success", "message": "",
+                                                  "lyapunov_initial": 1.0, "lyapunov_final": 0.5}),
+                      {}, name="quiet", ratio=0.01)
+    (quiet / "sweep.yaml").write_text("name: quiet\n")
+    return [out / "mixed", written, quiet]
+
+
+def _without(folder: Path, into: Path, name: str, checksum: str | None = None) -> Path:
+    """A copy of ``folder`` in ``into`` without its file ``name`` (and the summary's
+    ``checksum``)."""
+    import json
+    import shutil
+
+    copy = into / f"{folder.name}-without-{name}{'-' + checksum if checksum else ''}"
+    shutil.copytree(folder, copy)
+    (copy / name).unlink()
+    if checksum:
+        summary = json.loads((copy / "sweep_summary.json").read_text())
+        del summary[checksum]
+        (copy / "sweep_summary.json").write_text(json.dumps(summary))
+    return copy
+
+
+@pytest.mark.filterwarnings("error::pandas.errors.Pandas4Warning")
+@pytest.mark.parametrize("which", [0, 1, 2])
+def test_read_index_reads_index_arrow_as_it_reads_the_csv(index_folders, which, tmp_path):
+    """read_index reads index.arrow (a folder without index.csv still reads) and gives the
+    frame index.csv gives, dtypes included, but float columns of whole numbers, which the
+    CSV gives as integers; text such as "n/a" or "NA" is text in both. A folder without
+    index.arrow (an older one, or one whose file is gone) reads from index.csv."""
+    from pandas.testing import assert_frame_equal
+
+    from rbstab.sweep.folder import read_index
+
+    folder = index_folders[which]
+    mapped = read_index(_without(folder, tmp_path, "index.csv"))
+    parsed = read_index(_without(folder, tmp_path, "index.arrow", "index_arrow_sha256"))  # an older folder
+    assert_frame_equal(read_index(_without(folder, tmp_path, "index.arrow")), parsed)
+    assert_frame_equal(read_index(folder), mapped)
+    whole = [c for c in parsed if parsed[c].dtype.kind == "i" and mapped[c].dtype.kind == "f"]
+    assert all((mapped[c] == mapped[c].round()).all() for c in whole)
+    assert_frame_equal(mapped, parsed.astype(dict.fromkeys(whole, float)), check_exact=True)
+    assert str(mapped["run_id"].dtype) == str(mapped["message"].dtype) == "str" and mapped["converged"].dtype == bool
+    assert not mapped["message"].isna().any()
+    if which == 0:
+        assert "n/a" in set(mapped["lyapunov_rate_check"]) and mapped["final_controller_state_x"].isna().any()
+        assert whole  # theta_0, theta_2: 0.0 in every run
+    elif which == 1:
+        assert list(mapped["status"]) == ["success", "success", "failed", "success", "error", "pending"]
+        assert list(mapped["message"][:5]) == ['m0, "quoted"', "", "n/a", "NA", "ValueError: boom"]
+        assert list(mapped["lyapunov_rate_check"].fillna("-")) == ["pass", "-", "n/a", "-", "-", "-"]
+        assert mapped["file"].isna().all() and mapped["file"].dtype == mapped["file_row"].dtype == float
+    else:
+        assert list(mapped["message"]) == [""] * 6
+
+
+def test_a_damaged_index_arrow_is_refused(index_folders, tmp_path):
+    """read_index and rbstab show DIR refuse an index.arrow that does not match its
+    checksum, naming the file; verify=False reads it."""
+    import shutil
+
+    from rbstab.io.integrity import DamagedResultError
+    from rbstab.sweep.folder import read_index
+
+    damaged = tmp_path / "damaged"
+    shutil.copytree(index_folders[0], damaged)  # index.csv intact
+    data = bytearray((damaged / "index.arrow").read_bytes())
+    data[len(data) // 2] ^= 1
+    (damaged / "index.arrow").write_bytes(bytes(data))
+    with pytest.raises(DamagedResultError, match=r"index\.arrow: does not match its checksum"):
+        read_index(damaged)
+    assert len(read_index(damaged, verify=False)) == 4
+    shown = CliRunner().invoke(cli, ["show", str(damaged)])
+    assert shown.exit_code == 1 and "index.arrow: does not match its checksum" in shown.output, shown.output

@@ -11,7 +11,8 @@ runner (planning, resume, the index), ``rbstab show DIR``, ``rbstab report`` and
       runs/<run_id>.h5     or one result file per run (layout "run", :mod:`rbstab.io.hdf5`)
       index.csv            one row per run, the columns of :func:`index_columns`
       index.arrow          the same table as an Arrow IPC file, which :func:`open_sweep`
-                           maps into memory instead of parsing the CSV
+                           maps into memory and :func:`read_index` reads instead of
+                           parsing the CSV
       sweep_summary.json   counts per status, converged fraction (overall and per base)
 
 Parameter names
@@ -88,7 +89,8 @@ __all__ = [
 SPEC_FILE = "sweep.yaml"
 INDEX_FILE = "index.csv"
 #: The index as an Arrow IPC file (uncompressed, text of few values dictionary-encoded):
-#: :func:`open_sweep` maps it into memory, numbers without a copy.
+#: :func:`open_sweep` maps it into memory, numbers without a copy; :func:`read_index` reads
+#: it instead of parsing the CSV.
 INDEX_ARROW_FILE = "index.arrow"
 SUMMARY_FILE = "sweep_summary.json"
 RUNS_DIR = "runs"
@@ -336,7 +338,8 @@ def _write_index_files(directory: Path, index) -> None:
     atomically, from one Arrow table. The CSV by pyarrow's writer (numbers formatted in C,
     ~10x pandas' speed; they read back as the same floats), booleans as ``True``/``False``,
     absent values empty. An index Arrow does not take (lists in a column) is written by
-    pandas, and has no Arrow file (:func:`open_sweep` then reads the CSV)."""
+    pandas, and has no Arrow file (:func:`read_index` and :func:`open_sweep` then read the
+    CSV)."""
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.compute as pc  # heavy: pyarrow
 
@@ -443,7 +446,18 @@ def verify_index(folder: str | os.PathLike) -> bool:
 
 
 def read_index(folder: str | os.PathLike, *, verify: bool = True):
-    """``index.csv`` of a sweep folder as a pandas DataFrame (``message`` as text).
+    """The index of a sweep folder as a pandas DataFrame, one row per run, the columns of
+    :func:`index_columns`.
+
+    Read from :data:`INDEX_ARROW_FILE` when ``sweep_summary.json`` records its checksum
+    and the file is there (:func:`_arrow_index`), else from :data:`INDEX_FILE` (a folder
+    written before the Arrow file, or an index Arrow does not take). Both give the same
+    frame: ``run_id`` and ``message`` as text (``message`` ``""`` where absent), other
+    text as ``str`` with NaN where absent (an empty field; ``n/a`` or ``NA`` are text),
+    integers without an absent value as int64, with one as float64 (NaN), ``converged``
+    as bool. One difference: a float column whose values are all whole numbers
+    (``3000.0``) is int64 from the CSV (it holds ``3000``), float64 from the Arrow file
+    (as written).
 
     Raises
     ------
@@ -452,26 +466,61 @@ def read_index(folder: str | os.PathLike, *, verify: bool = True):
     ValueError
         If it cannot be parsed or lacks ``run_id``/``status``.
     rbstab.io.integrity.DamagedResultError
-        If ``verify`` and it does not match its checksum (:func:`verify_index`; a
-        ValueError).
+        If ``verify`` and the file read does not match its checksum
+        (:func:`_arrow_index`, :func:`verify_index`; a ValueError).
     """
+    folder = Path(folder)
+    table = _arrow_index(folder, verify=verify)
+    if table is not None:
+        path, index = folder / INDEX_ARROW_FILE, _arrow_frame(table)
+    else:
+        path, index = folder / INDEX_FILE, _csv_frame(folder, verify)
+    missing = [c for c in ("run_id", "status") if c not in index.columns]
+    if missing:
+        raise ValueError(f"{path}: no column {', '.join(missing)} (columns: {', '.join(map(str, index.columns))})")
+    index["message"] = index["message"].astype(str).fillna("") if "message" in index else ""
+    index["run_id"] = index["run_id"].astype(str)
+    return index
+
+
+def _csv_frame(folder: Path, verify: bool):
+    """:data:`INDEX_FILE` as a DataFrame (``run_id``, ``config_hash`` and ``message`` as
+    text, NaN where empty); its checksum checked first if ``verify``. FileNotFoundError,
+    ValueError, DamagedResultError as :func:`read_index`."""
     import pandas as pd  # heavy: pandas
 
-    path = Path(folder) / INDEX_FILE
+    path = folder / INDEX_FILE
     if verify:
         verify_index(folder)
     try:
-        index = pd.read_csv(path, keep_default_na=True, dtype={"run_id": str, "config_hash": str})
+        return pd.read_csv(path, keep_default_na=False, na_values=[""],
+                           dtype={"run_id": str, "config_hash": str, "message": str})
     except pd.errors.ParserError as exc:
         raise ValueError(f"{path}: cannot read ({exc})") from None
     except pd.errors.EmptyDataError:
         raise ValueError(f"{path}: empty") from None
-    missing = [c for c in ("run_id", "status") if c not in index.columns]
-    if missing:
-        raise ValueError(f"{path}: no column {', '.join(missing)} (columns: {', '.join(map(str, index.columns))})")
-    index["message"] = index["message"].fillna("").astype(str) if "message" in index else ""
-    index["run_id"] = index["run_id"].astype(str)
-    return index
+
+
+def _arrow_frame(table):
+    """The index as a pyarrow Table (:func:`_arrow_index`) as the DataFrame
+    :func:`_csv_frame` gives: dictionary-encoded text as ``str``, empty text as NaN (an
+    empty CSV field), a column of absent values only as float64 NaN; integers with an
+    absent value become float64 with NaN (pyarrow's conversion, as the CSV's)."""
+    import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.compute as pc  # heavy: pyarrow
+
+    columns = []
+    for column in table.columns:
+        if pa.types.is_dictionary(column.type):
+            column = column.cast(column.type.value_type)
+        elif pa.types.is_null(column.type):
+            column = pa.nulls(len(column), pa.float64())
+        if pa.types.is_string(column.type) or pa.types.is_large_string(column.type):
+            empty = pc.equal(column, "")
+            if pc.any(empty).as_py():
+                column = pc.if_else(empty, pa.scalar(None, column.type), column)
+        columns.append(column)
+    return pa.table(columns, names=table.column_names).to_pandas()
 
 
 def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str, str] | None = None) -> dict:
@@ -775,8 +824,36 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
 def _arrow_columns(folder: Path) -> dict | None:
     """The columns of :data:`INDEX_ARROW_FILE` as numpy arrays (numbers are views of the
     memory-mapped file), as :func:`_frame_columns` gives those of ``index.csv``; None when
-    the summary has no checksum of it (a folder written before it, or an index Arrow does
-    not take). DamagedResultError if the file does not match its checksum."""
+    there is none to read (:func:`_arrow_index`). DamagedResultError if the file does not
+    match its checksum."""
+    table = _arrow_index(folder)
+    if table is None:
+        return None
+    return {name: _arrow_numpy(name, column) for name, column in zip(table.column_names, table.columns)}
+
+
+def _arrow_index(folder: Path, verify: bool = True):
+    """:data:`INDEX_ARROW_FILE` of a sweep folder as a pyarrow Table over the memory-mapped
+    file (numbers are not copied), checked against ``index_arrow_sha256`` of
+    ``sweep_summary.json`` first if ``verify``; what :func:`read_index` and
+    :func:`open_sweep` read.
+
+    Returns
+    -------
+    pyarrow.Table or None
+        None when the summary records no checksum of the file (a folder written before
+        it, or an index Arrow does not take), or is missing, or the file is missing: the
+        reader then takes ``index.csv``.
+
+    Raises
+    ------
+    rbstab.io.integrity.DamagedResultError
+        If ``verify`` and the file does not match its checksum (damaged, or an invocation
+        killed between writing it and the summary: rerunning the sweep rebuilds both);
+        the message names the file and the command that rebuilds it.
+    ValueError
+        If the file matches but is not an Arrow IPC file.
+    """
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.ipc as ipc  # heavy: pyarrow
 
@@ -790,12 +867,14 @@ def _arrow_columns(folder: Path) -> dict | None:
     if not isinstance(expected, str) or not path.is_file():
         return None
     mapped = pa.memory_map(str(path)).read_buffer()  # the file's pages, hashed and read without a copy
-    if hashlib.sha256(mapped).hexdigest() != expected:
+    if verify and hashlib.sha256(mapped).hexdigest() != expected:
         raise DamagedResultError(
             f"{path}: does not match its checksum in {SUMMARY_FILE} (damaged, or an invocation was killed "
             f"between writing the two); rebuild both with: rbstab sweep {folder / SPEC_FILE} -o {folder.parent}")
-    table = ipc.open_file(mapped).read_all()
-    return {name: _arrow_numpy(name, column) for name, column in zip(table.column_names, table.columns)}
+    try:
+        return ipc.open_file(mapped).read_all()
+    except (pa.ArrowInvalid, OSError) as exc:
+        raise ValueError(f"{path}: cannot read ({exc})") from None
 
 
 def _arrow_numpy(name: str, column):
