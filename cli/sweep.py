@@ -47,7 +47,7 @@ def _key_value(text: str) -> tuple[str, str]:
 @output_option("results/sweeps", "Parent folder; the sweep writes OUTPUT/<name>/.")
 @click.option(
     "-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
-    help="Worker processes on this machine  [default: all CPUs].",
+    help="Worker processes on this machine  [default: all CPUs; with --engine cuda, up to 4].",
 )
 @click.option(
     "--executor", type=click.Choice(["local", "dask"]), default=None,
