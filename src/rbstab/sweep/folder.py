@@ -305,6 +305,7 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
         done = results.drop_duplicates("run", keep="last").set_index("run")[kept].reindex(np.arange(n))
     else:
         done = pd.DataFrame({"status": pd.Series([None] * n, dtype=object), "message": ""}, index=np.arange(n))
+    del results  # freed here when the caller handed over its only reference
     status = done["status"].astype(object)
     missing = status.isna().to_numpy()
     failed = missing & ids.isin(list(errors)).to_numpy()

@@ -609,14 +609,21 @@ DESIGN_FILE = "table.csv"
 
 
 def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepOutcome) -> None:
+    summary, outcome.problems = write_table_index(outcome.directory, table, _rows_of(results), errors,
+                                                  name=spec.name, ratio=spec.lyapunov_ratio)
+    outcome.counts = dict(summary["status"])
+    outcome.n_converged = summary["n_converged"]
+
+
+def _rows_of(results: list):
+    """The rows of ``results`` (DataFrames) as one DataFrame, the list emptied: the chunks'
+    rows are then held once, by the index's writer, which lets them go as it builds the
+    index (at 10^6 runs ~0.5 GB less at its peak)."""
     import pandas as pd  # heavy: pandas
 
     frames = [f for f in results if len(f)]
-    summary, outcome.problems = write_table_index(
-        outcome.directory, table, pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(), errors,
-        name=spec.name, ratio=spec.lyapunov_ratio)
-    outcome.counts = dict(summary["status"])
-    outcome.n_converged = summary["n_converged"]
+    results.clear()
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, table=None) -> SweepOutcome:
