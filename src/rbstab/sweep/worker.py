@@ -452,7 +452,7 @@ def _execute(rows, tasks: Sequence[RunTask], options: WorkerOptions, templates: 
             records: list[dict[str, Any]] = []
             if batch is not None:
                 alone = _batch_into(sink, *batch, options, part)
-                tasks = [*tasks, *(_task(part, j, folder, resolved=True) for j in alone)]
+                tasks = [*tasks, *(_task(part, j, folder) for j in alone)]
             records += ENGINES[options.engine](tasks, options, sink)
         result = sink.result(records)
     except Exception as exc:  # the chunk's file could not be written: each of its runs is an error
@@ -529,16 +529,16 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
     build = (_time.perf_counter() - t0) / max(len(fast), 1)
     slow = np.ones(len(part), dtype=bool)
     slow[fast] = False
-    tasks = [_task(part, j, folder, resolved=True) for j in np.flatnonzero(slow).tolist()]
+    tasks = [_task(part, j, folder) for j in np.flatnonzero(slow).tolist()]
     rows = StoreRows(np.asarray(part.index, dtype=np.int64), np.asarray(part.run_id, dtype=object),
                      np.asarray(part.base, dtype=object), dict(part.coords), np.asarray(part.template, dtype=np.int64))
     return _execute(rows, tasks, options, part.templates, folder, (batch, fast, build) if len(fast) else None, part)
 
 
-def _task(part, j: int, folder: str, *, resolved: bool) -> RunTask:
-    """Run ``j`` of a table slice as a :class:`RunTask` (its configuration built if ``resolved``)."""
+def _task(part, j: int, folder: str) -> RunTask:
+    """Run ``j`` of a table slice as a :class:`RunTask`, its configuration built."""
     rid = str(part.run_id[j])
-    return RunTask(rid, part.resolved(j) if resolved else {}, os.path.join(folder, f"{rid}.h5"), int(part.index[j]),
+    return RunTask(rid, part.resolved(j), os.path.join(folder, f"{rid}.h5"), int(part.index[j]),
                    str(part.base[j]), {name: _scalar(values[j]) for name, values in part.coords.items()},
                    str(part.config_hash[j]), int(part.template[j]))
 
