@@ -653,13 +653,10 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
         bad = int(rows[np.flatnonzero(~batch.compiled[rows])[0]])
         raise ValueError(f"run {bad} of the batch: the compiled engine does not take it (its method or the "
                          "pure sign law); run it with simulate()")
-    keys = np.stack([batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]], axis=1)
-    if len(rows) and np.all(keys == keys[0]):  # as a rule: one group
-        distinct, group = keys[:1], np.zeros(len(rows), dtype=np.int64)
-    else:
-        distinct, group = np.unique(keys, axis=0, return_inverse=True) if len(rows) else (keys, rows)
-    for g, (method, n_samples, size) in enumerate(distinct.tolist()):
-        members = rows[group.ravel() == g]
+    methods, samples, sizes = batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]
+    # the groups, in np.unique's order (a set of the rows: numpy's unique of rows sorts them all)
+    for method, n_samples, size in sorted(set(zip(methods.tolist(), samples.tolist(), sizes.tolist()))):
+        members = rows[(methods == method) & (samples == n_samples) & (sizes == size)]
         if engine == "cuda":
             runs = (batch.variant[members], batch.params[members], batch.y0[members, :size],
                     batch.settings_rows(members))

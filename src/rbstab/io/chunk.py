@@ -320,11 +320,6 @@ def _as_stored(name: str, values: np.ndarray) -> np.ndarray:
     return data
 
 
-def _plain_value(value: Any) -> Any:
-    """A numpy scalar as the Python number it holds; anything else as it is."""
-    return value.item() if isinstance(value, np.generic) else value
-
-
 def chunk_file_name(first_run_id: str) -> str:
     """``chunk-<first_run_id>-<8 random hex>.h5``: unique, sorted by run order."""
     return f"chunk-{first_run_id}-{uuid.uuid4().hex[:8]}.h5"
@@ -375,6 +370,7 @@ class ChunkWriter:
         n = len(self.ids)
         self._blocks: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []  # (rows, column -> a value a row) added
         self._block_of = np.full(n, -1, dtype=np.int64)  # row -> its block once added
+        self._stored: dict[str, np.ndarray] | None = None  # the per-run columns as written, once finished
         self._place = np.zeros(n, dtype=np.int64)  # row -> its position in its block
         self._pending: list[int] = []  # rows whose traces are in the buffer's first rows, in that order
         self._buffer: dict[str, np.ndarray] = {}  # variable -> (rows, *trace shape), written at each flush
@@ -539,11 +535,11 @@ class ChunkWriter:
         """Row ``i`` as :func:`read_chunk_rows` reads it back."""
         ident = self.identity
         out = {"run": int(ident.index[i]), "run_id": ident.run_id[i], "base": ident.base[i],
-               **{name: _plain_value(values[i]) for name, values in ident.coords.items()}}
+               **{name: _plain(values[i]) for name, values in ident.coords.items()}}
         b = self._block_of[i]
         if b >= 0:
             for name, values in self._blocks[b][1].items():
-                out[name] = _plain_value(values[self._place[i]])
+                out[name] = _plain(values[self._place[i]])
         out["store"] = self.store
         out["created"] = self.attrs["created"]
         out["file"] = self.path.name
@@ -555,8 +551,9 @@ class ChunkWriter:
         None where a row has none yet): what :func:`read_chunk_columns` reads back (``run``,
         ``run_id``, ``base``, the coordinates, the per-run values but ``config``,
         ``created``, ``file``, ``file_row``)."""
+        stored = self._stored if self._stored is not None else self._stored_columns()
         columns = {"run": self.identity.index}
-        columns.update((k, _as_stored(k, v)) for k, v in self._columns().items() if k != "config")
+        columns.update((k, v) for k, v in stored.items() if k != "config")
         n = len(self.ids)
         columns["created"] = np.full(n, self.attrs["created"], dtype=object)
         columns["file"] = np.full(n, self.path.name, dtype=object)
@@ -677,7 +674,8 @@ class ChunkWriter:
             raise ValueError(f"{self.path.name}: no result for {len(missing)} run(s), e.g. {self.ids[missing[0]]}")
         self._flush()
         f = self._file
-        columns = {name: self._variable(name, values) for name, values in self._columns().items()}
+        self._stored = self._stored_columns()  # kept for columns()
+        columns = {name: self._variable(name, values) for name, values in self._stored.items()}
         self._room(sum(data.nbytes for data, _ in columns.values()))
         self._coordinates = " ".join(n for n in columns if n in _COORDS or n in self.parameters)
         self._run_scale = f._h5file["run"].id
@@ -723,10 +721,14 @@ class ChunkWriter:
             columns[name] = _merged(n, parts)
         return {name: columns[name] for name in names}
 
-    def _variable(self, name: str, values: np.ndarray) -> tuple[np.ndarray, str | None]:
-        """The data of a ``(run,)`` variable (:func:`_as_stored`; text as characters,
-        :meth:`_characters`) and the name of its character dimension (None for numbers)."""
-        data = _as_stored(name, values)
+    def _stored_columns(self) -> dict[str, np.ndarray]:
+        """:meth:`_columns` as the file holds them (:func:`_as_stored`)."""
+        return {name: _as_stored(name, values) for name, values in self._columns().items()}
+
+    def _variable(self, name: str, data: np.ndarray) -> tuple[np.ndarray, str | None]:
+        """The data of a ``(run,)`` variable from its column as stored (:func:`_as_stored`;
+        text as characters, :meth:`_characters`) and the name of its character dimension
+        (None for numbers)."""
         if data.dtype == object:
             data, chars = self._characters(data)
             self._texts[name] = data

@@ -266,10 +266,7 @@ class RunTable:
 
     def time_grids(self) -> set:
         """The distinct sample grids (t_end, n_samples) of the runs."""
-        t_end, n_samples = self.setting("t_end"), self.setting("n_samples")
-        if self.n and np.all(t_end == t_end[0]) and np.all(n_samples == n_samples[0]):  # as a rule: one grid
-            return {(float(t_end[0]), int(n_samples[0]))}
-        return {(float(t), int(n)) for t, n in np.unique(np.stack([t_end, n_samples], axis=1), axis=0)}
+        return set(zip(self.setting("t_end").tolist(), self.setting("n_samples").astype(int).tolist()))
 
     def setting(self, name: str) -> np.ndarray:
         """A ``simulation`` setting of every run, shape (n,)."""
