@@ -378,24 +378,3 @@ def test_a_damaged_index_arrow_is_refused(index_folders, tmp_path):
     shown = CliRunner().invoke(cli, ["show", str(damaged)])
     assert shown.exit_code == 1 and "index.arrow: does not match its checksum" in shown.output, shown.output
 
-
-def test_index_csv_written_in_slices_is_pyarrows_csv_of_the_whole(tmp_path, monkeypatch):
-    """index.csv is formatted CSV_ROWS rows at a time on several threads: the same bytes
-    as pyarrow's writer of the whole table (one header, the rows in order), for a table
-    that is not a whole number of slices and for an empty one."""
-    import pyarrow as pa
-    import pyarrow.csv as pa_csv
-
-    from rbstab.sweep import folder
-
-    monkeypatch.setattr(folder, "CSV_ROWS", 7)
-    rng = np.random.default_rng(4)
-    for n in (0, 6, 7, 50):
-        table = pa.table({"run_id": [f"r{i:05d}" for i in range(n)], "x": rng.normal(size=n),
-                          "message": ["a, \"quoted\" one" if i % 3 else "" for i in range(n)]})
-        whole = tmp_path / f"whole{n}.csv"
-        pa_csv.write_csv(table, whole, write_options=pa_csv.WriteOptions(quoting_style="needed"))
-        parts = b"".join(bytes(p) for p in folder._csv_parts(table))
-        assert parts == whole.read_bytes(), n
-        back = pd.read_csv(pa.BufferReader(parts)) if n else None
-        assert n == 0 or back["x"].tolist() == table["x"].to_pylist()

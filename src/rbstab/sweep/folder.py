@@ -47,7 +47,6 @@ import hashlib
 import json
 import os
 import re
-from concurrent.futures import ThreadPoolExecutor
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -343,6 +342,7 @@ def _write_index_files(directory: Path, index) -> None:
     CSV)."""
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.compute as pc  # heavy: pyarrow
+    import pyarrow.csv as pa_csv  # heavy: pyarrow
 
     try:
         table = pa.Table.from_pandas(index, preserve_index=False).combine_chunks()
@@ -355,38 +355,9 @@ def _write_index_files(directory: Path, index) -> None:
     for i, field in enumerate(table.schema):
         if pa.types.is_boolean(field.type):
             as_text = as_text.set_column(i, field.name, pc.if_else(table.column(i), "True", "False"))
-    with atomic_path(directory / INDEX_FILE) as tmp, open(tmp, "wb") as out:
-        for text in _csv_parts(as_text):
-            out.write(text)
+    with atomic_path(directory / INDEX_FILE) as tmp:
+        pa_csv.write_csv(as_text, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
     _write_arrow(directory / INDEX_ARROW_FILE, table)
-
-
-#: Rows of the index formatted as CSV by one thread at a time.
-CSV_ROWS = 65536
-
-
-def _csv_parts(table) -> Iterable:
-    """``table`` as CSV text (pyarrow's writer, the header first), :data:`CSV_ROWS` rows at
-    a time, formatted on pyarrow's CPU count of threads (formatting the numbers is most of
-    a large index's writing time) and given in order, at most two parts a thread held."""
-    import pyarrow as pa  # heavy: pyarrow
-    import pyarrow.csv as pa_csv  # heavy: pyarrow
-
-    def part(lo: int):
-        sink = pa.BufferOutputStream()
-        pa_csv.write_csv(table.slice(lo, CSV_ROWS), sink,
-                         write_options=pa_csv.WriteOptions(quoting_style="needed", include_header=lo == 0))
-        return sink.getvalue()
-
-    starts = list(range(0, max(table.num_rows, 1), CSV_ROWS))
-    threads = max(1, min(pa.cpu_count(), len(starts)))
-    with ThreadPoolExecutor(threads) as pool:
-        pending = [pool.submit(part, lo) for lo in starts[: 2 * threads]]
-        for lo in starts[2 * threads:] + [None] * len(pending):
-            done = pending.pop(0).result()
-            if lo is not None:
-                pending.append(pool.submit(part, lo))
-            yield done
 
 
 #: Text columns of an index that :func:`open_sweep` gives as text ("" where absent).
