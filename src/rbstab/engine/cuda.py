@@ -34,7 +34,14 @@ from types import FunctionType
 from typing import Iterator
 
 import numpy as np
-from numba import cuda  # numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
+
+# numba-cuda 0.30.4 (numba_cuda/numba/cuda/np/arrayobj.py) registers an overload of
+# np.row_stack whenever numpy >= 2.0, and numpy 2.5 removed np.row_stack: without this
+# alias its CUDA target fails to load on numpy 2.5 (np.row_stack was np.vstack's alias).
+if "row_stack" not in vars(np):
+    np.row_stack = np.vstack
+
+from numba import cuda  # noqa: E402  numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..jit import CACHE_DIR, cache_is_warm, mark_warm
