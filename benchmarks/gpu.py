@@ -5,8 +5,15 @@ rtol 1e-6, atol 1e-8, t_end 2 s, 2001 samples. Two sweeps: ``initial-state`` (Om
 N((16, 32, -16), 4^2), one body) and ``parameter`` (mass and inertia x U(0.5, 1.5), K_c and
 L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record). Prints:
 
-- **compile**: the kernel's registers, local memory (stack) and spills a thread, from the
-  compiled kernel, and the occupancy they allow;
+- **compile**: the GPU's compute mode, the kernel's registers and local memory a thread
+  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`), the
+  occupancy they allow and the resident threads; the compile (or cache load) time in this
+  process and a new process's first launch, its kernel loaded from the disk cache;
+- **deadline**: 300,000 runs, 100 samples kept, a 0.05 s limit: the kernel's time, the runs
+  finished, stopped and not started, and whether every unstarted run's trace is NaN (and
+  no buffer kept an earlier launch's numbers);
+- **samples** and **launch size**: kernel runs/s with 2, 201 and 2001 samples a run (no
+  trace) and with 8,192 / 33,792 / 131,072 / 270,336 runs a launch;
 - **kernel** and **end to end** runs/s at each N of ``--n`` (10^4, 10^5, 10^6), with no
   trace (the summary store's) and with a thinned trace (201 samples a run): kernel time by
   CUDA events; end to end, from the host's arrays to the results in host memory
@@ -145,26 +152,69 @@ def correctness(kind: str, n: int) -> str:
 
 
 def compile_info() -> str:
-    from rbstab.engine.cuda import THREADS_PER_BLOCK, kernel
-    from rbstab.engine.rk import DOP853
-
-    fn = kernel(DOP853, 15)
-    codes, params, y0, settings, n_samples = runs("parameter", 128)
-    from rbstab.engine.cuda import integrate_chunks_cuda
-
-    list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))  # compiles it
-    (sig,) = fn.overloads
-    regs = fn.get_regs_per_thread(sig)
-    local = fn.get_local_mem_per_thread(sig)
     from numba import cuda
 
+    from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_kernel, compute_mode, integrate_chunks_cuda,
+                                    launch_signature, occupancy)
+    from rbstab.engine.rk import DOP853
+
+    start = time.perf_counter()
+    fn = compiled_kernel(DOP853, 15)
+    loaded = time.perf_counter() - start
+    signature = launch_signature(15)
+    regs = fn.get_regs_per_thread(signature)
+    local = fn.get_local_mem_per_thread(signature)
     device = cuda.get_current_device()
-    per_sm = min(device.MAX_REGISTERS_PER_MULTIPROCESSOR // (regs * THREADS_PER_BLOCK),
-                 device.MAX_THREADS_PER_MULTIPROCESSOR // THREADS_PER_BLOCK)
-    occupancy = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
-    return (f"{device.name.decode() if isinstance(device.name, bytes) else device.name}: {regs} registers, "
-            f"{local} B local memory a thread; {per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor "
-            f"(occupancy {occupancy:.0%})")
+    per_sm = occupancy(fn, 15)
+    sms = device.MULTIPROCESSOR_COUNT
+    share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
+    codes, params, y0, settings, n_samples = runs("parameter", 128)
+    list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
+    script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
+              "from rbstab.engine.cuda import integrate_chunks_cuda; a = gpu.runs('parameter', 128); "
+              "t = time.perf_counter(); list(integrate_chunks_cuda(*a[:4], n_samples=a[4])); "
+              "print(time.perf_counter() - t)")
+    again = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    name = device.name.decode() if isinstance(device.name, bytes) else device.name
+    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread; "
+            f"{per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}), "
+            f"{per_sm * THREADS_PER_BLOCK * sms:,} resident threads on {sms} multiprocessors; "
+            f"compiled or loaded in {loaded:.1f} s; a new process's first launch {float(again.stdout.split()[-1]):.2f} s "
+            f"(the kernel from the disk cache)")
+
+
+def deadline(n: int = 300_000, n_samples: int = 100, limit: float = 0.05) -> str:
+    """A launch stopped by its limit: its kernel time and what its runs report."""
+    from rbstab.engine.cuda import integrate_chunks_cuda
+    from rbstab.engine.status import NOT_STARTED, SUCCESS, TIMEOUT
+
+    codes, params, y0, settings, _ = runs("parameter", n)
+    list(integrate_chunks_cuda(codes[:4096], params[:4096], y0[:4096], settings[:4096], n_samples=n_samples,
+                               stride=1))  # the buffers hold an earlier launch's numbers
+    lines = []
+    for chunk in integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples, stride=1,
+                                       max_wall_time=limit):
+        unstarted = chunk.status == NOT_STARTED
+        nan = bool(np.isnan(chunk.trace[unstarted][..., -1]).all() and np.isnan(chunk.last[unstarted]).all())
+        lines.append(f"{len(chunk.runs):,} runs, limit {limit} s: kernel {chunk.kernel_seconds:.3f} s; "
+                     f"{int(np.sum(chunk.status == SUCCESS)):,} finished, {int(np.sum(chunk.status == TIMEOUT)):,} "
+                     f"stopped, {int(unstarted.sum()):,} not started (their dv/dt and last outputs NaN: {nan})")
+    return "; ".join(lines)
+
+
+def kernel_rate(n: int, n_samples: int, launch: int | None = None) -> float:
+    """Kernel runs/s of the parameter sweep, no trace, ``n_samples`` a run, launches of
+    ``launch`` runs (one call each)."""
+    from rbstab.engine.cuda import integrate_chunks_cuda
+
+    codes, params, y0, settings, _ = runs("parameter", n)
+    launch = launch or n
+    seconds = 0.0
+    for lo in range(0, n, launch):
+        part = slice(lo, lo + launch)
+        seconds += sum(c.kernel_seconds for c in integrate_chunks_cuda(codes[part], params[part], y0[part],
+                                                                       settings[part], n_samples=n_samples))
+    return n / seconds
 
 
 #: The stub of ``--host-only``: every launch of the CUDA engine returns its runs finished
@@ -268,6 +318,12 @@ def main() -> None:
 
     check_available()
     print("compile:", compile_info())
+    print("deadline:", deadline())
+    for n_samples in (2, 201, 2001):
+        print(f"samples {n_samples:5d}, 270,336 runs: kernel {kernel_rate(270_336, n_samples):,.0f} runs/s")
+    for launch in (8192, 33_792, 131_072, 270_336):
+        print(f"launches of {launch:7,d} runs (540,672 runs, 2001 samples): kernel "
+              f"{kernel_rate(540_672, 2001, launch):,.0f} runs/s")
     print(f"{'sweep':14s} {'N':>9s} {'trace':>8s} {'kernel runs/s':>14s} {'end to end runs/s':>18s}")
     for kind in ("initial-state", "parameter"):
         for n in args.n:

@@ -142,9 +142,9 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     if engine == "cuda" and not dry_run:
         check_cuda()
     if engine == "cuda":
-        from rbstab.sweep.runner import cuda_jobs  # heavy: numpy
+        from rbstab.sweep.runner import cuda_jobs  # heavy: numpy, numba (the GPU's compute mode)
 
-        jobs = jobs or cuda_jobs()
+        jobs = cuda_jobs(jobs)
     if table is not None:
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:

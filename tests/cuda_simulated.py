@@ -43,6 +43,7 @@ def main() -> None:
     warnings.simplefilter("ignore")
     from rbstab.simulator import simulate_blocks
 
+    recorded = record_launches()
     runs = configs(sys.argv[1])
 
     def collect(engine, keep):
@@ -76,7 +77,90 @@ def main() -> None:
                         "differences": differences}
     report["basin"] = basin()
     report["batch"] = batch()
+    report["deadline"] = deadline()
+    report["signatures"] = signatures(recorded)
     print(json.dumps(report))
+
+
+def record_launches() -> set:
+    """Record numba's types of every simulated launch's arguments, with the runs' state
+    size: the set the launches of this process add to."""
+    import numba
+
+    import rbstab.engine.cuda as engine
+
+    recorded = set()
+    compiled = engine.compiled_kernel
+
+    class Recording:
+        def __init__(self, fn, n_state):
+            self.fn, self.n_state = fn, n_state
+
+        def __getitem__(self, grid):
+            launch = self.fn[grid]
+
+            def call(*args):
+                recorded.add((self.n_state, tuple(str(numba.typeof(engine._plain(a))) for a in args)))
+                return launch(*args)
+
+            return call
+
+    engine.compiled_kernel = lambda method, n_state: Recording(compiled(method, n_state), n_state)
+    return recorded
+
+
+def signatures(recorded: set) -> dict:
+    """Whether every launch passed the arguments of rbstab.engine.cuda.launch_signature."""
+    from rbstab.engine.cuda import launch_signature
+
+    expected = {(n, tuple(str(t) for t in launch_signature(n))) for n, _ in recorded}
+    return {"launches": len(recorded), "state_sizes": sorted({n for n, _ in recorded}),
+            "mismatched": sorted(map(str, recorded - expected))}
+
+
+def deadline() -> dict:
+    """Two launches of 600 Case 3 runs on a grid of 4 blocks: the first with no limit, the
+    second with a 1 ns limit after every buffer of the process was poisoned (set to 7):
+    what the second's runs report (every run is written, none starts after the deadline)."""
+    import rbstab
+    import rbstab.engine.cuda as engine
+    from rbstab.engine import method_number
+    from rbstab.engine.settings import settings_records
+    from rbstab.engine.status import NOT_STARTED, status_message
+
+    config = rbstab.load_config(os.path.join(sys.argv[1], "configs/paper/case3_embedded.yaml"),
+                                ["simulation.t_end=0.002"])
+    variant, s = config.make_variant(), config.simulation
+    k = 600
+    y0 = np.repeat(variant.initial_state(config.initial_state)[None], k, axis=0)
+    row = np.array([[s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, s.max_wall_time]])
+    settings = settings_records(row, method_number(s.method)).repeat(k)
+    engine._resident_blocks = lambda fn, n_state: 4
+
+    def launch(limit):
+        (chunk,) = engine.integrate_chunks_cuda(np.full(k, variant.code), variant.parameters, y0, settings,
+                                                n_samples=5, stride=1, max_wall_time=limit)
+        return chunk
+
+    first = launch(np.inf)
+    for device, _ in engine._BUFFERS.values():
+        device.copy_to_device(np.full(device.shape, 7, dtype=device.dtype))
+    second = launch(1e-9)
+    # the outputs at a NaN state (the CPU engine's rows after a stop; some do not depend on it)
+    from rbstab.layout import N_OUTPUTS
+    from rbstab.variants.kernels import output_row
+
+    nan_state = np.full(N_OUTPUTS, np.nan)
+    output_row(variant.code, np.full(y0.shape[1], np.nan), variant.parameters[0], nan_state, False)
+    return {"first_success": int(np.sum(first.status == 0)),
+            "not_started": int(np.sum(second.status == NOT_STARTED)),
+            "t_stop_zero": bool(np.all(second.t_stop == 0)),
+            "nfev_zero": bool(np.all(second.nfev == 0)) and bool(np.all(second.n_steps == 0)),
+            "last_nan": bool(np.all(np.isnan(second.last))),
+            "trace_nan_state": bool(np.array_equal(second.trace[..., :-1], np.broadcast_to(
+                nan_state, second.trace[..., :-1].shape), equal_nan=True) and np.isnan(second.trace[..., -1]).all()),
+            "poison_left": int(np.sum(second.acc == 7) + np.sum(second.trace == 7) + np.sum(second.last == 7)),
+            "message": status_message(NOT_STARTED, 0.0, 0.0, max_wall_time=1e-9)}
 
 
 def batch() -> dict:

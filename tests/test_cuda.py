@@ -161,6 +161,28 @@ def test_simulated_sweep_writes_the_cpu_engines_store(tmp_path, store):
                                   equal_nan=cpu[name].dtype.kind == "f"), name
 
 
+def test_simulated_launch_has_one_deadline_and_writes_every_run(simulated):
+    """A launch of 600 runs on 4 blocks with a 1 ns limit, every buffer of the process
+    poisoned first (what an earlier launch left there): no thread of any block starts a run
+    after the launch's deadline, and every run's outputs are written: NOT_STARTED with its
+    reason, t_stop 0, no evaluations, NaN outputs (the CPU engine's rows after a stop)."""
+    found = simulated["deadline"]
+    assert found["first_success"] == 600
+    assert found["not_started"] == 600
+    assert found["t_stop_zero"] and found["nfev_zero"] and found["last_nan"] and found["trace_nan_state"]
+    assert found["poison_left"] == 0
+    assert found["message"].startswith("not run:") and "1e-09 s" in found["message"]
+
+
+def test_simulated_launches_pass_the_compiled_signature(simulated):
+    """Every launch of the simulated runs (each variant's state size) passes exactly the
+    types of launch_signature, the signature the GPU's kernel is compiled for (and the PTX
+    test compiles): C-contiguous arrays, the aligned settings record."""
+    found = simulated["signatures"]
+    assert found["state_sizes"] == [6, 12, 15] and found["launches"] >= 3
+    assert found["mismatched"] == []
+
+
 # -- compiled for a GPU, without one ------------------------------------------------------------------------
 def _compilers() -> bool:
     """Whether NVVM and NVRTC (the CUDA 12 compiler wheels of numba-cuda[cu12]) are here."""
@@ -174,45 +196,134 @@ def _compilers() -> bool:
         return False
 
 
-@pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
-def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
-    """The whole kernel (every variant's physics, DOP853, outputs, streamed summary) compiles
-    for CUDA from the CPU engine's source."""
-    import numba.cuda.dispatcher
-    from numba import typeof
+def _ptxas() -> str | None:
+    """ptxas of the CUDA compiler wheel (nvidia-cuda-nvcc), or on PATH."""
+    import shutil
 
-    from rbstab.engine.cuda import TRACE_COLUMNS, kernel
+    try:
+        import nvidia.cuda_nvcc
+
+        found = [os.path.join(p, "bin", "ptxas") for p in nvidia.cuda_nvcc.__path__]
+    except ImportError:
+        found = []
+    return next((p for p in found if os.path.exists(p)), None) or shutil.which("ptxas")
+
+
+@pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
+def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch, tmp_path):
+    """The kernel every launch runs (every variant's physics, DOP853, outputs, streamed
+    summary; launch_signature's types) compiles for CUDA from the CPU engine's source; with
+    ptxas, its registers and local memory a thread are reported."""
+    import numba.cuda.dispatcher
+
+    from rbstab.engine.cuda import kernel_function, launch_signature
     from rbstab.engine.rk import DOP853
-    from rbstab.engine.settings import SETTINGS
-    from rbstab.model import PARAMETERS
 
     class Device:  # numba-cuda asks the current device's compute capability for called dispatchers
         compute_capability = (9, 0)
 
     if not GPU:
         monkeypatch.setattr(numba.cuda.dispatcher, "get_current_device", lambda: Device())
-    k, n = 4, 51
-    args = (np.zeros(k, np.int64), np.zeros(k, PARAMETERS), np.zeros((k, 15)), np.zeros(k, SETTINGS),
-            np.zeros(n, np.int64), np.zeros((n, 7)), np.zeros((7, 7, 7)), np.int64(5), True, 1e-3,
-            np.zeros(1, np.int64), np.int64(1), np.zeros(k, np.int64), np.zeros(k), np.zeros(k, np.int64),
-            np.zeros(k, np.int64), np.zeros((k, N_OUTPUTS)), np.zeros((k, ACCUMULATOR_SIZE)),
-            np.zeros((k, 11, TRACE_COLUMNS)))
-    ptx, _ = cuda.compile_ptx(kernel(DOP853, 15).py_func, tuple(typeof(a) for a in args), cc=(9, 0))
+    ptx, _ = cuda.compile_ptx(kernel_function(DOP853, 15), launch_signature(15), cc=(9, 0))
     assert ".target sm_90" in ptx and ".entry" in ptx
     assert "globaltimer" in ptx  # the launch's wall-time limit reads the GPU's clock
+    assert "atom.global.cas.b64" in ptx  # the launch's one deadline
+    ptxas = _ptxas()
+    if ptxas:
+        (tmp_path / "k.ptx").write_text(ptx)
+        done = subprocess.run([ptxas, "-arch=sm_90", "-v", str(tmp_path / "k.ptx"), "-o", str(tmp_path / "k.cubin")],
+                              capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        report = " | ".join(line.split(":", 1)[-1].strip() for line in done.stderr.splitlines()
+                            if "Used" in line or "spill" in line)
+        print(f"run_all_DOP853_15 for sm_90: {report}")
+        registers = int(report.split("Used ")[1].split(" registers")[0])
+        assert 0 < registers <= 255
 
 
 def test_kernel_cache_key_is_the_same_in_every_process():
     """numba-cuda keys its disk cache on a kernel's bytecode and the pickled contents of its
     closure: they must not change from one process to the next, or every command would
     compile the kernel again."""
-    script = ("import hashlib; from numba.cuda.serialize import dumps; from rbstab.engine.cuda import kernel\n"
-              "f = kernel(2, 15).py_func\n"
+    script = ("import hashlib; from numba.cuda.serialize import dumps; from rbstab.engine.cuda import kernel_function\n"
+              "f = kernel_function(2, 15)\n"
               "print(hashlib.sha256(f.__code__.co_code + dumps(tuple(c.cell_contents for c in f.__closure__ or ())))"
               ".hexdigest())")
     keys = {subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
             for _ in range(2)}
     assert len(keys) == 1
+
+
+def test_each_kernel_has_cache_files_of_its_own():
+    """numba-cuda saves a kernel's cache index without a lock (read, update, write): two
+    processes compiling two kernels that shared an index file could leave an entry naming the
+    other's code. Each (method, state size) kernel has index files of its own, as two
+    processes find them."""
+    from rbstab.engine.rk import DOP853, method_number
+
+    RK45 = method_number("RK45")
+
+    script = ("import sys; from numba.cuda.dispatcher import CUDACache; from rbstab.engine.cuda import kernel_function\n"
+              "print(CUDACache(kernel_function(int(sys.argv[1]), int(sys.argv[2])))._cache_file._index_path)")
+    paths = [subprocess.run([sys.executable, "-c", script, str(m), str(n)], capture_output=True, text=True,
+                            check=True).stdout.strip() for m, n in ((DOP853, 15), (RK45, 15), (DOP853, 12))]
+    assert len(set(paths)) == 3, paths
+    assert all(p.endswith(".nbi") for p in paths)
+
+
+#: A process that compiles (here: a stand-in taking 1 s) the kernel of sys.argv[1] with a GPU
+#: present, in the cache folder $NUMBA_CACHE_DIR, printing which kernel it got.
+_COMPILING = """
+import sys, time
+from numba import cuda
+import rbstab.engine.cuda as engine
+
+engine.simulated = lambda: False
+def jit(signature, cache):
+    def compile(function):
+        time.sleep(1.0)
+        return function.__name__
+    return compile
+cuda.jit = jit
+print(engine.compiled_kernel(int(sys.argv[1]), 15))
+"""
+
+
+def test_processes_compiling_at_once_take_turns(tmp_path):
+    """Three processes that need kernels at once with a cold cache: each gets its own, they
+    compile one at a time (under the cache folder's lock, so numba-cuda's cache files are
+    never written by two at once), and the one-line notice appears once a kernel."""
+    import time
+
+    from rbstab.engine.rk import DOP853, method_number
+
+    RK45 = method_number("RK45")
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    env.pop("NUMBA_ENABLE_CUDASIM", None)
+    start = time.perf_counter()
+    procs = [subprocess.Popen([sys.executable, "-c", _COMPILING, str(m)], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True) for m in (DOP853, DOP853, RK45)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert all(p.returncode == 0 for p in procs), [e for _, e in outs]
+    assert [o.strip() for o, _ in outs] == ["run_all_DOP853_15", "run_all_DOP853_15", "run_all_RK45_15"]
+    notices = "".join(e for _, e in outs)
+    assert notices.count("compiling the CUDA kernel for DOP853") == 1
+    assert notices.count("compiling the CUDA kernel for RK45") == 1
+    assert time.perf_counter() - start >= 2.0  # the two DOP853 processes waited for each other
+
+
+def test_numba_cuda_loads_where_numpy_has_no_row_stack():
+    """numpy 2.5 removed np.row_stack, which numba-cuda 0.30.4 overloads on numpy >= 2.0:
+    imported through rbstab's engine, numba-cuda's CUDA target still loads."""
+    script = ("import numpy as np\n"
+              "if hasattr(np, 'row_stack'): del np.row_stack\n"
+              "import rbstab.engine.cuda\n"
+              "import numba.cuda.np.arrayobj\n"
+              "print('loaded')")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env)
+    assert done.returncode == 0 and done.stdout.strip() == "loaded", done.stderr[-2000:]
 
 
 # -- without a GPU ------------------------------------------------------------------------------------------

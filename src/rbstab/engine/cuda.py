@@ -19,14 +19,25 @@ outputs and numerical dv/dt (a thinned trace). Under numba's CUDA simulator
 (``NUMBA_ENABLE_CUDASIM=1``) the same driver runs as Python over the CPU-compiled
 functions and gives the CPU engine's bits.
 
+A launch has one deadline, ``max_wall_time`` after its first thread started: no run starts
+after it (such a run ends NOT_STARTED), a run under way stops at the next clock reading
+(TIMEOUT), and every run's outputs are written, started or not, so no buffer keeps what
+an earlier launch left in it. The grid is as many blocks as the compiled kernel's
+registers let the GPU hold at once (:func:`occupancy`); the kernel is compiled for the
+one argument signature every launch uses (:func:`launch_signature`), once per version,
+under a file lock that other processes wait on (:func:`compiled_kernel`).
+
 Not here: the pure sign law of ``sliding`` (``boundary_layer: 0``), whose event-driven
 integrator (:mod:`rbstab.engine.switching`) stays on the CPU, and the implicit methods.
 """
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import functools
 import math
+import os
 import sys
 import time as _time
 from dataclasses import dataclass
@@ -55,10 +66,11 @@ from .integrate import REJECTED, attempt_step, gimbal_event, locate_event, sampl
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
-from .status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT
+from .status import GIMBAL_LOCK, NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
 
-__all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "CudaChunk", "integrate_chunks_cuda",
-           "TRACE_COLUMNS", "THREADS_PER_BLOCK"]
+__all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
+           "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
+           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "RUNS_PER_RESIDENT_THREAD"]
 
 #: How to get what ``--engine cuda`` needs.
 INSTALL_HINT = 'pip install "rbstab[cuda]" (numba-cuda and the CUDA 12 wheels) and an NVIDIA driver'
@@ -68,8 +80,16 @@ TRACE_COLUMNS = N_OUTPUTS + 1
 THREADS_PER_BLOCK = 128
 #: Passes of a thread's loop between two readings of the GPU's clock (the launch's limit).
 CLOCK_EVERY = 64
-#: Device memory [bytes] the traces of one launch may take at most.
-TRACE_BYTES = 2 * 2**30
+#: Runs a launch holds, per thread the GPU keeps resident, where the call has them: a
+#: thread whose run ends takes the next, and the last runs' tail is a small part of it.
+RUNS_PER_RESIDENT_THREAD = 8
+#: Share of the device's free memory the traces of one launch may take (up to four worker
+#: processes may share a GPU, each taking this share of what is free when it launches).
+TRACE_MEMORY_SHARE = 0.25
+#: Longest launch limit [ns] (the deadline is the GPU clock plus it, in an int64).
+_NO_LIMIT_NS = 2**60
+#: CUDA's compute modes (``cuDeviceGetAttribute(CU_DEVICE_ATTRIBUTE_COMPUTE_MODE)``).
+COMPUTE_MODES = {0: "default", 1: "exclusive-thread", 2: "prohibited", 3: "exclusive-process"}
 
 
 class CudaUnavailable(RuntimeError):
@@ -101,6 +121,20 @@ def check_available() -> None:
     if not cuda.is_available():
         raise CudaUnavailable("--engine cuda found no usable NVIDIA GPU: no CUDA driver or device "
                               f"(numba.cuda.is_available() is False); it needs {INSTALL_HINT}")
+    if compute_mode() == "prohibited":
+        raise CudaUnavailable("--engine cuda: the GPU's compute mode is 'prohibited' (nvidia-smi -q shows it): "
+                              "no process may use it; ask its administrator for the default mode")
+
+
+def compute_mode() -> str:
+    """The compute mode of GPU 0 (a value of :data:`COMPUTE_MODES`; ``"default"`` under the
+    simulator), read from the driver without a context: ``"exclusive-process"`` lets one
+    process at a time use the GPU, so a sweep then runs one GPU worker."""
+    if simulated() or getattr(cuda, "implementation", "") != "NVIDIA" or not cuda.is_available():
+        return "default"
+    from numba.cuda.cudadrv.driver import driver  # optional: numba-cuda
+
+    return COMPUTE_MODES.get(int(driver.get_device(0).COMPUTE_MODE), "default")
 
 
 # -- the GPU's clock -----------------------------------------------------------------------------------
@@ -138,23 +172,39 @@ globaltimer = _globaltimer_intrinsic()
 
 
 # -- the kernel ---------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=None)
-def kernel(method: int, n_state: int):
-    """The CUDA kernel of the runs of method number ``method`` and ``n_state`` states (the
-    shapes of its thread-local work arrays), compiled on first use and cached on disk.
+def launch_signature(n_state: int) -> tuple:
+    """numba's types of a launch's arguments, in order, for runs of ``n_state`` states: the
+    one signature :func:`compiled_kernel` compiles and every launch passes (every array
+    C-contiguous).
 
-    Launched as ``kernel[blocks, THREADS_PER_BLOCK](codes, params, y0, settings, first,
-    weights, short, stride, full, ratio, counter, limit_ns, status, t_stop, nfev, n_steps,
-    last, acc, trace)``; see :func:`integrate_chunks_cuda` for the arrays.
+    codes int64 (k,); params :data:`rbstab.model.PARAMETERS` (k,) or (1,); y0 (k,
+    n_state); settings :data:`rbstab.engine.settings.SETTINGS` (k,); the grid's ``first``
+    int64 (n,), ``weights`` (n, w) and ``short`` (w, w, w) (:mod:`rbstab.summary`); stride
+    int64; full bool; ratio float64; control int64 (2,): the next run and the launch's
+    deadline [ns] (0 until its first thread sets it); limit_ns int64; then the outputs:
+    status int64 (k,), t_stop (k,), nfev, n_steps int64 (k,), last (k, N_OUTPUTS), acc (k,
+    ACCUMULATOR_SIZE), trace (k or 1, n_trace, TRACE_COLUMNS).
     """
-    _cuda()
+    from numba import boolean, float64, from_dtype, int64  # heavy: numba
+
+    vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
+    ints = int64[::1]
+    return (ints, from_dtype(PARAMETERS)[::1], matrix, from_dtype(SETTINGS)[::1], ints, matrix, cube, int64,
+            boolean, float64, ints, int64, ints, vector, ints, ints, matrix, matrix, cube)
+
+
+def kernel_function(method: int, n_state: int):
+    """The Python function of the CUDA kernel of the runs of method number ``method`` and
+    ``n_state`` states (the shapes of its thread-local work arrays); see
+    :func:`launch_signature` for its arguments. Its name names the two, so that each
+    (method, state size) kernel has cache files of its own on disk."""
     from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
     dop853 = method == DOP853
     parameters = from_dtype(PARAMETERS)
 
-    def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, counter, limit_ns,
+    def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, control, limit_ns,
                 status_o, t_stop_o, nfev_o, n_steps_o, last_o, acc_o, trace_o):
         K = cuda.local.array((n_rows, n_state), float64)
         Q = cuda.local.array((q_rows, n_state), float64)
@@ -170,11 +220,15 @@ def kernel(method: int, n_state: int):
         w = Work(K, Q, y_new, scale, work)
         n_runs = y0s.shape[0]
         n_samples = first.shape[0]
-        deadline = globaltimer() + limit_ns
+        # the launch's deadline: set once, by the first thread to start
+        now = globaltimer()
+        deadline = cuda.atomic.cas(control, 1, 0, now + limit_ns)
+        if deadline == 0:
+            deadline = now + limit_ns
         passes = 0
-        k = cuda.atomic.add(counter, 0, 1)
+        k = cuda.atomic.add(control, 0, 1)
         while k < n_runs:
-            # a run: its start
+            # a run: its start (none after the launch's deadline)
             code = codes[k]
             # the run's record copied to thread-local memory: its fields are read at every
             # right-hand side, and the copy reads it from device memory once, coalesced
@@ -188,17 +242,25 @@ def kernel(method: int, n_state: int):
             trace = trace_o[min(k, trace_o.shape[0] - 1)]
             t_end = s.t_end
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-            for i in range(n_state):
-                y[i] = y0s[k, i]
             stream_start(acc)
-            state_rate(code, y, p, f)
-            h_abs = initial_step(code, p, s, y, f, w)
-            nfev = 2
+            for i in range(N_OUTPUTS):  # outputs not computed (rbstab.layout.LEFT_OUT) stay NaN
+                row[i] = math.nan
+            nfev = 0
             t = 0.0
             j = 0
             n_steps = 0
             status = SUCCESS
-            h_abs = step_bounds(s, t, h_abs)
+            h_abs = 0.0
+            if globaltimer() > deadline:
+                status = NOT_STARTED
+                t_end = 0.0
+            else:
+                for i in range(n_state):
+                    y[i] = y0s[k, i]
+                state_rate(code, y, p, f)
+                h_abs = initial_step(code, p, s, y, f, w)
+                nfev = 2
+                h_abs = step_bounds(s, t, h_abs)
             rejected = False
             while t < t_end:
                 passes += 1
@@ -239,7 +301,7 @@ def kernel(method: int, n_state: int):
                     f[i] = K[n_stages, i]
                 h_abs = step_bounds(s, t, h_abs)
                 rejected = False
-            # its end: results, and the next run (none after the launch's limit)
+            # its end: every output of the run written, whether it ran or not
             stream_finish(acc, first, weights, short, trace, stride)
             status_o[k] = status
             t_stop_o[k] = t
@@ -257,29 +319,72 @@ def kernel(method: int, n_state: int):
                 for c in range(N_OUTPUTS):
                     trace[i // stride, c] = row[c]
                 trace[i // stride, NUMERICAL_RATE_AT] = math.nan
-            if status == TIMEOUT:
-                break
-            k = cuda.atomic.add(counter, 0, 1)
+            k = cuda.atomic.add(control, 0, 1)
 
+    run_all.__name__ = run_all.__qualname__ = f"run_all_{METHODS[method]}_{n_state}"
+    return run_all
+
+
+@functools.lru_cache(maxsize=None)
+def compiled_kernel(method: int, n_state: int):
+    """The CUDA kernel of the runs of method number ``method`` and ``n_state`` states,
+    compiled for :func:`launch_signature` (or loaded from the disk cache beside the CPU
+    kernels, :data:`rbstab.jit.CACHE_DIR`), once per process.
+
+    Processes that need it at once take turns under a file lock in the cache folder: the
+    first compiles it (and says so in one line on stderr, once for this version), the
+    others load what it saved. Launched as ``kernel[blocks, THREADS_PER_BLOCK](*arguments)``
+    (:func:`launch_signature`).
+    """
+    _cuda()
+    function = kernel_function(method, n_state)
     if simulated():
-        return cuda.jit(_simulator_function(run_all))
+        return cuda.jit(_simulator_function(function))
     from numba.cuda.core import config  # optional: numba-cuda
 
-    # beside the CPU kernels, in the folder of this version of the compiled sources (rbstab.jit)
     config.CACHE_DIR = str(CACHE_DIR)
-    return cuda.jit(cache=True)(run_all)
-
-
-def _say_compiling(method: int, n_state: int) -> str | None:
-    """One line on stderr the first time this version compiles the kernel of ``method`` and
-    ``n_state`` (numba-cuda then caches it on disk); its group for
-    :func:`rbstab.jit.mark_warm` once the kernel ran, or None when it is there already."""
     group = f"cuda-{METHODS[method]}-{n_state}"
-    if simulated() or cache_is_warm(group):
-        return None
-    print(f"rbstab: compiling the CUDA kernel for {METHODS[method]} with {n_state} states "
-          f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
-    return group
+    with _compile_lock(group):
+        if not cache_is_warm(group):
+            print(f"rbstab: compiling the CUDA kernel for {METHODS[method]} with {n_state} states "
+                  f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+        fn = cuda.jit(launch_signature(n_state), cache=True)(function)  # compiles, or loads from the cache
+        mark_warm(group)
+    return fn
+
+
+@contextlib.contextmanager
+def _compile_lock(group: str):
+    """Hold an exclusive lock on ``CACHE_DIR/<group>.lock`` (other processes wait): one
+    process at a time compiles a kernel or reads it from the cache (numba-cuda writes its
+    cache files without a lock). A cache folder that cannot be written goes without."""
+    try:
+        CACHE_DIR.mkdir(parents=True, exist_ok=True)
+        handle = open(CACHE_DIR / f"{group}.lock", "a")
+    except OSError:
+        yield
+        return
+    with handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def occupancy(fn, n_state: int) -> int:
+    """Blocks of :data:`THREADS_PER_BLOCK` threads one multiprocessor holds at once for the
+    compiled kernel ``fn`` (CUDA's occupancy calculation from its registers a thread and the
+    device's limits; the kernel uses no shared memory). 1 under the simulator."""
+    if simulated():
+        return 1
+    device = cuda.get_current_device()
+    regs = fn.get_regs_per_thread(launch_signature(n_state))
+    warps = -(-THREADS_PER_BLOCK // device.WARP_SIZE)
+    per_warp = -(-max(regs, 1) * device.WARP_SIZE // 256) * 256  # registers go to a warp in units of 256
+    by_registers = device.MAX_REGISTERS_PER_MULTIPROCESSOR // (per_warp * warps)
+    by_threads = device.MAX_THREADS_PER_MULTIPROCESSOR // THREADS_PER_BLOCK
+    return max(1, min(by_registers, by_threads, device.MAX_BLOCKS_PER_MULTIPROCESSOR))
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
@@ -353,22 +458,12 @@ class CudaChunk:
     seconds: float
 
 
-def _blocks(k: int) -> int:
-    """Blocks of a launch for k runs: enough to fill the GPU (a persistent grid), no more
-    than the runs need."""
-    wanted = -(-k // THREADS_PER_BLOCK)
-    if simulated():
-        return 1
-    sms = cuda.get_current_device().MULTIPROCESSOR_COUNT
-    return max(1, min(wanted, 8 * sms))
-
-
 def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride: int | None = None,
                           full: bool = False, max_wall_time: float = math.inf,
                           ratio: float = DEFAULT_LYAPUNOV_RATIO) -> Iterator[CudaChunk]:
     """Integrate k runs of one method and state size on the GPU; yields a
-    :class:`CudaChunk` per launch (the runs of one ``t_end`` at a time, in order, as many a launch as
-    :data:`TRACE_BYTES` of traces allow).
+    :class:`CudaChunk` per launch (the runs of one ``t_end`` at a time, in order, as many a
+    launch as :data:`TRACE_MEMORY_SHARE` of the device's free memory holds of their traces).
 
     Parameters
     ----------
@@ -387,8 +482,8 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     full : bool
         Every output at the kept samples, or all but :data:`rbstab.layout.LEFT_OUT`.
     max_wall_time : float
-        Seconds after which a launch stops [s]: its runs not finished are TIMEOUT. A
-        launch takes as many runs as :data:`TRACE_BYTES` of traces hold.
+        Each launch's limit [s] from its first thread's start: no run starts after it
+        (NOT_STARTED, t_stop 0, NaN outputs), a run under way stops (TIMEOUT).
     ratio : float
         The convergence ratio of each run's last sample not converged (the accumulator's
         ``LAST_ABOVE``: :func:`rbstab.convergence.converged` with v(0) and its v).
@@ -410,61 +505,88 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     codes = np.ascontiguousarray(codes, dtype=np.int64)
     params = np.ascontiguousarray(params, dtype=PARAMETERS)
     n_trace = 0 if stride is None else len(range(0, n_samples, stride))
-    per_launch = max(1, TRACE_BYTES // max(8 * TRACE_COLUMNS * n_trace, 1))
     method = int(methods[0]) if len(methods) else 0
-    compiling = _say_compiling(method, n_state)
-    fn = kernel(method, n_state)
-    limit_ns = np.int64(min(max_wall_time * 1e9, 2**62)) if math.isfinite(max_wall_time) else np.int64(2**62)
-    pinned: dict = {}  # host buffers the launches of this call copy their results into
+    fn = compiled_kernel(method, n_state)
+    limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
+        _NO_LIMIT_NS)
+    per_launch = _runs_per_launch(n_trace)
+    blocks = _resident_blocks(fn, n_state)
     # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
     for t_end in dict.fromkeys(settings["t_end"].tolist()):
         grid = np.linspace(0.0, t_end, n_samples)
-        stencils = (*stencil_weights(grid), short_stencils(grid))
+        stencils = tuple(np.ascontiguousarray(a) for a in (*stencil_weights(grid), short_stencils(grid)))
         group = np.flatnonzero(settings["t_end"] == t_end)
         for lo in range(0, len(group), per_launch):
             runs = group[lo: lo + per_launch]
             start = _time.perf_counter()
-            out = _launch(fn, (codes[runs], params if len(params) == 1 else params[runs], y0[runs], settings[runs]),
-                          stencils, (stride or n_samples, full, ratio), n_trace, limit_ns, pinned)
-            if compiling:
-                mark_warm(compiling)
-                compiling = None
+            out = _launch(fn, blocks, (codes[runs], params if len(params) == 1 else params[runs], y0[runs],
+                                       settings[runs]), stencils, (stride or n_samples, full, ratio), n_trace,
+                          limit_ns)
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _launch(fn, runs, stencils, options, n_trace, limit_ns, pinned: dict):
+def _resident_blocks(fn, n_state: int) -> int:
+    """The grid of a launch: the blocks the GPU holds at once (:func:`occupancy` on every
+    multiprocessor), each thread taking runs until none is left (a persistent grid)."""
+    if simulated():
+        return 1
+    return occupancy(fn, n_state) * cuda.get_current_device().MULTIPROCESSOR_COUNT
+
+
+def _runs_per_launch(n_trace: int) -> int:
+    """Most runs a launch takes: those whose traces fit in :data:`TRACE_MEMORY_SHARE` of the
+    device's free memory (no limit without traces)."""
+    if not n_trace:
+        return sys.maxsize
+    if simulated():
+        free = 2**30
+    else:
+        free, _ = cuda.current_context().get_memory_info()
+    return max(1, int(free * TRACE_MEMORY_SHARE) // (8 * TRACE_COLUMNS * n_trace))
+
+
+#: A process's buffers, reused by its launches: name -> (device array, page-locked host
+#: array), each of the largest size a launch asked for so far.
+_BUFFERS: dict[str, tuple] = {}
+
+
+def _buffer(name: str, shape: tuple, dtype) -> tuple:
+    """(device array, page-locked host array) of ``shape`` and ``dtype``: views of the
+    process's buffer ``name``, allocated again only when a launch needs more than it holds.
+    Nothing is filled: the kernel writes every element a launch reads back."""
+    dtype = np.dtype(dtype)
+    size = int(np.prod(shape))
+    held = _BUFFERS.get(name)
+    if held is None or held[0].size < size or held[0].dtype != dtype:
+        _BUFFERS.pop(name, None)
+        held = _BUFFERS[name] = (cuda.device_array(max(size, 1), dtype), cuda.pinned_array(max(size, 1), dtype))
+    device, host = held
+    return device[:size].reshape(shape), host[:size].reshape(shape)
+
+
+def _launch(fn, blocks: int, runs, stencils, options, n_trace: int, limit_ns):
     """One launch over ``runs`` (codes, params, y0, settings) with the grid's ``stencils``
-    (first, weights, short) and ``options`` (stride, full, ratio); the host arrays of
-    :class:`CudaChunk`, copied out of the page-locked buffers of ``pinned`` (shape and
-    dtype -> buffer: allocated once, the launches of a call reuse them)."""
+    (first, weights, short) and ``options`` (stride, full, ratio): the host arrays of
+    :class:`CudaChunk` (copies of the process's page-locked buffers) and the kernel's time."""
     stride, full, ratio = options
     k = len(runs[0])
-    status = np.full(k, TIMEOUT, dtype=np.int64)  # a run the launch's limit left unstarted
-    t_stop = np.zeros(k)
-    nfev = np.zeros(k, dtype=np.int64)
-    n_steps = np.zeros(k, dtype=np.int64)
-    last = np.full((k, N_OUTPUTS), np.nan)
-    acc = np.zeros((k, ACCUMULATOR_SIZE))
-    trace_shape = (k, n_trace, TRACE_COLUMNS) if n_trace else (1, 0, TRACE_COLUMNS)
-    outputs = [status, t_stop, nfev, n_steps, last, acc]
+    shapes = {"status": ((k,), np.int64), "t_stop": ((k,), np.float64), "nfev": ((k,), np.int64),
+              "n_steps": ((k,), np.int64), "last": ((k, N_OUTPUTS), np.float64),
+              "acc": ((k, ACCUMULATOR_SIZE), np.float64)}
+    if n_trace:
+        shapes["trace"] = ((k, n_trace, TRACE_COLUMNS), np.float64)
+    buffers = {name: _buffer(name, shape, dtype) for name, (shape, dtype) in shapes.items()}
     d_in = [cuda.to_device(a) for a in (*runs, *stencils)]
-    d_out = [cuda.to_device(a) for a in outputs]
-    d_trace = cuda.device_array(trace_shape)
-    counter = cuda.to_device(np.zeros(1, dtype=np.int64))
+    control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
+    no_trace = () if n_trace else (cuda.device_array((1, 0, TRACE_COLUMNS)),)
+    arguments = (*d_in, np.int64(stride), bool(full), float(ratio), control, limit_ns,
+                 *(device for device, _ in buffers.values()), *no_trace)
     start, end = cuda.event(), cuda.event()
     start.record()
-    fn[_blocks(k), THREADS_PER_BLOCK](*d_in, np.int64(stride), bool(full), float(ratio), counter, limit_ns, *d_out,
-                                      d_trace)
+    fn[blocks, THREADS_PER_BLOCK](*arguments)
     end.record()
     end.synchronize()
     kernel_seconds = start.elapsed_time(end) / 1e3
-
-    def to_host(device, shape, dtype):
-        key = (shape, np.dtype(dtype).str)
-        if key not in pinned:
-            pinned[key] = cuda.pinned_array(shape, dtype)
-        return np.array(device.copy_to_host(pinned[key]))
-
-    host = [to_host(d, a.shape, a.dtype) for d, a in zip(d_out, outputs)]
-    trace = to_host(d_trace, trace_shape, np.float64) if n_trace else None
-    return (*host, trace, kernel_seconds)
+    host = {name: np.array(device.copy_to_host(pinned)) for name, (device, pinned) in buffers.items()}
+    trace = host.pop("trace") if n_trace else None
+    return (*host.values(), trace, kernel_seconds)

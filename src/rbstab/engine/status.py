@@ -15,6 +15,7 @@ code    name                 the run ...
 -3      ``STEP_LIMIT``       took ``simulation.max_steps`` steps
 -4      ``TIMEOUT``          ran past ``simulation.max_wall_time``
 -5      ``SWITCHING_LIMIT``  located its largest number of switchings (pure sign law)
+-6      ``NOT_STARTED``      was not started: its GPU launch had reached its wall-time limit
 ======  ===================  ==========================================================
 
 A run whose code is not :data:`SUCCESS` has status ``"failed"``, with
@@ -33,6 +34,7 @@ __all__ = [
     "STEP_LIMIT",
     "TIMEOUT",
     "SWITCHING_LIMIT",
+    "NOT_STARTED",
     "STATUSES",
     "SUCCESS_MESSAGE",
     "TOO_SMALL_STEP_MESSAGE",
@@ -40,7 +42,8 @@ __all__ = [
     "status_message",
 ]
 
-SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT, SWITCHING_LIMIT = 0, 1, -1, -2, -3, -4, -5
+SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT, SWITCHING_LIMIT, NOT_STARTED = (
+    0, 1, -1, -2, -3, -4, -5, -6)
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).
 DEFAULT_MAX_STEPS = 10_000_000
@@ -65,6 +68,8 @@ STATUSES: dict[int, tuple[str, str]] = {
     SWITCHING_LIMIT: ("SWITCHING_LIMIT", "switching limit: {max_switchings} events located by t = {t_stop:.6g} s "
                                          "(the switchings accumulate without reaching the resolution "
                                          "{resolution:g} m)"),
+    NOT_STARTED: ("NOT_STARTED", "not run: its GPU launch reached its wall-time limit of {max_wall_time:g} s "
+                                 "(simulation.max_wall_time) before the run started; run it again"),
 }
 
 

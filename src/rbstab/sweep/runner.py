@@ -75,12 +75,16 @@ STORE_CHUNK_SIZE = 512
 #: whatever its runs (their headers, attributes and chunk indexes), ~0.5 KB a run without
 #: traces; the runs' outputs are not kept beyond a block of 32.
 SUMMARY_CHUNK_SIZE = 8192
-#: Runs per chunk of a ``--store summary`` sweep on the GPU (``--engine cuda``: one launch
-#: a chunk; other stores take ``DEFAULT_CHUNK_SIZE["cuda"]``, their traces in host memory).
-CUDA_SUMMARY_CHUNK_SIZE = 131072
+#: Runs per chunk of a sweep on the GPU (``--engine cuda``: a chunk is one launch) by store.
+#: ``summary``: 8 runs a thread the GPU keeps resident (:data:`rbstab.engine.cuda.RUNS_PER_RESIDENT_THREAD`;
+#: an H100 holds 132 x 2 blocks of 128 threads of the kernel at its 255 registers a thread),
+#: so that a launch's tail, where its last runs finish, is a small part of it; ``thinned``:
+#: about one run a resident thread, ~2 GB of traces at 201 samples (host and device memory
+#: bound it); ``full``: ``DEFAULT_CHUNK_SIZE["cuda"]`` (a trace of every sample).
+CUDA_CHUNK_SIZE = {"summary": 8 * 132 * 2 * 128, "thinned": 32768}
 
 #: Worker processes of a ``--engine cuda`` sweep by default (at most the CPU count): the
-#: GPU integrates a run in ~0.5 us, its worker spends ~15-20 us a run on the host (the
+#: GPU integrates a run in ~0.5 us, its worker spends ~11-15 us a run on the host (the
 #: batch's records, the store file and its rows), so several workers share one GPU.
 CUDA_JOBS = 4
 
@@ -421,7 +425,7 @@ def run_sweep(
                             engine=engine, store=store, layout=layout, parameters=table.parameters(),
                             sweep=spec.name)
     outcome = SweepOutcome(spec.name, Path(output) / spec.name, spec.n_runs, engine=engine)
-    jobs = cuda_jobs() if engine == "cuda" and jobs is None else jobs
+    jobs = cuda_jobs(jobs) if engine == "cuda" else jobs
     with _executor(executor, jobs, scheduler) as ex:
         (outcome.directory / RUNS_DIR).mkdir(parents=True, exist_ok=True)
         _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
@@ -429,10 +433,15 @@ def run_sweep(
     return outcome
 
 
-def cuda_jobs() -> int:
-    """Worker processes of a ``--engine cuda`` sweep by default: :data:`CUDA_JOBS`, at most
-    the CPU count (:func:`rbstab.sweep.executors.default_jobs`)."""
-    return min(CUDA_JOBS, default_jobs())
+def cuda_jobs(jobs: int | None = None) -> int | None:
+    """Worker processes of a ``--engine cuda`` sweep: ``jobs``, by default :data:`CUDA_JOBS`
+    at most the CPU count (:func:`rbstab.sweep.executors.default_jobs`); one where the GPU
+    is in exclusive-process compute mode (one process at a time may use it)."""
+    from ..engine.cuda import compute_mode  # heavy: numba-cuda (--engine cuda only)
+
+    if compute_mode() == "exclusive-process":
+        return 1
+    return jobs if jobs is not None else min(CUDA_JOBS, default_jobs())
 
 
 def _executor(executor: str | Executor, jobs: int | None, scheduler: str | None):
@@ -456,7 +465,7 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
         if layout == "chunk" and store == "summary":
             default = SUMMARY_CHUNK_SIZE
         if engine == "cuda":  # a launch fills the GPU with one chunk's runs
-            default = CUDA_SUMMARY_CHUNK_SIZE if store == "summary" else DEFAULT_CHUNK_SIZE["cuda"]
+            default = CUDA_CHUNK_SIZE.get(store, DEFAULT_CHUNK_SIZE["cuda"])
         return default, CHUNKS_PER_WORKER
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")
