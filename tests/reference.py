@@ -37,13 +37,28 @@ class Model:
     def __init__(self, variant: str, body, gains):
         self.variant, self.body, self.gains = variant, body, gains
 
-    def controls(self, theta, omega, x, v):
+    def delivered(self, u, which):
+        """``u`` through the actuators' limits of ``which`` (gains.saturation), if any."""
+        sat = getattr(self.gains, "saturation", None)
+        if sat is None:
+            return u
+        limit = np.asarray(getattr(sat, which), dtype=float)
+        if sat.shape == "smooth":
+            with np.errstate(invalid="ignore"):  # inf * tanh(0) where unlimited: not taken
+                return np.where(np.isinf(limit), u, limit * np.tanh(u / limit))
+        return np.clip(u, -limit, limit)
+
+    def commanded_controls(self, theta, omega, x, v):
         g = self.gains
         n = -euler_rate(theta).T @ g.k_r @ theta - g.l_r @ omega  # eq 23
         h = -g.k_t @ x - g.l_t @ v  # eq 24
         return n, h
 
-    def constraint(self, e, f, d):
+    def controls(self, theta, omega, x, v):
+        n, h = self.commanded_controls(theta, omega, x, v)
+        return self.delivered(n, "torque_n"), self.delivered(h, "force_h")
+
+    def commanded_constraint(self, e, f, d):
         g = self.gains
         if self.variant == "visco_elastic":
             return -g.k_c @ e - g.l_c @ f, np.zeros(3)
@@ -54,6 +69,10 @@ class Model:
             phi = g.boundary_layer
             return -g.k_s * (np.tanh(e / phi) if phi > 0 else np.sign(e)), np.zeros(3)
         return np.zeros(3), np.zeros(3)
+
+    def constraint(self, e, f, d):
+        lam, d_dot = self.commanded_constraint(e, f, d)
+        return self.delivered(lam, "constraint_force"), d_dot
 
     def rhs(self, t, y):
         if self.variant == "permanent":

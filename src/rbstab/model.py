@@ -8,6 +8,7 @@ every compiled function: one compiled kernel per variant serves every body and e
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -16,7 +17,8 @@ import numpy as np
 from .jit import jit
 from .kinematics import cross, hat, matTvec, matvec, neg, sub
 
-__all__ = ["RigidBody", "Gains", "PARAMETERS", "parameters", "gyroscopic", "torque_n", "force_h"]
+__all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "PARAMETERS", "parameters", "gyroscopic",
+           "saturate", "torque_n_command", "force_h_command", "torque_n", "force_h"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,6 +68,34 @@ class RigidBody:
         return np.linalg.inv(self.pivot_inertia)
 
 
+#: The shapes of a saturating actuator by name, and their codes in :data:`PARAMETERS`'s
+#: ``saturation`` (0: no limits): ``clip`` min(max(u, -u_max), u_max); ``smooth`` u_max
+#: tanh(u / u_max).
+SATURATION_SHAPES = {"clip": 1, "smooth": 2}
+
+
+@dataclass(frozen=True, eq=False)
+class Saturation:
+    """What the actuators can deliver: |u_i| <= limit_i for each axis i (inf: unlimited).
+
+    Attributes
+    ----------
+    torque_n : ndarray, shape (3,)
+        Limits of N [N m], body frame (eq 23).
+    force_h : ndarray, shape (3,)
+        Limits of H [N], inertial frame (eq 24).
+    constraint_force : ndarray, shape (3,)
+        Limits of Lambda [N], inertial frame (eqs 22, 39, 40; not ``permanent``'s pin).
+    shape : str
+        A key of :data:`SATURATION_SHAPES`.
+    """
+
+    torque_n: np.ndarray
+    force_h: np.ndarray
+    constraint_force: np.ndarray
+    shape: str = "clip"
+
+
 @dataclass(frozen=True, eq=False)
 class Gains:
     """Feedback and constraint gains, each symmetric, shape (3, 3).
@@ -84,6 +114,8 @@ class Gains:
         Sliding-mode force magnitude K_s [N] (eq 39).
     boundary_layer : float
         Sliding boundary-layer width phi [m]; 0 means a pure sign function.
+    saturation : Saturation or None
+        The actuators' limits (None: unlimited, the paper's linear feedback).
     """
 
     k_t: np.ndarray
@@ -96,6 +128,7 @@ class Gains:
     l_d: np.ndarray | None = None
     k_s: float | None = None
     boundary_layer: float = 0.0
+    saturation: Saturation | None = None
 
     @cached_property
     def l_d_inv(self) -> np.ndarray:
@@ -110,7 +143,9 @@ _VECTOR = (np.float64, (3,))
 #: function; fields read as ``p.mass``, ``p.k_t``): the body (SI units, frames as in
 #: :class:`RigidBody`), the quantities derived from it once (J^-1, J_p = J - m hat(R)^2 and
 #: its inverse, G = m g), every gain (zero where the variant has none), L_d^-1, K_s,
-#: the boundary layer phi, and the constant h [J] that makes v zero at the equilibrium.
+#: the boundary layer phi, the constant h [J] that makes v zero at the equilibrium, and the
+#: actuators' limits of N [N m], H [N] and Lambda [N] with the code of their shape
+#: (:data:`SATURATION_SHAPES`; 0, as in a record of zeros: no limits, which are then not read).
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -132,6 +167,10 @@ PARAMETERS = np.dtype(
         ("k_s", np.float64),
         ("boundary_layer", np.float64),
         ("lyapunov_offset", np.float64),
+        ("torque_limit", *_VECTOR),
+        ("force_limit", *_VECTOR),
+        ("constraint_force_limit", *_VECTOR),
+        ("saturation", np.float64),
     ],
     align=True,
 )
@@ -159,6 +198,12 @@ def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0) -> n
     p["k_s"] = 0.0 if gains.k_s is None else gains.k_s
     p["boundary_layer"] = gains.boundary_layer
     p["lyapunov_offset"] = lyapunov_offset
+    sat = gains.saturation
+    if sat is not None:
+        p["torque_limit"] = sat.torque_n
+        p["force_limit"] = sat.force_h
+        p["constraint_force_limit"] = sat.constraint_force
+        p["saturation"] = SATURATION_SHAPES[sat.shape]
     return p
 
 
@@ -170,8 +215,25 @@ def gyroscopic(inertia, omega):
 
 
 @jit(forceinline=True)
-def torque_n(b, theta, omega, p):
-    """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23).
+def _saturate(u, limit, shape):
+    """One axis: ``u`` delivered through an actuator of limit ``limit`` (> 0, inf: none)."""
+    if shape == 2.0 and limit < math.inf:
+        return limit * math.tanh(u / limit)
+    return min(max(u, -limit), limit)
+
+
+@jit(forceinline=True)
+def saturate(u, limit, shape):
+    """The 3-vector ``u`` as actuators deliver it, axis by axis: clipped to [-limit_i,
+    limit_i] (``shape`` 1) or limit_i tanh(u_i / limit_i) (``shape`` 2); ``limit`` (3,),
+    inf where unlimited (:data:`SATURATION_SHAPES`)."""
+    return (_saturate(u[0], limit[0], shape), _saturate(u[1], limit[1], shape), _saturate(u[2], limit[2], shape))
+
+
+@jit(forceinline=True)
+def torque_n_command(b, theta, omega, p):
+    """Rotational feedback N = -B' K_r Theta - L_r Omega [N m], body frame (eq 23), as
+    commanded (before the actuators' limits).
 
     ``b``: B(theta); ``theta`` [rad], ``omega`` [rad/s]; ``p``: a :data:`PARAMETERS` record.
     """
@@ -179,9 +241,29 @@ def torque_n(b, theta, omega, p):
 
 
 @jit(forceinline=True)
-def force_h(x, v, p):
-    """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24).
+def force_h_command(x, v, p):
+    """Translational feedback H = -K_t X - L_t V [N], inertial frame (eq 24), as commanded.
 
     ``x`` [m], ``v`` [m/s]; ``p``: a :data:`PARAMETERS` record.
     """
     return sub(neg(matvec(p.k_t, x)), matvec(p.l_t, v))
+
+
+@jit(forceinline=True)
+def torque_n(b, theta, omega, p):
+    """N [N m], body frame, as the actuators deliver it: eq 23 through ``p``'s torque limits
+    (:func:`saturate`; eq 23 itself without limits)."""
+    n = torque_n_command(b, theta, omega, p)
+    if p.saturation > 0.0:
+        return saturate(n, p.torque_limit, p.saturation)
+    return n
+
+
+@jit(forceinline=True)
+def force_h(x, v, p):
+    """H [N], inertial frame, as the actuators deliver it: eq 24 through ``p``'s force
+    limits (:func:`saturate`; eq 24 itself without limits)."""
+    h = force_h_command(x, v, p)
+    if p.saturation > 0.0:
+        return saturate(h, p.force_limit, p.saturation)
+    return h

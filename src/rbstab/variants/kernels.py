@@ -16,9 +16,9 @@ modules; this module only puts it together:
 from __future__ import annotations
 
 from ..jit import jit
-from ..kinematics import ZERO, matvec, rotation_and_rate_of, vector
+from ..kinematics import ZERO, dot, matvec, rotation_and_rate_of, sub, vector
 from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
-from ..model import force_h, torque_n
+from ..model import force_h, force_h_command, saturate, torque_n, torque_n_command
 from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
 
@@ -67,8 +67,19 @@ def body_state(y, p):
 
 @jit(forceinline=True)
 def constraint_force(code, e, f, d, p):
-    """(Lambda [N], inertial frame; dD/dt [m/s], zero without D) of the constraint law of
-    variant ``code`` (not ``permanent``) at E [m], F [m/s], D [m]: the variant module's
+    """(Lambda [N], inertial frame, as delivered through ``p``'s limits of Lambda
+    (:func:`rbstab.model.saturate`); dD/dt [m/s], zero without D) of the constraint law of
+    variant ``code`` (not ``permanent``) at E [m], F [m/s], D [m]."""
+    lam, d_rate = constraint_force_command(code, e, f, d, p)
+    if p.saturation > 0.0:
+        return saturate(lam, p.constraint_force_limit, p.saturation), d_rate
+    return lam, d_rate
+
+
+@jit(forceinline=True)
+def constraint_force_command(code, e, f, d, p):
+    """(Lambda [N] as the constraint law of variant ``code`` (not ``permanent``) commands
+    it, inertial frame; dD/dt [m/s]) at E [m], F [m/s], D [m]: the variant module's
     ``constraint_force`` (eqs 22, 39, 40)."""
     if code == EMBEDDED:
         return embedded.constraint_force(e, f, d, p)
@@ -138,15 +149,36 @@ def state_rate(code, y, p, dy):
 
 
 @jit(forceinline=True)
-def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation):
-    """v, its terms and dv/dt into ``out``: the body's (eq 25, gravity) plus the constraint's."""
+def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation, deficit):
+    """v, its terms and dv/dt into ``out``: the body's (eq 25, gravity) plus the
+    constraint's, and ``deficit`` [W], the power of the controls' saturation
+    (:func:`saturation_power`)."""
     translational, rotational, gravity = body_energy(theta, omega, x, v, p)
     out[TRANSLATIONAL_AT] = translational
     out[ROTATIONAL_AT] = rotational
     out[CONSTRAINT_AT] = constraint
     out[GRAVITY_AT] = gravity
     out[LYAPUNOV_AT] = translational + rotational + constraint + gravity
-    out[LYAPUNOV_RATE_AT] = -(body_dissipation(omega, v, p) + constraint_dissipation)
+    out[LYAPUNOV_RATE_AT] = -(body_dissipation(omega, v, p) + constraint_dissipation) + deficit
+
+
+@jit(forceinline=True)
+def saturation_power(code, theta, omega, x, v, b, e, f, d, p):
+    """Omega'(N - N_c) + V'(H - H_c) + F'(Lambda - Lambda_c) [W]: what dv/dt gains when the
+    delivered controls N, H, Lambda differ from the commanded N_c, H_c, Lambda_c (eqs 23,
+    24, 22, 39, 40). dv/dt = Omega'(N + B'K_r Theta) + V'(H + K_t X) + F'Lambda + dv_c/dt
+    (eq 1 with eqs 25, 42, 45), whose commanded form is the paper's -V'L_t V - Omega'L_r
+    Omega - ... (eqs 29, 43, 46): the delivered dv/dt is that plus this term (docs/physics.md).
+    ``permanent``'s Lambda is the pin's reaction (F = 0, no work). 0 without limits."""
+    if p.saturation == 0.0:
+        return 0.0
+    n_c, h_c = torque_n_command(b, theta, omega, p), force_h_command(x, v, p)
+    n, h = saturate(n_c, p.torque_limit, p.saturation), saturate(h_c, p.force_limit, p.saturation)
+    power = dot(omega, sub(n, n_c)) + dot(v, sub(h, h_c))
+    if code != PERMANENT:
+        lam_c, _ = constraint_force_command(code, e, f, d, p)
+        power += dot(f, sub(saturate(lam_c, p.constraint_force_limit, p.saturation), lam_c))
+    return power
 
 
 @jit(forceinline=True)
@@ -183,7 +215,8 @@ def output_row(code, y, p, out, full):
         _put(out, CONSTRAINT_FORCE_AT, lam)
         _put(out, FORCE_H_AT, h)
         _put(out, TORQUE_N_AT, n)
-    _lyapunov(out, theta, omega, x, v, p, energy, dissipation)
+    _lyapunov(out, theta, omega, x, v, p, energy, dissipation,
+              saturation_power(code, theta, omega, x, v, b, e, f, d, p))
 
 
 @jit

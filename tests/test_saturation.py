@@ -1,0 +1,118 @@
+"""Saturating actuators (|N_i|, |H_i|, |Lambda_i| limited; clip or smooth): the compiled
+physics against an independent plain-numpy model, the analytic dv/dt with the delivered
+controls against the derivative of v, and the basin edge of a torque-limited inverted
+pendulum against the tilt where the saturated torque balances gravity."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from conftest import paper_body, paper_gains
+from reference import Model
+from rbstab.engine import integrate_runs
+from rbstab.model import RigidBody, Saturation
+from rbstab.variants import VARIANTS
+
+ALL = sorted(VARIANTS)
+SHAPES = ["clip", "smooth"]
+
+
+def _saturated(name, shape, gravity=(0.0, 0.0, -10.0), **limits):
+    sat = Saturation(torque_n=np.array(limits.get("torque_n", [40.0, 60.0, np.inf])),
+                     force_h=np.array(limits.get("force_h", [150.0, np.inf, 300.0])),
+                     constraint_force=np.array(limits.get("constraint_force",
+                                                          [np.inf, 200.0, 250.0] if name != "permanent"
+                                                          else [np.inf] * 3)),
+                     shape=shape)
+    gains = dataclasses.replace(paper_gains(), saturation=sat)
+    return VARIANTS[name](paper_body(gravity), gains)
+
+
+def _states(variant, rng, n=30):
+    y = rng.normal(scale=0.2, size=(n, variant.layout.size))
+    y[:, 3:6] = rng.normal(scale=5.0, size=(n, 3))
+    return y
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("name", ALL)
+def test_saturated_rhs_is_the_plain_numpy_model(name, shape, rng):
+    """The compiled right-hand side with limits on N, H and Lambda against tests/reference.py
+    (np.clip / tanh of its own controls) at random states, where the limits are active."""
+    variant = _saturated(name, shape)
+    reference = Model(name, variant.body, variant.gains)
+    unlimited = Model(name, variant.body, dataclasses.replace(variant.gains, saturation=None))
+    y = _states(variant, rng)
+    compiled = variant.rhs(0.0, y)
+    differs = 0
+    for yi, fi in zip(y, compiled):
+        expected = reference.rhs(0.0, yi)
+        np.testing.assert_allclose(fi, expected, rtol=1e-12, atol=1e-10 * np.abs(expected).max())
+        differs += not np.allclose(expected, unlimited.rhs(0.0, yi))
+    assert differs == len(y)  # the limits act at every state drawn
+
+
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("name", ALL)
+def test_delivered_dv_dt_is_the_derivative_of_v(name, shape, rng):
+    """Pointwise: the analytic dv/dt (the paper's rate plus the power of the saturation
+    deficit) equals (v(y + h f) - v(y - h f)) / 2h, and differs from the paper's unsaturated
+    rate there (the bookkeeping is needed)."""
+    variant = _saturated(name, shape)
+    unlimited = VARIANTS[name](variant.body, dataclasses.replace(variant.gains, saturation=None))
+    y = _states(variant, rng)
+    f = variant.rhs(0.0, y)
+    h = 1e-7
+    numerical = (variant.lyapunov(y + h * f) - variant.lyapunov(y - h * f)) / (2 * h)
+    analytic = variant.evaluate(y)["lyapunov_rate"]
+    np.testing.assert_allclose(analytic, numerical, rtol=1e-5, atol=1e-5 * np.abs(analytic).max())
+    paper = unlimited.evaluate(y)["lyapunov_rate"]
+    assert np.max(np.abs(paper - analytic)) > 1e-3 * np.abs(analytic).max()
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_delivered_outputs_respect_the_limits(name, rng):
+    """The stored N, H and Lambda are the delivered ones: within their limits, at them where
+    the command exceeds them (clip)."""
+    variant = _saturated(name, "clip")
+    out = variant.evaluate(_states(variant, rng))
+    sat = variant.gains.saturation
+    for key, limit in (("torque_n", sat.torque_n), ("force_h", sat.force_h), ("constraint_force", sat.constraint_force)):
+        if name in ("permanent", "free") and key == "constraint_force":
+            continue  # the pin's reaction; no constraint force
+        assert np.all(np.abs(out[key]) <= limit * (1 + 1e-15)), key
+        finite = np.isfinite(limit)
+        assert np.any(np.isclose(np.abs(out[key][..., finite]), limit[finite], rtol=1e-15)), key
+
+
+def _pendulum_falls(theta_1: float, n_max: float) -> bool:
+    """Whether the pinned inverted pendulum (R = (0, 0, -L), gravity, K_t = L_t = 0,
+    |N_1| <= n_max) let go at rest at tilt theta_1 falls (ends beyond a right angle)."""
+    m, length = 2.0, 0.5
+    body = RigidBody(m, np.diag([0.05, 0.05, 0.01]), np.array([0.0, 0.0, -length]), np.array([0.0, 0.0, -9.81]))
+    zero = np.zeros((3, 3))
+    big = np.inf
+    gains = dataclasses.replace(paper_gains(), k_t=zero, l_t=zero, k_r=np.diag([200.0, 200.0, 50.0]),
+                                l_r=np.diag([10.0, 10.0, 2.0]),
+                                saturation=Saturation(np.array([n_max, big, big]), np.full(3, big), np.full(3, big)))
+    variant = VARIANTS["permanent"](body, gains)
+    y0 = np.zeros((1, 6))
+    y0[0, 0] = theta_1
+    sol = integrate_runs([variant.code], variant.parameters, y0, [[4.0, 1e-10, 1e-12, np.inf, 0.0, 10**7, np.inf]],
+                         method="DOP853", n_samples=401)
+    final = sol.samples[0, -1]
+    return not (abs(final[0]) < 1e-3) if np.all(np.isfinite(final)) else True
+
+
+def test_torque_limited_inverted_pendulum_has_its_basin_edge_where_torque_balances_gravity():
+    """From rest, the torque-limited pinned inverted pendulum recovers below the tilt
+    arcsin(N_max / (m g L)), where the saturated torque balances gravity, and falls above it."""
+    m, g, length, n_max = 2.0, 9.81, 0.5, 4.0
+    edge = math.asin(n_max / (m * g * length))
+    assert not _pendulum_falls(edge - 0.01, n_max)
+    assert _pendulum_falls(edge + 0.01, n_max)
+    assert not _pendulum_falls(0.5, np.inf)  # without the limit the feedback holds it
