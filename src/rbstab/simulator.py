@@ -2,16 +2,18 @@
 or :func:`simulate_blocks`, their results as blocks of runs), or the runs of a
 :class:`rbstab.engine.RunBatch` (:func:`simulate_batch`, no configuration object per run).
 
-Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
+The engines (:data:`rbstab.engine.ENGINES`) share the compiled model
+(:mod:`rbstab.variants.kernels`):
 
 - ``compiled`` (the default): :mod:`rbstab.engine`, scipy's RK23, RK45 and DOP853
   compiled with the model, the steps ``solve_ivp`` takes; every run of a call may have its
   own variant, body, gains and settings.
 - ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA):
   :func:`scipy.integrate.solve_ivp` on the compiled right-hand side.
+- ``cuda``: the compiled engine's steps on an NVIDIA GPU (:mod:`rbstab.engine.cuda`).
 
 The pure sign law of ``sliding`` (``boundary_layer: 0``), whose right-hand side jumps, is
-routed by both engines to the event-driven integrator :mod:`rbstab.engine.switching`
+routed by every engine to the event-driven integrator :mod:`rbstab.engine.switching`
 (switchings located, Filippov sliding, see docs/sliding.md); its result also holds the
 located events (``RunResult.switching``) and the switching figures in its summary.
 
@@ -36,7 +38,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .engine import METHODS, RunBatch, integrate_runs, method_number
-from .engine.settings import settings_records
+from .engine.registry import DEFAULT_ENGINE, get_engine
+from .engine.settings import settings_records, settings_rows
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
@@ -53,7 +56,6 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "RunResult",
     "RunTimeout",
-    "ENGINES",
     "simulate",
     "simulate_many",
     "simulate_blocks",
@@ -67,12 +69,6 @@ __all__ = [
     "simulate_sign_law",
 ]
 
-#: Integration engines: ``compiled`` (:mod:`rbstab.engine`, RK23/RK45/DOP853; other
-#: methods go through scipy), ``scipy`` (the reference, one ``solve_ivp`` call per run,
-#: any method) and ``cuda`` (the compiled engine's steps on an NVIDIA GPU,
-#: :mod:`rbstab.engine.cuda`; other methods go through scipy). The pure sign law takes
-#: :mod:`rbstab.engine.switching`, on the CPU, with any of them.
-ENGINES = ("compiled", "scipy", "cuda")
 #: What :func:`simulate_blocks` keeps of the samples of a ``cuda`` run: every one, every
 #: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store) or none
 #: (the summary figures only).
@@ -348,11 +344,10 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> 
     return outputs
 
 
-def uses_compiled_engine(config: "RunConfig", engine: str = "compiled") -> bool:
-    """Whether ``config`` runs on the compiled engine with ``engine`` (see the module docstring)."""
-    if engine not in ENGINES:
-        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    return engine != "scipy" and config.simulation.method in METHODS and not is_sign_law(config)
+def uses_compiled_engine(config: "RunConfig", engine: str = DEFAULT_ENGINE) -> bool:
+    """Whether ``engine`` integrates ``config`` in its batches (:meth:`rbstab.engine.Engine.takes`;
+    ValueError for an unknown engine)."""
+    return get_engine(engine).takes(config.simulation.method, is_sign_law(config))
 
 
 def is_sign_law(config: "RunConfig") -> bool:
@@ -380,7 +375,7 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     return result
 
 
-def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = "compiled") -> RunResult:
+def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
     """Run one validated configuration.
 
     Parameters
@@ -391,7 +386,7 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``;
         past it the run fails with a message.
     engine : {"compiled", "scipy", "cuda"}
-        See :data:`ENGINES`.
+        See :data:`rbstab.engine.ENGINES`.
 
     Returns
     -------
@@ -430,13 +425,6 @@ _LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUT
 #: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
 #: default number of runs per compiled call (the trajectories held at once).
 POSTPROCESS_BLOCK = 32
-
-
-def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
-    """The compiled engine's settings of each run (:func:`rbstab.engine.integrate_runs`)."""
-    return np.array([[c.simulation.t_end, c.simulation.rtol, c.simulation.atol, c.simulation.max_step,
-                      c.simulation.gimbal_margin, c.simulation.max_steps,
-                      c.simulation.max_wall_time if timeout is None else timeout] for c in configs], dtype=float)
 
 
 def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarray,
@@ -521,7 +509,7 @@ def _parameter_rows(variants: Sequence[Variant]) -> np.ndarray:
     return rows
 
 
-def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
+def simulate_many(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                   chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                   full: bool = True) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
@@ -533,7 +521,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             yield i, block.result(j)
 
 
-def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
+def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                     chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                     full: bool = True, keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
     """Run many validated configurations; yields ``(indices into configs, RunBlock)``.
@@ -563,7 +551,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     Raises
     ------
     ValueError
-        For an unknown engine (allowed: :data:`ENGINES`), ``keep`` or ``chunk_size < 1``.
+        For an unknown engine (allowed: :data:`rbstab.engine.ENGINES`), ``keep`` or ``chunk_size < 1``.
     rbstab.engine.cuda.CudaUnavailable
         With ``engine="cuda"`` where no GPU, driver or numba-cuda is found (before any run).
     """
@@ -571,10 +559,8 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
     if keep not in KEEP:
         raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
-    if engine == "cuda":
-        from .engine.cuda import check_available  # heavy: numba-cuda (--engine cuda only)
-
-        check_available()
+    gpu = get_engine(engine).gpu
+    get_engine(engine).check_available()  # before any run
     groups: dict[tuple, list[int]] = {}
     shared: dict[tuple, Variant] = {}
     for i, config in enumerate(configs):
@@ -584,12 +570,12 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
         else:
             yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
     for (method, n_samples, size), members in groups.items():
-        if engine == "cuda":
+        if gpu:
             group = [configs[i] for i in members]
             variants = [_variant_of(c, shared) for c in group]
             runs = (np.array([v.code for v in variants], dtype=np.int64), _parameter_rows(variants),
                     np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, group)]),
-                    _settings_rows(group, timeout))
+                    settings_rows([c.simulation for c in group], timeout))
             yield from _cuda_blocks(runs, group, members, method, n_samples, full, keep)
             continue
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
@@ -600,7 +586,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             variants = [_variant_of(c, shared) for c in chunk_configs]
             codes = np.array([v.code for v in variants], dtype=np.int64)
             params = _parameter_rows(variants)
-            settings = _settings_rows(chunk_configs, timeout)
+            settings = settings_rows([c.simulation for c in chunk_configs], timeout)
             sol = integrate_runs(
                 codes,
                 params,
@@ -616,7 +602,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
 
 
 def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
-                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = "compiled",
+                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = DEFAULT_ENGINE,
                    keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
     ``(rows of the batch, RunBlock)``.
@@ -657,7 +643,7 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     # the groups, in np.unique's order (a set of the rows: numpy's unique of rows sorts them all)
     for method, n_samples, size in sorted(set(zip(methods.tolist(), samples.tolist(), sizes.tolist()))):
         members = rows[(methods == method) & (samples == n_samples) & (sizes == size)]
-        if engine == "cuda":
+        if get_engine(engine).gpu:
             runs = (batch.variant[members], batch.params[members], batch.y0[members, :size],
                     batch.settings_rows(members))
             yield from _cuda_blocks(runs, [None] * len(members), members, METHODS[method], n_samples, full, keep)

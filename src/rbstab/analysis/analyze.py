@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..simulator import simulate
 from ..variants import VARIANTS
@@ -199,7 +200,7 @@ def analyze(
     basin_samples: int = DEFAULT_BASIN_SAMPLES,
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     jobs: int = 1,
-    engine: str = "compiled",
+    engine: str = DEFAULT_ENGINE,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 

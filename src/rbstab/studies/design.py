@@ -37,6 +37,7 @@ from ..config import ConfigError, parse_yaml
 from ..config.schema import RunSchema
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
+from ..engine.registry import DEFAULT_ENGINE
 from ..io.chunk import SUMMARY_FIGURES, summary_columns
 from ..simulator import simulate_many
 from ..sweep.folder import open_sweep
@@ -351,7 +352,7 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
 def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
     """The figures of the base configuration (one run in this process,
     :func:`figure_columns`): the columns a study's metrics are chosen from."""
-    (_, result), = simulate_many([config], engine=engine or "compiled", full=False)
+    (_, result), = simulate_many([config], engine=engine or DEFAULT_ENGINE, full=False)
     return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
 
 

@@ -46,6 +46,7 @@ from ..config import ConfigError, config_from_mapping, dump_yaml
 from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
+from ..engine.registry import DEFAULT_ENGINE
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
@@ -158,7 +159,7 @@ class TuningProblem:
     constraints: tuple[Constraint, ...]
     bodies: list[dict] = field(default_factory=list)
     quantile: float = 1.0
-    engine: str = "compiled"
+    engine: str = DEFAULT_ENGINE
 
     def suggest(self, trial) -> dict[str, Any]:
         """The trial's absolute values, design column -> value (Optuna's ``suggest_*``)."""
@@ -245,7 +246,7 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
         In (0, 1]; 1 = the worst case of the batch (see :class:`TuningProblem`).
     sampler : {"tpe", "cmaes"}
     engine : str, optional
-        :data:`rbstab.simulator.ENGINES` (default compiled).
+        :data:`rbstab.engine.ENGINES` (default compiled).
 
     Raises
     ------
@@ -283,7 +284,7 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
         raise StudyInputError(errors)
     bodies = _bodies(over_varied, over_n, over_seed) if over_varied else []
     problem = TuningProblem(config, varied, tuple(objectives), tuple(constraints), bodies, float(quantile),
-                            engine or "compiled")
+                            engine or DEFAULT_ENGINE)
     _check_corners(problem)
     return problem
 
