@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .convergence import ROUND_OFF
+from .convergence import within_bound
 from .jit import jit
 from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
 
@@ -382,6 +382,8 @@ ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
+#: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
+_within_bound = jit(forceinline=True)(within_bound)
 _T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
 #: Column of a streamed trace's row that holds the numerical dv/dt (after the outputs).
 NUMERICAL_RATE_AT = N_OUTPUTS
@@ -450,7 +452,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[V_MIN] = _min(acc[V_MIN], v)
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
     v0 = acc[V_INITIAL]
-    if not (math.isfinite(v0) and math.isfinite(v) and abs(v) <= ratio * abs(v0) + ROUND_OFF):
+    if not _within_bound(v0, v, ratio):
         acc[LAST_ABOVE] = i
     acc[MAX_RATE] = _max(acc[MAX_RATE], rate)
     acc[MAX_ABS_RATE] = _max(acc[MAX_ABS_RATE], abs(rate))

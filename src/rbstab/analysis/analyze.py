@@ -159,7 +159,7 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
 
 
 def _settling(config, variant, ratio: float) -> dict:
-    """Simulate ``config`` from its initial state: when |v| first stays below ratio * |v(0)| (:func:`~rbstab.analysis.basin.time_to_converge`)."""
+    """Simulate ``config`` from its initial state: when |v| first stays within ratio |v(0)| + 1e-12 J (:data:`rbstab.convergence.SAMPLE_RULE`) (:func:`~rbstab.analysis.basin.time_to_converge`)."""
     result = simulate(config)
     v = result.outputs["lyapunov"]
     return {
@@ -225,7 +225,8 @@ def analyze(
     basin_samples : int
         Samples per basin run.
     ratio : float
-        Convergence: |v(t)| <= ratio * |v(0)| from then on, 0 < ratio < 1.
+        Convergence: |v(t)| <= ratio |v(0)| + 1e-12 J from then on
+        (:data:`rbstab.convergence.SAMPLE_RULE`), 0 < ratio < 1.
     jobs : int
         Local processes for the basin map.
     engine : {"compiled", "cuda"}

@@ -7,8 +7,8 @@ go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 
 is classified by the rule a sweep classifies its runs with
 (:func:`rbstab.convergence.converged`), applied from every sample on:
 
-- ``converged`` (0): the run reached t_end and |v| <= ratio * |v(0)| (+ round-off) from
-  some time on;
+- ``converged`` (0): the run reached t_end and |v| <= ratio |v(0)| + 1e-12 J
+  (:data:`rbstab.convergence.SAMPLE_RULE`) from some time on;
 - ``not converged`` (1): it reached t_end with more of v left;
 - ``failed`` (2): gimbal lock (|theta_2| reached pi/2 - gimbal_margin, eq 5), a solver
   failure, a non-finite state, or an initial state outside the domain.

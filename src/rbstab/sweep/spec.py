@@ -19,7 +19,7 @@ A sweep spec names a base configuration and the keys to vary::
         body.mass: {scale_uniform: [0.5, 1.5]}
         initial_state.omega: {normal: {mean: [16, 32, -16], std: 5}}
     convergence:
-      lyapunov_ratio: 1.0e-3             # converged: success and v(t_end) <= ratio * v(0)
+      lyapunov_ratio: 1.0e-3             # converged: rbstab.convergence.RULE
 
 Keys are the dotted paths of :func:`rbstab.config.set_dotted` (``initial_state.omega.1``
 indexes into the list). A ``table:`` (a CSV or Parquet file, a DataFrame or a mapping of
