@@ -11,7 +11,8 @@ graph with no cycle, in which no module imports one of a higher layer:
 :mod:`rbstab.warning_codes`. :mod:`rbstab.config` (validated input, built from the model
 and the variants' registry) and :mod:`rbstab.resources` (the memory a run needs) sit
 between the variants and the engine; :mod:`rbstab.summary` (compiled summary figures of a
-run's outputs) and :mod:`rbstab.convergence` (the convergence rule) sit with the engine;
+run's outputs) and :mod:`rbstab.convergence` (the convergence rule) and :mod:`rbstab.results` (the result
+types, below the simulator and the files that store them) sit with the engine;
 :mod:`rbstab.kinds` (the registry of input kinds, each loaded by its format's module) with
 the sweeps and analyses. Modules of one layer may import each other (without a cycle).
 
@@ -36,7 +37,7 @@ LAYERS = [
     ("model", ["rbstab.model"]),
     ("variants", ["rbstab.variants"]),
     ("config", ["rbstab.config", "rbstab.resources"]),
-    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence"]),
+    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence", "rbstab.results"]),
     ("simulate", ["rbstab.simulator"]),
     ("io", ["rbstab.io"]),
     ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds", "rbstab.studies"]),

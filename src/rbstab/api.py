@@ -49,7 +49,7 @@ if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
     from .config import RunConfig
-    from .simulator import RunResult
+    from .results import RunResult
     from .sweep import SweepOutcome, SweepSpec
 
 __all__ = [

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import time as _time
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -45,7 +44,8 @@ from .engine.switching import integrate_sign_law, sign_law_outputs, switching_me
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import VARIANT_LAYOUTS, summary_stride
 from .model import PARAMETERS
-from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, table_row
+from .results import RunBlock, RunResult
+from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.kernels import run_outputs
@@ -73,138 +73,6 @@ __all__ = [
 #: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store) or none
 #: (the summary figures only).
 KEEP = ("all", "thinned", "none")
-
-
-@dataclass
-class RunResult:
-    """Outcome of one run.
-
-    Attributes
-    ----------
-    config : RunConfig
-        The validated configuration that was run.
-    time : ndarray, shape (n_samples,)
-        Sample times [s], evenly spaced on [0, t_end]. From :func:`simulate_many`'s
-        compiled engine, a read-only array that the results of a block of runs with the
-        same ``t_end`` share (copy it to change it).
-    outputs : dict of str -> ndarray
-        Every variable of the result file, shape (n_samples, 3) or (n_samples,): state
-        blocks, constraint quantities, controls, ``lyapunov``, ``lyapunov_rate``,
-        ``lyapunov_rate_numerical`` and the terms of v. Rows after a failure are NaN.
-    status : str
-        ``"success"`` or ``"failed"``.
-    message : str
-        The solver's message, or why the run failed.
-    solver : dict
-        ``nfev``, ``njev``, ``nlu`` (ints) and ``solver_status`` (scipy's int status).
-    wall_time : float
-        Integration plus post-processing time [s].
-    summary : dict
-        See :func:`rbstab.summary.summarize`.
-    timing : dict
-        Where ``wall_time`` went [s]: ``integration`` (for a batched run, its share of
-        the batch) and ``postprocess`` (output evaluation, numerical rate, summary).
-    switching : Switchings or None
-        The located events of a pure-sign-law run (:mod:`rbstab.engine.switching`), else None.
-    """
-
-    config: "RunConfig"
-    time: np.ndarray
-    outputs: dict[str, np.ndarray]
-    status: str
-    message: str
-    solver: dict = field(default_factory=dict)
-    wall_time: float = 0.0
-    summary: dict = field(default_factory=dict)
-    timing: dict = field(default_factory=dict)
-    switching: object = None
-
-    @property
-    def name(self) -> str:
-        """The run's name (``config.name``), also its result file's stem."""
-        return self.config.name
-
-    @property
-    def ok(self) -> bool:
-        """Whether the run reached ``t_end`` (``status == "success"``)."""
-        return self.status == "success"
-
-
-@dataclass
-class RunBlock:
-    """Outcomes of k runs that share their sample times, as columns: what
-    :func:`simulate_blocks` gives and a store file takes at once
-    (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); :meth:`result` is one run's
-    :class:`RunResult` (views of the block's arrays).
-
-    Attributes
-    ----------
-    configs : list of RunConfig (or None each), length k
-    time : ndarray, shape (n_samples,)
-        The runs' sample times [s] (read-only when the block comes from the compiled engine).
-    outputs : dict of str -> ndarray
-        :attr:`RunResult.outputs` with a leading run axis: shape (k, n_samples, 3) or
-        (k, n_samples).
-    summaries : dict of str -> ndarray
-        :func:`rbstab.summary.summary_table`: figure -> its k values, shape (k,) or (k, 3).
-    status, message : list of str
-    solver : dict of str -> sequence
-        :attr:`RunResult.solver` as columns: key -> its k values.
-    wall_time : ndarray, shape (k,)
-        [s]
-    timing : dict of str -> ndarray
-        :attr:`RunResult.timing` as columns: key -> its k values [s].
-    switching : list
-        Each run's :attr:`RunResult.switching`.
-    stride : int
-        Samples of the runs' grid (``simulation.n_samples`` on [0, t_end]) from one entry
-        of ``time`` to the next: 1, or a thinned trace of the ``cuda`` engine.
-    variants : list of str
-        Each run's controller variant (``config.variant``; given where ``configs`` are None).
-    """
-
-    configs: list
-    time: np.ndarray
-    outputs: dict[str, np.ndarray]
-    summaries: dict[str, np.ndarray]
-    status: list[str]
-    message: list[str]
-    solver: dict[str, Sequence]
-    wall_time: np.ndarray
-    timing: dict[str, np.ndarray]
-    switching: list
-    stride: int = 1
-    variants: list = None
-
-    def __post_init__(self) -> None:
-        if self.variants is None:
-            self.variants = [c.variant for c in self.configs]
-
-    def __len__(self) -> int:
-        return len(self.status)
-
-    def result(self, j: int) -> RunResult:
-        """Run ``j`` of the block as a :class:`RunResult` (its outputs are views)."""
-        return RunResult(config=self.configs[j], time=self.time,
-                         outputs={key: value[j] for key, value in self.outputs.items()},
-                         status=self.status[j], message=self.message[j], solver=_row(self.solver, j),
-                         wall_time=float(self.wall_time[j]), summary=table_row(self.summaries, j),
-                         timing=_row(self.timing, j), switching=self.switching[j])
-
-    @classmethod
-    def of(cls, result: RunResult) -> "RunBlock":
-        """A block of one run (its outputs as views with a leading axis of 1)."""
-        return cls([result.config], result.time, {key: np.asarray(value)[None] for key, value in result.outputs.items()},
-                   {key: np.asarray([value], dtype=object if isinstance(value, str) else None)
-                    for key, value in result.summary.items()},
-                   [result.status], [result.message], {key: [value] for key, value in result.solver.items()},
-                   np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
-                   [result.switching])
-
-
-def _row(columns: dict[str, Sequence], j: int) -> dict:
-    """Entry ``j`` of each column, as plain Python values."""
-    return {key: value[j].item() if isinstance(value[j], np.generic) else value[j] for key, value in columns.items()}
 
 
 def gimbal_lock_event(margin: float):

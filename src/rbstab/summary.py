@@ -13,6 +13,7 @@ import math
 import numpy as np
 
 from .convergence import within_bound
+from .results import row
 from .jit import jit
 from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
 
@@ -274,21 +275,14 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np
         The same figures (the same numbers) as :func:`summarize` of each run alone.
     """
     table = summary_table(time, outputs, checked)
-    return [table_row(table, j) for j in range(outputs["lyapunov"].shape[0])]
-
-
-def table_row(table: dict[str, np.ndarray], j: int) -> dict:
-    """Run ``j`` of a summary table (:func:`summary_table`, :func:`stream_table`) as
-    :func:`summarize` gives it: plain floats, lists of 3 floats and strings."""
-    return {key: values[j].tolist() if isinstance(values[j], np.ndarray | np.generic) else values[j]
-            for key, values in table.items()}
+    return [row(table, j) for j in range(outputs["lyapunov"].shape[0])]
 
 
 def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None
                   ) -> dict[str, np.ndarray]:
     """:func:`summarize_many` as columns: figure -> its k values, shape (k,) or (k, 3) for
     a 3-vector figure (floats; ``lyapunov_rate_check`` an object array of str), the
-    figures in :func:`summarize`'s order; the same numbers (:func:`table_row` gives run j's)."""
+    figures in :func:`summarize`'s order; the same numbers (:func:`rbstab.results.row` gives run j's, as :func:`summarize` does)."""
     lyapunov = outputs["lyapunov"]
     k, n = lyapunov.shape
     finite = np.isfinite(lyapunov)

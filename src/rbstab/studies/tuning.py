@@ -46,6 +46,7 @@ from ..config import ConfigError, config_from_mapping, dump_yaml
 from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
+from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
@@ -594,7 +595,7 @@ def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, co
         (folder / BEST_FILE).unlink(missing_ok=True)
     else:
         row = table.loc[best[0]]
-        best_params = {c: _plain(row[c]) for v in problem.varied for c in v.columns}
+        best_params = {c: plain(row[c]) for v in problem.varied for c in v.columns}
         config = problem.configs(best_params)[0] if not problem.bodies else _nominal(problem, best_params)
         data = dict(config.resolved)
         data["name"] = f"{study.study_name}_best"
@@ -612,10 +613,6 @@ def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, co
 def _nominal(problem: TuningProblem, values: Mapping[str, Any]):
     """The base configuration (the nominal body) with ``values``."""
     return TuningProblem(problem.base, problem.varied, problem.objectives, problem.constraints).configs(values)[0]
-
-
-def _plain(value: Any) -> Any:
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], path: Path,

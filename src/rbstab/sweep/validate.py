@@ -23,6 +23,7 @@ from .spec import Base, SweepSpec, SweepSpecError
 from ..config import set_dotted
 from ..config import get_dotted
 from .schema import numeric_array
+from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted
 from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
 from ..config.schema import MAX_MAGNITUDE
@@ -46,10 +47,6 @@ def _short(value: Any, limit: int = 40) -> str:
         value = value.tolist()
     text = json.dumps(value, default=str) if not isinstance(value, str) else repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _plain(value: Any) -> Any:
-    return value.tolist() if isinstance(value, np.ndarray | np.generic) else value
 
 
 def _expand_diagonal(data: dict, key: str) -> None:
@@ -77,7 +74,7 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
     data = copy.deepcopy(base.data)
     for key, value in zip(keys, values):
         _expand_diagonal(data, key)
-        set_dotted(data, key, _plain(value))
+        set_dotted(data, key, plain(value))
     data["name"] = name
     return data
 

@@ -25,7 +25,7 @@ Engines
 Layouts
 -------
 Both engines hand each finished run (the compiled engine a block of runs,
-:class:`rbstab.simulator.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
+:class:`rbstab.results.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
 one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
 writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
 into place when the whole chunk is done. Either way a chunk's result
@@ -54,6 +54,7 @@ from ..config import PhysicalPlausibilityWarning, RunConfig, config_from_mapping
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
+from ..results import plain
 from ..simulator import simulate, simulate_batch, simulate_blocks, uses_compiled_engine
 from .folder import NOT_IN_INDEX, index_part, row_from_attributes
 
@@ -190,7 +191,7 @@ class _RunFiles:
         return record
 
     def add_tasks(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """:meth:`add` of each run of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run
+        """:meth:`add` of each run of a :class:`rbstab.results.RunBlock` (``tasks[j]`` its run
         j); a file that cannot be written is that run's error."""
         return _each_run(self, tasks, block)
 
@@ -251,7 +252,7 @@ class _ChunkFile:
         return record
 
     def add_block(self, run_ids: Sequence[str], block, config_hashes: Sequence[str], config_time: float) -> None:
-        """The runs of a :class:`rbstab.simulator.RunBlock` (``run_ids[j]`` its run j) into
+        """The runs of a :class:`rbstab.results.RunBlock` (``run_ids[j]`` its run j) into
         the file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); ``config_time``:
         seconds a run spent on its configuration."""
         t0 = _time.perf_counter()
@@ -516,7 +517,7 @@ def _task(part, j: int, folder: str) -> RunTask:
     """Run ``j`` of a table slice as a :class:`RunTask`, its configuration built."""
     rid = str(part.run_id[j])
     return RunTask(rid, part.resolved(j), os.path.join(folder, f"{rid}.h5"), int(part.index[j]),
-                   str(part.base[j]), {name: _scalar(values[j]) for name, values in part.coords.items()},
+                   str(part.base[j]), {name: plain(values[j]) for name, values in part.coords.items()},
                    str(part.config_hash[j]), int(part.template[j]))
 
 
@@ -571,6 +572,3 @@ def _chunk_result(records: list[dict[str, Any]], folder: str, frame=None) -> Chu
         frame = pd.DataFrame.from_records(rows)
     return ChunkResult(frame, data, tracebacks, errno, folder, timing, None)
 
-
-def _scalar(value: Any) -> Any:
-    return value.item() if hasattr(value, "item") else value
