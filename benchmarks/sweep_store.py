@@ -152,15 +152,16 @@ def store(n: int, folder: str) -> dict:
     from rbstab.config import load_config
     from rbstab.simulator import simulate_blocks
     from rbstab.sweep import run_sweep
-    from rbstab.sweep.worker import ENGINES
+    from rbstab.sweep import worker
 
     base = load_config(CASE3)
     (_, pool), = simulate_blocks([base.with_initial_state({"omega": [16 + i, 32, -16]}) for i in range(32)],
                                  full=False)
-    ENGINES["replay"] = _replay_engine(pool)
+    worker._compiled_engine = _replay_engine(pool)  # the compiled engine's chunks replayed, not integrated
+    worker._table_batch = lambda part, options: None
     spec = _spec(n)
     t0 = time.perf_counter()
-    run_sweep(spec, folder, executor=_Serial(), engine="replay", store="summary", chunk_size=10_000,
+    run_sweep(spec, folder, executor=_Serial(), engine="compiled", store="summary", chunk_size=10_000,
               progress=False)
     t1 = time.perf_counter()
     size = sum(p.stat().st_size for p in (Path(folder) / spec.name / "runs").iterdir())

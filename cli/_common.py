@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from rbstab.api import load_config
+from rbstab.engine.registry import get_engine
 
 from .console import get_console
 
@@ -121,12 +122,9 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
             )
 
 
-def check_cuda() -> None:
-    """``--engine cuda`` where it cannot run: one line naming what is missing, before
-    anything starts or is written."""
-    from rbstab.engine.cuda import CudaUnavailable, check_available  # heavy: numba, numba-cuda
-
-    try:
-        check_available()
-    except CudaUnavailable as exc:
-        raise click.ClickException(str(exc))
+def check_engine(name: str | None) -> None:
+    """``--engine NAME`` where it cannot run (a GPU engine without its GPU): one line naming
+    what is missing, before anything starts or is written."""
+    why = get_engine(name).unavailable()
+    if why:
+        raise click.ClickException(why)

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import click
 
-from ._common import check_cuda, command_line, load_configs
+from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
+
+from ._common import check_engine, command_line, load_configs
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
 
@@ -83,7 +85,8 @@ def _check_sweeps(paths) -> None:
               help="Samples per basin run (the time-to-converge resolution is t_end / (N - 1)).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
               help="Local processes for the basin map  [default: all CPUs].")
-@click.option("--engine", type=click.Choice(["compiled", "cuda"]), default="compiled", show_default=True,
+@click.option("--engine", type=click.Choice([e.name for e in ENGINES.values() if e.compiled]), default=DEFAULT_ENGINE,
+              show_default=True,
               help="The basin map's engine: the CPU's, or cuda: an NVIDIA GPU, one thread a grid point "
               "(pip install \"rbstab[cuda]\").")
 @click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
@@ -113,8 +116,8 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
 
     if not configs and not sweeps:
         raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")
-    if engine == "cuda" and basin:
-        check_cuda()
+    if basin:
+        check_engine(engine)
     loaded = load_configs(configs, overrides)
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)

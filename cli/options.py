@@ -6,8 +6,10 @@ import functools
 
 import click
 
+from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
 from rbstab.warning_codes import WARNING_CODES
 
+from ._common import check_engine
 from .console import CONSOLE_KEY, Console
 
 set_option = click.option(
@@ -39,6 +41,14 @@ def output_option(default: str, help_text: str):
         show_default=True,
         help=help_text,
     )
+
+
+def engine_option(**kwargs):
+    """``--engine NAME``, a name of :data:`rbstab.engine.ENGINES` (each one's line in the help)."""
+    lines = "; ".join(f"{engine.name}: {engine.summary}" for engine in ENGINES.values())
+    return click.option("--engine", type=click.Choice(list(ENGINES)), default=None,
+                        help=f"How runs are integrated (docs/performance.md): {lines}  [default: {DEFAULT_ENGINE}].",
+                        **kwargs)
 
 
 json_option = click.option(
@@ -87,19 +97,14 @@ def console_options(command):
 
 
 def _usable_engine(ctx, param, value):
-    """``--engine cuda`` where it cannot run: one line, before the command starts."""
-    if value == "cuda":
-        from ._common import check_cuda  # heavy: numba, numba-cuda (--engine cuda only)
-
-        check_cuda()
+    """``--engine NAME`` where it cannot run: one line, before the command starts."""
+    check_engine(value)
     return value
 
 
 def study_options(command):
     """Options of the commands that run studies (``sensitivity``, ``tune``): ``--vary``,
     ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o`` and ``--json``."""
-    from rbstab.sweep.worker import ENGINES  # as rbstab sweep takes them
-
     options = [
         click.option("--vary", "vary", multiple=True, required=True, metavar="KEY=DISTRIBUTION",
                      help="A varied config key with a sweep distribution, e.g. body.mass=uniform:[30,50], "
@@ -107,9 +112,7 @@ def study_options(command):
         click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sampler."),
         click.option("--name", default=None, help="The study's name and folder OUTPUT/NAME  [default: the config's name]."),
         set_option,
-        click.option("--engine", type=click.Choice(list(ENGINES)), default=None, callback=_usable_engine,
-                     help="How runs are integrated (docs/performance.md; cuda: on an NVIDIA GPU)  "
-                     "[default: compiled]."),
+        engine_option(callback=_usable_engine),
         output_option("results/studies", "Parent folder; the study writes OUTPUT/<name>/."),
         json_option,
     ]

@@ -8,12 +8,12 @@ import os
 import click
 
 from rbstab.api import execute_sweep
-from rbstab.sweep.worker import ENGINES
+from rbstab.engine.registry import get_engine
 from rbstab.warning_codes import coded
 
-from ._common import check_cuda, command_line
+from ._common import check_engine, command_line
 from .console import get_console
-from .options import console_options, output_option, set_option
+from .options import console_options, engine_option, output_option, set_option
 
 
 def _indent(text: str) -> str:
@@ -82,12 +82,7 @@ def _key_value(text: str) -> tuple[str, str]:
     help="Per-run wall-time limit, instead of each config's simulation.max_wall_time; a run past it "
     "is recorded as failed.",
 )
-@click.option(
-    "--engine", type=click.Choice(list(ENGINES)), default=None,
-    help="How runs are integrated (see docs/performance.md); scipy: one solve_ivp call per run, "
-    "the reference; cuda: on an NVIDIA GPU, one thread a run (pip install \"rbstab[cuda]\")  "
-    f"[default: {next(iter(k for k in ENGINES if k != 'scipy'))}].",
-)
+@engine_option()
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
     help="Most runs per unit of work sent to a worker  [default: 256 for compiled or --layout chunk, "
@@ -139,9 +134,9 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     if connect_timeout is not None and executor != "dask":
         raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
     overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
-    if engine == "cuda" and not dry_run:
-        check_cuda()
-    if engine == "cuda":
+    if not dry_run:
+        check_engine(engine)
+    if get_engine(engine).gpu:
         from rbstab.sweep.runner import cuda_jobs  # heavy: numpy, numba (the GPU's compute mode)
 
         jobs = cuda_jobs(jobs)

@@ -60,3 +60,18 @@ def test_time_to_converge_is_the_first_sample_from_which_every_sample_converged(
     assert time_to_converge(t, v, 1e-3) == pytest.approx(0.4)
     reached = converged(True, v[0], v, 1e-3)
     assert reached[4:].all() and not reached[3]
+
+
+def test_the_rule_as_text_is_the_rule_of_the_code(tmp_path):
+    """The text a sweep's summary states is the convergence module's, with the absolute
+    values and the round-off floor the code applies."""
+    import pandas as pd
+
+    from rbstab.convergence import RULE, SAMPLE_RULE
+    from rbstab.sweep.folder import summarize_columns
+
+    assert "|lyapunov_final| <= lyapunov_ratio * |lyapunov_initial| + 1e-12 J" in RULE and f"{ROUND_OFF:g}" in RULE
+    assert SAMPLE_RULE == "|v| <= ratio |v(0)| + 1e-12 J"
+    index = pd.DataFrame({"run_id": ["r0"], "base": ["b"], "status": ["success"], "converged": [True],
+                          "wall_time": [0.1]})
+    assert summarize_columns(index, name="s", ratio=1e-3)["convergence"]["definition"] == RULE

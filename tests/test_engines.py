@@ -387,6 +387,18 @@ def test_worker_compiled_engine_isolates_failures(tmp_path):
     assert {k: v for k, v in got.items() if k in stored} == stored
 
 
+def test_the_registry_names_the_compiled_methods():
+    """The registry lists the compiled methods without importing numpy: the same as the tableaus'."""
+    from rbstab.engine import METHODS
+    from rbstab.engine.registry import COMPILED_METHODS, ENGINES
+
+    assert COMPILED_METHODS == METHODS
+    assert [name for name, engine in ENGINES.items() if engine.compiled] == ["compiled", "cuda"]
+    assert ENGINES["compiled"].takes("DOP853") and not ENGINES["compiled"].takes("DOP853", sign_law=True)
+    assert not ENGINES["compiled"].takes("Radau") and not ENGINES["scipy"].takes("DOP853")
+    assert ENGINES["compiled"].unavailable() is None and ENGINES["scipy"].unavailable() is None
+
+
 def test_engine_choice_and_timeout(tmp_path):
     assert resolve_engine(None, None) == "compiled"
     assert resolve_engine(None, 5.0) == "compiled"  # both engines take a per-run wall-time limit

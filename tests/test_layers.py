@@ -11,7 +11,8 @@ graph with no cycle, in which no module imports one of a higher layer:
 :mod:`rbstab.warning_codes`. :mod:`rbstab.config` (validated input, built from the model
 and the variants' registry) and :mod:`rbstab.resources` (the memory a run needs) sit
 between the variants and the engine; :mod:`rbstab.summary` (compiled summary figures of a
-run's outputs) and :mod:`rbstab.convergence` (the convergence rule) sit with the engine;
+run's outputs) and :mod:`rbstab.convergence` (the convergence rule) and :mod:`rbstab.results` (the result
+types, below the simulator and the files that store them) sit with the engine;
 :mod:`rbstab.kinds` (the registry of input kinds, each loaded by its format's module) with
 the sweeps and analyses. Modules of one layer may import each other (without a cycle).
 
@@ -36,7 +37,7 @@ LAYERS = [
     ("model", ["rbstab.model"]),
     ("variants", ["rbstab.variants"]),
     ("config", ["rbstab.config", "rbstab.resources"]),
-    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence"]),
+    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence", "rbstab.results"]),
     ("simulate", ["rbstab.simulator"]),
     ("io", ["rbstab.io"]),
     ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds", "rbstab.studies"]),
@@ -275,3 +276,28 @@ def test_the_engine_takes_its_settings_as_one_record():
                 if count >= 10 and f"{module}.{node.name}" not in kernels:
                     long.append(f"{module}.{node.name}: {count}")
     assert not long, "engine functions with 10 or more parameters:\n" + "\n".join(long)
+
+
+def test_no_engine_name_is_compared_outside_the_registry():
+    """What an engine can do is asked of :data:`rbstab.engine.ENGINES`
+    (:mod:`rbstab.engine.registry`): no other module compares a value with an engine's
+    name (``engine == "cuda"``, ``engine in ("compiled", "cuda")``)."""
+    from rbstab.engine.registry import ENGINES
+
+    def names(node) -> set:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            return {node.value} & set(ENGINES)
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return set().union(*(names(e) for e in node.elts)) if node.elts else set()
+        return set()
+
+    found = []
+    for module, (path, _) in MODULES.items():
+        if module == "rbstab.engine.registry":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Compare):
+                hit = set().union(*(names(n) for n in [node.left, *node.comparators]))
+                if hit:
+                    found.append(f"{path.relative_to(ROOT)}:{node.lineno}: {', '.join(sorted(hit))}")
+    assert not found, "engine names compared outside rbstab.engine.registry:\n" + "\n".join(found)

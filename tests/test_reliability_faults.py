@@ -169,11 +169,15 @@ def test_temporaries_of_dead_writers_are_removed_and_live_ones_kept(tmp_path):
     live = tmp_path / f".run.h5.{os.getpid()}@{_HOST}.abcd1234.tmp"
     foreign = tmp_path / f".run.h5.{dead.pid}@{'0000' if _HOST != '0000' else '1111'}.abcd1234.tmp"
     legacy = tmp_path / ".run.h5.x1y2z3w4.tmp"
-    for path in (stale, live, foreign, legacy):
+    animation = tmp_path / f".case3.gif.{dead.pid}@{_HOST}.abcd1234.tmp.gif"  # a writer that reads the suffix
+    other = tmp_path / ".notes.tmpl"
+    for path in (stale, live, foreign, legacy, animation, other):
         path.write_text("partial")
-    os.utime(legacy, (time.time() - 7200, time.time() - 7200))
-    assert remove_stale_temporaries(tmp_path) == 2
-    assert not stale.exists() and not legacy.exists() and live.exists() and foreign.exists()
+    for path in (legacy, other):
+        os.utime(path, (time.time() - 7200, time.time() - 7200))
+    assert remove_stale_temporaries(tmp_path) == 3
+    assert not stale.exists() and not legacy.exists() and not animation.exists()
+    assert live.exists() and foreign.exists() and other.exists()
 
 
 # -- damaged files ------------------------------------------------------------------------------

@@ -15,7 +15,8 @@ import yaml
 from rbstab.config import config_from_mapping
 from rbstab.engine import METHODS, RunBatch, batch_from_table
 from rbstab.engine.batch import MAX_STATE, NOT_COMPILED
-from rbstab.simulator import _settings_rows, is_sign_law, uses_compiled_engine
+from rbstab.engine.settings import settings_rows
+from rbstab.simulator import is_sign_law, uses_compiled_engine
 from rbstab.sweep import plan_table, spec_from_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,7 +50,7 @@ def _expected(resolved: dict):
         warnings.simplefilter("ignore")
         config = config_from_mapping(resolved)
     variant = config.make_variant()
-    return (variant.parameters[0], variant.initial_state(config.initial_state), _settings_rows([config])[0],
+    return (variant.parameters[0], variant.initial_state(config.initial_state), settings_rows([config.simulation])[0],
             uses_compiled_engine(config) and not is_sign_law(config), config)
 
 

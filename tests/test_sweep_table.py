@@ -152,6 +152,43 @@ def test_a_10000_run_zip_spec_is_read_and_planned(tmp_path):
         load_spec(tmp_path / "bomb.yaml")
 
 
+@pytest.mark.parametrize("key, values", [
+    # the rules the schema and the column checks share (rbstab.config.schema): each value
+    # just inside and just outside its limit
+    ("initial_state.theta.1", [np.pi / 2 - 1e-3 - 1e-9, np.pi / 2 - 1e-3, np.pi / 2 - 1e-3 + 1e-9, -1.0]),
+    ("simulation.gimbal_margin", [1e-3, 0.499, 0.5, 0.0]),
+    ("simulation.n_samples", [2, 2001, 2_000_000_000_001, 1]),
+    ("simulation.max_step", [2.0 / 1_000_000, 2.0 / 1_000_000 * (1 - 1e-9), 1.0, -1.0]),
+    ("body.mass", [1e-9, 0.0, 1e12, 1.1e12]),
+])
+def test_a_rule_refuses_the_same_values_in_a_config_and_in_a_sweep(key, values):
+    """A value a configuration refuses is refused in a sweep's run, and only then; the
+    sweep names the run, the key, the value and what is allowed, as the config does."""
+    base = yaml.safe_load(CASE3.read_text())
+    base["simulation"] = {**(base.get("simulation") or {}), "t_end": 2.0, "max_steps": 1_000_000}
+    refused = {}
+    for i, value in enumerate(values):
+        data = yaml.safe_load(yaml.safe_dump(base))
+        section, name, *index = key.split(".")
+        if index:
+            data[section][name][int(index[0])] = value
+        else:
+            data.setdefault(section, {})[name] = value
+        try:
+            config_from_mapping(data)
+        except ConfigError as exc:
+            refused[i] = exc.errors
+    assert 0 < len(refused) < len(values)
+    spec = spec_from_mapping({"name": "t", "base": base, "zip": {key: values}})
+    with pytest.raises(SweepSpecError) as info:
+        plan_table(spec)
+    lines = info.value.errors
+    assert lines[0].startswith(f"{len(refused)} of {len(values)} runs have an invalid configuration")
+    for i, problems in refused.items():
+        mine = [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(f"run r{i:04d} ")]
+        assert mine == problems and f"{key}=" in next(line for line in lines if line.startswith(f"run r{i:04d} "))
+
+
 def test_random_keys_draw_from_their_own_streams():
     """Each random key has its own stream of the seed: adding a key leaves the others'
     values as they were, and the first samples do not depend on random.n."""

@@ -43,11 +43,13 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
+from .engine.registry import DEFAULT_ENGINE
+
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
 
     from .config import RunConfig
-    from .simulator import RunResult
+    from .results import RunResult
     from .sweep import SweepOutcome, SweepSpec
 
 __all__ = [
@@ -176,7 +178,7 @@ def _integrate(config: "RunConfig", engine: str, timeout: float | None) -> "RunR
     return integrate(config, timeout, engine=engine)
 
 
-def simulate(config: Any, overrides: Overrides = (), *, engine: str = "compiled",
+def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_ENGINE,
              timeout: float | None = None) -> "xarray.Dataset":
     """Integrate one run and return what its result file would hold, in memory.
 
@@ -186,8 +188,8 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = "compiled"
         A validated config, or what :func:`load_config` takes.
     overrides : sequence of str or Mapping
         See :func:`load_config`.
-    engine : {"compiled", "scipy"}
-        :data:`rbstab.simulator.ENGINES`; Radau, BDF and LSODA always go through scipy.
+    engine : {"compiled", "scipy", "cuda"}
+        :data:`rbstab.engine.ENGINES`; Radau, BDF and LSODA always go through scipy.
     timeout : float, optional
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``.
 
@@ -291,7 +293,7 @@ def check_overwrite(config: "RunConfig", path: str | os.PathLike, *, overwrite: 
 
 
 def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overrides = (), overwrite: bool = False,
-        engine: str = "compiled", timeout: float | None = None, command_line: str | None = None) -> Path:
+        engine: str = DEFAULT_ENGINE, timeout: float | None = None, command_line: str | None = None) -> Path:
     """Integrate one run and write ``<output>/<name>.h5`` (what ``rbstab run`` does).
 
     Parameters

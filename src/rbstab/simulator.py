@@ -2,16 +2,18 @@
 or :func:`simulate_blocks`, their results as blocks of runs), or the runs of a
 :class:`rbstab.engine.RunBatch` (:func:`simulate_batch`, no configuration object per run).
 
-Two engines share the compiled model (:mod:`rbstab.variants.kernels`):
+The engines (:data:`rbstab.engine.ENGINES`) share the compiled model
+(:mod:`rbstab.variants.kernels`):
 
 - ``compiled`` (the default): :mod:`rbstab.engine`, scipy's RK23, RK45 and DOP853
   compiled with the model, the steps ``solve_ivp`` takes; every run of a call may have its
   own variant, body, gains and settings.
 - ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA):
   :func:`scipy.integrate.solve_ivp` on the compiled right-hand side.
+- ``cuda``: the compiled engine's steps on an NVIDIA GPU (:mod:`rbstab.engine.cuda`).
 
 The pure sign law of ``sliding`` (``boundary_layer: 0``), whose right-hand side jumps, is
-routed by both engines to the event-driven integrator :mod:`rbstab.engine.switching`
+routed by every engine to the event-driven integrator :mod:`rbstab.engine.switching`
 (switchings located, Filippov sliding, see docs/sliding.md); its result also holds the
 located events (``RunResult.switching``) and the switching figures in its summary.
 
@@ -30,19 +32,20 @@ from __future__ import annotations
 
 import time as _time
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .engine import METHODS, RunBatch, integrate_runs, method_number
-from .engine.settings import settings_records
+from .engine.registry import DEFAULT_ENGINE, get_engine
+from .engine.settings import settings_records, settings_rows
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import VARIANT_LAYOUTS, summary_stride
 from .model import PARAMETERS
-from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, table_row
+from .results import RunBlock, RunResult
+from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.kernels import run_outputs
@@ -53,7 +56,6 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = [
     "RunResult",
     "RunTimeout",
-    "ENGINES",
     "simulate",
     "simulate_many",
     "simulate_blocks",
@@ -67,148 +69,10 @@ __all__ = [
     "simulate_sign_law",
 ]
 
-#: Integration engines: ``compiled`` (:mod:`rbstab.engine`, RK23/RK45/DOP853; other
-#: methods go through scipy), ``scipy`` (the reference, one ``solve_ivp`` call per run,
-#: any method) and ``cuda`` (the compiled engine's steps on an NVIDIA GPU,
-#: :mod:`rbstab.engine.cuda`; other methods go through scipy). The pure sign law takes
-#: :mod:`rbstab.engine.switching`, on the CPU, with any of them.
-ENGINES = ("compiled", "scipy", "cuda")
 #: What :func:`simulate_blocks` keeps of the samples of a ``cuda`` run: every one, every
 #: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store) or none
 #: (the summary figures only).
 KEEP = ("all", "thinned", "none")
-
-
-@dataclass
-class RunResult:
-    """Outcome of one run.
-
-    Attributes
-    ----------
-    config : RunConfig
-        The validated configuration that was run.
-    time : ndarray, shape (n_samples,)
-        Sample times [s], evenly spaced on [0, t_end]. From :func:`simulate_many`'s
-        compiled engine, a read-only array that the results of a block of runs with the
-        same ``t_end`` share (copy it to change it).
-    outputs : dict of str -> ndarray
-        Every variable of the result file, shape (n_samples, 3) or (n_samples,): state
-        blocks, constraint quantities, controls, ``lyapunov``, ``lyapunov_rate``,
-        ``lyapunov_rate_numerical`` and the terms of v. Rows after a failure are NaN.
-    status : str
-        ``"success"`` or ``"failed"``.
-    message : str
-        The solver's message, or why the run failed.
-    solver : dict
-        ``nfev``, ``njev``, ``nlu`` (ints) and ``solver_status`` (scipy's int status).
-    wall_time : float
-        Integration plus post-processing time [s].
-    summary : dict
-        See :func:`rbstab.summary.summarize`.
-    timing : dict
-        Where ``wall_time`` went [s]: ``integration`` (for a batched run, its share of
-        the batch) and ``postprocess`` (output evaluation, numerical rate, summary).
-    switching : Switchings or None
-        The located events of a pure-sign-law run (:mod:`rbstab.engine.switching`), else None.
-    """
-
-    config: "RunConfig"
-    time: np.ndarray
-    outputs: dict[str, np.ndarray]
-    status: str
-    message: str
-    solver: dict = field(default_factory=dict)
-    wall_time: float = 0.0
-    summary: dict = field(default_factory=dict)
-    timing: dict = field(default_factory=dict)
-    switching: object = None
-
-    @property
-    def name(self) -> str:
-        """The run's name (``config.name``), also its result file's stem."""
-        return self.config.name
-
-    @property
-    def ok(self) -> bool:
-        """Whether the run reached ``t_end`` (``status == "success"``)."""
-        return self.status == "success"
-
-
-@dataclass
-class RunBlock:
-    """Outcomes of k runs that share their sample times, as columns: what
-    :func:`simulate_blocks` gives and a store file takes at once
-    (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); :meth:`result` is one run's
-    :class:`RunResult` (views of the block's arrays).
-
-    Attributes
-    ----------
-    configs : list of RunConfig (or None each), length k
-    time : ndarray, shape (n_samples,)
-        The runs' sample times [s] (read-only when the block comes from the compiled engine).
-    outputs : dict of str -> ndarray
-        :attr:`RunResult.outputs` with a leading run axis: shape (k, n_samples, 3) or
-        (k, n_samples).
-    summaries : dict of str -> ndarray
-        :func:`rbstab.summary.summary_table`: figure -> its k values, shape (k,) or (k, 3).
-    status, message : list of str
-    solver : dict of str -> sequence
-        :attr:`RunResult.solver` as columns: key -> its k values.
-    wall_time : ndarray, shape (k,)
-        [s]
-    timing : dict of str -> ndarray
-        :attr:`RunResult.timing` as columns: key -> its k values [s].
-    switching : list
-        Each run's :attr:`RunResult.switching`.
-    stride : int
-        Samples of the runs' grid (``simulation.n_samples`` on [0, t_end]) from one entry
-        of ``time`` to the next: 1, or a thinned trace of the ``cuda`` engine.
-    variants : list of str
-        Each run's controller variant (``config.variant``; given where ``configs`` are None).
-    """
-
-    configs: list
-    time: np.ndarray
-    outputs: dict[str, np.ndarray]
-    summaries: dict[str, np.ndarray]
-    status: list[str]
-    message: list[str]
-    solver: dict[str, Sequence]
-    wall_time: np.ndarray
-    timing: dict[str, np.ndarray]
-    switching: list
-    stride: int = 1
-    variants: list = None
-
-    def __post_init__(self) -> None:
-        if self.variants is None:
-            self.variants = [c.variant for c in self.configs]
-
-    def __len__(self) -> int:
-        return len(self.status)
-
-    def result(self, j: int) -> RunResult:
-        """Run ``j`` of the block as a :class:`RunResult` (its outputs are views)."""
-        return RunResult(config=self.configs[j], time=self.time,
-                         outputs={key: value[j] for key, value in self.outputs.items()},
-                         status=self.status[j], message=self.message[j], solver=_row(self.solver, j),
-                         wall_time=float(self.wall_time[j]), summary=table_row(self.summaries, j),
-                         timing=_row(self.timing, j), switching=self.switching[j])
-
-    @classmethod
-    def of(cls, result: RunResult) -> "RunBlock":
-        """A block of one run (its outputs as views with a leading axis of 1)."""
-        return cls([result.config], result.time, {key: np.asarray(value)[None] for key, value in result.outputs.items()},
-                   {key: np.asarray([value], dtype=object if isinstance(value, str) else None)
-                    for key, value in result.summary.items()},
-                   [result.status], [result.message], {key: [value] for key, value in result.solver.items()},
-                   np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
-                   [result.switching])
-
-
-def _row(columns: dict[str, Sequence], j: int) -> dict:
-    """Entry ``j`` of each column, as plain Python values."""
-    return {key: value[j].item() if isinstance(value[j], np.generic) else value[j] for key, value in columns.items()}
 
 
 def gimbal_lock_event(margin: float):
@@ -348,11 +212,10 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> 
     return outputs
 
 
-def uses_compiled_engine(config: "RunConfig", engine: str = "compiled") -> bool:
-    """Whether ``config`` runs on the compiled engine with ``engine`` (see the module docstring)."""
-    if engine not in ENGINES:
-        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    return engine != "scipy" and config.simulation.method in METHODS and not is_sign_law(config)
+def uses_compiled_engine(config: "RunConfig", engine: str = DEFAULT_ENGINE) -> bool:
+    """Whether ``engine`` integrates ``config`` in its batches (:meth:`rbstab.engine.Engine.takes`;
+    ValueError for an unknown engine)."""
+    return get_engine(engine).takes(config.simulation.method, is_sign_law(config))
 
 
 def is_sign_law(config: "RunConfig") -> bool:
@@ -380,7 +243,7 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     return result
 
 
-def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = "compiled") -> RunResult:
+def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
     """Run one validated configuration.
 
     Parameters
@@ -391,7 +254,7 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``;
         past it the run fails with a message.
     engine : {"compiled", "scipy", "cuda"}
-        See :data:`ENGINES`.
+        See :data:`rbstab.engine.ENGINES`.
 
     Returns
     -------
@@ -430,13 +293,6 @@ _LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUT
 #: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
 #: default number of runs per compiled call (the trajectories held at once).
 POSTPROCESS_BLOCK = 32
-
-
-def _settings_rows(configs, timeout: float | None = None) -> np.ndarray:
-    """The compiled engine's settings of each run (:func:`rbstab.engine.integrate_runs`)."""
-    return np.array([[c.simulation.t_end, c.simulation.rtol, c.simulation.atol, c.simulation.max_step,
-                      c.simulation.gimbal_margin, c.simulation.max_steps,
-                      c.simulation.max_wall_time if timeout is None else timeout] for c in configs], dtype=float)
 
 
 def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarray,
@@ -521,7 +377,7 @@ def _parameter_rows(variants: Sequence[Variant]) -> np.ndarray:
     return rows
 
 
-def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
+def simulate_many(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                   chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                   full: bool = True) -> Iterator[tuple[int, RunResult]]:
     """Run many validated configurations; yields ``(index into configs, RunResult)``.
@@ -533,7 +389,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             yield i, block.result(j)
 
 
-def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
+def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                     chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                     full: bool = True, keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
     """Run many validated configurations; yields ``(indices into configs, RunBlock)``.
@@ -563,7 +419,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
     Raises
     ------
     ValueError
-        For an unknown engine (allowed: :data:`ENGINES`), ``keep`` or ``chunk_size < 1``.
+        For an unknown engine (allowed: :data:`rbstab.engine.ENGINES`), ``keep`` or ``chunk_size < 1``.
     rbstab.engine.cuda.CudaUnavailable
         With ``engine="cuda"`` where no GPU, driver or numba-cuda is found (before any run).
     """
@@ -571,10 +427,8 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
     if keep not in KEEP:
         raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
-    if engine == "cuda":
-        from .engine.cuda import check_available  # heavy: numba-cuda (--engine cuda only)
-
-        check_available()
+    gpu = get_engine(engine).gpu
+    get_engine(engine).check_available()  # before any run
     groups: dict[tuple, list[int]] = {}
     shared: dict[tuple, Variant] = {}
     for i, config in enumerate(configs):
@@ -584,12 +438,12 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
         else:
             yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
     for (method, n_samples, size), members in groups.items():
-        if engine == "cuda":
+        if gpu:
             group = [configs[i] for i in members]
             variants = [_variant_of(c, shared) for c in group]
             runs = (np.array([v.code for v in variants], dtype=np.int64), _parameter_rows(variants),
                     np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, group)]),
-                    _settings_rows(group, timeout))
+                    settings_rows([c.simulation for c in group], timeout))
             yield from _cuda_blocks(runs, group, members, method, n_samples, full, keep)
             continue
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
@@ -600,7 +454,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
             variants = [_variant_of(c, shared) for c in chunk_configs]
             codes = np.array([v.code for v in variants], dtype=np.int64)
             params = _parameter_rows(variants)
-            settings = _settings_rows(chunk_configs, timeout)
+            settings = settings_rows([c.simulation for c in chunk_configs], timeout)
             sol = integrate_runs(
                 codes,
                 params,
@@ -616,7 +470,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = "compiled",
 
 
 def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
-                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = "compiled",
+                   chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = DEFAULT_ENGINE,
                    keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
     ``(rows of the batch, RunBlock)``.
@@ -657,7 +511,7 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     # the groups, in np.unique's order (a set of the rows: numpy's unique of rows sorts them all)
     for method, n_samples, size in sorted(set(zip(methods.tolist(), samples.tolist(), sizes.tolist()))):
         members = rows[(methods == method) & (samples == n_samples) & (sizes == size)]
-        if engine == "cuda":
+        if get_engine(engine).gpu:
             runs = (batch.variant[members], batch.params[members], batch.y0[members, :size],
                     batch.settings_rows(members))
             yield from _cuda_blocks(runs, [None] * len(members), members, METHODS[method], n_samples, full, keep)

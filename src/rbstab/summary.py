@@ -12,7 +12,8 @@ import math
 
 import numpy as np
 
-from .convergence import ROUND_OFF
+from .convergence import within_bound
+from .results import row
 from .jit import jit
 from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
 
@@ -274,21 +275,14 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np
         The same figures (the same numbers) as :func:`summarize` of each run alone.
     """
     table = summary_table(time, outputs, checked)
-    return [table_row(table, j) for j in range(outputs["lyapunov"].shape[0])]
-
-
-def table_row(table: dict[str, np.ndarray], j: int) -> dict:
-    """Run ``j`` of a summary table (:func:`summary_table`, :func:`stream_table`) as
-    :func:`summarize` gives it: plain floats, lists of 3 floats and strings."""
-    return {key: values[j].tolist() if isinstance(values[j], np.ndarray | np.generic) else values[j]
-            for key, values in table.items()}
+    return [row(table, j) for j in range(outputs["lyapunov"].shape[0])]
 
 
 def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None
                   ) -> dict[str, np.ndarray]:
     """:func:`summarize_many` as columns: figure -> its k values, shape (k,) or (k, 3) for
     a 3-vector figure (floats; ``lyapunov_rate_check`` an object array of str), the
-    figures in :func:`summarize`'s order; the same numbers (:func:`table_row` gives run j's)."""
+    figures in :func:`summarize`'s order; the same numbers (:func:`rbstab.results.row` gives run j's, as :func:`summarize` does)."""
     lyapunov = outputs["lyapunov"]
     k, n = lyapunov.shape
     finite = np.isfinite(lyapunov)
@@ -382,6 +376,8 @@ ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
+#: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
+_within_bound = jit(forceinline=True)(within_bound)
 _T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
 #: Column of a streamed trace's row that holds the numerical dv/dt (after the outputs).
 NUMERICAL_RATE_AT = N_OUTPUTS
@@ -450,7 +446,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[V_MIN] = _min(acc[V_MIN], v)
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
     v0 = acc[V_INITIAL]
-    if not (math.isfinite(v0) and math.isfinite(v) and abs(v) <= ratio * abs(v0) + ROUND_OFF):
+    if not _within_bound(v0, v, ratio):
         acc[LAST_ABOVE] = i
     acc[MAX_RATE] = _max(acc[MAX_RATE], rate)
     acc[MAX_ABS_RATE] = _max(acc[MAX_ABS_RATE], abs(rate))

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..simulator import simulate
 from ..variants import VARIANTS
@@ -158,7 +159,7 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
 
 
 def _settling(config, variant, ratio: float) -> dict:
-    """Simulate ``config`` from its initial state: when |v| first stays below ratio * |v(0)| (:func:`~rbstab.analysis.basin.time_to_converge`)."""
+    """Simulate ``config`` from its initial state: when |v| first stays within ratio |v(0)| + 1e-12 J (:data:`rbstab.convergence.SAMPLE_RULE`) (:func:`~rbstab.analysis.basin.time_to_converge`)."""
     result = simulate(config)
     v = result.outputs["lyapunov"]
     return {
@@ -199,7 +200,7 @@ def analyze(
     basin_samples: int = DEFAULT_BASIN_SAMPLES,
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     jobs: int = 1,
-    engine: str = "compiled",
+    engine: str = DEFAULT_ENGINE,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 
@@ -224,7 +225,8 @@ def analyze(
     basin_samples : int
         Samples per basin run.
     ratio : float
-        Convergence: |v(t)| <= ratio * |v(0)| from then on, 0 < ratio < 1.
+        Convergence: |v(t)| <= ratio |v(0)| + 1e-12 J from then on
+        (:data:`rbstab.convergence.SAMPLE_RULE`), 0 < ratio < 1.
     jobs : int
         Local processes for the basin map.
     engine : {"compiled", "cuda"}

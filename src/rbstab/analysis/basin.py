@@ -7,8 +7,8 @@ go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 
 is classified by the rule a sweep classifies its runs with
 (:func:`rbstab.convergence.converged`), applied from every sample on:
 
-- ``converged`` (0): the run reached t_end and |v| <= ratio * |v(0)| (+ round-off) from
-  some time on;
+- ``converged`` (0): the run reached t_end and |v| <= ratio |v(0)| + 1e-12 J
+  (:data:`rbstab.convergence.SAMPLE_RULE`) from some time on;
 - ``not converged`` (1): it reached t_end with more of v left;
 - ``failed`` (2): gimbal lock (|theta_2| reached pi/2 - gimbal_margin, eq 5), a solver
   failure, a non-finite state, or an initial state outside the domain.
@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..layout import BLOCK_UNITS, OUTPUTS
 
 __all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
@@ -221,23 +222,21 @@ def _run_block(items: list, ratio: float) -> list[tuple]:
     return rows
 
 
-def _run_on_gpu(base, variant, states: np.ndarray, points: np.ndarray, ratio: float) -> list[tuple]:
+def _run_on_gpu(engine, base, variant, states: np.ndarray, points: np.ndarray, ratio: float) -> list[tuple]:
     """:func:`_run_block`'s rows of the grid ``points`` (initial ``states`` (k, n_state))
-    on the GPU: the runs share ``base``'s variant, parameters and settings (a launch stops
-    after its ``simulation.max_wall_time``)."""
+    on the GPU ``engine`` (:class:`rbstab.engine.Engine`): the runs share ``base``'s
+    variant, parameters and settings (a launch stops after its ``simulation.max_wall_time``)."""
     from ..engine import method_number  # heavy: numba
-    from ..engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
-    from ..engine.settings import settings_records  # heavy: numba
+    from ..engine.settings import settings_records, settings_rows  # heavy: numba
     from ..engine.status import SUCCESS, status_message  # heavy: numba
     from ..summary import LAST_ABOVE, TAKEN  # heavy: numba
 
     s = base.simulation
     k, n = len(states), s.n_samples
-    row = np.array([[s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, s.max_wall_time]])
     time = np.linspace(0.0, s.t_end, n)
     out = []
-    for chunk in integrate_chunks_cuda(np.full(k, variant.code), variant.parameters, states,
-                                       settings_records(row, method_number(s.method)).repeat(k), n_samples=n,
+    for chunk in engine.entry_point()(np.full(k, variant.code), variant.parameters, states,
+                                       settings_records(settings_rows([s]), method_number(s.method)).repeat(k), n_samples=n,
                                        max_wall_time=s.max_wall_time, ratio=ratio):
         last_above = chunk.acc[:, LAST_ABOVE].astype(np.int64)
         ok = chunk.status == SUCCESS
@@ -266,7 +265,7 @@ def basin_map(
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     n_samples: int = DEFAULT_SAMPLES,
     jobs: int = 1,
-    engine: str = "compiled",
+    engine: str = DEFAULT_ENGINE,
 ) -> BasinMap:
     """Simulate every point of the slice spanned by ``axes`` (module docstring).
 
@@ -287,9 +286,10 @@ def basin_map(
     jobs : int
         Local processes (1: in this process).
     engine : {"compiled", "cuda"}
-        The CPU engine, or the GPU (:mod:`rbstab.engine.cuda`: every point in one process,
-        each run's time to converge taken as it goes; the pure sign law and implicit
-        methods stay on the CPU). The same outcomes and times (on a GPU, up to its rounding).
+        A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or the GPU's
+        (:mod:`rbstab.engine.cuda`: every point in one process, each run's time to converge
+        taken as it goes; the pure sign law and implicit methods stay on the CPU). The same
+        outcomes and times (on a GPU, up to its rounding).
 
     Raises
     ------
@@ -318,8 +318,8 @@ def basin_map(
     messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}
     t_conv = np.full(len(states), np.nan)
     v_final = np.full(len(states), np.nan)
-    if engine == "cuda" and len(points) and uses_compiled_engine(base, "cuda"):
-        results = [_run_on_gpu(base, variant, states[points], points, ratio)]
+    if get_engine(engine).gpu and len(points) and uses_compiled_engine(base, engine):
+        results = [_run_on_gpu(get_engine(engine), base, variant, states[points], points, ratio)]
     else:
         results = _execute(_point_configs(base, blocks, points), ratio, jobs)
     for rows in results:

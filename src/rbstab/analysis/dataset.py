@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
+from ..convergence import SAMPLE_RULE
 from ..io.atomic import atomic_path
 from ..io.hdf5 import read_format
 from ..io.metadata import provenance_attributes
@@ -135,10 +136,10 @@ def _settling_variables(analysis) -> dict:
     return {
         "time_to_converge": _var((), s["time_to_converge"], "s",
                                  "time to converge of the simulation from the configured initial state",
-                                 "first sample time from which |v| <= ratio |v(0)| (NaN: not converged)"),
+                                 f"first sample time from which {SAMPLE_RULE} (NaN: not converged)"),
         "simulation_lyapunov_initial": _var((), s["lyapunov_initial"], "J", "v(0) of the simulation"),
         "simulation_lyapunov_final": _var((), s["lyapunov_final"], "J", "v(t_end) of the simulation"),
-        "convergence_ratio": _var((), s["ratio"], "1", "converged: |v| <= ratio |v(0)| from then on"),
+        "convergence_ratio": _var((), s["ratio"], "1", f"converged: {SAMPLE_RULE} from then on"),
     }
 
 
@@ -189,7 +190,7 @@ def _basin_variables(analysis) -> tuple[dict, dict]:
     outcome[2].update(flag_values=np.array([0, 1, 2], dtype=np.int8), flag_meanings="converged not_converged failed")
     return {
         "basin_outcome": outcome,
-        "basin_time_to_converge": _var(dims, b.time_to_converge, "s", "time to converge (|v| <= ratio |v(0)| "
+        "basin_time_to_converge": _var(dims, b.time_to_converge, "s", f"time to converge ({SAMPLE_RULE} "
                                        "from then on)"),
         "basin_lyapunov_initial": _var(dims, b.lyapunov_initial, "J", "v at the initial state"),
         "basin_lyapunov_final": _var(dims, b.lyapunov_final, "J", "v at t_end"),

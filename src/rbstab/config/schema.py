@@ -55,6 +55,15 @@ __all__ = [
     "field_at",
     "problem_line",
     "field_rule",
+    "within_bounds",
+    "clear_of_gimbal_lock",
+    "samples_apart",
+    "steps_suffice",
+    "Invalid",
+    "checked",
+    "bounded_number",
+    "optional",
+    "run_name",
 ]
 
 #: Matrix gains of ``controller`` (:class:`rbstab.model.Gains`), with their units.
@@ -169,12 +178,48 @@ def _as_number(value: Any, *, allow_inf: bool = False) -> int | float:
     return number
 
 
+# -- the rules, on one value or on a column of values ----------------------------------------------
+# The checks of this schema and the column checks of a sweep's runs (rbstab.sweep.validate)
+# decide with these: each takes numbers, or numpy arrays element by element (NaN fails).
+
+
+def within_bounds(value: Any, gt: float | None = None, ge: float | None = None, lt: float | None = None,
+                  le: float | None = None) -> Any:
+    """Whether ``value`` is within the bounds given (> gt, >= ge, < lt, <= le)."""
+    ok = value == value  # noqa: PLR0124 - False for NaN
+    if gt is not None:
+        ok = ok & (value > gt)
+    if ge is not None:
+        ok = ok & (value >= ge)
+    if lt is not None:
+        ok = ok & (value < lt)
+    if le is not None:
+        ok = ok & (value <= le)
+    return ok
+
+
+def clear_of_gimbal_lock(theta_2: Any, margin: Any = 0.0) -> Any:
+    """Whether |theta_2| < pi/2 - ``margin`` [rad]: B(theta) is singular at |theta_2| = pi/2
+    (gimbal lock, eq 1)."""
+    return abs(theta_2) < math.pi / 2 - margin
+
+
+def samples_apart(t_end: Any, n_samples: Any) -> Any:
+    """Whether ``n_samples`` samples on [0, t_end] [s] are at least :data:`MIN_SAMPLE_SPACING` apart."""
+    return t_end / (n_samples - 1) >= MIN_SAMPLE_SPACING
+
+
+def steps_suffice(t_end: Any, max_step: Any, max_steps: Any) -> Any:
+    """Whether ``max_steps`` steps of at most ``max_step`` [s] can reach ``t_end`` [s]."""
+    return t_end / max_step <= max_steps
+
+
 def _too_large(found: str) -> str:
     return (f"{found}, beyond {MAX_MAGNITUDE:g} in magnitude, the largest a configuration takes: "
             "larger values overflow the dynamics (docs/reliability.md)")
 
 
-def _number(
+def bounded_number(
     *,
     gt: float | None = None,
     ge: float | None = None,
@@ -190,12 +235,7 @@ def _number(
         if integer and (isinstance(value, bool) or not isinstance(value, numbers.Integral)):
             raise Invalid(f"{kind_of(value)}, not an integer")
         number = _as_number(value, allow_inf=allow_inf)
-        if (
-            (gt is not None and not number > gt)
-            or (ge is not None and not number >= ge)
-            or (lt is not None and not number < lt)
-            or (le is not None and not number <= le)
-        ):
+        if not within_bounds(number, gt, ge, lt, le):
             raise Invalid(why(number) if why is not None else "")  # the description says what is allowed
         return number
 
@@ -287,7 +327,7 @@ def _psd_matrix(value: Any) -> list:
 def _theta(value: Any) -> list[int | float]:
     """Euler angles; the margin to gimbal lock is checked with the simulation section."""
     theta = _vector(value)
-    if not abs(theta[1]) < math.pi / 2:
+    if not clear_of_gimbal_lock(theta[1]):
         raise Invalid(
             "B(theta) is singular at |theta_2| = pi/2 (gimbal lock, eq 1)",
             "3 numbers (rad) with theta_2 in (-pi/2, pi/2)",
@@ -295,10 +335,10 @@ def _theta(value: Any) -> list[int | float]:
     return theta
 
 
-def _optional(check: Callable[[Any], Any]) -> Callable[[Any], Any]:
-    optional = lambda value: None if value is None else check(value)  # noqa: E731
-    optional.rule = getattr(check, "rule", None)
-    return optional
+def optional(check: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    allowing_null = lambda value: None if value is None else check(value)  # noqa: E731
+    allowing_null.rule = getattr(check, "rule", None)
+    return allowing_null
 
 
 # The constraint each check stands for, in a form a batched check of many values reads
@@ -315,12 +355,12 @@ def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
 
 
 def _valid_name(value: Any) -> bool:
-    """Whether ``value`` is a valid run ``name`` (see :func:`_name`)."""
+    """Whether ``value`` is a valid run ``name`` (see :func:`run_name`)."""
     return (isinstance(value, str) and len(value) <= MAX_NAME_LENGTH and bool(_NAME_PATTERN.fullmatch(value))
             and set(value) != {"."})
 
 
-def _name(value: Any) -> str:
+def run_name(value: Any) -> str:
     if not isinstance(value, str):
         raise Invalid(f"{kind_of(value)}, not a string")
     if len(value) > MAX_NAME_LENGTH:
@@ -352,12 +392,12 @@ def _method(value: Any) -> str:
 
 def _max_step(value: Any) -> float:
     """null means inf (that is how :attr:`RunConfig.resolved` writes inf)."""
-    return math.inf if value is None else _number(gt=0, allow_inf=True)(value)
+    return math.inf if value is None else bounded_number(gt=0, allow_inf=True)(value)
 
 
 def _max_wall_time(value: Any) -> float:
     """null means inf (no wall-time limit; the step limit still ends the run)."""
-    return math.inf if value is None else _number(gt=0, allow_inf=True)(value)
+    return math.inf if value is None else bounded_number(gt=0, allow_inf=True)(value)
 
 
 _max_step.rule = _max_wall_time.rule = ("number", {"gt": 0, "ge": None, "lt": None, "le": None, "allow_inf": True,
@@ -369,7 +409,7 @@ def _samples_memory(n: Any) -> str:
             f"~{_gib(run_memory_estimate(n))}, at most {MAX_SAMPLES} (~{_gib(run_memory_estimate(MAX_SAMPLES))}) are allowed")
 
 
-def _checked(check: Callable[[Any], Any]) -> BeforeValidator:
+def checked(check: Callable[[Any], Any]) -> BeforeValidator:
     def validate(value: Any) -> Any:
         try:
             return check(value)
@@ -421,7 +461,7 @@ class SimulationSettings:
 
 # -- schema --------------------------------------------------------------------------------
 
-_VECTOR = Annotated[Any, _checked(_vector)]
+_VECTOR = Annotated[Any, checked(_vector)]
 
 
 def _zero() -> list[float]:
@@ -442,7 +482,7 @@ def _gain_type(name: str) -> Any:
         check.rule = _spd_matrix.rule
     else:
         check = _psd_matrix
-    return Annotated[Any, _checked(_optional(check))]
+    return Annotated[Any, checked(optional(check))]
 
 
 def _gain(name: str) -> Any:
@@ -464,8 +504,8 @@ class _Section(BaseModel):
 
 
 class _Body(_Section):
-    mass: Annotated[Any, _checked(_number(gt=0))] = Field(description="a number > 0 (kg)")
-    inertia: Annotated[Any, _checked(_spd_matrix)] = Field(
+    mass: Annotated[Any, checked(bounded_number(gt=0))] = Field(description="a number > 0 (kg)")
+    inertia: Annotated[Any, checked(_spd_matrix)] = Field(
         description="3 numbers (principal moments) or a 3x3 list of lists, "
         "symmetric positive definite (kg m^2)"
     )
@@ -475,7 +515,7 @@ class _Body(_Section):
 
 class _Controller(_Section):
     # ``variant`` first: the gain validators read it from ``info.data``.
-    variant: Annotated[Any, _checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
+    variant: Annotated[Any, checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
     k_t: _gain_type("k_t") = _gain("k_t")
     l_t: _gain_type("l_t") = _gain("l_t")
     k_r: _gain_type("k_r") = _gain("k_r")
@@ -484,10 +524,10 @@ class _Controller(_Section):
     l_c: _gain_type("l_c") = _gain("l_c")
     k_d: _gain_type("k_d") = _gain("k_d")
     l_d: _gain_type("l_d") = _gain("l_d")
-    k_s: Annotated[Any, _checked(_optional(_number(ge=0)))] = Field(
+    k_s: Annotated[Any, checked(optional(bounded_number(ge=0)))] = Field(
         None, validate_default=True, description="a number >= 0 (N)"
     )
-    boundary_layer: Annotated[Any, _checked(_number(ge=0))] = Field(
+    boundary_layer: Annotated[Any, checked(bounded_number(ge=0))] = Field(
         0.0, description="a number >= 0 (m; 0 = pure sign function)"
     )
 
@@ -504,7 +544,7 @@ class _Controller(_Section):
 
 
 class _InitialState(_Section):
-    theta: Annotated[Any, _checked(_theta)] = Field(
+    theta: Annotated[Any, checked(_theta)] = Field(
         default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['theta']})"
     )
     omega: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['omega']}, body frame)")
@@ -517,31 +557,31 @@ _DEFAULT_SIMULATION = SimulationSettings()
 
 
 class _Simulation(_Section):
-    t_end: Annotated[Any, _checked(_number(gt=0))] = Field(
+    t_end: Annotated[Any, checked(bounded_number(gt=0))] = Field(
         _DEFAULT_SIMULATION.t_end, description="a number > 0 (s)"
     )
-    n_samples: Annotated[Any, _checked(_number(ge=2, le=MAX_SAMPLES, integer=True, why=_samples_memory))] = Field(
+    n_samples: Annotated[Any, checked(bounded_number(ge=2, le=MAX_SAMPLES, integer=True, why=_samples_memory))] = Field(
         _DEFAULT_SIMULATION.n_samples, description=f"an integer in [2, {MAX_SAMPLES}]"
     )
-    method: Annotated[Any, _checked(_method)] = Field(
+    method: Annotated[Any, checked(_method)] = Field(
         _DEFAULT_SIMULATION.method, description="a scipy solve_ivp method name"
     )
-    rtol: Annotated[Any, _checked(_number(gt=0))] = Field(
+    rtol: Annotated[Any, checked(bounded_number(gt=0))] = Field(
         _DEFAULT_SIMULATION.rtol, description="a number > 0"
     )
-    atol: Annotated[Any, _checked(_number(gt=0))] = Field(
+    atol: Annotated[Any, checked(bounded_number(gt=0))] = Field(
         _DEFAULT_SIMULATION.atol, description="a number > 0"
     )
-    max_step: Annotated[Any, _checked(_max_step)] = Field(
+    max_step: Annotated[Any, checked(_max_step)] = Field(
         _DEFAULT_SIMULATION.max_step, description="a number > 0 (s), .inf or null for no limit"
     )
-    gimbal_margin: Annotated[Any, _checked(_number(gt=0, lt=0.5))] = Field(
+    gimbal_margin: Annotated[Any, checked(bounded_number(gt=0, lt=0.5))] = Field(
         _DEFAULT_SIMULATION.gimbal_margin, description="a number in (0, 0.5) (rad)"
     )
-    max_steps: Annotated[Any, _checked(_number(ge=1, le=MAX_STEPS_LIMIT, integer=True))] = Field(
+    max_steps: Annotated[Any, checked(bounded_number(ge=1, le=MAX_STEPS_LIMIT, integer=True))] = Field(
         _DEFAULT_SIMULATION.max_steps, description=f"an integer in [1, {MAX_STEPS_LIMIT}] (solver steps)"
     )
-    max_wall_time: Annotated[Any, _checked(_max_wall_time)] = Field(
+    max_wall_time: Annotated[Any, checked(_max_wall_time)] = Field(
         _DEFAULT_SIMULATION.max_wall_time, description="a number > 0 (s), .inf or null for no limit"
     )
 
@@ -550,7 +590,7 @@ class _Simulation(_Section):
         """Settings no run can meet: samples closer than MIN_SAMPLE_SPACING, or a max_step
         that needs more steps than max_steps to reach t_end."""
         spacing = self.t_end / (self.n_samples - 1)
-        if spacing < MIN_SAMPLE_SPACING:
+        if not samples_apart(self.t_end, self.n_samples):
             raise PydanticCustomError("rbstab_invalid", "samples too close", {
                 "key": "simulation.t_end",
                 "found": short_repr(self.t_end),
@@ -560,7 +600,7 @@ class _Simulation(_Section):
                           f"{MIN_SAMPLE_SPACING:g} s; shorten n_samples or lengthen t_end",
             })
         needed = self.t_end / self.max_step
-        if needed > self.max_steps:
+        if not steps_suffice(self.t_end, self.max_step, self.max_steps):
             raise PydanticCustomError("rbstab_invalid", "max_step too small", {
                 "key": "simulation.max_step",
                 "found": short_repr(self.max_step),
@@ -574,7 +614,7 @@ class _Simulation(_Section):
 class RunSchema(_Section):
     """The whole run configuration (pydantic model; the public result is ``RunConfig``)."""
 
-    name: Annotated[Any, _checked(_name)] = Field(
+    name: Annotated[Any, checked(run_name)] = Field(
         description="a name of letters, digits, '_', '.' and '-' (it becomes a file name)"
     )
     body: _Body = Field(description=_mapping_of(_Body))
@@ -599,7 +639,7 @@ class RunSchema(_Section):
         if state is None:
             return value
         limit = math.pi / 2 - value.gimbal_margin
-        if not abs(state.theta[1]) < limit:
+        if not clear_of_gimbal_lock(state.theta[1], value.gimbal_margin):
             raise PydanticCustomError(
                 "rbstab_invalid",
                 "theta_2 too close to gimbal lock",

@@ -12,16 +12,39 @@ compiled right-hand side.
 :func:`batch_from_table` gives many runs as one :class:`RunBatch` of arrays (parameter
 records, initial states, variant codes, settings), the input of an engine that depends on
 no configuration object.
+
+:data:`ENGINES` (:mod:`rbstab.engine.registry`) names the engines (``compiled``, ``scipy``,
+``cuda``) with what each integrates. The names below are imported on first use, so that
+the registry can be read without numba.
 """
 
-from __future__ import annotations
+import importlib
 
-from .batch import RunBatch, batch_from_table
-from .integrate import ChunkSolution, integrate_runs
-from .rk import method_number
-from .status import DEFAULT_MAX_STEPS, status_message
-from .tableaus import METHODS
-from .warm import GROUPS, ensure_compiled, warm_up
+#: Public name -> the submodule defining it (PEP 562: imported on first use).
+_SOURCES = {
+    **dict.fromkeys(["RunBatch", "batch_from_table"], "batch"),
+    **dict.fromkeys(["ChunkSolution", "integrate_runs"], "integrate"),
+    "method_number": "rk",
+    **dict.fromkeys(["DEFAULT_MAX_STEPS", "status_message"], "status"),
+    "METHODS": "tableaus",
+    **dict.fromkeys(["GROUPS", "ensure_compiled", "warm_up"], "warm"),
+    **dict.fromkeys(["ENGINES", "DEFAULT_ENGINE", "Engine", "get_engine"], "registry"),
+}
+
+
+def __getattr__(name: str):
+    module = _SOURCES.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})
+
 
 __all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message",
-           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table"]
+           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table", "ENGINES", "DEFAULT_ENGINE",
+           "Engine", "get_engine"]

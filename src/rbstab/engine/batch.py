@@ -29,7 +29,7 @@ from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
 from ..layout import STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
 from ..model import PARAMETERS, Gains, RigidBody
 from ..variants import VARIANTS
-from .settings import SETTINGS
+from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
 
 __all__ = ["RunBatch", "batch_from_table", "MAX_STATE", "NOT_COMPILED"]
@@ -39,8 +39,6 @@ MAX_STATE = max(STATE_SIZE)
 #: ``RunBatch.settings["method"]`` of a run whose method is not one of
 #: :data:`rbstab.engine.METHODS` (Radau, BDF, LSODA: integrated by scipy).
 NOT_COMPILED = -1
-
-_SETTING_KEYS = ("t_end", "rtol", "atol", "max_step", "gimbal_margin", "max_steps", "max_wall_time")
 
 
 @dataclass(frozen=True)
@@ -88,8 +86,7 @@ class RunBatch:
         """The settings of ``rows`` as floats, shape (k, 7): t_end, rtol, atol, max_step,
         gimbal_margin, max_steps, max_wall_time (what
         :func:`rbstab.engine.integrate_runs` takes)."""
-        s = self.settings[rows]
-        return np.column_stack([s[name].astype(float) for name in _SETTING_KEYS])
+        return settings_rows(self.settings[rows])
 
 
 class _Fields:
@@ -221,7 +218,7 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
         p["boundary_layer"][sliding] = f.get("controller", "boundary_layer", 0.0)[sliding]
     p["lyapunov_offset"] = _offsets(p, names, gravity)
     settings = np.zeros(n, dtype=SETTINGS)
-    for name in _SETTING_KEYS:
+    for name in SETTING_COLUMNS:
         value = f.get("simulation", name, np.inf) if name in ("max_step", "max_wall_time") else f.get("simulation", name)
         settings[name] = value
     if timeout is not None:

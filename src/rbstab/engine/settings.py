@@ -19,7 +19,7 @@ import numpy as np
 from ..jit import jit
 from .rk import INTERPOLANT_ROWS, STAGE_ROWS
 
-__all__ = ["SETTINGS", "settings_records", "Work", "work_arrays"]
+__all__ = ["SETTINGS", "SETTING_COLUMNS", "settings_rows", "settings_records", "Work", "work_arrays"]
 
 #: A run's integration settings (module docstring); an aligned record, so that compiled code
 #: reads each field with one 8-byte load.
@@ -28,11 +28,31 @@ SETTINGS = np.dtype([("t_end", np.float64), ("rtol", np.float64), ("atol", np.fl
                      ("method", np.int64)], align=True)
 
 
+#: The columns of a run's settings row, :data:`SETTINGS` but the method: what
+#: :func:`rbstab.engine.integrate_runs` takes as floats, shape (k, 7).
+SETTING_COLUMNS = SETTINGS.names[:-1]
+
+
+def settings_rows(settings, timeout: float | None = None) -> np.ndarray:
+    """The settings rows, shape (k, 7) of floats (:data:`SETTING_COLUMNS`), of k runs:
+    ``settings`` is a sequence of objects with those attributes
+    (:class:`rbstab.config.SimulationSettings`, a configuration's ``simulation``) or an
+    array of :data:`SETTINGS` records. ``timeout`` [s], if given, replaces each run's
+    ``max_wall_time``."""
+    if isinstance(settings, np.ndarray):
+        rows = np.column_stack([settings[name].astype(float) for name in SETTING_COLUMNS]).reshape(-1, 7)
+    else:
+        rows = np.array([[getattr(s, name) for name in SETTING_COLUMNS] for s in settings], dtype=float).reshape(-1, 7)
+    if timeout is not None:
+        rows[:, 6] = timeout
+    return rows
+
+
 def settings_records(rows: np.ndarray, method: int) -> np.ndarray:
-    """:data:`SETTINGS` records, shape (k,), of ``rows`` (k, 7): t_end, rtol, atol,
-    max_step, gimbal_margin, max_steps, max_wall_time, each run with ``method``."""
+    """:data:`SETTINGS` records, shape (k,), of ``rows`` (k, 7, :func:`settings_rows`),
+    each run with ``method``."""
     records = np.empty(len(rows), dtype=SETTINGS)
-    for i, name in enumerate(SETTINGS.names[:-1]):
+    for i, name in enumerate(SETTING_COLUMNS):
         records[name] = rows[:, i]
     records["method"] = method
     return records

@@ -43,7 +43,7 @@ from ..variants.kernels import state_rate
 from ..variants.sliding import mode_code, mode_quantities, mode_rows, stop_at_c
 from .integrate import CLOCK_EVERY, sample_time, step, wall_clock
 from .rk import DOP853, N_STAGES, dense_coefficients, dense_value, initial_step, method_number
-from .settings import settings_records, work_arrays
+from .settings import settings_records, settings_rows, work_arrays
 from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, SWITCHING_LIMIT, TIMEOUT, status_message
 from .tableaus import METHODS
 
@@ -488,9 +488,7 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     method = engine_method(settings.method)
     max_steps = int(settings.max_steps)
     max_wall_time = float(settings.max_wall_time if timeout is None else timeout)
-    s = settings_records(np.array([[settings.t_end, settings.rtol, settings.atol, settings.max_step,
-                                    settings.gimbal_margin, max_steps, max_wall_time]], dtype=float),
-                         method_number(method))
+    s = settings_records(settings_rows([settings], timeout), method_number(method))
     with np.errstate(all="ignore"):
         status, t_stop, nfev, n_steps, n_pieces, n_events = integrate_switching(
             variant._parameters_without_offset[0], np.ascontiguousarray(y0, dtype=float), s[0], float(resolution),

@@ -40,7 +40,7 @@ __all__ = [
 #: Age [s] after which a temporary without a writer's pid (rbstab < 0.2) is stale.
 LEGACY_TEMPORARY_AGE = 3600.0
 _HOST = hashlib.sha256(socket.gethostname().encode()).hexdigest()[:4]
-_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)@(?P<host>[0-9a-f]{4})\.[^./]+\.tmp$")
+_TEMPORARY = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)@(?P<host>[0-9a-f]{4})\.[^./]+\.tmp(\.[A-Za-z0-9]+)?$")
 
 
 def file_mode() -> int:
@@ -64,8 +64,11 @@ def _fsync_folder(folder: Path) -> None:
 
 
 @contextmanager
-def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+def atomic_path(path: str | os.PathLike, *, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` when the block ends.
+
+    ``suffix`` (e.g. ``".gif"``) ends the temporary's name, for a writer that reads the
+    format from the name.
 
     The folder is created if missing. If the block raises (anything, KeyboardInterrupt
     included), the temporary file is removed and ``path`` is left untouched. The
@@ -78,7 +81,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}@{_HOST}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}@{_HOST}.", suffix=f".tmp{suffix}", dir=path.parent)
     try:
         os.fchmod(fd, file_mode())
         os.close(fd)
@@ -135,7 +138,7 @@ def remove_stale_temporaries(folder: str | os.PathLike, *, everything: bool = Fa
     n = 0
     now = time.time()
     try:
-        candidates = list(Path(folder).glob(".*.tmp"))
+        candidates = [p for p in Path(folder).glob(".*.tmp*") if p.suffix == ".tmp" or _TEMPORARY.match(p.name)]
     except OSError:
         return 0
     for path in candidates:

@@ -51,19 +51,17 @@ from collections.abc import Iterable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..config import canonical_config, config_hash
+from ..results import RunBlock, RunResult
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, _plain, summary_stride
+from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, attribute_value, summary_stride
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
-
-if TYPE_CHECKING:  # pragma: no cover
-    from ..simulator import RunResult
 
 __all__ = [
     "CHUNK_FORMAT",
@@ -329,7 +327,7 @@ class ChunkWriter:
     """Write the runs of one chunk into one store file (module docstring), atomically.
 
     Use as a context manager: :meth:`add` a finished run (any status), :meth:`add_block`
-    finished runs that share their sample times (:class:`rbstab.simulator.RunBlock`: their
+    finished runs that share their sample times (:class:`rbstab.results.RunBlock`: their
     traces copied at once, their values kept as columns) or :meth:`add_error` a run that
     raised, once per row; leaving the block without an
     exception writes the per-run values and renames the file into place; an exception
@@ -452,13 +450,11 @@ class ChunkWriter:
         if the caller has it (a sweep's plan computed it); else computed here. A writer
         without templates stores the run's configuration text (the ``config`` column).
         """
-        from ..simulator import RunBlock  # heavy: numba
-
         self.add_block([run_id], RunBlock.of(result), config_hashes=[config_hash])
         return self.row(self.position[run_id])
 
     def add_block(self, run_ids: Sequence[str], block, *, config_hashes: Sequence[str | None] | None = None) -> None:
-        """Add finished runs that share their sample times (a :class:`rbstab.simulator.RunBlock`,
+        """Add finished runs that share their sample times (a :class:`rbstab.results.RunBlock`,
         ``run_ids[j]`` its run j), as :meth:`add` adds each; :meth:`columns` gives their rows.
 
         ``config_hashes``: as :meth:`add`'s, a value a run (None or "" where the caller
@@ -535,11 +531,11 @@ class ChunkWriter:
         """Row ``i`` as :func:`read_chunk_rows` reads it back."""
         ident = self.identity
         out = {"run": int(ident.index[i]), "run_id": ident.run_id[i], "base": ident.base[i],
-               **{name: _plain(values[i]) for name, values in ident.coords.items()}}
+               **{name: attribute_value(values[i]) for name, values in ident.coords.items()}}
         b = self._block_of[i]
         if b >= 0:
             for name, values in self._blocks[b][1].items():
-                out[name] = _plain(values[self._place[i]])
+                out[name] = attribute_value(values[self._place[i]])
         out["store"] = self.store
         out["created"] = self.attrs["created"]
         out["file"] = self.path.name
@@ -825,7 +821,7 @@ def is_chunk_file(path: str | os.PathLike) -> bool:
 
     try:
         with h5py.File(path, "r") as f:
-            return _plain(f.attrs.get("rbstab_format")) in READ_FORMATS
+            return attribute_value(f.attrs.get("rbstab_format")) in READ_FORMATS
     except (OSError, ValueError):
         return False
 
@@ -855,17 +851,17 @@ def read_chunk_rows(path: str | os.PathLike, *, data: bool = False) -> list[dict
     """
     path = Path(path)
     with open_result(path) as f:
-        if _plain(f.attrs.get("rbstab_format")) not in READ_FORMATS:
+        if attribute_value(f.attrs.get("rbstab_format")) not in READ_FORMATS:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
-        store, created = _plain(f.attrs.get("store")), _plain(f.attrs.get("created"))
-        text = _plain(f.attrs.get("run_templates"))
+        store, created = attribute_value(f.attrs.get("store")), attribute_value(f.attrs.get("created"))
+        text = attribute_value(f.attrs.get("run_templates"))
         templates = json.loads(text) if text else None
         try:
             n_runs = f["run"].shape[0] if "run" in f else -1
             datasets = {k: f[k] for k in f if k not in ("axis", "time")}
             columns = {k: _column(d) for k, d in datasets.items() if _per_run(d, n_runs)}
-            keys = {k: _plain(d.attrs["config_key"]) for k, d in datasets.items()
+            keys = {k: attribute_value(d.attrs["config_key"]) for k, d in datasets.items()
                     if k in columns and "config_key" in d.attrs}
         except OSError as exc:  # a Fletcher-32 checksum that does not match
             raise DamagedResultError(f"{path}: damaged: its per-run values fail their checksum ({exc})") from None
@@ -896,10 +892,10 @@ def read_chunk_columns(path: str | os.PathLike, *, data: bool = False):
 
     path = Path(path)
     with open_result(path) as f:
-        if _plain(f.attrs.get("rbstab_format")) not in READ_FORMATS:
+        if attribute_value(f.attrs.get("rbstab_format")) not in READ_FORMATS:
             raise NotAResultFile(f"{path}: not an rbstab sweep store file (no rbstab_format = {CHUNK_FORMAT!r})")
         verify_open_file(f, path, data=data)
-        created = _plain(f.attrs.get("created"))
+        created = attribute_value(f.attrs.get("created"))
         try:
             n_runs = f["run"].shape[0] if "run" in f else -1
             columns = {}

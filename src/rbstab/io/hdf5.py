@@ -35,12 +35,13 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..config import canonical_config, config_hash
 from ..layout import SUMMARY_MAX_SAMPLES, summary_stride
+from ..results import RunResult, plain
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
@@ -52,9 +53,6 @@ from .metadata import (
     summary_units,
     variable_attributes,
 )
-
-if TYPE_CHECKING:  # pragma: no cover
-    from ..simulator import RunResult
 
 __all__ = [
     "FORMAT",
@@ -309,7 +307,7 @@ def write_run(
     elif store == "summary":
         time, outputs = time[:0], {}
     write_bytes_atomic(path, _file_image(time, outputs, attrs, switching))
-    return {k: _plain(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
+    return {k: attribute_value(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
 
 
 def write_result(
@@ -397,14 +395,14 @@ def read_dataset(path: str | os.PathLike):
     return ds
 
 
-def _plain(value: Any) -> Any:
+def attribute_value(value: Any) -> Any:
+    """An HDF5 attribute's value as plain Python (:func:`rbstab.results.plain`): text
+    decoded, an array of one element that element."""
     if isinstance(value, bytes):
         return value.decode()
-    if isinstance(value, np.ndarray):
-        return value.item() if value.shape in ((), (1,)) else value.tolist()
-    if isinstance(value, np.generic):
+    if isinstance(value, np.ndarray) and value.shape in ((), (1,)):
         return value.item()
-    return value
+    return plain(value)
 
 
 def read_format(path: str | os.PathLike) -> str | None:
@@ -422,7 +420,7 @@ def read_format(path: str | os.PathLike) -> str | None:
         If its attributes cannot be read (a damaged file).
     """
     with open_result(path) as f:
-        value = _plain(f.attrs.get("rbstab_format"))
+        value = attribute_value(f.attrs.get("rbstab_format"))
     return value if value is None else str(value)
 
 
@@ -461,7 +459,7 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     """
     path = Path(path)
     with open_result(path) as f:
-        attrs = {k: _plain(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
+        attrs = {k: attribute_value(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
         if attrs.get("rbstab_format") == FORMAT and verify:
             verify_open_file(f, path, data=data)
     if attrs.get("rbstab_format") != FORMAT:

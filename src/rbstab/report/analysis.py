@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..convergence import RULE
 from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
@@ -314,8 +315,8 @@ def _robustness_section(ds, path: Path, out: FigureWriter) -> Section:
                             f"{float(ds['stable_fraction_high'].values[i]):.1%}",
                             str(int(ds["n_excluded"].values[i])), str(int(ds["n_disagree"].values[i]))]
                            for i, g in enumerate(groups)],
-                          note="The sweep's converged is v(t_end) <= ratio v(0); it differs where v(t_end) < 0, a "
-                               "run that fell below the equilibrium's v (then not the minimum of v)."))
+                          note=f"Stable, as the sweep's converged: {RULE}; they differ only for an index "
+                               "written with another rule."))
     rows = []
     for i, g in enumerate(groups):
         for j, p in enumerate(ds["parameter"].values):

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import difflib
 import html
-import os
 import re
 import shutil
 import tempfile
@@ -40,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..io.atomic import file_mode
+from ..io.atomic import atomic_path
 from ..kinematics import rotation_matrix
 from .load import RunData
 
@@ -673,24 +672,16 @@ def write_animation(sc: Scene, path: str | Path, fps: float = FPS, view: tuple[f
 
     path = Path(path)
     kind = check_output(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_path(path, suffix=path.suffix) as tmp:  # the writers read the format from the name
         if kind == "html":
-            Path(tmp).write_text(_page(sc, animation_html(sc, fps, view, dpi=dpi)), encoding="utf-8")
+            tmp.write_text(_page(sc, animation_html(sc, fps, view, dpi=dpi)), encoding="utf-8")
         elif kind == "png":
             write_still(sc, tmp, nearest_frame(sc, at), view, dpi)
         else:
             from matplotlib.animation import FFMpegWriter, PillowWriter  # heavy: matplotlib
 
             writer = PillowWriter(fps=fps) if kind == "gif" else FFMpegWriter(fps=fps)
-            draw_animation(sc, fps, view, dpi=dpi).save(tmp, writer=writer, dpi=dpi)
-        os.chmod(tmp, file_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+            draw_animation(sc, fps, view, dpi=dpi).save(str(tmp), writer=writer, dpi=dpi)
     return path
 
 

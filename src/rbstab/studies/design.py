@@ -37,6 +37,8 @@ from ..config import ConfigError, parse_yaml
 from ..config.schema import RunSchema
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
+from ..results import plain
+from ..engine.registry import DEFAULT_ENGINE
 from ..io.chunk import SUMMARY_FIGURES, summary_columns
 from ..simulator import simulate_many
 from ..sweep.folder import open_sweep
@@ -351,7 +353,7 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
 def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
     """The figures of the base configuration (one run in this process,
     :func:`figure_columns`): the columns a study's metrics are chosen from."""
-    (_, result), = simulate_many([config], engine=engine or "compiled", full=False)
+    (_, result), = simulate_many([config], engine=engine or DEFAULT_ENGINE, full=False)
     return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
 
 
@@ -386,7 +388,7 @@ def design_mappings(design) -> dict[str, list]:
             groups.setdefault(m["key"], {})[index] = column
         else:
             plain[str(column)] = column
-    out: dict[str, list] = {k: [_plain(v) for v in design[c].tolist()] for k, c in plain.items()}
+    out: dict[str, list] = {k: [plain(v) for v in design[c].tolist()] for k, c in plain.items()}
     for key, entries in groups.items():
         shape = tuple(max(i[d] for i in entries) + 1 for d in range(len(next(iter(entries)))))
         if len(entries) != int(np.prod(shape)) or len({len(i) for i in entries}) != 1:
@@ -395,10 +397,6 @@ def design_mappings(design) -> dict[str, list]:
         stacked = np.stack([design[entries[i]].to_numpy(dtype=float) for i in np.ndindex(*shape)], axis=1)
         out[key] = stacked.reshape(len(design), *shape).tolist()
     return out
-
-
-def _plain(value: Any) -> Any:
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | None = None,

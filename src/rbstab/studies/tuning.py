@@ -46,6 +46,8 @@ from ..config import ConfigError, config_from_mapping, dump_yaml
 from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
+from ..results import plain
+from ..engine.registry import DEFAULT_ENGINE
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
@@ -158,7 +160,7 @@ class TuningProblem:
     constraints: tuple[Constraint, ...]
     bodies: list[dict] = field(default_factory=list)
     quantile: float = 1.0
-    engine: str = "compiled"
+    engine: str = DEFAULT_ENGINE
 
     def suggest(self, trial) -> dict[str, Any]:
         """The trial's absolute values, design column -> value (Optuna's ``suggest_*``)."""
@@ -245,7 +247,7 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
         In (0, 1]; 1 = the worst case of the batch (see :class:`TuningProblem`).
     sampler : {"tpe", "cmaes"}
     engine : str, optional
-        :data:`rbstab.simulator.ENGINES` (default compiled).
+        :data:`rbstab.engine.ENGINES` (default compiled).
 
     Raises
     ------
@@ -283,7 +285,7 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
         raise StudyInputError(errors)
     bodies = _bodies(over_varied, over_n, over_seed) if over_varied else []
     problem = TuningProblem(config, varied, tuple(objectives), tuple(constraints), bodies, float(quantile),
-                            engine or "compiled")
+                            engine or DEFAULT_ENGINE)
     _check_corners(problem)
     return problem
 
@@ -593,7 +595,7 @@ def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, co
         (folder / BEST_FILE).unlink(missing_ok=True)
     else:
         row = table.loc[best[0]]
-        best_params = {c: _plain(row[c]) for v in problem.varied for c in v.columns}
+        best_params = {c: plain(row[c]) for v in problem.varied for c in v.columns}
         config = problem.configs(best_params)[0] if not problem.bodies else _nominal(problem, best_params)
         data = dict(config.resolved)
         data["name"] = f"{study.study_name}_best"
@@ -611,10 +613,6 @@ def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, co
 def _nominal(problem: TuningProblem, values: Mapping[str, Any]):
     """The base configuration (the nominal body) with ``values``."""
     return TuningProblem(problem.base, problem.varied, problem.objectives, problem.constraints).configs(values)[0]
-
-
-def _plain(value: Any) -> Any:
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], path: Path,

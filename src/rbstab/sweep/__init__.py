@@ -15,7 +15,7 @@ Modules: :mod:`~rbstab.sweep.schema` (the spec's pydantic schema), :mod:`~rbstab
 (spec loading, the frozen spec), :mod:`~rbstab.sweep.table` (the run table: planning,
 run ids), :mod:`~rbstab.sweep.validate` (validation of its columns), :mod:`~rbstab.sweep.plan`
 (the runs one by one, for small sweeps),
-:mod:`~rbstab.sweep.worker` (the unit of work: a chunk of runs -> records; engine hook),
+:mod:`~rbstab.sweep.worker` (the unit of work: a chunk of runs -> records),
 :mod:`~rbstab.sweep.executors` (local process pool, Dask), :mod:`~rbstab.sweep.runner`
 (resume, execution) and :mod:`~rbstab.sweep.folder` (the folder's format: file names,
 parameter names, ``index.csv``, ``sweep_summary.json``, the convergence definition, and
@@ -37,7 +37,7 @@ _SOURCES = {
                      "spec_from_mapping"], "spec"),
     **dict.fromkeys(["PlannedRun", "expand"], "plan"),
     **dict.fromkeys(["RunTable", "plan_table"], "table"),
-    **dict.fromkeys(["ENGINES", "RunTask", "WorkerOptions", "run_chunk"], "worker"),
+    **dict.fromkeys(["RunTask", "WorkerOptions", "run_chunk"], "worker"),
 }
 
 
@@ -80,7 +80,6 @@ __all__ = [
     "run_chunk",
     "RunTask",
     "WorkerOptions",
-    "ENGINES",
     "EXECUTORS",
     "STATUSES",
     "DISTRIBUTIONS",

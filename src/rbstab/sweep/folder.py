@@ -51,7 +51,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..convergence import converged
+from ..convergence import RULE, converged
 from ..io.atomic import atomic_path, write_text_atomic
 
 __all__ = [
@@ -511,7 +511,7 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
     out: dict[str, Any] = {"name": name, **counts(index)}
     out["convergence"] = {
         "lyapunov_ratio": ratio,
-        "definition": "converged = status == 'success' and lyapunov_final <= lyapunov_ratio * lyapunov_initial",
+        "definition": RULE,
     }
     bases = pd.unique(index["base"]).tolist()
     if len(bases) > 1:

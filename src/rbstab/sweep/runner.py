@@ -63,7 +63,8 @@ from .folder import (
 )
 from .spec import SweepSpec
 from ..io.chunk import DEFAULT_STORE, STORES
-from .worker import DEFAULT_CHUNK_SIZE, ENGINES, WorkerOptions, run_table_chunk
+from ..engine.registry import get_engine
+from .worker import WorkerOptions, run_table_chunk
 from .table import plan_table
 
 #: Runs per store file (and unit of work) by default: a store file costs ~0.1 s to create
@@ -80,7 +81,7 @@ SUMMARY_CHUNK_SIZE = 8192
 #: an H100 holds 132 x 2 blocks of 128 threads of the kernel at its 255 registers a thread),
 #: so that a launch's tail, where its last runs finish, is a small part of it; ``thinned``:
 #: about one run a resident thread, ~2 GB of traces at 201 samples (host and device memory
-#: bound it); ``full``: ``DEFAULT_CHUNK_SIZE["cuda"]`` (a trace of every sample).
+#: bound it); ``full``: the engine's ``chunk_size`` (a trace of every sample).
 CUDA_CHUNK_SIZE = {"summary": 8 * 132 * 2 * 128, "thinned": 32768}
 
 #: Worker processes of a ``--engine cuda`` sweep by default (at most the CPU count): the
@@ -288,15 +289,9 @@ def resolve_engine(engine: str | None, timeout: float | None = None) -> str:
     rbstab.engine.cuda.CudaUnavailable
         For ``cuda`` where no GPU, driver or numba-cuda is found.
     """
-    if engine is None:
-        return "compiled"
-    if engine not in ENGINES:
-        raise ValueError(f"engine: found {engine!r}; expected one of {', '.join(ENGINES)}")
-    if engine == "cuda":
-        from ..engine.cuda import check_available  # heavy: numba-cuda (--engine cuda only)
-
-        check_available()
-    return engine
+    resolved = get_engine(engine)
+    resolved.check_available()
+    return resolved.name
 
 
 class _NoBar:
@@ -373,10 +368,10 @@ def run_sweep(
     chunk_size : int, optional
         Most runs per unit of work sent to a worker (and per store file): default
         :data:`STORE_CHUNK_SIZE` with ``layout="chunk"``, else
-        :data:`rbstab.sweep.worker.DEFAULT_CHUNK_SIZE` (1 for scipy, 256 for compiled);
+        the engine's ``chunk_size`` (:data:`rbstab.engine.ENGINES`: 1 for scipy, 256 for compiled);
         by default a sweep is cut into at least :data:`CHUNKS_PER_WORKER` chunks per worker.
     engine : {"compiled", "scipy"}, optional
-        Key of :data:`rbstab.sweep.worker.ENGINES`; default ``compiled``
+        Key of :data:`rbstab.engine.ENGINES`; default ``compiled``
         (:func:`resolve_engine`). ``compiled`` integrates
         every run with scipy's RK23/RK45/DOP853 compiled with the model (other methods
         and the pure sign law go through scipy), taking the steps scipy takes.
@@ -425,7 +420,7 @@ def run_sweep(
                             engine=engine, store=store, layout=layout, parameters=table.parameters(),
                             sweep=spec.name)
     outcome = SweepOutcome(spec.name, Path(output) / spec.name, spec.n_runs, engine=engine)
-    jobs = cuda_jobs(jobs) if engine == "cuda" else jobs
+    jobs = cuda_jobs(jobs) if get_engine(engine).gpu else jobs
     with _executor(executor, jobs, scheduler) as ex:
         (outcome.directory / RUNS_DIR).mkdir(parents=True, exist_ok=True)
         _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
@@ -461,11 +456,11 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
     if store not in STORES:
         raise ValueError(f"store: found {store!r}; expected one of {', '.join(STORES)}")
     if chunk_size is None:
-        default = STORE_CHUNK_SIZE if layout == "chunk" else DEFAULT_CHUNK_SIZE.get(engine, STORE_CHUNK_SIZE)
+        default = STORE_CHUNK_SIZE if layout == "chunk" else get_engine(engine).chunk_size
         if layout == "chunk" and store == "summary":
             default = SUMMARY_CHUNK_SIZE
-        if engine == "cuda":  # a launch fills the GPU with one chunk's runs
-            default = CUDA_CHUNK_SIZE.get(store, DEFAULT_CHUNK_SIZE["cuda"])
+        if get_engine(engine).gpu:  # a launch fills the GPU with one chunk's runs
+            default = CUDA_CHUNK_SIZE.get(store, get_engine(engine).chunk_size)
         return default, CHUNKS_PER_WORKER
     if chunk_size < 1:
         raise ValueError(f"chunk_size must be >= 1, got {chunk_size}")

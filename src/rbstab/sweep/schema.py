@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic_core import PydanticCustomError
 
 from ..config import ConfigError
-from ..config.schema import Invalid, _checked, _name, _number, _optional, kind_of, problem_line, short_repr
+from ..config.schema import Invalid, checked, run_name, bounded_number, optional, kind_of, problem_line, short_repr
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 
 __all__ = ["SweepSpecError", "SweepSchema", "DistributionSchema", "DISTRIBUTIONS", "DEFAULT_LYAPUNOV_RATIO",
@@ -145,8 +145,8 @@ def _invalid(key: str, found: Any, expected: str, detail: str = "") -> PydanticC
 class NormalSchema(_Section):
     """``normal: {mean: m, std: s}``."""
 
-    mean: Annotated[Any, _checked(_numbers)] = Field(description="a number or a list of numbers")
-    std: Annotated[Any, _checked(_numbers)] = Field(description="a number >= 0 or a list of them")
+    mean: Annotated[Any, checked(_numbers)] = Field(description="a number or a list of numbers")
+    std: Annotated[Any, checked(_numbers)] = Field(description="a number >= 0 or a list of them")
 
     @model_validator(mode="after")
     def _shapes(self) -> "NormalSchema":
@@ -168,15 +168,15 @@ class NormalSchema(_Section):
 class DistributionSchema(_Section):
     """One random parameter: a mapping with exactly one of :data:`DISTRIBUTIONS`."""
 
-    uniform: Annotated[Any, _checked(_optional(_bounds(positive=False)))] = Field(
+    uniform: Annotated[Any, checked(optional(_bounds(positive=False)))] = Field(
         None, description="[lo, hi] with lo <= hi, each a number or a list of numbers")
     normal: NormalSchema | None = Field(
         None, description="{mean: m, std: s}, m and s numbers or lists of numbers, s >= 0")
-    log_uniform: Annotated[Any, _checked(_optional(_bounds(positive=True)))] = Field(
+    log_uniform: Annotated[Any, checked(optional(_bounds(positive=True)))] = Field(
         None, description="[lo, hi] with 0 < lo <= hi, each a number or a list of numbers")
-    scale_uniform: Annotated[Any, _checked(_optional(_bounds(positive=False)))] = Field(
+    scale_uniform: Annotated[Any, checked(optional(_bounds(positive=False)))] = Field(
         None, description="[lo, hi] factors of the base value with lo <= hi, numbers or lists of numbers")
-    choice: Annotated[Any, _checked(_optional(_choices))] = Field(None, description="a non-empty list of values")
+    choice: Annotated[Any, checked(optional(_choices))] = Field(None, description="a non-empty list of values")
 
     @model_validator(mode="before")
     @classmethod
@@ -195,15 +195,15 @@ class DistributionSchema(_Section):
         return next(name for name in DISTRIBUTIONS if getattr(self, name) is not None)
 
 
-DottedKey = Annotated[str, _checked(_dotted_key)]
+DottedKey = Annotated[str, checked(_dotted_key)]
 
 
 class RandomSchema(_Section):
     """``random``: ``n`` samples of ``params`` drawn from ``numpy.random.default_rng(seed)``."""
 
-    n: Annotated[Any, _checked(_number(ge=0, integer=True))] = Field(
+    n: Annotated[Any, checked(bounded_number(ge=0, integer=True))] = Field(
         0, description="an integer >= 0 (0: no random samples)")
-    seed: Annotated[Any, _checked(_number(ge=0, integer=True))] = Field(0, description="an integer >= 0")
+    seed: Annotated[Any, checked(bounded_number(ge=0, integer=True))] = Field(0, description="an integer >= 0")
     params: dict[DottedKey, DistributionSchema] = Field(
         default_factory=dict, description="a mapping of dotted config key -> distribution")
 
@@ -218,7 +218,7 @@ class RandomSchema(_Section):
 class ConvergenceSchema(_Section):
     """``convergence``: when a run counts as converged."""
 
-    lyapunov_ratio: Annotated[Any, _checked(_number(gt=0, lt=1))] = Field(
+    lyapunov_ratio: Annotated[Any, checked(bounded_number(gt=0, lt=1))] = Field(
         DEFAULT_LYAPUNOV_RATIO, description="a number in (0, 1)")
 
 
@@ -242,13 +242,13 @@ def _overlapping(a: str, b: str) -> bool:
 class SweepSchema(_Section):
     """A whole sweep spec (see :mod:`rbstab.sweep.spec` for the meaning of each key)."""
 
-    name: Annotated[Any, _checked(_name)] = Field(
+    name: Annotated[Any, checked(run_name)] = Field(
         description="letters, digits, '_', '.' and '-' (it becomes a folder name)")
-    description: Annotated[Any, _checked(_optional(_string))] = Field("", description="a string")
-    base: Annotated[Any, _checked(_base)] = Field(description=_BASE_EXPECTED)
-    grid: dict[DottedKey, Annotated[Any, _checked(_values)]] = Field(
+    description: Annotated[Any, checked(optional(_string))] = Field("", description="a string")
+    base: Annotated[Any, checked(_base)] = Field(description=_BASE_EXPECTED)
+    grid: dict[DottedKey, Annotated[Any, checked(_values)]] = Field(
         default_factory=dict, description="a mapping of dotted config key -> list of values")
-    zip: dict[DottedKey, Annotated[Any, _checked(_values)]] = Field(
+    zip: dict[DottedKey, Annotated[Any, checked(_values)]] = Field(
         default_factory=dict, description="a mapping of dotted config key -> list of values, all of one length")
     random: RandomSchema = Field(default_factory=RandomSchema, description="a mapping with keys n, seed, params")
     table: Any = Field(None, description="a CSV or Parquet file (relative to the spec file) whose columns are "

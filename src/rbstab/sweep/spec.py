@@ -19,7 +19,7 @@ A sweep spec names a base configuration and the keys to vary::
         body.mass: {scale_uniform: [0.5, 1.5]}
         initial_state.omega: {normal: {mean: [16, 32, -16], std: 5}}
     convergence:
-      lyapunov_ratio: 1.0e-3             # converged: success and v(t_end) <= ratio * v(0)
+      lyapunov_ratio: 1.0e-3             # converged: rbstab.convergence.RULE
 
 Keys are the dotted paths of :func:`rbstab.config.set_dotted` (``initial_state.omega.1``
 indexes into the list). A ``table:`` (a CSV or Parquet file, a DataFrame or a mapping of
@@ -71,6 +71,7 @@ import numpy as np
 from ..config import ConfigError, apply_overrides, parse_yaml as parse, set_dotted
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import read_yaml_file
+from ..results import plain
 from .schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, SweepSchema, SweepSpecError, validate_spec
 
 __all__ = [
@@ -99,15 +100,6 @@ MAX_RUNS = 1_000_000
 #: Memory the parent holds per run of a sweep [bytes] (its row of the run table and of
 #: the index's columns; measured ~0.5 KB for Case 3 parameter sweeps).
 BYTES_PER_RUN = 600
-
-
-def _plain(value: Any) -> Any:
-    """numpy values -> Python floats/lists (YAML and JSON friendly)."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
 
 
 def _parse_yaml(text: str) -> Any:
@@ -152,10 +144,10 @@ class Distribution:
     def to_mapping(self) -> dict:
         """The YAML form, e.g. ``{"uniform": [lo, hi]}``."""
         if self.kind == "normal":
-            return {"normal": {"mean": _plain(self.args[0]), "std": _plain(self.args[1])}}
+            return {"normal": {"mean": plain(self.args[0]), "std": plain(self.args[1])}}
         if self.kind == "choice":
             return {"choice": copy.deepcopy(list(self.args[0]))}
-        return {self.kind: [_plain(self.args[0]), _plain(self.args[1])]}
+        return {self.kind: [plain(self.args[0]), plain(self.args[1])]}
 
 
 # -- the spec ---------------------------------------------------------------------------------

@@ -4,7 +4,11 @@ Each template (the first run of a base and combination of non-numeric values) is
 validated by the config schema. Every numeric field the varied keys touch is then
 assembled as an array over the runs and checked at once against the constraint the
 schema declares for it (:func:`rbstab.config.schema.field_rule`), with the joint checks
-made on the columns. The runs these checks flag are validated one by one by the schema,
+made on the columns: the rules are the schema's own functions
+(:func:`~rbstab.config.schema.within_bounds`,
+:func:`~rbstab.config.schema.clear_of_gimbal_lock`,
+:func:`~rbstab.config.schema.samples_apart`, :func:`~rbstab.config.schema.steps_suffice`),
+applied to a column instead of a value. The runs these checks flag are validated one by one by the schema,
 whose messages name the run, the key, the value and what is allowed.
 """
 
@@ -12,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import json
-import math
 import warnings
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -20,15 +23,11 @@ from typing import Any
 import numpy as np
 
 from .spec import Base, SweepSpec, SweepSpecError
-from ..config import set_dotted
-from ..config import get_dotted
 from .schema import numeric_array
-from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted
-from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
-from ..config.schema import MAX_MAGNITUDE
-from ..config.schema import MAX_MAGNITUDE, MIN_INVERTED
-from ..config.schema import field_rule
-from ..config.schema import MIN_SAMPLE_SPACING
+from ..results import plain
+from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
+from ..config.schema import (MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule, samples_apart,
+                             steps_suffice, within_bounds)
 from ..config.physics import SINGULAR_RTOL
 from ..config.physics import inertia_warnings
 
@@ -46,10 +45,6 @@ def _short(value: Any, limit: int = 40) -> str:
         value = value.tolist()
     text = json.dumps(value, default=str) if not isinstance(value, str) else repr(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
-def _plain(value: Any) -> Any:
-    return value.tolist() if isinstance(value, np.ndarray | np.generic) else value
 
 
 def _expand_diagonal(data: dict, key: str) -> None:
@@ -77,7 +72,7 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
     data = copy.deepcopy(base.data)
     for key, value in zip(keys, values):
         _expand_diagonal(data, key)
-        set_dotted(data, key, _plain(value))
+        set_dotted(data, key, plain(value))
     data["name"] = name
     return data
 
@@ -221,9 +216,7 @@ def _number_bad(values: np.ndarray, bounds: Mapping[str, Any], integer_column: b
         bad = np.isnan(v) | (np.abs(v) > MAX_MAGNITUDE) & np.isfinite(v)
         if not bounds["allow_inf"]:
             bad |= np.isinf(v)
-        for op, limit in (("gt", np.greater), ("ge", np.greater_equal), ("lt", np.less), ("le", np.less_equal)):
-            if bounds[op] is not None:
-                bad |= ~limit(v, bounds[op])
+        bad |= ~within_bounds(v, bounds["gt"], bounds["ge"], bounds["lt"], bounds["le"])
     bad = bad.any(axis=1)
     if bounds["integer"] and not integer_column:
         bad[:] = True
@@ -255,7 +248,8 @@ def _rule_bad(rule: tuple, values: np.ndarray, integer_column: bool) -> np.ndarr
     flat = values.reshape(len(values), -1)
     bad = ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
     if rule[0] == "theta":
-        bad |= ~(np.abs(values[:, 1]) < math.pi / 2)
+        with np.errstate(invalid="ignore"):
+            bad |= ~clear_of_gimbal_lock(values[:, 1])
     return bad
 
 
@@ -300,14 +294,14 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
         if theta is None or margin is None:
             return np.ones(n, dtype=bool)
         with np.errstate(invalid="ignore"):
-            flagged |= ~(np.abs(theta[0][:, 1]) < math.pi / 2 - margin[0])
+            flagged |= ~clear_of_gimbal_lock(theta[0][:, 1], margin[0])
     if any(fields.varied("simulation", k) for k in ("t_end", "n_samples", "max_step", "max_steps")):
         got = [fields.get("simulation", k) for k in ("t_end", "n_samples", "max_step", "max_steps")]
         if any(g is None for g in got):
             return np.ones(n, dtype=bool)
         (t_end, _), (samples, _), (step, _), (steps, _) = got
         with np.errstate(invalid="ignore", divide="ignore"):
-            flagged |= ~(t_end / (samples - 1) >= MIN_SAMPLE_SPACING) | (t_end / np.where(np.isnan(step), np.inf, step) > steps)
+            flagged |= ~samples_apart(t_end, samples) | ~steps_suffice(t_end, np.where(np.isnan(step), np.inf, step), steps)
     weight_keys = ("k_t", "k_c", "k_d", "k_s", "boundary_layer")
     if any(fields.varied("body", k) for k in ("mass", "gravity")) or any(fields.varied("controller", k) for k in weight_keys):
         gravity = fields.get("body", "gravity")

@@ -9,15 +9,15 @@ status and message; an unexpected exception is a record with status ``"error"``.
 
 Engines
 -------
-``ENGINES`` maps an engine name to a function ``(tasks, options, sink) -> records``:
+``options.engine`` names an engine of :data:`rbstab.engine.ENGINES`:
 
-- ``scipy`` (the reference): the tasks of a chunk one after the other through
-  :func:`rbstab.simulator.simulate`, one ``solve_ivp`` call each; any method, per-run
-  ``timeout``.
-- ``compiled``: :func:`rbstab.simulator.simulate_blocks` (:mod:`rbstab.engine`): every run
-  of the chunk that uses RK23, RK45 or DOP853 is integrated by the compiled engine,
-  whatever its variant, body and gains; the others (implicit methods, the pure sign law
-  of ``sliding``) go through scipy. Configurations are validated once per group of runs
+- one that integrates every run by ``solve_ivp`` (``scipy``, the reference): the tasks of
+  a chunk one after the other through :func:`rbstab.simulator.simulate`; any method,
+  per-run ``timeout``.
+- a compiled one (``compiled``, ``cuda``): :func:`rbstab.simulator.simulate_blocks`: every
+  run of the chunk whose method the engine takes (RK23, RK45, DOP853) is integrated in its
+  batches, whatever its variant, body and gains; the others (implicit methods, the pure
+  sign law of ``sliding``) go through scipy. Configurations are validated once per group of runs
   that differ only in name and initial state: the sweep validated every run when it was
   planned, and the other runs of a group take the group's validated config with their
   own name and initial state.
@@ -25,7 +25,7 @@ Engines
 Layouts
 -------
 Both engines hand each finished run (the compiled engine a block of runs,
-:class:`rbstab.simulator.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
+:class:`rbstab.results.RunBlock`) to a sink, ``SINKS[options.layout]``: ``run`` writes
 one file per run with :func:`rbstab.io.hdf5.write_run` (``options.store``); ``chunk``
 writes the chunk's runs into one file (:class:`rbstab.io.chunk.ChunkWriter`), renamed
 into place when the whole chunk is done. Either way a chunk's result
@@ -42,12 +42,23 @@ import tempfile
 import time as _time
 import traceback
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["RunTask", "WorkerOptions", "run_chunk", "run_table_chunk", "ChunkResult", "ENGINES", "DEFAULT_CHUNK_SIZE"]
+import numpy as np
+import pandas as pd
+
+from ..config import PhysicalPlausibilityWarning, RunConfig, config_from_mapping
+from ..engine.registry import get_engine
+from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
+from ..io.hdf5 import write_run
+from ..results import plain
+from ..simulator import simulate, simulate_batch, simulate_blocks, uses_compiled_engine
+from .folder import NOT_IN_INDEX, index_part, row_from_attributes
+
+__all__ = ["RunTask", "WorkerOptions", "run_chunk", "run_table_chunk", "ChunkResult"]
 
 
 @dataclass(frozen=True)
@@ -94,7 +105,7 @@ class WorkerOptions:
     command_line : str or None
         Recorded in each file's ``command_line`` attribute.
     engine : str
-        Key of :data:`ENGINES`.
+        Key of :data:`rbstab.engine.ENGINES`.
     return_bytes : bool
         Write each file in a private temporary folder and return its bytes in the record
         (``record["data"]``) instead of writing ``task.path``: for workers that do not
@@ -122,8 +133,6 @@ class WorkerOptions:
 
 
 def _config(task: RunTask):
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     with warnings.catch_warnings():
         # shown once, as a digest, when the sweep was planned
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
@@ -162,9 +171,6 @@ class _RunFiles:
 
     def add(self, task: RunTask, result) -> dict[str, Any]:
         """Write ``result``'s file (or its bytes); the record of a finished run."""
-        from ..io.hdf5 import write_run  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-        from .folder import index_part, row_from_attributes  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
         options = self.options
         record = _result_record(task, task.path, result)
         t0 = _time.perf_counter()
@@ -185,7 +191,7 @@ class _RunFiles:
         return record
 
     def add_tasks(self, tasks: Sequence[RunTask], block) -> list[dict[str, Any]]:
-        """:meth:`add` of each run of a :class:`rbstab.simulator.RunBlock` (``tasks[j]`` its run
+        """:meth:`add` of each run of a :class:`rbstab.results.RunBlock` (``tasks[j]`` its run
         j); a file that cannot be written is that run's error."""
         return _each_run(self, tasks, block)
 
@@ -213,10 +219,6 @@ class _ChunkFile:
     only their timing, a traceback or an errno."""
 
     def __init__(self, rows, options: WorkerOptions, templates: Sequence[dict] = (), folder: str = "") -> None:
-        import numpy as np  # heavy: numpy
-
-        from ..io.chunk import ChunkWriter, chunk_file_name  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
         self.options = options
         self.rows = rows
         self.folder = folder
@@ -250,11 +252,9 @@ class _ChunkFile:
         return record
 
     def add_block(self, run_ids: Sequence[str], block, config_hashes: Sequence[str], config_time: float) -> None:
-        """The runs of a :class:`rbstab.simulator.RunBlock` (``run_ids[j]`` its run j) into
+        """The runs of a :class:`rbstab.results.RunBlock` (``run_ids[j]`` its run j) into
         the file at once (:meth:`rbstab.io.chunk.ChunkWriter.add_block`); ``config_time``:
         seconds a run spent on its configuration."""
-        import numpy as np  # heavy: numpy
-
         t0 = _time.perf_counter()
         self.writer.add_block(run_ids, block, config_hashes=config_hashes)
         timing = {key: float(np.sum(values)) for key, values in block.timing.items()}
@@ -275,8 +275,6 @@ class _ChunkFile:
     def result(self, records: list[dict[str, Any]]) -> "ChunkResult":
         """The chunk's :class:`ChunkResult` once the file is written: its rows from the file's
         columns; tracebacks, errnos and timing from ``records``."""
-        import pandas as pd  # heavy: pandas
-
         columns = self.writer.columns()
         frame = pd.DataFrame({name: values for name, values in columns.items()
                               if name not in _FROM_TABLE and name not in self.rows.coords})
@@ -292,8 +290,6 @@ SINKS = {"run": _RunFiles, "chunk": _ChunkFile}
 
 
 def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
-    from ..simulator import simulate  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     try:
         t0 = _time.perf_counter()
         config = _config(task)
@@ -326,8 +322,6 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     configs where they are the same: a grid's inner axis); one that does not rebuild is
     validated, for the message of what is wrong with it.
     """
-    from ..config import RunConfig  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     configs: list = []
     errors: list[dict[str, Any]] = []
     recent: list = []  # distinct rebuilt configs, the latest first
@@ -351,14 +345,12 @@ KEEP_OF_STORE = {"full": "all", "thinned": "thinned", "summary": "none"}
 
 
 def _compiled_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
-    """Integrate the runs of the chunk with the compiled engine (see the module docstring),
-    on the CPU or, for ``options.engine == "cuda"``, on the GPU."""
-    from ..simulator import simulate_blocks, uses_compiled_engine  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
+    """Integrate the runs of the chunk with the compiled engine ``options.engine`` (see the
+    module docstring), on the CPU or on the GPU."""
     t0 = _time.perf_counter()
     configs, records = _group_configs(tasks, sink)
-    batch = [i for i, c in enumerate(configs) if c is not None and uses_compiled_engine(c)]
-    others = [i for i, c in enumerate(configs) if c is not None and not uses_compiled_engine(c)]
+    batch = [i for i, c in enumerate(configs) if c is not None and uses_compiled_engine(c, options.engine)]
+    others = [i for i, c in enumerate(configs) if c is not None and not uses_compiled_engine(c, options.engine)]
     config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
     done: set[int] = set()
     try:
@@ -402,19 +394,11 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     return records
 
 
-#: engine name -> ``(tasks, options, sink) -> list of records`` (what a run's row does not
-#: carry: its timing, a traceback, an errno; any order).
-ENGINES: dict[str, Callable[[Sequence[RunTask], WorkerOptions], list[dict[str, Any]]]] = {
-    "scipy": _scipy_engine,
-    "compiled": _compiled_engine,
-    "cuda": _compiled_engine,
-}
-
-#: Default runs per chunk of each engine: one run per unit of work for scipy; for the
-#: compiled engine enough runs that the per-chunk costs (a task's round trip, opening a
-#: file) are small, and few enough that both workers get work early (the engine holds
-#: the trajectories of 32 runs at a time, whatever the chunk).
-DEFAULT_CHUNK_SIZE = {"scipy": 1, "compiled": 256, "cuda": 8192}
+def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
+    """The records of ``tasks`` run by ``options.engine`` (what a run's row does not carry:
+    its timing, a traceback, an errno; any order)."""
+    engine = _compiled_engine if get_engine(options.engine).compiled else _scipy_engine
+    return engine(tasks, options, sink)
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> "ChunkResult":
@@ -435,8 +419,6 @@ def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Seque
     ChunkResult
         A row per task, any order.
     """
-    from ..io.chunk import StoreRow, StoreRows  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     rows = StoreRows.of([StoreRow(t.index, t.run_id, t.base, t.coords, t.template) for t in tasks])
     folder = str(Path(tasks[0].path).parent) if tasks else ""
     return _execute(rows, tasks, options, templates, folder)
@@ -453,7 +435,7 @@ def _execute(rows, tasks: Sequence[RunTask], options: WorkerOptions, templates: 
             if batch is not None:
                 alone = _batch_into(sink, *batch, options, part)
                 tasks = [*tasks, *(_task(part, j, folder) for j in alone)]
-            records += ENGINES[options.engine](tasks, options, sink)
+            records += _run_tasks(tasks, options, sink)
         result = sink.result(records)
     except Exception as exc:  # the chunk's file could not be written: each of its runs is an error
         records = [_error_record(RunTask(rid, {}, os.path.join(folder, f"{rid}.h5")), exc) for rid in rows.run_id]
@@ -519,10 +501,6 @@ def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResu
 
     ``folder``: the sweep's ``runs/`` folder (store files and run files go there).
     """
-    import numpy as np  # heavy: numpy
-
-    from ..io.chunk import StoreRows  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     t0 = _time.perf_counter()
     batch = _table_batch(part, options)
     fast = np.flatnonzero(batch.compiled) if batch is not None else np.empty(0, dtype=np.int64)
@@ -539,7 +517,7 @@ def _task(part, j: int, folder: str) -> RunTask:
     """Run ``j`` of a table slice as a :class:`RunTask`, its configuration built."""
     rid = str(part.run_id[j])
     return RunTask(rid, part.resolved(j), os.path.join(folder, f"{rid}.h5"), int(part.index[j]),
-                   str(part.base[j]), {name: _scalar(values[j]) for name, values in part.coords.items()},
+                   str(part.base[j]), {name: plain(values[j]) for name, values in part.coords.items()},
                    str(part.config_hash[j]), int(part.template[j]))
 
 
@@ -547,7 +525,7 @@ def _table_batch(part, options: WorkerOptions):
     """The slice's :class:`~rbstab.engine.RunBatch` where the worker integrates it as one
     (compiled or cuda engine, store files), else None; None also for a slice the batch cannot be
     built from, whose runs then go one by one (each run's problem, if any, its own record)."""
-    if options.engine not in ("compiled", "cuda") or options.layout != "chunk" or not len(part):
+    if not get_engine(options.engine).compiled or options.layout != "chunk" or not len(part):
         return None
     try:
         return part.batch(options.timeout)
@@ -560,10 +538,6 @@ def _batch_into(sink, batch, fast, build: float, options: WorkerOptions, part) -
     :func:`rbstab.simulator.simulate_batch` and stored by ``sink`` (a :class:`_ChunkFile`)
     as blocks; returns the runs it did not finish (an exception of the batch as a whole, a
     bug: they go one by one)."""
-    import numpy as np  # heavy: numpy
-
-    from ..simulator import simulate_batch  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     done = np.zeros(len(part), dtype=bool)
     try:
         for rows, block in simulate_batch(batch, fast, full=options.store == "full", engine=options.engine,
@@ -578,10 +552,6 @@ def _batch_into(sink, batch, fast, build: float, options: WorkerOptions, part) -
 def _chunk_result(records: list[dict[str, Any]], folder: str, frame=None) -> ChunkResult:
     """The :class:`ChunkResult` of a chunk's records (its rows from their ``attrs``, unless
     ``frame`` gives them)."""
-    import pandas as pd  # heavy: pandas
-
-    from ..sweep.folder import NOT_IN_INDEX  # heavy: numba, h5py (this module is imported at the CLI's start-up for ENGINES)
-
     rows, data, tracebacks, timing, errno = [], {}, {}, {}, None
     for rec in records:
         if frame is None:
@@ -602,6 +572,3 @@ def _chunk_result(records: list[dict[str, Any]], folder: str, frame=None) -> Chu
         frame = pd.DataFrame.from_records(rows)
     return ChunkResult(frame, data, tracebacks, errno, folder, timing, None)
 
-
-def _scalar(value: Any) -> Any:
-    return value.item() if hasattr(value, "item") else value
