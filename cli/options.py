@@ -73,7 +73,8 @@ def console_options(command):
 
     options = [
         click.option("-q", "--quiet", count=True,
-                     help="Print less: -q only warnings and errors, -qq only errors (and --json output)."),
+                     help="Print less: -q the results, warnings and errors (no notes or progress), -qq only errors "
+                     "(and --json output)."),
         click.option("-v", "--verbose", count=True,
                      help="Print more: each warning's explanation, every run, solver statistics."),
         click.option("--no-warn", "no_warn", multiple=True, metavar="CODE", callback=_no_warn_codes,

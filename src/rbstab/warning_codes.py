@@ -72,6 +72,11 @@ WARNING_CODES: dict[str, WarningCode] = {
             "left in place and not in the index: runs of an earlier version of the spec, or files copied "
             "there; remove them, or sweep into another folder (-o)",
         ),
+        WarningCode(
+            "W005", "initial_state.theta", "an initial Euler angle beyond 2 pi rad (degrees typed as radians?)",
+            "angles are in radians: 45 rad is more than seven turns; write 0.785 for 45 degrees "
+            "(the run goes on with the value as given)",
+        ),
     )
 }
 
