@@ -492,7 +492,8 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
         ``settle``, ``title``, ``figure_formats``, ``dpi``, ``animation_frames``, ``jobs``).
         With ``jobs`` > 1 (or None: one per CPU) the figures are drawn in that many
         processes, and a script that calls this needs ``if __name__ == "__main__":``, as
-        for :func:`sweep_dataset`; the default ``jobs=1`` draws them in this process.
+        for :func:`sweep_dataset` (without it: ``ExecutorError`` before anything is
+        written); the default ``jobs=1`` draws them in this process.
 
     Returns
     -------
@@ -514,5 +515,9 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise TypeError(f"write_report: unknown option {', '.join(unknown)}; expected some of {', '.join(known)}")
+    if options.get("jobs", 1) != 1:
+        from .sweep.executors import refuse_at_script_top_level  # heavy: multiprocessing
+
+        refuse_at_script_top_level("a report")  # before the folder is touched
     paths = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
     return build_report(paths, output, ReportOptions(**options))
