@@ -171,10 +171,13 @@ def _key_value(text: str) -> tuple[str, str]:
 )
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace the index of a sweep folder that holds other runs (another --grid of the same "
+              "config; without it: refused).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
 @console_options
 def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
-          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
+          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress, overwrite) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
     SPEC is a sweep spec, or a run config to vary from the command line:
@@ -187,6 +190,8 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
 
     Every run's config is validated before anything runs. Running the same command again
     skips the runs whose result exists and matches their config, and finishes the rest.
+    A folder holding a sweep with runs this one does not have (another --grid of the same
+    config) is refused unless --overwrite.
     --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the spec
     itself (e.g. --set sweep.random.n=20). The resolved spec is written to
     OUTPUT/<name>/sweep.yaml: `rbstab sweep OUTPUT/<name>/sweep.yaml` reruns or resumes it.
@@ -216,6 +221,8 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
         return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)
+    if not overwrite:
+        _check_folder(spec, overrides, output)
     # start local workers now: they import numpy, scipy and h5py while the runs are validated
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
@@ -231,6 +238,36 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     _say_outcome(outcome)
     if outcome.n_failed:
         raise SystemExit(min(outcome.n_failed, 100))
+
+
+def _check_folder(spec, overrides, output) -> None:
+    """Refuse, before anything runs or is written, a sweep whose folder holds a sweep with
+    runs this one does not have (another --grid, another spec of the same name): its index
+    would be replaced. The same sweep again (resume), or one that only adds runs, goes on."""
+    from pathlib import Path
+
+    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numpy, pydantic
+    from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy
+    from rbstab.sweep.table import plan_table  # heavy: numpy, pydantic
+
+    try:
+        loaded = load_spec(spec, overrides)
+    except SweepSpecError:
+        return  # said with every problem when the sweep is run
+    folder = Path(output) / loaded.name
+    if not is_sweep_folder(folder):
+        return
+    try:
+        before = set(read_index(folder)["run_id"].astype(str))
+        now = set(plan_table(loaded).ids())
+    except (OSError, ValueError, KeyError, SweepSpecError):
+        return  # a damaged folder or an invalid sweep: the sweep itself says so
+    gone = before - now
+    if gone:
+        raise click.ClickException(
+            f"{folder} holds a sweep with {len(gone)} of its {len(before)} runs not in this one (another --grid, "
+            "--zip, --random or base): not replaced; --overwrite replaces its index, -o DIR writes elsewhere, "
+            "--set sweep.name=NAME gives this sweep another folder (nothing was run)")
 
 
 def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> None:

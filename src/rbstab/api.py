@@ -476,7 +476,7 @@ def sweep_dataset(spec: Any, output: str | os.PathLike = "results/sweeps", *, gr
 
 
 def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str | os.PathLike | None = None,
-                 **options) -> Path:
+                 *, overwrite: bool = False, **options) -> Path:
     """Build a report folder (``rbstab report``): tables, figures, the comparison with the paper.
 
     Parameters
@@ -485,8 +485,11 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
         Run files (``*.h5``), sweep folders, folders of run files, analysis files
         (``*.analysis.nc``), in any mix.
     output : path-like, optional
-        The report folder (default under ``results/reports/``); an earlier report there
-        is replaced, any other non-empty folder refused.
+        The report folder (default under ``results/reports/``); an earlier report of the
+        same inputs there is replaced, one of other inputs only with ``overwrite=True``,
+        any other non-empty folder refused.
+    overwrite : bool
+        Replace an earlier report of other inputs.
     **options
         Fields of :class:`rbstab.report.ReportOptions` (``formats``, ``metrics``,
         ``settle``, ``title``, ``figure_formats``, ``dpi``, ``animation_frames``, ``jobs``).
@@ -520,4 +523,4 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
 
         refuse_at_script_top_level("a report")  # before the folder is touched
     paths = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
-    return build_report(paths, output, ReportOptions(**options))
+    return build_report(paths, output, ReportOptions(**options), overwrite=overwrite)

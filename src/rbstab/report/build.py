@@ -201,13 +201,26 @@ def report_title(inputs: ReportInputs, analyses: Sequence[Path] = (), studies: S
     return "rbstab report: " + ("; ".join(parts) or "no inputs")
 
 
-def _check_output(target: Path) -> None:
+def _check_output(target: Path, paths: Sequence[Path] = (), overwrite: bool = True) -> None:
     if target.exists() and not target.is_dir():
         raise ReportError(f"{target}: exists and is not a folder")
     if target.is_dir() and any(target.iterdir()) and not (target / MANIFEST).is_file():
         raise ReportError(
             f"{target}: folder exists, is not empty and is not an rbstab report (no {MANIFEST}); "
             "choose another -o"
+        )
+    if overwrite or not (target / MANIFEST).is_file():
+        return
+    try:
+        before = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("inputs") or []
+    except (OSError, ValueError, AttributeError):
+        before = []
+    now = sorted(str(p) for p in paths)
+    if sorted(map(str, before)) != now:
+        shown = ", ".join(before[:3]) + (f" and {len(before) - 3} more" if len(before) > 3 else "")
+        raise ReportError(
+            f"{target} holds a report of other inputs ({shown or 'unknown'}): not replaced; --overwrite "
+            "(overwrite=True) replaces it, -o DIR writes elsewhere"
         )
 
 
@@ -400,6 +413,8 @@ def build_report(
     inputs: Sequence[str | os.PathLike],
     output: str | os.PathLike | None = None,
     options: ReportOptions | None = None,
+    *,
+    overwrite: bool = False,
 ) -> Path:
     """Build a report folder from run files and sweep folders.
 
@@ -411,8 +426,10 @@ def build_report(
     output : path-like, optional
         Report folder; default ``results/reports/<name>``, ``<name>`` made of the inputs'
         names (:func:`default_report_name`). If it exists it must be empty or an earlier
-        report, which is replaced.
+        report of the same inputs, which is replaced (of other inputs: with ``overwrite``).
     options : ReportOptions, optional
+    overwrite : bool
+        Replace an earlier report of other inputs (else refused: ReportError).
 
     Returns
     -------
@@ -442,7 +459,7 @@ def build_report(
     data = load_inputs(inputs) if inputs or not (analyses or studies) else ReportInputs([], [], [])
     data.paths.extend(p.resolve() for p in [*analyses, *studies])
     target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data, given)
-    _check_output(target)
+    _check_output(target, data.paths, overwrite)
 
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))
