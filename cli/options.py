@@ -98,7 +98,7 @@ def _usable_engine(ctx, param, value):
 
 def study_options(command):
     """Options of the commands that run studies (``sensitivity``, ``tune``): ``--vary``,
-    ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o`` and ``--json``."""
+    ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o``, ``--overwrite`` and ``--json``."""
     from rbstab.sweep.worker import ENGINES  # as rbstab sweep takes them
 
     options = [
@@ -112,6 +112,9 @@ def study_options(command):
                      help="How runs are integrated (docs/performance.md; cuda: on an NVIDIA GPU)  "
                      "[default: compiled]."),
         output_option("results/studies", "Parent folder; the study writes OUTPUT/<name>/."),
+        click.option("--overwrite", is_flag=True,
+                     help="Replace a study of other inputs in OUTPUT/<name>/ (without it: refused; the same "
+                     "inputs again resume it)."),
         json_option,
     ]
     for option in reversed(options):

@@ -38,7 +38,7 @@ def study_error(exc) -> click.ClickException:
 @study_options
 @console_options
 def sensitivity(config, n, method, metrics, resamples, confidence, jobs, scheduler, progress, vary, seed, name,
-                overrides, engine, output, as_json) -> None:
+                overrides, engine, output, overwrite, as_json) -> None:
     """Global sensitivity of summary figures to the --vary factors of CONFIG.
 
     \b
@@ -63,7 +63,7 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
                                   name=name, num_resamples=resamples, conf_level=confidence, jobs=jobs,
                                   executor="dask" if scheduler else None, scheduler=scheduler, engine=engine,
                                   log=console.info, progress=False if console.verbosity < 0 else progress,
-                                  command_line=command_line())
+                                  command_line=command_line(), overwrite=overwrite)
     except StudyInputError as exc:
         raise study_error(exc)
     except SweepSpecError as exc:

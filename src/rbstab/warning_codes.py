@@ -77,6 +77,10 @@ WARNING_CODES: dict[str, WarningCode] = {
             "angles are in radians: 45 rad is more than seven turns; write 0.785 for 45 degrees "
             "(the run goes on with the value as given)",
         ),
+        WarningCode(
+            "W006", "rbstab tune", "a tuned value lies within 1 % of its search range's edge",
+            "the optimum may lie beyond the range searched: widen that --vary range and tune again",
+        ),
     )
 }
 

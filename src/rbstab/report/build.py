@@ -240,12 +240,17 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
     s = Section("Runs", "runs")
     s.blocks.append(
         "One row per run; values read back from the result files (summary attributes written by "
-        "the run). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
+        "the run). status success: the solver reached t_end; converged: besides, v(t_end) <= 0.001 v(0) "
+        "(not converged by t_end: still moving). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
     )
+    from ..diagnostics import convergence_word
+
     s.blocks.append(Table(
         "Runs: identity, solver statistics, status",
-        ["run", "file", "variant", "status", "t_final [s]", "method", "nfev", "njev", "nlu", "wall time [s]", "message"],
-        [[r["run"], Path(r["file"]).name, r["variant"], r["status"], _f(r["t_final"]), str(r["method"]),
+        ["run", "file", "variant", "status", "converged", "t_final [s]", "method", "nfev", "njev", "nlu",
+         "wall time [s]", "message"],
+        [[r["run"], Path(r["file"]).name, r["variant"], r["status"],
+          convergence_word(r["status"], r["lyapunov_initial"], r["lyapunov_final"]), _f(r["t_final"]), str(r["method"]),
           _f(r["nfev"]), _f(r["njev"]), _f(r["nlu"]), _f(r["wall_time"], 3), r["message"] if r["status"] != "success" else ""]
          for r in rows],
     ))

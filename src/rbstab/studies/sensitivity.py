@@ -55,7 +55,7 @@ from .design import (
     study_folder,
     vary_mapping,
 )
-from .files import KINDS, read_study_file, write_study_file
+from .files import KINDS, check_same_inputs, read_study_file, write_study_file
 
 __all__ = ["METHODS", "DEFAULT_METRICS", "FILE", "SWEEP_FOLDER", "SensitivityDesign", "plan_sensitivity",
            "analyze_results", "sensitivity_analysis", "read_sensitivity", "metric_records", "TRANSFORMS",
@@ -360,7 +360,7 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
                          num_resamples: int = 200, conf_level: float = 0.95, jobs: int | None = None,
                          executor: Any = None, scheduler: str | None = None, engine: str | None = None, log=None,
                          progress: bool | None = None,
-                         command_line: str | None = None):
+                         command_line: str | None = None, overwrite: bool = False):
     """Run a sensitivity study end to end (``rbstab sensitivity``).
 
     Parameters
@@ -378,6 +378,9 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
         Bootstrap resamples and level of the confidence intervals.
     jobs, executor, scheduler, engine, log, progress, command_line
         As for :func:`rbstab.studies.design.run_design`.
+    overwrite : bool
+        Replace a study of other inputs (method, n, seed, vary, base config) in the folder;
+        without it that is refused (StudyInputError) before anything runs.
 
     Returns
     -------
@@ -398,6 +401,9 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
     plan = plan_sensitivity(config, vary, n=n, method=method, metrics=metrics, seed=seed)
     expand_metrics([split_transform(m)[1] for m in plan.metrics],
                    list(nominal_figures(config, engine)))  # a figure these runs have
+    check_same_inputs(folder / FILE, {"method": plan.method, "n": plan.n, "seed": plan.seed,
+                                      "vary": json.dumps(vary_mapping(plan.varied)),
+                                      "config": dump_yaml(plan.base.resolved)}, overwrite=overwrite)
     say = log or (lambda text: None)
     say(f"{plan.method}: {len(plan.factors)} factors, {len(plan.design)} runs -> {folder / SWEEP_FOLDER}")
     results = run_design(config.resolved, plan.design, folder / SWEEP_FOLDER, jobs=jobs, executor=executor,
