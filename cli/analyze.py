@@ -62,6 +62,33 @@ def _check_sweeps(paths) -> None:
         raise click.ClickException("\n".join(problems))
 
 
+def _check_targets(loaded, out: Path) -> None:
+    """Refuse, before anything runs, to replace an analysis file of another configuration
+    (another config_hash) of the same name; the same configuration again is replaced."""
+    import h5py  # heavy
+
+    from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
+    from rbstab.config import canonical_config, config_hash  # heavy: numpy, pydantic
+
+    refused = []
+    for config in loaded:
+        path = analysis_path(out, config.name)
+        if not path.is_file():
+            continue
+        try:
+            with h5py.File(path, "r") as f:
+                stored = f.attrs.get("config_hash")
+        except OSError:
+            continue  # not readable as an analysis: replaced, as before
+        stored = stored.decode() if isinstance(stored, bytes) else stored
+        if stored is not None and stored != config_hash(canonical_config(config.resolved)):
+            refused.append(f"{path} holds the analysis of a different configuration of the name {config.name!r}: "
+                           "not replaced; --overwrite replaces it, -o DIR writes elsewhere, --set name=... gives "
+                           "this one another file")
+    if refused:
+        raise click.ClickException("\n".join(refused) + "\n(nothing was run)")
+
+
 @click.command("analyze")
 @click.argument("configs", nargs=-1, type=click.Path(dir_okay=False))
 @output_option("results/analysis", "Folder for the <name>.analysis.nc files.")
@@ -91,9 +118,11 @@ def _check_sweeps(paths) -> None:
               "(pip install \"rbstab[cuda]\").")
 @click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
               show_default=True, help="Confidence level of the Wilson interval (--robustness).")
+@click.option("--overwrite", is_flag=True,
+              help="Replace an analysis file of another configuration of the same name (without it: refused).")
 @console_options
 def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
-            no_simulation, ratio, basin_samples, jobs, engine, confidence) -> None:
+            no_simulation, ratio, basin_samples, jobs, engine, confidence, overwrite) -> None:
     """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
 
     \b
@@ -125,6 +154,8 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     console = get_console()
     say = console.out
     out = Path(output)
+    if not overwrite:
+        _check_targets(loaded, out)
     ensure_compiled(say=console.info)
     for config in loaded:
         try:

@@ -4,8 +4,8 @@ Streams: the command's own output (result lines, ``rbstab show``'s summaries) on
 warnings, notes and progress on stderr. With ``--json`` stdout holds only JSON objects,
 one per line and per item, and the text goes to stderr.
 
-Verbosity (``-v`` minus ``-q``): -2 errors only (and ``--json`` objects); -1 warnings
-too; 0 (default) the output and notes; 1 details (a warning's explanation, every run of a
+Verbosity (``-v`` minus ``-q``): -2 errors only (and ``--json`` objects); -1 the output
+(results: stdout) and warnings, without notes and progress; 0 (default) notes too; 1 details (a warning's explanation, every run of a
 sweep, solver statistics).
 
 Warnings carry a code (:mod:`rbstab.warning_codes`); each distinct one is printed once
@@ -49,8 +49,9 @@ class Console:
         self._explained: set[str] = set()
 
     def out(self, line: str = "") -> None:
-        """The command's output: stdout (stderr with ``--json``); hidden by ``-q``."""
-        if self.verbosity >= 0:
+        """The command's output: stdout (stderr with ``--json``); kept by ``-q`` (but with
+        ``--json``, whose objects hold it), hidden by ``-qq``."""
+        if self.verbosity >= (0 if self.json else -1):
             click.echo(line, err=self.json)
 
     def detail(self, line: str) -> None:

@@ -1,6 +1,7 @@
 """``rbstab`` command group: one module per subcommand, heavy imports inside commands.
 
-Exit status of every command: 0 done; 1 invalid input, a failed run or a fault of the
+Exit status of every command: 0 done (also when the reader of stdout closed it early,
+``rbstab show ... | head``); 1 invalid input, a failed run or a fault of the
 machine (full disk, read-only or missing output folder), reported in one line without a
 traceback; 2 a usage error; 130 interrupted by Ctrl-C (SIGINT), 143 by SIGTERM, after
 what was finished has been saved (``rbstab sweep``: the number of failed runs, at most 100,
@@ -57,8 +58,24 @@ class _Group(click.Group):
             after = _AFTER_INTERRUPT.get(ctx.invoked_subcommand, _AFTER_INTERRUPT_DEFAULT)
             click.echo(f"\ninterrupted: {after}", err=True)
             ctx.exit(getattr(exc, "exit_code", 130))
+        except BrokenPipeError:  # stdout closed by its reader (rbstab show ... | head): done, quietly
+            _quiet_stdout()
+            ctx.exit(0)
         except OSError as exc:  # a full disk, a read-only folder...: in words, not a traceback
             raise click.ClickException(describe_os_error(exc)) from None
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null, so that flushing it at exit does not fail again on the
+    closed pipe (the standard library's advice for SIGPIPE)."""
+    import os
+    import sys
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no real stdout (a test runner's capture)
+        pass
 
 
 @click.group(cls=_Group)

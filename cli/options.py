@@ -83,7 +83,8 @@ def console_options(command):
 
     options = [
         click.option("-q", "--quiet", count=True,
-                     help="Print less: -q only warnings and errors, -qq only errors (and --json output)."),
+                     help="Print less: -q the results, warnings and errors (no notes or progress), -qq only errors "
+                     "(and --json output)."),
         click.option("-v", "--verbose", count=True,
                      help="Print more: each warning's explanation, every run, solver statistics."),
         click.option("--no-warn", "no_warn", multiple=True, metavar="CODE", callback=_no_warn_codes,
@@ -104,7 +105,7 @@ def _usable_engine(ctx, param, value):
 
 def study_options(command):
     """Options of the commands that run studies (``sensitivity``, ``tune``): ``--vary``,
-    ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o`` and ``--json``."""
+    ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o``, ``--overwrite`` and ``--json``."""
     options = [
         click.option("--vary", "vary", multiple=True, required=True, metavar="KEY=DISTRIBUTION",
                      help="A varied config key with a sweep distribution, e.g. body.mass=uniform:[30,50], "
@@ -114,6 +115,9 @@ def study_options(command):
         set_option,
         engine_option(callback=_usable_engine),
         output_option("results/studies", "Parent folder; the study writes OUTPUT/<name>/."),
+        click.option("--overwrite", is_flag=True,
+                     help="Replace a study of other inputs in OUTPUT/<name>/ (without it: refused; the same "
+                     "inputs again resume it)."),
         json_option,
     ]
     for option in reversed(options):

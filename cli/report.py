@@ -36,8 +36,11 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     type=click.Path(file_okay=False),
     default=None,
     help="Report folder [default: results/reports/<name>: the run's name or the folder's name for "
-    "one input, their names joined by _vs_ for several]. An existing report there is replaced.",
+    "one input, their names joined by _vs_ for several]. An existing report of the same inputs there is "
+    "replaced; one of other inputs only with --overwrite.",
 )
+@click.option("--overwrite", is_flag=True,
+              help="Replace a report of other inputs in the report folder (without it: refused).")
 @click.option(
     "--title",
     default=None,
@@ -116,7 +119,7 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     help="Processes drawing the figures and animations of the runs  [default: all CPUs].",
 )
 @console_options
-def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega,
+def report(inputs, output, overwrite, title, formats, figure_formats, dpi, metrics, settle_e, settle_omega,
            animation_frames, no_animations, jobs) -> None:
     """Compare INPUT... (run files *.h5, sweep folders, folders of run files, analysis files *.analysis.nc).
 
@@ -143,7 +146,7 @@ def report(inputs, output, title, formats, figure_formats, dpi, metrics, settle_
         raise click.BadParameter(f"found 1; expected 0 (no animations) or {_ANIMATION_FRAMES_RANGE[0]} to "
                                  f"{_ANIMATION_FRAMES_RANGE[1]}", param_hint="--animation-frames")
     try:
-        folder = build_report(inputs, output, options)
+        folder = build_report(inputs, output, options, overwrite=overwrite)
     except ReportInputError as exc:
         raise click.ClickException("cannot build the report:\n" + "\n".join(f"  {p}" for p in exc.problems))
     except (ReportError, ExecutorError) as exc:

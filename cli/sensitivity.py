@@ -21,10 +21,11 @@ def study_error(exc) -> click.ClickException:
               "(morris: N (D + 1) runs).")
 @click.option("--method", default="sobol", show_default=True, metavar="sobol|morris",
               help="Sobol' indices (Saltelli sampling) or Morris elementary effects.")
-@click.option("--metric", "metrics", multiple=True, metavar="NAME",
+@click.option("--metric", "metrics", multiple=True, metavar="[log10:|rank:]NAME",
               help="A summary figure of the runs (docs/studies.md; a 3-vector figure gives its three "
-              "components). Repeatable  [default: max_abs_constraint_error, lyapunov_final, "
-              "max_lyapunov_rate, converged].")
+              "components), optionally through a transform: log10:NAME (a positive figure spread over "
+              "decades), rank:NAME (the ranks of the runs' values). Repeatable  [default: "
+              "max_abs_constraint_error, lyapunov_final, max_lyapunov_rate, converged].")
 @click.option("--resamples", type=click.IntRange(min=10), default=200, show_default=True,
               help="Bootstrap resamples of the confidence intervals.")
 @click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
@@ -37,7 +38,7 @@ def study_error(exc) -> click.ClickException:
 @study_options
 @console_options
 def sensitivity(config, n, method, metrics, resamples, confidence, jobs, scheduler, progress, vary, seed, name,
-                overrides, engine, output, as_json) -> None:
+                overrides, engine, output, overwrite, as_json) -> None:
     """Global sensitivity of summary figures to the --vary factors of CONFIG.
 
     \b
@@ -62,16 +63,24 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
                                   name=name, num_resamples=resamples, conf_level=confidence, jobs=jobs,
                                   executor="dask" if scheduler else None, scheduler=scheduler, engine=engine,
                                   log=console.info, progress=False if console.verbosity < 0 else progress,
-                                  command_line=command_line())
+                                  command_line=command_line(), overwrite=overwrite)
     except StudyInputError as exc:
         raise study_error(exc)
     except SweepSpecError as exc:
         raise click.ClickException("invalid design\n" + "\n".join("  " + line for line in exc.errors))
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
+    from rbstab.studies.sensitivity import HEAVY_TAIL_DECADES, split_transform
+
     records = metric_records(ds)
     for record in records:
         console.out(_describe(record))
+        if record["note"]:
+            console.out(f"  (!) {record['note']}")
+        spread = record["decades"]
+        if split_transform(record["metric"])[0] is None and spread is not None and spread > HEAVY_TAIL_DECADES:
+            console.info(f"  note: {record['metric']} spans {spread:.1f} decades over the runs; its indices are more "
+                         f"telling of log10:{record['metric']} or rank:{record['metric']} (--metric)")
         if as_json:
             console.emit(record)
     console.out(f"  -> {ds.attrs['path']}")
@@ -84,11 +93,17 @@ def _describe(record: dict) -> str:
              + (f", {record['n_nonfinite']} without a value: no indices" if record["n_nonfinite"] else "") + ")"]
     for factor, values in record["factors"].items():
         if record["method"] == "sobol":
-            text = f"S1 {_pm(values['S1'], values['S1_conf'])}  ST {_pm(values['ST'], values['ST_conf'])}"
+            text = (f"S1 {_pm(values['S1'], values['S1_conf'])}{_mark(values, 'S1')}  "
+                    f"ST {_pm(values['ST'], values['ST_conf'])}{_mark(values, 'ST')}")
         else:
             text = f"mu* {_pm(values['mu_star'], values['mu_star_conf'])}  sigma {_g(values['sigma'])}"
         lines.append(f"  {factor:<32} {text}")
     return "\n".join(lines)
+
+
+def _mark(values: dict, index: str) -> str:
+    """`` (!)`` after an index flagged unreliable."""
+    return " (!)" if values.get(f"{index}_unreliable") else ""
 
 
 def _g(value) -> str:

@@ -25,10 +25,16 @@ _MAX_LISTED = 20
 _METRICS = ("lyapunov_final", "max_abs_constraint_error", "max_lyapunov_rate", "wall_time")
 
 
-def _run_lines(rows) -> None:
-    """One line per run: id, status, v(0) -> v(t_end), max dv/dt, max |E_i|, rate check."""
+def _run_lines(rows, ratio: float | None = None) -> None:
+    """One line per run: id, status, converged (with the sweep's ``ratio``), v(0) -> v(t_end),
+    max dv/dt, max |E_i|, rate check."""
+    from rbstab.convergence import DEFAULT_LYAPUNOV_RATIO
+
+    ratio = DEFAULT_LYAPUNOV_RATIO if ratio is None else ratio
     out = get_console().out
-    out(f"  {'run':<20} {'status':<8} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
+    from rbstab.diagnostics import convergence_word  # heavy: numpy
+
+    out(f"  {'run':<20} {'status':<8} {'converged':<9} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
         f"{'max|E| [m]':>11}  rate check")
     for r in rows:
         v = f"{_fmt(r.get('lyapunov_initial', ''))} -> {_fmt(r.get('lyapunov_final', ''))}"
@@ -37,7 +43,9 @@ def _run_lines(rows) -> None:
         switchings = [r.get(f"switching_count_{a}") for a in "xyz"]  # the pure sign law of sliding
         located = (f"  {int(sum(switchings))} switchings"
                    if all(isinstance(x, (int, float)) and x == x for x in switchings) else "")
-        out(f"  {r['run_id']:<20} {r['status']:<8} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
+        settled = "yes" if convergence_word(r["status"], r.get("lyapunov_initial"), r.get("lyapunov_final"),
+                                            ratio) == "converged" else "no"
+        out(f"  {r['run_id']:<20} {r['status']:<8} {settled:<9} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
             f"{e:>11}  {r.get('lyapunov_rate_check', '')}{located}")
         if r["status"] != "success":
             out(f"    {r.get('message', '')}")
@@ -121,7 +129,8 @@ def _show_sweep(path: str) -> None:
                     f"max {_fmt(s['max'])}")
     listed = n if console.verbosity >= 1 else _MAX_LISTED
     rows = index.head(listed).to_dict("records")
-    _run_lines([{k: ("" if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows])
+    _run_lines([{k: ("" if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows],
+               info["lyapunov_ratio"])
     if n > listed:
         console.out(f"  ... and {n - listed} more runs (-v lists them; index.csv, rbstab.open_sweep)")
 
@@ -130,17 +139,25 @@ def _show_result(path: str) -> None:
     """A run's result file: identity, status, solver statistics, summary figures."""
     from rbstab.io.hdf5 import read_summary  # heavy: numpy
 
+    from rbstab.diagnostics import convergence_word  # heavy: numpy
+
+    from .run import rate_check_text
+
     console = get_console()
     info = read_summary(path)  # every checksum verified
+    summary = info["summary"]
+    settled = convergence_word(info["status"], summary.get("lyapunov_initial"), summary.get("lyapunov_final"))
+    check = rate_check_text(summary, Path(path))
     if console.json:
-        console.emit({"path": path, "kind": "run", **info})
+        console.emit({"path": path, "kind": "run", **info, "converged": settled == "converged",
+                      "rate_check_reason": check[len("fail ("):-1] if check.startswith("fail (") else None})
     console.out(f"{path}")
     console.out(f"  name       {info['name']}  (variant {info['variant']})")
-    console.out(f"  status     {info['status']}: {info['message']}")
+    console.out(f"  status     {info['status']}, {settled}: {info['message']}")
     console.out(f"  created    {info['created']}, wall time {_fmt(info['wall_time'])} s")
     console.out("  solver     " + ", ".join(f"{k} {v}" for k, v in info["solver"].items() if k != "message"))
-    for key, value in info["summary"].items():
-        console.out(f"  {key:<32} {_fmt(value)}")
+    for key, value in summary.items():
+        console.out(f"  {key:<32} {check if key == 'lyapunov_rate_check' else _fmt(value)}")
 
 
 def _expand(path: str) -> list[str]:
@@ -222,6 +239,8 @@ def show(files, run_id, as_json) -> None:
             shown += 1
             try:
                 _show(path) if run_id is None else _show_run(path, run_id)
+            except BrokenPipeError:  # the reader is gone (| head): nothing more to show
+                raise
             except (OSError, ValueError) as exc:  # FileNotFoundError, NotAResultFile, DamagedResultError ...
                 click.echo(f"error: {exc}", err=True)
                 if console.json:

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import json
+import math
 import os
+import re
 
 import click
 
@@ -20,9 +22,71 @@ def _indent(text: str) -> str:
     return "\n".join("  " + line for line in text.splitlines())
 
 
-def _sweep_overrides(grid, zipped, random, n, seed) -> list[str]:
+_RANGE = re.compile(r"\s*(log:)?([^:,\[\]]+):([^:,\[\]]+):([^:,\[\]]+)\s*")
+
+
+def grid_values(key: str, text: str) -> str:
+    """The values of ``--grid KEY=...`` as YAML list items: ``V1,V2,...`` as given, or a
+    range ``LO:HI:N`` (N evenly spaced values from LO to HI) or ``log:LO:HI:N`` (N values
+    evenly spaced in log10, LO and HI > 0), for scalar keys and scale factors; a bad
+    range is a usage error naming the key, the value and what is allowed."""
+    match = _RANGE.fullmatch(text)
+    if match is None:
+        return text
+    log, lo, hi, n = match.groups()
+    allowed = (f"--grid {key}={text}: expected LO:HI:N (N >= 2 values from LO to HI) or log:LO:HI:N "
+               "(LO, HI > 0), e.g. 100:1000:12 or log:1e2:1e4:5")
+    try:
+        lo_value, hi_value, count = float(lo), float(hi), int(n)
+    except ValueError:
+        raise click.ClickException(allowed) from None
+    if count < 2 or not all(math.isfinite(v) for v in (lo_value, hi_value)) or (
+            log and (lo_value <= 0 or hi_value <= 0)):
+        raise click.ClickException(allowed)
+    if log:
+        values = [10 ** (math.log10(lo_value) + i * (math.log10(hi_value) - math.log10(lo_value)) / (count - 1))
+                  for i in range(count)]
+        values[0], values[-1] = lo_value, hi_value
+    else:
+        values = [lo_value + i * (hi_value - lo_value) / (count - 1) for i in range(count)]
+        values[-1] = hi_value
+    return ",".join(repr(float(f"{v:.12g}")) for v in values)
+
+
+def _scaled_grid(spec: str, overrides, key: str, text: str) -> tuple[str, str]:
+    """``--grid KEY:scale=...``: the factors times KEY's value in the base config SPEC, as
+    a grid over KEY (a list-valued key gives one list per level)."""
+    from rbstab.config import ConfigError, load_config  # heavy: numpy, pydantic
+
+    base = key.removesuffix(":scale")
+    try:
+        resolved = load_config(spec, [o for o in overrides if not o.startswith("sweep.")]).resolved
+    except (ConfigError, OSError) as exc:
+        raise click.ClickException(f"--grid {key}={text}: a scale factor needs a run config to scale "
+                                   f"({spec}: {str(exc).splitlines()[0]})") from None
+    value = resolved
+    for part in base.split("."):
+        value = value.get(part) if isinstance(value, dict) else None
+    if not isinstance(value, (int, float, list)) or isinstance(value, bool):
+        raise click.ClickException(f"--grid {key}={text}: {base} is {value!r} in {spec}; a scale factor needs "
+                                   "a number or a list of numbers there")
+
+    def scaled(v, f):
+        return [scaled(x, f) for x in v] if isinstance(v, list) else float(f"{v * f:.12g}")
+
+    factors = [float(x) for x in grid_values(key, text).split(",")]
+    return base, ",".join(json.dumps(scaled(value, f)) for f in factors)
+
+
+def _sweep_overrides(grid, zipped, random, n, seed, spec: str = "", overrides=()) -> list[str]:
     """The command-line sweep options as ``sweep.*`` overrides of the spec."""
-    out = [f"sweep.grid.{key}=[{values}]" for key, values in map(_key_value, grid)]
+    out = []
+    for key, values in map(_key_value, grid):
+        if key.endswith(":scale"):
+            key, values = _scaled_grid(spec, overrides, key, values)
+        else:
+            values = grid_values(key, values)
+        out.append(f"sweep.grid.{key}=[{values}]")
     out += [f"sweep.zip.{key}=[{values}]" for key, values in map(_key_value, zipped)]
     for key, text in map(_key_value, random):
         name, sep, rest = text.partition(":")
@@ -63,8 +127,10 @@ def _key_value(text: str) -> tuple[str, str]:
     help="How long to wait for the Dask scheduler before giving up with a message naming it  [default: 5].",
 )
 @set_option
-@click.option("--grid", "grid", multiple=True, metavar="KEY=V1,V2,...",
-              help="Vary KEY over the values (YAML, comma-separated; lists in brackets), as a grid level. "
+@click.option("--grid", "grid", multiple=True, metavar="KEY=V1,V2,...|LO:HI:N|log:LO:HI:N",
+              help="Vary KEY over the values (YAML, comma-separated; lists in brackets), or over N values "
+              "from LO to HI (log: evenly in log10), as a grid level; KEY:scale (with a run config) scales "
+              "KEY's value by the factors. "
               "Repeatable: the Cartesian product.")
 @click.option("--zip", "zipped", multiple=True, metavar="KEY=V1,V2,...",
               help="Vary KEY together with the other --zip keys (lists of equal length).")
@@ -100,21 +166,27 @@ def _key_value(text: str) -> tuple[str, str]:
 )
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
+@click.option("--overwrite", is_flag=True,
+              help="Replace the index of a sweep folder that holds other runs (another --grid of the same "
+              "config; without it: refused).")
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
 @console_options
 def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
-          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress) -> None:
+          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress, overwrite) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
     SPEC is a sweep spec, or a run config to vary from the command line:
 
     \b
     rbstab sweep case3.yaml --grid body.mass=30,41,52 --grid controller.variant=visco_elastic,embedded
+    rbstab sweep case3.yaml --grid body.mass=30:60:7 --grid controller.k_c:scale=log:0.5:4:12
     rbstab sweep case3.yaml --random controller.k_c=scale_uniform:[0.5,2] -n 100 --seed 1
     rbstab sweep case3.yaml --table design.csv          # one run per row
 
     Every run's config is validated before anything runs. Running the same command again
     skips the runs whose result exists and matches their config, and finishes the rest.
+    A folder holding a sweep with runs this one does not have (another --grid of the same
+    config) is refused unless --overwrite.
     --set KEY=VALUE overrides every base config; --set sweep.KEY=VALUE changes the spec
     itself (e.g. --set sweep.random.n=20). The resolved spec is written to
     OUTPUT/<name>/sweep.yaml: `rbstab sweep OUTPUT/<name>/sweep.yaml` reruns or resumes it.
@@ -133,7 +205,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         raise click.UsageError("--executor dask needs --scheduler tcp://HOST:PORT")
     if connect_timeout is not None and executor != "dask":
         raise click.UsageError("--connect-timeout is for --executor dask (the wait for its scheduler)")
-    overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed)]
+    overrides = [*overrides, *_sweep_overrides(grid, zipped, random, n_random, seed, spec, overrides)]
     if not dry_run:
         check_engine(engine)
     if get_engine(engine).gpu:
@@ -144,6 +216,8 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
         return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)
+    if not overwrite:
+        _check_folder(spec, overrides, output)
     # start local workers now: they import numpy, scipy and h5py while the runs are validated
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
@@ -159,6 +233,36 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     _say_outcome(outcome)
     if outcome.n_failed:
         raise SystemExit(min(outcome.n_failed, 100))
+
+
+def _check_folder(spec, overrides, output) -> None:
+    """Refuse, before anything runs or is written, a sweep whose folder holds a sweep with
+    runs this one does not have (another --grid, another spec of the same name): its index
+    would be replaced. The same sweep again (resume), or one that only adds runs, goes on."""
+    from pathlib import Path
+
+    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numpy, pydantic
+    from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy
+    from rbstab.sweep.table import plan_table  # heavy: numpy, pydantic
+
+    try:
+        loaded = load_spec(spec, overrides)
+    except SweepSpecError:
+        return  # said with every problem when the sweep is run
+    folder = Path(output) / loaded.name
+    if not is_sweep_folder(folder):
+        return
+    try:
+        before = set(read_index(folder)["run_id"].astype(str))
+        now = set(plan_table(loaded).ids())
+    except (OSError, ValueError, KeyError, SweepSpecError):
+        return  # a damaged folder or an invalid sweep: the sweep itself says so
+    gone = before - now
+    if gone:
+        raise click.ClickException(
+            f"{folder} holds a sweep with {len(gone)} of its {len(before)} runs not in this one (another --grid, "
+            "--zip, --random or base): not replaced; --overwrite replaces its index, -o DIR writes elsewhere, "
+            "--set sweep.name=NAME gives this sweep another folder (nothing was run)")
 
 
 def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> None:

@@ -35,7 +35,7 @@ from .sensitivity import study_error
 @study_options
 @console_options
 def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, storage,
-         vary, seed, name, overrides, engine, output, as_json) -> None:
+         vary, seed, name, overrides, engine, output, overwrite, as_json) -> None:
     """Search the --vary keys of CONFIG for the best value of --minimize/--maximize.
 
     \b
@@ -59,7 +59,7 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
         result = run_tuning(base, vary, trials=trials, minimize=minimize, maximize=maximize, subject_to=subject_to,
                             over=over, over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler,
                             seed=seed, storage=storage, output=output, name=name, engine=engine, log=console.info,
-                            command_line=command_line())
+                            command_line=command_line(), overwrite=overwrite)
     except StudyInputError as exc:
         raise study_error(exc)
     record = result.record()
@@ -68,9 +68,20 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     if result.best_trial is None:
         console.out("  no feasible trial")
     else:
-        console.out(f"  best trial {result.best_trial}: {record['best_value']}")
+        from rbstab.io.chunk import figure_attributes  # heavy: numpy
+        from rbstab.layout import CONFIG_QUANTITIES, display_units
+
+        metrics = [*minimize, *maximize]
+        values = result.best_values
+        shown = ", ".join(f"{m} {v:.6g}" + (f" {u}" if (u := display_units(figure_attributes(m)[0])) not in ("", "1")
+                                            else "") for m, v in zip(metrics, values))
+        console.out(f"  best trial {result.best_trial}: {shown}")
         for key, value in result.best_params.items():
-            console.out(f"    {key} = {value:.6g}" if isinstance(value, float) else f"    {key} = {value}")
+            q = CONFIG_QUANTITIES.get(key.split("[")[0])
+            unit = f" {q.display_units}" if q is not None and q.units not in (None, "", "1") else ""
+            console.out(f"    {key} = {value:.6g}{unit}" if isinstance(value, float) else f"    {key} = {value}")
+        for line in result.at_edge:
+            console.warn(line)
     console.out(f"  -> {result.folder}")
     if as_json:
         console.emit(record)

@@ -478,7 +478,7 @@ def sweep_dataset(spec: Any, output: str | os.PathLike = "results/sweeps", *, gr
 
 
 def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output: str | os.PathLike | None = None,
-                 **options) -> Path:
+                 *, overwrite: bool = False, **options) -> Path:
     """Build a report folder (``rbstab report``): tables, figures, the comparison with the paper.
 
     Parameters
@@ -487,14 +487,18 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
         Run files (``*.h5``), sweep folders, folders of run files, analysis files
         (``*.analysis.nc``), in any mix.
     output : path-like, optional
-        The report folder (default under ``results/reports/``); an earlier report there
-        is replaced, any other non-empty folder refused.
+        The report folder (default under ``results/reports/``); an earlier report of the
+        same inputs there is replaced, one of other inputs only with ``overwrite=True``,
+        any other non-empty folder refused.
+    overwrite : bool
+        Replace an earlier report of other inputs.
     **options
         Fields of :class:`rbstab.report.ReportOptions` (``formats``, ``metrics``,
         ``settle``, ``title``, ``figure_formats``, ``dpi``, ``animation_frames``, ``jobs``).
         With ``jobs`` > 1 (or None: one per CPU) the figures are drawn in that many
         processes, and a script that calls this needs ``if __name__ == "__main__":``, as
-        for :func:`sweep_dataset`; the default ``jobs=1`` draws them in this process.
+        for :func:`sweep_dataset` (without it: ``ExecutorError`` before anything is
+        written); the default ``jobs=1`` draws them in this process.
 
     Returns
     -------
@@ -516,5 +520,9 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
     unknown = sorted(set(options) - set(known))
     if unknown:
         raise TypeError(f"write_report: unknown option {', '.join(unknown)}; expected some of {', '.join(known)}")
+    if options.get("jobs", 1) != 1:
+        from .sweep.executors import refuse_at_script_top_level  # heavy: multiprocessing
+
+        refuse_at_script_top_level("a report")  # before the folder is touched
     paths = [inputs] if isinstance(inputs, (str, os.PathLike)) else list(inputs)
-    return build_report(paths, output, ReportOptions(**options))
+    return build_report(paths, output, ReportOptions(**options), overwrite=overwrite)

@@ -37,6 +37,8 @@ __all__ = [
     "SUMMARY_MAX_SAMPLES",
     "summary_stride",
     "display_units",
+    "CONFIG_QUANTITIES",
+    "parameter_attributes",
     "StateLayout",
     "FULL_BODY",
     "EMBEDDED",
@@ -128,6 +130,63 @@ def _in_order(quantities: tuple[Quantity, ...]) -> tuple[Quantity, ...]:
         out.append(replace(q, offset=offset))
         offset += q.size
     return tuple(out)
+
+
+# -- the config keys a sweep varies (its parameters) ---------------------------------------------
+#: Every numeric config key a sweep or a study can vary, by dotted key: its symbol, CF units
+#: and long name (the parameter coordinates of :func:`rbstab.open_sweep` carry them).
+CONFIG_QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
+    Quantity("body.mass", "m", "kg", "mass m of the body"),
+    Quantity("body.inertia", "J", "kg m2", "inertia J about the centre of mass (body frame)"),
+    Quantity("body.attachment_point", "R", "m", "attachment point R of C (body frame)"),
+    Quantity("body.gravity", "g", "m s-2", "gravitational acceleration g (inertial frame)"),
+    Quantity("controller.k_t", "K_t", "N m-1", "translational stiffness K_t"),
+    Quantity("controller.l_t", "L_t", "N s m-1", "translational damping L_t"),
+    Quantity("controller.k_r", "K_r", "N m rad-1", "rotational stiffness K_r"),
+    Quantity("controller.l_r", "L_r", "N m s rad-1", "rotational damping L_r"),
+    Quantity("controller.k_c", "K_c", "N m-1", "constraint stiffness K_c"),
+    Quantity("controller.l_c", "L_c", "N s m-1", "constraint damping L_c"),
+    Quantity("controller.k_d", "K_d", "N m-1", "embedded controller stiffness K_d"),
+    Quantity("controller.l_d", "L_d", "N s m-1", "embedded controller damping L_d"),
+    Quantity("controller.k_s", "K_s", "N", "sign-law force bound K_s"),
+    Quantity("controller.boundary_layer", "eps", "m", "boundary layer of the sign law"),
+    Quantity("initial_state.theta", "Theta(0)", "rad", "initial Euler angles Theta(0)"),
+    Quantity("initial_state.omega", "Omega(0)", "rad s-1", "initial angular velocity Omega(0) (body frame)"),
+    Quantity("initial_state.x", "X(0)", "m", "initial centre-of-mass position X(0)"),
+    Quantity("initial_state.v", "V(0)", "m s-1", "initial centre-of-mass velocity V(0)"),
+    Quantity("initial_state.d", "D(0)", "m", "initial embedded controller state D(0)"),
+    Quantity("simulation.t_end", "t_end", "s", "end time of the simulation"),
+    Quantity("simulation.n_samples", "n", "1", "number of output samples"),
+    Quantity("simulation.rtol", "rtol", "1", "relative tolerance of the solver"),
+    Quantity("simulation.atol", "atol", "1", "absolute tolerance of the solver"),
+    Quantity("simulation.max_step", "h_max", "s", "largest step of the solver"),
+    Quantity("simulation.gimbal_margin", "margin", "rad", "gimbal-lock margin"),
+    Quantity("simulation.max_steps", "steps", "1", "most steps of a run"),
+    Quantity("simulation.max_wall_time", "t_wall", "s", "wall-time limit of a run"),
+)}
+
+
+def parameter_attributes(entry: str) -> dict[str, str]:
+    """``units``, ``long_name`` and ``config_key`` (the entry itself, as a store file's
+    coordinates give it) of a sweep parameter, from its dotted entry (``controller.k_c.2``,
+    ``body.mass:scale``, ``body.inertia.0.0``): the config key's row of
+    :data:`CONFIG_QUANTITIES`, the entry's indices in the long name (``constraint stiffness
+    K_c [2]``); a scale factor is dimensionless (``"1"``). A key not in the table has no
+    units, its key as long name."""
+    scale = entry.endswith(":scale")
+    key = entry.removesuffix(":scale")
+    parts = key.split(".")
+    indices = []
+    while parts and parts[-1].isdigit():
+        indices.insert(0, parts.pop())
+    config_key = ".".join(parts)
+    q = CONFIG_QUANTITIES.get(config_key)
+    long_name = (q.long_name if q is not None else config_key) + (f" [{', '.join(indices)}]" if indices else "")
+    attrs = {"long_name": f"scale factor of the {long_name}" if scale else long_name, "config_key": entry}
+    units = "1" if scale else (q.units if q is not None else None)
+    if units:
+        attrs["units"] = units
+    return attrs
 
 
 # -- the outputs of a run, in the order of a row of the outputs kernel -------------------------

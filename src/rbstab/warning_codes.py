@@ -72,6 +72,15 @@ WARNING_CODES: dict[str, WarningCode] = {
             "left in place and not in the index: runs of an earlier version of the spec, or files copied "
             "there; remove them, or sweep into another folder (-o)",
         ),
+        WarningCode(
+            "W005", "initial_state.theta", "an initial Euler angle beyond 2 pi rad (degrees typed as radians?)",
+            "angles are in radians: 45 rad is more than seven turns; write 0.785 for 45 degrees "
+            "(the run goes on with the value as given)",
+        ),
+        WarningCode(
+            "W006", "rbstab tune", "a tuned value lies within 1 % of its search range's edge",
+            "the optimum may lie beyond the range searched: widen that --vary range and tune again",
+        ),
     )
 }
 

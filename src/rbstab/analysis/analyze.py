@@ -243,6 +243,11 @@ def analyze(
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
+    if basin and jobs > 1:
+        from ..sweep.executors import refuse_at_script_top_level  # heavy: multiprocessing
+
+        refuse_at_script_top_level("a basin map")  # before anything is computed
+
     if isinstance(config, (str, os.PathLike)):
         from ..config import load_config  # heavy: pydantic (the validator)
 

@@ -348,7 +348,7 @@ def _execute(items: list, ratio: float, jobs: int):
 
     from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
 
-    with LocalExecutor(jobs) as executor:
+    with LocalExecutor(jobs, task="a basin map") as executor:
         executor.plan(len(items))
         for block, rows, exc in executor.imap_unordered(_run_block, _blocks(items, jobs), ratio):
             if exc is not None:  # a worker that died: its points are failed runs, with the reason

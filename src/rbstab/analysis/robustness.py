@@ -152,6 +152,11 @@ class RobustnessGroup:
         Per varied parameter, strongest first (empty when every run is stable, or none is).
     parameters : list of str
         The parameters that vary in the group.
+    t_end_hint : dict or None
+        When runs reached t_end without converging and the linearisation at the
+        equilibrium of one of them (``run_id``) is asymptotically stable: ``t_end`` [s] of
+        that run, ``tau`` [s] (its slowest mode's time constant) and ``settling_time`` [s]
+        (the slowest mode alone to bring v down by the ratio): t_end may be too short.
     """
 
     base: str
@@ -162,6 +167,7 @@ class RobustnessGroup:
     interval: tuple[float, float]
     separations: list[Separation]
     parameters: list[str]
+    t_end_hint: dict | None = None
 
     @property
     def fraction(self) -> float:
@@ -205,6 +211,8 @@ class Robustness:
                 {"base": g.base, "n_runs": g.n_runs, "n_stable": g.n_stable, "n_excluded": g.n_excluded,
                  "n_disagree": g.n_disagree,
                  "stable_fraction": g.fraction if g.n_runs else None, "interval": list(g.interval),
+                 "n_converged": g.n_stable, "converged_fraction": g.fraction if g.n_runs else None,
+                 "t_end_hint": g.t_end_hint,
                  "separations": [{"parameter": s.parameter, "auc": s.auc, "threshold": s.threshold,
                                   "stable_side": s.stable_side, "balanced_accuracy": s.balanced_accuracy}
                                  for s in g.separations]}
@@ -220,6 +228,27 @@ class Robustness:
         """(coordinates, variables, global attributes) of its file
         (:func:`~rbstab.analysis.dataset.robustness_content`)."""
         return robustness_content(self, command_line)
+
+
+def _t_end_hint(folder, run_id: str, ratio: float) -> dict | None:
+    """:attr:`RobustnessGroup.t_end_hint` from run ``run_id`` (reached t_end, not converged):
+    its configuration linearised at its equilibrium; None unless asymptotically stable."""
+    import math
+
+    from ..config import config_from_mapping
+    from ..sweep.folder import resolved_config
+    from .linearise import linearise
+
+    try:
+        config = config_from_mapping(resolved_config(folder, run_id))
+        lin = linearise(config.make_variant())
+    except Exception:  # noqa: BLE001 - a hint only: a run that cannot be rebuilt gives none
+        return None
+    if lin.verdict != "asymptotically stable":
+        return None
+    tau = float(lin.slowest_time_constant)
+    return {"run_id": run_id, "t_end": float(config.simulation.t_end), "tau": tau,
+            "settling_time": 0.5 * tau * math.log(1.0 / ratio)}
 
 
 def _numeric_parameters(ds) -> list[str]:
@@ -263,12 +292,15 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
         varied = [p for p in parameters if np.unique(values[p][ok]).size > 1]
         found = [separation(p, values[p][ok], stable[ok]) for p in varied]
         n, k = int(ok.sum()), int(stable[ok].sum())
+        reached = np.flatnonzero(member & (status == "success") & ~stable)
+        hint = _t_end_hint(path, str(ds["run_id"].values[reached[0]]), ratio) if reached.size else None
         groups.append(RobustnessGroup(
             base=str(name), n_runs=n, n_stable=k, n_excluded=int((member & ~has_result).sum()),
             n_disagree=int((member & disagree).sum()),
             interval=wilson_interval(k, n, confidence),
             separations=sorted((s for s in found if s is not None), key=lambda s: -s.strength),
             parameters=varied,
+            t_end_hint=hint,
         ))
     runs = {"base": base[has_result], "stable": stable[has_result],
             "values": {p: v[has_result] for p, v in values.items()}}

@@ -23,10 +23,18 @@ def format_eigenvalue(s: complex) -> str:
     return f"{_g(s.real)} {'+' if s.imag > 0 else '-'} {_g(abs(s.imag))}i"
 
 
+#: Entries of a state below this [rad, m, ...] print as 0: the round-off of an equilibrium
+#: found by a root finder to xtol 1e-13 (a solved 7.4e-23 is 0 to that tolerance).
+ROUND_OFF_STATE = 1e-12
+
+
 def format_state(layout, y: np.ndarray) -> str:
-    """``theta (0, 0, 0) rad, omega (0, 0, 0) rad s-1, ...``."""
+    """``theta (0, 0, 0) rad, omega (0, 0, 0) rad s-1, ...`` (entries below
+    :data:`ROUND_OFF_STATE` as 0)."""
     parts = []
-    for block, values in layout.split(np.asarray(y, dtype=float)).items():
+    y = np.asarray(y, dtype=float)
+    y = np.where(np.abs(y) < ROUND_OFF_STATE, 0.0, y)
+    for block, values in layout.split(y).items():
         parts.append(f"{block} ({', '.join(_g(v, 6) for v in values + 0.0)}) {BLOCK_UNITS[block]}")
     return ", ".join(parts)
 
@@ -83,11 +91,13 @@ def _basin_lines(analysis) -> list[str]:
     for message, n in b.messages.items():
         lines.append(f"    {n} failed: {message}")
     inside = analysis.basin_inside()
-    if inside is not None:
+    c = analysis.certificate
+    if inside is not None and c.positive_definite and np.isfinite(c.sublevel) and c.sublevel > 0:
         total = sum(inside.values())
         verdict = "all converged" if inside["converged"] == total else \
             ", ".join(f"{n} {k}" for k, n in inside.items()) + " (the estimate is NOT inside the basin map)"
-        lines.append(f"    inside the sublevel estimate: {total} points, {verdict}")
+        lines.append(f"    inside the sublevel estimate: {total} points, {verdict}" if total else
+                     "    inside the sublevel estimate: no point of the basin map (the estimate lies between its points)")
     return lines
 
 
@@ -110,22 +120,28 @@ def describe(analysis) -> list[str]:
 
 def describe_robustness(result) -> list[str]:
     """Lines summarising a :class:`~rbstab.analysis.robustness.Robustness`."""
-    lines = [f"robustness of sweep {result.sweep} ({result.folder}); stable: the run reached t_end with "
-             f"|v(t_end)| <= {_g(result.ratio)} |v(0)|"]
+    lines = [f"robustness of sweep {result.sweep} ({result.folder}); converged by t_end: the run reached t_end "
+             f"with |v(t_end)| <= {_g(result.ratio)} |v(0)| (stability as seen over t_end, not a proof)"]
     for g in result.groups:
         lo, hi = g.interval
         excluded = f", {g.n_excluded} without a result left out" if g.n_excluded else ""
         if g.n_disagree:
             excluded += (f"; {g.n_disagree} differ from the sweep's 'converged' (v(t_end) < 0: they fell below "
                          "the equilibrium's v, which is then not its minimum)")
-        lines.append(f"  {g.base}: {g.n_stable} of {g.n_runs} stable = {g.fraction:.1%} "
+        lines.append(f"  {g.base}: {g.n_stable} of {g.n_runs} converged by t_end = {g.fraction:.1%} "
                      f"({result.confidence:.0%} Wilson interval {lo:.1%} - {hi:.1%}){excluded}")
+        h = g.t_end_hint
+        if h is not None:
+            lines.append(f"    runs that reached t_end without converging are not necessarily unstable: the linearisation of "
+                         f"{h['run_id']} is asymptotically stable, its slowest mode (tau = {_g(h['tau'])} s) alone "
+                         f"needs ~{_g(h['settling_time'], 3)} s to converge; t_end = {_g(h['t_end'])} s may be too short")
         if not g.separations:
-            reason = "every run is stable" if g.n_stable == g.n_runs else "no run is stable" \
+            reason = "every run converged" if g.n_stable == g.n_runs else "no run converged" \
                 if g.n_stable == 0 else "no parameter varies"
             lines.append(f"    no separating parameter: {reason}")
         for s in g.separations:
-            lines.append(f"    {s.parameter}: AUC {s.auc:.3f}; stable {s.stable_side} {_g(s.threshold, 6)} "
-                         f"(balanced accuracy {s.balanced_accuracy:.1%}); stable {_g(s.stable_range[0])} .. "
-                         f"{_g(s.stable_range[1])}, unstable {_g(s.unstable_range[0])} .. {_g(s.unstable_range[1])}")
+            lines.append(f"    {s.parameter}: AUC {s.auc:.3f}; converged {s.stable_side} {_g(s.threshold, 6)} "
+                         f"(balanced accuracy {s.balanced_accuracy:.1%}); converged {_g(s.stable_range[0])} .. "
+                         f"{_g(s.stable_range[1])}, not converged {_g(s.unstable_range[0])} .. "
+                         f"{_g(s.unstable_range[1])}")
     return lines

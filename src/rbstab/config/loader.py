@@ -16,7 +16,7 @@ from pydantic import ValidationError
 from ..model import Gains, RigidBody
 from ..variants import VARIANTS, Variant
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
-from .physics import inertia_warnings, semidefinite_notes, unheld_weight
+from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_weight
 from .paths import apply_overrides, plain_tree
 from .schema import (
     GAIN_NAMES,
@@ -218,7 +218,7 @@ def _build(
         if math.isinf(getattr(sim, key)):
             dump["simulation"][key] = None
     as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
-    found_warnings = _emit_notes(body, as_written, source, stacklevel=4)
+    found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
     return RunConfig(
         name=run.name,
         variant=ctrl.variant,
@@ -235,12 +235,13 @@ def _build(
 
 
 def _emit_notes(body: RigidBody, gains_as_written: Mapping[str, Any], source: str | None, *,
-                stacklevel: int) -> tuple[str, ...]:
+                stacklevel: int, theta: Any = (0.0, 0.0, 0.0)) -> tuple[str, ...]:
     """Warn of the physical-plausibility problems of ``body`` and the singular gains of
     ``gains_as_written`` (the gains the variant uses, as validated); returns their lines.
     ``stacklevel``: that of ``warnings.warn``, naming the caller of the public function."""
     notes = [(m, PhysicalPlausibilityWarning) for m in inertia_warnings(body.inertia)]
     notes += [(m, SemiDefiniteGainWarning) for m in semidefinite_notes(gains_as_written)]
+    notes += [(m, PhysicalPlausibilityWarning) for m in angle_warnings(theta)]
     for message, category in notes:
         warnings.warn(f"{source}: {message}" if source else message, category, stacklevel=stacklevel)
     return tuple(message for message, _ in notes)

@@ -1,6 +1,7 @@
 """Physical checks of a configuration whose values are each valid on their own.
 
 - :func:`inertia_warnings`: an inertia no real body has (a warning, the equations hold).
+- :func:`angle_warnings`: initial Euler angles beyond one turn (degrees typed as radians?).
 - :func:`semidefinite_notes`: gains that are positive semi-definite but singular (a zero
   gain included): valid physics, but v is then not a strict Lyapunov function (a note).
 - :func:`unheld_weight`: with gravity, stiffnesses that leave a direction in which nothing
@@ -12,6 +13,7 @@ positive semi-definite (:mod:`rbstab.config.schema`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,7 +21,7 @@ import numpy as np
 
 from ..warning_codes import coded
 
-__all__ = ["inertia_warnings", "semidefinite_notes", "unheld_weight", "SINGULAR_RTOL"]
+__all__ = ["inertia_warnings", "angle_warnings", "semidefinite_notes", "unheld_weight", "SINGULAR_RTOL"]
 
 #: An eigenvalue at most this times the largest eigenvalue magnitude counts as zero (also
 #: down to minus this: rounding of a singular matrix written with decimals).
@@ -60,6 +62,16 @@ def inertia_warnings(inertia: np.ndarray) -> list[str]:
                 f"triangle inequality (j{i + 1} = {j[i]:g} > {others[0]:g} + {others[1]:g}); no real body has them",
             )]
     return []
+
+
+def angle_warnings(theta) -> list[str]:
+    """Warning lines (code ``W005``) for initial Euler angles beyond one turn (2 pi rad),
+    most often degrees typed as radians (``theta: [45, 0, 0]``)."""
+    big = [(i, float(a)) for i, a in enumerate(np.asarray(theta, dtype=float).ravel()) if abs(a) > 2 * math.pi]
+    if not big:
+        return []
+    which = ", ".join(f"theta[{i}] = {a:g} rad ({a / (2 * math.pi):.3g} turns)" for i, a in big)
+    return [coded("W005", f"initial_state.theta: {which}; the angles are in radians (degrees typed as radians?)")]
 
 
 def _null_space(matrix: np.ndarray) -> np.ndarray:

@@ -201,13 +201,26 @@ def report_title(inputs: ReportInputs, analyses: Sequence[Path] = (), studies: S
     return "rbstab report: " + ("; ".join(parts) or "no inputs")
 
 
-def _check_output(target: Path) -> None:
+def _check_output(target: Path, paths: Sequence[Path] = (), overwrite: bool = True) -> None:
     if target.exists() and not target.is_dir():
         raise ReportError(f"{target}: exists and is not a folder")
     if target.is_dir() and any(target.iterdir()) and not (target / MANIFEST).is_file():
         raise ReportError(
             f"{target}: folder exists, is not empty and is not an rbstab report (no {MANIFEST}); "
             "choose another -o"
+        )
+    if overwrite or not (target / MANIFEST).is_file():
+        return
+    try:
+        before = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("inputs") or []
+    except (OSError, ValueError, AttributeError):
+        before = []
+    now = sorted(str(p) for p in paths)
+    if sorted(map(str, before)) != now:
+        shown = ", ".join(before[:3]) + (f" and {len(before) - 3} more" if len(before) > 3 else "")
+        raise ReportError(
+            f"{target} holds a report of other inputs ({shown or 'unknown'}): not replaced; --overwrite "
+            "(overwrite=True) replaces it, -o DIR writes elsewhere"
         )
 
 
@@ -227,12 +240,17 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
     s = Section("Runs", "runs")
     s.blocks.append(
         "One row per run; values read back from the result files (summary attributes written by "
-        "the run). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
+        "the run). status success: the solver reached t_end; converged: besides, v(t_end) <= 0.001 v(0) "
+        "(not converged by t_end: still moving). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
     )
+    from ..diagnostics import convergence_word
+
     s.blocks.append(Table(
         "Runs: identity, solver statistics, status",
-        ["run", "file", "variant", "status", "t_final [s]", "method", "nfev", "njev", "nlu", "wall time [s]", "message"],
-        [[r["run"], Path(r["file"]).name, r["variant"], r["status"], _f(r["t_final"]), str(r["method"]),
+        ["run", "file", "variant", "status", "converged", "t_final [s]", "method", "nfev", "njev", "nlu",
+         "wall time [s]", "message"],
+        [[r["run"], Path(r["file"]).name, r["variant"], r["status"],
+          convergence_word(r["status"], r["lyapunov_initial"], r["lyapunov_final"]), _f(r["t_final"]), str(r["method"]),
           _f(r["nfev"]), _f(r["njev"]), _f(r["nlu"]), _f(r["wall_time"], 3), r["message"] if r["status"] != "success" else ""]
          for r in rows],
     ))
@@ -400,6 +418,8 @@ def build_report(
     inputs: Sequence[str | os.PathLike],
     output: str | os.PathLike | None = None,
     options: ReportOptions | None = None,
+    *,
+    overwrite: bool = False,
 ) -> Path:
     """Build a report folder from run files and sweep folders.
 
@@ -411,8 +431,10 @@ def build_report(
     output : path-like, optional
         Report folder; default ``results/reports/<name>``, ``<name>`` made of the inputs'
         names (:func:`default_report_name`). If it exists it must be empty or an earlier
-        report, which is replaced.
+        report of the same inputs, which is replaced (of other inputs: with ``overwrite``).
     options : ReportOptions, optional
+    overwrite : bool
+        Replace an earlier report of other inputs (else refused: ReportError).
 
     Returns
     -------
@@ -442,7 +464,7 @@ def build_report(
     data = load_inputs(inputs) if inputs or not (analyses or studies) else ReportInputs([], [], [])
     data.paths.extend(p.resolve() for p in [*analyses, *studies])
     target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data, given)
-    _check_output(target)
+    _check_output(target, data.paths, overwrite)
 
     target.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent))

@@ -205,9 +205,24 @@ _MD_ESCAPES = str.maketrans({
 _MD_LINK = re.compile(r"\](?=[(\[:])")
 
 
+#: What markdown would read as the start of raw HTML (a tag, a comment, a declaration) or
+#: as an entity: only then are ``&``, ``<``, ``>`` written as entities; elsewhere (``v <=
+#: 0.001 v(0)``, ``K_r > m g L``, ``it's``) the text stays plain, as a reader of the file
+#: expects.
+_MD_HTML = re.compile(r"<[A-Za-z/!?]|&(#\w+|[A-Za-z]\w*);")
+_MD_PLAIN_ESCAPES = str.maketrans({
+    "\\": "\\\\", "`": "\\`", "|": "\\|", "*": "\\*", "\n": " ", "\r": " ",
+})
+
+
 def _md_escape(text: str) -> str:
-    """``text`` as literal markdown text (:data:`_MD_ESCAPES`, :data:`_MD_LINK`)."""
-    return _MD_LINK.sub(r"\\]", str(text).translate(_MD_ESCAPES))
+    """``text`` as literal markdown text (:data:`_MD_ESCAPES`, :data:`_MD_LINK`): plain
+    where it holds nothing markdown would read as HTML (:data:`_MD_HTML`)."""
+    text = str(text)
+    if _MD_HTML.search(text):
+        return _MD_LINK.sub(r"\\]", text.translate(_MD_ESCAPES))
+    text = _MD_LINK.sub(r"\\]", text.translate(_MD_PLAIN_ESCAPES))
+    return "\\" + text if text.startswith(">") else text
 
 
 def _md_table(table: Table) -> str:

@@ -84,6 +84,12 @@ def _sensitivity_section(ds, out: FigureWriter) -> Section:
         "varied: " + "; ".join(f"{k} {json.dumps(v)}" for k, v in vary.items()),
         f"file: {ds.attrs['path']}",
     ])
+    notes = [f"{metric}: {note}" for metric, note in zip(ds["metric"].values.tolist(),
+                                                         ds["note"].values.tolist() if "note" in ds else [])
+             if note]
+    if notes:
+        s.blocks.append([f"Warning: {n} (hatched bars without fill in the figure, (!) in the table)"
+                         for n in notes])
     s.blocks.append(_sensitivity_figure(ds, out, name))
     s.blocks.append(_sensitivity_table(ds))
     return s
@@ -97,13 +103,17 @@ def _sensitivity_table(ds) -> Table:
             cells = [metric, factor]
             for k in keys:
                 half = ds[f"{k}_conf"].values[m, i] if f"{k}_conf" in ds else None
-                cells.append(_f(ds[k].values[m, i]) + (f" ± {_f(half, 2)}" if half is not None else ""))
+                flag = f"{k}_unreliable" in ds and bool(ds[f"{k}_unreliable"].values[m, i])
+                cells.append(_f(ds[k].values[m, i]) + (f" ± {_f(half, 2)}" if half is not None else "")
+                             + (" (!)" if flag else ""))
             rows.append(cells)
     return Table("Indices", ["metric", "factor", *keys], rows)
 
 
 def _sensitivity_figure(ds, out: FigureWriter, name: str) -> FigureFile:
     from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
+
+    from ..studies.sensitivity import RELIABLE_RANGE
 
     sobol = ds.attrs["method"] == "sobol"
     metrics = ds["metric"].values.tolist()
@@ -116,16 +126,28 @@ def _sensitivity_figure(ds, out: FigureWriter, name: str) -> FigureFile:
     bars = [("S1", "first order", -0.2), ("ST", "total", 0.2)] if sobol else [("mu_star", "mu*", -0.2),
                                                                               ("sigma", "sigma", 0.2)]
     for ax, (m, metric) in zip(axes, enumerate(metrics)):
-        for k, label, shift in bars:
+        for c, (k, label, shift) in enumerate(bars):
             err = ds[f"{k}_conf"].values[m] if f"{k}_conf" in ds else None
-            ax.barh(y + shift, ds[k].values[m], height=0.38, xerr=err, capsize=2, label=label)
+            values = np.asarray(ds[k].values[m], dtype=float)
+            bad = np.asarray(ds[f"{k}_unreliable"].values[m], dtype=bool) if f"{k}_unreliable" in ds else \
+                np.zeros(len(factors), dtype=bool)
+            color = f"C{c}"
+            ax.barh((y + shift)[~bad], values[~bad], height=0.38, xerr=None if err is None else err[~bad],
+                    capsize=2, label=label, color=color)
+            if bad.any():  # unreliable: an empty hatched bar, clipped to the range of an index
+                lo, hi = RELIABLE_RANGE
+                ax.barh((y + shift)[bad], np.clip(values[bad], lo, hi), height=0.38, fill=False, hatch="///",
+                        edgecolor=color, label=f"{label} (unreliable)")
         ax.set_yticks(y, factors, fontsize=7)
         ax.invert_yaxis()
         units = units_text(str(ds["units"].values[m]))
         ax.set_title(metric + (f" [{units}]" if units and not sobol else ""), fontsize=9)
         ax.grid(axis="x", alpha=0.3)
         if sobol:
-            ax.set_xlim(min(0.0, ax.get_xlim()[0]), max(1.0, ax.get_xlim()[1]))
+            if "S1_unreliable" in ds and (ds["S1_unreliable"].values[m].any() or ds["ST_unreliable"].values[m].any()):
+                ax.set_xlim(*RELIABLE_RANGE)  # an unreliable index's interval would set the scale
+            else:
+                ax.set_xlim(min(0.0, ax.get_xlim()[0]), max(1.0, ax.get_xlim()[1]))
     for ax in axes[len(metrics):]:
         ax.set_visible(False)
     axes[0].legend(fontsize=7)
@@ -133,7 +155,8 @@ def _sensitivity_figure(ds, out: FigureWriter, name: str) -> FigureFile:
             "Morris mu* (mean absolute elementary effect, per unit of the factor's range) and sigma")
     return out.save(fig, f"sensitivity_{safe_filename(name)}", f"{name}: {what}",
                     f"One panel per metric: {what} of each factor, with the bootstrap confidence intervals "
-                    "as error bars.")
+                    "as error bars; an index flagged unreliable (outside [-0.05, 1.05] or its interval wider "
+                    "than 0.5) is an empty hatched bar without error bar, clipped to that range.")
 
 
 # -- tuning ----------------------------------------------------------------------------------------

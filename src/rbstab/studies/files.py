@@ -11,7 +11,7 @@ import xarray as xr
 
 from ..io.atomic import atomic_path
 
-__all__ = ["study_kind", "read_study_file", "write_study_file", "KINDS"]
+__all__ = ["study_kind", "read_study_file", "write_study_file", "check_same_inputs", "KINDS"]
 
 #: Study kind -> its file in the study folder.
 KINDS = {"sensitivity": "sensitivity.nc", "tuning": "tuning.nc"}
@@ -70,3 +70,32 @@ def write_study_file(ds, path: str | os.PathLike) -> Path:
         out.attrs = {k: v for k, v in ds.attrs.items() if k != "path"}
         out.to_netcdf(tmp, engine="h5netcdf")
     return Path(path)
+
+
+def check_same_inputs(path: str | os.PathLike, expected: dict, *, overwrite: bool = False) -> None:
+    """Refuse (:class:`rbstab.studies.StudyInputError`) to replace the study file ``path``
+    when its attributes differ from ``expected`` (attribute -> the new study's value): a
+    study of other inputs under the same name; the same inputs again resume it.
+    Nothing is refused with ``overwrite``, or when there is no readable file."""
+    from .design import StudyInputError
+
+    path = Path(path)
+    if overwrite or not path.is_file():
+        return
+    try:
+        with h5py.File(path, "r") as f:
+            stored = {k: f.attrs.get(k) for k in expected}
+    except OSError:
+        return
+    def text(value) -> str:  # an attribute as netCDF keeps it (bytes, a 1-element array) as text
+        if hasattr(value, "tolist"):
+            value = value.tolist()
+        if isinstance(value, list) and len(value) == 1:
+            value = value[0]
+        return value.decode() if isinstance(value, bytes) else str(value)
+
+    differ = [k for k, v in expected.items() if stored[k] is not None and text(stored[k]) != str(v)]
+    if differ:
+        raise StudyInputError([f"{path.parent} holds a study of other inputs ({', '.join(differ)} differ): not "
+                               "replaced; --overwrite (overwrite=True) replaces it, -o DIR writes elsewhere, "
+                               "--name NAME gives this study another folder (nothing was run)"])

@@ -55,10 +55,11 @@ from .design import (
     study_folder,
     vary_mapping,
 )
-from .files import KINDS, read_study_file, write_study_file
+from .files import KINDS, check_same_inputs, read_study_file, write_study_file
 
 __all__ = ["METHODS", "DEFAULT_METRICS", "FILE", "SWEEP_FOLDER", "SensitivityDesign", "plan_sensitivity",
-           "analyze_results", "sensitivity_analysis", "read_sensitivity", "metric_records"]
+           "analyze_results", "sensitivity_analysis", "read_sensitivity", "metric_records", "TRANSFORMS",
+           "split_transform", "RELIABLE_RANGE", "MAX_INTERVAL", "HEAVY_TAIL_DECADES"]
 
 #: Sensitivity methods.
 METHODS = ("sobol", "morris")
@@ -72,6 +73,20 @@ SWEEP_FOLDER = "sweep"
 
 #: Levels of the Morris grid.
 MORRIS_LEVELS = 4
+
+#: Transforms of a metric before its indices (``--metric log10:lyapunov_final``): the
+#: decimal logarithm (a positive metric spread over decades; a value <= 0 has none) and the
+#: rank among the runs (any metric; Sobol' indices of the ranks).
+TRANSFORMS = ("log10", "rank")
+
+#: A Sobol' index whose value lies outside this range (an index lies in [0, 1]: outside it
+#: by more than 0.05 the estimator has failed, not sampled), or whose confidence interval
+#: is wider than :data:`MAX_INTERVAL` (half the range), is flagged unreliable.
+RELIABLE_RANGE = (-0.05, 1.05)
+MAX_INTERVAL = 0.5
+#: A positive metric whose largest value over the runs is more than 10 ** this times its
+#: smallest is heavy-tailed for Saltelli's estimators: a few runs hold its variance.
+HEAVY_TAIL_DECADES = 3.0
 
 #: Indices of each method: variable -> long name.
 INDICES = {
@@ -156,8 +171,15 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
     if not isinstance(seed, (int, np.integer)) or seed < 0:
         errors.append(f"--seed {seed!r}: expected an integer >= 0")
     metrics = tuple(metrics or DEFAULT_METRICS)
+    bare = []
+    for metric in metrics:
+        transform, name = split_transform(metric)
+        if transform is not None and transform not in TRANSFORMS:
+            errors.append(f"--metric {metric!r}: unknown transform {transform!r}; expected NAME, "
+                          + " or ".join(f"{t}:NAME" for t in TRANSFORMS))
+        bare.append(name)
     varied: list[Varied] = []
-    for check in (lambda: check_metrics(metrics), lambda: varied.extend(parse_vary(vary, config.resolved))):
+    for check in (lambda: check_metrics(bare), lambda: varied.extend(parse_vary(vary, config.resolved))):
         try:
             check()
         except StudyInputError as exc:
@@ -174,6 +196,70 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
         i += len(v.factors)
         columns.update({c: values[:, j] for j, c in enumerate(v.columns)})
     return SensitivityDesign(config, varied, method, int(n), int(seed), metrics, unit, pd.DataFrame(columns))
+
+
+def split_transform(metric: str) -> tuple[str | None, str]:
+    """``"log10:lyapunov_final"`` -> ``("log10", "lyapunov_final")``; ``(None, metric)``
+    without a transform."""
+    transform, sep, name = metric.partition(":")
+    return (transform, name) if sep else (None, metric)
+
+
+def _columns(metrics: Sequence[str], available: Sequence[str]) -> list[tuple[str, str, str | None]]:
+    """(label, column, transform) of every metric's columns (3-vectors per component):
+    ``("log10:max_abs_constraint_error_x", "max_abs_constraint_error_x", "log10")``."""
+    out: list[tuple[str, str, str | None]] = []
+    for metric in metrics:
+        transform, name = split_transform(metric)
+        for column in expand_metrics([name], available):
+            label = f"{transform}:{column}" if transform else column
+            if label not in [o[0] for o in out]:
+                out.append((label, column, transform))
+    return out
+
+
+def _transformed(y: np.ndarray, transform: str | None) -> np.ndarray:
+    """``y`` through ``transform``: log10 (NaN where y <= 0: counted as without a value),
+    rank (average ranks of ties, the non-finite values kept so)."""
+    if transform == "log10":
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(y > 0, np.log10(np.where(y > 0, y, 1.0)), np.nan)
+    if transform == "rank":
+        from scipy.stats import rankdata  # heavy: scipy
+
+        return np.where(np.isfinite(y), rankdata(np.where(np.isfinite(y), y, 0.0)), y)
+    return y
+
+
+def decades(y: np.ndarray) -> float:
+    """Decades a positive metric spans over the runs (log10 of largest / smallest); NaN
+    for a metric with a value <= 0 or none finite."""
+    y = y[np.isfinite(y)]
+    if y.size == 0 or np.any(y <= 0):
+        return float("nan")
+    return float(np.log10(y.max() / y.min()))
+
+
+def _flags(found: dict, spread: float, n: int) -> tuple[dict[str, np.ndarray], str]:
+    """Per Sobol' index (``S1``, ``ST``) whether it is unreliable (its value outside
+    :data:`RELIABLE_RANGE` or its interval wider than :data:`MAX_INTERVAL`, from SALib's
+    values and interval half-widths), and the reason in words (empty when none is)."""
+    lo, hi = RELIABLE_RANGE
+    flags = {}
+    for k in ("S1", "ST"):
+        value = np.asarray(found[k], dtype=float)
+        half = np.asarray(found[f"{k}_conf"], dtype=float)
+        with np.errstate(invalid="ignore"):
+            flags[k] = ~((value >= lo) & (value <= hi) & (2 * half <= MAX_INTERVAL))
+    if not any(f.any() for f in flags.values()):
+        return flags, ""
+    what = f"value outside [{lo:g}, {hi:g}] or confidence interval wider than {MAX_INTERVAL:g}"
+    if np.isfinite(spread) and spread > HEAVY_TAIL_DECADES:
+        why = (f"heavy tails: the metric spans {spread:.1f} decades over the runs, a few runs hold its variance; "
+               "use its log10 or rank (--metric log10:NAME or rank:NAME), or more samples")
+    else:
+        why = f"too few samples for this metric: more samples (-n {4 * n}) narrow the intervals"
+    return flags, f"unreliable indices ({what}): {why}"
 
 
 def _sample(problem: dict, n: int, method: str, seed: int) -> np.ndarray:
@@ -196,23 +282,34 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
     -------
     xarray.Dataset
         Dims ``metric`` x ``factor``: the method's indices (:data:`INDICES`) with
-        ``long_name``; per metric ``mean``, ``std`` (its units) and ``n_nonfinite`` (runs
-        whose value is NaN or infinite, e.g. failed runs: the metric's indices are NaN
-        then); coords ``factor_key`` (config key of each factor) and ``units`` (of each
-        metric).
+        ``long_name``; per metric ``mean``, ``std`` (its units), ``n_nonfinite`` (runs
+        whose value is NaN or infinite, e.g. failed runs, or <= 0 under ``log10``: the
+        metric's indices are NaN then) and ``decades`` (the decades a positive metric
+        spans, before its transform); for sobol, ``S1_unreliable`` and ``ST_unreliable``
+        (1 where the index lies outside :data:`RELIABLE_RANGE` or its confidence interval
+        is wider than :data:`MAX_INTERVAL`) and per metric ``note`` (the reason, or
+        empty); coords ``factor_key`` (config key of each factor) and ``units`` (of each
+        metric; ``1`` for a transformed one).
 
     Raises
     ------
     StudyInputError
         If a metric is not a figure of these runs.
     """
-    names = expand_metrics(plan.metrics, list(results.data_vars))
+    columns = _columns(plan.metrics, list(results.data_vars))
+    names = [label for label, _, _ in columns]
     indices = INDICES[plan.method]
     table = {k: np.full((len(names), len(plan.factors)), np.nan) for k in indices}
+    sobol = plan.method == "sobol"
+    flagged = {k: np.zeros((len(names), len(plan.factors)), dtype=np.int8) for k in (("S1", "ST") if sobol else ())}
+    notes = [""] * len(names)
     moments = {k: np.full(len(names), np.nan) for k in ("mean", "std")}
     nonfinite = np.zeros(len(names), dtype=np.int64)
-    for m, name in enumerate(names):
-        y = results[name].to_numpy().astype(float)
+    spread = np.full(len(names), np.nan)
+    for m, (name, column, transform) in enumerate(columns):
+        raw = results[column].to_numpy().astype(float)
+        spread[m] = decades(raw)
+        y = _transformed(raw, transform)
         nonfinite[m] = int(np.sum(~np.isfinite(y)))
         moments["mean"][m], moments["std"][m] = (np.nanmean(y), np.nanstd(y)) if nonfinite[m] < len(y) else (np.nan,) * 2
         if nonfinite[m] or not np.ptp(y) > 0:
@@ -220,12 +317,25 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
         found = _analyze(plan, y, num_resamples, conf_level)
         for k in indices:
             table[k][m] = np.asarray(found[k], dtype=float)
-    units = [str(results[n].attrs.get("units", "")) for n in names]
+        if sobol:
+            flags, notes[m] = _flags(found, spread[m] if transform is None else float("nan"), plan.n)
+            for k, f in flags.items():
+                flagged[k][m] = f
+    units = ["1" if transform else str(results[column].attrs.get("units", "")) for _, column, transform in columns]
     data = {k: (("metric", "factor"), v, {"long_name": indices[k], "units": "1" if k.startswith("S") else ""})
             for k, v in table.items()}
+    lo, hi = RELIABLE_RANGE
+    for k, f in flagged.items():
+        data[f"{k}_unreliable"] = (("metric", "factor"), f, {
+            "long_name": f"1 where the {k} index is unreliable: its value outside [{lo:g}, {hi:g}] or its "
+                         f"confidence interval wider than {MAX_INTERVAL:g}", "units": "1"})
     data.update(mean=("metric", moments["mean"], {"long_name": "mean of the metric over the runs"}),
                 std=("metric", moments["std"], {"long_name": "standard deviation of the metric over the runs"}),
-                n_nonfinite=("metric", nonfinite, {"long_name": "runs whose metric is not finite"}))
+                n_nonfinite=("metric", nonfinite, {"long_name": "runs whose metric is not finite"}),
+                decades=("metric", spread, {"long_name": "decades a positive metric spans over the runs "
+                                                         "(before its transform; NaN for other metrics)", "units": "1"}))
+    if sobol:
+        data["note"] = ("metric", np.array(notes, dtype=object), {"long_name": "why indices are flagged unreliable"})
     factor_keys = [v.key for v in plan.varied for _ in v.factors]
     return xr.Dataset(data, coords={"metric": names, "factor": plan.factors,
                                     "factor_key": ("factor", factor_keys), "units": ("metric", units)})
@@ -250,7 +360,7 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
                          num_resamples: int = 200, conf_level: float = 0.95, jobs: int | None = None,
                          executor: Any = None, scheduler: str | None = None, engine: str | None = None, log=None,
                          progress: bool | None = None,
-                         command_line: str | None = None):
+                         command_line: str | None = None, overwrite: bool = False):
     """Run a sensitivity study end to end (``rbstab sensitivity``).
 
     Parameters
@@ -268,6 +378,9 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
         Bootstrap resamples and level of the confidence intervals.
     jobs, executor, scheduler, engine, log, progress, command_line
         As for :func:`rbstab.studies.design.run_design`.
+    overwrite : bool
+        Replace a study of other inputs (method, n, seed, vary, base config) in the folder;
+        without it that is refused (StudyInputError) before anything runs.
 
     Returns
     -------
@@ -286,7 +399,11 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
     """
     folder = study_folder(output, name, config)
     plan = plan_sensitivity(config, vary, n=n, method=method, metrics=metrics, seed=seed)
-    expand_metrics(plan.metrics, list(nominal_figures(config, engine)))  # a figure these runs have
+    expand_metrics([split_transform(m)[1] for m in plan.metrics],
+                   list(nominal_figures(config, engine)))  # a figure these runs have
+    check_same_inputs(folder / FILE, {"method": plan.method, "n": plan.n, "seed": plan.seed,
+                                      "vary": json.dumps(vary_mapping(plan.varied)),
+                                      "config": dump_yaml(plan.base.resolved)}, overwrite=overwrite)
     say = log or (lambda text: None)
     say(f"{plan.method}: {len(plan.factors)} factors, {len(plan.design)} runs -> {folder / SWEEP_FOLDER}")
     results = run_design(config.resolved, plan.design, folder / SWEEP_FOLDER, jobs=jobs, executor=executor,
@@ -329,15 +446,21 @@ def read_sensitivity(path: str | os.PathLike):
 
 def metric_records(ds) -> list[dict]:
     """One plain mapping per metric (``--json``): ``metric``, ``units``, ``method``,
-    ``n_runs``, and per factor its indices with their interval half-widths."""
+    ``n_runs``, ``decades``, ``note`` (why indices are unreliable, or None) and per factor
+    its indices with their interval half-widths (sobol: and ``S1_unreliable``,
+    ``ST_unreliable``)."""
     records = []
     names = list(INDICES[ds.attrs["method"]])
+    flags = [f"{k}_unreliable" for k in ("S1", "ST") if f"{k}_unreliable" in ds]
     for m, metric in enumerate(ds["metric"].values.tolist()):
-        factors = {f: {k: _number(ds[k].values[m, i]) for k in names}
+        factors = {f: {**{k: _number(ds[k].values[m, i]) for k in names},
+                       **{k: bool(ds[k].values[m, i]) for k in flags}}
                    for i, f in enumerate(ds["factor"].values.tolist())}
+        note = str(ds["note"].values[m]) if "note" in ds else ""
         records.append({"metric": metric, "units": str(ds["units"].values[m]), "method": ds.attrs["method"],
                         "n_runs": int(ds.attrs["n_runs"]), "n_nonfinite": int(ds["n_nonfinite"].values[m]),
-                        "factors": factors})
+                        "decades": _number(ds["decades"].values[m]) if "decades" in ds else None,
+                        "note": note or None, "factors": factors})
     return records
 
 

@@ -63,7 +63,7 @@ from .design import (
     study_folder,
     vary_mapping,
 )
-from .files import KINDS, read_study_file, write_study_file
+from .files import KINDS, check_same_inputs, read_study_file, write_study_file
 
 __all__ = ["SAMPLERS", "Objective", "Constraint", "parse_constraint", "TuningProblem", "TuningResult",
            "plan_tuning", "tune", "read_tuning", "FILE", "BEST_FILE", "TRIALS_FILE", "STORAGE_FILE"]
@@ -344,6 +344,9 @@ class TuningResult:
         Trial numbers of the Pareto front (two objectives; else the best trial).
     trials : pandas.DataFrame
         :func:`trials_table`.
+    at_edge : list of str
+        Warning lines (code ``W006``) for best values within 1 % of their search range's
+        edge (the optimum may lie beyond it).
     """
 
     name: str
@@ -356,20 +359,61 @@ class TuningResult:
     best_trial: int | None
     pareto: list[int]
     trials: Any
+    at_edge: list = field(default_factory=list)
 
     def record(self) -> dict:
         """The ``--json`` object."""
         return {"study": self.name, "best_value": self.best_values[0] if len(self.best_values) == 1 else
                 self.best_values or None, "best_params": self.best_params, "best_trial": self.best_trial,
                 "n_trials": self.n_trials, "n_failed": self.n_failed, "pareto": self.pareto,
-                "folder": str(self.folder), "storage": self.storage}
+                "folder": str(self.folder), "storage": self.storage, "at_edge": self.at_edge}
+
+
+#: A best value this close to an edge of its search range (as a fraction of the range; in
+#: log10 for log_uniform) is reported (``W006``).
+EDGE_FRACTION = 0.01
+
+
+def edge_warnings(varied, best_params: Mapping[str, Any]) -> list[str]:
+    """``W006`` lines for the factors of ``best_params`` (design column -> absolute value)
+    within :data:`EDGE_FRACTION` of an edge of their range (``uniform``, ``log_uniform``,
+    ``scale_uniform``; a scale factor as the value over the base value)."""
+    from ..warning_codes import coded
+
+    lines = []
+    for v in varied:
+        if v.kind not in ("uniform", "log_uniform", "scale_uniform") or not best_params:
+            continue
+        values = np.array([float(best_params[c]) for c in v.columns]).reshape(v.shape or ())
+        if v.kind == "scale_uniform":
+            base = np.asarray(v.base, dtype=float)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = np.where(base != 0, values / np.where(base != 0, base, 1.0), np.nan)
+            # one factor per entry of the bounds: the first entry it scales stands for it
+            factors = ratio.reshape(*v.factor_shape, -1)[..., 0].ravel() if v.factor_shape else \
+                np.array([ratio.ravel()[np.flatnonzero(np.isfinite(ratio.ravel()))[0]]
+                          if np.isfinite(ratio).any() else np.nan])
+        else:
+            factors = values.ravel()
+        for name, f, (lo, hi) in zip(v.factors, factors, v.bounds()):
+            if not np.isfinite(f):
+                continue
+            scale = (lambda x: math.log10(x)) if v.kind == "log_uniform" else (lambda x: x)
+            width = scale(hi) - scale(lo)
+            where = "lower" if scale(f) - scale(lo) <= EDGE_FRACTION * width else \
+                "upper" if scale(hi) - scale(f) <= EDGE_FRACTION * width else None
+            if where:
+                lines.append(coded("W006", f"{name}: the best value {f:.4g} lies at the {where} edge of its range "
+                                           f"{v.kind}:[{lo:g}, {hi:g}]; the optimum may lie beyond it: widen the range"))
+    return lines
 
 
 def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimize: Sequence[str] = (),
          maximize: Sequence[str] = (), subject_to: Sequence[str] = (), over: Sequence[str] | Mapping[str, Any] = (),
          over_n: int = 16, over_seed: int = 0, quantile: float = 1.0, sampler: str = "tpe", seed: int = 0,
          storage: str | None = None, output: str | os.PathLike = "results/studies", name: str | None = None,
-         engine: str | None = None, log=None, command_line: str | None = None) -> TuningResult:
+         engine: str | None = None, log=None, command_line: str | None = None,
+         overwrite: bool = False) -> TuningResult:
     """Run (or resume) a tuning study (``rbstab tune``) and write its files.
 
     Parameters
@@ -391,6 +435,10 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         The study writes ``<output>/<name>/``; ``name`` (default: the config's name) is
         also the study's name in the storage.
 
+    overwrite : bool
+        Replace a study of other inputs (objectives, constraints, vary, base config) in
+        the folder; without it that is refused (StudyInputError) before anything runs.
+
     Returns
     -------
     TuningResult
@@ -407,6 +455,11 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
                           over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler, engine=engine)
     if not (isinstance(trials, int) and trials >= 1):
         raise StudyInputError([f"--trials {trials!r}: expected an integer >= 1"])
+    check_same_inputs(folder / FILE, {
+        "objectives": json.dumps([[o.metric, o.direction] for o in problem.objectives]),
+        "constraints": json.dumps([str(c) for c in problem.constraints]),
+        "vary": json.dumps(vary_mapping(problem.varied)), "config": dump_yaml(problem.base.resolved)},
+        overwrite=overwrite)
     ensure_compiled(say=log, sign_law=True)
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
@@ -607,7 +660,7 @@ def _write_outputs(problem: TuningProblem, study, folder: Path, storage: str, co
                         int((states == "fail").sum()),
                         [float(table.loc[best[0], o.metric]) for o in problem.objectives] if best else [],
                         best_params, int(table.loc[best[0], "trial"]) if best else None,
-                        [int(table.loc[i, "trial"]) for i in best], table)
+                        [int(table.loc[i, "trial"]) for i in best], table, edge_warnings(problem.varied, best_params))
 
 
 def _nominal(problem: TuningProblem, values: Mapping[str, Any]):

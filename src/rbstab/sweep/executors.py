@@ -51,6 +51,7 @@ __all__ = [
     "ExecutorError",
     "default_jobs",
     "make_executor",
+    "refuse_at_script_top_level",
     "EXECUTORS",
 ]
 
@@ -176,6 +177,70 @@ def _refuse_in_bootstrap(task: str = "a sweep") -> None:
         raise SystemExit(1)
 
 
+def _is_main_guard(node) -> bool:
+    """Whether an ``ast.If`` tests ``__name__ == "__main__"`` (either way round)."""
+    import ast
+
+    test = node.test
+    if not (isinstance(test, ast.Compare) and len(test.ops) == 1 and isinstance(test.ops[0], ast.Eq)):
+        return False
+    sides = [test.left, test.comparators[0]]
+    return (any(isinstance(x, ast.Name) and x.id == "__name__" for x in sides)
+            and any(isinstance(x, ast.Constant) and x.value == "__main__" for x in sides))
+
+
+def _unguarded_top_level_call() -> tuple[str, int, str] | None:
+    """``(script, line, called)`` when this call comes from the top level of the main
+    script outside ``if __name__ == "__main__":`` (``called``: the function the script's
+    line calls); None otherwise (an interactive session, a notebook, ``python -c``, a
+    guarded call, a script whose source cannot be read)."""
+    import ast
+
+    main = sys.modules.get("__main__")
+    frame, callee = sys._getframe(1), None
+    while frame is not None:
+        if frame.f_code.co_name == "<module>" and main is not None and frame.f_globals is vars(main):
+            break
+        callee, frame = frame, frame.f_back
+    if frame is None or callee is None:
+        return None
+    script = frame.f_code.co_filename
+    try:
+        with open(script, encoding="utf-8") as f:
+            tree = ast.parse(f.read())
+    except (OSError, SyntaxError, ValueError):
+        return None
+    line = frame.f_lineno
+    for node in tree.body:
+        if node.lineno <= line <= (node.end_lineno or node.lineno):
+            if isinstance(node, ast.If) and _is_main_guard(node):
+                return None
+            break
+    module = callee.f_globals.get("__name__", "")
+    name = callee.f_code.co_name
+    called = f"rbstab.{name}" if module.startswith("rbstab") else name
+    return script, line, called
+
+
+def refuse_at_script_top_level(task: str = "a sweep") -> None:
+    """Raise :class:`ExecutorError` before anything starts when this call, which starts
+    local worker processes, comes from a script's top level without the ``__main__`` guard.
+
+    Every worker started by ``forkserver`` or ``spawn`` runs the main script again (the
+    standard library's ``prepare`` step): a call outside ``if __name__ == "__main__":``
+    would run the script's prints, file writes and this very call again in every worker.
+    The line names the call (the function the script calls), the script and its line.
+    """
+    found = _unguarded_top_level_call()
+    if found is None:
+        return
+    script, line, called = found
+    raise ExecutorError(
+        f"{called}() at the top level of {script} (line {line}) starts local worker processes for {task}, "
+        "and each worker runs the script again from its top; put the call (and the script's other work) under "
+        "if __name__ == \"__main__\": (or pass jobs=1); nothing was run")
+
+
 def _warm() -> None:
     """A no-op task: submitting one per worker starts the workers."""
 
@@ -231,6 +296,7 @@ class LocalExecutor(Executor):
     def __init__(self, jobs: int | None = None, *, max_in_flight: int | None = None,
                  preload: tuple[str, ...] = FORKSERVER_PRELOAD, task: str = "a sweep") -> None:
         _refuse_in_bootstrap(task)
+        refuse_at_script_top_level(task)
         jobs = default_jobs() if jobs is None else int(jobs)
         if jobs < 1:
             raise ExecutorError(f"-j/--jobs: found {jobs}; expected a number of processes >= 1")

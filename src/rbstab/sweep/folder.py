@@ -790,7 +790,25 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
     spec = read_spec(folder)
     ds.attrs.update(sweep=spec.get("name", folder.name), lyapunov_ratio=(spec.get("convergence") or {}).get(
         "lyapunov_ratio"), folder=str(folder))
-    return _as_grid(ds, spec) if grid else ds
+    parameters = read_parameters(folder, list(columns))
+    out = _as_grid(ds, spec) if grid else ds
+    return _describe_parameters(out, parameters, spec)
+
+
+def _describe_parameters(ds, parameters: Mapping[str, str], spec: Mapping[str, Any]):
+    """Every parameter coordinate (and grid axis) with ``units``, ``long_name`` and
+    ``config_key`` from :data:`rbstab.layout.CONFIG_QUANTITIES`; a grid axis of a list-valued
+    key numbered by level has the key's ``config_key`` and a long name saying so."""
+    from ..layout import parameter_attributes
+
+    for name, entry in parameters.items():
+        if name in ds.coords:
+            ds[name].attrs.update(parameter_attributes(entry))
+    for key in (spec.get("grid") or {}):
+        name = parameter_name(key)
+        if name in ds.coords and name not in parameters:
+            ds[name].attrs.update(long_name=f"level of {key} in the grid (0, 1, ...)", config_key=key)
+    return ds
 
 
 def _arrow_columns(folder: Path) -> dict | None:

@@ -1,0 +1,133 @@
+"""What a run's figures mean, in words: converged or not, why a rate check failed, round-off.
+
+The lines ``rbstab run``, ``rbstab show`` and the report print beside a run's figures:
+
+- :func:`convergence_word`: ``converged`` or ``not converged by t_end`` (the rule of
+  :mod:`rbstab.convergence`, the one sweeps use) beside the solver's ``success``: a run
+  that reached t_end has not necessarily come to rest.
+- :func:`rate_check_reason`: why the check of the analytic dv/dt against the numerical
+  derivative of v failed (the largest mismatch, when, the likely cause and its fix).
+- :func:`chop`: a number at round-off level (below the tolerance that produced it) as 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .convergence import DEFAULT_LYAPUNOV_RATIO, converged
+
+__all__ = ["CONVERGED", "NOT_CONVERGED", "convergence_word", "rate_check_reason", "file_rate_check_reason",
+           "largest_mismatch_time", "samples_for_rate_check",
+           "chop", "NOISE_LIMIT"]
+
+#: The words beside a run's solver status.
+CONVERGED, NOT_CONVERGED = "converged", "not converged by t_end"
+
+#: rtol (n_samples - 1) above which the solver's noise, differentiated over the sample
+#: spacing, alone can fail the rate check of a conservative run (docs/physics.md).
+NOISE_LIMIT = 3e-5
+
+
+def convergence_word(status: str, lyapunov_initial: Any, lyapunov_final: Any,
+                     ratio: float = DEFAULT_LYAPUNOV_RATIO) -> str:
+    """:data:`CONVERGED` or :data:`NOT_CONVERGED` (also for a failed run)."""
+    return CONVERGED if converged(status == "success", lyapunov_initial, lyapunov_final, ratio) else NOT_CONVERGED
+
+
+def samples_for_rate_check(n_samples: int, relative_mismatch: float, tolerance: float) -> int:
+    """Samples for which the numerical derivative's error falls below ``tolerance``, with a
+    margin of 2, rounded up to a round number. The 7-point stencil is of 6th order in the
+    spacing once the samples resolve v; a failing run usually does not resolve its fastest
+    transient yet, where the error falls far more slowly: taken as 2nd order (measured on
+    Case 1 with t_end 20 s: 101 samples 0.5 P, 571 samples 0.061 P, 2901 samples 0.001 P,
+    3201 pass)."""
+    factor = 2.0 * (relative_mismatch / tolerance) ** (1.0 / 2.0)
+    wanted = (n_samples - 1) * max(factor, 1.5) + 1
+    step = 10 ** max(0, int(math.floor(math.log10(wanted))) - 1)
+    return int(math.ceil(wanted / step) * step) + 1
+
+
+def rate_check_reason(summary: Mapping[str, Any], *, n_samples: int, t_end: float, rtol: float,
+                      where: float | None = None) -> str:
+    """Why a run's rate check failed, in one clause (empty when it did not fail).
+
+    Parameters
+    ----------
+    summary : Mapping
+        The run's summary figures (``lyapunov_rate_check``,
+        ``lyapunov_rate_mismatch``, ``lyapunov_rate_mismatch_relative``).
+    n_samples, t_end, rtol
+        The run's ``simulation`` settings.
+    where : float, optional
+        The time of the largest mismatch [s] (:func:`largest_mismatch_time`).
+
+    Returns
+    -------
+    str
+        e.g. ``"mismatch 0.031 W = 3.2e-3 P > 1e-3 P at t = 0.41 s; likely the samples are
+        too sparse for t_end 20 s (spacing 0.02 s): more samples, e.g. --set
+        simulation.n_samples=4001"``.
+    """
+    from .summary import LYAPUNOV_RATE_TOLERANCE
+
+    if summary.get("lyapunov_rate_check") != "fail":
+        return ""
+    relative = float(summary.get("lyapunov_rate_mismatch_relative", float("nan")))
+    mismatch = float(summary.get("lyapunov_rate_mismatch", float("nan")))
+    at = f" at t = {where:.4g} s" if where is not None and math.isfinite(where) else ""
+    text = f"largest |analytic - numerical dv/dt| {mismatch:.3g} W = {relative:.2g} P > {LYAPUNOV_RATE_TOLERANCE:g} P{at}"
+    spacing = t_end / max(n_samples - 1, 1)
+    if rtol * (n_samples - 1) > NOISE_LIMIT:
+        return (f"{text}; likely the solver's noise through the numerical derivative (rtol {rtol:g} x "
+                f"{n_samples - 1} sample intervals > {NOISE_LIMIT:g}): tighten it, e.g. --set "
+                f"simulation.rtol={NOISE_LIMIT / (n_samples - 1) / 3:.1g} (docs/physics.md)")
+    wanted = samples_for_rate_check(n_samples, relative, LYAPUNOV_RATE_TOLERANCE)
+    return (f"{text}; likely the samples are too sparse for t_end {t_end:g} s (spacing {spacing:.3g} s) "
+            f"to differentiate v: more samples, e.g. --set simulation.n_samples={wanted} (docs/physics.md)")
+
+
+def largest_mismatch_time(time, rate, numerical) -> float | None:
+    """The time [s] of the largest |analytic - numerical dv/dt| over the finite samples."""
+    difference = np.abs(np.asarray(rate, dtype=float) - np.asarray(numerical, dtype=float))
+    finite = np.isfinite(difference)
+    if not finite.any():
+        return None
+    return float(np.asarray(time, dtype=float)[finite][np.argmax(difference[finite])])
+
+
+def file_rate_check_reason(path, summary: Mapping[str, Any]) -> str:
+    """:func:`rate_check_reason` of a result file (its samples, its config's rtol, and the
+    time of the largest mismatch read from it); empty unless its check failed."""
+    if summary.get("lyapunov_rate_check") != "fail":
+        return ""
+    import h5py  # heavy
+    import yaml  # heavy
+
+    with h5py.File(path, "r") as f:
+        time = f["time"][()]
+        where = largest_mismatch_time(time, f["lyapunov_rate"][()], f["lyapunov_rate_numerical"][()])
+        config = f.attrs.get("config", "")
+    if isinstance(config, bytes):
+        config = config.decode()
+    try:
+        simulation = (yaml.safe_load(config) or {}).get("simulation", {})
+    except yaml.YAMLError:
+        simulation = {}
+    t_end = float(simulation.get("t_end", time[-1]))
+    n_samples = int(simulation.get("n_samples", len(time)))
+    rtol = float(simulation.get("rtol", 1e-8))
+    return rate_check_reason(summary, n_samples=n_samples, t_end=t_end, rtol=rtol, where=where)
+
+
+def chop(values, tolerance: float):
+    """``values`` with every entry of magnitude below ``tolerance`` set to 0 (a float or a
+    list, as given): an equilibrium found to ``tolerance`` prints ``theta (0, ...)``
+    instead of ``theta (7.3633e-23, ...)``."""
+    if isinstance(values, (list, tuple, np.ndarray)):
+        return [chop(v, tolerance) for v in values]
+    value = float(values)
+    return 0.0 if abs(value) < tolerance else value
