@@ -290,8 +290,9 @@ def test_the_report_embeds_one_animation_per_run_and_can_leave_them_out(runs, tm
     assert "index.html plays it" in (tmp_path / "r" / "index.md").read_text()
     summary = (tmp_path / "r" / "summary.md").read_text()
     assert "index.html plays it" not in summary and "base64" not in summary  # tables and words only
-    result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r", "--no-animations")
+    # other inputs: another folder (a report of other inputs is not replaced)
+    result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r2", "--no-animations")
     assert result.exit_code == 0, result.output
-    assert '<figure class="animation">' not in (tmp_path / "r" / "index.html").read_text()
-    result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r", "--animation-frames", "1")
+    assert '<figure class="animation">' not in (tmp_path / "r2" / "index.html").read_text()
+    result = _invoke("report", runs["gimbal"], "-o", tmp_path / "r2", "--animation-frames", "1")
     assert result.exit_code == 2 and "expected 0 (no animations) or 2 to 500" in result.output
