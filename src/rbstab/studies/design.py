@@ -380,15 +380,15 @@ def design_mappings(design) -> dict[str, list]:
         If the components of a key do not fill a whole vector or matrix.
     """
     groups: dict[str, dict[tuple[int, ...], str]] = {}
-    plain: dict[str, str] = {}
+    whole: dict[str, str] = {}
     for column in design.columns:
         m = _COLUMN.match(str(column))
         if m:
             index = tuple(int(i) for i in m["index"].split(","))
             groups.setdefault(m["key"], {})[index] = column
         else:
-            plain[str(column)] = column
-    out: dict[str, list] = {k: [plain(v) for v in design[c].tolist()] for k, c in plain.items()}
+            whole[str(column)] = column
+    out: dict[str, list] = {k: [plain(v) for v in design[c].tolist()] for k, c in whole.items()}
     for key, entries in groups.items():
         shape = tuple(max(i[d] for i in entries) + 1 for d in range(len(next(iter(entries)))))
         if len(entries) != int(np.prod(shape)) or len({len(i) for i in entries}) != 1:
