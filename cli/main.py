@@ -10,7 +10,9 @@ when runs failed).
 
 import atexit
 import gc
+import os
 import signal
+import sys
 
 import click
 
@@ -68,9 +70,6 @@ class _Group(click.Group):
 def _quiet_stdout() -> None:
     """Point stdout at /dev/null, so that flushing it at exit does not fail again on the
     closed pipe (the standard library's advice for SIGPIPE)."""
-    import os
-    import sys
-
     try:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import click
@@ -94,8 +95,6 @@ def _load_kernels(loaded) -> None:
     """Load the compiled kernels from numba's cache (and scipy's optimizers, which find the
     equilibrium under gravity) before the first run, so that its ``wall_time`` is its own
     (the load, ~0.4-0.7 s, is said with -v)."""
-    import time
-
     from rbstab.engine import warm_up  # heavy: numba, numpy
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
 

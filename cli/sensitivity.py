@@ -70,7 +70,7 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
         raise click.ClickException("invalid design\n" + "\n".join("  " + line for line in exc.errors))
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
-    from rbstab.studies.sensitivity import HEAVY_TAIL_DECADES, split_transform
+    from rbstab.studies.sensitivity import HEAVY_TAIL_DECADES, split_transform  # heavy: pandas, xarray
 
     records = metric_records(ds)
     for record in records:

@@ -28,7 +28,7 @@ _METRICS = ("lyapunov_final", "max_abs_constraint_error", "max_lyapunov_rate", "
 def _run_lines(rows, ratio: float | None = None) -> None:
     """One line per run: id, status, converged (with the sweep's ``ratio``), v(0) -> v(t_end),
     max dv/dt, max |E_i|, rate check."""
-    from rbstab.convergence import DEFAULT_LYAPUNOV_RATIO
+    from rbstab.convergence import DEFAULT_LYAPUNOV_RATIO  # heavy: numpy
 
     ratio = DEFAULT_LYAPUNOV_RATIO if ratio is None else ratio
     out = get_console().out
@@ -141,7 +141,7 @@ def _show_result(path: str) -> None:
 
     from rbstab.diagnostics import convergence_word  # heavy: numpy
 
-    from .run import rate_check_text
+    from .run import rate_check_text  # heavy: rbstab.api
 
     console = get_console()
     info = read_summary(path)  # every checksum verified

@@ -6,6 +6,7 @@ import json
 import math
 import os
 import re
+from pathlib import Path
 
 import click
 
@@ -239,8 +240,6 @@ def _check_folder(spec, overrides, output) -> None:
     """Refuse, before anything runs or is written, a sweep whose folder holds a sweep with
     runs this one does not have (another --grid, another spec of the same name): its index
     would be replaced. The same sweep again (resume), or one that only adds runs, goes on."""
-    from pathlib import Path
-
     from rbstab.sweep import SweepSpecError, load_spec  # heavy: numpy, pydantic
     from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy
     from rbstab.sweep.table import plan_table  # heavy: numpy, pydantic

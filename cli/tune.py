@@ -69,7 +69,7 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
         console.out("  no feasible trial")
     else:
         from rbstab.io.chunk import figure_attributes  # heavy: numpy
-        from rbstab.layout import CONFIG_QUANTITIES, display_units
+        from rbstab.layout import CONFIG_QUANTITIES, display_units  # light; beside its heavy neighbour
 
         metrics = [*minimize, *maximize]
         values = result.best_values

@@ -37,7 +37,7 @@ LAYERS = [
     ("model", ["rbstab.model"]),
     ("variants", ["rbstab.variants"]),
     ("config", ["rbstab.config", "rbstab.resources"]),
-    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence", "rbstab.results"]),
+    ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence", "rbstab.results", "rbstab.diagnostics"]),
     ("simulate", ["rbstab.simulator"]),
     ("io", ["rbstab.io"]),
     ("sweep/analysis", ["rbstab.sweep", "rbstab.analysis", "rbstab.kinds", "rbstab.studies"]),

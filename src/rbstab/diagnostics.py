@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from .convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from .summary import LYAPUNOV_RATE_TOLERANCE
 
 __all__ = ["CONVERGED", "NOT_CONVERGED", "convergence_word", "rate_check_reason", "file_rate_check_reason",
            "largest_mismatch_time", "samples_for_rate_check",
@@ -72,8 +73,6 @@ def rate_check_reason(summary: Mapping[str, Any], *, n_samples: int, t_end: floa
         too sparse for t_end 20 s (spacing 0.02 s): more samples, e.g. --set
         simulation.n_samples=4001"``.
     """
-    from .summary import LYAPUNOV_RATE_TOLERANCE
-
     if summary.get("lyapunov_rate_check") != "fail":
         return ""
     relative = float(summary.get("lyapunov_rate_mismatch_relative", float("nan")))

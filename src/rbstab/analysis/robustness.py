@@ -23,15 +23,18 @@ Per group:
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from statistics import NormalDist
 
 import numpy as np
 
+from ..config import config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
-from ..sweep.folder import open_sweep
+from ..sweep.folder import open_sweep, resolved_config
 from .dataset import robustness_content, robustness_dataset
+from .linearise import linearise
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
            "DEFAULT_CONFIDENCE"]
@@ -233,12 +236,6 @@ class Robustness:
 def _t_end_hint(folder, run_id: str, ratio: float) -> dict | None:
     """:attr:`RobustnessGroup.t_end_hint` from run ``run_id`` (reached t_end, not converged):
     its configuration linearised at its equilibrium; None unless asymptotically stable."""
-    import math
-
-    from ..config import config_from_mapping
-    from ..sweep.folder import resolved_config
-    from .linearise import linearise
-
     try:
         config = config_from_mapping(resolved_config(folder, run_id))
         lin = linearise(config.make_variant())

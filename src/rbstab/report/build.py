@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..diagnostics import convergence_word
 from ..io.metadata import provenance_attributes
 from .analysis import analysis_sections, split_inputs
 from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures
@@ -243,8 +244,6 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
         "the run). status success: the solver reached t_end; converged: besides, v(t_end) <= 0.001 v(0) "
         "(not converged by t_end: still moving). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
     )
-    from ..diagnostics import convergence_word
-
     s.blocks.append(Table(
         "Runs: identity, solver statistics, status",
         ["run", "file", "variant", "status", "converged", "t_final [s]", "method", "nfev", "njev", "nlu",

@@ -113,7 +113,7 @@ def _sensitivity_table(ds) -> Table:
 def _sensitivity_figure(ds, out: FigureWriter, name: str) -> FigureFile:
     from matplotlib.figure import Figure  # matplotlib: only when a figure is drawn, as report/figures.py
 
-    from ..studies.sensitivity import RELIABLE_RANGE
+    from ..studies.sensitivity import RELIABLE_RANGE  # heavy: pandas, xarray (only with a study)
 
     sobol = ds.attrs["method"] == "sobol"
     metrics = ds["metric"].values.tolist()

@@ -77,7 +77,7 @@ def check_same_inputs(path: str | os.PathLike, expected: dict, *, overwrite: boo
     when its attributes differ from ``expected`` (attribute -> the new study's value): a
     study of other inputs under the same name; the same inputs again resume it.
     Nothing is refused with ``overwrite``, or when there is no readable file."""
-    from .design import StudyInputError
+    from .design import StudyInputError  # design imports the config and the sweep: only when checked
 
     path = Path(path)
     if overwrite or not path.is_file():

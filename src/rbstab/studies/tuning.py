@@ -52,6 +52,7 @@ from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
 from ..simulator import simulate_many
+from ..warning_codes import coded
 from .design import (
     StudyInputError,
     Varied,
@@ -378,8 +379,6 @@ def edge_warnings(varied, best_params: Mapping[str, Any]) -> list[str]:
     """``W006`` lines for the factors of ``best_params`` (design column -> absolute value)
     within :data:`EDGE_FRACTION` of an edge of their range (``uniform``, ``log_uniform``,
     ``scale_uniform``; a scale factor as the value over the base value)."""
-    from ..warning_codes import coded
-
     lines = []
     for v in varied:
         if v.kind not in ("uniform", "log_uniform", "scale_uniform") or not best_params:

@@ -30,6 +30,7 @@ same bit for bit (up to the ``created`` and ``command_line`` attributes).
 
 from __future__ import annotations
 
+import ast
 import multiprocessing
 import os
 import socket
@@ -179,8 +180,6 @@ def _refuse_in_bootstrap(task: str = "a sweep") -> None:
 
 def _is_main_guard(node) -> bool:
     """Whether an ``ast.If`` tests ``__name__ == "__main__"`` (either way round)."""
-    import ast
-
     test = node.test
     if not (isinstance(test, ast.Compare) and len(test.ops) == 1 and isinstance(test.ops[0], ast.Eq)):
         return False
@@ -194,8 +193,6 @@ def _unguarded_top_level_call() -> tuple[str, int, str] | None:
     script outside ``if __name__ == "__main__":`` (``called``: the function the script's
     line calls); None otherwise (an interactive session, a notebook, ``python -c``, a
     guarded call, a script whose source cannot be read)."""
-    import ast
-
     main = sys.modules.get("__main__")
     frame, callee = sys._getframe(1), None
     while frame is not None:

@@ -53,6 +53,7 @@ from typing import Any
 
 from ..convergence import RULE, converged
 from ..io.atomic import atomic_path, write_text_atomic
+from ..layout import parameter_attributes
 
 __all__ = [
     "SPEC_FILE",
@@ -799,8 +800,6 @@ def _describe_parameters(ds, parameters: Mapping[str, str], spec: Mapping[str, A
     """Every parameter coordinate (and grid axis) with ``units``, ``long_name`` and
     ``config_key`` from :data:`rbstab.layout.CONFIG_QUANTITIES`; a grid axis of a list-valued
     key numbered by level has the key's ``config_key`` and a long name saying so."""
-    from ..layout import parameter_attributes
-
     for name, entry in parameters.items():
         if name in ds.coords:
             ds[name].attrs.update(parameter_attributes(entry))
