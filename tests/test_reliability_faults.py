@@ -425,7 +425,8 @@ def test_a_pool_that_dies_before_finishing_anything_is_tried_once_more(tmp_path)
 
 def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     """Every local worker runs the caller's script again before it takes work: a sweep at a
-    script's top level used to fail every run with a traceback per worker, and exit 0."""
+    script's top level is refused before anything starts, naming the call, the script, its
+    line and the guard; nothing is written, and the mended script runs."""
     body = (f"import rbstab\n"
             f"spec = {{'name': 's', 'base': {str(CASE3)!r}, 'grid': {{'body.mass': [30.0, 50.0]}}}}\n"
             f"{{}}ds = rbstab.sweep_dataset(spec, 'out', overrides={{'simulation.t_end': 0.2}}, jobs=2)\n"
@@ -441,11 +442,10 @@ def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     bad = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode != 0
-    assert f"{unguarded.name} starts a sweep at its top level" in bad.stderr
-    assert 'ExecutorError: the local worker processes died twice in a row' in bad.stderr
-    assert "SweepBusyError" not in bad.stderr
-    index = pd.read_csv(unguarded.parent / "out" / "s" / "index.csv")
-    assert set(index.status) == {"pending"}  # nothing ran
+    assert f"sweep_dataset() at the top level of {unguarded}" in bad.stderr and "(line 3)" in bad.stderr
+    assert 'if __name__ == "__main__":' in bad.stderr and "nothing was run" in bad.stderr
+    assert "died twice in a row" not in bad.stderr and "SweepBusyError" not in bad.stderr
+    assert not (unguarded.parent / "out" / "s" / "index.csv").exists()  # nothing started, nothing written
     unguarded.write_text(guarded.read_text())  # the script mended: it runs the pending runs
     mended = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
                             timeout=300)
