@@ -487,11 +487,11 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
         Run files (``*.h5``), sweep folders, folders of run files, analysis files
         (``*.analysis.nc``), in any mix.
     output : path-like, optional
-        The report folder (default under ``results/reports/``); an earlier report of the
-        same inputs there is replaced, one of other inputs only with ``overwrite=True``,
-        any other non-empty folder refused.
+        The report folder (default under ``results/reports/``); an earlier report there
+        that shares an input with this one is replaced, one of none of these inputs only
+        with ``overwrite=True``, any other non-empty folder refused.
     overwrite : bool
-        Replace an earlier report of other inputs.
+        Replace an earlier report of none of these inputs.
     **options
         Fields of :class:`rbstab.report.ReportOptions` (``formats``, ``metrics``,
         ``settle``, ``title``, ``figure_formats``, ``dpi``, ``animation_frames``, ``jobs``).

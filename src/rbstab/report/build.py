@@ -216,8 +216,9 @@ def _check_output(target: Path, paths: Sequence[Path] = (), overwrite: bool = Tr
         before = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("inputs") or []
     except (OSError, ValueError, AttributeError):
         before = []
-    now = sorted(str(p) for p in paths)
-    if sorted(map(str, before)) != now:
+    # a report of none of these inputs (another run or sweep of the same name): refused; one
+    # that shares an input (the same comparison, an input more or less) is replaced as before
+    if before and not set(map(str, before)) & {str(p) for p in paths}:
         shown = ", ".join(before[:3]) + (f" and {len(before) - 3} more" if len(before) > 3 else "")
         raise ReportError(
             f"{target} holds a report of other inputs ({shown or 'unknown'}): not replaced; --overwrite "
@@ -430,10 +431,11 @@ def build_report(
     output : path-like, optional
         Report folder; default ``results/reports/<name>``, ``<name>`` made of the inputs'
         names (:func:`default_report_name`). If it exists it must be empty or an earlier
-        report of the same inputs, which is replaced (of other inputs: with ``overwrite``).
+        report sharing an input with this one, which is replaced (one of none of these
+        inputs: only with ``overwrite``).
     options : ReportOptions, optional
     overwrite : bool
-        Replace an earlier report of other inputs (else refused: ReportError).
+        Replace an earlier report of none of these inputs (else refused: ReportError).
 
     Returns
     -------
