@@ -421,7 +421,7 @@ def test_a_pool_that_dies_before_finishing_anything_is_tried_once_more(tmp_path)
 
 def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     """Every local worker runs the caller's script again before it takes work: a sweep at a
-    script's top level used to fail every run with a traceback per worker, and exit 0."""
+    script's top level is refused in the script's process, before anything starts."""
     body = (f"import rbstab\n"
             f"spec = {{'name': 's', 'base': {str(CASE3)!r}, 'grid': {{'body.mass': [30.0, 50.0]}}}}\n"
             f"{{}}ds = rbstab.sweep_dataset(spec, 'out', overrides={{'simulation.t_end': 0.2}}, jobs=2)\n"
@@ -437,12 +437,13 @@ def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     bad = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode != 0
-    assert f"{unguarded.name} starts a sweep at its top level" in bad.stderr
-    assert 'ExecutorError: the local worker processes died twice in a row' in bad.stderr
+    # refused in the script's own process, before any worker starts or anything is written
+    assert "rbstab.sweep_dataset() at the top level of " in bad.stderr
+    assert f"{unguarded.name} (line 3) starts local worker processes" in bad.stderr
+    assert 'if __name__ == "__main__":' in bad.stderr and "died" not in bad.stderr
     assert "SweepBusyError" not in bad.stderr
-    index = pd.read_csv(unguarded.parent / "out" / "s" / "index.csv")
-    assert set(index.status) == {"pending"}  # nothing ran
-    unguarded.write_text(guarded.read_text())  # the script mended: it runs the pending runs
+    assert not (unguarded.parent / "out").exists()  # nothing ran, nothing was written
+    unguarded.write_text(guarded.read_text())  # the script mended: it runs the sweep
     mended = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
                             timeout=300)
     assert mended.returncode == 0 and mended.stdout.strip() == "['success']", mended.stderr
