@@ -169,15 +169,11 @@ def test_temporaries_of_dead_writers_are_removed_and_live_ones_kept(tmp_path):
     live = tmp_path / f".run.h5.{os.getpid()}@{_HOST}.abcd1234.tmp"
     foreign = tmp_path / f".run.h5.{dead.pid}@{'0000' if _HOST != '0000' else '1111'}.abcd1234.tmp"
     legacy = tmp_path / ".run.h5.x1y2z3w4.tmp"
-    animation = tmp_path / f".case3.gif.{dead.pid}@{_HOST}.abcd1234.tmp.gif"  # a writer that reads the suffix
-    other = tmp_path / ".notes.tmpl"
-    for path in (stale, live, foreign, legacy, animation, other):
+    for path in (stale, live, foreign, legacy):
         path.write_text("partial")
-    for path in (legacy, other):
-        os.utime(path, (time.time() - 7200, time.time() - 7200))
-    assert remove_stale_temporaries(tmp_path) == 3
-    assert not stale.exists() and not legacy.exists() and not animation.exists()
-    assert live.exists() and foreign.exists() and other.exists()
+    os.utime(legacy, (time.time() - 7200, time.time() - 7200))
+    assert remove_stale_temporaries(tmp_path) == 2
+    assert not stale.exists() and not legacy.exists() and live.exists() and foreign.exists()
 
 
 # -- damaged files ------------------------------------------------------------------------------
@@ -425,8 +421,7 @@ def test_a_pool_that_dies_before_finishing_anything_is_tried_once_more(tmp_path)
 
 def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     """Every local worker runs the caller's script again before it takes work: a sweep at a
-    script's top level is refused before anything starts, naming the call, the script, its
-    line and the guard; nothing is written, and the mended script runs."""
+    script's top level is refused in the script's process, before anything starts."""
     body = (f"import rbstab\n"
             f"spec = {{'name': 's', 'base': {str(CASE3)!r}, 'grid': {{'body.mass': [30.0, 50.0]}}}}\n"
             f"{{}}ds = rbstab.sweep_dataset(spec, 'out', overrides={{'simulation.t_end': 0.2}}, jobs=2)\n"
@@ -442,11 +437,13 @@ def test_a_script_without_the_main_guard_is_told_so(tmp_path):
     bad = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
                          timeout=300)
     assert bad.returncode != 0
-    assert f"sweep_dataset() at the top level of {unguarded}" in bad.stderr and "(line 3)" in bad.stderr
-    assert 'if __name__ == "__main__":' in bad.stderr and "nothing was run" in bad.stderr
-    assert "died twice in a row" not in bad.stderr and "SweepBusyError" not in bad.stderr
-    assert not (unguarded.parent / "out" / "s" / "index.csv").exists()  # nothing started, nothing written
-    unguarded.write_text(guarded.read_text())  # the script mended: it runs the pending runs
+    # refused in the script's own process, before any worker starts or anything is written
+    assert "rbstab.sweep_dataset() at the top level of " in bad.stderr
+    assert f"{unguarded.name} (line 3) starts local worker processes" in bad.stderr
+    assert 'if __name__ == "__main__":' in bad.stderr and "died" not in bad.stderr
+    assert "SweepBusyError" not in bad.stderr
+    assert not (unguarded.parent / "out").exists()  # nothing ran, nothing was written
+    unguarded.write_text(guarded.read_text())  # the script mended: it runs the sweep
     mended = subprocess.run([sys.executable, unguarded.name], cwd=unguarded.parent, capture_output=True, text=True,
                             timeout=300)
     assert mended.returncode == 0 and mended.stdout.strip() == "['success']", mended.stderr
