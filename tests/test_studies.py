@@ -299,3 +299,24 @@ def test_report_draws_studies(config, sobol, tmp_path):
     assert figures == ["sensitivity_free_study.png", "tuning_free_study_objective.png", "tuning_free_study_pareto.png"]
     page = (out / "summary.md").read_text()
     assert "Sensitivity study free_study (sobol)" in page and "Trials of the Pareto front" in page
+
+
+def test_a_constant_metric_gets_one_line_and_no_indices(tmp_path):
+    """A free body whose rotation starts at rest: its final Omega_x is the same (0) in every run."""
+    from rbstab.studies.sensitivity import CONSTANT
+
+    path = tmp_path / "rest.yaml"
+    path.write_text(rbstab.config.dump_yaml({**FREE, "initial_state": {"v": [0.5, 0.3, 0.2]}}))
+    args = ["sensitivity", str(path), "-n", "8", "-o", str(tmp_path), "-j", "1", "--json", "--no-progress",
+            "--vary=controller.l_t=scale_uniform:[1,4]", "--vary=controller.k_t=scale_uniform:[0.5,2]",
+            "--metric=final_omega_x", "--metric=final_velocity_x"]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
+    constant, varying = lines
+    assert constant["reason"] == CONSTANT and varying["reason"] is None
+    assert all(v["ST"] is None and v["S1"] is None for v in constant["factors"].values())
+    assert all(v["ST"] is not None for v in varying["factors"].values())
+    assert f"final_omega_x [rad s-1] (sobol, 32 runs): {CONSTANT}" in result.output
+    ds = read_sensitivity(tmp_path / "free_study")
+    assert ds["reason"].values.tolist() == [CONSTANT, ""]

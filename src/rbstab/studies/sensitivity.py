@@ -187,6 +187,10 @@ def _sample(problem: dict, n: int, method: str, seed: int) -> np.ndarray:
     return morris.sample(problem, n, num_levels=MORRIS_LEVELS, seed=seed)
 
 
+#: Why a metric that takes one value over the design has no indices.
+CONSTANT = "this metric is constant over the design; no factor moves it"
+
+
 def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 200,
                     conf_level: float = 0.95):
     """The indices of every metric of ``results`` (:func:`run_design`'s Dataset, one run per
@@ -211,12 +215,18 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
     table = {k: np.full((len(names), len(plan.factors)), np.nan) for k in indices}
     moments = {k: np.full(len(names), np.nan) for k in ("mean", "std")}
     nonfinite = np.zeros(len(names), dtype=np.int64)
+    reasons = np.full(len(names), "", dtype=object)
     for m, name in enumerate(names):
         y = results[name].to_numpy().astype(float)
         nonfinite[m] = int(np.sum(~np.isfinite(y)))
         moments["mean"][m], moments["std"][m] = (np.nanmean(y), np.nanstd(y)) if nonfinite[m] < len(y) else (np.nan,) * 2
-        if nonfinite[m] or not np.ptp(y) > 0:
-            continue  # no variance to apportion (all equal) or runs without a value: NaN
+        finite = y[np.isfinite(y)]
+        if len(finite) and not np.ptp(finite) > 0:
+            reasons[m] = CONSTANT
+        elif nonfinite[m]:
+            reasons[m] = f"{nonfinite[m]} of {len(y)} runs have no value of this metric; no indices"
+        if reasons[m]:
+            continue  # no variance to apportion, or runs without a value: no indices (NaN)
         found = _analyze(plan, y, num_resamples, conf_level)
         for k in indices:
             table[k][m] = np.asarray(found[k], dtype=float)
@@ -225,7 +235,8 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
             for k, v in table.items()}
     data.update(mean=("metric", moments["mean"], {"long_name": "mean of the metric over the runs"}),
                 std=("metric", moments["std"], {"long_name": "standard deviation of the metric over the runs"}),
-                n_nonfinite=("metric", nonfinite, {"long_name": "runs whose metric is not finite"}))
+                n_nonfinite=("metric", nonfinite, {"long_name": "runs whose metric is not finite"}),
+                reason=("metric", reasons.astype(str), {"long_name": "why the metric has no indices (empty: it has)"}))
     factor_keys = [v.key for v in plan.varied for _ in v.factors]
     return xr.Dataset(data, coords={"metric": names, "factor": plan.factors,
                                     "factor_key": ("factor", factor_keys), "units": ("metric", units)})
@@ -329,15 +340,17 @@ def read_sensitivity(path: str | os.PathLike):
 
 def metric_records(ds) -> list[dict]:
     """One plain mapping per metric (``--json``): ``metric``, ``units``, ``method``,
-    ``n_runs``, and per factor its indices with their interval half-widths."""
+    ``n_runs``, ``reason`` (why it has no indices, else None), and per factor its indices
+    with their interval half-widths (null where it has none)."""
     records = []
     names = list(INDICES[ds.attrs["method"]])
     for m, metric in enumerate(ds["metric"].values.tolist()):
         factors = {f: {k: _number(ds[k].values[m, i]) for k in names}
                    for i, f in enumerate(ds["factor"].values.tolist())}
+        reason = str(ds["reason"].values[m]) if "reason" in ds else ""
         records.append({"metric": metric, "units": str(ds["units"].values[m]), "method": ds.attrs["method"],
                         "n_runs": int(ds.attrs["n_runs"]), "n_nonfinite": int(ds["n_nonfinite"].values[m]),
-                        "factors": factors})
+                        "reason": reason or None, "factors": factors})
     return records
 
 
