@@ -13,6 +13,7 @@ configuration, bit for bit.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -21,9 +22,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..config import ConfigError, config_from_mapping
+from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..io.chunk import summary_table_columns
-from .design import METRICS_NOT_FIGURES
+from .design import METRICS_NOT_FIGURES, design_mappings
 
 __all__ = ["GenerationRuns", "run_generation", "integrate_part", "CALLS"]
 
@@ -58,7 +61,6 @@ def integrate_part(part, engine: str = "compiled") -> dict:
     :class:`rbstab.engine.RunBatch` through :func:`rbstab.simulator.simulate_batch` (the
     summary figures only, no trace kept), the others (implicit methods, the pure sign law)
     one by one from their configurations."""
-    from ..config import config_from_mapping  # heavy: numba, h5py
     from ..simulator import simulate_batch, simulate_many  # heavy: numba
 
     CALLS["batches"] += 1
@@ -110,7 +112,7 @@ def run_generation(base: Mapping, design: pd.DataFrame, *, engine: str = "compil
     row whose configuration is invalid is not run (``invalid`` says why).
     """
     from ..sweep.spec import SweepSpecError, spec_from_mapping  # heavy: pydantic, numba
-    from ..sweep.table import plan_table
+    from ..sweep.table import plan_table  # heavy: numba, h5py (imported with the first generation)
 
     n = len(design)
     invalid: dict[int, str] = {}
@@ -152,12 +154,6 @@ def run_generation(base: Mapping, design: pd.DataFrame, *, engine: str = "compil
 
 def _invalid_rows(base: Mapping, design: pd.DataFrame) -> dict[int, str]:
     """Row -> why its configuration is invalid (the schema's messages), of the rows of ``design``."""
-    import copy
-
-    from ..config import ConfigError, config_from_mapping
-    from ..config.paths import set_dotted
-    from .design import design_mappings
-
     mappings = design_mappings(design)
     out = {}
     for i in range(len(design)):

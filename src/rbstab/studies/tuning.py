@@ -174,7 +174,7 @@ class TuningProblem:
     def distributions(self) -> dict:
         """Optuna's distribution of each factor (log-scaled for ``log_uniform`` and
         ``scale_log_uniform``)."""
-        from optuna.distributions import CategoricalDistribution, FloatDistribution
+        from optuna.distributions import CategoricalDistribution, FloatDistribution  # heavy: optuna (~1 s)
 
         out = {}
         for v in self.varied:
@@ -213,7 +213,7 @@ class TuningProblem:
         constraints over the batch), ``constraints`` (their excess), ``failed`` (runs that
         failed, -1 for an invalid configuration) and ``message``; the trials' runs
         integrated as one batch (:func:`rbstab.studies.batch.run_generation`)."""
-        from .batch import run_generation
+        from .batch import run_generation  # heavy: the sweep's planning (when a generation runs)
 
         b = max(len(self.bodies), 1)
         runs = run_generation(self.base.resolved, self.design(trials), engine=self.engine, executor=executor)
@@ -485,7 +485,7 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     """
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
-    from .search import RESTARTS, GenerationSearch, default_population
+    from .search import RESTARTS, GenerationSearch, default_population  # heavy: optuna, cmaes (when a study runs)
 
     folder = study_folder(output, name, config)
     problem = plan_tuning(config, vary, minimize=minimize, maximize=maximize, subject_to=subject_to, over=over,
@@ -575,7 +575,7 @@ def _executor(executor: Any, jobs: int | None, scheduler: str | None):
     if executor is None and (jobs is None or jobs <= 1) and scheduler is None:
         return contextlib.nullcontext(None)
     if executor is None or isinstance(executor, str):
-        from ..sweep.executors import ExecutorError, make_executor
+        from ..sweep.executors import ExecutorError, make_executor  # heavy: concurrent.futures, dask (with -j)
 
         try:
             return make_executor(executor or ("dask" if scheduler else "local"), jobs=jobs, scheduler=scheduler)

@@ -48,6 +48,7 @@ import json
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
+from itertools import product
 from pathlib import Path
 from typing import Any
 
@@ -1024,8 +1025,6 @@ def _table_as_grid(ds):
     grid over its columns (columns that vary together, e.g. the entries of one vector, are one
     axis, named by the first; the others stay as its coordinates), in the table's order of
     levels. ValueError in one line naming a combination missing or repeated otherwise."""
-    import itertools
-
     import numpy as np  # heavy: numpy
     import pandas as pd  # heavy: pandas
     import xarray as xr  # heavy: xarray
@@ -1055,7 +1054,7 @@ def _table_as_grid(ds):
     total = int(np.prod([len(levels[a]) for a in axes_with_levels]))
     if total != n:
         present = set(counts.index)
-        combo = next(c for c in itertools.product(*(levels[a] for a in axes_with_levels)) if c not in present)
+        combo = next(c for c in product(*(levels[a] for a in axes_with_levels)) if c not in present)
         raise ValueError(f"sweep {ds.attrs.get('sweep', '')!r}: its table is not a grid over {where}: the combination "
                          f"({_combination(axes_with_levels, combo)}) is missing ({n} rows, {total} combinations)")
     dependent = {name: a for a in axes_with_levels for name in axes[a][1:]}
