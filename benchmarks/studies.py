@@ -1,99 +1,110 @@
-"""Benchmark: a 10-factor Sobol' study and a 100-trial tuning study of Case 3.
+"""Benchmark: tuning studies at the batch engine's speed, and a Sobol' study.
 
-Targets: a 10-factor Sobol' study with N = 1024 on Case 3 end to end < 60 s on two cores
-(< 5 s on a GPU); a 100-trial tuning study of two gains < 30 s on two cores. Prints one
-table:
+Prints one table (wall times in this process, after the compile cache is loaded):
 
-- **sobol**: ``rbstab sensitivity configs/paper/case3_embedded.yaml -n N`` with ten
-  factors (the eight gains scaled in [0.5, 2], the mass in [30, 50] kg, Omega_x(0) in
-  [10, 22] rad/s) and the default metrics, from process start to exit, in a fresh folder:
-  N (D + 2) = 12 N runs (first-order and total indices; the 22,528 runs quoted for
-  N = 1024 count the second-order design N (2D + 2), which the study does not draw);
-- **sobol, resumed**: the same command again (every run is there: design, index, analysis);
-- **tune**: ``rbstab tune configs/paper/case3_embedded.yaml --trials 100`` over K_c and
-  L_c scaled in [0.25, 4], minimizing v(t_end) with max |E_z| <= 0.1 m, from process
-  start to exit, with the default SQLite storage and (in process) with
-  ``storage="memory"``, and the time per trial.
+- **two gains, 240 trials**: Case 2's damping gains L_t and L_r, one log-scaled factor each
+  over four decades (``scale_log_uniform:[0.01,100]``), minimizing v(t_end): TPE (the
+  default) and CMA-ES, with ``storage="memory"`` and with the default SQLite storage; the
+  best value against the best of the 31 x 31 log grid;
+- **six gains, 10,000 trials**: the six gain vectors of Case 3 scaled in [0.25, 4]
+  (log-scaled), CMA-ES with IPOP restarts, in memory;
+- **robust, --over 64 bodies x 2,000 trials**: Case 3's K_c and L_c over 64 bodies whose
+  mass is within +-20 %, the worst case, CMA-ES, in memory (128,000 runs);
+- **GPU, 10^6 trial-runs** (``--gpu``): 1,000 trials x 1,000 bodies with ``engine="cuda"``,
+  where a GPU can be reached; else the note says so.
+
+Targets (two cores): 240 trials <= 2 s; 10,000 trials of six gains <= 30 s; 64 x 2,000
+<= 60 s; on a GPU 10^6 trial-runs <= 10 s.
 
 Usage::
 
-    python benchmarks/studies.py [--jobs 2] [-n 1024] [--trials 100]
+    python benchmarks/studies.py [--only two,six,robust] [--gpu]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
 import tempfile
 import time
 import warnings
 from pathlib import Path
 
+import numpy as np
+import pandas as pd
+
 ROOT = Path(__file__).resolve().parents[1]
+CASE2 = ROOT / "configs" / "paper" / "case2_visco_elastic.yaml"
 CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
-#: The console script beside this interpreter (the installed ``rbstab``).
-RBSTAB = str(Path(sys.executable).parent / "rbstab")
-
-FACTORS = [*(f"controller.{k}=scale_uniform:[0.5,2]" for k in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d")),
-           "body.mass=uniform:[30,50]", "initial_state.omega.0=uniform:[10,22]"]
-GAINS = ["controller.k_c=scale_uniform:[0.25,4]", "controller.l_c=scale_uniform:[0.25,4]"]
-SPEC = ["--minimize", "lyapunov_final", "--subject-to", "max_abs_constraint_error_z<=0.1"]
+TWO = ["controller.l_t=scale_log_uniform:[0.01,100]", "controller.l_r=scale_log_uniform:[0.01,100]"]
+SIX = [f"controller.{k}=scale_log_uniform:[0.25,4]" for k in ("k_t", "l_t", "k_r", "l_r", "k_c", "l_c")]
+ROBUST = ["controller.k_c=scale_log_uniform:[0.25,4]", "controller.l_c=scale_log_uniform:[0.25,4]"]
 
 
-def _timed(args: list[str]) -> tuple[float, str]:
-    """Wall time [s] of ``rbstab ARGS`` and its stdout."""
+def _grid_best(config) -> float:
+    from rbstab.studies.batch import run_generation
+
+    factors = np.geomspace(0.01, 100, 31)
+    l_t, l_r = (np.asarray(config.resolved["controller"][k], dtype=float) for k in ("l_t", "l_r"))
+    rows = [{**{f"controller.l_t[{i}]": l_t[i] * a for i in range(3)},
+             **{f"controller.l_r[{i}]": l_r[i] * b for i in range(3)}} for a in factors for b in factors]
+    return float(np.min(run_generation(config.resolved, pd.DataFrame(rows)).figures["lyapunov_final"]))
+
+
+def _timed(tmp: Path, label: str, config, vary, trials: int, **kwargs) -> tuple:
+    import rbstab
+
     start = time.perf_counter()
-    done = subprocess.run([RBSTAB, *args], capture_output=True, text=True)
-    elapsed = time.perf_counter() - start
-    if done.returncode != 0:
-        raise SystemExit(f"rbstab {' '.join(args)} failed:\n{done.stderr}")
-    return elapsed, done.stdout
+    result = rbstab.tune(config, vary, trials=trials, minimize=["lyapunov_final"], output=tmp, name=label.replace(" ", "_")
+                         .replace(",", ""), **kwargs)
+    return label, trials, time.perf_counter() - start, result.best_values[0]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--jobs", type=int, default=2)
-    parser.add_argument("-n", type=int, default=1024, help="Sobol' base samples (a power of 2)")
-    parser.add_argument("--trials", type=int, default=100)
+    parser.add_argument("--only", default="two,six,robust")
+    parser.add_argument("--gpu", action="store_true", help="also 10^6 trial-runs with engine='cuda'")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
-    rows = []
-    with tempfile.TemporaryDirectory() as tmp:
-        sobol = ["sensitivity", str(CASE3), "-n", str(args.n), "-j", str(args.jobs), "-o", tmp, "--json", "-q",
-                 "--no-progress", "--no-warn", "all", *(f"--vary={v}" for v in FACTORS)]
-        elapsed, out = _timed(sobol)
-        n_runs = json.loads(out.splitlines()[0])["n_runs"]
-        rows.append((f"sobol, 10 factors, N = {args.n}", f"{n_runs} runs", elapsed, f"{n_runs / elapsed:.0f} runs/s"))
-        elapsed, _ = _timed(sobol)
-        rows.append(("sobol, resumed (all runs there)", f"{n_runs} runs", elapsed, ""))
-        tune = ["tune", str(CASE3), "--trials", str(args.trials), "-o", tmp, "--json", "-q", "--no-warn", "all",
-                *(f"--vary={v}" for v in GAINS), *SPEC]
-        elapsed, out = _timed(tune)
-        best = json.loads(out)
-        rows.append((f"tune, 2 gains, SQLite, {args.trials} trials", f"best {best['best_value']:.4g} J", elapsed,
-                     f"{1e3 * elapsed / args.trials:.0f} ms/trial"))
-        rows.append(_tune_in_process(args.trials, Path(tmp)))
-    print(f"{'study':<44} {'size':>14} {'wall [s]':>9}  rate")
-    for name, size, elapsed, rate in rows:
-        print(f"{name:<44} {size:>14} {elapsed:9.2f}  {rate}")
-    print("targets: sobol N = 1024 < 60 s on 2 cores; tune 100 trials < 30 s on 2 cores")
-
-
-def _tune_in_process(trials: int, tmp: Path) -> tuple:
-    """``rbstab.tune`` in this process with ``storage="memory"`` (after the compile cache is loaded)."""
     import rbstab
     from rbstab.engine import ensure_compiled
 
     ensure_compiled()
-    config = rbstab.load_config(CASE3)
-    start = time.perf_counter()
-    result = rbstab.tune(config, GAINS, trials=trials, minimize=["lyapunov_final"],
-                         subject_to=["max_abs_constraint_error_z<=0.1"], storage="memory", output=tmp, name="memory")
-    elapsed = time.perf_counter() - start
-    return (f"tune, in process, memory, {trials} trials", f"best {result.best_values[0]:.4g} J", elapsed,
-            f"{1e3 * elapsed / trials:.0f} ms/trial")
+    only = set(args.only.split(","))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        if "two" in only:
+            config = rbstab.load_config(CASE2)
+            best = _grid_best(config)
+            for sampler in ("tpe", "cmaes"):
+                for storage in ("memory", None):
+                    label = f"two gains, {sampler}, {'memory' if storage else 'SQLite'}"
+                    row = _timed(tmp, label, config, TWO, 240, sampler=sampler, storage=storage)
+                    rows.append((*row[:3], f"best / grid's best {row[3] / best:.3f}"))
+        if "six" in only:
+            config = rbstab.load_config(CASE3)
+            row = _timed(tmp, "six gains, cmaes ipop, memory", config, SIX, 10_000, sampler="cmaes", storage="memory")
+            rows.append((*row[:3], f"best {row[3]:.4g} J"))
+        if "robust" in only:
+            config = rbstab.load_config(CASE3)
+            row = _timed(tmp, "robust, 64 bodies, cmaes, memory", config, ROBUST, 2_000, sampler="cmaes",
+                         storage="memory", over=["body.mass=scale_uniform:[0.8,1.2]"], over_n=64, generation=32)
+            rows.append((*row[:3], f"worst-case best {row[3]:.4g} J, {64 * 2000} runs"))
+        if args.gpu:
+            try:
+                config = rbstab.load_config(CASE3)
+                row = _timed(tmp, "gpu, 1000 x 1000 bodies", config, ROBUST, 1_000, sampler="tpe", storage="memory",
+                             engine="cuda", over=["body.mass=scale_uniform:[0.8,1.2]"], over_n=1000, generation=500)
+                rows.append((*row[:3], "10^6 trial-runs"))
+            except Exception as exc:  # no GPU here
+                rows.append(("gpu, 10^6 trial-runs", 0, float("nan"), f"no GPU could be reached ({exc})"))
+        else:
+            rows.append(("gpu, 10^6 trial-runs", 0, float("nan"), "not run (--gpu; none reachable here)"))
+    print(f"{'study':<40} {'trials':>7} {'wall [s]':>9}  note")
+    for label, trials, elapsed, note in rows:
+        print(f"{label:<40} {trials:>7} {elapsed:9.2f}  {note}")
+    print("targets (2 cores): 240 trials <= 2 s; 6 gains x 10,000 <= 30 s; 64 bodies x 2,000 <= 60 s; "
+          "GPU 10^6 trial-runs <= 10 s")
 
 
 if __name__ == "__main__":

@@ -89,6 +89,8 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
 def _describe(record: dict) -> str:
     """A metric's indices in a few lines."""
     units = f" [{record['units']}]" if record["units"] not in ("", "1") else ""
+    if record.get("reason"):
+        return f"{record['metric']}{units} ({record['method']}, {record['n_runs']} runs): {record['reason']}"
     lines = [f"{record['metric']}{units} ({record['method']}, {record['n_runs']} runs"
              + (f", {record['n_nonfinite']} without a value: no indices" if record["n_nonfinite"] else "") + ")"]
     for factor, values in record["factors"].items():

@@ -28,14 +28,31 @@ from .sensitivity import study_error
 @click.option("--quantile", type=float, default=1.0, show_default=True, metavar="Q",
               help="With --over: the Q-quantile of the bodies' badness instead of the worst case (1).")
 @click.option("--sampler", default="tpe", show_default=True, metavar="tpe|cmaes",
-              help="Optuna's sampler: TPE (constraints, two objectives) or CMA-ES (one objective).")
+              help="After the space-filling start: multivariate TPE (constraints, two objectives) or CMA-ES "
+              "with restarts (one objective).")
+@click.option("--generation", type=int, default=None, metavar="K",
+              help="Trials asked and integrated at once, as one batch  [default: 32 on the CPU, 2048 with "
+              "--engine cuda; CMA-ES: its population, 4 + 3 ln d].")
+@click.option("--startup", type=int, default=None, metavar="N",
+              help="Space-filling trials first (scrambled Sobol')  [default: the generation, at least 16; 0: none].")
+@click.option("--restarts", default="ipop", show_default=True, metavar="ipop|bipop|none",
+              help="CMA-ES restarts once converged: doubled population (ipop) or alternating large and small "
+              "populations (bipop).")
+@click.option("-j", "--jobs", type=int, default=None, metavar="N",
+              help="Worker processes integrating each generation  [default: this process].")
+@click.option("--executor", type=click.Choice(["local", "dask"]), default=None,
+              help="Where a generation's runs are integrated, as for rbstab sweep  [default: this process, or "
+              "local with -j].")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --executor dask).")
 @click.option("--storage", default=None, metavar="URL",
               help="Optuna storage URL, e.g. sqlite:///studies.db or postgresql://...  "
               "[default: sqlite:///OUTPUT/<name>/study.db].")
 @study_options
 @console_options
-def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, storage,
-         vary, seed, name, overrides, engine, output, overwrite, as_json) -> None:
+def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, generation,
+         startup, restarts, jobs, executor, scheduler, storage, vary, seed, name, overrides, engine, output, overwrite,
+         as_json) -> None:
     """Search the --vary keys of CONFIG for the best value of --minimize/--maximize.
 
     \b
@@ -43,8 +60,10 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
         --vary controller.k_c=scale_uniform:[0.25,4] --vary controller.l_c=scale_uniform:[0.25,4] \\
         --minimize lyapunov_final --subject-to 'max_abs_constraint_error_z<=0.1'
 
-    Each trial is one run (with --over, a batch over uncertain bodies). The study is kept in
-    an Optuna storage: the same command again resumes it, and several processes can work on
+    Trials come a generation at a time (space-filling first, then the sampler); each trial
+    is one run (with --over, one per uncertain body), and a generation's runs are
+    integrated as one batch. The study is kept in an Optuna storage: the same command
+    again resumes it at its last finished generation, and several processes can work on
     one study. Writes OUTPUT/<name>/best.yaml (`rbstab run` takes it as it is), trials.csv
     and tuning.nc (`rbstab report OUTPUT/<name>` draws it). Options are checked before
     anything runs. With --json: the best value, the best parameters and the trial count.
@@ -58,8 +77,9 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     try:
         result = run_tuning(base, vary, trials=trials, minimize=minimize, maximize=maximize, subject_to=subject_to,
                             over=over, over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler,
-                            seed=seed, storage=storage, output=output, name=name, engine=engine, log=console.info,
-                            command_line=command_line(), overwrite=overwrite)
+                            seed=seed, storage=storage, output=output, name=name, engine=engine,
+                            generation=generation, startup=startup, restarts=restarts, jobs=jobs, executor=executor,
+                            scheduler=scheduler, log=console.info, command_line=command_line(), overwrite=overwrite)
     except StudyInputError as exc:
         raise study_error(exc)
     record = result.record()

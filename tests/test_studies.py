@@ -8,6 +8,7 @@ the hundreds of runs of a study take seconds.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ import rbstab
 from rbstab.simulator import simulate_many
 from rbstab.studies import StudyInputError, read_sensitivity, read_tuning, sensitivity_analysis, tune
 
+ROOT = Path(__file__).resolve().parents[1]
 FREE = {
     "name": "free_study",
     "body": {"mass": 41.0, "inertia": [10.0, 8.0, 4.0], "attachment_point": [0.15, 0.10, -0.42]},
@@ -94,59 +96,160 @@ def test_morris_ranks_the_factors_as_sobol(config, sobol, tmp_path):
 TUNE_VARY = ["controller.l_t=scale_uniform:[0.5,8]", "controller.l_r=scale_uniform:[0.5,8]"]
 
 
-def _grid(config, n=31):
-    """lyapunov_final on the n x n grid of the two damping factors of TUNE_VARY."""
-    factors = np.linspace(0.5, 8.0, n)
+#: A multimodal two-gain problem: the damping gains L_t, L_r of Case 2 over four decades
+#: each (one log-scaled factor per gain vector), minimizing v(t_end). Its 31 x 31 log grid
+#: has three local minima, two of them near the upper corner.
+CASE2 = "configs/paper/case2_visco_elastic.yaml"
+CASE2_VARY = ["controller.l_t=scale_log_uniform:[0.01,100]", "controller.l_r=scale_log_uniform:[0.01,100]"]
+
+
+@pytest.fixture(scope="module")
+def case2_grid():
+    """v(t_end) of Case 2 on the 31 x 31 log grid of CASE2_VARY's factors (one batch)."""
+    import pandas as pd
+    from scipy.ndimage import minimum_filter
+
+    from rbstab.studies.batch import run_generation
+
+    config = rbstab.load_config(ROOT / CASE2)
+    factors = np.geomspace(0.01, 100, 31)
     l_t, l_r = (np.asarray(config.resolved["controller"][k], dtype=float) for k in ("l_t", "l_r"))
-    configs = [rbstab.load_config(config, {"controller.l_t": (l_t * a).tolist(), "controller.l_r": (l_r * b).tolist()})
-               for a in factors for b in factors]
-    return np.array([r.summary["lyapunov_final"] for _, r in simulate_many(configs, full=False)]).reshape(n, n)
+    rows = [{**{f"controller.l_t[{i}]": l_t[i] * a for i in range(3)},
+             **{f"controller.l_r[{i}]": l_r[i] * b for i in range(3)}} for a in factors for b in factors]
+    grid = run_generation(config.resolved, pd.DataFrame(rows)).figures["lyapunov_final"].reshape(31, 31)
+    assert np.sum(grid == minimum_filter(grid, size=3)) >= 2, "the problem is multimodal"
+    return config, grid
 
 
-def test_tune_finds_the_grids_best_within_a_quarter_of_its_runs(config, tmp_path):
-    grid = _grid(config)
-    i, j = np.unravel_index(np.argmin(grid), grid.shape)
-    assert 0 < i < 30 and 0 < j < 30, "the optimum is interior"
-    budget = grid.size // 4  # 240 trials of one run each
-    result = tune(config, TUNE_VARY, trials=budget, minimize=["lyapunov_final"], output=tmp_path, seed=0,
-                  storage="memory")
-    assert result.n_trials == budget == len(result.trials)
-    assert result.best_values[0] <= 1.02 * grid.min()
+@pytest.mark.parametrize("sampler", ["tpe", "cmaes"])
+def test_tune_reaches_the_log_grids_best_for_every_seed(case2_grid, sampler, tmp_path):
+    config, grid = case2_grid
+    for seed in range(4):
+        result = tune(config, CASE2_VARY, trials=240, minimize=["lyapunov_final"], output=tmp_path, seed=seed,
+                      storage="memory", sampler=sampler, name=f"s{seed}")
+        assert result.n_trials == 240 == len(result.trials)
+        assert result.best_values[0] <= 1.02 * grid.min(), (seed, result.best_values[0] / grid.min())
 
 
-def test_best_yaml_reproduces_the_best_value_and_a_study_resumes(config, tmp_path, monkeypatch):
-    from rbstab.studies.tuning import TuningProblem
+def test_a_generation_is_one_engine_batch(config, tmp_path, monkeypatch):
+    """40 trials in generations of 16 over 4 bodies: three batches of 64, 64 and 32 runs."""
+    import rbstab.simulator
+
+    calls = []
+    batch = rbstab.simulator.simulate_batch
+
+    def counted(runs, rows=None, **kwargs):
+        calls.append(len(runs) if rows is None else len(rows))
+        return batch(runs, rows, **kwargs)
+
+    monkeypatch.setattr(rbstab.simulator, "simulate_batch", counted)
+    result = tune(config, TUNE_VARY, trials=40, minimize=["lyapunov_final"], output=tmp_path, storage="memory",
+                  generation=16, startup=16, over=["body.mass=scale_uniform:[0.9,1.1]"], over_n=4)
+    assert result.n_trials == 40
+    assert calls == [64, 64, 32]
+
+
+def test_a_generation_equals_its_runs_one_by_one(config):
+    """The figures of a generation's batch are those of simulate_many, bit for bit."""
+    from rbstab.studies.tuning import plan_tuning
+
+    problem = plan_tuning(config, TUNE_VARY, minimize=["lyapunov_final"], subject_to=["final_omega_x<=1"],
+                          over=["body.mass=scale_uniform:[0.8,1.2]"], over_n=3)
+    trials = [problem.values_of({"controller.l_t:scale": a, "controller.l_r:scale": b})
+              for a, b in [(0.5, 1.0), (2.0, 3.0), (7.5, 0.6)]]
+    records = problem.evaluate_many(trials)
+    for values, record in zip(trials, records):
+        runs = [r.summary for _, r in simulate_many(problem.configs(values), full=False)]
+        assert record["figures"]["lyapunov_final"] == max(s["lyapunov_final"] for s in runs)
+        assert record["figures"]["final_omega_x"] == max(s["final_omega"][0] for s in runs)
+
+
+def test_an_interrupted_study_resumes_with_every_finished_trial_once(config, tmp_path, monkeypatch):
+    import optuna
+    import pandas as pd
+
+    import rbstab.studies.batch
 
     calls = {"n": 0}
-    evaluate = TuningProblem.evaluate
+    run_generation = rbstab.studies.batch.run_generation
 
-    def interrupted(self, values):
+    def interrupted(*args, **kwargs):
         calls["n"] += 1
-        if calls["n"] == 4:
-            raise KeyboardInterrupt
-        return evaluate(self, values)
+        if calls["n"] == 3:
+            raise KeyboardInterrupt  # in the third generation's batch
+        return run_generation(*args, **kwargs)
 
-    monkeypatch.setattr(TuningProblem, "evaluate", interrupted)
+    monkeypatch.setattr(rbstab.studies.batch, "run_generation", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        tune(config, TUNE_VARY, trials=6, minimize=["lyapunov_final"], output=tmp_path)
-    monkeypatch.setattr(TuningProblem, "evaluate", evaluate)
-    args = ["tune", "-", "--trials", "6", "-o", str(tmp_path), "--minimize", "lyapunov_final", "--json", "-q",
-            *[f"--vary={v}" for v in TUNE_VARY]]
+        tune(config, TUNE_VARY, trials=40, minimize=["lyapunov_final"], output=tmp_path, generation=8, startup=8)
+    storage = f"sqlite:///{tmp_path}/free_study/study.db"
+    columns = ["number", "params_controller.l_t:scale", "value"]
+    before = optuna.load_study(study_name="free_study", storage=storage).trials_dataframe()[columns]
+    assert len(before) == 16  # two finished generations, stored whole
+    monkeypatch.setattr(rbstab.studies.batch, "run_generation", run_generation)
     path = tmp_path / "free.yaml"
     path.write_text(rbstab.config.dump_yaml(config.resolved))
-    args[1] = str(path)
+    args = ["tune", str(path), "--trials", "40", "-o", str(tmp_path), "--minimize", "lyapunov_final", "--json", "-q",
+            "--generation", "8", "--startup", "8", *[f"--vary={v}" for v in TUNE_VARY]]
     result = CliRunner().invoke(cli, args, catch_exceptions=False)
     assert result.exit_code == 0, result.output
     record = json.loads(result.stdout)
-    assert record["n_trials"] == 6 and record["n_failed"] == 1  # 3 before the interrupt, 3 after it
-    ds = read_tuning(tmp_path / "free_study")
-    assert ds["trial"].values.tolist() == list(range(7))
-    assert ds["state"].values.tolist()[3] == "fail"
+    assert record["n_trials"] == 40 and record["n_failed"] == 0
+    table = pd.read_csv(tmp_path / "free_study" / "trials.csv")
+    assert table["trial"].tolist() == list(range(40))
+    assert (table["state"] == "complete").all()
+    after = optuna.load_study(study_name="free_study", storage=storage).trials_dataframe()[columns]
+    pd.testing.assert_frame_equal(after.iloc[:16], before)
     run = CliRunner().invoke(cli, ["run", str(tmp_path / "free_study" / "best.yaml"), "-o", str(tmp_path / "best"),
                                    "-q"], catch_exceptions=False)
     assert run.exit_code == 0, run.output
-    stored = rbstab.open_result(tmp_path / "best" / "free_study_best.h5")
-    np.testing.assert_allclose(stored.attrs["summary_lyapunov_final"], record["best_value"], rtol=1e-12)
+    stored_run = rbstab.open_result(tmp_path / "best" / "free_study_best.h5")
+    np.testing.assert_allclose(stored_run.attrs["summary_lyapunov_final"], record["best_value"], rtol=1e-12)
+
+
+def test_a_generation_is_stored_whole_despite_ctrl_c():
+    import os
+    import signal
+
+    from rbstab.studies.tuning import _deferred_interrupt
+
+    done = []
+    with pytest.raises(KeyboardInterrupt):
+        with _deferred_interrupt():
+            os.kill(os.getpid(), signal.SIGINT)
+            done.append(1)
+    assert done == [1]
+
+
+def test_scale_log_uniform_scales_a_whole_gain_vector(config):
+    from rbstab.studies.design import parse_vary
+
+    (v,) = parse_vary(["controller.l_t=scale_log_uniform:[0.01,100]"], config.resolved)
+    assert v.factors == ["controller.l_t:scale"]
+    values = v.from_unit(np.array([[0.0], [0.5], [1.0]]))
+    np.testing.assert_allclose(values, np.outer([0.01, 1.0, 100.0], [210, 210, 140]))
+
+
+def test_tune_on_the_cuda_simulator_equals_the_compiled_engine(tmp_path):
+    """The same study (seed, generations) on the compiled engine and on the CUDA simulator
+    (``NUMBA_ENABLE_CUDASIM=1``, a process of its own) gives the same trials, bit for bit."""
+    import os
+    import subprocess
+    import sys
+
+    path = tmp_path / "free.yaml"
+    path.write_text(rbstab.config.dump_yaml(FREE))
+    rbstab_cli = str(Path(sys.executable).parent / "rbstab")
+    tables = {}
+    for engine in ("compiled", "cuda"):
+        env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if engine == "cuda" else "0"}
+        done = subprocess.run([rbstab_cli, "tune", str(path), "--trials", "12", "--generation", "6", "--startup", "6",
+                               "--engine", engine, "-o", str(tmp_path / engine), "--minimize", "lyapunov_final", "-q",
+                               "--subject-to", "final_omega_x<=1", *[f"--vary={v}" for v in TUNE_VARY]],
+                              env=env, capture_output=True, text=True)
+        assert done.returncode == 0, done.stderr
+        tables[engine] = (tmp_path / engine / "free_study" / "trials.csv").read_text()
+    assert tables["compiled"] == tables["cuda"]
 
 
 # -- bad input ---------------------------------------------------------------------------------------
@@ -196,3 +299,24 @@ def test_report_draws_studies(config, sobol, tmp_path):
     assert figures == ["sensitivity_free_study.png", "tuning_free_study_objective.png", "tuning_free_study_pareto.png"]
     page = (out / "summary.md").read_text()
     assert "Sensitivity study free_study (sobol)" in page and "Trials of the Pareto front" in page
+
+
+def test_a_constant_metric_gets_one_line_and_no_indices(tmp_path):
+    """A free body whose rotation starts at rest: its final Omega_x is the same (0) in every run."""
+    from rbstab.studies.sensitivity import CONSTANT
+
+    path = tmp_path / "rest.yaml"
+    path.write_text(rbstab.config.dump_yaml({**FREE, "initial_state": {"v": [0.5, 0.3, 0.2]}}))
+    args = ["sensitivity", str(path), "-n", "8", "-o", str(tmp_path), "-j", "1", "--json", "--no-progress",
+            "--vary=controller.l_t=scale_uniform:[1,4]", "--vary=controller.k_t=scale_uniform:[0.5,2]",
+            "--metric=final_omega_x", "--metric=final_velocity_x"]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    lines = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
+    constant, varying = lines
+    assert constant["reason"] == CONSTANT and varying["reason"] is None
+    assert all(v["ST"] is None and v["S1"] is None for v in constant["factors"].values())
+    assert all(v["ST"] is not None for v in varying["factors"].values())
+    assert f"final_omega_x [rad s-1] (sobol, 32 runs): {CONSTANT}" in result.output
+    ds = read_sensitivity(tmp_path / "free_study")
+    assert ds["reason"].values.tolist() == [CONSTANT, ""]

@@ -227,7 +227,7 @@ def test_bad_combination_is_reported_with_run_id_and_key(tmp_path):
         ({"grid": {"body.mass": 41}}, "sweep key 'grid.body.mass': found 41; expected a non-empty list of values"),
         ({"grid": {"body.mass": []}}, "sweep key 'grid.body.mass': found []; expected a non-empty list"),
         ({"random": {"n": 2, "params": {"body.mass": {"gauss": [1, 2]}}}},
-         "sweep key 'random.params.body.mass.gauss': unknown key (allowed: uniform, normal, log_uniform, scale_uniform, choice)"),
+         "sweep key 'random.params.body.mass.gauss': unknown key (allowed: uniform, normal, log_uniform, scale_uniform, scale_log_uniform, choice)"),
         ({"random": {"n": 2, "params": {"body.mass": {"uniform": [5, 1]}}}}, "lo > hi"),
         ({"random": {"n": 2, "params": {"body.mass": {"normal": {"mean": 1}}}}},
          "sweep key 'random.params.body.mass.normal.std': missing; expected a number >= 0"),

@@ -15,6 +15,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+import rbstab
 from rbstab.config import ConfigError, config_from_mapping
 from rbstab.sweep import SweepSpecError, expand, load_spec, plan_table, resolved_config, run_sweep, spec_from_mapping
 from rbstab_cli.main import cli
@@ -415,3 +416,33 @@ def test_a_damaged_index_arrow_is_refused(index_folders, tmp_path):
     shown = CliRunner().invoke(cli, ["show", str(damaged)])
     assert shown.exit_code == 1 and "index.arrow: does not match its checksum" in shown.output, shown.output
 
+
+
+def test_open_sweep_grid_of_a_full_factorial_table(tmp_path):
+    """A table of every (mass, K_t) combination opens as a grid over its columns (K_t's two
+    entries, which vary together, as one axis); a table missing or repeating a combination
+    gets one line naming it."""
+    import pandas as pd
+
+    from rbstab.sweep.spec import spec_from_mapping
+
+    base = {"controller": {"variant": "free", "k_t": [4100, 4100, 3280], "l_t": [210, 210, 140],
+                           "k_r": [400, 400, 320], "l_r": [60, 60, 42]},
+            "initial_state": {"v": [0.5, 0.3, 0.2]},
+            "body": {"mass": 41.0, "inertia": [10.0, 8.0, 4.0], "attachment_point": [0.15, 0.10, -0.42]},
+            "simulation": {"t_end": 0.2, "n_samples": 11, "rtol": 1e-6, "atol": 1e-9}}
+    rows = [{"body.mass": m, "controller.k_t.0": k, "controller.k_t.1": 2 * k} for m in (30.0, 40.0)
+            for k in (1000.0, 2000.0, 3000.0)]
+    for name, frame in [("full", rows), ("missing", rows[:-1]), ("repeated", rows + rows[:1])]:
+        run_sweep(spec_from_mapping({"name": name, "base": base, "table": pd.DataFrame(frame)}), tmp_path,
+                  jobs=1, progress=False)
+    ds = rbstab.open_sweep(tmp_path / "full", grid=True)
+    assert dict(ds["lyapunov_final"].sizes) == {"mass": 2, "k_t_0": 3}
+    assert ds["k_t_1"].dims == ("k_t_0",) and ds["k_t_1"].values.tolist() == [2000.0, 4000.0, 6000.0]
+    flat = rbstab.open_sweep(tmp_path / "full")
+    assert ds["lyapunov_final"].values.ravel().tolist() == flat["lyapunov_final"].values.tolist()
+    with pytest.raises(ValueError, match=r"not a grid over mass, k_t_0: the combination \(mass=40, k_t_0=3000\) "
+                                         r"is missing"):
+        rbstab.open_sweep(tmp_path / "missing", grid=True)
+    with pytest.raises(ValueError, match=r"the combination \(mass=30, k_t_0=1000\) appears 2 times"):
+        rbstab.open_sweep(tmp_path / "repeated", grid=True)

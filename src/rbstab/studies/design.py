@@ -8,9 +8,10 @@ design table (the absolute values set in the configuration):
 
 - a number, or bounds of one shape as the value (``uniform: [[10, 20, -30], [12, 40, -20]]``):
   one factor per component, each its own column;
-- ``scale_uniform`` with number bounds: one factor ``KEY:scale`` that multiplies the whole
-  base value (a vector or a matrix keeps its shape, as sweeps scale them); the columns hold
-  ``base * factor``; with list bounds one factor per component;
+- ``scale_uniform`` (``scale_log_uniform``: the factor log-uniform) with number bounds: one
+  factor ``KEY:scale`` that multiplies the whole base value (a vector or a matrix keeps its
+  shape, as sweeps scale them); the columns hold ``base * factor``; with list bounds one
+  factor per component;
 - ``choice``: one factor picking one of the values.
 
 Design tables are :class:`pandas.DataFrame` objects of absolute values, one row per run,
@@ -58,6 +59,10 @@ class StudyInputError(ConfigError):
 #: Per-run values of a sweep that are bookkeeping, not figures a study can take as a metric.
 METRICS_NOT_FIGURES = ("lyapunov_rate_check",)
 
+#: Distributions of a factor of the base value, and those searched on a log scale.
+SCALES = ("scale_uniform", "scale_log_uniform")
+LOG_SCALED = ("log_uniform", "scale_log_uniform")
+
 _COLUMN = re.compile(r"^(?P<key>[^\[\]]+)\[(?P<index>\d+(?:,\d+)*)\]$")
 
 
@@ -101,7 +106,7 @@ class Varied:
     args : tuple
         The distribution's arguments (:class:`rbstab.sweep.spec.Distribution`).
     base : ndarray or None
-        The base configuration's value at ``key`` (``scale_uniform`` only).
+        The base configuration's value at ``key`` (``scale_uniform``, ``scale_log_uniform`` only).
     shape : tuple of int
         Shape of the value set in the config (() for a number).
     """
@@ -128,11 +133,11 @@ class Varied:
     def factors(self) -> list[str]:
         """Factor names: a column name, or ``<key>:scale`` / ``<column>:scale`` for scale factors."""
         names = column_names(self.key, self.factor_shape)
-        return [f"{n}:scale" for n in names] if self.kind == "scale_uniform" else names
+        return [f"{n}:scale" for n in names] if self.kind in SCALES else names
 
     def bounds(self) -> list[tuple[float, float]]:
         """(lo, hi) of each factor in its own units (a scale factor: the factor); for a
-        search range (``uniform``, ``log_uniform``, ``scale_uniform``)."""
+        search range (``uniform``, ``log_uniform``, ``scale_uniform``, ``scale_log_uniform``)."""
         lo, hi = (np.broadcast_to(a, self.factor_shape).ravel() for a in self.args)
         return list(zip(lo.tolist(), hi.tolist()))
 
@@ -140,7 +145,7 @@ class Varied:
         """Absolute values of the columns, shape (n, len(columns)), from factor values
         ``f`` (n, len(factors)) in the distribution's own units (a scale factor, a value)."""
         f = np.asarray(f, dtype=float).reshape(len(f), *self.factor_shape)
-        if self.kind == "scale_uniform":  # one factor for the whole value, or one per entry
+        if self.kind in SCALES:  # one factor for the whole value, or one per entry
             f = f.reshape(len(f), *self.factor_shape, *[1] * (self.base.ndim - len(self.factor_shape)))
             return (self.base[None] * f).reshape(len(f), -1)
         return f.reshape(len(f), -1)
@@ -159,7 +164,7 @@ class Varied:
             mean, std = (np.broadcast_to(a, self.factor_shape).ravel() for a in self.args)
             return norm.ppf(np.clip(u, 1e-12, 1 - 1e-12), mean, std)
         lo, hi = (np.broadcast_to(a, self.factor_shape).ravel() for a in self.args)
-        if self.kind == "log_uniform":
+        if self.kind in LOG_SCALED:
             return self.from_factors(np.exp(np.log(lo) + u * (np.log(hi) - np.log(lo))))
         return self.from_factors(lo + u * (hi - lo))
 
@@ -246,15 +251,15 @@ def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, al
     if dist.kind == "choice":
         return Varied(key, dist.kind, dist.args, None, ())
     shape = np.broadcast_shapes(*(np.shape(a) for a in dist.args))
-    if dist.kind != "scale_uniform":
+    if dist.kind not in SCALES:
         return Varied(key, dist.kind, dist.args, None, shape)
     base_value = np.asarray(current, dtype=float) if _numeric(current) else None
     if base_value is None:
-        errors.append(f"{option} {shown!r}: scale_uniform scales the base value of '{key}', found {current!r}; "
+        errors.append(f"{option} {shown!r}: {dist.kind} scales the base value of '{key}', found {current!r}; "
                       "expected a number or a list of numbers in the base configuration")
         return None
     if shape and shape != base_value.shape:
-        errors.append(f"{option} {shown!r}: scale_uniform bounds of shape {shape} do not fit '{key}' of shape "
+        errors.append(f"{option} {shown!r}: {dist.kind} bounds of shape {shape} do not fit '{key}' of shape "
                       f"{base_value.shape}; give numbers (one factor) or lists of its shape")
         return None
     return Varied(key, dist.kind, dist.args, base_value, base_value.shape)

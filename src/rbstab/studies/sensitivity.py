@@ -273,6 +273,10 @@ def _sample(problem: dict, n: int, method: str, seed: int) -> np.ndarray:
     return morris.sample(problem, n, num_levels=MORRIS_LEVELS, seed=seed)
 
 
+#: Why a metric that takes one value over the design has no indices.
+CONSTANT = "this metric is constant over the design; no factor moves it"
+
+
 def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 200,
                     conf_level: float = 0.95):
     """The indices of every metric of ``results`` (:func:`run_design`'s Dataset, one run per
@@ -306,14 +310,20 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
     moments = {k: np.full(len(names), np.nan) for k in ("mean", "std")}
     nonfinite = np.zeros(len(names), dtype=np.int64)
     spread = np.full(len(names), np.nan)
+    reasons = np.full(len(names), "", dtype=object)
     for m, (name, column, transform) in enumerate(columns):
         raw = results[column].to_numpy().astype(float)
         spread[m] = decades(raw)
         y = _transformed(raw, transform)
         nonfinite[m] = int(np.sum(~np.isfinite(y)))
         moments["mean"][m], moments["std"][m] = (np.nanmean(y), np.nanstd(y)) if nonfinite[m] < len(y) else (np.nan,) * 2
-        if nonfinite[m] or not np.ptp(y) > 0:
-            continue  # no variance to apportion (all equal) or runs without a value: NaN
+        finite = y[np.isfinite(y)]
+        if len(finite) and not np.ptp(finite) > 0:
+            reasons[m] = CONSTANT
+        elif nonfinite[m]:
+            reasons[m] = f"{nonfinite[m]} of {len(y)} runs have no value of this metric; no indices"
+        if reasons[m]:
+            continue  # no variance to apportion, or runs without a value: no indices (NaN)
         found = _analyze(plan, y, num_resamples, conf_level)
         for k in indices:
             table[k][m] = np.asarray(found[k], dtype=float)
@@ -333,7 +343,8 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
                 std=("metric", moments["std"], {"long_name": "standard deviation of the metric over the runs"}),
                 n_nonfinite=("metric", nonfinite, {"long_name": "runs whose metric is not finite"}),
                 decades=("metric", spread, {"long_name": "decades a positive metric spans over the runs "
-                                                         "(before its transform; NaN for other metrics)", "units": "1"}))
+                                                         "(before its transform; NaN for other metrics)", "units": "1"}),
+                reason=("metric", reasons.astype(str), {"long_name": "why the metric has no indices (empty: it has)"}))
     if sobol:
         data["note"] = ("metric", np.array(notes, dtype=object), {"long_name": "why indices are flagged unreliable"})
     factor_keys = [v.key for v in plan.varied for _ in v.factors]
@@ -446,9 +457,9 @@ def read_sensitivity(path: str | os.PathLike):
 
 def metric_records(ds) -> list[dict]:
     """One plain mapping per metric (``--json``): ``metric``, ``units``, ``method``,
-    ``n_runs``, ``decades``, ``note`` (why indices are unreliable, or None) and per factor
-    its indices with their interval half-widths (sobol: and ``S1_unreliable``,
-    ``ST_unreliable``)."""
+    ``n_runs``, ``decades``, ``reason`` (why it has no indices, else None), ``note`` (why
+    indices are unreliable, or None) and per factor its indices with their interval
+    half-widths (null where it has none; sobol: and ``S1_unreliable``, ``ST_unreliable``)."""
     records = []
     names = list(INDICES[ds.attrs["method"]])
     flags = [f"{k}_unreliable" for k in ("S1", "ST") if f"{k}_unreliable" in ds]
@@ -457,10 +468,11 @@ def metric_records(ds) -> list[dict]:
                        **{k: bool(ds[k].values[m, i]) for k in flags}}
                    for i, f in enumerate(ds["factor"].values.tolist())}
         note = str(ds["note"].values[m]) if "note" in ds else ""
+        reason = str(ds["reason"].values[m]) if "reason" in ds else ""
         records.append({"metric": metric, "units": str(ds["units"].values[m]), "method": ds.attrs["method"],
                         "n_runs": int(ds.attrs["n_runs"]), "n_nonfinite": int(ds["n_nonfinite"].values[m]),
                         "decades": _number(ds["decades"].values[m]) if "decades" in ds else None,
-                        "note": note or None, "factors": factors})
+                        "reason": reason or None, "note": note or None, "factors": factors})
     return records
 
 

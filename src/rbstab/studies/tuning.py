@@ -1,17 +1,23 @@
 """Tuning: search gains (or any numeric config keys) that meet a specification best, by Optuna.
 
-Each trial sets the ``--vary`` keys to values the sampler suggests (TPE by default, CMA-ES
-available) and integrates one run in this process (:func:`rbstab.simulator.simulate_many`:
-no files, ~10 ms for a Case 3 run of 2 s), or, with ``over``, a batch of runs over
-uncertain bodies (one draw of the ``over`` distributions, the same for every trial) whose
-worst case (or a chosen quantile) is the trial's value. Objectives and constraints are
+The study asks Optuna for a **generation** of trials at once (Optuna's ask-and-tell
+interface): the first generation space-filling (a scrambled Sobol' sequence), then
+multivariate TPE (by default) or CMA-ES with restarts (:mod:`rbstab.studies.search`). Each
+trial sets the ``--vary`` keys to the values suggested; with ``over``, it runs them on a
+batch of uncertain bodies (one draw of the ``over`` distributions, the same for every
+trial) whose worst case (or a chosen quantile) is the trial's value. The generation's runs
+(trials x bodies) are one table of runs integrated as one batch on the sweep's engine
+(:mod:`rbstab.studies.batch`: compiled or cuda, in this process or on an executor), and
+the objectives are told to Optuna when the whole generation is done. Objectives and constraints are
 summary figures of the runs (:func:`rbstab.studies.design.check_metrics`); constraints go
 to the sampler as Optuna constraints (a trial is feasible when every ``metric <= limit``,
 ``metric >= limit`` holds).
 
 The study lives in an Optuna storage (default: the SQLite file ``<output>/<name>/study.db``),
-so running the same study again resumes it (``trials`` is the number of complete trials
-the study should reach) and several processes can work on one study at once. Written
+into which a generation's trials go once they are all finished (a trial is stored whole,
+values and all, or not at all), so running the same study again resumes it at the last
+finished generation (``trials`` is the number of complete trials the study should reach)
+and several processes can work on one study at once. Written
 into ``<output>/<name>/``: ``best.yaml`` (the base configuration with the best values:
 ``rbstab run best.yaml`` runs it), ``trials.csv`` and ``tuning.nc`` (every trial: number,
 state, objective and constraint values, the absolute values set; :func:`read_tuning`).
@@ -32,7 +38,9 @@ import json
 import math
 import os
 import re
+import signal
 import sqlite3
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,9 +59,9 @@ from ..engine.registry import DEFAULT_ENGINE
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
-from ..simulator import simulate_many
 from ..warning_codes import coded
 from .design import (
+    LOG_SCALED,
     StudyInputError,
     Varied,
     check_metrics,
@@ -69,9 +77,11 @@ from .files import KINDS, check_same_inputs, read_study_file, write_study_file
 __all__ = ["SAMPLERS", "Objective", "Constraint", "parse_constraint", "TuningProblem", "TuningResult",
            "plan_tuning", "tune", "read_tuning", "FILE", "BEST_FILE", "TRIALS_FILE", "STORAGE_FILE"]
 
-#: Samplers: Optuna's TPE (default; constraints, several objectives) and CMA-ES (one
-#: objective, no constraints).
+#: Samplers after the space-filling start: Optuna's multivariate TPE (default;
+#: constraints, several objectives) and CMA-ES with restarts (one objective, no constraints).
 SAMPLERS = ("tpe", "cmaes")
+#: Trials of a generation by default: a CPU engine's batch, and a GPU's.
+GENERATION = {"compiled": 32, "cuda": 2048}
 
 #: Files of a tuning study inside ``<output>/<name>/``.
 FILE = KINDS["tuning"]
@@ -80,7 +90,7 @@ TRIALS_FILE = "trials.csv"
 STORAGE_FILE = "study.db"
 
 #: Distributions a search range may have (a range needs bounds).
-RANGES = ("uniform", "log_uniform", "scale_uniform", "choice")
+RANGES = ("uniform", "log_uniform", "scale_uniform", "scale_log_uniform", "choice")
 
 _CONSTRAINT = re.compile(r"^\s*(?P<metric>[A-Za-z_][A-Za-z0-9_]*)\s*(?P<op><=|>=)\s*(?P<limit>\S+)\s*$")
 
@@ -162,18 +172,75 @@ class TuningProblem:
     bodies: list[dict] = field(default_factory=list)
     quantile: float = 1.0
     engine: str = DEFAULT_ENGINE
+    body_columns: dict = field(default_factory=dict)
 
-    def suggest(self, trial) -> dict[str, Any]:
-        """The trial's absolute values, design column -> value (Optuna's ``suggest_*``)."""
+    def distributions(self) -> dict:
+        """Optuna's distribution of each factor (log-scaled for ``log_uniform`` and
+        ``scale_log_uniform``)."""
+        from optuna.distributions import CategoricalDistribution, FloatDistribution  # heavy: optuna (~1 s)
+
+        out = {}
+        for v in self.varied:
+            if v.kind == "choice":
+                out[v.factors[0]] = CategoricalDistribution(list(v.args[0]))
+                continue
+            for name, (lo, hi) in zip(v.factors, v.bounds()):
+                out[name] = FloatDistribution(lo, hi, log=v.kind in LOG_SCALED)
+        return out
+
+    def values_of(self, params: Mapping[str, Any]) -> dict[str, Any]:
+        """The absolute values (design column -> value) of Optuna's parameters (factor -> value)."""
         values: dict[str, Any] = {}
         for v in self.varied:
             if v.kind == "choice":
-                values[v.columns[0]] = trial.suggest_categorical(v.factors[0], list(v.args[0]))
+                values[v.columns[0]] = params[v.factors[0]]
                 continue
-            f = [trial.suggest_float(name, lo, hi, log=v.kind == "log_uniform")
-                 for name, (lo, hi) in zip(v.factors, v.bounds())]
+            f = [params[name] for name in v.factors]
             values.update(zip(v.columns, v.from_factors(np.array([f]))[0].tolist()))
         return values
+
+    def design(self, trials: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
+        """The table of runs of trials' values: a row per trial and body (trial-major)."""
+        n, b = len(trials), max(len(self.bodies), 1)
+        data: dict[str, Any] = {}
+        for column in ([*trials[0]] if trials else []):
+            values = [t[column] for t in trials]
+            data[column] = np.repeat(np.asarray(values, dtype=object if isinstance(values[0], str) else float), b)
+        for column, values in self.body_columns.items():
+            if column not in data:
+                data[column] = np.tile(np.asarray(values), n)
+        return pd.DataFrame(data)
+
+    def evaluate_many(self, trials: Sequence[Mapping[str, Any]], executor=None) -> list[dict]:
+        """Each trial's record: ``values``, ``figures`` (each metric of the objectives and
+        constraints over the batch), ``constraints`` (their excess), ``failed`` (runs that
+        failed, -1 for an invalid configuration) and ``message``; the trials' runs
+        integrated as one batch (:func:`rbstab.studies.batch.run_generation`)."""
+        from .batch import run_generation  # heavy: the sweep's planning (when a generation runs)
+
+        b = max(len(self.bodies), 1)
+        runs = run_generation(self.base.resolved, self.design(trials), engine=self.engine, executor=executor)
+        out = []
+        for i, values in enumerate(trials):
+            rows = slice(i * b, (i + 1) * b)
+            record: dict[str, Any] = {"values": dict(values)}
+            invalid = [runs.invalid[j] for j in range(i * b, (i + 1) * b) if j in runs.invalid]
+            if invalid:
+                record.update(message=invalid[0], failed=-1)
+                out.append(record)
+                continue
+            failed = int(np.sum(~runs.ok[rows]))
+            figures = {}
+            for metric, worst_is_max in self._badness().items():
+                column = runs.figures.get(metric, np.full(len(runs.ok), np.nan))[rows]
+                q = self.quantile if worst_is_max else 1.0 - self.quantile
+                figures[metric] = float(np.quantile(column, q)) if np.all(np.isfinite(column)) else math.nan
+            record.update(figures=figures, constraints=[c.excess(figures[c.metric]) for c in self.constraints],
+                          failed=failed)
+            if failed:
+                record["message"] = f"{failed} run(s) failed"
+            out.append(record)
+        return out
 
     def configs(self, values: Mapping[str, Any]) -> list:
         """The run configs of a trial: the base (or each body of the batch) with ``values``.
@@ -194,18 +261,18 @@ class TuningProblem:
         return out
 
     def evaluate(self, values: Mapping[str, Any]) -> tuple[dict[str, float], int]:
-        """(the trial's figures: each metric of the objectives and constraints over the batch,
-        the number of failed runs)."""
-        figures, failed = [], 0
-        for _, result in simulate_many(self.configs(values), engine=self.engine, full=False):
-            figures.append(figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO))
-            failed += result.status != "success"
-        out = {}
-        for metric, worst_is_max in self._badness().items():
-            column = np.array([f.get(metric, np.nan) for f in figures], dtype=float)
-            q = self.quantile if worst_is_max else 1.0 - self.quantile
-            out[metric] = float(np.quantile(column, q)) if np.all(np.isfinite(column)) else math.nan
-        return out, failed
+        """(one trial's figures: each metric of the objectives and constraints over the batch,
+        the number of failed runs), by :meth:`evaluate_many`.
+
+        Raises
+        ------
+        rbstab.config.ConfigError
+            If the values give an invalid configuration.
+        """
+        (record,) = self.evaluate_many([values])
+        if record["failed"] < 0:
+            raise ConfigError([record["message"]])
+        return record["figures"], record["failed"]
 
     def _badness(self) -> dict[str, bool]:
         """metric -> whether larger is worse."""
@@ -278,28 +345,32 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
         errors.append(f"--sampler {sampler!r}: expected one of {', '.join(SAMPLERS)}")
     elif sampler == "cmaes" and (len(objectives) > 1 or subject_to or any(v.kind == "choice" for v in varied)):
         errors.append("--sampler cmaes: takes one objective, no --subject-to and no choice ranges; use --sampler tpe")
+    elif sampler == "cmaes" and varied and sum(len(v.factors) for v in varied) < 2:
+        errors.append("--sampler cmaes: needs two factors or more (CMA-ES searches a space of two dimensions or "
+                      "more); use --sampler tpe for one")
     if not (isinstance(quantile, (int, float)) and 0 < quantile <= 1):
         errors.append(f"--quantile {quantile!r}: expected a number in (0, 1] (1: the worst case)")
     if over and not (isinstance(over_n, int) and over_n >= 1):
         errors.append(f"--over-n {over_n!r}: expected an integer >= 1")
     if errors:
         raise StudyInputError(errors)
-    bodies = _bodies(over_varied, over_n, over_seed) if over_varied else []
+    bodies, body_columns = _bodies(over_varied, over_n, over_seed) if over_varied else ([], {})
     problem = TuningProblem(config, varied, tuple(objectives), tuple(constraints), bodies, float(quantile),
-                            engine or DEFAULT_ENGINE)
+                            engine or DEFAULT_ENGINE, body_columns)
     _check_corners(problem)
     return problem
 
 
-def _bodies(varied: Sequence[Varied], n: int, seed: int) -> list[dict]:
-    """``n`` draws of the ``--over`` distributions, key -> value each."""
+def _bodies(varied: Sequence[Varied], n: int, seed: int) -> tuple[list[dict], dict]:
+    """``n`` draws of the ``--over`` distributions: (key -> value of each body, design
+    column -> the bodies' values)."""
     rng = np.random.default_rng(seed)
     columns: dict[str, Any] = {}
     for v in varied:
         values = v.from_unit(rng.random((n, len(v.factors))))
         columns.update({c: values[:, j] for j, c in enumerate(v.columns)})
     mappings = design_mappings(pd.DataFrame(columns))
-    return [{k: values[i] for k, values in mappings.items()} for i in range(n)]
+    return [{k: values[i] for k, values in mappings.items()} for i in range(n)], columns
 
 
 def _check_corners(problem: TuningProblem) -> None:
@@ -411,8 +482,9 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
          maximize: Sequence[str] = (), subject_to: Sequence[str] = (), over: Sequence[str] | Mapping[str, Any] = (),
          over_n: int = 16, over_seed: int = 0, quantile: float = 1.0, sampler: str = "tpe", seed: int = 0,
          storage: str | None = None, output: str | os.PathLike = "results/studies", name: str | None = None,
-         engine: str | None = None, log=None, command_line: str | None = None,
-         overwrite: bool = False) -> TuningResult:
+         engine: str | None = None, generation: int | None = None, startup: int | None = None,
+         restarts: str = "ipop", jobs: int | None = None, executor: Any = None, scheduler: str | None = None,
+         log=None, command_line: str | None = None, overwrite: bool = False) -> TuningResult:
     """Run (or resume) a tuning study (``rbstab tune``) and write its files.
 
     Parameters
@@ -424,15 +496,27 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     trials : int
         Complete trials the study should have; a resumed study runs only the missing ones.
     seed : int
-        Seed of the sampler (offset by the trials already in the study, so a resumed
-        study does not repeat the first suggestions).
+        Seed of the samplers (offset by the trials already in the study, so a resumed
+        study does not repeat the first suggestions); with CMA-ES also the run of the
+        strategy that this process continues.
     storage : str, optional
         Optuna storage URL (default ``sqlite:///<output>/<name>/study.db``), or
-        ``"memory"``: the study lives in this process only (no resume; each trial costs
-        ~10 ms of Optuna's time instead of ~150 ms with SQLite on a slow disk).
+        ``"memory"``: the study lives in this process only (no resume).
     output, name
         The study writes ``<output>/<name>/``; ``name`` (default: the config's name) is
         also the study's name in the storage.
+    generation : int, optional
+        Trials asked and integrated at once (default :data:`GENERATION` of the engine; with
+        CMA-ES, its first population, by default 4 + 3 ln d).
+    startup : int, optional
+        Space-filling trials (a scrambled Sobol' sequence) before the sampler (default: the
+        generation's size for TPE, at least 16; 0: none).
+    restarts : {"ipop", "bipop", "none"}
+        CMA-ES's restarts (:mod:`rbstab.studies.search`).
+    jobs, executor, scheduler
+        Where a generation's runs are integrated: this process (default), ``jobs`` local
+        processes (``executor="local"``) or a Dask cluster (``executor="dask"`` with a
+        ``scheduler`` address), or an Executor object (not closed here), as a sweep's.
 
     overwrite : bool
         Replace a study of other inputs (objectives, constraints, vary, base config) in
@@ -449,11 +533,24 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     """
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
+    from .search import RESTARTS, GenerationSearch, default_population  # heavy: optuna, cmaes (when a study runs)
+
     folder = study_folder(output, name, config)
     problem = plan_tuning(config, vary, minimize=minimize, maximize=maximize, subject_to=subject_to, over=over,
                           over_n=over_n, over_seed=over_seed, quantile=quantile, sampler=sampler, engine=engine)
+    errors = []
     if not (isinstance(trials, int) and trials >= 1):
-        raise StudyInputError([f"--trials {trials!r}: expected an integer >= 1"])
+        errors.append(f"--trials {trials!r}: expected an integer >= 1")
+    if generation is not None and not (isinstance(generation, int) and generation >= 1):
+        errors.append(f"--generation {generation!r}: expected an integer >= 1 (trials integrated at once)")
+    if startup is not None and not (isinstance(startup, int) and startup >= 0):
+        errors.append(f"--startup {startup!r}: expected an integer >= 0 (space-filling trials first)")
+    if restarts not in RESTARTS:
+        errors.append(f"--restarts {restarts!r}: expected one of {', '.join(RESTARTS)}")
+    if jobs is not None and not (isinstance(jobs, int) and jobs >= 1):
+        errors.append(f"-j/--jobs {jobs!r}: expected an integer >= 1")
+    if errors:
+        raise StudyInputError(errors)
     check_same_inputs(folder / FILE, {
         "objectives": json.dumps([[o.metric, o.direction] for o in problem.objectives]),
         "constraints": json.dumps([str(c) for c in problem.constraints]),
@@ -466,13 +563,94 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     storage = storage or f"sqlite:///{(folder / STORAGE_FILE).resolve()}"
     optuna.logging.set_verbosity(optuna.logging.ERROR)
     study = _open_study(problem, name, storage)
-    done = sum(t.state == optuna.trial.TrialState.COMPLETE for t in study.get_trials(deepcopy=False))
-    study.sampler = _sampler(sampler, seed + len(study.get_trials(deepcopy=False)))
-    if done < trials:
-        (log or (lambda _: None))(f"{name}: {done} complete trials in {storage}; running {trials - done} more")
-        study.optimize(_objective(problem), n_trials=trials - done,
-                       callbacks=[optuna.study.MaxTrialsCallback(trials, states=(optuna.trial.TrialState.COMPLETE,))])
+    say = log or (lambda _: None)
+    dimension = sum(len(v.factors) for v in problem.varied)
+    size = generation or GENERATION.get(problem.engine, GENERATION["compiled"])
+    population = generation or default_population(dimension)
+    if startup is None:
+        startup = max(GENERATION.get(problem.engine, GENERATION["compiled"]) if sampler == "cmaes" else size, 16)
+    known = optuna.create_study(directions=[o.direction for o in problem.objectives])  # in memory: the sampler's
+    token = os.urandom(8).hex()  # this process's trials, as stored
+    seen: set[int] = set()
+    stored = _sync(study, known, seen, token)
+    done = sum(t.state == optuna.trial.TrialState.COMPLETE for t in stored)
+    search = GenerationSearch(known, problem.distributions(), sampler=sampler, seed=seed + len(stored), chain=seed,
+                              size=size, startup=startup, population=population, restarts=restarts,
+                              sign=1.0 if problem.objectives[0].direction == "minimize" else -1.0)
+    budget = trials - done  # new trials this process may ask at most (failed ones are not replaced)
+    if budget > 0:
+        say(f"{name}: {done} complete trials in {storage}; running {budget} more, in generations of "
+            f"{population if sampler == 'cmaes' else size} ({problem.engine} engine)")
+    with _executor(executor, jobs, scheduler) as ex:
+        while budget > 0:
+            if done >= trials:
+                break
+            asked = search.ask(min(budget, trials - done))
+            records = problem.evaluate_many([problem.values_of(t.params) for t in asked], executor=ex)
+            finished = [_tell(known, problem, trial, record, token) for trial, record in zip(asked, records)]
+            search.told(finished)
+            with _deferred_interrupt():  # a generation is stored whole
+                study.add_trials(finished)
+            budget -= len(asked)
+            stored = _sync(study, known, seen, token)
+            done = sum(t.state == optuna.trial.TrialState.COMPLETE for t in stored)
     return _write_outputs(problem, study, folder, storage, command_line)
+
+
+def _tell(known, problem: TuningProblem, trial, record: dict, token: str):
+    """Tell the in-memory study a trial's record; its FrozenTrial (to store)."""
+    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
+
+    failed = record.pop("failed")
+    trial.set_user_attr("record", record)
+    trial.set_user_attr("process", token)
+    for constraint, excess in zip(problem.constraints, record.get("constraints", ())):
+        trial.set_constraint(str(constraint), excess)  # feasible when every excess <= 0
+    values = [record.get("figures", {}).get(o.metric, math.nan) for o in problem.objectives]
+    if failed or not all(math.isfinite(v) for v in values):
+        return known.tell(trial, state=optuna.trial.TrialState.FAIL)
+    return known.tell(trial, values)
+
+
+def _sync(study, known, seen: set, token: str) -> list:
+    """The stored trials; those of other processes (or earlier runs) not yet in the in-memory
+    study ``known`` are added to it."""
+    stored = study.get_trials(deepcopy=False)
+    new = [t for t in stored if t.number not in seen and t.state.is_finished()]
+    seen.update(t.number for t in new)
+    known.add_trials([t for t in new if t.user_attrs.get("process") != token])
+    return stored
+
+
+def _executor(executor: Any, jobs: int | None, scheduler: str | None):
+    """The executor of a generation's runs as a context manager: None (this process) where
+    neither ``executor`` nor ``jobs`` > 1 asks for one; one made by name is closed at the end."""
+    if executor is None and (jobs is None or jobs <= 1) and scheduler is None:
+        return contextlib.nullcontext(None)
+    if executor is None or isinstance(executor, str):
+        from ..sweep.executors import ExecutorError, make_executor  # heavy: concurrent.futures, dask (with -j)
+
+        try:
+            return make_executor(executor or ("dask" if scheduler else "local"), jobs=jobs, scheduler=scheduler)
+        except ExecutorError as exc:
+            raise StudyInputError([str(exc)]) from None
+    return contextlib.nullcontext(executor)
+
+
+@contextlib.contextmanager
+def _deferred_interrupt():
+    """Hold Ctrl-C (SIGINT) back until the block ends (in the main thread)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            raise KeyboardInterrupt
 
 
 def _check_scalar_metrics(problem: TuningProblem, available: Mapping[str, float]) -> None:
@@ -561,43 +739,6 @@ def _creation_lock(url: str):
             yield
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
-
-
-def _sampler(kind: str, seed: int):
-    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
-
-    if kind == "cmaes":
-        return optuna.samplers.CmaEsSampler(seed=seed, warn_independent_sampling=False)
-    return optuna.samplers.TPESampler(seed=seed, multivariate=True)
-
-
-def _objective(problem: TuningProblem):
-    """Optuna's objective: a trial's values; NaN (a failed trial) when a run failed or
-    the values give an invalid configuration."""
-    def objective(trial):
-        values = problem.suggest(trial)
-        record: dict[str, Any] = {"values": values}
-        try:
-            record["figures"], failed = problem.evaluate(values)
-        except ConfigError as exc:
-            record["message"], failed = "; ".join(exc.errors), -1
-        else:
-            record["constraints"] = [c.excess(record["figures"][c.metric]) for c in problem.constraints]
-            if failed:
-                record["message"] = f"{failed} run(s) failed"
-        trial.set_user_attr("record", record)  # one write to the storage per trial
-        for constraint, excess in zip(problem.constraints, record.get("constraints", ())):
-            trial.set_constraint(str(constraint), excess)  # feasible when every excess <= 0
-        if failed:
-            return _nan(problem)
-        out = [record["figures"][o.metric] for o in problem.objectives]
-        return out[0] if len(out) == 1 else out
-
-    return objective
-
-
-def _nan(problem: TuningProblem):
-    return math.nan if len(problem.objectives) == 1 else [math.nan] * len(problem.objectives)
 
 
 # -- results ---------------------------------------------------------------------------------------

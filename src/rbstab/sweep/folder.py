@@ -48,6 +48,7 @@ import json
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
+from itertools import product
 from pathlib import Path
 from typing import Any
 
@@ -1010,6 +1011,9 @@ def _as_grid(ds, spec: Mapping[str, Any]):
     import pandas as pd  # heavy: pandas
     import xarray as xr  # heavy: xarray
 
+    if spec.get("table") is not None and not (spec.get("grid") or spec.get("zip") or (spec.get("random") or {}).get("n")) \
+            and not (isinstance(spec.get("base"), list) and len(spec["base"]) > 1):
+        return _table_as_grid(ds)
     axes = _grid_axes(spec)
     shape = [len(labels) for _, labels in axes]
     n = int(np.prod(shape)) if shape else 1
@@ -1031,3 +1035,63 @@ def _as_grid(ds, spec: Mapping[str, Any]):
         out = out.reindex({name: [x for x in labels]})
     out["status"] = out["status"].fillna("pending")
     return out
+
+
+def _table_as_grid(ds):
+    """A table sweep whose rows are every combination of its columns' levels, once each, as a
+    grid over its columns (columns that vary together, e.g. the entries of one vector, are one
+    axis, named by the first; the others stay as its coordinates), in the table's order of
+    levels. ValueError in one line naming a combination missing or repeated otherwise."""
+    import numpy as np  # heavy: numpy
+    import pandas as pd  # heavy: pandas
+    import xarray as xr  # heavy: xarray
+
+    names = [c for c in ds.coords if ds[c].dims == ("run",) and c not in ("run", "run_id", "base", "variant")]
+    axes: dict[str, list[str]] = {}  # axis -> the columns it stands for
+    codes: dict[str, np.ndarray] = {}
+    for name in names:
+        code, _ = pd.factorize(pd.Series(ds[name].to_numpy()).map(repr))
+        same = next((a for a, c in codes.items() if np.array_equal(c, code)), None)
+        if same is None:
+            codes[name], axes[name] = code, [name]
+        else:
+            axes[same].append(name)
+    levels = {a: list(pd.unique(ds[a].to_numpy())) for a in axes}
+    axes_with_levels = [a for a in axes if len(levels[a]) > 1]
+    if not axes_with_levels:
+        return ds
+    n = ds.sizes["run"]
+    combos = pd.Series(list(zip(*(ds[a].to_numpy().tolist() for a in axes_with_levels))))
+    counts = combos.value_counts(sort=False)
+    where = ", ".join(axes_with_levels)
+    if (counts > 1).any():
+        combo = counts.index[int(np.argmax(counts.to_numpy() > 1))]
+        raise ValueError(f"sweep {ds.attrs.get('sweep', '')!r}: its table is not a grid over {where}: the combination "
+                         f"({_combination(axes_with_levels, combo)}) appears {int(counts.max())} times")
+    total = int(np.prod([len(levels[a]) for a in axes_with_levels]))
+    if total != n:
+        present = set(counts.index)
+        combo = next(c for c in product(*(levels[a] for a in axes_with_levels)) if c not in present)
+        raise ValueError(f"sweep {ds.attrs.get('sweep', '')!r}: its table is not a grid over {where}: the combination "
+                         f"({_combination(axes_with_levels, combo)}) is missing ({n} rows, {total} combinations)")
+    dependent = {name: a for a in axes_with_levels for name in axes[a][1:]}
+    kept = {name: ds[name] for name in dependent}
+    ds = ds.drop_vars(list(dependent))
+    midx = pd.MultiIndex.from_arrays([pd.Index(ds[a].to_numpy()) for a in axes_with_levels], names=axes_with_levels)
+    ds = ds.drop_vars(axes_with_levels).assign_coords(run_index=("run", ds["run"].to_numpy()))
+    ds = ds.assign_coords(xr.Coordinates.from_pandas_multiindex(midx, "run"))
+    out = ds.unstack("run")
+    for a in axes_with_levels:
+        out = out.reindex({a: levels[a]})
+    for name, a in dependent.items():  # a column that varies with an axis: a coordinate along it
+        first = {}
+        for level, value in zip(midx.get_level_values(a), kept[name].to_numpy()):
+            first.setdefault(level, value)
+        out = out.assign_coords({name: (a, [first[level] for level in levels[a]], kept[name].attrs)})
+    out["status"] = out["status"].fillna("pending")
+    return out
+
+
+def _combination(names, values) -> str:
+    return ", ".join(f"{n}={v!r}" if isinstance(v, str) else f"{n}={v:g}" if isinstance(v, float) else f"{n}={v}"
+                     for n, v in zip(names, values))

@@ -27,7 +27,7 @@ __all__ = ["SweepSpecError", "SweepSchema", "DistributionSchema", "DISTRIBUTIONS
            "validate_spec", "numeric_array"]
 
 #: Names of the random distributions.
-DISTRIBUTIONS = ("uniform", "normal", "log_uniform", "scale_uniform", "choice")
+DISTRIBUTIONS = ("uniform", "normal", "log_uniform", "scale_uniform", "scale_log_uniform", "choice")
 
 
 class SweepSpecError(ConfigError):
@@ -176,6 +176,8 @@ class DistributionSchema(_Section):
         None, description="[lo, hi] with 0 < lo <= hi, each a number or a list of numbers")
     scale_uniform: Annotated[Any, checked(optional(_bounds(positive=False)))] = Field(
         None, description="[lo, hi] factors of the base value with lo <= hi, numbers or lists of numbers")
+    scale_log_uniform: Annotated[Any, checked(optional(_bounds(positive=True)))] = Field(
+        None, description="[lo, hi] factors of the base value, log-uniform, 0 < lo <= hi, numbers or lists of numbers")
     choice: Annotated[Any, checked(optional(_choices))] = Field(None, description="a non-empty list of values")
 
     @model_validator(mode="before")

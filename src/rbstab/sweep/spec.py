@@ -39,6 +39,8 @@ do not depend on ``n``, on the other keys nor on how the runs are executed):
 - ``scale_uniform: [lo, hi]`` -- the base value times a factor drawn uniformly in
   [lo, hi]; number bounds scale the whole value by one factor (an inertia keeps its
   shape), list bounds give one factor per component;
+- ``scale_log_uniform: [lo, hi]`` -- as ``scale_uniform``, the factor log-uniform on
+  [lo, hi], 0 < lo <= hi (a gain over decades: each decade as likely);
 - ``choice: [a, b, ...]`` -- one of the listed values, uniformly.
 
 The shape of a drawn value is the broadcast shape of the distribution's numbers: give
@@ -122,7 +124,7 @@ class Distribution:
     kind : str
         One of :data:`DISTRIBUTIONS`.
     args : tuple
-        ``(lo, hi)`` float arrays for uniform, log_uniform and scale_uniform,
+        ``(lo, hi)`` float arrays for uniform, log_uniform, scale_uniform and scale_log_uniform,
         ``(mean, std)`` for normal, ``(values,)`` for choice.
     """
 

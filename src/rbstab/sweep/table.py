@@ -51,6 +51,9 @@ __all__ = ["RunTable", "TableSlice", "plan_table", "estimate", "MAX_TEMPLATES",
 #: rtol 1e-8, DOP853, the compiled engine: ~0.35-0.45 ms), for the estimate of a dry run.
 RUN_SECONDS = 4e-4
 
+#: Distributions whose draws are factors of the base value.
+SCALES = ("scale_uniform", "scale_log_uniform")
+
 #: Most templates of a sweep (distinct combinations of base and non-numeric values).
 MAX_TEMPLATES = 4096
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
@@ -76,10 +79,10 @@ def _as_column(values: Sequence[Any]) -> np.ndarray:
 
 def _draw(d, rng: np.random.Generator, n: int) -> np.ndarray:
     """n draws of a :class:`~rbstab.sweep.spec.Distribution` (the factors for scale_uniform)."""
-    if d.kind in ("uniform", "scale_uniform", "log_uniform"):
+    if d.kind in ("uniform", "scale_uniform", "log_uniform", "scale_log_uniform"):
         lo, hi = d.args
         shape = (n, *np.broadcast_shapes(lo.shape, hi.shape))
-        if d.kind == "log_uniform":
+        if d.kind in ("log_uniform", "scale_log_uniform"):
             return np.exp(rng.uniform(np.log(lo), np.log(hi), size=shape))
         return rng.uniform(lo, hi, size=shape)
     if d.kind == "normal":
@@ -340,7 +343,7 @@ def _scaled_columns(spec: SweepSpec, base_index: np.ndarray, sample: np.ndarray,
     of the key (its default if unset) times the drawn factors."""
 
     values, factors = {}, {}
-    for d in (d for d in spec.random.params if d.kind == "scale_uniform"):
+    for d in (d for d in spec.random.params if d.kind in SCALES):
         drawn = _draw(d, random_stream(spec.random.seed, d.key), spec.random.n)
         f = drawn[sample]
         per_base = []
@@ -379,7 +382,7 @@ def _raw_columns(spec: SweepSpec) -> tuple[dict[str, np.ndarray], dict[str, np.n
     errors: list[str] = []
     if spec.random.n:
         for d in spec.random.params:
-            if d.kind != "scale_uniform":
+            if d.kind not in SCALES:
                 columns[d.key] = _draw(d, random_stream(spec.random.seed, d.key), spec.random.n)[pos["sample"]]
     scaled, factors = _scaled_columns(spec, pos["base"], pos["sample"], errors) if spec.random.n else ({}, {})
     if errors:
