@@ -25,6 +25,7 @@ import pandas as pd
 from ..config import ConfigError, config_from_mapping
 from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.chunk import summary_table_columns
 from .design import METRICS_NOT_FIGURES, design_mappings
 
@@ -86,7 +87,8 @@ def integrate_part(part, engine: str = "compiled") -> dict:
                                             np.asarray(flat["lyapunov_final"], dtype=float),
                                             DEFAULT_LYAPUNOV_RATIO), dtype=float)
 
-    engine_name = engine if engine in ("compiled", "cuda") else None
+    spec = get_engine(engine)
+    engine_name = engine if spec.compiled else None
     batch = part.batch() if engine_name else None
     fast = np.flatnonzero(batch.compiled) if batch is not None else np.empty(0, dtype=np.int64)
     if len(fast):
@@ -95,7 +97,7 @@ def integrate_part(part, engine: str = "compiled") -> dict:
     slow = np.setdiff1d(np.arange(n), fast)
     if len(slow):
         configs = [config_from_mapping(part.resolved(int(j)), source="<trial>") for j in slow]
-        for i, result in simulate_many(configs, engine=engine if engine != "cuda" else "compiled", full=False):
+        for i, result in simulate_many(configs, engine=DEFAULT_ENGINE if spec.gpu else engine, full=False):
             summary = {k: (np.asarray([v]) if not isinstance(v, (list, tuple, np.ndarray)) else np.asarray([v]))
                        for k, v in result.summary.items()}
             put([int(slow[i])], summary, [result.status])
