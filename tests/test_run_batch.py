@@ -17,7 +17,7 @@ from rbstab.engine import METHODS, RunBatch, batch_from_table
 from rbstab.engine.batch import MAX_STATE, NOT_COMPILED
 from rbstab.engine.settings import settings_rows
 from rbstab.simulator import is_sign_law, uses_compiled_engine
-from rbstab.sweep import plan_table, spec_from_mapping
+from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
 
 ROOT = Path(__file__).resolve().parents[1]
 BASES = [ROOT / "configs" / "paper" / f"{name}.yaml" for name in ("case1_permanent", "case2_visco_elastic",
@@ -144,3 +144,31 @@ def test_worker_batch_path_writes_what_the_per_run_path_writes(tmp_path, monkeyp
 
     pd.testing.assert_frame_equal(frame_a, frame_b, check_exact=True)
     xr.testing.assert_identical(ds_a.drop_attrs(), ds_b.drop_attrs())
+
+
+def test_batch_of_saturated_runs():
+    """The actuators' limits as columns: a limit for every axis, one entry of it, a whole
+    vector, and templates with and without limits (and the smooth shape): each run's record
+    is its config's, limits included."""
+    saturated = yaml.safe_load(BASES[2].read_text())  # Case 3 with limits written as one number
+    saturated["name"] = "limited"
+    saturated["controller"]["saturation"] = {"torque_n": 120.0, "constraint_force": [2500.0, 2000.0, 3000.0],
+                                             "shape": "smooth"}
+    spec = spec_from_mapping({
+        "name": "s", "base": [str(BASES[1]), saturated],
+        "zip": {"controller.saturation.force_h": [[800.0, 700.0, 600.0], [900.0, 900.0, 900.0]]},
+    })
+    table = plan_table(spec)
+    batch = _check(table, np.arange(table.n))
+    assert batch.params["saturation"].tolist() == [1.0, 1.0, 2.0, 2.0]
+    np.testing.assert_array_equal(batch.params["constraint_force_limit"][0], [np.inf] * 3)
+    np.testing.assert_array_equal(batch.params["force_limit"][3], [900.0] * 3)
+    entry = spec_from_mapping({"name": "e", "base": saturated, "grid": {"controller.saturation.torque_n.1": [80.0, 90.0],
+                                                                        "controller.saturation.force_h": [50.0]}})
+    batch = _check(plan_table(entry), np.arange(2))
+    np.testing.assert_array_equal(batch.params["torque_limit"][1], [120.0, 90.0, 120.0])
+    np.testing.assert_array_equal(batch.params["force_limit"][1], [50.0] * 3)
+    unlimited_entry = spec_from_mapping({"name": "u", "base": str(BASES[1]),
+                                         "grid": {"controller.saturation.torque_n.1": [80.0]}})
+    with pytest.raises(SweepSpecError, match="controller.saturation.torque_n' is not set"):
+        plan_table(unlimited_entry)

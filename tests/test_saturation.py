@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -116,3 +117,61 @@ def test_torque_limited_inverted_pendulum_has_its_basin_edge_where_torque_balanc
     assert not _pendulum_falls(edge - 0.01, n_max)
     assert _pendulum_falls(edge + 0.01, n_max)
     assert not _pendulum_falls(0.5, np.inf)  # without the limit the feedback holds it
+
+
+# -- the configuration ----------------------------------------------------------------------------------
+CASE2 = str(Path(__file__).resolve().parents[1] / "configs" / "paper" / "case2_visco_elastic.yaml")
+
+
+def _load(*overrides):
+    import warnings
+
+    import rbstab
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return rbstab.load_config(CASE2, list(overrides))
+
+
+def test_saturation_keys_give_the_limits():
+    """A number limits every axis, a list each one, a missing limit none; no section: no limits."""
+    config = _load("controller.saturation={torque_n: 120, force_h: [800, 700, .inf], shape: smooth}")
+    sat = config.gains.saturation
+    np.testing.assert_array_equal(sat.torque_n, [120.0] * 3)
+    np.testing.assert_array_equal(sat.force_h, [800.0, 700.0, np.inf])
+    np.testing.assert_array_equal(sat.constraint_force, [np.inf] * 3)
+    assert sat.shape == "smooth"
+    record = config.make_variant().parameters[0]
+    assert record["saturation"] == 2.0 and record["torque_limit"].tolist() == [120.0] * 3
+    assert _load().gains.saturation is None and _load().make_variant().parameters[0]["saturation"] == 0.0
+
+
+@pytest.mark.parametrize("override, found", [
+    ("controller.saturation.torque_n=0", "found 0"),
+    ("controller.saturation.torque_n=-5", "found -5"),
+    ("controller.saturation.torque_n=.nan", "found nan"),
+    ("controller.saturation.force_h=[1, 2]", "2 entries, not 3"),
+    ("controller.saturation.constraint_force=[1, -2, 3]", "entry [1]"),
+    ("controller.saturation.shape=tanh", "expected one of clip, smooth"),
+    ("controller.saturation.torque=5", "unknown key"),
+])
+def test_bad_limits_are_refused_in_one_line(override, found):
+    from rbstab.config import ConfigError
+
+    with pytest.raises(ConfigError) as info:
+        _load(override)
+    (line,) = info.value.errors
+    key = override.partition("=")[0]
+    assert f"'{key}'" in line and found in line, line
+
+
+@pytest.mark.parametrize("overrides, reason", [
+    (["controller.variant=permanent"], "the pin's reaction"),
+    (["controller.variant=sliding", "controller.k_s=500", "controller.boundary_layer=0"], "controller.k_s"),
+])
+def test_a_limit_on_a_force_no_actuator_delivers_is_refused(overrides, reason):
+    from rbstab.config import ConfigError
+
+    with pytest.raises(ConfigError) as info:
+        _load("controller.saturation.constraint_force=100", *overrides)
+    assert any("controller.saturation.constraint_force" in line and reason in line for line in info.value.errors)

@@ -25,6 +25,11 @@ Schema (the keys are public; units in brackets)::
                                     # ``required_gains`` lists them
       k_s: 500.0                    # K_s [N] >= 0 (sliding, eq 39)
       boundary_layer: 0.0           # phi [m] >= 0, default 0 (pure sign function)
+      saturation:                   # optional: what the actuators deliver (docs/saturation.md)
+        torque_n: 120               # |N_i| <= limit [N m]: a number > 0 (.inf: none) or 3
+        force_h: [800, 800, .inf]   # |H_i| <= limit [N]
+        constraint_force: 2500      # |Lambda_i| <= limit [N] (not permanent, not the pure sign law)
+        shape: clip                 # clip (default) | smooth (u_max tanh(u / u_max))
     initial_state:                  # each key 3 numbers, default zeros
       theta: [0, 0, 0]              # [rad], |theta_2| < pi/2 - gimbal_margin
       omega: [16, 32, -16]          # [rad/s], body frame

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from ..model import Gains, RigidBody
+from ..model import Gains, RigidBody, Saturation
 from ..variants import VARIANTS, Variant
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_weight
@@ -134,6 +134,7 @@ class RunConfig:
             **{g: _matrix(ctrl[g]) for g in GAIN_NAMES if g in used},
             k_s=float(ctrl["k_s"]) if "k_s" in used else None,
             boundary_layer=float(ctrl.get("boundary_layer", 0.0)) if "k_s" in used else 0.0,
+            saturation=saturation_of(ctrl.get("saturation")),
         )
         max_step = sim["max_step"]
         wall = sim.get("max_wall_time", SimulationSettings.max_wall_time)  # absent in files of rbstab < 0.2
@@ -157,6 +158,19 @@ class RunConfig:
     def make_variant(self) -> Variant:
         """The variant object, ``VARIANTS[variant](body, gains)``."""
         return VARIANTS[self.variant](self.body, self.gains)
+
+
+def saturation_of(section: Mapping | None) -> Saturation | None:
+    """The :class:`rbstab.model.Saturation` of a validated ``controller.saturation``
+    mapping (a limit missing or null: inf on every axis; a number: on every axis)."""
+    if section is None:
+        return None
+
+    def limits(key: str) -> np.ndarray:
+        value = section.get(key)
+        return np.broadcast_to(np.array(math.inf if value is None else value, dtype=float), (3,)).copy()
+
+    return Saturation(limits("torque_n"), limits("force_h"), limits("constraint_force"), section.get("shape", "clip"))
 
 
 def _array(value: Any) -> np.ndarray:
@@ -191,6 +205,7 @@ def _build(
         **{g: _matrix(getattr(ctrl, g)) for g in GAIN_NAMES if g in used},
         k_s=float(ctrl.k_s) if "k_s" in used else None,
         boundary_layer=float(ctrl.boundary_layer) if "k_s" in used else 0.0,
+        saturation=saturation_of(None if ctrl.saturation is None else ctrl.saturation.model_dump()),
     )
     body = RigidBody(
         mass=float(run.body.mass),

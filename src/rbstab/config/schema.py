@@ -30,6 +30,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from ..layout import BLOCK_UNITS
+from ..model import SATURATION_SHAPES
 from ..variants import VARIANTS
 from .physics import SINGULAR_RTOL
 
@@ -513,6 +514,45 @@ class _Body(_Section):
     gravity: _VECTOR = Field(default_factory=_zero, description="3 numbers (g, inertial frame, m/s^2)")
 
 
+def _limits(value: Any) -> float | list[float]:
+    """An actuator's limit on every axis (a number > 0; .inf: none) or one per axis (3)."""
+    check = bounded_number(gt=0, allow_inf=True)
+    if isinstance(value, (list, tuple)):
+        if len(value) != 3:
+            raise Invalid(f"{len(value)} entries, not 3")
+        out = []
+        for i, x in enumerate(value):
+            try:
+                out.append(check(x))
+            except Invalid as exc:
+                raise Invalid(f"entry [{i}] is {exc.detail}") from None
+        return out
+    return check(value)
+
+
+_limits.rule = ("limits", {"gt": 0, "ge": None, "lt": None, "le": None, "allow_inf": True, "integer": False})
+_LIMITS = Annotated[Any, checked(optional(_limits))]
+
+
+def _shape(value: Any) -> str:
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string")
+    if value not in SATURATION_SHAPES:
+        raise Invalid(_did_you_mean(value, list(SATURATION_SHAPES)))
+    return value
+
+
+class _Saturation(_Section):
+    """What the actuators can deliver (:class:`rbstab.model.Saturation`)."""
+
+    torque_n: _LIMITS = Field(None, description="|N_i| <= limit (N m, body frame): a number > 0 or 3 of them "
+                                                "(.inf: none)")
+    force_h: _LIMITS = Field(None, description="|H_i| <= limit (N, inertial frame): a number > 0 or 3 of them")
+    constraint_force: _LIMITS = Field(None, description="|Lambda_i| <= limit (N, inertial frame): a number > 0 "
+                                                        "or 3 of them (not permanent)")
+    shape: Annotated[Any, checked(_shape)] = Field("clip", description=f"one of {', '.join(SATURATION_SHAPES)}")
+
+
 class _Controller(_Section):
     # ``variant`` first: the gain validators read it from ``info.data``.
     variant: Annotated[Any, checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
@@ -530,6 +570,26 @@ class _Controller(_Section):
     boundary_layer: Annotated[Any, checked(bounded_number(ge=0))] = Field(
         0.0, description="a number >= 0 (m; 0 = pure sign function)"
     )
+    saturation: _Saturation | None = Field(None, description=_mapping_of(_Saturation) + " (optional)")
+
+    @model_validator(mode="after")
+    def _saturation_fits_the_variant(self) -> "_Controller":
+        """A limit of Lambda where Lambda is no actuator's: the pin's reaction (permanent),
+        or the pure sign law's switching force (its magnitude is K_s already)."""
+        limit = None if self.saturation is None else self.saturation.constraint_force
+        if limit is None:
+            return self
+        if self.variant == "permanent":
+            raise PydanticCustomError("rbstab_invalid", "limit on the pin", {
+                "key": "controller.saturation.constraint_force", "found": short_repr(limit),
+                "expected": "no limit with variant 'permanent'",
+                "detail": "Lambda is the pin's reaction, not an actuator's force"})
+        if self.variant == "sliding" and float(self.boundary_layer) == 0.0:
+            raise PydanticCustomError("rbstab_invalid", "limit on the sign law", {
+                "key": "controller.saturation.constraint_force", "found": short_repr(limit),
+                "expected": "no limit with the pure sign law (boundary_layer: 0)",
+                "detail": "its force is K_s sgn(E): set controller.k_s to at most the limit instead"})
+        return self
 
     @field_validator(*GAIN_NAMES, "k_s", mode="after")
     @classmethod
@@ -659,17 +719,53 @@ _SECTIONS = tuple(RunSchema.model_fields)
 TOP_LEVEL = _mapping_of(RunSchema)
 
 
+def _submodel(annotation: Any) -> type[BaseModel] | None:
+    """The model of a field that is a section (``_Saturation`` or ``_Saturation | None``)."""
+    for candidate in (annotation, *typing.get_args(annotation)):
+        if isinstance(candidate, type) and issubclass(candidate, BaseModel):
+            return candidate
+    return None
+
+
+def split_key(key: str) -> tuple[str, str, tuple[str, ...]]:
+    """(section, field, entries) of a dotted config key: the field's dotted name inside its
+    section (``k_c``, or ``saturation.torque_n`` inside a subsection) and the list indices
+    after it (``controller.k_c.0.1`` -> ``("controller", "k_c", ("0", "1"))``)."""
+    parts = key.split(".")
+    model = _submodel(RunSchema.model_fields[parts[0]].annotation) if parts[0] in RunSchema.model_fields else None
+    names = parts[1:2]
+    while model is not None and len(parts) > len(names) + 1 and names[-1] in model.model_fields:
+        model = _submodel(model.model_fields[names[-1]].annotation)
+        if model is None:
+            break
+        names.append(parts[len(names) + 1])
+    return parts[0], ".".join(names), tuple(parts[1 + len(names):])
+
+
+def field_value(section_value: Any, name: str) -> Any:
+    """The value of the field ``name`` (dotted inside a subsection) in a section's mapping,
+    or None where it or a subsection is absent."""
+    value = section_value
+    for part in name.split("."):
+        value = value.get(part) if isinstance(value, Mapping) else None
+    return value
+
+
 def field_rule(section: str, name: str) -> tuple | None:
-    """The constraint of the schema's field ``section.name`` in a form a batched check reads:
-    ``("number", bounds)`` (``gt``, ``ge``, ``lt``, ``le``, ``allow_inf``, ``integer``),
-    ``("vector",)``, ``("theta",)``, ``("matrix", "definite" | "semi-definite")``, or None
-    (a field checked another way: names, variants, methods). The same check functions the
-    schema validates a field with carry them."""
+    """The constraint of the schema's field ``section.name`` (``name`` dotted inside a
+    subsection) in a form a batched check reads: ``("number", bounds)`` (``gt``, ``ge``,
+    ``lt``, ``le``, ``allow_inf``, ``integer``), ``("limits", bounds)`` (a number or 3 of
+    them within bounds), ``("vector",)``, ``("theta",)``, ``("matrix", "definite" |
+    "semi-definite")``, or None (a field checked another way: names, variants, methods).
+    The same check functions the schema validates a field with carry them."""
     model = RunSchema.model_fields.get(section)
-    fields = getattr(model.annotation, "model_fields", {}) if model is not None else {}
-    field = fields.get(name)
-    if field is None:
-        return None
+    model = _submodel(model.annotation) if model is not None else None
+    field = None
+    for part in name.split("."):
+        field = model.model_fields.get(part) if model is not None else None
+        if field is None:
+            return None
+        model = _submodel(field.annotation)
     return next((getattr(m.func, "rule", None) for m in field.metadata if isinstance(m, BeforeValidator)), None)
 
 

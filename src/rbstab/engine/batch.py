@@ -20,14 +20,16 @@ h is 0.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
+from ..config.schema import field_value, split_key
 from ..layout import STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
-from ..model import PARAMETERS, Gains, RigidBody
+from ..model import PARAMETERS, SATURATION_SHAPES, Gains, RigidBody
 from ..variants import VARIANTS
 from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
@@ -102,25 +104,29 @@ class _Fields:
                        for t in present]
         self.varied: dict[tuple[str, str], list[tuple[tuple[int, ...], np.ndarray]]] = {}
         for key in keys:
-            parts = key.split(".")
-            if len(parts) < 2 or columns[key].dtype == object:
+            if "." not in key or columns[key].dtype == object:
                 continue  # a template's own value (runs share a template's non-numeric values)
-            self.varied.setdefault((parts[0], parts[1]), []).append((tuple(map(int, parts[2:])), columns[key]))
+            section, name, entries = split_key(key)
+            self.varied.setdefault((section, name), []).append((tuple(map(int, entries)), columns[key]))
 
     def get(self, section: str, name: str, default=None, *, shape: tuple | None = None) -> np.ndarray:
-        """The field of every run, shape (n, *shape): ``shape`` (3, 3) makes a matrix of a
-        3-list (its diagonal), as the configuration's loader does; ``default`` for a
-        template without the field (None: a ValueError)."""
+        """The field of every run (``name`` dotted inside a subsection), shape (n, *shape):
+        ``shape`` (3, 3) makes a matrix of a 3-list (its diagonal), as the configuration's
+        loader does, and (3,) 3 numbers of one; ``default`` for a template without the field
+        (None: a ValueError)."""
         out = None
         for t, rows in self.groups:
-            written = self.templates[t].get(section, {}).get(name, default)
+            written = field_value(self.templates[t].get(section), name)
             if written is None:
                 if default is None:
                     raise ValueError(f"no {section}.{name} in template {int(t)}")
                 written = default
-            value = np.broadcast_to(np.array(written, dtype=float), (len(rows), *np.shape(written))).copy()
+            written_shape = (3,) if shape == (3,) else np.shape(written)
+            value = np.broadcast_to(np.array(written, dtype=float), (len(rows), *written_shape)).copy()
             for index, column in self.varied.get((section, name), ()):
                 part = np.asarray(column[rows], dtype=float)
+                if shape == (3,) and not index and part.ndim == 1:
+                    part = np.broadcast_to(part[:, None], (len(rows), 3))
                 if index:
                     value[(slice(None), *index)] = part
                 else:
@@ -216,6 +222,14 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     if sliding.any():
         p["k_s"][sliding] = f.get("controller", "k_s", 0.0)[sliding]
         p["boundary_layer"][sliding] = f.get("controller", "boundary_layer", 0.0)[sliding]
+    shapes = f.of_templates([SATURATION_SHAPES[(t["controller"].get("saturation") or {}).get("shape", "clip")]
+                             if t["controller"].get("saturation") else 0 for t in templates], dtype=float)
+    saturated = np.flatnonzero(shapes > 0)
+    if len(saturated):
+        p["saturation"] = shapes
+        for field, key in (("torque_limit", "torque_n"), ("force_limit", "force_h"),
+                           ("constraint_force_limit", "constraint_force")):
+            p[field][saturated] = f.get("controller", f"saturation.{key}", math.inf, shape=(3,))[saturated]
     p["lyapunov_offset"] = _offsets(p, names, gravity)
     settings = np.zeros(n, dtype=SETTINGS)
     for name in SETTING_COLUMNS:

@@ -26,8 +26,8 @@ from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
-from ..config.schema import (MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule, samples_apart,
-                             steps_suffice, within_bounds)
+from ..config.schema import (MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule, field_value,
+                             samples_apart, split_key, steps_suffice, within_bounds)
 from ..config.physics import SINGULAR_RTOL
 from ..config.physics import inertia_warnings
 
@@ -59,6 +59,18 @@ def _expand_diagonal(data: dict, key: str) -> None:
         section[parts[1]] = np.diag(np.asarray(value, dtype=float)).tolist()
 
 
+def _expand_limit(data: dict, key: str) -> None:
+    """Before setting an entry ``key.i`` of an actuator's limit written as one number (every
+    axis): the 3 numbers it stands for."""
+    section, name, entries = split_key(key)
+    if len(entries) != 1 or field_rule(section, name) is None or field_rule(section, name)[0] != "limits":
+        return
+    parent = field_value(data.get(section), name.rpartition(".")[0]) if "." in name else data.get(section)
+    leaf = name.rpartition(".")[2]
+    if isinstance(parent, dict) and isinstance(parent.get(leaf), (int, float)) and not isinstance(parent[leaf], bool):
+        parent[leaf] = [parent[leaf]] * 3
+
+
 def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: str) -> dict:
     """The configuration mapping of one run as written: ``base`` with the varied values set
     (a list index into a list the base leaves at its default starts from the default).
@@ -72,6 +84,7 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
     data = copy.deepcopy(base.data)
     for key, value in zip(keys, values):
         _expand_diagonal(data, key)
+        _expand_limit(data, key)
         set_dotted(data, key, plain(value))
     data["name"] = name
     return data
@@ -143,9 +156,9 @@ class _Fields:
             return self._build_diagonal(section, name)
 
         rule = field_rule(section, name) or ("number",)
-        shape = (3, 3) if matrix else (3,) if rule[0] in ("vector", "theta") else ()
+        shape = (3, 3) if matrix else (3,) if rule[0] in ("vector", "theta", "limits") else ()
         for t in self.templates:
-            value = t.get(section, {}).get(name)
+            value = field_value(t.get(section), name)
             has.append(value is not None)
             try:
                 arr = np.asarray(value if value is not None else np.nan, dtype=float)
@@ -163,8 +176,10 @@ class _Fields:
         for key, col in self.columns.items():
             if not (key == prefix or key.startswith(prefix + ".")) or col.dtype == object:
                 continue
-            idx = tuple(int(p) for p in key[len(prefix) + 1:].split(".") if p)
+            idx = tuple(int(p) for p in split_key(key)[2])
             col = col.astype(float)
+            if rule[0] == "limits" and len(idx) == 0 and col.ndim == 1:
+                col = col[:, None]  # one limit for every axis
             if matrix and len(idx) == 0 and col.ndim == 2:
                 col = col[:, :, None] * np.eye(3)
             elif matrix and len(idx) == 1 and col.ndim == 1:
@@ -241,7 +256,7 @@ def _matrix_bad(values: np.ndarray, kind: str) -> np.ndarray:
 def _rule_bad(rule: tuple, values: np.ndarray, integer_column: bool) -> np.ndarray:
     """The runs whose values break the schema's constraint ``rule`` (field_rule)."""
 
-    if rule[0] == "number":
+    if rule[0] in ("number", "limits"):
         return _number_bad(values, rule[1], integer_column)
     if rule[0] == "matrix":
         return _matrix_bad(values, rule[1])
@@ -257,7 +272,7 @@ def _field_flags(fields: _Fields, n: int) -> np.ndarray:
     """Runs a varied numeric field's own constraint flags."""
 
     flagged = np.zeros(n, dtype=bool)
-    touched = {tuple(k.split(".")[:2]) for k, v in fields.columns.items() if v.dtype != object and "." in k}
+    touched = {split_key(k)[:2] for k, v in fields.columns.items() if v.dtype != object and "." in k}
     for section, name in touched:
         rule = field_rule(section, name)
         got = fields.get(section, name)
