@@ -164,20 +164,21 @@ def deadline() -> dict:
 
 
 def batch() -> dict:
-    """A sweep table's batch of runs (every variant, each run its own body and gains) on
-    the GPU against the CPU engine (rbstab.simulator.simulate_batch): how many runs, and
+    """A sweep table's batch of runs (every variant, each run its own body and gains, and a
+    body with saturating actuators) on the GPU against the CPU engine (rbstab.simulator.simulate_batch): how many runs, and
     which of their figures and outputs differ."""
     from rbstab.simulator import simulate_batch
     from rbstab.sweep import plan_table, spec_from_mapping
 
     rng = np.random.default_rng(5)
     n = 3
-    spec = spec_from_mapping({"name": "b", "base": [os.path.join(sys.argv[1], c) for c in CONFIGS], "zip": {
+    bases = [*CONFIGS, "configs/examples/saturated_pendulum.yaml"]  # and saturating actuators
+    spec = spec_from_mapping({"name": "b", "base": [os.path.join(sys.argv[1], c) for c in bases], "zip": {
         "body.mass": rng.uniform(20, 60, n).tolist(),
         "controller.k_t.1": rng.uniform(3000, 5000, n).tolist(),
         "initial_state.omega": rng.normal([16, 32, -16], 4, (n, 3)).tolist(),
         "simulation.t_end": [0.2] * n, "simulation.n_samples": [401] * n}})
-    runs = plan_table(spec).slice(np.arange(len(CONFIGS) * n)).batch()
+    runs = plan_table(spec).slice(np.arange(len(bases) * n)).batch()
     blocks = {engine: {i: block.result(j) for rows, block in simulate_batch(runs, engine=engine, keep="thinned")
                        for j, i in enumerate(rows)} for engine in ("compiled", "cuda")}
     differences = []

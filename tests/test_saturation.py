@@ -175,3 +175,22 @@ def test_a_limit_on_a_force_no_actuator_delivers_is_refused(overrides, reason):
     with pytest.raises(ConfigError) as info:
         _load("controller.saturation.constraint_force=100", *overrides)
     assert any("controller.saturation.constraint_force" in line and reason in line for line in info.value.errors)
+
+
+def test_the_shipped_saturated_pendulum_recovers_below_its_edge_and_falls_above():
+    """configs/examples/saturated_pendulum.yaml: back to rest from 0.3 rad, going over from 0.45 rad
+    (its edge: arcsin(4 N m / (2 kg 9.81 m/s^2 0.5 m)) = 0.42 rad), the rate check passing."""
+    import warnings
+
+    import rbstab
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "examples" / "saturated_pendulum.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        held = rbstab.simulate(rbstab.load_config(path))
+        fell = rbstab.simulate(rbstab.load_config(path, ["initial_state.theta=[0.45,0,0]"]))
+    assert abs(float(held["theta"][-1, 0])) < 1e-6
+    assert np.max(np.abs(fell["theta"].values[:, 0])) > math.pi  # over, through hanging down, and beyond
+    assert float(np.max(np.abs(held["torque_n"].values[:, 0]))) == 4.0
+    numerical, analytic = held["lyapunov_rate_numerical"].values, held["lyapunov_rate"].values
+    assert np.nanmax(np.abs(numerical - analytic)) <= 1e-3 * np.max(np.abs(analytic))
