@@ -194,3 +194,19 @@ def test_the_shipped_saturated_pendulum_recovers_below_its_edge_and_falls_above(
     assert float(np.max(np.abs(held["torque_n"].values[:, 0]))) == 4.0
     numerical, analytic = held["lyapunov_rate_numerical"].values, held["lyapunov_rate"].values
     assert np.nanmax(np.abs(numerical - analytic)) <= 1e-3 * np.max(np.abs(analytic))
+
+
+def test_analyze_says_there_is_no_equilibrium_when_the_limits_cannot_hold_the_weight():
+    """A free body whose |H_z| limit is below its weight m g has no rest point: analyze says
+    so in one line, naming the control and its limit, instead of a verdict."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    rbstab_cli = Path(sys.executable).parent / "rbstab"
+    done = subprocess.run([str(rbstab_cli), "analyze", str(root / "configs" / "examples" / "free_gravity.yaml"),
+                           "--set", "controller.saturation.force_h=[1000,1000,100]", "--no-simulation"],
+                          capture_output=True, text=True, cwd=root)
+    assert done.returncode == 1 and "Traceback" not in done.stderr
+    (line,) = [x for x in done.stderr.splitlines() if x.startswith("Error:")]
+    assert "no equilibrium" in line and "|force_h_3| = 410 N > its limit 100 N" in line, line

@@ -173,6 +173,31 @@ def _settling(config, variant, ratio: float) -> dict:
     }
 
 
+class NoEquilibrium(ValueError):
+    """The configuration has no rest point: its actuators' limits cannot hold the body
+    (one line: which control would need more than its limit)."""
+
+
+def _unheld(config) -> str:
+    """Why a configuration with actuator limits has no rest point: the controls that its
+    equilibrium without limits commands beyond their limits."""
+    import dataclasses
+
+    unlimited = dataclasses.replace(config, gains=dataclasses.replace(config.gains, saturation=None)).make_variant()
+    y_e = linearise(unlimited).equilibrium
+    commanded = unlimited.evaluate(np.asarray(y_e)[None])
+    sat = config.gains.saturation
+    beyond = []
+    for key, limit, unit in (("torque_n", sat.torque_n, "N m"), ("force_h", sat.force_h, "N"),
+                             ("constraint_force", sat.constraint_force, "N")):
+        value = np.abs(np.asarray(commanded[key])[0])
+        beyond += [f"|{key}_{i + 1}| = {value[i]:.4g} {unit} > its limit {limit[i]:g} {unit}"
+                   for i in range(3) if value[i] > limit[i]]
+    why = ("; without the limits the equilibrium would need " + ", ".join(beyond)) if beyond else ""
+    return (f"no equilibrium: with its actuators' limits (controller.saturation) no state is at rest{why}; "
+            "there is nothing to linearise or certify (rbstab run shows where the body goes)")
+
+
 def _domain_notes(linearisation: Linearisation, config) -> list[str]:
     notes = []
     limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
@@ -261,6 +286,8 @@ def analyze(
     if basin is not None and len(axes) != 2:
         raise ValueError(f"--basin: expected exactly two axes, found {len(axes)}")
     lin = linearise(variant)
+    if not lin.is_rest_point and analysed.gains.saturation is not None:
+        raise NoEquilibrium(_unheld(analysed))
     notes += _domain_notes(lin, analysed) + list(config.warnings)
     t1 = _time.perf_counter()
     timing["linearisation"] = t1 - t0
