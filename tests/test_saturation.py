@@ -210,3 +210,21 @@ def test_analyze_says_there_is_no_equilibrium_when_the_limits_cannot_hold_the_we
     assert done.returncode == 1 and "Traceback" not in done.stderr
     (line,) = [x for x in done.stderr.splitlines() if x.startswith("Error:")]
     assert "no equilibrium" in line and "|force_h_3| = 410 N > its limit 100 N" in line, line
+
+
+def test_time_with_dv_dt_positive_is_a_summary_figure():
+    """Where the theorem holds (no limits) v never rises: time_lyapunov_rising is 0; where
+    the saturated torque cannot hold the pendulum it is the time dv/dt > 0 on the samples."""
+    import warnings
+
+    import rbstab
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "examples" / "saturated_pendulum.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fell = rbstab.simulate(rbstab.load_config(path, ["initial_state.theta=[0.45,0,0]"]))
+        paper = rbstab.simulate(rbstab.load_config(CASE2))
+    rate = fell["lyapunov_rate"].values
+    spacing = float(fell["time"][1] - fell["time"][0])
+    assert fell.attrs["summary_time_lyapunov_rising"] == np.sum(rate > 0) * spacing > 0.5
+    assert paper.attrs["summary_time_lyapunov_rising"] == 0.0

@@ -306,6 +306,8 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("lyapunov_final", "v(t_end)", "J", "v(t_end)"),
     Quantity("max_lyapunov_rate", "max dv/dt", "W", "max dv/dt"),
     Quantity("max_lyapunov_increase", "max rise of v", "J", "largest rise of v above its running minimum"),
+    Quantity("time_lyapunov_rising", "time with dv/dt > 0", "s",
+             "time with analytic dv/dt > 0 (samples times their spacing)"),
     Quantity("lyapunov_rate_mismatch", "max |dv/dt analytic - numerical|", "W", "max |analytic - numerical dv/dt|"),
     Quantity("lyapunov_rate_mismatch_relative", "relative dv/dt mismatch", "1",
              "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),

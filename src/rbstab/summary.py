@@ -233,6 +233,8 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         ``max_abs_constraint_error`` [m] (3 floats, per axis), ``lyapunov_initial``,
         ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W], ``max_lyapunov_increase`` [J]
         (largest rise of v above its running minimum: 0 for a non-increasing v),
+        ``time_lyapunov_rising`` [s] (the samples with analytic dv/dt > 0 times the
+        spacing: 0 where the paper's theorem holds; saturating actuators can make v rise),
         ``lyapunov_rate_mismatch`` [W] (max |analytic - numerical dv/dt|),
         ``lyapunov_rate_mismatch_relative`` (divided by the reference power
         P = max(max |analytic dv/dt|, E / T): E [J] the energy scale, the largest sum over
@@ -325,6 +327,7 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
     table["lyapunov_final"] = v[:, n - 1].copy()
     table["max_lyapunov_rate"] = np.max(rate, axis=1)
     table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1)
+    table["time_lyapunov_rising"] = np.sum(rate > 0.0, axis=1) * _spacing(time)
     n_checked = np.full(k, n) if checked is None else np.sum(checked, axis=1)
     if checked is not None:
         table["lyapunov_rate_checked"] = n_checked / n
@@ -337,6 +340,11 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
         scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0]))
     table.update(_rate_check(largest, scales, n_checked >= MIN_CHECK_SAMPLES))
     return table
+
+
+def _spacing(time: np.ndarray) -> float:
+    """The spacing of an even sample grid [s] (0 for one sample)."""
+    return float(time[1] - time[0]) if len(time) > 1 else 0.0
 
 
 def _rate_check(largest: np.ndarray, scales: np.ndarray, enough: np.ndarray) -> dict[str, np.ndarray]:
@@ -366,11 +374,11 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: :func:`stream_table`): max |E_i| (3), v(0), max dv/dt, running min of v, largest rise of
 #: v above it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the
 #: samples taken, the last sample not converged (:func:`rbstab.convergence.converged`
-#: with v(0) and its v; -1 for none), and the last :data:`RATE_STENCIL` values of v and of
+#: with v(0) and its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL` values of v and of
 #: dv/dt (rings).
 MAX_ERROR = 0  # 3 slots
-V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE = range(3, 12)
-V_RING = 12
+V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(3, 13)
+V_RING = 13
 RATE_RING = V_RING + RATE_STENCIL
 ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
@@ -402,6 +410,7 @@ def stream_start(acc):
         acc[i] = -math.inf
     acc[TAKEN] = 0.0
     acc[LAST_ABOVE] = -1.0
+    acc[RISING] = 0.0
 
 
 @jit(forceinline=True)
@@ -445,6 +454,8 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
         acc[V_MIN] = v
     acc[V_MIN] = _min(acc[V_MIN], v)
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
+    if rate > 0.0:
+        acc[RISING] += 1.0
     v0 = acc[V_INITIAL]
     if not _within_bound(v0, v, ratio):
         acc[LAST_ABOVE] = i
@@ -529,6 +540,7 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     table["lyapunov_final"] = last[:, _V_AT].copy()
     table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
     table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
+    table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
     span = time[last_index] - time[0]
     with np.errstate(all="ignore"):
         scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
