@@ -296,8 +296,10 @@ def test_report_draws_studies(config, sobol, tmp_path):
                                 catch_exceptions=False)
     assert result.exit_code == 0, result.output
     figures = sorted(p.name for p in (out / "figures").iterdir())
-    assert figures == ["sensitivity_free_study.png", "tuning_free_study_objective.png", "tuning_free_study_pareto.png"]
+    assert figures == ["sensitivity_free_study.png", "tuning_free_study_objective.png", "tuning_free_study_pareto.png",
+                       "tuning_free_study_search.png"]
     page = (out / "summary.md").read_text()
+    assert "where the study searched" in (out / "index.html").read_text()
     assert "Sensitivity study free_study (sobol)" in page and "Trials of the Pareto front" in page
 
 

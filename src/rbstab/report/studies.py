@@ -179,6 +179,7 @@ def _tuning_section(ds, out: FigureWriter) -> Section:
         f"file: {ds.attrs['path']}",
     ])
     s.blocks.append(_objective_figure(ds, out, name, objectives))
+    s.blocks.append(_search_figure(ds, out, name, objectives))
     if len(objectives) == 2:
         s.blocks.append(_pareto_figure(ds, out, name, objectives, best))
     s.blocks.append(_best_table(ds, objectives, best))
@@ -211,6 +212,100 @@ def _objective_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFil
     return out.save(fig, f"tuning_{safe_filename(name)}_objective", f"{name}: objective against trial",
                     "Each trial's objective (the batch's worst case or quantile with --over); black: the best "
                     "feasible value so far. Failed trials are not drawn.")
+
+
+#: Trials a parallel-coordinates view of a study draws: its best (feasible) ones.
+SEARCH_BEST = 50
+
+
+def _wide(values: np.ndarray) -> bool:
+    """Whether positive values span enough (30x) for a log axis."""
+    return bool(len(values) and np.all(values > 0) and values.max() > 30 * values.min())
+
+
+def _searched(ds, parameters: Sequence[str]) -> list[str]:
+    """The design columns that vary independently: of the entries of one key that a single
+    factor scales together (``scale_uniform``, ``scale_log_uniform``), the first stands for
+    them all."""
+    kept: list[str] = []
+    for p in parameters:
+        values = ds[p].values.astype(float)
+        key = p.split("[")[0]
+        same = [q for q in kept if q.split("[")[0] == key]
+        if any(_proportional(values, ds[q].values.astype(float)) for q in same):
+            continue
+        kept.append(p)
+    return kept
+
+
+def _proportional(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether ``a`` is a constant multiple of ``b`` over the trials where both are finite."""
+    ok = np.isfinite(a) & np.isfinite(b) & (b != 0)
+    if not ok.any():
+        return False
+    ratio = a[ok] / b[ok]
+    return bool(np.allclose(ratio, ratio[0], rtol=1e-9, atol=0.0))
+
+
+def _search_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
+    """Where the study searched: one varied value, the objective against it; two, the trials
+    over their plane coloured by the (first) objective; more, the parallel coordinates of
+    the best feasible trials, each value on its range."""
+    from matplotlib.colors import LogNorm, Normalize  # matplotlib: only when a figure is drawn
+    from matplotlib.figure import Figure
+
+    parameters = _searched(ds, json.loads(ds.attrs["parameters"]))
+    metric, direction = objectives[0]
+    complete = ds["state"].values.astype(str) == "complete"
+    value = ds[metric].values.astype(float)
+    ok = complete & np.isfinite(value)
+    score = np.where(ok, value if direction == "minimize" else -value, np.inf)
+    best = int(np.argmin(score)) if ok.any() else None
+    norm = LogNorm() if _wide(value[ok]) else Normalize()
+    units = units_text(str(ds[metric].attrs.get("units", "")))
+    label = metric + (f" [{units}]" if units else "")
+    columns = [ds[p].values.astype(float) for p in parameters]
+    fig = Figure(figsize=(6.5, 4.5), dpi=DPI, layout="constrained")
+    ax = fig.subplots()
+    if len(parameters) <= 2:
+        x = columns[0]
+        y = columns[1] if len(parameters) == 2 else value
+        drawn = ax.scatter(x[ok], y[ok], c=value[ok] if len(parameters) == 2 else "C0", s=10, norm=norm if len(
+            parameters) == 2 else None, cmap="viridis_r" if direction == "minimize" else "viridis")
+        if best is not None:
+            ax.plot(x[best], y[best], "*", ms=14, color="C3", label=f"best: trial {int(ds['trial'].values[best])}")
+            ax.legend(fontsize=8)
+        for axis, values, p in ((ax.xaxis, x, parameters[0]),
+                                (ax.yaxis, y, parameters[1] if len(parameters) == 2 else label)):
+            (ax.set_xscale if axis is ax.xaxis else ax.set_yscale)("log" if _wide(values[ok]) else "linear")
+        ax.set_xlabel(parameters[0])
+        ax.set_ylabel(parameters[1] if len(parameters) == 2 else label)
+        if len(parameters) == 2:
+            fig.colorbar(drawn, ax=ax, label=label)
+        caption = ("Every completed trial over the two varied values, coloured by the objective; red star: the "
+                   "best." if len(parameters) == 2 else "Every completed trial's objective against the varied value.")
+    else:
+        shown = np.argsort(score)[: min(SEARCH_BEST, int(ok.sum()))]
+        lo = np.array([np.nanmin(c[ok]) for c in columns])
+        hi = np.array([np.nanmax(c[ok]) for c in columns])
+        scaled = np.array([(c - a) / (b - a) if b > a else np.full_like(c, 0.5) for c, a, b in zip(columns, lo, hi)])
+        mapper = norm if len(shown) else Normalize()
+        from matplotlib import colormaps
+
+        cmap = colormaps["viridis_r" if direction == "minimize" else "viridis"]
+        if len(shown):
+            mapper.autoscale(value[shown])
+        for j in shown[::-1]:  # the best drawn last, on top
+            ax.plot(range(len(parameters)), scaled[:, j], color=cmap(mapper(value[j])), lw=1, alpha=0.8)
+        ax.set_xticks(range(len(parameters)), parameters, rotation=30, ha="right", fontsize=7)
+        ax.set_ylabel("value on its range (0: lowest tried, 1: highest)")
+        from matplotlib.cm import ScalarMappable
+
+        fig.colorbar(ScalarMappable(norm=mapper, cmap=cmap), ax=ax, label=label)
+        caption = (f"The best {len(shown)} completed trials, each a line through its varied values (each on the "
+                   "range the study tried), coloured by the objective.")
+    ax.grid(alpha=0.3)
+    return out.save(fig, f"tuning_{safe_filename(name)}_search", f"{name}: where the study searched", caption)
 
 
 def _pareto_figure(ds, out: FigureWriter, name: str, objectives, best: Sequence[int]) -> FigureFile:
