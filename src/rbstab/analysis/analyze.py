@@ -9,6 +9,7 @@ for the settling time, and the basin map (:mod:`~rbstab.analysis.basin`) if aske
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import time as _time
@@ -181,8 +182,6 @@ class NoEquilibrium(ValueError):
 def _unheld(config) -> str:
     """Why a configuration with actuator limits has no rest point: the controls that its
     equilibrium without limits commands beyond their limits."""
-    import dataclasses
-
     unlimited = dataclasses.replace(config, gains=dataclasses.replace(config.gains, saturation=None)).make_variant()
     y_e = linearise(unlimited).equilibrium
     commanded = unlimited.evaluate(np.asarray(y_e)[None])

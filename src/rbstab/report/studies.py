@@ -251,8 +251,10 @@ def _search_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
     """Where the study searched: one varied value, the objective against it; two, the trials
     over their plane coloured by the (first) objective; more, the parallel coordinates of
     the best feasible trials, each value on its range."""
-    from matplotlib.colors import LogNorm, Normalize  # matplotlib: only when a figure is drawn
-    from matplotlib.figure import Figure
+    from matplotlib import colormaps  # matplotlib: only when a figure is drawn, as report/figures.py
+    from matplotlib.cm import ScalarMappable  # the same
+    from matplotlib.colors import LogNorm, Normalize  # the same
+    from matplotlib.figure import Figure  # the same
 
     parameters = _searched(ds, json.loads(ds.attrs["parameters"]))
     metric, direction = objectives[0]
@@ -290,8 +292,6 @@ def _search_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
         hi = np.array([np.nanmax(c[ok]) for c in columns])
         scaled = np.array([(c - a) / (b - a) if b > a else np.full_like(c, 0.5) for c, a, b in zip(columns, lo, hi)])
         mapper = norm if len(shown) else Normalize()
-        from matplotlib import colormaps
-
         cmap = colormaps["viridis_r" if direction == "minimize" else "viridis"]
         if len(shown):
             mapper.autoscale(value[shown])
@@ -299,8 +299,6 @@ def _search_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
             ax.plot(range(len(parameters)), scaled[:, j], color=cmap(mapper(value[j])), lw=1, alpha=0.8)
         ax.set_xticks(range(len(parameters)), parameters, rotation=30, ha="right", fontsize=7)
         ax.set_ylabel("value on its range (0: lowest tried, 1: highest)")
-        from matplotlib.cm import ScalarMappable
-
         fig.colorbar(ScalarMappable(norm=mapper, cmap=cmap), ax=ax, label=label)
         caption = (f"The best {len(shown)} completed trials, each a line through its varied values (each on the "
                    "range the study tried), coloured by the objective.")
