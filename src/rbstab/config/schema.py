@@ -698,7 +698,7 @@ class _Disturbance(_Section):
             if value is None and key in _NEEDED[self.kind]:
                 raise PydanticCustomError("rbstab_invalid", "missing", {
                     "subkey": key, "found": "nothing", "expected": f"{key} with kind '{self.kind}': "
-                    + (self.model_fields[key].description or "")})
+                    + (type(self).model_fields[key].description or "")})
         if self.quantity == "torque" and self.point is not None:
             raise PydanticCustomError("rbstab_invalid", "point on a torque", {
                 "subkey": "point", "found": short_repr(self.point),
@@ -864,6 +864,8 @@ def split_key(key: str) -> tuple[str, str, tuple[str, ...]]:
     section (``k_c``, or ``saturation.torque_n`` inside a subsection) and the list indices
     after it (``controller.k_c.0.1`` -> ``("controller", "k_c", ("0", "1"))``)."""
     parts = key.split(".")
+    if parts[0] == "disturbances" and len(parts) >= 3 and parts[1].isdigit():  # an entry's field
+        return parts[0], ".".join(parts[1:3]), tuple(parts[3:])
     model = _submodel(RunSchema.model_fields[parts[0]].annotation) if parts[0] in RunSchema.model_fields else None
     names = parts[1:2]
     while model is not None and len(parts) > len(names) + 1 and names[-1] in model.model_fields:
@@ -879,7 +881,12 @@ def field_value(section_value: Any, name: str) -> Any:
     or None where it or a subsection is absent."""
     value = section_value
     for part in name.split("."):
-        value = value.get(part) if isinstance(value, Mapping) else None
+        if isinstance(value, Mapping):
+            value = value.get(part)
+        elif isinstance(value, (list, tuple)) and part.isdigit():  # an entry of a list (disturbances)
+            value = value[int(part)] if int(part) < len(value) else None
+        else:
+            value = None
     return value
 
 
