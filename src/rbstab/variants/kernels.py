@@ -15,6 +15,8 @@ modules; this module only puts it together:
 
 from __future__ import annotations
 
+import math
+
 from ..jit import jit
 from ..kinematics import ZERO, add, dot, matvec, rotation_and_rate_of, sub, vector
 from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
@@ -233,7 +235,7 @@ def output_row(code, t, y, p, out, full):
     if p.disturbance_count > 0.0:
         power = disturbance_power(force_d, torque_d, omega, v)
     out[DISTURBANCE_POWER_AT] = power
-    out[DISTURBANCE_WORK_AT] = 0.0
+    out[DISTURBANCE_WORK_AT] = 0.0 if y[0] == y[0] else math.nan  # NaN after a stop, as the drivers'
     deficit = saturation_power(code, theta, omega, x, v, b, e, f, d, p)
     if p.disturbance_count > 0.0:
         deficit += power
