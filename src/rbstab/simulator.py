@@ -43,12 +43,13 @@ from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_mes
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
-from .model import PARAMETERS
+from .model import DISTURBANCE_KINDS, PARAMETERS
 from .results import RunBlock, RunResult
 from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
-from .variants.kernels import run_outputs
+from .variants.disturbances import apply_impulses, before
+from .variants.kernels import run_outputs, state_powers
 
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
@@ -218,8 +219,6 @@ _GAUSS_WEIGHTS = np.array([5.0, 8.0, 5.0]) / 18.0
 
 def _breakpoints(p: np.void, t_end: float) -> list[float]:
     """0, the edges of the disturbances' windows inside (0, t_end) in order, and t_end."""
-    from .model import DISTURBANCE_KINDS
-
     edges = {0.0, float(t_end)}
     for i in range(int(p["disturbance_count"])):
         t0 = float(p["disturbance_start"][i])
@@ -232,8 +231,6 @@ def _breakpoints(p: np.void, t_end: float) -> list[float]:
 def _step_work(variant: Variant, dense, t0: float, t1: np.ndarray) -> np.ndarray:
     """The disturbances' work [J] from t0 to each of ``t1`` along ``dense`` (one step's
     interpolant; 3-point Gauss-Legendre, as the compiled engine)."""
-    from .variants.kernels import state_powers
-
     t1 = np.atleast_1d(np.asarray(t1, dtype=float))
     span = t1 - t0
     nodes = (t0 + span[:, None] * _GAUSS_NODES[None, :]).ravel()
@@ -252,7 +249,6 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
     from scipy.integrate import solve_ivp  # heavy: scipy
 
     from .config.schema import SimulationSettings  # heavy: pydantic, yaml
-    from .variants.disturbances import apply_impulses, before
 
     t_end, n_samples = float(settings.t_end), int(settings.n_samples)
     t_eval = np.linspace(0.0, t_end, n_samples)

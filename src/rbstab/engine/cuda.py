@@ -270,7 +270,7 @@ def kernel_function(method: int, n_state: int):
                 if n_steps >= s.max_steps:
                     status = STEP_LIMIT
                     break
-                outcome, t_new, h, h_abs = attempt_step(code, p, s, t, t_end, t_end, y, f, h_abs, rejected, w)
+                outcome, t_new, h, h_abs = attempt_step(code, p, s, (t, t_end), y, f, h_abs, rejected, w)
                 if outcome == REJECTED:
                     nfev += n_stages
                     rejected = True
@@ -283,7 +283,7 @@ def kernel_function(method: int, n_state: int):
                 t_stop = t_new
                 event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
                 if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-                    nfev += dense_coefficients(code, p, t, t_end, y, y_new, K[n_stages], h, method, w)
+                    nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
                 if event:
                     t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
                 while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:

@@ -100,6 +100,12 @@ def spacing(t):
     return math.ldexp(1.0, math.frexp(t)[1] - 53)
 
 
+@jit(forceinline=True)
+def _limit_of(t_bound, t_end):
+    """The latest time a stage of a step that ends at ``t_bound`` evaluates."""
+    return before(t_bound) if t_bound < t_end else t_end
+
+
 #: :func:`attempt_step`'s outcome for a rejected attempt (a step to try again, smaller).
 REJECTED = 2
 
@@ -112,32 +118,34 @@ def step_bounds(s, t, h_abs):
 
 
 @jit(forceinline=True)
-def attempt_step(code, p, s, t, t_bound, t_lim, y, f, h_abs, rejected, w):
+def attempt_step(code, p, s, span, y, f, h_abs, rejected, w):
     """One attempt of scipy's ``_step_impl`` loop: a step of size ``h_abs`` from (t, y)
     with rate f, accepted or not by its error norm.
 
     ``s``: the run's :data:`~rbstab.engine.settings.SETTINGS`; ``w``: its
     :class:`~rbstab.engine.settings.Work`; ``h_abs`` before the first attempt from
     :func:`step_bounds`; ``rejected``: whether an attempt of this step was rejected before;
-    ``t_bound``: where the step ends at the latest (t_end, or the next breakpoint of the
+    ``t_bound``: where the step from t ends at the latest (t_end, or the next breakpoint of the
     disturbances), ``t_lim``: the latest time a stage evaluates (the float below a
-    breakpoint, else t_bound). Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
+    breakpoint, else t_bound), as ``span`` = (t, t_bound). Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
     and its rate ``w.K[n_stages]`` hold the new state at t_new = t + h), :data:`REJECTED`
     (try again with the next h_abs) or TOO_SMALL_STEP / NOT_FINITE (no right-hand side
     evaluated). The CPU driver (:func:`step`) and the CUDA driver
     (:mod:`rbstab.engine.cuda`) both take their steps through it.
     """
+    t, t_bound = span
     if not math.isfinite(h_abs):
         return NOT_FINITE, t, 0.0, h_abs
     if h_abs < 10 * spacing(t):
         return TOO_SMALL_STEP, t, 0.0, h_abs
+    t_lim = _limit_of(t_bound, s.t_end)
     rtol, atol, method = s.rtol, s.atol, s.method
-    K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
+    K, y_new, scale = w.K, w.y_new, w.scale
     error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
     t_new = min(t + h_abs, t_bound)
     h = t_new - t
     h_abs = abs(h)
-    rk_step(code, p, t, t_lim, y, f, h, method, K, y_new, work)
+    rk_step(code, p, t, t_lim, y, f, h, method, w)
     for i in range(y.shape[0]):
         scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
     norm = error_norm(K, h, scale, method)
@@ -152,21 +160,21 @@ def attempt_step(code, p, s, t, t_bound, t_lim, y, f, h_abs, rejected, w):
 
 
 @jit
-def step(code, p, s, t, t_bound, t_lim, y, f, h_abs, w):
+def step(code, p, s, span, y, f, h_abs, w):
     """One accepted step from (t, y) with rate f (scipy's ``_step_impl``), with the run's
     settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`) and work arrays ``w``
     (:class:`~rbstab.engine.settings.Work`): :func:`attempt_step` until one is accepted
-    (``t_bound``, ``t_lim``: see there).
+    (``span`` = (t, t_bound): see there).
 
     Returns (status, t_new, h, next h_abs, attempts); ``w.y_new`` and its rate
     ``w.K[n_stages]`` hold the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing
     accepted).
     """
-    h_abs = step_bounds(s, t, h_abs)
+    h_abs = step_bounds(s, span[0], h_abs)
     rejected = False
     attempts = 0
     while True:
-        outcome, t_new, h, h_abs = attempt_step(code, p, s, t, t_bound, t_lim, y, f, h_abs, rejected, w)
+        outcome, t_new, h, h_abs = attempt_step(code, p, s, span, y, f, h_abs, rejected, w)
         if outcome == REJECTED:
             attempts += 1
             rejected = True
@@ -234,11 +242,6 @@ def step_work(permanent, p, t, h, x, y_old, Q, dop853, out):
     return total * x * h
 
 
-@jit(forceinline=True)
-def _limit_of(t_bound, t_end):
-    """The latest time a stage of a step that ends at ``t_bound`` evaluates."""
-    return before(t_bound) if t_bound < t_end else t_end
-
 
 @jit(forceinline=True)
 def _run(code, p, y0, s, samples, work_done):
@@ -277,7 +280,7 @@ def _run(code, p, y0, s, samples, work_done):
             return STEP_LIMIT, t, nfev, n_steps, j
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, j
-        status, t_new, h, h_abs, attempts = step(code, p, s, t, t_bound, t_lim, y, f, h_abs, w)
+        status, t_new, h, h_abs, attempts = step(code, p, s, (t, t_bound), y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, j
@@ -287,7 +290,7 @@ def _run(code, p, y0, s, samples, work_done):
         event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
         at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
         if event or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-            nfev += dense_coefficients(code, p, t, t_lim, y, y_new, f_new, h, method, w)
+            nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
         if event:
             t_stop, _ = locate_event(t, h, y, Q, dop853, limit, scratch)
         # a sample at a breakpoint is the next step's (the state just after the breakpoint)
@@ -320,14 +323,15 @@ def _run(code, p, y0, s, samples, work_done):
 
 
 @jit
-def integrate_chunk(codes, params, y0, settings, samples, work_done, status, t_stop, nfev, n_steps):
+def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
     """:func:`integrate_run` for every run k of a chunk.
 
     ``codes`` (k,) variant codes; ``params`` (k,) PARAMETERS records; ``y0`` (k, n_state);
     ``settings`` (k,) :data:`~rbstab.engine.settings.SETTINGS` records; ``samples``
     (k, n_samples, n_state); ``work_done`` (k, n_samples) the disturbances' work W [J];
-    ``status``, ``t_stop``, ``nfev``, ``n_steps`` (k,) are filled.
+    ``ends`` = (``status``, ``t_stop``, ``nfev``, ``n_steps``), each (k,), are filled.
     """
+    status, t_stop, nfev, n_steps = ends
     for k in range(codes.shape[0]):
         status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(codes[k], params[k], y0[k], settings[k], samples[k],
                                                                   work_done[k])
@@ -408,7 +412,7 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     work = np.empty((k, n_samples))
     with np.errstate(all="ignore"):
         integrate_chunk(codes, np.ascontiguousarray(params), y0, settings_records(settings, method_number(method)),
-                        samples, work, status, t_stop, nfev, n_steps)
+                        samples, work, (status, t_stop, nfev, n_steps))
     return ChunkSolution(samples, status, t_stop, nfev, n_steps, work)
 
 

@@ -157,12 +157,14 @@ def _stage_state(y, h, a, K, s, out):
 
 
 @jit(forceinline=True)
-def rk_step(code, p, t, t_lim, y, f, h, method, K, y_new, work):
+def rk_step(code, p, t, t_lim, y, f, h, method, w):
     """One step from (t, y) (rate f) of size h: y_new and its rate in K[n_stages] (scipy's
     rk_step); no stage later than ``t_lim``.
 
-    ``K``: (:data:`STAGE_ROWS`, n) stage rates; ``work``: a state-sized array.
+    ``w``: the run's :class:`rbstab.engine.settings.Work` (``K`` (:data:`STAGE_ROWS`, n)
+    stage rates, ``y_new``, ``work`` a state-sized array).
     """
+    K, y_new, work = w.K, w.y_new, w.work
     n_stages = N_STAGES[method]
     for i in range(f.shape[0]):  # element by element: a slice store needs numba's runtime, absent on CUDA
         K[0, i] = f[i]
@@ -204,15 +206,16 @@ def error_norm(K, h, scale, method):
 
 
 @jit
-def dense_coefficients(code, p, t_old, t_lim, y_old, y_new, f_new, h, method, w):
+def dense_coefficients(code, p, t_old, t_lim, y_old, h, method, w):
     """The interpolant of the step from y_old to y_new into ``w.Q`` (rows of coefficients;
     ``w``: the run's :class:`rbstab.engine.settings.Work`, its stage rates ``w.K``).
 
     RK23/RK45: Q = (K' P)' (order rows); DOP853: its 3 extra stages (3 right-hand-side
     calls) and the 7 rows F of scipy's ``Dop853DenseOutput``.
     """
-    K, Q, work = w.K, w.Q, w.work
+    K, Q, work, y_new = w.K, w.Q, w.work, w.y_new
     n_stages, D = N_STAGES[method], DOP853_D
+    f_new = K[n_stages]
     n = y_old.shape[0]
     if method != DOP853:
         for r in range(INTERPOLANT_ROWS[method]):

@@ -404,12 +404,12 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, n_pieces, n_events
         code = mode_code(mode)
-        status, t_new, h, h_abs, attempts = step(code, p, s, t, t_end, t_end, y, f, h_abs, w)
+        status, t_new, h, h_abs, attempts = step(code, p, s, (t, t_end), y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, n_pieces, n_events
         n_steps += 1
-        nfev += dense_coefficients(code, p, t, t_end, y, y_new, K[N_STAGES[method]], h, method, w)
+        nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
         _event_values(y, p, mode, limit, g[0], dg[0])
         it = Interpolant(h, y, Q, dop853)
         x, index = first_event(p, mode, limit, it, work, g, dg)
