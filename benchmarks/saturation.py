@@ -71,7 +71,7 @@ def seconds_a_run(n: int, shape: str | None, scale_limits: float = 1.0) -> tuple
     if shape is None:
         return cost, nfev / n, 0.0
     out = np.empty((N_OUTPUTS, len(sol.samples), 2001))
-    run_outputs(codes[lo:lo + 256], params[lo:lo + 256], sol.samples, out, True)
+    run_outputs(codes[lo:lo + 256], params[lo:lo + 256], np.zeros((1, sol.samples.shape[1])), sol.samples, out, True)
     n_at = OUTPUTS["torque_n"].offset
     acting = np.abs(out[n_at:n_at + 3]) >= 200.0 * (1 - 1e-12) if shape == "clip" else np.zeros(1, bool)
     return cost, nfev / n, float(acting.any(axis=0).mean())

@@ -151,7 +151,7 @@ def deadline() -> dict:
     from rbstab.variants.kernels import output_row
 
     nan_state = np.full(N_OUTPUTS, np.nan)
-    output_row(variant.code, np.full(y0.shape[1], np.nan), variant.parameters[0], nan_state, False)
+    output_row(variant.code, 0.0, np.full(y0.shape[1], np.nan), variant.parameters[0], nan_state, False)
     return {"first_success": int(np.sum(first.status == 0)),
             "not_started": int(np.sum(second.status == NOT_STARTED)),
             "t_stop_zero": bool(np.all(second.t_stop == 0)),

@@ -129,3 +129,54 @@ def permanent_full_state_rhs(body, gains):
         return np.concatenate([euler_rate(theta) @ omega, omega_dot, v, (G + h + lam) / m])
 
     return rhs, constraint_force
+
+
+# -- disturbances (docs/disturbances.md), written again from the definitions ------------------------
+def disturbance_value(d, t):
+    """The value of one continuous disturbance ``d`` (rbstab.model.Disturbance) at t, or None
+    where it does not act (an impulse, or outside its window)."""
+    if d.kind == "impulse" or t < d.start:
+        return None
+    if d.kind == "pulse":
+        return None if t >= d.start + d.duration else np.asarray(d.value, float)
+    if d.kind == "step":
+        return np.asarray(d.value, float)
+    if d.kind == "sine":
+        return np.asarray(d.value, float) * np.sin(2 * np.pi * d.frequency * (t - d.start) + d.phase)
+    raise NotImplementedError(d.kind)  # noise: checked by its statistics
+
+
+def disturbance_wrench(disturbances, theta, t):
+    """(F inertial [N], T body [N m] about the centre of mass) of the continuous disturbances."""
+    a = rotation(theta)
+    force, torque = np.zeros(3), np.zeros(3)
+    for d in disturbances:
+        value = disturbance_value(d, t)
+        if value is None:
+            continue
+        if d.quantity == "force":
+            force += value
+            torque += np.cross(d.point, a.T @ value)
+        else:
+            torque += value
+    return force, torque
+
+
+def disturbed_rates(body, disturbances, theta, t):
+    """What the disturbances add to (dOmega/dt, dV/dt) of a full-state body: J^-1 T, F / m."""
+    force, torque = disturbance_wrench(disturbances, theta, t)
+    return np.linalg.solve(body.inertia, torque), force / body.mass
+
+
+def impulse_jump(body, d, theta, permanent=False):
+    """(dOmega, dV) of an impulse: J dOmega = R_p x A'P, dV = P / m (permanent: J_p dOmega =
+    (R_p - R) x A'P, V follows C at rest); torque impulses J dOmega = L."""
+    a = rotation(theta)
+    value = np.asarray(d.value, float)
+    r = np.asarray(body.attachment_point, float)
+    j_p = body.inertia - body.mass * hat(r) @ hat(r)
+    inertia = j_p if permanent else body.inertia
+    if d.quantity == "torque":
+        return np.linalg.solve(inertia, value), np.zeros(3)
+    arm = np.asarray(d.point, float) - (r if permanent else 0.0)
+    return np.linalg.solve(inertia, np.cross(arm, a.T @ value)), (np.zeros(3) if permanent else value / body.mass)

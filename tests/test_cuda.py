@@ -50,7 +50,7 @@ def _run_columns(config, n_samples):
                            config.simulation.max_step, config.simulation.gimbal_margin, config.simulation.max_steps,
                            np.inf]], method=config.simulation.method, n_samples=n_samples)
     columns = np.empty((N_OUTPUTS, 1, n_samples))
-    run_outputs(np.array([variant.code]), variant.parameters, sol.samples, columns, False)
+    run_outputs(np.array([variant.code]), variant.parameters, np.zeros((1, sol.samples.shape[1])), sol.samples, columns, False)
     return variant, columns
 
 

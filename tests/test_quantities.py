@@ -62,6 +62,7 @@ def _expected(variant, y):
            "lyapunov_gravity": -x @ (body.mass * body.gravity) + variant.lyapunov_offset,
            "lyapunov_rate": -(v @ g.l_t @ v + omega @ g.l_r @ omega + dissipated.get(variant.name, 0.0))}
     out["lyapunov"] = sum(out[t] for t in LYAPUNOV_TERMS)
+    out["disturbance_power"] = out["disturbance_work"] = 0.0  # no disturbances (tests/test_disturbances.py)
     return out
 
 
@@ -70,7 +71,7 @@ def test_each_output_is_where_the_table_says_the_kernel_writes_it(name, rng):
     variant = VARIANTS[name](paper_body(GRAVITY), paper_gains())
     states = rng.normal(scale=0.3, size=(5, variant.layout.size))
     out = np.full((N_OUTPUTS, 1, len(states)), np.nan)
-    run_outputs(np.array([variant.code]), variant.parameters, states[None], out, True)
+    run_outputs(np.array([variant.code]), variant.parameters, np.zeros((1, states.shape[0])), states[None], out, True)
     assert np.all(np.isfinite(out)), "a column of the outputs is not written"
     for j, y in enumerate(states):
         expected = _expected(variant, y)
@@ -80,7 +81,7 @@ def test_each_output_is_where_the_table_says_the_kernel_writes_it(name, rng):
             scale = max(1.0, float(np.max(np.abs(expected[q.name]))))
             np.testing.assert_allclose(got, expected[q.name], rtol=1e-9, atol=1e-9 * scale, err_msg=q.name)
     lean = np.full_like(out, np.nan)
-    run_outputs(np.array([variant.code]), variant.parameters, states[None], lean, False)
+    run_outputs(np.array([variant.code]), variant.parameters, np.zeros((1, states.shape[0])), states[None], lean, False)
     left_out = np.zeros(N_OUTPUTS, dtype=bool)
     for q in LEFT_OUT:
         left_out[OUTPUTS[q].columns] = True

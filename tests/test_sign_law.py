@@ -66,9 +66,9 @@ def test_modes_off_the_surfaces_are_the_sign_law(rng):
     for y in rng.normal(scale=0.3, size=(20, 12)):
         sigma = np.sign(quantities(variant, y, np.ones(3))[0, 0])
         dy, plain = np.empty(12), np.empty(12)
-        state_rate(mode_code.py_func(tuple(sigma)), y, variant.parameters[0], dy)
+        state_rate(mode_code.py_func(tuple(sigma)), 0.0, y, variant.parameters[0], dy)
         np.testing.assert_allclose(dy, reference.rhs(0.0, y), rtol=1e-12, atol=1e-10)
-        state_rate(SLIDING, y, variant.parameters[0], plain)
+        state_rate(SLIDING, 0.0, y, variant.parameters[0], plain)
         np.testing.assert_array_equal(dy, plain)
     for code in range(MODE_CODES, MODE_CODES + 27):  # the 27 modes, each its own code
         assert mode_code.py_func(mode_of.py_func(code)) == code and set(mode_of.py_func(code)) <= {-1.0, 0.0, 1.0}
@@ -251,13 +251,13 @@ def _rk4(y0, p, h, n_steps, every, out):
     k = np.empty((4, y0.shape[0]))
     out[0] = y
     for s in range(n_steps):
-        state_rate(SLIDING, y, p, k[0])
+        state_rate(SLIDING, 0.0, y, p, k[0])
         w[:] = y + 0.5 * h * k[0]
-        state_rate(SLIDING, w, p, k[1])
+        state_rate(SLIDING, 0.0, w, p, k[1])
         w[:] = y + 0.5 * h * k[1]
-        state_rate(SLIDING, w, p, k[2])
+        state_rate(SLIDING, 0.0, w, p, k[2])
         w[:] = y + h * k[2]
-        state_rate(SLIDING, w, p, k[3])
+        state_rate(SLIDING, 0.0, w, p, k[3])
         y += h / 6 * (k[0] + 2 * k[1] + 2 * k[2] + k[3])
         if (s + 1) % every == 0:
             out[(s + 1) // every] = y

@@ -229,6 +229,12 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
              "Lyapunov function v, the sum of the lyapunov_* terms (eqs 28-46)", "v", "Lyapunov function"),
     Quantity("lyapunov_rate", "dv/dt", "W", "analytic rate dv/dt of the Lyapunov function",
              "analytic dv/dt (eqs 29, 37, 43, 46)", r"\dot v", "Lyapunov rate"),
+    Quantity("disturbance_power", "P_d", "W", "power of the disturbances",
+             "P_d = F'V + Omega'T, F the disturbances' force (inertial frame), T their torque about the "
+             "centre of mass (body frame; eq 26)", "P_d", "disturbance power"),
+    Quantity("disturbance_work", "W", "J", "work of the disturbances",
+             "W = integral of P_d dt plus each impulse's jump of kinetic energy (eqs 26-28)",
+             "W", "disturbance work"),
 ))}
 
 #: Every quantity a run or store file holds as a variable (:data:`OUTPUTS` and the rest).

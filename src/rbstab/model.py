@@ -17,7 +17,8 @@ import numpy as np
 from .jit import jit
 from .kinematics import cross, hat, matTvec, matvec, neg, sub
 
-__all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "PARAMETERS", "parameters", "gyroscopic",
+__all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "Disturbance", "DISTURBANCE_KINDS",
+           "DISTURBANCE_QUANTITIES", "MAX_DISTURBANCES", "NOISE_TONES", "PARAMETERS", "parameters", "gyroscopic",
            "saturate", "torque_n_command", "force_h_command", "torque_n", "force_h"]
 
 
@@ -96,6 +97,60 @@ class Saturation:
     shape: str = "clip"
 
 
+#: The kinds of a disturbance by name, and their codes in :data:`PARAMETERS`'s
+#: ``disturbance_kind`` (0: no entry): ``impulse`` a jump of the velocities at ``start``;
+#: ``pulse`` a constant value on [start, start + duration); ``step`` a constant value from
+#: ``start`` on; ``sine`` value sin(2 pi frequency (t - start) + phase) from ``start`` on;
+#: ``noise`` a seeded random-phase multisine in ``band`` with RMS ``rms`` from ``start`` on.
+DISTURBANCE_KINDS = {"impulse": 1, "pulse": 2, "step": 3, "sine": 4, "noise": 5}
+#: What a disturbance applies, and its code in ``disturbance_torque``: a force at a point of
+#: the body (value in the inertial frame) or a torque (body frame).
+DISTURBANCE_QUANTITIES = {"force": 0, "torque": 1}
+#: Most disturbances of one run (the entries of :data:`PARAMETERS`'s disturbance fields).
+MAX_DISTURBANCES = 4
+#: Sines of a noise disturbance per axis (a random-phase multisine, equal amplitudes).
+NOISE_TONES = 16
+
+
+@dataclass(frozen=True, eq=False)
+class Disturbance:
+    """One disturbance acting on the body (docs/disturbances.md).
+
+    Attributes
+    ----------
+    kind : str
+        A key of :data:`DISTURBANCE_KINDS`.
+    quantity : str
+        ``force`` (at ``point``, inertial frame) or ``torque`` (body frame).
+    value : ndarray, shape (3,)
+        impulse [N s] or [N m s]; pulse, step, sine amplitude [N] or [N m]; noise: the RMS
+        per axis [N] or [N m].
+    point : ndarray, shape (3,)
+        R_p [m], body frame, from the centre of mass (force only).
+    start : float
+        t0 [s].
+    duration : float
+        pulse only [s].
+    frequency, phase : float
+        sine only [Hz], [rad].
+    band : tuple of float
+        noise only: (f_lo, f_hi) [Hz].
+    seed : int
+        noise only.
+    """
+
+    kind: str
+    quantity: str
+    value: np.ndarray
+    point: np.ndarray
+    start: float
+    duration: float = 0.0
+    frequency: float = 0.0
+    phase: float = 0.0
+    band: tuple[float, float] = (0.0, 0.0)
+    seed: int = 0
+
+
 @dataclass(frozen=True, eq=False)
 class Gains:
     """Feedback and constraint gains, each symmetric, shape (3, 3).
@@ -116,6 +171,8 @@ class Gains:
         Sliding boundary-layer width phi [m]; 0 means a pure sign function.
     saturation : Saturation or None
         The actuators' limits (None: unlimited, the paper's linear feedback).
+    disturbances : tuple of Disturbance
+        What acts on the body besides the controls (at most :data:`MAX_DISTURBANCES`).
     """
 
     k_t: np.ndarray
@@ -129,6 +186,7 @@ class Gains:
     k_s: float | None = None
     boundary_layer: float = 0.0
     saturation: Saturation | None = None
+    disturbances: tuple[Disturbance, ...] = ()
 
     @cached_property
     def l_d_inv(self) -> np.ndarray:
@@ -145,7 +203,11 @@ _VECTOR = (np.float64, (3,))
 #: its inverse, G = m g), every gain (zero where the variant has none), L_d^-1, K_s,
 #: the boundary layer phi, the constant h [J] that makes v zero at the equilibrium, and the
 #: actuators' limits of N [N m], H [N] and Lambda [N] with the code of their shape
-#: (:data:`SATURATION_SHAPES`; 0, as in a record of zeros: no limits, which are then not read).
+#: (:data:`SATURATION_SHAPES`; 0, as in a record of zeros: no limits, which are then not read);
+#: then the disturbances: their number (0: none, the other fields not read) and, entry by
+#: entry (:data:`MAX_DISTURBANCES`), the code of their kind (:data:`DISTURBANCE_KINDS`),
+#: whether a torque (:data:`DISTURBANCE_QUANTITIES`), value (noise: its RMS), point, start,
+#: duration, frequency, phase, band and seed (:class:`Disturbance`).
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -171,6 +233,17 @@ PARAMETERS = np.dtype(
         ("force_limit", *_VECTOR),
         ("constraint_force_limit", *_VECTOR),
         ("saturation", np.float64),
+        ("disturbance_count", np.float64),
+        ("disturbance_kind", np.float64, (MAX_DISTURBANCES,)),
+        ("disturbance_torque", np.float64, (MAX_DISTURBANCES,)),
+        ("disturbance_value", np.float64, (MAX_DISTURBANCES, 3)),
+        ("disturbance_point", np.float64, (MAX_DISTURBANCES, 3)),
+        ("disturbance_start", np.float64, (MAX_DISTURBANCES,)),
+        ("disturbance_duration", np.float64, (MAX_DISTURBANCES,)),
+        ("disturbance_frequency", np.float64, (MAX_DISTURBANCES,)),
+        ("disturbance_phase", np.float64, (MAX_DISTURBANCES,)),
+        ("disturbance_band", np.float64, (MAX_DISTURBANCES, 2)),
+        ("disturbance_seed", np.float64, (MAX_DISTURBANCES,)),
     ],
     align=True,
 )
@@ -204,7 +277,32 @@ def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0) -> n
         p["force_limit"] = sat.force_h
         p["constraint_force_limit"] = sat.constraint_force
         p["saturation"] = SATURATION_SHAPES[sat.shape]
+    set_disturbances(p, gains.disturbances)
     return p
+
+
+def set_disturbances(p: np.ndarray, disturbances) -> None:
+    """Write ``disturbances`` (a sequence of :class:`Disturbance`) into the record ``p``.
+
+    Raises
+    ------
+    ValueError
+        For more than :data:`MAX_DISTURBANCES` of them.
+    """
+    if len(disturbances) > MAX_DISTURBANCES:
+        raise ValueError(f"disturbances: found {len(disturbances)} entries; at most {MAX_DISTURBANCES}")
+    p["disturbance_count"] = len(disturbances)
+    for i, d in enumerate(disturbances):
+        p["disturbance_kind"][i] = DISTURBANCE_KINDS[d.kind]
+        p["disturbance_torque"][i] = DISTURBANCE_QUANTITIES[d.quantity]
+        p["disturbance_value"][i] = d.value
+        p["disturbance_point"][i] = d.point
+        p["disturbance_start"][i] = d.start
+        p["disturbance_duration"][i] = d.duration
+        p["disturbance_frequency"][i] = d.frequency
+        p["disturbance_phase"][i] = d.phase
+        p["disturbance_band"][i] = d.band
+        p["disturbance_seed"][i] = d.seed
 
 
 # -- the feedback, compiled (3-vectors are tuples, see rbstab.kinematics) ---------------------

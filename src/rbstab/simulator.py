@@ -42,13 +42,14 @@ from .engine.settings import settings_records, settings_rows
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .layout import VARIANT_LAYOUTS, summary_stride
-from .model import PARAMETERS
+from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
+from .model import DISTURBANCE_KINDS, PARAMETERS
 from .results import RunBlock, RunResult
 from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
-from .variants.kernels import run_outputs
+from .variants.disturbances import apply_impulses, before
+from .variants.kernels import run_outputs, state_powers
 
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
@@ -157,11 +158,20 @@ def solve(
     solver : dict
         ``nfev``, ``njev``, ``nlu``, ``solver_status``.
     """
+    return _solve(variant, y0, settings, timeout)[:5]
+
+
+def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = None):
+    """:func:`solve`, and the disturbances' work W [J] at the samples (n_samples,), zero
+    without disturbances (:func:`_solve_disturbed`)."""
     from scipy.integrate import solve_ivp  # heavy: scipy
 
     from .config.schema import SimulationSettings  # heavy: pydantic, yaml
 
+    if variant.gains.disturbances:
+        return _solve_disturbed(variant, y0, settings, timeout)
     t_eval = np.linspace(0.0, settings.t_end, settings.n_samples)
+    zero = np.zeros(settings.n_samples)
     states = np.full((settings.n_samples, variant.layout.size), np.nan)
     max_steps = int(getattr(settings, "max_steps", SimulationSettings.max_steps))
     if timeout is None:
@@ -182,32 +192,141 @@ def solve(
             )
         except RunLimit as exc:
             message = status_message(exc.status, exc.t, settings.gimbal_margin, max_steps, timeout)
-            return t_eval, states, "failed", message, no_solver
+            return t_eval, states, "failed", message, no_solver, zero
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-            return t_eval, states, "failed", f"solver error: {exc}", no_solver
+            return t_eval, states, "failed", f"solver error: {exc}", no_solver, zero
     y = np.asarray(sol.y, dtype=float)  # a list when the first step failed
     n = y.shape[1] if y.ndim == 2 else 0
     states[:n] = y.T[:n]
     solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
     if sol.status == 1:
         message = status_message(GIMBAL_LOCK, float(sol.t_events[0][0]), settings.gimbal_margin)
-        return t_eval, states, "failed", message, solver
+        return t_eval, states, "failed", message, solver, zero
     if sol.status != 0:
-        return t_eval, states, "failed", f"solver failed: {sol.message}", solver
+        return t_eval, states, "failed", f"solver failed: {sol.message}", solver, zero
     if not np.all(np.isfinite(states)):
         bad = int(np.argmin(np.all(np.isfinite(states), axis=1)))
         states[bad:] = np.nan
-        return t_eval, states, "failed", f"non-finite state at t = {t_eval[bad]:.6g} s", solver
-    return t_eval, states, "success", str(sol.message), solver
+        return t_eval, states, "failed", f"non-finite state at t = {t_eval[bad]:.6g} s", solver, zero
+    return t_eval, states, "success", str(sol.message), solver, zero
 
 
-def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
-    """Every output variable along sampled ``states`` (shape (n, n_state)) at ``time`` (n,).
+#: Gauss-Legendre nodes on [0, 1] and weights (3 points), as the compiled engine's
+#: :func:`rbstab.engine.integrate.step_work`.
+_GAUSS_NODES = np.array([0.5 - 0.1 * np.sqrt(15.0), 0.5, 0.5 + 0.1 * np.sqrt(15.0)])
+_GAUSS_WEIGHTS = np.array([5.0, 8.0, 5.0]) / 18.0
+
+
+def _breakpoints(p: np.void, t_end: float) -> list[float]:
+    """0, the edges of the disturbances' windows inside (0, t_end) in order, and t_end."""
+    edges = {0.0, float(t_end)}
+    for i in range(int(p["disturbance_count"])):
+        t0 = float(p["disturbance_start"][i])
+        edges.add(t0)
+        if p["disturbance_kind"][i] == DISTURBANCE_KINDS["pulse"]:
+            edges.add(t0 + float(p["disturbance_duration"][i]))
+    return sorted(e for e in edges if 0.0 <= e <= t_end)
+
+
+def _step_work(variant: Variant, dense, t0: float, t1: np.ndarray) -> np.ndarray:
+    """The disturbances' work [J] from t0 to each of ``t1`` along ``dense`` (one step's
+    interpolant; 3-point Gauss-Legendre, as the compiled engine)."""
+    t1 = np.atleast_1d(np.asarray(t1, dtype=float))
+    span = t1 - t0
+    nodes = (t0 + span[:, None] * _GAUSS_NODES[None, :]).ravel()
+    ys = np.ascontiguousarray(np.asarray(dense(nodes), dtype=float).T.reshape(len(nodes), -1))
+    power = np.empty(len(nodes))
+    state_powers(variant.code, nodes, ys, variant.parameters, power)
+    return span * (power.reshape(len(t1), 3) @ _GAUSS_WEIGHTS)
+
+
+def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float | None):
+    """:func:`_solve` of a run with disturbances: one ``solve_ivp`` from each breakpoint
+    (an edge of a disturbance's window) to the next, its right-hand side clamped to the
+    float below the next one, the impulses that start at a breakpoint applied to the state
+    there; W integrated along each step's interpolant (docs/disturbances.md). A sample at a
+    breakpoint shows the state just after it."""
+    from scipy.integrate import solve_ivp  # heavy: scipy
+
+    from .config.schema import SimulationSettings  # heavy: pydantic, yaml
+
+    t_end, n_samples = float(settings.t_end), int(settings.n_samples)
+    t_eval = np.linspace(0.0, t_end, n_samples)
+    states = np.full((n_samples, variant.layout.size), np.nan)
+    work = np.full(n_samples, np.nan)
+    max_steps = int(getattr(settings, "max_steps", SimulationSettings.max_steps))
+    if timeout is None:
+        timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
+    p = variant.parameters[0]
+    permanent = variant.name == "permanent"
+    rhs = _with_deadline(variant.rhs, timeout)
+    counter = _step_counter(max_steps)
+    edges = _breakpoints(p, t_end)
+    y = np.array(y0, dtype=float)
+    w = 0.0
+    solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": 0}
+    message = ""
+    with np.errstate(all="ignore"):
+        for a, b in zip(edges[:-1], edges[1:]):
+            w += apply_impulses(permanent, a, y, p)
+            last = b == t_end
+            lim = b if last else before(b)
+            inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
+            try:
+                sol = solve_ivp(lambda t, z, lim=lim: rhs(min(t, lim), z), (a, b), y, method=settings.method,
+                                t_eval=t_eval[inside], dense_output=True,
+                                events=[gimbal_lock_event(settings.gimbal_margin), counter],
+                                rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
+            except RunLimit as exc:
+                message = status_message(exc.status, exc.t, settings.gimbal_margin, max_steps, timeout)
+                return t_eval, states, "failed", message, solver, work
+            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                return t_eval, states, "failed", f"solver error: {exc}", solver, work
+            for key in ("nfev", "njev", "nlu"):
+                solver[key] += int(getattr(sol, key))
+            solver["solver_status"] = int(sol.status)
+            where = np.flatnonzero(inside)
+            yy = np.asarray(sol.y, dtype=float)
+            n = yy.shape[1] if yy.ndim == 2 else 0
+            states[where[:n]] = yy.T[:n]
+            if sol.sol is not None:  # W along each step, and to each sample inside it
+                ts = sol.sol.ts
+                for i, piece in enumerate(sol.sol.interpolants):
+                    lo, hi = ts[i], ts[i + 1]
+                    mine = where[:n][(t_eval[where[:n]] >= lo) & (t_eval[where[:n]] <= hi)]
+                    mine = mine[np.isnan(work[mine])]
+                    if len(mine):
+                        work[mine] = w + _step_work(variant, piece, lo, t_eval[mine])
+                    w += float(_step_work(variant, piece, lo, hi)[0])
+            if sol.status == 1:
+                message = status_message(GIMBAL_LOCK, float(sol.t_events[0][0]), settings.gimbal_margin)
+                return t_eval, states, "failed", message, solver, work
+            if sol.status != 0:
+                return t_eval, states, "failed", f"solver failed: {sol.message}", solver, work
+            if not last:
+                y = np.array(sol.sol(b), dtype=float)
+            message = str(sol.message)
+    jump = apply_impulses(permanent, t_end, y, p)
+    if jump != 0.0:
+        states[-1], work[-1] = y, work[-1] + jump
+    if not np.all(np.isfinite(states)):
+        bad = int(np.argmin(np.all(np.isfinite(states), axis=1)))
+        states[bad:] = np.nan
+        return t_eval, states, "failed", f"non-finite state at t = {t_eval[bad]:.6g} s", solver, work
+    return t_eval, states, "success", message, solver, work
+
+
+def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray,
+                     work: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Every output variable along sampled ``states`` (shape (n, n_state)) at ``time`` (n,),
+    with ``work`` (n,) the disturbances' work W [J] at the samples (default 0).
 
     Adds ``lyapunov_rate_numerical`` [W], the derivative of v along the samples
     (:func:`rbstab.summary.numerical_rate`), to :meth:`Variant.evaluate`.
     """
-    outputs = variant.evaluate(states)
+    outputs = variant.evaluate(states, time)
+    if work is not None:
+        outputs["disturbance_work"][...] = work
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
     return outputs
 
@@ -275,9 +394,9 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
     start = _time.perf_counter()
     variant = config.make_variant()
     y0 = variant.initial_state(config.initial_state)
-    time, states, status, message, solver = solve(variant, y0, config.simulation, timeout)
+    time, states, status, message, solver, work = _solve(variant, y0, config.simulation, timeout)
     solved = _time.perf_counter()
-    outputs = evaluate_outputs(variant, time, states)
+    outputs = evaluate_outputs(variant, time, states, work)
     result = RunResult(config=config, time=time, outputs=outputs, status=status, message=message,
                        solver=solver, summary=summarize(time, outputs))
     end = _time.perf_counter()
@@ -307,8 +426,11 @@ def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarra
         t0 = _time.perf_counter()
         hi = min(lo + POSTPROCESS_BLOCK, k)
         columns = np.empty((N_OUTPUTS, hi - lo, n_samples))
+        times = np.linspace(0.0, settings[lo:hi, 0], n_samples, axis=1)
         with np.errstate(all="ignore"):
-            run_outputs(codes[lo:hi], params[lo:hi], sol.samples[lo:hi], columns, full)
+            run_outputs(codes[lo:hi], params[lo:hi], times, sol.samples[lo:hi], columns, full)
+        if sol.work is not None:
+            columns[OUTPUTS["disturbance_work"].offset] = sol.work[lo:hi]
         # the runs of a chunk share the state size, so the same named outputs; runs with
         # the same sample times get their numerical dv/dt and summaries at once (the same
         # numbers as each alone), and one array of those times
@@ -540,6 +662,9 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
     from .engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
 
     codes, params, y0, settings = runs
+    if np.any(params["disturbance_count"] > 0):
+        raise ValueError("engine 'cuda': runs with disturbances are integrated by the CPU engines only "
+                         "(--engine compiled or scipy)")
     stride = {"all": 1, "thinned": summary_stride(n_samples), "none": None}[keep]
     chunks = integrate_chunks_cuda(codes, params, y0, settings_records(settings, method_number(method)),
                                    n_samples=n_samples, stride=stride, full=full,

@@ -46,6 +46,14 @@ Schema (the keys are public; units in brackets)::
       gimbal_margin: 1.0e-3         # [rad] in (0, 0.5)
       max_steps: 1000000            # solver steps after which the run fails, in [1, 1e9]
       max_wall_time: 600            # [s] of integration after which the run fails (null: none)
+    disturbances:                   # optional, at most 4 (docs/disturbances.md)
+      - kind: pulse                 # impulse | pulse | step | sine | noise
+        quantity: force             # force (at point, inertial frame) | torque (body frame)
+        value: [0, 40, 0]           # [N s] impulse; [N] amplitude (torque: N m s, N m)
+        point: [0, 0, 0.2]          # [m], body frame, from the centre of mass (force only)
+        start: 0.3                  # [s] in [0, t_end]
+        duration: 0.05              # pulse; sine: frequency [Hz], phase [rad];
+                                    # noise: rms, band [Hz], seed (instead of value)
 
 Limits (docs/reliability.md): every number is at most 1e12 in magnitude; the mass and the
 eigenvalues of the matrices the equations invert (inertia, l_d) are at least 1e-12;

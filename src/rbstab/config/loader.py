@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from ..model import Gains, RigidBody, Saturation
+from ..model import Disturbance, Gains, RigidBody, Saturation
 from ..variants import VARIANTS, Variant
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_weight
@@ -35,7 +35,7 @@ __all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS"
 #: not cache their YAML).
 PER_RUN_SECTIONS = ("name", "initial_state")
 #: The sections that :meth:`RunConfig.from_resolved` compares to share a rebuilt config's objects.
-_SHARED_SECTIONS = ("body", "controller", "simulation")
+_SHARED_SECTIONS = ("body", "controller", "simulation", "disturbances")
 
 
 @dataclass(frozen=True, eq=False)
@@ -125,7 +125,7 @@ class RunConfig:
         """
         initial_state = {block: _array(resolved["initial_state"][key]) for key, block in INITIAL_STATE_BLOCKS.items()}
         for other in like:
-            if all(resolved[key] == other.resolved[key] for key in _SHARED_SECTIONS):
+            if all(resolved.get(key) == other.resolved.get(key) for key in _SHARED_SECTIONS):
                 return dataclasses.replace(other, name=resolved["name"], initial_state=initial_state,
                                            resolved=resolved, warnings=())
         ctrl, body, sim = resolved["controller"], resolved["body"], resolved["simulation"]
@@ -135,6 +135,7 @@ class RunConfig:
             k_s=float(ctrl["k_s"]) if "k_s" in used else None,
             boundary_layer=float(ctrl.get("boundary_layer", 0.0)) if "k_s" in used else 0.0,
             saturation=saturation_of(ctrl.get("saturation")),
+            disturbances=disturbances_of(resolved.get("disturbances")),
         )
         max_step = sim["max_step"]
         wall = sim.get("max_wall_time", SimulationSettings.max_wall_time)  # absent in files of rbstab < 0.2
@@ -171,6 +172,24 @@ def saturation_of(section: Mapping | None) -> Saturation | None:
         return np.broadcast_to(np.array(math.inf if value is None else value, dtype=float), (3,)).copy()
 
     return Saturation(limits("torque_n"), limits("force_h"), limits("constraint_force"), section.get("shape", "clip"))
+
+
+def disturbances_of(entries: Sequence[Mapping] | None) -> tuple[Disturbance, ...]:
+    """The :class:`rbstab.model.Disturbance` of each validated ``disturbances`` entry (a
+    missing point: the centre of mass; an RMS as one number: on every axis)."""
+    out = []
+    for d in entries or ():
+        kind = d["kind"]
+        value = d.get("rms") if kind == "noise" else d.get("value")
+        band = d.get("band") or (0.0, 0.0)
+        out.append(Disturbance(
+            kind=kind, quantity=d.get("quantity", "force"),
+            value=np.broadcast_to(np.array(value, dtype=float), (3,)).copy(),
+            point=np.array(d.get("point") or (0.0, 0.0, 0.0), dtype=float),
+            start=float(d.get("start", 0.0)), duration=float(d.get("duration") or 0.0),
+            frequency=float(d.get("frequency") or 0.0), phase=float(d.get("phase") or 0.0),
+            band=(float(band[0]), float(band[1])), seed=int(d.get("seed") or 0)))
+    return tuple(out)
 
 
 def _array(value: Any) -> np.ndarray:
@@ -229,6 +248,11 @@ def _build(
     _check_weight(ctrl, body, gains, used_gains, source, overrides)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
+    if dump.get("disturbances") is None:
+        dump.pop("disturbances", None)  # a run without: its resolved form as before
+    else:
+        dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
+        gains = dataclasses.replace(gains, disturbances=disturbances_of(dump["disturbances"]))
     for key in ("max_step", "max_wall_time"):
         if math.isinf(getattr(sim, key)):
             dump["simulation"][key] = None

@@ -30,7 +30,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from ..layout import BLOCK_UNITS
-from ..model import SATURATION_SHAPES
+from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES
 from ..variants import VARIANTS
 from .physics import SINGULAR_RTOL
 
@@ -603,6 +603,109 @@ class _Controller(_Section):
         return value
 
 
+def _choice(options: Sequence[str]) -> Callable[[Any], str]:
+    def check(value: Any) -> str:
+        if not isinstance(value, str):
+            raise Invalid(f"{kind_of(value)}, not a string")
+        if value not in options:
+            raise Invalid(_did_you_mean(value, list(options)))
+        return value
+
+    return check
+
+
+def _band(value: Any) -> list[float]:
+    """[f_lo, f_hi] [Hz] with 0 <= f_lo < f_hi < inf."""
+    if not isinstance(value, (list, tuple)):
+        raise Invalid(f"{kind_of(value)}, not a list")
+    if len(value) != 2:
+        raise Invalid(f"{len(value)} entries, not 2")
+    lo, hi = (bounded_number(ge=0)(x) for x in value)
+    if hi <= lo:
+        raise Invalid(f"f_hi = {hi:g} <= f_lo = {lo:g}")
+    return [lo, hi]
+
+
+def _rms(value: Any) -> list[float]:
+    """An RMS on every axis (a number >= 0) or one per axis (3), not all zero."""
+    check = bounded_number(ge=0)
+    if isinstance(value, (list, tuple)):
+        if len(value) != 3:
+            raise Invalid(f"{len(value)} entries, not 3")
+        out = []
+        for i, x in enumerate(value):
+            try:
+                out.append(check(x))
+            except Invalid as exc:
+                raise Invalid(f"entry [{i}] is {exc.detail}") from None
+    else:
+        out = [check(value)] * 3
+    if not any(out):
+        raise Invalid("every axis 0")
+    return out
+
+
+_band.rule = None
+_rms.rule = ("limits", {"gt": None, "ge": 0, "lt": None, "le": None, "allow_inf": False, "integer": False})
+
+#: The keys of a disturbance each kind takes (besides kind, quantity, start), and those it needs.
+DISTURBANCE_KEYS = {
+    "impulse": ("value", "point"),
+    "pulse": ("value", "point", "duration"),
+    "step": ("value", "point"),
+    "sine": ("value", "point", "frequency", "phase"),
+    "noise": ("point", "band", "rms", "seed"),
+}
+_NEEDED = {"impulse": ("value",), "pulse": ("value", "duration"), "step": ("value",), "sine": ("value", "frequency"),
+           "noise": ("band", "rms", "seed")}
+
+
+class _Disturbance(_Section):
+    """One disturbance (:class:`rbstab.model.Disturbance`, docs/disturbances.md)."""
+
+    kind: Annotated[Any, checked(_choice(tuple(DISTURBANCE_KINDS)))] = Field(
+        description=f"one of {', '.join(DISTURBANCE_KINDS)}")
+    quantity: Annotated[Any, checked(_choice(tuple(DISTURBANCE_QUANTITIES)))] = Field(
+        "force", description="force (at point, inertial frame) or torque (body frame)")
+    value: Annotated[Any, checked(optional(_vector))] = Field(
+        None, description="3 numbers: impulse (N s or N m s); pulse, step, sine amplitude (N or N m)")
+    point: Annotated[Any, checked(optional(_vector))] = Field(
+        None, description="3 numbers (m, body frame, from the centre of mass; force only)")
+    start: Annotated[Any, checked(bounded_number(ge=0))] = Field(
+        0.0, description="a number in [0, simulation.t_end] (s)")
+    duration: Annotated[Any, checked(optional(bounded_number(gt=0)))] = Field(
+        None, description="a number > 0 (s; pulse only)")
+    frequency: Annotated[Any, checked(optional(bounded_number(gt=0)))] = Field(
+        None, description="a number > 0 (Hz; sine only)")
+    phase: Annotated[Any, checked(optional(bounded_number()))] = Field(
+        None, description="a number (rad; sine only)")
+    band: Annotated[Any, checked(optional(_band))] = Field(
+        None, description="[f_lo, f_hi] (Hz; noise only) with 0 <= f_lo < f_hi")
+    rms: Annotated[Any, checked(optional(_rms))] = Field(
+        None, description="a number >= 0 or 3 of them (N or N m; noise only)")
+    seed: Annotated[Any, checked(optional(bounded_number(ge=0, le=2**31 - 1, integer=True)))] = Field(
+        None, description="an integer in [0, 2^31 - 1] (noise only)")
+
+    @model_validator(mode="after")
+    def _keys_fit_the_kind(self) -> "_Disturbance":
+        takes = DISTURBANCE_KEYS[self.kind]
+        for key in ("value", "point", "duration", "frequency", "phase", "band", "rms", "seed"):
+            value = getattr(self, key)
+            if value is not None and key not in takes:
+                raise PydanticCustomError("rbstab_invalid", "key of another kind", {
+                    "subkey": key, "found": short_repr(value), "expected": f"no {key} with kind '{self.kind}' "
+                    f"(it takes {', '.join(takes)})"})
+            if value is None and key in _NEEDED[self.kind]:
+                raise PydanticCustomError("rbstab_invalid", "missing", {
+                    "subkey": key, "found": "nothing", "expected": f"{key} with kind '{self.kind}': "
+                    + (type(self).model_fields[key].description or "")})
+        if self.quantity == "torque" and self.point is not None:
+            raise PydanticCustomError("rbstab_invalid", "point on a torque", {
+                "subkey": "point", "found": short_repr(self.point),
+                "expected": "no point with quantity 'torque' (a torque has no point of application)"})
+        return self
+
+
 class _InitialState(_Section):
     theta: Annotated[Any, checked(_theta)] = Field(
         default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['theta']})"
@@ -686,6 +789,35 @@ class RunSchema(_Section):
     simulation: _Simulation = Field(
         default_factory=_Simulation, validate_default=True, description=_mapping_of(_Simulation)
     )
+    disturbances: list[_Disturbance] | None = Field(
+        None, description=f"a list of at most {MAX_DISTURBANCES} disturbances, each {_mapping_of(_Disturbance)} "
+                          "(optional; docs/disturbances.md)")
+
+    @field_validator("disturbances", mode="before")
+    @classmethod
+    def _few_disturbances(cls, value: Any) -> Any:
+        if isinstance(value, (list, tuple)) and len(value) > MAX_DISTURBANCES:
+            raise PydanticCustomError("rbstab_invalid", "too many disturbances", {
+                "key": "disturbances", "found": f"{len(value)} entries",
+                "expected": f"at most {MAX_DISTURBANCES} disturbances"})
+        return value
+
+    @model_validator(mode="after")
+    def _disturbances_fit_the_run(self) -> "RunSchema":
+        """A start after t_end; disturbances on the pure sign law (its event-driven
+        integrator has no breakpoints)."""
+        for i, d in enumerate(self.disturbances or ()):
+            if float(d.start) > float(self.simulation.t_end):
+                raise PydanticCustomError("rbstab_invalid", "start after the end", {
+                    "key": f"disturbances.{i}.start", "found": short_repr(d.start),
+                    "expected": f"a number in [0, simulation.t_end] = [0, {float(self.simulation.t_end):g}] (s)"})
+            if self.controller.variant == "sliding" and float(self.controller.boundary_layer) == 0.0:
+                raise PydanticCustomError("rbstab_invalid", "disturbance on the sign law", {
+                    "key": f"disturbances.{i}", "found": f"kind '{d.kind}'",
+                    "expected": "no disturbances with the pure sign law (controller.boundary_layer: 0)",
+                    "detail": "its event-driven integrator takes no disturbances; give the sign law a boundary "
+                              "layer > 0 instead"})
+        return self
 
     @field_validator("initial_state", "simulation", mode="before")
     @classmethod
@@ -732,6 +864,8 @@ def split_key(key: str) -> tuple[str, str, tuple[str, ...]]:
     section (``k_c``, or ``saturation.torque_n`` inside a subsection) and the list indices
     after it (``controller.k_c.0.1`` -> ``("controller", "k_c", ("0", "1"))``)."""
     parts = key.split(".")
+    if parts[0] == "disturbances" and len(parts) >= 3 and parts[1].isdigit():  # an entry's field
+        return parts[0], ".".join(parts[1:3]), tuple(parts[3:])
     model = _submodel(RunSchema.model_fields[parts[0]].annotation) if parts[0] in RunSchema.model_fields else None
     names = parts[1:2]
     while model is not None and len(parts) > len(names) + 1 and names[-1] in model.model_fields:
@@ -747,7 +881,12 @@ def field_value(section_value: Any, name: str) -> Any:
     or None where it or a subsection is absent."""
     value = section_value
     for part in name.split("."):
-        value = value.get(part) if isinstance(value, Mapping) else None
+        if isinstance(value, Mapping):
+            value = value.get(part)
+        elif isinstance(value, (list, tuple)) and part.isdigit():  # an entry of a list (disturbances)
+            value = value[int(part)] if int(part) < len(value) else None
+        else:
+            value = None
     return value
 
 
@@ -823,6 +962,11 @@ def field_at(loc: Sequence[Any], root: type[BaseModel] | None = None) -> tuple[t
                 return None, info
         if typing.get_origin(ann) in (typing.Union, types.UnionType):  # Optional[Model]
             ann = next((a for a in typing.get_args(ann) if a is not type(None)), None)
+        if typing.get_origin(ann) is list:  # skip the entry's index
+            ann = typing.get_args(ann)[0]
+            i += 1
+            if i == len(parts) - 1:
+                return None, info
         model = ann if isinstance(ann, type) and issubclass(ann, BaseModel) else None
         i += 1
     return None, None
@@ -848,6 +992,8 @@ def problem_line(
     loc = tuple(part for part in err["loc"] if part != "[key]")  # a dict key's own error
     ctx = err.get("ctx") or {}
     key = ctx.get("key") or ".".join(str(p) for p in loc)
+    if ctx.get("subkey"):  # a key inside the entry a model's validator checked
+        key = ".".join(str(p) for p in (*loc, ctx["subkey"]))
     model, info = field_at(loc, root)
     expected = ctx.get("expected") or (info.description if info is not None else None) or ""
     detail = ctx.get("detail", "")

@@ -29,7 +29,7 @@ import numpy as np
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
 from ..config.schema import field_value, split_key
 from ..layout import STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
-from ..model import PARAMETERS, SATURATION_SHAPES, Gains, RigidBody
+from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody
 from ..variants import VARIANTS
 from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
@@ -230,6 +230,7 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
         for field, key in (("torque_limit", "torque_n"), ("force_limit", "force_h"),
                            ("constraint_force_limit", "constraint_force")):
             p[field][saturated] = f.get("controller", f"saturation.{key}", math.inf, shape=(3,))[saturated]
+    _disturbances(p, f, templates)
     p["lyapunov_offset"] = _offsets(p, names, gravity)
     settings = np.zeros(n, dtype=SETTINGS)
     for name in SETTING_COLUMNS:
@@ -243,6 +244,32 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     return RunBatch(params=p, y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
                     variant=code, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
                     compiled=(settings["method"] != NOT_COMPILED) & ~sign_law)
+
+
+def _disturbances(p: np.ndarray, f: _Fields, templates: Sequence[Mapping]) -> None:
+    """The disturbances' fields of every run (:func:`rbstab.model.set_disturbances`): the
+    entries of its template, each number as written there or in a column
+    (``disturbances.0.value.1``)."""
+    lists = [t.get("disturbances") or () for t in templates]
+    count = f.of_templates([len(d) for d in lists], dtype=float)
+    if not count.any():
+        return
+    p["disturbance_count"] = count
+    for i in range(int(count.max())):
+        entry = [d[i] if i < len(d) else None for d in lists]
+        rows = np.flatnonzero(count > i)
+        p["disturbance_kind"][:, i] = f.of_templates([DISTURBANCE_KINDS[e["kind"]] if e else 0 for e in entry],
+                                                    dtype=float)
+        p["disturbance_torque"][:, i] = f.of_templates(
+            [DISTURBANCE_QUANTITIES[e.get("quantity", "force")] if e else 0 for e in entry], dtype=float)
+        noise = f.of_templates([bool(e) and e["kind"] == "noise" for e in entry], dtype=bool)
+        value = f.get("disturbances", f"{i}.value", [0.0, 0.0, 0.0], shape=(3,))
+        rms = f.get("disturbances", f"{i}.rms", [0.0, 0.0, 0.0], shape=(3,))
+        p["disturbance_value"][rows, i] = np.where(noise[:, None], rms, value)[rows]
+        p["disturbance_point"][rows, i] = f.get("disturbances", f"{i}.point", [0.0, 0.0, 0.0], shape=(3,))[rows]
+        for field, default in (("start", 0.0), ("duration", 0.0), ("frequency", 0.0), ("phase", 0.0), ("seed", 0.0)):
+            p[f"disturbance_{field}"][rows, i] = f.get("disturbances", f"{i}.{field}", default)[rows]
+        p["disturbance_band"][rows, i] = f.get("disturbances", f"{i}.band", [0.0, 0.0])[rows]
 
 
 def _initial_states(f: _Fields, code: np.ndarray) -> np.ndarray:
@@ -279,4 +306,4 @@ def _offset(record: np.void, gravity: np.ndarray, name: str) -> float:
     gains = Gains(**{g: record[g].copy() for g in GAIN_NAMES if g in used},
                   k_s=float(record["k_s"]) if "k_s" in used else None,
                   boundary_layer=float(record["boundary_layer"]) if "k_s" in used else 0.0)
-    return cls(body, gains).lyapunov_offset
+    return cls(body, gains).lyapunov_offset  # without disturbances: the equilibrium's

@@ -257,8 +257,8 @@ def kernel_function(method: int, n_state: int):
             else:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
-                state_rate(code, y, p, f)
-                h_abs = initial_step(code, p, s, y, f, w)
+                state_rate(code, 0.0, y, p, f)
+                h_abs = initial_step(code, p, s, 0.0, t_end, t_end, y, f, w)
                 nfev = 2
                 h_abs = step_bounds(s, t, h_abs)
             rejected = False
@@ -270,7 +270,7 @@ def kernel_function(method: int, n_state: int):
                 if n_steps >= s.max_steps:
                     status = STEP_LIMIT
                     break
-                outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, rejected, w)
+                outcome, t_new, h, h_abs = attempt_step(code, p, s, (t, t_end), y, f, h_abs, rejected, w)
                 if outcome == REJECTED:
                     nfev += n_stages
                     rejected = True
@@ -283,12 +283,12 @@ def kernel_function(method: int, n_state: int):
                 t_stop = t_new
                 event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
                 if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-                    nfev += dense_coefficients(code, p, y, y_new, K[n_stages], h, method, w)
+                    nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
                 if event:
                     t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
                 while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
                     dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
-                    output_row(code, sample, p, row, full)
+                    output_row(code, sample_time(j, n_samples, t_end), sample, p, row, full)
                     stream_sample(acc, j, row, first, weights, trace, stride, ratio)
                     j += 1
                 if event:
@@ -315,7 +315,7 @@ def kernel_function(method: int, n_state: int):
             for i in range(n_state):
                 sample[i] = math.nan
             for i in range(-(-j // stride) * stride, min(n_samples, trace.shape[0] * stride), stride):
-                output_row(code, sample, p, row, full)
+                output_row(code, sample_time(i, n_samples, s.t_end), sample, p, row, full)
                 for c in range(N_OUTPUTS):
                     trace[i // stride, c] = row[c]
                 trace[i // stride, NUMERICAL_RATE_AT] = math.nan

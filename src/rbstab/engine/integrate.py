@@ -25,7 +25,8 @@ from numba.core.extending import intrinsic
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..variants.kernels import state_rate
+from ..variants.disturbances import apply_impulses, before, next_breakpoint, state_power
+from ..variants.kernels import PERMANENT, state_rate
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
@@ -99,6 +100,12 @@ def spacing(t):
     return math.ldexp(1.0, math.frexp(t)[1] - 53)
 
 
+@jit(forceinline=True)
+def _limit_of(t_bound, t_end):
+    """The latest time a stage of a step that ends at ``t_bound`` evaluates."""
+    return before(t_bound) if t_bound < t_end else t_end
+
+
 #: :func:`attempt_step`'s outcome for a rejected attempt (a step to try again, smaller).
 REJECTED = 2
 
@@ -111,29 +118,34 @@ def step_bounds(s, t, h_abs):
 
 
 @jit(forceinline=True)
-def attempt_step(code, p, s, t, y, f, h_abs, rejected, w):
+def attempt_step(code, p, s, span, y, f, h_abs, rejected, w):
     """One attempt of scipy's ``_step_impl`` loop: a step of size ``h_abs`` from (t, y)
     with rate f, accepted or not by its error norm.
 
     ``s``: the run's :data:`~rbstab.engine.settings.SETTINGS`; ``w``: its
     :class:`~rbstab.engine.settings.Work`; ``h_abs`` before the first attempt from
-    :func:`step_bounds`; ``rejected``: whether an attempt of this step was rejected before. Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
+    :func:`step_bounds`; ``rejected``: whether an attempt of this step was rejected before;
+    ``t_bound``: where the step from t ends at the latest (t_end, or the next breakpoint of the
+    disturbances), ``t_lim``: the latest time a stage evaluates (the float below a
+    breakpoint, else t_bound), as ``span`` = (t, t_bound). Returns (outcome, t_new, h, next h_abs): outcome SUCCESS (``w.y_new``
     and its rate ``w.K[n_stages]`` hold the new state at t_new = t + h), :data:`REJECTED`
     (try again with the next h_abs) or TOO_SMALL_STEP / NOT_FINITE (no right-hand side
     evaluated). The CPU driver (:func:`step`) and the CUDA driver
     (:mod:`rbstab.engine.cuda`) both take their steps through it.
     """
+    t, t_bound = span
     if not math.isfinite(h_abs):
         return NOT_FINITE, t, 0.0, h_abs
     if h_abs < 10 * spacing(t):
         return TOO_SMALL_STEP, t, 0.0, h_abs
-    t_end, rtol, atol, method = s.t_end, s.rtol, s.atol, s.method
-    K, y_new, scale, work = w.K, w.y_new, w.scale, w.work
+    t_lim = _limit_of(t_bound, s.t_end)
+    rtol, atol, method = s.rtol, s.atol, s.method
+    K, y_new, scale = w.K, w.y_new, w.scale
     error_exponent = -1.0 / (ERROR_ORDER[method] + 1)
-    t_new = min(t + h_abs, t_end)
+    t_new = min(t + h_abs, t_bound)
     h = t_new - t
     h_abs = abs(h)
-    rk_step(code, p, y, f, h, method, K, y_new, work)
+    rk_step(code, p, t, t_lim, y, f, h, method, w)
     for i in range(y.shape[0]):
         scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
     norm = error_norm(K, h, scale, method)
@@ -148,20 +160,21 @@ def attempt_step(code, p, s, t, y, f, h_abs, rejected, w):
 
 
 @jit
-def step(code, p, s, t, y, f, h_abs, w):
+def step(code, p, s, span, y, f, h_abs, w):
     """One accepted step from (t, y) with rate f (scipy's ``_step_impl``), with the run's
     settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`) and work arrays ``w``
-    (:class:`~rbstab.engine.settings.Work`): :func:`attempt_step` until one is accepted.
+    (:class:`~rbstab.engine.settings.Work`): :func:`attempt_step` until one is accepted
+    (``span`` = (t, t_bound): see there).
 
     Returns (status, t_new, h, next h_abs, attempts); ``w.y_new`` and its rate
     ``w.K[n_stages]`` hold the new state. status 0, or TOO_SMALL_STEP / NOT_FINITE (nothing
     accepted).
     """
-    h_abs = step_bounds(s, t, h_abs)
+    h_abs = step_bounds(s, span[0], h_abs)
     rejected = False
     attempts = 0
     while True:
-        outcome, t_new, h, h_abs = attempt_step(code, p, s, t, y, f, h_abs, rejected, w)
+        outcome, t_new, h, h_abs = attempt_step(code, p, s, span, y, f, h_abs, rejected, w)
         if outcome == REJECTED:
             attempts += 1
             rejected = True
@@ -195,34 +208,69 @@ def locate_event(t_old, h, y_old, Q, dop853, limit, work):
 
 
 @jit
-def integrate_run(code, p, y0, s, samples):
+def integrate_run(code, p, y0, s, samples, work_done):
     """Integrate one run with the settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`)
-    and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end).
+    and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end), and ``work_done``
+    (n_samples,) with the work W [J] of the disturbances up to each sample (0 without).
 
     The run stops after ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time``
     seconds (TIMEOUT; inf for none). Rows after the run stopped are NaN. Returns
     (status, t_stop, nfev, n_steps).
     """
-    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, s, samples)
+    status, t_stop, nfev, n_steps, filled = _run(code, p, y0, s, samples, work_done)
     samples[filled:, :] = np.nan  # only the rows after a stop: a run that ends writes each row once
+    work_done[filled:] = np.nan
     return status, t_stop, nfev, n_steps
 
 
+#: Gauss-Legendre nodes on [0, 1] and weights of :func:`step_work` (3 points: exact for a
+#: power of degree 5 along the step).
+_GAUSS_NODES = (0.5 - 0.1 * math.sqrt(15.0), 0.5, 0.5 + 0.1 * math.sqrt(15.0))
+_GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
+
+
 @jit(forceinline=True)
-def _run(code, p, y0, s, samples):
-    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled."""
+def step_work(permanent, p, t, h, x, y_old, Q, dop853, out):
+    """The work [J] of the disturbances from t to t + x h along the step's interpolant
+    (3-point Gauss-Legendre; ``out``: a state-sized scratch array). A step never crosses
+    a breakpoint, so the power is smooth along it."""
+    total = 0.0
+    for i in range(3):
+        xi = x * _GAUSS_NODES[i]
+        dense_value(xi, h, y_old, Q, dop853, out)
+        total += _GAUSS_WEIGHTS[i] * state_power(permanent, t + xi * h, out, p)
+    return total * x * h
+
+
+
+@jit(forceinline=True)
+def _run(code, p, y0, s, samples, work_done):
+    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled.
+
+    With disturbances, the integration stops at each breakpoint (:func:`rbstab.variants.
+    disturbances.next_breakpoint`), applies the impulses that start there and starts again
+    as a new solve_ivp from there would (a new initial step); the samples at a breakpoint
+    show the state just after it."""
     max_wall_time, t_end, method = s.max_wall_time, s.t_end, s.method
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     n_samples = samples.shape[0]
     dop853 = method == DOP853
     w = work_arrays(method, n)
-    K, Q, y_new, work = w.K, w.Q, w.y_new, w.work
+    K, Q, y_new, scratch = w.K, w.Q, w.y_new, w.work
     y = y0.copy()
     f = np.empty(n)
     limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-    state_rate(code, y, p, f)
-    h_abs = initial_step(code, p, s, y, f, w)
+    disturbed = p.disturbance_count > 0.0
+    permanent = code == PERMANENT
+    work = 0.0
+    t_bound = t_end
+    if disturbed:
+        work += apply_impulses(permanent, 0.0, y, p)
+        t_bound = next_breakpoint(p, 0.0, t_end)
+    t_lim = _limit_of(t_bound, t_end)
+    state_rate(code, 0.0, y, p, f)
+    h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
     nfev = 2
     t = 0.0
     j = 0  # next sample
@@ -232,7 +280,7 @@ def _run(code, p, y0, s, samples):
             return STEP_LIMIT, t, nfev, n_steps, j
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, j
-        status, t_new, h, h_abs, attempts = step(code, p, s, t, y, f, h_abs, w)
+        status, t_new, h, h_abs, attempts = step(code, p, s, (t, t_bound), y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, j
@@ -240,32 +288,53 @@ def _run(code, p, y0, s, samples):
         f_new = K[N_STAGES[method]]
         t_stop = t_new
         event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
-        if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-            nfev += dense_coefficients(code, p, y, y_new, f_new, h, method, w)
+        at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
+        if event or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+            nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
         if event:
-            t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
-        while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
+            t_stop, _ = locate_event(t, h, y, Q, dop853, limit, scratch)
+        # a sample at a breakpoint is the next step's (the state just after the breakpoint)
+        while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
+                                 else sample_time(j, n_samples, t_end) <= t_stop):
             x = (sample_time(j, n_samples, t_end) - t) / h
             dense_value(x, h, y, Q, dop853, samples[j])
+            work_done[j] = work + step_work(permanent, p, t, h, x, y, Q, dop853, scratch) if disturbed else 0.0
             j += 1
         if event:
             return GIMBAL_LOCK, t_stop, nfev, n_steps, j
+        if disturbed:
+            work += step_work(permanent, p, t, h, 1.0, y, Q, dop853, scratch)
         t = t_new
         y[:] = y_new
         f[:] = f_new
+        if at_break:  # apply the impulses that start here, and start again from here
+            work += apply_impulses(permanent, t, y, p)
+            t_bound = next_breakpoint(p, t, t_end)
+            t_lim = _limit_of(t_bound, t_end)
+            state_rate(code, t, y, p, f)
+            h_abs = initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+            nfev += 2
+    if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
+        jump = apply_impulses(permanent, t_end, y, p)
+        if jump != 0.0:
+            samples[n_samples - 1, :] = y
+            work_done[n_samples - 1] += jump
     return SUCCESS, t, nfev, n_steps, j
 
 
 @jit
-def integrate_chunk(codes, params, y0, settings, samples, status, t_stop, nfev, n_steps):
+def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
     """:func:`integrate_run` for every run k of a chunk.
 
     ``codes`` (k,) variant codes; ``params`` (k,) PARAMETERS records; ``y0`` (k, n_state);
     ``settings`` (k,) :data:`~rbstab.engine.settings.SETTINGS` records; ``samples``
-    (k, n_samples, n_state); ``status``, ``t_stop``, ``nfev``, ``n_steps`` (k,) are filled.
+    (k, n_samples, n_state); ``work_done`` (k, n_samples) the disturbances' work W [J];
+    ``ends`` = (``status``, ``t_stop``, ``nfev``, ``n_steps``), each (k,), are filled.
     """
+    status, t_stop, nfev, n_steps = ends
     for k in range(codes.shape[0]):
-        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(codes[k], params[k], y0[k], settings[k], samples[k])
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(codes[k], params[k], y0[k], settings[k], samples[k],
+                                                                  work_done[k])
 
 
 # -- from Python -----------------------------------------------------------------------------------
@@ -284,6 +353,8 @@ class ChunkSolution:
         Where each run stopped [s] (the event time for gimbal lock).
     nfev, n_steps : ndarray of int, shape (k,)
         Right-hand-side evaluations and accepted steps.
+    work : ndarray, shape (k, n_samples)
+        The work W [J] of the disturbances up to each sample (0 without; NaN after a stop).
     """
 
     samples: np.ndarray
@@ -291,6 +362,7 @@ class ChunkSolution:
     t_stop: np.ndarray
     nfev: np.ndarray
     n_steps: np.ndarray
+    work: np.ndarray | None = None
 
 
 def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
@@ -337,10 +409,11 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     t_stop = np.empty(k)
     nfev = np.empty(k, dtype=np.int64)
     n_steps = np.empty(k, dtype=np.int64)
+    work = np.empty((k, n_samples))
     with np.errstate(all="ignore"):
         integrate_chunk(codes, np.ascontiguousarray(params), y0, settings_records(settings, method_number(method)),
-                        samples, status, t_stop, nfev, n_steps)
-    return ChunkSolution(samples, status, t_stop, nfev, n_steps)
+                        samples, work, (status, t_stop, nfev, n_steps))
+    return ChunkSolution(samples, status, t_stop, nfev, n_steps, work)
 
 
 def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:

@@ -6,7 +6,10 @@ run takes the steps ``solve_ivp`` takes on the same right-hand side, up to round
 :func:`error_norm` is ``_estimate_error_norm`` (DOP853's with its 3rd- and 5th-order
 estimates), :func:`dense_coefficients` and :func:`dense_value` are ``_dense_output_impl``
 and the ``DenseOutput`` classes. The right-hand side is the variant's compiled
-:func:`~rbstab.variants.kernels.state_rate` (autonomous: time does not enter).
+:func:`~rbstab.variants.kernels.state_rate`, called at scipy's stage times t + c h; time
+enters through the disturbances only. A step that ends at a breakpoint of the
+disturbances evaluates no stage later than ``t_lim``, the float below it
+(:mod:`rbstab.variants.disturbances`).
 
 A method travels as its number, its index in :data:`METHODS`; its tableau is the rows of
 that number in the module's tables (:data:`RK_A`, ...), built from
@@ -79,6 +82,7 @@ RK_A = _stacked([DOP853_EXTENDED.A if m == "DOP853" else t.A for m, t in zip(MET
                 (max(STAGE_ROWS),) * 2)
 RK_B = _stacked([t.B for t in _T], (max(N_STAGES),))
 RK_E = _stacked([getattr(t, "E", np.zeros(0)) for t in _T], (max(N_STAGES) + 1,))
+RK_C = _stacked([DOP853_EXTENDED.C if m == "DOP853" else t.C for m, t in zip(METHODS, _T)], (max(STAGE_ROWS),))
 RK_P = _stacked([getattr(t, "P", np.zeros((0, 0))) for t in _T], (max(N_STAGES) + 1, max(INTERPOLANT_ROWS)))
 #: DOP853's 3rd- and 5th-order error estimates and its dense output's D.
 DOP853_E3, DOP853_E5, DOP853_D = TABLEAUS["DOP853"].E3, TABLEAUS["DOP853"].E5, TABLEAUS["DOP853"].D
@@ -94,15 +98,17 @@ def rms_norm(x, scale):
 
 
 @jit
-def initial_step(code, p, s, y0, f0, w):
-    """scipy's ``select_initial_step`` from t = 0 (Hairer, Norsett & Wanner, II.4).
+def initial_step(code, p, s, t0, t_bound, t_lim, y0, f0, w):
+    """scipy's ``select_initial_step`` from t0 towards t_bound (Hairer, Norsett & Wanner,
+    II.4); its one right-hand-side call at min(t0 + h0, t_lim).
 
-    ``s``: the run's settings (:data:`rbstab.engine.settings.SETTINGS`: ``t_end``,
-    ``max_step``, ``rtol``, ``atol``, ``method``); ``w``: its work arrays
+    ``s``: the run's settings (:data:`rbstab.engine.settings.SETTINGS`: ``max_step``,
+    ``rtol``, ``atol``, ``method``); ``w``: its work arrays
     (:class:`rbstab.engine.settings.Work`: ``y_new``, ``work`` and ``scale`` are
-    overwritten). One right-hand-side call.
+    overwritten).
     """
-    t_bound, max_step, error_order, rtol, atol = s.t_end, s.max_step, ERROR_ORDER[s.method], s.rtol, s.atol
+    max_step, error_order, rtol, atol = s.max_step, ERROR_ORDER[s.method], s.rtol, s.atol
+    t_bound = t_bound - t0
     y1, f1, scale = w.y_new, w.work, w.scale
     n = y0.shape[0]
     for i in range(n):
@@ -113,7 +119,7 @@ def initial_step(code, p, s, y0, f0, w):
     h0 = min(h0, t_bound)
     for i in range(n):
         y1[i] = y0[i] + h0 * f0[i]
-    state_rate(code, y1, p, f1)
+    state_rate(code, min(t0 + h0, t_lim), y1, p, f1)
     for i in range(n):
         f1[i] = f1[i] - f0[i]
     d2 = rms_norm(f1, scale) / h0
@@ -151,19 +157,22 @@ def _stage_state(y, h, a, K, s, out):
 
 
 @jit(forceinline=True)
-def rk_step(code, p, y, f, h, method, K, y_new, work):
-    """One step from y (rate f) of size h: y_new and its rate in K[n_stages] (scipy's rk_step).
+def rk_step(code, p, t, t_lim, y, f, h, method, w):
+    """One step from (t, y) (rate f) of size h: y_new and its rate in K[n_stages] (scipy's
+    rk_step); no stage later than ``t_lim``.
 
-    ``K``: (:data:`STAGE_ROWS`, n) stage rates; ``work``: a state-sized array.
+    ``w``: the run's :class:`rbstab.engine.settings.Work` (``K`` (:data:`STAGE_ROWS`, n)
+    stage rates, ``y_new``, ``work`` a state-sized array).
     """
+    K, y_new, work = w.K, w.y_new, w.work
     n_stages = N_STAGES[method]
     for i in range(f.shape[0]):  # element by element: a slice store needs numba's runtime, absent on CUDA
         K[0, i] = f[i]
     for s in range(1, n_stages):
         _stage_state(y, h, RK_A[method, s], K, s, work)
-        state_rate(code, work, p, K[s])
+        state_rate(code, min(t + RK_C[method, s] * h, t_lim), work, p, K[s])
     _stage_state(y, h, RK_B[method], K, n_stages, y_new)
-    state_rate(code, y_new, p, K[n_stages])
+    state_rate(code, min(t + h, t_lim), y_new, p, K[n_stages])
 
 
 @jit(forceinline=True)
@@ -197,15 +206,16 @@ def error_norm(K, h, scale, method):
 
 
 @jit
-def dense_coefficients(code, p, y_old, y_new, f_new, h, method, w):
+def dense_coefficients(code, p, t_old, t_lim, y_old, h, method, w):
     """The interpolant of the step from y_old to y_new into ``w.Q`` (rows of coefficients;
     ``w``: the run's :class:`rbstab.engine.settings.Work`, its stage rates ``w.K``).
 
     RK23/RK45: Q = (K' P)' (order rows); DOP853: its 3 extra stages (3 right-hand-side
     calls) and the 7 rows F of scipy's ``Dop853DenseOutput``.
     """
-    K, Q, work = w.K, w.Q, w.work
+    K, Q, work, y_new = w.K, w.Q, w.work, w.y_new
     n_stages, D = N_STAGES[method], DOP853_D
+    f_new = K[n_stages]
     n = y_old.shape[0]
     if method != DOP853:
         for r in range(INTERPOLANT_ROWS[method]):
@@ -213,7 +223,7 @@ def dense_coefficients(code, p, y_old, y_new, f_new, h, method, w):
         return 0
     for s in range(n_stages + 1, STAGE_ROWS[method]):
         _stage_state(y_old, h, RK_A[method, s], K, s, work)
-        state_rate(code, work, p, K[s])
+        state_rate(code, min(t_old + RK_C[method, s] * h, t_lim), work, p, K[s])
     for i in range(n):
         delta = y_new[i] - y_old[i]
         Q[0, i] = delta

@@ -395,8 +395,8 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
     for i in range(3):
         if mode[i] == 0.0:
             n_events = _log(events, n_events, 0.0, i, SLIDING_STARTS, 0.0)
-    state_rate(mode_code(mode), y, p, f)
-    h_abs = initial_step(mode_code(mode), p, s, y, f, w)
+    state_rate(mode_code(mode), 0.0, y, p, f)  # disturbances: refused with the sign law (config)
+    h_abs = initial_step(mode_code(mode), p, s, 0.0, t_end, t_end, y, f, w)
     nfev, n_steps, n_pieces, t, j = 2, 0, 1, 0.0, 0
     while t < t_end:
         if n_steps >= s.max_steps:
@@ -404,12 +404,12 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
         if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
             return TIMEOUT, t, nfev, n_steps, n_pieces, n_events
         code = mode_code(mode)
-        status, t_new, h, h_abs, attempts = step(code, p, s, t, y, f, h_abs, w)
+        status, t_new, h, h_abs, attempts = step(code, p, s, (t, t_end), y, f, h_abs, w)
         nfev += attempts * N_STAGES[method]
         if status != SUCCESS:
             return status, t, nfev, n_steps, n_pieces, n_events
         n_steps += 1
-        nfev += dense_coefficients(code, p, y, y_new, K[N_STAGES[method]], h, method, w)
+        nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
         _event_values(y, p, mode, limit, g[0], dg[0])
         it = Interpolant(h, y, Q, dop853)
         x, index = first_event(p, mode, limit, it, work, g, dg)
@@ -429,7 +429,7 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
         mode, longest, n_events = next_piece(p, mode, index, t, work, resolution, y, (events, jumps), n_events)
         h_abs = min(h_abs, longest)
         n_pieces += 1
-        state_rate(mode_code(mode), y, p, f)
+        state_rate(mode_code(mode), t, y, p, f)
         nfev += 1
         if not math.isfinite(f[0]):
             return NOT_FINITE, t, nfev, n_steps, n_pieces, n_events

@@ -52,9 +52,9 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
     for code, n in enumerate(STATE_SIZE):
         y = np.zeros((1, n))
         if "rates" in wanted:
-            state_rates(code, y, params, np.empty_like(y))
+            state_rates(code, np.zeros(1), y, params, np.empty_like(y))
         if "outputs" in wanted:
-            run_outputs(np.array([code]), params, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
+            run_outputs(np.array([code]), params, np.zeros((1, 1)), y[None], np.empty((N_OUTPUTS, 1, 1)), True)
     if "outputs" in wanted:
         numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
     if "rates" in wanted:

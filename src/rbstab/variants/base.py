@@ -22,6 +22,7 @@ energy it stores and the power it dissipates.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import cached_property
 from typing import ClassVar
 
@@ -101,23 +102,33 @@ class Variant:
 
     # -- dynamics and outputs (compiled kernels) -------------------------------
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """dy/dt, shape like ``y`` ((n_state,) or (..., n_state)); ``t`` [s] is unused."""
+        """dy/dt at time ``t`` [s] (it enters through the disturbances only), shape like
+        ``y`` ((n_state,) or (..., n_state))."""
         y = np.asarray(y, dtype=float)
         flat = np.ascontiguousarray(y.reshape(-1, self.layout.size))
         out = np.empty_like(flat)
-        state_rates(self.code, flat, self._parameters_without_offset, out)
+        state_rates(self.code, np.array([float(t)]), flat, self._parameters_without_offset, out)
         return out.reshape(y.shape)
 
-    def _output_columns(self, y: np.ndarray, params: np.ndarray) -> np.ndarray:
-        """Every output along states ``y`` (..., n_state): shape (N_OUTPUTS, ...)."""
+    @cached_property
+    def _undisturbed(self) -> np.ndarray:
+        """The record without h and without the disturbances (the equilibrium's)."""
+        return parameters(self.body, replace(self.gains, disturbances=()), 0.0)[None]
+
+    def _output_columns(self, y: np.ndarray, params: np.ndarray, t: np.ndarray | float = 0.0) -> np.ndarray:
+        """Every output along states ``y`` (..., n_state) at times ``t`` (a number, or one
+        a state): shape (N_OUTPUTS, ...)."""
         y = np.asarray(y, dtype=float)
         flat = np.ascontiguousarray(y.reshape(1, -1, self.layout.size))
+        times = np.ascontiguousarray(np.broadcast_to(np.asarray(t, dtype=float), y.shape[:-1]).reshape(1, -1))
         out = np.empty((N_OUTPUTS, 1, flat.shape[1]))
-        run_outputs(np.array([self.code]), params, flat, out, True)
+        run_outputs(np.array([self.code]), params, times, flat, out, True)
         return out.reshape((N_OUTPUTS,) + y.shape[:-1])
 
-    def evaluate(self, y: np.ndarray) -> dict[str, np.ndarray]:
-        """All outputs along states ``y`` of shape (n, n_state), or (..., n_state).
+    def evaluate(self, y: np.ndarray, t: np.ndarray | float = 0.0) -> dict[str, np.ndarray]:
+        """All outputs along states ``y`` of shape (n, n_state), or (..., n_state), at times
+        ``t`` [s] (a number or one a state; they enter ``disturbance_power`` and dv/dt only;
+        ``disturbance_work`` is 0: it is a run's history, not a state's).
 
         Returns
         -------
@@ -128,7 +139,7 @@ class Variant:
             ``lyapunov``, ``lyapunov_rate`` and the terms of v (shape (...)); a state's
             outputs do not depend on the other states of ``y``.
         """
-        return split_outputs(self._output_columns(y, self.parameters), self.layout)
+        return split_outputs(self._output_columns(y, self.parameters, t), self.layout)
 
     def lyapunov(self, y: np.ndarray) -> np.ndarray:
         """v [J] along states ``y`` of shape (..., n_state); shape (...)."""
@@ -141,7 +152,7 @@ class Variant:
 
     def _potential(self, p: np.ndarray) -> float:
         """Stored energy without the constant h, at rest, for configuration vector p."""
-        columns = self._output_columns(self._rest_state(p), self._parameters_without_offset)
+        columns = self._output_columns(self._rest_state(p), self._undisturbed)
         return float(columns[OUTPUTS["lyapunov"].offset])
 
     def _rest_state(self, p: np.ndarray) -> np.ndarray:
@@ -153,7 +164,10 @@ class Variant:
 
     def _rest_acceleration(self, p: np.ndarray) -> np.ndarray:
         """Rates of omega, velocity (and D) at rest: zero exactly at an equilibrium."""
-        rate = self.layout.split(self.rhs(0.0, self._rest_state(p)))
+        y = np.ascontiguousarray(self._rest_state(p)[None])
+        out = np.empty_like(y)
+        state_rates(self.code, np.zeros(1), y, self._undisturbed, out)
+        rate = self.layout.split(out[0])
         return np.concatenate(
             [rate[b] for b in ("omega", "velocity", "controller_state") if b in self.layout.blocks]
         )

@@ -15,15 +15,18 @@ modules; this module only puts it together:
 
 from __future__ import annotations
 
+import math
+
 from ..jit import jit
-from ..kinematics import ZERO, dot, matvec, rotation_and_rate_of, sub, vector
+from ..kinematics import ZERO, add, dot, matvec, rotation_and_rate_of, sub, vector
 from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
 from ..model import force_h, force_h_command, saturate, torque_n, torque_n_command
 from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
+from .disturbances import disturbance_power, disturbance_wrench, state_power
 
 __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row",
-           "state_rates", "run_outputs", "STATE_SIZE"]
+           "state_rates", "run_outputs", "state_powers", "STATE_SIZE"]
 
 #: The variants' codes (:data:`rbstab.layout.VARIANT_CODES`); :data:`STATE_SIZE`: their
 #: scalar states, by code.
@@ -48,6 +51,8 @@ CONSTRAINT_AT = OUTPUTS["lyapunov_constraint"].offset
 GRAVITY_AT = OUTPUTS["lyapunov_gravity"].offset
 LYAPUNOV_AT = OUTPUTS["lyapunov"].offset
 LYAPUNOV_RATE_AT = OUTPUTS["lyapunov_rate"].offset
+DISTURBANCE_POWER_AT = OUTPUTS["disturbance_power"].offset
+DISTURBANCE_WORK_AT = OUTPUTS["disturbance_work"].offset
 
 
 @jit(forceinline=True)
@@ -122,14 +127,17 @@ def _put(out, i, x):
 
 
 @jit
-def state_rate(code, y, p, dy):
-    """dy/dt of one state ``y`` of the variant ``code`` into ``dy`` (same shape).
+def state_rate(code, t, y, p, dy):
+    """dy/dt of one state ``y`` at time ``t`` [s] of the variant ``code`` into ``dy``
+    (same shape).
 
     The body's equations (eq 1) are written once; only the constraint law depends on the
-    variant (:func:`constraint_force`). ``permanent`` is the reduced system (eq 15).
+    variant (:func:`constraint_force`). ``permanent`` is the reduced system (eq 15). The
+    time enters through the disturbances only (:mod:`rbstab.variants.disturbances`: their
+    force F joins H, their torque T about the centre of mass joins N).
     """
     if code == PERMANENT:
-        theta, omega, x, v, a, b, n, h, lam, omega_dot = permanent.quantities(y, p)
+        theta, omega, x, v, a, b, n, h, lam, omega_dot, _, _ = permanent.quantities(t, y, p)
         _put(dy, 0, matvec(b, omega))
         _put(dy, 3, omega_dot)
         return
@@ -139,6 +147,9 @@ def state_rate(code, y, p, dy):
     theta, omega, x, v, d, a, b, e, f = body_state(y, p)
     lam, d_rate = constraint_force(code, e, f, d, p)
     n, h = torque_n(b, theta, omega, p), force_h(x, v, p)
+    if p.disturbance_count > 0.0:
+        force_d, torque_d = disturbance_wrench(t, a, p)
+        n, h = add(n, torque_d), add(h, force_d)
     theta_dot, omega_dot, x_dot, v_dot = body_rates(omega, v, a, b, n, h, lam, p)
     _put(dy, 0, theta_dot)
     _put(dy, 3, omega_dot)
@@ -152,7 +163,7 @@ def state_rate(code, y, p, dy):
 def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation, deficit):
     """v, its terms and dv/dt into ``out``: the body's (eq 25, gravity) plus the
     constraint's, and ``deficit`` [W], the power of the controls' saturation
-    (:func:`saturation_power`)."""
+    (:func:`saturation_power`) and of the disturbances."""
     translational, rotational, gravity = body_energy(theta, omega, x, v, p)
     out[TRANSLATIONAL_AT] = translational
     out[ROTATIONAL_AT] = rotational
@@ -182,16 +193,17 @@ def saturation_power(code, theta, omega, x, v, b, e, f, d, p):
 
 
 @jit(forceinline=True)
-def output_row(code, y, p, out, full):
-    """The outputs of one state into ``out`` (length N_OUTPUTS, each at its offset in
-    :data:`rbstab.layout.OUTPUTS`): all of them if
+def output_row(code, t, y, p, out, full):
+    """The outputs of one state at time ``t`` [s] into ``out`` (length N_OUTPUTS, each at
+    its offset in :data:`rbstab.layout.OUTPUTS`): all of them if
     ``full``, else all but :data:`~rbstab.layout.LEFT_OUT` (their entries are not written;
-    N and H are then not computed: 20-30 % less time a sample).
+    N and H are then not computed: 20-30 % less time a sample). ``disturbance_work`` is
+    written 0: it is the run's history, not the state's (the drivers write it).
 
     Inlined into :func:`run_outputs`: ~20 % less time than a call a sample (the same bits).
     """
     if code == PERMANENT:
-        theta, omega, x, v, a, b, n, h, lam, omega_dot = permanent.quantities(y, p)
+        theta, omega, x, v, a, b, n, h, lam, omega_dot, force_d, torque_d = permanent.quantities(t, y, p)
         e = constraint_error(x, a, p)
         f = constraint_rate(omega, v, a, p)
         d, energy, dissipation = ZERO, 0.0, 0.0
@@ -204,6 +216,10 @@ def output_row(code, y, p, out, full):
             n, h = torque_n(b, theta, omega, p), force_h(x, v, p)
         else:  # not written below; given a value so that n and h are defined on every path
             n, h = ZERO, ZERO
+        if p.disturbance_count > 0.0:
+            force_d, torque_d = disturbance_wrench(t, a, p)
+        else:
+            force_d, torque_d = ZERO, ZERO
     _put(out, THETA_AT, theta)
     _put(out, OMEGA_AT, omega)
     _put(out, POSITION_AT, x)
@@ -215,23 +231,41 @@ def output_row(code, y, p, out, full):
         _put(out, CONSTRAINT_FORCE_AT, lam)
         _put(out, FORCE_H_AT, h)
         _put(out, TORQUE_N_AT, n)
-    _lyapunov(out, theta, omega, x, v, p, energy, dissipation,
-              saturation_power(code, theta, omega, x, v, b, e, f, d, p))
+    power = 0.0
+    if p.disturbance_count > 0.0:
+        power = disturbance_power(force_d, torque_d, omega, v)
+    out[DISTURBANCE_POWER_AT] = power
+    out[DISTURBANCE_WORK_AT] = 0.0 if y[0] == y[0] else math.nan  # NaN after a stop, as the drivers'
+    deficit = saturation_power(code, theta, omega, x, v, b, e, f, d, p)
+    if p.disturbance_count > 0.0:
+        deficit += power
+    _lyapunov(out, theta, omega, x, v, p, energy, dissipation, deficit)
 
 
 @jit
-def state_rates(code, y, params, out):
-    """dy/dt of every row of ``y`` (m, n_state) into ``out``; ``params`` has 1 or m records."""
+def state_rates(code, t, y, params, out):
+    """dy/dt of every row of ``y`` (m, n_state) at the times ``t`` (1 or m) into ``out``;
+    ``params`` has 1 or m records."""
     for k in range(y.shape[0]):
-        state_rate(code, y[k], params[min(k, params.shape[0] - 1)], out[k])
+        state_rate(code, t[min(k, t.shape[0] - 1)], y[k], params[min(k, params.shape[0] - 1)], out[k])
 
 
 @jit
-def run_outputs(codes, params, samples, out, full):
-    """Outputs of k runs: ``samples`` (k, n_samples, n_state) of runs with variant
-    ``codes`` (k,) and ``params`` (k,) into ``out`` (N_OUTPUTS, k, n_samples), an output
-    by row: each output of a run is contiguous in time, as the summaries read it.
-    ``full`` (bool): every output, or all but :data:`~rbstab.layout.LEFT_OUT` (their rows not written)."""
+def run_outputs(codes, params, times, samples, out, full):
+    """Outputs of k runs: ``samples`` (k, n_samples, n_state) at ``times`` (k or 1,
+    n_samples) of runs with variant ``codes`` (k,) and ``params`` (k,) into ``out``
+    (N_OUTPUTS, k, n_samples), an output by row: each output of a run is contiguous in
+    time, as the summaries read it. ``full`` (bool): every output, or all but
+    :data:`~rbstab.layout.LEFT_OUT` (their rows not written)."""
     for k in range(samples.shape[0]):
+        row = min(k, times.shape[0] - 1)
         for j in range(samples.shape[1]):
-            output_row(codes[k], samples[k, j], params[k], out[:, k, j], full)
+            output_row(codes[k], times[row, j], samples[k, j], params[k], out[:, k, j], full)
+
+
+@jit
+def state_powers(code, t, y, params, out):
+    """The disturbances' power P [W] at every row of ``y`` (m, n_state) at the times ``t``
+    (m,) into ``out`` (m,); ``params`` has 1 record."""
+    for k in range(y.shape[0]):
+        out[k] = state_power(code == PERMANENT, t[k], y[k], params[0])

@@ -10,21 +10,26 @@ same trajectory.
 from __future__ import annotations
 
 from ..jit import jit
-from ..kinematics import add, cross, matTvec, matvec, neg, rotation_and_rate_of, scale, sub, vector
+from ..kinematics import ZERO, add, cross, matTvec, matvec, neg, rotation_and_rate_of, scale, sub, vector
 from ..model import force_h, gyroscopic, torque_n
+from .disturbances import disturbance_wrench
 
 __all__ = ["quantities"]
 
 
 @jit(forceinline=True)
-def quantities(y, p):
-    """Eqs 20, 21 (corrected) and eq 32 at the reduced state y = (Theta, Omega).
+def quantities(t, y, p):
+    """Eqs 20, 21 (corrected) and eq 32 at the reduced state y = (Theta, Omega), time t.
 
-    J_p dOmega/dt = -Omega x (J_p Omega) + N - hat(R) A'(G + H),  J_p = J - m hat(R)^2
+    J_p dOmega/dt = -Omega x (J_p Omega) + N + T - hat(R) A'(G + H + F),  J_p = J - m hat(R)^2
     X = R - A R,  V = A hat(R) Omega = -A (Omega x R)
-    Lambda = m dV/dt - G - H,  dV/dt = A (R x dOmega/dt) - A (Omega x (Omega x R))
+    Lambda = m dV/dt - G - H - F,  dV/dt = A (R x dOmega/dt) - A (Omega x (Omega x R))
 
-    Returns (theta, omega, x, v, a, b, torque_n, force_h, constraint_force, dOmega/dt).
+    with the disturbances' force F (inertial frame) and torque T about the centre of mass
+    (body frame; :func:`rbstab.variants.disturbances.disturbance_wrench`), zero without.
+
+    Returns (theta, omega, x, v, a, b, torque_n, force_h, constraint_force, dOmega/dt,
+    F, T).
     """
     theta, omega = vector(y, 0), vector(y, 3)
     r = p.attachment_point
@@ -35,8 +40,15 @@ def quantities(y, p):
     n = torque_n(b, theta, omega, p)
     h = force_h(x, v, p)
     applied = add(p.weight, h)  # G + H [N], inertial frame
-    torque = sub(add(gyroscopic(p.pivot_inertia, omega), n), cross(r, matTvec(a, applied)))
+    moment = n
+    if p.disturbance_count > 0.0:
+        force_d, torque_d = disturbance_wrench(t, a, p)
+        applied = add(applied, force_d)
+        moment = add(n, torque_d)
+    else:
+        force_d, torque_d = ZERO, ZERO
+    torque = sub(add(gyroscopic(p.pivot_inertia, omega), moment), cross(r, matTvec(a, applied)))
     omega_dot = matvec(p.pivot_inertia_inv, torque)
     acceleration = matvec(a, sub(cross(r, omega_dot), cross(omega, omega_x_r)))
     constraint_force = sub(scale(p.mass, acceleration), applied)
-    return theta, omega, x, v, a, b, n, h, constraint_force, omega_dot
+    return theta, omega, x, v, a, b, n, h, constraint_force, omega_dot, force_d, torque_d
