@@ -173,7 +173,8 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
 @console_options
 def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
-          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress, overwrite) -> None:
+          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress,
+          overwrite) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
     SPEC is a sweep spec, or a run config to vary from the command line:
@@ -217,15 +218,18 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
         return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)
-    if not overwrite:
-        _check_folder(spec, overrides, output)
-    # start local workers now: they import numpy, scipy and h5py while the runs are validated
+    # start local workers now: they import numpy, scipy and h5py while the spec is read and
+    # the runs are validated
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
         ex.start()
     try:
-        outcome = _execute(spec, output, ex, jobs=jobs, scheduler=scheduler, connect_timeout=connect_timeout,
-                           overrides=overrides, timeout=timeout, retry_failed=retry_failed, engine=engine,
+        loaded = _load(spec, overrides)  # read once; None: invalid, said with every problem below
+        if not overwrite and loaded is not None:
+            _check_folder(loaded, output)
+        outcome = _execute(spec if loaded is None else loaded, output, ex, path=spec, jobs=jobs, scheduler=scheduler,
+                           connect_timeout=connect_timeout, overrides=overrides if loaded is None else (),
+                           timeout=timeout, retry_failed=retry_failed, engine=engine,
                            chunk_size=chunk_size, store=store, layout=layout,
                            progress=False if get_console().verbosity < 0 else progress)
     finally:
@@ -236,18 +240,24 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         raise SystemExit(min(outcome.n_failed, 100))
 
 
-def _check_folder(spec, overrides, output) -> None:
+def _load(spec, overrides):
+    """The loaded sweep spec, or None if it is invalid (the sweep then says why)."""
+    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numpy, pydantic
+
+    try:
+        return load_spec(spec, overrides)
+    except SweepSpecError:
+        return None
+
+
+def _check_folder(loaded, output) -> None:
     """Refuse, before anything runs or is written, a sweep whose folder holds a sweep with
     runs this one does not have (another --grid, another spec of the same name): its index
     would be replaced. The same sweep again (resume), or one that only adds runs, goes on."""
-    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numpy, pydantic
+    from rbstab.sweep import SweepSpecError  # heavy: numpy, pydantic
     from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy
     from rbstab.sweep.table import plan_table  # heavy: numpy, pydantic
 
-    try:
-        loaded = load_spec(spec, overrides)
-    except SweepSpecError:
-        return  # said with every problem when the sweep is run
     folder = Path(output) / loaded.name
     if not is_sweep_folder(folder):
         return
@@ -289,8 +299,9 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
         console.out(line)
 
 
-def _execute(spec, output, ex, **options):
-    """:func:`rbstab.api.execute_sweep`, its exceptions as one-line CLI errors."""
+def _execute(spec, output, ex, *, path, **options):
+    """:func:`rbstab.api.execute_sweep` of ``spec`` (the file ``path`` or its loaded spec),
+    its exceptions as one-line CLI errors."""
     from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numpy, pydantic
 
     try:
@@ -299,7 +310,7 @@ def _execute(spec, output, ex, **options):
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
-        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
+        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + _indent("\n".join(exc.errors)))
 
 
 def _say_outcome(outcome) -> None:
