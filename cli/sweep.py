@@ -165,6 +165,11 @@ def _key_value(text: str) -> tuple[str, str]:
     help="Store files of many runs along a 'run' dimension (runs/chunk-*.h5, netCDF-4), or one "
     "result file per run (runs/<run_id>.h5, the format of rbstab run).",
 )
+@click.option(
+    "--index", "index", type=click.Choice(["csv", "arrow"]), default=None,
+    help="Index files: index.arrow and index.csv (csv), or index.arrow alone (arrow)  [default: csv up to "
+    "100,000 runs, arrow above].",
+)
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
 @click.option("--overwrite", is_flag=True,
@@ -173,7 +178,7 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
 @console_options
 def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
-          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress,
+          table, timeout, engine, chunk_size, store, layout, index, retry_failed, dry_run, progress,
           overwrite) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
@@ -230,7 +235,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         outcome = _execute(spec if loaded is None else loaded, output, ex, path=spec, jobs=jobs, scheduler=scheduler,
                            connect_timeout=connect_timeout, overrides=overrides if loaded is None else (),
                            timeout=timeout, retry_failed=retry_failed, engine=engine,
-                           chunk_size=chunk_size, store=store, layout=layout,
+                           chunk_size=chunk_size, store=store, layout=layout, index=index,
                            progress=False if get_console().verbosity < 0 else progress)
     finally:
         if not isinstance(ex, str):
