@@ -34,7 +34,8 @@ Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
 besides the GPU: the same ``rbstab sweep`` command with every launch replaced by a stub
 that returns finished runs at once (its processes load the stub through a
 ``sitecustomize`` module in a temporary folder), wall time from process start to exit at
-each ``--sweep-n``, and one worker's seconds a run in a process of its own
+each ``--sweep-n`` with the parent's seconds writing the index and summary, and one
+worker's seconds a run in a process of its own
 (:func:`rbstab.sweep.worker.run_table_chunk` of a 131072-run slice)::
 
     python benchmarks/gpu.py --host-only [--sweep-n 100000 1000000] [--jobs N]
@@ -242,6 +243,21 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
 
     cuda.check_available = lambda: None
     cuda.integrate_chunks_cuda = launches
+
+    import sys
+    import time
+    import rbstab.sweep.folder as folder
+
+    write_index = folder.write_table_index
+
+    def timed_index(*args, **kwargs):  # the parent's index writing, said on stderr
+        start = time.perf_counter()
+        try:
+            return write_index(*args, **kwargs)
+        finally:
+            print(f"benchmark: index written in {time.perf_counter() - start:.2f} s", file=sys.stderr)
+
+    folder.write_table_index = timed_index
 """
 
 
@@ -258,9 +274,11 @@ def host_only(sizes: list[int], jobs: int | None) -> None:
               f"{float(done.stdout.split()[-1]) * 1e6:.1f} us a run")
         sweep_seconds(1000, "summary", env=env, jobs=jobs)  # the compile cache, warm
         for n in sizes:
-            wall = sweep_seconds(n, "summary", env=env, jobs=jobs)
+            times: dict = {}
+            wall = sweep_seconds(n, "summary", env=env, jobs=jobs, times=times)
             print(f"rbstab sweep --engine cuda --store summary{f' -j {jobs}' if jobs else ''}, N = {n}, "
-                  f"GPU stubbed: {wall:.1f} s ({wall / n * 1e6:.1f} us a run)")
+                  f"GPU stubbed: {wall:.1f} s ({wall / n * 1e6:.1f} us a run); the parent's index writing "
+                  f"{times.get('index', float('nan')):.2f} s")
 
 
 def worker_seconds(n: int) -> float:
@@ -283,7 +301,10 @@ def worker_seconds(n: int) -> float:
         return (time.perf_counter() - start) / n
 
 
-def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | None = None) -> float:
+def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | None = None,
+                  times: dict | None = None) -> float:
+    """Wall seconds of the sweep's command; ``times["index"]``: the parent's seconds writing
+    the index and summary, where the ``--host-only`` stub says them."""
     folder = Path(tempfile.mkdtemp())
     try:
         cmd = [RBSTAB, "sweep", CASE3, "--random", "body.mass=scale_uniform:[0.5,1.5]",
@@ -294,9 +315,13 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
                *[a for o in SETTINGS_OVERRIDES for a in ("--set", o)], *(["-j", str(jobs)] if jobs else [])]
         start = time.perf_counter()
         done = subprocess.run(cmd, capture_output=True, text=True, env=env)
+        wall = time.perf_counter() - start
         if done.returncode != 0:
             raise SystemExit(done.stderr)
-        return time.perf_counter() - start
+        said = [line.split()[-2] for line in done.stderr.splitlines() if line.startswith("benchmark: index written")]
+        if times is not None and said:
+            times["index"] = float(said[-1])
+        return wall
     finally:
         shutil.rmtree(folder, ignore_errors=True)
 

@@ -132,7 +132,7 @@ def _show_sweep(path: str) -> None:
     _run_lines([{k: ("" if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows],
                info["lyapunov_ratio"])
     if n > listed:
-        console.out(f"  ... and {n - listed} more runs (-v lists them; index.csv, rbstab.open_sweep)")
+        console.out(f"  ... and {n - listed} more runs (-v lists them; the index, rbstab.open_sweep)")
 
 
 def _show_result(path: str) -> None:
@@ -198,7 +198,7 @@ def _show_run(path: str, run_id: str) -> None:
     from rbstab.sweep.folder import is_sweep_folder, resolved_config  # heavy: numpy, pydantic
 
     if not is_sweep_folder(path):
-        raise ValueError(f"{path}: --run needs a sweep folder (sweep.yaml and index.csv)")
+        raise ValueError(f"{path}: --run needs a sweep folder (sweep.yaml and index.arrow or index.csv)")
     try:
         config = resolved_config(path, run_id)
     except KeyError as exc:

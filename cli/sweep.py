@@ -57,7 +57,7 @@ def grid_values(key: str, text: str) -> str:
 def _scaled_grid(spec: str, overrides, key: str, text: str) -> tuple[str, str]:
     """``--grid KEY:scale=...``: the factors times KEY's value in the base config SPEC, as
     a grid over KEY (a list-valued key gives one list per level)."""
-    from rbstab.config import ConfigError, load_config  # heavy: numpy, pydantic
+    from rbstab.config import ConfigError, load_config  # heavy: numba, pydantic (~0.4 s at the command's start)
 
     base = key.removesuffix(":scale")
     try:
@@ -165,6 +165,11 @@ def _key_value(text: str) -> tuple[str, str]:
     help="Store files of many runs along a 'run' dimension (runs/chunk-*.h5, netCDF-4), or one "
     "result file per run (runs/<run_id>.h5, the format of rbstab run).",
 )
+@click.option(
+    "--index", "index", type=click.Choice(["csv", "arrow"]), default=None,
+    help="Index files: index.arrow and index.csv (csv), or index.arrow alone (arrow)  [default: csv up to "
+    "100,000 runs, arrow above].",
+)
 @click.option("--retry-failed", is_flag=True, help="Also rerun runs whose result file says failed.")
 @click.option("--dry-run", is_flag=True, help="Validate the spec, list the runs, write nothing.")
 @click.option("--overwrite", is_flag=True,
@@ -173,7 +178,8 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option("--progress/--no-progress", default=None, help="Progress bar  [default: if stderr is a terminal].")
 @console_options
 def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, grid, zipped, random, n_random, seed,
-          table, timeout, engine, chunk_size, store, layout, retry_failed, dry_run, progress, overwrite) -> None:
+          table, timeout, engine, chunk_size, store, layout, index, retry_failed, dry_run, progress,
+          overwrite) -> None:
     """Run the sweep SPEC.yaml (or vary CONFIG.yaml); write OUTPUT/<name>/.
 
     SPEC is a sweep spec, or a run config to vary from the command line:
@@ -197,7 +203,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     --connect-timeout) or a fault of the machine (full disk, read-only folder: one line);
     130 when interrupted by Ctrl-C, 143 by SIGTERM.
     """
-    from rbstab.sweep.executors import LocalExecutor  # heavy: numpy, pydantic
+    from rbstab.sweep.executors import LocalExecutor  # heavy: multiprocessing (~0.015 s, every command's start-up)
 
     if scheduler and executor == "local":
         raise click.UsageError("--scheduler is for --executor dask")
@@ -210,23 +216,25 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     if not dry_run:
         check_engine(engine)
     if get_engine(engine).gpu:
-        from rbstab.sweep.runner import cuda_jobs  # heavy: numpy, numba (the GPU's compute mode)
+        from rbstab.sweep.runner import cuda_jobs  # heavy: numba, pandas (~0.7 s at the command's start)
 
         jobs = cuda_jobs(jobs)
     if table is not None:
         overrides.append(f"sweep.table={json.dumps(os.path.abspath(table))}")
     if dry_run:
         return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)
-    if not overwrite:
-        _check_folder(spec, overrides, output)
+    loaded = _load(spec, overrides)  # read once; None: invalid, said with every problem below
+    if not overwrite and loaded is not None:
+        _check_folder(loaded, output)
     # start local workers now: they import numpy, scipy and h5py while the runs are validated
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
         ex.start()
     try:
-        outcome = _execute(spec, output, ex, jobs=jobs, scheduler=scheduler, connect_timeout=connect_timeout,
-                           overrides=overrides, timeout=timeout, retry_failed=retry_failed, engine=engine,
-                           chunk_size=chunk_size, store=store, layout=layout,
+        outcome = _execute(spec if loaded is None else loaded, output, ex, path=spec, jobs=jobs, scheduler=scheduler,
+                           connect_timeout=connect_timeout, overrides=overrides if loaded is None else (),
+                           timeout=timeout, retry_failed=retry_failed, engine=engine,
+                           chunk_size=chunk_size, store=store, layout=layout, index=index,
                            progress=False if get_console().verbosity < 0 else progress)
     finally:
         if not isinstance(ex, str):
@@ -236,18 +244,24 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         raise SystemExit(min(outcome.n_failed, 100))
 
 
-def _check_folder(spec, overrides, output) -> None:
+def _load(spec, overrides):
+    """The loaded sweep spec, or None if it is invalid (the sweep then says why)."""
+    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numba, pandas, pydantic (~0.4-0.7 s at the start)
+
+    try:
+        return load_spec(spec, overrides)
+    except SweepSpecError:
+        return None
+
+
+def _check_folder(loaded, output) -> None:
     """Refuse, before anything runs or is written, a sweep whose folder holds a sweep with
     runs this one does not have (another --grid, another spec of the same name): its index
     would be replaced. The same sweep again (resume), or one that only adds runs, goes on."""
-    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numpy, pydantic
-    from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy
-    from rbstab.sweep.table import plan_table  # heavy: numpy, pydantic
+    from rbstab.sweep import SweepSpecError  # heavy: numba, pandas, pydantic (~0.4-0.7 s at the start)
+    from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy (~0.1 s at the start)
+    from rbstab.sweep.table import plan_table  # heavy: numba, pydantic (~0.4 s at the start)
 
-    try:
-        loaded = load_spec(spec, overrides)
-    except SweepSpecError:
-        return  # said with every problem when the sweep is run
     folder = Path(output) / loaded.name
     if not is_sweep_folder(folder):
         return
@@ -268,8 +282,8 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     """--dry-run: plan and validate every run, print the count, the varied keys with their
     ranges, the first and last runs (all with -v), the estimated store size and wall time;
     write nothing."""
-    from rbstab.sweep import SweepSpecError, default_jobs, load_spec  # heavy: numpy, pydantic
-    from rbstab.sweep.table import estimate, plan_table  # heavy: numpy, pydantic
+    from rbstab.sweep import SweepSpecError, default_jobs, load_spec  # heavy: numba, pandas, pydantic (~0.4-0.7 s)
+    from rbstab.sweep.table import estimate, plan_table  # heavy: numba, pydantic (~0.4 s at the start)
 
     console = get_console()
     try:
@@ -289,9 +303,10 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
         console.out(line)
 
 
-def _execute(spec, output, ex, **options):
-    """:func:`rbstab.api.execute_sweep`, its exceptions as one-line CLI errors."""
-    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numpy, pydantic
+def _execute(spec, output, ex, *, path, **options):
+    """:func:`rbstab.api.execute_sweep` of ``spec`` (the file ``path`` or its loaded spec),
+    its exceptions as one-line CLI errors."""
+    from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numba, pandas (~0.4-0.7 s)
 
     try:
         return execute_sweep(spec, output, executor=ex, command_line=command_line(), log=get_console().info,
@@ -299,7 +314,7 @@ def _execute(spec, output, ex, **options):
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
-        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
+        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + _indent("\n".join(exc.errors)))
 
 
 def _say_outcome(outcome) -> None:

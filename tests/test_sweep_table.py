@@ -446,3 +446,64 @@ def test_open_sweep_grid_of_a_full_factorial_table(tmp_path):
         rbstab.open_sweep(tmp_path / "missing", grid=True)
     with pytest.raises(ValueError, match=r"the combination \(mass=30, k_t_0=1000\) appears 2 times"):
         rbstab.open_sweep(tmp_path / "repeated", grid=True)
+
+
+# -- index.csv only up to CSV_INDEX_MAX_RUNS runs, or when asked ----------------------------------
+
+
+def _sweep(tmp_path, *args):
+    return CliRunner().invoke(cli, ["sweep", str(CASE3), "--grid", "body.mass=40,41,42", "-o", str(tmp_path),
+                                    "-j", "1", "--no-progress", *[a for s in SHORT for a in ("--set", s)], *args])
+
+
+def test_index_csv_is_written_up_to_the_threshold_or_when_asked(tmp_path, monkeypatch):
+    """Above CSV_INDEX_MAX_RUNS runs (patched to 2 here) a sweep writes index.arrow alone
+    (an index.csv of an earlier invocation is removed, the summary names index.arrow and has
+    no index_sha256); --index csv writes the CSV too, the text it writes at or below the
+    threshold; rbstab show, read_index, open_sweep and the report read the folder either
+    way, and --index arrow leaves the CSV out of a small sweep."""
+    import json
+
+    from rbstab.sweep import folder as sweep_folder
+    from rbstab.sweep.folder import is_sweep_folder, open_sweep, read_index
+
+    folder = tmp_path / "case3_embedded"
+    small = _sweep(tmp_path)  # 3 runs, at most the threshold
+    assert small.exit_code == 0, small.output
+    assert f"index   {folder / 'index.csv'}" in small.output
+    csv_text = (folder / "index.csv").read_bytes()
+    arrow_bytes = (folder / "index.arrow").read_bytes()
+    assert json.loads((folder / "sweep_summary.json").read_text())["index"] == "index.csv"
+
+    monkeypatch.setattr(sweep_folder, "CSV_INDEX_MAX_RUNS", 2)
+    large = _sweep(tmp_path)  # 3 runs, above it: the runs are done, the index rebuilt without the CSV
+    assert large.exit_code == 0, large.output
+    assert f"index   {folder / 'index.arrow'}" in large.output
+    assert not (folder / "index.csv").exists() and (folder / "index.arrow").read_bytes() == arrow_bytes
+    summary = json.loads((folder / "sweep_summary.json").read_text())
+    assert summary["index"] == "index.arrow" and "index_sha256" not in summary and "index_arrow_sha256" in summary
+    assert is_sweep_folder(folder) and len(read_index(folder)) == 3 and open_sweep(folder).sizes["run"] == 3
+    shown = CliRunner().invoke(cli, ["show", str(folder)])
+    assert shown.exit_code == 0 and "3 runs" in shown.output, shown.output
+    from rbstab.report.load import load_sweep
+
+    assert [r.name for r in load_sweep(folder).runs] == list(read_index(folder)["run_id"])  # what the report reads
+
+    asked = _sweep(tmp_path, "--index", "csv")
+    assert asked.exit_code == 0, asked.output
+    assert (folder / "index.csv").read_bytes() == csv_text and (folder / "index.arrow").read_bytes() == arrow_bytes
+    assert json.loads((folder / "sweep_summary.json").read_text())["index"] == "index.csv"
+
+    monkeypatch.undo()
+    arrow_only = _sweep(tmp_path, "--index", "arrow")
+    assert arrow_only.exit_code == 0 and not (folder / "index.csv").exists(), arrow_only.output
+    bad = _sweep(tmp_path, "--index", "parquet")
+    assert bad.exit_code == 2 and "'parquet' is not one of 'csv', 'arrow'" in bad.output
+    assert "Traceback" not in bad.output
+
+
+def test_an_index_value_not_allowed_is_refused_before_anything_runs(tmp_path):
+    spec = spec_from_mapping({"name": "bad-index", "base": str(CASE3)}, overrides=SHORT)
+    with pytest.raises(ValueError, match=r"index: found 'text'; expected one of csv, arrow"):
+        run_sweep(spec, tmp_path, jobs=1, progress=False, index="text")
+    assert not (tmp_path / "bad-index").exists()

@@ -42,7 +42,7 @@ from typing import Any
 
 from .io.chunk import is_chunk_file, read_chunk_rows
 from .io.hdf5 import NotAResultFile, is_run_file, read_dataset, read_format
-from .sweep.folder import INDEX_FILE, SPEC_FILE, is_sweep_folder, open_sweep
+from .sweep.folder import INDEX_FILE, SPEC_FILE, has_index, is_sweep_folder, open_sweep
 
 __all__ = ["InputKind", "RUN", "STORE", "SWEEP", "ANALYSIS", "SENSITIVITY", "TUNING", "KINDS", "kind_of", "open_input", "is_plain_folder",
            "inputs_in"]
@@ -164,11 +164,11 @@ def kind_of(path: str | os.PathLike, kinds: Sequence[InputKind] = KINDS) -> Inpu
     if other is not None:
         raise NotAResultFile(f"{p}: {_a(other.noun)}, not {_a(_nouns(kinds))}; {other.hint}")
     if p.is_dir():
-        present = [name for name in (SPEC_FILE, INDEX_FILE) if (p / name).is_file()]
+        spec, index = (p / SPEC_FILE).is_file(), has_index(p)
         if SWEEP not in kinds:
             raise NotAResultFile(f"{p}: a folder, not {_a(_nouns(kinds))}")
-        if len(present) == 1:
-            lacking = INDEX_FILE if present == [SPEC_FILE] else SPEC_FILE
+        if spec != index:
+            lacking = INDEX_FILE if spec else SPEC_FILE
             raise NotAResultFile(f"{p}: incomplete sweep folder (no {lacking})")
         raise NotAResultFile(f"{p}: a folder, but not a sweep folder (no {SPEC_FILE} and {INDEX_FILE})")
     found = read_format(p)  # raises for a file that is not HDF5 or is damaged, in the reader's words
@@ -185,9 +185,9 @@ def open_input(path: str | os.PathLike, kinds: Sequence[InputKind] = KINDS) -> A
 
 def is_plain_folder(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a folder that is not an input itself: neither a sweep folder
-    nor an incomplete one (it holds no ``sweep.yaml`` and no ``index.csv``)."""
+    nor an incomplete one (it holds no ``sweep.yaml`` and no index)."""
     p = Path(path)
-    return p.is_dir() and not any((p / name).is_file() for name in (SPEC_FILE, INDEX_FILE))
+    return p.is_dir() and not (p / SPEC_FILE).is_file() and not has_index(p)
 
 
 def inputs_in(folder: str | os.PathLike, kinds: Sequence[InputKind] = KINDS) -> list[Path]:

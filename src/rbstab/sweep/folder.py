@@ -9,10 +9,11 @@ runner (planning, resume, the index), ``rbstab show DIR``, ``rbstab report`` and
       runs/chunk-*.h5      store files, one per chunk of runs (layout "chunk", the default;
                            format: :mod:`rbstab.io.chunk`)
       runs/<run_id>.h5     or one result file per run (layout "run", :mod:`rbstab.io.hdf5`)
-      index.csv            one row per run, the columns of :func:`index_columns`
-      index.arrow          the same table as an Arrow IPC file, which :func:`open_sweep`
-                           maps into memory and :func:`read_index` reads instead of
-                           parsing the CSV
+      index.arrow          one row per run, the columns of :func:`index_columns`, an
+                           Arrow IPC file, which :func:`open_sweep` maps into memory and
+                           :func:`read_index` reads
+      index.csv            the same table as text, for sweeps of at most
+                           :data:`CSV_INDEX_MAX_RUNS` runs, or when asked (``index="csv"``)
       sweep_summary.json   counts per status, converged fraction (overall and per base)
 
 Parameter names
@@ -60,6 +61,8 @@ __all__ = [
     "SPEC_FILE",
     "INDEX_FILE",
     "INDEX_ARROW_FILE",
+    "CSV_INDEX_MAX_RUNS",
+    "INDEX_FORMATS",
     "SUMMARY_FILE",
     "RUNS_DIR",
     "LOCK_FILE",
@@ -89,6 +92,14 @@ __all__ = [
 
 SPEC_FILE = "sweep.yaml"
 INDEX_FILE = "index.csv"
+#: Most runs of a sweep whose index is also written as :data:`INDEX_FILE` unless asked
+#: (``index="csv"``, ``rbstab sweep --index csv``): above it the text (~600 B a run, a few
+#: seconds to write at 10^6 runs) would cost more than it serves; ``index.arrow`` is read
+#: by every reader, and ``pandas.read_feather`` turns it into a DataFrame.
+CSV_INDEX_MAX_RUNS = 100_000
+#: Values of ``index``: the index files of a sweep (None: "csv" up to
+#: :data:`CSV_INDEX_MAX_RUNS` runs, "arrow" above).
+INDEX_FORMATS = ("csv", "arrow")
 #: The index as an Arrow IPC file (uncompressed, text of few values dictionary-encoded):
 #: :func:`open_sweep` maps it into memory, numbers without a copy; :func:`read_index` reads
 #: it instead of parsing the CSV.
@@ -261,8 +272,9 @@ _INTEGERS = ("run", "file_row", "solver_nfev", "solver_njev", "solver_nlu", "sol
 
 
 def write_table_index(directory: Path, table, results, errors: Mapping[str, str], *, name: str,
-                      ratio: float) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
-    """Write ``index.csv`` and ``sweep_summary.json`` of a sweep's runs, atomically, from columns.
+                      ratio: float, index: str | None = None) -> tuple[dict[str, Any], list[tuple[str, str, str]]]:
+    """Write the index (``index.arrow``, ``index.csv``) and ``sweep_summary.json`` of a
+    sweep's runs, atomically, from columns.
 
     Parameters
     ----------
@@ -280,6 +292,9 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
         a row are ``pending``.
     name, ratio
         The sweep's name and ``convergence.lyapunov_ratio``.
+    index : {"csv", "arrow"}, optional
+        ``index.csv`` beside ``index.arrow`` ("csv") or not ("arrow", an earlier
+        ``index.csv`` removed); default "csv" up to :data:`CSV_INDEX_MAX_RUNS` runs.
 
     Returns
     -------
@@ -319,29 +334,43 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     done["converged"] = np.asarray(converged(status == "success", v0, v1, ratio), dtype=bool)
     if "file" in done:
         done["file"] = done["file"].where(done["file"].isna(), RUNS_DIR + "/" + done["file"].astype(str))
-    index = pd.concat([head, done.reset_index(drop=True)], axis=1)
+    frame = pd.concat([head, done.reset_index(drop=True)], axis=1)
     for column in _INTEGERS:
-        if column in index and index[column].dtype.kind != "i":
-            index[column] = pd.to_numeric(index[column], errors="coerce").round().astype("Int64")
+        if column in frame and frame[column].dtype.kind != "i":
+            frame[column] = pd.to_numeric(frame[column], errors="coerce").round().astype("Int64")
     fixed = {*_HEAD, *_MIDDLE, *_TAIL}
     order = index_columns([dict.fromkeys([*head.columns, *done.columns])],
                           parameters=[c for c in coords if c not in fixed])
-    index = index[[c for c in order if c in index.columns]]
-    _write_index_files(directory, index)
-    summary = summarize_columns(index, name=name, ratio=ratio, parameters=table.parameters())
+    frame = frame[[c for c in order if c in frame.columns]]
+    written = _write_index_files(directory, frame, csv=wants_csv(index, n))
+    summary = summarize_columns(frame, name=name, ratio=ratio, parameters=table.parameters())
+    summary["index"] = written
     write_summary(directory / SUMMARY_FILE, summary)
     bad = status != "success"
     problems = list(zip(ids[bad], status[bad], message[bad]))
     return summary, problems
 
 
-def _write_index_files(directory: Path, index) -> None:
-    """``index`` (a DataFrame) as :data:`INDEX_FILE` and :data:`INDEX_ARROW_FILE`,
-    atomically, from one Arrow table. The CSV by pyarrow's writer (numbers formatted in C,
-    ~10x pandas' speed; they read back as the same floats), booleans as ``True``/``False``,
-    absent values empty. An index Arrow does not take (lists in a column) is written by
-    pandas, and has no Arrow file (:func:`read_index` and :func:`open_sweep` then read the
-    CSV)."""
+def wants_csv(index: str | None, n: int) -> bool:
+    """Whether a sweep of ``n`` runs writes ``index.csv`` (``index``: :data:`INDEX_FORMATS`
+    or None); ValueError names a value not allowed."""
+    if index is None:
+        return n <= CSV_INDEX_MAX_RUNS
+    if index not in INDEX_FORMATS:
+        raise ValueError(f"index: found {index!r}; expected one of {', '.join(INDEX_FORMATS)} (or None: csv up to "
+                         f"{CSV_INDEX_MAX_RUNS} runs)")
+    return index == "csv"
+
+
+def _write_index_files(directory: Path, index, *, csv: bool = True) -> str:
+    """``index`` (a DataFrame) as :data:`INDEX_ARROW_FILE` and, if ``csv``, as
+    :data:`INDEX_FILE` (else an earlier one is removed), atomically, from one Arrow table;
+    returns the name of the file that holds the index (the CSV's where both are written).
+    The CSV by pyarrow's writer (numbers formatted in C, ~10x pandas' speed; they read back
+    as the same floats), booleans as ``True``/``False``, absent values empty. An index
+    Arrow does not take (lists in a column) is written by pandas as the CSV, whatever
+    ``csv`` says, and has no Arrow file (:func:`read_index` and :func:`open_sweep` then
+    read the CSV)."""
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.compute as pc  # heavy: pyarrow
     import pyarrow.csv as pa_csv  # heavy: pyarrow
@@ -352,14 +381,18 @@ def _write_index_files(directory: Path, index) -> None:
         with atomic_path(directory / INDEX_FILE) as tmp:
             index.to_csv(tmp, index=False, lineterminator="\n")
         (directory / INDEX_ARROW_FILE).unlink(missing_ok=True)
-        return
+        return INDEX_FILE
+    _write_arrow(directory / INDEX_ARROW_FILE, table)
+    if not csv:
+        (directory / INDEX_FILE).unlink(missing_ok=True)  # of an earlier invocation: it would not match
+        return INDEX_ARROW_FILE
     as_text = table
     for i, field in enumerate(table.schema):
         if pa.types.is_boolean(field.type):
             as_text = as_text.set_column(i, field.name, pc.if_else(table.column(i), "True", "False"))
     with atomic_path(directory / INDEX_FILE) as tmp:
         pa_csv.write_csv(as_text, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
-    _write_arrow(directory / INDEX_ARROW_FILE, table)
+    return INDEX_FILE
 
 
 #: Text columns of an index that :func:`open_sweep` gives as text ("" where absent).
@@ -554,9 +587,15 @@ def _sha256(path: Path) -> str:
 
 
 def is_sweep_folder(path: str | os.PathLike) -> bool:
-    """True when ``path`` is a folder with ``sweep.yaml`` and ``index.csv``."""
+    """True when ``path`` is a folder with ``sweep.yaml`` and an index (``index.arrow`` or
+    ``index.csv``)."""
     p = Path(path)
-    return p.is_dir() and (p / SPEC_FILE).is_file() and (p / INDEX_FILE).is_file()
+    return p.is_dir() and (p / SPEC_FILE).is_file() and has_index(p)
+
+
+def has_index(folder: Path) -> bool:
+    """Whether ``folder`` holds an index file (``index.arrow`` or ``index.csv``)."""
+    return (folder / INDEX_ARROW_FILE).is_file() or (folder / INDEX_FILE).is_file()
 
 
 def read_spec(folder: str | os.PathLike) -> dict:

@@ -37,6 +37,7 @@ import errno
 import math
 import os
 import sys
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -59,6 +60,7 @@ from .folder import (
     StoredRuns,
     read_spec,
     set_aside_damaged,
+    wants_csv,
     write_table_index,
 )
 from .spec import SweepSpec
@@ -165,6 +167,11 @@ class SweepOutcome:
     warnings : list of str
         Physical-plausibility warnings of the runs, one line per config key
         (:attr:`rbstab.sweep.table.RunTable.warnings`).
+    index_file : str
+        The index file the summary names: ``index.csv`` where it is written, else
+        ``index.arrow``.
+    index_seconds : float
+        Seconds spent writing the index and the summary.
     """
 
     name: str
@@ -184,6 +191,8 @@ class SweepOutcome:
     timing: dict = field(default_factory=dict)
     worker_peak_rss: int | None = None
     warnings: list = field(default_factory=list)
+    index_file: str = INDEX_FILE
+    index_seconds: float = 0.0
 
     @property
     def n_failed(self) -> int:
@@ -192,7 +201,7 @@ class SweepOutcome:
 
     @property
     def index_path(self) -> Path:
-        return self.directory / INDEX_FILE
+        return self.directory / self.index_file
 
     @property
     def summary_path(self) -> Path:
@@ -340,6 +349,7 @@ def run_sweep(
     progress: bool | None = None,
     command_line: str | None = None,
     log: Callable[[str], None] | None = None,
+    index: str | None = None,
 ) -> SweepOutcome:
     """Run every run of ``spec`` that has no current result file, then rebuild the index.
 
@@ -390,6 +400,10 @@ def run_sweep(
         Recorded in ``sweep.yaml`` and in every result file (default: ``sys.argv``).
     log : callable, optional
         Receives one-line status messages (the CLI prints them).
+    index : {"csv", "arrow"}, optional
+        The index files: ``index.arrow`` and ``index.csv`` ("csv"), or ``index.arrow``
+        alone ("arrow"); default "csv" up to
+        :data:`rbstab.sweep.folder.CSV_INDEX_MAX_RUNS` runs, "arrow" above.
 
     Returns
     -------
@@ -414,6 +428,7 @@ def run_sweep(
 
     engine = resolve_engine(engine, timeout)
     chunking = _chunking(chunk_size, engine, store, layout)
+    wants_csv(index, 0)  # a value not allowed: ValueError before anything runs
     table = plan_table(spec) if table is None else table
     _check_time_grids(table.time_grids(), store, layout)
     options = WorkerOptions(timeout=timeout, command_line=" ".join(sys.argv) if command_line is None else command_line,
@@ -424,7 +439,7 @@ def run_sweep(
     with _executor(executor, jobs, scheduler) as ex:
         (outcome.directory / RUNS_DIR).mkdir(parents=True, exist_ok=True)
         _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
-                    say=log or (lambda message: None), options=options)
+                    say=log or (lambda message: None), options=options, index=index)
     return outcome
 
 
@@ -467,7 +482,7 @@ def _chunking(chunk_size: int | None, engine: str, store: str, layout: str) -> t
     return chunk_size, 1
 
 
-def _run_locked(spec, table, ex, outcome, *, retry_failed, chunk_size, progress, say, options) -> None:
+def _run_locked(spec, table, ex, outcome, *, retry_failed, chunk_size, progress, say, options, index=None) -> None:
     """Skip what is done, execute the rest and write the index, holding the lock."""
     directory = outcome.directory
     runs_dir = directory / RUNS_DIR
@@ -490,7 +505,7 @@ def _run_locked(spec, table, ex, outcome, *, retry_failed, chunk_size, progress,
                 _take_late(stored, table, runs_dir, results, errors)
             outcome.stale_files = stored.stale(table)
             outcome.warnings = list(table.warnings)
-            _finish(spec, table, results, errors, outcome)
+            _finish(spec, table, results, errors, outcome, index)
 
 
 def _resume(spec, table, outcome, options, retry_failed: bool, say):
@@ -612,9 +627,13 @@ _MACHINE_FAULTS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
 DESIGN_FILE = "table.csv"
 
 
-def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepOutcome) -> None:
+def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepOutcome,
+            index: str | None = None) -> None:
+    start = time.perf_counter()
     summary, outcome.problems = write_table_index(outcome.directory, table, _rows_of(results), errors,
-                                                  name=spec.name, ratio=spec.lyapunov_ratio)
+                                                  name=spec.name, ratio=spec.lyapunov_ratio, index=index)
+    outcome.index_seconds = time.perf_counter() - start
+    outcome.index_file = summary["index"]
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
 
@@ -630,10 +649,12 @@ def _rows_of(results: list):
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
-def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, table=None) -> SweepOutcome:
-    """Rewrite ``index.csv`` and ``sweep_summary.json`` from the result files, running nothing.
+def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, table=None,
+                  index: str | None = None) -> SweepOutcome:
+    """Rewrite the index and ``sweep_summary.json`` from the result files, running nothing.
 
     Files whose config does not match the run's current config count as ``pending``.
+    ``index``: the index files, as for :func:`run_sweep`.
     """
 
     table = plan_table(spec) if table is None else table
@@ -644,5 +665,5 @@ def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *
     with _lock(directory):
         current = StoredRuns(directory / RUNS_DIR).current(table)
         outcome.n_skipped = len(current)
-        _finish(spec, table, [current], {}, outcome)
+        _finish(spec, table, [current], {}, outcome, index)
     return outcome

@@ -72,7 +72,7 @@ import numpy as np
 
 from ..config import ConfigError, apply_overrides, parse_yaml as parse, set_dotted
 from ..config.schema import kind_of as _kind
-from ..config.yaml_io import read_yaml_file
+from ..config.yaml_io import copy_tree, read_yaml_file
 from ..results import plain
 from .schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, SweepSchema, SweepSpecError, validate_spec
 
@@ -266,15 +266,15 @@ class SweepSpec:
         """
         bases = []
         for b in self.bases:
-            data = copy.deepcopy(b.data)
+            data = copy_tree(b.data)
             data["name"] = b.label
             bases.append(data)
         out: dict[str, Any] = {"name": self.name}
         if self.description:
             out["description"] = self.description
         out["base"] = bases[0] if len(bases) == 1 else bases
-        out["grid"] = copy.deepcopy(self.grid)
-        out["zip"] = copy.deepcopy(self.zip)
+        out["grid"] = copy_tree(self.grid)
+        out["zip"] = copy_tree(self.zip)
         if self.table is not None:
             out["table"] = self.table.source
         out["random"] = {
@@ -365,7 +365,7 @@ def spec_from_mapping(
     """
     if isinstance(data, Mapping):
         given_table = data.get("table")  # a DataFrame or arrays: not copied
-        data = copy.deepcopy({k: v for k, v in data.items() if k != "table"})
+        data = copy_tree({k: v for k, v in data.items() if k != "table"})
         if given_table is not None:
             data["table"] = given_table
         errors: list[str] = []
@@ -402,8 +402,8 @@ def spec_from_mapping(
     return SweepSpec(
         name=schema.name,
         bases=tuple(bases),
-        grid=copy.deepcopy(dict(schema.grid)),
-        zip=copy.deepcopy(dict(schema.zip)),
+        grid=copy_tree(dict(schema.grid)),
+        zip=copy_tree(dict(schema.zip)),
         random=random,
         table=table,
         lyapunov_ratio=float(schema.convergence.lyapunov_ratio),
