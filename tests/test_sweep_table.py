@@ -405,10 +405,16 @@ def test_a_damaged_index_arrow_is_refused(index_folders, tmp_path):
     from rbstab.io.integrity import DamagedResultError
     from rbstab.sweep.folder import read_index
 
+    import struct
+
+    import pyarrow.ipc as ipc
+
     damaged = tmp_path / "damaged"
     shutil.copytree(index_folders[0], damaged)  # index.csv intact
     data = bytearray((damaged / "index.arrow").read_bytes())
-    data[len(data) // 2] ^= 1
+    value = ipc.open_file(bytes(data)).read_all().column("lyapunov_final")[0].as_py()
+    at = bytes(data).index(struct.pack("<d", value))  # a bit of a value flipped: the file still reads
+    data[at] ^= 1
     (damaged / "index.arrow").write_bytes(bytes(data))
     with pytest.raises(DamagedResultError, match=r"index\.arrow: does not match its checksum"):
         read_index(damaged)

@@ -214,8 +214,11 @@ class _Fields:
             if key == prefix:
                 out = col.astype(float)
             elif key.startswith(prefix + "."):
+                entry = int(key.rsplit(".", 1)[1])
+                if entry >= out.shape[1]:  # no such entry of a diagonal: the schema decides
+                    return None
                 out = out.copy() if out.base is not None else out
-                out[:, int(key.rsplit(".", 1)[1])] = col
+                out[:, entry] = col
         return out, np.array([v is not None for v in values])[self.template]
 
 
