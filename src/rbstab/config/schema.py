@@ -514,9 +514,8 @@ class _Body(_Section):
     gravity: _VECTOR = Field(default_factory=_zero, description="3 numbers (g, inertial frame, m/s^2)")
 
 
-def _limits(value: Any) -> float | list[float]:
-    """An actuator's limit on every axis (a number > 0; .inf: none) or one per axis (3)."""
-    check = bounded_number(gt=0, allow_inf=True)
+def _per_axis(value: Any, check: Callable[[Any], Any]) -> Any:
+    """``check`` of one number (every axis), or of each of 3 (a list: one per axis)."""
     if isinstance(value, (list, tuple)):
         if len(value) != 3:
             raise Invalid(f"{len(value)} entries, not 3")
@@ -528,6 +527,11 @@ def _limits(value: Any) -> float | list[float]:
                 raise Invalid(f"entry [{i}] is {exc.detail}") from None
         return out
     return check(value)
+
+
+def _limits(value: Any) -> float | list[float]:
+    """An actuator's limit on every axis (a number > 0; .inf: none) or one per axis (3)."""
+    return _per_axis(value, bounded_number(gt=0, allow_inf=True))
 
 
 _limits.rule = ("limits", {"gt": 0, "ge": None, "lt": None, "le": None, "allow_inf": True, "integer": False})
@@ -628,18 +632,9 @@ def _band(value: Any) -> list[float]:
 
 def _rms(value: Any) -> list[float]:
     """An RMS on every axis (a number >= 0) or one per axis (3), not all zero."""
-    check = bounded_number(ge=0)
-    if isinstance(value, (list, tuple)):
-        if len(value) != 3:
-            raise Invalid(f"{len(value)} entries, not 3")
-        out = []
-        for i, x in enumerate(value):
-            try:
-                out.append(check(x))
-            except Invalid as exc:
-                raise Invalid(f"entry [{i}] is {exc.detail}") from None
-    else:
-        out = [check(value)] * 3
+    out = _per_axis(value, bounded_number(ge=0))
+    if not isinstance(out, list):
+        out = [out] * 3
     if not any(out):
         raise Invalid("every axis 0")
     return out
