@@ -228,3 +228,21 @@ def test_time_with_dv_dt_positive_is_a_summary_figure():
     spacing = float(fell["time"][1] - fell["time"][0])
     assert fell.attrs["summary_time_lyapunov_rising"] == np.sum(rate > 0) * spacing > 0.5
     assert paper.attrs["summary_time_lyapunov_rising"] == 0.0
+
+
+def test_analyze_names_an_actuator_saturated_at_rest():
+    """A free body whose smooth |H_z| limit barely exceeds its weight rests where the
+    commanded H_z is far beyond the limit: analyze notes it (the linearisation has the
+    actuator's slope there) and still gives a verdict."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    rbstab_cli = Path(sys.executable).parent / "rbstab"
+    done = subprocess.run([str(rbstab_cli), "analyze", str(root / "configs" / "examples" / "free_gravity.yaml"),
+                           "--set", "controller.saturation={force_h: [1000, 1000, 411], shape: smooth}",
+                           "--no-simulation", "--no-certificate", "--json", "-o", "out"],
+                          capture_output=True, text=True, cwd=Path(__import__("tempfile").mkdtemp()))
+    assert done.returncode == 0, done.stderr
+    assert "at the equilibrium the actuators saturate (|force_h_3| = " in done.stdout
+    assert ">= its limit 411" in done.stdout and "smooth actuator's slope" in done.stdout

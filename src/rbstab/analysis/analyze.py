@@ -183,18 +183,41 @@ def _unheld(config) -> str:
     """Why a configuration with actuator limits has no rest point: the controls that its
     equilibrium without limits commands beyond their limits."""
     unlimited = dataclasses.replace(config, gains=dataclasses.replace(config.gains, saturation=None)).make_variant()
-    y_e = linearise(unlimited).equilibrium
-    commanded = unlimited.evaluate(np.asarray(y_e)[None])
+    commanded = _commanded(config, linearise(unlimited).equilibrium)
     sat = config.gains.saturation
     beyond = []
     for key, limit, unit in (("torque_n", sat.torque_n, "N m"), ("force_h", sat.force_h, "N"),
                              ("constraint_force", sat.constraint_force, "N")):
-        value = np.abs(np.asarray(commanded[key])[0])
-        beyond += [f"|{key}_{i + 1}| = {value[i]:.4g} {unit} > its limit {limit[i]:g} {unit}"
-                   for i in range(3) if value[i] > limit[i]]
+        beyond += [f"|{key}_{i + 1}| = {commanded[key][i]:.4g} {unit} > its limit {limit[i]:g} {unit}"
+                   for i in range(3) if commanded[key][i] > limit[i]]
     why = ("; without the limits the equilibrium would need " + ", ".join(beyond)) if beyond else ""
     return (f"no equilibrium: with its actuators' limits (controller.saturation) no state is at rest{why}; "
             "there is nothing to linearise or certify (rbstab run shows where the body goes)")
+
+
+def _commanded(config, y: np.ndarray) -> dict[str, np.ndarray]:
+    """N, H and Lambda [N m, N, N] that the feedback and constraint law of ``config``
+    command at the state ``y`` (before the actuators' limits)."""
+    unlimited = dataclasses.replace(config, gains=dataclasses.replace(config.gains, saturation=None)).make_variant()
+    out = unlimited.evaluate(np.asarray(y)[None])
+    return {key: np.abs(np.asarray(out[key])[0]) for key in ("torque_n", "force_h", "constraint_force")}
+
+
+def _saturated_at_rest(linearisation: Linearisation, config) -> list[str]:
+    """A note naming each control that sits at or beyond its limit at the equilibrium: the
+    linearisation there sees the actuator's slope at its limit (0 for clip beyond it)."""
+    sat = config.gains.saturation
+    if sat is None or not linearisation.is_rest_point:
+        return []
+    commanded = _commanded(config, linearisation.equilibrium)
+    at = [f"|{key}_{i + 1}| = {commanded[key][i]:.4g} >= its limit {limit[i]:g}"
+          for key, limit in (("torque_n", sat.torque_n), ("force_h", sat.force_h),
+                             ("constraint_force", sat.constraint_force))
+          for i in range(3) if commanded[key][i] >= limit[i]]
+    if not at:
+        return []
+    return [f"at the equilibrium the actuators saturate ({', '.join(at)}, as commanded): the linearisation "
+            f"has the {sat.shape} actuator's slope there"]
 
 
 def _domain_notes(linearisation: Linearisation, config) -> list[str]:
@@ -287,7 +310,7 @@ def analyze(
     lin = linearise(variant)
     if not lin.is_rest_point and analysed.gains.saturation is not None:
         raise NoEquilibrium(_unheld(analysed))
-    notes += _domain_notes(lin, analysed) + list(config.warnings)
+    notes += _domain_notes(lin, analysed) + _saturated_at_rest(lin, analysed) + list(config.warnings)
     t1 = _time.perf_counter()
     timing["linearisation"] = t1 - t0
     result = Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes, timing=timing)
