@@ -222,7 +222,7 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     if sliding.any():
         p["k_s"][sliding] = f.get("controller", "k_s", 0.0)[sliding]
         p["boundary_layer"][sliding] = f.get("controller", "boundary_layer", 0.0)[sliding]
-    shapes = f.of_templates([SATURATION_SHAPES[(t["controller"].get("saturation") or {}).get("shape", "clip")]
+    shapes = f.of_templates([SATURATION_SHAPES[t["controller"]["saturation"].get("shape", "clip")]
                              if t["controller"].get("saturation") else 0 for t in templates], dtype=float)
     saturated = np.flatnonzero(shapes > 0)
     if len(saturated):

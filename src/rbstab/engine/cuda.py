@@ -70,7 +70,7 @@ from .status import GIMBAL_LOCK, NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
-           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "RUNS_PER_RESIDENT_THREAD"]
+           "TRACE_COLUMNS", "THREADS_PER_BLOCK"]
 
 #: How to get what ``--engine cuda`` needs.
 INSTALL_HINT = 'pip install "rbstab[cuda]" (numba-cuda and the CUDA 12 wheels) and an NVIDIA driver'
@@ -80,9 +80,6 @@ TRACE_COLUMNS = N_OUTPUTS + 1
 THREADS_PER_BLOCK = 128
 #: Passes of a thread's loop between two readings of the GPU's clock (the launch's limit).
 CLOCK_EVERY = 64
-#: Runs a launch holds, per thread the GPU keeps resident, where the call has them: a
-#: thread whose run ends takes the next, and the last runs' tail is a small part of it.
-RUNS_PER_RESIDENT_THREAD = 8
 #: Share of the device's free memory the traces of one launch may take (up to four worker
 #: processes may share a GPU, each taking this share of what is free when it launches).
 TRACE_MEMORY_SHARE = 0.25

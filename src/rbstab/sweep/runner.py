@@ -78,13 +78,17 @@ STORE_CHUNK_SIZE = 512
 #: whatever its runs (their headers, attributes and chunk indexes), ~0.5 KB a run without
 #: traces; the runs' outputs are not kept beyond a block of 32.
 SUMMARY_CHUNK_SIZE = 8192
+#: Runs a GPU launch holds per thread the GPU keeps resident: a thread whose run ends takes
+#: the next, so the launch's tail, where its last runs finish, is a small part of it.
+RUNS_PER_RESIDENT_THREAD = 8
+#: Threads an H100 keeps resident of the CUDA kernel at its 255 registers a thread: 132
+#: multiprocessors x 2 blocks of 128 (:func:`rbstab.engine.cuda.occupancy`).
+H100_RESIDENT_THREADS = 132 * 2 * 128
 #: Runs per chunk of a sweep on the GPU (``--engine cuda``: a chunk is one launch) by store.
-#: ``summary``: 8 runs a thread the GPU keeps resident (:data:`rbstab.engine.cuda.RUNS_PER_RESIDENT_THREAD`;
-#: an H100 holds 132 x 2 blocks of 128 threads of the kernel at its 255 registers a thread),
-#: so that a launch's tail, where its last runs finish, is a small part of it; ``thinned``:
-#: about one run a resident thread, ~2 GB of traces at 201 samples (host and device memory
-#: bound it); ``full``: the engine's ``chunk_size`` (a trace of every sample).
-CUDA_CHUNK_SIZE = {"summary": 8 * 132 * 2 * 128, "thinned": 32768}
+#: ``summary``: :data:`RUNS_PER_RESIDENT_THREAD` runs a resident thread of an H100;
+#: ``thinned``: about one run a resident thread, ~2 GB of traces at 201 samples (host and
+#: device memory bound it); ``full``: the engine's ``chunk_size`` (a trace of every sample).
+CUDA_CHUNK_SIZE = {"summary": RUNS_PER_RESIDENT_THREAD * H100_RESIDENT_THREADS, "thinned": 32768}
 
 #: Worker processes of a ``--engine cuda`` sweep by default (at most the CPU count): the
 #: GPU integrates a run in ~0.5 us, its worker spends ~11-15 us a run on the host (the

@@ -160,17 +160,17 @@ def state_rate(code, t, y, p, dy):
 
 
 @jit(forceinline=True)
-def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation, deficit):
+def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation, added):
     """v, its terms and dv/dt into ``out``: the body's (eq 25, gravity) plus the
-    constraint's, and ``deficit`` [W], the power of the controls' saturation
-    (:func:`saturation_power`) and of the disturbances."""
+    constraint's, and ``added`` [W], the power that the saturation of the controls
+    (:func:`saturation_power`) and the disturbances add to dv/dt."""
     translational, rotational, gravity = body_energy(theta, omega, x, v, p)
     out[TRANSLATIONAL_AT] = translational
     out[ROTATIONAL_AT] = rotational
     out[CONSTRAINT_AT] = constraint
     out[GRAVITY_AT] = gravity
     out[LYAPUNOV_AT] = translational + rotational + constraint + gravity
-    out[LYAPUNOV_RATE_AT] = -(body_dissipation(omega, v, p) + constraint_dissipation) + deficit
+    out[LYAPUNOV_RATE_AT] = -(body_dissipation(omega, v, p) + constraint_dissipation) + added
 
 
 @jit(forceinline=True)
@@ -236,10 +236,10 @@ def output_row(code, t, y, p, out, full):
         power = disturbance_power(force_d, torque_d, omega, v)
     out[DISTURBANCE_POWER_AT] = power
     out[DISTURBANCE_WORK_AT] = 0.0 if y[0] == y[0] else math.nan  # NaN after a stop, as the drivers'
-    deficit = saturation_power(code, theta, omega, x, v, b, e, f, d, p)
+    added = saturation_power(code, theta, omega, x, v, b, e, f, d, p)
     if p.disturbance_count > 0.0:
-        deficit += power
-    _lyapunov(out, theta, omega, x, v, p, energy, dissipation, deficit)
+        added += power
+    _lyapunov(out, theta, omega, x, v, p, energy, dissipation, added)
 
 
 @jit
