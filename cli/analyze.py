@@ -89,6 +89,71 @@ def _check_targets(loaded, out: Path) -> None:
         raise click.ClickException("\n".join(refused) + "\n(nothing was run)")
 
 
+def _vector(option: str, text: str) -> list[float]:
+    """Three numbers of ``X,Y,Z``; UsageError naming the option otherwise."""
+    try:
+        values = [float(x) for x in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) != 3:
+        raise click.UsageError(f"{option}: found {text!r}; expected three numbers X,Y,Z")
+    return values
+
+
+def _push_options(push, point, n_directions, directions, at, push_max, tol, rungs, ranges, distribution, draws,
+                  seed, confidence) -> tuple[dict | None, dict | None]:
+    """The keyword arguments of the push analysis and the basin stability (None: not asked
+    for); UsageError for options that do not go together or bad values (one line each)."""
+    from rbstab.analysis.push import check_push_options, parse_push_range  # heavy: numpy
+
+    if push is None:
+        for name, value in (("--push-point", point), ("--push-directions", n_directions),
+                            ("--push-direction", directions), ("--push-max", push_max)):
+            if value:
+                raise click.UsageError(f"{name}: give it with --push force|torque")
+        if distribution is not None:
+            raise click.UsageError("--push-distribution: give the quantity pushed with --push force|torque")
+    if directions and n_directions is not None:
+        raise click.UsageError("--push-directions and --push-direction: give one of the two")
+    if ranges and distribution is not None:
+        raise click.UsageError("--basin-stability and --push-distribution: give one of the two")
+    if (ranges or distribution is not None) and draws < 1:
+        raise click.UsageError(f"-n: found {draws}; expected an integer >= 1 (draws)")
+    point = _vector("--push-point", point) if point else None
+    given = [_vector("--push-direction", d) for d in directions]
+    push_options = stability = None
+    try:
+        if push is not None and distribution is None or push is not None and (n_directions or given):
+            push_options = {"kind": push, "directions": given or (n_directions if n_directions is not None else 64),
+                            "point": point, "at": at, "push_max": push_max, "tol": tol, "rungs": rungs, "seed": seed}
+            check_push_options(push, **{k: v for k, v in push_options.items() if k not in ("kind", "seed")})
+        if distribution is not None:
+            check_push_options(push, point=point, at=at)
+            stability = {"push": push, "push_range": parse_push_range(distribution), "point": point, "at": at,
+                         "draws": draws, "seed": seed, "confidence": confidence}
+        elif ranges:
+            stability = {"ranges": list(ranges), "draws": draws, "seed": seed, "confidence": confidence}
+    except ValueError as exc:
+        raise click.UsageError(str(exc))
+    return push_options, stability
+
+
+def _check_push_targets(configs, ranges) -> None:
+    """--basin-stability entries against every config's states (one line each)."""
+    if not ranges:
+        return
+    from rbstab.analysis.push import parse_ranges  # heavy: numba, numpy
+
+    problems = []
+    for config in configs:
+        try:
+            parse_ranges(ranges, config.make_variant().layout)
+        except ValueError as exc:
+            problems.append(f"{config.name}: {exc}")
+    if problems:
+        raise click.ClickException("\n".join(problems))
+
+
 @click.command("analyze")
 @click.argument("configs", nargs=-1, type=click.Path(dir_okay=False))
 @output_option("results/analysis", "Folder for the <name>.analysis.nc files.")
@@ -118,11 +183,38 @@ def _check_targets(loaded, out: Path) -> None:
               "(pip install \"rbstab[cuda]\").")
 @click.option("--confidence", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=0.95,
               show_default=True, help="Confidence level of the Wilson interval (--robustness).")
+@click.option("--push", type=click.Choice(["force", "torque"]), default=None,
+              help="The smallest fatal push of each direction: an impulse of a force (at --push-point, inertial "
+              "frame) or of a torque (body frame) on the body at rest at its equilibrium.")
+@click.option("--push-point", default=None, metavar="X,Y,Z",
+              help="Where a force push acts [m], body frame, from the centre of mass  [default: 0,0,0].")
+@click.option("--push-directions", type=int, default=None, metavar="N",
+              help="N quasi-uniform directions on the sphere (seeded by --seed), then a local search around the "
+              "weakest  [default: 64].")
+@click.option("--push-direction", "push_direction", multiple=True, metavar="X,Y,Z",
+              help="A direction of its own (repeatable; no local search).")
+@click.option("--push-at", type=float, default=0.0, show_default=True, metavar="T0", help="The push's time [s].")
+@click.option("--push-max", type=float, default=None, metavar="P",
+              help="The top of each direction's ladder [N s or N m s]  [default: found by doubling].")
+@click.option("--push-tol", type=float, default=1e-3, show_default=True, metavar="TOL",
+              help="Relative tolerance of each threshold.")
+@click.option("--push-rungs", type=int, default=16, show_default=True, metavar="N",
+              help="Rungs of each direction's ladder (a recovery above a fatal rung flags non-monotone recovery).")
+@click.option("--basin-stability", "stability_ranges", multiple=True, metavar="KEY=LO:HI",
+              help="An initial-state entry drawn uniformly in [LO, HI] (repeatable): the fraction of -n draws that "
+              "recover, with its Wilson interval.")
+@click.option("--push-distribution", default=None, metavar="LO:HI",
+              help="Basin stability over random pushes (with --push): a direction uniform on the sphere and a "
+              "magnitude uniform in [LO, HI].")
+@click.option("-n", "--draws", type=int, default=1000, show_default=True, metavar="N",
+              help="Draws of the basin stability.")
 @click.option("--overwrite", is_flag=True,
               help="Replace an analysis file of another configuration of the same name (without it: refused).")
 @console_options
 def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
-            no_simulation, ratio, basin_samples, jobs, engine, confidence, overwrite) -> None:
+            no_simulation, ratio, basin_samples, jobs, engine, confidence, push, push_point, push_directions,
+            push_direction, push_at, push_max, push_tol, push_rungs, stability_ranges, push_distribution, draws,
+            overwrite) -> None:
     """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
 
     \b
@@ -134,6 +226,10 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     With --robustness SWEEP_DIR: the stable fraction of a sweep's runs with its Wilson
     interval, and the parameters that separate stable from unstable runs.
     Every input is checked before anything runs. Method and limits: docs/analysis.md.
+    With --push force|torque: the smallest fatal push of each direction (a ladder of magnitudes,
+    then bisection; every direction in one batch per step on --engine). With --basin-stability
+    KEY=LO:HI ... or --push-distribution LO:HI: the fraction of -n random perturbations that
+    recover, with its Wilson interval.
     With --json: one object per config ("kind": "configuration") and per sweep ("robustness").
     """
     from rbstab.analysis import analyze as run_analysis  # heavy: numba, numpy
@@ -145,9 +241,13 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
 
     if not configs and not sweeps:
         raise click.UsageError("give CONFIG files and/or --robustness SWEEP_DIR")
-    if basin:
+    push_options, stability_options = _push_options(push, push_point, push_directions, push_direction, push_at,
+                                                    push_max, push_tol, push_rungs, stability_ranges,
+                                                    push_distribution, draws, seed, confidence)
+    if basin or push_options or stability_options:
         check_engine(engine)
     loaded = load_configs(configs, overrides)
+    _check_push_targets(loaded, stability_ranges)
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)
     _check_sweeps(sweeps)
@@ -162,7 +262,8 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,
                                   samples=samples, seed=seed, simulate=not no_simulation,
                                   basin=axes.get(config.name), basin_samples=basin_samples, ratio=ratio,
-                                  jobs=jobs or default_jobs(), engine=engine)
+                                  jobs=jobs or default_jobs(), engine=engine, push=push_options,
+                                  basin_stability=stability_options)
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         path = write_analysis(result, analysis_path(out, config.name), command_line=command_line())

@@ -4,17 +4,19 @@ Order of work: the configuration analysed (the pure sign law of ``sliding`` repl
 a boundary layer, said in the notes), its equilibrium and linearisation
 (:mod:`~rbstab.analysis.linearise`), the Lyapunov certificate
 (:mod:`~rbstab.analysis.certificate`), one simulation from the configured initial state
-for the settling time, and the basin map (:mod:`~rbstab.analysis.basin`) if asked for.
+for the settling time, the basin map (:mod:`~rbstab.analysis.basin`), the smallest fatal
+pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import os
 import time as _time
 import warnings
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,6 +32,8 @@ from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
 from .linearise import Linearisation, linearise
+from .push import basin_stability as stability_of
+from .push import push_analysis
 
 __all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config"]
 
@@ -55,6 +59,10 @@ class Analysis:
         ``time_to_converge`` [s] (NaN when not converged), ``lyapunov_initial`` [J],
         ``lyapunov_final`` [J], ``t_end`` [s], ``ratio``; None when not asked for.
     basin : BasinMap or None
+    push : PushAnalysis or None
+        The smallest fatal push of each direction (:func:`rbstab.analysis.push.push_analysis`).
+    basin_stability : BasinStability or None
+        (:func:`rbstab.analysis.push.basin_stability`).
     notes : list of str
         What the reader must know (a substituted law, an equilibrium outside the
         domain, the configuration's warnings).
@@ -68,6 +76,8 @@ class Analysis:
     certificate: Certificate | None = None
     settling: dict | None = None
     basin: BasinMap | None = None
+    push: Any = None
+    basin_stability: Any = None
     notes: list[str] = field(default_factory=list)
     timing: dict = field(default_factory=dict)
 
@@ -248,6 +258,9 @@ def analyze(
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     jobs: int = 1,
     engine: str = DEFAULT_ENGINE,
+    push: Mapping[str, Any] | None = None,
+    basin_stability: Mapping[str, Any] | None = None,
+    executor: Any = None,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 
@@ -277,7 +290,18 @@ def analyze(
     jobs : int
         Local processes for the basin map.
     engine : {"compiled", "cuda"}
-        The basin map's engine (:func:`rbstab.analysis.basin.basin_map`).
+        The engine of the basin map (:func:`rbstab.analysis.basin.basin_map`), the pushes
+        and the basin stability.
+    push : mapping, optional
+        Keyword arguments of :func:`rbstab.analysis.push.push_analysis` (``kind``,
+        ``directions``, ``point``, ``at``, ``push_max``, ``tol``, ``rungs``, ``refine``):
+        the smallest fatal push of each direction.
+    basin_stability : mapping, optional
+        Keyword arguments of :func:`rbstab.analysis.push.basin_stability` (``ranges`` or
+        ``push`` and ``push_range``, ``draws``, ``confidence`` ...).
+    executor : rbstab.sweep.executors.Executor, optional
+        Workers of the pushes and the basin stability (default: ``jobs`` local processes
+        where jobs > 1).
 
     Returns
     -------
@@ -290,10 +314,10 @@ def analyze(
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
-    if basin and jobs > 1:
+    if (basin or push or basin_stability) and jobs > 1 and executor is None:
         from ..sweep.executors import refuse_at_script_top_level  # heavy: multiprocessing
 
-        refuse_at_script_top_level("a basin map")  # before anything is computed
+        refuse_at_script_top_level("a basin map" if basin else "a push analysis")  # before anything is computed
 
     if isinstance(config, (str, os.PathLike)):
         from ..config import load_config  # heavy: pydantic (the validator)
@@ -327,7 +351,31 @@ def analyze(
         result.basin = basin_map(analysed, axes, variant, ratio=ratio, n_samples=basin_samples, jobs=jobs,
                                  engine=engine)
         timing["basin"] = _time.perf_counter() - t3
+    if push or basin_stability:
+        with _workers(executor, jobs, push, basin_stability) as workers:
+            if push:
+                t4 = _time.perf_counter()
+                result.push = push_analysis(analysed, **push, ratio=ratio, engine=engine, executor=workers)
+                timing["push"] = _time.perf_counter() - t4
+            if basin_stability:
+                t5 = _time.perf_counter()
+                result.basin_stability = stability_of(analysed, **basin_stability, ratio=ratio, engine=engine,
+                                                      executor=workers)
+                timing["basin_stability"] = _time.perf_counter() - t5
     return result
+
+
+def _workers(executor, jobs: int, push, stability):
+    """The executor of the pushes and the basin stability: ``executor``, else ``jobs``
+    local processes where jobs > 1 and there are enough runs to share, else none."""
+    directions = (push or {}).get("directions", 64)
+    many = bool(push) and (directions if np.isscalar(directions) else len(directions)) >= 16
+    many = many or bool(stability) and int(stability.get("draws", 0)) >= 256
+    if executor is not None or jobs <= 1 or not many:
+        return contextlib.nullcontext(executor)
+    from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
+
+    return LocalExecutor(jobs, task="a push analysis")
 
 
 def _check_options(samples: int, basin_samples: int, ratio: float, jobs: int) -> None:

@@ -23,7 +23,15 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
     worst_state_<block>(axis), sublevel, boundary_level, ... (scalars)
     basin: basin_outcome (flag_values 0 1 2: converged, not converged, failed),
     basin_time_to_converge, basin_lyapunov_initial, basin_lyapunov_final (basin_x, basin_y)
-    global attributes: verdict, notes, certificate_argument, sublevel_bound, ...
+    push: push_direction(push_direction, axis), push_threshold, push_recovering,
+    push_monotone (push_direction), push_ladder, push_ladder_recovered (push_direction,
+    push_rung); push_refined_direction(push_refined, axis), push_refined_threshold;
+    push_minimum, push_minimum_direction(axis)
+    basin stability: stability_value(draw, stability_key), stability_recovered(draw),
+    stability_low, stability_high, stability_auc (stability_key); stability_fraction,
+    stability_interval_low, stability_interval_high
+    global attributes: verdict, notes, certificate_argument, sublevel_bound, push_kind,
+    push_rule, stability_rule, ...
 
 Layout of ``<sweep>.robustness.analysis.nc`` (``kind = "robustness"``): per ``group`` (base
 configuration) the stable fraction and its Wilson interval; per (group, parameter) the
@@ -197,6 +205,64 @@ def _basin_variables(analysis) -> tuple[dict, dict]:
     }, coords
 
 
+def _push_variables(analysis) -> tuple[dict, dict, dict]:
+    """(variables, coordinates, attributes) of the push analysis (none without one)."""
+    p = analysis.push
+    if p is None:
+        return {}, {}, {}
+    u, th = p.units, p.thresholds
+    frame = "inertial frame" if p.kind == "force" else "body frame"
+    variables = {
+        "push_direction": _var(("push_direction", "axis"), p.directions, "1", f"unit direction of the push ({frame})"),
+        "push_threshold": _var(("push_direction",), th.threshold, u, "smallest fatal push magnitude",
+                               "the first fatal magnitude from below; inf: every rung recovered"),
+        "push_recovering": _var(("push_direction",), th.recovering, u, "largest recovering magnitude below it"),
+        "push_monotone": _var(("push_direction",), th.monotone.astype(np.int8), "1",
+                              "recovery monotone in the magnitude along the ladder (1) or not (0)"),
+        "push_ladder": _var(("push_direction", "push_rung"), th.ladder, u, "magnitudes of the ladder"),
+        "push_ladder_recovered": _var(("push_direction", "push_rung"), th.ladder_recovered.astype(np.int8), "1",
+                                      "the rung's push recovered (1) or was fatal (0)"),
+        "push_refined_direction": _var(("push_refined", "axis"), p.refined_directions.reshape(-1, 3), "1",
+                                       "directions of the local search around the weakest"),
+        "push_refined_threshold": _var(("push_refined",), p.refined_thresholds, u,
+                                       "smallest fatal push magnitude of the local search's directions"),
+        "push_minimum": _var((), p.minimum, u, "smallest fatal push magnitude found"),
+        "push_minimum_direction": _var(("axis",), p.minimum_direction, "1", "its direction"),
+        "push_point": _var(("axis",), p.point, "m", "point of the force push, body frame, from the centre of mass"),
+    }
+    attrs = {"push_kind": p.kind, "push_at": p.at, "push_tol": p.tol, "push_rungs": p.rungs, "push_ratio": p.ratio,
+             "push_rule": p.rule_text, "push_engine": p.engine, "push_runs": p.runs}
+    return variables, {}, attrs
+
+
+def _stability_variables(analysis) -> tuple[dict, dict, dict]:
+    """(variables, coordinates, attributes) of the basin stability (none without it)."""
+    b = analysis.basin_stability
+    if b is None:
+        return {}, {}, {}
+    auc = np.full(len(b.keys), np.nan)
+    for s in b.separations:
+        auc[b.keys.index(s.parameter)] = s.auc
+    coords = {"stability_key": _var(("stability_key",), np.array(b.keys, dtype=object), "1", "what was drawn")}
+    variables = {
+        "stability_units": _var(("stability_key",), np.array(b.units, dtype=object), "1", "units of each key"),
+        "stability_value": _var(("draw", "stability_key"), b.values, "1",
+                                "the draws (units per key: stability_units)"),
+        "stability_recovered": _var(("draw",), b.recovered.astype(np.int8), "1", "the draw recovered (1) or not (0)"),
+        "stability_low": _var(("stability_key",), b.low, "1", "low end of the uniform box"),
+        "stability_high": _var(("stability_key",), b.high, "1", "high end of the uniform box"),
+        "stability_auc": _var(("stability_key",), auc, "1", "P(recovered value > failed value) (ties half)"),
+        "stability_fraction": _var((), b.fraction, "1", "basin stability: recovered draws / draws"),
+        "stability_interval_low": _var((), b.interval[0], "1", f"{b.confidence:.0%} Wilson interval, low end"),
+        "stability_interval_high": _var((), b.interval[1], "1", f"{b.confidence:.0%} Wilson interval, high end"),
+    }
+    attrs = {"stability_perturbation": b.perturbation, "stability_rule": b.rule, "stability_seed": b.seed,
+             "stability_confidence": b.confidence, "stability_engine": b.engine}
+    if b.kind:
+        attrs["stability_push_kind"] = b.kind
+    return variables, coords, attrs
+
+
 def _text_attributes(analysis) -> dict[str, Any]:
     lin, c, s, b = analysis.linearisation, analysis.certificate, analysis.settling, analysis.basin
     attrs: dict[str, Any] = {
@@ -229,8 +295,10 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
     names = layout.state_names()
     units = [BLOCK_UNITS[b] for b in layout.blocks for _ in range(3)]
     basin, basin_coords = _basin_variables(analysis)
+    push, push_coords, push_attrs = _push_variables(analysis)
+    stability, stability_coords, stability_attrs = _stability_variables(analysis)
     data = {**_linearisation_variables(analysis), **_settling_variables(analysis),
-            **_certificate_variables(analysis), **basin}
+            **_certificate_variables(analysis), **basin, **push, **stability}
     coords = {
         "state": _var(("state",), np.array(names, dtype=object), "1", "state variable"),
         "state_wrt": _var(("state_wrt",), np.array(names, dtype=object), "1", "state variable (derivative with "
@@ -239,8 +307,11 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
         "mode": _var(("mode",), np.arange(len(names)), "1", "eigenvalue index, real part descending"),
         "axis": _var(("axis",), np.array(["x", "y", "z"], dtype=object), "1", "vector component"),
         **basin_coords,
+        **push_coords,
+        **stability_coords,
     }
-    attrs = {**_provenance(analysis.analysed, command_line), **_text_attributes(analysis)}
+    attrs = {**_provenance(analysis.analysed, command_line), **_text_attributes(analysis), **push_attrs,
+             **stability_attrs}
     if analysis.analysed is not analysis.config:
         attrs["config_as_given"] = analysis.config.to_yaml()
     return coords, data, attrs
@@ -435,4 +506,8 @@ def json_record(analysis) -> dict[str, Any]:
         b = analysis.basin
         record["basin"] = {"axes": [a.key for a in b.axes], "shape": list(b.outcome.shape), "counts": b.counts(),
                            "inside_estimate": analysis.basin_inside(), "ratio": b.ratio}
+    if analysis.push is not None:
+        record["push"] = analysis.push.to_json()
+    if analysis.basin_stability is not None:
+        record["basin_stability"] = analysis.basin_stability.to_json()
     return record

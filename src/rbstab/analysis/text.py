@@ -101,6 +101,52 @@ def _basin_lines(analysis) -> list[str]:
     return lines
 
 
+def _direction(u) -> str:
+    return "(" + ", ".join(f"{x:+.3f}" for x in u) + ")"
+
+
+def _push_lines(analysis) -> list[str]:
+    p = analysis.push
+    if p is None:
+        return []
+    where = f" at ({', '.join(_g(x) for x in p.point)}) m" if p.kind == "force" else ""
+    frame = "inertial frame" if p.kind == "force" else "body frame"
+    t = p.threshold
+    finite = np.isfinite(t)
+    lines = [f"  smallest fatal {p.kind} push{where}, t0 = {_g(p.at)} s, over {len(t)} directions ({frame}; "
+             f"relative tolerance {_g(p.tol)}; {p.runs} runs on {p.engine}):"]
+    if not finite.any():
+        lines.append(f"    none: every push up to the ladders' top recovered ({_g(np.max(p.thresholds.ladder))} {p.units})")
+        return lines
+    lines.append(f"    minimum {_g(p.minimum, 5)} {p.units} along {_direction(p.minimum_direction)}"
+                 + (f" (the local search lowered it by {p.refinement_gain:.1%} from {_g(p.grid_minimum, 5)})"
+                    if len(p.refined_thresholds) else ""))
+    lines.append(f"    over the directions: median {_g(np.median(t[finite]), 4)}, largest {_g(np.max(t[finite]), 4)} "
+                 f"{p.units}" + (f"; {int((~finite).sum())} recovered from every rung" if (~finite).any() else ""))
+    flagged = int((~p.thresholds.monotone).sum())
+    if flagged:
+        lines.append(f"    recovery is not monotone in the magnitude along {flagged} of {len(t)} directions (a rung "
+                     "above the first fatal one recovered): their threshold is the first fatal magnitude seen from "
+                     "below, at the ladder's resolution")
+    return lines
+
+
+def _stability_lines(analysis) -> list[str]:
+    b = analysis.basin_stability
+    if b is None:
+        return []
+    lo, hi = b.interval
+    what = (f"random {b.kind} pushes of {_g(b.low[0])} .. {_g(b.high[0])} {b.units[0]} in uniform directions"
+            if b.perturbation == "push" else
+            "initial states with " + ", ".join(f"{k} in [{_g(a)}, {_g(z)}]" for k, a, z in zip(b.keys, b.low, b.high)))
+    lines = [f"  basin stability over {what}: {int(b.recovered.sum())} of {b.draws} recovered = {b.fraction:.1%} "
+             f"({b.confidence:.0%} Wilson interval {lo:.1%} - {hi:.1%})"]
+    for s in b.separations:
+        lines.append(f"    {s.parameter}: AUC {s.auc:.3f}; recovered {s.stable_side} {_g(s.threshold, 5)} "
+                     f"(balanced accuracy {s.balanced_accuracy:.1%})")
+    return lines
+
+
 def describe(analysis) -> list[str]:
     """Lines summarising an :class:`~rbstab.analysis.Analysis`."""
     lin = analysis.linearisation
@@ -115,6 +161,8 @@ def describe(analysis) -> list[str]:
     lines.append(_settling_line(analysis))
     lines += _certificate_lines(analysis.certificate)
     lines += _basin_lines(analysis)
+    lines += _push_lines(analysis)
+    lines += _stability_lines(analysis)
     return lines
 
 

@@ -1,0 +1,779 @@
+"""Push recovery: the smallest fatal push of each direction (the minimal fatal shock) and the
+fraction of random perturbations a body recovers from (basin stability), on the batch engine.
+
+A *push* is an impulse (docs/disturbances.md) given to the body at rest at its equilibrium
+at time t0 (``at``): a force impulse P [N s] at a point R_p of the body (``point``, body
+frame from the centre of mass; P in the inertial frame), or a torque impulse L [N m s]
+(body frame). A pushed run *recovers* (:data:`RECOVERY_RULE`) when it reaches t_end (it
+did not leave the admissible region ``simulation.limits`` nor meet gimbal lock) and
+|v(t_end)| <= ratio dT + 1e-12 J, with dT the kinetic energy the push gave the body at
+rest: the sweeps' convergence rule (:mod:`rbstab.convergence`) with v just after the push
+in place of v(0), which it is when t0 = 0.
+
+The smallest fatal magnitude of a direction u (:func:`push_thresholds`):
+
+1. the top of its ladder: ``push_max``, or found by doubling (from 1 N s or 1 N m s:
+   doubled while the push recovers, halved while it is fatal, until two magnitudes a
+   factor 2 apart bracket the first fatal one);
+2. a ladder of ``rungs`` magnitudes top * i / rungs, i = 1 ... rungs;
+3. bisection between the last recovering rung below the first fatal rung (or 0) and
+   that rung, until hi - lo <= tol hi. The threshold is hi: a fatal magnitude with a
+   recovering one within ``tol`` below it.
+
+Where a recovering rung lies above the first fatal rung, recovery is not monotone in the
+magnitude (resonance islands): the threshold is still the first fatal magnitude seen from
+below, at the ladder's resolution, and ``monotone`` is False for that direction. Every
+direction advances together: each step (a doubling, the ladder, one bisection) is one
+batch of runs (:func:`rbstab.simulator.simulate_batch`, ``engine`` compiled or cuda, on an
+executor with ``jobs`` > 1). With ``n`` quasi-uniform directions, a local search around
+the weakest ones then refines the minimum (:func:`push_analysis`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time as _time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
+
+__all__ = ["PUSH_KINDS", "RECOVERY_RULE", "PushAnalysis", "Pushes", "push_directions", "push_thresholds",
+           "push_analysis", "check_push_options"]
+
+#: Quantity of a push -> the units of its magnitude.
+PUSH_KINDS = {"force": "N s", "torque": "N m s"}
+#: When a pushed run recovers, as text.
+RECOVERY_RULE = (f"recovered = status == 'success' (t_end reached inside simulation.limits) and "
+                 f"|v(t_end)| <= ratio * dT + {ROUND_OFF:g} J, dT the kinetic energy the push gave the body at rest")
+#: Default ladder rungs and relative tolerance of a threshold.
+DEFAULT_RUNGS = 16
+DEFAULT_TOL = 1e-3
+#: The doubling's first magnitude [N s or N m s] and its range: beyond it a direction
+#: counts as never fatal (above) or fatal for any push (below).
+FIRST_PUSH = 1.0
+LARGEST_PUSH = 2.0 ** 30
+SMALLEST_PUSH = 2.0 ** -30
+#: Refinement: the weakest directions searched around, new directions per round and
+#: each, and rounds (each round halves the cone).
+REFINE_WORST, REFINE_AROUND, REFINE_ROUNDS = 4, 6, 3
+#: Fewest runs of a batch slice sent to a worker.
+MIN_SLICE = 64
+
+
+def push_directions(n: int, seed: int = 0) -> np.ndarray:
+    """n unit vectors quasi-uniform on the sphere: the Fibonacci lattice (equal areas, the
+    golden angle between neighbours), turned by a random rotation drawn from ``seed``.
+    Shape (n, 3)."""
+    from scipy.spatial.transform import Rotation  # heavy: scipy
+
+    if n < 1:
+        raise ValueError(f"--push-directions: found {n}; expected an integer >= 1")
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = np.sqrt(np.maximum(0.0, 1.0 - z * z))
+    phi = math.pi * (3.0 - math.sqrt(5.0)) * i
+    lattice = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+    return Rotation.random(random_state=seed).apply(lattice)
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    return vectors / norm
+
+
+def check_push_options(kind: str, *, point: Sequence[float] | None = None, directions: Any = None,
+                       push_max: float | None = None, tol: float = DEFAULT_TOL, rungs: int = DEFAULT_RUNGS,
+                       at: float = 0.0) -> None:
+    """Refuse bad push options in one line each (ValueError naming the option, the value
+    found and what is allowed)."""
+    problems = []
+    if kind not in PUSH_KINDS:
+        problems.append(f"--push: found {kind!r}; expected one of {', '.join(PUSH_KINDS)}")
+    if point is not None and kind == "torque":
+        problems.append("--push-point: a torque has no point of application; give it with --push force")
+    if point is not None and (len(point) != 3 or not np.all(np.isfinite(point))):
+        problems.append(f"--push-point: found {list(point)}; expected three finite numbers X,Y,Z [m]")
+    if directions is not None and not np.isscalar(directions):
+        d = np.asarray(directions, dtype=float).reshape(-1, 3)
+        norms = np.linalg.norm(d, axis=1)
+        for row, norm in zip(d, norms):
+            if not (np.isfinite(norm) and norm > 0):
+                problems.append(f"--push-direction: found {','.join(f'{x:g}' for x in row)}; expected a non-zero "
+                                "finite vector X,Y,Z")
+    elif directions is not None and int(directions) < 1:
+        problems.append(f"--push-directions: found {directions}; expected an integer >= 1")
+    if push_max is not None and not (math.isfinite(push_max) and push_max > 0):
+        problems.append(f"--push-max: found {push_max}; expected a magnitude > 0 [{PUSH_KINDS.get(kind, '')}]")
+    if not 0 < tol < 1:
+        problems.append(f"--push-tol: found {tol}; expected 0 < tol < 1 (relative)")
+    if int(rungs) < 2:
+        problems.append(f"--push-rungs: found {rungs}; expected an integer >= 2")
+    if not (math.isfinite(at) and at >= 0):
+        problems.append(f"--push-at: found {at}; expected a time >= 0 [s] before simulation.t_end")
+    if problems:
+        raise ValueError("; ".join(problems))
+
+
+def _take(batch, rows: np.ndarray):
+    """The runs ``rows`` of a :class:`rbstab.engine.RunBatch` as a batch of their own."""
+    return type(batch)(**{f.name: getattr(batch, f.name)[rows] for f in dataclasses.fields(batch)})
+
+
+def integrate_pushes(batch, engine: str) -> np.ndarray:
+    """(success, v(0) [J], v(t_end) [J]) of the runs of ``batch`` as one array of shape
+    (3, k) (the function a worker runs)."""
+    from ..simulator import simulate_batch  # heavy: numba
+
+    out = np.full((3, len(batch)), np.nan)
+    for rows, block in simulate_batch(batch, full=False, engine=engine, keep="none"):
+        out[0, rows] = [s == "success" for s in block.status]
+        out[1, rows] = block.summaries["lyapunov_initial"]
+        out[2, rows] = block.summaries["lyapunov_final"]
+    return out
+
+
+class Pushes:
+    """One configuration's pushes as batches of runs: the body at rest at its equilibrium,
+    pushed at ``at`` by the impulse of a (k, 3) array of vectors (:meth:`recovered`).
+
+    Parameters
+    ----------
+    config : RunConfig
+        Validated; its own disturbances stay (the push is one more entry).
+    kind : {"force", "torque"}
+    point : (3,) float, optional
+        R_p [m], body frame, from the centre of mass (force only; default 0).
+    at : float
+        t0 [s], in [0, t_end).
+    ratio : float
+        Of :data:`RECOVERY_RULE`.
+    engine : {"compiled", "cuda"}
+    executor : rbstab.sweep.executors.Executor, optional
+        Takes a batch in slices (None: this process).
+
+    Raises
+    ------
+    ValueError
+        For a configuration that cannot take the push (no equilibrium at rest, the pure
+        sign law, four disturbances already, ``at`` beyond t_end).
+    """
+
+    def __init__(self, config, kind: str, *, point=None, at: float = 0.0, ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                 engine: str = "compiled", executor=None) -> None:
+        from ..config import INITIAL_STATE_BLOCKS, ConfigError, config_from_mapping  # heavy: pydantic
+        from ..engine.batch import batch_from_table  # heavy: numba
+        from ..model import MAX_DISTURBANCES
+        from ..variants.disturbances import apply_impulses  # heavy: numba
+
+        self.kind, self.at, self.ratio, self.engine, self.executor = kind, float(at), float(ratio), engine, executor
+        self.point = np.zeros(3) if point is None else np.asarray(point, dtype=float)
+        self.units = PUSH_KINDS[kind]
+        resolved = config.resolved
+        t_end = float(resolved["simulation"]["t_end"])
+        if not self.at < t_end:
+            raise ValueError(f"--push-at: found {self.at:g}; expected a time in [0, simulation.t_end) = [0, {t_end:g}) s")
+        own = list(resolved.get("disturbances") or [])
+        if len(own) >= MAX_DISTURBANCES:
+            raise ValueError(f"{config.name}: disturbances: found {len(own)} entries; a push needs one more and at most "
+                             f"{MAX_DISTURBANCES} are allowed")
+        variant = config.make_variant()
+        if not variant.smooth:
+            raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) takes no disturbances; "
+                             "analyse a boundary-layer law (--boundary-layer PHI)")
+        from .linearise import linearise  # heavy: numba
+
+        lin = linearise(variant)
+        if not lin.is_rest_point:
+            raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
+                             f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
+        self.equilibrium = lin.equilibrium
+        blocks = dict(zip(variant.layout.blocks, np.split(self.equilibrium, len(variant.layout.blocks))))
+        initial = {key: (blocks[b].tolist() if b in blocks else list(resolved["initial_state"][key]))
+                   for key, b in INITIAL_STATE_BLOCKS.items()}
+        entry = {"kind": "impulse", "quantity": kind, "value": [1.0, 0.0, 0.0], "start": self.at}
+        if kind == "force":
+            entry["point"] = self.point.tolist()
+        data = {**resolved, "initial_state": initial, "disturbances": own + [entry]}
+        try:
+            pushed = config_from_mapping(data, source=f"{config.name} pushed")
+        except ConfigError as exc:
+            raise ValueError(f"{config.name}: " + "; ".join(exc.errors)) from None
+        self.config = pushed
+        self.index = len(own)  # the push's entry in the record's disturbances
+        template = {k: v for k, v in pushed.resolved.items() if k != "name"}
+        self.base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
+        # dT of a unit push: the kinetic energy of the jump from rest (quadratic in the push)
+        record = self.base.params[0].copy()
+        record["disturbance_count"] = 1.0
+        for name in record.dtype.names:
+            if name.startswith("disturbance_") and record[name].ndim:
+                record[name][0] = record[name][self.index]
+        self._record = record
+        self._permanent = variant.name == "permanent"
+        self._jump = apply_impulses
+        self.runs = 0
+        self.batches = 0
+
+    def energy(self, vectors: np.ndarray) -> np.ndarray:
+        """dT [J] of each push of ``vectors`` (k, 3) on the body at rest at its equilibrium."""
+        out = np.empty(len(vectors))
+        for i, p in enumerate(np.asarray(vectors, dtype=float)):
+            self._record["disturbance_value"][0] = p
+            y = self.equilibrium.copy()
+            out[i] = self._jump(self._permanent, self.at, y, self._record)
+        return out
+
+    def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
+        """Whether the runs pushed by ``vectors`` (k, 3) recover (:data:`RECOVERY_RULE`);
+        ``energy``: their dT [J] where known. One batch."""
+        vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
+        k = len(vectors)
+        if k == 0:
+            return np.zeros(0, dtype=bool)
+        energy = self.energy(vectors) if energy is None else energy
+        batch = _take(self.base, np.zeros(k, dtype=np.int64))
+        batch.params["disturbance_value"][:, self.index, :] = vectors
+        ok, _, v = integrate_batch(batch, self.engine, self.executor)
+        self.runs += k
+        self.batches += 1
+        with np.errstate(invalid="ignore"):
+            return (ok == 1) & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
+
+
+def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
+    """:func:`integrate_pushes` of a batch, in slices of at least :data:`MIN_SLICE` runs
+    over ``executor``'s workers (None: this process)."""
+    workers = (executor.parallelism() or 1) if executor is not None else 1
+    if workers <= 1 or len(batch) < 2 * MIN_SLICE:
+        return integrate_pushes(batch, engine)
+    size = max(MIN_SLICE, -(-len(batch) // workers))
+    slices = [np.arange(lo, min(lo + size, len(batch))) for lo in range(0, len(batch), size)]
+    out = np.full((3, len(batch)), np.nan)
+    executor.plan(len(slices))
+    parts = ((rows, _take(batch, rows)) for rows in slices)
+    for (rows, _), result, exc in executor.imap_unordered(_integrate_slice, parts, engine):
+        if exc is not None:
+            raise exc
+        out[:, rows] = result
+    return out
+
+
+def _integrate_slice(item, engine: str):
+    """:func:`integrate_pushes` of an executor's item (rows, batch)."""
+    return integrate_pushes(item[1], engine)
+
+
+@dataclass
+class Thresholds:
+    """The smallest fatal push of each of d directions (:func:`push_thresholds`).
+
+    Attributes
+    ----------
+    threshold : ndarray, shape (d,)
+        The smallest fatal magnitude found [N s or N m s] (inf: every rung up to the
+        ladder's top recovered).
+    recovering : ndarray, shape (d,)
+        The largest recovering magnitude below it (its bracket's low end).
+    monotone : ndarray of bool, shape (d,)
+        False where a rung above the first fatal rung recovered.
+    ladder : ndarray, shape (d, rungs)
+        The ladder's magnitudes.
+    ladder_recovered : ndarray of bool, shape (d, rungs)
+    """
+
+    threshold: np.ndarray
+    recovering: np.ndarray
+    monotone: np.ndarray
+    ladder: np.ndarray
+    ladder_recovered: np.ndarray
+
+
+def _bracket_by_doubling(pushes: Pushes, u: np.ndarray, unit_energy: np.ndarray) -> np.ndarray:
+    """The top of each direction's ladder: the first fatal magnitude of a doubling from
+    :data:`FIRST_PUSH` (halving while fatal); inf where none is fatal up to
+    :data:`LARGEST_PUSH`, :data:`SMALLEST_PUSH` where even that is fatal."""
+    d = len(u)
+    s = np.full(d, FIRST_PUSH)
+    lo = np.zeros(d)
+    hi = np.full(d, np.inf)
+    active = np.ones(d, dtype=bool)
+    while active.any():
+        rows = np.flatnonzero(active)
+        rec = pushes.recovered(s[rows, None] * u[rows], s[rows] ** 2 * unit_energy[rows])
+        lo[rows[rec]] = s[rows[rec]]
+        hi[rows[~rec]] = s[rows[~rec]]
+        s[rows] = np.where(rec, 2.0 * s[rows], 0.5 * s[rows])
+        active = ((lo == 0) | np.isinf(hi)) & (s <= LARGEST_PUSH) & (s >= SMALLEST_PUSH)
+    return np.where(np.isinf(hi), np.inf, hi)
+
+
+def push_thresholds(pushes: Pushes, directions: np.ndarray, *, push_max: float | np.ndarray | None = None,
+                    tol: float = DEFAULT_TOL, rungs: int = DEFAULT_RUNGS) -> Thresholds:
+    """The smallest fatal push of each direction (module docstring): a ladder to
+    ``push_max`` (per direction, or found by doubling), then bisection to ``tol``."""
+    u = _unit(np.asarray(directions, dtype=float).reshape(-1, 3))
+    d = len(u)
+    unit_energy = pushes.energy(u)
+    if push_max is None:
+        top = _bracket_by_doubling(pushes, u, unit_energy)
+    else:
+        top = np.broadcast_to(np.asarray(push_max, dtype=float), (d,)).copy()
+    finite_top = np.where(np.isfinite(top), top, LARGEST_PUSH)
+    ladder = finite_top[:, None] * (np.arange(1, rungs + 1) / rungs)[None, :]
+    recovered = np.ones((d, rungs), dtype=bool)
+    run = np.isfinite(top)
+    rows = np.flatnonzero(run)
+    if len(rows):
+        mags = ladder[rows].ravel()
+        rec = pushes.recovered(np.repeat(u[rows], rungs, axis=0) * mags[:, None],
+                               np.repeat(unit_energy[rows], rungs) * mags ** 2)
+        recovered[rows] = rec.reshape(len(rows), rungs)
+    fatal = ~recovered
+    first = np.where(fatal.any(axis=1), fatal.argmax(axis=1), rungs)
+    monotone = np.array([not recovered[i, first[i] + 1:].any() for i in range(d)])
+    hi = np.where(first < rungs, ladder[np.arange(d), np.minimum(first, rungs - 1)], np.inf)
+    lo = np.where(first > 0, ladder[np.arange(d), np.maximum(first - 1, 0)], 0.0)
+    lo = np.where(first < rungs, lo, ladder[:, -1])
+    while True:
+        active = np.flatnonzero(np.isfinite(hi) & (hi - lo > tol * hi))
+        if not len(active):
+            break
+        mid = 0.5 * (lo[active] + hi[active])
+        rec = pushes.recovered(mid[:, None] * u[active], unit_energy[active] * mid ** 2)
+        lo[active[rec]] = mid[rec]
+        hi[active[~rec]] = mid[~rec]
+    return Thresholds(threshold=hi, recovering=lo, monotone=monotone, ladder=ladder, ladder_recovered=recovered)
+
+
+def _around(u: np.ndarray, angle: float, m: int, rng: np.random.Generator) -> np.ndarray:
+    """m unit vectors at ``angle`` [rad] from the unit vector u, evenly around it (a random
+    start), shape (m, 3)."""
+    helper = np.eye(3)[np.argmin(np.abs(u))]
+    e1 = _unit(np.cross(u, helper))
+    e2 = np.cross(u, e1)
+    psi = rng.uniform(0, 2 * math.pi) + 2 * math.pi * np.arange(m) / m
+    return _unit(math.cos(angle) * u[None] + math.sin(angle) * (np.cos(psi)[:, None] * e1 + np.sin(psi)[:, None] * e2))
+
+
+@dataclass
+class PushAnalysis:
+    """The push-recovery analysis of one configuration (:func:`push_analysis`).
+
+    Attributes
+    ----------
+    kind : {"force", "torque"}
+        Force impulse P at ``point`` (inertial frame), or torque impulse L (body frame).
+    units : str
+        Of every magnitude: "N s" or "N m s".
+    point : ndarray, shape (3,)
+        R_p [m], body frame, from the centre of mass (zeros for a torque).
+    at, tol, ratio : float
+        t0 [s]; the thresholds' relative tolerance; the recovery rule's ratio.
+    rungs : int
+    directions : ndarray, shape (d, 3)
+        Unit vectors (force: inertial frame; torque: body frame).
+    thresholds : Thresholds
+        Per direction.
+    refined_directions : ndarray, shape (m, 3)
+        The local search's directions (none with given directions or refine=False).
+    refined_thresholds : ndarray, shape (m,)
+    engine : str
+    runs, batches : int
+        Runs integrated and batches they took.
+    seconds : float
+        Wall time [s].
+    """
+
+    name: str
+    kind: str
+    units: str
+    point: np.ndarray
+    at: float
+    tol: float
+    ratio: float
+    rungs: int
+    directions: np.ndarray
+    thresholds: Thresholds
+    refined_directions: np.ndarray
+    refined_thresholds: np.ndarray
+    engine: str
+    runs: int = 0
+    batches: int = 0
+    seconds: float = 0.0
+    notes: list = field(default_factory=list)
+
+    @property
+    def rule_text(self) -> str:
+        """:data:`RECOVERY_RULE` with this analysis's ratio."""
+        return RECOVERY_RULE.replace("ratio", f"{self.ratio:g}", 1)
+
+    @property
+    def threshold(self) -> np.ndarray:
+        """The smallest fatal magnitude per direction, shape (d,) (inf: none found)."""
+        return self.thresholds.threshold
+
+    @property
+    def grid_minimum(self) -> float:
+        """The smallest threshold over :attr:`directions`."""
+        return float(np.min(self.threshold))
+
+    @property
+    def minimum(self) -> float:
+        """The smallest threshold found, the local search included."""
+        found = np.concatenate([self.threshold, self.refined_thresholds])
+        return float(np.min(found))
+
+    @property
+    def minimum_direction(self) -> np.ndarray:
+        """Its direction, shape (3,)."""
+        found = np.concatenate([self.threshold, self.refined_thresholds])
+        return np.concatenate([self.directions, self.refined_directions])[int(np.argmin(found))]
+
+    @property
+    def weakest(self) -> int:
+        """The index of the direction of :attr:`directions` with the smallest threshold."""
+        return int(np.argmin(self.threshold))
+
+    @property
+    def refinement_gain(self) -> float:
+        """How much the local search lowered the minimum, relative (0: not at all)."""
+        g = self.grid_minimum
+        return float((g - self.minimum) / g) if math.isfinite(g) and g > 0 else 0.0
+
+    @property
+    def monotone(self) -> bool:
+        """Whether recovery was monotone in the magnitude along every direction's ladder."""
+        return bool(np.all(self.thresholds.monotone))
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``push`` record of ``--json`` (inf as null)."""
+
+        def num(x):
+            return float(x) if math.isfinite(x) else None
+
+        return {
+            "kind": self.kind,
+            "units": self.units,
+            "point": self.point.tolist(),
+            "at": self.at,
+            "tol": self.tol,
+            "rule": self.rule_text,
+            "ratio": self.ratio,
+            "directions": self.directions.tolist(),
+            "threshold": [num(x) for x in self.threshold],
+            "monotone": self.thresholds.monotone.tolist(),
+            "minimum": {"threshold": num(self.minimum), "direction": self.minimum_direction.tolist(),
+                        "before_refinement": num(self.grid_minimum), "lowered_by": self.refinement_gain},
+            "runs": self.runs,
+            "engine": self.engine,
+        }
+
+
+def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point=None, at: float = 0.0,
+                  push_max: float | None = None, tol: float = DEFAULT_TOL, rungs: int = DEFAULT_RUNGS,
+                  seed: int = 0, ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled", executor=None,
+                  refine: bool | None = None, say: Callable[[str], None] | None = None) -> PushAnalysis:
+    """The smallest fatal push of each direction, and its minimum over directions.
+
+    Parameters
+    ----------
+    config : RunConfig
+        Validated. The runs use its body, controller, saturation, limits and simulation
+        settings; they start at rest at its equilibrium.
+    kind : {"force", "torque"}
+    directions : int or array_like, shape (d, 3)
+        n quasi-uniform directions (:func:`push_directions` with ``seed``), or the
+        directions themselves (not normalised needed).
+    point : (3,) float, optional
+        Force only: R_p [m], body frame, from the centre of mass (default 0).
+    at : float
+        t0 [s] of the push.
+    push_max : float, optional
+        The ladder's top [N s or N m s] (default: found by doubling, per direction).
+    tol : float
+        Relative tolerance of a threshold (0 < tol < 1).
+    rungs : int
+        Rungs of the ladder (>= 2).
+    seed : int
+        Of the directions and the local search.
+    ratio : float
+        Of :data:`RECOVERY_RULE`.
+    engine : {"compiled", "cuda"}
+    executor : rbstab.sweep.executors.Executor, optional
+    refine : bool, optional
+        Search around the weakest directions (default: with n directions, not with
+        given ones).
+    say : callable, optional
+        Progress lines.
+
+    Returns
+    -------
+    PushAnalysis
+
+    Raises
+    ------
+    ValueError
+        For a bad option or a configuration that cannot be pushed (one line each).
+    """
+    start = _time.perf_counter()
+    given = not np.isscalar(directions)
+    check_push_options(kind, point=point, directions=directions, push_max=push_max, tol=tol, rungs=rungs, at=at)
+    u = _unit(np.asarray(directions, dtype=float).reshape(-1, 3)) if given else push_directions(int(directions), seed)
+    pushes = Pushes(config, kind, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
+    found = push_thresholds(pushes, u, push_max=push_max, tol=tol, rungs=rungs)
+    refined_u = np.zeros((0, 3))
+    refined_t = np.zeros(0)
+    if (not given if refine is None else refine) and np.isfinite(found.threshold).any():
+        refined_u, refined_t = _refine(pushes, u, found.threshold, tol=tol, rungs=rungs, seed=seed)
+    if say is not None:
+        say(f"  push: {pushes.runs} runs in {pushes.batches} batches")
+    return PushAnalysis(name=config.name, kind=kind, units=PUSH_KINDS[kind],
+                        point=pushes.point if kind == "force" else np.zeros(3), at=float(at), tol=float(tol),
+                        ratio=float(ratio), rungs=int(rungs), directions=u, thresholds=found,
+                        refined_directions=refined_u, refined_thresholds=refined_t, engine=engine, runs=pushes.runs,
+                        batches=pushes.batches, seconds=_time.perf_counter() - start)
+
+
+def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float, rungs: int,
+            seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A local search around the weakest directions: :data:`REFINE_ROUNDS` rounds of
+    :data:`REFINE_AROUND` directions at an angle around each of the :data:`REFINE_WORST`
+    weakest found so far, the angle halved each round (from half the directions' mean
+    spacing). Returns the directions tried and their thresholds."""
+    rng = np.random.default_rng(seed)
+    angle = 0.5 * math.sqrt(4 * math.pi / len(u))
+    all_u, all_t = u, threshold
+    tried_u, tried_t = [np.zeros((0, 3))], [np.zeros(0)]
+    for _ in range(REFINE_ROUNDS):
+        worst = np.argsort(all_t, kind="stable")[:REFINE_WORST]
+        worst = worst[np.isfinite(all_t[worst])]
+        if not len(worst):
+            break
+        new = np.concatenate([_around(all_u[i], angle, REFINE_AROUND, rng) for i in worst])
+        top = np.repeat(2.0 * all_t[worst], REFINE_AROUND)
+        found = push_thresholds(pushes, new, push_max=top, tol=tol, rungs=rungs)
+        tried_u.append(new)
+        tried_t.append(found.threshold)
+        all_u = np.concatenate([all_u, new])
+        all_t = np.concatenate([all_t, found.threshold])
+        angle *= 0.5
+    return np.concatenate(tried_u), np.concatenate(tried_t)
+
+
+# -- basin stability ---------------------------------------------------------------------------
+
+#: The recovery rule of drawn initial states: the sweeps' convergence rule.
+STATE_RULE = "recovered = converged by the sweeps' rule (docs/sweeps.md), inside simulation.limits"
+
+
+@dataclass
+class BasinStability:
+    """The fraction of N random perturbations a configuration recovers from (Menck et al.
+    2013), :func:`basin_stability`.
+
+    Attributes
+    ----------
+    name : str
+    perturbation : {"initial_state", "push"}
+        Drawn initial-state entries (the other entries as configured), or pushes of a
+        uniform random direction and a magnitude uniform in a range, from rest at the
+        equilibrium.
+    keys : list of str
+        What was drawn: ``initial_state.omega.0`` ..., or ``push_magnitude``,
+        ``push_direction_x`` ... ``_z``.
+    units : list of str
+    low, high : ndarray, shape (n_keys,)
+        The box drawn from (uniform).
+    values : ndarray, shape (N, n_keys)
+        The draws.
+    recovered : ndarray of bool, shape (N,)
+    confidence : float
+    interval : (float, float)
+        Wilson score interval of the fraction at ``confidence``.
+    separations : list of Separation
+        Per key, how it separates recovering from failing draws (AUC), where both occur.
+    rule : str
+    seed, runs : int
+    seconds : float
+    """
+
+    name: str
+    perturbation: str
+    keys: list
+    units: list
+    low: np.ndarray
+    high: np.ndarray
+    values: np.ndarray
+    recovered: np.ndarray
+    confidence: float
+    interval: tuple
+    separations: list
+    rule: str
+    seed: int
+    engine: str
+    kind: str | None = None
+    seconds: float = 0.0
+
+    @property
+    def draws(self) -> int:
+        return len(self.recovered)
+
+    @property
+    def fraction(self) -> float:
+        """Recovering draws / draws."""
+        return float(self.recovered.mean()) if self.draws else math.nan
+
+    def to_json(self) -> dict[str, Any]:
+        """The ``basin_stability`` record of ``--json``."""
+        return {
+            "perturbation": self.perturbation, "kind": self.kind, "keys": list(self.keys), "units": list(self.units),
+            "low": self.low.tolist(), "high": self.high.tolist(), "draws": self.draws, "seed": self.seed,
+            "recovered": int(self.recovered.sum()), "fraction": self.fraction, "interval": list(self.interval),
+            "confidence": self.confidence, "rule": self.rule,
+            "separations": [{"key": s.parameter, "auc": s.auc, "threshold": s.threshold, "recovered_side": s.stable_side,
+                             "balanced_accuracy": s.balanced_accuracy} for s in self.separations],
+            "engine": self.engine,
+        }
+
+
+def parse_ranges(texts: Sequence[str], layout) -> list[tuple[Any, float, float]]:
+    """(BasinAxis of the entry, lo, hi) of each ``KEY=LO:HI`` (an initial-state entry of
+    ``layout``); ValueError naming the text otherwise."""
+    from .basin import BasinAxis
+
+    out = []
+    for text in texts:
+        key, _, bounds = text.partition("=")
+        parts = bounds.split(":")
+        if not key or len(parts) != 2:
+            raise ValueError(f"--basin-stability {text!r}: expected KEY=LO:HI, e.g. initial_state.omega.0=-3:3")
+        try:
+            lo, hi = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise ValueError(f"--basin-stability {text!r}: LO and HI must be numbers") from None
+        try:
+            axis = BasinAxis.parse(f"{key}={lo!r}:{hi!r}:2", layout)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("--basin", "--basin-stability").replace(":2", "")
+                             .replace("KEY=lo:hi:n", "KEY=LO:HI")) from None
+        out.append((axis, lo, hi))
+    keys = [a.key for a, _, _ in out]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"--basin-stability: an entry is given twice ({', '.join(keys)})")
+    return out
+
+
+def parse_push_range(text: str) -> tuple[float, float]:
+    """(lo, hi) of ``--push-distribution LO:HI`` (0 <= LO < HI, finite)."""
+    parts = str(text).split(":")
+    try:
+        lo, hi = (float(parts[0]), float(parts[1])) if len(parts) == 2 else (math.nan, math.nan)
+    except ValueError:
+        lo = hi = math.nan
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
+        raise ValueError(f"--push-distribution: found {text!r}; expected LO:HI, magnitudes with 0 <= LO < HI")
+    return lo, hi
+
+
+def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = None, push_range=None, point=None,
+                    at: float = 0.0, draws: int = 1000, seed: int = 0, ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                    confidence: float = 0.95, engine: str = "compiled", executor=None) -> BasinStability:
+    """The fraction of ``draws`` random perturbations that recover, with its Wilson interval.
+
+    Parameters
+    ----------
+    config : RunConfig
+        Validated.
+    ranges : sequence of str
+        ``KEY=LO:HI`` initial-state entries drawn uniformly (the other entries as
+        configured); a draw recovers when it converges by the sweeps' rule
+        (:mod:`rbstab.convergence`) without leaving ``simulation.limits``.
+    push : {"force", "torque"}, optional
+        With ``push_range`` (lo, hi) instead of ``ranges``: pushes from rest at the
+        equilibrium, a direction uniform on the sphere and a magnitude uniform in
+        [lo, hi] [N s or N m s], recovering by :data:`RECOVERY_RULE`; ``point`` and ``at``
+        as :class:`Pushes` takes them.
+    draws : int
+        N >= 1.
+    seed : int
+    ratio, confidence : float
+    engine, executor
+        As :func:`push_analysis`.
+
+    Raises
+    ------
+    ValueError
+        For a bad option (one line naming it).
+    """
+    from .robustness import separation, wilson_interval
+
+    start = _time.perf_counter()
+    if int(draws) < 1:
+        raise ValueError(f"-n: found {draws}; expected an integer >= 1 (draws)")
+    if bool(ranges) == (push_range is not None):
+        raise ValueError("--basin-stability: give initial-state entries KEY=LO:HI or --push-distribution LO:HI "
+                         "(with --push force|torque), one of the two")
+    rng = np.random.default_rng(seed)
+    if push_range is not None:
+        if push is None:
+            raise ValueError("--push-distribution: give the quantity pushed with --push force|torque")
+        lo, hi = parse_push_range(push_range) if isinstance(push_range, str) else map(float, push_range)
+        check_push_options(push, point=point, at=at)
+        pushes = Pushes(config, push, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
+        u = _unit(rng.normal(size=(int(draws), 3)))
+        magnitude = rng.uniform(lo, hi, size=int(draws))
+        recovered = pushes.recovered(magnitude[:, None] * u)
+        keys = ["push_magnitude", "push_direction_x", "push_direction_y", "push_direction_z"]
+        units = [PUSH_KINDS[push], "1", "1", "1"]
+        values = np.column_stack([magnitude, u])
+        low, high = np.array([lo, -1.0, -1.0, -1.0]), np.array([hi, 1.0, 1.0, 1.0])
+        perturbation, rule = "push", RECOVERY_RULE
+    else:
+        variant = config.make_variant()
+        axes = parse_ranges(ranges, variant.layout)
+        low = np.array([lo for _, lo, _ in axes])
+        high = np.array([hi for _, _, hi in axes])
+        values = rng.uniform(low, high, size=(int(draws), len(axes)))
+        recovered = _states_recover(config, variant, axes, values, ratio, engine, executor)
+        keys = [a.key for a, _, _ in axes]
+        units = [a.units for a, _, _ in axes]
+        perturbation, rule = "initial_state", STATE_RULE
+    k, n = int(recovered.sum()), len(recovered)
+    found = [separation(key, values[:, i], recovered) for i, key in enumerate(keys)]
+    return BasinStability(name=config.name, perturbation=perturbation, keys=keys, units=units, low=low, high=high,
+                          values=values, recovered=recovered, confidence=float(confidence),
+                          interval=wilson_interval(k, n, confidence), separations=[s for s in found if s is not None],
+                          rule=rule, seed=int(seed), engine=engine, kind=push if push_range is not None else None,
+                          seconds=_time.perf_counter() - start)
+
+
+def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, engine: str, executor) -> np.ndarray:
+    """Whether the runs from the configured initial state with the drawn entries ``values``
+    (N, n_axes) converge by the sweeps' rule."""
+    from ..engine.batch import batch_from_table  # heavy: numba
+    from ..kinematics import GIMBAL_LOCK_ANGLE
+    from .basin import OUTSIDE
+
+    template = {k: v for k, v in config.resolved.items() if k != "name"}
+    if not variant.smooth:
+        raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) runs one at a time; "
+                         "analyse a boundary-layer law (--boundary-layer PHI)")
+    base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
+    batch = _take(base, np.zeros(len(values), dtype=np.int64))
+    blocks = list(variant.layout.blocks)
+    for j, (axis, lo, hi) in enumerate(axes):
+        if axis.block == "theta" and axis.index == 1:
+            limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
+            if max(abs(lo), abs(hi)) >= limit:
+                raise ValueError(f"--basin-stability {axis.key}={lo:g}:{hi:g}: the box reaches |theta_2| >= "
+                                 f"{limit:.4g} rad: {OUTSIDE.split(': ', 1)[1]}")
+        batch.y0[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
+    from ..convergence import converged
+
+    ok, v0, v1 = integrate_batch(batch, engine, executor)
+    return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool)
