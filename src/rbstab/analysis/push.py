@@ -182,6 +182,10 @@ class Pushes:
             raise ValueError(f"{config.name}: disturbances: found {len(own)} entries; a push needs one more and at most "
                              f"{MAX_DISTURBANCES} are allowed")
         variant = config.make_variant()
+        if kind == "force" and variant.name == "permanent" and np.allclose(self.point, variant.body.attachment_point):
+            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of this "
+                             "permanent body (body.attachment_point): a force there moves nothing; push elsewhere "
+                             "or with --push torque")
         if not variant.smooth:
             raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) takes no disturbances; "
                              "analyse a boundary-layer law (--boundary-layer PHI)")

@@ -1,0 +1,165 @@
+"""Push recovery and basin stability (``rbstab analyze --push``, ``--basin-stability``):
+thresholds against an independent planar model, non-monotone recovery flagged, a basin
+known to be whole, files, JSON and bad input."""
+
+from __future__ import annotations
+
+import json
+import math
+import warnings
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import ROOT
+from scipy.integrate import solve_ivp
+
+from rbstab.analysis import read_analysis
+from rbstab.analysis.push import Pushes, basin_stability, push_analysis, push_directions
+from rbstab.analysis.robustness import wilson_interval
+from rbstab.config import config_from_mapping, load_config
+from rbstab_cli.main import cli
+
+PENDULUM = str(ROOT / "configs/examples/saturated_pendulum.yaml")
+
+# the pendulum of that file: m, L (pivot below the centre of mass), g, J_xx, K_r1, L_r1, |N_1| limit
+M, LENGTH, G, J_XX, K, D, N_MAX = 2.0, 0.5, 9.81, 0.05, 200.0, 10.0, 4.0
+J_P = J_XX + M * LENGTH**2  # about the pivot
+T_END, RATIO = 4.0, 1e-3
+
+
+@pytest.fixture(scope="module")
+def pendulum():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_config(PENDULUM)
+        data = dict(config.resolved)
+        data["simulation"] = {**data["simulation"], "n_samples": 201}
+        return config_from_mapping(data)
+
+
+def _planar_recovers(impulse: float) -> bool:
+    """The pendulum tilting about its x axis alone, written on its own: J_p theta'' =
+    clip(-K theta - D theta', +-N_max) + m g L sin(theta), pushed at rest by a torque
+    impulse (theta'(0) = impulse / J_p); it recovers when |v(t_end)| <= ratio dT + 1e-12 J,
+    v = J_p theta'^2 / 2 + K theta^2 / 2 - m g L (1 - cos theta), dT = impulse^2 / (2 J_p)."""
+
+    def rhs(t, y):
+        torque = min(max(-K * y[0] - D * y[1], -N_MAX), N_MAX)
+        return [y[1], (torque + M * G * LENGTH * math.sin(y[0])) / J_P]
+
+    w0 = impulse / J_P
+    theta, w = solve_ivp(rhs, (0.0, T_END), [0.0, w0], method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]
+    v = 0.5 * J_P * w * w + 0.5 * K * theta * theta - M * G * LENGTH * (1.0 - math.cos(theta))
+    return abs(v) <= RATIO * 0.5 * J_P * w0 * w0 + 1e-12
+
+
+def test_the_kinetic_energy_of_a_push_is_that_of_the_jump(pendulum):
+    """dT of a torque impulse L about x on the pinned body at rest: L^2 / (2 J_p)."""
+    pushes = Pushes(pendulum, "torque")
+    np.testing.assert_allclose(pushes.energy(np.array([[0.7, 0.0, 0.0]])), [0.49 / (2 * J_P)], rtol=1e-12)
+
+
+def test_threshold_matches_an_independent_planar_model_and_flags_non_monotone_recovery(pendulum):
+    """Along x, with the ladder's top at 2 N m s: the threshold is the planar model's first
+    fatal impulse from below within the tolerance, and a recovering rung above it (the
+    planar model recovers there too) flags the direction as not monotone."""
+    found = push_analysis(pendulum, "torque", directions=[[1.0, 0.0, 0.0]], push_max=2.0, tol=1e-3, rungs=16)
+    threshold = float(found.threshold[0])
+    # the planar model: scan from below to the first fatal impulse, then bisect
+    grid = np.arange(0.05, 2.0, 0.05)
+    fatal = next(p for p in grid if not _planar_recovers(p))
+    lo, hi = fatal - 0.05, fatal
+    while hi - lo > 1e-5 * hi:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _planar_recovers(mid) else (lo, mid)
+    assert abs(threshold - hi) <= 1.5e-3 * hi, (threshold, hi)
+    above = [p for p, ok in zip(found.thresholds.ladder[0], found.thresholds.ladder_recovered[0]) if ok and p > threshold]
+    assert above and _planar_recovers(above[0])  # the island above is the physics', not the engine's
+    assert not found.thresholds.monotone[0] and not found.monotone
+
+
+def test_doubling_brackets_the_threshold_and_every_direction_advances_together(pendulum):
+    """Without --push-max the doubling finds each direction's top; the thresholds of two
+    directions symmetric under the body's symmetry (x, y: J_xx = J_yy, K_r, L_r alike)
+    agree, and the local search is not run for given directions."""
+    found = push_analysis(pendulum, "torque", directions=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], tol=1e-3)
+    t = found.threshold
+    assert np.all(np.isfinite(t)) and abs(t[0] - t[1]) <= 1e-3 * t[0]
+    assert np.all(found.thresholds.recovering < t) and np.all(t - found.thresholds.recovering <= 1e-3 * t)
+    assert len(found.refined_thresholds) == 0
+    assert found.batches < found.runs  # one batch a step, not a run
+
+
+def test_directions_are_quasi_uniform_and_seeded():
+    u = push_directions(200, seed=3)
+    np.testing.assert_allclose(np.linalg.norm(u, axis=1), 1.0, rtol=1e-12)
+    assert np.allclose(u, push_directions(200, seed=3)) and not np.allclose(u, push_directions(200, seed=4))
+    assert np.linalg.norm(u.mean(axis=0)) < 0.02  # balanced over the sphere
+    # no direction far from the others: the largest nearest-neighbour angle is near the mean spacing
+    cos = np.clip(u @ u.T - 2 * np.eye(len(u)), -1, 1)
+    assert np.max(np.arccos(cos.max(axis=1))) < 2.0 * math.sqrt(4 * math.pi / len(u))
+
+
+def test_basin_stability_of_a_box_inside_the_basin_is_one_with_the_wilson_bound(pendulum):
+    """Every tilt in [-0.2, 0.2] rad recovers (the edge is arcsin(N_max / (m g L)) = 0.42 rad)."""
+    found = basin_stability(pendulum, ranges=["initial_state.theta.0=-0.2:0.2"], draws=120, seed=1)
+    assert found.fraction == 1.0 and found.recovered.all()
+    assert found.interval == pytest.approx(wilson_interval(120, 120))
+    assert found.interval[0] < 1.0 and not found.separations
+
+
+def test_basin_stability_over_a_box_across_the_edge_separates_by_the_tilt(pendulum):
+    """Tilts in [0, 0.8] rad: those below the edge recover, above fall; the tilt separates them."""
+    found = basin_stability(pendulum, ranges=["initial_state.theta.0=0:0.8"], draws=80, seed=2)
+    edge = math.asin(N_MAX / (M * G * LENGTH))
+    theta = found.values[:, 0]
+    assert np.all(found.recovered[theta < edge - 0.02]) and not np.any(found.recovered[theta > edge + 0.02])
+    (s,) = found.separations
+    assert s.stable_side == "below" and abs(s.threshold - edge) < 0.05 and s.auc < 0.05
+
+
+def test_cli_push_and_stability_files_and_json(tmp_path):
+    out = tmp_path / "analysis"
+    result = CliRunner().invoke(cli, ["analyze", PENDULUM, "-o", str(out), "--json", "--no-certificate",
+                                      "--no-simulation", "--set", "simulation.n_samples=201", "--push", "torque",
+                                      "--push-directions", "6", "--push-tol", "1e-2", "-j", "1"],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.stdout.splitlines()[-1])
+    push = record["push"]
+    assert push["units"] == "N m s" and len(push["directions"]) == 6 and len(push["threshold"]) == 6
+    assert push["minimum"]["threshold"] <= min(t for t in push["threshold"] if t is not None)
+    assert "smallest fatal torque push" in result.stderr + result.stdout
+    ds = read_analysis(out / "saturated_pendulum.analysis.nc")
+    assert ds["push_threshold"].attrs["units"] == "N m s" and ds.attrs["push_kind"] == "torque"
+    assert ds["push_ladder_recovered"].shape == (6, 16)
+    np.testing.assert_allclose(ds["push_threshold"].values, [t if t is not None else np.inf for t in push["threshold"]])
+
+    result = CliRunner().invoke(cli, ["analyze", PENDULUM, "-o", str(out), "--json", "--no-certificate",
+                                      "--no-simulation", "--set", "simulation.n_samples=201", "--push", "torque",
+                                      "--push-distribution", "0:0.5", "-n", "40", "-j", "1"], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.stdout.splitlines()[-1])
+    assert "push" not in record and record["basin_stability"]["draws"] == 40
+    assert record["basin_stability"]["fraction"] == 1.0  # far below every threshold
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--push", "torque", "--push-max", "0"], "--push-max: found 0.0; expected a magnitude > 0"),
+    (["--push", "torque", "--push-direction", "0,0,0"], "--push-direction: found 0,0,0; expected a non-zero"),
+    (["--push", "torque", "--push-point", "0,0,1"], "--push-point: a torque has no point of application"),
+    (["--push", "force", "--push-point", "0,0,-0.5"], "the pin of this permanent body"),
+    (["--push-directions", "8"], "--push-directions: give it with --push"),
+    (["--push", "torque", "--push-directions", "0"], "--push-directions: found 0; expected an integer >= 1"),
+    (["--basin-stability", "initial_state.theta.0=0:0.1", "-n", "0"], "-n: found 0; expected an integer >= 1"),
+    (["--basin-stability", "initial_state.x.0=0:0.1"], "not a state of this variant"),
+    (["--basin-stability", "initial_state.theta.1=-2:2"], "reaches |theta_2|"),
+    (["--push", "torque", "--push-at", "9"], "--push-at: found 9; expected a time in [0, simulation.t_end)"),
+])
+def test_bad_push_options_are_refused_in_one_line(tmp_path, args, expected):
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["analyze", PENDULUM, "-o", str(out), "--no-certificate", "--no-simulation",
+                                      *args])
+    assert result.exit_code != 0 and expected in result.output, result.output
+    assert "Traceback" not in result.output and not out.exists()
