@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 
 import click
@@ -154,6 +155,51 @@ def _check_push_targets(configs, ranges) -> None:
         raise click.ClickException("\n".join(problems))
 
 
+def _split_specs(paths) -> tuple[list[str], list[str]]:
+    """(config paths, sweep-spec paths): a YAML file with a ``base`` is a sweep spec."""
+    from rbstab.config import ConfigError
+    from rbstab.config.yaml_io import read_yaml_file
+
+    configs, specs = [], []
+    for path in paths:
+        try:
+            data = read_yaml_file(path)
+        except ConfigError:
+            data = None  # the config loader says what is wrong with it
+        (specs if isinstance(data, dict) and "base" in data else configs).append(path)
+    return configs, specs
+
+
+def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samples, seed, certificate, overwrite,
+                  overrides, as_json) -> None:
+    """Push recovery and basin stability at every configuration of the spec ``path``."""
+    from rbstab.analysis.dataset import analysis_path, write_analysis  # heavy: numba, numpy
+    from rbstab.analysis.recovery import RECOVERY_SUFFIX, recovery_across  # heavy: numba, numpy
+    from rbstab.sweep import LocalExecutor, SweepSpecError, load_spec  # heavy: numba, pandas, pydantic
+
+    console = get_console()
+    try:
+        spec = load_spec(path, overrides)
+    except SweepSpecError as exc:
+        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + "\n".join("  " + e for e in exc.errors))
+    workers = LocalExecutor(jobs, task="a push analysis") if jobs > 1 and engine == DEFAULT_ENGINE else None
+    try:
+        with workers if workers is not None else contextlib.nullcontext():
+            result = recovery_across(spec, push=push, basin_stability=stability, output=out, ratio=ratio,
+                                     engine=engine, executor=workers, seed=seed, certificate=certificate,
+                                     certificate_samples=min(samples, 2000), overwrite=overwrite, say=console.out)
+    except SweepSpecError as exc:
+        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + "\n".join("  " + e for e in exc.errors))
+    except ValueError as exc:
+        raise click.ClickException(f"{spec.name}: {exc}")
+    target = write_analysis(result, analysis_path(out, f"{spec.name}{RECOVERY_SUFFIX}"), command_line=command_line())
+    console.out(f"  -> {target} ({result.computed} computed now, {len(result.records) - result.computed} read back "
+                f"from {result.folder})")
+    if as_json:
+        console.emit({"kind": "recovery", "name": result.name, "keys": result.keys,
+                      "values": {k: v.tolist() for k, v in result.values.items()}, "points": result.records})
+
+
 @click.command("analyze")
 @click.argument("configs", nargs=-1, type=click.Path(dir_okay=False))
 @output_option("results/analysis", "Folder for the <name>.analysis.nc files.")
@@ -246,6 +292,13 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
                                                     push_distribution, draws, seed, confidence)
     if basin or push_options or stability_options:
         check_engine(engine)
+    configs, specs = _split_specs(configs)
+    if specs:
+        if not (push_options or stability_options):
+            raise click.UsageError(f"{specs[0]}: a sweep spec is analysed with --push and/or --basin-stability / "
+                                   "--push-distribution (the curves over its configurations)")
+        if basin or sweeps:
+            raise click.UsageError("--basin and --robustness take configs, not a sweep spec")
     loaded = load_configs(configs, overrides)
     _check_push_targets(loaded, stability_ranges)
     axes = _parse_axes(basin, loaded)
@@ -272,6 +325,10 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         say(f"  -> {path}")
         if as_json:
             console.emit({"kind": "configuration", **result.to_json()})
+    for spec in specs:
+        _analyse_spec(spec, out, push_options, stability_options, ratio=ratio, engine=engine,
+                      jobs=jobs or default_jobs(), samples=samples, seed=seed, certificate=not no_certificate,
+                      overwrite=overwrite, overrides=overrides, as_json=as_json)
     for folder in sweeps:
         result = robustness(folder, confidence=confidence)
         path = write_analysis(result, analysis_path(out, f"{result.sweep}.robustness"), command_line=command_line())

@@ -163,3 +163,26 @@ def test_bad_push_options_are_refused_in_one_line(tmp_path, args, expected):
                                       *args])
     assert result.exit_code != 0 and expected in result.output, result.output
     assert "Traceback" not in result.output and not out.exists()
+
+
+def test_a_spec_gives_curves_over_its_configurations_resumes_and_refuses_other_options(tmp_path):
+    """``rbstab analyze SPEC --push``: one record a configuration, the curves file with the
+    varied key as a coordinate; the threshold grows with the torque limit (more torque holds
+    a harder push), the certified push is below the sampled one; run again, nothing is
+    computed; with other options, refused without --overwrite."""
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(f"name: limits\nbase: {PENDULUM}\ngrid:\n  controller.saturation.torque_n: [[2.0, 2.0, .inf], "
+                    "[4.0, 4.0, .inf], [6.0, 6.0, .inf]]\n")
+    out = tmp_path / "analysis"
+    args = ["analyze", str(spec), "-o", str(out), "--set", "simulation.n_samples=201", "--push", "torque",
+            "--push-direction", "1,0,0", "--push-tol", "1e-2", "-j", "1", "--samples", "500"]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    ds = read_analysis(out / "limits.recovery.analysis.nc")
+    assert ds.attrs["kind"] == "recovery" and "run_id" in ds["push_minimum"].coords
+    t, certified = ds["push_minimum"].values, ds["push_certified"].values
+    assert np.all(np.diff(t) > 0) and np.all(certified < t) and np.all(certified > 0)
+    again = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert again.exit_code == 0 and "0 computed now, 3 read back" in again.output
+    other = CliRunner().invoke(cli, [*args[:-2], "--samples", "400"])
+    assert other.exit_code != 0 and "made with other options" in other.output and "--overwrite" in other.output

@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time as _time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any, Callable
@@ -165,7 +166,7 @@ class Pushes:
 
     def __init__(self, config, kind: str, *, point=None, at: float = 0.0, ratio: float = DEFAULT_LYAPUNOV_RATIO,
                  engine: str = "compiled", executor=None) -> None:
-        from ..config import INITIAL_STATE_BLOCKS, ConfigError, config_from_mapping  # heavy: pydantic
+        from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
         from ..engine.batch import batch_from_table  # heavy: numba
         from ..model import MAX_DISTURBANCES
         from ..variants.disturbances import apply_impulses  # heavy: numba
@@ -204,7 +205,9 @@ class Pushes:
             entry["point"] = self.point.tolist()
         data = {**resolved, "initial_state": initial, "disturbances": own + [entry]}
         try:
-            pushed = config_from_mapping(data, source=f"{config.name} pushed")
+            with warnings.catch_warnings():  # the configuration's own warnings were shown with it
+                warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+                pushed = config_from_mapping(data, source=f"{config.name} pushed")
         except ConfigError as exc:
             raise ValueError(f"{config.name}: " + "; ".join(exc.errors)) from None
         self.config = pushed

@@ -1,0 +1,316 @@
+"""Push recovery and basin stability across parameters: the questions of
+:mod:`rbstab.analysis.push` at every configuration of a sweep spec (``rbstab analyze
+SPEC.yaml --push ...``), with the Lyapunov certificate's inner estimate beside them.
+
+At each configuration (a run of the spec's table: grid, zip, random or table), as asked:
+
+- the smallest fatal push over the directions (:func:`~rbstab.analysis.push.push_analysis`),
+  and the *certified* one: the certificate's sublevel set {v <= c}
+  (:mod:`rbstab.analysis.certificate`) holds every push whose energy dT = v just after it is
+  at most c, so along u the pushes up to sqrt(c / dT(u)) recover by the certificate
+  (``push_certified``: its minimum over the directions);
+- the basin stability (:func:`~rbstab.analysis.push.basin_stability`), and among the draws
+  inside {v <= c} (v of the drawn state, or dT of the drawn push) the fraction that
+  recovered: 1 where the certificate's estimate is right.
+
+A folder ``<output>/<spec name>.recovery/`` keeps one JSON record a configuration
+(``points/<run_id>.json``, written when it is done): a command stopped and started again
+computes only the configurations without one, and refuses records made with other options
+(``--overwrite`` replaces them). The curves over the configurations go to
+``<output>/<spec name>.recovery.analysis.nc`` (``kind = "recovery"``): a ``point``
+dimension, the varied keys as its coordinates.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import time as _time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
+
+__all__ = ["Recovery", "recovery_across", "recovery_content", "RECOVERY_SUFFIX"]
+
+#: Suffix of the folder of records and of the curves file.
+RECOVERY_SUFFIX = ".recovery"
+#: Sampled states of each configuration's certificate.
+CERTIFICATE_SAMPLES = 2000
+
+
+@dataclass
+class Recovery:
+    """The records of every configuration of a spec (:func:`recovery_across`).
+
+    Attributes
+    ----------
+    name : str
+        The spec's name.
+    keys : list of str
+        Its varied keys (columns), in order; a vector key as one key an entry.
+    values : dict of str to ndarray
+        Key -> its value at each configuration, shape (n,).
+    records : list of dict
+        Per configuration: ``run_id``, ``push`` (``minimum``, ``direction``, ``median``,
+        ``certified``, ``non_monotone``, ``units``), ``stability`` (``fraction``, ``low``,
+        ``high``, ``draws``, ``inside``, ``inside_recovered``), ``sublevel`` c [J],
+        ``sublevel_bound``, ``seconds``; an entry not asked for is absent.
+    options : dict
+        What was asked (the push and basin-stability options, ratio, engine excluded).
+    folder : Path
+    computed : int
+        Configurations computed by this call (the others were read back).
+    seconds : float
+    """
+
+    name: str
+    keys: list
+    values: dict
+    records: list
+    options: dict
+    folder: Path
+    computed: int = 0
+    seconds: float = 0.0
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its curves file (:func:`recovery_content`)."""
+        return recovery_content(self, command_line)
+
+
+def _options_hash(options: Mapping[str, Any]) -> str:
+    text = json.dumps(options, sort_keys=True, default=lambda x: np.asarray(x).tolist())
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
+    """The record of one configuration (the function a worker runs): ``item`` its
+    (run_id, resolved configuration)."""
+    from ..config import config_from_mapping  # heavy: pydantic
+    from .certificate import certify  # heavy: numba
+    from .linearise import linearise  # heavy: numba
+    from .push import Pushes, basin_stability, push_analysis
+
+    start = _time.perf_counter()
+    run_id, resolved = item
+    config = config_from_mapping(resolved, source=run_id)
+    variant = config.make_variant()
+    lin = linearise(variant)
+    record: dict[str, Any] = {"run_id": run_id}
+    c, bound = math.nan, ""
+    if options.get("certificate", True) and variant.smooth:
+        cert = certify(variant, lin, gimbal_margin=config.simulation.gimbal_margin,
+                       n_samples=int(options.get("certificate_samples", CERTIFICATE_SAMPLES)), seed=options["seed"])
+        c, bound = (float(cert.sublevel), cert.sublevel_bound) if cert.positive_definite else (0.0, cert.sublevel_bound)
+    record["sublevel"], record["sublevel_bound"] = c, bound
+    ratio = options["ratio"]
+    push = options.get("push")
+    if push:
+        found = push_analysis(config, **push, ratio=ratio, engine=engine)
+        pushes = Pushes(config, push["kind"], point=push.get("point"), at=push.get("at", 0.0))
+        unit = pushes.energy(found.directions)
+        certified = float(np.min(np.sqrt(c / unit))) if c >= 0 and math.isfinite(c) else math.nan
+        t = found.threshold
+        record["push"] = {"minimum": found.minimum, "direction": found.minimum_direction.tolist(),
+                          "grid_minimum": found.grid_minimum,
+                          "median": float(np.median(t[np.isfinite(t)])) if np.isfinite(t).any() else math.inf,
+                          "certified": certified, "non_monotone": int((~found.thresholds.monotone).sum()),
+                          "directions": len(t), "units": found.units, "runs": found.runs}
+    stability = options.get("basin_stability")
+    if stability:
+        found = basin_stability(config, **stability, ratio=ratio, engine=engine)
+        if found.perturbation == "push":
+            pushes = Pushes(config, found.kind, point=stability.get("point"), at=stability.get("at", 0.0))
+            start_v = pushes.energy(found.values[:, 0:1] * found.values[:, 1:4])
+        else:
+            y0 = np.repeat(variant.initial_state(config.initial_state)[None], found.draws, axis=0)
+            blocks = list(variant.layout.blocks)
+            for j, key in enumerate(found.keys):
+                _, block_key, index = key.split(".")
+                from ..config import INITIAL_STATE_BLOCKS
+
+                y0[:, 3 * blocks.index(INITIAL_STATE_BLOCKS[block_key]) + int(index)] = found.values[:, j]
+            start_v = variant.lyapunov(y0)
+        inside = start_v <= c if math.isfinite(c) else np.zeros(found.draws, dtype=bool)
+        record["stability"] = {"fraction": found.fraction, "low": found.interval[0], "high": found.interval[1],
+                               "draws": found.draws, "recovered": int(found.recovered.sum()),
+                               "inside": int(inside.sum()), "inside_recovered": int((inside & found.recovered).sum())}
+    record["seconds"] = _time.perf_counter() - start
+    return record
+
+
+def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stability: Mapping[str, Any] | None = None,
+                    output: str | os.PathLike = "results/analysis", ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                    engine: str = "compiled", executor=None, seed: int = 0, certificate: bool = True,
+                    certificate_samples: int = CERTIFICATE_SAMPLES, overwrite: bool = False,
+                    say: Callable[[str], None] | None = None) -> Recovery:
+    """Push recovery and basin stability at every configuration of ``spec``.
+
+    Parameters
+    ----------
+    spec : SweepSpec or path-like
+        A sweep spec (:func:`rbstab.sweep.load_spec`).
+    push, basin_stability : mapping, optional
+        Keyword arguments of :func:`~rbstab.analysis.push.push_analysis` and
+        :func:`~rbstab.analysis.push.basin_stability` (one of them at least).
+    output : path-like
+        Where ``<name>.recovery/`` goes.
+    ratio : float
+        Of the recovery rules.
+    engine : {"compiled", "cuda"}
+    executor : rbstab.sweep.executors.Executor, optional
+        Takes the configurations (one whole configuration a task); None: this process.
+    seed : int
+        Of the certificates' sampling.
+    certificate : bool
+        Compute each configuration's certificate (its sublevel c; NaN without).
+    overwrite : bool
+        Replace records made with other options (without it: refused).
+
+    Raises
+    ------
+    ValueError
+        For records of other options in the folder (without ``overwrite``), or neither
+        question asked.
+    """
+    from ..io.atomic import atomic_path
+    from ..sweep import load_spec  # heavy: pydantic, numba
+    from ..sweep.table import plan_table  # heavy: numba
+
+    if not push and not basin_stability:
+        raise ValueError("a sweep spec is analysed with --push and/or --basin-stability / --push-distribution")
+    start = _time.perf_counter()
+    if isinstance(spec, (str, os.PathLike)):
+        spec = load_spec(spec)
+    table = plan_table(spec)
+    options = {"push": dict(push) if push else None, "basin_stability": dict(basin_stability) if basin_stability else None,
+               "ratio": float(ratio), "seed": int(seed), "certificate": bool(certificate),
+               "certificate_samples": int(certificate_samples)}
+    token = _options_hash(options)
+    folder = Path(output) / f"{spec.name}{RECOVERY_SUFFIX}"
+    points = folder / "points"
+    done: dict[str, dict] = {}
+    other = []
+    for path in sorted(points.glob("*.json")) if points.is_dir() else []:
+        try:
+            record = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue  # unreadable: computed again
+        if record.get("options") == token:
+            done[record["run_id"]] = record
+        else:
+            other.append(path)
+    if other and not overwrite:
+        raise ValueError(f"{folder} holds {len(other)} records made with other options: not replaced; --overwrite "
+                         "replaces them, -o DIR writes elsewhere")
+    for path in other:
+        path.unlink()
+    run_ids = [r.decode() for r in table.run_id]
+    todo = [(rid, table.resolved(i)) for i, rid in enumerate(run_ids) if rid not in done]
+    if say is not None:
+        say(f"{spec.name}: {table.n} configurations, {len(done)} done before, {len(todo)} to compute")
+
+    def keep(record: dict) -> None:
+        record["options"] = token
+        with atomic_path(points / f"{record['run_id']}.json") as tmp:
+            tmp.write_text(json.dumps(record, default=float))
+        done[record["run_id"]] = record
+        if say is not None:
+            say(_line(record, len(done), table.n))
+
+    if executor is None or len(todo) < 2:
+        for item in todo:
+            keep(_point(item, options, engine))
+    else:
+        executor.plan(len(todo))
+        for item, record, exc in executor.imap_unordered(_point, todo, options, engine):
+            if exc is not None:
+                raise exc
+            keep(record)
+    values = {}
+    for key in table.keys:
+        column = np.asarray(table.columns[key])
+        if column.dtype == object:
+            values[key] = column.astype(str)
+        elif column.ndim == 1:
+            values[key] = column
+        else:  # a vector or matrix key: one coordinate an entry (key.0, key.1 ...)
+            flat = column.reshape(len(column), -1)
+            for j in range(flat.shape[1]):
+                values[f"{key}.{j}"] = flat[:, j]
+    records = [done[rid] for rid in run_ids]
+    return Recovery(name=spec.name, keys=list(values), values=values, records=records, options=options,
+                    folder=folder, computed=len(todo), seconds=_time.perf_counter() - start)
+
+
+def _line(record: dict, k: int, n: int) -> str:
+    """One progress line of a configuration's record."""
+    parts = [f"  [{k}/{n}] {record['run_id']}:"]
+    p = record.get("push")
+    if p:
+        parts.append(f"smallest fatal push {p['minimum']:.4g} {p['units']} (certified {p['certified']:.3g})")
+    s = record.get("stability")
+    if s:
+        parts.append(f"basin stability {s['fraction']:.1%} ({s['low']:.1%} - {s['high']:.1%})")
+    return " ".join(parts)
+
+
+def recovery_content(result: Recovery, command_line: str | None = None) -> tuple[dict, dict, dict]:
+    """(coordinates, variables, global attributes) of the curves file (module docstring)."""
+    from ..io.metadata import provenance_attributes
+    from .dataset import FORMAT, _var
+
+    n = len(result.records)
+    coords = {"run_id": _var(("point",), np.array([r["run_id"] for r in result.records], dtype=object), "1",
+                             "the configuration's run id in the spec's table")}
+    for key in result.keys:
+        values = np.asarray(result.values[key])
+        coords[key] = _var(("point",), values if values.dtype.kind in "fiub" else values.astype(object), "1",
+                           f"varied key {key}")
+        coords[key][2]["config_key"] = key
+    data: dict[str, tuple] = {
+        "sublevel": _var(("point",), [r["sublevel"] for r in result.records], "J",
+                         "c of the certificate's sampling-based inner estimate {v <= c}"),
+    }
+    push = [r.get("push") for r in result.records]
+    if any(push):
+        units = next(p["units"] for p in push if p)
+        get = lambda k: [p[k] if p else math.nan for p in push]  # noqa: E731
+        data.update({
+            "push_minimum": _var(("point",), get("minimum"), units, "smallest fatal push over the directions"),
+            "push_minimum_direction": _var(("point", "axis"), [p["direction"] if p else [math.nan] * 3 for p in push],
+                                           "1", "its direction"),
+            "push_median": _var(("point",), get("median"), units, "median over the directions of the smallest "
+                                "fatal push"),
+            "push_certified": _var(("point",), get("certified"), units,
+                                   "smallest push the certificate holds: min over the directions of sqrt(c / dT(u))"),
+            "push_non_monotone": _var(("point",), get("non_monotone"), "1",
+                                      "directions along which recovery was not monotone in the magnitude"),
+        })
+    stability = [r.get("stability") for r in result.records]
+    if any(stability):
+        get = lambda k: [s[k] if s else math.nan for s in stability]  # noqa: E731
+        data.update({
+            "stability_fraction": _var(("point",), get("fraction"), "1", "basin stability: recovered draws / draws"),
+            "stability_interval_low": _var(("point",), get("low"), "1", "Wilson interval, low end"),
+            "stability_interval_high": _var(("point",), get("high"), "1", "Wilson interval, high end"),
+            "stability_inside": _var(("point",), get("inside"), "1", "draws inside {v <= c}"),
+            "stability_inside_recovered": _var(("point",), get("inside_recovered"), "1",
+                                               "of them, draws that recovered"),
+        })
+    attrs = {"rbstab_format": FORMAT, "kind": "recovery", "name": result.name, "points": n,
+             "options": json.dumps(result.options, default=lambda x: np.asarray(x).tolist()),
+             **provenance_attributes(f"rbstab analyze {result.name}: push recovery across parameters",
+                                     command_line=command_line)}
+    coords["axis"] = _var(("axis",), np.array(["x", "y", "z"], dtype=object), "1", "vector component")
+    along = " ".join(name for name in coords if name != "axis")
+    for _, _, var_attrs in data.values():
+        var_attrs["coordinates"] = along  # CF: the point's run id and varied values
+    return coords, data, attrs
+
