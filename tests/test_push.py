@@ -186,3 +186,20 @@ def test_a_spec_gives_curves_over_its_configurations_resumes_and_refuses_other_o
     assert again.exit_code == 0 and "0 computed now, 3 read back" in again.output
     other = CliRunner().invoke(cli, [*args[:-2], "--samples", "400"])
     assert other.exit_code != 0 and "made with other options" in other.output and "--overwrite" in other.output
+
+
+def test_report_draws_the_sphere_the_ladder_and_the_curves(tmp_path):
+    out = tmp_path / "analysis"
+    base = ["analyze", PENDULUM, "-o", str(out), "--no-certificate", "--no-simulation", "--set",
+            "simulation.n_samples=201", "-j", "1"]
+    assert CliRunner().invoke(cli, [*base, "--push", "torque", "--push-directions", "4", "--push-tol", "1e-2"]).exit_code == 0
+    assert CliRunner().invoke(cli, [*base, "--set", "name=drawn", "--basin-stability", "initial_state.theta.0=0:0.8",
+                                    "-n", "30"]).exit_code == 0
+    report = tmp_path / "report"
+    result = CliRunner().invoke(cli, ["report", str(out), "-o", str(report)], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    figures = {p.name for p in (report / "figures").iterdir()}
+    assert {"analysis_saturated_pendulum_push_sphere.png", "analysis_saturated_pendulum_push_ladder.png",
+            "analysis_drawn_stability.png"} <= figures
+    page = (report / "index.html").read_text()
+    assert "smallest fatal torque push over 4 directions" in page and "basin stability: " in page

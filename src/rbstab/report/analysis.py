@@ -3,7 +3,8 @@
 Per configuration: the verdict and notes, the equilibrium and rest check, the eigenvalue
 table and the pole plot, the slowest time constant beside the simulation's time to
 converge, the certificate table and the sampled dv/dt against v, and the basin map with
-the sublevel-set contour. Per robustness file: the stable fraction with its interval per
+the sublevel-set contour, the pushes and the basin stability (:mod:`rbstab.report.push`).
+Per curves file of a sweep spec: :func:`rbstab.report.push.recovery_section`. Per robustness file: the stable fraction with its interval per
 group, the separating parameters and a figure of the runs over the two strongest.
 
 The files are read with :func:`rbstab.analysis.dataset.read_analysis` (the module that
@@ -22,6 +23,7 @@ from ..convergence import RULE
 from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
+from .push import push_blocks, recovery_section, stability_blocks
 from .render import Section, Table
 from .tables import format_value
 
@@ -80,6 +82,8 @@ def analysis_sections(paths: Sequence[Path], out: FigureWriter) -> list[Section]
     for path, ds in zip(paths, _read(paths)):
         if ds.attrs.get("kind") == "robustness":
             sections.append(_robustness_section(ds, path, out))
+        elif ds.attrs.get("kind") == "recovery":
+            sections.append(recovery_section(ds, path, out))
         else:
             sections.append(_configuration_section(ds, path, out))
     return sections
@@ -294,6 +298,7 @@ def _configuration_section(ds, path: Path, out: FigureWriter) -> Section:
     if "basin_outcome" in ds:
         s.blocks.append(_basin_facts(ds))
         s.blocks.append(_basin_figure(ds, out, stem, name))
+    s.blocks += push_blocks(ds, out, stem, name) + stability_blocks(ds, out, stem, name)
     return s
 
 
