@@ -300,46 +300,59 @@ class Thresholds:
     ladder_recovered: np.ndarray
 
 
-def _bracket_by_doubling(pushes: Pushes, u: np.ndarray, unit_energy: np.ndarray) -> np.ndarray:
-    """The top of each direction's ladder: the first fatal magnitude of a doubling from
-    :data:`FIRST_PUSH` (halving while fatal); inf where none is fatal up to
-    :data:`LARGEST_PUSH`, :data:`SMALLEST_PUSH` where even that is fatal."""
+def _bracket_by_doubling(pushes: Pushes, u: np.ndarray, unit_energy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(top, floor) of each direction's ladder: ``top`` the first fatal magnitude of a
+    doubling from :data:`FIRST_PUSH` (halving while fatal), inf where none is fatal up to
+    :data:`LARGEST_PUSH`; ``floor`` the smallest magnitude the doubling saw recover (every
+    floor 2^k below top recovered)."""
     d = len(u)
     s = np.full(d, FIRST_PUSH)
     lo = np.zeros(d)
+    floor = np.full(d, np.inf)
     hi = np.full(d, np.inf)
     active = np.ones(d, dtype=bool)
     while active.any():
         rows = np.flatnonzero(active)
         rec = pushes.recovered(s[rows, None] * u[rows], s[rows] ** 2 * unit_energy[rows])
         lo[rows[rec]] = s[rows[rec]]
+        floor[rows[rec]] = np.minimum(floor[rows[rec]], s[rows[rec]])
         hi[rows[~rec]] = s[rows[~rec]]
         s[rows] = np.where(rec, 2.0 * s[rows], 0.5 * s[rows])
         active = ((lo == 0) | np.isinf(hi)) & (s <= LARGEST_PUSH) & (s >= SMALLEST_PUSH)
-    return np.where(np.isinf(hi), np.inf, hi)
+    return hi, floor
+
+
+def _known_recovering(ladder: np.ndarray, top: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """Which rungs of ``ladder`` (d, rungs) the doubling saw recover: floor 2^k < top."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        k = np.log2(ladder / floor[:, None])
+    return np.isfinite(k) & (k >= 0) & (k == np.round(k)) & (ladder < top[:, None])
 
 
 def push_thresholds(pushes: Pushes, directions: np.ndarray, *, push_max: float | np.ndarray | None = None,
                     tol: float = DEFAULT_TOL, rungs: int = DEFAULT_RUNGS) -> Thresholds:
     """The smallest fatal push of each direction (module docstring): a ladder to
-    ``push_max`` (per direction, or found by doubling), then bisection to ``tol``."""
+    ``push_max`` (per direction, or found by doubling), then bisection to ``tol``. The
+    rungs the doubling already ran are not run again."""
     u = _unit(np.asarray(directions, dtype=float).reshape(-1, 3))
     d = len(u)
     unit_energy = pushes.energy(u)
     if push_max is None:
-        top = _bracket_by_doubling(pushes, u, unit_energy)
+        top, floor = _bracket_by_doubling(pushes, u, unit_energy)
     else:
-        top = np.broadcast_to(np.asarray(push_max, dtype=float), (d,)).copy()
+        top, floor = np.broadcast_to(np.asarray(push_max, dtype=float), (d,)).copy(), np.full(d, np.inf)
     finite_top = np.where(np.isfinite(top), top, LARGEST_PUSH)
     ladder = finite_top[:, None] * (np.arange(1, rungs + 1) / rungs)[None, :]
     recovered = np.ones((d, rungs), dtype=bool)
-    run = np.isfinite(top)
-    rows = np.flatnonzero(run)
+    if push_max is None:  # the top itself was fatal in the doubling
+        recovered[:, -1] = ~np.isfinite(top)
+    known = _known_recovering(ladder, top, floor)
+    known[:, -1] |= push_max is None
+    run = np.isfinite(top)[:, None] & ~known
+    rows, cols = np.nonzero(run)
     if len(rows):
-        mags = ladder[rows].ravel()
-        rec = pushes.recovered(np.repeat(u[rows], rungs, axis=0) * mags[:, None],
-                               np.repeat(unit_energy[rows], rungs) * mags ** 2)
-        recovered[rows] = rec.reshape(len(rows), rungs)
+        mags = ladder[rows, cols]
+        recovered[rows, cols] = pushes.recovered(u[rows] * mags[:, None], unit_energy[rows] * mags ** 2)
     fatal = ~recovered
     first = np.where(fatal.any(axis=1), fatal.argmax(axis=1), rungs)
     monotone = np.array([not recovered[i, first[i] + 1:].any() for i in range(d)])
@@ -389,6 +402,8 @@ class PushAnalysis:
     refined_directions : ndarray, shape (m, 3)
         The local search's directions (none with given directions or refine=False).
     refined_thresholds : ndarray, shape (m,)
+        NaN for a direction that recovered at the minimum found before it (its threshold
+        is not below it, and was not computed).
     engine : str
     runs, batches : int
         Runs integrated and batches they took.
@@ -433,13 +448,13 @@ class PushAnalysis:
     def minimum(self) -> float:
         """The smallest threshold found, the local search included."""
         found = np.concatenate([self.threshold, self.refined_thresholds])
-        return float(np.min(found))
+        return float(np.nanmin(found))
 
     @property
     def minimum_direction(self) -> np.ndarray:
         """Its direction, shape (3,)."""
         found = np.concatenate([self.threshold, self.refined_thresholds])
-        return np.concatenate([self.directions, self.refined_directions])[int(np.argmin(found))]
+        return np.concatenate([self.directions, self.refined_directions])[int(np.nanargmin(found))]
 
     @property
     def weakest(self) -> int:
@@ -551,23 +566,30 @@ def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float,
     """A local search around the weakest directions: :data:`REFINE_ROUNDS` rounds of
     :data:`REFINE_AROUND` directions at an angle around each of the :data:`REFINE_WORST`
     weakest found so far, the angle halved each round (from half the directions' mean
-    spacing). Returns the directions tried and their thresholds."""
+    spacing). A new direction is first pushed at the minimum so far, m (1 - tol): only if
+    that is fatal is its threshold found (a ladder to there, then bisection). Returns the
+    directions tried and their thresholds (NaN: it recovered at m (1 - tol), so its
+    threshold is not below the minimum)."""
     rng = np.random.default_rng(seed)
     angle = 0.5 * math.sqrt(4 * math.pi / len(u))
     all_u, all_t = u, threshold
     tried_u, tried_t = [np.zeros((0, 3))], [np.zeros(0)]
     for _ in range(REFINE_ROUNDS):
-        worst = np.argsort(all_t, kind="stable")[:REFINE_WORST]
-        worst = worst[np.isfinite(all_t[worst])]
+        known = np.where(np.isnan(all_t), np.inf, all_t)
+        worst = np.argsort(known, kind="stable")[:REFINE_WORST]
+        worst = worst[np.isfinite(known[worst])]
         if not len(worst):
             break
         new = np.concatenate([_around(all_u[i], angle, REFINE_AROUND, rng) for i in worst])
-        top = np.repeat(2.0 * all_t[worst], REFINE_AROUND)
-        found = push_thresholds(pushes, new, push_max=top, tol=tol, rungs=rungs)
+        screen = (1.0 - tol) * float(known[worst[0]])
+        found = np.full(len(new), np.nan)
+        weaker = ~pushes.recovered(screen * new)
+        if weaker.any():
+            found[weaker] = push_thresholds(pushes, new[weaker], push_max=screen, tol=tol, rungs=rungs).threshold
         tried_u.append(new)
-        tried_t.append(found.threshold)
+        tried_t.append(found)
         all_u = np.concatenate([all_u, new])
-        all_t = np.concatenate([all_t, found.threshold])
+        all_t = np.concatenate([all_t, found])
         angle *= 0.5
     return np.concatenate(tried_u), np.concatenate(tried_t)
 
