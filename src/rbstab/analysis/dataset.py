@@ -229,6 +229,8 @@ def _push_variables(analysis) -> tuple[dict, dict, dict]:
         "push_minimum": _var((), p.minimum, u, "smallest fatal push magnitude found"),
         "push_minimum_direction": _var(("axis",), p.minimum_direction, "1", "its direction"),
         "push_point": _var(("axis",), p.point, "m", "point of the force push, body frame, from the centre of mass"),
+        "push_unit_energy": _var(("push_direction",), p.unit_energy, "J", "kinetic energy dT of a push of magnitude "
+                                 "1 along the direction (dT grows with the magnitude's square)"),
     }
     attrs = {"push_kind": p.kind, "push_at": p.at, "push_tol": p.tol, "push_rungs": p.rungs, "push_ratio": p.ratio,
              "push_rule": p.rule_text, "push_engine": p.engine, "push_runs": p.runs}
@@ -249,6 +251,8 @@ def _stability_variables(analysis) -> tuple[dict, dict, dict]:
         "stability_value": _var(("draw", "stability_key"), b.values, "1",
                                 "the draws (units per key: stability_units)"),
         "stability_recovered": _var(("draw",), b.recovered.astype(np.int8), "1", "the draw recovered (1) or not (0)"),
+        "stability_lyapunov_start": _var(("draw",), b.lyapunov_start, "J", "v where the draw starts (of the drawn "
+                                         "state, or just after the drawn push)"),
         "stability_low": _var(("stability_key",), b.low, "1", "low end of the uniform box"),
         "stability_high": _var(("stability_key",), b.high, "1", "high end of the uniform box"),
         "stability_auc": _var(("stability_key",), auc, "1", "P(recovered value > failed value) (ties half)"),

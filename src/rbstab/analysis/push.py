@@ -399,6 +399,8 @@ class PushAnalysis:
         Unit vectors (force: inertial frame; torque: body frame).
     thresholds : Thresholds
         Per direction.
+    unit_energy : ndarray, shape (d,)
+        dT [J] of a push of magnitude 1 along each direction (dT grows with its square).
     refined_directions : ndarray, shape (m, 3)
         The local search's directions (none with given directions or refine=False).
     refined_thresholds : ndarray, shape (m,)
@@ -421,6 +423,7 @@ class PushAnalysis:
     rungs: int
     directions: np.ndarray
     thresholds: Thresholds
+    unit_energy: np.ndarray
     refined_directions: np.ndarray
     refined_thresholds: np.ndarray
     engine: str
@@ -557,6 +560,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     return PushAnalysis(name=config.name, kind=kind, units=PUSH_KINDS[kind],
                         point=pushes.point if kind == "force" else np.zeros(3), at=float(at), tol=float(tol),
                         ratio=float(ratio), rungs=int(rungs), directions=u, thresholds=found,
+                        unit_energy=pushes.energy(u),
                         refined_directions=refined_u, refined_thresholds=refined_t, engine=engine, runs=pushes.runs,
                         batches=pushes.batches, seconds=_time.perf_counter() - start)
 
@@ -621,6 +625,9 @@ class BasinStability:
     values : ndarray, shape (N, n_keys)
         The draws.
     recovered : ndarray of bool, shape (N,)
+    lyapunov_start : ndarray, shape (N,)
+        v [J] where each draw starts: v of the drawn state, or dT of the drawn push (v just
+        after it).
     confidence : float
     interval : (float, float)
         Wilson score interval of the fraction at ``confidence``.
@@ -639,6 +646,7 @@ class BasinStability:
     high: np.ndarray
     values: np.ndarray
     recovered: np.ndarray
+    lyapunov_start: np.ndarray
     confidence: float
     interval: tuple
     separations: list
@@ -756,7 +764,8 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         pushes = Pushes(config, push, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
         u = _unit(rng.normal(size=(int(draws), 3)))
         magnitude = rng.uniform(lo, hi, size=int(draws))
-        recovered = pushes.recovered(magnitude[:, None] * u)
+        start_v = pushes.energy(magnitude[:, None] * u)
+        recovered = pushes.recovered(magnitude[:, None] * u, start_v)
         keys = ["push_magnitude", "push_direction_x", "push_direction_y", "push_direction_z"]
         units = [PUSH_KINDS[push], "1", "1", "1"]
         values = np.column_stack([magnitude, u])
@@ -768,22 +777,23 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         low = np.array([lo for _, lo, _ in axes])
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
-        recovered = _states_recover(config, variant, axes, values, ratio, engine, executor)
+        recovered, start_v = _states_recover(config, variant, axes, values, ratio, engine, executor)
         keys = [a.key for a, _, _ in axes]
         units = [a.units for a, _, _ in axes]
         perturbation, rule = "initial_state", STATE_RULE
     k, n = int(recovered.sum()), len(recovered)
     found = [separation(key, values[:, i], recovered) for i, key in enumerate(keys)]
     return BasinStability(name=config.name, perturbation=perturbation, keys=keys, units=units, low=low, high=high,
-                          values=values, recovered=recovered, confidence=float(confidence),
+                          values=values, recovered=recovered, lyapunov_start=start_v, confidence=float(confidence),
                           interval=wilson_interval(k, n, confidence), separations=[s for s in found if s is not None],
                           rule=rule, seed=int(seed), engine=engine, kind=push if push_range is not None else None,
                           seconds=_time.perf_counter() - start)
 
 
-def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, engine: str, executor) -> np.ndarray:
-    """Whether the runs from the configured initial state with the drawn entries ``values``
-    (N, n_axes) converge by the sweeps' rule."""
+def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, engine: str,
+                    executor) -> tuple[np.ndarray, np.ndarray]:
+    """(whether they converge by the sweeps' rule, v(0) [J]) of the runs from the
+    configured initial state with the drawn entries ``values`` (N, n_axes)."""
     from ..engine.batch import batch_from_table  # heavy: numba
     from ..kinematics import GIMBAL_LOCK_ANGLE
     from .basin import OUTSIDE
@@ -805,4 +815,4 @@ def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, eng
     from ..convergence import converged
 
     ok, v0, v1 = integrate_batch(batch, engine, executor)
-    return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool)
+    return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool), v0

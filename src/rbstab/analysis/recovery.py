@@ -95,7 +95,7 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     from ..config import config_from_mapping  # heavy: pydantic
     from .certificate import certify  # heavy: numba
     from .linearise import linearise  # heavy: numba
-    from .push import Pushes, basin_stability, push_analysis
+    from .push import basin_stability, push_analysis
 
     start = _time.perf_counter()
     run_id, resolved = item
@@ -113,9 +113,7 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     push = options.get("push")
     if push:
         found = push_analysis(config, **push, ratio=ratio, engine=engine)
-        pushes = Pushes(config, push["kind"], point=push.get("point"), at=push.get("at", 0.0))
-        unit = pushes.energy(found.directions)
-        certified = float(np.min(np.sqrt(c / unit))) if c >= 0 and math.isfinite(c) else math.nan
+        certified = float(np.min(np.sqrt(c / found.unit_energy))) if c >= 0 else math.nan
         t = found.threshold
         record["push"] = {"minimum": found.minimum, "direction": found.minimum_direction.tolist(),
                           "grid_minimum": found.grid_minimum,
@@ -125,19 +123,7 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     stability = options.get("basin_stability")
     if stability:
         found = basin_stability(config, **stability, ratio=ratio, engine=engine)
-        if found.perturbation == "push":
-            pushes = Pushes(config, found.kind, point=stability.get("point"), at=stability.get("at", 0.0))
-            start_v = pushes.energy(found.values[:, 0:1] * found.values[:, 1:4])
-        else:
-            y0 = np.repeat(variant.initial_state(config.initial_state)[None], found.draws, axis=0)
-            blocks = list(variant.layout.blocks)
-            for j, key in enumerate(found.keys):
-                _, block_key, index = key.split(".")
-                from ..config import INITIAL_STATE_BLOCKS
-
-                y0[:, 3 * blocks.index(INITIAL_STATE_BLOCKS[block_key]) + int(index)] = found.values[:, j]
-            start_v = variant.lyapunov(y0)
-        inside = start_v <= c if math.isfinite(c) else np.zeros(found.draws, dtype=bool)
+        inside = found.lyapunov_start <= c  # False where c is NaN (no certificate)
         record["stability"] = {"fraction": found.fraction, "low": found.interval[0], "high": found.interval[1],
                                "draws": found.draws, "recovered": int(found.recovered.sum()),
                                "inside": int(inside.sum()), "inside_recovered": int((inside & found.recovered).sum())}
