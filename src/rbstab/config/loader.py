@@ -259,7 +259,7 @@ def _build(
     used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
     _check_weight(ctrl, body, gains, used_gains, source, overrides)
     initial_state = {block: _array(getattr(run.initial_state, key)) for key, block in INITIAL_STATE_BLOCKS.items()}
-    _check_limits(ctrl.variant, body, initial_state, simulation.limits, source, overrides)
+    _check_limits(ctrl.variant, body, initial_state, simulation.limits, sim.limits, source, overrides)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
     if dump.get("disturbances") is None:
@@ -333,9 +333,10 @@ def _check_weight(ctrl, body: RigidBody, gains: Gains, used_gains: dict, source:
 
 
 def _check_limits(variant: str, body: RigidBody, initial_state: Mapping[str, np.ndarray], limits: Limits | None,
-                  source: str | None, overrides: Sequence[str]) -> None:
+                  written: Any, source: str | None, overrides: Sequence[str]) -> None:
     """ConfigError when the initial state lies outside the admissible region ``limits``
-    (:func:`rbstab.config.schema.inside_limits` of its bounded quantities)."""
+    (:func:`rbstab.config.schema.inside_limits` of its bounded quantities; ``written``: the
+    validated ``simulation.limits`` section, for the message)."""
     if limits is None:
         return
     cls = VARIANTS[variant]
@@ -344,7 +345,7 @@ def _check_limits(variant: str, body: RigidBody, initial_state: Mapping[str, np.
     if found is None:
         return
     key, detail = found
-    bound = short_repr(getattr(limits, key.rpartition(".")[2]).tolist())
+    bound = short_repr(getattr(written, key.rpartition(".")[2]))
     line = (f"config key '{key}': found {bound}; expected bounds that contain the initial state "
             f"(the initial state lies outside simulation.limits: {detail})")
     inputs = ("simulation.limits", "initial_state", "body.attachment_point")
