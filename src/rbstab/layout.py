@@ -39,6 +39,7 @@ __all__ = [
     "display_units",
     "CONFIG_QUANTITIES",
     "LIMITED",
+    "LIMITED_COMPONENTS",
     "parameter_attributes",
     "StateLayout",
     "FULL_BODY",
@@ -177,6 +178,9 @@ CONFIG_QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
 #: :mod:`rbstab.engine.status`: Euler angles [rad], Omega [rad/s] (body frame), X [m] and V
 #: [m/s] (inertial frame), E [m] (inertial frame).
 LIMITED = ("theta", "omega", "position", "velocity", "constraint_error")
+#: How a message writes component i of each of :data:`LIMITED` (1-based: ``theta_2``,
+#: ``Omega_1``, ``X_3``, as the paper's theta_2).
+LIMITED_COMPONENTS = {"theta": "theta", "omega": "Omega", "position": "X", "velocity": "V", "constraint_error": "E"}
 
 
 def parameter_attributes(entry: str) -> dict[str, str]:

@@ -340,12 +340,17 @@ def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0,
     return p
 
 
-def set_limits(p: np.ndarray, limits: Limits | None) -> None:
-    """Write the admissible region ``limits`` (None: unbounded) into the record(s) ``p``:
-    ``limits`` (5, 3) with inf where unbounded, ``limited`` 1 when any bound is finite."""
-    bounds = np.full((len(LIMITED), 3), np.inf) if limits is None else limits.array
+def set_limits(p: np.ndarray, limits) -> None:
+    """Write the admissible region ``limits`` into the record(s) ``p`` (shape () or (n,)):
+    ``limits`` (5, 3) with inf where unbounded, ``limited`` 1 when any bound is finite.
+    ``limits``: a :class:`Limits`, None (unbounded), or the bounds as an array (5, 3) or one
+    a record (n, 5, 3)."""
+    if limits is None:
+        bounds = np.full((len(LIMITED), 3), np.inf)
+    else:
+        bounds = limits.array if isinstance(limits, Limits) else np.asarray(limits, dtype=float)
     p["limits"] = bounds
-    p["limited"] = float(np.isfinite(bounds).any())
+    p["limited"] = np.isfinite(bounds).any(axis=(-2, -1))
 
 
 def set_disturbances(p: np.ndarray, disturbances) -> None:

@@ -19,8 +19,9 @@ located events (``RunResult.switching``) and the switching figures in its summar
 
 Both sample the dense output on an even grid, evaluate every output quantity with the
 compiled ``output_row`` and return a :class:`RunResult`. A failed run (solver failure,
-gimbal lock, non-finite state, step limit) is data: ``status == "failed"`` with a message,
-never an exception.
+gimbal lock, the admissible region of ``simulation.limits`` left, non-finite state, step
+limit) is data: ``status == "failed"`` with a message naming the bound and the time, never
+an exception.
 
 Every run ends: on either engine a run stops as ``failed`` after
 ``simulation.max_steps`` accepted steps or ``simulation.max_wall_time`` seconds of

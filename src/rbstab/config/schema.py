@@ -29,7 +29,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from ..layout import BLOCK_UNITS, LIMITED, OUTPUTS, display_units
+from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES, Limits
 from ..variants import VARIANTS
 from .physics import SINGULAR_RTOL
@@ -227,8 +227,8 @@ def limits_violation(values: Any, bounds: Any) -> tuple[str, str] | None:
     j, i = (int(k) for k in np.argwhere(outside)[0])
     name = LIMITED[j]
     units = display_units(OUTPUTS[name].units)
-    symbol = {"theta": "theta", "omega": "Omega"}.get(name, OUTPUTS[name].symbol)
-    return f"simulation.limits.{name}", f"|{symbol}_{i + 1}| = {abs(values[j, i]):.6g} {units} > {bounds[j, i]:g} {units}"
+    return (f"simulation.limits.{name}",
+            f"|{LIMITED_COMPONENTS[name]}_{i + 1}| = {abs(values[j, i]):.6g} {units} > {bounds[j, i]:g} {units}")
 
 
 def samples_apart(t_end: Any, n_samples: Any) -> Any:

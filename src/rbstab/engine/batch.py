@@ -29,7 +29,8 @@ import numpy as np
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
 from ..config.schema import field_value, split_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
-from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody
+from ..model import (DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody,
+                     set_limits)
 from ..variants import VARIANTS
 from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
@@ -278,13 +279,11 @@ def _limits(p: np.ndarray, f: _Fields, templates: Sequence[Mapping]) -> None:
     its template's ``simulation.limits`` as written there or in a column
     (``simulation.limits.theta.1``), inf where absent."""
     bounded = f.of_templates([bool(t["simulation"].get("limits")) for t in templates], dtype=bool)
-    p["limits"] = np.inf
     if not bounded.any():
+        set_limits(p, None)
         return
-    for j, name in enumerate(LIMITED):
-        p["limits"][:, j] = np.where(bounded[:, None], f.get("simulation", f"limits.{name}", math.inf, shape=(3,)),
-                                     np.inf)
-    p["limited"] = np.isfinite(p["limits"]).any(axis=(1, 2))
+    set_limits(p, np.stack([np.where(bounded[:, None], f.get("simulation", f"limits.{name}", math.inf, shape=(3,)),
+                                     np.inf) for name in LIMITED], axis=1))
 
 
 def _initial_states(f: _Fields, code: np.ndarray) -> np.ndarray:

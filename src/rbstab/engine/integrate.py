@@ -2,8 +2,9 @@
 
 :func:`integrate_run` is what ``solve_ivp(..., t_eval=linspace(0, t_end, n), events=[gimbal
 lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
-``_step_impl``), sample the step's interpolant at the grid times it covers, and stop at the
-gimbal-lock event, located on the interpolant. :func:`integrate_chunk` runs many runs, each
+``_step_impl``), sample the step's interpolant at the grid times it covers, and stop where
+the run leaves its admissible region (:func:`admissible_event`: gimbal lock and the bounds
+of ``simulation.limits``), located on the interpolant. :func:`integrate_chunk` runs many runs, each
 with its own variant, parameters and settings, one after the other in one call.
 
 A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
@@ -258,9 +259,12 @@ def integrate_run(code, p, y0, s, samples, work_done):
     and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end), and ``work_done``
     (n_samples,) with the work W [J] of the disturbances up to each sample (0 without).
 
-    The run stops after ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time``
-    seconds (TIMEOUT; inf for none). Rows after the run stopped are NaN. Returns
-    (status, t_stop, nfev, n_steps).
+    The run stops where it leaves its admissible region (GIMBAL_LOCK, or the status code of
+    the bound of ``simulation.limits`` it reached: :func:`admissible_event`; at t = 0 with no
+    step when it starts outside, at an impulse's time when the impulse throws it out), after
+    ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time`` seconds (TIMEOUT;
+    inf for none). Rows after the run stopped are NaN. Returns (status, t_stop, nfev,
+    n_steps).
     """
     status, t_stop, nfev, n_steps, filled = _run(code, p, y0, s, samples, work_done)
     samples[filled:, :] = np.nan  # only the rows after a stop: a run that ends writes each row once
@@ -401,9 +405,10 @@ class ChunkSolution:
         The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
     status : ndarray of int, shape (k,)
         How each run ended (:mod:`rbstab.engine.status`: 0 reached t_end, 1 gimbal lock,
-        negative a failure).
+        2-16 the admissible region left (:func:`rbstab.engine.status.limit_of` names the
+        bound), negative a failure).
     t_stop : ndarray, shape (k,)
-        Where each run stopped [s] (the event time for gimbal lock).
+        Where each run stopped [s] (the event time for gimbal lock and the region).
     nfev, n_steps : ndarray of int, shape (k,)
         Right-hand-side evaluations and accepted steps.
     work : ndarray, shape (k, n_samples)

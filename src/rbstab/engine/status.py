@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 
-from ..layout import LIMITED, OUTPUTS, display_units
+from ..layout import LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units
 
 __all__ = [
     "SUCCESS",
@@ -72,9 +72,6 @@ def limit_of(status: int) -> tuple[str, int] | None:
     return (LIMITED[k // 3], k % 3) if 0 <= k < 3 * len(LIMITED) else None
 
 
-#: How a message writes component i of each bounded quantity (1-based, as the paper's theta_2).
-_COMPONENT = {"theta": "theta", "omega": "Omega", "position": "X", "velocity": "V", "constraint_error": "E"}
-
 #: Accepted steps after which a run stops as failed (a run that would never finish).
 DEFAULT_MAX_STEPS = 10_000_000
 
@@ -101,7 +98,7 @@ STATUSES: dict[int, tuple[str, str]] = {
     NOT_STARTED: ("NOT_STARTED", "not run: its GPU launch reached its wall-time limit of {max_wall_time:g} s "
                                  "(simulation.max_wall_time) before the run started; run it again"),
     **{limit_status(j, i): (f"LEFT_REGION_{name.upper()}_{i}",
-                            f"left the admissible region: |{_COMPONENT[name]}_{i + 1}| reached "
+                            f"left the admissible region: |{LIMITED_COMPONENTS[name]}_{i + 1}| reached "
                             f"simulation.limits.{name} = {{bound:g}} {display_units(OUTPUTS[name].units)} at "
                             "t = {t_stop:.6g} s")
        for j, name in enumerate(LIMITED) for i in range(3)},
