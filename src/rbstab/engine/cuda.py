@@ -5,7 +5,8 @@ compiles every rbstab ``@jit`` function that a CUDA kernel calls as a device fun
 the same Python source (:func:`rbstab.variants.kernels.state_rate`,
 :func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
 :func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
-:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.locate_event`
+:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.admissible_event`,
+:func:`~rbstab.engine.integrate.locate_event`
 and the streaming summary of :mod:`rbstab.summary`). Only the driver loop is written here:
 :func:`rbstab.engine.integrate._run`'s loop with one step *attempt* per pass (a thread
 whose step is rejected tries again on the next pass with the others of its warp, instead
@@ -62,11 +63,11 @@ from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
 from ..variants.kernels import output_row, state_rate
-from .integrate import REJECTED, attempt_step, gimbal_event, locate_event, sample_time, step_bounds
+from .integrate import REJECTED, admissible_event, attempt_step, locate_event, sample_time, step_bounds
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
-from .status import GIMBAL_LOCK, NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
+from .status import NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
@@ -248,16 +249,22 @@ def kernel_function(method: int, n_state: int):
             n_steps = 0
             status = SUCCESS
             h_abs = 0.0
+            margin, left = 0.0, SUCCESS
             if globaltimer() > deadline:
                 status = NOT_STARTED
                 t_end = 0.0
             else:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
-                state_rate(code, 0.0, y, p, f)
-                h_abs = initial_step(code, p, s, 0.0, t_end, t_end, y, f, w)
-                nfev = 2
-                h_abs = step_bounds(s, t, h_abs)
+                margin, left = admissible_event(code, y, p, limit)
+                if margin < 0:  # outside the admissible region from the start
+                    status = left
+                    t_end = 0.0
+                else:
+                    state_rate(code, 0.0, y, p, f)
+                    h_abs = initial_step(code, p, s, 0.0, t_end, t_end, y, f, w)
+                    nfev = 2
+                    h_abs = step_bounds(s, t, h_abs)
             rejected = False
             while t < t_end:
                 passes += 1
@@ -278,21 +285,23 @@ def kernel_function(method: int, n_state: int):
                 nfev += n_stages
                 n_steps += 1
                 t_stop = t_new
-                event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
+                margin_new = admissible_event(code, y_new, p, limit)[0]
+                event = margin >= 0 and margin_new <= 0
                 if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
                 if event:
-                    t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
+                    t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, work)
                 while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
                     dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
                     output_row(code, sample_time(j, n_samples, t_end), sample, p, row, full)
                     stream_sample(acc, j, row, first, weights, trace, stride, ratio)
                     j += 1
                 if event:
-                    status = GIMBAL_LOCK
+                    status = left
                     t = t_stop
                     break
                 t = t_new
+                margin = margin_new
                 for i in range(n_state):
                     y[i] = y_new[i]
                     f[i] = K[n_stages, i]
@@ -385,7 +394,7 @@ def occupancy(fn, n_state: int) -> int:
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
-DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "gimbal_event",
+DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
                     "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
                     "stream_sample", "stream_finish")
 
