@@ -203,3 +203,27 @@ def test_report_draws_the_sphere_the_ladder_and_the_curves(tmp_path):
             "analysis_drawn_stability.png"} <= figures
     page = (report / "index.html").read_text()
     assert "smallest fatal torque push over 4 directions" in page and "basin stability: " in page
+
+
+def test_free_body_without_gravity_fails_only_where_the_push_reaches_the_theta_limit():
+    """A free body without gravity and without limits on its actuators, its tilt bounded by
+    |theta_i| <= b: a torque impulse P about a principal axis of an isotropic body makes
+    J theta'' + L theta' + K theta = 0 with theta'(0) = P / J, whose largest tilt is P times
+    e^(-zeta w_n t*) sin(w_d t*) / (J w_d), tan(w_d t*) = w_d / (zeta w_n): the threshold is
+    the P at which that reaches b, along every axis, and recovery is monotone."""
+    j, k, damping, b = 2.0, 50.0, 10.0, 0.3
+    data = {"name": "free_limited",
+            "body": {"mass": 3.0, "inertia": [j, j, j], "attachment_point": [0.0, 0.0, 0.0], "gravity": [0.0, 0.0, 0.0]},
+            "controller": {"variant": "free", "k_t": [100.0] * 3, "l_t": [20.0] * 3, "k_r": [k] * 3,
+                           "l_r": [damping] * 3},
+            "initial_state": {},
+            "simulation": {"t_end": 4.0, "n_samples": 201, "method": "DOP853", "rtol": 1e-10, "atol": 1e-12,
+                           "limits": {"theta": b}}}
+    config = config_from_mapping(data)
+    found = push_analysis(config, "torque", directions=np.eye(3), tol=1e-4)
+    w_n, zeta = math.sqrt(k / j), damping / (2 * math.sqrt(k * j))
+    w_d = w_n * math.sqrt(1 - zeta**2)
+    t_star = math.atan2(w_d, zeta * w_n) / w_d
+    largest_tilt = math.exp(-zeta * w_n * t_star) * math.sin(w_d * t_star) / (j * w_d)
+    np.testing.assert_allclose(found.threshold, b / largest_tilt, rtol=2e-4)
+    assert found.monotone

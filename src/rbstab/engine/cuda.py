@@ -63,7 +63,8 @@ from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
 from ..variants.kernels import output_row, state_rate
-from .integrate import REJECTED, admissible_event, attempt_step, locate_event, sample_time, step_bounds
+from .integrate import (REJECTED, admissible_event, attempt_step, grazing_exit, locate_event, sample_time,
+                        step_bounds)
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
@@ -287,10 +288,15 @@ def kernel_function(method: int, n_state: int):
                 t_stop = t_new
                 margin_new = admissible_event(code, y_new, p, limit)[0]
                 event = margin >= 0 and margin_new <= 0
-                if event or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+                bounded = p.limited != 0.0
+                if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
+                x_out = 1.0
+                if bounded and not event:  # a bound grazed inside the step
+                    x_out = grazing_exit(code, p, limit, margin, margin_new, h, y, Q, dop853, work)
+                    event = x_out > 0.0
                 if event:
-                    t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, work)
+                    t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, work, x_out)
                 while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
                     dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
                     output_row(code, sample_time(j, n_samples, t_end), sample, p, row, full)
@@ -395,7 +401,7 @@ def occupancy(fn, n_state: int) -> int:
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
 DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
-                    "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
+                    "grazing_exit", "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
                     "stream_sample", "stream_finish")
 
 
