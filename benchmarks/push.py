@@ -2,9 +2,10 @@
 
 The body of Case 1 of the paper (permanent: the point C pinned 0.46 m below the centre of
 mass, gravity: an inverted pendulum) with its torque actuators limited to |N_1|, |N_2| <=
-250 N m and |N_3| <= 100 N m (gravity's torque at a tilt theta is ~172 sin(theta) N m), t_end
-3 s, 301 samples, DOP853 at rtol 1e-8. Prints, each end to end (the command's process
-start to its exit, the engine already compiled):
+250 N m and |N_3| <= 100 N m (gravity's torque at a tilt theta is ~172 sin(theta) N m), a
+fall where a tilt reaches 1 rad (``simulation.limits.theta: [1, 1, 3.2]``: the run ends
+there), t_end 3 s, 301 samples, DOP853 at rtol 1e-8. Prints, each end to end (the
+command's process start to its exit, the engine already compiled):
 
 1. the smallest fatal torque push of 256 quasi-uniform directions, tolerance 1e-3, with
    the local search (target <= 10 s on two cores);
@@ -38,7 +39,7 @@ def write_config(folder: Path) -> Path:
     data["name"] = "case1_torque_limited"
     data["controller"]["saturation"] = {"torque_n": [250.0, 250.0, 100.0]}
     data["initial_state"] = {"theta": [0.0, 0.0, 0.0], "omega": [0.0, 0.0, 0.0]}
-    data["simulation"].update(t_end=3.0, n_samples=301)
+    data["simulation"].update(t_end=3.0, n_samples=301, limits={"theta": [1.0, 1.0, 3.2]})
     path = folder / "case1_torque_limited.yaml"
     path.write_text(yaml.safe_dump(data, sort_keys=False))
     return path

@@ -237,6 +237,7 @@ def kernel_function(method: int, n_state: int):
             for i in range(copy.shape[0]):
                 copy[i] = source[i]
             p = record[0]
+            bounded = params[shared].limited != 0.0  # simulation.limits: a bound grazed inside a step is looked for
             s = settings[k]
             trace = trace_o[min(k, trace_o.shape[0] - 1)]
             t_end = s.t_end
@@ -288,7 +289,6 @@ def kernel_function(method: int, n_state: int):
                 t_stop = t_new
                 margin_new = admissible_event(code, y_new, p, limit)[0]
                 event = margin >= 0 and margin_new <= 0
-                bounded = p.limited != 0.0
                 if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
                 x_out = 1.0
