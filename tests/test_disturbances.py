@@ -239,3 +239,25 @@ def test_batch_records_carry_the_disturbances_as_columns():
                              {"disturbances.0.value.1": np.array([5.0, 7.0])}, np.array([0, 0]))
     assert batch.params[0].tobytes() == config.make_variant().parameters[0].tobytes()
     assert batch.params[1]["disturbance_value"][0, 1] == 7.0
+
+
+def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed():
+    """A step force from t = 0: the equilibrium, the linearisation and the certificate's
+    Hessians are those of the same body without it (a rest point, the same eigenvalues bit
+    for bit; at t = 0 the disturbed right-hand side is not at rest there), while the
+    certificate's sampled dv/dt includes the step's power F'V, which is positive near the
+    equilibrium: the sublevel estimate shrinks to where dv/dt > 0 was sampled."""
+    from rbstab.analysis.analyze import analyze
+
+    pushed = config_from_mapping(_mapping(disturbances=[{"kind": "step", "value": [0, 6, 0], "point": [0, 0, 0.1]}]))
+    calm = config_from_mapping(_mapping())
+    a, b = (analyze(c, samples=300, simulate=False) for c in (pushed, calm))
+    assert np.max(np.abs(pushed.make_variant().rhs(0.0, a.linearisation.equilibrium))) > 1.0  # not at rest, pushed
+    assert a.linearisation.is_rest_point
+    np.testing.assert_array_equal(a.linearisation.eigenvalues, b.linearisation.eigenvalues)
+    np.testing.assert_array_equal(a.certificate.rate_hessian, b.certificate.rate_hessian)
+    assert any("undisturbed dynamics" in n and "(step)" in n for n in a.notes)
+    assert not any("undisturbed" in n for n in b.notes)
+    assert b.certificate.sublevel_bound == "domain boundary"
+    assert a.certificate.sublevel_bound == "dv/dt > 0 at a sampled state"
+    assert a.certificate.sublevel < 1e-3 * b.certificate.sublevel

@@ -15,7 +15,7 @@ import numpy as np
 from .convergence import within_bound
 from .results import row
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
+from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -235,6 +235,9 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         (largest rise of v above its running minimum: 0 for a non-increasing v),
         ``time_lyapunov_rising`` [s] (the samples with analytic dv/dt > 0 times the
         spacing: 0 where the paper's theorem holds; saturating actuators can make v rise),
+        ``fraction_saturated_torque_n``, ``_force_h``, ``_constraint_force`` (3 floats each,
+        per axis: the fraction of the samples whose ``<control>_saturated`` flag is set, the
+        control commanded at or beyond its limit; 0 without limits),
         ``lyapunov_rate_mismatch`` [W] (max |analytic - numerical dv/dt|),
         ``lyapunov_rate_mismatch_relative`` (divided by the reference power
         P = max(max |analytic dv/dt|, E / T): E [J] the energy scale, the largest sum over
@@ -328,6 +331,9 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
     table["max_lyapunov_rate"] = np.max(rate, axis=1)
     table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1)
     table["time_lyapunov_rising"] = np.sum(rate > 0.0, axis=1) * _spacing(time)
+    for flags, figure in SATURATION_FLAGS.values():
+        if flags in outputs:
+            table[figure] = np.stack([np.sum(outputs[flags][:, :, i], axis=1) for i in range(3)], axis=1) / n
     n_checked = np.full(k, n) if checked is None else np.sum(checked, axis=1)
     if checked is not None:
         table["lyapunov_rate_checked"] = n_checked / n
@@ -374,16 +380,20 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: :func:`stream_table`): max |E_i| (3), v(0), max dv/dt, running min of v, largest rise of
 #: v above it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the
 #: samples taken, the last sample not converged (:func:`rbstab.convergence.converged`
-#: with v(0) and its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL` values of v and of
-#: dv/dt (rings).
+#: with v(0) and its v; -1 for none), the samples with dv/dt > 0, the samples with each
+#: axis of N, H and Lambda flagged at its limit (:data:`rbstab.layout.SATURATION_FLAGS`),
+#: and the last :data:`RATE_STENCIL` values of v and of dv/dt (rings).
 MAX_ERROR = 0  # 3 slots
 V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(3, 13)
-V_RING = 13
+SATURATED = 13  # 3 slots a control, in the order of SATURATION_FLAGS
+_FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
+V_RING = SATURATED + _FLAG_SLOTS
 RATE_RING = V_RING + RATE_STENCIL
 ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
+_N_FLAGS_AT, _H_FLAGS_AT, _LAMBDA_FLAGS_AT = (OUTPUTS[flags].offset for flags, _ in SATURATION_FLAGS.values())
 #: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
 _within_bound = jit(forceinline=True)(within_bound)
 _T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
@@ -411,6 +421,8 @@ def stream_start(acc):
     acc[TAKEN] = 0.0
     acc[LAST_ABOVE] = -1.0
     acc[RISING] = 0.0
+    for i in range(_FLAG_SLOTS):
+        acc[SATURATED + i] = 0.0
 
 
 @jit(forceinline=True)
@@ -456,6 +468,10 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
     if rate > 0.0:
         acc[RISING] += 1.0
+    for a in range(3):
+        acc[SATURATED + a] += row[_N_FLAGS_AT + a]
+        acc[SATURATED + 3 + a] += row[_H_FLAGS_AT + a]
+        acc[SATURATED + 6 + a] += row[_LAMBDA_FLAGS_AT + a]
     v0 = acc[V_INITIAL]
     if not _within_bound(v0, v, ratio):
         acc[LAST_ABOVE] = i
@@ -541,6 +557,9 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
     table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
     table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
+    with np.errstate(all="ignore"):
+        for c, (_, figure) in enumerate(SATURATION_FLAGS.values()):
+            table[figure] = acc[:, SATURATED + 3 * c: SATURATED + 3 * c + 3] / taken[:, None]
     span = time[last_index] - time[0]
     with np.errstate(all="ignore"):
         scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
