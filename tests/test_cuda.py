@@ -60,7 +60,7 @@ SATURATED_FALL = ["initial_state.theta=[0.45,0,0]"]  # the torque limit cannot h
 
 @pytest.mark.parametrize("path, overrides", [
     (CASE3, []), (CASE3, ["simulation.max_steps=40"]), (CASE3, ["simulation.max_steps=13"]),
-    (CASE3, ["simulation.max_steps=3"]), (SATURATED, SATURATED_FALL), (SATURATED, [*SATURATED_FALL, "simulation.max_steps=40"])],
+    (CASE3, ["simulation.max_steps=3"]), (SATURATED, SATURATED_FALL), (SATURATED, [*SATURATED_FALL, "simulation.max_steps=6"])],
     ids=["whole", "stopped", "short", "shorter", "saturated", "saturated-stopped"])
 def test_streamed_summary_is_summary_table(path, overrides):
     """Fed a run's output rows one sample at a time, stream_sample / stream_finish /

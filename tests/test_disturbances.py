@@ -261,3 +261,56 @@ def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed(
     assert b.certificate.sublevel_bound == "domain boundary"
     assert a.certificate.sublevel_bound == "dv/dt > 0 at a sampled state"
     assert a.certificate.sublevel < 1e-3 * b.certificate.sublevel
+
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "configs" / "examples" / "saturated_push.yaml"
+
+
+def _sweep(tmp_path, name: str, body: str):
+    spec = tmp_path / f"{name}.yaml"
+    spec.write_text(f"name: {name}\nbase: {EXAMPLE}\n{body}")
+    cli = Path(sys.executable).parent / "rbstab"
+    return subprocess.run([str(cli), "sweep", str(spec), "-o", str(tmp_path / "out"), "-j", "1", "--no-progress",
+                           "--set", "simulation.n_samples=2001"], capture_output=True, text=True)
+
+
+def test_a_sweep_varies_a_push_and_a_torque_limit_end_to_end(tmp_path):
+    """The shipped saturated push swept over the impulse (disturbances.0.value.0, a grid) and
+    the torque limit (controller.saturation.torque_n), and zipped over the whole impulse and
+    3 limits: every run succeeds with its values as columns; a lower limit saturates longer,
+    and the strong push with the 3 N m limit (below m g L sin of the tilt it reaches) falls
+    while 6 N m holds it."""
+    import pandas as pd
+
+    done = _sweep(tmp_path, "grid", "grid:\n  disturbances.0.value.0: [0.2, 1.0]\n"
+                                    "  controller.saturation.torque_n: [3.0, 6.0]\n")
+    assert done.returncode == 0, done.stderr
+    index = pd.read_csv(tmp_path / "out" / "grid" / "index.csv").set_index(["value_0", "torque_n"])
+    assert (index["status"] == "success").all() and len(index) == 4
+    fraction = index["fraction_saturated_torque_n_x"]
+    assert fraction[0.2, 3.0] > fraction[0.2, 6.0] and fraction[1.0, 3.0] > fraction[1.0, 6.0] > fraction[0.2, 6.0]
+    assert index["converged"].to_dict() == {(0.2, 3.0): True, (0.2, 6.0): True, (1.0, 3.0): False, (1.0, 6.0): True}
+    done = _sweep(tmp_path, "zipped", "zip:\n  disturbances.0.value: [[0.2, 0, 0], [1.0, 0, 0]]\n"
+                                      "  controller.saturation.torque_n: [[3, 3, .inf], [6, 6, .inf]]\n")
+    assert done.returncode == 0, done.stderr
+    zipped = pd.read_csv(tmp_path / "out" / "zipped" / "index.csv")
+    assert zipped[["value_0", "torque_n_0"]].values.tolist() == [[0.2, 3.0], [1.0, 6.0]]
+    np.testing.assert_array_equal(zipped["fraction_saturated_torque_n_x"],
+                                  [fraction[0.2, 3.0], fraction[1.0, 6.0]])
+
+
+@pytest.mark.parametrize("body, key, found", [
+    ("grid:\n  disturbances.1.start: [1.0, 9.0]\n", "disturbances.1.start", "9.0"),  # after t_end = 5 s
+    ("grid:\n  simulation.t_end: [5.0, 2.0]\n", "disturbances.1.start", "2.5"),  # the pulse's start, after 2 s
+    ("zip:\n  disturbances.1.duration: [0.05, -0.1]\n", "disturbances.1.duration", "-0.1"),
+    ("grid:\n  controller.saturation.torque_n: [3.0, -6.0]\n", "controller.saturation.torque_n", "-6.0"),
+])
+def test_a_sweep_refuses_a_bad_push_or_limit_in_one_line_naming_the_key(tmp_path, body, key, found):
+    """The column checks (sweep/validate.py, the schema's rules) flag the bad run, the schema
+    names it: one line for the one bad run of two, with the key and the value; nothing run."""
+    done = _sweep(tmp_path, "bad", body)
+    assert done.returncode != 0 and "Traceback" not in done.stderr
+    lines = [line for line in done.stderr.splitlines() if "config key" in line]
+    assert len(lines) == 1 and f"'{key}'" in lines[0] and f"found {found}" in lines[0], done.stderr
+    assert "1 of 2 runs have an invalid configuration; nothing was run" in done.stderr
+    assert not (tmp_path / "out" / "bad" / "runs").exists() or not any((tmp_path / "out" / "bad" / "runs").iterdir())
