@@ -327,8 +327,8 @@ def analyze(
         timing["simulation"] = _time.perf_counter() - t2
     if axes:
         t3 = _time.perf_counter()
-        result.basin = basin_map(analysed, axes, disturbed or variant, ratio=ratio, n_samples=basin_samples, jobs=jobs,
-                                 engine=engine)
+        result.basin = basin_map(analysed, axes, disturbed if disturbed is not None else variant, ratio=ratio,
+                                 n_samples=basin_samples, jobs=jobs, engine=engine)
         timing["basin"] = _time.perf_counter() - t3
     return result
 
