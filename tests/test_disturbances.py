@@ -314,3 +314,28 @@ def test_a_sweep_refuses_a_bad_push_or_limit_in_one_line_naming_the_key(tmp_path
     assert len(lines) == 1 and f"'{key}'" in lines[0] and f"found {found}" in lines[0], done.stderr
     assert "1 of 2 runs have an invalid configuration; nothing was run" in done.stderr
     assert not (tmp_path / "out" / "bad" / "runs").exists() or not any((tmp_path / "out" / "bad" / "runs").iterdir())
+
+
+def test_the_rate_check_leaves_out_the_stencils_across_a_push_and_stays_a_check():
+    """v jumps at an impulse and dv/dt at a pulse's edges: a 7-point stencil across one is
+    no derivative. The check compares the samples whose stencil lies between two edges
+    (disturbance_edges equal at its ends): (RATE_STENCIL - 1) samples fewer per edge inside
+    the run; the pushed example passes there (it failed by 70 P across the impulse). It
+    still fails when the analytic dv/dt lacks the disturbances' power."""
+    import warnings
+
+    from rbstab.summary import LYAPUNOV_RATE_TOLERANCE, RATE_STENCIL, _within_one_piece, summarize
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        result = simulate(__import__("rbstab").load_config(EXAMPLE))  # dense: the clipped torque has kinks
+    edges = result.outputs["disturbance_edges"]
+    assert list(np.unique(edges)) == [0.0, 1.0, 2.0, 3.0]  # the impulse, the pulse's start and end
+    within = _within_one_piece(result.time, edges[None])[0]
+    assert np.sum(~within) == 3 * (RATE_STENCIL - 1)
+    assert result.summary["lyapunov_rate_check"] == "pass"
+    assert result.summary["lyapunov_rate_mismatch_relative"] <= LYAPUNOV_RATE_TOLERANCE
+    jumped = np.abs(result.outputs["lyapunov_rate"] - result.outputs["lyapunov_rate_numerical"])
+    assert np.max(jumped[~within]) > 10 * result.summary["lyapunov_rate_mismatch"]  # what is left out
+    wrong = dict(result.outputs, lyapunov_rate=result.outputs["lyapunov_rate"] - result.outputs["disturbance_power"])
+    assert summarize(result.time, wrong)["lyapunov_rate_check"] == "fail"

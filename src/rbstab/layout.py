@@ -250,6 +250,10 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
     Quantity("disturbance_work", "W", "J", "work of the disturbances",
              "W = integral of P_d dt plus each impulse's jump of kinetic energy (eqs 26-28)",
              "W", "disturbance work"),
+    Quantity("disturbance_edges", "edges", "1", "disturbance edges at or before the sample",
+             "number of the disturbances' edges (each start, impulses included, and each pulse's end) at or "
+             "before the sample time: v or dv/dt may jump between samples where it changes, so the rate check "
+             "compares the numerical dv/dt only on stencils where it does not", "n_e", "disturbance edges"),
 ))}
 
 #: Every quantity a run or store file holds as a variable (:data:`OUTPUTS` and the rest).

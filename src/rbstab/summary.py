@@ -242,7 +242,9 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         ``lyapunov_rate_mismatch_relative`` (divided by the reference power
         P = max(max |analytic dv/dt|, E / T): E [J] the energy scale, the largest sum over
         a sample of the magnitudes of v's terms, T [s] the duration of the samples),
-        ``lyapunov_rate_check`` (``"pass"`` when the relative mismatch is at most
+        ``lyapunov_rate_check`` (over the samples whose stencil lies between two of the
+        disturbances' edges, when ``outputs`` holds ``disturbance_edges``: across an impulse
+        or a pulse's edge v or dv/dt jumps; ``"pass"`` when the relative mismatch is at most
         :data:`LYAPUNOV_RATE_TOLERANCE`, ``"fail"`` when it is larger, ``"n/a"`` when
         fewer than :data:`MIN_CHECK_SAMPLES` finite samples exist, e.g. a run that failed
         at once).
@@ -342,10 +344,22 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
         difference = np.abs(rate - outputs["lyapunov_rate_numerical"])
         if checked is not None:
             difference = np.where(checked, difference, 0.0)
+        if "disturbance_edges" in outputs:
+            difference = np.where(_within_one_piece(time, outputs["disturbance_edges"]), difference, 0.0)
         largest = np.max(difference, axis=1)
         scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0]))
     table.update(_rate_check(largest, scales, n_checked >= MIN_CHECK_SAMPLES))
     return table
+
+
+def _within_one_piece(time: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Whether each sample's stencil (:func:`stencil_weights` of ``time``, as
+    :func:`numerical_rate` takes it) lies between two of the disturbances' edges: the
+    ``disturbance_edges`` (k, n) of its first and last samples are equal. Elsewhere v or
+    dv/dt may jump inside the stencil (an impulse, a pulse's edge), and the numerical dv/dt
+    there is not a derivative: the rate check does not compare it."""
+    first, weights = _stencil_weights_of(np.ascontiguousarray(time, dtype=float))
+    return edges[:, first] == edges[:, first + weights.shape[1] - 1]
 
 
 def _spacing(time: np.ndarray) -> float:
@@ -382,17 +396,20 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: samples taken, the last sample not converged (:func:`rbstab.convergence.converged`
 #: with v(0) and its v; -1 for none), the samples with dv/dt > 0, the samples with each
 #: axis of N, H and Lambda flagged at its limit (:data:`rbstab.layout.SATURATION_FLAGS`),
-#: and the last :data:`RATE_STENCIL` values of v and of dv/dt (rings).
+#: and the last :data:`RATE_STENCIL` values of v, of dv/dt and of the disturbances' edges
+#: (rings).
 MAX_ERROR = 0  # 3 slots
 V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(3, 13)
 SATURATED = 13  # 3 slots a control, in the order of SATURATION_FLAGS
 _FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
 V_RING = SATURATED + _FLAG_SLOTS
 RATE_RING = V_RING + RATE_STENCIL
-ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
+EDGE_RING = RATE_RING + RATE_STENCIL
+ACCUMULATOR_SIZE = EDGE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
+_EDGES_AT = OUTPUTS["disturbance_edges"].offset
 _N_FLAGS_AT, _H_FLAGS_AT, _LAMBDA_FLAGS_AT = (OUTPUTS[flags].offset for flags, _ in SATURATION_FLAGS.values())
 #: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
 _within_bound = jit(forceinline=True)(within_bound)
@@ -435,10 +452,14 @@ def _numerical_rate(acc, start, w):
 
 
 @jit(forceinline=True)
-def _compare(acc, i, numerical, trace, stride):
-    """Take sample i's numerical dv/dt: into the mismatch, and into the trace's row when
-    the trace keeps sample i."""
-    acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], abs(acc[RATE_RING + i % RATE_STENCIL] - numerical))
+def _compare(acc, i, numerical, start, w, trace, stride):
+    """Take sample i's numerical dv/dt, from the stencil of the w samples from ``start``: into
+    the mismatch (0 for a stencil across a disturbance's edge, as :func:`summary_table`
+    counts it), and into the trace's row when the trace keeps sample i."""
+    if acc[EDGE_RING + start % RATE_STENCIL] == acc[EDGE_RING + (start + w - 1) % RATE_STENCIL]:
+        acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], abs(acc[RATE_RING + i % RATE_STENCIL] - numerical))
+    else:
+        acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], 0.0)
     if i % stride == 0 and i // stride < trace.shape[0]:
         trace[i // stride, NUMERICAL_RATE_AT] = numerical
 
@@ -480,6 +501,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[ENERGY] = _max(acc[ENERGY], abs(row[_T0]) + abs(row[_T1]) + abs(row[_T2]) + abs(row[_T3]))
     acc[V_RING + i % RATE_STENCIL] = v
     acc[RATE_RING + i % RATE_STENCIL] = rate
+    acc[EDGE_RING + i % RATE_STENCIL] = row[_EDGES_AT]
     acc[TAKEN] = i + 1
     if i % stride == 0 and i // stride < trace.shape[0]:
         for c in range(row.shape[0]):
@@ -490,7 +512,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     if start >= 0:
         for q in range(max(0, i - w + 1), i + 1):
             if first[q] == start:
-                _compare(acc, q, _numerical_rate(acc, start, weights[q]), trace, stride)
+                _compare(acc, q, _numerical_rate(acc, start, weights[q]), start, w, trace, stride)
 
 
 @jit(forceinline=True)
@@ -509,12 +531,12 @@ def stream_finish(acc, first, weights, short, trace, stride):
             acc[MAX_MISMATCH] = math.nan
             return
         for i in range(taken):
-            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), trace, stride)
+            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), 0, taken, trace, stride)
         return
     start = taken - w
     for i in range(max(0, taken - w), taken):
         if first[i] + w - 1 > taken - 1:  # its stencil on the whole grid reaches past the run
-            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), trace, stride)
+            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), start, w, trace, stride)
 
 
 def short_stencils(time: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
 from ..model import force_h, force_h_command, saturate, saturated, torque_n, torque_n_command
 from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
-from .disturbances import disturbance_power, disturbance_wrench, state_power
+from .disturbances import disturbance_power, disturbance_wrench, edges_up_to, state_power
 
 __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row",
            "state_rates", "run_outputs", "state_powers", "STATE_SIZE"]
@@ -56,6 +56,7 @@ LYAPUNOV_AT = OUTPUTS["lyapunov"].offset
 LYAPUNOV_RATE_AT = OUTPUTS["lyapunov_rate"].offset
 DISTURBANCE_POWER_AT = OUTPUTS["disturbance_power"].offset
 DISTURBANCE_WORK_AT = OUTPUTS["disturbance_work"].offset
+DISTURBANCE_EDGES_AT = OUTPUTS["disturbance_edges"].offset
 
 
 @jit(forceinline=True)
@@ -246,6 +247,10 @@ def output_row(code, t, y, p, out, full):
         power = disturbance_power(force_d, torque_d, omega, v)
     out[DISTURBANCE_POWER_AT] = power
     out[DISTURBANCE_WORK_AT] = 0.0 if y[0] == y[0] else math.nan  # NaN after a stop, as the drivers'
+    edges = 0.0
+    if p.disturbance_count > 0.0:
+        edges = edges_up_to(p, t)
+    out[DISTURBANCE_EDGES_AT] = edges if y[0] == y[0] else math.nan
     added, n_flags, h_flags, lam_flags = saturation_effects(code, theta, omega, x, v, b, e, f, d, p)
     if y[0] != y[0]:  # a stopped run's NaN rows: no flag either
         n_flags = h_flags = lam_flags = (math.nan, math.nan, math.nan)
