@@ -156,8 +156,9 @@ def _show_result(path: str) -> None:
     console.out(f"  status     {info['status']}, {settled}: {info['message']}")
     console.out(f"  created    {info['created']}, wall time {_fmt(info['wall_time'])} s")
     console.out("  solver     " + ", ".join(f"{k} {v}" for k, v in info["solver"].items() if k != "message"))
+    width = max([32, *(len(key) for key in summary)])
     for key, value in summary.items():
-        console.out(f"  {key:<32} {check if key == 'lyapunov_rate_check' else _fmt(value)}")
+        console.out(f"  {key:<{width}} {check if key == 'lyapunov_rate_check' else _fmt(value)}")
 
 
 def _expand(path: str) -> list[str]:

@@ -959,6 +959,12 @@ def test_from_resolved_rebuilds_the_validated_config(path):
                     assert sa.shape == sb.shape and all(np.array_equal(getattr(sa, k), getattr(sb, k)) for k in
                                                         ("torque_n", "force_h", "constraint_force")), f.name
                     continue
+                if f.name == "disturbances":  # configs/examples/saturated_push.yaml
+                    assert len(a.disturbances) == len(b.disturbances), f.name
+                    for da, db in zip(a.disturbances, b.disturbances):
+                        assert all(np.array_equal(np.asarray(getattr(da, g.name)), np.asarray(getattr(db, g.name)))
+                                   for g in dataclasses.fields(da)), f.name
+                    continue
                 assert np.array_equal(np.asarray(getattr(a, f.name), dtype=float), np.asarray(getattr(b, f.name), dtype=float),
                                       equal_nan=True), f.name
         elif field.name == "initial_state":

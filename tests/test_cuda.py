@@ -28,6 +28,7 @@ numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not install
 from numba import cuda  # noqa: E402  (numba-cuda's target)
 
 CASE3 = str(ROOT / "configs" / "paper" / "case3_embedded.yaml")
+SATURATED = str(ROOT / "configs" / "examples" / "saturated_pendulum.yaml")
 #: The console script beside this interpreter.
 RBSTAB = os.path.join(os.path.dirname(sys.executable), "rbstab")
 
@@ -50,20 +51,31 @@ def _run_columns(config, n_samples):
                            config.simulation.max_step, config.simulation.gimbal_margin, config.simulation.max_steps,
                            np.inf]], method=config.simulation.method, n_samples=n_samples)
     columns = np.empty((N_OUTPUTS, 1, n_samples))
-    run_outputs(np.array([variant.code]), variant.parameters, np.zeros((1, sol.samples.shape[1])), sol.samples, columns, False)
+    times = np.linspace(0.0, config.simulation.t_end, n_samples)[None]
+    run_outputs(np.array([variant.code]), variant.parameters, times, sol.samples, columns, False)
     return variant, columns
 
 
-@pytest.mark.parametrize("overrides", [[], ["simulation.max_steps=40"], ["simulation.max_steps=13"],
-                                       ["simulation.max_steps=3"]], ids=["whole", "stopped", "short", "shorter"])
-def test_streamed_summary_is_summary_table(overrides):
+SATURATED_FALL = ["initial_state.theta=[0.45,0,0]"]  # the torque limit cannot hold it: flags set
+PUSHED = str(ROOT / "configs" / "examples" / "saturated_push.yaml")
+PUSHES = ["disturbances.1.start=0.7"]  # the impulse at 0.5 s and the pulse inside the run: 3 edges
+
+
+@pytest.mark.parametrize("path, overrides", [
+    (CASE3, []), (CASE3, ["simulation.max_steps=40"]), (CASE3, ["simulation.max_steps=13"]),
+    (CASE3, ["simulation.max_steps=3"]), (SATURATED, SATURATED_FALL), (SATURATED, [*SATURATED_FALL, "simulation.max_steps=6"]),
+    (PUSHED, PUSHES), (PUSHED, [*PUSHES, "simulation.max_steps=12"])],
+    ids=["whole", "stopped", "short", "shorter", "saturated", "saturated-stopped", "pushed", "pushed-stopped"])
+def test_streamed_summary_is_summary_table(path, overrides):
     """Fed a run's output rows one sample at a time, stream_sample / stream_finish /
-    stream_table give summary_table's figures (the same numbers) and numerical_rate's dv/dt;
-    for a run stopped early, the dv/dt of its first samples up to rounding."""
+    stream_table give summary_table's figures (the same numbers, the saturated time fractions
+    of a run whose torque is at its limit among them, and the rate check of a pushed run,
+    which leaves out the stencils across a push) and numerical_rate's dv/dt; for a run
+    stopped early, the dv/dt of its first samples up to rounding."""
     n = 101
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = rbstab.load_config(CASE3, ["simulation.t_end=1.0", f"simulation.n_samples={n}", *overrides])
+        config = rbstab.load_config(path, ["simulation.t_end=1.0", f"simulation.n_samples={n}", *overrides])
     variant, columns = _run_columns(config, n)
     time = np.linspace(0.0, 1.0, n)
     outputs = split_outputs(columns, variant.layout, False)
@@ -74,7 +86,7 @@ def test_streamed_summary_is_summary_table(overrides):
     trace = np.full((n, N_OUTPUTS + 1), -1.0)
     stream_start(acc)
     taken = int(np.isfinite(columns[0, 0]).sum())
-    assert (taken == n) == (not overrides)
+    assert (taken == n) == ("simulation.max_steps" not in " ".join(overrides))
     for i in range(taken):
         stream_sample(acc, i, np.ascontiguousarray(columns[:, 0, i]), first, weights, trace, 1, 1e-3)
     stream_finish(acc, first, weights, short_stencils(time), trace, 1)
@@ -83,6 +95,9 @@ def test_streamed_summary_is_summary_table(overrides):
     assert list(got) == list(expected)
     for key in expected:
         assert str(got[key]) == str(expected[key]), key
+    assert (got["fraction_saturated_torque_n"][0, 0] > 0) == (path != CASE3)
+    if path == PUSHED and taken == n:  # across the pushes the numerical dv/dt is no derivative: left out
+        assert str(got["lyapunov_rate_check"][0]) == "pass"
     rate = outputs["lyapunov_rate_numerical"][0, :taken]
     streamed = trace[:taken, NUMERICAL_RATE_AT]
     if taken == n or taken < 7:  # the whole grid's stencils, or the first samples' own (short_stencils)

@@ -44,7 +44,13 @@ pytestmark = pytest.mark.filterwarnings("ignore::rbstab.config.PhysicalPlausibil
 
 
 def base_data(path: Path, overrides=()) -> dict:
-    return apply_overrides(parse_yaml(path.read_text()), [*SHORT, *overrides])
+    """The config at ``path`` over SHORT's 0.3 s; its disturbances (configs/examples/saturated_push.yaml)
+    start at the same fraction of the run."""
+    data = parse_yaml(path.read_text())
+    t_end = data.get("simulation", {}).get("t_end", 1.0)
+    starts = [f"disturbances.{i}.start={d.get('start', 0.0) * 0.3 / t_end}"
+              for i, d in enumerate(data.get("disturbances") or ())]
+    return apply_overrides(data, [*SHORT, *starts, *overrides])
 
 
 def configs_with_spins(data: dict, spins=SPINS, **initial) -> list:

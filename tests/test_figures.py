@@ -237,3 +237,54 @@ def test_set_scale_uses_a_log_axis_only_where_values_span_decades(values, scale)
     ax.plot(values)
     assert set_scale(ax, values) == scale
     assert ax.get_yscale() == scale
+
+
+# -- saturating actuators and disturbances -----------------------------------------------------------------
+
+EXAMPLE = ROOT / "configs" / "examples" / "saturated_push.yaml"
+
+
+def _spans(ax, gid: str) -> list[tuple[float, float]]:
+    """The (t0, t1) of the spans of ``ax`` whose gid is ``gid``."""
+    return sorted((float(p.get_x()), float(p.get_x() + p.get_width())) for p in ax.patches if p.get_gid() == gid)
+
+
+def test_saturated_push_report_shades_the_limits_marks_the_pushes_and_draws_v_minus_w(tmp_path, monkeypatch):
+    """The shipped saturated push: the forces figure shades, on N's panel, exactly the
+    intervals where the stored |N_1| is the 4 N m limit (and nothing on the other axes);
+    every time panel marks the impulse with a line at 0.5 s and the pulse with a span over
+    [2.5, 2.55] s; the Lyapunov figure draws v - W from the stored v and W; the page's table
+    gives the saturated time fractions the run file holds."""
+    from rbstab.report.figures import saturated_intervals
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    monkeypatch.setattr("rbstab.report.build._animation", lambda run, frames: "")
+    monkeypatch.setattr("rbstab.report.build._jobs", lambda options: 1)
+    _ok("run", EXAMPLE, "-o", tmp_path, "--set", "simulation.n_samples=5001")
+    (run,) = load_inputs([tmp_path / "saturated_push.h5"]).runs
+    s = run.series("torque_n", "lyapunov", "disturbance_work")
+    at_limit = np.abs(s["torque_n"][:, 0]) == 4.0
+    assert at_limit.any() and not at_limit.all()
+    run_figures(run, FigureWriter(tmp_path))
+    n_panel = saved["saturated_push_forces"].axes[2]
+    shaded = _spans(n_panel, "saturated-torque_n-1")
+    assert shaded == saturated_intervals(s["time"], at_limit.astype(float)) and len(shaded) >= 2
+    starts = [a for a, _ in shaded]
+    assert any(0.49 < a < 0.6 for a in starts) and any(2.49 < a < 2.6 for a in starts)  # after each push
+    assert not _spans(n_panel, "saturated-torque_n-2") and not _spans(saved["saturated_push_forces"].axes[1],
+                                                                      "saturated-force_h-1")
+    for name in ("rotational", "translational", "lyapunov", "forces"):
+        for ax in saved[f"saturated_push_{name}"].axes:
+            (impulse,) = [line for line in ax.get_lines() if line.get_gid() == "disturbance-impulse"]
+            assert list(impulse.get_xdata()) == [0.5, 0.5]
+            np.testing.assert_allclose(_spans(ax, "disturbance-pulse"), [(2.5, 2.55)])
+    (work,) = [line for ax in saved["saturated_push_lyapunov"].axes for line in ax.get_lines()
+               if line.get_gid() == "lyapunov-minus-work"]
+    np.testing.assert_array_equal(work.get_ydata(), s["lyapunov"] - s["disturbance_work"])
+    assert s["disturbance_work"][-1] > 0.0
+    folder = build_report([tmp_path / "saturated_push.h5"], tmp_path / "report")
+    page = (folder / "index.html").read_text()
+    fraction = run.summary["fraction_saturated_torque_n"]
+    assert "fraction of time N_i saturated" in page and f"{fraction[0]:.3g}" in page
+    assert "impulse at 0.5 s, pulse at 2.5 s" in page

@@ -62,7 +62,10 @@ def _expected(variant, y):
            "lyapunov_gravity": -x @ (body.mass * body.gravity) + variant.lyapunov_offset,
            "lyapunov_rate": -(v @ g.l_t @ v + omega @ g.l_r @ omega + dissipated.get(variant.name, 0.0))}
     out["lyapunov"] = sum(out[t] for t in LYAPUNOV_TERMS)
-    out["disturbance_power"] = out["disturbance_work"] = 0.0  # no disturbances (tests/test_disturbances.py)
+    out["disturbance_power"] = out["disturbance_work"] = out["disturbance_edges"] = 0.0  # no disturbances
+    # (tests/test_disturbances.py)
+    for flags in ("torque_n_saturated", "force_h_saturated", "constraint_force_saturated"):
+        out[flags] = np.zeros(3)  # no limits (tests/test_saturation.py)
     return out
 
 

@@ -90,6 +90,36 @@ def test_delivered_outputs_respect_the_limits(name, rng):
         assert np.any(np.isclose(np.abs(out[key][..., finite]), limit[finite], rtol=1e-15)), key
 
 
+@pytest.mark.parametrize("shape", SHAPES)
+@pytest.mark.parametrize("name", ALL)
+def test_saturation_flags_mark_the_axes_commanded_at_their_limits(name, shape, rng):
+    """The stored flags are 1 exactly where tests/reference.py's commanded N, H, Lambda are
+    at or beyond their limits (clip: where the delivered value is the limit); Lambda of
+    ``permanent``, the pin's reaction, is never flagged."""
+    variant = _saturated(name, shape)
+    reference = Model(name, variant.body, variant.gains)
+    y = _states(variant, rng)
+    out = variant.evaluate(y)
+    sat = variant.gains.saturation
+    expected = {key: [] for key in ("torque_n", "force_h", "constraint_force")}
+    for j in range(len(y)):
+        theta, omega = out["theta"][j], out["omega"][j]
+        n_c, h_c = reference.commanded_controls(theta, omega, out["position"][j], out["velocity"][j])
+        d = out["controller_state"][j] if "controller_state" in out else np.zeros(3)
+        lam_c = (np.zeros(3) if name == "permanent" else
+                 reference.commanded_constraint(out["constraint_error"][j], out["constraint_rate"][j], d)[0])
+        expected["torque_n"].append(np.abs(n_c) >= sat.torque_n)
+        expected["force_h"].append(np.abs(h_c) >= sat.force_h)
+        expected["constraint_force"].append((np.abs(lam_c) >= sat.constraint_force) & (name != "permanent"))
+    for key, flags in expected.items():
+        np.testing.assert_array_equal(out[f"{key}_saturated"], np.array(flags, dtype=float), err_msg=key)
+        if shape == "clip":
+            at_limit = np.abs(out[key]) == sat.__getattribute__(key)
+            np.testing.assert_array_equal(out[f"{key}_saturated"] == 1.0, at_limit if name != "permanent"
+                                          or key != "constraint_force" else np.zeros_like(at_limit), err_msg=key)
+    assert np.any(out["torque_n_saturated"] == 1.0) and np.any(out["torque_n_saturated"] == 0.0)
+
+
 def _pendulum_falls(theta_1: float, n_max: float) -> bool:
     """Whether the pinned inverted pendulum (R = (0, 0, -L), gravity, K_t = L_t = 0,
     |N_1| <= n_max) let go at rest at tilt theta_1 falls (ends beyond a right angle)."""
@@ -228,6 +258,27 @@ def test_time_with_dv_dt_positive_is_a_summary_figure():
     spacing = float(fell["time"][1] - fell["time"][0])
     assert fell.attrs["summary_time_lyapunov_rising"] == np.sum(rate > 0) * spacing > 0.5
     assert paper.attrs["summary_time_lyapunov_rising"] == 0.0
+
+
+def test_saturated_time_fractions_are_summary_figures():
+    """fraction_saturated_<control> is, per axis, the fraction of the samples where the
+    control is flagged at its limit: for the clipped pendulum that falls, where |N_1| is
+    the limit 4 N m (most of the run); 0 for the paper's case without limits."""
+    import warnings
+
+    import rbstab
+
+    path = Path(__file__).resolve().parents[1] / "configs" / "examples" / "saturated_pendulum.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fell = rbstab.simulate(rbstab.load_config(path, ["initial_state.theta=[0.45,0,0]"]))
+        paper = rbstab.simulate(rbstab.load_config(CASE2))
+    at_limit = np.abs(fell["torque_n"].values) == 4.0
+    fraction = fell.attrs["summary_fraction_saturated_torque_n"]
+    np.testing.assert_array_equal(fraction, at_limit.mean(axis=0))
+    assert fraction[0] > 0.5 and fraction[1] == fraction[2] == 0.0
+    for key in ("torque_n", "force_h", "constraint_force"):
+        assert list(paper.attrs[f"summary_fraction_saturated_{key}"]) == [0.0, 0.0, 0.0]
 
 
 def test_analyze_names_an_actuator_saturated_at_rest():

@@ -30,6 +30,7 @@ __all__ = [
     "STATE_BLOCKS",
     "BLOCK_UNITS",
     "LYAPUNOV_TERMS",
+    "SATURATION_FLAGS",
     "OUTPUT_VECTORS",
     "OUTPUT_SCALARS",
     "N_OUTPUTS",
@@ -208,7 +209,8 @@ def parameter_attributes(entry: str) -> dict[str, str]:
 
 # -- the outputs of a run, in the order of a row of the outputs kernel -------------------------
 #: The outputs of the compiled ``outputs`` kernel (:mod:`rbstab.variants.kernels`), in the
-#: order of a row of outputs: the state blocks, the constraint and feedback vectors, then
+#: order of a row of outputs: the state blocks, the constraint and feedback vectors, the
+#: flags of the controls' axes at their limits (:data:`SATURATION_FLAGS`), then
 #: the terms of v in the order they are summed, v and dv/dt.
 OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
     Quantity("theta", "Theta", "rad", "Euler angles Theta",
@@ -232,6 +234,19 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
              "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)", "H", "feedback force", 3),
     Quantity("torque_n", "N", "N m", "rotational feedback torque N (body frame)",
              "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)", "N", "feedback torque", 3),
+    Quantity("torque_n_saturated", "N saturated", "1", "N_i at or beyond its limit, 1 or 0 (body frame)",
+             "1 where the commanded N_i (eq 23) is at or beyond its limit, |N_i| >= controller.saturation.torque_n_i "
+             "(clip: N_i is the limit; smooth: at least tanh(1) of it); 0 elsewhere and without limits",
+             r"N_{sat}", "torque N saturated", 3),
+    Quantity("force_h_saturated", "H saturated", "1", "H_i at or beyond its limit, 1 or 0 (inertial frame)",
+             "1 where the commanded H_i (eq 24) is at or beyond its limit, |H_i| >= controller.saturation.force_h_i "
+             "(clip: H_i is the limit; smooth: at least tanh(1) of it); 0 elsewhere and without limits",
+             r"H_{sat}", "force H saturated", 3),
+    Quantity("constraint_force_saturated", "Lambda saturated", "1",
+             "Lambda_i at or beyond its limit, 1 or 0 (inertial frame)",
+             "1 where the commanded Lambda_i (eqs 22, 39, 40) is at or beyond its limit, |Lambda_i| >= "
+             "controller.saturation.constraint_force_i (clip: Lambda_i is the limit; smooth: at least tanh(1) of "
+             "it); 0 elsewhere, without limits and for permanent's pin", r"\Lambda_{sat}", "constraint force saturated", 3),
     Quantity("lyapunov_translational", "v_t", "J", "translational term v_t of the Lyapunov function",
              "v_t = V'MV/2 + X'K_t X/2 (eq 25)", "v_t", "translational"),
     Quantity("lyapunov_rotational", "v_r", "J", "rotational term v_r of the Lyapunov function",
@@ -252,6 +267,10 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
     Quantity("disturbance_work", "W", "J", "work of the disturbances",
              "W = integral of P_d dt plus each impulse's jump of kinetic energy (eqs 26-28)",
              "W", "disturbance work"),
+    Quantity("disturbance_edges", "edges", "1", "disturbance edges at or before the sample",
+             "number of the disturbances' edges (each start, impulses included, and each pulse's end) at or "
+             "before the sample time: v or dv/dt may jump between samples where it changes, so the rate check "
+             "compares the numerical dv/dt only on stencils where it does not", "n_e", "disturbance edges"),
 ))}
 
 #: Every quantity a run or store file holds as a variable (:data:`OUTPUTS` and the rest).
@@ -284,6 +303,11 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
 STATE_BLOCKS = ("theta", "omega", "position", "velocity", "controller_state")
 #: Units of each state block (CF spelling; the files' ``units`` attribute).
 BLOCK_UNITS = {b: OUTPUTS[b].units for b in STATE_BLOCKS}
+#: The controls an actuator delivers (:class:`rbstab.model.Saturation`'s limits) -> the output
+#: that flags their axes at or beyond the limit and the summary figure of the fraction of the
+#: samples so flagged.
+SATURATION_FLAGS = {control: (f"{control}_saturated", f"fraction_saturated_{control}")
+                    for control in ("torque_n", "force_h", "constraint_force")}
 #: Names of the terms of v, in the order they are summed.
 LYAPUNOV_TERMS = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
 #: The vector outputs (3 columns each), in order.
@@ -331,6 +355,12 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("max_lyapunov_increase", "max rise of v", "J", "largest rise of v above its running minimum"),
     Quantity("time_lyapunov_rising", "time with dv/dt > 0", "s",
              "time with analytic dv/dt > 0 (samples times their spacing)"),
+    Quantity("fraction_saturated_torque_n", "fraction of time N_i saturated", "1",
+             "fraction of the samples with N_i commanded at or beyond its limit (body frame)", size=3),
+    Quantity("fraction_saturated_force_h", "fraction of time H_i saturated", "1",
+             "fraction of the samples with H_i commanded at or beyond its limit (inertial frame)", size=3),
+    Quantity("fraction_saturated_constraint_force", "fraction of time Lambda_i saturated", "1",
+             "fraction of the samples with Lambda_i commanded at or beyond its limit (inertial frame)", size=3),
     Quantity("lyapunov_rate_mismatch", "max |dv/dt analytic - numerical|", "W", "max |analytic - numerical dv/dt|"),
     Quantity("lyapunov_rate_mismatch_relative", "relative dv/dt mismatch", "1",
              "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),

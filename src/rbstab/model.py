@@ -21,7 +21,7 @@ from .kinematics import cross, hat, matTvec, matvec, neg, sub
 __all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "Disturbance", "DISTURBANCE_KINDS",
            "DISTURBANCE_QUANTITIES", "MAX_DISTURBANCES", "NOISE_TONES", "Limits", "PARAMETERS", "parameters",
            "set_disturbances", "set_limits", "gyroscopic",
-           "saturate", "torque_n_command", "force_h_command", "torque_n", "force_h"]
+           "saturate", "saturated", "torque_n_command", "force_h_command", "torque_n", "force_h"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -398,6 +398,20 @@ def saturate(u, limit, shape):
     limit_i] (``shape`` 1) or limit_i tanh(u_i / limit_i) (``shape`` 2); ``limit`` (3,),
     inf where unlimited (:data:`SATURATION_SHAPES`)."""
     return (_saturate(u[0], limit[0], shape), _saturate(u[1], limit[1], shape), _saturate(u[2], limit[2], shape))
+
+
+@jit(forceinline=True)
+def _at_limit(u, limit):
+    return 1.0 if abs(u) >= limit else 0.0
+
+
+@jit(forceinline=True)
+def saturated(u, limit):
+    """1.0 on each axis i where the commanded 3-vector ``u`` is at or beyond its limit,
+    |u_i| >= limit_i, else 0.0 (``limit`` (3,), inf where unlimited: never). There a
+    ``clip`` actuator delivers its limit and a ``smooth`` one at least tanh(1) = 0.76 of it
+    (:func:`saturate`); the summaries count these samples (docs/saturation.md)."""
+    return (_at_limit(u[0], limit[0]), _at_limit(u[1], limit[1]), _at_limit(u[2], limit[2]))
 
 
 @jit(forceinline=True)

@@ -15,7 +15,7 @@ import numpy as np
 from .convergence import within_bound
 from .results import row
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, STATE_BLOCKS
+from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -235,11 +235,16 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         (largest rise of v above its running minimum: 0 for a non-increasing v),
         ``time_lyapunov_rising`` [s] (the samples with analytic dv/dt > 0 times the
         spacing: 0 where the paper's theorem holds; saturating actuators can make v rise),
+        ``fraction_saturated_torque_n``, ``_force_h``, ``_constraint_force`` (3 floats each,
+        per axis: the fraction of the samples whose ``<control>_saturated`` flag is set, the
+        control commanded at or beyond its limit; 0 without limits),
         ``lyapunov_rate_mismatch`` [W] (max |analytic - numerical dv/dt|),
         ``lyapunov_rate_mismatch_relative`` (divided by the reference power
         P = max(max |analytic dv/dt|, E / T): E [J] the energy scale, the largest sum over
         a sample of the magnitudes of v's terms, T [s] the duration of the samples),
-        ``lyapunov_rate_check`` (``"pass"`` when the relative mismatch is at most
+        ``lyapunov_rate_check`` (over the samples whose stencil lies between two of the
+        disturbances' edges, when ``outputs`` holds ``disturbance_edges``: across an impulse
+        or a pulse's edge v or dv/dt jumps; ``"pass"`` when the relative mismatch is at most
         :data:`LYAPUNOV_RATE_TOLERANCE`, ``"fail"`` when it is larger, ``"n/a"`` when
         fewer than :data:`MIN_CHECK_SAMPLES` finite samples exist, e.g. a run that failed
         at once).
@@ -328,6 +333,9 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
     table["max_lyapunov_rate"] = np.max(rate, axis=1)
     table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1)
     table["time_lyapunov_rising"] = np.sum(rate > 0.0, axis=1) * _spacing(time)
+    for flags, figure in SATURATION_FLAGS.values():
+        if flags in outputs:
+            table[figure] = np.stack([np.sum(outputs[flags][:, :, i], axis=1) for i in range(3)], axis=1) / n
     n_checked = np.full(k, n) if checked is None else np.sum(checked, axis=1)
     if checked is not None:
         table["lyapunov_rate_checked"] = n_checked / n
@@ -336,10 +344,22 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
         difference = np.abs(rate - outputs["lyapunov_rate_numerical"])
         if checked is not None:
             difference = np.where(checked, difference, 0.0)
+        if "disturbance_edges" in outputs:
+            difference = np.where(_within_one_piece(time, outputs["disturbance_edges"]), difference, 0.0)
         largest = np.max(difference, axis=1)
         scales = np.maximum(np.max(np.abs(rate), axis=1), _energy_scale(outputs) / (time[n - 1] - time[0]))
     table.update(_rate_check(largest, scales, n_checked >= MIN_CHECK_SAMPLES))
     return table
+
+
+def _within_one_piece(time: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Whether each sample's stencil (:func:`stencil_weights` of ``time``, as
+    :func:`numerical_rate` takes it) lies between two of the disturbances' edges: the
+    ``disturbance_edges`` (k, n) of its first and last samples are equal. Elsewhere v or
+    dv/dt may jump inside the stencil (an impulse, a pulse's edge), and the numerical dv/dt
+    there is not a derivative: the rate check does not compare it."""
+    first, weights = _stencil_weights_of(np.ascontiguousarray(time, dtype=float))
+    return edges[:, first] == edges[:, first + weights.shape[1] - 1]
 
 
 def _spacing(time: np.ndarray) -> float:
@@ -374,16 +394,23 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: :func:`stream_table`): max |E_i| (3), v(0), max dv/dt, running min of v, largest rise of
 #: v above it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the
 #: samples taken, the last sample not converged (:func:`rbstab.convergence.converged`
-#: with v(0) and its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL` values of v and of
-#: dv/dt (rings).
+#: with v(0) and its v; -1 for none), the samples with dv/dt > 0, the samples with each
+#: axis of N, H and Lambda flagged at its limit (:data:`rbstab.layout.SATURATION_FLAGS`),
+#: and the last :data:`RATE_STENCIL` values of v, of dv/dt and of the disturbances' edges
+#: (rings).
 MAX_ERROR = 0  # 3 slots
 V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(3, 13)
-V_RING = 13
+SATURATED = 13  # 3 slots a control, in the order of SATURATION_FLAGS
+_FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
+V_RING = SATURATED + _FLAG_SLOTS
 RATE_RING = V_RING + RATE_STENCIL
-ACCUMULATOR_SIZE = RATE_RING + RATE_STENCIL
+EDGE_RING = RATE_RING + RATE_STENCIL
+ACCUMULATOR_SIZE = EDGE_RING + RATE_STENCIL
 _ERROR_AT = OUTPUTS["constraint_error"].offset
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
+_EDGES_AT = OUTPUTS["disturbance_edges"].offset
+_N_FLAGS_AT, _H_FLAGS_AT, _LAMBDA_FLAGS_AT = (OUTPUTS[flags].offset for flags, _ in SATURATION_FLAGS.values())
 #: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
 _within_bound = jit(forceinline=True)(within_bound)
 _T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
@@ -411,6 +438,8 @@ def stream_start(acc):
     acc[TAKEN] = 0.0
     acc[LAST_ABOVE] = -1.0
     acc[RISING] = 0.0
+    for i in range(_FLAG_SLOTS):
+        acc[SATURATED + i] = 0.0
 
 
 @jit(forceinline=True)
@@ -423,10 +452,14 @@ def _numerical_rate(acc, start, w):
 
 
 @jit(forceinline=True)
-def _compare(acc, i, numerical, trace, stride):
-    """Take sample i's numerical dv/dt: into the mismatch, and into the trace's row when
-    the trace keeps sample i."""
-    acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], abs(acc[RATE_RING + i % RATE_STENCIL] - numerical))
+def _compare(acc, i, numerical, start, w, trace, stride):
+    """Take sample i's numerical dv/dt, from the stencil of the w samples from ``start``: into
+    the mismatch (0 for a stencil across a disturbance's edge, as :func:`summary_table`
+    counts it), and into the trace's row when the trace keeps sample i."""
+    if acc[EDGE_RING + start % RATE_STENCIL] == acc[EDGE_RING + (start + w - 1) % RATE_STENCIL]:
+        acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], abs(acc[RATE_RING + i % RATE_STENCIL] - numerical))
+    else:
+        acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], 0.0)
     if i % stride == 0 and i // stride < trace.shape[0]:
         trace[i // stride, NUMERICAL_RATE_AT] = numerical
 
@@ -456,6 +489,10 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
     if rate > 0.0:
         acc[RISING] += 1.0
+    for a in range(3):
+        acc[SATURATED + a] += row[_N_FLAGS_AT + a]
+        acc[SATURATED + 3 + a] += row[_H_FLAGS_AT + a]
+        acc[SATURATED + 6 + a] += row[_LAMBDA_FLAGS_AT + a]
     v0 = acc[V_INITIAL]
     if not _within_bound(v0, v, ratio):
         acc[LAST_ABOVE] = i
@@ -464,6 +501,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[ENERGY] = _max(acc[ENERGY], abs(row[_T0]) + abs(row[_T1]) + abs(row[_T2]) + abs(row[_T3]))
     acc[V_RING + i % RATE_STENCIL] = v
     acc[RATE_RING + i % RATE_STENCIL] = rate
+    acc[EDGE_RING + i % RATE_STENCIL] = row[_EDGES_AT]
     acc[TAKEN] = i + 1
     if i % stride == 0 and i // stride < trace.shape[0]:
         for c in range(row.shape[0]):
@@ -474,7 +512,7 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     if start >= 0:
         for q in range(max(0, i - w + 1), i + 1):
             if first[q] == start:
-                _compare(acc, q, _numerical_rate(acc, start, weights[q]), trace, stride)
+                _compare(acc, q, _numerical_rate(acc, start, weights[q]), start, w, trace, stride)
 
 
 @jit(forceinline=True)
@@ -493,12 +531,12 @@ def stream_finish(acc, first, weights, short, trace, stride):
             acc[MAX_MISMATCH] = math.nan
             return
         for i in range(taken):
-            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), trace, stride)
+            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), 0, taken, trace, stride)
         return
     start = taken - w
     for i in range(max(0, taken - w), taken):
         if first[i] + w - 1 > taken - 1:  # its stencil on the whole grid reaches past the run
-            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), trace, stride)
+            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), start, w, trace, stride)
 
 
 def short_stencils(time: np.ndarray) -> np.ndarray:
@@ -541,6 +579,9 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
     table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
     table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
+    with np.errstate(all="ignore"):
+        for c, (_, figure) in enumerate(SATURATION_FLAGS.values()):
+            table[figure] = acc[:, SATURATED + 3 * c: SATURATED + 3 * c + 3] / taken[:, None]
     span = time[last_index] - time[0]
     with np.errstate(all="ignore"):
         scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)

@@ -352,7 +352,9 @@ def analyze(
     timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
-    variant = analysed.make_variant()
+    disturbed = analysed.make_variant()
+    variant, disturbed, disturbance_notes = _undisturbed(analysed, disturbed)
+    notes += disturbance_notes
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a, variant.layout) for a in basin or ()]
     if basin is not None and len(axes) != 2:
         raise ValueError(f"--basin: expected exactly two axes, found {len(axes)}")
@@ -368,7 +370,8 @@ def analyze(
     result = Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes, timing=timing)
     if certificate:
         result.certificate = certify(variant, lin, gimbal_margin=analysed.simulation.gimbal_margin,
-                                     n_samples=samples, seed=seed)
+                                     n_samples=samples, seed=seed, disturbed=disturbed,
+                                     t_end=analysed.simulation.t_end)
         timing["certificate"] = _time.perf_counter() - t1
     if simulate:
         t2 = _time.perf_counter()
@@ -376,8 +379,8 @@ def analyze(
         timing["simulation"] = _time.perf_counter() - t2
     if axes:
         t3 = _time.perf_counter()
-        result.basin = basin_map(analysed, axes, variant, ratio=ratio, n_samples=basin_samples, jobs=jobs,
-                                 engine=engine)
+        result.basin = basin_map(analysed, axes, disturbed if disturbed is not None else variant, ratio=ratio,
+                                 n_samples=basin_samples, jobs=jobs, engine=engine)
         timing["basin"] = _time.perf_counter() - t3
     if push or basin_stability:
         with _workers(executor, jobs, push, basin_stability) as workers:
@@ -404,6 +407,20 @@ def _workers(executor, jobs: int, push, stability):
     from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
 
     return LocalExecutor(jobs, task="a push analysis")
+
+
+def _undisturbed(config, variant) -> tuple:
+    """(the variant without ``config``'s disturbances, ``variant`` with them or None when it
+    has none, a note saying which dynamics each part of the analysis sees)."""
+    if not config.gains.disturbances:
+        return variant, None, []
+    undisturbed = dataclasses.replace(config, gains=dataclasses.replace(config.gains, disturbances=()))
+    kinds = ", ".join(dict.fromkeys(d.kind for d in config.gains.disturbances))
+    return undisturbed.make_variant(), variant, [
+        f"disturbances ({kinds}): the equilibrium, the linearisation and the certificate's Hessians are of the "
+        "undisturbed dynamics; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
+        "impulses not seen) and the simulations integrate the disturbed dynamics"]
+>>>>>>> main
 
 
 def _check_options(samples: int, basin_samples: int, ratio: float, jobs: int) -> None:

@@ -26,6 +26,11 @@ least v on the domain boundary |theta_2| = pi/2 - gimbal_margin (eq 5; minimised
 over the other coordinates, at rest: the kinetic terms of v are >= 0). By LaSalle,
 {v <= c} is then an inner estimate of the region of attraction, valid as far as the
 sampling is dense: it is labelled sampling-based, with its sample size.
+
+With disturbances (``disturbed``), the local part is of the undisturbed dynamics and the
+sampled part of the disturbed ones: each sampled state at a time drawn uniformly in
+[0, t_end], its dv/dt with the disturbances' power then (an impulse is a jump of the
+velocities, not a rate: the samples do not see it; a basin map's runs do).
 """
 
 from __future__ import annotations
@@ -254,6 +259,8 @@ def certify(
     gimbal_margin: float,
     n_samples: int = DEFAULT_SAMPLES,
     seed: int = 0,
+    disturbed=None,
+    t_end: float = 0.0,
 ) -> Certificate:
     """The certificate of ``variant``'s equilibrium (module docstring).
 
@@ -269,6 +276,9 @@ def certify(
         States sampled for the dv/dt check (>= 1).
     seed : int
         Of the sampling (numpy's default generator).
+    disturbed : rbstab.variants.Variant, optional
+        ``variant`` with its disturbances, whose dv/dt the samples check, each at a time
+        drawn uniformly in [0, ``t_end``] [s] (default: ``variant`` itself, at t = 0).
     """
     y_e = linearisation.equilibrium
     h_v, _ = hessian(variant.lyapunov, y_e)
@@ -291,8 +301,10 @@ def certify(
     mu = np.linalg.eigvalsh(root @ h_r @ root)  # H_r w = mu H_v w
     observable = _pbh_observable(linearisation.jacobian, h_r, root, linearisation.eigenvalues)
     level = boundary_level(variant, y_e, h_v, limit)
-    sampled = _sampled_rates(variant, linearisation, _samples(y_e, root, _REACH * level, n_samples,
-                                                               np.random.default_rng(seed)), limit)
+    rng = np.random.default_rng(seed)
+    states = _samples(y_e, root, _REACH * level, n_samples, rng)
+    times = rng.uniform(0.0, t_end, n_samples) if disturbed is not None else np.zeros(1)
+    sampled = _sampled_rates(disturbed if disturbed is not None else variant, linearisation, states, limit, times)
     sublevel, bound = _sublevel(level, sampled)
     return Certificate(**common, rate_eigenvalues=mu, rate_definiteness=_rate_definiteness(mu),
                        lasalle_observable=observable, n_samples=n_samples, boundary_level=level,
@@ -300,20 +312,22 @@ def certify(
                                                                   if not k.startswith("_")})
 
 
-def _sampled_rates(variant, linearisation, y: np.ndarray, limit: float) -> dict:
-    """v, numerical and analytic dv/dt at the states ``y`` (NaN outside the domain), the
-    worst state and the rate mismatch (fields of :class:`Certificate`)."""
+def _sampled_rates(variant, linearisation, y: np.ndarray, limit: float, t: np.ndarray) -> dict:
+    """v, numerical and analytic dv/dt at the states ``y`` (NaN outside the domain) at the
+    times ``t`` [s] (1, or one a state), the worst state and the rate mismatch (fields of
+    :class:`Certificate`)."""
     outside = np.abs(y[:, 1]) >= limit
     inside = ~outside
+    t = np.broadcast_to(t, len(y))
     with np.errstate(all="ignore"):
-        out = variant.evaluate(y)
+        out = variant.evaluate(y, t)
         v = np.array(out["lyapunov"])
         analytic = np.where(inside, out["lyapunov_rate"], np.nan)
         rate = np.full(len(y), np.nan)
         error = np.full(len(y), np.nan)
         rho = max(float(np.abs(linearisation.eigenvalues).max()), 1e-3)
         if inside.any():
-            f = variant.rhs(0.0, y[inside])
+            f = variant.rhs(t[inside], y[inside])
             rate[inside], error[inside] = directional_derivative(variant.lyapunov, y[inside], f, 1.0 / rho)
         power = np.abs(analytic) + rho * np.abs(v)
         relative = rate / np.where(power > 0, power, 1.0)

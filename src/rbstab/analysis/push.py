@@ -192,7 +192,9 @@ class Pushes:
                              "analyse a boundary-layer law (--boundary-layer PHI)")
         from .linearise import linearise  # heavy: numba
 
-        lin = linearise(variant)
+        # the equilibrium of the undisturbed dynamics (the configuration's own disturbances act on the runs)
+        calm = dataclasses.replace(config, gains=dataclasses.replace(config.gains, disturbances=()))
+        lin = linearise(calm.make_variant() if own else variant)
         if not lin.is_rest_point:
             raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
                              f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")

@@ -236,6 +236,11 @@ def samples_apart(t_end: Any, n_samples: Any) -> Any:
     return t_end / (n_samples - 1) >= MIN_SAMPLE_SPACING
 
 
+def starts_in_run(start: Any, t_end: Any) -> Any:
+    """Whether a disturbance's ``start`` [s] is not after the run's ``t_end`` [s]."""
+    return start <= t_end
+
+
 def steps_suffice(t_end: Any, max_step: Any, max_steps: Any) -> Any:
     """Whether ``max_steps`` steps of at most ``max_step`` [s] can reach ``t_end`` [s]."""
     return t_end / max_step <= max_steps
@@ -845,7 +850,7 @@ class RunSchema(_Section):
         """A start after t_end; disturbances on the pure sign law (its event-driven
         integrator has no breakpoints)."""
         for i, d in enumerate(self.disturbances or ()):
-            if float(d.start) > float(self.simulation.t_end):
+            if not starts_in_run(float(d.start), float(self.simulation.t_end)):
                 raise PydanticCustomError("rbstab_invalid", "start after the end", {
                     "key": f"disturbances.{i}.start", "found": short_repr(d.start),
                     "expected": f"a number in [0, simulation.t_end] = [0, {float(self.simulation.t_end):g}] (s)"})
@@ -948,6 +953,9 @@ def field_rule(section: str, name: str) -> tuple | None:
     The same check functions the schema validates a field with carry them."""
     model = RunSchema.model_fields.get(section)
     model = _submodel(model.annotation) if model is not None else None
+    entry, _, rest = name.partition(".")
+    if section == "disturbances" and entry.isdigit():  # a field of the list's entry number ``entry``
+        model, name = _Disturbance, rest
     field = None
     for part in name.split("."):
         field = model.model_fields.get(part) if model is not None else None

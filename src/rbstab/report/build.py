@@ -38,6 +38,7 @@ import numpy as np
 from .. import __version__
 from ..diagnostics import convergence_word
 from ..io.metadata import provenance_attributes
+from ..layout import SATURATION_FLAGS, SUMMARY_FIGURES
 from .analysis import analysis_sections, split_inputs
 from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
@@ -285,7 +286,42 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
     switching = _switching_table(runs)
     if switching is not None:
         s.blocks.append(switching)
+    limits = _saturation_table(runs)
+    if limits is not None:
+        s.blocks.append(limits)
     return [s]
+
+
+#: The summary figures of the table of runs with actuators' limits or disturbances.
+SATURATION_FIGURES = ("max_lyapunov_increase", "time_lyapunov_rising",
+                      *(figure for _, figure in SATURATION_FLAGS.values()))
+
+
+def _saturation_table(runs: Sequence[RunData]) -> Table | None:
+    """The runs with actuators' limits (controller.saturation) or disturbances: how much v
+    rose, how long dv/dt > 0, and per axis of N, H, Lambda the fraction of the time at the
+    limit (None if no run has either); headers from the table of quantities."""
+    rows = [r for r in runs if r.config.get("disturbances") or r.config.get("controller", {}).get("saturation")]
+    if not rows:
+        return None
+    figures = [SUMMARY_FIGURES[name] for name in SATURATION_FIGURES]
+    return Table(
+        "Saturating actuators and disturbances: where v rises, and the time each axis of N, H, Lambda spends at "
+        "its limit (docs/saturation.md, docs/disturbances.md)",
+        ["run", "limits", "disturbances",
+         *(q.symbol if q.units == "1" else f"{q.symbol} [{q.display_units}]" for q in figures)],
+        [[r.label, _limits_text(r.config.get("controller", {}).get("saturation")),
+          ", ".join(f"{d.get('kind')} at {d.get('start', 0)} s" for d in r.config.get("disturbances") or ()) or "-",
+          *(_f(r.summary.get(q.name), 3) for q in figures)] for r in rows],
+    )
+
+
+def _limits_text(saturation) -> str:
+    """A run's actuators' limits as the config gives them, e.g. ``torque_n 4, clip``."""
+    if not saturation:
+        return "-"
+    keys = [f"{k} {saturation[k]}" for k in ("torque_n", "force_h", "constraint_force") if saturation.get(k) is not None]
+    return ", ".join([*keys, str(saturation.get("shape", "clip"))])
 
 
 def _switching_table(runs: Sequence[RunData]) -> Table | None:

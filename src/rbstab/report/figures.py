@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..layout import LYAPUNOV_TERMS, QUANTITIES, display_units
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, SATURATION_FLAGS, display_units
 from .load import RunData, safe_filename
 from .tables import SettleThresholds
 
@@ -37,6 +37,8 @@ __all__ = [
     "run_figures",
     "RUN_FIGURES",
     "switching_figure",
+    "disturbance_marks",
+    "saturated_intervals",
     "comparison_figures",
     "set_scale",
 ]
@@ -241,14 +243,72 @@ def _suptitle(fig, run: RunData, what: str) -> None:
     fig.suptitle(f"{run.label} ({run.variant}): {what}{_status(run)}", fontsize=11)
 
 
+def disturbance_marks(run: RunData) -> list[tuple[str, float, float]]:
+    """Where the run's disturbances (its config's ``disturbances``) act on the time axis:
+    (kind, t0, t1) [s] each, t1 = t0 for an impulse, the pulse's end, t_end for the kinds
+    that act from ``start`` on (step, sine, noise)."""
+    t_end = float(run.config.get("simulation", {}).get("t_end", np.nan))
+    marks = []
+    for d in run.config.get("disturbances") or ():
+        start = float(d.get("start", 0.0))
+        end = {"impulse": start, "pulse": start + float(d.get("duration") or 0.0)}.get(d.get("kind"), t_end)
+        marks.append((str(d.get("kind")), start, end))
+    return marks
+
+
+#: Grey of the disturbances' marks on the time axes.
+_DISTURBANCE_GREY = "0.35"
+
+
+def _mark_disturbances(ax, run: RunData) -> None:
+    """Each disturbance on a time axis: an impulse a dash-dotted line at its time, a pulse a
+    grey span over its window, a step, sine or noise a dashed line where it starts (it acts
+    from there on). The artists' gid is ``disturbance-<kind>``."""
+    for kind, t0, t1 in disturbance_marks(run):
+        if kind == "pulse":
+            ax.axvspan(t0, t1, color=_DISTURBANCE_GREY, alpha=0.18, lw=0, gid=f"disturbance-{kind}")
+        else:
+            ax.axvline(t0, color=_DISTURBANCE_GREY, lw=0.9, ls="-." if kind == "impulse" else "--",
+                       gid=f"disturbance-{kind}")
+
+
 def _finish_time_axes(axes, run: RunData, legend: bool = True, **legend_kw) -> None:
-    """Grid, legend titled with the run, failure mark and the time label of a column of panels."""
+    """Grid, legend titled with the run, failure and disturbance marks and the time label of
+    a column of panels."""
     for ax in axes:
         if legend:
             ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8, **legend_kw)
         ax.grid(alpha=0.3, which="both")
         _mark_failure(ax, run)
+        _mark_disturbances(ax, run)
     axes[-1].set_xlabel(_label("time"))
+
+
+def saturated_intervals(time: np.ndarray, flags: np.ndarray) -> list[tuple[float, float]]:
+    """The intervals [t0, t1] [s] of consecutive samples whose flag is 1 (a control's axis at
+    its limit, :data:`rbstab.layout.SATURATION_FLAGS`), each widened by half a sample spacing
+    on either side (within the samples' span), so that a single flagged sample shows."""
+    on = np.asarray(flags) == 1.0
+    if not on.any():
+        return []
+    half = 0.5 * (time[-1] - time[0]) / max(len(time) - 1, 1)
+    edges = np.diff(np.r_[0, on.astype(np.int8), 0])
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    return [(max(float(time[a]) - half, float(time[0])), min(float(time[b]) + half, float(time[-1])))
+            for a, b in zip(starts, ends)]
+
+
+def _shade_saturation(ax, run: RunData, control: str) -> None:
+    """Shade, in each component's colour, where that axis of ``control`` is at its limit
+    (the file's ``<control>_saturated`` flags; nothing for a file without them). The spans'
+    gid is ``saturated-<control>-<component>``."""
+    flags = SATURATION_FLAGS[control][0]
+    s = run.series(flags)
+    if flags not in s:
+        return
+    for k in range(3):
+        for t0, t1 in saturated_intervals(s["time"], s[flags][:, k]):
+            ax.axvspan(t0, t1, color=f"C{k}", alpha=0.12, lw=0, gid=f"saturated-{control}-{k + 1}")
 
 
 def _vector_panels(axes, run: RunData, names: Sequence[str], scale: bool = False) -> dict:
@@ -288,7 +348,8 @@ def _rotational_figure(run: RunData, out: FigureWriter) -> FigureFile:
     _vector_panels(axes[:, 0], run, ("theta", "omega"))
     _suptitle(fig, run, "rotational states")
     return out.save(fig, f"{safe_filename(run.label)}_rotational", f"{run.label}: rotational states",
-                    "Euler angles Theta and body angular velocity Omega against time (cf. the paper's Figs 3, 4, 6).")
+                    "Euler angles Theta and body angular velocity Omega against time (cf. the paper's Figs 3, 4, 6)"
+                    + _marks_caption(run) + ".")
 
 
 def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
@@ -307,7 +368,8 @@ def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
     return out.save(fig, f"{safe_filename(run.label)}_translational", f"{run.label}: translational states and constraint",
                     "Centre-of-mass position X and velocity V (inertial frame), "
                     + ("controller state D, " if "controller_state" in names else "")
-                    + f"and the constraint error E = X + A R - R against time (cf. the paper's Figs 5, 7){extra}.")
+                    + f"and the constraint error E = X + A R - R against time (cf. the paper's Figs 5, 7){extra}"
+                    + _marks_caption(run) + ".")
 
 
 def _lyapunov_terms_panel(ax, run: RunData) -> None:
@@ -334,12 +396,32 @@ def _lyapunov_terms_panel(ax, run: RunData) -> None:
     ax.set_ylabel(_label("lyapunov"), fontsize=9)
 
 
+def _work_panel(ax, run: RunData) -> None:
+    """v beside v - W and the disturbances' work W (linear axis): with unsaturated gains
+    v - W never rises (docs/disturbances.md)."""
+    s = run.series("lyapunov", "disturbance_work")
+    t, v, w = s["time"], s["lyapunov"], s["disturbance_work"]
+    ax.plot(t, v, color="k", lw=1.6, label=f"${_symbol('lyapunov')}$")
+    ax.plot(t, v - w, color="C1", lw=1.4, ls="--", label=f"${_symbol('lyapunov')} - {_symbol('disturbance_work')}$",
+            gid="lyapunov-minus-work")
+    ax.plot(t, w, color="C2", lw=1.0, ls=":", label=f"${_symbol('disturbance_work')}$ {QUANTITIES['disturbance_work'].words}")
+    ax.set_ylabel(f"$v$, $v - W$, $W$ [{QUANTITIES['lyapunov'].display_units}]", fontsize=9)
+
+
+def _disturbed(run: RunData) -> bool:
+    """Whether the run has disturbances and its file their work (not a thinned store)."""
+    return bool(run.config.get("disturbances")) and "disturbance_work" in run.series("disturbance_work")
+
+
 def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
     s = run.series("lyapunov_rate", "lyapunov_rate_numerical")
     t = s["time"]
-    fig, axes = new_figure(3, row_height=2.6)
+    work = _disturbed(run)
+    fig, axes = new_figure(3 + work, row_height=2.6)
     _lyapunov_terms_panel(axes[0, 0], run)
-    rate, diff = axes[1, 0], axes[2, 0]
+    if work:
+        _work_panel(axes[1, 0], run)
+    rate, diff = axes[1 + work, 0], axes[2 + work, 0]
     rate.plot(t, s["lyapunov_rate"], color="C0", lw=2.2, alpha=0.6, marker=_marker(s["lyapunov_rate"]),
               label=r"$\dot v$ analytic")
     if "lyapunov_rate_numerical" in s:
@@ -354,9 +436,12 @@ def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
     _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
     return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
                     "v and its non-zero terms (translational, rotational, constraint controller, gravity; "
-                    "logarithmic axis, a term that changes sign as its magnitude), its analytic rate dv/dt (solid) and the numerical derivative of v along "
+                    "logarithmic axis, a term that changes sign as its magnitude), "
+                    + ("v beside v - W, W the work of the disturbances (with unsaturated gains v - W never rises), "
+                       if work else "")
+                    + "its analytic rate dv/dt (solid) and the numerical derivative of v along "
                     "the samples (dashed; symmetric-logarithmic axis where it spans decades), and their difference "
-                    "(cf. the paper's Figs 3, 4, 6).")
+                    "(cf. the paper's Figs 3, 4, 6)" + _marks_caption(run) + ".")
 
 
 def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
@@ -365,11 +450,25 @@ def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
         return None
     fig, axes = new_figure(3)
     _vector_panels(axes[:, 0], run, names, scale=True)
+    for ax, control in zip(axes[:, 0], names):
+        _shade_saturation(ax, run, control)
     _suptitle(fig, run, "constraint force and feedback")
+    limited = run.config.get("controller", {}).get("saturation")
     return out.save(fig, f"{safe_filename(run.label)}_forces", f"{run.label}: forces and torque",
                     "The constraint force Lambda at C and the translational feedback H (inertial frame, "
-                    "eqs 20-24, 39, 40) and the rotational feedback torque N (body frame, eq 23) against time; "
-                    "a symmetric-logarithmic axis where a quantity spans more than two decades.")
+                    "eqs 20-24, 39, 40) and the rotational feedback torque N (body frame, eq 23) against time, "
+                    "as delivered; a symmetric-logarithmic axis where a quantity spans more than two decades"
+                    + ("; shaded in a component's colour where that axis is commanded at or beyond its limit "
+                       "(controller.saturation; clip delivers the limit there)" if limited else "")
+                    + _marks_caption(run) + ".")
+
+
+def _marks_caption(run: RunData) -> str:
+    """The caption's words for the disturbances' marks (empty without disturbances)."""
+    if not run.config.get("disturbances"):
+        return ""
+    return ("; disturbances in grey: an impulse dash-dotted at its time, a pulse shaded over its window, "
+            "a step, sine or noise dashed where it starts")
 
 
 def _phase_row(axes, run: RunData, x_var: str, y_var: str) -> None:

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..io.chunk import read_chunk_series
-from ..layout import STATE_BLOCKS, SUMMARY_FIGURES
+from ..layout import SATURATION_FLAGS, STATE_BLOCKS, SUMMARY_FIGURES
 from .load import RunData, SweepData
 
 __all__ = [
@@ -327,7 +327,9 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         ``max_abs_constraint_error_1..3`` [m], ``settling_time`` [s] (NaN: not settled),
         ``lyapunov_initial`` [J], ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W],
         ``lyapunov_rate_mismatch`` [W], ``lyapunov_rate_mismatch_relative``,
-        ``lyapunov_rate_check``, ``method``, ``nfev``, ``njev``, ``nlu``,
+        ``lyapunov_rate_check``, ``max_lyapunov_increase`` [J], ``time_lyapunov_rising`` [s],
+        ``fraction_saturated_torque_n_1..3``, ``_force_h_1..3``, ``_constraint_force_1..3``
+        (NaN for a file without them), ``method``, ``nfev``, ``njev``, ``nlu``,
         ``wall_time`` [s]. Values as stored in the files (full precision).
     """
     import pandas as pd  # heavy: pandas
@@ -358,6 +360,11 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
                     "lyapunov_rate_mismatch_relative"):
             row[key] = float(run.summary.get(key, np.nan))
         row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
+        for key in ("max_lyapunov_increase", "time_lyapunov_rising"):
+            row[key] = float(run.summary.get(key, np.nan))
+        for _, figure in SATURATION_FLAGS.values():
+            for i, v in enumerate(_vector(run, figure), start=1):
+                row[f"{figure}_{i}"] = v
         row["method"] = run.flat_config.get("simulation.method", "")
         for key in ("nfev", "njev", "nlu"):
             row[key] = run.solver.get(key)

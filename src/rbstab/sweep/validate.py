@@ -27,7 +27,8 @@ from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
 from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule,
-                             field_value, inside_limits, samples_apart, split_key, steps_suffice, within_bounds)
+                             field_value, inside_limits, samples_apart, split_key, starts_in_run, steps_suffice,
+                             within_bounds)
 from ..layout import LIMITED, VARIANT_LAYOUTS
 from ..variants import VARIANTS
 from ..variants.base import limited_values
@@ -179,6 +180,9 @@ class _Fields:
         for key, col in self.columns.items():
             if not (key == prefix or key.startswith(prefix + ".")) or col.dtype == object:
                 continue
+            if section == "disturbances":  # an entry's field set by the sweep (its default, e.g. start 0, unwritten)
+                present = np.asarray([isinstance(field_value(t.get(section), name.partition(".")[0]), Mapping)
+                                      for t in self.templates])[self.template]
             idx = tuple(int(p) for p in split_key(key)[2])
             col = col.astype(float)
             if rule[0] == "limits" and len(idx) == 0 and col.ndim == 1:
@@ -307,7 +311,8 @@ def _stiffness(variant: str, get) -> np.ndarray | None:
 
 def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray:
     """Runs the schema's joint checks may refuse (gimbal-lock margin, samples and steps
-    that let a run end, the weight held); the schema decides."""
+    that let a run end, a disturbance's start after t_end, the weight held); the schema
+    decides."""
 
     flagged = np.zeros(n, dtype=bool)
     if fields.varied("initial_state", "theta") or fields.varied("simulation", "gimbal_margin"):
@@ -324,6 +329,16 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
         with np.errstate(invalid="ignore", divide="ignore"):
             flagged |= ~samples_apart(t_end, samples) | ~steps_suffice(t_end, np.where(np.isnan(step), np.inf, step), steps)
     flagged |= _limit_flags(fields, variants, n)
+    starts = sorted({split_key(k)[1] for k in fields.columns if k.startswith("disturbances.") and k.endswith(".start")})
+    if fields.varied("simulation", "t_end"):  # every entry's start against each run's t_end
+        starts = [f"{i}.start" for i in range(max((len(t.get("disturbances") or ()) for t in fields.templates),
+                                                  default=0))]
+    for name in starts:
+        start, t_end = fields.get("disturbances", name), fields.get("simulation", "t_end")
+        if start is None or t_end is None:
+            return np.ones(n, dtype=bool)
+        with np.errstate(invalid="ignore"):
+            flagged |= start[1] & ~starts_in_run(start[0], t_end[0])
     weight_keys = ("k_t", "k_c", "k_d", "k_s", "boundary_layer")
     if any(fields.varied("body", k) for k in ("mass", "gravity")) or any(fields.varied("controller", k) for k in weight_keys):
         gravity = fields.get("body", "gravity")

@@ -107,13 +107,14 @@ class Variant:
         return parameters(self.body, self.gains, 0.0, self.limits)[None]
 
     # -- dynamics and outputs (compiled kernels) -------------------------------
-    def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
-        """dy/dt at time ``t`` [s] (it enters through the disturbances only), shape like
-        ``y`` ((n_state,) or (..., n_state))."""
+    def rhs(self, t: float | np.ndarray, y: np.ndarray) -> np.ndarray:
+        """dy/dt at time ``t`` [s] (a number, or one a state, shape (...); it enters through
+        the disturbances only), shape like ``y`` ((n_state,) or (..., n_state))."""
         y = np.asarray(y, dtype=float)
         flat = np.ascontiguousarray(y.reshape(-1, self.layout.size))
+        times = np.ascontiguousarray(np.asarray(t, dtype=float).reshape(-1))  # 1 or one a state
         out = np.empty_like(flat)
-        state_rates(self.code, np.array([float(t)]), flat, self._parameters_without_offset, out)
+        state_rates(self.code, times, flat, self._parameters_without_offset, out)
         return out.reshape(y.shape)
 
     @cached_property

@@ -29,7 +29,7 @@ from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, neg, rotation_and_rate_of, scale, sub, vector
 from ..model import DISTURBANCE_KINDS, NOISE_TONES
 
-__all__ = ["disturbance_wrench", "disturbance_power", "apply_impulses", "next_breakpoint", "noise_phase",
+__all__ = ["disturbance_wrench", "disturbance_power", "apply_impulses", "next_breakpoint", "edges_up_to", "noise_phase",
            "kinetic_energy", "before", "state_power"]
 
 IMPULSE, PULSE, STEP, SINE, NOISE = (float(DISTURBANCE_KINDS[k]) for k in ("impulse", "pulse", "step", "sine", "noise"))
@@ -133,6 +133,22 @@ def next_breakpoint(p, t, t_end):
             if t < t1 < out:
                 out = t1
     return out
+
+
+@jit(forceinline=True)
+def edges_up_to(p, t):
+    """The number of edges of the disturbances' windows at or before t (each start, an
+    impulse's included, and each pulse's end): constant between two breakpoints
+    (:func:`next_breakpoint`), one more after each; a sample at an edge shows the state
+    after it."""
+    count = 0
+    for i in range(int(p.disturbance_count)):
+        t0 = p.disturbance_start[i]
+        if t0 <= t:
+            count += 1
+        if p.disturbance_kind[i] == PULSE and t0 + p.disturbance_duration[i] <= t:
+            count += 1
+    return float(count)
 
 
 @jit(forceinline=True)

@@ -20,10 +20,10 @@ import math
 from ..jit import jit
 from ..kinematics import ZERO, add, dot, matvec, rotation_and_rate_of, sub, vector
 from ..layout import OUTPUTS, STATE_SIZE, VARIANT_CODES
-from ..model import force_h, force_h_command, saturate, torque_n, torque_n_command
+from ..model import force_h, force_h_command, saturate, saturated, torque_n, torque_n_command
 from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
-from .disturbances import disturbance_power, disturbance_wrench, state_power
+from .disturbances import disturbance_power, disturbance_wrench, edges_up_to, state_power
 
 __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row", "limited_quantities",
            "state_rates", "run_outputs", "state_powers", "STATE_SIZE"]
@@ -45,6 +45,9 @@ CONSTRAINT_RATE_AT = OUTPUTS["constraint_rate"].offset
 CONSTRAINT_FORCE_AT = OUTPUTS["constraint_force"].offset
 FORCE_H_AT = OUTPUTS["force_h"].offset
 TORQUE_N_AT = OUTPUTS["torque_n"].offset
+TORQUE_N_SATURATED_AT = OUTPUTS["torque_n_saturated"].offset
+FORCE_H_SATURATED_AT = OUTPUTS["force_h_saturated"].offset
+CONSTRAINT_FORCE_SATURATED_AT = OUTPUTS["constraint_force_saturated"].offset
 TRANSLATIONAL_AT = OUTPUTS["lyapunov_translational"].offset
 ROTATIONAL_AT = OUTPUTS["lyapunov_rotational"].offset
 CONSTRAINT_AT = OUTPUTS["lyapunov_constraint"].offset
@@ -53,6 +56,7 @@ LYAPUNOV_AT = OUTPUTS["lyapunov"].offset
 LYAPUNOV_RATE_AT = OUTPUTS["lyapunov_rate"].offset
 DISTURBANCE_POWER_AT = OUTPUTS["disturbance_power"].offset
 DISTURBANCE_WORK_AT = OUTPUTS["disturbance_work"].offset
+DISTURBANCE_EDGES_AT = OUTPUTS["disturbance_edges"].offset
 
 
 @jit(forceinline=True)
@@ -179,7 +183,7 @@ def state_rate(code, t, y, p, dy):
 def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation, added):
     """v, its terms and dv/dt into ``out``: the body's (eq 25, gravity) plus the
     constraint's, and ``added`` [W], the power that the saturation of the controls
-    (:func:`saturation_power`) and the disturbances add to dv/dt."""
+    (:func:`saturation_effects`) and the disturbances add to dv/dt."""
     translational, rotational, gravity = body_energy(theta, omega, x, v, p)
     out[TRANSLATIONAL_AT] = translational
     out[ROTATIONAL_AT] = rotational
@@ -190,28 +194,35 @@ def _lyapunov(out, theta, omega, x, v, p, constraint, constraint_dissipation, ad
 
 
 @jit(forceinline=True)
-def saturation_power(code, theta, omega, x, v, b, e, f, d, p):
-    """Omega'(N - N_c) + V'(H - H_c) + F'(Lambda - Lambda_c) [W]: what dv/dt gains when the
-    delivered controls N, H, Lambda differ from the commanded N_c, H_c, Lambda_c (eqs 23,
-    24, 22, 39, 40). dv/dt = Omega'(N + B'K_r Theta) + V'(H + K_t X) + F'Lambda + dv_c/dt
-    (eq 1 with eqs 25, 42, 45), whose commanded form is the paper's -V'L_t V - Omega'L_r
-    Omega - ... (eqs 29, 43, 46): the delivered dv/dt is that plus this term (docs/physics.md).
-    ``permanent``'s Lambda is the pin's reaction (F = 0, no work). 0 without limits."""
+def saturation_effects(code, theta, omega, x, v, b, e, f, d, p):
+    """(power [W], N flags, H flags, Lambda flags) of the actuators' limits at one state.
+
+    The power Omega'(N - N_c) + V'(H - H_c) + F'(Lambda - Lambda_c) is what dv/dt gains
+    when the delivered controls N, H, Lambda differ from the commanded N_c, H_c, Lambda_c
+    (eqs 23, 24, 22, 39, 40). dv/dt = Omega'(N + B'K_r Theta) + V'(H + K_t X) + F'Lambda +
+    dv_c/dt (eq 1 with eqs 25, 42, 45), whose commanded form is the paper's -V'L_t V -
+    Omega'L_r Omega - ... (eqs 29, 43, 46): the delivered dv/dt is that plus this term
+    (docs/physics.md). ``permanent``'s Lambda is the pin's reaction (F = 0, no work, never
+    flagged). The flags (3 each, 1.0 or 0.0) mark the axes commanded at or beyond their
+    limits (:func:`rbstab.model.saturated`). 0 and no flags without limits."""
     if p.saturation == 0.0:
-        return 0.0
+        return 0.0, ZERO, ZERO, ZERO
     n_c, h_c = torque_n_command(b, theta, omega, p), force_h_command(x, v, p)
     n, h = saturate(n_c, p.torque_limit, p.saturation), saturate(h_c, p.force_limit, p.saturation)
     power = dot(omega, sub(n, n_c)) + dot(v, sub(h, h_c))
+    lam_flags = ZERO
     if code != PERMANENT:
         lam_c, _ = constraint_force_command(code, e, f, d, p)
         power += dot(f, sub(saturate(lam_c, p.constraint_force_limit, p.saturation), lam_c))
-    return power
+        lam_flags = saturated(lam_c, p.constraint_force_limit)
+    return power, saturated(n_c, p.torque_limit), saturated(h_c, p.force_limit), lam_flags
 
 
 @jit(forceinline=True)
 def output_row(code, t, y, p, out, full):
     """The outputs of one state at time ``t`` [s] into ``out`` (length N_OUTPUTS, each at
-    its offset in :data:`rbstab.layout.OUTPUTS`): all of them if
+    its offset in :data:`rbstab.layout.OUTPUTS`; the saturation flags from
+    :func:`saturation_effects`): all of them if
     ``full``, else all but :data:`~rbstab.layout.LEFT_OUT` (their entries are not written;
     N and H are then not computed: 20-30 % less time a sample). ``disturbance_work`` is
     written 0: it is the run's history, not the state's (the drivers write it).
@@ -252,7 +263,16 @@ def output_row(code, t, y, p, out, full):
         power = disturbance_power(force_d, torque_d, omega, v)
     out[DISTURBANCE_POWER_AT] = power
     out[DISTURBANCE_WORK_AT] = 0.0 if y[0] == y[0] else math.nan  # NaN after a stop, as the drivers'
-    added = saturation_power(code, theta, omega, x, v, b, e, f, d, p)
+    edges = 0.0
+    if p.disturbance_count > 0.0:
+        edges = edges_up_to(p, t)
+    out[DISTURBANCE_EDGES_AT] = edges if y[0] == y[0] else math.nan
+    added, n_flags, h_flags, lam_flags = saturation_effects(code, theta, omega, x, v, b, e, f, d, p)
+    if y[0] != y[0]:  # a stopped run's NaN rows: no flag either
+        n_flags = h_flags = lam_flags = (math.nan, math.nan, math.nan)
+    _put(out, TORQUE_N_SATURATED_AT, n_flags)
+    _put(out, FORCE_H_SATURATED_AT, h_flags)
+    _put(out, CONSTRAINT_FORCE_SATURATED_AT, lam_flags)
     if p.disturbance_count > 0.0:
         added += power
     _lyapunov(out, theta, omega, x, v, p, energy, dissipation, added)
