@@ -420,7 +420,6 @@ def _undisturbed(config, variant) -> tuple:
         f"disturbances ({kinds}): the equilibrium, the linearisation and the certificate's Hessians are of the "
         "undisturbed dynamics; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
         "impulses not seen) and the simulations integrate the disturbed dynamics"]
->>>>>>> main
 
 
 def _check_options(samples: int, basin_samples: int, ratio: float, jobs: int) -> None:
