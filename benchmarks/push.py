@@ -10,7 +10,8 @@ command's process start to its exit, the engine already compiled):
 1. the smallest fatal torque push of 256 quasi-uniform directions, tolerance 1e-3, with
    the local search (target <= 10 s on two cores);
 2. basin stability over 10,000 random initial tilts and rates (target <= 10 s);
-3. across 32 values of the torque limit, 64 directions each (target <= 3 minutes);
+3. across 32 values of the torque limit, 64 directions each, with each configuration's
+   certificate (2000 sampled states) for the certified push (target <= 3 minutes);
 4. with ``--gpu`` (an NVIDIA GPU and ``rbstab[cuda]``): 16,384 directions on ``--engine
    cuda`` (target <= 5 s).
 
@@ -73,14 +74,14 @@ def main() -> None:
         print(f"1. {n} directions, tolerance 1e-3, local search: {seconds:.2f} s end to end on {a.jobs} "
               f"process(es) (target 10 s for 256)\n{tail}\n")
         n = 10_000 // scale
-        seconds, tail = timed(["analyze", str(config), *common, "--basin-stability", "initial_state.theta.0=-0.8:0.8",
-                               "--basin-stability", "initial_state.omega.0=-4:4", "-n", str(n)])
+        seconds, tail = timed(["analyze", str(config), *common, "--basin-stability", "initial_state.theta.0=-0.95:0.95",
+                               "--basin-stability", "initial_state.omega.0=-6:6", "-n", str(n)])
         print(f"2. basin stability, {n} draws: {seconds:.2f} s end to end (target 10 s for 10,000)\n{tail}\n")
         spec = folder / "limits.yaml"
         levels = ", ".join(f"[{x:.1f}, {x:.1f}, 100.0]" for x in [100 + 10 * i for i in range(32 // scale)])
         spec.write_text(f"name: limits\nbase: {config}\ngrid:\n  controller.saturation.torque_n: [{levels}]\n")
-        seconds, tail = timed(["analyze", str(spec), *common[:-1], "--push", "torque", "--push-directions",
-                               str(64 // scale)])
+        seconds, tail = timed(["analyze", str(spec), "-o", out, "-j", str(a.jobs), "--samples", "2000", "--push",
+                               "torque", "--push-directions", str(64 // scale)])
         print(f"3. {32 // scale} torque limits x {64 // scale} directions: {seconds:.1f} s end to end "
               f"(target 180 s for 32 x 64)\n{tail}\n")
         if a.gpu:
