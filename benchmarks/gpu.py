@@ -18,6 +18,9 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   trace (the summary store's) and with a thinned trace (201 samples a run): kernel time by
   CUDA events; end to end, from the host's arrays to the results in host memory
   (:func:`rbstab.engine.cuda.integrate_chunks_cuda`);
+- **disturbed**: kernel runs/s of the parameter sweep at the smallest N of ``--n`` with
+  saturating actuators and disturbances (:data:`DISTURBED`: every limit, a noise, an
+  impulse and a pulse), beside the same runs without them (the same kernel takes both);
 - **sweep**: ``rbstab sweep SPEC --engine cuda --store summary`` from process start to
   exit at ``--sweep-n`` runs (warm kernel cache), and ``--store thinned`` at a tenth of it;
 - **CPU engine**: runs/s of :func:`rbstab.engine.integrate_runs` on every core of the
@@ -62,8 +65,17 @@ SETTINGS_OVERRIDES = ["simulation.rtol=1e-6", "simulation.atol=1e-8"]
 RBSTAB = str(Path(sys.executable).parent / "rbstab")
 
 
-def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
-    """(codes, params, y0, settings records) of n Case 3 runs of sweep ``kind``."""
+#: Saturating actuators and disturbances (every limit, a noise, an impulse and a pulse) added
+#: to Case 3 for the ``disturbed`` line.
+DISTURBED = ["controller.saturation={torque_n: 400, force_h: [300, 300, 500], constraint_force: 2000}",
+             "disturbances=[{kind: noise, rms: [50, 50, 0], band: [0.5, 5], seed: 1, point: [0, 0, 0.2]},"
+             " {kind: impulse, value: [0, 15, 0], point: [0, 0, 0.2], start: 0.3},"
+             " {kind: pulse, quantity: torque, value: [0, 40, 0], start: 1.0, duration: 0.05}]"]
+
+
+def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: list[str] = ()):
+    """(codes, params, y0, settings records) of n Case 3 runs of sweep ``kind``, with the
+    overrides ``extra`` (e.g. :data:`DISTURBED`)."""
     import rbstab
     from rbstab.engine import method_number
     from rbstab.engine.settings import settings_records
@@ -72,7 +84,7 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = rbstab.load_config(CASE3, [f"simulation.rtol={rtol}", "simulation.atol=1e-8" if rtol > 1e-9
-                                            else "simulation.atol=1e-13"])
+                                            else "simulation.atol=1e-13", *extra])
     variant = config.make_variant()
     rng = np.random.default_rng(seed)
     y0 = np.repeat(variant.initial_state(config.initial_state)[None], n, axis=0)
@@ -88,17 +100,19 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
         for i in range(n):  # the benchmark's own per-run records (the sweep builds them its way)
             b = RigidBody(body.mass * scale[i], body.inertia * scale[i], body.attachment_point, body.gravity)
             g = Gains(k_t=gains.k_t * kt[i], l_t=gains.l_t, k_r=gains.k_r, l_r=gains.l_r, k_c=gains.k_c * kc[i],
-                      l_c=gains.l_c * lc[i], k_d=gains.k_d, l_d=gains.l_d)
+                      l_c=gains.l_c * lc[i], k_d=gains.k_d, l_d=gains.l_d, saturation=gains.saturation,
+                      disturbances=gains.disturbances)
             params[i] = parameters(b, g, float(base["lyapunov_offset"][0]))
     s = config.simulation
     rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (n, 1))
     return np.full(n, variant.code), params, y0, settings_records(rows, method_number(s.method)), s.n_samples
 
 
-def gpu_rates(kind: str, n: int, stride):
+def gpu_rates(kind: str, n: int, stride, extra: list[str] = ()):
+    """(kernel, end-to-end) runs/s of n runs of sweep ``kind`` (overrides ``extra``)."""
     from rbstab.engine.cuda import integrate_chunks_cuda
 
-    codes, params, y0, settings, n_samples = runs(kind, n)
+    codes, params, y0, settings, n_samples = runs(kind, n, extra=extra)
     start = time.perf_counter()
     kernel = sum(c.kernel_seconds for c in integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples,
                                                                   stride=stride))
@@ -357,6 +371,10 @@ def main() -> None:
                     continue  # 201 samples x 10^6 runs: the traces alone take 61 GB
                 kernel, total = gpu_rates(kind, n, stride)
                 print(f"{kind:14s} {n:9d} {label:>8s} {kernel:14,.0f} {total:18,.0f}")
+    n = min(args.n)
+    plain, disturbed = gpu_rates("parameter", n, None)[0], gpu_rates("parameter", n, None, DISTURBED)[0]
+    print(f"disturbed: parameter sweep, {n:,} runs, every limit, a noise, an impulse and a pulse (DISTURBED): "
+          f"kernel {disturbed:,.0f} runs/s, {plain / disturbed:.2f}x the time a run without them ({plain:,.0f} runs/s)")
     print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")
     for kind in ("initial-state", "parameter"):
         print(f"correctness, {kind}, {args.check_n} runs: {correctness(kind, args.check_n)}")
