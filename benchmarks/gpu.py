@@ -6,7 +6,8 @@ N((16, 32, -16), 4^2), one body) and ``parameter`` (mass and inertia x U(0.5, 1.
 L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record). Prints:
 
 - **compile**: the GPU's compute mode, the kernel's registers and local memory a thread
-  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`), the
+  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`; and the
+  same kernel without its steps for disturbances, ``kernel_function(..., disturbances=False)``), the
   occupancy they allow and the resident threads; the compile (or cache load) time in this
   process and a new process's first launch, its kernel loaded from the disk cache;
 - **deadline**: 300,000 runs, 100 samples kept, a 0.05 s limit: the kernel's time, the runs
@@ -170,7 +171,7 @@ def compile_info() -> str:
     from numba import cuda
 
     from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_kernel, compute_mode, integrate_chunks_cuda,
-                                    launch_signature, occupancy)
+                                    kernel_function, launch_signature, occupancy)
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
@@ -183,6 +184,9 @@ def compile_info() -> str:
     per_sm = occupancy(fn, 15)
     sms = device.MULTIPROCESSOR_COUNT
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
+    # the same kernel without the driver's steps for disturbances (breakpoints, impulses, work)
+    plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
+    plain_regs, plain_local = plain.get_regs_per_thread(signature), plain.get_local_mem_per_thread(signature)
     codes, params, y0, settings, n_samples = runs("parameter", 128)
     list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
     script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
@@ -191,7 +195,8 @@ def compile_info() -> str:
               "print(time.perf_counter() - t)")
     again = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     name = device.name.decode() if isinstance(device.name, bytes) else device.name
-    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread; "
+    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread "
+            f"(without the driver's steps for disturbances: {plain_regs}, {plain_local} B); "
             f"{per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}), "
             f"{per_sm * THREADS_PER_BLOCK * sms:,} resident threads on {sms} multiprocessors; "
             f"compiled or loaded in {loaded:.1f} s; a new process's first launch {float(again.stdout.split()[-1]):.2f} s "
