@@ -6,8 +6,8 @@ the same Python source (:func:`rbstab.variants.kernels.state_rate`,
 :func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
 :func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
 :func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.locate_event`,
-:func:`~rbstab.engine.integrate.step_work`, the disturbances'
-:func:`~rbstab.variants.disturbances.apply_impulses` and
+:func:`~rbstab.engine.integrate.step_work`, :func:`~rbstab.engine.integrate.restart`, the
+disturbances' :func:`~rbstab.variants.disturbances.apply_impulses` and
 :func:`~rbstab.variants.disturbances.next_breakpoint`, and the streaming summary of
 :mod:`rbstab.summary`). Only the driver loop is written here:
 :func:`rbstab.engine.integrate._run`'s loop with one step *attempt* per pass (a thread
@@ -76,8 +76,8 @@ from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, sten
                        stream_sample, stream_start)
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
-from .integrate import (REJECTED, _limit_of, attempt_step, gimbal_event, locate_event, sample_time, step_bounds,
-                        step_work)
+from .integrate import (REJECTED, _limit_of, attempt_step, gimbal_event, locate_event, restart, sample_time,
+                        step_bounds, step_work)
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
@@ -342,11 +342,8 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                     y[i] = y_new[i]
                     f[i] = K[n_stages, i]
                 if at_break:  # the impulses that start here; a new initial step from here
-                    done += apply_impulses(permanent, t, y, p)
-                    t_bound = next_breakpoint(p, t, t_end)
-                    t_lim = _limit_of(t_bound, t_end)
-                    state_rate(code, t, y, p, f)
-                    h_abs = initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+                    jump, t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
+                    done += jump
                     nfev += 2
                 h_abs = step_bounds(s, t, h_abs)
                 rejected = False
@@ -440,7 +437,7 @@ def occupancy(fn, n_state: int) -> int:
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
 DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "gimbal_event",
                     "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
-                    "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "step_work")
+                    "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "step_work", "restart")
 
 
 def _plain(value):

@@ -242,6 +242,18 @@ def step_work(permanent, p, t, h, x, y_old, Q, dop853, out):
     return total * x * h
 
 
+@jit(forceinline=True)
+def restart(code, p, s, t, y, f, w):
+    """At a breakpoint t of the disturbances: apply the impulses that start there to y (in
+    place), and start again as a new solve_ivp from there would: y's rate at t into f and
+    a new initial step (2 right-hand sides). Returns (the impulses' work [J], the next
+    breakpoint t_bound, the latest stage time t_lim before it, the initial step h_abs)."""
+    jump = apply_impulses(code == PERMANENT, t, y, p)
+    t_bound = next_breakpoint(p, t, s.t_end)
+    t_lim = _limit_of(t_bound, s.t_end)
+    state_rate(code, t, y, p, f)
+    return jump, t_bound, t_lim, initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+
 
 @jit(forceinline=True)
 def _run(code, p, y0, s, samples, work_done):
@@ -308,11 +320,8 @@ def _run(code, p, y0, s, samples, work_done):
         y[:] = y_new
         f[:] = f_new
         if at_break:  # apply the impulses that start here, and start again from here
-            work += apply_impulses(permanent, t, y, p)
-            t_bound = next_breakpoint(p, t, t_end)
-            t_lim = _limit_of(t_bound, t_end)
-            state_rate(code, t, y, p, f)
-            h_abs = initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+            jump, t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
+            work += jump
             nfev += 2
     if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
         jump = apply_impulses(permanent, t_end, y, p)
