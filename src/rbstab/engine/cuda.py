@@ -307,7 +307,7 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                 n_steps += 1
                 t_stop = t_new
                 event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
-                at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
+                at_break = disturbed and t_new == t_bound and t_bound < t_end
                 if event or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
                 if event:
