@@ -35,6 +35,13 @@ def configs(root: str):
                     "simulation.t_end=0.5", "simulation.n_samples=401", f"simulation.method={method}", *extra]))
     out.append(rbstab.load_config(os.path.join(root, CONFIGS[-1]), [
         "simulation.t_end=0.05", "simulation.n_samples=51", "controller.boundary_layer=0"]))
+    # runs that leave their admissible region (simulation.limits): a bound of X (permanent) or
+    # E (the others) on each variant, one of theta
+    for path, bound in zip(CONFIGS, ("position=0.05", *["constraint_error=[0.01, 0.02, .inf]"] * 4)):
+        out.append(rbstab.load_config(os.path.join(root, path), [
+            "simulation.t_end=0.5", "simulation.n_samples=401", "simulation.method=RK45", f"simulation.limits.{bound}"]))
+    out.append(rbstab.load_config(os.path.join(root, CONFIGS[1]), [
+        "simulation.t_end=0.5", "simulation.n_samples=401", "simulation.limits.theta=[0.3, 0.2, 3]"]))
     return out
 
 
@@ -55,7 +62,9 @@ def main() -> None:
 
     reference = collect("compiled", "all")
     report = {"variants": sorted({c.variant for c in runs}), "methods": sorted({c.simulation.method for c in runs}),
-              "statuses": sorted({r.status for r, _ in reference.values()})}
+              "statuses": sorted({r.status for r, _ in reference.values()}),
+              "left_region": sorted({r.message.split(" = ")[0] for r, _ in reference.values()
+                                     if r.message.startswith("left the admissible region")})}
     for keep in ("all", "thinned", "none"):
         found = collect("cuda", keep)
         differences = []

@@ -107,6 +107,10 @@ def test_simulated_driver_covers_every_variant_and_method(simulated):
     assert simulated["variants"] == ["embedded", "free", "permanent", "sliding", "visco_elastic"]
     assert simulated["methods"] == ["DOP853", "RK23", "RK45"]
     assert simulated["statuses"] == ["failed", "success"]
+    assert simulated["left_region"] == [  # the limits runs leave their region, each at the bound it names
+        "left the admissible region: |E_1| reached simulation.limits.constraint_error",
+        "left the admissible region: |X_1| reached simulation.limits.position",
+        "left the admissible region: |theta_2| reached simulation.limits.theta"]
     assert simulated["thinned"]["strides"] == [1, 2] and simulated["all"]["strides"] == [1]  # 1: the sign law (CPU)
 
 
@@ -116,7 +120,7 @@ def test_simulated_driver_is_the_cpu_engine_bit_for_bit(simulated, keep):
     samples equal the CPU engine's, but the numerical dv/dt of a run stopped early (the
     whole grid's stencils: rounding)."""
     found = simulated[keep]
-    assert found["runs"] == 46
+    assert found["runs"] == 52
     for run, what, status, relative in found["differences"]:
         assert what == "lyapunov_rate_numerical" and status == "failed", (run, what, status, relative)
         assert relative < 1e-12

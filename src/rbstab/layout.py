@@ -38,6 +38,8 @@ __all__ = [
     "summary_stride",
     "display_units",
     "CONFIG_QUANTITIES",
+    "LIMITED",
+    "LIMITED_COMPONENTS",
     "parameter_attributes",
     "StateLayout",
     "FULL_BODY",
@@ -163,7 +165,22 @@ CONFIG_QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("simulation.gimbal_margin", "margin", "rad", "gimbal-lock margin"),
     Quantity("simulation.max_steps", "steps", "1", "most steps of a run"),
     Quantity("simulation.max_wall_time", "t_wall", "s", "wall-time limit of a run"),
+    Quantity("simulation.limits.theta", "|theta|max", "rad", "bound of |theta_i| (admissible region)"),
+    Quantity("simulation.limits.omega", "|Omega|max", "rad s-1", "bound of |Omega_i| (admissible region)"),
+    Quantity("simulation.limits.position", "|X|max", "m", "bound of |X_i| (admissible region)"),
+    Quantity("simulation.limits.velocity", "|V|max", "m s-1", "bound of |V_i| (admissible region)"),
+    Quantity("simulation.limits.constraint_error", "|E|max", "m", "bound of |E_i| (admissible region)"),
 )}
+
+#: The outputs whose components ``simulation.limits`` bounds (|q_i| <= bound), by the
+#: config key under ``simulation.limits``, in the order of the rows of the ``limits`` field
+#: of :data:`rbstab.model.PARAMETERS` and of the status codes of
+#: :mod:`rbstab.engine.status`: Euler angles [rad], Omega [rad/s] (body frame), X [m] and V
+#: [m/s] (inertial frame), E [m] (inertial frame).
+LIMITED = ("theta", "omega", "position", "velocity", "constraint_error")
+#: How a message writes component i of each of :data:`LIMITED` (1-based: ``theta_2``,
+#: ``Omega_1``, ``X_3``, as the paper's theta_2).
+LIMITED_COMPONENTS = {"theta": "theta", "omega": "Omega", "position": "X", "velocity": "V", "constraint_error": "E"}
 
 
 def parameter_attributes(entry: str) -> dict[str, str]:

@@ -15,10 +15,12 @@ from functools import cached_property
 import numpy as np
 
 from .jit import jit
+from .layout import LIMITED
 from .kinematics import cross, hat, matTvec, matvec, neg, sub
 
 __all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "Disturbance", "DISTURBANCE_KINDS",
-           "DISTURBANCE_QUANTITIES", "MAX_DISTURBANCES", "NOISE_TONES", "PARAMETERS", "parameters", "gyroscopic",
+           "DISTURBANCE_QUANTITIES", "MAX_DISTURBANCES", "NOISE_TONES", "Limits", "PARAMETERS", "parameters",
+           "set_disturbances", "set_limits", "gyroscopic",
            "saturate", "torque_n_command", "force_h_command", "torque_n", "force_h"]
 
 
@@ -152,6 +154,54 @@ class Disturbance:
 
 
 @dataclass(frozen=True, eq=False)
+class Limits:
+    """The admissible region of a run (``simulation.limits``): |q_i| <= bound_i for each
+    bounded quantity q and axis i; inf where unbounded. A run that leaves it stops, failed.
+
+    Attributes
+    ----------
+    theta : ndarray, shape (3,)
+        Bounds of |theta_i| [rad] (Euler angles).
+    omega : ndarray, shape (3,)
+        Bounds of |Omega_i| [rad/s], body frame.
+    position : ndarray, shape (3,)
+        Bounds of |X_i| [m], the centre of mass in the inertial frame (from the origin,
+        where the translational feedback H = -K_t X - L_t V pulls it; not from the
+        equilibrium, which gravity moves).
+    velocity : ndarray, shape (3,)
+        Bounds of |V_i| [m/s], inertial frame.
+    constraint_error : ndarray, shape (3,)
+        Bounds of |E_i| [m], inertial frame (eq 4; not ``permanent``, whose E is 0).
+    """
+
+    theta: np.ndarray
+    omega: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    constraint_error: np.ndarray
+
+    @classmethod
+    def of(cls, **bounds) -> "Limits":
+        """Limits from keyword bounds (names of :data:`rbstab.layout.LIMITED`), each a number
+        (every axis) or 3, None or absent: inf."""
+        unknown = set(bounds) - set(LIMITED)
+        if unknown:
+            raise TypeError(f"Limits.of: unknown quantities {sorted(unknown)}; allowed: {', '.join(LIMITED)}")
+        return cls(**{name: np.broadcast_to(np.array(np.inf if bounds.get(name) is None else bounds[name],
+                                                     dtype=float), (3,)).copy() for name in LIMITED})
+
+    @property
+    def array(self) -> np.ndarray:
+        """The bounds as rows in the order of :data:`rbstab.layout.LIMITED`, shape (5, 3)."""
+        return np.array([getattr(self, name) for name in LIMITED], dtype=float)
+
+    @property
+    def bounded(self) -> bool:
+        """Whether any bound is finite."""
+        return bool(np.isfinite(self.array).any())
+
+
+@dataclass(frozen=True, eq=False)
 class Gains:
     """Feedback and constraint gains, each symmetric, shape (3, 3).
 
@@ -207,7 +257,11 @@ _VECTOR = (np.float64, (3,))
 #: then the disturbances: their number (0: none, the other fields not read) and, entry by
 #: entry (:data:`MAX_DISTURBANCES`), the code of their kind (:data:`DISTURBANCE_KINDS`),
 #: whether a torque (:data:`DISTURBANCE_QUANTITIES`), value (noise: its RMS), point, start,
-#: duration, frequency, phase, band and seed (:class:`Disturbance`).
+#: duration, frequency, phase, band and seed (:class:`Disturbance`); last the admissible
+#: region (:class:`Limits`): ``limited`` (1 when any bound is finite; 0, as in a record of
+#: zeros: none, ``limits`` not read) and ``limits`` (5, 3), the bounds of |theta_i| [rad],
+#: |Omega_i| [rad/s], |X_i| [m], |V_i| [m/s], |E_i| [m] in the rows of
+#: :data:`rbstab.layout.LIMITED` (inf: none).
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -244,13 +298,17 @@ PARAMETERS = np.dtype(
         ("disturbance_phase", np.float64, (MAX_DISTURBANCES,)),
         ("disturbance_band", np.float64, (MAX_DISTURBANCES, 2)),
         ("disturbance_seed", np.float64, (MAX_DISTURBANCES,)),
+        ("limited", np.float64),
+        ("limits", np.float64, (len(LIMITED), 3)),
     ],
     align=True,
 )
 
 
-def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0) -> np.ndarray:
-    """The record of :data:`PARAMETERS` for ``body`` and ``gains``: a 0-d structured array.
+def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0,
+               limits: Limits | None = None) -> np.ndarray:
+    """The record of :data:`PARAMETERS` for ``body``, ``gains`` and the admissible region
+    ``limits`` (None: unbounded): a 0-d structured array.
 
     Gains that are None (not used by the variant) are zero; ``lyapunov_offset`` is h [J].
     """
@@ -278,7 +336,21 @@ def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0) -> n
         p["constraint_force_limit"] = sat.constraint_force
         p["saturation"] = SATURATION_SHAPES[sat.shape]
     set_disturbances(p, gains.disturbances)
+    set_limits(p, limits)
     return p
+
+
+def set_limits(p: np.ndarray, limits) -> None:
+    """Write the admissible region ``limits`` into the record(s) ``p`` (shape () or (n,)):
+    ``limits`` (5, 3) with inf where unbounded, ``limited`` 1 when any bound is finite.
+    ``limits``: a :class:`Limits`, None (unbounded), or the bounds as an array (5, 3) or one
+    a record (n, 5, 3)."""
+    if limits is None:
+        bounds = np.full((len(LIMITED), 3), np.inf)
+    else:
+        bounds = limits.array if isinstance(limits, Limits) else np.asarray(limits, dtype=float)
+    p["limits"] = bounds
+    p["limited"] = np.isfinite(bounds).any(axis=(-2, -1))
 
 
 def set_disturbances(p: np.ndarray, disturbances) -> None:

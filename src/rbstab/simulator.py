@@ -19,8 +19,9 @@ located events (``RunResult.switching``) and the switching figures in its summar
 
 Both sample the dense output on an even grid, evaluate every output quantity with the
 compiled ``output_row`` and return a :class:`RunResult`. A failed run (solver failure,
-gimbal lock, non-finite state, step limit) is data: ``status == "failed"`` with a message,
-never an exception.
+gimbal lock, the admissible region of ``simulation.limits`` left, non-finite state, step
+limit) is data: ``status == "failed"`` with a message naming the bound and the time, never
+an exception.
 
 Every run ends: on either engine a run stops as ``failed`` after
 ``simulation.max_steps`` accepted steps or ``simulation.max_wall_time`` seconds of
@@ -39,7 +40,8 @@ import numpy as np
 from .engine import METHODS, RunBatch, integrate_runs, method_number
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
-from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, status_message
+from .engine.integrate import admissible
+from .engine.status import STEP_LIMIT, SUCCESS, TIMEOUT, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
@@ -63,7 +65,7 @@ __all__ = [
     "simulate_batch",
     "RunBlock",
     "solve",
-    "gimbal_lock_event",
+    "admissible_region_event",
     "evaluate_outputs",
     "uses_compiled_engine",
     "is_sign_law",
@@ -76,18 +78,36 @@ __all__ = [
 KEEP = ("all", "thinned", "none")
 
 
-def gimbal_lock_event(margin: float):
-    """Terminal solve_ivp event: zero when |theta_2| reaches pi/2 - ``margin`` [rad] (eq 5).
-
-    theta is ``y[0:3]`` in every state layout.
-    """
+def admissible_region_event(variant: Variant, margin: float):
+    """Terminal solve_ivp event of the admissible region of ``variant``'s run: the compiled
+    :func:`rbstab.engine.integrate.admissible_event`, zero when |theta_2| reaches pi/2 -
+    ``margin`` [rad] (gimbal lock, eq 5) or a component reaches its bound of
+    ``simulation.limits`` (``variant.limits``), falling through it. ``event.status(y)`` is
+    the status code of the bound reached at the state y (:mod:`rbstab.engine.status`)."""
+    code, p, limit = variant.code, variant._parameters_without_offset[0], GIMBAL_LOCK_ANGLE - margin
 
     def event(t: float, y: np.ndarray) -> float:
-        return GIMBAL_LOCK_ANGLE - margin - abs(y[1])
+        return admissible(code, np.ascontiguousarray(y, dtype=float), p, limit)[0]
 
     event.terminal = True
     event.direction = -1
+    event.status = lambda y: int(admissible(code, np.ascontiguousarray(y, dtype=float), p, limit)[1])
     return event
+
+
+def _left_region(variant: Variant, event, t: float, y: np.ndarray, settings) -> str | None:
+    """The message of a run at (t, y) outside the admissible region (``event``:
+    :func:`admissible_region_event`; the state at the start, or just after an impulse), or
+    None inside it."""
+    if event(t, y) >= 0:
+        return None
+    return status_message(event.status(y), t, settings.gimbal_margin, limits=variant.parameters[0]["limits"])
+
+
+def _event_message(variant: Variant, event, sol, settings) -> str:
+    """The message of a run that ``solve_ivp`` stopped at its ``event`` (the first event)."""
+    return status_message(event.status(sol.y_events[0][0]), float(sol.t_events[0][0]), settings.gimbal_margin,
+                          limits=variant.parameters[0]["limits"])
 
 
 class RunLimit(Exception):
@@ -177,6 +197,10 @@ def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = N
     if timeout is None:
         timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
     no_solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
+    region = admissible_region_event(variant, settings.gimbal_margin)
+    outside = _left_region(variant, region, 0.0, y0, settings)
+    if outside is not None:
+        return t_eval, states, "failed", outside, no_solver, zero
     with np.errstate(all="ignore"):
         try:
             sol = solve_ivp(
@@ -185,7 +209,7 @@ def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = N
                 y0,
                 method=settings.method,
                 t_eval=t_eval,
-                events=[gimbal_lock_event(settings.gimbal_margin), _step_counter(max_steps)],
+                events=[region, _step_counter(max_steps)],
                 rtol=settings.rtol,
                 atol=settings.atol,
                 max_step=settings.max_step,
@@ -200,8 +224,7 @@ def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = N
     states[:n] = y.T[:n]
     solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
     if sol.status == 1:
-        message = status_message(GIMBAL_LOCK, float(sol.t_events[0][0]), settings.gimbal_margin)
-        return t_eval, states, "failed", message, solver, zero
+        return t_eval, states, "failed", _event_message(variant, region, sol, settings), solver, zero
     if sol.status != 0:
         return t_eval, states, "failed", f"solver failed: {sol.message}", solver, zero
     if not np.all(np.isfinite(states)):
@@ -266,16 +289,20 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
     w = 0.0
     solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": 0}
     message = ""
+    region = admissible_region_event(variant, settings.gimbal_margin)
     with np.errstate(all="ignore"):
         for a, b in zip(edges[:-1], edges[1:]):
             w += apply_impulses(permanent, a, y, p)
+            outside = _left_region(variant, region, a, y, settings)
+            if outside is not None:
+                return t_eval, states, "failed", outside, solver, work
             last = b == t_end
             lim = b if last else before(b)
             inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
             try:
                 sol = solve_ivp(lambda t, z, lim=lim: rhs(min(t, lim), z), (a, b), y, method=settings.method,
                                 t_eval=t_eval[inside], dense_output=True,
-                                events=[gimbal_lock_event(settings.gimbal_margin), counter],
+                                events=[region, counter],
                                 rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
             except RunLimit as exc:
                 message = status_message(exc.status, exc.t, settings.gimbal_margin, max_steps, timeout)
@@ -299,8 +326,7 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
                         work[mine] = w + _step_work(variant, piece, lo, t_eval[mine])
                     w += float(_step_work(variant, piece, lo, hi)[0])
             if sol.status == 1:
-                message = status_message(GIMBAL_LOCK, float(sol.t_events[0][0]), settings.gimbal_margin)
-                return t_eval, states, "failed", message, solver, work
+                return t_eval, states, "failed", _event_message(variant, region, sol, settings), solver, work
             if sol.status != 0:
                 return t_eval, states, "failed", f"solver failed: {sol.message}", solver, work
             if not last:
@@ -454,7 +480,7 @@ def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarra
                 outputs=outputs,
                 summaries=summaries,
                 **_ends(sol.status[members], sol.t_stop[members], sol.nfev[members], sol.n_steps[members],
-                        settings[members]),
+                        settings[members], params[members]["limits"]),
                 wall_time=np.full(k, share + per_run),
                 timing={"integration": np.full(k, share), "postprocess": np.full(k, per_run)},
                 switching=[None] * k,
@@ -462,17 +488,18 @@ def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarra
             )
 
 
-def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.ndarray, settings: np.ndarray
-          ) -> dict:
+def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.ndarray, settings: np.ndarray,
+          limits: np.ndarray) -> dict:
     """A :class:`RunBlock`'s ``status``, ``message`` and ``solver`` of k runs of the compiled
     engine, from their status codes (:mod:`rbstab.engine.status`), stop times [s],
-    right-hand-side evaluations, steps and settings rows (k, 7)."""
+    right-hand-side evaluations, steps, settings rows (k, 7) and admissible regions (k, 5,
+    3; the ``limits`` of their records)."""
     status = np.asarray(status, dtype=np.int64)
     ok = status == SUCCESS
     message = np.full(len(status), status_message(SUCCESS, 0.0, 0.0), dtype=object)
     for j in np.flatnonzero(~ok).tolist():  # failed runs: few
         message[j] = status_message(int(status[j]), float(t_stop[j]), float(settings[j, 4]), int(settings[j, 5]),
-                                    float(settings[j, 6]))
+                                    float(settings[j, 6]), limits=limits[j])
     return {"status": np.where(ok, "success", "failed").tolist(), "message": message.tolist(),
             "solver": {"nfev": np.asarray(nfev, dtype=np.int64), "njev": np.zeros(len(status), dtype=np.int64),
                        "nlu": np.zeros(len(status), dtype=np.int64), "solver_status": status,
@@ -483,7 +510,7 @@ def _variant_of(config: "RunConfig", shared: dict) -> Variant:
     """``config.make_variant()``, one for the configs that share their body and gains objects
     (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``): its parameters record
     and equilibrium are computed once for them."""
-    key = (config.variant, config.body, config.gains)  # identity: both are eq=False dataclasses
+    key = (config.variant, config.body, config.gains, config.simulation.limits)  # identity: eq=False dataclasses
     variant = shared.get(key)
     if variant is None:
         variant = shared[key] = config.make_variant()
@@ -685,7 +712,8 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
             time=time,
             outputs=outputs,
             summaries=stream_table(grid, chunk.acc, chunk.last, layout),
-            **_ends(chunk.status, chunk.t_stop, chunk.nfev, chunk.n_steps, settings[chunk.runs]),
+            **_ends(chunk.status, chunk.t_stop, chunk.nfev, chunk.n_steps, settings[chunk.runs],
+                    params[chunk.runs]["limits"]),
             wall_time=np.full(k, share),
             timing={"integration": np.full(k, share), "postprocess": np.zeros(k)},
             switching=[None] * k,

@@ -14,7 +14,7 @@
 Method and limits: ``docs/analysis.md``.
 """
 
-from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, analyze
+from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, analyze, OutsideLimits, equilibrium_outside_limits
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
 from .dataset import is_analysis_file, read_analysis, write_analysis
@@ -25,6 +25,8 @@ __all__ = [
     "analyze",
     "Analysis",
     "DEFAULT_BOUNDARY_LAYER",
+    "OutsideLimits",
+    "equilibrium_outside_limits",
     "linearise",
     "Linearisation",
     "certify",

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from ..config.schema import limits_violation
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
@@ -31,7 +32,8 @@ from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
 from .linearise import Linearisation, linearise
 
-__all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config"]
+__all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits",
+           "equilibrium_outside_limits"]
 
 #: phi [m] put in place of the pure sign law (boundary_layer 0) of ``sliding``.
 DEFAULT_BOUNDARY_LAYER = 1e-3
@@ -179,6 +181,27 @@ class NoEquilibrium(ValueError):
     (one line: which control would need more than its limit)."""
 
 
+class OutsideLimits(ValueError):
+    """The equilibrium lies outside the admissible region ``simulation.limits`` (one line
+    naming the bound): every run there leaves it, so no push or initial state recovers."""
+
+
+def equilibrium_outside_limits(variant, equilibrium: np.ndarray) -> str | None:
+    """Why ``equilibrium`` (n_state,), the state :func:`rbstab.analysis.linearise.linearise`
+    linearises at, lies outside ``variant.limits`` (the configuration's
+    ``simulation.limits``), in one line ("the equilibrium lies outside simulation.limits:
+    |theta_2| = 0.7 rad > 0.6 rad (simulation.limits.theta)"), or None where it lies inside
+    (or there are no limits)."""
+    if variant.limits is None:
+        return None
+    found = limits_violation(variant.limited_values(np.asarray(equilibrium, dtype=float)[None])[0],
+                             variant.limits.array)
+    if found is None:
+        return None
+    key, detail = found
+    return f"the equilibrium lies outside simulation.limits: {detail} ({key})"
+
+
 def _unheld(config) -> str:
     """Why a configuration with actuator limits has no rest point: the controls that its
     equilibrium without limits commands beyond their limits."""
@@ -287,6 +310,8 @@ def analyze(
     ------
     ConfigError
         For an invalid configuration file.
+    OutsideLimits
+        When the equilibrium lies outside ``simulation.limits``.
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
@@ -310,6 +335,9 @@ def analyze(
     lin = linearise(variant)
     if not lin.is_rest_point and analysed.gains.saturation is not None:
         raise NoEquilibrium(_unheld(analysed))
+    outside = equilibrium_outside_limits(variant, lin.equilibrium)
+    if outside is not None:
+        raise OutsideLimits(outside)
     notes += _domain_notes(lin, analysed) + _saturated_at_rest(lin, analysed) + list(config.warnings)
     t1 = _time.perf_counter()
     timing["linearisation"] = t1 - t0

@@ -10,7 +10,8 @@ is classified by the rule a sweep classifies its runs with
 - ``converged`` (0): the run reached t_end and |v| <= ratio |v(0)| + 1e-12 J
   (:data:`rbstab.convergence.SAMPLE_RULE`) from some time on;
 - ``not converged`` (1): it reached t_end with more of v left;
-- ``failed`` (2): gimbal lock (|theta_2| reached pi/2 - gimbal_margin, eq 5), a solver
+- ``failed`` (2): gimbal lock (|theta_2| reached pi/2 - gimbal_margin, eq 5), the
+  admissible region left (``simulation.limits``; a point outside it fails at t = 0), a solver
   failure, a non-finite state, or an initial state outside the domain.
 
 The time to converge is the first sample time from which the bound holds [s] (its
@@ -246,7 +247,8 @@ def _run_on_gpu(engine, base, variant, states: np.ndarray, points: np.ndarray, r
         message = [""] * len(ok)
         for i in np.flatnonzero(~ok).tolist():  # failed runs: few
             message[i] = status_message(int(chunk.status[i]), float(chunk.t_stop[i]), s.gimbal_margin,
-                                        s.max_steps, s.max_wall_time).split(" at t =")[0]
+                                        s.max_steps, s.max_wall_time,
+                                        limits=variant.parameters[0]["limits"]).split(" at t =")[0]
         out += zip(points[chunk.runs].tolist(), code.tolist(), t.tolist(), v1.tolist(), message)
     return out
 

@@ -46,6 +46,12 @@ Schema (the keys are public; units in brackets)::
       gimbal_margin: 1.0e-3         # [rad] in (0, 0.5)
       max_steps: 1000000            # solver steps after which the run fails, in [1, 1e9]
       max_wall_time: 600            # [s] of integration after which the run fails (null: none)
+      limits:                       # optional: the admissible region (docs/physics.md); a run
+        theta: [0.6, 0.6, 3.2]      # that leaves it fails there. |theta_i| <= bound [rad]: a
+        omega: 20                   # number > 0 (every axis; .inf: none) or 3. |Omega_i| [rad/s],
+        position: [1, 1, 1]         # |X_i| [m] (inertial frame, from the origin), |V_i| [m/s],
+        velocity: 5                 # |E_i| [m] (not permanent); the initial state must lie
+        constraint_error: 0.05      # inside
     disturbances:                   # optional, at most 4 (docs/disturbances.md)
       - kind: pulse                 # impulse | pulse | step | sine | noise
         quantity: force             # force (at point, inertial frame) | torque (body frame)

@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 from pydantic import ValidationError
 
-from ..model import Disturbance, Gains, RigidBody, Saturation
+from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS, Variant
+from ..variants.base import limited_values
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_weight
 from .paths import apply_overrides, plain_tree
@@ -24,12 +25,13 @@ from .schema import (
     TOP_LEVEL,
     RunSchema,
     SimulationSettings,
+    limits_violation,
     problem_line,
     short_repr,
 )
 from .yaml_io import dump_yaml_sections, read_yaml_file
 
-__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS"]
+__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS", "limits_of"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
@@ -152,13 +154,14 @@ class RunConfig:
                 max_step=math.inf if max_step is None else float(max_step), gimbal_margin=float(sim["gimbal_margin"]),
                 max_steps=int(sim.get("max_steps", SimulationSettings.max_steps)),
                 max_wall_time=math.inf if wall is None else float(wall),
+                limits=limits_of(sim.get("limits")),
             ),
             resolved=resolved,
         )
 
     def make_variant(self) -> Variant:
-        """The variant object, ``VARIANTS[variant](body, gains)``."""
-        return VARIANTS[self.variant](self.body, self.gains)
+        """The variant object, ``VARIANTS[variant](body, gains, simulation.limits)``."""
+        return VARIANTS[self.variant](self.body, self.gains, self.simulation.limits)
 
 
 def saturation_of(section: Mapping | None) -> Saturation | None:
@@ -172,6 +175,14 @@ def saturation_of(section: Mapping | None) -> Saturation | None:
         return np.broadcast_to(np.array(math.inf if value is None else value, dtype=float), (3,)).copy()
 
     return Saturation(limits("torque_n"), limits("force_h"), limits("constraint_force"), section.get("shape", "clip"))
+
+
+def limits_of(section: Mapping | None) -> Limits | None:
+    """The :class:`rbstab.model.Limits` of a validated ``simulation.limits`` mapping (a bound
+    missing or null: inf on every axis; a number: on every axis), or None without one."""
+    if section is None:
+        return None
+    return Limits.of(**section)
 
 
 def disturbances_of(entries: Sequence[Mapping] | None) -> tuple[Disturbance, ...]:
@@ -243,9 +254,12 @@ def _build(
         gimbal_margin=float(sim.gimbal_margin),
         max_steps=int(sim.max_steps),
         max_wall_time=float(sim.max_wall_time),
+        limits=limits_of(None if sim.limits is None else sim.limits.model_dump()),
     )
     used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
     _check_weight(ctrl, body, gains, used_gains, source, overrides)
+    initial_state = {block: _array(getattr(run.initial_state, key)) for key, block in INITIAL_STATE_BLOCKS.items()}
+    _check_limits(ctrl.variant, body, initial_state, simulation.limits, sim.limits, source, overrides)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
     if dump.get("disturbances") is None:
@@ -256,6 +270,10 @@ def _build(
     for key in ("max_step", "max_wall_time"):
         if math.isinf(getattr(sim, key)):
             dump["simulation"][key] = None
+    if sim.limits is None:
+        dump["simulation"].pop("limits")  # a run without: its resolved form (and identity) as before
+    else:
+        dump["simulation"]["limits"] = {k: v for k, v in dump["simulation"]["limits"].items() if v is not None}
     as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
     found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
     return RunConfig(
@@ -263,10 +281,7 @@ def _build(
         variant=ctrl.variant,
         body=body,
         gains=gains,
-        initial_state={
-            block: _array(getattr(run.initial_state, key))
-            for key, block in INITIAL_STATE_BLOCKS.items()
-        },
+        initial_state=initial_state,
         simulation=simulation,
         resolved=dump,  # plain dicts, lists, str and numbers (the validators make new lists; tested)
         warnings=found_warnings,
@@ -313,6 +328,27 @@ def _check_weight(ctrl, body: RigidBody, gains: Gains, used_gains: dict, source:
     found = short_repr(getattr(ctrl, key.partition(".")[2]))
     line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
     inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
+    related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
+    raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
+
+
+def _check_limits(variant: str, body: RigidBody, initial_state: Mapping[str, np.ndarray], limits: Limits | None,
+                  written: Any, source: str | None, overrides: Sequence[str]) -> None:
+    """ConfigError when the initial state lies outside the admissible region ``limits``
+    (:func:`rbstab.config.schema.inside_limits` of its bounded quantities; ``written``: the
+    validated ``simulation.limits`` section, for the message)."""
+    if limits is None:
+        return
+    cls = VARIANTS[variant]
+    y0 = cls.layout.join(**{b: initial_state[b] for b in cls.layout.blocks})
+    found = limits_violation(limited_values(cls.code, y0[None], body.attachment_point)[0], limits.array)
+    if found is None:
+        return
+    key, detail = found
+    bound = short_repr(getattr(written, key.rpartition(".")[2]))
+    line = (f"config key '{key}': found {bound}; expected bounds that contain the initial state "
+            f"(the initial state lies outside simulation.limits: {detail})")
+    inputs = ("simulation.limits", "initial_state", "body.attachment_point")
     related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
     raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
 

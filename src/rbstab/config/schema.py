@@ -29,8 +29,8 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from ..layout import BLOCK_UNITS
-from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES
+from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units
+from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES, Limits
 from ..variants import VARIANTS
 from .physics import SINGULAR_RTOL
 
@@ -58,6 +58,8 @@ __all__ = [
     "field_rule",
     "within_bounds",
     "clear_of_gimbal_lock",
+    "inside_limits",
+    "limits_violation",
     "samples_apart",
     "steps_suffice",
     "Invalid",
@@ -203,6 +205,30 @@ def clear_of_gimbal_lock(theta_2: Any, margin: Any = 0.0) -> Any:
     """Whether |theta_2| < pi/2 - ``margin`` [rad]: B(theta) is singular at |theta_2| = pi/2
     (gimbal lock, eq 1)."""
     return abs(theta_2) < math.pi / 2 - margin
+
+
+def inside_limits(values: Any, bounds: Any) -> Any:
+    """Whether every |q_j,i| <= bound_j,i: ``values`` and ``bounds`` of shape (..., 5, 3), the
+    rows those of :data:`rbstab.layout.LIMITED` (``simulation.limits``; inf: unbounded);
+    shape (...). A NaN value is outside."""
+    with np.errstate(invalid="ignore"):
+        return np.all(np.abs(np.asarray(values, dtype=float)) <= np.asarray(bounds, dtype=float), axis=(-2, -1))
+
+
+def limits_violation(values: Any, bounds: Any) -> tuple[str, str] | None:
+    """(the key ``simulation.limits.<quantity>``, a phrase ``|Omega_1| = 25 rad/s > 20
+    rad/s``) of the first component of ``values`` (5, 3) beyond its bound in ``bounds`` (5,
+    3) (:func:`inside_limits`), or None when all are inside."""
+    values, bounds = np.asarray(values, dtype=float), np.asarray(bounds, dtype=float)
+    with np.errstate(invalid="ignore"):
+        outside = ~(np.abs(values) <= bounds)
+    if not outside.any():
+        return None
+    j, i = (int(k) for k in np.argwhere(outside)[0])
+    name = LIMITED[j]
+    units = display_units(OUTPUTS[name].units)
+    return (f"simulation.limits.{name}",
+            f"|{LIMITED_COMPONENTS[name]}_{i + 1}| = {abs(values[j, i]):.6g} {units} > {bounds[j, i]:g} {units}")
 
 
 def samples_apart(t_end: Any, n_samples: Any) -> Any:
@@ -447,6 +473,9 @@ class SimulationSettings:
     max_wall_time : float
         Wall time [s] of the integration after which the run stops as ``failed`` (every
         engine); ``inf`` for none (the step limit still ends it).
+    limits : Limits or None
+        The admissible region (``simulation.limits``); a run that leaves it stops as
+        ``failed``, its message naming the bound and the time. None: unbounded.
     """
 
     t_end: float = 2.0
@@ -458,6 +487,7 @@ class SimulationSettings:
     gimbal_margin: float = 1e-3
     max_steps: int = 1_000_000
     max_wall_time: float = 600.0
+    limits: Limits | None = None
 
 
 # -- schema --------------------------------------------------------------------------------
@@ -711,6 +741,18 @@ class _InitialState(_Section):
     d: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['controller_state']})")
 
 
+class _Limits(_Section):
+    """The admissible region (:class:`rbstab.model.Limits`): |q_i| <= bound."""
+
+    theta: _LIMITS = Field(None, description="|theta_i| <= bound (rad): a number > 0 or 3 of them (.inf: none)")
+    omega: _LIMITS = Field(None, description="|Omega_i| <= bound (rad/s, body frame): a number > 0 or 3 of them")
+    position: _LIMITS = Field(None, description="|X_i| <= bound (m, centre of mass, inertial frame): a number > 0 "
+                                                "or 3 of them")
+    velocity: _LIMITS = Field(None, description="|V_i| <= bound (m/s, inertial frame): a number > 0 or 3 of them")
+    constraint_error: _LIMITS = Field(None, description="|E_i| <= bound (m, inertial frame): a number > 0 or 3 of "
+                                                        "them (not permanent)")
+
+
 _DEFAULT_SIMULATION = SimulationSettings()
 
 
@@ -742,6 +784,7 @@ class _Simulation(_Section):
     max_wall_time: Annotated[Any, checked(_max_wall_time)] = Field(
         _DEFAULT_SIMULATION.max_wall_time, description="a number > 0 (s), .inf or null for no limit"
     )
+    limits: _Limits | None = Field(None, description=_mapping_of(_Limits) + " (optional: the admissible region)")
 
     @model_validator(mode="after")
     def _run_can_end(self) -> "_Simulation":
@@ -812,6 +855,17 @@ class RunSchema(_Section):
                     "expected": "no disturbances with the pure sign law (controller.boundary_layer: 0)",
                     "detail": "its event-driven integrator takes no disturbances; give the sign law a boundary "
                               "layer > 0 instead"})
+        return self
+
+    @model_validator(mode="after")
+    def _limits_fit_the_variant(self) -> "RunSchema":
+        """A bound of E on ``permanent``, whose C is pinned (E = 0 at every instant)."""
+        limits = self.simulation.limits
+        if limits is not None and limits.constraint_error is not None and self.controller.variant == "permanent":
+            raise PydanticCustomError("rbstab_invalid", "bound of E on the pin", {
+                "key": "simulation.limits.constraint_error", "found": short_repr(limits.constraint_error),
+                "expected": "no bound with variant 'permanent'",
+                "detail": "C is pinned: E = 0 at every instant; bound theta, omega, position or velocity"})
         return self
 
     @field_validator("initial_state", "simulation", mode="before")

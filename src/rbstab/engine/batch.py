@@ -28,8 +28,9 @@ import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
 from ..config.schema import field_value, split_key
-from ..layout import STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
-from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody
+from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
+from ..model import (DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody,
+                     set_limits)
 from ..variants import VARIANTS
 from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
@@ -231,6 +232,7 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
                            ("constraint_force_limit", "constraint_force")):
             p[field][saturated] = f.get("controller", f"saturation.{key}", math.inf, shape=(3,))[saturated]
     _disturbances(p, f, templates)
+    _limits(p, f, templates)
     p["lyapunov_offset"] = _offsets(p, names, gravity)
     settings = np.zeros(n, dtype=SETTINGS)
     for name in SETTING_COLUMNS:
@@ -270,6 +272,18 @@ def _disturbances(p: np.ndarray, f: _Fields, templates: Sequence[Mapping]) -> No
         for field, default in (("start", 0.0), ("duration", 0.0), ("frequency", 0.0), ("phase", 0.0), ("seed", 0.0)):
             p[f"disturbance_{field}"][rows, i] = f.get("disturbances", f"{i}.{field}", default)[rows]
         p["disturbance_band"][rows, i] = f.get("disturbances", f"{i}.band", [0.0, 0.0])[rows]
+
+
+def _limits(p: np.ndarray, f: _Fields, templates: Sequence[Mapping]) -> None:
+    """The admissible region of every run (:func:`rbstab.model.set_limits`): each bound of
+    its template's ``simulation.limits`` as written there or in a column
+    (``simulation.limits.theta.1``), inf where absent."""
+    bounded = f.of_templates([bool(t["simulation"].get("limits")) for t in templates], dtype=bool)
+    if not bounded.any():
+        set_limits(p, None)
+        return
+    set_limits(p, np.stack([np.where(bounded[:, None], f.get("simulation", f"limits.{name}", math.inf, shape=(3,)),
+                                     np.inf) for name in LIMITED], axis=1))
 
 
 def _initial_states(f: _Fields, code: np.ndarray) -> np.ndarray:

@@ -5,9 +5,10 @@ compiles every rbstab ``@jit`` function that a CUDA kernel calls as a device fun
 the same Python source (:func:`rbstab.variants.kernels.state_rate`,
 :func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
 :func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
-:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.locate_event`,
-:func:`~rbstab.engine.integrate.step_work`, :func:`~rbstab.engine.integrate.restart`, the
-disturbances' :func:`~rbstab.variants.disturbances.apply_impulses` and
+:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.admissible_event`,
+:func:`~rbstab.engine.integrate.locate_event`, :func:`~rbstab.engine.integrate.step_work`,
+:func:`~rbstab.engine.integrate.restart`, the disturbances'
+:func:`~rbstab.variants.disturbances.apply_impulses` and
 :func:`~rbstab.variants.disturbances.next_breakpoint`, and the streaming summary of
 :mod:`rbstab.summary`). Only the driver loop is written here:
 :func:`rbstab.engine.integrate._run`'s loop with one step *attempt* per pass (a thread
@@ -76,12 +77,12 @@ from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, sten
                        stream_sample, stream_start)
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
-from .integrate import (REJECTED, _limit_of, attempt_step, gimbal_event, locate_event, restart, sample_time,
+from .integrate import (REJECTED, _limit_of, admissible_event, attempt_step, locate_event, restart, sample_time,
                         step_bounds, step_work)
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
-from .status import GIMBAL_LOCK, NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
+from .status import NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
@@ -270,6 +271,7 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
             n_steps = 0
             status = SUCCESS
             h_abs = 0.0
+            margin, left = 0.0, SUCCESS
             t_bound = t_end  # where the step from t ends at the latest: t_end, or the next breakpoint
             t_lim = t_end  # the latest time a stage of that step evaluates
             if globaltimer() > deadline:
@@ -282,10 +284,15 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                     done += apply_impulses(permanent, 0.0, y, p)
                     t_bound = next_breakpoint(p, 0.0, t_end)
                     t_lim = _limit_of(t_bound, t_end)
-                state_rate(code, 0.0, y, p, f)
-                h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
-                nfev = 2
-                h_abs = step_bounds(s, t, h_abs)
+                margin, left = admissible_event(code, y, p, limit)
+                if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
+                    status = left
+                    t_end = 0.0
+                else:
+                    state_rate(code, 0.0, y, p, f)
+                    h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
+                    nfev = 2
+                    h_abs = step_bounds(s, t, h_abs)
             rejected = False
             while t < t_end:
                 passes += 1
@@ -306,12 +313,13 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                 nfev += n_stages
                 n_steps += 1
                 t_stop = t_new
-                event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
+                margin_new = admissible_event(code, y_new, p, limit)[0]
+                event = margin >= 0 and margin_new <= 0
                 at_break = disturbed and t_new == t_bound and t_bound < t_end
                 if event or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
                 if event:
-                    t_stop, _ = locate_event(t, h, y, Q, dop853, limit, work)
+                    t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, work)
                 # a sample at a breakpoint is the next step's (the state just after the breakpoint)
                 while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
                                          else sample_time(j, n_samples, t_end) <= t_stop):
@@ -332,18 +340,23 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                     stream_sample(acc, j, row, first, weights, trace, stride, ratio)
                     j += 1
                 if event:
-                    status = GIMBAL_LOCK
+                    status = left
                     t = t_stop
                     break
                 if disturbed:
                     done += step_work(permanent, p, t, h, 1.0, y, Q, dop853, work)
                 t = t_new
+                margin = margin_new
                 for i in range(n_state):
                     y[i] = y_new[i]
                     f[i] = K[n_stages, i]
                 if at_break:  # the impulses that start here; a new initial step from here
-                    jump, t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
-                    done += jump
+                    done += apply_impulses(permanent, t, y, p)
+                    margin, left = admissible_event(code, y, p, limit)
+                    if margin < 0:  # an impulse took the state out of the admissible region
+                        status = left
+                        break
+                    t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
                     nfev += 2
                 h_abs = step_bounds(s, t, h_abs)
                 rejected = False
@@ -435,7 +448,7 @@ def occupancy(fn, n_state: int) -> int:
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
-DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "gimbal_event",
+DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
                     "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
                     "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "step_work", "restart")
 

@@ -2,8 +2,9 @@
 
 :func:`integrate_run` is what ``solve_ivp(..., t_eval=linspace(0, t_end, n), events=[gimbal
 lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
-``_step_impl``), sample the step's interpolant at the grid times it covers, and stop at the
-gimbal-lock event, located on the interpolant. :func:`integrate_chunk` runs many runs, each
+``_step_impl``), sample the step's interpolant at the grid times it covers, and stop where
+the run leaves its admissible region (:func:`admissible_event`: gimbal lock and the bounds
+of ``simulation.limits``), located on the interpolant. :func:`integrate_chunk` runs many runs, each
 with its own variant, parameters and settings, one after the other in one call.
 
 A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
@@ -26,15 +27,17 @@ from numba.core.extending import intrinsic
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.disturbances import apply_impulses, before, next_breakpoint, state_power
-from ..variants.kernels import PERMANENT, state_rate
+from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
-from .status import DEFAULT_MAX_STEPS, GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
+from .status import (DEFAULT_MAX_STEPS, GIMBAL_LOCK, LEFT_REGION, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT,
+                     TOO_SMALL_STEP)
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "locate_event"]
+           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
+           "admissible", "locate_event"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
 
@@ -190,21 +193,64 @@ def gimbal_event(y, limit):
     return limit - abs(y[1])
 
 
+@jit(forceinline=True)
+def _bound_margin(q, bounds, j, margin, status):
+    """(margin, status) after the bounds ``bounds`` (3,) of quantity j (``q``, a 3-tuple):
+    the smaller of ``margin`` and bound_i - |q_i|, with the status code of its axis."""
+    for i in range(3):
+        m = bounds[i] - abs(q[i])
+        if m < margin:
+            margin, status = m, LEFT_REGION + 3 * j + i
+    return margin, status
+
+
+@jit(forceinline=True)
+def admissible_event(code, y, p, limit):
+    """The event function of the admissible region at the state ``y`` of variant ``code``
+    with the record ``p``: (margin, status), margin the smallest of the gimbal-lock margin
+    ``limit`` - |theta_2| [rad] (``limit`` = pi/2 - gimbal_margin) and every bound
+    ``p.limits[j, i]`` - |q_j,i| of ``simulation.limits`` (in the bound's units;
+    :func:`rbstab.variants.kernels.limited_quantities`), status the code of the smallest
+    (GIMBAL_LOCK, or :func:`rbstab.engine.status.limit_status`). The run leaves the region
+    where the margin falls through 0; without bounds (``p.limited`` 0) it is
+    :func:`gimbal_event`, bit for bit."""
+    margin, status = gimbal_event(y, limit), GIMBAL_LOCK
+    if p.limited == 0.0:
+        return margin, status
+    theta, omega, x, v, e = limited_quantities(code, y, p)
+    margin, status = _bound_margin(theta, p.limits[0], 0, margin, status)
+    margin, status = _bound_margin(omega, p.limits[1], 1, margin, status)
+    margin, status = _bound_margin(x, p.limits[2], 2, margin, status)
+    margin, status = _bound_margin(v, p.limits[3], 3, margin, status)
+    return _bound_margin(e, p.limits[4], 4, margin, status)
+
+
 @jit
-def locate_event(t_old, h, y_old, Q, dop853, limit, work):
-    """Time in [t_old, t_old + h] where the interpolant's |theta_2| reaches ``limit``
-    (bisection to the spacing of floats; the event is positive at t_old, <= 0 at the end)."""
+def admissible(code, y, p, limit):
+    """:func:`admissible_event` as a function Python calls (the scipy reference's event,
+    the checks of an initial state): (margin, status)."""
+    return admissible_event(code, y, p, limit)
+
+
+@jit
+def locate_event(code, p, t_old, h, y_old, Q, dop853, limit, work):
+    """Where the interpolant leaves the admissible region (:func:`admissible_event` of
+    variant ``code``, record ``p``, gimbal-lock angle ``limit``) in [t_old, t_old + h]:
+    bisection to the spacing of floats (the margin is >= 0 at t_old, <= 0 at the end).
+    Returns (time [s], its fraction of the step, the status code of the bound reached
+    there); ``work`` holds the state there."""
     lo, hi = 0.0, 1.0
     for _ in range(200):
         mid = 0.5 * (lo + hi)
         if mid <= lo or mid >= hi:
             break
         dense_value(mid, h, y_old, Q, dop853, work)
-        if gimbal_event(work, limit) > 0:
+        if admissible_event(code, work, p, limit)[0] > 0:
             lo = mid
         else:
             hi = mid
-    return t_old + hi * h, hi
+    dense_value(hi, h, y_old, Q, dop853, work)
+    return t_old + hi * h, hi, admissible_event(code, work, p, limit)[1]
 
 
 @jit
@@ -213,9 +259,12 @@ def integrate_run(code, p, y0, s, samples, work_done):
     and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end), and ``work_done``
     (n_samples,) with the work W [J] of the disturbances up to each sample (0 without).
 
-    The run stops after ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time``
-    seconds (TIMEOUT; inf for none). Rows after the run stopped are NaN. Returns
-    (status, t_stop, nfev, n_steps).
+    The run stops where it leaves its admissible region (GIMBAL_LOCK, or the status code of
+    the bound of ``simulation.limits`` it reached: :func:`admissible_event`; at t = 0 with no
+    step when it starts outside, at an impulse's time when the impulse throws it out), after
+    ``s.max_steps`` accepted steps (STEP_LIMIT) or ``s.max_wall_time`` seconds (TIMEOUT;
+    inf for none). Rows after the run stopped are NaN. Returns (status, t_stop, nfev,
+    n_steps).
     """
     status, t_stop, nfev, n_steps, filled = _run(code, p, y0, s, samples, work_done)
     samples[filled:, :] = np.nan  # only the rows after a stop: a run that ends writes each row once
@@ -244,15 +293,14 @@ def step_work(permanent, p, t, h, x, y_old, Q, dop853, out):
 
 @jit(forceinline=True)
 def restart(code, p, s, t, y, f, w):
-    """At a breakpoint t of the disturbances: apply the impulses that start there to y (in
-    place), and start again as a new solve_ivp from there would: y's rate at t into f and
-    a new initial step (2 right-hand sides). Returns (the impulses' work [J], the next
-    breakpoint t_bound, the latest stage time t_lim before it, the initial step h_abs)."""
-    jump = apply_impulses(code == PERMANENT, t, y, p)
+    """Start again from a breakpoint t of the disturbances (its impulses applied to y) as a
+    new solve_ivp from there would: y's rate at t into f and a new initial step (2
+    right-hand sides). Returns (the next breakpoint t_bound, the latest stage time t_lim
+    before it, the initial step h_abs)."""
     t_bound = next_breakpoint(p, t, s.t_end)
     t_lim = _limit_of(t_bound, s.t_end)
     state_rate(code, t, y, p, f)
-    return jump, t_bound, t_lim, initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+    return t_bound, t_lim, initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
 
 
 @jit(forceinline=True)
@@ -280,6 +328,9 @@ def _run(code, p, y0, s, samples, work_done):
     if disturbed:
         work += apply_impulses(permanent, 0.0, y, p)
         t_bound = next_breakpoint(p, 0.0, t_end)
+    margin, left = admissible_event(code, y, p, limit)
+    if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
+        return left, 0.0, 0, 0, 0
     t_lim = _limit_of(t_bound, t_end)
     state_rate(code, 0.0, y, p, f)
     h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
@@ -299,12 +350,13 @@ def _run(code, p, y0, s, samples, work_done):
         n_steps += 1
         f_new = K[N_STAGES[method]]
         t_stop = t_new
-        event = gimbal_event(y, limit) >= 0 and gimbal_event(y_new, limit) <= 0
+        margin_new = admissible_event(code, y_new, p, limit)[0]
+        event = margin >= 0 and margin_new <= 0
         at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
         if event or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
             nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
         if event:
-            t_stop, _ = locate_event(t, h, y, Q, dop853, limit, scratch)
+            t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, scratch)
         # a sample at a breakpoint is the next step's (the state just after the breakpoint)
         while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
                                  else sample_time(j, n_samples, t_end) <= t_stop):
@@ -313,15 +365,19 @@ def _run(code, p, y0, s, samples, work_done):
             work_done[j] = work + step_work(permanent, p, t, h, x, y, Q, dop853, scratch) if disturbed else 0.0
             j += 1
         if event:
-            return GIMBAL_LOCK, t_stop, nfev, n_steps, j
+            return left, t_stop, nfev, n_steps, j
         if disturbed:
             work += step_work(permanent, p, t, h, 1.0, y, Q, dop853, scratch)
         t = t_new
         y[:] = y_new
         f[:] = f_new
+        margin = margin_new
         if at_break:  # apply the impulses that start here, and start again from here
-            jump, t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
-            work += jump
+            work += apply_impulses(permanent, t, y, p)
+            margin, left = admissible_event(code, y, p, limit)
+            if margin < 0:  # an impulse took the state out of the admissible region
+                return left, t, nfev, n_steps, j
+            t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
             nfev += 2
     if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
         jump = apply_impulses(permanent, t_end, y, p)
@@ -357,9 +413,10 @@ class ChunkSolution:
         The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
     status : ndarray of int, shape (k,)
         How each run ended (:mod:`rbstab.engine.status`: 0 reached t_end, 1 gimbal lock,
-        negative a failure).
+        2-16 the admissible region left (:func:`rbstab.engine.status.limit_of` names the
+        bound), negative a failure).
     t_stop : ndarray, shape (k,)
-        Where each run stopped [s] (the event time for gimbal lock).
+        Where each run stopped [s] (the event time for gimbal lock and the region).
     nfev, n_steps : ndarray of int, shape (k,)
         Right-hand-side evaluations and accepted steps.
     work : ndarray, shape (k, n_samples)

@@ -16,6 +16,10 @@ code    name                 the run ...
 -4      ``TIMEOUT``          ran past ``simulation.max_wall_time``
 -5      ``SWITCHING_LIMIT``  located its largest number of switchings (pure sign law)
 -6      ``NOT_STARTED``      was not started: its GPU launch had reached its wall-time limit
+2-16    ``LEFT_REGION + k``  left the admissible region (``simulation.limits``): |q_i|
+                             reached its bound (the event time returned), k = 3 j + i
+                             for the quantity j of :data:`rbstab.layout.LIMITED` and the
+                             axis i (:func:`limit_status`, :func:`limit_of`)
 ======  ===================  ==========================================================
 
 A run whose code is not :data:`SUCCESS` has status ``"failed"``, with
@@ -26,6 +30,8 @@ from __future__ import annotations
 
 import math
 
+from ..layout import LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units
+
 __all__ = [
     "SUCCESS",
     "GIMBAL_LOCK",
@@ -35,6 +41,9 @@ __all__ = [
     "TIMEOUT",
     "SWITCHING_LIMIT",
     "NOT_STARTED",
+    "LEFT_REGION",
+    "limit_status",
+    "limit_of",
     "STATUSES",
     "SUCCESS_MESSAGE",
     "TOO_SMALL_STEP_MESSAGE",
@@ -44,6 +53,24 @@ __all__ = [
 
 SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT, SWITCHING_LIMIT, NOT_STARTED = (
     0, 1, -1, -2, -3, -4, -5, -6)
+
+#: The first code of a run that left the admissible region: LEFT_REGION + 3 j + i for the
+#: bound of quantity j (:data:`rbstab.layout.LIMITED`) on axis i.
+LEFT_REGION = 2
+
+
+def limit_status(quantity: int, axis: int) -> int:
+    """The status code of a run whose |q_i| reached its bound: q the ``quantity``-th of
+    :data:`rbstab.layout.LIMITED`, i = ``axis`` (0, 1, 2)."""
+    return LEFT_REGION + 3 * quantity + axis
+
+
+def limit_of(status: int) -> tuple[str, int] | None:
+    """(the bounded quantity's name in :data:`rbstab.layout.LIMITED`, the axis 0-2) of a
+    status code of :func:`limit_status`, or None for another code."""
+    k = int(status) - LEFT_REGION
+    return (LIMITED[k // 3], k % 3) if 0 <= k < 3 * len(LIMITED) else None
+
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).
 DEFAULT_MAX_STEPS = 10_000_000
@@ -70,11 +97,17 @@ STATUSES: dict[int, tuple[str, str]] = {
                                          "{resolution:g} m)"),
     NOT_STARTED: ("NOT_STARTED", "not run: its GPU launch reached its wall-time limit of {max_wall_time:g} s "
                                  "(simulation.max_wall_time) before the run started; run it again"),
+    **{limit_status(j, i): (f"LEFT_REGION_{name.upper()}_{i}",
+                            f"left the admissible region: |{LIMITED_COMPONENTS[name]}_{i + 1}| reached "
+                            f"simulation.limits.{name} = {{bound:g}} {display_units(OUTPUTS[name].units)} at "
+                            "t = {t_stop:.6g} s")
+       for j, name in enumerate(LIMITED) for i in range(3)},
 }
 
 
 def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: int = DEFAULT_MAX_STEPS,
-                   max_wall_time: float = math.inf, *, max_switchings: int = 0, resolution: float = 0.0) -> str:
+                   max_wall_time: float = math.inf, *, max_switchings: int = 0, resolution: float = 0.0,
+                   limits=None) -> str:
     """The message of a run that ended with ``status`` (scipy's words where scipy has them).
 
     Parameters
@@ -89,12 +122,18 @@ def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: 
         The run's step limit and wall-time limit [s].
     max_switchings, resolution : int, float
         The pure sign law's limit of located switchings and its resolution [m].
+    limits : array_like, shape (5, 3), optional
+        The run's admissible region (the ``limits`` field of its
+        :data:`rbstab.model.PARAMETERS` record, rows :data:`rbstab.layout.LIMITED`): the
+        bound a run that left it reached.
 
     Raises
     ------
     KeyError
         For a code not in :data:`STATUSES`.
     """
+    which = limit_of(status)
+    bound = math.nan if which is None or limits is None else float(limits[LIMITED.index(which[0])][which[1]])
     return STATUSES[int(status)][1].format(
         t_stop=t_stop, gimbal_margin=gimbal_margin, max_steps=max_steps, max_wall_time=max_wall_time,
-        max_switchings=max_switchings, resolution=resolution)
+        max_switchings=max_switchings, resolution=resolution, bound=bound)

@@ -20,7 +20,9 @@ regula falsi (Illinois) to a few units of rounding of the step:
   and Lambda_i is the equivalent force (Utkin's equivalent control);
 - **sliding ends**: |Lambda_i| of a sliding axis reaches K_s; then sigma_i = -sgn(Lambda_i)
   (the force is continuous) and C leaves the surface on the side the force cannot hold;
-- **gimbal lock**: |theta_2| reaches pi/2 - gimbal_margin (eq 5): the run stops, failed.
+- **the admissible region**: |theta_2| reaches pi/2 - gimbal_margin (gimbal lock, eq 5) or
+  a component reaches its bound of ``simulation.limits``
+  (:func:`rbstab.engine.integrate.admissible_event`): the run stops, failed.
 
 Methods: RK23, RK45, DOP853 (the compiled engine's); a run configured with an implicit
 method is integrated with DOP853 between switchings (each piece has a constant or
@@ -39,12 +41,12 @@ import numpy as np
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..summary import piecewise_numerical_rate
-from ..variants.kernels import state_rate
+from ..variants.kernels import SLIDING, state_rate
 from ..variants.sliding import mode_code, mode_quantities, mode_rows, stop_at_c
-from .integrate import CLOCK_EVERY, sample_time, step, wall_clock
+from .integrate import CLOCK_EVERY, admissible_event, sample_time, step, wall_clock
 from .rk import DOP853, N_STAGES, dense_coefficients, dense_value, initial_step, method_number
 from .settings import settings_records, settings_rows, work_arrays
-from .status import GIMBAL_LOCK, NOT_FINITE, STEP_LIMIT, SUCCESS, SWITCHING_LIMIT, TIMEOUT, status_message
+from .status import NOT_FINITE, STEP_LIMIT, SUCCESS, SWITCHING_LIMIT, TIMEOUT, status_message
 from .tableaus import METHODS
 
 __all__ = [
@@ -148,8 +150,10 @@ class SignLawSolution:
 @jit
 def _event_values(y, p, mode, limit, g, dg):
     """Event functions g (4,) at ``y`` and their rates dg (NaN where not used): per axis
-    sigma_i E_i (rate sigma_i F_i), or K_s - |Lambda_i| when sliding; then the gimbal-lock
-    margin limit - |theta_2|. An event is a g falling from > 0 to <= 0."""
+    sigma_i E_i (rate sigma_i F_i), or K_s - |Lambda_i| when sliding; then the margin of
+    the admissible region (gimbal lock at ``limit`` and ``simulation.limits``:
+    :func:`rbstab.engine.integrate.admissible_event`). An event is a g falling from > 0 to
+    <= 0."""
     e, f, lam, _ = mode_quantities(y, p, mode)
     for i in range(3):
         if mode[i] == 0.0:
@@ -158,7 +162,7 @@ def _event_values(y, p, mode, limit, g, dg):
         else:
             g[i] = mode[i] * e[i]
             dg[i] = mode[i] * f[i]
-    g[3] = limit - abs(y[1])
+    g[3] = admissible_event(SLIDING, y, p, limit)[0]
     dg[3] = np.nan
 
 
@@ -212,7 +216,7 @@ def _root(p, mode, limit, it, scratch, index, rate, lo, hi):
 @jit
 def first_event(p, mode, limit, it, work, g, dg):
     """The first event in the step of interpolant ``it``: ``(x, index)`` with x its fraction
-    of the step (-1 if none) and index 0-2 an axis, 3 the gimbal lock. ``g``, ``dg`` (4, 4):
+    of the step (-1 if none) and index 0-2 an axis, 3 the admissible region's bounds. ``g``, ``dg`` (4, 4):
     rows 0 hold the event values at the step's start (:func:`_event_values`); the rest is
     scratch, as is ``work``."""
     scratch = (work, g[2], dg[2])
@@ -395,6 +399,9 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
     for i in range(3):
         if mode[i] == 0.0:
             n_events = _log(events, n_events, 0.0, i, SLIDING_STARTS, 0.0)
+    margin, left = admissible_event(SLIDING, y, p, limit)
+    if margin < 0:  # outside the admissible region from the start
+        return left, 0.0, 0, 0, 0, n_events
     state_rate(mode_code(mode), 0.0, y, p, f)  # disturbances: refused with the sign law (config)
     h_abs = initial_step(mode_code(mode), p, s, 0.0, t_end, t_end, y, f, w)
     nfev, n_steps, n_pieces, t, j = 2, 0, 1, 0.0, 0
@@ -423,7 +430,7 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
         dense_value(x, h, y, Q, dop853, work)  # the state at the event
         t = t_stop
         if index == 3:
-            return GIMBAL_LOCK, t, nfev, n_steps, n_pieces, n_events
+            return admissible_event(SLIDING, work, p, limit)[1], t, nfev, n_steps, n_pieces, n_events
         if n_events >= events.shape[0]:
             return SWITCHING_LIMIT, t, nfev, n_steps, n_pieces, n_events
         mode, longest, n_events = next_piece(p, mode, index, t, work, resolution, y, (events, jumps), n_events)
@@ -478,7 +485,8 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     Returns
     -------
     SignLawSolution
-        A failure (gimbal lock, solver failure, switching or step limit, timeout) is data.
+        A failure (gimbal lock, the admissible region left, solver failure, switching or
+        step limit, timeout) is data.
     """
     n = int(settings.n_samples)
     samples = np.empty((n, 12))
@@ -496,7 +504,8 @@ def integrate_sign_law(variant, y0: np.ndarray, settings, *, resolution: float =
     log = events[: min(n_events, max_switchings)]
     switchings = Switchings(log[:, 0].copy(), log[:, 1].astype(np.int64), log[:, 2].astype(np.int64), log[:, 3].copy())
     message = status_message(int(status), t_stop, settings.gimbal_margin, max_steps, max_wall_time,
-                             max_switchings=max_switchings, resolution=resolution)
+                             max_switchings=max_switchings, resolution=resolution,
+                             limits=variant.parameters[0]["limits"])
     solver = {"nfev": int(nfev), "njev": 0, "nlu": 0, "solver_status": int(status), "n_steps": int(n_steps),
               "n_pieces": int(n_pieces)}
     time = np.linspace(0.0, float(settings.t_end), n)

@@ -21,7 +21,7 @@ from ..model import PARAMETERS
 from ..summary import numerical_rate
 from ..variants.base import N_OUTPUTS
 from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
-from .integrate import integrate_runs
+from .integrate import admissible, integrate_runs
 from .switching import warm_up as warm_up_sign_law
 from .tableaus import METHODS
 
@@ -58,6 +58,7 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
     if "outputs" in wanted:
         numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
     if "rates" in wanted:
+        admissible(0, np.zeros(12), params[0], 1.0)  # the scipy reference's event
         settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
         for method in METHODS:
             integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)

@@ -25,8 +25,11 @@ A varied config key becomes a coordinate (and an ``index.csv`` column) named by
     controller.k_c.0 -> k_c_0     controller.k_t.2.2 -> k_t_2_2
     initial_state.omega -> omega_0, omega_1, omega_2 (a whole 3-vector, per component)
     body.mass:scale -> mass_scale (the factor of a scale_uniform draw)
+    simulation.limits.theta.1 -> limits_theta_1 (a bound of the admissible region)
 
-Every field name of the config schema is unique across its sections, so the map is one to
+Every field name of the config schema is unique across its sections but those of
+``simulation.limits`` (:data:`PREFIXED_SUBSECTIONS`), which name the quantities they bound
+(``theta`` as ``initial_state.theta``) and keep their subsection's name, so the map is one to
 one; each coordinate's ``config_key`` attribute (and ``sweep_summary.json``'s
 ``parameters``) gives the dotted key back.
 
@@ -71,6 +74,7 @@ __all__ = [
     "DEFAULT_LAYOUT",
     "STATUSES",
     "parameter_name",
+    "PREFIXED_SUBSECTIONS",
     "parameter_columns",
     "coordinate_columns",
     "run_coords",
@@ -127,6 +131,11 @@ NOT_IN_INDEX = ("config", "created", "store", "template")
 # -- names ----------------------------------------------------------------------------------------
 
 
+#: Subsections whose fields' parameter names start with the subsection's name (their field
+#: names repeat those of another section: ``simulation.limits.theta``, ``initial_state.theta``).
+PREFIXED_SUBSECTIONS = ("limits",)
+
+
 @functools.lru_cache(maxsize=4096)  # the same keys for every run of a sweep
 def parameter_name(key: str) -> str:
     """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``."""
@@ -134,6 +143,8 @@ def parameter_name(key: str) -> str:
     parts = key.split(".")
     fields = [i for i, p in enumerate(parts) if not p.isdigit()]
     last = fields[-1] if fields else 0
+    if last >= 2 and parts[last - 1] in PREFIXED_SUBSECTIONS:
+        last -= 1
     name = "_".join(parts[last:])
     name = re.sub(r"\W", "_", name)
     if not name or name[0].isdigit():

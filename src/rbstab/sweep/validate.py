@@ -26,8 +26,11 @@ from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
-from ..config.schema import (MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule, field_value,
-                             samples_apart, split_key, steps_suffice, within_bounds)
+from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule,
+                             field_value, inside_limits, samples_apart, split_key, steps_suffice, within_bounds)
+from ..layout import LIMITED, VARIANT_LAYOUTS
+from ..variants import VARIANTS
+from ..variants.base import limited_values
 from ..config.physics import SINGULAR_RTOL
 from ..config.physics import inertia_warnings
 
@@ -320,6 +323,7 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
         (t_end, _), (samples, _), (step, _), (steps, _) = got
         with np.errstate(invalid="ignore", divide="ignore"):
             flagged |= ~samples_apart(t_end, samples) | ~steps_suffice(t_end, np.where(np.isnan(step), np.inf, step), steps)
+    flagged |= _limit_flags(fields, variants, n)
     weight_keys = ("k_t", "k_c", "k_d", "k_s", "boundary_layer")
     if any(fields.varied("body", k) for k in ("mass", "gravity")) or any(fields.varied("controller", k) for k in weight_keys):
         gravity = fields.get("body", "gravity")
@@ -347,6 +351,31 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
             eig = np.linalg.eigvalsh((good + good.transpose(0, 2, 1)) / 2)
             held = eig[:, 0] > SINGULAR_RTOL * np.abs(eig).max(axis=1)
             flagged[np.flatnonzero(rows)[~held]] = True
+    return flagged
+
+
+def _limit_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray:
+    """Runs whose initial state the schema may find outside ``simulation.limits``
+    (:func:`~rbstab.config.schema.inside_limits` of the bounded quantities of each run's
+    initial state, computed as the loader does), where a bound, the initial state or R is varied."""
+    flagged = np.zeros(n, dtype=bool)
+    bounded = [bool(t.get("simulation", {}).get("limits")) for t in fields.templates]
+    keys = [("simulation", "limits"), ("body", "attachment_point"), *(("initial_state", k) for k in INITIAL_STATE_BLOCKS)]
+    if not any(bounded) or not any(fields.varied(*k) for k in keys):
+        return flagged
+    got = {key: fields.get("initial_state", key) for key in INITIAL_STATE_BLOCKS}
+    got["R"] = fields.get("body", "attachment_point")
+    bounds = [fields.get("simulation", f"limits.{name}") for name in LIMITED]
+    if any(g is None for g in (*got.values(), *bounds)):
+        return np.ones(n, dtype=bool)
+    blocks = {block: np.nan_to_num(got[key][0], nan=0.0) for key, block in INITIAL_STATE_BLOCKS.items()}
+    limits = np.stack([np.where(present[:, None], values, np.inf) for values, present in bounds], axis=1)
+    for variant in sorted({v for v, b in zip(variants, bounded) if b and v}):
+        rows = np.flatnonzero(np.isin(fields.template, [t for t, v in enumerate(variants) if v == variant and bounded[t]]))
+        layout = VARIANT_LAYOUTS[variant]
+        y0 = np.concatenate([blocks[b][rows] for b in layout.blocks], axis=1)
+        values = limited_values(VARIANTS[variant].code, y0, got["R"][0][rows])
+        flagged[rows] = ~inside_limits(values, limits[rows])
     return flagged
 
 

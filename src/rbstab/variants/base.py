@@ -31,6 +31,7 @@ import numpy as np
 from ..layout import (  # the table of outputs lives with the layout: files and readers need no compiler
     FULL_BODY,
     LEFT_OUT,
+    LIMITED,
     LYAPUNOV_TERMS,
     N_OUTPUTS,
     OUTPUTS,
@@ -38,10 +39,10 @@ from ..layout import (  # the table of outputs lives with the layout: files and 
     VARIANT_LAYOUTS,
     StateLayout,
 )
-from ..model import Gains, RigidBody, parameters
+from ..model import PARAMETERS, Gains, Limits, RigidBody, parameters
 from .kernels import run_outputs, state_rates
 
-__all__ = ["Variant", "LYAPUNOV_TERMS", "N_OUTPUTS", "split_outputs"]
+__all__ = ["Variant", "LYAPUNOV_TERMS", "N_OUTPUTS", "split_outputs", "limited_values"]
 
 
 # -- the protocol -----------------------------------------------------------------------------
@@ -54,6 +55,9 @@ class Variant:
         The rigid body (Table 1).
     gains : Gains
         Gains; those in ``required_gains`` are not None.
+    limits : Limits, optional
+        The admissible region (``simulation.limits``), written into :attr:`parameters`
+        for the integrators; None: unbounded.
     """
 
     #: Registry name (the config value of ``controller.variant``).
@@ -68,9 +72,10 @@ class Variant:
     #: Paper equation of the constraint law, for documentation and reports.
     equation: ClassVar[str] = ""
 
-    def __init__(self, body: RigidBody, gains: Gains) -> None:
+    def __init__(self, body: RigidBody, gains: Gains, limits: Limits | None = None) -> None:
         self.body = body
         self.gains = gains
+        self.limits = limits
 
     def __init_subclass__(cls, **kwargs) -> None:
         """A variant's ``code`` and ``layout`` are those :mod:`rbstab.layout` gives its ``name``."""
@@ -93,12 +98,13 @@ class Variant:
 
     @cached_property
     def parameters(self) -> np.ndarray:
-        """This run's :data:`~rbstab.model.PARAMETERS` record, shape (1,), with h."""
-        return parameters(self.body, self.gains, self.lyapunov_offset)[None]
+        """This run's :data:`~rbstab.model.PARAMETERS` record, shape (1,), with h and the
+        admissible region."""
+        return parameters(self.body, self.gains, self.lyapunov_offset, self.limits)[None]
 
     @cached_property
     def _parameters_without_offset(self) -> np.ndarray:
-        return parameters(self.body, self.gains, 0.0)[None]
+        return parameters(self.body, self.gains, 0.0, self.limits)[None]
 
     # -- dynamics and outputs (compiled kernels) -------------------------------
     def rhs(self, t: float, y: np.ndarray) -> np.ndarray:
@@ -140,6 +146,11 @@ class Variant:
             outputs do not depend on the other states of ``y``.
         """
         return split_outputs(self._output_columns(y, self.parameters, t), self.layout)
+
+    def limited_values(self, y: np.ndarray) -> np.ndarray:
+        """The quantities ``simulation.limits`` bounds along states ``y`` (n, n_state):
+        shape (n, 5, 3) (:func:`limited_values`)."""
+        return limited_values(self.code, y, self.body.attachment_point)
 
     def lyapunov(self, y: np.ndarray) -> np.ndarray:
         """v [J] along states ``y`` of shape (..., n_state); shape (...)."""
@@ -204,6 +215,22 @@ class Variant:
     def lyapunov_offset(self) -> float:
         """The constant h [J] that makes v zero at :attr:`equilibrium` (eq 30)."""
         return self._equilibrium[1]
+
+
+def limited_values(code: int, y: np.ndarray, attachment_point: np.ndarray) -> np.ndarray:
+    """The quantities ``simulation.limits`` bounds at states ``y`` (n, n_state) of the
+    variant ``code`` whose bodies have attachment points R [m] (3,) or (n, 3): shape (n, 5, 3),
+    the rows of :data:`rbstab.layout.LIMITED` (Theta [rad], Omega [rad/s] body frame, X [m],
+    V [m/s], E [m] inertial frame), as the compiled outputs give them (``permanent``'s X, V
+    and E those of the pinned body). They depend on the state and R only."""
+    y = np.ascontiguousarray(np.atleast_2d(np.asarray(y, dtype=float)))
+    n = y.shape[0]
+    params = np.zeros(n, dtype=PARAMETERS)
+    params["attachment_point"] = attachment_point
+    out = np.empty((N_OUTPUTS, n, 1))
+    with np.errstate(all="ignore"):
+        run_outputs(np.full(n, code, dtype=np.int64), params, np.zeros((1, 1)), y[:, None, :], out, False)
+    return np.stack([np.moveaxis(out[OUTPUTS[name].columns, :, 0], 0, -1) for name in LIMITED], axis=1)
 
 
 def split_outputs(columns: np.ndarray, layout: StateLayout, full: bool = True) -> dict[str, np.ndarray]:

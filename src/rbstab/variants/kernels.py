@@ -25,7 +25,7 @@ from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
 from .disturbances import disturbance_power, disturbance_wrench, state_power
 
-__all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row",
+__all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row", "limited_quantities",
            "state_rates", "run_outputs", "state_powers", "STATE_SIZE"]
 
 #: The variants' codes (:data:`rbstab.layout.VARIANT_CODES`); :data:`STATE_SIZE`: their
@@ -68,6 +68,22 @@ def body_state(y, p):
     e = constraint_error(x, a, p)
     f = constraint_rate(omega, v, a, p)
     return theta, omega, x, v, d, a, b, e, f
+
+
+@jit(forceinline=True)
+def limited_quantities(code, y, p):
+    """The quantities ``simulation.limits`` bounds at the state ``y`` of variant ``code``, in
+    the order of :data:`rbstab.layout.LIMITED`: (Theta [rad], Omega [rad/s] body frame,
+    X [m], V [m/s], E [m] inertial frame), each a 3-tuple. ``permanent``'s X and V are
+    those of the pinned body (:func:`rbstab.variants.permanent.pin_motion`), its E that of
+    eq 4 (0 to rounding)."""
+    if code == PERMANENT:
+        theta, omega = vector(y, 0), vector(y, 3)
+        a = rotation_and_rate_of(theta)[0]
+        x, v = permanent.pin_motion(omega, a, p)
+        return theta, omega, x, v, constraint_error(x, a, p)
+    theta, omega, x, v, _, _, _, e, _ = body_state(y, p)
+    return theta, omega, x, v, e
 
 
 @jit(forceinline=True)

@@ -14,7 +14,15 @@ from ..kinematics import ZERO, add, cross, matTvec, matvec, neg, rotation_and_ra
 from ..model import force_h, gyroscopic, torque_n
 from .disturbances import disturbance_wrench
 
-__all__ = ["quantities"]
+__all__ = ["quantities", "pin_motion"]
+
+
+@jit(forceinline=True)
+def pin_motion(omega, a, p):
+    """X = R - A R [m] and V = -A (Omega x R) [m/s] (eq 32 with X_e = 0), inertial frame:
+    the centre of mass of the body pinned at C, from Omega [rad/s] (body frame) and A."""
+    r = p.attachment_point
+    return sub(r, matvec(a, r)), neg(matvec(a, cross(omega, r)))
 
 
 @jit(forceinline=True)
@@ -35,8 +43,7 @@ def quantities(t, y, p):
     r = p.attachment_point
     a, b = rotation_and_rate_of(theta)
     omega_x_r = cross(omega, r)
-    x = sub(r, matvec(a, r))
-    v = neg(matvec(a, omega_x_r))
+    x, v = pin_motion(omega, a, p)
     n = torque_n(b, theta, omega, p)
     h = force_h(x, v, p)
     applied = add(p.weight, h)  # G + H [N], inertial frame
