@@ -20,7 +20,7 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   CUDA events; end to end, from the host's arrays to the results in host memory
   (:func:`rbstab.engine.cuda.integrate_chunks_cuda`);
 - **disturbed**: kernel runs/s of the parameter sweep at the smallest N of ``--n`` with
-  saturating actuators and disturbances (:data:`DISTURBED`: every limit, a noise, an
+  saturating actuators and disturbances (:data:`DISTURBED`: every actuator limit, a noise, an
   impulse and a pulse), beside the same runs without them (the same kernel takes both);
 - **sweep**: ``rbstab sweep SPEC --engine cuda --store summary`` from process start to
   exit at ``--sweep-n`` runs (warm kernel cache), and ``--store thinned`` at a tenth of it;
@@ -66,7 +66,7 @@ SETTINGS_OVERRIDES = ["simulation.rtol=1e-6", "simulation.atol=1e-8"]
 RBSTAB = str(Path(sys.executable).parent / "rbstab")
 
 
-#: Saturating actuators and disturbances (every limit, a noise, an impulse and a pulse) added
+#: Saturating actuators and disturbances (every actuator limit, a noise, an impulse and a pulse) added
 #: to Case 3 for the ``disturbed`` line.
 DISTURBED = ["controller.saturation={torque_n: 400, force_h: [300, 300, 500], constraint_force: 2000}",
              "disturbances=[{kind: noise, rms: [50, 50, 0], band: [0.5, 5], seed: 1, point: [0, 0, 0.2]},"
@@ -378,7 +378,7 @@ def main() -> None:
                 print(f"{kind:14s} {n:9d} {label:>8s} {kernel:14,.0f} {total:18,.0f}")
     n = min(args.n)
     plain, disturbed = gpu_rates("parameter", n, None)[0], gpu_rates("parameter", n, None, DISTURBED)[0]
-    print(f"disturbed: parameter sweep, {n:,} runs, every limit, a noise, an impulse and a pulse (DISTURBED): "
+    print(f"disturbed: parameter sweep, {n:,} runs, every actuator limit, a noise, an impulse and a pulse: "
           f"kernel {disturbed:,.0f} runs/s, {plain / disturbed:.2f}x the time a run without them ({plain:,.0f} runs/s)")
     print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")
     for kind in ("initial-state", "parameter"):

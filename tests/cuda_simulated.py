@@ -203,7 +203,8 @@ def batch() -> dict:
 #: Disturbed runs, each a base and its overrides (t_end 0.2 s, 201 samples: 0.05, 0.1 and
 #: 0.15 s are sample times): every kind, forces at a point and torques, impulses at t = 0, at
 #: a sample time inside the run and at t_end (on ``permanent`` too), edges between samples
-#: and on them, actuators that saturate (clip and smooth), each method.
+#: and on them, actuators that saturate (clip and smooth), each method; an impulse that
+#: takes the state out of the admissible region.
 DISTURBED = [
     ("configs/paper/case2_visco_elastic.yaml", [
         "simulation.method=RK45",
@@ -231,6 +232,11 @@ DISTURBED = [
     ("configs/examples/saturated_pendulum.yaml", [
         "disturbances=[{kind: impulse, quantity: torque, value: [0.2, 0, 0], start: 0.05},"
         " {kind: pulse, value: [3, 0, 0], point: [0, 0, 0.5], start: 0.12, duration: 0.013}]"]),
+    # an impulse that takes V out of the admissible region (simulation.limits) at t = 0.1 s
+    ("configs/paper/case3_embedded.yaml", [
+        "simulation.limits.velocity=[.inf, 5, .inf]",
+        "disturbances=[{kind: sine, quantity: torque, value: [5, 5, 0], frequency: 3, start: 0},"
+        " {kind: impulse, value: [0, 328, 0], start: 0.1}]"]),
 ]
 
 
@@ -238,7 +244,8 @@ def disturbed() -> dict:
     """The runs of :data:`DISTURBED`, each a sweep table's batch of one run (its
     disturbances the table's columns), on the GPU against the CPU engine
     (rbstab.simulator.simulate_batch, thinned): which summary figures and outputs differ,
-    the variants, methods and kinds run, each run's W(t_end) [J], and for each run with an
+    the variants, methods and kinds run, each run's W at its last sample [J] and message,
+    and for each run with an
     impulse at t_end: the impulse, the body's m and J, whether theta, omega, V and W equal
     those of the same run without it (CPU engine) before the last sample, and both runs'
     at the last."""
@@ -248,7 +255,7 @@ def disturbed() -> dict:
     from rbstab.sweep import plan_table, spec_from_mapping
 
     names = {float(code): kind for kind, code in DISTURBANCE_KINDS.items()}
-    differences, variants, methods, kinds, work, last_jump = [], [], [], set(), [], []
+    differences, variants, methods, kinds, work, last_jump, messages = [], [], [], set(), [], [], []
     for n, (base, overrides) in enumerate(DISTURBED):
         spec = spec_from_mapping({"name": "d", "base": os.path.join(sys.argv[1], base), "zip": {
             "simulation.t_end": [0.2]}}, overrides=["simulation.n_samples=201", *overrides])
@@ -266,6 +273,7 @@ def disturbed() -> dict:
         differences += [[n, what] for what in ("status", "message", "solver") if str(getattr(ref, what)) != str(
             getattr(got, what))]
         work.append(float(ref.outputs["disturbance_work"][-1]))
+        messages.append(ref.message)
         at_end = (p["disturbance_kind"] == DISTURBANCE_KINDS["impulse"]) & (p["disturbance_start"] == 0.2)
         if at_end.any():  # the same run without its impulse at t_end
             (i,) = np.flatnonzero(at_end)
@@ -280,7 +288,7 @@ def disturbed() -> dict:
                               **impulse, **{k: [np.atleast_1d(o[k][-1]).tolist() for o in (ref.outputs, without)]
                                             for k in keys}})
     return {"runs": len(DISTURBED), "differences": differences, "variants": variants, "methods": sorted(set(methods)),
-            "kinds": sorted(kinds), "work": work, "impulse_at_t_end": last_jump}
+            "kinds": sorted(kinds), "work": work, "messages": messages, "impulse_at_t_end": last_jump}
 
 
 def basin() -> dict:

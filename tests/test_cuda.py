@@ -156,17 +156,21 @@ def test_simulated_batch_is_the_cpu_engines(simulated):
 
 def test_simulated_disturbed_runs_are_the_cpu_engines(simulated):
     """Disturbed runs (every kind, forces at a point and torques, impulses at t = 0, at a
-    sample time, at t_end and on the pinned body; saturating actuators; each method), each
-    a sweep table's batch, on the GPU: status, solver counts, every summary figure and
-    thinned output (disturbance_power and disturbance_work among them) equal to the CPU
-    engine's. The runs did take the disturbances: W(t_end) is not 0 in any, and an impulse
-    at t_end changes the last sample only, by its jump."""
+    sample time, at t_end, on the pinned body and out of the admissible region; saturating
+    actuators; each method), each a sweep table's batch, on the GPU: status, message,
+    solver counts, every summary figure and thinned output (disturbance_power and
+    disturbance_work among them) equal to the CPU engine's. The runs did take the
+    disturbances: W(t_end) is not 0 in any that reaches it, and an impulse at t_end changes
+    the last sample only, by its jump."""
     found = simulated["disturbed"]
-    assert found["runs"] == 6 and found["differences"] == []
+    assert found["runs"] == 7 and found["differences"] == []
     assert sorted(set(found["variants"])) == ["embedded", "free", "permanent", "sliding", "visco_elastic"]
     assert found["methods"] == ["DOP853", "RK23", "RK45"]
     assert found["kinds"] == ["impulse", "noise", "pulse", "sine", "step"]
-    assert all(w != 0.0 and np.isfinite(w) for w in found["work"])
+    assert all(w != 0.0 and np.isfinite(w) for w in found["work"][:6])
+    # the last: its impulse at 0.1 s takes V_2 beyond its bound, where the run stops
+    assert found["messages"][6].startswith("left the admissible region: |V_2| reached simulation.limits.velocity")
+    assert found["messages"][6].endswith("at t = 0.1 s") and np.isnan(found["work"][6])
     # a torque impulse at t_end (embedded) and a force's at a point (sliding), against the
     # same runs without them: only the last sample differs, by the jump of the velocities
     # (J dOmega = L or R_p x A'P, dV = P/m) and of W by the jump of T
