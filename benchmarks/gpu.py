@@ -6,7 +6,8 @@ N((16, 32, -16), 4^2), one body) and ``parameter`` (mass and inertia x U(0.5, 1.
 L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record). Prints:
 
 - **compile**: the GPU's compute mode, the kernel's registers and local memory a thread
-  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`), the
+  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`; and the
+  same kernel without its steps for disturbances, ``kernel_function(..., disturbances=False)``), the
   occupancy they allow and the resident threads; the compile (or cache load) time in this
   process and a new process's first launch, its kernel loaded from the disk cache;
 - **deadline**: 300,000 runs, 100 samples kept, a 0.05 s limit: the kernel's time, the runs
@@ -18,6 +19,9 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   trace (the summary store's) and with a thinned trace (201 samples a run): kernel time by
   CUDA events; end to end, from the host's arrays to the results in host memory
   (:func:`rbstab.engine.cuda.integrate_chunks_cuda`);
+- **disturbed**: kernel runs/s of the parameter sweep at the smallest N of ``--n`` with
+  saturating actuators and disturbances (:data:`DISTURBED`: every actuator limit, a noise, an
+  impulse and a pulse), beside the same runs without them (the same kernel takes both);
 - **sweep**: ``rbstab sweep SPEC --engine cuda --store summary`` from process start to
   exit at ``--sweep-n`` runs (warm kernel cache), and ``--store thinned`` at a tenth of it;
 - **CPU engine**: runs/s of :func:`rbstab.engine.integrate_runs` on every core of the
@@ -62,8 +66,17 @@ SETTINGS_OVERRIDES = ["simulation.rtol=1e-6", "simulation.atol=1e-8"]
 RBSTAB = str(Path(sys.executable).parent / "rbstab")
 
 
-def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
-    """(codes, params, y0, settings records) of n Case 3 runs of sweep ``kind``."""
+#: Saturating actuators and disturbances (every actuator limit, a noise, an impulse and a pulse) added
+#: to Case 3 for the ``disturbed`` line.
+DISTURBED = ["controller.saturation={torque_n: 400, force_h: [300, 300, 500], constraint_force: 2000}",
+             "disturbances=[{kind: noise, rms: [50, 50, 0], band: [0.5, 5], seed: 1, point: [0, 0, 0.2]},"
+             " {kind: impulse, value: [0, 15, 0], point: [0, 0, 0.2], start: 0.3},"
+             " {kind: pulse, quantity: torque, value: [0, 40, 0], start: 1.0, duration: 0.05}]"]
+
+
+def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: list[str] = ()):
+    """(codes, params, y0, settings records) of n Case 3 runs of sweep ``kind``, with the
+    overrides ``extra`` (e.g. :data:`DISTURBED`)."""
     import rbstab
     from rbstab.engine import method_number
     from rbstab.engine.settings import settings_records
@@ -72,7 +85,7 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = rbstab.load_config(CASE3, [f"simulation.rtol={rtol}", "simulation.atol=1e-8" if rtol > 1e-9
-                                            else "simulation.atol=1e-13"])
+                                            else "simulation.atol=1e-13", *extra])
     variant = config.make_variant()
     rng = np.random.default_rng(seed)
     y0 = np.repeat(variant.initial_state(config.initial_state)[None], n, axis=0)
@@ -88,17 +101,19 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6):
         for i in range(n):  # the benchmark's own per-run records (the sweep builds them its way)
             b = RigidBody(body.mass * scale[i], body.inertia * scale[i], body.attachment_point, body.gravity)
             g = Gains(k_t=gains.k_t * kt[i], l_t=gains.l_t, k_r=gains.k_r, l_r=gains.l_r, k_c=gains.k_c * kc[i],
-                      l_c=gains.l_c * lc[i], k_d=gains.k_d, l_d=gains.l_d)
+                      l_c=gains.l_c * lc[i], k_d=gains.k_d, l_d=gains.l_d, saturation=gains.saturation,
+                      disturbances=gains.disturbances)
             params[i] = parameters(b, g, float(base["lyapunov_offset"][0]))
     s = config.simulation
     rows = np.tile([s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, np.inf], (n, 1))
     return np.full(n, variant.code), params, y0, settings_records(rows, method_number(s.method)), s.n_samples
 
 
-def gpu_rates(kind: str, n: int, stride):
+def gpu_rates(kind: str, n: int, stride, extra: list[str] = ()):
+    """(kernel, end-to-end) runs/s of n runs of sweep ``kind`` (overrides ``extra``)."""
     from rbstab.engine.cuda import integrate_chunks_cuda
 
-    codes, params, y0, settings, n_samples = runs(kind, n)
+    codes, params, y0, settings, n_samples = runs(kind, n, extra=extra)
     start = time.perf_counter()
     kernel = sum(c.kernel_seconds for c in integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples,
                                                                   stride=stride))
@@ -156,7 +171,7 @@ def compile_info() -> str:
     from numba import cuda
 
     from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_kernel, compute_mode, integrate_chunks_cuda,
-                                    launch_signature, occupancy)
+                                    kernel_function, launch_signature, occupancy)
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
@@ -169,6 +184,9 @@ def compile_info() -> str:
     per_sm = occupancy(fn, 15)
     sms = device.MULTIPROCESSOR_COUNT
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
+    # the same kernel without the driver's steps for disturbances (breakpoints, impulses, work)
+    plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
+    plain_regs, plain_local = plain.get_regs_per_thread(signature), plain.get_local_mem_per_thread(signature)
     codes, params, y0, settings, n_samples = runs("parameter", 128)
     list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
     script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
@@ -177,7 +195,8 @@ def compile_info() -> str:
               "print(time.perf_counter() - t)")
     again = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     name = device.name.decode() if isinstance(device.name, bytes) else device.name
-    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread; "
+    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread "
+            f"(without the driver's steps for disturbances: {plain_regs}, {plain_local} B); "
             f"{per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}), "
             f"{per_sm * THREADS_PER_BLOCK * sms:,} resident threads on {sms} multiprocessors; "
             f"compiled or loaded in {loaded:.1f} s; a new process's first launch {float(again.stdout.split()[-1]):.2f} s "
@@ -357,6 +376,10 @@ def main() -> None:
                     continue  # 201 samples x 10^6 runs: the traces alone take 61 GB
                 kernel, total = gpu_rates(kind, n, stride)
                 print(f"{kind:14s} {n:9d} {label:>8s} {kernel:14,.0f} {total:18,.0f}")
+    n = min(args.n)
+    plain, disturbed = gpu_rates("parameter", n, None)[0], gpu_rates("parameter", n, None, DISTURBED)[0]
+    print(f"disturbed: parameter sweep, {n:,} runs, every actuator limit, a noise, an impulse and a pulse: "
+          f"kernel {disturbed:,.0f} runs/s, {plain / disturbed:.2f}x the time a run without them ({plain:,.0f} runs/s)")
     print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")
     for kind in ("initial-state", "parameter"):
         print(f"correctness, {kind}, {args.check_n} runs: {correctness(kind, args.check_n)}")

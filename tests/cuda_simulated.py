@@ -86,6 +86,7 @@ def main() -> None:
                         "differences": differences}
     report["basin"] = basin()
     report["batch"] = batch()
+    report["disturbed"] = disturbed()
     report["deadline"] = deadline()
     report["signatures"] = signatures(recorded)
     print(json.dumps(report))
@@ -199,9 +200,102 @@ def batch() -> dict:
     return {"runs": len(blocks["cuda"]), "differences": differences}
 
 
+#: Disturbed runs, each a base and its overrides (t_end 0.2 s, 201 samples: 0.05, 0.1 and
+#: 0.15 s are sample times): every kind, forces at a point and torques, impulses at t = 0, at
+#: a sample time inside the run and at t_end (on ``permanent`` too), edges between samples
+#: and on them, actuators that saturate (clip and smooth), each method; an impulse that
+#: takes the state out of the admissible region.
+DISTURBED = [
+    ("configs/paper/case2_visco_elastic.yaml", [
+        "simulation.method=RK45",
+        "disturbances=[{kind: impulse, value: [0, 20, 5], point: [0, 0.1, 0.2], start: 0},"
+        " {kind: pulse, value: [0, 400, 100], point: [0.1, 0, 0], start: 0.05, duration: 0.0375},"
+        " {kind: step, quantity: torque, value: [20, 0, -10], start: 0.1},"
+        " {kind: sine, quantity: torque, value: [10, 20, 0], frequency: 10, phase: 0.5, start: 0.0625}]"]),
+    ("configs/paper/case3_embedded.yaml", [
+        "controller.saturation={torque_n: 400, force_h: [300, 300, 500], constraint_force: 2000}",
+        "disturbances=[{kind: noise, rms: [200, 100, 0], band: [2, 30], seed: 7, point: [0, 0, 0.1], start: 0.02},"
+        " {kind: impulse, quantity: torque, value: [1, 0, 0.2], start: 0.2}]"]),
+    ("configs/paper/case1_permanent.yaml", [
+        "simulation.method=RK23",
+        "disturbances=[{kind: impulse, value: [0, 15, 0], point: [0, 0, 0.2], start: 0.1},"
+        " {kind: sine, value: [50, 0, 30], point: [0.1, 0, 0], frequency: 4, start: 0}]"]),
+    ("configs/examples/free_gravity.yaml", [
+        "controller.saturation={torque_n: 600, force_h: 800, shape: smooth}",
+        "disturbances=[{kind: impulse, quantity: torque, value: [2, -3, 0.5], start: 0},"
+        " {kind: step, value: [100, 0, 50], point: [0, 0.2, 0], start: 0.15},"
+        " {kind: noise, quantity: torque, rms: 20, band: [0, 40], seed: 2, start: 0.03}]"]),
+    ("configs/examples/sliding.yaml", [
+        "controller.saturation={constraint_force: 1500}",
+        "disturbances=[{kind: pulse, quantity: torque, value: [0, 30, 0], start: 0.1, duration: 0.05},"
+        " {kind: impulse, value: [10, 0, -10], point: [0.1, 0.1, 0], start: 0.2}]"]),
+    ("configs/examples/saturated_pendulum.yaml", [
+        "disturbances=[{kind: impulse, quantity: torque, value: [0.2, 0, 0], start: 0.05},"
+        " {kind: pulse, value: [3, 0, 0], point: [0, 0, 0.5], start: 0.12, duration: 0.013}]"]),
+    # an impulse that takes V out of the admissible region (simulation.limits) at t = 0.1 s
+    ("configs/paper/case3_embedded.yaml", [
+        "simulation.limits.velocity=[.inf, 5, .inf]",
+        "disturbances=[{kind: sine, quantity: torque, value: [5, 5, 0], frequency: 3, start: 0},"
+        " {kind: impulse, value: [0, 328, 0], start: 0.1}]"]),
+]
+
+
+def disturbed() -> dict:
+    """The runs of :data:`DISTURBED`, each a sweep table's batch of one run (its
+    disturbances the table's columns), on the GPU against the CPU engine
+    (rbstab.simulator.simulate_batch, thinned): which summary figures and outputs differ,
+    the variants, methods and kinds run, each run's W at its last sample [J] and message,
+    and for each run with an
+    impulse at t_end: the impulse, the body's m and J, whether theta, omega, V and W equal
+    those of the same run without it (CPU engine) before the last sample, and both runs'
+    at the last."""
+    from rbstab.engine import METHODS
+    from rbstab.model import DISTURBANCE_KINDS
+    from rbstab.simulator import simulate_batch
+    from rbstab.sweep import plan_table, spec_from_mapping
+
+    names = {float(code): kind for kind, code in DISTURBANCE_KINDS.items()}
+    differences, variants, methods, kinds, work, last_jump, messages = [], [], [], set(), [], [], []
+    for n, (base, overrides) in enumerate(DISTURBED):
+        spec = spec_from_mapping({"name": "d", "base": os.path.join(sys.argv[1], base), "zip": {
+            "simulation.t_end": [0.2]}}, overrides=["simulation.n_samples=201", *overrides])
+        runs = plan_table(spec).slice(np.arange(1)).batch()
+        p = runs.params[0]
+        kinds |= {names[float(k)] for k in p["disturbance_kind"][: int(p["disturbance_count"])]}
+        found = {engine: [(block.result(0), block.stride, block.variants[0]) for _, block in
+                          simulate_batch(runs, engine=engine, keep="thinned")] for engine in ("compiled", "cuda")}
+        (ref, _, variant), (got, stride, _) = found["compiled"][0], found["cuda"][0]
+        variants.append(variant)
+        methods.append(METHODS[int(runs.settings["method"][0])])
+        differences += [[n, key] for key, value in ref.summary.items() if str(value) != str(got.summary[key])]
+        differences += [[n, key] for key, value in ref.outputs.items()
+                        if not np.array_equal(value[::stride], got.outputs[key], equal_nan=True)]
+        differences += [[n, what] for what in ("status", "message", "solver") if str(getattr(ref, what)) != str(
+            getattr(got, what))]
+        work.append(float(ref.outputs["disturbance_work"][-1]))
+        messages.append(ref.message)
+        at_end = (p["disturbance_kind"] == DISTURBANCE_KINDS["impulse"]) & (p["disturbance_start"] == 0.2)
+        if at_end.any():  # the same run without its impulse at t_end
+            (i,) = np.flatnonzero(at_end)
+            impulse = {"value": p["disturbance_value"][i].tolist(), "point": p["disturbance_point"][i].tolist(),
+                       "torque": bool(p["disturbance_torque"][i]), "mass": float(p["mass"]),
+                       "inertia": p["inertia"].tolist()}
+            runs.params["disturbance_value"][0, i] = 0.0
+            (_, block), = simulate_batch(runs, engine="compiled", keep="thinned")
+            without = block.result(0).outputs
+            keys = ("theta", "omega", "velocity", "disturbance_work")
+            last_jump.append({"earlier_equal": all(np.array_equal(ref.outputs[k][:-1], without[k][:-1]) for k in keys),
+                              **impulse, **{k: [np.atleast_1d(o[k][-1]).tolist() for o in (ref.outputs, without)]
+                                            for k in keys}})
+    return {"runs": len(DISTURBED), "differences": differences, "variants": variants, "methods": sorted(set(methods)),
+            "kinds": sorted(kinds), "work": work, "messages": messages, "impulse_at_t_end": last_jump}
+
+
 def basin() -> dict:
     """A basin map of Case 3 on the GPU against the CPU engine's (outcomes, times to
-    converge, v(t_end), messages)."""
+    converge, v(t_end), messages), ``plain``, and a small one with DISTURBED's saturation
+    and disturbances, ``disturbed`` (with ``pushed``: its v(t_end) differs at every point
+    from the map without them)."""
     import rbstab
     from rbstab.analysis.basin import BasinAxis, basin_map
 
@@ -209,11 +303,24 @@ def basin() -> dict:
                                 ["simulation.t_end=0.3"])
     axes = [BasinAxis.parse("initial_state.omega.0=-60:60:4"), BasinAxis.parse("initial_state.theta.1=0.3:1.6:4")]
     maps = {engine: basin_map(config, axes, ratio=0.05, n_samples=61, engine=engine) for engine in ("compiled", "cuda")}
-    a, b = maps["compiled"], maps["cuda"]
-    return {"outcomes": sorted(set(a.outcome.ravel().tolist())),
-            "equal": {name: bool(np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True))
-                      for name in ("outcome", "time_to_converge", "lyapunov_final", "lyapunov_initial")},
-            "messages": a.messages == b.messages}
+    # and a small one of a disturbed, saturated Case 3 (DISTURBED's)
+    disturbed = rbstab.load_config(os.path.join(sys.argv[1], DISTURBED[1][0]), ["simulation.t_end=0.2",
+                                                                                *DISTURBED[1][1]])
+    axes = [BasinAxis.parse("initial_state.omega.0=-30:30:3"), BasinAxis.parse("initial_state.theta.1=0.3:0.9:2")]
+    pushed = {engine: basin_map(disturbed, axes, ratio=0.75, n_samples=41, engine=engine)
+              for engine in ("compiled", "cuda")}
+    out = {}
+    for label, (a, b) in (("plain", (maps["compiled"], maps["cuda"])), ("disturbed", (pushed["compiled"],
+                                                                                      pushed["cuda"]))):
+        out[label] = {"outcomes": sorted(set(a.outcome.ravel().tolist())),
+                      "equal": {name: bool(np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True))
+                                for name in ("outcome", "time_to_converge", "lyapunov_final", "lyapunov_initial")},
+                      "messages": a.messages == b.messages}
+    # the disturbances act in the map: v(t_end) differs from the undisturbed map's
+    plain = basin_map(rbstab.load_config(os.path.join(sys.argv[1], DISTURBED[1][0]), ["simulation.t_end=0.2"]), axes,
+                      ratio=0.75, n_samples=41)
+    out["disturbed"]["pushed"] = bool(np.all(pushed["compiled"].lyapunov_final != plain.lyapunov_final))
+    return out
 
 
 if __name__ == "__main__":

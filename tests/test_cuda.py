@@ -23,6 +23,7 @@ from rbstab.variants.base import split_outputs
 from rbstab.variants.kernels import run_outputs
 
 from conftest import ROOT
+from reference import rotation
 
 numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
 from numba import cuda  # noqa: E402  (numba-cuda's target)
@@ -143,11 +144,22 @@ def test_simulated_driver_is_the_cpu_engine_bit_for_bit(simulated, keep):
 def test_simulated_basin_map_is_the_cpu_engines(simulated):
     """A basin map on the GPU (each run's time to converge streamed): the CPU engine's
     outcomes (converged, not converged and failed among them), times, v(t_end), messages."""
-    basin = simulated["basin"]
+    basin = simulated["basin"]["plain"]
     assert basin["outcomes"] == [0, 1, 2]
     assert basin["equal"] == {"outcome": True, "time_to_converge": True, "lyapunov_final": True,
                               "lyapunov_initial": True}
     assert basin["messages"]
+
+
+def test_simulated_disturbed_basin_map_is_the_cpu_engines(simulated):
+    """A basin map with saturating actuators and disturbances on the GPU: the CPU engine's
+    outcomes, times, v(t_end) and messages; the disturbances act (v(t_end) is not that of
+    the map without them at any point)."""
+    basin = simulated["basin"]["disturbed"]
+    assert basin["outcomes"] == [0, 1]
+    assert basin["equal"] == {"outcome": True, "time_to_converge": True, "lyapunov_final": True,
+                              "lyapunov_initial": True}
+    assert basin["messages"] and basin["pushed"]
 
 
 def test_simulated_batch_is_the_cpu_engines(simulated):
@@ -155,6 +167,42 @@ def test_simulated_batch_is_the_cpu_engines(simulated):
     own record; no config objects) on the GPU: every summary figure and thinned output equal
     to the CPU engine's."""
     assert simulated["batch"] == {"runs": 18, "differences": []}
+
+
+def test_simulated_disturbed_runs_are_the_cpu_engines(simulated):
+    """Disturbed runs (every kind, forces at a point and torques, impulses at t = 0, at a
+    sample time, at t_end, on the pinned body and out of the admissible region; saturating
+    actuators; each method), each a sweep table's batch, on the GPU: status, message,
+    solver counts, every summary figure and thinned output (disturbance_power and
+    disturbance_work among them) equal to the CPU engine's. The runs did take the
+    disturbances: W(t_end) is not 0 in any that reaches it, and an impulse at t_end changes
+    the last sample only, by its jump."""
+    found = simulated["disturbed"]
+    assert found["runs"] == 7 and found["differences"] == []
+    assert sorted(set(found["variants"])) == ["embedded", "free", "permanent", "sliding", "visco_elastic"]
+    assert found["methods"] == ["DOP853", "RK23", "RK45"]
+    assert found["kinds"] == ["impulse", "noise", "pulse", "sine", "step"]
+    assert all(w != 0.0 and np.isfinite(w) for w in found["work"][:6])
+    # the last: its impulse at 0.1 s takes V_2 beyond its bound, where the run stops
+    assert found["messages"][6].startswith("left the admissible region: |V_2| reached simulation.limits.velocity")
+    assert found["messages"][6].endswith("at t = 0.1 s") and np.isnan(found["work"][6])
+    # a torque impulse at t_end (embedded) and a force's at a point (sliding), against the
+    # same runs without them: only the last sample differs, by the jump of the velocities
+    # (J dOmega = L or R_p x A'P, dV = P/m) and of W by the jump of T
+    kinds = []
+    for run in found["impulse_at_t_end"]:
+        assert run["earlier_equal"]
+        (theta, theta_0), (omega, omega_0), (v, v_0), (w, w_0) = (
+            np.array(run[k]) for k in ("theta", "omega", "velocity", "disturbance_work"))
+        m, j, value = run["mass"], np.array(run["inertia"]), np.array(run["value"])
+        np.testing.assert_array_equal(theta, theta_0)
+        moment = value if run["torque"] else np.cross(run["point"], rotation(theta).T @ value)
+        np.testing.assert_allclose(j @ (omega - omega_0), moment, rtol=1e-12, atol=1e-12 * np.abs(moment).max())
+        np.testing.assert_allclose(v - v_0, 0.0 if run["torque"] else value / m, rtol=1e-12, atol=1e-14)
+        energy = [0.5 * m * u @ u + 0.5 * o @ j @ o for u, o in ((v, omega), (v_0, omega_0))]
+        np.testing.assert_allclose(w - w_0, energy[0] - energy[1], rtol=1e-9)
+        kinds.append(run["torque"])
+    assert kinds == [True, False]
 
 
 @pytest.mark.parametrize("store", ["thinned", "summary"])

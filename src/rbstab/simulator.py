@@ -689,9 +689,6 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
     from .engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
 
     codes, params, y0, settings = runs
-    if np.any(params["disturbance_count"] > 0):
-        raise ValueError("engine 'cuda': runs with disturbances are integrated by the CPU engines only "
-                         "(--engine compiled or scipy)")
     stride = {"all": 1, "thinned": summary_stride(n_samples), "none": None}[keep]
     chunks = integrate_chunks_cuda(codes, params, y0, settings_records(settings, method_number(method)),
                                    n_samples=n_samples, stride=stride, full=full,

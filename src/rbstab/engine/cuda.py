@@ -6,12 +6,25 @@ the same Python source (:func:`rbstab.variants.kernels.state_rate`,
 :func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
 :func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
 :func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.admissible_event`,
-:func:`~rbstab.engine.integrate.locate_event`
-and the streaming summary of :mod:`rbstab.summary`). Only the driver loop is written here:
+:func:`~rbstab.engine.integrate.locate_event`, :func:`~rbstab.engine.integrate.step_work`,
+:func:`~rbstab.engine.integrate.restart`, the disturbances'
+:func:`~rbstab.variants.disturbances.apply_impulses` and
+:func:`~rbstab.variants.disturbances.next_breakpoint`, and the streaming summary of
+:mod:`rbstab.summary`). Only the driver loop is written here:
 :func:`rbstab.engine.integrate._run`'s loop with one step *attempt* per pass (a thread
 whose step is rejected tries again on the next pass with the others of its warp, instead
 of stalling them), work arrays in thread-local memory, and a persistent grid whose
 threads take the next run from an atomic counter when theirs ends.
+
+A run with disturbances (``disturbance_count`` > 0, read once a run) is integrated as the
+CPU engine integrates it (docs/disturbances.md): its impulses at t = 0 are applied before
+the first step; no step crosses a breakpoint (an edge of a disturbance's window) and no
+stage of a step that ends at one evaluates at or after it; at a breakpoint its impulses
+are applied and a new initial step is taken; a sample at a breakpoint shows the state
+just after it, and the last sample the state after the impulses at t_end. The work W [J]
+of the disturbances is integrated along each step's interpolant (3-point Gauss-Legendre)
+plus each impulse's jump of kinetic energy, and written as each sample's
+``disturbance_work``.
 
 A run gives what the CPU engine gives, computed as it goes: its status, stop time,
 right-hand-side evaluations and steps, the outputs at its last sample, the summary
@@ -62,9 +75,10 @@ from ..layout import N_OUTPUTS
 from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
-from ..variants.kernels import output_row, state_rate
-from .integrate import (REJECTED, admissible_event, attempt_step, grazing_exit, locate_event, sample_time,
-                        step_bounds)
+from ..variants.disturbances import apply_impulses, next_breakpoint
+from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
+from .integrate import (REJECTED, _limit_of, admissible_event, attempt_step, grazing_exit, locate_event, restart,
+                        sample_time, step_bounds, step_work)
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
@@ -192,11 +206,15 @@ def launch_signature(n_state: int) -> tuple:
             boolean, float64, ints, int64, ints, vector, ints, ints, matrix, matrix, cube)
 
 
-def kernel_function(method: int, n_state: int):
+def kernel_function(method: int, n_state: int, disturbances: bool = True):
     """The Python function of the CUDA kernel of the runs of method number ``method`` and
     ``n_state`` states (the shapes of its thread-local work arrays); see
     :func:`launch_signature` for its arguments. Its name names the two, so that each
-    (method, state size) kernel has cache files of its own on disk."""
+    (method, state size) kernel has cache files of its own on disk.
+
+    ``disturbances`` False gives a kernel without the driver's steps for disturbances
+    (breakpoints, impulses, work), wrong for a run with disturbances: what
+    ``benchmarks/gpu.py`` compares the registers and local memory of the kernel with."""
     from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
@@ -242,6 +260,9 @@ def kernel_function(method: int, n_state: int):
             trace = trace_o[min(k, trace_o.shape[0] - 1)]
             t_end = s.t_end
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
+            disturbed = disturbances and params[shared].disturbance_count > 0.0
+            permanent = code == PERMANENT
+            done = 0.0  # the disturbances' work W [J] from 0 to t
             stream_start(acc)
             for i in range(N_OUTPUTS):  # outputs not computed (rbstab.layout.LEFT_OUT) stay NaN
                 row[i] = math.nan
@@ -252,19 +273,25 @@ def kernel_function(method: int, n_state: int):
             status = SUCCESS
             h_abs = 0.0
             margin, left = 0.0, SUCCESS
+            t_bound = t_end  # where the step from t ends at the latest: t_end, or the next breakpoint
+            t_lim = t_end  # the latest time a stage of that step evaluates
             if globaltimer() > deadline:
                 status = NOT_STARTED
                 t_end = 0.0
             else:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
+                if disturbed:  # the impulses at t = 0; the steps stop at the first breakpoint
+                    done += apply_impulses(permanent, 0.0, y, p)
+                    t_bound = next_breakpoint(p, 0.0, t_end)
+                    t_lim = _limit_of(t_bound, t_end)
                 margin, left = admissible_event(code, y, p, limit)
-                if margin < 0:  # outside the admissible region from the start
+                if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
                     status = left
                     t_end = 0.0
                 else:
                     state_rate(code, 0.0, y, p, f)
-                    h_abs = initial_step(code, p, s, 0.0, t_end, t_end, y, f, w)
+                    h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
                     nfev = 2
                     h_abs = step_bounds(s, t, h_abs)
             rejected = False
@@ -276,7 +303,7 @@ def kernel_function(method: int, n_state: int):
                 if n_steps >= s.max_steps:
                     status = STEP_LIMIT
                     break
-                outcome, t_new, h, h_abs = attempt_step(code, p, s, (t, t_end), y, f, h_abs, rejected, w)
+                outcome, t_new, h, h_abs = attempt_step(code, p, s, (t, t_bound), y, f, h_abs, rejected, w)
                 if outcome == REJECTED:
                     nfev += n_stages
                     rejected = True
@@ -289,28 +316,53 @@ def kernel_function(method: int, n_state: int):
                 t_stop = t_new
                 margin_new = admissible_event(code, y_new, p, limit)[0]
                 event = margin >= 0 and margin_new <= 0
-                if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-                    nfev += dense_coefficients(code, p, t, t_end, y, h, method, w)
+                at_break = disturbed and t_new == t_bound and t_bound < t_end
+                if event or bounded or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+                    nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
                 x_out = 1.0
                 if bounded and not event:  # a bound grazed inside the step
                     x_out = grazing_exit(code, p, limit, margin, margin_new, h, y, Q, dop853, work)
                     event = x_out > 0.0
                 if event:
                     t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, work, x_out)
-                while j < n_samples and sample_time(j, n_samples, t_end) <= t_stop:
-                    dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
+                # a sample at a breakpoint is the next step's (the state just after the breakpoint)
+                while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
+                                         else sample_time(j, n_samples, t_end) <= t_stop):
+                    x = (sample_time(j, n_samples, t_end) - t) / h
+                    dense_value(x, h, y, Q, dop853, sample)
+                    done_here = done
+                    if disturbed:
+                        done_here += step_work(permanent, p, t, h, x, y, Q, dop853, work)
+                        if j == n_samples - 1 and not event:  # at t_end: the state after its impulses
+                            jump = apply_impulses(permanent, t_end, y_new, p)
+                            if jump != 0.0:
+                                for i in range(n_state):
+                                    sample[i] = y_new[i]
+                                done_here += jump
                     output_row(code, sample_time(j, n_samples, t_end), sample, p, row, full)
+                    if disturbed:
+                        row[DISTURBANCE_WORK_AT] = done_here
                     stream_sample(acc, j, row, first, weights, trace, stride, ratio)
                     j += 1
                 if event:
                     status = left
                     t = t_stop
                     break
+                if disturbed:
+                    done += step_work(permanent, p, t, h, 1.0, y, Q, dop853, work)
                 t = t_new
                 margin = margin_new
                 for i in range(n_state):
                     y[i] = y_new[i]
                     f[i] = K[n_stages, i]
+                if at_break:  # the impulses that start here; a new initial step from here
+                    done += apply_impulses(permanent, t, y, p)
+                    margin, left = admissible_event(code, y, p, limit)
+                    if margin < 0:  # an impulse took the state out of the admissible region
+                        status = left
+                        break
+                    t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
+                    nfev += 2
                 h_abs = step_bounds(s, t, h_abs)
                 rejected = False
             # its end: every output of the run written, whether it ran or not
@@ -333,7 +385,8 @@ def kernel_function(method: int, n_state: int):
                 trace[i // stride, NUMERICAL_RATE_AT] = math.nan
             k = cuda.atomic.add(control, 0, 1)
 
-    run_all.__name__ = run_all.__qualname__ = f"run_all_{METHODS[method]}_{n_state}"
+    run_all.__name__ = run_all.__qualname__ = f"run_all_{METHODS[method]}_{n_state}" + (
+        "" if disturbances else "_undisturbed")
     return run_all
 
 
@@ -402,7 +455,7 @@ def occupancy(fn, n_state: int) -> int:
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
 DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
                     "grazing_exit", "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
-                    "stream_sample", "stream_finish")
+                    "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "step_work", "restart")
 
 
 def _plain(value):

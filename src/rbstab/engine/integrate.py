@@ -353,6 +353,17 @@ def step_work(permanent, p, t, h, x, y_old, Q, dop853, out):
     return total * x * h
 
 
+@jit(forceinline=True)
+def restart(code, p, s, t, y, f, w):
+    """Start again from a breakpoint t of the disturbances (its impulses applied to y) as a
+    new solve_ivp from there would: y's rate at t into f and a new initial step (2
+    right-hand sides). Returns (the next breakpoint t_bound, the latest stage time t_lim
+    before it, the initial step h_abs)."""
+    t_bound = next_breakpoint(p, t, s.t_end)
+    t_lim = _limit_of(t_bound, s.t_end)
+    state_rate(code, t, y, p, f)
+    return t_bound, t_lim, initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+
 
 @jit(forceinline=True)
 def _run(code, p, y0, s, samples, work_done):
@@ -433,10 +444,7 @@ def _run(code, p, y0, s, samples, work_done):
             margin, left = admissible_event(code, y, p, limit)
             if margin < 0:  # an impulse took the state out of the admissible region
                 return left, t, nfev, n_steps, j
-            t_bound = next_breakpoint(p, t, t_end)
-            t_lim = _limit_of(t_bound, t_end)
-            state_rate(code, t, y, p, f)
-            h_abs = initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
+            t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
             nfev += 2
     if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
         jump = apply_impulses(permanent, t_end, y, p)
