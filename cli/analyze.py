@@ -157,8 +157,8 @@ def _check_push_targets(configs, ranges) -> None:
 
 def _split_specs(paths) -> tuple[list[str], list[str]]:
     """(config paths, sweep-spec paths): a YAML file with a ``base`` is a sweep spec."""
-    from rbstab.config import ConfigError
-    from rbstab.config.yaml_io import read_yaml_file
+    from rbstab.config import ConfigError  # heavy: pydantic
+    from rbstab.config.yaml_io import read_yaml_file  # heavy: yaml
 
     configs, specs = [], []
     for path in paths:

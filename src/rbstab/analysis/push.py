@@ -166,9 +166,9 @@ class Pushes:
 
     def __init__(self, config, kind: str, *, point=None, at: float = 0.0, ratio: float = DEFAULT_LYAPUNOV_RATIO,
                  engine: str = "compiled", executor=None) -> None:
-        from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+        from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping  # heavy: pydantic
         from ..engine.batch import batch_from_table  # heavy: numba
-        from ..model import MAX_DISTURBANCES
+        from ..model import MAX_DISTURBANCES  # heavy: numba
         from ..variants.disturbances import apply_impulses  # heavy: numba
 
         self.kind, self.at, self.ratio, self.engine, self.executor = kind, float(at), float(ratio), engine, executor
@@ -683,7 +683,7 @@ class BasinStability:
 def parse_ranges(texts: Sequence[str], layout) -> list[tuple[Any, float, float]]:
     """(BasinAxis of the entry, lo, hi) of each ``KEY=LO:HI`` (an initial-state entry of
     ``layout``); ValueError naming the text otherwise."""
-    from .basin import BasinAxis
+    from .basin import BasinAxis  # heavy: numba (the basin map's engine)
 
     out = []
     for text in texts:
@@ -749,7 +749,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
     ValueError
         For a bad option (one line naming it).
     """
-    from .robustness import separation, wilson_interval
+    from .robustness import separation, wilson_interval  # heavy: scipy.stats
 
     start = _time.perf_counter()
     if int(draws) < 1:
@@ -797,8 +797,8 @@ def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, eng
     """(whether they converge by the sweeps' rule, v(0) [J]) of the runs from the
     configured initial state with the drawn entries ``values`` (N, n_axes)."""
     from ..engine.batch import batch_from_table  # heavy: numba
-    from ..kinematics import GIMBAL_LOCK_ANGLE
-    from .basin import OUTSIDE
+    from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba
+    from .basin import OUTSIDE  # heavy: numba
 
     template = {k: v for k, v in config.resolved.items() if k != "name"}
     if not variant.smooth:
@@ -814,7 +814,7 @@ def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, eng
                 raise ValueError(f"--basin-stability {axis.key}={lo:g}:{hi:g}: the box reaches |theta_2| >= "
                                  f"{limit:.4g} rad: {OUTSIDE.split(': ', 1)[1]}")
         batch.y0[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
-    from ..convergence import converged
+    from ..convergence import converged  # the rule's one owner, beside its use
 
     ok, v0, v1 = integrate_batch(batch, engine, executor)
     return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool), v0

@@ -95,7 +95,7 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     from ..config import config_from_mapping  # heavy: pydantic
     from .certificate import certify  # heavy: numba
     from .linearise import linearise  # heavy: numba
-    from .push import basin_stability, push_analysis
+    from .push import basin_stability, push_analysis  # heavy: numba (its engine)
 
     start = _time.perf_counter()
     run_id, resolved = item
@@ -165,7 +165,7 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
         For records of other options in the folder (without ``overwrite``), or neither
         question asked.
     """
-    from ..io.atomic import atomic_path
+    from ..io.atomic import atomic_path  # with the files it writes
     from ..sweep import load_spec  # heavy: pydantic, numba
     from ..sweep.table import plan_table  # heavy: numba
 
@@ -249,8 +249,8 @@ def _line(record: dict, k: int, n: int) -> str:
 
 def recovery_content(result: Recovery, command_line: str | None = None) -> tuple[dict, dict, dict]:
     """(coordinates, variables, global attributes) of the curves file (module docstring)."""
-    from ..io.metadata import provenance_attributes
-    from .dataset import FORMAT, _var
+    from ..io.metadata import provenance_attributes  # heavy: h5py, library versions
+    from .dataset import FORMAT, _var  # heavy: h5netcdf
 
     n = len(result.records)
     coords = {"run_id": _var(("point",), np.array([r["run_id"] for r in result.records], dtype=object), "1",

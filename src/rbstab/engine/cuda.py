@@ -321,10 +321,10 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                     nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
                 x_out = 1.0
                 if bounded and not event:  # a bound grazed inside the step
-                    x_out = grazing_exit(code, p, limit, margin, margin_new, h, y, Q, dop853, work)
+                    x_out = grazing_exit(code, p, limit, (margin, margin_new), (h, y, Q, dop853), work)
                     event = x_out > 0.0
                 if event:
-                    t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, work, x_out)
+                    t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), work, x_out)
                 # a sample at a breakpoint is the next step's (the state just after the breakpoint)
                 while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
                                          else sample_time(j, n_samples, t_end) <= t_stop):

@@ -239,37 +239,40 @@ _GOLDEN = 0.5 * (math.sqrt(5.0) - 1.0)
 
 
 @jit(forceinline=True)
-def _margin_at(code, p, limit, x, h, y_old, Q, dop853, work):
+def _margin_at(code, p, limit, x, interpolant, work):
+    """The admissible margin at the fraction x of a step, ``interpolant`` = (h, y_old, Q,
+    dop853) its dense output."""
+    h, y_old, Q, dop853 = interpolant
     dense_value(x, h, y_old, Q, dop853, work)
     return admissible_event(code, work, p, limit)[0]
 
 
 @jit(forceinline=True)
-def _dip(code, p, limit, lo, hi, h, y_old, Q, dop853, work):
+def _dip(code, p, limit, lo, hi, interpolant, work):
     """(x, margin) of the smallest margin on [lo, hi] of the step's interpolant, by golden
     section (the margin has one dip there)."""
     a, b = lo, hi
     c = b - _GOLDEN * (b - a)
     d = a + _GOLDEN * (b - a)
-    mc = _margin_at(code, p, limit, c, h, y_old, Q, dop853, work)
-    md = _margin_at(code, p, limit, d, h, y_old, Q, dop853, work)
+    mc = _margin_at(code, p, limit, c, interpolant, work)
+    md = _margin_at(code, p, limit, d, interpolant, work)
     for _ in range(GRAZE_ITERATIONS):
         if mc < md:
             b, d, md = d, c, mc
             c = b - _GOLDEN * (b - a)
-            mc = _margin_at(code, p, limit, c, h, y_old, Q, dop853, work)
+            mc = _margin_at(code, p, limit, c, interpolant, work)
         else:
             a, c, mc = c, d, md
             d = a + _GOLDEN * (b - a)
-            md = _margin_at(code, p, limit, d, h, y_old, Q, dop853, work)
+            md = _margin_at(code, p, limit, d, interpolant, work)
     return (c, mc) if mc < md else (d, md)
 
 
 @jit(forceinline=True)
-def grazing_exit(code, p, limit, margin_old, margin_new, h, y_old, Q, dop853, work):
+def grazing_exit(code, p, limit, margins, interpolant, work):
     """The fraction x in (0, 1] of a step at which its interpolant is outside the
-    admissible region though inside at both ends (margins ``margin_old``, ``margin_new``
-    >= 0): an excursion that a sign change at the ends misses, a bound grazed (the case at
+    admissible region though inside at both ends (``margins`` = (at its start, at its end),
+    both >= 0; ``interpolant`` = (h, y_old, Q, dop853), its dense output): an excursion that a sign change at the ends misses, a bound grazed (the case at
     a push's threshold); -1 where there is none.
 
     The margin is evaluated at :data:`GRAZE_POINTS` - 1 inner points of the step's dense
@@ -278,15 +281,15 @@ def grazing_exit(code, p, limit, margin_old, margin_new, h, y_old, Q, dop853, wo
     section finds the dip's bottom, returned where it is outside. ``work``: a state-sized
     scratch array.
     """
+    margin_old, margin_new = margins
     step = 1.0 / GRAZE_POINTS
-    before, here = margin_old, _margin_at(code, p, limit, step, h, y_old, Q, dop853, work)
+    before, here = margin_old, _margin_at(code, p, limit, step, interpolant, work)
     for k in range(1, GRAZE_POINTS):
         if here < 0.0:
             return k * step
-        after = margin_new if k == GRAZE_POINTS - 1 else _margin_at(code, p, limit, (k + 1) * step, h, y_old, Q,
-                                                                     dop853, work)
+        after = margin_new if k == GRAZE_POINTS - 1 else _margin_at(code, p, limit, (k + 1) * step, interpolant, work)
         if here <= before and here <= after:
-            x, bottom = _dip(code, p, limit, (k - 1) * step, (k + 1) * step, h, y_old, Q, dop853, work)
+            x, bottom = _dip(code, p, limit, (k - 1) * step, (k + 1) * step, interpolant, work)
             if bottom < 0.0:
                 return x
         before, here = here, after
@@ -294,13 +297,15 @@ def grazing_exit(code, p, limit, margin_old, margin_new, h, y_old, Q, dop853, wo
 
 
 @jit
-def locate_event(code, p, t_old, h, y_old, Q, dop853, limit, work, x_out):
+def locate_event(code, p, limit, t_old, interpolant, work, x_out):
     """Where the interpolant leaves the admissible region (:func:`admissible_event` of
     variant ``code``, record ``p``, gimbal-lock angle ``limit``) in [t_old, t_old + x_out
-    h]: bisection to the spacing of floats (the margin is >= 0 at t_old, <= 0 at the
-    fraction ``x_out`` of the step: 1, its end, or a grazed bound's :func:`grazing_exit`).
-    Returns (time [s], its fraction of the step, the status code of the bound reached
-    there); ``work`` holds the state there."""
+    h] of a step whose dense output is ``interpolant`` = (h, y_old, Q, dop853): bisection
+    to the spacing of floats (the margin is >= 0 at t_old, <= 0 at the fraction ``x_out``
+    of the step: 1, its end, or a grazed bound's :func:`grazing_exit`). Returns (time [s],
+    its fraction of the step, the status code of the bound reached there); ``work`` holds
+    the state there."""
+    h, y_old, Q, dop853 = interpolant
     lo, hi = 0.0, x_out
     for _ in range(200):
         mid = 0.5 * (lo + hi)
@@ -420,10 +425,10 @@ def _run(code, p, y0, s, samples, work_done):
             nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
         x_out = 1.0
         if bounded and not event:  # a bound grazed inside the step
-            x_out = grazing_exit(code, p, limit, margin, margin_new, h, y, Q, dop853, scratch)
+            x_out = grazing_exit(code, p, limit, (margin, margin_new), (h, y, Q, dop853), scratch)
             event = x_out > 0.0
         if event:
-            t_stop, _, left = locate_event(code, p, t, h, y, Q, dop853, limit, scratch, x_out)
+            t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), scratch, x_out)
         # a sample at a breakpoint is the next step's (the state just after the breakpoint)
         while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
                                  else sample_time(j, n_samples, t_end) <= t_stop):
