@@ -86,6 +86,7 @@ def main() -> None:
                         "differences": differences}
     report["basin"] = basin()
     report["batch"] = batch()
+    report["push"] = push(sys.argv[1])
     report["disturbed"] = disturbed()
     report["deadline"] = deadline()
     report["signatures"] = signatures(recorded)
@@ -171,6 +172,25 @@ def deadline() -> dict:
                 nan_state, second.trace[..., :-1].shape), equal_nan=True) and np.isnan(second.trace[..., -1]).all()),
             "poison_left": int(np.sum(second.acc == 7) + np.sum(second.trace == 7) + np.sum(second.last == 7)),
             "message": status_message(NOT_STARTED, 0.0, 0.0, max_wall_time=1e-9)}
+
+
+def push(root: str) -> dict:
+    """The smallest fatal push of two directions of the saturated pendulum (a short ladder,
+    a loose tolerance: few runs) on the CPU engine and on the GPU: the thresholds, the
+    ladders' outcomes and the counts of runs."""
+    from rbstab import load_config
+    from rbstab.analysis.push import push_analysis
+
+    config = load_config(os.path.join(root, "configs/examples/saturated_pendulum.yaml"),
+                         ["simulation.n_samples=41", "simulation.t_end=2.0", "simulation.rtol=1e-6",
+                          "simulation.atol=1e-8"])
+    found = {engine: push_analysis(config, "torque", directions=[[1.0, 0.0, 0.0], [0.3, 1.0, 0.0]], push_max=2.0,
+                                   rungs=4, tol=0.05, engine=engine) for engine in ("compiled", "cuda")}
+    a, b = found["compiled"], found["cuda"]
+    return {"thresholds": a.threshold.tolist(), "runs": a.runs,
+            "equal": {"threshold": bool(np.array_equal(a.threshold, b.threshold)),
+                      "ladder": bool(np.array_equal(a.thresholds.ladder_recovered, b.thresholds.ladder_recovered)),
+                      "runs": a.runs == b.runs}}
 
 
 def batch() -> dict:

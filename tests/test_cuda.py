@@ -162,6 +162,14 @@ def test_simulated_disturbed_basin_map_is_the_cpu_engines(simulated):
     assert basin["messages"] and basin["pushed"]
 
 
+def test_simulated_push_thresholds_are_the_cpu_engines(simulated):
+    """The push analysis (a saturated impulse ladder and bisection, batches of pushed runs)
+    on the GPU finds the CPU engine's thresholds, ladders and runs."""
+    push = simulated["push"]
+    assert push["equal"] == {"threshold": True, "ladder": True, "runs": True}
+    assert all(0 < t < 2.0 for t in push["thresholds"]) and push["runs"] > 8
+
+
 def test_simulated_batch_is_the_cpu_engines(simulated):
     """A sweep table's batch (5 variants and a body with saturating actuators, each run its
     own record; no config objects) on the GPU: every summary figure and thinned output equal
