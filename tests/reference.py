@@ -143,7 +143,43 @@ def disturbance_value(d, t):
         return np.asarray(d.value, float)
     if d.kind == "sine":
         return np.asarray(d.value, float) * np.sin(2 * np.pi * d.frequency * (t - d.start) + d.phase)
-    raise NotImplementedError(d.kind)  # noise: checked by its statistics
+    return noise_value(d, t)
+
+
+#: The sines of a noise per axis (docs/disturbances.md).
+NOISE_TONES = 16
+
+
+def _hash32(x):
+    """lowbias32's shape with the multipliers 0x7FEB352D, 0x5BD1E995 (Python integers)."""
+    x &= 0xFFFFFFFF
+    x ^= x >> 16
+    x = (x * 0x7FEB352D) & 0xFFFFFFFF
+    x ^= x >> 15
+    x = (x * 0x5BD1E995) & 0xFFFFFFFF
+    return x ^ (x >> 16)
+
+
+def noise_phases(seed, axis):
+    """The phases phi_k = 2 pi n_k / 256 [rad], k = 0 ... 15, of the sines of axis ``axis`` of a
+    noise of ``seed``: n_k byte k mod 4 (the lowest first) of h(key + k // 4), key =
+    h(h(seed) + axis 0x9E3779B1 + 1) (h: :func:`_hash32`)."""
+    key = _hash32(_hash32(seed) + axis * 0x9E3779B1 + 1)
+    levels = [(_hash32(key + k // 4) >> (8 * (k % 4))) & 0xFF for k in range(NOISE_TONES)]
+    return 2 * np.pi * np.array(levels) / 256
+
+
+def noise_value(d, t):
+    """A noise's value [N] or [N m] at t >= start: on axis j, rms_j sqrt(2/N) times the sum of
+    sin(2 pi f_k (t - start) + phi_jk), f_k = f_lo + (k + 1/2) (f_hi - f_lo) / N, each sine
+    evaluated on its own."""
+    f_lo, f_hi = d.band
+    n = NOISE_TONES
+    f = f_lo + (np.arange(n) + 0.5) * (f_hi - f_lo) / n
+    tau = t - d.start
+    rms = np.asarray(d.value, float)
+    return np.array([rms[j] * np.sqrt(2.0 / n) * np.sum(np.sin(2 * np.pi * f * tau + noise_phases(int(d.seed), j)))
+                     for j in range(3)])
 
 
 def disturbance_wrench(disturbances, theta, t):

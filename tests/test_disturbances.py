@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference import disturbed_rates, hat, impulse_jump, rotation
+from reference import NOISE_TONES, disturbed_rates, hat, impulse_jump, noise_phases, noise_value, rotation
 from rbstab.config import ConfigError, config_from_mapping
 from rbstab.model import Disturbance
 from rbstab.simulator import simulate
@@ -46,13 +46,16 @@ PUSHES = [
     {"kind": "step", "value": [1, 0, 0], "point": [0.1, 0, 0], "start": 1.0},
     {"kind": "impulse", "value": [0.2, 0.5, 0], "point": [0, 0, 0.2], "start": 0.75},
 ]
+NOISE = {"kind": "noise", "rms": [3.0, 1.0, 2.0], "band": [0.5, 5.0], "point": [0, 0.1, 0.2], "seed": 11,
+         "start": 0.1}
 
 
 @pytest.mark.parametrize("name", ["free", "permanent", "visco_elastic", "embedded", "sliding"])
 def test_state_rate_adds_what_the_numpy_reference_adds(name):
     """dOmega/dt and dV/dt gain J^-1 (T + R_p x A'F) and F / m (reference.py) at random
-    states and times (full state); for permanent the pinned body's J_p."""
-    config = config_from_mapping(_mapping(name, PUSHES[:3]))
+    states and times (full state); for permanent the pinned body's J_p. A pulse, a sine, a
+    step and a noise (reference.py sums its sines one by one)."""
+    config = config_from_mapping(_mapping(name, [*PUSHES[:3], NOISE]))
     plain = config_from_mapping(_mapping(name))
     variant, undisturbed = config.make_variant(), plain.make_variant()
     rng = np.random.default_rng(4)
@@ -182,6 +185,26 @@ def test_noise_rms_and_band():
     assert outside < 1e-3
     again = config_from_mapping(_mapping("free", [push], gravity=(0, 0, 0))).make_variant()
     np.testing.assert_array_equal(again.rhs(3.3, y[0]), variant.rhs(3.3, y[0]))
+
+
+def test_noise_is_its_sines_summed_one_by_one():
+    """The compiled noise (its sines' phasors by a recurrence, their phases from a table)
+    equals the plain sum of the sines of reference.py to 2e-13 of the RMS over tau in
+    [0, 10] s, axis by axis; seeds and axes draw other phases, and an axis of RMS 0 is 0."""
+    push = dict(NOISE, start=0.5, rms=[3.0, 0.0, 2.0], seed=2 ** 31 - 1)
+    config = config_from_mapping(_mapping("free", [push], t_end=12.0, gravity=(0, 0, 0)))
+    plain = config_from_mapping(_mapping("free", (), t_end=12.0, gravity=(0, 0, 0))).make_variant()
+    variant, d = config.make_variant(), config.gains.disturbances[0]
+    y = np.zeros(12)
+    t = np.random.default_rng(3).uniform(0.5, 10.5, 400)
+    got = np.array([variant.rhs(ti, y)[9:12] - plain.rhs(ti, y)[9:12] for ti in t]) * config.body.mass
+    expected = np.array([noise_value(d, ti) for ti in t])
+    assert np.all(np.abs(got - expected) <= 2e-13 * np.array(push["rms"])), np.max(np.abs(got - expected), axis=0)
+    assert np.max(np.abs(expected[:, 0])) > 3.0 and np.all(got[:, 1] == 0.0)
+    phases = np.array([noise_phases(seed, axis) for seed in (0, 1, 2) for axis in range(3)])
+    assert phases.shape == (9, NOISE_TONES)
+    differ = np.abs(np.angle(np.exp(1j * (phases[:, None] - phases[None]))))  # every pair, tone by tone
+    assert np.all(differ.max(axis=2) + np.eye(9) > 0.1)
 
 
 @pytest.mark.parametrize(("push", "key", "found"), [

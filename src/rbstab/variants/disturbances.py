@@ -14,28 +14,46 @@ the integration (:func:`next_breakpoint`): no step crosses one, and a step that 
 one evaluates the disturbance just before it (the drivers clamp the stage times to the
 float below the breakpoint), so the window is [start, end) on both sides of an edge.
 
-``noise`` is a random-phase multisine: on each axis, NOISE_TONES sines of equal amplitude
-at the frequencies f_k = f_lo + (k + 1/2) (f_hi - f_lo) / NOISE_TONES, k = 0 ...
-NOISE_TONES - 1, with phases from a hash of (seed, axis, k), scaled so that its RMS over
-a long window is the requested one: amplitude rms sqrt(2 / NOISE_TONES). It needs no
-state and gives the same numbers on every engine.
+``noise`` is a random-phase multisine: on axis j, with N = NOISE_TONES,
+
+    x_j(tau) = rms_j sqrt(2 / N) sum_{k=0}^{N-1} sin(2 pi f_k tau + phi_jk),   tau = t - start,
+
+at the frequencies f_k = f_lo + (k + 1/2) df, df = (f_hi - f_lo) / N (each inside the band),
+with the phases phi_jk = 2 pi n_jk / 256, n_jk a byte of a 32-bit hash of (seed, axis, k)
+(:func:`noise_level`): one hash gives 4 sines' phases. Its mean square over a long window is
+rms_j^2 (N sines of mean square 1/2 at distinct frequencies). An evaluation takes two sines
+and two cosines, whatever t: with E_k = exp(i 2 pi f_k tau), E_0 and D = exp(i 2 pi df tau)
+from the fractions of a turn f_0 tau and df tau, E_{k+1} = E_k D (shared by the axes), and
+sin(2 pi f_k tau + phi) = Im E_k cos(phi) + Re E_k sin(phi) with cos(phi), sin(phi) from the
+table :data:`NOISE_PHASORS`. The round-off of the N - 1 products grows as k, and stays that
+of a direct sum of the sines in double precision: against the exact sum, at most 6e-15 rms_j
+for tau <= 1 s (direct: 6e-15), 3.5e-14 for tau <= 10 s (direct: 5.6e-14), 4e-12 for
+tau <= 1000 s (direct: 5e-12), the rounding of f_k tau growing with tau. It needs no state and
+gives the same numbers on every engine.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, neg, rotation_and_rate_of, scale, sub, vector
 from ..model import DISTURBANCE_KINDS, NOISE_TONES
 
-__all__ = ["disturbance_wrench", "disturbance_power", "apply_impulses", "next_breakpoint", "edges_up_to", "noise_phase",
-           "kinetic_energy", "before", "state_power"]
+__all__ = ["disturbance_wrench", "disturbance_power", "apply_impulses", "next_breakpoint", "edges_up_to", "noise_level",
+           "NOISE_PHASORS", "kinetic_energy", "before", "state_power"]
 
 IMPULSE, PULSE, STEP, SINE, NOISE = (float(DISTURBANCE_KINDS[k]) for k in ("impulse", "pulse", "step", "sine", "noise"))
 TWO_PI = 2.0 * math.pi
 _TONES = NOISE_TONES
+if _TONES % 4:
+    raise ValueError(f"NOISE_TONES must be a multiple of 4 (a hash gives 4 phases), not {_TONES}")
 _MASK = 0xFFFFFFFF
+#: (cos, sin) of the phase 2 pi n / 256 of a noise's sine, n = 0 ... 255 (:func:`noise_level`),
+#: shape (256, 2): one table compiled into every engine.
+NOISE_PHASORS = np.stack([np.cos(TWO_PI * np.arange(256) / 256), np.sin(TWO_PI * np.arange(256) / 256)], axis=1)
 
 
 @jit(forceinline=True)
@@ -52,31 +70,50 @@ def _hash32(x):
 
 
 @jit(forceinline=True)
-def noise_phase(seed, axis, k):
-    """The phase [rad] in [0, 2 pi) of the k-th sine of axis ``axis`` of a noise of ``seed``."""
-    h = _hash32(_hash32(_hash32(int(seed)) + axis * 0x9E3779B1 + 1) + k)
-    return TWO_PI * (h / 4294967296.0)
+def _noise_key(seed, axis):
+    """The 32-bit hash of (seed, axis) from which the phases of an axis of a noise follow."""
+    return _hash32(_hash32(int(seed)) + axis * 0x9E3779B1 + 1)
+
+
+@jit(forceinline=True)
+def noise_level(seed, axis, k):
+    """n in 0 ... 255, the phase 2 pi n / 256 [rad] of the k-th sine of axis ``axis`` (0, 1, 2)
+    of a noise of ``seed``: byte k mod 4 (the lowest: 0) of h(key + k // 4), key = h(h(seed) +
+    axis 0x9E3779B1 + 1), h :func:`_hash32`."""
+    return (_hash32(_noise_key(seed, axis) + k // 4) >> (8 * (k % 4))) & 255
+
+
+@jit(forceinline=True)
+def _turn(x):
+    """(cos, sin) of 2 pi x, x [turns] reduced to [0, 1) first."""
+    angle = TWO_PI * (x - math.floor(x))
+    return math.cos(angle), math.sin(angle)
 
 
 @jit(forceinline=True)
 def _noise(t, i, p):
-    """The noise of entry i at time t (from its start) on each axis, as a 3-tuple."""
+    """The noise of entry i of ``p`` at time t [s] (acting from its start) on each axis, as a
+    3-tuple [N] or [N m]: the sines' phasors E_k by the recurrence E_{k+1} = E_k D of the
+    module's docstring, their phases from :data:`NOISE_PHASORS`."""
     f_lo, f_hi = p.disturbance_band[i, 0], p.disturbance_band[i, 1]
     df = (f_hi - f_lo) / _TONES
     tau = t - p.disturbance_start[i]
     seed = p.disturbance_seed[i]
-    amp = math.sqrt(2.0 / _TONES)
+    ec, es = _turn((f_lo + 0.5 * df) * tau)
+    dc, ds = _turn(df * tau)
+    key0, key1, key2 = _noise_key(seed, 0), _noise_key(seed, 1), _noise_key(seed, 2)
     out0 = 0.0
     out1 = 0.0
     out2 = 0.0
-    for k in range(_TONES):
-        w = TWO_PI * (f_lo + (k + 0.5) * df) * tau
-        if p.disturbance_value[i, 0] != 0.0:
-            out0 += math.sin(w + noise_phase(seed, 0, k))
-        if p.disturbance_value[i, 1] != 0.0:
-            out1 += math.sin(w + noise_phase(seed, 1, k))
-        if p.disturbance_value[i, 2] != 0.0:
-            out2 += math.sin(w + noise_phase(seed, 2, k))
+    for m in range(_TONES // 4):  # sine k = 4 m + b: byte b of the hashes of key + m (noise_level)
+        h0, h1, h2 = _hash32(key0 + m), _hash32(key1 + m), _hash32(key2 + m)
+        for b in range(4):
+            n0, n1, n2 = (h0 >> 8 * b) & 255, (h1 >> 8 * b) & 255, (h2 >> 8 * b) & 255
+            out0 += es * NOISE_PHASORS[n0, 0] + ec * NOISE_PHASORS[n0, 1]
+            out1 += es * NOISE_PHASORS[n1, 0] + ec * NOISE_PHASORS[n1, 1]
+            out2 += es * NOISE_PHASORS[n2, 0] + ec * NOISE_PHASORS[n2, 1]
+            ec, es = ec * dc - es * ds, ec * ds + es * dc
+    amp = math.sqrt(2.0 / _TONES)
     return (p.disturbance_value[i, 0] * amp * out0, p.disturbance_value[i, 1] * amp * out1,
             p.disturbance_value[i, 2] * amp * out2)
 
