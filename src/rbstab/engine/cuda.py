@@ -77,8 +77,8 @@ from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, sten
                        stream_sample, stream_start)
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
-from .integrate import (REJECTED, _limit_of, admissible_event, attempt_step, grazing_exit, locate_event, restart,
-                        sample_time, step_bounds, step_work)
+from .integrate import (REJECTED, _limit_of, admissible_event, attempt_step, locate_event, restart, sample_time,
+                        step_bounds, step_exit, step_work)
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
@@ -319,10 +319,8 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                 at_break = disturbed and t_new == t_bound and t_bound < t_end
                 if event or bounded or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
-                x_out = 1.0
-                if bounded and not event:  # a bound grazed inside the step
-                    x_out = grazing_exit(code, p, limit, (margin, margin_new), (h, y, Q, dop853), work)
-                    event = x_out > 0.0
+                x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), work)
+                event = x_out > 0.0
                 if event:
                     t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), work, x_out)
                 # a sample at a breakpoint is the next step's (the state just after the breakpoint)
@@ -454,7 +452,7 @@ def occupancy(fn, n_state: int) -> int:
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
 DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
-                    "grazing_exit", "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
+                    "step_exit", "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
                     "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "step_work", "restart")
 
 

@@ -36,7 +36,8 @@ from .status import (DEFAULT_MAX_STEPS, GIMBAL_LOCK, LEFT_REGION, NOT_FINITE, ST
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event", "grazing_exit",
+           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
+           "grazing_exit", "step_exit",
            "admissible", "locate_event"]
 
 SAFETY, MIN_FACTOR, MAX_FACTOR = float(SAFETY), float(MIN_FACTOR), float(MAX_FACTOR)
@@ -296,6 +297,20 @@ def grazing_exit(code, p, limit, margins, interpolant, work):
     return -1.0
 
 
+@jit(forceinline=True)
+def step_exit(code, p, limit, crossed, margins, interpolant, work):
+    """Where a step leaves the admissible region, as a fraction of it: 1 where the margin
+    ``crossed`` zero between its ends (``margins``), the first point outside of a bound
+    grazed inside it (:func:`grazing_exit`, with ``simulation.limits`` only), or -1 where
+    it stays inside. The step's dense output ``interpolant`` = (h, y_old, Q, dop853) is
+    computed where the run has bounds."""
+    if crossed:
+        return 1.0
+    if p.limited == 0.0:
+        return -1.0
+    return grazing_exit(code, p, limit, margins, interpolant, work)
+
+
 @jit
 def locate_event(code, p, limit, t_old, interpolant, work, x_out):
     """Where the interpolant leaves the admissible region (:func:`admissible_event` of
@@ -423,10 +438,8 @@ def _run(code, p, y0, s, samples, work_done):
         at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
         if event or bounded or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
             nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
-        x_out = 1.0
-        if bounded and not event:  # a bound grazed inside the step
-            x_out = grazing_exit(code, p, limit, (margin, margin_new), (h, y, Q, dop853), scratch)
-            event = x_out > 0.0
+        x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), scratch)
+        event = x_out > 0.0
         if event:
             t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), scratch, x_out)
         # a sample at a breakpoint is the next step's (the state just after the breakpoint)
