@@ -221,6 +221,86 @@ def test_a_generation_is_stored_whole_despite_ctrl_c():
     assert done == [1]
 
 
+def test_a_generation_is_stored_as_optuna_stores_its_trials(tmp_path):
+    """store_generation (one transaction) leaves in SQLite what Study.add_trials (a
+    transaction per trial) leaves: numbers, states, values (infinite too), parameters and
+    their distributions, user and system attributes (constraints), times."""
+    import optuna
+
+    from rbstab.studies.tuning import _storage, store_generation
+
+    optuna.logging.set_verbosity(optuna.logging.ERROR)
+    known = optuna.create_study()
+    distributions = {"a": optuna.distributions.FloatDistribution(0.1, 10, log=True),
+                     "b": optuna.distributions.FloatDistribution(-1, 1),
+                     "c": optuna.distributions.CategoricalDistribution(["x", "y"])}
+    finished = []
+    for i, value in enumerate([3.0, float("inf"), None, -2.5, 0.0]):
+        trial = known.ask(distributions)
+        trial.set_user_attr("record", {"values": {"k": i}, "figures": [1.5, None]})
+        trial.set_user_attr("process", "p")
+        known._storage.set_trial_system_attr(trial._trial_id, "constraints", [i - 2.0])
+        state = optuna.trial.TrialState.FAIL if value is None else optuna.trial.TrialState.COMPLETE
+        finished.append(known.tell(trial, None if value is None else value, state=state))
+    stored = {}
+    for how in ("ours", "optuna"):
+        study = optuna.create_study(study_name=how, storage=_storage(f"sqlite:///{tmp_path}/{how}.db"))
+        study.add_trial(finished[0])  # a trial stored before: the generation's numbers go on from it
+        (store_generation if how == "ours" else optuna.Study.add_trials)(study, finished[1:])
+        store_generation(study, finished[:2])  # a second generation after the first
+        again = optuna.load_study(study_name=how, storage=f"sqlite:///{tmp_path}/{how}.db")
+        stored[how] = [(t.number, t.state, t.values, t.params, t.distributions, t.user_attrs, t.system_attrs,
+                        t.datetime_start, t.datetime_complete) for t in again.get_trials()]
+    assert [t[0] for t in stored["ours"]] == list(range(7))
+    assert stored["ours"] == stored["optuna"]
+    assert stored["ours"][1][2] == [float("inf")] and stored["ours"][2][1] == optuna.trial.TrialState.FAIL
+
+
+def test_two_processes_on_one_study_share_its_trials(config, tmp_path):
+    """Two processes run one SQLite study at once: together they reach the trials asked,
+    each stores whole generations, every trial is stored once (numbers 0..n-1), and the
+    study's files hold every stored trial, best.yaml the best of them."""
+    import os
+    import subprocess
+    import sys
+
+    import optuna
+    import pandas as pd
+    import yaml
+
+    data = {**config.resolved, "simulation": {**config.resolved["simulation"], "t_end": 0.2, "n_samples": 5}}
+    path = tmp_path / "free.yaml"
+    path.write_text(rbstab.config.dump_yaml(data))
+    script = ("import sys, rbstab\n"
+              "if __name__ == '__main__':\n"
+              "    rbstab.tune(rbstab.load_config(sys.argv[1]), %r, trials=24, minimize=['lyapunov_final'],\n"
+              "                output=sys.argv[2], name='shared', seed=int(sys.argv[3]), generation=4, startup=4)\n"
+              % TUNE_VARY)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(rbstab.__file__).parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    processes = [subprocess.Popen([sys.executable, "-c", script, str(path), str(tmp_path), str(seed)], env=env,
+                                  stderr=subprocess.PIPE, text=True) for seed in (1, 2)]
+    for process in processes:
+        assert process.wait(timeout=300) == 0, process.stderr.read()
+    study = optuna.load_study(study_name="shared", storage=f"sqlite:///{tmp_path}/shared/study.db")
+    trials = study.get_trials()
+    assert [t.number for t in trials] == list(range(len(trials)))
+    assert all(t.state == optuna.trial.TrialState.COMPLETE for t in trials)
+    assert 24 <= len(trials) <= 24 + 4  # the other process's generation running at the end finishes too
+    by_process = {}
+    for t in trials:
+        by_process.setdefault(t.user_attrs["process"], []).append(t.number)
+    assert len(by_process) == 2 and all(len(n) % 4 == 0 for n in by_process.values())  # whole generations
+    table = pd.read_csv(tmp_path / "shared" / "trials.csv")
+    assert table["trial"].tolist() == list(range(len(trials)))
+    np.testing.assert_array_equal(table["lyapunov_final"], [t.values[0] for t in trials])
+    best = min(trials, key=lambda t: t.values[0])
+    text = (tmp_path / "shared" / "best.yaml").read_text()
+    assert text.startswith(f"# best trial {best.number} of tuning study shared")
+    gains = yaml.safe_load(text)["controller"]
+    np.testing.assert_allclose(gains["l_t"], np.asarray(data["controller"]["l_t"]) * best.params["controller.l_t:scale"])
+
+
 def test_scale_log_uniform_scales_a_whole_gain_vector(config):
     from rbstab.studies.design import parse_vary
 
