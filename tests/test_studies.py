@@ -221,6 +221,51 @@ def test_a_generation_is_stored_whole_despite_ctrl_c():
     assert done == [1]
 
 
+def test_two_processes_on_one_study_share_its_trials(config, tmp_path):
+    """Two processes run one SQLite study at once: together they reach the trials asked,
+    each stores whole generations, every trial is stored once (numbers 0..n-1), and the
+    study's files hold every stored trial, best.yaml the best of them."""
+    import os
+    import subprocess
+    import sys
+
+    import optuna
+    import pandas as pd
+    import yaml
+
+    data = {**config.resolved, "simulation": {**config.resolved["simulation"], "t_end": 0.2, "n_samples": 5}}
+    path = tmp_path / "free.yaml"
+    path.write_text(rbstab.config.dump_yaml(data))
+    script = ("import sys, rbstab\n"
+              "if __name__ == '__main__':\n"
+              "    rbstab.tune(rbstab.load_config(sys.argv[1]), %r, trials=24, minimize=['lyapunov_final'],\n"
+              "                output=sys.argv[2], name='shared', seed=int(sys.argv[3]), generation=4, startup=4)\n"
+              % TUNE_VARY)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(rbstab.__file__).parents[1]),
+                                                        os.environ.get("PYTHONPATH", "")])}
+    processes = [subprocess.Popen([sys.executable, "-c", script, str(path), str(tmp_path), str(seed)], env=env,
+                                  stderr=subprocess.PIPE, text=True) for seed in (1, 2)]
+    for process in processes:
+        assert process.wait(timeout=300) == 0, process.stderr.read()
+    study = optuna.load_study(study_name="shared", storage=f"sqlite:///{tmp_path}/shared/study.db")
+    trials = study.get_trials()
+    assert [t.number for t in trials] == list(range(len(trials)))
+    assert all(t.state == optuna.trial.TrialState.COMPLETE for t in trials)
+    assert 24 <= len(trials) <= 24 + 4  # the other process's generation running at the end finishes too
+    by_process = {}
+    for t in trials:
+        by_process.setdefault(t.user_attrs["process"], []).append(t.number)
+    assert len(by_process) == 2 and all(len(n) % 4 == 0 for n in by_process.values())  # whole generations
+    table = pd.read_csv(tmp_path / "shared" / "trials.csv")
+    assert table["trial"].tolist() == list(range(len(trials)))
+    np.testing.assert_array_equal(table["lyapunov_final"], [t.values[0] for t in trials])
+    best = min(trials, key=lambda t: t.values[0])
+    text = (tmp_path / "shared" / "best.yaml").read_text()
+    assert text.startswith(f"# best trial {best.number} of tuning study shared")
+    gains = yaml.safe_load(text)["controller"]
+    np.testing.assert_allclose(gains["l_t"], np.asarray(data["controller"]["l_t"]) * best.params["controller.l_t:scale"])
+
+
 def test_scale_log_uniform_scales_a_whole_gain_vector(config):
     from rbstab.studies.design import parse_vary
 

@@ -594,7 +594,8 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
             budget -= len(asked)
             stored = _sync(study, known, seen, token)
             done = sum(t.state == optuna.trial.TrialState.COMPLETE for t in stored)
-    return _write_outputs(problem, study, folder, storage, command_line)
+    with _file_lock(storage):  # processes on one study write its files in turn, each from every stored trial
+        return _write_outputs(problem, study, folder, storage, command_line)
 
 
 def _tell(known, problem: TuningProblem, trial, record: dict, token: str):
@@ -715,7 +716,7 @@ def _storage(url: str):
 
         kwargs = {"engine_kwargs": {"creator": connect}}
     try:
-        with _creation_lock(url):
+        with _file_lock(url):
             return optuna.storages.RDBStorage(url, **kwargs)
     except sqlalchemy.exc.SQLAlchemyError as exc:
         raise StudyInputError([f"--storage {url!r}: cannot open it ({str(exc).splitlines()[0]})"]) from None
@@ -725,9 +726,12 @@ def _storage(url: str):
 
 
 @contextlib.contextmanager
-def _creation_lock(url: str):
-    """Hold ``<file>.lock`` beside an SQLite file while its storage is opened: two processes
-    that start one study at once would both make its tables (Optuna does not guard that)."""
+def _file_lock(url: str):
+    """Hold ``<file>.lock`` beside an SQLite file: while its storage is opened (two processes
+    that start one study at once would both make its tables; Optuna does not guard that),
+    and while a process reads the stored trials and writes the study's files (so the last
+    process to write them writes every trial: its own are stored before, and so are those
+    of a process that wrote before it)."""
     if not url.startswith("sqlite:///"):
         yield
         return
