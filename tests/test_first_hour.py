@@ -204,6 +204,29 @@ def test_a_report_of_other_inputs_is_not_replaced(tmp_path):
     assert forced.exit_code == 0 and "case2" in (out / "report.json").read_text()
 
 
+def test_a_report_of_an_input_more_or_fewer_is_not_replaced_and_the_same_inputs_rebuild_it(tmp_path):
+    """The same set of inputs (in any order) rebuilds the report; a subset or a superset of
+    them is another comparison: refused, naming the folder and the inputs that differ."""
+    assert invoke("run", CASE1, CASE2, "-o", tmp_path, *SHORT, "-qq").exit_code == 0
+    one, two = tmp_path / "case1_permanent.h5", tmp_path / "case2_visco_elastic.h5"
+    out = tmp_path / "report"
+    fast = ["-o", out, "--format", "md", "--no-animations", "-q"]
+    assert invoke("report", one, two, *fast).exit_code == 0
+    before = (out / "report.json").read_text()
+    fewer = invoke("report", one, *fast)
+    assert fewer.exit_code == 1 and f"{out} holds a report of other inputs" in fewer.stderr
+    assert f"only there: {two.resolve()}" in fewer.stderr and "only here" not in fewer.stderr
+    assert "--overwrite" in fewer.stderr and "-o DIR" in fewer.stderr and "Traceback" not in fewer.output
+    assert (out / "report.json").read_text() == before
+    rebuilt = invoke("report", two, one, *fast)  # the same inputs, another order
+    assert rebuilt.exit_code == 0, rebuilt.output
+    assert sorted(json.loads((out / "report.json").read_text())["inputs"]) == sorted(json.loads(before)["inputs"])
+    assert invoke("report", one, *fast, "--overwrite").exit_code == 0
+    more = invoke("report", one, two, *fast)
+    assert more.exit_code == 1 and f"only here: {two.resolve()}" in more.stderr
+    assert json.loads((out / "report.json").read_text())["inputs"] == [str(one.resolve())]
+
+
 def test_a_cli_sweep_with_another_grid_does_not_replace_the_first(tmp_path):
     common = ["-o", tmp_path, "-j", "1", *SHORT, "--no-warn", "all", "--no-progress", "-q"]
     assert invoke("sweep", CASE2, "--grid", "body.mass=30,40", *common).exit_code == 0
