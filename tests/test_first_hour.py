@@ -184,6 +184,33 @@ def test_the_same_call_under_the_guard_is_not_refused(tmp_path):
     assert done.returncode == 0 and "ok" in done.stdout, done.stderr
 
 
+def test_the_kernels_a_batch_calls_from_python_release_the_gil():
+    from rbstab.engine.integrate import integrate_chunk
+    from rbstab.summary import _apply_stencil
+    from rbstab.variants.kernels import run_outputs
+
+    assert all(f.targetoptions.get("nogil") for f in (integrate_chunk, run_outputs, _apply_stencil))
+
+
+def test_the_thread_executor_yields_every_result_and_error_as_data_from_threads_of_this_process():
+    import multiprocessing
+    import threading
+
+    from rbstab.sweep.executors import ThreadExecutor
+
+    def work(item, power):
+        if item == 3:
+            raise ValueError("three")
+        return item**power, threading.current_thread().name
+
+    with ThreadExecutor(2) as executor:
+        executor.plan(7)
+        out = {item: (result, exc) for item, result, exc in executor.imap_unordered(work, range(7), 2)}
+    assert sorted(out) == list(range(7)) and not multiprocessing.active_children()
+    assert isinstance(out[3][1], ValueError) and out[3][0] is None
+    assert all(out[i][0][0] == i**2 and out[i][0][1].startswith("rbstab") for i in out if i != 3)
+
+
 # -- no silent replacement -------------------------------------------------------------------------
 
 
