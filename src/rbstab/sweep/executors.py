@@ -264,7 +264,21 @@ def _mp_context(preload: tuple[str, ...] = FORKSERVER_PRELOAD):
     return ctx
 
 
-class LocalExecutor(Executor):
+class _LocalWorkers(Executor):
+    """``jobs`` workers of this machine (processes or threads), as many started as items."""
+
+    jobs: int
+    _workers: int
+
+    def parallelism(self) -> int | None:
+        return self.jobs
+
+    def plan(self, n_items: int) -> None:
+        """Start no more workers than there are items."""
+        self._workers = max(1, min(self.jobs, n_items))
+
+
+class LocalExecutor(_LocalWorkers):
     """``jobs`` worker processes on this machine.
 
     Parameters
@@ -310,13 +324,6 @@ class LocalExecutor(Executor):
 
     def describe(self) -> str:
         return f"{self._workers} local process{'es' if self._workers != 1 else ''}"
-
-    def parallelism(self) -> int | None:
-        return self.jobs
-
-    def plan(self, n_items: int) -> None:
-        """Start no more processes than there are items."""
-        self._workers = max(1, min(self.jobs, n_items))
 
     def start(self) -> None:
         """Start the fork server now, in a background thread, and return at once.
@@ -453,7 +460,7 @@ class LocalExecutor(Executor):
 # -- local threads --------------------------------------------------------------------------
 
 
-class ThreadExecutor(Executor):
+class ThreadExecutor(_LocalWorkers):
     """``jobs`` threads of this process.
 
     For work whose time is spent in the compiled engine's kernels, which release the GIL
@@ -488,13 +495,6 @@ class ThreadExecutor(Executor):
 
     def describe(self) -> str:
         return f"{self._workers} thread{'s' if self._workers != 1 else ''}"
-
-    def parallelism(self) -> int | None:
-        return self.jobs
-
-    def plan(self, n_items: int) -> None:
-        """Start no more threads than there are items."""
-        self._workers = max(1, min(self.jobs, n_items))
 
     def imap_unordered(self, fn, items, *args):
         """See :meth:`Executor.imap_unordered`."""
