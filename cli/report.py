@@ -36,11 +36,12 @@ def _figure_formats(ctx, param, values) -> tuple[str, ...]:
     type=click.Path(file_okay=False),
     default=None,
     help="Report folder [default: results/reports/<name>: the run's name or the folder's name for "
-    "one input, their names joined by _vs_ for several]. An existing report there sharing an input with "
-    "this one is replaced; one of none of these inputs (another run of the same name) only with --overwrite.",
+    "one input, their names joined by _vs_ for several]. An existing report there of the same inputs (in "
+    "any order) is rebuilt; one of other inputs (another run of the same name, an input more or fewer) "
+    "only with --overwrite.",
 )
 @click.option("--overwrite", is_flag=True,
-              help="Replace a report of none of these inputs in the report folder (without it: refused).")
+              help="Replace a report of other inputs in the report folder (without it: refused).")
 @click.option(
     "--title",
     default=None,

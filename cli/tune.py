@@ -39,10 +39,11 @@ from .sensitivity import study_error
               help="CMA-ES restarts once converged: doubled population (ipop) or alternating large and small "
               "populations (bipop).")
 @click.option("-j", "--jobs", type=int, default=None, metavar="N",
-              help="Worker processes integrating each generation  [default: this process].")
+              help="Threads integrating each generation of up to 1,024 runs on the compiled engine (larger, "
+              "--executor local or another engine: worker processes)  [default: this process].")
 @click.option("--executor", type=click.Choice(["local", "dask"]), default=None,
               help="Where a generation's runs are integrated, as for rbstab sweep  [default: this process, or "
-              "local with -j].")
+              "threads of this process with -j].")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --executor dask).")
 @click.option("--storage", default=None, metavar="URL",

@@ -184,6 +184,33 @@ def test_the_same_call_under_the_guard_is_not_refused(tmp_path):
     assert done.returncode == 0 and "ok" in done.stdout, done.stderr
 
 
+def test_the_kernels_a_batch_calls_from_python_release_the_gil():
+    from rbstab.engine.integrate import integrate_chunk
+    from rbstab.summary import _apply_stencil
+    from rbstab.variants.kernels import run_outputs
+
+    assert all(f.targetoptions.get("nogil") for f in (integrate_chunk, run_outputs, _apply_stencil))
+
+
+def test_the_thread_executor_yields_every_result_and_error_as_data_from_threads_of_this_process():
+    import multiprocessing
+    import threading
+
+    from rbstab.sweep.executors import ThreadExecutor
+
+    def work(item, power):
+        if item == 3:
+            raise ValueError("three")
+        return item**power, threading.current_thread().name
+
+    with ThreadExecutor(2) as executor:
+        executor.plan(7)
+        out = {item: (result, exc) for item, result, exc in executor.imap_unordered(work, range(7), 2)}
+    assert sorted(out) == list(range(7)) and not multiprocessing.active_children()
+    assert isinstance(out[3][1], ValueError) and out[3][0] is None
+    assert all(out[i][0][0] == i**2 and out[i][0][1].startswith("rbstab") for i in out if i != 3)
+
+
 # -- no silent replacement -------------------------------------------------------------------------
 
 
@@ -202,6 +229,29 @@ def test_a_report_of_other_inputs_is_not_replaced(tmp_path):
     forced = invoke("report", tmp_path / "case2_visco_elastic.h5", "-o", out, "--format", "md", "--overwrite",
                     "--no-animations", "-q")
     assert forced.exit_code == 0 and "case2" in (out / "report.json").read_text()
+
+
+def test_a_report_of_an_input_more_or_fewer_is_not_replaced_and_the_same_inputs_rebuild_it(tmp_path):
+    """The same set of inputs (in any order) rebuilds the report; a subset or a superset of
+    them is another comparison: refused, naming the folder and the inputs that differ."""
+    assert invoke("run", CASE1, CASE2, "-o", tmp_path, *SHORT, "-qq").exit_code == 0
+    one, two = tmp_path / "case1_permanent.h5", tmp_path / "case2_visco_elastic.h5"
+    out = tmp_path / "report"
+    fast = ["-o", out, "--format", "md", "--no-animations", "-q"]
+    assert invoke("report", one, two, *fast).exit_code == 0
+    before = (out / "report.json").read_text()
+    fewer = invoke("report", one, *fast)
+    assert fewer.exit_code == 1 and f"{out} holds a report of other inputs" in fewer.stderr
+    assert f"only there: {two.resolve()}" in fewer.stderr and "only here" not in fewer.stderr
+    assert "--overwrite" in fewer.stderr and "-o DIR" in fewer.stderr and "Traceback" not in fewer.output
+    assert (out / "report.json").read_text() == before
+    rebuilt = invoke("report", two, one, *fast)  # the same inputs, another order
+    assert rebuilt.exit_code == 0, rebuilt.output
+    assert sorted(json.loads((out / "report.json").read_text())["inputs"]) == sorted(json.loads(before)["inputs"])
+    assert invoke("report", one, *fast, "--overwrite").exit_code == 0
+    more = invoke("report", one, two, *fast)
+    assert more.exit_code == 1 and f"only here: {two.resolve()}" in more.stderr
+    assert json.loads((out / "report.json").read_text())["inputs"] == [str(one.resolve())]
 
 
 def test_a_cli_sweep_with_another_grid_does_not_replace_the_first(tmp_path):

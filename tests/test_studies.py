@@ -8,6 +8,8 @@ the hundreds of runs of a study take seconds.
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -147,6 +149,49 @@ def test_a_generation_is_one_engine_batch(config, tmp_path, monkeypatch):
                   generation=16, startup=16, over=["body.mass=scale_uniform:[0.9,1.1]"], over_n=4)
     assert result.n_trials == 40
     assert calls == [64, 64, 32]
+
+
+def test_tune_with_jobs_integrates_each_generation_in_threads_with_the_same_trials(config, tmp_path, monkeypatch):
+    """-j 2 on the compiled engine: each generation in two threads of this process (no
+    worker process), and the same trials as in this process alone."""
+    import threading
+
+    import rbstab.studies.batch
+
+    names = []
+    part = rbstab.studies.batch.integrate_part
+
+    def recorded(item, engine="compiled"):
+        names.append(threading.current_thread().name)
+        return part(item, engine)
+
+    monkeypatch.setattr(rbstab.studies.batch, "integrate_part", recorded)
+    common = dict(trials=32, minimize=["lyapunov_final"], storage="memory", generation=16, startup=16)
+    alone = tune(config, TUNE_VARY, output=tmp_path / "one", **common)
+    assert names and all(n == threading.main_thread().name for n in names)
+    names.clear()
+    threaded = tune(config, TUNE_VARY, output=tmp_path / "two", jobs=2, **common)
+    assert len(names) == 4 and all(n.startswith("rbstab") for n in names)  # 2 generations x 2 slices
+    assert (tmp_path / "one" / "free_study" / "trials.csv").read_text() == \
+        (tmp_path / "two" / "free_study" / "trials.csv").read_text()
+    assert threaded.best_values == alone.best_values
+
+
+def test_tune_with_jobs_at_a_scripts_top_level_runs_once(config, tmp_path):
+    """Threads start no process: a script need not guard tune(jobs=2)."""
+    path = tmp_path / "free.yaml"
+    path.write_text(rbstab.config.dump_yaml(config.resolved))
+    script = tmp_path / "script.py"
+    script.write_text(
+        "import rbstab\n"
+        "print('top')\n"
+        f"r = rbstab.tune(rbstab.load_config({str(path)!r}), {TUNE_VARY!r}, minimize=['lyapunov_final'], trials=16, generation=8,\n"
+        f"                startup=8, storage='memory', output={str(tmp_path)!r}, jobs=2)\n"
+        "print('trials', r.n_trials)\n")
+    done = subprocess.run([sys.executable, "-W", "ignore", str(script)], capture_output=True, text=True, timeout=300,
+                          cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.count("top") == 1 and "trials 16" in done.stdout
 
 
 def test_a_generation_equals_its_runs_one_by_one(config):

@@ -488,10 +488,11 @@ def write_report(inputs: str | os.PathLike | Sequence[str | os.PathLike], output
         (``*.analysis.nc``), in any mix.
     output : path-like, optional
         The report folder (default under ``results/reports/``); an earlier report there
-        that shares an input with this one is replaced, one of none of these inputs only
-        with ``overwrite=True``, any other non-empty folder refused.
+        of the same inputs (in any order) is rebuilt, one of other inputs (an input more or
+        fewer, another run of the same name) only with ``overwrite=True``, any other
+        non-empty folder refused.
     overwrite : bool
-        Replace an earlier report of none of these inputs.
+        Replace an earlier report of other inputs.
     **options
         Fields of :class:`rbstab.report.ReportOptions` (``formats``, ``metrics``,
         ``settle``, ``title``, ``figure_formats``, ``dpi``, ``animation_frames``, ``jobs``).

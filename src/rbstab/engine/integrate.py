@@ -472,7 +472,7 @@ def _run(code, p, y0, s, samples, work_done):
     return SUCCESS, t, nfev, n_steps, j
 
 
-@jit
+@jit(nogil=True)  # no Python object inside: threads run it in parallel
 def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
     """:func:`integrate_run` for every run k of a chunk.
 

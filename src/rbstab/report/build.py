@@ -5,7 +5,8 @@ Order of work, so that bad input never leaves anything behind:
 1. validate the options (metric names, thresholds, formats);
 2. read and check every input (:func:`rbstab.report.load.load_inputs`);
 3. check the output folder: it may be absent, empty, or hold an earlier report
-   (``report.json``), which is then replaced; anything else is refused;
+   (``report.json``) of the same inputs, which is then replaced (of other inputs: only
+   with ``overwrite``); anything else is refused;
 4. write everything into a temporary folder beside the target and rename it into place.
 
 Layout of the report folder::
@@ -217,14 +218,26 @@ def _check_output(target: Path, paths: Sequence[Path] = (), overwrite: bool = Tr
         before = json.loads((target / MANIFEST).read_text(encoding="utf-8")).get("inputs") or []
     except (OSError, ValueError, AttributeError):
         before = []
-    # a report of none of these inputs (another run or sweep of the same name): refused; one
-    # that shares an input (the same comparison, an input more or less) is replaced as before
-    if before and not set(map(str, before)) & {str(p) for p in paths}:
-        shown = ", ".join(before[:3]) + (f" and {len(before) - 3} more" if len(before) > 3 else "")
+    # the same set of inputs (in any order): rebuilt in place; any other set (another run of
+    # the same name, an input more or fewer) is another comparison: refused unless overwrite
+    before_set = {str(p) for p in before}
+    now_set = {str(p) for p in paths}
+    if before and before_set != now_set:
+        missing = sorted(before_set - now_set)
+        added = sorted(now_set - before_set)
+        parts = []
+        if missing:
+            parts.append("only there: " + _shown(missing))
+        if added:
+            parts.append("only here: " + _shown(added))
         raise ReportError(
-            f"{target} holds a report of other inputs ({shown or 'unknown'}): not replaced; --overwrite "
-            "(overwrite=True) replaces it, -o DIR writes elsewhere"
+            f"{target} holds a report of other inputs ({'; '.join(parts) or 'unknown'}): not replaced; "
+            "--overwrite (overwrite=True) replaces it, -o DIR writes elsewhere"
         )
+
+
+def _shown(paths: Sequence[str], limit: int = 3) -> str:
+    return ", ".join(paths[:limit]) + (f" and {len(paths) - limit} more" if len(paths) > limit else "")
 
 
 # -- tables ---------------------------------------------------------------------------
@@ -467,11 +480,11 @@ def build_report(
     output : path-like, optional
         Report folder; default ``results/reports/<name>``, ``<name>`` made of the inputs'
         names (:func:`default_report_name`). If it exists it must be empty or an earlier
-        report sharing an input with this one, which is replaced (one of none of these
-        inputs: only with ``overwrite``).
+        report of the same inputs in any order, which is rebuilt (of other inputs: only
+        with ``overwrite``).
     options : ReportOptions, optional
     overwrite : bool
-        Replace an earlier report of none of these inputs (else refused: ReportError).
+        Replace an earlier report of other inputs (else refused: ReportError).
 
     Returns
     -------

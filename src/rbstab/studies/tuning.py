@@ -55,7 +55,7 @@ from ..config.paths import set_dotted
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
 from ..results import plain
-from ..engine.registry import DEFAULT_ENGINE
+from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.atomic import write_text_atomic
 from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
@@ -514,9 +514,13 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     restarts : {"ipop", "bipop", "none"}
         CMA-ES's restarts (:mod:`rbstab.studies.search`).
     jobs, executor, scheduler
-        Where a generation's runs are integrated: this process (default), ``jobs`` local
-        processes (``executor="local"``) or a Dask cluster (``executor="dask"`` with a
-        ``scheduler`` address), or an Executor object (not closed here), as a sweep's.
+        Where a generation's runs are integrated: this process (default); with ``jobs`` > 1
+        and no ``executor``, ``jobs`` threads of this process for a generation of at most
+        :data:`THREADS_MAX_RUNS` runs (trials x bodies) on the compiled engine (no
+        ``if __name__ == "__main__":`` guard needed), else local processes;
+        ``jobs`` local processes (``executor="local"``), a Dask cluster
+        (``executor="dask"`` with a ``scheduler`` address), or an Executor object (not
+        closed here), as a sweep's.
 
     overwrite : bool
         Replace a study of other inputs (objectives, constraints, vary, base config) in
@@ -581,7 +585,8 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     if budget > 0:
         say(f"{name}: {done} complete trials in {storage}; running {budget} more, in generations of "
             f"{population if sampler == 'cmaes' else size} ({problem.engine} engine)")
-    with _executor(executor, jobs, scheduler) as ex:
+    generation_runs = (population if sampler == "cmaes" else size) * max(len(problem.bodies), 1)
+    with _executor(executor, jobs, scheduler, generation_runs <= THREADS_MAX_RUNS and _threads_take(problem)) as ex:
         while budget > 0:
             if done >= trials:
                 break
@@ -623,11 +628,40 @@ def _sync(study, known, seen: set, token: str) -> list:
     return stored
 
 
-def _executor(executor: Any, jobs: int | None, scheduler: str | None):
+#: Largest generation (trials x bodies) integrated in threads with ``jobs`` > 1; a larger one
+#: goes to worker processes. Up to ~2,000 runs a batch, threads are as fast as warm worker
+#: processes; above, the post-processing's Python parts, which hold the GIL, make them
+#: ~10 % slower (benchmarks/threads.py).
+THREADS_MAX_RUNS = 1024
+
+#: Keys whose variation can take a run off the compiled engine's batches (an implicit
+#: method, the pure sign law): such a study keeps worker processes for ``jobs``.
+_OFF_BATCH_KEYS = ("simulation.method", "controller.variant", "controller.boundary_layer")
+
+
+def _threads_take(problem: TuningProblem) -> bool:
+    """Whether every run of the study goes through the compiled engine's batches, whose
+    kernels release the GIL (the runs one by one from their configurations would not)."""
+    from ..simulator import uses_compiled_engine  # heavy: numba
+
+    return (not get_engine(problem.engine).gpu and uses_compiled_engine(problem.base, problem.engine)
+            and not any(v.key.startswith(_OFF_BATCH_KEYS) for v in problem.varied)
+            and not any(k.startswith(_OFF_BATCH_KEYS) for body in problem.bodies for k in body))
+
+
+def _executor(executor: Any, jobs: int | None, scheduler: str | None, threads: bool = False):
     """The executor of a generation's runs as a context manager: None (this process) where
-    neither ``executor`` nor ``jobs`` > 1 asks for one; one made by name is closed at the end."""
+    neither ``executor`` nor ``jobs`` > 1 asks for one; ``jobs`` threads of this process
+    where ``threads`` (:func:`_threads_take`, a generation of at most
+    :data:`THREADS_MAX_RUNS` runs) and no ``executor`` is named (the compiled kernels
+    release the GIL: as fast as worker processes there, with nothing started, pickled or
+    imported again); one made by name is closed at the end."""
     if executor is None and (jobs is None or jobs <= 1) and scheduler is None:
         return contextlib.nullcontext(None)
+    if executor is None and scheduler is None and threads:
+        from ..sweep.executors import ThreadExecutor  # heavy: concurrent.futures
+
+        return ThreadExecutor(jobs)
     if executor is None or isinstance(executor, str):
         from ..sweep.executors import ExecutorError, make_executor  # heavy: concurrent.futures, dask (with -j)
 

@@ -39,7 +39,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from multiprocessing import forkserver
 from typing import Any
@@ -48,6 +48,7 @@ from urllib.parse import urlsplit
 __all__ = [
     "Executor",
     "LocalExecutor",
+    "ThreadExecutor",
     "DaskExecutor",
     "ExecutorError",
     "default_jobs",
@@ -263,7 +264,21 @@ def _mp_context(preload: tuple[str, ...] = FORKSERVER_PRELOAD):
     return ctx
 
 
-class LocalExecutor(Executor):
+class _LocalWorkers(Executor):
+    """``jobs`` workers of this machine (processes or threads), as many started as items."""
+
+    jobs: int
+    _workers: int
+
+    def parallelism(self) -> int | None:
+        return self.jobs
+
+    def plan(self, n_items: int) -> None:
+        """Start no more workers than there are items."""
+        self._workers = max(1, min(self.jobs, n_items))
+
+
+class LocalExecutor(_LocalWorkers):
     """``jobs`` worker processes on this machine.
 
     Parameters
@@ -309,13 +324,6 @@ class LocalExecutor(Executor):
 
     def describe(self) -> str:
         return f"{self._workers} local process{'es' if self._workers != 1 else ''}"
-
-    def parallelism(self) -> int | None:
-        return self.jobs
-
-    def plan(self, n_items: int) -> None:
-        """Start no more processes than there are items."""
-        self._workers = max(1, min(self.jobs, n_items))
 
     def start(self) -> None:
         """Start the fork server now, in a background thread, and return at once.
@@ -447,6 +455,77 @@ class LocalExecutor(Executor):
         for process in processes:
             process.join(timeout=5)
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+# -- local threads --------------------------------------------------------------------------
+
+
+class ThreadExecutor(_LocalWorkers):
+    """``jobs`` threads of this process.
+
+    For work whose time is spent in the compiled engine's kernels, which release the GIL
+    (``nogil``): nothing is started, pickled or imported again, so a script needs no
+    ``if __name__ == "__main__":`` guard. Python code in ``fn`` still runs one thread at a
+    time.
+
+    Parameters
+    ----------
+    jobs : int, optional
+        Number of threads, >= 1 (default :func:`default_jobs`).
+    max_in_flight : int, optional
+        Items submitted ahead (default ``2 * jobs``).
+
+    Raises
+    ------
+    ExecutorError
+        If ``jobs < 1``.
+    """
+
+    name = "threads"
+    return_bytes = False
+
+    def __init__(self, jobs: int | None = None, *, max_in_flight: int | None = None) -> None:
+        jobs = default_jobs() if jobs is None else int(jobs)
+        if jobs < 1:
+            raise ExecutorError(f"-j/--jobs: found {jobs}; expected a number of threads >= 1")
+        self.jobs = jobs
+        self.max_in_flight = max_in_flight or 2 * jobs
+        self._workers = jobs
+        self._pool: ThreadPoolExecutor | None = None
+
+    def describe(self) -> str:
+        return f"{self._workers} thread{'s' if self._workers != 1 else ''}"
+
+    def imap_unordered(self, fn, items, *args):
+        """See :meth:`Executor.imap_unordered`."""
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self._workers, thread_name_prefix="rbstab")
+        pending = iter(items)
+        in_flight: dict = {}
+        exhausted = False
+        while True:
+            while len(in_flight) < self.max_in_flight and not exhausted:
+                try:
+                    item = next(pending)
+                except StopIteration:
+                    exhausted = True
+                    break
+                in_flight[self._pool.submit(fn, item, *args)] = item
+            if not in_flight:
+                return
+            done, _ = wait(list(in_flight), return_when=FIRST_COMPLETED)
+            for future in done:
+                item = in_flight.pop(future)
+                try:
+                    result, error = future.result(), None
+                except Exception as exc:
+                    result, error = None, exc
+                yield item, result, error
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
 
 
 # -- Dask -----------------------------------------------------------------------------------

@@ -286,7 +286,7 @@ def state_rates(code, t, y, params, out):
         state_rate(code, t[min(k, t.shape[0] - 1)], y[k], params[min(k, params.shape[0] - 1)], out[k])
 
 
-@jit
+@jit(nogil=True)  # no Python object inside: threads run it in parallel
 def run_outputs(codes, params, times, samples, out, full):
     """Outputs of k runs: ``samples`` (k, n_samples, n_state) at ``times`` (k or 1,
     n_samples) of runs with variant ``codes`` (k,) and ``params`` (k,) into ``out``
