@@ -53,8 +53,11 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
         y = np.zeros((1, n))
         if "rates" in wanted:
             state_rates(code, np.zeros(1), y, params, np.empty_like(y))
-        if "outputs" in wanted:
-            run_outputs(np.array([code]), params, np.zeros((1, 1)), y[None], np.empty((N_OUTPUTS, 1, 1)), True)
+        if "outputs" in wanted:  # sample times writable (a batch's) and read-only (a run's grid): two signatures
+            fixed = np.zeros((1, 1))
+            fixed.setflags(write=False)
+            for times in (np.zeros((1, 1)), fixed):
+                run_outputs(np.array([code]), params, times, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
     if "outputs" in wanted:
         numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
     if "rates" in wanted:
