@@ -124,7 +124,7 @@ def _push_options(push, point, n_directions, directions, at, push_max, tol, rung
     given = [_vector("--push-direction", d) for d in directions]
     push_options = stability = None
     try:
-        if push is not None and distribution is None or push is not None and (n_directions or given):
+        if push is not None and (distribution is None or n_directions is not None or given):
             push_options = {"kind": push, "directions": given or (n_directions if n_directions is not None else 64),
                             "point": point, "at": at, "push_max": push_max, "tol": tol, "rungs": rungs, "seed": seed}
             check_push_options(push, **{k: v for k, v in push_options.items() if k not in ("kind", "seed")})

@@ -8,6 +8,8 @@
   sublevel-set estimate of the region of attraction;
 - :mod:`~rbstab.analysis.basin`: the basin of attraction over a 2-D slice, by simulation;
 - :mod:`~rbstab.analysis.robustness`: stable fraction and separating parameters of a sweep;
+- :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin
+  stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
 - :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;
 - :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record.
 

@@ -36,15 +36,16 @@ import math
 import time as _time
 import warnings
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 
-from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
 
-__all__ = ["PUSH_KINDS", "RECOVERY_RULE", "PushAnalysis", "Pushes", "push_directions", "push_thresholds",
-           "push_analysis", "check_push_options"]
+__all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
+           "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
+           "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch"]
 
 #: Quantity of a push -> the units of its magnitude.
 PUSH_KINDS = {"force": "N s", "torque": "N m s"}
@@ -125,9 +126,10 @@ def _take(batch, rows: np.ndarray):
     return type(batch)(**{f.name: getattr(batch, f.name)[rows] for f in dataclasses.fields(batch)})
 
 
-def integrate_pushes(batch, engine: str) -> np.ndarray:
-    """(success, v(0) [J], v(t_end) [J]) of the runs of ``batch`` as one array of shape
-    (3, k) (the function a worker runs)."""
+def batch_outcomes(batch, engine: str) -> np.ndarray:
+    """The outcomes of the k runs of ``batch`` (a :class:`rbstab.engine.RunBatch`) on
+    ``engine`` as one array of shape (3, k): success (1: status ``success``, else 0), v(0)
+    [J] and v(t_end) [J] (NaN for a run that stopped early). The function a worker runs."""
     from ..simulator import simulate_batch  # heavy: numba
 
     out = np.full((3, len(batch)), np.nan)
@@ -169,7 +171,6 @@ class Pushes:
         from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping  # heavy: pydantic
         from ..engine.batch import batch_from_table  # heavy: numba
         from ..model import MAX_DISTURBANCES  # heavy: numba
-        from ..variants.disturbances import apply_impulses  # heavy: numba
 
         self.kind, self.at, self.ratio, self.engine, self.executor = kind, float(at), float(ratio), engine, executor
         self.point = np.zeros(3) if point is None else np.asarray(point, dtype=float)
@@ -224,17 +225,17 @@ class Pushes:
                 record[name][0] = record[name][self.index]
         self._record = record
         self._permanent = variant.name == "permanent"
-        self._jump = apply_impulses
         self.runs = 0
         self.batches = 0
 
     def energy(self, vectors: np.ndarray) -> np.ndarray:
         """dT [J] of each push of ``vectors`` (k, 3) on the body at rest at its equilibrium."""
+        from ..variants.disturbances import apply_impulses  # heavy: numba
         out = np.empty(len(vectors))
         for i, p in enumerate(np.asarray(vectors, dtype=float)):
             self._record["disturbance_value"][0] = p
             y = self.equilibrium.copy()
-            out[i] = self._jump(self._permanent, self.at, y, self._record)
+            out[i] = apply_impulses(self._permanent, self.at, y, self._record)
         return out
 
     def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
@@ -255,11 +256,11 @@ class Pushes:
 
 
 def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
-    """:func:`integrate_pushes` of a batch, in slices of at least :data:`MIN_SLICE` runs
+    """:func:`batch_outcomes` of a batch, in slices of at least :data:`MIN_SLICE` runs
     over ``executor``'s workers (None: this process)."""
     workers = (executor.parallelism() or 1) if executor is not None else 1
     if workers <= 1 or len(batch) < 2 * MIN_SLICE:
-        return integrate_pushes(batch, engine)
+        return batch_outcomes(batch, engine)
     size = max(MIN_SLICE, -(-len(batch) // workers))
     slices = [np.arange(lo, min(lo + size, len(batch))) for lo in range(0, len(batch), size)]
     out = np.full((3, len(batch)), np.nan)
@@ -273,8 +274,8 @@ def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
 
 
 def _integrate_slice(item, engine: str):
-    """:func:`integrate_pushes` of an executor's item (rows, batch)."""
-    return integrate_pushes(item[1], engine)
+    """:func:`batch_outcomes` of an executor's item (rows, batch)."""
+    return batch_outcomes(item[1], engine)
 
 
 @dataclass
@@ -293,6 +294,8 @@ class Thresholds:
     ladder : ndarray, shape (d, rungs)
         The ladder's magnitudes.
     ladder_recovered : ndarray of bool, shape (d, rungs)
+    unit_energy : ndarray, shape (d,)
+        dT [J] of a push of magnitude 1 along each direction.
     """
 
     threshold: np.ndarray
@@ -300,6 +303,7 @@ class Thresholds:
     monotone: np.ndarray
     ladder: np.ndarray
     ladder_recovered: np.ndarray
+    unit_energy: np.ndarray
 
 
 def _bracket_by_doubling(pushes: Pushes, u: np.ndarray, unit_energy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -369,7 +373,8 @@ def push_thresholds(pushes: Pushes, directions: np.ndarray, *, push_max: float |
         rec = pushes.recovered(mid[:, None] * u[active], unit_energy[active] * mid ** 2)
         lo[active[rec]] = mid[rec]
         hi[active[~rec]] = mid[~rec]
-    return Thresholds(threshold=hi, recovering=lo, monotone=monotone, ladder=ladder, ladder_recovered=recovered)
+    return Thresholds(threshold=hi, recovering=lo, monotone=monotone, ladder=ladder, ladder_recovered=recovered,
+                      unit_energy=unit_energy)
 
 
 def _around(u: np.ndarray, angle: float, m: int, rng: np.random.Generator) -> np.ndarray:
@@ -432,7 +437,6 @@ class PushAnalysis:
     runs: int = 0
     batches: int = 0
     seconds: float = 0.0
-    notes: list = field(default_factory=list)
 
     @property
     def rule_text(self) -> str:
@@ -562,7 +566,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     return PushAnalysis(name=config.name, kind=kind, units=PUSH_KINDS[kind],
                         point=pushes.point if kind == "force" else np.zeros(3), at=float(at), tol=float(tol),
                         ratio=float(ratio), rungs=int(rungs), directions=u, thresholds=found,
-                        unit_energy=pushes.energy(u),
+                        unit_energy=found.unit_energy,
                         refined_directions=refined_u, refined_thresholds=refined_t, engine=engine, runs=pushes.runs,
                         batches=pushes.batches, seconds=_time.perf_counter() - start)
 
@@ -814,7 +818,6 @@ def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, eng
                 raise ValueError(f"--basin-stability {axis.key}={lo:g}:{hi:g}: the box reaches |theta_2| >= "
                                  f"{limit:.4g} rad: {OUTSIDE.split(': ', 1)[1]}")
         batch.y0[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
-    from ..convergence import converged  # the rule's one owner, beside its use
 
     ok, v0, v1 = integrate_batch(batch, engine, executor)
     return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool), v0
