@@ -81,7 +81,9 @@ def test_state_rate_adds_what_the_numpy_reference_adds(name):
 @pytest.mark.parametrize("name", ["free", "permanent", "visco_elastic", "embedded"])
 def test_v_minus_w_never_rises_and_engines_agree(name):
     """With unsaturated gains dv/dt = -dissipation + P, so v - W never increases (every kind,
-    impulses included); the scipy path takes the compiled engine's steps (same breakpoints)."""
+    impulses included); the scipy path takes the compiled engine's steps (same breakpoints).
+    W is two formulations of one integral (the compiled engine integrates it with the state,
+    the scipy path by 5-point Gauss-Legendre along its steps): they agree to 1e-9 of max |W|."""
     config = config_from_mapping(_mapping(name, PUSHES))
     results = {engine: simulate(config, engine=engine) for engine in ("compiled", "scipy")}
     for r in results.values():
@@ -91,8 +93,10 @@ def test_v_minus_w_never_rises_and_engines_agree(name):
         assert np.any(w != 0.0)
     a, b = results["compiled"], results["scipy"]
     assert a.solver["nfev"] == b.solver["nfev"]
-    for key in ("theta", "omega", "disturbance_work", "lyapunov"):
+    for key in ("theta", "omega", "lyapunov"):
         np.testing.assert_allclose(a.outputs[key], b.outputs[key], rtol=1e-9, atol=1e-11)
+    w = b.outputs["disturbance_work"]
+    np.testing.assert_allclose(a.outputs["disturbance_work"], w, rtol=0, atol=1e-9 * np.max(np.abs(w)))
 
 
 def test_energy_identity_to_1e_8():

@@ -234,10 +234,12 @@ def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = N
     return t_eval, states, "success", str(sol.message), solver, zero
 
 
-#: Gauss-Legendre nodes on [0, 1] and weights (3 points), as the compiled engine's
-#: :func:`rbstab.engine.integrate.step_work`.
-_GAUSS_NODES = np.array([0.5 - 0.1 * np.sqrt(15.0), 0.5, 0.5 + 0.1 * np.sqrt(15.0)])
-_GAUSS_WEIGHTS = np.array([5.0, 8.0, 5.0]) / 18.0
+#: Gauss-Legendre nodes on [0, 1] and weights (5 points: exact for a power of degree 9
+#: along a step; DOP853's interpolant is of degree 7, and 3 points left ~1e-8 of W) of the
+#: reference's quadrature of W (the compiled engines integrate W with the state instead:
+#: two formulations of one integral).
+_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(5)
+_GAUSS_NODES, _GAUSS_WEIGHTS = 0.5 * (_GAUSS_NODES + 1.0), 0.5 * _GAUSS_WEIGHTS
 
 
 def _breakpoints(p: np.void, t_end: float) -> list[float]:
@@ -253,14 +255,14 @@ def _breakpoints(p: np.void, t_end: float) -> list[float]:
 
 def _step_work(variant: Variant, dense, t0: float, t1: np.ndarray) -> np.ndarray:
     """The disturbances' work [J] from t0 to each of ``t1`` along ``dense`` (one step's
-    interpolant; 3-point Gauss-Legendre, as the compiled engine)."""
+    interpolant; 5-point Gauss-Legendre)."""
     t1 = np.atleast_1d(np.asarray(t1, dtype=float))
     span = t1 - t0
     nodes = (t0 + span[:, None] * _GAUSS_NODES[None, :]).ravel()
     ys = np.ascontiguousarray(np.asarray(dense(nodes), dtype=float).T.reshape(len(nodes), -1))
     power = np.empty(len(nodes))
     state_powers(variant.code, nodes, ys, variant.parameters, power)
-    return span * (power.reshape(len(t1), 3) @ _GAUSS_WEIGHTS)
+    return span * (power.reshape(len(t1), len(_GAUSS_NODES)) @ _GAUSS_WEIGHTS)
 
 
 def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float | None):

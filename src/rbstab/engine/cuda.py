@@ -6,8 +6,8 @@ the same Python source (:func:`rbstab.variants.kernels.state_rate`,
 :func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
 :func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
 :func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.admissible_event`,
-:func:`~rbstab.engine.integrate.locate_event`, :func:`~rbstab.engine.integrate.step_work`,
-:func:`~rbstab.engine.integrate.restart`, the disturbances'
+:func:`~rbstab.engine.integrate.locate_event`, :func:`~rbstab.engine.integrate.restart`,
+the disturbances'
 :func:`~rbstab.variants.disturbances.apply_impulses` and
 :func:`~rbstab.variants.disturbances.next_breakpoint`, and the streaming summary of
 :mod:`rbstab.summary`). Only the driver loop is written here:
@@ -22,9 +22,9 @@ the first step; no step crosses a breakpoint (an edge of a disturbance's window)
 stage of a step that ends at one evaluates at or after it; at a breakpoint its impulses
 are applied and a new initial step is taken; a sample at a breakpoint shows the state
 just after it, and the last sample the state after the impulses at t_end. The work W [J]
-of the disturbances is integrated along each step's interpolant (3-point Gauss-Legendre)
-plus each impulse's jump of kinetic energy, and written as each sample's
-``disturbance_work``.
+of the disturbances is one more entry of the integrated vector after the state (its rate
+their power; each impulse adds its jump of kinetic energy; left out of the error norms),
+sampled with the state as each sample's ``disturbance_work``.
 
 A run gives what the CPU engine gives, computed as it goes: its status, stop time,
 right-hand-side evaluations and steps, the outputs at its last sample, the summary
@@ -78,7 +78,7 @@ from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, sten
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
 from .integrate import (REJECTED, _limit_of, admissible_event, attempt_step, locate_event, restart, sample_time,
-                        step_bounds, step_exit, step_work)
+                        step_bounds, step_exit)
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
 from .settings import SETTINGS, Work
 from .tableaus import METHODS
@@ -213,24 +213,26 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
     (method, state size) kernel has cache files of its own on disk.
 
     ``disturbances`` False gives a kernel without the driver's steps for disturbances
-    (breakpoints, impulses, work), wrong for a run with disturbances: what
-    ``benchmarks/gpu.py`` compares the registers and local memory of the kernel with."""
+    (breakpoints, impulses, the work W after the state in its work arrays), wrong for a
+    run with disturbances: what ``benchmarks/gpu.py`` compares the registers and local
+    memory of the kernel with."""
     from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
     dop853 = method == DOP853
     parameters = from_dtype(PARAMETERS)
+    n_vec = n_state + 1 if disturbances else n_state  # the integrated vector: the state, then W
 
     def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, control, limit_ns,
                 status_o, t_stop_o, nfev_o, n_steps_o, last_o, acc_o, trace_o):
-        K = cuda.local.array((n_rows, n_state), float64)
-        Q = cuda.local.array((q_rows, n_state), float64)
-        y = cuda.local.array(n_state, float64)
-        f = cuda.local.array(n_state, float64)
-        y_new = cuda.local.array(n_state, float64)
-        scale = cuda.local.array(n_state, float64)
-        work = cuda.local.array(n_state, float64)
-        sample = cuda.local.array(n_state, float64)
+        K = cuda.local.array((n_rows, n_vec), float64)
+        Q = cuda.local.array((q_rows, n_vec), float64)
+        y = cuda.local.array(n_vec, float64)
+        f = cuda.local.array(n_vec, float64)
+        y_new = cuda.local.array(n_vec, float64)
+        scale = cuda.local.array(n_state, float64)  # the error norms take the state's entries
+        work = cuda.local.array(n_vec, float64)
+        sample = cuda.local.array(n_vec, float64)
         row = cuda.local.array(N_OUTPUTS, float64)
         acc = cuda.local.array(ACCUMULATOR_SIZE, float64)
         record = cuda.local.array(1, parameters)
@@ -262,7 +264,6 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
             disturbed = disturbances and params[shared].disturbance_count > 0.0
             permanent = code == PERMANENT
-            done = 0.0  # the disturbances' work W [J] from 0 to t
             stream_start(acc)
             for i in range(N_OUTPUTS):  # outputs not computed (rbstab.layout.LEFT_OUT) stay NaN
                 row[i] = math.nan
@@ -281,8 +282,10 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
             else:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
+                for i in range(n_state, n_vec):
+                    y[i] = 0.0  # W [J] from 0 to t
                 if disturbed:  # the impulses at t = 0; the steps stop at the first breakpoint
-                    done += apply_impulses(permanent, 0.0, y, p)
+                    y[n_state] += apply_impulses(permanent, 0.0, y, p)
                     t_bound = next_breakpoint(p, 0.0, t_end)
                     t_lim = _limit_of(t_bound, t_end)
                 margin, left = admissible_event(code, y, p, limit)
@@ -317,7 +320,7 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                 margin_new = admissible_event(code, y_new, p, limit)[0]
                 event = margin >= 0 and margin_new <= 0
                 at_break = disturbed and t_new == t_bound and t_bound < t_end
-                if event or bounded or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+                if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
                     nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
                 x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), work)
                 event = x_out > 0.0
@@ -328,9 +331,9 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                                          else sample_time(j, n_samples, t_end) <= t_stop):
                     x = (sample_time(j, n_samples, t_end) - t) / h
                     dense_value(x, h, y, Q, dop853, sample)
-                    done_here = done
+                    done_here = 0.0
                     if disturbed:
-                        done_here += step_work(permanent, p, t, h, x, y, Q, dop853, work)
+                        done_here = sample[n_state]
                         if j == n_samples - 1 and not event:  # at t_end: the state after its impulses
                             jump = apply_impulses(permanent, t_end, y_new, p)
                             if jump != 0.0:
@@ -346,15 +349,13 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
                     status = left
                     t = t_stop
                     break
-                if disturbed:
-                    done += step_work(permanent, p, t, h, 1.0, y, Q, dop853, work)
                 t = t_new
                 margin = margin_new
-                for i in range(n_state):
+                for i in range(n_vec):
                     y[i] = y_new[i]
                     f[i] = K[n_stages, i]
                 if at_break:  # the impulses that start here; a new initial step from here
-                    done += apply_impulses(permanent, t, y, p)
+                    y[n_state] += apply_impulses(permanent, t, y, p)
                     margin, left = admissible_event(code, y, p, limit)
                     if margin < 0:  # an impulse took the state out of the admissible region
                         status = left
@@ -453,7 +454,7 @@ def occupancy(fn, n_state: int) -> int:
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
 DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
                     "step_exit", "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
-                    "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "step_work", "restart")
+                    "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "restart")
 
 
 def _plain(value):

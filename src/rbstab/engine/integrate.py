@@ -26,7 +26,7 @@ from numba.core.extending import intrinsic
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..variants.disturbances import apply_impulses, before, next_breakpoint, state_power
+from ..variants.disturbances import apply_impulses, before, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
@@ -150,7 +150,7 @@ def attempt_step(code, p, s, span, y, f, h_abs, rejected, w):
     h = t_new - t
     h_abs = abs(h)
     rk_step(code, p, t, t_lim, y, f, h, method, w)
-    for i in range(y.shape[0]):
+    for i in range(scale.shape[0]):  # the state's entries (not a work W after them)
         scale[i] = atol + max(abs(y[i]), abs(y_new[i])) * rtol
     norm = error_norm(K, h, scale, method)
     if norm < 1:
@@ -354,25 +354,6 @@ def integrate_run(code, p, y0, s, samples, work_done):
     return status, t_stop, nfev, n_steps
 
 
-#: Gauss-Legendre nodes on [0, 1] and weights of :func:`step_work` (3 points: exact for a
-#: power of degree 5 along the step).
-_GAUSS_NODES = (0.5 - 0.1 * math.sqrt(15.0), 0.5, 0.5 + 0.1 * math.sqrt(15.0))
-_GAUSS_WEIGHTS = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
-
-
-@jit(forceinline=True)
-def step_work(permanent, p, t, h, x, y_old, Q, dop853, out):
-    """The work [J] of the disturbances from t to t + x h along the step's interpolant
-    (3-point Gauss-Legendre; ``out``: a state-sized scratch array). A step never crosses
-    a breakpoint, so the power is smooth along it."""
-    total = 0.0
-    for i in range(3):
-        xi = x * _GAUSS_NODES[i]
-        dense_value(xi, h, y_old, Q, dop853, out)
-        total += _GAUSS_WEIGHTS[i] * state_power(permanent, t + xi * h, out, p)
-    return total * x * h
-
-
 @jit(forceinline=True)
 def restart(code, p, s, t, y, f, w):
     """Start again from a breakpoint t of the disturbances (its impulses applied to y) as a
@@ -392,23 +373,27 @@ def _run(code, p, y0, s, samples, work_done):
     With disturbances, the integration stops at each breakpoint (:func:`rbstab.variants.
     disturbances.next_breakpoint`), applies the impulses that start there and starts again
     as a new solve_ivp from there would (a new initial step); the samples at a breakpoint
-    show the state just after it."""
+    show the state just after it. Their work W is integrated as one more entry after the
+    state (its rate the disturbances' power, :func:`~rbstab.variants.kernels.state_rate`;
+    an impulse adds its jump of kinetic energy), by the same steps and interpolant, and
+    left out of the error norms: the state takes the steps it takes without it."""
     max_wall_time, t_end, method = s.max_wall_time, s.t_end, s.method
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     n_samples = samples.shape[0]
     dop853 = method == DOP853
-    w = work_arrays(method, n)
-    K, Q, y_new, scratch = w.K, w.Q, w.y_new, w.work
-    y = y0.copy()
-    f = np.empty(n)
-    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
     disturbed = p.disturbance_count > 0.0
+    m = n + 1 if disturbed else n  # the integrated vector: the state, and W at [n]
+    w = work_arrays(method, m, n)
+    K, Q, y_new, scratch = w.K, w.Q, w.y_new, w.work
+    y = np.zeros(m)
+    y[:n] = y0
+    f = np.empty(m)
+    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
     permanent = code == PERMANENT
-    work = 0.0
     t_bound = t_end
     if disturbed:
-        work += apply_impulses(permanent, 0.0, y, p)
+        y[n] += apply_impulses(permanent, 0.0, y, p)
         t_bound = next_breakpoint(p, 0.0, t_end)
     margin, left = admissible_event(code, y, p, limit)
     if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
@@ -436,7 +421,7 @@ def _run(code, p, y0, s, samples, work_done):
         event = margin >= 0 and margin_new <= 0
         bounded = p.limited != 0.0
         at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
-        if event or bounded or disturbed or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+        if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
             nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
         x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), scratch)
         event = x_out > 0.0
@@ -446,19 +431,23 @@ def _run(code, p, y0, s, samples, work_done):
         while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
                                  else sample_time(j, n_samples, t_end) <= t_stop):
             x = (sample_time(j, n_samples, t_end) - t) / h
-            dense_value(x, h, y, Q, dop853, samples[j])
-            work_done[j] = work + step_work(permanent, p, t, h, x, y, Q, dop853, scratch) if disturbed else 0.0
+            if disturbed:
+                dense_value(x, h, y, Q, dop853, scratch)
+                for i in range(n):
+                    samples[j, i] = scratch[i]
+                work_done[j] = scratch[n]
+            else:
+                dense_value(x, h, y, Q, dop853, samples[j])
+                work_done[j] = 0.0
             j += 1
         if event:
             return left, t_stop, nfev, n_steps, j
-        if disturbed:
-            work += step_work(permanent, p, t, h, 1.0, y, Q, dop853, scratch)
         t = t_new
         y[:] = y_new
         f[:] = f_new
         margin = margin_new
         if at_break:  # apply the impulses that start here, and start again from here
-            work += apply_impulses(permanent, t, y, p)
+            y[n] += apply_impulses(permanent, t, y, p)
             margin, left = admissible_event(code, y, p, limit)
             if margin < 0:  # an impulse took the state out of the admissible region
                 return left, t, nfev, n_steps, j
@@ -467,7 +456,7 @@ def _run(code, p, y0, s, samples, work_done):
     if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
         jump = apply_impulses(permanent, t_end, y, p)
         if jump != 0.0:
-            samples[n_samples - 1, :] = y
+            samples[n_samples - 1, :] = y[:n]
             work_done[n_samples - 1] += jump
     return SUCCESS, t, nfev, n_steps, j
 

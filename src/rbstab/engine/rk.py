@@ -90,11 +90,13 @@ DOP853_E3, DOP853_E5, DOP853_D = TABLEAUS["DOP853"].E3, TABLEAUS["DOP853"].E5, T
 
 @jit
 def rms_norm(x, scale):
-    """RMS norm of x / scale (scipy's ``norm``)."""
+    """RMS norm of x / scale (scipy's ``norm``) over the entries of ``scale`` (the state's:
+    an integrated work W after them is not part of any norm)."""
+    n = scale.shape[0]
     total = 0.0
-    for i in range(x.shape[0]):
+    for i in range(n):
         total += (x[i] / scale[i]) ** 2
-    return math.sqrt(total) / math.sqrt(x.shape[0])
+    return math.sqrt(total) / math.sqrt(n)
 
 
 @jit
@@ -105,13 +107,13 @@ def initial_step(code, p, s, t0, t_bound, t_lim, y0, f0, w):
     ``s``: the run's settings (:data:`rbstab.engine.settings.SETTINGS`: ``max_step``,
     ``rtol``, ``atol``, ``method``); ``w``: its work arrays
     (:class:`rbstab.engine.settings.Work`: ``y_new``, ``work`` and ``scale`` are
-    overwritten).
+    overwritten). The norms take the state's entries (``scale``'s), not a work W after them.
     """
     max_step, error_order, rtol, atol = s.max_step, ERROR_ORDER[s.method], s.rtol, s.atol
     t_bound = t_bound - t0
     y1, f1, scale = w.y_new, w.work, w.scale
     n = y0.shape[0]
-    for i in range(n):
+    for i in range(scale.shape[0]):
         scale[i] = atol + abs(y0[i]) * rtol
     d0 = rms_norm(y0, scale)
     d1 = rms_norm(f0, scale)
@@ -177,7 +179,8 @@ def rk_step(code, p, t, t_lim, y, f, h, method, w):
 
 @jit(forceinline=True)
 def error_norm(K, h, scale, method):
-    """The scaled RMS norm of the local error estimate (scipy's ``_estimate_error_norm``)."""
+    """The scaled RMS norm of the local error estimate (scipy's ``_estimate_error_norm``),
+    over the entries of ``scale`` (the state's; not a work W integrated after them)."""
     n_stages = N_STAGES[method]
     E, E3, E5 = RK_E[method], DOP853_E3, DOP853_E5
     n = scale.shape[0]

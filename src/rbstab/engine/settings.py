@@ -58,14 +58,17 @@ def settings_records(rows: np.ndarray, method: int) -> np.ndarray:
     return records
 
 
-#: One run's work arrays: ``K`` (STAGE_ROWS[method], n) stage rates, ``Q``
-#: (INTERPOLANT_ROWS[method], n) the step's interpolant, and ``y_new``, ``scale``, ``work``
-#: (n,): the new state, the error's scale and scratch.
+#: One run's work arrays for an integrated vector of n entries (the state, and with
+#: disturbances their work W after it): ``K`` (STAGE_ROWS[method], n) stage rates, ``Q``
+#: (INTERPOLANT_ROWS[method], n) the step's interpolant, ``y_new`` and ``work`` (n,) the new
+#: vector and scratch, and ``scale`` (n_state,) the error's scale, over the state's entries
+#: only (the norms of :mod:`rbstab.engine.rk` take those).
 Work = namedtuple("Work", ["K", "Q", "y_new", "scale", "work"])
 
 
 @jit
-def work_arrays(method, n):
-    """:class:`Work` for a state of size n and the method number ``method``."""
+def work_arrays(method, n, n_state):
+    """:class:`Work` for an integrated vector of size n whose first ``n_state`` entries are
+    the state, and the method number ``method``."""
     return Work(np.empty((STAGE_ROWS[method], n)), np.empty((INTERPOLANT_ROWS[method], n)), np.empty(n),
-                np.empty(n), np.empty(n))
+                np.empty(n_state), np.empty(n))

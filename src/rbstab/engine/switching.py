@@ -387,7 +387,7 @@ def integrate_switching(p, y0, s, resolution, samples, modes, events, jumps):
     deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
     n = y0.shape[0]
     dop853 = method == DOP853
-    w = work_arrays(method, n)
+    w = work_arrays(method, n, n)
     K, Q, y_new, work = w.K, w.Q, w.y_new, w.work
     y, f = y0.copy(), np.empty(n)
     g, dg = np.empty((4, 4)), np.empty((4, 4))

@@ -32,6 +32,9 @@ __all__ = ["FREE", "PERMANENT", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_r
 #: scalar states, by code.
 FREE, PERMANENT, SLIDING, VISCO_ELASTIC, EMBEDDED = (
     VARIANT_CODES[name] for name in ("free", "permanent", "sliding", "visco_elastic", "embedded"))
+#: The states' sizes: ``permanent``'s reduced state, the full state (free, sliding,
+#: visco_elastic) and ``embedded``'s (with its controller state D).
+PERMANENT_SIZE, FULL_SIZE, EMBEDDED_SIZE = STATE_SIZE[PERMANENT], STATE_SIZE[FREE], STATE_SIZE[EMBEDDED]
 
 # First column of each output in a row of outputs (rbstab.layout.OUTPUTS): module-level
 # ints, which numba compiles as constants.
@@ -61,13 +64,14 @@ DISTURBANCE_EDGES_AT = OUTPUTS["disturbance_edges"].offset
 
 @jit(forceinline=True)
 def body_state(y, p):
-    """The body's state at the 12- or 15-state y (D = y[12:15] when there).
+    """The body's state at the 12- or 15-state y (D = y[12:15] when there; an entry after
+    them, the work W of an integrator's augmented state, is not read).
 
     Returns (theta, omega, x, v, d, a, b, e, f): A, B (eqs 2, 5), the constraint error E
     and rate F (eqs 7, 8).
     """
     theta, omega, x, v = vector(y, 0), vector(y, 3), vector(y, 6), vector(y, 9)
-    d = vector(y, 12) if y.shape[0] == 15 else ZERO
+    d = vector(y, 12) if y.shape[0] >= 15 else ZERO
     a, b = rotation_and_rate_of(theta)
     e = constraint_error(x, a, p)
     f = constraint_rate(omega, v, a, p)
@@ -155,11 +159,21 @@ def state_rate(code, t, y, p, dy):
     variant (:func:`constraint_force`). ``permanent`` is the reduced system (eq 15). The
     time enters through the disturbances only (:mod:`rbstab.variants.disturbances`: their
     force F joins H, their torque T about the centre of mass joins N).
+
+    ``y`` may carry one entry after the variant's state (size :data:`STATE_SIZE`): the
+    work W [J] of the disturbances, which the compiled drivers integrate with the state
+    (eq 26's work term); its rate is their power P = F'V + Omega'T [W]
+    (:func:`rbstab.variants.disturbances.disturbance_power`; 0 without disturbances).
     """
+    power = 0.0
     if code == PERMANENT:
-        theta, omega, x, v, a, b, n, h, lam, omega_dot, _, _ = permanent.quantities(t, y, p)
+        theta, omega, x, v, a, b, n, h, lam, omega_dot, force_d, torque_d = permanent.quantities(t, y, p)
         _put(dy, 0, matvec(b, omega))
         _put(dy, 3, omega_dot)
+        if dy.shape[0] > PERMANENT_SIZE:
+            if p.disturbance_count > 0.0:
+                power = disturbance_power(force_d, torque_d, omega, v)
+            dy[PERMANENT_SIZE] = power
         return
     if code >= sliding.MODE_CODES:  # the pure sign law in a mode (rbstab.engine.switching)
         sliding.mode_rate(y, p, sliding.mode_of(code), dy)
@@ -170,13 +184,17 @@ def state_rate(code, t, y, p, dy):
     if p.disturbance_count > 0.0:
         force_d, torque_d = disturbance_wrench(t, a, p)
         n, h = add(n, torque_d), add(h, force_d)
+        power = disturbance_power(force_d, torque_d, omega, v)
     theta_dot, omega_dot, x_dot, v_dot = body_rates(omega, v, a, b, n, h, lam, p)
     _put(dy, 0, theta_dot)
     _put(dy, 3, omega_dot)
     _put(dy, 6, x_dot)
     _put(dy, 9, v_dot)
-    if y.shape[0] == 15:
+    size = EMBEDDED_SIZE if code == EMBEDDED else FULL_SIZE
+    if size == EMBEDDED_SIZE:
         _put(dy, 12, d_rate)
+    if dy.shape[0] > size:
+        dy[size] = power
 
 
 @jit(forceinline=True)
