@@ -34,8 +34,8 @@ from optuna.storages.journal import BaseJournalBackend
 
 from .design import StudyInputError
 
-__all__ = ["JOURNAL_FILE", "RDB_FILE", "SQLiteJournal", "default_storage", "open_storage", "optuna_storage",
-           "storage_lock"]
+__all__ = ["JOURNAL_FILE", "RDB_FILE", "SQLiteJournal", "default_storage", "is_journal", "open_storage",
+           "optuna_storage", "storage_lock"]
 
 #: The default storage of a study folder: Optuna's journal in an SQLite file.
 JOURNAL_FILE = "journal.db"
