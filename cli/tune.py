@@ -48,7 +48,7 @@ from .sensitivity import study_error
               help="Dask scheduler address, e.g. tcp://10.0.0.5:8786 (implies --executor dask).")
 @click.option("--storage", default=None, metavar="URL",
               help="Optuna storage URL, e.g. sqlite:///studies.db or postgresql://...  "
-              "[default: sqlite:///OUTPUT/<name>/study.db].")
+              "[default: Optuna's journal storage in the SQLite file OUTPUT/<name>/journal.db].")
 @study_options
 @console_options
 def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, generation,

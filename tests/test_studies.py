@@ -19,7 +19,8 @@ from rbstab_cli.main import cli
 
 import rbstab
 from rbstab.simulator import simulate_many
-from rbstab.studies import StudyInputError, read_sensitivity, read_tuning, sensitivity_analysis, tune
+from rbstab.studies import (StudyInputError, optuna_storage, read_sensitivity, read_tuning, sensitivity_analysis,
+                            tune)
 
 ROOT = Path(__file__).resolve().parents[1]
 FREE = {
@@ -227,9 +228,9 @@ def test_an_interrupted_study_resumes_with_every_finished_trial_once(config, tmp
     monkeypatch.setattr(rbstab.studies.batch, "run_generation", interrupted)
     with pytest.raises(KeyboardInterrupt):
         tune(config, TUNE_VARY, trials=40, minimize=["lyapunov_final"], output=tmp_path, generation=8, startup=8)
-    storage = f"sqlite:///{tmp_path}/free_study/study.db"
     columns = ["number", "params_controller.l_t:scale", "value"]
-    before = optuna.load_study(study_name="free_study", storage=storage).trials_dataframe()[columns]
+    before = optuna.load_study(study_name="free_study", storage=optuna_storage(tmp_path / "free_study")) \
+        .trials_dataframe()[columns]
     assert len(before) == 16  # two finished generations, stored whole
     monkeypatch.setattr(rbstab.studies.batch, "run_generation", run_generation)
     path = tmp_path / "free.yaml"
@@ -243,7 +244,8 @@ def test_an_interrupted_study_resumes_with_every_finished_trial_once(config, tmp
     table = pd.read_csv(tmp_path / "free_study" / "trials.csv")
     assert table["trial"].tolist() == list(range(40))
     assert (table["state"] == "complete").all()
-    after = optuna.load_study(study_name="free_study", storage=storage).trials_dataframe()[columns]
+    after = optuna.load_study(study_name="free_study", storage=optuna_storage(tmp_path / "free_study")) \
+        .trials_dataframe()[columns]
     pd.testing.assert_frame_equal(after.iloc[:16], before)
     run = CliRunner().invoke(cli, ["run", str(tmp_path / "free_study" / "best.yaml"), "-o", str(tmp_path / "best"),
                                    "-q"], catch_exceptions=False)
@@ -267,7 +269,7 @@ def test_a_generation_is_stored_whole_despite_ctrl_c():
 
 
 def test_two_processes_on_one_study_share_its_trials(config, tmp_path):
-    """Two processes run one SQLite study at once: together they reach the trials asked,
+    """Two processes run one study (its SQLite journal) at once: together they reach the trials asked,
     each stores whole generations, every trial is stored once (numbers 0..n-1), and the
     study's files hold every stored trial, best.yaml the best of them."""
     import os
@@ -292,7 +294,7 @@ def test_two_processes_on_one_study_share_its_trials(config, tmp_path):
                                   stderr=subprocess.PIPE, text=True) for seed in (1, 2)]
     for process in processes:
         assert process.wait(timeout=300) == 0, process.stderr.read()
-    study = optuna.load_study(study_name="shared", storage=f"sqlite:///{tmp_path}/shared/study.db")
+    study = optuna.load_study(study_name="shared", storage=optuna_storage(tmp_path / "shared"))
     trials = study.get_trials()
     assert [t.number for t in trials] == list(range(len(trials)))
     assert all(t.state == optuna.trial.TrialState.COMPLETE for t in trials)
@@ -309,6 +311,42 @@ def test_two_processes_on_one_study_share_its_trials(config, tmp_path):
     assert text.startswith(f"# best trial {best.number} of tuning study shared")
     gains = yaml.safe_load(text)["controller"]
     np.testing.assert_allclose(gains["l_t"], np.asarray(data["controller"]["l_t"]) * best.params["controller.l_t:scale"])
+
+
+def test_a_journal_transaction_is_stored_whole_or_not_at_all(tmp_path):
+    """Appends inside a transaction are read back by its own process before the commit, by
+    another connection only after it, and not at all after a rollback."""
+    from rbstab.studies.storage import SQLiteJournal
+
+    path = tmp_path / "journal.db"
+    writer, reader = SQLiteJournal(path), SQLiteJournal(path)
+    writer.append_logs([{"op_code": 0}])
+    with writer.transaction():
+        writer.append_logs([{"op_code": 1}])
+        writer.append_logs([{"op_code": 2}, {"op_code": 3}])
+        assert [log["op_code"] for log in writer.read_logs(1)] == [1, 2, 3]
+        assert reader.read_logs(0) == [{"op_code": 0}]
+    assert [log["op_code"] for log in reader.read_logs(2)] == [2, 3]
+    with pytest.raises(KeyboardInterrupt):
+        with writer.transaction():
+            writer.append_logs([{"op_code": 4}])
+            raise KeyboardInterrupt
+    assert len(SQLiteJournal(path).read_logs(0)) == 4
+
+
+def test_a_study_in_optunas_relational_sqlite_file_resumes_there(config, tmp_path):
+    """A folder holding a study.db (Optuna's relational storage) and no journal resumes in it."""
+    import optuna
+
+    folder = tmp_path / "free_study"
+    folder.mkdir()
+    url = f"sqlite:///{folder / 'study.db'}"
+    tune(config, TUNE_VARY, trials=4, minimize=["lyapunov_final"], output=tmp_path, generation=4, startup=4,
+         storage=url)
+    result = tune(config, TUNE_VARY, trials=8, minimize=["lyapunov_final"], output=tmp_path, generation=4, startup=4)
+    assert result.storage == url and result.n_trials == 8
+    assert not (folder / "journal.db").exists()
+    assert len(optuna.load_study(study_name="free_study", storage=url).trials) == 8
 
 
 def test_scale_log_uniform_scales_a_whole_gain_vector(config):

@@ -15,7 +15,8 @@
 
 Modules: :mod:`~rbstab.studies.design` (``--vary`` factors, design tables, their run as a
 sweep, metrics), :mod:`~rbstab.studies.sensitivity`, :mod:`~rbstab.studies.tuning` and
-:mod:`~rbstab.studies.files` (the study files). SALib and Optuna are imported when a study
+:mod:`~rbstab.studies.files` (the study files) and :mod:`~rbstab.studies.storage` (where a
+tuning study is kept). SALib and Optuna are imported when a study
 runs. Manual: docs/studies.md.
 """
 
@@ -28,6 +29,7 @@ _SOURCES = {
                      "metric_records", "METHODS", "DEFAULT_METRICS"], "sensitivity"),
     **dict.fromkeys(["tune", "plan_tuning", "read_tuning", "TuningResult", "SAMPLERS"], "tuning"),
     **dict.fromkeys(["study_kind"], "files"),
+    **dict.fromkeys(["optuna_storage"], "storage"),
 }
 
 

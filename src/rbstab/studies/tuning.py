@@ -13,11 +13,12 @@ summary figures of the runs (:func:`rbstab.studies.design.check_metrics`); const
 to the sampler as Optuna constraints (a trial is feasible when every ``metric <= limit``,
 ``metric >= limit`` holds).
 
-The study lives in an Optuna storage (default: the SQLite file ``<output>/<name>/study.db``),
-into which a generation's trials go once they are all finished (a trial is stored whole,
-values and all, or not at all), so running the same study again resumes it at the last
-finished generation (``trials`` is the number of complete trials the study should reach)
-and several processes can work on one study at once. Written
+The study lives in an Optuna storage (default: Optuna's journal storage in the SQLite file
+``<output>/<name>/journal.db``, :mod:`rbstab.studies.storage`), into which a generation's
+trials go once they are all finished (a generation is stored whole, values and all, or not
+at all), so running the same study again resumes it at the last finished generation
+(``trials`` is the number of complete trials the study should reach) and several processes
+can work on one study at once. Written
 into ``<output>/<name>/``: ``best.yaml`` (the base configuration with the best values:
 ``rbstab run best.yaml`` runs it), ``trials.csv`` and ``tuning.nc`` (every trial: number,
 state, objective and constraint values, the absolute values set; :func:`read_tuning`).
@@ -33,13 +34,11 @@ from __future__ import annotations
 
 import contextlib
 import copy
-import fcntl
 import json
 import math
 import os
 import re
 import signal
-import sqlite3
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -75,7 +74,7 @@ from .design import (
 from .files import KINDS, check_same_inputs, read_study_file, write_study_file
 
 __all__ = ["SAMPLERS", "Objective", "Constraint", "parse_constraint", "TuningProblem", "TuningResult",
-           "plan_tuning", "tune", "read_tuning", "FILE", "BEST_FILE", "TRIALS_FILE", "STORAGE_FILE"]
+           "plan_tuning", "tune", "read_tuning", "FILE", "BEST_FILE", "TRIALS_FILE"]
 
 #: Samplers after the space-filling start: Optuna's multivariate TPE (default;
 #: constraints, several objectives) and CMA-ES with restarts (one objective, no constraints).
@@ -87,7 +86,6 @@ GENERATION = {"compiled": 32, "cuda": 2048}
 FILE = KINDS["tuning"]
 BEST_FILE = "best.yaml"
 TRIALS_FILE = "trials.csv"
-STORAGE_FILE = "study.db"
 
 #: Distributions a search range may have (a range needs bounds).
 RANGES = ("uniform", "log_uniform", "scale_uniform", "scale_log_uniform", "choice")
@@ -400,9 +398,10 @@ class TuningResult:
     ----------
     name : str
     folder : Path
-        ``best.yaml``, ``trials.csv``, ``tuning.nc`` (and ``study.db`` by default).
+        ``best.yaml``, ``trials.csv``, ``tuning.nc`` (and ``journal.db`` by default).
     storage : str
-        The Optuna storage URL.
+        The Optuna storage URL, or the path of the study's SQLite journal
+        (:mod:`rbstab.studies.storage`).
     n_trials : int
         Complete trials of the study (by every process, this run and earlier ones).
     n_failed : int
@@ -500,8 +499,10 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         study does not repeat the first suggestions); with CMA-ES also the run of the
         strategy that this process continues.
     storage : str, optional
-        Optuna storage URL (default ``sqlite:///<output>/<name>/study.db``), or
-        ``"memory"``: the study lives in this process only (no resume).
+        Optuna storage URL; by default Optuna's journal storage in the SQLite file
+        ``<output>/<name>/journal.db`` (:mod:`rbstab.studies.storage`; a folder holding
+        only a ``study.db`` resumes in it); ``"memory"``: the study lives in this process
+        only (no resume).
     output, name
         The study writes ``<output>/<name>/``; ``name`` (default: the config's name) is
         also the study's name in the storage.
@@ -538,6 +539,7 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
     from .search import RESTARTS, GenerationSearch, default_population  # heavy: optuna, cmaes (when a study runs)
+    from .storage import default_storage, storage_lock  # heavy: optuna
 
     folder = study_folder(output, name, config)
     problem = plan_tuning(config, vary, minimize=minimize, maximize=maximize, subject_to=subject_to, over=over,
@@ -564,9 +566,9 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
     folder.mkdir(parents=True, exist_ok=True)
-    storage = storage or f"sqlite:///{(folder / STORAGE_FILE).resolve()}"
+    storage = storage or default_storage(folder)
     optuna.logging.set_verbosity(optuna.logging.ERROR)
-    study = _open_study(problem, name, storage)
+    study, journal = _open_study(problem, name, storage)
     say = log or (lambda _: None)
     dimension = sum(len(v.factors) for v in problem.varied)
     size = generation or GENERATION.get(problem.engine, GENERATION["compiled"])
@@ -594,12 +596,13 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
             records = problem.evaluate_many([problem.values_of(t.params) for t in asked], executor=ex)
             finished = [_tell(known, problem, trial, record, token) for trial, record in zip(asked, records)]
             search.told(finished)
-            with _deferred_interrupt():  # a generation is stored whole
+            with _deferred_interrupt(), (journal.transaction() if journal else contextlib.nullcontext()):
+                # a generation is stored whole: in one transaction of the study's journal
                 study.add_trials(finished)
             budget -= len(asked)
             stored = _sync(study, known, seen, token)
             done = sum(t.state == optuna.trial.TrialState.COMPLETE for t in stored)
-    with _file_lock(storage):  # processes on one study write its files in turn, each from every stored trial
+    with storage_lock(storage):  # processes on one study write its files in turn, each from every stored trial
         return _write_outputs(problem, study, folder, storage, command_line)
 
 
@@ -703,11 +706,14 @@ def _check_scalar_metrics(problem: TuningProblem, available: Mapping[str, float]
 
 
 def _open_study(problem: TuningProblem, name: str, storage: str):
-    """The study ``name`` in ``storage``: made, or loaded when its settings match."""
+    """(The study ``name`` in ``storage``: made, or loaded when its settings match; its
+    SQLite journal or None)."""
     import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
 
+    from .storage import open_storage  # heavy: optuna
+
     directions = [o.direction for o in problem.objectives]
-    opened = _storage(storage)
+    opened, journal = open_storage(storage)
     try:
         study = optuna.create_study(study_name=name, storage=opened, directions=directions, load_if_exists=True)
     except ValueError as exc:  # e.g. other directions than the stored study's
@@ -719,64 +725,7 @@ def _open_study(problem: TuningProblem, name: str, storage: str):
     elif stored != settings or [d.name.lower() for d in study.directions] != directions:
         raise StudyInputError([f"study {name!r} in {storage} was made with other settings ({json.dumps(stored)}); "
                                "run it with those to resume, or give another --name or -o for a new study"])
-    return study
-
-
-def _storage(url: str):
-    """Optuna's storage at ``url``; an SQLite file in write-ahead-log mode, synchronised at
-    checkpoints (a commit costs no fsync: ~15 ms less per write on a slow disk; a crash of
-    the machine may lose the last trials, never corrupt the file). ``"memory"``: None (an
-    in-memory study).
-
-    Raises
-    ------
-    StudyInputError
-        If no storage can be opened at ``url`` (the message names it).
-    """
-    import optuna  # optuna and SQLAlchemy: ~1 s to import, only when a study runs
-    import sqlalchemy.exc  # heavy: sqlalchemy (optuna's storage)
-
-    if url == "memory":
-        return None
-    kwargs = {}
-    if url.startswith("sqlite:///"):
-        path = url[len("sqlite:///"):]
-
-        def connect():
-            connection = sqlite3.connect(path, timeout=60, check_same_thread=False)
-            connection.execute("PRAGMA journal_mode=WAL")
-            connection.execute("PRAGMA synchronous=NORMAL")
-            return connection
-
-        kwargs = {"engine_kwargs": {"creator": connect}}
-    try:
-        with _file_lock(url):
-            return optuna.storages.RDBStorage(url, **kwargs)
-    except sqlalchemy.exc.SQLAlchemyError as exc:
-        raise StudyInputError([f"--storage {url!r}: cannot open it ({str(exc).splitlines()[0]})"]) from None
-    except (ValueError, ImportError) as exc:
-        raise StudyInputError([f"--storage {url!r}: {exc}; expected an Optuna storage URL, e.g. "
-                               "sqlite:///study.db or postgresql://user@host/db"]) from None
-
-
-@contextlib.contextmanager
-def _file_lock(url: str):
-    """Hold ``<file>.lock`` beside an SQLite file: while its storage is opened (two processes
-    that start one study at once would both make its tables; Optuna does not guard that),
-    and while a process reads the stored trials and writes the study's files (so the last
-    process to write them writes every trial: its own are stored before, and so are those
-    of a process that wrote before it)."""
-    if not url.startswith("sqlite:///"):
-        yield
-        return
-    path = Path(url[len("sqlite:///"):] + ".lock")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
+    return study, journal
 
 
 # -- results ---------------------------------------------------------------------------------------
