@@ -24,7 +24,10 @@ worst of ``--repeat``:
 
 Usage::
 
-    python benchmarks/startup.py [--repeat 3] [--jobs 2] [--n 10000]
+    python benchmarks/startup.py [--repeat 3] [--jobs 2] [--n 10000] [--rbstab COMMAND]
+
+``--rbstab``: the command timed (default: the ``rbstab`` beside this Python), e.g. a
+script that runs another checkout's ``python -m rbstab``.
 """
 
 from __future__ import annotations
@@ -111,8 +114,8 @@ def timed(cmd: list[str], stop_at_first_line: bool = False) -> tuple[float | Non
     return first, time.perf_counter() - start, rc
 
 
-def sweep_command(path: Path, out: Path, jobs: int) -> list[str]:
-    return [RBSTAB, "sweep", str(path), "-o", str(out), "-j", str(jobs), "--no-progress",
+def sweep_command(path: Path, out: Path, jobs: int, rbstab: str = RBSTAB) -> list[str]:
+    return [rbstab, "sweep", str(path), "-o", str(out), "-j", str(jobs), "--no-progress",
             *[a for t in TOLERANCES for a in ("--set", t)]]
 
 
@@ -139,10 +142,11 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--n", type=int, default=10_000)
+    parser.add_argument("--rbstab", default=RBSTAB, help="the command timed")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        subprocess.run([RBSTAB, "run", str(CASE3), "-o", str(folder / "warm")], env=environment(),
+        subprocess.run([args.rbstab, "run", str(CASE3), "-o", str(folder / "warm")], env=environment(),
                        capture_output=True, check=True)  # the compile cache and the bytecode caches warm
         print(f"{'what':<34} {'size':>9} {'best [s]':>9} {'worst [s]':>10}")
         for i, (what, data) in enumerate(specs(args.n).items()):
@@ -150,7 +154,8 @@ def main() -> None:
             path.write_text(yaml.safe_dump(data, default_flow_style=None, sort_keys=False))
             firsts = []
             for r in range(args.repeat):
-                first, _, rc = timed(sweep_command(path, folder / f"out-{i}-{r}", args.jobs), stop_at_first_line=True)
+                first, _, rc = timed(sweep_command(path, folder / f"out-{i}-{r}", args.jobs, args.rbstab),
+                                  stop_at_first_line=True)
                 if rc != 0:
                     raise SystemExit(f"{what}: exit status {rc}")
                 firsts.append(first)
@@ -162,7 +167,7 @@ def main() -> None:
         path.write_text(yaml.safe_dump(random_spec(args.n)))
         exits = []
         for r in range(args.repeat):
-            _, wall, rc = timed(sweep_command(path, folder / f"out-random-{r}", args.jobs))
+            _, wall, rc = timed(sweep_command(path, folder / f"out-random-{r}", args.jobs, args.rbstab))
             if rc != 0:
                 raise SystemExit(f"initial-state sweep: exit status {rc}")
             exits.append(wall)
