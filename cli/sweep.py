@@ -224,7 +224,7 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
     if dry_run:
         return _dry_run(spec, overrides, store=store, layout=layout, jobs=jobs)
     # start the local workers' fork server first: it imports numpy, numba and h5py and loads
-    # the kernels (~1.1 s of CPU) while this process imports its own modules and reads,
+    # the kernels (~0.8 s of CPU) while this process imports its own modules and reads,
     # plans and validates the runs (~0.7 s for a 10,000-run initial-state spec)
     ex = LocalExecutor(jobs) if executor == "local" else executor
     if executor == "local":
