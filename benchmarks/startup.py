@@ -7,7 +7,10 @@ worst of ``--repeat``:
 
 - **first line**: seconds from the process's start to its first line of output (the
   sweep's "N runs on ..." line, said once every run is planned and validated and
-  ``sweep.yaml`` is written), for three specs written here:
+  ``sweep.yaml`` is written), and the CPU seconds the command's process used until then
+  (``/proc``: what the wall time would be on an otherwise idle machine, the workers'
+  fork server, which starts at the same time, on the other core), for three specs
+  written here:
 
   - ``explicit zip``: 10,000 runs spelled out as ``zip`` lists (body.mass,
     controller.k_c, l_c, k_t, initial_state.omega: 13 numbers a run, ~2.5 MB of YAML);
@@ -24,7 +27,10 @@ worst of ``--repeat``:
 
 Usage::
 
-    python benchmarks/startup.py [--repeat 3] [--jobs 2] [--n 10000]
+    python benchmarks/startup.py [--repeat 3] [--jobs 2] [--n 10000] [--rbstab COMMAND]
+
+``--rbstab``: the command timed (default: the ``rbstab`` beside this Python), e.g. a
+script that runs another checkout's ``python -m rbstab``.
 """
 
 from __future__ import annotations
@@ -87,32 +93,44 @@ def environment() -> dict:
     return {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
-def timed(cmd: list[str], stop_at_first_line: bool = False) -> tuple[float | None, float, int]:
-    """(seconds to the first line of stdout or stderr, seconds to the exit, exit status) of
-    ``cmd``; ``stop_at_first_line``: its processes killed at the first line (status 0)."""
+def cpu_seconds(pid: int) -> float | None:
+    """CPU seconds (user and system) process ``pid`` has used so far, or None where
+    ``/proc`` does not say (not Linux)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return None
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def timed(cmd: list[str], stop_at_first_line: bool = False) -> tuple[float | None, float, int, float | None]:
+    """(seconds to the first line of stdout or stderr, seconds to the exit, exit status,
+    the command's own CPU seconds to its first line) of ``cmd``; ``stop_at_first_line``:
+    its processes killed at the first line (status 0)."""
     start = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=environment(),
                             start_new_session=True)
-    first = None
+    first = cpu = None
     with selectors.DefaultSelector() as sel:
         sel.register(proc.stdout, selectors.EVENT_READ)
         sel.register(proc.stderr, selectors.EVENT_READ)
         while sel.get_map():
             for key, _ in sel.select():
                 if key.fileobj.readline():
-                    first = first if first is not None else time.perf_counter() - start
+                    if first is None:
+                        first, cpu = time.perf_counter() - start, cpu_seconds(proc.pid)
                     if stop_at_first_line:
                         os.killpg(proc.pid, signal.SIGKILL)  # its session: the sweep and its workers
                         proc.wait()
-                        return first, time.perf_counter() - start, 0
+                        return first, time.perf_counter() - start, 0, cpu
                 else:
                     sel.unregister(key.fileobj)
     rc = proc.wait()
-    return first, time.perf_counter() - start, rc
+    return first, time.perf_counter() - start, rc, cpu
 
 
-def sweep_command(path: Path, out: Path, jobs: int) -> list[str]:
-    return [RBSTAB, "sweep", str(path), "-o", str(out), "-j", str(jobs), "--no-progress",
+def sweep_command(path: Path, out: Path, jobs: int, rbstab: str = RBSTAB) -> list[str]:
+    return [rbstab, "sweep", str(path), "-o", str(out), "-j", str(jobs), "--no-progress",
             *[a for t in TOLERANCES for a in ("--set", t)]]
 
 
@@ -139,30 +157,35 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--n", type=int, default=10_000)
+    parser.add_argument("--rbstab", default=RBSTAB, help="the command timed")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
-        subprocess.run([RBSTAB, "run", str(CASE3), "-o", str(folder / "warm")], env=environment(),
+        subprocess.run([args.rbstab, "run", str(CASE3), "-o", str(folder / "warm")], env=environment(),
                        capture_output=True, check=True)  # the compile cache and the bytecode caches warm
-        print(f"{'what':<34} {'size':>9} {'best [s]':>9} {'worst [s]':>10}")
+        print(f"{'what':<34} {'size':>9} {'best [s]':>9} {'worst [s]':>10} {'CPU [s]':>12}")
         for i, (what, data) in enumerate(specs(args.n).items()):
             path = folder / f"spec-{i}.yaml"
             path.write_text(yaml.safe_dump(data, default_flow_style=None, sort_keys=False))
-            firsts = []
+            firsts, cpus = [], []
             for r in range(args.repeat):
-                first, _, rc = timed(sweep_command(path, folder / f"out-{i}-{r}", args.jobs), stop_at_first_line=True)
+                first, _, rc, cpu = timed(sweep_command(path, folder / f"out-{i}-{r}", args.jobs, args.rbstab),
+                                          stop_at_first_line=True)
                 if rc != 0:
                     raise SystemExit(f"{what}: exit status {rc}")
                 firsts.append(first)
+                cpus.append(cpu)
             size = path.stat().st_size / 1e6
-            print(f"first line, {what:<22} {size:>7.2f}MB {min(firsts):>9.2f} {max(firsts):>10.2f}", flush=True)
+            cpu = "" if None in cpus else f"{min(cpus):.2f}-{max(cpus):.2f}"
+            print(f"first line, {what:<22} {size:>7.2f}MB {min(firsts):>9.2f} {max(firsts):>10.2f} {cpu:>12}",
+                  flush=True)
             if i == 0:
                 text = path.read_text()
         path = folder / "random.yaml"
         path.write_text(yaml.safe_dump(random_spec(args.n)))
         exits = []
         for r in range(args.repeat):
-            _, wall, rc = timed(sweep_command(path, folder / f"out-random-{r}", args.jobs))
+            _, wall, rc, _ = timed(sweep_command(path, folder / f"out-random-{r}", args.jobs, args.rbstab))
             if rc != 0:
                 raise SystemExit(f"initial-state sweep: exit status {rc}")
             exits.append(wall)

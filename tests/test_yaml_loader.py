@@ -182,6 +182,50 @@ def test_the_writer_gives_pyyamls_text():
     assert dump_yaml(data) == stock
 
 
+def _random_floats(rng, n: int) -> list:
+    special = [float("inf"), -float("inf"), float("nan"), 0.0, -0.0, 1e-05, 1e16, 1e300, 5e-324]
+    return [rng.choice(special) if rng.random() < 0.05 else
+            float(f"{rng.uniform(-1e5, 1e5):.{rng.randint(1, 17)}g}") if rng.random() < 0.3 else
+            rng.uniform(-1, 1) * 10 ** rng.randint(-30, 30) for _ in range(n)]
+
+
+def _random_document(rng, depth: int = 0) -> dict:
+    """Long lists of floats (flat, or of rows of one length) at every place a mapping can
+    hold them: top level, nested mappings, mappings in block sequences, after long keys
+    (written ``? key`` / ``: value``) of ASCII and other characters; beside other values."""
+    keys = ["body.mass", "initial_state.omega", "k", "x" * rng.randint(1, 140), "a_long_key." * rng.randint(1, 14),
+            "'quoted: key'", "- dash", "ключ.ω", "日本語" * rng.randint(1, 50)]
+    out = {}
+    for _ in range(rng.randint(1, 5)):
+        key, kind = rng.choice(keys), rng.random()
+        if kind < 0.4:
+            n, size = rng.randint(200, 700), rng.randint(0, 6)
+            out[key] = _random_floats(rng, n) if size == 0 else [_random_floats(rng, size) for _ in range(n // size + 1)]
+        elif kind < 0.6 and depth < 3:
+            out[key] = _random_document(rng, depth + 1)
+        elif kind < 0.7 and depth < 3:
+            out[key] = [_random_document(rng, depth + 1) for _ in range(rng.randint(1, 3))]
+        elif kind < 0.8:
+            out[key] = [1, 2.5, "x"] * rng.randint(1, 200)
+        else:
+            out[key] = rng.choice(["text", 3, 2.5, None, True])
+    return out
+
+
+def test_the_writer_gives_pyyamls_text_for_long_lists_of_floats():
+    """The writer's own text for long lists of floats is libyaml's, wherever they are."""
+    import random
+
+    rng = random.Random(0)
+    for _ in range(60):
+        data = _random_document(rng)
+        assert dump_yaml(data) == yaml.dump(data, Dumper=_Stock, sort_keys=False, allow_unicode=True)
+    shared = _random_floats(rng, 300)  # one list reached twice: an anchor and an alias
+    data = {"a": shared, "b": {"c": shared}}
+    assert "&id001" in dump_yaml(data)
+    assert dump_yaml(data) == yaml.dump(data, Dumper=_Stock, sort_keys=False, allow_unicode=True)
+
+
 def test_copy_tree_is_a_deep_copy():
     data = {"a": [1.5, [2, {"b": "c"}], None], "t": (1, [2]), "f": 1e-8}
     copied = copy_tree(data)

@@ -248,8 +248,9 @@ def _warm() -> None:
 #: every worker forked from it starts with them. Not scipy: the compiled engine and the
 #: post-processing need none of it (its import costs ~0.7 s); the scipy engine imports
 #: ``solve_ivp`` when a chunk needs it. Every module a worker of the compiled engine uses
-#: (:mod:`rbstab.config` loads its validator lazily). The standard library ignores a name
-#: that fails to import: ``tests/test_layers.py`` imports each.
+#: (:mod:`rbstab.config` loads its validator lazily). :mod:`rbstab.engine.preload` comes
+#: last: it freezes the objects the others made. The standard library ignores a name that
+#: fails to import: ``tests/test_layers.py`` imports each.
 FORKSERVER_PRELOAD = (
     "rbstab.sweep.worker", "rbstab.sweep.folder", "rbstab.simulator", "rbstab.config.loader",
     "rbstab.io.hdf5", "rbstab.io.chunk", "rbstab.io.integrity", "h5py", "h5netcdf", "rbstab.engine.preload",

@@ -695,19 +695,23 @@ class StoredRuns:
 
     def __init__(self, runs_dir: Path, *, verify: bool = False, damaged: list | None = None,
                  skip: set | frozenset = frozenset()) -> None:
-        import pandas as pd  # heavy: pandas
-
         self.runs_dir = runs_dir
         self.damaged = damaged if damaged is not None else []
         # what was there before this invocation (but the files of ``skip``, read before)
         self.files = sorted(p.name for p in runs_dir.glob("*.h5") if p.name not in skip)
         chunks = [n for n in self.files if n.startswith("chunk-")]
-        frames = _store_frames(runs_dir, chunks, verify, self.damaged)
-        singles = [r for n in self.files if not n.startswith("chunk-")
-                   if (r := _run_file_row(runs_dir / n, verify, self.damaged)) is not None]
-        if singles:
-            frames.append(pd.DataFrame.from_records(singles))
-        self.frame = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
+        self._frames = _store_frames(runs_dir, chunks, verify, self.damaged)
+        self._singles = [r for n in self.files if not n.startswith("chunk-")
+                         if (r := _run_file_row(runs_dir / n, verify, self.damaged)) is not None]
+
+    @functools.cached_property
+    def frame(self):
+        """The stored rows, a DataFrame (made when first read: a folder without files needs
+        no pandas)."""
+        import pandas as pd  # heavy: pandas (~0.25 s, which a new sweep spends after its first line)
+
+        frames = [*self._frames, *([pd.DataFrame.from_records(self._singles)] if self._singles else [])]
+        return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(
             {"run_id": [], "config_hash": [], "status": [], "created": [], "file": []})
 
     def current(self, table, *, success_only: bool = False):

@@ -492,7 +492,7 @@ def _run_locked(spec, table, ex, outcome, *, retry_failed, chunk_size, progress,
     runs_dir = directory / RUNS_DIR
     with _lock(directory):
         stored, current = _resume(spec, table, outcome, options, retry_failed, say)
-        results, errors = [current], {}
+        results, errors = [] if current is None else [current], {}
         stopped = False
         try:
             _execute(spec, table, _remaining(table, current), runs_dir, results, errors, outcome, ex,
@@ -513,7 +513,8 @@ def _run_locked(spec, table, ex, outcome, *, retry_failed, chunk_size, progress,
 
 
 def _resume(spec, table, outcome, options, retry_failed: bool, say):
-    """(the folder's StoredRuns, the current rows of the table's runs) after removing the
+    """(the folder's StoredRuns, the current rows of the table's runs or None where the
+    folder holds no result file) after removing the
     temporaries of killed writers, writing ``sweep.yaml`` and setting damaged files aside."""
     directory = outcome.directory
     runs_dir = directory / RUNS_DIR
@@ -524,17 +525,21 @@ def _resume(spec, table, outcome, options, retry_failed: bool, say):
     stored = StoredRuns(runs_dir, verify=True, damaged=outcome.damaged)
     for (name, reason), new in zip(outcome.damaged, set_aside_damaged(runs_dir, outcome.damaged)):
         say(f"{reason}; renamed to {RUNS_DIR}/{new}, its runs are rerun")
-    current = stored.current(table, success_only=retry_failed)
-    outcome.n_skipped = len(current)
+    # a new sweep's folder holds no file: no table of its rows (pandas, first needed for
+    # the workers' rows, after the sweep's first line)
+    current = stored.current(table, success_only=retry_failed) if stored.files else None
+    outcome.n_skipped = 0 if current is None else len(current)
     return stored, current
 
 
 def _remaining(table, current):
-    """Positions in ``table`` of the runs without a current row, increasing."""
+    """Positions in ``table`` of the runs without a current row (``current``: a DataFrame
+    with their ``run``, or None for none), increasing."""
     import numpy as np  # heavy: numpy
 
     done = np.zeros(table.n, dtype=bool)
-    done[current["run"].to_numpy()] = True
+    if current is not None:
+        done[current["run"].to_numpy()] = True
     return np.flatnonzero(~done)
 
 

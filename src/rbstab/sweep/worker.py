@@ -36,6 +36,7 @@ so the parent need not reopen any file, and resume and the index work the same.
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import tempfile
@@ -48,7 +49,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 
 from ..config import PhysicalPlausibilityWarning, RunConfig, config_from_mapping
 from ..engine.registry import get_engine
@@ -276,9 +276,8 @@ class _ChunkFile:
         """The chunk's :class:`ChunkResult` once the file is written: its rows from the file's
         columns; tracebacks, errnos and timing from ``records``."""
         columns = self.writer.columns()
-        frame = pd.DataFrame({name: values for name, values in columns.items()
-                              if name not in _FROM_TABLE and name not in self.rows.coords})
-        out = _chunk_result(records, self.folder, frame=frame)
+        out = _chunk_result(records, self.folder, columns={
+            name: values for name, values in columns.items() if name not in _FROM_TABLE and name not in self.rows.coords})
         for key, seconds in self.timing.items():
             out.timing[key] = out.timing.get(key, 0.0) + seconds
         out.data.update(self.data)
@@ -460,10 +459,11 @@ class ChunkResult:
 
     Attributes
     ----------
-    frame : pandas.DataFrame
+    rows : dict of str to array-like, or list of dict
         A row per run, its index row as stored: ``run_id``, ``status``, ``message``,
         ``wall_time``, the summary columns, ``solver_*``, ``config_hash``, ``created``,
-        ``file`` and ``file_row`` (None where no file was written).
+        ``file`` and ``file_row`` (None where no file was written); as columns (a store
+        file's) or as records (one per run file). :attr:`frame` is the same as a table.
     data : dict of str to bytes
         Final path -> the file's bytes (``WorkerOptions.return_bytes``).
     tracebacks : dict of str to str
@@ -477,13 +477,21 @@ class ChunkResult:
     worker_peak_rss : int or None
     """
 
-    frame: Any
+    rows: Any
     data: dict
     tracebacks: dict
     errno: int | None
     path: str
     timing: dict
     worker_peak_rss: int | None
+
+    @functools.cached_property
+    def frame(self):
+        """:attr:`rows` as a pandas DataFrame, a row per run, built where it is read (the
+        parent): a worker never imports pandas."""
+        import pandas as pd  # heavy: ~0.25 s, which the workers' fork server would spend before the first run
+
+        return pd.DataFrame(self.rows) if isinstance(self.rows, dict) else pd.DataFrame.from_records(self.rows)
 
 
 def run_table_chunk(part, options: WorkerOptions, folder: str = "") -> ChunkResult:
@@ -549,12 +557,12 @@ def _batch_into(sink, batch, fast, build: float, options: WorkerOptions, part) -
     return []
 
 
-def _chunk_result(records: list[dict[str, Any]], folder: str, frame=None) -> ChunkResult:
+def _chunk_result(records: list[dict[str, Any]], folder: str, columns: dict | None = None) -> ChunkResult:
     """The :class:`ChunkResult` of a chunk's records (its rows from their ``attrs``, unless
-    ``frame`` gives them)."""
+    ``columns`` gives them)."""
     rows, data, tracebacks, timing, errno = [], {}, {}, {}, None
     for rec in records:
-        if frame is None:
+        if columns is None:
             row = {k: v for k, v in (rec.get("attrs") or {}).items() if k not in NOT_IN_INDEX and k != "created"}
             row.update(run_id=rec["run_id"], status=rec["status"], message=rec.get("message") or "")
             if rec.get("attrs") is None:
@@ -568,7 +576,5 @@ def _chunk_result(records: list[dict[str, Any]], folder: str, frame=None) -> Chu
         errno = errno or rec.get("errno")
         for key, seconds in (rec.get("timing") or {}).items():
             timing[key] = timing.get(key, 0.0) + seconds
-    if frame is None:
-        frame = pd.DataFrame.from_records(rows)
-    return ChunkResult(frame, data, tracebacks, errno, folder, timing, None)
+    return ChunkResult(rows if columns is None else columns, data, tracebacks, errno, folder, timing, None)
 
