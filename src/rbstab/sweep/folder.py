@@ -52,6 +52,7 @@ import json
 import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from itertools import product
 from pathlib import Path
 from typing import Any
@@ -321,45 +322,112 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     """
     import numpy as np  # heavy: numpy
     import pandas as pd  # heavy: pandas
+    import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.compute as pc  # heavy: pyarrow
 
     n = table.n
-    ids = pd.Series(table.run_id.astype(str))
     coords = table.coords()
-    head = pd.DataFrame({"run_id": ids, "run": np.arange(n), "base": table.base_labels,
-                         **{c: values for c, (_, values) in coords.items()}, "variant": table.variant})
+    head = {"run_id": pa.array(table.run_id).cast(pa.large_string()), "run": np.arange(n),  # ids: ASCII bytes
+            "base": _text(table.base_labels),
+            **{c: pd.Series(v, copy=False) if v.dtype == object else v for c, (_, v) in coords.items()},
+            "variant": _text(table.variant)}  # object arrays typed as a DataFrame's columns: text as str
     if len(results):
-        kept = [c for c in results.columns if c not in head.columns and c not in NOT_IN_INDEX and c != "converged"]
-        done = results.drop_duplicates("run", keep="last").set_index("run")[kept].reindex(np.arange(n))
+        kept = [c for c in results.columns if c not in head and c not in NOT_IN_INDEX and c != "converged"]
+        done = _reindexed(results, kept, n)
     else:
-        done = pd.DataFrame({"status": pd.Series([None] * n, dtype=object), "message": ""}, index=np.arange(n))
+        done = {"status": pa.nulls(n, pa.large_string()), "message": pa.nulls(n, pa.large_string())}
     del results  # freed here when the caller handed over its only reference
-    status = done["status"].astype(object)
-    missing = status.isna().to_numpy()
-    failed = missing & ids.isin(list(errors)).to_numpy()
-    status = status.where(~missing, "pending").where(~failed, "error").to_numpy(dtype=object, copy=True)
-    message = done["message"].astype(object).where(~missing, _PENDING).to_numpy(dtype=object, copy=True)
-    message[failed] = ids[failed].map(errors).to_numpy()
-    done = done.assign(status=status, message=message)
-    v0, v1 = (pd.to_numeric(done[c], errors="coerce").to_numpy(dtype=float) if c in done else np.full(n, np.nan)
-              for c in ("lyapunov_initial", "lyapunov_final"))
-    done["converged"] = np.asarray(converged(status == "success", v0, v1, ratio), dtype=bool)
+    status, message = _text(done["status"]), _text(done["message"])
+    missing = status.is_null().to_numpy(zero_copy_only=False)
+    failed = np.zeros(n, dtype=bool)
+    if missing.any():
+        where = np.flatnonzero(missing)
+        failed[where[np.isin(table.run_id[where].astype(str), list(errors))]] = True
+        status = pc.if_else(missing, pc.if_else(failed, _text_scalar("error"), _text_scalar("pending")), status)
+        message = pc.if_else(missing, _text_scalar(_PENDING), message)
+        if failed.any():
+            raised = [errors[i] for i in table.run_id[failed].astype(str)]
+            message = pc.replace_with_mask(message, failed, pa.array(raised, pa.large_string()))
+    done["status"] = status
+    done["message"] = message if message.null_count < n else pa.nulls(n)  # no text at all: as pandas infers it
+    v0, v1 = (pd.to_numeric(pd.Series(done[c], copy=False), errors="coerce").to_numpy(dtype=float) if c in done
+              else np.full(n, np.nan) for c in ("lyapunov_initial", "lyapunov_final"))
+    success = pc.equal(status, "success").to_numpy(zero_copy_only=False)
+    done["converged"] = np.asarray(converged(success, v0, v1, ratio), dtype=bool)
     if "file" in done:
-        done["file"] = done["file"].where(done["file"].isna(), RUNS_DIR + "/" + done["file"].astype(str))
-    frame = pd.concat([head, done.reset_index(drop=True)], axis=1)
+        file = _arrow_array(done["file"])
+        if pa.types.is_large_string(file.type) or pa.types.is_string(file.type):
+            file = pc.binary_join_element_wise(pa.scalar(RUNS_DIR + "/", file.type), file, pa.scalar("", file.type))
+        done["file"] = file
     for column in _INTEGERS:
-        if column in frame and frame[column].dtype.kind != "i":
-            frame[column] = pd.to_numeric(frame[column], errors="coerce").round().astype("Int64")
+        if column in done and done[column].dtype.kind != "i":
+            done[column] = pd.to_numeric(pd.Series(done[column], copy=False), errors="coerce").round().astype("Int64")
     fixed = {*_HEAD, *_MIDDLE, *_TAIL}
-    order = index_columns([dict.fromkeys([*head.columns, *done.columns])],
-                          parameters=[c for c in coords if c not in fixed])
-    frame = frame[[c for c in order if c in frame.columns]]
-    written = _write_index_files(directory, frame, csv=wants_csv(index, n))
-    summary = summarize_columns(frame, name=name, ratio=ratio, parameters=table.parameters())
+    order = index_columns([dict.fromkeys([*head, *done])], parameters=[c for c in coords if c not in fixed])
+    columns = {**head, **done}
+    columns = {c: columns[c] for c in order if c in columns}
+    written, digests = _write_index_files(directory, columns, csv=wants_csv(index, n))
+    counted = pd.DataFrame({"base": head["base"].dictionary_encode().to_pandas(),
+                            "status": status.dictionary_encode().to_pandas(), "converged": done["converged"],
+                            **({"wall_time": done["wall_time"]} if "wall_time" in done else {})})
+    summary = summarize_columns(counted, name=name, ratio=ratio, parameters=table.parameters())
     summary["index"] = written
-    write_summary(directory / SUMMARY_FILE, summary)
-    bad = status != "success"
-    problems = list(zip(ids[bad], status[bad], message[bad]))
-    return summary, problems
+    write_summary(directory / SUMMARY_FILE, summary, sha256=digests)
+    bad = np.flatnonzero(~success)
+    told = [np.nan if m is None else m for m in pc.take(message, bad).to_pylist()]
+    return summary, list(zip(table.run_id[bad].astype(str).tolist(), pc.take(status, bad).to_pylist(), told))
+
+
+def _text(values):
+    """Text values (an object array of str, a pandas or pyarrow array; absent values None or
+    NaN) as a pyarrow ``large_string`` array, as pandas' ``str`` columns hold them."""
+    import pyarrow as pa  # heavy: pyarrow
+
+    if isinstance(values, pa.Array):
+        return values.cast(pa.large_string())
+    out = pa.array(values, pa.large_string(), from_pandas=True)
+    return out.combine_chunks() if isinstance(out, pa.ChunkedArray) else out
+
+
+def _text_scalar(text: str):
+    """``text`` as a pyarrow ``large_string`` scalar."""
+    import pyarrow as pa  # heavy: pyarrow
+
+    return pa.scalar(text, pa.large_string())
+
+
+def _arrow_array(values):
+    """One index column (a numpy array, a pandas array or Series, a pyarrow array) as
+    ``pyarrow.Table.from_pandas`` converts a DataFrame's column (NaN absent)."""
+    import numpy as np  # heavy: numpy
+    import pyarrow as pa  # heavy: pyarrow
+
+    if isinstance(values, pa.Array):
+        return values
+    if isinstance(values, np.ndarray) and values.dtype.kind == "f" and not np.isnan(values).any():
+        return pa.array(values)  # the same array: no NaN to look for one by one
+    out = pa.array(values, from_pandas=True)
+    return out.combine_chunks() if isinstance(out, pa.ChunkedArray) else out
+
+
+def _reindexed(results, columns: Sequence[str], n: int) -> dict:
+    """``columns`` of ``results`` (a DataFrame with a ``run`` column) over the runs 0..n-1,
+    the last row of a run counting: as ``results.drop_duplicates("run", keep="last")
+    .set_index("run")[columns].reindex(range(n))`` gives them (NaN, integers as floats and
+    booleans as objects where a run has no row), each as a numpy or pandas array."""
+    import numpy as np  # heavy: numpy
+    import pandas as pd  # heavy: pandas
+
+    runs = results["run"].to_numpy()
+    last = ~results["run"].duplicated(keep="last").to_numpy() & (runs >= 0) & (runs < n)
+    rows = np.full(n, -1, dtype=np.intp)
+    rows[runs[last].astype(np.intp)] = np.flatnonzero(last)
+    out = {}
+    for c in columns:
+        values = results[c]
+        values = values.array if isinstance(values.dtype, pd.api.extensions.ExtensionDtype) else values.to_numpy()
+        out[c] = pd.api.extensions.take(values, rows, allow_fill=True)
+    return out
 
 
 def wants_csv(index: str | None, n: int) -> bool:
@@ -373,37 +441,39 @@ def wants_csv(index: str | None, n: int) -> bool:
     return index == "csv"
 
 
-def _write_index_files(directory: Path, index, *, csv: bool = True) -> str:
-    """``index`` (a DataFrame) as :data:`INDEX_ARROW_FILE` and, if ``csv``, as
-    :data:`INDEX_FILE` (else an earlier one is removed), atomically, from one Arrow table;
-    returns the name of the file that holds the index (the CSV's where both are written).
+def _write_index_files(directory: Path, columns: Mapping[str, Any], *, csv: bool = True) -> tuple[str, dict]:
+    """The index's ``columns`` (name -> numpy, pandas or pyarrow array, in order) as
+    :data:`INDEX_ARROW_FILE` and, if ``csv``, as :data:`INDEX_FILE` (else an earlier one is
+    removed), atomically, from one Arrow table (each column as ``pyarrow.Table.from_pandas``
+    converts it); returns the name of the file that holds the index (the CSV's where both
+    are written) and the SHA-256 of ``index.arrow`` (:func:`_write_arrow`) by file name.
     The CSV by pyarrow's writer (numbers formatted in C, ~10x pandas' speed; they read back
     as the same floats), booleans as ``True``/``False``, absent values empty. An index
     Arrow does not take (lists in a column) is written by pandas as the CSV, whatever
     ``csv`` says, and has no Arrow file (:func:`read_index` and :func:`open_sweep` then
     read the CSV)."""
+    import pandas as pd  # heavy: pandas
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.compute as pc  # heavy: pyarrow
     import pyarrow.csv as pa_csv  # heavy: pyarrow
 
     try:
-        table = pa.Table.from_pandas(index, preserve_index=False).combine_chunks()
+        arrays = [_arrow_array(values) for values in columns.values()]
     except (pa.ArrowInvalid, pa.ArrowTypeError):
+        frame = pd.DataFrame({c: v.to_pandas() if isinstance(v, pa.Array) else v for c, v in columns.items()})
         with atomic_path(directory / INDEX_FILE) as tmp:
-            index.to_csv(tmp, index=False, lineterminator="\n")
+            frame.to_csv(tmp, index=False, lineterminator="\n")
         (directory / INDEX_ARROW_FILE).unlink(missing_ok=True)
-        return INDEX_FILE
-    _write_arrow(directory / INDEX_ARROW_FILE, table)
+        return INDEX_FILE, {}
+    names = list(columns)
+    digests = {INDEX_ARROW_FILE: _write_arrow(directory / INDEX_ARROW_FILE, pa.table(arrays, names=names))}
     if not csv:
         (directory / INDEX_FILE).unlink(missing_ok=True)  # of an earlier invocation: it would not match
-        return INDEX_ARROW_FILE
-    as_text = table
-    for i, field in enumerate(table.schema):
-        if pa.types.is_boolean(field.type):
-            as_text = as_text.set_column(i, field.name, pc.if_else(table.column(i), "True", "False"))
+        return INDEX_ARROW_FILE, digests
+    as_text = [pc.if_else(a, "True", "False") if pa.types.is_boolean(a.type) else a for a in arrays]
     with atomic_path(directory / INDEX_FILE) as tmp:
-        pa_csv.write_csv(as_text, tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
-    return INDEX_FILE
+        pa_csv.write_csv(pa.table(as_text, names=names), tmp, write_options=pa_csv.WriteOptions(quoting_style="needed"))
+    return INDEX_FILE, digests
 
 
 #: Text columns of an index that :func:`open_sweep` gives as text ("" where absent).
@@ -412,9 +482,10 @@ _TEXT_COLUMNS = ("status", "message", "run_id", "base", "variant", "lyapunov_rat
 _UNIQUE_TEXT = ("run_id", "config_hash")
 
 
-def _write_arrow(path: Path, table) -> None:
+def _write_arrow(path: Path, table) -> str:
     """``table`` (the index as a pyarrow Table) as :data:`INDEX_ARROW_FILE`, atomically:
-    uncompressed, the text columns but :data:`_UNIQUE_TEXT` dictionary-encoded."""
+    uncompressed, the text columns but :data:`_UNIQUE_TEXT` dictionary-encoded; returns
+    the file's SHA-256, read back by a thread while the file is flushed to the disk."""
     import pyarrow as pa  # heavy: pyarrow
     import pyarrow.ipc as ipc  # heavy: pyarrow
 
@@ -422,8 +493,13 @@ def _write_arrow(path: Path, table) -> None:
     columns = [c.dictionary_encode() if any(t(c.type) for t in text) and name not in _UNIQUE_TEXT else c
                for name, c in zip(table.column_names, table.columns)]
     table = pa.table(columns, names=table.column_names)
-    with atomic_path(path) as tmp, ipc.new_file(str(tmp), table.schema) as writer:
-        writer.write_table(table)
+    with ThreadPoolExecutor(1) as hasher:
+        with atomic_path(path) as tmp:
+            with ipc.new_file(str(tmp), table.schema) as writer:
+                writer.write_table(table)
+            written = open(tmp, "rb", buffering=0)  # opened before atomic_path renames it
+            digest = hasher.submit(_sha256_of, written)
+        return digest.result()
 
 
 def verify_index(folder: str | os.PathLike) -> bool:
@@ -571,24 +647,31 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
     return out
 
 
-def write_summary(path: Path, summary: Mapping[str, Any]) -> Path:
+def write_summary(path: Path, summary: Mapping[str, Any], *, sha256: Mapping[str, str] | None = None) -> Path:
     """Write ``summary`` as indented JSON, atomically, with the SHA-256 of the ``index.csv``
     and ``index.arrow`` beside it (``index_sha256``, ``index_arrow_sha256``,
-    :func:`verify_index`)."""
+    :func:`verify_index`): read from the files, or from ``sha256`` (file name -> hex digest)
+    for those just written."""
     summary = dict(summary)
     for name, key in ((INDEX_FILE, "index_sha256"), (INDEX_ARROW_FILE, "index_arrow_sha256")):
         index = Path(path).parent / name
         if index.is_file():
-            summary[key] = _sha256(index)
+            summary[key] = (sha256 or {}).get(name) or _sha256(index)
     return write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
 
 
 def _sha256(path: Path) -> str:
-    """SHA-256 of a file, read 1 MiB at a time (into one buffer: a large index costs no memory)."""
+    """SHA-256 of a file (:func:`_sha256_of`)."""
+    return _sha256_of(open(path, "rb", buffering=0))
+
+
+def _sha256_of(fh) -> str:
+    """SHA-256 of an open file from its position, read 1 MiB at a time (into one buffer: a
+    large index costs no memory); closes it."""
     h = hashlib.sha256()
     buffer = bytearray(2**20)
     view = memoryview(buffer)
-    with open(path, "rb", buffering=0) as fh:
+    with fh:
         while n := fh.readinto(buffer):
             h.update(view[:n])
     return h.hexdigest()
