@@ -498,7 +498,7 @@ def _write_arrow(path: Path, table) -> str:
             with ipc.new_file(str(tmp), table.schema) as writer:
                 writer.write_table(table)
             written = open(tmp, "rb", buffering=0)  # opened before atomic_path renames it
-            digest = hasher.submit(_sha256_of, written)
+            digest = hasher.submit(_sha256, written)
         return digest.result()
 
 
@@ -660,21 +660,11 @@ def write_summary(path: Path, summary: Mapping[str, Any], *, sha256: Mapping[str
     return write_text_atomic(path, json.dumps(summary, indent=2) + "\n")
 
 
-def _sha256(path: Path) -> str:
-    """SHA-256 of a file (:func:`_sha256_of`)."""
-    return _sha256_of(open(path, "rb", buffering=0))
-
-
-def _sha256_of(fh) -> str:
-    """SHA-256 of an open file from its position, read 1 MiB at a time (into one buffer: a
-    large index costs no memory); closes it."""
-    h = hashlib.sha256()
-    buffer = bytearray(2**20)
-    view = memoryview(buffer)
-    with fh:
-        while n := fh.readinto(buffer):
-            h.update(view[:n])
-    return h.hexdigest()
+def _sha256(file) -> str:
+    """SHA-256 (hex) of a file: a path, or a file open for binary reading from its position
+    (closed after); read a block at a time by ``hashlib.file_digest``."""
+    with open(file, "rb", buffering=0) if isinstance(file, (str, os.PathLike)) else file as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
 
 
 # -- reading a folder -----------------------------------------------------------------------------

@@ -162,18 +162,15 @@ def state_rate(code, t, y, p, dy):
 
     ``y`` may carry one entry after the variant's state (size :data:`STATE_SIZE`): the
     work W [J] of the disturbances, which the compiled drivers integrate with the state
-    (eq 26's work term); its rate is their power P = F'V + Omega'T [W]
+    (eq 26's work term); its rate is their power P = F'V + Omega'(T + R_p x A'F) [W]
     (:func:`rbstab.variants.disturbances.disturbance_power`; 0 without disturbances).
     """
-    power = 0.0
     if code == PERMANENT:
         theta, omega, x, v, a, b, n, h, lam, omega_dot, force_d, torque_d = permanent.quantities(t, y, p)
         _put(dy, 0, matvec(b, omega))
         _put(dy, 3, omega_dot)
-        if dy.shape[0] > PERMANENT_SIZE:
-            if p.disturbance_count > 0.0:
-                power = disturbance_power(force_d, torque_d, omega, v)
-            dy[PERMANENT_SIZE] = power
+        if dy.shape[0] > PERMANENT_SIZE:  # force_d, torque_d are zero without disturbances
+            dy[PERMANENT_SIZE] = disturbance_power(force_d, torque_d, omega, v)
         return
     if code >= sliding.MODE_CODES:  # the pure sign law in a mode (rbstab.engine.switching)
         sliding.mode_rate(y, p, sliding.mode_of(code), dy)
@@ -181,10 +178,10 @@ def state_rate(code, t, y, p, dy):
     theta, omega, x, v, d, a, b, e, f = body_state(y, p)
     lam, d_rate = constraint_force(code, e, f, d, p)
     n, h = torque_n(b, theta, omega, p), force_h(x, v, p)
+    force_d, torque_d = ZERO, ZERO
     if p.disturbance_count > 0.0:
         force_d, torque_d = disturbance_wrench(t, a, p)
         n, h = add(n, torque_d), add(h, force_d)
-        power = disturbance_power(force_d, torque_d, omega, v)
     theta_dot, omega_dot, x_dot, v_dot = body_rates(omega, v, a, b, n, h, lam, p)
     _put(dy, 0, theta_dot)
     _put(dy, 3, omega_dot)
@@ -194,7 +191,7 @@ def state_rate(code, t, y, p, dy):
     if size == EMBEDDED_SIZE:
         _put(dy, 12, d_rate)
     if dy.shape[0] > size:
-        dy[size] = power
+        dy[size] = disturbance_power(force_d, torque_d, omega, v)
 
 
 @jit(forceinline=True)
