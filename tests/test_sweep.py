@@ -572,6 +572,38 @@ def test_sweep_index_is_the_table_and_the_stored_rows(tmp_path):
                                                           index["message"][2:]) if s != "success"]
 
 
+def test_index_rows_in_any_order(tmp_path):
+    """The index is the same whether the stored rows come in the order of the runs (taken
+    as they are) or in any other (gathered); a run's later row counts, also where the
+    sweep's chunks are put in the order of their runs (runner._rows_of)."""
+    from rbstab.sweep import plan_table
+    from rbstab.sweep.folder import write_table_index
+    from rbstab.sweep.runner import _rows_of
+
+    table = plan_table(spec_from_mapping({"name": "ix", "base": str(CASE3), "grid": {"body.mass": [40.0, 41.0, 42.0,
+                                                                                                   43.0]}}))
+    ids = table.ids()
+
+    def rows(runs, final):
+        return pd.DataFrame({"run": runs, "run_id": [ids[r] for r in runs], "status": "success", "message": "",
+                             "lyapunov_initial": 10.0, "lyapunov_final": final, "solver_nfev": [7 * r for r in runs]})
+
+    def index(name, frames):
+        folder = tmp_path / name
+        folder.mkdir()
+        write_table_index(folder, table, _rows_of(frames), {}, name="ix", ratio=0.01)
+        return (folder / "index.csv").read_text(), pd.read_feather(folder / "index.arrow")
+
+    in_order = index("in-order", [rows([0, 1], [1.0, 2.0]), rows([2, 3], [3.0, 4.0])])
+    shuffled = index("shuffled", [rows([3, 2], [4.0, 3.0]), rows([1, 0], [2.0, 1.0])])
+    later = index("later", [rows([1, 2, 3], [9.0, 9.0, 9.0]), rows([0, 1], [1.0, 2.0]), rows([2, 3], [3.0, 4.0])])
+    assert list(in_order[1]["lyapunov_final"]) == [1.0, 2.0, 3.0, 4.0]
+    assert list(in_order[1]["solver_nfev"]) == [0, 7, 14, 21]
+    for other in (shuffled, later):
+        assert other[0] == in_order[0]
+        pd.testing.assert_frame_equal(other[1], in_order[1])
+
+
 def test_run_coordinates_name_every_entry():
     """Vectors, matrices and scale factors of a run's varied values as coordinates."""
     from rbstab.sweep.folder import run_coords

@@ -648,14 +648,23 @@ def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepO
 
 
 def _rows_of(results: list):
-    """The rows of ``results`` (DataFrames) as one DataFrame, the list emptied: the chunks'
-    rows are then held once, by the index's writer, which lets them go as it builds the
-    index (at 10^6 runs ~0.5 GB less at its peak)."""
+    """The rows of ``results`` (DataFrames with a ``run`` column) as one DataFrame, the list
+    emptied: the chunks' rows are then held once, by the index's writer, which lets them go
+    as it builds the index (at 10^6 runs ~0.5 GB less at its peak).
+
+    Chunks finish in any order; where no run has two rows (else the last one counts) the
+    frames go in the order of their first run, so that a sweep's rows are usually in the
+    order of its runs and the index takes its columns as they are
+    (:func:`rbstab.sweep.folder.write_table_index`: no gather of every column)."""
     import pandas as pd  # heavy: pandas
 
     frames = [f for f in results if len(f)]
     results.clear()
-    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    if not frames:
+        return pd.DataFrame()
+    if len(frames) > 1 and sum(map(len, frames)) == len(pd.Index(pd.concat([f["run"] for f in frames])).unique()):
+        frames.sort(key=lambda f: int(f["run"].iat[0]))
+    return pd.concat(frames, ignore_index=True)
 
 
 def rebuild_index(spec: SweepSpec, output: str | os.PathLike = DEFAULT_OUTPUT, *, table=None,
