@@ -663,7 +663,7 @@ def _rows_of(results: list):
     if not frames:
         return pd.DataFrame()
     if len(frames) > 1 and sum(map(len, frames)) == len(pd.Index(pd.concat([f["run"] for f in frames])).unique()):
-        frames.sort(key=lambda f: int(f["run"].iat[0]))
+        frames.sort(key=lambda f: f["run"].iat[0])
     return pd.concat(frames, ignore_index=True)
 
 
