@@ -152,8 +152,9 @@ def _key_value(text: str) -> tuple[str, str]:
 @engine_option()
 @click.option(
     "--chunk-size", type=click.IntRange(min=1), default=None, metavar="N",
-    help="Most runs per unit of work sent to a worker  [default: 256 for compiled or --layout chunk, "
-    "1 for scipy].",
+    help="Most runs per unit of work sent to a worker, and per store file  [default: 512 runs a store file, "
+    "8192 with --store summary, a GPU launch's with --engine cuda; one result file per run (--layout run): "
+    "256 with the compiled engine, 1 with scipy].",
 )
 @click.option(
     "--store", type=click.Choice(["full", "thinned", "summary"]), default="thinned", show_default=True,

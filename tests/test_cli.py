@@ -232,3 +232,17 @@ def test_console_script_passes_on_exit_status_and_flushes_output(tmp_path):
     assert "case1_permanent" in run.stdout
     summary = read_summary(out / "case1_permanent.h5")
     assert summary["status"] == "success" and summary["summary"]["t_final"] == pytest.approx(0.1)
+
+
+def test_sweep_chunk_size_help_gives_the_defaults():
+    """``rbstab sweep --help`` states the chunk sizes the sweep takes by default."""
+    from click.testing import CliRunner
+
+    from rbstab.engine.registry import get_engine
+    from rbstab.sweep.runner import STORE_CHUNK_SIZE, SUMMARY_CHUNK_SIZE
+    from rbstab_cli.main import cli
+
+    text = " ".join(CliRunner().invoke(cli, ["sweep", "--help"]).output.split())
+    assert (f"[default: {STORE_CHUNK_SIZE} runs a store file, {SUMMARY_CHUNK_SIZE} with --store summary" in text)
+    assert (f"{get_engine('compiled').chunk_size} with the compiled engine, {get_engine('scipy').chunk_size} "
+            "with scipy]") in text
