@@ -414,7 +414,8 @@ def _reindexed(results, columns: Sequence[str], n: int) -> dict:
     """``columns`` of ``results`` (a DataFrame with a ``run`` column) over the runs 0..n-1,
     the last row of a run counting: as ``results.drop_duplicates("run", keep="last")
     .set_index("run")[columns].reindex(range(n))`` gives them (NaN, integers as floats and
-    booleans as objects where a run has no row), each as a numpy or pandas array."""
+    booleans as objects where a run has no row), each as a numpy or pandas array: the
+    columns themselves (no copy) where the rows are every run once, in order."""
     import numpy as np  # heavy: numpy
     import pandas as pd  # heavy: pandas
 

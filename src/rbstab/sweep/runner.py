@@ -662,7 +662,7 @@ def _rows_of(results: list):
     results.clear()
     if not frames:
         return pd.DataFrame()
-    if len(frames) > 1 and sum(map(len, frames)) == len(pd.Index(pd.concat([f["run"] for f in frames])).unique()):
+    if len(frames) > 1 and pd.concat([f["run"] for f in frames], ignore_index=True).is_unique:
         frames.sort(key=lambda f: f["run"].iat[0])
     return pd.concat(frames, ignore_index=True)
 
