@@ -34,7 +34,7 @@ PACKAGES = {"rbstab": ROOT / "src" / "rbstab", "rbstab_cli": ROOT / "cli"}
 LAYERS = [
     ("base", ["rbstab", "rbstab.jit", "rbstab.layout", "rbstab.warning_codes"]),
     ("kinematics", ["rbstab.kinematics"]),
-    ("model", ["rbstab.model"]),
+    ("model", ["rbstab.model", "rbstab.chain"]),
     ("variants", ["rbstab.variants"]),
     ("config", ["rbstab.config", "rbstab.resources"]),
     ("engine", ["rbstab.engine", "rbstab.summary", "rbstab.convergence", "rbstab.results", "rbstab.diagnostics"]),

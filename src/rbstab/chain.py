@@ -1,0 +1,147 @@
+"""The description of a chain of rigid bodies: bodies, the joints that connect them, gravity.
+
+A chain is a tree of 1-8 bodies (:data:`MAX_BODIES`). Every body has exactly one joint; the
+joint's parent is the ground (index :data:`GROUND`) or an earlier body, so the bodies are in
+topological order and the joints are numbered like their children (joint ``j`` holds body
+``j``). Each joint holds a point C of its child (``child_point``, child body frame) to a point
+of its parent (``parent_point``: inertial frame for the ground, else the parent's body frame)
+by one of the paper's five laws (``variant``), and carries the rotational feedback of eq 23 on
+the relative orientation, applied as an internal torque pair. A body may also carry the
+ground-anchored feedback H of eq 24 (``k_t``, ``l_t``, zero: none).
+
+This module is the compiled description's plain data, shared by the config layer (which builds
+it, validated) and the physics (which trusts it); the per-run state lives elsewhere. A one-body
+config is the one-body chain :func:`single` builds: its joint to the ground is today's
+``controller`` law at the origin, its body's ``k_t``, ``l_t`` today's H.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Joint", "Chain", "single"]
+
+#: The parent index of a joint to the ground.
+GROUND = -1
+#: Most bodies of one chain.
+MAX_BODIES = 8
+
+_ZERO3 = np.zeros((3, 3))
+
+
+@dataclass(frozen=True, eq=False)
+class Body:
+    """One body of a chain (Table 1) with its optional ground-anchored feedback (eq 24).
+
+    Attributes
+    ----------
+    name : str
+        The name used in configs, files, reports and errors.
+    mass : float
+        m [kg], > 0.
+    inertia : ndarray, shape (3, 3)
+        J [kg m^2] about the centre of mass, body frame, symmetric positive definite.
+    k_t, l_t : ndarray, shape (3, 3)
+        H = -K_t X - L_t V [N] on the centre of mass, inertial frame (eq 24); zero: none.
+    """
+
+    name: str
+    mass: float
+    inertia: np.ndarray
+    k_t: np.ndarray = field(default_factory=lambda: _ZERO3.copy())
+    l_t: np.ndarray = field(default_factory=lambda: _ZERO3.copy())
+
+
+@dataclass(frozen=True, eq=False)
+class Joint:
+    """One joint: the law holding the child's point C to a point of its parent, and the
+    rotational feedback across it.
+
+    Attributes
+    ----------
+    name : str
+        The name used in configs, files, reports and errors.
+    parent : int
+        Index of the parent body, or :data:`GROUND`; always < ``child``.
+    child : int
+        Index of the child body.
+    parent_point : ndarray, shape (3,)
+        R_p [m]: inertial frame if the parent is the ground, else the parent's body frame
+        from its centre of mass.
+    child_point : ndarray, shape (3,)
+        R_c [m]: the point C, child body frame, from its centre of mass.
+    variant : str
+        ``free``, ``permanent``, ``sliding``, ``visco_elastic`` or ``embedded``: the law of
+        the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p).
+    k_r, l_r : ndarray, shape (3, 3)
+        N_j = -K_r Theta_j - L_r Omega_j [N m] (eq 23 on the relative orientation Theta_j and
+        the relative angular velocity Omega_j, child frame).
+    k_c, l_c : ndarray, shape (3, 3), or None
+        Point-law stiffness [N/m] and damping [N s/m] (eqs 22, 40).
+    k_d, l_d : ndarray, shape (3, 3), or None
+        Embedded-controller stiffness [N/m] and damping [N s/m] (eq 22).
+    k_s : float or None
+        Sliding-law force magnitude [N] (eq 39).
+    boundary_layer : float
+        Sliding boundary-layer width phi [m]; 0: the sign law.
+    """
+
+    name: str
+    parent: int
+    child: int
+    parent_point: np.ndarray
+    child_point: np.ndarray
+    variant: str
+    k_r: np.ndarray
+    l_r: np.ndarray
+    k_c: np.ndarray | None = None
+    l_c: np.ndarray | None = None
+    k_d: np.ndarray | None = None
+    l_d: np.ndarray | None = None
+    k_s: float | None = None
+    boundary_layer: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Chain:
+    """A tree of rigid bodies (module docstring for the conventions).
+
+    Attributes
+    ----------
+    bodies : tuple of Body
+        1-:data:`MAX_BODIES` bodies, in topological order.
+    joints : tuple of Joint
+        ``joints[j].child == j`` for every j.
+    gravity : ndarray, shape (3,)
+        g [m/s^2], inertial frame.
+    """
+
+    bodies: tuple[Body, ...]
+    joints: tuple[Joint, ...]
+    gravity: np.ndarray
+
+    @property
+    def size(self) -> int:
+        """The number of bodies (= joints)."""
+        return len(self.bodies)
+
+    @property
+    def parents(self) -> np.ndarray:
+        """Each joint's parent index (:data:`GROUND` for the ground), shape (n,), int."""
+        return np.array([j.parent for j in self.joints], dtype=np.int64)
+
+    @property
+    def body_names(self) -> tuple[str, ...]:
+        return tuple(b.name for b in self.bodies)
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(j.name for j in self.joints)
+
+
+def single(body: Body, joint: Joint, gravity) -> Chain:
+    """The one-body chain: ``body`` held to the ground by ``joint`` (parent :data:`GROUND`,
+    child 0)."""
+    return Chain(bodies=(body,), joints=(joint,), gravity=np.asarray(gravity, dtype=float))
