@@ -426,6 +426,8 @@ def parse_yaml(text: str) -> Any:
         mark = exc.problem_mark or exc.context_mark
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
         problem = exc.problem or exc.context or "invalid YAML"
+        if "maximum nesting depth" in problem:  # libyaml's own limit, met while it scans ahead
+            raise ConfigError([f"YAML refused{where}: nested deeper than {MAX_YAML_DEPTH} levels"]) from None
         raise ConfigError([f"YAML syntax error{where}: {problem}"]) from None
     except yaml.YAMLError as exc:
         raise ConfigError([f"YAML syntax error: {exc}"]) from None
