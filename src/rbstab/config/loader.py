@@ -169,6 +169,9 @@ class RunConfig:
 _NOT_RUN = ("config key 'bodies': found a chain of bodies; expected a one-body config (body, controller) here: "
             "chains are validated (rbstab validate) but not yet run")
 
+_BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller (one body) or "
+         "bodies and joints (a chain)")
+
 
 def is_chain(data: Any) -> bool:
     """Whether a configuration mapping is a chain's (``bodies`` and ``joints`` instead of
@@ -242,6 +245,8 @@ def _build(
         raise ConfigError([f"{what}; expected {TOP_LEVEL}"], source)
     if is_chain(data):
         raise ConfigError([_NOT_RUN], source)
+    if "bodies" in data:
+        raise ConfigError([_BOTH], source)
     run = _validated(plain_tree(data), default_name, source, overrides)
     ctrl = run.controller
     used = VARIANTS[ctrl.variant].required_gains

@@ -1085,7 +1085,7 @@ class ChainSchema(_Section):
         """Distinct names; every body held by exactly one joint whose parent is the ground or
         a body listed before its child (so no loop)."""
         bodies = [b.name for b in self.bodies]
-        index = {name: i for i, name in enumerate(bodies)}
+        index = {name: bodies.index(name) for name in bodies}
         for i, name in enumerate(bodies):
             if name == GROUND_NAME:
                 raise _chain_error(f"bodies.{i}.name", short_repr(name), f"a name other than '{GROUND_NAME}'",
