@@ -198,6 +198,14 @@ REFUSED = [
     ("joint_at_gimbal_lock", lambda d: d["initial_state"]["trunk"].update(theta=[0.0, 1.0, 0.0])
      or d["initial_state"]["legs"].update(theta=[0.0, -0.5707, 0.0]), "initial_state.trunk.theta",
      ["joint 'hip' starts at its gimbal lock"]),
+    ("outside_the_limits", lambda d: d.update(simulation={"limits": {"theta": 0.06}}), "simulation.limits.theta",
+     ["found 0.06", "expected bounds that contain the initial state", "body 'trunk' starts outside: |theta_1| = 0.08"]),
+    ("e_outside_the_limits", lambda d: d.update(simulation={"limits": {"constraint_error": 0.001}})
+     or d["initial_state"]["trunk"].update(x=_TRUNK_X), "simulation.limits.constraint_error",
+     ["joint 'hip' starts outside: |E_3| = 0.0101"]),
+    ("bound_of_e_on_pins", lambda d: d.update(simulation={"limits": {"constraint_error": 0.01}})
+     or d["joints"][1].update(variant="permanent"), "simulation.limits.constraint_error",
+     ["no bound when every joint is 'permanent'"]),
     ("bad_body_name", _set(["bodies", 1, "name"], "trunk.upper"), "bodies.1.name",
      ["found 'trunk.upper'", "a name of letters, digits, '_' and '-'"]),
 ]
@@ -219,7 +227,8 @@ def test_refused_in_one_line_naming_the_key_and_nothing_written(tmp_path, change
 
 
 def test_the_base_chain_is_valid(tmp_path):
-    result, files = _validate(tmp_path, base())
+    data = base() | {"simulation": {"limits": {"theta": 0.09, "constraint_error": 0.001}}}
+    result, files = _validate(tmp_path, data)
     assert result.exit_code == 0, result.output
     assert files == ["chain.yaml"]
 
@@ -408,6 +417,9 @@ def test_overrides_reach_a_chain_and_are_named_in_its_errors(tmp_path):
 def test_a_chain_body_warns_like_a_one_body_config():
     data = base()
     data["bodies"][1]["inertia"] = [10, 8, 0.4]
-    with pytest.warns(PhysicalPlausibilityWarning, match=r"bodies.1 \('trunk'\): W001"):
+    data["initial_state"]["legs"]["theta"] = [45, 0, 0]
+    with pytest.warns(PhysicalPlausibilityWarning) as caught:
         config = chain_config_from_mapping(data)
-    assert len(config.warnings) == 1
+    assert [str(w.message)[:40] for w in caught] == ["W005 initial_state.legs.theta: theta[0] ",
+                                                    "W001 bodies.1.inertia ('trunk'): princip"]
+    assert len(config.warnings) == 2

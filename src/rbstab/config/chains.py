@@ -179,11 +179,11 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
 
 
 def _initial_state(run: ChainSchema, chain: Chain, source: str | None,
-                   overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...]]:
-    """Each body's initial state, x and v placed where left out; ConfigError for a permanent
-    joint whose given x or v misses its constraint, or a joint's relative orientation at
-    gimbal lock."""
-    states, placed, rotations = {}, [], []
+                   overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...], list]:
+    """(each body's initial state, x and v placed where left out; the keys placed; each
+    joint's E_j [m]). ConfigError for a permanent joint whose given x or v misses its
+    constraint, or a joint's relative orientation at gimbal lock."""
+    states, placed, rotations, errors = {}, [], [], []
     margin = run.simulation.gimbal_margin
     for body, joint in zip(chain.bodies, chain.joints):
         written = run.initial_state.get(body.name)
@@ -226,10 +226,11 @@ def _initial_state(run: ChainSchema, chain: Chain, source: str | None,
                     f"joint '{joint.name}' starts at its gimbal lock, theta_2 = {theta_2:.6g} rad (eq 1)",
                     source, overrides, ("initial_state", "simulation.gimbal_margin"))
         rotations.append(a_c)
+        errors.append(state["position"] + a_c @ r_c - point_p)
         for array in state.values():
             array.setflags(write=False)
         states[body.name] = state
-    return states, tuple(placed)
+    return states, tuple(placed), errors
 
 
 def _refuse(key: str, found: str, expected: str, detail: str, source: str | None, overrides: Sequence[str],
@@ -239,13 +240,22 @@ def _refuse(key: str, found: str, expected: str, detail: str, source: str | None
     raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
 
 
-def _check_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], run: ChainSchema,
-                  source: str | None, overrides: Sequence[str]) -> None:
-    """ConfigError when a body's initial theta, omega, x or v lies outside ``simulation.limits``
-    (the same bounds for every body)."""
+def _check_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], errors: Sequence[np.ndarray],
+                  run: ChainSchema, source: str | None, overrides: Sequence[str]) -> None:
+    """ConfigError when a body's initial theta, omega, x or v, or the E_j of a joint that is
+    not ``permanent``, lies outside ``simulation.limits`` (the same bounds for every body and
+    joint)."""
     limits = simulation_settings(run.simulation).limits
     if limits is None:
         return
+    for joint, error in zip(chain.joints, errors):
+        outside = np.flatnonzero(~(np.abs(error) <= limits.constraint_error))
+        if joint.variant != "permanent" and outside.size:
+            i = int(outside[0])
+            _refuse("simulation.limits.constraint_error", short_repr(run.simulation.limits.constraint_error),
+                    "bounds that contain the initial state",
+                    f"joint '{joint.name}' starts outside: |E_{i + 1}| = {abs(error[i]):.6g} m > "
+                    f"{limits.constraint_error[i]:g} m", source, overrides, ("simulation.limits", "initial_state"))
     for name, bound in (("theta", limits.theta), ("omega", limits.omega), ("position", limits.position),
                         ("velocity", limits.velocity)):
         for body in chain.bodies:
@@ -286,11 +296,13 @@ def _resolved(run: ChainSchema) -> dict:
 def _notes(chain: Chain, run: ChainSchema, source: str | None) -> tuple[str, ...]:
     """Warn of each body's physical-plausibility problems (its inertia, its angles in degrees)."""
     lines = []
-    for i, body in enumerate(chain.bodies):
-        lines += [f"bodies.{i} ('{body.name}'): {m}" for m in inertia_warnings(body.inertia)]
+    for i, body in enumerate(chain.bodies):  # the one-body lines, with this body's keys
+        lines += [m.replace(" body.inertia:", f" bodies.{i}.inertia ('{body.name}'):", 1)
+                  for m in inertia_warnings(body.inertia)]
         state = run.initial_state.get(body.name)
         if state is not None:
-            lines += [f"'{body.name}': {m}" for m in angle_warnings(state.theta)]
+            lines += [m.replace(" initial_state.theta:", f" initial_state.{body.name}.theta:", 1)
+                      for m in angle_warnings(state.theta)]
     for line in lines:
         warnings.warn(f"{source}: {line}" if source else line, PhysicalPlausibilityWarning, stacklevel=4)
     return tuple(lines)
@@ -303,8 +315,8 @@ def _build(data: Any, *, default_name: str | None, source: str | None, overrides
     run = _validated(plain_tree(data), default_name, source, overrides, schema=ChainSchema)
     resolved = _resolved(run)
     chain = _chain(run, resolved.get("disturbances") or ())
-    states, placed = _initial_state(run, chain, source, overrides)
-    _check_limits(chain, states, run, source, overrides)
+    states, placed, errors = _initial_state(run, chain, source, overrides)
+    _check_limits(chain, states, errors, run, source, overrides)
     return ChainConfig(name=run.name, chain=chain, initial_state=states, placed=placed,
                        simulation=simulation_settings(run.simulation), resolved=resolved,
                        warnings=_notes(chain, run, source))
