@@ -206,6 +206,12 @@ REFUSED = [
     ("bound_of_e_on_pins", lambda d: d.update(simulation={"limits": {"constraint_error": 0.01}})
      or d["joints"][1].update(variant="permanent"), "simulation.limits.constraint_error",
      ["no bound when every joint is 'permanent'"]),
+    ("body_gain_on_a_joint", lambda d: d["joints"][1].update(k_t=[10, 10, 10]), "joints.1.k_t",
+     ["found [10, 10, 10]", "expected no k_t on a joint", "give k_t to the child body"]),
+    ("misspelt_joint_key", lambda d: d["joints"][1].update(k_rr=[10, 10, 10]), "joints.1.k_rr",
+     ["unknown key; did you mean 'joints.1.k_r'?"]),
+    ("one_body_initial_state", _set(["initial_state"], {"theta": [0.1, 0, 0]}), "initial_state",
+     ["found keys theta", "expected body names as keys ('legs', 'trunk')"]),
     ("bad_body_name", _set(["bodies", 1, "name"], "trunk.upper"), "bodies.1.name",
      ["found 'trunk.upper'", "a name of letters, digits, '_' and '-'"]),
 ]

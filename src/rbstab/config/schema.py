@@ -997,6 +997,17 @@ class _ChainJoint(_Section):
         0.0, description="a number >= 0 (m; 0 = pure sign function)")
     saturation: _JointSaturation | None = Field(None, description=_mapping_of(_JointSaturation) + " (optional)")
 
+    @model_validator(mode="before")
+    @classmethod
+    def _no_body_gains(cls, value: Any) -> Any:
+        """k_t, l_t written on a joint: they are the body's (H acts from the ground)."""
+        for key in BODY_GAINS:
+            if isinstance(value, Mapping) and key in value:
+                raise PydanticCustomError("rbstab_invalid", "a body's gain on a joint", {
+                    "subkey": key, "found": short_repr(value[key]), "expected": f"no {key} on a joint",
+                    "detail": f"the ground-anchored feedback H (eq 24) is a body's: give {key} to the child body"})
+        return value
+
     @field_validator("k_c", "l_c", "k_d", "l_d", "k_s", mode="after")
     @classmethod
     def _required_by_variant(cls, value: Any, info: ValidationInfo) -> Any:
@@ -1079,6 +1090,21 @@ class ChainSchema(_Section):
     @classmethod
     def _empty_section(cls, value: Any) -> Any:
         return {} if value is None else value
+
+    @field_validator("initial_state", mode="before")
+    @classmethod
+    def _by_body(cls, value: Any, info: ValidationInfo) -> Any:
+        """A one-body ``initial_state`` (theta, omega, ... at its top) in a chain."""
+        blocks = set(_InitialState.model_fields)
+        if isinstance(value, Mapping) and value and set(value) <= blocks:
+            names = [b.name for b in info.data.get("bodies") or ()]
+            if not blocks & set(names):
+                raise PydanticCustomError("rbstab_invalid", "one-body initial state", {
+                    "key": "initial_state", "found": f"keys {', '.join(map(str, value))}",
+                    "expected": "body names as keys" + (f" ({_names_list(names)})" if names else "")
+                                + f", each {_mapping_of(_InitialState)}",
+                    "detail": "a chain's initial state is given per body"})
+        return value
 
     @model_validator(mode="after")
     def _a_tree(self) -> "ChainSchema":
@@ -1353,6 +1379,8 @@ def problem_line(
         allowed = list(model.model_fields) if model is not None else []
         word = str(loc[-1])
         section = str(loc[-2]) if len(loc) > 1 else ""
+        if len(loc) > 2 and isinstance(loc[-2], int):  # an entry of a list: name the list too
+            section = f"{loc[-3]}.{section}"
         # a key of another section spelled exactly is surely meant; else the closest here
         other = _other_section_hint(word, section) if root is None or root is RunSchema else ""
         hint = other or _did_you_mean(word, allowed, f"{section}." if section else "")
