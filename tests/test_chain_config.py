@@ -429,3 +429,16 @@ def test_a_chain_body_warns_like_a_one_body_config():
     assert [str(w.message)[:40] for w in caught] == ["W005 initial_state.legs.theta: theta[0] ",
                                                     "W001 bodies.1.inertia ('trunk'): princip"]
     assert len(config.warnings) == 2
+
+
+def test_validate_json_gives_the_chain_by_names():
+    import json
+
+    result = CliRunner().invoke(cli, ["validate", "--json", str(EXAMPLES["knee"])])
+    assert result.exit_code == 0, result.output
+    record = json.loads(next(line for line in result.output.splitlines() if line.startswith("{")))
+    assert record["valid"] and "variant" not in record
+    assert [b["name"] for b in record["chain"]["bodies"]] == ["thigh", "shank"]
+    assert [(j["name"], j["parent"], j["child"], j["variant"]) for j in record["chain"]["joints"]] == [
+        ("hip", "ground", "thigh", "visco_elastic"), ("knee", "thigh", "shank", "embedded")]
+    assert record["chain"]["joints"][1]["parent_point"] == [0.0, 0.243, 0.0]
