@@ -442,3 +442,17 @@ def test_validate_json_gives_the_chain_by_names():
     assert [(j["name"], j["parent"], j["child"], j["variant"]) for j in record["chain"]["joints"]] == [
         ("hip", "ground", "thigh", "visco_elastic"), ("knee", "thigh", "shank", "embedded")]
     assert record["chain"]["joints"][1]["parent_point"] == [0.0, 0.243, 0.0]
+
+
+def test_singular_gains_written_are_noted_those_left_out_are_not():
+    from rbstab.config import SemiDefiniteGainWarning
+
+    chain_config_from_mapping(base())  # k_t, l_t left out: no note (the autouse fixture makes one an error)
+    data = base()
+    data["bodies"][0]["k_t"] = [0, 0, 0]
+    data["joints"][1]["l_r"] = [0, 120, 40]
+    with pytest.warns(SemiDefiniteGainWarning) as caught:
+        config = chain_config_from_mapping(data)
+    assert [str(w.message)[:40] for w in caught] == ["W002 bodies.0.k_t: positive semi-definit",
+                                                    "W002 joints.1.l_r: positive semi-definit"]
+    assert len(config.warnings) == 2

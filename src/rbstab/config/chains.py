@@ -53,7 +53,7 @@ from ..chain import GROUND, Body, Chain, Joint, single
 from ..kinematics import rotation_matrix
 from ..model import Saturation
 from ..variants import VARIANTS
-from .errors import ConfigError, PhysicalPlausibilityWarning
+from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .loader import (
     RunConfig,
     _array,
@@ -69,8 +69,17 @@ from .loader import (
     simulation_settings,
 )
 from .paths import apply_overrides, plain_tree
-from .physics import angle_warnings, inertia_warnings
-from .schema import CHAIN_TOP_LEVEL, GROUND_NAME, INITIAL_STATE_BLOCKS, ChainSchema, SimulationSettings, short_repr
+from .physics import angle_warnings, inertia_warnings, semidefinite_notes
+from .schema import (
+    BODY_GAINS,
+    CHAIN_TOP_LEVEL,
+    GROUND_NAME,
+    INITIAL_STATE_BLOCKS,
+    JOINT_GAINS,
+    ChainSchema,
+    SimulationSettings,
+    short_repr,
+)
 from .yaml_io import dump_yaml, read_yaml_file
 
 __all__ = ["ChainConfig", "chain_of", "chain_config_from_mapping", "load_any_config", "ONE_BODY_NAMES",
@@ -294,17 +303,26 @@ def _resolved(run: ChainSchema) -> dict:
 
 
 def _notes(chain: Chain, run: ChainSchema, source: str | None) -> tuple[str, ...]:
-    """Warn of each body's physical-plausibility problems (its inertia, its angles in degrees)."""
+    """Warn of each body's physical-plausibility problems (its inertia, its angles in degrees)
+    and note the singular gains written (W002; a gain left out is zero by intent: a passive
+    joint, no ground-anchored feedback)."""
     lines = []
-    for i, body in enumerate(chain.bodies):  # the one-body lines, with this body's keys
+    for i, (body, written) in enumerate(zip(chain.bodies, run.bodies)):  # the one-body lines, this body's keys
         lines += [m.replace(" body.inertia:", f" bodies.{i}.inertia ('{body.name}'):", 1)
                   for m in inertia_warnings(body.inertia)]
         state = run.initial_state.get(body.name)
         if state is not None:
             lines += [m.replace(" initial_state.theta:", f" initial_state.{body.name}.theta:", 1)
                       for m in angle_warnings(state.theta)]
+        lines += [m.replace("controller.", f"bodies.{i}.") for m in semidefinite_notes(
+            {g: getattr(written, g) for g in BODY_GAINS})]
+    for i, joint in enumerate(run.joints):
+        used = VARIANTS[joint.variant].required_gains
+        lines += [m.replace("controller.", f"joints.{i}.") for m in semidefinite_notes(
+            {g: getattr(joint, g) for g in (*JOINT_GAINS, "k_s") if g in used or g in ("k_r", "l_r")})]
     for line in lines:
-        warnings.warn(f"{source}: {line}" if source else line, PhysicalPlausibilityWarning, stacklevel=4)
+        category = SemiDefiniteGainWarning if line.startswith("W002") else PhysicalPlausibilityWarning
+        warnings.warn(f"{source}: {line}" if source else line, category, stacklevel=4)
     return tuple(lines)
 
 
