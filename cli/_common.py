@@ -23,15 +23,17 @@ def command_line() -> str:
     return " ".join(shlex.quote(a) for a in sys.argv)
 
 
-def load_one(path: str, overrides: Sequence[str]):
-    """``(config, error, warnings)`` of one config file: the RunConfig or None, the
-    ConfigError or None, and its coded warning lines (:mod:`rbstab.warning_codes`)."""
+def load_one(path: str, overrides: Sequence[str], *, chains: bool = False):
+    """``(config, error, warnings)`` of one config file: the RunConfig (with ``chains``, a
+    ChainConfig for a chain's file) or None, the ConfigError or None, and its coded warning
+    lines (:mod:`rbstab.warning_codes`)."""
     from rbstab.config import ConfigError, PhysicalPlausibilityWarning  # heavy: yaml
+    from rbstab.config.chains import load_any_config  # heavy: yaml, pydantic
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PhysicalPlausibilityWarning)
         try:
-            config = load_config(path, overrides)
+            config = load_any_config(path, overrides) if chains else load_config(path, overrides)
         except ConfigError as exc:
             return None, exc, []
     for w in caught:

@@ -34,14 +34,57 @@ def _check_spec(path: str, overrides) -> dict:
 
 
 def _check_config(path: str, overrides) -> dict:
-    """One JSON-able record of a run config: valid or not, its settings, its warnings."""
-    config, error, lines = load_one(path, overrides)
+    """One JSON-able record of a run config: valid or not, its settings, its warnings; for a
+    chain its bodies and joints instead of the variant."""
+    from rbstab.config.chains import ChainConfig  # heavy: pydantic
+
+    config, error, lines = load_one(path, overrides, chains=True)
     if config is None:
         return {"path": path, "kind": "config", "valid": False, "errors": list(error.errors),
                 "text": config_error_text(path, error)}
     sim = config.simulation
-    return {"path": path, "kind": "config", "valid": True, "name": config.name, "variant": config.variant,
-            "t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
+    record = {"path": path, "kind": "config", "valid": True, "name": config.name}
+    if isinstance(config, ChainConfig):
+        record["chain"] = _chain_record(config.chain)
+    else:
+        record["variant"] = config.variant
+    return record | {"t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
+
+
+def _chain_record(chain) -> dict:
+    """A chain's bodies and joints, JSON-able, parents by name (``ground``: the inertial frame)."""
+    from rbstab.chain import GROUND  # heavy: numpy
+
+    names = chain.body_names
+    return {
+        "bodies": [{"name": b.name, "mass": b.mass} for b in chain.bodies],
+        "joints": [{"name": j.name, "parent": "ground" if j.parent == GROUND else names[j.parent],
+                    "child": names[j.child], "variant": j.variant, "parent_point": j.parent_point.tolist(),
+                    "child_point": j.child_point.tolist()} for j in chain.joints],
+    }
+
+
+def _tree(chain: dict) -> list[str]:
+    """The chain as an indented tree, one line a joint: parent -> child (its mass): the
+    joint's name, variant and points (the parent's, the child's C) [m]."""
+    mass = {b["name"]: b["mass"] for b in chain["bodies"]}
+    children: dict[str, list[dict]] = {}
+    for joint in chain["joints"]:
+        children.setdefault(joint["parent"], []).append(joint)
+
+    def point(values) -> str:
+        return "[" + ", ".join(f"{v:g}" for v in values) + "]"
+
+    lines: list[str] = []
+
+    def walk(parent: str, depth: int) -> None:
+        for j in children.get(parent, ()):
+            lines.append(f"{'  ' * depth}{parent} -> {j['child']} ({mass[j['child']]:g} kg): {j['name']}, "
+                         f"{j['variant']}, {point(j['parent_point'])} -> {point(j['child_point'])} m")
+            walk(j["child"], depth + 1)
+
+    walk("ground", 1)
+    return lines
 
 
 def _say(record: dict) -> None:
@@ -52,6 +95,13 @@ def _say(record: dict) -> None:
         console.out(f"ok: sweep {record['name']} ({record['n_runs']} runs)")
         for line in record["warnings"]:
             console.warn(line, record["name"])
+        return
+    if "chain" in record:
+        n = len(record["chain"]["bodies"])
+        console.out(f"ok: {record['name']} (chain of {n} bod{'y' if n == 1 else 'ies'}, t_end {record['t_end']:g} s, "
+                    f"{record['n_samples']} samples, {record['method']})")
+        for line in _tree(record["chain"]):
+            console.out(line)
         return
     console.out(f"ok: {record['name']} ({record['variant']}, t_end {record['t_end']:g} s, "
                 f"{record['n_samples']} samples, {record['method']})")
@@ -66,8 +116,11 @@ def validate(configs, overrides, as_json) -> None:
     """Validate CONFIG... and sweep specs (with --set overrides applied); exit non-zero if any is invalid.
 
     A sweep spec (a file with a ``base`` key) is expanded: every run's config is validated.
+    A chain (a config with ``bodies`` and ``joints``) is shown as its tree: one line a joint,
+    parent -> child (mass), the joint's name, variant and points.
     With --json: one object per file, with "path", "kind" (config or sweep), "valid" and
-    either "errors" or "name", the settings and "warnings".
+    either "errors" or "name", the settings ("variant", or "chain" with its "bodies" and
+    "joints") and "warnings".
     """
     console = get_console()
     records = [_check_spec(p, overrides) if _is_spec(p) else _check_config(p, overrides) for p in configs]

@@ -7,7 +7,10 @@ topological order and the joints are numbered like their children (joint ``j`` h
 of its parent (``parent_point``: inertial frame for the ground, else the parent's body frame)
 by one of the paper's five laws (``variant``), and carries the rotational feedback of eq 23 on
 the relative orientation, applied as an internal torque pair. A body may also carry the
-ground-anchored feedback H of eq 24 (``k_t``, ``l_t``, zero: none).
+ground-anchored feedback H of eq 24 (``k_t``, ``l_t``, zero: none). What the actuators can
+deliver is a :class:`rbstab.model.Saturation` per joint (its ``torque_n``, the limits of N_j,
+and ``constraint_force``, of the point force Lambda_j) and per body (its ``force_h``, the
+limits of H); the disturbances act on the body that lists them.
 
 This module is the compiled description's plain data, shared by the config layer (which builds
 it, validated) and the physics (which trusts it); the per-run state lives elsewhere. A one-body
@@ -20,6 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .model import Disturbance, Saturation
 
 __all__ = ["GROUND", "MAX_BODIES", "Body", "Joint", "Chain", "single"]
 
@@ -45,6 +50,10 @@ class Body:
         J [kg m^2] about the centre of mass, body frame, symmetric positive definite.
     k_t, l_t : ndarray, shape (3, 3)
         H = -K_t X - L_t V [N] on the centre of mass, inertial frame (eq 24); zero: none.
+    saturation : Saturation or None
+        The limits of H (its ``force_h``; its other limits are inf); None: unlimited.
+    disturbances : tuple of Disturbance
+        The disturbances acting on this body (``point`` in its body frame).
     """
 
     name: str
@@ -52,6 +61,8 @@ class Body:
     inertia: np.ndarray
     k_t: np.ndarray = field(default_factory=lambda: _ZERO3.copy())
     l_t: np.ndarray = field(default_factory=lambda: _ZERO3.copy())
+    saturation: Saturation | None = None
+    disturbances: tuple[Disturbance, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -86,6 +97,10 @@ class Joint:
         Sliding-law force magnitude [N] (eq 39).
     boundary_layer : float
         Sliding boundary-layer width phi [m]; 0: the sign law.
+    saturation : Saturation or None
+        The limits of N_j (``torque_n`` [N m], child frame) and of Lambda_j
+        (``constraint_force`` [N], inertial frame; inf for ``permanent``, whose Lambda_j is
+        the pin's reaction); its ``force_h`` is inf. None: unlimited.
     """
 
     name: str
@@ -102,6 +117,7 @@ class Joint:
     l_d: np.ndarray | None = None
     k_s: float | None = None
     boundary_layer: float = 0.0
+    saturation: Saturation | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -68,6 +68,12 @@ memory); samples are at least 1e-12 s apart. ``max_steps`` and ``max_wall_time``
 how long a run may take, not what it computes: they are not part of the run's
 ``config_hash`` (a run stopped by them is ``failed``; ``--retry-failed`` reruns it).
 
+A chain of bodies (``bodies`` and ``joints`` instead of ``body`` and ``controller``) is
+validated by the same schema into a :class:`ChainConfig` (:mod:`rbstab.config.chains`,
+:func:`load_any_config`); :func:`chain_of` gives the :class:`rbstab.chain.Chain` of any
+configuration, a one-body one being the one-body chain. :func:`load_config` and
+:func:`config_from_mapping` give one-body configurations and refuse a chain in one line.
+
 A run's identity is :func:`config_hash` of its :func:`canonical_config` (the resolved
 configuration without ``name`` and the run limits, as canonical JSON;
 :mod:`rbstab.config.identity`): result files store it, and ``rbstab run`` and ``rbstab
@@ -99,6 +105,7 @@ _LAZY = {
     "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "load_config"),
     "paths": ("apply_overrides", "get_dotted", "set_dotted"),
     "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
+    "chains": ("ChainConfig", "chain_of", "chain_config_from_mapping", "load_any_config"),
 }
 
 
@@ -132,4 +139,8 @@ __all__ = [
     "GAIN_NAMES",
     "GAIN_UNITS",
     "INITIAL_STATE_BLOCKS",
+    "ChainConfig",
+    "chain_of",
+    "chain_config_from_mapping",
+    "load_any_config",
 ]

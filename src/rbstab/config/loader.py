@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import ValidationError
+from pydantic import BaseModel, ValidationError
 
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS, Variant
@@ -31,7 +31,8 @@ from .schema import (
 )
 from .yaml_io import dump_yaml_sections, read_yaml_file
 
-__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS", "limits_of"]
+__all__ = ["RunConfig", "config_from_mapping", "load_config", "PER_RUN_SECTIONS", "limits_of", "is_chain",
+           "simulation_settings", "resolved_simulation"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
@@ -164,6 +165,20 @@ class RunConfig:
         return VARIANTS[self.variant](self.body, self.gains, self.simulation.limits)
 
 
+#: The line with which a one-body loader refuses a chain configuration.
+_NOT_RUN = ("config key 'bodies': found a chain of bodies; expected a one-body config (body, controller) here: "
+            "chains are validated (rbstab validate) but not yet run")
+
+_BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller (one body) or "
+         "bodies and joints (a chain)")
+
+
+def is_chain(data: Any) -> bool:
+    """Whether a configuration mapping is a chain's (``bodies`` and ``joints`` instead of
+    ``body`` and ``controller``): it has ``bodies`` and no ``body``."""
+    return isinstance(data, Mapping) and "bodies" in data and "body" not in data
+
+
 def saturation_of(section: Mapping | None) -> Saturation | None:
     """The :class:`rbstab.model.Saturation` of a validated ``controller.saturation``
     mapping (a limit missing or null: inf on every axis; a number: on every axis)."""
@@ -228,6 +243,10 @@ def _build(
     if not isinstance(data, Mapping):
         what = "the configuration is empty" if data is None else f"top level: found {short_repr(data)}"
         raise ConfigError([f"{what}; expected {TOP_LEVEL}"], source)
+    if is_chain(data):
+        raise ConfigError([_NOT_RUN], source)
+    if "bodies" in data:
+        raise ConfigError([_BOTH], source)
     run = _validated(plain_tree(data), default_name, source, overrides)
     ctrl = run.controller
     used = VARIANTS[ctrl.variant].required_gains
@@ -244,18 +263,7 @@ def _build(
         gravity=_array(run.body.gravity),
     )
     sim = run.simulation
-    simulation = SimulationSettings(
-        t_end=float(sim.t_end),
-        n_samples=sim.n_samples,
-        method=sim.method,
-        rtol=float(sim.rtol),
-        atol=float(sim.atol),
-        max_step=float(sim.max_step),
-        gimbal_margin=float(sim.gimbal_margin),
-        max_steps=int(sim.max_steps),
-        max_wall_time=float(sim.max_wall_time),
-        limits=limits_of(None if sim.limits is None else sim.limits.model_dump()),
-    )
+    simulation = simulation_settings(sim)
     used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
     _check_weight(ctrl, body, gains, used_gains, source, overrides)
     initial_state = {block: _array(getattr(run.initial_state, key)) for key, block in INITIAL_STATE_BLOCKS.items()}
@@ -267,13 +275,7 @@ def _build(
     else:
         dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
         gains = dataclasses.replace(gains, disturbances=disturbances_of(dump["disturbances"]))
-    for key in ("max_step", "max_wall_time"):
-        if math.isinf(getattr(sim, key)):
-            dump["simulation"][key] = None
-    if sim.limits is None:
-        dump["simulation"].pop("limits")  # a run without: its resolved form (and identity) as before
-    else:
-        dump["simulation"]["limits"] = {k: v for k, v in dump["simulation"]["limits"].items() if v is not None}
+    resolved_simulation(dump["simulation"], sim)
     as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
     found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
     return RunConfig(
@@ -286,6 +288,34 @@ def _build(
         resolved=dump,  # plain dicts, lists, str and numbers (the validators make new lists; tested)
         warnings=found_warnings,
     )
+
+
+def simulation_settings(sim) -> SimulationSettings:
+    """The :class:`SimulationSettings` of a validated ``simulation`` section (the schema's model)."""
+    return SimulationSettings(
+        t_end=float(sim.t_end),
+        n_samples=sim.n_samples,
+        method=sim.method,
+        rtol=float(sim.rtol),
+        atol=float(sim.atol),
+        max_step=float(sim.max_step),
+        gimbal_margin=float(sim.gimbal_margin),
+        max_steps=int(sim.max_steps),
+        max_wall_time=float(sim.max_wall_time),
+        limits=limits_of(None if sim.limits is None else sim.limits.model_dump()),
+    )
+
+
+def resolved_simulation(dump: dict, sim) -> None:
+    """``dump`` (a ``simulation`` section's model_dump) as ``resolved`` writes it, in place:
+    inf run limits as None, no ``limits`` key without limits, unset bounds left out."""
+    for key in ("max_step", "max_wall_time"):
+        if math.isinf(getattr(sim, key)):
+            dump[key] = None
+    if sim.limits is None:
+        dump.pop("limits")  # a run without: its resolved form (and identity) as before
+    else:
+        dump["limits"] = {k: v for k, v in dump["limits"].items() if v is not None}
 
 
 def _emit_notes(body: RigidBody, gains_as_written: Mapping[str, Any], source: str | None, *,
@@ -301,18 +331,20 @@ def _emit_notes(body: RigidBody, gains_as_written: Mapping[str, Any], source: st
     return tuple(message for message, _ in notes)
 
 
-def _validated(data: dict, default_name: str | None, source: str | None, overrides: Sequence[str]) -> RunSchema:
+def _validated(data: dict, default_name: str | None, source: str | None, overrides: Sequence[str],
+               schema: type[BaseModel] = RunSchema) -> Any:
     """``data`` (a plain tree, ``name`` set from ``default_name`` if absent) through the
-    schema; ConfigError lists every problem, each with the overrides that touch its key."""
+    ``schema`` (:class:`RunSchema`, or :class:`ChainSchema` for a chain); ConfigError lists
+    every problem, each with the overrides that touch its key."""
     name_defaulted = "name" not in data and default_name is not None
     if name_defaulted:
         data["name"] = default_name
     try:
-        return RunSchema.model_validate(data)
+        return schema.model_validate(data)
     except ValidationError as exc:
         lines = []
         for err in exc.errors(include_url=False):
-            key, text = problem_line(err, name_defaulted)
+            key, text = problem_line(err, name_defaulted, root=None if schema is RunSchema else schema)
             related = [o for o in overrides if _related(o.partition("=")[0].strip(), key)]
             lines.append(text + "".join(f" [from override {_short_override(o)}]" for o in related))
         raise ConfigError(lines, source) from None

@@ -29,6 +29,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
+from ..chain import MAX_BODIES
 from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES, Limits
 from ..variants import VARIANTS
@@ -67,6 +68,13 @@ __all__ = [
     "bounded_number",
     "optional",
     "run_name",
+    "ChainSchema",
+    "CHAIN_TOP_LEVEL",
+    "BODY_GAINS",
+    "JOINT_GAINS",
+    "GROUND_NAME",
+    "MAX_PART_NAME",
+    "part_name",
 ]
 
 #: Matrix gains of ``controller`` (:class:`rbstab.model.Gains`), with their units.
@@ -901,6 +909,317 @@ class RunSchema(_Section):
         return value
 
 
+# -- chains of bodies ------------------------------------------------------------------------------
+# A chain configuration (``bodies`` and ``joints`` instead of ``body`` and ``controller``):
+# validated here like a one-body one; rbstab.config.chains builds its rbstab.chain.Chain.
+
+#: Gains of a chain's body: the ground-anchored feedback H (eq 24), zero when absent.
+BODY_GAINS = ("k_t", "l_t")
+#: Gains of a chain's joint: its rotational feedback (eq 23, zero when absent: a passive
+#: joint) and those of its point law that its variant needs (``required_gains``).
+JOINT_GAINS = ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d")
+#: The name of a joint's parent that is the inertial frame.
+GROUND_NAME = "ground"
+#: Longest name of a body or joint.
+MAX_PART_NAME = 64
+_PART_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_-]*")
+_PART_NAME_RULE = ("a name of letters, digits, '_' and '-' that starts with a letter or '_' (it is part of "
+                   f"dotted keys), at most {MAX_PART_NAME} characters")
+
+
+def part_name(value: Any) -> str:
+    """The name of a body or a joint: it appears in dotted keys, files and reports."""
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string")
+    if len(value) > MAX_PART_NAME:
+        raise Invalid(f"{len(value)} characters; at most {MAX_PART_NAME}")
+    if not _PART_NAME.fullmatch(value):
+        raise Invalid()
+    return value
+
+
+_PART = Annotated[Any, checked(part_name)]
+
+
+class _BodySaturation(_Section):
+    """What a body's ground-anchored actuator can deliver (H, eq 24)."""
+
+    force_h: _LIMITS = Field(None, description="|H_i| <= limit (N, inertial frame): a number > 0 or 3 of them "
+                                               "(.inf: none)")
+    shape: Annotated[Any, checked(_shape)] = Field("clip", description=f"one of {', '.join(SATURATION_SHAPES)}")
+
+
+class _JointSaturation(_Section):
+    """What a joint's actuators can deliver: its torque N_j and its point force Lambda_j."""
+
+    torque_n: _LIMITS = Field(None, description="|N_i| <= limit (N m, child frame): a number > 0 or 3 of them "
+                                                "(.inf: none)")
+    constraint_force: _LIMITS = Field(None, description="|Lambda_i| <= limit (N, inertial frame): a number > 0 "
+                                                        "or 3 of them (not permanent)")
+    shape: Annotated[Any, checked(_shape)] = Field("clip", description=f"one of {', '.join(SATURATION_SHAPES)}")
+
+
+class _ChainBody(_Section):
+    """One body of a chain (Table 1) and its optional ground-anchored feedback (eq 24)."""
+
+    name: _PART = Field(description=_PART_NAME_RULE)
+    mass: Annotated[Any, checked(bounded_number(gt=0))] = Field(description="a number > 0 (kg)")
+    inertia: Annotated[Any, checked(_spd_matrix)] = Field(
+        description="3 numbers (principal moments) or a 3x3 list of lists, symmetric positive definite (kg m^2)")
+    k_t: _gain_type("k_t") = _gain("k_t")
+    l_t: _gain_type("l_t") = _gain("l_t")
+    saturation: _BodySaturation | None = Field(None, description=_mapping_of(_BodySaturation) + " (optional)")
+
+
+class _ChainJoint(_Section):
+    """One joint of a chain: the law of its point and the rotational feedback across it."""
+
+    name: _PART = Field(description=_PART_NAME_RULE)
+    parent: _PART = Field(description=f"'{GROUND_NAME}' or the name of a body listed before the child")
+    parent_point: _VECTOR = Field(
+        default_factory=_zero, description="3 numbers (m; inertial frame for the ground, else the parent's body "
+                                           "frame from its centre of mass)")
+    child: _PART = Field(description="the name of a body")
+    child_point: _VECTOR = Field(
+        default_factory=_zero, description="3 numbers (the point C, m, the child's body frame from its centre of "
+                                           "mass)")
+    # ``variant`` before the gains: their validators read it from ``info.data``.
+    variant: Annotated[Any, checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
+    k_r: _gain_type("k_r") = _gain("k_r")
+    l_r: _gain_type("l_r") = _gain("l_r")
+    k_c: _gain_type("k_c") = _gain("k_c")
+    l_c: _gain_type("l_c") = _gain("l_c")
+    k_d: _gain_type("k_d") = _gain("k_d")
+    l_d: _gain_type("l_d") = _gain("l_d")
+    k_s: Annotated[Any, checked(optional(bounded_number(ge=0)))] = Field(
+        None, validate_default=True, description="a number >= 0 (N)")
+    boundary_layer: Annotated[Any, checked(bounded_number(ge=0))] = Field(
+        0.0, description="a number >= 0 (m; 0 = pure sign function)")
+    saturation: _JointSaturation | None = Field(None, description=_mapping_of(_JointSaturation) + " (optional)")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_body_gains(cls, value: Any) -> Any:
+        """k_t, l_t written on a joint: they are the body's (H acts from the ground)."""
+        for key in BODY_GAINS:
+            if isinstance(value, Mapping) and key in value:
+                raise PydanticCustomError("rbstab_invalid", "a body's gain on a joint", {
+                    "subkey": key, "found": short_repr(value[key]), "expected": f"no {key} on a joint",
+                    "detail": f"the ground-anchored feedback H (eq 24) is a body's: give {key} to the child body"})
+        return value
+
+    @field_validator("k_c", "l_c", "k_d", "l_d", "k_s", mode="after")
+    @classmethod
+    def _required_by_variant(cls, value: Any, info: ValidationInfo) -> Any:
+        variant = info.data.get("variant")  # absent if the variant itself is invalid
+        if value is None and variant is not None and info.field_name in VARIANTS[variant].required_gains:
+            raise PydanticCustomError("rbstab_missing", "missing", {"detail": f"required by variant '{variant}'"})
+        return value
+
+    @model_validator(mode="after")
+    def _saturation_fits_the_variant(self) -> "_ChainJoint":
+        """A limit of Lambda_j where Lambda_j is no actuator's (as for ``controller``)."""
+        limit = None if self.saturation is None else self.saturation.constraint_force
+        if limit is None:
+            return self
+        if self.variant == "permanent" or (self.variant == "sliding" and float(self.boundary_layer) == 0.0):
+            raise PydanticCustomError("rbstab_invalid", "limit on the pin", {
+                "subkey": "saturation.constraint_force", "found": short_repr(limit),
+                "expected": "no limit with variant 'permanent' or the pure sign law (boundary_layer: 0)",
+                "detail": "Lambda is then the pin's reaction or K_s sgn(E), not an actuator's force"})
+        return self
+
+
+class _ChainDisturbance(_Disturbance):
+    """One disturbance on one body of a chain."""
+
+    body: Annotated[Any, checked(optional(part_name))] = Field(
+        None, description="the name of the body it acts on (optional with one body)")
+
+
+def _chain_error(key: str, found: str, expected: str, detail: str = "") -> PydanticCustomError:
+    ctx = {"key": key, "found": found, "expected": expected}
+    if detail:
+        ctx["detail"] = detail
+    return PydanticCustomError("rbstab_invalid", "invalid chain", ctx)
+
+
+def _names_list(names: Sequence[str]) -> str:
+    return ", ".join(f"'{n}'" for n in names)
+
+
+class ChainSchema(_Section):
+    """A chain configuration (pydantic model; the public result is
+    :class:`rbstab.config.chains.ChainConfig`): 1 to :data:`rbstab.chain.MAX_BODIES` bodies,
+    each held by exactly one joint to the ground or to a body listed before it (a tree)."""
+
+    name: Annotated[Any, checked(run_name)] = Field(
+        description="a name of letters, digits, '_', '.' and '-' (it becomes a file name)")
+    gravity: _VECTOR = Field(default_factory=_zero, description="3 numbers (g, inertial frame, m/s^2)")
+    bodies: list[_ChainBody] = Field(
+        description=f"a list of 1 to {MAX_BODIES} bodies, each {_mapping_of(_ChainBody)}")
+    joints: list[_ChainJoint] = Field(
+        description=f"a list of joints, one per body, each {_mapping_of(_ChainJoint)}")
+    initial_state: dict[str, _InitialState] = Field(
+        default_factory=dict, description=f"a mapping of body names to {_mapping_of(_InitialState)}")
+    simulation: _Simulation = Field(
+        default_factory=_Simulation, validate_default=True, description=_mapping_of(_Simulation))
+    disturbances: list[_ChainDisturbance] | None = Field(
+        None, description=f"a list of at most {MAX_DISTURBANCES} disturbances, each "
+                          f"{_mapping_of(_ChainDisturbance)} (optional; docs/disturbances.md)")
+
+    @field_validator("bodies", mode="before")
+    @classmethod
+    def _few_bodies(cls, value: Any) -> Any:
+        if isinstance(value, (list, tuple)) and not 1 <= len(value) <= MAX_BODIES:
+            raise PydanticCustomError("rbstab_invalid", "too many bodies", {
+                "key": "bodies", "found": f"{len(value)} bodies",
+                "expected": f"a list of 1 to {MAX_BODIES} bodies (the most one chain holds)"})
+        return value
+
+    @field_validator("disturbances", mode="before")
+    @classmethod
+    def _few_disturbances(cls, value: Any) -> Any:
+        if isinstance(value, (list, tuple)) and len(value) > MAX_DISTURBANCES:
+            raise PydanticCustomError("rbstab_invalid", "too many disturbances", {
+                "key": "disturbances", "found": f"{len(value)} entries",
+                "expected": f"at most {MAX_DISTURBANCES} disturbances"})
+        return value
+
+    @field_validator("initial_state", "simulation", mode="before")
+    @classmethod
+    def _empty_section(cls, value: Any) -> Any:
+        return {} if value is None else value
+
+    @field_validator("initial_state", mode="before")
+    @classmethod
+    def _by_body(cls, value: Any, info: ValidationInfo) -> Any:
+        """A one-body ``initial_state`` (theta, omega, ... at its top) in a chain."""
+        blocks = set(_InitialState.model_fields)
+        if isinstance(value, Mapping) and value and set(value) <= blocks:
+            names = [b.name for b in info.data.get("bodies") or ()]
+            if not blocks & set(names):
+                raise PydanticCustomError("rbstab_invalid", "one-body initial state", {
+                    "key": "initial_state", "found": f"keys {', '.join(map(str, value))}",
+                    "expected": "body names as keys" + (f" ({_names_list(names)})" if names else "")
+                                + f", each {_mapping_of(_InitialState)}",
+                    "detail": "a chain's initial state is given per body"})
+        return value
+
+    @model_validator(mode="after")
+    def _a_tree(self) -> "ChainSchema":
+        """Distinct names; every body held by exactly one joint whose parent is the ground or
+        a body listed before its child (so no loop)."""
+        bodies = [b.name for b in self.bodies]
+        index = {name: bodies.index(name) for name in bodies}
+        for i, name in enumerate(bodies):
+            if name == GROUND_NAME:
+                raise _chain_error(f"bodies.{i}.name", short_repr(name), f"a name other than '{GROUND_NAME}'",
+                                   f"'{GROUND_NAME}' is the parent of the joints to the inertial frame")
+            if index[name] != i:
+                raise _chain_error(f"bodies.{i}.name", short_repr(name), "a name no other body has",
+                                   f"bodies.{bodies.index(name)}.name is '{name}' too")
+        joints = [j.name for j in self.joints]
+        for i, name in enumerate(joints):
+            if joints.index(name) != i:
+                raise _chain_error(f"joints.{i}.name", short_repr(name), "a name no other joint has",
+                                   f"joints.{joints.index(name)}.name is '{name}' too")
+        holder: dict[str, int] = {}
+        for i, joint in enumerate(self.joints):
+            if joint.child not in index:
+                hint = _did_you_mean(joint.child, bodies)
+                raise _chain_error(f"joints.{i}.child", short_repr(joint.child),
+                                   f"the name of a body: {_names_list(bodies)}", hint)
+            if joint.parent != GROUND_NAME and joint.parent not in index:
+                hint = _did_you_mean(joint.parent, [GROUND_NAME, *bodies])
+                raise _chain_error(f"joints.{i}.parent", short_repr(joint.parent),
+                                   f"'{GROUND_NAME}' or the name of a body: {_names_list(bodies)}", hint)
+            if joint.child in holder:
+                k = holder[joint.child]
+                raise _chain_error(f"joints.{i}.child", short_repr(joint.child), "a body no other joint holds",
+                                   f"joint '{self.joints[k].name}' (joints.{k}) holds '{joint.child}' already; "
+                                   "every body has exactly one joint")
+            holder[joint.child] = i
+        for i, name in enumerate(bodies):
+            if name not in holder:
+                raise _chain_error("joints", f"{len(joints)} joints ({_names_list(joints)})",
+                                   "exactly one joint per body",
+                                   f"body '{name}' (bodies.{i}) has none: add a joint with child: {name}")
+        parent_of = {j.child: j.parent for j in self.joints}
+        for i, joint in enumerate(self.joints):  # a loop, before the order: it is the graver fault
+            path, at = [joint.child], joint.parent
+            while at != GROUND_NAME and at not in path:
+                path.append(at)
+                at = parent_of[at]
+            if at == joint.child:  # reported once, by a joint of the loop
+                loop = " -> ".join([*path[path.index(at):], at][::-1])
+                raise _chain_error(f"joints.{i}.parent", short_repr(joint.parent),
+                                   f"'{GROUND_NAME}' or a body listed before '{joint.child}'",
+                                   f"a loop: {loop}; a chain is a tree, each body held by one joint from the "
+                                   f"ground or from a body nearer the ground")
+        for i, joint in enumerate(self.joints):
+            if joint.parent != GROUND_NAME and index[joint.parent] > index[joint.child]:
+                earlier = bodies[: index[joint.child]]
+                raise _chain_error(f"joints.{i}.parent", short_repr(joint.parent),
+                                   f"'{GROUND_NAME}' or a body listed before '{joint.child}' in bodies"
+                                   + (f": {_names_list(earlier)}" if earlier else ""),
+                                   f"bodies are listed parents first: list '{joint.parent}' before "
+                                   f"'{joint.child}'")
+        return self
+
+    @model_validator(mode="after")
+    def _names_known(self) -> "ChainSchema":
+        """Every body named in ``initial_state`` and ``disturbances`` is one of ``bodies``."""
+        bodies = [b.name for b in self.bodies]
+        for name in self.initial_state:
+            if name not in bodies:
+                raise _chain_error(f"initial_state.{name}", short_repr(name),
+                                   f"the name of a body: {_names_list(bodies)}",
+                                   _did_you_mean(str(name), bodies, "initial_state."))
+        for i, d in enumerate(self.disturbances or ()):
+            if d.body is None and len(bodies) > 1:
+                raise _chain_error(f"disturbances.{i}.body", "nothing",
+                                   f"the name of the body it acts on: {_names_list(bodies)}")
+            if d.body is not None and d.body not in bodies:
+                raise _chain_error(f"disturbances.{i}.body", short_repr(d.body),
+                                   f"the name of a body: {_names_list(bodies)}", _did_you_mean(d.body, bodies))
+        return self
+
+    @model_validator(mode="after")
+    def _fits_the_run(self) -> "ChainSchema":
+        """As for a one-body config: disturbances start by t_end and not with the pure sign
+        law; a bound of E needs a joint that is not pinned; each body clear of gimbal lock."""
+        sign_law = [j.name for j in self.joints if j.variant == "sliding" and float(j.boundary_layer) == 0.0]
+        for i, d in enumerate(self.disturbances or ()):
+            if not starts_in_run(float(d.start), float(self.simulation.t_end)):
+                raise _chain_error(f"disturbances.{i}.start", short_repr(d.start),
+                                   f"a number in [0, simulation.t_end] = [0, {float(self.simulation.t_end):g}] (s)")
+            if sign_law:
+                raise _chain_error(f"disturbances.{i}", f"kind '{d.kind}'",
+                                   "no disturbances with the pure sign law (boundary_layer: 0)",
+                                   f"joint '{sign_law[0]}' has it; give it a boundary layer > 0")
+        limits = self.simulation.limits
+        if (limits is not None and limits.constraint_error is not None
+                and all(j.variant == "permanent" for j in self.joints)):
+            raise _chain_error("simulation.limits.constraint_error", short_repr(limits.constraint_error),
+                               "no bound when every joint is 'permanent'",
+                               "their points are pinned: E = 0 at every instant")
+        margin = float(self.simulation.gimbal_margin)
+        for name, state in self.initial_state.items():
+            if not clear_of_gimbal_lock(state.theta[1], margin):
+                limit = math.pi / 2 - margin
+                raise _chain_error(f"initial_state.{name}.theta", short_repr(state.theta),
+                                   "3 numbers (rad) with theta_2 in (-pi/2 + gimbal_margin, pi/2 - gimbal_margin) "
+                                   f"= ({-limit:.6g}, {limit:.6g})",
+                                   f"B(theta) is singular at |theta_2| = pi/2 (gimbal lock, eq 1); "
+                                   f"gimbal_margin = {margin:g}")
+        return self
+
+
+#: The top-level keys of a chain configuration.
+CHAIN_TOP_LEVEL = _mapping_of(ChainSchema)
+
+
 _SECTIONS = tuple(RunSchema.model_fields)
 TOP_LEVEL = _mapping_of(RunSchema)
 
@@ -1060,6 +1379,8 @@ def problem_line(
         allowed = list(model.model_fields) if model is not None else []
         word = str(loc[-1])
         section = str(loc[-2]) if len(loc) > 1 else ""
+        if len(loc) > 2 and isinstance(loc[-2], int):  # an entry of a list: name the list too
+            section = f"{loc[-3]}.{section}"
         # a key of another section spelled exactly is surely meant; else the closest here
         other = _other_section_hint(word, section) if root is None or root is RunSchema else ""
         hint = other or _did_you_mean(word, allowed, f"{section}." if section else "")
