@@ -5,7 +5,9 @@ a boundary layer, said in the notes), its equilibrium and linearisation
 (:mod:`~rbstab.analysis.linearise`), the Lyapunov certificate
 (:mod:`~rbstab.analysis.certificate`), one simulation from the configured initial state
 for the settling time, the basin map (:mod:`~rbstab.analysis.basin`), the smallest fatal
-pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for.
+pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for; last, the
+certificate's sublevel estimate checked against simulations (:mod:`~rbstab.analysis.evidence`:
+runs from {v = c}, and every run above).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
+from .evidence import FALSIFICATION_RUNS, check_runs, falsify
 from .linearise import Linearisation, linearise
 from .push import basin_stability as stability_of
 from .push import push_analysis
@@ -284,6 +287,7 @@ def analyze(
     push: Mapping[str, Any] | None = None,
     basin_stability: Mapping[str, Any] | None = None,
     executor: Any = None,
+    falsification_runs: int = FALSIFICATION_RUNS,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 
@@ -325,6 +329,10 @@ def analyze(
     executor : rbstab.sweep.executors.Executor, optional
         Workers of the pushes and the basin stability (default: ``jobs`` local processes
         where jobs > 1).
+    falsification_runs : int
+        Runs of the certificate's falsification pass from states on {v = c}
+        (:func:`rbstab.analysis.evidence.falsify`; 0: none). Whatever it is, c is checked
+        against every run of the analysis (:func:`rbstab.analysis.evidence.check_runs`).
 
     Returns
     -------
@@ -393,6 +401,12 @@ def analyze(
                 result.basin_stability = stability_of(analysed, **basin_stability, ratio=ratio, engine=engine,
                                                       executor=workers)
                 timing["basin_stability"] = _time.perf_counter() - t5
+    if result.certificate is not None:
+        t6 = _time.perf_counter()
+        checked = falsify(analysed, variant, lin, result.certificate, runs=falsification_runs, ratio=ratio,
+                          engine=engine, seed=seed)
+        result.certificate = check_runs(checked, result)
+        timing["checks"] = _time.perf_counter() - t6
     return result
 
 

@@ -553,3 +553,76 @@ def _sublevel(level: float, sampled: dict) -> tuple[float, str]:
             candidates.append((0.0, name))
     c, bound = min(candidates, key=lambda item: item[0])
     return max(c, 0.0), bound
+
+
+def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certificate:
+    """``certificate`` with c checked against simulated runs: a run that starts inside
+    {v <= c} and does not recover lowers c below its starting v (the next float down),
+    with a note naming the run.
+
+    Parameters
+    ----------
+    certificate : Certificate
+    lyapunov_start : array_like, shape (k,)
+        v [J] where each run starts (v of its initial state, or v just after a push);
+        NaN: not a run (not counted).
+    recovered : array_like of bool, shape (k,)
+        Whether each run recovered (by the rule of the analysis that ran it).
+    name : callable
+        ``name(i)`` -> the run's description, for the note.
+
+    Returns
+    -------
+    Certificate
+        With ``runs_checked`` grown by the runs counted, and where a run contradicts c, c,
+        ``sublevel_bound`` and ``notes`` changed.
+    """
+    v0 = np.asarray(lyapunov_start, dtype=float).ravel()
+    ok = np.asarray(recovered, dtype=bool).ravel()
+    counted = np.isfinite(v0)
+    bad = counted & ~ok & (v0 <= certificate.sublevel)
+    out = replace(certificate, runs_checked=certificate.runs_checked + int(counted.sum()))
+    if not bad.any() or not certificate.positive_definite:
+        return out
+    i = int(np.argmin(np.where(bad, v0, np.inf)))
+    c = max(float(np.nextafter(v0[i], -np.inf)), 0.0)
+    others = int(bad.sum()) - 1
+    note = (f"c lowered from {certificate.sublevel:.4g} J to {c:.4g} J: {name(i)} started inside {{v <= c}} at "
+            f"v = {v0[i]:.4g} J and did not recover" + (f" (and {others} more such runs)" if others else ""))
+    return replace(out, sublevel=c, sublevel_bound=BOUNDS[6], notes=certificate.notes + (note,))
+
+
+def level_states(variant, linearisation, certificate: Certificate, n: int, seed: int = 0) -> np.ndarray:
+    """n states on the level set {v = c} (c the certificate's sublevel): along the worst
+    sampled state's direction and n - 1 random directions from y_e in the coordinates z of
+    y = y_e + S z, each at the first radius where v reaches c (bisection). Shape (n, n_state);
+    empty where c is not positive."""
+    c = certificate.sublevel
+    if not (c > 0 and np.isfinite(c)) or n < 1:
+        return np.zeros((0, len(linearisation.equilibrium)))
+    y_e = linearisation.equilibrium
+    w, q = np.linalg.eigh(certificate.lyapunov_hessian)
+    root = q @ np.diag(1.0 / np.sqrt(w)) @ q.T
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((n, len(y_e)))
+    worst = certificate.worst_state
+    if np.all(np.isfinite(worst)) and np.any(worst != y_e):
+        u[0] = np.linalg.solve(root, worst - y_e)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+
+    def v_at(r):
+        with np.errstate(all="ignore"):
+            return np.asarray(variant.lyapunov(y_e + (r[:, None] * u) @ root.T), dtype=float)
+
+    lo = np.zeros(n)
+    hi = np.full(n, np.sqrt(2.0 * c))
+    for _ in range(60):  # hi: a radius beyond the level (v ~ |z|^2 / 2 near y_e)
+        above = v_at(hi) >= c
+        if above.all():
+            break
+        hi = np.where(above, hi, 2.0 * hi)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        above = v_at(mid) >= c
+        lo, hi = np.where(above, lo, mid), np.where(above, mid, hi)
+    return y_e + (lo[:, None] * u) @ root.T
