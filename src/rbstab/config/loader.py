@@ -274,7 +274,8 @@ def _build(
         dump["simulation"].pop("limits")  # a run without: its resolved form (and identity) as before
     else:
         dump["simulation"]["limits"] = {k: v for k, v in dump["simulation"]["limits"].items() if v is not None}
-    as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
+    definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
+    as_written = {g: getattr(ctrl, g) for g in used_gains if g in definite}  # 3 numbers: no numpy needed
     found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
     return RunConfig(
         name=run.name,
