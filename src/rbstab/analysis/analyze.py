@@ -37,7 +37,7 @@ from .dataset import analysis_content, analysis_dataset, json_record
 from .evidence import FALSIFICATION_RUNS, check_runs, falsify
 from .linearise import Linearisation, linearise
 from .push import basin_stability as stability_of
-from .push import push_analysis
+from .push import push_analysis, unbounded_fall_note
 
 __all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits",
            "equilibrium_outside_limits"]
@@ -390,6 +390,10 @@ def analyze(
         result.basin = basin_map(analysed, axes, disturbed if disturbed is not None else variant, ratio=ratio,
                                  n_samples=basin_samples, jobs=jobs, engine=engine)
         timing["basin"] = _time.perf_counter() - t3
+    if push or basin_stability or axes:
+        fall = unbounded_fall_note(analysed)
+        if fall is not None:
+            notes.append(fall)
     if push or basin_stability:
         with _workers(executor, jobs, push, basin_stability) as workers:
             if push:

@@ -230,6 +230,14 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
     todo = [(rid, table.resolved(i)) for i, rid in enumerate(run_ids) if rid not in done]
     if say is not None:
         say(f"{spec.name}: {table.n} configurations, {len(done)} done before, {len(todo)} to compute")
+        from ..config import config_from_mapping  # heavy: pydantic
+        from .push import unbounded_fall_note  # heavy: numba
+
+        with warnings.catch_warnings():  # shown once with the points' records
+            warnings.simplefilter("ignore")
+            fall = unbounded_fall_note(config_from_mapping(table.resolved(0))) if table.n else None
+        if fall is not None:
+            say(f"note: {fall}")
 
     def keep(record: dict) -> None:
         record["options"] = token
