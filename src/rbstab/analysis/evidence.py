@@ -8,9 +8,13 @@ make it too large. A run that starts inside {v <= c} and does not recover contra
 the run. The runs are
 
 - the falsification pass (:func:`falsify`): :data:`FALSIFICATION_RUNS` runs from states on
-  {v = c} (along the worst sample's direction and random directions), converged by the
-  sweeps' rule; where one does not recover, c is lowered below its start and the pass is
-  repeated at half that level (at most :data:`FALSIFICATION_ROUNDS` times);
+  {v = c} (along the worst sample's direction and random directions). Such a run
+  contradicts {v <= c} (positively invariant, inside the region of attraction) when it
+  stops early (it left the domain or ``simulation.limits``) or ends with v(t_end) above
+  v(0): what LaSalle's argument rules out. (A run still on its way at t_end is no
+  contradiction: t_end bounds what a run can show of convergence, not the estimate.) Where
+  one contradicts it, c is lowered below its start and the pass is repeated at half that
+  level (at most :data:`FALSIFICATION_ROUNDS` times);
 - those of the analysis itself (:func:`check_runs`): the run from the configured initial
   state, the basin map's runs, the smallest fatal push of each direction, the basin
   stability's draws.
@@ -51,13 +55,19 @@ def falsify(config, variant, linearisation, certificate: Certificate, *, runs: i
     runs : int
         States on {v = c} per level (0: no pass).
     ratio : float
-        Of the sweeps' convergence rule.
+        Unused (the pass's rule is v(t_end) <= v(0) inside the domain: module docstring).
     engine, executor
-        As :func:`rbstab.analysis.push.states_recover` takes them.
+        As :func:`rbstab.analysis.push.runs_from_states` takes them.
     seed : int
         Of the random directions.
     """
-    from .push import states_recover  # heavy: numba (the batch engine)
+    from ..convergence import ROUND_OFF
+    from .push import runs_from_states  # heavy: numba (the batch engine)
+
+    def run(y):
+        ok, v0, v1 = runs_from_states(config, y, engine=engine, executor=executor)
+        with np.errstate(invalid="ignore"):
+            return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
     if runs < 1 or not certificate.positive_definite:
         return certificate
@@ -66,16 +76,17 @@ def falsify(config, variant, linearisation, certificate: Certificate, *, runs: i
         y = level_states(variant, linearisation, certificate, runs, seed)
         if not len(y):
             return certificate
-        recovered, v0 = states_recover(config, y, ratio=ratio, engine=engine, executor=executor)
+        recovered, v0 = run(y)
         certificate = checked(certificate, v0, recovered,
-                              lambda i: f"the falsification run from {{v = {level:.4g} J}} at y = {_state_text(y[i])}")
+                              lambda i: f"the falsification run from {{v = {level:.4g} J}} at y = "
+                              f"{_state_text(y[i])} (it left the domain or ended with v above its start)")
         if certificate.sublevel >= level:
             return certificate
         lower = 0.5 * certificate.sublevel
         certificate = replace(certificate, sublevel=lower, notes=certificate.notes[:-1] + (
             certificate.notes[-1] + f"; the pass tried again at half that, c = {lower:.4g} J",))
     y = level_states(variant, linearisation, certificate, runs, seed)
-    recovered, v0 = states_recover(config, y, ratio=ratio, engine=engine, executor=executor)
+    recovered, v0 = run(y)
     if not recovered.all():
         certificate = replace(certificate, sublevel=0.0, notes=certificate.notes + (
             "no level tried by the falsification pass recovered every run: no estimate",))

@@ -45,7 +45,7 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
            "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
-           "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch", "states_recover",
+           "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch", "runs_from_states",
            "unbounded_fall_note"]
 
 #: Quantity of a push -> the units of its magnitude.
@@ -871,16 +871,14 @@ def _state_batch(config, variant, k: int):
     return _take(base, np.zeros(k, dtype=np.int64))
 
 
-def states_recover(config, states: np.ndarray, *, ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled",
-                   executor=None) -> tuple[np.ndarray, np.ndarray]:
-    """(whether each run converges by the sweeps' rule without leaving ``simulation.limits``,
-    its v(0) [J]) of the runs of ``config`` from ``states`` (k, n_state), the variant's
-    layout. One batch."""
+def runs_from_states(config, states: np.ndarray, *, engine: str = "compiled", executor=None) -> np.ndarray:
+    """The outcomes of the runs of ``config`` from ``states`` (k, n_state), the variant's
+    layout, as :func:`batch_outcomes` gives them: shape (3, k), success (1 or 0), v(0) and
+    v(t_end) [J] (NaN for a run that stopped early). One batch."""
     variant = config.make_variant()
     states = np.asarray(states, dtype=float).reshape(-1, variant.layout.size)
     if not len(states):
-        return np.zeros(0, dtype=bool), np.zeros(0)
+        return np.zeros((3, 0))
     batch = _state_batch(config, variant, len(states))
     batch.y0[:, :states.shape[1]] = states
-    ok, v0, v1 = integrate_batch(batch, engine, executor)
-    return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool), v0
+    return integrate_batch(batch, engine, executor)
