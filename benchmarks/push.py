@@ -11,7 +11,7 @@ command's process start to its exit, the engine already compiled):
    the local search (target <= 10 s on two cores);
 2. basin stability over 10,000 random initial tilts and rates (target <= 10 s);
 3. across 32 values of the torque limit, 64 directions each, with each configuration's
-   certificate (2000 sampled states) for the certified push (target <= 3 minutes);
+   certificate (10,000 sampled states, refined and checked) for the push estimate (target <= 3 minutes);
 4. with ``--gpu`` (an NVIDIA GPU and ``rbstab[cuda]``): 16,384 directions on ``--engine
    cuda`` (target <= 5 s).
 
