@@ -269,8 +269,9 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     \b
     Per config: the equilibrium and rest check, the eigenvalues of the Jacobian there
     (damping ratio, natural frequency, time constant, verdict), the Lyapunov certificate
-    (Hessians of v and dv/dt, dv/dt <= 0 on sampled states, a sublevel set of v as a
-    sampling-based inner estimate of the region of attraction) and, with --basin, the
+    (Hessians of v and dv/dt, dv/dt <= 0 on sampled states, a sublevel set of v as an
+    estimate of an inner part of the region of attraction: sampled, refined by local
+    search, checked against every run of the command) and, with --basin, the
     basin of attraction over a 2-D slice of initial states by simulation.
     With --robustness SWEEP_DIR: the stable fraction of a sweep's runs with its Wilson
     interval, and the parameters that separate stable from unstable runs.

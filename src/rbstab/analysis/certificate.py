@@ -24,8 +24,14 @@ formula shows. The sublevel estimate is the largest c such that no sampled state
 v < c has a numerical dv/dt > 0 or lies outside the model's domain, and c is at most the
 least v on the domain boundary |theta_2| = pi/2 - gimbal_margin (eq 5; minimised there
 over the other coordinates, at rest: the kinetic terms of v are >= 0). By LaSalle,
-{v <= c} is then an inner estimate of the region of attraction, valid as far as the
-sampling is dense: it is labelled sampling-based, with its sample size.
+{v <= c} is then an inner estimate of the region of attraction, valid as far as the search
+for dv/dt > 0 is complete. Sampling misses thin regions (where a torque clips, the states
+with dv/dt > 0 at low levels are a sliver), so a local search (:class:`_LevelSearch`, scipy's
+SLSQP) starts from the samples nearest a violation: the largest dv/dt on a sample's level
+set, then the least v where dv/dt > 0. c is computed from the first N/4, N/2 and N samples,
+each with its search (the history; :attr:`Certificate.settled`). It stays an *estimate*:
+:func:`checked` lowers it where a simulated run contradicts it
+(:mod:`rbstab.analysis.evidence`).
 
 With disturbances (``disturbed``), the local part is of the undisturbed dynamics and the
 sampled part of the disturbed ones: each sampled state at a time drawn uniformly in

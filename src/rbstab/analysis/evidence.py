@@ -26,6 +26,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..convergence import ROUND_OFF
 from .certificate import Certificate, checked, level_states
 
 __all__ = ["falsify", "check_runs", "FALSIFICATION_RUNS", "FALSIFICATION_ROUNDS"]
@@ -61,7 +62,6 @@ def falsify(config, variant, linearisation, certificate: Certificate, *, runs: i
     seed : int
         Of the random directions.
     """
-    from ..convergence import ROUND_OFF
     from .push import runs_from_states  # heavy: numba (the batch engine)
 
     def run(y):
