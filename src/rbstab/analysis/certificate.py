@@ -180,13 +180,10 @@ class Certificate:
 
     @property
     def evidence(self) -> str:
-        """What c is, in words: ``"estimate (sampled, 10000 states, refined by 24 local
-        searches, checked against 37 runs)"``."""
-        parts = [f"sampled, {self.n_samples} states"]
-        if self.searches:
-            parts.append(f"refined by {self.searches} local searches")
-        parts.append(f"checked against {self.runs_checked} runs")
-        return f"estimate ({', '.join(parts)})"
+        """What c is, in words: ``"estimate (sampled, 10000 states, checked against 37 runs;
+        refined by 24 local searches)"``."""
+        refined = f"; refined by {self.searches} local searches" if self.searches else ""
+        return f"estimate (sampled, {self.n_samples} states, checked against {self.runs_checked} runs{refined})"
 
     @property
     def samples_inside(self) -> int:

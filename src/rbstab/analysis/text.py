@@ -76,7 +76,7 @@ def _certificate_lines(c) -> list[str]:
                  f"eigenvalues zero); LaSalle's condition (PBH test) {'holds' if c.lasalle_observable else 'FAILS'}")
     lines.append(f"    {c.n_samples} sampled states: largest dv/dt {_g(c.worst_rate)} W at v = {_g(c.worst_lyapunov)} J; "
                  f"|numerical - analytic dv/dt| <= {_g(c.rate_mismatch, 2)} of the power scale")
-    lines.append(f"    region of attraction contains {{v <= {_g(c.sublevel)} J}}: {c.evidence}; bounded by: "
+    lines.append(f"    inner estimate of the region of attraction: {{v <= {_g(c.sublevel)} J}}, an {c.evidence}; bounded by: "
                  f"{c.sublevel_bound}; domain boundary at {_g(c.boundary_level)} J")
     lines += [f"    {note}" for note in c.notes]
     if len(c.sublevel_history):
