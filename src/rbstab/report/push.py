@@ -215,7 +215,7 @@ def recovery_section(ds, path, out: FigureWriter) -> Section:
             ax.set_ylabel(f"push [{units}]")
             ax.set_xlabel(label)
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncols=2)  # off the curves
             row += 1
         if has_stability:
             ax = axes[row, j]
@@ -232,7 +232,7 @@ def recovery_section(ds, path, out: FigureWriter) -> Section:
             ax.set_ylabel("fraction recovered")
             ax.set_xlabel(label)
             ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncols=2)  # off the curves
     fig.suptitle(f"{name}: push recovery across parameters", fontsize=10)
     s.blocks.append(out.save(fig, f"recovery_{safe_filename(name)}", f"{name}: curves across parameters",
                              "Against each varied key: the smallest fatal push over the directions (simulated) and "
