@@ -146,3 +146,20 @@ def test_push_sphere_colour_scale_separates_the_thresholds_that_matter():
     assert norm.vmax < 100 and norm.vmin == 20.0  # one vertical push does not take the whole scale
     assert norm(25.0) < norm(31.0) < norm(40.0)  # log: equal ratios, equal steps
     assert norm(40.0) - norm(31.0) == pytest.approx((norm(31.0) - norm(24.025)), rel=1e-6)
+
+
+def test_a_fatal_push_inside_the_estimate_lowers_c_in_an_analysis():
+    """t_end = 0.2 s is too short for any push to die down by the recovery rule: every push
+    is fatal, far inside the sublevel set the samples and the search leave; the analysis
+    lowers c below the weakest fatal push's dT, names that push, and the push estimate
+    lies below the threshold."""
+    data = dict(_quiet(load_config, PENDULUM).resolved)
+    data["simulation"] = {**data["simulation"], "t_end": 0.2, "n_samples": 201}
+    config = _quiet(config_from_mapping, data)
+    result = analyze(config, samples=200, simulate=False, falsification_runs=0,
+                     push={"kind": "torque", "directions": [[1, 0, 0]], "tol": 0.1})
+    cert, push = result.certificate, result.push
+    assert cert.sublevel_bound == BOUNDS[6] and cert.sublevel < cert.sublevel_history[-1]
+    assert cert.sublevel < push.unit_energy[0] * push.threshold[0] ** 2
+    assert "torque push of" in cert.notes[0] and "did not recover" in cert.notes[0]
+    assert push.estimate(cert.sublevel) < push.threshold[0]

@@ -273,7 +273,7 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
 
 
 def _line(record: dict, k: int, n: int) -> str:
-    """One progress line of a configuration's record."""
+    """One progress line of a configuration's record (and a line a run that lowered its c)."""
     parts = [f"  [{k}/{n}] {record['run_id']}:"]
     p = record.get("push")
     if p:
@@ -283,7 +283,7 @@ def _line(record: dict, k: int, n: int) -> str:
     s = record.get("stability")
     if s:
         parts.append(f"basin stability {s['fraction']:.1%} ({s['low']:.1%} - {s['high']:.1%})")
-    return " ".join(parts)
+    return "\n".join([" ".join(parts)] + [f"    note: {n}" for n in record.get("sublevel_notes", [])])
 
 
 def recovery_content(result: Recovery, command_line: str | None = None) -> tuple[dict, dict, dict]:
@@ -309,6 +309,8 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
                                       "simulated runs c was checked against"),
         "sublevel_settled": _var(("point",), [int(r.get("sublevel_settled", False)) for r in result.records], "1",
                                  "c from N/2 samples within 1% of c from N (1), or still moving (0)"),
+        "sublevel_notes": _var(("point",), np.array(["\n".join(r.get("sublevel_notes", [])) for r in result.records],
+                                                    dtype=object), "1", "the runs that lowered c, one a line"),
     }
     push = [r.get("push") for r in result.records]
     if any(push):
