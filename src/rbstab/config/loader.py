@@ -388,8 +388,9 @@ def config_from_mapping(
     PhysicalPlausibilityWarning
         For a configuration no real body has (inertia violating the triangle inequality).
     SemiDefiniteGainWarning
-        For a gain the variant uses that is positive semi-definite but singular (zero
-        included): v is then not a strict Lyapunov function.
+        For a gain v needs definite (the variant's ``definite_gains``, else every gain it
+        uses) that is positive semi-definite but singular (zero included): v is then not a
+        strict Lyapunov function.
     """
     return _build(data, default_name=default_name, source=source)
 
