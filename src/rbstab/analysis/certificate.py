@@ -398,6 +398,7 @@ class _LevelSearch:
     def __init__(self, variant, linearisation, root: np.ndarray, limit: float, floor: float) -> None:
         self.variant, self.linearisation, self.root, self.limit = variant, linearisation, root, limit
         self.floor = floor  # the least level sampled: below it v and dv/dt are round-off
+        self.seen: set = set()  # the samples searched from (the history's prefixes share them)
         self.y_e = linearisation.equilibrium
         self.rho = max(float(np.abs(linearisation.eigenvalues).max()), 1e-3)
 
@@ -410,7 +411,16 @@ class _LevelSearch:
         return np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float)
 
     def _gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
-        """v, dv/dt and their gradients in z at z (central differences, one call)."""
+        """v, dv/dt and their gradients in z at z (central differences, one call; the last
+        point's kept: SLSQP asks for the objective, the constraints and their gradients
+        at the same point)."""
+        key = (np.asarray(z, dtype=float).tobytes(), float(t))
+        if getattr(self, "_last", (None,))[0] == key:
+            return self._last[1]
+        self._last = (key, self._evaluate_gradients(np.asarray(z, dtype=float), t))
+        return self._last[1]
+
+    def _evaluate_gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
         m = len(z)
         h = 1e-7 * (1.0 + np.abs(z))
         points = np.concatenate([z[None], z + np.diag(h), z - np.diag(h)])
@@ -473,11 +483,13 @@ class _LevelSearch:
         with np.errstate(all="ignore"):
             relative = np.where(~positive & np.isfinite(rate) & (v < c) & (v > 0), rate / power, -np.inf)
         climb = np.argsort(-relative, kind="stable")[:REFINE_STARTS]
-        climb = climb[np.isfinite(relative[climb])]
+        climb = [i for i in climb[np.isfinite(relative[climb])] if ("climb", i) not in self.seen]
         least = np.where(positive, v, np.inf)
         first = np.argsort(least, kind="stable")[:REFINE_STARTS]
+        first = [i for i in first[np.isfinite(least[first])] if ("descend", i) not in self.seen]
+        self.seen.update([("climb", i) for i in climb] + [("descend", i) for i in first])  # a prefix's starts: once
         z_of = lambda i: np.linalg.solve(self.root, states[i] - self.y_e)  # noqa: E731
-        descend = [(z_of(i), float(times[i])) for i in first[np.isfinite(least[first])]]
+        descend = [(z_of(i), float(times[i])) for i in first]
         found_z, found_t, runs = [], [], 0
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore")
