@@ -136,6 +136,9 @@ class Certificate:
         c [J] from the first N / 4, N / 2 and N samples, each with its local search.
     searches : int
         Local searches run (over the whole history).
+    search_states : ndarray, shape (k, n)
+        Where the local search's climbs ended: the states of largest dv/dt on their level
+        sets (the falsification pass starts along their directions).
     runs_checked : int
         Simulated runs c was checked against (0 before :func:`checked`).
     notes : tuple of str
@@ -166,6 +169,7 @@ class Certificate:
     history_samples: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     sublevel_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
     searches: int = 0
+    search_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     runs_checked: int = 0
     notes: tuple = ()
 
@@ -379,6 +383,7 @@ def certify(
                        lasalle_observable=observable, n_samples=n_samples, boundary_level=level,
                        sublevel=sublevel, sublevel_bound=bound, sublevel_sampled=sampled_c,
                        history_samples=sizes, sublevel_history=np.array(history), searches=searches,
+                       search_states=np.array(search.climbed).reshape(-1, len(y_e)),
                        **{k: v for k, v in sampled.items() if not k.startswith("_")})
 
 
@@ -399,6 +404,7 @@ class _LevelSearch:
         self.variant, self.linearisation, self.root, self.limit = variant, linearisation, root, limit
         self.floor = floor  # the least level sampled: below it v and dv/dt are round-off
         self.seen: set = set()  # the samples searched from (the history's prefixes share them)
+        self.climbed: list = []  # where the climbs ended (states)
         self.y_e = linearisation.equilibrium
         self.rho = max(float(np.abs(linearisation.eigenvalues).max()), 1e-3)
 
@@ -501,6 +507,7 @@ class _LevelSearch:
                     continue
                 found_z.append(z)
                 found_t.append(times[i])
+                self.climbed.append(self._states(z)[0])
                 if np.isfinite(self._confirmed(z[None], times[i:i + 1])[0]):
                     descend.append((z, float(times[i])))
             for z0, t in descend:
@@ -608,10 +615,11 @@ def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certif
 
 
 def level_states(variant, linearisation, certificate: Certificate, n: int, seed: int = 0) -> np.ndarray:
-    """n states on the level set {v = c} (c the certificate's sublevel): along the worst
-    sampled state's direction and n - 1 random directions from y_e in the coordinates z of
-    y = y_e + S z, each at the first radius where v reaches c (bisection). Shape (n, n_state);
-    empty where c is not positive."""
+    """n states on the level set {v = c} (c the certificate's sublevel): along the
+    directions from y_e of the states where the local search's climbs ended (dv/dt largest on
+    their level sets; up to n / 2 of them), of the worst sampled state, and random ones, in
+    the coordinates z of y = y_e + S z, each at the first radius where v reaches c
+    (bisection). Shape (n, n_state); empty where c is not positive."""
     c = certificate.sublevel
     if not (c > 0 and np.isfinite(c)) or n < 1:
         return np.zeros((0, len(linearisation.equilibrium)))
@@ -620,9 +628,10 @@ def level_states(variant, linearisation, certificate: Certificate, n: int, seed:
     root = q @ np.diag(1.0 / np.sqrt(w)) @ q.T
     rng = np.random.default_rng(seed)
     u = rng.standard_normal((n, len(y_e)))
-    worst = certificate.worst_state
-    if np.all(np.isfinite(worst)) and np.any(worst != y_e):
-        u[0] = np.linalg.solve(root, worst - y_e)
+    known = [y for y in (*certificate.search_states[: n // 2], certificate.worst_state)
+             if len(y) == len(y_e) and np.all(np.isfinite(y)) and np.any(y != y_e)][:n]
+    for i, y in enumerate(known):
+        u[i] = np.linalg.solve(root, y - y_e)
     u /= np.linalg.norm(u, axis=1, keepdims=True)
 
     def v_at(r):

@@ -8,7 +8,8 @@ make it too large. A run that starts inside {v <= c} and does not recover contra
 the run. The runs are
 
 - the falsification pass (:func:`falsify`): :data:`FALSIFICATION_RUNS` runs from states on
-  {v = c} (along the worst sample's direction and random directions). Such a run
+  {v = c} (along the directions where the local search found dv/dt largest, the worst
+  sample's and random ones, :func:`rbstab.analysis.certificate.level_states`). Such a run
   contradicts {v <= c} (positively invariant, inside the region of attraction) when it
   stops early (it left the domain or ``simulation.limits``) or ends with v(t_end) above
   v(0): what LaSalle's argument rules out. (A run still on its way at t_end is no
