@@ -47,16 +47,16 @@ def config_error_text(path: str, error) -> str:
     return str(error) if error.source else f"in {path}:\n{_indent(str(error))}"
 
 
-def show_config_warnings(found: dict[str, list[str]], n_configs: int) -> None:
+def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str = "configs") -> None:
     """Each distinct warning once, with the configs it concerns: ``found`` maps a config's
-    name to its warning lines."""
+    name to its warning lines (``noun``: what to count them as, ``"3 of 5 points"``)."""
     names: dict[str, list[str]] = {}
     for name, lines in found.items():
         for line in lines:
             names.setdefault(line, []).append(name)
     console = get_console()
     for line, which in names.items():
-        where = "" if n_configs == 1 else which[0] if len(which) == 1 else f"{len(which)} of {n_configs} configs"
+        where = "" if n_configs == 1 else which[0] if len(which) == 1 else f"{len(which)} of {n_configs} {noun}"
         console.warn(line, where)
 
 

@@ -9,7 +9,7 @@ import click
 
 from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
 
-from ._common import check_engine, command_line, load_configs
+from ._common import check_engine, command_line, load_configs, show_config_warnings
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
 
@@ -187,11 +187,13 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
         with workers if workers is not None else contextlib.nullcontext():
             result = recovery_across(spec, push=push, basin_stability=stability, output=out, ratio=ratio,
                                      engine=engine, executor=workers, seed=seed, certificate=certificate,
-                                     certificate_samples=min(samples, 2000), overwrite=overwrite, say=console.out)
+                                     certificate_samples=samples, overwrite=overwrite, say=console.out)
     except SweepSpecError as exc:
         raise click.ClickException("invalid sweep spec " + str(path) + "\n" + "\n".join("  " + e for e in exc.errors))
     except ValueError as exc:
         raise click.ClickException(f"{spec.name}: {exc}")
+    show_config_warnings({r["run_id"]: r.get("warnings", []) for r in result.records}, len(result.records),
+                         noun="points")
     target = write_analysis(result, analysis_path(out, f"{spec.name}{RECOVERY_SUFFIX}"), command_line=command_line())
     console.out(f"  -> {target} ({result.computed} computed now, {len(result.records) - result.computed} read back "
                 f"from {result.folder})")
@@ -213,7 +215,8 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.option("--boundary-layer", type=float, default=None, metavar="PHI",
               help="phi [m] analysed in place of the pure sign law of sliding (boundary_layer 0)  [default: 1e-3].")
 @click.option("--samples", type=click.IntRange(min=1), default=10_000, show_default=True, metavar="N",
-              help="States sampled for the certificate's dv/dt check.")
+              help="States sampled for the certificate's dv/dt check (then refined by local searches and checked "
+              "against simulated runs; single configs and sweep specs alike).")
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Seed of that sampling.")
 @click.option("--no-certificate", is_flag=True, help="Skip the Lyapunov certificate.")
 @click.option("--no-simulation", is_flag=True, help="Skip the simulation from the configured initial state.")
@@ -266,8 +269,9 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     \b
     Per config: the equilibrium and rest check, the eigenvalues of the Jacobian there
     (damping ratio, natural frequency, time constant, verdict), the Lyapunov certificate
-    (Hessians of v and dv/dt, dv/dt <= 0 on sampled states, a sublevel set of v as a
-    sampling-based inner estimate of the region of attraction) and, with --basin, the
+    (Hessians of v and dv/dt, dv/dt <= 0 on sampled states, a sublevel set of v as an
+    estimate of an inner part of the region of attraction: sampled, refined by local
+    search, checked against every run of the command) and, with --basin, the
     basin of attraction over a 2-D slice of initial states by simulation.
     With --robustness SWEEP_DIR: the stable fraction of a sweep's runs with its Wilson
     interval, and the parameters that separate stable from unstable runs.

@@ -212,8 +212,8 @@ def test_certificate_fails_with_negative_damping():
     assert lin.verdict == "unstable"
     cert = certify(variant, lin, gimbal_margin=1e-3, n_samples=2000)
     assert cert.rate_definiteness == "indefinite" and not cert.holds
-    assert cert.sublevel_bound == "dv/dt > 0 at a sampled state"
-    assert cert.sublevel < 1e-3 * cert.boundary_level
+    assert cert.sublevel_bound in ("dv/dt > 0 at a sampled state", "dv/dt > 0 at a state found by the local search")
+    assert cert.sublevel <= cert.sublevel_sampled < 1e-3 * cert.boundary_level
     assert cert.worst_rate > 0
 
 

@@ -273,7 +273,8 @@ def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed(
     Hessians are those of the same body without it (a rest point, the same eigenvalues bit
     for bit; at t = 0 the disturbed right-hand side is not at rest there), while the
     certificate's sampled dv/dt includes the step's power F'V, which is positive near the
-    equilibrium: the sublevel estimate shrinks to where dv/dt > 0 was sampled."""
+    equilibrium: the sampled sublevel estimate shrinks to where dv/dt > 0 was sampled (and
+    the local search and the runs from {v = c} may lower it further)."""
     from rbstab.analysis.analyze import analyze
 
     pushed = config_from_mapping(_mapping(disturbances=[{"kind": "step", "value": [0, 6, 0], "point": [0, 0, 0.1]}]))
@@ -286,8 +287,8 @@ def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed(
     assert any("undisturbed dynamics" in n and "(step)" in n for n in a.notes)
     assert not any("undisturbed" in n for n in b.notes)
     assert b.certificate.sublevel_bound == "domain boundary"
-    assert a.certificate.sublevel_bound == "dv/dt > 0 at a sampled state"
-    assert a.certificate.sublevel < 1e-3 * b.certificate.sublevel
+    assert a.certificate.sublevel_bound != "domain boundary"
+    assert a.certificate.sublevel <= a.certificate.sublevel_sampled < 1e-3 * b.certificate.sublevel
 
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "configs" / "examples" / "saturated_push.yaml"

@@ -168,7 +168,7 @@ def test_bad_push_options_are_refused_in_one_line(tmp_path, args, expected):
 def test_a_spec_gives_curves_over_its_configurations_resumes_and_refuses_other_options(tmp_path):
     """``rbstab analyze SPEC --push``: one record a configuration, the curves file with the
     varied key as a coordinate; the threshold grows with the torque limit (more torque holds
-    a harder push), the certified push is below the sampled one; run again, nothing is
+    a harder push), the estimate from {v <= c} is below the simulated one; run again, nothing is
     computed; with other options, refused without --overwrite."""
     spec = tmp_path / "spec.yaml"
     spec.write_text(f"name: limits\nbase: {PENDULUM}\ngrid:\n  controller.saturation.torque_n: [[2.0, 2.0, .inf], "
@@ -180,8 +180,9 @@ def test_a_spec_gives_curves_over_its_configurations_resumes_and_refuses_other_o
     assert result.exit_code == 0, result.output
     ds = read_analysis(out / "limits.recovery.analysis.nc")
     assert ds.attrs["kind"] == "recovery" and "run_id" in ds["push_minimum"].coords
-    t, certified = ds["push_minimum"].values, ds["push_certified"].values
-    assert np.all(np.diff(t) > 0) and np.all(certified < t) and np.all(certified > 0)
+    t, estimate = ds["push_minimum"].values, ds["push_estimate"].values
+    assert np.all(np.diff(t) > 0) and np.all(estimate < t) and np.all(estimate > 0)
+    assert "certified" not in result.output and "estimate" in result.output
     again = CliRunner().invoke(cli, args, catch_exceptions=False)
     assert again.exit_code == 0 and "0 computed now, 3 read back" in again.output
     other = CliRunner().invoke(cli, [*args[:-2], "--samples", "400"])

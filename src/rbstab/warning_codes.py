@@ -59,7 +59,7 @@ WARNING_CODES: dict[str, WarningCode] = {
             "(the paper's Table 1 inertia (10, 8, 0.4) is such a case, see docs/physics.md)",
         ),
         WarningCode(
-            "W002", "controller.<gain>", "a gain the variant uses is positive semi-definite, not definite",
+            "W002", "controller.<gain>", "a gain v needs definite is positive semi-definite, not definite",
             "valid physics (a torque-free body, a passive pendulum), but v is then not a strict Lyapunov "
             "function and asymptotic stability is not implied (docs/physics.md)",
         ),

@@ -4,8 +4,10 @@
   Richardson extrapolation (Jacobians, Hessians, rates along the flow);
 - :mod:`~rbstab.analysis.linearise`: equilibrium, rest check, Jacobian, eigenvalues,
   modes and verdict;
-- :mod:`~rbstab.analysis.certificate`: the Lyapunov certificate and the sampling-based
-  sublevel-set estimate of the region of attraction;
+- :mod:`~rbstab.analysis.certificate`: the Lyapunov certificate and the sublevel-set
+  estimate of the region of attraction (sampled, refined by local search);
+- :mod:`~rbstab.analysis.evidence`: that estimate checked against simulations (runs from
+  {v = c}, and every run of the command);
 - :mod:`~rbstab.analysis.basin`: the basin of attraction over a 2-D slice, by simulation;
 - :mod:`~rbstab.analysis.robustness`: stable fraction and separating parameters of a sweep;
 - :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin

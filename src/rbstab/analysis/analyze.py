@@ -5,7 +5,9 @@ a boundary layer, said in the notes), its equilibrium and linearisation
 (:mod:`~rbstab.analysis.linearise`), the Lyapunov certificate
 (:mod:`~rbstab.analysis.certificate`), one simulation from the configured initial state
 for the settling time, the basin map (:mod:`~rbstab.analysis.basin`), the smallest fatal
-pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for.
+pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for; last, the
+certificate's sublevel estimate checked against simulations (:mod:`~rbstab.analysis.evidence`:
+runs from {v = c}, and every run above).
 """
 
 from __future__ import annotations
@@ -32,9 +34,10 @@ from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
+from .evidence import FALSIFICATION_RUNS, check_runs, falsify
 from .linearise import Linearisation, linearise
 from .push import basin_stability as stability_of
-from .push import push_analysis
+from .push import push_analysis, unbounded_fall_note
 
 __all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits",
            "equilibrium_outside_limits"]
@@ -284,6 +287,7 @@ def analyze(
     push: Mapping[str, Any] | None = None,
     basin_stability: Mapping[str, Any] | None = None,
     executor: Any = None,
+    falsification_runs: int = FALSIFICATION_RUNS,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 
@@ -325,6 +329,10 @@ def analyze(
     executor : rbstab.sweep.executors.Executor, optional
         Workers of the pushes and the basin stability (default: ``jobs`` local processes
         where jobs > 1).
+    falsification_runs : int
+        Runs of the certificate's falsification pass from states on {v = c}
+        (:func:`rbstab.analysis.evidence.falsify`; 0: none). Whatever it is, c is checked
+        against every run of the analysis (:func:`rbstab.analysis.evidence.check_runs`).
 
     Returns
     -------
@@ -382,6 +390,10 @@ def analyze(
         result.basin = basin_map(analysed, axes, disturbed if disturbed is not None else variant, ratio=ratio,
                                  n_samples=basin_samples, jobs=jobs, engine=engine)
         timing["basin"] = _time.perf_counter() - t3
+    if push or basin_stability or axes:
+        fall = unbounded_fall_note(analysed)
+        if fall is not None:
+            notes.append(fall)
     if push or basin_stability:
         with _workers(executor, jobs, push, basin_stability) as workers:
             if push:
@@ -393,6 +405,13 @@ def analyze(
                 result.basin_stability = stability_of(analysed, **basin_stability, ratio=ratio, engine=engine,
                                                       executor=workers)
                 timing["basin_stability"] = _time.perf_counter() - t5
+    if result.certificate is not None:
+        t6 = _time.perf_counter()
+        # 32 runs a level: the CPU's engine (a GPU gains nothing there, and --engine is the maps')
+        checked = falsify(analysed, variant, lin, result.certificate, runs=falsification_runs, ratio=ratio,
+                          engine=DEFAULT_ENGINE, seed=seed)
+        result.certificate = check_runs(checked, result)
+        timing["checks"] = _time.perf_counter() - t6
     return result
 
 

@@ -24,8 +24,14 @@ formula shows. The sublevel estimate is the largest c such that no sampled state
 v < c has a numerical dv/dt > 0 or lies outside the model's domain, and c is at most the
 least v on the domain boundary |theta_2| = pi/2 - gimbal_margin (eq 5; minimised there
 over the other coordinates, at rest: the kinetic terms of v are >= 0). By LaSalle,
-{v <= c} is then an inner estimate of the region of attraction, valid as far as the
-sampling is dense: it is labelled sampling-based, with its sample size.
+{v <= c} is then an inner estimate of the region of attraction, valid as far as the search
+for dv/dt > 0 is complete. Sampling misses thin regions (where a torque clips, the states
+with dv/dt > 0 at low levels are a sliver), so a local search (:class:`_LevelSearch`, scipy's
+SLSQP) starts from the samples nearest a violation: the largest dv/dt on a sample's level
+set, then the least v where dv/dt > 0. c is computed from the first N/4, N/2 and N samples,
+each with its search (the history; :attr:`Certificate.settled`). It stays an *estimate*:
+:func:`checked` lowers it where a simulated run contradicts it
+(:mod:`rbstab.analysis.evidence`).
 
 With disturbances (``disturbed``), the local part is of the undisturbed dynamics and the
 sampled part of the disturbed ones: each sampled state at a time drawn uniformly in
@@ -35,21 +41,34 @@ velocities, not a rate: the samples do not see it; a basin map's runs do).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import warnings
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from .derivatives import directional_derivative, hessian, jacobian
 
-__all__ = ["Certificate", "certify", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES", "RATE_DEFINITENESS"]
+__all__ = ["Certificate", "certify", "checked", "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
+           "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
 #: Eigenvalues of a scaled Hessian within this of zero (relative to the largest) are zero.
 DEFINITE_RTOL = 1e-8
 #: A sampled dv/dt is positive when above this times the state's power scale (and its error).
 RATE_RTOL = 1e-8
-#: Sampled states of the dv/dt check.
+#: Sampled states of the dv/dt check (single and spec analyses alike).
 DEFAULT_SAMPLES = 10_000
+#: Local searches from the samples: this many from the positive samples of least v, and as
+#: many from the samples below c with the largest relative dv/dt.
+REFINE_STARTS = 8
+#: The history of c: from the first N / d samples, for each d.
+HISTORY_DIVISORS = (4, 2, 1)
+#: An estimate is still moving when c from N / 2 samples exceeds c from N by more than this
+#: (relative).
+SETTLED_RTOL = 0.01
+#: The local minimisation of v keeps dv/dt >= this times rho v (rho the spectral radius of
+#: the linearisation): a strict inequality, away from the rest states where dv/dt = 0.
+_RATE_MARGIN = 1e-7
 #: How the Hessian of dv/dt may be, in the order of preference.
 RATE_DEFINITENESS = ("negative definite", "negative semi-definite", "indefinite")
 #: Decades of v spanned by the samples, below the top level.
@@ -58,7 +77,8 @@ _DECADES = 6.0
 _REACH = 1.5
 #: Bound names of the sublevel estimate.
 BOUNDS = ("domain boundary", "dv/dt > 0 at a sampled state", "sampled state outside the domain",
-          "non-finite value at a sampled state", "v not positive definite")
+          "non-finite value at a sampled state", "v not positive definite",
+          "dv/dt > 0 at a state found by the local search", "a simulated run from inside did not recover")
 
 
 @dataclass(frozen=True)
@@ -108,6 +128,21 @@ class Certificate:
         What limits c (one of :data:`BOUNDS`).
     samples_inside : int
         Samples with v <= c.
+    sublevel_sampled : float
+        c from the samples alone [J].
+    history_samples : ndarray of int, shape (3,)
+        N / 4, N / 2 and N.
+    sublevel_history : ndarray, shape (3,)
+        c [J] from the first N / 4, N / 2 and N samples, each with its local search.
+    searches : int
+        Local searches run (over the whole history).
+    search_states : ndarray, shape (k, n)
+        Where the local search's climbs ended: the states of largest dv/dt on their level
+        sets (the falsification pass starts along their directions).
+    runs_checked : int
+        Simulated runs c was checked against (0 before :func:`checked`).
+    notes : tuple of str
+        Where a run lowered c: which run, from what v.
     """
 
     lyapunov_equilibrium: float
@@ -130,6 +165,29 @@ class Certificate:
     boundary_level: float
     sublevel: float
     sublevel_bound: str
+    sublevel_sampled: float = np.nan
+    history_samples: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    sublevel_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    searches: int = 0
+    search_states: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    runs_checked: int = 0
+    notes: tuple = ()
+
+    @property
+    def settled(self) -> bool:
+        """Whether c stopped moving: c from N / 2 samples within :data:`SETTLED_RTOL` of c
+        from N (with their local searches)."""
+        h = self.sublevel_history
+        if len(h) < 2 or not np.all(np.isfinite(h[-2:])):
+            return False
+        return bool(h[-2] <= h[-1] * (1.0 + SETTLED_RTOL) + np.finfo(float).tiny)
+
+    @property
+    def evidence(self) -> str:
+        """What c is, in words: ``"estimate (sampled, 10000 states, checked against 37 runs;
+        refined by 24 local searches)"``."""
+        refined = f"; refined by {self.searches} local searches" if self.searches else ""
+        return f"estimate (sampled, {self.n_samples} states, checked against {self.runs_checked} runs{refined})"
 
     @property
     def samples_inside(self) -> int:
@@ -303,13 +361,167 @@ def certify(
     level = boundary_level(variant, y_e, h_v, limit)
     rng = np.random.default_rng(seed)
     states = _samples(y_e, root, _REACH * level, n_samples, rng)
-    times = rng.uniform(0.0, t_end, n_samples) if disturbed is not None else np.zeros(1)
-    sampled = _sampled_rates(disturbed if disturbed is not None else variant, linearisation, states, limit, times)
-    sublevel, bound = _sublevel(level, sampled)
+    times = rng.uniform(0.0, t_end, n_samples) if disturbed is not None else np.zeros(n_samples)
+    dynamics = disturbed if disturbed is not None else variant
+    sampled = _sampled_rates(dynamics, linearisation, states, limit, times)
+    sampled_c, bound = _sublevel(level, sampled)
+    search = _LevelSearch(dynamics, linearisation, root, limit, _REACH * level * 10.0 ** -_DECADES)
+    sizes = np.array(sorted({max(1, n_samples // d) for d in HISTORY_DIVISORS}), dtype=int)
+    history, sublevel, searches = [], np.inf, 0
+    for m in sizes:
+        prefix = {k: (v[:m] if isinstance(v, np.ndarray) and v.shape[:1] == (n_samples,) else v)
+                  for k, v in sampled.items()}
+        c_m, bound_m = _sublevel(level, prefix)
+        found, runs = search.refine(c_m, states[:m], times[:m], prefix)
+        searches += runs
+        if found < c_m:
+            c_m, bound_m = found, BOUNDS[5]
+        if c_m < sublevel:
+            sublevel, bound = c_m, bound_m
+        history.append(sublevel)  # every state found so far bounds c
     return Certificate(**common, rate_eigenvalues=mu, rate_definiteness=_rate_definiteness(mu),
                        lasalle_observable=observable, n_samples=n_samples, boundary_level=level,
-                       sublevel=sublevel, sublevel_bound=bound, **{k: v for k, v in sampled.items()
-                                                                  if not k.startswith("_")})
+                       sublevel=sublevel, sublevel_bound=bound, sublevel_sampled=sampled_c,
+                       history_samples=sizes, sublevel_history=np.array(history), searches=searches,
+                       search_states=np.array(search.climbed).reshape(-1, len(y_e)),
+                       **{k: v for k, v in sampled.items() if not k.startswith("_")})
+
+
+class _LevelSearch:
+    """The local search where sampling misses (:func:`certify`), in the coordinates z of
+    y = y_e + S z (v ~ |z|^2 / 2), with scipy's SLSQP and central-difference gradients:
+
+    - from a sample below c with a large relative dv/dt: the largest dv/dt on its level set
+      {v = v(sample)} (an equality constraint); if positive there, on to the next step;
+    - from a state with dv/dt > 0: the least v subject to dv/dt >= 1e-7 rho v (rho the
+      spectral radius of the linearisation: away from the rest states, where dv/dt = 0).
+
+    Both keep |theta_2| <= pi/2 - gimbal_margin (linear in z), and v above the least sampled level. Every state the searches end
+    at is checked as a sample is (the numerical dv/dt of :func:`_sampled_rates`, above its
+    error): only a confirmed dv/dt > 0 lowers c."""
+
+    def __init__(self, variant, linearisation, root: np.ndarray, limit: float, floor: float) -> None:
+        self.variant, self.linearisation, self.root, self.limit = variant, linearisation, root, limit
+        self.floor = floor  # the least level sampled: below it v and dv/dt are round-off
+        self.seen: set = set()  # the samples searched from (the history's prefixes share them)
+        self.climbed: list = []  # where the climbs ended (states)
+        self.y_e = linearisation.equilibrium
+        self.rho = max(float(np.abs(linearisation.eigenvalues).max()), 1e-3)
+
+    def _states(self, z: np.ndarray) -> np.ndarray:
+        return self.y_e + np.atleast_2d(z) @ self.root.T
+
+    def _values(self, z: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        with np.errstate(all="ignore"):
+            out = self.variant.evaluate(self._states(z), t)
+        return np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float)
+
+    def _gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+        """v, dv/dt and their gradients in z at z (central differences, one call; the last
+        point's kept: SLSQP asks for the objective, the constraints and their gradients
+        at the same point)."""
+        key = (np.asarray(z, dtype=float).tobytes(), float(t))
+        if getattr(self, "_last", (None,))[0] == key:
+            return self._last[1]
+        self._last = (key, self._evaluate_gradients(np.asarray(z, dtype=float), t))
+        return self._last[1]
+
+    def _evaluate_gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+        m = len(z)
+        h = 1e-7 * (1.0 + np.abs(z))
+        points = np.concatenate([z[None], z + np.diag(h), z - np.diag(h)])
+        v, r = self._values(points, t)
+        return v[0], r[0], (v[1:m + 1] - v[m + 1:]) / (2 * h), (r[1:m + 1] - r[m + 1:]) / (2 * h)
+
+    def _domain(self) -> list[dict]:
+        row = self.root[1]
+        y1 = self.y_e[1]
+        return [{"type": "ineq", "fun": lambda z: (self.limit - y1 - row @ z) / self.limit, "jac": lambda z: -row / self.limit},
+                {"type": "ineq", "fun": lambda z: (self.limit + y1 + row @ z) / self.limit, "jac": lambda z: row / self.limit}]
+
+    def _climb(self, z0: np.ndarray, level: float, t: float) -> np.ndarray:
+        """The largest dv/dt on {v = level} near z0."""
+        from scipy.optimize import minimize  # heavy: scipy
+
+        scale = self.rho * level
+        cons = [{"type": "eq", "fun": lambda z: self._gradients(z, t)[0] / level - 1.0,
+                 "jac": lambda z: self._gradients(z, t)[2] / level}] + self._domain()
+        res = minimize(lambda z: -self._gradients(z, t)[1] / scale, z0, jac=lambda z: -self._gradients(z, t)[3] / scale,
+                       method="SLSQP", constraints=cons, options={"maxiter": 60, "ftol": 1e-12})
+        return res.x
+
+    def _descend(self, z0: np.ndarray, t: float) -> np.ndarray:
+        """The least v near z0 subject to dv/dt >= margin rho v."""
+        from scipy.optimize import minimize  # heavy: scipy
+
+        level = max(float(self._values(z0, t)[0][0]), np.finfo(float).tiny)
+
+        def rate_margin(z):  # dv/dt / (rho v) - margin: negative at and near y_e
+            v, r, _, _ = self._gradients(z, t)
+            return r / (self.rho * v) - _RATE_MARGIN
+
+        def rate_margin_jac(z):
+            v, r, gv, gr = self._gradients(z, t)
+            return (gr * v - r * gv) / (self.rho * v * v)
+
+        cons = [{"type": "ineq", "fun": rate_margin, "jac": rate_margin_jac},
+                {"type": "ineq", "fun": lambda z: self._gradients(z, t)[0] / self.floor - 1.0,
+                 "jac": lambda z: self._gradients(z, t)[2] / self.floor}] + self._domain()
+        res = minimize(lambda z: self._gradients(z, t)[0] / level, z0, jac=lambda z: self._gradients(z, t)[2] / level,
+                       method="SLSQP", constraints=cons, options={"maxiter": 100, "ftol": 1e-12})
+        return res.x
+
+    def _confirmed(self, z: np.ndarray, t: np.ndarray) -> np.ndarray:
+        """v at the states z (k, n) whose numerical dv/dt is positive (the samples' test), inf elsewhere."""
+        if not len(z):
+            return np.zeros(0)
+        checked = _sampled_rates(self.variant, self.linearisation, self._states(z), self.limit, t)
+        v = checked["sample_lyapunov"]
+        return np.where(checked["_positive"] & np.isfinite(v) & (v >= self.floor), v, np.inf)
+
+    def refine(self, c: float, states: np.ndarray, times: np.ndarray, sampled: dict) -> tuple[float, int]:
+        """(the least v of a confirmed dv/dt > 0 the searches found, inf if none; searches run)
+        from the samples ``states`` (their ``times`` and :func:`_sampled_rates` ``sampled``)."""
+        v = sampled["sample_lyapunov"]
+        positive = sampled["_positive"] & np.isfinite(v)
+        rate = sampled["sample_rate"]
+        power = np.abs(sampled["sample_rate_analytic"]) + self.rho * np.abs(v)
+        with np.errstate(all="ignore"):
+            relative = np.where(~positive & np.isfinite(rate) & (v < c) & (v > 0), rate / power, -np.inf)
+        climb = np.argsort(-relative, kind="stable")[:REFINE_STARTS]
+        climb = [i for i in climb[np.isfinite(relative[climb])] if ("climb", i) not in self.seen]
+        least = np.where(positive, v, np.inf)
+        first = np.argsort(least, kind="stable")[:REFINE_STARTS]
+        first = [i for i in first[np.isfinite(least[first])] if ("descend", i) not in self.seen]
+        self.seen.update([("climb", i) for i in climb] + [("descend", i) for i in first])  # a prefix's starts: once
+        z_of = lambda i: np.linalg.solve(self.root, states[i] - self.y_e)  # noqa: E731
+        descend = [(z_of(i), float(times[i])) for i in first]
+        found_z, found_t, runs = [], [], 0
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            for i in climb:
+                runs += 1
+                try:
+                    z = self._climb(z_of(i), float(v[i]), float(times[i]))
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+                found_z.append(z)
+                found_t.append(times[i])
+                self.climbed.append(self._states(z)[0])
+                if np.isfinite(self._confirmed(z[None], times[i:i + 1])[0]):
+                    descend.append((z, float(times[i])))
+            for z0, t in descend:
+                runs += 1
+                try:
+                    z = self._descend(z0, t)
+                except (ValueError, np.linalg.LinAlgError):
+                    continue
+                found_z.append(z)
+                found_t.append(t)
+        if not found_z:
+            return np.inf, runs
+        levels = self._confirmed(np.array(found_z), np.array(found_t, dtype=float))
+        return float(levels.min()), runs
 
 
 def _sampled_rates(variant, linearisation, y: np.ndarray, limit: float, t: np.ndarray) -> dict:
@@ -363,3 +575,78 @@ def _sublevel(level: float, sampled: dict) -> tuple[float, str]:
             candidates.append((0.0, name))
     c, bound = min(candidates, key=lambda item: item[0])
     return max(c, 0.0), bound
+
+
+def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certificate:
+    """``certificate`` with c checked against simulated runs: a run that starts inside
+    {v <= c} and does not recover lowers c below its starting v (the next float down),
+    with a note naming the run.
+
+    Parameters
+    ----------
+    certificate : Certificate
+    lyapunov_start : array_like, shape (k,)
+        v [J] where each run starts (v of its initial state, or v just after a push);
+        NaN: not a run (not counted).
+    recovered : array_like of bool, shape (k,)
+        Whether each run recovered (by the rule of the analysis that ran it).
+    name : callable
+        ``name(i)`` -> the run's description, for the note.
+
+    Returns
+    -------
+    Certificate
+        With ``runs_checked`` grown by the runs counted, and where a run contradicts c, c,
+        ``sublevel_bound`` and ``notes`` changed.
+    """
+    v0 = np.asarray(lyapunov_start, dtype=float).ravel()
+    ok = np.asarray(recovered, dtype=bool).ravel()
+    counted = np.isfinite(v0)
+    bad = counted & ~ok & (v0 <= certificate.sublevel)
+    out = replace(certificate, runs_checked=certificate.runs_checked + int(counted.sum()))
+    if not bad.any() or not certificate.positive_definite:
+        return out
+    i = int(np.argmin(np.where(bad, v0, np.inf)))
+    c = max(float(np.nextafter(v0[i], -np.inf)), 0.0)
+    others = int(bad.sum()) - 1
+    note = (f"c lowered from {certificate.sublevel:.4g} J to {c:.4g} J: {name(i)} started inside {{v <= c}} at "
+            f"v = {v0[i]:.4g} J and did not recover" + (f" (and {others} more such runs)" if others else ""))
+    return replace(out, sublevel=c, sublevel_bound=BOUNDS[6], notes=certificate.notes + (note,))
+
+
+def level_states(variant, linearisation, certificate: Certificate, n: int, seed: int = 0) -> np.ndarray:
+    """n states on the level set {v = c} (c the certificate's sublevel): along the
+    directions from y_e of the states where the local search's climbs ended (dv/dt largest on
+    their level sets; up to n / 2 of them), of the worst sampled state, and random ones, in
+    the coordinates z of y = y_e + S z, each at the first radius where v reaches c
+    (bisection). Shape (n, n_state); empty where c is not positive."""
+    c = certificate.sublevel
+    if not (c > 0 and np.isfinite(c)) or n < 1:
+        return np.zeros((0, len(linearisation.equilibrium)))
+    y_e = linearisation.equilibrium
+    w, q = np.linalg.eigh(certificate.lyapunov_hessian)
+    root = q @ np.diag(1.0 / np.sqrt(w)) @ q.T
+    rng = np.random.default_rng(seed)
+    u = rng.standard_normal((n, len(y_e)))
+    known = [y for y in (*certificate.search_states[: n // 2], certificate.worst_state)
+             if len(y) == len(y_e) and np.all(np.isfinite(y)) and np.any(y != y_e)][:n]
+    for i, y in enumerate(known):
+        u[i] = np.linalg.solve(root, y - y_e)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+
+    def v_at(r):
+        with np.errstate(all="ignore"):
+            return np.asarray(variant.lyapunov(y_e + (r[:, None] * u) @ root.T), dtype=float)
+
+    lo = np.zeros(n)
+    hi = np.full(n, np.sqrt(2.0 * c))
+    for _ in range(60):  # hi: a radius beyond the level (v ~ |z|^2 / 2 near y_e)
+        above = v_at(hi) >= c
+        if above.all():
+            break
+        hi = np.where(above, hi, 2.0 * hi)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        above = v_at(mid) >= c
+        lo, hi = np.where(above, lo, mid), np.where(above, mid, hi)
+    return y_e + (lo[:, None] * u) @ root.T

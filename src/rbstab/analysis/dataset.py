@@ -20,7 +20,8 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
     slowest_time_constant, time_to_converge, linear_settling_time (scalars)
     certificate: lyapunov_hessian, rate_hessian (state, state_wrt), rate_eigenvalue
     (rate_mode), sample_lyapunov, sample_rate, sample_rate_analytic, sample_outside (sample),
-    worst_state_<block>(axis), sublevel, boundary_level, ... (scalars)
+    worst_state_<block>(axis), sublevel, sublevel_sampled, boundary_level, ... (scalars),
+    sublevel_history, sublevel_history_samples (sublevel_step)
     basin: basin_outcome (flag_values 0 1 2: converged, not converged, failed),
     basin_time_to_converge, basin_lyapunov_initial, basin_lyapunov_final (basin_x, basin_y)
     push: push_direction(push_direction, axis), push_threshold, push_recovering,
@@ -180,8 +181,14 @@ def _certificate_variables(analysis) -> dict:
         "rate_mismatch": _var((), c.rate_mismatch, "1",
                               "largest |numerical - analytic dv/dt| relative to the power scale"),
         "boundary_level": _var((), c.boundary_level, "J", "least v on the domain boundary |theta_2| = pi/2 - margin"),
-        "sublevel": _var((), c.sublevel, "J", "c of the sampling-based inner estimate {v <= c} of the region "
-                         "of attraction"),
+        "sublevel": _var((), c.sublevel, "J", "c of the inner estimate {v <= c} of the region of attraction "
+                         "(sampled, refined by local searches, checked against simulated runs)"),
+        "sublevel_sampled": _var((), c.sublevel_sampled, "J", "c from the sampled states alone"),
+        "sublevel_history": _var(("sublevel_step",), c.sublevel_history, "J",
+                                 "c with the local search from the first N/4, N/2, N samples"),
+        "sublevel_history_samples": _var(("sublevel_step",), np.asarray(c.history_samples, dtype=np.int64), "1",
+                                         "samples of each step of the history"),
+        "sublevel_runs_checked": _var((), int(c.runs_checked), "1", "simulated runs c was checked against"),
     }
 
 
@@ -232,6 +239,11 @@ def _push_variables(analysis) -> tuple[dict, dict, dict]:
         "push_unit_energy": _var(("push_direction",), p.unit_energy, "J", "kinetic energy dT of a push of magnitude "
                                  "1 along the direction (dT grows with the magnitude's square)"),
     }
+    c = analysis.certificate
+    if c is not None and c.positive_definite:
+        variables["push_estimate"] = _var((), p.estimate(c.sublevel), u, "smallest push the sublevel estimate "
+                                          "{v <= c} holds: min over the directions of sqrt(c / dT(u)) (an estimate, "
+                                          "checked against every push run)")
     attrs = {"push_kind": p.kind, "push_at": p.at, "push_tol": p.tol, "push_rungs": p.rungs, "push_ratio": p.ratio,
              "push_rule": p.rule_text, "push_engine": p.engine, "push_runs": p.runs}
     return variables, {}, attrs
@@ -283,7 +295,8 @@ def _text_attributes(analysis) -> dict[str, Any]:
         attrs.update(certificate_holds=int(c.holds), certificate_argument=c.argument,
                      rate_definiteness=c.rate_definiteness, positive_definite=int(c.positive_definite),
                      lasalle_observable=int(c.lasalle_observable), sublevel_bound=c.sublevel_bound,
-                     n_samples=int(c.n_samples), sublevel_estimate="sampling-based")
+                     n_samples=int(c.n_samples), sublevel_estimate=c.evidence, sublevel_settled=int(c.settled),
+                     sublevel_notes="\n".join(c.notes))
     if s is not None:
         attrs.update(simulation_status=s["status"], simulation_message=s["message"], t_end=s["t_end"])
     if b is not None:
@@ -504,7 +517,10 @@ def json_record(analysis) -> dict[str, Any]:
             "n_samples": c.n_samples, "worst_rate": _finite(c.worst_rate), "worst_lyapunov": _finite(c.worst_lyapunov),
             "worst_state": _floats(c.worst_state), "rate_mismatch": _finite(c.rate_mismatch),
             "boundary_level": _finite(c.boundary_level), "sublevel": c.sublevel, "sublevel_bound": c.sublevel_bound,
-            "sublevel_estimate": "sampling-based",
+            "sublevel_estimate": c.evidence, "sublevel_sampled": _finite(c.sublevel_sampled),
+            "sublevel_history": _floats(c.sublevel_history),
+            "sublevel_history_samples": [int(n) for n in c.history_samples], "sublevel_settled": c.settled,
+            "runs_checked": c.runs_checked, "sublevel_notes": list(c.notes),
         }
     if analysis.basin is not None:
         b = analysis.basin
@@ -512,6 +528,8 @@ def json_record(analysis) -> dict[str, Any]:
                            "inside_estimate": analysis.basin_inside(), "ratio": b.ratio}
     if analysis.push is not None:
         record["push"] = analysis.push.to_json()
+        if c is not None and c.positive_definite:
+            record["push"]["estimate"] = _finite(analysis.push.estimate(c.sublevel))
     if analysis.basin_stability is not None:
         record["basin_stability"] = analysis.basin_stability.to_json()
     return record

@@ -45,7 +45,8 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
            "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
-           "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch"]
+           "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch", "runs_from_states",
+           "unbounded_fall_note"]
 
 #: Quantity of a push -> the units of its magnitude.
 PUSH_KINDS = {"force": "N s", "torque": "N m s"}
@@ -86,6 +87,18 @@ def push_directions(n: int, seed: int = 0) -> np.ndarray:
 def _unit(vectors: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
     return vectors / norm
+
+
+def unbounded_fall_note(config) -> str | None:
+    """One line where ``config`` is a body under gravity without an admissible region
+    (``simulation.limits``): a run that falls may then swing through and come back to the
+    equilibrium, counted as recovered (recovery then looks not monotone in the push); None
+    otherwise."""
+    if config.simulation.limits is not None or not np.any(np.asarray(config.body.gravity) != 0):
+        return None
+    return ("no admissible region on a body under gravity: without simulation.limits a run that falls can swing "
+            "through and come back, and counts as recovered (recovery then looks not monotone); set "
+            "simulation.limits (e.g. theta: [0.6, 0.6, .inf]) to end a fall where it becomes one")
 
 
 def check_push_options(kind: str, *, point: Sequence[float] | None = None, directions: Any = None,
@@ -413,6 +426,8 @@ class PushAnalysis:
     refined_thresholds : ndarray, shape (m,)
         NaN for a direction that recovered at the minimum found before it (its threshold
         is not below it, and was not computed).
+    refined_unit_energy : ndarray, shape (m,)
+        dT [J] of a push of magnitude 1 along each refined direction.
     engine : str
     runs, batches : int
         Runs integrated and batches they took.
@@ -437,6 +452,32 @@ class PushAnalysis:
     runs: int = 0
     batches: int = 0
     seconds: float = 0.0
+    refined_unit_energy: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+
+    def fatal_starts(self) -> tuple[np.ndarray, Callable[[int], str]]:
+        """(v [J] just after the smallest fatal push of each direction, the grid's then the
+        local search's, NaN where none was fatal; the name of each such run)."""
+        t = np.concatenate([self.threshold, self.refined_thresholds])
+        e = np.concatenate([self.unit_energy, self.refined_unit_energy[:len(self.refined_thresholds)]])
+        e = np.pad(e, (0, len(t) - len(e)), constant_values=np.nan)
+        u = np.concatenate([self.directions, self.refined_directions])
+        with np.errstate(invalid="ignore"):
+            v = np.where(np.isfinite(t), e * t ** 2, np.nan)
+
+        def name(i: int) -> str:
+            return (f"the {self.kind} push of {t[i]:.4g} {self.units} along "
+                    f"({', '.join(f'{x:+.3f}' for x in u[i])})")
+
+        return v, name
+
+    def estimate(self, sublevel: float) -> float:
+        """The smallest push the sublevel set {v <= c} holds (c = ``sublevel`` [J]): the
+        minimum over the directions of sqrt(c / dT(u)) [N s or N m s] (NaN without c)."""
+        if not (sublevel >= 0):
+            return math.nan
+        e = np.concatenate([self.unit_energy, self.refined_unit_energy])
+        e = e[np.isfinite(e) & (e > 0)]
+        return float(np.min(np.sqrt(sublevel / e))) if len(e) else math.inf
 
     @property
     def rule_text(self) -> str:
@@ -567,8 +608,9 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
                         point=pushes.point if kind == "force" else np.zeros(3), at=float(at), tol=float(tol),
                         ratio=float(ratio), rungs=int(rungs), directions=u, thresholds=found,
                         unit_energy=found.unit_energy,
-                        refined_directions=refined_u, refined_thresholds=refined_t, engine=engine, runs=pushes.runs,
-                        batches=pushes.batches, seconds=_time.perf_counter() - start)
+                        refined_directions=refined_u, refined_thresholds=refined_t,
+                        refined_unit_energy=pushes.energy(refined_u) if len(refined_u) else np.zeros(0),
+                        engine=engine, runs=pushes.runs, batches=pushes.batches, seconds=_time.perf_counter() - start)
 
 
 def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float, rungs: int,
@@ -800,16 +842,10 @@ def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, eng
                     executor) -> tuple[np.ndarray, np.ndarray]:
     """(whether they converge by the sweeps' rule, v(0) [J]) of the runs from the
     configured initial state with the drawn entries ``values`` (N, n_axes)."""
-    from ..engine.batch import batch_from_table  # heavy: numba
     from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba
     from .basin import OUTSIDE  # heavy: numba
 
-    template = {k: v for k, v in config.resolved.items() if k != "name"}
-    if not variant.smooth:
-        raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) runs one at a time; "
-                         "analyse a boundary-layer law (--boundary-layer PHI)")
-    base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
-    batch = _take(base, np.zeros(len(values), dtype=np.int64))
+    batch = _state_batch(config, variant, len(values))
     blocks = list(variant.layout.blocks)
     for j, (axis, lo, hi) in enumerate(axes):
         if axis.block == "theta" and axis.index == 1:
@@ -821,3 +857,28 @@ def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, eng
 
     ok, v0, v1 = integrate_batch(batch, engine, executor)
     return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool), v0
+
+
+def _state_batch(config, variant, k: int):
+    """A batch of k runs of ``config`` from its configured initial state (to be changed)."""
+    from ..engine.batch import batch_from_table  # heavy: numba
+
+    if not variant.smooth:
+        raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) runs one at a time; "
+                         "analyse a boundary-layer law (--boundary-layer PHI)")
+    template = {k: v for k, v in config.resolved.items() if k != "name"}
+    base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
+    return _take(base, np.zeros(k, dtype=np.int64))
+
+
+def runs_from_states(config, states: np.ndarray, *, engine: str = "compiled", executor=None) -> np.ndarray:
+    """The outcomes of the runs of ``config`` from ``states`` (k, n_state), the variant's
+    layout, as :func:`batch_outcomes` gives them: shape (3, k), success (1 or 0), v(0) and
+    v(t_end) [J] (NaN for a run that stopped early). One batch."""
+    variant = config.make_variant()
+    states = np.asarray(states, dtype=float).reshape(-1, variant.layout.size)
+    if not len(states):
+        return np.zeros((3, 0))
+    batch = _state_batch(config, variant, len(states))
+    batch.y0[:, :states.shape[1]] = states
+    return integrate_batch(batch, engine, executor)

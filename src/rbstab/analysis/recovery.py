@@ -5,10 +5,11 @@ SPEC.yaml --push ...``), with the Lyapunov certificate's inner estimate beside t
 At each configuration (a run of the spec's table: grid, zip, random or table), as asked:
 
 - the smallest fatal push over the directions (:func:`~rbstab.analysis.push.push_analysis`),
-  and the *certified* one: the certificate's sublevel set {v <= c}
-  (:mod:`rbstab.analysis.certificate`) holds every push whose energy dT = v just after it is
-  at most c, so along u the pushes up to sqrt(c / dT(u)) recover by the certificate
-  (``push_certified``: its minimum over the directions);
+  and the *estimate* from the sublevel set {v <= c} (:mod:`rbstab.analysis.certificate`,
+  checked against every run of the point, :mod:`rbstab.analysis.evidence`): it holds every
+  push whose energy dT = v just after it is at most c, so along u the pushes up to
+  sqrt(c / dT(u)) recover by the estimate (``push_estimate``: its minimum over the
+  directions; below every simulated threshold, since each fatal push lowers c below its dT);
 - the basin stability (:func:`~rbstab.analysis.push.basin_stability`), and among the draws
   inside {v <= c} (v of the drawn state, or dT of the drawn push) the fraction that
   recovered: 1 where the certificate's estimate is right.
@@ -28,6 +29,7 @@ import json
 import math
 import os
 import time as _time
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,8 +43,9 @@ __all__ = ["Recovery", "recovery_across", "recovery_content", "RECOVERY_SUFFIX"]
 
 #: Suffix of the folder of records and of the curves file.
 RECOVERY_SUFFIX = ".recovery"
-#: Sampled states of each configuration's certificate.
-CERTIFICATE_SAMPLES = 2000
+#: How each configuration's sublevel estimate is made (in the records' options: records of
+#: an older method are not read back).
+ESTIMATE_METHOD = "sampled, refined by local search, falsified and checked against the runs"
 
 
 @dataclass
@@ -58,10 +61,12 @@ class Recovery:
     values : dict of str to ndarray
         Key -> its value at each configuration, shape (n,).
     records : list of dict
-        Per configuration: ``run_id``, ``push`` (``minimum``, ``direction``, ``median``,
-        ``certified``, ``non_monotone``, ``units``), ``stability`` (``fraction``, ``low``,
-        ``high``, ``draws``, ``inside``, ``inside_recovered``), ``sublevel`` c [J],
-        ``sublevel_bound``, ``seconds``; an entry not asked for is absent.
+        Per configuration: ``run_id``, ``warnings`` (its configuration's lines), ``push``
+        (``minimum``, ``direction``, ``median``, ``estimate``, ``non_monotone``, ``units``),
+        ``stability`` (``fraction``, ``low``, ``high``, ``draws``, ``inside``,
+        ``inside_recovered``), ``sublevel`` c [J], ``sublevel_bound``, ``sublevel_sampled``,
+        ``sublevel_history``, ``sublevel_settled``, ``runs_checked``, ``sublevel_notes``,
+        ``seconds``; an entry not asked for is absent.
     options : dict
         What was asked (the push and basin-stability options, ratio, engine excluded).
     folder : Path
@@ -93,40 +98,59 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     """The record of one configuration (the function a worker runs): ``item`` its
     (run_id, resolved configuration)."""
     from ..config import config_from_mapping  # heavy: pydantic
-    from .certificate import certify  # heavy: numba
+    from .certificate import DEFAULT_SAMPLES, certify  # heavy: numba
+    from .evidence import FALSIFICATION_RUNS, falsify  # heavy: numba
     from .linearise import linearise  # heavy: numba
     from .push import basin_stability, push_analysis  # heavy: numba (its engine)
 
     start = _time.perf_counter()
     run_id, resolved = item
-    config = config_from_mapping(resolved, source=run_id)
+    with warnings.catch_warnings(record=True):  # its lines are kept in the record, shown once by the caller
+        warnings.simplefilter("always")
+        config = config_from_mapping(resolved, source=run_id)
     variant = config.make_variant()
     lin = linearise(variant)
-    record: dict[str, Any] = {"run_id": run_id}
-    c, bound = math.nan, ""
+    record: dict[str, Any] = {"run_id": run_id, "warnings": list(config.warnings)}
+    ratio = options["ratio"]
+    cert = None
     if options.get("certificate", True) and variant.smooth:
         cert = certify(variant, lin, gimbal_margin=config.simulation.gimbal_margin,
-                       n_samples=int(options.get("certificate_samples", CERTIFICATE_SAMPLES)), seed=options["seed"])
-        c, bound = (float(cert.sublevel), cert.sublevel_bound) if cert.positive_definite else (0.0, cert.sublevel_bound)
-    record["sublevel"], record["sublevel_bound"] = c, bound
-    ratio = options["ratio"]
+                       n_samples=int(options.get("certificate_samples", DEFAULT_SAMPLES)), seed=options["seed"])
+        cert = falsify(config, variant, lin, cert, runs=FALSIFICATION_RUNS, ratio=ratio, engine="compiled",
+                       seed=options["seed"])  # 32 runs a level: the CPU's engine
     push = options.get("push")
-    if push:
-        found = push_analysis(config, **push, ratio=ratio, engine=engine)
-        certified = float(np.min(np.sqrt(c / found.unit_energy))) if c >= 0 else math.nan
-        t = found.threshold
-        record["push"] = {"minimum": found.minimum, "direction": found.minimum_direction.tolist(),
-                          "grid_minimum": found.grid_minimum,
-                          "median": float(np.median(t[np.isfinite(t)])) if np.isfinite(t).any() else math.inf,
-                          "certified": certified, "non_monotone": int((~found.thresholds.monotone).sum()),
-                          "directions": len(t), "units": found.units, "runs": found.runs}
+    found_push = push_analysis(config, **push, ratio=ratio, engine=engine) if push else None
     stability = options.get("basin_stability")
-    if stability:
-        found = basin_stability(config, **stability, ratio=ratio, engine=engine)
-        inside = found.lyapunov_start <= c  # False where c is NaN (no certificate)
-        record["stability"] = {"fraction": found.fraction, "low": found.interval[0], "high": found.interval[1],
-                               "draws": found.draws, "recovered": int(found.recovered.sum()),
-                               "inside": int(inside.sum()), "inside_recovered": int((inside & found.recovered).sum())}
+    found_stability = basin_stability(config, **stability, ratio=ratio, engine=engine) if stability else None
+    if cert is not None:
+        from .certificate import checked  # heavy: numba
+
+        if found_push is not None:
+            v0, name = found_push.fatal_starts()
+            cert = checked(cert, v0, np.zeros(len(v0), dtype=bool), name)
+        if found_stability is not None:
+            b = found_stability
+            cert = checked(cert, b.lyapunov_start, b.recovered,
+                           lambda i: f"basin-stability draw {i} ({', '.join(f'{k} = {v:.4g}' for k, v in zip(b.keys, b.values[i]))})")
+    c = (float(cert.sublevel) if cert.positive_definite else 0.0) if cert is not None else math.nan
+    record["sublevel"], record["sublevel_bound"] = c, cert.sublevel_bound if cert is not None else ""
+    if cert is not None:
+        record.update(sublevel_sampled=float(cert.sublevel_sampled), sublevel_settled=bool(cert.settled),
+                      sublevel_history=[float(x) for x in cert.sublevel_history], runs_checked=int(cert.runs_checked),
+                      samples=int(cert.n_samples), sublevel_estimate=cert.evidence, sublevel_notes=list(cert.notes))
+    if found_push is not None:
+        t = found_push.threshold
+        record["push"] = {"minimum": found_push.minimum, "direction": found_push.minimum_direction.tolist(),
+                          "grid_minimum": found_push.grid_minimum,
+                          "median": float(np.median(t[np.isfinite(t)])) if np.isfinite(t).any() else math.inf,
+                          "estimate": found_push.estimate(c), "non_monotone": int((~found_push.thresholds.monotone).sum()),
+                          "directions": len(t), "units": found_push.units, "runs": found_push.runs}
+    if found_stability is not None:
+        b = found_stability
+        inside = b.lyapunov_start <= c  # False where c is NaN (no certificate)
+        record["stability"] = {"fraction": b.fraction, "low": b.interval[0], "high": b.interval[1],
+                               "draws": b.draws, "recovered": int(b.recovered.sum()),
+                               "inside": int(inside.sum()), "inside_recovered": int((inside & b.recovered).sum())}
     record["seconds"] = _time.perf_counter() - start
     return record
 
@@ -134,7 +158,7 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
 def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stability: Mapping[str, Any] | None = None,
                     output: str | os.PathLike = "results/analysis", ratio: float = DEFAULT_LYAPUNOV_RATIO,
                     engine: str = "compiled", executor=None, seed: int = 0, certificate: bool = True,
-                    certificate_samples: int = CERTIFICATE_SAMPLES, overwrite: bool = False,
+                    certificate_samples: int | None = None, overwrite: bool = False,
                     say: Callable[[str], None] | None = None) -> Recovery:
     """Push recovery and basin stability at every configuration of ``spec``.
 
@@ -156,6 +180,9 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
         Of the certificates' sampling.
     certificate : bool
         Compute each configuration's certificate (its sublevel c; NaN without).
+    certificate_samples : int, optional
+        Its sampled states (default :data:`rbstab.analysis.certificate.DEFAULT_SAMPLES`, as
+        a single analysis).
     overwrite : bool
         Replace records made with other options (without it: refused).
 
@@ -166,6 +193,7 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
         question asked.
     """
     from ..io.atomic import atomic_path  # with the files it writes
+    from .certificate import DEFAULT_SAMPLES  # heavy: numba
     from ..sweep import load_spec  # heavy: pydantic, numba
     from ..sweep.table import plan_table  # heavy: numba
 
@@ -177,7 +205,8 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
     table = plan_table(spec)
     options = {"push": dict(push) if push else None, "basin_stability": dict(basin_stability) if basin_stability else None,
                "ratio": float(ratio), "seed": int(seed), "certificate": bool(certificate),
-               "certificate_samples": int(certificate_samples)}
+               "certificate_samples": int(DEFAULT_SAMPLES if certificate_samples is None else certificate_samples),
+               "estimate": ESTIMATE_METHOD if certificate else None}
     token = _options_hash(options)
     folder = Path(output) / f"{spec.name}{RECOVERY_SUFFIX}"
     points = folder / "points"
@@ -201,6 +230,14 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
     todo = [(rid, table.resolved(i)) for i, rid in enumerate(run_ids) if rid not in done]
     if say is not None:
         say(f"{spec.name}: {table.n} configurations, {len(done)} done before, {len(todo)} to compute")
+        from ..config import config_from_mapping  # heavy: pydantic
+        from .push import unbounded_fall_note  # heavy: numba
+
+        with warnings.catch_warnings():  # shown once with the points' records
+            warnings.simplefilter("ignore")
+            fall = unbounded_fall_note(config_from_mapping(table.resolved(0))) if table.n else None
+        if fall is not None:
+            say(f"note: {fall}")
 
     def keep(record: dict) -> None:
         record["options"] = token
@@ -236,15 +273,17 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
 
 
 def _line(record: dict, k: int, n: int) -> str:
-    """One progress line of a configuration's record."""
+    """One progress line of a configuration's record (and a line a run that lowered its c)."""
     parts = [f"  [{k}/{n}] {record['run_id']}:"]
     p = record.get("push")
     if p:
-        parts.append(f"smallest fatal push {p['minimum']:.4g} {p['units']} (certified {p['certified']:.3g})")
+        parts.append(f"smallest fatal push {p['minimum']:.4g} {p['units']} (estimate {p['estimate']:.3g}, from c = "
+                     f"{record['sublevel']:.4g} J checked against {record.get('runs_checked', 0)} runs"
+                     + ("" if record.get("sublevel_settled", True) else ", STILL MOVING") + ")")
     s = record.get("stability")
     if s:
         parts.append(f"basin stability {s['fraction']:.1%} ({s['low']:.1%} - {s['high']:.1%})")
-    return " ".join(parts)
+    return "\n".join([" ".join(parts)] + [f"    note: {n}" for n in record.get("sublevel_notes", [])])
 
 
 def recovery_content(result: Recovery, command_line: str | None = None) -> tuple[dict, dict, dict]:
@@ -262,7 +301,16 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
         coords[key][2]["config_key"] = key
     data: dict[str, tuple] = {
         "sublevel": _var(("point",), [r["sublevel"] for r in result.records], "J",
-                         "c of the certificate's sampling-based inner estimate {v <= c}"),
+                         "c of the inner estimate {v <= c}: sampled, refined by local search, checked against the "
+                         "point's runs"),
+        "sublevel_sampled": _var(("point",), [r.get("sublevel_sampled", math.nan) for r in result.records], "J",
+                                 "c from the sampled states alone"),
+        "sublevel_runs_checked": _var(("point",), [r.get("runs_checked", 0) for r in result.records], "1",
+                                      "simulated runs c was checked against"),
+        "sublevel_settled": _var(("point",), [int(r.get("sublevel_settled", False)) for r in result.records], "1",
+                                 "c from N/2 samples within 1% of c from N (1), or still moving (0)"),
+        "sublevel_notes": _var(("point",), np.array(["\n".join(r.get("sublevel_notes", [])) for r in result.records],
+                                                    dtype=object), "1", "the runs that lowered c, one a line"),
     }
     push = [r.get("push") for r in result.records]
     if any(push):
@@ -274,8 +322,9 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
                                            "1", "its direction"),
             "push_median": _var(("point",), get("median"), units, "median over the directions of the smallest "
                                 "fatal push"),
-            "push_certified": _var(("point",), get("certified"), units,
-                                   "smallest push the certificate holds: min over the directions of sqrt(c / dT(u))"),
+            "push_estimate": _var(("point",), get("estimate"), units,
+                                  "smallest push the sublevel estimate {v <= c} holds: min over the directions of "
+                                  "sqrt(c / dT(u)), below every simulated threshold"),
             "push_non_monotone": _var(("point",), get("non_monotone"), "1",
                                       "directions along which recovery was not monotone in the magnitude"),
         })

@@ -76,8 +76,14 @@ def _certificate_lines(c) -> list[str]:
                  f"eigenvalues zero); LaSalle's condition (PBH test) {'holds' if c.lasalle_observable else 'FAILS'}")
     lines.append(f"    {c.n_samples} sampled states: largest dv/dt {_g(c.worst_rate)} W at v = {_g(c.worst_lyapunov)} J; "
                  f"|numerical - analytic dv/dt| <= {_g(c.rate_mismatch, 2)} of the power scale")
-    lines.append(f"    region of attraction contains {{v <= {_g(c.sublevel)} J}} (sampling-based inner estimate, "
-                 f"{c.n_samples} samples, bounded by: {c.sublevel_bound}; domain boundary at {_g(c.boundary_level)} J)")
+    lines.append(f"    inner estimate of the region of attraction: {{v <= {_g(c.sublevel)} J}}, an {c.evidence}; bounded by: "
+                 f"{c.sublevel_bound}; domain boundary at {_g(c.boundary_level)} J")
+    lines += [f"    {note}" for note in c.notes]
+    if len(c.sublevel_history):
+        steps = ", ".join(f"{n} states {_g(h)} J" for n, h in zip(c.history_samples, c.sublevel_history))
+        lines.append(f"    c with the local search from the first N/4, N/2, N samples: {steps} (samples alone: "
+                     f"{_g(c.sublevel_sampled)} J): " + ("settled" if c.settled else
+                                                          "STILL MOVING (an estimate to take with care; more --samples)"))
     return lines
 
 
@@ -123,6 +129,11 @@ def _push_lines(analysis) -> list[str]:
                     if len(p.refined_thresholds) else ""))
     lines.append(f"    over the directions: median {_g(np.median(t[finite]), 4)}, largest {_g(np.max(t[finite]), 4)} "
                  f"{p.units}" + (f"; {int((~finite).sum())} recovered from every rung" if (~finite).any() else ""))
+    c = analysis.certificate
+    if c is not None and c.positive_definite:
+        lines.append(f"    estimate from {{v <= {_g(c.sublevel)} J}}: pushes up to {_g(p.estimate(c.sublevel), 4)} {p.units} "
+                     "recover in every direction (min over the directions of sqrt(c / dT); below every simulated "
+                     "threshold)")
     flagged = int((~p.thresholds.monotone).sum())
     if flagged:
         lines.append(f"    recovery is not monotone in the magnitude along {flagged} of {len(t)} directions (a rung "

@@ -276,7 +276,8 @@ def _build(
         dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
         gains = dataclasses.replace(gains, disturbances=disturbances_of(dump["disturbances"]))
     resolved_simulation(dump["simulation"], sim)
-    as_written = {g: getattr(ctrl, g) for g in used_gains}  # 3 numbers: no numpy needed
+    definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
+    as_written = {g: getattr(ctrl, g) for g in used_gains if g in definite}  # 3 numbers: no numpy needed
     found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
     return RunConfig(
         name=run.name,
@@ -419,8 +420,9 @@ def config_from_mapping(
     PhysicalPlausibilityWarning
         For a configuration no real body has (inertia violating the triangle inequality).
     SemiDefiniteGainWarning
-        For a gain the variant uses that is positive semi-definite but singular (zero
-        included): v is then not a strict Lyapunov function.
+        For a gain v needs definite (the variant's ``definite_gains``, else every gain it
+        uses) that is positive semi-definite but singular (zero included): v is then not a
+        strict Lyapunov function.
     """
     return _build(data, default_name=default_name, source=source)
 

@@ -163,13 +163,22 @@ def _certificate_table(ds) -> Table | None:
                                                   f"{_f(_scalar(ds, 'worst_lyapunov'))} J"],
         ["|numerical - analytic dv/dt| / power scale", _f(_scalar(ds, "rate_mismatch"), 2)],
         ["least v on the domain boundary |theta_2| = pi/2 - margin [J]", _f(_scalar(ds, "boundary_level"))],
-        ["sublevel estimate c of {v <= c} [J] (sampling-based)", _f(_scalar(ds, "sublevel"))],
+        ["sublevel estimate c of {v <= c} [J]", _f(_scalar(ds, "sublevel"))],
+        ["what c is", str(a.get("sublevel_estimate", "estimate (sampled)"))],
+        ["c from the samples alone [J]", _f(_scalar(ds, "sublevel_sampled")) if "sublevel_sampled" in ds else "-"],
+        ["c with the local search from N/4, N/2, N samples [J]",
+         ", ".join(_f(x) for x in ds["sublevel_history"].values) + ("" if a.get("sublevel_settled", 1) else
+                                                                     " (STILL MOVING)")
+         if "sublevel_history" in ds else "-"],
         ["c bounded by", str(a.get("sublevel_bound"))],
         ["certificate", f"holds ({a.get('certificate_argument')})" if a.get("certificate_holds") else "does not hold"],
     ]
     return Table("Lyapunov certificate", ["quantity", "value"], rows,
-                 note="The sublevel set is an inner estimate of the region of attraction only as far as the "
-                      "sampling is dense: no sampled state with v < c has dv/dt > 0 or lies outside the domain.")
+                 note="The sublevel set is an estimate of an inner part of the region of attraction, not a proof: "
+                      "no sampled state, nor any state the local search from them found, with v < c has dv/dt > 0 "
+                      "or lies outside the domain, and no simulated run of the command that started inside "
+                      "{v <= c} failed to recover (docs/analysis.md)."
+                      + (("\n" + str(a.get("sublevel_notes"))) if a.get("sublevel_notes") else ""))
 
 
 def _pole_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:

@@ -69,6 +69,9 @@ class Variant:
     layout: ClassVar[StateLayout] = FULL_BODY
     #: Gains that must be configured for this variant.
     required_gains: ClassVar[tuple[str, ...]] = ("k_t", "l_t", "k_r", "l_r")
+    #: Gains whose singularity leaves v not a strict Lyapunov function (W002): those of
+    #: ``required_gains`` unless the variant says fewer.
+    definite_gains: ClassVar[tuple[str, ...] | None] = None
     #: Paper equation of the constraint law, for documentation and reports.
     equation: ClassVar[str] = ""
 

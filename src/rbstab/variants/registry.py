@@ -41,6 +41,10 @@ class Permanent(Variant):
 
     name = "permanent"
     equation = "eqs 20, 21"
+    #: On the reduced state (Theta, Omega), v is positive definite with K_r alone and
+    #: dv/dt <= -Omega'L_r Omega (eqs 34, 37): K_t and L_t only add terms >= 0 to v and <= 0
+    #: to dv/dt, so they may be singular (zero) without loss.
+    definite_gains = ("k_r", "l_r")
 
     def full_state(self, y: np.ndarray) -> np.ndarray:
         """The 12-state vector (Theta, Omega, X, V) of reduced states y, shape (..., 12)."""
