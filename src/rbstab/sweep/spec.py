@@ -21,7 +21,7 @@ A sweep spec names a base configuration and the keys to vary::
     convergence:
       lyapunov_ratio: 1.0e-3             # converged: rbstab.convergence.RULE
 
-Keys are the dotted paths of :func:`rbstab.config.set_dotted` (``initial_state.omega.1``
+Keys are the dotted paths of :func:`rbstab.config.paths.parse_key` (``initial_state.omega.1``
 indexes into the list). A ``table:`` (a CSV or Parquet file, a DataFrame or a mapping of
 columns named by dotted keys, ``initial_state.omega[1]``, ``body.inertia[0,2]``) gives runs
 row by row. The run list is the product base x grid x zip x table x random; its order
@@ -70,7 +70,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError, apply_overrides, parse_yaml as parse, set_dotted
+from ..config import ConfigError, apply_overrides, parse_yaml as parse
+from ..config.paths import KeyPathError, parse_key
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import copy_tree, read_yaml_file
 from ..results import plain
@@ -329,9 +330,9 @@ def _set_spec_override(data: dict, override: str) -> None:
             node[path[len(section):]] = value
             return
     try:
-        set_dotted(data, path, value)
-    except ConfigError as exc:
-        raise ConfigError([f"override {override!r}: {e}" for e in exc.errors]) from None
+        parse_key(path, SweepSchema).set(data, value)
+    except KeyPathError as exc:
+        raise ConfigError([f"override {override!r}: {exc.problem}"]) from None
 
 
 def spec_from_mapping(
@@ -444,6 +445,11 @@ def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
             errors.append(f"sweep key '{where}': column {name!r} is not a config key; expected a dotted key "
                           "such as 'body.mass', a vector entry 'initial_state.omega[1]' or a matrix entry "
                           "'body.inertia[0,0]'")
+            continue
+        try:
+            parse_key(key)
+        except KeyPathError as exc:
+            errors.append(f"sweep key '{where}': column {name!r}: {exc.problem}")
             continue
         array = np.asarray(values)
         if array.ndim != 1:
