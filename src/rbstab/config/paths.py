@@ -165,15 +165,14 @@ class KeyPath:
         """
         node = data
         steps = self.steps
-        n_field = len(steps) - len(self.index)
+        n_field = len(steps) - len(self.index)  # steps[n_field - 1] is the field
         for depth, step in enumerate(steps):
-            if depth >= n_field and not isinstance(node, (list, tuple)) and _is_number(node):
-                node = node if self.rule is not None and self.rule[0] == "limits" else None  # one limit: every axis
-                if node is not None:
-                    continue
-            if depth == n_field + 1 and len(self.index) == 2 and _is_vector(node, self.shape):
-                node = node if step == self.index[0] else 0.0  # off the diagonal of 3 numbers
-                continue
+            if depth == n_field:  # the field's value: what stands for more numbers, read as those
+                if len(self.index) == 2 and _is_vector(node, self.shape):
+                    i, j = self.index
+                    return node[i] if i == j else 0.0
+                if self.rule is not None and self.rule[0] == "limits" and _is_number(node):
+                    return node
             try:
                 node = _child(node, step)
             except LookupError:
