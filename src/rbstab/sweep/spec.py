@@ -414,17 +414,16 @@ def spec_from_mapping(
     )
 
 
-_COLUMN = re.compile(r"^\s*([A-Za-z_][\w.]*?)\s*(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?\s*$")
+_COLUMN = re.compile(r"^\s*(.*?)\s*\[\s*([0-9]+)\s*(?:,\s*([0-9]+)\s*)?\]\s*$")
 
 
-def column_key(name: str) -> str | None:
-    """The dotted config key of a design-table column name, or None if it is not one:
-    ``body.mass`` -> ``body.mass``, ``initial_state.omega[1]`` -> ``initial_state.omega.1``,
-    ``body.inertia[0,2]`` -> ``body.inertia.0.2``."""
+def column_key(name: str) -> str:
+    """The dotted config key a design-table column name stands for: ``body.mass`` as it is,
+    ``initial_state.omega[1]`` -> ``initial_state.omega.1``, ``body.inertia[0,2]`` ->
+    ``body.inertia.0.2`` (whether it names anything is :func:`rbstab.config.paths.parse_key`'s
+    to say)."""
     m = _COLUMN.match(str(name))
-    if m is None or any(not p for p in m.group(1).split(".")):
-        return None
-    return ".".join(p for p in m.groups() if p is not None)
+    return str(name).strip() if m is None else ".".join(p for p in m.groups() if p is not None)
 
 
 def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
@@ -441,11 +440,6 @@ def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
     errors, out, lengths = [], {}, set()
     for name, values in columns.items():
         key = column_key(name)
-        if key is None:
-            errors.append(f"sweep key '{where}': column {name!r} is not a config key; expected a dotted key "
-                          "such as 'body.mass', a vector entry 'initial_state.omega[1]' or a matrix entry "
-                          "'body.inertia[0,0]'")
-            continue
         try:
             parse_key(key)
         except KeyPathError as exc:
