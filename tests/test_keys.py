@@ -23,8 +23,8 @@ from rbstab_cli.main import cli
 
 from rbstab import api
 from rbstab.analysis.basin import BasinAxis
-from rbstab.config import ConfigError
 from rbstab.config.paths import KeyPathError, parse_key
+from rbstab.studies import sensitivity_analysis
 from rbstab.studies.tuning import plan_tuning
 from rbstab.sweep import spec_from_mapping
 from rbstab.sweep.table import plan_table
@@ -155,10 +155,20 @@ def test_a_mutated_key_is_refused_in_one_line_by_every_command(folder, key):
         assert len(lines) == 1 and lines[0].startswith("Error: "), (name, result.output)
         assert key[:60] in lines[0] or repr(key)[1:61] in lines[0], (name, lines[0])
         assert not (folder / "out").exists(), name
-    with pytest.raises(ConfigError) as info:  # the Python API: the same refusal
-        api.load_config(folder / "keys.yaml", [f"{key}=1"])
-    (line,) = info.value.errors
-    assert "\n" not in line
+    config = api.load_config(folder / "keys.yaml")
+    out = folder / "out"
+    for name, call in [  # the Python API: the same refusal, one line
+        ("load_config", lambda: api.load_config(folder / "keys.yaml", [f"{key}=1"])),
+        ("execute_sweep", lambda: api.execute_sweep({"name": "s", "base": str(folder / "keys.yaml"),
+                                                     "grid": {key: [1.0, 2.0]}}, out)),
+        ("sensitivity_analysis", lambda: sensitivity_analysis(config, [f"{key}=uniform:[1,2]"], n=8, output=out)),
+        ("BasinAxis.parse", lambda: BasinAxis.parse(f"{key}=-1:1:3")),
+    ]:
+        with pytest.raises(ValueError) as info:  # ConfigError, SweepSpecError, StudyInputError are ValueErrors
+            call()
+        errors = getattr(info.value, "errors", [str(info.value)])
+        assert len(errors) == 1 and "\n" not in errors[0], (name, errors)
+        assert not out.exists(), name
 
 
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
