@@ -133,7 +133,9 @@ class KeyPath:
     shape: tuple[int, ...]
     rule: tuple | None
     description: str
-    defaults: tuple = ()  # (depth in ``steps``, default value) of each mapping or list field the path crosses
+    #: (position in :attr:`steps`, default) of each field on the path whose schema default is a
+    #: list: what indexing into it starts from where the configuration leaves it unset.
+    defaults: tuple = ()
 
     @property
     def name(self) -> str:
@@ -146,7 +148,7 @@ class KeyPath:
         """The key without its indices (``initial_state.omega``)."""
         return ".".join(p for p in (self.section, self.name) if p)
 
-    @property
+    @functools.cached_property  # read by every get and set (a sweep sets its keys in every run)
     def steps(self) -> tuple:
         """The walk into a mapping: keys (str) and list positions (int; a str entry a name)."""
         fields = tuple(self.field.split(".")) if self.field else ()
@@ -220,7 +222,7 @@ class KeyPath:
                 node = _child(node, step)
             except LookupError:
                 parent = ".".join(map(str, steps[:depth]))
-                found = f"has {len(node)} entries" if isinstance(node, list) else f"is {kind_of(node)}"
+                found = _found(node)
                 raise KeyPathError(self.key, f"'{parent}' {found}; there is no {_shown(str(step))} to set "
                                              "(set the whole value)") from None
         last = steps[-1]
@@ -230,9 +232,16 @@ class KeyPath:
             node[last] = value
         else:
             where = ".".join(map(str, steps[:-1]))
-            found = f"has {len(node)} entries" if isinstance(node, list) else f"is {kind_of(node)}"
+            found = _found(node)
             raise KeyPathError(self.key, f"'{where}' {found}; there is no {_shown(str(last))} to set "
                                          "(set the whole value)")
+
+
+def _found(node: Any) -> str:
+    """What a value found on the path is, for a message: ``has 1 entry``, ``is a number``."""
+    if isinstance(node, list):
+        return f"has {len(node)} entr{'y' if len(node) == 1 else 'ies'}"
+    return f"is {kind_of(node)}"
 
 
 def _is_number(value: Any) -> bool:
