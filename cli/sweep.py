@@ -54,6 +54,7 @@ def _scaled_grid(spec: str, overrides, key: str, text: str) -> tuple[str, str]:
     """``--grid KEY:scale=...``: the factors times KEY's value in the base config SPEC, as
     a grid over KEY (a list-valued key gives one list per level)."""
     from rbstab.config import ConfigError, load_config  # heavy: numba, pydantic (~0.4 s at the command's start)
+    from rbstab.config.paths import parse_key  # heavy: pydantic
 
     base = key.removesuffix(":scale")
     try:

@@ -109,6 +109,7 @@ def _entry_points(key: str, tmp: Path) -> list[tuple[str, list[str]]]:
         ("run --set", ["run", config, "--set", f"{key}=1", *out]),
         ("sweep --set sweep.grid", ["sweep", config, "--set", f"sweep.grid.{key}=[1, 2]", *out]),
         ("sweep --grid", ["sweep", config, "--grid", f"{key}=1,2", *out]),
+        ("sweep --grid :scale", ["sweep", config, "--grid", f"{key}:scale=0.5,2", *out]),
         ("sweep --zip", ["sweep", config, "--zip", f"{key}=1,2", *out]),
         ("sweep --random", ["sweep", config, "--random", f"{key}=uniform:[1,2]", "-n", "2", *out]),
         ("spec grid", ["sweep", specs["grid"], *out]),
