@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import math
 from pathlib import Path
+from typing import Annotated, Any
 
 import pytest
 import yaml
@@ -185,6 +186,8 @@ def test_a_valid_key_sets_the_same_value_through_every_command(folder, data, key
         "grid": plan_table(spec_from_mapping({**one, "grid": {key: [value]}})).resolved(0),
         "zip": plan_table(spec_from_mapping({**one, "zip": {key: [value]}})).resolved(0),
         "table": plan_table(spec_from_mapping({**one, "table": {key: [value]}})).resolved(0),
+        "random": plan_table(spec_from_mapping({**one, "random": {"n": 1, "params": {key: {"choice": [value]}}}}))
+        .resolved(0),
         "sweep --set": plan_table(spec_from_mapping(one, overrides=[f"sweep.grid.{key}=[{value!r}]"])).resolved(0),
         "tune --vary": plan_tuning(api.load_config(base), [f"{key}=uniform:[{value!r},{value!r}]"],
                                    minimize=["lyapunov_final"]).configs({key: value})[0].resolved,
@@ -221,3 +224,30 @@ def test_the_refusal_names_the_segment_and_what_is_allowed(key, words):
         parse_key(key)
     assert words in info.value.problem
     assert str(info.value).startswith(f"key {key!r}: ") and "\n" not in str(info.value)
+
+
+def test_a_list_of_named_entries_takes_an_index_or_a_name():
+    """A section that is a list of entries with a ``name`` (a chain's bodies) takes either."""
+    from pydantic import BaseModel, Field
+
+    from rbstab.config.schema import checked, _vector
+
+    class Body(BaseModel):
+        name: str
+        mass: float = 1.0
+        attachment_point: Annotated[Any, checked(_vector)] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    class Chain(BaseModel):
+        bodies: list[Body] = Field(json_schema_extra={"max_entries": 8})
+
+    data = {"bodies": [{"name": "trunk", "mass": 30.0}, {"name": "leg", "mass": 10.0}]}
+    assert parse_key("bodies.leg.mass", Chain).get(data) == parse_key("bodies.1.mass", Chain).get(data) == 10.0
+    parse_key("bodies.trunk.attachment_point.2", Chain).set(data, 0.5)
+    assert data["bodies"][0]["attachment_point"] == [0.0, 0.0, 0.5]
+    with pytest.raises(KeyPathError, match="'bodies' is a list of at most 8 entries; index it with 0..7 or an "
+                                           "entry's name, not '8'"):
+        parse_key("bodies.8.mass", Chain)
+    with pytest.raises(KeyPathError, match="'bodies.trunk.attachment_point' is a list of 3; index it with 0..2"):
+        parse_key("bodies.trunk.attachment_point.x", Chain)
+    with pytest.raises(KeyPathError, match="'bodies' has 2 entries; there is no 'arm' to set"):
+        parse_key("bodies.arm.mass", Chain).set(data, 1.0)
