@@ -47,9 +47,20 @@ _SWEEP_KEY_SECTIONS = ("sweep.grid.", "sweep.zip.", "sweep.random.params.")
 
 
 def _overrides_checked(ctx, param, values):
-    """--set: each override's config key (a sweep's ``sweep.grid.KEY=...`` too) checked by :func:`key_of`."""
+    """--set: each override's config key (a sweep's ``sweep.grid.KEY=...`` too) checked by
+    :func:`key_of`; an override without ``=`` or without a key refused alike, in one line."""
+    from rbstab.config.paths import KeyPathError, parse_key  # heavy: pydantic
+
     for text in values or ():
         stripped = str(text).strip()
+        key, sep, _ = stripped.partition("=")
+        if not sep:
+            raise click.ClickException(f"--set {text!r}: no '='; expected KEY.PATH=VALUE, e.g. simulation.t_end=1.5")
+        if not key.strip():
+            try:
+                parse_key(key.strip())
+            except KeyPathError as exc:
+                raise click.ClickException(f"--set {text!r}: {exc.problem}") from None
         prefix = next((p for p in _SWEEP_KEY_SECTIONS if stripped.startswith(p)), None)
         if prefix is not None:
             key_of(text, "--set", prefix=prefix)

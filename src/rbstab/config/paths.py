@@ -343,7 +343,7 @@ def parse_key(key: str, root: Any = None) -> KeyPath:
             if isinstance(default, (list, tuple)):  # what indexing into the field starts from when it is unset
                 defaults.append((i, plain_tree(default)))
             entries = list_model(info.annotation)
-            if entries is not None and i + 1 < len(parts):  # a list of sections: the next part is an entry
+            if entries is not None and not fields and i + 1 < len(parts):  # a section that is a list: an entry next
                 i += 1
                 most = (info.json_schema_extra or {}).get("max_entries") if isinstance(info.json_schema_extra, dict) \
                     else None
@@ -354,10 +354,10 @@ def parse_key(key: str, root: Any = None) -> KeyPath:
                 elif named and not _is_index(text):
                     entry = text
                 else:
-                    span = f"0..{most - 1}" if most else "0, 1, ..."
+                    size, span = (f"at most {most} entries", f"0..{most - 1}") if most else ("entries", "0, 1, ...")
                     names = " or an entry's name" if named else ""
-                    raise KeyPathError(key, f"'{'.'.join(parts[:i])}' is a list of at most {most} entries; index it "
-                                            f"with {span}{names}, not {_shown(text)}")
+                    raise KeyPathError(key, f"'{'.'.join(parts[:i])}' is a list of {size}; index it with {span}{names}, "
+                                            f"not {_shown(text)}")
                 model = entries
             else:
                 model = submodel(info.annotation)
