@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ..layout import is_index
 from .errors import ConfigError
 from .schema import RunSchema, field_check, kind_of, list_model, submodel
 from .yaml_io import parse_yaml
@@ -83,12 +84,6 @@ def plain_tree(value: Any) -> Any:
     if isinstance(value, (np.ndarray, np.generic)):
         return value.tolist()
     return value  # a scalar
-
-
-def _is_index(part: str) -> bool:
-    """Whether a segment is written as a list index: ASCII digits, no sign, no leading zero
-    (``str.isdigit`` also takes '²' and '١', which ``int`` refuses or reads as another number)."""
-    return part.isascii() and part.isdigit() and (part == "0" or not part.startswith("0"))
 
 
 def _shape_words(shape: tuple[int, ...]) -> str:
@@ -349,9 +344,9 @@ def parse_key(key: str, root: Any = None) -> KeyPath:
                     else None
                 text = parts[i]
                 named = "name" in entries.model_fields
-                if _is_index(text) and (most is None or int(text) < most):
+                if is_index(text) and (most is None or int(text) < most):
                     entry = int(text)
-                elif named and not _is_index(text):
+                elif named and not is_index(text):
                     entry = text
                 else:
                     size, span = (f"at most {most} entries", f"0..{most - 1}") if most else ("entries", "0, 1, ...")
@@ -372,7 +367,7 @@ def parse_key(key: str, root: Any = None) -> KeyPath:
                 raise KeyPathError(key, f"'{where}' is one number of '{field_path}' ({_shape_words(shape)}); it has "
                                         f"no entry {_shown(part)}")
             n = shape[len(index)]
-            if not _is_index(part) or int(part) >= n:
+            if not is_index(part) or int(part) >= n:
                 raise KeyPathError(key, f"'{where}' is {_shape_words(shape[len(index):])}; index it with 0..{n - 1}, "
                                         f"not {_shown(part)}")
             index.append(int(part))
