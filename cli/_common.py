@@ -88,6 +88,14 @@ def load_configs(paths: Sequence[str], overrides: Sequence[str]):
     return configs
 
 
+def spec_error(path, errors: Sequence[str]) -> click.ClickException:
+    """An invalid sweep spec as the CLI prints it: one problem on one line
+    (``invalid sweep spec <path>: <problem>``), several one line each under that header."""
+    if len(errors) == 1:
+        return click.ClickException(f"invalid sweep spec {path}: {errors[0]}")
+    return click.ClickException(f"invalid sweep spec {path}\n" + _indent("\n".join(errors)))
+
+
 def _indent(text: str) -> str:
     return "\n".join("  " + line for line in text.splitlines())
 

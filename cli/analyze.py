@@ -9,9 +9,29 @@ import click
 
 from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
 
-from ._common import check_engine, command_line, load_configs, show_config_warnings
+from ._common import check_engine, command_line, load_configs, show_config_warnings, spec_error
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
+
+
+def _state_entries(option: str):
+    """A click callback: the key of each ``KEY=...`` of ``option`` one entry of an initial
+    state (:func:`rbstab.analysis.basin.state_entry`), else one line before anything runs."""
+
+    def callback(ctx, param, values):
+        from rbstab.analysis.basin import state_entry  # heavy: numba, numpy
+
+        for text in values or ():
+            key, sep, _ = str(text).partition("=")
+            if not sep or not key.strip():
+                continue  # the option's own parser says what it expects
+            try:
+                state_entry(key.strip())
+            except ValueError as exc:
+                raise click.ClickException(f"{option} {text!r}: {exc}") from None
+        return values
+
+    return callback
 
 
 def _parse_axes(texts, configs):
@@ -30,7 +50,7 @@ def _parse_axes(texts, configs):
         except ValueError as exc:
             problems.append(f"{config.name}: {exc}")
     if problems:
-        raise click.ClickException("invalid --basin\n" + "\n".join(problems))
+        raise click.ClickException(problems[0] if len(problems) == 1 else "invalid --basin\n" + "\n".join(problems))
     return axes
 
 
@@ -181,7 +201,7 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
     try:
         spec = load_spec(path, overrides)
     except SweepSpecError as exc:
-        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + "\n".join("  " + e for e in exc.errors))
+        raise spec_error(path, exc.errors)
     workers = LocalExecutor(jobs, task="a push analysis") if jobs > 1 and engine == DEFAULT_ENGINE else None
     try:
         with workers if workers is not None else contextlib.nullcontext():
@@ -189,7 +209,7 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
                                      engine=engine, executor=workers, seed=seed, certificate=certificate,
                                      certificate_samples=samples, overwrite=overwrite, say=console.out)
     except SweepSpecError as exc:
-        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + "\n".join("  " + e for e in exc.errors))
+        raise spec_error(path, exc.errors)
     except ValueError as exc:
         raise click.ClickException(f"{spec.name}: {exc}")
     show_config_warnings({r["run_id"]: r.get("warnings", []) for r in result.records}, len(result.records),
@@ -206,7 +226,7 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.argument("configs", nargs=-1, type=click.Path(dir_okay=False))
 @output_option("results/analysis", "Folder for the <name>.analysis.nc files.")
 @json_option
-@click.option("--basin", "basin", multiple=True, metavar="KEY=LO:HI:N",
+@click.option("--basin", "basin", multiple=True, metavar="KEY=LO:HI:N", callback=_state_entries("--basin"),
               help="An axis of the basin map, twice, e.g. --basin initial_state.omega.0=-60:60:41 "
               "--basin initial_state.omega.1=-60:60:41 (one simulation per grid point).")
 @click.option("--robustness", "sweeps", multiple=True, type=click.Path(file_okay=False), metavar="SWEEP_DIR",
@@ -250,6 +270,7 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.option("--push-rungs", type=int, default=16, show_default=True, metavar="N",
               help="Rungs of each direction's ladder (a recovery above a fatal rung flags non-monotone recovery).")
 @click.option("--basin-stability", "stability_ranges", multiple=True, metavar="KEY=LO:HI",
+              callback=_state_entries("--basin-stability"),
               help="An initial-state entry drawn uniformly in [LO, HI] (repeatable): the fraction of -n draws that "
               "recover, with its Wilson interval.")
 @click.option("--push-distribution", default=None, metavar="LO:HI",

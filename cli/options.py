@@ -12,10 +12,68 @@ from rbstab.warning_codes import WARNING_CODES
 from ._common import check_engine
 from .console import CONSOLE_KEY, Console
 
+def key_of(text: str, option: str, *, suffix: str = "", prefix: str = "") -> None:
+    """The key of an option's ``KEY=...`` value read by :func:`rbstab.config.paths.parse_key`
+    (``prefix``, e.g. ``sweep.grid.``, and ``suffix``, e.g. ``:scale``, taken off first); a key that names nothing is refused in
+    one line naming the option, its value, the wrong segment and what is allowed, before the
+    command reads or writes anything. A value without ``=`` is left to the command."""
+    from rbstab.config.paths import KeyPathError, parse_key  # heavy: pydantic
+
+    key, sep, _ = str(text).partition("=")
+    if not sep or not key.strip():
+        return
+    key = key.strip().removeprefix(prefix)
+    if suffix and key.endswith(suffix):
+        key = key[: -len(suffix)]
+    try:
+        parse_key(key)
+    except KeyPathError as exc:
+        raise click.ClickException(f"{option} {text!r}: {exc.problem}") from None
+
+
+def keys_checked(option: str, *, suffix: str = ""):
+    """A click callback checking the key of each ``KEY=...`` value of ``option`` (:func:`key_of`)."""
+
+    def callback(ctx, param, values):
+        for text in values or ():
+            key_of(text, option, suffix=suffix)
+        return values
+
+    return callback
+
+
+#: Prefixes of a sweep's ``--set`` overrides whose rest is a config key (the others name the spec's own keys).
+_SWEEP_KEY_SECTIONS = ("sweep.grid.", "sweep.zip.", "sweep.random.params.")
+
+
+def _overrides_checked(ctx, param, values):
+    """--set: each override's config key (a sweep's ``sweep.grid.KEY=...`` too) checked by
+    :func:`key_of`; an override without ``=`` or without a key refused alike, in one line."""
+    from rbstab.config.paths import KeyPathError, parse_key  # heavy: pydantic
+
+    for text in values or ():
+        stripped = str(text).strip()
+        key, sep, _ = stripped.partition("=")
+        if not sep:
+            raise click.ClickException(f"--set {text!r}: no '='; expected KEY.PATH=VALUE, e.g. simulation.t_end=1.5")
+        if not key.strip():
+            try:
+                parse_key(key.strip())
+            except KeyPathError as exc:
+                raise click.ClickException(f"--set {text!r}: {exc.problem}") from None
+        prefix = next((p for p in _SWEEP_KEY_SECTIONS if stripped.startswith(p)), None)
+        if prefix is not None:
+            key_of(text, "--set", prefix=prefix)
+        elif not stripped.startswith("sweep."):
+            key_of(text, "--set")
+    return values
+
+
 set_option = click.option(
     "--set",
     "overrides",
     multiple=True,
+    callback=_overrides_checked,
     metavar="KEY.PATH=VALUE",
     help="Override a config key (dotted path; YAML-typed value), e.g. "
     "--set simulation.t_end=1.5 --set controller.k_t=[1,2,3]. Repeatable.",
@@ -108,6 +166,7 @@ def study_options(command):
     ``--seed``, ``--name``, ``--set``, ``--engine``, ``-o``, ``--overwrite`` and ``--json``."""
     options = [
         click.option("--vary", "vary", multiple=True, required=True, metavar="KEY=DISTRIBUTION",
+                     callback=keys_checked("--vary"),
                      help="A varied config key with a sweep distribution, e.g. body.mass=uniform:[30,50], "
                      "controller.k_c=scale_uniform:[0.5,2] (one factor scaling the whole gain). Repeatable."),
         click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sampler."),

@@ -14,13 +14,9 @@ from rbstab.api import execute_sweep
 from rbstab.engine.registry import get_engine
 from rbstab.warning_codes import coded
 
-from ._common import check_engine, command_line
+from ._common import check_engine, command_line, spec_error
 from .console import get_console
-from .options import console_options, engine_option, output_option, set_option
-
-
-def _indent(text: str) -> str:
-    return "\n".join("  " + line for line in text.splitlines())
+from .options import console_options, engine_option, keys_checked, output_option, set_option
 
 
 _RANGE = re.compile(r"\s*(log:)?([^:,\[\]]+):([^:,\[\]]+):([^:,\[\]]+)\s*")
@@ -58,6 +54,7 @@ def _scaled_grid(spec: str, overrides, key: str, text: str) -> tuple[str, str]:
     """``--grid KEY:scale=...``: the factors times KEY's value in the base config SPEC, as
     a grid over KEY (a list-valued key gives one list per level)."""
     from rbstab.config import ConfigError, load_config  # heavy: numba, pydantic (~0.4 s at the command's start)
+    from rbstab.config.paths import parse_key  # heavy: pydantic
 
     base = key.removesuffix(":scale")
     try:
@@ -65,9 +62,7 @@ def _scaled_grid(spec: str, overrides, key: str, text: str) -> tuple[str, str]:
     except (ConfigError, OSError) as exc:
         raise click.ClickException(f"--grid {key}={text}: a scale factor needs a run config to scale "
                                    f"({spec}: {str(exc).splitlines()[0]})") from None
-    value = resolved
-    for part in base.split("."):
-        value = value.get(part) if isinstance(value, dict) else None
+    value = parse_key(base).get(resolved, None)
     if not isinstance(value, (int, float, list)) or isinstance(value, bool):
         raise click.ClickException(f"--grid {key}={text}: {base} is {value!r} in {spec}; a scale factor needs "
                                    "a number or a list of numbers there")
@@ -129,13 +124,14 @@ def _key_value(text: str) -> tuple[str, str]:
 )
 @set_option
 @click.option("--grid", "grid", multiple=True, metavar="KEY=V1,V2,...|LO:HI:N|log:LO:HI:N",
+              callback=keys_checked("--grid", suffix=":scale"),
               help="Vary KEY over the values (YAML, comma-separated; lists in brackets), or over N values "
               "from LO to HI (log: evenly in log10), as a grid level; KEY:scale (with a run config) scales "
               "KEY's value by the factors. "
               "Repeatable: the Cartesian product.")
-@click.option("--zip", "zipped", multiple=True, metavar="KEY=V1,V2,...",
+@click.option("--zip", "zipped", multiple=True, metavar="KEY=V1,V2,...", callback=keys_checked("--zip"),
               help="Vary KEY together with the other --zip keys (lists of equal length).")
-@click.option("--random", "random", multiple=True, metavar="KEY=DISTRIBUTION",
+@click.option("--random", "random", multiple=True, metavar="KEY=DISTRIBUTION", callback=keys_checked("--random"),
               help="Draw KEY from a distribution of the spec files, e.g. body.mass=uniform:[30,50], "
               "controller.k_c=scale_uniform:[0.5,2], initial_state.omega='normal:{mean: [16,32,-16], std: 4}'.")
 @click.option("-n", "n_random", type=click.IntRange(min=0), default=None, metavar="N",
@@ -293,7 +289,7 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
         loaded = load_spec(spec, overrides)
         table = plan_table(loaded)
     except SweepSpecError as exc:
-        raise click.ClickException("invalid sweep spec " + str(spec) + "\n" + _indent("\n".join(exc.errors)))
+        raise spec_error(spec, exc.errors)
     for line in table.warnings:
         console.warn(line)
     workers = jobs or default_jobs()
@@ -317,7 +313,7 @@ def _execute(spec, output, ex, *, path, **options):
     except (SweepBusyError, ExecutorError) as exc:
         raise click.ClickException(str(exc))
     except SweepSpecError as exc:
-        raise click.ClickException("invalid sweep spec " + str(path) + "\n" + _indent("\n".join(exc.errors)))
+        raise spec_error(path, exc.errors)
 
 
 def _say_outcome(outcome) -> None:

@@ -6,7 +6,7 @@ import click
 
 from ._common import command_line, load_configs
 from .console import get_console
-from .options import console_options, study_options
+from .options import console_options, keys_checked, study_options
 from .sensitivity import study_error
 
 
@@ -19,7 +19,7 @@ from .sensitivity import study_error
 @click.option("--maximize", "maximize", multiple=True, metavar="METRIC", help="A summary figure to maximize.")
 @click.option("--subject-to", "subject_to", multiple=True, metavar="METRIC<=VALUE",
               help="A constraint, METRIC<=VALUE or METRIC>=VALUE, e.g. 'max_abs_constraint_error_z<=0.05'. Repeatable.")
-@click.option("--over", "over", multiple=True, metavar="KEY=DISTRIBUTION",
+@click.option("--over", "over", multiple=True, metavar="KEY=DISTRIBUTION", callback=keys_checked("--over"),
               help="Uncertain bodies: each trial runs --over-n bodies drawn from these distributions "
               "(e.g. body.mass=scale_uniform:[0.8,1.2]) and takes their worst case. Repeatable.")
 @click.option("--over-n", "over_n", type=int, default=16, show_default=True, metavar="N",

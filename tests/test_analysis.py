@@ -287,8 +287,9 @@ def test_basin_axis_parsing():
     layout = VARIANTS["permanent"].layout
     axis = BasinAxis.parse("initial_state.omega.0=-60:60:41", layout)
     assert axis.block == "omega" and axis.index == 0 and len(axis.values) == 41 and axis.units == "rad s-1"
-    for bad, match in [("initial_state.omega.0=-60:60", "KEY=lo:hi:n"), ("controller.k_t.0=1:2:3", "not an initial"),
-                       ("initial_state.omega.3=1:2:3", "not an initial"), ("initial_state.omega.1=2:1:3", "lo < hi"),
+    for bad, match in [("initial_state.omega.0=-60:60", "KEY=lo:hi:n"), ("controller.k_t.0=1:2:3", "not one entry of an initial state"),
+                       ("initial_state.omega.3=1:2:3", "'initial_state.omega' is a list of 3; index it with 0..2, not '3'"),
+                       ("initial_state.omega=1:2:3", "not one entry of an initial state"), ("initial_state.omega.1=2:1:3", "lo < hi"),
                        ("initial_state.omega.1=1:2:1", "n >= 2"), ("initial_state.omega.1=a:2:3", "numbers"),
                        ("initial_state.x.0=-1:1:3", "not a state of this variant")]:
         with pytest.raises(ValueError, match=match):

@@ -384,7 +384,11 @@ def test_tune_on_the_cuda_simulator_equals_the_compiled_engine(tmp_path):
 
 
 @pytest.mark.parametrize("args, words", [
-    (["sensitivity", "-n", "64", "--vary", "controller.k_q=uniform:[1,2]"], ["--vary", "controller.k_q", "config key"]),
+    (["sensitivity", "-n", "64", "--vary", "controller.k_q=uniform:[1,2]"], ["--vary", "'controller' has no 'k_q'", "allowed: variant, k_t"]),
+    (["tune", "--trials", "5", "--vary", "initial_state.omega.x=uniform:[1,2]", "--minimize", "lyapunov_final"],
+     ["--vary", "'initial_state.omega' is a list of 3; index it with 0..2, not 'x'"]),
+    (["tune", "--trials", "5", "--vary", "body.mass=uniform:[30,50]", "--over", "disturbances.0.start=uniform:[0,1]",
+      "--minimize", "lyapunov_final"], ["--over", "'disturbances' is not set, so it has no entry '0'"]),
     (["sensitivity", "-n", "64", "--vary", "body.mass=unifrm:[1,2]"], ["--vary", "unifrm", "uniform, normal"]),
     (["sensitivity", "-n", "60", "--vary", "body.mass=uniform:[30,50]"], ["-n 60", "power of 2"]),
     (["sensitivity", "-n", "64", "--vary", "body.mass=uniform:[30,50]", "--metric", "lyapunov_fnal"],

@@ -238,7 +238,10 @@ def test_bad_combination_is_reported_with_run_id_and_key(tmp_path):
         ({"name": "a b"}, "sweep key 'name': found 'a b'; expected letters, digits"),
         ({"base": "missing.yaml"}, "config file not found"),
         ({"convergence": {"lyapunov_ratio": 2}}, "'convergence.lyapunov_ratio': found 2; expected a number in (0, 1)"),
-        ({"grid": {"a..b": [1]}}, "sweep key 'grid.a..b': found 'a..b'; expected a dotted config key"),
+        ({"grid": {"a..b": [1]}}, "sweep key 'grid.a..b': segment 2 of 3 is empty (a doubled, leading or trailing '.')"),
+        ({"grid": {"initial_state.theta.x": [1]}},
+         "sweep key 'grid.initial_state.theta.x': 'initial_state.theta' is a list of 3; index it with 0..2, not 'x'"),
+        ({"zip": {"body.1.mass": [1]}}, "sweep key 'zip.body.1.mass': 'body' is a mapping, not a list; it has no '1'"),
         ({"random": {"n": 2, "params": {"body.mass": {"uniform": [1, 2], "choice": [1]}}}},
          "sweep key 'random.params.body.mass': found {'uniform': [1, 2], 'choice': [1]}; expected a mapping with "
          "exactly one distribution"),

@@ -65,7 +65,7 @@ def test_design_table_from_csv_dataframe_and_mapping(tmp_path):
 
 
 @pytest.mark.parametrize("columns, expected", [
-    ({"body.mass": [1.0], "bad name!": [2.0]}, "column 'bad name!' is not a config key"),
+    ({"body.mass": [1.0], "bad name!": [2.0]}, "column 'bad name!': unknown section 'bad name!'"),
     ({"body.mass": [1.0, 2.0], "body.inertia[0,0]": [1.0]}, "columns of different lengths"),
     ({"body.mass": []}, "a table without rows"),
 ])

@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 __all__ = [
+    "is_index",
     "Quantity",
     "QUANTITIES",
     "OUTPUTS",
@@ -184,6 +185,13 @@ LIMITED = ("theta", "omega", "position", "velocity", "constraint_error")
 LIMITED_COMPONENTS = {"theta": "theta", "omega": "Omega", "position": "X", "velocity": "V", "constraint_error": "E"}
 
 
+def is_index(part: str) -> bool:
+    """Whether a segment of a dotted config key is a list index: ASCII digits, no sign, no
+    leading zero (``str.isdigit`` also takes '²' and '١', which ``int`` refuses or reads as
+    another number). The grammar of keys: :func:`rbstab.config.paths.parse_key`."""
+    return part.isascii() and part.isdigit() and (part == "0" or not part.startswith("0"))
+
+
 def parameter_attributes(entry: str) -> dict[str, str]:
     """``units``, ``long_name`` and ``config_key`` (the entry itself, as a store file's
     coordinates give it) of a sweep parameter, from its dotted entry (``controller.k_c.2``,
@@ -195,7 +203,7 @@ def parameter_attributes(entry: str) -> dict[str, str]:
     key = entry.removesuffix(":scale")
     parts = key.split(".")
     indices = []
-    while parts and parts[-1].isdigit():
+    while parts and is_index(parts[-1]):
         indices.insert(0, parts.pop())
     config_key = ".".join(parts)
     q = CONFIG_QUANTITIES.get(config_key)

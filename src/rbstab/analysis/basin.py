@@ -31,13 +31,37 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..layout import BLOCK_UNITS, OUTPUTS
 
-__all__ = ["BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
+__all__ = ["state_entry", "BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
 
 #: Outcome codes of a grid point (the ``flag_values`` of the file's ``basin_outcome``).
 OUTCOMES = ("converged", "not converged", "failed")
 #: Samples per basin run (the time-to-converge resolution is t_end / (DEFAULT_SAMPLES - 1)).
 DEFAULT_SAMPLES = 201
 _AXIS = re.compile(r"^\s*(?P<key>[^=]+?)\s*=\s*(?P<lo>[^:]+):(?P<hi>[^:]+):(?P<n>[^:]+)\s*$")
+
+
+def state_entry(key: str):
+    """The :class:`~rbstab.config.paths.KeyPath` of one entry of an initial state,
+    ``initial_state.<block>.<i>`` (block ``theta``, ``omega``, ``x``, ``v``, ``d``).
+
+    Raises
+    ------
+    ValueError
+        One line: the key's problem (:func:`~rbstab.config.paths.parse_key`), or that it
+        names no single entry of an initial state, with those allowed.
+    """
+    from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
+    from ..config.paths import KeyPathError, parse_key  # heavy: pydantic
+
+    try:
+        path = parse_key(key)
+    except KeyPathError as exc:
+        raise ValueError(exc.problem) from None
+    if path.section != "initial_state" or len(path.index) != 1:
+        allowed = ", ".join(f"initial_state.{k}.0..{parse_key(f'initial_state.{k}').shape[0] - 1}"
+                            for k in INITIAL_STATE_BLOCKS)
+        raise ValueError(f"'{key}' is not one entry of an initial state; allowed: {allowed}")
+    return path
 
 
 @dataclass(frozen=True)
@@ -76,14 +100,13 @@ class BasinAxis:
         if not match:
             raise ValueError(f"--basin {text!r}: expected KEY=lo:hi:n, e.g. initial_state.omega.0=-60:60:41")
         key = match["key"]
-        parts = key.split(".")
-        allowed = ", ".join(f"initial_state.{k}.0..2" for k in INITIAL_STATE_BLOCKS)
-        if len(parts) != 3 or parts[0] != "initial_state" or parts[1] not in INITIAL_STATE_BLOCKS \
-                or parts[2] not in ("0", "1", "2"):
-            raise ValueError(f"--basin {text!r}: key {key!r} is not an initial-state entry; allowed: {allowed}")
-        if layout is not None and INITIAL_STATE_BLOCKS[parts[1]] not in layout.blocks:
+        try:
+            path = state_entry(key)
+        except ValueError as exc:
+            raise ValueError(f"--basin {text!r}: {exc}") from None
+        if layout is not None and INITIAL_STATE_BLOCKS[path.field] not in layout.blocks:
             states = ", ".join(k for k, b in INITIAL_STATE_BLOCKS.items() if b in layout.blocks)
-            raise ValueError(f"--basin {text!r}: {key!r} is not a state of this variant (its states: {states})")
+            raise ValueError(f"--basin {text!r}: '{path.field_key}' is not a state of this variant (its states: {states})")
         try:
             lo, hi, n = float(match["lo"]), float(match["hi"]), int(match["n"])
         except ValueError:
@@ -98,12 +121,17 @@ class BasinAxis:
         """The state block (``theta`` ... ``controller_state``)."""
         from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
-        return INITIAL_STATE_BLOCKS[self.key.split(".")[1]]
+        from ..config.paths import parse_key  # heavy: pydantic
+
+        return INITIAL_STATE_BLOCKS[parse_key(self.key).field]
 
     @property
     def index(self) -> int:
         """The component (0, 1, 2)."""
-        return int(self.key.split(".")[2])
+        from ..config.paths import parse_key  # heavy: pydantic
+
+        (index,) = parse_key(self.key).index
+        return index
 
     @property
     def units(self) -> str:

@@ -103,7 +103,7 @@ from .yaml_io import dump_yaml, parse_yaml
 # what only reads files (rbstab.open_sweep, rbstab show) does not load the compiler.
 _LAZY = {
     "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "load_config"),
-    "paths": ("apply_overrides", "get_dotted", "set_dotted"),
+    "paths": ("apply_overrides", "parse_key", "KeyPath", "KeyPathError"),
     "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
     "chains": ("ChainConfig", "chain_of", "chain_config_from_mapping", "load_any_config"),
 }
@@ -128,8 +128,9 @@ __all__ = [
     "config_from_mapping",
     "PER_RUN_SECTIONS",
     "apply_overrides",
-    "set_dotted",
-    "get_dotted",
+    "parse_key",
+    "KeyPath",
+    "KeyPathError",
     "parse_yaml",
     "dump_yaml",
     "canonical_config",

@@ -1,21 +1,68 @@
-"""Dotted key paths (``controller.k_t``, ``initial_state.omega.0``) and ``--set`` overrides."""
+"""Dotted key paths (``controller.k_t``, ``initial_state.omega.0``) and ``--set`` overrides.
+
+:func:`parse_key` is the one reading of a key path, for every command that takes one
+(``--set``, a sweep's grid, zip, random and table keys, ``--grid``, ``--zip``, ``--random``,
+``--vary``, ``--over``, ``--basin``, ``--basin-stability``, the Python API). A key is::
+
+    section . [entry .] field [. subfield ...] [. index ...]
+
+- ``section`` a top-level key of the configuration (``body``, ``controller``, ...);
+- ``entry`` for a section that is a list of entries (``disturbances.0``): an index in
+  0..N-1, N the most entries the schema allows (an entry model with a ``name`` field also
+  takes the entry's name);
+- ``field`` a key of the section (``k_c``), through its subsections
+  (``saturation.torque_n``, ``limits.theta``);
+- ``index`` entries of a field's value, as many as its shape has dimensions (a vector of
+  3: ``initial_state.omega.1``; a 3x3 matrix: ``body.inertia.0.2``, or one index for the
+  diagonal entry of a matrix written as 3 numbers), each an ASCII integer in 0..n-1.
+
+The names and the shapes are the schema's (:mod:`rbstab.config.schema`). A key that names
+nothing is refused with :class:`KeyPathError`, one line naming the key, the wrong segment
+and what is allowed there.
+"""
 
 from __future__ import annotations
 
+import difflib
+import functools
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..layout import is_index
 from .errors import ConfigError
-from .schema import field_at, kind_of
+from .schema import RunSchema, field_check, kind_of, list_model, submodel
 from .yaml_io import parse_yaml
 
-__all__ = ["set_dotted", "get_dotted", "apply_overrides", "plain_tree"]
+__all__ = ["KeyPath", "KeyPathError", "parse_key", "apply_overrides", "plain_tree"]
+
+#: Longest key path taken (characters): longer is no key of the schema.
+MAX_KEY_LENGTH = 200
+_EXAMPLE = "e.g. 'controller.k_t', 'initial_state.omega.0', 'disturbances.0.value.2'"
 
 
-class _PathError(Exception):
-    pass
+class KeyPathError(ConfigError):
+    """A key path that names nothing of the configuration, or that cannot be set or read.
+
+    Attributes
+    ----------
+    key : str
+        The key as given.
+    problem : str
+        One line: the wrong segment and what is allowed there (the names, the index range).
+    """
+
+    def __init__(self, key: Any, problem: str) -> None:
+        self.key, self.problem = key, problem
+        super().__init__([f"key {_shown(key)}: {problem}"])
+
+
+def _shown(text: Any, limit: int = 80) -> str:
+    """``repr`` of a key or segment (escapes included: a message stays one line), shortened."""
+    shown = repr(text)
+    return shown if len(shown) <= limit else shown[: limit - 4] + "...'"
 
 
 _SCALARS = (float, int, str, bool, type(None))
@@ -39,123 +86,310 @@ def plain_tree(value: Any) -> Any:
     return value  # a scalar
 
 
-def _parts(path: str) -> list[str]:
-    parts = path.split(".")
-    if not path or any(not p.strip() or p != p.strip() for p in parts):
-        raise _PathError(
-            f"malformed key path {path!r} (expected e.g. 'controller.k_t', 'initial_state.omega.0')"
-        )
-    return parts
+def _shape_words(shape: tuple[int, ...]) -> str:
+    return f"a list of {shape[0]}" if len(shape) == 1 else f"a {'x'.join(map(str, shape))} matrix"
 
 
-def _is_index(part: str) -> bool:
-    """Whether a key path component is a list index: ASCII digits only (``str.isdigit``
-    also takes '²' and '١', which ``int`` refuses or reads as another number)."""
-    return part.isascii() and part.isdigit()
+_MISSING = object()
 
 
-def _index(node: list, part: str, where: str) -> int:
-    if not _is_index(part):
-        raise _PathError(f"'{where}' is a list; index it with 0..{len(node) - 1}, not {part!r}")
-    i = int(part)
-    if i >= len(node):
-        raise _PathError(f"index {i} out of range for '{where}' (a list of {len(node)})")
-    return i
+@dataclass(frozen=True)
+class KeyPath:
+    """A parsed key path (:func:`parse_key`).
 
+    Attributes
+    ----------
+    key : str
+        The key (dotted).
+    section : str
+        Its top-level key (``controller``).
+    entry : int, str or None
+        The entry of a section that is a list (``disturbances.0`` -> 0), by index or name.
+    field : str
+        The field inside the section or entry, dotted through subsections
+        (``saturation.torque_n``); "" for the section or entry itself.
+    index : tuple of int
+        Indices into the field's value (``initial_state.omega.1`` -> (1,)).
+    shape : tuple of int
+        The shape of the field's value: () a single value, (3,) a vector, (3, 3) a matrix.
+    rule : tuple or None
+        The constraint of the field in the form a batched check reads (the check's
+        ``rule``: ``("number", bounds)``, ``("vector",)``, ``("theta",)``, ``("matrix",
+        kind)``, ``("limits", bounds)``), or None.
+    description : str
+        What the field takes (the schema's description).
+    """
 
-def _schema_default(parts: Sequence[str]) -> list | None:
-    """A copy of the schema default of a list-valued key (``initial_state.theta``), else None."""
-    _, info = field_at(parts)
-    default = info.get_default(call_default_factory=True) if info is not None else None
-    return list(default) if isinstance(default, (list, tuple)) else None
+    key: str
+    section: str
+    entry: int | str | None
+    field: str
+    index: tuple[int, ...]
+    shape: tuple[int, ...]
+    rule: tuple | None
+    description: str
+    #: (position in :attr:`steps`, default) of each field on the path whose schema default is a
+    #: list: what indexing into it starts from where the configuration leaves it unset.
+    defaults: tuple = ()
 
+    @property
+    def name(self) -> str:
+        """The dotted name inside the section, entry included (``k_c``, ``0.start``)."""
+        entry = "" if self.entry is None else str(self.entry)
+        return ".".join(p for p in (entry, self.field) if p)
 
-def _walk(data: Any, parts: list[str], *, create: bool) -> Any:
-    """The container holding ``parts[-1]``; missing mappings are created if ``create``."""
-    node = data
-    for depth, part in enumerate(parts[:-1]):
-        where = ".".join(parts[: depth + 1])
-        if isinstance(node, dict):
-            if part not in node:
-                if not create:
-                    raise _PathError(f"'{where}' is not set")
-                default = _schema_default(parts[: depth + 1])
-                if default is None and _is_index(parts[depth + 1]):
-                    raise _PathError(
-                        f"'{where}' is not set, so it has no index {parts[depth + 1]}; "
-                        "set the whole list"
-                    )
-                node[part] = {} if default is None else default
-            node = node[part]
-        elif isinstance(node, list):
-            node = node[_index(node, part, ".".join(parts[:depth]))]
+    @property
+    def field_key(self) -> str:
+        """The key without its indices (``initial_state.omega``)."""
+        return ".".join(p for p in (self.section, self.name) if p)
+
+    @functools.cached_property  # read by every get and set (a sweep sets its keys in every run)
+    def steps(self) -> tuple:
+        """The walk into a mapping: keys (str) and list positions (int; a str entry a name)."""
+        fields = tuple(self.field.split(".")) if self.field else ()
+        entry = () if self.entry is None else (self.entry,)
+        return (self.section, *entry, *fields, *self.index)
+
+    def get(self, data: Any, default: Any = _MISSING) -> Any:
+        """The value at the path in ``data`` (a configuration mapping); a matrix written as
+        3 numbers reads as the 3x3 it stands for, a limit written as one number as that
+        number on every axis.
+
+        Raises
+        ------
+        KeyPathError
+            If the path leads to nothing and no ``default`` is given.
+        """
+        node = data
+        steps = self.steps
+        n_field = len(steps) - len(self.index)  # steps[n_field - 1] is the field
+        for depth, step in enumerate(steps):
+            if depth == n_field:  # the field's value: what stands for more numbers, read as those
+                if len(self.index) == 2 and _is_vector(node, self.shape):
+                    i, j = self.index
+                    return node[i] if i == j else 0.0
+                if self.rule is not None and self.rule[0] == "limits" and _is_number(node):
+                    return node
+            try:
+                node = _child(node, step)
+            except LookupError:
+                if default is _MISSING:
+                    raise KeyPathError(self.key, f"'{'.'.join(map(str, steps[:depth + 1]))}' is not set") from None
+                return default
+        return node
+
+    def set(self, data: dict, value: Any) -> None:
+        """Set the value at the path in ``data``, in place.
+
+        Missing mappings are created; indexing into a field the configuration leaves at its
+        default starts from the default (``initial_state.theta.1``); a matrix written as 3
+        numbers becomes the 3x3 it stands for before an off-diagonal entry is set, and a
+        limit written as one number the 3 it stands for before one axis is set.
+
+        Raises
+        ------
+        KeyPathError
+            If it indexes into a field that is not set and has no list default, an entry
+            of a list section beyond its entries, or a value that is not a list.
+        """
+        steps = self.steps
+        n_field = len(steps) - len(self.index)  # steps[n_field - 1] is the field
+        defaults = dict(self.defaults)
+        node = data
+        for depth, step in enumerate(steps[:-1]):
+            where = ".".join(map(str, steps[: depth + 1]))
+            is_key = depth < n_field and not (self.entry is not None and depth == 1)
+            if is_key and isinstance(node, dict):
+                if node.get(step) is None:
+                    entry_next = self.entry is not None and depth == 0
+                    if depth + 1 < n_field and not entry_next:
+                        node[step] = {}
+                    elif isinstance(defaults.get(depth), list) and not entry_next:
+                        node[step] = plain_tree(defaults[depth])
+                    else:
+                        raise KeyPathError(self.key, f"'{where}' is not set, so it has no entry "
+                                                     f"{_shown(str(steps[depth + 1]))}; set the whole list")
+                if depth == n_field - 1:  # the field: what stands for more numbers, expanded
+                    node[step] = _expanded(node[step], self)
+                node = node[step]
+                continue
+            try:
+                node = _child(node, step)
+            except LookupError:
+                parent = ".".join(map(str, steps[:depth]))
+                found = _found(node)
+                raise KeyPathError(self.key, f"'{parent}' {found}; there is no {_shown(str(step))} to set "
+                                             "(set the whole value)") from None
+        last = steps[-1]
+        if isinstance(node, dict) and isinstance(last, str):
+            node[last] = value
+        elif isinstance(node, list) and isinstance(last, int) and last < len(node):
+            node[last] = value
         else:
-            raise _PathError(f"'{'.'.join(parts[:depth])}' is {kind_of(node)}; it has no '{part}'")
-    if not isinstance(node, (dict, list)):
-        raise _PathError(f"'{'.'.join(parts[:-1])}' is {kind_of(node)}; it has no '{parts[-1]}'")
-    return node
+            where = ".".join(map(str, steps[:-1]))
+            found = _found(node)
+            raise KeyPathError(self.key, f"'{where}' {found}; there is no {_shown(str(last))} to set "
+                                         "(set the whole value)")
 
 
-def set_dotted(data: dict, path: str, value: Any) -> None:
-    """Set ``data[a][b][0] = value`` for ``path = "a.b.0"``, in place.
-
-    Components that are non-negative integers index into lists; missing mapping keys
-    are created (whether they are allowed is for validation to judge). Indexing into an
-    absent key whose schema default is a list starts from that default, so
-    ``initial_state.theta.1=0.5`` works when the config leaves ``theta`` at zero.
-
-    Raises
-    ------
-    ConfigError
-        If the path is malformed, an index is out of range or not an integer, the path
-        descends into a scalar, or it would index into a list that is not set.
-    """
-    try:
-        _set(data, path, value)
-    except _PathError as exc:
-        raise ConfigError([f"cannot set {path!r}: {exc}"]) from None
-
-
-def _set(data: dict, path: str, value: Any) -> None:
-    parts = _parts(path)
-    node = _walk(data, parts, create=True)
+def _found(node: Any) -> str:
+    """What a value found on the path is, for a message: ``has 1 entry``, ``is a number``."""
     if isinstance(node, list):
-        node[_index(node, parts[-1], ".".join(parts[:-1]))] = value
-    else:
-        node[parts[-1]] = value
+        return f"has {len(node)} entr{'y' if len(node) == 1 else 'ies'}"
+    return f"is {kind_of(node)}"
 
 
-def get_dotted(data: Any, path: str) -> Any:
-    """The value at ``path = "a.b.0"`` (``data[a][b][0]``); integer components index lists.
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float, np.number)) and not isinstance(value, bool)
+
+
+def _is_vector(node: Any, shape: tuple[int, ...]) -> bool:
+    return len(shape) == 2 and isinstance(node, (list, tuple)) and len(node) == shape[0] and not any(
+        isinstance(v, (list, tuple)) for v in node)
+
+
+def _expanded(value: Any, path: KeyPath) -> Any:
+    """The field's value before one of its entries is set: 3 numbers of a matrix as the
+    diagonal matrix (for an entry [i][j]), one limit as 3 (for an axis)."""
+    if len(path.index) == 2 and _is_vector(value, path.shape):
+        return np.diag(np.asarray(value, dtype=float)).tolist()
+    if path.index and path.rule is not None and path.rule[0] == "limits" and _is_number(value):
+        return [value] * path.shape[0]
+    return value
+
+
+def _child(node: Any, step: str | int) -> Any:
+    """``node[step]``: a key of a mapping, a position in a list, or the entry of a list
+    whose ``name`` is ``step``; LookupError where there is none."""
+    if isinstance(node, Mapping) and isinstance(step, str):
+        return node[step]
+    if isinstance(node, (list, tuple)):
+        if isinstance(step, int):
+            return node[step]
+        for entry in node:
+            if isinstance(entry, Mapping) and entry.get("name") == step:
+                return entry
+    raise LookupError(step)
+
+
+def _unknown(key: str, where: str, part: str, allowed: Sequence[str], model: Any, root: Any) -> KeyPathError:
+    """An unknown name: the closest allowed one, else the same name in another section."""
+    prefix = f"{where}." if where else ""
+    close = difflib.get_close_matches(part, list(allowed), n=1)
+    hint = f"; did you mean '{prefix}{close[0]}'?" if close else ""
+    if not close and where and model is not root:
+        other = next((s for s, info in root.model_fields.items()
+                      if s != where.partition(".")[0] and (sub := submodel(info.annotation)) is not None
+                      and part in sub.model_fields), None)
+        hint = f"; did you mean '{other}.{part}'?" if other else ""
+    what = f"'{where}' has no {_shown(part)}" if where else f"unknown section {_shown(part)}"
+    if where and part.isdigit():
+        what = f"'{where}' is a mapping, not a list; it has no {_shown(part)}"
+    return KeyPathError(key, f"{what}{hint} (allowed: {', '.join(allowed)})")
+
+
+@functools.lru_cache(maxsize=4096)  # the same keys for every run of a sweep
+def parse_key(key: str, root: Any = None) -> KeyPath:
+    """The key path ``key`` (module docstring) checked against the schema.
+
+    Parameters
+    ----------
+    key : str
+        A dotted key: ``body.mass``, ``controller.k_c.0.1``, ``disturbances.0.value.2``.
+    root : pydantic model, optional
+        The model the key starts in (default: the run configuration's schema).
 
     Raises
     ------
-    KeyError
-        If the path is malformed or leads to nothing.
+    KeyPathError
+        One line naming the key, the segment that is wrong (an empty one, an unknown name,
+        a word where an index belongs or an index out of range, a segment past the end)
+        and what is allowed there (the names, with the closest one; the index range).
     """
-    try:
-        parts = _parts(path)
-        node = _walk(data, parts, create=False)
-        if isinstance(node, list):
-            return node[_index(node, parts[-1], ".".join(parts[:-1]))]
-        if parts[-1] not in node:
-            raise _PathError(f"'{path}' is not set")
-        return node[parts[-1]]
-    except _PathError as exc:
-        raise KeyError(str(exc)) from None
+    root = RunSchema if root is None else root
+    if not isinstance(key, str) or not key:
+        raise KeyPathError(key, f"expected a dotted key, {_EXAMPLE}")
+    if len(key) > MAX_KEY_LENGTH:
+        raise KeyPathError(key, f"{len(key)} characters; a key has at most {MAX_KEY_LENGTH}")
+    parts = key.split(".")
+    for i, part in enumerate(parts):
+        if not part:
+            raise KeyPathError(key, f"segment {i + 1} of {len(parts)} is empty (a doubled, leading or trailing "
+                                    f"'.'); {_EXAMPLE}")
+        if part != part.strip():
+            raise KeyPathError(key, f"segment {_shown(part)} has white space around it")
+    model, info, section, entry = root, None, "", None
+    fields: list[str] = []
+    index: list[int] = []
+    defaults: list[tuple[int, Any]] = []
+    shape: tuple[int, ...] = ()
+    i = 0
+    while i < len(parts):
+        part, where = parts[i], ".".join(parts[:i])
+        if model is not None:  # a mapping: the part names one of its fields
+            if part not in model.model_fields:
+                raise _unknown(key, where, part, list(model.model_fields), model, root)
+            info = model.model_fields[part]
+            if section:
+                fields.append(part)
+            else:
+                section = part
+            default = None if info.is_required() else info.get_default(call_default_factory=True)
+            if isinstance(default, (list, tuple)):  # what indexing into the field starts from when it is unset
+                defaults.append((i, plain_tree(default)))
+            entries = list_model(info.annotation)
+            if entries is not None and not fields and i + 1 < len(parts):  # a section that is a list: an entry next
+                i += 1
+                most = (info.json_schema_extra or {}).get("max_entries") if isinstance(info.json_schema_extra, dict) \
+                    else None
+                text = parts[i]
+                named = "name" in entries.model_fields
+                if is_index(text) and (most is None or int(text) < most):
+                    entry = int(text)
+                elif named and not is_index(text):
+                    entry = text
+                else:
+                    size, span = (f"at most {most} entries", f"0..{most - 1}") if most else ("entries", "0, 1, ...")
+                    names = " or an entry's name" if named else ""
+                    raise KeyPathError(key, f"'{'.'.join(parts[:i])}' is a list of {size}; index it with {span}{names}, "
+                                            f"not {_shown(text)}")
+                model = entries
+            else:
+                model = submodel(info.annotation)
+                check = field_check(info) if model is None else None
+                shape = tuple(getattr(check, "shape", ())) if check is not None else ()
+        else:  # past the field: the part indexes its value
+            field_path = ".".join(parts[:i - len(index)])
+            if len(index) >= len(shape):
+                if not shape:
+                    raise KeyPathError(key, f"'{field_path}' is {info.description or 'a single value'}; it has no "
+                                            f"entry {_shown(part)}")
+                raise KeyPathError(key, f"'{where}' is one number of '{field_path}' ({_shape_words(shape)}); it has "
+                                        f"no entry {_shown(part)}")
+            n = shape[len(index)]
+            if not is_index(part) or int(part) >= n:
+                raise KeyPathError(key, f"'{where}' is {_shape_words(shape[len(index):])}; index it with 0..{n - 1}, "
+                                        f"not {_shown(part)}")
+            index.append(int(part))
+        i += 1
+    check = field_check(info) if info is not None and model is None else None
+    return KeyPath(key, section, entry, ".".join(fields), tuple(index), shape,
+                   getattr(check, "rule", None) if check is not None else None,
+                   (info.description or "") if info is not None else "", tuple(defaults))
 
 
 def apply_overrides(data: Mapping, overrides: Sequence[str]) -> dict:
     """A deep copy of ``data`` with each ``key.path=value`` override applied, in order.
 
     The value is parsed as YAML (``controller.k_t=[1,2,3]``, ``simulation.t_end=1.5``,
-    ``controller.variant=free``); see :func:`set_dotted` for the path rules.
+    ``controller.variant=free``); the key is read by :func:`parse_key` and set by
+    :meth:`KeyPath.set`.
 
     Raises
     ------
     ConfigError
-        Naming every malformed override (no '=', empty key, invalid YAML value, index out
-        of range, a path through a scalar).
+        Naming every malformed override, one line each (no '=', a key that names nothing of
+        the schema, an invalid YAML value, an index into a list that is not set).
     """
     result = plain_tree(data)
     problems = []
@@ -165,9 +399,11 @@ def apply_overrides(data: Mapping, overrides: Sequence[str]) -> dict:
             problems.append(f"override {override!r}: no '='; expected key.path=value")
             continue
         try:
-            _set(result, key.strip(), parse_yaml(text))
-        except _PathError as exc:
-            problems.append(f"override {override!r}: {exc}")
+            path = parse_key(key.strip())
+            value = parse_yaml(text)
+            path.set(result, value)
+        except KeyPathError as exc:
+            problems.append(f"override {override!r}: {exc.problem}")
         except ConfigError as exc:  # the value is not valid YAML
             prefix = f"override {override!r}: the value is not valid YAML"
             problems += [f"{prefix}: {line}" for line in exc.errors]

@@ -56,7 +56,10 @@ __all__ = [
     "short_repr",
     "field_at",
     "problem_line",
-    "field_rule",
+    "submodel",
+    "list_model",
+    "field_check",
+    "VECTOR_LENGTH",
     "within_bounds",
     "clear_of_gimbal_lock",
     "inside_limits",
@@ -290,11 +293,15 @@ def _entry(value: Any, where: str) -> int | float:
         raise Invalid(f"entry {where} is {exc.detail}") from None
 
 
+#: Entries of a vector of the configuration (a 3-vector; a 3x3 matrix has this many rows).
+VECTOR_LENGTH = 3
+
+
 def _vector(value: Any) -> list[int | float]:
     if type(value) is not list and not isinstance(value, (list, tuple)):
         raise Invalid(f"{kind_of(value)}, not a list")
-    if len(value) != 3:
-        raise Invalid(f"{len(value)} entries, not 3")
+    if len(value) != VECTOR_LENGTH:
+        raise Invalid(f"{len(value)} entries, not {VECTOR_LENGTH}")
     return [_entry(x, f"[{i}]") for i, x in enumerate(value)]
 
 
@@ -378,15 +385,20 @@ def _theta(value: Any) -> list[int | float]:
 def optional(check: Callable[[Any], Any]) -> Callable[[Any], Any]:
     allowing_null = lambda value: None if value is None else check(value)  # noqa: E731
     allowing_null.rule = getattr(check, "rule", None)
+    allowing_null.shape = getattr(check, "shape", ())
     return allowing_null
 
 
 # The constraint each check stands for, in a form a batched check of many values reads
-# (rbstab.sweep.table validates a sweep's columns with them): read by :func:`field_rule`.
+# (rbstab.sweep.table validates a sweep's columns with them): read by :func:`rbstab.config.paths.parse_key`.
 _vector.rule = ("vector",)
 _theta.rule = ("theta",)
 _spd_matrix.rule = ("matrix", "definite")
 _psd_matrix.rule = ("matrix", "semi-definite")
+# The shape of the value each check takes (what a key path may index: ``.shape``; none: a
+# single value), read by :func:`rbstab.config.paths.parse_key`.
+_vector.shape = _theta.shape = (VECTOR_LENGTH,)
+_spd_matrix.shape = _psd_matrix.shape = (VECTOR_LENGTH, VECTOR_LENGTH)
 
 
 def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
@@ -460,6 +472,7 @@ def checked(check: Callable[[Any], Any]) -> BeforeValidator:
             raise PydanticCustomError("rbstab_invalid", "invalid value {detail}", ctx) from None
 
     validate.rule = getattr(check, "rule", None)
+    validate.shape = getattr(check, "shape", ())
     return BeforeValidator(validate)
 
 
@@ -523,7 +536,7 @@ DEFINITE_GAINS = {
 def _gain_type(name: str) -> Any:
     if name in DEFINITE_GAINS:
         check = lambda value: _spd_matrix(value, DEFINITE_GAINS[name])  # noqa: E731
-        check.rule = _spd_matrix.rule
+        check.rule, check.shape = _spd_matrix.rule, _spd_matrix.shape
     else:
         check = _psd_matrix
     return Annotated[Any, checked(optional(check))]
@@ -578,6 +591,7 @@ def _limits(value: Any) -> float | list[float]:
 
 
 _limits.rule = ("limits", {"gt": 0, "ge": None, "lt": None, "le": None, "allow_inf": True, "integer": False})
+_limits.shape = (VECTOR_LENGTH,)
 _LIMITS = Annotated[Any, checked(optional(_limits))]
 
 
@@ -684,7 +698,9 @@ def _rms(value: Any) -> list[float]:
 
 
 _band.rule = None
+_band.shape = (2,)
 _rms.rule = ("limits", {"gt": None, "ge": 0, "lt": None, "le": None, "allow_inf": False, "integer": False})
+_rms.shape = (VECTOR_LENGTH,)
 
 #: The keys of a disturbance each kind takes (besides kind, quantity, start), and those it needs.
 DISTURBANCE_KEYS = {
@@ -841,7 +857,7 @@ class RunSchema(_Section):
         default_factory=_Simulation, validate_default=True, description=_mapping_of(_Simulation)
     )
     disturbances: list[_Disturbance] | None = Field(
-        None, description=f"a list of at most {MAX_DISTURBANCES} disturbances, each {_mapping_of(_Disturbance)} "
+        None, json_schema_extra={"max_entries": MAX_DISTURBANCES}, description=f"a list of at most {MAX_DISTURBANCES} disturbances, each {_mapping_of(_Disturbance)} "
                           "(optional; docs/disturbances.md)")
 
     @field_validator("disturbances", mode="before")
@@ -1224,7 +1240,7 @@ _SECTIONS = tuple(RunSchema.model_fields)
 TOP_LEVEL = _mapping_of(RunSchema)
 
 
-def _submodel(annotation: Any) -> type[BaseModel] | None:
+def submodel(annotation: Any) -> type[BaseModel] | None:
     """The model of a field that is a section (``_Saturation`` or ``_Saturation | None``)."""
     for candidate in (annotation, *typing.get_args(annotation)):
         if isinstance(candidate, type) and issubclass(candidate, BaseModel):
@@ -1232,56 +1248,18 @@ def _submodel(annotation: Any) -> type[BaseModel] | None:
     return None
 
 
-def split_key(key: str) -> tuple[str, str, tuple[str, ...]]:
-    """(section, field, entries) of a dotted config key: the field's dotted name inside its
-    section (``k_c``, or ``saturation.torque_n`` inside a subsection) and the list indices
-    after it (``controller.k_c.0.1`` -> ``("controller", "k_c", ("0", "1"))``)."""
-    parts = key.split(".")
-    if parts[0] == "disturbances" and len(parts) >= 3 and parts[1].isdigit():  # an entry's field
-        return parts[0], ".".join(parts[1:3]), tuple(parts[3:])
-    model = _submodel(RunSchema.model_fields[parts[0]].annotation) if parts[0] in RunSchema.model_fields else None
-    names = parts[1:2]
-    while model is not None and len(parts) > len(names) + 1 and names[-1] in model.model_fields:
-        model = _submodel(model.model_fields[names[-1]].annotation)
-        if model is None:
-            break
-        names.append(parts[len(names) + 1])
-    return parts[0], ".".join(names), tuple(parts[1 + len(names):])
+def list_model(annotation: Any) -> type[BaseModel] | None:
+    """The model of the entries of a field that is a list of sections (``disturbances``)."""
+    for candidate in (annotation, *typing.get_args(annotation)):
+        if typing.get_origin(candidate) is list:
+            return submodel(typing.get_args(candidate)[0])
+    return None
 
 
-def field_value(section_value: Any, name: str) -> Any:
-    """The value of the field ``name`` (dotted inside a subsection) in a section's mapping,
-    or None where it or a subsection is absent."""
-    value = section_value
-    for part in name.split("."):
-        if isinstance(value, Mapping):
-            value = value.get(part)
-        elif isinstance(value, (list, tuple)) and part.isdigit():  # an entry of a list (disturbances)
-            value = value[int(part)] if int(part) < len(value) else None
-        else:
-            value = None
-    return value
-
-
-def field_rule(section: str, name: str) -> tuple | None:
-    """The constraint of the schema's field ``section.name`` (``name`` dotted inside a
-    subsection) in a form a batched check reads: ``("number", bounds)`` (``gt``, ``ge``,
-    ``lt``, ``le``, ``allow_inf``, ``integer``), ``("limits", bounds)`` (a number or 3 of
-    them within bounds), ``("vector",)``, ``("theta",)``, ``("matrix", "definite" |
-    "semi-definite")``, or None (a field checked another way: names, variants, methods).
-    The same check functions the schema validates a field with carry them."""
-    model = RunSchema.model_fields.get(section)
-    model = _submodel(model.annotation) if model is not None else None
-    entry, _, rest = name.partition(".")
-    if section == "disturbances" and entry.isdigit():  # a field of the list's entry number ``entry``
-        model, name = _Disturbance, rest
-    field = None
-    for part in name.split("."):
-        field = model.model_fields.get(part) if model is not None else None
-        if field is None:
-            return None
-        model = _submodel(field.annotation)
-    return next((getattr(m.func, "rule", None) for m in field.metadata if isinstance(m, BeforeValidator)), None)
+def field_check(info: Any) -> Callable[[Any], Any] | None:
+    """The check a field is validated with (its ``rule`` and ``shape`` attributes say what
+    a batched check and a key path read of it), or None (a section, a list of sections)."""
+    return next((m.func for m in getattr(info, "metadata", ()) if isinstance(m, BeforeValidator)), None)
 
 
 # -- pydantic errors -> our lines ----------------------------------------------------------
@@ -1374,6 +1352,8 @@ def problem_line(
     expected = ctx.get("expected") or (info.description if info is not None else None) or ""
     detail = ctx.get("detail", "")
     head = f"{what} '{key}'"
+    if ctx.get("line"):  # a refusal that is its own line (a key path that names nothing)
+        return key, f"{what} {key!r}: {ctx['line']}"  # repr: a key with a line break stays on one line
 
     if err["type"] in ("extra_forbidden", "invalid_key"):
         allowed = list(model.model_fields) if model is not None else []

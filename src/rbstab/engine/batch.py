@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.schema import field_value, split_key
+from ..config.paths import parse_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
 from ..model import (DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody,
                      set_limits)
@@ -107,8 +107,8 @@ class _Fields:
         for key in keys:
             if "." not in key or columns[key].dtype == object:
                 continue  # a template's own value (runs share a template's non-numeric values)
-            section, name, entries = split_key(key)
-            self.varied.setdefault((section, name), []).append((tuple(map(int, entries)), columns[key]))
+            path = parse_key(key)
+            self.varied.setdefault((path.section, path.name), []).append((path.index, columns[key]))
 
     def get(self, section: str, name: str, default=None, *, shape: tuple | None = None) -> np.ndarray:
         """The field of every run (``name`` dotted inside a subsection), shape (n, *shape):
@@ -117,7 +117,7 @@ class _Fields:
         (None: a ValueError)."""
         out = None
         for t, rows in self.groups:
-            written = field_value(self.templates[t].get(section), name)
+            written = parse_key(f"{section}.{name}").get(self.templates[t], None)
             if written is None:
                 if default is None:
                     raise ValueError(f"no {section}.{name} in template {int(t)}")

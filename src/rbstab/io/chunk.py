@@ -921,13 +921,13 @@ def _config_text(templates: list, columns: Mapping[str, list], keys: Mapping[str
 
 
 def _resolved(templates: list, columns: Mapping[str, list], keys: Mapping[str, str], i: int) -> dict:
-    from ..config import set_dotted  # heavy: pydantic (rbstab.config's schema); reading a store stays light
+    from ..config.paths import parse_key  # heavy: pydantic (rbstab.config's schema); reading a store stays light
 
     template = json.loads(json.dumps(templates[int(columns["template"][i])]))
     for name, key in keys.items():
         value = columns[name][i]
         if not key.endswith(":scale") and not isinstance(value, str) and value is not None:
-            set_dotted(template, key, value)
+            parse_key(key).set(template, value)
     template["name"] = columns["run_id"][i]
     return template
 

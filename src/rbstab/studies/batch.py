@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ..config import ConfigError, config_from_mapping
-from ..config.paths import set_dotted
+from ..config.paths import parse_key
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.chunk import summary_table_columns
@@ -161,7 +161,7 @@ def _invalid_rows(base: Mapping, design: pd.DataFrame) -> dict[int, str]:
     for i in range(len(design)):
         data = copy.deepcopy(dict(base))
         for key, values in mappings.items():
-            set_dotted(data, key, values[i])
+            parse_key(key).set(data, values[i])
         try:
             config_from_mapping(data, source="<trial>")
         except ConfigError as exc:

@@ -35,7 +35,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..config import ConfigError, parse_yaml
-from ..config.schema import RunSchema
+from ..config.paths import KeyPathError, parse_key, plain_tree
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain
@@ -48,7 +48,7 @@ from ..sweep.schema import DISTRIBUTIONS, DistributionSchema
 from ..sweep.spec import Distribution, spec_from_mapping
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
-           "value_at", "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
+           "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
 
 
 class StudyInputError(ConfigError):
@@ -67,23 +67,6 @@ _COLUMN = re.compile(r"^(?P<key>[^\[\]]+)\[(?P<index>\d+(?:,\d+)*)\]$")
 
 
 # -- the varied parameters -----------------------------------------------------------------------
-
-
-def value_at(mapping: Mapping, key: str) -> Any:
-    """The value at a dotted key of a (resolved) config mapping; None if absent.
-
-    ``controller.k_c`` -> the gain as given (a number, 3 numbers or a 3x3 list);
-    ``initial_state.omega.1`` -> one entry.
-    """
-    node: Any = mapping
-    for part in key.split("."):
-        if isinstance(node, Mapping) and part in node:
-            node = node[part]
-        elif isinstance(node, (list, tuple)) and part.isdigit() and int(part) < len(node):
-            node = node[int(part)]
-        else:
-            return None
-    return node
 
 
 def column_names(key: str, shape: tuple[int, ...]) -> list[str]:
@@ -231,6 +214,13 @@ def parse_vary(texts: Sequence[str] | Mapping[str, Any], base: Mapping, *, optio
 def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, allowed: Sequence[str],
                 errors: list[str]) -> Varied | None:
     """One entry of :func:`parse_vary`, or None with its problems appended to ``errors``."""
+    try:
+        path = parse_key(key)
+        current = path.get(base, None)
+        path.set(plain_tree(base), current)  # a key the base cannot take (an entry of a list it lacks)
+    except KeyPathError as exc:
+        errors.append(f"{option} {shown!r}: {exc.problem}")
+        return None
     kind = next(iter(value)) if isinstance(value, Mapping) and len(value) == 1 else None
     if kind is not None and kind not in allowed:
         errors.append(f"{option} {shown!r}: distribution {kind!r} is not allowed here; expected one of "
@@ -242,11 +232,6 @@ def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, al
         detail = "; ".join(f"{'.'.join(map(str, e['loc'])) or 'value'}: {e['msg']}" for e in exc.errors())
         errors.append(f"{option} {shown!r}: invalid distribution ({detail}); expected one of {', '.join(allowed)}, "
                       "e.g. uniform:[30,50], scale_uniform:[0.5,2], 'normal:{mean: 41, std: 4}', choice:[a,b]")
-        return None
-    current = value_at(base, key)
-    if current is None and not _settable(base, key):
-        errors.append(f"{option} {shown!r}: '{key}' is not a config key of the base configuration "
-                      "(dotted path, e.g. body.mass, controller.k_c, initial_state.omega.0)")
         return None
     if dist.kind == "choice":
         return Varied(key, dist.kind, dist.args, None, ())
@@ -275,15 +260,6 @@ def _numeric(value: Any) -> bool:
         return np.asarray(value, dtype=float).size > 0
     except (TypeError, ValueError):
         return False
-
-
-def _settable(base: Mapping, key: str) -> bool:
-    """Whether ``key`` names a field of the config schema that the base leaves unset."""
-    section, _, field = key.partition(".")
-    model = RunSchema.model_fields.get(section)
-    annotation = getattr(model, "annotation", None) if model else None
-    fields = getattr(annotation, "model_fields", {})
-    return field.split(".")[0] in fields
 
 
 _NAME = re.compile(r"^[A-Za-z0-9_.-]+$")

@@ -50,7 +50,7 @@ import pandas as pd
 import xarray as xr
 
 from ..config import ConfigError, config_from_mapping, dump_yaml
-from ..config.paths import set_dotted
+from ..config.paths import parse_key
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
 from ..results import plain
@@ -254,7 +254,7 @@ class TuningProblem:
         for body in self.bodies or [{}]:
             data = copy.deepcopy(self.base.resolved)
             for key, value in {**body, **settings}.items():
-                set_dotted(data, key, value)
+                parse_key(key).set(data, value)
             out.append(config_from_mapping(data, source="<trial>"))
         return out
 

@@ -59,7 +59,7 @@ from typing import Any
 
 from ..convergence import RULE, converged
 from ..io.atomic import atomic_path, write_text_atomic
-from ..layout import parameter_attributes
+from ..layout import is_index, parameter_attributes
 
 __all__ = [
     "SPEC_FILE",
@@ -142,7 +142,7 @@ def parameter_name(key: str) -> str:
     """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``."""
     key, scale = (key[: -len(":scale")], True) if key.endswith(":scale") else (key, False)
     parts = key.split(".")
-    fields = [i for i, p in enumerate(parts) if not p.isdigit()]
+    fields = [i for i, p in enumerate(parts) if not is_index(p)]
     last = fields[-1] if fields else 0
     if last >= 2 and parts[last - 1] in PREFIXED_SUBSECTIONS:
         last -= 1

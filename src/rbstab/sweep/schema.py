@@ -20,6 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic_core import PydanticCustomError
 
 from ..config import ConfigError
+from ..config.paths import KeyPathError, parse_key
 from ..config.schema import Invalid, checked, run_name, bounded_number, optional, kind_of, problem_line, short_repr
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 
@@ -65,12 +66,11 @@ def numeric_array(value: Any) -> np.ndarray | None:
 
 
 def _dotted_key(key: Any) -> str:
-    parts = key.split(".") if isinstance(key, str) else []
-    if not parts or any(not p.strip() or p != p.strip() for p in parts):
-        raise Invalid(
-            f"the key {short_repr(key)} is not a dotted config key",
-            "a dotted config key such as 'controller.k_c' or 'initial_state.omega.0'",
-        )
+    """A config key path (:func:`rbstab.config.paths.parse_key`); its refusal is the line."""
+    try:
+        parse_key(key)
+    except KeyPathError as exc:
+        raise PydanticCustomError("rbstab_invalid", "invalid key", {"line": exc.problem}) from None
     return key
 
 

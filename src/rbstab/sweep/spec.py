@@ -21,7 +21,7 @@ A sweep spec names a base configuration and the keys to vary::
     convergence:
       lyapunov_ratio: 1.0e-3             # converged: rbstab.convergence.RULE
 
-Keys are the dotted paths of :func:`rbstab.config.set_dotted` (``initial_state.omega.1``
+Keys are the dotted paths of :func:`rbstab.config.paths.parse_key` (``initial_state.omega.1``
 indexes into the list). A ``table:`` (a CSV or Parquet file, a DataFrame or a mapping of
 columns named by dotted keys, ``initial_state.omega[1]``, ``body.inertia[0,2]``) gives runs
 row by row. The run list is the product base x grid x zip x table x random; its order
@@ -70,7 +70,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config import ConfigError, apply_overrides, parse_yaml as parse, set_dotted
+from ..config import ConfigError, apply_overrides, parse_yaml as parse
+from ..config.paths import KeyPathError, parse_key
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import copy_tree, read_yaml_file
 from ..results import plain
@@ -329,9 +330,9 @@ def _set_spec_override(data: dict, override: str) -> None:
             node[path[len(section):]] = value
             return
     try:
-        set_dotted(data, path, value)
-    except ConfigError as exc:
-        raise ConfigError([f"override {override!r}: {e}" for e in exc.errors]) from None
+        parse_key(path, SweepSchema).set(data, value)
+    except KeyPathError as exc:
+        raise ConfigError([f"override {override!r}: {exc.problem}"]) from None
 
 
 def spec_from_mapping(
@@ -413,17 +414,16 @@ def spec_from_mapping(
     )
 
 
-_COLUMN = re.compile(r"^\s*([A-Za-z_][\w.]*?)\s*(?:\[\s*(\d+)\s*(?:,\s*(\d+)\s*)?\])?\s*$")
+_COLUMN = re.compile(r"^\s*(.*?)\s*\[\s*([0-9]+)\s*(?:,\s*([0-9]+)\s*)?\]\s*$")
 
 
-def column_key(name: str) -> str | None:
-    """The dotted config key of a design-table column name, or None if it is not one:
-    ``body.mass`` -> ``body.mass``, ``initial_state.omega[1]`` -> ``initial_state.omega.1``,
-    ``body.inertia[0,2]`` -> ``body.inertia.0.2``."""
+def column_key(name: str) -> str:
+    """The dotted config key a design-table column name stands for: ``body.mass`` as it is,
+    ``initial_state.omega[1]`` -> ``initial_state.omega.1``, ``body.inertia[0,2]`` ->
+    ``body.inertia.0.2`` (whether it names anything is :func:`rbstab.config.paths.parse_key`'s
+    to say)."""
     m = _COLUMN.match(str(name))
-    if m is None or any(not p for p in m.group(1).split(".")):
-        return None
-    return ".".join(p for p in m.groups() if p is not None)
+    return str(name).strip() if m is None else ".".join(p for p in m.groups() if p is not None)
 
 
 def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
@@ -440,10 +440,10 @@ def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
     errors, out, lengths = [], {}, set()
     for name, values in columns.items():
         key = column_key(name)
-        if key is None:
-            errors.append(f"sweep key '{where}': column {name!r} is not a config key; expected a dotted key "
-                          "such as 'body.mass', a vector entry 'initial_state.omega[1]' or a matrix entry "
-                          "'body.inertia[0,0]'")
+        try:
+            parse_key(key)
+        except KeyPathError as exc:
+            errors.append(f"sweep key '{where}': column {name!r}: {exc.problem}")
             continue
         array = np.asarray(values)
         if array.ndim != 1:

@@ -11,7 +11,7 @@ indexing, random samples by one numpy call per key. No Python object is made per
   numeric values set (:meth:`RunTable.resolved`).
 - **Validation of the columns.** Every numeric field a varied key touches is assembled as
   an array over the runs (``(n,)``, ``(n, 3)`` or ``(n, 3, 3)``) and checked at once with
-  the constraint the config schema declares for it (:func:`rbstab.config.schema.field_rule`:
+  the constraint the config schema declares for it (:attr:`rbstab.config.paths.KeyPath.rule`:
   bounds, finiteness, magnitude, positive (semi-)definiteness by batched ``eigvalsh``), and
   the joint checks are made on the columns (the margin to gimbal lock, samples and steps
   that let a run end, the weight held by the stiffnesses). The runs a check flags are
@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from .spec import SweepSpec, SweepSpecError
-from ..config import set_dotted
+from ..config.paths import parse_key
 from .validate import base_value
 from .validate import validate_columns
 from ..config import canonical_config
@@ -155,11 +155,11 @@ def build_resolved(template: Mapping, keys: Sequence[str], values: Sequence[Any]
     out["name"] = name
     copied: set[str] = set()
     for key, value in zip(keys, values):
-        section = key.partition(".")[0]
-        if section not in copied:
-            out[section] = _deep(out[section])
-            copied.add(section)
-        set_dotted(out, key, value.tolist() if isinstance(value, np.ndarray | np.generic) else value)
+        path = parse_key(key)
+        if path.section not in copied:
+            out[path.section] = _deep(out[path.section])
+            copied.add(path.section)
+        path.set(out, value.tolist() if isinstance(value, np.ndarray | np.generic) else value)
     return out
 
 

@@ -3,7 +3,7 @@
 Each template (the first run of a base and combination of non-numeric values) is
 validated by the config schema. Every numeric field the varied keys touch is then
 assembled as an array over the runs and checked at once against the constraint the
-schema declares for it (:func:`rbstab.config.schema.field_rule`), with the joint checks
+schema declares for it (:attr:`rbstab.config.paths.KeyPath.rule`), with the joint checks
 made on the columns: the rules are the schema's own functions
 (:func:`~rbstab.config.schema.within_bounds`,
 :func:`~rbstab.config.schema.clear_of_gimbal_lock`,
@@ -25,10 +25,10 @@ import numpy as np
 from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
-from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping, get_dotted, set_dotted
-from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, field_rule,
-                             field_value, inside_limits, samples_apart, split_key, starts_in_run, steps_suffice,
-                             within_bounds)
+from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+from ..config.paths import parse_key
+from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
+                             samples_apart, starts_in_run, steps_suffice, within_bounds)
 from ..layout import LIMITED, VARIANT_LAYOUTS
 from ..variants import VARIANTS
 from ..variants.base import limited_values
@@ -41,7 +41,6 @@ _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 #: Flagged runs validated one by one (for the count of invalid runs); beyond it, the runs
 #: the column checks flag are counted as invalid when every one validated so far was.
 _MAX_CONFIRMED = 2000
-_MATRICES = {"inertia", "k_t", "l_t", "k_r", "l_r", "k_c", "l_c", "k_d", "l_d"}
 
 
 def _short(value: Any, limit: int = 40) -> str:
@@ -51,33 +50,11 @@ def _short(value: Any, limit: int = 40) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def _expand_diagonal(data: dict, key: str) -> None:
-    """Before setting a matrix entry ``key.i.j``: a matrix written as 3 numbers (a
-    diagonal) becomes the 3x3 list of lists it stands for."""
-    parts = key.split(".")
-    if len(parts) != 4 or parts[1] not in _MATRICES or not (parts[2].isdigit() and parts[3].isdigit()):
-        return
-    section = data.get(parts[0])
-    value = section.get(parts[1]) if isinstance(section, dict) else None
-    if isinstance(value, list) and len(value) == 3 and not any(isinstance(v, list) for v in value):
-        section[parts[1]] = np.diag(np.asarray(value, dtype=float)).tolist()
-
-
-def _expand_limit(data: dict, key: str) -> None:
-    """Before setting an entry ``key.i`` of an actuator's limit written as one number (every
-    axis): the 3 numbers it stands for."""
-    section, name, entries = split_key(key)
-    if len(entries) != 1 or field_rule(section, name) is None or field_rule(section, name)[0] != "limits":
-        return
-    parent = field_value(data.get(section), name.rpartition(".")[0]) if "." in name else data.get(section)
-    leaf = name.rpartition(".")[2]
-    if isinstance(parent, dict) and isinstance(parent.get(leaf), (int, float)) and not isinstance(parent[leaf], bool):
-        parent[leaf] = [parent[leaf]] * 3
-
-
 def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: str) -> dict:
     """The configuration mapping of one run as written: ``base`` with the varied values set
-    (a list index into a list the base leaves at its default starts from the default).
+    by :meth:`rbstab.config.paths.KeyPath.set` (a list index into a list the base leaves at
+    its default starts from the default; an entry of a matrix written as 3 numbers, or of a
+    limit written as one, sets it in the 3x3 or the 3 numbers it stands for).
 
     Raises
     ------
@@ -87,9 +64,7 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
 
     data = copy.deepcopy(base.data)
     for key, value in zip(keys, values):
-        _expand_diagonal(data, key)
-        _expand_limit(data, key)
-        set_dotted(data, key, plain(value))
+        parse_key(key).set(data, plain(value))
     data["name"] = name
     return data
 
@@ -98,9 +73,8 @@ def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:
     """(the value of ``key`` in ``base`` as a float array, None) or (None, problem): what a
     ``scale_uniform`` factor scales (the schema's default where the base leaves it unset)."""
 
-    try:
-        value = get_dotted(base.data, key)
-    except KeyError:
+    value = parse_key(key).get(base.data, None)
+    if value is None:
         value = _default(base, key)
         if value is None:
             return None, (f"random.params.{key}: scale_uniform needs a base value, but '{key}' is not set in "
@@ -117,8 +91,8 @@ def _default(base: Base, key: str) -> Any:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         try:
-            return get_dotted(config_from_mapping(base.data, default_name=base.label).resolved, key)
-        except (ConfigError, KeyError):
+            return parse_key(key).get(config_from_mapping(base.data, default_name=base.label).resolved)
+        except ConfigError:  # KeyPathError included
             return None
 
 
@@ -155,14 +129,15 @@ class _Fields:
 
     def _build(self, section: str, name: str):
         per_template, has = [], []
-        matrix = name in _MATRICES
+        path = parse_key(f"{section}.{name}")
+        matrix = len(path.shape) == 2
         if matrix and self._diagonal(section, name):
             return self._build_diagonal(section, name)
 
-        rule = field_rule(section, name) or ("number",)
-        shape = (3, 3) if matrix else (3,) if rule[0] in ("vector", "theta", "limits") else ()
+        rule = path.rule or ("number",)
+        shape = path.shape
         for t in self.templates:
-            value = field_value(t.get(section), name)
+            value = path.get(t, None)
             has.append(value is not None)
             try:
                 arr = np.asarray(value if value is not None else np.nan, dtype=float)
@@ -181,9 +156,9 @@ class _Fields:
             if not (key == prefix or key.startswith(prefix + ".")) or col.dtype == object:
                 continue
             if section == "disturbances":  # an entry's field set by the sweep (its default, e.g. start 0, unwritten)
-                present = np.asarray([isinstance(field_value(t.get(section), name.partition(".")[0]), Mapping)
-                                      for t in self.templates])[self.template]
-            idx = tuple(int(p) for p in split_key(key)[2])
+                entry = parse_key(f"{section}.{name.partition('.')[0]}")
+                present = np.asarray([isinstance(entry.get(t, None), Mapping) for t in self.templates])[self.template]
+            idx = parse_key(key).index
             col = col.astype(float)
             if rule[0] == "limits" and len(idx) == 0 and col.ndim == 1:
                 col = col[:, None]  # one limit for every axis
@@ -197,7 +172,6 @@ class _Fields:
                 return None
         return values, present
 
-
     def _diagonal(self, section: str, name: str) -> bool:
         """Whether a matrix field is a diagonal (3 numbers) in every template and every
         varied value of it: then held as (n, 3)."""
@@ -208,7 +182,7 @@ class _Fields:
         for key, col in self.columns.items():
             if key == prefix and (col.dtype == object or col.ndim != 2):
                 return False
-            if key.startswith(prefix + ".") and (col.dtype == object or col.ndim != 1 or key.count(".") != 2):
+            if key.startswith(prefix + ".") and (col.dtype == object or col.ndim != 1 or len(parse_key(key).index) != 1):
                 return False
         return True
 
@@ -221,9 +195,7 @@ class _Fields:
             if key == prefix:
                 out = col.astype(float)
             elif key.startswith(prefix + "."):
-                entry = int(key.rsplit(".", 1)[1])
-                if entry >= out.shape[1]:  # no such entry of a diagonal: the schema decides
-                    return None
+                (entry,) = parse_key(key).index
                 out = out.copy() if out.base is not None else out
                 out[:, entry] = col
         return out, np.array([v is not None for v in values])[self.template]
@@ -264,7 +236,7 @@ def _matrix_bad(values: np.ndarray, kind: str) -> np.ndarray:
 
 
 def _rule_bad(rule: tuple, values: np.ndarray, integer_column: bool) -> np.ndarray:
-    """The runs whose values break the schema's constraint ``rule`` (field_rule)."""
+    """The runs whose values break the schema's constraint ``rule`` (:attr:`KeyPath.rule`)."""
 
     if rule[0] in ("number", "limits"):
         return _number_bad(values, rule[1], integer_column)
@@ -282,9 +254,10 @@ def _field_flags(fields: _Fields, n: int) -> np.ndarray:
     """Runs a varied numeric field's own constraint flags."""
 
     flagged = np.zeros(n, dtype=bool)
-    touched = {split_key(k)[:2] for k, v in fields.columns.items() if v.dtype != object and "." in k}
+    touched = {(p.section, p.name) for p in (parse_key(k) for k, v in fields.columns.items()
+                                                 if v.dtype != object and "." in k)}
     for section, name in touched:
-        rule = field_rule(section, name)
+        rule = parse_key(f"{section}.{name}").rule
         got = fields.get(section, name)
         if got is None:  # entries that do not fit the field's shape: the schema decides
             flagged[:] = True
@@ -329,7 +302,7 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
         with np.errstate(invalid="ignore", divide="ignore"):
             flagged |= ~samples_apart(t_end, samples) | ~steps_suffice(t_end, np.where(np.isnan(step), np.inf, step), steps)
     flagged |= _limit_flags(fields, variants, n)
-    starts = sorted({split_key(k)[1] for k in fields.columns if k.startswith("disturbances.") and k.endswith(".start")})
+    starts = sorted({parse_key(k).name for k in fields.columns if k.startswith("disturbances.") and k.endswith(".start")})
     if fields.varied("simulation", "t_end"):  # every entry's start against each run's t_end
         starts = [f"{i}.start" for i in range(max((len(t.get("disturbances") or ()) for t in fields.templates),
                                                   default=0))]
