@@ -17,7 +17,7 @@ def key_of(text: str, option: str, *, suffix: str = "", prefix: str = "") -> Non
     (``prefix``, e.g. ``sweep.grid.``, and ``suffix``, e.g. ``:scale``, taken off first); a key that names nothing is refused in
     one line naming the option, its value, the wrong segment and what is allowed, before the
     command reads or writes anything. A value without ``=`` is left to the command."""
-    from rbstab.config.paths import KeyPathError, parse_key  # heavy: pydantic
+    from rbstab.config.paths import KeyPathError, parse_any_key  # heavy: pydantic
 
     key, sep, _ = str(text).partition("=")
     if not sep or not key.strip():
@@ -26,7 +26,7 @@ def key_of(text: str, option: str, *, suffix: str = "", prefix: str = "") -> Non
     if suffix and key.endswith(suffix):
         key = key[: -len(suffix)]
     try:
-        parse_key(key)
+        parse_any_key(key)
     except KeyPathError as exc:
         raise click.ClickException(f"{option} {text!r}: {exc.problem}") from None
 

@@ -249,5 +249,25 @@ def test_a_list_of_named_entries_takes_an_index_or_a_name():
         parse_key("bodies.8.mass", Chain)
     with pytest.raises(KeyPathError, match="'bodies.trunk.attachment_point' is a list of 3; index it with 0..2"):
         parse_key("bodies.trunk.attachment_point.x", Chain)
-    with pytest.raises(KeyPathError, match="'bodies' has 2 entries; there is no 'arm' to set"):
+    with pytest.raises(KeyPathError, match=r"'bodies' has 2 entries \(0..1, or by name: trunk, leg\); there is no 'arm' to set"):
         parse_key("bodies.arm.mass", Chain).set(data, 1.0)
+
+
+def test_a_chain_key_by_name_reaches_the_chain_and_a_one_body_key_stays_one():
+    """A chain's keys by body or joint name (``initial_state.<body>``: a mapping by name)
+    set what they name; a one-body key whose entry is one of the one-body section's fields
+    is read as the one-body key, whatever a chain could name."""
+    from rbstab.config import load_any_config
+    from rbstab.config.paths import parse_any_key
+
+    config = load_any_config(Path(__file__).parents[1] / "configs" / "examples" / "stance_ankle_hip.yaml",
+                             ["bodies.trunk.mass=50", "joints.hip.k_r.0=700", "initial_state.trunk.theta.0=0.02"])
+    assert config.chain.bodies[1].mass == 50.0 and config.chain.joints[1].k_r[0, 0] == 700.0
+    assert config.initial_state["trunk"]["theta"][0] == 0.02
+    with pytest.raises(KeyPathError, match="'initial_state.theta' is a list of 3; index it with 0..2, not 'x'"):
+        parse_any_key("initial_state.theta.x")
+    from rbstab.config.schema import ChainSchema
+
+    with pytest.raises(KeyPathError, match="'initial_state' is a mapping by name"):
+        parse_key("initial_state.0.theta.0", ChainSchema)
+    assert parse_any_key("joints.hip.k_c.0").entry == "hip"

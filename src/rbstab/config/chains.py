@@ -378,7 +378,7 @@ def load_any_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfi
     if not is_chain(data):
         return load_config(path, overrides)
     try:
-        data = apply_overrides(data, overrides)
+        data = apply_overrides(data, overrides, ChainSchema)
     except ConfigError as exc:
         raise ConfigError(exc.errors, source) from None
     return _build(data, default_name=path.stem, source=source, overrides=overrides)

@@ -33,10 +33,10 @@ import numpy as np
 
 from ..layout import is_index
 from .errors import ConfigError
-from .schema import RunSchema, field_check, kind_of, list_model, submodel
+from .schema import ChainSchema, RunSchema, field_check, kind_of, list_model, mapping_model, submodel
 from .yaml_io import parse_yaml
 
-__all__ = ["KeyPath", "KeyPathError", "parse_key", "apply_overrides", "plain_tree"]
+__all__ = ["KeyPath", "KeyPathError", "parse_key", "parse_any_key", "apply_overrides", "plain_tree"]
 
 #: Longest key path taken (characters): longer is no key of the schema.
 MAX_KEY_LENGTH = 200
@@ -199,6 +199,9 @@ class KeyPath:
         for depth, step in enumerate(steps[:-1]):
             where = ".".join(map(str, steps[: depth + 1]))
             is_key = depth < n_field and not (self.entry is not None and depth == 1)
+            if depth == 1 and isinstance(self.entry, str) and isinstance(node, dict):  # a named mapping's entry
+                node = node.setdefault(step, {})
+                continue
             if is_key and isinstance(node, dict):
                 if node.get(step) is None:
                     entry_next = self.entry is not None and depth == 0
@@ -233,9 +236,12 @@ class KeyPath:
 
 
 def _found(node: Any) -> str:
-    """What a value found on the path is, for a message: ``has 1 entry``, ``is a number``."""
+    """What a value found on the path is, for a message: ``has 1 entry``, ``has 2 entries
+    (names: legs, trunk)``, ``is a number``."""
     if isinstance(node, list):
-        return f"has {len(node)} entr{'y' if len(node) == 1 else 'ies'}"
+        names = [e["name"] for e in node if isinstance(e, Mapping) and isinstance(e.get("name"), str)]
+        named = f" (0..{len(node) - 1}, or by name: {', '.join(names)})" if names and len(names) == len(node) else ""
+        return f"has {len(node)} entr{'y' if len(node) == 1 else 'ies'}{named}"
     return f"is {kind_of(node)}"
 
 
@@ -338,7 +344,14 @@ def parse_key(key: str, root: Any = None) -> KeyPath:
             if isinstance(default, (list, tuple)):  # what indexing into the field starts from when it is unset
                 defaults.append((i, plain_tree(default)))
             entries = list_model(info.annotation)
-            if entries is not None and not fields and i + 1 < len(parts):  # a section that is a list: an entry next
+            named_values = mapping_model(info.annotation)
+            if named_values is not None and not fields and i + 1 < len(parts):  # a mapping of names: a name next
+                i += 1
+                if is_index(parts[i]):
+                    raise KeyPathError(key, f"'{'.'.join(parts[:i])}' is a mapping by name; name its entry "
+                                            f"(e.g. a body's name), not {_shown(parts[i])}")
+                entry, model = parts[i], named_values
+            elif entries is not None and not fields and i + 1 < len(parts):  # a section that is a list: an entry next
                 i += 1
                 most = (info.json_schema_extra or {}).get("max_entries") if isinstance(info.json_schema_extra, dict) \
                     else None
@@ -378,8 +391,34 @@ def parse_key(key: str, root: Any = None) -> KeyPath:
                    (info.description or "") if info is not None else "", tuple(defaults))
 
 
-def apply_overrides(data: Mapping, overrides: Sequence[str]) -> dict:
-    """A deep copy of ``data`` with each ``key.path=value`` override applied, in order.
+def parse_any_key(key: str) -> KeyPath:
+    """``key`` read as a key of a one-body configuration, else of a chain's
+    (:class:`rbstab.config.schema.ChainSchema`): what a command can check before it knows
+    which kind its configuration is.
+
+    Raises
+    ------
+    KeyPathError
+        The refusal of the schema whose section the key names (the one-body one where both
+        or neither name it).
+    """
+    try:
+        return parse_key(key)
+    except KeyPathError as one_body:
+        section, _, rest = key.partition(".") if isinstance(key, str) else ("", "", "")
+        one_body_section = RunSchema.model_fields.get(section)
+        model = submodel(one_body_section.annotation) if one_body_section is not None else None
+        if model is not None and rest.partition(".")[0] in model.model_fields:
+            raise  # a one-body key (``initial_state.theta.x``), not a body named like its field
+        try:
+            return parse_key(key, ChainSchema)
+        except KeyPathError as chain:
+            raise (chain if one_body_section is None and section in ChainSchema.model_fields else one_body) from None
+
+
+def apply_overrides(data: Mapping, overrides: Sequence[str], root: Any = None) -> dict:
+    """A deep copy of ``data`` with each ``key.path=value`` override applied, in order;
+    the keys read against ``root`` (a schema model; None: a one-body run's).
 
     The value is parsed as YAML (``controller.k_t=[1,2,3]``, ``simulation.t_end=1.5``,
     ``controller.variant=free``); the key is read by :func:`parse_key` and set by
@@ -399,7 +438,7 @@ def apply_overrides(data: Mapping, overrides: Sequence[str]) -> dict:
             problems.append(f"override {override!r}: no '='; expected key.path=value")
             continue
         try:
-            path = parse_key(key.strip())
+            path = parse_key(key.strip(), root)
             value = parse_yaml(text)
             path.set(result, value)
         except KeyPathError as exc:

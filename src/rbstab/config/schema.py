@@ -1256,6 +1256,15 @@ def list_model(annotation: Any) -> type[BaseModel] | None:
     return None
 
 
+def mapping_model(annotation: Any) -> type[BaseModel] | None:
+    """The model of the values of a field that maps names to sections (a chain's
+    ``initial_state``: body name -> state)."""
+    for candidate in (annotation, *typing.get_args(annotation)):
+        if typing.get_origin(candidate) is dict:
+            return submodel(typing.get_args(candidate)[1])
+    return None
+
+
 def field_check(info: Any) -> Callable[[Any], Any] | None:
     """The check a field is validated with (its ``rule`` and ``shape`` attributes say what
     a batched check and a key path read of it), or None (a section, a list of sections)."""
