@@ -1,0 +1,527 @@
+"""A verified inner bound of the region of attraction: a sublevel set {v <= c} of the
+reduced (6-state, ``permanent``) model proven positively invariant and attracted to the
+equilibrium, with outward-rounded interval arithmetic (python-flint's ``arb`` balls) and
+branch and bound over boxes of the Euler angles Theta.
+
+The argument (docs/analysis.md, "verified"). For the pinned body (eqs 21, 31, 32, 34),
+v = 0.5 Omega' J_p Omega + P(Theta) with the potential
+
+    P(Theta) = 0.5 Theta' K_r Theta + 0.5 X' K_t X - X' G + h,   X = R - A(Theta) R,
+
+and along the flow, with N the torque the actuators deliver and tau = -B' K_r Theta the
+static part of the commanded torque (eq 23), and L_r diagonal,
+
+    dv/dt = sum_i Omega_i (sat_i(tau_i - l_i Omega_i) - tau_i) - V' L_t V      (eq 37)
+
+(H unlimited). Where |tau_i| < limit_i, sat_i(tau_i) = tau_i, and since a clip is
+monotone each term is -l_i Omega_i^2 when axis i does not saturate and negative for
+Omega_i != 0 when it does: the saturation deficit power is never positive, and dv/dt < 0
+wherever Omega != 0. The proof at a level c therefore needs, on every Theta of a box
+domain D (|theta_2| < pi/2 - gimbal margin and ``simulation.limits``) with P(Theta) <= c:
+
+1. Theta is not on the boundary of D (so {v <= c} n D is compact and a union of
+   components of {v <= c}: a run cannot leave it without v rising above c);
+2. |tau_i(Theta)| < limit_i on every limited axis (so dv/dt <= 0 on it);
+3. grad P(Theta) != 0, except in a small box E around the equilibrium on which the
+   interval Hessian of P is positive definite (P strictly convex there: one rest point).
+
+Then {v <= c} n D is positively invariant, dv/dt = 0 only where Omega = 0, and the
+largest invariant set there consists of rest points (grad P = 0 with Omega = 0): only the
+equilibrium. By LaSalle's invariance principle every run from the set converges to it.
+
+The largest such c is found at once: c is a lower bound of P over the set of Theta that
+fail 1-3, computed by best-first branch and bound (boxes ordered by their lower bound of
+P, bisected along their widest side scaled by sqrt(K_r)) to a relative tolerance; the box
+that stops the search, and why, is :attr:`Verification.reason`.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+import os
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..kinematics import GIMBAL_LOCK_ANGLE
+
+__all__ = ["Verification", "NotVerifiable", "verify_sublevel", "verify_analysis", "check_verifiable",
+           "potential", "DEFAULT_RTOL"]
+
+#: The verified c is within this (relative) of the least P over the failing set of the
+#: sufficient conditions (the search stops there).
+DEFAULT_RTOL = 0.01
+#: Boxes no smaller than this (relative to the domain's scaled size) are bisected further.
+_MIN_WIDTH = 1e-6
+#: The most boxes of one search.
+MAX_BOXES = 400_000
+
+
+class NotVerifiable(ValueError):
+    """The configuration or level cannot be verified here; the message says why."""
+
+
+@dataclass(frozen=True)
+class Verification:
+    """A verified sublevel bound (module docstring).
+
+    Attributes
+    ----------
+    level : float
+        c [J]: {v <= c} (the component of the equilibrium, inside the domain) is proven
+        positively invariant and inside the region of attraction.
+    boxes : int
+        Theta boxes the branch and bound evaluated.
+    seconds : float
+        Wall time of the proof [s].
+    reason : str
+        What stops c from being larger: the box and the condition that failed there.
+    box : ndarray, shape (3, 2)
+        That box, [theta_i low, high] [rad].
+    equilibrium_box : float
+        Half-width [rad] of the box around the equilibrium where P is proven strictly convex.
+    method : str
+        ``"interval arithmetic"``.
+    """
+
+    level: float
+    boxes: int
+    seconds: float
+    reason: str
+    box: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
+    equilibrium_box: float = 0.0
+    method: str = "interval arithmetic"
+
+    @property
+    def summary(self) -> str:
+        """``"verified c = 0.0375 J (interval arithmetic, 1234 boxes, 0.8 s)"``."""
+        return (f"verified c = {self.level:.4g} J ({self.method}, {self.boxes} boxes, {self.seconds:.2g} s)")
+
+
+# -- what is covered ----------------------------------------------------------------------------
+def check_verifiable(config) -> None:
+    """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
+    unless the configuration's analysis runs on the reduced 6-state model with what the
+    proof covers: clipped torque limits, diagonal positive L_r, H unlimited, no
+    disturbances, no bounds of X, V or E in ``simulation.limits``."""
+    variant = config.variant
+    if variant != "permanent":
+        raise NotVerifiable(f"controller.variant: found {variant!r} (its analysis runs on more than 6 states); "
+                            "--verify covers the reduced 6-state model of 'permanent'")
+    gains = config.gains
+    l_r = np.asarray(gains.l_r, dtype=float)
+    if np.any(l_r - np.diag(np.diag(l_r))):
+        raise NotVerifiable(f"controller.l_r: found a non-diagonal L_r {l_r.tolist()}; --verify needs a diagonal "
+                            "L_r (the saturation deficit power is bounded axis by axis)")
+    if np.any(np.diag(l_r) <= 0.0):
+        raise NotVerifiable(f"controller.l_r: found {np.diag(l_r).tolist()}; --verify needs every L_r_i > 0 "
+                            "(LaSalle's argument: dv/dt = 0 only where Omega = 0)")
+    sat = gains.saturation
+    if sat is not None:
+        if sat.shape != "clip":
+            raise NotVerifiable(f"controller.saturation.shape: found {sat.shape!r}; --verify covers 'clip' "
+                                "(a smooth saturation delivers less than the commanded torque at every state, "
+                                "so its deficit power is not zero where no limit is reached)")
+        if np.any(np.isfinite(sat.force_h)) and (np.any(gains.k_t) or np.any(gains.l_t)):
+            raise NotVerifiable(f"controller.saturation.force_h: found {np.asarray(sat.force_h).tolist()}; "
+                                "--verify covers unlimited H (or K_t = L_t = 0)")
+    if gains.disturbances:
+        raise NotVerifiable(f"disturbances: found {len(gains.disturbances)}; --verify covers the undisturbed "
+                            "body (a disturbance is not a property of a sublevel set)")
+    limits = config.simulation.limits
+    if limits is not None:
+        bounds = np.asarray(limits.array, dtype=float)
+        if np.any(np.isfinite(bounds[2:])):
+            raise NotVerifiable("simulation.limits: found bounds of x, v or e; --verify covers bounds of "
+                                "theta and omega")
+
+
+# -- interval kernels (3-vectors and 3x3 matrices as lists of arb) -----------------------------
+def _arb():
+    try:
+        from flint import arb
+    except ImportError as exc:  # pragma: no cover - the extra is a test dependency
+        raise NotVerifiable("--verify needs python-flint (pip install \"rbstab[verify]\")") from exc
+    return arb
+
+
+def _ball(arb, lo: float, hi: float):
+    """An arb ball containing [lo, hi] (outward)."""
+    mid = 0.5 * (lo + hi)
+    rad = max(hi - mid, mid - lo)
+    rad = math.nextafter(rad * (1.0 + 4e-16), math.inf) + 1e-300
+    return arb(mid, rad)
+
+
+def _rot(axis: int, c, s, zero, one):
+    """R_axis(t) from its cosine and sine (A = Rx Ry Rz, eq 1)."""
+    if axis == 0:
+        return [[one, zero, zero], [zero, c, -s], [zero, s, c]]
+    if axis == 1:
+        return [[c, zero, s], [zero, one, zero], [-s, zero, c]]
+    return [[c, -s, zero], [s, c, zero], [zero, zero, one]]
+
+
+def _drot(axis: int, c, s, zero):
+    """dR_axis/dt."""
+    if axis == 0:
+        return [[zero, zero, zero], [zero, -s, -c], [zero, c, -s]]
+    if axis == 1:
+        return [[-s, zero, c], [zero, zero, zero], [-c, zero, -s]]
+    return [[-s, -c, zero], [c, -s, zero], [zero, zero, zero]]
+
+
+def _ddrot(axis: int, c, s, zero):
+    """d^2 R_axis/dt^2."""
+    if axis == 0:
+        return [[zero, zero, zero], [zero, -c, s], [zero, -s, -c]]
+    if axis == 1:
+        return [[-c, zero, -s], [zero, zero, zero], [s, zero, -c]]
+    return [[-c, s, zero], [-s, -c, zero], [zero, zero, zero]]
+
+
+def _mv(m, v):
+    return [m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+            m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+            m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2]]
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+class _Model:
+    """P, grad P, the Hessian of P and tau = -B' K_r Theta over a box of Theta, in arb."""
+
+    def __init__(self, variant, arb) -> None:
+        p = variant.parameters[0]
+        self.arb = arb
+        self.zero, self.one = arb(0), arb(1)
+        self.k_r = np.asarray(p["k_r"], dtype=float)
+        self.k_t = np.asarray(p["k_t"], dtype=float)
+        self.diag_kr = not np.any(self.k_r - np.diag(np.diag(self.k_r)))
+        self.R = [arb(float(x)) for x in p["attachment_point"]]
+        self.G = [arb(float(x)) for x in p["weight"]]
+        self.h = arb(float(p["lyapunov_offset"]))
+        self.K_r = [[arb(float(x)) for x in row] for row in self.k_r]
+        self.K_t = [[arb(float(x)) for x in row] for row in self.k_t]
+        self.has_kt = bool(np.any(self.k_t))
+        self.limit = np.asarray(p["torque_limit"], dtype=float) if p["saturation"] > 0 else np.full(3, np.inf)
+        self.limit_arb = [arb(float(x)) if np.isfinite(x) else None for x in self.limit]
+
+    def _trig(self, theta):
+        return [t.cos() for t in theta], [t.sin() for t in theta]
+
+    def _w(self, rots, vec):
+        """Rx Ry Rz vec with the given factors."""
+        return _mv(rots[0], _mv(rots[1], _mv(rots[2], vec)))
+
+    def _spring(self, theta, lo, hi):
+        """0.5 Theta' K_r Theta, tight for a diagonal K_r (squares of intervals)."""
+        arb = self.arb
+        if self.diag_kr:
+            total = self.zero
+            for i in range(3):
+                a, b = lo[i], hi[i]
+                sq_hi = max(a * a, b * b)
+                sq_lo = 0.0 if a <= 0.0 <= b else min(a * a, b * b)
+                sq = arb(sq_lo).union(arb(sq_hi)) if sq_lo != sq_hi else arb(sq_lo)
+                # sq_lo, sq_hi were rounded: widen by their rounding
+                sq = sq + arb(0, 4e-16 * sq_hi + 1e-300)
+                total = total + 0.5 * self.K_r[i][i] * sq
+            return total
+        return 0.5 * _dot(theta, _mv(self.K_r, theta))
+
+    def evaluate(self, lo, hi, hessian: bool = False):
+        """(P, grad P, tau) over the box [lo, hi] (arb balls); with ``hessian`` also the
+        3x3 Hessian of P."""
+        arb, zero, one = self.arb, self.zero, self.one
+        theta = [_ball(arb, lo[i], hi[i]) for i in range(3)]
+        cos, sin = self._trig(theta)
+        rots = [_rot(a, cos[a], sin[a], zero, one) for a in range(3)]
+        drots = [_drot(a, cos[a], sin[a], zero) for a in range(3)]
+        w = self._w(rots, self.R)
+        x = [self.R[i] - w[i] for i in range(3)]
+        kx = _mv(self.K_t, x) if self.has_kt else [zero, zero, zero]
+        force = [self.G[i] - kx[i] for i in range(3)]  # G - K_t X
+        p_val = self._spring(theta, lo, hi) - _dot(x, self.G) + self.h
+        if self.has_kt:
+            p_val = p_val + 0.5 * _dot(x, kx)
+        dw = []
+        for a in range(3):
+            f = [drots[b] if b == a else rots[b] for b in range(3)]
+            dw.append(self._w(f, self.R))
+        kth = _mv(self.K_r, theta)
+        grad = [kth[a] + _dot(force, dw[a]) for a in range(3)]
+        # tau = -B' K_r Theta, B of eq 1 (physics notes)
+        c2, s2, c3, s3 = cos[1], sin[1], cos[2], sin[2]
+        tau = [-(c3 / c2 * kth[0] + s3 * kth[1] - s2 * c3 / c2 * kth[2]),
+               -(-s3 / c2 * kth[0] + c3 * kth[1] + s2 * s3 / c2 * kth[2]),
+               -kth[2]]
+        if not hessian:
+            return p_val, grad, tau
+        ddrots = [_ddrot(a, cos[a], sin[a], zero) for a in range(3)]
+        hess = [[None] * 3 for _ in range(3)]
+        for a in range(3):
+            for b in range(a, 3):
+                f = list(rots)
+                if a == b:
+                    f[a] = ddrots[a]
+                else:
+                    f[a], f[b] = drots[a], drots[b]
+                dd = self._w(f, self.R)
+                kdw = _mv(self.K_t, dw[b]) if self.has_kt else [zero, zero, zero]
+                hess[a][b] = hess[b][a] = self.K_r[a][b] + _dot(dw[a], kdw) + _dot(force, dd)
+        return p_val, grad, tau, hess
+
+    def point(self, theta: np.ndarray) -> float:
+        """P at a point (float, for the search's ordering only)."""
+        p_val = self.evaluate(theta, theta)[0]
+        return float(p_val.mid())
+
+
+def _positive_definite(hess) -> bool:
+    """Every symmetric matrix in the interval matrix is positive definite (leading minors
+    bounded away from zero, Sylvester)."""
+    m1 = hess[0][0]
+    m2 = hess[0][0] * hess[1][1] - hess[0][1] * hess[1][0]
+    m3 = (hess[0][0] * (hess[1][1] * hess[2][2] - hess[1][2] * hess[2][1])
+          - hess[0][1] * (hess[1][0] * hess[2][2] - hess[1][2] * hess[2][0])
+          + hess[0][2] * (hess[1][0] * hess[2][1] - hess[1][1] * hess[2][0]))
+    return bool(m1 > 0 and m2 > 0 and m3 > 0)
+
+
+def _convex_box(model: _Model, centre: np.ndarray, radius: float) -> float:
+    """The largest half-width <= ``radius`` (halving) of a box around ``centre`` on which
+    the interval Hessian of P is positive definite (on each of 8 sub-boxes); 0 if none."""
+    for _ in range(24):
+        ok = True
+        for corner in range(8):
+            sign = np.array([1.0 if corner >> i & 1 else -1.0 for i in range(3)])
+            a, b = centre, centre + sign * radius
+            if not _positive_definite(model.evaluate(np.minimum(a, b), np.maximum(a, b), hessian=True)[3]):
+                ok = False
+                break
+        if ok:
+            return radius
+        radius *= 0.5
+    return 0.0
+
+
+def _domain(config, variant, model: _Model, equilibrium: np.ndarray, level_cap: float):
+    """The box D of Theta, (3, 2) [rad], and which of its faces are bounds of the model
+    (gimbal margin, limits) rather than chosen wide enough to hold every P <= level_cap."""
+    gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
+    limits = config.simulation.limits
+    theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
+    k_min = float(np.linalg.eigvalsh(model.k_r).min())
+    p = variant.parameters[0]
+    # P >= 0.5 k_min |Theta|^2 - 2 |R| |G| + h  (0.5 X'K_t X >= 0, |X| <= 2 |R|)
+    floor = -2.0 * np.linalg.norm(p["attachment_point"]) * np.linalg.norm(p["weight"]) + float(p["lyapunov_offset"])
+    spring = math.sqrt(max(2.0 * (level_cap - floor) / k_min, 0.0)) * 1.05 + 1e-3
+    half = np.array([spring, spring, spring])
+    half[1] = min(half[1], gimbal)
+    half = np.minimum(half, theta_limit)
+    box = np.column_stack([-half, half])
+    return box
+
+
+@dataclass(order=True)
+class _Item:
+    key: float
+    index: int
+    lo: np.ndarray = field(compare=False)
+    hi: np.ndarray = field(compare=False)
+    p_lo: object = field(compare=False)
+
+
+def _lower(x) -> float:
+    """A float <= every value of the arb ball x."""
+    return math.nextafter(float(x.lower()), -math.inf)
+
+
+def _upper(x) -> float:
+    return math.nextafter(float(x.upper()), math.inf)
+
+
+def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT_RTOL,
+                    max_boxes: int = MAX_BOXES) -> Verification:
+    """Prove {v <= c} positively invariant and inside the region of attraction (module
+    docstring).
+
+    Parameters
+    ----------
+    config : RunConfig or path-like
+        A ``permanent`` configuration (:func:`check_verifiable`).
+    level : float, optional
+        c [J] to prove; None: the largest c the method proves, to ``rtol``.
+    rtol : float
+        Relative tolerance of the largest c.
+    max_boxes : int
+        The most boxes of the search.
+
+    Returns
+    -------
+    Verification
+
+    Raises
+    ------
+    NotVerifiable
+        For a configuration the method does not cover, or a ``level`` it cannot prove
+        (the message names the box and the condition that failed there).
+    """
+    if isinstance(config, (str, os.PathLike)):
+        from ..config import load_config  # heavy: pydantic
+
+        config = load_config(config)
+    check_verifiable(config)
+    arb = _arb()
+    t0 = _time.perf_counter()
+    variant = config.make_variant()
+    model = _Model(variant, arb)
+    equilibrium = np.asarray(variant.equilibrium, dtype=float)[:3]
+    gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
+    # an upper bound of the least P on the faces |theta_2| = gimbal: no c above it can be proven
+    face = [model.point(np.array([s1, sg * gimbal, 0.0])) for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0)]
+    level_cap = min(face) if level is None else max(float(level), 0.0)
+    domain = _domain(config, variant, model, equilibrium, level_cap)
+    limits = config.simulation.limits
+    theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
+    omega_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[1]
+    radius = _convex_box(model, equilibrium, 0.05 * float(np.min(domain[:, 1])))
+    if radius == 0.0:
+        raise NotVerifiable("the interval Hessian of P is not positive definite on any box around the equilibrium "
+                            f"theta = {np.round(equilibrium, 6).tolist()} rad")
+    e_lo, e_hi = equilibrium - radius, equilibrium + radius
+    scale = np.sqrt(np.diag(model.k_r))  # sides in units of the spring's sqrt(J)
+    min_width = _MIN_WIDTH * float(np.max((domain[:, 1] - domain[:, 0]) * scale))
+
+    heap: list[_Item] = []
+    counter = 0
+
+    def push(lo, hi) -> None:
+        nonlocal counter
+        counter += 1
+        p_val, grad, tau = model.evaluate(lo, hi)
+        # mean-value form: P(mid) + grad P(box) (Theta - mid), intersected with the plain one
+        mid = 0.5 * (lo + hi)
+        p_mid = model.evaluate(mid, mid)[0]
+        mvf = p_mid
+        for a in range(3):
+            mvf = mvf + grad[a] * _ball(arb, lo[a] - mid[a], hi[a] - mid[a])
+        try:
+            p_val = p_val.intersection(mvf)
+        except ValueError:  # disjoint enclosures cannot both hold: keep the first
+            pass
+        heapq.heappush(heap, _Item(_lower(p_val), counter, lo, hi, (p_val, grad, tau)))
+
+    push(domain[:, 0].copy(), domain[:, 1].copy())
+    best_bad = math.inf  # least P found at a point that fails (for the stopping rule only)
+    p_floor = None
+    reason, bad_box = "", np.zeros((3, 2))
+    result_level = None
+    while heap:
+        item = heapq.heappop(heap)
+        lo, hi = item.lo, item.hi
+        p_val, grad, tau = item.p_lo
+        if p_floor is None:
+            p_floor = item.key  # best-first: the least lower bound of P on D
+        if level is not None and item.key > level:
+            result_level = float(level)
+            break
+        if level is None and item.key >= best_bad * (1.0 - rtol):
+            result_level = item.key
+            reason = reason or "the search's tolerance"
+            break
+        failures = []
+        on_face = ([(a, 0) for a in range(3) if lo[a] <= domain[a, 0]]
+                   + [(a, 1) for a in range(3) if hi[a] >= domain[a, 1]])
+        if on_face:
+            a, s = on_face[0]
+            what = ("the gimbal-lock margin" if a == 1 and domain[1, 1] >= gimbal
+                    else "simulation.limits.theta" if domain[a, 1] >= theta_limit[a] else "the search domain")
+            failures.append(f"the level set reaches the domain boundary |theta_{a + 1}| = {domain[a, 1]:.4g} rad "
+                            f"({what})")
+            pt = 0.5 * (lo + hi)
+            pt[a] = domain[a, s]
+            best_bad = min(best_bad, model.point(pt))
+        for i in range(3):
+            lim = model.limit_arb[i]
+            if lim is None:
+                continue
+            if not (abs(tau[i]) < lim):
+                failures.append(f"the commanded torque |N_{i + 1}| (at Omega = 0) reaches its limit "
+                                f"{model.limit[i]:g} N m")
+                mid = 0.5 * (lo + hi)
+                t_mid = model.evaluate(mid, mid)[2][i]
+                if abs(t_mid) > lim:
+                    best_bad = min(best_bad, float(p_val.upper()))
+        inside_e = bool(np.all(lo >= e_lo) and np.all(hi <= e_hi))
+        if not inside_e and not any(g > 0 or g < 0 for g in grad):
+            failures.append("grad P may vanish there (a rest point other than the equilibrium cannot be excluded)")
+        if not failures:
+            continue
+        widths = (hi - lo) * scale
+        if float(np.max(widths)) <= min_width or counter >= max_boxes:
+            reason = failures[0] + (" (box limit reached)" if counter >= max_boxes else "")
+            bad_box = np.column_stack([lo, hi])
+            if level is not None:
+                raise NotVerifiable(f"v <= {level:g} J not proven: box theta in "
+                                    f"{_fmt_box(bad_box)}: {reason}")
+            result_level = item.key
+            break
+        if level is None and not reason:
+            reason = failures[0]
+        if level is None:
+            reason = failures[0]
+            bad_box = np.column_stack([lo, hi])
+        a = int(np.argmax(widths))
+        m = 0.5 * (lo[a] + hi[a])
+        lo2, hi1 = lo.copy(), hi.copy()
+        hi1[a], lo2[a] = m, m
+        push(lo.copy(), hi1)
+        push(lo2, hi.copy())
+    else:
+        result_level = math.inf if level is None else float(level)
+    if level is None:
+        result_level = min(result_level, level_cap)
+        # strictly below the lower bound: no failing Theta has P <= c
+        result_level = result_level * (1.0 - 1e-9) if result_level > 0 else result_level
+    # Omega's bounds of simulation.limits: 0.5 Omega' J_p Omega <= c - min P
+    jp_inv = np.linalg.inv(np.asarray(variant.parameters[0]["pivot_inertia"], dtype=float))
+    for i in range(3):
+        if np.isfinite(omega_limit[i]):
+            cap = (p_floor or 0.0) + 0.5 * omega_limit[i] ** 2 / jp_inv[i, i] * (1.0 - 1e-9)
+            if cap < result_level:
+                if level is not None:
+                    raise NotVerifiable(f"v <= {level:g} J not proven: |Omega_{i + 1}| may reach "
+                                        f"simulation.limits.omega = {omega_limit[i]:g} rad/s")
+                result_level = cap
+                reason = f"|Omega_{i + 1}| may reach simulation.limits.omega = {omega_limit[i]:g} rad/s"
+    if level is None and not result_level > 0.0:
+        raise NotVerifiable(f"no level c > 0 proven: box theta in {_fmt_box(bad_box)}: {reason}")
+    if level is not None:
+        reason = f"v <= {level:g} J proven"
+    else:
+        reason = f"box theta in {_fmt_box(bad_box)}: {reason}"
+    return Verification(level=float(result_level), boxes=counter, seconds=_time.perf_counter() - t0,
+                        reason=reason, box=bad_box, equilibrium_box=radius)
+
+
+def _fmt_box(box: np.ndarray) -> str:
+    return " x ".join(f"[{a:.4g}, {b:.4g}]" for a, b in box)
+
+
+def verify_analysis(analysis, *, rtol: float = DEFAULT_RTOL) -> Verification:
+    """:func:`verify_sublevel` of an :class:`~rbstab.analysis.analyze.Analysis`'s analysed
+    configuration (the largest c proven)."""
+    return verify_sublevel(analysis.analysed, rtol=rtol)
+
+
+def potential(config, theta: np.ndarray) -> float:
+    """P(Theta) [J] of the module docstring at one Theta (3,) [rad], by the interval
+    kernel (its ball's midpoint): v at rest."""
+    variant = config.make_variant()
+    return _Model(variant, _arb()).point(np.asarray(theta, dtype=float))
