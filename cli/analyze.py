@@ -278,13 +278,17 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
               "magnitude uniform in [LO, HI].")
 @click.option("-n", "--draws", type=int, default=1000, show_default=True, metavar="N",
               help="Draws of the basin stability.")
+@click.option("--verify", is_flag=True,
+              help="Prove a sublevel bound {v <= c} positively invariant and inside the region of attraction "
+              "(interval arithmetic, branch and bound; the reduced 6-state model of permanent with clipped "
+              "torque limits). Needs python-flint (pip install \"rbstab[verify]\").")
 @click.option("--overwrite", is_flag=True,
               help="Replace an analysis file of another configuration of the same name (without it: refused).")
 @console_options
 def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
             no_simulation, ratio, basin_samples, jobs, engine, confidence, push, push_point, push_directions,
             push_direction, push_at, push_max, push_tol, push_rungs, stability_ranges, push_distribution, draws,
-            overwrite) -> None:
+            verify, overwrite) -> None:
     """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
 
     \b
@@ -301,6 +305,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     then bisection; every direction in one batch per step on --engine). With --basin-stability
     KEY=LO:HI ... or --push-distribution LO:HI: the fraction of -n random perturbations that
     recover, with its Wilson interval.
+    With --verify: a sublevel bound proven by interval arithmetic (docs/analysis.md, "verified").
     With --json: one object per config ("kind": "configuration") and per sweep ("robustness").
     """
     from rbstab.analysis import analyze as run_analysis  # heavy: numba, numpy
@@ -328,6 +333,8 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     _check_push_targets(loaded, stability_ranges)
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)
+    if verify:
+        _check_verifiable(loaded, specs)
     _check_sweeps(sweeps)
     console = get_console()
     say = console.out
@@ -341,7 +348,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
                                   samples=samples, seed=seed, simulate=not no_simulation,
                                   basin=axes.get(config.name), basin_samples=basin_samples, ratio=ratio,
                                   jobs=jobs or default_jobs(), engine=engine, push=push_options,
-                                  basin_stability=stability_options)
+                                  basin_stability=stability_options, verify=verify)
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         path = write_analysis(result, analysis_path(out, config.name), command_line=command_line())
@@ -363,3 +370,15 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         if as_json:
             console.emit({"kind": "robustness", **result.to_json()})
 
+
+def _check_verifiable(loaded, specs) -> None:
+    """--verify: every config covered by the verification (one line otherwise), before anything runs."""
+    from rbstab.analysis.verify import NotVerifiable, check_verifiable  # heavy: numpy
+
+    if specs:
+        raise click.UsageError(f"{specs[0]}: --verify takes configs, not a sweep spec")
+    for config in loaded:
+        try:
+            check_verifiable(config)
+        except NotVerifiable as exc:
+            raise click.ClickException(f"{config.name}: --verify: {exc}")

@@ -8,6 +8,8 @@
   estimate of the region of attraction (sampled, refined by local search);
 - :mod:`~rbstab.analysis.evidence`: that estimate checked against simulations (runs from
   {v = c}, and every run of the command);
+- :mod:`~rbstab.analysis.verify`: a verified sublevel bound (interval arithmetic, branch and
+  bound; the reduced 6-state model);
 - :mod:`~rbstab.analysis.basin`: the basin of attraction over a 2-D slice, by simulation;
 - :mod:`~rbstab.analysis.robustness`: stable fraction and separating parameters of a sweep;
 - :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin
@@ -24,6 +26,7 @@ from .certificate import Certificate, certify
 from .dataset import is_analysis_file, read_analysis, write_analysis
 from .linearise import Linearisation, linearise
 from .robustness import Robustness, robustness, wilson_interval
+from .verify import NotVerifiable, Verification, verify_analysis, verify_sublevel
 
 __all__ = [
     "analyze",
@@ -44,4 +47,8 @@ __all__ = [
     "write_analysis",
     "read_analysis",
     "is_analysis_file",
+    "verify_sublevel",
+    "verify_analysis",
+    "Verification",
+    "NotVerifiable",
 ]

@@ -38,6 +38,7 @@ from .evidence import FALSIFICATION_RUNS, check_runs, falsify
 from .linearise import Linearisation, linearise
 from .push import basin_stability as stability_of
 from .push import push_analysis, unbounded_fall_note
+from .verify import NotVerifiable, check_verifiable, verify_analysis
 
 __all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits",
            "equilibrium_outside_limits"]
@@ -68,6 +69,9 @@ class Analysis:
         The smallest fatal push of each direction (:func:`rbstab.analysis.push.push_analysis`).
     basin_stability : BasinStability or None
         (:func:`rbstab.analysis.push.basin_stability`).
+    verification : Verification or None
+        The verified sublevel bound (:func:`rbstab.analysis.verify.verify_analysis`); None
+        when not asked for.
     notes : list of str
         What the reader must know (a substituted law, an equilibrium outside the
         domain, the configuration's warnings).
@@ -83,6 +87,7 @@ class Analysis:
     basin: BasinMap | None = None
     push: Any = None
     basin_stability: Any = None
+    verification: Any = None
     notes: list[str] = field(default_factory=list)
     timing: dict = field(default_factory=dict)
 
@@ -288,6 +293,7 @@ def analyze(
     basin_stability: Mapping[str, Any] | None = None,
     executor: Any = None,
     falsification_runs: int = FALSIFICATION_RUNS,
+    verify: bool = False,
 ) -> Analysis:
     """Analyse the stability of one configuration's equilibrium.
 
@@ -333,6 +339,9 @@ def analyze(
         Runs of the certificate's falsification pass from states on {v = c}
         (:func:`rbstab.analysis.evidence.falsify`; 0: none). Whatever it is, c is checked
         against every run of the analysis (:func:`rbstab.analysis.evidence.check_runs`).
+    verify : bool
+        Prove a sublevel bound by interval arithmetic (:func:`rbstab.analysis.verify.verify_analysis`;
+        the reduced 6-state model of ``permanent``, checked before anything runs).
 
     Returns
     -------
@@ -344,6 +353,8 @@ def analyze(
         For an invalid configuration file.
     OutsideLimits
         When the equilibrium lies outside ``simulation.limits``.
+    NotVerifiable
+        With ``verify``, for a configuration the verification does not cover.
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
@@ -357,6 +368,8 @@ def analyze(
 
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
+    if verify:
+        check_verifiable(config)
     timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
@@ -412,6 +425,13 @@ def analyze(
                           engine=DEFAULT_ENGINE, seed=seed)
         result.certificate = check_runs(checked, result)
         timing["checks"] = _time.perf_counter() - t6
+    if verify:
+        t7 = _time.perf_counter()
+        try:
+            result.verification = verify_analysis(result)
+        except NotVerifiable as exc:  # a covered configuration whose proof reached no c > 0
+            notes.append(f"verification: {exc}")
+        timing["verification"] = _time.perf_counter() - t7
     return result
 
 

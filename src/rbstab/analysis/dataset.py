@@ -22,6 +22,8 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
     (rate_mode), sample_lyapunov, sample_rate, sample_rate_analytic, sample_outside (sample),
     worst_state_<block>(axis), sublevel, sublevel_sampled, boundary_level, ... (scalars),
     sublevel_history, sublevel_history_samples (sublevel_step)
+    verification (--verify): sublevel_verified, sublevel_verified_boxes, sublevel_verified_seconds
+    (scalars), sublevel_verified_box (axis, bound)
     basin: basin_outcome (flag_values 0 1 2: converged, not converged, failed),
     basin_time_to_converge, basin_lyapunov_initial, basin_lyapunov_final (basin_x, basin_y)
     push: push_direction(push_direction, axis), push_threshold, push_recovering,
@@ -192,6 +194,21 @@ def _certificate_variables(analysis) -> dict:
     }
 
 
+def _verification_variables(analysis) -> dict:
+    """The verified bound (``--verify``; none without it)."""
+    w = getattr(analysis, "verification", None)
+    if w is None:
+        return {}
+    return {
+        "sublevel_verified": _var((), w.level, "J", "c of {v <= c} proven positively invariant and inside the region "
+                                  "of attraction (interval arithmetic, branch and bound over Theta boxes)"),
+        "sublevel_verified_boxes": _var((), int(w.boxes), "1", "Theta boxes of the proof"),
+        "sublevel_verified_seconds": _var((), float(w.seconds), "s", "wall time of the proof"),
+        "sublevel_verified_box": _var(("axis", "bound"), np.asarray(w.box, dtype=float), "rad",
+                                      "the Theta box that stops c from being larger [low, high]"),
+    }
+
+
 def _basin_variables(analysis) -> tuple[dict, dict]:
     b = analysis.basin
     if b is None:
@@ -297,6 +314,9 @@ def _text_attributes(analysis) -> dict[str, Any]:
                      lasalle_observable=int(c.lasalle_observable), sublevel_bound=c.sublevel_bound,
                      n_samples=int(c.n_samples), sublevel_estimate=c.evidence, sublevel_settled=int(c.settled),
                      sublevel_notes="\n".join(c.notes))
+    w = getattr(analysis, "verification", None)
+    if w is not None:
+        attrs.update(sublevel_verified_method=w.method, sublevel_verified_reason=w.reason)
     if s is not None:
         attrs.update(simulation_status=s["status"], simulation_message=s["message"], t_end=s["t_end"])
     if b is not None:
@@ -315,7 +335,7 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
     push, push_coords, push_attrs = _push_variables(analysis)
     stability, stability_coords, stability_attrs = _stability_variables(analysis)
     data = {**_linearisation_variables(analysis), **_settling_variables(analysis),
-            **_certificate_variables(analysis), **basin, **push, **stability}
+            **_certificate_variables(analysis), **_verification_variables(analysis), **basin, **push, **stability}
     coords = {
         "state": _var(("state",), np.array(names, dtype=object), "1", "state variable"),
         "state_wrt": _var(("state_wrt",), np.array(names, dtype=object), "1", "state variable (derivative with "
@@ -323,6 +343,8 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
         "state_units": _var(("state",), np.array(units, dtype=object), "1", "units of each state variable"),
         "mode": _var(("mode",), np.arange(len(names)), "1", "eigenvalue index, real part descending"),
         "axis": _var(("axis",), np.array(["x", "y", "z"], dtype=object), "1", "vector component"),
+        **({"bound": _var(("bound",), np.array(["low", "high"], dtype=object), "1", "end of an interval")}
+           if getattr(analysis, "verification", None) is not None else {}),
         **basin_coords,
         **push_coords,
         **stability_coords,
@@ -522,6 +544,10 @@ def json_record(analysis) -> dict[str, Any]:
             "sublevel_history_samples": [int(n) for n in c.history_samples], "sublevel_settled": c.settled,
             "runs_checked": c.runs_checked, "sublevel_notes": list(c.notes),
         }
+    w = getattr(analysis, "verification", None)
+    if w is not None:
+        record["verification"] = {"sublevel": w.level, "method": w.method, "boxes": w.boxes, "seconds": w.seconds,
+                                  "reason": w.reason, "box": _floats(w.box)}
     if analysis.basin is not None:
         b = analysis.basin
         record["basin"] = {"axes": [a.key for a in b.axes], "shape": list(b.outcome.shape), "counts": b.counts(),

@@ -87,6 +87,17 @@ def _certificate_lines(c) -> list[str]:
     return lines
 
 
+def _verification_lines(analysis) -> list[str]:
+    w = getattr(analysis, "verification", None)
+    if w is None:
+        return []
+    c = analysis.certificate
+    ratio = (f"; {w.level / c.sublevel:.3g} x the estimate {_g(c.sublevel)} J"
+             if c is not None and c.sublevel > 0 and np.isfinite(c.sublevel) else "")
+    return [f"  {w.summary}{ratio}: {{v <= c}} proven positively invariant and inside the region of attraction",
+            f"    bounded by: {w.reason}"]
+
+
 def _basin_lines(analysis) -> list[str]:
     b = analysis.basin
     if b is None:
@@ -171,6 +182,7 @@ def describe(analysis) -> list[str]:
     lines += _mode_lines(lin)
     lines.append(_settling_line(analysis))
     lines += _certificate_lines(analysis.certificate)
+    lines += _verification_lines(analysis)
     lines += _basin_lines(analysis)
     lines += _push_lines(analysis)
     lines += _stability_lines(analysis)

@@ -457,7 +457,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
                 mid = 0.5 * (lo + hi)
                 t_mid = model.evaluate(mid, mid)[2][i]
                 if abs(t_mid) > lim:
-                    best_bad = min(best_bad, float(p_val.upper()))
+                    best_bad = min(best_bad, model.point(mid))
         inside_e = bool(np.all(lo >= e_lo) and np.all(hi <= e_hi))
         if not inside_e and not any(g > 0 or g < 0 for g in grad):
             failures.append("grad P may vanish there (a rest point other than the equilibrium cannot be excluded)")

@@ -1,0 +1,136 @@
+"""The verified sublevel bound (``rbstab analyze --verify``): never contradicted by states
+inside it (dv/dt <= 0 at 10,000 of them, recovery of the runs from the outermost), below
+the closed-form level of a second rest point and refused above it, refused with its reason
+on what it does not cover, and the CLI flag end to end."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from conftest import ROOT
+
+pytest.importorskip("flint")
+
+from rbstab.analysis import NotVerifiable, Verification, read_analysis, verify_sublevel  # noqa: E402
+from rbstab.analysis.push import runs_from_states  # noqa: E402
+from rbstab.analysis.verify import potential  # noqa: E402
+from rbstab.config import load_config  # noqa: E402
+from rbstab_cli.main import cli  # noqa: E402
+
+PENDULUM = ROOT / "configs/examples/saturated_pendulum.yaml"
+STANCE = ROOT / "configs/examples/stance_ankle.yaml"
+
+
+@pytest.fixture(scope="module", params=[PENDULUM, STANCE], ids=["pendulum", "stance"])
+def verified(request):
+    config = load_config(request.param)
+    return config, verify_sublevel(config)
+
+
+def _inside(variant, level: float, n: int, seed: int) -> np.ndarray:
+    """n states with v <= level, the outermost of 4 n drawn uniformly in the ellipsoid
+    0.5 dy' H dy <= 1.3 level of v's Hessian H at the equilibrium."""
+    from rbstab.analysis.derivatives import hessian
+
+    y_e = np.asarray(variant.equilibrium, dtype=float)
+    hess = hessian(lambda y: variant.lyapunov(y), y_e)[0]
+    vals, vecs = np.linalg.eigh(0.5 * (hess + hess.T))
+    rng = np.random.default_rng(seed)
+    z = rng.normal(size=(4 * n, 6))
+    z *= (rng.random(4 * n) ** (1 / 6) / np.linalg.norm(z, axis=1))[:, None]
+    y = y_e + (z * np.sqrt(2.6 * level / vals)) @ vecs.T
+    v = variant.lyapunov(y)
+    y, v = y[v <= level], v[v <= level]
+    assert len(y) >= n, "too few samples inside the verified set"
+    return y[np.argsort(v)[::-1][:n]]
+
+
+def test_verified_level_is_never_contradicted(verified):
+    config, result = verified
+    assert isinstance(result, Verification) and result.level > 0 and result.boxes > 0
+    variant = config.make_variant()
+    y = _inside(variant, result.level, 10_000, seed=1)
+    # dv/dt at every state: the analytic rate and the rate of v along the right-hand side
+    rate = variant.evaluate(y)["lyapunov_rate"]
+    f = variant.rhs(0.0, y)
+    h = 1e-7 / np.maximum(np.linalg.norm(f, axis=1), 1.0)[:, None]
+    numeric = (variant.lyapunov(y + h * f) - variant.lyapunov(y - h * f)) / (2 * h[:, 0])
+    scale = 1e-9 * (1.0 + np.abs(rate)) + 1e-12
+    assert np.all(rate <= scale), f"dv/dt > 0 inside the verified set: {rate.max():g} W"
+    assert np.all(numeric <= 1e-5 * (1.0 + np.abs(rate))), f"numerical dv/dt > 0: {numeric.max():g} W"
+    # the runs from the 200 outermost states recover (inside the domain, v ends below its start)
+    ok, v0, v1 = runs_from_states(config, y[:200])
+    assert np.all(ok == 1) and np.all(v1 < 0.5 * v0), "a run from inside the verified set did not recover"
+
+
+def test_verified_level_is_near_the_checked_estimate(verified):
+    config, result = verified
+    # the sufficient condition's onset: the static torque K_r theta reaching the limit about a tilt axis
+    # (the equilibrium at 0, theta along axis 1): P there is the closed form's least failing level
+    p = config.make_variant().parameters[0]
+    k, limit = float(p["k_r"][0, 0]), float(p["torque_limit"][0])
+    onset = potential(config, np.array([limit / k, 0.0, 0.0]))
+    assert result.level <= onset
+    assert result.level >= 0.97 * onset, (result.level, onset)
+
+
+@pytest.mark.parametrize("path", [PENDULUM, STANCE], ids=["pendulum", "stance"])
+def test_refused_at_a_level_holding_a_second_rest_point(path):
+    """At rest at theta* = arcsin(limit / (m g L)) the clipped torque holds the body against
+    gravity: a rest point other than the equilibrium, which a level P(theta*) contains."""
+    config = load_config(path)
+    p = config.make_variant().parameters[0]
+    mgl = float(p["mass"]) * 9.81 * float(-p["attachment_point"][2])
+    theta_s = math.asin(float(p["torque_limit"][0]) / mgl)
+    rest = np.array([theta_s, 0, 0, 0, 0, 0.0])
+    assert np.abs(config.make_variant().rhs(0.0, rest)).max() < 1e-9 * mgl  # it is a rest point
+    level = potential(config, rest[:3])
+    assert verify_sublevel(config).level < level
+    with pytest.raises(NotVerifiable, match="not proven: box theta in .*reaches its limit"):
+        verify_sublevel(config, level=level)
+
+
+def test_unlimited_body_is_bounded_by_the_domain():
+    """Without limits (K_r > m g L: no other rest point) only the gimbal-lock margin bounds c."""
+    config = load_config(PENDULUM, ["controller.saturation=null"])
+    result = verify_sublevel(config)
+    margin = np.pi / 2 - config.simulation.gimbal_margin
+    face = min(potential(config, np.array([0.0, s * margin, 0.0])) for s in (-1, 1))
+    assert "domain boundary |theta_2|" in result.reason
+    assert 0.97 * face <= result.level <= face
+
+
+@pytest.mark.parametrize("override, key", [
+    ("controller.saturation.shape=smooth", "controller.saturation.shape"),
+    ("controller.l_r=[[10,1,0],[1,10,0],[0,0,2]]", "controller.l_r"),
+])
+def test_refused_where_not_covered(override, key):
+    config = load_config(PENDULUM, [override])
+    with pytest.raises(NotVerifiable, match=key):
+        verify_sublevel(config)
+
+
+def test_refused_for_a_variant_on_more_states():
+    config = load_config(ROOT / "configs/paper/case2_visco_elastic.yaml")
+    with pytest.raises(NotVerifiable, match="controller.variant"):
+        verify_sublevel(config)
+
+
+def test_cli_verify(tmp_path):
+    runner = CliRunner()
+    result = runner.invoke(cli, ["analyze", str(PENDULUM), "--verify", "--no-simulation", "--samples", "400",
+                                 "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "verified c = " in result.output and "interval arithmetic" in result.output
+    ds = read_analysis(tmp_path / "saturated_pendulum.analysis.nc")
+    level = float(ds["sublevel_verified"])
+    assert level > 0 and "reaches its limit" in ds.attrs["sublevel_verified_reason"]
+    refused = runner.invoke(cli, ["analyze", str(PENDULUM), "--verify", "--set", "controller.saturation.shape=smooth",
+                                  "-o", str(tmp_path / "no")])
+    assert refused.exit_code != 0
+    assert "controller.saturation.shape" in refused.output and "Traceback" not in refused.output
+    assert len(refused.output.strip().splitlines()) == 1
+    assert not (tmp_path / "no").exists()
