@@ -320,8 +320,9 @@ def _domain(config, variant, model: _Model, equilibrium: np.ndarray, level_cap: 
     p = variant.parameters[0]
     # P >= 0.5 k_min |Theta|^2 - 2 |R| |G| + h  (0.5 X'K_t X >= 0, |X| <= 2 |R|)
     floor = -2.0 * np.linalg.norm(p["attachment_point"]) * np.linalg.norm(p["weight"]) + float(p["lyapunov_offset"])
-    spring = math.sqrt(max(2.0 * (level_cap - floor) / k_min, 0.0)) * 1.05 + 1e-3
-    half = np.array([spring, spring, spring])
+    # and with a diagonal K_r, P >= 0.5 k_i theta_i^2 + that floor for each i
+    k = np.diag(model.k_r) if model.diag_kr else np.full(3, k_min)
+    half = np.sqrt(np.maximum(2.0 * (level_cap - floor) / k, 0.0)) * 1.05 + 1e-3
     half[1] = min(half[1], gimbal)
     half = np.minimum(half, theta_limit)
     box = np.column_stack([-half, half])
@@ -419,6 +420,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
 
     push(domain[:, 0].copy(), domain[:, 1].copy())
     best_bad = math.inf  # least P found at a point that fails (for the stopping rule only)
+    point_failure = ""
     p_floor = None
     reason, bad_box = "", np.zeros((3, 2))
     result_level = None
@@ -446,7 +448,8 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
                             f"({what})")
             pt = 0.5 * (lo + hi)
             pt[a] = domain[a, s]
-            best_bad = min(best_bad, model.point(pt))
+            if model.point(pt) < best_bad:
+                best_bad, point_failure = model.point(pt), failures[-1]
         for i in range(3):
             lim = model.limit_arb[i]
             if lim is None:
@@ -456,13 +459,16 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
                                 f"{model.limit[i]:g} N m")
                 mid = 0.5 * (lo + hi)
                 t_mid = model.evaluate(mid, mid)[2][i]
-                if abs(t_mid) > lim:
-                    best_bad = min(best_bad, model.point(mid))
+                if abs(t_mid) > lim and model.point(mid) < best_bad:
+                    best_bad, point_failure = model.point(mid), failures[-1]
         inside_e = bool(np.all(lo >= e_lo) and np.all(hi <= e_hi))
         if not inside_e and not any(g > 0 or g < 0 for g in grad):
             failures.append("grad P may vanish there (a rest point other than the equilibrium cannot be excluded)")
         if not failures:
             continue
+        if level is not None and best_bad <= level:  # a point of the box fails below the level
+            raise NotVerifiable(f"v <= {level:g} J not proven: box theta in "
+                                f"{_fmt_box(np.column_stack([lo, hi]))}: {point_failure}")
         widths = (hi - lo) * scale
         if float(np.max(widths)) <= min_width or counter >= max_boxes:
             reason = failures[0] + (" (box limit reached)" if counter >= max_boxes else "")
