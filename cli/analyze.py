@@ -191,7 +191,7 @@ def _split_specs(paths) -> tuple[list[str], list[str]]:
 
 
 def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samples, seed, certificate, overwrite,
-                  overrides, as_json) -> None:
+                  overrides, as_json, verify=False) -> None:
     """Push recovery and basin stability at every configuration of the spec ``path``."""
     from rbstab.analysis.dataset import analysis_path, write_analysis  # heavy: numba, numpy
     from rbstab.analysis.recovery import RECOVERY_SUFFIX, recovery_across  # heavy: numba, numpy
@@ -207,7 +207,8 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
         with workers if workers is not None else contextlib.nullcontext():
             result = recovery_across(spec, push=push, basin_stability=stability, output=out, ratio=ratio,
                                      engine=engine, executor=workers, seed=seed, certificate=certificate,
-                                     certificate_samples=samples, overwrite=overwrite, say=console.out)
+                                     certificate_samples=samples, overwrite=overwrite, say=console.out,
+                                     verify=verify)
     except SweepSpecError as exc:
         raise spec_error(path, exc.errors)
     except ValueError as exc:
@@ -360,7 +361,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     for spec in specs:
         _analyse_spec(spec, out, push_options, stability_options, ratio=ratio, engine=engine,
                       jobs=jobs or default_jobs(), samples=samples, seed=seed, certificate=not no_certificate,
-                      overwrite=overwrite, overrides=overrides, as_json=as_json)
+                      overwrite=overwrite, overrides=overrides, as_json=as_json, verify=verify)
     for folder in sweeps:
         result = robustness(folder, confidence=confidence)
         path = write_analysis(result, analysis_path(out, f"{result.sweep}.robustness"), command_line=command_line())
@@ -375,8 +376,6 @@ def _check_verifiable(loaded, specs) -> None:
     """--verify: every config covered by the verification (one line otherwise), before anything runs."""
     from rbstab.analysis.verify import NotVerifiable, check_verifiable  # heavy: numpy
 
-    if specs:
-        raise click.UsageError(f"{specs[0]}: --verify takes configs, not a sweep spec")
     for config in loaded:
         try:
             check_verifiable(config)

@@ -134,6 +134,16 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
                            lambda i: f"basin-stability draw {i} ({', '.join(f'{k} = {v:.4g}' for k, v in zip(b.keys, b.values[i]))})")
     c = (float(cert.sublevel) if cert.positive_definite else 0.0) if cert is not None else math.nan
     record["sublevel"], record["sublevel_bound"] = c, cert.sublevel_bound if cert is not None else ""
+    verified = math.nan
+    if options.get("verify"):
+        from .verify import NotVerifiable, verify_sublevel  # heavy: python-flint
+
+        try:
+            proof = verify_sublevel(config)
+            verified = proof.level
+            record.update(sublevel_verified=verified, sublevel_verified_reason=proof.reason)
+        except NotVerifiable as exc:
+            record.update(sublevel_verified=math.nan, sublevel_verified_reason=str(exc))
     if cert is not None:
         record.update(sublevel_sampled=float(cert.sublevel_sampled), sublevel_settled=bool(cert.settled),
                       sublevel_history=[float(x) for x in cert.sublevel_history], runs_checked=int(cert.runs_checked),
@@ -143,7 +153,8 @@ def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
         record["push"] = {"minimum": found_push.minimum, "direction": found_push.minimum_direction.tolist(),
                           "grid_minimum": found_push.grid_minimum,
                           "median": float(np.median(t[np.isfinite(t)])) if np.isfinite(t).any() else math.inf,
-                          "estimate": found_push.estimate(c), "non_monotone": int((~found_push.thresholds.monotone).sum()),
+                          "estimate": found_push.estimate(c), "verified": found_push.estimate(verified),
+                          "non_monotone": int((~found_push.thresholds.monotone).sum()),
                           "directions": len(t), "units": found_push.units, "runs": found_push.runs}
     if found_stability is not None:
         b = found_stability
@@ -159,7 +170,7 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
                     output: str | os.PathLike = "results/analysis", ratio: float = DEFAULT_LYAPUNOV_RATIO,
                     engine: str = "compiled", executor=None, seed: int = 0, certificate: bool = True,
                     certificate_samples: int | None = None, overwrite: bool = False,
-                    say: Callable[[str], None] | None = None) -> Recovery:
+                    say: Callable[[str], None] | None = None, verify: bool = False) -> Recovery:
     """Push recovery and basin stability at every configuration of ``spec``.
 
     Parameters
@@ -185,6 +196,10 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
         a single analysis).
     overwrite : bool
         Replace records made with other options (without it: refused).
+    verify : bool
+        Prove each configuration's sublevel bound (:func:`rbstab.analysis.verify.verify_sublevel`;
+        ``push_verified``: the pushes it holds). The spec's first configuration is checked
+        against what the proof covers before anything runs.
 
     Raises
     ------
@@ -207,6 +222,15 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
                "ratio": float(ratio), "seed": int(seed), "certificate": bool(certificate),
                "certificate_samples": int(DEFAULT_SAMPLES if certificate_samples is None else certificate_samples),
                "estimate": ESTIMATE_METHOD if certificate else None}
+    if verify:
+        from ..config import config_from_mapping  # heavy: pydantic
+        from .verify import check_verifiable  # raises NotVerifiable (a ValueError) with its reason
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if table.n:
+                check_verifiable(config_from_mapping(table.resolved(0)))
+        options["verify"] = True
     token = _options_hash(options)
     folder = Path(output) / f"{spec.name}{RECOVERY_SUFFIX}"
     points = folder / "points"
@@ -280,6 +304,10 @@ def _line(record: dict, k: int, n: int) -> str:
         parts.append(f"smallest fatal push {p['minimum']:.4g} {p['units']} (estimate {p['estimate']:.3g}, from c = "
                      f"{record['sublevel']:.4g} J checked against {record.get('runs_checked', 0)} runs"
                      + ("" if record.get("sublevel_settled", True) else ", STILL MOVING") + ")")
+        if "sublevel_verified" in record:
+            parts.append(f"verified {p.get('verified', math.nan):.3g} (c = {record['sublevel_verified']:.4g} J, "
+                         "interval arithmetic)" if np.isfinite(record["sublevel_verified"]) else
+                         f"not verified ({record.get('sublevel_verified_reason', '')})")
     s = record.get("stability")
     if s:
         parts.append(f"basin stability {s['fraction']:.1%} ({s['low']:.1%} - {s['high']:.1%})")
@@ -312,6 +340,10 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
         "sublevel_notes": _var(("point",), np.array(["\n".join(r.get("sublevel_notes", [])) for r in result.records],
                                                     dtype=object), "1", "the runs that lowered c, one a line"),
     }
+    if any("sublevel_verified" in r for r in result.records):
+        data["sublevel_verified"] = _var(("point",), [r.get("sublevel_verified", math.nan) for r in result.records],
+                                         "J", "c of {v <= c} proven positively invariant and inside the region of "
+                                         "attraction (interval arithmetic; NaN: not verifiable)")
     push = [r.get("push") for r in result.records]
     if any(push):
         units = next(p["units"] for p in push if p)
@@ -325,6 +357,10 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
             "push_estimate": _var(("point",), get("estimate"), units,
                                   "smallest push the sublevel estimate {v <= c} holds: min over the directions of "
                                   "sqrt(c / dT(u)), below every simulated threshold"),
+            **({"push_verified": _var(("point",), [p.get("verified", math.nan) if p else math.nan for p in push],
+                                      units, "smallest push the verified set {v <= c} holds: min over the "
+                                      "directions of sqrt(c / dT(u)), a proven bound")}
+               if any(p and "verified" in p and np.isfinite(p["verified"]) for p in push) else {}),
             "push_non_monotone": _var(("point",), get("non_monotone"), "1",
                                       "directions along which recovery was not monotone in the magnitude"),
         })

@@ -212,6 +212,9 @@ def recovery_section(ds, path, out: FigureWriter) -> Section:
                 ax.plot(x[order], below, ":", color="0.4", marker="v", ms=4,
                         label="estimate from {v <= c}: sqrt(c / dT), min")
                 ax.fill_between(x[order], 0, below, color="0.6", alpha=0.15, lw=0)
+            if "push_verified" in ds:  # a proven bound: drawn as it is (a proof lies below every threshold)
+                ax.plot(x[order], ds["push_verified"].values[order], "-", color="k", marker="_", ms=8, lw=1.2,
+                        drawstyle="steps-mid", label="verified bound from {v <= c}: sqrt(c / dT), min")
             ax.set_ylabel(f"push [{units}]")
             ax.set_xlabel(label)
             ax.grid(alpha=0.3)
@@ -240,12 +243,21 @@ def recovery_section(ds, path, out: FigureWriter) -> Section:
                              "energy dT <= c; c sampled, refined by local search and checked against every run of "
                              "the point, so below each simulated threshold; an estimate, not a proof); the basin "
                              "stability with its Wilson interval as a band, and the fraction of draws inside "
-                             "{v <= c} that recovered."))
+                             "{v <= c} that recovered."
+                             + (" Black steps: the bound from the verified set {v <= c} (interval arithmetic, "
+                                "--verify): a proof, below every simulated threshold." if "push_verified" in ds
+                                else "")))
     facts = []
     if has_push:
         t = ds["push_minimum"].values
         facts.append(f"smallest fatal push from {format_value(float(np.nanmin(t)), 4)} to "
                      f"{format_value(float(np.nanmax(t)), 4)} {ds['push_minimum'].attrs.get('units', '')}")
+        if "push_verified" in ds:
+            above = int(np.sum(ds["push_verified"].values > t))
+            facts.append(f"verified bound from {format_value(float(np.nanmin(ds['push_verified'].values)), 4)} to "
+                         f"{format_value(float(np.nanmax(ds['push_verified'].values)), 4)}"
+                         + (f"; ABOVE the simulated threshold at {above} points: a contradiction to report"
+                            if above else ", below the simulated threshold at every point"))
     if has_stability:
         f = ds["stability_fraction"].values
         facts.append(f"basin stability from {np.nanmin(f):.1%} to {np.nanmax(f):.1%}")
