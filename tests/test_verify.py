@@ -66,6 +66,16 @@ def test_verified_level_is_never_contradicted(verified):
     assert np.all(ok == 1) and np.all(v1 < 0.5 * v0), "a run from inside the verified set did not recover"
 
 
+def test_potential_is_v_at_rest(verified):
+    """P(Theta) of the interval kernel is the variant's v at Omega = 0 (same constant h)."""
+    config, _ = verified
+    variant = config.make_variant()
+    theta = np.random.default_rng(3).normal(scale=0.4, size=(20, 3))
+    v = variant.lyapunov(np.hstack([theta, np.zeros((20, 3))]))
+    p = [potential(config, t) for t in theta]
+    assert np.allclose(p, v, rtol=1e-12, atol=1e-12 * np.abs(v).max())
+
+
 def test_verified_level_is_near_the_checked_estimate(verified):
     config, result = verified
     # the sufficient condition's onset: the static torque K_r theta reaching the limit about a tilt axis

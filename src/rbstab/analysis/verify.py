@@ -410,8 +410,8 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
         mid = 0.5 * (lo + hi)
         p_mid = model.evaluate(mid, mid)[0]
         mvf = p_mid
-        for a in range(3):
-            mvf = mvf + grad[a] * _ball(arb, lo[a] - mid[a], hi[a] - mid[a])
+        for a in range(3):  # Theta_a - mid_a over the box, in arb (no float rounding)
+            mvf = mvf + grad[a] * (_ball(arb, lo[a], hi[a]) - arb(float(mid[a])))
         try:
             p_val = p_val.intersection(mvf)
         except ValueError:  # disjoint enclosures cannot both hold: keep the first
