@@ -138,6 +138,11 @@ def test_cli_verify(tmp_path):
     ds = read_analysis(tmp_path / "saturated_pendulum.analysis.nc")
     level = float(ds["sublevel_verified"])
     assert level > 0 and "reaches its limit" in ds.attrs["sublevel_verified_reason"]
+    report = runner.invoke(cli, ["report", str(tmp_path), "-o", str(tmp_path / "r"), "--format", "md"],
+                           catch_exceptions=False)
+    assert report.exit_code == 0, report.output
+    text = "\n".join(p.read_text() for p in (tmp_path / "r").rglob("*.md"))
+    assert "verified c of {v <= c}" in text and "reaches its limit 4 N m" in text
     refused = runner.invoke(cli, ["analyze", str(PENDULUM), "--verify", "--set", "controller.saturation.shape=smooth",
                                   "-o", str(tmp_path / "no")])
     assert refused.exit_code != 0
@@ -167,3 +172,4 @@ def test_spec_verify_draws_a_bound_below_every_threshold(tmp_path):
     assert report.exit_code == 0, report.output
     text = "\n".join(p.read_text() for p in (tmp_path / "r").rglob("*.md"))
     assert "below the simulated threshold at every point" in text and "verified set" in text
+

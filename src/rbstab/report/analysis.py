@@ -171,6 +171,10 @@ def _certificate_table(ds) -> Table | None:
                                                                      " (STILL MOVING)")
          if "sublevel_history" in ds else "-"],
         ["c bounded by", str(a.get("sublevel_bound"))],
+        *([["verified c of {v <= c} [J] (interval arithmetic, --verify)",
+            f"{_f(_scalar(ds, 'sublevel_verified'))} ({int(_scalar(ds, 'sublevel_verified_boxes'))} boxes, "
+            f"{_f(_scalar(ds, 'sublevel_verified_seconds'), 2)} s)"],
+           ["verified c bounded by", str(a.get("sublevel_verified_reason"))]] if "sublevel_verified" in ds else []),
         ["certificate", f"holds ({a.get('certificate_argument')})" if a.get("certificate_holds") else "does not hold"],
     ]
     return Table("Lyapunov certificate", ["quantity", "value"], rows,
@@ -178,6 +182,9 @@ def _certificate_table(ds) -> Table | None:
                       "no sampled state, nor any state the local search from them found, with v < c has dv/dt > 0 "
                       "or lies outside the domain, and no simulated run of the command that started inside "
                       "{v <= c} failed to recover (docs/analysis.md)."
+                      + (" The verified c is a proof: {v <= c} positively invariant and inside the region of "
+                         "attraction, by interval arithmetic over boxes of Theta (docs/analysis.md, \"verified\")."
+                         if "sublevel_verified" in ds else "")
                       + (("\n" + str(a.get("sublevel_notes"))) if a.get("sublevel_notes") else ""))
 
 
@@ -225,6 +232,10 @@ def _rate_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile | No
         ax.plot(v[positive], rate[positive], ".", ms=4, color="C3", label="dv/dt > 0 (as |dv/dt|)")
     if c > 0:
         ax.axvline(c, color="k", ls="--", lw=1.0, label=f"sublevel estimate c = {c:.4g} J")
+    if "sublevel_verified" in ds and _scalar(ds, "sublevel_verified") > 0:
+        cv = _scalar(ds, "sublevel_verified")
+        ax.axvspan(v[ok].min() if ok.any() else cv * 1e-6, cv, color="C2", alpha=0.12, lw=0,
+                   label=f"verified {{v <= {cv:.4g} J}} (interval arithmetic)")
     ax.set_xscale("log")
     if (-rate[ok] > 0).any():
         ax.set_yscale("log")
