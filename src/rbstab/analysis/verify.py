@@ -141,7 +141,7 @@ def check_verifiable(config) -> None:
 # -- interval kernels (3-vectors and 3x3 matrices as lists of arb) -----------------------------
 def _arb():
     try:
-        from flint import arb
+        from flint import arb  # optional: the verify extra (python-flint)
     except ImportError as exc:  # pragma: no cover - the extra is a test dependency
         raise NotVerifiable("--verify needs python-flint (pip install \"rbstab[verify]\")") from exc
     return arb
