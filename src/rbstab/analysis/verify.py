@@ -310,9 +310,10 @@ def _convex_box(model: _Model, centre: np.ndarray, radius: float) -> float:
     return 0.0
 
 
-def _domain(config, variant, model: _Model, equilibrium: np.ndarray, level_cap: float):
-    """The box D of Theta, (3, 2) [rad], and which of its faces are bounds of the model
-    (gimbal margin, limits) rather than chosen wide enough to hold every P <= level_cap."""
+def _domain(config, variant, model: _Model, level_cap: float):
+    """The box D of Theta, (3, 2) [rad]: |theta_2| <= pi/2 - gimbal margin, the bounds of
+    ``simulation.limits.theta``, and otherwise wide enough that the spring alone holds every
+    P <= level_cap inside it."""
     gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
     limits = config.simulation.limits
     theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
@@ -325,8 +326,7 @@ def _domain(config, variant, model: _Model, equilibrium: np.ndarray, level_cap: 
     half = np.sqrt(np.maximum(2.0 * (level_cap - floor) / k, 0.0)) * 1.05 + 1e-3
     half[1] = min(half[1], gimbal)
     half = np.minimum(half, theta_limit)
-    box = np.column_stack([-half, half])
-    return box
+    return np.column_stack([-half, half])
 
 
 @dataclass(order=True)
@@ -341,10 +341,6 @@ class _Item:
 def _lower(x) -> float:
     """A float <= every value of the arb ball x."""
     return math.nextafter(float(x.lower()), -math.inf)
-
-
-def _upper(x) -> float:
-    return math.nextafter(float(x.upper()), math.inf)
 
 
 def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT_RTOL,
@@ -387,7 +383,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     # an upper bound of the least P on the faces |theta_2| = gimbal: no c above it can be proven
     face = [model.point(np.array([s1, sg * gimbal, 0.0])) for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0)]
     level_cap = min(face) if level is None else max(float(level), 0.0)
-    domain = _domain(config, variant, model, equilibrium, level_cap)
+    domain = _domain(config, variant, model, level_cap)
     limits = config.simulation.limits
     theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
     omega_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[1]
@@ -478,9 +474,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
                                     f"{_fmt_box(bad_box)}: {reason}")
             result_level = item.key
             break
-        if level is None and not reason:
-            reason = failures[0]
-        if level is None:
+        if level is None:  # the last box that failed before the search stopped
             reason = failures[0]
             bad_box = np.column_stack([lo, hi])
         a = int(np.argmax(widths))
