@@ -26,7 +26,7 @@ from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.config.loader import is_chain
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
 from rbstab.simulator import simulate, simulate_many
-from rbstab.summary import numerical_rate
+from rbstab.summary import LYAPUNOV_RATE_TOLERANCE, numerical_rate
 from rbstab.sweep.folder import index_part, row_from_attributes
 from rbstab.sweep import expand, run_sweep, spec_from_mapping
 from rbstab.sweep.runner import resolve_engine
@@ -80,6 +80,8 @@ def assert_close(batch, ref, rtol, sensitivity=()):
     for key, value in ref.outputs.items():
         scale = max(1.0, float(np.nanmax(np.abs(value))))
         tol = 50 * rtol * scale
+        if key == "lyapunov_rate_numerical" and len(ref.time) > 1:  # differences of v: its error over the step
+            tol = max(tol, 50 * rtol * float(np.nanmax(np.abs(ref.outputs["lyapunov"]))) / float(np.min(np.diff(ref.time))))
         for moved in sensitivity:
             tol = max(tol, 10 * max_diff(moved.outputs[key], value))
         assert np.array_equal(np.isnan(batch.outputs[key]), np.isnan(value)), key
@@ -115,7 +117,11 @@ def test_compiled_agrees_with_scipy_for_every_variant(path, overrides):
                 moved["initial_state"]["omega"] = np.nextafter(config.initial_state["omega"], direction).tolist()
                 sensitivity.append(simulate(config_from_mapping(moved), engine="scipy"))
         assert_close(got[i], ref, rtol, sensitivity)
-        assert got[i].summary["lyapunov_rate_check"] == ref.summary["lyapunov_rate_check"]
+        near = [got[i].summary["lyapunov_rate_mismatch_relative"], ref.summary["lyapunov_rate_mismatch_relative"]]
+        if not any(LYAPUNOV_RATE_TOLERANCE / 3 <= m <= 3 * LYAPUNOV_RATE_TOLERANCE for m in near):
+            # a verdict at its threshold is not comparable: a clipped torque's kinks between sparse
+            # samples move the numerical dv/dt by the engines' step placement (stance_ankle's spins)
+            assert got[i].summary["lyapunov_rate_check"] == ref.summary["lyapunov_rate_check"]
         assert got[i].name == config.name and got[i].config is config
         assert set(got[i].timing) == {"integration", "postprocess"}
 
