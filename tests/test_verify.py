@@ -173,3 +173,16 @@ def test_spec_verify_draws_a_bound_below_every_threshold(tmp_path):
     text = "\n".join(p.read_text() for p in (tmp_path / "r").rglob("*.md"))
     assert "below the simulated threshold at every point" in text and "verified set" in text
 
+
+
+def test_tilted_equilibrium_with_translational_gains_reaches_the_domain_boundary():
+    """Case 1 (permanent, K_t and L_t, gravity: a tilted equilibrium, no limits): only the
+    gimbal-lock margin bounds c, and the proof comes within 3 % of the least v there that the
+    certificate finds by Newton steps on the boundary (an independent computation)."""
+    from rbstab.analysis import analyze
+
+    path = ROOT / "configs/paper/case1_permanent.yaml"
+    boundary = analyze(path, samples=200, simulate=False, falsification_runs=0).certificate.boundary_level
+    result = verify_sublevel(path)
+    assert "gimbal-lock margin" in result.reason
+    assert 0.97 * boundary <= result.level <= boundary
