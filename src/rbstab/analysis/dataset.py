@@ -547,7 +547,7 @@ def json_record(analysis) -> dict[str, Any]:
     w = getattr(analysis, "verification", None)
     if w is not None:
         record["verification"] = {"sublevel": w.level, "method": w.method, "boxes": w.boxes, "seconds": w.seconds,
-                                  "reason": w.reason, "box": _floats(w.box)}
+                                  "reason": w.reason, "box": [_floats(row) for row in w.box]}
     if analysis.basin is not None:
         b = analysis.basin
         record["basin"] = {"axes": [a.key for a in b.axes], "shape": list(b.outcome.shape), "counts": b.counts(),
