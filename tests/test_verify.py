@@ -186,3 +186,43 @@ def test_tilted_equilibrium_with_translational_gains_reaches_the_domain_boundary
     result = verify_sublevel(path)
     assert "gimbal-lock margin" in result.reason
     assert 0.97 * boundary <= result.level <= boundary
+
+
+def test_interval_enclosures_hold_the_model_at_every_point():
+    """The arb kernel against the compiled model at points of random boxes (Case 1: a tilted
+    equilibrium, K_t, all three axes coupled): v at rest in P(box); its gradient and Hessian
+    (central differences of v) in the enclosures; the commanded torque at rest in tau(box)."""
+    from flint import arb
+
+    from rbstab.analysis.verify import _Model
+
+    config = load_config(ROOT / "configs/paper/case1_permanent.yaml")
+    variant = config.make_variant()
+    model = _Model(variant, arb)
+    rng = np.random.default_rng(5)
+
+    def v_at(theta):
+        return variant.lyapunov(np.hstack([np.atleast_2d(theta), np.zeros((len(np.atleast_2d(theta)), 3))]))
+
+    def inside(ball, x, slack):
+        return float(ball.lower()) - slack <= x <= float(ball.upper()) + slack
+
+    h = 1e-4
+    eye = np.eye(3) * h
+    for _ in range(12):
+        lo = rng.uniform(-1.0, 1.0, 3)
+        hi = lo + rng.uniform(0.001, 0.005, 3)  # small: enclosures a few per cent wide, so a wrong term shows
+        p_box, grad, tau, hess = model.evaluate(lo, hi, hessian=True)
+        points = rng.uniform(lo, hi, (10, 3))
+        command = variant.evaluate(np.hstack([points, np.zeros((10, 3))]))["torque_n"]
+        for x, n in zip(points, command):
+            v0 = float(v_at(x)[0])
+            assert inside(p_box, v0, 1e-9 * (1 + abs(v0)))
+            g = (v_at(x + eye) - v_at(x - eye)) / (2 * h)
+            hs = np.array([(v_at(x + eye[a] + eye) - v_at(x + eye[a] - eye) - v_at(x - eye[a] + eye)
+                            + v_at(x - eye[a] - eye)) / (4 * h * h) for a in range(3)])
+            for a in range(3):
+                assert inside(grad[a], g[a], 1e-4 * (1 + abs(g[a])))
+                assert inside(tau[a], n[a], 1e-9 * (1 + abs(n[a])))
+                for b in range(3):
+                    assert inside(hess[a][b], hs[a, b], 1e-3 * (1 + abs(hs[a, b])))
