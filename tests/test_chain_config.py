@@ -262,7 +262,8 @@ def _expected_chain(config):
     inf = np.full(3, math.inf)
     body = Body("body", config.body.mass, config.body.inertia, g.k_t, g.l_t,
                 None if sat is None else Saturation(inf, sat.force_h, inf, sat.shape), g.disturbances)
-    joint = Joint("controller", GROUND, 0, np.zeros(3), config.body.attachment_point, config.variant, g.k_r, g.l_r,
+    joint = Joint("controller", GROUND, 0, config.body.attachment_point, config.body.attachment_point,
+                  config.variant, g.k_r, g.l_r,
                   g.k_c, g.l_c, g.k_d, g.l_d, g.k_s, g.boundary_layer,
                   None if sat is None else Saturation(sat.torque_n, inf, sat.constraint_force, sat.shape))
     return single(body, joint, config.body.gravity)

@@ -134,9 +134,10 @@ class ChainConfig:
 def chain_of(config: RunConfig | ChainConfig) -> Chain:
     """The chain a configuration means: a chain config's own, or for a one-body config the
     one-body chain (:func:`rbstab.chain.single`): its body (named ``body``) with the
-    ground-anchored feedback K_t, L_t and the limits of H, held to the ground at the origin by
-    its joint (named ``controller``) at C = ``attachment_point`` with the variant's law, K_r,
-    L_r and the limits of N and Lambda. Same equations, same numbers."""
+    ground-anchored feedback K_t, L_t and the limits of H, held by its joint (named
+    ``controller``) at C = ``attachment_point`` to the ground point R (where C is at the
+    equilibrium X = 0, Theta = 0: E = X + A R - R, eq 4) with the variant's law, K_r, L_r and
+    the limits of N and Lambda. Same equations, same numbers."""
     if isinstance(config, ChainConfig):
         return config.chain
     gains, sat = config.gains, config.gains.saturation
@@ -145,7 +146,7 @@ def chain_of(config: RunConfig | ChainConfig) -> Chain:
         saturation=None if sat is None else Saturation(_INF3.copy(), sat.force_h, _INF3.copy(), sat.shape),
         disturbances=gains.disturbances)
     joint = Joint(
-        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=_array(np.zeros(3)),
+        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=config.body.attachment_point,
         child_point=config.body.attachment_point, variant=config.variant, k_r=gains.k_r, l_r=gains.l_r,
         k_c=gains.k_c, l_c=gains.l_c, k_d=gains.k_d, l_d=gains.l_d, k_s=gains.k_s,
         boundary_layer=gains.boundary_layer,
