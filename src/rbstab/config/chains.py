@@ -28,8 +28,9 @@ config, :mod:`rbstab.config`)::
     initial_state:                  # optional, per body by name; each key 3 numbers
       legs: {theta: [0.05, 0, 0]}   # theta, omega, x, v, d as in a one-body config
     simulation: {t_end: 5.0}        # as in a one-body config
-    disturbances:                   # optional, at most 4; as in a one-body config, plus
-      - {kind: impulse, value: [0, 15, 0], point: [0, 0, 0.2], start: 0.3, body: trunk}
+    disturbances:                   # optional, at most 4; as in a one-body config but no impulse,
+      # plus the body it acts on; a sliding joint needs boundary_layer > 0
+      - {kind: pulse, value: [0, 150, 0], point: [0, 0, 0.2], start: 0.3, duration: 0.1, body: trunk}
 
 Where a body's ``x`` (``v``) is left out, rbstab places it from its parent's state so that
 its joint's point coincides, E_j = 0 (and moves with it, dE_j/dt = 0):
@@ -243,6 +244,22 @@ def _initial_state(run: ChainSchema, chain: Chain, source: str | None,
     return states, tuple(placed), errors
 
 
+def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, overrides: Sequence[str]) -> None:
+    """Refuse what the chain engine does not integrate: a sliding joint's pure sign law
+    (boundary_layer 0: integrated event by event for one body only) and impulses (the
+    continuous disturbances act on chains)."""
+    for joint in chain.joints:
+        if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
+            _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
+                    "the pure sign law is integrated event by event for one body only; tanh(E/phi) in a chain",
+                    source, overrides, ("joints",))
+    for i, entry in enumerate(resolved.get("disturbances") or ()):
+        if entry.get("kind") == "impulse":
+            _refuse(f"disturbances.{i}.kind", "'impulse'", "step, pulse, sine or noise in a chain",
+                    "an impulse is applied to one body only; a short pulse acts on a chain's body",
+                    source, overrides, ("disturbances",))
+
+
 def _refuse(key: str, found: str, expected: str, detail: str, source: str | None, overrides: Sequence[str],
             inputs: Sequence[str]) -> None:
     line = f"config key '{key}': found {found}; expected {expected} ({detail})"
@@ -334,6 +351,7 @@ def _build(data: Any, *, default_name: str | None, source: str | None, overrides
     run = _validated(plain_tree(data), default_name, source, overrides, schema=ChainSchema)
     resolved = _resolved(run)
     chain = _chain(run, resolved.get("disturbances") or ())
+    _check_engine_scope(chain, resolved, source, overrides)
     states, placed, errors = _initial_state(run, chain, source, overrides)
     _check_limits(chain, states, errors, run, source, overrides)
     return ChainConfig(name=run.name, chain=chain, initial_state=states, placed=placed,
