@@ -179,6 +179,11 @@ REFUSED = [
     ("permanent_v_violated", lambda d: d["initial_state"]["legs"].update(v=[0.0, 0.0, 0.1]),
      "initial_state.legs.v", ["found [0.0, 0.0, 0.1]", "the permanent joint 'ankle' to 'ground' (dE_j/dt = 0)",
                               "|dE_j/dt| = 0.1"]),
+    ("sliding_sign_law_in_a_chain", lambda d: d["joints"][1].update(variant="sliding", k_s=50.0),
+     "joints.hip.boundary_layer", ["found 0", "expected a boundary layer > 0 [m] in a chain"]),
+    ("impulse_on_a_chain", _set(["disturbances"], [
+        {"kind": "impulse", "value": [0, 10, 0], "point": [0, 0, 0.2], "start": 0.1, "body": "trunk"}]),
+     "disturbances.0.kind", ["found 'impulse'", "expected step, pulse, sine or noise in a chain"]),
     ("more_than_8_bodies", _nine_bodies, "bodies", ["found 9 bodies", "expected a list of 1 to 8 bodies"]),
     ("duplicate_body", _set(["bodies", 1, "name"], "legs"), "bodies.1.name",
      ["found 'legs'", "expected a name no other body has", "bodies.0.name is 'legs' too"]),
@@ -262,7 +267,8 @@ def _expected_chain(config):
     inf = np.full(3, math.inf)
     body = Body("body", config.body.mass, config.body.inertia, g.k_t, g.l_t,
                 None if sat is None else Saturation(inf, sat.force_h, inf, sat.shape), g.disturbances)
-    joint = Joint("controller", GROUND, 0, np.zeros(3), config.body.attachment_point, config.variant, g.k_r, g.l_r,
+    joint = Joint("controller", GROUND, 0, config.body.attachment_point, config.body.attachment_point,
+                  config.variant, g.k_r, g.l_r,
                   g.k_c, g.l_c, g.k_d, g.l_d, g.k_s, g.boundary_layer,
                   None if sat is None else Saturation(sat.torque_n, inf, sat.constraint_force, sat.shape))
     return single(body, joint, config.body.gravity)
@@ -304,8 +310,8 @@ def _as_chain_mapping(config) -> dict:
     sat = r["controller"].get("saturation")
     body = {"name": "body", "mass": r["body"]["mass"], "inertia": r["body"]["inertia"],
             "k_t": ctrl.pop("k_t"), "l_t": ctrl.pop("l_t")}
-    joint = {"name": "controller", "parent": "ground", "child": "body",
-             "child_point": r["body"]["attachment_point"], **ctrl}
+    joint = {"name": "controller", "parent": "ground", "parent_point": r["body"]["attachment_point"],
+             "child": "body", "child_point": r["body"]["attachment_point"], **ctrl}
     if sat is not None:
         body["saturation"] = {k: sat[k] for k in ("force_h", "shape") if k in sat}
         joint["saturation"] = {k: sat[k] for k in ("torque_n", "constraint_force", "shape") if k in sat}
@@ -325,6 +331,10 @@ def test_the_two_spellings_of_one_body_are_one_chain(path):
         if config.variant == "permanent":  # x and v follow from theta and omega: let rbstab place them
             for key in ("x", "v"):
                 data["initial_state"]["body"].pop(key)
+        if any(d["kind"] == "impulse" for d in data.get("disturbances", ())):  # a chain takes no impulse
+            with pytest.raises(ConfigError, match="found 'impulse'; expected step, pulse, sine or noise in a chain"):
+                chain_config_from_mapping(data)
+            return
         chained = chain_config_from_mapping(data)
     _assert_same(chained.chain, chain_of(config))  # the gains the variant does not use: None in both
     state = chained.initial_state["body"]

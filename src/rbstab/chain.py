@@ -15,7 +15,7 @@ limits of H); the disturbances act on the body that lists them.
 This module is the compiled description's plain data, shared by the config layer (which builds
 it, validated) and the physics (which trusts it); the per-run state lives elsewhere. A one-body
 config is the one-body chain :func:`single` builds: its joint to the ground is today's
-``controller`` law at the origin, its body's ``k_t``, ``l_t`` today's H.
+``controller`` law holding C to the ground point R (eq 4), its body's ``k_t``, ``l_t`` today's H.
 """
 
 from __future__ import annotations

@@ -28,8 +28,9 @@ config, :mod:`rbstab.config`)::
     initial_state:                  # optional, per body by name; each key 3 numbers
       legs: {theta: [0.05, 0, 0]}   # theta, omega, x, v, d as in a one-body config
     simulation: {t_end: 5.0}        # as in a one-body config
-    disturbances:                   # optional, at most 4; as in a one-body config, plus
-      - {kind: impulse, value: [0, 15, 0], point: [0, 0, 0.2], start: 0.3, body: trunk}
+    disturbances:                   # optional, at most 4; as in a one-body config but no impulse,
+      # plus the body it acts on; a sliding joint needs boundary_layer > 0
+      - {kind: pulse, value: [0, 150, 0], point: [0, 0, 0.2], start: 0.3, duration: 0.1, body: trunk}
 
 Where a body's ``x`` (``v``) is left out, rbstab places it from its parent's state so that
 its joint's point coincides, E_j = 0 (and moves with it, dE_j/dt = 0):
@@ -134,9 +135,10 @@ class ChainConfig:
 def chain_of(config: RunConfig | ChainConfig) -> Chain:
     """The chain a configuration means: a chain config's own, or for a one-body config the
     one-body chain (:func:`rbstab.chain.single`): its body (named ``body``) with the
-    ground-anchored feedback K_t, L_t and the limits of H, held to the ground at the origin by
-    its joint (named ``controller``) at C = ``attachment_point`` with the variant's law, K_r,
-    L_r and the limits of N and Lambda. Same equations, same numbers."""
+    ground-anchored feedback K_t, L_t and the limits of H, held by its joint (named
+    ``controller``) at C = ``attachment_point`` to the ground point R (where C is at the
+    equilibrium X = 0, Theta = 0: E = X + A R - R, eq 4) with the variant's law, K_r, L_r and
+    the limits of N and Lambda. Same equations, same numbers."""
     if isinstance(config, ChainConfig):
         return config.chain
     gains, sat = config.gains, config.gains.saturation
@@ -145,7 +147,7 @@ def chain_of(config: RunConfig | ChainConfig) -> Chain:
         saturation=None if sat is None else Saturation(_INF3.copy(), sat.force_h, _INF3.copy(), sat.shape),
         disturbances=gains.disturbances)
     joint = Joint(
-        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=_array(np.zeros(3)),
+        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=config.body.attachment_point,
         child_point=config.body.attachment_point, variant=config.variant, k_r=gains.k_r, l_r=gains.l_r,
         k_c=gains.k_c, l_c=gains.l_c, k_d=gains.k_d, l_d=gains.l_d, k_s=gains.k_s,
         boundary_layer=gains.boundary_layer,
@@ -242,6 +244,22 @@ def _initial_state(run: ChainSchema, chain: Chain, source: str | None,
     return states, tuple(placed), errors
 
 
+def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, overrides: Sequence[str]) -> None:
+    """Refuse what the chain engine does not integrate: a sliding joint's pure sign law
+    (boundary_layer 0: integrated event by event for one body only) and impulses (the
+    continuous disturbances act on chains)."""
+    for joint in chain.joints:
+        if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
+            _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
+                    "the pure sign law is integrated event by event for one body only; tanh(E/phi) in a chain",
+                    source, overrides, ("joints",))
+    for i, entry in enumerate(resolved.get("disturbances") or ()):
+        if entry.get("kind") == "impulse":
+            _refuse(f"disturbances.{i}.kind", "'impulse'", "step, pulse, sine or noise in a chain",
+                    "an impulse is applied to one body only; a short pulse acts on a chain's body",
+                    source, overrides, ("disturbances",))
+
+
 def _refuse(key: str, found: str, expected: str, detail: str, source: str | None, overrides: Sequence[str],
             inputs: Sequence[str]) -> None:
     line = f"config key '{key}': found {found}; expected {expected} ({detail})"
@@ -333,6 +351,7 @@ def _build(data: Any, *, default_name: str | None, source: str | None, overrides
     run = _validated(plain_tree(data), default_name, source, overrides, schema=ChainSchema)
     resolved = _resolved(run)
     chain = _chain(run, resolved.get("disturbances") or ())
+    _check_engine_scope(chain, resolved, source, overrides)
     states, placed, errors = _initial_state(run, chain, source, overrides)
     _check_limits(chain, states, errors, run, source, overrides)
     return ChainConfig(name=run.name, chain=chain, initial_state=states, placed=placed,

@@ -1,0 +1,630 @@
+"""The physics of a chain of rigid bodies (docs/physics.md, "Chains of rigid bodies"): the
+rate of its state, its Lyapunov function v with its terms and analytic rate, the joints'
+quantities, and its integration.
+
+A chain is compiled once (:func:`compile_chain`) into runtime records, so one compiled code
+path serves any chain of 1-8 bodies: a :data:`rbstab.model.PARAMETERS` record per body and
+its joint (body ``i`` and joint ``i``, whose child it is: the body's mass, inertia, weight,
+K_t, L_t and the limits of H; the joint's child point as ``attachment_point``, its K_r, L_r,
+point-law gains and the limits of N_j and Lambda_j; the body's disturbances), the variant
+code, parent index and parent point of each joint. The point laws are the variants' own
+compiled functions (:mod:`rbstab.variants.kernels`): a one-body chain is today's body.
+
+State layout (``n_states = 12 n + 3 e``): body ``i`` at ``y[12 i: 12 i + 12]`` = Theta
+[rad], Omega [rad/s] (body frame), X [m], V [m/s] (inertial frame); then the 3 states D [m]
+of each ``embedded`` joint, in joint order. ``permanent`` joints are held in maximal
+coordinates by the constraint forces that make d^2E_j/dt^2 = 0 (the stacked eq 15: one
+linear solve of 3k unknowns for k permanent joints).
+"""
+
+from __future__ import annotations
+
+import math
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..chain import GROUND, Chain
+from ..jit import jit
+from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
+from ..layout import VARIANT_CODES
+from ..model import (
+    PARAMETERS,
+    Gains,
+    RigidBody,
+    Saturation,
+    force_h,
+    force_h_command,
+    gyroscopic,
+    parameters,
+    torque_n,
+    torque_n_command,
+)
+from .disturbances import disturbance_power, disturbance_wrench
+from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
+    constraint_force_command
+
+__all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
+           "integrate", "lyapunov", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+
+#: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
+BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
+#: Per-joint outputs of :func:`evaluate`, each (n_samples, n_joints, 3).
+JOINT_OUTPUTS = ("constraint_error", "constraint_rate", "constraint_force", "torque_n", "controller_state",
+                 "joint_theta", "joint_omega")
+#: Scalar outputs of :func:`evaluate`, each (n_samples,).
+SCALAR_OUTPUTS = ("lyapunov", "lyapunov_rate", "lyapunov_kinetic", "lyapunov_joint", "lyapunov_body",
+                  "lyapunov_gravity")
+
+# Rows of the per-joint record the compiled core fills.
+_E, _F, _LAMBDA, _N, _D, _THETA_J, _OMEGA_J = range(7)
+# Entries of the scalar record: the terms of v (h not included) and dv/dt.
+_KINETIC, _JOINT, _BODY, _GRAVITY, _RATE = range(5)
+
+
+# -- compiled core --------------------------------------------------------------------------
+@jit(forceinline=True)
+def _relative(a_p, a_c):
+    """A_rel = A_p' A_c as a tuple of rows."""
+    return (
+        (a_p[0][0] * a_c[0][0] + a_p[1][0] * a_c[1][0] + a_p[2][0] * a_c[2][0],
+         a_p[0][0] * a_c[0][1] + a_p[1][0] * a_c[1][1] + a_p[2][0] * a_c[2][1],
+         a_p[0][0] * a_c[0][2] + a_p[1][0] * a_c[1][2] + a_p[2][0] * a_c[2][2]),
+        (a_p[0][1] * a_c[0][0] + a_p[1][1] * a_c[1][0] + a_p[2][1] * a_c[2][0],
+         a_p[0][1] * a_c[0][1] + a_p[1][1] * a_c[1][1] + a_p[2][1] * a_c[2][1],
+         a_p[0][1] * a_c[0][2] + a_p[1][1] * a_c[1][2] + a_p[2][1] * a_c[2][2]),
+        (a_p[0][2] * a_c[0][0] + a_p[1][2] * a_c[1][0] + a_p[2][2] * a_c[2][0],
+         a_p[0][2] * a_c[0][1] + a_p[1][2] * a_c[1][1] + a_p[2][2] * a_c[2][1],
+         a_p[0][2] * a_c[0][2] + a_p[1][2] * a_c[1][2] + a_p[2][2] * a_c[2][2]),
+    )
+
+
+@jit(forceinline=True)
+def euler_angles(a):
+    """Theta with A(Theta) = a = Rx Ry Rz (eq 2), |theta_2| <= pi/2, theta_1, theta_3 in
+    (-pi, pi]: a[0][2] = s2, a[1][2] = -s1 c2, a[2][2] = c1 c2, a[0][1] = -c2 s3,
+    a[0][0] = c2 c3."""
+    s2 = min(1.0, max(-1.0, a[0][2]))
+    return (math.atan2(-a[1][2], a[2][2]), math.asin(s2), math.atan2(-a[0][1], a[0][0]))
+
+
+@jit(forceinline=True)
+def _put(out, i, x):
+    out[i] = x[0]
+    out[i + 1] = x[1]
+    out[i + 2] = x[2]
+
+
+@jit(forceinline=True)
+def _acc_add(torque, force, i, dt, df):
+    for k in range(3):
+        torque[i, k] += dt[k]
+        force[i, k] += df[k]
+
+
+@jit(forceinline=True)
+def _point_acceleration(i, r, rot, y, torque, force, params, with_velocity):
+    """d^2/dt^2 (X_i + A_i r) [m/s^2], inertial frame, of body i under its body-frame torque
+    and inertial force (rows i of ``torque``, ``force``); ``with_velocity``: with the
+    centripetal term A (Omega x (Omega x r)), else the part linear in the wrench only."""
+    p = params[i]
+    omega_dot = matvec(p.inertia_inv, vector(torque[i], 0))
+    acc = (force[i, 0] / p.mass, force[i, 1] / p.mass, force[i, 2] / p.mass)
+    local = cross(omega_dot, r)
+    if with_velocity:
+        omega = vector(y, 12 * i + 3)
+        local = add(local, cross(omega, cross(omega, r)))
+    return add(acc, matvec(rot[i], local))
+
+
+@jit
+def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars):
+    """The state rate of a chain and everything it is made of, at time ``t`` [s].
+
+    ``y`` (n_states,) (module docstring); ``params`` (n,) :data:`PARAMETERS` records;
+    ``codes`` (n,) variant codes; ``parents`` (n,) parent index or -1 (ground); ``ppoints``
+    (n, 3) parent points R_p [m] (inertial frame for the ground, else the parent's body
+    frame); ``d_at`` (n,) the index of each embedded joint's D in ``y`` (-1: none).
+    Writes dy/dt into ``dy`` (n_states,); per joint (n, 7, 3) into ``joints``: E_j, F_j,
+    Lambda_j (inertial), N_j (child frame, delivered), D_j, Theta_j, Omega_j; per body
+    (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the kinetic, joint,
+    body-feedback and gravity terms of v (without h) and dv/dt (analytic: minus the
+    dissipations, plus the saturation deficit, disturbance and permanent-constraint
+    powers; the last is F_j' Lambda_j, zero on the constraint).
+    """
+    n = codes.shape[0]
+    rot = np.empty((n, 3, 3))
+    rate = np.empty((n, 3, 3))
+    torque = np.zeros((n, 3))
+    force = np.zeros((n, 3))
+    kinetic = 0.0
+    joint_energy = 0.0
+    body_energy = 0.0
+    gravity = 0.0
+    dissipation = 0.0
+    power = 0.0
+    for i in range(n):
+        a, b = rotation_and_rate_of(vector(y, 12 * i))
+        for r in range(3):
+            for c in range(3):
+                rot[i, r, c] = a[r][c]
+                rate[i, r, c] = b[r][c]
+    for i in range(n):
+        p = params[i]
+        omega, x, v = vector(y, 12 * i + 3), vector(y, 12 * i + 6), vector(y, 12 * i + 9)
+        h = force_h(x, v, p)
+        if p.saturation > 0.0:
+            power += dot(v, sub(h, force_h_command(x, v, p)))
+        _put(bodies[i], 0, h)
+        tq = gyroscopic(p.inertia, omega)
+        fc = add(p.weight, h)
+        if p.disturbance_count > 0.0:
+            force_d, torque_d = disturbance_wrench(t, rot[i], p)
+            tq, fc = add(tq, torque_d), add(fc, force_d)
+            power += disturbance_power(force_d, torque_d, omega, v)
+        _acc_add(torque, force, i, tq, fc)
+        kinetic += 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(omega, p.inertia)
+        body_energy += 0.5 * quadratic_form(x, p.k_t)
+        gravity -= dot(x, p.weight)
+        dissipation += quadratic_form(v, p.l_t)
+    n_permanent = 0
+    for j in range(n):
+        p = params[j]
+        q = parents[j]
+        omega_c, x_c, v_c = vector(y, 12 * j + 3), vector(y, 12 * j + 6), vector(y, 12 * j + 9)
+        r_c, r_p = p.attachment_point, vector(ppoints[j], 0)
+        if q < 0:
+            point_p, rate_p = r_p, ZERO
+            theta_j, omega_j = vector(y, 12 * j), omega_c
+            b_j = rotation_and_rate_of(theta_j)[1]
+            rel = rotation_and_rate_of(theta_j)[0]
+        else:
+            omega_p, x_p, v_p = vector(y, 12 * q + 3), vector(y, 12 * q + 6), vector(y, 12 * q + 9)
+            point_p = add(x_p, matvec(rot[q], r_p))
+            rate_p = add(v_p, matvec(rot[q], cross(omega_p, r_p)))
+            rel = _relative(rot[q], rot[j])
+            theta_j = euler_angles(rel)
+            b_j = rotation_and_rate_of(theta_j)[1]
+            omega_j = sub(omega_c, matTvec(rel, omega_p))
+        e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
+        f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
+        n_j = torque_n(b_j, theta_j, omega_j, p)
+        if p.saturation > 0.0:
+            power += dot(omega_j, sub(n_j, torque_n_command(b_j, theta_j, omega_j, p)))
+        joint_energy += 0.5 * quadratic_form(theta_j, p.k_r)
+        dissipation += quadratic_form(omega_j, p.l_r)
+        _acc_add(torque, force, j, n_j, ZERO)
+        if q >= 0:
+            reaction = matvec(rel, n_j)
+            _acc_add(torque, force, q, (-reaction[0], -reaction[1], -reaction[2]), ZERO)
+        d = ZERO
+        lam = ZERO
+        if d_at[j] >= 0:
+            d = vector(y, d_at[j])
+        if codes[j] == PERMANENT:
+            n_permanent += 1
+        else:
+            lam, d_rate = constraint_force(codes[j], e, f, d, p)
+            if p.saturation > 0.0:
+                lam_c, _ = constraint_force_command(codes[j], e, f, d, p)
+                power += dot(f, sub(lam, lam_c))
+            joint_energy += constraint_energy(codes[j], e, d, p)
+            dissipation += constraint_dissipation(codes[j], f, d_rate, p)
+            _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], lam)), lam)
+            if q >= 0:
+                back = cross(r_p, matTvec(rot[q], lam))
+                _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
+            if d_at[j] >= 0:
+                _put(dy, d_at[j], d_rate)
+        _put(joints[j, _E], 0, e)
+        _put(joints[j, _F], 0, f)
+        _put(joints[j, _LAMBDA], 0, lam)
+        _put(joints[j, _N], 0, n_j)
+        _put(joints[j, _D], 0, d)
+        _put(joints[j, _THETA_J], 0, theta_j)
+        _put(joints[j, _OMEGA_J], 0, omega_j)
+    if n_permanent > 0:
+        _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent)
+        for j in range(n):
+            if codes[j] == PERMANENT:
+                power += dot(vector(joints[j, _F], 0), vector(joints[j, _LAMBDA], 0))
+    for i in range(n):
+        p = params[i]
+        omega, v = vector(y, 12 * i + 3), vector(y, 12 * i + 9)
+        _put(dy, 12 * i, matvec(rate[i], omega))
+        _put(dy, 12 * i + 3, matvec(p.inertia_inv, vector(torque[i], 0)))
+        _put(dy, 12 * i + 6, v)
+        _put(dy, 12 * i + 9, (force[i, 0] / p.mass, force[i, 1] / p.mass, force[i, 2] / p.mass))
+    scalars[_KINETIC] = kinetic
+    scalars[_JOINT] = joint_energy
+    scalars[_BODY] = body_energy
+    scalars[_GRAVITY] = gravity
+    scalars[_RATE] = power - dissipation
+
+
+@jit(forceinline=True)
+def _joint_acceleration(j, y, params, parents, ppoints, rot, torque, force, with_velocity):
+    """d^2E_j/dt^2 [m/s^2] under the wrenches ``torque``, ``force`` (linear part only unless
+    ``with_velocity``)."""
+    q = parents[j]
+    acc = _point_acceleration(j, params[j].attachment_point, rot, y, torque, force, params, with_velocity)
+    if q >= 0:
+        acc = sub(acc, _point_acceleration(q, vector(ppoints[j], 0), rot, y, torque, force, params, with_velocity))
+    return acc
+
+
+@jit
+def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, k):
+    """The constraint forces Lambda_j of the ``k`` permanent joints with d^2E_j/dt^2 = 0
+    (the stacked eq 15), added to ``torque``, ``force`` and written to ``joints``."""
+    n = codes.shape[0]
+    which = np.empty(k, dtype=np.int64)
+    m = 0
+    for j in range(n):
+        if codes[j] == PERMANENT:
+            which[m] = j
+            m += 1
+    rhs = np.empty(3 * k)
+    for a in range(k):
+        acc = _joint_acceleration(which[a], y, params, parents, ppoints, rot, torque, force, True)
+        for r in range(3):
+            rhs[3 * a + r] = -acc[r]
+    matrix = np.empty((3 * k, 3 * k))
+    d_torque = np.zeros((n, 3))
+    d_force = np.zeros((n, 3))
+    for b in range(k):
+        j = which[b]
+        q = parents[j]
+        r_c, r_p = params[j].attachment_point, vector(ppoints[j], 0)
+        for axis in range(3):
+            lam = (1.0 if axis == 0 else 0.0, 1.0 if axis == 1 else 0.0, 1.0 if axis == 2 else 0.0)
+            d_torque[:] = 0.0
+            d_force[:] = 0.0
+            _acc_add(d_torque, d_force, j, cross(r_c, matTvec(rot[j], lam)), lam)
+            if q >= 0:
+                back = cross(r_p, matTvec(rot[q], lam))
+                _acc_add(d_torque, d_force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
+            for a in range(k):
+                acc = _joint_acceleration(which[a], y, params, parents, ppoints, rot, d_torque, d_force, False)
+                for r in range(3):
+                    matrix[3 * a + r, 3 * b + axis] = acc[r]
+    lam_all = np.linalg.solve(matrix, rhs)
+    for b in range(k):
+        j = which[b]
+        q = parents[j]
+        lam = (lam_all[3 * b], lam_all[3 * b + 1], lam_all[3 * b + 2])
+        r_c, r_p = params[j].attachment_point, vector(ppoints[j], 0)
+        _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], lam)), lam)
+        if q >= 0:
+            back = cross(r_p, matTvec(rot[q], lam))
+            _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
+        _put(joints[j, _LAMBDA], 0, lam)
+
+
+@jit
+def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
+    """dy/dt of the chain's state ``y`` at ``t`` into ``dy`` (:func:`chain_core`)."""
+    n = codes.shape[0]
+    chain_core(t, y, params, codes, parents, ppoints, d_at, dy, np.empty((n, 7, 3)), np.empty((n, 3)),
+               np.empty(5))
+
+
+@jit
+def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars):
+    """:func:`chain_core` at every sample: ``states`` (m, n_states) at ``times`` (m,) into
+    ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5)."""
+    dy = np.empty(states.shape[1])
+    for k in range(states.shape[0]):
+        if states[k, 0] != states[k, 0]:
+            joints[k] = np.nan
+            bodies[k] = np.nan
+            scalars[k] = np.nan
+            continue
+        chain_core(times[k], states[k], params, codes, parents, ppoints, d_at, dy, joints[k], bodies[k], scalars[k])
+
+
+# -- the compiled description ------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class CompiledChain:
+    """A chain as the compiled core reads it (module docstring).
+
+    Attributes
+    ----------
+    chain : Chain
+    params : ndarray, shape (n,), dtype PARAMETERS
+        Body i with joint i's gains and limits (``attachment_point`` = joint i's R_c).
+    codes, parents, d_at : ndarray, shape (n,), int64
+        Variant codes, parent indices (-1: ground), index of D in the state (-1: none).
+    ppoints : ndarray, shape (n, 3)
+        R_p [m] of each joint.
+    n_states : int
+        12 n + 3 (number of embedded joints).
+    offset : float
+        h [J]: v is zero at the chain's rest state nearest the reference configuration
+        (:func:`rest_offset`); 0 where the potential has no minimum there.
+    """
+
+    chain: Chain
+    params: np.ndarray
+    codes: np.ndarray
+    parents: np.ndarray
+    ppoints: np.ndarray
+    d_at: np.ndarray
+    n_states: int
+    offset: float = 0.0
+    args: tuple = field(default=(), repr=False)
+
+    @property
+    def size(self) -> int:
+        return int(self.codes.shape[0])
+
+
+def _record(chain: Chain, i: int) -> np.ndarray:
+    body, joint = chain.bodies[i], chain.joints[i]
+    limits = [np.full(3, math.inf)] * 3
+    shape = "clip"
+    if joint.saturation is not None:
+        limits[0], limits[2], shape = joint.saturation.torque_n, joint.saturation.constraint_force, joint.saturation.shape
+    if body.saturation is not None:
+        limits[1], shape = body.saturation.force_h, body.saturation.shape
+    limited = joint.saturation is not None or body.saturation is not None
+    gains = Gains(k_t=body.k_t, l_t=body.l_t, k_r=joint.k_r, l_r=joint.l_r, k_c=joint.k_c, l_c=joint.l_c,
+                  k_d=joint.k_d, l_d=joint.l_d, k_s=joint.k_s, boundary_layer=joint.boundary_layer,
+                  saturation=Saturation(*limits, shape) if limited else None, disturbances=body.disturbances)
+    rigid = RigidBody(mass=body.mass, inertia=np.asarray(body.inertia, dtype=float),
+                      attachment_point=np.asarray(joint.child_point, dtype=float),
+                      gravity=np.asarray(chain.gravity, dtype=float))
+    return parameters(rigid, gains)
+
+
+def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
+    """The runtime records of ``chain`` (:class:`CompiledChain`); ``offset`` h [J], None:
+    :func:`rest_offset`."""
+    n = chain.size
+    params = np.zeros(n, dtype=PARAMETERS)
+    for i in range(n):
+        params[i] = _record(chain, i)
+    codes = np.array([VARIANT_CODES[j.variant] for j in chain.joints], dtype=np.int64)
+    parents = np.array([j.parent for j in chain.joints], dtype=np.int64)
+    ppoints = np.array([np.asarray(j.parent_point, dtype=float) for j in chain.joints]).reshape(n, 3)
+    d_at = np.full(n, -1, dtype=np.int64)
+    size = 12 * n
+    for j in range(n):
+        if codes[j] == EMBEDDED:
+            d_at[j] = size
+            size += 3
+    compiled = CompiledChain(chain, params, codes, parents, ppoints, d_at, size, 0.0,
+                             (params, codes, parents, ppoints, d_at))
+    h = rest_offset(compiled) if offset is None else float(offset)
+    return CompiledChain(chain, params, codes, parents, ppoints, d_at, size, h, compiled.args)
+
+
+# -- rest state and v ---------------------------------------------------------------------------
+def _configuration(compiled: CompiledChain, q: np.ndarray) -> np.ndarray:
+    """The state at rest of the configuration ``q``: every Theta_i, then X_i of bodies whose
+    joint is not ``permanent``, then D of embedded joints; X of a permanent joint's child
+    placed on its parent's point (E_j = 0)."""
+    n = compiled.size
+    y = np.zeros(compiled.n_states)
+    k = 3 * n
+    rots = []
+    from ..kinematics import rotation_matrix
+    for i in range(n):
+        y[12 * i: 12 * i + 3] = q[3 * i: 3 * i + 3]
+        a = rotation_matrix(q[3 * i: 3 * i + 3])
+        rots.append(a)
+        if compiled.codes[i] == PERMANENT:
+            parent = compiled.parents[i]
+            r_p = compiled.ppoints[i]
+            point = r_p if parent < 0 else y[12 * parent + 6: 12 * parent + 9] + rots[parent] @ r_p
+            y[12 * i + 6: 12 * i + 9] = point - a @ compiled.params[i]["attachment_point"]
+        else:
+            y[12 * i + 6: 12 * i + 9] = q[k: k + 3]
+            k += 3
+    for j in range(n):
+        if compiled.d_at[j] >= 0:
+            y[compiled.d_at[j]: compiled.d_at[j] + 3] = q[k: k + 3]
+            k += 3
+    return y
+
+
+def _potential(compiled: CompiledChain, y: np.ndarray) -> float:
+    scalars = _terms(compiled, 0.0, y)[2]
+    return float(scalars[_JOINT] + scalars[_BODY] + scalars[_GRAVITY])
+
+
+def rest_offset(compiled: CompiledChain) -> float:
+    """h [J] with v = 0 at the chain's rest state: minus the least potential (joint and
+    body feedback, point laws, gravity) found by a local minimisation from the reference
+    configuration (Theta = 0, every point law at rest; scipy's BFGS); 0 without gravity or
+    where the potential has no minimum there (it falls without bound)."""
+    if not np.any(compiled.chain.gravity):
+        return 0.0
+    from scipy.optimize import minimize
+
+    n = compiled.size
+    free = sum(1 for i in range(n) if compiled.codes[i] != PERMANENT)
+    q0 = np.zeros(3 * n + 3 * free + 3 * int(np.sum(compiled.d_at >= 0)))
+    # start with each non-permanent body placed on its parent's point
+    y0 = _place(compiled, np.zeros(compiled.n_states))
+    k = 3 * n
+    for i in range(n):
+        if compiled.codes[i] != PERMANENT:
+            q0[k: k + 3] = y0[12 * i + 6: 12 * i + 9]
+            k += 3
+    result = minimize(lambda q: _potential(compiled, _configuration(compiled, q)), q0, method="BFGS",
+                      options={"gtol": 1e-10, "maxiter": 2000})
+    value = float(result.fun)
+    if not np.isfinite(value) or np.max(np.abs(result.x)) > 1e3:
+        return 0.0
+    return -value
+
+
+def _place(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
+    """``y`` with every body's X, V placed on its parent's point (E_j = F_j = 0)."""
+    from ..kinematics import rotation_matrix
+
+    y = np.array(y, dtype=float)
+    for i in range(compiled.size):
+        parent, r_p = compiled.parents[i], compiled.ppoints[i]
+        a = rotation_matrix(y[12 * i: 12 * i + 3])
+        r_c = compiled.params[i]["attachment_point"]
+        if parent < 0:
+            point, rate = r_p, np.zeros(3)
+        else:
+            a_p = rotation_matrix(y[12 * parent: 12 * parent + 3])
+            point = y[12 * parent + 6: 12 * parent + 9] + a_p @ r_p
+            rate = y[12 * parent + 9: 12 * parent + 12] + a_p @ np.cross(y[12 * parent + 3: 12 * parent + 6], r_p)
+        y[12 * i + 6: 12 * i + 9] = point - a @ r_c
+        y[12 * i + 9: 12 * i + 12] = rate - a @ np.cross(y[12 * i + 3: 12 * i + 6], r_c)
+    return y
+
+
+def _terms(compiled: CompiledChain, t: float, y: np.ndarray):
+    n = compiled.size
+    dy = np.empty(compiled.n_states)
+    joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
+    chain_core(float(t), np.ascontiguousarray(y, dtype=float), *compiled.args, dy, joints, bodies, scalars)
+    return dy, joints, scalars
+
+
+def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[float, float]:
+    """(v [J], dv/dt [W] analytic) at the state ``y`` (n_states,) and time ``t`` [s]."""
+    _, _, scalars = _terms(compiled, t, y)
+    return float(scalars[:_RATE].sum() + compiled.offset), float(scalars[_RATE])
+
+
+def initial_state(config) -> np.ndarray:
+    """The initial state (n_states,) of a :class:`rbstab.config.chains.ChainConfig` (module
+    docstring for the layout)."""
+    compiled = compile_chain(config.chain, offset=0.0)
+    y = np.zeros(compiled.n_states)
+    for i, body in enumerate(config.chain.bodies):
+        state = config.initial_state[body.name]
+        for k, block in enumerate(("theta", "omega", "position", "velocity")):
+            y[12 * i + 3 * k: 12 * i + 3 * k + 3] = state[block]
+        if compiled.d_at[i] >= 0:
+            y[compiled.d_at[i]: compiled.d_at[i] + 3] = state["controller_state"]
+    return y
+
+
+# -- integration and outputs ------------------------------------------------------------------
+@dataclass
+class ChainTrajectory:
+    """A chain run's samples.
+
+    Attributes
+    ----------
+    time : ndarray, shape (n_samples,)
+        [s], evenly spaced on [0, t_end].
+    states : ndarray, shape (n_samples, n_states)
+        Rows after a failure are NaN.
+    status : str
+        ``"success"`` or ``"failed"``.
+    message : str
+    solver : dict
+        ``nfev``, ``solver_status``, ``wall_time`` [s].
+    compiled : CompiledChain
+    """
+
+    time: np.ndarray
+    states: np.ndarray
+    status: str
+    message: str
+    solver: dict
+    compiled: CompiledChain
+
+
+def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
+    """min over bodies and joints of (pi/2 - margin - |theta_2|) [rad]: the run stops where it
+    reaches 0 (eq 1's B(Theta) is singular at |theta_2| = pi/2)."""
+    limit = math.pi / 2 - margin
+    worst = min(limit - abs(y[12 * i + 1]) for i in range(compiled.size))
+    n = compiled.size
+    joints = np.empty((n, 7, 3))
+    chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)), np.empty(5))
+    return min(worst, float(np.min(limit - np.abs(joints[:, _THETA_J, 1]))))
+
+
+def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
+    """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) with scipy's
+    ``solve_ivp`` (``simulation``'s method, tolerances, steps), sampled at ``n_samples``
+    times on [0, t_end]; it stops ``failed`` where any body's or joint's |theta_2| reaches
+    pi/2 - ``gimbal_margin`` (the rows after are NaN) or after ``timeout`` [s] of wall time."""
+    from scipy.integrate import solve_ivp
+
+    sim = config.simulation
+    compiled = compile_chain(config.chain) if compiled is None else compiled
+    y0 = initial_state(config)
+    time = np.linspace(0.0, sim.t_end, sim.n_samples)
+    args = compiled.args
+    dy = np.empty(compiled.n_states)
+    start = _time.perf_counter()
+    limit = timeout if timeout is not None else sim.max_wall_time
+
+    class _Timeout(Exception):
+        pass
+
+    def rhs(t, y):
+        if limit is not None and math.isfinite(limit) and _time.perf_counter() - start > limit:
+            raise _Timeout
+        chain_rate(t, y, *args, dy)
+        return dy.copy()
+
+    def lock(t, y):
+        return _gimbal_margin(compiled, y, sim.gimbal_margin)
+
+    lock.terminal = True
+    try:
+        sol = solve_ivp(rhs, (0.0, sim.t_end), y0, method=sim.method, t_eval=time, rtol=sim.rtol, atol=sim.atol,
+                        max_step=sim.max_step, events=lock)
+    except _Timeout:
+        states = np.full((time.size, compiled.n_states), np.nan)
+        return ChainTrajectory(time, states, "failed", f"wall-time limit of {limit:g} s reached",
+                               {"nfev": 0, "solver_status": -1, "wall_time": _time.perf_counter() - start}, compiled)
+    states = np.full((time.size, compiled.n_states), np.nan)
+    states[: sol.y.shape[1]] = sol.y.T
+    if sol.status == 1:
+        t_lock = float(sol.t_events[0][0])
+        status, message = "failed", f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
+    elif sol.status == 0:
+        status, message = "success", str(sol.message)
+    else:
+        status, message = "failed", str(sol.message)
+    return ChainTrajectory(time, states, status, message,
+                           {"nfev": int(sol.nfev), "solver_status": int(sol.status),
+                            "wall_time": _time.perf_counter() - start}, compiled)
+
+
+def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
+    """Every output of a chain run's samples ``states`` (m, n_states) at ``time`` (m,):
+    per body (m, n, 3): theta, omega, position, velocity, force_h (H delivered, inertial);
+    per joint (m, n, 3): constraint_error E_j, constraint_rate F_j, constraint_force
+    Lambda_j (inertial, on the child at C), torque_n N_j (child frame, delivered),
+    controller_state D_j (NaN where not embedded), joint_theta Theta_j [rad], joint_omega
+    Omega_j [rad/s] (child frame); per joint (m, n): constraint_drift |E_j| [m] (NaN where
+    not permanent); scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
+    terms lyapunov_kinetic, lyapunov_joint, lyapunov_body, lyapunov_gravity [J] (h in the
+    gravity term)."""
+    time = np.ascontiguousarray(time, dtype=float)
+    states = np.ascontiguousarray(np.atleast_2d(states), dtype=float)
+    m, n = states.shape[0], compiled.size
+    joints, bodies, scalars = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5))
+    chain_samples(time, states, *compiled.args, joints, bodies, scalars)
+    blocks = states[:, : 12 * n].reshape(m, n, 4, 3)
+    out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
+    out["force_h"] = bodies
+    for k, name in enumerate(JOINT_OUTPUTS):
+        out[name] = joints[:, :, k]
+    embedded = compiled.d_at >= 0
+    out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
+    permanent = compiled.codes == PERMANENT
+    out["constraint_drift"] = np.where(permanent[None, :], np.linalg.norm(out["constraint_error"], axis=-1), np.nan)
+    out["lyapunov_kinetic"] = scalars[:, _KINETIC]
+    out["lyapunov_joint"] = scalars[:, _JOINT]
+    out["lyapunov_body"] = scalars[:, _BODY]
+    out["lyapunov_gravity"] = scalars[:, _GRAVITY] + compiled.offset
+    out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + compiled.offset
+    out["lyapunov_rate"] = scalars[:, _RATE]
+    return out

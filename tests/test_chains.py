@@ -1,0 +1,228 @@
+"""Chains of rigid bodies checked by physics (docs/physics.md, "Chains of rigid bodies"): a
+one-body chain is today's body; the analytic dv/dt is the flow derivative of v for random
+chains of every variant mix; a double pendulum conserves energy and moves as MuJoCo's; the
+planar double inverted pendulum's linearisation has the eigenvalues of M q'' + L q' +
+(K - G) q = 0 written by hand; a stiff visco-elastic joint approaches the permanent one."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from conftest import paper_body, paper_gains
+from rbstab.chain import GROUND, Body, Chain, Joint, single
+from rbstab.config.chains import load_any_config
+from rbstab.kinematics import rotation_matrix
+from rbstab.model import Saturation
+from rbstab.variants import VARIANTS
+from rbstab.variants import chain as C
+
+D = np.diag
+ALL = sorted(VARIANTS)
+
+
+def _one_body(name, gravity):
+    variant = VARIANTS[name](paper_body(gravity), paper_gains(boundary_layer=0.01) if name == "sliding"
+                             else paper_gains())
+    body, gains = variant.body, variant.gains
+    chain = single(
+        Body("body", body.mass, body.inertia, gains.k_t, gains.l_t),
+        Joint("controller", GROUND, 0, body.attachment_point, body.attachment_point, name, gains.k_r, gains.l_r,
+              gains.k_c, gains.l_c, gains.k_d, gains.l_d, gains.k_s, gains.boundary_layer),
+        body.gravity)
+    return variant, C.compile_chain(chain, offset=variant.lyapunov_offset)
+
+
+def _rate(compiled, y, t=0.0):
+    dy = np.empty(compiled.n_states)
+    C.chain_rate(t, np.ascontiguousarray(y, dtype=float), *compiled.args, dy)
+    return dy
+
+
+@pytest.mark.parametrize("gravity", [(0.0, 0.0, 0.0), (0.0, 0.0, -9.81)])
+@pytest.mark.parametrize("name", ALL)
+def test_a_one_body_chain_is_todays_body(name, gravity, rng):
+    """Rate, v and dv/dt of the one-body chain equal the single body's at random states;
+    ``permanent`` (a reduced 6-state model there) at states on its constraint."""
+    variant, compiled = _one_body(name, gravity)
+    for _ in range(10):
+        y = rng.normal(scale=0.2, size=compiled.n_states)
+        y[3:6] = rng.normal(scale=3.0, size=3)
+        if name == "permanent":
+            y = C._place(compiled, y)
+            single_y = y[:6]
+            mine, theirs = _rate(compiled, y)[:6], variant.rhs(0.0, single_y)
+        else:
+            single_y = y
+            mine, theirs = _rate(compiled, y), variant.rhs(0.0, single_y)
+        np.testing.assert_allclose(mine, theirs, rtol=1e-10, atol=1e-10 * np.abs(theirs).max())
+        v, rate = C.lyapunov(compiled, y)
+        expected = variant.evaluate(single_y[None])
+        assert v == pytest.approx(float(expected["lyapunov"][0]), rel=1e-10, abs=1e-9)
+        assert rate == pytest.approx(float(expected["lyapunov_rate"][0]), rel=1e-9, abs=1e-8)
+
+
+def _random_chain(rng, n, variants):
+    bodies, joints = [], []
+    for i in range(n):
+        inertia = D(rng.uniform(0.05, 0.5, 3))
+        k_t = D(rng.uniform(0, 20, 3)) if rng.random() < 0.3 else np.zeros((3, 3))
+        bodies.append(Body(f"b{i}", float(rng.uniform(0.5, 3.0)), inertia, k_t, 0.5 * k_t,
+                           Saturation(np.full(3, np.inf), np.full(3, 5.0), np.full(3, np.inf), "clip")
+                           if rng.random() < 0.3 else None))
+        variant = variants[i]
+        gains = {"k_c": D(rng.uniform(200, 800, 3)), "l_c": D(rng.uniform(5, 30, 3))} \
+            if variant in ("visco_elastic", "embedded") else {}
+        if variant == "embedded":
+            gains |= {"k_d": D(rng.uniform(200, 800, 3)), "l_d": D(rng.uniform(5, 30, 3))}
+        if variant == "sliding":
+            gains |= {"k_s": float(rng.uniform(5, 20)), "boundary_layer": 0.02}
+        limited = rng.random() < 0.5 and variant != "permanent"
+        joints.append(Joint(
+            f"j{i}", GROUND if i == 0 else int(rng.integers(0, i)), i, rng.normal(scale=0.2, size=3),
+            rng.normal(scale=0.2, size=3), variant, D(rng.uniform(0, 30, 3)), D(rng.uniform(0, 5, 3)),
+            saturation=Saturation(np.full(3, 2.0), np.full(3, np.inf), np.full(3, 20.0), "clip") if limited else None,
+            **gains))
+    return Chain(tuple(bodies), tuple(joints), np.array([0.0, 0.0, -9.81]))
+
+
+@pytest.mark.parametrize("n", [2, 3, 5])
+def test_analytic_lyapunov_rate_is_the_flow_derivative_of_v_for_random_chains(n, rng):
+    """dv/dt (minus the dissipations, plus the saturation deficit and constraint powers) equals
+    (v(y + h f) - v(y - h f)) / 2h at random states of random chains of every variant mix."""
+    names = ["free", "permanent", "sliding", "visco_elastic", "embedded"]
+    for trial in range(4):
+        chain = _random_chain(rng, n, [names[(trial + i) % 5] for i in range(n)])
+        compiled = C.compile_chain(chain, offset=0.0)
+        for _ in range(5):
+            y = C._place(compiled, rng.normal(scale=0.3, size=compiled.n_states))
+            y[12 * np.arange(n)[:, None] + np.arange(6, 9)] += rng.normal(scale=0.02, size=(n, 3))  # E_j != 0
+            f = _rate(compiled, y)
+            h = 1e-6
+            numerical = (C.lyapunov(compiled, y + h * f)[0] - C.lyapunov(compiled, y - h * f)[0]) / (2 * h)
+            analytic = C.lyapunov(compiled, y)[1]
+            assert analytic == pytest.approx(numerical, rel=1e-5, abs=1e-6 * (1 + np.abs(f).max())), (trial, chain)
+
+
+def _pendulum():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_any_config("configs/examples/double_pendulum.yaml")
+    return config, C.compile_chain(config.chain)
+
+
+def _solve(compiled, y0, t_end, t_eval):
+    return solve_ivp(lambda t, y: _rate(compiled, y, t), (0.0, t_end), y0, method="DOP853", rtol=1e-11, atol=1e-12,
+                     t_eval=t_eval)
+
+
+def test_double_pendulum_conserves_energy_and_moves_as_mujocos():
+    """Ball joints, gravity, no feedback: v (kinetic energy + gravity) constant, the joints
+    hold, and both centres of mass follow MuJoCo's ball-joint model to 1e-6 m."""
+    mujoco = pytest.importorskip("mujoco")
+    config, compiled = _pendulum()
+    t_end = 2.0
+    t_eval = np.linspace(0.0, t_end, 21)
+    sol = _solve(compiled, C.initial_state(config), t_end, t_eval)
+    out = C.evaluate(compiled, sol.t, sol.y.T)
+    assert np.ptp(out["lyapunov"]) < 1e-8 * (1 + np.abs(out["lyapunov_kinetic"]).max())
+    assert np.nanmax(out["constraint_drift"]) < 1e-8
+    assert np.abs(out["lyapunov_kinetic"]).max() > 1.0  # it moves
+    upper, lower = config.chain.bodies
+    xml = f"""<mujoco><option gravity="0 0 -9.81" timestep="1e-4" integrator="RK4"/>
+      <worldbody><body name="upper" pos="0 0 0"><joint type="ball" damping="0"/>
+        <inertial pos="0 0 -0.5" mass="{upper.mass}" diaginertia="{' '.join(map(str, np.diag(upper.inertia)))}"/>
+        <body name="lower" pos="0 0 -1"><joint type="ball" damping="0"/>
+          <inertial pos="0 0 -0.5" mass="{lower.mass}" diaginertia="{' '.join(map(str, np.diag(lower.inertia)))}"/>
+        </body></body></worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    a1 = rotation_matrix(config.initial_state["upper"]["theta"])
+    a2 = rotation_matrix(config.initial_state["lower"]["theta"])
+    for k, a in enumerate((a1, a1.T @ a2)):
+        quat = np.empty(4)
+        mujoco.mju_mat2Quat(quat, a.flatten())
+        data.qpos[4 * k: 4 * k + 4] = quat
+    data.qvel[:] = 0.0
+    mujoco.mj_forward(model, data)
+    steps = int(round(0.1 / model.opt.timestep))
+    for k, t in enumerate(t_eval):
+        if k:
+            mujoco.mj_step(model, data, nstep=steps)
+        np.testing.assert_allclose(data.xipos[1:3], out["position"][k], atol=1e-6, err_msg=f"t = {t}")
+
+
+def _planar_stance(k_r=(800.0, 300.0), l_r=(150.0, 40.0)):
+    """Two bodies tilting about y: legs on an ankle at the origin (COM c1 above it, hip l1
+    above it), trunk on the hip (COM c2 above it); joint feedback about y only."""
+    m1, m2, i1, i2, c1, l1, c2 = 28.0, 42.0, 2.6, 2.3, 0.45, 0.9, 0.3
+    spring = [D([1e3, k, 1e3]) for k in k_r]
+    damper = [D([1e2, d, 1e2]) for d in l_r]
+    chain = Chain(
+        (Body("legs", m1, D([i1, i1, 0.1])), Body("trunk", m2, D([i2, i2, 0.4]))),
+        (Joint("ankle", GROUND, 0, np.zeros(3), np.array([0, 0, -c1]), "permanent", spring[0], damper[0]),
+         Joint("hip", 0, 1, np.array([0, 0, l1 - c1]), np.array([0, 0, -c2]), "permanent", spring[1], damper[1])),
+        np.array([0.0, 0.0, -9.81]))
+    g = 9.81
+    m_abs = np.array([[i1 + m1 * c1**2 + m2 * l1**2, m2 * l1 * c2], [m2 * l1 * c2, i2 + m2 * c2**2]])
+    g_abs = np.diag([(m1 * c1 + m2 * l1) * g, m2 * c2 * g])  # -d2U/dalpha2 at upright
+    t = np.array([[1.0, 0.0], [1.0, 1.0]])  # absolute tilts = T (ankle, hip)
+    m, gg = t.T @ m_abs @ t, t.T @ g_abs @ t
+    stiff, damp = np.diag(k_r) - gg, np.diag(l_r)
+    closed = np.linalg.eigvals(np.block([[np.zeros((2, 2)), np.eye(2)],
+                                         [-np.linalg.solve(m, stiff), -np.linalg.solve(m, damp)]]))
+    return chain, closed
+
+
+def _planar_state(compiled, q, qd):
+    y = np.zeros(compiled.n_states)
+    y[1], y[13] = q[0], q[0] + q[1]
+    y[4], y[16] = qd[0], qd[0] + qd[1]
+    return C._place(compiled, y)
+
+
+@pytest.mark.parametrize("k_r", [(800.0, 300.0), (400.0, 300.0)])
+def test_planar_double_inverted_pendulum_eigenvalues_are_the_closed_forms(k_r):
+    """The linearisation in the independent coordinates (ankle tilt, hip angle) about the
+    upright, by central differences of the chain's rate, has the eigenvalues of
+    M q'' + L q' + (K - G) q = 0 written by hand; with a weak ankle the upright is unstable
+    in both."""
+    chain, closed = _planar_stance(k_r)
+    compiled = C.compile_chain(chain, offset=0.0)
+
+    def accel(z):
+        dy = _rate(compiled, _planar_state(compiled, z[:2], z[2:]))
+        return np.array([dy[4], dy[16] - dy[4]])
+
+    jac = np.zeros((4, 4))
+    jac[:2, 2:] = np.eye(2)
+    h = 1e-6
+    for k in range(4):
+        step = np.zeros(4)
+        step[k] = h
+        jac[2:, k] = (accel(step) - accel(-step)) / (2 * h)
+    mine = np.linalg.eigvals(jac)
+    key = lambda z: (round(z.real, 6), round(z.imag, 6))  # noqa: E731
+    np.testing.assert_allclose(sorted(mine, key=key), sorted(closed, key=key), rtol=1e-6, atol=1e-6)
+    assert (closed.real.max() > 0) == (k_r[0] == 400.0)
+
+
+def test_a_stiff_visco_elastic_joint_approaches_the_permanent_joint():
+    """The double pendulum with a visco-elastic elbow of stiffness k_c: its motion differs from
+    the ball joint's by O(1/k_c)."""
+    config, permanent = _pendulum()
+    t_eval = np.linspace(0.0, 0.3, 7)
+    y0 = C.initial_state(config)
+    reference = _solve(permanent, y0, 0.3, t_eval).y
+    errors = []
+    for k_c in (1e4, 1e5, 1e6):
+        elbow = config.chain.joints[1]
+        joint = Joint(elbow.name, elbow.parent, elbow.child, elbow.parent_point, elbow.child_point, "visco_elastic",
+                      elbow.k_r, elbow.l_r, k_c=D([k_c] * 3), l_c=D([2 * np.sqrt(k_c)] * 3))
+        chain = Chain(config.chain.bodies, (config.chain.joints[0], joint), config.chain.gravity)
+        y = _solve(C.compile_chain(chain, offset=0.0), y0, 0.3, t_eval).y
+        errors.append(np.abs(y[:12] - reference[:12]).max())
+    assert errors[0] > 5 * errors[1] > 25 * errors[2] > 0
