@@ -226,3 +226,20 @@ def test_a_stiff_visco_elastic_joint_approaches_the_permanent_joint():
         y = _solve(C.compile_chain(chain, offset=0.0), y0, 0.3, t_eval).y
         errors.append(np.abs(y[:12] - reference[:12]).max())
     assert errors[0] > 5 * errors[1] > 25 * errors[2] > 0
+
+
+@pytest.mark.parametrize("name", ALL)
+def test_a_one_body_chains_linearisation_is_todays(name):
+    """Under gravity, the one-body chain's rest state in its independent coordinates
+    ((Theta, Omega) for permanent, the body's state otherwise) and its eigenvalues equal the
+    single body's (``rbstab.analysis.linearise``)."""
+    from rbstab.analysis.linearise import linearise, linearise_chain
+
+    variant, compiled = _one_body(name, (0.0, 0.0, -9.81))
+    mine, coordinates = linearise_chain(compiled)
+    theirs = linearise(variant)
+    assert [c[:2] for c in coordinates][:2] == [("body", "theta"), ("body", "omega")]
+    assert mine.is_rest_point and theirs.is_rest_point
+    np.testing.assert_allclose(mine.equilibrium, theirs.equilibrium, atol=1e-9)
+    np.testing.assert_allclose(mine.eigenvalues, theirs.eigenvalues, rtol=1e-6, atol=1e-6)
+    assert mine.verdict == theirs.verdict

@@ -31,6 +31,7 @@ from .derivatives import jacobian
 __all__ = [
     "Linearisation",
     "linearise",
+    "linearise_chain",
     "modes",
     "verdict",
     "rest_tolerance",
@@ -193,3 +194,51 @@ def linearise(variant) -> Linearisation:
         eigenvalues=eigenvalues,
         tolerance=EIGENVALUE_RTOL * max(1.0, radius),
     )
+
+
+def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]]:
+    """Rest state, rest check, Jacobian and eigenvalues of a chain
+    (:class:`rbstab.variants.chain.CompiledChain`), in its independent coordinates.
+
+    The rest state is :func:`rbstab.variants.chain.rest_state` (the least potential near
+    the reference configuration); the Jacobian is that of
+    :func:`rbstab.variants.chain.reduced_rate` (Theta_i, Omega_i of every body; X_i, V_i of
+    bodies whose joint is not ``permanent``; D of embedded joints) by central differences
+    extrapolated to step zero, so a ``permanent`` joint's constraint is not a mode.
+
+    Returns
+    -------
+    (Linearisation, coordinates)
+        ``Linearisation.equilibrium`` holds the independent coordinates at rest (shape
+        (3 k,)); ``coordinates`` names them: (body, block, index into the full state), 3
+        entries each (:func:`rbstab.variants.chain.independent_coordinates`).
+
+    Raises
+    ------
+    ValueError
+        Where the potential has no minimum near the reference configuration (no rest
+        state to linearise at), or a sliding joint without a boundary layer.
+    """
+    from ..variants import chain as C
+
+    if any(j.variant == "sliding" and j.boundary_layer <= 0 for j in compiled.chain.joints):
+        raise ValueError("a sliding joint with boundary_layer 0 has no linearisation; give it a boundary layer")
+    y_rest, _ = C.rest_state(compiled)
+    if y_rest is None:
+        raise ValueError("the chain's potential has no minimum near its reference configuration "
+                         "(a body falls without bound): there is no rest state to linearise at")
+    coordinates = C.independent_coordinates(compiled)
+    z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
+    residual = C.reduced_rate(compiled, z)
+    jac, error = jacobian(lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)]), z)
+    eigenvalues = sort_eigenvalues(np.linalg.eigvals(jac))
+    radius = float(np.abs(eigenvalues).max()) if eigenvalues.size else 0.0
+    return Linearisation(
+        equilibrium=z,
+        rest_residual=residual,
+        rest_tolerance=rest_tolerance(jac, z, compiled.chain.gravity),
+        jacobian=jac,
+        jacobian_error=error,
+        eigenvalues=eigenvalues,
+        tolerance=EIGENVALUE_RTOL * max(1.0, radius),
+    ), coordinates

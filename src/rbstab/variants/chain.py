@@ -46,7 +46,8 @@ from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_ene
     constraint_force_command
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "integrate", "lyapunov", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
+           "reduced_rate", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -434,31 +435,105 @@ def _potential(compiled: CompiledChain, y: np.ndarray) -> float:
     return float(scalars[_JOINT] + scalars[_BODY] + scalars[_GRAVITY])
 
 
-def rest_offset(compiled: CompiledChain) -> float:
-    """h [J] with v = 0 at the chain's rest state: minus the least potential (joint and
-    body feedback, point laws, gravity) found by a local minimisation from the reference
-    configuration (Theta = 0, every point law at rest; scipy's BFGS); 0 without gravity or
-    where the potential has no minimum there (it falls without bound)."""
-    if not np.any(compiled.chain.gravity):
-        return 0.0
-    from scipy.optimize import minimize
+def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
+    """(the chain's rest state (n_states,), its potential [J] without h): the least potential
+    (joint and body feedback, point laws, gravity) found by a local minimisation (scipy's
+    BFGS) over the configuration (every Theta_i, X_i of bodies whose joint is not
+    ``permanent``, D of embedded joints; a permanent joint's child placed on its parent)
+    from the reference configuration (Theta = 0, every body placed on its joint, E_j = 0);
+    (None, nan) where the potential has no minimum there (it falls without bound)."""
+    from scipy.optimize import minimize, root
 
     n = compiled.size
-    free = sum(1 for i in range(n) if compiled.codes[i] != PERMANENT)
-    q0 = np.zeros(3 * n + 3 * free + 3 * int(np.sum(compiled.d_at >= 0)))
-    # start with each non-permanent body placed on its parent's point
-    y0 = _place(compiled, np.zeros(compiled.n_states))
-    k = 3 * n
-    for i in range(n):
-        if compiled.codes[i] != PERMANENT:
-            q0[k: k + 3] = y0[12 * i + 6: 12 * i + 9]
-            k += 3
+    free = [i for i in range(n) if compiled.codes[i] != PERMANENT]
+    q0 = np.zeros(3 * n + 3 * len(free) + 3 * int(np.sum(compiled.d_at >= 0)))
+    placed = _place(compiled, np.zeros(compiled.n_states))
+    for k, i in enumerate(free):
+        q0[3 * n + 3 * k: 3 * n + 3 * k + 3] = placed[12 * i + 6: 12 * i + 9]
     result = minimize(lambda q: _potential(compiled, _configuration(compiled, q)), q0, method="BFGS",
-                      options={"gtol": 1e-10, "maxiter": 2000})
+                      options={"gtol": 1e-11, "maxiter": 5000})
     value = float(result.fun)
-    if not np.isfinite(value) or np.max(np.abs(result.x)) > 1e3:
+    if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
+        return None, math.nan
+    q = result.x
+    polished = root(lambda q: _rest_acceleration(compiled, q), q, method="hybr", options={"xtol": 1e-13})
+    if np.linalg.norm(polished.fun) < np.linalg.norm(_rest_acceleration(compiled, q)):
+        q = polished.x  # a rest point to rounding: the minimiser's gradient tolerance is not
+    y = _configuration(compiled, q)
+    return y, _potential(compiled, y)
+
+
+def _rest_acceleration(compiled: CompiledChain, q: np.ndarray) -> np.ndarray:
+    """The accelerations at rest in the configuration ``q`` (:func:`_configuration`):
+    dOmega_i/dt of every body, dV_i/dt of bodies whose joint is not permanent, dD/dt."""
+    y = _configuration(compiled, q)
+    dy = np.empty(compiled.n_states)
+    chain_rate(0.0, y, *compiled.args, dy)
+    rows = [dy[12 * i + 3: 12 * i + 6] for i in range(compiled.size)]
+    rows += [dy[12 * i + 9: 12 * i + 12] for i in range(compiled.size) if compiled.codes[i] != PERMANENT]
+    rows += [dy[d: d + 3] for d in compiled.d_at if d >= 0]
+    return np.concatenate(rows)
+
+
+def rest_offset(compiled: CompiledChain) -> float:
+    """h [J] with v = 0 at the chain's rest state (:func:`rest_state`); 0 without gravity
+    (the potential's least value is then 0 at the reference configuration) or where the
+    potential has no minimum."""
+    if not np.any(compiled.chain.gravity):
         return 0.0
-    return -value
+    y, value = rest_state(compiled)
+    return 0.0 if y is None else -value
+
+
+def independent_coordinates(compiled: CompiledChain) -> list[tuple[str, str, int]]:
+    """The chain's independent coordinates, in the order of :func:`full_state`'s ``z``:
+    (body name, block, index into the full state) for Theta_i, Omega_i of every body, X_i,
+    V_i of bodies whose joint is not ``permanent`` (a permanent joint's child is placed on
+    its parent), and D of embedded joints (block ``controller_state``), 3 entries each."""
+    out = []
+    names = compiled.chain.body_names
+    for i in range(compiled.size):
+        blocks = [("theta", 0), ("omega", 3)]
+        if compiled.codes[i] != PERMANENT:
+            blocks += [("position", 6), ("velocity", 9)]
+        out += [(names[i], block, 12 * i + at) for block, at in blocks]
+    for j in range(compiled.size):
+        if compiled.d_at[j] >= 0:
+            out.append((names[j], "controller_state", int(compiled.d_at[j])))
+    return out
+
+
+def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
+    """The full state (n_states,) of the independent coordinates ``z``
+    (:func:`independent_coordinates`, 3 entries each): the children of permanent joints
+    placed on their parents (E_j = F_j = 0)."""
+    from ..kinematics import rotation_matrix
+
+    y = np.zeros(compiled.n_states)
+    for k, (_, _, at) in enumerate(independent_coordinates(compiled)):
+        y[at: at + 3] = z[3 * k: 3 * k + 3]
+    for i in range(compiled.size):
+        if compiled.codes[i] != PERMANENT:
+            continue
+        parent, r_p = compiled.parents[i], compiled.ppoints[i]
+        a = rotation_matrix(y[12 * i: 12 * i + 3])
+        r_c = compiled.params[i]["attachment_point"]
+        if parent < 0:
+            point, rate = r_p, np.zeros(3)
+        else:
+            a_p = rotation_matrix(y[12 * parent: 12 * parent + 3])
+            point = y[12 * parent + 6: 12 * parent + 9] + a_p @ r_p
+            rate = y[12 * parent + 9: 12 * parent + 12] + a_p @ np.cross(y[12 * parent + 3: 12 * parent + 6], r_p)
+        y[12 * i + 6: 12 * i + 9] = point - a @ r_c
+        y[12 * i + 9: 12 * i + 12] = rate - a @ np.cross(y[12 * i + 3: 12 * i + 6], r_c)
+    return y
+
+
+def reduced_rate(compiled: CompiledChain, z: np.ndarray, t: float = 0.0) -> np.ndarray:
+    """dz/dt of the independent coordinates ``z`` (:func:`independent_coordinates`)."""
+    dy = np.empty(compiled.n_states)
+    chain_rate(float(t), full_state(compiled, z), *compiled.args, dy)
+    return np.concatenate([dy[at: at + 3] for _, _, at in independent_coordinates(compiled)])
 
 
 def _place(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
