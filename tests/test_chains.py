@@ -243,3 +243,21 @@ def test_a_one_body_chains_linearisation_is_todays(name):
     np.testing.assert_allclose(mine.equilibrium, theirs.equilibrium, atol=1e-9)
     np.testing.assert_allclose(mine.eigenvalues, theirs.eigenvalues, rtol=1e-6, atol=1e-6)
     assert mine.verdict == theirs.verdict
+
+
+def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stiffness():
+    """The stance example is stable upright (its K_r - G positive definite); with ankle
+    stiffness below gravity's (652 N m/rad about x) it is unstable; v is zero at rest."""
+    from rbstab.analysis import analyze_chain
+
+    path = "configs/examples/stance_ankle_hip.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        stable = analyze_chain(load_any_config(path))
+        weak = analyze_chain(load_any_config(path, ["joints.ankle.k_r.0=400"]))
+    assert stable.verdict == "asymptotically stable" and stable.linearisation.is_rest_point
+    assert weak.verdict == "unstable"
+    compiled = C.compile_chain(load_any_config(path).chain)
+    assert abs(C.lyapunov(compiled, stable.rest_state)[0]) < 1e-9
+    record = stable.as_dict()
+    assert set(record["rest_state"]) == {"legs", "trunk"} and record["verdict"] == "asymptotically stable"

@@ -15,7 +15,8 @@
 - :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin
   stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
 - :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;
-- :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record.
+- :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record;
+- :mod:`~rbstab.analysis.chain`: a chain's rest state, linearisation and verdict.
 
 Method and limits: ``docs/analysis.md``.
 """
@@ -23,8 +24,9 @@ Method and limits: ``docs/analysis.md``.
 from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, analyze, OutsideLimits, equilibrium_outside_limits
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
+from .chain import ChainAnalysis, analyze_chain
 from .dataset import is_analysis_file, read_analysis, write_analysis
-from .linearise import Linearisation, linearise
+from .linearise import Linearisation, linearise, linearise_chain
 from .robustness import Robustness, robustness, wilson_interval
 from .verify import NotVerifiable, Verification, verify_analysis, verify_sublevel
 
@@ -35,7 +37,10 @@ __all__ = [
     "OutsideLimits",
     "equilibrium_outside_limits",
     "linearise",
+    "linearise_chain",
     "Linearisation",
+    "analyze_chain",
+    "ChainAnalysis",
     "certify",
     "Certificate",
     "basin_map",
