@@ -42,6 +42,19 @@ def load_one(path: str, overrides: Sequence[str], *, chains: bool = False):
     return config, None, list(config.warnings)
 
 
+def is_chain_file(path: str) -> bool:
+    """Whether ``path`` is a readable YAML mapping with ``bodies`` (a chain's config); False
+    for anything else, whose errors its loader reports."""
+    from rbstab.config import ConfigError  # heavy: yaml
+    from rbstab.config.loader import is_chain  # heavy: yaml, pydantic
+    from rbstab.config.yaml_io import read_yaml_file  # heavy: yaml
+
+    try:
+        return is_chain(read_yaml_file(path))
+    except (ConfigError, OSError):
+        return False
+
+
 def config_error_text(path: str, error) -> str:
     """A ConfigError as the CLI prints it: ``in <file>:`` and one line per problem."""
     return str(error) if error.source else f"in {path}:\n{_indent(str(error))}"
@@ -60,8 +73,9 @@ def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str 
         console.warn(line, where)
 
 
-def load_configs(paths: Sequence[str], overrides: Sequence[str]):
-    """Load and validate every config before anything runs.
+def load_configs(paths: Sequence[str], overrides: Sequence[str], *, chains: bool = False):
+    """Load and validate every config before anything runs (with ``chains``, a chain's file
+    gives its ChainConfig).
 
     Shows each distinct warning once (e.g. an impossible inertia, ``W001``) on stderr;
     raises ``click.ClickException`` listing every invalid file, so the CLI exits non-zero
@@ -69,7 +83,7 @@ def load_configs(paths: Sequence[str], overrides: Sequence[str]):
     """
     configs, problems, found = [], [], {}
     for path in paths:
-        config, error, lines = load_one(path, overrides)
+        config, error, lines = load_one(path, overrides, chains=chains)
         if error is not None:
             problems.append(config_error_text(path, error))
             continue

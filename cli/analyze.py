@@ -9,7 +9,7 @@ import click
 
 from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
 
-from ._common import check_engine, command_line, load_configs, show_config_warnings, spec_error
+from ._common import check_engine, command_line, is_chain_file, load_configs, show_config_warnings, spec_error
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
 
@@ -324,6 +324,18 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     if basin or push_options or stability_options:
         check_engine(engine)
     configs, specs = _split_specs(configs)
+    chains = [c for c in configs if is_chain_file(c)]
+    if chains:
+        asked = [name for name, given in (("--basin", basin), ("--robustness", sweeps), ("--push", push_options),
+                                          ("--basin-stability/--push-distribution", stability_options),
+                                          ("--verify", verify), ("a sweep spec", specs),
+                                          ("--boundary-layer", boundary_layer is not None)) if given]
+        if asked or len(chains) < len(configs):
+            what = ", ".join(asked) if asked else "one-body configs"
+            raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation "
+                                   f"and verdict; {what} take one-body configs (give them in another command)")
+        _analyse_chains(chains, overrides)
+        return
     if specs:
         if not (push_options or stability_options):
             raise click.UsageError(f"{specs[0]}: a sweep spec is analysed with --push and/or --basin-stability / "
@@ -370,6 +382,23 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         say(f"  -> {path}")
         if as_json:
             console.emit({"kind": "robustness", **result.to_json()})
+
+
+def _analyse_chains(paths, overrides) -> None:
+    """Each chain's rest state, linearisation and verdict, printed (or one JSON object each,
+    "kind": "chain"); nothing is written."""
+    from rbstab.analysis import analyze_chain  # heavy: numba, numpy
+
+    console = get_console()
+    for config in load_configs(paths, overrides, chains=True):
+        try:
+            result = analyze_chain(config)
+        except ValueError as exc:
+            raise click.ClickException(f"{config.name}: {exc}")
+        if console.json:
+            console.emit({"kind": "chain", **result.as_dict()})
+        else:
+            console.out(result.text())
 
 
 def _check_verifiable(loaded, specs) -> None:

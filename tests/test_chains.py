@@ -261,3 +261,17 @@ def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stif
     assert abs(C.lyapunov(compiled, stable.rest_state)[0]) < 1e-9
     record = stable.as_dict()
     assert set(record["rest_state"]) == {"legs", "trunk"} and record["verdict"] == "asymptotically stable"
+
+
+def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp_path):
+    from click.testing import CliRunner
+
+    from rbstab_cli.main import cli
+
+    path = "configs/examples/stance_ankle_hip.yaml"
+    result = CliRunner().invoke(cli, ["analyze", path, "--set", "joints.ankle.k_r.0=400", "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert result.output.startswith("stance_ankle_hip: unstable") and "rest legs.theta: [0, 0, 0]" in result.output
+    refused = CliRunner().invoke(cli, ["analyze", path, "--push", "force", "-o", str(tmp_path)])
+    assert refused.exit_code == 2 and "is a chain" in refused.output and "--push take one-body configs" in refused.output
+    assert "Traceback" not in refused.output and not any(tmp_path.iterdir())

@@ -61,7 +61,9 @@ class ChainAnalysis:
         lines = [f"{self.name}: {lin.verdict} (linearisation in {lin.equilibrium.size} independent coordinates)"]
         for k, (body, block, _) in enumerate(self.coordinates):
             if block in ("theta", "position", "controller_state"):
-                values = ", ".join(f"{x:.6g}" for x in lin.equilibrium[3 * k: 3 * k + 3])
+                block_values = lin.equilibrium[3 * k: 3 * k + 3]
+                scale = max(1.0, float(np.abs(lin.equilibrium).max()))
+                values = ", ".join(f"{x:.6g}" for x in np.where(np.abs(block_values) < 1e-12 * scale, 0.0, block_values))
                 lines.append(f"  rest {body}.{block}: [{values}]")
         if not lin.is_rest_point:
             lines.append(f"  not a rest point to rounding: max |dz/dt| = {np.abs(lin.rest_residual).max():.3g}")
@@ -83,7 +85,7 @@ def analyze_chain(config) -> ChainAnalysis:
         Where the chain has no rest state near its reference configuration, or a joint has
         no linearisation (:func:`rbstab.analysis.linearise.linearise_chain`).
     """
-    from ..variants import chain as C
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     compiled = C.compile_chain(config.chain)
     lin, coordinates = linearise_chain(compiled)

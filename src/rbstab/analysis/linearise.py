@@ -219,7 +219,7 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
         Where the potential has no minimum near the reference configuration (no rest
         state to linearise at), or a sliding joint without a boundary layer.
     """
-    from ..variants import chain as C
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     if any(j.variant == "sliding" and j.boundary_layer <= 0 for j in compiled.chain.joints):
         raise ValueError("a sliding joint with boundary_layer 0 has no linearisation; give it a boundary layer")

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..chain import GROUND, Chain
 from ..jit import jit
-from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
+from ..kinematics import (ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of,
+                          rotation_matrix, sub, vector)
 from ..layout import VARIANT_CODES
 from ..model import (
     PARAMETERS,
@@ -409,25 +410,16 @@ def _configuration(compiled: CompiledChain, q: np.ndarray) -> np.ndarray:
     n = compiled.size
     y = np.zeros(compiled.n_states)
     k = 3 * n
-    rots = []
-    from ..kinematics import rotation_matrix
     for i in range(n):
         y[12 * i: 12 * i + 3] = q[3 * i: 3 * i + 3]
-        a = rotation_matrix(q[3 * i: 3 * i + 3])
-        rots.append(a)
-        if compiled.codes[i] == PERMANENT:
-            parent = compiled.parents[i]
-            r_p = compiled.ppoints[i]
-            point = r_p if parent < 0 else y[12 * parent + 6: 12 * parent + 9] + rots[parent] @ r_p
-            y[12 * i + 6: 12 * i + 9] = point - a @ compiled.params[i]["attachment_point"]
-        else:
+        if compiled.codes[i] != PERMANENT:
             y[12 * i + 6: 12 * i + 9] = q[k: k + 3]
             k += 3
     for j in range(n):
         if compiled.d_at[j] >= 0:
             y[compiled.d_at[j]: compiled.d_at[j] + 3] = q[k: k + 3]
             k += 3
-    return y
+    return _place(compiled, y, only_permanent=True)
 
 
 def _potential(compiled: CompiledChain, y: np.ndarray) -> float:
@@ -442,7 +434,7 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     ``permanent``, D of embedded joints; a permanent joint's child placed on its parent)
     from the reference configuration (Theta = 0, every body placed on its joint, E_j = 0);
     (None, nan) where the potential has no minimum there (it falls without bound)."""
-    from scipy.optimize import minimize, root
+    from scipy.optimize import minimize, root  # heavy: scipy, only where a rest state is sought
 
     n = compiled.size
     free = [i for i in range(n) if compiled.codes[i] != PERMANENT]
@@ -507,26 +499,10 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     """The full state (n_states,) of the independent coordinates ``z``
     (:func:`independent_coordinates`, 3 entries each): the children of permanent joints
     placed on their parents (E_j = F_j = 0)."""
-    from ..kinematics import rotation_matrix
-
     y = np.zeros(compiled.n_states)
     for k, (_, _, at) in enumerate(independent_coordinates(compiled)):
         y[at: at + 3] = z[3 * k: 3 * k + 3]
-    for i in range(compiled.size):
-        if compiled.codes[i] != PERMANENT:
-            continue
-        parent, r_p = compiled.parents[i], compiled.ppoints[i]
-        a = rotation_matrix(y[12 * i: 12 * i + 3])
-        r_c = compiled.params[i]["attachment_point"]
-        if parent < 0:
-            point, rate = r_p, np.zeros(3)
-        else:
-            a_p = rotation_matrix(y[12 * parent: 12 * parent + 3])
-            point = y[12 * parent + 6: 12 * parent + 9] + a_p @ r_p
-            rate = y[12 * parent + 9: 12 * parent + 12] + a_p @ np.cross(y[12 * parent + 3: 12 * parent + 6], r_p)
-        y[12 * i + 6: 12 * i + 9] = point - a @ r_c
-        y[12 * i + 9: 12 * i + 12] = rate - a @ np.cross(y[12 * i + 3: 12 * i + 6], r_c)
-    return y
+    return _place(compiled, y, only_permanent=True)
 
 
 def reduced_rate(compiled: CompiledChain, z: np.ndarray, t: float = 0.0) -> np.ndarray:
@@ -536,12 +512,13 @@ def reduced_rate(compiled: CompiledChain, z: np.ndarray, t: float = 0.0) -> np.n
     return np.concatenate([dy[at: at + 3] for _, _, at in independent_coordinates(compiled)])
 
 
-def _place(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
-    """``y`` with every body's X, V placed on its parent's point (E_j = F_j = 0)."""
-    from ..kinematics import rotation_matrix
-
+def _place(compiled: CompiledChain, y: np.ndarray, only_permanent: bool = False) -> np.ndarray:
+    """``y`` with every body's (``only_permanent``: every permanent joint's child's) X, V
+    placed on its parent's point (E_j = F_j = 0), parents first."""
     y = np.array(y, dtype=float)
     for i in range(compiled.size):
+        if only_permanent and compiled.codes[i] != PERMANENT:
+            continue
         parent, r_p = compiled.parents[i], compiled.ppoints[i]
         a = rotation_matrix(y[12 * i: 12 * i + 3])
         r_c = compiled.params[i]["attachment_point"]
@@ -627,7 +604,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     ``solve_ivp`` (``simulation``'s method, tolerances, steps), sampled at ``n_samples``
     times on [0, t_end]; it stops ``failed`` where any body's or joint's |theta_2| reaches
     pi/2 - ``gimbal_margin`` (the rows after are NaN) or after ``timeout`` [s] of wall time."""
-    from scipy.integrate import solve_ivp
+    from scipy.integrate import solve_ivp  # heavy: scipy, only where a chain is integrated
 
     sim = config.simulation
     compiled = compile_chain(config.chain) if compiled is None else compiled
