@@ -180,15 +180,20 @@ def linearise(variant) -> Linearisation:
             f"{variant.name}: the right-hand side is not differentiable (the pure sign law, "
             "boundary_layer 0): there is no linearisation; analyse a boundary-layer law"
         )
-    y_e = np.asarray(variant.equilibrium, dtype=float)
-    residual = variant.rhs(0.0, y_e)
-    jac, error = jacobian(lambda y: variant.rhs(0.0, y), y_e)
+    return _linearisation(lambda y: variant.rhs(0.0, y), np.asarray(variant.equilibrium, dtype=float),
+                          variant.body.gravity)
+
+
+def _linearisation(rates, y_e: np.ndarray, gravity: np.ndarray) -> Linearisation:
+    """The Linearisation of the vectorised ``rates`` ((k, n) -> (k, n)) at ``y_e`` (n,)."""
+    residual = rates(y_e[None])[0]
+    jac, error = jacobian(rates, y_e)
     eigenvalues = sort_eigenvalues(np.linalg.eigvals(jac))
     radius = float(np.abs(eigenvalues).max()) if eigenvalues.size else 0.0
     return Linearisation(
         equilibrium=y_e,
         rest_residual=residual,
-        rest_tolerance=rest_tolerance(jac, y_e, variant.body.gravity),
+        rest_tolerance=rest_tolerance(jac, y_e, gravity),
         jacobian=jac,
         jacobian_error=error,
         eigenvalues=eigenvalues,
@@ -229,16 +234,5 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
                          "(a body falls without bound): there is no rest state to linearise at")
     coordinates = C.independent_coordinates(compiled)
     z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
-    residual = C.reduced_rate(compiled, z)
-    jac, error = jacobian(lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)]), z)
-    eigenvalues = sort_eigenvalues(np.linalg.eigvals(jac))
-    radius = float(np.abs(eigenvalues).max()) if eigenvalues.size else 0.0
-    return Linearisation(
-        equilibrium=z,
-        rest_residual=residual,
-        rest_tolerance=rest_tolerance(jac, z, compiled.chain.gravity),
-        jacobian=jac,
-        jacobian_error=error,
-        eigenvalues=eigenvalues,
-        tolerance=EIGENVALUE_RTOL * max(1.0, radius),
-    ), coordinates
+    rates = lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)])  # noqa: E731
+    return _linearisation(rates, z, compiled.chain.gravity), coordinates
