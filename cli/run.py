@@ -74,6 +74,21 @@ def _report(config, path: Path, mode: str) -> dict:
     s = {k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}
     settled = convergence_word(attrs["status"], s["lyapunov_initial"], s["lyapunov_final"])
     check = rate_check_text(s, path)
+    variant = attrs["variant"]
+    if variant == "chain":
+        if console.json:
+            console.emit({"name": config.name, "path": str(path), "variant": variant, "status": attrs["status"],
+                          "converged": settled == "converged", "message": attrs["message"],
+                          "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
+                          "replaced": _REPLACED[mode], "summary": s})
+        drift = [x for x in s["max_constraint_drift"] if x == x]
+        console.out(
+            f"{config.name}: {attrs['status']}, {settled} (a chain of {len(attrs['joints'].split(','))} bodies, "
+            f"{attrs['wall_time']:.3g} s) v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
+            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E_j| {max(s['max_abs_constraint_error']):.3g} m"
+            + (f" (permanent joints' drift {max(drift):.3g} m)" if drift else "")
+            + f", rate check {check} -> {path}")
+        return attrs
     if console.json:
         console.emit({"name": config.name, "path": str(path), "variant": config.variant, "status": attrs["status"],
                       "converged": settled == "converged", "message": attrs["message"],
@@ -98,6 +113,7 @@ def _load_kernels(loaded) -> None:
     from rbstab.engine import warm_up  # heavy: numba, numpy
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
 
+    loaded = [c for c in loaded if hasattr(c, "body")]  # a chain's kernels compile on their first use
     parts = (["rates", "outputs"] if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
         ["switching"] if any(is_sign_law(c) for c in loaded) else [])
     start = time.perf_counter()
@@ -142,12 +158,12 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
 
     if method is not None:
         overrides = (*overrides, f"simulation.method={method}")
-    loaded = load_configs(configs, overrides)
+    loaded = load_configs(configs, overrides, chains=True)
     _check_memory(loaded)
     out = Path(output)
     how = _check_targets(loaded, out, overwrite)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
-    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded))
+    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")))
     _load_kernels(loaded)
     failed = 0
     for written, config in enumerate(loaded):

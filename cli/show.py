@@ -153,6 +153,11 @@ def _show_result(path: str) -> None:
                       "rate_check_reason": check[len("fail ("):-1] if check.startswith("fail (") else None})
     console.out(f"{path}")
     console.out(f"  name       {info['name']}  (variant {info['variant']})")
+    if info["variant"] == "chain":  # a chain's file: per-body and per-joint variables, names as coordinates
+        from rbstab.io.hdf5 import read_attributes  # heavy: numpy
+
+        attrs = read_attributes(path, verify=False)
+        console.out(f"  bodies     {attrs['bodies']}; joints {attrs['joints']}")
     console.out(f"  status     {info['status']}, {settled}: {info['message']}")
     console.out(f"  created    {info['created']}, wall time {_fmt(info['wall_time'])} s")
     console.out("  solver     " + ", ".join(f"{k} {v}" for k, v in info["solver"].items() if k != "message"))
@@ -163,14 +168,14 @@ def _show_result(path: str) -> None:
 
 def _expand(path: str) -> list[str]:
     """A plain folder (not a sweep folder) stands for the sweep folders and result files in it."""
-    from rbstab.kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder  # heavy: numba, numpy, pydantic, yaml
+    from rbstab.kinds import CHAIN_RUN, RUN, STORE, SWEEP, inputs_in, is_plain_folder  # heavy: numba, numpy, pydantic, yaml
 
     folder = Path(path)
     if not folder.exists():
         raise ValueError(f"no such result file or folder: {path}" + _did_you_mean(folder))
     if not is_plain_folder(folder):
         return [path]
-    inside = [str(p) for p in inputs_in(folder, (RUN, STORE, SWEEP))]
+    inside = [str(p) for p in inputs_in(folder, (RUN, CHAIN_RUN, STORE, SWEEP))]
     if not inside:
         raise ValueError(f"{path}: a folder, but not a sweep folder (no sweep.yaml and index.csv) and without "
                          "result files (*.h5) or sweep folders in it")
@@ -187,9 +192,9 @@ def _did_you_mean(missing: Path) -> str:
 
 def _show(path: str) -> None:
     """``path`` shown as its kind says (:func:`rbstab.kinds.kind_of`)."""
-    from rbstab.kinds import RUN, STORE, SWEEP, kind_of  # heavy: numba, numpy, pydantic, yaml
+    from rbstab.kinds import CHAIN_RUN, RUN, STORE, SWEEP, kind_of  # heavy: numba, numpy, pydantic, yaml
 
-    show_kind = {RUN: _show_result, STORE: _show_chunk, SWEEP: _show_sweep}
+    show_kind = {RUN: _show_result, CHAIN_RUN: _show_result, STORE: _show_chunk, SWEEP: _show_sweep}
     show_kind[kind_of(path, tuple(show_kind))](path)
 
 

@@ -156,12 +156,26 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Ov
     return load_file(source, lines)
 
 
-def _config(config: Any, overrides: Overrides) -> "RunConfig":
+def _config(config: Any, overrides: Overrides, *, chains: bool = False) -> "RunConfig":
+    """A validated config of ``config`` (a path or a validated config) with ``overrides``;
+    with ``chains``, a chain's file gives its ChainConfig."""
     from .config import RunConfig  # heavy: yaml
+    from .config.chains import ChainConfig, load_any_config  # heavy: yaml, pydantic
 
-    if isinstance(config, RunConfig) and not overrides:
+    if isinstance(config, RunConfig | ChainConfig) and not overrides:
+        if isinstance(config, ChainConfig) and not chains:
+            from .config import ConfigError  # heavy: yaml
+            from .config.loader import _NOT_RUN  # heavy: yaml, pydantic
+
+            raise ConfigError([_NOT_RUN], None)
         return config
-    return load_config(config, overrides)
+    return load_any_config(config, overrides) if chains else load_config(config, overrides)
+
+
+def _is_chain_config(config: Any) -> bool:
+    from .config.chains import ChainConfig  # heavy: yaml, pydantic
+
+    return isinstance(config, ChainConfig)
 
 
 # -- one run ------------------------------------------------------------------------------------
@@ -323,11 +337,16 @@ def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overri
     OSError
         If the file cannot be written (a full disk, a read-only folder).
     """
-    from .io.hdf5 import write_result  # heavy: numpy
+    from .io.hdf5 import write_chain_result, write_result  # heavy: numpy
 
-    config = _config(config, overrides)
+    config = _config(config, overrides, chains=True)
     path = Path(output) / f"{config.name}.h5"
     check_overwrite(config, path, overwrite=overwrite)
+    if _is_chain_config(config):
+        from .simulator import simulate_chain  # heavy: numba, numpy
+
+        return write_chain_result(simulate_chain(config, timeout), path,
+                                  command_line=command_line or _python_command("run"))
     result = _integrate(config, engine, timeout)
     return write_result(result, path, command_line=command_line or _python_command("run"))
 
@@ -350,9 +369,9 @@ def open_result(path: str | os.PathLike) -> "xarray.Dataset":
     rbstab.io.integrity.DamagedResultError
         If its checksums do not match (a subclass of NotAResultFile).
     """
-    from .kinds import RUN, open_input  # heavy: numba, numpy, pydantic, yaml
+    from .kinds import CHAIN_RUN, RUN, open_input  # heavy: numba, numpy, pydantic, yaml
 
-    return open_input(path, (RUN,))  # another kind is refused, saying what it is and how to read it
+    return open_input(path, (RUN, CHAIN_RUN))  # another kind is refused, saying what it is and how to read it
 
 
 # -- sweeps -------------------------------------------------------------------------------------

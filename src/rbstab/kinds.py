@@ -1,7 +1,7 @@
 """The kinds of input rbstab reads, and the one registry that tells them apart.
 
 - ``run``: a run's result file (``rbstab run``: ``<name>.h5``), loaded by
-  :func:`rbstab.io.hdf5.read_dataset`;
+  :func:`rbstab.io.hdf5.read_dataset`; ``chain_run``: a chain run's, the same way;
 - ``store``: a sweep's store file of many runs (``runs/chunk-*.h5``), loaded by
   :func:`rbstab.io.chunk.read_chunk_rows`;
 - ``sweep``: a sweep folder (``sweep.yaml`` and ``index.csv``), loaded by
@@ -41,10 +41,10 @@ from pathlib import Path
 from typing import Any
 
 from .io.chunk import is_chunk_file, read_chunk_rows
-from .io.hdf5 import NotAResultFile, is_run_file, read_dataset, read_format
+from .io.hdf5 import NotAResultFile, is_chain_run_file, is_run_file, read_dataset, read_format
 from .sweep.folder import INDEX_FILE, SPEC_FILE, has_index, is_sweep_folder, open_sweep
 
-__all__ = ["InputKind", "RUN", "STORE", "SWEEP", "ANALYSIS", "SENSITIVITY", "TUNING", "KINDS", "kind_of", "open_input", "is_plain_folder",
+__all__ = ["InputKind", "RUN", "CHAIN_RUN", "STORE", "SWEEP", "ANALYSIS", "SENSITIVITY", "TUNING", "KINDS", "kind_of", "open_input", "is_plain_folder",
            "inputs_in"]
 
 
@@ -93,6 +93,9 @@ def _read_analysis(path: Path):
 
 
 RUN = InputKind("run", "run result", "rbstab show or rbstab.open_result read it", "*.h5", is_run_file, read_dataset)
+CHAIN_RUN = InputKind("chain_run", "chain run result",
+                      "rbstab show or rbstab.open_result read it (report and animate take one-body runs)", "*.h5",
+                      is_chain_run_file, read_dataset)
 STORE = InputKind("store", "store file of a sweep (many runs)",
                   "open its sweep folder with rbstab.open_sweep(folder), or rbstab show it", "*.h5", is_chunk_file,
                   read_chunk_rows)
@@ -128,7 +131,7 @@ SENSITIVITY = InputKind("sensitivity", "sensitivity study (its sensitivity.nc or
 TUNING = InputKind("tuning", "tuning study (its tuning.nc or folder)", "rbstab report draws it", "tuning.nc",
                    _study_test("tuning"), _read_tuning)
 #: Every kind, in the order :func:`kind_of` tries them.
-KINDS = (RUN, STORE, SWEEP, ANALYSIS, SENSITIVITY, TUNING)
+KINDS = (RUN, CHAIN_RUN, STORE, SWEEP, ANALYSIS, SENSITIVITY, TUNING)
 
 
 def _a(noun: str) -> str:

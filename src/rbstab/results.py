@@ -15,7 +15,7 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
 
-__all__ = ["RunResult", "RunBlock", "plain", "row"]
+__all__ = ["RunResult", "RunBlock", "ChainRun", "plain", "row"]
 
 
 def plain(value: Any) -> Any:
@@ -156,3 +156,35 @@ class RunBlock:
                    [result.status], [result.message], {key: [value] for key, value in result.solver.items()},
                    np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
                    [result.switching])
+
+
+@dataclass
+class ChainRun:
+    """Outcome of one run of a chain of bodies (:func:`rbstab.simulator.simulate_chain`).
+
+    Attributes
+    ----------
+    config : ChainConfig
+        The validated chain configuration that was run.
+    time : ndarray, shape (n_samples,)
+        Sample times [s], evenly spaced on [0, t_end].
+    outputs : dict of str -> ndarray
+        :func:`rbstab.variants.chain.evaluate`'s outputs: per body (n_samples, n_bodies, 3),
+        per joint (n_samples, n_joints, 3) or (n_samples, n_joints), scalars (n_samples,),
+        plus ``lyapunov_rate_numerical``. Rows after a failure are NaN.
+    status, message, solver, wall_time, summary
+        As for :class:`RunResult` (:func:`rbstab.simulator.chain_summary` for the summary).
+    """
+
+    config: Any
+    time: np.ndarray
+    outputs: dict[str, np.ndarray]
+    status: str
+    message: str
+    solver: dict = field(default_factory=dict)
+    wall_time: float = 0.0
+    summary: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return self.config.name

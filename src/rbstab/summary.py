@@ -588,3 +588,46 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     largest = acc[:, MAX_MISMATCH]
     table.update(_rate_check(largest, scales, (taken >= MIN_CHECK_SAMPLES) & np.isfinite(largest)))
     return table
+
+
+#: The terms of a chain's v (:func:`rbstab.variants.chain.evaluate`).
+CHAIN_LYAPUNOV_TERMS = ("lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity")
+
+
+def chain_summary(time: np.ndarray, outputs: dict[str, np.ndarray], joint_names) -> dict:
+    """Summary figures of a chain run (:func:`rbstab.variants.chain.evaluate`'s outputs plus
+    ``lyapunov_rate_numerical``; NaN rows after a failure): ``t_final`` [s],
+    ``lyapunov_initial``, ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W],
+    ``max_lyapunov_increase`` [J], ``max_abs_constraint_error`` [m] (per joint, max |E_j|),
+    ``max_constraint_drift`` [m] (per joint, in the order of ``joint_names``; NaN where not
+    permanent), and the rate check as for one body (:func:`summarize`): the relative mismatch of
+    the analytic and numerical dv/dt against the reference power max(max |analytic|, E / T),
+    E the largest sum of the magnitudes of v's terms, ``pass`` within
+    :data:`LYAPUNOV_RATE_TOLERANCE`."""
+    time = np.asarray(time, dtype=float)
+    v = np.asarray(outputs["lyapunov"], dtype=float)
+    finite = np.isfinite(v)
+    last = int(np.flatnonzero(finite)[-1]) if finite.any() else 0
+    rate, numerical = outputs["lyapunov_rate"], outputs["lyapunov_rate_numerical"]
+    with np.errstate(all="ignore"):
+        running_min = np.fmin.accumulate(np.where(finite, v, np.inf))
+        increase = float(np.nanmax(np.where(finite, v - running_min, np.nan))) if finite.any() else float("nan")
+        error = np.linalg.norm(outputs["constraint_error"], axis=-1)
+        mismatch = float(np.nanmax(np.abs(rate - numerical))) if finite.sum() >= MIN_CHECK_SAMPLES else float("nan")
+        energy = float(np.nanmax(sum(np.abs(outputs[k]) for k in CHAIN_LYAPUNOV_TERMS)))
+        duration = max(float(time[last] - time[0]), float(np.finfo(float).tiny))
+        power = max(float(np.nanmax(np.abs(rate))), energy / duration, float(np.finfo(float).tiny))
+    relative = mismatch / power
+    return {
+        "t_final": float(time[last]),
+        "lyapunov_initial": float(v[0]),
+        "lyapunov_final": float(v[last]),
+        "max_lyapunov_rate": float(np.nanmax(rate)),
+        "max_lyapunov_increase": increase,
+        "max_abs_constraint_error": [float(x) for x in np.nanmax(error, axis=0)],
+        "max_constraint_drift": [float(x) for x in np.max(outputs["constraint_drift"][: last + 1], axis=0)],
+        "lyapunov_rate_mismatch": mismatch,
+        "lyapunov_rate_mismatch_relative": relative,
+        "lyapunov_rate_check": "n/a" if relative != relative else ("pass" if relative <= LYAPUNOV_RATE_TOLERANCE
+                                                                   else "fail"),
+    }

@@ -21,6 +21,15 @@ Layout of ``<name>.h5``
   ...), ``wall_time``, ``solver_*`` statistics, ``summary_*`` figures
   (:func:`rbstab.summary.summarize`) and ``units_of_summary`` (their units, JSON).
 
+A chain run's file (:func:`write_chain_result`, ``rbstab_format`` :data:`CHAIN_FORMAT`,
+``variant`` ``chain``) has the same layout with two more dimensions, ``body`` and ``joint``
+(their names as coordinates): the state blocks and ``force_h`` along (``time``, ``body``,
+``axis``); ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``torque_n``,
+``controller_state``, ``joint_theta``, ``joint_omega`` along (``time``, ``joint``,
+``axis``); ``constraint_drift`` along (``time``, ``joint``); v, its terms
+(``lyapunov_kinetic``, ``lyapunov_joint``, ``lyapunov_body``, ``lyapunov_gravity``) and
+rates along ``time``; the global attributes ``bodies`` and ``joints`` list the names.
+
 Open with ``xarray.open_dataset(path, engine="h5netcdf")``, or :func:`read_dataset`
 (checksums verified first); :func:`result_dataset` gives the same Dataset for a run in
 memory, from the same tables (:func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
@@ -60,6 +69,7 @@ __all__ = [
     "VARIABLE_DESCRIPTIONS",
     "write_result",
     "write_run",
+    "write_chain_result",
     "result_dataset",
     "read_dataset",
     "variable_attributes",
@@ -74,11 +84,17 @@ __all__ = [
     "read_summary",
     "read_format",
     "is_run_file",
+    "is_chain_run_file",
+    "CHAIN_FORMAT",
     "NotAResultFile",
 ]
 
 #: Value of the ``rbstab_format`` global attribute of every result file.
 FORMAT = "rbstab-run-1"
+#: Value of the ``rbstab_format`` global attribute of a chain run's file (:func:`write_chain_result`).
+CHAIN_FORMAT = "rbstab-chain-run-1"
+#: The formats :func:`read_attributes` and :func:`read_summary` read.
+RUN_FORMATS = (FORMAT, CHAIN_FORMAT)
 
 #: Labels of the ``axis`` dimension (vector components).
 AXIS_LABELS = ("x", "y", "z")
@@ -237,8 +253,13 @@ def _write_events(w, root, switching) -> None:
 
 
 def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[str, Any],
-                switching=None) -> bytes:
+                switching=None, labels: dict[str, tuple[str, ...]] | None = None,
+                dims: dict[str, str] | None = None) -> bytes:
     """The bytes of a result file, built in memory (HDF5's ``core`` driver).
+
+    ``labels``: further dimensions with their names as coordinates (a chain's ``body`` and
+    ``joint``); ``dims``: the variables that have one, by name, as their second dimension
+    (then ``axis`` third where they are vectors).
 
     HDF5 never writes to the disk itself: a full disk or a failing device then shows up
     as an ordinary ``OSError`` of the caller's write, with nothing half-open inside HDF5
@@ -257,15 +278,25 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         axis = w.dataset(root, "axis", np.array(AXIS_LABELS, dtype=object), dtype=h5py.string_dtype())
         h5ds.set_scale(axis, b"axis")
         _describe(w, axis, "axis")
+        scales = {}
+        for dim, names in (labels or {}).items():
+            scales[dim] = w.dataset(root, dim, np.array(names, dtype=object), dtype=h5py.string_dtype())
+            h5ds.set_scale(scales[dim], dim.encode())
+            _describe(w, scales[dim], dim)
+        dims = dims or {}
         for key, values in outputs.items():
             var = w.dataset(root, key, np.ascontiguousarray(values, dtype=float))
             h5ds.attach_scale(var, t, 0)
-            if var.rank == 2:
-                h5ds.attach_scale(var, axis, 1)
+            if key in dims:
+                h5ds.attach_scale(var, scales[dims[key]], 1)
+            if var.rank == 2 + (key in dims):
+                h5ds.attach_scale(var, axis, var.rank - 1)
             _describe(w, var, key)
             var.close()
         t.close()
         axis.close()
+        for scale in scales.values():
+            scale.close()
         if switching is not None:
             _write_events(w, root, switching)
         for key, value in attrs.items():
@@ -279,6 +310,48 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         w.attr(root, DATA_DIGEST_ATTR, data_digest_of(numbers))
         f.flush()
         return f.id.get_file_image()
+
+
+def write_chain_result(result: "ChainRun", path: str | os.PathLike, *, command_line: str | None = None) -> Path:
+    """Write a chain run (:class:`rbstab.results.ChainRun`) to ``path``, atomically: the
+    layout of a one-body file (module docstring) with the dimensions ``body`` and ``joint``
+    (their names as coordinates) on the per-body and per-joint variables, ``variant``
+    ``"chain"`` and the global attributes ``bodies`` and ``joints`` (the names, comma
+    separated)."""
+    chain = result.config.chain
+    config_yaml = result.config.to_yaml()
+    attrs = {
+        "rbstab_format": CHAIN_FORMAT,
+        "name": result.name,
+        "variant": "chain",
+        "bodies": ",".join(chain.body_names),
+        "joints": ",".join(chain.joint_names),
+        "status": result.status,
+        "message": result.message,
+        "config": config_yaml,
+        "config_hash": config_hash(canonical_config(result.config.resolved)),
+        **provenance_attributes(f"rbstab run {result.name} (a chain of {chain.size} bodies)",
+                                command_line=command_line),
+        "wall_time": float(result.wall_time),
+    }
+    attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
+    attrs["solver_status"] = int(result.solver.get("solver_status", -1))
+    attrs["solver_message"] = result.message
+    attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
+    attrs["units_of_summary"] = summary_units(result.summary)
+    n = len(result.time)
+    dims = {}
+    for key, values in result.outputs.items():
+        if values.ndim >= 2 and values.shape[1] == chain.size and values.shape[0] == n:
+            dims[key] = "body" if key in BODY_VARIABLES else "joint"
+    labels = {"body": chain.body_names, "joint": chain.joint_names}
+    path = Path(path)
+    write_bytes_atomic(path, _file_image(result.time, result.outputs, attrs, None, labels, dims))
+    return path
+
+
+#: A chain file's variables along ``body`` (the others with a second dimension are along ``joint``).
+BODY_VARIABLES = ("theta", "omega", "position", "velocity", "force_h")
 
 
 def write_run(
@@ -424,6 +497,15 @@ def read_format(path: str | os.PathLike) -> str | None:
     return value if value is None else str(value)
 
 
+def is_chain_run_file(path: str | os.PathLike) -> bool:
+    """Whether ``path`` is a chain run's result file (``rbstab_format`` = :data:`CHAIN_FORMAT`);
+    False for anything else."""
+    try:
+        return read_format(path) == CHAIN_FORMAT
+    except (OSError, ValueError):
+        return False
+
+
 def is_run_file(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a run's result file (``rbstab_format`` = :data:`FORMAT`);
     False for anything else, a folder or a file that cannot be read included."""
@@ -460,9 +542,9 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     path = Path(path)
     with open_result(path) as f:
         attrs = {k: attribute_value(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
-        if attrs.get("rbstab_format") == FORMAT and verify:
+        if attrs.get("rbstab_format") in RUN_FORMATS and verify:
             verify_open_file(f, path, data=data)
-    if attrs.get("rbstab_format") != FORMAT:
+    if attrs.get("rbstab_format") not in RUN_FORMATS:
         raise NotAResultFile(f"{path}: not an rbstab run result (no rbstab_format = {FORMAT!r} attribute)")
     return attrs
 

@@ -598,7 +598,8 @@ def load_spec(path: str | Path, overrides: Sequence[str] = ()) -> SweepSpec:
 
 def is_run_config(data: Any) -> bool:
     """Whether a parsed YAML file is a run config rather than a sweep spec (no ``base``,
-    and a ``body`` or ``controller`` section)."""
-    return isinstance(data, Mapping) and "base" not in data and ("body" in data or "controller" in data)
+    and a ``body`` or ``controller`` section, or a chain's ``bodies`` or ``joints``)."""
+    return isinstance(data, Mapping) and "base" not in data and any(
+        key in data for key in ("body", "controller", "bodies", "joints"))
 
 

@@ -1,0 +1,68 @@
+"""rbstab run and show of chains of bodies: the file layout (body and joint dimensions, names as
+coordinates, CF attributes), the summary with its rate check, the API, and the commands that
+take one-body runs refusing a chain's file in one line."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+
+import rbstab
+from rbstab.config.chains import load_any_config
+from rbstab.io.hdf5 import CHAIN_FORMAT, read_attributes
+from rbstab_cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+SHORT = ["--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=501"]
+
+
+@pytest.mark.parametrize("name", ["double_pendulum", "stance_ankle_hip", "knee"])
+def test_run_writes_a_chain_file_with_body_and_joint_dimensions(name, tmp_path):
+    result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / f"{name}.yaml"), *SHORT,
+                                      "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "a chain of 2 bodies" in result.output and "rate check pass" in result.output
+    path = tmp_path / f"{name}.h5"
+    attrs = read_attributes(path, data=True)  # every checksum verified
+    assert attrs["rbstab_format"] == CHAIN_FORMAT and attrs["variant"] == "chain"
+    config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml")
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        assert list(ds["body"].values) == list(config.chain.body_names)
+        assert list(ds["joint"].values) == list(config.chain.joint_names)
+        assert ds["theta"].dims == ("time", "body", "axis") and ds["torque_n"].dims == ("time", "joint", "axis")
+        assert ds["constraint_drift"].dims == ("time", "joint") and ds["lyapunov"].dims == ("time",)
+        assert ds["joint_theta"].attrs["units"] == "rad" and ds["constraint_force"].attrs["units"] == "N"
+        np.testing.assert_array_equal(ds["theta"].values[0, 1], config.initial_state[config.chain.body_names[1]]["theta"])
+        v = ds["lyapunov"].values
+    assert attrs["summary_lyapunov_initial"] == pytest.approx(v[0])
+    assert attrs["summary_lyapunov_rate_check"] == "pass"
+    shown = CliRunner().invoke(cli, ["show", str(path)])
+    assert shown.exit_code == 0 and f"bodies     {','.join(config.chain.body_names)}" in shown.output
+
+
+def test_the_api_runs_a_chain_and_opens_its_file(tmp_path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        path = rbstab.run(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", tmp_path,
+                          overrides=["simulation.t_end=0.3", "simulation.n_samples=301"])
+    ds = rbstab.open_result(path)
+    assert ds.attrs["variant"] == "chain" and ds["force_h"].dims == ("time", "body", "axis")
+    assert float(ds["lyapunov"][-1]) < float(ds["lyapunov"][0])  # feedback and no saturation reached: v falls
+
+
+def test_report_and_animate_refuse_a_chain_file_in_one_line(tmp_path):
+    out = tmp_path / "results"
+    assert CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"), *SHORT,
+                                    "-o", str(out)]).exit_code == 0
+    path = out / "stance_ankle_hip.h5"
+    for args in (["report", str(path), "-o", str(tmp_path / "report")], ["animate", str(path), "-o",
+                                                                        str(tmp_path / "a.gif")]):
+        result = CliRunner().invoke(cli, args)
+        assert result.exit_code != 0 and "Traceback" not in result.output
+        assert "a chain run result" in result.output and "take one-body runs" in result.output
+        assert not (tmp_path / "report").exists() and not (tmp_path / "a.gif").exists()
