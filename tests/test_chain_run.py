@@ -66,3 +66,17 @@ def test_report_and_animate_refuse_a_chain_file_in_one_line(tmp_path):
         assert result.exit_code != 0 and "Traceback" not in result.output
         assert "a chain run result" in result.output and "take one-body runs" in result.output
         assert not (tmp_path / "report").exists() and not (tmp_path / "a.gif").exists()
+
+
+def test_a_chain_run_stops_where_it_leaves_the_admissible_region(tmp_path):
+    """simulation.limits bound every body's Theta, Omega, X, V and every joint's E_j: a push
+    of the trunk past 0.2 rad stops the run, failed, naming the body, the quantity and the time."""
+    result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"),
+                                      "--set", "simulation.limits.theta=0.2", "--set", "initial_state.trunk.omega=[-3,0,0]",
+                                      *SHORT, "-o", str(tmp_path)])
+    assert result.exit_code == 1 and "Traceback" not in result.output
+    assert "left the admissible region (simulation.limits): |theta_1| of trunk reached 0.2 at t = " in result.output
+    with xr.open_dataset(tmp_path / "stance_ankle_hip.h5", engine="h5netcdf") as ds:
+        theta = ds["theta"].values
+    finite = np.isfinite(theta[:, 1, 0])
+    assert not finite.all() and np.abs(theta[finite, 1, 0]).max() <= 0.2 + 1e-9

@@ -599,6 +599,35 @@ def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> flo
     return min(worst, float(np.min(limit - np.abs(joints[:, _THETA_J, 1]))))
 
 
+def _region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
+    """(min over bodies, joints and axes of bound - |q| [the quantity's units], the quantity
+    that reaches its bound first, in words) of ``simulation.limits``: Theta, Omega, X, V of
+    every body, E_j of every joint (not permanent); a run stops where it reaches 0."""
+    n = compiled.size
+    worst, what = math.inf, ""
+    names = compiled.chain.body_names
+    for k, block in enumerate(("theta", "omega", "position", "velocity")):
+        bound = np.asarray(getattr(limits, block), dtype=float)
+        values = np.abs(y[: 12 * n].reshape(n, 4, 3)[:, k])
+        margin = bound[None, :] - values
+        i, axis = np.unravel_index(int(np.argmin(margin)), margin.shape)
+        if margin[i, axis] < worst:
+            worst, what = float(margin[i, axis]), f"|{block}_{axis + 1}| of {names[i]} reached {bound[axis]:g}"
+    bound = np.asarray(limits.constraint_error, dtype=float)
+    if np.isfinite(bound).any():
+        joints = np.empty((n, 7, 3))
+        chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)), np.empty(5))
+        for j in range(n):
+            if compiled.codes[j] == PERMANENT:
+                continue
+            margin = bound - np.abs(joints[j, _E])
+            axis = int(np.argmin(margin))
+            if margin[axis] < worst:
+                worst = float(margin[axis])
+                what = f"|E_{axis + 1}| of joint {compiled.chain.joint_names[j]} reached {bound[axis]:g}"
+    return worst, what
+
+
 def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
     """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) with scipy's
     ``solve_ivp`` (``simulation``'s method, tolerances, steps), sampled at ``n_samples``
@@ -628,18 +657,29 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
         return _gimbal_margin(compiled, y, sim.gimbal_margin)
 
     lock.terminal = True
+    events = [lock]
+    if sim.limits is not None:
+        def region(t, y):
+            return _region_margin(compiled, y, sim.limits)[0]
+
+        region.terminal = True
+        events.append(region)
     try:
         sol = solve_ivp(rhs, (0.0, sim.t_end), y0, method=sim.method, t_eval=time, rtol=sim.rtol, atol=sim.atol,
-                        max_step=sim.max_step, events=lock)
+                        max_step=sim.max_step, events=events)
     except _Timeout:
         states = np.full((time.size, compiled.n_states), np.nan)
         return ChainTrajectory(time, states, "failed", f"wall-time limit of {limit:g} s reached",
                                {"nfev": 0, "solver_status": -1, "wall_time": _time.perf_counter() - start}, compiled)
     states = np.full((time.size, compiled.n_states), np.nan)
     states[: sol.y.shape[1]] = sol.y.T
-    if sol.status == 1:
+    if sol.status == 1 and len(sol.t_events[0]):
         t_lock = float(sol.t_events[0][0])
         status, message = "failed", f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
+    elif sol.status == 1:
+        t_out = float(sol.t_events[1][0])
+        what = _region_margin(compiled, sol.y_events[1][0], sim.limits)[1]
+        status, message = "failed", f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
     elif sol.status == 0:
         status, message = "success", str(sol.message)
     else:
