@@ -15,7 +15,7 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
 
-__all__ = ["RunResult", "RunBlock", "ChainRun", "plain", "row"]
+__all__ = ["RunResult", "RunBlock", "plain", "row"]
 
 
 def plain(value: Any) -> Any:
@@ -37,8 +37,8 @@ class RunResult:
 
     Attributes
     ----------
-    config : RunConfig
-        The validated configuration that was run.
+    config : RunConfig or ChainConfig
+        The validated configuration that was run (a chain's: :func:`rbstab.simulator.simulate_chain`).
     time : ndarray, shape (n_samples,)
         Sample times [s], evenly spaced on [0, t_end]. From :func:`rbstab.simulator.simulate_many`'s
         compiled engine, a read-only array that the results of a block of runs with the
@@ -46,7 +46,9 @@ class RunResult:
     outputs : dict of str -> ndarray
         Every variable of the result file, shape (n_samples, 3) or (n_samples,): state
         blocks, constraint quantities, controls, ``lyapunov``, ``lyapunov_rate``,
-        ``lyapunov_rate_numerical`` and the terms of v. Rows after a failure are NaN.
+        ``lyapunov_rate_numerical`` and the terms of v. Rows after a failure are NaN. A
+        chain's (:func:`rbstab.variants.chain.evaluate`): per body (n_samples, n_bodies, 3),
+        per joint (n_samples, n_joints, 3) or (n_samples, n_joints), scalars (n_samples,).
     status : str
         ``"success"`` or ``"failed"``.
     message : str
@@ -157,34 +159,3 @@ class RunBlock:
                    np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
                    [result.switching])
 
-
-@dataclass
-class ChainRun:
-    """Outcome of one run of a chain of bodies (:func:`rbstab.simulator.simulate_chain`).
-
-    Attributes
-    ----------
-    config : ChainConfig
-        The validated chain configuration that was run.
-    time : ndarray, shape (n_samples,)
-        Sample times [s], evenly spaced on [0, t_end].
-    outputs : dict of str -> ndarray
-        :func:`rbstab.variants.chain.evaluate`'s outputs: per body (n_samples, n_bodies, 3),
-        per joint (n_samples, n_joints, 3) or (n_samples, n_joints), scalars (n_samples,),
-        plus ``lyapunov_rate_numerical``. Rows after a failure are NaN.
-    status, message, solver, wall_time, summary
-        As for :class:`RunResult` (:func:`rbstab.simulator.chain_summary` for the summary).
-    """
-
-    config: Any
-    time: np.ndarray
-    outputs: dict[str, np.ndarray]
-    status: str
-    message: str
-    solver: dict = field(default_factory=dict)
-    wall_time: float = 0.0
-    summary: dict = field(default_factory=dict)
-
-    @property
-    def name(self) -> str:
-        return self.config.name

@@ -46,7 +46,7 @@ from .engine.switching import integrate_sign_law, sign_law_outputs, switching_me
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
 from .model import DISTURBANCE_KINDS, PARAMETERS
-from .results import ChainRun, RunBlock, RunResult
+from .results import RunBlock, RunResult
 from .summary import NUMERICAL_RATE_AT, chain_summary, numerical_rate, stream_table, summarize, summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
@@ -724,7 +724,7 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
         )
 
 
-def simulate_chain(config, timeout: float | None = None) -> "ChainRun":
+def simulate_chain(config, timeout: float | None = None) -> RunResult:
     """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) and evaluate its
     outputs and summary (:mod:`rbstab.variants.chain`: scipy's ``solve_ivp`` over the
     compiled rate, sampled at ``simulation.n_samples`` times; a failed run's rows after the
@@ -737,5 +737,5 @@ def simulate_chain(config, timeout: float | None = None) -> "ChainRun":
     outputs["lyapunov_rate_numerical"] = numerical_rate(trajectory.time, outputs["lyapunov"])
     summary = chain_summary(trajectory.time, outputs, config.chain.joint_names)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
-    return ChainRun(config, trajectory.time, outputs, trajectory.status, trajectory.message, solver,
-                    _time.perf_counter() - start, summary)
+    return RunResult(config, trajectory.time, outputs, trajectory.status, trajectory.message, solver,
+                     _time.perf_counter() - start, summary)

@@ -140,21 +140,27 @@ SUMMARY_VARIABLES = (
 def result_attributes(
     result: "RunResult", *, command_line: str | None = None, store: str = "full", config_yaml: str | None = None
 ) -> dict[str, Any]:
-    """The global attributes of ``result``'s file, as written (see the module docstring).
+    """The global attributes of ``result``'s file, as written (see the module docstring; a
+    chain run's: :data:`CHAIN_FORMAT`, ``variant`` ``chain``, its ``bodies`` and ``joints``).
 
     ``config_yaml`` is ``result.config.to_yaml()`` when the caller already has it.
     """
     config_yaml = result.config.to_yaml() if config_yaml is None else config_yaml
+    chain = getattr(result.config, "chain", None)
+    if chain is None:
+        identity = {"rbstab_format": FORMAT, "name": result.name, "variant": result.config.variant}
+        title = f"rbstab run {result.name} ({result.config.variant} controller)"
+    else:
+        identity = {"rbstab_format": CHAIN_FORMAT, "name": result.name, "variant": "chain",
+                    "bodies": ",".join(chain.body_names), "joints": ",".join(chain.joint_names)}
+        title = f"rbstab run {result.name} (a chain of {chain.size} bodies)"
     attrs = {
-        "rbstab_format": FORMAT,
-        "name": result.name,
-        "variant": result.config.variant,
+        **identity,
         "status": result.status,
         "message": result.message,
         "config": config_yaml,
         "config_hash": config_hash(canonical_config(result.config.resolved)),
-        **provenance_attributes(f"rbstab run {result.name} ({result.config.variant} controller)",
-                                command_line=command_line),
+        **provenance_attributes(title, command_line=command_line),
         "wall_time": float(result.wall_time),
     }
     attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
@@ -312,38 +318,14 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         return f.id.get_file_image()
 
 
-def write_chain_result(result: "ChainRun", path: str | os.PathLike, *, command_line: str | None = None) -> Path:
-    """Write a chain run (:class:`rbstab.results.ChainRun`) to ``path``, atomically: the
-    layout of a one-body file (module docstring) with the dimensions ``body`` and ``joint``
-    (their names as coordinates) on the per-body and per-joint variables, ``variant``
-    ``"chain"`` and the global attributes ``bodies`` and ``joints`` (the names, comma
-    separated)."""
+def write_chain_result(result: "RunResult", path: str | os.PathLike, *, command_line: str | None = None) -> Path:
+    """Write a chain run (:func:`rbstab.simulator.simulate_chain`) to ``path``, atomically:
+    the layout of a one-body file (module docstring) with the dimensions ``body`` and
+    ``joint`` (their names as coordinates) on the per-body and per-joint variables."""
     chain = result.config.chain
-    config_yaml = result.config.to_yaml()
-    attrs = {
-        "rbstab_format": CHAIN_FORMAT,
-        "name": result.name,
-        "variant": "chain",
-        "bodies": ",".join(chain.body_names),
-        "joints": ",".join(chain.joint_names),
-        "status": result.status,
-        "message": result.message,
-        "config": config_yaml,
-        "config_hash": config_hash(canonical_config(result.config.resolved)),
-        **provenance_attributes(f"rbstab run {result.name} (a chain of {chain.size} bodies)",
-                                command_line=command_line),
-        "wall_time": float(result.wall_time),
-    }
-    attrs.update({f"solver_{k}": v for k, v in result.solver.items() if not k.startswith("solver_")})
-    attrs["solver_status"] = int(result.solver.get("solver_status", -1))
-    attrs["solver_message"] = result.message
-    attrs.update({f"summary_{k}": _attr_value(v) for k, v in result.summary.items()})
-    attrs["units_of_summary"] = summary_units(result.summary)
-    n = len(result.time)
-    dims = {}
-    for key, values in result.outputs.items():
-        if values.ndim >= 2 and values.shape[1] == chain.size and values.shape[0] == n:
-            dims[key] = "body" if key in BODY_VARIABLES else "joint"
+    attrs = result_attributes(result, command_line=command_line)
+    dims = {key: "body" if key in BODY_VARIABLES else "joint" for key, values in result.outputs.items()
+            if values.ndim >= 2}
     labels = {"body": chain.body_names, "joint": chain.joint_names}
     path = Path(path)
     write_bytes_atomic(path, _file_image(result.time, result.outputs, attrs, None, labels, dims))
