@@ -12,6 +12,7 @@ import pytest
 import xarray as xr
 from click.testing import CliRunner
 
+import rbstab
 from rbstab.io.hdf5 import NotAResultFile
 from rbstab.kinds import ANALYSIS, KINDS, RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of, open_input
 from rbstab.studies.files import write_study_file
@@ -51,7 +52,10 @@ def inputs(tmp_path_factory) -> dict[str, Path]:
     incomplete = root / "incomplete"
     incomplete.mkdir()
     shutil.copy(sweep / "sweep.yaml", incomplete / "sweep.yaml")
-    return {"run": DATA / "run_file_6596935.h5", "store": DATA / "store_file_6596935.h5", "sweep": sweep,
+    chain_run = rbstab.run(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", root / "chain",
+                           overrides=["simulation.t_end=0.1", "simulation.n_samples=11"])
+    return {"run": DATA / "run_file_6596935.h5", "chain_run": chain_run, "store": DATA / "store_file_6596935.h5",
+            "sweep": sweep,
             "analysis": analysis, "foreign": foreign, "other_format": other_format, "text": text, "plain": plain,
             "incomplete": incomplete, **studies}
 
@@ -75,7 +79,8 @@ def test_each_kind_opens_with_its_loader(inputs):
 
 
 @pytest.mark.parametrize("name, message", [
-    ("foreign", "not an rbstab run result, store file of a sweep (many runs), sweep folder, analysis file, "
+    ("foreign", "not an rbstab run result, chain run result, store file of a sweep (many runs), sweep folder, "
+                "analysis file, "
                 "sensitivity study (its sensitivity.nc or folder) or tuning study (its tuning.nc or folder) "
                 "(an HDF5 file without an rbstab_format attribute)"),
     ("other_format", "rbstab_format 'rbstab-future-9', of no kind this version reads"),
@@ -119,7 +124,8 @@ def test_show_and_open_result_go_through_the_registry(inputs):
     import rbstab
 
     shown = CliRunner().invoke(cli, ["show", str(inputs["analysis"])])
-    assert shown.exit_code == 1 and "an analysis file, not a run result, store file of a sweep" in shown.output
+    assert shown.exit_code == 1 and "an analysis file, not a run result, chain run result, store file of a sweep" \
+        in shown.output
     assert "Traceback" not in shown.output
     incomplete = CliRunner().invoke(cli, ["show", str(inputs["incomplete"])])
     assert incomplete.exit_code == 1 and "incomplete sweep folder (no index.csv)" in incomplete.output

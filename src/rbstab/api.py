@@ -169,7 +169,13 @@ def _config(config: Any, overrides: Overrides, *, chains: bool = False) -> "RunC
 
             raise ConfigError([_NOT_RUN], None)
         return config
-    return load_any_config(config, overrides) if chains else load_config(config, overrides)
+    if chains and isinstance(config, str | os.PathLike):
+        from .config.loader import is_chain  # heavy: yaml, pydantic
+        from .config.yaml_io import read_yaml_file  # heavy: yaml
+
+        if is_chain(read_yaml_file(config)):
+            return load_any_config(config, _override_lines(overrides))
+    return load_config(config, overrides)
 
 
 def _is_chain_config(config: Any) -> bool:
