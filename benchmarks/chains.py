@@ -1,9 +1,12 @@
 """Chains of rigid bodies: what a run and an evaluation of the chain's rate cost.
 
 Prints (2 cores, warm numba cache):
-- ms a run of each chain example (``rbstab.variants.chain.integrate``: scipy's ``solve_ivp``
-  over the compiled rate) and of the one-body Case 3 config through the same chain engine
-  and through the one-body compiled engine (``rbstab.simulator.simulate``);
+- ms a run of each chain example: its integration by scipy's ``solve_ivp`` over the
+  compiled rate (``rbstab.variants.chain.integrate``, ``--engine scipy``) and by the
+  compiled driver (``rbstab.engine.integrate.integrate_chain_runs``), and the whole run
+  ``rbstab run`` makes (``rbstab.simulator.simulate_chain``: with its outputs and summary);
+- ms the integration of the one-body Case 3 config on the one-body compiled engine and
+  as a one-body chain on the compiled driver;
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
   and visco-elastic joints with feedback, gravity), and that per body.
 
@@ -21,7 +24,10 @@ import numpy as np
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
 from rbstab.config.chains import chain_of, load_any_config
-from rbstab.simulator import simulate
+from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
+from rbstab.engine.settings import settings_rows
+from rbstab.engine.systems import chain_system
+from rbstab.simulator import simulate_chain
 from rbstab.variants import chain as C
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -49,27 +55,35 @@ def serial(n: int) -> Chain:
     return Chain(bodies, tuple(joints), np.array([0.0, 0.0, -9.81]))
 
 
+def _compiled_run(compiled, y0, sim):
+    system = chain_system(compiled, sim.limits)
+    settings = settings_rows([sim])
+    return lambda: integrate_chain_runs(system, y0[None], settings, method=sim.method, n_samples=sim.n_samples)
+
+
 def main() -> None:
     warnings.simplefilter("ignore")
-    print("runs (ms a run, best of 5):")
+    print("runs, integration only (ms a run, best of 5): scipy's solve_ivp over the compiled rate | the compiled "
+          "driver | rbstab run's whole run (compiled, with outputs and summary)")
     for name in ("double_pendulum", "stance_ankle_hip", "knee"):
         config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml")
         compiled = C.compile_chain(config.chain)
-        seconds = _best(lambda: C.integrate(config, compiled=compiled))
-        print(f"  {name:18s} {config.chain.size} bodies, t_end {config.simulation.t_end:g} s: {1e3 * seconds:8.1f} ms")
+        scipy_s = _best(lambda: C.integrate(config, compiled=compiled))
+        driver_s = _best(_compiled_run(compiled, C.initial_state(config), config.simulation))
+        whole_s = _best(lambda: simulate_chain(config))
+        print(f"  {name:18s} {config.chain.size} bodies, t_end {config.simulation.t_end:g} s: {1e3 * scipy_s:8.1f} | "
+              f"{1e3 * driver_s:7.1f} | {1e3 * whole_s:7.1f}  ({scipy_s / driver_s:.1f}x)")
     case3 = load_config(ROOT / "configs" / "paper" / "case3_embedded.yaml")
-    one = _best(lambda: simulate(case3))
-    print(f"  case3_embedded one-body engine, t_end {case3.simulation.t_end:g} s: {1e3 * one:8.1f} ms")
-    y0 = np.concatenate([case3.initial_state[b] for b in ("theta", "omega", "position", "velocity", "controller_state")])
+    sim = case3.simulation
+    variant = case3.make_variant()
+    y0 = variant.initial_state(case3.initial_state)
+    params = np.atleast_1d(variant.parameters)
+    one = _best(lambda: integrate_runs([variant.code], params, y0[None], settings_rows([sim]), method=sim.method,
+                                       n_samples=sim.n_samples))
     compiled = C.compile_chain(chain_of(case3), offset=0.0)
-    rate = np.empty(compiled.n_states)
-
-    def chain_run():
-        from scipy.integrate import solve_ivp
-        sim = case3.simulation
-        return solve_ivp(lambda t, y: (C.chain_rate(t, y, *compiled.args, rate), rate.copy())[1], (0, sim.t_end), y0,
-                         method=sim.method, rtol=sim.rtol, atol=sim.atol, t_eval=np.linspace(0, sim.t_end, sim.n_samples))
-    print(f"  case3_embedded as a one-body chain (scipy over the chain rate): {1e3 * _best(chain_run, 3):8.1f} ms")
+    as_chain = _best(_compiled_run(compiled, y0, sim))
+    print(f"  case3_embedded, t_end {sim.t_end:g} s: one-body engine {1e3 * one:6.2f} ms, as a one-body chain on the "
+          f"compiled driver {1e3 * as_chain:6.2f} ms ({as_chain / one:.2f}x)")
     print("rate evaluations (us an evaluation; per body):")
     for n in range(1, 9):
         compiled = C.compile_chain(serial(n), offset=0.0)

@@ -41,7 +41,7 @@ from .engine import METHODS, RunBatch, integrate_runs, method_number
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
 from .engine.integrate import admissible
-from .engine.status import STEP_LIMIT, SUCCESS, TIMEOUT, status_message
+from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
@@ -80,7 +80,7 @@ KEEP = ("all", "thinned", "none")
 
 def admissible_region_event(variant: Variant, margin: float):
     """Terminal solve_ivp event of the admissible region of ``variant``'s run: the compiled
-    :func:`rbstab.engine.integrate.admissible_event`, zero when |theta_2| reaches pi/2 -
+    :func:`rbstab.engine.systems.admissible_event`, zero when |theta_2| reaches pi/2 -
     ``margin`` [rad] (gimbal lock, eq 5) or a component reaches its bound of
     ``simulation.limits`` (``variant.limits``), falling through it. ``event.status(y)`` is
     the status code of the bound reached at the state y (:mod:`rbstab.engine.status`)."""
@@ -724,18 +724,65 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
         )
 
 
-def simulate_chain(config, timeout: float | None = None) -> RunResult:
+def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
     """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) and evaluate its
-    outputs and summary (:mod:`rbstab.variants.chain`: scipy's ``solve_ivp`` over the
-    compiled rate, sampled at ``simulation.n_samples`` times; a failed run's rows after the
-    failure are NaN)."""
+    outputs and summary; a failed run's rows after the failure are NaN.
+
+    ``engine``: ``"scipy"`` integrates with ``solve_ivp`` (:func:`rbstab.variants.chain.integrate`,
+    any method); every other engine, and the compiled engine's methods, with the compiled
+    driver on the CPU (:func:`rbstab.engine.integrate.integrate_chain_runs`: the same steps
+    as ``solve_ivp``'s, the admissible region's events located on the step's interpolant).
+    ``timeout`` [s] replaces ``simulation.max_wall_time``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown engine.
+    """
     from .variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
+    get_engine(engine)  # checks the name
     start = _time.perf_counter()
-    trajectory = C.integrate(config, timeout=timeout)
-    outputs = C.evaluate(trajectory.compiled, trajectory.time, trajectory.states)
-    outputs["lyapunov_rate_numerical"] = numerical_rate(trajectory.time, outputs["lyapunov"])
-    summary = chain_summary(trajectory.time, outputs, config.chain.joint_names)
-    solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
-    return RunResult(config, trajectory.time, outputs, trajectory.status, trajectory.message, solver,
-                     _time.perf_counter() - start, summary)
+    sim = config.simulation
+    if engine == "scipy" or sim.method not in METHODS:
+        trajectory = C.integrate(config, timeout=timeout)
+        compiled, time, states = trajectory.compiled, trajectory.time, trajectory.states
+        status, message, solver = trajectory.status, trajectory.message, trajectory.solver
+    else:
+        compiled = C.compile_chain(config.chain)
+        time, states, status, message, solver = _chain_compiled(config, compiled, timeout)
+    outputs = C.evaluate(compiled, time, states)
+    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+    summary = chain_summary(time, outputs, config.chain.joint_names)
+    solver = {k: v for k, v in solver.items() if k != "wall_time"}
+    return RunResult(config, time, outputs, status, message, solver, _time.perf_counter() - start, summary)
+
+
+def _chain_compiled(config, compiled, timeout: float | None):
+    """(time, states, status, message, solver) of a chain run on the compiled driver."""
+    from .engine.integrate import integrate_chain_runs  # heavy: numba
+    from .engine.systems import chain_system  # heavy: numba
+    from .variants import chain as C  # heavy: numba
+
+    sim = config.simulation
+    y0 = C.initial_state(config)
+    settings = settings_rows([sim], timeout)
+    sol = integrate_chain_runs(chain_system(compiled, sim.limits), y0[None], settings, method=sim.method,
+                               n_samples=sim.n_samples)
+    time = np.linspace(0.0, sim.t_end, sim.n_samples)
+    states = sol.samples[0]
+    code, t_stop = int(sol.status[0]), float(sol.t_stop[0])
+    solver = {"nfev": int(sol.nfev[0]), "n_steps": int(sol.n_steps[0]), "solver_status": 0 if code == SUCCESS else -1}
+    if code == SUCCESS:
+        return time, states, "success", status_message(code, t_stop, sim.gimbal_margin), solver
+    if code == GIMBAL_LOCK:
+        message = (f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_stop:.6g} s")
+    elif limit_of(code) is not None:
+        finite = states[np.isfinite(states[:, 0])]
+        last = finite[-1] if len(finite) else y0
+        message = (f"left the admissible region (simulation.limits): {C.nearest_bound(compiled, last, sim.limits, limit_of(code))}"
+                   f" at t = {t_stop:.6g} s")
+    else:
+        message = status_message(code, t_stop, sim.gimbal_margin, int(sim.max_steps),
+                                 sim.max_wall_time if timeout is None else timeout)
+    return time, states, "failed", message, solver

@@ -5,7 +5,7 @@ compiles every rbstab ``@jit`` function that a CUDA kernel calls as a device fun
 the same Python source (:func:`rbstab.variants.kernels.state_rate`,
 :func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
 :func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
-:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.integrate.admissible_event`,
+:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.systems.admissible_event`,
 :func:`~rbstab.engine.integrate.locate_event`, :func:`~rbstab.engine.integrate.restart`,
 the disturbances'
 :func:`~rbstab.variants.disturbances.apply_impulses` and

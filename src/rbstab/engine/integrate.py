@@ -3,9 +3,11 @@
 :func:`integrate_run` is what ``solve_ivp(..., t_eval=linspace(0, t_end, n), events=[gimbal
 lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
 ``_step_impl``), sample the step's interpolant at the grid times it covers, and stop where
-the run leaves its admissible region (:func:`admissible_event`: gimbal lock and the bounds
-of ``simulation.limits``), located on the interpolant. :func:`integrate_chunk` runs many runs, each
-with its own variant, parameters and settings, one after the other in one call.
+the run leaves its admissible region (gimbal lock and the bounds of ``simulation.limits``),
+located on the interpolant. A run's system is one body or a chain
+(:mod:`rbstab.engine.systems`: its rate and admissible margin). :func:`integrate_chunk`
+runs many one-body runs, each with its own variant, parameters and settings, one after the
+other in one call; :func:`integrate_chain_chunk` many runs of one chain.
 
 A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
 checked every :data:`CLOCK_EVERY` steps).
@@ -26,17 +28,17 @@ from numba.core.extending import intrinsic
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..variants.disturbances import apply_impulses, before, next_breakpoint
-from ..variants.kernels import PERMANENT, limited_quantities, state_rate
+from ..variants.disturbances import before
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
-from .status import (DEFAULT_MAX_STEPS, GIMBAL_LOCK, LEFT_REGION, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT,
-                     TOO_SMALL_STEP)
+from .status import DEFAULT_MAX_STEPS, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
+from .systems import (CHAIN, admissible, admissible_event, gimbal_event, system_breakpoint, system_disturbed,
+                      system_impulses, system_limited, system_margin, system_rate)
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
+           "integrate_runs", "integrate_chain_runs", "integrate_chain_chunk", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
            "grazing_exit", "step_exit",
            "admissible", "locate_event"]
 
@@ -188,51 +190,6 @@ def step(code, p, s, span, y, f, h_abs, w):
         return outcome, t_new, h, h_abs, attempts
 
 
-@jit(forceinline=True)
-def gimbal_event(y, limit):
-    """The event function: zero when |theta_2| reaches ``limit`` (decreasing through 0)."""
-    return limit - abs(y[1])
-
-
-@jit(forceinline=True)
-def _bound_margin(q, bounds, j, margin, status):
-    """(margin, status) after the bounds ``bounds`` (3,) of quantity j (``q``, a 3-tuple):
-    the smaller of ``margin`` and bound_i - |q_i|, with the status code of its axis."""
-    for i in range(3):
-        m = bounds[i] - abs(q[i])
-        if m < margin:
-            margin, status = m, LEFT_REGION + 3 * j + i
-    return margin, status
-
-
-@jit(forceinline=True)
-def admissible_event(code, y, p, limit):
-    """The event function of the admissible region at the state ``y`` of variant ``code``
-    with the record ``p``: (margin, status), margin the smallest of the gimbal-lock margin
-    ``limit`` - |theta_2| [rad] (``limit`` = pi/2 - gimbal_margin) and every bound
-    ``p.limits[j, i]`` - |q_j,i| of ``simulation.limits`` (in the bound's units;
-    :func:`rbstab.variants.kernels.limited_quantities`), status the code of the smallest
-    (GIMBAL_LOCK, or :func:`rbstab.engine.status.limit_status`). The run leaves the region
-    where the margin falls through 0; without bounds (``p.limited`` 0) it is
-    :func:`gimbal_event`, bit for bit."""
-    margin, status = gimbal_event(y, limit), GIMBAL_LOCK
-    if p.limited == 0.0:
-        return margin, status
-    theta, omega, x, v, e = limited_quantities(code, y, p)
-    margin, status = _bound_margin(theta, p.limits[0], 0, margin, status)
-    margin, status = _bound_margin(omega, p.limits[1], 1, margin, status)
-    margin, status = _bound_margin(x, p.limits[2], 2, margin, status)
-    margin, status = _bound_margin(v, p.limits[3], 3, margin, status)
-    return _bound_margin(e, p.limits[4], 4, margin, status)
-
-
-@jit
-def admissible(code, y, p, limit):
-    """:func:`admissible_event` as a function Python calls (the scipy reference's event,
-    the checks of an initial state): (margin, status)."""
-    return admissible_event(code, y, p, limit)
-
-
 #: Points a step's interpolant is checked at for a bound grazed inside it
 #: (:func:`grazing_exit`), and the golden-section iterations that refine a dip.
 GRAZE_POINTS, GRAZE_ITERATIONS = 8, 30
@@ -245,7 +202,7 @@ def _margin_at(code, p, limit, x, interpolant, work):
     dop853) its dense output."""
     h, y_old, Q, dop853 = interpolant
     dense_value(x, h, y_old, Q, dop853, work)
-    return admissible_event(code, work, p, limit)[0]
+    return system_margin(code, work, p, limit)[0]
 
 
 @jit(forceinline=True)
@@ -306,7 +263,7 @@ def step_exit(code, p, limit, crossed, margins, interpolant, work):
     computed where the run has bounds."""
     if crossed:
         return 1.0
-    if p.limited == 0.0:
+    if not system_limited(p):
         return -1.0
     return grazing_exit(code, p, limit, margins, interpolant, work)
 
@@ -327,12 +284,12 @@ def locate_event(code, p, limit, t_old, interpolant, work, x_out):
         if mid <= lo or mid >= hi:
             break
         dense_value(mid, h, y_old, Q, dop853, work)
-        if admissible_event(code, work, p, limit)[0] > 0:
+        if system_margin(code, work, p, limit)[0] > 0:
             lo = mid
         else:
             hi = mid
     dense_value(hi, h, y_old, Q, dop853, work)
-    return t_old + hi * h, hi, admissible_event(code, work, p, limit)[1]
+    return t_old + hi * h, hi, system_margin(code, work, p, limit)[1]
 
 
 @jit
@@ -360,9 +317,9 @@ def restart(code, p, s, t, y, f, w):
     new solve_ivp from there would: y's rate at t into f and a new initial step (2
     right-hand sides). Returns (the next breakpoint t_bound, the latest stage time t_lim
     before it, the initial step h_abs)."""
-    t_bound = next_breakpoint(p, t, s.t_end)
+    t_bound = system_breakpoint(p, t, s.t_end)
     t_lim = _limit_of(t_bound, s.t_end)
-    state_rate(code, t, y, p, f)
+    system_rate(code, t, y, p, f)
     return t_bound, t_lim, initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
 
 
@@ -382,7 +339,7 @@ def _run(code, p, y0, s, samples, work_done):
     n = y0.shape[0]
     n_samples = samples.shape[0]
     dop853 = method == DOP853
-    disturbed = p.disturbance_count > 0.0
+    disturbed = system_disturbed(p)
     m = n + 1 if disturbed else n  # the integrated vector: the state, and W at [n]
     w = work_arrays(method, m, n)
     K, Q, y_new, scratch = w.K, w.Q, w.y_new, w.work
@@ -390,16 +347,15 @@ def _run(code, p, y0, s, samples, work_done):
     y[:n] = y0
     f = np.empty(m)
     limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-    permanent = code == PERMANENT
     t_bound = t_end
     if disturbed:
-        y[n] += apply_impulses(permanent, 0.0, y, p)
-        t_bound = next_breakpoint(p, 0.0, t_end)
-    margin, left = admissible_event(code, y, p, limit)
+        y[n] += system_impulses(code, 0.0, y, p)
+        t_bound = system_breakpoint(p, 0.0, t_end)
+    margin, left = system_margin(code, y, p, limit)
     if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
         return left, 0.0, 0, 0, 0
     t_lim = _limit_of(t_bound, t_end)
-    state_rate(code, 0.0, y, p, f)
+    system_rate(code, 0.0, y, p, f)
     h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
     nfev = 2
     t = 0.0
@@ -417,9 +373,9 @@ def _run(code, p, y0, s, samples, work_done):
         n_steps += 1
         f_new = K[N_STAGES[method]]
         t_stop = t_new
-        margin_new = admissible_event(code, y_new, p, limit)[0]
+        margin_new = system_margin(code, y_new, p, limit)[0]
         event = margin >= 0 and margin_new <= 0
-        bounded = p.limited != 0.0
+        bounded = system_limited(p)
         at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
         if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
             nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
@@ -447,14 +403,14 @@ def _run(code, p, y0, s, samples, work_done):
         f[:] = f_new
         margin = margin_new
         if at_break:  # apply the impulses that start here, and start again from here
-            y[n] += apply_impulses(permanent, t, y, p)
-            margin, left = admissible_event(code, y, p, limit)
+            y[n] += system_impulses(code, t, y, p)
+            margin, left = system_margin(code, y, p, limit)
             if margin < 0:  # an impulse took the state out of the admissible region
                 return left, t, nfev, n_steps, j
             t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
             nfev += 2
     if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
-        jump = apply_impulses(permanent, t_end, y, p)
+        jump = system_impulses(code, t_end, y, p)
         if jump != 0.0:
             samples[n_samples - 1, :] = y[:n]
             work_done[n_samples - 1] += jump
@@ -473,6 +429,17 @@ def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
     status, t_stop, nfev, n_steps = ends
     for k in range(codes.shape[0]):
         status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(codes[k], params[k], y0[k], settings[k], samples[k],
+                                                                  work_done[k])
+
+
+@jit(nogil=True)
+def integrate_chain_chunk(system, y0, settings, samples, work_done, ends):
+    """:func:`integrate_run` for k runs of one chain (``system``, a
+    :class:`~rbstab.engine.systems.ChainSystem`) from the initial states ``y0`` (k, n_state);
+    the other arguments as :func:`integrate_chunk`'s."""
+    status, t_stop, nfev, n_steps = ends
+    for k in range(y0.shape[0]):
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(CHAIN, system, y0[k], settings[k], samples[k],
                                                                   work_done[k])
 
 
@@ -554,6 +521,35 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
         integrate_chunk(codes, np.ascontiguousarray(params), y0, settings_records(settings, method_number(method)),
                         samples, work, (status, t_stop, nfev, n_steps))
     return ChunkSolution(samples, status, t_stop, nfev, n_steps, work)
+
+
+def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -> ChunkSolution:
+    """Integrate k runs of one chain from the initial states ``y0`` (k, n_state) with the
+    compiled driver, as :func:`integrate_runs` integrates one body's runs.
+
+    Parameters
+    ----------
+    system : ChainSystem
+        The chain (:func:`rbstab.engine.systems.chain_system`: its compiled description and
+        admissible region).
+    y0 : ndarray, shape (k, n_state)
+    settings : ndarray, shape (k, 7)
+        Per run: :data:`~rbstab.engine.settings.SETTING_COLUMNS` (t_end [s], rtol, atol,
+        max_step [s], gimbal_margin [rad], max_steps, max_wall_time [s]).
+    method : str
+        One of :data:`METHODS`.
+    n_samples : int
+        Samples per run, evenly spaced on [0, t_end] (>= 2).
+    """
+    y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
+    k, n = y0.shape
+    samples = np.empty((k, n_samples, n))
+    ends = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64))
+    work = np.empty((k, n_samples))
+    records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
+    with np.errstate(all="ignore"):
+        integrate_chain_chunk(system, y0, records, samples, work, ends)
+    return ChunkSolution(samples, *ends, work)
 
 
 def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:

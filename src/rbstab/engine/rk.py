@@ -33,7 +33,7 @@ import math
 import numpy as np
 
 from ..jit import jit
-from ..variants.kernels import state_rate
+from .systems import system_rate
 from .tableaus import DOP853_EXTENDED, METHODS, TABLEAUS
 
 __all__ = ["METHODS", "DOP853", "method_number", "rms_norm", "initial_step", "rk_step", "error_norm",
@@ -121,7 +121,7 @@ def initial_step(code, p, s, t0, t_bound, t_lim, y0, f0, w):
     h0 = min(h0, t_bound)
     for i in range(n):
         y1[i] = y0[i] + h0 * f0[i]
-    state_rate(code, min(t0 + h0, t_lim), y1, p, f1)
+    system_rate(code, min(t0 + h0, t_lim), y1, p, f1)
     for i in range(n):
         f1[i] = f1[i] - f0[i]
     d2 = rms_norm(f1, scale) / h0
@@ -172,9 +172,9 @@ def rk_step(code, p, t, t_lim, y, f, h, method, w):
         K[0, i] = f[i]
     for s in range(1, n_stages):
         _stage_state(y, h, RK_A[method, s], K, s, work)
-        state_rate(code, min(t + RK_C[method, s] * h, t_lim), work, p, K[s])
+        system_rate(code, min(t + RK_C[method, s] * h, t_lim), work, p, K[s])
     _stage_state(y, h, RK_B[method], K, n_stages, y_new)
-    state_rate(code, min(t + h, t_lim), y_new, p, K[n_stages])
+    system_rate(code, min(t + h, t_lim), y_new, p, K[n_stages])
 
 
 @jit(forceinline=True)
@@ -226,7 +226,7 @@ def dense_coefficients(code, p, t_old, t_lim, y_old, h, method, w):
         return 0
     for s in range(n_stages + 1, STAGE_ROWS[method]):
         _stage_state(y_old, h, RK_A[method, s], K, s, work)
-        state_rate(code, min(t_old + RK_C[method, s] * h, t_lim), work, p, K[s])
+        system_rate(code, min(t_old + RK_C[method, s] * h, t_lim), work, p, K[s])
     for i in range(n):
         delta = y_new[i] - y_old[i]
         Q[0, i] = delta

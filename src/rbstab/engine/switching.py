@@ -22,7 +22,7 @@ regula falsi (Illinois) to a few units of rounding of the step:
   (the force is continuous) and C leaves the surface on the side the force cannot hold;
 - **the admissible region**: |theta_2| reaches pi/2 - gimbal_margin (gimbal lock, eq 5) or
   a component reaches its bound of ``simulation.limits``
-  (:func:`rbstab.engine.integrate.admissible_event`): the run stops, failed.
+  (:func:`rbstab.engine.systems.admissible_event`): the run stops, failed.
 
 Methods: RK23, RK45, DOP853 (the compiled engine's); a run configured with an implicit
 method is integrated with DOP853 between switchings (each piece has a constant or
@@ -152,7 +152,7 @@ def _event_values(y, p, mode, limit, g, dg):
     """Event functions g (4,) at ``y`` and their rates dg (NaN where not used): per axis
     sigma_i E_i (rate sigma_i F_i), or K_s - |Lambda_i| when sliding; then the margin of
     the admissible region (gimbal lock at ``limit`` and ``simulation.limits``:
-    :func:`rbstab.engine.integrate.admissible_event`). An event is a g falling from > 0 to
+    :func:`rbstab.engine.systems.admissible_event`). An event is a g falling from > 0 to
     <= 0."""
     e, f, lam, _ = mode_quantities(y, p, mode)
     for i in range(3):

@@ -48,7 +48,7 @@ from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_ene
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
-           "reduced_rate", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "reduced_rate", "nearest_bound", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -128,7 +128,8 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
     ``codes`` (n,) variant codes; ``parents`` (n,) parent index or -1 (ground); ``ppoints``
     (n, 3) parent points R_p [m] (inertial frame for the ground, else the parent's body
     frame); ``d_at`` (n,) the index of each embedded joint's D in ``y`` (-1: none).
-    Writes dy/dt into ``dy`` (n_states,); per joint (n, 7, 3) into ``joints``: E_j, F_j,
+    Writes dy/dt into ``dy`` (n_states,; with one more entry, the disturbances' power after
+    the state, the rate of their work W); per joint (n, 7, 3) into ``joints``: E_j, F_j,
     Lambda_j (inertial), N_j (child frame, delivered), D_j, Theta_j, Omega_j; per body
     (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the kinetic, joint,
     body-feedback and gravity terms of v (without h) and dv/dt (analytic: minus the
@@ -146,7 +147,11 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
     gravity = 0.0
     dissipation = 0.0
     power = 0.0
+    work_power = 0.0
+    size = 12 * n
     for i in range(n):
+        if d_at[i] >= 0:
+            size += 3
         a, b = rotation_and_rate_of(vector(y, 12 * i))
         for r in range(3):
             for c in range(3):
@@ -164,7 +169,7 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
         if p.disturbance_count > 0.0:
             force_d, torque_d = disturbance_wrench(t, rot[i], p)
             tq, fc = add(tq, torque_d), add(fc, force_d)
-            power += disturbance_power(force_d, torque_d, omega, v)
+            work_power += disturbance_power(force_d, torque_d, omega, v)
         _acc_add(torque, force, i, tq, fc)
         kinetic += 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(omega, p.inertia)
         body_energy += 0.5 * quadratic_form(x, p.k_t)
@@ -242,7 +247,9 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
     scalars[_JOINT] = joint_energy
     scalars[_BODY] = body_energy
     scalars[_GRAVITY] = gravity
-    scalars[_RATE] = power - dissipation
+    scalars[_RATE] = power + work_power - dissipation
+    if dy.shape[0] > size:  # the work W of the disturbances, integrated after the state
+        dy[size] = work_power
 
 
 @jit(forceinline=True)
@@ -626,6 +633,25 @@ def _region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[floa
                 worst = float(margin[axis])
                 what = f"|E_{axis + 1}| of joint {compiled.chain.joint_names[j]} reached {bound[axis]:g}"
     return worst, what
+
+
+def nearest_bound(compiled: CompiledChain, y: np.ndarray, limits, which: tuple[str, int]) -> str:
+    """In words, the body or joint whose |q_i| is nearest its bound of ``simulation.limits``
+    at the state ``y``: ``which`` = (q, i), q one of :data:`rbstab.layout.LIMITED`
+    (``constraint_error``: E_j of a non-permanent joint), i the axis (0-2); e.g.
+    ``"|theta_1| of trunk reached 0.2"``."""
+    quantity, axis = which
+    bound = float(np.asarray(getattr(limits, quantity), dtype=float)[axis])
+    n = compiled.size
+    if quantity == "constraint_error":
+        joints = np.empty((n, 7, 3))
+        chain_core(0.0, np.ascontiguousarray(y, dtype=float), *compiled.args, np.empty(compiled.n_states), joints,
+                   np.empty((n, 3)), np.empty(5))
+        values = np.where(compiled.codes == PERMANENT, -np.inf, np.abs(joints[:, _E, axis]))
+        return f"|E_{axis + 1}| of joint {compiled.chain.joint_names[int(np.argmax(values))]} reached {bound:g}"
+    k = ("theta", "omega", "position", "velocity").index(quantity)
+    values = np.abs(np.asarray(y)[: 12 * n].reshape(n, 4, 3)[:, k, axis])
+    return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[int(np.argmax(values))]} reached {bound:g}"
 
 
 def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:

@@ -1,0 +1,250 @@
+"""The system a compiled run integrates: one rigid body, or a chain of them.
+
+The compiled driver (:mod:`rbstab.engine.rk`, :mod:`rbstab.engine.integrate`) takes a
+run's system as the pair (``code``, ``p``):
+
+- one body: its variant code and its :data:`rbstab.model.PARAMETERS` record (the only
+  system of the CUDA kernel and of the sign law's integrator);
+- a chain: ``code`` :data:`CHAIN` and ``p`` a :class:`ChainSystem`, the arrays of the
+  chain's compiled description (:class:`rbstab.variants.chain.CompiledChain`), its
+  admissible region in every record (:func:`chain_system`).
+
+The driver asks the system for the few things it needs through the functions below: its
+rate, its admissible margin, whether it has bounds or disturbances, their next breakpoint
+and the impulses there. Each is chosen by the type of ``p`` when numba compiles the
+driver (``numba.extending.overload``, for every target: the CPU and CUDA), so a one-body
+run compiles to the code it compiled to with the body's functions called directly, and a
+chain takes the same steps, step-size control, dense output, sampling, event location
+and wall-time limit.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+from numba import types
+from numba.extending import overload
+
+from ..jit import jit
+from ..kinematics import rotation_and_rate_of, vector
+from ..model import set_limits
+from ..variants.chain import _relative, chain_rate
+from ..variants.disturbances import apply_impulses, next_breakpoint
+from ..variants.kernels import PERMANENT, limited_quantities, state_rate
+from .status import GIMBAL_LOCK, LEFT_REGION
+
+__all__ = ["CHAIN", "ChainSystem", "chain_system", "system_rate", "system_margin", "system_limited",
+           "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
+           "admissible", "chain_margin"]
+
+#: The ``code`` of a chain's runs (no variant's code: a chain's joints carry theirs).
+CHAIN = -1
+
+#: A chain as the compiled driver reads it: ``params`` (n,) PARAMETERS records (body i with
+#: joint i's gains; the admissible region in every record), ``codes`` (n,) the joints'
+#: variant codes, ``parents`` (n,) parent indices (-1: ground), ``ppoints`` (n, 3) parent
+#: points [m], ``d_at`` (n,) the index of each embedded joint's D in the state (-1: none).
+ChainSystem = namedtuple("ChainSystem", ["params", "codes", "parents", "ppoints", "d_at"])
+
+
+def chain_system(compiled, limits=None) -> ChainSystem:
+    """The :class:`ChainSystem` of a :class:`rbstab.variants.chain.CompiledChain`, with the
+    admissible region ``limits`` (a :class:`rbstab.model.Limits`, the bounds (5, 3), or
+    None: unbounded) written into copies of its records."""
+    params = compiled.params.copy()
+    set_limits(params, limits)
+    return ChainSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at)
+
+
+# -- one body's admissible region -------------------------------------------------------------
+@jit(forceinline=True)
+def gimbal_event(y, limit):
+    """The event function: zero when |theta_2| reaches ``limit`` (decreasing through 0)."""
+    return limit - abs(y[1])
+
+
+@jit(forceinline=True)
+def _bound_margin(q, bounds, j, margin, status):
+    """(margin, status) after the bounds ``bounds`` (3,) of quantity j (``q``, a 3-tuple):
+    the smaller of ``margin`` and bound_i - |q_i|, with the status code of its axis."""
+    for i in range(3):
+        m = bounds[i] - abs(q[i])
+        if m < margin:
+            margin, status = m, LEFT_REGION + 3 * j + i
+    return margin, status
+
+
+@jit(forceinline=True)
+def admissible_event(code, y, p, limit):
+    """The event function of the admissible region at the state ``y`` of variant ``code``
+    with the record ``p``: (margin, status), margin the smallest of the gimbal-lock margin
+    ``limit`` - |theta_2| [rad] (``limit`` = pi/2 - gimbal_margin) and every bound
+    ``p.limits[j, i]`` - |q_j,i| of ``simulation.limits`` (in the bound's units;
+    :func:`rbstab.variants.kernels.limited_quantities`), status the code of the smallest
+    (GIMBAL_LOCK, or :func:`rbstab.engine.status.limit_status`). The run leaves the region
+    where the margin falls through 0; without bounds (``p.limited`` 0) it is
+    :func:`gimbal_event`, bit for bit."""
+    margin, status = gimbal_event(y, limit), GIMBAL_LOCK
+    if p.limited == 0.0:
+        return margin, status
+    theta, omega, x, v, e = limited_quantities(code, y, p)
+    margin, status = _bound_margin(theta, p.limits[0], 0, margin, status)
+    margin, status = _bound_margin(omega, p.limits[1], 1, margin, status)
+    margin, status = _bound_margin(x, p.limits[2], 2, margin, status)
+    margin, status = _bound_margin(v, p.limits[3], 3, margin, status)
+    return _bound_margin(e, p.limits[4], 4, margin, status)
+
+
+@jit
+def admissible(code, y, p, limit):
+    """:func:`admissible_event` as a function Python calls (the scipy reference's event,
+    the checks of an initial state): (margin, status)."""
+    return admissible_event(code, y, p, limit)
+
+
+# -- a chain's admissible region ------------------------------------------------------------------
+@jit
+def chain_margin(y, params, codes, parents, ppoints, limit):
+    """The admissible margin of a chain's state ``y`` (:class:`ChainSystem`'s arrays):
+    (margin, status) as :func:`admissible_event`'s, over every body's |theta_2| and every
+    joint's relative |theta_2| (its gimbal lock, ``limit`` = pi/2 - gimbal_margin [rad]) and,
+    where ``params[0].limited``, the bounds ``params[0].limits`` of every body's Theta,
+    Omega, X, V and every non-permanent joint's E_j (status: the quantity and axis;
+    which body or joint reached it is not in the code)."""
+    n = codes.shape[0]
+    margin, status = math.inf, GIMBAL_LOCK
+    for i in range(n):
+        margin = min(margin, limit - abs(y[12 * i + 1]))
+    for j in range(n):
+        q = parents[j]
+        if q < 0:
+            continue
+        rel = _relative(rotation_and_rate_of(vector(y, 12 * q))[0], rotation_and_rate_of(vector(y, 12 * j))[0])
+        margin = min(margin, limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2])))))
+    p0 = params[0]
+    if p0.limited == 0.0:
+        return margin, status
+    for i in range(n):
+        margin, status = _bound_margin(vector(y, 12 * i), p0.limits[0], 0, margin, status)
+        margin, status = _bound_margin(vector(y, 12 * i + 3), p0.limits[1], 1, margin, status)
+        margin, status = _bound_margin(vector(y, 12 * i + 6), p0.limits[2], 2, margin, status)
+        margin, status = _bound_margin(vector(y, 12 * i + 9), p0.limits[3], 3, margin, status)
+    for j in range(n):
+        if codes[j] == PERMANENT:
+            continue
+        a = rotation_and_rate_of(vector(y, 12 * j))[0]
+        r = params[j].attachment_point
+        point = (y[12 * j + 6] + a[0][0] * r[0] + a[0][1] * r[1] + a[0][2] * r[2],
+                 y[12 * j + 7] + a[1][0] * r[0] + a[1][1] * r[1] + a[1][2] * r[2],
+                 y[12 * j + 8] + a[2][0] * r[0] + a[2][1] * r[1] + a[2][2] * r[2])
+        q = parents[j]
+        if q < 0:
+            e = (point[0] - ppoints[j, 0], point[1] - ppoints[j, 1], point[2] - ppoints[j, 2])
+        else:
+            b = rotation_and_rate_of(vector(y, 12 * q))[0]
+            s = ppoints[j]
+            e = (point[0] - y[12 * q + 6] - (b[0][0] * s[0] + b[0][1] * s[1] + b[0][2] * s[2]),
+                 point[1] - y[12 * q + 7] - (b[1][0] * s[0] + b[1][1] * s[1] + b[1][2] * s[2]),
+                 point[2] - y[12 * q + 8] - (b[2][0] * s[0] + b[2][1] * s[1] + b[2][2] * s[2]))
+        margin, status = _bound_margin(e, p0.limits[4], 4, margin, status)
+    return margin, status
+
+
+@jit
+def _chain_breakpoint(params, t, t_end):
+    out = t_end
+    for i in range(params.shape[0]):
+        out = min(out, next_breakpoint(params[i], t, t_end))
+    return out
+
+
+@jit
+def _chain_disturbed(params):
+    for i in range(params.shape[0]):
+        if params[i].disturbance_count > 0.0:
+            return True
+    return False
+
+
+# -- what the driver asks of a system ----------------------------------------------------------
+def system_rate(code, t, y, p, f):
+    """dy/dt of the system (``code``, ``p``) at time ``t`` [s] into ``f`` (the disturbances'
+    power after the state where ``f`` has one more entry)."""
+    raise NotImplementedError("compiled code only")
+
+
+def system_margin(code, y, p, limit):
+    """(margin, status) of the admissible region at ``y``: :func:`admissible_event` or
+    :func:`chain_margin`."""
+    raise NotImplementedError("compiled code only")
+
+
+def system_limited(p):
+    """Whether the system has bounds of ``simulation.limits``."""
+    raise NotImplementedError("compiled code only")
+
+
+def system_disturbed(p):
+    """Whether the system has disturbances (their work W is then integrated after the state)."""
+    raise NotImplementedError("compiled code only")
+
+
+def system_breakpoint(p, t, t_end):
+    """The first edge of a disturbance's window after t, or ``t_end``."""
+    raise NotImplementedError("compiled code only")
+
+
+def system_impulses(code, t, y, p):
+    """Apply the impulses that start at t to ``y`` (in place); returns their work [J] (a
+    chain has none)."""
+    raise NotImplementedError("compiled code only")
+
+
+_INLINE = {"forceinline": True, "error_model": "numpy"}
+
+
+def _is_body(p) -> bool:
+    return isinstance(p, types.Record)
+
+
+@overload(system_rate, target="generic", jit_options=_INLINE)
+def _system_rate(code, t, y, p, f):
+    if _is_body(p):
+        return lambda code, t, y, p, f: state_rate(code, t, y, p, f)
+    return lambda code, t, y, p, f: chain_rate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, f)
+
+
+@overload(system_margin, target="generic", jit_options=_INLINE)
+def _system_margin(code, y, p, limit):
+    if _is_body(p):
+        return lambda code, y, p, limit: admissible_event(code, y, p, limit)
+    return lambda code, y, p, limit: chain_margin(y, p.params, p.codes, p.parents, p.ppoints, limit)
+
+
+@overload(system_limited, target="generic", jit_options=_INLINE)
+def _system_limited(p):
+    if _is_body(p):
+        return lambda p: p.limited != 0.0
+    return lambda p: p.params[0].limited != 0.0
+
+
+@overload(system_disturbed, target="generic", jit_options=_INLINE)
+def _system_disturbed(p):
+    if _is_body(p):
+        return lambda p: p.disturbance_count > 0.0
+    return lambda p: _chain_disturbed(p.params)
+
+
+@overload(system_breakpoint, target="generic", jit_options=_INLINE)
+def _system_breakpoint(p, t, t_end):
+    if _is_body(p):
+        return lambda p, t, t_end: next_breakpoint(p, t, t_end)
+    return lambda p, t, t_end: _chain_breakpoint(p.params, t, t_end)
+
+
+@overload(system_impulses, target="generic", jit_options=_INLINE)
+def _system_impulses(code, t, y, p):
+    if _is_body(p):
+        return lambda code, t, y, p: apply_impulses(code == PERMANENT, t, y, p)
+    return lambda code, t, y, p: 0.0
