@@ -113,9 +113,10 @@ def _load_kernels(loaded) -> None:
     from rbstab.engine import warm_up  # heavy: numba, numpy
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
 
-    loaded = [c for c in loaded if hasattr(c, "body")]  # a chain's kernels compile on their first use
+    chains = ["chains"] if any(not hasattr(c, "body") for c in loaded) else []
+    loaded = [c for c in loaded if hasattr(c, "body")]
     parts = (["rates", "outputs"] if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
-        ["switching"] if any(is_sign_law(c) for c in loaded) else [])
+        ["switching"] if any(is_sign_law(c) for c in loaded) else []) + chains
     start = time.perf_counter()
     if any(c.body.weight.any() for c in loaded):
         import scipy.optimize  # noqa: F401  (heavy: scipy) the equilibrium under gravity
@@ -163,7 +164,8 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     out = Path(output)
     how = _check_targets(loaded, out, overwrite)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
-    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")))
+    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")),
+                    chain=any(not hasattr(c, "body") for c in loaded))
     _load_kernels(loaded)
     failed = 0
     for written, config in enumerate(loaded):

@@ -349,9 +349,11 @@ def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overri
     path = Path(output) / f"{config.name}.h5"
     check_overwrite(config, path, overwrite=overwrite)
     if _is_chain_config(config):
+        from .engine import ensure_compiled  # heavy: numba, numpy
         from .simulator import simulate_chain  # heavy: numba, numpy
 
-        return write_chain_result(simulate_chain(config, timeout), path,
+        ensure_compiled(chain=True)
+        return write_chain_result(simulate_chain(config, timeout, engine=engine), path,
                                   command_line=command_line or _python_command("run"))
     result = _integrate(config, engine, timeout)
     return write_result(result, path, command_line=command_line or _python_command("run"))

@@ -29,17 +29,38 @@ __all__ = ["GROUPS", "warm_up", "ensure_compiled"]
 
 #: Kernel groups, each compiled (and marked warm in the cache) as a whole: the engine's
 #: right-hand side, integrator and outputs; the sign law's event-driven integrator, which
-#: only pure-sign-law runs need (parts of :func:`warm_up`).
-GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",)}
+#: only pure-sign-law runs need; a chain's rate, driver and outputs, which only chains need
+#: (parts of :func:`warm_up`).
+GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",), "chain": ("chains",)}
 
 
-def warm_up(parts: str = "rates,outputs,switching") -> None:
+def _warm_up_chains() -> None:
+    """A one-body chain's run on the compiled driver, its outputs and its rest state (the
+    kernels every chain uses: their argument types do not depend on the chain's size)."""
+    from ..chain import GROUND, Body, Joint, single
+    from ..variants import chain as C
+    from .integrate import integrate_chain_runs
+    from .systems import chain_system
+
+    eye = np.eye(3)
+    chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, np.zeros(3), np.array([0.0, 0.0, -1.0]),
+                                                 "permanent", eye, eye), np.array([0.0, 0.0, -1.0]))
+    compiled = C.compile_chain(chain)
+    y = C._place(compiled, np.zeros(compiled.n_states))
+    settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3, 10.0, np.inf]])
+    for limits in (None, np.ones((5, 3))):
+        integrate_chain_runs(chain_system(compiled, limits), y[None], settings, method="DOP853", n_samples=2)
+    C.evaluate(compiled, np.zeros(1), y[None])
+
+
+def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
     ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
     integrator), ``outputs`` (every output at the samples and the numerical dv/dt,
     :func:`rbstab.summary.numerical_rate`) and ``switching`` (the sign
-    law's event-driven integrator, :mod:`rbstab.engine.switching`);
+    law's event-driven integrator, :mod:`rbstab.engine.switching`) and ``chains`` (a
+    chain's rate, compiled driver and outputs, :mod:`rbstab.engine.systems`);
     :func:`ensure_compiled` compiles some in a second process at the same time.
     """
     wanted = set(parts.split(","))
@@ -49,6 +70,8 @@ def warm_up(parts: str = "rates,outputs,switching") -> None:
         params[name] = np.eye(3)
     if "switching" in wanted:
         warm_up_sign_law(params)
+    if "chains" in wanted:
+        _warm_up_chains()
     for code, n in enumerate(STATE_SIZE):
         y = np.zeros((1, n))
         if "rates" in wanted:
@@ -79,15 +102,16 @@ def _start_warm_up(parts: str):
         return None
 
 
-def ensure_compiled(say=None, *, sign_law: bool = False) -> None:
+def ensure_compiled(say=None, *, sign_law: bool = False, chain: bool = False) -> None:
     """Compile the engine's kernels into the cache unless that was done before.
 
     ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
     stderr; nothing is said when the cache is warm. ``sign_law``: also the sign law's
-    integrator (:data:`GROUPS`). The parts are compiled in two processes at once (numba
+    integrator; ``chain``: also a chain's kernels (:data:`GROUPS`). The parts are compiled in two processes at once (numba
     compiles on one core; each writes its own kernels into the cache folder).
     """
-    cold = [g for g in ("engine", "sign_law") if (g == "engine" or sign_law) and not cache_is_warm(g)]
+    wanted = {"engine": True, "sign_law": sign_law, "chain": chain}
+    cold = [g for g, want in wanted.items() if want and not cache_is_warm(g)]
     if not cold:
         return
     if say is not None:
