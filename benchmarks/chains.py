@@ -7,6 +7,7 @@ Prints (2 cores, warm numba cache):
   ``rbstab run`` makes (``rbstab.simulator.simulate_chain``: with its outputs and summary);
 - ms the integration of the one-body Case 3 config on the one-body compiled engine and
   as a one-body chain on the compiled driver;
+- s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process);
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
   and visco-elastic joints with feedback, gravity), and that per body.
 
@@ -21,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rbstab.analysis import BasinAxis, chain_basin_map
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
 from rbstab.config.chains import chain_of, load_any_config
@@ -84,6 +86,15 @@ def main() -> None:
     as_chain = _best(_compiled_run(compiled, y0, sim))
     print(f"  case3_embedded, t_end {sim.t_end:g} s: one-body engine {1e3 * one:6.2f} ms, as a one-body chain on the "
           f"compiled driver {1e3 * as_chain:6.2f} ms ({as_chain / one:.2f}x)")
+    stance = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+                             ["simulation.limits.theta=[0.6, 0.6, 3.2]"])
+    axes = [BasinAxis.parse("initial_state.legs.theta.0=-0.4:0.4:41"),
+            BasinAxis.parse("initial_state.trunk.omega.0=-3:3:41")]
+    chain_basin_map(stance, [BasinAxis.parse("initial_state.legs.theta.0=-0.4:0.4:2"), axes[1]])  # compiled
+    start = time.perf_counter()
+    found = chain_basin_map(stance, axes)
+    print(f"  basin map of stance_ankle_hip (limits.theta 0.6 rad), 41 x 41 over legs theta_1 x trunk omega_1, "
+          f"t_end 5 s: {time.perf_counter() - start:.2f} s ({found.counts()})")
     print("rate evaluations (us an evaluation; per body):")
     for n in range(1, 9):
         compiled = C.compile_chain(serial(n), offset=0.0)

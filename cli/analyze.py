@@ -326,15 +326,16 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     configs, specs = _split_specs(configs)
     chains = [c for c in configs if is_chain_file(c)]
     if chains:
-        asked = [name for name, given in (("--basin", basin), ("--robustness", sweeps), ("--push", push_options),
+        asked = [name for name, given in (("--robustness", sweeps), ("--push", push_options),
                                           ("--basin-stability/--push-distribution", stability_options),
                                           ("--verify", verify), ("a sweep spec", specs),
                                           ("--boundary-layer", boundary_layer is not None)) if given]
         if asked or len(chains) < len(configs):
             what = ", ".join(asked) if asked else "one-body configs"
-            raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation "
-                                   f"and verdict; {what} take one-body configs (give them in another command)")
-        _analyse_chains(chains, overrides)
+            raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation, "
+                                   f"verdict and --basin map; {what} take one-body configs (give them in another "
+                                   "command)")
+        _analyse_chains(chains, overrides, basin, ratio=ratio, n_samples=basin_samples)
         return
     if specs:
         if not (push_options or stability_options):
@@ -384,21 +385,54 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             console.emit({"kind": "robustness", **result.to_json()})
 
 
-def _analyse_chains(paths, overrides) -> None:
-    """Each chain's rest state, linearisation and verdict, printed (or one JSON object each,
-    "kind": "chain"); nothing is written."""
-    from rbstab.analysis import analyze_chain  # heavy: numba, numpy
+def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int) -> None:
+    """Each chain's rest state, linearisation and verdict and, with two ``basin`` axes, its
+    basin map (:func:`rbstab.analysis.chain_basin_map`), printed (or one JSON object each,
+    "kind": "chain"); nothing is written. Every axis is checked against every chain before
+    anything runs."""
+    from rbstab.analysis import BasinAxis, analyze_chain, chain_basin_map  # heavy: numba, numpy
+    from rbstab.analysis.chain import check_axes  # heavy: numba, numpy
+    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
 
     console = get_console()
-    for config in load_configs(paths, overrides, chains=True):
+    loaded = load_configs(paths, overrides, chains=True)
+    axes = []
+    if basin:
+        if len(basin) != 2:
+            raise click.UsageError(f"--basin: give it exactly twice (two axes of the slice), found {len(basin)}")
+        try:
+            axes = [BasinAxis.parse(t) for t in basin]
+            for config in loaded:
+                check_axes(config, axes)
+        except ValueError as exc:
+            raise click.ClickException(str(exc))
+        ensure_compiled(say=console.info, chain=True)
+    for config in loaded:
         try:
             result = analyze_chain(config)
+            found = chain_basin_map(config, axes, ratio=ratio, n_samples=n_samples) if axes else None
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         if console.json:
-            console.emit({"kind": "chain", **result.as_dict()})
-        else:
-            console.out(result.text())
+            console.emit({"kind": "chain", **result.as_dict(), **({"basin": _basin_json(found)} if found else {})})
+            continue
+        console.out(result.text())
+        if found is not None:
+            counts = ", ".join(f"{n} {name}" for name, n in found.counts().items())
+            a, b = found.axes
+            console.out(f"  basin map over {a.label} x {b.label} ({len(a.values)} x {len(b.values)} runs, t_end "
+                        f"{found.t_end:g} s): {counts}")
+            for message, n in found.messages.items():
+                console.out(f"    {n} failed: {message}")
+
+
+def _basin_json(found) -> dict:
+    """A chain's basin map as plain Python: the axes' keys and values, the outcome of every
+    point (rows: the first axis; 0 converged, 1 not converged, 2 failed), the counts and
+    the failures' messages."""
+    return {"axes": [{"key": a.key, "values": a.values.tolist()} for a in found.axes],
+            "outcome": found.outcome.tolist(), "counts": found.counts(), "messages": found.messages,
+            "t_end": found.t_end, "ratio": found.ratio}
 
 
 def _check_verifiable(loaded, specs) -> None:

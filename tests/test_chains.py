@@ -275,3 +275,24 @@ def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp
     refused = CliRunner().invoke(cli, ["analyze", path, "--push", "force", "-o", str(tmp_path)])
     assert refused.exit_code == 2 and "is a chain" in refused.output and "--push take one-body configs" in refused.output
     assert "Traceback" not in refused.output and not any(tmp_path.iterdir())
+
+
+def test_rbstab_analyze_maps_a_chains_basin_and_refuses_a_key_naming_no_body(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from rbstab_cli.main import cli
+
+    path = "configs/examples/stance_ankle_hip.yaml"
+    short = ["--set", "simulation.t_end=1", "--basin-samples", "51", "-o", str(tmp_path)]
+    result = CliRunner().invoke(cli, ["analyze", path, "--json", "--basin", "initial_state.legs.theta.0=-0.1:0.1:3",
+                                      "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2", *short])
+    assert result.exit_code == 0, result.output
+    found = json.loads(result.stdout.strip().splitlines()[-1])
+    assert found["kind"] == "chain" and np.shape(found["basin"]["outcome"]) == (3, 2)
+    assert sum(found["basin"]["counts"].values()) == 6 and found["basin"]["axes"][1]["values"] == [-0.1, 0.1]
+    refused = CliRunner().invoke(cli, ["analyze", path, "--basin", "initial_state.hips.theta.0=-0.1:0.1:3",
+                                       "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2", *short])
+    assert refused.exit_code == 1 and "no body 'hips' in this chain (its bodies: legs, trunk" in refused.output
+    assert "Traceback" not in refused.output and not any(tmp_path.iterdir())

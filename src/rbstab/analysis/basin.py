@@ -42,19 +42,21 @@ _AXIS = re.compile(r"^\s*(?P<key>[^=]+?)\s*=\s*(?P<lo>[^:]+):(?P<hi>[^:]+):(?P<n
 
 def state_entry(key: str):
     """The :class:`~rbstab.config.paths.KeyPath` of one entry of an initial state,
-    ``initial_state.<block>.<i>`` (block ``theta``, ``omega``, ``x``, ``v``, ``d``).
+    ``initial_state.<block>.<i>`` (block ``theta``, ``omega``, ``x``, ``v``, ``d``), or of
+    a chain's body, ``initial_state.<body>.<block>.<i>`` (the path's ``entry`` the body's
+    name).
 
     Raises
     ------
     ValueError
-        One line: the key's problem (:func:`~rbstab.config.paths.parse_key`), or that it
+        One line: the key's problem (:func:`~rbstab.config.paths.parse_any_key`), or that it
         names no single entry of an initial state, with those allowed.
     """
     from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
-    from ..config.paths import KeyPathError, parse_key  # heavy: pydantic
+    from ..config.paths import KeyPathError, parse_any_key, parse_key  # heavy: pydantic
 
     try:
-        path = parse_key(key)
+        path = parse_any_key(key)
     except KeyPathError as exc:
         raise ValueError(exc.problem) from None
     if path.section != "initial_state" or len(path.index) != 1:
@@ -104,6 +106,9 @@ class BasinAxis:
             path = state_entry(key)
         except ValueError as exc:
             raise ValueError(f"--basin {text!r}: {exc}") from None
+        if layout is not None and path.entry is not None:
+            raise ValueError(f"--basin {text!r}: names a body of a chain ('{path.entry}'); a one-body config's entries "
+                             "are initial_state.<block>.<i>")
         if layout is not None and INITIAL_STATE_BLOCKS[path.field] not in layout.blocks:
             states = ", ".join(k for k, b in INITIAL_STATE_BLOCKS.items() if b in layout.blocks)
             raise ValueError(f"--basin {text!r}: '{path.field_key}' is not a state of this variant (its states: {states})")
@@ -121,17 +126,18 @@ class BasinAxis:
         """The state block (``theta`` ... ``controller_state``)."""
         from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
-        from ..config.paths import parse_key  # heavy: pydantic
-
-        return INITIAL_STATE_BLOCKS[parse_key(self.key).field]
+        return INITIAL_STATE_BLOCKS[state_entry(self.key).field]
 
     @property
     def index(self) -> int:
         """The component (0, 1, 2)."""
-        from ..config.paths import parse_key  # heavy: pydantic
-
-        (index,) = parse_key(self.key).index
+        (index,) = state_entry(self.key).index
         return index
+
+    @property
+    def body(self) -> str | None:
+        """A chain's body the entry belongs to (None: a one-body config's)."""
+        return state_entry(self.key).entry
 
     @property
     def units(self) -> str:
@@ -139,8 +145,10 @@ class BasinAxis:
 
     @property
     def label(self) -> str:
-        """``omega_1 [rad s-1]`` (component numbered from 1, as in the paper)."""
-        return f"{self.block}_{self.index + 1} [{self.units}]"
+        """``omega_1 [rad s-1]`` (component numbered from 1, as in the paper; a chain's
+        ``legs theta_1 [rad]``)."""
+        body = f"{self.body} " if self.body is not None else ""
+        return f"{body}{self.block}_{self.index + 1} [{self.units}]"
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,8 @@
 """The analysis of a chain of rigid bodies: its rest state, the linearisation there in the
 chain's independent coordinates, the eigenvalues and Lyapunov's indirect verdict
-(:func:`rbstab.analysis.linearise.linearise_chain`), and v at the configured initial state.
+(:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, and
+the basin of attraction by simulation over a 2-D slice of initial states
+(:func:`chain_basin_map`).
 """
 
 from __future__ import annotations
@@ -9,9 +11,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from .basin import DEFAULT_SAMPLES, BasinAxis, BasinMap, time_to_converge
 from .linearise import Linearisation, linearise_chain
 
-__all__ = ["ChainAnalysis", "analyze_chain"]
+__all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes"]
+
+#: The state blocks of a body in the chain's state, in order (12 entries a body).
+_BODY_BLOCKS = ("theta", "omega", "position", "velocity")
 
 
 @dataclass(frozen=True)
@@ -92,3 +99,98 @@ def analyze_chain(config) -> ChainAnalysis:
     rest = C.full_state(compiled, lin.equilibrium)
     v0 = C.lyapunov(compiled, C.initial_state(config))[0]
     return ChainAnalysis(config.name, lin, coordinates, rest, float(v0))
+
+
+def _state_offset(compiled, axis: BasinAxis) -> int:
+    """The index in the chain's state of the entry ``axis`` names; ValueError naming what
+    is allowed where it names no body of the chain or a D its joint does not have."""
+    names = list(compiled.chain.body_names)
+    if axis.body not in names:
+        raise ValueError(f"--basin {axis.key!r}: no body '{axis.body}' in this chain (its bodies: {', '.join(names)}; "
+                         "keys initial_state.<body>.<theta|omega|x|v|d>.<0|1|2>)")
+    i = names.index(axis.body)
+    if axis.block == "controller_state":
+        if compiled.d_at[i] < 0:
+            raise ValueError(f"--basin {axis.key!r}: the joint of '{axis.body}' is not embedded (no D)")
+        return int(compiled.d_at[i]) + axis.index
+    return 12 * i + 3 * _BODY_BLOCKS.index(axis.block) + axis.index
+
+
+def check_axes(config, axes) -> None:
+    """ValueError (one line) where a basin axis names no entry of the chain's state
+    (:func:`chain_basin_map`'s keys), or the two are the same entry."""
+    from ..variants import chain as C  # heavy: numba
+
+    if len(axes) != 2 or axes[0].key == axes[1].key:
+        raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
+    compiled = C.compile_chain(config.chain, offset=0.0)
+    for axis in axes:
+        _state_offset(compiled, axis)
+
+
+def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                    n_samples: int = DEFAULT_SAMPLES) -> BasinMap:
+    """The basin of attraction of a chain (:class:`rbstab.config.chains.ChainConfig`) over
+    the slice of initial states spanned by two ``axes`` (:class:`BasinAxis`, keys
+    ``initial_state.<body>.<block>.<i>``), every other entry the configuration's; each
+    grid point one run of the compiled driver, classified as a one-body basin map's
+    points are (:mod:`rbstab.analysis.basin`). A body whose ``x`` (``v``) the configuration
+    leaves out is placed on its joint at every point, as the configuration places it
+    (E_j = 0, dE_j/dt = 0), so a tilt moves the bodies it carries. ``initial_states``
+    holds the chain's full state (n_states) of each point.
+
+    Raises
+    ------
+    ValueError
+        For two equal keys, or a key that names no body of the chain (or a D its joint
+        does not have).
+    """
+    from ..engine.integrate import integrate_chain_runs  # heavy: numba
+    from ..engine.settings import settings_rows  # heavy: numba
+    from ..engine.status import GIMBAL_LOCK, SUCCESS, limit_of, status_message  # heavy: numba
+    from ..engine.systems import chain_system  # heavy: numba
+    from ..variants import chain as C  # heavy: numba
+
+    check_axes(config, axes)
+    compiled = C.compile_chain(config.chain)
+    at = [_state_offset(compiled, a) for a in axes]
+    names = list(config.chain.body_names)
+    x_placed = np.array([f"initial_state.{b}.x" in config.placed for b in names])
+    v_placed = np.array([f"initial_state.{b}.v" in config.placed for b in names])
+    y0 = C.initial_state(config)
+    shape = (len(axes[0].values), len(axes[1].values))
+    first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
+    states = np.repeat(y0[None], first.size, axis=0)
+    states[:, at[0]], states[:, at[1]] = first.ravel(), second.ravel()
+    if x_placed.any() or v_placed.any():
+        states = np.array([C.place(compiled, y, x_placed, v_placed) for y in states])
+    sim = config.simulation
+    settings = np.repeat(settings_rows([sim]), len(states), axis=0)
+    sol = integrate_chain_runs(chain_system(compiled, sim.limits), states, settings, method=sim.method,
+                               n_samples=int(n_samples))
+    time = np.linspace(0.0, sim.t_end, int(n_samples))
+    outcome = np.full(len(states), 2, dtype=np.int8)
+    t_conv = np.full(len(states), np.nan)
+    v_final = np.full(len(states), np.nan)
+    v_initial = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
+    v = C.evaluate(compiled, np.tile(time, len(states)), sol.samples.reshape(-1, compiled.n_states))["lyapunov"]
+    v = v.reshape(len(states), -1)
+    messages: dict[str, int] = {}
+    for k in range(len(states)):
+        code = int(sol.status[k])
+        if code == SUCCESS:
+            t_conv[k], v_final[k] = time_to_converge(time, v[k], ratio), v[k, -1]
+            outcome[k] = 0 if np.isfinite(t_conv[k]) else 1
+            continue
+        if code == GIMBAL_LOCK:
+            message = "gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin)"
+        elif limit_of(code) is not None:
+            quantity, axis = limit_of(code)
+            message = f"left the admissible region (simulation.limits): |{quantity}_{axis + 1}| of a body or joint"
+        else:
+            message = status_message(code, float(sol.t_stop[k]), sim.gimbal_margin, int(sim.max_steps),
+                                     sim.max_wall_time).split(" at t =")[0]
+        messages[message] = messages.get(message, 0) + 1
+    return BasinMap(axes=(axes[0], axes[1]), outcome=outcome.reshape(shape), time_to_converge=t_conv.reshape(shape),
+                    lyapunov_initial=v_initial.reshape(shape), lyapunov_final=v_final.reshape(shape),
+                    initial_states=states.reshape(*shape, -1), ratio=ratio, t_end=sim.t_end, messages=messages)

@@ -48,7 +48,7 @@ from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_ene
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
-           "reduced_rate", "nearest_bound", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "reduced_rate", "nearest_bound", "place", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -522,9 +522,18 @@ def reduced_rate(compiled: CompiledChain, z: np.ndarray, t: float = 0.0) -> np.n
 def _place(compiled: CompiledChain, y: np.ndarray, only_permanent: bool = False) -> np.ndarray:
     """``y`` with every body's (``only_permanent``: every permanent joint's child's) X, V
     placed on its parent's point (E_j = F_j = 0), parents first."""
+    chosen = compiled.codes == PERMANENT if only_permanent else np.ones(compiled.size, dtype=bool)
+    return place(compiled, y, chosen, chosen)
+
+
+def place(compiled: CompiledChain, y: np.ndarray, x_placed, v_placed) -> np.ndarray:
+    """A copy of the state ``y`` (n_states,) with X_i of the bodies i where ``x_placed[i]``
+    (V_i where ``v_placed[i]``), (n,) booleans, placed so that joint i's points coincide
+    (E_i = 0) and move together (F_i = 0), parents first: X_c = X_p + A_p R_p - A_c R_c,
+    V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x R_c) (ground: X_p = V_p = 0, A_p = I)."""
     y = np.array(y, dtype=float)
     for i in range(compiled.size):
-        if only_permanent and compiled.codes[i] != PERMANENT:
+        if not (x_placed[i] or v_placed[i]):
             continue
         parent, r_p = compiled.parents[i], compiled.ppoints[i]
         a = rotation_matrix(y[12 * i: 12 * i + 3])
@@ -535,8 +544,10 @@ def _place(compiled: CompiledChain, y: np.ndarray, only_permanent: bool = False)
             a_p = rotation_matrix(y[12 * parent: 12 * parent + 3])
             point = y[12 * parent + 6: 12 * parent + 9] + a_p @ r_p
             rate = y[12 * parent + 9: 12 * parent + 12] + a_p @ np.cross(y[12 * parent + 3: 12 * parent + 6], r_p)
-        y[12 * i + 6: 12 * i + 9] = point - a @ r_c
-        y[12 * i + 9: 12 * i + 12] = rate - a @ np.cross(y[12 * i + 3: 12 * i + 6], r_c)
+        if x_placed[i]:
+            y[12 * i + 6: 12 * i + 9] = point - a @ r_c
+        if v_placed[i]:
+            y[12 * i + 9: 12 * i + 12] = rate - a @ np.cross(y[12 * i + 3: 12 * i + 6], r_c)
     return y
 
 
