@@ -741,10 +741,10 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     """
     from .variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
-    get_engine(engine)  # checks the name
+    methods = get_engine(engine).methods  # checks the name; None: solve_ivp integrates every method
     start = _time.perf_counter()
     sim = config.simulation
-    if engine == "scipy" or sim.method not in METHODS:
+    if methods is None or sim.method not in methods:
         trajectory = C.integrate(config, timeout=timeout)
         compiled, time, states = trajectory.compiled, trajectory.time, trajectory.states
         status, message, solver = trajectory.status, trajectory.message, trajectory.solver

@@ -468,7 +468,7 @@ class _LevelSearch:
                 {"type": "ineq", "fun": lambda z: self._gradients(z, t)[0] / self.floor - 1.0,
                  "jac": lambda z: self._gradients(z, t)[2] / self.floor}] + self._domain()
         res = minimize(lambda z: self._gradients(z, t)[0] / level, z0, jac=lambda z: self._gradients(z, t)[2] / level,
-                       method="SLSQP", constraints=cons, options={"maxiter": 100, "ftol": 1e-12})
+                       method="SLSQP", constraints=cons, options={"maxiter": 400, "ftol": 1e-12})
         return res.x
 
     def _confirmed(self, z: np.ndarray, t: np.ndarray) -> np.ndarray:

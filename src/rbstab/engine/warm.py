@@ -17,12 +17,15 @@ from pathlib import Path
 import numpy as np
 
 from ..jit import CACHE_DIR, cache_is_warm, mark_warm
+from ..chain import GROUND, Body, Joint, single
 from ..model import PARAMETERS
 from ..summary import numerical_rate
+from ..variants import chain as C
 from ..variants.base import N_OUTPUTS
 from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
-from .integrate import admissible, integrate_runs
+from .integrate import admissible, integrate_chain_runs, integrate_runs
 from .switching import warm_up as warm_up_sign_law
+from .systems import chain_system
 from .tableaus import METHODS
 
 __all__ = ["GROUPS", "warm_up", "ensure_compiled"]
@@ -37,11 +40,6 @@ GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",), "chain": (
 def _warm_up_chains() -> None:
     """A one-body chain's run on the compiled driver, its outputs and its rest state (the
     kernels every chain uses: their argument types do not depend on the chain's size)."""
-    from ..chain import GROUND, Body, Joint, single
-    from ..variants import chain as C
-    from .integrate import integrate_chain_runs
-    from .systems import chain_system
-
     eye = np.eye(3)
     chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, np.zeros(3), np.array([0.0, 0.0, -1.0]),
                                                  "permanent", eye, eye), np.array([0.0, 0.0, -1.0]))
