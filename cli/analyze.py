@@ -258,6 +258,8 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
               "frame) or of a torque (body frame) on the body at rest at its equilibrium.")
 @click.option("--push-point", default=None, metavar="X,Y,Z",
               help="Where a force push acts [m], body frame, from the centre of mass  [default: 0,0,0].")
+@click.option("--push-body", default=None, metavar="NAME",
+              help="A chain's body that is pushed (its frame for --push-point and a torque); chains only.")
 @click.option("--push-directions", type=int, default=None, metavar="N",
               help="N quasi-uniform directions on the sphere (seeded by --seed), then a local search around the "
               "weakest  [default: 64].")
@@ -289,7 +291,7 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, samples, seed, no_certificate,
             no_simulation, ratio, basin_samples, jobs, engine, confidence, push, push_point, push_directions,
             push_direction, push_at, push_max, push_tol, push_rungs, stability_ranges, push_distribution, draws,
-            verify, overwrite) -> None:
+            verify, overwrite, push_body) -> None:
     """Analyse the stability of the equilibrium of each CONFIG; write OUTPUT/<name>.analysis.nc.
 
     \b
@@ -326,17 +328,23 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     configs, specs = _split_specs(configs)
     chains = [c for c in configs if is_chain_file(c)]
     if chains:
-        asked = [name for name, given in (("--robustness", sweeps), ("--push", push_options),
-                                          ("--basin-stability/--push-distribution", stability_options),
+        asked = [name for name, given in (("--robustness", sweeps),
                                           ("--verify", verify), ("a sweep spec", specs),
                                           ("--boundary-layer", boundary_layer is not None)) if given]
         if asked or len(chains) < len(configs):
             what = ", ".join(asked) if asked else "one-body configs"
             raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation, "
-                                   f"verdict and --basin map; {what} take one-body configs (give them in another "
-                                   "command)")
-        _analyse_chains(chains, overrides, basin, ratio=ratio, n_samples=basin_samples)
+                                   f"verdict, --basin map, --push thresholds and basin stability; {what} take "
+                                   "one-body configs (give them in another command)")
+        if push_options is not None:
+            push_options = {**push_options, "body": push_body}
+        if stability_options is not None and stability_options.get("push") is not None:
+            stability_options = {**stability_options, "body": push_body}
+        _analyse_chains(chains, overrides, basin, ratio=ratio, n_samples=basin_samples, push=push_options,
+                        stability=stability_options, jobs=jobs or default_jobs())
         return
+    if push_body is not None:
+        raise click.UsageError("--push-body: names the body of a chain that is pushed; a one-body config has one")
     if specs:
         if not (push_options or stability_options):
             raise click.UsageError(f"{specs[0]}: a sweep spec is analysed with --push and/or --basin-stability / "
@@ -385,17 +393,44 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             console.emit({"kind": "robustness", **result.to_json()})
 
 
-def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int) -> None:
+def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, push: dict | None,
+                    stability: dict | None, jobs: int) -> None:
     """Each chain's rest state, linearisation and verdict and, with two ``basin`` axes, its
-    basin map (:func:`rbstab.analysis.chain_basin_map`), printed (or one JSON object each,
-    "kind": "chain"); nothing is written. Every axis is checked against every chain before
-    anything runs."""
+    basin map (:func:`rbstab.analysis.chain_basin_map`), with ``push`` its smallest fatal
+    pushes (:func:`rbstab.analysis.push.push_analysis` on a named body), printed (or one
+    JSON object each, "kind": "chain"); nothing is written. Every axis and the pushed body
+    are checked against every chain before anything runs."""
+    from types import SimpleNamespace
+
     from rbstab.analysis import BasinAxis, analyze_chain, chain_basin_map  # heavy: numba, numpy
-    from rbstab.analysis.chain import check_axes  # heavy: numba, numpy
+    from rbstab.analysis.chain import check_axes, check_entries  # heavy: numba, numpy
+    from rbstab.analysis.push import basin_stability, push_analysis  # heavy: numba, numpy
+    from rbstab.analysis.text import push_lines, stability_lines  # heavy: numba, numpy
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
 
     console = get_console()
     loaded = load_configs(paths, overrides, chains=True)
+    for options in (push, stability if stability and stability.get("push") else None):
+        if options is None:
+            continue
+        for config in loaded:
+            names = config.chain.body_names
+            if options["body"] not in names:
+                found = "none" if options["body"] is None else f"'{options['body']}'"
+                raise click.UsageError(f"--push-body: found {found} for {config.name}; expected the body of the "
+                                       f"chain that is pushed ({', '.join(names)})")
+            if options["at"] != 0.0:
+                raise click.UsageError(f"--push-at: found {options['at']:g}; a chain is pushed at t = 0, from its "
+                                       "rest state")
+    if stability is not None and stability.get("ranges"):
+        from rbstab.analysis.push import parse_ranges  # heavy: numba, numpy
+
+        try:
+            entries = [a for a, _, _ in parse_ranges(stability["ranges"], None)]
+            for config in loaded:
+                check_entries(config, entries)
+        except ValueError as exc:
+            raise click.ClickException(str(exc).replace("--basin ", "--basin-stability "))
     axes = []
     if basin:
         if len(basin) != 2:
@@ -406,17 +441,25 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int) ->
                 check_axes(config, axes)
         except ValueError as exc:
             raise click.ClickException(str(exc))
+    if axes or push is not None or stability is not None:
         ensure_compiled(say=console.info, chain=True)
     for config in loaded:
         try:
             result = analyze_chain(config)
             found = chain_basin_map(config, axes, ratio=ratio, n_samples=n_samples) if axes else None
+            pushed = push_analysis(config, ratio=ratio, jobs=jobs, **push) if push is not None else None
+            stable = basin_stability(config, ratio=ratio, jobs=jobs, **stability) if stability is not None else None
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         if console.json:
-            console.emit({"kind": "chain", **result.as_dict(), **({"basin": _basin_json(found)} if found else {})})
+            console.emit({"kind": "chain", **result.as_dict(), **({"basin": _basin_json(found)} if found else {}),
+                          **({"push": pushed.to_json()} if pushed else {}),
+                          **({"basin_stability": stable.to_json()} if stable else {})})
             continue
         console.out(result.text())
+        shown = SimpleNamespace(push=pushed, certificate=None, basin_stability=stable)
+        for line in push_lines(shown) + stability_lines(shown):
+            console.out(line)
         if found is not None:
             counts = ", ".join(f"{n} {name}" for name, n in found.counts().items())
             a, b = found.axes

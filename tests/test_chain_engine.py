@@ -121,3 +121,110 @@ def test_a_chains_basin_map_runs_each_point_as_rbstab_run_would():
         assert (result.status == "success") == (found.outcome[i, j] < 2)
         if result.status == "success":
             assert found.lyapunov_final[i, j] == pytest.approx(result.outputs["lyapunov"][-1], rel=1e-12, abs=1e-14)
+
+
+def _arm(root: str, pulse: float | None = None):
+    """Two bodies, the upper on a ``root`` joint to the ground (permanent: a pendulum;
+    free: floating), the lower on a permanent elbow; a pulse of force 2/pulse N along
+    (1, 2, 0.5) for ``pulse`` seconds at the lower body's point (0.05, 0, -0.2)."""
+    data = {
+        "name": "arm", "gravity": [0, 0, -9.81],
+        "bodies": [{"name": "upper", "mass": 2.0, "inertia": [0.2, 0.18, 0.05]},
+                   {"name": "lower", "mass": 1.5, "inertia": [0.1, 0.09, 0.03]}],
+        "joints": [{"name": "shoulder", "parent": "ground", "parent_point": [0, 0, 0], "child": "upper",
+                    "child_point": [0, 0, 0.4], "variant": root, "k_r": [30, 30, 5], "l_r": [1, 1, 1]},
+                   {"name": "elbow", "parent": "upper", "parent_point": [0, 0, -0.4], "child": "lower",
+                    "child_point": [0, 0, 0.3], "variant": "permanent", "k_r": [20, 20, 5], "l_r": [1, 1, 1]}],
+        "initial_state": {"upper": {"theta": [0.3, -0.2, 0.1]}, "lower": {"theta": [-0.4, 0.3, 0.0]}},
+        "simulation": {"t_end": 1.0, "n_samples": 2, "method": "DOP853", "rtol": 1e-12, "atol": 1e-14},
+    }
+    if pulse is not None:
+        data["disturbances"] = [{"kind": "pulse", "value": [2 / pulse, 4 / pulse, 1 / pulse],
+                                 "point": [0.05, 0.0, -0.2], "start": 0.0, "duration": pulse, "body": "lower"}]
+        data["simulation"]["t_end"] = pulse
+    return chain_config_from_mapping(data)
+
+
+def test_a_push_on_a_chain_keeps_its_joints_and_is_the_limit_of_short_pulses():
+    """The impulse P = (2, 4, 1) N s at a point of the lower body: the permanent joints'
+    dE_j/dt stay 0; a floating chain's momentum jumps by P and its angular momentum about
+    the origin by (X + A R) x P; dT is the kinetic energy's jump; and the state after a
+    pulse of the same impulse over ever shorter times, integrated, approaches the jump."""
+    from rbstab.kinematics import rotation_matrix
+
+    push, point = np.array([2.0, 4.0, 1.0]), np.array([0.05, 0.0, -0.2])
+    for root in ("permanent", "free"):
+        config = _arm(root)
+        compiled = C.compile_chain(config.chain)
+        y0 = C.initial_state(config)
+        y0[3:6] = [0.5, -0.3, 0.2]  # moving already
+        y0 = C.place(compiled, y0, np.ones(2, bool), np.ones(2, bool))
+        y = y0.copy()
+        energy = C.chain_push(y, *compiled.args[:4], 1, point, push, False)
+        out = C.evaluate(compiled, np.zeros(2), np.array([y0, y]))
+        kinetic = out["lyapunov_kinetic"]
+        assert energy == pytest.approx(kinetic[1] - kinetic[0], rel=1e-12)
+        np.testing.assert_array_equal(y[:3], y0[:3])  # the configuration does not move
+        assert np.abs(out["constraint_rate"][1, 1]).max() < 1e-12  # the elbow holds
+        if root == "permanent":
+            assert np.abs(out["constraint_rate"][1, 0]).max() < 1e-12
+            continue
+        masses = np.array([b.mass for b in config.chain.bodies])
+        momentum = [(masses[:, None] * s.reshape(-1, 12)[:2, 9:12]).sum(axis=0) for s in (y0, y)]
+        np.testing.assert_allclose(momentum[1] - momentum[0], push, atol=1e-12)
+
+        def angular(s):
+            total = np.zeros(3)
+            for i, body in enumerate(config.chain.bodies):
+                a = rotation_matrix(s[12 * i: 12 * i + 3])
+                total += np.cross(s[12 * i + 6: 12 * i + 9], body.mass * s[12 * i + 9: 12 * i + 12])
+                total += a @ (np.asarray(body.inertia) @ s[12 * i + 3: 12 * i + 6])
+            return total
+        arm = y0[18:21] + rotation_matrix(y0[12:15]) @ point
+        np.testing.assert_allclose(angular(y) - angular(y0), np.cross(arm, push), atol=1e-12)
+    config = _arm("permanent")
+    compiled = C.compile_chain(config.chain)
+    y = C.initial_state(config)
+    C.chain_push(y, *compiled.args[:4], 1, point, push, False)
+    errors = []
+    for pulse in (1e-3, 1e-4):
+        pulsed = _arm("permanent", pulse)
+        sol = integrate_chain_runs(chain_system(C.compile_chain(pulsed.chain)), C.initial_state(pulsed)[None],
+                                   settings_rows([pulsed.simulation]), method="DOP853", n_samples=2)
+        errors.append(np.abs(sol.samples[0, -1] - y).max())
+    assert errors[1] < 0.15 * errors[0] and errors[1] < 0.02  # first order in the pulse's length
+
+
+def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it():
+    """The stance example pushed on the trunk: each direction's threshold from the jump
+    (chain_push) against an independent formulation, a 0.1 ms pulse of the same impulse
+    integrated as a disturbance: 3 % below it the body recovers, 3 % above it falls."""
+    import yaml
+
+    from rbstab.analysis.push import push_analysis
+
+    source = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    limits = "simulation.limits.theta=[0.6, 0.6, 3.2]"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_any_config(source, [limits])
+    directions = np.array([[0.0, -1.0, 0.0], [0.6, 0.8, 0.0]])
+    point = [0.0, 0.0, 0.2]
+    found = push_analysis(config, "force", directions=directions, body="trunk", point=point, jobs=2)
+    assert np.isfinite(found.threshold).all() and found.body == "trunk"
+    data = yaml.safe_load(source.read_text())
+    data["simulation"]["limits"] = {"theta": [0.6, 0.6, 3.2]}
+    from rbstab.analysis.chain import ChainPushes
+
+    equilibrium = ChainPushes(config, "force", body="trunk", point=point).equilibrium
+    data["initial_state"] = {b: {"theta": equilibrium[12 * i: 12 * i + 3].tolist()}
+                             for i, b in enumerate(config.chain.body_names)}
+    for u, threshold in zip(directions, found.threshold):
+        for factor, falls in ((0.97, False), (1.03, True)):
+            pulse = 1e-4
+            data["disturbances"] = [{"kind": "pulse", "value": (factor * threshold * u / pulse).tolist(), "point": point,
+                                     "start": 0.0, "duration": pulse, "body": "trunk"}]
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                result = simulate_chain(chain_config_from_mapping(data))
+            assert (result.status == "failed") == falls, (u, factor, result.message)

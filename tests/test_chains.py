@@ -296,3 +296,32 @@ def test_rbstab_analyze_maps_a_chains_basin_and_refuses_a_key_naming_no_body(tmp
                                        "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2", *short])
     assert refused.exit_code == 1 and "no body 'hips' in this chain (its bodies: legs, trunk" in refused.output
     assert "Traceback" not in refused.output and not any(tmp_path.iterdir())
+
+
+def test_rbstab_analyze_pushes_a_chains_body_and_draws_its_basin_stability(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from rbstab_cli.main import cli
+
+    path = "configs/examples/stance_ankle_hip.yaml"
+    short = ["--set", "simulation.limits.theta=[0.6,0.6,3.2]", "-o", str(tmp_path), "--json"]
+    pushed = CliRunner().invoke(cli, ["analyze", path, "--push", "force", "--push-body", "trunk", "--push-point",
+                                      "0,0,0.2", "--push-direction", "0,-1,0", *short])
+    assert pushed.exit_code == 0, pushed.output
+    push = json.loads(pushed.stdout.strip().splitlines()[-1])["push"]
+    assert push["body"] == "trunk" and push["point"] == [0.0, 0.0, 0.2] and 1.0 < push["threshold"][0] < 1e3
+    drawn = CliRunner().invoke(cli, ["analyze", path, "--basin-stability", "initial_state.legs.theta.0=-0.5:0.5",
+                                     "-n", "30", *short])
+    assert drawn.exit_code == 0, drawn.output
+    stability = json.loads(drawn.stdout.strip().splitlines()[-1])["basin_stability"]
+    assert stability["draws"] == 30 and 0 < stability["recovered"] < 30  # the box reaches beyond the basin
+    for args, says in ((["--push", "force"], "--push-body: found none for stance_ankle_hip; expected the body"),
+                       (["--basin-stability", "initial_state.arms.theta.0=-1:1"], "no body 'arms' in this chain")):
+        refused = CliRunner().invoke(cli, ["analyze", path, *args, *short])
+        assert refused.exit_code != 0 and says in refused.output and "Traceback" not in refused.output
+    one_body = CliRunner().invoke(cli, ["analyze", "configs/paper/case1_permanent.yaml", "--push", "torque",
+                                        "--push-body", "trunk", "-o", str(tmp_path)])
+    assert one_body.exit_code == 2 and "--push-body: names the body of a chain" in one_body.output
+    assert not any(tmp_path.iterdir())

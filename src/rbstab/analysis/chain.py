@@ -2,7 +2,8 @@
 chain's independent coordinates, the eigenvalues and Lyapunov's indirect verdict
 (:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, and
 the basin of attraction by simulation over a 2-D slice of initial states
-(:func:`chain_basin_map`).
+(:func:`chain_basin_map`), and the smallest fatal push on a named body
+(:class:`ChainPushes`, for :func:`rbstab.analysis.push.push_analysis`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from .basin import DEFAULT_SAMPLES, BasinAxis, BasinMap, time_to_converge
 from .linearise import Linearisation, linearise_chain
 
-__all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes"]
+__all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states", "chain_states_recover",
+           "ChainPushes"]
 
 #: The state blocks of a body in the chain's state, in order (12 entries a body).
 _BODY_BLOCKS = ("theta", "omega", "position", "velocity")
@@ -116,16 +118,76 @@ def _state_offset(compiled, axis: BasinAxis) -> int:
     return 12 * i + 3 * _BODY_BLOCKS.index(axis.block) + axis.index
 
 
-def check_axes(config, axes) -> None:
-    """ValueError (one line) where a basin axis names no entry of the chain's state
-    (:func:`chain_basin_map`'s keys), or the two are the same entry."""
+def chain_states(config, compiled, axes, values: np.ndarray) -> np.ndarray:
+    """The chain's states (N, n_states): its configured initial state with the entries
+    ``axes`` (:class:`BasinAxis`, keys ``initial_state.<body>.<block>.<i>``) set to the
+    rows of ``values`` (N, len(axes)), the bodies whose ``x`` (``v``) the configuration
+    leaves out placed on their joints (:func:`rbstab.variants.chain.place`)."""
     from ..variants import chain as C  # heavy: numba
 
-    if len(axes) != 2 or axes[0].key == axes[1].key:
-        raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
+    names = list(config.chain.body_names)
+    x_placed = np.array([f"initial_state.{b}.x" in config.placed for b in names])
+    v_placed = np.array([f"initial_state.{b}.v" in config.placed for b in names])
+    values = np.asarray(values, dtype=float).reshape(-1, len(axes))
+    states = np.repeat(C.initial_state(config)[None], len(values), axis=0)
+    for j, axis in enumerate(axes):
+        states[:, _state_offset(compiled, axis)] = values[:, j]
+    if x_placed.any() or v_placed.any():
+        states = np.array([C.place(compiled, y, x_placed, v_placed) for y in states])
+    return states
+
+
+def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                         jobs: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(whether each run converges by the sweeps' rule, :func:`rbstab.convergence.converged`,
+    without leaving the admissible region; v(0) [J]) of the chain's runs from the states
+    :func:`chain_states` gives ``values`` (N, len(axes)), on the compiled driver in ``jobs``
+    threads."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ..convergence import converged
+    from ..engine.integrate import integrate_chain_runs  # heavy: numba
+    from ..engine.settings import settings_rows  # heavy: numba
+    from ..engine.status import SUCCESS  # heavy: numba
+    from ..engine.systems import chain_system  # heavy: numba
+    from ..variants import chain as C  # heavy: numba
+
+    check_entries(config, axes)
+    compiled = C.compile_chain(config.chain)
+    states = chain_states(config, compiled, axes, values)
+    sim = config.simulation
+    system, settings = chain_system(compiled, sim.limits), settings_rows([sim])
+
+    def final(rows):
+        sol = integrate_chain_runs(system, states[rows], np.repeat(settings, len(rows), axis=0), method=sim.method,
+                                   n_samples=2)
+        return sol.status == SUCCESS, sol.samples[:, -1]
+
+    slices = np.array_split(np.arange(len(states)), max(1, min(int(jobs), len(states))))
+    with ThreadPoolExecutor(len(slices)) as pool:
+        parts = list(pool.map(final, slices))
+    ok = np.concatenate([p[0] for p in parts])
+    v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
+    v1 = C.evaluate(compiled, np.full(len(states), sim.t_end), np.concatenate([p[1] for p in parts]))["lyapunov"]
+    return np.asarray(converged(ok, v0, v1, ratio), dtype=bool), v0
+
+
+def check_entries(config, axes) -> None:
+    """ValueError (one line) where an axis (:class:`BasinAxis`) names no entry of the
+    chain's state (keys ``initial_state.<body>.<block>.<i>``)."""
+    from ..variants import chain as C  # heavy: numba
+
     compiled = C.compile_chain(config.chain, offset=0.0)
     for axis in axes:
         _state_offset(compiled, axis)
+
+
+def check_axes(config, axes) -> None:
+    """ValueError (one line) where a basin axis names no entry of the chain's state
+    (:func:`chain_basin_map`'s keys), or the two are the same entry."""
+    if len(axes) != 2 or axes[0].key == axes[1].key:
+        raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
+    check_entries(config, axes)
 
 
 def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
@@ -153,17 +215,9 @@ def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
 
     check_axes(config, axes)
     compiled = C.compile_chain(config.chain)
-    at = [_state_offset(compiled, a) for a in axes]
-    names = list(config.chain.body_names)
-    x_placed = np.array([f"initial_state.{b}.x" in config.placed for b in names])
-    v_placed = np.array([f"initial_state.{b}.v" in config.placed for b in names])
-    y0 = C.initial_state(config)
     shape = (len(axes[0].values), len(axes[1].values))
     first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
-    states = np.repeat(y0[None], first.size, axis=0)
-    states[:, at[0]], states[:, at[1]] = first.ravel(), second.ravel()
-    if x_placed.any() or v_placed.any():
-        states = np.array([C.place(compiled, y, x_placed, v_placed) for y in states])
+    states = chain_states(config, compiled, axes, np.column_stack([first.ravel(), second.ravel()]))
     sim = config.simulation
     settings = np.repeat(settings_rows([sim]), len(states), axis=0)
     sol = integrate_chain_runs(chain_system(compiled, sim.limits), states, settings, method=sim.method,
@@ -194,3 +248,118 @@ def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
     return BasinMap(axes=(axes[0], axes[1]), outcome=outcome.reshape(shape), time_to_converge=t_conv.reshape(shape),
                     lyapunov_initial=v_initial.reshape(shape), lyapunov_final=v_final.reshape(shape),
                     initial_states=states.reshape(*shape, -1), ratio=ratio, t_end=sim.t_end, messages=messages)
+
+
+class ChainPushes:
+    """A chain's pushes as batches of runs, for :func:`rbstab.analysis.push.push_thresholds`
+    (the interface of :class:`rbstab.analysis.push.Pushes`): the chain at rest at its rest
+    state, pushed at t = 0 on body ``body`` (docs/physics.md, "A push on a chain";
+    :func:`rbstab.variants.chain.chain_push`), each pushed state one run of the compiled
+    driver to t_end, recovered by :data:`rbstab.analysis.push.RECOVERY_RULE`.
+
+    Parameters
+    ----------
+    config : ChainConfig
+    kind : {"force", "torque"}
+        A force impulse P [N s] (inertial frame) at ``point``, or a torque impulse L
+        [N m s] (the body's frame).
+    body : str
+        The body pushed (a name of the chain).
+    point : (3,) float, optional
+        R [m], the body's frame, from its centre of mass (force only; default 0).
+    at : float
+        0: a chain is pushed from rest at t = 0.
+    ratio : float
+    jobs : int
+        Threads integrating a batch's slices (the compiled driver releases Python's lock).
+
+    Raises
+    ------
+    ValueError
+        One line: an unknown body, ``at`` not 0, a force at the pin of a body held by a
+        permanent joint to the ground, or a chain without a rest state.
+    """
+
+    def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
+                 ratio: float = DEFAULT_LYAPUNOV_RATIO, jobs: int = 1) -> None:
+        from ..engine.settings import settings_rows  # heavy: numba
+        from ..engine.systems import chain_system  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
+        from .push import PUSH_KINDS  # heavy: numpy
+
+        names = list(config.chain.body_names)
+        if body not in names:
+            found = "none" if body is None else f"'{body}'"
+            raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
+                             f"({', '.join(names)})")
+        if at != 0.0:
+            raise ValueError(f"--push-at: found {at:g}; a chain is pushed at t = 0, from its rest state")
+        self.kind, self.body, self.at, self.ratio, self.jobs = kind, body, 0.0, float(ratio), max(1, int(jobs))
+        self.engine, self.executor = "compiled", None
+        self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
+        self.units = PUSH_KINDS[kind]
+        self._index = names.index(body)
+        joint = config.chain.joints[self._index]
+        if (kind == "force" and joint.variant == "permanent" and joint.parent < 0
+                and np.allclose(self.point, joint.child_point)):
+            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of '{body}' "
+                             f"(joint '{joint.name}' holds it to the ground): a force there moves nothing; push "
+                             "elsewhere or with --push torque")
+        self.compiled = C.compile_chain(config.chain)
+        rest, _ = C.rest_state(self.compiled)
+        if rest is None:
+            raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
+                             "potential falls without bound): a push from rest cannot be analysed")
+        self.equilibrium = rest
+        sim = config.simulation
+        self._system = chain_system(self.compiled, sim.limits)
+        self._settings = settings_rows([sim])
+        self._method, self._t_end = sim.method, float(sim.t_end)
+        self.runs = 0
+        self.batches = 0
+
+    def _pushed(self, vector: np.ndarray) -> tuple[np.ndarray, float]:
+        from ..variants import chain as C  # heavy: numba
+
+        y = self.equilibrium.copy()
+        energy = C.chain_push(y, *self.compiled.args[:4], self._index, self.point, np.asarray(vector, dtype=float),
+                              self.kind == "torque")
+        return y, energy
+
+    def energy(self, vectors: np.ndarray) -> np.ndarray:
+        """dT [J] of each push of ``vectors`` (k, 3) on the chain at rest."""
+        return np.array([self._pushed(v)[1] for v in np.asarray(vectors, dtype=float).reshape(-1, 3)])
+
+    def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
+        """Whether the runs pushed by ``vectors`` (k, 3) recover; one batch (in ``jobs``
+        threads)."""
+        from concurrent.futures import ThreadPoolExecutor
+
+        from ..convergence import ROUND_OFF
+        from ..engine.integrate import integrate_chain_runs  # heavy: numba
+        from ..engine.status import SUCCESS  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
+
+        vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
+        k = len(vectors)
+        if k == 0:
+            return np.zeros(0, dtype=bool)
+        pushed = [self._pushed(v) for v in vectors]
+        states = np.array([y for y, _ in pushed])
+        energy = np.array([e for _, e in pushed]) if energy is None else np.asarray(energy, dtype=float)
+
+        def final(rows):
+            sol = integrate_chain_runs(self._system, states[rows], np.repeat(self._settings, len(rows), axis=0),
+                                       method=self._method, n_samples=2)
+            return sol.status == SUCCESS, sol.samples[:, -1]
+
+        slices = np.array_split(np.arange(k), min(self.jobs, k))
+        with ThreadPoolExecutor(len(slices)) as pool:
+            parts = list(pool.map(final, slices))
+        ok = np.concatenate([p[0] for p in parts])
+        last = np.concatenate([p[1] for p in parts])
+        v = C.evaluate(self.compiled, np.full(k, self._t_end), last)["lyapunov"]
+        self.runs += k
+        self.batches += 1
+        with np.errstate(invalid="ignore"):
+            return ok & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)

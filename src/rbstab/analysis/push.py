@@ -433,6 +433,8 @@ class PushAnalysis:
         Runs integrated and batches they took.
     seconds : float
         Wall time [s].
+    body : str or None
+        A chain's body pushed (``point`` and a torque in its frame); None for one body.
     """
 
     name: str
@@ -453,6 +455,7 @@ class PushAnalysis:
     batches: int = 0
     seconds: float = 0.0
     refined_unit_energy: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    body: str | None = None
 
     def fatal_starts(self) -> tuple[np.ndarray, Callable[[int], str]]:
         """(v [J] just after the smallest fatal push of each direction, the grid's then the
@@ -531,6 +534,7 @@ class PushAnalysis:
         return {
             "kind": self.kind,
             "units": self.units,
+            **({"body": self.body} if self.body is not None else {}),
             "point": self.point.tolist(),
             "at": self.at,
             "tol": self.tol,
@@ -549,14 +553,17 @@ class PushAnalysis:
 def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point=None, at: float = 0.0,
                   push_max: float | None = None, tol: float = DEFAULT_TOL, rungs: int = DEFAULT_RUNGS,
                   seed: int = 0, ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled", executor=None,
-                  refine: bool | None = None, say: Callable[[str], None] | None = None) -> PushAnalysis:
+                  refine: bool | None = None, say: Callable[[str], None] | None = None, body: str | None = None,
+                  jobs: int = 1) -> PushAnalysis:
     """The smallest fatal push of each direction, and its minimum over directions.
 
     Parameters
     ----------
-    config : RunConfig
+    config : RunConfig or ChainConfig
         Validated. The runs use its body, controller, saturation, limits and simulation
-        settings; they start at rest at its equilibrium.
+        settings; they start at rest at its equilibrium. A chain
+        (:class:`rbstab.analysis.chain.ChainPushes`) is pushed on ``body`` at t = 0, its
+        runs on the CPU's compiled driver in ``jobs`` threads.
     kind : {"force", "torque"}
     directions : int or array_like, shape (d, 3)
         n quasi-uniform directions (:func:`push_directions` with ``seed``), or the
@@ -596,7 +603,12 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     given = not np.isscalar(directions)
     check_push_options(kind, point=point, directions=directions, push_max=push_max, tol=tol, rungs=rungs, at=at)
     u = _unit(np.asarray(directions, dtype=float).reshape(-1, 3)) if given else push_directions(int(directions), seed)
-    pushes = Pushes(config, kind, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
+    if hasattr(config, "chain"):
+        from .chain import ChainPushes  # heavy: numba
+
+        pushes = ChainPushes(config, kind, body=body, point=point, at=at, ratio=ratio, jobs=jobs)
+    else:
+        pushes = Pushes(config, kind, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
     found = push_thresholds(pushes, u, push_max=push_max, tol=tol, rungs=rungs)
     refined_u = np.zeros((0, 3))
     refined_t = np.zeros(0)
@@ -610,7 +622,8 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
                         unit_energy=found.unit_energy,
                         refined_directions=refined_u, refined_thresholds=refined_t,
                         refined_unit_energy=pushes.energy(refined_u) if len(refined_u) else np.zeros(0),
-                        engine=engine, runs=pushes.runs, batches=pushes.batches, seconds=_time.perf_counter() - start)
+                        engine=pushes.engine, runs=pushes.runs, batches=pushes.batches,
+                        seconds=_time.perf_counter() - start, body=getattr(pushes, "body", None))
 
 
 def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float, rungs: int,
@@ -767,13 +780,17 @@ def parse_push_range(text: str) -> tuple[float, float]:
 
 def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = None, push_range=None, point=None,
                     at: float = 0.0, draws: int = 1000, seed: int = 0, ratio: float = DEFAULT_LYAPUNOV_RATIO,
-                    confidence: float = 0.95, engine: str = "compiled", executor=None) -> BasinStability:
+                    confidence: float = 0.95, engine: str = "compiled", executor=None, body: str | None = None,
+                    jobs: int = 1) -> BasinStability:
     """The fraction of ``draws`` random perturbations that recover, with its Wilson interval.
 
     Parameters
     ----------
-    config : RunConfig
-        Validated.
+    config : RunConfig or ChainConfig
+        Validated. A chain's entries are ``initial_state.<body>.<block>.<i>`` (the bodies
+        the configuration places re-placed on their joints), its pushes act on ``body``
+        (:class:`rbstab.analysis.chain.ChainPushes`), its runs on the CPU's compiled
+        driver in ``jobs`` threads.
     ranges : sequence of str
         ``KEY=LO:HI`` initial-state entries drawn uniformly (the other entries as
         configured); a draw recovers when it converges by the sweeps' rule
@@ -809,7 +826,12 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
             raise ValueError("--push-distribution: give the quantity pushed with --push force|torque")
         lo, hi = parse_push_range(push_range) if isinstance(push_range, str) else map(float, push_range)
         check_push_options(push, point=point, at=at)
-        pushes = Pushes(config, push, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
+        if hasattr(config, "chain"):
+            from .chain import ChainPushes  # heavy: numba
+
+            pushes = ChainPushes(config, push, body=body, point=point, at=at, ratio=ratio, jobs=jobs)
+        else:
+            pushes = Pushes(config, push, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
         u = _unit(rng.normal(size=(int(draws), 3)))
         magnitude = rng.uniform(lo, hi, size=int(draws))
         start_v = pushes.energy(magnitude[:, None] * u)
@@ -820,12 +842,18 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         low, high = np.array([lo, -1.0, -1.0, -1.0]), np.array([hi, 1.0, 1.0, 1.0])
         perturbation, rule = "push", RECOVERY_RULE
     else:
-        variant = config.make_variant()
-        axes = parse_ranges(ranges, variant.layout)
+        chain = hasattr(config, "chain")
+        variant = None if chain else config.make_variant()
+        axes = parse_ranges(ranges, None if chain else variant.layout)
         low = np.array([lo for _, lo, _ in axes])
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
-        recovered, start_v = _states_recover(config, variant, axes, values, ratio, engine, executor)
+        if chain:
+            from .chain import chain_states_recover  # heavy: numba
+
+            recovered, start_v = chain_states_recover(config, [a for a, _, _ in axes], values, ratio=ratio, jobs=jobs)
+        else:
+            recovered, start_v = _states_recover(config, variant, axes, values, ratio, engine, executor)
         keys = [a.key for a, _, _ in axes]
         units = [a.units for a, _, _ in axes]
         perturbation, rule = "initial_state", STATE_RULE
@@ -834,7 +862,8 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
     return BasinStability(name=config.name, perturbation=perturbation, keys=keys, units=units, low=low, high=high,
                           values=values, recovered=recovered, lyapunov_start=start_v, confidence=float(confidence),
                           interval=wilson_interval(k, n, confidence), separations=[s for s in found if s is not None],
-                          rule=rule, seed=int(seed), engine=engine, kind=push if push_range is not None else None,
+                          rule=rule, seed=int(seed), engine="compiled" if hasattr(config, "chain") else engine,
+                          kind=push if push_range is not None else None,
                           seconds=_time.perf_counter() - start)
 
 

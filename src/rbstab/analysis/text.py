@@ -6,7 +6,7 @@ import numpy as np
 
 from ..layout import BLOCK_UNITS
 
-__all__ = ["describe", "describe_robustness", "format_eigenvalue", "format_state"]
+__all__ = ["describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines", "stability_lines"]
 
 
 def _g(value, digits: int = 4) -> str:
@@ -122,12 +122,16 @@ def _direction(u) -> str:
     return "(" + ", ".join(f"{x:+.3f}" for x in u) + ")"
 
 
-def _push_lines(analysis) -> list[str]:
+def push_lines(analysis) -> list[str]:
+    """The lines of ``analysis.push`` (a :class:`rbstab.analysis.push.PushAnalysis`, with
+    ``analysis.certificate`` or None)."""
     p = analysis.push
     if p is None:
         return []
     where = f" at ({', '.join(_g(x) for x in p.point)}) m" if p.kind == "force" else ""
-    frame = "inertial frame" if p.kind == "force" else "body frame"
+    if p.body is not None:
+        where += f" on {p.body}"
+    frame = "inertial frame" if p.kind == "force" else f"{p.body or 'body'}'s frame"
     t = p.threshold
     finite = np.isfinite(t)
     lines = [f"  smallest fatal {p.kind} push{where}, t0 = {_g(p.at)} s, over {len(t)} directions ({frame}; "
@@ -153,7 +157,8 @@ def _push_lines(analysis) -> list[str]:
     return lines
 
 
-def _stability_lines(analysis) -> list[str]:
+def stability_lines(analysis) -> list[str]:
+    """The lines of ``analysis.basin_stability`` (a :class:`rbstab.analysis.push.BasinStability`)."""
     b = analysis.basin_stability
     if b is None:
         return []
@@ -184,8 +189,8 @@ def describe(analysis) -> list[str]:
     lines += _certificate_lines(analysis.certificate)
     lines += _verification_lines(analysis)
     lines += _basin_lines(analysis)
-    lines += _push_lines(analysis)
-    lines += _stability_lines(analysis)
+    lines += push_lines(analysis)
+    lines += stability_lines(analysis)
     return lines
 
 

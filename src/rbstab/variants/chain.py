@@ -48,7 +48,7 @@ from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_ene
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
-           "reduced_rate", "nearest_bound", "place", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "reduced_rate", "nearest_bound", "place", "chain_push", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -264,9 +264,13 @@ def _joint_acceleration(j, y, params, parents, ppoints, rot, torque, force, with
 
 
 @jit
-def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, k):
+def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, k, with_velocity=True):
     """The constraint forces Lambda_j of the ``k`` permanent joints with d^2E_j/dt^2 = 0
-    (the stacked eq 15), added to ``torque``, ``force`` and written to ``joints``."""
+    (the stacked eq 15), added to ``torque``, ``force`` and written to ``joints``.
+
+    Without ``with_velocity``: the impulsive reactions that keep dE_j/dt of the permanent
+    joints unchanged under the impulses ``torque`` (body frames) and ``force`` (the same
+    linear map, no centripetal term)."""
     n = codes.shape[0]
     which = np.empty(k, dtype=np.int64)
     m = 0
@@ -276,7 +280,7 @@ def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, jo
             m += 1
     rhs = np.empty(3 * k)
     for a in range(k):
-        acc = _joint_acceleration(which[a], y, params, parents, ppoints, rot, torque, force, True)
+        acc = _joint_acceleration(which[a], y, params, parents, ppoints, rot, torque, force, with_velocity)
         for r in range(3):
             rhs[3 * a + r] = -acc[r]
     matrix = np.empty((3 * k, 3 * k))
@@ -309,6 +313,47 @@ def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, jo
             back = cross(r_p, matTvec(rot[q], lam))
             _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
         _put(joints[j, _LAMBDA], 0, lam)
+
+
+@jit
+def chain_push(y, params, codes, parents, ppoints, body, point, value, torque_push):
+    """Apply a push to the chain's state ``y`` (n_states,) in place and return its energy dT
+    [J] (the jump of the kinetic energy): a force impulse ``value`` P [N s] (inertial frame)
+    at ``point`` R [m] of body ``body`` (its body frame, from its centre of mass), or with
+    ``torque_push`` a torque impulse L [N m s] (the body's frame). The permanent joints'
+    impulsive reactions keep their dE_j/dt (docs/physics.md, "A push on a chain")."""
+    n = codes.shape[0]
+    rot = np.empty((n, 3, 3))
+    for i in range(n):
+        a = rotation_and_rate_of(vector(y, 12 * i))[0]
+        for r in range(3):
+            for c in range(3):
+                rot[i, r, c] = a[r][c]
+    torque = np.zeros((n, 3))
+    force = np.zeros((n, 3))
+    v = (value[0], value[1], value[2])
+    if torque_push:
+        _acc_add(torque, force, body, v, ZERO)
+    else:
+        _acc_add(torque, force, body, cross((point[0], point[1], point[2]), matTvec(rot[body], v)), v)
+    k = 0
+    for j in range(n):
+        if codes[j] == PERMANENT:
+            k += 1
+    if k > 0:
+        _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, np.empty((n, 7, 3)), k, False)
+    before = 0.0
+    after = 0.0
+    for i in range(n):
+        p = params[i]
+        omega, v_i = vector(y, 12 * i + 3), vector(y, 12 * i + 9)
+        before += 0.5 * p.mass * dot(v_i, v_i) + 0.5 * quadratic_form(omega, p.inertia)
+        omega = add(omega, matvec(p.inertia_inv, vector(torque[i], 0)))
+        v_i = (v_i[0] + force[i, 0] / p.mass, v_i[1] + force[i, 1] / p.mass, v_i[2] + force[i, 2] / p.mass)
+        _put(y, 12 * i + 3, omega)
+        _put(y, 12 * i + 9, v_i)
+        after += 0.5 * p.mass * dot(v_i, v_i) + 0.5 * quadratic_form(omega, p.inertia)
+    return after - before
 
 
 @jit
@@ -455,7 +500,10 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
         return None, math.nan
     q = result.x
-    polished = root(lambda q: _rest_acceleration(compiled, q), q, method="hybr", options={"xtol": 1e-13})
+    try:
+        polished = root(lambda q: _rest_acceleration(compiled, q), q, method="hybr", options={"xtol": 1e-13})
+    except np.linalg.LinAlgError:  # the search left for a singular configuration: no rest point near
+        return None, math.nan
     if np.linalg.norm(polished.fun) < np.linalg.norm(_rest_acceleration(compiled, q)):
         q = polished.x  # a rest point to rounding: the minimiser's gradient tolerance is not
     y = _configuration(compiled, q)
