@@ -7,7 +7,8 @@ Prints (2 cores, warm numba cache):
   ``rbstab run`` makes (``rbstab.simulator.simulate_chain``: with its outputs and summary);
 - ms the integration of the one-body Case 3 config on the one-body compiled engine and
   as a one-body chain on the compiled driver;
-- s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process);
+- s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process)
+  and its smallest fatal push on the trunk over 64 directions (``--push``, 2 threads);
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
   and visco-elastic joints with feedback, gravity), and that per body.
 
@@ -23,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from rbstab.analysis import BasinAxis, chain_basin_map
+from rbstab.analysis.push import push_analysis
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
 from rbstab.config.chains import chain_of, load_any_config
@@ -95,6 +97,12 @@ def main() -> None:
     found = chain_basin_map(stance, axes)
     print(f"  basin map of stance_ankle_hip (limits.theta 0.6 rad), 41 x 41 over legs theta_1 x trunk omega_1, "
           f"t_end 5 s: {time.perf_counter() - start:.2f} s ({found.counts()})")
+    push_analysis(stance, "force", directions=np.array([[0.0, -1.0, 0.0]]), body="trunk", point=[0, 0, 0.2])
+    start = time.perf_counter()
+    pushed = push_analysis(stance, "force", directions=64, body="trunk", point=[0, 0, 0.2], jobs=2)
+    print(f"  smallest fatal push of stance_ankle_hip (limits.theta 0.6 rad) on the trunk at (0, 0, 0.2) m, 64 "
+          f"directions and the local search, 2 threads: {time.perf_counter() - start:.2f} s ({pushed.runs} runs; "
+          f"minimum {pushed.minimum:.4g} N s along ({', '.join(f'{x:+.3f}' for x in pushed.minimum_direction)}))")
     print("rate evaluations (us an evaluation; per body):")
     for n in range(1, 9):
         compiled = C.compile_chain(serial(n), offset=0.0)

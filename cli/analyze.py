@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 from pathlib import Path
+from types import SimpleNamespace
 
 import click
 
@@ -400,8 +401,6 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
     pushes (:func:`rbstab.analysis.push.push_analysis` on a named body), printed (or one
     JSON object each, "kind": "chain"); nothing is written. Every axis and the pushed body
     are checked against every chain before anything runs."""
-    from types import SimpleNamespace
-
     from rbstab.analysis import BasinAxis, analyze_chain, chain_basin_map  # heavy: numba, numpy
     from rbstab.analysis.chain import check_axes, check_entries  # heavy: numba, numpy
     from rbstab.analysis.push import basin_stability, push_analysis  # heavy: numba, numpy

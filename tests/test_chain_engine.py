@@ -214,7 +214,7 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
     assert np.isfinite(found.threshold).all() and found.body == "trunk"
     data = yaml.safe_load(source.read_text())
     data["simulation"]["limits"] = {"theta": [0.6, 0.6, 3.2]}
-    from rbstab.analysis.chain import ChainPushes
+    from rbstab.analysis.push import ChainPushes
 
     equilibrium = ChainPushes(config, "force", body="trunk", point=point).equilibrium
     data["initial_state"] = {b: {"theta": equilibrium[12 * i: 12 * i + 3].tolist()}

@@ -272,8 +272,8 @@ def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp
     result = CliRunner().invoke(cli, ["analyze", path, "--set", "joints.ankle.k_r.0=400", "-o", str(tmp_path)])
     assert result.exit_code == 0, result.output
     assert result.output.startswith("stance_ankle_hip: unstable") and "rest legs.theta: [0, 0, 0]" in result.output
-    refused = CliRunner().invoke(cli, ["analyze", path, "--push", "force", "-o", str(tmp_path)])
-    assert refused.exit_code == 2 and "is a chain" in refused.output and "--push take one-body configs" in refused.output
+    refused = CliRunner().invoke(cli, ["analyze", path, "--verify", "-o", str(tmp_path)])
+    assert refused.exit_code == 2 and "is a chain" in refused.output and "--verify take one-body configs" in refused.output
     assert "Traceback" not in refused.output and not any(tmp_path.iterdir())
 
 

@@ -2,22 +2,23 @@
 chain's independent coordinates, the eigenvalues and Lyapunov's indirect verdict
 (:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, and
 the basin of attraction by simulation over a 2-D slice of initial states
-(:func:`chain_basin_map`), and the smallest fatal push on a named body
-(:class:`ChainPushes`, for :func:`rbstab.analysis.push.push_analysis`).
+(:func:`chain_basin_map`), and the recovery of runs from drawn initial states
+(:func:`chain_states_recover`, for :func:`rbstab.analysis.push.basin_stability`).
 """
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from .basin import DEFAULT_SAMPLES, BasinAxis, BasinMap, time_to_converge
 from .linearise import Linearisation, linearise_chain
 
-__all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states", "chain_states_recover",
-           "ChainPushes"]
+__all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
+           "chain_states_recover"]
 
 #: The state blocks of a body in the chain's state, in order (12 entries a body).
 _BODY_BLOCKS = ("theta", "omega", "position", "velocity")
@@ -143,9 +144,6 @@ def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEF
     without leaving the admissible region; v(0) [J]) of the chain's runs from the states
     :func:`chain_states` gives ``values`` (N, len(axes)), on the compiled driver in ``jobs``
     threads."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from ..convergence import converged
     from ..engine.integrate import integrate_chain_runs  # heavy: numba
     from ..engine.settings import settings_rows  # heavy: numba
     from ..engine.status import SUCCESS  # heavy: numba
@@ -249,117 +247,3 @@ def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
                     lyapunov_initial=v_initial.reshape(shape), lyapunov_final=v_final.reshape(shape),
                     initial_states=states.reshape(*shape, -1), ratio=ratio, t_end=sim.t_end, messages=messages)
 
-
-class ChainPushes:
-    """A chain's pushes as batches of runs, for :func:`rbstab.analysis.push.push_thresholds`
-    (the interface of :class:`rbstab.analysis.push.Pushes`): the chain at rest at its rest
-    state, pushed at t = 0 on body ``body`` (docs/physics.md, "A push on a chain";
-    :func:`rbstab.variants.chain.chain_push`), each pushed state one run of the compiled
-    driver to t_end, recovered by :data:`rbstab.analysis.push.RECOVERY_RULE`.
-
-    Parameters
-    ----------
-    config : ChainConfig
-    kind : {"force", "torque"}
-        A force impulse P [N s] (inertial frame) at ``point``, or a torque impulse L
-        [N m s] (the body's frame).
-    body : str
-        The body pushed (a name of the chain).
-    point : (3,) float, optional
-        R [m], the body's frame, from its centre of mass (force only; default 0).
-    at : float
-        0: a chain is pushed from rest at t = 0.
-    ratio : float
-    jobs : int
-        Threads integrating a batch's slices (the compiled driver releases Python's lock).
-
-    Raises
-    ------
-    ValueError
-        One line: an unknown body, ``at`` not 0, a force at the pin of a body held by a
-        permanent joint to the ground, or a chain without a rest state.
-    """
-
-    def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
-                 ratio: float = DEFAULT_LYAPUNOV_RATIO, jobs: int = 1) -> None:
-        from ..engine.settings import settings_rows  # heavy: numba
-        from ..engine.systems import chain_system  # heavy: numba
-        from ..variants import chain as C  # heavy: numba
-        from .push import PUSH_KINDS  # heavy: numpy
-
-        names = list(config.chain.body_names)
-        if body not in names:
-            found = "none" if body is None else f"'{body}'"
-            raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
-                             f"({', '.join(names)})")
-        if at != 0.0:
-            raise ValueError(f"--push-at: found {at:g}; a chain is pushed at t = 0, from its rest state")
-        self.kind, self.body, self.at, self.ratio, self.jobs = kind, body, 0.0, float(ratio), max(1, int(jobs))
-        self.engine, self.executor = "compiled", None
-        self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
-        self.units = PUSH_KINDS[kind]
-        self._index = names.index(body)
-        joint = config.chain.joints[self._index]
-        if (kind == "force" and joint.variant == "permanent" and joint.parent < 0
-                and np.allclose(self.point, joint.child_point)):
-            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of '{body}' "
-                             f"(joint '{joint.name}' holds it to the ground): a force there moves nothing; push "
-                             "elsewhere or with --push torque")
-        self.compiled = C.compile_chain(config.chain)
-        rest, _ = C.rest_state(self.compiled)
-        if rest is None:
-            raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
-                             "potential falls without bound): a push from rest cannot be analysed")
-        self.equilibrium = rest
-        sim = config.simulation
-        self._system = chain_system(self.compiled, sim.limits)
-        self._settings = settings_rows([sim])
-        self._method, self._t_end = sim.method, float(sim.t_end)
-        self.runs = 0
-        self.batches = 0
-
-    def _pushed(self, vector: np.ndarray) -> tuple[np.ndarray, float]:
-        from ..variants import chain as C  # heavy: numba
-
-        y = self.equilibrium.copy()
-        energy = C.chain_push(y, *self.compiled.args[:4], self._index, self.point, np.asarray(vector, dtype=float),
-                              self.kind == "torque")
-        return y, energy
-
-    def energy(self, vectors: np.ndarray) -> np.ndarray:
-        """dT [J] of each push of ``vectors`` (k, 3) on the chain at rest."""
-        return np.array([self._pushed(v)[1] for v in np.asarray(vectors, dtype=float).reshape(-1, 3)])
-
-    def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
-        """Whether the runs pushed by ``vectors`` (k, 3) recover; one batch (in ``jobs``
-        threads)."""
-        from concurrent.futures import ThreadPoolExecutor
-
-        from ..convergence import ROUND_OFF
-        from ..engine.integrate import integrate_chain_runs  # heavy: numba
-        from ..engine.status import SUCCESS  # heavy: numba
-        from ..variants import chain as C  # heavy: numba
-
-        vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
-        k = len(vectors)
-        if k == 0:
-            return np.zeros(0, dtype=bool)
-        pushed = [self._pushed(v) for v in vectors]
-        states = np.array([y for y, _ in pushed])
-        energy = np.array([e for _, e in pushed]) if energy is None else np.asarray(energy, dtype=float)
-
-        def final(rows):
-            sol = integrate_chain_runs(self._system, states[rows], np.repeat(self._settings, len(rows), axis=0),
-                                       method=self._method, n_samples=2)
-            return sol.status == SUCCESS, sol.samples[:, -1]
-
-        slices = np.array_split(np.arange(k), min(self.jobs, k))
-        with ThreadPoolExecutor(len(slices)) as pool:
-            parts = list(pool.map(final, slices))
-        ok = np.concatenate([p[0] for p in parts])
-        last = np.concatenate([p[1] for p in parts])
-        v = C.evaluate(self.compiled, np.full(k, self._t_end), last)["lyapunov"]
-        self.runs += k
-        self.batches += 1
-        with np.errstate(invalid="ignore"):
-            return ok & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)

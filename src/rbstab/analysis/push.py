@@ -36,6 +36,7 @@ import math
 import time as _time
 import warnings
 from collections.abc import Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -44,7 +45,7 @@ import numpy as np
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
-           "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
+           "ChainPushes", "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
            "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch", "runs_from_states",
            "unbounded_fall_note"]
 
@@ -266,6 +267,116 @@ class Pushes:
         self.batches += 1
         with np.errstate(invalid="ignore"):
             return (ok == 1) & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
+
+
+class ChainPushes:
+    """A chain's pushes as batches of runs, for :func:`rbstab.analysis.push.push_thresholds`
+    (the interface of :class:`rbstab.analysis.push.Pushes`): the chain at rest at its rest
+    state, pushed at t = 0 on body ``body`` (docs/physics.md, "A push on a chain";
+    :func:`rbstab.variants.chain.chain_push`), each pushed state one run of the compiled
+    driver to t_end, recovered by :data:`rbstab.analysis.push.RECOVERY_RULE`.
+
+    Parameters
+    ----------
+    config : ChainConfig
+    kind : {"force", "torque"}
+        A force impulse P [N s] (inertial frame) at ``point``, or a torque impulse L
+        [N m s] (the body's frame).
+    body : str
+        The body pushed (a name of the chain).
+    point : (3,) float, optional
+        R [m], the body's frame, from its centre of mass (force only; default 0).
+    at : float
+        0: a chain is pushed from rest at t = 0.
+    ratio : float
+    jobs : int
+        Threads integrating a batch's slices (the compiled driver releases Python's lock).
+
+    Raises
+    ------
+    ValueError
+        One line: an unknown body, ``at`` not 0, a force at the pin of a body held by a
+        permanent joint to the ground, or a chain without a rest state.
+    """
+
+    def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
+                 ratio: float = DEFAULT_LYAPUNOV_RATIO, jobs: int = 1) -> None:
+        from ..engine.settings import settings_rows  # heavy: numba
+        from ..engine.systems import chain_system  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
+        names = list(config.chain.body_names)
+        if body not in names:
+            found = "none" if body is None else f"'{body}'"
+            raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
+                             f"({', '.join(names)})")
+        if at != 0.0:
+            raise ValueError(f"--push-at: found {at:g}; a chain is pushed at t = 0, from its rest state")
+        self.kind, self.body, self.at, self.ratio, self.jobs = kind, body, 0.0, float(ratio), max(1, int(jobs))
+        self.engine, self.executor = "compiled", None
+        self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
+        self.units = PUSH_KINDS[kind]
+        self._index = names.index(body)
+        joint = config.chain.joints[self._index]
+        if (kind == "force" and joint.variant == "permanent" and joint.parent < 0
+                and np.allclose(self.point, joint.child_point)):
+            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of '{body}' "
+                             f"(joint '{joint.name}' holds it to the ground): a force there moves nothing; push "
+                             "elsewhere or with --push torque")
+        self.compiled = C.compile_chain(config.chain)
+        rest, _ = C.rest_state(self.compiled)
+        if rest is None:
+            raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
+                             "potential falls without bound): a push from rest cannot be analysed")
+        self.equilibrium = rest
+        sim = config.simulation
+        self._system = chain_system(self.compiled, sim.limits)
+        self._settings = settings_rows([sim])
+        self._method, self._t_end = sim.method, float(sim.t_end)
+        self.runs = 0
+        self.batches = 0
+
+    def _pushed(self, vector: np.ndarray) -> tuple[np.ndarray, float]:
+        from ..variants import chain as C  # heavy: numba
+
+        y = self.equilibrium.copy()
+        energy = C.chain_push(y, *self.compiled.args[:4], self._index, self.point, np.asarray(vector, dtype=float),
+                              self.kind == "torque")
+        return y, energy
+
+    def energy(self, vectors: np.ndarray) -> np.ndarray:
+        """dT [J] of each push of ``vectors`` (k, 3) on the chain at rest."""
+        return np.array([self._pushed(v)[1] for v in np.asarray(vectors, dtype=float).reshape(-1, 3)])
+
+    def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
+        """Whether the runs pushed by ``vectors`` (k, 3) recover; one batch (in ``jobs``
+        threads)."""
+        from ..engine.integrate import integrate_chain_runs  # heavy: numba
+        from ..engine.status import SUCCESS  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
+
+        vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
+        k = len(vectors)
+        if k == 0:
+            return np.zeros(0, dtype=bool)
+        pushed = [self._pushed(v) for v in vectors]
+        states = np.array([y for y, _ in pushed])
+        energy = np.array([e for _, e in pushed]) if energy is None else np.asarray(energy, dtype=float)
+
+        def final(rows):
+            sol = integrate_chain_runs(self._system, states[rows], np.repeat(self._settings, len(rows), axis=0),
+                                       method=self._method, n_samples=2)
+            return sol.status == SUCCESS, sol.samples[:, -1]
+
+        slices = np.array_split(np.arange(k), min(self.jobs, k))
+        with ThreadPoolExecutor(len(slices)) as pool:
+            parts = list(pool.map(final, slices))
+        ok = np.concatenate([p[0] for p in parts])
+        last = np.concatenate([p[1] for p in parts])
+        v = C.evaluate(self.compiled, np.full(k, self._t_end), last)["lyapunov"]
+        self.runs += k
+        self.batches += 1
+        with np.errstate(invalid="ignore"):
+            return ok & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
 
 
 def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
@@ -562,7 +673,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     config : RunConfig or ChainConfig
         Validated. The runs use its body, controller, saturation, limits and simulation
         settings; they start at rest at its equilibrium. A chain
-        (:class:`rbstab.analysis.chain.ChainPushes`) is pushed on ``body`` at t = 0, its
+        (:class:`ChainPushes`) is pushed on ``body`` at t = 0, its
         runs on the CPU's compiled driver in ``jobs`` threads.
     kind : {"force", "torque"}
     directions : int or array_like, shape (d, 3)
@@ -604,8 +715,6 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     check_push_options(kind, point=point, directions=directions, push_max=push_max, tol=tol, rungs=rungs, at=at)
     u = _unit(np.asarray(directions, dtype=float).reshape(-1, 3)) if given else push_directions(int(directions), seed)
     if hasattr(config, "chain"):
-        from .chain import ChainPushes  # heavy: numba
-
         pushes = ChainPushes(config, kind, body=body, point=point, at=at, ratio=ratio, jobs=jobs)
     else:
         pushes = Pushes(config, kind, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
@@ -789,7 +898,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
     config : RunConfig or ChainConfig
         Validated. A chain's entries are ``initial_state.<body>.<block>.<i>`` (the bodies
         the configuration places re-placed on their joints), its pushes act on ``body``
-        (:class:`rbstab.analysis.chain.ChainPushes`), its runs on the CPU's compiled
+        (:class:`ChainPushes`), its runs on the CPU's compiled
         driver in ``jobs`` threads.
     ranges : sequence of str
         ``KEY=LO:HI`` initial-state entries drawn uniformly (the other entries as
@@ -827,8 +936,6 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         lo, hi = parse_push_range(push_range) if isinstance(push_range, str) else map(float, push_range)
         check_push_options(push, point=point, at=at)
         if hasattr(config, "chain"):
-            from .chain import ChainPushes  # heavy: numba
-
             pushes = ChainPushes(config, push, body=body, point=point, at=at, ratio=ratio, jobs=jobs)
         else:
             pushes = Pushes(config, push, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
@@ -849,7 +956,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
         if chain:
-            from .chain import chain_states_recover  # heavy: numba
+            from .chain import chain_states_recover  # heavy: numba (the chain's driver)
 
             recovered, start_v = chain_states_recover(config, [a for a, _, _ in axes], values, ratio=ratio, jobs=jobs)
         else:
