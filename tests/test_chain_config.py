@@ -181,9 +181,6 @@ REFUSED = [
                               "|dE_j/dt| = 0.1"]),
     ("sliding_sign_law_in_a_chain", lambda d: d["joints"][1].update(variant="sliding", k_s=50.0),
      "joints.hip.boundary_layer", ["found 0", "expected a boundary layer > 0 [m] in a chain"]),
-    ("impulse_on_a_chain", _set(["disturbances"], [
-        {"kind": "impulse", "value": [0, 10, 0], "point": [0, 0, 0.2], "start": 0.1, "body": "trunk"}]),
-     "disturbances.0.kind", ["found 'impulse'", "expected step, pulse, sine or noise in a chain"]),
     ("more_than_8_bodies", _nine_bodies, "bodies", ["found 9 bodies", "expected a list of 1 to 8 bodies"]),
     ("duplicate_body", _set(["bodies", 1, "name"], "legs"), "bodies.1.name",
      ["found 'legs'", "expected a name no other body has", "bodies.0.name is 'legs' too"]),

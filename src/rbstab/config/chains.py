@@ -28,8 +28,9 @@ config, :mod:`rbstab.config`)::
     initial_state:                  # optional, per body by name; each key 3 numbers
       legs: {theta: [0.05, 0, 0]}   # theta, omega, x, v, d as in a one-body config
     simulation: {t_end: 5.0}        # as in a one-body config
-    disturbances:                   # optional, at most 4; as in a one-body config but no impulse,
-      # plus the body it acts on; a sliding joint needs boundary_layer > 0
+    disturbances:                   # optional, at most 4; as in a one-body config, plus the body
+      # it acts on (an impulse's jump: docs/physics.md, "A push on a chain"); a sliding joint
+      # needs boundary_layer > 0
       - {kind: pulse, value: [0, 150, 0], point: [0, 0, 0.2], start: 0.3, duration: 0.1, body: trunk}
 
 Where a body's ``x`` (``v``) is left out, rbstab places it from its parent's state so that
@@ -246,18 +247,12 @@ def _initial_state(run: ChainSchema, chain: Chain, source: str | None,
 
 def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, overrides: Sequence[str]) -> None:
     """Refuse what the chain engine does not integrate: a sliding joint's pure sign law
-    (boundary_layer 0: integrated event by event for one body only) and impulses (the
-    continuous disturbances act on chains)."""
+    (boundary_layer 0: integrated event by event for one body only)."""
     for joint in chain.joints:
         if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
             _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
                     "the pure sign law is integrated event by event for one body only; tanh(E/phi) in a chain",
                     source, overrides, ("joints",))
-    for i, entry in enumerate(resolved.get("disturbances") or ()):
-        if entry.get("kind") == "impulse":
-            _refuse(f"disturbances.{i}.kind", "'impulse'", "step, pulse, sine or noise in a chain",
-                    "an impulse is applied to one body only; a short pulse acts on a chain's body",
-                    source, overrides, ("disturbances",))
 
 
 def _refuse(key: str, found: str, expected: str, detail: str, source: str | None, overrides: Sequence[str],

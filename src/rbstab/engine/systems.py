@@ -29,7 +29,7 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
 from ..model import set_limits
-from ..variants.chain import _relative, chain_rate
+from ..variants.chain import _relative, chain_impulses, chain_rate
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from .status import GIMBAL_LOCK, LEFT_REGION
@@ -196,8 +196,9 @@ def system_breakpoint(p, t, t_end):
 
 
 def system_impulses(code, t, y, p):
-    """Apply the impulses that start at t to ``y`` (in place); returns their work [J] (a
-    chain has none)."""
+    """Apply the impulses that start at t to ``y`` (in place); returns their work [J]
+    (:func:`rbstab.variants.disturbances.apply_impulses`,
+    :func:`rbstab.variants.chain.chain_impulses`)."""
     raise NotImplementedError("compiled code only")
 
 
@@ -247,4 +248,4 @@ def _system_breakpoint(p, t, t_end):
 def _system_impulses(code, t, y, p):
     if _is_body(p):
         return lambda code, t, y, p: apply_impulses(code == PERMANENT, t, y, p)
-    return lambda code, t, y, p: 0.0
+    return lambda code, t, y, p: chain_impulses(t, y, p.params, p.codes, p.parents, p.ppoints)

@@ -42,13 +42,13 @@ from ..model import (
     torque_n,
     torque_n_command,
 )
-from .disturbances import disturbance_power, disturbance_wrench
+from .disturbances import IMPULSE, disturbance_power, disturbance_wrench
 from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
-           "reduced_rate", "nearest_bound", "place", "chain_push", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "reduced_rate", "nearest_bound", "place", "chain_push", "chain_impulses", "impulse_times", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -354,6 +354,21 @@ def chain_push(y, params, codes, parents, ppoints, body, point, value, torque_pu
         _put(y, 12 * i + 9, v_i)
         after += 0.5 * p.mass * dot(v_i, v_i) + 0.5 * quadratic_form(omega, p.inertia)
     return after - before
+
+
+@jit
+def chain_impulses(t, y, params, codes, parents, ppoints):
+    """Apply the impulses of every body's disturbances that start at ``t`` [s] to the state
+    ``y`` in place (:func:`chain_push`, one after the other); returns their energy, the jump
+    of the kinetic energy [J] (0 where none starts at t)."""
+    jump = 0.0
+    for i in range(codes.shape[0]):
+        p = params[i]
+        for k in range(int(p.disturbance_count)):
+            if p.disturbance_kind[k] == IMPULSE and p.disturbance_start[k] == t:
+                jump += chain_push(y, params, codes, parents, ppoints, i, p.disturbance_point[k],
+                                   p.disturbance_value[k], p.disturbance_torque[k] != 0.0)
+    return jump
 
 
 @jit
@@ -713,16 +728,28 @@ def nearest_bound(compiled: CompiledChain, y: np.ndarray, limits, which: tuple[s
     return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[int(np.argmax(values))]} reached {bound:g}"
 
 
+def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
+    """The times [s] in [0, t_end] at which an impulse of a body's disturbances starts, sorted."""
+    times = set()
+    for p in compiled.params:
+        for k in range(int(p["disturbance_count"])):
+            if p["disturbance_kind"][k] == IMPULSE and 0.0 <= p["disturbance_start"][k] <= t_end:
+                times.add(float(p["disturbance_start"][k]))
+    return sorted(times)
+
+
 def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
     """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) with scipy's
     ``solve_ivp`` (``simulation``'s method, tolerances, steps), sampled at ``n_samples``
     times on [0, t_end]; it stops ``failed`` where any body's or joint's |theta_2| reaches
-    pi/2 - ``gimbal_margin`` (the rows after are NaN) or after ``timeout`` [s] of wall time."""
+    pi/2 - ``gimbal_margin`` (the rows after are NaN) or after ``timeout`` [s] of wall time.
+    Impulses (:func:`chain_impulses`) split the run: a new ``solve_ivp`` from each impulse's
+    time, from the state just after it (a sample at that time shows it)."""
     from scipy.integrate import solve_ivp  # heavy: scipy, only where a chain is integrated
 
     sim = config.simulation
     compiled = compile_chain(config.chain) if compiled is None else compiled
-    y0 = initial_state(config)
+    y = initial_state(config)
     time = np.linspace(0.0, sim.t_end, sim.n_samples)
     args = compiled.args
     dy = np.empty(compiled.n_states)
@@ -749,28 +776,48 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
 
         region.terminal = True
         events.append(region)
-    try:
-        sol = solve_ivp(rhs, (0.0, sim.t_end), y0, method=sim.method, t_eval=time, rtol=sim.rtol, atol=sim.atol,
-                        max_step=sim.max_step, events=events)
-    except _Timeout:
-        states = np.full((time.size, compiled.n_states), np.nan)
-        return ChainTrajectory(time, states, "failed", f"wall-time limit of {limit:g} s reached",
-                               {"nfev": 0, "solver_status": -1, "wall_time": _time.perf_counter() - start}, compiled)
+    jumps = impulse_times(compiled, sim.t_end)
+    edges = [0.0] + [t for t in jumps if 0.0 < t < sim.t_end] + [sim.t_end]
     states = np.full((time.size, compiled.n_states), np.nan)
-    states[: sol.y.shape[1]] = sol.y.T
-    if sol.status == 1 and len(sol.t_events[0]):
-        t_lock = float(sol.t_events[0][0])
-        status, message = "failed", f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
-    elif sol.status == 1:
-        t_out = float(sol.t_events[1][0])
-        what = _region_margin(compiled, sol.y_events[1][0], sim.limits)[1]
-        status, message = "failed", f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
-    elif sol.status == 0:
-        status, message = "success", str(sol.message)
+    nfev = 0
+    status, message = "success", "The solver successfully reached the end of the integration interval."
+    for a, b in zip(edges[:-1], edges[1:]):
+        chain_impulses(a, y, *args[:4])
+        rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
+        t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
+        try:
+            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=sim.atol,
+                            max_step=sim.max_step, events=events)
+        except _Timeout:
+            states[:] = np.nan
+            return ChainTrajectory(time, states, "failed", f"wall-time limit of {limit:g} s reached",
+                                   {"nfev": nfev, "solver_status": -1, "wall_time": _time.perf_counter() - start},
+                                   compiled)
+        nfev += int(sol.nfev)
+        got = min(sol.y.shape[1], rows.size)
+        states[rows[:got]] = sol.y[:, :got].T
+        if sol.status == 1 and len(sol.t_events[0]):
+            t_lock = float(sol.t_events[0][0])
+            status = "failed"
+            message = f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
+            break
+        if sol.status == 1:
+            t_out = float(sol.t_events[1][0])
+            what = _region_margin(compiled, sol.y_events[1][0], sim.limits)[1]
+            status = "failed"
+            message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
+            break
+        if sol.status != 0:
+            status, message = "failed", str(sol.message)
+            break
+        y = sol.y[:, -1].copy()
     else:
-        status, message = "failed", str(sol.message)
+        if sim.t_end in jumps:  # an impulse at t_end: the last sample shows the state after it
+            y = states[-1].copy()
+            chain_impulses(sim.t_end, y, *args[:4])
+            states[-1] = y
     return ChainTrajectory(time, states, status, message,
-                           {"nfev": int(sol.nfev), "solver_status": int(sol.status),
+                           {"nfev": nfev, "solver_status": 0 if status == "success" else 1,
                             "wall_time": _time.perf_counter() - start}, compiled)
 
 
