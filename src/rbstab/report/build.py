@@ -17,7 +17,8 @@ Layout of the report folder::
     summary.md            the tables of the page
     summary.csv           one row per run (direct runs and the runs of every sweep)
     sweep_<name>.csv      per sweep: index.csv plus the chosen metrics
-    (analysis files of ``rbstab analyze`` add their sections: rbstab.report.analysis)
+    (analysis files of ``rbstab analyze`` add their sections: rbstab.report.analysis;
+    chain runs theirs: rbstab.report.chain)
     figures/*.png|pdf|svg every figure, in each format asked (--figure-format)
     report.json           what the report was built from (inputs, options, version)
 """
@@ -41,6 +42,7 @@ from ..diagnostics import convergence_word
 from ..io.metadata import provenance_attributes
 from ..layout import SATURATION_FLAGS, SUMMARY_FIGURES
 from .analysis import analysis_sections, split_inputs
+from .chain import chain_sections
 from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
@@ -541,9 +543,11 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     """Every file of the report into ``folder`` (module docstring)."""
     (folder / "figures").mkdir()
     out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
-    params = differing_parameters(data.runs)
+    runs = [r for r in data.runs if r.variant != "chain"]
+    params = differing_parameters(runs)
     frames = options.animation_frames if "html" in options.formats else 0
-    sections = _direct_run_sections(data.runs, params, out, options.settle, frames, _jobs(options)) if data.runs else []
+    sections = _direct_run_sections(runs, params, out, options.settle, frames, _jobs(options)) if runs else []
+    sections += chain_sections([r for r in data.runs if r.variant == "chain"], out)
     for sweep in data.sweeps:
         sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
     sections += analysis_sections(analyses, out)
@@ -629,7 +633,7 @@ def _write_summary_csv(data: ReportInputs, params: Sequence[str], folder: Path, 
     """``summary.csv``: every run, direct and swept, one row each."""
     import pandas as pd  # heavy: pandas
 
-    all_runs = data.all_runs
+    all_runs = [r for r in data.all_runs if r.variant != "chain"]  # a chain run's figures differ: its own table
     all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
     pd.DataFrame(runs_table(all_runs, settle, all_params) if all_runs else []).to_csv(folder / "summary.csv", index=False)
 

@@ -38,7 +38,7 @@ import yaml
 from ..io.chunk import SUMMARY_FIGURES, read_chunk_rows
 from ..io.hdf5 import NotAResultFile, read_attributes
 from ..io.integrity import reading
-from ..kinds import RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of
+from ..kinds import CHAIN_RUN, RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of
 from ..sweep.folder import config_key_of, read_index, read_parameters, read_spec
 
 __all__ = [
@@ -508,7 +508,7 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
         if not p.exists():
             problems.append(f"{p}: no such file or folder")
         elif is_plain_folder(p):
-            files = inputs_in(p, (RUN, STORE))
+            files = inputs_in(p, (RUN, CHAIN_RUN, STORE))
             if not files:
                 inner = [q.name for q in inputs_in(p, (SWEEP,))]
                 if inner:
@@ -526,12 +526,12 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> ReportInputs:
                     continue
                 seen.add(file.resolve())
                 try:
-                    runs.extend(_load_file(file, kind_of(file, (RUN, STORE))))
+                    runs.extend(_load_file(file, kind_of(file, (RUN, CHAIN_RUN, STORE))))
                 except (FileNotFoundError, NotAResultFile) as exc:
                     problems.append(str(exc))
         else:
             try:
-                kind = kind_of(p, (RUN, STORE, SWEEP))
+                kind = kind_of(p, (RUN, CHAIN_RUN, STORE, SWEEP))
                 if kind is SWEEP:
                     sweeps.append(load_sweep(p))
                 else:
