@@ -367,7 +367,7 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
         ids, runs = [r.name for r in inputs.runs], list(inputs.runs)
     if run_id is None:
         if len(runs) == 1 and runs[0] is not None:
-            return runs[0]
+            return _one_body(runs[0], path)
         raise ReportInputError([(f"{path} holds {len(ids)} runs: choose one with --run ID "
                                  f"(e.g. {', '.join(ids[:3])}; rbstab show {path} lists them)")])
     if run_id not in ids:
@@ -377,6 +377,16 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
     run = runs[ids.index(run_id)]
     if run is None:
         raise ReportInputError([f"run {run_id} of {path} has no result file (its status in index.csv says why)"])
+    return _one_body(run, path)
+
+
+def _one_body(run: RunData, path) -> RunData:
+    """``run``, or ReportInputError where it is a chain's (not animated yet)."""
+    from .load import ReportInputError  # heavy: pydantic or the report's loaders, needed only when a run is animated
+
+    if run.variant == "chain":
+        raise ReportInputError([f"{path}: a chain run result: rbstab animate and the report's animations take "
+                                f"one-body runs (rbstab report {path} draws the chain's bodies and joints)"])
     return run
 
 
