@@ -753,7 +753,7 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
         time, states, status, message, solver = _chain_compiled(config, compiled, timeout)
     outputs = C.evaluate(compiled, time, states)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    summary = chain_summary(time, outputs, config.chain.joint_names)
+    summary = chain_summary(time, outputs, config.chain.joint_names, C.disturbance_edges(compiled, time))
     solver = {k: v for k, v in solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, status, message, solver, _time.perf_counter() - start, summary)
 

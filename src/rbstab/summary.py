@@ -594,7 +594,7 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
 CHAIN_LYAPUNOV_TERMS = ("lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity")
 
 
-def chain_summary(time: np.ndarray, outputs: dict[str, np.ndarray], joint_names) -> dict:
+def chain_summary(time: np.ndarray, outputs: dict[str, np.ndarray], joint_names, edges: np.ndarray | None = None) -> dict:
     """Summary figures of a chain run (:func:`rbstab.variants.chain.evaluate`'s outputs plus
     ``lyapunov_rate_numerical``; NaN rows after a failure): ``t_final`` [s],
     ``lyapunov_initial``, ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W],
@@ -603,7 +603,9 @@ def chain_summary(time: np.ndarray, outputs: dict[str, np.ndarray], joint_names)
     permanent), and the rate check as for one body (:func:`summarize`): the relative mismatch of
     the analytic and numerical dv/dt against the reference power max(max |analytic|, E / T),
     E the largest sum of the magnitudes of v's terms, ``pass`` within
-    :data:`LYAPUNOV_RATE_TOLERANCE`."""
+    :data:`LYAPUNOV_RATE_TOLERANCE`; ``edges`` (n,), the disturbances' edges at or before each
+    sample (:func:`rbstab.variants.chain.disturbance_edges`): a stencil across one is not
+    compared (v jumps at an impulse)."""
     time = np.asarray(time, dtype=float)
     v = np.asarray(outputs["lyapunov"], dtype=float)
     finite = np.isfinite(v)
@@ -613,7 +615,10 @@ def chain_summary(time: np.ndarray, outputs: dict[str, np.ndarray], joint_names)
         running_min = np.fmin.accumulate(np.where(finite, v, np.inf))
         increase = float(np.nanmax(np.where(finite, v - running_min, np.nan))) if finite.any() else float("nan")
         error = np.linalg.norm(outputs["constraint_error"], axis=-1)
-        mismatch = float(np.nanmax(np.abs(rate - numerical))) if finite.sum() >= MIN_CHECK_SAMPLES else float("nan")
+        difference = np.abs(rate - numerical)
+        if edges is not None and time.size >= MIN_CHECK_SAMPLES:
+            difference = np.where(_within_one_piece(time, np.asarray(edges, dtype=float)[None])[0], difference, 0.0)
+        mismatch = float(np.nanmax(difference)) if finite.sum() >= MIN_CHECK_SAMPLES else float("nan")
         energy = float(np.nanmax(sum(np.abs(outputs[k]) for k in CHAIN_LYAPUNOV_TERMS)))
         duration = max(float(time[last] - time[0]), float(np.finfo(float).tiny))
         power = max(float(np.nanmax(np.abs(rate))), energy / duration, float(np.finfo(float).tiny))

@@ -42,13 +42,13 @@ from ..model import (
     torque_n,
     torque_n_command,
 )
-from .disturbances import IMPULSE, disturbance_power, disturbance_wrench
+from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
 from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
-           "reduced_rate", "nearest_bound", "place", "chain_push", "chain_impulses", "impulse_times", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "reduced_rate", "nearest_bound", "place", "chain_push", "chain_impulses", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -726,6 +726,21 @@ def nearest_bound(compiled: CompiledChain, y: np.ndarray, limits, which: tuple[s
     k = ("theta", "omega", "position", "velocity").index(quantity)
     values = np.abs(np.asarray(y)[: 12 * n].reshape(n, 4, 3)[:, k, axis])
     return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[int(np.argmax(values))]} reached {bound:g}"
+
+
+def disturbance_edges(compiled: CompiledChain, time: np.ndarray) -> np.ndarray:
+    """The number of edges of the bodies' disturbances' windows (each start, an impulse's
+    included, and each pulse's end) at or before each of the times ``time`` (n,) [s]: the
+    samples between two edges are one piece (v and dv/dt continuous there)."""
+    time = np.asarray(time, dtype=float)
+    count = np.zeros(time.shape)
+    for p in compiled.params:
+        for k in range(int(p["disturbance_count"])):
+            start = p["disturbance_start"][k]
+            count += time >= start
+            if p["disturbance_kind"][k] == PULSE:
+                count += time >= start + p["disturbance_duration"][k]
+    return count
 
 
 def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
