@@ -17,6 +17,9 @@ pure functions of arrays, then drawn with matplotlib (``mpl_toolkits.mplot3d``,
 - the trace of the COM, the direction of gravity; the time, v(t) and |E| in a corner; a
   failed run is drawn up to its last finite sample, with its message.
 
+A chain run (:func:`chain_scene`) draws each body so, the segments from each centre of mass
+to its joints' points, each joint's two points joined by E_j, and the ground points.
+
 The scene's limits are fixed over the animation and its axes are equal
 (:func:`scene_limits`). Outputs: an HTML snippet that plays offline (:func:`animation_html`,
 matplotlib's ``to_jshtml`` with its frames embedded, its buttons made of text instead of
