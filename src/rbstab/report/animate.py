@@ -17,6 +17,9 @@ pure functions of arrays, then drawn with matplotlib (``mpl_toolkits.mplot3d``,
 - the trace of the COM, the direction of gravity; the time, v(t) and |E| in a corner; a
   failed run is drawn up to its last finite sample, with its message.
 
+A chain run (:func:`chain_scene`) draws each body so, the segments from each centre of mass
+to its joints' points, each joint's two points joined by E_j, and the ground points.
+
 The scene's limits are fixed over the animation and its axes are equal
 (:func:`scene_limits`). Outputs: an HTML snippet that plays offline (:func:`animation_html`,
 matplotlib's ``to_jshtml`` with its frames embedded, its buttons made of text instead of
@@ -61,6 +64,8 @@ __all__ = [
     "frame_times",
     "playback_frames",
     "scene",
+    "ChainScene",
+    "chain_scene",
     "scene_limits",
     "pick_run",
     "draw_animation",
@@ -300,6 +305,8 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
         If the run has no stored trajectory (a ``summary`` store) or fewer than 2 finite
         samples, or the frames would be more than :data:`MAX_FRAMES`.
     """
+    if run.variant == "chain":
+        return chain_scene(run, n_frames, fps, speed)
     s = run.series("theta", "position", "constraint_error", "lyapunov")
     missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
     if missing:
@@ -337,11 +344,144 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
     )
 
 
+@dataclass(frozen=True)
+class ChainScene:
+    """Everything drawn of a chain run, per frame (k frames, n bodies, n joints: joint j holds
+    body j to its parent).
+
+    Attributes
+    ----------
+    time, lyapunov : ndarray, shape (k,)
+        Frame times [s]; the stored v [J], interpolated.
+    rotation : ndarray, shape (k, n, 3, 3)
+        A(Theta_i) of each body.
+    position : ndarray, shape (k, n, 3)
+        X_i [m], each body's COM.
+    corners : ndarray, shape (k, n, 8, 3)
+        Each body's box (:func:`box_corners`).
+    shapes : list of BodyShape
+        Each body's box; ``attachment_point`` its joint's R_c.
+    point_c : ndarray, shape (k, n, 3)
+        Each joint's point on its child, X_c + A_c R_c [m].
+    parent_point : ndarray, shape (k, n, 3)
+        Each joint's point on its parent, X_p + A_p R_p [m] (the ground point R_p itself).
+    anchor : ndarray, shape (g, 3)
+        The ground points of the joints held to the ground [m].
+    constraint_error : ndarray, shape (k, 3)
+        At each frame, the E_j of largest magnitude over the joints [m].
+    trace : ndarray, shape (m, n, 3)
+        Every stored X_i up to the last frame; ``trace_time`` (m,) their times.
+    bodies, joints : list of str
+        Their names.
+    parents : list of int
+        Each joint's parent body (-1: the ground).
+    label, variant, status, message, t_failed, gravity
+        As :class:`Scene`'s.
+    """
+
+    time: np.ndarray
+    lyapunov: np.ndarray
+    rotation: np.ndarray
+    position: np.ndarray
+    corners: np.ndarray
+    shapes: list
+    point_c: np.ndarray
+    parent_point: np.ndarray
+    anchor: np.ndarray
+    constraint_error: np.ndarray
+    trace: np.ndarray
+    trace_time: np.ndarray
+    bodies: list
+    joints: list
+    parents: list
+    label: str = ""
+    variant: str = "chain"
+    status: str = "success"
+    message: str = ""
+    t_failed: float | None = None
+    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def shape(self) -> BodyShape:
+        """The bodies' shapes as one for the notes: a side drawn thin on any body."""
+        thin = np.any([b.thin for b in self.shapes], axis=0)
+        first = self.shapes[0]
+        return BodyShape(first.sides, thin, first.principal_axes, first.attachment_point)
+
+
+def _chain_shapes(config: dict) -> tuple[list[BodyShape], list[int], np.ndarray]:
+    """(each body's BodyShape, its joint's R_c; each joint's parent index, -1 ground; each
+    joint's R_p (n, 3)) of a chain run's resolved configuration."""
+    try:
+        bodies, joints = list(config["bodies"]), list(config["joints"])
+        names = [b["name"] for b in bodies]
+        by_child = {j["child"]: j for j in joints}
+        shapes, parents, points = [], [], []
+        for body in bodies:
+            joint = by_child[body["name"]]
+            shape = body_shape({"body": {"mass": body["mass"], "inertia": body["inertia"],
+                                         "attachment_point": joint["child_point"]}})
+            shapes.append(shape)
+            parents.append(-1 if joint["parent"] == "ground" else names.index(joint["parent"]))
+            points.append(np.asarray(joint["parent_point"], dtype=float).reshape(3))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise AnimationError(f"the run's config has no usable bodies and joints ({exc})") from None
+    return shapes, parents, np.array(points)
+
+
+def chain_scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> ChainScene:
+    """The :class:`ChainScene` of a chain run, from its stored series (Theta_i, X_i, E_j, v)
+    interpolated linearly to the frame times; the bodies' names and the joints' points from
+    its configuration. Raises AnimationError as :func:`scene` does."""
+    s = run.series("theta", "position", "constraint_error", "lyapunov")
+    missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
+    if missing:
+        raise AnimationError(f"{run.label}: no stored trajectory to animate (the file lacks {', '.join(missing)})")
+    finite = np.isfinite(s["time"]) & np.isfinite(s["lyapunov"])
+    for name in ("theta", "position", "constraint_error"):
+        finite &= np.all(np.isfinite(s[name]), axis=(1, 2))
+    last = int(np.flatnonzero(finite)[-1]) if finite.any() else -1
+    if last < 1 or not finite[: last + 1].all():
+        raise AnimationError(f"{run.label}: fewer than 2 finite samples: nothing to animate")
+    keep = slice(0, last + 1)
+    t = s["time"][keep]
+    count = n_frames or playback_frames(t[-1] - t[0], fps, speed)
+    if count > MAX_FRAMES:
+        raise AnimationError(f"speed {speed:g} at {fps:g} frames/s gives {count} frames for the {t[-1] - t[0]:.4g} s "
+                             f"of {run.label}; at most {MAX_FRAMES}: raise the speed or lower the frame rate")
+    frames = frame_times(t[0], t[-1], count)
+    shapes, parents, r_p = _chain_shapes(run.config)
+    n = len(shapes)
+    theta, x, e = s["theta"][keep], s["position"][keep], s["constraint_error"][keep]
+    if theta.shape[1] != n:
+        raise AnimationError(f"{run.label}: the file holds {theta.shape[1]} bodies, its config {n}")
+    rotation = np.stack([rotation_matrix(_interpolate(t, theta[:, i], frames)) for i in range(n)], axis=1)
+    position = np.stack([_interpolate(t, x[:, i], frames) for i in range(n)], axis=1)
+    error = np.stack([_interpolate(t, e[:, j], frames) for j in range(n)], axis=1)
+    point_c = np.stack([attachment_point(position[:, i], rotation[:, i], shapes[i].attachment_point)
+                        for i in range(n)], axis=1)
+    parent_point = np.stack([np.broadcast_to(r_p[j], (len(frames), 3)) if parents[j] < 0 else
+                             attachment_point(position[:, parents[j]], rotation[:, parents[j]], r_p[j])
+                             for j in range(n)], axis=1)
+    largest = np.argmax(np.linalg.norm(error, axis=-1), axis=1)
+    names = [b["name"] for b in run.config["bodies"]]
+    return ChainScene(
+        time=frames, lyapunov=_interpolate(t, s["lyapunov"][keep], frames), rotation=rotation, position=position,
+        corners=np.stack([box_corners(position[:, i], rotation[:, i], shapes[i]) for i in range(n)], axis=1),
+        shapes=shapes, point_c=point_c, parent_point=parent_point,
+        anchor=np.array([r_p[j] for j in range(n) if parents[j] < 0]).reshape(-1, 3),
+        constraint_error=error[np.arange(len(frames)), largest], trace=x, trace_time=t,
+        bodies=names, joints=[{j["child"]: j["name"] for j in run.config["joints"]}[b] for b in names], parents=parents,
+        label=run.label, status=run.status, message=run.message, t_failed=None if run.ok else float(t[-1]),
+        gravity=np.asarray(run.config.get("gravity") or np.zeros(3), dtype=float).reshape(3),
+    )
+
+
 def scene_limits(sc: Scene, margin: float = 0.05) -> tuple[np.ndarray, float]:
     """Centre [m] (shape (3,)) and half width [m] of the cube that holds every frame's box,
     C, the anchor and the trace, widened by ``margin`` (a fraction): equal axes, fixed
     limits."""
-    points = np.concatenate([sc.corners.reshape(-1, 3), sc.point_c, sc.anchor[None, :], sc.trace])
+    points = np.concatenate([np.reshape(a, (-1, 3)) for a in (sc.corners, sc.point_c, sc.anchor, sc.trace)])
     low, high = points.min(axis=0), points.max(axis=0)
     return 0.5 * (low + high), 0.5 * float((high - low).max()) * (1.0 + margin)
 
@@ -367,7 +507,7 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
         ids, runs = [r.name for r in inputs.runs], list(inputs.runs)
     if run_id is None:
         if len(runs) == 1 and runs[0] is not None:
-            return _one_body(runs[0], path)
+            return runs[0]
         raise ReportInputError([(f"{path} holds {len(ids)} runs: choose one with --run ID "
                                  f"(e.g. {', '.join(ids[:3])}; rbstab show {path} lists them)")])
     if run_id not in ids:
@@ -377,16 +517,6 @@ def pick_run(path: str | Path, run_id: str | None = None) -> RunData:
     run = runs[ids.index(run_id)]
     if run is None:
         raise ReportInputError([f"run {run_id} of {path} has no result file (its status in index.csv says why)"])
-    return _one_body(run, path)
-
-
-def _one_body(run: RunData, path) -> RunData:
-    """``run``, or ReportInputError where it is a chain's (not animated yet)."""
-    from .load import ReportInputError  # heavy: pydantic or the report's loaders, needed only when a run is animated
-
-    if run.variant == "chain":
-        raise ReportInputError([f"{path}: a chain run result: rbstab animate and the report's animations take "
-                                f"one-body runs (rbstab report {path} draws the chain's bodies and joints)"])
     return run
 
 
@@ -468,6 +598,79 @@ class _Artists:
         return [self.box, *self.axes, self.trace, self.com, self.error, self.c, self.text]
 
 
+class _ChainArtists:
+    """The artists of a chain's animation: a box a body (its own colour), each joint's two
+    points joined by E_j (orange) and the segments from each body's COM to its joints'
+    points (the skeleton, grey), the COMs and the trace of the last body's COM."""
+
+    def __init__(self, ax, sc: ChainScene) -> None:
+        from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # heavy: mpl_toolkits
+
+        self.sc = sc
+        self.axes3d = ax
+        tints = [(0.45, 0.62, 0.85), (0.85, 0.62, 0.45), (0.5, 0.78, 0.5), (0.78, 0.55, 0.78),
+                 (0.85, 0.8, 0.4), (0.5, 0.75, 0.8), (0.7, 0.7, 0.7), (0.9, 0.55, 0.6)]
+        self.boxes = []
+        for i, name in enumerate(sc.bodies):
+            box = Poly3DCollection(self._faces(0, i), facecolor=(*tints[i % len(tints)], 0.3), edgecolor="0.25",
+                                   linewidths=0.7, label=name)
+            ax.add_collection3d(box)
+            self.boxes.append(box)
+        self.skeleton = ax.plot([], [], [], color="0.3", lw=1.2, label="COM to joints")[0]
+        self.coms = ax.plot([], [], [], "o", color=COM_COLOUR, ms=4, label="COMs X_i")[0]
+        self.trace = ax.plot([], [], [], color=COM_COLOUR, lw=0.8, ls=":", label=f"trace of {sc.bodies[-1]}")[0]
+        self.error = ax.plot([], [], [], color=C_COLOUR, lw=2.5, label="E_j (joint's points)")[0]
+        self.joints = ax.plot([], [], [], "o", color=C_COLOUR, ms=5, label="joints' points C")[0]
+        if len(sc.anchor):
+            ax.plot(sc.anchor[:, 0], sc.anchor[:, 1], sc.anchor[:, 2], "x", color=ANCHOR_COLOUR, ms=9, mew=2,
+                    label="ground points")
+        if np.any(sc.gravity):
+            _gravity_arrow(ax, sc.gravity)
+        self.text = ax.text2D(0.01, 0.99, "", transform=ax.transAxes, va="top", ha="left", family="monospace",
+                              fontsize=8, bbox={"facecolor": "white", "edgecolor": "0.7", "alpha": 0.85})
+        self.trace_index = np.searchsorted(sc.trace_time, sc.time, side="right")
+
+    def _faces(self, k: int, i: int) -> list:
+        corners = self.sc.corners[k, i]
+        return [corners[list(face)] for face in BOX_FACES]
+
+    @staticmethod
+    def _segments(pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x, y, z of line segments separated by NaN (one artist draws them all)."""
+        out = [[], [], []]
+        for a, b in pairs:
+            for d in range(3):
+                out[d] += [a[d], b[d], np.nan]
+        return tuple(np.array(d, dtype=float) for d in out)
+
+    def update(self, k: int) -> list:
+        sc = self.sc
+        n = len(sc.bodies)
+        for i, box in enumerate(self.boxes):
+            box.set_verts(self._faces(k, i))
+        x = sc.position[k]
+        pairs = [(x[i], sc.point_c[k, i]) for i in range(n)]
+        self.skeleton.set_data_3d(*self._segments(pairs + self._parent_pairs(k)))
+        self.coms.set_data_3d(x[:, 0], x[:, 1], x[:, 2])
+        self.error.set_data_3d(*self._segments([(sc.parent_point[k, j], sc.point_c[k, j]) for j in range(n)]))
+        points = np.concatenate([sc.point_c[k], sc.parent_point[k]])
+        self.joints.set_data_3d(points[:, 0], points[:, 1], points[:, 2])
+        path = np.vstack([sc.trace[: self.trace_index[k], -1], x[-1]])
+        self.trace.set_data_3d(path[:, 0], path[:, 1], path[:, 2])
+        self.text.set_text(_corner_text(sc, k))
+        return [*self.boxes, self.skeleton, self.coms, self.trace, self.error, self.joints, self.text]
+
+    def _parent_pairs(self, k: int) -> list:
+        """(a parent's COM, its point of joint j) for each joint with a parent body."""
+        sc = self.sc
+        out = []
+        for j in range(len(sc.joints)):
+            p = sc.parents[j]
+            if p >= 0:
+                out.append((sc.position[k, p], sc.parent_point[k, j]))
+        return out
+
+
 def _gravity_arrow(ax, gravity: np.ndarray) -> None:
     """An arrow along g in a top corner of the view (its direction only; fixed)."""
     (x0, x1), (y0, y1), (z0, z1) = ax.get_xlim(), ax.get_ylim(), ax.get_zlim()
@@ -499,7 +702,7 @@ def _figure(sc: Scene, view: tuple[float, float], size: tuple[float, float], dpi
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_major_locator(MaxNLocator(5))
     ax.view_init(elev=view[1], azim=view[0])
-    artists = _Artists(ax, sc)
+    artists = (_ChainArtists if isinstance(sc, ChainScene) else _Artists)(ax, sc)
     artists.update(0)
     fig.legend(loc="center right", fontsize=7, frameon=False, bbox_to_anchor=(0.995, 0.55))
     fig.text(0.5, 0.975, f"{sc.label} ({sc.variant})", ha="center", va="top", fontsize=10, parse_math=False)

@@ -547,7 +547,7 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     params = differing_parameters(runs)
     frames = options.animation_frames if "html" in options.formats else 0
     sections = _direct_run_sections(runs, params, out, options.settle, frames, _jobs(options)) if runs else []
-    sections += chain_sections([r for r in data.runs if r.variant == "chain"], out)
+    sections += chain_sections([r for r in data.runs if r.variant == "chain"], out, frames)
     for sweep in data.sweeps:
         sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
     sections += analysis_sections(analyses, out)
