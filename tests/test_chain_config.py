@@ -110,7 +110,7 @@ def test_sweep_refuses_a_chain_in_one_line_and_writes_nothing(tmp_path):
     assert result.exit_code != 0
     assert "Traceback" not in result.output
     assert ("config key 'bodies': found a chain of bodies; expected a one-body config (body, controller) here: "
-            "chains are taken by rbstab validate, run, show and analyze (rest state, linearisation)") in result.output
+            "chains are taken by rbstab validate, run, show, report, animate and analyze") in result.output
     assert not out.exists()
 
 

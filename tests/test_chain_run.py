@@ -1,6 +1,6 @@
-"""rbstab run and show of chains of bodies: the file layout (body and joint dimensions, names as
-coordinates, CF attributes), the summary with its rate check, the API, and the commands that
-take one-body runs refusing a chain's file in one line."""
+"""rbstab run, show, report and animate of chains of bodies: the file layout (body and joint
+dimensions, names as coordinates, CF attributes), the summary with its rate check, the API,
+the report's chain section and the animation, and the admissible region's stop."""
 
 from __future__ import annotations
 

@@ -94,7 +94,7 @@ def _read_analysis(path: Path):
 
 RUN = InputKind("run", "run result", "rbstab show or rbstab.open_result read it", "*.h5", is_run_file, read_dataset)
 CHAIN_RUN = InputKind("chain_run", "chain run result",
-                      "rbstab show or rbstab.open_result read it (report and animate take one-body runs)", "*.h5",
+                      "rbstab show, report, animate or rbstab.open_result read it", "*.h5",
                       is_chain_run_file, read_dataset)
 STORE = InputKind("store", "store file of a sweep (many runs)",
                   "open its sweep folder with rbstab.open_sweep(folder), or rbstab show it", "*.h5", is_chunk_file,
