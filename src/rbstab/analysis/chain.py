@@ -18,7 +18,7 @@ from .basin import DEFAULT_SAMPLES, BasinAxis, BasinMap, time_to_converge
 from .linearise import Linearisation, linearise_chain
 
 __all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
-           "chain_states_recover"]
+           "chain_states_recover", "final_lyapunov"]
 
 #: The state blocks of a body in the chain's state, in order (12 entries a body).
 _BODY_BLOCKS = ("theta", "omega", "position", "velocity")
@@ -144,9 +144,6 @@ def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEF
     without leaving the admissible region; v(0) [J]) of the chain's runs from the states
     :func:`chain_states` gives ``values`` (N, len(axes)), on the compiled driver in ``jobs``
     threads."""
-    from ..engine.integrate import integrate_chain_runs  # heavy: numba
-    from ..engine.settings import settings_rows  # heavy: numba
-    from ..engine.status import SUCCESS  # heavy: numba
     from ..engine.systems import chain_system  # heavy: numba
     from ..variants import chain as C  # heavy: numba
 
@@ -154,20 +151,36 @@ def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEF
     compiled = C.compile_chain(config.chain)
     states = chain_states(config, compiled, axes, values)
     sim = config.simulation
-    system, settings = chain_system(compiled, sim.limits), settings_rows([sim])
+    ok, v1 = final_lyapunov(compiled, chain_system(compiled, sim.limits), states, sim, jobs=jobs)
+    v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
+    return np.asarray(converged(ok, v0, v1, ratio), dtype=bool), v0
+
+
+def final_lyapunov(compiled, system, states: np.ndarray, simulation, *, jobs: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(whether each run reached t_end inside the admissible region, v(t_end) [J], NaN for a
+    run that stopped) of the runs of one chain (``compiled``, its
+    :class:`~rbstab.engine.systems.ChainSystem` ``system``) from ``states`` (k, n_states)
+    with the settings ``simulation``, on the compiled driver in ``jobs`` threads (it
+    releases Python's lock); only the last sample is kept."""
+    from ..engine.integrate import integrate_chain_runs  # heavy: numba
+    from ..engine.settings import settings_rows  # heavy: numba
+    from ..engine.status import SUCCESS  # heavy: numba
+    from ..variants import chain as C  # heavy: numba
+
+    settings = settings_rows([simulation])
 
     def final(rows):
-        sol = integrate_chain_runs(system, states[rows], np.repeat(settings, len(rows), axis=0), method=sim.method,
-                                   n_samples=2)
+        sol = integrate_chain_runs(system, states[rows], np.repeat(settings, len(rows), axis=0),
+                                   method=simulation.method, n_samples=2)
         return sol.status == SUCCESS, sol.samples[:, -1]
 
-    slices = np.array_split(np.arange(len(states)), max(1, min(int(jobs), len(states))))
+    k = len(states)
+    slices = np.array_split(np.arange(k), max(1, min(int(jobs), k)))
     with ThreadPoolExecutor(len(slices)) as pool:
         parts = list(pool.map(final, slices))
     ok = np.concatenate([p[0] for p in parts])
-    v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
-    v1 = C.evaluate(compiled, np.full(len(states), sim.t_end), np.concatenate([p[1] for p in parts]))["lyapunov"]
-    return np.asarray(converged(ok, v0, v1, ratio), dtype=bool), v0
+    v1 = C.evaluate(compiled, np.full(k, float(simulation.t_end)), np.concatenate([p[1] for p in parts]))["lyapunov"]
+    return ok, v1
 
 
 def check_entries(config, axes) -> None:

@@ -36,7 +36,6 @@ import math
 import time as _time
 import warnings
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -301,9 +300,9 @@ class ChainPushes:
 
     def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
                  ratio: float = DEFAULT_LYAPUNOV_RATIO, jobs: int = 1) -> None:
-        from ..engine.settings import settings_rows  # heavy: numba
         from ..engine.systems import chain_system  # heavy: numba
         from ..variants import chain as C  # heavy: numba
+
         names = list(config.chain.body_names)
         if body not in names:
             found = "none" if body is None else f"'{body}'"
@@ -328,10 +327,8 @@ class ChainPushes:
             raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
                              "potential falls without bound): a push from rest cannot be analysed")
         self.equilibrium = rest
-        sim = config.simulation
-        self._system = chain_system(self.compiled, sim.limits)
-        self._settings = settings_rows([sim])
-        self._method, self._t_end = sim.method, float(sim.t_end)
+        self._simulation = config.simulation
+        self._system = chain_system(self.compiled, config.simulation.limits)
         self.runs = 0
         self.batches = 0
 
@@ -350,9 +347,7 @@ class ChainPushes:
     def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
         """Whether the runs pushed by ``vectors`` (k, 3) recover; one batch (in ``jobs``
         threads)."""
-        from ..engine.integrate import integrate_chain_runs  # heavy: numba
-        from ..engine.status import SUCCESS  # heavy: numba
-        from ..variants import chain as C  # heavy: numba
+        from .chain import final_lyapunov  # heavy: numba (the chain's driver)
 
         vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
         k = len(vectors)
@@ -361,18 +356,7 @@ class ChainPushes:
         pushed = [self._pushed(v) for v in vectors]
         states = np.array([y for y, _ in pushed])
         energy = np.array([e for _, e in pushed]) if energy is None else np.asarray(energy, dtype=float)
-
-        def final(rows):
-            sol = integrate_chain_runs(self._system, states[rows], np.repeat(self._settings, len(rows), axis=0),
-                                       method=self._method, n_samples=2)
-            return sol.status == SUCCESS, sol.samples[:, -1]
-
-        slices = np.array_split(np.arange(k), min(self.jobs, k))
-        with ThreadPoolExecutor(len(slices)) as pool:
-            parts = list(pool.map(final, slices))
-        ok = np.concatenate([p[0] for p in parts])
-        last = np.concatenate([p[1] for p in parts])
-        v = C.evaluate(self.compiled, np.full(k, self._t_end), last)["lyapunov"]
+        ok, v = final_lyapunov(self.compiled, self._system, states, self._simulation, jobs=self.jobs)
         self.runs += k
         self.batches += 1
         with np.errstate(invalid="ignore"):

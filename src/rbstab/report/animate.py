@@ -275,6 +275,30 @@ def _interpolate(t: np.ndarray, samples: np.ndarray, times: np.ndarray) -> np.nd
     return np.stack([np.interp(times, t, samples[:, i]) for i in range(samples.shape[1])], axis=1)
 
 
+def _trajectory(run: RunData, n_frames: int | None, fps: float, speed: float) -> tuple[dict, slice, np.ndarray]:
+    """(the run's stored theta, position, constraint_error, lyapunov with their time; the
+    samples up to its last finite one; the frame times): AnimationError where the file keeps
+    no trajectory, fewer than 2 finite samples, or more than :data:`MAX_FRAMES` frames."""
+    s = run.series("theta", "position", "constraint_error", "lyapunov")
+    missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
+    if missing:
+        raise AnimationError(f"{run.label}: no stored trajectory to animate (the file lacks {', '.join(missing)}; "
+                             "a sweep's --store summary keeps none)")
+    finite = np.isfinite(s["time"]) & np.isfinite(s["lyapunov"])
+    for name in ("theta", "position", "constraint_error"):  # (n, 3) for a body, (n, bodies or joints, 3) for a chain
+        finite &= np.all(np.isfinite(s[name]).reshape(len(finite), -1), axis=1)
+    last = int(np.flatnonzero(finite)[-1]) if finite.any() else -1
+    if last < 1 or not finite[: last + 1].all():
+        raise AnimationError(f"{run.label}: fewer than 2 finite samples: nothing to animate")
+    keep = slice(0, last + 1)
+    t = s["time"][keep]
+    count = n_frames or playback_frames(t[-1] - t[0], fps, speed)
+    if count > MAX_FRAMES:
+        raise AnimationError(f"speed {speed:g} at {fps:g} frames/s gives {count} frames for the {t[-1] - t[0]:.4g} s "
+                             f"of {run.label}; at most {MAX_FRAMES}: raise the speed or lower the frame rate")
+    return s, keep, frame_times(t[0], t[-1], count)
+
+
 def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> Scene:
     """The :class:`Scene` of a run, from its stored series interpolated to the frame times.
 
@@ -307,24 +331,8 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
     """
     if run.variant == "chain":
         return chain_scene(run, n_frames, fps, speed)
-    s = run.series("theta", "position", "constraint_error", "lyapunov")
-    missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
-    if missing:
-        raise AnimationError(f"{run.label}: no stored trajectory to animate (the file lacks {', '.join(missing)}; "
-                             "a sweep's --store summary keeps none)")
-    finite = np.isfinite(s["time"]) & np.isfinite(s["lyapunov"])
-    for name in ("theta", "position", "constraint_error"):
-        finite &= np.all(np.isfinite(s[name]), axis=1)
-    last = int(np.flatnonzero(finite)[-1]) if finite.any() else -1
-    if last < 1 or not finite[: last + 1].all():
-        raise AnimationError(f"{run.label}: fewer than 2 finite samples: nothing to animate")
-    keep = slice(0, last + 1)
+    s, keep, frames = _trajectory(run, n_frames, fps, speed)
     t = s["time"][keep]
-    count = n_frames or playback_frames(t[-1] - t[0], fps, speed)
-    if count > MAX_FRAMES:
-        raise AnimationError(f"speed {speed:g} at {fps:g} frames/s gives {count} frames for the {t[-1] - t[0]:.4g} s "
-                             f"of {run.label}; at most {MAX_FRAMES}: raise the speed or lower the frame rate")
-    frames = frame_times(t[0], t[-1], count)
     shape = body_shape(run.config)
     r = shape.attachment_point
     rotation = rotation_matrix(_interpolate(t, s["theta"][keep], frames))
@@ -433,23 +441,8 @@ def chain_scene(run: RunData, n_frames: int | None = None, fps: float = FPS, spe
     """The :class:`ChainScene` of a chain run, from its stored series (Theta_i, X_i, E_j, v)
     interpolated linearly to the frame times; the bodies' names and the joints' points from
     its configuration. Raises AnimationError as :func:`scene` does."""
-    s = run.series("theta", "position", "constraint_error", "lyapunov")
-    missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
-    if missing:
-        raise AnimationError(f"{run.label}: no stored trajectory to animate (the file lacks {', '.join(missing)})")
-    finite = np.isfinite(s["time"]) & np.isfinite(s["lyapunov"])
-    for name in ("theta", "position", "constraint_error"):
-        finite &= np.all(np.isfinite(s[name]), axis=(1, 2))
-    last = int(np.flatnonzero(finite)[-1]) if finite.any() else -1
-    if last < 1 or not finite[: last + 1].all():
-        raise AnimationError(f"{run.label}: fewer than 2 finite samples: nothing to animate")
-    keep = slice(0, last + 1)
+    s, keep, frames = _trajectory(run, n_frames, fps, speed)
     t = s["time"][keep]
-    count = n_frames or playback_frames(t[-1] - t[0], fps, speed)
-    if count > MAX_FRAMES:
-        raise AnimationError(f"speed {speed:g} at {fps:g} frames/s gives {count} frames for the {t[-1] - t[0]:.4g} s "
-                             f"of {run.label}; at most {MAX_FRAMES}: raise the speed or lower the frame rate")
-    frames = frame_times(t[0], t[-1], count)
     shapes, parents, r_p = _chain_shapes(run.config)
     n = len(shapes)
     theta, x, e = s["theta"][keep], s["position"][keep], s["constraint_error"][keep]
