@@ -22,6 +22,23 @@ PAPER_CONFIGS = sorted((ROOT / "configs" / "paper").glob("*.yaml"))
 D = np.diag
 
 
+def pytest_sessionstart(session):
+    """Compile the engine's kernels (the engine, the sign law, chains) into the cache once,
+    before any test (and before pytest-xdist starts its workers, which then load them
+    instead of each compiling them again)."""
+    if hasattr(session.config, "workerinput"):  # an xdist worker: the controller did it
+        return
+    from rbstab.engine import ensure_compiled
+
+    ensure_compiled(sign_law=True, chain=True)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The tests marked ``slow`` first (in their order): pytest-xdist's workers share out the
+    short ones at the end instead of one running a long test alone."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 def paper_body(gravity=(0.0, 0.0, 0.0)) -> RigidBody:
     return RigidBody(41.0, D([10.0, 8.0, 0.4]), np.array([0.15, 0.10, -0.42]), np.array(gravity, float))
 

@@ -110,12 +110,24 @@ def test_streamed_summary_is_summary_table(path, overrides):
 
 # -- the driver under the CUDA simulator ------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def simulated():
-    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
-    done = subprocess.run([sys.executable, str(ROOT / "tests" / "cuda_simulated.py"), str(ROOT)], env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.splitlines()[-1])
+def simulated(tmp_path_factory):
+    """tests/cuda_simulated.py's findings (~40 s), run once a test session: pytest-xdist's
+    workers share them through a file in the session's temporary folder."""
+    import fcntl
+
+    folder = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # <session>/popen-gwN: the session's folder is its parent
+        folder = folder.parent
+    shared = folder / "cuda_simulated.json"
+    with open(folder / "cuda_simulated.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # the first worker runs it, the others wait and read it
+        if not shared.exists():
+            env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+            done = subprocess.run([sys.executable, str(ROOT / "tests" / "cuda_simulated.py"), str(ROOT)], env=env,
+                                  capture_output=True, text=True, timeout=600)
+            assert done.returncode == 0, done.stderr[-3000:]
+            shared.write_text(done.stdout.splitlines()[-1])
+    return json.loads(shared.read_text())
 
 
 def test_simulated_driver_covers_every_variant_and_method(simulated):
@@ -285,6 +297,7 @@ def _ptxas() -> str | None:
     return next((p for p in found if os.path.exists(p)), None) or shutil.which("ptxas")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
 def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch, tmp_path):
     """The kernel every launch runs (every variant's physics, DOP853, outputs, streamed

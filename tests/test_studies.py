@@ -283,8 +283,15 @@ def test_two_processes_on_one_study_share_its_trials(config, tmp_path):
     data = {**config.resolved, "simulation": {**config.resolved["simulation"], "t_end": 0.2, "n_samples": 5}}
     path = tmp_path / "free.yaml"
     path.write_text(rbstab.config.dump_yaml(data))
-    script = ("import sys, rbstab\n"
+    # Each process loads the engine, says it is ready and waits for the other before tuning: a
+    # process that starts while the other has already finished every trial shares nothing.
+    script = ("import sys, time, pathlib, rbstab, rbstab.engine\n"
               "if __name__ == '__main__':\n"
+              "    rbstab.engine.ensure_compiled(sign_law=True)\n"
+              "    folder = pathlib.Path(sys.argv[2])\n"
+              "    (folder / ('ready-' + sys.argv[3])).touch()\n"
+              "    while len(list(folder.glob('ready-*'))) < 2:\n"
+              "        time.sleep(0.05)\n"
               "    rbstab.tune(rbstab.load_config(sys.argv[1]), %r, trials=24, minimize=['lyapunov_final'],\n"
               "                output=sys.argv[2], name='shared', seed=int(sys.argv[3]), generation=4, startup=4)\n"
               % TUNE_VARY)
