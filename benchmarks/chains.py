@@ -10,9 +10,13 @@ Prints (2 cores, warm numba cache):
 - s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process)
   and its smallest fatal push on the trunk over 64 directions (``--push``, 2 threads);
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
-  and visco-elastic joints with feedback, gravity), and that per body.
+  and visco-elastic joints with feedback, gravity), and that per body;
+- s a sweep over initial states (``rbstab.execute_sweep``, 2 local processes, ``--store
+  summary``) of N runs (``--sweep-runs``, default 10,000) of a 3-body chain (a triple
+  inverted pendulum held by its joints' feedback, t_end 2 s) and of the one-body Case 3
+  config (t_end 2 s), and their ratio.
 
-Run: python benchmarks/chains.py
+Run: python benchmarks/chains.py [--sweep-runs N]
 """
 
 from __future__ import annotations
@@ -65,7 +69,53 @@ def _compiled_run(compiled, y0, sim):
     return lambda: integrate_chain_runs(system, y0[None], settings, method=sim.method, n_samples=sim.n_samples)
 
 
+def triple_pendulum() -> dict:
+    """A 3-body chain config: three 10 kg links (1 m) in a column, permanent joints with
+    feedback strong enough to hold them upright under gravity."""
+    gains = {"k_r": [3000.0, 3000.0, 300.0], "l_r": [400.0, 400.0, 40.0]}
+    joints = [{"name": f"j{i}", "parent": "ground" if i == 0 else f"link{i - 1}",
+               "parent_point": [0.0, 0.0, 0.0 if i == 0 else 0.5], "child": f"link{i}",
+               "child_point": [0.0, 0.0, -0.5], "variant": "permanent", **gains} for i in range(3)]
+    return {"name": "triple", "gravity": [0.0, 0.0, -9.81],
+            "bodies": [{"name": f"link{i}", "mass": 10.0, "inertia": [0.85, 0.85, 0.05]} for i in range(3)],
+            "joints": joints, "initial_state": {"link0": {"theta": [0.05, 0.0, 0.0]}},
+            "simulation": {"t_end": 2.0, "n_samples": 201, "method": "DOP853", "rtol": 1e-8, "atol": 1e-10}}
+
+
+def sweeps(n: int) -> None:
+    """Seconds of an initial-state sweep of ``n`` runs of the 3-body chain and of Case 3."""
+    import tempfile
+
+    import yaml
+
+    import rbstab
+
+    side = int(round(n ** 0.5))
+    levels = np.linspace(-0.1, 0.1, side).tolist()
+    case3 = yaml.safe_load((ROOT / "configs" / "paper" / "case3_embedded.yaml").read_text())
+    specs = {"3-body chain": {"name": "triple", "base": triple_pendulum(),
+                              "grid": {"initial_state.link0.theta.0": levels, "initial_state.link2.theta.1": levels}},
+             "one-body Case 3": {"name": "case3", "base": case3,
+                                 "grid": {"initial_state.theta.0": levels, "initial_state.theta.1": levels}}}
+    seconds = {}
+    for label, spec in specs.items():
+        with tempfile.TemporaryDirectory() as out:
+            small = {**spec, "name": "warm", "grid": {k: v[:2] for k, v in spec["grid"].items()}}
+            rbstab.execute_sweep(small, out, jobs=2, store="summary", progress=False)  # the kernels compiled
+            t0 = time.perf_counter()
+            outcome = rbstab.execute_sweep(spec, out, jobs=2, store="summary", progress=False)
+            seconds[label] = time.perf_counter() - t0
+            print(f"  {label}: {outcome.n_runs} runs in {seconds[label]:.2f} s ({1e3 * seconds[label] / outcome.n_runs:.2f}"
+                  f" ms a run on 2 processes; {outcome.counts['success']} succeeded)")
+    print(f"  ratio chain / Case 3: {seconds['3-body chain'] / seconds['one-body Case 3']:.2f}")
+
+
 def main() -> None:
+    import argparse
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sweep-runs", type=int, default=10_000, help="runs of each sweep (0: none)")
+    args = parser.parse_args()
     warnings.simplefilter("ignore")
     print("runs, integration only (ms a run, best of 5): scipy's solve_ivp over the compiled rate | the compiled "
           "driver | rbstab run's whole run (compiled, with outputs and summary)")
@@ -116,6 +166,9 @@ def main() -> None:
                 C.chain_rate(0.0, y, *args, dy)
         seconds = _best(loop, 3) / k
         print(f"  n = {n}: {1e6 * seconds:7.2f} us  ({1e6 * seconds / n:6.2f} us a body)")
+    if args.sweep_runs:
+        print("sweeps over initial states (2 local processes, store summary):")
+        sweeps(args.sweep_runs)
 
 
 if __name__ == "__main__":

@@ -158,9 +158,10 @@ def _key_value(text: str) -> tuple[str, str]:
     "<= 201 samples (thinned), or none (summary); summary figures and the index are the same.",
 )
 @click.option(
-    "--layout", type=click.Choice(["chunk", "run"]), default="chunk", show_default=True,
+    "--layout", type=click.Choice(["chunk", "run"]), default=None,
     help="Store files of many runs along a 'run' dimension (runs/chunk-*.h5, netCDF-4), or one "
-    "result file per run (runs/<run_id>.h5, the format of rbstab run).",
+    "result file per run (runs/<run_id>.h5, the format of rbstab run)  [default: chunk; run for a "
+    "sweep of chains].",
 )
 @click.option(
     "--index", "index", type=click.Choice(["csv", "arrow"]), default=None,
@@ -282,6 +283,7 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     ranges, the first and last runs (all with -v), the estimated store size and wall time;
     write nothing."""
     from rbstab.sweep import SweepSpecError, default_jobs, load_spec  # heavy: numba, pandas, pydantic (~0.4-0.7 s)
+    from rbstab.sweep.runner import sweep_layout  # heavy: numba, pandas
     from rbstab.sweep.table import estimate, plan_table  # heavy: numba, pydantic (~0.4 s at the start)
 
     console = get_console()
@@ -295,7 +297,7 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     workers = jobs or default_jobs()
     size, seconds = estimate(table, store, workers)
     console.out(f"{loaded.name}: {table.n} runs (dry run: nothing run or written)")
-    console.out(f"  store ~{size / 2**20:.3g} MiB (--store {store}, --layout {layout}); "
+    console.out(f"  store ~{size / 2**20:.3g} MiB (--store {store}, --layout {layout or sweep_layout(loaded)}); "
                 f"wall time ~{seconds:.3g} s on {workers} worker(s) after the engine's start-up")
     console.out("varied:" if table.keys else "varied: nothing")
     for line in table.describe(every=console.verbosity >= 1):

@@ -465,7 +465,7 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
     loaded = _load_spec(spec, overrides)
     ex, owned = _sweep_executor(executor, scheduler, connect_timeout)
     try:
-        ensure_compiled(say=log, sign_law=True)  # once, before any worker starts
+        ensure_compiled(say=log, sign_law=True, chain=loaded.is_chain)  # once, before any worker starts
         return run_sweep(loaded, output, executor=ex, jobs=jobs, log=log, **options)
     finally:
         if owned:

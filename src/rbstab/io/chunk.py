@@ -176,12 +176,15 @@ def store_bytes_per_run(store: str, n_samples):
     return VALUE_BYTES + 8 * _FULL_VALUES * samples
 
 
-def summary_columns(summary: Mapping[str, Any]) -> dict[str, Any]:
-    """Summary figures as flat columns: 3-vectors as ``<name>_x``, ``_y``, ``_z``."""
+def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = None) -> dict[str, Any]:
+    """Summary figures as flat columns: 3-vectors as ``<name>_x``, ``_y``, ``_z``; a chain's
+    figures per joint (``joints``: its joint names, :func:`rbstab.summary.chain_summary`) as
+    ``<name>_<joint>``."""
     out: dict[str, Any] = {}
+    labels = _AXES if joints is None else tuple(joints)
     for key, value in summary.items():
         if isinstance(value, (list, tuple, np.ndarray)):
-            for axis, v in zip(_AXES, value):
+            for axis, v in zip(labels, value):
                 out[f"{key}_{axis}"] = float(v)
         else:
             out[key] = value

@@ -135,11 +135,16 @@ NOT_IN_INDEX = ("config", "created", "store", "template")
 #: Subsections whose fields' parameter names start with the subsection's name (their field
 #: names repeat those of another section: ``simulation.limits.theta``, ``initial_state.theta``).
 PREFIXED_SUBSECTIONS = ("limits",)
+#: A chain's sections of named entries: their parameter names start with the entry's name.
+CHAIN_ENTRIES = ("bodies", "joints")
 
 
 @functools.lru_cache(maxsize=4096)  # the same keys for every run of a sweep
 def parameter_name(key: str) -> str:
-    """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``."""
+    """Identifier of a dotted config key (module docstring): ``controller.k_c.0`` -> ``k_c_0``;
+    a key of a chain's body or joint starts with its entry (``joints.hip.k_c.0`` ->
+    ``hip_k_c_0``, ``bodies.1.mass`` -> ``bodies_1_mass``, ``initial_state.trunk.theta.0``
+    -> ``trunk_theta_0``)."""
     key, scale = (key[: -len(":scale")], True) if key.endswith(":scale") else (key, False)
     parts = key.split(".")
     fields = [i for i, p in enumerate(parts) if not is_index(p)]
@@ -147,6 +152,9 @@ def parameter_name(key: str) -> str:
     if last >= 2 and parts[last - 1] in PREFIXED_SUBSECTIONS:
         last -= 1
     name = "_".join(parts[last:])
+    if len(parts) > 2 and last > 1 and (parts[0] in CHAIN_ENTRIES or (
+            parts[0] == "initial_state" and not is_index(parts[2]))):  # not one body's initial_state.theta.0
+        name = "_".join([parts[1] if not is_index(parts[1]) else f"{parts[0]}_{parts[1]}", name])
     name = re.sub(r"\W", "_", name)
     if not name or name[0].isdigit():
         name = f"p_{name}"
@@ -238,7 +246,8 @@ def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
     from ..io.chunk import summary_columns  # heavy: numba, pydantic or h5py
 
     row = {k: attrs.get(k) for k in ("variant", "status", "message", "wall_time")}
-    row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}))
+    joints = attrs["joints"].split(",") if attrs.get("joints") else None  # a chain's file
+    row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}, joints))
     row.update({k: attrs.get(k) for k in _SOLVER})
     row.update(config_hash=attrs.get("config_hash"), created=attrs.get("created"), file=file, file_row=None)
     row["run_id"] = attrs.get("name")

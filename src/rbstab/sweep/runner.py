@@ -63,7 +63,7 @@ from .folder import (
     wants_csv,
     write_table_index,
 )
-from .spec import SweepSpec
+from .spec import SweepSpec, SweepSpecError
 from ..io.chunk import DEFAULT_STORE, STORES
 from ..engine.registry import get_engine
 from .worker import WorkerOptions, run_table_chunk
@@ -349,7 +349,7 @@ def run_sweep(
     chunk_size: int | None = None,
     engine: str | None = None,
     store: str = DEFAULT_STORE,
-    layout: str = DEFAULT_LAYOUT,
+    layout: str | None = None,
     progress: bool | None = None,
     command_line: str | None = None,
     log: Callable[[str], None] | None = None,
@@ -431,6 +431,7 @@ def run_sweep(
     """
 
     engine = resolve_engine(engine, timeout)
+    layout = sweep_layout(spec, layout)
     chunking = _chunking(chunk_size, engine, store, layout)
     wants_csv(index, 0)  # a value not allowed: ValueError before anything runs
     table = plan_table(spec) if table is None else table
@@ -445,6 +446,24 @@ def run_sweep(
         _run_locked(spec, table, ex, outcome, retry_failed=retry_failed, chunk_size=chunking, progress=progress,
                     say=log or (lambda message: None), options=options, index=index)
     return outcome
+
+
+def sweep_layout(spec: SweepSpec, layout: str | None = None) -> str:
+    """The layout a sweep of ``spec`` writes: ``layout``, by default ``"chunk"`` (store
+    files), ``"run"`` (a result file per run) for a sweep of chains, which store files do not
+    hold.
+
+    Raises
+    ------
+    SweepSpecError
+        For ``layout="chunk"`` with bases that are chains.
+    """
+    if layout is None:
+        return "run" if spec.is_chain else DEFAULT_LAYOUT
+    if layout == "chunk" and spec.is_chain:
+        raise SweepSpecError(["layout: found 'chunk'; the bases are chains, whose sweeps write a result file per run "
+                              "(layout 'run', the default for chains)"], spec.source)
+    return layout
 
 
 def cuda_jobs(jobs: int | None = None) -> int | None:

@@ -20,7 +20,8 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from pydantic_core import PydanticCustomError
 
 from ..config import ConfigError
-from ..config.paths import KeyPathError, parse_key
+from ..config.paths import parse_any_key
+from ..config.paths import KeyPathError
 from ..config.schema import Invalid, checked, run_name, bounded_number, optional, kind_of, problem_line, short_repr
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 
@@ -66,9 +67,10 @@ def numeric_array(value: Any) -> np.ndarray | None:
 
 
 def _dotted_key(key: Any) -> str:
-    """A config key path (:func:`rbstab.config.paths.parse_key`); its refusal is the line."""
+    """A config key path of one body or of a chain (:func:`rbstab.config.chains.parse_any_key`;
+    which kind the bases take is checked once they are read); its refusal is the line."""
     try:
-        parse_key(key)
+        parse_any_key(key)
     except KeyPathError as exc:
         raise PydanticCustomError("rbstab_invalid", "invalid key", {"line": exc.problem}) from None
     return key

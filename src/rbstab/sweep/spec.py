@@ -71,7 +71,10 @@ from typing import Any
 import numpy as np
 
 from ..config import ConfigError, apply_overrides, parse_yaml as parse
+from ..config.paths import parse_any_key
+from ..config.loader import is_chain
 from ..config.paths import KeyPathError, parse_key
+from ..config.schema import ChainSchema
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import copy_tree, read_yaml_file
 from ..results import plain
@@ -241,6 +244,12 @@ class SweepSpec:
     description: str = ""
     source: str | None = None
     overrides: tuple[str, ...] = ()
+
+    @property
+    def is_chain(self) -> bool:
+        """Whether the bases are chains (:func:`rbstab.config.loader.is_chain`; a spec's bases
+        are all chains or all one-body configurations)."""
+        return bool(self.bases) and is_chain(self.bases[0].data)
 
     @property
     def varied_keys(self) -> list[str]:
@@ -441,7 +450,7 @@ def table_columns(data: Any, where: str = "table") -> dict[str, np.ndarray]:
     for name, values in columns.items():
         key = column_key(name)
         try:
-            parse_key(key)
+            parse_any_key(key)  # which kind the bases take: checked run by run
         except KeyPathError as exc:
             errors.append(f"sweep key '{where}': column {name!r}: {exc.problem}")
             continue
@@ -549,9 +558,17 @@ def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) ->
         if b is None:
             continue
         try:
-            bases.append(Base(b.label, apply_overrides(b.data, overrides), b.source))
+            bases.append(Base(b.label, apply_overrides(b.data, overrides, ChainSchema if is_chain(b.data) else None),
+                              b.source))
         except ConfigError as exc:
             errors += exc.errors
+    chains = [b.label for b in bases if is_chain(b.data)]
+    if chains and len(chains) < len(bases):
+        bodies = next(b.label for b in bases if not is_chain(b.data))
+        errors.append(f"sweep key 'base': base '{chains[0]}' is a chain (bodies, joints) and base '{bodies}' one body "
+                      "(body, controller); expected the bases of a sweep all chains or all one-body configs")
+    elif bases:
+        errors += _keys_of_bases(schema, bool(chains))
     labels = [b.label for b in bases]
     dups = sorted({x for x in labels if labels.count(x) > 1})
     if dups:
@@ -560,6 +577,21 @@ def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) ->
             "stem); give each a distinct 'name'"
         )
     return bases, errors
+
+
+def _keys_of_bases(schema: SweepSchema, chain: bool) -> list[str]:
+    """The problems of the varied keys read as keys of the bases' kind (``chain``: chains,
+    else one-body configurations)."""
+    keys = [("grid", k) for k in schema.grid] + [("zip", k) for k in schema.zip] + [
+        ("random.params", k) for k in schema.random.params]
+    kind = "chains" if chain else "one-body configs"
+    errors = []
+    for where, key in keys:
+        try:
+            parse_key(key, ChainSchema if chain else None)
+        except KeyPathError as exc:
+            errors.append(f"sweep key '{where}.{key}': the bases are {kind}; {exc.errors[0]}")
+    return errors
 
 
 def _overridden_sweep_keys(schema: SweepSchema, overrides: Sequence[str]) -> list[str]:

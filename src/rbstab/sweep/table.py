@@ -36,8 +36,7 @@ from typing import Any
 import numpy as np
 
 from .spec import SweepSpec, SweepSpecError
-from ..config.paths import parse_key
-from .validate import base_value
+from .validate import base_value, key_path
 from .validate import validate_columns
 from ..config import canonical_config
 from ..engine.batch import batch_from_table
@@ -155,7 +154,7 @@ def build_resolved(template: Mapping, keys: Sequence[str], values: Sequence[Any]
     out["name"] = name
     copied: set[str] = set()
     for key, value in zip(keys, values):
-        path = parse_key(key)
+        path = key_path(key, template)
         if path.section not in copied:
             out[path.section] = _deep(out[path.section])
             copied.add(path.section)
@@ -219,7 +218,8 @@ class RunTable:
         """Each run's controller variant, shape (n,) (object)."""
         if "controller.variant" in self.columns:
             return self.columns["controller.variant"]
-        return np.asarray([t["controller"]["variant"] for t in self.templates], dtype=object)[self.template]
+        return np.asarray([t["controller"]["variant"] if "controller" in t else "chain" for t in self.templates],
+                          dtype=object)[self.template]
 
     def ids(self) -> list[str]:
         """The run ids as str."""

@@ -26,7 +26,10 @@ from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
-from ..config.paths import parse_key
+from ..config.chains import chain_config_from_mapping
+from ..config.loader import is_chain
+from ..config.paths import KeyPath, parse_key
+from ..config.schema import ChainSchema
 from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
                              samples_apart, starts_in_run, steps_suffice, within_bounds)
 from ..layout import LIMITED, VARIANT_LAYOUTS
@@ -35,7 +38,7 @@ from ..variants.base import limited_values
 from ..config.physics import SINGULAR_RTOL
 from ..config.physics import inertia_warnings
 
-__all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report"]
+__all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report", "key_path", "any_config_from_mapping"]
 
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 #: Flagged runs validated one by one (for the count of invalid runs); beyond it, the runs
@@ -64,16 +67,34 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
 
     data = copy.deepcopy(base.data)
     for key, value in zip(keys, values):
-        parse_key(key).set(data, plain(value))
+        key_path(key, base.data).set(data, plain(value))
     data["name"] = name
     return data
+
+
+def key_path(key: str, data: Mapping) -> KeyPath:
+    """``key`` read against the schema of the configuration ``data`` is written in: a
+    chain's (:class:`rbstab.config.schema.ChainSchema`) or one body's.
+
+    Raises
+    ------
+    rbstab.config.paths.KeyPathError
+        If it names nothing of that schema.
+    """
+    return parse_key(key, ChainSchema if is_chain(data) else None)
+
+
+def any_config_from_mapping(data: Mapping, **kwargs):
+    """:func:`rbstab.config.chains.chain_config_from_mapping` of a chain's mapping, else
+    :func:`rbstab.config.config_from_mapping` (same arguments)."""
+    return (chain_config_from_mapping if is_chain(data) else config_from_mapping)(data, **kwargs)
 
 
 def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:
     """(the value of ``key`` in ``base`` as a float array, None) or (None, problem): what a
     ``scale_uniform`` factor scales (the schema's default where the base leaves it unset)."""
 
-    value = parse_key(key).get(base.data, None)
+    value = key_path(key, base.data).get(base.data, None)
     if value is None:
         value = _default(base, key)
         if value is None:
@@ -91,7 +112,7 @@ def _default(base: Base, key: str) -> Any:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         try:
-            return parse_key(key).get(config_from_mapping(base.data, default_name=base.label).resolved)
+            return key_path(key, base.data).get(any_config_from_mapping(base.data, default_name=base.label).resolved)
         except ConfigError:  # KeyPathError included
             return None
 
@@ -104,7 +125,7 @@ def _validate_row(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index
         data = row_mapping(base, list(columns), [columns[k][i] for k in columns], "sweep-run")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-            return config_from_mapping(data, source=f"base '{base.label}'"), []
+            return any_config_from_mapping(data, source=f"base '{base.label}'"), []
     except ConfigError as exc:
         return None, exc.errors
 
@@ -402,6 +423,19 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
     """
     n = len(base_index)
     templates, notes, invalid_rows, counted = _templates(spec, columns, base_index, template, first_of)
+    if spec.is_chain:  # a chain's checks are its schema's and its tree's: every run validated by them
+        for i in np.flatnonzero(~counted):
+            config, problems = _validate_row(spec, columns, base_index, int(i))
+            if config is None:
+                invalid_rows[int(i)] = problems
+                counted[i] = True
+        _refuse_invalid(spec, columns, base_index, invalid_rows, counted)
+        counts = np.bincount(template, minlength=len(notes))
+        lines = {}
+        for t, messages in enumerate(notes):
+            for message in messages:
+                lines[message] = lines.get(message, 0) + int(counts[t])
+        return tuple(templates), [f"{k} of {n} runs: {message}" for message, k in lines.items()]
     valid = [t if t is not None else {} for t in templates]
     fields = _Fields(columns, valid, template)
     variants = [t.get("controller", {}).get("variant", "") for t in valid]  # per template
@@ -417,12 +451,17 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
             invalid_rows[int(i)] = problems
             counted[i] = True
         exact = exact and config is None
+    _refuse_invalid(spec, columns, base_index, invalid_rows, counted)
+    return tuple(templates), _warning_lines(spec, fields, notes, template, n)
+
+
+def _refuse_invalid(spec: SweepSpec, columns, base_index, invalid_rows: dict, counted: np.ndarray) -> None:
+    """Raise SweepSpecError listing the invalid runs (:func:`invalid_report`), if any."""
     n_invalid = int(counted.sum())
     if n_invalid:
         listed = sorted(invalid_rows)[:_MAX_LISTED]
         raise SweepSpecError(invalid_report(spec, columns, base_index, n_invalid,
                                             [(i, invalid_rows[i]) for i in listed]), spec.source)
-    return tuple(templates), _warning_lines(spec, fields, notes, template, n)
 
 
 def _warning_lines(spec: SweepSpec, fields: _Fields, notes: Sequence[Sequence[str]], template: np.ndarray,

@@ -51,11 +51,13 @@ from typing import Any
 import numpy as np
 
 from ..config import PhysicalPlausibilityWarning, RunConfig, config_from_mapping
+from ..config.chains import chain_config_from_mapping
+from ..config.loader import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
 from ..results import plain
-from ..simulator import simulate, simulate_batch, simulate_blocks, uses_compiled_engine
+from ..simulator import simulate, simulate_batch, simulate_blocks, simulate_chain, uses_compiled_engine
 from .folder import NOT_IN_INDEX, index_part, row_from_attributes
 
 __all__ = ["RunTask", "WorkerOptions", "run_chunk", "run_table_chunk", "ChunkResult"]
@@ -393,11 +395,39 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     return records
 
 
+def _chain_runs(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
+    """The records of chain runs, each validated and integrated alone
+    (:func:`rbstab.simulator.simulate_chain`, ``options.engine``)."""
+    records = []
+    for task in tasks:
+        try:
+            t0 = _time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", PhysicalPlausibilityWarning)  # said once, when the sweep was planned
+                config = chain_config_from_mapping(task.config)
+            config_time = _time.perf_counter() - t0
+            result = simulate_chain(config, timeout=options.timeout, engine=options.engine)
+        except Exception as exc:  # a bug: data, not a crash of the sweep
+            records.append(sink.error(task, exc))
+            continue
+        try:
+            record = sink.add(task, result)
+        except Exception as exc:  # an I/O problem: this run's error
+            records.append(sink.error(task, exc))
+            continue
+        record["timing"]["config"] = config_time
+        records.append(record)
+    return records
+
+
 def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """The records of ``tasks`` run by ``options.engine`` (what a run's row does not carry:
     its timing, a traceback, an errno; any order)."""
+    chains = [t for t in tasks if is_chain(t.config)]
+    if chains:
+        tasks = [t for t in tasks if not is_chain(t.config)]
     engine = _compiled_engine if get_engine(options.engine).compiled else _scipy_engine
-    return engine(tasks, options, sink)
+    return (_chain_runs(chains, options, sink) if chains else []) + engine(tasks, options, sink)
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> "ChunkResult":
@@ -533,7 +563,8 @@ def _table_batch(part, options: WorkerOptions):
     """The slice's :class:`~rbstab.engine.RunBatch` where the worker integrates it as one
     (compiled or cuda engine, store files), else None; None also for a slice the batch cannot be
     built from, whose runs then go one by one (each run's problem, if any, its own record)."""
-    if not get_engine(options.engine).compiled or options.layout != "chunk" or not len(part):
+    if not get_engine(options.engine).compiled or options.layout != "chunk" or not len(part) or any(
+            is_chain(t) for t in part.templates):
         return None
     try:
         return part.batch(options.timeout)

@@ -1,0 +1,91 @@
+"""rbstab sweep of chains: keys of bodies, joints and initial states by name or index, a result
+file per run (what rbstab run writes), the index with the joints' figures under their names,
+resume, open_sweep over the grid, and the refusals (a key of another kind or naming no body,
+a spec mixing chains and one-body configs, store files, an invalid value)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+
+import rbstab
+from rbstab.sweep.folder import parameter_name
+from rbstab_cli.main import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+STANCE = str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
+SHORT = ["--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=501"]
+GRID = ["--grid", "initial_state.trunk.theta.0=-0.1,0.1", "--grid", "joints.hip.k_r.0=400,600"]
+
+
+def test_a_chain_sweep_writes_what_rbstab_run_writes_and_resumes(tmp_path):
+    out = tmp_path / "results"
+    args = ["sweep", STANCE, *GRID, *SHORT, "--store", "full", "-j", "1", "-o", str(out)]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 0, result.output
+    folder = out / "stance_ankle_hip"
+    index = pd.read_csv(folder / "index.csv")
+    assert index["variant"].tolist() == ["chain"] * 4 and set(index["status"]) == {"success"}
+    assert {"trunk_theta_0", "hip_k_r_0", "max_abs_constraint_error_ankle", "max_abs_constraint_error_hip",
+            "max_constraint_drift_hip"} <= set(index.columns)
+    assert (index["max_constraint_drift_hip"] < 1e-8).all()
+    assert sorted(zip(index["trunk_theta_0"], index["hip_k_r_0"])) == [(-0.1, 400), (-0.1, 600), (0.1, 400), (0.1, 600)]
+
+    row = index.iloc[3]
+    one = tmp_path / "one"
+    alone = CliRunner().invoke(cli, ["run", STANCE, *SHORT, "--set", f"initial_state.trunk.theta.0={row.trunk_theta_0}",
+                                     "--set", f"joints.hip.k_r.0={row.hip_k_r_0}", "-o", str(one)])
+    assert alone.exit_code == 0, alone.output
+    with xr.open_dataset(folder / row.file, engine="h5netcdf") as a, \
+            xr.open_dataset(one / "stance_ankle_hip.h5", engine="h5netcdf") as b:
+        assert list(a["joint"].values) == ["ankle", "hip"] and a["theta"].dims == ("time", "body", "axis")
+        for name in ("theta", "omega", "joint_theta", "torque_n", "constraint_error", "lyapunov", "lyapunov_rate"):
+            np.testing.assert_array_equal(a[name].values, b[name].values)
+        assert a.attrs["summary_lyapunov_final"] == pytest.approx(row.lyapunov_final, rel=1e-12)
+
+    again = CliRunner().invoke(cli, args)
+    assert again.exit_code == 0, again.output
+    assert "4 skipped" in again.output or "skipped 4" in again.output, again.output
+    ds = rbstab.open_sweep(folder, grid=True)
+    assert dict(ds.sizes) == {"trunk_theta_0": 2, "hip_k_r_0": 2}
+    assert ds["lyapunov_final"].sel(trunk_theta_0=row.trunk_theta_0, hip_k_r_0=row.hip_k_r_0) == pytest.approx(
+        row.lyapunov_final, rel=1e-12)
+
+
+def test_the_parameter_names_of_a_chains_keys_name_the_body_or_joint():
+    assert parameter_name("joints.hip.k_c.0") == "hip_k_c_0"
+    assert parameter_name("joints.ankle.saturation.torque_n.0") == "ankle_torque_n_0"
+    assert parameter_name("bodies.1.mass") == "bodies_1_mass"
+    assert parameter_name("bodies.trunk.mass") == "trunk_mass"
+    assert parameter_name("initial_state.trunk.theta.0") == "trunk_theta_0"
+    assert parameter_name("initial_state.theta.0") == "theta_0"  # one body's, as before
+    assert parameter_name("controller.k_c.0") == "k_c_0"
+
+
+def _mixed(tmp_path):
+    spec = tmp_path / "mixed.yaml"
+    spec.write_text(f"name: mixed\nbase: [{STANCE}, {ROOT / 'configs' / 'paper' / 'case1_permanent.yaml'}]\n"
+                    "grid:\n  simulation.t_end: [0.5, 1.0]\n")
+    return [str(spec)]
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["--grid", "joints.knee.k_r.0=1,2"], "'knee'"),
+    (["--grid", "controller.k_r.0=1,2"], "the bases are chains"),
+    (["--grid", "initial_state.torso.theta.0=0,0.1"], "'torso'"),
+    (["--grid", "simulation.t_end=0.5,1", "--layout", "chunk"], "layout: found 'chunk'"),
+    (["--grid", "bodies.legs.mass=20,-1"], "bodies.legs.mass"),
+    (_mixed, "all chains or all one-body configs"),
+], ids=["joint", "one-body-key", "body", "chunk", "value", "mixed"])
+def test_a_chain_sweep_refuses_in_one_line_and_writes_nothing(args, expected, tmp_path):
+    out = tmp_path / "results"
+    command = ["sweep", *args(tmp_path)] if callable(args) else ["sweep", STANCE, *args]
+    result = CliRunner().invoke(cli, [*command, "-o", str(out)])
+    assert result.exit_code != 0
+    assert "Traceback" not in result.output and expected in result.output, result.output
+    assert not out.exists()
