@@ -106,7 +106,7 @@ def test_the_examples_mean_what_their_comments_say():
 def test_sensitivity_refuses_a_chain_in_one_line_and_writes_nothing(tmp_path):
     out = tmp_path / "results"
     result = CliRunner().invoke(cli, ["sensitivity", str(EXAMPLES["double_pendulum"]), "--vary",
-                                      "simulation.t_end=uniform:[1,2]", "-o", str(out)])
+                                      "simulation.t_end=uniform:[1,2]", "-n", "8", "-o", str(out)])
     assert result.exit_code != 0
     assert "Traceback" not in result.output
     assert ("config key 'bodies': found a chain of bodies; expected a one-body config (body, controller) here: "

@@ -56,6 +56,27 @@ def test_a_chain_sweep_writes_what_rbstab_run_writes_and_resumes(tmp_path):
     assert ds["lyapunov_final"].sel(trunk_theta_0=row.trunk_theta_0, hip_k_r_0=row.hip_k_r_0) == pytest.approx(
         row.lyapunov_final, rel=1e-12)
 
+    report = CliRunner().invoke(cli, ["report", str(folder), "-o", str(tmp_path / "report")])
+    assert report.exit_code == 0, report.output
+    assert (tmp_path / "report" / "figures" / "sweep_stance_ankle_hip_heatmap_lyapunov_final.png").exists()
+
+
+def test_a_chain_settles_when_every_joint_and_body_has():
+    from rbstab.report.tables import SettleThresholds, settling_time
+
+    time = np.linspace(0.0, 1.0, 11)
+    error = np.zeros((11, 2, 3))
+    error[:4, 0, 0] = 1.0  # joint 0 settles at t = 0.4
+    error[:7, 1, 2] = 1.0  # joint 1 at t = 0.7
+    omega = np.zeros((11, 3, 3))
+    omega[:6, 2, 1] = 1.0  # body 2 at t = 0.6
+    thresholds = SettleThresholds(e=0.1, omega=0.1)
+    assert settling_time(time, error, omega, thresholds) == pytest.approx(0.7)
+    omega[:9, 0, 0] = 1.0
+    assert settling_time(time, error, omega, thresholds) == pytest.approx(0.9)
+    error[-1, 1, 1] = np.nan  # a failed run's last sample
+    assert np.isnan(settling_time(time, error, omega, thresholds))
+
 
 def test_the_parameter_names_of_a_chains_keys_name_the_body_or_joint():
     assert parameter_name("joints.hip.k_c.0") == "hip_k_c_0"

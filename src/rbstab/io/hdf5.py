@@ -322,14 +322,19 @@ def write_chain_result(result: "RunResult", path: str | os.PathLike, *, command_
     """Write a chain run (:func:`rbstab.simulator.simulate_chain`) to ``path``, atomically:
     the layout of a one-body file (module docstring) with the dimensions ``body`` and
     ``joint`` (their names as coordinates) on the per-body and per-joint variables."""
-    chain = result.config.chain
-    attrs = result_attributes(result, command_line=command_line)
-    dims = {key: "body" if key in BODY_VARIABLES else "joint" for key, values in result.outputs.items()
-            if values.ndim >= 2}
-    labels = {"body": chain.body_names, "joint": chain.joint_names}
     path = Path(path)
-    write_bytes_atomic(path, _file_image(result.time, result.outputs, attrs, None, labels, dims))
+    write_run(result, path, command_line=command_line)
     return path
+
+
+def _chain_dimensions(result: "RunResult", outputs: dict[str, np.ndarray]) -> tuple[dict | None, dict | None]:
+    """(labels, dims) of :func:`_file_image` for a chain run's ``outputs``: ``body`` and
+    ``joint`` with their names; (None, None) for one body's run."""
+    chain = getattr(result.config, "chain", None)
+    if chain is None:
+        return None, None
+    dims = {key: "body" if key in BODY_VARIABLES else "joint" for key, values in outputs.items() if values.ndim >= 2}
+    return {"body": chain.body_names, "joint": chain.joint_names}, dims
 
 
 #: A chain file's variables along ``body`` (the others with a second dimension are along ``joint``).
@@ -361,7 +366,8 @@ def write_run(
         outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
     elif store == "summary":
         time, outputs = time[:0], {}
-    write_bytes_atomic(path, _file_image(time, outputs, attrs, switching))
+    labels, dims = _chain_dimensions(result, outputs)
+    write_bytes_atomic(path, _file_image(time, outputs, attrs, switching, labels, dims))
     return {k: attribute_value(np.asarray(v) if isinstance(v, np.ndarray) else v) for k, v in attrs.items()}
 
 

@@ -143,10 +143,10 @@ def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresh
     ----------
     time : ndarray, shape (n,)
         Sample times [s].
-    error : ndarray, shape (n, 3)
-        Constraint error E [m].
-    omega : ndarray, shape (n, 3)
-        Angular velocity Omega [rad/s].
+    error : ndarray, shape (n, 3), or (n, joints, 3) for a chain
+        Constraint error E [m] (a chain's E_j of every joint: each must hold).
+    omega : ndarray, shape (n, 3), or (n, bodies, 3) for a chain
+        Angular velocity Omega [rad/s] (a chain's of every body: each must hold).
     thresholds : SettleThresholds
         Bounds on the Euclidean norms |E| [m] and |Omega| [rad/s].
 
@@ -158,7 +158,9 @@ def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresh
         or not finite (a failed run never settles). Resolution: the sample spacing.
     """
     with np.errstate(invalid="ignore"):
-        inside = (np.linalg.norm(error, axis=1) <= thresholds.e) & (np.linalg.norm(omega, axis=1) <= thresholds.omega)
+        largest_error = np.linalg.norm(error, axis=-1).reshape(len(time), -1).max(axis=1, initial=0.0)
+        largest_omega = np.linalg.norm(omega, axis=-1).reshape(len(time), -1).max(axis=1, initial=0.0)
+        inside = (largest_error <= thresholds.e) & (largest_omega <= thresholds.omega)
     if len(inside) == 0 or not inside[-1]:
         return float("nan")
     outside = np.flatnonzero(~inside)
