@@ -72,7 +72,7 @@ def _compiled_run(compiled, y0, sim):
 def triple_pendulum() -> dict:
     """A 3-body chain config: three 10 kg links (1 m) in a column, permanent joints with
     feedback strong enough to hold them upright under gravity."""
-    gains = {"k_r": [3000.0, 3000.0, 300.0], "l_r": [400.0, 400.0, 40.0]}
+    gains = {"k_r": [1500.0, 1500.0, 150.0], "l_r": [300.0, 300.0, 30.0]}
     joints = [{"name": f"j{i}", "parent": "ground" if i == 0 else f"link{i - 1}",
                "parent_point": [0.0, 0.0, 0.0 if i == 0 else 0.5], "child": f"link{i}",
                "child_point": [0.0, 0.0, -0.5], "variant": "permanent", **gains} for i in range(3)]
@@ -115,7 +115,7 @@ def main() -> None:
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep-runs", type=int, default=10_000, help="runs of each sweep (0: none)")
-    args = parser.parse_args()
+    options = parser.parse_args()
     warnings.simplefilter("ignore")
     print("runs, integration only (ms a run, best of 5): scipy's solve_ivp over the compiled rate | the compiled "
           "driver | rbstab run's whole run (compiled, with outputs and summary)")
@@ -166,9 +166,9 @@ def main() -> None:
                 C.chain_rate(0.0, y, *args, dy)
         seconds = _best(loop, 3) / k
         print(f"  n = {n}: {1e6 * seconds:7.2f} us  ({1e6 * seconds / n:6.2f} us a body)")
-    if args.sweep_runs:
+    if options.sweep_runs:
         print("sweeps over initial states (2 local processes, store summary):")
-        sweeps(args.sweep_runs)
+        sweeps(options.sweep_runs)
 
 
 if __name__ == "__main__":

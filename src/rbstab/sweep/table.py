@@ -49,6 +49,9 @@ __all__ = ["RunTable", "TableSlice", "plan_table", "estimate", "MAX_TEMPLATES",
 #: Integration time of a run per core [s] for 2 s of simulated time (the paper's Case 3 at
 #: rtol 1e-8, DOP853, the compiled engine: ~0.35-0.45 ms), for the estimate of a dry run.
 RUN_SECONDS = 4e-4
+#: The same for a chain's run, and the seconds a run's file costs (``benchmarks/chains.py``:
+#: the 3-body chain, ~20 ms its integration, ~20 ms its file).
+CHAIN_RUN_SECONDS, CHAIN_FILE_SECONDS = 2e-2, 2e-2
 
 #: Distributions whose draws are factors of the base value.
 SCALES = ("scale_uniform", "scale_log_uniform")
@@ -493,8 +496,11 @@ def estimate(table: RunTable, store: str, workers: int) -> tuple[float, float]:
     """(bytes of the store, wall seconds) a sweep of ``table`` takes, roughly: the store
     from the bytes a run takes in it (:func:`rbstab.io.chunk.store_bytes_per_run` of each
     template's samples), the time from :data:`RUN_SECONDS` scaled by each run's ``t_end``
-    over 2 s and shared by ``workers`` processes."""
+    over 2 s and shared by ``workers`` processes (a chain's from :data:`CHAIN_RUN_SECONDS`
+    and :data:`CHAIN_FILE_SECONDS`)."""
 
     t_end = table.setting("t_end")
     size = float(np.sum(store_bytes_per_run(store, table.setting("n_samples"))))
+    if table.spec.is_chain:
+        return size, float(np.sum(t_end / 2.0 * CHAIN_RUN_SECONDS + CHAIN_FILE_SECONDS)) / max(workers, 1)
     return size, float(np.sum(t_end / 2.0)) * RUN_SECONDS / max(workers, 1)
