@@ -418,9 +418,6 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
                 found = "none" if options["body"] is None else f"'{options['body']}'"
                 raise click.UsageError(f"--push-body: found {found} for {config.name}; expected the body of the "
                                        f"chain that is pushed ({', '.join(names)})")
-            if options["at"] != 0.0:
-                raise click.UsageError(f"--push-at: found {options['at']:g}; a chain is pushed at t = 0, from its "
-                                       "rest state")
     if stability is not None and stability.get("ranges"):
         from rbstab.analysis.push import parse_ranges  # heavy: numba, numpy
 

@@ -195,10 +195,12 @@ def test_a_push_on_a_chain_keeps_its_joints_and_is_the_limit_of_short_pulses():
     assert errors[1] < 0.15 * errors[0] and errors[1] < 0.02  # first order in the pulse's length
 
 
-def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it():
-    """The stance example pushed on the trunk: each direction's threshold from the jump
-    (chain_push) against an independent formulation, a 0.1 ms pulse of the same impulse
-    integrated as a disturbance: 3 % below it the body recovers, 3 % above it falls."""
+@pytest.mark.parametrize("at", [0.0, 1.5])
+def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it(at):
+    """The stance example pushed on the trunk at t0: each direction's threshold from the jump
+    (chain_push) against an independent formulation, the chain at rest from t = 0 and a 0.1 ms
+    pulse of the same impulse from t0 integrated as a disturbance: 3 % below it the body
+    recovers, 3 % above it falls."""
     import yaml
 
     from rbstab.analysis.push import push_analysis
@@ -210,8 +212,8 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
         config = load_any_config(source, [limits])
     directions = np.array([[0.0, -1.0, 0.0], [0.6, 0.8, 0.0]])
     point = [0.0, 0.0, 0.2]
-    found = push_analysis(config, "force", directions=directions, body="trunk", point=point, jobs=2)
-    assert np.isfinite(found.threshold).all() and found.body == "trunk"
+    found = push_analysis(config, "force", directions=directions, body="trunk", point=point, at=at, jobs=2)
+    assert np.isfinite(found.threshold).all() and found.body == "trunk" and found.at == at
     data = yaml.safe_load(source.read_text())
     data["simulation"]["limits"] = {"theta": [0.6, 0.6, 3.2]}
     from rbstab.analysis.push import ChainPushes
@@ -223,11 +225,27 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
         for factor, falls in ((0.97, False), (1.03, True)):
             pulse = 1e-4
             data["disturbances"] = [{"kind": "pulse", "value": (factor * threshold * u / pulse).tolist(), "point": point,
-                                     "start": 0.0, "duration": pulse, "body": "trunk"}]
+                                     "start": at, "duration": pulse, "body": "trunk"}]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 result = simulate_chain(chain_config_from_mapping(data))
             assert (result.status == "failed") == falls, (u, factor, result.message)
+
+
+def test_a_chain_push_at_t0_is_refused_outside_the_run_or_with_disturbances():
+    from rbstab.analysis.push import ChainPushes
+
+    source = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_any_config(source)
+        pulsed = load_any_config(source, ['disturbances=[{kind: pulse, value: [1, 0, 0], start: 0.1, duration: 0.1, '
+                                          'body: trunk}]'])
+    with pytest.raises(ValueError, match=r"--push-at: found 9; expected a time in \[0, simulation.t_end\)"):
+        ChainPushes(config, "torque", body="trunk", at=9.0)
+    with pytest.raises(ValueError, match="a chain with disturbances .* is pushed at t = 0"):
+        ChainPushes(pulsed, "torque", body="trunk", at=1.0)
+    assert ChainPushes(pulsed, "torque", body="trunk", at=0.0).at == 0.0
 
 
 def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():

@@ -271,7 +271,7 @@ class Pushes:
 class ChainPushes:
     """A chain's pushes as batches of runs, for :func:`rbstab.analysis.push.push_thresholds`
     (the interface of :class:`rbstab.analysis.push.Pushes`): the chain at rest at its rest
-    state, pushed at t = 0 on body ``body`` (docs/physics.md, "A push on a chain";
+    state, pushed at t0 on body ``body`` (docs/physics.md, "A push on a chain";
     :func:`rbstab.variants.chain.chain_push`), each pushed state one run of the compiled
     driver to t_end, recovered by :data:`rbstab.analysis.push.RECOVERY_RULE`.
 
@@ -286,7 +286,9 @@ class ChainPushes:
     point : (3,) float, optional
         R [m], the body's frame, from its centre of mass (force only; default 0).
     at : float
-        0: a chain is pushed from rest at t = 0.
+        t0 [s], in [0, t_end). A chain without disturbances rests at its rest state until
+        t0, and its rate does not depend on time: each run is the run pushed at 0 with
+        t_end - t0 left (a chain with disturbances, which act from t = 0, is pushed at 0).
     ratio : float
     jobs : int
         Threads integrating a batch's slices (the compiled driver releases Python's lock).
@@ -294,8 +296,9 @@ class ChainPushes:
     Raises
     ------
     ValueError
-        One line: an unknown body, ``at`` not 0, a force at the pin of a body held by a
-        permanent joint to the ground, or a chain without a rest state.
+        One line: an unknown body, ``at`` outside [0, t_end) or not 0 for a chain with
+        disturbances, a force at the pin of a body held by a permanent joint to the
+        ground, or a chain without a rest state.
     """
 
     def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
@@ -308,9 +311,13 @@ class ChainPushes:
             found = "none" if body is None else f"'{body}'"
             raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
                              f"({', '.join(names)})")
-        if at != 0.0:
-            raise ValueError(f"--push-at: found {at:g}; a chain is pushed at t = 0, from its rest state")
-        self.kind, self.body, self.at, self.ratio, self.jobs = kind, body, 0.0, float(ratio), max(1, int(jobs))
+        t_end = float(config.simulation.t_end)
+        if not 0.0 <= at < t_end:
+            raise ValueError(f"--push-at: found {at:g}; expected a time in [0, simulation.t_end) = [0, {t_end:g}) s")
+        if at != 0.0 and any(b.disturbances for b in config.chain.bodies):
+            raise ValueError(f"--push-at: found {at:g}; a chain with disturbances (which act from t = 0) is pushed at "
+                             "t = 0, from its rest state")
+        self.kind, self.body, self.at, self.ratio, self.jobs = kind, body, float(at), float(ratio), max(1, int(jobs))
         self.engine, self.executor = "compiled", None
         self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
         self.units = PUSH_KINDS[kind]
@@ -327,7 +334,8 @@ class ChainPushes:
             raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
                              "potential falls without bound): a push from rest cannot be analysed")
         self.equilibrium = rest
-        self._simulation = config.simulation
+        # at rest until t0, then pushed: the run pushed at 0 over the time left (the rate does not depend on time)
+        self._simulation = dataclasses.replace(config.simulation, t_end=t_end - self.at)
         self._system = chain_system(self.compiled, config.simulation.limits)
         self.runs = 0
         self.batches = 0
@@ -657,7 +665,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     config : RunConfig or ChainConfig
         Validated. The runs use its body, controller, saturation, limits and simulation
         settings; they start at rest at its equilibrium. A chain
-        (:class:`ChainPushes`) is pushed on ``body`` at t = 0, its
+        (:class:`ChainPushes`) is pushed on ``body`` at ``at``, its
         runs on the CPU's compiled driver in ``jobs`` threads.
     kind : {"force", "torque"}
     directions : int or array_like, shape (d, 3)
