@@ -110,3 +110,24 @@ def test_a_chain_sweep_refuses_in_one_line_and_writes_nothing(args, expected, tm
     assert result.exit_code != 0
     assert "Traceback" not in result.output and expected in result.output, result.output
     assert not out.exists()
+
+
+def test_two_chains_share_a_sweep_and_show_names_each_ones_joints(tmp_path):
+    spec = tmp_path / "two.yaml"
+    spec.write_text(f"name: two\nbase: [{STANCE}, {ROOT / 'configs' / 'examples' / 'double_pendulum.yaml'}]\n"
+                    "grid:\n  simulation.t_end: [0.2, 0.4]\n")
+    out = tmp_path / "results"
+    result = CliRunner().invoke(cli, ["sweep", str(spec), "--set", "simulation.n_samples=201", "-j", "1",
+                                      "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    index = pd.read_csv(out / "two" / "index.csv")
+    assert index["base"].tolist() == ["stance_ankle_hip"] * 2 + ["double_pendulum"] * 2
+    stance, pendulum = index.iloc[:2], index.iloc[2:]
+    assert stance["max_abs_constraint_error_hip"].notna().all() and stance["max_abs_constraint_error_elbow"].isna().all()
+    assert pendulum["max_abs_constraint_error_elbow"].notna().all() and pendulum["max_abs_constraint_error_hip"].isna().all()
+    shown = CliRunner().invoke(cli, ["show", str(out / "two")])
+    assert shown.exit_code == 0, shown.output
+    for rid, row in zip(index["run_id"], index.itertuples()):
+        line = next(text for text in shown.output.splitlines() if text.strip().startswith(rid))
+        largest = max(v for k, v in row._asdict().items() if k.startswith("max_abs_constraint_error_") and v == v)
+        assert f"{largest:.6g}" in line, line
