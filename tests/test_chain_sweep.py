@@ -131,3 +131,25 @@ def test_two_chains_share_a_sweep_and_show_names_each_ones_joints(tmp_path):
         line = next(text for text in shown.output.splitlines() if text.strip().startswith(rid))
         largest = max(v for k, v in row._asdict().items() if k.startswith("max_abs_constraint_error_") and v == v)
         assert f"{largest:.6g}" in line, line
+
+
+def test_a_chain_sweep_on_a_dask_cluster_writes_the_local_sweeps_files(tmp_path):
+    """The workers of a Dask cluster send each run's file back as bytes; the parent writes
+    them: the index and every file's traces are those of the local sweep."""
+    pytest.importorskip("distributed", reason='the dask executor needs "distributed" (pip install ".[dask]")')
+    from distributed import LocalCluster
+
+    args = ["sweep", STANCE, "--grid", "initial_state.trunk.theta.0=-0.1,0.1", *SHORT, "--no-progress"]
+    local = CliRunner().invoke(cli, [*args, "-j", "1", "-o", str(tmp_path / "local")])
+    assert local.exit_code == 0, local.output
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        result = CliRunner().invoke(cli, [*args, "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "dask")])
+    assert result.exit_code == 0 and "Dask scheduler" in result.output, result.output
+    folders = [tmp_path / where / "stance_ankle_hip" for where in ("local", "dask")]
+    ia, ib = (pd.read_csv(f / "index.csv").drop(columns=["wall_time"]) for f in folders)
+    pd.testing.assert_frame_equal(ia, ib)
+    for name in ia["file"]:
+        with xr.open_dataset(folders[0] / name, engine="h5netcdf") as a, \
+                xr.open_dataset(folders[1] / name, engine="h5netcdf") as b:
+            np.testing.assert_array_equal(a["theta"].values, b["theta"].values)
+            np.testing.assert_array_equal(a["lyapunov"].values, b["lyapunov"].values)
