@@ -105,7 +105,7 @@ _LAZY = {
     "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "load_config"),
     "paths": ("apply_overrides", "parse_key", "KeyPath", "KeyPathError"),
     "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
-    "chains": ("ChainConfig", "chain_of", "chain_config_from_mapping", "load_any_config"),
+    "chains": ("ChainConfig", "chain_of", "chain_config_from_mapping", "any_config_from_mapping", "load_any_config"),
 }
 
 
@@ -143,5 +143,6 @@ __all__ = [
     "ChainConfig",
     "chain_of",
     "chain_config_from_mapping",
+    "any_config_from_mapping",
     "load_any_config",
 ]

@@ -63,6 +63,7 @@ from .loader import (
     _related,
     _short_override,
     _validated,
+    config_from_mapping,
     disturbances_of,
     is_chain,
     load_config,
@@ -84,7 +85,7 @@ from .schema import (
 )
 from .yaml_io import dump_yaml, read_yaml_file
 
-__all__ = ["ChainConfig", "chain_of", "chain_config_from_mapping", "load_any_config", "ONE_BODY_NAMES",
+__all__ = ["ChainConfig", "chain_of", "chain_config_from_mapping", "any_config_from_mapping", "load_any_config", "ONE_BODY_NAMES",
            "CONSTRAINT_TOLERANCE"]
 
 #: The names of the body and the joint of a one-body config's chain (its sections' names).
@@ -374,6 +375,21 @@ def chain_config_from_mapping(data: Mapping, *, default_name: str | None = None,
         beyond one turn.
     """
     return _build(data, default_name=default_name, source=source)
+
+
+def any_config_from_mapping(data: Mapping, *, default_name: str | None = None,
+                            source: str | None = None) -> RunConfig | ChainConfig:
+    """Validate a configuration mapping: a :class:`ChainConfig` for a chain's (``bodies``,
+    :func:`chain_config_from_mapping`), else a :class:`rbstab.config.RunConfig`
+    (:func:`rbstab.config.config_from_mapping`).
+
+    Raises
+    ------
+    ConfigError
+        As those two.
+    """
+    build = chain_config_from_mapping if is_chain(data) else config_from_mapping
+    return build(data, default_name=default_name, source=source)
 
 
 def load_any_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig | ChainConfig:

@@ -25,8 +25,8 @@ import numpy as np
 from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
-from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
-from ..config.chains import chain_config_from_mapping
+from ..config import ConfigError, PhysicalPlausibilityWarning
+from ..config.chains import any_config_from_mapping
 from ..config.loader import is_chain
 from ..config.paths import KeyPath, parse_key
 from ..config.schema import ChainSchema
@@ -38,7 +38,7 @@ from ..variants.base import limited_values
 from ..config.physics import SINGULAR_RTOL
 from ..config.physics import inertia_warnings
 
-__all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report", "key_path", "any_config_from_mapping"]
+__all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report", "key_path"]
 
 _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 #: Flagged runs validated one by one (for the count of invalid runs); beyond it, the runs
@@ -82,12 +82,6 @@ def key_path(key: str, data: Mapping) -> KeyPath:
         If it names nothing of that schema.
     """
     return parse_key(key, ChainSchema if is_chain(data) else None)
-
-
-def any_config_from_mapping(data: Mapping, **kwargs):
-    """:func:`rbstab.config.chains.chain_config_from_mapping` of a chain's mapping, else
-    :func:`rbstab.config.config_from_mapping` (same arguments)."""
-    return (chain_config_from_mapping if is_chain(data) else config_from_mapping)(data, **kwargs)
 
 
 def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:

@@ -50,8 +50,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config import PhysicalPlausibilityWarning, RunConfig, config_from_mapping
-from ..config.chains import chain_config_from_mapping
+from ..config import PhysicalPlausibilityWarning, RunConfig
+from ..config.chains import any_config_from_mapping
 from ..config.loader import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
@@ -138,7 +138,7 @@ def _config(task: RunTask):
     with warnings.catch_warnings():
         # shown once, as a digest, when the sweep was planned
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-        return config_from_mapping(task.config)
+        return any_config_from_mapping(task.config)
 
 
 def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:
@@ -295,7 +295,10 @@ def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
         t0 = _time.perf_counter()
         config = _config(task)
         config_time = _time.perf_counter() - t0
-        result = simulate(config, timeout=options.timeout)
+        if is_chain(task.config):  # each chain run alone, on the engine's CPU driver
+            result = simulate_chain(config, timeout=options.timeout, engine=options.engine)
+        else:
+            result = simulate(config, timeout=options.timeout)
     except Exception as exc:  # a bug: data, not a crash of the sweep
         return sink.error(task, exc)
     try:
@@ -395,31 +398,6 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     return records
 
 
-def _chain_runs(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
-    """The records of chain runs, each validated and integrated alone
-    (:func:`rbstab.simulator.simulate_chain`, ``options.engine``)."""
-    records = []
-    for task in tasks:
-        try:
-            t0 = _time.perf_counter()
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", PhysicalPlausibilityWarning)  # said once, when the sweep was planned
-                config = chain_config_from_mapping(task.config)
-            config_time = _time.perf_counter() - t0
-            result = simulate_chain(config, timeout=options.timeout, engine=options.engine)
-        except Exception as exc:  # a bug: data, not a crash of the sweep
-            records.append(sink.error(task, exc))
-            continue
-        try:
-            record = sink.add(task, result)
-        except Exception as exc:  # an I/O problem: this run's error
-            records.append(sink.error(task, exc))
-            continue
-        record["timing"]["config"] = config_time
-        records.append(record)
-    return records
-
-
 def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """The records of ``tasks`` run by ``options.engine`` (what a run's row does not carry:
     its timing, a traceback, an errno; any order)."""
@@ -427,7 +405,7 @@ def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[d
     if chains:
         tasks = [t for t in tasks if not is_chain(t.config)]
     engine = _compiled_engine if get_engine(options.engine).compiled else _scipy_engine
-    return (_chain_runs(chains, options, sink) if chains else []) + engine(tasks, options, sink)
+    return [_run_one(task, options, sink) for task in chains] + engine(tasks, options, sink)
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> "ChunkResult":
