@@ -297,7 +297,7 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
     workers = jobs or default_jobs()
     size, seconds = estimate(table, store, workers)
     console.out(f"{loaded.name}: {table.n} runs (dry run: nothing run or written)")
-    console.out(f"  store ~{size / 2**20:.3g} MiB (--store {store}, --layout {layout or sweep_layout(loaded)}); "
+    console.out(f"  store ~{size / 2**20:.3g} MiB (--store {store}, --layout {layout or sweep_layout(loaded, None, store)}); "
                 f"wall time ~{seconds:.3g} s on {workers} worker(s) after the engine's start-up")
     console.out("varied:" if table.keys else "varied: nothing")
     for line in table.describe(every=console.verbosity >= 1):

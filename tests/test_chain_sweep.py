@@ -61,6 +61,34 @@ def test_a_chain_sweep_writes_what_rbstab_run_writes_and_resumes(tmp_path):
     assert (tmp_path / "report" / "figures" / "sweep_stance_ankle_hip_heatmap_lyapunov_final.png").exists()
 
 
+def test_a_chain_sweep_of_summaries_writes_store_files_with_the_run_layouts_figures(tmp_path):
+    """--store summary: the runs of a chain go into store files (the default layout), one
+    integration call for the runs of one chain; the index's figures are those of a file
+    per run, bit for bit, two chains share the files, and a rerun skips every run."""
+    spec = tmp_path / "two.yaml"
+    spec.write_text(f"name: two\nbase: [{STANCE}, {ROOT / 'configs' / 'examples' / 'double_pendulum.yaml'}]\n"
+                    "grid:\n  simulation.rtol: [1.0e-8, 1.0e-7]\n")
+    indexes = {}
+    for layout in ("chunk", "run"):
+        out = tmp_path / layout
+        args = ["sweep", str(spec), *SHORT, "--store", "summary", "-j", "1", "-o", str(out)]
+        result = CliRunner().invoke(cli, args + ([] if layout == "chunk" else ["--layout", "run"]))
+        assert result.exit_code == 0, result.output
+        indexes[layout] = pd.read_csv(out / "two" / "index.csv")
+        files = sorted(p.name for p in (out / "two" / "runs").iterdir())
+        assert all(name.startswith("chunk-") for name in files) == (layout == "chunk"), files
+    chunk, run = indexes["chunk"], indexes["run"]
+    assert chunk["run_id"].tolist() == run["run_id"].tolist() and set(chunk["status"]) == {"success"}
+    figures = [c for c in run.columns if c.startswith(("max_abs_constraint_error_", "max_constraint_drift_", "lyapunov_"))]
+    assert {"max_abs_constraint_error_hip", "max_abs_constraint_error_elbow", "lyapunov_final"} <= set(figures)
+    pd.testing.assert_frame_equal(chunk[figures], run[figures])
+    again = CliRunner().invoke(cli, ["sweep", str(spec), *SHORT, "--store", "summary", "-j", "1", "-o",
+                                     str(tmp_path / "chunk")])
+    assert again.exit_code == 0 and ("4 skipped" in again.output or "skipped 4" in again.output), again.output
+    ds = rbstab.open_sweep(tmp_path / "chunk" / "two")
+    np.testing.assert_array_equal(ds["lyapunov_final"].values, chunk["lyapunov_final"].values)
+
+
 def test_a_chain_settles_when_every_joint_and_body_has():
     from rbstab.report.tables import SettleThresholds, settling_time
 

@@ -7,6 +7,7 @@ planar double inverted pendulum's linearisation has the eigenvalues of M q'' + L
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from rbstab.variants import VARIANTS
 from rbstab.variants import chain as C
 
 D = np.diag
+ROOT = Path(__file__).resolve().parents[1]
 ALL = sorted(VARIANTS)
 
 
@@ -325,3 +327,18 @@ def test_rbstab_analyze_pushes_a_chains_body_and_draws_its_basin_stability(tmp_p
                                         "--push-body", "trunk", "-o", str(tmp_path)])
     assert one_body.exit_code == 2 and "--push-body: names the body of a chain" in one_body.output
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("mass", [44.0, 45.0, 48.0])
+def test_v_is_zero_at_the_stance_rest_state_for_every_trunk_mass(mass):
+    """h puts v's minimum at the rest state whatever the trunk's mass: v there is 0 and
+    every body's acceleration vanishes (a rest point: the minimiser's, where polishing it
+    leaves the model's domain)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", [f"bodies.trunk.mass={mass}"])
+    compiled = C.compile_chain(config.chain)
+    rest, _ = C.rest_state(compiled)
+    v, rate = C.lyapunov(compiled, rest)
+    assert abs(v) < 1e-9 * abs(compiled.offset) and abs(rate) < 1e-9
+    assert np.abs(_rate(compiled, rest)).max() < 1e-6

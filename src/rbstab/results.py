@@ -118,7 +118,11 @@ class RunBlock:
         Samples of the runs' grid (``simulation.n_samples`` on [0, t_end]) from one entry
         of ``time`` to the next: 1, or a thinned trace of the ``cuda`` engine.
     variants : list of str
-        Each run's controller variant (``config.variant``; given where ``configs`` are None).
+        Each run's controller variant (``config.variant``; given where ``configs`` are None;
+        ``chain`` for a chain's runs).
+    joints : tuple of str, optional
+        The joint names of a block of one chain's runs: its per-joint summary figures have
+        shape (k, n_joints), in this order.
     """
 
     configs: list
@@ -133,10 +137,11 @@ class RunBlock:
     switching: list
     stride: int = 1
     variants: list = None
+    joints: tuple | None = None
 
     def __post_init__(self) -> None:
         if self.variants is None:
-            self.variants = [c.variant for c in self.configs]
+            self.variants = ["chain" if self.joints is not None else c.variant for c in self.configs]
 
     def __len__(self) -> int:
         return len(self.status)
@@ -157,5 +162,11 @@ class RunBlock:
                     for key, value in result.summary.items()},
                    [result.status], [result.message], {key: [value] for key, value in result.solver.items()},
                    np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
-                   [result.switching])
+                   [result.switching], joints=_joints(result.config))
+
+
+def _joints(config) -> tuple | None:
+    """A chain config's joint names; None for one body's."""
+    chain = getattr(config, "chain", None)
+    return None if chain is None else tuple(chain.joint_names)
 

@@ -730,9 +730,9 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
 
     ``engine``: ``"scipy"`` integrates with ``solve_ivp`` (:func:`rbstab.variants.chain.integrate`,
     any method); every other engine, and the compiled engine's methods, with the compiled
-    driver on the CPU (:func:`rbstab.engine.integrate.integrate_chain_runs`: the same steps
-    as ``solve_ivp``'s, the admissible region's events located on the step's interpolant).
-    ``timeout`` [s] replaces ``simulation.max_wall_time``.
+    driver on the CPU (:func:`simulate_chain_blocks`: the same steps as ``solve_ivp``'s, the
+    admissible region's events located on the step's interpolant). ``timeout`` [s] replaces
+    ``simulation.max_wall_time``.
 
     Raises
     ------
@@ -742,47 +742,113 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     from .variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     methods = get_engine(engine).methods  # checks the name; None: solve_ivp integrates every method
-    start = _time.perf_counter()
     sim = config.simulation
-    if methods is None or sim.method not in methods:
-        trajectory = C.integrate(config, timeout=timeout)
-        compiled, time, states = trajectory.compiled, trajectory.time, trajectory.states
-        status, message, solver = trajectory.status, trajectory.message, trajectory.solver
-    else:
-        compiled = C.compile_chain(config.chain)
-        time, states, status, message, solver = _chain_compiled(config, compiled, timeout)
+    if methods is not None and sim.method in methods:
+        (_, block), = simulate_chain_blocks([config], timeout=timeout)
+        return block.result(0)
+    start = _time.perf_counter()
+    trajectory = C.integrate(config, timeout=timeout)
+    compiled, time = trajectory.compiled, trajectory.time
+    outputs, summary = _chain_outputs(compiled, config, time, trajectory.states)
+    solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
+    return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,
+                     _time.perf_counter() - start, summary)
+
+
+def _chain_outputs(compiled, config, time: np.ndarray, states: np.ndarray) -> tuple[dict, dict]:
+    """(outputs, summary) of a chain run's samples ``states`` at ``time``."""
+    from .variants import chain as C  # heavy: numba
+
     outputs = C.evaluate(compiled, time, states)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    summary = chain_summary(time, outputs, config.chain.joint_names, C.disturbance_edges(compiled, time))
-    solver = {k: v for k, v in solver.items() if k != "wall_time"}
-    return RunResult(config, time, outputs, status, message, solver, _time.perf_counter() - start, summary)
+    return outputs, chain_summary(time, outputs, config.chain.joint_names, C.disturbance_edges(compiled, time))
 
 
-def _chain_compiled(config, compiled, timeout: float | None):
-    """(time, states, status, message, solver) of a chain run on the compiled driver."""
+def _chain_key(compiled, sim) -> bytes:
+    """What runs integrated in one call share: the chain's records and admissible region,
+    the method, sample count and t_end."""
+    parts = [np.ascontiguousarray(a).tobytes() for a in compiled.args]
+    limits = b"" if sim.limits is None else repr(sim.limits).encode()
+    return b"|".join([*parts, limits, str((sim.method, sim.n_samples, float(sim.t_end), compiled.offset)).encode()])
+
+
+def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None,
+                          outputs: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
+    """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
+    on the compiled CPU driver: the runs of one chain (the same bodies, joints, gains and
+    admissible region) with the same method, sample count and t_end in one call of
+    :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states:
+    one call a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
+    :class:`RunBlock`'s runs, in order. ``outputs`` False: the block carries the summaries
+    but no traces (a store of summaries). ``timeout`` [s] replaces each run's
+    ``simulation.max_wall_time``."""
     from .engine.integrate import integrate_chain_runs  # heavy: numba
     from .engine.systems import chain_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
-    sim = config.simulation
-    y0 = C.initial_state(config)
-    settings = settings_rows([sim], timeout)
-    sol = integrate_chain_runs(chain_system(compiled, sim.limits), y0[None], settings, method=sim.method,
-                               n_samples=sim.n_samples)
-    time = np.linspace(0.0, sim.t_end, sim.n_samples)
-    states = sol.samples[0]
-    code, t_stop = int(sol.status[0]), float(sol.t_stop[0])
-    solver = {"nfev": int(sol.nfev[0]), "n_steps": int(sol.n_steps[0]), "solver_status": 0 if code == SUCCESS else -1}
+    groups: dict[bytes, tuple] = {}
+    by_chain: dict[int, object] = {}  # configs that share their Chain object share its compilation
+    for i, config in enumerate(configs):
+        compiled = by_chain.get(id(config.chain))
+        if compiled is None:
+            compiled = by_chain[id(config.chain)] = C.compile_chain(config.chain)
+        key = _chain_key(compiled, config.simulation)
+        if key not in groups:
+            groups[key] = (compiled, [])
+        groups[key][1].append(i)
+    for compiled, members in groups.values():
+        start = _time.perf_counter()
+        sims = [configs[i].simulation for i in members]
+        sim = sims[0]
+        y0 = np.array([C.initial_state(configs[i]) for i in members])
+        settings = settings_rows(sims, timeout)
+        sol = integrate_chain_runs(chain_system(compiled, sim.limits), y0, settings, method=sim.method,
+                                   n_samples=sim.n_samples)
+        time = np.linspace(0.0, sim.t_end, sim.n_samples)
+        time.flags.writeable = False
+        integration = (_time.perf_counter() - start) / len(members)
+        traces, summaries, status, message, seconds = [], [], [], [], []
+        for j, i in enumerate(members):
+            t0 = _time.perf_counter()
+            run_outputs, summary = _chain_outputs(compiled, configs[i], time, sol.samples[j])
+            if outputs:
+                traces.append(run_outputs)
+            summaries.append(summary)
+            ended = _chain_end(compiled, sim, int(sol.status[j]), float(sol.t_stop[j]), sol.samples[j], y0[j],
+                               float(settings[j, 6]))
+            status.append(ended[0])
+            message.append(ended[1])
+            seconds.append(_time.perf_counter() - t0)
+        ok = sol.status == SUCCESS
+        post = np.asarray(seconds)
+        yield members, RunBlock(
+            configs=[configs[i] for i in members],
+            time=time if outputs else time[:0],
+            outputs={key: np.stack([t[key] for t in traces]) for key in traces[0]} if outputs else {},
+            summaries={key: np.array([s[key] for s in summaries], dtype=object if isinstance(summaries[0][key], str)
+                                     else None) for key in summaries[0]},
+            status=status, message=message,
+            solver={"nfev": sol.nfev.astype(np.int64), "n_steps": sol.n_steps.astype(np.int64),
+                    "solver_status": np.where(ok, 0, -1).astype(np.int64)},
+            wall_time=integration + post,
+            timing={"integration": np.full(len(members), integration), "postprocess": post},
+            switching=[None] * len(members),
+            joints=tuple(compiled.chain.joint_names),
+        )
+
+
+def _chain_end(compiled, sim, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray,
+               wall_limit: float) -> tuple[str, str]:
+    """(status, message) of a chain run of the compiled driver that ended with ``code``."""
+    from .variants import chain as C  # heavy: numba
+
     if code == SUCCESS:
-        return time, states, "success", status_message(code, t_stop, sim.gimbal_margin), solver
+        return "success", status_message(code, t_stop, sim.gimbal_margin)
     if code == GIMBAL_LOCK:
-        message = (f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_stop:.6g} s")
-    elif limit_of(code) is not None:
+        return "failed", f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_stop:.6g} s"
+    if limit_of(code) is not None:
         finite = states[np.isfinite(states[:, 0])]
         last = finite[-1] if len(finite) else y0
-        message = (f"left the admissible region (simulation.limits): {C.nearest_bound(compiled, last, sim.limits, limit_of(code))}"
-                   f" at t = {t_stop:.6g} s")
-    else:
-        message = status_message(code, t_stop, sim.gimbal_margin, int(sim.max_steps),
-                                 sim.max_wall_time if timeout is None else timeout)
-    return time, states, "failed", message, solver
+        return "failed", (f"left the admissible region (simulation.limits): "
+                          f"{C.nearest_bound(compiled, last, sim.limits, limit_of(code))} at t = {t_stop:.6g} s")
+    return "failed", status_message(code, t_stop, sim.gimbal_margin, int(sim.max_steps), wall_limit)

@@ -28,13 +28,14 @@ from numba.core.extending import intrinsic
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..variants.chain import chain_work
 from ..variants.disturbances import before
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
 from .status import DEFAULT_MAX_STEPS, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
-from .systems import (CHAIN, admissible, admissible_event, gimbal_event, system_breakpoint, system_disturbed,
-                      system_impulses, system_limited, system_margin, system_rate)
+from .systems import (CHAIN, ChainSystem, admissible, admissible_event, gimbal_event, system_breakpoint,
+                      system_disturbed, system_impulses, system_limited, system_margin, system_rate)
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
@@ -436,10 +437,13 @@ def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
 def integrate_chain_chunk(system, y0, settings, samples, work_done, ends):
     """:func:`integrate_run` for k runs of one chain (``system``, a
     :class:`~rbstab.engine.systems.ChainSystem`) from the initial states ``y0`` (k, n_state);
-    the other arguments as :func:`integrate_chunk`'s."""
+    the other arguments as :func:`integrate_chunk`'s. The call evaluates the chain with
+    scratch arrays of its own (threads may integrate one system at once)."""
     status, t_stop, nfev, n_steps = ends
+    own = ChainSystem(system.params, system.codes, system.parents, system.ppoints, system.d_at,
+                      chain_work(system.codes.shape[0]))
     for k in range(y0.shape[0]):
-        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(CHAIN, system, y0[k], settings[k], samples[k],
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(CHAIN, own, y0[k], settings[k], samples[k],
                                                                   work_done[k])
 
 

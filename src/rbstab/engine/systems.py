@@ -29,7 +29,7 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
 from ..model import set_limits
-from ..variants.chain import _relative, chain_impulses, chain_rate
+from ..variants.chain import _relative, chain_evaluate, chain_impulses, chain_work
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from .status import GIMBAL_LOCK, LEFT_REGION
@@ -44,8 +44,10 @@ CHAIN = -1
 #: A chain as the compiled driver reads it: ``params`` (n,) PARAMETERS records (body i with
 #: joint i's gains; the admissible region in every record), ``codes`` (n,) the joints'
 #: variant codes, ``parents`` (n,) parent indices (-1: ground), ``ppoints`` (n, 3) parent
-#: points [m], ``d_at`` (n,) the index of each embedded joint's D in the state (-1: none).
-ChainSystem = namedtuple("ChainSystem", ["params", "codes", "parents", "ppoints", "d_at"])
+#: points [m], ``d_at`` (n,) the index of each embedded joint's D in the state (-1: none),
+#: ``work`` the scratch arrays of an evaluation (:class:`rbstab.variants.chain.ChainWork`;
+#: each call of the driver evaluates with scratch arrays of its own).
+ChainSystem = namedtuple("ChainSystem", ["params", "codes", "parents", "ppoints", "d_at", "work"])
 
 
 def chain_system(compiled, limits=None) -> ChainSystem:
@@ -54,7 +56,8 @@ def chain_system(compiled, limits=None) -> ChainSystem:
     None: unbounded) written into copies of its records."""
     params = compiled.params.copy()
     set_limits(params, limits)
-    return ChainSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at)
+    return ChainSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at,
+                       chain_work(compiled.size))
 
 
 # -- one body's admissible region -------------------------------------------------------------
@@ -213,7 +216,8 @@ def _is_body(p) -> bool:
 def _system_rate(code, t, y, p, f):
     if _is_body(p):
         return lambda code, t, y, p, f: state_rate(code, t, y, p, f)
-    return lambda code, t, y, p, f: chain_rate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, f)
+    return lambda code, t, y, p, f: chain_evaluate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, f,
+                                                   p.work.joints, p.work.bodies, p.work.scalars, p.work)
 
 
 @overload(system_margin, target="generic", jit_options=_INLINE)
@@ -248,4 +252,4 @@ def _system_breakpoint(p, t, t_end):
 def _system_impulses(code, t, y, p):
     if _is_body(p):
         return lambda code, t, y, p: apply_impulses(code == PERMANENT, t, y, p)
-    return lambda code, t, y, p: chain_impulses(t, y, p.params, p.codes, p.parents, p.ppoints)
+    return lambda code, t, y, p: chain_impulses(t, y, p.params, p.codes, p.parents, p.ppoints, p.work)

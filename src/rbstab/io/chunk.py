@@ -191,14 +191,16 @@ def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = N
     return out
 
 
-def summary_table_columns(table: Mapping[str, Sequence]) -> dict[str, np.ndarray]:
+def summary_table_columns(table: Mapping[str, Sequence], joints: Sequence[str] | None = None) -> dict[str, np.ndarray]:
     """:func:`summary_columns` of k runs at once, from :func:`rbstab.summary.summary_table`
-    (figure -> k values, shape (k,) or (k, 3)): column -> its k values, shape (k,)."""
+    (figure -> k values, shape (k,) or (k, 3); a chain's per-joint figures (k, n_joints),
+    ``joints`` their names): column -> its k values, shape (k,)."""
     out: dict[str, np.ndarray] = {}
+    labels = _AXES if joints is None else tuple(joints)
     for key, values in table.items():
         values = np.asarray(values)
         if values.ndim == 2:
-            for a, axis in enumerate(_AXES):
+            for a, axis in enumerate(labels):
                 out[f"{key}_{axis}"] = values[:, a]
         else:
             out[key] = values
@@ -499,7 +501,7 @@ class ChunkWriter:
         if "run_templates" not in self.attrs:
             values["config"] = texts
         values["config_hash"] = hashes
-        values.update(summary_table_columns(block.summaries))
+        values.update(summary_table_columns(block.summaries, block.joints))
         return values
 
     def add_error(self, run_id: str, message: str) -> dict[str, Any]:

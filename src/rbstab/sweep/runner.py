@@ -431,7 +431,7 @@ def run_sweep(
     """
 
     engine = resolve_engine(engine, timeout)
-    layout = sweep_layout(spec, layout)
+    layout = sweep_layout(spec, layout, store)
     chunking = _chunking(chunk_size, engine, store, layout)
     wants_csv(index, 0)  # a value not allowed: ValueError before anything runs
     table = plan_table(spec) if table is None else table
@@ -448,21 +448,23 @@ def run_sweep(
     return outcome
 
 
-def sweep_layout(spec: SweepSpec, layout: str | None = None) -> str:
-    """The layout a sweep of ``spec`` writes: ``layout``, by default ``"chunk"`` (store
-    files), ``"run"`` (a result file per run) for a sweep of chains, which store files do not
-    hold.
+def sweep_layout(spec: SweepSpec, layout: str | None = None, store: str = DEFAULT_STORE) -> str:
+    """The layout a sweep of ``spec`` with the store ``store`` writes: ``layout``, by
+    default ``"chunk"`` (store files); for a sweep of chains ``"chunk"`` with the store
+    ``summary`` (per-run figures only), else ``"run"`` (a result file per run: store files
+    do not hold a chain's per-body and per-joint traces).
 
     Raises
     ------
     SweepSpecError
-        For ``layout="chunk"`` with bases that are chains.
+        For ``layout="chunk"`` with bases that are chains and a store with traces.
     """
     if layout is None:
-        return "run" if spec.is_chain else DEFAULT_LAYOUT
-    if layout == "chunk" and spec.is_chain:
-        raise SweepSpecError(["layout: found 'chunk'; the bases are chains, whose sweeps write a result file per run "
-                              "(layout 'run', the default for chains)"], spec.source)
+        return "run" if spec.is_chain and store != "summary" else DEFAULT_LAYOUT
+    if layout == "chunk" and spec.is_chain and store != "summary":
+        raise SweepSpecError([f"layout: found 'chunk' with store '{store}'; the bases are chains, whose traces are "
+                              "written a result file per run (layout 'run', their default) and whose store files "
+                              "hold summaries only (store 'summary')"], spec.source)
     return layout
 
 

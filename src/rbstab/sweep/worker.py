@@ -57,7 +57,8 @@ from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
 from ..results import plain
-from ..simulator import simulate, simulate_batch, simulate_blocks, simulate_chain, uses_compiled_engine
+from ..simulator import (simulate, simulate_batch, simulate_blocks, simulate_chain, simulate_chain_blocks,
+                         uses_compiled_engine)
 from .folder import NOT_IN_INDEX, index_part, row_from_attributes
 
 __all__ = ["RunTask", "WorkerOptions", "run_chunk", "run_table_chunk", "ChunkResult"]
@@ -398,6 +399,36 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     return records
 
 
+def _chain_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
+    """Integrate the chain runs of the chunk with the compiled CPU driver, the runs of one
+    chain in one call (:func:`rbstab.simulator.simulate_chain_blocks`); runs of another
+    method (scipy's implicit ones) or engine (scipy) each alone (:func:`_run_one`)."""
+    t0 = _time.perf_counter()
+    records: list[dict[str, Any]] = []
+    configs: list = []
+    for task in tasks:
+        try:
+            configs.append(_config(task))
+        except Exception as exc:
+            configs.append(None)
+            records.append(sink.error(task, exc))
+    methods = get_engine(options.engine).methods
+    batch = [i for i, c in enumerate(configs) if c is not None and methods is not None
+             and c.simulation.method in methods]
+    others = [i for i, c in enumerate(configs) if c is not None and i not in set(batch)]
+    config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
+    done: set[int] = set()
+    try:
+        for members, block in simulate_chain_blocks([configs[i] for i in batch], timeout=options.timeout,
+                                                    outputs=options.store != "summary" or options.layout != "chunk"):
+            chunk = [batch[j] for j in members]
+            done.update(chunk)
+            records += _add_block(sink, [tasks[i] for i in chunk], block, config_time)
+    except Exception:  # a bug of the batch as a whole: its unfinished runs go one by one
+        others += [i for i in batch if i not in done]
+    return records + [_run_one(tasks[i], options, sink) for i in sorted(others)]
+
+
 def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """The records of ``tasks`` run by ``options.engine`` (what a run's row does not carry:
     its timing, a traceback, an errno; any order)."""
@@ -405,7 +436,7 @@ def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[d
     if chains:
         tasks = [t for t in tasks if not is_chain(t.config)]
     engine = _compiled_engine if get_engine(options.engine).compiled else _scipy_engine
-    return [_run_one(task, options, sink) for task in chains] + engine(tasks, options, sink)
+    return (_chain_engine(chains, options, sink) if chains else []) + engine(tasks, options, sink)
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> "ChunkResult":

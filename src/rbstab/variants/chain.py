@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import time as _time
+from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +49,7 @@ from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_ene
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
-           "reduced_rate", "nearest_bound", "place", "chain_push", "chain_impulses", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "reduced_rate", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
@@ -63,6 +64,25 @@ SCALAR_OUTPUTS = ("lyapunov", "lyapunov_rate", "lyapunov_kinetic", "lyapunov_joi
 _E, _F, _LAMBDA, _N, _D, _THETA_J, _OMEGA_J = range(7)
 # Entries of the scalar record: the terms of v (h not included) and dv/dt.
 _KINETIC, _JOINT, _BODY, _GRAVITY, _RATE = range(5)
+
+#: Scratch arrays of one evaluation of a chain of n bodies (:func:`chain_work`): ``rot``,
+#: ``rate`` (n, 3, 3) A_i and B(Theta_i); ``torque``, ``force`` (n, 3) the wrench on each body
+#: (body-frame torque [N m], inertial force [N]); ``g`` (n, 3, 3) the inverse inertias in
+#: the inertial frame [1/(kg m^2)]; ``matrix`` (3n, 3n) and ``rhs`` (3n,) the permanent joints'
+#: linear system; ``which`` (n,) int64 the permanent joints; ``joints`` (n, 7, 3),
+#: ``bodies`` (n, 3), ``scalars`` (5,) the per-joint, per-body and scalar records
+#: :func:`chain_core` fills. The compiled driver holds one per chain (in its system), so an
+#: evaluation allocates nothing.
+ChainWork = namedtuple("ChainWork", ["rot", "rate", "torque", "force", "g", "matrix", "rhs",
+                                     "which", "joints", "bodies", "scalars"])
+
+
+@jit
+def chain_work(n):
+    """Scratch arrays (:class:`ChainWork`) of a chain of ``n`` bodies."""
+    return ChainWork(np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3)),
+                     np.empty((3 * n, 3 * n)), np.empty(3 * n), np.empty(n, dtype=np.int64),
+                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5))
 
 
 # -- compiled core --------------------------------------------------------------------------
@@ -89,6 +109,18 @@ def euler_angles(a):
     a[0][0] = c2 c3."""
     s2 = min(1.0, max(-1.0, a[0][2]))
     return (math.atan2(-a[1][2], a[2][2]), math.asin(s2), math.atan2(-a[0][1], a[0][0]))
+
+
+@jit(forceinline=True)
+def _euler_rate_of(a):
+    """B(Theta) (eq 1, as :func:`rbstab.kinematics.rotation_and_rate_of`'s) of the rotation
+    a = A(Theta), read from its entries: c2 = hypot(a[0][0], a[0][1]), s2 = a[0][2],
+    c2 c3 = a[0][0], -c2 s3 = a[0][1] (no trigonometric function)."""
+    c2_sq = a[0][0] * a[0][0] + a[0][1] * a[0][1]
+    c2 = math.sqrt(c2_sq)
+    s2 = a[0][2]
+    c3_c2, s3_c2 = a[0][0] / c2_sq, -a[0][1] / c2_sq
+    return ((c3_c2, -s3_c2, 0.0), (s3_c2 * c2, c3_c2 * c2, 0.0), (-s2 * c3_c2, s2 * s3_c2, 1.0))
 
 
 @jit(forceinline=True)
@@ -122,6 +154,13 @@ def _point_acceleration(i, r, rot, y, torque, force, params, with_velocity):
 
 @jit
 def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars):
+    """:func:`chain_evaluate` with scratch arrays of its own (for callers in Python)."""
+    chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars,
+                   chain_work(codes.shape[0]))
+
+
+@jit
+def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work):
     """The state rate of a chain and everything it is made of, at time ``t`` [s].
 
     ``y`` (n_states,) (module docstring); ``params`` (n,) :data:`PARAMETERS` records;
@@ -134,13 +173,13 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
     (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the kinetic, joint,
     body-feedback and gravity terms of v (without h) and dv/dt (analytic: minus the
     dissipations, plus the saturation deficit, disturbance and permanent-constraint
-    powers; the last is F_j' Lambda_j, zero on the constraint).
+    powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
+    (:class:`ChainWork`).
     """
     n = codes.shape[0]
-    rot = np.empty((n, 3, 3))
-    rate = np.empty((n, 3, 3))
-    torque = np.zeros((n, 3))
-    force = np.zeros((n, 3))
+    rot, rate, torque, force = work.rot, work.rate, work.torque, work.force
+    torque[:] = 0.0
+    force[:] = 0.0
     kinetic = 0.0
     joint_energy = 0.0
     body_energy = 0.0
@@ -184,15 +223,14 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
         if q < 0:
             point_p, rate_p = r_p, ZERO
             theta_j, omega_j = vector(y, 12 * j), omega_c
-            b_j = rotation_and_rate_of(theta_j)[1]
-            rel = rotation_and_rate_of(theta_j)[0]
+            rel, b_j = rotation_and_rate_of(theta_j)
         else:
             omega_p, x_p, v_p = vector(y, 12 * q + 3), vector(y, 12 * q + 6), vector(y, 12 * q + 9)
             point_p = add(x_p, matvec(rot[q], r_p))
             rate_p = add(v_p, matvec(rot[q], cross(omega_p, r_p)))
             rel = _relative(rot[q], rot[j])
             theta_j = euler_angles(rel)
-            b_j = rotation_and_rate_of(theta_j)[1]
+            b_j = _euler_rate_of(rel)
             omega_j = sub(omega_c, matTvec(rel, omega_p))
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
@@ -232,7 +270,7 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
         _put(joints[j, _THETA_J], 0, theta_j)
         _put(joints[j, _OMEGA_J], 0, omega_j)
     if n_permanent > 0:
-        _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent)
+        _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent, work, True)
         for j in range(n):
             if codes[j] == PERMANENT:
                 power += dot(vector(joints[j, _F], 0), vector(joints[j, _LAMBDA], 0))
@@ -263,50 +301,113 @@ def _joint_acceleration(j, y, params, parents, ppoints, rot, torque, force, with
     return acc
 
 
+@jit(forceinline=True)
+def _cholesky_solve(matrix, rhs, m):
+    """Solve ``matrix[:m, :m] x = rhs[:m]`` for a symmetric positive definite matrix, in
+    place: its lower triangle becomes the Cholesky factor L (L L' = matrix), ``rhs`` x."""
+    for c in range(m):
+        total = matrix[c, c]
+        for k in range(c):
+            total -= matrix[c, k] * matrix[c, k]
+        diagonal = math.sqrt(total)
+        matrix[c, c] = diagonal
+        for r in range(c + 1, m):
+            total = matrix[r, c]
+            for k in range(c):
+                total -= matrix[r, k] * matrix[c, k]
+            matrix[r, c] = total / diagonal
+    for r in range(m):
+        total = rhs[r]
+        for k in range(r):
+            total -= matrix[r, k] * rhs[k]
+        rhs[r] = total / matrix[r, r]
+    for r in range(m - 1, -1, -1):
+        total = rhs[r]
+        for k in range(r + 1, m):
+            total -= matrix[k, r] * rhs[k]
+        rhs[r] = total / matrix[r, r]
+
+
+@jit(forceinline=True)
+def _add_mobility(matrix, row, col, sign, mass, g, i, u, w):
+    """Add ``sign`` W to the 3x3 block of ``matrix`` at (``row``, ``col``): W = I/m -
+    [u]x G [w]x [s^2/kg], the acceleration of the point u [m] of body i (inertial frame,
+    from its centre of mass) under a unit force at its point w (G = A J^-1 A', the body's
+    inverse inertia in the inertial frame, ``g[i]``)."""
+    for k in range(3):
+        c = cross(w, (1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0))  # w x e_k
+        alpha = (g[i, 0, 0] * c[0] + g[i, 0, 1] * c[1] + g[i, 0, 2] * c[2],
+                 g[i, 1, 0] * c[0] + g[i, 1, 1] * c[1] + g[i, 1, 2] * c[2],
+                 g[i, 2, 0] * c[0] + g[i, 2, 1] * c[1] + g[i, 2, 2] * c[2])
+        column = cross(alpha, u)
+        for r in range(3):
+            matrix[row + r, col + k] += sign * ((1.0 / mass if r == k else 0.0) + column[r])
+
+
 @jit
-def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, k, with_velocity=True):
+def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, k, work, with_velocity):
     """The constraint forces Lambda_j of the ``k`` permanent joints with d^2E_j/dt^2 = 0
     (the stacked eq 15), added to ``torque``, ``force`` and written to ``joints``.
 
-    Without ``with_velocity``: the impulsive reactions that keep dE_j/dt of the permanent
-    joints unchanged under the impulses ``torque`` (body frames) and ``force`` (the same
-    linear map, no centripetal term)."""
+    The system's matrix K = J M^-1 J' (symmetric positive definite) has a 3x3 block for each
+    pair of permanent joints a, b that share a body i: the sum over such bodies of s_a s_b
+    W_i(u_a, u_b) (:func:`_add_mobility`; s = +1 where i is the joint's child, -1 its
+    parent; u the joint's point on i, inertial frame); its upper triangle is assembled,
+    mirrored and solved by Cholesky. Without ``with_velocity``: the impulsive reactions that
+    keep dE_j/dt of the permanent joints unchanged under the impulses ``torque`` (body
+    frames) and ``force`` (the same linear map, no centripetal term). ``work``: scratch
+    arrays (:class:`ChainWork`)."""
     n = codes.shape[0]
-    which = np.empty(k, dtype=np.int64)
+    which, rhs, matrix, g = work.which, work.rhs, work.matrix, work.g
     m = 0
     for j in range(n):
         if codes[j] == PERMANENT:
             which[m] = j
             m += 1
-    rhs = np.empty(3 * k)
     for a in range(k):
         acc = _joint_acceleration(which[a], y, params, parents, ppoints, rot, torque, force, with_velocity)
         for r in range(3):
             rhs[3 * a + r] = -acc[r]
-    matrix = np.empty((3 * k, 3 * k))
-    d_torque = np.zeros((n, 3))
-    d_force = np.zeros((n, 3))
+    for i in range(n):  # G_i = (A_i J_i^-1) A_i'
+        inv = params[i].inertia_inv
+        for r in range(3):
+            row = (rot[i, r, 0] * inv[0, 0] + rot[i, r, 1] * inv[1, 0] + rot[i, r, 2] * inv[2, 0],
+                   rot[i, r, 0] * inv[0, 1] + rot[i, r, 1] * inv[1, 1] + rot[i, r, 2] * inv[2, 1],
+                   rot[i, r, 0] * inv[0, 2] + rot[i, r, 1] * inv[1, 2] + rot[i, r, 2] * inv[2, 2])
+            for c in range(3):
+                g[i, r, c] = row[0] * rot[i, c, 0] + row[1] * rot[i, c, 1] + row[2] * rot[i, c, 2]
+    size = 3 * k
+    for r in range(size):
+        for c in range(size):
+            matrix[r, c] = 0.0
+    for b in range(k):
+        jb = which[b]
+        qb = parents[jb]
+        ub_c = matvec(rot[jb], params[jb].attachment_point)
+        for a in range(b + 1):
+            ja = which[a]
+            qa = parents[ja]
+            ua_c = matvec(rot[ja], params[ja].attachment_point)
+            if ja == jb:  # the joint's child body
+                _add_mobility(matrix, 3 * a, 3 * b, 1.0, params[ja].mass, g, ja, ua_c, ub_c)
+            if qb >= 0 and ja == qb:  # a's child is b's parent
+                _add_mobility(matrix, 3 * a, 3 * b, -1.0, params[ja].mass, g, ja, ua_c,
+                              matvec(rot[qb], vector(ppoints[jb], 0)))
+            if qa >= 0:
+                ua_p = matvec(rot[qa], vector(ppoints[ja], 0))
+                if qa == jb:  # a's parent is b's child
+                    _add_mobility(matrix, 3 * a, 3 * b, -1.0, params[qa].mass, g, qa, ua_p, ub_c)
+                if qa == qb:  # a and b share their parent
+                    _add_mobility(matrix, 3 * a, 3 * b, 1.0, params[qa].mass, g, qa, ua_p,
+                                  matvec(rot[qb], vector(ppoints[jb], 0)))
+    for c in range(size):
+        for r in range(c + 1, size):
+            matrix[r, c] = matrix[c, r]
+    _cholesky_solve(matrix, rhs, size)
     for b in range(k):
         j = which[b]
         q = parents[j]
-        r_c, r_p = params[j].attachment_point, vector(ppoints[j], 0)
-        for axis in range(3):
-            lam = (1.0 if axis == 0 else 0.0, 1.0 if axis == 1 else 0.0, 1.0 if axis == 2 else 0.0)
-            d_torque[:] = 0.0
-            d_force[:] = 0.0
-            _acc_add(d_torque, d_force, j, cross(r_c, matTvec(rot[j], lam)), lam)
-            if q >= 0:
-                back = cross(r_p, matTvec(rot[q], lam))
-                _acc_add(d_torque, d_force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
-            for a in range(k):
-                acc = _joint_acceleration(which[a], y, params, parents, ppoints, rot, d_torque, d_force, False)
-                for r in range(3):
-                    matrix[3 * a + r, 3 * b + axis] = acc[r]
-    lam_all = np.linalg.solve(matrix, rhs)
-    for b in range(k):
-        j = which[b]
-        q = parents[j]
-        lam = (lam_all[3 * b], lam_all[3 * b + 1], lam_all[3 * b + 2])
+        lam = (rhs[3 * b], rhs[3 * b + 1], rhs[3 * b + 2])
         r_c, r_p = params[j].attachment_point, vector(ppoints[j], 0)
         _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], lam)), lam)
         if q >= 0:
@@ -317,20 +418,28 @@ def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, jo
 
 @jit
 def chain_push(y, params, codes, parents, ppoints, body, point, value, torque_push):
+    """:func:`chain_push_with` with scratch arrays of its own (for callers in Python)."""
+    return chain_push_with(y, params, codes, parents, ppoints, body, point, value, torque_push,
+                           chain_work(codes.shape[0]))
+
+
+@jit
+def chain_push_with(y, params, codes, parents, ppoints, body, point, value, torque_push, work):
     """Apply a push to the chain's state ``y`` (n_states,) in place and return its energy dT
     [J] (the jump of the kinetic energy): a force impulse ``value`` P [N s] (inertial frame)
     at ``point`` R [m] of body ``body`` (its body frame, from its centre of mass), or with
     ``torque_push`` a torque impulse L [N m s] (the body's frame). The permanent joints'
-    impulsive reactions keep their dE_j/dt (docs/physics.md, "A push on a chain")."""
+    impulsive reactions keep their dE_j/dt (docs/physics.md, "A push on a chain").
+    ``work``: scratch arrays (:class:`ChainWork`)."""
     n = codes.shape[0]
-    rot = np.empty((n, 3, 3))
+    rot, torque, force = work.rot, work.torque, work.force
     for i in range(n):
         a = rotation_and_rate_of(vector(y, 12 * i))[0]
         for r in range(3):
             for c in range(3):
                 rot[i, r, c] = a[r][c]
-    torque = np.zeros((n, 3))
-    force = np.zeros((n, 3))
+    torque[:] = 0.0
+    force[:] = 0.0
     v = (value[0], value[1], value[2])
     if torque_push:
         _acc_add(torque, force, body, v, ZERO)
@@ -341,7 +450,7 @@ def chain_push(y, params, codes, parents, ppoints, body, point, value, torque_pu
         if codes[j] == PERMANENT:
             k += 1
     if k > 0:
-        _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, np.empty((n, 7, 3)), k, False)
+        _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, work.joints, k, work, False)
     before = 0.0
     after = 0.0
     for i in range(n):
@@ -357,40 +466,44 @@ def chain_push(y, params, codes, parents, ppoints, body, point, value, torque_pu
 
 
 @jit
-def chain_impulses(t, y, params, codes, parents, ppoints):
+def chain_impulses(t, y, params, codes, parents, ppoints, work):
     """Apply the impulses of every body's disturbances that start at ``t`` [s] to the state
-    ``y`` in place (:func:`chain_push`, one after the other); returns their energy, the jump
-    of the kinetic energy [J] (0 where none starts at t)."""
+    ``y`` in place (:func:`chain_push_with`, one after the other); returns their energy, the
+    jump of the kinetic energy [J] (0 where none starts at t). ``work``: scratch arrays
+    (:class:`ChainWork`)."""
     jump = 0.0
     for i in range(codes.shape[0]):
         p = params[i]
         for k in range(int(p.disturbance_count)):
             if p.disturbance_kind[k] == IMPULSE and p.disturbance_start[k] == t:
-                jump += chain_push(y, params, codes, parents, ppoints, i, p.disturbance_point[k],
-                                   p.disturbance_value[k], p.disturbance_torque[k] != 0.0)
+                jump += chain_push_with(y, params, codes, parents, ppoints, i, p.disturbance_point[k],
+                                        p.disturbance_value[k], p.disturbance_torque[k] != 0.0, work)
     return jump
 
 
 @jit
 def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
-    """dy/dt of the chain's state ``y`` at ``t`` into ``dy`` (:func:`chain_core`)."""
-    n = codes.shape[0]
-    chain_core(t, y, params, codes, parents, ppoints, d_at, dy, np.empty((n, 7, 3)), np.empty((n, 3)),
-               np.empty(5))
+    """dy/dt of the chain's state ``y`` at ``t`` into ``dy`` (:func:`chain_core`; for
+    callers in Python: the compiled driver calls :func:`chain_evaluate` with its system's
+    scratch arrays)."""
+    chain_core(t, y, params, codes, parents, ppoints, d_at, dy, np.empty((codes.shape[0], 7, 3)),
+               np.empty((codes.shape[0], 3)), np.empty(5))
 
 
 @jit
 def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars):
-    """:func:`chain_core` at every sample: ``states`` (m, n_states) at ``times`` (m,) into
+    """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,) into
     ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5)."""
     dy = np.empty(states.shape[1])
+    work = chain_work(codes.shape[0])
     for k in range(states.shape[0]):
         if states[k, 0] != states[k, 0]:
             joints[k] = np.nan
             bodies[k] = np.nan
             scalars[k] = np.nan
             continue
-        chain_core(times[k], states[k], params, codes, parents, ppoints, d_at, dy, joints[k], bodies[k], scalars[k])
+        chain_evaluate(times[k], states[k], params, codes, parents, ppoints, d_at, dy, joints[k], bodies[k], scalars[k],
+                       work)
 
 
 # -- the compiled description ------------------------------------------------------------------
@@ -517,9 +630,9 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     q = result.x
     try:
         polished = root(lambda q: _rest_acceleration(compiled, q), q, method="hybr", options={"xtol": 1e-13})
-    except np.linalg.LinAlgError:  # the search left for a singular configuration: no rest point near
-        return None, math.nan
-    if np.linalg.norm(polished.fun) < np.linalg.norm(_rest_acceleration(compiled, q)):
+    except (np.linalg.LinAlgError, ValueError):  # the polish left for a singular configuration
+        polished = None  # (its rate not finite): the minimiser's rest point stands
+    if polished is not None and np.linalg.norm(polished.fun) < np.linalg.norm(_rest_acceleration(compiled, q)):
         q = polished.x  # a rest point to rounding: the minimiser's gradient tolerance is not
     y = _configuration(compiled, q)
     return y, _potential(compiled, y)
@@ -778,6 +891,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     time = np.linspace(0.0, sim.t_end, sim.n_samples)
     args = compiled.args
     dy = np.empty(compiled.n_states)
+    work = chain_work(compiled.size)
     start = _time.perf_counter()
     limit = timeout if timeout is not None else sim.max_wall_time
 
@@ -807,7 +921,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     nfev = 0
     status, message = "success", "The solver successfully reached the end of the integration interval."
     for a, b in zip(edges[:-1], edges[1:]):
-        chain_impulses(a, y, *args[:4])
+        chain_impulses(a, y, *args[:4], work)
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
         try:
@@ -839,7 +953,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     else:
         if sim.t_end in jumps:  # an impulse at t_end: the last sample shows the state after it
             y = states[-1].copy()
-            chain_impulses(sim.t_end, y, *args[:4])
+            chain_impulses(sim.t_end, y, *args[:4], work)
             states[-1] = y
     return ChainTrajectory(time, states, status, message,
                            {"nfev": nfev, "solver_status": 0 if status == "success" else 1,
