@@ -168,7 +168,8 @@ def study_options(command):
         click.option("--vary", "vary", multiple=True, required=True, metavar="KEY=DISTRIBUTION",
                      callback=keys_checked("--vary"),
                      help="A varied config key with a sweep distribution, e.g. body.mass=uniform:[30,50], "
-                     "controller.k_c=scale_uniform:[0.5,2] (one factor scaling the whole gain). Repeatable."),
+                     "controller.k_c=scale_uniform:[0.5,2] (one factor scaling the whole gain); a chain's keys by "
+                     "body or joint, e.g. joints.hip.k_r.0=uniform:[400,800]. Repeatable."),
         click.option("--seed", type=int, default=0, show_default=True, help="Seed of the sampler."),
         click.option("--name", default=None, help="The study's name and folder OUTPUT/NAME  [default: the config's name]."),
         set_option,

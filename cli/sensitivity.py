@@ -23,7 +23,7 @@ def study_error(exc) -> click.ClickException:
               help="Sobol' indices (Saltelli sampling) or Morris elementary effects.")
 @click.option("--metric", "metrics", multiple=True, metavar="[log10:|rank:]NAME",
               help="A summary figure of the runs (docs/studies.md; a 3-vector figure gives its three "
-              "components), optionally through a transform: log10:NAME (a positive figure spread over "
+              "components, a chain's per-joint figure one metric a joint), optionally through a transform: log10:NAME (a positive figure spread over "
               "decades), rank:NAME (the ranks of the runs' values). Repeatable  [default: "
               "max_abs_constraint_error, lyapunov_final, max_lyapunov_rate, converged].")
 @click.option("--resamples", type=click.IntRange(min=10), default=200, show_default=True,
@@ -46,6 +46,10 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
         --vary controller.k_c=scale_uniform:[0.5,2] --vary controller.l_c=scale_uniform:[0.5,2] \\
         --vary body.mass=uniform:[30,50] --metric max_abs_constraint_error --metric lyapunov_final
 
+    CONFIG may be a chain (bodies and joints): its keys name a body or a joint by index or
+    name (bodies.1.mass, joints.hip.k_r.0, initial_state.trunk.theta.0), and its per-joint
+    figures give one metric a joint (max_abs_constraint_error_hip).
+
     Draws the design with SALib, runs it as a sweep (OUTPUT/<name>/sweep/: the same command
     again resumes it) and writes first-order and total Sobol' indices (or Morris mu*, sigma)
     with bootstrap confidence intervals to OUTPUT/<name>/sensitivity.nc; `rbstab report
@@ -56,7 +60,7 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
     from rbstab.studies import StudyInputError, metric_records, sensitivity_analysis
     from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numba, numpy, pydantic, yaml
 
-    (base,) = load_configs([config], overrides)
+    (base,) = load_configs([config], overrides, chains=True)
     console = get_console()
     try:
         ds = sensitivity_analysis(base, vary, n=n, method=method, metrics=metrics, seed=seed, output=output,

@@ -18,10 +18,12 @@ from .sensitivity import study_error
               help="A summary figure to minimize (docs/studies.md). Give one objective, or two for a Pareto front.")
 @click.option("--maximize", "maximize", multiple=True, metavar="METRIC", help="A summary figure to maximize.")
 @click.option("--subject-to", "subject_to", multiple=True, metavar="METRIC<=VALUE",
-              help="A constraint, METRIC<=VALUE or METRIC>=VALUE, e.g. 'max_abs_constraint_error_z<=0.05'. Repeatable.")
+              help="A constraint, METRIC<=VALUE or METRIC>=VALUE, e.g. 'max_abs_constraint_error_z<=0.05' (a "
+              "chain's: 'max_abs_constraint_error_hip<=0.01'). Repeatable.")
 @click.option("--over", "over", multiple=True, metavar="KEY=DISTRIBUTION", callback=keys_checked("--over"),
               help="Uncertain bodies: each trial runs --over-n bodies drawn from these distributions "
-              "(e.g. body.mass=scale_uniform:[0.8,1.2]) and takes their worst case. Repeatable.")
+              "(e.g. body.mass=scale_uniform:[0.8,1.2]; a chain's: bodies.0.mass=scale_uniform:[0.9,1.1]) and "
+              "takes their worst case. Repeatable.")
 @click.option("--over-n", "over_n", type=int, default=16, show_default=True, metavar="N",
               help="Bodies per trial with --over (drawn once, the same for every trial).")
 @click.option("--over-seed", "over_seed", type=int, default=0, show_default=True, help="Seed of the --over draw.")
@@ -61,6 +63,11 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
         --vary controller.k_c=scale_uniform:[0.25,4] --vary controller.l_c=scale_uniform:[0.25,4] \\
         --minimize lyapunov_final --subject-to 'max_abs_constraint_error_z<=0.1'
 
+    CONFIG may be a chain (bodies and joints): its keys name a body or a joint by index or
+    name (joints.hip.l_r.0, bodies.trunk.mass, also in --over), and its per-joint figures are
+    metrics one joint at a time (max_abs_constraint_error_hip); its runs are integrated one
+    by one.
+
     Trials come a generation at a time (space-filling first, then the sampler); each trial
     is one run (with --over, one per uncertain body), and a generation's runs are
     integrated as one batch. The study is kept in an Optuna storage: the same command
@@ -73,7 +80,7 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     from rbstab.studies import StudyInputError  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
     from rbstab.studies import tune as run_tuning  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
 
-    (base,) = load_configs([config], overrides)
+    (base,) = load_configs([config], overrides, chains=True)
     console = get_console()
     try:
         result = run_tuning(base, vary, trials=trials, minimize=minimize, maximize=maximize, subject_to=subject_to,
@@ -89,13 +96,14 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     if result.best_trial is None:
         console.out("  no feasible trial")
     else:
-        from rbstab.io.chunk import figure_attributes  # heavy: numpy
+        from rbstab.studies.design import joints_of, study_figure_attributes  # heavy: numpy (loaded by now)
         from rbstab.layout import CONFIG_QUANTITIES, display_units  # light; beside its heavy neighbour
 
         metrics = [*minimize, *maximize]
         values = result.best_values
-        shown = ", ".join(f"{m} {v:.6g}" + (f" {u}" if (u := display_units(figure_attributes(m)[0])) not in ("", "1")
-                                            else "") for m, v in zip(metrics, values))
+        joints = joints_of(base)  # a chain's: its figures per joint
+        shown = ", ".join(f"{m} {v:.6g}" + (f" {u}" if (u := display_units(study_figure_attributes(m, joints)[0]))
+                                            not in ("", "1") else "") for m, v in zip(metrics, values))
         console.out(f"  best trial {result.best_trial}: {shown}")
         for key, value in result.best_params.items():
             q = CONFIG_QUANTITIES.get(key.split("[")[0])

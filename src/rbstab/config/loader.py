@@ -167,8 +167,8 @@ class RunConfig:
 
 #: The line with which a one-body loader refuses a chain configuration.
 _NOT_RUN = ("config key 'bodies': found a chain of bodies; expected a one-body config (body, controller) here: "
-            "chains are taken by rbstab validate, run, show, report, animate, sweep and analyze (rest state, linearisation, "
-            "--basin, --push, basin stability)")
+            "chains are taken by rbstab validate, run, show, report, animate, sweep, analyze (rest state, linearisation, "
+            "--basin, --push, basin stability), sensitivity and tune")
 
 _BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller (one body) or "
          "bodies and joints (a chain)")

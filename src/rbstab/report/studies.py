@@ -272,8 +272,9 @@ def _search_figure(ds, out: FigureWriter, name: str, objectives) -> FigureFile:
     if len(parameters) <= 2:
         x = columns[0]
         y = columns[1] if len(parameters) == 2 else value
-        drawn = ax.scatter(x[ok], y[ok], c=value[ok] if len(parameters) == 2 else "C0", s=10, norm=norm if len(
-            parameters) == 2 else None, cmap="viridis_r" if direction == "minimize" else "viridis")
+        coloured = len(parameters) == 2  # two parameters: the objective as colour; one: it is the y axis
+        drawn = ax.scatter(x[ok], y[ok], c=value[ok] if coloured else "C0", s=10, norm=norm if coloured else None,
+                           cmap=("viridis_r" if direction == "minimize" else "viridis") if coloured else None)
         if best is not None:
             ax.plot(x[best], y[best], "*", ms=14, color="C3", label=f"best: trial {int(ds['trial'].values[best])}")
             ax.legend(fontsize=8)

@@ -13,6 +13,10 @@
                   minimize=["lyapunov_final"], subject_to=["max_abs_constraint_error_z<=0.1"], trials=100)
     result.best_values, result.best_params      # and results/studies/case3_embedded/best.yaml
 
+A chain's configuration (:func:`rbstab.config.chains.load_any_config`) is studied alike, with
+a chain's keys (``bodies.1.mass``, ``joints.hip.k_r.0``, ``initial_state.trunk.theta.0``) and
+its figures per joint (``max_abs_constraint_error_hip``) as metrics.
+
 Modules: :mod:`~rbstab.studies.design` (``--vary`` factors, design tables, their run as a
 sweep, metrics), :mod:`~rbstab.studies.sensitivity`, :mod:`~rbstab.studies.tuning` and
 :mod:`~rbstab.studies.files` (the study files) and :mod:`~rbstab.studies.storage` (where a

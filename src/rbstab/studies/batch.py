@@ -9,12 +9,18 @@ this process or in slices on an executor (``-j N`` local processes, Dask), as a 
 integrates its chunks. Nothing is written: the runs' summary figures come back as columns.
 The figures are those of :func:`rbstab.simulator.simulate_many` for each run's
 configuration, bit for bit.
+
+A chain's runs (a table whose base is a chain's configuration) do not go as a batch of
+arrays: each row's configuration is built and integrated alone
+(:func:`integrate_chain_part`, :func:`rbstab.studies.design.run_one`: the figures of
+:func:`rbstab.simulator.simulate_chain`, per joint as ``<figure>_<joint>``).
 """
 
 from __future__ import annotations
 
 import copy
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -22,14 +28,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..config import ConfigError, config_from_mapping
-from ..config.paths import parse_key
+from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+from ..config.chains import any_config_from_mapping
+from ..config.loader import is_chain
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.chunk import summary_table_columns
-from .design import METRICS_NOT_FIGURES, design_mappings
+from ..sweep.validate import key_path
+from .design import METRICS_NOT_FIGURES, design_mappings, figure_columns, joints_of, run_one
 
-__all__ = ["GenerationRuns", "run_generation", "integrate_part", "CALLS"]
+__all__ = ["GenerationRuns", "run_generation", "integrate_part", "integrate_chain_part", "CALLS"]
 
 #: Batches integrated in this process (a count per call of :func:`integrate_part`; tests read it).
 CALLS = {"batches": 0}
@@ -65,6 +73,8 @@ def integrate_part(part, engine: str = "compiled") -> dict:
     from ..simulator import simulate_batch, simulate_many  # heavy: numba
 
     CALLS["batches"] += 1
+    if any(is_chain(t) for t in part.templates):
+        return integrate_chain_part(part, engine)
     n = len(part)
     columns: dict[str, np.ndarray] = {}
     ok = np.zeros(n, dtype=bool)
@@ -104,10 +114,34 @@ def integrate_part(part, engine: str = "compiled") -> dict:
     return {"figures": columns, "ok": ok}
 
 
+def integrate_chain_part(part, engine: str = "compiled") -> dict:
+    """:func:`integrate_part` of a slice of a chain's runs: each run's configuration built
+    from its row (:func:`rbstab.config.chains.any_config_from_mapping`) and integrated
+    alone by :func:`rbstab.studies.design.run_one` (a GPU engine's runs on the CPU driver).
+    Returns ``figures`` (column -> values, shape (k,): the chain's figures, per joint as
+    ``<figure>_<joint>``, and ``converged``) and ``ok`` (success per run, shape (k,))."""
+    engine = DEFAULT_ENGINE if get_engine(engine).gpu else engine
+    n = len(part)
+    columns: dict[str, np.ndarray] = {}
+    ok = np.zeros(n, dtype=bool)
+    for j in range(n):
+        data = part.resolved(j)
+        with warnings.catch_warnings():  # shown once, when the table was planned
+            warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+            config = any_config_from_mapping(data, source="<trial>")
+        result = run_one(config, engine)
+        ok[j] = result.status == "success"
+        for key, value in figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO,
+                                         joints_of(data)).items():
+            columns.setdefault(key, np.full(n, np.nan))[j] = value
+    return {"figures": columns, "ok": ok}
+
+
 def run_generation(base: Mapping, design: pd.DataFrame, *, engine: str = "compiled", executor=None,
                    size: int | None = None) -> GenerationRuns:
     """Plan the rows of ``design`` (absolute values, columns as in :mod:`rbstab.studies.design`)
-    on ``base`` (a resolved configuration) as a table of runs and integrate it as one batch.
+    on ``base`` (a resolved configuration, one body's or a chain's) as a table of runs and
+    integrate it as one batch (a chain's runs each alone, :func:`integrate_chain_part`).
 
     ``executor`` (an :class:`rbstab.sweep.executors.Executor`, or None: this process) takes
     the table in ``size``-row slices (default: the rows split evenly over its workers). A
@@ -161,9 +195,9 @@ def _invalid_rows(base: Mapping, design: pd.DataFrame) -> dict[int, str]:
     for i in range(len(design)):
         data = copy.deepcopy(dict(base))
         for key, values in mappings.items():
-            parse_key(key).set(data, values[i])
+            key_path(key, base).set(data, values[i])
         try:
-            config_from_mapping(data, source="<trial>")
+            any_config_from_mapping(data, source="<trial>")
         except ConfigError as exc:
             out[i] = "; ".join(exc.errors)
     return out

@@ -19,6 +19,13 @@ columns named by dotted config keys: a number ``body.mass``, vector components
 ``controller.k_c[0]`` .. ``[2]``, matrix entries ``body.inertia[0,1]``. :func:`run_design`
 runs one as a sweep (resumable: a run whose result exists is skipped) and returns its
 summary figures.
+
+A chain's configuration (``bodies`` and ``joints``, :mod:`rbstab.config.chains`) takes the
+keys of chain sweeps: a body or a joint by index or name (``bodies.1.mass``,
+``joints.hip.k_r.0``), an initial state by body name (``initial_state.trunk.theta.0``).
+Its summary figures (:data:`CHAIN_FIGURES`) are numbers, and per joint
+(:data:`JOINT_FIGURES`) one column a joint, ``<figure>_<joint>``
+(``max_abs_constraint_error_hip`` [m]); each run is integrated by :func:`run_one`.
 """
 
 from __future__ import annotations
@@ -35,20 +42,23 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..config import ConfigError, parse_yaml
-from ..config.paths import KeyPathError, parse_key, plain_tree
+from ..config.loader import is_chain
+from ..config.paths import KeyPathError, plain_tree
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE
-from ..io.chunk import SUMMARY_FIGURES, summary_columns
+from ..io.chunk import SUMMARY_FIGURES, figure_attributes, summary_columns
 from ..simulator import simulate_many
 from ..sweep.folder import open_sweep
 from ..sweep.runner import run_sweep
 from ..sweep.schema import DISTRIBUTIONS, DistributionSchema
 from ..sweep.spec import Distribution, spec_from_mapping
+from ..sweep.validate import key_path
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
-           "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns"]
+           "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns",
+           "CHAIN_FIGURES", "JOINT_FIGURES", "joints_of", "run_one", "study_figure_attributes"]
 
 
 class StudyInputError(ConfigError):
@@ -197,13 +207,15 @@ def parse_vary(texts: Sequence[str] | Mapping[str, Any], base: Mapping, *, optio
             entries.append((key, f"{key}={text}", text))
     varied = [v for v in (_one_varied(key, shown, value, base, option, allowed, errors) for key, shown, value in entries)
               if v is not None]
-    keys = [v.key for v in varied]
-    for a in keys:
-        for b in keys:
+    keys = [_by_index(v.key, base) for v in varied]  # a chain's body or joint by index, as by name
+    for a, shown_a in zip(keys, varied):
+        for b, shown_b in zip(keys, varied):
             if a != b and b.startswith(a + "."):
-                errors.append(f"{option}: '{a}' and '{b}' overlap; vary a key or its entries, not both")
-    if len(set(keys)) < len(keys):
-        errors.append(f"{option}: a key is given twice ({', '.join(sorted({k for k in keys if keys.count(k) > 1}))})")
+                errors.append(f"{option}: '{shown_a.key}' and '{shown_b.key}' overlap; vary a key or its entries, "
+                              "not both")
+    for key in sorted({k for k in keys if keys.count(k) > 1}):
+        given = [v.key for k, v in zip(keys, varied) if k == key]
+        errors.append(f"{option}: a key is given twice ({' and '.join(dict.fromkeys(given))})")
     if not errors and not varied:
         errors.append(f"{option}: nothing varied; give at least one KEY=DISTRIBUTION")
     if errors:
@@ -215,12 +227,18 @@ def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, al
                 errors: list[str]) -> Varied | None:
     """One entry of :func:`parse_vary`, or None with its problems appended to ``errors``."""
     try:
-        path = parse_key(key)
+        path = key_path(key, base)  # a chain's keys for a chain's configuration
         current = path.get(base, None)
         path.set(plain_tree(base), current)  # a key the base cannot take (an entry of a list it lacks)
     except KeyPathError as exc:
         errors.append(f"{option} {shown!r}: {exc.problem}")
         return None
+    if is_chain(base) and path.section == "initial_state":  # a mapping by body name: setting it adds a name
+        bodies = [b.get("name") for b in base.get("bodies") or ()]
+        if path.entry not in bodies:
+            errors.append(f"{option} {shown!r}: 'initial_state' is by body name; found {str(path.entry)!r}, "
+                          f"expected one of {', '.join(map(str, bodies))}")
+            return None
     kind = next(iter(value)) if isinstance(value, Mapping) and len(value) == 1 else None
     if kind is not None and kind not in allowed:
         errors.append(f"{option} {shown!r}: distribution {kind!r} is not allowed here; expected one of "
@@ -238,16 +256,28 @@ def _one_varied(key: str, shown: str, value: Any, base: Mapping, option: str, al
     shape = np.broadcast_shapes(*(np.shape(a) for a in dist.args))
     if dist.kind not in SCALES:
         return Varied(key, dist.kind, dist.args, None, shape)
-    base_value = np.asarray(current, dtype=float) if _numeric(current) else None
+    base_value = np.asarray(current, dtype=float) if current is not None and _numeric(current) else None
     if base_value is None:
-        errors.append(f"{option} {shown!r}: {dist.kind} scales the base value of '{key}', found {current!r}; "
-                      "expected a number or a list of numbers in the base configuration")
+        found = "no value (it is not set)" if current is None else repr(current)
+        errors.append(f"{option} {shown!r}: {dist.kind} scales the base value of '{key}', found {found}; "
+                      "expected a number or a list of numbers in the base configuration (or vary it with uniform)")
         return None
     if shape and shape != base_value.shape:
         errors.append(f"{option} {shown!r}: {dist.kind} bounds of shape {shape} do not fit '{key}' of shape "
                       f"{base_value.shape}; give numbers (one factor) or lists of its shape")
         return None
     return Varied(key, dist.kind, dist.args, base_value, base_value.shape)
+
+
+def _by_index(key: str, base: Mapping) -> str:
+    """``key`` with a chain's body or joint named by its index (``joints.hip.k_r`` ->
+    ``joints.1.k_r``): two keys of one value read alike."""
+    parts = key.split(".")
+    if is_chain(base) and len(parts) > 1 and parts[0] in ("bodies", "joints"):
+        names = [e.get("name") if isinstance(e, Mapping) else None for e in base.get(parts[0]) or ()]
+        if parts[1] in names:
+            parts[1] = str(names.index(parts[1]))
+    return ".".join(parts)
 
 
 def vary_mapping(varied: Sequence[Varied]) -> dict[str, dict]:
@@ -282,36 +312,92 @@ def study_folder(output: str | os.PathLike, name: str | None, config, *, option:
 
 # -- metrics ---------------------------------------------------------------------------------------
 
+#: A chain's summary figures that are numbers (:func:`rbstab.summary.chain_summary`): name ->
+#: units.
+CHAIN_FIGURES = {"t_final": "s", "lyapunov_initial": "J", "lyapunov_final": "J", "max_lyapunov_rate": "W",
+                 "max_lyapunov_increase": "J", "lyapunov_rate_mismatch": "W", "lyapunov_rate_mismatch_relative": "1"}
+#: A chain's summary figures per joint, one column a joint ``<name>_<joint>``: name -> units
+#: (max |E_j| over the samples; the drift of a permanent joint's constraint, NaN for others).
+JOINT_FIGURES = {"max_abs_constraint_error": "m", "max_constraint_drift": "m"}
+_JOINT_LONG_NAMES = {"max_abs_constraint_error": "max |E_j| over the samples",
+                     "max_constraint_drift": "max drift of the permanent joint's constraint"}
+
+
+def study_figure_attributes(column: str, joints: Sequence[str] | None = None) -> tuple[str, str]:
+    """(units, long name) of a figure column (:func:`rbstab.io.chunk.figure_attributes`); with
+    ``joints`` (a chain's joint names) also a chain's per-joint column ``<name>_<joint>``."""
+    for name, units in JOINT_FIGURES.items() if joints is not None else ():
+        joint = column[len(name) + 1:] if column.startswith(f"{name}_") else None
+        if joint in joints:
+            return units, f"{_JOINT_LONG_NAMES[name]}, joint {joint}"
+    return figure_attributes(column)
+
 
 def _figure_names() -> dict[str, tuple[str, str]]:
     return {k: v for k, v in SUMMARY_FIGURES.items() if k not in METRICS_NOT_FIGURES}
 
 
-def check_metrics(names: Sequence[str], *, option: str = "--metric") -> None:
+def _one_body_figure(name: str) -> bool:
+    """Whether ``name`` is a figure of one body's runs (a 3-vector's component included)."""
+    known = _figure_names()
+    stem, _, axis = name.rpartition("_")
+    return name == "converged" or name in known or (stem in known and axis in ("x", "y", "z"))
+
+
+def joints_of(config) -> tuple[str, ...] | None:
+    """The joint names of a chain's configuration (a :class:`rbstab.config.chains.ChainConfig`
+    or its resolved mapping), in order; None for a one-body configuration."""
+    data = config if isinstance(config, Mapping) else getattr(config, "resolved", None)
+    if not is_chain(data):
+        return None
+    return tuple(str(j["name"]) for j in data.get("joints") or ())
+
+
+def _allowed_words(joints: Sequence[str] | None) -> tuple[list[str], str]:
+    """(the metric names, the sentence listing what is allowed) of one body's runs, or of a
+    chain's with ``joints``."""
+    if joints is None:
+        known = [*_figure_names()]
+        return ["converged", *known], (f"allowed: converged, {', '.join(known)} (3-vectors also as <name>_x, "
+                                       "_y, _z)")
+    per_joint = [f"{f}_{j}" for f in JOINT_FIGURES for j in joints]
+    return (["converged", *CHAIN_FIGURES, *JOINT_FIGURES, *per_joint],
+            f"allowed for a chain: converged, {', '.join(CHAIN_FIGURES)}, {', '.join(per_joint)} "
+            f"(per joint: {', '.join(joints)}; {' or '.join(JOINT_FIGURES)} alone for every joint)")
+
+
+def check_metrics(names: Sequence[str], *, option: str = "--metric", joints: Sequence[str] | None = None) -> None:
     """Raise :class:`StudyInputError` for a name that is no summary figure of a run.
 
     Allowed: the summary figures of :data:`rbstab.io.chunk.SUMMARY_FIGURES` (3-vectors as
     the whole figure or one component ``<name>_x``, ``_y``, ``_z``) but the text
     ``lyapunov_rate_check``, and ``converged`` (1 when the run succeeded and v(t_end) <=
-    lyapunov_ratio v(0), else 0).
+    lyapunov_ratio v(0), else 0). With ``joints`` (a chain's joint names, in order): the
+    chain's figures, :data:`CHAIN_FIGURES`, and :data:`JOINT_FIGURES` as a whole (every
+    joint) or one joint's ``<name>_<joint>``, and ``converged``.
     """
-    known = _figure_names()
+    allowed, words = _allowed_words(joints)
     errors = []
     for name in names:
-        stem, _, axis = name.rpartition("_")
-        if name == "converged" or name in known or (stem in known and axis in ("x", "y", "z")):
+        one_body = _one_body_figure(name)
+        if name in allowed or (joints is None and one_body):
             continue
-        close = difflib.get_close_matches(name, [*known, "converged"], n=1)
+        close = difflib.get_close_matches(name, allowed, n=1)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
-        errors.append(f"{option} {name!r}: not a summary figure{hint}; allowed: converged, "
-                      f"{', '.join(known)} (3-vectors also as <name>_x, _y, _z)")
+        what = "a figure of one body's runs, not of a chain's" if one_body else "not a summary figure"
+        stem = next((f for f in JOINT_FIGURES if name.startswith(f"{f}_")), None) if joints is not None else None
+        if stem is not None and not one_body:
+            what, hint = f"this chain has no joint {name[len(stem) + 1:]!r}", ""
+        errors.append(f"{option} {name!r}: {what}{hint}; {words}")
     if errors:
         raise StudyInputError(errors)
 
 
-def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: str = "--metric") -> list[str]:
+def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: str = "--metric",
+                   joints: Sequence[str] | None = None) -> list[str]:
     """The columns of ``available`` that ``names`` select: a name itself, or its components
-    ``<name>_x``, ``_y``, ``_z``.
+    ``<name>_x``, ``_y``, ``_z`` (with ``joints``, a chain's joint names: its joints'
+    ``<name>_<joint>``).
 
     Raises
     ------
@@ -319,9 +405,10 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
         For a name with no column (a figure the variant does not have, e.g.
         ``final_controller_state`` of a variant without controller state).
     """
+    labels = ("x", "y", "z") if joints is None else tuple(joints)
     out, errors = [], []
     for name in names:
-        parts = [name] if name in available else [f"{name}_{a}" for a in "xyz" if f"{name}_{a}" in available]
+        parts = [name] if name in available else [f"{name}_{a}" for a in labels if f"{name}_{a}" in available]
         if not parts:
             errors.append(f"{option} {name!r}: these runs have no such figure; they have "
                           f"{', '.join(c for c in available)}")
@@ -331,17 +418,33 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
     return out
 
 
+def run_one(config, engine: str | None = None):
+    """One run of a chain (a :class:`rbstab.config.chains.ChainConfig`) in this process:
+    :func:`rbstab.simulator.simulate_chain` on ``engine`` (default compiled; a GPU engine
+    runs it on the CPU driver), the summary only kept. Returns its
+    :class:`rbstab.results.RunResult`. The one place studies integrate a chain."""
+    from ..simulator import simulate_chain  # heavy: numba (a chain's kernels)
+
+    return simulate_chain(config, engine=engine or DEFAULT_ENGINE)
+
+
 def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
     """The figures of the base configuration (one run in this process,
-    :func:`figure_columns`): the columns a study's metrics are chosen from."""
+    :func:`figure_columns`; a chain's by :func:`run_one`): the columns a study's metrics
+    are chosen from."""
+    joints = joints_of(config)
+    if joints is not None:
+        result = run_one(config, engine)
+        return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO, joints)
     (_, result), = simulate_many([config], engine=engine or DEFAULT_ENGINE, full=False)
     return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
 
 
-def figure_columns(summary: Mapping[str, Any], status: str, ratio: float) -> dict[str, float]:
-    """A run's numeric summary figures as flat columns (as a sweep's index has them) and
-    ``converged`` (0 or 1)."""
-    columns = {k: float(v) for k, v in summary_columns(summary).items()
+def figure_columns(summary: Mapping[str, Any], status: str, ratio: float,
+                   joints: Sequence[str] | None = None) -> dict[str, float]:
+    """A run's numeric summary figures as flat columns (as a sweep's index has them; a
+    chain's per joint with ``joints``, its joint names) and ``converged`` (0 or 1)."""
+    columns = {k: float(v) for k, v in summary_columns(summary, joints).items()
                if k not in METRICS_NOT_FIGURES and isinstance(v, (int, float, np.number))}
     columns["converged"] = float(converged(status == "success", summary.get("lyapunov_initial"),
                                               summary.get("lyapunov_final"), ratio))
@@ -388,7 +491,9 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     Parameters
     ----------
     base : Mapping
-        The base configuration (``RunConfig.resolved``); each row's values are set on it.
+        The base configuration (``RunConfig.resolved``, or a chain's
+        ``ChainConfig.resolved``: its runs each write a result file, as a chain sweep's);
+        each row's values are set on it.
     design : pandas.DataFrame
         Absolute values, one row per run, columns as in the module docstring.
     folder : path-like
@@ -403,7 +508,8 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     -------
     xarray.Dataset
         Along ``run`` (row i of ``design`` is run i): ``status``, ``converged`` (float 0/1)
-        and the numeric summary figures (units, long names), loaded in memory.
+        and the numeric summary figures (units, long names; a chain's per joint,
+        ``<figure>_<joint>``), loaded in memory.
 
     Raises
     ------
@@ -415,14 +521,24 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     folder = Path(folder)
     mapping = {"name": folder.name, "base": dict(base), "table": design}
     spec = spec_from_mapping(mapping)
-    ensure_compiled(say=log, sign_law=True)
+    joints = joints_of(base)
+    ensure_compiled(say=log, sign_law=True, chain=joints is not None)
     run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
               engine=engine, store=store,
               progress=progress, command_line=command_line)
     ds = open_sweep(folder)
-    figures = _figure_names()
+    if joints is None:
+        figures = _figure_names()
+        is_figure = lambda k: k in figures or k.rpartition("_")[0] in figures  # noqa: E731
+    else:
+        columns = {*CHAIN_FIGURES, *(f"{f}_{j}" for f in JOINT_FIGURES for j in joints)}
+        is_figure = columns.__contains__
     keep = [k for k, v in ds.data_vars.items() if v.dims == ("run",) and (k in ("status", "converged") or (
-            v.dtype.kind in "fiub" and (k in figures or k.rpartition("_")[0] in figures)))]
+            v.dtype.kind in "fiub" and is_figure(k)))]
     out = ds[keep].load()
     out["converged"] = out["converged"].astype(float)
+    for k in keep if joints is not None else ():  # a chain's per-joint figures: their units and names
+        units, long_name = study_figure_attributes(k, joints)
+        if units and not out[k].attrs.get("units"):
+            out[k].attrs.update(units=units, long_name=long_name)
     return out

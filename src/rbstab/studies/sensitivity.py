@@ -49,6 +49,7 @@ from .design import (
     Varied,
     check_metrics,
     expand_metrics,
+    joints_of,
     nominal_figures,
     parse_vary,
     run_design,
@@ -143,8 +144,9 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
 
     Parameters
     ----------
-    config : RunConfig
-        The base configuration (validated).
+    config : RunConfig or ChainConfig
+        The base configuration (validated); a chain's takes the keys and figures of chains
+        (:mod:`rbstab.studies.design`).
     vary : sequence of str or Mapping
         ``KEY=DISTRIBUTION`` (:func:`rbstab.studies.design.parse_vary`).
     n : int
@@ -179,7 +181,8 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
                           + " or ".join(f"{t}:NAME" for t in TRANSFORMS))
         bare.append(name)
     varied: list[Varied] = []
-    for check in (lambda: check_metrics(bare), lambda: varied.extend(parse_vary(vary, config.resolved))):
+    for check in (lambda: check_metrics(bare, joints=joints_of(config)),
+                  lambda: varied.extend(parse_vary(vary, config.resolved))):
         try:
             check()
         except StudyInputError as exc:
@@ -205,13 +208,15 @@ def split_transform(metric: str) -> tuple[str | None, str]:
     return (transform, name) if sep else (None, metric)
 
 
-def _columns(metrics: Sequence[str], available: Sequence[str]) -> list[tuple[str, str, str | None]]:
-    """(label, column, transform) of every metric's columns (3-vectors per component):
+def _columns(metrics: Sequence[str], available: Sequence[str],
+             joints: Sequence[str] | None = None) -> list[tuple[str, str, str | None]]:
+    """(label, column, transform) of every metric's columns (3-vectors per component, a
+    chain's figures per joint of ``joints``):
     ``("log10:max_abs_constraint_error_x", "max_abs_constraint_error_x", "log10")``."""
     out: list[tuple[str, str, str | None]] = []
     for metric in metrics:
         transform, name = split_transform(metric)
-        for column in expand_metrics([name], available):
+        for column in expand_metrics([name], available, joints=joints):
             label = f"{transform}:{column}" if transform else column
             if label not in [o[0] for o in out]:
                 out.append((label, column, transform))
@@ -300,7 +305,7 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
     StudyInputError
         If a metric is not a figure of these runs.
     """
-    columns = _columns(plan.metrics, list(results.data_vars))
+    columns = _columns(plan.metrics, list(results.data_vars), joints_of(plan.base))
     names = [label for label, _, _ in columns]
     indices = INDICES[plan.method]
     table = {k: np.full((len(names), len(plan.factors)), np.nan) for k in indices}
@@ -376,8 +381,9 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
 
     Parameters
     ----------
-    config : RunConfig
-        The base configuration.
+    config : RunConfig or ChainConfig
+        The base configuration: one body's, or a chain's (keys and figures of chains,
+        :mod:`rbstab.studies.design`).
     vary, n, method, metrics, seed
         See :func:`plan_sensitivity`.
     output : path-like
@@ -411,7 +417,7 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
     folder = study_folder(output, name, config)
     plan = plan_sensitivity(config, vary, n=n, method=method, metrics=metrics, seed=seed)
     expand_metrics([split_transform(m)[1] for m in plan.metrics],
-                   list(nominal_figures(config, engine)))  # a figure these runs have
+                   list(nominal_figures(config, engine)), joints=joints_of(config))  # a figure these runs have
     check_same_inputs(folder / FILE, {"method": plan.method, "n": plan.n, "seed": plan.seed,
                                       "vary": json.dumps(vary_mapping(plan.varied)),
                                       "config": dump_yaml(plan.base.resolved)}, overwrite=overwrite)

@@ -49,15 +49,15 @@ import numpy as np
 import pandas as pd
 import xarray as xr
 
-from ..config import ConfigError, config_from_mapping, dump_yaml
-from ..config.paths import parse_key
+from ..config import ConfigError, dump_yaml
+from ..config.chains import any_config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.atomic import write_text_atomic
-from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
+from ..sweep.validate import key_path
 from ..warning_codes import coded
 from .design import (
     LOG_SCALED,
@@ -66,7 +66,9 @@ from .design import (
     check_metrics,
     design_mappings,
     figure_columns,
+    joints_of,
     nominal_figures,
+    study_figure_attributes,
     parse_vary,
     study_folder,
     vary_mapping,
@@ -119,8 +121,9 @@ class Constraint:
         return f"{self.metric}{self.op}{self.limit:g}"
 
 
-def parse_constraint(text: str, *, option: str = "--subject-to") -> Constraint:
-    """``"METRIC<=VALUE"`` or ``"METRIC>=VALUE"`` as a :class:`Constraint`.
+def parse_constraint(text: str, *, option: str = "--subject-to", joints: Sequence[str] | None = None) -> Constraint:
+    """``"METRIC<=VALUE"`` or ``"METRIC>=VALUE"`` as a :class:`Constraint` (``joints``: a
+    chain's joint names, whose figures the metric is then, :func:`check_metrics`).
 
     Raises
     ------
@@ -132,7 +135,7 @@ def parse_constraint(text: str, *, option: str = "--subject-to") -> Constraint:
     if m is None or limit is None:
         raise StudyInputError([f"{option} {text!r}: expected METRIC<=VALUE or METRIC>=VALUE with a finite number, "
                                "e.g. 'max_abs_constraint_error_z<=0.05'"])
-    check_metrics([m["metric"]], option=option)
+    check_metrics([m["metric"]], option=option, joints=joints)
     return Constraint(m["metric"], m["op"], limit)
 
 
@@ -251,11 +254,12 @@ class TuningProblem:
 
         settings = {k: v[0] for k, v in design_mappings(pd.DataFrame({k: [x] for k, x in values.items()})).items()}
         out = []
+        base = self.base.resolved
         for body in self.bodies or [{}]:
-            data = copy.deepcopy(self.base.resolved)
+            data = copy.deepcopy(base)
             for key, value in {**body, **settings}.items():
-                parse_key(key).set(data, value)
-            out.append(config_from_mapping(data, source="<trial>"))
+                key_path(key, base).set(data, value)
+            out.append(any_config_from_mapping(data, source="<trial>"))
         return out
 
     def evaluate(self, values: Mapping[str, Any]) -> tuple[dict[str, float], int]:
@@ -295,8 +299,9 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
 
     Parameters
     ----------
-    config : RunConfig
-        The base configuration.
+    config : RunConfig or ChainConfig
+        The base configuration: one body's, or a chain's (keys and figures of chains,
+        :mod:`rbstab.studies.design`).
     vary : sequence of str or Mapping
         ``KEY=RANGE``: ``uniform:[lo,hi]``, ``log_uniform:[lo,hi]``, ``scale_uniform:[lo,hi]``
         (a factor of the base value) or ``choice:[a,b]`` (:func:`parse_vary`).
@@ -325,11 +330,12 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
     constraints: list[Constraint] = []
     varied: list[Varied] = []
     over_varied: list[Varied] = []
+    joints = joints_of(config)
     checks = [
         lambda: varied.extend(parse_vary(vary, config.resolved, allowed=RANGES)),
-        lambda: check_metrics(list(minimize), option="--minimize"),
-        lambda: check_metrics(list(maximize), option="--maximize"),
-        *[(lambda t=t: constraints.append(parse_constraint(t))) for t in subject_to],
+        lambda: check_metrics(list(minimize), option="--minimize", joints=joints),
+        lambda: check_metrics(list(maximize), option="--maximize", joints=joints),
+        *[(lambda t=t: constraints.append(parse_constraint(t, joints=joints))) for t in subject_to],
         *([lambda: over_varied.extend(parse_vary(over, config.resolved, option="--over"))] if over else []),
     ]
     for check in checks:
@@ -488,8 +494,9 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
 
     Parameters
     ----------
-    config : RunConfig
-        The base configuration.
+    config : RunConfig or ChainConfig
+        The base configuration: one body's, or a chain's (keys and figures of chains,
+        :mod:`rbstab.studies.design`).
     vary, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, engine
         See :func:`plan_tuning`.
     trials : int
@@ -562,7 +569,7 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         "constraints": json.dumps([str(c) for c in problem.constraints]),
         "vary": json.dumps(vary_mapping(problem.varied)), "config": dump_yaml(problem.base.resolved)},
         overwrite=overwrite)
-    ensure_compiled(say=log, sign_law=True)
+    ensure_compiled(say=log, sign_law=True, chain=joints_of(config) is not None)
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
     folder.mkdir(parents=True, exist_ok=True)
@@ -647,6 +654,8 @@ def _threads_take(problem: TuningProblem) -> bool:
     kernels release the GIL (the runs one by one from their configurations would not)."""
     from ..simulator import uses_compiled_engine  # heavy: numba
 
+    if joints_of(problem.base) is not None:  # a chain's runs go one by one (integrate_chain_part)
+        return False
     return (not get_engine(problem.engine).gpu and uses_compiled_engine(problem.base, problem.engine)
             and not any(v.key.startswith(_OFF_BATCH_KEYS) for v in problem.varied)
             and not any(k.startswith(_OFF_BATCH_KEYS) for body in problem.bodies for k in body))
@@ -695,11 +704,13 @@ def _check_scalar_metrics(problem: TuningProblem, available: Mapping[str, float]
     """Refuse an objective or constraint that is no single figure of these runs (a 3-vector
     figure without its component, a figure the variant does not have)."""
     errors = []
+    joints = joints_of(problem.base)
     for option, metric in [*((f"--{o.direction}", o.metric) for o in problem.objectives),
                            *(("--subject-to", c.metric) for c in problem.constraints)]:
         if metric not in available:
-            parts = [f"{metric}_{a}" for a in "xyz" if f"{metric}_{a}" in available]
-            errors.append(f"{option} {metric!r}: " + (f"a 3-vector; give one component ({', '.join(parts)})" if parts
+            parts = [f"{metric}_{a}" for a in (joints or "xyz") if f"{metric}_{a}" in available]
+            whole = "a 3-vector; give one component" if joints is None else "a figure per joint; give one joint's"
+            errors.append(f"{option} {metric!r}: " + (f"{whole} ({', '.join(parts)})" if parts
                           else f"these runs have no such figure; they have {', '.join(available)}"))
     if errors:
         raise StudyInputError(errors)
@@ -805,7 +816,7 @@ def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], pa
         values = table[column].to_numpy()
         if values.dtype == object:
             values = table[column].astype(str).to_numpy()
-        units, long_name = figure_attributes(column)
+        units, long_name = study_figure_attributes(column, joints_of(problem.base))
         data[column] = xr.Variable(("trial",), values, {"long_name": long_name, **({"units": units} if units else {})})
     ds = xr.Dataset(data, coords={"trial": table["trial"].to_numpy()})
     ds.attrs.update(provenance_attributes(f"rbstab tuning study {study.study_name}", command_line=command_line))

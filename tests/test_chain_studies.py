@@ -1,0 +1,183 @@
+"""Studies of chains (rbstab sensitivity, rbstab tune, tune --over): the chain's keys (a body
+or a joint by index or name, an initial state by body name), its figures per joint, each
+run's figures those of simulate_chain on the run's configuration, and the refusals.
+
+The runs are short (0.5 s, 51 samples, coarse tolerances: ~10 ms each) so that a study of a
+few dozen runs takes a second or two.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from rbstab_cli.main import cli
+
+import rbstab
+from rbstab.config.chains import any_config_from_mapping, load_any_config
+from rbstab.simulator import simulate_chain
+from rbstab.studies import StudyInputError, read_sensitivity, tune
+from rbstab.studies.design import CHAIN_FIGURES, JOINT_FIGURES, nominal_figures
+from rbstab.studies.sensitivity import plan_sensitivity
+from rbstab.studies.tuning import plan_tuning
+from rbstab.sweep.validate import key_path
+
+ROOT = Path(__file__).resolve().parents[1]
+PENDULUM = ROOT / "configs" / "examples" / "double_pendulum.yaml"
+STANCE = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+SHORT = ["simulation.t_end=0.5", "simulation.n_samples=51", "simulation.rtol=1e-6", "simulation.atol=1e-9"]
+SET = [a for s in SHORT for a in ("--set", s)]
+#: The lower rod's mass and the upper rod's initial angle, the one by index, the other by name.
+PENDULUM_VARY = ["bodies.1.mass=uniform:[0.5,2]", "initial_state.upper.theta.0=uniform:[0.3,0.9]"]
+#: The hip's sway damping L_r[0] [N m s/rad] of the stance: v(0.5 s) is least near 50 (critical
+#: damping), larger with less damping (it swings) and with more (it creeps).
+HIP_DAMPING = [10, 25, 50, 100, 200, 400]
+
+
+def _alone(config, values: dict):
+    """simulate_chain of ``config`` with the dotted keys of ``values`` set (one run alone)."""
+    data = copy.deepcopy(config.resolved)
+    for key, value in values.items():
+        key_path(key, data).set(data, value)
+    return simulate_chain(any_config_from_mapping(data))
+
+
+def test_the_chain_metrics_are_the_figures_of_a_chain_run():
+    config = load_any_config(PENDULUM, SHORT)
+    per_joint = {f"{f}_{j}" for f in JOINT_FIGURES for j in ("shoulder", "elbow")}
+    assert set(nominal_figures(config)) == {"converged", *CHAIN_FIGURES, *per_joint}
+
+
+def test_sensitivity_of_a_chain_gives_each_rows_figures_of_simulate_chain(tmp_path):
+    out = tmp_path / "studies"
+    args = ["sensitivity", str(PENDULUM), "-n", "8", *SET, "-o", str(out), "-j", "1", "--json", "-q",
+            "--no-progress", *[f"--vary={v}" for v in PENDULUM_VARY]]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    records = {r["metric"]: r for r in map(json.loads, result.stdout.splitlines())}
+    # the default metrics: max |E_j| of each joint, v(t_end), the largest dv/dt, converged
+    assert list(records) == ["max_abs_constraint_error_shoulder", "max_abs_constraint_error_elbow", "lyapunov_final",
+                             "max_lyapunov_rate", "converged"]
+    assert records["max_abs_constraint_error_elbow"]["units"] == "m" and records["lyapunov_final"]["units"] == "J"
+    assert set(records["lyapunov_final"]["factors"]) == {"bodies.1.mass", "initial_state.upper.theta.0"}
+    assert records["lyapunov_final"]["n_runs"] == 32 and records["lyapunov_final"]["n_nonfinite"] == 0
+    ds = read_sensitivity(out / "double_pendulum")
+    assert list(ds["metric"].values) == list(records)
+
+    config = load_any_config(PENDULUM, SHORT)
+    plan = plan_sensitivity(config, PENDULUM_VARY, n=8)  # the same design, drawn again
+    runs = rbstab.open_sweep(out / "double_pendulum" / "sweep")
+    assert runs.sizes["run"] == len(plan.design) == 32
+    for i, row in plan.design.iterrows():
+        alone = _alone(config, row.to_dict())
+        assert runs["lyapunov_final"].values[i] == alone.summary["lyapunov_final"]
+        assert runs["max_lyapunov_rate"].values[i] == alone.summary["max_lyapunov_rate"]
+        for j, joint in enumerate(("shoulder", "elbow")):
+            assert runs[f"max_abs_constraint_error_{joint}"].values[i] == alone.summary["max_abs_constraint_error"][j]
+
+
+def test_tune_on_a_chain_reaches_the_grids_best_and_its_trials_are_simulate_chains(tmp_path):
+    config = load_any_config(STANCE, SHORT)
+    grid = {d: _alone(config, {"joints.hip.l_r.0": d}).summary for d in HIP_DAMPING}
+    v = {d: s["lyapunov_final"] for d, s in grid.items()}
+    best = min(v, key=v.get)
+    assert best not in (HIP_DAMPING[0], HIP_DAMPING[-1])  # an optimum inside the grid
+    result = tune(config, [f"joints.hip.l_r.0=choice:{HIP_DAMPING}"], minimize=["lyapunov_final"],
+                  subject_to=["max_abs_constraint_error_hip<=1e-6"], trials=16, generation=8, storage="memory",
+                  output=tmp_path)
+    assert result.n_trials == 16 and result.n_failed == 0
+    assert result.best_params == {"joints.hip.l_r.0": best} and result.best_values == [v[best]]
+    for _, row in result.trials.iterrows():
+        damping = row["joints.hip.l_r.0"]
+        assert row["lyapunov_final"] == v[damping]
+        assert row["max_abs_constraint_error_hip"] == grid[damping]["max_abs_constraint_error"][1]
+    # best.yaml is a chain's config that rbstab run takes: it gives the best trial's value
+    again = load_any_config(tmp_path / "stance_ankle_hip" / "best.yaml")
+    assert again.resolved["joints"][1]["l_r"][0] == best
+    assert simulate_chain(again).summary["lyapunov_final"] == v[best]
+    assert rbstab.studies.read_tuning(tmp_path / "stance_ankle_hip")["max_abs_constraint_error_hip"].attrs["units"] == "m"
+
+
+OVER = ["bodies.trunk.mass=scale_uniform:[0.95,1.05]", "bodies.0.mass=uniform:[21,23]"]
+
+
+def test_tune_over_uncertain_chain_bodies_takes_the_worst_of_simulate_chains_runs():
+    config = load_any_config(STANCE, SHORT)
+    problem = plan_tuning(config, ["joints.hip.l_r.0=uniform:[25,100]"], minimize=["lyapunov_final"],
+                          subject_to=["max_abs_constraint_error_hip<=1"], over=OVER, over_n=3)
+    masses = [(b["bodies.0.mass"], b["bodies.trunk.mass"]) for b in problem.bodies]
+    assert len(set(masses)) == 3 and all(21 <= a <= 23 and 45 <= b <= 50 for a, b in masses)
+    trials = [problem.values_of({"joints.hip.l_r.0": d}) for d in (30.0, 80.0)]
+    for values, record in zip(trials, problem.evaluate_many(trials)):
+        runs = [simulate_chain(c).summary for c in problem.configs(values)]
+        assert [[b.mass for b in c.chain.bodies] for c in problem.configs(values)] == [list(m) for m in masses]
+        assert record["figures"]["lyapunov_final"] == max(s["lyapunov_final"] for s in runs)
+        assert record["figures"]["max_abs_constraint_error_hip"] == max(s["max_abs_constraint_error"][1] for s in runs)
+
+
+def test_tune_over_a_chain_from_the_command_line(tmp_path):
+    out = tmp_path / "studies"
+    args = ["tune", str(STANCE), "--trials", "4", "--generation", "4", "--vary", "joints.hip.l_r.0=uniform:[25,100]",
+            "--minimize", "lyapunov_final", *[f"--over={o}" for o in OVER], "--over-n", "3", *SET, "-o", str(out),
+            "--json", "-q"]
+    result = CliRunner().invoke(cli, args, catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    record = json.loads(result.stdout.splitlines()[-1])
+    assert record["n_trials"] == 4 and record["n_failed"] == 0 and set(record["best_params"]) == {"joints.hip.l_r.0"}
+    tuning = rbstab.studies.read_tuning(out / "stance_ankle_hip")
+    assert tuning.attrs["bodies"] == 3
+    assert load_any_config(out / "stance_ankle_hip" / "best.yaml").resolved["bodies"][1]["mass"] == 47.46  # nominal
+
+
+# -- refused input -------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("args, words", [
+    (["sensitivity", "--vary", "joints.knee.k_r.0=uniform:[1,2]"],
+     ["--vary 'joints.knee.k_r.0=uniform:[1,2]'", "no 'knee'", "by name: shoulder, elbow"]),
+    (["sensitivity", "--vary", "initial_state.torso.theta.0=uniform:[0,0.1]"],
+     ["--vary", "found 'torso'", "expected one of upper, lower"]),
+    (["sensitivity", "--vary", "controller.k_r.0=uniform:[1,2]"],
+     ["--vary", "unknown section 'controller'", "allowed: name, gravity, bodies, joints"]),
+    (["sensitivity", "--vary", "bodies.1.mass=uniform:[1,2]", "--metric", "max_abs_constraint_error_knee"],
+     ["--metric 'max_abs_constraint_error_knee'", "no joint 'knee'", "max_abs_constraint_error_elbow"]),
+    (["sensitivity", "--vary", "bodies.1.mass=uniform:[1,2]", "--metric", "final_theta"],
+     ["--metric 'final_theta'", "one body's runs, not of a chain's", "allowed for a chain: converged"]),
+    (["tune", "--vary", "bodies.1.mass=uniform:[1,2]", "--minimize", "max_abs_constraint_error"],
+     ["--minimize 'max_abs_constraint_error'", "per joint", "max_abs_constraint_error_shoulder"]),
+    (["tune", "--vary", "bodies.1.mass=uniform:[1,2]", "--minimize", "lyapunov_final",
+      "--subject-to", "max_abs_constraint_error_z<=0.1"], ["--subject-to", "one body's runs", "_elbow"]),
+    (["tune", "--vary", "bodies.1.mass=uniform:[1,2]", "--minimize", "lyapunov_final",
+      "--over", "bodies.5.mass=uniform:[1,2]"], ["--over 'bodies.5.mass=uniform:[1,2]'", "no '5'", "upper, lower"]),
+    (["tune", "--vary", "joints.elbow.k_r=scale_uniform:[1,2]", "--minimize", "lyapunov_final"],
+     ["--vary", "'joints.elbow.k_r'", "found no value", "a number or a list of numbers"]),
+    (["tune", "--vary", "bodies.upper.mass=uniform:[1,2]", "--vary", "bodies.0.mass=uniform:[1,2]",
+      "--minimize", "lyapunov_final"], ["--vary", "given twice", "bodies.upper.mass and bodies.0.mass"]),
+    (["tune", "--vary", "bodies.1.mass=uniform:[-1,2]", "--minimize", "lyapunov_final"],
+     ["--vary", "lower ends", "'bodies.1.mass': found -1.0; expected a number > 0"]),
+], ids=["joint", "body", "one-body-key", "metric-joint", "metric-one-body", "per-joint-objective",
+        "one-body-constraint", "over-body", "scale-unset", "twice", "corner"])
+def test_bad_chain_study_options_are_refused_in_one_line_and_nothing_is_written(tmp_path, args, words):
+    out = tmp_path / "out"
+    n = ["-n", "8"] if args[0] == "sensitivity" else ["--trials", "4"]
+    result = CliRunner().invoke(cli, [args[0], str(PENDULUM), *n, *args[1:], *SET, "-o", str(out)])
+    assert result.exit_code == 1, result.output
+    assert "Traceback" not in result.output
+    problems = [line for line in result.output.splitlines() if line.startswith("  ")]
+    assert result.output.startswith("Error: invalid study\n") and len(problems) == 1, result.output
+    for word in words:
+        assert word in problems[0], problems[0]
+    assert not out.exists()
+
+
+def test_a_chain_study_from_python_lists_every_problem():
+    config = load_any_config(PENDULUM, SHORT)
+    with pytest.raises(StudyInputError) as info:
+        plan_sensitivity(config, ["joints.knee.l_r.0=uniform:[1,2]", "bodies.lower.mass=choice:[]"], n=8,
+                         metrics=["max_abs_constraint_error_hip"])
+    assert len(info.value.errors) == 3, info.value.errors
+    assert np.all([e.startswith(("--vary", "--metric")) for e in info.value.errors])
