@@ -543,28 +543,37 @@ class _LevelSearch:
         return self.y_e + np.atleast_2d(z) @ self.root.T
 
     def _values(self, z: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        return self._outputs(z, t)[:2]
+
+    def _outputs(self, z: np.ndarray, t: float) -> tuple:
+        """(v, dv/dt, the angles or None) at the states z (k, n): the angles where the model's
+        ``evaluate`` gives them (``"angles"``) and they are not linear in the state."""
         with np.errstate(all="ignore"):
             out = self.variant.evaluate(self._states(z), t)
-        return np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float)
+        angles = out.get("angles") if self.variant.angle_matrix is None else None
+        return (np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float),
+                None if angles is None else np.asarray(angles, dtype=float))
 
-    def _gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+    def _gradients(self, z: np.ndarray, t: float) -> tuple:
         """v, dv/dt and their gradients in z at z (central differences, one call; the last
         point's kept: SLSQP asks for the objective, the constraints and their gradients
-        at the same point)."""
+        at the same point), then the angles and their Jacobian in z (None where the model's
+        angles are linear or its ``evaluate`` does not give them)."""
         key = (np.asarray(z, dtype=float).tobytes(), float(t))
         if getattr(self, "_last", (None,))[0] == key:
             return self._last[1]
         self._last = (key, self._evaluate_gradients(np.asarray(z, dtype=float), t))
         return self._last[1]
 
-    def _evaluate_gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+    def _evaluate_gradients(self, z: np.ndarray, t: float) -> tuple:
         m = len(z)
         h = 1e-7 * (1.0 + np.abs(z))
         points = np.concatenate([z[None], z + np.diag(h), z - np.diag(h)])
-        v, r = self._values(points, t)
-        return v[0], r[0], (v[1:m + 1] - v[m + 1:]) / (2 * h), (r[1:m + 1] - r[m + 1:]) / (2 * h)
+        v, r, a = self._outputs(points, t)
+        angles = (None, None) if a is None else (a[0], ((a[1:m + 1] - a[m + 1:]) / (2 * h)[:, None]).T)
+        return (v[0], r[0], (v[1:m + 1] - v[m + 1:]) / (2 * h), (r[1:m + 1] - r[m + 1:]) / (2 * h), *angles)
 
-    def _domain(self) -> list[dict]:
+    def _domain(self, t: float) -> list[dict]:
         """|angle| <= limit for each of the model's angles: linear constraints in z where the
         angles are linear in the state, else with their Jacobian."""
         lim = self.limit
@@ -578,8 +587,14 @@ class _LevelSearch:
                         {"type": "ineq", "fun": lambda z, row=row, y1=y1: (lim + y1 + row @ z) / lim,
                          "jac": lambda z, row=row: row / lim}]
             return out
-        angles = lambda z: self.variant.angles(self._states(z))[0]  # noqa: E731
-        jac = lambda z: self.variant.angle_jacobian(self._states(z)[0]) @ self.root  # noqa: E731
+        def angles(z):
+            found = self._gradients(z, t)[4]
+            return self.variant.angles(self._states(z))[0] if found is None else found
+
+        def jac(z):
+            found = self._gradients(z, t)[5]
+            return self.variant.angle_jacobian(self._states(z)[0]) @ self.root if found is None else found
+
         return [{"type": "ineq", "fun": lambda z: (lim - angles(z)) / lim, "jac": lambda z: -jac(z) / lim},
                 {"type": "ineq", "fun": lambda z: (lim + angles(z)) / lim, "jac": lambda z: jac(z) / lim}]
 
@@ -589,7 +604,7 @@ class _LevelSearch:
 
         scale = self.rho * level
         cons = [{"type": "eq", "fun": lambda z: self._gradients(z, t)[0] / level - 1.0,
-                 "jac": lambda z: self._gradients(z, t)[2] / level}] + self._domain()
+                 "jac": lambda z: self._gradients(z, t)[2] / level}] + self._domain(t)
         res = minimize(lambda z: -self._gradients(z, t)[1] / scale, z0, jac=lambda z: -self._gradients(z, t)[3] / scale,
                        method="SLSQP", constraints=cons, options={"maxiter": 60, "ftol": 1e-12})
         return res.x
@@ -601,16 +616,16 @@ class _LevelSearch:
         level = max(float(self._values(z0, t)[0][0]), np.finfo(float).tiny)
 
         def rate_margin(z):  # dv/dt / (rho v) - margin: negative at and near y_e
-            v, r, _, _ = self._gradients(z, t)
+            v, r = self._gradients(z, t)[:2]
             return r / (self.rho * v) - _RATE_MARGIN
 
         def rate_margin_jac(z):
-            v, r, gv, gr = self._gradients(z, t)
+            v, r, gv, gr = self._gradients(z, t)[:4]
             return (gr * v - r * gv) / (self.rho * v * v)
 
         cons = [{"type": "ineq", "fun": rate_margin, "jac": rate_margin_jac},
                 {"type": "ineq", "fun": lambda z: self._gradients(z, t)[0] / self.floor - 1.0,
-                 "jac": lambda z: self._gradients(z, t)[2] / self.floor}] + self._domain()
+                 "jac": lambda z: self._gradients(z, t)[2] / self.floor}] + self._domain(t)
         res = minimize(lambda z: self._gradients(z, t)[0] / level, z0, jac=lambda z: self._gradients(z, t)[2] / level,
                        method="SLSQP", constraints=cons, options={"maxiter": 400, "ftol": 1e-12})
         return res.x
