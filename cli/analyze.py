@@ -336,9 +336,8 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         if asked or len(chains) < len(configs):
             what = ", ".join(asked) if asked else "one-body configs"
             raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation, "
-                                   f"verdict, Lyapunov certificate, --basin map, --push thresholds and basin stability; "
-                                   f"{what} take "
-                                   "one-body configs (give them in another command)")
+                                   "verdict, Lyapunov certificate, --basin map, --push thresholds and basin "
+                                   f"stability; {what} take one-body configs (give them in another command)")
         if push_options is not None:
             push_options = {**push_options, "body": push_body}
         if stability_options is not None and stability_options.get("push") is not None:

@@ -110,7 +110,8 @@ def test_no_run_started_inside_the_estimate_fails_to_recover(planar):
     model = ChainModel(compiled, result.coordinates)
     on = level_states(model, result.linearisation, cert, 32, seed=7)
     rng = np.random.default_rng(8)
-    inside = result.linearisation.equilibrium + rng.uniform(0.2, 1.0, (32, 1)) * (on[::-1] - result.linearisation.equilibrium)
+    z_e = result.linearisation.equilibrium
+    inside = z_e + rng.uniform(0.2, 1.0, (32, 1)) * (on[::-1] - z_e)
     x = np.concatenate([on, inside])
     v0 = model.lyapunov(x)
     np.testing.assert_allclose(v0[:32], cert.sublevel, rtol=1e-9)
@@ -171,7 +172,8 @@ def test_rbstab_analyze_gives_a_chains_certificate(tmp_path):
     path = "configs/examples/stance_ankle_hip.yaml"
     result = CliRunner().invoke(cli, ["analyze", path, "--samples", "500", "-o", str(tmp_path)])
     assert result.exit_code == 0, result.output
-    assert "certificate: holds (LaSalle)" in result.output and "inner estimate of the region of attraction" in result.output
+    assert "certificate: holds (LaSalle)" in result.output
+    assert "inner estimate of the region of attraction" in result.output
     found = CliRunner().invoke(cli, ["analyze", path, "--samples", "500", "--json", "-o", str(tmp_path)])
     record = json.loads(found.stdout.strip().splitlines()[-1])
     c = record["certificate"]

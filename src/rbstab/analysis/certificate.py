@@ -56,7 +56,8 @@ import numpy as np
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from .derivatives import directional_derivative, hessian, jacobian
 
-__all__ = ["Certificate", "Model", "VariantModel", "as_model", "constrained_boundary_level", "certify", "checked", "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
+__all__ = ["Certificate", "Model", "VariantModel", "as_model", "constrained_boundary_level", "certify", "checked",
+           "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
            "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
 #: Eigenvalues of a scaled Hessian within this of zero (relative to the largest) are zero.
@@ -527,9 +528,10 @@ class _LevelSearch:
     - from a state with dv/dt > 0: the least v subject to dv/dt >= 1e-7 rho v (rho the
       spectral radius of the linearisation: away from the rest states, where dv/dt = 0).
 
-    Both keep the model's angles within pi/2 - gimbal_margin (for one body |theta_2|, linear in z), and v above the least sampled level. Every state the searches end
-    at is checked as a sample is (the numerical dv/dt of :func:`_sampled_rates`, above its
-    error): only a confirmed dv/dt > 0 lowers c."""
+    Both keep the model's angles within pi/2 - gimbal_margin (for one body |theta_2|, linear
+    in z), and v above the least sampled level. Every state the searches end at is checked
+    as a sample is (the numerical dv/dt of :func:`_sampled_rates`, above its error): only a
+    confirmed dv/dt > 0 lowers c."""
 
     def __init__(self, variant, linearisation, root: np.ndarray, limit: float, floor: float) -> None:
         self.variant, self.linearisation, self.root, self.limit = variant, linearisation, root, limit
