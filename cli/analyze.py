@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -335,14 +336,15 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         if asked or len(chains) < len(configs):
             what = ", ".join(asked) if asked else "one-body configs"
             raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation, "
-                                   f"verdict, --basin map, --push thresholds and basin stability; {what} take "
-                                   "one-body configs (give them in another command)")
+                                   "verdict, Lyapunov certificate, --basin map, --push thresholds and basin "
+                                   f"stability; {what} take one-body configs (give them in another command)")
         if push_options is not None:
             push_options = {**push_options, "body": push_body}
         if stability_options is not None and stability_options.get("push") is not None:
             stability_options = {**stability_options, "body": push_body}
         _analyse_chains(chains, overrides, basin, ratio=ratio, n_samples=basin_samples, push=push_options,
-                        stability=stability_options, jobs=jobs or default_jobs())
+                        stability=stability_options, jobs=jobs or default_jobs(), certificate=not no_certificate,
+                        samples=samples, seed=seed)
         return
     if push_body is not None:
         raise click.UsageError("--push-body: names the body of a chain that is pushed; a one-body config has one")
@@ -395,8 +397,11 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
 
 
 def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, push: dict | None,
-                    stability: dict | None, jobs: int) -> None:
-    """Each chain's rest state, linearisation and verdict and, with two ``basin`` axes, its
+                    stability: dict | None, jobs: int, certificate: bool = True, samples: int = 10_000,
+                    seed: int = 0) -> None:
+    """Each chain's rest state, linearisation, verdict and (``certificate``) Lyapunov
+    certificate (``samples`` states, ``seed``; its c checked against every run of the
+    command) and, with two ``basin`` axes, its
     basin map (:func:`rbstab.analysis.chain_basin_map`), with ``push`` its smallest fatal
     pushes (:func:`rbstab.analysis.push.push_analysis` on a named body), printed (or one
     JSON object each, "kind": "chain"); nothing is written. Every axis and the pushed body
@@ -437,23 +442,31 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
                 check_axes(config, axes)
         except ValueError as exc:
             raise click.ClickException(str(exc))
-    if axes or push is not None or stability is not None:
+    if certificate or axes or push is not None or stability is not None:
         ensure_compiled(say=console.info, chain=True)
     for config in loaded:
         try:
-            result = analyze_chain(config)
+            result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed, ratio=ratio)
             found = chain_basin_map(config, axes, ratio=ratio, n_samples=n_samples) if axes else None
             pushed = push_analysis(config, ratio=ratio, jobs=jobs, **push) if push is not None else None
             stable = basin_stability(config, ratio=ratio, jobs=jobs, **stability) if stability is not None else None
+            result = result.checked(SimpleNamespace(settling=None, basin=found, push=pushed, basin_stability=stable))
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         if console.json:
+            c = result.certificate
+            push_json = None
+            if pushed:
+                push_json = pushed.to_json()
+                if c is not None and c.positive_definite:
+                    estimate = pushed.estimate(c.sublevel)
+                    push_json["estimate"] = estimate if math.isfinite(estimate) else None
             console.emit({"kind": "chain", **result.as_dict(), **({"basin": _basin_json(found)} if found else {}),
-                          **({"push": pushed.to_json()} if pushed else {}),
+                          **({"push": push_json} if pushed else {}),
                           **({"basin_stability": stable.to_json()} if stable else {})})
             continue
         console.out(result.text())
-        shown = SimpleNamespace(push=pushed, certificate=None, basin_stability=stable)
+        shown = SimpleNamespace(push=pushed, certificate=result.certificate, basin_stability=stable)
         for line in push_lines(shown) + stability_lines(shown):
             console.out(line)
         if found is not None:

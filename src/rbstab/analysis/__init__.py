@@ -16,7 +16,8 @@
   stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
 - :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;
 - :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record;
-- :mod:`~rbstab.analysis.chain`: a chain's rest state, linearisation and verdict, and its basin map.
+- :mod:`~rbstab.analysis.chain`: a chain's rest state, linearisation and verdict, and its basin map;
+  :mod:`~rbstab.analysis.chain_certificate`: its Lyapunov certificate in its independent coordinates.
 
 Method and limits: ``docs/analysis.md``.
 """

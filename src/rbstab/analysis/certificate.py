@@ -33,6 +33,12 @@ each with its search (the history; :attr:`Certificate.settled`). It stays an *es
 :func:`checked` lowers it where a simulated run contradicts it
 (:mod:`rbstab.analysis.evidence`).
 
+The model is anything with the small protocol of :class:`Model` (v, the analytic dv/dt, the
+right-hand side f, the domain's angles, the least v on the domain boundary and the map to
+the state a run starts from): a one-body variant (:class:`VariantModel`, its own state) or a
+chain in its independent coordinates (:class:`rbstab.analysis.chain_certificate.ChainModel`,
+on the constraint manifold of its permanent joints).
+
 With disturbances (``disturbed``), the local part is of the undisturbed dynamics and the
 sampled part of the disturbed ones: each sampled state at a time drawn uniformly in
 [0, t_end], its dv/dt with the disturbances' power then (an impulse is a jump of the
@@ -43,13 +49,15 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from .derivatives import directional_derivative, hessian, jacobian
 
-__all__ = ["Certificate", "certify", "checked", "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
+__all__ = ["Certificate", "Model", "VariantModel", "as_model", "constrained_boundary_level", "certify", "checked",
+           "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
            "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
 #: Eigenvalues of a scaled Hessian within this of zero (relative to the largest) are zero.
@@ -79,6 +87,71 @@ _REACH = 1.5
 BOUNDS = ("domain boundary", "dv/dt > 0 at a sampled state", "sampled state outside the domain",
           "non-finite value at a sampled state", "v not positive definite",
           "dv/dt > 0 at a state found by the local search", "a simulated run from inside did not recover")
+
+
+class Model(Protocol):
+    """What the certificate needs of a model, in its coordinates x (n,; stacks (k, n)).
+
+    ``lyapunov(x)`` -> v (k,) [J]; ``evaluate(x, t)`` -> a mapping with ``"lyapunov"`` and
+    ``"lyapunov_rate"`` (the analytic dv/dt [W]) (k,) at the times ``t`` (scalar or (k,));
+    ``rhs(t, x)`` -> dx/dt (k, n); ``angles(x)`` -> (k, m) the angles [rad] whose
+    |value| must stay below pi/2 - gimbal_margin (the domain); ``angle_matrix``: (m, n) where
+    the angles are linear in x (angles = angle_matrix @ x), else None (then
+    ``angle_jacobian(x)`` -> (m, n)); ``boundary_level(y_e, hess, limit)`` -> the least v on
+    the domain boundary [J]; ``states(x)`` -> the states (k, n_states) a run starts from."""
+
+    angle_matrix: np.ndarray | None
+
+    def lyapunov(self, x: np.ndarray) -> np.ndarray: ...
+
+    def evaluate(self, x: np.ndarray, t=0.0) -> dict: ...
+
+    def rhs(self, t, x: np.ndarray) -> np.ndarray: ...
+
+    def angles(self, x: np.ndarray) -> np.ndarray: ...
+
+    def angle_jacobian(self, x: np.ndarray) -> np.ndarray: ...
+
+    def boundary_level(self, y_e: np.ndarray, hess: np.ndarray, limit: float) -> float: ...
+
+    def states(self, x: np.ndarray) -> np.ndarray: ...
+
+
+class VariantModel:
+    """A one-body variant (:class:`rbstab.variants.Variant`) as a :class:`Model` in its own
+    state of ``n`` entries: the domain |theta_2| < limit (eq 5, linear: ``y[1]``), the
+    boundary level of :func:`boundary_level`, runs from the state itself."""
+
+    def __init__(self, variant, n: int) -> None:
+        self.variant = variant
+        self.angle_matrix = np.eye(n)[1:2]
+
+    def lyapunov(self, x):
+        return self.variant.lyapunov(x)
+
+    def evaluate(self, x, t=0.0):
+        return self.variant.evaluate(x, t)
+
+    def rhs(self, t, x):
+        return self.variant.rhs(t, x)
+
+    def angles(self, x):
+        return np.atleast_2d(x)[:, 1:2]
+
+    def angle_jacobian(self, x):
+        return self.angle_matrix
+
+    def boundary_level(self, y_e, hess, limit):
+        return boundary_level(self.variant, y_e, hess, limit)
+
+    def states(self, x):
+        return np.atleast_2d(x)
+
+
+def as_model(model, n: int):
+    """``model`` as a :class:`Model` of ``n`` coordinates: a variant wrapped in
+    :class:`VariantModel`, a model as it is."""
+    return model if hasattr(model, "angles") else VariantModel(model, n)
 
 
 @dataclass(frozen=True)
@@ -301,6 +374,62 @@ def boundary_level(variant, y_e: np.ndarray, hess: np.ndarray, limit: float) -> 
     return min(levels)
 
 
+def constrained_boundary_level(model, y_e: np.ndarray, hess: np.ndarray, limit: float, free: np.ndarray) -> float:
+    """The least v [J] on the domain boundary of a :class:`Model` whose angles need not be
+    coordinates: for each angle k and side, v at rest (the coordinates outside ``free`` at
+    y_e) minimised over the configuration coordinates ``free`` subject to angle_k = +-limit
+    (scipy's SLSQP from the quadratic model's minimiser on the linearised constraint,
+    central-difference gradients). The kinetic terms of v are >= 0, so the least v on the
+    boundary is at rest. A search that ends off the boundary (|angle_k -+ limit| > 1e-6 rad)
+    counts with the quadratic model's value there, the least v of the quadratic model on the
+    linearised boundary."""
+    from scipy.optimize import minimize  # heavy: scipy
+
+    free = np.asarray(free, dtype=int)
+    h_ff = hess[np.ix_(free, free)]
+    scale = max(float(np.abs(np.diag(h_ff)).max()) * limit * limit, np.finfo(float).tiny)
+    step = 1e-7
+
+    def states(q):
+        x = np.tile(y_e, (len(q), 1))
+        x[:, free] = q
+        return x
+
+    def value_and_gradient(fun, q):
+        points = np.concatenate([q[None], q + step * np.eye(len(q)), q - step * np.eye(len(q))])
+        values = fun(states(points))
+        m = len(q)
+        return values[0], (values[1:m + 1] - values[m + 1:]) / (2 * step)
+
+    a0 = model.angles(y_e[None])[0]
+    grad_a = model.angle_jacobian(y_e)[:, free]
+    levels = []
+    for k in range(len(a0)):
+        g = grad_a[k]
+        if not np.any(g):
+            continue
+        solved = np.linalg.solve(h_ff, g)
+        for side in (limit, -limit):
+            start = y_e[free] + solved * (side - a0[k]) / float(g @ solved)
+            quadratic = 0.5 * float((start - y_e[free]) @ h_ff @ (start - y_e[free]))
+            v_of = lambda x: np.asarray(model.lyapunov(x), dtype=float) / scale  # noqa: E731
+            a_of = lambda x, k=k, side=side: (model.angles(x)[:, k] - side) / limit  # noqa: E731
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    res = minimize(lambda q: value_and_gradient(v_of, q)[0], start,
+                                   jac=lambda q: value_and_gradient(v_of, q)[1], method="SLSQP",
+                                   constraints=[{"type": "eq", "fun": lambda q: value_and_gradient(a_of, q)[0],
+                                                 "jac": lambda q: value_and_gradient(a_of, q)[1]}],
+                                   options={"maxiter": 200, "ftol": 1e-14})
+                    on = abs(float(model.angles(states(res.x[None]))[0, k]) - side) <= 1e-6
+                    found = float(model.lyapunov(states(res.x[None]))[0]) if on else np.nan
+                except (ValueError, np.linalg.LinAlgError):
+                    found = np.nan
+            levels.append(found if np.isfinite(found) else quadratic)
+    return min(levels) if levels else np.inf
+
+
 def _samples(y_e: np.ndarray, root: np.ndarray, top: float, n: int, rng) -> np.ndarray:
     """n states y_e + S z, |z|^2/2 log-uniform over :data:`_DECADES` decades below ``top``."""
     u = rng.standard_normal((n, len(y_e)))
@@ -324,21 +453,24 @@ def certify(
 
     Parameters
     ----------
-    variant : rbstab.variants.Variant
-        Smooth (``variant.smooth``).
+    variant : rbstab.variants.Variant or Model
+        Smooth (``variant.smooth``); a variant is taken in its own state
+        (:class:`VariantModel`), a :class:`Model` in its coordinates.
     linearisation : rbstab.analysis.linearise.Linearisation
-        Of ``variant`` (its equilibrium, Jacobian and eigenvalues).
+        Of ``variant`` (its equilibrium, Jacobian and eigenvalues, in the model's coordinates).
     gimbal_margin : float
         [rad]: the domain is |theta_2| < pi/2 - gimbal_margin (eq 5).
     n_samples : int
         States sampled for the dv/dt check (>= 1).
     seed : int
         Of the sampling (numpy's default generator).
-    disturbed : rbstab.variants.Variant, optional
+    disturbed : rbstab.variants.Variant or Model, optional
         ``variant`` with its disturbances, whose dv/dt the samples check, each at a time
         drawn uniformly in [0, ``t_end``] [s] (default: ``variant`` itself, at t = 0).
     """
     y_e = linearisation.equilibrium
+    variant = as_model(variant, len(y_e))
+    disturbed = as_model(disturbed, len(y_e)) if disturbed is not None else None
     h_v, _ = hessian(variant.lyapunov, y_e)
     h_r, _ = hessian(lambda y: variant.evaluate(y)["lyapunov_rate"], y_e)
     positive = bool(np.all(np.diag(h_v) > 0) and _scaled_eigenvalues(h_v)[0] > DEFINITE_RTOL)
@@ -358,7 +490,7 @@ def certify(
     root = q @ np.diag(1.0 / np.sqrt(w)) @ q.T  # S = H_v^(-1/2)
     mu = np.linalg.eigvalsh(root @ h_r @ root)  # H_r w = mu H_v w
     observable = _pbh_observable(linearisation.jacobian, h_r, root, linearisation.eigenvalues)
-    level = boundary_level(variant, y_e, h_v, limit)
+    level = variant.boundary_level(y_e, h_v, limit)
     rng = np.random.default_rng(seed)
     states = _samples(y_e, root, _REACH * level, n_samples, rng)
     times = rng.uniform(0.0, t_end, n_samples) if disturbed is not None else np.zeros(n_samples)
@@ -396,9 +528,10 @@ class _LevelSearch:
     - from a state with dv/dt > 0: the least v subject to dv/dt >= 1e-7 rho v (rho the
       spectral radius of the linearisation: away from the rest states, where dv/dt = 0).
 
-    Both keep |theta_2| <= pi/2 - gimbal_margin (linear in z), and v above the least sampled level. Every state the searches end
-    at is checked as a sample is (the numerical dv/dt of :func:`_sampled_rates`, above its
-    error): only a confirmed dv/dt > 0 lowers c."""
+    Both keep the model's angles within pi/2 - gimbal_margin (for one body |theta_2|, linear
+    in z), and v above the least sampled level. Every state the searches end at is checked
+    as a sample is (the numerical dv/dt of :func:`_sampled_rates`, above its error): only a
+    confirmed dv/dt > 0 lowers c."""
 
     def __init__(self, variant, linearisation, root: np.ndarray, limit: float, floor: float) -> None:
         self.variant, self.linearisation, self.root, self.limit = variant, linearisation, root, limit
@@ -412,32 +545,60 @@ class _LevelSearch:
         return self.y_e + np.atleast_2d(z) @ self.root.T
 
     def _values(self, z: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        return self._outputs(z, t)[:2]
+
+    def _outputs(self, z: np.ndarray, t: float) -> tuple:
+        """(v, dv/dt, the angles or None) at the states z (k, n): the angles where the model's
+        ``evaluate`` gives them (``"angles"``) and they are not linear in the state."""
         with np.errstate(all="ignore"):
             out = self.variant.evaluate(self._states(z), t)
-        return np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float)
+        angles = out.get("angles") if self.variant.angle_matrix is None else None
+        return (np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float),
+                None if angles is None else np.asarray(angles, dtype=float))
 
-    def _gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+    def _gradients(self, z: np.ndarray, t: float) -> tuple:
         """v, dv/dt and their gradients in z at z (central differences, one call; the last
         point's kept: SLSQP asks for the objective, the constraints and their gradients
-        at the same point)."""
+        at the same point), then the angles and their Jacobian in z (None where the model's
+        angles are linear or its ``evaluate`` does not give them)."""
         key = (np.asarray(z, dtype=float).tobytes(), float(t))
         if getattr(self, "_last", (None,))[0] == key:
             return self._last[1]
         self._last = (key, self._evaluate_gradients(np.asarray(z, dtype=float), t))
         return self._last[1]
 
-    def _evaluate_gradients(self, z: np.ndarray, t: float) -> tuple[float, float, np.ndarray, np.ndarray]:
+    def _evaluate_gradients(self, z: np.ndarray, t: float) -> tuple:
         m = len(z)
         h = 1e-7 * (1.0 + np.abs(z))
         points = np.concatenate([z[None], z + np.diag(h), z - np.diag(h)])
-        v, r = self._values(points, t)
-        return v[0], r[0], (v[1:m + 1] - v[m + 1:]) / (2 * h), (r[1:m + 1] - r[m + 1:]) / (2 * h)
+        v, r, a = self._outputs(points, t)
+        angles = (None, None) if a is None else (a[0], ((a[1:m + 1] - a[m + 1:]) / (2 * h)[:, None]).T)
+        return (v[0], r[0], (v[1:m + 1] - v[m + 1:]) / (2 * h), (r[1:m + 1] - r[m + 1:]) / (2 * h), *angles)
 
-    def _domain(self) -> list[dict]:
-        row = self.root[1]
-        y1 = self.y_e[1]
-        return [{"type": "ineq", "fun": lambda z: (self.limit - y1 - row @ z) / self.limit, "jac": lambda z: -row / self.limit},
-                {"type": "ineq", "fun": lambda z: (self.limit + y1 + row @ z) / self.limit, "jac": lambda z: row / self.limit}]
+    def _domain(self, t: float) -> list[dict]:
+        """|angle| <= limit for each of the model's angles: linear constraints in z where the
+        angles are linear in the state, else with their Jacobian."""
+        lim = self.limit
+        matrix = self.variant.angle_matrix
+        out = []
+        if matrix is not None:
+            for row_y in matrix:
+                row, y1 = row_y @ self.root, float(row_y @ self.y_e)
+                out += [{"type": "ineq", "fun": lambda z, row=row, y1=y1: (lim - y1 - row @ z) / lim,
+                         "jac": lambda z, row=row: -row / lim},
+                        {"type": "ineq", "fun": lambda z, row=row, y1=y1: (lim + y1 + row @ z) / lim,
+                         "jac": lambda z, row=row: row / lim}]
+            return out
+        def angles(z):
+            found = self._gradients(z, t)[4]
+            return self.variant.angles(self._states(z))[0] if found is None else found
+
+        def jac(z):
+            found = self._gradients(z, t)[5]
+            return self.variant.angle_jacobian(self._states(z)[0]) @ self.root if found is None else found
+
+        return [{"type": "ineq", "fun": lambda z: (lim - angles(z)) / lim, "jac": lambda z: -jac(z) / lim},
+                {"type": "ineq", "fun": lambda z: (lim + angles(z)) / lim, "jac": lambda z: jac(z) / lim}]
 
     def _climb(self, z0: np.ndarray, level: float, t: float) -> np.ndarray:
         """The largest dv/dt on {v = level} near z0."""
@@ -445,7 +606,7 @@ class _LevelSearch:
 
         scale = self.rho * level
         cons = [{"type": "eq", "fun": lambda z: self._gradients(z, t)[0] / level - 1.0,
-                 "jac": lambda z: self._gradients(z, t)[2] / level}] + self._domain()
+                 "jac": lambda z: self._gradients(z, t)[2] / level}] + self._domain(t)
         res = minimize(lambda z: -self._gradients(z, t)[1] / scale, z0, jac=lambda z: -self._gradients(z, t)[3] / scale,
                        method="SLSQP", constraints=cons, options={"maxiter": 60, "ftol": 1e-12})
         return res.x
@@ -457,16 +618,16 @@ class _LevelSearch:
         level = max(float(self._values(z0, t)[0][0]), np.finfo(float).tiny)
 
         def rate_margin(z):  # dv/dt / (rho v) - margin: negative at and near y_e
-            v, r, _, _ = self._gradients(z, t)
+            v, r = self._gradients(z, t)[:2]
             return r / (self.rho * v) - _RATE_MARGIN
 
         def rate_margin_jac(z):
-            v, r, gv, gr = self._gradients(z, t)
+            v, r, gv, gr = self._gradients(z, t)[:4]
             return (gr * v - r * gv) / (self.rho * v * v)
 
         cons = [{"type": "ineq", "fun": rate_margin, "jac": rate_margin_jac},
                 {"type": "ineq", "fun": lambda z: self._gradients(z, t)[0] / self.floor - 1.0,
-                 "jac": lambda z: self._gradients(z, t)[2] / self.floor}] + self._domain()
+                 "jac": lambda z: self._gradients(z, t)[2] / self.floor}] + self._domain(t)
         res = minimize(lambda z: self._gradients(z, t)[0] / level, z0, jac=lambda z: self._gradients(z, t)[2] / level,
                        method="SLSQP", constraints=cons, options={"maxiter": 400, "ftol": 1e-12})
         return res.x
@@ -528,7 +689,8 @@ def _sampled_rates(variant, linearisation, y: np.ndarray, limit: float, t: np.nd
     """v, numerical and analytic dv/dt at the states ``y`` (NaN outside the domain) at the
     times ``t`` [s] (1, or one a state), the worst state and the rate mismatch (fields of
     :class:`Certificate`)."""
-    outside = np.abs(y[:, 1]) >= limit
+    with np.errstate(invalid="ignore"):
+        outside = np.any(np.abs(variant.angles(y)) >= limit, axis=1)
     inside = ~outside
     t = np.broadcast_to(t, len(y))
     with np.errstate(all="ignore"):
@@ -615,7 +777,8 @@ def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certif
 
 
 def level_states(variant, linearisation, certificate: Certificate, n: int, seed: int = 0) -> np.ndarray:
-    """n states on the level set {v = c} (c the certificate's sublevel): along the
+    """n states on the level set {v = c} (c the certificate's sublevel) of ``variant`` (a
+    variant or a :class:`Model`, in its coordinates: map them with ``Model.states``): along the
     directions from y_e of the states where the local search's climbs ended (dv/dt largest on
     their level sets; up to n / 2 of them), of the worst sampled state, and random ones, in
     the coordinates z of y = y_e + S z, each at the first radius where v reaches c

@@ -1,6 +1,8 @@
 """The analysis of a chain of rigid bodies: its rest state, the linearisation there in the
 chain's independent coordinates, the eigenvalues and Lyapunov's indirect verdict
-(:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, and
+(:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, the
+Lyapunov certificate with its sublevel estimate checked against the chain's runs
+(:func:`rbstab.analysis.chain_certificate.certify_chain`), and
 the basin of attraction by simulation over a 2-D slice of initial states
 (:func:`chain_basin_map`), and the recovery of runs from drawn initial states
 (:func:`chain_states_recover`, for :func:`rbstab.analysis.push.basin_stability`).
@@ -9,7 +11,7 @@ the basin of attraction by simulation over a 2-D slice of initial states
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -41,6 +43,10 @@ class ChainAnalysis:
         The full rest state (:func:`rbstab.variants.chain.rest_state`).
     initial_lyapunov : float
         v [J] at the configured initial state (zero at the rest state).
+    certificate : Certificate or None
+        The Lyapunov certificate in the independent coordinates (its states, e.g.
+        ``worst_state``, are z), None where not asked for.
+    notes : tuple of str
     """
 
     name: str
@@ -48,6 +54,8 @@ class ChainAnalysis:
     coordinates: list
     rest_state: np.ndarray
     initial_lyapunov: float
+    certificate: object = None
+    notes: tuple = ()
 
     @property
     def verdict(self) -> str:
@@ -55,7 +63,9 @@ class ChainAnalysis:
 
     def as_dict(self) -> dict:
         """Plain Python (the ``--json`` form): rest state per body and block, eigenvalues as
-        [re, im] [1/s], verdict, v at the initial state [J]."""
+        [re, im] [1/s], verdict, v at the initial state [J], the certificate (the fields of
+        a one-body analysis's, :func:`rbstab.analysis.dataset.certificate_record`, with
+        ``coordinates`` naming the entries of ``worst_state``) and notes."""
         lin = self.linearisation
         rest = {}
         for k, (body, block, _) in enumerate(self.coordinates):
@@ -63,7 +73,14 @@ class ChainAnalysis:
         return {"name": self.name, "verdict": lin.verdict, "rest_point": lin.is_rest_point, "rest_state": rest,
                 "eigenvalues": [[float(s.real), float(s.imag)] for s in lin.eigenvalues],
                 "slowest_time_constant": float(lin.slowest_time_constant),
-                "initial_lyapunov": self.initial_lyapunov}
+                "initial_lyapunov": self.initial_lyapunov, "notes": list(self.notes),
+                **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
+
+    def _certificate_dict(self) -> dict:
+        from .dataset import certificate_record
+
+        names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(3)]
+        return {**certificate_record(self.certificate), "coordinates": names}
 
     def text(self) -> str:
         """A few lines for the terminal."""
@@ -82,12 +99,33 @@ class ChainAnalysis:
         lines.append(f"  eigenvalues [1/s], largest real part first: {shown}{more}")
         lines.append(f"  slowest time constant {lin.slowest_time_constant:.4g} s; "
                      f"v at the initial state {self.initial_lyapunov:.6g} J")
+        lines += [f"  note: {n}" for n in self.notes]
+        if self.certificate is not None:
+            from .text import certificate_lines
+
+            lines += certificate_lines(self.certificate, domain="|theta_2| of a body or joint")
         return "\n".join(lines)
 
+    def checked(self, runs) -> "ChainAnalysis":
+        """This analysis with its certificate's c checked against the runs of ``runs`` (an
+        object with ``settling``, ``basin``, ``push`` and ``basin_stability``, those of the
+        same command; :func:`rbstab.analysis.evidence.check_runs`)."""
+        if self.certificate is None:
+            return self
+        from .evidence import check_runs
 
-def analyze_chain(config) -> ChainAnalysis:
-    """Rest state, linearisation, eigenvalues and verdict of a chain run
-    (:class:`rbstab.config.chains.ChainConfig`).
+        return replace(self, certificate=check_runs(self.certificate, runs))
+
+
+def analyze_chain(config, *, certificate: bool = True, samples: int | None = None, seed: int = 0,
+                  falsification_runs: int | None = None, ratio: float = DEFAULT_LYAPUNOV_RATIO) -> ChainAnalysis:
+    """Rest state, linearisation, eigenvalues, verdict and (``certificate``) the Lyapunov
+    certificate of a chain run (:class:`rbstab.config.chains.ChainConfig`).
+
+    ``samples`` (default :data:`rbstab.analysis.chain_certificate.DEFAULT_CHAIN_SAMPLES`),
+    ``seed``, ``falsification_runs`` (default
+    :data:`rbstab.analysis.evidence.FALSIFICATION_RUNS`) and ``ratio`` are those of
+    :func:`rbstab.analysis.chain_certificate.certify_chain`.
 
     Raises
     ------
@@ -101,7 +139,16 @@ def analyze_chain(config) -> ChainAnalysis:
     lin, coordinates = linearise_chain(compiled)
     rest = C.full_state(compiled, lin.equilibrium)
     v0 = C.lyapunov(compiled, C.initial_state(config))[0]
-    return ChainAnalysis(config.name, lin, coordinates, rest, float(v0))
+    found, notes = None, []
+    if certificate:
+        from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
+        from .evidence import FALSIFICATION_RUNS
+
+        found, notes = certify_chain(config, compiled, lin, coordinates,
+                                     n_samples=DEFAULT_CHAIN_SAMPLES if samples is None else int(samples), seed=seed,
+                                     falsification_runs=FALSIFICATION_RUNS if falsification_runs is None
+                                     else int(falsification_runs), ratio=ratio)
+    return ChainAnalysis(config.name, lin, coordinates, rest, float(v0), found, tuple(notes))
 
 
 def _state_offset(compiled, axis: BasinAxis) -> int:

@@ -59,6 +59,7 @@ from ..io.metadata import provenance_attributes
 from ..layout import BLOCK_UNITS
 
 __all__ = [
+    "certificate_record",
     "FORMAT",
     "SUFFIX",
     "analysis_content",
@@ -504,6 +505,23 @@ def _floats(values) -> list:
     return [_finite(v) for v in np.asarray(values, dtype=float).ravel()]
 
 
+def certificate_record(c) -> dict:
+    """A :class:`rbstab.analysis.certificate.Certificate` as plain Python (the ``--json``
+    record's ``certificate``; non-finite numbers are null)."""
+    return {
+        "holds": c.holds, "argument": c.argument, "lyapunov_equilibrium": c.lyapunov_equilibrium,
+        "positive_definite": c.positive_definite, "hessian_min_eigenvalue": c.hessian_min_eigenvalue,
+        "rate_definiteness": c.rate_definiteness, "lasalle_observable": c.lasalle_observable,
+        "n_samples": c.n_samples, "worst_rate": _finite(c.worst_rate), "worst_lyapunov": _finite(c.worst_lyapunov),
+        "worst_state": _floats(c.worst_state), "rate_mismatch": _finite(c.rate_mismatch),
+        "boundary_level": _finite(c.boundary_level), "sublevel": c.sublevel, "sublevel_bound": c.sublevel_bound,
+        "sublevel_estimate": c.evidence, "sublevel_sampled": _finite(c.sublevel_sampled),
+        "sublevel_history": _floats(c.sublevel_history),
+        "sublevel_history_samples": [int(n) for n in c.history_samples], "sublevel_settled": c.settled,
+        "runs_checked": c.runs_checked, "sublevel_notes": list(c.notes),
+    }
+
+
 def json_record(analysis) -> dict[str, Any]:
     """The ``--json`` record of an analysis: plain JSON (non-finite numbers are null)."""
     lin = analysis.linearisation
@@ -532,18 +550,7 @@ def json_record(analysis) -> dict[str, Any]:
                                 "ratio": s["ratio"], "t_end": s["t_end"]}
     c = analysis.certificate
     if c is not None:
-        record["certificate"] = {
-            "holds": c.holds, "argument": c.argument, "lyapunov_equilibrium": c.lyapunov_equilibrium,
-            "positive_definite": c.positive_definite, "hessian_min_eigenvalue": c.hessian_min_eigenvalue,
-            "rate_definiteness": c.rate_definiteness, "lasalle_observable": c.lasalle_observable,
-            "n_samples": c.n_samples, "worst_rate": _finite(c.worst_rate), "worst_lyapunov": _finite(c.worst_lyapunov),
-            "worst_state": _floats(c.worst_state), "rate_mismatch": _finite(c.rate_mismatch),
-            "boundary_level": _finite(c.boundary_level), "sublevel": c.sublevel, "sublevel_bound": c.sublevel_bound,
-            "sublevel_estimate": c.evidence, "sublevel_sampled": _finite(c.sublevel_sampled),
-            "sublevel_history": _floats(c.sublevel_history),
-            "sublevel_history_samples": [int(n) for n in c.history_samples], "sublevel_settled": c.settled,
-            "runs_checked": c.runs_checked, "sublevel_notes": list(c.notes),
-        }
+        record["certificate"] = certificate_record(c)
     w = getattr(analysis, "verification", None)
     if w is not None:
         record["verification"] = {"sublevel": w.level, "method": w.method, "boxes": w.boxes, "seconds": w.seconds,

@@ -30,7 +30,7 @@ import numpy as np
 from ..convergence import ROUND_OFF
 from .certificate import Certificate, checked, level_states
 
-__all__ = ["falsify", "check_runs", "FALSIFICATION_RUNS", "FALSIFICATION_ROUNDS"]
+__all__ = ["falsify", "falsify_with", "check_runs", "FALSIFICATION_RUNS", "FALSIFICATION_ROUNDS"]
 
 #: Runs of the falsification pass from states on {v = c}.
 FALSIFICATION_RUNS = 32
@@ -70,11 +70,20 @@ def falsify(config, variant, linearisation, certificate: Certificate, *, runs: i
         with np.errstate(invalid="ignore"):
             return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
+    return falsify_with(run, variant, linearisation, certificate, runs=runs, seed=seed)
+
+
+def falsify_with(run, model, linearisation, certificate: Certificate, *, runs: int = FALSIFICATION_RUNS,
+                 seed: int = 0) -> Certificate:
+    """``certificate`` after the falsification pass (module docstring) with the runs of
+    ``run``: ``run(x)`` -> (whether each run from the states ``x`` (k, n; the model's
+    coordinates) recovered by the pass's rule, v [J] where each starts); ``model`` a variant
+    or a :class:`rbstab.analysis.certificate.Model` (its v: the certificate's)."""
     if runs < 1 or not certificate.positive_definite:
         return certificate
     for _ in range(FALSIFICATION_ROUNDS):
         level = certificate.sublevel
-        y = level_states(variant, linearisation, certificate, runs, seed)
+        y = level_states(model, linearisation, certificate, runs, seed)
         if not len(y):
             return certificate
         recovered, v0 = run(y)
@@ -86,7 +95,7 @@ def falsify(config, variant, linearisation, certificate: Certificate, *, runs: i
         lower = 0.5 * certificate.sublevel
         certificate = replace(certificate, sublevel=lower, notes=certificate.notes[:-1] + (
             certificate.notes[-1] + f"; the pass tried again at half that, c = {lower:.4g} J",))
-    y = level_states(variant, linearisation, certificate, runs, seed)
+    y = level_states(model, linearisation, certificate, runs, seed)
     recovered, v0 = run(y)
     if not recovered.all():
         certificate = replace(certificate, sublevel=0.0, notes=certificate.notes + (

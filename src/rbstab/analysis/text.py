@@ -6,7 +6,7 @@ import numpy as np
 
 from ..layout import BLOCK_UNITS
 
-__all__ = ["describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines", "stability_lines"]
+__all__ = ["certificate_lines", "describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines", "stability_lines"]
 
 
 def _g(value, digits: int = 4) -> str:
@@ -62,7 +62,9 @@ def _settling_line(analysis) -> str:
             f"then on) at {_g(s['time_to_converge'])} s (the slowest mode alone: {_g(analysis.linear_settling_time)} s)")
 
 
-def _certificate_lines(c) -> list[str]:
+def certificate_lines(c, domain: str | None = None) -> list[str]:
+    """The lines of a :class:`rbstab.analysis.certificate.Certificate` (none for None);
+    ``domain`` names the angles of the domain boundary (a chain's)."""
     if c is None:
         return []
     head = f"  certificate: {'holds (' + c.argument + ')' if c.holds else 'does not hold'}"
@@ -77,7 +79,8 @@ def _certificate_lines(c) -> list[str]:
     lines.append(f"    {c.n_samples} sampled states: largest dv/dt {_g(c.worst_rate)} W at v = {_g(c.worst_lyapunov)} J; "
                  f"|numerical - analytic dv/dt| <= {_g(c.rate_mismatch, 2)} of the power scale")
     lines.append(f"    inner estimate of the region of attraction: {{v <= {_g(c.sublevel)} J}}, an {c.evidence}; bounded by: "
-                 f"{c.sublevel_bound}; domain boundary at {_g(c.boundary_level)} J")
+                 f"{c.sublevel_bound}; domain boundary{f' ({domain} = pi/2 - gimbal_margin)' if domain else ''} at "
+                 f"{_g(c.boundary_level)} J")
     lines += [f"    {note}" for note in c.notes]
     if len(c.sublevel_history):
         steps = ", ".join(f"{n} states {_g(h)} J" for n, h in zip(c.history_samples, c.sublevel_history))
@@ -186,7 +189,7 @@ def describe(analysis) -> list[str]:
                  f"{_g(lin.rest_tolerance, 3)})")
     lines += _mode_lines(lin)
     lines.append(_settling_line(analysis))
-    lines += _certificate_lines(analysis.certificate)
+    lines += certificate_lines(analysis.certificate)
     lines += _verification_lines(analysis)
     lines += _basin_lines(analysis)
     lines += push_lines(analysis)

@@ -1,0 +1,265 @@
+"""The Lyapunov certificate of a chain's rest state, in the chain's independent coordinates.
+
+The certificate is that of one body (:mod:`rbstab.analysis.certificate`: H_v, H_r and the
+PBH test, dv/dt <= 0 on sampled states computed twice, the sublevel estimate {v <= c} from
+the samples and the local search, capped by the domain boundary), over the chain as a
+:class:`~rbstab.analysis.certificate.Model` (:class:`ChainModel`):
+
+- coordinates: the independent coordinates z of
+  :func:`rbstab.variants.chain.independent_coordinates` (Theta_i, Omega_i of every body;
+  X_i, V_i of bodies whose joint is not ``permanent``; D of embedded joints). A state is
+  :func:`rbstab.variants.chain.full_state` of z: the children of permanent joints placed on
+  their parents (E_j = F_j = 0), so every sample lies on the constraint manifold, where the
+  constraint power F_j' Lambda_j of the analytic rate vanishes;
+- v and the analytic dv/dt: :func:`rbstab.variants.chain.evaluate` at those states (docs/physics.md,
+  "v and dv/dt"); f: :func:`rbstab.variants.chain.reduced_rate`;
+- the domain: |theta_2| < pi/2 - gimbal_margin of every body and of every joint's relative
+  orientation Theta_j (the chain's runs stop at either); its boundary level is the least v
+  there at rest (:func:`rbstab.analysis.certificate.constrained_boundary_level`: a joint's
+  angle is not a coordinate).
+
+The level c is then checked against runs of the chain's compiled engine
+(:func:`rbstab.analysis.chain.final_lyapunov`) from states on {v = c}
+(:func:`rbstab.analysis.evidence.falsify_with`: a run that leaves the domain or
+``simulation.limits`` or ends with v above its start lowers c below its start), and against
+the run from the configured initial state (not converged by t_end from inside {v <= c}: c
+is lowered). It is an estimate, as for one body.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
+from ..kinematics import rotation_matrix
+from ..layout import VARIANT_CODES
+from .certificate import DEFAULT_SAMPLES, Certificate, certify, checked, constrained_boundary_level
+from .evidence import FALSIFICATION_RUNS, falsify_with
+
+__all__ = ["ChainModel", "certify_chain", "DEFAULT_CHAIN_SAMPLES"]
+
+#: Sampled states of a chain's certificate (each costs a rate of the chain through Python).
+DEFAULT_CHAIN_SAMPLES = DEFAULT_SAMPLES
+_PERMANENT = VARIANT_CODES["permanent"]
+#: The vectorised state map must equal :func:`rbstab.variants.chain.full_state` to this
+#: (relative to the state's size), else the model falls back to it row by row.
+_MAP_RTOL = 1e-12
+#: Step of the central differences of a joint angle's gradient [units of z].
+_ANGLE_STEP = 1e-7
+
+
+def _cross(a: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """a x r for the rows of ``a`` (k, 3) and one vector ``r`` (3,)."""
+    return np.stack([a[:, 1] * r[2] - a[:, 2] * r[1], a[:, 2] * r[0] - a[:, 0] * r[2],
+                     a[:, 0] * r[1] - a[:, 1] * r[0]], axis=1)
+
+
+class ChainModel:
+    """A compiled chain (:class:`rbstab.variants.chain.CompiledChain`) as a
+    :class:`~rbstab.analysis.certificate.Model` in its independent coordinates (module
+    docstring).
+
+    Attributes
+    ----------
+    compiled : CompiledChain
+    coordinates : list of (str, str, int)
+        :func:`rbstab.variants.chain.independent_coordinates`.
+    angle_names : list of str
+        The domain's angles, in the order of :meth:`angles`: ``"<body>.theta_2"`` of each
+        body, then ``"<joint>.theta_2"`` of each joint whose parent is a body.
+    angle_matrix : ndarray or None
+        (bodies, n) where every angle is a coordinate (no joint has a body for parent), else None.
+    vectorised : bool
+        Whether :meth:`states` maps a stack at once (checked against ``full_state``).
+    """
+
+    def __init__(self, compiled, coordinates=None) -> None:
+        from ..variants import chain as C  # heavy: numba
+
+        self.compiled = compiled
+        self.coordinates = list(C.independent_coordinates(compiled) if coordinates is None else coordinates)
+        self._at = [int(at) for _, _, at in self.coordinates]
+        self.n = 3 * len(self.coordinates)
+        names = list(compiled.chain.body_names)
+        self._theta = [3 * self._at.index(12 * i) + 1 for i in range(compiled.size)]  # theta_2 of each body in z
+        self._parented = [j for j in range(compiled.size) if compiled.parents[j] >= 0]
+        self.angle_names = [f"{b}.theta_2" for b in names] + [f"{compiled.chain.joint_names[j]}.theta_2"
+                                                               for j in self._parented]
+        if self._parented:
+            self.angle_matrix = None
+        else:
+            self.angle_matrix = np.eye(self.n)[self._theta]
+        self.vectorised = True
+        self.vectorised = self._map_agrees()
+
+    # -- the state map -----------------------------------------------------------------------
+    def _map(self, x: np.ndarray) -> np.ndarray:
+        """:func:`rbstab.variants.chain.full_state` of every row of ``x`` at once (the
+        placement of :func:`rbstab.variants.chain.place`, vectorised over the rows)."""
+        c = self.compiled
+        k = len(x)
+        y = np.zeros((k, c.n_states))
+        for i, at in enumerate(self._at):
+            y[:, at: at + 3] = x[:, 3 * i: 3 * i + 3]
+        rot = [rotation_matrix(np.ascontiguousarray(y[:, 12 * i: 12 * i + 3])) for i in range(c.size)]
+        for i in range(c.size):
+            if c.codes[i] != _PERMANENT:
+                continue
+            parent, r_p = int(c.parents[i]), np.asarray(c.ppoints[i], dtype=float)
+            r_c = np.asarray(c.params[i]["attachment_point"], dtype=float)
+            if parent < 0:
+                point, rate = np.broadcast_to(r_p, (k, 3)), np.zeros((k, 3))
+            else:
+                a_p = rot[parent]
+                omega_p = y[:, 12 * parent + 3: 12 * parent + 6]
+                point = y[:, 12 * parent + 6: 12 * parent + 9] + a_p @ r_p
+                rate = y[:, 12 * parent + 9: 12 * parent + 12] + np.einsum("kij,kj->ki", a_p, _cross(omega_p, r_p))
+            omega = y[:, 12 * i + 3: 12 * i + 6]
+            y[:, 12 * i + 6: 12 * i + 9] = point - rot[i] @ r_c
+            y[:, 12 * i + 9: 12 * i + 12] = rate - np.einsum("kij,kj->ki", rot[i], _cross(omega, r_c))
+        return y
+
+    def _map_agrees(self) -> bool:
+        """Whether :meth:`_map` equals ``full_state`` at a few random states."""
+        from ..variants import chain as C  # heavy: numba
+
+        rng = np.random.default_rng(0)
+        x = rng.normal(scale=0.3, size=(4, self.n))
+        mine = self._map(x)
+        theirs = np.array([C.full_state(self.compiled, row) for row in x])
+        return bool(np.all(np.abs(mine - theirs) <= _MAP_RTOL * (1.0 + np.abs(theirs).max())))
+
+    def states(self, x) -> np.ndarray:
+        """The chain's full states (k, n_states) of the independent coordinates ``x`` (k, n)."""
+        from ..variants import chain as C  # heavy: numba
+
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        if self.vectorised:
+            return self._map(x)
+        return np.array([C.full_state(self.compiled, row) for row in x]).reshape(len(x), self.compiled.n_states)
+
+    # -- v, dv/dt, f ----------------------------------------------------------------------------
+    def _outputs(self, x, t=0.0) -> dict:
+        from ..variants import chain as C  # heavy: numba
+
+        y = self.states(x)
+        return C.evaluate(self.compiled, np.broadcast_to(np.asarray(t, dtype=float), len(y)).copy(), y)
+
+    def lyapunov(self, x):
+        """v [J] at each row of ``x`` (a float for one state (n,))."""
+        v = self._outputs(x)["lyapunov"]
+        return float(v[0]) if np.ndim(x) == 1 else v
+
+    def evaluate(self, x, t=0.0) -> dict:
+        """v [J], the analytic dv/dt [W] and the angles (:meth:`angles`) at each row of ``x``
+        at the times ``t`` [s]."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        out = self._outputs(x, t)
+        return {"lyapunov": out["lyapunov"], "lyapunov_rate": out["lyapunov_rate"],
+                "angles": self._angles_of(x, out)}
+
+    def rhs(self, t, x) -> np.ndarray:
+        """dz/dt at each row of ``x`` (:func:`rbstab.variants.chain.reduced_rate`)."""
+        from ..variants import chain as C  # heavy: numba
+
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        t = np.broadcast_to(np.asarray(t, dtype=float), len(x))
+        return np.array([C.reduced_rate(self.compiled, row, float(s)) for row, s in zip(x, t)]).reshape(x.shape)
+
+    # -- the domain ----------------------------------------------------------------------------
+    def angles(self, x) -> np.ndarray:
+        """(k, m) theta_2 [rad] of every body, then of every joint whose parent is a body."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        return self._angles_of(x, self._outputs(x) if self._parented else None)
+
+    def _angles_of(self, x: np.ndarray, out) -> np.ndarray:
+        body = x[:, self._theta]
+        if not self._parented:
+            return body
+        return np.concatenate([body, out["joint_theta"][:, self._parented, 1]], axis=1)
+
+    def angle_jacobian(self, x) -> np.ndarray:
+        """(m, n) d angles / dx at the state ``x`` (n,) (central differences)."""
+        if self.angle_matrix is not None:
+            return self.angle_matrix
+        x = np.asarray(x, dtype=float)
+        steps = _ANGLE_STEP * np.eye(self.n)
+        values = self.angles(np.concatenate([x + steps, x - steps]))
+        return ((values[: self.n] - values[self.n:]) / (2 * _ANGLE_STEP)).T
+
+    def boundary_level(self, y_e, hess, limit) -> float:
+        """The least v [J] on the domain boundary (any angle at +-limit), at rest."""
+        free = [3 * k + a for k, (_, block, _) in enumerate(self.coordinates)
+                if block in ("theta", "position", "controller_state") for a in range(3)]
+        return constrained_boundary_level(self, np.asarray(y_e, dtype=float), hess, limit, np.array(free))
+
+
+def _undisturbed(compiled):
+    """``compiled`` without its bodies' disturbances (the same h), or None where it has none."""
+    from ..variants import chain as C  # heavy: numba
+
+    chain = compiled.chain
+    if not any(b.disturbances for b in chain.bodies):
+        return None
+    bodies = tuple(dataclasses.replace(b, disturbances=()) for b in chain.bodies)
+    return C.compile_chain(dataclasses.replace(chain, bodies=bodies), offset=compiled.offset)
+
+
+def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: int = DEFAULT_CHAIN_SAMPLES,
+                  seed: int = 0, falsification_runs: int = FALSIFICATION_RUNS,
+                  ratio: float = DEFAULT_LYAPUNOV_RATIO) -> tuple[Certificate, list[str]]:
+    """(the certificate of a chain's rest state, notes) (module docstring).
+
+    Parameters
+    ----------
+    config : rbstab.config.chains.ChainConfig
+        Its simulation settings (gimbal margin, limits, t_end) and initial state.
+    compiled : CompiledChain
+        Of ``config.chain``.
+    linearisation : Linearisation
+        At the rest state, in the independent coordinates ``coordinates``
+        (:func:`rbstab.analysis.linearise.linearise_chain`).
+    n_samples, seed
+        The certificate's sampled states and the seed of their draw.
+    falsification_runs : int
+        Runs from states on {v = c} per level tried (0: none).
+    ratio : float
+        Convergence of the run from the configured initial state
+        (:func:`rbstab.convergence.converged`).
+    """
+    from ..engine.systems import chain_system  # heavy: numba
+    from ..variants import chain as C  # heavy: numba
+    from .chain import final_lyapunov
+
+    sim = config.simulation
+    notes = []
+    quiet = _undisturbed(compiled)
+    model = ChainModel(compiled if quiet is None else quiet, coordinates)
+    disturbed = None
+    if quiet is not None:
+        disturbed = ChainModel(compiled, coordinates)
+        notes.append("disturbances: the certificate's Hessians are of the undisturbed chain; its sampled dv/dt "
+                     "(each state at a time drawn in [0, t_end], impulses not seen) and the runs integrate the "
+                     "disturbed one")
+    certificate = certify(model, linearisation, gimbal_margin=sim.gimbal_margin, n_samples=n_samples, seed=seed,
+                          disturbed=disturbed, t_end=float(sim.t_end))
+    if not certificate.positive_definite:
+        return certificate, notes
+    system = chain_system(compiled, sim.limits)
+
+    def run(x):
+        states = model.states(x)
+        ok, v1 = final_lyapunov(compiled, system, states, sim)
+        v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
+        with np.errstate(invalid="ignore"):
+            return ok & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
+
+    certificate = falsify_with(run, model, linearisation, certificate, runs=falsification_runs, seed=seed)
+    y0 = C.initial_state(config)[None]
+    ok, v1 = final_lyapunov(compiled, system, y0, sim)
+    v0 = C.evaluate(compiled, np.zeros(1), y0)["lyapunov"]
+    certificate = checked(certificate, v0, np.asarray(converged(ok, v0, v1, ratio), dtype=bool),
+                          lambda i: "the run from the configured initial state")
+    return certificate, notes
