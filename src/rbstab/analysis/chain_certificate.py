@@ -33,8 +33,6 @@ import dataclasses
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
-from ..kinematics import rotation_matrix
-from ..layout import VARIANT_CODES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify, checked, constrained_boundary_level
 from .evidence import FALSIFICATION_RUNS, falsify_with
 
@@ -42,18 +40,8 @@ __all__ = ["ChainModel", "certify_chain", "DEFAULT_CHAIN_SAMPLES"]
 
 #: Sampled states of a chain's certificate (each costs a rate of the chain through Python).
 DEFAULT_CHAIN_SAMPLES = DEFAULT_SAMPLES
-_PERMANENT = VARIANT_CODES["permanent"]
-#: The vectorised state map must equal :func:`rbstab.variants.chain.full_state` to this
-#: (relative to the state's size), else the model falls back to it row by row.
-_MAP_RTOL = 1e-12
 #: Step of the central differences of a joint angle's gradient [units of z].
 _ANGLE_STEP = 1e-7
-
-
-def _cross(a: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """a x r for the rows of ``a`` (k, 3) and one vector ``r`` (3,)."""
-    return np.stack([a[:, 1] * r[2] - a[:, 2] * r[1], a[:, 2] * r[0] - a[:, 0] * r[2],
-                     a[:, 0] * r[1] - a[:, 1] * r[0]], axis=1)
 
 
 class ChainModel:
@@ -71,8 +59,6 @@ class ChainModel:
         body, then ``"<joint>.theta_2"`` of each joint whose parent is a body.
     angle_matrix : ndarray or None
         (bodies, n) where every angle is a coordinate (no joint has a body for parent), else None.
-    vectorised : bool
-        Whether :meth:`states` maps a stack at once (checked against ``full_state``).
     """
 
     def __init__(self, compiled, coordinates=None) -> None:
@@ -91,54 +77,13 @@ class ChainModel:
             self.angle_matrix = None
         else:
             self.angle_matrix = np.eye(self.n)[self._theta]
-        self.vectorised = True
-        self.vectorised = self._map_agrees()
-
-    # -- the state map -----------------------------------------------------------------------
-    def _map(self, x: np.ndarray) -> np.ndarray:
-        """:func:`rbstab.variants.chain.full_state` of every row of ``x`` at once (the
-        placement of :func:`rbstab.variants.chain.place`, vectorised over the rows)."""
-        c = self.compiled
-        k = len(x)
-        y = np.zeros((k, c.n_states))
-        for i, at in enumerate(self._at):
-            y[:, at: at + 3] = x[:, 3 * i: 3 * i + 3]
-        rot = [rotation_matrix(np.ascontiguousarray(y[:, 12 * i: 12 * i + 3])) for i in range(c.size)]
-        for i in range(c.size):
-            if c.codes[i] != _PERMANENT:
-                continue
-            parent, r_p = int(c.parents[i]), np.asarray(c.ppoints[i], dtype=float)
-            r_c = np.asarray(c.params[i]["attachment_point"], dtype=float)
-            if parent < 0:
-                point, rate = np.broadcast_to(r_p, (k, 3)), np.zeros((k, 3))
-            else:
-                a_p = rot[parent]
-                omega_p = y[:, 12 * parent + 3: 12 * parent + 6]
-                point = y[:, 12 * parent + 6: 12 * parent + 9] + a_p @ r_p
-                rate = y[:, 12 * parent + 9: 12 * parent + 12] + np.einsum("kij,kj->ki", a_p, _cross(omega_p, r_p))
-            omega = y[:, 12 * i + 3: 12 * i + 6]
-            y[:, 12 * i + 6: 12 * i + 9] = point - rot[i] @ r_c
-            y[:, 12 * i + 9: 12 * i + 12] = rate - np.einsum("kij,kj->ki", rot[i], _cross(omega, r_c))
-        return y
-
-    def _map_agrees(self) -> bool:
-        """Whether :meth:`_map` equals ``full_state`` at a few random states."""
-        from ..variants import chain as C  # heavy: numba
-
-        rng = np.random.default_rng(0)
-        x = rng.normal(scale=0.3, size=(4, self.n))
-        mine = self._map(x)
-        theirs = np.array([C.full_state(self.compiled, row) for row in x])
-        return bool(np.all(np.abs(mine - theirs) <= _MAP_RTOL * (1.0 + np.abs(theirs).max())))
 
     def states(self, x) -> np.ndarray:
-        """The chain's full states (k, n_states) of the independent coordinates ``x`` (k, n)."""
+        """The chain's full states (k, n_states) of the independent coordinates ``x`` (k, n)
+        (:func:`rbstab.variants.chain.full_state`)."""
         from ..variants import chain as C  # heavy: numba
 
-        x = np.atleast_2d(np.asarray(x, dtype=float))
-        if self.vectorised:
-            return self._map(x)
-        return np.array([C.full_state(self.compiled, row) for row in x]).reshape(len(x), self.compiled.n_states)
+        return C.full_state(self.compiled, np.atleast_2d(np.asarray(x, dtype=float)))
 
     # -- v, dv/dt, f ----------------------------------------------------------------------------
     def _outputs(self, x, t=0.0) -> dict:

@@ -691,11 +691,14 @@ def independent_coordinates(compiled: CompiledChain) -> list[tuple[str, str, int
 def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     """The full state (n_states,) of the independent coordinates ``z``
     (:func:`independent_coordinates`, 3 entries each): the children of permanent joints
-    placed on their parents (E_j = F_j = 0)."""
-    y = np.zeros(compiled.n_states)
+    placed on their parents (E_j = F_j = 0). A stack ``z`` (k, m) gives (k, n_states)."""
+    z = np.asarray(z, dtype=float)
+    stack = np.atleast_2d(z)
+    y = np.zeros((len(stack), compiled.n_states))
     for k, (_, _, at) in enumerate(independent_coordinates(compiled)):
-        y[at: at + 3] = z[3 * k: 3 * k + 3]
-    return _place(compiled, y, only_permanent=True)
+        y[:, at: at + 3] = stack[:, 3 * k: 3 * k + 3]
+    y = _place(compiled, y, only_permanent=True)
+    return y if z.ndim == 2 else y[0]
 
 
 def reduced_rate(compiled: CompiledChain, z: np.ndarray, t: float = 0.0) -> np.ndarray:
@@ -713,27 +716,30 @@ def _place(compiled: CompiledChain, y: np.ndarray, only_permanent: bool = False)
 
 
 def place(compiled: CompiledChain, y: np.ndarray, x_placed, v_placed) -> np.ndarray:
-    """A copy of the state ``y`` (n_states,) with X_i of the bodies i where ``x_placed[i]``
-    (V_i where ``v_placed[i]``), (n,) booleans, placed so that joint i's points coincide
-    (E_i = 0) and move together (F_i = 0), parents first: X_c = X_p + A_p R_p - A_c R_c,
-    V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x R_c) (ground: X_p = V_p = 0, A_p = I)."""
+    """A copy of the state ``y`` (n_states,), or of each row of a stack (k, n_states), with
+    X_i of the bodies i where ``x_placed[i]`` (V_i where ``v_placed[i]``), (n,) booleans,
+    placed so that joint i's points coincide (E_i = 0) and move together (F_i = 0), parents
+    first: X_c = X_p + A_p R_p - A_c R_c, V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x
+    R_c) (ground: X_p = V_p = 0, A_p = I)."""
     y = np.array(y, dtype=float)
+    stack = y.reshape(-1, y.shape[-1])  # a view: rows of y
     for i in range(compiled.size):
         if not (x_placed[i] or v_placed[i]):
             continue
         parent, r_p = compiled.parents[i], compiled.ppoints[i]
-        a = rotation_matrix(y[12 * i: 12 * i + 3])
+        a = rotation_matrix(np.ascontiguousarray(stack[:, 12 * i: 12 * i + 3]))
         r_c = compiled.params[i]["attachment_point"]
         if parent < 0:
             point, rate = r_p, np.zeros(3)
         else:
-            a_p = rotation_matrix(y[12 * parent: 12 * parent + 3])
-            point = y[12 * parent + 6: 12 * parent + 9] + a_p @ r_p
-            rate = y[12 * parent + 9: 12 * parent + 12] + a_p @ np.cross(y[12 * parent + 3: 12 * parent + 6], r_p)
+            a_p = rotation_matrix(np.ascontiguousarray(stack[:, 12 * parent: 12 * parent + 3]))
+            point = stack[:, 12 * parent + 6: 12 * parent + 9] + a_p @ r_p
+            rate = stack[:, 12 * parent + 9: 12 * parent + 12] + np.einsum(
+                "kij,kj->ki", a_p, np.cross(stack[:, 12 * parent + 3: 12 * parent + 6], r_p))
         if x_placed[i]:
-            y[12 * i + 6: 12 * i + 9] = point - a @ r_c
+            stack[:, 12 * i + 6: 12 * i + 9] = point - a @ r_c
         if v_placed[i]:
-            y[12 * i + 9: 12 * i + 12] = rate - a @ np.cross(y[12 * i + 3: 12 * i + 6], r_c)
+            stack[:, 12 * i + 9: 12 * i + 12] = rate - np.einsum("kij,kj->ki", a, np.cross(stack[:, 12 * i + 3: 12 * i + 6], r_c))
     return y
 
 
