@@ -10,11 +10,13 @@ Prints (2 cores, warm numba cache):
 - s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process)
   and its smallest fatal push on the trunk over 64 directions (``--push``, 2 threads);
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
-  and visco-elastic joints with feedback, gravity), and that per body;
+  and visco-elastic joints with feedback, gravity) as the compiled driver makes it (scratch
+  arrays of its own), and that per body, beside one evaluation of Case 3's one-body rate;
 - s a sweep over initial states (``rbstab.execute_sweep``, 2 local processes, ``--store
   summary``) of N runs (``--sweep-runs``, default 10,000) of a 3-body chain (a triple
   inverted pendulum held by its joints' feedback, t_end 2 s) and of the one-body Case 3
-  config (t_end 2 s), and their ratio.
+  config (t_end 2 s), the rate evaluations a run takes, and their ratios: a sweep's time,
+  and its time per rate evaluation (the chain takes more steps than Case 3).
 
 Run: python benchmarks/chains.py [--sweep-runs N]
 """
@@ -25,6 +27,7 @@ import time
 import warnings
 from pathlib import Path
 
+import numba
 import numpy as np
 
 from rbstab.analysis import BasinAxis, chain_basin_map
@@ -37,6 +40,7 @@ from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import chain_system
 from rbstab.simulator import simulate_chain
 from rbstab.variants import chain as C
+from rbstab.variants.kernels import state_rate
 
 ROOT = Path(__file__).resolve().parents[1]
 D = np.diag
@@ -50,6 +54,29 @@ def _best(f, repeat=5):
         f()
         times.append(time.perf_counter() - t0)
     return min(times)
+
+
+@numba.njit
+def _body_loop(k, code, y, p, f):
+    """k evaluations of one body's rate (the state nudged each time, so none is hoisted)."""
+    total = 0.0
+    for _ in range(k):
+        y[0] += 1e-12
+        state_rate(code, 0.0, y, p, f)
+        total += f[3]
+    return total
+
+
+@numba.njit
+def _chain_loop(k, y, args, dy, work):
+    """k evaluations of a chain's rate with its scratch arrays, as the compiled driver makes them."""
+    params, codes, parents, ppoints, d_at = args
+    total = 0.0
+    for _ in range(k):
+        y[0] += 1e-12
+        C.chain_evaluate(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars, work)
+        total += dy[3]
+    return total
 
 
 def serial(n: int) -> Chain:
@@ -97,7 +124,7 @@ def sweeps(n: int) -> None:
                               "grid": {"initial_state.link0.theta.0": levels, "initial_state.link2.theta.1": levels}},
              "one-body Case 3": {"name": "case3", "base": case3,
                                  "grid": {"initial_state.theta.0": levels, "initial_state.theta.1": levels}}}
-    seconds = {}
+    seconds, nfev = {}, {}
     for label, spec in specs.items():
         with tempfile.TemporaryDirectory() as out:
             small = {**spec, "name": "warm", "grid": {k: v[:2] for k, v in spec["grid"].items()}}
@@ -105,9 +132,13 @@ def sweeps(n: int) -> None:
             t0 = time.perf_counter()
             outcome = rbstab.execute_sweep(spec, out, jobs=2, store="summary", progress=False)
             seconds[label] = time.perf_counter() - t0
+            nfev[label] = float(rbstab.open_sweep(outcome.directory)["solver_nfev"].mean())
             print(f"  {label}: {outcome.n_runs} runs in {seconds[label]:.2f} s ({1e3 * seconds[label] / outcome.n_runs:.2f}"
-                  f" ms a run on 2 processes; {outcome.counts['success']} succeeded)")
-    print(f"  ratio chain / Case 3: {seconds['3-body chain'] / seconds['one-body Case 3']:.2f}")
+                  f" ms a run on 2 processes; {outcome.counts['success']} succeeded; {nfev[label]:.0f} rate evaluations"
+                  f" a run)")
+    chain, case3 = "3-body chain", "one-body Case 3"
+    print(f"  ratio chain / Case 3: {seconds[chain] / seconds[case3]:.2f} (a sweep); "
+          f"{seconds[chain] / nfev[chain] / (seconds[case3] / nfev[case3]):.2f} (a rate evaluation in the sweep)")
 
 
 def main() -> None:
@@ -153,19 +184,21 @@ def main() -> None:
     print(f"  smallest fatal push of stance_ankle_hip (limits.theta 0.6 rad) on the trunk at (0, 0, 0.2) m, 64 "
           f"directions and the local search, 2 threads: {time.perf_counter() - start:.2f} s ({pushed.runs} runs; "
           f"minimum {pushed.minimum:.4g} N s along ({', '.join(f'{x:+.3f}' for x in pushed.minimum_direction)}))")
-    print("rate evaluations (us an evaluation; per body):")
+    print("rate evaluations, compiled (us an evaluation; per body); one-body Case 3's rate for comparison:")
+    code, p = variant.code, params[0]
+    f = np.empty(y0.size)
+    _body_loop(10, code, y0.copy(), p, f)
+    k = 200_000
+    seconds = _best(lambda: _body_loop(k, code, y0.copy(), p, f), 3) / k
+    print(f"  case3_embedded (one body): {1e6 * seconds:7.3f} us")
     for n in range(1, 9):
         compiled = C.compile_chain(serial(n), offset=0.0)
         y = C._place(compiled, np.random.default_rng(n).normal(scale=0.1, size=compiled.n_states))
         dy = np.empty(compiled.n_states)
-        k = 2000
-        args = compiled.args
-
-        def loop():
-            for _ in range(k):
-                C.chain_rate(0.0, y, *args, dy)
-        seconds = _best(loop, 3) / k
-        print(f"  n = {n}: {1e6 * seconds:7.2f} us  ({1e6 * seconds / n:6.2f} us a body)")
+        work = C.chain_work(n)
+        _chain_loop(10, y.copy(), compiled.args, dy, work)
+        seconds = _best(lambda: _chain_loop(k, y.copy(), compiled.args, dy, work), 3) / k
+        print(f"  n = {n}: {1e6 * seconds:7.3f} us  ({1e6 * seconds / n:6.3f} us a body)")
     if options.sweep_runs:
         print("sweeps over initial states (2 local processes, store summary):")
         sweeps(options.sweep_runs)

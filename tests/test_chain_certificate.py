@@ -17,7 +17,7 @@ import pytest
 
 from rbstab.analysis import analyze_chain
 from rbstab.analysis.certificate import certify, level_states
-from rbstab.analysis.chain import final_lyapunov
+from rbstab.analysis.chain_runs import final_lyapunov
 from rbstab.analysis.chain_certificate import ChainModel
 from rbstab.analysis.linearise import linearise, linearise_chain
 from rbstab.config.chains import chain_config_from_mapping

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
 from .certificate import DEFAULT_SAMPLES, Certificate, certify, checked, constrained_boundary_level
+from .chain_runs import final_lyapunov
 from .evidence import FALSIFICATION_RUNS, falsify_with
 
 __all__ = ["ChainModel", "certify_chain", "DEFAULT_CHAIN_SAMPLES"]
@@ -176,7 +177,6 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
     """
     from ..engine.systems import chain_system  # heavy: numba
     from ..variants import chain as C  # heavy: numba
-    from .chain import final_lyapunov
 
     sim = config.simulation
     notes = []

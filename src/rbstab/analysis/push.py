@@ -355,7 +355,7 @@ class ChainPushes:
     def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
         """Whether the runs pushed by ``vectors`` (k, 3) recover; one batch (in ``jobs``
         threads)."""
-        from .chain import final_lyapunov  # heavy: numba (the chain's driver)
+        from .chain_runs import final_lyapunov  # heavy: numba (the chain's driver)
 
         vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
         k = len(vectors)
@@ -948,7 +948,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
         if chain:
-            from .chain import chain_states_recover  # heavy: numba (the chain's driver)
+            from .chain_runs import chain_states_recover  # heavy: numba (the chain's driver)
 
             recovered, start_v = chain_states_recover(config, [a for a, _, _ in axes], values, ratio=ratio, jobs=jobs)
         else:
