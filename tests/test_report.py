@@ -326,8 +326,8 @@ def test_on_one_cpu_the_report_is_drawn_in_the_command_s_process(paper_runs, tmp
 
     monkeypatch.setattr(executors, "default_jobs", lambda: 1)  # what a machine of one CPU gives
     monkeypatch.setattr(executors, "LocalExecutor", None)  # no worker process is started
-    _ok(_invoke("report", *paper_runs, "-o", tmp_path / "r", "--animation-frames", "2"))
-    assert len(list((tmp_path / "r" / "figures").iterdir())) == 3 * 5 + 4
+    _ok(_invoke("report", *paper_runs[:2], "-o", tmp_path / "r", "--animation-frames", "2"))
+    assert len(list((tmp_path / "r" / "figures").iterdir())) == 2 * 5 + 4
 
 
 def test_jobs_must_be_a_positive_number(paper_runs, tmp_path):

@@ -378,7 +378,7 @@ def test_tune_on_the_cuda_simulator_equals_the_compiled_engine(tmp_path):
     tables = {}
     for engine in ("compiled", "cuda"):
         env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1" if engine == "cuda" else "0"}
-        done = subprocess.run([rbstab_cli, "tune", str(path), "--trials", "12", "--generation", "6", "--startup", "6",
+        done = subprocess.run([rbstab_cli, "tune", str(path), "--trials", "6", "--generation", "3", "--startup", "3",
                                "--engine", engine, "-o", str(tmp_path / engine), "--minimize", "lyapunov_final", "-q",
                                "--subject-to", "final_omega_x<=1", *[f"--vary={v}" for v in TUNE_VARY]],
                               env=env, capture_output=True, text=True)
