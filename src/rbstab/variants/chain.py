@@ -44,7 +44,7 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
+from .kernels import PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
@@ -560,6 +560,17 @@ def _record(chain: Chain, i: int) -> np.ndarray:
     return parameters(rigid, gains)
 
 
+def _controller_states(chain: Chain) -> tuple[np.ndarray, int]:
+    """(the index of each embedded joint's D in the state (n,), -1 where none; n_states)."""
+    d_at = np.full(chain.size, -1, dtype=np.int64)
+    size = 12 * chain.size
+    for j, joint in enumerate(chain.joints):
+        if joint.variant == "embedded":
+            d_at[j] = size
+            size += 3
+    return d_at, size
+
+
 def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
     """The runtime records of ``chain`` (:class:`CompiledChain`); ``offset`` h [J], None:
     :func:`rest_offset`."""
@@ -570,12 +581,7 @@ def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
     codes = np.array([VARIANT_CODES[j.variant] for j in chain.joints], dtype=np.int64)
     parents = np.array([j.parent for j in chain.joints], dtype=np.int64)
     ppoints = np.array([np.asarray(j.parent_point, dtype=float) for j in chain.joints]).reshape(n, 3)
-    d_at = np.full(n, -1, dtype=np.int64)
-    size = 12 * n
-    for j in range(n):
-        if codes[j] == EMBEDDED:
-            d_at[j] = size
-            size += 3
+    d_at, size = _controller_states(chain)
     compiled = CompiledChain(chain, params, codes, parents, ppoints, d_at, size, 0.0,
                              (params, codes, parents, ppoints, d_at))
     h = rest_offset(compiled) if offset is None else float(offset)
@@ -760,14 +766,14 @@ def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[fl
 def initial_state(config) -> np.ndarray:
     """The initial state (n_states,) of a :class:`rbstab.config.chains.ChainConfig` (module
     docstring for the layout)."""
-    compiled = compile_chain(config.chain, offset=0.0)
-    y = np.zeros(compiled.n_states)
+    d_at, size = _controller_states(config.chain)
+    y = np.zeros(size)
     for i, body in enumerate(config.chain.bodies):
         state = config.initial_state[body.name]
         for k, block in enumerate(("theta", "omega", "position", "velocity")):
             y[12 * i + 3 * k: 12 * i + 3 * k + 3] = state[block]
-        if compiled.d_at[i] >= 0:
-            y[compiled.d_at[i]: compiled.d_at[i] + 3] = state["controller_state"]
+        if d_at[i] >= 0:
+            y[d_at[i]: d_at[i] + 3] = state["controller_state"]
     return y
 
 
