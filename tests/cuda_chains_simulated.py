@@ -19,10 +19,11 @@ import warnings
 import numpy as np
 
 
-def pulsed_chain(theta: float):
+def pulsed_chain(theta: float, impulses: bool = False):
     """Three bodies hanging on permanent (ball) joints under gravity with joint springs, a
     pulse of force on the lowest from 0.05 s to 0.15 s and an admissible region in theta;
-    the upper body tilted ``theta`` [rad] about x."""
+    the upper body tilted ``theta`` [rad] about x. ``impulses``: also a torque impulse on the
+    upper body at t = 0, and force impulses on the middle one at 0.12 s and at t_end."""
     from rbstab.config.chains import chain_config_from_mapping
 
     body = {"mass": 1.5, "inertia": [0.1, 0.1, 0.03]}
@@ -35,8 +36,12 @@ def pulsed_chain(theta: float):
                    {"name": "elbow", "parent": "upper", "child": "middle", **joint},
                    {"name": "wrist", "parent": "middle", "child": "lower", **joint}],
         "initial_state": {"upper": {"theta": [theta, 0.0, 0.0]}},
-        "disturbances": [{"kind": "pulse", "value": [0.0, 30.0, 1.0], "point": [0.0, 0.05, -0.2], "start": 0.05,
-                          "duration": 0.1, "body": "lower"}],
+        "disturbances": [{"kind": "pulse", "value": [0.0, 20.0, 1.0], "point": [0.0, 0.05, -0.2], "start": 0.05,
+                          "duration": 0.1, "body": "lower"},
+                         *([{"kind": "impulse", "quantity": "torque", "value": [0.05, 0.0, 0.0], "start": 0.0,
+                             "body": "upper"},
+                            *[{"kind": "impulse", "quantity": "force", "value": [0.0, 0.3, 0.0], "point": [0.0, 0.0, 0.1],
+                               "start": at, "body": "middle"} for at in (0.12, 0.3)]] if impulses else [])],
         "simulation": {"t_end": 0.3, "n_samples": 31, "method": "RK45", "rtol": 1e-8, "atol": 1e-10,
                        "limits": {"theta": [0.5, 0.5, 3.2]}},
     })
@@ -51,10 +56,12 @@ def cases(root: str):
     short = ["simulation.t_end=0.3", "simulation.n_samples=31"]
     return {
         "stance": [load_any_config(stance, [*short, *extra]) for extra in (
-            [], ["initial_state.trunk.theta=[-0.1, 0.02, 0]"], ["initial_state.legs.theta=[0.05, -0.01, 0]"])],
+            [], ["initial_state.trunk.theta=[-0.1, 0.02, 0]"], ["initial_state.legs.theta=[0.05, -0.01, 0]"],
+            ["simulation.max_steps=12"])],  # stopped by its step limit
         "knee": [load_any_config(knee, ["simulation.t_end=0.05", "simulation.n_samples=26", *extra]) for extra in (
             [], ["initial_state.shank.theta=[0.6, 0.1, 0]"])],
-        "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.35)],
+        "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
+        "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
     }
 
 

@@ -534,18 +534,19 @@ def chain_kernel_function(method: int):
     the state there (and W), written to device memory, as the CPU driver's samples are; the
     chain's outputs and summary are computed from them on the host. Its thread-local arrays
     are sized for :data:`MAX_CHAIN_BODIES` bodies; the integrated vector (the state, and W
-    after it where a body has disturbances) is a C-contiguous view of its first entries."""
+    after it where a body has disturbances) and its stage rates and interpolant are views of
+    their first entries."""
     from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
     dop853 = method == DOP853
     size = MAX_CHAIN_STATE + 1  # the longest integrated vector: the state and W
-    bodies = MAX_CHAIN_BODIES
+    bodies, rows = MAX_CHAIN_BODIES, 3 * MAX_CHAIN_BODIES
 
     def run_chains(params, codes, parents, ppoints, d_at, y0s, settings, n_samples, stride, control, limit_ns,
                    status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
-        K_all = cuda.local.array(n_rows * size, float64)
-        Q_all = cuda.local.array(q_rows * size, float64)
+        K_all = cuda.local.array((n_rows, size), float64)
+        Q_all = cuda.local.array((q_rows, size), float64)
         y_all = cuda.local.array(size, float64)
         f_all = cuda.local.array(size, float64)
         y_new_all = cuda.local.array(size, float64)
@@ -555,7 +556,7 @@ def chain_kernel_function(method: int):
         scratch = ChainWork(cuda.local.array((bodies, 3, 3), float64), cuda.local.array((bodies, 3, 3), float64),
                             cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                             cuda.local.array((bodies, 3, 3), float64),
-                            cuda.local.array((3 * bodies, 3 * bodies), float64), cuda.local.array(3 * bodies, float64),
+                            cuda.local.array((rows, rows), float64), cuda.local.array(rows, float64),
                             cuda.local.array(bodies, int64), cuda.local.array((bodies, 7, 3), float64),
                             cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64))
         p = ChainSystem(params, codes, parents, ppoints, d_at, scratch)
@@ -564,8 +565,7 @@ def chain_kernel_function(method: int):
         disturbed = disturbed_of(p)
         bounded = limited_of(p)
         n_vec = n_state + 1 if disturbed else n_state  # the integrated vector: the state, then W
-        K = K_all[: n_rows * n_vec].reshape((n_rows, n_vec))
-        Q = Q_all[: q_rows * n_vec].reshape((q_rows, n_vec))
+        K, Q = K_all[:, :n_vec], Q_all[:, :n_vec]  # views of the first columns (a reshape needs numba's runtime)
         y, f, y_new, work, sample = y_all[:n_vec], f_all[:n_vec], y_new_all[:n_vec], work_all[:n_vec], sample_all[:n_vec]
         w = Work(K, Q, y_new, scale_all[:n_state], work)  # the error norms take the state's entries
         # the launch's deadline: set once, by the first thread to start
