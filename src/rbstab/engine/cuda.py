@@ -41,6 +41,17 @@ registers let the GPU hold at once (:func:`occupancy`); the kernel is compiled f
 one argument signature every launch uses (:func:`launch_signature`), once per version,
 under a file lock that other processes wait on (:func:`compiled_kernel`).
 
+Chains (:func:`chain_kernel_function`, :func:`integrate_chain_runs_cuda`): the same driver
+on a chain's :class:`~rbstab.engine.systems.ChainSystem` through the system's functions
+(:func:`rbstab.engine.systems.rate_of`, ``margin_of``, ...; the chain's physics is
+:func:`rbstab.variants.chain.chain_evaluate`, compiled as a device function with scratch
+arrays in thread-local memory), one kernel for chains of 1 to :data:`MAX_CHAIN_BODIES`
+bodies and every launch one chain (its records passed once, read by every thread), each
+run with its own initial state and settings. A run gives its status, stop time, counts and
+its state (and W) at every ``stride``-th sample, as the CPU driver's
+(:func:`rbstab.engine.integrate.integrate_chain_runs`); the outputs and summary are the
+host's (:func:`rbstab.simulator.simulate_chain_blocks`).
+
 Not here: the pure sign law of ``sliding`` (``boundary_layer: 0``), whose event-driven
 integrator (:mod:`rbstab.engine.switching`) stays on the CPU, and the implicit methods.
 """
