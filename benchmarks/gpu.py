@@ -28,11 +28,22 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   machine (one process a core), on the parameter sweep;
 - **correctness** on ``--check-n`` runs of each sweep: statuses equal, step counts equal
   (and the largest difference), the final states' median and largest relative difference
-  from the CPU engine's, beside the CPU engine's own difference from an rtol 1e-11 run.
+  from the CPU engine's, beside the CPU engine's own difference from an rtol 1e-11 run;
+- **chains** (:func:`rbstab.engine.cuda.compiled_chain_kernel`, one kernel for chains of 1
+  to 8 bodies): the chain kernel's registers and local memory a thread and its occupancy;
+  kernel and end-to-end runs/s of an initial-state sweep of the stance example
+  (``configs/examples/stance_ankle_hip.yaml``: 2 bodies on permanent joints, saturated
+  torques; DOP853, rtol 1e-8, atol 1e-10, t_end 2 s, 201 samples of which the first and
+  last come back; each body's theta_1 ~ U(-0.1, 0.1) rad, omega ~ N(0, 0.2^2) rad/s) at
+  each N of ``--chain-n``, beside the compiled CPU driver
+  (:func:`rbstab.engine.integrate.integrate_chain_runs`) on every core at ``--chain-cpu-n``;
+  correctness on ``--check-n`` of its runs against the CPU driver (statuses, steps, final
+  states).
 
 Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
 
     python benchmarks/gpu.py [--n 10000 100000 1000000] [--sweep-n 1000000] [--check-n 256]
+                             [--chain-n 10000 100000] [--chain-cpu-n 2000] [--chains-only]
 
 ``--host-only`` (any machine, no GPU needed) measures what a ``--engine cuda`` sweep costs
 besides the GPU: the same ``rbstab sweep`` command with every launch replaced by a stub
@@ -237,6 +248,102 @@ def kernel_rate(n: int, n_samples: int, launch: int | None = None) -> float:
     return n / seconds
 
 
+# -- chains -----------------------------------------------------------------------------------------
+STANCE = str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
+
+
+def chain_runs(n: int, seed: int = 0):
+    """(system, y0 (n, n_state), settings rows (n, 7), method, n_samples) of n runs of the
+    stance example's initial-state sweep (module docstring)."""
+    from rbstab.config.chains import load_any_config
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.systems import chain_system
+    from rbstab.variants import chain as C
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_any_config(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=201",
+                                          "simulation.rtol=1e-8", "simulation.atol=1e-10"])
+    compiled = C.compile_chain(config.chain)
+    coordinates = C.independent_coordinates(compiled)
+    rng = np.random.default_rng(seed)
+    z = np.zeros((n, 3 * len(coordinates)))
+    for k, (_, block, _) in enumerate(coordinates):
+        if block == "theta":
+            z[:, 3 * k] = rng.uniform(-0.1, 0.1, n)
+        elif block == "omega":
+            z[:, 3 * k: 3 * k + 3] = rng.normal(0.0, 0.2, (n, 3))
+    sim = config.simulation
+    rows = np.repeat(settings_rows([sim]), n, axis=0)
+    rows[:, 6] = np.inf
+    return chain_system(compiled, sim.limits), C.full_state(compiled, z), rows, sim.method, sim.n_samples
+
+
+def chain_compile_info() -> str:
+    """The chain kernel's registers, local memory, occupancy and compile (or load) time."""
+    from numba import cuda
+
+    from rbstab.engine.cuda import THREADS_PER_BLOCK, chain_launch_signature, compiled_chain_kernel, occupancy
+    from rbstab.engine.rk import DOP853
+
+    start = time.perf_counter()
+    fn = compiled_chain_kernel(DOP853)
+    loaded = time.perf_counter() - start
+    signature = chain_launch_signature()
+    device = cuda.get_current_device()
+    per_sm = occupancy(fn, None)
+    share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
+    return (f"{fn.get_regs_per_thread(signature)} registers, {fn.get_local_mem_per_thread(signature)} B local memory "
+            f"a thread; {per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}); compiled "
+            f"or loaded in {loaded:.1f} s")
+
+
+def chain_gpu_rates(n: int) -> tuple[float, float]:
+    """(kernel, end-to-end) runs/s of n runs of the chain sweep (first and last samples back)."""
+    from rbstab.engine.cuda import integrate_chain_runs_cuda
+
+    system, y0, rows, method, n_samples = chain_runs(n)
+    start = time.perf_counter()
+    sol = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=n_samples, stride=n_samples - 1)
+    return n / sol.kernel_seconds, n / (time.perf_counter() - start)
+
+
+def _chain_cpu_part(args) -> None:
+    from rbstab.engine.integrate import integrate_chain_runs
+
+    n, seed = args
+    system, y0, rows, method, n_samples = chain_runs(n, seed)
+    for lo in range(0, n, 64):
+        integrate_chain_runs(system, y0[lo:lo + 64], rows[lo:lo + 64], method=method, n_samples=n_samples)
+
+
+def chain_cpu_rate(n: int, cores: int | None = None) -> float:
+    """Runs/s of the chain sweep on the compiled CPU driver, one process a core (the kernels
+    compiled, or loaded from the cache, before the clock starts)."""
+    cores = cores or os.cpu_count() or 1
+    _chain_cpu_part((2, 0))
+    with ProcessPoolExecutor(cores) as pool:
+        list(pool.map(_chain_cpu_part, [(2, seed) for seed in range(cores)]))  # each process's kernels loaded
+        start = time.perf_counter()
+        list(pool.map(_chain_cpu_part, [(n // cores, seed) for seed in range(cores)]))
+        return (n // cores) * cores / (time.perf_counter() - start)
+
+
+def chain_correctness(n: int) -> str:
+    """The GPU's chain runs against the CPU driver's: statuses, steps, final states."""
+    from rbstab.engine.cuda import integrate_chain_runs_cuda
+    from rbstab.engine.integrate import integrate_chain_runs
+
+    system, y0, rows, method, n_samples = chain_runs(n)
+    cpu = integrate_chain_runs(system, y0, rows, method=method, n_samples=2)
+    gpu = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=2)
+    final_cpu, final_gpu = cpu.samples[:, -1], gpu.samples[:, -1]
+    rel = np.max(np.abs(final_gpu - final_cpu), axis=1) / np.max(np.abs(final_cpu), axis=1)
+    steps = np.abs(gpu.n_steps - cpu.n_steps)
+    return (f"statuses equal {int(np.sum(gpu.status == cpu.status))}/{n}; steps equal {int(np.sum(steps == 0))}/{n} "
+            f"(max {int(steps.max())} apart); final states rel. diff median {np.median(rel):.2g}, max {rel.max():.2g}")
+
+
 #: The stub of ``--host-only``: every launch of the CUDA engine returns its runs finished
 #: (SUCCESS at t_end, a full accumulator) at once.
 STUB = """
@@ -345,6 +452,16 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def chains(args) -> None:
+    """The lines of the chain kernel (module docstring, **chains**)."""
+    print("chains, compile:", chain_compile_info())
+    for n in args.chain_n:
+        kernel, total = chain_gpu_rates(n)
+        print(f"chains, stance sweep, {n:,} runs: kernel {kernel:,.0f} runs/s, end to end {total:,.0f} runs/s")
+    print(f"chains, CPU driver, {os.cpu_count()} processes, stance sweep: {chain_cpu_rate(args.chain_cpu_n):,.0f} runs/s")
+    print(f"chains, correctness, {args.check_n} runs: {chain_correctness(args.check_n)}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
@@ -354,6 +471,9 @@ def main() -> None:
     parser.add_argument("--jobs", type=int, default=None, help="-j of the sweeps (default: the sweep's own)")
     parser.add_argument("--check-n", type=int, default=256)
     parser.add_argument("--cpu-n", type=int, default=20_000)
+    parser.add_argument("--chain-n", type=int, nargs="+", default=[10_000, 100_000])
+    parser.add_argument("--chain-cpu-n", type=int, default=2000)
+    parser.add_argument("--chains-only", action="store_true", help="only the chain kernel's lines")
     args = parser.parse_args()
     if args.host_only:
         host_only(args.sweep_n, args.jobs)
@@ -361,6 +481,9 @@ def main() -> None:
     from rbstab.engine.cuda import check_available
 
     check_available()
+    if args.chains_only:
+        chains(args)
+        return
     print("compile:", compile_info())
     print("deadline:", deadline())
     for n_samples in (2, 201, 2001):
@@ -383,6 +506,7 @@ def main() -> None:
     print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")
     for kind in ("initial-state", "parameter"):
         print(f"correctness, {kind}, {args.check_n} runs: {correctness(kind, args.check_n)}")
+    chains(args)
     sweep_seconds(1000, "summary")  # the kernel cache, warm
     for n in args.sweep_n:
         print(f"rbstab sweep --engine cuda --store summary, N = {n}: {sweep_seconds(n, 'summary', jobs=args.jobs):.1f} s")

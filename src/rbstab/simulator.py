@@ -730,9 +730,9 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
 
     ``engine``: ``"scipy"`` integrates with ``solve_ivp`` (:func:`rbstab.variants.chain.integrate`,
     any method); every other engine, and the compiled engine's methods, with the compiled
-    driver on the CPU (:func:`simulate_chain_blocks`: the same steps as ``solve_ivp``'s, the
-    admissible region's events located on the step's interpolant). ``timeout`` [s] replaces
-    ``simulation.max_wall_time``.
+    driver (:func:`simulate_chain_blocks`: the same steps as ``solve_ivp``'s, the
+    admissible region's events located on the step's interpolant), on the GPU with
+    ``"cuda"``, else on the CPU. ``timeout`` [s] replaces ``simulation.max_wall_time``.
 
     Raises
     ------
@@ -744,7 +744,7 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     methods = get_engine(engine).methods  # checks the name; None: solve_ivp integrates every method
     sim = config.simulation
     if methods is not None and sim.method in methods:
-        (_, block), = simulate_chain_blocks([config], timeout=timeout)
+        (_, block), = simulate_chain_blocks([config], timeout=timeout, engine=engine)
         return block.result(0)
     start = _time.perf_counter()
     trajectory = C.integrate(config, timeout=timeout)
@@ -772,20 +772,27 @@ def _chain_key(compiled, sim) -> bytes:
     return b"|".join([*parts, limits, str((sim.method, sim.n_samples, float(sim.t_end), compiled.offset)).encode()])
 
 
-def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None,
-                          outputs: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
+def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
+                          engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
-    on the compiled CPU driver: the runs of one chain (the same bodies, joints, gains and
+    on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of one chain (the same bodies, joints, gains and
     admissible region) with the same method, sample count and t_end in one call of
     :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states:
     one call a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
     :class:`RunBlock`'s runs, in order. ``outputs`` False: the block carries the summaries
     but no traces (a store of summaries). ``timeout`` [s] replaces each run's
-    ``simulation.max_wall_time``."""
+    ``simulation.max_wall_time``. ``engine`` ``"cuda"``: the runs of a call are one launch
+    on the GPU (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit the largest
+    ``max_wall_time`` of its runs), the outputs and summaries computed from their samples
+    as the CPU driver's; any other engine: the CPU driver."""
     from .engine.integrate import integrate_chain_runs  # heavy: numba
     from .engine.systems import chain_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
+    integrate, gpu = integrate_chain_runs, get_engine(engine).gpu
+    if gpu:
+        get_engine(engine).check_available()  # before any run
+        from .engine.cuda import integrate_chain_runs_cuda as integrate  # heavy: numba-cuda (--engine cuda only)
     groups: dict[bytes, tuple] = {}
     by_chain: dict[int, object] = {}  # configs that share their Chain object share its compilation
     for i, config in enumerate(configs):
@@ -802,8 +809,9 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None,
         sim = sims[0]
         y0 = np.array([C.initial_state(configs[i]) for i in members])
         settings = settings_rows(sims, timeout)
-        sol = integrate_chain_runs(chain_system(compiled, sim.limits), y0, settings, method=sim.method,
-                                   n_samples=sim.n_samples)
+        limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
+        sol = integrate(chain_system(compiled, sim.limits), y0, settings, method=sim.method, n_samples=sim.n_samples,
+                        **limit)
         time = np.linspace(0.0, sim.t_end, sim.n_samples)
         time.flags.writeable = False
         integration = (_time.perf_counter() - start) / len(members)

@@ -41,6 +41,17 @@ registers let the GPU hold at once (:func:`occupancy`); the kernel is compiled f
 one argument signature every launch uses (:func:`launch_signature`), once per version,
 under a file lock that other processes wait on (:func:`compiled_kernel`).
 
+Chains (:func:`chain_kernel_function`, :func:`integrate_chain_runs_cuda`): the same driver
+on a chain's :class:`~rbstab.engine.systems.ChainSystem` through the system's functions
+(:func:`rbstab.engine.systems.rate_of`, ``margin_of``, ...; the chain's physics is
+:func:`rbstab.variants.chain.chain_evaluate`, compiled as a device function with scratch
+arrays in thread-local memory), one kernel for chains of 1 to :data:`MAX_CHAIN_BODIES`
+bodies and every launch one chain (its records passed once, read by every thread), each
+run with its own initial state and settings. A run gives its status, stop time, counts and
+its state (and W) at every ``stride``-th sample, as the CPU driver's
+(:func:`rbstab.engine.integrate.integrate_chain_runs`); the outputs and summary are the
+host's (:func:`rbstab.simulator.simulate_chain_blocks`).
+
 Not here: the pure sign law of ``sliding`` (``boundary_layer: 0``), whose event-driven
 integrator (:mod:`rbstab.engine.switching`) stays on the CPU, and the implicit methods.
 """
@@ -75,18 +86,23 @@ from ..layout import N_OUTPUTS
 from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
+from ..variants.chain import ChainWork
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
-from .integrate import (REJECTED, _limit_of, admissible_event, attempt_step, locate_event, restart, sample_time,
-                        step_bounds, step_exit)
-from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step
-from .settings import SETTINGS, Work
+from .integrate import (REJECTED, ChunkSolution, _limit_of, admissible_event, attempt_step, locate_event, restart,
+                        sample_time, step_bounds, step_exit)
+from .rk import (DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step,
+                 method_number)
+from .settings import SETTINGS, Work, settings_records
+from .systems import (CHAIN, ChainSystem, breakpoint_of, disturbed_of, impulses_of, limited_of, margin_of,
+                      rate_of)
 from .tableaus import METHODS
 from .status import NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
-           "TRACE_COLUMNS", "THREADS_PER_BLOCK"]
+           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "MAX_CHAIN_BODIES", "MAX_CHAIN_STATE", "chain_launch_signature",
+           "chain_kernel_function", "compiled_chain_kernel", "integrate_chain_runs_cuda"]
 
 #: How to get what ``--engine cuda`` needs.
 INSTALL_HINT = 'pip install "rbstab[cuda]" (numba-cuda and the CUDA 12 wheels) and an NVIDIA driver'
@@ -436,14 +452,15 @@ def _compile_lock(group: str):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
-def occupancy(fn, n_state: int) -> int:
+def occupancy(fn, n_state: int | None) -> int:
     """Blocks of :data:`THREADS_PER_BLOCK` threads one multiprocessor holds at once for the
     compiled kernel ``fn`` (CUDA's occupancy calculation from its registers a thread and the
-    device's limits; the kernel uses no shared memory). 1 under the simulator."""
+    device's limits; the kernel uses no shared memory). ``n_state`` None: ``fn`` is the
+    chain kernel (:func:`compiled_chain_kernel`). 1 under the simulator."""
     if simulated():
         return 1
     device = cuda.get_current_device()
-    regs = fn.get_regs_per_thread(launch_signature(n_state))
+    regs = fn.get_regs_per_thread(launch_signature(n_state) if n_state is not None else chain_launch_signature())
     warps = -(-THREADS_PER_BLOCK // device.WARP_SIZE)
     per_warp = -(-max(regs, 1) * device.WARP_SIZE // 256) * 256  # registers go to a warp in units of 256
     by_registers = device.MAX_REGISTERS_PER_MULTIPROCESSOR // (per_warp * warps)
@@ -458,7 +475,10 @@ DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "
 
 
 def _plain(value):
-    """The numpy array or record behind the simulator's wrappers of a kernel's arguments."""
+    """The numpy array or record behind the simulator's wrappers of a kernel's arguments
+    (in a named tuple: a tuple of them, a chain's system)."""
+    if isinstance(value, tuple) and hasattr(value, "_fields"):
+        return type(value)(*[_plain(v) for v in value])
     while hasattr(value, "_item") or hasattr(value, "_ary"):
         value = value.__dict__["_item"] if "_item" in value.__dict__ else value._ary
     return value
@@ -471,15 +491,240 @@ def _unwrapping(function):
     return call
 
 
-def _simulator_function(function):
-    """``function`` with the compiled functions it calls taking the simulator's arguments:
-    under the simulator a kernel runs as Python and calls rbstab's CPU-compiled functions,
-    which take numpy's arrays and records, not the simulator's wrappers of them."""
+def _simulator_function(function, device_functions=DEVICE_FUNCTIONS):
+    """``function`` with the compiled functions it calls (``device_functions``, names of
+    this module's globals) taking the simulator's arguments: under the simulator a kernel
+    runs as Python and calls rbstab's CPU-compiled functions, which take numpy's arrays and
+    records, not the simulator's wrappers of them."""
     names = dict(function.__globals__)
-    names.update({name: _unwrapping(names[name]) for name in DEVICE_FUNCTIONS})
+    names.update({name: _unwrapping(names[name]) for name in device_functions})
     names["globaltimer"] = _clock_ns_python
     return FunctionType(function.__code__, names, function.__name__, function.__defaults__,
                               function.__closure__)
+
+
+# -- the chain kernel -----------------------------------------------------------------------------------
+#: The most bodies of a chain the chain kernel integrates (the sizes of its thread-local arrays;
+#: a chain of n <= 8 bodies uses their first n rows).
+MAX_CHAIN_BODIES = 8
+#: The longest state of such a chain: 12 entries a body and 3 an embedded joint's D.
+MAX_CHAIN_STATE = 15 * MAX_CHAIN_BODIES
+
+
+def chain_launch_signature() -> tuple:
+    """numba's types of a chain launch's arguments, in order (every array C-contiguous):
+    the one signature :func:`compiled_chain_kernel` compiles, for chains of 1 to
+    :data:`MAX_CHAIN_BODIES` bodies (n and the state size are read at run time).
+
+    The chain, passed once and read by every thread (:class:`rbstab.engine.systems.ChainSystem`'s
+    arrays): params :data:`rbstab.model.PARAMETERS` (n,), codes, parents int64 (n,), ppoints
+    (n, 3), d_at int64 (n,); its k runs: y0 (k, n_state), settings
+    :data:`rbstab.engine.settings.SETTINGS` (k,); n_samples int64 (the grid of each run:
+    linspace(0, t_end, n_samples)); stride int64 (every stride-th sample kept); control
+    int64 (2,) and limit_ns int64 as :func:`launch_signature`'s; then the outputs: status
+    int64 (k,), t_stop (k,), nfev, n_steps int64 (k,), samples (k, n_kept, n_state) and
+    work (k, n_kept) (the disturbances' work W [J]) at the kept samples.
+    """
+    from numba import float64, from_dtype, int64  # heavy: numba
+
+    vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
+    ints = int64[::1]
+    return (from_dtype(PARAMETERS)[::1], ints, ints, matrix, ints, matrix, from_dtype(SETTINGS)[::1], int64, int64,
+            ints, int64, ints, vector, ints, ints, cube, matrix)
+
+
+def chain_kernel_function(method: int):
+    """The Python function of the CUDA kernel of chain runs of method number ``method``
+    (:func:`chain_launch_signature`: one chain, k runs, one thread a run).
+
+    The driver is :func:`kernel_function`'s (one step attempt a pass, the persistent grid
+    and the launch's one deadline) on a chain's :class:`~rbstab.engine.systems.ChainSystem`,
+    through the system's functions (:func:`rbstab.engine.systems.rate_of`, ``margin_of``,
+    ``impulses_of``, ``breakpoint_of``, ``disturbed_of``, ``limited_of``) that the CPU
+    driver (:func:`rbstab.engine.integrate.integrate_run`) takes its steps with; a sample is
+    the state there (and W), written to device memory, as the CPU driver's samples are; the
+    chain's outputs and summary are computed from them on the host. Its thread-local arrays
+    are sized for :data:`MAX_CHAIN_BODIES` bodies; the integrated vector (the state, and W
+    after it where a body has disturbances) and its stage rates and interpolant are views of
+    their first entries."""
+    from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
+
+    n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
+    dop853 = method == DOP853
+    size = MAX_CHAIN_STATE + 1  # the longest integrated vector: the state and W
+    bodies, rows = MAX_CHAIN_BODIES, 3 * MAX_CHAIN_BODIES
+
+    def run_chains(params, codes, parents, ppoints, d_at, y0s, settings, n_samples, stride, control, limit_ns,
+                   status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
+        K_all = cuda.local.array((n_rows, size), float64)
+        Q_all = cuda.local.array((q_rows, size), float64)
+        y_all = cuda.local.array(size, float64)
+        f_all = cuda.local.array(size, float64)
+        y_new_all = cuda.local.array(size, float64)
+        scale_all = cuda.local.array(size, float64)
+        work_all = cuda.local.array(size, float64)
+        sample_all = cuda.local.array(size, float64)
+        scratch = ChainWork(cuda.local.array((bodies, 3, 3), float64), cuda.local.array((bodies, 3, 3), float64),
+                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
+                            cuda.local.array((bodies, 3, 3), float64),
+                            cuda.local.array((rows, rows), float64), cuda.local.array(rows, float64),
+                            cuda.local.array(bodies, int64), cuda.local.array((bodies, 7, 3), float64),
+                            cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64))
+        p = ChainSystem(params, codes, parents, ppoints, d_at, scratch)
+        n_runs, n_state = y0s.shape[0], y0s.shape[1]
+        n_kept = samples_o.shape[1]
+        disturbed = disturbed_of(p)
+        bounded = limited_of(p)
+        n_vec = n_state + 1 if disturbed else n_state  # the integrated vector: the state, then W
+        K, Q = K_all[:, :n_vec], Q_all[:, :n_vec]  # views of the first columns (a reshape needs numba's runtime)
+        y, f, y_new, work, sample = y_all[:n_vec], f_all[:n_vec], y_new_all[:n_vec], work_all[:n_vec], sample_all[:n_vec]
+        w = Work(K, Q, y_new, scale_all[:n_state], work)  # the error norms take the state's entries
+        # the launch's deadline: set once, by the first thread to start
+        now = globaltimer()
+        deadline = cuda.atomic.cas(control, 1, 0, now + limit_ns)
+        if deadline == 0:
+            deadline = now + limit_ns
+        passes = 0
+        k = cuda.atomic.add(control, 0, 1)
+        while k < n_runs:
+            s = settings[k]
+            t_end = s.t_end
+            limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
+            nfev = 0
+            t = 0.0
+            j = 0
+            n_steps = 0
+            status = SUCCESS
+            h_abs = 0.0
+            margin, left = 0.0, SUCCESS
+            t_bound = t_end  # where the step from t ends at the latest: t_end, or the next breakpoint
+            t_lim = t_end  # the latest time a stage of that step evaluates
+            running = False
+            if globaltimer() > deadline:
+                status = NOT_STARTED
+            else:
+                for i in range(n_state):
+                    y[i] = y0s[k, i]
+                for i in range(n_state, n_vec):
+                    y[i] = 0.0  # W [J] from 0 to t
+                if disturbed:  # the impulses at t = 0; the steps stop at the first breakpoint
+                    y[n_state] += impulses_of(CHAIN, 0.0, y, p)
+                    t_bound = breakpoint_of(p, 0.0, t_end)
+                    t_lim = _limit_of(t_bound, t_end)
+                margin, left = margin_of(CHAIN, y, p, limit)
+                if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
+                    status = left
+                else:
+                    rate_of(CHAIN, 0.0, y, p, f)
+                    h_abs = initial_step(CHAIN, p, s, 0.0, t_bound, t_lim, y, f, w)
+                    nfev = 2
+                    h_abs = step_bounds(s, t, h_abs)
+                    running = True
+            rejected = False
+            while running and t < t_end:
+                passes += 1
+                if passes % CLOCK_EVERY == 0 and globaltimer() > deadline:
+                    status = TIMEOUT
+                    break
+                if n_steps >= s.max_steps:
+                    status = STEP_LIMIT
+                    break
+                outcome, t_new, h, h_abs = attempt_step(CHAIN, p, s, (t, t_bound), y, f, h_abs, rejected, w)
+                if outcome == REJECTED:
+                    nfev += n_stages
+                    rejected = True
+                    continue
+                if outcome != SUCCESS:
+                    status = outcome
+                    break
+                nfev += n_stages
+                n_steps += 1
+                t_stop = t_new
+                margin_new = margin_of(CHAIN, y_new, p, limit)[0]
+                event = margin >= 0 and margin_new <= 0
+                at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
+                if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+                    nfev += dense_coefficients(CHAIN, p, t, t_lim, y, h, method, w)
+                x_out = step_exit(CHAIN, p, limit, event, (margin, margin_new), (h, y, Q, dop853), work)
+                event = x_out > 0.0
+                if event:
+                    t_stop, _, left = locate_event(CHAIN, p, limit, t, (h, y, Q, dop853), work, x_out)
+                # a sample at a breakpoint is the next step's (the state just after the breakpoint)
+                while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
+                                         else sample_time(j, n_samples, t_end) <= t_stop):
+                    if j % stride == 0:
+                        dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
+                        for i in range(n_state):
+                            samples_o[k, j // stride, i] = sample[i]
+                        work_o[k, j // stride] = sample[n_state] if disturbed else 0.0
+                    j += 1
+                if event:
+                    status = left
+                    t = t_stop
+                    break
+                t = t_new
+                margin = margin_new
+                for i in range(n_vec):
+                    y[i] = y_new[i]
+                    f[i] = K[n_stages, i]
+                if at_break:  # the impulses that start here; a new initial step from here
+                    y[n_state] += impulses_of(CHAIN, t, y, p)
+                    margin, left = margin_of(CHAIN, y, p, limit)
+                    if margin < 0:  # an impulse took the state out of the admissible region
+                        status = left
+                        break
+                    t_bound, t_lim, h_abs = restart(CHAIN, p, s, t, y, f, w)
+                    nfev += 2
+                h_abs = step_bounds(s, t, h_abs)
+                rejected = False
+            if running and status == SUCCESS and disturbed and j == n_samples:
+                # an impulse at t_end: the last sample shows the state after it
+                jump = impulses_of(CHAIN, t_end, y, p)
+                if jump != 0.0 and (n_samples - 1) % stride == 0:
+                    for i in range(n_state):
+                        samples_o[k, n_kept - 1, i] = y[i]
+                    work_o[k, n_kept - 1] += jump
+            # its end: every output of the run written, whether it ran or not
+            status_o[k] = status
+            t_stop_o[k] = t
+            nfev_o[k] = nfev
+            n_steps_o[k] = n_steps
+            for i in range(-(-j // stride), n_kept):  # the samples after a stop: NaN, as the CPU driver's
+                for c in range(n_state):
+                    samples_o[k, i, c] = math.nan
+                work_o[k, i] = math.nan
+            k = cuda.atomic.add(control, 0, 1)
+
+    run_chains.__name__ = run_chains.__qualname__ = f"run_chains_{METHODS[method]}"
+    return run_chains
+
+
+#: The compiled functions the chain kernel calls (the simulator hands them numpy's arrays).
+CHAIN_DEVICE_FUNCTIONS = ("rate_of", "margin_of", "impulses_of", "breakpoint_of", "disturbed_of", "limited_of",
+                          "initial_step", "step_bounds", "attempt_step", "step_exit", "locate_event",
+                          "dense_coefficients", "dense_value", "sample_time", "restart")
+
+
+@functools.lru_cache(maxsize=None)
+def compiled_chain_kernel(method: int):
+    """The CUDA kernel of chain runs of method number ``method``, compiled for
+    :func:`chain_launch_signature` (chains of 1 to :data:`MAX_CHAIN_BODIES` bodies) or
+    loaded from the disk cache, once per process, as :func:`compiled_kernel`."""
+    _cuda()
+    function = chain_kernel_function(method)
+    if simulated():
+        return cuda.jit(_simulator_function(function, CHAIN_DEVICE_FUNCTIONS))
+    from numba.cuda.core import config  # optional: numba-cuda
+
+    config.CACHE_DIR = str(CACHE_DIR)
+    group = f"cuda-chain-{METHODS[method]}"
+    with _compile_lock(group):
+        if not cache_is_warm(group):
+            print(f"rbstab: compiling the CUDA kernel for chains with {METHODS[method]} "
+                  f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+        fn = cuda.jit(chain_launch_signature(), cache=True)(function)  # compiles, or loads from the cache
+        mark_warm(group)
+    return fn
 
 
 # -- from Python ----------------------------------------------------------------------------------------
@@ -589,7 +834,7 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _resident_blocks(fn, n_state: int) -> int:
+def _resident_blocks(fn, n_state: int | None) -> int:
     """The grid of a launch: the blocks the GPU holds at once (:func:`occupancy` on every
     multiprocessor), each thread taking runs until none is left (a persistent grid)."""
     if simulated():
@@ -654,3 +899,92 @@ def _launch(fn, blocks: int, runs, stencils, options, n_trace: int, limit_ns):
     host = {name: np.array(device.copy_to_host(pinned)) for name, (device, pinned) in buffers.items()}
     trace = host.pop("trace") if n_trace else None
     return (*host.values(), trace, kernel_seconds)
+
+
+@dataclass
+class CudaChainSolution(ChunkSolution):
+    """:class:`rbstab.engine.integrate.ChunkSolution` of chain runs on the GPU
+    (:func:`integrate_chain_runs_cuda`): ``samples`` (k, n_kept, n_state) and ``work`` (k,
+    n_kept) at every ``stride``-th sample; ``kernel_seconds`` the launches' time on the GPU
+    (CUDA events) [s], ``seconds`` their wall time (transfers included) [s]."""
+
+    kernel_seconds: float = 0.0
+    seconds: float = 0.0
+
+
+def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: int, stride: int = 1,
+                              max_wall_time: float = math.inf) -> CudaChainSolution:
+    """Integrate k runs of one chain on the GPU, one thread a run: what
+    :func:`rbstab.engine.integrate.integrate_chain_runs` does on the CPU (the same arguments),
+    the chain's records passed once for every run.
+
+    Parameters
+    ----------
+    system : ChainSystem
+        The chain (:func:`rbstab.engine.systems.chain_system`; its ``work`` is not read), of
+        at most :data:`MAX_CHAIN_BODIES` bodies.
+    y0 : ndarray, shape (k, n_state)
+    settings : ndarray, shape (k, 7)
+        Per run: :data:`~rbstab.engine.settings.SETTING_COLUMNS`; ``max_wall_time`` is not
+        read (see below).
+    method : str
+        One of :data:`METHODS`.
+    n_samples : int
+        Samples per run, evenly spaced on [0, t_end] (>= 2).
+    stride : int
+        Keep every ``stride``-th sample (``samples`` has ``len(range(0, n_samples,
+        stride))`` rows a run).
+    max_wall_time : float
+        Each launch's limit [s] from its first thread's start: no run starts after it
+        (NOT_STARTED, t_stop 0, NaN samples), a run under way stops (TIMEOUT).
+
+    Raises
+    ------
+    CudaUnavailable
+        No GPU, driver or numba-cuda (:func:`check_available`).
+    ValueError
+        For a chain of more than :data:`MAX_CHAIN_BODIES` bodies, or ``stride`` < 1.
+    """
+    check_available()
+    n_bodies = int(np.shape(system.codes)[0])
+    if not 1 <= n_bodies <= MAX_CHAIN_BODIES:
+        raise ValueError(f"chain: found {n_bodies} bodies; the CUDA engine takes 1 to {MAX_CHAIN_BODIES}")
+    if stride < 1:
+        raise ValueError(f"stride: found {stride}; expected an integer >= 1")
+    y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
+    k, n_state = y0.shape
+    records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
+    chain = (np.ascontiguousarray(system.params, dtype=PARAMETERS),
+             *(np.ascontiguousarray(a, dtype=np.int64) for a in (system.codes, system.parents)),
+             np.ascontiguousarray(system.ppoints, dtype=float), np.ascontiguousarray(system.d_at, dtype=np.int64))
+    n_kept = len(range(0, n_samples, stride))
+    fn = compiled_chain_kernel(method_number(method))
+    limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
+        _NO_LIMIT_NS)
+    blocks = _resident_blocks(fn, None)
+    if simulated():
+        free = 2**30
+    else:
+        free, _ = cuda.current_context().get_memory_info()
+    per_launch = max(1, int(free * TRACE_MEMORY_SHARE) // (8 * n_kept * (n_state + 1)))
+    out = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64),
+           np.empty((k, n_kept, n_state)), np.empty((k, n_kept)))
+    kernel_seconds, start = 0.0, _time.perf_counter()
+    d_chain = [cuda.to_device(a) for a in chain]
+    for lo in range(0, k, per_launch):
+        runs = slice(lo, min(k, lo + per_launch))
+        d_in = [cuda.to_device(a) for a in (y0[runs], records[runs])]
+        d_out = [cuda.device_array(a[runs].shape, a.dtype) for a in out]
+        control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
+        begin, end = cuda.event(), cuda.event()
+        begin.record()
+        fn[blocks, THREADS_PER_BLOCK](*d_chain, *d_in, np.int64(n_samples), np.int64(stride), control, limit_ns,
+                                      *d_out)
+        end.record()
+        end.synchronize()
+        kernel_seconds += begin.elapsed_time(end) / 1e3
+        for a, d in zip(out, d_out):
+            a[runs] = d.copy_to_host()
+    status, t_stop, nfev, n_steps, samples, work = out
+    return CudaChainSolution(samples, status, t_stop, nfev, n_steps, work, kernel_seconds=kernel_seconds,
+                             seconds=_time.perf_counter() - start)

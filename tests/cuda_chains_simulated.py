@@ -1,0 +1,113 @@
+"""The CUDA engine's chain kernel under numba's CUDA simulator against the compiled CPU
+driver, run by tests/test_cuda_chains.py in a process of its own (the simulator is chosen
+when numba starts: ``NUMBA_ENABLE_CUDASIM=1``).
+
+Prints one JSON object (its last line): for each case, the runs' statuses and whether their
+status, t_stop, nfev, n_steps, samples and work W at every sample are the CPU driver's bit
+for bit (all samples and every 3rd), and whether ``simulate_chain(engine="cuda")`` gives
+``simulate_chain(engine="compiled")``'s outputs and summary.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+
+
+def pulsed_chain(theta: float, impulses: bool = False):
+    """Three bodies hanging on permanent (ball) joints under gravity with joint springs, a
+    pulse of force on the lowest from 0.05 s to 0.15 s and an admissible region in theta;
+    the upper body tilted ``theta`` [rad] about x. ``impulses``: also a torque impulse on the
+    upper body at t = 0, and force impulses on the middle one at 0.12 s and at t_end."""
+    from rbstab.config.chains import chain_config_from_mapping
+
+    body = {"mass": 1.5, "inertia": [0.1, 0.1, 0.03]}
+    joint = {"parent_point": [0, 0, -0.3], "child_point": [0, 0, 0.3], "variant": "permanent", "k_r": [20, 20, 5],
+             "l_r": [1.0, 1.0, 1.0]}
+    return chain_config_from_mapping({
+        "name": "pulsed3", "gravity": [0, 0, -9.81],
+        "bodies": [{"name": name, **body} for name in ("upper", "middle", "lower")],
+        "joints": [{"name": "shoulder", "parent": "ground", "child": "upper", **joint, "parent_point": [0, 0, 0]},
+                   {"name": "elbow", "parent": "upper", "child": "middle", **joint},
+                   {"name": "wrist", "parent": "middle", "child": "lower", **joint}],
+        "initial_state": {"upper": {"theta": [theta, 0.0, 0.0]}},
+        "disturbances": [{"kind": "pulse", "value": [0.0, 20.0, 1.0], "point": [0.0, 0.05, -0.2], "start": 0.05,
+                          "duration": 0.1, "body": "lower"},
+                         *([{"kind": "impulse", "quantity": "torque", "value": [0.05, 0.0, 0.0], "start": 0.0,
+                             "body": "upper"},
+                            *[{"kind": "impulse", "quantity": "force", "value": [0.0, 0.3, 0.0], "point": [0.0, 0.0, 0.1],
+                               "start": at, "body": "middle"} for at in (0.12, 0.3)]] if impulses else [])],
+        "simulation": {"t_end": 0.3, "n_samples": 31, "method": "RK45", "rtol": 1e-8, "atol": 1e-10,
+                       "limits": {"theta": [0.5, 0.5, 3.2]}},
+    })
+
+
+def cases(root: str):
+    """name -> (configs of one chain: its runs)."""
+    from rbstab.config.chains import load_any_config
+
+    stance = os.path.join(root, "configs", "examples", "stance_ankle_hip.yaml")
+    knee = os.path.join(root, "configs", "examples", "knee.yaml")
+    short = ["simulation.t_end=0.3", "simulation.n_samples=31"]
+    return {
+        "stance": [load_any_config(stance, [*short, *extra]) for extra in (
+            [], ["initial_state.trunk.theta=[-0.1, 0.02, 0]"], ["initial_state.legs.theta=[0.05, -0.01, 0]"],
+            ["simulation.max_steps=12"])],  # stopped by its step limit
+        "knee": [load_any_config(knee, ["simulation.t_end=0.05", "simulation.n_samples=26", *extra]) for extra in (
+            [], ["initial_state.shank.theta=[0.6, 0.1, 0]"])],
+        "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
+        "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
+    }
+
+
+def same(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    return a.shape == b.shape and a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+def main() -> None:
+    assert os.environ.get("NUMBA_ENABLE_CUDASIM") == "1"
+    warnings.simplefilter("ignore")
+    from rbstab.engine.cuda import integrate_chain_runs_cuda
+    from rbstab.engine.integrate import integrate_chain_runs
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.systems import chain_system
+    from rbstab.simulator import simulate_chain
+    from rbstab.variants import chain as C
+
+    report = {}
+    for name, configs in cases(sys.argv[1]).items():
+        start = time.perf_counter()
+        sim = configs[0].simulation
+        system = chain_system(C.compile_chain(configs[0].chain), sim.limits)
+        y0 = np.array([C.initial_state(c) for c in configs])
+        settings = settings_rows([c.simulation for c in configs])
+        cpu = integrate_chain_runs(system, y0, settings, method=sim.method, n_samples=sim.n_samples)
+        found = {"bodies": int(len(system.codes)), "status": cpu.status.tolist(), "n_steps": cpu.n_steps.tolist(),
+                 "differences": []}
+        for stride in (1, 3):
+            gpu = integrate_chain_runs_cuda(system, y0, settings, method=sim.method, n_samples=sim.n_samples,
+                                            stride=stride)
+            for what in ("status", "t_stop", "nfev", "n_steps"):
+                if not same(getattr(cpu, what), getattr(gpu, what)):
+                    found["differences"].append([stride, what, str(getattr(cpu, what)), str(getattr(gpu, what))])
+            if not same(cpu.samples[:, ::stride], gpu.samples):
+                found["differences"].append([stride, "samples"])
+            if not same(cpu.work[:, ::stride], gpu.work):
+                found["differences"].append([stride, "work"])
+        ref, got = simulate_chain(configs[-1], engine="compiled"), simulate_chain(configs[-1], engine="cuda")
+        found["result"] = [what for what in ("status", "message", "solver") if getattr(ref, what) != getattr(got, what)]
+        found["result"] += [key for key in ref.outputs if not same(ref.outputs[key], got.outputs[key])]
+        found["result"] += [key for key in ref.summary if str(ref.summary[key]) != str(got.summary[key])]
+        found["seconds"] = round(time.perf_counter() - start, 2)
+        report[name] = found
+    print(json.dumps(report))
+
+
+if __name__ == "__main__":
+    main()
