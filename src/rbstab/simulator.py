@@ -775,8 +775,9 @@ def _chain_key(compiled, sim) -> bytes:
 def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
                           engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
-    on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of one chain (the same bodies, joints, gains and
-    admissible region) with the same method, sample count and t_end in one call of
+    on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of
+    one chain (the same bodies, joints, gains and admissible region) with the same method,
+    sample count and t_end in one call of
     :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states:
     one call a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
     :class:`RunBlock`'s runs, in order. ``outputs`` False: the block carries the summaries

@@ -400,9 +400,10 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
 
 
 def _chain_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
-    """Integrate the chain runs of the chunk with the compiled CPU driver, the runs of one
-    chain in one call (:func:`rbstab.simulator.simulate_chain_blocks`); runs of another
-    method (scipy's implicit ones) or engine (scipy) each alone (:func:`_run_one`)."""
+    """Integrate the chain runs of the chunk with the compiled driver (the GPU's with the
+    ``cuda`` engine), the runs of one chain in one call
+    (:func:`rbstab.simulator.simulate_chain_blocks`); runs of another method (scipy's
+    implicit ones) or engine (scipy) each alone (:func:`_run_one`)."""
     t0 = _time.perf_counter()
     records: list[dict[str, Any]] = []
     configs: list = []
@@ -420,7 +421,8 @@ def _chain_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> lis
     done: set[int] = set()
     try:
         for members, block in simulate_chain_blocks([configs[i] for i in batch], timeout=options.timeout,
-                                                    outputs=options.store != "summary" or options.layout != "chunk"):
+                                                    outputs=options.store != "summary" or options.layout != "chunk",
+                                                    engine=options.engine):
             chunk = [batch[j] for j in members]
             done.update(chunk)
             records += _add_block(sink, [tasks[i] for i in chunk], block, config_time)
