@@ -76,6 +76,31 @@ def settings(**kw):
     return types.SimpleNamespace(**base)
 
 
+def simulated_once(tmp_path_factory, script: str) -> dict:
+    """The findings (the JSON of its last line) of ``tests/<script>`` run once a test
+    session under numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, chosen when numba
+    starts: a process of its own): the first pytest-xdist worker to ask runs it, the others
+    wait on a lock and read its file in the session's temporary folder."""
+    import fcntl
+    import json
+    import subprocess
+    import sys
+
+    folder = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # <session>/popen-gwN: the session's folder is its parent
+        folder = folder.parent
+    shared = folder / f"{Path(script).stem}.json"
+    with open(folder / f"{Path(script).stem}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not shared.exists():
+            env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+            done = subprocess.run([sys.executable, str(ROOT / "tests" / script), str(ROOT)], env=env,
+                                  capture_output=True, text=True, timeout=600)
+            assert done.returncode == 0, done.stderr[-3000:]
+            shared.write_text(done.stdout.splitlines()[-1])
+    return json.loads(shared.read_text())
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261121)

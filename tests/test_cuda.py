@@ -5,7 +5,6 @@ GPU skip without one."""
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -22,7 +21,7 @@ from rbstab.summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, numerical_rate,
 from rbstab.variants.base import split_outputs
 from rbstab.variants.kernels import run_outputs
 
-from conftest import ROOT
+from conftest import ROOT, simulated_once
 from reference import rotation
 
 numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
@@ -111,23 +110,9 @@ def test_streamed_summary_is_summary_table(path, overrides):
 # -- the driver under the CUDA simulator ------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def simulated(tmp_path_factory):
-    """tests/cuda_simulated.py's findings (~40 s), run once a test session: pytest-xdist's
-    workers share them through a file in the session's temporary folder."""
-    import fcntl
-
-    folder = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):  # <session>/popen-gwN: the session's folder is its parent
-        folder = folder.parent
-    shared = folder / "cuda_simulated.json"
-    with open(folder / "cuda_simulated.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)  # the first worker runs it, the others wait and read it
-        if not shared.exists():
-            env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
-            done = subprocess.run([sys.executable, str(ROOT / "tests" / "cuda_simulated.py"), str(ROOT)], env=env,
-                                  capture_output=True, text=True, timeout=600)
-            assert done.returncode == 0, done.stderr[-3000:]
-            shared.write_text(done.stdout.splitlines()[-1])
-    return json.loads(shared.read_text())
+    """tests/cuda_simulated.py's findings (~40 s), run once a test session
+    (:func:`conftest.simulated_once`)."""
+    return simulated_once(tmp_path_factory, "cuda_simulated.py")
 
 
 def test_simulated_driver_covers_every_variant_and_method(simulated):

@@ -4,14 +4,11 @@ compile of it to PTX for sm_90 covers chains of 1 to 8 bodies."""
 
 from __future__ import annotations
 
-import json
-import os
 import subprocess
-import sys
 
 import pytest
 
-from conftest import ROOT
+from conftest import simulated_once
 
 numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
 from numba import cuda  # noqa: E402  (numba-cuda's target)
@@ -20,14 +17,10 @@ from test_cuda import GPU, _compilers, _ptxas  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def simulated():
-    """tests/cuda_chains_simulated.py's findings (a few seconds with a warm cache), run in a
-    process of its own (the simulator is chosen when numba starts)."""
-    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
-    done = subprocess.run([sys.executable, str(ROOT / "tests" / "cuda_chains_simulated.py"), str(ROOT)], env=env,
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-3000:]
-    return json.loads(done.stdout.splitlines()[-1])
+def simulated(tmp_path_factory):
+    """tests/cuda_chains_simulated.py's findings (a few seconds with a warm cache), run once
+    a test session (:func:`conftest.simulated_once`)."""
+    return simulated_once(tmp_path_factory, "cuda_chains_simulated.py")
 
 
 @pytest.mark.parametrize("case, bodies, status", [

@@ -263,8 +263,8 @@ def test_the_engine_takes_its_settings_as_one_record():
     """The compiled engine's functions take a run's settings (tolerances, limits, method,
     sample grid) as one record (:data:`rbstab.engine.settings.SETTINGS`) and its work
     arrays as one :class:`~rbstab.engine.settings.Work`: none takes 10 parameters, but the
-    CUDA kernel, whose parameters are its launch's device arrays (one a column of results)."""
-    kernels = {"rbstab.engine.cuda.run_all"}
+    CUDA kernels, whose parameters are their launch's device arrays (one a column of results)."""
+    kernels = {"rbstab.engine.cuda.run_all", "rbstab.engine.cuda.run_chains"}
     long = []
     for module, (path, _) in MODULES.items():
         if not module.startswith("rbstab.engine"):
