@@ -287,7 +287,7 @@ def test_rbstab_analyze_maps_a_chains_basin_and_refuses_a_key_naming_no_body(tmp
     from rbstab_cli.main import cli
 
     path = "configs/examples/stance_ankle_hip.yaml"
-    short = ["--set", "simulation.t_end=1", "--basin-samples", "51", "-o", str(tmp_path)]
+    short = ["--set", "simulation.t_end=1", "--basin-samples", "51", "--no-certificate", "-o", str(tmp_path)]
     result = CliRunner().invoke(cli, ["analyze", path, "--json", "--basin", "initial_state.legs.theta.0=-0.1:0.1:3",
                                       "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2", *short])
     assert result.exit_code == 0, result.output
@@ -308,7 +308,7 @@ def test_rbstab_analyze_pushes_a_chains_body_and_draws_its_basin_stability(tmp_p
     from rbstab_cli.main import cli
 
     path = "configs/examples/stance_ankle_hip.yaml"
-    short = ["--set", "simulation.limits.theta=[0.6,0.6,3.2]", "-o", str(tmp_path), "--json"]
+    short = ["--set", "simulation.limits.theta=[0.6,0.6,3.2]", "-o", str(tmp_path), "--json", "--no-certificate"]
     pushed = CliRunner().invoke(cli, ["analyze", path, "--push", "force", "--push-body", "trunk", "--push-point",
                                       "0,0,0.2", "--push-direction", "0,-1,0", *short])
     assert pushed.exit_code == 0, pushed.output

@@ -4,16 +4,12 @@ compile of it to PTX for sm_90 covers chains of 1 to 8 bodies."""
 
 from __future__ import annotations
 
-import subprocess
-
 import pytest
 
 from conftest import simulated_once
 
 numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
-from numba import cuda  # noqa: E402  (numba-cuda's target)
-
-from test_cuda import GPU, _compilers, _ptxas  # noqa: E402
+from test_cuda import _compilers, ptx_for_sm_90  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -42,33 +38,12 @@ def test_simulated_chain_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, b
 
 @pytest.mark.slow
 @pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
-def test_chain_kernel_compiles_to_ptx_for_sm_90(monkeypatch, tmp_path):
+def test_chain_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
     """The chain kernel (DOP853, every joint variant's physics, the permanent joints'
     Cholesky solve, disturbances and the admissible region; chain_launch_signature's types)
     compiles for CUDA from the CPU driver's source, once for chains of 1 to 8 bodies (n is
-    read at run time); with ptxas, its registers and local memory a thread are reported."""
-    import numba.cuda.dispatcher
-
+    read at run time)."""
     from rbstab.engine.cuda import chain_kernel_function, chain_launch_signature
     from rbstab.engine.rk import DOP853
 
-    class Device:  # numba-cuda asks the current device's compute capability for called dispatchers
-        compute_capability = (9, 0)
-
-    if not GPU:
-        monkeypatch.setattr(numba.cuda.dispatcher, "get_current_device", lambda: Device())
-    ptx, _ = cuda.compile_ptx(chain_kernel_function(DOP853), chain_launch_signature(), cc=(9, 0))
-    assert ".target sm_90" in ptx and ".entry" in ptx
-    assert "globaltimer" in ptx  # the launch's wall-time limit reads the GPU's clock
-    assert "atom.global.cas.b64" in ptx  # the launch's one deadline
-    ptxas = _ptxas()
-    if ptxas:
-        (tmp_path / "k.ptx").write_text(ptx)
-        done = subprocess.run([ptxas, "-arch=sm_90", "-v", str(tmp_path / "k.ptx"), "-o", str(tmp_path / "k.cubin")],
-                              capture_output=True, text=True)
-        assert done.returncode == 0, done.stderr
-        report = " | ".join(line.split(":", 1)[-1].strip() for line in done.stderr.splitlines()
-                            if "Used" in line or "spill" in line)
-        print(f"run_chains_DOP853 for sm_90: {report}")
-        registers = int(report.split("Used ")[1].split(" registers")[0])
-        assert 0 < registers <= 255
+    ptx_for_sm_90(monkeypatch, chain_kernel_function(DOP853), chain_launch_signature())
