@@ -289,13 +289,13 @@ def test_a_report_drawn_by_worker_processes_equals_one_drawn_in_one_process(pape
     folders = {}
     for jobs in (1, 2):
         folders[jobs] = tmp_path / f"j{jobs}"
-        _ok(_invoke("report", *paper_runs, "-o", folders[jobs], "-j", jobs, "--animation-frames", "3"))
+        _ok(_invoke("report", *paper_runs[:2], "-o", folders[jobs], "-j", jobs, "--animation-frames", "3"))
     one, two = folders[1], folders[2]
     names = sorted(p.name for p in (one / "figures").iterdir())
-    assert names == sorted(p.name for p in (two / "figures").iterdir()) and len(names) == 3 * 5 + 4
+    assert names == sorted(p.name for p in (two / "figures").iterdir()) and len(names) == 2 * 5 + 4
     for name in names:
         assert (one / "figures" / name).read_bytes() == (two / "figures" / name).read_bytes(), name
-    assert _normalised_page(one).count("data:image/jpeg;base64,") == 3 * 3
+    assert _normalised_page(one).count("data:image/jpeg;base64,") == 2 * 3
     assert _normalised_page(one) == _normalised_page(two)
     assert (one / "summary.csv").read_bytes() == (two / "summary.csv").read_bytes()
     manifests = [json.loads((f / "report.json").read_text()) for f in (one, two)]
