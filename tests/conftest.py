@@ -22,15 +22,58 @@ PAPER_CONFIGS = sorted((ROOT / "configs" / "paper").glob("*.yaml"))
 D = np.diag
 
 
+#: Scripts run under numba's CUDA simulator (:func:`simulated_once`) -> the test file that reads them.
+SIMULATED = {"cuda_simulated.py": "test_cuda.py", "cuda_chains_simulated.py": "test_cuda_chains.py"}
+
+
 def pytest_sessionstart(session):
     """Compile the engine's kernels (the engine, the sign law, chains) into the cache once,
     before any test (and before pytest-xdist starts its workers, which then load them
-    instead of each compiling them again)."""
+    instead of each compiling them again); then start the CUDA simulator's scripts the
+    session's tests read, in processes of their own, so that no worker waits for them."""
     if hasattr(session.config, "workerinput"):  # an xdist worker: the controller did it
         return
     from rbstab.engine import ensure_compiled
 
     ensure_compiled(sign_law=True, chain=True)
+    _start_simulated(session.config)
+
+
+def _start_simulated(config) -> None:
+    """Run each of :data:`SIMULATED` whose test file the session collects in the background;
+    its output, error and exit status go to ``<script stem>.out/.err/.rc`` in a folder named
+    by ``RBSTAB_SIMULATED`` (the workers inherit it)."""
+    import importlib.util
+    import shutil
+    import subprocess
+    import sys
+    import tempfile
+
+    if importlib.util.find_spec("numba_cuda") is None:
+        return
+    asked = [Path(str(a).split("::")[0]).resolve() for a in (config.args or ["."])]
+    scripts = [s for s, test in SIMULATED.items()
+               if any(p == ROOT / "tests" / test or p in (ROOT / "tests" / test).parents for p in asked)]
+    if not scripts:
+        return
+    folder = Path(tempfile.mkdtemp(prefix="rbstab-simulated-"))
+    os.environ["RBSTAB_SIMULATED"] = str(folder)
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1"}
+    running = []
+    for script in scripts:
+        stem = folder / Path(script).stem
+        Path(f"{stem}.out").touch()  # the workers' sign that it is under way
+        command = (f'"{sys.executable}" "{ROOT / "tests" / script}" "{ROOT}" > "{stem}.out" 2> "{stem}.err"; '
+                   f'echo $? > "{stem}.rc.tmp" && mv "{stem}.rc.tmp" "{stem}.rc"')
+        running.append(subprocess.Popen(["sh", "-c", command], env=env, start_new_session=True))
+
+    def stop():
+        for process in running:
+            if process.poll() is None:
+                os.killpg(process.pid, 9)
+        shutil.rmtree(folder, ignore_errors=True)
+
+    config.add_cleanup(stop)
 
 
 def pytest_collection_modifyitems(config, items):
@@ -79,13 +122,24 @@ def settings(**kw):
 def simulated_once(tmp_path_factory, script: str) -> dict:
     """The findings (the JSON of its last line) of ``tests/<script>`` run once a test
     session under numba's CUDA simulator (``NUMBA_ENABLE_CUDASIM=1``, chosen when numba
-    starts: a process of its own): the first pytest-xdist worker to ask runs it, the others
-    wait on a lock and read its file in the session's temporary folder."""
+    starts: a process of its own): started with the session (:func:`_start_simulated`), or
+    else run by the first pytest-xdist worker to ask, the others waiting on a lock and
+    reading its file in the session's temporary folder."""
     import fcntl
     import json
     import subprocess
     import sys
+    import time
 
+    started = os.environ.get("RBSTAB_SIMULATED")
+    if started and (Path(started) / f"{Path(script).stem}.out").exists():  # started with the session
+        stem = Path(started) / Path(script).stem
+        deadline = time.monotonic() + 600
+        while not stem.with_suffix(".rc").exists():
+            assert time.monotonic() < deadline, f"{script} did not finish in 600 s"
+            time.sleep(0.2)
+        assert stem.with_suffix(".rc").read_text().strip() == "0", stem.with_suffix(".err").read_text()[-3000:]
+        return json.loads(stem.with_suffix(".out").read_text().splitlines()[-1])
     folder = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):  # <session>/popen-gwN: the session's folder is its parent
         folder = folder.parent
