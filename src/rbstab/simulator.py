@@ -823,7 +823,7 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
             if outputs:
                 traces.append(run_outputs)
             summaries.append(summary)
-            ended = _chain_end(compiled, sim, int(sol.status[j]), float(sol.t_stop[j]), sol.samples[j], y0[j],
+            ended = _chain_end(compiled, sims[j], int(sol.status[j]), float(sol.t_stop[j]), sol.samples[j], y0[j],
                                float(settings[j, 6]))
             status.append(ended[0])
             message.append(ended[1])
