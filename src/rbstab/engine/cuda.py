@@ -921,7 +921,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     Parameters
     ----------
     system : ChainSystem
-        The chain (:func:`rbstab.engine.systems.chain_system`; its ``work`` is not read), of
+        The chain (:func:`rbstab.engine.systems.chain_system`), of
         at most :data:`MAX_CHAIN_BODIES` bodies.
     y0 : ndarray, shape (k, n_state)
     settings : ndarray, shape (k, 7)

@@ -438,7 +438,8 @@ def integrate_chain_chunk(system, y0, settings, samples, work_done, ends):
     """:func:`integrate_run` for k runs of one chain (``system``, a
     :class:`~rbstab.engine.systems.ChainSystem`) from the initial states ``y0`` (k, n_state);
     the other arguments as :func:`integrate_chunk`'s. The call evaluates the chain with
-    scratch arrays of its own (threads may integrate one system at once)."""
+    scratch arrays of its own (``system.work`` is None; threads may integrate one system at
+    once)."""
     status, t_stop, nfev, n_steps = ends
     own = ChainSystem(system.params, system.codes, system.parents, system.ppoints, system.d_at,
                       chain_work(system.codes.shape[0]))

@@ -29,7 +29,7 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
 from ..model import set_limits
-from ..variants.chain import _relative, chain_evaluate, chain_impulses, chain_work
+from ..variants.chain import _relative, chain_evaluate, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from .status import GIMBAL_LOCK, LEFT_REGION
@@ -46,19 +46,20 @@ CHAIN = -1
 #: joint i's gains; the admissible region in every record), ``codes`` (n,) the joints'
 #: variant codes, ``parents`` (n,) parent indices (-1: ground), ``ppoints`` (n, 3) parent
 #: points [m], ``d_at`` (n,) the index of each embedded joint's D in the state (-1: none),
-#: ``work`` the scratch arrays of an evaluation (:class:`rbstab.variants.chain.ChainWork`;
-#: each call of the driver evaluates with scratch arrays of its own).
+#: ``work`` the scratch arrays of an evaluation (:class:`rbstab.variants.chain.ChainWork`):
+#: None in the description Python passes (:func:`chain_system`); the driver attaches its own
+#: (each call of :func:`rbstab.engine.integrate.integrate_chain_chunk`, each thread of the
+#: CUDA kernel), so no two threads share them.
 ChainSystem = namedtuple("ChainSystem", ["params", "codes", "parents", "ppoints", "d_at", "work"])
 
 
 def chain_system(compiled, limits=None) -> ChainSystem:
     """The :class:`ChainSystem` of a :class:`rbstab.variants.chain.CompiledChain`, with the
     admissible region ``limits`` (a :class:`rbstab.model.Limits`, the bounds (5, 3), or
-    None: unbounded) written into copies of its records."""
+    None: unbounded) written into copies of its records; ``work`` None (the driver's own)."""
     params = compiled.params.copy()
     set_limits(params, limits)
-    return ChainSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at,
-                       chain_work(compiled.size))
+    return ChainSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at, None)
 
 
 # -- one body's admissible region -------------------------------------------------------------
