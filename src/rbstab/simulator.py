@@ -785,7 +785,15 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
     ``simulation.max_wall_time``. ``engine`` ``"cuda"``: the runs of a call are one launch
     on the GPU (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit the largest
     ``max_wall_time`` of its runs), the outputs and summaries computed from their samples
-    as the CPU driver's; any other engine: the CPU driver."""
+    as the CPU driver's; any other engine: the CPU driver.
+
+    Raises
+    ------
+    ValueError
+        For an unknown engine.
+    rbstab.engine.cuda.CudaUnavailable
+        For ``"cuda"`` where no GPU (or numba-cuda) can be used, before any run.
+    """
     from .engine.integrate import integrate_chain_runs  # heavy: numba
     from .engine.systems import chain_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
