@@ -13,10 +13,13 @@ Prints (2 cores, warm numba cache):
   and visco-elastic joints with feedback, gravity) as the compiled driver makes it (scratch
   arrays of its own), and that per body, beside one evaluation of Case 3's one-body rate;
 - s a sweep over initial states (``rbstab.execute_sweep``, 2 local processes, ``--store
-  summary``) of N runs (``--sweep-runs``, default 10,000) of a 3-body chain (a triple
-  inverted pendulum held by its joints' feedback, t_end 2 s) and of the one-body Case 3
+  summary``) of N runs (``--sweep-runs``, default 10,000) of two 3-body chains (a triple
+  inverted pendulum held by its joints' feedback, t_end 2 s; three Case 3 bodies in a
+  column, each joint Case 3's embedded law, :func:`three_case3`) and of the one-body Case 3
   config (t_end 2 s), the rate evaluations a run takes, and their ratios: a sweep's time,
-  and its time per rate evaluation (the chain takes more steps than Case 3).
+  and its time per rate evaluation (a chain takes more steps than Case 3); and the time a
+  run on one process that 3.5x Case 3's sweep allows, beside what a chain run's rate
+  evaluations alone take (their count x us an evaluation at the initial state).
 
 Run: python benchmarks/chains.py [--sweep-runs N]
 """
@@ -34,6 +37,7 @@ from rbstab.analysis import BasinAxis, chain_basin_map
 from rbstab.analysis.push import push_analysis
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
+from rbstab.config.chains import any_config_from_mapping as load_any_config_mapping
 from rbstab.config.chains import chain_of, load_any_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
 from rbstab.engine.settings import settings_rows
@@ -109,8 +113,43 @@ def triple_pendulum() -> dict:
             "simulation": {"t_end": 2.0, "n_samples": 201, "method": "DOP853", "rtol": 1e-8, "atol": 1e-10}}
 
 
+def three_case3() -> dict:
+    """A 3-body chain of Case 3's physics: three of its bodies in a column (no gravity), each
+    joint Case 3's embedded law and gains (the first to the ground at its point R, the others
+    0.84 m apart, top of the parent to the bottom of the child), the first body with its
+    K_t, L_t and initial Omega, DOP853 over 2 s at its tolerances and 2001 samples."""
+    import yaml
+
+    case3 = yaml.safe_load((ROOT / "configs" / "paper" / "case3_embedded.yaml").read_text())
+    control = {k: v for k, v in case3["controller"].items() if k not in ("k_t", "l_t")}
+    point = case3["body"]["attachment_point"]
+    anchor = {"k_t": case3["controller"]["k_t"], "l_t": case3["controller"]["l_t"]}
+    bodies = [{"name": f"body{i}", "mass": case3["body"]["mass"], "inertia": case3["body"]["inertia"],
+               **(anchor if i == 0 else {})} for i in range(3)]
+    joints = [{"name": f"j{i}", "parent": "ground" if i == 0 else f"body{i - 1}",
+               "parent_point": point if i == 0 else [0.0, 0.0, 0.42], "child": f"body{i}",
+               "child_point": point if i == 0 else [0.0, 0.0, -0.42], **control} for i in range(3)]
+    return {"name": "three_case3", "gravity": [0.0, 0.0, 0.0], "bodies": bodies, "joints": joints,
+            "initial_state": {"body0": {"omega": case3["initial_state"]["omega"]}, "body1": {"x": [0.0, 0.0, 0.84]},
+                              "body2": {"x": [0.0, 0.0, 1.68]}},
+            "simulation": case3["simulation"]}
+
+
+def _chain_rate_us(data: dict) -> float:
+    """us an evaluation of the rate of the chain config ``data`` at its initial state."""
+    config = load_any_config_mapping(data)
+    compiled = C.compile_chain(config.chain)
+    y = C.initial_state(config)
+    dy, work = np.empty(compiled.n_states), C.chain_work(config.chain.size)
+    _chain_loop(10, y.copy(), compiled.args, dy, work)
+    k = 100_000
+    return 1e6 * _best(lambda: _chain_loop(k, y.copy(), compiled.args, dy, work), 3) / k
+
+
 def sweeps(n: int) -> None:
-    """Seconds of an initial-state sweep of ``n`` runs of the 3-body chain and of Case 3."""
+    """Seconds of an initial-state sweep of ``n`` runs of two 3-body chains and of Case 3,
+    and what the target (3.5x Case 3's sweep) leaves a chain's run beside the time its rate
+    evaluations alone take."""
     import tempfile
 
     import yaml
@@ -120,8 +159,11 @@ def sweeps(n: int) -> None:
     side = int(round(n ** 0.5))
     levels = np.linspace(-0.1, 0.1, side).tolist()
     case3 = yaml.safe_load((ROOT / "configs" / "paper" / "case3_embedded.yaml").read_text())
-    specs = {"3-body chain": {"name": "triple", "base": triple_pendulum(),
+    chains = {"3-body chain": triple_pendulum(), "3 Case 3 bodies": three_case3()}
+    specs = {"3-body chain": {"name": "triple", "base": chains["3-body chain"],
                               "grid": {"initial_state.link0.theta.0": levels, "initial_state.link2.theta.1": levels}},
+             "3 Case 3 bodies": {"name": "three", "base": chains["3 Case 3 bodies"],
+                                 "grid": {"initial_state.body0.theta.0": levels, "initial_state.body2.theta.1": levels}},
              "one-body Case 3": {"name": "case3", "base": case3,
                                  "grid": {"initial_state.theta.0": levels, "initial_state.theta.1": levels}}}
     seconds, nfev = {}, {}
@@ -136,9 +178,14 @@ def sweeps(n: int) -> None:
             print(f"  {label}: {outcome.n_runs} runs in {seconds[label]:.2f} s ({1e3 * seconds[label] / outcome.n_runs:.2f}"
                   f" ms a run on 2 processes; {outcome.counts['success']} succeeded; {nfev[label]:.0f} rate evaluations"
                   f" a run)")
-    chain, case3 = "3-body chain", "one-body Case 3"
-    print(f"  ratio chain / Case 3: {seconds[chain] / seconds[case3]:.2f} (a sweep); "
-          f"{seconds[chain] / nfev[chain] / (seconds[case3] / nfev[case3]):.2f} (a rate evaluation in the sweep)")
+    one = "one-body Case 3"
+    budget = 3.5 * seconds[one] / n * 2  # s a run a process that the target allows
+    for chain, data in chains.items():
+        rate = _chain_rate_us(data)
+        print(f"  ratio {chain} / Case 3: {seconds[chain] / seconds[one]:.2f} (a sweep); "
+              f"{seconds[chain] / nfev[chain] / (seconds[one] / nfev[one]):.2f} (a rate evaluation in the sweep); "
+              f"the target (3.5x) allows {1e3 * budget:.2f} ms a run a process, its {nfev[chain]:.0f} rate evaluations "
+              f"alone take {1e-3 * rate * nfev[chain]:.2f} ms ({rate:.3f} us each)")
 
 
 def main() -> None:

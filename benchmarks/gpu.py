@@ -54,6 +54,14 @@ worker's seconds a run in a process of its own
 (:func:`rbstab.sweep.worker.run_table_chunk` of a 131072-run slice)::
 
     python benchmarks/gpu.py --host-only [--sweep-n 100000 1000000] [--jobs N]
+
+``--ptx-only`` (any machine with numba-cuda's compilers and CUDA's ``ptxas``; no GPU
+needed) compiles the one-body kernel (DOP853, 15 states) and the chain kernel (DOP853, 1 to
+8 bodies) to optimised PTX for sm_90 and prints what ``ptxas -v`` reports for each: the
+registers, the stack frame (local memory) and the spill stores and loads a thread, with
+each compile's seconds::
+
+    python benchmarks/gpu.py --ptx-only
 """
 
 from __future__ import annotations
@@ -452,6 +460,42 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def ptx_only() -> None:
+    """The ``ptxas -v`` lines of both kernels (module docstring, ``--ptx-only``)."""
+    import re
+
+    import numba.cuda.dispatcher
+    from numba import cuda
+
+    from rbstab.engine.cuda import chain_kernel_function, chain_launch_signature, kernel_function, launch_signature
+    from rbstab.engine.rk import DOP853
+
+    ptxas = shutil.which("ptxas")
+    if ptxas is None:
+        raise SystemExit("ptxas (CUDA's PTX assembler) is not on PATH")
+
+    class Device:  # numba-cuda asks the current device's compute capability for called dispatchers
+        compute_capability = (9, 0)
+
+    numba.cuda.dispatcher.get_current_device = lambda: Device()
+    kernels = {"one-body kernel (DOP853, 15 states)": (kernel_function(DOP853, 15), launch_signature(15)),
+               "chain kernel (DOP853, 1-8 bodies)": (chain_kernel_function(DOP853), chain_launch_signature())}
+    for name, (function, signature) in kernels.items():
+        start = time.perf_counter()
+        ptx, _ = cuda.compile_ptx(function, signature, cc=(9, 0), opt=True)
+        with tempfile.NamedTemporaryFile("w", suffix=".ptx") as handle:
+            handle.write(ptx)
+            handle.flush()
+            report = subprocess.run([ptxas, "-v", "-arch=sm_90", handle.name, "-o", os.devnull],
+                                    capture_output=True, text=True, check=True).stderr
+        entry = report[report.index("Compiling entry function"):]
+        regs = re.search(r"Used (\d+) registers", entry).group(1)
+        frame, stores, loads = re.search(r"(\d+) bytes stack frame, (\d+) bytes spill stores, (\d+) bytes spill loads",
+                                         entry).groups()
+        print(f"{name}: {regs} registers, {int(frame):,} B stack frame (local memory), {int(stores):,} B spill stores, "
+              f"{int(loads):,} B spill loads a thread ({time.perf_counter() - start:.0f} s to PTX and ptxas)")
+
+
 def chains(args) -> None:
     """The lines of the chain kernel (module docstring, **chains**)."""
     print("chains, compile:", chain_compile_info())
@@ -474,7 +518,12 @@ def main() -> None:
     parser.add_argument("--chain-n", type=int, nargs="+", default=[10_000, 100_000])
     parser.add_argument("--chain-cpu-n", type=int, default=2000)
     parser.add_argument("--chains-only", action="store_true", help="only the chain kernel's lines")
+    parser.add_argument("--ptx-only", action="store_true",
+                        help="no GPU: each kernel's registers and local memory by ptxas (module docstring)")
     args = parser.parse_args()
+    if args.ptx_only:
+        ptx_only()
+        return
     if args.host_only:
         host_only(args.sweep_n, args.jobs)
         return

@@ -1,20 +1,16 @@
 """The CUDA engine: the compiled engine's runs on an NVIDIA GPU, one thread a run.
 
-The physics and the Runge-Kutta step are the CPU engine's own functions: numba-cuda
-compiles every rbstab ``@jit`` function that a CUDA kernel calls as a device function of
-the same Python source (:func:`rbstab.variants.kernels.state_rate`,
-:func:`~rbstab.variants.kernels.output_row`, :func:`rbstab.engine.rk.initial_step`,
-:func:`~rbstab.engine.rk.dense_coefficients`, :func:`~rbstab.engine.rk.dense_value`,
-:func:`rbstab.engine.integrate.attempt_step`, :func:`~rbstab.engine.systems.admissible_event`,
-:func:`~rbstab.engine.integrate.locate_event`, :func:`~rbstab.engine.integrate.restart`,
-the disturbances'
-:func:`~rbstab.variants.disturbances.apply_impulses` and
-:func:`~rbstab.variants.disturbances.next_breakpoint`, and the streaming summary of
-:mod:`rbstab.summary`). Only the driver loop is written here:
-:func:`rbstab.engine.integrate._run`'s loop with one step *attempt* per pass (a thread
-whose step is rejected tries again on the next pass with the others of its warp, instead
-of stalling them), work arrays in thread-local memory, and a persistent grid whose
-threads take the next run from an atomic counter when theirs ends.
+The physics, the Runge-Kutta step and the driver's loop are the CPU engine's own
+functions: numba-cuda compiles every rbstab ``@jit`` function that a CUDA kernel calls as a
+device function of the same Python source. A run is :func:`rbstab.engine.integrate.begin_run`
+and then passes of :func:`rbstab.engine.integrate.run_pass` (one step *attempt* a pass, its
+event, samples, breakpoints and impulses), the loop of the CPU driver
+(:func:`rbstab.engine.integrate.integrate_run`) too; a thread whose step is rejected tries
+again on the next pass with the others of its warp, instead of stalling them. Only the
+kernels' frames are written here: work arrays in thread-local memory, a persistent grid
+whose threads take the next run from an atomic counter when theirs ends, the launch's
+clock, and what becomes of a run's samples (:class:`StreamSink`: outputs and the streamed
+summary of :mod:`rbstab.summary`; a chain's raw samples).
 
 A run with disturbances (``disturbance_count`` > 0, read once a run) is integrated as the
 CPU engine integrates it (docs/disturbances.md): its impulses at t = 0 are applied before
@@ -43,7 +39,7 @@ under a file lock that other processes wait on (:func:`compiled_kernel`).
 
 Chains (:func:`chain_kernel_function`, :func:`integrate_chain_runs_cuda`): the same driver
 on a chain's :class:`~rbstab.engine.systems.ChainSystem` through the system's functions
-(:func:`rbstab.engine.systems.rate_of`, ``margin_of``, ...; the chain's physics is
+(:mod:`rbstab.engine.systems`; the chain's physics is
 :func:`rbstab.variants.chain.chain_evaluate`, compiled as a device function with scratch
 arrays in thread-local memory), one kernel for chains of 1 to :data:`MAX_CHAIN_BODIES`
 bodies and every launch one chain (its records passed once, read by every thread), each
@@ -65,6 +61,7 @@ import math
 import os
 import sys
 import time as _time
+from collections import namedtuple
 from dataclasses import dataclass
 from types import FunctionType
 from typing import Iterator
@@ -77,7 +74,8 @@ import numpy as np
 if "row_stack" not in vars(np):
     np.row_stack = np.vstack
 
-from numba import cuda  # noqa: E402  numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
+from numba import cuda, types  # noqa: E402  numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
+from numba.extending import overload  # noqa: E402
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..jit import CACHE_DIR, cache_is_warm, mark_warm
@@ -87,17 +85,13 @@ from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
 from ..variants.chain import ChainWork
-from ..variants.disturbances import apply_impulses, next_breakpoint
-from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row, state_rate
-from .integrate import (REJECTED, ChunkSolution, _limit_of, admissible_event, attempt_step, locate_event, restart,
-                        sample_time, step_bounds, step_exit)
-from .rk import (DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, dense_coefficients, dense_value, initial_step,
-                 method_number)
+from ..variants.kernels import DISTURBANCE_WORK_AT, output_row
+from .integrate import ChunkSolution, SampleRows, begin_run, keep_sample, run_pass, sample_time
+from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
-from .systems import (CHAIN, ChainSystem, breakpoint_of, disturbed_of, impulses_of, limited_of, margin_of,
-                      rate_of)
+from .systems import CHAIN, ChainSystem, disturbed_of, limited_of
 from .tableaus import METHODS
-from .status import NOT_STARTED, STEP_LIMIT, SUCCESS, TIMEOUT
+from .status import NOT_STARTED, STEP_LIMIT, TIMEOUT
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
@@ -201,6 +195,28 @@ globaltimer = _globaltimer_intrinsic()
 
 
 # -- the kernel ---------------------------------------------------------------------------------------
+#: Where the one-body kernel's samples go (:func:`rbstab.engine.integrate.keep_sample`): each
+#: sample's outputs into ``row`` (N_OUTPUTS,; :func:`rbstab.variants.kernels.output_row`
+#: with ``full``, and the work W where the run is ``disturbed``), streamed into the summary's
+#: accumulator ``acc`` and every ``stride``-th into ``trace`` (:func:`rbstab.summary.stream_sample`
+#: with the grid's ``first``, ``weights`` and the convergence ``ratio``).
+StreamSink = namedtuple("StreamSink", ["acc", "row", "first", "weights", "trace", "stride", "ratio", "full",
+                                       "disturbed"])
+
+
+@overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy"})
+def _keep_streamed(sink, code, p, j, t, sample, work):
+    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is StreamSink):
+        return None
+
+    def keep(sink, code, p, j, t, sample, work):
+        output_row(code, t, sample, p, sink.row, sink.full)
+        if sink.disturbed:
+            sink.row[DISTURBANCE_WORK_AT] = work
+        stream_sample(sink.acc, j, sink.row, sink.first, sink.weights, sink.trace, sink.stride, sink.ratio)
+    return keep
+
+
 def launch_signature(n_state: int) -> tuple:
     """numba's types of a launch's arguments, in order, for runs of ``n_state`` states: the
     one signature :func:`compiled_kernel` compiles and every launch passes (every array
@@ -234,8 +250,8 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
     memory of the kernel with."""
     from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
 
-    n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
-    dop853 = method == DOP853
+    n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
+    scheme = (method, int(N_STAGES[method]), method == DOP853)
     parameters = from_dtype(PARAMETERS)
     n_vec = n_state + 1 if disturbances else n_state  # the integrated vector: the state, then W
 
@@ -273,113 +289,32 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
             for i in range(copy.shape[0]):
                 copy[i] = source[i]
             p = record[0]
-            bounded = params[shared].limited != 0.0  # simulation.limits: a bound grazed inside a step is looked for
             s = settings[k]
             trace = trace_o[min(k, trace_o.shape[0] - 1)]
-            t_end = s.t_end
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-            disturbed = disturbances and params[shared].disturbance_count > 0.0
-            permanent = code == PERMANENT
+            disturbed = disturbances and disturbed_of(p)
+            flags = (limit, disturbed, limited_of(p), n_samples)
             stream_start(acc)
             for i in range(N_OUTPUTS):  # outputs not computed (rbstab.layout.LEFT_OUT) stay NaN
                 row[i] = math.nan
-            nfev = 0
-            t = 0.0
-            j = 0
-            n_steps = 0
-            status = SUCCESS
-            h_abs = 0.0
-            margin, left = 0.0, SUCCESS
-            t_bound = t_end  # where the step from t ends at the latest: t_end, or the next breakpoint
-            t_lim = t_end  # the latest time a stage of that step evaluates
-            if globaltimer() > deadline:
-                status = NOT_STARTED
-                t_end = 0.0
-            else:
+            sink = StreamSink(acc, row, first, weights, trace, stride, ratio, full, disturbed)
+            running, status, state = False, NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
+            if globaltimer() <= deadline:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
                 for i in range(n_state, n_vec):
                     y[i] = 0.0  # W [J] from 0 to t
-                if disturbed:  # the impulses at t = 0; the steps stop at the first breakpoint
-                    y[n_state] += apply_impulses(permanent, 0.0, y, p)
-                    t_bound = next_breakpoint(p, 0.0, t_end)
-                    t_lim = _limit_of(t_bound, t_end)
-                margin, left = admissible_event(code, y, p, limit)
-                if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
-                    status = left
-                    t_end = 0.0
-                else:
-                    state_rate(code, 0.0, y, p, f)
-                    h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
-                    nfev = 2
-                    h_abs = step_bounds(s, t, h_abs)
-            rejected = False
-            while t < t_end:
+                running, status, state = begin_run(code, p, s, y, f, w, limit, disturbed)
+            while running:
                 passes += 1
                 if passes % CLOCK_EVERY == 0 and globaltimer() > deadline:
                     status = TIMEOUT
                     break
-                if n_steps >= s.max_steps:
+                if state[8] >= s.max_steps:
                     status = STEP_LIMIT
                     break
-                outcome, t_new, h, h_abs = attempt_step(code, p, s, (t, t_bound), y, f, h_abs, rejected, w)
-                if outcome == REJECTED:
-                    nfev += n_stages
-                    rejected = True
-                    continue
-                if outcome != SUCCESS:
-                    status = outcome
-                    break
-                nfev += n_stages
-                n_steps += 1
-                t_stop = t_new
-                margin_new = admissible_event(code, y_new, p, limit)[0]
-                event = margin >= 0 and margin_new <= 0
-                at_break = disturbed and t_new == t_bound and t_bound < t_end
-                if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-                    nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
-                x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), work)
-                event = x_out > 0.0
-                if event:
-                    t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), work, x_out)
-                # a sample at a breakpoint is the next step's (the state just after the breakpoint)
-                while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
-                                         else sample_time(j, n_samples, t_end) <= t_stop):
-                    x = (sample_time(j, n_samples, t_end) - t) / h
-                    dense_value(x, h, y, Q, dop853, sample)
-                    done_here = 0.0
-                    if disturbed:
-                        done_here = sample[n_state]
-                        if j == n_samples - 1 and not event:  # at t_end: the state after its impulses
-                            jump = apply_impulses(permanent, t_end, y_new, p)
-                            if jump != 0.0:
-                                for i in range(n_state):
-                                    sample[i] = y_new[i]
-                                done_here += jump
-                    output_row(code, sample_time(j, n_samples, t_end), sample, p, row, full)
-                    if disturbed:
-                        row[DISTURBANCE_WORK_AT] = done_here
-                    stream_sample(acc, j, row, first, weights, trace, stride, ratio)
-                    j += 1
-                if event:
-                    status = left
-                    t = t_stop
-                    break
-                t = t_new
-                margin = margin_new
-                for i in range(n_vec):
-                    y[i] = y_new[i]
-                    f[i] = K[n_stages, i]
-                if at_break:  # the impulses that start here; a new initial step from here
-                    y[n_state] += apply_impulses(permanent, t, y, p)
-                    margin, left = admissible_event(code, y, p, limit)
-                    if margin < 0:  # an impulse took the state out of the admissible region
-                        status = left
-                        break
-                    t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
-                    nfev += 2
-                h_abs = step_bounds(s, t, h_abs)
-                rejected = False
+                running, status, state = run_pass(code, p, s, w, (y, f, sample), state, sink, flags, scheme)
+            t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
             # its end: every output of the run written, whether it ran or not
             stream_finish(acc, first, weights, short, trace, stride)
             status_o[k] = status
@@ -469,9 +404,8 @@ def occupancy(fn, n_state: int | None) -> int:
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
-DEVICE_FUNCTIONS = ("state_rate", "output_row", "initial_step", "step_bounds", "attempt_step", "admissible_event",
-                    "step_exit", "locate_event", "dense_coefficients", "dense_value", "sample_time", "stream_start",
-                    "stream_sample", "stream_finish", "apply_impulses", "next_breakpoint", "restart")
+DEVICE_FUNCTIONS = ("begin_run", "run_pass", "disturbed_of", "limited_of", "output_row", "sample_time",
+                    "stream_start", "stream_finish")
 
 
 def _plain(value):
@@ -537,20 +471,20 @@ def chain_kernel_function(method: int):
     """The Python function of the CUDA kernel of chain runs of method number ``method``
     (:func:`chain_launch_signature`: one chain, k runs, one thread a run).
 
-    The driver is :func:`kernel_function`'s (one step attempt a pass, the persistent grid
-    and the launch's one deadline) on a chain's :class:`~rbstab.engine.systems.ChainSystem`,
-    through the system's functions (:func:`rbstab.engine.systems.rate_of`, ``margin_of``,
-    ``impulses_of``, ``breakpoint_of``, ``disturbed_of``, ``limited_of``) that the CPU
-    driver (:func:`rbstab.engine.integrate.integrate_run`) takes its steps with; a sample is
-    the state there (and W), written to device memory, as the CPU driver's samples are; the
+    The driver is :func:`kernel_function`'s (:func:`rbstab.engine.integrate.begin_run` and
+    passes of :func:`~rbstab.engine.integrate.run_pass`, the persistent grid and the launch's
+    one deadline) on a chain's :class:`~rbstab.engine.systems.ChainSystem`, whose functions
+    (:mod:`rbstab.engine.systems`) the passes call as the CPU driver's do; a sample is the
+    state there (and W), written to device memory
+    (:class:`~rbstab.engine.integrate.SampleRows`) as the CPU driver's samples are; the
     chain's outputs and summary are computed from them on the host. Its thread-local arrays
     are sized for :data:`MAX_CHAIN_BODIES` bodies; the integrated vector (the state, and W
     after it where a body has disturbances) and its stage rates and interpolant are views of
     their first entries."""
     from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
 
-    n_rows, q_rows, n_stages = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method]), int(N_STAGES[method])
-    dop853 = method == DOP853
+    n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
+    scheme = (method, int(N_STAGES[method]), method == DOP853)
     size = MAX_CHAIN_STATE + 1  # the longest integrated vector: the state and W
     bodies, rows = MAX_CHAIN_BODIES, 3 * MAX_CHAIN_BODIES
 
@@ -588,102 +522,26 @@ def chain_kernel_function(method: int):
         k = cuda.atomic.add(control, 0, 1)
         while k < n_runs:
             s = settings[k]
-            t_end = s.t_end
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-            nfev = 0
-            t = 0.0
-            j = 0
-            n_steps = 0
-            status = SUCCESS
-            h_abs = 0.0
-            margin, left = 0.0, SUCCESS
-            t_bound = t_end  # where the step from t ends at the latest: t_end, or the next breakpoint
-            t_lim = t_end  # the latest time a stage of that step evaluates
-            running = False
-            if globaltimer() > deadline:
-                status = NOT_STARTED
-            else:
+            flags = (limit, disturbed, bounded, n_samples)
+            sink = SampleRows(samples_o[k], work_o[k], stride)
+            running, status, state = False, NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
+            if globaltimer() <= deadline:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
                 for i in range(n_state, n_vec):
                     y[i] = 0.0  # W [J] from 0 to t
-                if disturbed:  # the impulses at t = 0; the steps stop at the first breakpoint
-                    y[n_state] += impulses_of(CHAIN, 0.0, y, p)
-                    t_bound = breakpoint_of(p, 0.0, t_end)
-                    t_lim = _limit_of(t_bound, t_end)
-                margin, left = margin_of(CHAIN, y, p, limit)
-                if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
-                    status = left
-                else:
-                    rate_of(CHAIN, 0.0, y, p, f)
-                    h_abs = initial_step(CHAIN, p, s, 0.0, t_bound, t_lim, y, f, w)
-                    nfev = 2
-                    h_abs = step_bounds(s, t, h_abs)
-                    running = True
-            rejected = False
-            while running and t < t_end:
+                running, status, state = begin_run(CHAIN, p, s, y, f, w, limit, disturbed)
+            while running:
                 passes += 1
                 if passes % CLOCK_EVERY == 0 and globaltimer() > deadline:
                     status = TIMEOUT
                     break
-                if n_steps >= s.max_steps:
+                if state[8] >= s.max_steps:
                     status = STEP_LIMIT
                     break
-                outcome, t_new, h, h_abs = attempt_step(CHAIN, p, s, (t, t_bound), y, f, h_abs, rejected, w)
-                if outcome == REJECTED:
-                    nfev += n_stages
-                    rejected = True
-                    continue
-                if outcome != SUCCESS:
-                    status = outcome
-                    break
-                nfev += n_stages
-                n_steps += 1
-                t_stop = t_new
-                margin_new = margin_of(CHAIN, y_new, p, limit)[0]
-                event = margin >= 0 and margin_new <= 0
-                at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
-                if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-                    nfev += dense_coefficients(CHAIN, p, t, t_lim, y, h, method, w)
-                x_out = step_exit(CHAIN, p, limit, event, (margin, margin_new), (h, y, Q, dop853), work)
-                event = x_out > 0.0
-                if event:
-                    t_stop, _, left = locate_event(CHAIN, p, limit, t, (h, y, Q, dop853), work, x_out)
-                # a sample at a breakpoint is the next step's (the state just after the breakpoint)
-                while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
-                                         else sample_time(j, n_samples, t_end) <= t_stop):
-                    if j % stride == 0:
-                        dense_value((sample_time(j, n_samples, t_end) - t) / h, h, y, Q, dop853, sample)
-                        for i in range(n_state):
-                            samples_o[k, j // stride, i] = sample[i]
-                        work_o[k, j // stride] = sample[n_state] if disturbed else 0.0
-                    j += 1
-                if event:
-                    status = left
-                    t = t_stop
-                    break
-                t = t_new
-                margin = margin_new
-                for i in range(n_vec):
-                    y[i] = y_new[i]
-                    f[i] = K[n_stages, i]
-                if at_break:  # the impulses that start here; a new initial step from here
-                    y[n_state] += impulses_of(CHAIN, t, y, p)
-                    margin, left = margin_of(CHAIN, y, p, limit)
-                    if margin < 0:  # an impulse took the state out of the admissible region
-                        status = left
-                        break
-                    t_bound, t_lim, h_abs = restart(CHAIN, p, s, t, y, f, w)
-                    nfev += 2
-                h_abs = step_bounds(s, t, h_abs)
-                rejected = False
-            if running and status == SUCCESS and disturbed and j == n_samples:
-                # an impulse at t_end: the last sample shows the state after it
-                jump = impulses_of(CHAIN, t_end, y, p)
-                if jump != 0.0 and (n_samples - 1) % stride == 0:
-                    for i in range(n_state):
-                        samples_o[k, n_kept - 1, i] = y[i]
-                    work_o[k, n_kept - 1] += jump
+                running, status, state = run_pass(CHAIN, p, s, w, (y, f, sample), state, sink, flags, scheme)
+            t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
             # its end: every output of the run written, whether it ran or not
             status_o[k] = status
             t_stop_o[k] = t
@@ -700,9 +558,7 @@ def chain_kernel_function(method: int):
 
 
 #: The compiled functions the chain kernel calls (the simulator hands them numpy's arrays).
-CHAIN_DEVICE_FUNCTIONS = ("rate_of", "margin_of", "impulses_of", "breakpoint_of", "disturbed_of", "limited_of",
-                          "initial_step", "step_bounds", "attempt_step", "step_exit", "locate_event",
-                          "dense_coefficients", "dense_value", "sample_time", "restart")
+CHAIN_DEVICE_FUNCTIONS = ("begin_run", "run_pass", "disturbed_of", "limited_of")
 
 
 @functools.lru_cache(maxsize=None)

@@ -1,16 +1,17 @@
 """One run from t = 0 to t_end, sampled on an even grid, as compiled code (scipy's driver).
 
 :func:`integrate_run` is what ``solve_ivp(..., t_eval=linspace(0, t_end, n), events=[gimbal
-lock])`` does with an explicit Runge-Kutta method: step (:func:`step`, scipy's
-``_step_impl``), sample the step's interpolant at the grid times it covers, and stop where
+lock])`` does with an explicit Runge-Kutta method: step (:func:`attempt_step`, an attempt
+of scipy's ``_step_impl``), sample the step's interpolant at the grid times it covers, and stop where
 the run leaves its admissible region (gimbal lock and the bounds of ``simulation.limits``),
-located on the interpolant. A run's system is one body or a chain
+located on the interpolant: :func:`begin_run`, then passes of :func:`run_pass` (one step
+attempt each), the loop the CUDA kernels run too. A run's system is one body or a chain
 (:mod:`rbstab.engine.systems`: its rate and admissible margin). :func:`integrate_chunk`
 runs many one-body runs, each with its own variant, parameters and settings, one after the
 other in one call; :func:`integrate_chain_chunk` many runs of one chain.
 
 A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
-checked every :data:`CLOCK_EVERY` steps).
+checked every :data:`CLOCK_EVERY` passes).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections import namedtuple
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +27,7 @@ from llvmlite import ir
 from numba import objmode, types
 from numba.core import cgutils
 from numba.core.extending import intrinsic
+from numba.extending import overload
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
@@ -39,7 +42,8 @@ from .systems import (CHAIN, ChainSystem, admissible, admissible_event, gimbal_e
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "integrate_chain_runs", "integrate_chain_chunk", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
+           "integrate_runs", "integrate_chain_runs", "integrate_chain_chunk", "begin_run", "run_pass", "keep_sample",
+           "SampleRows", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
            "grazing_exit", "step_exit",
            "admissible", "locate_event"]
 
@@ -324,98 +328,170 @@ def restart(code, p, s, t, y, f, w):
     return t_bound, t_lim, initial_step(code, p, s, t, t_bound, t_lim, y, f, w)
 
 
-@jit(forceinline=True)
-def _run(code, p, y0, s, samples, work_done):
-    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled.
+#: Where a run's samples go: its state (the first ``samples.shape[1]`` entries of a sample)
+#: at every ``stride``-th sample j into ``samples[j // stride]`` and its work W [J] into
+#: ``work[j // stride]`` (the CPU driver's samples, stride 1; the CUDA chain kernel's).
+SampleRows = namedtuple("SampleRows", ["samples", "work", "stride"])
 
-    With disturbances, the integration stops at each breakpoint (:func:`rbstab.variants.
-    disturbances.next_breakpoint`), applies the impulses that start there and starts again
-    as a new solve_ivp from there would (a new initial step); the samples at a breakpoint
-    show the state just after it. Their work W is integrated as one more entry after the
-    state (its rate the disturbances' power, :func:`~rbstab.variants.kernels.state_rate`;
-    an impulse adds its jump of kinetic energy), by the same steps and interpolant, and
-    left out of the error norms: the state takes the steps it takes without it."""
-    max_wall_time, t_end, method = s.max_wall_time, s.t_end, s.method
-    deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
-    n = y0.shape[0]
-    n_samples = samples.shape[0]
-    dop853 = method == DOP853
-    disturbed = system_disturbed(p)
-    m = n + 1 if disturbed else n  # the integrated vector: the state, and W at [n]
-    w = work_arrays(method, m, n)
-    K, Q, y_new, scratch = w.K, w.Q, w.y_new, w.work
-    y = np.zeros(m)
-    y[:n] = y0
-    f = np.empty(m)
-    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
+
+def keep_sample(sink, code, p, j, t, sample, work):
+    """Hand sample j of a run (at time t [s]: the state in ``sample``, the disturbances' work
+    W ``work`` [J]) of the system (``code``, ``p``) to ``sink``: a :class:`SampleRows`, or
+    the CUDA kernel's streamed summary (:class:`rbstab.engine.cuda.StreamSink`)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy"})
+def _keep_rows(sink, code, p, j, t, sample, work):
+    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is SampleRows):
+        return None
+
+    def keep(sink, code, p, j, t, sample, work):
+        if j % sink.stride == 0:
+            row = j // sink.stride
+            for i in range(sink.samples.shape[1]):
+                sink.samples[row, i] = sample[i]
+            sink.work[row] = work
+    return keep
+
+
+@jit(forceinline=True)
+def begin_run(code, p, s, y, f, w, limit, disturbed):
+    """The start of a run from the state in ``y`` (its work W after it, 0): the impulses at
+    t = 0 where ``disturbed``, the admissible margin (``limit`` = pi/2 - gimbal_margin), the
+    rate into ``f`` and the first step (2 right-hand sides). Returns (running, status,
+    state): running False with the bound's status where the run starts outside its region
+    (or an impulse at 0 throws it out); ``state`` = (t, t_bound, t_lim, h_abs, margin,
+    rejected, j, nfev, n_steps) the run's loop variables, as :func:`run_pass` takes them."""
+    t_end = s.t_end
+    n = w.scale.shape[0]
     t_bound = t_end
     if disturbed:
         y[n] += system_impulses(code, 0.0, y, p)
         t_bound = system_breakpoint(p, 0.0, t_end)
+    t_lim = _limit_of(t_bound, t_end)
     margin, left = system_margin(code, y, p, limit)
     if margin < 0:  # outside the admissible region from the start (or after an impulse at 0)
-        return left, 0.0, 0, 0, 0
-    t_lim = _limit_of(t_bound, t_end)
+        return False, left, (0.0, t_bound, t_lim, 0.0, margin, False, 0, 0, 0)
     system_rate(code, 0.0, y, p, f)
-    h_abs = initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w)
-    nfev = 2
-    t = 0.0
-    j = 0  # next sample
-    n_steps = 0
-    while t < t_end:
-        if n_steps >= s.max_steps:
-            return STEP_LIMIT, t, nfev, n_steps, j
-        if deadline < math.inf and n_steps % CLOCK_EVERY == 0 and wall_clock() > deadline:
-            return TIMEOUT, t, nfev, n_steps, j
-        status, t_new, h, h_abs, attempts = step(code, p, s, (t, t_bound), y, f, h_abs, w)
-        nfev += attempts * N_STAGES[method]
-        if status != SUCCESS:
-            return status, t, nfev, n_steps, j
-        n_steps += 1
-        f_new = K[N_STAGES[method]]
-        t_stop = t_new
-        margin_new = system_margin(code, y_new, p, limit)[0]
-        event = margin >= 0 and margin_new <= 0
-        bounded = system_limited(p)
-        at_break = t_new == t_bound and t_bound < t_end  # only with disturbances
-        if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
-            nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
-        x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), scratch)
-        event = x_out > 0.0
-        if event:
-            t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), scratch, x_out)
-        # a sample at a breakpoint is the next step's (the state just after the breakpoint)
-        while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
-                                 else sample_time(j, n_samples, t_end) <= t_stop):
-            x = (sample_time(j, n_samples, t_end) - t) / h
-            if disturbed:
-                dense_value(x, h, y, Q, dop853, scratch)
-                for i in range(n):
-                    samples[j, i] = scratch[i]
-                work_done[j] = scratch[n]
-            else:
-                dense_value(x, h, y, Q, dop853, samples[j])
-                work_done[j] = 0.0
-            j += 1
-        if event:
-            return left, t_stop, nfev, n_steps, j
-        t = t_new
-        y[:] = y_new
-        f[:] = f_new
-        margin = margin_new
-        if at_break:  # apply the impulses that start here, and start again from here
-            y[n] += system_impulses(code, t, y, p)
-            margin, left = system_margin(code, y, p, limit)
-            if margin < 0:  # an impulse took the state out of the admissible region
-                return left, t, nfev, n_steps, j
-            t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
-            nfev += 2
-    if disturbed and j == n_samples:  # an impulse at t_end: the last sample shows the state after it
-        jump = system_impulses(code, t_end, y, p)
-        if jump != 0.0:
-            samples[n_samples - 1, :] = y[:n]
-            work_done[n_samples - 1] += jump
-    return SUCCESS, t, nfev, n_steps, j
+    h_abs = step_bounds(s, 0.0, initial_step(code, p, s, 0.0, t_bound, t_lim, y, f, w))
+    return True, SUCCESS, (0.0, t_bound, t_lim, h_abs, margin, False, 0, 2, 0)
+
+
+@jit(forceinline=True)
+def run_pass(code, p, s, w, vectors, state, sink, flags, scheme):
+    """One pass of a run's loop: one step attempt (:func:`attempt_step`) from the loop
+    variables ``state`` (:func:`begin_run`'s), and for an accepted step what follows it: the
+    admissible region's event located on the interpolant, the samples the step covers handed
+    to ``sink`` (:func:`keep_sample`), the impulses at a breakpoint and at t_end.
+    ``vectors`` = (y, f, sample): the state and its rate at t, and a scratch vector as long;
+    ``flags`` = (limit, disturbed, bounded, n_samples): the gimbal-lock angle pi/2 -
+    gimbal_margin [rad], whether the run has disturbances and bounds, its samples;
+    ``scheme`` = (method, n_stages, dop853). Every driver's loop is made of these passes:
+    the CPU's (:func:`integrate_run`) and the CUDA kernels' (:mod:`rbstab.engine.cuda`),
+    which check their clock and step limit between passes.
+
+    With disturbances, the integration stops at each breakpoint (:func:`rbstab.variants.
+    disturbances.next_breakpoint`), applies the impulses that start there and starts again
+    as a new solve_ivp from there would (a new initial step); the samples at a breakpoint
+    show the state just after it, the last sample the state after the impulses at t_end.
+    Their work W is integrated as one more entry after the state (its rate the disturbances'
+    power, :func:`~rbstab.variants.kernels.state_rate`; an impulse adds its jump of kinetic
+    energy), by the same steps and interpolant, and left out of the error norms.
+
+    Returns (running, status, state): running False where the run ended (status SUCCESS at
+    t_end, the status of the region left, TOO_SMALL_STEP or NOT_FINITE; t in ``state`` the
+    stop time), else the variables of the next pass, with ``y``, ``f`` at its t.
+    """
+    t, t_bound, t_lim, h_abs, margin, rejected, j, nfev, n_steps = state
+    y, f, sample = vectors
+    limit, disturbed, bounded, n_samples = flags
+    method, n_stages, dop853 = scheme
+    t_end = s.t_end
+    n = w.scale.shape[0]
+    K, Q, y_new, scratch = w.K, w.Q, w.y_new, w.work
+    outcome, t_new, h, h_abs = attempt_step(code, p, s, (t, t_bound), y, f, h_abs, rejected, w)
+    if outcome == REJECTED:
+        return True, SUCCESS, (t, t_bound, t_lim, h_abs, margin, True, j, nfev + n_stages, n_steps)
+    if outcome != SUCCESS:
+        return False, outcome, (t, t_bound, t_lim, h_abs, margin, rejected, j, nfev, n_steps)
+    nfev += n_stages
+    n_steps += 1
+    t_stop = t_new
+    margin_new = system_margin(code, y_new, p, limit)[0]
+    event = margin >= 0 and margin_new <= 0
+    at_break = disturbed and t_new == t_bound and t_bound < t_end
+    if event or bounded or (j < n_samples and sample_time(j, n_samples, t_end) <= t_new):
+        nfev += dense_coefficients(code, p, t, t_lim, y, h, method, w)
+    x_out = step_exit(code, p, limit, event, (margin, margin_new), (h, y, Q, dop853), scratch)
+    event = x_out > 0.0
+    left = SUCCESS
+    if event:
+        t_stop, _, left = locate_event(code, p, limit, t, (h, y, Q, dop853), scratch, x_out)
+    # a sample at a breakpoint is the next step's (the state just after the breakpoint)
+    while j < n_samples and (sample_time(j, n_samples, t_end) < t_stop if at_break and not event
+                             else sample_time(j, n_samples, t_end) <= t_stop):
+        t_j = sample_time(j, n_samples, t_end)
+        dense_value((t_j - t) / h, h, y, Q, dop853, sample)
+        done = 0.0
+        if disturbed:
+            done = sample[n]
+            if j == n_samples - 1 and not event:  # at t_end: the state after its impulses
+                jump = system_impulses(code, t_end, y_new, p)
+                if jump != 0.0:
+                    for i in range(n):
+                        sample[i] = y_new[i]
+                    done += jump
+        keep_sample(sink, code, p, j, t_j, sample, done)
+        j += 1
+    if event:
+        return False, left, (t_stop, t_bound, t_lim, h_abs, margin, False, j, nfev, n_steps)
+    t = t_new
+    margin = margin_new
+    for i in range(y.shape[0]):
+        y[i] = y_new[i]
+        f[i] = K[n_stages, i]
+    if at_break:  # the impulses that start here; a new initial step from here
+        y[n] += system_impulses(code, t, y, p)
+        margin, left = system_margin(code, y, p, limit)
+        if margin < 0:  # an impulse took the state out of the admissible region
+            return False, left, (t, t_bound, t_lim, h_abs, margin, False, j, nfev, n_steps)
+        t_bound, t_lim, h_abs = restart(code, p, s, t, y, f, w)
+        nfev += 2
+    h_abs = step_bounds(s, t, h_abs)
+    return t < t_end, SUCCESS, (t, t_bound, t_lim, h_abs, margin, False, j, nfev, n_steps)
+
+
+@jit(forceinline=True)
+def _run(code, p, y0, s, samples, work_done):
+    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled: the
+    passes of :func:`run_pass` from :func:`begin_run`, the step limit and the clock checked
+    between them."""
+    max_wall_time, method = s.max_wall_time, s.method
+    deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
+    n = y0.shape[0]
+    disturbed = system_disturbed(p)
+    m = n + 1 if disturbed else n  # the integrated vector: the state, and W at [n]
+    w = work_arrays(method, m, n)
+    y = np.zeros(m)
+    y[:n] = y0
+    f = np.empty(m)
+    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
+    flags = (limit, disturbed, system_limited(p), samples.shape[0])
+    scheme = (method, N_STAGES[method], method == DOP853)
+    sink = SampleRows(samples, work_done, 1)
+    running, status, state = begin_run(code, p, s, y, f, w, limit, disturbed)
+    passes = 0
+    while running:
+        if state[8] >= s.max_steps:
+            status = STEP_LIMIT
+            break
+        if deadline < math.inf and passes % CLOCK_EVERY == 0 and wall_clock() > deadline:
+            status = TIMEOUT
+            break
+        passes += 1
+        running, status, state = run_pass(code, p, s, w, (y, f, w.work), state, sink, flags, scheme)
+    return status, state[0], state[7], state[8], state[6]
 
 
 @jit(nogil=True)  # no Python object inside: threads run it in parallel

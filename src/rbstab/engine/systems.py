@@ -36,7 +36,7 @@ from .status import GIMBAL_LOCK, LEFT_REGION
 
 __all__ = ["CHAIN", "ChainSystem", "chain_system", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
-           "admissible", "chain_margin", "rate_of", "margin_of", "impulses_of", "breakpoint_of", "disturbed_of",
+           "admissible", "chain_margin", "disturbed_of",
            "limited_of"]
 
 #: The ``code`` of a chain's runs (no variant's code: a chain's joints carry theirs).
@@ -259,33 +259,9 @@ def _system_impulses(code, t, y, p):
 
 # -- the same as compiled functions: what Python (the CUDA simulator's kernels) calls -----------------
 @jit(forceinline=True)
-def rate_of(code, t, y, p, f):
-    """:func:`system_rate` as a compiled function (the CUDA kernels call it; under numba's
-    CUDA simulator the kernel, Python, calls it compiled)."""
-    system_rate(code, t, y, p, f)
-
-
-@jit(forceinline=True)
-def margin_of(code, y, p, limit):
-    """:func:`system_margin` as a compiled function: (margin, status)."""
-    return system_margin(code, y, p, limit)
-
-
-@jit(forceinline=True)
-def impulses_of(code, t, y, p):
-    """:func:`system_impulses` as a compiled function: the impulses' work [J]."""
-    return system_impulses(code, t, y, p)
-
-
-@jit(forceinline=True)
-def breakpoint_of(p, t, t_end):
-    """:func:`system_breakpoint` as a compiled function."""
-    return system_breakpoint(p, t, t_end)
-
-
-@jit(forceinline=True)
 def disturbed_of(p):
-    """:func:`system_disturbed` as a compiled function."""
+    """:func:`system_disturbed` as a compiled function (the CUDA kernels call it; under numba's
+    CUDA simulator the kernel, Python, calls it compiled)."""
     return system_disturbed(p)
 
 
