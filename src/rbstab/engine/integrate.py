@@ -347,11 +347,14 @@ def _keep_rows(sink, code, p, j, t, sample, work):
         return None
 
     def keep(sink, code, p, j, t, sample, work):
-        if j % sink.stride == 0:
+        row = j
+        if sink.stride != 1:  # (no integer division for every sample of the CPU's runs)
+            if j % sink.stride != 0:
+                return
             row = j // sink.stride
-            for i in range(sink.samples.shape[1]):
-                sink.samples[row, i] = sample[i]
-            sink.work[row] = work
+        for i in range(sink.samples.shape[1]):
+            sink.samples[row, i] = sample[i]
+        sink.work[row] = work
     return keep
 
 
@@ -448,9 +451,11 @@ def run_pass(code, p, s, w, vectors, state, sink, flags, scheme):
         return False, left, (t_stop, t_bound, t_lim, h_abs, margin, False, j, nfev, n_steps)
     t = t_new
     margin = margin_new
+    f_new = K[n_stages]
     for i in range(y.shape[0]):
         y[i] = y_new[i]
-        f[i] = K[n_stages, i]
+    for i in range(f.shape[0]):
+        f[i] = f_new[i]
     if at_break:  # the impulses that start here; a new initial step from here
         y[n] += system_impulses(code, t, y, p)
         margin, left = system_margin(code, y, p, limit)
