@@ -1,10 +1,12 @@
-"""rbstab sweep of chains: keys of bodies, joints and initial states by name or index, a result
-file per run (what rbstab run writes), the index with the joints' figures under their names,
-resume, open_sweep over the grid, and the refusals (a key of another kind or naming no body,
-a spec mixing chains and one-body configs, store files, an invalid value)."""
+"""rbstab sweep of chains: keys of bodies, joints and initial states by name or index, store
+files holding what rbstab run writes (traces along body and joint), the index with the joints'
+figures under their names, resume, open_sweep over the grid, and the refusals (a key of another
+kind or naming no body, a spec mixing chains and one-body configs, store files of different
+chains' traces, an invalid value)."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -41,24 +43,36 @@ def test_a_chain_sweep_writes_what_rbstab_run_writes_and_resumes(tmp_path):
     alone = CliRunner().invoke(cli, ["run", STANCE, *SHORT, "--set", f"initial_state.trunk.theta.0={row.trunk_theta_0}",
                                      "--set", f"joints.hip.k_r.0={row.hip_k_r_0}", "-o", str(one)])
     assert alone.exit_code == 0, alone.output
-    with xr.open_dataset(folder / row.file, engine="h5netcdf") as a, \
-            xr.open_dataset(one / "stance_ankle_hip.h5", engine="h5netcdf") as b:
-        assert list(a["joint"].values) == ["ankle", "hip"] and a["theta"].dims == ("time", "body", "axis")
-        for name in ("theta", "omega", "joint_theta", "torque_n", "constraint_error", "lyapunov", "lyapunov_rate"):
+    assert Path(row.file).name.startswith("chunk-")  # store files: the runs' traces along body and joint
+    stored = rbstab.open_sweep(folder)
+    assert list(stored["joint"].values) == ["ankle", "hip"] and list(stored["body"].values) == ["legs", "trunk"]
+    assert stored["theta"].dims == ("run", "time", "body", "axis")
+    assert stored["constraint_drift"].dims == ("run", "time", "joint")
+    a = stored.sel(run=row.run)
+    with xr.open_dataset(one / "stance_ankle_hip.h5", engine="h5netcdf") as b:
+        assert b["theta"].dims == ("time", "body", "axis")
+        for name in ("theta", "omega", "joint_theta", "torque_n", "constraint_error", "constraint_drift", "lyapunov",
+                     "lyapunov_rate"):
             np.testing.assert_array_equal(a[name].values, b[name].values)
-        assert a.attrs["summary_lyapunov_final"] == pytest.approx(row.lyapunov_final, rel=1e-12)
+        assert b.attrs["summary_lyapunov_final"] == pytest.approx(row.lyapunov_final, rel=1e-12)
 
     again = CliRunner().invoke(cli, args)
     assert again.exit_code == 0, again.output
     assert "4 skipped" in again.output or "skipped 4" in again.output, again.output
     ds = rbstab.open_sweep(folder, grid=True)
-    assert dict(ds.sizes) == {"trunk_theta_0": 2, "hip_k_r_0": 2}
+    assert dict(ds.sizes) == {"trunk_theta_0": 2, "hip_k_r_0": 2, "time": 501, "body": 2, "joint": 2, "axis": 3}
     assert ds["lyapunov_final"].sel(trunk_theta_0=row.trunk_theta_0, hip_k_r_0=row.hip_k_r_0) == pytest.approx(
         row.lyapunov_final, rel=1e-12)
 
     report = CliRunner().invoke(cli, ["report", str(folder), "-o", str(tmp_path / "report")])
     assert report.exit_code == 0, report.output
     assert (tmp_path / "report" / "figures" / "sweep_stance_ankle_hip_heatmap_lyapunov_final.png").exists()
+    lines = (tmp_path / "report" / "summary.md").read_text().splitlines()  # the store rows' per-joint figures
+    cells = lambda line: [c.strip() for c in re.split(r"(?<!\\)\|", line)[1:-1]]  # noqa: E731  (not at "\\|")
+    header = cells(next(line for line in lines if line.startswith("| run_id")))
+    values = cells(next(line for line in lines if line.startswith(f"| {row.run_id}")))
+    largest = float(values[next(i for i, name in enumerate(header) if name.startswith("max \\|E\\|"))])
+    assert largest == pytest.approx(max(row.max_abs_constraint_error_ankle, row.max_abs_constraint_error_hip), rel=1e-3)
 
 
 def test_a_chain_sweep_of_summaries_writes_store_files_with_the_run_layouts_figures(tmp_path):
@@ -123,14 +137,22 @@ def _mixed(tmp_path):
     return [str(spec)]
 
 
+def _two_chains_in_store_files(tmp_path):
+    spec = tmp_path / "two.yaml"
+    spec.write_text(f"name: two\nbase: [{STANCE}, {ROOT / 'configs' / 'examples' / 'double_pendulum.yaml'}]\n"
+                    "grid:\n  simulation.rtol: [1.0e-8, 1.0e-7]\n")
+    return [str(spec), "--layout", "chunk"]
+
+
 @pytest.mark.parametrize("args, expected", [
     (["--grid", "joints.knee.k_r.0=1,2"], "'knee'"),
     (["--grid", "controller.k_r.0=1,2"], "the bases are chains"),
     (["--grid", "initial_state.torso.theta.0=0,0.1"], "'torso'"),
-    (["--grid", "simulation.t_end=0.5,1", "--layout", "chunk"], "layout: found 'chunk'"),
+    (_two_chains_in_store_files, "layout: found 'chunk'"),
+    (["--grid", "simulation.t_end=0.5,1"], "simulation.t_end, simulation.n_samples: found 2 different sample grids"),
     (["--grid", "bodies.legs.mass=20,-1"], "bodies.legs.mass"),
     (_mixed, "all chains or all one-body configs"),
-], ids=["joint", "one-body-key", "body", "chunk", "value", "mixed"])
+], ids=["joint", "one-body-key", "body", "chunk-two-chains", "chunk-two-grids", "value", "mixed"])
 def test_a_chain_sweep_refuses_in_one_line_and_writes_nothing(args, expected, tmp_path):
     out = tmp_path / "results"
     command = ["sweep", *args(tmp_path)] if callable(args) else ["sweep", STANCE, *args]
@@ -162,8 +184,8 @@ def test_two_chains_share_a_sweep_and_show_names_each_ones_joints(tmp_path):
 
 
 def test_a_chain_sweep_on_a_dask_cluster_writes_the_local_sweeps_files(tmp_path):
-    """The workers of a Dask cluster send each run's file back as bytes; the parent writes
-    them: the index and every file's traces are those of the local sweep."""
+    """A sweep of chains on a Dask cluster: its index and its runs' traces (store files,
+    through open_sweep) are those of the local sweep."""
     pytest.importorskip("distributed", reason='the dask executor needs "distributed" (pip install ".[dask]")')
     from distributed import LocalCluster
 
@@ -174,10 +196,9 @@ def test_a_chain_sweep_on_a_dask_cluster_writes_the_local_sweeps_files(tmp_path)
         result = CliRunner().invoke(cli, [*args, "--scheduler", cluster.scheduler_address, "-o", str(tmp_path / "dask")])
     assert result.exit_code == 0 and "Dask scheduler" in result.output, result.output
     folders = [tmp_path / where / "stance_ankle_hip" for where in ("local", "dask")]
-    ia, ib = (pd.read_csv(f / "index.csv").drop(columns=["wall_time"]) for f in folders)
+    ia, ib = (pd.read_csv(f / "index.csv").drop(columns=["wall_time", "file"]) for f in folders)  # files: own names
     pd.testing.assert_frame_equal(ia, ib)
-    for name in ia["file"]:
-        with xr.open_dataset(folders[0] / name, engine="h5netcdf") as a, \
-                xr.open_dataset(folders[1] / name, engine="h5netcdf") as b:
-            np.testing.assert_array_equal(a["theta"].values, b["theta"].values)
-            np.testing.assert_array_equal(a["lyapunov"].values, b["lyapunov"].values)
+    a, b = (rbstab.open_sweep(f) for f in folders)
+    assert a["theta"].dims == ("run", "time", "body", "axis")
+    for name in ("theta", "constraint_error", "lyapunov"):
+        np.testing.assert_array_equal(a[name].values, b[name].values)

@@ -20,7 +20,9 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
   (a sweep's files; :func:`resolved_config` rebuilds a run's), or, for a writer given no
   templates, ``config`` (each run's resolved configuration, canonical JSON);
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
-  time[, axis])``; ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
+  time[, axis])``, a chain's per body and per joint as ``(run, time, body|joint[, axis])``
+  with the names as the ``body`` and ``joint`` coordinates (:func:`trace_dimensions`: one
+  chain's runs a file); ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
   every ``store_stride``-th sample (at most 201); ``summary`` none (no ``time``
   dimension). A run that failed has NaN after its last sample; one that raised is NaN.
 - global attributes ``rbstab_format`` (:data:`CHUNK_FORMAT`), the provenance
@@ -58,7 +60,7 @@ import numpy as np
 from ..config import canonical_config, config_hash
 from ..results import RunBlock, RunResult
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import SUMMARY_VARIABLES, NotAResultFile, attribute_value, summary_stride
+from .hdf5 import BODY_VARIABLES, SUMMARY_VARIABLES, NotAResultFile, attribute_value, summary_stride
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
@@ -80,6 +82,8 @@ __all__ = [
     "resolved_config",
     "StoreTrace",
     "store_trace_shapes",
+    "store_trace_dimensions",
+    "trace_dimensions",
     "summary_columns",
     "summary_table_columns",
     "store_bytes_per_run",
@@ -323,6 +327,25 @@ def _as_stored(name: str, values: np.ndarray) -> np.ndarray:
     return data
 
 
+def trace_dimensions(block) -> tuple[dict[str, tuple[str, ...]], dict[str, tuple[str, ...]]]:
+    """(output name -> its dimensions after ``run``, a chain's dimension -> its names) of
+    the traces of a :class:`rbstab.results.RunBlock`: ``("time",)`` for a scalar a
+    sample, ``("time", "axis")`` for a vector; a chain's per-body outputs ``("time",
+    "body", "axis")`` (:data:`rbstab.io.hdf5.BODY_VARIABLES`), its per-joint ones ``("time",
+    "joint"[, "axis"])``, as in a chain's run file; labels ``body`` and ``joint`` with the
+    chain's names (none for one body)."""
+    chain = getattr(block.configs[0], "chain", None) if len(block.configs) else None
+    dims: dict[str, tuple[str, ...]] = {}
+    for name, value in block.outputs.items():
+        extra = np.ndim(value) - 2  # the dimensions after (run, time)
+        if chain is not None and extra >= 1:
+            dims[name] = ("time", "body" if name in BODY_VARIABLES else "joint", "axis")[: extra + 1]
+        else:
+            dims[name] = ("time", "axis")[: extra + 1]
+    labels = {} if chain is None else {"body": tuple(chain.body_names), "joint": tuple(chain.joint_names)}
+    return dims, labels
+
+
 def chunk_file_name(first_run_id: str) -> str:
     """``chunk-<first_run_id>-<8 random hex>.h5``: unique, sorted by run order."""
     return f"chunk-{first_run_id}-{uuid.uuid4().hex[:8]}.h5"
@@ -471,8 +494,7 @@ class ChunkWriter:
         values = self._block_values(block, config_hashes)
         if self.store != "summary":
             if self._time is None:
-                self._start(block.time, {name: np.ndim(value) - 1 for name, value in block.outputs.items()},
-                            block.stride)
+                self._start(block.time, *trace_dimensions(block), block.stride)
             self._keep_traces(run_ids, rows.tolist(), block)
         self._add(rows, values)
 
@@ -563,12 +585,14 @@ class ChunkWriter:
 
     # -- traces -------------------------------------------------------------------------------
 
-    def _start(self, time, ranks: Mapping[str, int], grid_stride: int = 1) -> None:
+    def _start(self, time, dims: Mapping[str, tuple[str, ...]], labels: Mapping[str, Sequence[str]],
+               grid_stride: int = 1) -> None:
         """Create the trace variables: ``time`` the runs' sample times (every
-        ``grid_stride``-th of their grid), ``ranks`` output name -> 0 (a scalar a sample)
-        or 1 (a 3-vector)."""
+        ``grid_stride``-th of their grid), ``dims`` output name -> its dimensions after
+        ``run`` (:func:`trace_dimensions`), ``labels`` a chain's ``body`` and ``joint``
+        names (its coordinates)."""
         time = np.asarray(time, dtype=float)
-        names = [k for k in ranks if self.store == "full" or k in THINNED_VARIABLES]
+        names = [k for k in dims if self.store == "full" or k in THINNED_VARIABLES]
         if self.store == "thinned":
             self._stride = summary_stride(len(time))
             self.attrs["store_stride"] = self._stride * grid_stride
@@ -577,22 +601,27 @@ class ChunkWriter:
         f.dimensions["time"] = len(self._time)
         t = f.create_variable("time", ("time",), data=self._time, fletcher32=bool(len(self._time)))
         t.attrs.update(variable_attributes("time"))
+        sizes = {"run": len(self.ids), "time": len(self._time), "axis": 3}
+        for dim, values in labels.items():  # a chain's body and joint names
+            if any(dim in dims[name] for name in names):
+                f.dimensions[dim] = sizes[dim] = len(values)
+                self._texts[dim] = np.array(values, dtype=object)
+                label = f.create_variable(dim, (dim,), data=self._texts[dim], dtype=self._str)
+                label.attrs.update(variable_attributes(dim))
         block = min(WRITE_BLOCK, len(self.ids))
         h5 = f._h5file
-        scales = [h5["run"], h5["time"], h5["axis"]]
         for name in names:
-            rank = ranks[name]
-            shape = (len(self.ids), len(self._time), 3)[: rank + 1]
+            axes = ("run", *dims[name])
+            shape = tuple(sizes[d] for d in axes)
             # through h5py with the dimension scales attached (what netCDF-4 reads as a
             # variable of those dimensions): h5netcdf's create_variable costs ~5 ms each;
             # track_order: netCDF-C lists attributes in HDF5's creation order (as written)
-            var = h5.create_dataset(name, shape=shape, dtype=float, fillvalue=np.nan,
-                                    chunks=(block, len(self._time), 3)[: rank + 1], fletcher32=True,
-                                    track_order=True)
-            for axis, scale in enumerate(scales[: rank + 1]):
-                var.dims[axis].attach_scale(scale)
+            var = h5.create_dataset(name, shape=shape, dtype=float, fillvalue=np.nan, chunks=(block, *shape[1:]),
+                                    fletcher32=True, track_order=True)
+            for axis, dim in enumerate(axes):
+                var.dims[axis].attach_scale(h5[dim])
             _put_attributes(var.id, variable_attributes(name), self._written.setdefault(f"/{name}", {}))
-            self._traces[name] = (len(self._time), 3)[:rank]
+            self._traces[name] = shape[1:]
             self._datasets[name] = var
         per_run = 8 * sum(int(np.prod(shape)) for shape in self._traces.values()) or 1
         self._block = max(WRITE_BLOCK, WRITE_BYTES // per_run)
@@ -926,13 +955,16 @@ def _config_text(templates: list, columns: Mapping[str, list], keys: Mapping[str
 
 
 def _resolved(templates: list, columns: Mapping[str, list], keys: Mapping[str, str], i: int) -> dict:
-    from ..config.paths import parse_key  # heavy: pydantic (rbstab.config's schema); reading a store stays light
+    from ..config.loader import is_chain  # heavy: pydantic (rbstab.config's schema); reading a store stays light
+    from ..config.paths import parse_key  # heavy: pydantic
+    from ..config.schema import ChainSchema  # heavy: pydantic
 
     template = json.loads(json.dumps(templates[int(columns["template"][i])]))
+    schema = ChainSchema if is_chain(template) else None  # a chain's keys name its bodies and joints
     for name, key in keys.items():
         value = columns[name][i]
         if not key.endswith(":scale") and not isinstance(value, str) and value is not None:
-            parse_key(key).set(template, value)
+            parse_key(key, schema).set(template, value)
     template["name"] = columns["run_id"][i]
     return template
 
@@ -1112,7 +1144,8 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
     """(trace variable -> shape of one run's trace, ``time`` or None) of store files, the
     variables of any of them, from their structure only (nothing verified:
     :class:`StoreTrace` checks a file when it reads it). A variable's shape is probed in the
-    first file that has it; the others are only listed.
+    first file that has it; the others are only listed. :func:`store_trace_dimensions`
+    names their dimensions.
 
     Raises
     ------
@@ -1120,7 +1153,18 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
         For a missing file, one that is not HDF5, or one whose structure cannot be read
         (:func:`rbstab.io.integrity.open_result`).
     """
+    shapes, time, _, _ = store_trace_dimensions(paths)
+    return shapes, time
+
+
+def store_trace_dimensions(paths: Iterable[str | os.PathLike]):
+    """:func:`store_trace_shapes` with each variable's dimensions after ``run`` (``time``,
+    and ``axis``, a chain's ``body`` or ``joint``: the names of its dimension scales) and
+    the labels of a chain's ``body`` and ``joint`` dimensions: (shapes, time, dims,
+    labels)."""
     shapes: dict[str, tuple[int, ...]] = {}
+    dims: dict[str, tuple[str, ...]] = {}
+    labels: dict[str, list[str]] = {}
     probed = {"run", "time", "axis"}
     time = None
     for path in paths:
@@ -1131,7 +1175,13 @@ def store_trace_shapes(paths: Iterable[str | os.PathLike]) -> tuple[dict[str, tu
                 if name in probed:
                     continue
                 probed.add(name)
-                shape = f[name].shape
-                if len(shape) >= 2 and time is not None and shape[1] == len(time) and f[name].dtype.kind == "f":
+                data = f[name]
+                if name in ("body", "joint") and data.ndim == 1:
+                    labels[name] = [v.decode() if isinstance(v, bytes) else str(v) for v in data[...]]
+                    continue
+                shape = data.shape
+                if len(shape) >= 2 and time is not None and shape[1] == len(time) and data.dtype.kind == "f":
                     shapes[name] = tuple(shape[1:])
-    return shapes, time
+                    dims[name] = tuple(scale[0].name.rsplit("/", 1)[-1] if len(scale) else "axis"
+                                       for scale in list(data.dims)[1:])
+    return shapes, time, dims, labels

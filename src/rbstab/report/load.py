@@ -316,13 +316,26 @@ def _store_attributes(row: dict) -> dict:
     """A store file's row in the form of a run file's attributes (``name``, ``summary_*``...)."""
     attrs = {k: v for k, v in row.items()}
     attrs["name"] = row["run_id"]
+    labels = _joint_names(row) or ("x", "y", "z")  # a chain's figures per joint, else per axis
     for key in SUMMARY_FIGURES:
-        parts = [row.get(f"{key}_{a}") for a in "xyz"]
+        parts = [row.get(f"{key}_{a}") for a in labels]
         if key in row:
             attrs[f"summary_{key}"] = float("nan") if row[key] is None else row[key]
         elif any(p is not None for p in parts):
             attrs[f"summary_{key}"] = [float("nan") if p is None else p for p in parts]
     return attrs
+
+
+def _joint_names(row: dict) -> tuple[str, ...]:
+    """The joint names of a store row's chain (its ``config``, canonical JSON); () for one
+    body's row."""
+    text = row.get("config") or ""
+    if '"joints"' not in text:
+        return ()
+    try:
+        return tuple(str(j["name"]) for j in json.loads(text).get("joints") or ())
+    except (ValueError, TypeError, KeyError, AttributeError):
+        return ()
 
 
 def _run_data(path: Path, attrs: dict, absent: list[str], sweep: str | None, row: int | None = None) -> RunData:

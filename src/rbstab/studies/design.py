@@ -492,7 +492,7 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     ----------
     base : Mapping
         The base configuration (``RunConfig.resolved``, or a chain's
-        ``ChainConfig.resolved``: its runs each write a result file, as a chain sweep's);
+        ``ChainConfig.resolved``: its runs go into store files, as a chain sweep's);
         each row's values are set on it.
     design : pandas.DataFrame
         Absolute values, one row per run, columns as in the module docstring.

@@ -903,7 +903,8 @@ def open_sweep(path: str | os.PathLike, grid: bool = False):
         coordinates ``run_id``, ``base``, ``variant`` and the varied parameters
         (:func:`parameter_name`); the per-run values and summary figures of the store
         (``units``, ``long_name``), ``converged`` and, for a store with traces,
-        ``(run, time[, axis])`` variables. Store files are read lazily (dask arrays, a
+        ``(run, time[, axis])`` variables (a chain's ``(run, time, body|joint[, axis])``,
+        with the ``body`` and ``joint`` names as coordinates). Store files are read lazily (dask arrays, a
         chunk per stretch of runs from one file, :class:`rbstab.io.chunk.StoreTrace`); a
         sweep with layout "run" gives the summaries of ``index.csv``.
 
@@ -1083,7 +1084,7 @@ def _from_store(folder: Path, columns):
     import pandas as pd  # heavy: pandas
     import xarray as xr  # heavy: xarray
 
-    from ..io.chunk import StoreTrace, store_trace_shapes  # heavy: numba, pydantic or h5py
+    from ..io.chunk import StoreTrace, store_trace_dimensions  # heavy: numba, pydantic or h5py
     from ..io.metadata import LONG_NAMES, variable_attributes  # heavy: numba, pydantic or h5py
 
     if "file_row" not in columns or "file" not in columns:
@@ -1093,7 +1094,7 @@ def _from_store(folder: Path, columns):
     names = [str(f) for f in pd.unique(file[has]) if "chunk-" in str(f)]
     if not names:
         return None
-    shapes, time = store_trace_shapes(folder / name for name in sorted(names))
+    shapes, time, dims, labels = store_trace_dimensions(folder / name for name in sorted(names))
     if not shapes:
         return None
     keep = np.flatnonzero(has & np.isin(file, names))
@@ -1107,8 +1108,8 @@ def _from_store(folder: Path, columns):
         trace = StoreTrace(name, segments, tail)
         array = da.from_array(trace, chunks=trace.chunks, name=False, asarray=True, meta=np.empty((0,) * trace.ndim))
         attrs = variable_attributes(name) if name in LONG_NAMES else {}
-        data[name] = xr.Variable(("run", "time", "axis")[: trace.ndim], array, attrs)
-    coords = {"run": columns["run"][keep], "axis": ["x", "y", "z"]}
+        data[name] = xr.Variable(("run", *dims[name]), array, attrs)
+    coords = {"run": columns["run"][keep], "axis": ["x", "y", "z"], **labels}
     if time is not None:
         coords["time"] = xr.Variable(("time",), time, {"units": "s", "long_name": "time"})
     return xr.Dataset(data, coords=coords)

@@ -280,15 +280,16 @@ def _chunk_length(n_runs: int, size: int, per_worker: int, workers: int | None) 
     return max(1, size)
 
 
-def _check_time_grids(grids: set, store: str, layout: str) -> None:
-    """Traces in a store file share one time axis: refuse a sweep whose runs differ in it."""
+def _check_time_grids(grids: set, store: str, layout: str, source=None) -> None:
+    """Traces in a store file share one time axis: refuse a sweep whose runs differ in it
+    (SweepSpecError, ``source`` the spec file)."""
     if layout != "chunk" or store == "summary":
         return
     if len(grids) > 1:
-        raise ValueError(
-            f"the runs have {len(grids)} different sample grids (simulation.t_end, n_samples); "
-            f"a store file with traces ('--store {store}') needs one: use --store summary or --layout run"
-        )
+        raise SweepSpecError([
+            f"simulation.t_end, simulation.n_samples: found {len(grids)} different sample grids among the runs; "
+            f"a store file with traces (store '{store}') holds one: expected one grid, store 'summary' or layout 'run'"
+        ], source)
 
 
 def resolve_engine(engine: str | None, timeout: float | None = None) -> str:
@@ -435,7 +436,7 @@ def run_sweep(
     chunking = _chunking(chunk_size, engine, store, layout)
     wants_csv(index, 0)  # a value not allowed: ValueError before anything runs
     table = plan_table(spec) if table is None else table
-    _check_time_grids(table.time_grids(), store, layout)
+    _check_time_grids(table.time_grids(), store, layout, spec.source)
     options = WorkerOptions(timeout=timeout, command_line=" ".join(sys.argv) if command_line is None else command_line,
                             engine=engine, store=store, layout=layout, parameters=table.parameters(),
                             sweep=spec.name)
@@ -450,22 +451,29 @@ def run_sweep(
 
 def sweep_layout(spec: SweepSpec, layout: str | None = None, store: str = DEFAULT_STORE) -> str:
     """The layout a sweep of ``spec`` with the store ``store`` writes: ``layout``, by
-    default ``"chunk"`` (store files); for a sweep of chains ``"chunk"`` with the store
-    ``summary`` (per-run figures only), else ``"run"`` (a result file per run: store files
-    do not hold a chain's per-body and per-joint traces).
+    default ``"chunk"`` (store files); for a sweep of chains whose bases differ in their
+    bodies or joints (their names) and a store with traces, ``"run"`` (a result file per
+    run: a store file's traces share their ``body`` and ``joint`` dimensions).
 
     Raises
     ------
     SweepSpecError
-        For ``layout="chunk"`` with bases that are chains and a store with traces.
+        For ``layout="chunk"`` with such bases and a store with traces.
     """
+    mixed = spec.is_chain and store != "summary" and len({_chain_names(b.data) for b in spec.bases}) > 1
     if layout is None:
-        return "run" if spec.is_chain and store != "summary" else DEFAULT_LAYOUT
-    if layout == "chunk" and spec.is_chain and store != "summary":
-        raise SweepSpecError([f"layout: found 'chunk' with store '{store}'; the bases are chains, whose traces are "
-                              "written a result file per run (layout 'run', their default) and whose store files "
-                              "hold summaries only (store 'summary')"], spec.source)
+        return "run" if mixed else DEFAULT_LAYOUT
+    if layout == "chunk" and mixed:
+        raise SweepSpecError([f"layout: found 'chunk' with store '{store}'; the bases are chains with different "
+                              "bodies or joints, whose traces a store file cannot share (its body and joint "
+                              "dimensions); expected layout 'run' (their default) or store 'summary'"], spec.source)
     return layout
+
+
+def _chain_names(data: dict) -> tuple:
+    """A chain config's body names and joint names (what a store file's dimensions take)."""
+    return (tuple(str(b.get("name")) for b in data.get("bodies") or ()),
+            tuple(str(j.get("name")) for j in data.get("joints") or ()))
 
 
 def cuda_jobs(jobs: int | None = None) -> int | None:
