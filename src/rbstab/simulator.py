@@ -777,15 +777,17 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
     """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
     on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of
     one chain (the same bodies, joints, gains and admissible region) with the same method,
-    sample count and t_end in one call of
-    :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states:
-    one call a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
-    :class:`RunBlock`'s runs, in order. ``outputs`` False: the block carries the summaries
-    but no traces (a store of summaries). ``timeout`` [s] replaces each run's
+    sample count and t_end in calls of :data:`POSTPROCESS_BLOCK` runs of
+    :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states: one
+    such group a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
+    :class:`RunBlock`'s runs, in order, :data:`POSTPROCESS_BLOCK` runs a block at most
+    (which bounds the samples and outputs held at once). ``outputs`` False: the block
+    carries the summaries but no traces (a store of summaries). ``timeout`` [s] replaces each run's
     ``simulation.max_wall_time``. ``engine`` ``"cuda"``: the runs of a call are one launch
     on the GPU (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit the largest
-    ``max_wall_time`` of its runs), the outputs and summaries computed from their samples
-    as the CPU driver's; any other engine: the CPU driver.
+    ``max_wall_time`` of its runs; all the runs of a chain at once), the outputs and
+    summaries computed from their samples as the CPU driver's; any other engine: the CPU
+    driver.
 
     Raises
     ------
@@ -795,7 +797,6 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
         For ``"cuda"`` where no GPU (or numba-cuda) can be used, before any run.
     """
     from .engine.integrate import integrate_chain_runs  # heavy: numba
-    from .engine.systems import chain_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     integrate, gpu = integrate_chain_runs, get_engine(engine).gpu
@@ -813,21 +814,37 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
             groups[key] = (compiled, [])
         groups[key][1].append(i)
     for compiled, members in groups.values():
-        start = _time.perf_counter()
-        sims = [configs[i].simulation for i in members]
-        sim = sims[0]
-        y0 = np.array([C.initial_state(configs[i]) for i in members])
-        settings = settings_rows(sims, timeout)
-        limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
-        sol = integrate(chain_system(compiled, sim.limits), y0, settings, method=sim.method, n_samples=sim.n_samples,
-                        **limit)
-        time = np.linspace(0.0, sim.t_end, sim.n_samples)
-        time.flags.writeable = False
-        integration = (_time.perf_counter() - start) / len(members)
+        per_call = len(members) if gpu else POSTPROCESS_BLOCK  # a launch takes a group's runs at once
+        for lo in range(0, len(members), per_call):
+            yield from _chain_call(compiled, configs, members[lo: lo + per_call], integrate, gpu, timeout, outputs)
+
+
+def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu: bool, timeout: float | None,
+                outputs: bool) -> Iterator[tuple[list[int], RunBlock]]:
+    """:func:`simulate_chain_blocks` for the runs ``members`` of ``configs`` (one chain, one
+    method, sample count and t_end): one call of ``integrate``, then their outputs and
+    summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the outputs held at
+    once: those of that many runs)."""
+    from .engine.systems import chain_system  # heavy: numba
+    from .variants import chain as C  # heavy: numba
+
+    start = _time.perf_counter()
+    sims = [configs[i].simulation for i in members]
+    sim = sims[0]
+    y0 = np.array([C.initial_state(configs[i]) for i in members])
+    settings = settings_rows(sims, timeout)
+    limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
+    sol = integrate(chain_system(compiled, sim.limits), y0, settings, method=sim.method, n_samples=sim.n_samples,
+                    **limit)
+    time = np.linspace(0.0, sim.t_end, sim.n_samples)
+    time.flags.writeable = False
+    integration = (_time.perf_counter() - start) / len(members)
+    for lo in range(0, len(members), POSTPROCESS_BLOCK):
+        hi = min(lo + POSTPROCESS_BLOCK, len(members))
         traces, summaries, status, message, seconds = [], [], [], [], []
-        for j, i in enumerate(members):
+        for j in range(lo, hi):
             t0 = _time.perf_counter()
-            run_outputs, summary = _chain_outputs(compiled, configs[i], time, sol.samples[j])
+            run_outputs, summary = _chain_outputs(compiled, configs[members[j]], time, sol.samples[j])
             if outputs:
                 traces.append(run_outputs)
             summaries.append(summary)
@@ -836,20 +853,20 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
             status.append(ended[0])
             message.append(ended[1])
             seconds.append(_time.perf_counter() - t0)
-        ok = sol.status == SUCCESS
+        ok = sol.status[lo:hi] == SUCCESS
         post = np.asarray(seconds)
-        yield members, RunBlock(
-            configs=[configs[i] for i in members],
+        yield members[lo:hi], RunBlock(
+            configs=[configs[i] for i in members[lo:hi]],
             time=time if outputs else time[:0],
             outputs={key: np.stack([t[key] for t in traces]) for key in traces[0]} if outputs else {},
             summaries={key: np.array([s[key] for s in summaries], dtype=object if isinstance(summaries[0][key], str)
                                      else None) for key in summaries[0]},
             status=status, message=message,
-            solver={"nfev": sol.nfev.astype(np.int64), "n_steps": sol.n_steps.astype(np.int64),
+            solver={"nfev": sol.nfev[lo:hi].astype(np.int64), "n_steps": sol.n_steps[lo:hi].astype(np.int64),
                     "solver_status": np.where(ok, 0, -1).astype(np.int64)},
             wall_time=integration + post,
-            timing={"integration": np.full(len(members), integration), "postprocess": post},
-            switching=[None] * len(members),
+            timing={"integration": np.full(hi - lo, integration), "postprocess": post},
+            switching=[None] * (hi - lo),
             joints=tuple(compiled.chain.joint_names),
         )
 
