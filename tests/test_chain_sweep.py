@@ -202,3 +202,19 @@ def test_a_chain_sweep_on_a_dask_cluster_writes_the_local_sweeps_files(tmp_path)
     assert a["theta"].dims == ("run", "time", "body", "axis")
     for name in ("theta", "constraint_error", "lyapunov"):
         np.testing.assert_array_equal(a[name].values, b[name].values)
+
+
+@pytest.mark.parametrize("layout", ["chunk", "run"])
+def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
+    """A thinned store keeps what a chain run's report draws (each joint's Theta_j, N_j,
+    Lambda_j and v's terms besides one body's variables), in store files and in a file per
+    run: the report of a run's file draws its four figures."""
+    out = tmp_path / "results"
+    result = CliRunner().invoke(cli, ["sweep", STANCE, "--grid", "initial_state.trunk.theta.0=0.1", *SHORT,
+                                      "--layout", layout, "-j", "1", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    (file,) = (out / "stance_ankle_hip" / "runs").iterdir()
+    report = CliRunner().invoke(cli, ["report", str(file), "-o", str(tmp_path / "report")])
+    assert report.exit_code == 0, report.output
+    drawn = sorted(p.name.rpartition("_")[2] for p in (tmp_path / "report" / "figures").iterdir())
+    assert drawn == ["bodies.png", "constraints.png", "joints.png", "lyapunov.png"], drawn

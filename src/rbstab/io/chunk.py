@@ -22,7 +22,8 @@ and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read
 - traces per :data:`STORES`: ``full`` every output variable at every sample as ``(run,
   time[, axis])``, a chain's per body and per joint as ``(run, time, body|joint[, axis])``
   with the names as the ``body`` and ``joint`` coordinates (:func:`trace_dimensions`: one
-  chain's runs a file); ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`) at
+  chain's runs a file); ``thinned`` the variables a report draws (:data:`THINNED_VARIABLES`;
+  a chain's :data:`rbstab.io.hdf5.CHAIN_SUMMARY_VARIABLES`) at
   every ``store_stride``-th sample (at most 201); ``summary`` none (no ``time``
   dimension). A run that failed has NaN after its last sample; one that raised is NaN.
 - global attributes ``rbstab_format`` (:data:`CHUNK_FORMAT`), the provenance
@@ -60,7 +61,8 @@ import numpy as np
 from ..config import canonical_config, config_hash
 from ..results import RunBlock, RunResult
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import BODY_VARIABLES, SUMMARY_VARIABLES, NotAResultFile, attribute_value, summary_stride
+from .hdf5 import (BODY_VARIABLES, CHAIN_SUMMARY_VARIABLES, SUMMARY_VARIABLES, NotAResultFile, attribute_value,
+                   summary_stride)
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
@@ -592,7 +594,8 @@ class ChunkWriter:
         ``run`` (:func:`trace_dimensions`), ``labels`` a chain's ``body`` and ``joint``
         names (its coordinates)."""
         time = np.asarray(time, dtype=float)
-        names = [k for k in dims if self.store == "full" or k in THINNED_VARIABLES]
+        thinned = CHAIN_SUMMARY_VARIABLES if labels else THINNED_VARIABLES  # a chain's, or one body's
+        names = [k for k in dims if self.store == "full" or k in thinned]
         if self.store == "thinned":
             self._stride = summary_stride(len(time))
             self.attrs["store_stride"] = self._stride * grid_stride

@@ -78,6 +78,7 @@ __all__ = [
     "result_attributes",
     "STORE_MODES",
     "SUMMARY_VARIABLES",
+    "CHAIN_SUMMARY_VARIABLES",
     "SWITCHING_VARIABLES",
     "summary_stride",
     "read_attributes",
@@ -134,6 +135,12 @@ STORE_MODES = ("full", "thinned", "summary")
 SUMMARY_VARIABLES = (
     "theta", "omega", "position", "velocity", "controller_state",
     "constraint_error", "lyapunov", "lyapunov_rate", "lyapunov_rate_numerical",
+)
+#: Variables of a chain's ``thinned`` file: :data:`SUMMARY_VARIABLES` and what its report
+#: draws besides (each joint's Theta_j, N_j and Lambda_j, and v's terms).
+CHAIN_SUMMARY_VARIABLES = SUMMARY_VARIABLES + (
+    "joint_theta", "torque_n", "constraint_force",
+    "lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity",
 )
 
 
@@ -363,7 +370,8 @@ def write_run(
     if store == "thinned":
         stride = attrs["store_stride"]
         time = time[::stride]
-        outputs = {k: v[::stride] for k, v in outputs.items() if k in SUMMARY_VARIABLES}
+        kept = CHAIN_SUMMARY_VARIABLES if getattr(result.config, "chain", None) is not None else SUMMARY_VARIABLES
+        outputs = {k: v[::stride] for k, v in outputs.items() if k in kept}
     elif store == "summary":
         time, outputs = time[:0], {}
     labels, dims = _chain_dimensions(result, outputs)
