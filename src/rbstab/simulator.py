@@ -440,6 +440,10 @@ _LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUT
 #: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
 #: default number of runs per compiled call (the trajectories held at once).
 POSTPROCESS_BLOCK = 32
+#: Bytes of samples a chain's GPU launch brings back to the host at most (every sample of
+#: its runs, which their summaries read): the runs of a launch of
+#: :func:`simulate_chain_blocks` with the CUDA engine.
+CUDA_CHAIN_SAMPLE_BYTES = 2 * 2**30
 
 
 def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarray,
@@ -785,9 +789,9 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
     carries the summaries but no traces (a store of summaries). ``timeout`` [s] replaces each run's
     ``simulation.max_wall_time``. ``engine`` ``"cuda"``: the runs of a call are one launch
     on the GPU (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit the largest
-    ``max_wall_time`` of its runs; all the runs of a chain at once), the outputs and
-    summaries computed from their samples as the CPU driver's; any other engine: the CPU
-    driver.
+    ``max_wall_time`` of its runs; as many runs as :data:`CUDA_CHAIN_SAMPLE_BYTES` of
+    samples), the outputs and summaries computed from their samples as the CPU driver's;
+    any other engine: the CPU driver.
 
     Raises
     ------
@@ -814,7 +818,10 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
             groups[key] = (compiled, [])
         groups[key][1].append(i)
     for compiled, members in groups.values():
-        per_call = len(members) if gpu else POSTPROCESS_BLOCK  # a launch takes a group's runs at once
+        per_call = POSTPROCESS_BLOCK
+        if gpu:  # a launch takes as many runs as the host may hold the samples of
+            n_samples = configs[members[0]].simulation.n_samples
+            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * n_samples * (compiled.n_states + 1)))
         for lo in range(0, len(members), per_call):
             yield from _chain_call(compiled, configs, members[lo: lo + per_call], integrate, gpu, timeout, outputs)
 
