@@ -160,8 +160,8 @@ def _key_value(text: str) -> tuple[str, str]:
 @click.option(
     "--layout", type=click.Choice(["chunk", "run"]), default=None,
     help="Store files of many runs along a 'run' dimension (runs/chunk-*.h5, netCDF-4), or one "
-    "result file per run (runs/<run_id>.h5, the format of rbstab run)  [default: chunk; run for a "
-    "sweep of chains].",
+    "result file per run (runs/<run_id>.h5, the format of rbstab run)  [default: chunk; run for the "
+    "traces of a sweep of different chains].",
 )
 @click.option(
     "--index", "index", type=click.Choice(["csv", "arrow"]), default=None,
