@@ -74,6 +74,19 @@ def test_a_chain_sweep_writes_what_rbstab_run_writes_and_resumes(tmp_path):
     largest = float(values[next(i for i, name in enumerate(header) if name.startswith("max \\|E\\|"))])
     assert largest == pytest.approx(max(row.max_abs_constraint_error_ankle, row.max_abs_constraint_error_hip), rel=1e-3)
 
+    # a joint's own figure, and a figure over the joints, as --metric; a joint the chain lacks refused in one line
+    metrics = ["--metric", "max_abs_constraint_error_hip", "--metric", "max_constraint_drift"]
+    by_joint = CliRunner().invoke(cli, ["report", str(folder), *metrics, "-o", str(tmp_path / "by_joint")])
+    assert by_joint.exit_code == 0, by_joint.output
+    table = pd.read_csv(tmp_path / "by_joint" / "sweep_stance_ankle_hip.csv")
+    np.testing.assert_array_equal(table["report:max_abs_constraint_error_hip"], index["max_abs_constraint_error_hip"])
+    np.testing.assert_array_equal(table["report:max_constraint_drift"],
+                                  index[["max_constraint_drift_ankle", "max_constraint_drift_hip"]].max(axis=1))
+    knee = CliRunner().invoke(cli, ["report", str(folder), "--metric", "max_abs_constraint_error_knee", "-o",
+                                    str(tmp_path / "knee")])
+    assert knee.exit_code != 0 and "Traceback" not in knee.output and not (tmp_path / "knee").exists()
+    assert "'max_abs_constraint_error_knee'" in knee.output and "max_abs_constraint_error_hip" in knee.output
+
 
 def test_a_chain_sweep_of_summaries_writes_store_files_with_the_run_layouts_figures(tmp_path):
     """--store summary: the runs of a chain go into store files (the default layout), one

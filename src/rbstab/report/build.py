@@ -52,6 +52,7 @@ from .sweep_figures import sweep_figures
 from .tables import (
     DEFAULT_METRICS,
     SettleThresholds,
+    check_joint_metrics,
     differing_parameters,
     format_value,
     metric_column,
@@ -514,6 +515,10 @@ def build_report(
     studies, inputs = split_studies(given)  # study files and folders (rbstab sensitivity, tune)
     analyses, inputs = split_inputs(inputs)  # analysis files (rbstab analyze) and the rest
     data = load_inputs(inputs) if inputs or not (analyses or studies) else ReportInputs([], [], [])
+    try:
+        check_joint_metrics(metrics, data.sweeps)
+    except ValueError as exc:
+        raise ReportError(str(exc)) from None
     data.paths.extend(p.resolve() for p in [*analyses, *studies])
     target = Path(output) if output is not None else REPORTS_ROOT / default_report_name(data, given)
     _check_output(target, data.paths, overwrite)

@@ -30,6 +30,8 @@ __all__ = [
     "VECTOR_SUMMARY_METRICS",
     "allowed_metrics",
     "validate_metrics",
+    "joint_metric",
+    "check_joint_metrics",
     "metric_value",
     "metric_label",
     "settling_time",
@@ -93,7 +95,8 @@ class SettleThresholds:
 
 
 def allowed_metrics() -> list[str]:
-    """Every name accepted by ``--metric``, sorted."""
+    """Every name accepted by ``--metric``, sorted (besides a chain's per-joint figures,
+    :func:`joint_metric`)."""
     names = set(SCALAR_SUMMARY_METRICS) | set(OTHER_METRICS)
     for key in VECTOR_SUMMARY_METRICS:
         names |= {key, *(f"{key}_{axis}" for axis in _AXES)}
@@ -110,10 +113,55 @@ def validate_metrics(names: Sequence[str]) -> list[str]:
     """
     allowed = allowed_metrics()
     names = [METRIC_ALIASES.get(n, n) for n in names]
-    unknown = [n for n in names if n not in allowed]
+    unknown = [n for n in names if n not in allowed and joint_metric(n) is None]
     if unknown:
-        raise ValueError(f"unknown metric {', '.join(map(repr, unknown))}; allowed: {', '.join(allowed)}")
+        raise ValueError(f"unknown metric {', '.join(map(repr, unknown))}; allowed: {', '.join(allowed)}; and for a "
+                         f"chain's sweep {', '.join(f'{f}_<joint>' for f in _joint_figures())}, "
+                         f"{', '.join(f for f in _joint_figures() if f not in allowed)}")
     return list(dict.fromkeys(names))
+
+
+def _joint_figures() -> dict[str, str]:
+    from ..studies.design import JOINT_FIGURES  # a chain's per-joint summary figures -> units
+
+    return JOINT_FIGURES
+
+
+def joint_metric(name: str) -> tuple[str, str | None] | None:
+    """(figure, joint) of a chain's per-joint metric: ``<figure>_<joint>`` for a figure of
+    :data:`rbstab.studies.design.JOINT_FIGURES` (``max_abs_constraint_error_hip``), or
+    (figure, None) for such a figure alone that one body's runs lack
+    (``max_constraint_drift``: the largest over the joints); None for any other name (one
+    body's ``max_abs_constraint_error_x`` included)."""
+    figures = _joint_figures()
+    if name in figures and name not in VECTOR_SUMMARY_METRICS:
+        return name, None
+    for figure in figures:
+        joint = name[len(figure) + 1:] if name.startswith(f"{figure}_") else ""
+        if joint and not (figure in VECTOR_SUMMARY_METRICS and joint in _AXES):
+            return figure, joint
+    return None
+
+
+def check_joint_metrics(names: Sequence[str], sweeps: Sequence) -> None:
+    """Refuse a chain's per-joint metric (:func:`joint_metric`) that no sweep of ``sweeps``
+    (:class:`rbstab.report.load.SweepData`) has among its index's columns.
+
+    Raises
+    ------
+    ValueError
+        Naming the metric and the per-joint columns the sweeps have.
+    """
+    columns = {c for sweep in sweeps for c in sweep.index.columns}
+    for name in names:
+        found = joint_metric(name)
+        if found is None:
+            continue
+        figure, joint = found
+        held = sorted(c for c in columns if c.startswith(f"{figure}_") and joint_metric(c) is not None)
+        if (joint is None and not held) or (joint is not None and name not in columns):
+            raise ValueError(f"metric {name!r}: no sweep of the report has it; the sweeps' chains have "
+                             f"{', '.join(held) if held else 'no such figure (one body, or no chain sweep)'}")
 
 
 def _split_metric(name: str) -> tuple[str, int | None]:
@@ -127,6 +175,12 @@ def _split_metric(name: str) -> tuple[str, int | None]:
 
 def metric_label(name: str) -> str:
     """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
+    joint = joint_metric(name)
+    if joint is not None:
+        figure, member = joint
+        symbol = {"max_abs_constraint_error": "max |E_j|", "max_constraint_drift": "max drift |E_j|"}.get(figure, figure)
+        where = f" of joint {member}" if member is not None else " (largest over the joints)"
+        return f"{symbol}{where} [{_joint_figures()[figure]}]"
     base, comp = _split_metric(name)
     if base in VECTOR_SUMMARY_METRICS:
         symbol, units = VECTOR_SUMMARY_METRICS[base]
@@ -406,6 +460,10 @@ def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThreshol
         return table["converged"].astype(str).eq("True").astype(float).where(table["status"] == "success")
     if name in table.columns:
         return table[name].astype(float).where(table["status"] == "success")
+    joint = joint_metric(name)
+    if joint is not None and joint[1] is None:  # a chain's figure alone: the largest over its joints
+        columns = [c for c in table.columns if c.startswith(f"{name}_") and joint_metric(c) is not None]
+        return table[columns].astype(float).max(axis=1).where(table["status"] == "success")
     base, comp = _split_metric(name)
     columns = [f"{base}_{axis}" for axis in _AXES]
     if base in VECTOR_SUMMARY_METRICS and comp is None and all(c in table.columns for c in columns):
