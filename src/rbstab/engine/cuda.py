@@ -2,15 +2,16 @@
 
 The physics, the Runge-Kutta step and the driver's loop are the CPU engine's own
 functions: numba-cuda compiles every rbstab ``@jit`` function that a CUDA kernel calls as a
-device function of the same Python source. A run is :func:`rbstab.engine.integrate.begin_run`
-and then passes of :func:`rbstab.engine.integrate.run_pass` (one step *attempt* a pass, its
-event, samples, breakpoints and impulses), the loop of the CPU driver
-(:func:`rbstab.engine.integrate.integrate_run`) too; a thread whose step is rejected tries
-again on the next pass with the others of its warp, instead of stalling them. Only the
-kernels' frames are written here: work arrays in thread-local memory, a persistent grid
-whose threads take the next run from an atomic counter when theirs ends, the launch's
-clock, and what becomes of a run's samples (:class:`StreamSink`: outputs and the streamed
-summary of :mod:`rbstab.summary`; a chain's raw samples).
+device function of the same Python source. A run is :func:`rbstab.engine.integrate.drive_run`,
+as on the CPU (:func:`rbstab.engine.integrate.integrate_run`): passes of
+:func:`rbstab.engine.integrate.run_pass` (one step *attempt* a pass, its event, samples,
+breakpoints and impulses), the step limit and the clock read between them (here the GPU's
+``%globaltimer``, :func:`globaltimer`); a thread whose step is rejected tries again on the
+next pass with the others of its warp, instead of stalling them. Only the kernels' frames
+are written here: work arrays in thread-local memory, a persistent grid whose threads take
+the next run from an atomic counter when theirs ends, the launch's one deadline, and what
+becomes of a run's samples (:class:`StreamSink`: outputs and the streamed summary of
+:mod:`rbstab.summary`; a chain's raw samples).
 
 A run with disturbances (``disturbance_count`` > 0, read once a run) is integrated as the
 CPU engine integrates it (docs/disturbances.md): its impulses at t = 0 are applied before
@@ -86,12 +87,12 @@ from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, sten
                        stream_sample, stream_start)
 from ..variants.chain import ChainWork
 from ..variants.kernels import DISTURBANCE_WORK_AT, output_row
-from .integrate import ChunkSolution, SampleRows, begin_run, keep_sample, run_pass, sample_time
+from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample, sample_time
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
 from .systems import CHAIN, ChainSystem, disturbed_of, limited_of
 from .tableaus import METHODS
-from .status import NOT_STARTED, STEP_LIMIT, TIMEOUT
+from .status import NOT_STARTED
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
@@ -104,8 +105,6 @@ INSTALL_HINT = 'pip install "rbstab[cuda]" (numba-cuda and the CUDA 12 wheels) a
 TRACE_COLUMNS = N_OUTPUTS + 1
 #: Threads per block (runs of a warp step together; 128-256 within ~7 % on an H100).
 THREADS_PER_BLOCK = 128
-#: Passes of a thread's loop between two readings of the GPU's clock (the launch's limit).
-CLOCK_EVERY = 64
 #: Share of the device's free memory the traces of one launch may take (up to four worker
 #: processes may share a GPU, each taking this share of what is free when it launches).
 TRACE_MEMORY_SHARE = 0.25
@@ -192,6 +191,24 @@ def _globaltimer_intrinsic():
 #: The kernel's clock, a global of this module: a closure's contents key numba-cuda's disk
 #: cache, and an intrinsic pickles differently in every process.
 globaltimer = _globaltimer_intrinsic()
+
+
+def _register_gpu_clock() -> None:
+    """:func:`rbstab.engine.integrate.clock_ns` in a CUDA kernel: :func:`globaltimer` (none
+    under the simulator, whose kernels call the CPU-compiled driver and its clock)."""
+    try:
+        from numba.cuda.extending import overload as cuda_overload  # optional: numba-cuda
+    except ImportError:
+        return
+    if globaltimer is None:  # pragma: no cover - numba-cuda without its extending API
+        return
+
+    @cuda_overload(clock_ns)
+    def _gpu_clock_ns():
+        return lambda: globaltimer()
+
+
+_register_gpu_clock()
 
 
 # -- the kernel ---------------------------------------------------------------------------------------
@@ -298,22 +315,13 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
             for i in range(N_OUTPUTS):  # outputs not computed (rbstab.layout.LEFT_OUT) stay NaN
                 row[i] = math.nan
             sink = StreamSink(acc, row, first, weights, trace, stride, ratio, full, disturbed)
-            running, status, state = False, NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
+            status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
                 for i in range(n_state, n_vec):
                     y[i] = 0.0  # W [J] from 0 to t
-                running, status, state = begin_run(code, p, s, y, f, w, limit, disturbed)
-            while running:
-                passes += 1
-                if passes % CLOCK_EVERY == 0 and globaltimer() > deadline:
-                    status = TIMEOUT
-                    break
-                if state[8] >= s.max_steps:
-                    status = STEP_LIMIT
-                    break
-                running, status, state = run_pass(code, p, s, w, (y, f, sample), state, sink, flags, scheme)
+                status, state, passes = drive_run(code, p, s, w, (y, f, sample), sink, flags, scheme, (deadline, passes))
             t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
             # its end: every output of the run written, whether it ran or not
             stream_finish(acc, first, weights, short, trace, stride)
@@ -404,8 +412,8 @@ def occupancy(fn, n_state: int | None) -> int:
 
 
 #: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
-DEVICE_FUNCTIONS = ("begin_run", "run_pass", "disturbed_of", "limited_of", "output_row", "sample_time",
-                    "stream_start", "stream_finish")
+DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of", "output_row", "sample_time", "stream_start",
+                    "stream_finish")
 
 
 def _plain(value):
@@ -471,9 +479,8 @@ def chain_kernel_function(method: int):
     """The Python function of the CUDA kernel of chain runs of method number ``method``
     (:func:`chain_launch_signature`: one chain, k runs, one thread a run).
 
-    The driver is :func:`kernel_function`'s (:func:`rbstab.engine.integrate.begin_run` and
-    passes of :func:`~rbstab.engine.integrate.run_pass`, the persistent grid and the launch's
-    one deadline) on a chain's :class:`~rbstab.engine.systems.ChainSystem`, whose functions
+    The driver is :func:`kernel_function`'s (:func:`rbstab.engine.integrate.drive_run`,
+    the persistent grid and the launch's one deadline) on a chain's :class:`~rbstab.engine.systems.ChainSystem`, whose functions
     (:mod:`rbstab.engine.systems`) the passes call as the CPU driver's do; a sample is the
     state there (and W), written to device memory
     (:class:`~rbstab.engine.integrate.SampleRows`) as the CPU driver's samples are; the
@@ -525,22 +532,14 @@ def chain_kernel_function(method: int):
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
             flags = (limit, disturbed, bounded, n_samples)
             sink = SampleRows(samples_o[k], work_o[k], stride)
-            running, status, state = False, NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
+            status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
                 for i in range(n_state, n_vec):
                     y[i] = 0.0  # W [J] from 0 to t
-                running, status, state = begin_run(CHAIN, p, s, y, f, w, limit, disturbed)
-            while running:
-                passes += 1
-                if passes % CLOCK_EVERY == 0 and globaltimer() > deadline:
-                    status = TIMEOUT
-                    break
-                if state[8] >= s.max_steps:
-                    status = STEP_LIMIT
-                    break
-                running, status, state = run_pass(CHAIN, p, s, w, (y, f, sample), state, sink, flags, scheme)
+                status, state, passes = drive_run(CHAIN, p, s, w, (y, f, sample), sink, flags, scheme,
+                                                  (deadline, passes))
             t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
             # its end: every output of the run written, whether it ran or not
             status_o[k] = status
@@ -558,7 +557,7 @@ def chain_kernel_function(method: int):
 
 
 #: The compiled functions the chain kernel calls (the simulator hands them numpy's arrays).
-CHAIN_DEVICE_FUNCTIONS = ("begin_run", "run_pass", "disturbed_of", "limited_of")
+CHAIN_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of")
 
 
 @functools.lru_cache(maxsize=None)

@@ -42,7 +42,8 @@ from .systems import (CHAIN, ChainSystem, admissible, admissible_event, gimbal_e
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "integrate_chain_runs", "integrate_chain_chunk", "begin_run", "run_pass", "keep_sample",
+           "integrate_runs", "integrate_chain_runs", "integrate_chain_chunk", "begin_run", "run_pass", "drive_run", "clock_ns", "NO_DEADLINE",
+           "keep_sample",
            "SampleRows", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
            "grazing_exit", "step_exit",
            "admissible", "locate_event"]
@@ -92,6 +93,24 @@ else:  # pragma: no cover - other platforms: through the interpreter
         with objmode(now="float64"):
             now = time.perf_counter()
         return now
+
+
+#: A deadline [ns] that is none: :func:`drive_run` reads no clock.
+NO_DEADLINE = 2**62
+
+
+def clock_ns():
+    """The clock a run's deadline is read on [ns], in compiled code: ``CLOCK_MONOTONIC`` on
+    the CPU (:func:`wall_clock`'s), the GPU's ``%globaltimer`` in a CUDA kernel (the
+    overload :mod:`rbstab.engine.cuda` registers)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(clock_ns, target="cpu", jit_options={"forceinline": True})
+def _cpu_clock_ns():
+    if _CLOCK_MONOTONIC is not None:
+        return lambda: _monotonic_ns()
+    return lambda: np.int64(wall_clock() * 1e9)  # pragma: no cover - other platforms
 
 
 @jit(forceinline=True)
@@ -468,12 +487,38 @@ def run_pass(code, p, s, w, vectors, state, sink, flags, scheme):
 
 
 @jit(forceinline=True)
+def drive_run(code, p, s, w, vectors, sink, flags, scheme, clock):
+    """A run from the state in ``y`` (``vectors`` = (y, f, sample), the arguments of
+    :func:`run_pass`, as ``sink``, ``flags``, ``scheme``): :func:`begin_run`, then passes of
+    :func:`run_pass` until it ends, reaches ``s.max_steps`` accepted steps (STEP_LIMIT) or
+    the ``clock`` = (deadline [ns] of :func:`clock_ns`, passes so far) reads past its
+    deadline, every :data:`CLOCK_EVERY` passes (TIMEOUT; :data:`NO_DEADLINE`: never read).
+    Every driver runs its runs through it: the CPU's (:func:`integrate_run`) and the CUDA
+    kernels (:mod:`rbstab.engine.cuda`, the passes counted over a thread's runs). Returns
+    (status, state, passes): ``state`` the loop variables at the end (:func:`begin_run`;
+    t the stop time)."""
+    y, f, sample = vectors
+    limit, disturbed = flags[0], flags[1]
+    deadline, passes = clock
+    running, status, state = begin_run(code, p, s, y, f, w, limit, disturbed)
+    while running:
+        if state[8] >= s.max_steps:
+            status = STEP_LIMIT
+            break
+        if deadline < NO_DEADLINE and passes % CLOCK_EVERY == 0 and clock_ns() > deadline:
+            status = TIMEOUT
+            break
+        passes += 1
+        running, status, state = run_pass(code, p, s, w, vectors, state, sink, flags, scheme)
+    return status, state, passes
+
+
+@jit(forceinline=True)
 def _run(code, p, y0, s, samples, work_done):
-    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled: the
-    passes of :func:`run_pass` from :func:`begin_run`, the step limit and the clock checked
-    between them."""
+    """:func:`integrate_run` but the NaN rows; also returns the number of rows filled
+    (:func:`drive_run`)."""
     max_wall_time, method = s.max_wall_time, s.method
-    deadline = wall_clock() + max_wall_time if max_wall_time < math.inf else math.inf
+    deadline = clock_ns() + np.int64(max_wall_time * 1e9) if max_wall_time < 1e9 else NO_DEADLINE  # 1e9 s: none
     n = y0.shape[0]
     disturbed = system_disturbed(p)
     m = n + 1 if disturbed else n  # the integrated vector: the state, and W at [n]
@@ -481,21 +526,10 @@ def _run(code, p, y0, s, samples, work_done):
     y = np.zeros(m)
     y[:n] = y0
     f = np.empty(m)
-    limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-    flags = (limit, disturbed, system_limited(p), samples.shape[0])
+    flags = (GIMBAL_LOCK_ANGLE - s.gimbal_margin, disturbed, system_limited(p), samples.shape[0])
     scheme = (method, N_STAGES[method], method == DOP853)
-    sink = SampleRows(samples, work_done, 1)
-    running, status, state = begin_run(code, p, s, y, f, w, limit, disturbed)
-    passes = 0
-    while running:
-        if state[8] >= s.max_steps:
-            status = STEP_LIMIT
-            break
-        if deadline < math.inf and passes % CLOCK_EVERY == 0 and wall_clock() > deadline:
-            status = TIMEOUT
-            break
-        passes += 1
-        running, status, state = run_pass(code, p, s, w, (y, f, w.work), state, sink, flags, scheme)
+    status, state, _ = drive_run(code, p, s, w, (y, f, w.work), SampleRows(samples, work_done, 1), flags, scheme,
+                                 (deadline, 0))
     return status, state[0], state[7], state[8], state[6]
 
 
