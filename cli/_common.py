@@ -18,6 +18,28 @@ from rbstab.engine.registry import get_engine
 from .console import get_console
 
 
+#: Exit statuses of every command (docs/reliability.md, section 5). A run that fell
+#: (gimbal lock, the admissible region left) was computed: its command exits 0.
+EXIT_INVALID_INPUT = 1
+EXIT_USAGE = 2  # click's
+EXIT_NOT_COMPUTED = 3
+EXIT_MACHINE_FAULT = 4
+
+
+class NotComputed(click.ClickException):
+    """Runs that could not be computed (a solver failure, a non-finite state, a step,
+    wall-time or switching limit, an exception): one line, status 3."""
+
+    exit_code = EXIT_NOT_COMPUTED
+
+
+class MachineFault(click.ClickException):
+    """A fault of the machine (a full disk, a read-only or missing output folder, a name too
+    long for the file system, an unreachable scheduler): one line, status 4."""
+
+    exit_code = EXIT_MACHINE_FAULT
+
+
 def command_line() -> str:
     """This process's command line, shell-quoted."""
     return " ".join(shlex.quote(a) for a in sys.argv)
@@ -136,11 +158,11 @@ def prepare_output(folder: Path, names: Sequence[str] = ()) -> None:
         os.unlink(probe)
         limit = os.pathconf(folder, "PC_NAME_MAX")
     except OSError as exc:
-        raise click.ClickException(describe_os_error(exc)) from None
+        raise MachineFault(describe_os_error(exc)) from None
     for name in names:
         longest = len(f".{name}.{2**22}@0000.abcdefgh.tmp".encode())  # its temporary while written
         if longest > limit:
-            raise click.ClickException(
+            raise MachineFault(
                 f"cannot write {folder / name}: the name is too long for this file system "
                 f"({longest} bytes with its temporary suffix, at most {limit}); shorten the run's name"
             )

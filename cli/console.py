@@ -18,6 +18,7 @@ import contextlib
 import json
 import warnings
 from collections.abc import Iterable, Iterator
+from pathlib import Path
 from typing import Any
 
 import click
@@ -91,16 +92,21 @@ class Console:
     @contextlib.contextmanager
     def catching_warnings(self) -> Iterator[None]:
         """Python warnings with a code (:mod:`rbstab.warning_codes`) go to :meth:`warn`,
-        every time they are raised (the console prints each once); others as usual."""
+        every time they are raised (the console prints each once). Others (a library's
+        numerical warning, e.g. scipy's or numpy's RuntimeWarning) are no finding of rbstab's:
+        with ``-v`` one line each, once; otherwise not shown (what they would have said
+        about the physics, rbstab's own warnings and messages say)."""
         with warnings.catch_warnings():
             warnings.filterwarnings("always", message=r".*\bW\d{3}\b")
-            shown = warnings.showwarning
 
             def show(message, category, filename, lineno, file=None, line=None) -> None:
-                if code_of(str(message)) is None:
-                    shown(message, category, filename, lineno, file, line)
-                else:
+                if code_of(str(message)) is not None:
                     self.warn(str(message))
+                    return
+                text = " ".join(str(message).split())
+                if self.verbosity >= 1 and text not in self._seen:
+                    self._seen.add(text)
+                    click.echo(f"note: {category.__name__} from {Path(filename).name}:{lineno}: {text}", err=True)
 
             warnings.showwarning = show
             yield

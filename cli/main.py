@@ -1,11 +1,12 @@
 """``rbstab`` command group: one module per subcommand, heavy imports inside commands.
 
-Exit status of every command: 0 done (also when the reader of stdout closed it early,
-``rbstab show ... | head``); 1 invalid input, a failed run or a fault of the
-machine (full disk, read-only or missing output folder), reported in one line without a
-traceback; 2 a usage error; 130 interrupted by Ctrl-C (SIGINT), 143 by SIGTERM, after
-what was finished has been saved (``rbstab sweep``: the number of failed runs, at most 100,
-when runs failed).
+Exit status of every command (``_common.EXIT_*``): 0 done, every run computed, whatever
+its physics (a run that fell is a result; also when the reader of stdout closed it early,
+``rbstab show ... | head``); 1 invalid input; 2 a usage error; 3 runs that could not be
+computed (a solver failure, a non-finite state, a step, wall-time or switching limit, an
+exception); 4 a fault of the machine (full disk, read-only or missing output folder, an
+unreachable scheduler); each reported in one line without a traceback; 130 interrupted by
+Ctrl-C (SIGINT), 143 by SIGTERM, after what was finished has been saved.
 """
 
 import atexit
@@ -18,6 +19,7 @@ import click
 
 from rbstab import __version__
 
+from ._common import MachineFault
 from .analyze import analyze
 from .animate import animate
 from .report import report
@@ -64,7 +66,7 @@ class _Group(click.Group):
             _quiet_stdout()
             ctx.exit(0)
         except OSError as exc:  # a full disk, a read-only folder...: in words, not a traceback
-            raise click.ClickException(describe_os_error(exc)) from None
+            raise MachineFault(describe_os_error(exc)) from None
 
 
 def _quiet_stdout() -> None:

@@ -12,7 +12,7 @@ from rbstab.api import run as run_one
 from rbstab.resources import memory_problem
 from rbstab.warning_codes import coded
 
-from ._common import command_line, load_configs, prepare_output
+from ._common import MachineFault, NotComputed, command_line, load_configs, prepare_output
 from .console import get_console
 from .options import console_options, json_option, method_option, output_option, set_option
 
@@ -72,7 +72,8 @@ def _report(config, path: Path, mode: str) -> dict:
     console = get_console()
     attrs = read_attributes(path, verify=False)
     s = {k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}
-    settled = convergence_word(attrs["status"], s["lyapunov_initial"], s["lyapunov_final"])
+    settled = convergence_word(attrs["status"], s["lyapunov_initial"], s["lyapunov_final"],
+                               message=attrs["message"])
     check = rate_check_text(s, path)
     variant = attrs["variant"]
     if variant == "chain":
@@ -148,13 +149,16 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     Every config is validated, and the output folder checked, before the first one runs.
     A result file made from another configuration (another config_hash) is not replaced
     unless --overwrite; one of the identical configuration is run again and replaced.
-    Exits with status 1 when a run failed (gimbal lock, solver failure, non-finite state,
-    step or wall-time limit); its file is still written with status "failed" and the
-    reason. A file that cannot be written (full disk, read-only folder) stops the command
-    with one line; files written before are complete, and no temporary file is left.
+    A run that fell (gimbal lock, the admissible region left) is a result: its line says
+    "fell at t = ...", its file has status "failed" and the reason, and the command exits 0.
+    Exits with status 3 when a run could not be computed (solver failure, non-finite state,
+    step or wall-time limit; its file is written too, with the reason). A file that cannot
+    be written (full disk, read-only folder) stops the command with one line (status 4);
+    files written before are complete, and no temporary file is left.
     """
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
     from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
+    from rbstab.engine.status import computed  # heavy: numba, numpy (rbstab.engine)
     from rbstab.simulator import is_sign_law  # heavy: numba, numpy
 
     if method is not None:
@@ -167,15 +171,15 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")),
                     chain=any(not hasattr(c, "body") for c in loaded))
     _load_kernels(loaded)
-    failed = 0
+    not_computed = 0
     for written, config in enumerate(loaded):
         try:
             path = run_one(config, out, overwrite=True, command_line=command_line())
         except OSError as exc:
-            raise click.ClickException(f"{describe_os_error(exc)} ({written} of {len(loaded)} results written)")
+            raise MachineFault(f"{describe_os_error(exc)} ({written} of {len(loaded)} results written)")
         attrs = _report(config, path, how[config.name])
         if attrs["status"] != "success":
-            failed += 1
+            not_computed += not computed(attrs["status"], attrs["message"])
             click.echo(f"  {config.name}: {attrs['message']}", err=True)
-    if failed:
-        raise click.ClickException(f"{failed} of {len(loaded)} runs failed")
+    if not_computed:
+        raise NotComputed(f"{not_computed} of {len(loaded)} runs could not be computed (written with the reason)")

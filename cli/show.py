@@ -147,7 +147,8 @@ def _show_result(path: str) -> None:
     console = get_console()
     info = read_summary(path)  # every checksum verified
     summary = info["summary"]
-    settled = convergence_word(info["status"], summary.get("lyapunov_initial"), summary.get("lyapunov_final"))
+    settled = convergence_word(info["status"], summary.get("lyapunov_initial"), summary.get("lyapunov_final"),
+                               message=info.get("message"))
     check = rate_check_text(summary, Path(path))
     if console.json:
         console.emit({"path": path, "kind": "run", **info, "converged": settled == "converged",

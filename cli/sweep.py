@@ -14,7 +14,7 @@ from rbstab.api import execute_sweep
 from rbstab.engine.registry import get_engine
 from rbstab.warning_codes import coded
 
-from ._common import check_engine, command_line, spec_error
+from ._common import MachineFault, NotComputed, check_engine, command_line, spec_error
 from .console import get_console
 from .options import console_options, engine_option, keys_checked, output_option, set_option
 
@@ -240,8 +240,9 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         if not isinstance(ex, str):
             ex.close()
     _say_outcome(outcome)
-    if outcome.n_failed:
-        raise SystemExit(min(outcome.n_failed, 100))
+    if outcome.n_not_computed:
+        raise NotComputed(f"{outcome.n_not_computed} of {outcome.n_runs} runs could not be computed (listed above); "
+                          "the same command with --retry-failed runs them again")
 
 
 def _load(spec, overrides):
@@ -312,8 +313,10 @@ def _execute(spec, output, ex, *, path, **options):
     try:
         return execute_sweep(spec, output, executor=ex, command_line=command_line(), log=get_console().info,
                              **options)
-    except (SweepBusyError, ExecutorError) as exc:
+    except SweepBusyError as exc:
         raise click.ClickException(str(exc))
+    except ExecutorError as exc:  # an unreachable scheduler, a pool of workers that keeps dying
+        raise MachineFault(str(exc))
     except SweepSpecError as exc:
         raise spec_error(path, exc.errors)
 
@@ -328,7 +331,8 @@ def _say_outcome(outcome) -> None:
     pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0
     console.out(
         f"{outcome.name}: {outcome.n_runs} runs ({outcome.n_skipped} skipped, {outcome.n_executed} run now): "
-        f"{c.get('success', 0)} success, {c.get('failed', 0)} failed, {c.get('error', 0)} error, "
+        f"{c.get('success', 0)} success, {outcome.n_fell} fell, {c.get('failed', 0) - outcome.n_fell} failed, "
+        f"{c.get('error', 0)} error, "
         f"{c.get('pending', 0)} pending; converged {outcome.n_converged} ({pct:.1f}%)"
     )
     console.out(f"  index   {outcome.index_path}")

@@ -458,3 +458,41 @@ def test_singular_gains_written_are_noted_those_left_out_are_not():
     assert [str(w.message)[:40] for w in caught] == ["W002 bodies.0.k_t: positive semi-definit",
                                                     "W002 joints.1.l_r: positive semi-definit"]
     assert len(config.warnings) == 2
+
+
+def test_bodies_that_nothing_holds_under_gravity_are_warned_of_at_validation(tmp_path):
+    """A ``free`` joint exerts torques only: the knee's shank on a free joint, with no k_t of
+    its own, falls without bound (W007 at validation, naming it), while the same shank with a
+    k_t that holds its weight, or the hip's thigh on its spring, is not warned of. A run prints
+    no raw Python warning (a library's RuntimeWarning) without -v."""
+    from rbstab.config.physics import unheld_bodies
+
+    knee = EXAMPLES["knee"]
+    result = CliRunner().invoke(cli, ["validate", str(knee), "--set", "joints.knee.variant=free"])
+    assert result.exit_code == 0, result.output
+    (line,) = [x for x in result.output.splitlines() if "W007" in x]
+    assert "body 'shank' held by no joint to the ground" in line and "thigh" not in line, line
+    held = CliRunner().invoke(cli, ["validate", str(knee), "--set", "joints.knee.variant=free",
+                                    "--set", "bodies.shank.k_t=[0,0,400]"])
+    assert held.exit_code == 0 and "W007" not in held.output, held.output
+    eye, zero = np.eye(3), np.zeros((3, 3))
+    g = np.array([0.0, 0.0, -9.81])
+    # two bodies tied by a spring joint, free to the ground: held by the k_t of one of them
+    assert unheld_bodies(["a", "b"], [1.0, 2.0], [zero, 100 * eye], [(None, 0, "free"), (0, 1, "visco_elastic")], g) == []
+    (both,) = unheld_bodies(["a", "b"], [1.0, 2.0], [zero, zero], [(None, 0, "free"), (0, 1, "visco_elastic")], g)
+    assert "bodies 'a', 'b'" in both and "(0, 0, -29.43) N" in both
+    sideways = np.diag([100.0, 100.0, 0.0])  # springs in x and y only: the weight along z is not held
+    assert unheld_bodies(["a"], [1.0], [sideways], [(None, 0, "free")], g)
+    assert unheld_bodies(["a"], [1.0], [sideways], [(None, 0, "free")], np.zeros(3)) == []
+    import subprocess
+    import sys
+
+    both_free = [str(knee), "--set", "joints.knee.variant=free", "--set", "joints.hip.variant=free",
+                 "--set", "simulation.t_end=0.2", "--set", "simulation.n_samples=21"]
+    rbstab = Path(sys.executable).parent / "rbstab"
+    for flags, shown in (((), False), (("-v",), True)):
+        out = tmp_path / f"run{len(flags)}"
+        done = subprocess.run([str(rbstab), "run", *both_free, "-o", str(out), *flags], capture_output=True, text=True)
+        assert done.returncode == 0 and "W007" in done.stderr, done.stderr
+        assert "Warning:" not in done.stderr and "warnings.warn" not in done.stderr, done.stderr  # no raw warning
+        assert ("note: RuntimeWarning from " in done.stderr) == shown, done.stderr

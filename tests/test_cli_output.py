@@ -218,7 +218,7 @@ def test_python_dash_m_rbstab():
 def test_connect_timeout_reaches_the_dask_executor(tmp_path, silent_server):
     pytest.importorskip("distributed")
     result = invoke("sweep", CASE3, "-o", tmp_path / "o", "--scheduler", silent_server, "--connect-timeout", "0.5")
-    assert result.exit_code == 1
+    assert result.exit_code == 4  # a fault of the machine
     assert f"cannot connect to the Dask scheduler at {silent_server}: no Dask scheduler answered within 0.5 s" \
         in result.stderr
     assert "Traceback" not in result.output and not (tmp_path / "o").exists()

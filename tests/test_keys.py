@@ -271,3 +271,27 @@ def test_a_chain_key_by_name_reaches_the_chain_and_a_one_body_key_stays_one():
     with pytest.raises(KeyPathError, match="'initial_state' is a mapping by name"):
         parse_key("initial_state.0.theta.0", ChainSchema)
     assert parse_any_key("joints.hip.k_c.0").entry == "hip"
+
+
+def test_a_typo_is_named_where_it_is_not_in_a_valid_segment_before_it(tmp_path):
+    """The refusal blames the segment that is wrong: a chain's body name (``hat`` is one) is
+    not taken for a one-body field, a mistyped joint name gets its did-you-mean, and a limit
+    refused in a vector says which entry and why."""
+    stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    basin = CliRunner().invoke(cli, ["analyze", str(stance), "--basin", "initial_state.trunk.thta.0=-0.1:0.1:3",
+                                     "--basin", "initial_state.trunk.theta.0=-0.1:0.1:3", "-o", str(tmp_path)])
+    assert basin.exit_code == 1 and "Traceback" not in basin.output
+    assert "'initial_state.trunk' has no 'thta'; did you mean 'initial_state.trunk.theta'?" in basin.output, basin.output
+    joint = CliRunner().invoke(cli, ["run", str(stance), "--set", "joints.ankel.k_r.0=400", "-o", str(tmp_path)])
+    assert joint.exit_code == 1 and "there is no 'ankel' to set; did you mean 'joints.ankle'?" in joint.output, \
+        joint.output
+    one_body = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "stance_ankle.yaml"), "--set",
+                                        "controller.saturation.torque_n=[0,180,.inf]", "-o", str(tmp_path)])
+    assert one_body.exit_code == 1 and "(entry [0] is 0, not > 0)" in one_body.output, one_body.output
+    assert not list(tmp_path.iterdir())
+    from rbstab.config.paths import parse_any_key
+
+    with pytest.raises(KeyPathError, match=r"'initial_state' has no 'thta'; did you mean 'initial_state.theta'\?"):
+        parse_any_key("initial_state.thta.0")  # a one-body field's typo stays the one-body reading
+    with pytest.raises(KeyPathError, match=r"'initial_state.hat' has no 'thta'; did you mean 'initial_state.hat.theta'"):
+        parse_any_key("initial_state.hat.thta.0")

@@ -93,7 +93,7 @@ def test_full_disk_during_run_is_one_line_and_keeps_what_was_there(tmp_path, mon
     monkeypatch.setattr(Path, "write_bytes", full_disk)
     result = CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(out), "--set", "simulation.t_end=0.3",
                                       "--set", "simulation.n_samples=21", "--overwrite"])
-    assert result.exit_code == 1
+    assert result.exit_code == 4  # a fault of the machine
     errors = [line for line in result.output.splitlines() if line.startswith("Error:")]
     assert len(errors) == 1 and "No space left on device" in errors[0] and "0 of 1 results written" in errors[0]
     assert "Traceback" not in result.output
@@ -145,18 +145,18 @@ def test_output_folder_faults_are_one_line_before_any_run(tmp_path, monkeypatch)
 
     (tmp_path / "afile").write_text("")
     below_a_file = CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(tmp_path / "afile" / "sub")])
-    assert below_a_file.exit_code == 1 and "not a folder" in below_a_file.output
+    assert below_a_file.exit_code == 4 and "not a folder" in below_a_file.output
 
     def read_only(*args, **kwargs):
         raise OSError(errno.EROFS, "Read-only file system", str(tmp_path / "ro"))
 
     monkeypatch.setattr(common.tempfile, "mkstemp", read_only)
     refused = CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(tmp_path / "ro")])
-    assert refused.exit_code == 1 and "read-only" in refused.output and "Traceback" not in refused.output
+    assert refused.exit_code == 4 and "read-only" in refused.output and "Traceback" not in refused.output
     monkeypatch.undo()
     monkeypatch.setattr(common.os, "pathconf", lambda path, name: 32)  # a file system of short names
     too_long = CliRunner().invoke(cli, ["run", str(CASE1), "-o", str(tmp_path / "short")])
-    assert too_long.exit_code == 1 and "name is too long" in too_long.output
+    assert too_long.exit_code == 4 and "name is too long" in too_long.output
     assert not list((tmp_path / "short").glob("*.h5"))
 
 

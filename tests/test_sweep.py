@@ -345,7 +345,8 @@ def test_sweep_end_to_end_rerun_and_failure(tmp_path):
     out = tmp_path / "out"
     args = ["sweep", str(path), "-o", str(out), "-j", "2", "--no-progress", *sum((["--set", s] for s in SHORT), [])]
     result = CliRunner().invoke(cli, args)
-    assert result.exit_code == 2, result.output  # two runs hit gimbal lock (one per variant)
+    assert result.exit_code == 0, result.output  # two runs fell (gimbal lock, one per variant): results
+    assert "4 success, 2 fell, 0 failed, 0 error" in result.output
     folder = out / "e2e"
     index = pd.read_csv(folder / "index.csv")
     assert len(index) == 6 and list(index["run"]) == list(range(6))
@@ -361,7 +362,7 @@ def test_sweep_end_to_end_rerun_and_failure(tmp_path):
     assert "omega_1" in index.columns[: list(index.columns).index("status")]
     summary = json.loads((folder / "sweep_summary.json").read_text())
     assert summary["status"] == {"success": 4, "failed": 2, "error": 0, "pending": 0}
-    assert summary["n_runs"] == 6 and summary["fraction_converged"] == 0.0
+    assert summary["n_runs"] == 6 and summary["fraction_converged"] == 0.0 and summary["n_fell"] == 2
     assert summary["parameters"]["omega_1"] == "initial_state.omega.1"
     # every row of a store file: the run id, hash of its config, the index's values
     runs = expand(load_spec(path, SHORT))
@@ -382,7 +383,7 @@ def test_sweep_end_to_end_rerun_and_failure(tmp_path):
     # rerun: everything skipped, files untouched, same exit status
     stamps = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in (folder / "runs").glob("*.h5")}
     result = CliRunner().invoke(cli, args)
-    assert result.exit_code == 2
+    assert result.exit_code == 0
     assert "6 skipped, 0 run now" in result.output
     assert stamps == {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in (folder / "runs").glob("*.h5")}
     pd.testing.assert_frame_equal(pd.read_csv(folder / "index.csv"), index)
@@ -419,6 +420,26 @@ def test_resume_reruns_only_stale_or_corrupt_files_and_timeout(tmp_path):
     assert all("timeout" in message for _, _, message in timed.problems)
 
 
+def test_the_exit_status_says_whether_every_run_was_computed(tmp_path):
+    """0 when every run was computed, whatever its physics (test_sweep_end_to_end_rerun_and_failure:
+    runs that fell); 3 when runs could not be computed (a wall-time limit), naming how many;
+    errors count as not computed."""
+    from rbstab.sweep.runner import SweepOutcome
+
+    spec = {"name": "limits", "base": str(CASE3), "grid": {"initial_state.omega.0": [10.0, 12.0]}}
+    path = write_spec(tmp_path, spec)
+    sets = sum((["--set", s] for s in SHORT), [])
+    done = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "ok"), "--no-progress", *sets])
+    assert done.exit_code == 0, done.output
+    timed = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "t"), "--no-progress", "--timeout",
+                                     "1e-9", *sets])
+    assert timed.exit_code == 3, timed.output
+    assert "0 success, 0 fell, 2 failed, 0 error" in timed.output
+    assert "2 of 2 runs could not be computed" in timed.output and "Traceback" not in timed.output
+    outcome = SweepOutcome("x", tmp_path, 7, counts={"success": 2, "failed": 4, "error": 1}, n_fell=3)
+    assert (outcome.n_failed, outcome.n_not_computed) == (5, 2)
+
+
 def test_busy_folder_is_refused(tmp_path):
     from rbstab.sweep.runner import _lock
 
@@ -446,13 +467,13 @@ def test_dask_executor_gives_identical_results(tmp_path):
     path = write_spec(tmp_path, spec)
     sets = sum((["--set", s] for s in SHORT), [])
     local = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "local"), "-j", "2", "--no-progress", *sets])
-    assert local.exit_code == 2, local.output
+    assert local.exit_code == 0, local.output
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         result = CliRunner().invoke(
             cli, ["sweep", str(path), "-o", str(tmp_path / "dask"), "--scheduler", cluster.scheduler_address,
                   "--no-progress", *sets],
         )
-    assert result.exit_code == 2, result.output
+    assert result.exit_code == 0, result.output
     assert "Dask scheduler" in result.output
     # store files written by the parent from the workers' bytes: the same runs, the same bits
     ia = pd.read_csv(tmp_path / "local" / "dask" / "index.csv").drop(columns=["wall_time", "file"])
@@ -486,7 +507,7 @@ def test_dask_unreachable_scheduler_is_a_clean_cli_error(tmp_path):
 
     with mock.patch.object(executors.DaskExecutor, "__init__", quick):
         result = CliRunner().invoke(cli, ["sweep", str(path), "-o", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"])
-    assert result.exit_code == 1
+    assert result.exit_code == 4  # a fault of the machine
     assert "cannot connect to the Dask scheduler at tcp://127.0.0.1:9" in result.output
     assert "Traceback" not in result.output
     assert not (tmp_path / "o").exists()

@@ -4,7 +4,8 @@ The lines ``rbstab run``, ``rbstab show`` and the report print beside a run's fi
 
 - :func:`convergence_word`: ``converged`` or ``not converged by t_end`` (the rule of
   :mod:`rbstab.convergence`, the one sweeps use) beside the solver's ``success``: a run
-  that reached t_end has not necessarily come to rest.
+  that reached t_end has not necessarily come to rest; for a failed run, ``fell before
+  t_end`` or ``stopped before t_end`` (:func:`rbstab.engine.status.fell`).
 - :func:`rate_check_reason`: why the check of the analytic dv/dt against the numerical
   derivative of v failed (the largest mismatch, when, the likely cause and its fix).
 - :func:`chop`: a number at round-off level (below the tolerance that produced it) as 0.
@@ -19,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from .convergence import DEFAULT_LYAPUNOV_RATIO, converged
+from .engine.status import fell
 from .summary import LYAPUNOV_RATE_TOLERANCE
 
 __all__ = ["CONVERGED", "NOT_CONVERGED", "convergence_word", "rate_check_reason", "file_rate_check_reason",
@@ -34,8 +36,15 @@ NOISE_LIMIT = 3e-5
 
 
 def convergence_word(status: str, lyapunov_initial: Any, lyapunov_final: Any,
-                     ratio: float = DEFAULT_LYAPUNOV_RATIO) -> str:
-    """:data:`CONVERGED` or :data:`NOT_CONVERGED` (also for a failed run)."""
+                     ratio: float = DEFAULT_LYAPUNOV_RATIO, *, message: str | None = None) -> str:
+    """:data:`CONVERGED` or :data:`NOT_CONVERGED` for a run that reached t_end.
+
+    A failed run, given its ``message``, is ``fell before t_end`` (gimbal lock, the
+    admissible region left: a result of its physics) or ``stopped before t_end`` (it could
+    not be computed further); its message says why and when. Without the message,
+    :data:`NOT_CONVERGED`."""
+    if status not in ("success", "pending") and message is not None:
+        return f"{'fell' if fell(status, message) else 'stopped'} before t_end"
     return CONVERGED if converged(status == "success", lyapunov_initial, lyapunov_final, ratio) else NOT_CONVERGED
 
 

@@ -78,6 +78,12 @@ WARNING_CODES: dict[str, WarningCode] = {
             "(the run goes on with the value as given)",
         ),
         WarningCode(
+            "W007", "joints", "with gravity, bodies that nothing holds fall without bound",
+            "no joint ties them to the ground (their joints are free) and their ground-anchored feedback "
+            "(bodies' k_t) leaves a direction in which their weight pulls: they fall without end, v has no "
+            "minimum and the run's v means nothing; give them a joint to the ground or a k_t",
+        ),
+        WarningCode(
             "W006", "rbstab tune", "a tuned value lies within 1 % of its search range's edge",
             "the optimum may lie beyond the range searched: widen that --vary range and tune again",
         ),

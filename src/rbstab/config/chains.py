@@ -72,7 +72,7 @@ from .loader import (
     simulation_settings,
 )
 from .paths import apply_overrides, plain_tree
-from .physics import angle_warnings, inertia_warnings, semidefinite_notes
+from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies
 from .schema import (
     BODY_GAINS,
     CHAIN_TOP_LEVEL,
@@ -334,6 +334,9 @@ def _notes(chain: Chain, run: ChainSchema, source: str | None) -> tuple[str, ...
         used = VARIANTS[joint.variant].required_gains
         lines += [m.replace("controller.", f"joints.{i}.") for m in semidefinite_notes(
             {g: getattr(joint, g) for g in (*JOINT_GAINS, "k_s") if g in used or g in ("k_r", "l_r")})]
+    lines += unheld_bodies([b.name for b in chain.bodies], [b.mass for b in chain.bodies], [b.k_t for b in chain.bodies],
+                           [(None if j.parent == GROUND else j.parent, j.child, j.variant) for j in chain.joints],
+                           chain.gravity)
     for line in lines:
         category = SemiDefiniteGainWarning if line.startswith("W002") else PhysicalPlausibilityWarning
         warnings.warn(f"{source}: {line}" if source else line, category, stacklevel=4)

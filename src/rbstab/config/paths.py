@@ -220,9 +220,8 @@ class KeyPath:
                 node = _child(node, step)
             except LookupError:
                 parent = ".".join(map(str, steps[:depth]))
-                found = _found(node)
-                raise KeyPathError(self.key, f"'{parent}' {found}; there is no {_shown(str(step))} to set "
-                                             "(set the whole value)") from None
+                raise KeyPathError(self.key, f"'{parent}' {_found(node)}; there is no {_shown(str(step))} to set"
+                                             f"{_close_name(node, step, parent)}") from None
         last = steps[-1]
         if isinstance(node, dict) and isinstance(last, str):
             node[last] = value
@@ -230,9 +229,8 @@ class KeyPath:
             node[last] = value
         else:
             where = ".".join(map(str, steps[:-1]))
-            found = _found(node)
-            raise KeyPathError(self.key, f"'{where}' {found}; there is no {_shown(str(last))} to set "
-                                         "(set the whole value)")
+            raise KeyPathError(self.key, f"'{where}' {_found(node)}; there is no {_shown(str(last))} to set"
+                                         f"{_close_name(node, last, where)}")
 
 
 def _found(node: Any) -> str:
@@ -243,6 +241,15 @@ def _found(node: Any) -> str:
         named = f" (0..{len(node) - 1}, or by name: {', '.join(names)})" if names and len(names) == len(node) else ""
         return f"has {len(node)} entr{'y' if len(node) == 1 else 'ies'}{named}"
     return f"is {kind_of(node)}"
+
+
+def _close_name(node: Any, step: Any, where: str) -> str:
+    """The end of the message of a step that names nothing in ``node``: the closest name of
+    a named list's entries (``; did you mean 'joints.ankle'?``), else what to do instead."""
+    names = [e["name"] for e in node if isinstance(e, Mapping) and isinstance(e.get("name"), str)] \
+        if isinstance(node, list) else []
+    close = difflib.get_close_matches(str(step), names, n=1) if isinstance(step, str) else []
+    return f"; did you mean '{where}.{close[0]}'?" if close else " (set the whole value)"
 
 
 def _is_number(value: Any) -> bool:
@@ -408,12 +415,18 @@ def parse_any_key(key: str) -> KeyPath:
         section, _, rest = key.partition(".") if isinstance(key, str) else ("", "", "")
         one_body_section = RunSchema.model_fields.get(section)
         model = submodel(one_body_section.annotation) if one_body_section is not None else None
-        if model is not None and rest.partition(".")[0] in model.model_fields:
+        segment = rest.partition(".")[0]
+        if model is not None and segment in model.model_fields:
             raise  # a one-body key (``initial_state.theta.x``), not a body named like its field
         try:
             return parse_key(key, ChainSchema)
         except KeyPathError as chain:
-            raise (chain if one_body_section is None and section in ChainSchema.model_fields else one_body) from None
+            if section in ChainSchema.model_fields and (
+                    one_body_section is None  # a chain's section (``joints``)
+                    or (model is not None and not difflib.get_close_matches(segment, list(model.model_fields), n=1))
+                    or ("did you mean" in chain.problem and "did you mean" not in one_body.problem)):
+                raise chain from None  # a body's name (``initial_state.hat.thta``): the chain's reading is the one meant
+            raise one_body from None
 
 
 def apply_overrides(data: Mapping, overrides: Sequence[str], root: Any = None) -> dict:

@@ -6,6 +6,8 @@
   gain included): valid physics, but v is then not a strict Lyapunov function (a note).
 - :func:`unheld_weight`: with gravity, stiffnesses that leave a direction in which nothing
   holds the weight: the body falls without end, there is no equilibrium (an error).
+- :func:`unheld_bodies`: the same for a chain's bodies that no joint ties to the ground (a
+  warning, W007).
 
 Matrices here are the validated 3x3 arrays of :class:`rbstab.model.Gains`, symmetric
 positive semi-definite (:mod:`rbstab.config.schema`).
@@ -21,7 +23,8 @@ import numpy as np
 
 from ..warning_codes import coded
 
-__all__ = ["inertia_warnings", "angle_warnings", "semidefinite_notes", "unheld_weight", "SINGULAR_RTOL"]
+__all__ = ["inertia_warnings", "angle_warnings", "semidefinite_notes", "unheld_weight", "unheld_bodies",
+           "SINGULAR_RTOL"]
 
 #: An eigenvalue at most this times the largest eigenvalue magnitude counts as zero (also
 #: down to minus this: rounding of a singular matrix written with decimals).
@@ -253,3 +256,68 @@ def _springs_unheld(variant: str, gains: Mapping[str, np.ndarray | float | None]
         "where no spring acts; the body falls without end and there is no "
         f"equilibrium{equilibrium}"
     )
+
+
+def unheld_bodies(names, masses, k_t, joints, gravity) -> list[str]:
+    """W007 warnings: with gravity, the groups of a chain's bodies that nothing holds.
+
+    Joints other than ``free`` hold their child to their parent (``permanent``, ``sliding``,
+    ``visco_elastic``, ``embedded``: a constraint or a spring at the point C); a ``free``
+    joint exerts torques only. The bodies tied together by such joints form groups; a group
+    tied to the ground holds its weight. Another group is held only by its bodies' ground-
+    anchored feedback H_b = -K_t,b X_b - L_t,b V_b (eq 24): at rest the net force on it is
+    sum_b (m_b g - K_t,b X_b), so along a direction u with K_t,b u = 0 for every body of the
+    group (the null space of sum_b K_t,b, each PSD) the weight (sum_b m_b) g.u pulls without
+    end: the group falls without bound and v has no minimum.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The bodies' names.
+    masses : sequence of float
+        m_b [kg].
+    k_t : sequence of ndarray, shape (3, 3)
+        K_t,b [N/m], each symmetric positive semi-definite.
+    joints : sequence of (int or None, int, str)
+        (parent body's index, None for the ground; child body's index; variant) per joint.
+    gravity : ndarray, shape (3,)
+        g [m/s^2], inertial frame.
+
+    Returns
+    -------
+    list of str
+        One W007 line per group that falls, naming its bodies.
+    """
+    g = np.asarray(gravity, float)
+    if not np.linalg.norm(g):
+        return []
+    group = list(range(len(names)))  # union-find over the holding joints
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    grounded = set()
+    for parent, child, variant in joints:
+        if variant == "free":
+            continue
+        if parent is None:
+            grounded.add(child)
+        else:
+            group[root(child)] = root(parent)
+    grounded = {root(i) for i in grounded}
+    lines = []
+    for r in sorted({root(i) for i in range(len(names))} - grounded):
+        members = [i for i in range(len(names)) if root(i) == r]
+        weight = sum(masses[i] for i in members) * g
+        null = _null_space(sum(np.asarray(k_t[i], float) for i in members))
+        along = null @ (null.T @ weight)
+        if np.linalg.norm(along) <= _WEIGHT_RTOL * np.linalg.norm(weight):
+            continue
+        who = ", ".join(f"'{names[i]}'" for i in members)
+        lines.append(coded("W007", (
+            f"joints: bod{'y' if len(members) == 1 else 'ies'} {who} held by no joint to the ground and no k_t along "
+            f"{_fmt(along / np.linalg.norm(along))}: with gravity the weight {_fmt(weight)} N pulls there without end, "
+            "so it falls without bound and v has no minimum")))
+    return lines

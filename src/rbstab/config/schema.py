@@ -580,9 +580,17 @@ def _per_axis(value: Any, check: Callable[[Any], Any]) -> Any:
             try:
                 out.append(check(x))
             except Invalid as exc:
-                raise Invalid(f"entry [{i}] is {exc.detail}") from None
+                raise Invalid(f"entry [{i}] is {exc.detail or _out_of_bounds(x, check)}") from None
         return out
     return check(value)
+
+
+def _out_of_bounds(value: Any, check: Callable[[Any], Any]) -> str:
+    """``0, not > 0``: a number that ``check`` (a :func:`bounded_number`) refused for its bounds."""
+    bounds = getattr(check, "rule", (None, {}))[1]
+    words = [f"{op} {bounds[name]:g}" for name, op in (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
+             if bounds.get(name) is not None]
+    return f"{value!r}, not {' and '.join(words)}" if words else repr(value)
 
 
 def _limits(value: Any) -> float | list[float]:

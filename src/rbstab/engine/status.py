@@ -23,7 +23,11 @@ code    name                 the run ...
 ======  ===================  ==========================================================
 
 A run whose code is not :data:`SUCCESS` has status ``"failed"``, with
-:func:`status_message` as its message.
+:func:`status_message` as its message. Two kinds of failed run differ in what they mean
+(:func:`fell`): a run that stopped at gimbal lock or where it left the admissible region
+*fell*: its motion was computed up to the event, which is a result of its physics; every
+other failed run (a solver failure, a non-finite state, a step, wall-time or switching
+limit, a launch that did not start) *could not be computed*.
 """
 
 from __future__ import annotations
@@ -49,6 +53,9 @@ __all__ = [
     "TOO_SMALL_STEP_MESSAGE",
     "DEFAULT_MAX_STEPS",
     "status_message",
+    "FALL_MESSAGES",
+    "fell",
+    "computed",
 ]
 
 SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT, SWITCHING_LIMIT, NOT_STARTED = (
@@ -137,3 +144,22 @@ def status_message(status: int, t_stop: float, gimbal_margin: float, max_steps: 
     return STATUSES[int(status)][1].format(
         t_stop=t_stop, gimbal_margin=gimbal_margin, max_steps=max_steps, max_wall_time=max_wall_time,
         max_switchings=max_switchings, resolution=resolution, bound=bound)
+
+
+#: How the message of a run that fell begins (the codes :data:`GIMBAL_LOCK` and
+#: ``LEFT_REGION + k``, for one body and for chains).
+FALL_MESSAGES = ("gimbal lock", "left the admissible region")
+
+
+def fell(status: str, message: str | None) -> bool:
+    """Whether a run of ``status`` (``"success"``, ``"failed"``, ``"error"``, ``"pending"``)
+    and ``message`` fell: it stopped at gimbal lock or where it left the admissible region,
+    its motion computed up to there (a result of its physics, not a fault)."""
+    return status == "failed" and isinstance(message, str) and message.startswith(FALL_MESSAGES)
+
+
+def computed(status: str, message: str | None) -> bool:
+    """Whether a run was computed: it reached t_end (``"success"``) or :func:`fell`. A run
+    that is not (a solver failure, a non-finite state, a step, wall-time or switching limit,
+    an exception) has no result of its physics."""
+    return status == "success" or fell(status, message)

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
+from ..engine.status import fell
 from ..io.atomic import atomic_path
 from ..kinematics import rotation_matrix
 from .load import RunData
@@ -532,11 +533,11 @@ def _corner_text(sc: Scene, k: int) -> str:
 
 
 def _notes(sc: Scene) -> list[tuple[str, str]]:
-    """Lines under the view and their colours: a failure and its time (red), a box side the
-    inertia cannot give (grey)."""
+    """Lines under the view and their colours: a failure and its message, which says when
+    (red), a box side the inertia cannot give (grey)."""
     notes = []
     if sc.t_failed is not None:
-        notes.append((f"{sc.status} at t = {sc.t_failed:.4g} s: {sc.message}", "#b00000"))
+        notes.append((f"{'fell' if fell(sc.status, sc.message) else sc.status}: {sc.message}", "#b00000"))
     if sc.shape.thin.any():
         which = ", ".join(f"{'xyz'[i]}_b" for i in np.flatnonzero(sc.shape.thin))
         notes.append((f"the inertia has no uniform box (a moment exceeds the sum of the other two): side along "

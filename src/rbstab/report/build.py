@@ -267,7 +267,8 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
         ["run", "file", "variant", "status", "converged", "t_final [s]", "method", "nfev", "njev", "nlu",
          "wall time [s]", "message"],
         [[r["run"], Path(r["file"]).name, r["variant"], r["status"],
-          convergence_word(r["status"], r["lyapunov_initial"], r["lyapunov_final"]), _f(r["t_final"]), str(r["method"]),
+          convergence_word(r["status"], r["lyapunov_initial"], r["lyapunov_final"], message=r["message"]),
+          _f(r["t_final"]), str(r["method"]),
           _f(r["nfev"]), _f(r["njev"]), _f(r["nlu"]), _f(r["wall_time"], 3), r["message"] if r["status"] != "success" else ""]
          for r in rows],
     ))

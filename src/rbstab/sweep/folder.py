@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from ..convergence import RULE, converged
+from ..engine.status import FALL_MESSAGES
 from ..io.atomic import atomic_path, write_text_atomic
 from ..layout import is_index, parameter_attributes
 
@@ -378,6 +379,7 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     written, digests = _write_index_files(directory, columns, csv=wants_csv(index, n))
     counted = pd.DataFrame({"base": head["base"].dictionary_encode().to_pandas(),
                             "status": status.dictionary_encode().to_pandas(), "converged": done["converged"],
+                            "fell": _fell(status, message),
                             **({"wall_time": done["wall_time"]} if "wall_time" in done else {})})
     summary = summarize_columns(counted, name=name, ratio=ratio, parameters=table.parameters())
     summary["index"] = written
@@ -629,9 +631,29 @@ def _arrow_frame(table):
     return pa.table(columns, names=table.column_names).to_pandas()
 
 
+def _fell(status, message) -> np.ndarray:
+    """Whether each run fell (:func:`rbstab.engine.status.fell`), from the index's pyarrow
+    ``status`` and ``message`` columns, as a bool array."""
+    import numpy as np  # heavy: numpy
+    import pyarrow as pa  # heavy: pyarrow
+    import pyarrow.compute as pc  # heavy: pyarrow
+
+    if pa.types.is_dictionary(status.type):
+        status = status.cast(status.type.value_type)
+    if pa.types.is_dictionary(message.type):
+        message = message.cast(message.type.value_type)
+    if pa.types.is_null(message.type):
+        return np.zeros(len(status), dtype=bool)
+    failed = pc.equal(status, "failed")
+    starts = [pc.starts_with(message, prefix) for prefix in FALL_MESSAGES]
+    hit = pc.and_(failed, pc.or_(*starts) if len(starts) > 1 else starts[0])
+    return np.asarray(pc.fill_null(hit, False).to_numpy(zero_copy_only=False), dtype=bool)
+
+
 def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str, str] | None = None) -> dict:
     """The content of ``sweep_summary.json`` of an index (a DataFrame with ``base``,
-    ``status``, ``converged`` and ``wall_time`` columns): counts, converged fraction,
+    ``status``, ``converged``, ``fell`` and ``wall_time`` columns): counts, converged
+    fraction, the failed runs that fell (``n_fell``: :func:`rbstab.engine.status.fell`),
     per base, parameters (name -> config key)."""
     import pandas as pd  # heavy: pandas
 
@@ -639,7 +661,8 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
         status = {s: 0 for s in STATUSES}
         status.update({str(k): int(v) for k, v in frame["status"].value_counts().items()})
         n, converged = len(frame), int(frame["converged"].sum())
-        return {"n_runs": n, "status": status, "n_converged": converged,
+        n_fell = int(frame["fell"].sum()) if "fell" in frame else 0
+        return {"n_runs": n, "status": status, "n_converged": converged, "n_fell": n_fell,
                 "fraction_converged": converged / n if n else 0.0}
 
     out: dict[str, Any] = {"name": name, **counts(index)}

@@ -185,6 +185,7 @@ class SweepOutcome:
     n_executed: int = 0
     counts: dict = field(default_factory=dict)
     n_converged: int = 0
+    n_fell: int = 0
     problems: list = field(default_factory=list)
     tracebacks: dict = field(default_factory=dict)
     stale_files: list = field(default_factory=list)
@@ -200,8 +201,14 @@ class SweepOutcome:
 
     @property
     def n_failed(self) -> int:
-        """Runs that failed or raised (the CLI's exit status, capped at 100)."""
+        """Runs that failed (fell or could not be computed) or raised."""
         return self.counts.get("failed", 0) + self.counts.get("error", 0)
+
+    @property
+    def n_not_computed(self) -> int:
+        """Runs that failed without falling or raised: runs with no result of their physics
+        (:func:`rbstab.engine.status.computed`; the CLI's exit status 3)."""
+        return self.n_failed - self.n_fell
 
     @property
     def index_path(self) -> Path:
@@ -674,6 +681,7 @@ def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepO
     outcome.index_file = summary["index"]
     outcome.counts = dict(summary["status"])
     outcome.n_converged = summary["n_converged"]
+    outcome.n_fell = summary["n_fell"]
 
 
 def _rows_of(results: list):
