@@ -86,6 +86,7 @@ def _parameter_values(index, column: str) -> dict:
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
     from rbstab.sweep.folder import read_index, read_parameters, read_spec  # heavy: numpy
+    from rbstab.engine.status import fell  # heavy: numba, numpy (rbstab.engine)
 
     index = read_index(path)  # checksum verified
     if "max_abs_constraint_error_x" in index:
@@ -93,9 +94,11 @@ def sweep_overview(path: str) -> dict:
     spec = read_spec(path)
     converged = int(index["converged"].astype(str).eq("True").sum()) if "converged" in index else 0
     counts = {s: int(n) for s, n in index["status"].value_counts().items()}
+    failed = index[index["status"] == "failed"]
+    n_fell = int(sum(fell("failed", m) for m in failed["message"])) if "message" in index else 0
     return {
         "path": path, "kind": "sweep", "name": spec.get("name", Path(path).name), "n_runs": len(index),
-        "status": counts, "n_converged": converged,
+        "status": counts, "n_fell": n_fell, "n_converged": converged,
         "lyapunov_ratio": (spec.get("convergence") or {}).get("lyapunov_ratio"),
         "parameters": {column: {"key": key, **_parameter_values(index, column)}
                        for column, key in read_parameters(path, index).items() if column in index},
@@ -117,7 +120,8 @@ def _show_sweep(path: str) -> None:
         console.emit(info)
     n = info["n_runs"]
     console.out(f"{path}")
-    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{v} {k}" for k, v in info["status"].items()))
+    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{v} {k}" for k, v in info["status"].items())
+                + (f" ({info['n_fell']} of them fell)" if info["n_fell"] else ""))
     console.out(f"  converged  {info['n_converged']} of {n} ({100.0 * info['n_converged'] / max(n, 1):.1f}%; "
                 f"v(t_end) <= {info['lyapunov_ratio']} v(0))")
     for column, p in info["parameters"].items():
