@@ -17,6 +17,8 @@ from scipy.integrate import solve_ivp
 from rbstab.analysis import read_analysis
 from rbstab.analysis.push import Pushes, basin_stability, push_analysis, push_directions
 from rbstab.analysis.robustness import wilson_interval
+from rbstab.analysis.text import rule_lines
+from rbstab.analysis.thresholds import EXPLAINS_BAR, INTERVAL_MARGIN, split_rule
 from rbstab.config import config_from_mapping, load_config
 from rbstab_cli.main import cli
 
@@ -117,6 +119,87 @@ def test_basin_stability_over_a_box_across_the_edge_separates_by_the_tilt(pendul
     assert np.all(found.recovered[theta < edge - 0.02]) and not np.any(found.recovered[theta > edge + 0.02])
     (s,) = found.separations
     assert s.stable_side == "below" and abs(s.threshold - edge) < 0.05 and s.auc < 0.05
+    assert s.rule.side == "below" and abs(s.rule.high - edge) < 0.05 and np.isnan(s.rule.low) and s.rule.explains
+
+
+def test_basin_stability_over_a_symmetric_box_recovers_inside_an_interval(pendulum):
+    """Tilts in [-0.8, 0.8] rad: -theta falls like theta, the recovered draws lie inside
+    (-edge, edge); one threshold would put half the failed draws on the wrong side."""
+    found = basin_stability(pendulum, ranges=["initial_state.theta.0=-0.8:0.8"], draws=60, seed=3)
+    edge = math.asin(N_MAX / (M * G * LENGTH))
+    (s,) = found.separations
+    rule = s.rule
+    assert rule.side == "inside" and rule.explains and rule.balanced_accuracy == 1.0
+    assert abs(rule.low + edge) < 0.05 and abs(rule.high - edge) < 0.05
+    np.testing.assert_array_equal(rule.holds(found.values[:, 0]), found.recovered)
+
+
+def _brute_force_accuracy(x, stable):
+    """Best balanced accuracy of one threshold and of two, over every cut (and pair of cuts)
+    between distinct values, each side."""
+    u = np.unique(x)
+    cuts = 0.5 * (u[1:] + u[:-1])
+
+    def accuracy(says):
+        return 0.5 * (says[stable].mean() + (~says[~stable]).mean())
+
+    one = max(max(accuracy(x < c), accuracy(x > c)) for c in cuts)
+    two = max(max(accuracy((x > a) & (x < b)), accuracy((x < a) | (x > b)))
+              for i, a in enumerate(cuts) for b in cuts[i + 1:])
+    return one, two
+
+
+def test_split_rule_is_the_best_rule_of_one_or_two_thresholds():
+    """Against every cut and pair of cuts, on noisy outcomes with tied values; the rule's own
+    balanced accuracy is that of what it says on the samples."""
+    rng = np.random.default_rng(5)
+    for shape in ("one-sided", "inside", "outside"):
+        x = np.round(rng.uniform(-1, 1, 80), 1)  # ties
+        clean = {"one-sided": x < 0.2, "inside": np.abs(x - 0.1) < 0.4, "outside": np.abs(x) > 0.5}[shape]
+        stable = clean ^ (rng.uniform(size=x.size) < 0.15)
+        one, two = _brute_force_accuracy(x, stable)
+        interval = split_rule(x, stable, margin=-1.0)  # the best interval, whatever it gains
+        single = split_rule(x, stable, margin=2.0)  # the best single threshold
+        assert single.side in ("below", "above") and single.balanced_accuracy == pytest.approx(one)
+        assert interval.side in ("inside", "outside") and interval.balanced_accuracy == pytest.approx(two)
+        for rule in (single, interval):
+            says = rule.holds(x)
+            assert rule.balanced_accuracy == pytest.approx(0.5 * (says[stable].mean() + (~says[~stable]).mean()))
+            assert rule.explains == (rule.balanced_accuracy >= EXPLAINS_BAR)
+        chosen, expected = split_rule(x, stable), interval if two >= one + INTERVAL_MARGIN else single
+        assert chosen.side == expected.side and chosen.balanced_accuracy == expected.balanced_accuracy
+        np.testing.assert_array_equal([chosen.low, chosen.high], [expected.low, expected.high])  # NaN == NaN here
+    assert split_rule(x, np.ones(x.size, bool)) is None and split_rule(x, np.zeros(x.size, bool)) is None
+
+
+def test_split_rule_of_a_two_sided_outcome_is_an_interval_and_of_a_one_sided_one_a_threshold():
+    x = np.random.default_rng(6).uniform(-0.4, 0.4, 50)
+    inside = split_rule(x, np.abs(x) < 0.24)
+    assert inside.side == "inside" and inside.balanced_accuracy == 1.0 and inside.explains
+    assert x[x < -0.24].max() < inside.low < x[np.abs(x) < 0.24].min()
+    assert x[np.abs(x) < 0.24].max() < inside.high < x[x > 0.24].min()
+    assert split_rule(x, np.abs(x) > 0.1).side == "outside"
+    below = split_rule(x, x < 0.1)
+    assert below.side == "below" and np.isnan(below.low) and x[x < 0.1].max() < below.high < x[x >= 0.1].min()
+    assert split_rule(x, x > -0.2).side == "above"
+    # one odd recovered draw at the top: an outside interval gains 1/(2 n_recovered) < the margin
+    stable = x < 0.1
+    stable[np.argmax(x)] = True
+    assert split_rule(x, stable).side == "below"
+    assert split_rule(x, stable, margin=0.0).side == "outside"
+
+
+def test_no_single_key_explains_an_outcome_of_two_keys_together():
+    """Recovered iff |theta + 0.5 omega| < 0.3: neither key alone reaches the bar."""
+    rng = np.random.default_rng(7)
+    theta, omega = rng.uniform(-0.8, 0.8, 400), rng.uniform(-3, 3, 400)
+    recovered = np.abs(theta + 0.5 * omega) < 0.3
+    rules = [("theta", split_rule(theta, recovered)), ("omega", split_rule(omega, recovered))]
+    assert not any(r.explains for _, r in rules)
+    best = max(r.balanced_accuracy for _, r in rules)
+    (line,) = rule_lines(rules, EXPLAINS_BAR)
+    assert f"no single key explains the outcome (best: balanced accuracy {best:.1%}" in line
+    assert split_rule(theta + 0.5 * omega, recovered).explains  # the two together do
 
 
 def test_cli_push_and_stability_files_and_json(tmp_path):
@@ -143,6 +226,38 @@ def test_cli_push_and_stability_files_and_json(tmp_path):
     record = json.loads(result.stdout.splitlines()[-1])
     assert "push" not in record and record["basin_stability"]["draws"] == 40
     assert record["basin_stability"]["fraction"] == 1.0  # far below every threshold
+
+
+def test_cli_basin_stability_gives_a_rule_only_where_it_explains(tmp_path):
+    """Text, --json and the file: tilt and rate drawn together, no single key explains the
+    outcome; the tilt alone over a symmetric box, recovered inside an interval."""
+    out = tmp_path / "analysis"
+    base = ["analyze", PENDULUM, "-o", str(out), "--json", "--no-certificate", "--no-simulation", "--set",
+            "simulation.n_samples=201", "-j", "1"]
+    result = CliRunner().invoke(cli, [*base, "--basin-stability", "initial_state.theta.0=-0.8:0.8",
+                                      "--basin-stability", "initial_state.omega.0=-4:4", "-n", "200", "--seed", "1"],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    separations = json.loads(result.stdout.splitlines()[-1])["basin_stability"]["separations"]
+    assert [s["explains"] for s in separations] == [False, False]
+    best = max(s["balanced_accuracy"] for s in separations)
+    assert f"no single key explains the outcome (best: balanced accuracy {best:.1%}" in result.stderr + result.stdout
+    assert "recovered where" not in result.stderr + result.stdout
+    ds = read_analysis(out / "saturated_pendulum.analysis.nc")
+    assert ds["stability_explains"].values.tolist() == [0, 0]
+    np.testing.assert_allclose(ds["stability_balanced_accuracy"].values, [s["balanced_accuracy"] for s in separations])
+
+    result = CliRunner().invoke(cli, [*base, "--basin-stability", "initial_state.theta.0=-0.8:0.8", "-n", "40"],
+                                catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+    (s,) = json.loads(result.stdout.splitlines()[-1])["basin_stability"]["separations"]
+    assert s["recovered_side"] == "inside" and s["explains"] and s["threshold_low"] < 0 < s["threshold_high"]
+    assert (f"initial_state.theta.0: recovered where {s['threshold_low']:.5g} < x < {s['threshold_high']:.5g}"
+            in result.stderr + result.stdout)
+    ds = read_analysis(out / "saturated_pendulum.analysis.nc")
+    assert str(ds["stability_recovered_side"].values[0]) == "inside" and int(ds["stability_explains"].values[0]) == 1
+    assert ds["stability_threshold_low"].values[0] == s["threshold_low"]
+    assert ds["stability_threshold_high"].attrs["long_name"].startswith("upper threshold of the key's rule")
 
 
 @pytest.mark.parametrize("args, expected", [
@@ -204,6 +319,7 @@ def test_report_draws_the_sphere_the_ladder_and_the_curves(tmp_path):
             "analysis_drawn_stability.png"} <= figures
     page = (report / "index.html").read_text()
     assert "smallest fatal torque push over 4 directions" in page and "basin stability: " in page
+    assert "initial_state.theta.0: recovered where x &lt; " in page
 
 
 def test_free_body_without_gravity_fails_only_where_the_push_reaches_the_theta_limit():

@@ -12,6 +12,8 @@
   bound; the reduced 6-state model);
 - :mod:`~rbstab.analysis.basin`: the basin of attraction over a 2-D slice, by simulation;
 - :mod:`~rbstab.analysis.robustness`: stable fraction and separating parameters of a sweep;
+- :mod:`~rbstab.analysis.thresholds`: the rule of one or two thresholds that separates two
+  outcomes along one key (basin stability's rules);
 - :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin
   stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
 - :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;

@@ -31,8 +31,10 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
     push_rung); push_refined_direction(push_refined, axis), push_refined_threshold;
     push_minimum, push_minimum_direction(axis)
     basin stability: stability_value(draw, stability_key), stability_recovered(draw),
-    stability_low, stability_high, stability_auc (stability_key); stability_fraction,
-    stability_interval_low, stability_interval_high
+    stability_low, stability_high, stability_auc, stability_recovered_side,
+    stability_threshold_low, stability_threshold_high, stability_balanced_accuracy,
+    stability_explains (stability_key); stability_fraction, stability_interval_low,
+    stability_interval_high
     global attributes: verdict, notes, certificate_argument, sublevel_bound, push_kind,
     push_rule, stability_rule, ...
 
@@ -57,6 +59,7 @@ from ..io.atomic import atomic_path
 from ..io.hdf5 import read_format
 from ..io.metadata import provenance_attributes
 from ..layout import BLOCK_UNITS
+from .thresholds import EXPLAINS_BAR
 
 __all__ = [
     "certificate_record",
@@ -272,9 +275,13 @@ def _stability_variables(analysis) -> tuple[dict, dict, dict]:
     b = analysis.basin_stability
     if b is None:
         return {}, {}, {}
-    auc = np.full(len(b.keys), np.nan)
+    n = len(b.keys)
+    auc, low, high, accuracy = (np.full(n, np.nan) for _ in range(4))
+    side, explains = np.full(n, "", dtype=object), np.zeros(n, dtype=np.int8)
     for s in b.separations:
-        auc[b.keys.index(s.parameter)] = s.auc
+        i = b.keys.index(s.parameter)
+        auc[i], low[i], high[i], accuracy[i] = s.auc, s.rule.low, s.rule.high, s.rule.balanced_accuracy
+        side[i], explains[i] = s.rule.side, s.rule.explains
     coords = {"stability_key": _var(("stability_key",), np.array(b.keys, dtype=object), "1", "what was drawn")}
     variables = {
         "stability_units": _var(("stability_key",), np.array(b.units, dtype=object), "1", "units of each key"),
@@ -285,13 +292,29 @@ def _stability_variables(analysis) -> tuple[dict, dict, dict]:
                                          "state, or just after the drawn push)"),
         "stability_low": _var(("stability_key",), b.low, "1", "low end of the uniform box"),
         "stability_high": _var(("stability_key",), b.high, "1", "high end of the uniform box"),
-        "stability_auc": _var(("stability_key",), auc, "1", "P(recovered value > failed value) (ties half)"),
+        "stability_auc": _var(("stability_key",), auc, "1", "P(recovered value > failed value) (ties half)",
+                              "a one-sided measure: about 0.5 also where the recovered draws lie inside or "
+                              "outside an interval (stability_recovered_side)"),
+        "stability_recovered_side": _var(("stability_key",), side, "1", "where the key's rule puts the recovered "
+                                         "draws: below, above, inside or outside its thresholds",
+                                         "below: x < threshold_high; above: x > threshold_low; inside: threshold_low "
+                                         "< x < threshold_high; outside: x < threshold_low or x > threshold_high; "
+                                         "empty where the key's draws all recovered or all failed"),
+        "stability_threshold_low": _var(("stability_key",), low, "1", "lower threshold of the key's rule (units per "
+                                        "key: stability_units; NaN where the rule has none)"),
+        "stability_threshold_high": _var(("stability_key",), high, "1", "upper threshold of the key's rule (units "
+                                         "per key: stability_units; NaN where the rule has none)"),
+        "stability_balanced_accuracy": _var(("stability_key",), accuracy, "1", "balanced accuracy of the key's rule",
+                                            "mean of the fractions of the recovered and of the failed draws the rule "
+                                            "puts on their side: 0.5 chance, 1 complete"),
+        "stability_explains": _var(("stability_key",), explains, "1", "the key's rule explains the outcome (1) or "
+                                   f"not (0): balanced accuracy >= {EXPLAINS_BAR}"),
         "stability_fraction": _var((), b.fraction, "1", "basin stability: recovered draws / draws"),
         "stability_interval_low": _var((), b.interval[0], "1", f"{b.confidence:.0%} Wilson interval, low end"),
         "stability_interval_high": _var((), b.interval[1], "1", f"{b.confidence:.0%} Wilson interval, high end"),
     }
     attrs = {"stability_perturbation": b.perturbation, "stability_rule": b.rule, "stability_seed": b.seed,
-             "stability_confidence": b.confidence, "stability_engine": b.engine}
+             "stability_confidence": b.confidence, "stability_engine": b.engine, "stability_explains_bar": EXPLAINS_BAR}
     if b.kind:
         attrs["stability_push_kind"] = b.kind
     return variables, coords, attrs

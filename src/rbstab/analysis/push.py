@@ -794,7 +794,10 @@ class BasinStability:
     interval : (float, float)
         Wilson score interval of the fraction at ``confidence``.
     separations : list of Separation
-        Per key, how it separates recovering from failing draws (AUC), where both occur.
+        Per key, how it separates recovering from failing draws, where both occur: its
+        ``rule`` (:func:`rbstab.analysis.thresholds.split_rule`: recovered below, above,
+        inside or outside thresholds, with its balanced accuracy and whether it explains the
+        outcome) and its AUC.
     rule : str
     seed, runs : int
     seconds : float
@@ -828,14 +831,20 @@ class BasinStability:
         return float(self.recovered.mean()) if self.draws else math.nan
 
     def to_json(self) -> dict[str, Any]:
-        """The ``basin_stability`` record of ``--json``."""
+        """The ``basin_stability`` record of ``--json`` (a threshold the rule has not as null)."""
+
+        def num(x):
+            return float(x) if math.isfinite(x) else None
+
         return {
             "perturbation": self.perturbation, "kind": self.kind, "keys": list(self.keys), "units": list(self.units),
             "low": self.low.tolist(), "high": self.high.tolist(), "draws": self.draws, "seed": self.seed,
             "recovered": int(self.recovered.sum()), "fraction": self.fraction, "interval": list(self.interval),
             "confidence": self.confidence, "rule": self.rule,
-            "separations": [{"key": s.parameter, "auc": s.auc, "threshold": s.threshold, "recovered_side": s.stable_side,
-                             "balanced_accuracy": s.balanced_accuracy} for s in self.separations],
+            "separations": [{"key": s.parameter, "recovered_side": s.rule.side,
+                             "threshold_low": num(s.rule.low), "threshold_high": num(s.rule.high),
+                             "balanced_accuracy": s.rule.balanced_accuracy, "explains": s.rule.explains,
+                             "auc": s.auc} for s in self.separations],
             "engine": self.engine,
         }
 

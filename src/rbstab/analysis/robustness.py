@@ -19,6 +19,9 @@ Per group:
   under the ROC curve, AUC = P(value of a stable run > value of an unstable run), from
   the Mann-Whitney U statistic (0.5: no separation; 0 or 1: complete), and the best
   single threshold (stable below or above it) with its balanced accuracy.
+
+Each separation also holds the rule of one or two thresholds that basin stability prints
+(:func:`rbstab.analysis.thresholds.split_rule`).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..sweep.folder import open_sweep, resolved_config
 from .dataset import robustness_content, robustness_dataset
 from .linearise import linearise
+from .thresholds import SplitRule, split_rule, split_rules
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
            "DEFAULT_CONFIDENCE"]
@@ -85,6 +89,8 @@ class Separation:
         Mean of the fractions of stable and of unstable runs on their side.
     stable_range, unstable_range : (float, float)
         Smallest and largest value among the stable, the unstable runs.
+    rule : SplitRule
+        The best rule of one or two thresholds (:func:`rbstab.analysis.thresholds.split_rule`).
     """
 
     parameter: str
@@ -94,6 +100,7 @@ class Separation:
     balanced_accuracy: float
     stable_range: tuple[float, float]
     unstable_range: tuple[float, float]
+    rule: SplitRule
 
     @property
     def strength(self) -> float:
@@ -117,22 +124,11 @@ def separation(parameter: str, values: np.ndarray, stable: np.ndarray) -> Separa
     if not len(s) or not len(u):
         return None
     auc = _auc(s, u)
-    order = np.argsort(values, kind="stable")
-    x, y = values[order], stable[order]
-    # stable fraction below and unstable fraction above each cut between distinct values
-    cuts = np.flatnonzero(np.diff(x) > 0)
-    stable_below = np.cumsum(y)[cuts] / len(s)
-    unstable_below = np.cumsum(~y)[cuts] / len(u)
-    below = 0.5 * (stable_below + 1.0 - unstable_below)  # stable below the cut
-    above = 0.5 * (1.0 - stable_below + unstable_below)
-    if cuts.size:
-        k = int(np.argmax(np.maximum(below, above)))
-        side = "below" if below[k] >= above[k] else "above"
-        threshold, accuracy = 0.5 * (x[cuts[k]] + x[cuts[k] + 1]), float(max(below[k], above[k]))
-    else:
-        side, threshold, accuracy = "below", float(x[0]), 0.5
-    return Separation(parameter, auc, float(threshold), side, accuracy, (float(s.min()), float(s.max())),
-                      (float(u.min()), float(u.max())))
+    one, _ = split_rules(values, stable)
+    threshold = one.high if one.side == "below" else one.low
+    return Separation(parameter, auc, float(threshold), one.side, one.balanced_accuracy,
+                      (float(s.min()), float(s.max())), (float(u.min()), float(u.max())),
+                      split_rule(values, stable))
 
 
 @dataclass(frozen=True)

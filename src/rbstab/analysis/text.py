@@ -5,8 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..layout import BLOCK_UNITS
+from .thresholds import EXPLAINS_BAR
 
-__all__ = ["certificate_lines", "describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines", "stability_lines"]
+__all__ = ["certificate_lines", "describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines",
+           "rule_lines", "stability_lines"]
 
 
 def _g(value, digits: int = 4) -> str:
@@ -171,10 +173,50 @@ def stability_lines(analysis) -> list[str]:
             "initial states with " + ", ".join(f"{k} in [{_g(a)}, {_g(z)}]" for k, a, z in zip(b.keys, b.low, b.high)))
     lines = [f"  basin stability over {what}: {int(b.recovered.sum())} of {b.draws} recovered = {b.fraction:.1%} "
              f"({b.confidence:.0%} Wilson interval {lo:.1%} - {hi:.1%})"]
-    for s in b.separations:
-        lines.append(f"    {s.parameter}: AUC {s.auc:.3f}; recovered {s.stable_side} {_g(s.threshold, 5)} "
-                     f"(balanced accuracy {s.balanced_accuracy:.1%})")
-    return lines
+    return lines + rule_lines([(s.parameter, s.rule) for s in b.separations], EXPLAINS_BAR)
+
+
+def _rule_text(rule) -> str:
+    """``x < 0.41``, ``-0.41 < x < 0.42, i.e. |x - 0.005| < 0.415`` ... of a
+    :class:`rbstab.analysis.thresholds.SplitRule` (x: the key's value)."""
+    if rule.side == "below":
+        return f"x < {_g(rule.high, 5)}"
+    if rule.side == "above":
+        return f"x > {_g(rule.low, 5)}"
+    centre, half = 0.5 * (rule.low + rule.high), 0.5 * (rule.high - rule.low)
+    centred = f"|x {'-' if centre >= 0 else '+'} {_g(abs(centre))}|"
+    if rule.side == "inside":
+        return f"{_g(rule.low, 5)} < x < {_g(rule.high, 5)}, i.e. {centred} < {_g(half)}"
+    return f"x < {_g(rule.low, 5)} or x > {_g(rule.high, 5)}, i.e. {centred} > {_g(half)}"
+
+
+def rule_lines(rules, bar: float) -> list[str]:
+    """The basin stability's lines of the rules of single keys.
+
+    Parameters
+    ----------
+    rules : list of (str, SplitRule)
+        Per key that has draws of both outcomes, its rule
+        (:func:`rbstab.analysis.thresholds.split_rule`).
+    bar : float
+        The balanced accuracy from which a rule explains the outcome.
+
+    Returns
+    -------
+    list of str
+        ``KEY: recovered where RULE (balanced accuracy ...)`` per key whose rule explains,
+        ``KEY: no threshold (...)`` per other key; where no key's rule explains, one line
+        ``no single key explains the outcome (best: balanced accuracy ...)``.
+    """
+    if not rules:
+        return []
+    if not any(r.explains for _, r in rules):
+        key, best = max(rules, key=lambda kr: kr[1].balanced_accuracy)
+        return [f"    no single key explains the outcome (best: balanced accuracy {best.balanced_accuracy:.1%}, "
+                f"{key}; a threshold is given from {bar:.0%})"]
+    return [f"    {key}: recovered where {_rule_text(r)} (balanced accuracy {r.balanced_accuracy:.1%})" if r.explains
+            else f"    {key}: no threshold (best: balanced accuracy {r.balanced_accuracy:.1%}, below {bar:.0%})"
+            for key, r in rules]
 
 
 def describe(analysis) -> list[str]:

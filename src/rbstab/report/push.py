@@ -4,8 +4,9 @@
 
 - a configuration's pushes: the smallest fatal push over the sphere of directions (a map in
   azimuth and elevation), and the ladder of the weakest direction;
-- its basin stability: the fraction with its interval, and the draws over the two keys
-  that separate recovering from failing draws best;
+- its basin stability: the fraction with its interval, the rule of each key that explains
+  the outcome (or that no single key does), and the draws over the two keys whose rules
+  separate recovering from failing draws best;
 - a spec's curves: the smallest fatal push and the estimate from {v <= c} against each varied key,
   and the basin stability with its interval as a band.
 
@@ -147,6 +148,8 @@ def stability_blocks(ds, out: FigureWriter, stem: str, name: str) -> list:
         return []
     from matplotlib.figure import Figure  # heavy: matplotlib
 
+    from ..analysis.text import rule_lines  # heavy: numba (the rbstab.analysis package)
+
     recovered = ds["stability_recovered"].values.astype(bool)
     keys = [str(k) for k in ds["stability_key"].values]
     units = [str(u) for u in ds["stability_units"].values]
@@ -155,8 +158,11 @@ def stability_blocks(ds, out: FigureWriter, stem: str, name: str) -> list:
     facts = [f"basin stability: {int(recovered.sum())} of {len(recovered)} draws recovered = "
              f"{float(ds['stability_fraction'].values):.1%} ({ds.attrs.get('stability_confidence', 0.95):.0%} Wilson "
              f"interval {lo:.1%} - {hi:.1%})", f"rule: {ds.attrs.get('stability_rule')}"]
-    auc = ds["stability_auc"].values
-    order = np.argsort(-np.abs(2 * np.nan_to_num(auc, nan=0.5) - 1), kind="stable")[:2]
+    rules = _stability_rules(ds, keys)
+    facts += [line.strip() for line in rule_lines([(k, r) for k, r in zip(keys, rules) if r is not None],
+                                                 float(ds.attrs.get("stability_explains_bar", np.nan)))]
+    accuracy = np.array([r.balanced_accuracy if r is not None else 0.5 for r in rules])
+    order = np.argsort(-accuracy, kind="stable")[:2]
     fig = Figure(figsize=(6.0, 4.2), dpi=DPI, layout="constrained")
     ax = fig.subplots()
     x = values[:, order[0]]
@@ -164,6 +170,11 @@ def stability_blocks(ds, out: FigureWriter, stem: str, name: str) -> list:
     for flag, colour, marker, label in ((True, "#4daf4a", "o", "recovered"), (False, "#d62728", "x", "failed")):
         pick = recovered == flag
         ax.plot(x[pick], y[pick], marker, color=colour, ms=3, ls="none", label=f"{label} ({int(pick.sum())})")
+    for line, i in ((ax.axvline, order[0]), (ax.axhline, order[1] if len(order) > 1 else None)):
+        if i is not None and rules[i] is not None and rules[i].explains:  # a rule that explains, drawn
+            for threshold in (rules[i].low, rules[i].high):
+                if np.isfinite(threshold):
+                    line(threshold, color="0.3", ls="--", lw=0.8)
     ax.set_xlabel(f"{keys[order[0]]} [{units[order[0]]}]")
     if len(order) > 1:
         ax.set_ylabel(f"{keys[order[1]]} [{units[order[1]]}]")
@@ -172,9 +183,24 @@ def stability_blocks(ds, out: FigureWriter, stem: str, name: str) -> list:
     fig.suptitle(f"{name}: basin stability {float(ds['stability_fraction'].values):.1%} ({lo:.1%} - {hi:.1%})",
                  fontsize=10)
     figure = out.save(fig, f"{stem}_stability", f"{name}: basin stability draws",
-                      "The random draws over the two keys that separate recovering from failing draws best "
-                      "(|2 AUC - 1|).")
+                      "The random draws over the two keys whose rules separate recovering from failing draws "
+                      "best (balanced accuracy); dashed: the thresholds of a rule that explains the outcome.")
     return [facts, figure]
+
+
+def _stability_rules(ds, keys: list) -> list:
+    """Per key, its rule (:class:`rbstab.analysis.thresholds.SplitRule`) as the file holds it,
+    None where its draws all recovered or all failed, or the file has no rules (written before
+    they were)."""
+    from ..analysis.thresholds import SplitRule  # heavy: numba (the rbstab.analysis package)
+
+    if "stability_recovered_side" not in ds:
+        return [None] * len(keys)
+    sides = [str(v) for v in ds["stability_recovered_side"].values]
+    return [SplitRule(side, float(ds["stability_threshold_low"].values[i]),
+                      float(ds["stability_threshold_high"].values[i]),
+                      float(ds["stability_balanced_accuracy"].values[i]), bool(ds["stability_explains"].values[i]))
+            if side else None for i, side in enumerate(sides)]
 
 
 def _numeric_keys(ds) -> list[str]:
