@@ -144,6 +144,17 @@ def test_robustness_of_a_sweep(pendulum_sweep, tmp_path):
     assert record["kind"] == "robustness" and record["groups"][0]["n_stable"] == group.n_stable
     ds = read_analysis(tmp_path / "pendulum.robustness.analysis.nc")
     assert ds.attrs["kind"] == "robustness" and ds["auc"].sizes["parameter"] >= 2
+    # a threshold only where it explains which runs converged: k_r's does, the mass's (+-10 %) does not
+    by_name = {s["parameter"]: s for s in record["groups"][0]["separations"]}
+    assert by_name[best.parameter]["explains"] and by_name[best.parameter]["stable_side"] == "above"
+    weak = [s for s in group.separations if s.rule.balanced_accuracy < 0.9]
+    assert weak and all(not by_name[s.parameter]["explains"] for s in weak)
+    text = _invoke("--robustness", str(pendulum_sweep), "-o", str(tmp_path / "text"))
+    lines = {line.split(":")[0].strip(): line for line in text.output.splitlines() if line.startswith("    ")}
+    assert f"converged where x > " in lines[best.parameter], lines
+    assert all("no threshold (best: balanced accuracy" in lines[s.parameter] for s in weak), lines
+    j = list(ds["parameter"].values).index(best.parameter)
+    assert str(ds["rule_side"].values[0, j]) == "above" and bool(ds["rule_explains"].values[0, j])
 
 
 def test_report_pages(tmp_path, pendulum_sweep):

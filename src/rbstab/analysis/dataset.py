@@ -394,6 +394,9 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
     table = {k: np.full(shape, np.nan) for k in ("auc", "threshold", "balanced_accuracy", "stable_min",
                                                   "stable_max", "unstable_min", "unstable_max")}
     side = np.full(shape, "", dtype=object)
+    rule = {k: np.full(shape, np.nan) for k in ("rule_low", "rule_high", "rule_balanced_accuracy")}
+    rule_side = np.full(shape, "", dtype=object)
+    explains = np.zeros(shape, dtype=bool)
     for i, g in enumerate(groups):
         for s in g.separations:
             j = parameters.index(s.parameter)
@@ -401,6 +404,9 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
             for key, value in zip(table, values):
                 table[key][i, j] = value
             side[i, j] = s.stable_side
+            rule["rule_low"][i, j], rule["rule_high"][i, j] = s.rule.low, s.rule.high
+            rule["rule_balanced_accuracy"][i, j] = s.rule.balanced_accuracy
+            rule_side[i, j], explains[i, j] = s.rule.side, s.rule.explains
     gp = ("group", "parameter")
     data = {
         "n_runs": _var(("group",), [g.n_runs for g in groups], "1", "runs with a result"),
@@ -415,6 +421,13 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
         "threshold": _var(gp, table["threshold"], "1", "best single threshold (units of the parameter)"),
         "stable_side": _var(gp, side, "1", "side of the threshold where the stable runs lie"),
         "balanced_accuracy": _var(gp, table["balanced_accuracy"], "1", "balanced accuracy of the threshold"),
+        "rule_side": _var(gp, rule_side, "1", "where the stable runs lie in the best rule of one or two "
+                          "thresholds: below, above, inside, outside"),
+        "rule_low": _var(gp, rule["rule_low"], "1", "the rule's lower threshold (units of the parameter; NaN: none)"),
+        "rule_high": _var(gp, rule["rule_high"], "1", "the rule's upper threshold (units of the parameter; NaN: none)"),
+        "rule_balanced_accuracy": _var(gp, rule["rule_balanced_accuracy"], "1", "balanced accuracy of the rule"),
+        "rule_explains": _var(gp, explains, "1", f"the rule's balanced accuracy reaches {EXPLAINS_BAR:g}: it "
+                              "explains which runs converged"),
         **{k: _var(gp, table[k], "1", k.replace("_", " ") + " value (units of the parameter)")
            for k in ("stable_min", "stable_max", "unstable_min", "unstable_max")},
         "run_group": _var(("run",), np.asarray(result.runs["base"], dtype=object), "1", "group of the run"),

@@ -104,8 +104,9 @@ class Separation:
 
     @property
     def strength(self) -> float:
-        """|2 AUC - 1|: 0 no separation, 1 complete."""
-        return abs(2.0 * self.auc - 1.0)
+        """2 b - 1 of the rule's balanced accuracy b: 0 no separation, 1 complete (one- or
+        two-sided; the AUC sees one side only)."""
+        return 2.0 * self.rule.balanced_accuracy - 1.0
 
 
 def _auc(s: np.ndarray, u: np.ndarray) -> float:
@@ -212,8 +213,10 @@ class Robustness:
                  "stable_fraction": g.fraction if g.n_runs else None, "interval": list(g.interval),
                  "n_converged": g.n_stable, "converged_fraction": g.fraction if g.n_runs else None,
                  "t_end_hint": g.t_end_hint,
-                 "separations": [{"parameter": s.parameter, "auc": s.auc, "threshold": s.threshold,
-                                  "stable_side": s.stable_side, "balanced_accuracy": s.balanced_accuracy}
+                 "separations": [{"parameter": s.parameter, "auc": s.auc, "stable_side": s.rule.side,
+                                  "threshold_low": s.rule.low if math.isfinite(s.rule.low) else None,
+                                  "threshold_high": s.rule.high if math.isfinite(s.rule.high) else None,
+                                  "balanced_accuracy": s.rule.balanced_accuracy, "explains": s.rule.explains}
                                  for s in g.separations]}
                 for g in self.groups
             ],

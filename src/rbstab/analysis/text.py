@@ -261,8 +261,12 @@ def describe_robustness(result) -> list[str]:
                 if g.n_stable == 0 else "no parameter varies"
             lines.append(f"    no separating parameter: {reason}")
         for s in g.separations:
-            lines.append(f"    {s.parameter}: AUC {s.auc:.3f}; converged {s.stable_side} {_g(s.threshold, 6)} "
-                         f"(balanced accuracy {s.balanced_accuracy:.1%}); converged {_g(s.stable_range[0])} .. "
+            r = s.rule
+            found = (f"converged where {_rule_text(r)} (balanced accuracy {r.balanced_accuracy:.1%})" if r.explains
+                     else f"no threshold (best: balanced accuracy {r.balanced_accuracy:.1%}, below {EXPLAINS_BAR:.0%})")
+            lines.append(f"    {s.parameter}: {found}; converged {_g(s.stable_range[0])} .. "
                          f"{_g(s.stable_range[1])}, not converged {_g(s.unstable_range[0])} .. "
                          f"{_g(s.unstable_range[1])}")
+        if g.separations and not any(s.rule.explains for s in g.separations):
+            lines.append("    no single parameter explains which runs converged")
     return lines

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.thresholds import EXPLAINS_BAR
 from ..convergence import RULE
 from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
 from .figures import DPI, FigureFile, FigureWriter
@@ -342,26 +343,48 @@ def _robustness_section(ds, path: Path, out: FigureWriter) -> Section:
                            for i, g in enumerate(groups)],
                           note=f"Stable, as the sweep's converged: {RULE}; they differ only for an index "
                                "written with another rule."))
-    rows = []
+    rows, order = [], []
+    ruled = "rule_side" in ds  # a file written before rules of two thresholds: the one-sided threshold
     for i, g in enumerate(groups):
         for j, p in enumerate(ds["parameter"].values):
             auc = float(ds["auc"].values[i, j])
-            if np.isfinite(auc):
-                rows.append([g, str(p), _f(auc, 3), f"{ds['stable_side'].values[i, j]} {_f(ds['threshold'].values[i, j], 6)}",
-                             f"{float(ds['balanced_accuracy'].values[i, j]):.1%}",
-                             f"{_f(ds['stable_min'].values[i, j])} .. {_f(ds['stable_max'].values[i, j])}",
-                             f"{_f(ds['unstable_min'].values[i, j])} .. {_f(ds['unstable_max'].values[i, j])}"])
-    rows.sort(key=lambda r: (r[0], -abs(2 * float(r[2]) - 1)))
+            if not np.isfinite(auc):
+                continue
+            if ruled:
+                accuracy = float(ds["rule_balanced_accuracy"].values[i, j])
+                rule = (_rule_cell(str(ds["rule_side"].values[i, j]), float(ds["rule_low"].values[i, j]),
+                                   float(ds["rule_high"].values[i, j]))
+                        if bool(ds["rule_explains"].values[i, j]) else "none (below the bar)")
+            else:
+                accuracy = float(ds["balanced_accuracy"].values[i, j])
+                rule = f"{ds['stable_side'].values[i, j]} {_f(ds['threshold'].values[i, j], 6)}"
+            rows.append([g, str(p), rule, f"{accuracy:.1%}",
+                         f"{_f(ds['stable_min'].values[i, j])} .. {_f(ds['stable_max'].values[i, j])}",
+                         f"{_f(ds['unstable_min'].values[i, j])} .. {_f(ds['unstable_max'].values[i, j])}"])
+            order.append((g, -accuracy))
+    rows = [r for _, r in sorted(zip(order, rows), key=lambda x: x[0])]
     if rows:
         s.blocks.append(Table("Parameters that separate stable from unstable runs (strongest first)",
-                              ["group", "parameter", "AUC", "stable side of threshold", "balanced accuracy",
+                              ["group", "parameter", "converged where", "balanced accuracy",
                                "stable range", "unstable range"], rows,
-                              note="AUC = P(value of a stable run > value of an unstable run): 0.5 no separation, "
-                                   "0 or 1 complete."))
+                              note=f"The best rule of one or two thresholds of each parameter, given where its "
+                                   f"balanced accuracy (the mean of the fractions of converged and of other runs "
+                                   f"on their side; 0.5 chance) reaches {EXPLAINS_BAR:.0%} (docs/push.md)."))
     else:
         s.blocks.append("No parameter separates stable from unstable runs: every group is all stable or all unstable.")
     s.blocks.append(_robustness_figure(ds, out))
     return s
+
+
+def _rule_cell(side: str, low: float, high: float) -> str:
+    """``x < 0.41``, ``-0.4 < x < 0.41``... of a rule's side and thresholds."""
+    if side == "below":
+        return f"x < {_f(high, 6)}"
+    if side == "above":
+        return f"x > {_f(low, 6)}"
+    if side == "inside":
+        return f"{_f(low, 6)} < x < {_f(high, 6)}"
+    return f"x < {_f(low, 6)} or x > {_f(high, 6)}"
 
 
 def _two_parameters(values: np.ndarray, order: Sequence[int]) -> list[int]:
@@ -388,8 +411,10 @@ def _robustness_figure(ds, out: FigureWriter) -> FigureFile:
     stable = ds["run_stable"].values.astype(bool)
     values = ds["run_value"].values
     for ax, (i, g) in zip(axes, enumerate(groups)):
-        auc = ds["auc"].values[i]
-        order = [j for j in np.argsort(-np.abs(2 * np.nan_to_num(auc, nan=0.5) - 1))]
+        if "rule_balanced_accuracy" in ds:  # strongest first, one- or two-sided
+            order = list(np.argsort(-np.nan_to_num(ds["rule_balanced_accuracy"].values[i], nan=0.5)))
+        else:
+            order = list(np.argsort(-np.abs(2 * np.nan_to_num(ds["auc"].values[i], nan=0.5) - 1)))
         mine = run_group == g
         varying = _two_parameters(values[mine], order)
         if len(varying) == 0:
