@@ -1,0 +1,467 @@
+"""An independent plain-numpy model of a tree of rigid bodies in reduced coordinates
+(docs/physics.md, "A tree in reduced coordinates").
+
+What a physicist would write by hand from that section: a ``permanent`` joint is held by
+construction, its child carried by the joint's relative orientation Theta_j and relative
+angular velocity Omega_j (child frame); a body on any other joint (here ``free`` or
+``visco_elastic``) keeps its own Theta, Omega, X, V. The equations of motion are the bodies'
+Newton-Euler equations projected on the generalised velocities u (Jourdain's principle):
+
+    M(q) du/dt = Q - b,   M = sum_i S_i' M_i S_i,   Q = sum_i S_i' w_i,
+    b = sum_i S_i' (M_i kappa_i + (Omega_i x J_i Omega_i, 0))
+
+with S_i = d(Omega_i, V_i)/du body i's velocity Jacobian, M_i = diag(J_i, m_i I), w_i the
+applied wrench (torque about the centre of mass in the body frame, force in the inertial
+frame) and kappa_i body i's acceleration at du/dt = 0. The mass matrix is assembled from the
+Jacobians (not by the composite-rigid-body or articulated-body algorithms, so that this
+model shares no method with an engine built on those); the constraint forces Lambda_j of
+the permanent joints are recovered afterwards from the bodies' Newton equations, leaves
+first.
+
+It shares no code with rbstab's physics; the rotation, Euler-rate and skew matrices are
+those of :mod:`reference` (the paper's eqs 1, 2, written there by hand).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reference import euler_rate, hat, rotation
+
+GROUND = -1
+PERMANENT, FREE, VISCO_ELASTIC = "permanent", "free", "visco_elastic"
+LAWS = (PERMANENT, FREE, VISCO_ELASTIC)
+
+
+def _zero():
+    return np.zeros((3, 3))
+
+
+@dataclass(frozen=True)
+class Body:
+    """m [kg], J [kg m^2] (3x3, about the centre of mass, body frame), and the ground-anchored
+    feedback H = -K_t X - L_t V [N] (eq 24; zero: none)."""
+
+    mass: float
+    inertia: np.ndarray
+    k_t: np.ndarray = field(default_factory=_zero)
+    l_t: np.ndarray = field(default_factory=_zero)
+
+
+@dataclass(frozen=True)
+class Joint:
+    """Joint j holds body j's point R_c (its body frame) to the point R_p of its parent
+    (``parent`` < j, or GROUND: R_p in the inertial frame) by ``law``, with the rotational
+    feedback N_j = -B(Theta_j)' K_r Theta_j - L_r Omega_j (eq 23 on the relative motion),
+    clipped to +-``torque_limit`` [N m] axis by axis where given; K_c, L_c: the
+    visco-elastic law Lambda_j = -K_c E_j - L_c F_j (eq 40)."""
+
+    parent: int
+    parent_point: np.ndarray
+    child_point: np.ndarray
+    law: str = PERMANENT
+    k_r: np.ndarray = field(default_factory=_zero)
+    l_r: np.ndarray = field(default_factory=_zero)
+    k_c: np.ndarray = field(default_factory=_zero)
+    l_c: np.ndarray = field(default_factory=_zero)
+    torque_limit: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Tree:
+    """Bodies and joints (joint i holds body i; parents before children), gravity g [m/s^2]."""
+
+    bodies: tuple
+    joints: tuple
+    gravity: np.ndarray
+
+    @property
+    def size(self):
+        return len(self.bodies)
+
+    def permanent(self, i):
+        return self.joints[i].law == PERMANENT
+
+    def children(self, i):
+        return [k for k, joint in enumerate(self.joints) if joint.parent == i]
+
+
+# -- layout -----------------------------------------------------------------------------------
+def state_blocks(tree):
+    """Where each body's states start in y: 6 (Theta_j, Omega_j) for a permanent joint's
+    child, 12 (Theta, Omega, X, V) for any other; and the state's size."""
+    starts, at = [], 0
+    for i in range(tree.size):
+        starts.append(at)
+        at += 6 if tree.permanent(i) else 12
+    return starts, at
+
+
+def velocity_blocks(tree):
+    """Where each body's generalised velocities start in u: 3 (Omega_j) or 6 (Omega, V)."""
+    starts, at = [], 0
+    for i in range(tree.size):
+        starts.append(at)
+        at += 3 if tree.permanent(i) else 6
+    return starts, at
+
+
+def generalised_velocities(tree, y):
+    """u: Omega_j of each permanent joint's child, (Omega, V) of every other body."""
+    starts, _ = state_blocks(tree)
+    parts = []
+    for i, s in enumerate(starts):
+        parts.append(y[s + 3: s + 6] if tree.permanent(i) else np.concatenate([y[s + 3: s + 6], y[s + 9: s + 12]]))
+    return np.concatenate(parts)
+
+
+def cross(a, b):
+    """a x b of two 3-vectors (np.cross, without its generality: it dominates the run time)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+def euler_angles(a):
+    """Theta with rotation(Theta) = a (A = Rx Ry Rz: a[0,2] = s2, a[1,2] = -s1 c2,
+    a[2,2] = c1 c2, a[0,1] = -c2 s3, a[0,0] = c2 c3)."""
+    return np.array([math.atan2(-a[1, 2], a[2, 2]), math.asin(max(-1.0, min(1.0, a[0, 2]))),
+                     math.atan2(-a[0, 1], a[0, 0])])
+
+
+# -- kinematics: positions, velocities, accelerations, outward from the ground ------------------
+@dataclass
+class Configuration:
+    """Of each body i: A_i, X_i [m]; of each joint j: Theta_j [rad], A_rel = A_p' A_c."""
+
+    rot: list
+    position: list
+    theta_j: list
+    rel: list
+
+
+def parent_frame(tree, conf, j):
+    """(A_p, X_p) of joint j's parent (ground: I, 0)."""
+    p = tree.joints[j].parent
+    return (np.eye(3), np.zeros(3)) if p == GROUND else (conf.rot[p], conf.position[p])
+
+
+def configuration(tree, y):
+    """Every body's A_i, X_i and every joint's Theta_j, A_rel from the state y, parents first:
+    permanent A_c = A_p A(Theta_j), X_c = X_p + A_p R_p - A_c R_c; else A(Theta_c), X_c."""
+    starts, _ = state_blocks(tree)
+    conf = Configuration([], [], [], [])
+    for c, joint in enumerate(tree.joints):
+        s = starts[c]
+        a_p, x_p = parent_frame(tree, conf, c)
+        if tree.permanent(c):
+            theta_j = y[s: s + 3]
+            a_rel = rotation(theta_j)
+            a_c = a_p @ a_rel
+            x_c = x_p + a_p @ joint.parent_point - a_c @ joint.child_point
+        else:
+            a_c = rotation(y[s: s + 3])
+            x_c = y[s + 6: s + 9]
+            a_rel = a_p.T @ a_c
+            theta_j = y[s: s + 3] if joint.parent == GROUND else euler_angles(a_rel)
+        conf.rot.append(a_c)
+        conf.position.append(x_c)
+        conf.theta_j.append(np.asarray(theta_j, dtype=float))
+        conf.rel.append(a_rel)
+    return conf
+
+
+def motion(tree, conf, u, du):
+    """(Omega_i, V_i, dOmega_i/dt, dV_i/dt) of every body [(n, 3) each] and Omega_j of every
+    joint from the generalised velocities u and their rates du, parents first. A permanent
+    joint's child (ground: Omega_p = V_p = 0, A_p = I):
+
+        Omega_c = A_rel' Omega_p + Omega_j
+        V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x R_c)
+        dOmega_c/dt = A_rel' dOmega_p/dt + dOmega_j/dt + Omega_c x Omega_j
+        dV_c/dt = dV_p/dt + A_p (dOmega_p/dt x R_p + Omega_p x (Omega_p x R_p))
+                  - A_c (dOmega_c/dt x R_c + Omega_c x (Omega_c x R_c))
+
+    Velocities are linear in u; with du = 0 the accelerations are the bias kappa_i."""
+    n = tree.size
+    starts, _ = velocity_blocks(tree)
+    omega, v, omega_dot, v_dot, omega_j = (np.zeros((n, 3)) for _ in range(5))
+    for c, joint in enumerate(tree.joints):
+        s, p = starts[c], joint.parent
+        if p == GROUND:
+            a_p, w_p, v_p, dw_p, dv_p = np.eye(3), np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3)
+        else:
+            a_p, w_p, v_p, dw_p, dv_p = conf.rot[p], omega[p], v[p], omega_dot[p], v_dot[p]
+        a_c, a_rel, r_p, r_c = conf.rot[c], conf.rel[c], joint.parent_point, joint.child_point
+        if tree.permanent(c):
+            omega_j[c] = u[s: s + 3]
+            omega[c] = a_rel.T @ w_p + omega_j[c]
+            v[c] = v_p + a_p @ cross(w_p, r_p) - a_c @ cross(omega[c], r_c)
+            omega_dot[c] = a_rel.T @ dw_p + du[s: s + 3] + cross(omega[c], omega_j[c])
+            v_dot[c] = (dv_p + a_p @ (cross(dw_p, r_p) + cross(w_p, cross(w_p, r_p)))
+                        - a_c @ (cross(omega_dot[c], r_c) + cross(omega[c], cross(omega[c], r_c))))
+        else:
+            omega[c], v[c] = u[s: s + 3], u[s + 3: s + 6]
+            omega_dot[c], v_dot[c] = du[s: s + 3], du[s + 3: s + 6]
+            omega_j[c] = omega[c] - a_rel.T @ w_p
+    return omega, v, omega_dot, v_dot, omega_j
+
+
+def jacobians(tree, conf):
+    """S_i = d(Omega_i, V_i)/du, shape (n, 6, n_u): the velocities of unit generalised
+    velocities (they are linear in u)."""
+    _, n_u = velocity_blocks(tree)
+    s = np.zeros((tree.size, 6, n_u))
+    for k in range(n_u):
+        unit = np.zeros(n_u)
+        unit[k] = 1.0
+        omega, v, _, _, _ = motion(tree, conf, unit, np.zeros(n_u))
+        s[:, :3, k], s[:, 3:, k] = omega, v
+    return s
+
+
+def spatial_inertia(body):
+    """M_i = diag(J_i, m_i I), the kinetic energy's matrix of (Omega_i, V_i)."""
+    m = np.zeros((6, 6))
+    m[:3, :3], m[3:, 3:] = body.inertia, body.mass * np.eye(3)
+    return m
+
+
+def mass_matrix(tree, conf):
+    """M(q) = sum_i S_i' M_i S_i: T = u' M u / 2."""
+    s = jacobians(tree, conf)
+    return sum(s[i].T @ spatial_inertia(b) @ s[i] for i, b in enumerate(tree.bodies))
+
+
+# -- forces ---------------------------------------------------------------------------------------
+def point_motion(tree, conf, omega, v, j):
+    """(E_j, F_j) of joint j: E_j = X_c + A_c R_c - X_p - A_p R_p,
+    F_j = V_c + A_c (Omega_c x R_c) - V_p - A_p (Omega_p x R_p)."""
+    joint, c, p = tree.joints[j], j, tree.joints[j].parent
+    e = conf.position[c] + conf.rot[c] @ joint.child_point
+    f = v[c] + conf.rot[c] @ cross(omega[c], joint.child_point)
+    if p == GROUND:
+        return e - joint.parent_point, f
+    return (e - conf.position[p] - conf.rot[p] @ joint.parent_point,
+            f - v[p] - conf.rot[p] @ cross(omega[p], joint.parent_point))
+
+
+def joint_torque(joint, theta_j, omega_j):
+    """(N_j delivered, N_j commanded) [N m], child frame: N = -B(Theta_j)' K_r Theta_j - L_r Omega_j
+    (eq 23 on the relative motion), clipped to the joint's limits."""
+    command = -euler_rate(theta_j).T @ joint.k_r @ theta_j - joint.l_r @ omega_j
+    if joint.torque_limit is None:
+        return command, command
+    return np.clip(command, -joint.torque_limit, joint.torque_limit), command
+
+
+@dataclass
+class Forces:
+    """The applied wrenches (everything but the permanent joints' Lambda_j): per body the
+    torque about the centre of mass (body frame) and the force (inertial frame); per joint
+    N_j (delivered and commanded), and Lambda_j, E_j, F_j of the point laws."""
+
+    torque: np.ndarray
+    force: np.ndarray
+    n_j: np.ndarray
+    n_command: np.ndarray
+    h: np.ndarray
+    lam: np.ndarray
+    e: np.ndarray
+    f: np.ndarray
+
+
+def applied_forces(tree, conf, omega, v, omega_j):
+    """Gravity G_i = m_i g and H_i on each centre of mass; N_j on the child and -A_rel N_j on
+    the parent; a point law's Lambda_j on the child at R_c and -Lambda_j on the parent at R_p."""
+    n = tree.size
+    out = Forces(*(np.zeros((n, 3)) for _ in range(8)))
+    for i, body in enumerate(tree.bodies):
+        out.h[i] = -body.k_t @ conf.position[i] - body.l_t @ v[i]  # eq 24
+        out.force[i] += body.mass * tree.gravity + out.h[i]
+    for j, joint in enumerate(tree.joints):
+        c, p = j, joint.parent
+        out.n_j[j], out.n_command[j] = joint_torque(joint, conf.theta_j[j], omega_j[j])
+        out.torque[c] += out.n_j[j]
+        if p != GROUND:
+            out.torque[p] -= conf.rel[j] @ out.n_j[j]
+        out.e[j], out.f[j] = point_motion(tree, conf, omega, v, j)
+        if joint.law == PERMANENT:
+            continue
+        if joint.law == VISCO_ELASTIC:
+            out.lam[j] = -joint.k_c @ out.e[j] - joint.l_c @ out.f[j]  # eq 40
+        out.torque[c] += cross(joint.child_point, conf.rot[c].T @ out.lam[j])
+        out.force[c] += out.lam[j]
+        if p != GROUND:
+            out.torque[p] -= cross(joint.parent_point, conf.rot[p].T @ out.lam[j])
+            out.force[p] -= out.lam[j]
+    return out
+
+
+# -- equations of motion ---------------------------------------------------------------------------
+@dataclass
+class Evaluation:
+    """Everything one evaluation computes: dy/dt, the generalised quantities, each body's
+    velocities and accelerations, the applied forces and the permanent joints' Lambda_j."""
+
+    dy: np.ndarray
+    u: np.ndarray
+    du: np.ndarray
+    mass: np.ndarray
+    conf: Configuration
+    omega: np.ndarray
+    v: np.ndarray
+    omega_dot: np.ndarray
+    v_dot: np.ndarray
+    omega_j: np.ndarray
+    forces: Forces
+    lam: np.ndarray
+
+
+def evaluate(tree, y):
+    """The rate of the reduced state y and the quantities it is made of (module docstring):
+    M du/dt = Q - b, then dTheta_j/dt = B(Theta_j) Omega_j for a permanent joint's child,
+    dTheta/dt = B(Theta) Omega, dX/dt = V for every other body."""
+    conf = configuration(tree, y)
+    u = generalised_velocities(tree, y)
+    n_u = u.size
+    omega, v, kappa_w, kappa_v, omega_j = motion(tree, conf, u, np.zeros(n_u))
+    forces = applied_forces(tree, conf, omega, v, omega_j)
+    s = jacobians(tree, conf)
+    mass = np.zeros((n_u, n_u))
+    q = np.zeros(n_u)
+    b = np.zeros(n_u)
+    for i, body in enumerate(tree.bodies):
+        m_i = spatial_inertia(body)
+        mass += s[i].T @ m_i @ s[i]
+        q += s[i].T @ np.concatenate([forces.torque[i], forces.force[i]])
+        gyroscopic = cross(omega[i], body.inertia @ omega[i])
+        b += s[i].T @ (m_i @ np.concatenate([kappa_w[i], kappa_v[i]]) + np.concatenate([gyroscopic, np.zeros(3)]))
+    du = np.linalg.solve(mass, q - b)
+    _, _, omega_dot, v_dot, _ = motion(tree, conf, u, du)
+    lam = constraint_forces(tree, v_dot, forces)
+    starts, size = state_blocks(tree)
+    ustarts, _ = velocity_blocks(tree)
+    dy = np.zeros(size)
+    for i, s0 in enumerate(starts):
+        k = ustarts[i]
+        if tree.permanent(i):
+            dy[s0: s0 + 3] = euler_rate(conf.theta_j[i]) @ omega_j[i]
+            dy[s0 + 3: s0 + 6] = du[k: k + 3]
+        else:
+            dy[s0: s0 + 3] = euler_rate(y[s0: s0 + 3]) @ omega[i]
+            dy[s0 + 3: s0 + 6] = du[k: k + 3]
+            dy[s0 + 6: s0 + 9] = v[i]
+            dy[s0 + 9: s0 + 12] = du[k + 3: k + 6]
+    return Evaluation(dy, u, du, mass, conf, omega, v, omega_dot, v_dot, omega_j, forces, lam)
+
+
+def rate(tree, y, t=0.0):
+    """dy/dt (for solve_ivp)."""
+    return evaluate(tree, y).dy
+
+
+def constraint_forces(tree, v_dot, forces):
+    """Lambda_j [N] (inertial frame, on the child at R_c) of each permanent joint, from the
+    Newton equation of its child, leaves first (eqs 15, 20 for one body):
+
+        Lambda_c = m_c dV_c/dt - (G_c + H_c + the point laws' forces on c) + sum_k Lambda_k
+
+    the sum over the permanent joints k whose parent is c (each pulls on c with -Lambda_k).
+    The point laws' Lambda_j are ``forces.lam``; the permanent ones are filled in here."""
+    lam = forces.lam.copy()
+    for c in reversed(range(tree.size)):
+        if not tree.permanent(c):
+            continue
+        pulled = sum((lam[k] for k in tree.children(c) if tree.permanent(k)), np.zeros(3))
+        lam[c] = tree.bodies[c].mass * v_dot[c] - forces.force[c] + pulled
+    return lam
+
+
+# -- v and dv/dt -----------------------------------------------------------------------------------
+def lyapunov(tree, y):
+    """(the terms of v without the constant h: kinetic, joint, body feedback, gravity [J];
+    dv/dt analytic [W]):
+
+        v = sum_i (m_i V_i'V_i / 2 + Omega_i'J_i Omega_i / 2) + sum_j Theta_j'K_r Theta_j / 2
+            + sum_visco E_j'K_c E_j / 2 + sum_i (X_i'K_t X_i / 2 - X_i'G_i)
+        dv/dt = -sum_j Omega_j'L_r Omega_j - sum_i V_i'L_t V_i - sum_visco F_j'L_c F_j
+                + sum_j Omega_j'(N_j - N_j,commanded)
+
+    No term of the permanent joints' Lambda_j: in these coordinates F_j is 0 identically."""
+    ev = evaluate(tree, y)
+    conf, forces = ev.conf, ev.forces
+    kinetic = sum(0.5 * b.mass * ev.v[i] @ ev.v[i] + 0.5 * ev.omega[i] @ b.inertia @ ev.omega[i]
+                  for i, b in enumerate(tree.bodies))
+    joint = 0.0
+    dv_dt = 0.0
+    for j, jt in enumerate(tree.joints):
+        joint += 0.5 * conf.theta_j[j] @ jt.k_r @ conf.theta_j[j]
+        dv_dt += -ev.omega_j[j] @ jt.l_r @ ev.omega_j[j] + ev.omega_j[j] @ (forces.n_j[j] - forces.n_command[j])
+        if jt.law == VISCO_ELASTIC:
+            joint += 0.5 * forces.e[j] @ jt.k_c @ forces.e[j]
+            dv_dt -= forces.f[j] @ jt.l_c @ forces.f[j]
+    body = sum(0.5 * conf.position[i] @ b.k_t @ conf.position[i] for i, b in enumerate(tree.bodies))
+    gravity = -sum(b.mass * tree.gravity @ conf.position[i] for i, b in enumerate(tree.bodies))
+    dv_dt -= sum(ev.v[i] @ b.l_t @ ev.v[i] for i, b in enumerate(tree.bodies))
+    return (kinetic, joint, body, gravity), dv_dt
+
+
+# -- a push -----------------------------------------------------------------------------------------
+def push(tree, y, body, point, impulse):
+    """(the state just after a force impulse P [N s] (inertial frame) at ``point`` [m] of body
+    ``body`` (its frame, from its centre of mass); the permanent joints' impulsive reactions
+    (n, 3) [N s]): M du = J_P' P, J_P = dV_P/du the Jacobian of the point's velocity
+    V_P = V_b - A_b hat(point) Omega_b; the configuration does not move."""
+    conf = configuration(tree, y)
+    s = jacobians(tree, conf)
+    j_point = s[body, 3:] - conf.rot[body] @ hat(point) @ s[body, :3]
+    du = np.linalg.solve(mass_matrix(tree, conf), j_point.T @ impulse)
+    _, dv, _, _, _ = motion(tree, conf, du, np.zeros_like(du))  # the velocities are linear in u
+    external = Forces(*(np.zeros((tree.size, 3)) for _ in range(8)))
+    external.force[body] = impulse
+    reactions = constraint_forces(tree, dv, external)
+    after = np.array(y, dtype=float)
+    starts, _ = state_blocks(tree)
+    ustarts, _ = velocity_blocks(tree)
+    for i, s0 in enumerate(starts):
+        k = ustarts[i]
+        after[s0 + 3: s0 + 6] += du[k: k + 3]
+        if not tree.permanent(i):
+            after[s0 + 9: s0 + 12] += du[k + 3: k + 6]
+    return after, reactions
+
+
+# -- maximal coordinates (rbstab's chain state) --------------------------------------------------------
+def maximal_state(tree, y):
+    """The chain's maximal state (12 n,): (Theta_i, Omega_i, X_i, V_i) of every body, Theta_i
+    the Euler angles of A_i."""
+    conf = configuration(tree, y)
+    u = generalised_velocities(tree, y)
+    omega, v, _, _, _ = motion(tree, conf, u, np.zeros(u.size))
+    starts, _ = state_blocks(tree)
+    out = np.zeros(12 * tree.size)
+    for i in range(tree.size):
+        theta = y[starts[i]: starts[i] + 3] if not tree.permanent(i) else euler_angles(conf.rot[i])
+        out[12 * i: 12 * i + 12] = np.concatenate([theta, omega[i], conf.position[i], v[i]])
+    return out
+
+
+def reduced_state(tree, y12):
+    """The reduced state of a maximal one (inverse of :func:`maximal_state` on the
+    constraints): a permanent joint's Theta_j = the Euler angles of A_p' A_c,
+    Omega_j = Omega_c - A_rel' Omega_p."""
+    starts, size = state_blocks(tree)
+    out = np.zeros(size)
+    rot = [rotation(y12[12 * i: 12 * i + 3]) for i in range(tree.size)]
+    for c, joint in enumerate(tree.joints):
+        s, p = starts[c], joint.parent
+        if not tree.permanent(c):
+            out[s: s + 12] = y12[12 * c: 12 * c + 12]
+            continue
+        a_p, w_p = (np.eye(3), np.zeros(3)) if p == GROUND else (rot[p], y12[12 * p + 3: 12 * p + 6])
+        a_rel = a_p.T @ rot[c]
+        out[s: s + 3] = euler_angles(a_rel)
+        out[s + 3: s + 6] = y12[12 * c + 3: 12 * c + 6] - a_rel.T @ w_p
+    return out

@@ -1,0 +1,297 @@
+"""A tree in reduced coordinates (docs/physics.md, "A tree in reduced coordinates"), as the
+plain-numpy model of tests/reference_tree.py writes it, against rbstab's two models of today:
+one body on a permanent joint is the paper's reduced system (eqs 18-21, 32-35); the stance
+double pendulum moves as the maximal-coordinate chain, with the same constraint forces; v is
+conserved without damping and its rate is -sum Omega_j' L_r Omega_j; random trees of
+permanent, free and visco-elastic joints have the chain's accelerations, Lambda_j, v and
+dv/dt; a push in reduced coordinates is the chain's push."""
+
+from __future__ import annotations
+
+import functools
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+import reference_tree as T
+from reference import hat, rotation
+from rbstab.chain import Body, Chain, Joint
+from rbstab.config.chains import load_any_config
+from rbstab.model import Saturation
+from rbstab.simulator import simulate_chain
+from rbstab.variants import VARIANTS
+from rbstab.variants import chain as C
+
+D = np.diag
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "configs" / "examples"
+
+
+def _load(path, overrides=()):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # plausibility notes: not what these tests look at
+        return load_any_config(path, list(overrides))
+
+
+# -- (a) one body on a permanent joint ----------------------------------------------------------------
+@pytest.mark.parametrize("path", [EXAMPLES / "stance_ankle.yaml", ROOT / "configs" / "paper" / "case1_permanent.yaml"],
+                         ids=["stance_ankle", "case1_permanent"])
+def test_one_permanent_body_is_the_papers_reduced_system(path, rng):
+    """The reduced tree of one body on a permanent joint has the mass matrix J_p = J - m hat(R)^2
+    (eq 21) and, at random states, the rate, Lambda (eq 20), v and dv/dt of rbstab's
+    ``permanent`` variant (with the ankle's clipped torque where the config limits it)."""
+    config = _load(path)
+    body, gains = config.body, config.gains
+    sat = gains.saturation
+    tree = T.Tree((T.Body(body.mass, body.inertia, gains.k_t, gains.l_t),),
+                  (T.Joint(T.GROUND, body.attachment_point, body.attachment_point, T.PERMANENT, gains.k_r, gains.l_r,
+                           torque_limit=None if sat is None else np.asarray(sat.torque_n, float)),),
+                  body.gravity)
+    variant = VARIANTS[config.variant](body, gains)
+    r, m = body.attachment_point, body.mass
+    clipped = 0
+    for _ in range(20):
+        y = np.concatenate([rng.normal(scale=0.3, size=3), rng.normal(scale=2.0, size=3)])
+        ev = T.evaluate(tree, y)
+        np.testing.assert_allclose(ev.mass, body.inertia - m * hat(r) @ hat(r), rtol=1e-13, atol=1e-12)
+        theirs = variant.evaluate(y[None])
+        expected = variant.rhs(0.0, y)
+        np.testing.assert_allclose(ev.dy, expected, rtol=1e-11, atol=1e-11 * np.abs(expected).max())
+        np.testing.assert_allclose(ev.lam[0], theirs["constraint_force"][0], rtol=1e-11,
+                                   atol=1e-11 * np.abs(ev.lam).max())
+        np.testing.assert_allclose(ev.conf.position[0], theirs["position"][0], atol=1e-14)  # X = R - A R (eq 32)
+        np.testing.assert_allclose(ev.v[0], theirs["velocity"][0], atol=1e-13)  # V = A hat(R) Omega
+        terms, rate = T.lyapunov(tree, y)
+        assert sum(terms) + variant.lyapunov_offset == pytest.approx(float(theirs["lyapunov"][0]), rel=1e-11, abs=1e-9)
+        assert rate == pytest.approx(float(theirs["lyapunov_rate"][0]), rel=1e-10, abs=1e-9)
+        clipped += bool(np.any(ev.forces.n_j != ev.forces.n_command))
+    if sat is not None:
+        assert clipped > 0  # the clipped torque was exercised
+
+
+# -- (b), (c) the stance double pendulum -------------------------------------------------------------
+STANCE = EXAMPLES / "stance_ankle_hip.yaml"
+
+
+def _stance_tree(l_r=((300.0, 300.0, 30.0), (100.0, 100.0, 20.0)), limited=True):
+    """configs/examples/stance_ankle_hip.yaml written out by hand: legs on the ankle (ground),
+    the trunk on the hip (legs); K_r, L_r and the torque limits of its joints."""
+    legs, trunk = T.Body(22.54, D([1.77, 1.95, 0.22])), T.Body(47.46, D([2.97, 2.97, 0.42]))
+    ankle = T.Joint(T.GROUND, np.zeros(3), np.array([0.0, 0.0, -0.475]), T.PERMANENT, D([1000.0, 1000.0, 100.0]),
+                    D(l_r[0]), torque_limit=np.array([120.0, 120.0, np.inf]) if limited else None)
+    hip = T.Joint(0, np.array([0.0, 0.0, 0.384]), np.array([0.0, 0.0, -0.316]), T.PERMANENT, D([500.0, 500.0, 100.0]),
+                  D(l_r[1]), torque_limit=np.array([150.0, 150.0, np.inf]) if limited else None)
+    return T.Tree((legs, trunk), (ankle, hip), np.array([0.0, 0.0, -9.81]))
+
+
+def _same_tree(tree, chain):
+    """The hand-written tree is the config's chain (masses, inertias, points, gains, limits)."""
+    for mine, body in zip(tree.bodies, chain.bodies):
+        assert mine.mass == body.mass and np.array_equal(mine.inertia, body.inertia)
+        assert not body.k_t.any() and not body.l_t.any()
+    for mine, joint in zip(tree.joints, chain.joints):
+        assert mine.parent == joint.parent and joint.variant == "permanent"
+        for a, b in ((mine.parent_point, joint.parent_point), (mine.child_point, joint.child_point),
+                     (mine.k_r, joint.k_r), (mine.l_r, joint.l_r), (mine.torque_limit, joint.saturation.torque_n)):
+            assert np.array_equal(a, b)
+        assert joint.saturation.shape == "clip"
+
+
+#: The stance example as written (planar: it sways about x), and with a 3-D start whose
+#: ankle torque reaches its limit.
+STARTS = {
+    "planar": [],
+    "3d": ["initial_state.legs.omega=[0.4, -0.3, 0.5]", "initial_state.trunk.omega=[-0.6, 0.5, 1.2]",
+           "initial_state.trunk.theta=[-0.05, 0.04, 0.1]"],
+}
+T_END = 2.0
+
+
+@functools.lru_cache(maxsize=None)
+def _stance_runs(start):
+    """(rbstab's chain run of the stance example over 2 s at rtol 1e-10, the reference's
+    trajectory at the same times, the tree)."""
+    config = _load(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=41", "simulation.rtol=1e-10",
+                            "simulation.atol=1e-12", *STARTS[start]])
+    run = simulate_chain(config)
+    assert run.status == "success", run.message
+    tree = _stance_tree()
+    _same_tree(tree, config.chain)
+    y12 = np.concatenate([np.concatenate([config.initial_state[b.name][k] for k in ("theta", "omega", "position",
+                                                                                    "velocity")])
+                          for b in config.chain.bodies])
+    sol = solve_ivp(lambda t, y: T.rate(tree, y), (0.0, T_END), T.reduced_state(tree, y12), method="DOP853",
+                    rtol=1e-10, atol=1e-12, t_eval=run.time)
+    assert sol.success
+    return run, sol, tree
+
+
+@pytest.mark.parametrize("start", sorted(STARTS))
+def test_stance_double_pendulum_moves_as_the_maximal_coordinate_chain(start):
+    """The reference's centres of mass and orientations follow rbstab's maximal-coordinate
+    chain run to the solver's tolerance: 1e-8 m, 1e-7 rad over 2 s at rtol 1e-10."""
+    run, sol, tree = _stance_runs(start)
+    maximal = np.array([T.maximal_state(tree, y).reshape(2, 4, 3) for y in sol.y.T])
+    assert np.abs(maximal[:, :, 2] - run.outputs["position"]).max() < 1e-8
+    assert np.abs(maximal[:, :, 0] - run.outputs["theta"]).max() < 1e-7
+    assert np.abs(maximal[:, :, 1] - run.outputs["omega"]).max() < 1e-6
+    assert np.ptp(maximal[:, :, 0], axis=0).max() > 0.05  # it moves
+    torque = np.array([T.evaluate(tree, y).forces.n_j for y in sol.y.T])
+    if start == "3d":
+        assert np.abs(torque[:, 0, 0]).max() == 120.0  # the ankle's limit was reached
+
+
+@pytest.mark.parametrize("start", sorted(STARTS))
+def test_constraint_forces_recovered_from_the_reduced_state_are_the_chains(start):
+    """Lambda_j from the reduced state and its accelerations (Newton's equations, leaves first)
+    equals the chain's Lambda_j of the stacked eq 15 at the same times, to 1e-6 of its size."""
+    run, sol, tree = _stance_runs(start)
+    lam = np.array([T.evaluate(tree, y).lam for y in sol.y.T])
+    theirs = run.outputs["constraint_force"]
+    assert np.abs(lam - theirs).max() < 1e-6 * np.abs(theirs).max()
+    weight = sum(b.mass for b in tree.bodies) * 9.81
+    assert np.abs(theirs[:, 0, 2]).max() == pytest.approx(weight, rel=0.2)  # the ankle carries the body
+
+
+def test_v_is_conserved_without_damping_and_its_rate_is_the_joints_dissipation(rng):
+    """With L_r = 0 (and no torque limits) v of the stance double pendulum stays constant along
+    a 3-D motion of the reference; with L_r, the derivative of v along the flow is
+    -sum_j Omega_j' L_r Omega_j, Omega_j read from the state: no constraint-force term."""
+    tree = _stance_tree(l_r=(np.zeros(3), np.zeros(3)), limited=False)
+    y0 = np.array([0.05, -0.02, 0.1, 0.4, -0.3, 0.5, -0.1, 0.04, 0.1, -0.6, 0.5, 1.2])
+    sol = solve_ivp(lambda t, y: T.rate(tree, y), (0.0, 1.0), y0, method="DOP853", rtol=1e-10, atol=1e-12,
+                    t_eval=np.linspace(0.0, 1.0, 11))
+    terms = np.array([T.lyapunov(tree, y)[0] for y in sol.y.T])
+    v = terms.sum(axis=1)
+    assert np.ptp(v) < 1e-8 * np.abs(terms).max()
+    assert np.ptp(terms[:, 0]) > 1.0  # energy moves between its terms
+    damped = _stance_tree(limited=False)
+    l_r = [j.l_r for j in damped.joints]
+    for _ in range(10):
+        y = np.concatenate([rng.normal(scale=0.2, size=3), rng.normal(size=3), rng.normal(scale=0.2, size=3),
+                            rng.normal(size=3)])
+        f = T.rate(damped, y)
+        h = 1e-6
+        numerical = (sum(T.lyapunov(damped, y + h * f)[0]) - sum(T.lyapunov(damped, y - h * f)[0])) / (2 * h)
+        dissipation = y[3:6] @ l_r[0] @ y[3:6] + y[9:12] @ l_r[1] @ y[9:12]
+        assert numerical == pytest.approx(-dissipation, rel=1e-6, abs=1e-6)
+        assert T.lyapunov(damped, y)[1] == pytest.approx(-dissipation, rel=1e-12)
+
+
+# -- random trees: every body's Euler equation, and the chain's rate ------------------------------------
+def _random_tree(rng, laws):
+    bodies, joints = [], []
+    for i, law in enumerate(laws):
+        k_t = D(rng.uniform(0.0, 20.0, 3)) if rng.random() < 0.5 else np.zeros((3, 3))
+        bodies.append(T.Body(float(rng.uniform(0.5, 3.0)), D(rng.uniform(0.05, 0.5, 3)), k_t, 0.5 * k_t))
+        point_law = dict(k_c=D(rng.uniform(200.0, 800.0, 3)), l_c=D(rng.uniform(5.0, 30.0, 3))) \
+            if law == T.VISCO_ELASTIC else {}
+        joints.append(T.Joint(T.GROUND if i == 0 else int(rng.integers(0, i)), rng.normal(scale=0.2, size=3),
+                              rng.normal(scale=0.2, size=3), law, D(rng.uniform(0.0, 30.0, 3)),
+                              D(rng.uniform(0.0, 5.0, 3)),
+                              torque_limit=np.full(3, 2.0) if rng.random() < 0.5 else None, **point_law))
+    return T.Tree(tuple(bodies), tuple(joints), np.array([0.0, 0.0, -9.81]))
+
+
+def _chain(tree):
+    """rbstab's chain of the same tree."""
+    inf = np.full(3, np.inf)
+    bodies = tuple(Body(f"b{i}", b.mass, b.inertia, b.k_t, b.l_t) for i, b in enumerate(tree.bodies))
+    joints = tuple(Joint(f"j{i}", j.parent, i, j.parent_point, j.child_point, j.law, j.k_r, j.l_r,
+                         **({"k_c": j.k_c, "l_c": j.l_c} if j.law == T.VISCO_ELASTIC else {}),
+                         saturation=None if j.torque_limit is None else Saturation(j.torque_limit, inf, inf, "clip"))
+                   for i, j in enumerate(tree.joints))
+    return Chain(bodies, joints, tree.gravity)
+
+
+LAW_MIXES = {
+    "permanent": [T.PERMANENT] * 4,
+    "mixed": [T.PERMANENT, T.VISCO_ELASTIC, T.PERMANENT, T.FREE],
+    "free_root": [T.FREE, T.PERMANENT, T.VISCO_ELASTIC, T.PERMANENT],
+}
+
+
+def _random_state(rng, tree):
+    """Angles, positions and speeds of 0.3, angular velocities of 2 rad/s (standard deviations)."""
+    starts, size = T.state_blocks(tree)
+    y = rng.normal(scale=0.3, size=size)
+    for s in starts:
+        y[s + 3: s + 6] = rng.normal(scale=2.0, size=3)
+    return y
+
+
+@pytest.mark.parametrize("mix", sorted(LAW_MIXES))
+def test_recovered_constraint_forces_close_every_bodys_euler_equation(mix, rng):
+    """The Lambda_j recovered from the bodies' Newton equations also satisfy every body's Euler
+    equation J dOmega/dt + Omega x J Omega = (applied torque) + R_c x A'Lambda_c -
+    sum_k R_p,k x A'Lambda_k: the projected equations lose nothing."""
+    for _ in range(3):
+        tree = _random_tree(rng, LAW_MIXES[mix])
+        for _ in range(3):
+            ev = T.evaluate(tree, _random_state(rng, tree))
+            for i, body in enumerate(tree.bodies):
+                torque = ev.forces.torque[i].copy()
+                if tree.permanent(i):
+                    torque += T.cross(tree.joints[i].child_point, ev.conf.rot[i].T @ ev.lam[i])
+                for k in tree.children(i):
+                    if tree.permanent(k):
+                        torque -= T.cross(tree.joints[k].parent_point, ev.conf.rot[i].T @ ev.lam[k])
+                inertial = body.inertia @ ev.omega_dot[i] + T.cross(ev.omega[i], body.inertia @ ev.omega[i])
+                np.testing.assert_allclose(inertial, torque, atol=1e-10 * (1 + np.abs(torque).max()))
+
+
+@pytest.mark.parametrize("mix", sorted(LAW_MIXES))
+def test_random_trees_have_the_chains_accelerations_forces_and_v(mix, rng):
+    """At random reduced states of random trees (permanent, free and visco-elastic joints,
+    body feedback, clipped joint torques, gravity), the maximal image of the state has, in
+    rbstab's chain, the reference's body accelerations, Lambda_j of every joint, the terms of
+    v and dv/dt (the chain's F_j' Lambda_j is 0 there)."""
+    for _ in range(3):
+        tree = _random_tree(rng, LAW_MIXES[mix])
+        compiled = C.compile_chain(_chain(tree), offset=0.0)
+        n = tree.size
+        for _ in range(4):
+            y = _random_state(rng, tree)
+            y12 = T.maximal_state(tree, y)
+            np.testing.assert_allclose(T.reduced_state(tree, y12), y, atol=1e-13)
+            dy, joints, scalars = np.empty(compiled.n_states), np.empty((n, 7, 3)), np.empty(5)
+            bodies = np.empty((n, 3))
+            C.chain_core(0.0, y12, *compiled.args, dy, joints, bodies, scalars)
+            ev = T.evaluate(tree, y)
+            theirs = dy[:12 * n].reshape(n, 4, 3)
+            scale = np.abs(theirs).max()
+            np.testing.assert_allclose(ev.omega_dot, theirs[:, 1], atol=1e-12 * scale)
+            np.testing.assert_allclose(ev.v_dot, theirs[:, 3], atol=1e-12 * scale)
+            np.testing.assert_allclose(ev.lam, joints[:, 2], atol=1e-12 * (1 + np.abs(ev.lam).max()))
+            np.testing.assert_allclose(ev.forces.n_j, joints[:, 3], atol=1e-12 * (1 + np.abs(ev.forces.n_j).max()))
+            np.testing.assert_allclose(ev.forces.e, joints[:, 0], atol=1e-13)  # E_j: 0 where permanent
+            np.testing.assert_allclose(ev.forces.f, joints[:, 1], atol=1e-12)  # F_j: 0 where permanent
+            terms, rate = T.lyapunov(tree, y)
+            np.testing.assert_allclose(terms, scalars[:4], atol=1e-12 * (1 + np.abs(scalars[:4]).max()))
+            assert rate == pytest.approx(scalars[4], rel=1e-11, abs=1e-11)
+
+
+def test_a_push_in_reduced_coordinates_is_the_chains_push():
+    """M du = J_P' P: the velocities just after a push on the trunk, the kinetic energy's jump
+    and the joints' impulsive reactions are those of the chain's push (the stacked eq 15 with
+    the impulse); the ankle's reaction takes the push's momentum less the bodies'."""
+    tree = _stance_tree()
+    y = np.array([0.05, -0.02, 0.1, 0.4, -0.3, 0.5, -0.1, 0.04, 0.1, -0.6, 0.5, 1.2])
+    point, impulse = np.array([0.05, -0.1, 0.2]), np.array([12.0, -30.0, 5.0])
+    after, reactions = T.push(tree, y, 1, point, impulse)
+    compiled = C.compile_chain(_chain(tree), offset=0.0)
+    y12 = T.maximal_state(tree, y)
+    pushed = y12.copy()
+    work = C.chain_work(2)
+    jump = C.chain_push_with(pushed, *compiled.args[:4], 1, point, impulse, False, work)
+    np.testing.assert_allclose(T.maximal_state(tree, after), pushed, atol=1e-12)
+    kinetic = [T.lyapunov(tree, s)[0][0] for s in (y, after)]
+    assert kinetic[1] - kinetic[0] == pytest.approx(jump, rel=1e-11)
+    np.testing.assert_allclose(reactions, work.joints[:, 2], atol=1e-11 * np.abs(reactions).max())
+    masses = np.array([b.mass for b in tree.bodies])
+    momentum_jump = masses @ (pushed.reshape(2, 4, 3)[:, 3] - y12.reshape(2, 4, 3)[:, 3])
+    np.testing.assert_allclose(momentum_jump, impulse + reactions[0], atol=1e-11 * np.abs(impulse).max())
+    assert np.array_equal(rotation(after[:3]), rotation(y[:3]))  # the configuration does not move
