@@ -87,7 +87,7 @@ class Joint:
         ``free``, ``permanent``, ``sliding``, ``visco_elastic`` or ``embedded``: the law of
         the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p).
     k_r, l_r : ndarray, shape (3, 3)
-        N_j = -K_r Theta_j - L_r Omega_j [N m] (eq 23 on the relative orientation Theta_j and
+        N_j = -B(Theta_j)' K_r Theta_j - L_r Omega_j [N m] (eq 23 on the relative orientation Theta_j and
         the relative angular velocity Omega_j, child frame).
     k_c, l_c : ndarray, shape (3, 3), or None
         Point-law stiffness [N/m] and damping [N s/m] (eqs 22, 40).
