@@ -450,7 +450,7 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
             found = chain_basin_map(config, axes, ratio=ratio, n_samples=n_samples) if axes else None
             pushed = push_analysis(config, ratio=ratio, jobs=jobs, **push) if push is not None else None
             stable = basin_stability(config, ratio=ratio, jobs=jobs, **stability) if stability is not None else None
-            result = result.checked(SimpleNamespace(settling=None, basin=found, push=pushed, basin_stability=stable))
+            result = result.checked(SimpleNamespace(basin=found, push=pushed, basin_stability=stable))
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
         if console.json:

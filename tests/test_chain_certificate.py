@@ -184,3 +184,39 @@ def test_rbstab_analyze_gives_a_chains_certificate(tmp_path):
     none = CliRunner().invoke(cli, ["analyze", path, "--no-certificate", "--json", "-o", str(tmp_path)])
     assert "certificate" not in json.loads(none.stdout.strip().splitlines()[-1])
     assert not any(tmp_path.iterdir())
+
+
+KNEE = "configs/examples/knee.yaml"
+
+
+def _knee(*overrides):
+    from rbstab.config.chains import load_any_config
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return load_any_config(KNEE, list(overrides))
+
+
+def test_the_knees_slow_run_does_not_lower_c():
+    """The knee example: the run from the configured start (the shank lifted 1.2 rad, inside
+    {v <= c}) is still settling at its t_end of 5 s (v above 0.1 % of its start, never
+    above c); run longer it converges, so c stays the domain boundary's level."""
+    from rbstab.simulator import simulate_chain
+
+    config = _knee()
+    cert = analyze_chain(config, samples=200, falsification_runs=0).certificate
+    assert cert.sublevel == cert.boundary_level and cert.sublevel_bound == "domain boundary"
+    v = simulate_chain(config).outputs["lyapunov"]
+    assert v[-1] > 1e-3 * v[0] and v.max() <= cert.sublevel  # the premise: slow, never above c
+    assert cert.runs_checked == 1 and "had not converged by t_end = 5 s" in cert.notes[0]
+
+
+def test_a_knee_run_that_leaves_its_admissible_region_lowers_c():
+    """The knee with |omega_i| <= 3 rad/s as its admissible region: the shank's swing from
+    inside {v <= c} leaves it; c is lowered below the start and the note says why."""
+    config = _knee("simulation.limits.omega=[3,3,3]")
+    result = analyze_chain(config, samples=200, falsification_runs=0)
+    cert = result.certificate
+    assert cert.sublevel < result.initial_lyapunov < cert.boundary_level
+    assert cert.sublevel_bound.startswith("a simulated run from inside")
+    assert "failed: left the admissible region" in cert.notes[0]

@@ -163,3 +163,69 @@ def test_a_fatal_push_inside_the_estimate_lowers_c_in_an_analysis():
     assert cert.sublevel < push.unit_energy[0] * push.threshold[0] ** 2
     assert "torque push of" in cert.notes[0] and "did not recover" in cert.notes[0]
     assert push.estimate(cert.sublevel) < push.threshold[0]
+
+
+STANCE_ANKLE = ROOT / "configs/examples/stance_ankle.yaml"
+SATURATED_PUSH = ROOT / "configs/examples/saturated_push.yaml"
+
+
+def test_a_slow_run_from_inside_is_run_longer_and_does_not_lower_c():
+    """The stance example with t_end = 0.5 s: its run from the configured start (inside
+    {v <= c}) has not converged by then, v never above c; run longer it converges, so c is
+    the one without the run, with a note saying so."""
+    config = _quiet(load_config, STANCE_ANKLE, ["simulation.t_end=0.5", "simulation.n_samples=2001"])
+    result = analyze(config, samples=200, falsification_runs=0)
+    s, cert = result.settling, result.certificate
+    assert s["status"] == "success" and not np.isfinite(s["time_to_converge"])  # slow at t_end
+    assert 0 < s["lyapunov_initial"] < cert.sublevel
+    unchecked = analyze(config, samples=200, falsification_runs=0, simulate=False).certificate
+    assert cert.sublevel == unchecked.sublevel and cert.sublevel_bound == unchecked.sublevel_bound != BOUNDS[6]
+    assert cert.runs_checked == 1 and len(cert.notes) == 1
+    assert "had not converged by t_end = 0.5 s" in cert.notes[0] and "it converged" in cert.notes[0]
+
+
+def test_a_run_that_fails_from_inside_lowers_c_and_says_why():
+    """The stance example with |Omega_i| <= 0.02 rad/s as its admissible region: the run
+    from the configured start, inside {v <= c}, leaves it in its first swing; c is lowered
+    below its start and the note names the failure."""
+    config = _quiet(load_config, STANCE_ANKLE, ["simulation.limits.omega=[0.02,0.02,0.02]"])
+    result = analyze(config, samples=200, falsification_runs=0)
+    s, cert = result.settling, result.certificate
+    assert s["status"] == "failed" and "simulation.limits.omega" in s["message"]
+    assert cert.sublevel < s["lyapunov_initial"] < cert.sublevel_history[-1]
+    assert cert.sublevel_bound == BOUNDS[6]
+    assert f"failed: {s['message']}" in cert.notes[0] and "from the configured initial state" in cert.notes[0]
+
+
+def test_v_rising_above_c_lowers_it_and_an_impulse_does_not():
+    """The saturated push example starts at rest at its equilibrium (v = 0): its impulse at
+    0.5 s makes v jump above c, which is no run from inside, so c stays. With an impulse 80
+    times weaker v stays inside {v <= c} after it, and the force pulse at 2.5 s (which
+    few of 200 sampled times fall in) lifts v above c: c is lowered below v after the
+    impulse, and the note says where v rose above c."""
+    config = _quiet(load_config, SATURATED_PUSH)
+    cert = analyze(config, samples=200, falsification_runs=0).certificate
+    assert cert.sublevel == cert.sublevel_history[-1] and cert.sublevel_bound == BOUNDS[5] and not cert.notes
+    weak = _quiet(load_config, SATURATED_PUSH, ["disturbances.0.value=[0.01,0,0]"])
+    result = analyze(weak, samples=200, falsification_runs=0)
+    lowered = result.certificate
+    assert lowered.sublevel_bound == BOUNDS[6] and 0 < lowered.sublevel < 1e-2 * cert.sublevel
+    assert "impulse at t = 0.5 s" in lowered.notes[0] and "v rose above c" in lowered.notes[0]
+    t = float(lowered.notes[0].split("at t = ")[-1].split(" s")[0])
+    assert 2.5 <= t <= 2.6  # during the pulse
+
+
+def test_a_run_that_has_not_converged_when_run_longer_is_named_and_not_counted():
+    """The stance example twisted 0.2 rad with a twist damper of 0.01 N m s/rad: v of the
+    twist decays as exp(-2 t / tau), tau = 2 J_3 / L_r3 = 200 s, so the run has not
+    converged by 16 t_end = 80 s either, without ever rising above c: c stays, and a note
+    says the run was not counted."""
+    config = _quiet(load_config, STANCE_ANKLE, ["controller.l_r=[350,350,0.01]", "initial_state.theta=[0,0,0.2]",
+                                                "simulation.n_samples=2001"])
+    result = analyze(config, samples=200, falsification_runs=0)
+    cert = result.certificate
+    assert result.linearisation.slowest_time_constant == pytest.approx(200.0)
+    assert result.settling["lyapunov_initial"] < cert.sublevel
+    unchecked = analyze(config, samples=200, falsification_runs=0, simulate=False).certificate
+    assert cert.sublevel == unchecked.sublevel and cert.sublevel_bound != BOUNDS[6]
+    assert "had not converged after 80 s" in cert.notes[0] and "not counted against c" in cert.notes[0]

@@ -24,17 +24,17 @@ from typing import Any
 
 import numpy as np
 
+from .. import simulator
 from ..config.schema import limits_violation
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..simulator import simulate
 from ..variants import VARIANTS
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
-from .evidence import FALSIFICATION_RUNS, check_runs, falsify
+from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
 from .linearise import Linearisation, linearise
 from .push import basin_stability as stability_of
 from .push import push_analysis, unbounded_fall_note
@@ -179,9 +179,11 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     return analysed, [note]
 
 
-def _settling(config, variant, ratio: float) -> dict:
-    """Simulate ``config`` from its initial state: when |v| first stays within ratio |v(0)| + 1e-12 J (:data:`rbstab.convergence.SAMPLE_RULE`) (:func:`~rbstab.analysis.basin.time_to_converge`)."""
-    result = simulate(config)
+def _settling(config, ratio: float) -> tuple[dict, Any]:
+    """Simulate ``config`` from its initial state: (:attr:`Analysis.settling`, with when |v|
+    first stays within ratio |v(0)| + 1e-12 J (:data:`rbstab.convergence.SAMPLE_RULE`,
+    :func:`~rbstab.analysis.basin.time_to_converge`); the run, a RunResult)."""
+    result = simulator.simulate(config)
     v = result.outputs["lyapunov"]
     return {
         "status": result.status,
@@ -191,7 +193,7 @@ def _settling(config, variant, ratio: float) -> dict:
         "lyapunov_final": float(v[-1]),
         "t_end": float(config.simulation.t_end),
         "ratio": float(ratio),
-    }
+    }, result
 
 
 class NoEquilibrium(ValueError):
@@ -338,7 +340,8 @@ def analyze(
     falsification_runs : int
         Runs of the certificate's falsification pass from states on {v = c}
         (:func:`rbstab.analysis.evidence.falsify`; 0: none). Whatever it is, c is checked
-        against every run of the analysis (:func:`rbstab.analysis.evidence.check_runs`).
+        against every run of the analysis (:func:`rbstab.analysis.evidence.check_initial_run`,
+        :func:`rbstab.analysis.evidence.check_runs`).
     verify : bool
         Prove a sublevel bound by interval arithmetic (:func:`rbstab.analysis.verify.verify_analysis`;
         the reduced 6-state model of ``permanent``, checked before anything runs).
@@ -394,9 +397,10 @@ def analyze(
                                      n_samples=samples, seed=seed, disturbed=disturbed,
                                      t_end=analysed.simulation.t_end)
         timing["certificate"] = _time.perf_counter() - t1
+    first = None
     if simulate:
         t2 = _time.perf_counter()
-        result.settling = _settling(analysed, variant, ratio)
+        result.settling, first = _settling(analysed, ratio)
         timing["simulation"] = _time.perf_counter() - t2
     if axes:
         t3 = _time.perf_counter()
@@ -423,6 +427,9 @@ def analyze(
         # 32 runs a level: the CPU's engine (a GPU gains nothing there, and --engine is the maps')
         checked = falsify(analysed, variant, lin, result.certificate, runs=falsification_runs, ratio=ratio,
                           engine=DEFAULT_ENGINE, seed=seed)
+        if first is not None:
+            checked = check_initial_run(checked, analysed, simulator.simulate, lin, ratio=ratio, first=first,
+                                        impulses=[d.start for d in analysed.gains.disturbances if d.kind == "impulse"])
         result.certificate = check_runs(checked, result)
         timing["checks"] = _time.perf_counter() - t6
     if verify:

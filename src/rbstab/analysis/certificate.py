@@ -86,7 +86,8 @@ _REACH = 1.5
 #: Bound names of the sublevel estimate.
 BOUNDS = ("domain boundary", "dv/dt > 0 at a sampled state", "sampled state outside the domain",
           "non-finite value at a sampled state", "v not positive definite",
-          "dv/dt > 0 at a state found by the local search", "a simulated run from inside did not recover")
+          "dv/dt > 0 at a state found by the local search",
+          "a simulated run from inside counted against it (see the note)")
 
 
 class Model(Protocol):
@@ -215,7 +216,8 @@ class Certificate:
     runs_checked : int
         Simulated runs c was checked against (0 before :func:`checked`).
     notes : tuple of str
-        Where a run lowered c: which run, from what v.
+        Where a run lowered c: which run, from what v, and why; where the run from the
+        configured initial state was run past its t_end, what it showed.
     """
 
     lyapunov_equilibrium: float
@@ -739,10 +741,10 @@ def _sublevel(level: float, sampled: dict) -> tuple[float, str]:
     return max(c, 0.0), bound
 
 
-def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certificate:
+def checked(certificate: Certificate, lyapunov_start, recovered, name, reasons=None) -> Certificate:
     """``certificate`` with c checked against simulated runs: a run that starts inside
     {v <= c} and does not recover lowers c below its starting v (the next float down),
-    with a note naming the run.
+    with a note naming the run and why it counts.
 
     Parameters
     ----------
@@ -751,9 +753,13 @@ def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certif
         v [J] where each run starts (v of its initial state, or v just after a push);
         NaN: not a run (not counted).
     recovered : array_like of bool, shape (k,)
-        Whether each run recovered (by the rule of the analysis that ran it).
+        Whether each run recovered: False where it counts against c (by the rule of the
+        analysis that ran it, :mod:`rbstab.analysis.evidence`).
     name : callable
         ``name(i)`` -> the run's description, for the note.
+    reasons : sequence of str, shape (k,), optional
+        Why each run that did not recover counts against c, for the note ("v rose above
+        c = ... (to ... at t = ... s)", "failed: <message>"; default "did not recover").
 
     Returns
     -------
@@ -771,8 +777,9 @@ def checked(certificate: Certificate, lyapunov_start, recovered, name) -> Certif
     i = int(np.argmin(np.where(bad, v0, np.inf)))
     c = max(float(np.nextafter(v0[i], -np.inf)), 0.0)
     others = int(bad.sum()) - 1
+    why = "did not recover" if reasons is None else reasons[i]
     note = (f"c lowered from {certificate.sublevel:.4g} J to {c:.4g} J: {name(i)} started inside {{v <= c}} at "
-            f"v = {v0[i]:.4g} J and did not recover" + (f" (and {others} more such runs)" if others else ""))
+            f"v = {v0[i]:.4g} J and {why}" + (f" (and {others} more such runs)" if others else ""))
     return replace(out, sublevel=c, sublevel_bound=BOUNDS[6], notes=certificate.notes + (note,))
 
 

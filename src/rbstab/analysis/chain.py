@@ -105,8 +105,9 @@ class ChainAnalysis:
 
     def checked(self, runs) -> "ChainAnalysis":
         """This analysis with its certificate's c checked against the runs of ``runs`` (an
-        object with ``settling``, ``basin``, ``push`` and ``basin_stability``, those of the
-        same command; :func:`rbstab.analysis.evidence.check_runs`)."""
+        object with ``basin``, ``push`` and ``basin_stability``, those of the same command;
+        :func:`rbstab.analysis.evidence.check_runs`; the run from the configured initial
+        state was checked by :func:`analyze_chain`)."""
         if self.certificate is None:
             return self
         return replace(self, certificate=check_runs(self.certificate, runs))

@@ -22,8 +22,10 @@ The level c is then checked against runs of the chain's compiled engine
 (:func:`rbstab.analysis.chain.final_lyapunov`) from states on {v = c}
 (:func:`rbstab.analysis.evidence.falsify_with`: a run that leaves the domain or
 ``simulation.limits`` or ends with v above its start lowers c below its start), and against
-the run from the configured initial state (not converged by t_end from inside {v <= c}: c
-is lowered). It is an estimate, as for one body.
+the run from the configured initial state as for one body
+(:func:`rbstab.analysis.evidence.check_initial_run`: started inside {v <= c}, it lowers c
+where v rises above c or the run fails; one still settling at t_end is run longer first).
+It is an estimate, as for one body.
 """
 
 from __future__ import annotations
@@ -32,10 +34,10 @@ import dataclasses
 
 import numpy as np
 
-from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
-from .certificate import DEFAULT_SAMPLES, Certificate, certify, checked, constrained_boundary_level
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
+from .certificate import DEFAULT_SAMPLES, Certificate, certify, constrained_boundary_level
 from .chain_runs import final_lyapunov
-from .evidence import FALSIFICATION_RUNS, falsify_with
+from .evidence import FALSIFICATION_RUNS, check_initial_run, falsify_with
 
 __all__ = ["ChainModel", "certify_chain", "DEFAULT_CHAIN_SAMPLES"]
 
@@ -173,9 +175,11 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
         Runs from states on {v = c} per level tried (0: none).
     ratio : float
         Convergence of the run from the configured initial state
-        (:func:`rbstab.convergence.converged`).
+        (:func:`rbstab.convergence.converged`): one not converged by t_end is run longer
+        (:func:`rbstab.analysis.evidence.check_initial_run`).
     """
     from ..engine.systems import chain_system  # heavy: numba
+    from ..simulator import simulate_chain  # heavy: numba
     from ..variants import chain as C  # heavy: numba
 
     sim = config.simulation
@@ -202,9 +206,6 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
             return ok & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
     certificate = falsify_with(run, model, linearisation, certificate, runs=falsification_runs, seed=seed)
-    y0 = C.initial_state(config)[None]
-    ok, v1 = final_lyapunov(compiled, system, y0, sim)
-    v0 = C.evaluate(compiled, np.zeros(1), y0)["lyapunov"]
-    certificate = checked(certificate, v0, np.asarray(converged(ok, v0, v1, ratio), dtype=bool),
-                          lambda i: "the run from the configured initial state")
+    impulses = [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
+    certificate = check_initial_run(certificate, config, simulate_chain, linearisation, ratio=ratio, impulses=impulses)
     return certificate, notes
