@@ -81,6 +81,39 @@ def test_a_run_that_contradicts_c_lowers_it_and_is_named():
     assert "checked against 2 runs" in lowered.evidence and "certified" not in lowered.evidence
 
 
+def test_a_basin_point_still_settling_is_no_counterexample_and_one_that_fails_or_rises_is():
+    """The basin map's points count against c where they start inside and fail or end with v
+    above their start; a point not converged by t_end with v(t_end) <= v(0) does not count.
+    And a note tells the two levels apart however close they are."""
+    from types import SimpleNamespace
+
+    from rbstab.analysis.basin import BasinAxis
+    from rbstab.analysis.evidence import check_runs
+
+    config = _quiet(load_config, PENDULUM)
+    variant = config.make_variant()
+    cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
+    c = cert.sublevel
+    axes = [BasinAxis.parse("initial_state.omega.0=-1:1:2"), BasinAxis.parse("initial_state.omega.1=-1:1:2")]
+
+    def basin(outcome, v0, v1):
+        return SimpleNamespace(basin=SimpleNamespace(axes=axes, outcome=np.array(outcome, dtype=np.int8).reshape(2, 2),
+                                                     lyapunov_initial=np.reshape(v0, (2, 2)),
+                                                     lyapunov_final=np.reshape(v1, (2, 2))),
+                               push=None, basin_stability=None)
+
+    inside = [0.5 * c] * 4
+    settling = check_runs(cert, basin([0, 1, 1, 0], inside, [0.0, 0.4 * c, 0.49 * c, 0.0]))
+    assert settling.sublevel == c and not settling.notes and settling.runs_checked == cert.runs_checked + 4
+    fell = check_runs(cert, basin([0, 1, 2, 0], [0.5 * c, 0.5 * c, 0.3 * c, 0.5 * c], [0, 0.1 * c, np.nan, 0]))
+    assert fell.sublevel < 0.3 * c and "failed" in fell.notes[0] and "omega.0 = 1, initial_state.omega.1 = -1" in fell.notes[0]
+    rose = check_runs(cert, basin([0, 1, 0, 0], inside, [0, 0.6 * c, 0, 0]))
+    assert rose.sublevel < 0.5 * c and "ended at v(t_end) =" in rose.notes[0] and "above its start" in rose.notes[0]
+    close = checked(cert, [c * (1 - 1e-9)], [False], lambda i: "run")
+    low, high = close.notes[0].split(": ")[0].split(" from ")[1].split(" J to ")
+    assert low != high.removesuffix(" J")  # not "lowered from 6.219 J to 6.219 J"
+
+
 def test_stance_push_estimate_lies_below_every_simulated_threshold():
     """A single analysis with pushes: c from the samples and the local search, checked
     against every push run; the estimate sqrt(c / dT) lies below the threshold along each

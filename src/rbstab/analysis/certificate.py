@@ -778,7 +778,10 @@ def checked(certificate: Certificate, lyapunov_start, recovered, name, reasons=N
     c = max(float(np.nextafter(v0[i], -np.inf)), 0.0)
     others = int(bad.sum()) - 1
     why = "did not recover" if reasons is None else reasons[i]
-    note = (f"c lowered from {certificate.sublevel:.4g} J to {c:.4g} J: {name(i)} started inside {{v <= c}} at "
+    digits = 4  # enough to tell the two levels apart
+    while digits < 17 and f"{certificate.sublevel:.{digits}g}" == f"{c:.{digits}g}":
+        digits += 1
+    note = (f"c lowered from {certificate.sublevel:.{digits}g} J to {c:.{digits}g} J: {name(i)} started inside {{v <= c}} at "
             f"v = {v0[i]:.4g} J and {why}" + (f" (and {others} more such runs)" if others else ""))
     return replace(out, sublevel=c, sublevel_bound=BOUNDS[6], notes=certificate.notes + (note,))
 

@@ -29,10 +29,12 @@ the run and why. The runs are
   converged, too). An impulse disturbance is a jump of v, not a rate: the run is
   judged piece by piece between impulses, each piece from its first sample after the
   impulse (a piece an impulse starts above c is no run from inside);
-- the other runs of the analysis (:func:`check_runs`): the basin map's runs, the smallest
-  fatal push of each direction, the basin stability's draws, each counted against c when
-  it starts inside and does not recover by the rule of the analysis that ran it (so that
-  the push estimate lies below every simulated threshold).
+- the other runs of the analysis (:func:`check_runs`): the basin map's runs, each counted
+  against c when it starts inside and fails or ends with v(t_end) above its start (a point
+  still settling at t_end is no contradiction); the smallest fatal push of each direction
+  and the basin stability's draws, each counted when it starts inside and does not recover
+  by the rule of the analysis that ran it (so that the push estimate lies below every
+  simulated threshold).
 """
 
 from __future__ import annotations
@@ -280,8 +282,15 @@ def check_runs(certificate: Certificate, analysis) -> Certificate:
         x, y = (a.values for a in b.axes)
         k0, k1 = (a.key for a in b.axes)
         n1 = len(y)
-        certificate = checked(certificate, b.lyapunov_initial.ravel(), (b.outcome == 0).ravel(),
-                              lambda i: f"the basin map's run from {k0} = {x[i // n1]:.4g}, {k1} = {y[i % n1]:.4g}")
+        outcome, v0, v1 = b.outcome.ravel(), b.lyapunov_initial.ravel(), b.lyapunov_final.ravel()
+        risen = v1 > v0 + ROUND_OFF * np.maximum(np.abs(v0), 1.0)
+        # a point still settling at t_end (never failed, v(t_end) <= v(0)) is no contradiction
+        recovered = (outcome == 0) | ((outcome == 1) & ~risen)
+        reasons = [("failed (it left the domain or simulation.limits)" if o == 2 else
+                    f"ended at v(t_end) = {e:.4g} J, above its start") for o, e in zip(outcome, v1)]
+        certificate = checked(certificate, v0, recovered,
+                              lambda i: f"the basin map's run from {k0} = {x[i // n1]:.4g}, {k1} = {y[i % n1]:.4g}",
+                              reasons)
     p = analysis.push
     if p is not None:
         v0, name = p.fatal_starts()
