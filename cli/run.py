@@ -66,6 +66,8 @@ def rate_check_text(summary: dict, path: Path) -> str:
 
 def _report(config, path: Path, mode: str) -> dict:
     """Print the run's line (or JSON object) from its file's attributes; return them."""
+    import numpy as np  # heavy
+
     from rbstab.diagnostics import convergence_word  # heavy: numpy
     from rbstab.io.hdf5 import read_attributes  # heavy: numpy
 
@@ -82,11 +84,11 @@ def _report(config, path: Path, mode: str) -> dict:
                           "converged": settled == "converged", "message": attrs["message"],
                           "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
                           "replaced": _REPLACED[mode], "summary": s})
-        drift = [x for x in s["max_constraint_drift"] if x == x]
+        drift = [x for x in np.atleast_1d(s["max_constraint_drift"]) if x == x]  # one joint: a scalar attribute
         console.out(
-            f"{config.name}: {attrs['status']}, {settled} (a chain of {len(attrs['joints'].split(','))} bodies, "
+            f"{config.name}: {attrs['status']}, {settled} (a chain of {_bodies(len(attrs['joints'].split(',')))}, "
             f"{attrs['wall_time']:.3g} s) v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
-            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E_j| {max(s['max_abs_constraint_error']):.3g} m"
+            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E_j| {np.max(s['max_abs_constraint_error']):.3g} m"
             + (f" (permanent joints' drift {max(drift):.3g} m)" if drift else "")
             + f", rate check {check} -> {path}")
         return attrs
@@ -105,6 +107,10 @@ def _report(config, path: Path, mode: str) -> dict:
     console.detail("  solver " + ", ".join(f"{k[len('solver_'):]} {v}" for k, v in attrs.items()
                                           if k.startswith("solver_") and k != "solver_message"))
     return attrs
+
+
+def _bodies(n: int) -> str:
+    return f"{n} bod{'y' if n == 1 else 'ies'}"
 
 
 def _load_kernels(loaded) -> None:

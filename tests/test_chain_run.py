@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
+import yaml
 from click.testing import CliRunner
 
 import rbstab
@@ -110,3 +111,21 @@ def test_the_runs_of_one_chain_come_in_blocks_of_at_most_postprocess_block_runs(
     assert last.status == alone.status == "success"
     for name in ("theta", "joint_theta", "constraint_error", "lyapunov"):
         np.testing.assert_array_equal(last.outputs[name], alone.outputs[name])
+
+
+def test_one_body_written_as_a_tree_runs_and_says_so(tmp_path):
+    """A tree of one body on one permanent joint: rbstab run prints its line (one joint's
+    figures are scalars in the file), in the singular."""
+    stance = yaml.safe_load((ROOT / "configs" / "examples" / "stance_ankle.yaml").read_text())
+    tree = {"name": "one_tree", "gravity": stance["body"]["gravity"],
+            "bodies": [{"name": "body", "mass": stance["body"]["mass"], "inertia": stance["body"]["inertia"]}],
+            "joints": [{"name": "ankle", "parent": "ground", "parent_point": [0.0, 0.0, 0.0], "child": "body",
+                        "child_point": stance["body"]["attachment_point"], "variant": "permanent",
+                        "k_r": stance["controller"]["k_r"], "l_r": stance["controller"]["l_r"]}],
+            "initial_state": {"body": {"theta": stance["initial_state"]["theta"]}},
+            "simulation": {"t_end": 0.5, "n_samples": 51}}
+    path = tmp_path / "one_tree.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    result = CliRunner().invoke(cli, ["run", str(path), "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0 and "Traceback" not in result.output, result.output
+    assert "one_tree: success" in result.output and "(a chain of 1 body, " in result.output

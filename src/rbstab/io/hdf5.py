@@ -160,7 +160,7 @@ def result_attributes(
     else:
         identity = {"rbstab_format": CHAIN_FORMAT, "name": result.name, "variant": "chain",
                     "bodies": ",".join(chain.body_names), "joints": ",".join(chain.joint_names)}
-        title = f"rbstab run {result.name} (a chain of {chain.size} bodies)"
+        title = f"rbstab run {result.name} (a chain of {chain.size} bod{'y' if chain.size == 1 else 'ies'})"
     attrs = {
         **identity,
         "status": result.status,
