@@ -187,7 +187,8 @@ def test_unstable_configuration_is_reported_not_refused(tmp_path):
     assert np.isnan(ds["time_constant"][0]) and float(ds["e_folding_time"][0]) == pytest.approx(e_fold)
     assert np.isnan(ds["linear_settling_time"]) and ds["e_folding_time"].attrs["units"] == "s"
     report = tmp_path / "report"
-    shown = CliRunner().invoke(cli, ["report", str(tmp_path / "pendulum.analysis.nc"), "-o", str(report), "--format", "md"])
+    shown = CliRunner().invoke(cli, ["report", str(tmp_path / "pendulum.analysis.nc"), "-o", str(report),
+                                     "--format", "md"])
     assert shown.exit_code == 0, shown.output
     page = (report / "index.md").read_text()
     assert f"- unstable: e-folding time {e_fold:.4g} s; simulation from the configured initial state: not converged" \
@@ -200,7 +201,8 @@ def test_marginal_configuration_has_no_time_scale(tmp_path):
     zero eigenvalues, a marginal verdict, no time constant or e-folding time for them, and
     none for the equilibrium: text, record and file."""
     result = _invoke(str(ROOT / "configs/examples/stance_ankle.yaml"), "-o", str(tmp_path), "--json",
-                     "--no-certificate", "--set", "controller.k_r=[1300, 1300, 0]", "--set", "controller.l_r=[350, 350, 0]")
+                     "--no-certificate", "--set", "controller.k_r=[1300, 1300, 0]",
+                     "--set", "controller.l_r=[350, 350, 0]")
     assert result.exit_code == 0, result.output
     record = _strict(result.stdout)
     assert record["verdict"] == "marginal"
@@ -213,4 +215,5 @@ def test_marginal_configuration_has_no_time_scale(tmp_path):
     ds = read_analysis(tmp_path / "stance_ankle.analysis.nc")
     assert ds.attrs["verdict"] == "marginal"
     assert np.isnan(ds["slowest_time_constant"]) and np.isnan(ds["shortest_e_folding_time"])
-    assert np.isnan(ds["time_constant"].values[zero]).all() and np.isfinite(ds["time_constant"].values[~np.array(zero)]).all()
+    tau = ds["time_constant"].values
+    assert np.isnan(tau[zero]).all() and np.isfinite(tau[~np.array(zero)]).all()

@@ -30,7 +30,7 @@ unstable, none when marginal (:func:`rbstab.analysis.text.time_scale` says which
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,6 +40,7 @@ __all__ = [
     "Linearisation",
     "linearise",
     "linearise_chain",
+    "linearise_config",
     "modes",
     "verdict",
     "rest_tolerance",
@@ -266,3 +267,24 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
     z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
     rates = lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)])  # noqa: E731
     return _linearisation(rates, z, compiled.chain.gravity), coordinates
+
+
+def linearise_config(config) -> Linearisation:
+    """The linearisation at the rest state of a run configuration, as ``rbstab analyze``
+    finds it: of a chain (:class:`rbstab.config.chains.ChainConfig`) by
+    :func:`linearise_chain`; of one body (:class:`rbstab.config.RunConfig`) by
+    :func:`linearise` of its variant without disturbances (they act in time, not at rest).
+
+    Raises
+    ------
+    ValueError
+        Where there is none: the pure sign law of ``sliding``, a chain with no rest state
+        near its reference configuration (:func:`linearise`, :func:`linearise_chain`).
+    """
+    if hasattr(config, "chain"):
+        from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+
+        return linearise_chain(C.compile_chain(config.chain))[0]
+    if config.gains.disturbances:
+        config = replace(config, gains=replace(config.gains, disturbances=()))
+    return linearise(config.make_variant())

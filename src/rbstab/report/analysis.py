@@ -3,7 +3,8 @@
 Per configuration: the verdict and notes, the equilibrium and rest check, the eigenvalue
 table and the pole plot, the time scale (the slowest time constant; the e-folding time when
 unstable; none when marginal) beside the simulation's time to converge, the certificate
-table and the sampled dv/dt against v, and the basin map with the sublevel-set contour, the pushes and the basin stability (:mod:`rbstab.report.push`).
+table and the sampled dv/dt against v, and the basin map with the sublevel-set contour,
+the pushes and the basin stability (:mod:`rbstab.report.push`).
 Per curves file of a sweep spec: :func:`rbstab.report.push.recovery_section`. Per robustness file: the stable fraction with its interval per
 group, the separating parameters and a figure of the runs over the two strongest.
 
@@ -157,9 +158,9 @@ def _eigen_table(ds) -> Table:
                      _f(e_fold[k])])
     return Table("Eigenvalues of the Jacobian at the equilibrium (real part descending)",
                  ["mode", "Re s [1/s]", "Im s [rad/s]", "omega_n [rad/s]", "zeta", "tau [s]", "e-folding time [s]"],
-                 rows, note="omega_n = |s|, zeta = -Re s / |s|; tau = -1 / Re s of a decaying mode (Re s < -tolerance), "
-                            "the e-folding time 1 / Re s of a growing mode (Re s > tolerance); a mode with |Re s| within "
-                            "the tolerance (a zero or imaginary eigenvalue) has neither ('-').")
+                 rows, note="omega_n = |s|, zeta = -Re s / |s|; tau = -1 / Re s of a decaying mode (Re s < "
+                            "-tolerance), the e-folding time 1 / Re s of a growing mode (Re s > tolerance); a mode "
+                            "with |Re s| within the tolerance (a zero or imaginary eigenvalue) has neither ('-').")
 
 
 def _certificate_table(ds) -> Table | None:
