@@ -109,11 +109,19 @@ def test_inverted_pendulum_closed_form_unstable_and_confirmed_by_simulation():
     assert np.all(lin.equilibrium == 0) and lin.is_rest_point
     assert np.all(_match(lin.eigenvalues, expected) <= 1e-9 * np.abs(expected).max())
     assert lin.verdict == "unstable"
-    assert lin.eigenvalues[0].real > 0.5 and lin.time_constant[0] < 0
-    # a small tilt grows (time constant -1/0.67 s): the body leaves the neighbourhood
-    tilted = _inverted_pendulum(100.0, ["simulation.t_end=8"]).with_initial_state({"theta": [0.01, 0.0, 0.0]})
+    # the growing root's e-folding time; no time constant anywhere for it, none negative
+    growing = expected[np.argmax(expected.real)].real
+    assert lin.shortest_e_folding_time == pytest.approx(1.0 / growing, rel=1e-9)
+    assert np.isnan(lin.slowest_time_constant) and np.isnan(lin.time_constant[0])
+    assert np.all(np.isnan(lin.time_constant) == (lin.eigenvalues.real > 0)) and np.nanmin(lin.time_constant) > 0
+    assert np.all(np.isnan(lin.e_folding_time) == (lin.eigenvalues.real < 0))
+    # a small tilt about y' (the axis of the least pivot inertia: the fastest-growing mode) grows by e every
+    # e-folding time (~1 s) while it is small: the body leaves the neighbourhood
+    tilted = _inverted_pendulum(100.0, ["simulation.t_end=8"]).with_initial_state({"theta": [0.0, 0.01, 0.0]})
     result = simulate(tilted)
     theta = result.outputs["theta"]
+    grown = np.interp([1.0, 1.0 + lin.shortest_e_folding_time], result.time, theta[:, 1])
+    assert grown[1] / grown[0] == pytest.approx(np.e, rel=0.01)  # |theta_2| < 0.06 rad: sin nearly linear
     assert np.nanmax(np.abs(theta)) > 0.5 or not result.ok
     # the same pendulum held up by k_r > m g L is stable, with the same closed form
     stiff = linearise(_inverted_pendulum(k_r=400.0).make_variant())
@@ -157,14 +165,16 @@ def test_jacobian_matches_the_complex_step_of_the_reference_model_and_finite_dif
 
 
 def test_modes_and_verdict():
-    s = np.array([-3 + 4j, -3 - 4j, -2.0, 0.0, 1e-9])
-    omega_n, zeta, tau = modes(s)
+    s = np.array([-3 + 4j, -3 - 4j, -2.0, 0.0, 1e-9, 0.5 + 2j])
+    omega_n, zeta, tau, e_fold = modes(s, 1e-6)
     np.testing.assert_allclose(omega_n[:3], [5, 5, 2])
     np.testing.assert_allclose(zeta[:3], [0.6, 0.6, 1.0])
     np.testing.assert_allclose(tau[:3], [1 / 3, 1 / 3, 0.5])
-    assert np.isinf(tau[3]) and np.isnan(zeta[3])
-    assert verdict(s, 1e-6) == "marginal"
-    assert verdict(s, 1e-12) == "unstable"
+    assert np.all(np.isnan(tau[3:])) and np.isnan(zeta[3])  # zero, within the tolerance, growing: no time constant
+    assert np.all(np.isnan(e_fold[:5])) and e_fold[5] == pytest.approx(2.0)  # only a growing mode e-folds
+    assert modes(s, 1e-12)[3][4] == pytest.approx(1e9)  # beyond a finer tolerance 1e-9 1/s grows
+    assert verdict(s[:5], 1e-6) == "marginal"
+    assert verdict(s[:5], 1e-12) == "unstable"
     assert verdict(s[:3], 1e-6) == "asymptotically stable"
 
 
@@ -175,6 +185,11 @@ def test_semidefinite_stiffness_is_marginal():
         lin = linearise(VARIANTS["free"](body, gains))
     assert lin.verdict == "marginal"
     assert np.min(np.abs(lin.eigenvalues)) <= lin.tolerance
+    # no time scale: neither a time constant nor an e-folding time, and no mode within the tolerance has one
+    assert np.isnan(lin.slowest_time_constant) and np.isnan(lin.shortest_e_folding_time)
+    zero = np.abs(lin.eigenvalues.real) <= lin.tolerance
+    assert zero.any() and np.all(np.isnan(lin.time_constant[zero])) and np.all(np.isnan(lin.e_folding_time))
+    assert np.all(np.isfinite(lin.time_constant[~zero]))
 
 
 # -- certificate -----------------------------------------------------------------------------------------

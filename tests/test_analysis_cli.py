@@ -183,5 +183,48 @@ def test_unstable_configuration_is_reported_not_refused(tmp_path):
     record = _strict(result.stdout)
     assert record["verdict"] == "unstable" and record["eigenvalues"][0][0] > 0
     assert record["certificate"]["holds"] is False and record["certificate"]["sublevel"] == 0.0
-    assert "fastest-growing mode" in result.stderr
-    assert read_analysis(tmp_path / "pendulum.analysis.nc").attrs["verdict"] == "unstable"
+    # its time scale is the growing mode's e-folding time 1/Re(s), in the text, the record and the file;
+    # no time constant for it, none negative
+    e_fold = 1.0 / record["eigenvalues"][0][0]
+    assert record["shortest_e_folding_time"] == pytest.approx(e_fold) and record["slowest_time_constant"] is None
+    growing = [re > 0 for re, _ in record["eigenvalues"]]
+    assert [t is None for t in record["time_constant"]] == growing
+    assert [t is not None for t in record["e_folding_time"]] == growing
+    assert min(t for t in record["time_constant"] + record["e_folding_time"] if t is not None) > 0
+    assert f"unstable: e-folding time {e_fold:.4g} s" in result.stderr
+    ds = read_analysis(tmp_path / "pendulum.analysis.nc")
+    assert ds.attrs["verdict"] == "unstable"
+    assert np.isnan(ds["slowest_time_constant"]) and float(ds["shortest_e_folding_time"]) == pytest.approx(e_fold)
+    assert np.isnan(ds["time_constant"][0]) and float(ds["e_folding_time"][0]) == pytest.approx(e_fold)
+    assert np.isnan(ds["linear_settling_time"]) and ds["e_folding_time"].attrs["units"] == "s"
+    report = tmp_path / "report"
+    shown = CliRunner().invoke(cli, ["report", str(tmp_path / "pendulum.analysis.nc"), "-o", str(report),
+                                     "--format", "md"])
+    assert shown.exit_code == 0, shown.output
+    page = (report / "index.md").read_text()
+    assert f"- unstable: e-folding time {e_fold:.4g} s; simulation from the configured initial state: not converged" \
+        in page and "slowest" not in page
+    assert "| tau [s] | e-folding time [s] |" in page and f"| - | {e_fold:.4g} |" in page
+
+
+def test_marginal_configuration_has_no_time_scale(tmp_path):
+    """No rotational stiffness nor damping about the twist axis of the stance example: two
+    zero eigenvalues, a marginal verdict, no time constant or e-folding time for them, and
+    none for the equilibrium: text, record and file."""
+    result = _invoke(str(ROOT / "configs/examples/stance_ankle.yaml"), "-o", str(tmp_path), "--json",
+                     "--no-certificate", "--set", "controller.k_r=[1300, 1300, 0]",
+                     "--set", "controller.l_r=[350, 350, 0]")
+    assert result.exit_code == 0, result.output
+    record = _strict(result.stdout)
+    assert record["verdict"] == "marginal"
+    zero = [abs(re) <= record["tolerance"] for re, _ in record["eigenvalues"]]
+    assert sum(zero) == 2 and not record["eigenvalues"][0][0] > record["tolerance"]
+    assert [t is None for t in record["time_constant"]] == zero and all(t is None for t in record["e_folding_time"])
+    assert record["slowest_time_constant"] is None and record["shortest_e_folding_time"] is None
+    assert "  marginally stable (a zero or imaginary eigenvalue); the simulation" in result.stderr
+    assert "time constant" not in result.stderr and "e-folding time" not in result.stderr
+    ds = read_analysis(tmp_path / "stance_ankle.analysis.nc")
+    assert ds.attrs["verdict"] == "marginal"
+    assert np.isnan(ds["slowest_time_constant"]) and np.isnan(ds["shortest_e_folding_time"])
+    tau = ds["time_constant"].values
+    assert np.isnan(tau[zero]).all() and np.isfinite(tau[~np.array(zero)]).all()

@@ -265,6 +265,43 @@ def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stif
     assert set(record["rest_state"]) == {"legs", "trunk"} and record["verdict"] == "asymptotically stable"
 
 
+def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
+    """Stable stance: the slowest time constant; ankle stiffness 600 N m/rad (below what
+    gravity and the hip need, ~713): the e-folding time of the growing mode, which a small
+    lean confirms by growing e-fold in it; the undamped double pendulum (imaginary
+    eigenvalues): marginal, no number. Never a negative or astronomical time."""
+    import json
+
+    from rbstab.analysis import analyze_chain
+    from rbstab.simulator import simulate_chain
+
+    path = "configs/examples/stance_ankle_hip.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        stable = analyze_chain(load_any_config(path), certificate=False)
+        weak = analyze_chain(load_any_config(path, ["joints.ankle.k_r.0=600"]), certificate=False)
+        undamped = analyze_chain(load_any_config("configs/examples/double_pendulum.yaml"), certificate=False)
+    records = [json.loads(json.dumps(r.as_dict(), allow_nan=False)) for r in (stable, weak, undamped)]  # strict JSON
+    s0 = [r.linearisation.eigenvalues[0].real for r in (stable, weak, undamped)]
+    assert records[0]["slowest_time_constant"] == pytest.approx(-1.0 / s0[0]) and s0[0] < 0
+    assert records[0]["shortest_e_folding_time"] is None
+    assert f"slowest time constant {-1.0 / s0[0]:.4g} s" in stable.text()
+    e_fold = records[1]["shortest_e_folding_time"]
+    assert weak.verdict == "unstable" and e_fold == pytest.approx(1.0 / s0[1]) and s0[1] > 0
+    assert records[1]["slowest_time_constant"] is None
+    assert f"unstable: e-folding time {e_fold:.4g} s" in weak.text() and "time constant" not in weak.text()
+    # a lean of the legs grows by e every e-folding time once the decaying modes have gone (~0.6 s each)
+    lean = load_any_config(path, ["joints.ankle.k_r.0=600", "simulation.t_end=8", "simulation.n_samples=801",
+                                  "initial_state.legs.theta=[0.001, 0, 0]", "initial_state.trunk.theta=[0, 0, 0]"])
+    run = simulate_chain(lean)
+    grown = np.interp([4.0, 4.0 + e_fold], run.time, run.outputs["theta"][:, 0, 0])
+    assert run.ok and grown[1] / grown[0] == pytest.approx(np.e, rel=1e-3)
+    assert undamped.verdict == "marginal" and abs(s0[2]) <= undamped.linearisation.tolerance
+    assert records[2]["slowest_time_constant"] is None and records[2]["shortest_e_folding_time"] is None
+    assert "marginally stable (a zero or imaginary eigenvalue); v at the initial state" in undamped.text()
+    assert "time constant" not in undamped.text() and "e-folding" not in undamped.text()
+
+
 def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp_path):
     from click.testing import CliRunner
 

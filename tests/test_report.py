@@ -38,7 +38,7 @@ from rbstab.report import (
 from rbstab.report.build import DPI_RANGE
 from rbstab.report.figures import DPI, FIGURE_FORMATS
 from rbstab.report.paper import PAPER_CASES, compare_with_paper
-from rbstab.report.tables import settling_time, validate_metrics
+from rbstab.report.tables import settling_time, sweep_table, validate_metrics
 from rbstab.sweep.folder import write_summary
 from rbstab_cli import report as report_cli
 from rbstab_cli.main import cli
@@ -581,3 +581,84 @@ def test_settling_times_of_a_store_read_a_file_at_a_time_equal_a_run_at_a_time(s
     want = [run_settling_time(run, thresholds) for run in alone.runs if run is not None]
     np.testing.assert_array_equal(got, want)
     assert np.isfinite(got).sum() >= 1 and np.isnan(got).sum() >= 1  # one settles, the failed one not
+
+
+# -- settled, and at rest without settling ------------------------------------------------------------
+
+def test_a_leaning_rest_and_an_unstable_rest_are_not_counted_as_settled(tmp_path):
+    """The stance example pinned at the ankle without its torque limit: 1300 N m/rad holds
+    it upright, 550 N m/rad is below gravity's stiffness m g L = 652 N m/rad, so upright is
+    unstable and the body leans over to rest where 550 theta = m g L sin(theta). From 0.1
+    rad the weak one comes to rest leaning (under the thresholds, v far from zero): 'rest
+    away from equilibrium'; started at rest upright it stays there (v zero throughout, no
+    motion): 'unstable rest'. Neither settled, neither has a settling time."""
+    from scipy.optimize import brentq
+
+    from rbstab.report.tables import rest_verdict
+
+    spec = tmp_path / "lean.yaml"
+    spec.write_text(yaml.safe_dump({"name": "lean", "base": str(ROOT / "configs/examples/stance_ankle.yaml"),
+                                    "grid": {"controller.k_r": [[1300, 1300, 200], [550, 1300, 200]],
+                                             "initial_state.theta": [[0.1, 0, 0], [0, 0, 0]]}}, sort_keys=False))
+    long = ["--set", "controller.saturation=null", "--set", "controller.l_r=[200, 350, 50]",
+            "--set", "simulation.t_end=30", "--set", "simulation.n_samples=601"]
+    _ok(_invoke("sweep", spec, "-o", tmp_path / "sweeps", "-j", "1", "--no-progress", *long))
+    out = tmp_path / "report"
+    _ok(_invoke("report", tmp_path / "sweeps" / "lean", "-o", out, "--format", "md", "-j", "1",
+                "--metric", "settling_time", "--metric", "settled"))
+    table = pd.read_csv(out / "sweep_lean.csv").set_index(["k_r_0", "theta_0"])
+    upright, leaning, weak_upright = (1300, 0.1), (550, 0.1), (550, 0.0)
+    # physics: the weak one rests at the leaning equilibrium, the weak upright one never moves
+    m_g_l = 70.0 * 9.81 * 0.95
+    lean = brentq(lambda th: 550 * th - m_g_l * np.sin(th), 0.5, 1.5)
+    runs = {r.name: r for r in load_inputs([tmp_path / "sweeps" / "lean"]).sweeps[0].runs}
+    final = {key: runs[table.loc[key, "run_id"]].summary for key in (leaning, weak_upright)}
+    assert final[leaning]["final_theta"][0] == pytest.approx(lean, abs=1e-3)
+    assert final[weak_upright]["final_theta"] == [0, 0, 0] and final[weak_upright]["lyapunov_final"] == 0
+    assert rest_verdict(runs[table.loc[weak_upright, "run_id"]].config) == "unstable"  # 550 < m g L
+    assert rest_verdict(runs[table.loc[upright, "run_id"]].config) == "asymptotically stable"
+    # both came under the thresholds: what counted them as settled before
+    assert table.loc[leaning, "converged"] == False and table.loc[weak_upright, "converged"] == True  # noqa: E712
+    rest = table["report:rest"].to_dict()
+    assert rest == {upright: "settled", (1300, 0.0): "settled", leaning: "rest away from equilibrium",
+                    weak_upright: "unstable rest"}
+    assert table["report:settled"].to_dict() == {k: v == "settled" for k, v in rest.items()}
+    assert np.isnan(table.loc[[leaning, weak_upright], "report:settling_time"]).all()
+    assert np.isfinite(table.loc[[upright], "report:settling_time"]).all()
+    page = (out / "index.md").read_text()
+    assert "v converged, the rest state not linearly unstable): 2 of 4 = 50%" in page
+    assert "at rest but not settled: 1 rest away from equilibrium (v not converged), 1 unstable rest" in page
+    index = {(r[1], r[2]): r[-1] for r in _md_table(page, "Index of lean (metrics read back from the run files)")}
+    assert index == {("550", "0.1"): "rest away from equilibrium", ("550", "0"): "unstable rest",
+                     ("1300", "0.1"): "settled", ("1300", "0"): "settled"}
+    summary = pd.read_csv(out / "summary.csv").set_index("run")  # every run, with the default ratio
+    assert summary.loc[table.loc[leaning, "run_id"], "rest"] == "rest away from equilibrium"
+    assert summary.loc[table.loc[weak_upright, "run_id"], "rest"] == "unstable rest"
+    assert np.isnan(summary.loc[table.loc[weak_upright, "run_id"], "settling_time"])
+
+
+def test_a_chain_beside_a_slowly_unstable_upright_is_an_unstable_rest(tmp_path):
+    """The ankle-hip stance with ankle stiffness 705 N m/rad, just below the ~713 that
+    gravity and the hip need: upright is unstable, but its growing mode's e-folding time
+    (~40 s) is far longer than t_end = 5 s, so from the example's lean the body comes to rest
+    near upright with v converged by the sweep's ratio 0.01: an unstable rest, not settled;
+    with 1000 N m/rad it settles."""
+    from rbstab.analysis.linearise import linearise_config
+    from rbstab.config.chains import any_config_from_mapping
+
+    spec = tmp_path / "upright.yaml"
+    spec.write_text(yaml.safe_dump({"name": "upright", "base": str(ROOT / "configs/examples/stance_ankle_hip.yaml"),
+                                    "grid": {"joints.ankle.k_r.0": [705, 1000]},
+                                    "convergence": {"lyapunov_ratio": 0.01}}, sort_keys=False))
+    _ok(_invoke("sweep", spec, "-o", tmp_path / "sweeps", "-j", "1", "--no-progress",
+                "--set", "simulation.n_samples=501"))
+    sweep = load_inputs([tmp_path / "sweeps" / "upright"]).sweeps[0]
+    weak = next(r for r in sweep.runs if r.config["joints"][0]["k_r"][0] == 705)
+    growth = linearise_config(any_config_from_mapping(weak.config, default_name="weak")).eigenvalues[0].real
+    assert 0 < growth < 0.2 / 5.0  # grows by less than e^0.2 over t_end
+    table = sweep_table(sweep, ["settling_time"], SettleThresholds()).set_index("ankle_k_r_0")
+    assert table["converged"].astype(str).eq("True").all()  # by v alone both would count
+    assert table["report:rest"].to_dict() == {705: "unstable rest", 1000: "settled"}
+    assert table["report:rest_state"].to_dict() == {705: "unstable", 1000: "asymptotically stable"}
+    assert table["report:settled"].to_dict() == {705: False, 1000: True}
+    assert np.isnan(table.loc[705, "report:settling_time"]) and table.loc[1000, "report:settling_time"] > 0

@@ -18,10 +18,10 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from .basin import DEFAULT_SAMPLES, BasinMap, time_to_converge
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
 from .chain_runs import chain_states, chain_states_recover, check_entries, final_lyapunov
-from .dataset import certificate_record
+from .dataset import certificate_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain
-from .text import certificate_lines
+from .text import certificate_lines, time_scale
 
 __all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
            "chain_states_recover", "final_lyapunov"]
@@ -64,7 +64,9 @@ class ChainAnalysis:
 
     def as_dict(self) -> dict:
         """Plain Python (the ``--json`` form): rest state per body and block, eigenvalues as
-        [re, im] [1/s], verdict, v at the initial state [J], the certificate (the fields of
+        [re, im] [1/s], verdict, ``slowest_time_constant`` [s] (null unless asymptotically
+        stable), ``shortest_e_folding_time`` [s] (null unless unstable), v at the initial
+        state [J], the certificate (the fields of
         a one-body analysis's, :func:`rbstab.analysis.dataset.certificate_record`, with
         ``coordinates`` naming the entries of ``worst_state``) and notes."""
         lin = self.linearisation
@@ -73,7 +75,7 @@ class ChainAnalysis:
             rest.setdefault(body, {})[block] = lin.equilibrium[3 * k: 3 * k + 3].tolist()
         return {"name": self.name, "verdict": lin.verdict, "rest_point": lin.is_rest_point, "rest_state": rest,
                 "eigenvalues": [[float(s.real), float(s.imag)] for s in lin.eigenvalues],
-                "slowest_time_constant": float(lin.slowest_time_constant),
+                **time_scale_record(lin),
                 "initial_lyapunov": self.initial_lyapunov, "notes": list(self.notes),
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
 
@@ -96,7 +98,7 @@ class ChainAnalysis:
         shown = ", ".join(f"{s.real:.4g}{s.imag:+.4g}j" for s in lin.eigenvalues[:6])
         more = f" (+{lin.eigenvalues.size - 6} more)" if lin.eigenvalues.size > 6 else ""
         lines.append(f"  eigenvalues [1/s], largest real part first: {shown}{more}")
-        lines.append(f"  slowest time constant {lin.slowest_time_constant:.4g} s; "
+        lines.append(f"  {time_scale(lin.verdict, lin.slowest_time_constant, lin.shortest_e_folding_time)}; "
                      f"v at the initial state {self.initial_lyapunov:.6g} J")
         lines += [f"  note: {n}" for n in self.notes]
         if self.certificate is not None:

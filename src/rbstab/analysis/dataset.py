@@ -16,8 +16,9 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
            part descending), rate_mode, sample, axis, basin_x, basin_y
     equilibrium_<block>(axis), rest_residual_<block>(axis)
     jacobian(state, state_wrt), jacobian_error, eigenvalue_real(mode), eigenvalue_imag,
-    natural_frequency, damping_ratio, time_constant; eigenvalue_tolerance, rest_tolerance,
-    slowest_time_constant, time_to_converge, linear_settling_time (scalars)
+    natural_frequency, damping_ratio, time_constant, e_folding_time; eigenvalue_tolerance,
+    rest_tolerance, slowest_time_constant, shortest_e_folding_time, time_to_converge,
+    linear_settling_time (scalars)
     certificate: lyapunov_hessian, rate_hessian (state, state_wrt), rate_eigenvalue
     (rate_mode), sample_lyapunov, sample_rate, sample_rate_analytic, sample_outside (sample),
     worst_state_<block>(axis), sublevel, sublevel_sampled, boundary_level, ... (scalars),
@@ -63,6 +64,7 @@ from .thresholds import EXPLAINS_BAR
 
 __all__ = [
     "certificate_record",
+    "time_scale_record",
     "FORMAT",
     "SUFFIX",
     "analysis_content",
@@ -133,14 +135,21 @@ def _linearisation_variables(analysis) -> dict:
         "eigenvalue_imag": _var(("mode",), s.imag, "rad s-1", "imaginary part of the eigenvalue s of A"),
         "natural_frequency": _var(("mode",), omega_n, "rad s-1", "natural frequency |s|"),
         "damping_ratio": _var(("mode",), zeta, "1", "damping ratio -Re(s)/|s|"),
-        "time_constant": _var(("mode",), tau, "s", "time constant -1/Re(s)",
-                              "negative for a growing mode, infinite on the imaginary axis"),
+        "time_constant": _var(("mode",), tau, "s", "time constant -1/Re(s) of a decaying mode",
+                              "NaN unless Re(s) < -eigenvalue_tolerance"),
+        "e_folding_time": _var(("mode",), lin.e_folding_time, "s", "e-folding time 1/Re(s) of a growing mode",
+                               "NaN unless Re(s) > eigenvalue_tolerance"),
         "eigenvalue_tolerance": _var((), lin.tolerance, "s-1", "|Re(s)| at most this is marginal"),
         "slowest_time_constant": _var((), lin.slowest_time_constant, "s",
-                                      "time constant of the eigenvalue with the largest real part"),
+                                      "time constant of the eigenvalue with the largest real part",
+                                      "NaN unless the verdict is asymptotically stable"),
+        "shortest_e_folding_time": _var((), lin.shortest_e_folding_time, "s",
+                                        "e-folding time of the eigenvalue with the largest real part "
+                                        "(the fastest-growing mode)", "NaN unless the verdict is unstable"),
         "linear_settling_time": _var((), analysis.linear_settling_time, "s",
                                      "time the slowest mode alone takes to bring v down by the ratio",
-                                     "tau ln(1/ratio) / 2, as v ~ exp(-2 t / tau)"),
+                                     "tau ln(1/ratio) / 2, as v ~ exp(-2 t / tau); NaN unless the verdict is "
+                                     "asymptotically stable"),
     }
 
 
@@ -558,6 +567,15 @@ def certificate_record(c) -> dict:
     }
 
 
+def time_scale_record(lin) -> dict[str, float | None]:
+    """The time scale of a :class:`rbstab.analysis.linearise.Linearisation` as plain
+    Python (the ``--json`` records of one body and of a chain): ``slowest_time_constant``
+    [s] (null unless asymptotically stable), ``shortest_e_folding_time`` [s] (null unless
+    unstable); both null when marginal."""
+    return {"slowest_time_constant": _finite(lin.slowest_time_constant),
+            "shortest_e_folding_time": _finite(lin.shortest_e_folding_time)}
+
+
 def json_record(analysis) -> dict[str, Any]:
     """The ``--json`` record of an analysis: plain JSON (non-finite numbers are null)."""
     lin = analysis.linearisation
@@ -574,7 +592,8 @@ def json_record(analysis) -> dict[str, Any]:
         "natural_frequency": _floats(lin.natural_frequency),
         "damping_ratio": _floats(lin.damping_ratio),
         "time_constant": _floats(lin.time_constant),
-        "slowest_time_constant": _finite(lin.slowest_time_constant),
+        "e_folding_time": _floats(lin.e_folding_time),
+        **time_scale_record(lin),
         "linear_settling_time": _finite(analysis.linear_settling_time),
         "notes": list(analysis.notes),
     }

@@ -11,18 +11,26 @@ Per eigenvalue s (python-control's ``damp`` conventions):
 
 - natural frequency ``omega_n = |s|`` [rad/s];
 - damping ratio ``zeta = -Re(s) / |s|`` (1 for a real stable mode, < 0 when unstable);
-- time constant ``tau = -1 / Re(s)`` [s] (the e-folding time of the mode; negative for a
-  growing mode, infinite on the imaginary axis).
+- time constant ``tau = -1 / Re(s)`` [s] of a decaying mode (Re(s) < -tol): the time it
+  takes to shrink by the factor e; NaN for any other mode;
+- e-folding time ``1 / Re(s)`` [s] of a growing mode (Re(s) > tol): the time it takes to
+  grow by the factor e; NaN for any other mode.
+
+A mode with |Re(s)| <= tol (a zero or purely imaginary eigenvalue) has neither.
 
 Verdict (Lyapunov's indirect method): ``asymptotically stable`` when every Re(s) < -tol,
 ``unstable`` when some Re(s) > tol, else ``marginal`` (the linearisation cannot decide:
 a centre-manifold question, e.g. a zero stiffness), with tol = :data:`EIGENVALUE_RTOL`
 times the spectral radius (at least 1 s^-1 times it).
+
+The time scale of the equilibrium is that of the eigenvalue with the largest real part:
+the slowest time constant when asymptotically stable, the shortest e-folding time when
+unstable, none when marginal (:func:`rbstab.analysis.text.time_scale` says which in words).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -32,6 +40,7 @@ __all__ = [
     "Linearisation",
     "linearise",
     "linearise_chain",
+    "linearise_config",
     "modes",
     "verdict",
     "rest_tolerance",
@@ -67,7 +76,7 @@ class Linearisation:
     eigenvalues : ndarray of complex, shape (n,)
         Of A [1/s], sorted by real part, descending (then by imaginary part).
     tolerance : float
-        |Re(s)| below which a mode is marginal [1/s].
+        |Re(s)| at most which a mode is marginal [1/s].
     """
 
     equilibrium: np.ndarray
@@ -100,26 +109,48 @@ class Linearisation:
 
     @property
     def time_constant(self) -> np.ndarray:
-        """-1/Re(s) [s] per eigenvalue (inf on the imaginary axis, < 0 when growing)."""
-        return modes(self.eigenvalues)[2]
+        """-1/Re(s) [s] per eigenvalue where Re(s) < -:attr:`tolerance` (a decaying mode), NaN elsewhere."""
+        return modes(self.eigenvalues, self.tolerance)[2]
+
+    @property
+    def e_folding_time(self) -> np.ndarray:
+        """1/Re(s) [s] per eigenvalue where Re(s) > :attr:`tolerance` (a growing mode), NaN elsewhere."""
+        return modes(self.eigenvalues, self.tolerance)[3]
 
     @property
     def slowest_time_constant(self) -> float:
-        """tau of the eigenvalue with the largest real part [s]."""
-        return float(self.time_constant[0])
+        """The time constant of the eigenvalue with the largest real part [s] when
+        asymptotically stable; NaN otherwise."""
+        return float(self.time_constant[0]) if self.verdict == "asymptotically stable" else float("nan")
+
+    @property
+    def shortest_e_folding_time(self) -> float:
+        """The e-folding time of the eigenvalue with the largest real part [s] when
+        unstable (the fastest-growing mode); NaN otherwise."""
+        return float(self.e_folding_time[0]) if self.verdict == "unstable" else float("nan")
 
 
-def modes(eigenvalues: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(natural frequency [rad/s], damping ratio, time constant [s]) per eigenvalue.
+def modes(eigenvalues: np.ndarray, tolerance: float = 0.0
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(natural frequency [rad/s], damping ratio, time constant [s], e-folding time [s])
+    per eigenvalue (module docstring).
 
-    See the module docstring; ``eigenvalues`` complex, shape (n,).
+    Parameters
+    ----------
+    eigenvalues : ndarray of complex, shape (n,)
+        [1/s]
+    tolerance : float
+        [1/s], >= 0: a mode with |Re(s)| at most this has neither a time constant nor an
+        e-folding time (NaN).
     """
     s = np.asarray(eigenvalues, dtype=complex)
     omega_n = np.abs(s)
     with np.errstate(divide="ignore", invalid="ignore"):
         zeta = np.where(omega_n > 0, -s.real / np.where(omega_n > 0, omega_n, 1.0), np.nan)
-        tau = np.where(s.real != 0, -1.0 / np.where(s.real != 0, s.real, 1.0), np.inf)
-    return omega_n, zeta, tau
+        decaying, growing = s.real < -tolerance, s.real > tolerance
+        tau = np.where(decaying, -1.0 / np.where(decaying, s.real, 1.0), np.nan)
+        e_fold = np.where(growing, 1.0 / np.where(growing, s.real, 1.0), np.nan)
+    return omega_n, zeta, tau, e_fold
 
 
 def verdict(eigenvalues: np.ndarray, tolerance: float) -> str:
@@ -236,3 +267,24 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
     z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
     rates = lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)])  # noqa: E731
     return _linearisation(rates, z, compiled.chain.gravity), coordinates
+
+
+def linearise_config(config) -> Linearisation:
+    """The linearisation at the rest state of a run configuration, as ``rbstab analyze``
+    finds it: of a chain (:class:`rbstab.config.chains.ChainConfig`) by
+    :func:`linearise_chain`; of one body (:class:`rbstab.config.RunConfig`) by
+    :func:`linearise` of its variant without disturbances (they act in time, not at rest).
+
+    Raises
+    ------
+    ValueError
+        Where there is none: the pure sign law of ``sliding``, a chain with no rest state
+        near its reference configuration (:func:`linearise`, :func:`linearise_chain`).
+    """
+    if hasattr(config, "chain"):
+        from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+
+        return linearise_chain(C.compile_chain(config.chain))[0]
+    if config.gains.disturbances:
+        config = replace(config, gains=replace(config.gains, disturbances=()))
+    return linearise(config.make_variant())

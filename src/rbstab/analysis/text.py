@@ -8,7 +8,7 @@ from ..layout import BLOCK_UNITS
 from .thresholds import EXPLAINS_BAR
 
 __all__ = ["certificate_lines", "describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines",
-           "rule_lines", "stability_lines"]
+           "rule_lines", "stability_lines", "time_scale"]
 
 
 def _g(value, digits: int = 4) -> str:
@@ -41,18 +41,43 @@ def format_state(layout, y: np.ndarray) -> str:
     return ", ".join(parts)
 
 
+def time_scale(verdict: str, slowest_time_constant: float, shortest_e_folding_time: float) -> str:
+    """The time scale of a linearisation in words, from its eigenvalue with the largest real
+    part (:mod:`rbstab.analysis.linearise`): ``slowest time constant 0.4296 s`` when
+    asymptotically stable, ``unstable: e-folding time 2.495 s`` when unstable,
+    ``marginally stable (a zero or imaginary eigenvalue)`` when marginal (no number).
+
+    Parameters
+    ----------
+    verdict : str
+        One of :data:`rbstab.analysis.linearise.VERDICTS`.
+    slowest_time_constant, shortest_e_folding_time : float
+        [s] (:attr:`rbstab.analysis.linearise.Linearisation.slowest_time_constant`,
+        :attr:`~rbstab.analysis.linearise.Linearisation.shortest_e_folding_time`); the one
+        the verdict does not name is not read.
+    """
+    if verdict == "asymptotically stable":
+        return f"slowest time constant {_g(slowest_time_constant)} s"
+    if verdict == "unstable":
+        return f"unstable: e-folding time {_g(shortest_e_folding_time)} s"
+    return "marginally stable (a zero or imaginary eigenvalue)"
+
+
+def _time_scale(lin) -> str:
+    return time_scale(lin.verdict, lin.slowest_time_constant, lin.shortest_e_folding_time)
+
+
 def _mode_lines(lin) -> list[str]:
-    lines = [f"  {'eigenvalue s [1/s]':<26}{'omega_n [rad/s]':>16}{'zeta':>9}{'tau [s]':>11}"]
-    for s, wn, zeta, tau in zip(lin.eigenvalues, lin.natural_frequency, lin.damping_ratio, lin.time_constant):
-        lines.append(f"  {format_eigenvalue(s):<26}{_g(wn):>16}{_g(zeta, 3):>9}{_g(tau):>11}")
+    lines = [f"  {'eigenvalue s [1/s]':<26}{'omega_n [rad/s]':>16}{'zeta':>9}{'tau [s]':>11}{'e-folding [s]':>15}"]
+    for s, wn, zeta, tau, e_fold in zip(lin.eigenvalues, lin.natural_frequency, lin.damping_ratio, lin.time_constant,
+                                        lin.e_folding_time):
+        lines.append(f"  {format_eigenvalue(s):<26}{_g(wn):>16}{_g(zeta, 3):>9}{_g(tau):>11}{_g(e_fold):>15}")
     return lines
 
 
 def _settling_line(analysis) -> str:
     s = analysis.settling
-    tau = analysis.linearisation.slowest_time_constant
-    head = f"  slowest mode: tau = {_g(tau)} s" if tau > 0 else \
-        f"  fastest-growing mode: e-folding time {_g(-tau)} s" if np.isfinite(tau) else "  slowest mode: undamped"
+    head = f"  {_time_scale(analysis.linearisation)}"
     if s is None:
         return head
     if s["status"] != "success":
@@ -60,8 +85,10 @@ def _settling_line(analysis) -> str:
     if not np.isfinite(s["time_to_converge"]):
         return f"{head}; the simulation from the configured initial state did not converge (|v| <= {s['ratio']:g} |v(0)|) " \
                f"by t_end = {_g(s['t_end'])} s"
+    alone = analysis.linear_settling_time
     return (f"{head}; the simulation from the configured initial state converged (|v| <= {s['ratio']:g} |v(0)| from "
-            f"then on) at {_g(s['time_to_converge'])} s (the slowest mode alone: {_g(analysis.linear_settling_time)} s)")
+            f"then on) at {_g(s['time_to_converge'])} s"
+            + (f" (the slowest mode alone: {_g(alone)} s)" if np.isfinite(alone) else ""))
 
 
 def certificate_lines(c, domain: str | None = None) -> list[str]:

@@ -1,9 +1,10 @@
 """Report pages of analysis files (``rbstab analyze`` -> ``*.analysis.nc``).
 
 Per configuration: the verdict and notes, the equilibrium and rest check, the eigenvalue
-table and the pole plot, the slowest time constant beside the simulation's time to
-converge, the certificate table and the sampled dv/dt against v, and the basin map with
-the sublevel-set contour, the pushes and the basin stability (:mod:`rbstab.report.push`).
+table and the pole plot, the time scale (the slowest time constant; the e-folding time when
+unstable; none when marginal) beside the simulation's time to converge, the certificate
+table and the sampled dv/dt against v, and the basin map with the sublevel-set contour,
+the pushes and the basin stability (:mod:`rbstab.report.push`).
 Per curves file of a sweep spec: :func:`rbstab.report.push.recovery_section`. Per robustness file: the stable fraction with its interval per
 group, the separating parameters and a figure of the runs over the two strongest.
 
@@ -116,6 +117,8 @@ def _state_text(ds, prefix: str) -> str:
 
 
 def _facts(ds) -> list[str]:
+    from ..analysis.text import time_scale  # heavy: numba (the rbstab.analysis package)
+
     a = ds.attrs
     facts = [f"variant: {a.get('variant')}; verdict of the linearisation: {a.get('verdict')} "
              f"(modes with |Re s| <= {_f(_scalar(ds, 'eigenvalue_tolerance'), 2)} 1/s count as marginal)",
@@ -123,25 +126,42 @@ def _facts(ds) -> list[str]:
              f"rest check: {'passed' if a.get('rest_point') else 'FAILED'} (max |dy/dt| "
              f"{_f(max(abs(float(ds[n].values.max())) for n in ds.data_vars if n.startswith('rest_residual_')), 3)} "
              f"<= {_f(_scalar(ds, 'rest_tolerance'), 3)})"]
+    _, _, tau, e_fold = _modes(ds)
+    scale = time_scale(str(a.get("verdict")), tau[0], e_fold[0])
     if "time_to_converge" in ds:
         ttc = _scalar(ds, "time_to_converge")
-        simulated = f"{_f(ttc)} s" if np.isfinite(ttc) else f"not converged by t_end ({a.get('simulation_status')})"
-        facts.append(f"slowest mode: tau = {_f(_scalar(ds, 'slowest_time_constant'))} s (alone it would take "
-                     f"{_f(_scalar(ds, 'linear_settling_time'))} s to bring v down by the ratio "
-                     f"{_f(_scalar(ds, 'convergence_ratio'))}); simulation from the configured initial state: "
-                     f"converged at {simulated}")
+        simulated = f"converged at {_f(ttc)} s" if np.isfinite(ttc) else \
+            f"not converged by t_end ({a.get('simulation_status')})"
+        alone = _scalar(ds, "linear_settling_time")
+        facts.append(f"{scale}"
+                     + (f" (alone it would take {_f(alone)} s to bring v down by the ratio "
+                        f"{_f(_scalar(ds, 'convergence_ratio'))})" if np.isfinite(alone) else "")
+                     + f"; simulation from the configured initial state: {simulated}")
+    else:
+        facts.append(scale)
     facts += [f"note: {n}" for n in str(a.get("notes", "")).splitlines() if n]
     return facts
 
 
+def _modes(ds) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(omega_n, zeta, tau, e-folding time) per mode, from the eigenvalues and their tolerance
+    (:func:`rbstab.analysis.linearise.modes`; so for a file of any version alike)."""
+    from ..analysis.linearise import modes  # heavy: numba (the rbstab.analysis package)
+
+    return modes(_eigenvalues(ds), _scalar(ds, "eigenvalue_tolerance"))
+
+
 def _eigen_table(ds) -> Table:
     rows = []
+    omega_n, zeta, tau, e_fold = _modes(ds)
     for k, s in enumerate(_eigenvalues(ds)):
-        rows.append([str(k + 1), _f(s.real, 6), _f(s.imag, 6), _f(ds["natural_frequency"].values[k]),
-                     _f(ds["damping_ratio"].values[k], 3), _f(ds["time_constant"].values[k])])
+        rows.append([str(k + 1), _f(s.real, 6), _f(s.imag, 6), _f(omega_n[k]), _f(zeta[k], 3), _f(tau[k]),
+                     _f(e_fold[k])])
     return Table("Eigenvalues of the Jacobian at the equilibrium (real part descending)",
-                 ["mode", "Re s [1/s]", "Im s [rad/s]", "omega_n [rad/s]", "zeta", "tau [s]"], rows,
-                 note="omega_n = |s|, zeta = -Re s / |s|, tau = -1 / Re s (negative: a growing mode).")
+                 ["mode", "Re s [1/s]", "Im s [rad/s]", "omega_n [rad/s]", "zeta", "tau [s]", "e-folding time [s]"],
+                 rows, note="omega_n = |s|, zeta = -Re s / |s|; tau = -1 / Re s of a decaying mode (Re s < "
+                            "-tolerance), the e-folding time 1 / Re s of a growing mode (Re s > tolerance); a mode "
+                            "with |Re s| within the tolerance (a zero or imaginary eigenvalue) has neither ('-').")
 
 
 def _certificate_table(ds) -> Table | None:

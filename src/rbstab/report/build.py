@@ -51,12 +51,18 @@ from .studies import split_studies, study_sections
 from .sweep_figures import sweep_figures
 from .tables import (
     DEFAULT_METRICS,
+    MAX_REST_CHECKS,
+    NOT_CHECKED,
+    REST_AWAY,
+    SETTLED,
+    UNSTABLE_REST,
     SettleThresholds,
     check_joint_metrics,
     differing_parameters,
     format_value,
     metric_column,
     metric_label,
+    rest_words,
     runs_table,
     sweep_table,
     validate_metrics,
@@ -295,7 +301,7 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
         ["run", "max |E| per axis [m]", "settling time [s]", "v(0) [J]", "v(t_end) [J]", "max dv/dt [W]",
          "max |analytic - numerical dv/dt| [W]", "relative", "rate check"],
         [[r["run"], _vec(r, "max_abs_constraint_error"),
-          "not settled" if not np.isfinite(r["settling_time"]) else _f(r["settling_time"]),
+          _f(r["settling_time"]) if r["rest"] == SETTLED else r["rest"],
           _f(r["lyapunov_initial"]), _f(r["lyapunov_final"]), _f(r["max_lyapunov_rate"]),
           _f(r["lyapunov_rate_mismatch"]), _f(r["lyapunov_rate_mismatch_relative"], 3), str(r["lyapunov_rate_check"])]
          for r in rows],
@@ -394,7 +400,6 @@ def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, set
     s = Section(f"Sweep {sweep.name}", f"sweep-{safe_filename(sweep.name)}")
     n = len(table)
     ok = table["status"].astype(str) == "success"
-    settled_col = "report:settled"
     facts = [
         f"folder: {sweep.path}",
         f"{n} runs: " + ", ".join(f"{count} {status}" for status, count in table["status"].astype(str).value_counts().items()),
@@ -404,11 +409,21 @@ def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, set
     if "converged" in table.columns:
         stable = int(sum(_truthy(v) and st for v, st in zip(table["converged"], ok)))
         facts.append(f"stable (status success and converged, as the sweep recorded it): {stable} of {n} = {stable / n:.0%}")
-    settled = int(table[settled_col].sum())
+    rest = table["report:rest"].astype(str)
+    settled = int((rest == SETTLED).sum())
     facts.append(
-        f"settled (|E| <= {settle.e:g} m and |Omega| <= {settle.omega:g} rad/s until t_end): "
-        f"{settled} of {n} = {settled / n:.0%}"
+        f"settled (|E| <= {settle.e:g} m and |Omega| <= {settle.omega:g} rad/s until t_end, v converged, the rest "
+        f"state not linearly unstable): {settled} of {n} = {settled / n:.0%}"
     )
+    away, unstable = int((rest == REST_AWAY).sum()), int((rest == UNSTABLE_REST).sum())
+    if away or unstable:
+        facts.append(f"at rest but not settled: {away} {REST_AWAY} (v not converged), {unstable} {UNSTABLE_REST} "
+                     "(the linearisation at the rest state unstable)")
+    unchecked = int(((table["report:rest_state"].astype(str) == NOT_CHECKED) & (rest == SETTLED)).sum())
+    if unchecked:
+        facts.append(f"{unchecked} runs otherwise settled have a configuration beyond the {MAX_REST_CHECKS} distinct "
+                     "ones whose rest state the report linearises: counted as settled on v alone (report:rest_state "
+                     f"'{NOT_CHECKED}')")
     missing = sum(r is None for r in sweep.runs)
     if missing:
         facts.append(f"{missing} rows of index.csv have no result file: their metrics are blank")
@@ -428,11 +443,11 @@ def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, set
     s.blocks.extend(figures)
     shown = table.head(MAX_TABLE_ROWS)
     metric_cols = [metric_column(m) for m in metrics]
-    cols = ["run_id", *sweep.varied, "status", *metric_cols, settled_col]
+    cols = ["run_id", *sweep.varied, "status", *metric_cols, "report:rest"]
     if "converged" in table.columns:
         cols.insert(cols.index("status") + 1, "converged")
     headers = ["run_id", *sweep.varied, "status", *(["converged"] if "converged" in table.columns else []),
-               *(metric_label(m) for m in metrics), "settled"]
+               *(metric_label(m) for m in metrics), "at t_end"]
     note = f"sweep_{safe_filename(sweep.name)}.csv holds every column of index.csv plus these metrics"
     if n > MAX_TABLE_ROWS:
         note = f"first {MAX_TABLE_ROWS} of {n} runs; " + note
@@ -649,9 +664,8 @@ def _intro(data: ReportInputs, created: str, settle: SettleThresholds) -> list[s
         f"Created {created} by rbstab {__version__} from {len(data.paths)} input(s): "
         + ", ".join(str(p) for p in data.paths) + ".",
         f"Settling time: the first sample time after which |E| <= {settle.e:g} m and |Omega| <= "
-        f"{settle.omega:g} rad/s (Euclidean norms) hold until the end of the run; 'not settled' when the "
-        "last sample is outside (always for a failed run). Tables: summary.csv (every run, full precision), "
-        "summary.md.",
+        f"{settle.omega:g} rad/s (Euclidean norms) hold until the end of the run. {rest_words(settle)} "
+        "Tables: summary.csv (every run, full precision), summary.md.",
     ]
 
 

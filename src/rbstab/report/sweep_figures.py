@@ -16,7 +16,7 @@ import numpy as np
 
 from .figures import FigureFile, FigureWriter, new_figure
 from .load import SweepData, safe_filename
-from .tables import metric_column, metric_label
+from .tables import REST_AWAY, UNSTABLE_REST, metric_column, metric_label
 
 __all__ = ["sweep_figures"]
 
@@ -84,7 +84,11 @@ def sweep_figures(sweep: SweepData, table, metrics: Sequence[str], out: FigureWr
         hatched); otherwise, for each varied parameter, ``sweep_<name>_<parameter>`` with
         one panel per metric (successful runs as dots coloured by base / variant where
         those vary, failed runs as red crosses on the lower edge). Empty when no parameter
-        varies. ``converged`` as a metric gives a map of 1 (converged) and 0.
+        varies. ``converged`` as a metric gives a map of 1 (converged) and 0, ``settled``
+        one of 1 (settled) and 0; their cells and those of ``settling_time`` are labelled
+        with how the run ended (``report:rest``: not settled, rest away from equilibrium,
+        unstable rest), and in the panels the runs at rest but not settled are marked on
+        the lower edge.
     """
     grid = _Grid.of(sweep, table)
     if grid is not None:
@@ -113,17 +117,20 @@ class _Grid:
         xs, ys = np.unique(x), np.unique(y)
         return cls(tuple(sweep.varied), x, y, (xcats or [f"{v:g}" for v in xs], ycats or [f"{v:g}" for v in ys]))
 
-    def cells(self, values: np.ndarray, failed: np.ndarray) -> tuple[np.ndarray, np.ndarray, set]:
-        """(value per cell, failed per cell, the cells that have a run), rows along y."""
+    def cells(self, values: np.ndarray, failed: np.ndarray, words: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, dict]:
+        """(value per cell, failed per cell, the cells that have a run -> the word of the
+        run there, from ``words``, else ""), rows along y."""
         xs, ys = np.unique(self.x), np.unique(self.y)
         grid = np.full((len(ys), len(xs)), np.nan)
         bad = np.zeros_like(grid, dtype=bool)
-        for xi, yi, value, f in zip(self.x, self.y, values, failed):
+        present = {}
+        for k, (xi, yi, value, f) in enumerate(zip(self.x, self.y, values, failed)):
             i, j = int(np.searchsorted(ys, yi)), int(np.searchsorted(xs, xi))
             bad[i, j] |= bool(f)
+            present[i, j] = "" if words is None else str(words[k])
             if not f:
                 grid[i, j] = value
-        present = {(int(np.searchsorted(ys, yi)), int(np.searchsorted(xs, xi))) for xi, yi in zip(self.x, self.y)}
         return grid, bad, present
 
 
@@ -131,13 +138,15 @@ def _heatmap(sweep: SweepData, g: _Grid, table, name: str, out: FigureWriter) ->
     from matplotlib.colors import LogNorm  # heavy: matplotlib
 
     failed = (table["status"].astype(str) != "success").to_numpy()
-    grid, bad, present = g.cells(table[metric_column(name)].to_numpy(dtype=float), failed)
+    rest = name in _REST_METRICS and "report:rest" in table.columns
+    grid, bad, present = g.cells(table[metric_column(name)].to_numpy(dtype=float), failed,
+                                 table["report:rest"].to_numpy(dtype=object) if rest else None)
     fig, axes = new_figure(1, width=8.0, row_height=5.0)
     ax = axes[0, 0]
     mesh = ax.imshow(grid, origin="lower", aspect="auto", cmap="viridis", norm=LogNorm() if _use_log(grid.ravel()) else None)
     if np.isfinite(grid).any():
         fig.colorbar(mesh, ax=ax, label=metric_label(name))
-    _annotate_cells(ax, mesh, grid, bad, present, "not settled" if name == "settling_time" else "n/a")
+    _annotate_cells(ax, mesh, grid, bad, present, words=name == "settled")
     ax.set_xticks(range(grid.shape[1]), g.labels[0], rotation=30, fontsize=8)
     ax.set_yticks(range(grid.shape[0]), g.labels[1], fontsize=8)
     p1, p2 = g.names
@@ -147,14 +156,23 @@ def _heatmap(sweep: SweepData, g: _Grid, table, name: str, out: FigureWriter) ->
     return out.save(fig, f"sweep_{safe_filename(sweep.name)}_heatmap_{safe_filename(name)}",
                     f"{sweep.name}: {name} over {p1} and {p2}",
                     f"{metric_label(name)} for each pair of values of {p1} and {p2}; hatched red cells: failed runs; "
-                    "'n/a' or 'not settled': the metric is undefined for that run; blank: no run.")
+                    + ("cells labelled with how the run ended (not settled, rest away from equilibrium: at rest "
+                       "but v not converged, unstable rest: at rest at a linearly unstable rest state); "
+                       if rest else "'n/a': the metric is undefined for that run; ") + "blank: no run.")
 
 
-def _annotate_cells(ax, mesh, grid: np.ndarray, bad: np.ndarray, present: set, undefined: str) -> None:
-    """Failed cells hatched and labelled; on small grids every cell's value (or ``undefined``)."""
+#: Metrics whose cells say how the run ended (``report:rest``) where it did not settle.
+_REST_METRICS = ("settling_time", "settled")
+
+
+def _annotate_cells(ax, mesh, grid: np.ndarray, bad: np.ndarray, present: dict, words: bool = False) -> None:
+    """Failed cells hatched and labelled; on small grids every cell's value, or its run's
+    word (``present``) where it has none (``n/a`` without one), or where ``words`` its word
+    beside the value."""
     from matplotlib.patches import Rectangle  # heavy: matplotlib
 
     for i, j in np.ndindex(grid.shape):
+        word = textwrap.fill(present.get((i, j)) or "n/a", 12)
         if bad[i, j]:
             ax.add_patch(Rectangle((j - 0.5, i - 0.5), 1, 1, fill=False, hatch="xx", edgecolor="red", lw=0))
             ax.text(j, i, "failed", ha="center", va="center", color="red", fontsize=8,
@@ -164,9 +182,9 @@ def _annotate_cells(ax, mesh, grid: np.ndarray, bad: np.ndarray, present: set, u
         elif np.isfinite(grid[i, j]):
             r, g, b, _ = mesh.cmap(mesh.norm(grid[i, j]))
             ink = "k" if 0.299 * r + 0.587 * g + 0.114 * b > 0.5 else "w"
-            ax.text(j, i, f"{grid[i, j]:.3g}", ha="center", va="center", fontsize=8, color=ink)
+            ax.text(j, i, word if words else f"{grid[i, j]:.3g}", ha="center", va="center", fontsize=8, color=ink)
         elif (i, j) in present:
-            ax.text(j, i, undefined, ha="center", va="center", fontsize=8, color="0.3")
+            ax.text(j, i, word, ha="center", va="center", fontsize=8, color="0.3")
 
 
 # -- otherwise: each metric against each parameter -------------------------------------------------
@@ -182,10 +200,16 @@ def _metric_panel(ax, table, param: str, x: np.ndarray, name: str, failed: np.nd
     for k, label in enumerate(dict.fromkeys(groups)):
         mine = groups == label
         ax.plot(x[ok][order][mine], y[ok][order][mine], style, ms=4, color=f"C{k % 10}", label=label or "success")
+    trans = blended_transform_factory(ax.transData, ax.transAxes)
     if failed.any():
-        trans = blended_transform_factory(ax.transData, ax.transAxes)
         ax.plot(x[failed], np.full(failed.sum(), 0.03), "x", color="red", ms=8, mew=2, transform=trans,
                 label="failed", clip_on=False)
+    if name in _REST_METRICS and "report:rest" in table.columns:
+        for word, marker, colour in ((REST_AWAY, "v", "C1"), (UNSTABLE_REST, "^", "C3")):
+            pick = ok & (table["report:rest"].astype(str) == word).to_numpy()
+            if pick.any():
+                ax.plot(x[pick], np.full(pick.sum(), 0.03), marker, color=colour, ms=7, transform=trans,
+                        label=word, clip_on=False)
     if _use_log(y[ok]):
         ax.set_yscale("log")
     ax.set_ylabel(metric_label(name), fontsize=9)
@@ -210,4 +234,5 @@ def _parameter_figure(sweep: SweepData, table, param: str, metrics: Sequence[str
                     f"{sweep.name}: metrics against {param}",
                     f"{', '.join(metrics)} against {param}{note}; red crosses on the lower edge: failed runs "
                     "(status failed, error or pending). A successful run without a value (e.g. not settled) "
-                    "has no point.")
+                    "has no point; in a panel of settling_time or settled, triangles on the lower edge mark the runs "
+                    "at rest but not settled (rest away from equilibrium, unstable rest).")

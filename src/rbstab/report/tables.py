@@ -3,7 +3,10 @@
 Every figure in these tables is either a summary attribute of the result file
 (:func:`rbstab.summary.summarize`, written by the run) or, for the settling time, a
 direct function of the stored time series (:func:`settling_time`). Nothing is
-recomputed from the physics.
+recomputed from the physics but one thing: whether a run settled at a rest state that is
+linearly unstable, for which the configuration of a run that would otherwise count as
+settled is linearised at its rest state, once per distinct physical configuration
+(:func:`rest_verdicts`, :func:`rest_outcome`).
 
 Vector figures are split into components ``_1``, ``_2``, ``_3`` (the file's ``axis``
 coordinate x, y, z; for Euler angles the rotations about x, y', z'').
@@ -11,12 +14,15 @@ coordinate x, y, z; for Euler angles the rotations about x, y', z'').
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import warnings
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..config.identity import canonical_config
+from ..convergence import converged
 from ..io.chunk import read_chunk_series
 from ..layout import SATURATION_FLAGS, STATE_BLOCKS, SUMMARY_FIGURES
 from .load import RunData, SweepData
@@ -36,6 +42,17 @@ __all__ = [
     "metric_label",
     "settling_time",
     "run_settling_time",
+    "SETTLED",
+    "NOT_SETTLED",
+    "REST_AWAY",
+    "UNSTABLE_REST",
+    "MAX_REST_CHECKS",
+    "NOT_CHECKED",
+    "NO_LINEARISATION",
+    "rest_outcome",
+    "rest_words",
+    "rest_verdict",
+    "rest_verdicts",
     "settle_store_runs",
     "differing_parameters",
     "format_value",
@@ -65,6 +82,7 @@ OTHER_METRICS = {
     "wall_time": ("wall time", "s"),
     "solver_nfev": ("right-hand side evaluations", "1"),
     "converged": ("converged (1) or not (0)", "1"),
+    "settled": ("settled (1) or not (0)", "1"),
 }
 #: Old metric names -> current ones.
 METRIC_ALIASES = {"nfev": "solver_nfev", **{
@@ -222,6 +240,127 @@ def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresh
     return float(time[i])
 
 
+#: How a successful run ends (:func:`rest_outcome`), in the report's words.
+SETTLED = "settled"
+NOT_SETTLED = "not settled"
+REST_AWAY = "rest away from equilibrium"
+UNSTABLE_REST = "unstable rest"
+#: Most distinct physical configurations one table linearises (:func:`rest_verdicts`): a
+#: chain's takes ~0.1-0.2 s (the minimisation to its rest state, then the Jacobian), one
+#: body's ~10 ms; 1000 chains ~2-3 min.
+MAX_REST_CHECKS = 1000
+#: :func:`rest_verdicts` for a configuration beyond :data:`MAX_REST_CHECKS`.
+NOT_CHECKED = "not checked"
+#: :func:`rest_verdict` where the configuration has no linearisation.
+NO_LINEARISATION = "no linearisation"
+
+
+def rest_outcome(settling_time: float, converged: bool, verdict: str) -> str:
+    """How a run ends, in the report's words.
+
+    Parameters
+    ----------
+    settling_time : float
+        :func:`run_settling_time` [s] (NaN: |E| or |Omega| above its threshold at t_end, or
+        a failed run).
+    converged : bool
+        Whether v converged, |v(t_end)| <= ratio |v(0)| + round-off (:mod:`rbstab.convergence`).
+    verdict : str
+        Of the linearisation at the rest state of the run's configuration
+        (:func:`rest_verdicts`; ``""`` where not known).
+
+    Returns
+    -------
+    str
+        :data:`NOT_SETTLED` without a finite settling time; else :data:`REST_AWAY` where v
+        has not converged: at rest (or creeping) away from the rest state v is zero at, e.g.
+        leaning; else :data:`UNSTABLE_REST` where that rest state is linearly ``unstable``:
+        at rest beside it, the body has not yet drifted away; else :data:`SETTLED`.
+    """
+    if not np.isfinite(settling_time):
+        return NOT_SETTLED
+    if not converged:
+        return REST_AWAY
+    return UNSTABLE_REST if verdict == "unstable" else SETTLED
+
+
+def rest_words(thresholds: SettleThresholds) -> str:
+    """What :func:`rest_outcome`'s words mean, for the pages of a report."""
+    return (f"Settled: |E| <= {thresholds.e:g} m and |Omega| <= {thresholds.omega:g} rad/s (Euclidean norms) from "
+            "the settling time to t_end, v converged (|v(t_end)| <= ratio |v(0)|: the sweep's ratio, 0.001 for a run "
+            "given directly) and the rest state v is zero at not linearly unstable. Otherwise: 'not settled' "
+            "(above a threshold at t_end, or failed); 'rest away from equilibrium' (below the thresholds but v "
+            "not converged: at rest, or creeping, away from the rest state v is zero at, e.g. leaning); 'unstable "
+            "rest' (below the thresholds and v converged, but the linearisation at that rest state is unstable: "
+            "it has not yet drifted away). The settling time is given for a settled run only.")
+
+
+def physical_key(config: Mapping) -> str:
+    """What sets a run's rest state and its linearisation: its resolved configuration
+    without ``name``, ``initial_state`` and ``simulation``, as canonical JSON."""
+    return canonical_config({k: v for k, v in config.items() if k not in ("initial_state", "simulation")})
+
+
+def rest_verdict(config: Mapping, name: str = "run") -> str:
+    """The verdict of the linearisation at the rest state of a run's resolved configuration
+    ``config`` (:func:`rbstab.analysis.linearise.linearise_config`, as ``rbstab analyze``
+    finds it): one of :data:`rbstab.analysis.linearise.VERDICTS`, or
+    :data:`NO_LINEARISATION` where there is none (the pure sign law, no rest state, a rest
+    point the search did not reach, a configuration that does not validate today)."""
+    from ..analysis.linearise import linearise_config  # heavy: numba
+    from ..config.chains import any_config_from_mapping  # heavy: pydantic
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the run's own warnings were the run's to give
+            lin = linearise_config(any_config_from_mapping(config, default_name=name))
+    except ValueError:  # ConfigError included
+        return NO_LINEARISATION
+    return lin.verdict if lin.is_rest_point else NO_LINEARISATION
+
+
+_REST_KEY = ("rest_verdict",)  # tuples: RunData.drop_series keeps them
+_PHYSICAL_KEY = ("physical_key",)
+
+
+def _physical_key(run: RunData) -> str:
+    """:func:`physical_key` of a run's configuration, cached on the run."""
+    if _PHYSICAL_KEY not in run._cache:
+        run._cache[_PHYSICAL_KEY] = physical_key(run.config)
+    return run._cache[_PHYSICAL_KEY]
+
+
+def rest_verdicts(runs: Sequence[RunData | None], wanted: Sequence[bool]) -> list[str]:
+    """The verdict at the rest state of each run's configuration (:func:`rest_verdict`):
+    the configurations of the runs where ``wanted`` (a run that would otherwise count as
+    settled), each distinct physical configuration (:func:`physical_key`) once and at most
+    :data:`MAX_REST_CHECKS` of them (beyond: :data:`NOT_CHECKED`); every run of a
+    configuration so linearised gets its verdict, the others ``""``. Cached per run."""
+    found: dict[str, str] = {}
+    keys: list[str | None] = []
+    for run in runs:
+        key = None if run is None else _physical_key(run)
+        keys.append(key)
+        if key is not None and _REST_KEY in run._cache:
+            found.setdefault(key, run._cache[_REST_KEY])
+    checked = sum(v != NOT_CHECKED for v in found.values())
+    for run, key, want in zip(runs, keys, wanted):
+        if not want or key is None or key in found:
+            continue
+        if checked < MAX_REST_CHECKS:
+            found[key] = rest_verdict(run.config, run.name)
+            checked += 1
+        else:
+            found[key] = NOT_CHECKED
+    out = []
+    for run, key in zip(runs, keys):
+        verdict = found.get(key, "") if key is not None else ""
+        if verdict:
+            run._cache[_REST_KEY] = verdict
+        out.append(verdict)
+    return out
+
+
 def _settling_key(thresholds: SettleThresholds) -> tuple:
     return ("settling_time", thresholds.e, thresholds.omega)
 
@@ -281,8 +420,8 @@ def metric_value(run: RunData | None, name: str, thresholds: SettleThresholds | 
         return float(run.wall_time)
     if base == "solver_nfev":
         return float(run.solver.get("nfev", np.nan))
-    if base == "converged":
-        return float("nan")  # a sweep's definition: read from its index (sweep_table)
+    if base in ("converged", "settled"):
+        return float("nan")  # a sweep's definition, or the report's: read from its table (sweep_table)
     value = run.summary.get(base)
     if value is None:
         return float("nan")
@@ -381,7 +520,10 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         ``final_position_1..3`` [m], ``final_velocity_1..3`` [m/s],
         ``final_controller_state_1..3`` [m] (NaN outside ``embedded``),
         ``max_abs_constraint_error_1..3`` [m], ``settling_time`` [s] (NaN: not settled),
-        ``lyapunov_initial`` [J], ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W],
+        ``rest`` (:func:`rest_outcome`: settled, not settled, rest away from equilibrium,
+        unstable rest; v converged by the default ratio), ``rest_state`` (the verdict of
+        the linearisation at the rest state, :func:`rest_verdicts`; empty where not
+        needed), ``lyapunov_initial`` [J], ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W],
         ``lyapunov_rate_mismatch`` [W], ``lyapunov_rate_mismatch_relative``,
         ``lyapunov_rate_check``, ``max_lyapunov_increase`` [J], ``time_lyapunov_rising`` [s],
         ``fraction_saturated_torque_n_1..3``, ``_force_h_1..3``, ``_constraint_force_1..3``
@@ -393,8 +535,12 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
     if parameters is None:
         parameters = differing_parameters(runs)
     settle_store_runs(runs, thresholds)
+    times = [run_settling_time(run, thresholds) for run in runs]
+    v_converged = [bool(converged(run.ok, run.summary.get("lyapunov_initial"), run.summary.get("lyapunov_final")))
+                   for run in runs]
+    verdicts = rest_verdicts(runs, [bool(np.isfinite(t)) and c for t, c in zip(times, v_converged)])
     rows = []
-    for run in runs:
+    for run, time, run_converged, verdict in zip(runs, times, v_converged, verdicts):
         row: dict[str, Any] = {
             "run": run.label,
             "file": str(run.path),
@@ -411,7 +557,9 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
                 row[f"final_{block}_{i}"] = v
         for i, v in enumerate(_vector(run, "max_abs_constraint_error"), start=1):
             row[f"max_abs_constraint_error_{i}"] = v
-        row["settling_time"] = run_settling_time(run, thresholds)
+        row["rest"] = rest_outcome(time, run_converged, verdict)
+        row["rest_state"] = verdict
+        row["settling_time"] = time if row["rest"] == SETTLED else float("nan")
         for key in ("lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch",
                     "lyapunov_rate_mismatch_relative"):
             row[key] = float(run.summary.get(key, np.nan))
@@ -437,20 +585,43 @@ def sweep_table(sweep: SweepData, metrics: Sequence[str], thresholds: SettleThre
     pandas.DataFrame
         ``index.csv`` columns first, then the grouped list parameters of
         :attr:`SweepData.axes` not already a column, then ``report:<metric>`` for each
-        metric (NaN for rows without a file) and ``report:settled`` (bool: success and
-        a finite :func:`run_settling_time`).
+        metric (NaN for rows without a file; ``settling_time`` NaN unless settled),
+        ``report:settled`` (bool: :func:`rest_outcome` is ``settled``), ``report:rest``
+        (:func:`rest_outcome`, with the sweep's ``converged``) and ``report:rest_state``
+        (:func:`rest_verdicts`: the verdict of the linearisation at the rest state of the
+        run's configuration, for the configurations of runs that would otherwise count as
+        settled; empty for the others).
     """
     settle_store_runs(sweep.runs, thresholds)
     table = sweep.index.copy()
     for name, values in sweep.axes.items():
         if name not in table.columns:
             table[name] = list(values)
+    times = [run_settling_time(run, thresholds) if run is not None else float("nan") for run in sweep.runs]
+    v_converged = _converged(table, sweep)
+    verdicts = rest_verdicts(sweep.runs, [bool(np.isfinite(t)) and c for t, c in zip(times, v_converged)])
+    rest = [rest_outcome(t, c, v) for t, c, v in zip(times, v_converged, verdicts)]
+    settled = [r == SETTLED for r in rest]
     for name in metrics:
-        table[metric_column(name)] = _index_metric(table, name, sweep, thresholds)
-    table["report:settled"] = [
-        bool(run is not None and run.ok and np.isfinite(run_settling_time(run, thresholds))) for run in sweep.runs
-    ]
+        if name == "settling_time":
+            table[metric_column(name)] = [t if ok else float("nan") for t, ok in zip(times, settled)]
+        elif name == "settled":
+            table[metric_column(name)] = settled  # report:settled itself
+        else:
+            table[metric_column(name)] = _index_metric(table, name, sweep, thresholds)
+    table["report:settled"] = settled
+    table["report:rest"] = rest
+    table["report:rest_state"] = verdicts
     return table
+
+
+def _converged(table, sweep: SweepData) -> list[bool]:
+    """Whether each run's v converged: the sweep's own ``converged`` column (its ratio), or
+    for an index without it :func:`rbstab.convergence.converged` of the run's summary."""
+    if "converged" in table.columns:
+        return list(table["converged"].astype(str).eq("True") & table["status"].astype(str).eq("success"))
+    return [run is not None and bool(converged(run.ok, run.summary.get("lyapunov_initial"),
+                                                run.summary.get("lyapunov_final"))) for run in sweep.runs]
 
 
 def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThresholds):
