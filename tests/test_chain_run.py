@@ -129,3 +129,18 @@ def test_one_body_written_as_a_tree_runs_and_says_so(tmp_path):
     result = CliRunner().invoke(cli, ["run", str(path), "-o", str(tmp_path / "out")])
     assert result.exit_code == 0 and "Traceback" not in result.output, result.output
     assert "one_tree: success" in result.output and "(a chain of 1 body, " in result.output
+
+
+def test_simulate_takes_a_chain_and_gives_what_its_file_holds(tmp_path):
+    """rbstab.simulate of a chain's file: the run file's variables, dimensions (body, joint
+    with their names) and attributes, in memory."""
+    path = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    short = ["simulation.t_end=0.3", "simulation.n_samples=31"]
+    ds = rbstab.simulate(path, overrides=short)
+    written = rbstab.open_result(rbstab.run(path, tmp_path, overrides=short))
+    assert ds["theta"].dims == ("time", "body", "axis") and list(ds["body"].values) == ["legs", "trunk"]
+    assert ds["constraint_drift"].dims == ("time", "joint") and list(ds["joint"].values) == ["ankle", "hip"]
+    assert set(ds.data_vars) == set(written.data_vars) and set(ds.attrs) == set(written.attrs)
+    for key in ds.data_vars:
+        assert ds[key].dims == written[key].dims, key
+        np.testing.assert_array_equal(ds[key].values, written[key].values, err_msg=key)

@@ -198,14 +198,24 @@ def _integrate(config: "RunConfig", engine: str, timeout: float | None) -> "RunR
     return integrate(config, timeout, engine=engine)
 
 
+def _integrate_chain(config: "ChainConfig", engine: str, timeout: float | None) -> "RunResult":
+    """A chain's run, the compiled kernels made first (once per machine, cached)."""
+    from .engine import ensure_compiled  # heavy: numba, numpy
+    from .simulator import simulate_chain  # heavy: numba, numpy
+
+    ensure_compiled(chain=True)
+    return simulate_chain(config, timeout, engine=engine)
+
+
 def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_ENGINE,
              timeout: float | None = None) -> "xarray.Dataset":
     """Integrate one run and return what its result file would hold, in memory.
 
     Parameters
     ----------
-    config : RunConfig, path-like or Mapping
-        A validated config, or what :func:`load_config` takes.
+    config : RunConfig, ChainConfig, path-like or Mapping
+        A validated config (one body or a chain), or what :func:`load_config` takes (a
+        chain's file too).
     overrides : sequence of str or Mapping
         See :func:`load_config`.
     engine : {"compiled", "scipy", "cuda"}
@@ -235,7 +245,9 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_EN
     """
     from .io.hdf5 import result_dataset  # heavy: numpy
 
-    result = _integrate(_config(config, overrides), engine, timeout)
+    config = _config(config, overrides, chains=True)
+    result = _integrate_chain(config, engine, timeout) if _is_chain_config(config) else \
+        _integrate(config, engine, timeout)
     return result_dataset(result, command_line=_python_command("simulate"))
 
 
@@ -349,11 +361,7 @@ def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overri
     path = Path(output) / f"{config.name}.h5"
     check_overwrite(config, path, overwrite=overwrite)
     if _is_chain_config(config):
-        from .engine import ensure_compiled  # heavy: numba, numpy
-        from .simulator import simulate_chain  # heavy: numba, numpy
-
-        ensure_compiled(chain=True)
-        return write_chain_result(simulate_chain(config, timeout, engine=engine), path,
+        return write_chain_result(_integrate_chain(config, engine, timeout), path,
                                   command_line=command_line or _python_command("run"))
     result = _integrate(config, engine, timeout)
     return write_result(result, path, command_line=command_line or _python_command("run"))

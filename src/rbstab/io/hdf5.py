@@ -111,7 +111,7 @@ SWITCHING_VARIABLES = {
 
 
 #: Attributes of the dimension coordinates (HDF5 dimension scales) of a result file.
-COORDINATE_ATTRIBUTES = {name: variable_attributes(name) for name in ("time", "axis", "switching")}
+COORDINATE_ATTRIBUTES = {name: variable_attributes(name) for name in ("time", "axis", "switching", "body", "joint")}
 
 
 def _git_commit() -> str:
@@ -423,7 +423,9 @@ def result_dataset(result: "RunResult", *, command_line: str | None = None):
     xarray.Dataset
         Dimensions ``time`` (coordinate [s]) and ``axis`` (``x``, ``y``, ``z``); vectors
         ``(time, axis)``, scalars ``(time,)``, each with ``units``, ``long_name`` and
-        ``description`` (:mod:`rbstab.io.metadata`); a
+        ``description`` (:mod:`rbstab.io.metadata`); a chain's run also has ``body`` and
+        ``joint`` (their names as coordinates), its per-body and per-joint variables
+        ``(time, body[, axis])`` and ``(time, joint[, axis])``, as in its file; a
         pure-sign-law run also has the ``switching`` dimension and its variables.
     """
     import xarray as xr  # heavy: xarray
@@ -432,8 +434,13 @@ def result_dataset(result: "RunResult", *, command_line: str | None = None):
         "time": ("time", np.asarray(result.time, dtype=float), dict(COORDINATE_ATTRIBUTES["time"])),
         "axis": ("axis", np.array(AXIS_LABELS), dict(COORDINATE_ATTRIBUTES["axis"])),
     }
+    labels, dims = _chain_dimensions(result, result.outputs)
+    for dim, names in (labels or {}).items():
+        coords[dim] = (dim, np.array(names), dict(COORDINATE_ATTRIBUTES[dim]))
+    dims = dims or {}
     variables = {
-        key: (("time", "axis")[: np.ndim(values)], np.asarray(values, dtype=float), variable_attributes(key))
+        key: ((("time", dims[key], "axis") if key in dims else ("time", "axis"))[: np.ndim(values)],
+              np.asarray(values, dtype=float), variable_attributes(key))
         for key, values in result.outputs.items()
     }
     if getattr(result, "switching", None) is not None:
