@@ -143,6 +143,23 @@ def test_the_parameter_names_of_a_chains_keys_name_the_body_or_joint():
     assert parameter_name("controller.k_c.0") == "k_c_0"
 
 
+def test_a_chains_parameters_have_the_units_and_names_of_the_quantities_they_set():
+    """A sweep's coordinates over a chain's keys carry the units of the one-body key of the
+    same quantity and say whose it is; a scale factor is dimensionless."""
+    from rbstab.layout import parameter_attributes
+
+    assert parameter_attributes("bodies.trunk.mass") == {"long_name": "mass m of the body (body trunk)",
+                                                         "config_key": "bodies.trunk.mass", "units": "kg"}
+    assert parameter_attributes("joints.hip.k_r.0")["units"] == "N m rad-1"
+    assert "(joint hip) [0]" in parameter_attributes("joints.hip.k_r.0")["long_name"]
+    assert parameter_attributes("initial_state.legs.theta.0")["units"] == "rad"
+    assert parameter_attributes("joints.ankle.child_point.2")["units"] == "m"
+    assert parameter_attributes("gravity.2")["units"] == "m s-2"
+    assert parameter_attributes("bodies.trunk.mass:scale")["units"] == "1"
+    for key in ("bodies.trunk.name", "joints.hip.parent"):  # no quantity: the key as its name, no units
+        assert parameter_attributes(key) == {"long_name": key, "config_key": key}
+
+
 def _mixed(tmp_path):
     spec = tmp_path / "mixed.yaml"
     spec.write_text(f"name: mixed\nbase: [{STANCE}, {ROOT / 'configs' / 'paper' / 'case1_permanent.yaml'}]\n"

@@ -192,6 +192,34 @@ def is_index(part: str) -> bool:
     return part.isascii() and part.isdigit() and (part == "0" or not part.startswith("0"))
 
 
+#: A chain's keys as the one-body keys of the same quantity (or a quantity of their own):
+#: ``<section>.<name>.<field>`` by section and field (``bodies.trunk.mass`` is a
+#: ``body.mass``), and its ``gravity``.
+_CHAIN_KEYS = {
+    "bodies": {"mass": "body.mass", "inertia": "body.inertia", "k_t": "controller.k_t", "l_t": "controller.l_t"},
+    "joints": {"parent_point": Quantity("joints.parent_point", "R_p", "m",
+                                        "joint point R_p on the parent (its body frame; inertial for the ground)"),
+               "child_point": Quantity("joints.child_point", "R_c", "m", "joint point R_c of C on the child (body frame)"),
+               **{g: f"controller.{g}" for g in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "boundary_layer")}},
+    "initial_state": {b: f"initial_state.{b}" for b in ("theta", "omega", "x", "v", "d")},
+}
+
+
+def _config_quantity(config_key: str) -> tuple[Quantity | None, str]:
+    """(the :data:`CONFIG_QUANTITIES` row of a config key without indices, one body's or a
+    chain's (:data:`_CHAIN_KEYS`), or None; what the long name adds: `` (body trunk)``)."""
+    if config_key in CONFIG_QUANTITIES:
+        return CONFIG_QUANTITIES[config_key], ""
+    if config_key == "gravity":
+        return CONFIG_QUANTITIES["body.gravity"], ""
+    parts = config_key.split(".")
+    if len(parts) == 3 and parts[2] in _CHAIN_KEYS.get(parts[0], {}):
+        kind = "joint" if parts[0] == "joints" else "body"
+        q = _CHAIN_KEYS[parts[0]][parts[2]]
+        return (q if isinstance(q, Quantity) else CONFIG_QUANTITIES[q]), f" ({kind} {parts[1]})"
+    return None, ""
+
+
 def parameter_attributes(entry: str) -> dict[str, str]:
     """``units``, ``long_name`` and ``config_key`` (the entry itself, as a store file's
     coordinates give it) of a sweep parameter, from its dotted entry (``controller.k_c.2``,
@@ -206,8 +234,8 @@ def parameter_attributes(entry: str) -> dict[str, str]:
     while parts and is_index(parts[-1]):
         indices.insert(0, parts.pop())
     config_key = ".".join(parts)
-    q = CONFIG_QUANTITIES.get(config_key)
-    long_name = (q.long_name if q is not None else config_key) + (f" [{', '.join(indices)}]" if indices else "")
+    q, whose = _config_quantity(config_key)
+    long_name = (q.long_name + whose if q is not None else config_key) + (f" [{', '.join(indices)}]" if indices else "")
     attrs = {"long_name": f"scale factor of the {long_name}" if scale else long_name, "config_key": entry}
     units = "1" if scale else (q.units if q is not None else None)
     if units:
