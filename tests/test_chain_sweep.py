@@ -248,3 +248,9 @@ def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     assert report.exit_code == 0, report.output
     drawn = sorted(p.name.rpartition("_")[2] for p in (tmp_path / "report" / "figures").iterdir())
     assert drawn == ["bodies.png", "constraints.png", "joints.png", "lyapunov.png"], drawn
+    import pandas as pd
+
+    summary = pd.read_csv(tmp_path / "report" / "summary.csv")  # a row per chain run, its figures per joint
+    assert len(summary) == 1 and summary["variant"][0] == "chain" and summary["status"][0] == "success"
+    assert {"lyapunov_final", "max_abs_constraint_error_ankle", "max_abs_constraint_error_hip"} <= set(summary.columns)
+    assert summary["max_abs_constraint_error_hip"][0] < 1e-6

@@ -57,6 +57,7 @@ from .tables import (
     SETTLED,
     UNSTABLE_REST,
     SettleThresholds,
+    chain_runs_table,
     check_joint_metrics,
     differing_parameters,
     format_value,
@@ -654,9 +655,14 @@ def _write_summary_csv(data: ReportInputs, params: Sequence[str], folder: Path, 
     """``summary.csv``: every run, direct and swept, one row each."""
     import pandas as pd  # heavy: pandas
 
-    all_runs = [r for r in data.all_runs if r.variant != "chain"]  # a chain run's figures differ: its own table
+    all_runs = [r for r in data.all_runs if r.variant != "chain"]
+    chains = [r for r in data.all_runs if r.variant == "chain"]  # their figures per joint: columns of their own
     all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
-    pd.DataFrame(runs_table(all_runs, settle, all_params) if all_runs else []).to_csv(folder / "summary.csv", index=False)
+    tables = [runs_table(all_runs, settle, all_params)] if all_runs else []
+    if chains:
+        tables.append(chain_runs_table(chains, params))
+    pd.concat(tables, ignore_index=True, sort=False).to_csv(folder / "summary.csv", index=False) if tables else \
+        pd.DataFrame().to_csv(folder / "summary.csv", index=False)
 
 
 def _intro(data: ReportInputs, created: str, settle: SettleThresholds) -> list[str]:

@@ -57,6 +57,7 @@ __all__ = [
     "differing_parameters",
     "format_value",
     "runs_table",
+    "chain_runs_table",
     "sweep_table",
     "metric_column",
 ]
@@ -569,6 +570,47 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         for _, figure in SATURATION_FLAGS.values():
             for i, v in enumerate(_vector(run, figure), start=1):
                 row[f"{figure}_{i}"] = v
+        row["method"] = run.flat_config.get("simulation.method", "")
+        for key in ("nfev", "njev", "nlu"):
+            row[key] = run.solver.get(key)
+        row["wall_time"] = run.wall_time
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
+    """One row per chain run: identity, the ``parameters`` (dotted keys), the figures every
+    run has and each joint's largest |E_j| and drift.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``run``, ``file``, ``sweep``, ``variant`` (``chain``), ``status``,
+        ``message``, the parameters, ``t_final`` [s], ``lyapunov_initial``,
+        ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W], ``lyapunov_rate_mismatch`` [W],
+        ``lyapunov_rate_mismatch_relative``, ``lyapunov_rate_check``,
+        ``max_lyapunov_increase`` [J], ``max_abs_constraint_error_<joint>`` [m],
+        ``max_constraint_drift_<joint>`` [m] (NaN for a joint that is not ``permanent``),
+        ``method``, ``nfev``, ``njev``, ``nlu``, ``wall_time`` [s].
+    """
+    import pandas as pd  # heavy: pandas
+
+    rows = []
+    for run in runs:
+        row: dict[str, Any] = {"run": run.label, "file": str(run.path), "sweep": run.sweep or "",
+                               "variant": run.variant, "status": run.status, "message": run.message}
+        for key in parameters:
+            row[key] = run.flat_config.get(key)
+        for key in ("t_final", "lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch",
+                    "lyapunov_rate_mismatch_relative"):
+            row[key] = float(run.summary.get(key, np.nan))
+        row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
+        row["max_lyapunov_increase"] = float(run.summary.get("max_lyapunov_increase", np.nan))
+        joints = [str(j.get("name")) for j in run.flat_config.get("joints") or () if isinstance(j, dict)]
+        for figure in ("max_abs_constraint_error", "max_constraint_drift"):
+            values = np.atleast_1d(np.asarray(run.summary.get(figure, []), dtype=float))
+            for name, value in zip(joints, values):
+                row[f"{figure}_{name}"] = float(value)
         row["method"] = run.flat_config.get("simulation.method", "")
         for key in ("nfev", "njev", "nlu"):
             row[key] = run.solver.get(key)
