@@ -157,6 +157,30 @@ def test_robustness_of_a_sweep(pendulum_sweep, tmp_path):
     assert str(ds["rule_side"].values[0, j]) == "above" and bool(ds["rule_explains"].values[0, j])
 
 
+def test_a_run_at_rest_beside_an_unstable_equilibrium_is_not_stable(tmp_path):
+    """The inverted pendulum started upright at rest never moves: v stays 0 and converges
+    by the rule, but with K_r below m g L = 172 N m/rad its rest state is unstable. Robustness
+    counts such runs as unstable rests, not stable; with K_r above it they are stable."""
+    from rbstab.config import load_config
+    from rbstab.sweep import run_sweep, spec_from_mapping
+
+    base = load_config(CASE1, ["body.attachment_point=[0, 0, -0.42]", "controller.k_t=[0, 0, 0]",
+                               "controller.l_t=[0, 0, 0]", "initial_state.omega=[0, 0, 0]",
+                               "simulation.t_end=1", "simulation.n_samples=11"]).resolved
+    k_r = [80.0, 120.0, 400.0, 480.0]
+    spec = spec_from_mapping({"name": "upright", "base": base, "grid": {},
+                              "zip": {"controller.k_r.0": k_r, "controller.k_r.1": k_r}})
+    run_sweep(spec, tmp_path, jobs=1, progress=False)
+    result = robustness(tmp_path / "upright")
+    (group,) = result.groups
+    assert (group.n_runs, group.n_stable, group.n_unstable_rest) == (4, 2, 2)
+    assert group.n_disagree == 0  # the sweep's own 'converged' says all 4: v never left 0
+    assert group.separations and all(s.rule.explains and s.rule.side == "above" and 120 < s.rule.low < 400
+                                     for s in group.separations)
+    text = _invoke("--robustness", str(tmp_path / "upright"), "-o", str(tmp_path / "out"))
+    assert "2 more converged beside an unstable rest state" in text.output, text.output
+
+
 def test_report_pages(tmp_path, pendulum_sweep):
     out = tmp_path / "analysis"
     assert _invoke(CASE3, "-o", str(out), "--samples", "300", "-j", "1", "--basin", "initial_state.omega.0=-20:20:3",

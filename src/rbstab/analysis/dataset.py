@@ -421,6 +421,8 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
         "n_runs": _var(("group",), [g.n_runs for g in groups], "1", "runs with a result"),
         "n_stable": _var(("group",), [g.n_stable for g in groups], "1", "runs that converged"),
         "n_excluded": _var(("group",), [g.n_excluded for g in groups], "1", "runs without a result"),
+        "n_unstable_rest": _var(("group",), [g.n_unstable_rest for g in groups], "1",
+                                "runs that converged beside an unstable rest state (counted as not stable)"),
         "n_disagree": _var(("group",), [g.n_disagree for g in groups], "1",
                            "runs whose stability differs from the sweep's converged (v(t_end) < 0)"),
         "stable_fraction": _var(("group",), [g.fraction for g in groups], "1", "stable fraction"),
@@ -451,7 +453,8 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
     attrs = dict(
         rbstab_format=FORMAT, kind="robustness", name=f"{result.sweep}.robustness", sweep=result.sweep,
         folder=result.folder, confidence=result.confidence, lyapunov_ratio=result.ratio,
-        stability="status success and |v(t_end)| <= lyapunov_ratio |v(0)| in the sweep's simulation",
+        stability="status success and |v(t_end)| <= lyapunov_ratio |v(0)| in the sweep's simulation, and the rest "
+                  "state v is zero at not linearly unstable (an unstable rest: not stable)",
         **provenance_attributes(f"rbstab analyze --robustness {result.sweep}", command_line=command_line),
     )
     return coords, data, attrs

@@ -3,8 +3,12 @@ interval, and the parameters that separate stable from unstable runs.
 
 The sweep folder is read through :func:`rbstab.open_sweep`; a run is *stable* when it
 converged (:func:`rbstab.convergence.converged`: it reached t_end and |v(t_end)| <=
-lyapunov_ratio |v(0)| + 1e-12 J) with the sweep's ratio: stability as seen in simulation
-over the sweep's t_end, not a proof. The sweep's index records its own ``converged``
+lyapunov_ratio |v(0)| + 1e-12 J) with the sweep's ratio, and the rest state v is zero at
+is not linearly unstable: stability as seen in simulation over the sweep's t_end, not a
+proof. (A run that converged beside an unstable rest state has not yet drifted away: an
+*unstable rest*, counted as not stable. The rest state is linearised once per distinct
+physical configuration, the values of the varied keys outside ``initial_state`` and
+``simulation``, for at most :data:`MAX_REST_CHECKS` of them.) The sweep's index records its own ``converged``
 column; the runs where it differs from this reading of the same figures (an index
 written under another rule) are counted. Runs without a result (``error``,
 ``pending``) are left out and counted. Each base configuration of the sweep is a group
@@ -28,16 +32,18 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from dataclasses import dataclass, field
 from statistics import NormalDist
 
 import numpy as np
 
 from ..config import config_from_mapping
+from ..config.chains import any_config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..sweep.folder import open_sweep, resolved_config
 from .dataset import robustness_content, robustness_dataset
-from .linearise import linearise
+from .linearise import linearise, linearise_config
 from .thresholds import SplitRule, split_rule, split_rules
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
@@ -152,6 +158,11 @@ class RobustnessGroup:
         Per varied parameter, strongest first (empty when every run is stable, or none is).
     parameters : list of str
         The parameters that vary in the group.
+    n_unstable_rest : int
+        Runs that converged beside an unstable rest state (counted as not stable).
+    n_rest_unchecked : int
+        Converged runs whose configuration's rest state was not linearised
+        (beyond :data:`MAX_REST_CHECKS` configurations): counted as stable.
     t_end_hint : dict or None
         When runs reached t_end without converging and the linearisation at the
         equilibrium of one of them (``run_id``) is asymptotically stable: ``t_end`` [s] of
@@ -167,6 +178,8 @@ class RobustnessGroup:
     interval: tuple[float, float]
     separations: list[Separation]
     parameters: list[str]
+    n_unstable_rest: int = 0
+    n_rest_unchecked: int = 0
     t_end_hint: dict | None = None
 
     @property
@@ -209,7 +222,8 @@ class Robustness:
             "confidence": self.confidence,
             "groups": [
                 {"base": g.base, "n_runs": g.n_runs, "n_stable": g.n_stable, "n_excluded": g.n_excluded,
-                 "n_disagree": g.n_disagree,
+                 "n_disagree": g.n_disagree, "n_unstable_rest": g.n_unstable_rest,
+                 "n_rest_unchecked": g.n_rest_unchecked,
                  "stable_fraction": g.fraction if g.n_runs else None, "interval": list(g.interval),
                  "n_converged": g.n_stable, "converged_fraction": g.fraction if g.n_runs else None,
                  "t_end_hint": g.t_end_hint,
@@ -247,6 +261,42 @@ def _t_end_hint(folder, run_id: str, ratio: float) -> dict | None:
             "settling_time": 0.5 * tau * math.log(1.0 / ratio)}
 
 
+#: Most distinct physical configurations whose rest state one robustness analysis
+#: linearises (one body ~10 ms each, a chain ~0.1-0.2 s).
+MAX_REST_CHECKS = 1000
+
+
+def _unstable_rest(folder, ds, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(unstable, unchecked), bool arrays over the runs: of the runs where ``candidates``
+    (converged), those whose configuration's rest state is linearly unstable, and those not
+    linearised (beyond :data:`MAX_REST_CHECKS` distinct physical configurations)."""
+    physical = [str(c) for c in ds.coords if ds[c].dims == ("run",)
+                and not str(ds[c].attrs.get("config_key", "initial_state")).startswith(("initial_state", "simulation"))
+                and "config_key" in ds[c].attrs]
+    columns = [ds[c].values for c in physical]
+    base = ds["base"].values.astype(str) if "base" in ds.coords else np.full(ds.sizes["run"], "")
+    unstable = np.zeros(ds.sizes["run"], dtype=bool)
+    unchecked = np.zeros(ds.sizes["run"], dtype=bool)
+    verdicts: dict[tuple, bool | None] = {}
+    for i in np.flatnonzero(candidates):
+        key = (base[i], *(str(c[i]) for c in columns))
+        if key not in verdicts:
+            if len(verdicts) >= MAX_REST_CHECKS:
+                verdicts[key] = None
+            else:
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore")  # the sweep's runs gave their warnings
+                        config = any_config_from_mapping(resolved_config(folder, str(ds["run_id"].values[i])))
+                        lin = linearise_config(config)
+                    verdicts[key] = lin.is_rest_point and lin.verdict == "unstable"
+                except Exception:  # noqa: BLE001 - no linearisation (sign law, no rest state): not judged
+                    verdicts[key] = False
+        unstable[i] = verdicts[key] is True
+        unchecked[i] = verdicts[key] is None
+    return unstable, unchecked
+
+
 def _numeric_parameters(ds) -> list[str]:
     names = []
     for name in ds.coords:
@@ -278,6 +328,8 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
     v1 = np.asarray(ds["lyapunov_final"].values, dtype=float)
     stable = converged(status == "success", v0, v1, ratio)
     disagree = has_result & (stable != (np.asarray(ds["converged"].values, dtype=bool) & (status == "success")))
+    unstable_rest, unchecked = _unstable_rest(path, ds, stable)
+    stable &= ~unstable_rest
     base = ds["base"].values.astype(str) if "base" in ds.coords else np.full(ds.sizes["run"], ds.attrs["sweep"])
     parameters = _numeric_parameters(ds)
     values = {p: np.asarray(ds[p].values, dtype=float) for p in parameters}
@@ -293,6 +345,7 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
         groups.append(RobustnessGroup(
             base=str(name), n_runs=n, n_stable=k, n_excluded=int((member & ~has_result).sum()),
             n_disagree=int((member & disagree).sum()),
+            n_unstable_rest=int((member & unstable_rest).sum()), n_rest_unchecked=int((member & unchecked).sum()),
             interval=wilson_interval(k, n, confidence),
             separations=sorted((s for s in found if s is not None), key=lambda s: -s.strength),
             parameters=varied,

@@ -278,6 +278,12 @@ def describe_robustness(result) -> list[str]:
                          "the equilibrium's v, which is then not its minimum)")
         lines.append(f"  {g.base}: {g.n_stable} of {g.n_runs} converged by t_end = {g.fraction:.1%} "
                      f"({result.confidence:.0%} Wilson interval {lo:.1%} - {hi:.1%}){excluded}")
+        if g.n_unstable_rest:
+            lines.append(f"    {g.n_unstable_rest} more converged beside an unstable rest state (its linearisation "
+                         "is unstable: they have not yet drifted away): counted as not stable")
+        if g.n_rest_unchecked:
+            lines.append(f"    {g.n_rest_unchecked} converged runs' rest states were not linearised (more than "
+                         "1000 distinct configurations): counted as stable")
         h = g.t_end_hint
         if h is not None:
             lines.append(f"    runs that reached t_end without converging are not necessarily unstable: the linearisation of "

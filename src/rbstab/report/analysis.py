@@ -353,12 +353,13 @@ def _robustness_section(ds, path: Path, out: FigureWriter) -> Section:
                     f"interval: Wilson score at {float(a.get('confidence', 0.95)):.0%}.")
     groups = [str(g) for g in ds["group"].values]
     s.blocks.append(Table("Stable fraction per base configuration",
-                          ["group", "runs", "stable", "fraction", "interval", "without a result",
+                          ["group", "runs", "stable", "fraction", "interval", "unstable rest", "without a result",
                            "differ from the sweep's converged"],
                           [[g, str(int(ds["n_runs"].values[i])), str(int(ds["n_stable"].values[i])),
                             f"{float(ds['stable_fraction'].values[i]):.1%}",
                             f"{float(ds['stable_fraction_low'].values[i]):.1%} - "
                             f"{float(ds['stable_fraction_high'].values[i]):.1%}",
+                            str(int(ds["n_unstable_rest"].values[i])) if "n_unstable_rest" in ds else "-",
                             str(int(ds["n_excluded"].values[i])), str(int(ds["n_disagree"].values[i]))]
                            for i, g in enumerate(groups)],
                           note=f"Stable, as the sweep's converged: {RULE}; they differ only for an index "
