@@ -500,6 +500,19 @@ def _vector(run: RunData, key: str) -> list[float]:
     return [float(v) for v in np.asarray(value, dtype=float).reshape(-1)[:3]]
 
 
+def _identity(run: RunData, parameters: Sequence[str]) -> dict[str, Any]:
+    """The first columns of a run's row: who it is, how it ended, the ``parameters``' values."""
+    row: dict[str, Any] = {"run": run.label, "file": str(run.path), "sweep": run.sweep or "", "variant": run.variant,
+                           "status": run.status, "message": run.message}
+    return row | {key: run.flat_config.get(key) for key in parameters}
+
+
+def _solver(run: RunData) -> dict[str, Any]:
+    """The last columns of a run's row: the method and the solver's statistics."""
+    return {"method": run.flat_config.get("simulation.method", ""),
+            **{key: run.solver.get(key) for key in ("nfev", "njev", "nlu")}, "wall_time": run.wall_time}
+
+
 def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters: Sequence[str] | None = None):
     """One row per run: identity, differing parameters, final state, constraint and
     Lyapunov figures, solver statistics.
@@ -542,16 +555,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
     verdicts = rest_verdicts(runs, [bool(np.isfinite(t)) and c for t, c in zip(times, v_converged)])
     rows = []
     for run, time, run_converged, verdict in zip(runs, times, v_converged, verdicts):
-        row: dict[str, Any] = {
-            "run": run.label,
-            "file": str(run.path),
-            "sweep": run.sweep or "",
-            "variant": run.variant,
-            "status": run.status,
-            "message": run.message,
-        }
-        for key in parameters:
-            row[key] = run.flat_config.get(key)
+        row = _identity(run, parameters)
         row["t_final"] = float(run.summary.get("t_final", np.nan))
         for block in STATE_BLOCKS:
             for i, v in enumerate(_vector(run, f"final_{block}"), start=1):
@@ -570,11 +574,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         for _, figure in SATURATION_FLAGS.values():
             for i, v in enumerate(_vector(run, figure), start=1):
                 row[f"{figure}_{i}"] = v
-        row["method"] = run.flat_config.get("simulation.method", "")
-        for key in ("nfev", "njev", "nlu"):
-            row[key] = run.solver.get(key)
-        row["wall_time"] = run.wall_time
-        rows.append(row)
+        rows.append(row | _solver(run))
     return pd.DataFrame(rows)
 
 
@@ -597,10 +597,7 @@ def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
 
     rows = []
     for run in runs:
-        row: dict[str, Any] = {"run": run.label, "file": str(run.path), "sweep": run.sweep or "",
-                               "variant": run.variant, "status": run.status, "message": run.message}
-        for key in parameters:
-            row[key] = run.flat_config.get(key)
+        row = _identity(run, parameters)
         for key in ("t_final", "lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch",
                     "lyapunov_rate_mismatch_relative"):
             row[key] = float(run.summary.get(key, np.nan))
@@ -611,11 +608,7 @@ def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
             values = np.atleast_1d(np.asarray(run.summary.get(figure, []), dtype=float))
             for name, value in zip(joints, values):
                 row[f"{figure}_{name}"] = float(value)
-        row["method"] = run.flat_config.get("simulation.method", "")
-        for key in ("nfev", "njev", "nlu"):
-            row[key] = run.solver.get(key)
-        row["wall_time"] = run.wall_time
-        rows.append(row)
+        rows.append(row | _solver(run))
     return pd.DataFrame(rows)
 
 
