@@ -86,7 +86,7 @@ def _parameter_values(index, column: str) -> dict:
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
     from rbstab.sweep.folder import read_index, read_parameters, read_spec  # heavy: numpy
-    from rbstab.engine.status import fell  # heavy: numba, numpy (rbstab.engine)
+    from rbstab.engine.status import fell_mask  # heavy: numba, numpy (rbstab.engine)
 
     index = read_index(path)  # checksum verified
     if "max_abs_constraint_error_x" in index:
@@ -94,8 +94,7 @@ def sweep_overview(path: str) -> dict:
     spec = read_spec(path)
     converged = int(index["converged"].astype(str).eq("True").sum()) if "converged" in index else 0
     counts = {s: int(n) for s, n in index["status"].value_counts().items()}
-    failed = index[index["status"] == "failed"]
-    n_fell = int(sum(fell("failed", m) for m in failed["message"])) if "message" in index else 0
+    n_fell = int(fell_mask(index["status"], index["message"]).sum()) if "message" in index else 0
     return {
         "path": path, "kind": "sweep", "name": spec.get("name", Path(path).name), "n_runs": len(index),
         "status": counts, "n_fell": n_fell, "n_converged": converged,

@@ -594,7 +594,7 @@ def test_a_leaning_rest_and_an_unstable_rest_are_not_counted_as_settled(tmp_path
     motion): 'unstable rest'. Neither settled, neither has a settling time."""
     from scipy.optimize import brentq
 
-    from rbstab.report.tables import rest_verdict
+    from rbstab.analysis.linearise import rest_verdict
 
     spec = tmp_path / "lean.yaml"
     spec.write_text(yaml.safe_dump({"name": "lean", "base": str(ROOT / "configs/examples/stance_ankle.yaml"),

@@ -35,7 +35,7 @@ from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, certify
 from .dataset import analysis_content, analysis_dataset, json_record
 from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
-from .linearise import Linearisation, linearise
+from .linearise import Linearisation, linearise, undisturbed
 from .push import basin_stability as stability_of
 from .push import push_analysis, unbounded_fall_note
 from .verify import NotVerifiable, check_verifiable, verify_analysis
@@ -460,9 +460,8 @@ def _undisturbed(config, variant) -> tuple:
     has none, a note saying which dynamics each part of the analysis sees)."""
     if not config.gains.disturbances:
         return variant, None, []
-    undisturbed = dataclasses.replace(config, gains=dataclasses.replace(config.gains, disturbances=()))
     kinds = ", ".join(dict.fromkeys(d.kind for d in config.gains.disturbances))
-    return undisturbed.make_variant(), variant, [
+    return undisturbed(config).make_variant(), variant, [
         f"disturbances ({kinds}): the equilibrium, the linearisation and the certificate's Hessians are of the "
         "undisturbed dynamics; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
         "impulses not seen) and the simulations integrate the disturbed dynamics"]

@@ -30,6 +30,7 @@ unstable, none when marginal (:func:`rbstab.analysis.text.time_scale` says which
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -41,6 +42,10 @@ __all__ = [
     "linearise",
     "linearise_chain",
     "linearise_config",
+    "undisturbed",
+    "rest_verdict",
+    "NO_LINEARISATION",
+    "MAX_REST_CHECKS",
     "modes",
     "verdict",
     "rest_tolerance",
@@ -285,6 +290,38 @@ def linearise_config(config) -> Linearisation:
         from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
         return linearise_chain(C.compile_chain(config.chain))[0]
-    if config.gains.disturbances:
-        config = replace(config, gains=replace(config.gains, disturbances=()))
-    return linearise(config.make_variant())
+    return linearise(undisturbed(config).make_variant())
+
+
+def undisturbed(config):
+    """A one-body :class:`rbstab.config.RunConfig` without its disturbances (they act in
+    time, not at rest): what its equilibrium, linearisation and certificate see."""
+    if not config.gains.disturbances:
+        return config
+    return replace(config, gains=replace(config.gains, disturbances=()))
+
+
+#: :func:`rest_verdict` where the configuration has no linearisation.
+NO_LINEARISATION = "no linearisation"
+#: Most distinct physical configurations a report's table or a robustness analysis passes
+#: to :func:`rest_verdict`: a chain's takes ~0.1-0.2 s (the minimisation to its rest state,
+#: then the Jacobian), one body's ~10 ms; 1000 chains ~2-3 min.
+MAX_REST_CHECKS = 1000
+
+
+def rest_verdict(config, name: str = "run") -> str:
+    """The verdict of the linearisation at the rest state of a run's resolved configuration
+    ``config`` (a mapping: one body's or a chain's; :func:`linearise_config`, as
+    ``rbstab analyze`` finds it): one of :data:`VERDICTS`, or :data:`NO_LINEARISATION`
+    where there is none (the pure sign law, no rest state, a rest point the search did not
+    reach, a configuration that does not validate today). Its warnings are not shown (the
+    run gave them)."""
+    from ..config.chains import any_config_from_mapping  # heavy: pydantic
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            lin = linearise_config(any_config_from_mapping(config, default_name=name))
+    except ValueError:  # ConfigError included
+        return NO_LINEARISATION
+    return lin.verdict if lin.is_rest_point else NO_LINEARISATION

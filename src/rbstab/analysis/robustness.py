@@ -32,18 +32,16 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from dataclasses import dataclass, field
 from statistics import NormalDist
 
 import numpy as np
 
 from ..config import config_from_mapping
-from ..config.chains import any_config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..sweep.folder import open_sweep, resolved_config
 from .dataset import robustness_content, robustness_dataset
-from .linearise import linearise, linearise_config
+from .linearise import MAX_REST_CHECKS, linearise, rest_verdict
 from .thresholds import SplitRule, split_rule, split_rules
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
@@ -261,19 +259,12 @@ def _t_end_hint(folder, run_id: str, ratio: float) -> dict | None:
             "settling_time": 0.5 * tau * math.log(1.0 / ratio)}
 
 
-#: Most distinct physical configurations whose rest state one robustness analysis
-#: linearises (one body ~10 ms each, a chain ~0.1-0.2 s).
-MAX_REST_CHECKS = 1000
-
-
 def _unstable_rest(folder, ds, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(unstable, unchecked), bool arrays over the runs: of the runs where ``candidates``
     (converged), those whose configuration's rest state is linearly unstable, and those not
     linearised (beyond :data:`MAX_REST_CHECKS` distinct physical configurations)."""
-    physical = [str(c) for c in ds.coords if ds[c].dims == ("run",)
-                and not str(ds[c].attrs.get("config_key", "initial_state")).startswith(("initial_state", "simulation"))
-                and "config_key" in ds[c].attrs]
-    columns = [ds[c].values for c in physical]
+    keys = {str(c): str(ds[c].attrs.get("config_key", "")) for c in ds.coords if ds[c].dims == ("run",)}
+    columns = [ds[c].values for c, key in keys.items() if key and not key.startswith(("initial_state", "simulation"))]
     base = ds["base"].values.astype(str) if "base" in ds.coords else np.full(ds.sizes["run"], "")
     unstable = np.zeros(ds.sizes["run"], dtype=bool)
     unchecked = np.zeros(ds.sizes["run"], dtype=bool)
@@ -284,14 +275,7 @@ def _unstable_rest(folder, ds, candidates: np.ndarray) -> tuple[np.ndarray, np.n
             if len(verdicts) >= MAX_REST_CHECKS:
                 verdicts[key] = None
             else:
-                try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore")  # the sweep's runs gave their warnings
-                        config = any_config_from_mapping(resolved_config(folder, str(ds["run_id"].values[i])))
-                        lin = linearise_config(config)
-                    verdicts[key] = lin.is_rest_point and lin.verdict == "unstable"
-                except Exception:  # noqa: BLE001 - no linearisation (sign law, no rest state): not judged
-                    verdicts[key] = False
+                verdicts[key] = rest_verdict(resolved_config(folder, str(ds["run_id"].values[i]))) == "unstable"
         unstable[i] = verdicts[key] is True
         unchecked[i] = verdicts[key] is None
     return unstable, unchecked

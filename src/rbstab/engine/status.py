@@ -55,6 +55,7 @@ __all__ = [
     "status_message",
     "FALL_MESSAGES",
     "fell",
+    "fell_mask",
     "computed",
 ]
 
@@ -156,6 +157,20 @@ def fell(status: str, message: str | None) -> bool:
     and ``message`` fell: it stopped at gimbal lock or where it left the admissible region,
     its motion computed up to there (a result of its physics, not a fault)."""
     return status == "failed" and isinstance(message, str) and message.startswith(FALL_MESSAGES)
+
+
+def fell_mask(status, message) -> "np.ndarray":
+    """:func:`fell` of many runs: ``status`` and ``message`` of shape (n,) (numpy arrays,
+    pandas columns or lists; text, None or NaN where a run has none); a bool array of
+    shape (n,). Only the failed runs' messages are read."""
+    import numpy as np  # heavy: numpy
+
+    if isinstance(status, (list, tuple)):
+        status = np.asarray(status, dtype=object)
+    rows = np.flatnonzero(np.asarray(status == "failed", dtype=bool))
+    out = np.zeros(len(status), dtype=bool)
+    out[rows] = [isinstance(m, str) and m.startswith(FALL_MESSAGES) for m in np.asarray(message, dtype=object)[rows]]
+    return out
 
 
 def computed(status: str, message: str | None) -> bool:

@@ -14,13 +14,13 @@ coordinate x, y, z; for Euler angles the rotations about x, y', z'').
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from ..analysis.linearise import MAX_REST_CHECKS, rest_verdict
 from ..config.identity import canonical_config
 from ..convergence import converged
 from ..io.chunk import read_chunk_series
@@ -48,10 +48,8 @@ __all__ = [
     "UNSTABLE_REST",
     "MAX_REST_CHECKS",
     "NOT_CHECKED",
-    "NO_LINEARISATION",
     "rest_outcome",
     "rest_words",
-    "rest_verdict",
     "rest_verdicts",
     "settle_store_runs",
     "differing_parameters",
@@ -246,14 +244,8 @@ SETTLED = "settled"
 NOT_SETTLED = "not settled"
 REST_AWAY = "rest away from equilibrium"
 UNSTABLE_REST = "unstable rest"
-#: Most distinct physical configurations one table linearises (:func:`rest_verdicts`): a
-#: chain's takes ~0.1-0.2 s (the minimisation to its rest state, then the Jacobian), one
-#: body's ~10 ms; 1000 chains ~2-3 min.
-MAX_REST_CHECKS = 1000
 #: :func:`rest_verdicts` for a configuration beyond :data:`MAX_REST_CHECKS`.
 NOT_CHECKED = "not checked"
-#: :func:`rest_verdict` where the configuration has no linearisation.
-NO_LINEARISATION = "no linearisation"
 
 
 def rest_outcome(settling_time: float, converged: bool, verdict: str) -> str:
@@ -300,24 +292,6 @@ def physical_key(config: Mapping) -> str:
     """What sets a run's rest state and its linearisation: its resolved configuration
     without ``name``, ``initial_state`` and ``simulation``, as canonical JSON."""
     return canonical_config({k: v for k, v in config.items() if k not in ("initial_state", "simulation")})
-
-
-def rest_verdict(config: Mapping, name: str = "run") -> str:
-    """The verdict of the linearisation at the rest state of a run's resolved configuration
-    ``config`` (:func:`rbstab.analysis.linearise.linearise_config`, as ``rbstab analyze``
-    finds it): one of :data:`rbstab.analysis.linearise.VERDICTS`, or
-    :data:`NO_LINEARISATION` where there is none (the pure sign law, no rest state, a rest
-    point the search did not reach, a configuration that does not validate today)."""
-    from ..analysis.linearise import linearise_config  # heavy: numba
-    from ..config.chains import any_config_from_mapping  # heavy: pydantic
-
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # the run's own warnings were the run's to give
-            lin = linearise_config(any_config_from_mapping(config, default_name=name))
-    except ValueError:  # ConfigError included
-        return NO_LINEARISATION
-    return lin.verdict if lin.is_rest_point else NO_LINEARISATION
 
 
 _REST_KEY = ("rest_verdict",)  # tuples: RunData.drop_series keeps them

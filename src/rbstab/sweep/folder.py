@@ -58,7 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from ..convergence import RULE, converged
-from ..engine.status import FALL_MESSAGES
+from ..engine.status import fell_mask
 from ..io.atomic import atomic_path, write_text_atomic
 from ..layout import is_index, parameter_attributes
 
@@ -377,9 +377,10 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     columns = {**head, **done}
     columns = {c: columns[c] for c in order if c in columns}
     written, digests = _write_index_files(directory, columns, csv=wants_csv(index, n))
+    statuses = status.dictionary_encode().to_pandas()
     counted = pd.DataFrame({"base": head["base"].dictionary_encode().to_pandas(),
-                            "status": status.dictionary_encode().to_pandas(), "converged": done["converged"],
-                            "fell": _fell(status, message),
+                            "status": statuses, "converged": done["converged"],
+                            "fell": fell_mask(statuses, message.to_numpy(zero_copy_only=False)),
                             **({"wall_time": done["wall_time"]} if "wall_time" in done else {})})
     summary = summarize_columns(counted, name=name, ratio=ratio, parameters=table.parameters())
     summary["index"] = written
@@ -629,25 +630,6 @@ def _arrow_frame(table):
                 column = pc.if_else(empty, pa.scalar(None, column.type), column)
         columns.append(column)
     return pa.table(columns, names=table.column_names).to_pandas()
-
-
-def _fell(status, message) -> np.ndarray:
-    """Whether each run fell (:func:`rbstab.engine.status.fell`), from the index's pyarrow
-    ``status`` and ``message`` columns, as a bool array."""
-    import numpy as np  # heavy: numpy
-    import pyarrow as pa  # heavy: pyarrow
-    import pyarrow.compute as pc  # heavy: pyarrow
-
-    if pa.types.is_dictionary(status.type):
-        status = status.cast(status.type.value_type)
-    if pa.types.is_dictionary(message.type):
-        message = message.cast(message.type.value_type)
-    if pa.types.is_null(message.type):
-        return np.zeros(len(status), dtype=bool)
-    failed = pc.equal(status, "failed")
-    starts = [pc.starts_with(message, prefix) for prefix in FALL_MESSAGES]
-    hit = pc.and_(failed, pc.or_(*starts) if len(starts) > 1 else starts[0])
-    return np.asarray(pc.fill_null(hit, False).to_numpy(zero_copy_only=False), dtype=bool)
 
 
 def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str, str] | None = None) -> dict:
