@@ -67,6 +67,7 @@ each compile's seconds::
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import shutil
 import subprocess
@@ -93,9 +94,11 @@ DISTURBED = ["controller.saturation={torque_n: 400, force_h: [300, 300, 500], co
              " {kind: pulse, quantity: torque, value: [0, 40, 0], start: 1.0, duration: 0.05}]"]
 
 
-def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: list[str] = ()):
+@functools.lru_cache(maxsize=4)
+def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: tuple[str, ...] = ()):
     """(codes, params, y0, settings records) of n Case 3 runs of sweep ``kind``, with the
-    overrides ``extra`` (e.g. :data:`DISTURBED`)."""
+    overrides ``extra`` (e.g. :data:`DISTURBED`); the last few kept (a parameter sweep's
+    records take ~70 us a run to build). Read-only: callers slice, never write."""
     import rbstab
     from rbstab.engine import method_number
     from rbstab.engine.settings import settings_records
@@ -128,7 +131,7 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: list[str] 
     return np.full(n, variant.code), params, y0, settings_records(rows, method_number(s.method)), s.n_samples
 
 
-def gpu_rates(kind: str, n: int, stride, extra: list[str] = ()):
+def gpu_rates(kind: str, n: int, stride, extra: tuple[str, ...] = ()):
     """(kernel, end-to-end) runs/s of n runs of sweep ``kind`` (overrides ``extra``)."""
     from rbstab.engine.cuda import integrate_chunks_cuda
 
@@ -153,11 +156,15 @@ def _cpu_part(args):
 
 
 def cpu_rate(kind: str, n: int) -> float:
+    """Runs/s of sweep ``kind`` on the compiled CPU engine, one process a core (the kernels
+    compiled, or loaded from the cache, before the clock starts)."""
     cores = os.cpu_count() or 1
-    start = time.perf_counter()
+    _cpu_part((kind, 2, 0))
     with ProcessPoolExecutor(cores) as pool:
+        list(pool.map(_cpu_part, [(kind, 2, seed) for seed in range(cores)]))  # each process's kernels loaded
+        start = time.perf_counter()
         list(pool.map(_cpu_part, [(kind, n // cores, seed) for seed in range(cores)]))
-    return (n // cores) * cores / (time.perf_counter() - start)
+        return (n // cores) * cores / (time.perf_counter() - start)
 
 
 def correctness(kind: str, n: int) -> str:
@@ -190,22 +197,21 @@ def compile_info() -> str:
     from numba import cuda
 
     from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_kernel, compute_mode, integrate_chunks_cuda,
-                                    kernel_function, launch_signature, occupancy)
+                                    kernel_function, kernel_resources, launch_signature, occupancy)
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
     fn = compiled_kernel(DOP853, 15)
     loaded = time.perf_counter() - start
     signature = launch_signature(15)
-    regs = fn.get_regs_per_thread(signature)
-    local = fn.get_local_mem_per_thread(signature)
+    regs, local = kernel_resources(fn, 15)
     device = cuda.get_current_device()
     per_sm = occupancy(fn, 15)
     sms = device.MULTIPROCESSOR_COUNT
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
     # the same kernel without the driver's steps for disturbances (breakpoints, impulses, work)
     plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
-    plain_regs, plain_local = plain.get_regs_per_thread(signature), plain.get_local_mem_per_thread(signature)
+    plain_regs, plain_local = kernel_resources(plain, 15)
     codes, params, y0, settings, n_samples = runs("parameter", 128)
     list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
     script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
@@ -291,17 +297,17 @@ def chain_compile_info() -> str:
     """The chain kernel's registers, local memory, occupancy and compile (or load) time."""
     from numba import cuda
 
-    from rbstab.engine.cuda import THREADS_PER_BLOCK, chain_launch_signature, compiled_chain_kernel, occupancy
+    from rbstab.engine.cuda import THREADS_PER_BLOCK, compiled_chain_kernel, kernel_resources, occupancy
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
     fn = compiled_chain_kernel(DOP853)
     loaded = time.perf_counter() - start
-    signature = chain_launch_signature()
+    regs, local = kernel_resources(fn, None)
     device = cuda.get_current_device()
     per_sm = occupancy(fn, None)
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
-    return (f"{fn.get_regs_per_thread(signature)} registers, {fn.get_local_mem_per_thread(signature)} B local memory "
+    return (f"{regs} registers, {local} B local memory "
             f"a thread; {per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}); compiled "
             f"or loaded in {loaded:.1f} s")
 
@@ -549,7 +555,7 @@ def main() -> None:
                 kernel, total = gpu_rates(kind, n, stride)
                 print(f"{kind:14s} {n:9d} {label:>8s} {kernel:14,.0f} {total:18,.0f}")
     n = min(args.n)
-    plain, disturbed = gpu_rates("parameter", n, None)[0], gpu_rates("parameter", n, None, DISTURBED)[0]
+    plain, disturbed = gpu_rates("parameter", n, None)[0], gpu_rates("parameter", n, None, tuple(DISTURBED))[0]
     print(f"disturbed: parameter sweep, {n:,} runs, every actuator limit, a noise, an impulse and a pulse: "
           f"kernel {disturbed:,.0f} runs/s, {plain / disturbed:.2f}x the time a run without them ({plain:,.0f} runs/s)")
     print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")

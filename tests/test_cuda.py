@@ -436,3 +436,46 @@ def test_gpu_sweep_agrees_with_the_cpu_engine():
         assert abs(r.solver["n_steps"] - g.solver["n_steps"]) <= 2
         final_r, final_g = np.asarray(r.summary["final_omega"]), np.asarray(g.summary["final_omega"])
         np.testing.assert_allclose(final_g, final_r, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.skipif(not GPU, reason="no NVIDIA GPU here")
+def test_gpu_cli_sweep_finishes(tmp_path):
+    """On a real GPU: ``rbstab sweep --engine cuda`` (its worker processes, each launching
+    the kernel) ends with every run computed. If it has not ended within 300 s, every
+    process of the command dumps its Python stack (faulthandler, SIGABRT) into the failure:
+    where the parent and its workers wait."""
+    import signal
+
+    cmd = [RBSTAB, "sweep", CASE3, "--random", "body.mass=scale_uniform:[0.5,1.5]", "--random",
+           "controller.k_c=scale_uniform:[0.5,2]", "-n", "2000", "--set", "simulation.rtol=1e-6", "--set",
+           "simulation.atol=1e-8", "--engine", "cuda", "--store", "summary", "--no-progress", "-o", str(tmp_path)]
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_ENABLE_CUDASIM"} | {"PYTHONFAULTHANDLER": "1"}
+    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+                               start_new_session=True)
+    try:
+        out, err = process.communicate(timeout=300)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGABRT)
+        out, err = process.communicate()
+        pytest.fail(f"rbstab sweep --engine cuda had not ended after 300 s; the stacks of its processes:\n{err}")
+    assert process.returncode == 0, err
+    assert "2000 success" in err + out, err + out
+
+
+def test_kernel_resources_ask_the_dispatcher_by_signature():
+    """numba-cuda's dispatcher takes a signature object (``sig.args``) in
+    ``get_regs_per_thread`` and ``get_local_mem_per_thread``, not the tuple of argument
+    types: the occupancy of every launch on a GPU reads them."""
+    from rbstab.engine.cuda import chain_launch_signature, kernel_resources, launch_signature
+
+    class Dispatcher:  # what numba-cuda's CUDADispatcher does with the signature it is given
+        def get_regs_per_thread(self, signature):
+            return 200 if signature.args == self.args else 0
+
+        def get_local_mem_per_thread(self, signature):
+            return 7000 if signature.args == self.args else 0
+
+    for n_state, args in ((15, launch_signature(15)), (None, chain_launch_signature())):
+        fn = Dispatcher()
+        fn.args = tuple(args)
+        assert kernel_resources(fn, n_state) == (200, 7000)

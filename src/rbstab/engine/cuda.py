@@ -395,6 +395,18 @@ def _compile_lock(group: str):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
+def kernel_resources(fn, n_state: int | None) -> tuple[int, int]:
+    """(registers, local memory [B]) a thread of the compiled kernel ``fn`` on the current
+    device; ``n_state`` None: ``fn`` is the chain kernel. numba-cuda's dispatcher looks a
+    kernel up by a signature object (its ``args``), not by the tuple of argument types."""
+    from numba import types  # heavy: numba
+    from numba.core.typing import signature
+
+    args = launch_signature(n_state) if n_state is not None else chain_launch_signature()
+    sig = signature(types.void, *args)
+    return fn.get_regs_per_thread(sig), fn.get_local_mem_per_thread(sig)
+
+
 def occupancy(fn, n_state: int | None) -> int:
     """Blocks of :data:`THREADS_PER_BLOCK` threads one multiprocessor holds at once for the
     compiled kernel ``fn`` (CUDA's occupancy calculation from its registers a thread and the
@@ -403,7 +415,7 @@ def occupancy(fn, n_state: int | None) -> int:
     if simulated():
         return 1
     device = cuda.get_current_device()
-    regs = fn.get_regs_per_thread(launch_signature(n_state) if n_state is not None else chain_launch_signature())
+    regs, _ = kernel_resources(fn, n_state)
     warps = -(-THREADS_PER_BLOCK // device.WARP_SIZE)
     per_warp = -(-max(regs, 1) * device.WARP_SIZE // 256) * 256  # registers go to a warp in units of 256
     by_registers = device.MAX_REGISTERS_PER_MULTIPROCESSOR // (per_warp * warps)
