@@ -19,9 +19,12 @@ Prints (2 cores, warm numba cache):
   config (t_end 2 s), the rate evaluations a run takes, and their ratios: a sweep's time,
   and its time per rate evaluation (a chain takes more steps than Case 3); and the time a
   run on one process that 3.5x Case 3's sweep allows, beside what a chain run's rate
-  evaluations alone take (their count x us an evaluation at the initial state).
+  evaluations alone take (their count x us an evaluation at the initial state);
+- s a sweep of the stance example over the trunk's mass (every run another chain: its
+  rest state and h found again) and over the legs' initial tilt, ``--parameter-runs``
+  runs (default 1,000) on one worker process, and their ratio.
 
-Run: python benchmarks/chains.py [--sweep-runs N]
+Run: python benchmarks/chains.py [--sweep-runs N] [--parameter-runs N] [--only-parameter]
 """
 
 from __future__ import annotations
@@ -188,13 +191,47 @@ def sweeps(n: int) -> None:
               f"alone take {1e-3 * rate * nfev[chain]:.2f} ms ({rate:.3f} us each)")
 
 
+def parameter_vs_initial_state(n: int) -> None:
+    """Wall seconds of ``rbstab sweep`` of the stance example (t_end 2 s, ``--store
+    summary``, one worker process: ``-j 1``) over the trunk's mass (every run another
+    chain, so another rest state and h) and over the legs' initial tilt (one chain), each
+    after a 20-run sweep of its own (the worker's kernels loaded), and their ratio."""
+    import subprocess
+    import sys
+    import tempfile
+
+    rbstab = str(Path(sys.executable).parent / "rbstab")
+    stance = str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
+    seconds = {}
+    for label, axis in (("trunk mass", "bodies.trunk.mass=uniform:[40,55]"),
+                        ("legs tilt", "initial_state.legs.theta.0=uniform:[-0.1,0.1]")):
+        for runs in (20, n):
+            with tempfile.TemporaryDirectory() as folder:
+                start = time.perf_counter()
+                subprocess.run([rbstab, "sweep", stance, "--random", axis, "-n", str(runs), "-j", "1", "--store",
+                                "summary", "--no-progress", "--set", "simulation.t_end=2", "-o", folder],
+                               check=True, capture_output=True)
+                seconds[label] = time.perf_counter() - start
+        print(f"  stance_ankle_hip over the {label}: {n} runs in {seconds[label]:.2f} s "
+              f"({1e3 * seconds[label] / n:.2f} ms a run, start to exit)")
+    print(f"  ratio trunk mass / legs tilt: {seconds['trunk mass'] / seconds['legs tilt']:.2f}")
+
+
 def main() -> None:
     import argparse
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sweep-runs", type=int, default=10_000, help="runs of each sweep (0: none)")
+    parser.add_argument("--parameter-runs", type=int, default=1000,
+                        help="runs of the stance sweeps over a parameter and an initial state (0: none)")
+    parser.add_argument("--only-parameter", action="store_true", help="only those two sweeps")
     options = parser.parse_args()
     warnings.simplefilter("ignore")
+    if options.parameter_runs:
+        print("a sweep over a parameter against one over an initial state (one worker process, store summary):")
+        parameter_vs_initial_state(options.parameter_runs)
+        if options.only_parameter:
+            return
     print("runs, integration only (ms a run, best of 5): scipy's solve_ivp over the compiled rate | the compiled "
           "driver | rbstab run's whole run (compiled, with outputs and summary)")
     for name in ("double_pendulum", "stance_ankle_hip", "knee"):

@@ -490,9 +490,24 @@ def test_bodies_that_nothing_holds_under_gravity_are_warned_of_at_validation(tmp
     both_free = [str(knee), "--set", "joints.knee.variant=free", "--set", "joints.hip.variant=free",
                  "--set", "simulation.t_end=0.2", "--set", "simulation.n_samples=21"]
     rbstab = Path(sys.executable).parent / "rbstab"
-    for flags, shown in (((), False), (("-v",), True)):
+    for flags in ((), ("-v",)):
         out = tmp_path / f"run{len(flags)}"
         done = subprocess.run([str(rbstab), "run", *both_free, "-o", str(out), *flags], capture_output=True, text=True)
         assert done.returncode == 0 and "W007" in done.stderr, done.stderr
         assert "Warning:" not in done.stderr and "warnings.warn" not in done.stderr, done.stderr  # no raw warning
-        assert ("note: RuntimeWarning from " in done.stderr) == shown, done.stderr
+
+
+def test_a_librarys_warning_is_a_note_with_v_and_silent_without(capsys):
+    """A library's numerical warning (no code of rbstab's) is no finding: not shown by
+    default, one ``note:`` line with ``-v``, once however often it is raised."""
+    import warnings
+
+    from rbstab_cli.console import Console
+
+    for verbosity, shown in ((0, False), (1, True)):
+        with Console(verbosity).catching_warnings():
+            for _ in range(3):
+                warnings.warn("overflow encountered in multiply", RuntimeWarning)
+        err = capsys.readouterr().err
+        assert err.count("note: RuntimeWarning from ") == (1 if shown else 0), err
+        assert "Warning:" not in err, err

@@ -378,4 +378,6 @@ def test_v_is_zero_at_the_stance_rest_state_for_every_trunk_mass(mass):
     rest, _ = C.rest_state(compiled)
     v, rate = C.lyapunov(compiled, rest)
     assert abs(v) < 1e-9 * abs(compiled.offset) and abs(rate) < 1e-9
+    # the compiled configuration's bodies sit on their joints, as the state's placement puts them
+    np.testing.assert_allclose(C._place(compiled, rest), rest, rtol=0, atol=1e-15)
     assert np.abs(_rate(compiled, rest)).max() < 1e-6

@@ -400,7 +400,7 @@ def kernel_resources(fn, n_state: int | None) -> tuple[int, int]:
     device; ``n_state`` None: ``fn`` is the chain kernel. numba-cuda's dispatcher looks a
     kernel up by a signature object (its ``args``), not by the tuple of argument types."""
     from numba import types  # heavy: numba
-    from numba.core.typing import signature
+    from numba.core.typing import signature  # heavy: numba
 
     args = launch_signature(n_state) if n_state is not None else chain_launch_signature()
     sig = signature(types.void, *args)

@@ -589,28 +589,88 @@ def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
 
 
 # -- rest state and v ---------------------------------------------------------------------------
-def _configuration(compiled: CompiledChain, q: np.ndarray) -> np.ndarray:
-    """The state at rest of the configuration ``q``: every Theta_i, then X_i of bodies whose
-    joint is not ``permanent``, then D of embedded joints; X of a permanent joint's child
-    placed on its parent's point (E_j = 0)."""
-    n = compiled.size
-    y = np.zeros(compiled.n_states)
+@jit
+def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
+    """Fill ``y`` (n_states,) with the state at rest of the configuration ``q``: every
+    Theta_i, then X_i of bodies whose joint is not ``permanent``, then D of embedded joints;
+    every Omega, V zero; X of a permanent joint's child placed on its parent's point
+    (E_j = 0), parents first: X_c = X_p + A_p R_p - A_c R_c."""
+    n = codes.shape[0]
+    for k in range(y.shape[0]):
+        y[k] = 0.0
     k = 3 * n
     for i in range(n):
-        y[12 * i: 12 * i + 3] = q[3 * i: 3 * i + 3]
-        if compiled.codes[i] != PERMANENT:
-            y[12 * i + 6: 12 * i + 9] = q[k: k + 3]
+        for c in range(3):
+            y[12 * i + c] = q[3 * i + c]
+        if codes[i] != PERMANENT:
+            for c in range(3):
+                y[12 * i + 6 + c] = q[k + c]
             k += 3
     for j in range(n):
-        if compiled.d_at[j] >= 0:
-            y[compiled.d_at[j]: compiled.d_at[j] + 3] = q[k: k + 3]
+        if d_at[j] >= 0:
+            for c in range(3):
+                y[d_at[j] + c] = q[k + c]
             k += 3
-    return _place(compiled, y, only_permanent=True)
+    for i in range(n):
+        if codes[i] != PERMANENT:
+            continue
+        point = vector(ppoints[i], 0)
+        p = parents[i]
+        if p >= 0:
+            point = add(vector(y, 12 * p + 6), matvec(rotation_and_rate_of(vector(y, 12 * p))[0], point))
+        _put(y, 12 * i + 6, sub(point, matvec(rotation_and_rate_of(vector(y, 12 * i))[0],
+                                              vector(params[i].attachment_point, 0))))
 
 
-def _potential(compiled: CompiledChain, y: np.ndarray) -> float:
-    scalars = _terms(compiled, 0.0, y)[2]
-    return float(scalars[_JOINT] + scalars[_BODY] + scalars[_GRAVITY])
+@jit
+def rest_potential(q, params, codes, parents, ppoints, d_at, y, dy, work):
+    """The potential [J] (joint and body feedback, point laws, gravity; h not included) of
+    the configuration ``q`` (:func:`rest_configuration`, written into ``y``)."""
+    rest_configuration(q, params, codes, parents, ppoints, d_at, y)
+    chain_evaluate(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars, work)
+    return work.scalars[_JOINT] + work.scalars[_BODY] + work.scalars[_GRAVITY]
+
+
+@jit
+def rest_gradient(q, params, codes, parents, ppoints, d_at, y, dy, work, gradient):
+    """The gradient of :func:`rest_potential` at ``q`` into ``gradient``, by central
+    differences (step (machine epsilon)^(1/3) max(1, |q_k|)). Returns the potential at q."""
+    value = rest_potential(q, params, codes, parents, ppoints, d_at, y, dy, work)
+    for k in range(q.shape[0]):
+        held = q[k]
+        step = 6.0554544523933395e-06 * max(1.0, abs(held))
+        q[k] = held + step
+        up = rest_potential(q, params, codes, parents, ppoints, d_at, y, dy, work)
+        q[k] = held - step
+        down = rest_potential(q, params, codes, parents, ppoints, d_at, y, dy, work)
+        q[k] = held
+        gradient[k] = (up - down) / (2.0 * step)
+    return value
+
+
+@jit
+def rest_acceleration(q, params, codes, parents, ppoints, d_at, y, dy, work, out):
+    """The accelerations at rest in the configuration ``q`` (:func:`rest_configuration`)
+    into ``out``: dOmega_i/dt of every body, dV_i/dt of bodies whose joint is not
+    permanent, dD/dt of embedded joints."""
+    rest_configuration(q, params, codes, parents, ppoints, d_at, y)
+    chain_evaluate(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars, work)
+    n = codes.shape[0]
+    k = 0
+    for i in range(n):
+        for c in range(3):
+            out[k + c] = dy[12 * i + 3 + c]
+        k += 3
+    for i in range(n):
+        if codes[i] != PERMANENT:
+            for c in range(3):
+                out[k + c] = dy[12 * i + 9 + c]
+            k += 3
+    for j in range(n):
+        if d_at[j] >= 0:
+            for c in range(3):
+                out[k + c] = dy[d_at[j] + c]
+            k += 3
 
 
 def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
@@ -628,32 +688,33 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     placed = _place(compiled, np.zeros(compiled.n_states))
     for k, i in enumerate(free):
         q0[3 * n + 3 * k: 3 * n + 3 * k + 3] = placed[12 * i + 6: 12 * i + 9]
-    result = minimize(lambda q: _potential(compiled, _configuration(compiled, q)), q0, method="BFGS",
-                      options={"gtol": 1e-11, "maxiter": 5000})
+    y, dy, work = np.empty(compiled.n_states), np.empty(compiled.n_states), chain_work(n)
+    args = (*compiled.args, y, dy, work)
+
+    def potential_and_gradient(q):
+        gradient = np.empty(q.shape[0])
+        return rest_gradient(np.array(q, dtype=float), *args, gradient), gradient
+
+    def acceleration(q):
+        out = np.empty(q.shape[0])
+        rest_acceleration(np.asarray(q, dtype=float), *args, out)
+        return out
+
+    result = minimize(potential_and_gradient, q0, jac=True, method="BFGS", options={"gtol": 1e-11, "maxiter": 5000})
     value = float(result.fun)
     if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
         return None, math.nan
     q = result.x
     try:
-        polished = root(lambda q: _rest_acceleration(compiled, q), q, method="hybr", options={"xtol": 1e-13})
+        with np.errstate(all="ignore"):
+            polished = root(acceleration, q, method="hybr", options={"xtol": 1e-13})
     except (np.linalg.LinAlgError, ValueError):  # the polish left for a singular configuration
         polished = None  # (its rate not finite): the minimiser's rest point stands
-    if polished is not None and np.linalg.norm(polished.fun) < np.linalg.norm(_rest_acceleration(compiled, q)):
+    if (polished is not None and np.all(np.isfinite(polished.fun))
+            and np.linalg.norm(polished.fun) < np.linalg.norm(acceleration(q))):
         q = polished.x  # a rest point to rounding: the minimiser's gradient tolerance is not
-    y = _configuration(compiled, q)
-    return y, _potential(compiled, y)
-
-
-def _rest_acceleration(compiled: CompiledChain, q: np.ndarray) -> np.ndarray:
-    """The accelerations at rest in the configuration ``q`` (:func:`_configuration`):
-    dOmega_i/dt of every body, dV_i/dt of bodies whose joint is not permanent, dD/dt."""
-    y = _configuration(compiled, q)
-    dy = np.empty(compiled.n_states)
-    chain_rate(0.0, y, *compiled.args, dy)
-    rows = [dy[12 * i + 3: 12 * i + 6] for i in range(compiled.size)]
-    rows += [dy[12 * i + 9: 12 * i + 12] for i in range(compiled.size) if compiled.codes[i] != PERMANENT]
-    rows += [dy[d: d + 3] for d in compiled.d_at if d >= 0]
-    return np.concatenate(rows)
+    value = rest_potential(q, *args)
+    return y.copy(), float(value)
 
 
 def rest_offset(compiled: CompiledChain) -> float:
