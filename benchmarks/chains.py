@@ -20,11 +20,14 @@ Prints (2 cores, warm numba cache):
   and its time per rate evaluation (a chain takes more steps than Case 3); and the time a
   run on one process that 3.5x Case 3's sweep allows, beside what a chain run's rate
   evaluations alone take (their count x us an evaluation at the initial state);
+- us an evaluation of the rate of a serial chain of n = 1..8 bodies on permanent joints, in
+  maximal coordinates (the chain's rate: the stacked solve for the constraint forces) and
+  in reduced coordinates (:func:`rbstab.variants.tree.tree_rate`: no constraint force);
 - s a sweep of the stance example over the trunk's mass (every run another chain: its
   rest state and h found again) and over the legs' initial tilt, ``--parameter-runs``
   runs (default 1,000) on one worker process, and their ratio.
 
-Run: python benchmarks/chains.py [--sweep-runs N] [--parameter-runs N] [--only-parameter]
+Run: python benchmarks/chains.py [--sweep-runs N] [--parameter-runs N] [--only-parameter] [--only-reduced]
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import chain_system
 from rbstab.simulator import simulate_chain
 from rbstab.variants import chain as C
+from rbstab.variants import tree as R
 from rbstab.variants.kernels import state_rate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -86,15 +90,48 @@ def _chain_loop(k, y, args, dy, work):
     return total
 
 
-def serial(n: int) -> Chain:
+@numba.njit
+def _tree_loop(k, y, args, layout, dy, work):
+    """k evaluations of a tree's rate in reduced coordinates (:func:`rbstab.variants.tree.tree_rate`)."""
+    params, codes, parents, ppoints, d_at = args
+    r_at, u_at, rd_at = layout
+    total = 0.0
+    for _ in range(k):
+        y[0] += 1e-12
+        R.tree_rate(0.0, y, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dy, work)
+        total += dy[3]
+    return total
+
+
+def serial(n: int, laws: tuple = ("permanent", "visco_elastic")) -> Chain:
+    """A serial chain of n links 0.6 m long, its joints' laws in turn from ``laws``."""
     bodies = tuple(Body(f"link{i}", 2.0, D([0.2, 0.2, 0.02])) for i in range(n))
     joints = []
     for i in range(n):
-        gains = {"k_c": D([5e4] * 3), "l_c": D([500.0] * 3)} if i % 2 else {}
+        law = laws[i % len(laws)]
+        gains = {"k_c": D([5e4] * 3), "l_c": D([500.0] * 3)} if law == "visco_elastic" else {}
         joints.append(Joint(f"joint{i}", GROUND if i == 0 else i - 1, i, np.zeros(3) if i == 0 else np.array([0, 0, 0.3]),
-                            np.array([0, 0, -0.3]), "visco_elastic" if i % 2 else "permanent",
-                            D([400.0, 400.0, 100.0]), D([40.0, 40.0, 10.0]), **gains))
+                            np.array([0, 0, -0.3]), law, D([400.0, 400.0, 100.0]), D([40.0, 40.0, 10.0]), **gains))
     return Chain(bodies, tuple(joints), np.array([0.0, 0.0, -9.81]))
+
+
+def reduced_rates() -> None:
+    """us an evaluation of a serial chain of permanent joints' rate, n = 1..8: the
+    maximal-coordinate chain's (the stacked solve for Lambda_j) and the reduced tree's."""
+    print("permanent joints only, us an evaluation: maximal coordinates (stacked solve) | reduced coordinates")
+    k = 100_000
+    for n in range(1, 9):
+        compiled = C.compile_chain(serial(n, ("permanent",)), offset=0.0)
+        layout = R.tree_layout(compiled)
+        y = C._place(compiled, np.random.default_rng(n).normal(scale=0.1, size=compiled.n_states))
+        yr = R.reduce_state(compiled, layout, y)
+        dy, dyr = np.empty(compiled.n_states), np.empty(layout.n_r)
+        work, tree_work = C.chain_work(n), R.tree_work(n, compiled.n_states)
+        _chain_loop(10, y.copy(), compiled.args, dy, work)
+        _tree_loop(10, yr.copy(), compiled.args, layout.args, dyr, tree_work)
+        maximal = _best(lambda: _chain_loop(k, y.copy(), compiled.args, dy, work), 3) / k
+        reduced = _best(lambda: _tree_loop(k, yr.copy(), compiled.args, layout.args, dyr, tree_work), 3) / k
+        print(f"  n = {n}: {1e6 * maximal:7.3f} | {1e6 * reduced:7.3f}  ({reduced / maximal:.2f}x)")
 
 
 def _compiled_run(compiled, y0, sim):
@@ -225,8 +262,13 @@ def main() -> None:
     parser.add_argument("--parameter-runs", type=int, default=1000,
                         help="runs of the stance sweeps over a parameter and an initial state (0: none)")
     parser.add_argument("--only-parameter", action="store_true", help="only those two sweeps")
+    parser.add_argument("--only-reduced", action="store_true",
+                        help="only the rates of serial chains of permanent joints, maximal and reduced")
     options = parser.parse_args()
     warnings.simplefilter("ignore")
+    if options.only_reduced:
+        reduced_rates()
+        return
     if options.parameter_runs:
         print("a sweep over a parameter against one over an initial state (one worker process, store summary):")
         parameter_vs_initial_state(options.parameter_runs)
@@ -283,6 +325,7 @@ def main() -> None:
         _chain_loop(10, y.copy(), compiled.args, dy, work)
         seconds = _best(lambda: _chain_loop(k, y.copy(), compiled.args, dy, work), 3) / k
         print(f"  n = {n}: {1e6 * seconds:7.3f} us  ({1e6 * seconds / n:6.3f} us a body)")
+    reduced_rates()
     if options.sweep_runs:
         print("sweeps over initial states (2 local processes, store summary):")
         sweeps(options.sweep_runs)

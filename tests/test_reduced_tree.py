@@ -295,3 +295,53 @@ def test_a_push_in_reduced_coordinates_is_the_chains_push():
     momentum_jump = masses @ (pushed.reshape(2, 4, 3)[:, 3] - y12.reshape(2, 4, 3)[:, 3])
     np.testing.assert_allclose(momentum_jump, impulse + reactions[0], atol=1e-11 * np.abs(impulse).max())
     assert np.array_equal(rotation(after[:3]), rotation(y[:3]))  # the configuration does not move
+
+
+# -- the compiled reduced rate (rbstab.variants.tree) against the reference ------------------------------
+@pytest.mark.parametrize("mix", sorted(LAW_MIXES))
+def test_the_compiled_reduced_rate_is_the_references(mix, rng):
+    """rbstab's compiled rate of a tree in reduced coordinates (no constraint force in it)
+    equals the reference's at random states of random trees (permanent, free and
+    visco-elastic joints, body feedback, clipped joint torques, gravity), with the same
+    terms of v; its maximal image is the reference's, and the chain's state reduces back."""
+    from rbstab.variants import tree as R
+
+    for _ in range(3):
+        tree = _random_tree(rng, LAW_MIXES[mix])
+        compiled = C.compile_chain(_chain(tree), offset=0.0)
+        layout = R.tree_layout(compiled)
+        assert layout.n_r == T.state_blocks(tree)[1] and layout.n_u == T.velocity_blocks(tree)[1]
+        work = R.tree_work(tree.size, compiled.n_states)
+        for _ in range(4):
+            y = _random_state(rng, tree)
+            dyr = np.empty(layout.n_r)
+            R.tree_rate(0.0, y, *compiled.args, *layout.args, dyr, work)
+            ev = T.evaluate(tree, y)
+            np.testing.assert_allclose(dyr, ev.dy, rtol=0, atol=1e-12 * np.abs(ev.dy).max())
+            maximal = T.maximal_state(tree, y)
+            np.testing.assert_allclose(R.expand_state(compiled, layout, y), maximal, rtol=0, atol=1e-14)
+            np.testing.assert_allclose(R.reduce_state(compiled, layout, maximal), y, rtol=0, atol=1e-13)
+            terms, _ = T.lyapunov(tree, y)
+            np.testing.assert_allclose(work.chain.scalars[:4], terms, rtol=0, atol=1e-12 * (1 + np.abs(terms).max()))
+
+
+@pytest.mark.parametrize("path", [EXAMPLES / "stance_ankle.yaml", ROOT / "configs" / "paper" / "case1_permanent.yaml"],
+                         ids=["stance_ankle", "case1_permanent"])
+def test_the_compiled_reduced_rate_of_one_permanent_body_is_the_papers(path, rng):
+    """A one-body tree on a permanent joint, in reduced coordinates, has the rate of rbstab's
+    ``permanent`` variant (eq 21's 6 states) at random states."""
+    from rbstab.config.chains import chain_of
+    from rbstab.variants import tree as R
+
+    config = _load(path)
+    variant = VARIANTS[config.variant](config.body, config.gains)
+    compiled = C.compile_chain(chain_of(config), offset=0.0)
+    layout = R.tree_layout(compiled)
+    assert layout.n_r == 6
+    work = R.tree_work(1, compiled.n_states)
+    for _ in range(20):
+        y = np.concatenate([rng.normal(scale=0.3, size=3), rng.normal(scale=2.0, size=3)])
+        dyr = np.empty(6)
+        R.tree_rate(0.0, y, *compiled.args, *layout.args, dyr, work)
+        expected = variant.rhs(0.0, y)
+        np.testing.assert_allclose(dyr, expected, rtol=0, atol=1e-12 * np.abs(expected).max())

@@ -160,22 +160,17 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
 
 
 @jit
-def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work):
-    """The state rate of a chain and everything it is made of, at time ``t`` [s].
-
-    ``y`` (n_states,) (module docstring); ``params`` (n,) :data:`PARAMETERS` records;
-    ``codes`` (n,) variant codes; ``parents`` (n,) parent index or -1 (ground); ``ppoints``
-    (n, 3) parent points R_p [m] (inertial frame for the ground, else the parent's body
-    frame); ``d_at`` (n,) the index of each embedded joint's D in ``y`` (-1: none).
-    Writes dy/dt into ``dy`` (n_states,; with one more entry, the disturbances' power after
-    the state, the rate of their work W); per joint (n, 7, 3) into ``joints``: E_j, F_j,
-    Lambda_j (inertial), N_j (child frame, delivered), D_j, Theta_j, Omega_j; per body
-    (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the kinetic, joint,
-    body-feedback and gravity terms of v (without h) and dv/dt (analytic: minus the
-    dissipations, plus the saturation deficit, disturbance and permanent-constraint
-    powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
-    (:class:`ChainWork`).
-    """
+def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
+    """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
+    rotations A_i and B(Theta_i) into ``work.rot``, ``work.rate`` (``rotations``: the caller
+    has put A_i there already, and only A_i is read); the wrench on each body of
+    everything but those Lambda_j into ``work.torque`` (body frame, the gyroscopic term
+    -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
+    (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H
+    into ``bodies``; the kinetic, joint, body-feedback and gravity terms of v into
+    ``scalars[:4]``; dD/dt of embedded joints into ``dy``. Returns (the number of permanent
+    joints, the saturation deficit power, the disturbances' power, the dissipation [W], the
+    state's size 12 n + 3 e)."""
     n = codes.shape[0]
     rot, rate, torque, force = work.rot, work.rate, work.torque, work.force
     torque[:] = 0.0
@@ -191,6 +186,8 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     for i in range(n):
         if d_at[i] >= 0:
             size += 3
+        if rotations:
+            continue
         a, b = rotation_and_rate_of(vector(y, 12 * i))
         for r in range(3):
             for c in range(3):
@@ -269,6 +266,34 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         _put(joints[j, _D], 0, d)
         _put(joints[j, _THETA_J], 0, theta_j)
         _put(joints[j, _OMEGA_J], 0, omega_j)
+    scalars[_KINETIC] = kinetic
+    scalars[_JOINT] = joint_energy
+    scalars[_BODY] = body_energy
+    scalars[_GRAVITY] = gravity
+    return n_permanent, power, work_power, dissipation, size
+
+
+@jit
+def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work):
+    """The state rate of a chain and everything it is made of, at time ``t`` [s].
+
+    ``y`` (n_states,) (module docstring); ``params`` (n,) :data:`PARAMETERS` records;
+    ``codes`` (n,) variant codes; ``parents`` (n,) parent index or -1 (ground); ``ppoints``
+    (n, 3) parent points R_p [m] (inertial frame for the ground, else the parent's body
+    frame); ``d_at`` (n,) the index of each embedded joint's D in ``y`` (-1: none).
+    Writes dy/dt into ``dy`` (n_states,; with one more entry, the disturbances' power after
+    the state, the rate of their work W); per joint (n, 7, 3) into ``joints``: E_j, F_j,
+    Lambda_j (inertial), N_j (child frame, delivered), D_j, Theta_j, Omega_j; per body
+    (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the kinetic, joint,
+    body-feedback and gravity terms of v (without h) and dv/dt (analytic: minus the
+    dissipations, plus the saturation deficit, disturbance and permanent-constraint
+    powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
+    (:class:`ChainWork`).
+    """
+    n = codes.shape[0]
+    rot, rate, torque, force = work.rot, work.rate, work.torque, work.force
+    n_permanent, power, work_power, dissipation, size = chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy,
+                                                                       joints, bodies, scalars, work)
     if n_permanent > 0:
         _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent, work, True)
         for j in range(n):
@@ -281,10 +306,6 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         _put(dy, 12 * i + 3, matvec(p.inertia_inv, vector(torque[i], 0)))
         _put(dy, 12 * i + 6, v)
         _put(dy, 12 * i + 9, (force[i, 0] / p.mass, force[i, 1] / p.mass, force[i, 2] / p.mass))
-    scalars[_KINETIC] = kinetic
-    scalars[_JOINT] = joint_energy
-    scalars[_BODY] = body_energy
-    scalars[_GRAVITY] = gravity
     scalars[_RATE] = power + work_power - dissipation
     if dy.shape[0] > size:  # the work W of the disturbances, integrated after the state
         dy[size] = work_power
