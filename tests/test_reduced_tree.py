@@ -345,3 +345,46 @@ def test_the_compiled_reduced_rate_of_one_permanent_body_is_the_papers(path, rng
         R.tree_rate(0.0, y, *compiled.args, *layout.args, dyr, work)
         expected = variant.rhs(0.0, y)
         np.testing.assert_allclose(dyr, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("start", sorted(STARTS))
+def test_the_compiled_driver_integrates_the_reduced_tree_as_the_maximal_chain(start):
+    """The compiled driver on the stance double pendulum in reduced coordinates (its system
+    a TreeSystem) follows the maximal-coordinate chain's run to the solver's tolerance, with
+    its joints held to rounding (E_j of the samples' maximal image ~1e-16 m) and the same
+    outcome; with an impulse on the trunk both runs take the same jump."""
+    from rbstab.engine.integrate import integrate_chain_runs
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.systems import chain_system, tree_system
+    from rbstab.variants import tree as R
+
+    impulse = ["disturbances=[{kind: impulse, body: trunk, value: [0, 20, 0], point: [0, 0, 0.2], start: 0.5}]"]
+    for extra in ([], impulse):
+        config = _load(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=41", "simulation.rtol=1e-10",
+                                "simulation.atol=1e-12", *STARTS[start], *extra])
+        compiled = C.compile_chain(config.chain)
+        layout = R.tree_layout(compiled)
+        y0 = C.initial_state(config)
+        rows = settings_rows([config.simulation])
+        rows[:, 6] = np.inf
+        sim = config.simulation
+        maximal = integrate_chain_runs(chain_system(compiled, sim.limits), y0[None], rows, method=sim.method,
+                                       n_samples=sim.n_samples)
+        reduced = integrate_chain_runs(tree_system(compiled, layout, sim.limits),
+                                       R.reduce_state(compiled, layout, y0)[None], rows, method=sim.method,
+                                       n_samples=sim.n_samples)
+        assert reduced.status[0] == maximal.status[0] == 0
+        a, b = maximal.samples[0].reshape(41, -1), reduced.samples[0].reshape(41, -1)
+        bodies = [slice(12 * i, 12 * i + 12) for i in range(2)]
+        for s in bodies:
+            np.testing.assert_allclose(b[:, s], a[:, s], rtol=0, atol=1e-7)
+        assert np.ptp(a[:, 6:9], axis=0).max() > 0.01  # it moves
+        n = compiled.size
+        for row in b:
+            joints = np.empty((n, 7, 3))
+            C.chain_core(0.0, row, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)),
+                         np.empty(5))
+            assert np.abs(joints[:, 0]).max() < 1e-14  # E_j: held by construction
+        np.testing.assert_allclose(reduced.work, maximal.work, rtol=0, atol=1e-8 * (1 + np.abs(maximal.work).max()))
+        if extra:
+            assert np.abs(reduced.work[0, -1]) > 1.0  # the push did work

@@ -32,12 +32,13 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.chain import chain_work
+from ..variants.tree import expand_samples, tree_work
 from ..variants.disturbances import before
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
 from .status import DEFAULT_MAX_STEPS, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
-from .systems import (CHAIN, ChainSystem, admissible, admissible_event, gimbal_event, system_breakpoint,
+from .systems import (CHAIN, ChainSystem, TreeSystem, admissible, admissible_event, gimbal_event, system_breakpoint,
                       system_disturbed, system_impulses, system_limited, system_margin, system_rate)
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
@@ -563,6 +564,24 @@ def integrate_chain_chunk(system, y0, settings, samples, work_done, ends):
                                                                   work_done[k])
 
 
+@jit(nogil=True)
+def integrate_tree_chunk(system, y0, settings, samples, work_done, ends):
+    """:func:`integrate_chain_chunk` for a tree in reduced coordinates (``system``, a
+    :class:`~rbstab.engine.systems.TreeSystem`): ``y0`` (k, n_r) and ``samples`` in the
+    reduced layout."""
+    status, t_stop, nfev, n_steps = ends
+    n = system.codes.shape[0]
+    n_states = 12 * n
+    for j in range(n):
+        if system.d_at[j] >= 0:
+            n_states += 3
+    own = TreeSystem(system.params, system.codes, system.parents, system.ppoints, system.d_at, system.r_at,
+                     system.u_at, system.rd_at, tree_work(n, n_states))
+    for k in range(y0.shape[0]):
+        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(CHAIN, own, y0[k], settings[k], samples[k],
+                                                                  work_done[k])
+
+
 # -- from Python -----------------------------------------------------------------------------------
 @dataclass
 class ChunkSolution:
@@ -649,9 +668,11 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
 
     Parameters
     ----------
-    system : ChainSystem
+    system : ChainSystem or TreeSystem
         The chain (:func:`rbstab.engine.systems.chain_system`: its compiled description and
-        admissible region).
+        admissible region), or the same tree in reduced coordinates
+        (:func:`rbstab.engine.systems.tree_system`): then ``y0`` is in the reduced layout
+        (:mod:`rbstab.variants.tree`) and the samples are the maximal image of its states.
     y0 : ndarray, shape (k, n_state)
     settings : ndarray, shape (k, 7)
         Per run: :data:`~rbstab.engine.settings.SETTING_COLUMNS` (t_end [s], rtol, atol,
@@ -667,6 +688,13 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
     ends = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64))
     work = np.empty((k, n_samples))
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
+    if isinstance(system, TreeSystem):
+        with np.errstate(all="ignore"):
+            integrate_tree_chunk(system, y0, records, samples, work, ends)
+        n_states = 12 * len(system.codes) + 3 * int(np.sum(system.d_at >= 0))
+        maximal = np.empty((k, n_samples, n_states))
+        expand_samples(samples, *system[:8], maximal)
+        return ChunkSolution(maximal, *ends, work)
     with np.errstate(all="ignore"):
         integrate_chain_chunk(system, y0, records, samples, work, ends)
     return ChunkSolution(samples, *ends, work)

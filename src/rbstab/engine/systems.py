@@ -32,9 +32,10 @@ from ..model import set_limits
 from ..variants.chain import _relative, chain_evaluate, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
+from ..variants.tree import tree_expand, tree_rate, tree_velocities
 from .status import GIMBAL_LOCK, LEFT_REGION
 
-__all__ = ["CHAIN", "ChainSystem", "chain_system", "system_rate", "system_margin", "system_limited",
+__all__ = ["CHAIN", "ChainSystem", "chain_system", "TreeSystem", "tree_system", "tree_margin", "tree_impulses", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
            "admissible", "chain_margin", "disturbed_of",
            "limited_of"]
@@ -51,6 +52,23 @@ CHAIN = -1
 #: (each call of :func:`rbstab.engine.integrate.integrate_chain_chunk`, each thread of the
 #: CUDA kernel), so no two threads share them.
 ChainSystem = namedtuple("ChainSystem", ["params", "codes", "parents", "ppoints", "d_at", "work"])
+
+
+#: A tree in reduced coordinates as the compiled driver reads it (:mod:`rbstab.variants.tree`):
+#: a :class:`ChainSystem`'s arrays, the reduced layout (``r_at``, ``u_at``, ``rd_at``: each
+#: body's states and generalised velocities, each embedded joint's D) and ``work`` the
+#: scratch arrays of an evaluation (:class:`rbstab.variants.tree.TreeWork`; None from
+#: Python, the driver attaches its own).
+TreeSystem = namedtuple("TreeSystem", ["params", "codes", "parents", "ppoints", "d_at", "r_at", "u_at", "rd_at",
+                                       "work"])
+
+
+def tree_system(compiled, layout, limits=None) -> TreeSystem:
+    """The :class:`TreeSystem` of a :class:`rbstab.variants.chain.CompiledChain` and its
+    :class:`rbstab.variants.tree.TreeLayout`, with the admissible region ``limits`` as
+    :func:`chain_system`'s; ``work`` None (the driver's own)."""
+    chain = chain_system(compiled, limits)
+    return TreeSystem(chain.params, chain.codes, chain.parents, chain.ppoints, chain.d_at, *layout.args, None)
 
 
 def chain_system(compiled, limits=None) -> ChainSystem:
@@ -172,6 +190,31 @@ def _chain_disturbed(params):
     return False
 
 
+# -- a tree in reduced coordinates: its region and impulses on its maximal image -------------------------
+@jit
+def tree_margin(y, p, limit):
+    """:func:`chain_margin` of the maximal image of the reduced state ``y`` (a
+    :class:`TreeSystem` ``p``): the same admissible region as the chain's."""
+    w = p.work
+    tree_expand(y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, w.chain.rot,
+                w.chain.rate, True)
+    return chain_margin(w.y, p.params, p.codes, p.parents, p.ppoints, limit)
+
+
+@jit
+def tree_impulses(t, y, p):
+    """:func:`rbstab.variants.chain.chain_impulses` on the maximal image of the reduced state
+    ``y`` (the permanent joints' impulsive reactions keep them held), the jumps of the
+    generalised velocities written back into ``y``; returns their energy [J]."""
+    w = p.work
+    tree_expand(y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, w.chain.rot,
+                w.chain.rate, True)
+    jump = chain_impulses(t, w.y, p.params, p.codes, p.parents, p.ppoints, w.chain)
+    if jump != 0.0:
+        tree_velocities(w.y, p.codes, p.parents, p.r_at, y)
+    return jump
+
+
 # -- what the driver asks of a system ----------------------------------------------------------
 def system_rate(code, t, y, p, f):
     """dy/dt of the system (``code``, ``p``) at time ``t`` [s] into ``f`` (the disturbances'
@@ -214,10 +257,17 @@ def _is_body(p) -> bool:
     return isinstance(p, types.Record)
 
 
+def _is_tree(p) -> bool:
+    return isinstance(p, types.BaseNamedTuple) and p.instance_class is TreeSystem
+
+
 @overload(system_rate, target="generic", jit_options=_INLINE)
 def _system_rate(code, t, y, p, f):
     if _is_body(p):
         return lambda code, t, y, p, f: state_rate(code, t, y, p, f)
+    if _is_tree(p):
+        return lambda code, t, y, p, f: tree_rate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at,
+                                                  p.u_at, p.rd_at, f, p.work)
     return lambda code, t, y, p, f: chain_evaluate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, f,
                                                    p.work.joints, p.work.bodies, p.work.scalars, p.work)
 
@@ -226,6 +276,8 @@ def _system_rate(code, t, y, p, f):
 def _system_margin(code, y, p, limit):
     if _is_body(p):
         return lambda code, y, p, limit: admissible_event(code, y, p, limit)
+    if _is_tree(p):
+        return lambda code, y, p, limit: tree_margin(y, p, limit)
     return lambda code, y, p, limit: chain_margin(y, p.params, p.codes, p.parents, p.ppoints, limit)
 
 
@@ -254,6 +306,8 @@ def _system_breakpoint(p, t, t_end):
 def _system_impulses(code, t, y, p):
     if _is_body(p):
         return lambda code, t, y, p: apply_impulses(code == PERMANENT, t, y, p)
+    if _is_tree(p):
+        return lambda code, t, y, p: tree_impulses(t, y, p)
     return lambda code, t, y, p: chain_impulses(t, y, p.params, p.codes, p.parents, p.ppoints, p.work)
 
 

@@ -163,7 +163,7 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
 def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
     rotations A_i and B(Theta_i) into ``work.rot``, ``work.rate`` (``rotations``: the caller
-    has put A_i there already, and only A_i is read); the wrench on each body of
+    has put A_i there already, and B(Theta_j) of each joint to the ground); the wrench on each body of
     everything but those Lambda_j into ``work.torque`` (body frame, the gyroscopic term
     -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
     (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H
@@ -220,7 +220,10 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         if q < 0:
             point_p, rate_p = r_p, ZERO
             theta_j, omega_j = vector(y, 12 * j), omega_c
-            rel, b_j = rotation_and_rate_of(theta_j)
+            rel = ((rot[j, 0, 0], rot[j, 0, 1], rot[j, 0, 2]), (rot[j, 1, 0], rot[j, 1, 1], rot[j, 1, 2]),
+                   (rot[j, 2, 0], rot[j, 2, 1], rot[j, 2, 2]))  # A(Theta_j) = A_j: the ground's A_p is I
+            b_j = ((rate[j, 0, 0], rate[j, 0, 1], rate[j, 0, 2]), (rate[j, 1, 0], rate[j, 1, 1], rate[j, 1, 2]),
+                   (rate[j, 2, 0], rate[j, 2, 1], rate[j, 2, 2]))
         else:
             omega_p, x_p, v_p = vector(y, 12 * q + 3), vector(y, 12 * q + 6), vector(y, 12 * q + 9)
             point_p = add(x_p, matvec(rot[q], r_p))

@@ -12,10 +12,12 @@ Newton-Euler equations projected on the generalised velocities u (Jourdain's pri
 
     M(q) du/dt = sum_i S_i' (w_i - M_i kappa_i),   M = sum_i S_i' M_i S_i
 
-with S_i = d(Omega_i, V_i)/du body i's velocity Jacobian (an outward recursion), M_i =
-diag(J_i, m_i I), w_i the wrench on body i (body-frame torque with -Omega x J Omega,
-inertial force) and kappa_i its acceleration at du/dt = 0; M is solved by Cholesky. No
-constraint force enters the rate and no constraint drifts.
+with S_i = d(Omega_i, V_i)/du body i's velocity Jacobian, M_i = diag(J_i, m_i I), w_i the
+wrench on body i (body-frame torque with -Omega x J Omega, inertial force) and kappa_i its
+acceleration at du/dt = 0 (an outward recursion). M and the right-hand side are assembled
+by composite rigid bodies (each joint's column moves the bodies hanging from it as one;
+its momentum is projected on the columns of the joints above it), and M is solved by
+Cholesky. No constraint force enters the rate and no constraint drifts.
 
 Reduced state layout (``n_r``): body ``i`` at ``y[r_at[i]:]``: Theta_j, Omega_j (6) where
 joint i is ``permanent``, else Theta, Omega, X, V (12); then the 3 states D [m] of each
@@ -46,8 +48,8 @@ from .chain import (
 )
 from .kernels import PERMANENT
 
-__all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "reduce_state",
-           "expand_state"]
+__all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "tree_velocities",
+           "expand_samples", "reduce_state", "expand_state"]
 
 
 @dataclass(frozen=True)
@@ -93,23 +95,25 @@ def tree_layout(compiled: CompiledChain) -> TreeLayout:
 
 
 #: Scratch arrays of one evaluation of a tree of n bodies (:func:`tree_work`): ``y``, ``dy``
-#: (12 n + 3 e + 1) the maximal image of the state and its rate; ``s`` (n, 6 n, 6) the
-#: velocity Jacobians S_i (``s[i, k]``: column k of S_i, (Omega_i, V_i) of a unit u_k); ``kappa`` (n, 6) the accelerations at du/dt = 0; ``matrix`` (6 n,
-#: 6 n) and ``rhs`` (6 n,) M and the right-hand side (du/dt after the solve); ``chain`` the
-#: ``support`` (n, 6 n) int64 and ``n_support`` (n,) the columns of u that move body i (its
-#: own and those of the bodies it hangs from by permanent joints: S_i is zero elsewhere);
-#: ``chain`` the chain's scratch (:class:`rbstab.variants.chain.ChainWork`, whose ``joints``,
-#: ``bodies`` and ``scalars`` receive the joints', bodies' and v's quantities).
-TreeWork = namedtuple("TreeWork", ["y", "dy", "s", "kappa", "matrix", "rhs", "support", "n_support", "chain"])
+#: (12 n + 3 e + 1) the maximal image of the state and its rate; ``kappa`` (n, 6) each body's
+#: (dOmega_i/dt, dV_i/dt) at du/dt = 0; ``matrix`` (6 n, 6 n) and ``rhs`` (6 n,) M and Q - b
+#: (du/dt after the solve); per body, with the bodies that permanent joints hang from it (its
+#: composite, inertial frame): ``mass`` (n,), ``first`` (n, 3) sum m X, ``second`` (n, 3, 3)
+#: sum (A J A' + m [X]x' [X]x), ``force`` (n, 3) and ``moment`` (n, 3, about the origin) the
+#: sum of w_b - M_b kappa_b; ``chain`` the chain's scratch
+#: (:class:`rbstab.variants.chain.ChainWork`, whose ``joints``, ``bodies`` and ``scalars``
+#: receive the joints', bodies' and v's quantities).
+TreeWork = namedtuple("TreeWork", ["y", "dy", "kappa", "matrix", "rhs", "mass", "first", "second", "force", "moment",
+                                   "chain"])
 
 
 @jit
 def tree_work(n, n_states):
     """Scratch arrays (:class:`TreeWork`) of a tree of ``n`` bodies whose maximal state has
     ``n_states`` entries."""
-    return TreeWork(np.empty(n_states), np.empty(n_states + 1), np.empty((n, 6 * n, 6)), np.empty((n, 6)),
-                    np.empty((6 * n, 6 * n)), np.empty(6 * n), np.empty((n, 6 * n), dtype=np.int64),
-                    np.empty(n, dtype=np.int64), chain_work(n))
+    return TreeWork(np.empty(n_states), np.empty(n_states + 1), np.empty((n, 6)), np.empty((6 * n, 6 * n)),
+                    np.empty(6 * n), np.empty(n), np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 3)),
+                    np.empty((n, 3)), chain_work(n))
 
 
 @jit(forceinline=True)
@@ -195,91 +199,126 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
     ``bodies`` and ``scalars`` (the permanent joints' Lambda_j not computed: zero there).
     ``work``: :class:`TreeWork`."""
     n = codes.shape[0]
-    y, dy, s, kappa, matrix, rhs, cw = work.y, work.dy, work.s, work.kappa, work.matrix, work.rhs, work.chain
+    y, dy, kappa, matrix, rhs, cw = work.y, work.dy, work.kappa, work.matrix, work.rhs, work.chain
     tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
     _, _, work_power, _, _ = chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, cw.joints, cw.bodies,
                                             cw.scalars, cw, True)
     rot, torque, force = cw.rot, cw.torque, cw.force
+    mass, first, second, f_net, n_net = work.mass, work.first, work.second, work.force, work.moment
     n_u = 0
     for i in range(n):
         n_u += 3 if codes[i] == PERMANENT else 6
-    # S_i and kappa_i, outward, on the columns that move body i: S_c(Omega) = A_rel' S_p(Omega) + I_j,
-    # S_c(V) = S_p(V) + A_p (S_p(Omega) x R_p) - A_c (S_c(Omega) x R_c)
-    support, n_support = work.support, work.n_support
+    # kappa_i, outward: each body's (dOmega_i/dt, dV_i/dt) at du/dt = 0
     for i in range(n):
-        at = u_at[i]
-        kappa_zero = True
         if codes[i] != PERMANENT:
-            for k in range(6):
-                support[i, k] = at + k
-                for r in range(6):
-                    s[i, at + k, r] = 1.0 if r == k else 0.0
-                kappa[i, k] = 0.0
-            n_support[i] = 6
+            for r in range(6):
+                kappa[i, r] = 0.0
             continue
         q = parents[i]
-        m = 0
-        if q >= 0:
-            for k in range(n_support[q]):
-                support[i, m] = support[q, k]
-                m += 1
-        for k in range(3):
-            support[i, m] = at + k
-            m += 1
-        n_support[i] = m
-        r_c, r_p = vector(params[i].attachment_point, 0), vector(ppoints[i], 0)
+        r_c = vector(params[i].attachment_point, 0)
         a_c = _rows(rot, i)
         omega_c = vector(y, 12 * i + 3)
-        omega_j = (yr[r_at[i] + 3], yr[r_at[i] + 4], yr[r_at[i] + 5])
+        omega_j = vector(yr, r_at[i] + 3)
+        dw_c = cross(omega_c, omega_j)
+        dv_c = (0.0, 0.0, 0.0)
         if q >= 0:
+            r_p = vector(ppoints[i], 0)
             a_p = _rows(rot, q)
-            rel = _relative(a_p, a_c)
-            for kk in range(n_support[q]):
-                k = support[q, kk]
-                w_p = (s[q, k, 0], s[q, k, 1], s[q, k, 2])
-                w_c = matTvec(rel, w_p)
-                v_c = sub(add((s[q, k, 3], s[q, k, 4], s[q, k, 5]), matvec(a_p, cross(w_p, r_p))),
-                          matvec(a_c, cross(w_c, r_c)))
-                _put(s[i, k], 0, w_c)
-                _put(s[i, k], 3, v_c)
             omega_p = vector(y, 12 * q + 3)
-            dw_p, dv_p = (kappa[q, 0], kappa[q, 1], kappa[q, 2]), (kappa[q, 3], kappa[q, 4], kappa[q, 5])
-            dw_c = add(matTvec(rel, dw_p), cross(omega_c, omega_j))
+            dw_p, dv_p = vector(kappa[q], 0), vector(kappa[q], 3)
+            dw_c = add(matTvec(_relative(a_p, a_c), dw_p), dw_c)
             dv_c = add(dv_p, matvec(a_p, add(cross(dw_p, r_p), cross(omega_p, cross(omega_p, r_p)))))
-        else:
-            dw_c = cross(omega_c, omega_j)
-            dv_c = (0.0, 0.0, 0.0)
-        for k in range(3):  # the joint's own columns: Omega_c moves with Omega_j
-            unit = (1.0 if k == 0 else 0.0, 1.0 if k == 1 else 0.0, 1.0 if k == 2 else 0.0)
-            _put(s[i, at + k], 0, unit)
-            _put(s[i, at + k], 3, sub((0.0, 0.0, 0.0), matvec(a_c, cross(unit, r_c))))
         dv_c = sub(dv_c, matvec(a_c, add(cross(dw_c, r_c), cross(omega_c, cross(omega_c, r_c)))))
         _put(kappa[i], 0, dw_c)
         _put(kappa[i], 3, dv_c)
-    # M = sum_i S_i' M_i S_i, rhs = sum_i S_i' (w_i - M_i kappa_i), over each body's columns
+    # composite rigid bodies, leaves first: each body with the bodies that permanent joints hang
+    # from it: mass, first moment sum m X, second moment about the origin sum (A J A' + m [X]x' [X]x)
+    # (inertial frame), and the residual wrench sum (w_b - M_b kappa_b): force, moment about the origin
+    for i in range(n):
+        p = params[i]
+        m = p.mass
+        a = _rows(rot, i)
+        x = vector(y, 12 * i + 6)
+        mass[i] = m
+        _put(first[i], 0, (m * x[0], m * x[1], m * x[2]))
+        xx = x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+        for r in range(3):
+            ja = matvec(p.inertia, (a[r][0], a[r][1], a[r][2]))  # J A' e_r
+            for c in range(3):
+                second[i, r, c] = (a[c][0] * ja[0] + a[c][1] * ja[1] + a[c][2] * ja[2]
+                                   + m * ((xx if r == c else 0.0) - x[r] * x[c]))
+        jk = matvec(p.inertia, vector(kappa[i], 0))
+        tau = matvec(a, (torque[i, 0] - jk[0], torque[i, 1] - jk[1], torque[i, 2] - jk[2]))
+        rf = (force[i, 0] - m * kappa[i, 3], force[i, 1] - m * kappa[i, 4], force[i, 2] - m * kappa[i, 5])
+        _put(f_net[i], 0, rf)
+        _put(n_net[i], 0, add(tau, cross(x, rf)))
+    for i in range(n - 1, -1, -1):
+        q = parents[i]
+        if codes[i] == PERMANENT and q >= 0:
+            mass[q] += mass[i]
+            for r in range(3):
+                first[q, r] += first[i, r]
+                f_net[q, r] += f_net[i, r]
+                n_net[q, r] += n_net[i, r]
+                for c in range(3):
+                    second[q, r, c] += second[i, r, c]
+    # M and Q - b: a column of body i's joint moves its composite (a unit angular velocity
+    # about the joint's point P along A_i e_c; for a 12-state body about its centre of mass,
+    # and a unit velocity e_l); its momentum (f, moment about P) projected on the columns of
+    # the joint and of every joint above it in the group
     for a in range(n_u):
         rhs[a] = 0.0
         for b in range(a + 1):
             matrix[a, b] = 0.0
     for i in range(n):
-        p = params[i]
-        inertia, mass = p.inertia, p.mass
-        jk = matvec(inertia, (kappa[i, 0], kappa[i, 1], kappa[i, 2]))
-        net_t = (torque[i, 0] - jk[0], torque[i, 1] - jk[1], torque[i, 2] - jk[2])
-        net_f = (force[i, 0] - mass * kappa[i, 3], force[i, 1] - mass * kappa[i, 4], force[i, 2] - mass * kappa[i, 5])
-        for bb in range(n_support[i]):
-            b = support[i, bb]
-            w_b = (s[i, b, 0], s[i, b, 1], s[i, b, 2])
-            jw = matvec(inertia, w_b)
-            mv = (mass * s[i, b, 3], mass * s[i, b, 4], mass * s[i, b, 5])
-            rhs[b] += (w_b[0] * net_t[0] + w_b[1] * net_t[1] + w_b[2] * net_t[2] + s[i, b, 3] * net_f[0]
-                       + s[i, b, 4] * net_f[1] + s[i, b, 5] * net_f[2])
-            for aa in range(n_support[i]):
-                a = support[i, aa]
-                if a > b:
-                    continue
-                matrix[b, a] += (s[i, a, 0] * jw[0] + s[i, a, 1] * jw[1] + s[i, a, 2] * jw[2] + s[i, a, 3] * mv[0]
-                                 + s[i, a, 4] * mv[1] + s[i, a, 5] * mv[2])
+        at = u_at[i]
+        a_i = _rows(rot, i)
+        point = vector(y, 12 * i + 6)
+        if codes[i] == PERMANENT:
+            point = add(point, matvec(a_i, vector(params[i].attachment_point, 0)))
+        m = mass[i]
+        c = sub(vector(first[i], 0), (m * point[0], m * point[1], m * point[2]))  # first moment about P
+        cs = vector(first[i], 0)
+        shift = m * (point[0] * point[0] + point[1] * point[1] + point[2] * point[2]) - 2.0 * (
+            cs[0] * point[0] + cs[1] * point[1] + cs[2] * point[2])
+        moment_p = sub(vector(n_net[i], 0), cross(point, vector(f_net[i], 0)))  # residual moment about P
+        for col in range(3):
+            e = (a_i[0][col], a_i[1][col], a_i[2][col])
+            f = cross(e, c)
+            inertia_e = (0.0, 0.0, 0.0)
+            for r in range(3):  # I_P e, I_P = second + shift I + cs P' + P cs' - m P P'
+                total = shift * e[r]
+                for k in range(3):
+                    total += (second[i, r, k] + cs[r] * point[k] + point[r] * cs[k] - m * point[r] * point[k]) * e[k]
+                inertia_e = (total if r == 0 else inertia_e[0], total if r == 1 else inertia_e[1],
+                             total if r == 2 else inertia_e[2])
+            row = at + col
+            rhs[row] = e[0] * moment_p[0] + e[1] * moment_p[1] + e[2] * moment_p[2]
+            for col2 in range(col + 1):
+                matrix[row, at + col2] = (a_i[0][col2] * inertia_e[0] + a_i[1][col2] * inertia_e[1]
+                                          + a_i[2][col2] * inertia_e[2])
+            if codes[i] != PERMANENT:
+                for l in range(3):
+                    matrix[at + 3 + l, row] = f[l]
+            k = i
+            while codes[k] == PERMANENT and parents[k] >= 0:
+                k = parents[k]
+                a_k = _rows(rot, k)
+                point_k = vector(y, 12 * k + 6)
+                if codes[k] == PERMANENT:
+                    point_k = add(point_k, matvec(a_k, vector(params[k].attachment_point, 0)))
+                moment_k = add(inertia_e, cross(sub(point, point_k), f))
+                for col2 in range(3):
+                    matrix[row, u_at[k] + col2] = (a_k[0][col2] * moment_k[0] + a_k[1][col2] * moment_k[1]
+                                                   + a_k[2][col2] * moment_k[2])
+                if codes[k] != PERMANENT:
+                    for l in range(3):
+                        matrix[row, u_at[k] + 3 + l] = f[l]
+        if codes[i] != PERMANENT:
+            for l in range(3):
+                rhs[at + 3 + l] = f_net[i, l]
+                for l2 in range(l + 1):
+                    matrix[at + 3 + l, at + 3 + l2] = m if l == l2 else 0.0
     _cholesky_solve(matrix, rhs, n_u)
     for i in range(n):
         at, u = r_at[i], u_at[i]
@@ -303,6 +342,37 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
                 dyr[rd_at[j] + k] = dy[d_at[j] + k]
     if dyr.shape[0] > n_r:  # the work W of the disturbances, integrated after the state
         dyr[n_r] = work_power
+
+
+@jit
+def tree_velocities(y, codes, parents, r_at, yr):
+    """Write the generalised velocities of the maximal state ``y`` into the reduced state
+    ``yr``: Omega_j = Omega_c - A_rel' Omega_p of a permanent joint's child (ground: its
+    Omega), Omega and V of every other body; its configuration is left as it is."""
+    for i in range(codes.shape[0]):
+        at = r_at[i]
+        if codes[i] != PERMANENT:
+            for k in range(3):
+                yr[at + 3 + k] = y[12 * i + 3 + k]
+                yr[at + 9 + k] = y[12 * i + 9 + k]
+            continue
+        omega = vector(y, 12 * i + 3)
+        q = parents[i]
+        if q >= 0:
+            rel = _relative(rotation_and_rate_of(vector(y, 12 * q))[0], rotation_and_rate_of(vector(y, 12 * i))[0])
+            omega = sub(omega, matTvec(rel, vector(y, 12 * q + 3)))
+        _put(yr, at + 3, omega)
+
+
+@jit
+def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, out):
+    """The maximal image ``out`` (k, m, 12 n + 3 e) of reduced states ``samples`` (k, m,
+    n_r) row by row (NaN rows stay NaN)."""
+    rot, rate = np.empty((codes.shape[0], 3, 3)), np.empty((codes.shape[0], 3, 3))
+    for a in range(samples.shape[0]):
+        for b in range(samples.shape[1]):
+            tree_expand(samples[a, b], params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, out[a, b], rot, rate,
+                        True)
 
 
 def expand_state(compiled: CompiledChain, layout: TreeLayout, yr: np.ndarray) -> np.ndarray:
