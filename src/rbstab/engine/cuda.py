@@ -75,7 +75,7 @@ import numpy as np
 if "row_stack" not in vars(np):
     np.row_stack = np.vstack
 
-from numba import cuda, types  # noqa: E402  numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
+from numba import cuda, from_dtype, types  # noqa: E402  numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
 from numba.extending import overload  # noqa: E402
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
@@ -255,6 +255,14 @@ def launch_signature(n_state: int) -> tuple:
             boolean, float64, ints, int64, ints, vector, ints, ints, matrix, matrix, cube)
 
 
+#: numba's type of a :data:`rbstab.model.PARAMETERS` record, a global of the kernels (not a
+#: closure variable): numba-cuda keys its disk cache on the pickled closure, and a numba type
+#: pickles with its type code, which depends on the types a process made before (a sweep's
+#: worker, forked from a server that loaded the CPU kernels, numbers them otherwise than a
+#: new process, so the kernel would be compiled again in every worker).
+PARAMETERS_TYPE = from_dtype(PARAMETERS)
+
+
 def kernel_function(method: int, n_state: int, disturbances: bool = True):
     """The Python function of the CUDA kernel of the runs of method number ``method`` and
     ``n_state`` states (the shapes of its thread-local work arrays); see
@@ -265,11 +273,10 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
     (breakpoints, impulses, the work W after the state in its work arrays), wrong for a
     run with disturbances: what ``benchmarks/gpu.py`` compares the registers and local
     memory of the kernel with."""
-    from numba import float64, from_dtype  # heavy: numba (this module is imported only by --engine cuda)
+    from numba import float64  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
     scheme = (method, int(N_STAGES[method]), method == DOP853)
-    parameters = from_dtype(PARAMETERS)
     n_vec = n_state + 1 if disturbances else n_state  # the integrated vector: the state, then W
 
     def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, control, limit_ns,
@@ -284,7 +291,7 @@ def kernel_function(method: int, n_state: int, disturbances: bool = True):
         sample = cuda.local.array(n_vec, float64)
         row = cuda.local.array(N_OUTPUTS, float64)
         acc = cuda.local.array(ACCUMULATOR_SIZE, float64)
-        record = cuda.local.array(1, parameters)
+        record = cuda.local.array(1, PARAMETERS_TYPE)
         w = Work(K, Q, y_new, scale, work)
         n_runs = y0s.shape[0]
         n_samples = first.shape[0]
