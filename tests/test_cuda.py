@@ -361,10 +361,12 @@ from numba import cuda
 import rbstab.engine.cuda as engine
 
 engine.simulated = lambda: False
+class Compiled(str):  # the kernel's name, and numba-cuda's cache statistics: loaded, not compiled
+    stats = type("Stats", (), {"cache_misses": {}})()
 def jit(signature, cache):
     def compile(function):
         time.sleep(1.0)
-        return function.__name__
+        return Compiled(function.__name__)
     return compile
 cuda.jit = jit
 print(engine.compiled_kernel(int(sys.argv[1]), 15))
@@ -393,6 +395,25 @@ def test_processes_compiling_at_once_take_turns(tmp_path):
     assert notices.count("compiling the CUDA kernel for DOP853") == 1
     assert notices.count("compiling the CUDA kernel for RK45") == 1
     assert time.perf_counter() - start >= 2.0  # the two DOP853 processes waited for each other
+
+
+def test_a_kernel_the_cache_should_have_held_says_it_was_compiled_again(capsys):
+    """Where the warm marker says the cache holds a kernel but numba-cuda compiled it (its
+    cache key did not match: minutes on the CPU), one line says so; a first compile (the
+    command said "compiling" before it) and a kernel loaded from the cache say nothing."""
+    from collections import Counter
+
+    from rbstab.engine.cuda import _say_cache_miss
+
+    class Kernel:
+        def __init__(self, misses):
+            self.stats = type("Stats", (), {"cache_misses": Counter(misses)})()
+
+    _say_cache_miss(Kernel({"sig": 1}), True, "the CUDA kernel for DOP853 with 15 states")
+    assert capsys.readouterr().err.count("was not found in the cache") == 1
+    _say_cache_miss(Kernel({"sig": 1}), False, "the kernel")
+    _say_cache_miss(Kernel({}), True, "the kernel")
+    assert capsys.readouterr().err == ""
 
 
 def test_numba_cuda_loads_where_numpy_has_no_row_stack():

@@ -374,13 +374,25 @@ def compiled_kernel(method: int, n_state: int):
 
     config.CACHE_DIR = str(CACHE_DIR)
     group = f"cuda-{METHODS[method]}-{n_state}"
+    what = f"the CUDA kernel for {METHODS[method]} with {n_state} states"
     with _compile_lock(group):
-        if not cache_is_warm(group):
-            print(f"rbstab: compiling the CUDA kernel for {METHODS[method]} with {n_state} states "
-                  f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+        warm = cache_is_warm(group)
+        if not warm:
+            print(f"rbstab: compiling {what} (once for this version; cached in {CACHE_DIR})", file=sys.stderr,
+                  flush=True)
         fn = cuda.jit(launch_signature(n_state), cache=True)(function)  # compiles, or loads from the cache
+        _say_cache_miss(fn, warm, what)
         mark_warm(group)
     return fn
+
+
+def _say_cache_miss(fn, warm: bool, what: str) -> None:
+    """One line on stderr where a kernel the cache should have held (``warm``) was compiled
+    again (numba-cuda's cache key did not match: minutes on the CPU, so the command says why
+    it is slow)."""
+    if warm and sum(fn.stats.cache_misses.values()):
+        print(f"rbstab: {what} was not found in the cache ({CACHE_DIR}) and was compiled again", file=sys.stderr,
+              flush=True)
 
 
 @contextlib.contextmanager
@@ -592,11 +604,14 @@ def compiled_chain_kernel(method: int):
 
     config.CACHE_DIR = str(CACHE_DIR)
     group = f"cuda-chain-{METHODS[method]}"
+    what = f"the CUDA kernel for chains with {METHODS[method]}"
     with _compile_lock(group):
-        if not cache_is_warm(group):
-            print(f"rbstab: compiling the CUDA kernel for chains with {METHODS[method]} "
-                  f"(once for this version; cached in {CACHE_DIR})", file=sys.stderr, flush=True)
+        warm = cache_is_warm(group)
+        if not warm:
+            print(f"rbstab: compiling {what} (once for this version; cached in {CACHE_DIR})", file=sys.stderr,
+                  flush=True)
         fn = cuda.jit(chain_launch_signature(), cache=True)(function)  # compiles, or loads from the cache
+        _say_cache_miss(fn, warm, what)
         mark_warm(group)
     return fn
 
