@@ -75,7 +75,8 @@ import numpy as np
 if "row_stack" not in vars(np):
     np.row_stack = np.vstack
 
-from numba import cuda, from_dtype, types  # noqa: E402  numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
+# numba-cuda's target where installed (rbstab[cuda]); _cuda() checks which
+from numba import cuda, from_dtype, types  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
@@ -251,7 +252,7 @@ def launch_signature(n_state: int) -> tuple:
 
     vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
     ints = int64[::1]
-    return (ints, from_dtype(PARAMETERS)[::1], matrix, from_dtype(SETTINGS)[::1], ints, matrix, cube, int64,
+    return (ints, PARAMETERS_TYPE[::1], matrix, from_dtype(SETTINGS)[::1], ints, matrix, cube, int64,
             boolean, float64, ints, int64, ints, vector, ints, ints, matrix, matrix, cube)
 
 
@@ -502,7 +503,7 @@ def chain_launch_signature() -> tuple:
 
     vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
     ints = int64[::1]
-    return (from_dtype(PARAMETERS)[::1], ints, ints, matrix, ints, matrix, from_dtype(SETTINGS)[::1], int64, int64,
+    return (PARAMETERS_TYPE[::1], ints, ints, matrix, ints, matrix, from_dtype(SETTINGS)[::1], int64, int64,
             ints, int64, ints, vector, ints, ints, cube, matrix)
 
 

@@ -35,7 +35,8 @@ from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from ..variants.tree import tree_expand, tree_rate, tree_velocities
 from .status import GIMBAL_LOCK, LEFT_REGION
 
-__all__ = ["CHAIN", "ChainSystem", "chain_system", "TreeSystem", "tree_system", "tree_margin", "tree_impulses", "system_rate", "system_margin", "system_limited",
+__all__ = ["CHAIN", "ChainSystem", "chain_system", "TreeSystem", "tree_system", "tree_margin",
+           "tree_impulses", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
            "admissible", "chain_margin", "disturbed_of",
            "limited_of"]

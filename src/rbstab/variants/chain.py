@@ -615,8 +615,9 @@ def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
 # -- rest state and v ---------------------------------------------------------------------------
 @jit
 def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
-    """Fill ``y`` (n_states,) with the state at rest of the configuration ``q``: every
-    Theta_i, then X_i of bodies whose joint is not ``permanent``, then D of embedded joints;
+    """Fill ``y`` (n_states,) with the state at rest of the configuration ``q`` (3 n + 3 f
+    + 3 e,: every Theta_i [rad], then X_i [m, inertial] of the f bodies whose joint is not
+    ``permanent``, then D [m] of the e embedded joints);
     every Omega, V zero; X of a permanent joint's child placed on its parent's point
     (E_j = 0), parents first: X_c = X_p + A_p R_p - A_c R_c."""
     n = codes.shape[0]

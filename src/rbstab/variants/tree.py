@@ -139,6 +139,17 @@ def _rows(m, i):
             (m[i, 2, 0], m[i, 2, 1], m[i, 2, 2]))
 
 
+@jit(forceinline=True)
+def _moment_row(second, i, r, cs, point, m, shift):
+    """Row r of composite i's second moment about the point P [kg m^2] from its second moment
+    about the origin S, first moment cs = sum m X and mass m: S + shift I + cs P' + P cs' - m P P'
+    (shift = m |P|^2 - 2 cs.P)."""
+    s_r, c_r, p_r = second[i, r], cs[r], point[r]
+    return (s_r[0] + c_r * point[0] + p_r * cs[0] - m * p_r * point[0] + (shift if r == 0 else 0.0),
+            s_r[1] + c_r * point[1] + p_r * cs[1] - m * p_r * point[1] + (shift if r == 1 else 0.0),
+            s_r[2] + c_r * point[2] + p_r * cs[2] - m * p_r * point[2] + (shift if r == 2 else 0.0))
+
+
 @jit
 def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, rot, rate, angles):
     """The maximal image ``y`` (12 n + 3 e,; the chain's layout) of the reduced state ``yr``,
@@ -193,11 +204,21 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
 
 @jit
 def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work):
-    """dy/dt (``dyr``, n_r; with one more entry, the disturbances' power: the rate of their
-    work W) of the reduced state ``yr`` at time ``t`` [s] (module docstring); the joints',
-    bodies' and v's quantities of the maximal image into ``work.chain``'s ``joints``,
-    ``bodies`` and ``scalars`` (the permanent joints' Lambda_j not computed: zero there).
-    ``work``: :class:`TreeWork`."""
+    """The rate of a tree in reduced coordinates (docs/physics.md, "A tree in reduced
+    coordinates"; for one body on a permanent joint, eq 21).
+
+    ``yr`` (n_r,) the reduced state (module docstring: Theta_j [rad], Omega_j [rad/s, child
+    frame] of a permanent joint's child; Theta [rad], Omega [rad/s, body frame], X [m], V
+    [m/s, inertial] of every other body; D [m]) at time ``t`` [s]; ``params``, ``codes``,
+    ``parents``, ``ppoints``, ``d_at`` the chain's description
+    (:class:`rbstab.variants.chain.CompiledChain`), ``r_at``, ``u_at``, ``rd_at`` its
+    :class:`TreeLayout`. Writes dy/dt into ``dyr`` (n_r,; with one more entry, the
+    disturbances' power [W], the rate of their work W), and the joints', bodies' and v's
+    quantities of the maximal image into ``work.chain``'s ``joints``, ``bodies`` and
+    ``scalars`` (as :func:`rbstab.variants.chain.chain_evaluate`'s, the permanent joints'
+    Lambda_j not computed: zero there). ``work``: :class:`TreeWork`. Raises nothing: M is
+    positive definite at every orientation, and a state at an Euler singularity (eq 5) of a
+    12-state body or a permanent joint gives non-finite rates, which the driver reports."""
     n = codes.shape[0]
     y, dy, kappa, matrix, rhs, cw = work.y, work.dy, work.kappa, work.matrix, work.rhs, work.chain
     tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
@@ -282,16 +303,12 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
         shift = m * (point[0] * point[0] + point[1] * point[1] + point[2] * point[2]) - 2.0 * (
             cs[0] * point[0] + cs[1] * point[1] + cs[2] * point[2])
         moment_p = sub(vector(n_net[i], 0), cross(point, vector(f_net[i], 0)))  # residual moment about P
+        inertia_p = (_moment_row(second, i, 0, cs, point, m, shift), _moment_row(second, i, 1, cs, point, m, shift),
+                     _moment_row(second, i, 2, cs, point, m, shift))
         for col in range(3):
             e = (a_i[0][col], a_i[1][col], a_i[2][col])
             f = cross(e, c)
-            inertia_e = (0.0, 0.0, 0.0)
-            for r in range(3):  # I_P e, I_P = second + shift I + cs P' + P cs' - m P P'
-                total = shift * e[r]
-                for k in range(3):
-                    total += (second[i, r, k] + cs[r] * point[k] + point[r] * cs[k] - m * point[r] * point[k]) * e[k]
-                inertia_e = (total if r == 0 else inertia_e[0], total if r == 1 else inertia_e[1],
-                             total if r == 2 else inertia_e[2])
+            inertia_e = matvec(inertia_p, e)
             row = at + col
             rhs[row] = e[0] * moment_p[0] + e[1] * moment_p[1] + e[2] * moment_p[2]
             for col2 in range(col + 1):
@@ -346,9 +363,10 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
 
 @jit
 def tree_velocities(y, codes, parents, r_at, yr):
-    """Write the generalised velocities of the maximal state ``y`` into the reduced state
-    ``yr``: Omega_j = Omega_c - A_rel' Omega_p of a permanent joint's child (ground: its
-    Omega), Omega and V of every other body; its configuration is left as it is."""
+    """Write the generalised velocities of the maximal state ``y`` (12 n + 3 e,) into the
+    reduced state ``yr`` (n_r,; ``r_at`` its layout): Omega_j = Omega_c - A_rel' Omega_p
+    [rad/s, child frame] of a permanent joint's child (ground: its Omega), Omega [rad/s, body
+    frame] and V [m/s, inertial] of every other body; its configuration is left as it is."""
     for i in range(codes.shape[0]):
         at = r_at[i]
         if codes[i] != PERMANENT:
