@@ -29,8 +29,9 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
 - **correctness** on ``--check-n`` runs of each sweep: statuses equal, step counts equal
   (and the largest difference), the final states' median and largest relative difference
   from the CPU engine's, beside the CPU engine's own difference from an rtol 1e-11 run;
-- **chains** (:func:`rbstab.engine.cuda.compiled_chain_kernel`, one kernel for chains of 1
-  to 8 bodies): the chain kernel's registers and local memory a thread and its occupancy;
+- **chains** (:func:`rbstab.engine.cuda.compiled_tree_kernel`, a kernel per tree size, the
+  tree in reduced coordinates): the 2-body kernel's registers and local memory a thread and
+  its occupancy;
   kernel and end-to-end runs/s of an initial-state sweep of the stance example
   (``configs/examples/stance_ankle_hip.yaml``: 2 bodies on permanent joints, saturated
   torques; DOP853, rtol 1e-8, atol 1e-10, t_end 2 s, 201 samples of which the first and
@@ -56,12 +57,12 @@ worker's seconds a run in a process of its own
     python benchmarks/gpu.py --host-only [--sweep-n 100000 1000000] [--jobs N]
 
 ``--ptx-only`` (any machine with numba-cuda's compilers and CUDA's ``ptxas``; no GPU
-needed) compiles the one-body kernel (DOP853, 15 states) and the chain kernel (DOP853, 1 to
-8 bodies) to optimised PTX for sm_90 and prints what ``ptxas -v`` reports for each: the
-registers, the stack frame (local memory) and the spill stores and loads a thread, with
-each compile's seconds::
+needed) compiles the one-body kernel (DOP853, 15 states) and the tree kernel (DOP853) for
+each tree size of ``--ptx-bodies`` (default 1, 2, 8) to optimised PTX for sm_90 and prints
+what ``ptxas -v`` reports for each: the registers, the stack frame (local memory) and the
+spill stores and loads a thread, with each compile's seconds::
 
-    python benchmarks/gpu.py --ptx-only
+    python benchmarks/gpu.py --ptx-only [--ptx-bodies 1 2 8]
 """
 
 from __future__ import annotations
@@ -204,14 +205,14 @@ def compile_info() -> str:
     fn = compiled_kernel(DOP853, 15)
     loaded = time.perf_counter() - start
     signature = launch_signature(15)
-    regs, local = kernel_resources(fn, 15)
+    regs, local = kernel_resources(fn, signature)
     device = cuda.get_current_device()
-    per_sm = occupancy(fn, 15)
+    per_sm = occupancy(fn, signature)
     sms = device.MULTIPROCESSOR_COUNT
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
     # the same kernel without the driver's steps for disturbances (breakpoints, impulses, work)
     plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
-    plain_regs, plain_local = kernel_resources(plain, 15)
+    plain_regs, plain_local = kernel_resources(plain, signature)
     codes, params, y0, settings, n_samples = runs("parameter", 128)
     list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
     script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
@@ -271,7 +272,7 @@ def chain_runs(n: int, seed: int = 0):
     stance example's initial-state sweep (module docstring)."""
     from rbstab.config.chains import load_any_config
     from rbstab.engine.settings import settings_rows
-    from rbstab.engine.systems import chain_system
+    from rbstab.engine.systems import tree_system
     from rbstab.variants import chain as C
 
     with warnings.catch_warnings():
@@ -290,22 +291,23 @@ def chain_runs(n: int, seed: int = 0):
     sim = config.simulation
     rows = np.repeat(settings_rows([sim]), n, axis=0)
     rows[:, 6] = np.inf
-    return chain_system(compiled, sim.limits), C.full_state(compiled, z), rows, sim.method, sim.n_samples
+    return tree_system(compiled, sim.limits), C.full_state(compiled, z), rows, sim.method, sim.n_samples
 
 
 def chain_compile_info() -> str:
-    """The chain kernel's registers, local memory, occupancy and compile (or load) time."""
+    """The 2-body tree kernel's registers, local memory, occupancy and compile (or load) time."""
     from numba import cuda
 
-    from rbstab.engine.cuda import THREADS_PER_BLOCK, compiled_chain_kernel, kernel_resources, occupancy
+    from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_tree_kernel, kernel_resources, occupancy,
+                                    tree_launch_signature)
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
-    fn = compiled_chain_kernel(DOP853)
+    fn = compiled_tree_kernel(DOP853, 2)
     loaded = time.perf_counter() - start
-    regs, local = kernel_resources(fn, None)
+    regs, local = kernel_resources(fn, tree_launch_signature())
     device = cuda.get_current_device()
-    per_sm = occupancy(fn, None)
+    per_sm = occupancy(fn, tree_launch_signature())
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
     return (f"{regs} registers, {local} B local memory "
             f"a thread; {per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}); compiled "
@@ -466,14 +468,15 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def ptx_only() -> None:
-    """The ``ptxas -v`` lines of both kernels (module docstring, ``--ptx-only``)."""
+def ptx_only(bodies) -> None:
+    """The ``ptxas -v`` lines of the one-body kernel and of the tree kernel of each size of
+    ``bodies`` (module docstring, ``--ptx-only``)."""
     import re
 
     import numba.cuda.dispatcher
     from numba import cuda
 
-    from rbstab.engine.cuda import chain_kernel_function, chain_launch_signature, kernel_function, launch_signature
+    from rbstab.engine.cuda import kernel_function, launch_signature, tree_kernel_function, tree_launch_signature
     from rbstab.engine.rk import DOP853
 
     ptxas = shutil.which("ptxas")
@@ -484,8 +487,9 @@ def ptx_only() -> None:
         compute_capability = (9, 0)
 
     numba.cuda.dispatcher.get_current_device = lambda: Device()
-    kernels = {"one-body kernel (DOP853, 15 states)": (kernel_function(DOP853, 15), launch_signature(15)),
-               "chain kernel (DOP853, 1-8 bodies)": (chain_kernel_function(DOP853), chain_launch_signature())}
+    kernels = {"one-body kernel (DOP853, 15 states)": (kernel_function(DOP853, 15), launch_signature(15))}
+    for n in bodies:
+        kernels[f"tree kernel (DOP853, {n} bodies)"] = (tree_kernel_function(DOP853, n), tree_launch_signature())
     for name, (function, signature) in kernels.items():
         start = time.perf_counter()
         ptx, _ = cuda.compile_ptx(function, signature, cc=(9, 0), opt=True)
@@ -503,7 +507,7 @@ def ptx_only() -> None:
 
 
 def chains(args) -> None:
-    """The lines of the chain kernel (module docstring, **chains**)."""
+    """The lines of the tree kernel (module docstring, **chains**)."""
     print("chains, compile:", chain_compile_info())
     for n in args.chain_n:
         kernel, total = chain_gpu_rates(n)
@@ -523,12 +527,13 @@ def main() -> None:
     parser.add_argument("--cpu-n", type=int, default=20_000)
     parser.add_argument("--chain-n", type=int, nargs="+", default=[10_000, 100_000])
     parser.add_argument("--chain-cpu-n", type=int, default=2000)
-    parser.add_argument("--chains-only", action="store_true", help="only the chain kernel's lines")
+    parser.add_argument("--chains-only", action="store_true", help="only the tree kernel's lines")
+    parser.add_argument("--ptx-bodies", type=int, nargs="+", default=[1, 2, 8], help="tree sizes of --ptx-only")
     parser.add_argument("--ptx-only", action="store_true",
                         help="no GPU: each kernel's registers and local memory by ptxas (module docstring)")
     args = parser.parse_args()
     if args.ptx_only:
-        ptx_only()
+        ptx_only(args.ptx_bodies)
         return
     if args.host_only:
         host_only(args.sweep_n, args.jobs)

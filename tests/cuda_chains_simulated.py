@@ -1,4 +1,4 @@
-"""The CUDA engine's chain kernel under numba's CUDA simulator against the compiled CPU
+"""The CUDA engine's tree kernel under numba's CUDA simulator against the compiled CPU
 driver, run by tests/test_cuda_chains.py in a process of its own (the simulator is chosen
 when numba starts: ``NUMBA_ENABLE_CUDASIM=1``).
 
@@ -76,7 +76,7 @@ def main() -> None:
     from rbstab.engine.cuda import integrate_chain_runs_cuda
     from rbstab.engine.integrate import integrate_chain_runs
     from rbstab.engine.settings import settings_rows
-    from rbstab.engine.systems import chain_system
+    from rbstab.engine.systems import tree_system
     from rbstab.simulator import simulate_chain
     from rbstab.variants import chain as C
 
@@ -84,7 +84,7 @@ def main() -> None:
     for name, configs in cases(sys.argv[1]).items():
         start = time.perf_counter()
         sim = configs[0].simulation
-        system = chain_system(C.compile_chain(configs[0].chain), sim.limits)
+        system = tree_system(C.compile_chain(configs[0].chain), sim.limits)
         y0 = np.array([C.initial_state(c) for c in configs])
         settings = settings_rows([c.simulation for c in configs])
         cpu = integrate_chain_runs(system, y0, settings, method=sim.method, n_samples=sim.n_samples)

@@ -305,16 +305,16 @@ def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
 
 
 def _kernel_cache_keys() -> tuple[str, str]:
-    """numba-cuda's cache key material of the one-body and the chain kernel in this process:
+    """numba-cuda's cache key material of the one-body and the 2-body tree kernel in this process:
     the bytecode and the pickled closure of each (hashed)."""
     import hashlib
 
     from numba.cuda.serialize import dumps
 
-    from rbstab.engine.cuda import chain_kernel_function, kernel_function
+    from rbstab.engine.cuda import kernel_function, tree_kernel_function
 
     return tuple(hashlib.sha256(f.__code__.co_code + dumps(tuple(c.cell_contents for c in f.__closure__ or ())))
-                 .hexdigest() for f in (kernel_function(2, 15), chain_kernel_function(2)))
+                 .hexdigest() for f in (kernel_function(2, 15), tree_kernel_function(2, 2)))
 
 
 def test_kernel_cache_key_is_the_same_in_every_process():
@@ -506,7 +506,7 @@ def test_kernel_resources_ask_the_dispatcher_by_signature():
     """numba-cuda's dispatcher takes a signature object (``sig.args``) in
     ``get_regs_per_thread`` and ``get_local_mem_per_thread``, not the tuple of argument
     types: the occupancy of every launch on a GPU reads them."""
-    from rbstab.engine.cuda import chain_launch_signature, kernel_resources, launch_signature
+    from rbstab.engine.cuda import kernel_resources, launch_signature, tree_launch_signature
 
     class Dispatcher:  # what numba-cuda's CUDADispatcher does with the signature it is given
         def get_regs_per_thread(self, signature):
@@ -515,7 +515,7 @@ def test_kernel_resources_ask_the_dispatcher_by_signature():
         def get_local_mem_per_thread(self, signature):
             return 7000 if signature.args == self.args else 0
 
-    for n_state, args in ((15, launch_signature(15)), (None, chain_launch_signature())):
+    for args in (launch_signature(15), tree_launch_signature()):
         fn = Dispatcher()
         fn.args = tuple(args)
-        assert kernel_resources(fn, n_state) == (200, 7000)
+        assert kernel_resources(fn, args) == (200, 7000)

@@ -1,6 +1,6 @@
-"""The CUDA engine's chain kernel (rbstab.engine.cuda.chain_kernel_function) without a GPU:
-under numba's CUDA simulator its runs are the compiled CPU driver's bit for bit, and one
-compile of it to PTX for sm_90 covers chains of 1 to 8 bodies."""
+"""The CUDA engine's tree kernel (rbstab.engine.cuda.tree_kernel_function) without a GPU:
+under numba's CUDA simulator its runs are the compiled CPU driver's bit for bit, and it
+compiles to PTX for sm_90."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ def simulated(tmp_path_factory):
 
 @pytest.mark.parametrize("case, bodies, status", [
     ("stance", 2, [0, 0, 0, -3]), ("knee", 2, [0, 0]), ("pulsed3", 3, [0, 2]), ("pushed3", 3, [0, 2])])
-def test_simulated_chain_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bodies, status):
+def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bodies, status):
     """The stance example (permanent joints, saturated torques; one run stopped by its step
     limit), the knee (visco-elastic and embedded joints), three bodies with a pulse and an
     admissible region that one run leaves, and the same with impulses at 0, inside the run
@@ -38,12 +38,12 @@ def test_simulated_chain_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, b
 
 @pytest.mark.slow
 @pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
-def test_chain_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
-    """The chain kernel (DOP853, every joint variant's physics, the permanent joints'
-    Cholesky solve, disturbances and the admissible region; chain_launch_signature's types)
-    compiles for CUDA from the CPU driver's source, once for chains of 1 to 8 bodies (n is
-    read at run time)."""
-    from rbstab.engine.cuda import chain_kernel_function, chain_launch_signature
+def test_tree_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
+    """The tree kernel (DOP853, every joint variant's physics, the reduced rate's Cholesky
+    solve, the permanent joints' impulsive reactions, disturbances and the admissible
+    region; tree_launch_signature's types) compiles for CUDA from the CPU driver's source,
+    its thread-local arrays sized for a tree of 2 bodies."""
+    from rbstab.engine.cuda import tree_kernel_function, tree_launch_signature
     from rbstab.engine.rk import DOP853
 
-    ptx_for_sm_90(monkeypatch, chain_kernel_function(DOP853), chain_launch_signature())
+    ptx_for_sm_90(monkeypatch, tree_kernel_function(DOP853, 2), tree_launch_signature())

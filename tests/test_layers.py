@@ -264,7 +264,7 @@ def test_the_engine_takes_its_settings_as_one_record():
     sample grid) as one record (:data:`rbstab.engine.settings.SETTINGS`) and its work
     arrays as one :class:`~rbstab.engine.settings.Work`: none takes 10 parameters, but the
     CUDA kernels, whose parameters are their launch's device arrays (one a column of results)."""
-    kernels = {"rbstab.engine.cuda.run_all", "rbstab.engine.cuda.run_chains"}
+    kernels = {"rbstab.engine.cuda.run_all", "rbstab.engine.cuda.run_tree"}
     long = []
     for module, (path, _) in MODULES.items():
         if not module.startswith("rbstab.engine"):

@@ -370,7 +370,7 @@ def test_the_compiled_driver_integrates_the_reduced_tree_as_the_maximal_chain(st
         sim = config.simulation
         maximal = integrate_chain_runs(chain_system(compiled, sim.limits), y0[None], rows, method=sim.method,
                                        n_samples=sim.n_samples)
-        reduced = integrate_chain_runs(tree_system(compiled, layout, sim.limits),
+        reduced = integrate_chain_runs(tree_system(compiled, sim.limits),
                                        R.reduce_state(compiled, layout, y0)[None], rows, method=sim.method,
                                        n_samples=sim.n_samples)
         assert reduced.status[0] == maximal.status[0] == 0

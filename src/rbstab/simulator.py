@@ -732,7 +732,7 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) and evaluate its
     outputs and summary; a failed run's rows after the failure are NaN.
 
-    ``engine``: ``"scipy"`` integrates with ``solve_ivp`` (:func:`rbstab.variants.chain.integrate`,
+    ``engine``: ``"scipy"`` integrates with ``solve_ivp`` (:func:`rbstab.variants.tree.integrate`,
     any method); every other engine, and the compiled engine's methods, with the compiled
     driver (:func:`simulate_chain_blocks`: the same steps as ``solve_ivp``'s, the
     admissible region's events located on the step's interpolant), on the GPU with
@@ -743,7 +743,7 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     ValueError
         For an unknown engine.
     """
-    from .variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+    from .variants import tree  # heavy: numba (the tree's kernels compile on first use)
 
     methods = get_engine(engine).methods  # checks the name; None: solve_ivp integrates every method
     sim = config.simulation
@@ -751,7 +751,7 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
         (_, block), = simulate_chain_blocks([config], timeout=timeout, engine=engine)
         return block.result(0)
     start = _time.perf_counter()
-    trajectory = C.integrate(config, timeout=timeout)
+    trajectory = tree.integrate(config, timeout=timeout)
     compiled, time = trajectory.compiled, trajectory.time
     outputs, summary = _chain_outputs(compiled, config, time, trajectory.states)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
@@ -832,7 +832,7 @@ def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu:
     method, sample count and t_end): one call of ``integrate``, then their outputs and
     summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the outputs held at
     once: those of that many runs)."""
-    from .engine.systems import chain_system  # heavy: numba
+    from .engine.systems import tree_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     start = _time.perf_counter()
@@ -841,8 +841,8 @@ def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu:
     y0 = np.array([C.initial_state(configs[i]) for i in members])
     settings = settings_rows(sims, timeout)
     limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
-    sol = integrate(chain_system(compiled, sim.limits), y0, settings, method=sim.method, n_samples=sim.n_samples,
-                    **limit)
+    sol = integrate(tree_system(compiled, sim.limits), y0, settings, method=sim.method,
+                    n_samples=sim.n_samples, **limit)
     time = np.linspace(0.0, sim.t_end, sim.n_samples)
     time.flags.writeable = False
     integration = (_time.perf_counter() - start) / len(members)

@@ -174,7 +174,7 @@ def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
     from ..engine.integrate import integrate_chain_runs  # heavy: numba
     from ..engine.settings import settings_rows  # heavy: numba
     from ..engine.status import GIMBAL_LOCK, SUCCESS, limit_of, status_message  # heavy: numba
-    from ..engine.systems import chain_system  # heavy: numba
+    from ..engine.systems import tree_system  # heavy: numba
     from ..variants import chain as C  # heavy: numba
 
     check_axes(config, axes)
@@ -184,7 +184,7 @@ def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
     states = chain_states(config, compiled, axes, np.column_stack([first.ravel(), second.ravel()]))
     sim = config.simulation
     settings = np.repeat(settings_rows([sim]), len(states), axis=0)
-    sol = integrate_chain_runs(chain_system(compiled, sim.limits), states, settings, method=sim.method,
+    sol = integrate_chain_runs(tree_system(compiled, sim.limits), states, settings, method=sim.method,
                                n_samples=int(n_samples))
     time = np.linspace(0.0, sim.t_end, int(n_samples))
     outcome = np.full(len(states), 2, dtype=np.int8)

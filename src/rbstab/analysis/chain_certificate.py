@@ -178,7 +178,7 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
         (:func:`rbstab.convergence.converged`): one not converged by t_end is run longer
         (:func:`rbstab.analysis.evidence.check_initial_run`).
     """
-    from ..engine.systems import chain_system  # heavy: numba
+    from ..engine.systems import tree_system  # heavy: numba
     from ..simulator import simulate_chain  # heavy: numba
     from ..variants import chain as C  # heavy: numba
 
@@ -196,7 +196,7 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
                           disturbed=disturbed, t_end=float(sim.t_end))
     if not certificate.positive_definite:
         return certificate, notes
-    system = chain_system(compiled, sim.limits)
+    system = tree_system(compiled, sim.limits)
 
     def run(x):
         states = model.states(x)

@@ -59,14 +59,14 @@ def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEF
     without leaving the admissible region; v(0) [J]) of the chain's runs from the states
     :func:`chain_states` gives ``values`` (N, len(axes)), on the compiled driver in ``jobs``
     threads."""
-    from ..engine.systems import chain_system  # heavy: numba
+    from ..engine.systems import tree_system  # heavy: numba
     from ..variants import chain as C  # heavy: numba
 
     check_entries(config, axes)
     compiled = C.compile_chain(config.chain)
     states = chain_states(config, compiled, axes, values)
     sim = config.simulation
-    ok, v1 = final_lyapunov(compiled, chain_system(compiled, sim.limits), states, sim, jobs=jobs)
+    ok, v1 = final_lyapunov(compiled, tree_system(compiled, sim.limits), states, sim, jobs=jobs)
     v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
     return np.asarray(converged(ok, v0, v1, ratio), dtype=bool), v0
 
@@ -74,7 +74,7 @@ def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEF
 def final_lyapunov(compiled, system, states: np.ndarray, simulation, *, jobs: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """(whether each run reached t_end inside the admissible region, v(t_end) [J], NaN for a
     run that stopped) of the runs of one chain (``compiled``, its
-    :class:`~rbstab.engine.systems.ChainSystem` ``system``) from ``states`` (k, n_states)
+    :class:`~rbstab.engine.systems.TreeSystem` ``system``) from ``states`` (k, n_states)
     with the settings ``simulation``, on the compiled driver in ``jobs`` threads (it
     releases Python's lock); only the last sample is kept."""
     from ..engine.integrate import integrate_chain_runs  # heavy: numba

@@ -303,7 +303,7 @@ class ChainPushes:
 
     def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
                  ratio: float = DEFAULT_LYAPUNOV_RATIO, jobs: int = 1) -> None:
-        from ..engine.systems import chain_system  # heavy: numba
+        from ..engine.systems import tree_system  # heavy: numba
         from ..variants import chain as C  # heavy: numba
 
         names = list(config.chain.body_names)
@@ -336,7 +336,7 @@ class ChainPushes:
         self.equilibrium = rest
         # at rest until t0, then pushed: the run pushed at 0 over the time left (the rate does not depend on time)
         self._simulation = dataclasses.replace(config.simulation, t_end=t_end - self.at)
-        self._system = chain_system(self.compiled, config.simulation.limits)
+        self._system = tree_system(self.compiled, config.simulation.limits)
         self.runs = 0
         self.batches = 0
 

@@ -11,7 +11,7 @@ next pass with the others of its warp, instead of stalling them. Only the kernel
 are written here: work arrays in thread-local memory, a persistent grid whose threads take
 the next run from an atomic counter when theirs ends, the launch's one deadline, and what
 becomes of a run's samples (:class:`StreamSink`: outputs and the streamed summary of
-:mod:`rbstab.summary`; a chain's raw samples).
+:mod:`rbstab.summary`; a tree's raw samples).
 
 A run with disturbances (``disturbance_count`` > 0, read once a run) is integrated as the
 CPU engine integrates it (docs/disturbances.md): its impulses at t = 0 are applied before
@@ -38,14 +38,14 @@ registers let the GPU hold at once (:func:`occupancy`); the kernel is compiled f
 one argument signature every launch uses (:func:`launch_signature`), once per version,
 under a file lock that other processes wait on (:func:`compiled_kernel`).
 
-Chains (:func:`chain_kernel_function`, :func:`integrate_chain_runs_cuda`): the same driver
-on a chain's :class:`~rbstab.engine.systems.ChainSystem` through the system's functions
-(:mod:`rbstab.engine.systems`; the chain's physics is
-:func:`rbstab.variants.chain.chain_evaluate`, compiled as a device function with scratch
-arrays in thread-local memory), one kernel for chains of 1 to :data:`MAX_CHAIN_BODIES`
-bodies and every launch one chain (its records passed once, read by every thread), each
-run with its own initial state and settings. A run gives its status, stop time, counts and
-its state (and W) at every ``stride``-th sample, as the CPU driver's
+Trees of bodies (:func:`tree_kernel_function`, :func:`integrate_chain_runs_cuda`): the
+same driver on a tree's :class:`~rbstab.engine.systems.TreeSystem` through the system's
+functions (:mod:`rbstab.engine.systems`; the physics is
+:func:`rbstab.variants.tree.tree_rate`, compiled as a device function with scratch arrays
+in thread-local memory sized for the tree's number of bodies: a kernel per size, 1 to
+:data:`MAX_TREE_BODIES`), every launch one tree (its records passed once, read by every
+thread), each run with its own initial state and settings. A run gives its status, stop
+time, counts and its state (and W) at every ``stride``-th sample, as the CPU driver's
 (:func:`rbstab.engine.integrate.integrate_chain_runs`); the outputs and summary are the
 host's (:func:`rbstab.simulator.simulate_chain_blocks`).
 
@@ -59,7 +59,6 @@ import contextlib
 import fcntl
 import functools
 import math
-import os
 import sys
 import time as _time
 from collections import namedtuple
@@ -87,18 +86,19 @@ from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
 from ..variants.chain import ChainWork
+from ..variants.tree import TreeWork, expand_samples, reduce_states, reduced_size
 from ..variants.kernels import DISTURBANCE_WORK_AT, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample, sample_time
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
-from .systems import CHAIN, ChainSystem, disturbed_of, limited_of
+from .systems import CHAIN, TreeSystem, disturbed_of, limited_of
 from .tableaus import METHODS
 from .status import NOT_STARTED
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
-           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "MAX_CHAIN_BODIES", "MAX_CHAIN_STATE", "chain_launch_signature",
-           "chain_kernel_function", "compiled_chain_kernel", "integrate_chain_runs_cuda"]
+           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "MAX_TREE_BODIES", "tree_launch_signature",
+           "tree_kernel_function", "compiled_tree_kernel", "integrate_chain_runs_cuda"]
 
 #: How to get what ``--engine cuda`` needs.
 INSTALL_HINT = 'pip install "rbstab[cuda]" (numba-cuda and the CUDA 12 wheels) and an NVIDIA driver'
@@ -415,27 +415,27 @@ def _compile_lock(group: str):
             fcntl.flock(handle, fcntl.LOCK_UN)
 
 
-def kernel_resources(fn, n_state: int | None) -> tuple[int, int]:
+def kernel_resources(fn, signature: tuple) -> tuple[int, int]:
     """(registers, local memory [B]) a thread of the compiled kernel ``fn`` on the current
-    device; ``n_state`` None: ``fn`` is the chain kernel. numba-cuda's dispatcher looks a
-    kernel up by a signature object (its ``args``), not by the tuple of argument types."""
+    device, ``signature`` the argument types it was compiled for (:func:`launch_signature`
+    or :func:`tree_launch_signature`). numba-cuda's dispatcher looks a kernel up by a
+    signature object (its ``args``), not by the tuple of argument types."""
     from numba import types  # heavy: numba
-    from numba.core.typing import signature  # heavy: numba
+    from numba.core.typing import signature as make_signature  # heavy: numba
 
-    args = launch_signature(n_state) if n_state is not None else chain_launch_signature()
-    sig = signature(types.void, *args)
+    sig = make_signature(types.void, *signature)
     return fn.get_regs_per_thread(sig), fn.get_local_mem_per_thread(sig)
 
 
-def occupancy(fn, n_state: int | None) -> int:
+def occupancy(fn, signature: tuple) -> int:
     """Blocks of :data:`THREADS_PER_BLOCK` threads one multiprocessor holds at once for the
-    compiled kernel ``fn`` (CUDA's occupancy calculation from its registers a thread and the
-    device's limits; the kernel uses no shared memory). ``n_state`` None: ``fn`` is the
-    chain kernel (:func:`compiled_chain_kernel`). 1 under the simulator."""
+    compiled kernel ``fn`` of the argument types ``signature`` (CUDA's occupancy calculation
+    from its registers a thread and the device's limits; the kernel uses no shared memory).
+    1 under the simulator."""
     if simulated():
         return 1
     device = cuda.get_current_device()
-    regs, _ = kernel_resources(fn, n_state)
+    regs, _ = kernel_resources(fn, signature)
     warps = -(-THREADS_PER_BLOCK // device.WARP_SIZE)
     per_warp = -(-max(regs, 1) * device.WARP_SIZE // 256) * 256  # registers go to a warp in units of 256
     by_registers = device.MAX_REGISTERS_PER_MULTIPROCESSOR // (per_warp * warps)
@@ -450,7 +450,7 @@ DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of", "output_row", "sa
 
 def _plain(value):
     """The numpy array or record behind the simulator's wrappers of a kernel's arguments
-    (in a named tuple: a tuple of them, a chain's system)."""
+    (in a named tuple: a tuple of them, a tree's system)."""
     if isinstance(value, tuple) and hasattr(value, "_fields"):
         return type(value)(*[_plain(v) for v in value])
     while hasattr(value, "_item") or hasattr(value, "_ary"):
@@ -477,58 +477,59 @@ def _simulator_function(function, device_functions=DEVICE_FUNCTIONS):
                               function.__closure__)
 
 
-# -- the chain kernel -----------------------------------------------------------------------------------
-#: The most bodies of a chain the chain kernel integrates (the sizes of its thread-local arrays;
-#: a chain of n <= 8 bodies uses their first n rows).
-MAX_CHAIN_BODIES = 8
-#: The longest state of such a chain: 12 entries a body and 3 an embedded joint's D.
-MAX_CHAIN_STATE = 15 * MAX_CHAIN_BODIES
+# -- the tree kernel ------------------------------------------------------------------------------------
+#: The most bodies of a tree the tree kernel integrates.
+MAX_TREE_BODIES = 8
 
 
-def chain_launch_signature() -> tuple:
-    """numba's types of a chain launch's arguments, in order (every array C-contiguous):
-    the one signature :func:`compiled_chain_kernel` compiles, for chains of 1 to
-    :data:`MAX_CHAIN_BODIES` bodies (n and the state size are read at run time).
+def tree_launch_signature() -> tuple:
+    """numba's types of a tree launch's arguments, in order (every array C-contiguous):
+    the signature :func:`compiled_tree_kernel` compiles for every tree size.
 
-    The chain, passed once and read by every thread (:class:`rbstab.engine.systems.ChainSystem`'s
+    The tree, passed once and read by every thread (:class:`rbstab.engine.systems.TreeSystem`'s
     arrays): params :data:`rbstab.model.PARAMETERS` (n,), codes, parents int64 (n,), ppoints
-    (n, 3), d_at int64 (n,); its k runs: y0 (k, n_state), settings
-    :data:`rbstab.engine.settings.SETTINGS` (k,); n_samples int64 (the grid of each run:
-    linspace(0, t_end, n_samples)); stride int64 (every stride-th sample kept); control
-    int64 (2,) and limit_ns int64 as :func:`launch_signature`'s; then the outputs: status
-    int64 (k,), t_stop (k,), nfev, n_steps int64 (k,), samples (k, n_kept, n_state) and
-    work (k, n_kept) (the disturbances' work W [J]) at the kept samples.
+    (n, 3), d_at, r_at, u_at, rd_at int64 (n,); its k runs: y0 (k, n_r) in the reduced
+    layout (:mod:`rbstab.variants.tree`), settings :data:`rbstab.engine.settings.SETTINGS`
+    (k,); n_samples int64 (the grid of each run: linspace(0, t_end, n_samples)); stride
+    int64 (every stride-th sample kept); control int64 (2,) and limit_ns int64 as
+    :func:`launch_signature`'s; then the outputs: status int64 (k,), t_stop (k,), nfev,
+    n_steps int64 (k,), samples (k, n_kept, n_r) and work (k, n_kept) (the disturbances'
+    work W [J]) at the kept samples.
     """
     from numba import float64, from_dtype, int64  # heavy: numba
 
     vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
     ints = int64[::1]
-    return (PARAMETERS_TYPE[::1], ints, ints, matrix, ints, matrix, from_dtype(SETTINGS)[::1], int64, int64,
-            ints, int64, ints, vector, ints, ints, cube, matrix)
+    return (PARAMETERS_TYPE[::1], ints, ints, matrix, ints, ints, ints, ints, matrix, from_dtype(SETTINGS)[::1], int64,
+            int64, ints, int64, ints, vector, ints, ints, cube, matrix)
 
 
-def chain_kernel_function(method: int):
-    """The Python function of the CUDA kernel of chain runs of method number ``method``
-    (:func:`chain_launch_signature`: one chain, k runs, one thread a run).
+def tree_kernel_function(method: int, n_bodies: int):
+    """The Python function of the CUDA kernel of the runs of trees of ``n_bodies`` bodies
+    with method number ``method`` (:func:`tree_launch_signature`: one tree, k runs, one
+    thread a run). Its name names the two, so that each kernel has cache files of its own.
 
     The driver is :func:`kernel_function`'s (:func:`rbstab.engine.integrate.drive_run`,
-    the persistent grid and the launch's one deadline) on a chain's :class:`~rbstab.engine.systems.ChainSystem`, whose functions
-    (:mod:`rbstab.engine.systems`) the passes call as the CPU driver's do; a sample is the
-    state there (and W), written to device memory
-    (:class:`~rbstab.engine.integrate.SampleRows`) as the CPU driver's samples are; the
-    chain's outputs and summary are computed from them on the host. Its thread-local arrays
-    are sized for :data:`MAX_CHAIN_BODIES` bodies; the integrated vector (the state, and W
-    after it where a body has disturbances) and its stage rates and interpolant are views of
-    their first entries."""
+    the persistent grid and the launch's one deadline) on a
+    :class:`~rbstab.engine.systems.TreeSystem`, whose functions (:mod:`rbstab.engine.systems`)
+    the passes call as the CPU driver's do; a sample is the reduced state there (and W),
+    written to device memory (:class:`~rbstab.engine.integrate.SampleRows`) as the CPU
+    driver's samples are; the outputs and summary are computed from them on the host. Its
+    thread-local arrays are sized for ``n_bodies`` bodies (the stack a thread grows with the
+    tree): the longest state (15 entries a body: 12, and an embedded joint's 3), the mass
+    matrix (6 n_bodies)^2 of :func:`rbstab.variants.tree.tree_rate` and the permanent joints'
+    impulsive system (3 n_bodies)^2 of :func:`rbstab.variants.chain.chain_impulses`."""
     from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
     scheme = (method, int(N_STAGES[method]), method == DOP853)
-    size = MAX_CHAIN_STATE + 1  # the longest integrated vector: the state and W
-    bodies, rows = MAX_CHAIN_BODIES, 3 * MAX_CHAIN_BODIES
+    bodies = int(n_bodies)
+    states = 15 * bodies  # the longest maximal (and reduced) state
+    size = states + 1  # the longest integrated vector: the state and W
+    rows, columns = 3 * bodies, 6 * bodies
 
-    def run_chains(params, codes, parents, ppoints, d_at, y0s, settings, n_samples, stride, control, limit_ns,
-                   status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
+    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y0s, settings, n_samples, stride, control,
+                 limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
         K_all = cuda.local.array((n_rows, size), float64)
         Q_all = cuda.local.array((q_rows, size), float64)
         y_all = cuda.local.array(size, float64)
@@ -537,13 +538,18 @@ def chain_kernel_function(method: int):
         scale_all = cuda.local.array(size, float64)
         work_all = cuda.local.array(size, float64)
         sample_all = cuda.local.array(size, float64)
-        scratch = ChainWork(cuda.local.array((bodies, 3, 3), float64), cuda.local.array((bodies, 3, 3), float64),
-                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
-                            cuda.local.array((bodies, 3, 3), float64),
-                            cuda.local.array((rows, rows), float64), cuda.local.array(rows, float64),
-                            cuda.local.array(bodies, int64), cuda.local.array((bodies, 7, 3), float64),
-                            cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64))
-        p = ChainSystem(params, codes, parents, ppoints, d_at, scratch)
+        chain = ChainWork(cuda.local.array((bodies, 3, 3), float64), cuda.local.array((bodies, 3, 3), float64),
+                          cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
+                          cuda.local.array((bodies, 3, 3), float64),
+                          cuda.local.array((rows, rows), float64), cuda.local.array(rows, float64),
+                          cuda.local.array(bodies, int64), cuda.local.array((bodies, 7, 3), float64),
+                          cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64))
+        scratch = TreeWork(cuda.local.array(states, float64), cuda.local.array(size, float64),
+                           cuda.local.array((bodies, 6), float64), cuda.local.array((columns, columns), float64),
+                           cuda.local.array(columns, float64), cuda.local.array(bodies, float64),
+                           cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3, 3), float64),
+                           cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64), chain)
+        p = TreeSystem(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, scratch)
         n_runs, n_state = y0s.shape[0], y0s.shape[1]
         n_kept = samples_o.shape[1]
         disturbed = disturbed_of(p)
@@ -584,34 +590,34 @@ def chain_kernel_function(method: int):
                 work_o[k, i] = math.nan
             k = cuda.atomic.add(control, 0, 1)
 
-    run_chains.__name__ = run_chains.__qualname__ = f"run_chains_{METHODS[method]}"
-    return run_chains
+    run_tree.__name__ = run_tree.__qualname__ = f"run_tree{bodies}_{METHODS[method]}"
+    return run_tree
 
 
-#: The compiled functions the chain kernel calls (the simulator hands them numpy's arrays).
-CHAIN_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of")
+#: The compiled functions the tree kernel calls (the simulator hands them numpy's arrays).
+TREE_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of")
 
 
 @functools.lru_cache(maxsize=None)
-def compiled_chain_kernel(method: int):
-    """The CUDA kernel of chain runs of method number ``method``, compiled for
-    :func:`chain_launch_signature` (chains of 1 to :data:`MAX_CHAIN_BODIES` bodies) or
-    loaded from the disk cache, once per process, as :func:`compiled_kernel`."""
+def compiled_tree_kernel(method: int, n_bodies: int):
+    """The CUDA kernel of the runs of trees of ``n_bodies`` bodies with method number
+    ``method``, compiled for :func:`tree_launch_signature` or loaded from the disk cache,
+    once per process, as :func:`compiled_kernel`."""
     _cuda()
-    function = chain_kernel_function(method)
+    function = tree_kernel_function(method, n_bodies)
     if simulated():
-        return cuda.jit(_simulator_function(function, CHAIN_DEVICE_FUNCTIONS))
+        return cuda.jit(_simulator_function(function, TREE_DEVICE_FUNCTIONS))
     from numba.cuda.core import config  # optional: numba-cuda
 
     config.CACHE_DIR = str(CACHE_DIR)
-    group = f"cuda-chain-{METHODS[method]}"
-    what = f"the CUDA kernel for chains with {METHODS[method]}"
+    group = f"cuda-tree{n_bodies}-{METHODS[method]}"
+    what = f"the CUDA kernel for trees of {n_bodies} bodies with {METHODS[method]}"
     with _compile_lock(group):
         warm = cache_is_warm(group)
         if not warm:
             print(f"rbstab: compiling {what} (once for this version; cached in {CACHE_DIR})", file=sys.stderr,
                   flush=True)
-        fn = cuda.jit(chain_launch_signature(), cache=True)(function)  # compiles, or loads from the cache
+        fn = cuda.jit(tree_launch_signature(), cache=True)(function)  # compiles, or loads from the cache
         _say_cache_miss(fn, warm, what)
         mark_warm(group)
     return fn
@@ -709,7 +715,7 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
         _NO_LIMIT_NS)
     per_launch = _runs_per_launch(n_trace)
-    blocks = _resident_blocks(fn, n_state)
+    blocks = _resident_blocks(fn, launch_signature(n_state))
     # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
     for t_end in dict.fromkeys(settings["t_end"].tolist()):
         grid = np.linspace(0.0, t_end, n_samples)
@@ -724,12 +730,12 @@ def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride
             yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
 
 
-def _resident_blocks(fn, n_state: int | None) -> int:
+def _resident_blocks(fn, signature: tuple) -> int:
     """The grid of a launch: the blocks the GPU holds at once (:func:`occupancy` on every
     multiprocessor), each thread taking runs until none is left (a persistent grid)."""
     if simulated():
         return 1
-    return occupancy(fn, n_state) * cuda.get_current_device().MULTIPROCESSOR_COUNT
+    return occupancy(fn, signature) * cuda.get_current_device().MULTIPROCESSOR_COUNT
 
 
 def _runs_per_launch(n_trace: int) -> int:
@@ -793,10 +799,11 @@ def _launch(fn, blocks: int, runs, stencils, options, n_trace: int, limit_ns):
 
 @dataclass
 class CudaChainSolution(ChunkSolution):
-    """:class:`rbstab.engine.integrate.ChunkSolution` of chain runs on the GPU
-    (:func:`integrate_chain_runs_cuda`): ``samples`` (k, n_kept, n_state) and ``work`` (k,
-    n_kept) at every ``stride``-th sample; ``kernel_seconds`` the launches' time on the GPU
-    (CUDA events) [s], ``seconds`` their wall time (transfers included) [s]."""
+    """:class:`rbstab.engine.integrate.ChunkSolution` of tree runs on the GPU
+    (:func:`integrate_chain_runs_cuda`): ``samples`` (k, n_kept, 12 n + 3 e) the maximal
+    image of the state and ``work`` (k, n_kept) at every ``stride``-th sample;
+    ``kernel_seconds`` the launches' time on the GPU (CUDA events) [s], ``seconds`` their
+    wall time (transfers and the maximal image included) [s]."""
 
     kernel_seconds: float = 0.0
     seconds: float = 0.0
@@ -804,16 +811,19 @@ class CudaChainSolution(ChunkSolution):
 
 def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: int, stride: int = 1,
                               max_wall_time: float = math.inf) -> CudaChainSolution:
-    """Integrate k runs of one chain on the GPU, one thread a run: what
-    :func:`rbstab.engine.integrate.integrate_chain_runs` does on the CPU (the same arguments),
-    the chain's records passed once for every run.
+    """Integrate k runs of one tree on the GPU, one thread a run: what
+    :func:`rbstab.engine.integrate.integrate_chain_runs` does on the CPU with a
+    :class:`~rbstab.engine.systems.TreeSystem` (the same arguments), the tree's records
+    passed once for every run.
 
     Parameters
     ----------
-    system : ChainSystem
-        The chain (:func:`rbstab.engine.systems.chain_system`), of
-        at most :data:`MAX_CHAIN_BODIES` bodies.
-    y0 : ndarray, shape (k, n_state)
+    system : TreeSystem
+        The tree (:func:`rbstab.engine.systems.tree_system`), of at most
+        :data:`MAX_TREE_BODIES` bodies.
+    y0 : ndarray, shape (k, n_r) or (k, 12 n + 3 e)
+        Initial states in the reduced layout (:mod:`rbstab.variants.tree`) or the maximal
+        one, as :func:`rbstab.engine.integrate.integrate_chain_runs` takes them.
     settings : ndarray, shape (k, 7)
         Per run: :data:`~rbstab.engine.settings.SETTING_COLUMNS`; ``max_wall_time`` is not
         read (see below).
@@ -833,25 +843,28 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     CudaUnavailable
         No GPU, driver or numba-cuda (:func:`check_available`).
     ValueError
-        For a chain of more than :data:`MAX_CHAIN_BODIES` bodies, or ``stride`` < 1.
+        For a tree of more than :data:`MAX_TREE_BODIES` bodies, or ``stride`` < 1.
     """
     check_available()
     n_bodies = int(np.shape(system.codes)[0])
-    if not 1 <= n_bodies <= MAX_CHAIN_BODIES:
-        raise ValueError(f"chain: found {n_bodies} bodies; the CUDA engine takes 1 to {MAX_CHAIN_BODIES}")
+    if not 1 <= n_bodies <= MAX_TREE_BODIES:
+        raise ValueError(f"bodies: found {n_bodies}; the CUDA engine takes 1 to {MAX_TREE_BODIES}")
     if stride < 1:
         raise ValueError(f"stride: found {stride}; expected an integer >= 1")
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
+    if y0.shape[1] != reduced_size(system.codes, system.d_at):
+        y0 = reduce_states(*system[:8], y0)
     k, n_state = y0.shape
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
-    chain = (np.ascontiguousarray(system.params, dtype=PARAMETERS),
-             *(np.ascontiguousarray(a, dtype=np.int64) for a in (system.codes, system.parents)),
-             np.ascontiguousarray(system.ppoints, dtype=float), np.ascontiguousarray(system.d_at, dtype=np.int64))
+    ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.codes, system.parents)]
+    layout = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.d_at, system.r_at, system.u_at, system.rd_at)]
+    tree = (np.ascontiguousarray(system.params, dtype=PARAMETERS), *ints, np.ascontiguousarray(system.ppoints,
+                                                                                               dtype=float), *layout)
     n_kept = len(range(0, n_samples, stride))
-    fn = compiled_chain_kernel(method_number(method))
+    fn = compiled_tree_kernel(method_number(method), n_bodies)
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
         _NO_LIMIT_NS)
-    blocks = _resident_blocks(fn, None)
+    blocks = _resident_blocks(fn, tree_launch_signature())
     if simulated():
         free = 2**30
     else:
@@ -860,7 +873,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     out = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64),
            np.empty((k, n_kept, n_state)), np.empty((k, n_kept)))
     kernel_seconds, start = 0.0, _time.perf_counter()
-    d_chain = [cuda.to_device(a) for a in chain]
+    d_tree = [cuda.to_device(a) for a in tree]
     for lo in range(0, k, per_launch):
         runs = slice(lo, min(k, lo + per_launch))
         d_in = [cuda.to_device(a) for a in (y0[runs], records[runs])]
@@ -868,13 +881,16 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
         begin, end = cuda.event(), cuda.event()
         begin.record()
-        fn[blocks, THREADS_PER_BLOCK](*d_chain, *d_in, np.int64(n_samples), np.int64(stride), control, limit_ns,
+        fn[blocks, THREADS_PER_BLOCK](*d_tree, *d_in, np.int64(n_samples), np.int64(stride), control, limit_ns,
                                       *d_out)
         end.record()
         end.synchronize()
         kernel_seconds += begin.elapsed_time(end) / 1e3
         for a, d in zip(out, d_out):
             a[runs] = d.copy_to_host()
-    status, t_stop, nfev, n_steps, samples, work = out
+    status, t_stop, nfev, n_steps, reduced, work = out
+    n_maximal = 12 * n_bodies + 3 * int(np.sum(layout[0] >= 0))
+    samples = np.empty((k, n_kept, n_maximal))
+    expand_samples(reduced, *tree[:5], *layout[1:], samples)
     return CudaChainSolution(samples, status, t_stop, nfev, n_steps, work, kernel_seconds=kernel_seconds,
                              seconds=_time.perf_counter() - start)

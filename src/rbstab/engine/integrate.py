@@ -32,7 +32,7 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.chain import chain_work
-from ..variants.tree import expand_samples, tree_work
+from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_work
 from ..variants.disturbances import before
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
@@ -671,9 +671,13 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
     system : ChainSystem or TreeSystem
         The chain (:func:`rbstab.engine.systems.chain_system`: its compiled description and
         admissible region), or the same tree in reduced coordinates
-        (:func:`rbstab.engine.systems.tree_system`): then ``y0`` is in the reduced layout
-        (:mod:`rbstab.variants.tree`) and the samples are the maximal image of its states.
+        (:func:`rbstab.engine.systems.tree_system`): then the samples are the maximal image
+        of its states.
     y0 : ndarray, shape (k, n_state)
+        Initial states: a chain's (12 n + 3 e); a tree's in the reduced layout
+        (:mod:`rbstab.variants.tree`, n_r) or the maximal one (12 n + 3 e, reduced here by
+        :func:`rbstab.variants.tree.reduce_states`; the two layouts are one where no joint
+        is permanent).
     settings : ndarray, shape (k, 7)
         Per run: :data:`~rbstab.engine.settings.SETTING_COLUMNS` (t_end [s], rtol, atol,
         max_step [s], gimbal_margin [rad], max_steps, max_wall_time [s]).
@@ -683,6 +687,8 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
         Samples per run, evenly spaced on [0, t_end] (>= 2).
     """
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
+    if isinstance(system, TreeSystem) and y0.shape[1] != reduced_size(system.codes, system.d_at):
+        y0 = reduce_states(*system[:8], y0)
     k, n = y0.shape
     samples = np.empty((k, n_samples, n))
     ends = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64))

@@ -32,7 +32,7 @@ from ..model import set_limits
 from ..variants.chain import _relative, chain_evaluate, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
-from ..variants.tree import tree_expand, tree_rate, tree_velocities
+from ..variants.tree import tree_expand, tree_layout, tree_rate, tree_velocities
 from .status import GIMBAL_LOCK, LEFT_REGION
 
 __all__ = ["CHAIN", "ChainSystem", "chain_system", "TreeSystem", "tree_system", "tree_margin",
@@ -64,12 +64,13 @@ TreeSystem = namedtuple("TreeSystem", ["params", "codes", "parents", "ppoints", 
                                        "work"])
 
 
-def tree_system(compiled, layout, limits=None) -> TreeSystem:
-    """The :class:`TreeSystem` of a :class:`rbstab.variants.chain.CompiledChain` and its
-    :class:`rbstab.variants.tree.TreeLayout`, with the admissible region ``limits`` as
-    :func:`chain_system`'s; ``work`` None (the driver's own)."""
+def tree_system(compiled, limits=None) -> TreeSystem:
+    """The :class:`TreeSystem` of a :class:`rbstab.variants.chain.CompiledChain` (its
+    reduced layout, :func:`rbstab.variants.tree.tree_layout`), with the admissible region
+    ``limits`` as :func:`chain_system`'s; ``work`` None (the driver's own)."""
     chain = chain_system(compiled, limits)
-    return TreeSystem(chain.params, chain.codes, chain.parents, chain.ppoints, chain.d_at, *layout.args, None)
+    return TreeSystem(chain.params, chain.codes, chain.parents, chain.ppoints, chain.d_at, *tree_layout(compiled).args,
+                      None)
 
 
 def chain_system(compiled, limits=None) -> ChainSystem:

@@ -25,7 +25,7 @@ from ..variants.base import N_OUTPUTS
 from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
 from .integrate import admissible, integrate_chain_runs, integrate_runs
 from .switching import warm_up as warm_up_sign_law
-from .systems import chain_system
+from .systems import tree_system
 from .tableaus import METHODS
 
 __all__ = ["GROUPS", "warm_up", "ensure_compiled"]
@@ -51,7 +51,7 @@ def _warm_up_chains() -> None:
     y = C._place(compiled, np.zeros(compiled.n_states))
     settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3, 10.0, np.inf]])
     for limits in (None, np.ones((5, 3))):
-        integrate_chain_runs(chain_system(compiled, limits), y[None], settings, method="DOP853", n_samples=2)
+        integrate_chain_runs(tree_system(compiled, limits), y[None], settings, method="DOP853", n_samples=2)
     C.evaluate(compiled, np.zeros(1), y[None])
 
 

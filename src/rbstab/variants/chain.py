@@ -20,13 +20,12 @@ linear solve of 3k unknowns for k permanent joints).
 from __future__ import annotations
 
 import math
-import time as _time
 from collections import namedtuple
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..chain import GROUND, Chain
+from ..chain import Chain
 from ..jit import jit
 from ..kinematics import (ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of,
                           rotation_matrix, sub, vector)
@@ -48,7 +47,7 @@ from .kernels import PERMANENT, constraint_dissipation, constraint_energy, const
     constraint_force_command
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "integrate", "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
            "reduced_rate", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -972,90 +971,6 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
             if p["disturbance_kind"][k] == IMPULSE and 0.0 <= p["disturbance_start"][k] <= t_end:
                 times.add(float(p["disturbance_start"][k]))
     return sorted(times)
-
-
-def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
-    """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) with scipy's
-    ``solve_ivp`` (``simulation``'s method, tolerances, steps), sampled at ``n_samples``
-    times on [0, t_end]; it stops ``failed`` where any body's or joint's |theta_2| reaches
-    pi/2 - ``gimbal_margin`` (the rows after are NaN) or after ``timeout`` [s] of wall time.
-    Impulses (:func:`chain_impulses`) split the run: a new ``solve_ivp`` from each impulse's
-    time, from the state just after it (a sample at that time shows it)."""
-    from scipy.integrate import solve_ivp  # heavy: scipy, only where a chain is integrated
-
-    sim = config.simulation
-    compiled = compile_chain(config.chain) if compiled is None else compiled
-    y = initial_state(config)
-    time = np.linspace(0.0, sim.t_end, sim.n_samples)
-    args = compiled.args
-    dy = np.empty(compiled.n_states)
-    work = chain_work(compiled.size)
-    start = _time.perf_counter()
-    limit = timeout if timeout is not None else sim.max_wall_time
-
-    class _Timeout(Exception):
-        pass
-
-    def rhs(t, y):
-        if limit is not None and math.isfinite(limit) and _time.perf_counter() - start > limit:
-            raise _Timeout
-        chain_rate(t, y, *args, dy)
-        return dy.copy()
-
-    def lock(t, y):
-        return _gimbal_margin(compiled, y, sim.gimbal_margin)
-
-    lock.terminal = True
-    events = [lock]
-    if sim.limits is not None:
-        def region(t, y):
-            return _region_margin(compiled, y, sim.limits)[0]
-
-        region.terminal = True
-        events.append(region)
-    jumps = impulse_times(compiled, sim.t_end)
-    edges = [0.0] + [t for t in jumps if 0.0 < t < sim.t_end] + [sim.t_end]
-    states = np.full((time.size, compiled.n_states), np.nan)
-    nfev = 0
-    status, message = "success", "The solver successfully reached the end of the integration interval."
-    for a, b in zip(edges[:-1], edges[1:]):
-        chain_impulses(a, y, *args[:4], work)
-        rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
-        t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
-        try:
-            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=sim.atol,
-                            max_step=sim.max_step, events=events)
-        except _Timeout:
-            states[:] = np.nan
-            return ChainTrajectory(time, states, "failed", f"wall-time limit of {limit:g} s reached",
-                                   {"nfev": nfev, "solver_status": -1, "wall_time": _time.perf_counter() - start},
-                                   compiled)
-        nfev += int(sol.nfev)
-        got = min(sol.y.shape[1], rows.size)
-        states[rows[:got]] = sol.y[:, :got].T
-        if sol.status == 1 and len(sol.t_events[0]):
-            t_lock = float(sol.t_events[0][0])
-            status = "failed"
-            message = f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
-            break
-        if sol.status == 1:
-            t_out = float(sol.t_events[1][0])
-            what = _region_margin(compiled, sol.y_events[1][0], sim.limits)[1]
-            status = "failed"
-            message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
-            break
-        if sol.status != 0:
-            status, message = "failed", str(sol.message)
-            break
-        y = sol.y[:, -1].copy()
-    else:
-        if sim.t_end in jumps:  # an impulse at t_end: the last sample shows the state after it
-            y = states[-1].copy()
-            chain_impulses(sim.t_end, y, *args[:4], work)
-            states[-1] = y
-    return ChainTrajectory(time, states, status, message,
-                           {"nfev": nfev, "solver_status": 0 if status == "success" else 1,
-                            "wall_time": _time.perf_counter() - start}, compiled)
 
 
 def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:

@@ -27,6 +27,8 @@ joint i is ``permanent``, else Theta, Omega, X, V (12); then the 3 states D [m] 
 
 from __future__ import annotations
 
+import math
+import time as _time
 from collections import namedtuple
 from dataclasses import dataclass
 
@@ -36,6 +38,13 @@ from ..jit import jit
 from ..kinematics import add, cross, matTvec, matvec, rotation_and_rate_of, sub, vector
 from .chain import (
     _OMEGA_J,
+    ChainTrajectory,
+    _gimbal_margin,
+    _region_margin,
+    chain_impulses,
+    compile_chain,
+    impulse_times,
+    initial_state,
     _THETA_J,
     CompiledChain,
     _cholesky_solve,
@@ -49,7 +58,7 @@ from .chain import (
 from .kernels import PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "tree_velocities",
-           "expand_samples", "reduce_state", "expand_state"]
+           "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state", "integrate"]
 
 
 @dataclass(frozen=True)
@@ -406,18 +415,141 @@ def reduce_state(compiled: CompiledChain, layout: TreeLayout, y: np.ndarray) -> 
     """The reduced state (n_r,) of the chain's state ``y`` (12 n + 3 e,): Theta_j, Omega_j
     of each permanent joint (the joint's quantities of the chain), every other body's
     Theta, Omega, X, V, and D."""
-    n = compiled.size
+    return reduce_states(*compiled.args, *layout.args, np.asarray(y, dtype=float)[None])[0]
+
+
+def reduced_size(codes, d_at) -> int:
+    """n_r: the size of the reduced state of a tree of joint variant codes ``codes`` (n,)
+    whose embedded joints' D sit at ``d_at`` (n,; -1: none)."""
+    codes, d_at = np.asarray(codes), np.asarray(d_at)
+    return int(np.sum(np.where(codes == PERMANENT, 6, 12)) + 3 * np.sum(d_at >= 0))
+
+
+def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y) -> np.ndarray:
+    """:func:`reduce_state` of each row of ``y`` (k, 12 n + 3 e) of the tree of the arrays
+    ``params`` ... ``rd_at`` (a :class:`rbstab.engine.systems.TreeSystem`'s): (k, n_r). A
+    body whose joint is not permanent keeps its maximal entries; a permanent joint's child
+    is carried by its Theta_j, Omega_j (its position follows from its parent's)."""
+    y = np.ascontiguousarray(np.atleast_2d(y), dtype=float)
+    n, k = len(codes), len(y)
     joints = np.empty((n, 7, 3))
-    chain_core(0.0, np.ascontiguousarray(y, dtype=float), *compiled.args, np.empty(compiled.n_states), joints,
-               np.empty((n, 3)), np.empty(5))
-    yr = np.empty(layout.n_r)
-    for i in range(n):
-        at = layout.r_at[i]
-        if compiled.codes[i] == PERMANENT:
-            yr[at: at + 3], yr[at + 3: at + 6] = joints[i, _THETA_J], joints[i, _OMEGA_J]
-        else:
-            yr[at: at + 12] = y[12 * i: 12 * i + 12]
-    for j in range(n):
-        if compiled.d_at[j] >= 0:
-            yr[layout.rd_at[j]: layout.rd_at[j] + 3] = y[compiled.d_at[j]: compiled.d_at[j] + 3]
-    return yr
+    out = np.empty((k, reduced_size(codes, d_at)))
+    permanent = bool(np.any(np.asarray(codes) == PERMANENT))
+    for row in range(k):
+        if permanent:
+            chain_core(0.0, y[row], params, codes, parents, ppoints, d_at, np.empty(y.shape[1]), joints,
+                       np.empty((n, 3)), np.empty(5))
+        for i in range(n):
+            at = r_at[i]
+            if codes[i] == PERMANENT:
+                out[row, at: at + 3], out[row, at + 3: at + 6] = joints[i, _THETA_J], joints[i, _OMEGA_J]
+            else:
+                out[row, at: at + 12] = y[row, 12 * i: 12 * i + 12]
+        for j in range(n):
+            if d_at[j] >= 0:
+                out[row, rd_at[j]: rd_at[j] + 3] = y[row, d_at[j]: d_at[j] + 3]
+    return out
+
+
+def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
+    """Integrate a run of a tree (:class:`rbstab.config.chains.ChainConfig`) in reduced
+    coordinates (:func:`tree_rate`) with scipy's ``solve_ivp`` (``simulation``'s method,
+    tolerances, steps), sampled at ``n_samples`` times on [0, t_end]: the reference of the
+    compiled driver. It stops ``failed`` where any body's or joint's |theta_2| reaches pi/2 -
+    ``gimbal_margin`` or the state leaves ``simulation.limits`` (the rows after are NaN), or
+    after ``timeout`` [s] of wall time. Impulses split the run: a new ``solve_ivp`` from each
+    impulse's time, from the state just after it (a sample at that time shows it; the
+    permanent joints' impulsive reactions, :func:`rbstab.variants.chain.chain_impulses`,
+    keep them held). ``states`` are the maximal image (12 n + 3 e) of the samples."""
+    from scipy.integrate import solve_ivp  # heavy: scipy, only where a tree is integrated by scipy
+
+    sim = config.simulation
+    compiled = compile_chain(config.chain) if compiled is None else compiled
+    layout = tree_layout(compiled)
+    n = compiled.size
+    args, tree = compiled.args, (*compiled.args, *layout.args)
+    y = reduce_state(compiled, layout, initial_state(config))
+    time = np.linspace(0.0, sim.t_end, sim.n_samples)
+    dy = np.empty(layout.n_r)
+    work = tree_work(n, compiled.n_states)
+    rot, rate = np.empty((n, 3, 3)), np.empty((n, 3, 3))
+    start = _time.perf_counter()
+    limit = timeout if timeout is not None else sim.max_wall_time
+
+    class _Timeout(Exception):
+        pass
+
+    def maximal(yr):
+        full = np.empty(compiled.n_states)
+        tree_expand(np.ascontiguousarray(yr), *tree, full, rot, rate, True)
+        return full
+
+    def rhs(t, yr):
+        if limit is not None and math.isfinite(limit) and _time.perf_counter() - start > limit:
+            raise _Timeout
+        tree_rate(t, np.ascontiguousarray(yr), *tree, dy, work)
+        return dy.copy()
+
+    def jump(t, yr):
+        """Apply the impulses that start at t to ``yr`` (in place)."""
+        full = maximal(yr)
+        if chain_impulses(t, full, *args[:4], work.chain) != 0.0:
+            tree_velocities(full, compiled.codes, compiled.parents, layout.r_at, yr)
+
+    def lock(t, yr):
+        return _gimbal_margin(compiled, maximal(yr), sim.gimbal_margin)
+
+    lock.terminal = True
+    events = [lock]
+    if sim.limits is not None:
+        def region(t, yr):
+            return _region_margin(compiled, maximal(yr), sim.limits)[0]
+
+        region.terminal = True
+        events.append(region)
+    jumps = impulse_times(compiled, sim.t_end)
+    edges = [0.0] + [t for t in jumps if 0.0 < t < sim.t_end] + [sim.t_end]
+    states = np.full((time.size, layout.n_r), np.nan)
+    nfev = 0
+    status, message = "success", "The solver successfully reached the end of the integration interval."
+
+    def trajectory(status, message, solver_status):
+        full = np.full((time.size, compiled.n_states), np.nan)
+        expand_samples(states[None], *tree, full[None])
+        return ChainTrajectory(time, full, status, message, {"nfev": nfev, "solver_status": solver_status,
+                                                             "wall_time": _time.perf_counter() - start}, compiled)
+
+    for a, b in zip(edges[:-1], edges[1:]):
+        jump(a, y)
+        rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
+        t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
+        try:
+            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=sim.atol,
+                            max_step=sim.max_step, events=events)
+        except _Timeout:
+            states[:] = np.nan
+            return trajectory("failed", f"wall-time limit of {limit:g} s reached", -1)
+        nfev += int(sol.nfev)
+        got = min(sol.y.shape[1], rows.size)
+        states[rows[:got]] = sol.y[:, :got].T
+        if sol.status == 1 and len(sol.t_events[0]):
+            t_lock = float(sol.t_events[0][0])
+            status = "failed"
+            message = f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
+            break
+        if sol.status == 1:
+            t_out = float(sol.t_events[1][0])
+            what = _region_margin(compiled, maximal(sol.y_events[1][0]), sim.limits)[1]
+            status = "failed"
+            message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
+            break
+        if sol.status != 0:
+            status, message = "failed", str(sol.message)
+            break
+        y = sol.y[:, -1].copy()
+    else:
+        if sim.t_end in jumps:  # an impulse at t_end: the last sample shows the state after it
+            y = states[-1].copy()
+            jump(sim.t_end, y)
+            states[-1] = y
+    return trajectory(status, message, 0 if status == "success" else 1)
