@@ -2,7 +2,7 @@
 
 Prints (2 cores, warm numba cache):
 - ms a run of each chain example: its integration by scipy's ``solve_ivp`` over the
-  compiled rate (``rbstab.variants.chain.integrate``, ``--engine scipy``) and by the
+  compiled reduced rate (``rbstab.variants.tree.integrate``, ``--engine scipy``) and by the
   compiled driver (``rbstab.engine.integrate.integrate_chain_runs``), and the whole run
   ``rbstab run`` makes (``rbstab.simulator.simulate_chain``: with its outputs and summary);
 - ms the integration of the one-body Case 3 config on the one-body compiled engine and
@@ -10,8 +10,9 @@ Prints (2 cores, warm numba cache):
 - s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process)
   and its smallest fatal push on the trunk over 64 directions (``--push``, 2 threads);
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
-  and visco-elastic joints with feedback, gravity) as the compiled driver makes it (scratch
-  arrays of its own), and that per body, beside one evaluation of Case 3's one-body rate;
+  and visco-elastic joints with feedback, gravity) as the compiled driver makes it (the
+  reduced rate with scratch arrays of its own), and that per body, beside one evaluation of
+  Case 3's one-body rate;
 - s a sweep over initial states (``rbstab.execute_sweep``, 2 local processes, ``--store
   summary``) of N runs (``--sweep-runs``, default 10,000) of two 3-body chains (a triple
   inverted pendulum held by its joints' feedback, t_end 2 s; three Case 3 bodies in a
@@ -47,7 +48,7 @@ from rbstab.config.chains import any_config_from_mapping as load_any_config_mapp
 from rbstab.config.chains import chain_of, load_any_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
 from rbstab.engine.settings import settings_rows
-from rbstab.engine.systems import chain_system
+from rbstab.engine.systems import tree_system
 from rbstab.simulator import simulate_chain
 from rbstab.variants import chain as C
 from rbstab.variants import tree as R
@@ -135,7 +136,7 @@ def reduced_rates() -> None:
 
 
 def _compiled_run(compiled, y0, sim):
-    system = chain_system(compiled, sim.limits)
+    system = tree_system(compiled, sim.limits)
     settings = settings_rows([sim])
     return lambda: integrate_chain_runs(system, y0[None], settings, method=sim.method, n_samples=sim.n_samples)
 
@@ -179,11 +180,12 @@ def _chain_rate_us(data: dict) -> float:
     """us an evaluation of the rate of the chain config ``data`` at its initial state."""
     config = load_any_config_mapping(data)
     compiled = C.compile_chain(config.chain)
-    y = C.initial_state(config)
-    dy, work = np.empty(compiled.n_states), C.chain_work(config.chain.size)
-    _chain_loop(10, y.copy(), compiled.args, dy, work)
+    layout = R.tree_layout(compiled)
+    y = R.reduce_state(compiled, layout, C.initial_state(config))
+    dy, work = np.empty(layout.n_r), R.tree_work(config.chain.size, compiled.n_states)
+    _tree_loop(10, y.copy(), compiled.args, layout.args, dy, work)
     k = 100_000
-    return 1e6 * _best(lambda: _chain_loop(k, y.copy(), compiled.args, dy, work), 3) / k
+    return 1e6 * _best(lambda: _tree_loop(k, y.copy(), compiled.args, layout.args, dy, work), 3) / k
 
 
 def sweeps(n: int) -> None:
@@ -279,7 +281,7 @@ def main() -> None:
     for name in ("double_pendulum", "stance_ankle_hip", "knee"):
         config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml")
         compiled = C.compile_chain(config.chain)
-        scipy_s = _best(lambda: C.integrate(config, compiled=compiled))
+        scipy_s = _best(lambda: R.integrate(config, compiled=compiled))
         driver_s = _best(_compiled_run(compiled, C.initial_state(config), config.simulation))
         whole_s = _best(lambda: simulate_chain(config))
         print(f"  {name:18s} {config.chain.size} bodies, t_end {config.simulation.t_end:g} s: {1e3 * scipy_s:8.1f} | "
@@ -319,11 +321,13 @@ def main() -> None:
     print(f"  case3_embedded (one body): {1e6 * seconds:7.3f} us")
     for n in range(1, 9):
         compiled = C.compile_chain(serial(n), offset=0.0)
-        y = C._place(compiled, np.random.default_rng(n).normal(scale=0.1, size=compiled.n_states))
-        dy = np.empty(compiled.n_states)
-        work = C.chain_work(n)
-        _chain_loop(10, y.copy(), compiled.args, dy, work)
-        seconds = _best(lambda: _chain_loop(k, y.copy(), compiled.args, dy, work), 3) / k
+        layout = R.tree_layout(compiled)
+        y = R.reduce_state(compiled, layout,
+                           C._place(compiled, np.random.default_rng(n).normal(scale=0.1, size=compiled.n_states)))
+        dy = np.empty(layout.n_r)
+        work = R.tree_work(n, compiled.n_states)
+        _tree_loop(10, y.copy(), compiled.args, layout.args, dy, work)
+        seconds = _best(lambda: _tree_loop(k, y.copy(), compiled.args, layout.args, dy, work), 3) / k
         print(f"  n = {n}: {1e6 * seconds:7.3f} us  ({1e6 * seconds / n:6.3f} us a body)")
     reduced_rates()
     if options.sweep_runs:

@@ -28,7 +28,7 @@ import numpy as np
 from rbstab.config.chains import load_any_config
 from rbstab.engine.integrate import integrate_chain_runs
 from rbstab.engine.settings import settings_rows
-from rbstab.engine.systems import chain_system
+from rbstab.engine.systems import tree_system
 from rbstab.kinematics import rotation_matrix
 from rbstab.variants import chain as C
 
@@ -55,7 +55,7 @@ def rbstab_run(rtol: float, k: int = 1):
                                  [f"simulation.t_end={T_END}", "simulation.n_samples=2", f"simulation.rtol={rtol}",
                                   f"simulation.atol={rtol * 1e-2}"])
     compiled = C.compile_chain(config.chain)
-    system = chain_system(compiled)
+    system = tree_system(compiled)
     y0 = np.repeat(C.initial_state(config)[None], k, axis=0)
     rows = np.repeat(settings_rows([config.simulation]), k, axis=0)
     rows[:, 6] = np.inf

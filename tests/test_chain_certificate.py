@@ -116,9 +116,9 @@ def test_no_run_started_inside_the_estimate_fails_to_recover(planar):
     v0 = model.lyapunov(x)
     np.testing.assert_allclose(v0[:32], cert.sublevel, rtol=1e-9)
     assert np.all(v0[32:] < cert.sublevel)
-    from rbstab.engine.systems import chain_system
+    from rbstab.engine.systems import tree_system
 
-    ok, v1 = final_lyapunov(compiled, chain_system(compiled, config.simulation.limits), model.states(x),
+    ok, v1 = final_lyapunov(compiled, tree_system(compiled, config.simulation.limits), model.states(x),
                             config.simulation)
     assert np.all(ok) and np.all(v1 <= 0.2 * v0), (ok, v1 / v0)  # the pass's rule: in the domain, v falls
 

@@ -14,7 +14,7 @@ from rbstab.config import load_config
 from rbstab.config.chains import chain_config_from_mapping, chain_of, load_any_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
 from rbstab.engine.settings import settings_rows
-from rbstab.engine.systems import chain_system
+from rbstab.engine.systems import tree_system
 from rbstab.simulator import simulate_chain
 from rbstab.variants import chain as C
 
@@ -51,10 +51,37 @@ def test_a_one_body_chain_on_the_compiled_driver_moves_as_the_one_body_engines_b
     body = integrate_runs([variant.code], np.atleast_1d(variant.parameters), y0[None], settings, method=sim.method,
                           n_samples=sim.n_samples)
     compiled = C.compile_chain(chain_of(config), offset=0.0)
-    chain = integrate_chain_runs(chain_system(compiled), y0[None], settings, method=sim.method, n_samples=sim.n_samples)
+    chain = integrate_chain_runs(tree_system(compiled), y0[None], settings, method=sim.method, n_samples=sim.n_samples)
     assert body.status[0] == chain.status[0] == 0
     scale = 1.0 + np.abs(body.samples).max(axis=(0, 1))
     assert np.max(np.abs(chain.samples - body.samples) / scale) < 1e-8
+
+
+@pytest.mark.parametrize("path", ["paper/case1_permanent.yaml", "paper/case2_visco_elastic.yaml",
+                                  "paper/case3_embedded.yaml", "examples/stance_ankle.yaml",
+                                  "examples/saturated_push.yaml", "examples/sliding.yaml", "examples/free_gravity.yaml"])
+def test_one_body_and_its_one_body_tree_have_one_state_and_one_motion(path):
+    """A one-body config's state is its one-body tree's reduced state (a permanent joint's
+    Theta_j, Omega_j are the body's Theta, Omega: the paper's 6-state eq 21; any other law's
+    12 states, then D): the compiled driver moves the tree, from the body's own initial
+    state, as the one-body engine moves the body, for all five laws, saturation and
+    disturbances (an impulse and a pulse), to the solver's tolerance."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_config(ROOT / "configs" / path, ["simulation.t_end=3.0", "simulation.n_samples=301"])
+    sim = config.simulation
+    variant = config.make_variant()
+    y0 = variant.initial_state(config.initial_state)
+    settings = settings_rows([sim])
+    body = integrate_runs([variant.code], np.atleast_1d(variant.parameters), y0[None], settings, method=sim.method,
+                          n_samples=sim.n_samples)
+    system = tree_system(C.compile_chain(chain_of(config), offset=0.0))
+    tree = integrate_chain_runs(system, y0[None], settings, method=sim.method, n_samples=sim.n_samples)
+    assert body.status[0] == tree.status[0] == 0
+    samples = tree.samples[0] if y0.size != 6 else tree.samples[0, :, :6]  # permanent: the maximal image's Theta, Omega
+    scale = 1.0 + np.abs(body.samples[0]).max(axis=0)
+    assert np.max(np.abs(samples - body.samples[0]) / scale) < 1e-8
+    np.testing.assert_allclose(tree.work[0], body.work[0], rtol=0, atol=1e-8 * (1.0 + np.abs(body.work).max()))
 
 
 def _pulsed_chain(l_r):
@@ -83,7 +110,7 @@ def test_a_pulses_work_on_a_chain_is_what_v_gains_without_damping():
         config = _pulsed_chain(l_r)
         sim = config.simulation
         compiled = C.compile_chain(config.chain)
-        sol = integrate_chain_runs(chain_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
+        sol = integrate_chain_runs(tree_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
                                    method=sim.method, n_samples=sim.n_samples)
         assert sol.status[0] == 0
         time = np.linspace(0.0, sim.t_end, sim.n_samples)
@@ -192,7 +219,7 @@ def test_a_push_on_a_chain_keeps_its_joints_and_is_the_limit_of_short_pulses():
     errors = []
     for pulse in (1e-3, 1e-4):
         pulsed = _arm("permanent", pulse)
-        sol = integrate_chain_runs(chain_system(C.compile_chain(pulsed.chain)), C.initial_state(pulsed)[None],
+        sol = integrate_chain_runs(tree_system(C.compile_chain(pulsed.chain)), C.initial_state(pulsed)[None],
                                    settings_rows([pulsed.simulation]), method="DOP853", n_samples=2)
         errors.append(np.abs(sol.samples[0, -1] - y).max())
     assert errors[1] < 0.15 * errors[0] and errors[1] < 0.02  # first order in the pulse's length
@@ -272,12 +299,12 @@ def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():
     np.testing.assert_allclose(result.outputs["theta"], reference.outputs["theta"], atol=1e-8)
     np.testing.assert_allclose(result.outputs["lyapunov"], reference.outputs["lyapunov"], rtol=1e-8, atol=1e-10)
     sim = config.simulation
-    sol = integrate_chain_runs(chain_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
+    sol = integrate_chain_runs(tree_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
                                method=sim.method, n_samples=sim.n_samples)
     at = 30  # t = 0.3 s
     quiet = chain_config_from_mapping({**data, "disturbances": data["disturbances"][1:],
                                        "simulation": {**data["simulation"], "t_end": 0.3, "n_samples": 31}})
-    before = integrate_chain_runs(chain_system(C.compile_chain(quiet.chain)), C.initial_state(quiet)[None],
+    before = integrate_chain_runs(tree_system(C.compile_chain(quiet.chain)), C.initial_state(quiet)[None],
                                   settings_rows([quiet.simulation]), method=sim.method, n_samples=31).samples[0, -1]
     y = before.copy()
     energy = C.chain_push(y, *compiled.args[:4], 1, np.array([0.05, 0.0, -0.2]), np.array([2.0, 4.0, 1.0]), False)

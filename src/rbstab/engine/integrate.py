@@ -8,7 +8,7 @@ located on the interpolant: :func:`begin_run`, then passes of :func:`run_pass` (
 attempt each), the loop the CUDA kernels run too. A run's system is one body or a chain
 (:mod:`rbstab.engine.systems`: its rate and admissible margin). :func:`integrate_chunk`
 runs many one-body runs, each with its own variant, parameters and settings, one after the
-other in one call; :func:`integrate_chain_chunk` many runs of one chain.
+other in one call; :func:`integrate_tree_chunk` many runs of one tree (a chain).
 
 A run ends with a status code of :mod:`rbstab.engine.status` (the wall-time limit is
 checked every :data:`CLOCK_EVERY` passes).
@@ -31,19 +31,18 @@ from numba.extending import overload
 
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..variants.chain import chain_work
 from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_work
 from ..variants.disturbances import before
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
 from .status import DEFAULT_MAX_STEPS, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
-from .systems import (CHAIN, ChainSystem, TreeSystem, admissible, admissible_event, gimbal_event, system_breakpoint,
+from .systems import (CHAIN, TreeSystem, admissible, admissible_event, gimbal_event, system_breakpoint,
                       system_disturbed, system_impulses, system_limited, system_margin, system_rate)
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
-           "integrate_runs", "integrate_chain_runs", "integrate_chain_chunk", "begin_run", "run_pass", "drive_run", "clock_ns", "NO_DEADLINE",
+           "integrate_runs", "integrate_chain_runs", "integrate_tree_chunk", "begin_run", "run_pass", "drive_run", "clock_ns", "NO_DEADLINE",
            "keep_sample",
            "SampleRows", "step", "attempt_step", "step_bounds", "spacing", "REJECTED", "gimbal_event", "admissible_event",
            "grazing_exit", "step_exit",
@@ -550,25 +549,12 @@ def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
 
 
 @jit(nogil=True)
-def integrate_chain_chunk(system, y0, settings, samples, work_done, ends):
-    """:func:`integrate_run` for k runs of one chain (``system``, a
-    :class:`~rbstab.engine.systems.ChainSystem`) from the initial states ``y0`` (k, n_state);
-    the other arguments as :func:`integrate_chunk`'s. The call evaluates the chain with
-    scratch arrays of its own (``system.work`` is None; threads may integrate one system at
-    once)."""
-    status, t_stop, nfev, n_steps = ends
-    own = ChainSystem(system.params, system.codes, system.parents, system.ppoints, system.d_at,
-                      chain_work(system.codes.shape[0]))
-    for k in range(y0.shape[0]):
-        status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(CHAIN, own, y0[k], settings[k], samples[k],
-                                                                  work_done[k])
-
-
-@jit(nogil=True)
 def integrate_tree_chunk(system, y0, settings, samples, work_done, ends):
-    """:func:`integrate_chain_chunk` for a tree in reduced coordinates (``system``, a
-    :class:`~rbstab.engine.systems.TreeSystem`): ``y0`` (k, n_r) and ``samples`` in the
-    reduced layout."""
+    """:func:`integrate_run` for k runs of one tree in reduced coordinates (``system``, a
+    :class:`~rbstab.engine.systems.TreeSystem`) from the initial states ``y0`` (k, n_r);
+    ``samples`` in the reduced layout; the other arguments as :func:`integrate_chunk`'s. The
+    call evaluates the tree with scratch arrays of its own (``system.work`` is None; threads
+    may integrate one system at once)."""
     status, t_stop, nfev, n_steps = ends
     n = system.codes.shape[0]
     n_states = 12 * n
@@ -663,19 +649,17 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
 
 
 def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -> ChunkSolution:
-    """Integrate k runs of one chain from the initial states ``y0`` (k, n_state) with the
-    compiled driver, as :func:`integrate_runs` integrates one body's runs.
+    """Integrate k runs of one tree of bodies (a chain) from the initial states ``y0`` with
+    the compiled driver, as :func:`integrate_runs` integrates one body's runs, in reduced
+    coordinates (:mod:`rbstab.variants.tree`).
 
     Parameters
     ----------
-    system : ChainSystem or TreeSystem
-        The chain (:func:`rbstab.engine.systems.chain_system`: its compiled description and
-        admissible region), or the same tree in reduced coordinates
-        (:func:`rbstab.engine.systems.tree_system`): then the samples are the maximal image
-        of its states.
-    y0 : ndarray, shape (k, n_state)
-        Initial states: a chain's (12 n + 3 e); a tree's in the reduced layout
-        (:mod:`rbstab.variants.tree`, n_r) or the maximal one (12 n + 3 e, reduced here by
+    system : TreeSystem
+        The tree (:func:`rbstab.engine.systems.tree_system`: its compiled description,
+        admissible region and reduced layout).
+    y0 : ndarray, shape (k, n_r) or (k, 12 n + 3 e)
+        Initial states in the reduced layout or the maximal one (reduced here by
         :func:`rbstab.variants.tree.reduce_states`; the two layouts are one where no joint
         is permanent).
     settings : ndarray, shape (k, 7)
@@ -685,25 +669,27 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
         One of :data:`METHODS`.
     n_samples : int
         Samples per run, evenly spaced on [0, t_end] (>= 2).
+
+    Returns
+    -------
+    ChunkSolution
+        ``samples`` (k, n_samples, 12 n + 3 e): the maximal image of the states (Theta,
+        Omega, X, V of every body, then each embedded joint's D).
     """
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
-    if isinstance(system, TreeSystem) and y0.shape[1] != reduced_size(system.codes, system.d_at):
+    if y0.shape[1] != reduced_size(system.codes, system.d_at):
         y0 = reduce_states(*system[:8], y0)
     k, n = y0.shape
     samples = np.empty((k, n_samples, n))
     ends = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64))
     work = np.empty((k, n_samples))
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
-    if isinstance(system, TreeSystem):
-        with np.errstate(all="ignore"):
-            integrate_tree_chunk(system, y0, records, samples, work, ends)
-        n_states = 12 * len(system.codes) + 3 * int(np.sum(system.d_at >= 0))
-        maximal = np.empty((k, n_samples, n_states))
-        expand_samples(samples, *system[:8], maximal)
-        return ChunkSolution(maximal, *ends, work)
     with np.errstate(all="ignore"):
-        integrate_chain_chunk(system, y0, records, samples, work, ends)
-    return ChunkSolution(samples, *ends, work)
+        integrate_tree_chunk(system, y0, records, samples, work, ends)
+    n_states = 12 * len(system.codes) + 3 * int(np.sum(system.d_at >= 0))
+    maximal = np.empty((k, n_samples, n_states))
+    expand_samples(samples, *system[:8], maximal)
+    return ChunkSolution(maximal, *ends, work)
 
 
 def _sample_buffer(out, shape: tuple[int, int, int]) -> np.ndarray:

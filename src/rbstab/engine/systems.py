@@ -5,9 +5,9 @@ run's system as the pair (``code``, ``p``):
 
 - one body: its variant code and its :data:`rbstab.model.PARAMETERS` record (the only
   system of the CUDA kernel and of the sign law's integrator);
-- a chain: ``code`` :data:`CHAIN` and ``p`` a :class:`ChainSystem`, the arrays of the
-  chain's compiled description (:class:`rbstab.variants.chain.CompiledChain`), its
-  admissible region in every record (:func:`chain_system`).
+- a tree of bodies (a chain): ``code`` :data:`CHAIN` and ``p`` a :class:`TreeSystem`, the
+  arrays of the chain's compiled description (:class:`rbstab.variants.chain.CompiledChain`),
+  its admissible region in every record, and its reduced layout (:func:`tree_system`).
 
 The driver asks the system for the few things it needs through the functions below: its
 rate, its admissible margin, whether it has bounds or disturbances, their next breakpoint
@@ -29,13 +29,13 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
 from ..model import set_limits
-from ..variants.chain import _relative, chain_evaluate, chain_impulses
+from ..variants.chain import _relative, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from ..variants.tree import tree_expand, tree_layout, tree_rate, tree_velocities
 from .status import GIMBAL_LOCK, LEFT_REGION
 
-__all__ = ["CHAIN", "ChainSystem", "chain_system", "TreeSystem", "tree_system", "tree_margin",
+__all__ = ["CHAIN", "TreeSystem", "tree_system", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
            "admissible", "chain_margin", "disturbed_of",
@@ -44,22 +44,16 @@ __all__ = ["CHAIN", "ChainSystem", "chain_system", "TreeSystem", "tree_system", 
 #: The ``code`` of a chain's runs (no variant's code: a chain's joints carry theirs).
 CHAIN = -1
 
-#: A chain as the compiled driver reads it: ``params`` (n,) PARAMETERS records (body i with
-#: joint i's gains; the admissible region in every record), ``codes`` (n,) the joints'
-#: variant codes, ``parents`` (n,) parent indices (-1: ground), ``ppoints`` (n, 3) parent
-#: points [m], ``d_at`` (n,) the index of each embedded joint's D in the state (-1: none),
-#: ``work`` the scratch arrays of an evaluation (:class:`rbstab.variants.chain.ChainWork`):
-#: None in the description Python passes (:func:`chain_system`); the driver attaches its own
-#: (each call of :func:`rbstab.engine.integrate.integrate_chain_chunk`, each thread of the
-#: CUDA kernel), so no two threads share them.
-ChainSystem = namedtuple("ChainSystem", ["params", "codes", "parents", "ppoints", "d_at", "work"])
-
-
-#: A tree in reduced coordinates as the compiled driver reads it (:mod:`rbstab.variants.tree`):
-#: a :class:`ChainSystem`'s arrays, the reduced layout (``r_at``, ``u_at``, ``rd_at``: each
-#: body's states and generalised velocities, each embedded joint's D) and ``work`` the
-#: scratch arrays of an evaluation (:class:`rbstab.variants.tree.TreeWork`; None from
-#: Python, the driver attaches its own).
+#: A tree as the compiled driver reads it (:mod:`rbstab.variants.tree`): ``params`` (n,)
+#: PARAMETERS records (body i with joint i's gains; the admissible region in every record),
+#: ``codes`` (n,) the joints' variant codes, ``parents`` (n,) parent indices (-1: ground),
+#: ``ppoints`` (n, 3) parent points [m], ``d_at`` (n,) the index of each embedded joint's D in
+#: the maximal state (-1: none), the reduced layout (``r_at``, ``u_at``, ``rd_at``: each body's
+#: states and generalised velocities, each embedded joint's D) and ``work`` the scratch arrays
+#: of an evaluation (:class:`rbstab.variants.tree.TreeWork`): None in the description Python
+#: passes (:func:`tree_system`); the driver attaches its own (each call of
+#: :func:`rbstab.engine.integrate.integrate_tree_chunk`, each thread of the CUDA kernel), so
+#: no two threads share them.
 TreeSystem = namedtuple("TreeSystem", ["params", "codes", "parents", "ppoints", "d_at", "r_at", "u_at", "rd_at",
                                        "work"])
 
@@ -67,19 +61,12 @@ TreeSystem = namedtuple("TreeSystem", ["params", "codes", "parents", "ppoints", 
 def tree_system(compiled, limits=None) -> TreeSystem:
     """The :class:`TreeSystem` of a :class:`rbstab.variants.chain.CompiledChain` (its
     reduced layout, :func:`rbstab.variants.tree.tree_layout`), with the admissible region
-    ``limits`` as :func:`chain_system`'s; ``work`` None (the driver's own)."""
-    chain = chain_system(compiled, limits)
-    return TreeSystem(chain.params, chain.codes, chain.parents, chain.ppoints, chain.d_at, *tree_layout(compiled).args,
-                      None)
-
-
-def chain_system(compiled, limits=None) -> ChainSystem:
-    """The :class:`ChainSystem` of a :class:`rbstab.variants.chain.CompiledChain`, with the
-    admissible region ``limits`` (a :class:`rbstab.model.Limits`, the bounds (5, 3), or
-    None: unbounded) written into copies of its records; ``work`` None (the driver's own)."""
+    ``limits`` (a :class:`rbstab.model.Limits`, the bounds (5, 3), or None: unbounded)
+    written into copies of its records; ``work`` None (the driver's own)."""
     params = compiled.params.copy()
     set_limits(params, limits)
-    return ChainSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at, None)
+    return TreeSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at,
+                      *tree_layout(compiled).args, None)
 
 
 # -- one body's admissible region -------------------------------------------------------------
@@ -131,7 +118,7 @@ def admissible(code, y, p, limit):
 # -- a chain's admissible region ------------------------------------------------------------------
 @jit
 def chain_margin(y, params, codes, parents, ppoints, limit):
-    """The admissible margin of a chain's state ``y`` (:class:`ChainSystem`'s arrays):
+    """The admissible margin of a chain's maximal state ``y`` (:class:`TreeSystem`'s arrays):
     (margin, status) as :func:`admissible_event`'s, over every body's |theta_2| and every
     joint's relative |theta_2| (its gimbal lock, ``limit`` = pi/2 - gimbal_margin [rad]) and,
     where ``params[0].limited``, the bounds ``params[0].limits`` of every body's Theta,
@@ -226,7 +213,7 @@ def system_rate(code, t, y, p, f):
 
 def system_margin(code, y, p, limit):
     """(margin, status) of the admissible region at ``y``: :func:`admissible_event` or
-    :func:`chain_margin`."""
+    :func:`tree_margin`."""
     raise NotImplementedError("compiled code only")
 
 
@@ -247,8 +234,7 @@ def system_breakpoint(p, t, t_end):
 
 def system_impulses(code, t, y, p):
     """Apply the impulses that start at t to ``y`` (in place); returns their work [J]
-    (:func:`rbstab.variants.disturbances.apply_impulses`,
-    :func:`rbstab.variants.chain.chain_impulses`)."""
+    (:func:`rbstab.variants.disturbances.apply_impulses`, :func:`tree_impulses`)."""
     raise NotImplementedError("compiled code only")
 
 
@@ -259,28 +245,19 @@ def _is_body(p) -> bool:
     return isinstance(p, types.Record)
 
 
-def _is_tree(p) -> bool:
-    return isinstance(p, types.BaseNamedTuple) and p.instance_class is TreeSystem
-
-
 @overload(system_rate, target="generic", jit_options=_INLINE)
 def _system_rate(code, t, y, p, f):
     if _is_body(p):
         return lambda code, t, y, p, f: state_rate(code, t, y, p, f)
-    if _is_tree(p):
-        return lambda code, t, y, p, f: tree_rate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at,
-                                                  p.u_at, p.rd_at, f, p.work)
-    return lambda code, t, y, p, f: chain_evaluate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, f,
-                                                   p.work.joints, p.work.bodies, p.work.scalars, p.work)
+    return lambda code, t, y, p, f: tree_rate(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at,
+                                              p.u_at, p.rd_at, f, p.work)
 
 
 @overload(system_margin, target="generic", jit_options=_INLINE)
 def _system_margin(code, y, p, limit):
     if _is_body(p):
         return lambda code, y, p, limit: admissible_event(code, y, p, limit)
-    if _is_tree(p):
-        return lambda code, y, p, limit: tree_margin(y, p, limit)
-    return lambda code, y, p, limit: chain_margin(y, p.params, p.codes, p.parents, p.ppoints, limit)
+    return lambda code, y, p, limit: tree_margin(y, p, limit)
 
 
 @overload(system_limited, target="generic", jit_options=_INLINE)
@@ -308,9 +285,7 @@ def _system_breakpoint(p, t, t_end):
 def _system_impulses(code, t, y, p):
     if _is_body(p):
         return lambda code, t, y, p: apply_impulses(code == PERMANENT, t, y, p)
-    if _is_tree(p):
-        return lambda code, t, y, p: tree_impulses(t, y, p)
-    return lambda code, t, y, p: chain_impulses(t, y, p.params, p.codes, p.parents, p.ppoints, p.work)
+    return lambda code, t, y, p: tree_impulses(t, y, p)
 
 
 # -- the same as compiled functions: what Python (the CUDA simulator's kernels) calls -----------------

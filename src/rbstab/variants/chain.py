@@ -1,6 +1,10 @@
-"""The physics of a chain of rigid bodies (docs/physics.md, "Chains of rigid bodies"): the
-rate of its state, its Lyapunov function v with its terms and analytic rate, the joints'
-quantities, and its integration.
+"""The physics of a chain of rigid bodies in maximal coordinates (docs/physics.md, "Chains
+of rigid bodies"): the applied wrenches, the joints' quantities (Lambda_j of permanent joints
+by the stacked eq 15), its Lyapunov function v with its terms and analytic rate at any
+state, a push's jump, and its rest state. Runs integrate the same tree in reduced
+coordinates (:mod:`rbstab.variants.tree`), whose rate calls :func:`chain_wrenches`; the
+maximal rate here (:func:`chain_rate`) gives the outputs at the samples and is the
+independent formulation the reduced one is checked against.
 
 A chain is compiled once (:func:`compile_chain`) into runtime records, so one compiled code
 path serves any chain of 1-8 bodies: a :data:`rbstab.model.PARAMETERS` record per body and
@@ -506,9 +510,8 @@ def chain_impulses(t, y, params, codes, parents, ppoints, work):
 
 @jit
 def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
-    """dy/dt of the chain's state ``y`` at ``t`` into ``dy`` (:func:`chain_core`; for
-    callers in Python: the compiled driver calls :func:`chain_evaluate` with its system's
-    scratch arrays)."""
+    """dy/dt of the chain's maximal state ``y`` at ``t`` into ``dy`` (:func:`chain_core`, the
+    stacked eq 15; for callers in Python)."""
     chain_core(t, y, params, codes, parents, ppoints, d_at, dy, np.empty((codes.shape[0], 7, 3)),
                np.empty((codes.shape[0], 3)), np.empty(5))
 
