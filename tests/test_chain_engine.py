@@ -1,5 +1,5 @@
-"""The compiled driver on chains (rbstab.engine.systems): it takes solve_ivp's steps on a
-chain's rate, a one-body chain on it moves as the one-body engine's body, and a
+"""The compiled driver on trees (rbstab.engine.systems): it takes solve_ivp's steps on a
+tree's rate, a one-body tree on it moves as the one-body engine's body, and a
 disturbance's work, integrated with the state, is what v gains without damping."""
 
 from __future__ import annotations
@@ -38,23 +38,6 @@ def test_the_compiled_driver_takes_solve_ivps_steps_on_a_chain(name):
         scale = 1.0 + np.abs(reference.outputs[key]).max()
         np.testing.assert_allclose(compiled.outputs[key], reference.outputs[key], rtol=0, atol=1e-9 * scale,
                                    err_msg=key)
-
-
-def test_a_one_body_chain_on_the_compiled_driver_moves_as_the_one_body_engines_body():
-    """Case 3 (embedded, the body's own equations) and its one-body chain (the chain's
-    core), each on the compiled driver: two formulations, the same trajectory."""
-    config = load_config(ROOT / "configs" / "paper" / "case3_embedded.yaml")
-    sim = config.simulation
-    variant = config.make_variant()
-    y0 = variant.initial_state(config.initial_state)
-    settings = settings_rows([sim])
-    body = integrate_runs([variant.code], np.atleast_1d(variant.parameters), y0[None], settings, method=sim.method,
-                          n_samples=sim.n_samples)
-    compiled = C.compile_chain(chain_of(config), offset=0.0)
-    chain = integrate_chain_runs(tree_system(compiled), y0[None], settings, method=sim.method, n_samples=sim.n_samples)
-    assert body.status[0] == chain.status[0] == 0
-    scale = 1.0 + np.abs(body.samples).max(axis=(0, 1))
-    assert np.max(np.abs(chain.samples - body.samples) / scale) < 1e-8
 
 
 @pytest.mark.parametrize("path", ["paper/case1_permanent.yaml", "paper/case2_visco_elastic.yaml",
