@@ -58,11 +58,13 @@ worker's seconds a run in a process of its own
 
 ``--ptx-only`` (any machine with numba-cuda's compilers and CUDA's ``ptxas``; no GPU
 needed) compiles the one-body kernel (DOP853, 15 states) and the tree kernel (DOP853) for
-each tree size of ``--ptx-bodies`` (default 1, 2, 8) to optimised PTX for sm_90 and prints
-what ``ptxas -v`` reports for each: the registers, the stack frame (local memory) and the
-spill stores and loads a thread, with each compile's seconds::
+each tree shape of ``--ptx-trees`` (bodies:permanent joints:embedded joints; default one
+body on a permanent and on an embedded joint, the stance example's 2:2:0, and 8 bodies on
+permanent and on embedded joints) to optimised PTX for sm_90 and prints what ``ptxas -v``
+reports for each: the registers, the stack frame (local memory) and the spill stores and
+loads a thread, with each compile's seconds::
 
-    python benchmarks/gpu.py --ptx-only [--ptx-bodies 1 2 8]
+    python benchmarks/gpu.py --ptx-only [--ptx-trees 1:1:0 1:0:1 2:2:0 8:8:0 8:0:8]
 """
 
 from __future__ import annotations
@@ -295,7 +297,8 @@ def chain_runs(n: int, seed: int = 0):
 
 
 def chain_compile_info() -> str:
-    """The 2-body tree kernel's registers, local memory, occupancy and compile (or load) time."""
+    """The stance example's tree kernel's (2 bodies on permanent joints) registers, local
+    memory, occupancy and compile (or load) time."""
     from numba import cuda
 
     from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_tree_kernel, kernel_resources, occupancy,
@@ -303,7 +306,7 @@ def chain_compile_info() -> str:
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
-    fn = compiled_tree_kernel(DOP853, 2)
+    fn = compiled_tree_kernel(DOP853, (2, 2, 0))
     loaded = time.perf_counter() - start
     regs, local = kernel_resources(fn, tree_launch_signature())
     device = cuda.get_current_device()
@@ -468,9 +471,10 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def ptx_only(bodies) -> None:
-    """The ``ptxas -v`` lines of the one-body kernel and of the tree kernel of each size of
-    ``bodies`` (module docstring, ``--ptx-only``)."""
+def ptx_only(shapes) -> None:
+    """The ``ptxas -v`` lines of the one-body kernel and of the tree kernel of each tree
+    shape of ``shapes`` (bodies, permanent joints, embedded joints; module docstring,
+    ``--ptx-only``)."""
     import re
 
     import numba.cuda.dispatcher
@@ -488,8 +492,9 @@ def ptx_only(bodies) -> None:
 
     numba.cuda.dispatcher.get_current_device = lambda: Device()
     kernels = {"one-body kernel (DOP853, 15 states)": (kernel_function(DOP853, 15), launch_signature(15))}
-    for n in bodies:
-        kernels[f"tree kernel (DOP853, {n} bodies)"] = (tree_kernel_function(DOP853, n), tree_launch_signature())
+    for n, p, e in shapes:
+        kernels[f"tree kernel (DOP853, {n} bodies, {p} permanent and {e} embedded joints)"] = (
+            tree_kernel_function(DOP853, (n, p, e)), tree_launch_signature())
     for name, (function, signature) in kernels.items():
         start = time.perf_counter()
         ptx, _ = cuda.compile_ptx(function, signature, cc=(9, 0), opt=True)
@@ -528,12 +533,13 @@ def main() -> None:
     parser.add_argument("--chain-n", type=int, nargs="+", default=[10_000, 100_000])
     parser.add_argument("--chain-cpu-n", type=int, default=2000)
     parser.add_argument("--chains-only", action="store_true", help="only the tree kernel's lines")
-    parser.add_argument("--ptx-bodies", type=int, nargs="+", default=[1, 2, 8], help="tree sizes of --ptx-only")
+    parser.add_argument("--ptx-trees", nargs="+", default=["1:1:0", "1:0:1", "2:2:0", "8:8:0", "8:0:8"],
+                        help="tree shapes of --ptx-only, BODIES:PERMANENT:EMBEDDED")
     parser.add_argument("--ptx-only", action="store_true",
                         help="no GPU: each kernel's registers and local memory by ptxas (module docstring)")
     args = parser.parse_args()
     if args.ptx_only:
-        ptx_only(args.ptx_bodies)
+        ptx_only([tuple(int(x) for x in shape.split(":")) for shape in args.ptx_trees])
         return
     if args.host_only:
         host_only(args.sweep_n, args.jobs)

@@ -314,7 +314,7 @@ def _kernel_cache_keys() -> tuple[str, str]:
     from rbstab.engine.cuda import kernel_function, tree_kernel_function
 
     return tuple(hashlib.sha256(f.__code__.co_code + dumps(tuple(c.cell_contents for c in f.__closure__ or ())))
-                 .hexdigest() for f in (kernel_function(2, 15), tree_kernel_function(2, 2)))
+                 .hexdigest() for f in (kernel_function(2, 15), tree_kernel_function(2, (2, 2, 0))))
 
 
 def test_kernel_cache_key_is_the_same_in_every_process():

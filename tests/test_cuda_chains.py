@@ -42,8 +42,8 @@ def test_tree_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
     """The tree kernel (DOP853, every joint variant's physics, the reduced rate's Cholesky
     solve, the permanent joints' impulsive reactions, disturbances and the admissible
     region; tree_launch_signature's types) compiles for CUDA from the CPU driver's source,
-    its thread-local arrays sized for a tree of 2 bodies."""
+    its thread-local arrays sized for a tree of 2 bodies on permanent joints."""
     from rbstab.engine.cuda import tree_kernel_function, tree_launch_signature
     from rbstab.engine.rk import DOP853
 
-    ptx_for_sm_90(monkeypatch, tree_kernel_function(DOP853, 2), tree_launch_signature())
+    ptx_for_sm_90(monkeypatch, tree_kernel_function(DOP853, (2, 2, 0)), tree_launch_signature())

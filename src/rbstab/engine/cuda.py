@@ -42,10 +42,11 @@ Trees of bodies (:func:`tree_kernel_function`, :func:`integrate_chain_runs_cuda`
 same driver on a tree's :class:`~rbstab.engine.systems.TreeSystem` through the system's
 functions (:mod:`rbstab.engine.systems`; the physics is
 :func:`rbstab.variants.tree.tree_rate`, compiled as a device function with scratch arrays
-in thread-local memory sized for the tree's number of bodies: a kernel per size, 1 to
-:data:`MAX_TREE_BODIES`), every launch one tree (its records passed once, read by every
-thread), each run with its own initial state and settings. A run gives its status, stop
-time, counts and its state (and W) at every ``stride``-th sample, as the CPU driver's
+in thread-local memory sized for the tree's shape: a kernel per number of bodies, 1 to
+:data:`MAX_TREE_BODIES`, of permanent joints and of embedded joints, :func:`tree_shape`),
+every launch one tree (its records passed once, read by every thread), each run with its
+own initial state and settings. A run gives its status, stop time, counts and its state
+(and W) at every ``stride``-th sample, as the CPU driver's
 (:func:`rbstab.engine.integrate.integrate_chain_runs`); the outputs and summary are the
 host's (:func:`rbstab.simulator.simulate_chain_blocks`).
 
@@ -87,7 +88,7 @@ from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, sten
                        stream_sample, stream_start)
 from ..variants.chain import ChainWork
 from ..variants.tree import TreeWork, expand_samples, reduce_states, reduced_size
-from ..variants.kernels import DISTURBANCE_WORK_AT, output_row
+from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample, sample_time
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
@@ -97,7 +98,7 @@ from .status import NOT_STARTED
 
 __all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
            "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
-           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "MAX_TREE_BODIES", "tree_launch_signature",
+           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "MAX_TREE_BODIES", "tree_launch_signature", "tree_shape",
            "tree_kernel_function", "compiled_tree_kernel", "integrate_chain_runs_cuda"]
 
 #: How to get what ``--engine cuda`` needs.
@@ -504,10 +505,19 @@ def tree_launch_signature() -> tuple:
             int64, ints, int64, ints, vector, ints, ints, cube, matrix)
 
 
-def tree_kernel_function(method: int, n_bodies: int):
-    """The Python function of the CUDA kernel of the runs of trees of ``n_bodies`` bodies
-    with method number ``method`` (:func:`tree_launch_signature`: one tree, k runs, one
-    thread a run). Its name names the two, so that each kernel has cache files of its own.
+def tree_shape(codes, d_at) -> tuple[int, int, int]:
+    """(bodies, permanent joints, embedded joints) of a tree of joint variant codes
+    ``codes`` (n,) whose embedded joints' D sit at ``d_at`` (n,; -1: none): what sizes the
+    tree kernel's thread-local arrays (:func:`tree_kernel_function`)."""
+    codes, d_at = np.asarray(codes), np.asarray(d_at)
+    return int(codes.size), int(np.sum(codes == PERMANENT)), int(np.sum(d_at >= 0))
+
+
+def tree_kernel_function(method: int, shape: tuple[int, int, int]):
+    """The Python function of the CUDA kernel of the runs of trees of ``shape`` (bodies n,
+    permanent joints p, embedded joints e; :func:`tree_shape`) with method number ``method``
+    (:func:`tree_launch_signature`: one tree, k runs, one thread a run). Its name names
+    them, so that each kernel has cache files of its own.
 
     The driver is :func:`kernel_function`'s (:func:`rbstab.engine.integrate.drive_run`,
     the persistent grid and the launch's one deadline) on a
@@ -515,18 +525,21 @@ def tree_kernel_function(method: int, n_bodies: int):
     the passes call as the CPU driver's do; a sample is the reduced state there (and W),
     written to device memory (:class:`~rbstab.engine.integrate.SampleRows`) as the CPU
     driver's samples are; the outputs and summary are computed from them on the host. Its
-    thread-local arrays are sized for ``n_bodies`` bodies (the stack a thread grows with the
-    tree): the longest state (15 entries a body: 12, and an embedded joint's 3), the mass
-    matrix (6 n_bodies)^2 of :func:`rbstab.variants.tree.tree_rate` and the permanent joints'
-    impulsive system (3 n_bodies)^2 of :func:`rbstab.variants.chain.chain_impulses`."""
+    thread-local arrays are sized for the tree's shape (the stack a thread grows with the
+    tree): the reduced state (n_r = 12 n - 6 p + 3 e entries) and its Runge-Kutta stages, the
+    maximal image (12 n + 3 e), the mass matrix (n_u)^2 of
+    :func:`rbstab.variants.tree.tree_rate` (n_u = 6 n - 3 p generalised velocities) and the
+    permanent joints' impulsive system (3 p)^2 of
+    :func:`rbstab.variants.chain.chain_impulses`."""
     from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
 
     n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
     scheme = (method, int(N_STAGES[method]), method == DOP853)
-    bodies = int(n_bodies)
-    states = 15 * bodies  # the longest maximal (and reduced) state
-    size = states + 1  # the longest integrated vector: the state and W
-    rows, columns = 3 * bodies, 6 * bodies
+    bodies, permanent, embedded = (int(x) for x in shape)
+    states = 12 * bodies + 3 * embedded  # the maximal image
+    rates = states + 1  # its rate, and W's
+    size = states - 6 * permanent + 1  # the integrated vector: the reduced state and W
+    rows, columns = max(1, 3 * permanent), 6 * bodies - 3 * permanent
 
     def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y0s, settings, n_samples, stride, control,
                  limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
@@ -544,7 +557,7 @@ def tree_kernel_function(method: int, n_bodies: int):
                           cuda.local.array((rows, rows), float64), cuda.local.array(rows, float64),
                           cuda.local.array(bodies, int64), cuda.local.array((bodies, 7, 3), float64),
                           cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64))
-        scratch = TreeWork(cuda.local.array(states, float64), cuda.local.array(size, float64),
+        scratch = TreeWork(cuda.local.array(states, float64), cuda.local.array(rates, float64),
                            cuda.local.array((bodies, 6), float64), cuda.local.array((columns, columns), float64),
                            cuda.local.array(columns, float64), cuda.local.array(bodies, float64),
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3, 3), float64),
@@ -590,7 +603,7 @@ def tree_kernel_function(method: int, n_bodies: int):
                 work_o[k, i] = math.nan
             k = cuda.atomic.add(control, 0, 1)
 
-    run_tree.__name__ = run_tree.__qualname__ = f"run_tree{bodies}_{METHODS[method]}"
+    run_tree.__name__ = run_tree.__qualname__ = f"run_tree{bodies}_{permanent}p{embedded}e_{METHODS[method]}"
     return run_tree
 
 
@@ -599,19 +612,21 @@ TREE_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of")
 
 
 @functools.lru_cache(maxsize=None)
-def compiled_tree_kernel(method: int, n_bodies: int):
-    """The CUDA kernel of the runs of trees of ``n_bodies`` bodies with method number
-    ``method``, compiled for :func:`tree_launch_signature` or loaded from the disk cache,
-    once per process, as :func:`compiled_kernel`."""
+def compiled_tree_kernel(method: int, shape: tuple[int, int, int]):
+    """The CUDA kernel of the runs of trees of ``shape`` (:func:`tree_shape`) with method
+    number ``method``, compiled for :func:`tree_launch_signature` or loaded from the disk
+    cache, once per process, as :func:`compiled_kernel`."""
     _cuda()
-    function = tree_kernel_function(method, n_bodies)
+    function = tree_kernel_function(method, shape)
     if simulated():
         return cuda.jit(_simulator_function(function, TREE_DEVICE_FUNCTIONS))
     from numba.cuda.core import config  # optional: numba-cuda
 
     config.CACHE_DIR = str(CACHE_DIR)
-    group = f"cuda-tree{n_bodies}-{METHODS[method]}"
-    what = f"the CUDA kernel for trees of {n_bodies} bodies with {METHODS[method]}"
+    n, p, e = shape
+    group = f"cuda-tree{n}-{p}p{e}e-{METHODS[method]}"
+    what = (f"the CUDA kernel for trees of {n} bodies ({p} permanent joints, {e} embedded) with "
+            f"{METHODS[method]}")
     with _compile_lock(group):
         warm = cache_is_warm(group)
         if not warm:
@@ -861,7 +876,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     tree = (np.ascontiguousarray(system.params, dtype=PARAMETERS), *ints, np.ascontiguousarray(system.ppoints,
                                                                                                dtype=float), *layout)
     n_kept = len(range(0, n_samples, stride))
-    fn = compiled_tree_kernel(method_number(method), n_bodies)
+    fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at))
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
         _NO_LIMIT_NS)
     blocks = _resident_blocks(fn, tree_launch_signature())
