@@ -296,3 +296,27 @@ def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():
     v = C.evaluate(compiled, np.linspace(0, 0.6, 61), sol.samples[0])["lyapunov"]
     v_before = C.lyapunov(compiled, before)[0]
     assert v[at] - v_before == pytest.approx(energy, rel=1e-9, abs=1e-12)
+
+
+def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_starts():
+    """v's zero (h) is fixed by the chain's undisturbed rest state: a constant torque on the
+    trunk of the stance example from t = 0 and the same from t = 1 s give the same v(0),
+    which is v(0) without it; and a run started at that rest, the torque starting at 1 s,
+    has v = 0 until then."""
+    from rbstab.simulator import simulate_chain
+
+    step = "disturbances=[{{kind: step, quantity: torque, body: trunk, value: [5, 0, 0], start: {}}}]"
+    stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    short = ["simulation.t_end=2.0", "simulation.n_samples=21"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        configs = {name: load_any_config(stance, [*short, *extra]) for name, extra in (
+            ("none", []), ("at 0", [step.format(0.0)]), ("at 1", [step.format(1.0)]))}
+    v0 = {name: simulate_chain(config).outputs["lyapunov"][0] for name, config in configs.items()}
+    assert v0["at 0"] == v0["at 1"] == v0["none"] > 0.0
+    compiled = C.compile_chain(configs["at 1"].chain)
+    rest, _ = C.rest_state(compiled)
+    sol = integrate_chain_runs(tree_system(compiled), rest[None], settings_rows([configs["at 1"].simulation]),
+                               method="DOP853", n_samples=21)
+    v = C.evaluate(compiled, np.linspace(0.0, 2.0, 21), sol.samples[0])["lyapunov"]
+    assert np.abs(v[:10]).max() < 1e-9 and v[-1] > 1e-3  # at rest until the torque starts, then moved

@@ -700,13 +700,21 @@ def rest_acceleration(q, params, codes, parents, ppoints, d_at, y, dy, work, out
             k += 3
 
 
+def _undisturbed(params: np.ndarray) -> np.ndarray:
+    """A copy of the records ``params`` without their disturbances."""
+    params = params.copy()
+    params["disturbance_count"] = 0.0
+    return params
+
+
 def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     """(the chain's rest state (n_states,), its potential [J] without h): the least potential
     (joint and body feedback, point laws, gravity) found by a local minimisation (scipy's
     BFGS) over the configuration (every Theta_i, X_i of bodies whose joint is not
     ``permanent``, D of embedded joints; a permanent joint's child placed on its parent)
     from the reference configuration (Theta = 0, every body placed on its joint, E_j = 0);
-    (None, nan) where the potential has no minimum there (it falls without bound)."""
+    (None, nan) where the potential has no minimum there (it falls without bound). The
+    rest state is the undisturbed chain's: its disturbances do not move it (nor v's zero)."""
     from scipy.optimize import minimize, root  # heavy: scipy, only where a rest state is sought
 
     n = compiled.size
@@ -716,7 +724,7 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     for k, i in enumerate(free):
         q0[3 * n + 3 * k: 3 * n + 3 * k + 3] = placed[12 * i + 6: 12 * i + 9]
     y, dy, work = np.empty(compiled.n_states), np.empty(compiled.n_states), chain_work(n)
-    args = (*compiled.args, y, dy, work)
+    args = (_undisturbed(compiled.params), *compiled.args[1:], y, dy, work)
 
     def potential_and_gradient(q):
         gradient = np.empty(q.shape[0])
@@ -750,7 +758,8 @@ def rest_offset(compiled: CompiledChain) -> float:
     potential has no minimum."""
     if not np.any(compiled.chain.gravity):
         return 0.0
-    key = b"".join(np.ascontiguousarray(a).tobytes() for a in (*compiled.args, compiled.chain.gravity))
+    key = b"".join(np.ascontiguousarray(a).tobytes() for a in (_undisturbed(compiled.params), *compiled.args[1:],
+                                                                 compiled.chain.gravity))
     if key not in _OFFSETS:  # the runs of a sweep over initial states share their chain's
         if len(_OFFSETS) >= _MAX_OFFSETS:
             _OFFSETS.clear()
