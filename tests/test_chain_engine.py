@@ -108,6 +108,25 @@ def test_a_pulses_work_on_a_chain_is_what_v_gains_without_damping():
             assert v[-1] - v[0] < work[-1] - 1e-3
 
 
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_chain_runs_outputs_carry_its_disturbances_work_and_power(engine):
+    """A chain run's outputs (what its file holds) carry the disturbances' power P_d, their
+    work W and the windows' edges; without damping v - W stays v(0), on both engines, and W
+    is the time integral of P_d (trapezoids over the pulse)."""
+    from rbstab.simulator import simulate_chain
+
+    result = simulate_chain(_pulsed_chain(0.0), engine=engine)
+    out, time = result.outputs, result.time
+    assert result.status == "success"
+    w, p = out["disturbance_work"], out["disturbance_power"]
+    assert w.shape == p.shape == out["disturbance_edges"].shape == time.shape
+    assert abs(w[-1]) > 0.05 and np.ptp(w[time >= 0.5]) == 0.0
+    np.testing.assert_allclose(out["lyapunov"] - w, out["lyapunov"][0], atol=1e-7 * (1 + abs(w[-1])))
+    inside = (time >= 0.2) & (time <= 0.5)
+    assert np.trapezoid(p[inside], time[inside]) == pytest.approx(w[-1], rel=2e-2)
+    assert list(np.unique(out["disturbance_edges"])) == [0.0, 1.0, 2.0]
+
+
 def test_a_chains_basin_map_runs_each_point_as_rbstab_run_would():
     """Each grid point of a chain's basin map is the run of the configuration with that
     initial state (the bodies the config places re-placed on their joints: a tilt of the

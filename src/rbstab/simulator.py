@@ -753,19 +753,20 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     start = _time.perf_counter()
     trajectory = tree.integrate(config, timeout=timeout)
     compiled, time = trajectory.compiled, trajectory.time
-    outputs, summary = _chain_outputs(compiled, config, time, trajectory.states)
+    outputs, summary = _chain_outputs(compiled, config, time, trajectory.states, trajectory.work)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,
                      _time.perf_counter() - start, summary)
 
 
-def _chain_outputs(compiled, config, time: np.ndarray, states: np.ndarray) -> tuple[dict, dict]:
-    """(outputs, summary) of a chain run's samples ``states`` at ``time``."""
+def _chain_outputs(compiled, config, time: np.ndarray, states: np.ndarray, work: np.ndarray) -> tuple[dict, dict]:
+    """(outputs, summary) of a chain run's samples ``states`` at ``time`` and its
+    disturbances' work ``work`` there."""
     from .variants import chain as C  # heavy: numba
 
-    outputs = C.evaluate(compiled, time, states)
+    outputs = C.evaluate(compiled, time, states, work)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, chain_summary(time, outputs, config.chain.joint_names, C.disturbance_edges(compiled, time))
+    return outputs, chain_summary(time, outputs, config.chain.joint_names, outputs["disturbance_edges"])
 
 
 def _chain_key(compiled, sim) -> bytes:
@@ -851,7 +852,7 @@ def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu:
         traces, summaries, status, message, seconds = [], [], [], [], []
         for j in range(lo, hi):
             t0 = _time.perf_counter()
-            run_outputs, summary = _chain_outputs(compiled, configs[members[j]], time, sol.samples[j])
+            run_outputs, summary = _chain_outputs(compiled, configs[members[j]], time, sol.samples[j], sol.work[j])
             if outputs:
                 traces.append(run_outputs)
             summaries.append(summary)

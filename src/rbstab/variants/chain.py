@@ -517,19 +517,22 @@ def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
 
 
 @jit
-def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars):
+def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars, power):
     """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,) into
-    ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5)."""
-    dy = np.empty(states.shape[1])
+    ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5) and ``power`` (m,) the
+    disturbances' power [W]."""
+    dy = np.empty(states.shape[1] + 1)
     work = chain_work(codes.shape[0])
     for k in range(states.shape[0]):
         if states[k, 0] != states[k, 0]:
             joints[k] = np.nan
             bodies[k] = np.nan
             scalars[k] = np.nan
+            power[k] = np.nan
             continue
         chain_evaluate(times[k], states[k], params, codes, parents, ppoints, d_at, dy, joints[k], bodies[k], scalars[k],
                        work)
+        power[k] = dy[states.shape[1]]
 
 
 # -- the compiled description ------------------------------------------------------------------
@@ -891,6 +894,8 @@ class ChainTrajectory:
     solver : dict
         ``nfev``, ``solver_status``, ``wall_time`` [s].
     compiled : CompiledChain
+    work : ndarray, shape (n_samples,)
+        The disturbances' work W [J] at the samples (0 without; NaN after a failure).
     """
 
     time: np.ndarray
@@ -899,6 +904,7 @@ class ChainTrajectory:
     message: str
     solver: dict
     compiled: CompiledChain
+    work: np.ndarray
 
 
 def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
@@ -985,7 +991,8 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
     return sorted(times)
 
 
-def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray) -> dict[str, np.ndarray]:
+def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
+             work: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Every output of a chain run's samples ``states`` (m, n_states) at ``time`` (m,):
     per body (m, n, 3): theta, omega, position, velocity, force_h (H delivered, inertial);
     per joint (m, n, 3): constraint_error E_j, constraint_rate F_j, constraint_force
@@ -994,12 +1001,15 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray) -> d
     Omega_j [rad/s] (child frame); per joint (m, n): constraint_drift |E_j| [m] (NaN where
     not permanent); scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
     terms lyapunov_kinetic, lyapunov_joint, lyapunov_body, lyapunov_gravity [J] (h in the
-    gravity term)."""
+    gravity term), disturbance_power [W], disturbance_work W [J] (``work`` (m,), the run's
+    integrated work at the samples; 0 where not given: it is a run's history, not a
+    state's) and disturbance_edges (the windows' edges at or before each sample,
+    :func:`disturbance_edges`)."""
     time = np.ascontiguousarray(time, dtype=float)
     states = np.ascontiguousarray(np.atleast_2d(states), dtype=float)
     m, n = states.shape[0], compiled.size
-    joints, bodies, scalars = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5))
-    chain_samples(time, states, *compiled.args, joints, bodies, scalars)
+    joints, bodies, scalars, power = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5)), np.empty(m)
+    chain_samples(time, states, *compiled.args, joints, bodies, scalars, power)
     blocks = states[:, : 12 * n].reshape(m, n, 4, 3)
     out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
     out["force_h"] = bodies
@@ -1015,4 +1025,7 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray) -> d
     out["lyapunov_gravity"] = scalars[:, _GRAVITY] + compiled.offset
     out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + compiled.offset
     out["lyapunov_rate"] = scalars[:, _RATE]
+    out["disturbance_power"] = power
+    out["disturbance_work"] = np.zeros(m) if work is None else np.asarray(work, dtype=float).copy()
+    out["disturbance_edges"] = disturbance_edges(compiled, time)
     return out

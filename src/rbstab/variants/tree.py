@@ -55,6 +55,7 @@ from .chain import (
     chain_work,
     euler_angles,
 )
+from .disturbances import next_breakpoint
 from .kernels import PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "tree_velocities",
@@ -457,10 +458,14 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     tolerances, steps), sampled at ``n_samples`` times on [0, t_end]: the reference of the
     compiled driver. It stops ``failed`` where any body's or joint's |theta_2| reaches pi/2 -
     ``gimbal_margin`` or the state leaves ``simulation.limits`` (the rows after are NaN), or
-    after ``timeout`` [s] of wall time. Impulses split the run: a new ``solve_ivp`` from each
-    impulse's time, from the state just after it (a sample at that time shows it; the
+    after ``timeout`` [s] of wall time. The edges of the disturbances' windows split the
+    run: a new ``solve_ivp`` from each edge (the rate evaluated below the next one), from
+    the state just after the impulses that start there (a sample at that time shows it; the
     permanent joints' impulsive reactions, :func:`rbstab.variants.chain.chain_impulses`,
-    keep them held). ``states`` are the maximal image (12 n + 3 e) of the samples."""
+    keep them held). ``states`` are the maximal image (12 n + 3 e) of the samples; ``work``
+    the disturbances' work W [J] there, integrated with the state where the chain has
+    disturbances (its rate their power, left out of the error norm, as the compiled
+    driver's; each impulse adds its energy)."""
     from scipy.integrate import solve_ivp  # heavy: scipy, only where a tree is integrated by scipy
 
     sim = config.simulation
@@ -468,9 +473,13 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     layout = tree_layout(compiled)
     n = compiled.size
     args, tree = compiled.args, (*compiled.args, *layout.args)
-    y = reduce_state(compiled, layout, initial_state(config))
+    n_r = layout.n_r
+    disturbed = bool(np.any(compiled.params["disturbance_count"] > 0.0))
+    # W after the state where the chain has disturbances: its rate their power, out of the error norm
+    y = np.append(reduce_state(compiled, layout, initial_state(config)), [0.0] if disturbed else [])
+    atol = np.append(np.full(n_r, sim.atol), [np.inf] if disturbed else [])
     time = np.linspace(0.0, sim.t_end, sim.n_samples)
-    dy = np.empty(layout.n_r)
+    dy = np.empty(y.size)
     work = tree_work(n, compiled.n_states)
     rot, rate = np.empty((n, 3, 3)), np.empty((n, 3, 3))
     start = _time.perf_counter()
@@ -484,47 +493,57 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
         tree_expand(np.ascontiguousarray(yr), *tree, full, rot, rate, True)
         return full
 
+    below = [math.inf]  # the float below the segment's end: no evaluation at or after an edge
+
     def rhs(t, yr):
         if limit is not None and math.isfinite(limit) and _time.perf_counter() - start > limit:
             raise _Timeout
-        tree_rate(t, np.ascontiguousarray(yr), *tree, dy, work)
+        tree_rate(min(t, below[0]), np.ascontiguousarray(yr), *tree, dy, work)
         return dy.copy()
 
     def jump(t, yr):
-        """Apply the impulses that start at t to ``yr`` (in place)."""
-        full = maximal(yr)
-        if chain_impulses(t, full, *args[:4], work.chain) != 0.0:
+        """Apply the impulses that start at t to ``yr`` (in place; their energy added to W)."""
+        full = maximal(yr[:n_r])
+        energy = chain_impulses(t, full, *args[:4], work.chain)
+        if energy != 0.0:
             tree_velocities(full, compiled.codes, compiled.parents, layout.r_at, yr)
+            if disturbed:
+                yr[n_r] += energy
 
     def lock(t, yr):
-        return _gimbal_margin(compiled, maximal(yr), sim.gimbal_margin)
+        return _gimbal_margin(compiled, maximal(yr[:n_r]), sim.gimbal_margin)
 
     lock.terminal = True
     events = [lock]
     if sim.limits is not None:
         def region(t, yr):
-            return _region_margin(compiled, maximal(yr), sim.limits)[0]
+            return _region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
 
         region.terminal = True
         events.append(region)
     jumps = impulse_times(compiled, sim.t_end)
-    edges = [0.0] + [t for t in jumps if 0.0 < t < sim.t_end] + [sim.t_end]
-    states = np.full((time.size, layout.n_r), np.nan)
+    edges = [0.0]  # every edge of a disturbance's window: no step crosses one
+    while edges[-1] < sim.t_end:
+        edges.append(min(next_breakpoint(p, edges[-1], float(sim.t_end)) for p in compiled.params))
+    states = np.full((time.size, y.size), np.nan)
     nfev = 0
     status, message = "success", "The solver successfully reached the end of the integration interval."
 
     def trajectory(status, message, solver_status):
         full = np.full((time.size, compiled.n_states), np.nan)
-        expand_samples(states[None], *tree, full[None])
+        expand_samples(np.ascontiguousarray(states[None, :, :n_r]), *tree, full[None])
+        done = states[:, n_r] if disturbed else np.where(np.isnan(states[:, 0]), np.nan, 0.0)
         return ChainTrajectory(time, full, status, message, {"nfev": nfev, "solver_status": solver_status,
-                                                             "wall_time": _time.perf_counter() - start}, compiled)
+                                                             "wall_time": _time.perf_counter() - start}, compiled,
+                               done)
 
     for a, b in zip(edges[:-1], edges[1:]):
         jump(a, y)
+        below[0] = math.nextafter(b, a) if b < sim.t_end else math.inf
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
         try:
-            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=sim.atol,
+            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
                             max_step=sim.max_step, events=events)
         except _Timeout:
             states[:] = np.nan
@@ -539,7 +558,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
             break
         if sol.status == 1:
             t_out = float(sol.t_events[1][0])
-            what = _region_margin(compiled, maximal(sol.y_events[1][0]), sim.limits)[1]
+            what = _region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
             status = "failed"
             message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
             break
