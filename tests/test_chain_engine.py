@@ -63,8 +63,9 @@ def test_one_body_and_its_one_body_tree_have_one_state_and_one_motion(path):
     assert body.status[0] == tree.status[0] == 0
     samples = tree.samples[0] if y0.size != 6 else tree.samples[0, :, :6]  # permanent: the maximal image's Theta, Omega
     scale = 1.0 + np.abs(body.samples[0]).max(axis=0)
-    assert np.max(np.abs(samples - body.samples[0]) / scale) < 1e-8
-    np.testing.assert_allclose(tree.work[0], body.work[0], rtol=0, atol=1e-8 * (1.0 + np.abs(body.work).max()))
+    # two formulations of one model: their rates agree to rounding, so the runs to the solver's tolerance
+    assert np.max(np.abs(samples - body.samples[0]) / scale) < 10 * sim.rtol
+    np.testing.assert_allclose(tree.work[0], body.work[0], rtol=0, atol=10 * sim.rtol * (1.0 + np.abs(body.work).max()))
 
 
 def _pulsed_chain(l_r):

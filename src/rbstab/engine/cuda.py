@@ -485,7 +485,7 @@ MAX_TREE_BODIES = 8
 
 def tree_launch_signature() -> tuple:
     """numba's types of a tree launch's arguments, in order (every array C-contiguous):
-    the signature :func:`compiled_tree_kernel` compiles for every tree size.
+    the signature :func:`compiled_tree_kernel` compiles for every tree shape.
 
     The tree, passed once and read by every thread (:class:`rbstab.engine.systems.TreeSystem`'s
     arrays): params :data:`rbstab.model.PARAMETERS` (n,), codes, parents int64 (n,), ppoints
@@ -561,7 +561,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                            cuda.local.array((bodies, 6), float64), cuda.local.array((columns, columns), float64),
                            cuda.local.array(columns, float64), cuda.local.array(bodies, float64),
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3, 3), float64),
-                           cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64), chain)
+                           cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
+                           cuda.local.array(bodies, int64), chain)
         p = TreeSystem(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, scratch)
         n_runs, n_state = y0s.shape[0], y0s.shape[1]
         n_kept = samples_o.shape[1]

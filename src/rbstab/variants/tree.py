@@ -17,7 +17,8 @@ wrench on body i (body-frame torque with -Omega x J Omega, inertial force) and k
 acceleration at du/dt = 0 (an outward recursion). M and the right-hand side are assembled
 by composite rigid bodies (each joint's column moves the bodies hanging from it as one;
 its momentum is projected on the columns of the joints above it), and M is solved by
-Cholesky. No constraint force enters the rate and no constraint drifts.
+Cholesky within its envelope (group by group of the bodies permanent joints hold
+together). No constraint force enters the rate and no constraint drifts.
 
 Reduced state layout (``n_r``): body ``i`` at ``y[r_at[i]:]``: Theta_j, Omega_j (6) where
 joint i is ``permanent``, else Theta, Omega, X, V (12); then the 3 states D [m] of each
@@ -38,6 +39,7 @@ from ..jit import jit
 from ..kinematics import add, cross, matTvec, matvec, rotation_and_rate_of, sub, vector
 from .chain import (
     _OMEGA_J,
+    _cholesky_solve,
     ChainTrajectory,
     _gimbal_margin,
     _region_margin,
@@ -47,7 +49,6 @@ from .chain import (
     initial_state,
     _THETA_J,
     CompiledChain,
-    _cholesky_solve,
     _put,
     _relative,
     chain_core,
@@ -110,11 +111,12 @@ def tree_layout(compiled: CompiledChain) -> TreeLayout:
 #: (du/dt after the solve); per body, with the bodies that permanent joints hang from it (its
 #: composite, inertial frame): ``mass`` (n,), ``first`` (n, 3) sum m X, ``second`` (n, 3, 3)
 #: sum (A J A' + m [X]x' [X]x), ``force`` (n, 3) and ``moment`` (n, 3, about the origin) the
-#: sum of w_b - M_b kappa_b; ``chain`` the chain's scratch
+#: sum of w_b - M_b kappa_b; ``start`` (n,) int64 the first column of body i's rows of M (its
+#: envelope, :func:`_group_start`); ``chain`` the chain's scratch
 #: (:class:`rbstab.variants.chain.ChainWork`, whose ``joints``, ``bodies`` and ``scalars``
 #: receive the joints', bodies' and v's quantities).
 TreeWork = namedtuple("TreeWork", ["y", "dy", "kappa", "matrix", "rhs", "mass", "first", "second", "force", "moment",
-                                   "chain"])
+                                   "start", "chain"])
 
 
 @jit
@@ -123,7 +125,7 @@ def tree_work(n, n_states):
     ``n_states`` entries."""
     return TreeWork(np.empty(n_states), np.empty(n_states + 1), np.empty((n, 6)), np.empty((6 * n, 6 * n)),
                     np.empty(6 * n), np.empty(n), np.empty((n, 3)), np.empty((n, 3, 3)), np.empty((n, 3)),
-                    np.empty((n, 3)), chain_work(n))
+                    np.empty((n, 3)), np.empty(n, dtype=np.int64), chain_work(n))
 
 
 @jit(forceinline=True)
@@ -212,6 +214,63 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
                 y[d_at[j] + k] = yr[rd_at[j] + k]
 
 
+@jit(forceinline=True)
+def _group_start(i, codes, parents, u_at):
+    """The first generalised velocity of body i's group: the bodies its permanent joints
+    chain it to up to a body whose joint is not permanent (or the ground's child). Body i's
+    rows of M are zero before it (parents come first in the body order)."""
+    k = i
+    while codes[k] == PERMANENT and parents[k] >= 0:
+        k = parents[k]
+    return u_at[k]
+
+
+@jit(forceinline=True)
+def _envelope_cholesky_solve(matrix, rhs, codes, u_at, start):
+    """Solve M x = ``rhs`` in place for the tree's mass matrix M (lower triangle of
+    ``matrix``, within its envelope: body i's rows from its group's first column
+    ``start[i]``, :func:`_group_start`), its factor L (L L' = M) written over it. The groups of bodies
+    that permanent joints hold together are blocks of M, and L keeps M's envelope, so a
+    tree factorises group by group (a tree without permanent joints, body by body)."""
+    n = codes.shape[0]
+    for i in range(n):
+        s_i = start[i]
+        end_i = u_at[i] + (3 if codes[i] == PERMANENT else 6)
+        for c in range(u_at[i], end_i):
+            total = matrix[c, c]
+            for k in range(s_i, c):
+                total -= matrix[c, k] * matrix[c, k]
+            diagonal = math.sqrt(total)
+            matrix[c, c] = diagonal
+            for j in range(i, n):
+                s_j = start[j]
+                if s_j > c:
+                    continue
+                first = max(s_i, s_j)
+                for r in range(max(c + 1, u_at[j]), u_at[j] + (3 if codes[j] == PERMANENT else 6)):
+                    total = matrix[r, c]
+                    for k in range(first, c):
+                        total -= matrix[r, k] * matrix[c, k]
+                    matrix[r, c] = total / diagonal
+    for i in range(n):
+        s_i = start[i]
+        for r in range(u_at[i], u_at[i] + (3 if codes[i] == PERMANENT else 6)):
+            total = rhs[r]
+            for k in range(s_i, r):
+                total -= matrix[r, k] * rhs[k]
+            rhs[r] = total / matrix[r, r]
+    for j in range(n - 1, -1, -1):
+        end_j = u_at[j] + (3 if codes[j] == PERMANENT else 6)
+        for r in range(end_j - 1, u_at[j] - 1, -1):
+            total = rhs[r]
+            for i in range(j, n):
+                if start[i] > r:
+                    continue
+                for k in range(max(r + 1, u_at[i]), u_at[i] + (3 if codes[i] == PERMANENT else 6)):
+                    total -= matrix[k, r] * rhs[k]
+            rhs[r] = total / matrix[r, r]
+
+
 @jit
 def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work):
     """The rate of a tree in reduced coordinates (docs/physics.md, "A tree in reduced
@@ -230,15 +289,45 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
     positive definite at every orientation, and a state at an Euler singularity (eq 5) of a
     12-state body or a permanent joint gives non-finite rates, which the driver reports."""
     n = codes.shape[0]
-    y, dy, kappa, matrix, rhs, cw = work.y, work.dy, work.kappa, work.matrix, work.rhs, work.chain
+    y, dy, cw = work.y, work.dy, work.chain
     tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
     _, _, work_power, _, _ = chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, cw.joints, cw.bodies,
                                             cw.scalars, cw, True)
-    rot, torque, force = cw.rot, cw.torque, cw.force
-    mass, first, second, f_net, n_net = work.mass, work.first, work.second, work.force, work.moment
+    torque, force = cw.torque, cw.force
     n_u = 0
     for i in range(n):
         n_u += 3 if codes[i] == PERMANENT else 6
+    if n_u == 6 * n:  # no permanent joint: M = diag(J_i, m_i I), each body's own Newton-Euler equations
+        for i in range(n):
+            at, p = r_at[i], params[i]
+            _put(dyr, at, matvec(_rows(cw.rate, i), vector(y, 12 * i + 3)))
+            _put(dyr, at + 3, matvec(p.inertia_inv, vector(torque[i], 0)))
+            _put(dyr, at + 6, vector(y, 12 * i + 9))
+            _put(dyr, at + 9, (force[i, 0] / p.mass, force[i, 1] / p.mass, force[i, 2] / p.mass))
+    else:
+        _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_u)
+    n_r = 0
+    for i in range(n):
+        n_r += 6 if codes[i] == PERMANENT else 12
+    for j in range(n):
+        if d_at[j] >= 0:
+            n_r += 3
+            for k in range(3):
+                dyr[rd_at[j] + k] = dy[d_at[j] + k]
+    if dyr.shape[0] > n_r:  # the work W of the disturbances, integrated after the state
+        dyr[n_r] = work_power
+
+
+@jit(forceinline=True)
+def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_u):
+    """:func:`tree_rate`'s generalised accelerations of a tree with permanent joints, after
+    its applied wrenches (``work.chain``'s ``torque``, ``force``, rotations at ``work.y``):
+    kappa, the composite rigid bodies, M and Q - b, the solve; writes every body's rates
+    into ``dyr``."""
+    n = codes.shape[0]
+    y, kappa, matrix, rhs, cw = work.y, work.kappa, work.matrix, work.rhs, work.chain
+    rot, torque, force = cw.rot, cw.torque, cw.force
+    mass, first, second, f_net, n_net = work.mass, work.first, work.second, work.force, work.moment
     # kappa_i, outward: each body's (dOmega_i/dt, dV_i/dt) at du/dt = 0
     for i in range(n):
         if codes[i] != PERMANENT:
@@ -297,10 +386,13 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
     # about the joint's point P along A_i e_c; for a 12-state body about its centre of mass,
     # and a unit velocity e_l); its momentum (f, moment about P) projected on the columns of
     # the joint and of every joint above it in the group
-    for a in range(n_u):
-        rhs[a] = 0.0
-        for b in range(a + 1):
-            matrix[a, b] = 0.0
+    start = work.start
+    for i in range(n):  # M's envelope: a row's columns from its group's first (parents come first)
+        start[i] = _group_start(i, codes, parents, u_at)
+        for a in range(u_at[i], u_at[i] + (3 if codes[i] == PERMANENT else 6)):
+            rhs[a] = 0.0
+            for b in range(start[i], a + 1):
+                matrix[a, b] = 0.0
     for i in range(n):
         at = u_at[i]
         a_i = _rows(rot, i)
@@ -346,7 +438,13 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
                 rhs[at + 3 + l] = f_net[i, l]
                 for l2 in range(l + 1):
                     matrix[at + 3 + l, at + 3 + l2] = m if l == l2 else 0.0
-    _cholesky_solve(matrix, rhs, n_u)
+    groups = 0
+    for i in range(n):
+        groups += 1 if start[i] == u_at[i] else 0
+    if groups == 1:  # one group: M is dense
+        _cholesky_solve(matrix, rhs, n_u)
+    else:
+        _envelope_cholesky_solve(matrix, rhs, codes, u_at, start)
     for i in range(n):
         at, u = r_at[i], u_at[i]
         if codes[i] == PERMANENT:
@@ -359,16 +457,6 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
             for k in range(3):
                 dyr[at + 3 + k] = rhs[u + k]
                 dyr[at + 9 + k] = rhs[u + 3 + k]
-    n_r = 0
-    for i in range(n):
-        n_r += 6 if codes[i] == PERMANENT else 12
-    for j in range(n):
-        if d_at[j] >= 0:
-            n_r += 3
-            for k in range(3):
-                dyr[rd_at[j] + k] = dy[d_at[j] + k]
-    if dyr.shape[0] > n_r:  # the work W of the disturbances, integrated after the state
-        dyr[n_r] = work_power
 
 
 @jit
@@ -397,6 +485,12 @@ def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, r
     """The maximal image ``out`` (k, m, 12 n + 3 e) of reduced states ``samples`` (k, m,
     n_r) row by row (NaN rows stay NaN)."""
     rot, rate = np.empty((codes.shape[0], 3, 3)), np.empty((codes.shape[0], 3, 3))
+    permanent = False
+    for i in range(codes.shape[0]):
+        permanent = permanent or codes[i] == PERMANENT
+    if not permanent:  # the two layouts are one
+        out[:] = samples
+        return
     for a in range(samples.shape[0]):
         for b in range(samples.shape[1]):
             tree_expand(samples[a, b], params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, out[a, b], rot, rate,
