@@ -18,6 +18,7 @@ Run: python benchmarks/versus_mujoco.py  (MuJoCo: pip install -e ".[test]")
 
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -29,10 +30,12 @@ from rbstab.config.chains import load_any_config
 from rbstab.engine.integrate import integrate_chain_runs
 from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import tree_system
-from rbstab.kinematics import rotation_matrix
 from rbstab.variants import chain as C
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
+from reference_mujoco import double_pendulum  # noqa: E402  (MuJoCo's model of the example)
+
 T_END = 2.0
 DT = 2e-3
 
@@ -69,20 +72,7 @@ def rbstab_run(rtol: float, k: int = 1):
 
 def mujoco_run(config):
     """(a function running MuJoCo's RK4 over 2 s, the centres of mass at t_end (2, 3))."""
-    upper, lower = config.chain.bodies
-    xml = f"""<mujoco><option gravity="0 0 -9.81" timestep="{DT}" integrator="RK4"/>
-      <worldbody><body name="upper" pos="0 0 0"><joint type="ball" damping="0"/>
-        <inertial pos="0 0 -0.5" mass="{upper.mass}" diaginertia="{' '.join(map(str, np.diag(upper.inertia)))}"/>
-        <body name="lower" pos="0 0 -1"><joint type="ball" damping="0"/>
-          <inertial pos="0 0 -0.5" mass="{lower.mass}" diaginertia="{' '.join(map(str, np.diag(lower.inertia)))}"/>
-        </body></body></worldbody></mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    a1 = rotation_matrix(config.initial_state["upper"]["theta"])
-    a2 = rotation_matrix(config.initial_state["lower"]["theta"])
-    start = np.empty(8)
-    for k, a in enumerate((a1, a1.T @ a2)):
-        mujoco.mju_mat2Quat(start[4 * k: 4 * k + 4], a.flatten())
+    model, data, start = double_pendulum(config, DT)
     steps = int(round(T_END / DT))
 
     def run():

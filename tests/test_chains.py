@@ -16,7 +16,6 @@ from scipy.integrate import solve_ivp
 from conftest import paper_body, paper_gains
 from rbstab.chain import GROUND, Body, Chain, Joint, single
 from rbstab.config.chains import load_any_config
-from rbstab.kinematics import rotation_matrix
 from rbstab.model import Saturation
 from rbstab.variants import VARIANTS
 from rbstab.variants import chain as C
@@ -133,21 +132,10 @@ def test_double_pendulum_conserves_energy_and_moves_as_mujocos():
     assert np.ptp(out["lyapunov"]) < 1e-8 * (1 + np.abs(out["lyapunov_kinetic"]).max())
     assert np.nanmax(out["constraint_drift"]) < 1e-8
     assert np.abs(out["lyapunov_kinetic"]).max() > 1.0  # it moves
-    upper, lower = config.chain.bodies
-    xml = f"""<mujoco><option gravity="0 0 -9.81" timestep="1e-4" integrator="RK4"/>
-      <worldbody><body name="upper" pos="0 0 0"><joint type="ball" damping="0"/>
-        <inertial pos="0 0 -0.5" mass="{upper.mass}" diaginertia="{' '.join(map(str, np.diag(upper.inertia)))}"/>
-        <body name="lower" pos="0 0 -1"><joint type="ball" damping="0"/>
-          <inertial pos="0 0 -0.5" mass="{lower.mass}" diaginertia="{' '.join(map(str, np.diag(lower.inertia)))}"/>
-        </body></body></worldbody></mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    a1 = rotation_matrix(config.initial_state["upper"]["theta"])
-    a2 = rotation_matrix(config.initial_state["lower"]["theta"])
-    for k, a in enumerate((a1, a1.T @ a2)):
-        quat = np.empty(4)
-        mujoco.mju_mat2Quat(quat, a.flatten())
-        data.qpos[4 * k: 4 * k + 4] = quat
+    from reference_mujoco import double_pendulum
+
+    model, data, qpos0 = double_pendulum(config, 1e-4)
+    data.qpos[:] = qpos0
     data.qvel[:] = 0.0
     mujoco.mj_forward(model, data)
     steps = int(round(0.1 / model.opt.timestep))

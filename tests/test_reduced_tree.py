@@ -211,6 +211,7 @@ LAW_MIXES = {
     "permanent": [T.PERMANENT] * 4,
     "mixed": [T.PERMANENT, T.VISCO_ELASTIC, T.PERMANENT, T.FREE],
     "free_root": [T.FREE, T.PERMANENT, T.VISCO_ELASTIC, T.PERMANENT],
+    "no_permanent": [T.FREE, T.VISCO_ELASTIC, T.VISCO_ELASTIC, T.FREE],
 }
 
 
