@@ -11,9 +11,13 @@ from .console import get_console
 from .options import console_options, json_option
 
 
-def _fmt(value) -> str:
+def _fmt(value, members: list[str] | None = None) -> str:
+    """A figure as text; a chain's figure per body or joint (``members``, their names) as
+    ``legs [...]; trunk [...]``."""
+    if isinstance(value, list) and members is not None and len(value) == len(members):
+        return "; ".join(f"{m} {_fmt(v)}" for m, v in zip(members, value))
     if isinstance(value, list):
-        return "[" + ", ".join(f"{v:.6g}" for v in value) + "]"
+        return "[" + ", ".join(_fmt(v) for v in value) + "]"
     if isinstance(value, float):
         return f"{value:.6g}"
     return str(value)
@@ -158,17 +162,22 @@ def _show_result(path: str) -> None:
                       "rate_check_reason": check[len("fail ("):-1] if check.startswith("fail (") else None})
     console.out(f"{path}")
     console.out(f"  name       {info['name']}  (variant {info['variant']})")
+    names = {}
     if info["variant"] == "chain":  # a chain's file: per-body and per-joint variables, names as coordinates
         from rbstab.io.hdf5 import read_attributes  # heavy: numpy
+        from rbstab.layout import SUMMARY_FIGURES  # heavy: numpy
 
         attrs = read_attributes(path, verify=False)
         console.out(f"  bodies     {attrs['bodies']}; joints {attrs['joints']}")
+        bodies, joints = attrs["bodies"].split(","), attrs["joints"].split(",")
+        names = {key: bodies if key in SUMMARY_FIGURES and SUMMARY_FIGURES[key].member == "body" else joints
+                 for key in summary}
     console.out(f"  status     {info['status']}, {settled}: {info['message']}")
     console.out(f"  created    {info['created']}, wall time {_fmt(info['wall_time'])} s")
     console.out("  solver     " + ", ".join(f"{k} {v}" for k, v in info["solver"].items() if k != "message"))
     width = max([32, *(len(key) for key in summary)])
     for key, value in summary.items():
-        console.out(f"  {key:<{width}} {check if key == 'lyapunov_rate_check' else _fmt(value)}")
+        console.out(f"  {key:<{width}} {check if key == 'lyapunov_rate_check' else _fmt(value, names.get(key))}")
 
 
 def _expand(path: str) -> list[str]:

@@ -149,3 +149,44 @@ def test_simulate_takes_a_chain_and_gives_what_its_file_holds(tmp_path):
     for key in ds.data_vars:
         assert ds[key].dims == written[key].dims, key
         np.testing.assert_array_equal(ds[key].values, written[key].values, err_msg=key)
+
+
+def _euler_rate(theta: np.ndarray) -> np.ndarray:
+    """B(Theta) of eq 1 (docs/physics.md's middle row [s3, c3, 0]), (..., 3, 3), in numpy."""
+    s2, c2 = np.sin(theta[..., 1]), np.cos(theta[..., 1])
+    s3, c3 = np.sin(theta[..., 2]), np.cos(theta[..., 2])
+    zero, one = np.zeros_like(s2), np.ones_like(s2)
+    return np.stack([np.stack([c3 / c2, -s3 / c2, zero], -1), np.stack([s3, c3, zero], -1),
+                     np.stack([-s2 * c3 / c2, s2 * s3 / c2, one], -1)], -2)
+
+
+def test_a_chains_clipped_joint_torque_is_flagged_where_its_command_reaches_the_limit():
+    """The stance double pendulum leaning 0.25 rad, the ankle's N_j clipped at 120 N m: torque_n_saturated is
+    1 exactly where eq 23's command -B(Theta_j)'K_r Theta_j - L_r Omega_j (here in numpy,
+    from the run's Theta_j and Omega_j) reaches the joint's limit, N_j is the clipped
+    command, and the summary's fraction per joint and axis is the flags' mean; a body
+    without limits on H and permanent joints (no Lambda law) are never flagged."""
+    config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+                             ["simulation.t_end=2.0", "simulation.n_samples=2001",
+                              "initial_state.legs.theta.0=0.25"])
+    result = rbstab.simulator.simulate_chain(config)
+    out, summary = result.outputs, result.summary
+    assert result.status == "success"
+    theta, omega = out["joint_theta"], out["joint_omega"]  # (m, joints, 3)
+    k_r = np.array([[1000.0, 1000.0, 100.0], [500.0, 500.0, 100.0]])
+    l_r = np.array([[300.0, 300.0, 30.0], [100.0, 100.0, 20.0]])
+    limit = np.array([[120.0, 120.0, np.inf], [150.0, 150.0, np.inf]])
+    command = -np.einsum("mjik,mji->mjk", _euler_rate(theta), k_r * theta) - l_r * omega
+    expected = (np.abs(command) >= limit).astype(float)
+    assert expected[:, 0, 0].sum() >= 20  # the ankle's sway torque is held at its limit for a while
+    close = np.abs(np.abs(command) - limit) <= 1e-9 * np.minimum(limit, 1e300)  # on the limit to rounding
+    np.testing.assert_array_equal(np.where(close, 0.0, out["torque_n_saturated"]), np.where(close, 0.0, expected))
+    np.testing.assert_allclose(out["torque_n"], np.clip(command, -limit, limit), rtol=1e-12, atol=1e-9)
+    assert out["torque_n_saturated"].shape == out["force_h_saturated"].shape == theta.shape
+    assert not out["force_h_saturated"].any() and not out["constraint_force_saturated"].any()
+    np.testing.assert_allclose(summary["fraction_saturated_torque_n"], out["torque_n_saturated"].mean(axis=0),
+                               rtol=0, atol=1e-15)
+    assert np.shape(summary["fraction_saturated_force_h"]) == np.shape(summary["final_theta"]) == (2, 3)
+    np.testing.assert_array_equal(summary["final_theta"], out["theta"][-1])
+    rising = np.sum(out["lyapunov_rate"] > 0.0) * (result.time[1] - result.time[0])
+    assert summary["time_lyapunov_rising"] == pytest.approx(rising, rel=1e-12)

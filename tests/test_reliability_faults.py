@@ -286,22 +286,38 @@ def test_show_refuses_a_file_with_only_some_attributes(tmp_path):
 # -- interrupts and dead parents (real processes) ----------------------------------------------
 
 
-def _descendants(pid: int) -> list[int]:
+def _stat(pid: int) -> list[str]:
+    """The fields of /proc/<pid>/stat after the command's name (field 3, the state, first)."""
+    return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()
+
+
+def _descendants(pid: int) -> list[tuple[int, str]]:
+    """(pid, start time) of every descendant of ``pid``: the start time tells a process from
+    a later one given the same pid."""
     try:
         children = Path(f"/proc/{pid}/task/{pid}/children").read_text().split()
     except OSError:
         return []
-    return [c for child in map(int, children) for c in (child, *_descendants(child))]
-
-
-def _alive(pids) -> list[int]:
-    alive = []
-    for pid in pids:
+    found = []
+    for child in map(int, children):
         try:
-            if Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z":
-                alive.append(pid)
+            found.append((child, _stat(child)[19]))
         except OSError:
-            pass
+            continue
+        found.extend(_descendants(child))
+    return found
+
+
+def _alive(processes) -> list[int]:
+    """The pids of ``processes`` (:func:`_descendants`) that still run (not zombies)."""
+    alive = []
+    for pid, start in processes:
+        try:
+            fields = _stat(pid)
+        except OSError:
+            continue
+        if fields[0] != "Z" and fields[19] == start:
+            alive.append(pid)
     return alive
 
 
@@ -333,7 +349,9 @@ def test_sigterm_at_a_random_point_leaves_an_exact_index(tmp_path):
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=60) == 143
     assert "interrupted" in proc.stderr.read()
-    time.sleep(0.3)
+    deadline = time.monotonic() + 10  # a worker reaped by the parent is gone; a helper (the resource
+    while time.monotonic() < deadline and _alive(workers):  # tracker) sees its pipe close and ends
+        time.sleep(0.05)
     assert not _alive(workers)
     _no_temporaries(runs.parent)
     index = pd.read_csv(runs.parent / "index.csv")

@@ -31,6 +31,7 @@ __all__ = [
     "STATE_BLOCKS",
     "BLOCK_UNITS",
     "LYAPUNOV_TERMS",
+    "TREE_LYAPUNOV_TERMS",
     "SATURATION_FLAGS",
     "OUTPUT_VECTORS",
     "OUTPUT_SCALARS",
@@ -95,6 +96,10 @@ class Quantity:
     offset : int or None
         First column in a row of outputs of the compiled ``outputs`` kernel
         (:data:`OUTPUTS`); None for a quantity that is not one of those outputs.
+    member : {"body", "joint"} or None
+        Where a tree of several bodies has one value of it per body or per joint (its
+        files' ``body`` or ``joint`` dimension, a summary figure's ``<name>_<member>``
+        columns); None: one value for the whole tree (v and its terms, the time).
     """
 
     name: str
@@ -107,6 +112,7 @@ class Quantity:
     size: int = 1
     component_tex: str = ""
     offset: int | None = None
+    member: str | None = None
 
     @property
     def display_units(self) -> str:
@@ -251,38 +257,44 @@ def parameter_attributes(entry: str) -> dict[str, str]:
 OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
     Quantity("theta", "Theta", "rad", "Euler angles Theta",
              "Euler angles Theta, A = Rx(t1) Ry(t2) Rz(t3) (eq 2)",
-             r"\Theta", "Euler angles", 3, r"\theta"),
+             r"\Theta", "Euler angles", 3, r"\theta", member="body"),
     Quantity("omega", "Omega", "rad s-1", "angular velocity Omega (body frame)",
-             "angular velocity Omega in the body frame (eq 1)", r"\Omega", "angular velocity", 3),
+             "angular velocity Omega in the body frame (eq 1)", r"\Omega", "angular velocity", 3, member="body"),
     Quantity("position", "X", "m", "centre-of-mass position X (inertial frame)",
-             "centre-of-mass position X in the inertial frame (eq 1)", "X", "COM position", 3),
+             "centre-of-mass position X in the inertial frame (eq 1)", "X", "COM position", 3, member="body"),
     Quantity("velocity", "V", "m s-1", "centre-of-mass velocity V (inertial frame)",
-             "centre-of-mass velocity V in the inertial frame (eq 1)", "V", "COM velocity", 3),
+             "centre-of-mass velocity V in the inertial frame (eq 1)", "V", "COM velocity", 3, member="body"),
     Quantity("controller_state", "D", "m", "embedded controller state D (inertial frame)",
-             "embedded controller state D in the inertial frame (eq 22)", "D", "controller state", 3),
+             "embedded controller state D in the inertial frame (eq 22)", "D", "controller state", 3, member="joint"),
     Quantity("constraint_error", "E", "m", "constraint error E (inertial frame)",
-             "E = X + A R - R, displacement of the point C, inertial frame (eq 4)", "E", "constraint error", 3),
+             "E = X + A R - R, displacement of the point C, inertial frame (eq 4)", "E", "constraint error", 3,
+             member="joint"),
     Quantity("constraint_rate", "F", "m s-1", "constraint error rate F = dE/dt (inertial frame)",
-             "F = dE/dt = V - A hat(R) Omega, velocity of C, inertial frame (eq 4)", "F", "constraint rate", 3),
+             "F = dE/dt = V - A hat(R) Omega, velocity of C, inertial frame (eq 4)", "F", "constraint rate", 3,
+             member="joint"),
     Quantity("constraint_force", "Lambda", "N", "constraint force Lambda at C (inertial frame)",
-             "Lambda, force applied at C, inertial frame (eqs 20, 22, 39, 40)", r"\Lambda", "constraint force", 3),
+             "Lambda, force applied at C, inertial frame (eqs 20, 22, 39, 40)", r"\Lambda", "constraint force", 3,
+             member="joint"),
     Quantity("force_h", "H", "N", "translational feedback force H (inertial frame)",
-             "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)", "H", "feedback force", 3),
+             "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)", "H", "feedback force", 3,
+             member="body"),
     Quantity("torque_n", "N", "N m", "rotational feedback torque N (body frame)",
-             "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)", "N", "feedback torque", 3),
+             "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)", "N", "feedback torque", 3,
+             member="joint"),
     Quantity("torque_n_saturated", "N saturated", "1", "N_i at or beyond its limit, 1 or 0 (body frame)",
              "1 where the commanded N_i (eq 23) is at or beyond its limit, |N_i| >= controller.saturation.torque_n_i "
              "(clip: N_i is the limit; smooth: at least tanh(1) of it); 0 elsewhere and without limits",
-             r"N_{sat}", "torque N saturated", 3),
+             r"N_{sat}", "torque N saturated", 3, member="joint"),
     Quantity("force_h_saturated", "H saturated", "1", "H_i at or beyond its limit, 1 or 0 (inertial frame)",
              "1 where the commanded H_i (eq 24) is at or beyond its limit, |H_i| >= controller.saturation.force_h_i "
              "(clip: H_i is the limit; smooth: at least tanh(1) of it); 0 elsewhere and without limits",
-             r"H_{sat}", "force H saturated", 3),
+             r"H_{sat}", "force H saturated", 3, member="body"),
     Quantity("constraint_force_saturated", "Lambda saturated", "1",
              "Lambda_i at or beyond its limit, 1 or 0 (inertial frame)",
              "1 where the commanded Lambda_i (eqs 22, 39, 40) is at or beyond its limit, |Lambda_i| >= "
              "controller.saturation.constraint_force_i (clip: Lambda_i is the limit; smooth: at least tanh(1) of "
-             "it); 0 elsewhere, without limits and for permanent's pin", r"\Lambda_{sat}", "constraint force saturated", 3),
+             "it); 0 elsewhere, without limits and for permanent's pin", r"\Lambda_{sat}", "constraint force saturated", 3,
+             member="joint"),
     Quantity("lyapunov_translational", "v_t", "J", "translational term v_t of the Lyapunov function",
              "v_t = V'MV/2 + X'K_t X/2 (eq 25)", "v_t", "translational"),
     Quantity("lyapunov_rotational", "v_r", "J", "rotational term v_r of the Lyapunov function",
@@ -321,13 +333,13 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
              "name of the joint (a chain's file: joint j holds body j to its parent)"),
     Quantity("joint_theta", "Theta_j", "rad", "relative Euler angles Theta_j of a joint",
              "Euler angles of A_rel = A_parent' A_child (the ground's: the child's Theta) (docs/physics.md, chains)",
-             r"\Theta_j", "joint angles", 3),
+             r"\Theta_j", "joint angles", 3, member="joint"),
     Quantity("joint_omega", "Omega_j", "rad s-1", "relative angular velocity Omega_j of a joint (child frame)",
              "Omega_j = Omega_child - A_rel' Omega_parent, child frame (docs/physics.md, chains)",
-             r"\Omega_j", "joint angular velocity", 3),
+             r"\Omega_j", "joint angular velocity", 3, member="joint"),
     Quantity("constraint_drift", "|E_j|", "m", "constraint drift |E_j| of a permanent joint",
-             "|E_j| of a permanent joint, held by the stacked eq 15 (NaN for the other variants)",
-             "|E_j|", "constraint drift"),
+             "|E_j| of a permanent joint, held by construction in reduced coordinates: rounding only "
+             "(NaN for the other variants)", "|E_j|", "constraint drift", member="joint"),
     Quantity("lyapunov_kinetic", "v_k", "J", "kinetic term of a chain's Lyapunov function",
              "sum over the bodies of V'mV/2 + Omega'J Omega/2 (eq 25)", "v_k", "kinetic"),
     Quantity("lyapunov_joint", "v_j", "J", "joint term of a chain's Lyapunov function",
@@ -364,6 +376,8 @@ SATURATION_FLAGS = {control: (f"{control}_saturated", f"fraction_saturated_{cont
                     for control in ("torque_n", "force_h", "constraint_force")}
 #: Names of the terms of v, in the order they are summed.
 LYAPUNOV_TERMS = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
+#: Names of the terms of a tree's v (:func:`rbstab.variants.chain.evaluate`), in the order they are summed.
+TREE_LYAPUNOV_TERMS = ("lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity")
 #: The vector outputs (3 columns each), in order.
 OUTPUT_VECTORS = tuple(q.name for q in OUTPUTS.values() if q.size == 3)
 #: The scalar outputs after the vectors, one column each, in order.
@@ -388,7 +402,7 @@ def summary_stride(n_samples: int) -> int:
 def _final(block: str, long_name: str) -> Quantity:
     """The summary figure ``final_<block>``: the state block at the last finite sample."""
     q = OUTPUTS[block]
-    return Quantity(f"final_{block}", f"final {q.symbol}", q.units, long_name, size=3)
+    return Quantity(f"final_{block}", f"final {q.symbol}", q.units, long_name, size=3, member=q.member)
 
 
 #: The summary figures (:func:`rbstab.summary.summarize` and, for runs of the pure sign law,
@@ -402,7 +416,7 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     _final("position", "position X of C at t_final"),
     _final("velocity", "velocity V of C at t_final"),
     _final("controller_state", "controller state D at t_final"),
-    Quantity("max_abs_constraint_error", "max |E|", "m", "max |E_i| over the samples", size=3),
+    Quantity("max_abs_constraint_error", "max |E|", "m", "max |E_i| over the samples", size=3, member="joint"),
     Quantity("lyapunov_initial", "v(0)", "J", "v(0)"),
     Quantity("lyapunov_final", "v(t_end)", "J", "v(t_end)"),
     Quantity("max_lyapunov_rate", "max dv/dt", "W", "max dv/dt"),
@@ -410,11 +424,13 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("time_lyapunov_rising", "time with dv/dt > 0", "s",
              "time with analytic dv/dt > 0 (samples times their spacing)"),
     Quantity("fraction_saturated_torque_n", "fraction of time N_i saturated", "1",
-             "fraction of the samples with N_i commanded at or beyond its limit (body frame)", size=3),
+             "fraction of the samples with N_i commanded at or beyond its limit (body frame)", size=3, member="joint"),
     Quantity("fraction_saturated_force_h", "fraction of time H_i saturated", "1",
-             "fraction of the samples with H_i commanded at or beyond its limit (inertial frame)", size=3),
+             "fraction of the samples with H_i commanded at or beyond its limit (inertial frame)", size=3,
+             member="body"),
     Quantity("fraction_saturated_constraint_force", "fraction of time Lambda_i saturated", "1",
-             "fraction of the samples with Lambda_i commanded at or beyond its limit (inertial frame)", size=3),
+             "fraction of the samples with Lambda_i commanded at or beyond its limit (inertial frame)", size=3,
+             member="joint"),
     Quantity("lyapunov_rate_mismatch", "max |dv/dt analytic - numerical|", "W", "max |analytic - numerical dv/dt|"),
     Quantity("lyapunov_rate_mismatch_relative", "relative dv/dt mismatch", "1",
              "max |analytic - numerical dv/dt| / max |analytic dv/dt|"),

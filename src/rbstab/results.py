@@ -120,9 +120,9 @@ class RunBlock:
     variants : list of str
         Each run's controller variant (``config.variant``; given where ``configs`` are None;
         ``chain`` for a chain's runs).
-    joints : tuple of str, optional
-        The joint names of a block of one chain's runs: its per-joint summary figures have
-        shape (k, n_joints), in this order.
+    joints, bodies : tuple of str, optional
+        The joint and body names of a block of one chain's runs: its per-joint and per-body
+        summary figures have shape (k, n_joints) or (k, n_bodies[, 3]), in this order.
     """
 
     configs: list
@@ -138,6 +138,7 @@ class RunBlock:
     stride: int = 1
     variants: list = None
     joints: tuple | None = None
+    bodies: tuple | None = None
 
     def __post_init__(self) -> None:
         if self.variants is None:
@@ -162,11 +163,12 @@ class RunBlock:
                     for key, value in result.summary.items()},
                    [result.status], [result.message], {key: [value] for key, value in result.solver.items()},
                    np.array([result.wall_time], dtype=float), {key: np.array([value]) for key, value in result.timing.items()},
-                   [result.switching], joints=_joints(result.config))
+                   [result.switching], **members(result.config))
 
 
-def _joints(config) -> tuple | None:
-    """A chain config's joint names; None for one body's."""
+def members(config) -> dict:
+    """``joints`` and ``bodies`` of a chain config (its joint and body names, as a
+    :class:`RunBlock` takes them); empty for one body's."""
     chain = getattr(config, "chain", None)
-    return None if chain is None else tuple(chain.joint_names)
+    return {} if chain is None else {"joints": tuple(chain.joint_names), "bodies": tuple(chain.body_names)}
 

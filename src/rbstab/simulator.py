@@ -47,7 +47,7 @@ from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
 from .model import DISTURBANCE_KINDS, PARAMETERS
 from .results import RunBlock, RunResult
-from .summary import NUMERICAL_RATE_AT, chain_summary, numerical_rate, stream_table, summarize, summary_table
+from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.disturbances import apply_impulses, before
@@ -766,7 +766,7 @@ def _chain_outputs(compiled, config, time: np.ndarray, states: np.ndarray, work:
 
     outputs = C.evaluate(compiled, time, states, work)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, chain_summary(time, outputs, config.chain.joint_names, outputs["disturbance_edges"])
+    return outputs, tree_summary(time, outputs)
 
 
 def _chain_key(compiled, sim) -> bytes:
@@ -875,7 +875,7 @@ def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu:
             wall_time=integration + post,
             timing={"integration": np.full(hi - lo, integration), "postprocess": post},
             switching=[None] * (hi - lo),
-            joints=tuple(compiled.chain.joint_names),
+            joints=tuple(compiled.chain.joint_names), bodies=tuple(compiled.chain.body_names),
         )
 
 

@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
+from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
 from ..results import RunBlock, RunResult
 from .atomic import as_os_error, atomic_path, check_free_space
 from .hdf5 import (BODY_VARIABLES, CHAIN_SUMMARY_VARIABLES, SUMMARY_VARIABLES, NotAResultFile, attribute_value,
@@ -182,35 +183,48 @@ def store_bytes_per_run(store: str, n_samples):
     return VALUE_BYTES + 8 * _FULL_VALUES * samples
 
 
-def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = None) -> dict[str, Any]:
-    """Summary figures as flat columns: 3-vectors as ``<name>_x``, ``_y``, ``_z``; a chain's
-    figures per joint (``joints``: its joint names, :func:`rbstab.summary.chain_summary`) as
-    ``<name>_<joint>``."""
+def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = None,
+                    bodies: Sequence[str] | None = None) -> dict[str, Any]:
+    """Summary figures as flat columns: one body's 3-vectors as ``<name>_x``, ``_y``, ``_z``;
+    a tree's (``joints``, ``bodies``: its joint and body names) per joint or per body
+    (the figure's member, :data:`rbstab.layout.SUMMARY_FIGURES`) as ``<name>_<member>``,
+    their 3-vectors as ``<name>_<member>_<axis>`` (``final_theta_trunk_x``)."""
     out: dict[str, Any] = {}
-    labels = _AXES if joints is None else tuple(joints)
     for key, value in summary.items():
         if isinstance(value, (list, tuple, np.ndarray)):
-            for axis, v in zip(labels, value):
-                out[f"{key}_{axis}"] = float(v)
+            for column, labels in _figure_columns(key, np.ndim(value), joints, bodies):
+                out[column] = float(np.asarray(value, dtype=float)[labels])
         else:
             out[key] = value
     return out
 
 
-def summary_table_columns(table: Mapping[str, Sequence], joints: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+def summary_table_columns(table: Mapping[str, Sequence], joints: Sequence[str] | None = None,
+                          bodies: Sequence[str] | None = None) -> dict[str, np.ndarray]:
     """:func:`summary_columns` of k runs at once, from :func:`rbstab.summary.summary_table`
-    (figure -> k values, shape (k,) or (k, 3); a chain's per-joint figures (k, n_joints),
-    ``joints`` their names): column -> its k values, shape (k,)."""
+    (figure -> k values, shape (k,), (k, 3), or a tree's (k, n_members[, 3])): column -> its
+    k values, shape (k,)."""
     out: dict[str, np.ndarray] = {}
-    labels = _AXES if joints is None else tuple(joints)
     for key, values in table.items():
         values = np.asarray(values)
-        if values.ndim == 2:
-            for a, axis in enumerate(labels):
-                out[f"{key}_{axis}"] = values[:, a]
+        if values.ndim >= 2:
+            for column, at in _figure_columns(key, values.ndim - 1, joints, bodies):
+                out[column] = values[(slice(None), *at)]
         else:
             out[key] = values
     return out
+
+
+def _figure_columns(key: str, ndim: int, joints: Sequence[str] | None, bodies: Sequence[str] | None):
+    """(column name, index into one run's value) of each entry of the figure ``key`` whose
+    value a run has ``ndim`` dimensions: one body's axes, or a tree's members (and axes)."""
+    if joints is None:
+        return [(f"{key}_{axis}", (a,)) for a, axis in enumerate(_AXES)]
+    quantity = SUMMARY_QUANTITIES.get(key)
+    members = bodies if quantity is not None and quantity.member == "body" and bodies is not None else joints
+    if ndim == 1:
+        return [(f"{key}_{m}", (i,)) for i, m in enumerate(members)]
+    return [(f"{key}_{m}_{axis}", (i, a)) for i, m in enumerate(members) for a, axis in enumerate(_AXES)]
 
 
 def _has_text(values: np.ndarray) -> bool:
@@ -221,16 +235,22 @@ def _has_text(values: np.ndarray) -> bool:
 
 
 def figure_attributes(column: str) -> tuple[str, str]:
-    """(units, long name) of a per-run column (a summary figure component or :data:`PER_RUN`)."""
+    """(units, long name) of a per-run column (:data:`PER_RUN`, or a summary figure, its
+    component ``<name>_<axis>`` or a tree's ``<name>_<member>[_<axis>]``,
+    :func:`summary_columns`)."""
     if column in PER_RUN:
         return PER_RUN[column]
     if column in SUMMARY_FIGURES:
         return SUMMARY_FIGURES[column]
-    base, _, axis = column.rpartition("_")
-    if base in SUMMARY_FIGURES and axis in _AXES:
-        units, name = SUMMARY_FIGURES[base]
-        return units, f"{name}, {axis} component"
-    return "", column
+    bases = [f for f in SUMMARY_FIGURES if column.startswith(f"{f}_")]
+    if not bases:
+        return "", column
+    base = max(bases, key=len)
+    units, name = SUMMARY_FIGURES[base]
+    member, _, axis = column[len(base) + 1:].rpartition("_")
+    if axis not in _AXES:
+        member, axis = column[len(base) + 1:], ""
+    return units, ", ".join(w for w in (name, member, axis and f"{axis} component") if w)
 
 
 @dataclass(frozen=True)
@@ -525,7 +545,7 @@ class ChunkWriter:
         if "run_templates" not in self.attrs:
             values["config"] = texts
         values["config_hash"] = hashes
-        values.update(summary_table_columns(block.summaries, block.joints))
+        values.update(summary_table_columns(block.summaries, block.joints, block.bodies))
         return values
 
     def add_error(self, run_id: str, message: str) -> dict[str, Any]:

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
-from ..layout import SUMMARY_MAX_SAMPLES, summary_stride
+from ..layout import QUANTITIES, SUMMARY_MAX_SAMPLES, summary_stride
 from ..results import RunResult, plain
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
@@ -137,9 +137,9 @@ SUMMARY_VARIABLES = (
     "constraint_error", "lyapunov", "lyapunov_rate", "lyapunov_rate_numerical",
 )
 #: Variables of a chain's ``thinned`` file: :data:`SUMMARY_VARIABLES` and what its report
-#: draws besides (each joint's Theta_j, N_j and Lambda_j, and v's terms).
+#: draws besides (each joint's Theta_j, N_j with its saturation flags and Lambda_j, and v's terms).
 CHAIN_SUMMARY_VARIABLES = SUMMARY_VARIABLES + (
-    "joint_theta", "torque_n", "constraint_force",
+    "joint_theta", "torque_n", "torque_n_saturated", "constraint_force",
     "lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity",
 )
 
@@ -345,7 +345,7 @@ def _chain_dimensions(result: "RunResult", outputs: dict[str, np.ndarray]) -> tu
 
 
 #: A chain file's variables along ``body`` (the others with a second dimension are along ``joint``).
-BODY_VARIABLES = ("theta", "omega", "position", "velocity", "force_h")
+BODY_VARIABLES = tuple(q.name for q in QUANTITIES.values() if q.member == "body")
 
 
 def write_run(

@@ -13,15 +13,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..layout import QUANTITIES
-from .figures import FigureFile, FigureWriter, _finish_time_axes, _label, _marker, _symbol, new_figure, set_scale
+from ..layout import QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS as CHAIN_LYAPUNOV_TERMS
+from .figures import (FigureFile, FigureWriter, _finish_time_axes, _label, _marker, _symbol, new_figure, set_scale,
+                      shade_saturation)
 from .load import RunData, safe_filename
 from .render import Animation, Section, Table
 
 __all__ = ["chain_sections", "chain_figures", "CHAIN_FIGURES"]
 
-#: The terms of a chain's v (:func:`rbstab.variants.chain.evaluate`), drawn with v.
-CHAIN_LYAPUNOV_TERMS = ("lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity")
 _STYLES = ("-", "--", ":")
 
 
@@ -59,6 +58,8 @@ def _per_member_figure(run: RunData, out: FigureWriter, dimension: str, names: S
                 ax.plot(s["time"], values[:, k], ls=_STYLES[k], marker=_marker(values), label=_component(var, k))
             ax.set_ylabel(f"{member}\n{_label(var)}", fontsize=8)
             set_scale(ax, values)
+            if var in SATURATION_FLAGS:
+                shade_saturation(ax, run, var, row)
         _finish_time_axes(axes[:, col], run, ncols=3)
     _suptitle(fig, run, title)
     return out.save(fig, f"{safe_filename(run.label)}_{kind}", f"{run.label}: {title}", caption)
@@ -74,7 +75,7 @@ def _joints_figure(run: RunData, out: FigureWriter) -> FigureFile:
     return _per_member_figure(run, out, "joint", ("joint_theta", "torque_n"), "joints", "joints",
                               "Each joint's relative orientation Theta_j (the Euler angles of A_parent' A_child) and "
                               "its rotational feedback N_j (eq 23 on the relative motion, child frame, as delivered) "
-                              "against time, a row a joint.")
+                              "against time, a row a joint; shaded where an axis of N_j is at its actuator's limit.")
 
 
 def _constraints_figure(run: RunData, out: FigureWriter) -> FigureFile:

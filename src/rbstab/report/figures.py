@@ -39,6 +39,7 @@ __all__ = [
     "switching_figure",
     "disturbance_marks",
     "saturated_intervals",
+    "shade_saturation",
     "comparison_figures",
     "set_scale",
 ]
@@ -298,16 +299,17 @@ def saturated_intervals(time: np.ndarray, flags: np.ndarray) -> list[tuple[float
             for a, b in zip(starts, ends)]
 
 
-def _shade_saturation(ax, run: RunData, control: str) -> None:
+def shade_saturation(ax, run: RunData, control: str, member: int | None = None) -> None:
     """Shade, in each component's colour, where that axis of ``control`` is at its limit
-    (the file's ``<control>_saturated`` flags; nothing for a file without them). The spans'
-    gid is ``saturated-<control>-<component>``."""
+    (the file's ``<control>_saturated`` flags, of body or joint ``member`` of a chain's file;
+    nothing for a file without them). The spans' gid is ``saturated-<control>-<component>``."""
     flags = SATURATION_FLAGS[control][0]
     s = run.series(flags)
     if flags not in s:
         return
+    values = s[flags] if member is None else s[flags][:, member]
     for k in range(3):
-        for t0, t1 in saturated_intervals(s["time"], s[flags][:, k]):
+        for t0, t1 in saturated_intervals(s["time"], values[:, k]):
             ax.axvspan(t0, t1, color=f"C{k}", alpha=0.12, lw=0, gid=f"saturated-{control}-{k + 1}")
 
 
@@ -451,7 +453,7 @@ def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
     fig, axes = new_figure(3)
     _vector_panels(axes[:, 0], run, names, scale=True)
     for ax, control in zip(axes[:, 0], names):
-        _shade_saturation(ax, run, control)
+        shade_saturation(ax, run, control)
     _suptitle(fig, run, "constraint force and feedback")
     limited = run.config.get("controller", {}).get("saturation")
     return out.save(fig, f"{safe_filename(run.label)}_forces", f"{run.label}: forces and torque",

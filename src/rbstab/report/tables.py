@@ -648,7 +648,18 @@ def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThreshol
     columns = [f"{base}_{axis}" for axis in _AXES]
     if base in VECTOR_SUMMARY_METRICS and comp is None and all(c in table.columns for c in columns):
         return table[columns].astype(float).abs().max(axis=1, skipna=False).where(table["status"] == "success")
+    members = _member_columns(table.columns, base, comp) if base in VECTOR_SUMMARY_METRICS else []
+    if members:  # a chain's sweep: the largest over its bodies or joints
+        return table[members].astype(float).abs().max(axis=1).where(table["status"] == "success")
     return [metric_value(run, name, thresholds) for run in sweep.runs]
+
+
+def _member_columns(columns, base: str, comp: int | None) -> list[str]:
+    """A chain sweep's columns ``<base>_<member>_<axis>`` of the vector figure ``base``
+    (:func:`rbstab.io.chunk.summary_columns`), of component ``comp`` only unless None."""
+    axes = _AXES if comp is None else (_AXES[comp],)
+    return [c for c in columns if c.startswith(f"{base}_") and c.rpartition("_")[2] in axes
+            and c.rpartition("_")[0] != base]
 
 
 def metric_column(name: str) -> str:

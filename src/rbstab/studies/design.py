@@ -312,10 +312,11 @@ def study_folder(output: str | os.PathLike, name: str | None, config, *, option:
 
 # -- metrics ---------------------------------------------------------------------------------------
 
-#: A chain's summary figures that are numbers (:func:`rbstab.summary.chain_summary`): name ->
+#: A chain's summary figures that are numbers (:func:`rbstab.summary.tree_summary`): name ->
 #: units.
 CHAIN_FIGURES = {"t_final": "s", "lyapunov_initial": "J", "lyapunov_final": "J", "max_lyapunov_rate": "W",
-                 "max_lyapunov_increase": "J", "lyapunov_rate_mismatch": "W", "lyapunov_rate_mismatch_relative": "1"}
+                 "max_lyapunov_increase": "J", "time_lyapunov_rising": "s", "lyapunov_rate_mismatch": "W",
+                 "lyapunov_rate_mismatch_relative": "1"}
 #: A chain's summary figures per joint, one column a joint ``<name>_<joint>``: name -> units
 #: (max |E_j| over the samples; the drift of a permanent joint's constraint, NaN for others).
 JOINT_FIGURES = {"max_abs_constraint_error": "m", "max_constraint_drift": "m"}
@@ -443,7 +444,10 @@ def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
 def figure_columns(summary: Mapping[str, Any], status: str, ratio: float,
                    joints: Sequence[str] | None = None) -> dict[str, float]:
     """A run's numeric summary figures as flat columns (as a sweep's index has them; a
-    chain's per joint with ``joints``, its joint names) and ``converged`` (0 or 1)."""
+    chain's, with ``joints`` its joint names, :data:`CHAIN_FIGURES` and
+    :data:`JOINT_FIGURES` per joint) and ``converged`` (0 or 1)."""
+    if joints is not None:
+        summary = {k: v for k, v in summary.items() if k in CHAIN_FIGURES or k in JOINT_FIGURES}
     columns = {k: float(v) for k, v in summary_columns(summary, joints).items()
                if k not in METRICS_NOT_FIGURES and isinstance(v, (int, float, np.number))}
     columns["converged"] = float(converged(status == "success", summary.get("lyapunov_initial"),

@@ -248,7 +248,9 @@ def row_from_attributes(attrs: Mapping[str, Any], file: str) -> dict[str, Any]:
 
     row = {k: attrs.get(k) for k in ("variant", "status", "message", "wall_time")}
     joints = attrs["joints"].split(",") if attrs.get("joints") else None  # a chain's file
-    row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}, joints))
+    bodies = attrs["bodies"].split(",") if attrs.get("bodies") else None
+    row.update(summary_columns({k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}, joints,
+                               bodies))
     row.update({k: attrs.get(k) for k in _SOLVER})
     row.update(config_hash=attrs.get("config_hash"), created=attrs.get("created"), file=file, file_row=None)
     row["run_id"] = attrs.get("name")

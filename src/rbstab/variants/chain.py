@@ -48,17 +48,17 @@ from ..model import (
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
 from .kernels import PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
-    constraint_force_command
+    constraint_force_command, saturation_effects
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
            "reduced_rate", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
-BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h")
+BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
 #: Per-joint outputs of :func:`evaluate`, each (n_samples, n_joints, 3).
 JOINT_OUTPUTS = ("constraint_error", "constraint_rate", "constraint_force", "torque_n", "controller_state",
-                 "joint_theta", "joint_omega")
+                 "joint_theta", "joint_omega", "torque_n_saturated", "constraint_force_saturated")
 #: Scalar outputs of :func:`evaluate`, each (n_samples,).
 SCALAR_OUTPUTS = ("lyapunov", "lyapunov_rate", "lyapunov_kinetic", "lyapunov_joint", "lyapunov_body",
                   "lyapunov_gravity")
@@ -517,10 +517,29 @@ def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
 
 
 @jit
-def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars, power):
+def _saturation_flags(y, params, codes, joints, flags):
+    """The actuators' saturation flags of one evaluated state into ``flags`` (n, 3, 3): per
+    joint j, the axes of N_j, of H of body j (its child) and of Lambda_j commanded at or
+    beyond their limits, 1.0 or 0.0 (:func:`rbstab.variants.kernels.saturation_effects`
+    of joint j's Theta_j, Omega_j, B(Theta_j), E_j, F_j, D_j and body j's X, V, as one
+    body's; ``joints`` (n, 7, 3) as :func:`chain_evaluate` filled it)."""
+    for j in range(codes.shape[0]):
+        theta_j = vector(joints[j, _THETA_J], 0)
+        _, b_j = rotation_and_rate_of(theta_j)
+        _, n_flags, h_flags, lam_flags = saturation_effects(
+            codes[j], theta_j, vector(joints[j, _OMEGA_J], 0), vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
+            vector(joints[j, _E], 0), vector(joints[j, _F], 0), vector(joints[j, _D], 0), params[j])
+        _put(flags[j, 0], 0, n_flags)
+        _put(flags[j, 1], 0, h_flags)
+        _put(flags[j, 2], 0, lam_flags)
+
+
+@jit
+def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars, power, flags):
     """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,) into
-    ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5) and ``power`` (m,) the
-    disturbances' power [W]."""
+    ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5), ``power`` (m,) the
+    disturbances' power [W] and ``flags`` (m, n, 3, 3) the saturation flags of N_j, H_j and
+    Lambda_j (:func:`_saturation_flags`); NaN rows where the state is NaN."""
     dy = np.empty(states.shape[1] + 1)
     work = chain_work(codes.shape[0])
     for k in range(states.shape[0]):
@@ -529,10 +548,12 @@ def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, 
             bodies[k] = np.nan
             scalars[k] = np.nan
             power[k] = np.nan
+            flags[k] = np.nan
             continue
         chain_evaluate(times[k], states[k], params, codes, parents, ppoints, d_at, dy, joints[k], bodies[k], scalars[k],
                        work)
         power[k] = dy[states.shape[1]]
+        _saturation_flags(states[k], params, codes, joints[k], flags[k])
 
 
 # -- the compiled description ------------------------------------------------------------------
@@ -999,7 +1020,10 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     Lambda_j (inertial, on the child at C), torque_n N_j (child frame, delivered),
     controller_state D_j (NaN where not embedded), joint_theta Theta_j [rad], joint_omega
     Omega_j [rad/s] (child frame); per joint (m, n): constraint_drift |E_j| [m] (NaN where
-    not permanent); scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
+    not permanent); the saturation flags (m, n, 3), 1.0 on an axis commanded
+    at or beyond its limit, else 0.0 (:func:`rbstab.model.saturated`): torque_n_saturated
+    and constraint_force_saturated per joint (Lambda_j never for a permanent joint),
+    force_h_saturated per body; scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
     terms lyapunov_kinetic, lyapunov_joint, lyapunov_body, lyapunov_gravity [J] (h in the
     gravity term), disturbance_power [W], disturbance_work W [J] (``work`` (m,), the run's
     integrated work at the samples; 0 where not given: it is a run's history, not a
@@ -1009,16 +1033,19 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     states = np.ascontiguousarray(np.atleast_2d(states), dtype=float)
     m, n = states.shape[0], compiled.size
     joints, bodies, scalars, power = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5)), np.empty(m)
-    chain_samples(time, states, *compiled.args, joints, bodies, scalars, power)
+    flags = np.empty((m, n, 3, 3))
+    chain_samples(time, states, *compiled.args, joints, bodies, scalars, power, flags)
     blocks = states[:, : 12 * n].reshape(m, n, 4, 3)
     out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
     out["force_h"] = bodies
-    for k, name in enumerate(JOINT_OUTPUTS):
-        out[name] = joints[:, :, k]
+    for k in range(_OMEGA_J + 1):
+        out[JOINT_OUTPUTS[k]] = joints[:, :, k]
     embedded = compiled.d_at >= 0
     out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
     permanent = compiled.codes == PERMANENT
     out["constraint_drift"] = np.where(permanent[None, :], np.linalg.norm(out["constraint_error"], axis=-1), np.nan)
+    for k, name in enumerate(("torque_n_saturated", "force_h_saturated", "constraint_force_saturated")):
+        out[name] = flags[:, :, k]
     out["lyapunov_kinetic"] = scalars[:, _KINETIC]
     out["lyapunov_joint"] = scalars[:, _JOINT]
     out["lyapunov_body"] = scalars[:, _BODY]
