@@ -53,9 +53,14 @@ _AFTER_INTERRUPT_DEFAULT = "results finished before are saved and complete; run 
 class _Group(click.Group):
     """The command group, turning faults into one line and interrupts into 130 / 143."""
 
-    def invoke(self, ctx: click.Context):
-        from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
+    def make_context(self, info_name, args, parent=None, **extra) -> click.Context:
+        try:
+            return super().make_context(info_name, args, parent=parent, **extra)
+        except KeyboardInterrupt as exc:  # while the command line is read: nothing started yet
+            click.echo("\ninterrupted", err=True)
+            sys.exit(getattr(exc, "exit_code", 130))
 
+    def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt as exc:
@@ -66,6 +71,8 @@ class _Group(click.Group):
             _quiet_stdout()
             ctx.exit(0)
         except OSError as exc:  # a full disk, a read-only folder...: in words, not a traceback
+            from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
+
             raise MachineFault(describe_os_error(exc)) from None
 
 

@@ -340,3 +340,50 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
                                method="DOP853", n_samples=21)
     v = C.evaluate(compiled, np.linspace(0.0, 2.0, 21), sol.samples[0])["lyapunov"]
     assert np.abs(v[:10]).max() < 1e-9 and v[-1] > 1e-3  # at rest until the torque starts, then moved
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
+    """Two bodies on permanent joints set turning about y at 3 rad/s, no gravity, no gains,
+    gimbal_margin 0.3 rad: the lower body's own Euler angles pass theta_2 = pi/2 - 0.3,
+    which its permanent joint's Theta_j (from 0.6 rad, the state's) does not, and the run
+    goes on, on either engine; straight (a rigid rotation about a principal axis through
+    the fixed point) with the upper body started at 1.0 rad, the upper body's Theta, the
+    ground joint's Theta_j, reaches the margin and the run stops there, at
+    (pi/2 - 0.3 - 1.0) / 3 s."""
+    from rbstab.engine.status import GIMBAL_LOCK, SUCCESS
+
+    limit = np.pi / 2 - 0.3
+
+    def run(upper, bend):
+        config = chain_config_from_mapping({
+            "name": "turning", "gravity": [0, 0, 0],
+            "bodies": [{"name": "upper", "mass": 2.0, "inertia": [0.2, 0.2, 0.05]},
+                       {"name": "lower", "mass": 1.5, "inertia": [0.1, 0.1, 0.03]}],
+            "joints": [{"name": "shoulder", "parent": "ground", "parent_point": [0, 0, 0], "child": "upper",
+                        "child_point": [0, 0, 0.4], "variant": "permanent", "k_r": [0, 0, 0], "l_r": [0, 0, 0]},
+                       {"name": "elbow", "parent": "upper", "parent_point": [0, 0, -0.4], "child": "lower",
+                        "child_point": [0, 0, 0.3], "variant": "permanent", "k_r": [0, 0, 0], "l_r": [0, 0, 0]}],
+            "initial_state": {"upper": {"theta": [0.0, upper, 0.0], "omega": [0.0, 3.0, 0.0]},
+                              "lower": {"theta": [0.0, upper + bend, 0.0], "omega": [0.0, 3.0, 0.0]}},
+            "simulation": {"t_end": 0.2, "n_samples": 201, "method": "DOP853", "rtol": 1e-10, "atol": 1e-12,
+                           "gimbal_margin": 0.3},
+        })
+        if engine == "scipy":
+            return simulate_chain(config, engine="scipy")
+        compiled = C.compile_chain(config.chain, offset=0.0)
+        sim = config.simulation
+        return integrate_chain_runs(tree_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
+                                    method=sim.method, n_samples=sim.n_samples)
+
+    on, locked = run(0.5, 0.6), run(1.0, 0.0)
+    if engine == "scipy":
+        assert on.status == "success" and locked.status == "failed" and "gimbal" in locked.message
+        lower = on.outputs["theta"][:, 1, 1]
+        t_stop = locked.time[np.isfinite(locked.outputs["lyapunov"])][-1]
+    else:
+        assert on.status[0] == SUCCESS and locked.status[0] == GIMBAL_LOCK
+        lower = on.samples[0, :, 13]
+        t_stop = locked.t_stop[0]
+    assert np.abs(lower).max() > limit + 0.1  # the lower body's own angles passed the margin
+    assert t_stop == pytest.approx((limit - 1.0) / 3.0, abs=0.002)

@@ -200,6 +200,38 @@ def test_planar_double_inverted_pendulum_eigenvalues_are_the_closed_forms(k_r):
     assert (closed.real.max() > 0) == (k_r[0] == 400.0)
 
 
+def test_the_planar_stances_mode_shapes_are_the_closed_forms():
+    """The mode shapes on the bodies' tilts (:func:`rbstab.analysis.linearise.mode_shapes`
+    of the chain's linearisation) are the eigenvectors of M q'' + L q' + (K - G) q = 0
+    written by hand in the joint angles q (ankle, hip), mapped to the tilts T q; the slow mode
+    leans both bodies one way (the ankle strategy), the fast one turns them against each
+    other (the hip strategy)."""
+    from rbstab.analysis.linearise import linearise_chain, mode_shapes
+
+    chain, _ = _planar_stance()
+    m1, m2, i1, i2, c1, l1, c2 = 28.0, 42.0, 2.6, 2.3, 0.45, 0.9, 0.3
+    g, t = 9.81, np.array([[1.0, 0.0], [1.0, 1.0]])
+    m = t.T @ np.array([[i1 + m1 * c1**2 + m2 * l1**2, m2 * l1 * c2], [m2 * l1 * c2, i2 + m2 * c2**2]]) @ t
+    stiff = np.diag([800.0, 300.0]) - t.T @ np.diag([(m1 * c1 + m2 * l1) * g, m2 * c2 * g]) @ t
+    damp = np.diag([150.0, 40.0])
+    block = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.linalg.solve(m, stiff), -np.linalg.solve(m, damp)]])
+    closed, vectors = np.linalg.eig(block)
+    lin, coordinates = linearise_chain(C.compile_chain(chain, offset=0.0))
+    assert [c[:2] for c in coordinates] == [("legs", "theta"), ("legs", "omega"), ("trunk", "theta"), ("trunk", "omega")]
+    shapes = mode_shapes(lin, [1, 7])  # theta_2 of legs and trunk: the tilts about y
+    full = mode_shapes(lin, range(lin.eigenvalues.size))
+    np.testing.assert_allclose(lin.jacobian @ full.T, full.T * lin.eigenvalues, atol=1e-6 * np.abs(lin.jacobian).max())
+    signs = []
+    for s, q in zip(closed, vectors[:2].T):
+        k = int(np.argmin(np.abs(lin.eigenvalues - s)))
+        assert abs(lin.eigenvalues[k] - s) < 1e-6 * abs(s)
+        tilt = t @ q
+        tilt = tilt / tilt[np.argmax(np.abs(tilt))]
+        np.testing.assert_allclose(shapes[k], tilt, atol=1e-6)
+        signs.append((abs(s), np.sign(tilt.real.prod())))
+    assert [sign for _, sign in sorted(signs)][0] == 1 and [sign for _, sign in sorted(signs)][-1] == -1
+
+
 def test_a_stiff_visco_elastic_joint_approaches_the_permanent_joint():
     """The double pendulum with a visco-elastic elbow of stiffness k_c: its motion differs from
     the ball joint's by O(1/k_c)."""
@@ -287,7 +319,12 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     assert undamped.verdict == "marginal" and abs(s0[2]) <= undamped.linearisation.tolerance
     assert records[2]["slowest_time_constant"] is None and records[2]["shortest_e_folding_time"] is None
     assert "marginally stable (a zero or imaginary eigenvalue); v at the initial state" in undamped.text()
-    assert "time constant" not in undamped.text() and "e-folding" not in undamped.text()
+    lines = undamped.text().splitlines()
+    scale = next(line for line in lines if "marginally stable" in line)
+    assert "time constant" not in scale and "e-folding" not in scale
+    header = next(k for k, line in enumerate(lines) if "e-folding [s]" in line)  # the table of the modes: no number
+    rows = lines[header + 1: header + 1 + undamped.linearisation.eigenvalues.size]
+    assert all(row.split()[-2:] == ["-", "-"] for row in rows), rows
 
 
 def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp_path):

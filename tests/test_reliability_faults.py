@@ -347,8 +347,8 @@ def test_sigterm_at_a_random_point_leaves_an_exact_index(tmp_path):
     time.sleep(random.Random(15).uniform(0.0, 0.4))
     workers = _descendants(proc.pid)
     proc.send_signal(signal.SIGTERM)
-    assert proc.wait(timeout=60) == 143
-    assert "interrupted" in proc.stderr.read()
+    status, said = proc.wait(timeout=60), proc.stderr.read()
+    assert status == 143 and "interrupted" in said, (status, said)
     deadline = time.monotonic() + 10  # a worker reaped by the parent is gone; a helper (the resource
     while time.monotonic() < deadline and _alive(workers):  # tracker) sees its pipe close and ends
         time.sleep(0.05)

@@ -352,12 +352,12 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
 
 def _over_samples(reduce, values: np.ndarray) -> np.ndarray:
     """``reduce`` (np.max, np.sum) of k runs' ``values`` (k, n, ...) over their n samples:
-    (k, ...), e.g. (k, 3) per axis, (k, n_joints, 3) per joint and axis. A (k, n, 3) array
-    is reduced a strided column at a time, many times faster than numpy's reduction over
-    its middle axis."""
-    if values.ndim == 3:
-        return np.stack([reduce(values[:, :, i], axis=1) for i in range(values.shape[2])], axis=1)
-    return reduce(values, axis=1)
+    (k, ...), e.g. (k, 3) per axis, (k, n_joints, 3) per joint and axis. Reduced a strided
+    column at a time, many times faster than numpy's reduction over the middle axis."""
+    k, n = values.shape[:2]
+    columns = values.reshape(k, n, -1)
+    out = np.stack([reduce(columns[:, :, i], axis=1) for i in range(columns.shape[2])], axis=1)
+    return out.reshape(k, *values.shape[2:])
 
 
 def _within_one_piece(time: np.ndarray, edges: np.ndarray) -> np.ndarray:

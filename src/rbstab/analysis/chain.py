@@ -21,7 +21,8 @@ from .chain_runs import chain_states, chain_states_recover, check_entries, final
 from .dataset import certificate_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain
-from .text import certificate_lines, time_scale
+from .linearise import mode_shapes
+from .text import certificate_lines, mode_lines, mode_shape_lines, time_scale
 
 __all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
            "chain_states_recover", "final_lyapunov"]
@@ -64,7 +65,9 @@ class ChainAnalysis:
 
     def as_dict(self) -> dict:
         """Plain Python (the ``--json`` form): rest state per body and block, eigenvalues as
-        [re, im] [1/s], verdict, ``slowest_time_constant`` [s] (null unless asymptotically
+        [re, im] [1/s] with each one's mode shape on the bodies' angles (``modes``:
+        ``{"eigenvalue": [re, im], "shape": {"<body>.theta_<i>": [re, im]}}``, largest entry
+        1), verdict, ``slowest_time_constant`` [s] (null unless asymptotically
         stable), ``shortest_e_folding_time`` [s] (null unless unstable), v at the initial
         state [J], the certificate (the fields of
         a one-body analysis's, :func:`rbstab.analysis.dataset.certificate_record`, with
@@ -75,9 +78,28 @@ class ChainAnalysis:
             rest.setdefault(body, {})[block] = lin.equilibrium[3 * k: 3 * k + 3].tolist()
         return {"name": self.name, "verdict": lin.verdict, "rest_point": lin.is_rest_point, "rest_state": rest,
                 "eigenvalues": [[float(s.real), float(s.imag)] for s in lin.eigenvalues],
+                "modes": self._modes(),
                 **time_scale_record(lin),
                 "initial_lyapunov": self.initial_lyapunov, "notes": list(self.notes),
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
+
+    def angles(self) -> tuple[list[str], list[int]]:
+        """(names ``<body>.theta_<i>``, positions in the linearisation's coordinates) of the
+        bodies' Euler angles among the independent coordinates."""
+        names, rows = [], []
+        for k, (body, block, _) in enumerate(self.coordinates):
+            if block == "theta":
+                names += [f"{body}.theta_{i + 1}" for i in range(3)]
+                rows += [3 * k + i for i in range(3)]
+        return names, rows
+
+    def _modes(self) -> list[dict]:
+        """Each eigenvalue's mode on the bodies' angles (:func:`mode_shapes`), for ``--json``."""
+        names, rows = self.angles()
+        shapes = mode_shapes(self.linearisation, rows)
+        return [{"eigenvalue": [float(s.real), float(s.imag)],
+                 "shape": {n: [float(c.real), float(c.imag)] for n, c in zip(names, shape)}}
+                for s, shape in zip(self.linearisation.eigenvalues, shapes)]
 
     def _certificate_dict(self) -> dict:
         names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(3)]
@@ -100,6 +122,8 @@ class ChainAnalysis:
         lines.append(f"  eigenvalues [1/s], largest real part first: {shown}{more}")
         lines.append(f"  {time_scale(lin.verdict, lin.slowest_time_constant, lin.shortest_e_folding_time)}; "
                      f"v at the initial state {self.initial_lyapunov:.6g} J")
+        lines += mode_lines(lin)
+        lines += mode_shape_lines(lin, *self.angles())
         lines += [f"  note: {n}" for n in self.notes]
         if self.certificate is not None:
             lines += certificate_lines(self.certificate, domain="|theta_2| of a body or joint")

@@ -47,6 +47,7 @@ __all__ = [
     "NO_LINEARISATION",
     "MAX_REST_CHECKS",
     "modes",
+    "mode_shapes",
     "verdict",
     "rest_tolerance",
     "EIGENVALUE_RTOL",
@@ -156,6 +157,24 @@ def modes(eigenvalues: np.ndarray, tolerance: float = 0.0
         tau = np.where(decaying, -1.0 / np.where(decaying, s.real, 1.0), np.nan)
         e_fold = np.where(growing, 1.0 / np.where(growing, s.real, 1.0), np.nan)
     return omega_n, zeta, tau, e_fold
+
+
+def mode_shapes(lin: Linearisation, rows) -> np.ndarray:
+    """The right eigenvectors of ``lin.jacobian`` in the order of ``lin.eigenvalues`` (each
+    eigenvalue's nearest eigenvalue of the matrix, none taken twice), on the state entries
+    ``rows`` (m indices) only: shape (n, m) complex, each row divided by its entry of largest
+    modulus (so that entry is 1; the others give their size and phase relative to it; a row
+    that is zero on ``rows`` stays zero)."""
+    w, v = np.linalg.eig(lin.jacobian)
+    free = list(range(w.size))
+    order = []
+    for s in lin.eigenvalues:
+        k = min(free, key=lambda i: abs(w[i] - s))
+        free.remove(k)
+        order.append(k)
+    shapes = v[np.ix_(list(rows), order)].T
+    pivot = shapes[np.arange(shapes.shape[0]), np.argmax(np.abs(shapes), axis=1)]
+    return shapes / np.where(pivot == 0, 1.0, pivot)[:, None]
 
 
 def verdict(eigenvalues: np.ndarray, tolerance: float) -> str:

@@ -6,9 +6,11 @@ import numpy as np
 
 from ..layout import BLOCK_UNITS
 from .certificate import BOUNDS
+from .linearise import mode_shapes
 from .thresholds import EXPLAINS_BAR
 
-__all__ = ["certificate_lines", "describe", "describe_robustness", "format_eigenvalue", "format_state", "push_lines",
+__all__ = ["certificate_lines", "describe", "describe_robustness", "format_eigenvalue", "format_state", "mode_lines",
+           "mode_shape_lines", "push_lines",
            "rule_lines", "stability_lines", "time_scale"]
 
 
@@ -68,11 +70,31 @@ def _time_scale(lin) -> str:
     return time_scale(lin.verdict, lin.slowest_time_constant, lin.shortest_e_folding_time)
 
 
-def _mode_lines(lin) -> list[str]:
-    lines = [f"  {'eigenvalue s [1/s]':<26}{'omega_n [rad/s]':>16}{'zeta':>9}{'tau [s]':>11}{'e-folding [s]':>15}"]
+def mode_lines(lin) -> list[str]:
+    """The table of the eigenvalues of ``lin`` (a :class:`rbstab.analysis.linearise.Linearisation`):
+    s, natural frequency, damping ratio, time constant and e-folding time, a line each."""
+    lines = [f"  {'eigenvalue s [1/s]':<26}{'omega_n [rad/s]':>16}{'zeta':>11}{'tau [s]':>11}{'e-folding [s]':>15}"]
     for s, wn, zeta, tau, e_fold in zip(lin.eigenvalues, lin.natural_frequency, lin.damping_ratio, lin.time_constant,
                                         lin.e_folding_time):
-        lines.append(f"  {format_eigenvalue(s):<26}{_g(wn):>16}{_g(zeta, 3):>9}{_g(tau):>11}{_g(e_fold):>15}")
+        lines.append(f"  {format_eigenvalue(s):<26}{_g(wn):>16}{_g(zeta, 3):>11}{_g(tau):>11}{_g(e_fold):>15}")
+    return lines
+
+
+def mode_shape_lines(lin, names, rows, shown: int = 6) -> list[str]:
+    """The shapes of the slowest ``shown`` modes of ``lin`` (one of each complex pair) on the
+    state entries ``rows`` named ``names`` (:func:`rbstab.analysis.linearise.mode_shapes`):
+    each entry of at least 5 % of the largest as its size and, where it is not in phase
+    with the largest, its phase in degrees."""
+    shapes = mode_shapes(lin, rows)
+    lines = [f"  mode shapes on {', '.join(names)} (the largest entry 1; phases in degrees):"]
+    picked = [k for k, s in enumerate(lin.eigenvalues) if s.imag >= 0.0][:shown]
+    for k in picked:
+        parts = []
+        for name, c in zip(names, shapes[k]):
+            if abs(c) >= 0.05:
+                phase = np.degrees(np.angle(c))
+                parts.append(f"{name} {abs(c):.2g}" + (f" ({phase:+.0f})" if abs(phase) >= 0.5 else ""))
+        lines.append(f"    s = {format_eigenvalue(lin.eigenvalues[k])}: {', '.join(parts)}")
     return lines
 
 
@@ -258,7 +280,7 @@ def describe(analysis) -> list[str]:
     rest = "yes" if lin.is_rest_point else "NO"
     lines.append(f"  rest point: {rest} (max |dy/dt| {_g(np.abs(lin.rest_residual).max(), 3)} <= "
                  f"{_g(lin.rest_tolerance, 3)})")
-    lines += _mode_lines(lin)
+    lines += mode_lines(lin)
     lines.append(_settling_line(analysis))
     lines += certificate_lines(analysis.certificate)
     lines += _verification_lines(analysis)

@@ -38,7 +38,7 @@ from .status import GIMBAL_LOCK, LEFT_REGION
 __all__ = ["CHAIN", "TreeSystem", "tree_system", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
-           "admissible", "chain_margin", "disturbed_of",
+           "admissible", "chain_bounds", "disturbed_of",
            "limited_of"]
 
 #: The ``code`` of a chain's runs (no variant's code: a chain's joints carry theirs).
@@ -117,26 +117,13 @@ def admissible(code, y, p, limit):
 
 # -- a chain's admissible region ------------------------------------------------------------------
 @jit
-def chain_margin(y, params, codes, parents, ppoints, limit):
-    """The admissible margin of a chain's maximal state ``y`` (:class:`TreeSystem`'s arrays):
-    (margin, status) as :func:`admissible_event`'s, over every body's |theta_2| and every
-    joint's relative |theta_2| (its gimbal lock, ``limit`` = pi/2 - gimbal_margin [rad]) and,
-    where ``params[0].limited``, the bounds ``params[0].limits`` of every body's Theta,
-    Omega, X, V and every non-permanent joint's E_j (status: the quantity and axis;
-    which body or joint reached it is not in the code)."""
+def chain_bounds(y, params, codes, parents, ppoints, margin, status):
+    """(margin, status) after the bounds ``params[0].limits`` of ``simulation.limits`` on a
+    chain's maximal state ``y`` (:class:`TreeSystem`'s arrays): every body's Theta, Omega,
+    X, V and every non-permanent joint's E_j, as :func:`admissible_event`'s (status: the
+    quantity and axis; which body or joint reached it is not in the code)."""
     n = codes.shape[0]
-    margin, status = math.inf, GIMBAL_LOCK
-    for i in range(n):
-        margin = min(margin, limit - abs(y[12 * i + 1]))
-    for j in range(n):
-        q = parents[j]
-        if q < 0:
-            continue
-        rel = _relative(rotation_and_rate_of(vector(y, 12 * q))[0], rotation_and_rate_of(vector(y, 12 * j))[0])
-        margin = min(margin, limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2])))))
     p0 = params[0]
-    if p0.limited == 0.0:
-        return margin, status
     for i in range(n):
         margin, status = _bound_margin(vector(y, 12 * i), p0.limits[0], 0, margin, status)
         margin, status = _bound_margin(vector(y, 12 * i + 3), p0.limits[1], 1, margin, status)
@@ -182,12 +169,35 @@ def _chain_disturbed(params):
 # -- a tree in reduced coordinates: its region and impulses on its maximal image -------------------------
 @jit
 def tree_margin(y, p, limit):
-    """:func:`chain_margin` of the maximal image of the reduced state ``y`` (a
-    :class:`TreeSystem` ``p``): the same admissible region as the chain's."""
+    """(margin, status) of the admissible region at the reduced state ``y`` (a
+    :class:`TreeSystem` ``p``; as :func:`admissible_event`'s): the gimbal lock, ``limit`` -
+    |theta_2| (``limit`` = pi/2 - gimbal_margin [rad]), of the Euler angles the state holds
+    (each body's Theta, or the Theta_j of the permanent joint that holds it: eq 1's B is
+    singular at |theta_2| = pi/2) and of every other joint's relative Theta_j off the ground
+    (the B(Theta_j) of its feedback, eq 23); with ``simulation.limits`` also
+    :func:`chain_bounds` on the maximal image. The Euler angles of a permanent joint's
+    child are not the state's: they pass pi/2 without harm. The maximal image is made only
+    where a bound or such a joint asks for it."""
+    n = p.codes.shape[0]
+    margin = math.inf
+    limited = p.params[0].limited != 0.0
+    relative = False
+    for i in range(n):
+        margin = min(margin, limit - abs(y[p.r_at[i] + 1]))
+        relative = relative or (p.codes[i] != PERMANENT and p.parents[i] >= 0)
+    if not (limited or relative):
+        return margin, GIMBAL_LOCK
     w = p.work
     tree_expand(y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, w.chain.rot,
                 w.chain.rate, True)
-    return chain_margin(w.y, p.params, p.codes, p.parents, p.ppoints, limit)
+    for j in range(n):
+        q = p.parents[j]
+        if p.codes[j] != PERMANENT and q >= 0:
+            rel = _relative(rotation_and_rate_of(vector(w.y, 12 * q))[0], rotation_and_rate_of(vector(w.y, 12 * j))[0])
+            margin = min(margin, limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2])))))
+    if not limited:
+        return margin, GIMBAL_LOCK
+    return chain_bounds(w.y, p.params, p.codes, p.parents, p.ppoints, margin, GIMBAL_LOCK)
 
 
 @jit

@@ -929,14 +929,21 @@ class ChainTrajectory:
 
 
 def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
-    """min over bodies and joints of (pi/2 - margin - |theta_2|) [rad]: the run stops where it
-    reaches 0 (eq 1's B(Theta) is singular at |theta_2| = pi/2)."""
+    """min of (pi/2 - margin - |theta_2|) [rad] over the Euler angles a run integrates (each
+    body's Theta, or the Theta_j of the permanent joint that holds it) and every other
+    joint's relative Theta_j off the ground, at the maximal state ``y``: the run stops where
+    it reaches 0 (eq 1's B(Theta) is singular at |theta_2| = pi/2; the compiled driver's
+    :func:`rbstab.engine.systems.tree_margin`)."""
     limit = math.pi / 2 - margin
-    worst = min(limit - abs(y[12 * i + 1]) for i in range(compiled.size))
     n = compiled.size
     joints = np.empty((n, 7, 3))
     chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)), np.empty(5))
-    return min(worst, float(np.min(limit - np.abs(joints[:, _THETA_J, 1]))))
+    permanent = compiled.codes == PERMANENT
+    body = np.asarray(y)[1: 12 * n: 12]
+    relative = joints[:, _THETA_J, 1]
+    worst = np.where(permanent, relative, body)
+    return float(min(np.min(limit - np.abs(worst)),
+                     np.min(limit - np.abs(relative[~permanent & (compiled.parents >= 0)]), initial=math.inf)))
 
 
 def _region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
