@@ -20,8 +20,7 @@ from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
 from .chain_runs import chain_states, chain_states_recover, check_entries, final_lyapunov
 from .dataset import certificate_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
-from .linearise import Linearisation, linearise_chain
-from .linearise import mode_shapes
+from .linearise import Linearisation, linearise_chain, mode_shapes
 from .text import certificate_lines, mode_lines, mode_shape_lines, time_scale
 
 __all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",

@@ -192,8 +192,9 @@ def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = N
     out: dict[str, Any] = {}
     for key, value in summary.items():
         if isinstance(value, (list, tuple, np.ndarray)):
-            for column, labels in _figure_columns(key, np.ndim(value), joints, bodies):
-                out[column] = float(np.asarray(value, dtype=float)[labels])
+            values = np.asarray(value, dtype=float)
+            for column, at in _figure_columns(key, values.ndim, joints, bodies):
+                out[column] = float(values[at])
         else:
             out[key] = value
     return out
@@ -217,11 +218,18 @@ def summary_table_columns(table: Mapping[str, Sequence], joints: Sequence[str] |
 
 def _figure_columns(key: str, ndim: int, joints: Sequence[str] | None, bodies: Sequence[str] | None):
     """(column name, index into one run's value) of each entry of the figure ``key`` whose
-    value a run has ``ndim`` dimensions: one body's axes, or a tree's members (and axes)."""
+    value a run has ``ndim`` dimensions: one body's axes, or a tree's members (and axes).
+
+    Raises
+    ------
+    ValueError
+        For a tree's figure per body without the body names ``bodies``."""
     if joints is None:
         return [(f"{key}_{axis}", (a,)) for a, axis in enumerate(_AXES)]
     quantity = SUMMARY_QUANTITIES.get(key)
-    members = bodies if quantity is not None and quantity.member == "body" and bodies is not None else joints
+    members = bodies if quantity is not None and quantity.member == "body" else joints
+    if members is None:
+        raise ValueError(f"summary figure {key!r} is one per body: its columns need the chain's body names")
     if ndim == 1:
         return [(f"{key}_{m}", (i,)) for i, m in enumerate(members)]
     return [(f"{key}_{m}_{axis}", (i, a)) for i, m in enumerate(members) for a, axis in enumerate(_AXES)]

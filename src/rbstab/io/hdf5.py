@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
-from ..layout import QUANTITIES, SUMMARY_MAX_SAMPLES, summary_stride
+from ..layout import QUANTITIES, SUMMARY_MAX_SAMPLES, TREE_LYAPUNOV_TERMS, summary_stride
 from ..results import RunResult, plain
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
@@ -139,8 +139,7 @@ SUMMARY_VARIABLES = (
 #: Variables of a chain's ``thinned`` file: :data:`SUMMARY_VARIABLES` and what its report
 #: draws besides (each joint's Theta_j, N_j with its saturation flags and Lambda_j, and v's terms).
 CHAIN_SUMMARY_VARIABLES = SUMMARY_VARIABLES + (
-    "joint_theta", "torque_n", "torque_n_saturated", "constraint_force",
-    "lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity",
+    "joint_theta", "torque_n", "torque_n_saturated", "constraint_force", *TREE_LYAPUNOV_TERMS,
 )
 
 

@@ -13,7 +13,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..layout import QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS as CHAIN_LYAPUNOV_TERMS
+from ..layout import QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS
 from .figures import (FigureFile, FigureWriter, _finish_time_axes, _label, _marker, _symbol, new_figure, set_scale,
                       shade_saturation)
 from .load import RunData, safe_filename
@@ -102,14 +102,14 @@ def _constraints_figure(run: RunData, out: FigureWriter) -> FigureFile:
 
 
 def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
-    s = run.series("lyapunov", "lyapunov_rate", "lyapunov_rate_numerical", *CHAIN_LYAPUNOV_TERMS)
+    s = run.series("lyapunov", "lyapunov_rate", "lyapunov_rate_numerical", *TREE_LYAPUNOV_TERMS)
     t = s["time"]
     fig, axes = new_figure(2, row_height=2.8)
     ax = axes[0, 0]
     ax.plot(t, s["lyapunov"], color="k", lw=1.8, label=f"${_symbol('lyapunov')}$")
-    for i, name in enumerate(n for n in CHAIN_LYAPUNOV_TERMS if n in s):
+    for i, name in enumerate(n for n in TREE_LYAPUNOV_TERMS if n in s):
         ax.plot(t, s[name], color=f"C{i}", lw=1.0, ls=_STYLES[i % 3], label=QUANTITIES[name].words)
-    set_scale(ax, np.concatenate([s[n] for n in ("lyapunov", *CHAIN_LYAPUNOV_TERMS) if n in s]))
+    set_scale(ax, np.concatenate([s[n] for n in ("lyapunov", *TREE_LYAPUNOV_TERMS) if n in s]))
     ax.set_ylabel(_label("lyapunov"), fontsize=9)
     rate = axes[1, 0]
     rate.plot(t, s["lyapunov_rate"], color="C0", lw=2.2, alpha=0.6, label=r"$\dot v$ analytic")

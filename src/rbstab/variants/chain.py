@@ -33,7 +33,7 @@ from ..chain import Chain
 from ..jit import jit
 from ..kinematics import (ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of,
                           rotation_matrix, sub, vector)
-from ..layout import VARIANT_CODES
+from ..layout import SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     Gains,
@@ -1051,7 +1051,7 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
     permanent = compiled.codes == PERMANENT
     out["constraint_drift"] = np.where(permanent[None, :], np.linalg.norm(out["constraint_error"], axis=-1), np.nan)
-    for k, name in enumerate(("torque_n_saturated", "force_h_saturated", "constraint_force_saturated")):
+    for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]
     out["lyapunov_kinetic"] = scalars[:, _KINETIC]
     out["lyapunov_joint"] = scalars[:, _JOINT]
