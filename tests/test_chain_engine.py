@@ -4,6 +4,7 @@ disturbance's work, integrated with the state, is what v gains without damping."
 
 from __future__ import annotations
 
+import copy
 import warnings
 from pathlib import Path
 
@@ -12,10 +13,11 @@ import pytest
 
 from rbstab.config import load_config
 from rbstab.config.chains import chain_config_from_mapping, chain_of, load_any_config
-from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
-from rbstab.engine.settings import settings_rows
+from rbstab.engine.integrate import integrate_chain_runs, integrate_tree_chunk
+from rbstab.engine.settings import settings_records, settings_rows
+from rbstab.engine import method_number
 from rbstab.engine.systems import tree_system
-from rbstab.simulator import simulate_chain
+from rbstab.simulator import simulate, simulate_chain
 from rbstab.variants import chain as C
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -40,32 +42,108 @@ def test_the_compiled_driver_takes_solve_ivps_steps_on_a_chain(name):
                                    err_msg=key)
 
 
-@pytest.mark.parametrize("path", ["paper/case1_permanent.yaml", "paper/case2_visco_elastic.yaml",
-                                  "paper/case3_embedded.yaml", "examples/stance_ankle.yaml",
-                                  "examples/saturated_push.yaml", "examples/sliding.yaml", "examples/free_gravity.yaml"])
-def test_one_body_and_its_one_body_tree_have_one_state_and_one_motion(path):
-    """A one-body config's state is its one-body tree's reduced state (a permanent joint's
-    Theta_j, Omega_j are the body's Theta, Omega: the paper's 6-state eq 21; any other law's
-    12 states, then D): the compiled driver moves the tree, from the body's own initial
-    state, as the one-body engine moves the body, for all five laws, saturation and
-    disturbances (an impulse and a pulse), to the solver's tolerance."""
+ONE_BODY = ["paper/case1_permanent.yaml", "paper/case2_visco_elastic.yaml", "paper/case3_embedded.yaml",
+            "examples/stance_ankle.yaml", "examples/saturated_push.yaml", "examples/sliding.yaml",
+            "examples/free_gravity.yaml"]
+
+
+def _one_body(path, *overrides):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_config(ROOT / "configs" / path, ["simulation.t_end=3.0", "simulation.n_samples=301"])
+        return load_config(ROOT / "configs" / path, ["simulation.t_end=3.0", "simulation.n_samples=301", *overrides])
+
+
+def _tree_spelling(config):
+    """The one-body config ``config`` written in the tree's spelling (bodies, joints): its
+    body ``body`` held to the ground at R by its joint ``controller``."""
+    r = copy.deepcopy(config.resolved)
+    body, controller, state = r.pop("body"), r.pop("controller"), r.pop("initial_state")
+    point = body.pop("attachment_point")
+    r["gravity"] = body.pop("gravity")
+    sat = controller.pop("saturation", None)
+    tree_body = {"name": "body", **body, "k_t": controller.pop("k_t"), "l_t": controller.pop("l_t")}
+    if controller["variant"] != "sliding":
+        controller.pop("boundary_layer")
+    joint = {"name": "controller", "parent": "ground", "parent_point": point, "child": "body", "child_point": point,
+             **controller}
+    if sat is not None:
+        if sat["force_h"] is not None:
+            tree_body["saturation"] = {"force_h": sat["force_h"], "shape": sat["shape"]}
+        joint["saturation"] = {k: sat[k] for k in ("torque_n", "constraint_force") if sat[k] is not None}
+        joint["saturation"]["shape"] = sat["shape"]
+    if controller["variant"] == "permanent":  # placed on the joint
+        state = {k: state[k] for k in ("theta", "omega")}
+    r.update(bodies=[tree_body], joints=[joint], initial_state={"body": state})
+    for d in r.get("disturbances", []):
+        d["body"] = "body"
+    return chain_config_from_mapping(r)
+
+
+@pytest.mark.parametrize("path", ONE_BODY)
+def test_one_bodys_two_spellings_are_one_model(path):
+    """A one-body config and the same body written as a tree (bodies, joints) are one model,
+    for all five laws, saturation, disturbances (an impulse and a pulse) and limits: the same
+    state at every sample, bit for bit, the same steps and the same disturbances' work; v, E
+    and the controls to rounding (the tree's outputs are the chain's functions of that
+    state)."""
+    config = _one_body(path, "simulation.limits.omega=[40, 40, 40]")
+    tree = _tree_spelling(config)
+    body, chain = simulate(config), simulate_chain(tree)
+    assert body.status == chain.status == "success"
+    assert body.solver["nfev"] == chain.solver["nfev"]
+    blocks = ("theta", "omega") if config.variant == "permanent" else ("theta", "omega", "position", "velocity")
+    for key in blocks:
+        np.testing.assert_array_equal(chain.outputs[key][:, 0], body.outputs[key], err_msg=key)
+    if config.variant == "embedded":
+        np.testing.assert_array_equal(chain.outputs["controller_state"][:, 0], body.outputs["controller_state"])
+    if "disturbance_work" in body.outputs:
+        np.testing.assert_array_equal(chain.outputs["disturbance_work"], body.outputs["disturbance_work"])
+    for key in ("position", "velocity", "constraint_error", "constraint_force", "torque_n", "force_h", "lyapunov"):
+        expected = body.outputs[key]
+        scale = 1.0 + np.abs(expected).max()
+        found = chain.outputs[key] if key == "lyapunov" else chain.outputs[key][:, 0]
+        np.testing.assert_allclose(found, expected, rtol=0, atol=1e-11 * scale, err_msg=key)
+
+
+@pytest.mark.parametrize("path", ONE_BODY)
+def test_the_general_tree_rate_is_one_bodys_rate(path):
+    """The tree's rate in reduced coordinates (composite rigid bodies, Cholesky; the general
+    formulation, which the compiled driver leaves for one body's own) equals one body's rate
+    (a permanent joint: eq 21 on Theta_j, Omega_j; any other law: eq 1 with its Lambda, then
+    dD/dt) to rounding at every sample of the body's run; and the scipy reference, which
+    integrates the tree with it, moves the body as the one-body engine to the solver's
+    tolerance."""
+    from rbstab.variants import tree as T
+
+    config = _one_body(path)
     sim = config.simulation
+    body = simulate(config)
     variant = config.make_variant()
-    y0 = variant.initial_state(config.initial_state)
-    settings = settings_rows([sim])
-    body = integrate_runs([variant.code], np.atleast_1d(variant.parameters), y0[None], settings, method=sim.method,
-                          n_samples=sim.n_samples)
-    system = tree_system(C.compile_chain(chain_of(config), offset=0.0))
-    tree = integrate_chain_runs(system, y0[None], settings, method=sim.method, n_samples=sim.n_samples)
-    assert body.status[0] == tree.status[0] == 0
-    samples = tree.samples[0] if y0.size != 6 else tree.samples[0, :, :6]  # permanent: the maximal image's Theta, Omega
-    scale = 1.0 + np.abs(body.samples[0]).max(axis=0)
-    # two formulations of one model: their rates agree to rounding, so the runs to the solver's tolerance
-    assert np.max(np.abs(samples - body.samples[0]) / scale) < 10 * sim.rtol
-    np.testing.assert_allclose(tree.work[0], body.work[0], rtol=0, atol=10 * sim.rtol * (1.0 + np.abs(body.work).max()))
+    y = np.ascontiguousarray(np.column_stack([body.outputs[b] for b in variant.layout.blocks]))
+    time = np.ascontiguousarray(body.time)
+    compiled = C.compile_chain(chain_of(config), offset=0.0)
+    layout = T.tree_layout(compiled)
+    assert layout.n_r == y.shape[1]  # the one-body state is the tree's reduced state
+    work = T.tree_work(1, compiled.n_states)
+    found = np.empty_like(y)
+    for k in range(len(time)):
+        T.tree_rate(time[k], y[k], *compiled.args, *layout.args, found[k], work)
+    expected = variant.rhs(time[:, None], y)
+    scale = 1.0 + np.abs(expected).max(axis=0)
+    assert np.max(np.abs(found - expected) / scale) < 1e-11
+    # the compiled driver on the general rate (integrate_chain_runs takes one body's): the same
+    # steps, so the same motion to the solver's tolerance, with the disturbances' work
+    system = tree_system(compiled, sim.limits)
+    settings = settings_records(settings_rows([sim]), method_number(sim.method))
+    samples, work_done = np.empty((1, sim.n_samples, y.shape[1])), np.empty((1, sim.n_samples))
+    ends = (np.empty(1, dtype=np.int64), np.empty(1), np.empty(1, dtype=np.int64), np.empty(1, dtype=np.int64))
+    integrate_tree_chunk(system, y[:1].copy(), settings, samples, work_done, ends)
+    assert ends[0][0] == 0
+    scale = 1.0 + np.abs(y).max(axis=0)
+    assert np.max(np.abs(samples[0] - y) / scale) < 10 * sim.rtol
+    if "disturbance_work" in body.outputs:
+        work = body.outputs["disturbance_work"]
+        np.testing.assert_allclose(work_done[0], work, rtol=0, atol=10 * sim.rtol * (1.0 + np.abs(work).max()))
 
 
 def _pulsed_chain(l_r):

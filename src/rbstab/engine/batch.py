@@ -29,9 +29,9 @@ import numpy as np
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
 from ..config.paths import parse_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
-from ..model import (DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, Gains, RigidBody,
-                     set_limits)
+from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import VARIANTS
+from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
 
@@ -306,18 +306,6 @@ def _offsets(p: np.ndarray, names: np.ndarray, gravity: np.ndarray) -> np.ndarra
         return out
     keys = np.array([p[i].tobytes() + gravity[i].tobytes() + names[i].encode() for i in heavy], dtype=object)
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    found = np.array([_offset(p[heavy[i]], gravity[heavy[i]], names[heavy[i]]) for i in first])
+    found = np.array([record_offset(p[heavy[i]], gravity[heavy[i]], names[heavy[i]]) for i in first])
     out[heavy] = found[inverse.ravel()]
     return out
-
-
-def _offset(record: np.void, gravity: np.ndarray, name: str) -> float:
-    """``Variant.lyapunov_offset`` of one run's record (the body and the gains its variant uses)."""
-    cls = VARIANTS[name]
-    body = RigidBody(float(record["mass"]), record["inertia"].copy(), record["attachment_point"].copy(),
-                     gravity.copy())
-    used = cls.required_gains
-    gains = Gains(**{g: record[g].copy() for g in GAIN_NAMES if g in used},
-                  k_s=float(record["k_s"]) if "k_s" in used else None,
-                  boundary_layer=float(record["boundary_layer"]) if "k_s" in used else 0.0)
-    return cls(body, gains).lyapunov_offset  # without disturbances: the equilibrium's

@@ -47,11 +47,12 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
+from .registry import record_offset
 from .kernels import PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command, saturation_effects
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "is_one_body", "independent_coordinates", "full_state",
            "reduced_rate", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -591,6 +592,22 @@ class CompiledChain:
     def size(self) -> int:
         return int(self.codes.shape[0])
 
+    @property
+    def one_body(self) -> bool:
+        """Whether the chain is the paper's one-body model (:func:`is_one_body`)."""
+        return is_one_body(self.params, self.codes, self.parents, self.ppoints)
+
+
+def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoints: np.ndarray) -> bool:
+    """Whether a tree (its records, codes, parents and parent points as in
+    :class:`CompiledChain`) is the paper's one-body model: one body held by its joint to
+    the ground at the point R_p = R_c, where its point C rests with its centre of mass at the
+    origin (E = X + A R - R, eq 4; the one-body spelling's body and controller). One body's
+    compiled rate (:func:`rbstab.variants.kernels.state_rate`) and its h then serve the
+    tree: its reduced state is the body's state."""
+    return (codes.shape[0] == 1 and parents[0] < 0
+            and bool(np.array_equal(ppoints[0], params[0]["attachment_point"])))
+
 
 def _record(chain: Chain, i: int) -> np.ndarray:
     body, joint = chain.bodies[i], chain.joints[i]
@@ -782,6 +799,8 @@ def rest_offset(compiled: CompiledChain) -> float:
     potential has no minimum."""
     if not np.any(compiled.chain.gravity):
         return 0.0
+    if compiled.one_body:  # the one-body model's own h, as its one-body spelling has it
+        return record_offset(compiled.params[0], compiled.chain.gravity, _VARIANT_NAMES[int(compiled.codes[0])])
     key = b"".join(np.ascontiguousarray(a).tobytes() for a in (_undisturbed(compiled.params), *compiled.args[1:],
                                                                  compiled.chain.gravity))
     if key not in _OFFSETS:  # the runs of a sweep over initial states share their chain's
@@ -791,6 +810,9 @@ def rest_offset(compiled: CompiledChain) -> float:
         _OFFSETS[key] = 0.0 if y is None else -value
     return _OFFSETS[key]
 
+
+#: Variant names by their code (:data:`rbstab.layout.VARIANT_CODES`).
+_VARIANT_NAMES = {code: name for name, code in VARIANT_CODES.items()}
 
 #: h of the chains met so far in this process, by their records' bytes (:func:`rest_offset`).
 _OFFSETS: dict[bytes, float] = {}

@@ -13,9 +13,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..layout import FULL_BODY
+from ..model import Gains, RigidBody
 from .base import Variant
 
-__all__ = ["VARIANTS", "Free", "Permanent", "Sliding", "ViscoElastic", "Embedded"]
+__all__ = ["VARIANTS", "Free", "Permanent", "Sliding", "ViscoElastic", "Embedded", "record_offset"]
 
 
 class Free(Variant):
@@ -101,3 +102,17 @@ class Embedded(Variant):
 VARIANTS: dict[str, type[Variant]] = {
     cls.name: cls for cls in (Free, Permanent, Sliding, ViscoElastic, Embedded)
 }
+
+
+def record_offset(record: np.void, gravity: np.ndarray, name: str) -> float:
+    """h [J] (``Variant.lyapunov_offset``, eq 30) of the body and gains of one
+    :data:`rbstab.model.PARAMETERS` record under ``gravity`` [m/s^2] (3,) with the variant
+    ``name``'s law, without disturbances (the undisturbed equilibrium's)."""
+    cls = VARIANTS[name]
+    body = RigidBody(float(record["mass"]), record["inertia"].copy(), record["attachment_point"].copy(),
+                     np.array(gravity, dtype=float))
+    used = cls.required_gains
+    gains = Gains(**{g: record[g].copy() for g in used if g != "k_s"},
+                  k_s=float(record["k_s"]) if "k_s" in used else None,
+                  boundary_layer=float(record["boundary_layer"]) if "k_s" in used else 0.0)
+    return cls(body, gains).lyapunov_offset
