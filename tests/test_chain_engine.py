@@ -428,13 +428,14 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
     goes on, on either engine; straight (a rigid rotation about a principal axis through
     the fixed point) with the upper body started at 1.0 rad, the upper body's Theta, the
     ground joint's Theta_j, reaches the margin and the run stops there, at
-    (pi/2 - 0.3 - 1.0) / 3 s."""
+    (pi/2 - 0.3 - 1.0) / 3 s. Its message names the joint whose angle locked: the shoulder;
+    the elbow, where the lower body starts bent 1.2 rad and turning, the upper at rest."""
     from rbstab.engine.status import GIMBAL_LOCK, SUCCESS
 
     limit = np.pi / 2 - 0.3
 
-    def run(upper, bend):
-        config = chain_config_from_mapping({
+    def config_of(upper, bend, spin=3.0):
+        return chain_config_from_mapping({
             "name": "turning", "gravity": [0, 0, 0],
             "bodies": [{"name": "upper", "mass": 2.0, "inertia": [0.2, 0.2, 0.05]},
                        {"name": "lower", "mass": 1.5, "inertia": [0.1, 0.1, 0.03]}],
@@ -442,11 +443,14 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
                         "child_point": [0, 0, 0.4], "variant": "permanent", "k_r": [0, 0, 0], "l_r": [0, 0, 0]},
                        {"name": "elbow", "parent": "upper", "parent_point": [0, 0, -0.4], "child": "lower",
                         "child_point": [0, 0, 0.3], "variant": "permanent", "k_r": [0, 0, 0], "l_r": [0, 0, 0]}],
-            "initial_state": {"upper": {"theta": [0.0, upper, 0.0], "omega": [0.0, 3.0, 0.0]},
+            "initial_state": {"upper": {"theta": [0.0, upper, 0.0], "omega": [0.0, spin, 0.0]},
                               "lower": {"theta": [0.0, upper + bend, 0.0], "omega": [0.0, 3.0, 0.0]}},
             "simulation": {"t_end": 0.2, "n_samples": 201, "method": "DOP853", "rtol": 1e-10, "atol": 1e-12,
                            "gimbal_margin": 0.3},
         })
+
+    def run(upper, bend):
+        config = config_of(upper, bend)
         if engine == "scipy":
             return simulate_chain(config, engine="scipy")
         compiled = C.compile_chain(config.chain, offset=0.0)
@@ -465,3 +469,7 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
         t_stop = locked.t_stop[0]
     assert np.abs(lower).max() > limit + 0.1  # the lower body's own angles passed the margin
     assert t_stop == pytest.approx((limit - 1.0) / 3.0, abs=0.002)
+    for (upper, bend, spin), joint in (((1.0, 0.0, 3.0), "shoulder"), ((0.0, 1.2, 0.0), "elbow")):
+        result = simulate_chain(config_of(upper, bend, spin), engine=engine)
+        assert result.status == "failed"
+        assert result.message.startswith(f"gimbal lock: |theta_2| of joint {joint}'s Theta_j reached pi/2 - 0.3 rad")

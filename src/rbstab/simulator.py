@@ -886,11 +886,11 @@ def _chain_end(compiled, sim, code: int, t_stop: float, states: np.ndarray, y0: 
 
     if code == SUCCESS:
         return "success", status_message(code, t_stop, sim.gimbal_margin)
+    finite = states[np.isfinite(states[:, 0])]
+    last = finite[-1] if len(finite) else y0  # the last sample before the stop
     if code == GIMBAL_LOCK:
-        return "failed", f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_stop:.6g} s"
+        return "failed", C.gimbal_lock_message(compiled, last, sim.gimbal_margin, t_stop)
     if limit_of(code) is not None:
-        finite = states[np.isfinite(states[:, 0])]
-        last = finite[-1] if len(finite) else y0
         return "failed", (f"left the admissible region (simulation.limits): "
                           f"{C.nearest_bound(compiled, last, sim.limits, limit_of(code))} at t = {t_stop:.6g} s")
     return "failed", status_message(code, t_stop, sim.gimbal_margin, int(sim.max_steps), wall_limit)

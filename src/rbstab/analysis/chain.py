@@ -224,7 +224,9 @@ def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
             outcome[k] = 0 if np.isfinite(t_conv[k]) else 1
             continue
         if code == GIMBAL_LOCK:
-            message = "gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin)"
+            finite = sol.samples[k][np.isfinite(sol.samples[k, :, 0])]
+            last = finite[-1] if len(finite) else states[k]  # the last sample before the stop
+            message = C.gimbal_lock_message(compiled, last, sim.gimbal_margin, float(sol.t_stop[k])).split(" at t =")[0]
         elif limit_of(code) is not None:
             quantity, axis = limit_of(code)
             message = f"left the admissible region (simulation.limits): |{quantity}_{axis + 1}| of a body or joint"

@@ -52,7 +52,7 @@ from .kernels import PERMANENT, constraint_dissipation, constraint_energy, const
     constraint_force_command, saturation_effects
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "is_one_body", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "is_one_body", "gimbal_lock_message", "independent_coordinates", "full_state",
            "reduced_rate", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -950,22 +950,43 @@ class ChainTrajectory:
     work: np.ndarray
 
 
-def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
-    """min of (pi/2 - margin - |theta_2|) [rad] over the Euler angles a run integrates (each
-    body's Theta, or the Theta_j of the permanent joint that holds it) and every other
-    joint's relative Theta_j off the ground, at the maximal state ``y``: the run stops where
-    it reaches 0 (eq 1's B(Theta) is singular at |theta_2| = pi/2; the compiled driver's
-    :func:`rbstab.engine.systems.tree_margin`)."""
-    limit = math.pi / 2 - margin
+def _gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """(theta_2 [rad] of every Euler angle a run integrates (each body's Theta, or the Theta_j
+    of the permanent joint that holds it) and of every other joint's relative Theta_j off
+    the ground, at the maximal state ``y``; the words naming each)."""
     n = compiled.size
     joints = np.empty((n, 7, 3))
-    chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)), np.empty(5))
-    permanent = compiled.codes == PERMANENT
-    body = np.asarray(y)[1: 12 * n: 12]
-    relative = joints[:, _THETA_J, 1]
-    worst = np.where(permanent, relative, body)
-    return float(min(np.min(limit - np.abs(worst)),
-                     np.min(limit - np.abs(relative[~permanent & (compiled.parents >= 0)]), initial=math.inf)))
+    chain_core(0.0, np.ascontiguousarray(y, dtype=float), *compiled.args, np.empty(compiled.n_states), joints,
+               np.empty((n, 3)), np.empty(5))
+    bodies, names = compiled.chain.body_names, compiled.chain.joint_names
+    angles, what = [], []
+    for i in range(n):
+        if compiled.codes[i] == PERMANENT:
+            angles.append(joints[i, _THETA_J, 1])
+            what.append(f"joint {names[i]}'s Theta_j")
+            continue
+        angles.append(float(np.asarray(y)[12 * i + 1]))
+        what.append(f"body {bodies[i]}'s Theta")
+        if compiled.parents[i] >= 0:
+            angles.append(joints[i, _THETA_J, 1])
+            what.append(f"joint {names[i]}'s Theta_j")
+    return np.array(angles, dtype=float), what
+
+
+def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
+    """min of (pi/2 - margin - |theta_2|) [rad] over the angles of :func:`_gimbal_angles` at
+    the maximal state ``y``: the run stops where it reaches 0 (eq 1's B(Theta) is singular
+    at |theta_2| = pi/2; the compiled driver's :func:`rbstab.engine.systems.tree_margin`)."""
+    return float(np.min(math.pi / 2 - margin - np.abs(_gimbal_angles(compiled, y)[0])))
+
+
+def gimbal_lock_message(compiled: CompiledChain, y: np.ndarray, margin: float, t: float) -> str:
+    """The message of a run stopped by gimbal lock at ``t`` [s], naming the body or joint
+    whose |theta_2| is largest at the maximal state ``y`` (the event's, or the last sample
+    before it); ``margin`` the run's ``simulation.gimbal_margin`` [rad]."""
+    angles, what = _gimbal_angles(compiled, y)
+    return (f"gimbal lock: |theta_2| of {what[int(np.argmax(np.abs(angles)))]} reached pi/2 - {margin:g} rad "
+            f"at t = {t:.6g} s; B(theta) is singular there (eq 5), so the Euler-angle model stops")
 
 
 def _region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:

@@ -55,6 +55,7 @@ from .chain import (
     chain_wrenches,
     chain_work,
     euler_angles,
+    gimbal_lock_message,
 )
 from .disturbances import next_breakpoint
 from .kernels import PERMANENT
@@ -648,7 +649,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
         if sol.status == 1 and len(sol.t_events[0]):
             t_lock = float(sol.t_events[0][0])
             status = "failed"
-            message = f"gimbal lock of a body or joint (|theta_2| = pi/2 - gimbal_margin) at t = {t_lock:.6g} s"
+            message = gimbal_lock_message(compiled, maximal(sol.y_events[0][0][:n_r]), sim.gimbal_margin, t_lock)
             break
         if sol.status == 1:
             t_out = float(sol.t_events[1][0])
