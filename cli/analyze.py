@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import math
 from pathlib import Path
-from types import SimpleNamespace
 
 import click
 
@@ -342,9 +341,9 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             push_options = {**push_options, "body": push_body}
         if stability_options is not None and stability_options.get("push") is not None:
             stability_options = {**stability_options, "body": push_body}
-        _analyse_chains(chains, overrides, basin, ratio=ratio, n_samples=basin_samples, push=push_options,
-                        stability=stability_options, jobs=jobs or default_jobs(), certificate=not no_certificate,
-                        samples=samples, seed=seed)
+        _analyse_chains(chains, overrides, basin, Path(output), ratio=ratio, n_samples=basin_samples,
+                        push=push_options, stability=stability_options, jobs=jobs or default_jobs(),
+                        certificate=not no_certificate, samples=samples, seed=seed, overwrite=overwrite)
         return
     if push_body is not None:
         raise click.UsageError("--push-body: names the body of a chain that is pushed; a one-body config has one")
@@ -396,18 +395,20 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             console.emit({"kind": "robustness", **result.to_json()})
 
 
-def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, push: dict | None,
+def _analyse_chains(paths, overrides, basin, out: Path, *, ratio: float, n_samples: int, push: dict | None,
                     stability: dict | None, jobs: int, certificate: bool = True, samples: int = 10_000,
-                    seed: int = 0) -> None:
+                    seed: int = 0, overwrite: bool = False) -> None:
     """Each chain's rest state, linearisation, verdict and (``certificate``) Lyapunov
     certificate (``samples`` states, ``seed``; its c checked against every run of the
     command) and, with two ``basin`` axes, its
     basin map (:func:`rbstab.analysis.chain_basin_map`), with ``push`` its smallest fatal
     pushes (:func:`rbstab.analysis.push.push_analysis` on a named body), printed (or one
-    JSON object each, "kind": "chain"); nothing is written. Every axis and the pushed body
-    are checked against every chain before anything runs."""
-    from rbstab.analysis import BasinAxis, analyze_chain, chain_basin_map  # heavy: numba, numpy
+    JSON object each, "kind": "chain") and written to ``out``/<name>.analysis.nc. Every axis,
+    the pushed body and the files to write are checked against every chain before anything
+    runs."""
+    from rbstab.analysis import BasinAxis, analyze_chain, chain_basin_map, write_analysis  # heavy: numba, numpy
     from rbstab.analysis.chain import check_axes, check_entries  # heavy: numba, numpy
+    from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
     from rbstab.analysis.push import basin_stability, push_analysis  # heavy: numba, numpy
     from rbstab.analysis.text import push_lines, stability_lines  # heavy: numba, numpy
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
@@ -442,6 +443,8 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
                 check_axes(config, axes)
         except ValueError as exc:
             raise click.ClickException(str(exc))
+    if not overwrite:
+        _check_targets(loaded, out)
     if certificate or axes or push is not None or stability is not None:
         ensure_compiled(say=console.info, chain=True)
     for config in loaded:
@@ -450,9 +453,10 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
             found = chain_basin_map(config, axes, ratio=ratio, n_samples=n_samples) if axes else None
             pushed = push_analysis(config, ratio=ratio, jobs=jobs, **push) if push is not None else None
             stable = basin_stability(config, ratio=ratio, jobs=jobs, **stability) if stability is not None else None
-            result = result.checked(SimpleNamespace(basin=found, push=pushed, basin_stability=stable))
+            result = result.with_runs(basin=found, push=pushed, basin_stability=stable)
         except ValueError as exc:
             raise click.ClickException(f"{config.name}: {exc}")
+        path = write_analysis(result, analysis_path(out, config.name), command_line=command_line())
         if console.json:
             c = result.certificate
             push_json = None
@@ -466,8 +470,7 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
                           **({"basin_stability": stable.to_json()} if stable else {})})
             continue
         console.out(result.text())
-        shown = SimpleNamespace(push=pushed, certificate=result.certificate, basin_stability=stable)
-        for line in push_lines(shown) + stability_lines(shown):
+        for line in push_lines(result) + stability_lines(result):
             console.out(line)
         if found is not None:
             counts = ", ".join(f"{n} {name}" for name, n in found.counts().items())
@@ -476,6 +479,7 @@ def _analyse_chains(paths, overrides, basin, *, ratio: float, n_samples: int, pu
                         f"{found.t_end:g} s): {counts}")
             for message, n in found.messages.items():
                 console.out(f"    {n} failed: {message}")
+        console.out(f"  -> {path}")
 
 
 def _basin_json(found) -> dict:

@@ -330,21 +330,41 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
 def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp_path):
     from click.testing import CliRunner
 
+    from rbstab.analysis import read_analysis
     from rbstab_cli.main import cli
 
     path = "configs/examples/stance_ankle_hip.yaml"
-    result = CliRunner().invoke(cli, ["analyze", path, "--set", "joints.ankle.k_r.0=400", "-o", str(tmp_path)])
+    weak = ["--set", "joints.ankle.k_r.0=400"]
+    result = CliRunner().invoke(cli, ["analyze", path, *weak, "-o", str(tmp_path), "--samples", "300"])
     assert result.exit_code == 0, result.output
     assert result.output.startswith("stance_ankle_hip: unstable") and "rest legs.theta: [0, 0, 0]" in result.output
-    refused = CliRunner().invoke(cli, ["analyze", path, "--verify", "-o", str(tmp_path)])
+    written = tmp_path / "stance_ankle_hip.analysis.nc"
+    assert f"-> {written}" in result.output
+    ds = read_analysis(written)  # one body's analysis file, its state blocks by body
+    assert ds.attrs["variant"] == "chain" and ds.attrs["verdict"] == "unstable"
+    assert list(ds["body"].values) == ["legs", "trunk"] and ds["equilibrium_theta"].dims == ("body", "axis")
+    assert list(ds["state"].values[2:5]) == ["legs.theta_3", "legs.omega_1", "legs.omega_2"]
+    assert list(ds["state"].values[6:7]) == ["trunk.theta_1"]
+    assert ds["jacobian"].shape == (12, 12) and ds["eigenvalue_real"].values[0] > 0  # the ankle too weak
+    assert list(ds["state_units"].values[:7]) == ["rad"] * 3 + ["rad s-1"] * 3 + ["rad"]
+    assert ds.attrs["certificate_holds"] == 0 and ds["sublevel"].values == 0.0  # no region of an unstable rest
+    refused_dir = tmp_path / "refused"
+    refused = CliRunner().invoke(cli, ["analyze", path, "--verify", "-o", str(refused_dir)])
     assert refused.exit_code == 2 and "is a chain" in refused.output and "--verify take one-body configs" in refused.output
-    assert "Traceback" not in refused.output and not any(tmp_path.iterdir())
+    assert "Traceback" not in refused.output and not refused_dir.exists()
+    # another configuration of the same name does not replace the file without --overwrite
+    before = written.read_bytes()
+    other = CliRunner().invoke(cli, ["analyze", path, "-o", str(tmp_path), "--no-certificate"])
+    assert other.exit_code == 1 and "holds the analysis of a different configuration" in other.output
+    assert written.read_bytes() == before
 
 
 def test_rbstab_analyze_maps_a_chains_basin_and_refuses_a_key_naming_no_body(tmp_path):
     import json
 
     from click.testing import CliRunner
+
+    from rbstab.analysis import read_analysis
 
     from rbstab_cli.main import cli
 
@@ -356,16 +376,32 @@ def test_rbstab_analyze_maps_a_chains_basin_and_refuses_a_key_naming_no_body(tmp
     found = json.loads(result.stdout.strip().splitlines()[-1])
     assert found["kind"] == "chain" and np.shape(found["basin"]["outcome"]) == (3, 2)
     assert sum(found["basin"]["counts"].values()) == 6 and found["basin"]["axes"][1]["values"] == [-0.1, 0.1]
+    ds = read_analysis(tmp_path / "stance_ankle_hip.analysis.nc")
+    np.testing.assert_array_equal(ds["basin_outcome"].values, found["basin"]["outcome"])
+    assert ds["basin_x"].attrs["config_key"] == "initial_state.legs.theta.0" and list(ds["basin_y"].values) == [-0.1, 0.1]
+    np.testing.assert_array_equal(ds["eigenvalue_real"].values + 1j * ds["eigenvalue_imag"].values,
+                                  [complex(*s) for s in found["eigenvalues"]])
+    for body, blocks in found["rest_state"].items():
+        np.testing.assert_array_equal(ds["equilibrium_theta"].sel(body=body).values, blocks["theta"])
+    report = CliRunner().invoke(cli, ["report", str(tmp_path / "stance_ankle_hip.analysis.nc"), "-o",
+                                      str(tmp_path / "report")])
+    assert report.exit_code == 0, report.output
+    assert (tmp_path / "report" / "figures" / "analysis_stance_ankle_hip_basin.png").is_file()
+    assert "legs theta (0, 0, 0) rad; trunk theta (0, 0, 0) rad" in (tmp_path / "report" / "index.html").read_text()
+    refused_dir = tmp_path / "refused"
     refused = CliRunner().invoke(cli, ["analyze", path, "--basin", "initial_state.hips.theta.0=-0.1:0.1:3",
-                                       "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2", *short])
+                                       "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2", *short[:-1],
+                                       str(refused_dir)])
     assert refused.exit_code == 1 and "no body 'hips' in this chain (its bodies: legs, trunk" in refused.output
-    assert "Traceback" not in refused.output and not any(tmp_path.iterdir())
+    assert "Traceback" not in refused.output and not refused_dir.exists()
 
 
 def test_rbstab_analyze_pushes_a_chains_body_and_draws_its_basin_stability(tmp_path):
     import json
 
     from click.testing import CliRunner
+
+    from rbstab.analysis import read_analysis
 
     from rbstab_cli.main import cli
 
@@ -376,19 +412,26 @@ def test_rbstab_analyze_pushes_a_chains_body_and_draws_its_basin_stability(tmp_p
     assert pushed.exit_code == 0, pushed.output
     push = json.loads(pushed.stdout.strip().splitlines()[-1])["push"]
     assert push["body"] == "trunk" and push["point"] == [0.0, 0.0, 0.2] and 1.0 < push["threshold"][0] < 1e3
+    ds = read_analysis(tmp_path / "stance_ankle_hip.analysis.nc")
+    assert ds.attrs["push_body"] == "trunk" and ds.attrs["push_kind"] == "force"
+    assert list(ds["push_threshold"].values) == push["threshold"] and list(ds["push_point"].values) == [0.0, 0.0, 0.2]
     drawn = CliRunner().invoke(cli, ["analyze", path, "--basin-stability", "initial_state.legs.theta.0=-0.5:0.5",
                                      "-n", "30", *short])
     assert drawn.exit_code == 0, drawn.output
     stability = json.loads(drawn.stdout.strip().splitlines()[-1])["basin_stability"]
     assert stability["draws"] == 30 and 0 < stability["recovered"] < 30  # the box reaches beyond the basin
+    ds = read_analysis(tmp_path / "stance_ankle_hip.analysis.nc")  # the same configuration's file, replaced
+    assert "push_threshold" not in ds and ds["stability_recovered"].size == 30
+    refused_dir = tmp_path / "refused"
+    short[short.index("-o") + 1] = str(refused_dir)
     for args, says in ((["--push", "force"], "--push-body: found none for stance_ankle_hip; expected the body"),
                        (["--basin-stability", "initial_state.arms.theta.0=-1:1"], "no body 'arms' in this chain")):
         refused = CliRunner().invoke(cli, ["analyze", path, *args, *short])
         assert refused.exit_code != 0 and says in refused.output and "Traceback" not in refused.output
     one_body = CliRunner().invoke(cli, ["analyze", "configs/paper/case1_permanent.yaml", "--push", "torque",
-                                        "--push-body", "trunk", "-o", str(tmp_path)])
+                                        "--push-body", "trunk", "-o", str(refused_dir)])
     assert one_body.exit_code == 2 and "--push-body: names the body of a chain" in one_body.output
-    assert not any(tmp_path.iterdir())
+    assert not refused_dir.exists()
 
 
 @pytest.mark.parametrize("mass", [44.0, 45.0, 48.0])

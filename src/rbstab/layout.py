@@ -496,6 +496,10 @@ class StateLayout:
         """Scalar state names such as ``theta_1`` ... in layout order."""
         return [f"{b}_{k}" for b in self.blocks for k in (1, 2, 3)]
 
+    def state_units(self) -> list[str]:
+        """The units of each scalar state (:data:`BLOCK_UNITS`), in layout order."""
+        return [BLOCK_UNITS[b] for b in self.blocks for _ in range(3)]
+
 
 FULL_BODY = StateLayout(("theta", "omega", "position", "velocity"))
 EMBEDDED = StateLayout(("theta", "omega", "position", "velocity", "controller_state"))

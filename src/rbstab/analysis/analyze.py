@@ -118,9 +118,7 @@ class Analysis:
     def linear_settling_time(self) -> float:
         """Time [s] the slowest mode alone takes to bring v down by the convergence ratio:
         v ~ exp(-2 t / tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
-        tau = self.linearisation.slowest_time_constant
-        ratio = self.settling["ratio"] if self.settling else DEFAULT_LYAPUNOV_RATIO
-        return 0.5 * tau * math.log(1.0 / ratio) if self.verdict == "asymptotically stable" else float("nan")
+        return self.linearisation.settling_time(self.settling["ratio"] if self.settling else DEFAULT_LYAPUNOV_RATIO)
 
     def basin_inside(self) -> dict[str, int] | None:
         """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""

@@ -15,26 +15,72 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .basin import DEFAULT_SAMPLES, BasinMap, time_to_converge
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
 from .chain_runs import chain_states, chain_states_recover, check_entries, final_lyapunov
-from .dataset import certificate_record, time_scale_record
+from .dataset import analysis_content, analysis_dataset, certificate_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain, mode_shapes
 from .text import certificate_lines, mode_lines, mode_shape_lines, time_scale
 
-__all__ = ["ChainAnalysis", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
+__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
            "chain_states_recover", "final_lyapunov"]
 
 
 @dataclass(frozen=True)
-class ChainAnalysis:
-    """What :func:`analyze_chain` finds.
+class TreeCoordinates:
+    """A chain's independent coordinates (:func:`rbstab.variants.chain.independent_coordinates`)
+    as the layout of its linearisation's state z: 3 entries per (body, state block), the
+    blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has (Theta, Omega of every body; X,
+    V of one whose joint is not ``permanent``; D of an ``embedded`` joint's child), as
+    :class:`rbstab.layout.StateLayout` lays out one body's state.
 
     Attributes
     ----------
-    name : str
-        The run's name.
+    coordinates : tuple of (str, str, int)
+        (body name, block, index into the full state) of each 3 entries of z.
+    bodies : tuple of str
+        The chain's bodies, in order.
+    """
+
+    coordinates: tuple
+    bodies: tuple
+
+    @property
+    def blocks(self) -> tuple[str, ...]:
+        """The state blocks some body has, in :data:`rbstab.layout.STATE_BLOCKS`' order."""
+        present = {block for _, block, _ in self.coordinates}
+        return tuple(b for b in STATE_BLOCKS if b in present)
+
+    def state_names(self) -> list[str]:
+        """Scalar coordinate names ``<body>.<block>_<i>`` (``legs.theta_1``), in z's order."""
+        return [f"{body}.{block}_{i}" for body, block, _ in self.coordinates for i in (1, 2, 3)]
+
+    def state_units(self) -> list[str]:
+        """The units of each scalar coordinate (:data:`rbstab.layout.BLOCK_UNITS`), in z's order."""
+        return [BLOCK_UNITS[block] for _, block, _ in self.coordinates for _ in range(3)]
+
+    def split(self, z: np.ndarray) -> dict[str, np.ndarray]:
+        """Each block of ``z`` (n_z,) by body: {block: shape (n_bodies, 3)}, NaN for a body
+        without that block."""
+        z = np.asarray(z, dtype=float)
+        out = {b: np.full((len(self.bodies), 3), np.nan) for b in self.blocks}
+        for k, (body, block, _) in enumerate(self.coordinates):
+            out[block][self.bodies.index(body)] = z[3 * k: 3 * k + 3]
+        return out
+
+
+@dataclass(frozen=True)
+class ChainAnalysis:
+    """What :func:`analyze_chain` finds, with the basin map, pushes and basin stability of
+    the same command (:mod:`rbstab.analysis.dataset` writes it as one body's analysis,
+    its state blocks by body).
+
+    Attributes
+    ----------
+    config : ChainConfig
+        The configuration analysed.
     linearisation : Linearisation
         At the rest state, in the independent coordinates (``coordinates``).
     coordinates : list of (str, str, int)
@@ -48,15 +94,61 @@ class ChainAnalysis:
         The Lyapunov certificate in the independent coordinates (its states, e.g.
         ``worst_state``, are z), None where not asked for.
     notes : tuple of str
+    ratio : float
+        The convergence ratio of the command's runs.
+    basin : BasinMap or None
+        :func:`chain_basin_map`.
+    push : PushAnalysis or None
+        :func:`rbstab.analysis.push.push_analysis` on one of its bodies.
+    basin_stability : BasinStability or None
+        :func:`rbstab.analysis.push.basin_stability`.
     """
 
-    name: str
+    config: object
     linearisation: Linearisation
     coordinates: list
     rest_state: np.ndarray
     initial_lyapunov: float
     certificate: object = None
     notes: tuple = ()
+    ratio: float = DEFAULT_LYAPUNOV_RATIO
+    basin: BasinMap | None = None
+    push: object = None
+    basin_stability: object = None
+    #: Neither simulated from the configured initial state nor verified (one body's analysis
+    #: has them).
+    settling = None
+    verification = None
+    #: A chain's analysis file's ``variant``, as its run file's.
+    variant = "chain"
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def analysed(self):
+        """The configuration analysed (the one given)."""
+        return self.config
+
+    @property
+    def layout(self) -> TreeCoordinates:
+        """The linearisation's coordinates by body and block."""
+        return TreeCoordinates(tuple(self.coordinates), tuple(self.config.chain.body_names))
+
+    @property
+    def linear_settling_time(self) -> float:
+        """:meth:`Linearisation.settling_time` at :attr:`ratio` [s]."""
+        return self.linearisation.settling_time(self.ratio)
+
+    def to_dataset(self):
+        """The analysis as an :class:`xarray.Dataset` (its file's content, :mod:`~rbstab.analysis.dataset`)."""
+        return analysis_dataset(self)
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
+        return analysis_content(self, command_line)
 
     @property
     def verdict(self) -> str:
@@ -128,14 +220,14 @@ class ChainAnalysis:
             lines += certificate_lines(self.certificate, domain="|theta_2| of a body or joint")
         return "\n".join(lines)
 
-    def checked(self, runs) -> "ChainAnalysis":
-        """This analysis with its certificate's c checked against the runs of ``runs`` (an
-        object with ``basin``, ``push`` and ``basin_stability``, those of the same command;
-        :func:`rbstab.analysis.evidence.check_runs`; the run from the configured initial
-        state was checked by :func:`analyze_chain`)."""
+    def with_runs(self, basin=None, push=None, basin_stability=None) -> "ChainAnalysis":
+        """This analysis with the basin map, pushes and basin stability of the same command,
+        its certificate's c checked against their runs (:func:`rbstab.analysis.evidence.check_runs`;
+        the run from the configured initial state was checked by :func:`analyze_chain`)."""
+        found = replace(self, basin=basin, push=push, basin_stability=basin_stability)
         if self.certificate is None:
-            return self
-        return replace(self, certificate=check_runs(self.certificate, runs))
+            return found
+        return replace(found, certificate=check_runs(self.certificate, found))
 
 
 def analyze_chain(config, *, certificate: bool = True, samples: int | None = None, seed: int = 0,
@@ -166,7 +258,7 @@ def analyze_chain(config, *, certificate: bool = True, samples: int | None = Non
                                      n_samples=DEFAULT_CHAIN_SAMPLES if samples is None else int(samples), seed=seed,
                                      falsification_runs=FALSIFICATION_RUNS if falsification_runs is None
                                      else int(falsification_runs), ratio=ratio)
-    return ChainAnalysis(config.name, lin, coordinates, rest, float(v0), found, tuple(notes))
+    return ChainAnalysis(config, lin, coordinates, rest, float(v0), found, tuple(notes), ratio)
 
 
 def check_axes(config, axes) -> None:

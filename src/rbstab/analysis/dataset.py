@@ -14,7 +14,9 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
 
     dims   state, state_wrt (the state variables, for matrices), mode (eigenvalues, real
            part descending), rate_mode, sample, axis, basin_x, basin_y
-    equilibrium_<block>(axis), rest_residual_<block>(axis)
+    equilibrium_<block>(axis), rest_residual_<block>(axis); a chain's (``variant`` chain):
+    <block>(body, axis), NaN where a body has no such coordinate, the state named
+    <body>.<block>_<i>, its coordinates those of rbstab analyze's linearisation (independent)
     jacobian(state, state_wrt), jacobian_error, eigenvalue_real(mode), eigenvalue_imag,
     natural_frequency, damping_ratio, time_constant, e_folding_time; eigenvalue_tolerance,
     rest_tolerance, slowest_time_constant, shortest_e_folding_time, time_to_converge,
@@ -99,11 +101,14 @@ def _var(dims, data, units: str, long_name: str, description: str = "") -> tuple
 
 
 def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = False) -> dict:
-    """``<prefix>_<block>(axis)`` variables of a state vector ``y`` in ``layout``."""
+    """``<prefix>_<block>(axis)`` variables of a state vector ``y`` in ``layout`` (a
+    :class:`~rbstab.layout.StateLayout`), or ``<prefix>_<block>(body, axis)`` in a chain's
+    (:class:`rbstab.analysis.chain.TreeCoordinates`: NaN for a body without the block)."""
     out = {}
     for block, values in layout.split(np.asarray(y, dtype=float)).items():
         units = _rate_units(BLOCK_UNITS[block]) if rate else BLOCK_UNITS[block]
-        out[f"{prefix}_{block}"] = _var(("axis",), values, units, f"{long_name}: {block}")
+        dims = ("axis",) if values.ndim == 1 else ("body", "axis")
+        out[f"{prefix}_{block}"] = _var(dims, values, units, f"{long_name}: {block}")
     return out
 
 
@@ -275,7 +280,8 @@ def _push_variables(analysis) -> tuple[dict, dict, dict]:
                                           "{v <= c} holds: min over the directions of sqrt(c / dT(u)) (an estimate, "
                                           "checked against every push run)")
     attrs = {"push_kind": p.kind, "push_at": p.at, "push_tol": p.tol, "push_rungs": p.rungs, "push_ratio": p.ratio,
-             "push_rule": p.rule_text, "push_engine": p.engine, "push_runs": p.runs}
+             "push_rule": p.rule_text, "push_engine": p.engine, "push_runs": p.runs,
+             **({"push_body": p.body} if p.body is not None else {})}
     return variables, {}, attrs
 
 
@@ -363,7 +369,7 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
     file (module docstring); each variable a (dims, data, attrs) triple."""
     layout = analysis.layout
     names = layout.state_names()
-    units = [BLOCK_UNITS[b] for b in layout.blocks for _ in range(3)]
+    units = layout.state_units()
     basin, basin_coords = _basin_variables(analysis)
     push, push_coords, push_attrs = _push_variables(analysis)
     stability, stability_coords, stability_attrs = _stability_variables(analysis)
@@ -376,6 +382,8 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
         "state_units": _var(("state",), np.array(units, dtype=object), "1", "units of each state variable"),
         "mode": _var(("mode",), np.arange(len(names)), "1", "eigenvalue index, real part descending"),
         "axis": _var(("axis",), np.array(["x", "y", "z"], dtype=object), "1", "vector component"),
+        **({"body": _var(("body",), np.array(layout.bodies, dtype=object), "1", "body of the chain")}
+           if hasattr(layout, "bodies") else {}),
         **({"bound": _var(("bound",), np.array(["low", "high"], dtype=object), "1", "end of an interval")}
            if getattr(analysis, "verification", None) is not None else {}),
         **basin_coords,

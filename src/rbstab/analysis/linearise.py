@@ -33,6 +33,8 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, replace
 
+import math
+
 import numpy as np
 
 from .derivatives import jacobian
@@ -128,6 +130,11 @@ class Linearisation:
         """The time constant of the eigenvalue with the largest real part [s] when
         asymptotically stable; NaN otherwise."""
         return float(self.time_constant[0]) if self.verdict == "asymptotically stable" else float("nan")
+
+    def settling_time(self, ratio: float) -> float:
+        """Time [s] the slowest mode alone takes to bring v down by ``ratio``: v ~ exp(-2 t /
+        tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
+        return 0.5 * self.slowest_time_constant * math.log(1.0 / ratio)
 
     @property
     def shortest_e_folding_time(self) -> float:

@@ -107,12 +107,18 @@ def _eigenvalues(ds) -> np.ndarray:
 
 
 def _state_text(ds, prefix: str) -> str:
+    """The blocks ``<prefix>_<block>`` of an analysis file's state in words: ``theta (0, 0, 0)
+    rad; ...``, a chain's by body (``legs theta (...)``; a body without the block left out)."""
     parts = []
     for name in ds.data_vars:
-        if name.startswith(f"{prefix}_") and ds[name].dims == ("axis",):
-            block = name[len(prefix) + 1:]
-            values = ", ".join(_f(v, 6) for v in ds[name].values + 0.0)
-            parts.append(f"{block} ({values}) {ds[name].attrs.get('units', '')}")
+        if not name.startswith(f"{prefix}_") or ds[name].dims[-1:] != ("axis",):
+            continue
+        block, units = name[len(prefix) + 1:], ds[name].attrs.get("units", "")
+        rows = ([(f"{body} {block}", row) for body, row in zip(ds["body"].values.astype(str), ds[name].values)]
+                if ds[name].dims == ("body", "axis") else [(block, ds[name].values)])
+        for label, row in rows:
+            if np.all(np.isfinite(row)):
+                parts.append(f"{label} ({', '.join(_f(v, 6) for v in row + 0.0)}) {units}")
     return "; ".join(parts)
 
 
@@ -124,7 +130,7 @@ def _facts(ds) -> list[str]:
              f"(modes with |Re s| <= {_f(_scalar(ds, 'eigenvalue_tolerance'), 2)} 1/s count as marginal)",
              f"equilibrium: {_state_text(ds, 'equilibrium')}",
              f"rest check: {'passed' if a.get('rest_point') else 'FAILED'} (max |dy/dt| "
-             f"{_f(max(abs(float(ds[n].values.max())) for n in ds.data_vars if n.startswith('rest_residual_')), 3)} "
+             f"{_f(max(float(np.nanmax(np.abs(ds[n].values))) for n in ds.data_vars if n.startswith('rest_residual_')), 3)} "
              f"<= {_f(_scalar(ds, 'rest_tolerance'), 3)})"]
     _, _, tau, e_fold = _modes(ds)
     scale = time_scale(str(a.get("verdict")), tau[0], e_fold[0])
