@@ -191,6 +191,25 @@ def _split_specs(paths) -> tuple[list[str], list[str]]:
     return configs, specs
 
 
+def _chain_spec_bodies(specs, overrides) -> dict[str, list[str]]:
+    """The bodies of each sweep spec of chains among ``specs`` (by path; the bodies every base
+    has, in its first base's order); a spec that does not load is left to
+    :func:`_analyse_spec`, which says why."""
+    from rbstab.sweep import SweepSpecError, load_spec  # heavy: numba, pandas, pydantic
+
+    out = {}
+    for path in specs:
+        try:
+            spec = load_spec(path, overrides)
+        except SweepSpecError:
+            continue
+        if spec.is_chain:
+            names = [[b.get("name") for b in base.data.get("bodies") or [] if isinstance(b, dict)]
+                     for base in spec.bases]
+            out[path] = [n for n in names[0] if all(n in other for other in names[1:])]
+    return out
+
+
 def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samples, seed, certificate, overwrite,
                   overrides, as_json, verify=False) -> None:
     """Push recovery and basin stability at every configuration of the spec ``path``."""
@@ -345,8 +364,20 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
                         push=push_options, stability=stability_options, jobs=jobs or default_jobs(),
                         certificate=not no_certificate, samples=samples, seed=seed, overwrite=overwrite)
         return
-    if push_body is not None:
+    bodies = _chain_spec_bodies(specs, overrides)
+    pushed = push_options is not None or (stability_options is not None and stability_options.get("push"))
+    if push_body is not None and (configs or len(bodies) < len(specs)):
         raise click.UsageError("--push-body: names the body of a chain that is pushed; a one-body config has one")
+    for spec, names in bodies.items():
+        if pushed and push_body not in names:
+            found = "none" if push_body is None else f"'{push_body}'"
+            raise click.UsageError(f"--push-body: found {found} for {spec}; expected the body of the chain that is "
+                                   f"pushed ({', '.join(names)})")
+    if push_body is not None:
+        if push_options is not None:
+            push_options = {**push_options, "body": push_body}
+        if stability_options is not None and stability_options.get("push") is not None:
+            stability_options = {**stability_options, "body": push_body}
     if specs:
         if not (push_options or stability_options):
             raise click.UsageError(f"{specs[0]}: a sweep spec is analysed with --push and/or --basin-stability / "

@@ -434,6 +434,46 @@ def test_rbstab_analyze_pushes_a_chains_body_and_draws_its_basin_stability(tmp_p
     assert not refused_dir.exists()
 
 
+def test_rbstab_analyze_pushes_a_chains_body_across_a_spec(tmp_path):
+    """A sweep spec of chains with --push and --push-body: the smallest fatal push at each
+    configuration, as push_analysis gives it for that configuration alone; a spec of chains
+    without --push-body, with a body it has not, or with --verify is refused in one line
+    before anything runs, and --push-body with a one-body spec."""
+    from click.testing import CliRunner
+
+    from rbstab.analysis import read_analysis
+    from rbstab.analysis.push import push_analysis
+    from rbstab_cli.main import cli
+
+    stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    spec = tmp_path / "stance_mass.yaml"
+    spec.write_text(f"name: stance_mass\nbase: {stance}\ngrid:\n  bodies.trunk.mass: [40.0, 60.0]\n"
+                    "  simulation.limits.theta: [[0.6, 0.6, 3.2]]\n")
+    push = ["--push", "force", "--push-direction", "0,1,0", "--push-tol", "0.01"]
+    out = tmp_path / "out"
+    result = CliRunner().invoke(cli, ["analyze", str(spec), *push, "--push-body", "trunk", "--no-certificate", "-j", "1",
+                                      "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    ds = read_analysis(out / "stance_mass.recovery.analysis.nc")
+    assert list(ds["bodies.trunk.mass"].values) == [40.0, 60.0]
+    minima = ds["push_minimum"].values
+    assert np.all(np.isfinite(minima)) and minima[0] != minima[1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        heavy = load_any_config(stance, ["bodies.trunk.mass=60.0", "simulation.limits.theta=[0.6, 0.6, 3.2]"])
+    alone = push_analysis(heavy, "force", directions=np.array([[0.0, 1.0, 0.0]]), tol=0.01, body="trunk")
+    assert minima[1] == alone.minimum
+    refused_dir = tmp_path / "refused"
+    for args, says in (([], "--push-body: found none for"), (["--push-body", "arms"], "found 'arms' for"),
+                       (["--push-body", "trunk", "--verify"], "--verify: the proof is of one body's reduced")):
+        refused = CliRunner().invoke(cli, ["analyze", str(spec), *push, *args, "-o", str(refused_dir)])
+        assert refused.exit_code != 0 and says in refused.output and "Traceback" not in refused.output
+    one_body = CliRunner().invoke(cli, ["analyze", str(ROOT / "configs" / "sweeps" / "gains.yaml"), *push,
+                                        "--push-body", "trunk", "-o", str(refused_dir)])
+    assert one_body.exit_code == 2 and "--push-body: names the body of a chain" in one_body.output
+    assert not refused_dir.exists()
+
+
 @pytest.mark.parametrize("mass", [44.0, 45.0, 48.0])
 def test_v_is_zero_at_the_stance_rest_state_for_every_trunk_mass(mass):
     """h puts v's minimum at the rest state whatever the trunk's mass: v there is 0 and

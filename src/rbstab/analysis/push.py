@@ -94,7 +94,9 @@ def unbounded_fall_note(config) -> str | None:
     (``simulation.limits``): a run that falls may then swing through and come back to the
     equilibrium, counted as recovered (recovery then looks not monotone in the push); None
     otherwise."""
-    if config.simulation.limits is not None or not np.any(np.asarray(config.body.gravity) != 0):
+    from ..config.chains import chain_of  # heavy: pydantic
+
+    if config.simulation.limits is not None or not np.any(chain_of(config).gravity != 0):
         return None
     return ("no admissible region on a body under gravity: without simulation.limits a run that falls can swing "
             "through and come back, and counts as recovered (recovery then looks not monotone); set "

@@ -94,30 +94,44 @@ def _options_hash(options: Mapping[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _certificate(config, options: dict):
+    """The Lyapunov certificate of one configuration (a body's or a chain's, sampled and
+    falsified against the compiled engine's runs), None for a law without one (the pure
+    sign law)."""
+    from .certificate import DEFAULT_SAMPLES  # heavy: numba
+
+    samples, seed, ratio = int(options.get("certificate_samples", DEFAULT_SAMPLES)), options["seed"], options["ratio"]
+    if hasattr(config, "chain"):
+        from .chain import analyze_chain  # heavy: numba
+
+        return analyze_chain(config, samples=samples, seed=seed, ratio=ratio).certificate
+    from .certificate import certify  # heavy: numba
+    from .evidence import FALSIFICATION_RUNS, falsify  # heavy: numba
+    from .linearise import linearise  # heavy: numba
+
+    variant = config.make_variant()
+    if not variant.smooth:
+        return None
+    lin = linearise(variant)
+    cert = certify(variant, lin, gimbal_margin=config.simulation.gimbal_margin, n_samples=samples, seed=seed)
+    return falsify(config, variant, lin, cert, runs=FALSIFICATION_RUNS, ratio=ratio, engine="compiled",
+                   seed=seed)  # 32 runs a level: the CPU's engine
+
+
 def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     """The record of one configuration (the function a worker runs): ``item`` its
     (run_id, resolved configuration)."""
-    from ..config import config_from_mapping  # heavy: pydantic
-    from .certificate import DEFAULT_SAMPLES, certify  # heavy: numba
-    from .evidence import FALSIFICATION_RUNS, falsify  # heavy: numba
-    from .linearise import linearise  # heavy: numba
+    from ..config.chains import any_config_from_mapping  # heavy: pydantic
     from .push import basin_stability, push_analysis  # heavy: numba (its engine)
 
     start = _time.perf_counter()
     run_id, resolved = item
     with warnings.catch_warnings(record=True):  # its lines are kept in the record, shown once by the caller
         warnings.simplefilter("always")
-        config = config_from_mapping(resolved, source=run_id)
-    variant = config.make_variant()
-    lin = linearise(variant)
+        config = any_config_from_mapping(resolved, source=run_id)
     record: dict[str, Any] = {"run_id": run_id, "warnings": list(config.warnings)}
     ratio = options["ratio"]
-    cert = None
-    if options.get("certificate", True) and variant.smooth:
-        cert = certify(variant, lin, gimbal_margin=config.simulation.gimbal_margin,
-                       n_samples=int(options.get("certificate_samples", DEFAULT_SAMPLES)), seed=options["seed"])
-        cert = falsify(config, variant, lin, cert, runs=FALSIFICATION_RUNS, ratio=ratio, engine="compiled",
-                       seed=options["seed"])  # 32 runs a level: the CPU's engine
+    cert = _certificate(config, options) if options.get("certificate", True) else None
     push = options.get("push")
     found_push = push_analysis(config, **push, ratio=ratio, engine=engine) if push else None
     stability = options.get("basin_stability")
@@ -224,7 +238,11 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
                "estimate": ESTIMATE_METHOD if certificate else None}
     if verify:
         from ..config import config_from_mapping  # heavy: pydantic
-        from .verify import check_verifiable  # raises NotVerifiable (a ValueError) with its reason
+        from .verify import NotVerifiable, check_verifiable  # raises NotVerifiable (a ValueError) with its reason
+
+        if spec.is_chain:
+            raise NotVerifiable("--verify: the proof is of one body's reduced 6-state model (permanent); a chain "
+                                "spec's configurations are trees of bodies")
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -254,12 +272,12 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
     todo = [(rid, table.resolved(i)) for i, rid in enumerate(run_ids) if rid not in done]
     if say is not None:
         say(f"{spec.name}: {table.n} configurations, {len(done)} done before, {len(todo)} to compute")
-        from ..config import config_from_mapping  # heavy: pydantic
+        from ..config.chains import any_config_from_mapping  # heavy: pydantic
         from .push import unbounded_fall_note  # heavy: numba
 
         with warnings.catch_warnings():  # shown once with the points' records
             warnings.simplefilter("ignore")
-            fall = unbounded_fall_note(config_from_mapping(table.resolved(0))) if table.n else None
+            fall = unbounded_fall_note(any_config_from_mapping(table.resolved(0))) if table.n else None
         if fall is not None:
             say(f"note: {fall}")
 
