@@ -191,6 +191,28 @@ def _split_specs(paths) -> tuple[list[str], list[str]]:
     return configs, specs
 
 
+def _one_body_models(paths, overrides) -> list:
+    """--verify of chains: the one-body spelling of each (:func:`rbstab.config.chains.one_body_config`),
+    whose analysis and proof are those of the one-body model it is; a chain that is not one
+    body on a joint at its own point is refused in one line."""
+    from rbstab.config.chains import one_body_config  # heavy: pydantic
+
+    out = []
+    for config in load_configs(paths, overrides, chains=True):
+        body = one_body_config(config) if len(config.chain.bodies) == 1 else None
+        if body is None:
+            raise click.ClickException(
+                f"{config.name}: --verify: the proof covers one body held to the ground at its own point, the "
+                f"reduced 6-state model of 'permanent' (eq 21); this chain has {len(config.chain.bodies)} bodies "
+                "(interval arithmetic bounds one body's v and dv/dt)"
+                if len(config.chain.bodies) > 1 else
+                f"{config.name}: --verify: the proof covers one body held to the ground at its own point "
+                "(parent_point = child_point); joint "
+                f"{config.chain.joint_names[0]} holds it elsewhere")
+        out.append(body)
+    return out
+
+
 def _chain_spec_bodies(specs, overrides) -> dict[str, list[str]]:
     """The bodies of each sweep spec of chains among ``specs`` (by path; the bodies every base
     has, in its first base's order); a spec that does not load is left to
@@ -304,7 +326,8 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.option("--verify", is_flag=True,
               help="Prove a sublevel bound {v <= c} positively invariant and inside the region of attraction "
               "(interval arithmetic, branch and bound; the reduced 6-state model of permanent with clipped "
-              "torque limits). Needs python-flint (pip install \"rbstab[verify]\").")
+              "torque limits: a one-body config, or a chain of one body held at its own point). Needs "
+              "python-flint (pip install \"rbstab[verify]\").")
 @click.option("--overwrite", is_flag=True,
               help="Replace an analysis file of another configuration of the same name (without it: refused).")
 @console_options
@@ -347,9 +370,12 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         check_engine(engine)
     configs, specs = _split_specs(configs)
     chains = [c for c in configs if is_chain_file(c)]
+    trees = []  # one-body trees, verified as the one-body model they are
+    if verify and chains:
+        trees = _one_body_models(chains, overrides)
+        configs, chains = [c for c in configs if c not in chains], []
     if chains:
-        asked = [name for name, given in (("--robustness", sweeps),
-                                          ("--verify", verify), ("a sweep spec", specs),
+        asked = [name for name, given in (("--robustness", sweeps), ("a sweep spec", specs),
                                           ("--boundary-layer", boundary_layer is not None)) if given]
         if asked or len(chains) < len(configs):
             what = ", ".join(asked) if asked else "one-body configs"
@@ -384,7 +410,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
                                    "--push-distribution (the curves over its configurations)")
         if basin or sweeps:
             raise click.UsageError("--basin and --robustness take configs, not a sweep spec")
-    loaded = load_configs(configs, overrides)
+    loaded = load_configs(configs, overrides) + trees
     _check_push_targets(loaded, stability_ranges)
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)

@@ -289,6 +289,34 @@ def _assert_same(a, b, where=""):
 
 
 @pytest.mark.parametrize("path", ONE_BODY)
+def test_one_body_spelling_of_a_one_body_tree_is_the_one_body_config(path):
+    """one_body_config undoes chain_of: the same body written as a tree (bodies, joints)
+    reads back as the one-body config, every resolved key equal; a tree held elsewhere than
+    at its own point, or of two bodies, has none."""
+    from conftest import tree_spelling
+    from rbstab.config.chains import one_body_config
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+        config = load_config(ROOT / "configs" / path)
+        tree = tree_spelling(config)
+    assert one_body_config(tree).resolved == config.resolved
+    from rbstab.variants.chain import compile_chain
+
+    back, given = (compile_chain(c, offset=0.0) for c in (chain_of(one_body_config(tree)), tree.chain))
+    for a, b in zip(back.args, given.args):  # the same records: one model
+        np.testing.assert_array_equal(a, b)
+    moved = dict(tree.resolved, joints=[dict(tree.resolved["joints"][0], parent_point=[0.0, 0.0, 0.0])])
+    if config.variant == "permanent":  # its initial x, v placed from the joint
+        moved["initial_state"] = {"body": {k: v for k, v in tree.resolved["initial_state"]["body"].items()
+                                           if k not in ("x", "v")}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert one_body_config(chain_config_from_mapping(moved)) is None
+        assert one_body_config(load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")) is None
+
+
+@pytest.mark.parametrize("path", ONE_BODY)
 def test_chain_of_a_one_body_config_is_its_one_body_chain(path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)

@@ -4,13 +4,13 @@ disturbance's work, integrated with the state, is what v gains without damping."
 
 from __future__ import annotations
 
-import copy
 import warnings
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from conftest import tree_spelling
 from rbstab.config import load_config
 from rbstab.config.chains import chain_config_from_mapping, chain_of, load_any_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_tree_chunk
@@ -53,32 +53,6 @@ def _one_body(path, *overrides):
         return load_config(ROOT / "configs" / path, ["simulation.t_end=3.0", "simulation.n_samples=301", *overrides])
 
 
-def _tree_spelling(config):
-    """The one-body config ``config`` written in the tree's spelling (bodies, joints): its
-    body ``body`` held to the ground at R by its joint ``controller``."""
-    r = copy.deepcopy(config.resolved)
-    body, controller, state = r.pop("body"), r.pop("controller"), r.pop("initial_state")
-    point = body.pop("attachment_point")
-    r["gravity"] = body.pop("gravity")
-    sat = controller.pop("saturation", None)
-    tree_body = {"name": "body", **body, "k_t": controller.pop("k_t"), "l_t": controller.pop("l_t")}
-    if controller["variant"] != "sliding":
-        controller.pop("boundary_layer")
-    joint = {"name": "controller", "parent": "ground", "parent_point": point, "child": "body", "child_point": point,
-             **controller}
-    if sat is not None:
-        if sat["force_h"] is not None:
-            tree_body["saturation"] = {"force_h": sat["force_h"], "shape": sat["shape"]}
-        joint["saturation"] = {k: sat[k] for k in ("torque_n", "constraint_force") if sat[k] is not None}
-        joint["saturation"]["shape"] = sat["shape"]
-    if controller["variant"] == "permanent":  # placed on the joint
-        state = {k: state[k] for k in ("theta", "omega")}
-    r.update(bodies=[tree_body], joints=[joint], initial_state={"body": state})
-    for d in r.get("disturbances", []):
-        d["body"] = "body"
-    return chain_config_from_mapping(r)
-
-
 @pytest.mark.parametrize("path", ONE_BODY)
 def test_one_bodys_two_spellings_are_one_model(path):
     """A one-body config and the same body written as a tree (bodies, joints) are one model,
@@ -87,7 +61,7 @@ def test_one_bodys_two_spellings_are_one_model(path):
     and the controls to rounding (the tree's outputs are the chain's functions of that
     state)."""
     config = _one_body(path, "simulation.limits.omega=[40, 40, 40]")
-    tree = _tree_spelling(config)
+    tree = tree_spelling(config)
     body, chain = simulate(config), simulate_chain(tree)
     assert body.status == chain.status == "success"
     assert body.solver["nfev"] == chain.solver["nfev"]

@@ -350,13 +350,41 @@ def test_rbstab_analyze_prints_a_chains_verdict_and_refuses_one_body_options(tmp
     assert ds.attrs["certificate_holds"] == 0 and ds["sublevel"].values == 0.0  # no region of an unstable rest
     refused_dir = tmp_path / "refused"
     refused = CliRunner().invoke(cli, ["analyze", path, "--verify", "-o", str(refused_dir)])
-    assert refused.exit_code == 2 and "is a chain" in refused.output and "--verify take one-body configs" in refused.output
+    assert refused.exit_code == 1 and "stance_ankle_hip: --verify: the proof covers one body held" in refused.output
+    assert "this chain has 2 bodies" in refused.output
     assert "Traceback" not in refused.output and not refused_dir.exists()
     # another configuration of the same name does not replace the file without --overwrite
     before = written.read_bytes()
     other = CliRunner().invoke(cli, ["analyze", path, "-o", str(tmp_path), "--no-certificate"])
     assert other.exit_code == 1 and "holds the analysis of a different configuration" in other.output
     assert written.read_bytes() == before
+
+
+def test_rbstab_analyze_verifies_a_one_body_tree_as_the_one_body_model(tmp_path):
+    """--verify of one body written as a tree (held to the ground at its own point) is the
+    one-body config's analysis and proof: the same verified level, the same eigenvalues."""
+    import yaml
+    from click.testing import CliRunner
+
+    from conftest import tree_spelling
+    from rbstab.analysis import read_analysis
+    from rbstab.config import load_config
+    from rbstab_cli.main import cli
+
+    path = ROOT / "configs" / "examples" / "saturated_pendulum.yaml"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_config(path)
+    tree = tmp_path / "tree.yaml"
+    tree.write_text(yaml.safe_dump(tree_spelling(config).resolved))
+    short = ["--verify", "--samples", "500", "--no-simulation"]
+    for given, out in ((tree, tmp_path / "tree"), (path, tmp_path / "body")):
+        result = CliRunner().invoke(cli, ["analyze", str(given), *short, "-o", str(out)])
+        assert result.exit_code == 0, result.output
+    as_tree, as_body = (read_analysis(tmp_path / d / f"{config.name}.analysis.nc") for d in ("tree", "body"))
+    assert as_tree.attrs["variant"] == "permanent" and np.isfinite(as_body["sublevel_verified"].values)
+    for name in ("sublevel_verified", "eigenvalue_real", "eigenvalue_imag", "sublevel"):
+        np.testing.assert_array_equal(as_tree[name].values, as_body[name].values, err_msg=name)
 
 
 def test_rbstab_analyze_maps_a_chains_basin_and_refuses_a_key_naming_no_body(tmp_path):

@@ -85,7 +85,7 @@ from .schema import (
 )
 from .yaml_io import dump_yaml, read_yaml_file
 
-__all__ = ["ChainConfig", "chain_of", "chain_config_from_mapping", "any_config_from_mapping", "load_any_config", "ONE_BODY_NAMES",
+__all__ = ["ChainConfig", "chain_of", "one_body_config", "chain_config_from_mapping", "any_config_from_mapping", "load_any_config", "ONE_BODY_NAMES",
            "CONSTRAINT_TOLERANCE"]
 
 #: The names of the body and the joint of a one-body config's chain (its sections' names).
@@ -155,6 +155,37 @@ def chain_of(config: RunConfig | ChainConfig) -> Chain:
         boundary_layer=gains.boundary_layer,
         saturation=None if sat is None else Saturation(sat.torque_n, _INF3.copy(), sat.constraint_force, sat.shape))
     return single(body, joint, config.body.gravity)
+
+
+def one_body_config(config: ChainConfig) -> RunConfig | None:
+    """The one-body spelling of a chain that is the paper's one-body model (one body held
+    by its joint to the ground at R_p = R_c, :func:`rbstab.variants.chain.is_one_body`): its
+    body's mass, inertia, K_t, L_t and limits of H, its joint's point as ``attachment_point``,
+    law, gains and limits as ``controller``, gravity, initial state, disturbances and
+    simulation, the inverse of :func:`chain_of` (the same model: the same runs, bit for bit);
+    None for any other chain."""
+    r = config.resolved
+    if len(r["bodies"]) != 1:
+        return None
+    (body,), (joint,) = r["bodies"], r["joints"]
+    if joint["parent"] != GROUND_NAME or list(joint["parent_point"]) != list(joint["child_point"]):
+        return None
+    placed = ("name", "parent", "parent_point", "child", "child_point", "saturation")
+    controller = {k: v for k, v in joint.items() if k not in placed} | {"k_t": body["k_t"], "l_t": body["l_t"]}
+    limits = {**(joint.get("saturation") or {}), **(body.get("saturation") or {})}
+    if limits:
+        controller["saturation"] = limits
+    mapping = {"name": r["name"],
+               "body": {"mass": body["mass"], "inertia": body["inertia"], "attachment_point": joint["child_point"],
+                        "gravity": r["gravity"]},
+               "controller": controller,
+               "initial_state": dict(r.get("initial_state", {}).get(body["name"], {})),
+               "simulation": r["simulation"]}
+    if r.get("disturbances"):
+        mapping["disturbances"] = [{k: v for k, v in d.items() if k != "body"} for d in r["disturbances"]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the chain's own warnings were shown
+        return config_from_mapping(mapping, source=f"the one-body spelling of {config.name}")
 
 
 def _gain(value: Any) -> np.ndarray:
