@@ -34,9 +34,10 @@ def _check_spec(path: str, overrides) -> dict:
 
 
 def _check_config(path: str, overrides) -> dict:
-    """One JSON-able record of a run config: valid or not, its settings, its warnings; for a
-    chain its bodies and joints instead of the variant."""
-    from rbstab.config.chains import ChainConfig  # heavy: pydantic
+    """One JSON-able record of a run config: valid or not, its settings, its warnings, its
+    tree's bodies and joints (a one-body config's: its body held by its controller) and for
+    a one-body config its variant."""
+    from rbstab.config.chains import ChainConfig, chain_of  # heavy: pydantic
 
     config, error, lines = load_one(path, overrides, chains=True)
     if config is None:
@@ -44,10 +45,9 @@ def _check_config(path: str, overrides) -> dict:
                 "text": config_error_text(path, error)}
     sim = config.simulation
     record = {"path": path, "kind": "config", "valid": True, "name": config.name}
-    if isinstance(config, ChainConfig):
-        record["chain"] = _chain_record(config.chain)
-    else:
+    if not isinstance(config, ChainConfig):
         record["variant"] = config.variant
+    record["chain"] = _chain_record(chain_of(config))
     return record | {"t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
 
 
@@ -96,15 +96,12 @@ def _say(record: dict) -> None:
         for line in record["warnings"]:
             console.warn(line, record["name"])
         return
-    if "chain" in record:
-        n = len(record["chain"]["bodies"])
-        console.out(f"ok: {record['name']} (chain of {n} bod{'y' if n == 1 else 'ies'}, t_end {record['t_end']:g} s, "
-                    f"{record['n_samples']} samples, {record['method']})")
-        for line in _tree(record["chain"]):
-            console.out(line)
-        return
-    console.out(f"ok: {record['name']} ({record['variant']}, t_end {record['t_end']:g} s, "
-                f"{record['n_samples']} samples, {record['method']})")
+    n = len(record["chain"]["bodies"])
+    what = record.get("variant") or f"chain of {n} bod{'y' if n == 1 else 'ies'}"
+    console.out(f"ok: {record['name']} ({what}, t_end {record['t_end']:g} s, {record['n_samples']} samples, "
+                f"{record['method']})")
+    for line in _tree(record["chain"]):
+        console.out(line)
 
 
 @click.command("validate")
@@ -116,11 +113,12 @@ def validate(configs, overrides, as_json) -> None:
     """Validate CONFIG... and sweep specs (with --set overrides applied); exit non-zero if any is invalid.
 
     A sweep spec (a file with a ``base`` key) is expanded: every run's config is validated.
-    A chain (a config with ``bodies`` and ``joints``) is shown as its tree: one line a joint,
-    parent -> child (mass), the joint's name, variant and points.
+    Every config is shown as its tree of bodies: one line a joint, parent -> child (mass),
+    the joint's name, variant and points (a one-body config: ground -> body, its
+    controller, at its attachment point).
     With --json: one object per file, with "path", "kind" (config or sweep), "valid" and
-    either "errors" or "name", the settings ("variant", or "chain" with its "bodies" and
-    "joints") and "warnings".
+    either "errors" or "name", the settings ("chain" with its "bodies" and "joints"; a
+    one-body config's "variant") and "warnings".
     """
     console = get_console()
     records = [_check_spec(p, overrides) if _is_spec(p) else _check_config(p, overrides) for p in configs]

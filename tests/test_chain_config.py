@@ -83,6 +83,20 @@ def test_the_examples_validate_and_show_their_tree():
     assert "    thigh -> shank (3.26 kg): knee, embedded" in out
 
 
+
+def test_a_one_body_config_validates_as_its_one_body_tree():
+    """rbstab validate shows a one-body config as the tree it is: its body held to the
+    ground by its controller at its attachment point (--json: the variant and the chain)."""
+    import json
+
+    path = str(ROOT / "configs" / "examples" / "saturated_pendulum.yaml")
+    result = CliRunner().invoke(cli, ["validate", path])
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[1] == "  ground -> body (2 kg): controller, permanent, [0, 0, -0.5] -> [0, 0, -0.5] m"
+    record = json.loads(CliRunner().invoke(cli, ["validate", "--json", path]).stdout.strip().splitlines()[-1])
+    assert record["variant"] == "permanent" and record["chain"]["joints"][0]["parent"] == "ground"
+
+
 def test_the_examples_mean_what_their_comments_say():
     stance = load_any_config(EXAMPLES["stance_ankle_hip"])
     assert isinstance(stance, ChainConfig)
