@@ -181,3 +181,20 @@ def test_a_chain_study_from_python_lists_every_problem():
                          metrics=["max_abs_constraint_error_hip"])
     assert len(info.value.errors) == 3, info.value.errors
     assert np.all([e.startswith(("--vary", "--metric")) for e in info.value.errors])
+
+
+def test_a_chain_study_on_cuda_runs_there_or_says_why(tmp_path):
+    """A chain's study takes the engine asked for (its runs batched there), as one body's:
+    without a GPU, --engine cuda is one line and a non-zero exit, not a quiet CPU run."""
+    from rbstab.engine.registry import get_engine
+
+    try:
+        get_engine("cuda").check_available()
+        pytest.skip("a GPU is usable here: the CUDA tests cover it")
+    except Exception:
+        pass
+    args = ["sensitivity", str(PENDULUM), "-n", "4", *SET, "-o", str(tmp_path / "studies"), "-j", "1", "-q",
+            "--no-progress", "--engine", "cuda", *[f"--vary={v}" for v in PENDULUM_VARY]]
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code != 0 and "--engine cuda found no usable NVIDIA GPU" in result.output
+    assert "Traceback" not in result.output

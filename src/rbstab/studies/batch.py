@@ -10,9 +10,9 @@ integrates its chunks. Nothing is written: the runs' summary figures come back a
 The figures are those of :func:`rbstab.simulator.simulate_many` for each run's
 configuration, bit for bit.
 
-A chain's runs (a table whose base is a chain's configuration) do not go as a batch of
-arrays: each row's configuration is built and integrated alone
-(:func:`integrate_chain_part`, :func:`rbstab.studies.design.run_one`: the figures of
+A chain's runs (a table whose base is a chain's configuration) are built from their rows and
+integrated together on the engine, the runs of one chain in one call
+(:func:`integrate_chain_part`, :func:`rbstab.studies.design.run_chains`: the figures of
 :func:`rbstab.simulator.simulate_chain`, per joint as ``<figure>_<joint>``).
 """
 
@@ -35,7 +35,7 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.chunk import summary_table_columns
 from ..sweep.validate import key_path
-from .design import METRICS_NOT_FIGURES, design_mappings, figure_columns, joints_of, run_one
+from .design import METRICS_NOT_FIGURES, design_mappings, figure_columns, joints_of, run_chains
 
 __all__ = ["GenerationRuns", "run_generation", "integrate_part", "integrate_chain_part", "CALLS"]
 
@@ -116,20 +116,18 @@ def integrate_part(part, engine: str = "compiled") -> dict:
 
 def integrate_chain_part(part, engine: str = "compiled") -> dict:
     """:func:`integrate_part` of a slice of a chain's runs: each run's configuration built
-    from its row (:func:`rbstab.config.chains.any_config_from_mapping`) and integrated
-    alone by :func:`rbstab.studies.design.run_one` (a GPU engine's runs on the CPU driver).
-    Returns ``figures`` (column -> values, shape (k,): the chain's figures, per joint as
-    ``<figure>_<joint>``, and ``converged``) and ``ok`` (success per run, shape (k,))."""
-    engine = DEFAULT_ENGINE if get_engine(engine).gpu else engine
+    from its row (:func:`rbstab.config.chains.any_config_from_mapping`), all integrated by
+    :func:`rbstab.studies.design.run_chains` on ``engine`` (the runs of one chain in one
+    call). Returns ``figures`` (column -> values, shape (k,): the chain's figures, per joint
+    as ``<figure>_<joint>``, and ``converged``) and ``ok`` (success per run, shape (k,))."""
     n = len(part)
     columns: dict[str, np.ndarray] = {}
     ok = np.zeros(n, dtype=bool)
-    for j in range(n):
-        data = part.resolved(j)
-        with warnings.catch_warnings():  # shown once, when the table was planned
-            warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-            config = any_config_from_mapping(data, source="<trial>")
-        result = run_one(config, engine)
+    rows = [part.resolved(j) for j in range(n)]
+    with warnings.catch_warnings():  # shown once, when the table was planned
+        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+        configs = [any_config_from_mapping(data, source="<trial>") for data in rows]
+    for j, (data, result) in enumerate(zip(rows, run_chains(configs, engine))):
         ok[j] = result.status == "success"
         for key, value in figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO,
                                          joints_of(data)).items():

@@ -25,7 +25,7 @@ keys of chain sweeps: a body or a joint by index or name (``bodies.1.mass``,
 ``joints.hip.k_r.0``), an initial state by body name (``initial_state.trunk.theta.0``).
 Its summary figures (:data:`CHAIN_FIGURES`) are numbers, and per joint
 (:data:`JOINT_FIGURES`) one column a joint, ``<figure>_<joint>``
-(``max_abs_constraint_error_hip`` [m]); each run is integrated by :func:`run_one`.
+(``max_abs_constraint_error_hip`` [m]); its runs are integrated by :func:`run_chains`.
 """
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ from ..config.paths import KeyPathError, plain_tree
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain
-from ..engine.registry import DEFAULT_ENGINE
+from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.chunk import SUMMARY_FIGURES, figure_attributes, summary_columns
 from ..simulator import simulate_many
 from ..sweep.folder import open_sweep
@@ -58,7 +58,7 @@ from ..sweep.validate import key_path
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
            "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns",
-           "CHAIN_FIGURES", "JOINT_FIGURES", "joints_of", "run_one", "study_figure_attributes"]
+           "CHAIN_FIGURES", "JOINT_FIGURES", "joints_of", "run_one", "run_chains", "study_figure_attributes"]
 
 
 class StudyInputError(ConfigError):
@@ -419,14 +419,34 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
     return out
 
 
-def run_one(config, engine: str | None = None):
-    """One run of a chain (a :class:`rbstab.config.chains.ChainConfig`) in this process:
-    :func:`rbstab.simulator.simulate_chain` on ``engine`` (default compiled; a GPU engine
-    runs it on the CPU driver), the summary only kept. Returns its
-    :class:`rbstab.results.RunResult`. The one place studies integrate a chain."""
-    from ..simulator import simulate_chain  # heavy: numba (a chain's kernels)
+def run_chains(configs, engine: str | None = None) -> list:
+    """The runs of chains (:class:`rbstab.config.chains.ChainConfig`) in this process, the
+    summaries only kept: those of a method ``engine`` (default compiled) integrates, the
+    runs of one chain in one call (:func:`rbstab.simulator.simulate_chain_blocks`, on the
+    GPU with ``cuda``), the others (scipy's implicit methods) one by one
+    (:func:`rbstab.simulator.simulate_chain`). Returns their
+    :class:`rbstab.results.RunResult`, in order. The one place studies integrate chains.
 
-    return simulate_chain(config, engine=engine or DEFAULT_ENGINE)
+    Raises
+    ------
+    rbstab.engine.cuda.CudaUnavailable
+        For ``"cuda"`` where no GPU (or numba-cuda) can be used, before any run.
+    """
+    from ..simulator import simulate_chain, simulate_chain_blocks  # heavy: numba (a chain's kernels)
+
+    engine = engine or DEFAULT_ENGINE
+    methods = get_engine(engine).methods
+    batch = [i for i, c in enumerate(configs) if methods is not None and c.simulation.method in methods]
+    results: list = [None] * len(configs)
+    for members, block in simulate_chain_blocks([configs[i] for i in batch], outputs=False, engine=engine):
+        for k, j in enumerate(members):
+            results[batch[j]] = block.result(k)
+    return [simulate_chain(c, engine=engine) if r is None else r for c, r in zip(configs, results)]
+
+
+def run_one(config, engine: str | None = None):
+    """:func:`run_chains` of one chain."""
+    return run_chains([config], engine)[0]
 
 
 def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
