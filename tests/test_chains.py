@@ -517,3 +517,52 @@ def test_v_is_zero_at_the_stance_rest_state_for_every_trunk_mass(mass):
     # the compiled configuration's bodies sit on their joints, as the state's placement puts them
     np.testing.assert_allclose(C._place(compiled, rest), rest, rtol=0, atol=1e-15)
     assert np.abs(_rate(compiled, rest)).max() < 1e-6
+
+
+@pytest.mark.parametrize("n", [1, 2, 4])
+def test_a_trees_v_changes_by_the_disturbances_work_and_its_analytic_rate_along_a_run(n, rng):
+    """Along a run of a random tree (every law mix, damping, clipped controls, a sine force on
+    one body and a torque pulse on another), v(t) - v(0) - W(t) is the time integral of the
+    analytic dv/dt less the disturbances' power (the dissipation, the saturation deficit
+    and constraint powers, W the work the driver integrates with the state), to the
+    quadrature's error; and dv/dt is the derivative of v along the run (away from the
+    windows' edges, where it jumps)."""
+    import dataclasses
+
+    from scipy.integrate import cumulative_simpson
+
+    from rbstab.engine.integrate import integrate_chain_runs
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.systems import tree_system
+    from rbstab.model import Disturbance
+    from rbstab.simulator import numerical_rate
+
+    names = ["free", "permanent", "sliding", "visco_elastic", "embedded"]
+    sine = Disturbance("sine", "force", np.array([3.0, -2.0, 1.0]), np.array([0.0, 0.05, 0.1]), 0.1, 0.0, 2.0, 0.3)
+    pulse = Disturbance("pulse", "torque", np.array([0.0, 0.5, -0.3]), np.zeros(3), 0.4, 0.3)
+    for trial in range(2):
+        chain = _random_chain(rng, n, [names[(trial * 2 + i) % 5] for i in range(n)])
+        bodies = list(chain.bodies)
+        bodies[0] = dataclasses.replace(bodies[0], disturbances=(sine,))
+        bodies[-1] = dataclasses.replace(bodies[-1], disturbances=bodies[-1].disturbances + (pulse,))
+        chain = dataclasses.replace(chain, bodies=tuple(bodies))
+        compiled = C.compile_chain(chain, offset=0.0)
+        y0 = C._place(compiled, rng.normal(scale=0.1, size=compiled.n_states))
+        sim = type("Settings", (), dict(t_end=1.0, rtol=1e-10, atol=1e-12, max_step=np.inf, gimbal_margin=1e-3,
+                                        max_steps=10**6, max_wall_time=600.0))
+        sol = integrate_chain_runs(tree_system(compiled), y0[None], settings_rows([sim]), method="DOP853",
+                                   n_samples=4001)
+        assert sol.status[0] == 0, (trial, chain)
+        time = np.linspace(0.0, 1.0, 4001)
+        out = C.evaluate(compiled, time, sol.samples[0], sol.work[0])
+        v, w = out["lyapunov"], out["disturbance_work"]
+        assert abs(w[-1]) > 1e-3  # the disturbances do work
+        inner = cumulative_simpson(out["lyapunov_rate"] - out["disturbance_power"], x=time, initial=0.0)
+        scale = 1.0 + np.abs(v).max()
+        assert np.abs((v - v[0] - w) - inner).max() < 1e-5 * scale, (trial, chain)
+        # and the analytic dv/dt is the derivative of v along the run
+        smooth = np.ones(time.size, dtype=bool)
+        for edge in time[np.flatnonzero(np.diff(out["disturbance_edges"])) + 1]:  # the sine's start, the pulse's
+            smooth &= np.abs(time - edge) > 0.002
+        assert np.abs(numerical_rate(time, v) - out["lyapunov_rate"])[smooth].max() < 1e-3 * (
+            1.0 + np.abs(out["lyapunov_rate"]).max())

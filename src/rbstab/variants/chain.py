@@ -47,9 +47,9 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .registry import record_offset
 from .kernels import PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command, saturation_effects
+from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "is_one_body", "gimbal_lock_message", "independent_coordinates", "full_state",
