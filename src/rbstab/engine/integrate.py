@@ -693,6 +693,8 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
         else:
             integrate_tree_chunk(system, y0, records, samples, work, ends)
     n_states = 12 * len(system.codes) + 3 * int(np.sum(system.d_at >= 0))
+    if n == n_states:  # no permanent joint: the reduced layout is the maximal one
+        return ChunkSolution(samples, *ends, work)
     maximal = np.empty((k, n_samples, n_states))
     expand_samples(samples, *system[:8], maximal)
     return ChunkSolution(maximal, *ends, work)
