@@ -167,6 +167,7 @@ def test_rbstab_analyze_gives_a_chains_certificate(tmp_path):
     the local search), below the domain boundary; --no-certificate leaves it out."""
     from click.testing import CliRunner
 
+    from rbstab.analysis import read_analysis
     from rbstab_cli.main import cli
 
     path = "configs/examples/stance_ankle_hip.yaml"
@@ -181,9 +182,11 @@ def test_rbstab_analyze_gives_a_chains_certificate(tmp_path):
     assert 0 < c["sublevel"] < c["boundary_level"] and c["sublevel_bound"].startswith("dv/dt > 0")
     assert len(c["worst_state"]) == len(c["coordinates"]) == 12 and c["coordinates"][0] == "legs.theta.0"
     assert c["runs_checked"] >= 33 and c["sublevel_estimate"].startswith("estimate (sampled, 500 states")
+    written = read_analysis(tmp_path / "stance_ankle_hip.analysis.nc")  # its file holds the same certificate
+    assert float(written["sublevel"].values) == c["sublevel"] and written["sample_lyapunov"].size == 500
     none = CliRunner().invoke(cli, ["analyze", path, "--no-certificate", "--json", "-o", str(tmp_path)])
     assert "certificate" not in json.loads(none.stdout.strip().splitlines()[-1])
-    assert not any(tmp_path.iterdir())
+    assert "sublevel" not in read_analysis(tmp_path / "stance_ankle_hip.analysis.nc")
 
 
 KNEE = "configs/examples/knee.yaml"
