@@ -192,24 +192,17 @@ def _split_specs(paths) -> tuple[list[str], list[str]]:
 
 
 def _one_body_models(paths, overrides) -> list:
-    """--verify of chains: the one-body spelling of each (:func:`rbstab.config.chains.one_body_config`),
-    whose analysis and proof are those of the one-body model it is; a chain that is not one
-    body on a joint at its own point is refused in one line."""
-    from rbstab.config.chains import one_body_config  # heavy: pydantic
+    """--verify of chains: the one-body spelling of each
+    (:func:`rbstab.analysis.verify.verified_model`), whose analysis and proof are those of the
+    one-body model it is; any other chain is refused in one line saying why."""
+    from rbstab.analysis.verify import NotVerifiable, verified_model  # heavy: numpy
 
     out = []
     for config in load_configs(paths, overrides, chains=True):
-        body = one_body_config(config) if len(config.chain.bodies) == 1 else None
-        if body is None:
-            raise click.ClickException(
-                f"{config.name}: --verify: the proof covers one body held to the ground at its own point, the "
-                f"reduced 6-state model of 'permanent' (eq 21); this chain has {len(config.chain.bodies)} bodies "
-                "(interval arithmetic bounds one body's v and dv/dt)"
-                if len(config.chain.bodies) > 1 else
-                f"{config.name}: --verify: the proof covers one body held to the ground at its own point "
-                "(parent_point = child_point); joint "
-                f"{config.chain.joint_names[0]} holds it elsewhere")
-        out.append(body)
+        try:
+            out.append(verified_model(config))
+        except NotVerifiable as exc:
+            raise click.ClickException(f"{config.name}: --verify: {exc}")
     return out
 
 

@@ -237,17 +237,13 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
                "certificate_samples": int(DEFAULT_SAMPLES if certificate_samples is None else certificate_samples),
                "estimate": ESTIMATE_METHOD if certificate else None}
     if verify:
-        from ..config import config_from_mapping  # heavy: pydantic
-        from .verify import NotVerifiable, check_verifiable  # raises NotVerifiable (a ValueError) with its reason
-
-        if spec.is_chain:
-            raise NotVerifiable("--verify: the proof is of one body's reduced 6-state model (permanent); a chain "
-                                "spec's configurations are trees of bodies")
+        from ..config.chains import any_config_from_mapping  # heavy: pydantic
+        from .verify import check_verifiable  # raises NotVerifiable (a ValueError) with its reason
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if table.n:
-                check_verifiable(config_from_mapping(table.resolved(0)))
+                check_verifiable(any_config_from_mapping(table.resolved(0)))
         options["verify"] = True
     token = _options_hash(options)
     folder = Path(output) / f"{spec.name}{RECOVERY_SUFFIX}"

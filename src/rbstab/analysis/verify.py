@@ -101,11 +101,35 @@ class Verification:
 
 
 # -- what is covered ----------------------------------------------------------------------------
+def verified_model(config):
+    """The one-body configuration the proof is of: ``config`` (a RunConfig), or the one-body
+    spelling of a chain of one body held to the ground at its own point
+    (:func:`rbstab.config.chains.one_body_config`: the same model).
+
+    Raises
+    ------
+    NotVerifiable
+        For any other chain (one line: why)."""
+    from ..config.chains import one_body_config  # heavy: pydantic
+
+    body = one_body_config(config)
+    if body is not None:
+        return body
+    bodies = config.chain.size
+    if bodies > 1:
+        raise NotVerifiable(f"the proof covers one body held to the ground at its own point, the reduced 6-state "
+                            f"model of 'permanent' (eq 21); this chain has {bodies} bodies (interval arithmetic "
+                            "bounds one body's v and dv/dt)")
+    raise NotVerifiable(f"the proof covers one body held to the ground at its own point (parent_point = "
+                        f"child_point); joint {config.chain.joint_names[0]} holds it elsewhere")
+
+
 def check_verifiable(config) -> None:
     """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
-    unless the configuration's analysis runs on the reduced 6-state model with what the
-    proof covers: clipped torque limits, diagonal positive L_r, H unlimited, no
-    disturbances, no bounds of X, V or E in ``simulation.limits``."""
+    unless the configuration's analysis (:func:`verified_model`'s) runs on the reduced
+    6-state model with what the proof covers: clipped torque limits, diagonal positive L_r,
+    H unlimited, no disturbances, no bounds of X, V or E in ``simulation.limits``."""
+    config = verified_model(config)
     variant = config.variant
     if variant != "permanent":
         raise NotVerifiable(f"controller.variant: found {variant!r} (its analysis runs on more than 6 states); "
@@ -350,8 +374,9 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
 
     Parameters
     ----------
-    config : RunConfig or path-like
-        A ``permanent`` configuration (:func:`check_verifiable`).
+    config : RunConfig, ChainConfig or path-like
+        A ``permanent`` configuration, or a chain that is one (:func:`verified_model`,
+        :func:`check_verifiable`).
     level : float, optional
         c [J] to prove; None: the largest c the method proves, to ``rtol``.
     rtol : float
@@ -373,6 +398,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
         from ..config import load_config  # heavy: pydantic
 
         config = load_config(config)
+    config = verified_model(config)
     check_verifiable(config)
     arb = _arb()
     t0 = _time.perf_counter()

@@ -157,13 +157,15 @@ def chain_of(config: RunConfig | ChainConfig) -> Chain:
     return single(body, joint, config.body.gravity)
 
 
-def one_body_config(config: ChainConfig) -> RunConfig | None:
-    """The one-body spelling of a chain that is the paper's one-body model (one body held
-    by its joint to the ground at R_p = R_c, :func:`rbstab.variants.chain.is_one_body`): its
-    body's mass, inertia, K_t, L_t and limits of H, its joint's point as ``attachment_point``,
-    law, gains and limits as ``controller``, gravity, initial state, disturbances and
-    simulation, the inverse of :func:`chain_of` (the same model: the same runs, bit for bit);
-    None for any other chain."""
+def one_body_config(config: RunConfig | ChainConfig) -> RunConfig | None:
+    """The one-body spelling of a configuration: a one-body config itself; a chain that is
+    the paper's one-body model (one body held by its joint to the ground at R_p = R_c,
+    :func:`rbstab.variants.chain.is_one_body`) with its body's mass, inertia, K_t, L_t and
+    limits of H, its joint's point as ``attachment_point``, law, gains and limits as
+    ``controller``, gravity, initial state, disturbances and simulation, the inverse of
+    :func:`chain_of` (the same model: the same runs, bit for bit); None for any other chain."""
+    if not isinstance(config, ChainConfig):
+        return config
     r = config.resolved
     if len(r["bodies"]) != 1:
         return None
