@@ -4,7 +4,7 @@ Prints (2 cores, warm numba cache):
 - ms a run of each chain example: its integration by scipy's ``solve_ivp`` over the
   compiled reduced rate (``rbstab.variants.tree.integrate``, ``--engine scipy``) and by the
   compiled driver (``rbstab.engine.integrate.integrate_chain_runs``), and the whole run
-  ``rbstab run`` makes (``rbstab.simulator.simulate_chain``: with its outputs and summary);
+  ``rbstab run`` makes (``rbstab.simulator.simulate``: with its outputs and summary);
 - ms the integration of the one-body Case 3 config on the one-body compiled engine and
   as a one-body chain on the compiled driver;
 - s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process)
@@ -49,7 +49,7 @@ from rbstab.config.chains import chain_of, load_any_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
 from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import tree_system
-from rbstab.simulator import simulate_chain
+from rbstab.simulator import simulate
 from rbstab.variants import chain as C
 from rbstab.variants import tree as R
 from rbstab.variants.kernels import state_rate
@@ -283,7 +283,7 @@ def main() -> None:
         compiled = C.compile_chain(config.chain)
         scipy_s = _best(lambda: R.integrate(config, compiled=compiled))
         driver_s = _best(_compiled_run(compiled, C.initial_state(config), config.simulation))
-        whole_s = _best(lambda: simulate_chain(config))
+        whole_s = _best(lambda: simulate(config))
         print(f"  {name:18s} {config.chain.size} bodies, t_end {config.simulation.t_end:g} s: {1e3 * scipy_s:8.1f} | "
               f"{1e3 * driver_s:7.1f} | {1e3 * whole_s:7.1f}  ({scipy_s / driver_s:.1f}x)")
     case3 = load_config(ROOT / "configs" / "paper" / "case3_embedded.yaml")

@@ -8,7 +8,7 @@
 - rbstab: the compiled driver's integration of the chain (DOP853, rtol 1e-8, atol 1e-10, the
   first and last samples kept: :func:`rbstab.engine.integrate.integrate_chain_runs`), one run a
   call and 100 runs a call;
-- rbstab's whole run as ``rbstab run`` makes it (:func:`rbstab.simulator.simulate_chain`:
+- rbstab's whole run as ``rbstab run`` makes it (:func:`rbstab.simulator.simulate`:
   the integration, the outputs at 201 samples and the summary);
 - the ratio rbstab / MuJoCo a run, and each engine's largest distance [m] of a centre of mass
   at t = 2 s from an rbstab run at rtol 1e-12 (its accuracy at those settings).
@@ -95,14 +95,14 @@ def main() -> None:
     print(f"double pendulum, 2 s: MuJoCo RK4 dt {DT:g}: {1e3 * theirs:.3f} ms a run; rbstab DOP853 rtol 1e-8: "
           f"{1e3 * ours:.3f} ms a run ({1e3 * per_run_batch:.3f} ms a run in calls of 100)")
     print(f"  ratio rbstab / MuJoCo: {ours / theirs:.2f} ({per_run_batch / theirs:.2f} in calls of 100)")
-    from rbstab.simulator import simulate_chain
+    from rbstab.simulator import simulate
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         whole_config = load_any_config(ROOT / "configs" / "examples" / "double_pendulum.yaml",
                                        [f"simulation.t_end={T_END}", "simulation.n_samples=201",
                                         "simulation.rtol=1e-8", "simulation.atol=1e-10"])
-    whole = _best(lambda: simulate_chain(whole_config))
+    whole = _best(lambda: simulate(whole_config))
     print(f"  rbstab's whole run (outputs at 201 samples, summary): {1e3 * whole:.3f} ms, {whole / theirs:.2f}x MuJoCo")
     print(f"  largest distance of a centre of mass at t = 2 s from rbstab at rtol 1e-12: rbstab "
           f"{np.abs(final - reference).max():.2g} m, MuJoCo {np.abs(mj_final - reference).max():.2g} m")

@@ -4,8 +4,8 @@ when numba starts: ``NUMBA_ENABLE_CUDASIM=1``).
 
 Prints one JSON object (its last line): for each case, the runs' statuses and whether their
 status, t_stop, nfev, n_steps, samples and work W at every sample are the CPU driver's bit
-for bit (all samples and every 3rd), and whether ``simulate_chain(engine="cuda")`` gives
-``simulate_chain(engine="compiled")``'s outputs and summary.
+for bit (all samples and every 3rd), and whether ``simulate(engine="cuda")`` gives
+``simulate(engine="compiled")``'s outputs and summary.
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ def main() -> None:
     from rbstab.engine.integrate import integrate_chain_runs
     from rbstab.engine.settings import settings_rows
     from rbstab.engine.systems import tree_system
-    from rbstab.simulator import simulate_chain
+    from rbstab.simulator import simulate
     from rbstab.variants import chain as C
 
     report = {}
@@ -100,7 +100,7 @@ def main() -> None:
                 found["differences"].append([stride, "samples"])
             if not same(cpu.work[:, ::stride], gpu.work):
                 found["differences"].append([stride, "work"])
-        ref, got = simulate_chain(configs[-1], engine="compiled"), simulate_chain(configs[-1], engine="cuda")
+        ref, got = simulate(configs[-1], engine="compiled"), simulate(configs[-1], engine="cuda")
         found["result"] = [what for what in ("status", "message", "solver") if getattr(ref, what) != getattr(got, what)]
         found["result"] += [key for key in ref.outputs if not same(ref.outputs[key], got.outputs[key])]
         found["result"] += [key for key in ref.summary if str(ref.summary[key]) != str(got.summary[key])]

@@ -204,12 +204,12 @@ def test_the_knees_slow_run_does_not_lower_c():
     """The knee example: the run from the configured start (the shank lifted 1.2 rad, inside
     {v <= c}) is still settling at its t_end of 5 s (v above 0.1 % of its start, never
     above c); run longer it converges, so c stays the domain boundary's level."""
-    from rbstab.simulator import simulate_chain
+    from rbstab.simulator import simulate
 
     config = _knee()
     cert = analyze_chain(config, samples=200, falsification_runs=0).certificate
     assert cert.sublevel == cert.boundary_level and cert.sublevel_bound == "domain boundary"
-    v = simulate_chain(config).outputs["lyapunov"]
+    v = simulate(config).outputs["lyapunov"]
     assert v[-1] > 1e-3 * v[0] and v.max() <= cert.sublevel  # the premise: slow, never above c
     assert cert.runs_checked == 1 and "had not converged by t_end = 5 s" in cert.notes[0]
 

@@ -17,7 +17,7 @@ from rbstab.engine.integrate import integrate_chain_runs, integrate_tree_chunk
 from rbstab.engine.settings import settings_records, settings_rows
 from rbstab.engine import method_number
 from rbstab.engine.systems import tree_system
-from rbstab.simulator import simulate, simulate_chain
+from rbstab.simulator import simulate
 from rbstab.variants import chain as C
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -29,8 +29,8 @@ def test_the_compiled_driver_takes_solve_ivps_steps_on_a_chain(name):
         warnings.simplefilter("ignore")
         config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml",
                                  ["simulation.t_end=1.0", "simulation.n_samples=201"])
-    reference = simulate_chain(config, engine="scipy")
-    compiled = simulate_chain(config, engine="compiled")
+    reference = simulate(config, engine="scipy")
+    compiled = simulate(config, engine="compiled")
     assert compiled.status == reference.status == "success"
     # the same steps: solve_ivp's numpy and the driver's loops sum a step's stages in another
     # order, so an error ratio within rounding of 1 may be a rejected step in one of them
@@ -62,7 +62,7 @@ def test_one_bodys_two_spellings_are_one_model(path):
     state)."""
     config = _one_body(path, "simulation.limits.omega=[40, 40, 40]")
     tree = tree_spelling(config)
-    body, chain = simulate(config), simulate_chain(tree)
+    body, chain = simulate(config), simulate(tree)
     assert body.status == chain.status == "success"
     assert body.solver["nfev"] == chain.solver["nfev"]
     blocks = ("theta", "omega") if config.variant == "permanent" else ("theta", "omega", "position", "velocity")
@@ -166,9 +166,9 @@ def test_a_chain_runs_outputs_carry_its_disturbances_work_and_power(engine):
     """A chain run's outputs (what its file holds) carry the disturbances' power P_d, their
     work W and the windows' edges; without damping v - W stays v(0), on both engines, and W
     is the time integral of P_d (trapezoids over the pulse)."""
-    from rbstab.simulator import simulate_chain
+    from rbstab.simulator import simulate
 
-    result = simulate_chain(_pulsed_chain(0.0), engine=engine)
+    result = simulate(_pulsed_chain(0.0), engine=engine)
     out, time = result.outputs, result.time
     assert result.status == "success"
     w, p = out["disturbance_work"], out["disturbance_power"]
@@ -202,7 +202,7 @@ def test_a_chains_basin_map_runs_each_point_as_rbstab_run_would():
                                     [*overrides, f"initial_state.legs.theta=[{theta!r}, 0, 0]",
                                      f"initial_state.trunk.omega=[{omega!r}, 0, 0]"])
         np.testing.assert_allclose(found.initial_states[i, j], C.initial_state(point), atol=1e-14)
-        result = simulate_chain(point)
+        result = simulate(point)
         assert (result.status == "success") == (found.outcome[i, j] < 2)
         if result.status == "success":
             assert found.lyapunov_final[i, j] == pytest.approx(result.outputs["lyapunov"][-1], rel=1e-12, abs=1e-14)
@@ -313,7 +313,7 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
                                      "start": at, "duration": pulse, "body": "trunk"}]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                result = simulate_chain(chain_config_from_mapping(data))
+                result = simulate(chain_config_from_mapping(data))
             assert (result.status == "failed") == falls, (u, factor, result.message)
 
 
@@ -347,8 +347,8 @@ def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():
         "simulation": {**data["simulation"], "t_end": 0.6, "n_samples": 61, "rtol": 1e-10, "atol": 1e-12}}
     config = chain_config_from_mapping(data)
     compiled = C.compile_chain(config.chain)
-    reference = simulate_chain(config, engine="scipy")
-    result = simulate_chain(config, engine="compiled")
+    reference = simulate(config, engine="scipy")
+    result = simulate(config, engine="compiled")
     assert result.status == reference.status == "success"
     assert result.summary["lyapunov_rate_check"] == "pass"  # the stencils across the impulses left out
     np.testing.assert_allclose(result.outputs["theta"], reference.outputs["theta"], atol=1e-8)
@@ -375,7 +375,7 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
     trunk of the stance example from t = 0 and the same from t = 1 s give the same v(0),
     which is v(0) without it; and a run started at that rest, the torque starting at 1 s,
     has v = 0 until then."""
-    from rbstab.simulator import simulate_chain
+    from rbstab.simulator import simulate
 
     step = "disturbances=[{{kind: step, quantity: torque, body: trunk, value: [5, 0, 0], start: {}}}]"
     stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
@@ -384,7 +384,7 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
         warnings.simplefilter("ignore")
         configs = {name: load_any_config(stance, [*short, *extra]) for name, extra in (
             ("none", []), ("at 0", [step.format(0.0)]), ("at 1", [step.format(1.0)]))}
-    v0 = {name: simulate_chain(config).outputs["lyapunov"][0] for name, config in configs.items()}
+    v0 = {name: simulate(config).outputs["lyapunov"][0] for name, config in configs.items()}
     assert v0["at 0"] == v0["at 1"] == v0["none"] > 0.0
     compiled = C.compile_chain(configs["at 1"].chain)
     rest, _ = C.rest_state(compiled)
@@ -426,7 +426,7 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
     def run(upper, bend):
         config = config_of(upper, bend)
         if engine == "scipy":
-            return simulate_chain(config, engine="scipy")
+            return simulate(config, engine="scipy")
         compiled = C.compile_chain(config.chain, offset=0.0)
         sim = config.simulation
         return integrate_chain_runs(tree_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
@@ -444,6 +444,6 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
     assert np.abs(lower).max() > limit + 0.1  # the lower body's own angles passed the margin
     assert t_stop == pytest.approx((limit - 1.0) / 3.0, abs=0.002)
     for (upper, bend, spin), joint in (((1.0, 0.0, 3.0), "shoulder"), ((0.0, 1.2, 0.0), "elbow")):
-        result = simulate_chain(config_of(upper, bend, spin), engine=engine)
+        result = simulate(config_of(upper, bend, spin), engine=engine)
         assert result.status == "failed"
         assert result.message.startswith(f"gimbal lock: |theta_2| of joint {joint}'s Theta_j reached pi/2 - 0.3 rad")

@@ -101,18 +101,18 @@ def test_a_chain_run_stops_where_it_leaves_the_admissible_region(tmp_path):
 
 
 def test_the_runs_of_one_chain_come_in_blocks_of_at_most_postprocess_block_runs():
-    """simulate_chain_blocks integrates and post-processes the runs of one chain
+    """simulate_blocks integrates and post-processes the runs of one chain
     POSTPROCESS_BLOCK at a time (the samples and outputs held at once), and a run's outputs
-    do not depend on the others of its call: they equal simulate_chain's, bit for bit."""
-    from rbstab.simulator import POSTPROCESS_BLOCK, simulate_chain, simulate_chain_blocks
+    do not depend on the others of its call: they equal simulate's, bit for bit."""
+    from rbstab.simulator import POSTPROCESS_BLOCK, simulate, simulate_blocks
 
     path = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
     n = POSTPROCESS_BLOCK + 3
     configs = [load_any_config(path, ["simulation.t_end=0.2", "simulation.n_samples=21",
                                       f"initial_state.trunk.theta.0={0.1 * k / n}"]) for k in range(n)]
-    blocks = list(simulate_chain_blocks(configs))
+    blocks = list(simulate_blocks(configs))
     assert [members for members, _ in blocks] == [list(range(POSTPROCESS_BLOCK)), list(range(POSTPROCESS_BLOCK, n))]
-    last, alone = blocks[1][1].result(2), simulate_chain(configs[-1])
+    last, alone = blocks[1][1].result(2), simulate(configs[-1])
     assert last.status == alone.status == "success"
     for name in ("theta", "joint_theta", "constraint_error", "lyapunov"):
         np.testing.assert_array_equal(last.outputs[name], alone.outputs[name])
@@ -169,7 +169,7 @@ def test_a_chains_clipped_joint_torque_is_flagged_where_its_command_reaches_the_
     config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
                              ["simulation.t_end=2.0", "simulation.n_samples=2001",
                               "initial_state.legs.theta.0=0.25"])
-    result = rbstab.simulator.simulate_chain(config)
+    result = rbstab.simulator.simulate(config)
     out, summary = result.outputs, result.summary
     assert result.status == "success"
     theta, omega = out["joint_theta"], out["joint_omega"]  # (m, joints, 3)

@@ -1,6 +1,6 @@
 """Studies of chains (rbstab sensitivity, rbstab tune, tune --over): the chain's keys (a body
 or a joint by index or name, an initial state by body name), its figures per joint, each
-run's figures those of simulate_chain on the run's configuration, and the refusals.
+run's figures those of simulate on the run's configuration, and the refusals.
 
 The runs are short (0.5 s, 51 samples, coarse tolerances: ~10 ms each) so that a study of a
 few dozen runs takes a second or two.
@@ -19,7 +19,7 @@ from rbstab_cli.main import cli
 
 import rbstab
 from rbstab.config.chains import any_config_from_mapping, load_any_config
-from rbstab.simulator import simulate_chain
+from rbstab.simulator import simulate
 from rbstab.studies import StudyInputError, read_sensitivity, tune
 from rbstab.studies.design import CHAIN_FIGURES, JOINT_FIGURES, nominal_figures
 from rbstab.studies.sensitivity import plan_sensitivity
@@ -39,11 +39,11 @@ HIP_DAMPING = [10, 25, 50, 100, 200, 400]
 
 
 def _alone(config, values: dict):
-    """simulate_chain of ``config`` with the dotted keys of ``values`` set (one run alone)."""
+    """simulate of ``config`` with the dotted keys of ``values`` set (one run alone)."""
     data = copy.deepcopy(config.resolved)
     for key, value in values.items():
         key_path(key, data).set(data, value)
-    return simulate_chain(any_config_from_mapping(data))
+    return simulate(any_config_from_mapping(data))
 
 
 def test_the_chain_metrics_are_the_figures_of_a_chain_run():
@@ -98,7 +98,7 @@ def test_tune_on_a_chain_reaches_the_grids_best_and_its_trials_are_simulate_chai
     # best.yaml is a chain's config that rbstab run takes: it gives the best trial's value
     again = load_any_config(tmp_path / "stance_ankle_hip" / "best.yaml")
     assert again.resolved["joints"][1]["l_r"][0] == best
-    assert simulate_chain(again).summary["lyapunov_final"] == v[best]
+    assert simulate(again).summary["lyapunov_final"] == v[best]
     assert rbstab.studies.read_tuning(tmp_path / "stance_ankle_hip")["max_abs_constraint_error_hip"].attrs["units"] == "m"
 
 
@@ -113,7 +113,7 @@ def test_tune_over_uncertain_chain_bodies_takes_the_worst_of_simulate_chains_run
     assert len(set(masses)) == 3 and all(21 <= a <= 23 and 45 <= b <= 50 for a, b in masses)
     trials = [problem.values_of({"joints.hip.l_r.0": d}) for d in (30.0, 80.0)]
     for values, record in zip(trials, problem.evaluate_many(trials)):
-        runs = [simulate_chain(c).summary for c in problem.configs(values)]
+        runs = [simulate(c).summary for c in problem.configs(values)]
         assert [[b.mass for b in c.chain.bodies] for c in problem.configs(values)] == [list(m) for m in masses]
         assert record["figures"]["lyapunov_final"] == max(s["lyapunov_final"] for s in runs)
         assert record["figures"]["max_abs_constraint_error_hip"] == max(s["max_abs_constraint_error"][1] for s in runs)

@@ -293,7 +293,7 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     import json
 
     from rbstab.analysis import analyze_chain
-    from rbstab.simulator import simulate_chain
+    from rbstab.simulator import simulate
 
     path = "configs/examples/stance_ankle_hip.yaml"
     with warnings.catch_warnings():
@@ -313,7 +313,7 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     # a lean of the legs grows by e every e-folding time once the decaying modes have gone (~0.6 s each)
     lean = load_any_config(path, ["joints.ankle.k_r.0=600", "simulation.t_end=8", "simulation.n_samples=801",
                                   "initial_state.legs.theta=[0.001, 0, 0]", "initial_state.trunk.theta=[0, 0, 0]"])
-    run = simulate_chain(lean)
+    run = simulate(lean)
     grown = np.interp([4.0, 4.0 + e_fold], run.time, run.outputs["theta"][:, 0, 0])
     assert run.ok and grown[1] / grown[0] == pytest.approx(np.e, rel=1e-3)
     assert undamped.verdict == "marginal" and abs(s0[2]) <= undamped.linearisation.tolerance

@@ -26,8 +26,8 @@ def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bo
     limit), the knee (visco-elastic and embedded joints), three bodies with a pulse and an
     admissible region that one run leaves, and the same with impulses at 0, inside the run
     and at t_end: every run's status, t_stop, nfev, n_steps and its state and work W at every
-    sample (and every 3rd, stride 3) equal the CPU driver's; simulate_chain(engine="cuda")
-    gives simulate_chain(engine="compiled")'s status, message, solver counts, outputs and
+    sample (and every 3rd, stride 3) equal the CPU driver's; simulate(engine="cuda")
+    gives simulate(engine="compiled")'s status, message, solver counts, outputs and
     summary."""
     found = simulated[case]
     assert found["bodies"] == bodies

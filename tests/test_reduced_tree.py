@@ -21,7 +21,7 @@ from reference import hat, rotation
 from rbstab.chain import Body, Chain, Joint
 from rbstab.config.chains import load_any_config
 from rbstab.model import Saturation
-from rbstab.simulator import simulate_chain
+from rbstab.simulator import simulate
 from rbstab.variants import VARIANTS
 from rbstab.variants import chain as C
 
@@ -116,7 +116,7 @@ def _stance_runs(start):
     trajectory at the same times, the tree)."""
     config = _load(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=41", "simulation.rtol=1e-10",
                             "simulation.atol=1e-12", *STARTS[start]])
-    run = simulate_chain(config)
+    run = simulate(config)
     assert run.status == "success", run.message
     tree = _stance_tree()
     _same_tree(tree, config.chain)

@@ -187,24 +187,17 @@ def _is_chain_config(config: Any) -> bool:
 # -- one run ------------------------------------------------------------------------------------
 
 
-def _integrate(config: "RunConfig", engine: str, timeout: float | None) -> "RunResult":
-    """The run, the compiled kernels made first (once per machine, ~30-60 s, cached)."""
+def _integrate(config, engine: str, timeout: float | None) -> "RunResult":
+    """The run (one body or a tree), the compiled kernels made first (once per machine,
+    ~30-60 s, cached)."""
     from .engine import ensure_compiled  # heavy: numba, numpy
     from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
     from .simulator import simulate as integrate  # heavy: numba, numpy
 
-    if uses_compiled_engine(config, engine):
-        ensure_compiled(sign_law=is_sign_law(config))
+    tree = _is_chain_config(config)
+    if tree or uses_compiled_engine(config, engine):
+        ensure_compiled(sign_law=is_sign_law(config), chain=tree)
     return integrate(config, timeout, engine=engine)
-
-
-def _integrate_chain(config: "ChainConfig", engine: str, timeout: float | None) -> "RunResult":
-    """A chain's run, the compiled kernels made first (once per machine, cached)."""
-    from .engine import ensure_compiled  # heavy: numba, numpy
-    from .simulator import simulate_chain  # heavy: numba, numpy
-
-    ensure_compiled(chain=True)
-    return simulate_chain(config, timeout, engine=engine)
 
 
 def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_ENGINE,
@@ -246,8 +239,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_EN
     from .io.hdf5 import result_dataset  # heavy: numpy
 
     config = _config(config, overrides, chains=True)
-    result = _integrate_chain(config, engine, timeout) if _is_chain_config(config) else \
-        _integrate(config, engine, timeout)
+    result = _integrate(config, engine, timeout)
     return result_dataset(result, command_line=_python_command("simulate"))
 
 
@@ -355,14 +347,11 @@ def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overri
     OSError
         If the file cannot be written (a full disk, a read-only folder).
     """
-    from .io.hdf5 import write_chain_result, write_result  # heavy: numpy
+    from .io.hdf5 import write_result  # heavy: numpy
 
     config = _config(config, overrides, chains=True)
     path = Path(output) / f"{config.name}.h5"
     check_overwrite(config, path, overwrite=overwrite)
-    if _is_chain_config(config):
-        return write_chain_result(_integrate_chain(config, engine, timeout), path,
-                                  command_line=command_line or _python_command("run"))
     result = _integrate(config, engine, timeout)
     return write_result(result, path, command_line=command_line or _python_command("run"))
 

@@ -38,7 +38,7 @@ class RunResult:
     Attributes
     ----------
     config : RunConfig or ChainConfig
-        The validated configuration that was run (a chain's: :func:`rbstab.simulator.simulate_chain`).
+        The validated configuration that was run (a chain's: :func:`rbstab.simulator.simulate`).
     time : ndarray, shape (n_samples,)
         Sample times [s], evenly spaced on [0, t_end]. From :func:`rbstab.simulator.simulate_many`'s
         compiled engine, a read-only array that the results of a block of runs with the

@@ -37,6 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .config.chains import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
@@ -359,15 +360,15 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray,
     return outputs
 
 
-def uses_compiled_engine(config: "RunConfig", engine: str = DEFAULT_ENGINE) -> bool:
-    """Whether ``engine`` integrates ``config`` in its batches (:meth:`rbstab.engine.Engine.takes`;
-    ValueError for an unknown engine)."""
+def uses_compiled_engine(config, engine: str = DEFAULT_ENGINE) -> bool:
+    """Whether ``engine`` integrates ``config`` (a RunConfig or ChainConfig) in its batches
+    (:meth:`rbstab.engine.Engine.takes`; ValueError for an unknown engine)."""
     return get_engine(engine).takes(config.simulation.method, is_sign_law(config))
 
 
-def is_sign_law(config: "RunConfig") -> bool:
-    """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0)."""
-    return config.variant == "sliding" and not config.gains.boundary_layer
+def is_sign_law(config) -> bool:
+    """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0) of one body."""
+    return not isinstance(config, ChainConfig) and config.variant == "sliding" and not config.gains.boundary_layer
 
 
 def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunResult:
@@ -390,13 +391,20 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     return result
 
 
-def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
-    """Run one validated configuration.
+def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
+    """Run one validated configuration: one body, or a tree of bodies.
+
+    A tree's run with a method the engine takes is integrated by the compiled driver
+    (:func:`simulate_blocks`: the same steps as ``solve_ivp``'s, the admissible region's
+    events located on the step's interpolant); with scipy's engine or methods, by
+    ``solve_ivp`` (:func:`rbstab.variants.tree.integrate`). Its outputs and summary are per
+    body and joint; a failed run's rows after the failure are NaN.
 
     Parameters
     ----------
-    config : RunConfig
-        From :func:`rbstab.config.load_config` (already validated).
+    config : RunConfig or ChainConfig
+        From :func:`rbstab.config.load_config` or
+        :func:`rbstab.config.chains.load_any_config` (already validated).
     timeout : float, optional
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``;
         past it the run fails with a message.
@@ -419,6 +427,8 @@ def simulate(config: "RunConfig", timeout: float | None = None, *, engine: str =
         return simulate_sign_law(config, timeout)
     if compiled:
         return next(simulate_many([config], engine=engine, timeout=timeout))[1]
+    if isinstance(config, ChainConfig):
+        return _simulate_tree(config, timeout)
     start = _time.perf_counter()
     variant = config.make_variant()
     y0 = variant.initial_state(config.initial_state)
@@ -442,7 +452,7 @@ _LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUT
 POSTPROCESS_BLOCK = 32
 #: Bytes of samples a chain's GPU launch brings back to the host at most (every sample of
 #: its runs, which their summaries read): the runs of a launch of
-#: :func:`simulate_chain_blocks` with the CUDA engine.
+#: :func:`_tree_blocks` with the CUDA engine.
 CUDA_CHAIN_SAMPLE_BYTES = 2 * 2**30
 
 
@@ -547,9 +557,16 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGIN
 def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                     chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                     full: bool = True, keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
-    """Run many validated configurations; yields ``(indices into configs, RunBlock)``.
+    """Run many validated configurations (RunConfig or ChainConfig); yields ``(indices
+    into configs, RunBlock)``.
 
-    With ``engine="compiled"`` every run that the compiled engine takes
+    The runs of trees (ChainConfig) that the engine takes are integrated by the compiled
+    driver, the runs of one tree (the same bodies, joints, gains and admissible region) with
+    the same method, sample count and t_end in one call (:func:`_tree_blocks`; ``keep``
+    ``"none"``: their blocks carry summaries and no traces), the others one by one
+    (:func:`simulate`).
+
+    With ``engine="compiled"`` every run of one body that the compiled engine takes
     (:func:`uses_compiled_engine`) is integrated by :func:`rbstab.engine.integrate_runs`,
     ``chunk_size`` runs per call, whatever its variant, body, gains and settings (a call
     takes runs of one method, sample count and state size); the others go through
@@ -584,9 +601,14 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
         raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
     gpu = get_engine(engine).gpu
     get_engine(engine).check_available()  # before any run
+    trees = [i for i, config in enumerate(configs) if isinstance(config, ChainConfig)]
+    if trees:
+        yield from _tree_runs(configs, trees, timeout, keep != "none", engine)
     groups: dict[tuple, list[int]] = {}
     shared: dict[tuple, Variant] = {}
     for i, config in enumerate(configs):
+        if isinstance(config, ChainConfig):
+            continue
         if uses_compiled_engine(config, engine):
             size = _variant_of(config, shared).layout.size
             groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
@@ -728,28 +750,12 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
         )
 
 
-def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
-    """Integrate a chain run (:class:`rbstab.config.chains.ChainConfig`) and evaluate its
-    outputs and summary; a failed run's rows after the failure are NaN.
-
-    ``engine``: ``"scipy"`` integrates with ``solve_ivp`` (:func:`rbstab.variants.tree.integrate`,
-    any method); every other engine, and the compiled engine's methods, with the compiled
-    driver (:func:`simulate_chain_blocks`: the same steps as ``solve_ivp``'s, the
-    admissible region's events located on the step's interpolant), on the GPU with
-    ``"cuda"``, else on the CPU. ``timeout`` [s] replaces ``simulation.max_wall_time``.
-
-    Raises
-    ------
-    ValueError
-        For an unknown engine.
-    """
+def _simulate_tree(config, timeout: float | None = None) -> RunResult:
+    """A tree's run (:class:`rbstab.config.chains.ChainConfig`) integrated by ``solve_ivp``
+    (:func:`rbstab.variants.tree.integrate`, any method), with its outputs and summary;
+    ``timeout`` [s] replaces ``simulation.max_wall_time``."""
     from .variants import tree  # heavy: numba (the tree's kernels compile on first use)
 
-    methods = get_engine(engine).methods  # checks the name; None: solve_ivp integrates every method
-    sim = config.simulation
-    if methods is not None and sim.method in methods:
-        (_, block), = simulate_chain_blocks([config], timeout=timeout, engine=engine)
-        return block.result(0)
     start = _time.perf_counter()
     trajectory = tree.integrate(config, timeout=timeout)
     compiled, time = trajectory.compiled, trajectory.time
@@ -757,6 +763,18 @@ def simulate_chain(config, timeout: float | None = None, *, engine: str = DEFAUL
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,
                      _time.perf_counter() - start, summary)
+
+
+def _tree_runs(configs: Sequence, trees: list[int], timeout: float | None, outputs: bool,
+               engine: str) -> Iterator[tuple[list[int], RunBlock]]:
+    """:func:`simulate_blocks` for the runs ``trees`` (positions in ``configs``) of trees:
+    those ``engine`` takes in :func:`_tree_blocks`, the others one by one."""
+    taken = [i for i in trees if uses_compiled_engine(configs[i], engine)]
+    for members, block in _tree_blocks([configs[i] for i in taken], timeout=timeout, outputs=outputs,
+                                       engine=engine):
+        yield [taken[j] for j in members], block
+    for i in sorted(set(trees) - set(taken)):
+        yield [i], RunBlock.of(_simulate_tree(configs[i], timeout))
 
 
 def _chain_outputs(compiled, config, time: np.ndarray, states: np.ndarray, work: np.ndarray) -> tuple[dict, dict]:
@@ -777,8 +795,8 @@ def _chain_key(compiled, sim) -> bytes:
     return b"|".join([*parts, limits, str((sim.method, sim.n_samples, float(sim.t_end), compiled.offset)).encode()])
 
 
-def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
-                          engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
+def _tree_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
+                 engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
     on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of
     one chain (the same bodies, joints, gains and admissible region) with the same method,
@@ -829,7 +847,7 @@ def simulate_chain_blocks(configs: Sequence, *, timeout: float | None = None, ou
 
 def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu: bool, timeout: float | None,
                 outputs: bool) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`simulate_chain_blocks` for the runs ``members`` of ``configs`` (one chain, one
+    """:func:`_tree_blocks` for the runs ``members`` of ``configs`` (one chain, one
     method, sample count and t_end): one call of ``integrate``, then their outputs and
     summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the outputs held at
     once: those of that many runs)."""

@@ -179,7 +179,7 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
         (:func:`rbstab.analysis.evidence.check_initial_run`).
     """
     from ..engine.systems import tree_system  # heavy: numba
-    from ..simulator import simulate_chain  # heavy: numba
+    from ..simulator import simulate  # heavy: numba
     from ..variants import chain as C  # heavy: numba
 
     sim = config.simulation
@@ -207,5 +207,5 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
 
     certificate = falsify_with(run, model, linearisation, certificate, runs=falsification_runs, seed=seed)
     impulses = [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
-    certificate = check_initial_run(certificate, config, simulate_chain, linearisation, ratio=ratio, impulses=impulses)
+    certificate = check_initial_run(certificate, config, simulate, linearisation, ratio=ratio, impulses=impulses)
     return certificate, notes

@@ -219,7 +219,7 @@ def check_initial_run(certificate: Certificate, config, simulate, linearisation,
     simulate : callable
         ``simulate(config)`` -> a :class:`rbstab.results.RunResult` (``time`` [s],
         ``outputs["lyapunov"]`` [J], ``ok``, ``message``):
-        :func:`rbstab.simulator.simulate` or :func:`rbstab.simulator.simulate_chain`.
+        :func:`rbstab.simulator.simulate`.
     linearisation : Linearisation
         Of the certificate (its ``slowest_time_constant`` [s] sets the longer t_end).
     ratio : float

@@ -48,7 +48,7 @@ every launch one tree (its records passed once, read by every thread), each run 
 own initial state and settings. A run gives its status, stop time, counts and its state
 (and W) at every ``stride``-th sample, as the CPU driver's
 (:func:`rbstab.engine.integrate.integrate_chain_runs`); the outputs and summary are the
-host's (:func:`rbstab.simulator.simulate_chain_blocks`).
+host's (:func:`rbstab.simulator.simulate_blocks`).
 
 Not here: the pure sign law of ``sliding`` (``boundary_layer: 0``), whose event-driven
 integrator (:mod:`rbstab.engine.switching`) stays on the CPU, and the implicit methods.

@@ -21,7 +21,7 @@ Layout of ``<name>.h5``
   ...), ``wall_time``, ``solver_*`` statistics, ``summary_*`` figures
   (:func:`rbstab.summary.summarize`) and ``units_of_summary`` (their units, JSON).
 
-A chain run's file (:func:`write_chain_result`, ``rbstab_format`` :data:`CHAIN_FORMAT`,
+A chain run's file (:func:`write_result` of a tree's run, ``rbstab_format`` :data:`CHAIN_FORMAT`,
 ``variant`` ``chain``) has the same layout with two more dimensions, ``body`` and ``joint``
 (their names as coordinates): the state blocks and ``force_h`` along (``time``, ``body``,
 ``axis``); ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``torque_n``,
@@ -69,7 +69,6 @@ __all__ = [
     "VARIABLE_DESCRIPTIONS",
     "write_result",
     "write_run",
-    "write_chain_result",
     "result_dataset",
     "read_dataset",
     "variable_attributes",
@@ -92,7 +91,7 @@ __all__ = [
 
 #: Value of the ``rbstab_format`` global attribute of every result file.
 FORMAT = "rbstab-run-1"
-#: Value of the ``rbstab_format`` global attribute of a chain run's file (:func:`write_chain_result`).
+#: Value of the ``rbstab_format`` global attribute of a chain run's file (:func:`write_result` of a tree's run).
 CHAIN_FORMAT = "rbstab-chain-run-1"
 #: The formats :func:`read_attributes` and :func:`read_summary` read.
 RUN_FORMATS = (FORMAT, CHAIN_FORMAT)
@@ -322,15 +321,6 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
         w.attr(root, DATA_DIGEST_ATTR, data_digest_of(numbers))
         f.flush()
         return f.id.get_file_image()
-
-
-def write_chain_result(result: "RunResult", path: str | os.PathLike, *, command_line: str | None = None) -> Path:
-    """Write a chain run (:func:`rbstab.simulator.simulate_chain`) to ``path``, atomically:
-    the layout of a one-body file (module docstring) with the dimensions ``body`` and
-    ``joint`` (their names as coordinates) on the per-body and per-joint variables."""
-    path = Path(path)
-    write_run(result, path, command_line=command_line)
-    return path
 
 
 def _chain_dimensions(result: "RunResult", outputs: dict[str, np.ndarray]) -> tuple[dict | None, dict | None]:

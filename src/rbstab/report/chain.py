@@ -3,7 +3,7 @@
 joints' angles and torques, the constraints' errors and the chain's v with its terms and rate.
 
 Each figure is drawn from the run file's variables, whose second dimension is ``body`` or
-``joint`` (:func:`rbstab.io.hdf5.write_chain_result`); the bodies and joints are named as
+``joint`` (:func:`rbstab.io.hdf5.write_result`); the bodies and joints are named as
 in the configuration.
 """
 

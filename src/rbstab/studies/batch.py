@@ -13,7 +13,7 @@ configuration, bit for bit.
 A chain's runs (a table whose base is a chain's configuration) are built from their rows and
 integrated together on the engine, the runs of one chain in one call
 (:func:`integrate_chain_part`, :func:`rbstab.studies.design.run_chains`: the figures of
-:func:`rbstab.simulator.simulate_chain`, per joint as ``<figure>_<joint>``).
+:func:`rbstab.simulator.simulate`, per joint as ``<figure>_<joint>``).
 """
 
 from __future__ import annotations

@@ -420,28 +420,23 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
 
 
 def run_chains(configs, engine: str | None = None) -> list:
-    """The runs of chains (:class:`rbstab.config.chains.ChainConfig`) in this process, the
-    summaries only kept: those of a method ``engine`` (default compiled) integrates, the
-    runs of one chain in one call (:func:`rbstab.simulator.simulate_chain_blocks`, on the
-    GPU with ``cuda``), the others (scipy's implicit methods) one by one
-    (:func:`rbstab.simulator.simulate_chain`). Returns their
-    :class:`rbstab.results.RunResult`, in order. The one place studies integrate chains.
+    """The runs of trees (:class:`rbstab.config.chains.ChainConfig`) in this process, the
+    summaries only kept (:func:`rbstab.simulator.simulate_blocks`: the runs of one tree
+    in one call of ``engine``, default compiled; on the GPU with ``cuda``). Returns their
+    :class:`rbstab.results.RunResult`, in order. The one place studies integrate trees.
 
     Raises
     ------
     rbstab.engine.cuda.CudaUnavailable
         For ``"cuda"`` where no GPU (or numba-cuda) can be used, before any run.
     """
-    from ..simulator import simulate_chain, simulate_chain_blocks  # heavy: numba (a chain's kernels)
+    from ..simulator import simulate_blocks  # heavy: numba (a tree's kernels)
 
-    engine = engine or DEFAULT_ENGINE
-    methods = get_engine(engine).methods
-    batch = [i for i, c in enumerate(configs) if methods is not None and c.simulation.method in methods]
     results: list = [None] * len(configs)
-    for members, block in simulate_chain_blocks([configs[i] for i in batch], outputs=False, engine=engine):
+    for members, block in simulate_blocks(configs, keep="none", engine=engine or DEFAULT_ENGINE):
         for k, j in enumerate(members):
-            results[batch[j]] = block.result(k)
-    return [simulate_chain(c, engine=engine) if r is None else r for c, r in zip(configs, results)]
+            results[j] = block.result(k)
+    return results
 
 
 def run_one(config, engine: str | None = None):

@@ -16,7 +16,8 @@ Engines
   per-run ``timeout``.
 - a compiled one (``compiled``, ``cuda``): :func:`rbstab.simulator.simulate_blocks`: every
   run of the chunk whose method the engine takes (RK23, RK45, DOP853) is integrated in its
-  batches, whatever its variant, body and gains; the others (implicit methods, the pure
+  batches, whatever its variant, body and gains (a tree's runs with the runs of the same
+  tree); the others (implicit methods, the pure
   sign law of ``sliding``) go through scipy. Configurations are validated once per group of runs
   that differ only in name and initial state: the sweep validated every run when it was
   planned, and the other runs of a group take the group's validated config with their
@@ -57,8 +58,7 @@ from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
 from ..results import plain
-from ..simulator import (simulate, simulate_batch, simulate_blocks, simulate_chain, simulate_chain_blocks,
-                         uses_compiled_engine)
+from ..simulator import simulate, simulate_batch, simulate_blocks, uses_compiled_engine
 from .folder import NOT_IN_INDEX, index_part, row_from_attributes
 
 __all__ = ["RunTask", "WorkerOptions", "run_chunk", "run_table_chunk", "ChunkResult"]
@@ -296,10 +296,7 @@ def _run_one(task: RunTask, options: WorkerOptions, sink) -> dict[str, Any]:
         t0 = _time.perf_counter()
         config = _config(task)
         config_time = _time.perf_counter() - t0
-        if is_chain(task.config):  # each chain run alone, on the engine's CPU driver
-            result = simulate_chain(config, timeout=options.timeout, engine=options.engine)
-        else:
-            result = simulate(config, timeout=options.timeout)
+        result = simulate(config, timeout=options.timeout)
     except Exception as exc:  # a bug: data, not a crash of the sweep
         return sink.error(task, exc)
     try:
@@ -332,6 +329,9 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     recent: list = []  # distinct rebuilt configs, the latest first
     for task in tasks:
         try:
+            if is_chain(task.config):  # a tree's spelling: validated again
+                configs.append(_config(task))
+                continue
             try:
                 config = RunConfig.from_resolved(task.config, like=recent)
                 if not recent or config.body is not recent[0].body:
@@ -399,46 +399,11 @@ def _add_block(sink, tasks: Sequence[RunTask], block, config_time: float) -> lis
     return records
 
 
-def _chain_engine(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
-    """Integrate the chain runs of the chunk with the compiled driver (the GPU's with the
-    ``cuda`` engine), the runs of one chain in one call
-    (:func:`rbstab.simulator.simulate_chain_blocks`); runs of another method (scipy's
-    implicit ones) or engine (scipy) each alone (:func:`_run_one`)."""
-    t0 = _time.perf_counter()
-    records: list[dict[str, Any]] = []
-    configs: list = []
-    for task in tasks:
-        try:
-            configs.append(_config(task))
-        except Exception as exc:
-            configs.append(None)
-            records.append(sink.error(task, exc))
-    methods = get_engine(options.engine).methods
-    batch = [i for i, c in enumerate(configs) if c is not None and methods is not None
-             and c.simulation.method in methods]
-    others = [i for i, c in enumerate(configs) if c is not None and i not in set(batch)]
-    config_time = (_time.perf_counter() - t0) / max(len(tasks), 1)
-    done: set[int] = set()
-    try:
-        for members, block in simulate_chain_blocks([configs[i] for i in batch], timeout=options.timeout,
-                                                    outputs=options.store != "summary" or options.layout != "chunk",
-                                                    engine=options.engine):
-            chunk = [batch[j] for j in members]
-            done.update(chunk)
-            records += _add_block(sink, [tasks[i] for i in chunk], block, config_time)
-    except Exception:  # a bug of the batch as a whole: its unfinished runs go one by one
-        others += [i for i in batch if i not in done]
-    return records + [_run_one(tasks[i], options, sink) for i in sorted(others)]
-
-
 def _run_tasks(tasks: Sequence[RunTask], options: WorkerOptions, sink) -> list[dict[str, Any]]:
     """The records of ``tasks`` run by ``options.engine`` (what a run's row does not carry:
     its timing, a traceback, an errno; any order)."""
-    chains = [t for t in tasks if is_chain(t.config)]
-    if chains:
-        tasks = [t for t in tasks if not is_chain(t.config)]
     engine = _compiled_engine if get_engine(options.engine).compiled else _scipy_engine
-    return (_chain_engine(chains, options, sink) if chains else []) + engine(tasks, options, sink)
+    return engine(tasks, options, sink)
 
 
 def run_chunk(tasks: Sequence[RunTask], options: WorkerOptions, templates: Sequence[dict] = ()) -> "ChunkResult":
