@@ -84,13 +84,11 @@ def _report(config, path: Path, mode: str) -> dict:
                           "converged": settled == "converged", "message": attrs["message"],
                           "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
                           "replaced": _REPLACED[mode], "summary": s})
-        drift = [x for x in np.atleast_1d(s["max_constraint_drift"]) if x == x]  # one joint: a scalar attribute
         console.out(
             f"{config.name}: {attrs['status']}, {settled} (a chain of {_bodies(len(attrs['joints'].split(',')))}, "
             f"{attrs['wall_time']:.3g} s) v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
-            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E_j| {np.max(s['max_abs_constraint_error']):.3g} m"
-            + (f" (permanent joints' drift {max(drift):.3g} m)" if drift else "")
-            + f", rate check {check} -> {path}")
+            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E_j| {np.max(s['max_abs_constraint_error']):.3g} m, "
+            f"rate check {check} -> {path}")
         return attrs
     if console.json:
         console.emit({"name": config.name, "path": str(path), "variant": config.variant, "status": attrs["status"],

@@ -36,7 +36,7 @@ def test_run_writes_a_chain_file_with_body_and_joint_dimensions(name, tmp_path):
         assert list(ds["body"].values) == list(config.chain.body_names)
         assert list(ds["joint"].values) == list(config.chain.joint_names)
         assert ds["theta"].dims == ("time", "body", "axis") and ds["torque_n"].dims == ("time", "joint", "axis")
-        assert ds["constraint_drift"].dims == ("time", "joint") and ds["lyapunov"].dims == ("time",)
+        assert ds["constraint_error"].dims == ("time", "joint", "axis") and ds["lyapunov"].dims == ("time",)
         assert ds["joint_theta"].attrs["units"] == "rad" and ds["constraint_force"].attrs["units"] == "N"
         np.testing.assert_array_equal(ds["theta"].values[0, 1], config.initial_state[config.chain.body_names[1]]["theta"])
         v = ds["lyapunov"].values
@@ -144,7 +144,7 @@ def test_simulate_takes_a_chain_and_gives_what_its_file_holds(tmp_path):
     ds = rbstab.simulate(path, overrides=short)
     written = rbstab.open_result(rbstab.run(path, tmp_path, overrides=short))
     assert ds["theta"].dims == ("time", "body", "axis") and list(ds["body"].values) == ["legs", "trunk"]
-    assert ds["constraint_drift"].dims == ("time", "joint") and list(ds["joint"].values) == ["ankle", "hip"]
+    assert ds["constraint_error"].dims == ("time", "joint", "axis") and list(ds["joint"].values) == ["ankle", "hip"]
     assert set(ds.data_vars) == set(written.data_vars) and set(ds.attrs) == set(written.attrs)
     for key in ds.data_vars:
         assert ds[key].dims == written[key].dims, key

@@ -337,9 +337,6 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("joint_omega", "Omega_j", "rad s-1", "relative angular velocity Omega_j of a joint (child frame)",
              "Omega_j = Omega_child - A_rel' Omega_parent, child frame (docs/physics.md, chains)",
              r"\Omega_j", "joint angular velocity", 3, member="joint"),
-    Quantity("constraint_drift", "|E_j|", "m", "constraint drift |E_j| of a permanent joint",
-             "|E_j| of a permanent joint, held by construction in reduced coordinates: rounding only "
-             "(NaN for the other variants)", "|E_j|", "constraint drift", member="joint"),
     Quantity("lyapunov_kinetic", "v_k", "J", "kinetic term of a chain's Lyapunov function",
              "sum over the bodies of V'mV/2 + Omega'J Omega/2 (eq 25)", "v_k", "kinetic"),
     Quantity("lyapunov_joint", "v_j", "J", "joint term of a chain's Lyapunov function",

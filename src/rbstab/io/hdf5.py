@@ -26,7 +26,7 @@ A chain run's file (:func:`write_result` of a tree's run, ``rbstab_format`` :dat
 (their names as coordinates): the state blocks and ``force_h`` along (``time``, ``body``,
 ``axis``); ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``torque_n``,
 ``controller_state``, ``joint_theta``, ``joint_omega`` along (``time``, ``joint``,
-``axis``); ``constraint_drift`` along (``time``, ``joint``); v, its terms
+``axis``); v, its terms
 (``lyapunov_kinetic``, ``lyapunov_joint``, ``lyapunov_body``, ``lyapunov_gravity``) and
 rates along ``time``; the global attributes ``bodies`` and ``joints`` list the names.
 

@@ -97,7 +97,7 @@ def _constraints_figure(run: RunData, out: FigureWriter) -> FigureFile:
     _suptitle(fig, run, "joints' constraints")
     return out.save(fig, f"{safe_filename(run.label)}_constraints", f"{run.label}: joints' constraints",
                     "Each joint's constraint error |E_j| = |X_c + A_c R_c - X_p - A_p R_p| (a permanent joint's: "
-                    "its drift, held by the constraint forces) and the force |Lambda_j| on the child at C, against "
+                    "rounding, since reduced coordinates hold it) and the force |Lambda_j| on the child at C, against "
                     "time; a symmetric-logarithmic axis where they span decades.")
 
 
@@ -167,7 +167,7 @@ def _animation(run: RunData, frames: int) -> Animation | str:
 
 def chain_sections(runs: Sequence[RunData], out: FigureWriter, frames: int = 0) -> list[Section]:
     """The section of the chain runs: a table (status, bodies, joints, v(0), v(t_end), the
-    rate check, the largest constraint drift of a permanent joint), each run's animation
+    rate check, the largest max |E_j| over the joints), each run's animation
     (``frames`` > 0) and figures."""
     if not runs:
         return []
@@ -175,13 +175,13 @@ def chain_sections(runs: Sequence[RunData], out: FigureWriter, frames: int = 0) 
     rows = []
     for run in runs:
         summary = run.summary
-        drift = np.asarray(summary.get("max_constraint_drift", []), dtype=float).ravel()
-        drift = drift[np.isfinite(drift)]  # permanent joints only
+        error = np.asarray(summary.get("max_abs_constraint_error", []), dtype=float).ravel()
+        error = error[np.isfinite(error)]
         rows.append([run.label, run.status, ", ".join(_names(run, "body")), ", ".join(_names(run, "joint")),
                      _number(summary.get("lyapunov_initial")), _number(summary.get("lyapunov_final")),
-                     str(summary.get("lyapunov_rate_check", "")), _number(drift.max()) if drift.size else "—"])
+                     str(summary.get("lyapunov_rate_check", "")), _number(error.max()) if error.size else "—"])
     section.blocks.append(Table("Chain runs", ["run", "status", "bodies", "joints", "v(0) [J]", "v(t_end) [J]",
-                                               "rate check", "max drift [m]"], rows))
+                                               "rate check", "max |E_j| [m]"], rows))
     for run in runs:
         sub = Section(f"{run.label} (chain, {run.status})", f"chain-{safe_filename(run.label)}", level=3)
         if not run.ok:

@@ -133,8 +133,7 @@ def validate_metrics(names: Sequence[str]) -> list[str]:
     unknown = [n for n in names if n not in allowed and joint_metric(n) is None]
     if unknown:
         raise ValueError(f"unknown metric {', '.join(map(repr, unknown))}; allowed: {', '.join(allowed)}; and for a "
-                         f"chain's sweep {', '.join(f'{f}_<joint>' for f in _joint_figures())}, "
-                         f"{', '.join(f for f in _joint_figures() if f not in allowed)}")
+                         f"chain's sweep {', '.join(f'{f}_<joint>' for f in _joint_figures())}")
     return list(dict.fromkeys(names))
 
 
@@ -144,16 +143,11 @@ def _joint_figures() -> dict[str, str]:
     return JOINT_FIGURES
 
 
-def joint_metric(name: str) -> tuple[str, str | None] | None:
+def joint_metric(name: str) -> tuple[str, str] | None:
     """(figure, joint) of a chain's per-joint metric: ``<figure>_<joint>`` for a figure of
-    :data:`rbstab.studies.design.JOINT_FIGURES` (``max_abs_constraint_error_hip``), or
-    (figure, None) for such a figure alone that one body's runs lack
-    (``max_constraint_drift``: the largest over the joints); None for any other name (one
-    body's ``max_abs_constraint_error_x`` included)."""
-    figures = _joint_figures()
-    if name in figures and name not in VECTOR_SUMMARY_METRICS:
-        return name, None
-    for figure in figures:
+    :data:`rbstab.studies.design.JOINT_FIGURES` (``max_abs_constraint_error_hip``); None
+    for any other name (one body's ``max_abs_constraint_error_x`` included)."""
+    for figure in _joint_figures():
         joint = name[len(figure) + 1:] if name.startswith(f"{figure}_") else ""
         if joint and not (figure in VECTOR_SUMMARY_METRICS and joint in _AXES):
             return figure, joint
@@ -176,7 +170,7 @@ def check_joint_metrics(names: Sequence[str], sweeps: Sequence) -> None:
             continue
         figure, joint = found
         held = sorted(c for c in columns if c.startswith(f"{figure}_") and joint_metric(c) is not None)
-        if (joint is None and not held) or (joint is not None and name not in columns):
+        if name not in columns:
             raise ValueError(f"metric {name!r}: no sweep of the report has it; the sweeps' chains have "
                              f"{', '.join(held) if held else 'no such figure (one body, or no chain sweep)'}")
 
@@ -195,9 +189,8 @@ def metric_label(name: str) -> str:
     joint = joint_metric(name)
     if joint is not None:
         figure, member = joint
-        symbol = {"max_abs_constraint_error": "max |E_j|", "max_constraint_drift": "max drift |E_j|"}.get(figure, figure)
-        where = f" of joint {member}" if member is not None else " (largest over the joints)"
-        return f"{symbol}{where} [{_joint_figures()[figure]}]"
+        symbol = {"max_abs_constraint_error": "max |E_j|"}.get(figure, figure)
+        return f"{symbol} of joint {member} [{_joint_figures()[figure]}]"
     base, comp = _split_metric(name)
     if base in VECTOR_SUMMARY_METRICS:
         symbol, units = VECTOR_SUMMARY_METRICS[base]
@@ -554,7 +547,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
 
 def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
     """One row per chain run: identity, the ``parameters`` (dotted keys), the figures every
-    run has and each joint's largest |E_j| and drift.
+    run has and each joint's largest |E_j|.
 
     Returns
     -------
@@ -563,9 +556,7 @@ def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
         ``message``, the parameters, ``t_final`` [s], ``lyapunov_initial``,
         ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W], ``lyapunov_rate_mismatch`` [W],
         ``lyapunov_rate_mismatch_relative``, ``lyapunov_rate_check``,
-        ``max_lyapunov_increase`` [J], ``max_abs_constraint_error_<joint>`` [m],
-        ``max_constraint_drift_<joint>`` [m] (NaN for a joint that is not ``permanent``),
-        ``method``, ``nfev``, ``njev``, ``nlu``, ``wall_time`` [s].
+        ``max_lyapunov_increase`` [J], ``max_abs_constraint_error_<joint>`` [m], ``method``, ``nfev``, ``njev``, ``nlu``, ``wall_time`` [s].
     """
     import pandas as pd  # heavy: pandas
 
@@ -578,10 +569,9 @@ def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
         row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
         row["max_lyapunov_increase"] = float(run.summary.get("max_lyapunov_increase", np.nan))
         joints = [str(j.get("name")) for j in run.flat_config.get("joints") or () if isinstance(j, dict)]
-        for figure in ("max_abs_constraint_error", "max_constraint_drift"):
-            values = np.atleast_1d(np.asarray(run.summary.get(figure, []), dtype=float))
-            for name, value in zip(joints, values):
-                row[f"{figure}_{name}"] = float(value)
+        values = np.atleast_1d(np.asarray(run.summary.get("max_abs_constraint_error", []), dtype=float))
+        for name, value in zip(joints, values):
+            row[f"max_abs_constraint_error_{name}"] = float(value)
         rows.append(row | _solver(run))
     return pd.DataFrame(rows)
 
@@ -640,10 +630,6 @@ def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThreshol
         return table["converged"].astype(str).eq("True").astype(float).where(table["status"] == "success")
     if name in table.columns:
         return table[name].astype(float).where(table["status"] == "success")
-    joint = joint_metric(name)
-    if joint is not None and joint[1] is None:  # a chain's figure alone: the largest over its joints
-        columns = [c for c in table.columns if c.startswith(f"{name}_") and joint_metric(c) is not None]
-        return table[columns].astype(float).max(axis=1).where(table["status"] == "success")
     base, comp = _split_metric(name)
     columns = [f"{base}_{axis}" for axis in _AXES]
     if base in VECTOR_SUMMARY_METRICS and comp is None and all(c in table.columns for c in columns):

@@ -318,10 +318,9 @@ CHAIN_FIGURES = {"t_final": "s", "lyapunov_initial": "J", "lyapunov_final": "J",
                  "max_lyapunov_increase": "J", "time_lyapunov_rising": "s", "lyapunov_rate_mismatch": "W",
                  "lyapunov_rate_mismatch_relative": "1"}
 #: A chain's summary figures per joint, one column a joint ``<name>_<joint>``: name -> units
-#: (max |E_j| over the samples; the drift of a permanent joint's constraint, NaN for others).
-JOINT_FIGURES = {"max_abs_constraint_error": "m", "max_constraint_drift": "m"}
-_JOINT_LONG_NAMES = {"max_abs_constraint_error": "max |E_j| over the samples",
-                     "max_constraint_drift": "max drift of the permanent joint's constraint"}
+#: (max |E_j| over the samples; for a permanent joint, the drift of its constraint).
+JOINT_FIGURES = {"max_abs_constraint_error": "m"}
+_JOINT_LONG_NAMES = {"max_abs_constraint_error": "max |E_j| over the samples"}
 
 
 def study_figure_attributes(column: str, joints: Sequence[str] | None = None) -> tuple[str, str]:

@@ -1069,8 +1069,7 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     per joint (m, n, 3): constraint_error E_j, constraint_rate F_j, constraint_force
     Lambda_j (inertial, on the child at C), torque_n N_j (child frame, delivered),
     controller_state D_j (NaN where not embedded), joint_theta Theta_j [rad], joint_omega
-    Omega_j [rad/s] (child frame); per joint (m, n): constraint_drift |E_j| [m] (NaN where
-    not permanent); the saturation flags (m, n, 3), 1.0 on an axis commanded
+    Omega_j [rad/s] (child frame); the saturation flags (m, n, 3), 1.0 on an axis commanded
     at or beyond its limit, else 0.0 (:func:`rbstab.model.saturated`): torque_n_saturated
     and constraint_force_saturated per joint (Lambda_j never for a permanent joint),
     force_h_saturated per body; scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
@@ -1092,8 +1091,6 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
         out[JOINT_OUTPUTS[k]] = joints[:, :, k]
     embedded = compiled.d_at >= 0
     out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
-    permanent = compiled.codes == PERMANENT
-    out["constraint_drift"] = np.where(permanent[None, :], np.linalg.norm(out["constraint_error"], axis=-1), np.nan)
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]
     out["lyapunov_kinetic"] = scalars[:, _KINETIC]
