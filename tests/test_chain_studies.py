@@ -21,7 +21,8 @@ import rbstab
 from rbstab.config.chains import any_config_from_mapping, load_any_config
 from rbstab.simulator import simulate
 from rbstab.studies import StudyInputError, read_sensitivity, tune
-from rbstab.studies.design import CHAIN_FIGURES, JOINT_FIGURES, nominal_figures
+from rbstab.layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
+from rbstab.studies.design import Members, check_metrics, expand_metrics, nominal_figures
 from rbstab.studies.sensitivity import plan_sensitivity
 from rbstab.studies.tuning import plan_tuning
 from rbstab.sweep.validate import key_path
@@ -47,9 +48,45 @@ def _alone(config, values: dict):
 
 
 def test_the_chain_metrics_are_the_figures_of_a_chain_run():
+    """A chain's study metrics are every numeric figure of its run, per body or joint (and
+    axis) as a sweep's columns name them, with their values."""
     config = load_any_config(PENDULUM, SHORT)
-    per_joint = {f"{f}_{j}" for f in JOINT_FIGURES for j in ("shoulder", "elbow")}
-    assert set(nominal_figures(config)) == {"converged", *CHAIN_FIGURES, *per_joint}
+    figures, run = nominal_figures(config), simulate(config).summary
+    assert figures["max_abs_constraint_error_elbow"] == run["max_abs_constraint_error"][1]
+    assert figures["final_theta_lower_z"] == run["final_theta"][1][2]
+    assert figures["fraction_saturated_torque_n_shoulder_x"] == run["fraction_saturated_torque_n"][0][0]
+    np.testing.assert_equal(figures["time_lyapunov_rising"], run["time_lyapunov_rising"])
+    assert figures["lyapunov_final"] == run["lyapunov_final"] and figures["converged"] in (0.0, 1.0)
+    names = {"body": ("upper", "lower"), "joint": ("shoulder", "elbow")}
+    expected = {"converged"}
+    for key, value in run.items():
+        if key == "lyapunov_rate_check":
+            continue
+        members = names[SUMMARY_QUANTITIES[key].member] if np.ndim(value) else ("",)
+        axes = "xyz" if np.ndim(value) == 2 else ("",)
+        expected |= {"_".join(w for w in (key, m, a) if w) for m in members for a in axes}
+    assert set(figures) == expected
+
+
+def test_a_chain_metric_names_its_columns_by_member_and_axis():
+    """<figure>[_<member>][_<axis>]: a name leaving out the member or the axis stands for
+    each of its columns, in the tree's order; a member the tree lacks, or a figure of the
+    pure sign law, is refused."""
+    members = Members(("upper", "lower"), ("shoulder", "elbow"))
+    available = ["final_theta_lower_x", "final_theta_upper_x", "final_theta_upper_y", "lyapunov_final",
+                 "max_abs_constraint_error_elbow", "max_abs_constraint_error_shoulder"]
+    expand = lambda name: expand_metrics([name], available, members=members)  # noqa: E731
+    assert expand("final_theta") == ["final_theta_upper_x", "final_theta_upper_y", "final_theta_lower_x"]
+    assert expand("final_theta_x") == ["final_theta_upper_x", "final_theta_lower_x"]
+    assert expand("final_theta_upper") == ["final_theta_upper_x", "final_theta_upper_y"]
+    assert expand("max_abs_constraint_error") == ["max_abs_constraint_error_shoulder", "max_abs_constraint_error_elbow"]
+    assert expand("lyapunov_final") == ["lyapunov_final"]
+    check_metrics(["final_theta_lower_z", "fraction_saturated_torque_n_elbow", "converged"], members=members)
+    with pytest.raises(StudyInputError, match="no body 'torso'"):
+        check_metrics(["final_theta_torso_x"], members=members)
+    with pytest.raises(StudyInputError, match="not a summary figure"):
+        check_metrics(["switching_count"], members=members)
+    check_metrics(["switching_count", "final_theta_x"])  # one body's runs: the sign law's figure, a component
 
 
 def test_sensitivity_of_a_chain_gives_each_rows_figures_of_simulate_chain(tmp_path):
@@ -144,13 +181,13 @@ def test_tune_over_a_chain_from_the_command_line(tmp_path):
     (["sensitivity", "--vary", "controller.k_r.0=uniform:[1,2]"],
      ["--vary", "unknown section 'controller'", "allowed: name, gravity, bodies, joints"]),
     (["sensitivity", "--vary", "bodies.1.mass=uniform:[1,2]", "--metric", "max_abs_constraint_error_knee"],
-     ["--metric 'max_abs_constraint_error_knee'", "no joint 'knee'", "max_abs_constraint_error_elbow"]),
-    (["sensitivity", "--vary", "bodies.1.mass=uniform:[1,2]", "--metric", "final_theta"],
-     ["--metric 'final_theta'", "one body's runs, not of a chain's", "allowed for a chain: converged"]),
+     ["--metric 'max_abs_constraint_error_knee'", "no joint 'knee'", "joints: shoulder, elbow"]),
+    (["sensitivity", "--vary", "bodies.1.mass=uniform:[1,2]", "--metric", "final_theta_torso_x"],
+     ["--metric 'final_theta_torso_x'", "no body 'torso'", "allowed for a chain: converged", "bodies: upper, lower"]),
     (["tune", "--vary", "bodies.1.mass=uniform:[1,2]", "--minimize", "max_abs_constraint_error"],
      ["--minimize 'max_abs_constraint_error'", "per joint", "max_abs_constraint_error_shoulder"]),
     (["tune", "--vary", "bodies.1.mass=uniform:[1,2]", "--minimize", "lyapunov_final",
-      "--subject-to", "max_abs_constraint_error_z<=0.1"], ["--subject-to", "one body's runs", "_elbow"]),
+      "--subject-to", "max_abs_constraint_error_z<=0.1"], ["--subject-to", "no such figure", "_elbow"]),
     (["tune", "--vary", "bodies.1.mass=uniform:[1,2]", "--minimize", "lyapunov_final",
       "--over", "bodies.5.mass=uniform:[1,2]"], ["--over 'bodies.5.mass=uniform:[1,2]'", "no '5'", "upper, lower"]),
     (["tune", "--vary", "joints.elbow.k_r=scale_uniform:[1,2]", "--minimize", "lyapunov_final"],
@@ -159,7 +196,7 @@ def test_tune_over_a_chain_from_the_command_line(tmp_path):
       "--minimize", "lyapunov_final"], ["--vary", "given twice", "bodies.upper.mass and bodies.0.mass"]),
     (["tune", "--vary", "bodies.1.mass=uniform:[-1,2]", "--minimize", "lyapunov_final"],
      ["--vary", "lower ends", "'bodies.1.mass': found -1.0; expected a number > 0"]),
-], ids=["joint", "body", "one-body-key", "metric-joint", "metric-one-body", "per-joint-objective",
+], ids=["joint", "body", "one-body-key", "metric-joint", "metric-body", "per-joint-objective",
         "one-body-constraint", "over-body", "scale-unset", "twice", "corner"])
 def test_bad_chain_study_options_are_refused_in_one_line_and_nothing_is_written(tmp_path, args, words):
     out = tmp_path / "out"

@@ -28,6 +28,7 @@ __all__ = [
     "QUANTITIES",
     "OUTPUTS",
     "SUMMARY_FIGURES",
+    "SIGN_LAW_FIGURES",
     "STATE_BLOCKS",
     "BLOCK_UNITS",
     "LYAPUNOV_TERMS",
@@ -446,6 +447,9 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("switching_resolution", "switching resolution", "m",
              "switching resolution: excursions smaller than this start sliding"),
 )}
+#: The figures of the pure sign law's runs alone (:func:`rbstab.engine.switching.switching_summary`).
+SIGN_LAW_FIGURES = ("switching_count", "sliding_time", "sliding_starts", "min_switching_interval", "chattering",
+                    "switching_resolution")
 
 
 @dataclass(frozen=True)

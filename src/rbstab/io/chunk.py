@@ -91,6 +91,7 @@ __all__ = [
     "summary_table_columns",
     "store_bytes_per_run",
     "SUMMARY_FIGURES",
+    "split_figure_column",
     "WRITE_BLOCK",
 ]
 
@@ -198,6 +199,28 @@ def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = N
         else:
             out[key] = value
     return out
+
+
+def split_figure_column(column: str, bodies: Sequence[str] = (), joints: Sequence[str] = ()
+                        ) -> tuple[str, str | None, str | None] | None:
+    """(figure, member, axis) of a summary column as :func:`summary_columns` names it:
+    ``<figure>``, ``<figure>_<axis>``, and a tree's (its ``bodies`` and ``joints`` names,
+    by the figure's member, :data:`rbstab.layout.SUMMARY_FIGURES`) ``<figure>_<member>``
+    and ``<figure>_<member>_<axis>``; member and axis None where absent. None for a name
+    that is none of these (an unknown figure, a member the tree lacks)."""
+    if column in SUMMARY_QUANTITIES:
+        return column, None, None
+    for figure in sorted((f for f in SUMMARY_QUANTITIES if column.startswith(f"{f}_")), key=len, reverse=True):
+        rest = column[len(figure) + 1:]
+        if rest in _AXES:
+            return figure, None, rest
+        members = bodies if SUMMARY_QUANTITIES[figure].member == "body" else joints
+        member, _, axis = rest.rpartition("_")
+        if rest in members:
+            return figure, rest, None
+        if axis in _AXES and member in members:
+            return figure, member, axis
+    return None
 
 
 def summary_table_columns(table: Mapping[str, Sequence], joints: Sequence[str] | None = None,

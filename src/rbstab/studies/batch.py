@@ -35,7 +35,7 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.chunk import summary_table_columns
 from ..sweep.validate import key_path
-from .design import METRICS_NOT_FIGURES, design_mappings, figure_columns, joints_of, run_chains
+from .design import METRICS_NOT_FIGURES, design_mappings, figure_columns, members_of, run_chains
 
 __all__ = ["GenerationRuns", "run_generation", "integrate_part", "integrate_chain_part", "CALLS"]
 
@@ -130,7 +130,7 @@ def integrate_chain_part(part, engine: str = "compiled") -> dict:
     for j, (data, result) in enumerate(zip(rows, run_chains(configs, engine))):
         ok[j] = result.status == "success"
         for key, value in figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO,
-                                         joints_of(data)).items():
+                                         members_of(data)).items():
             columns.setdefault(key, np.full(n, np.nan))[j] = value
     return {"figures": columns, "ok": ok}
 

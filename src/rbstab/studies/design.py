@@ -23,9 +23,9 @@ summary figures.
 A chain's configuration (``bodies`` and ``joints``, :mod:`rbstab.config.chains`) takes the
 keys of chain sweeps: a body or a joint by index or name (``bodies.1.mass``,
 ``joints.hip.k_r.0``), an initial state by body name (``initial_state.trunk.theta.0``).
-Its summary figures (:data:`CHAIN_FIGURES`) are numbers, and per joint
-(:data:`JOINT_FIGURES`) one column a joint, ``<figure>_<joint>``
-(``max_abs_constraint_error_hip`` [m]); its runs are integrated by :func:`run_chains`.
+Its summary figures are those of one body's runs, per body or joint as a sweep's columns
+name them (:func:`rbstab.io.chunk.summary_columns`: ``max_abs_constraint_error_hip`` [m],
+``final_theta_trunk_x`` [rad]); its runs are integrated by :func:`run_chains`.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from pydantic import ValidationError
@@ -48,7 +48,9 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE, get_engine
-from ..io.chunk import SUMMARY_FIGURES, figure_attributes, summary_columns
+from ..io.chunk import SUMMARY_FIGURES, figure_attributes, split_figure_column, summary_columns
+from ..layout import SIGN_LAW_FIGURES
+from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
 from ..simulator import simulate_many
 from ..sweep.folder import open_sweep
 from ..sweep.runner import run_sweep
@@ -58,7 +60,7 @@ from ..sweep.validate import key_path
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
            "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns",
-           "CHAIN_FIGURES", "JOINT_FIGURES", "joints_of", "run_one", "run_chains", "study_figure_attributes"]
+           "JOINT_FIGURES", "Members", "members_of", "run_one", "run_chains", "study_figure_attributes"]
 
 
 class StudyInputError(ConfigError):
@@ -312,24 +314,33 @@ def study_folder(output: str | os.PathLike, name: str | None, config, *, option:
 
 # -- metrics ---------------------------------------------------------------------------------------
 
-#: A chain's summary figures that are numbers (:func:`rbstab.summary.tree_summary`): name ->
-#: units.
-CHAIN_FIGURES = {"t_final": "s", "lyapunov_initial": "J", "lyapunov_final": "J", "max_lyapunov_rate": "W",
-                 "max_lyapunov_increase": "J", "time_lyapunov_rising": "s", "lyapunov_rate_mismatch": "W",
-                 "lyapunov_rate_mismatch_relative": "1"}
 #: A chain's summary figures per joint, one column a joint ``<name>_<joint>``: name -> units
 #: (max |E_j| over the samples; for a permanent joint, the drift of its constraint).
 JOINT_FIGURES = {"max_abs_constraint_error": "m"}
-_JOINT_LONG_NAMES = {"max_abs_constraint_error": "max |E_j| over the samples"}
 
 
-def study_figure_attributes(column: str, joints: Sequence[str] | None = None) -> tuple[str, str]:
-    """(units, long name) of a figure column (:func:`rbstab.io.chunk.figure_attributes`); with
-    ``joints`` (a chain's joint names) also a chain's per-joint column ``<name>_<joint>``."""
-    for name, units in JOINT_FIGURES.items() if joints is not None else ():
-        joint = column[len(name) + 1:] if column.startswith(f"{name}_") else None
-        if joint in joints:
-            return units, f"{_JOINT_LONG_NAMES[name]}, joint {joint}"
+class Members(NamedTuple):
+    """The names of a tree's bodies and joints, in order: its figures' columns are named by
+    them (:func:`rbstab.io.chunk.summary_columns`)."""
+
+    bodies: tuple[str, ...]
+    joints: tuple[str, ...]
+
+
+def members_of(config) -> Members | None:
+    """The body and joint names of a chain's configuration (a
+    :class:`rbstab.config.chains.ChainConfig` or its resolved mapping); None for a one-body
+    configuration."""
+    data = config if isinstance(config, Mapping) else getattr(config, "resolved", None)
+    if not is_chain(data):
+        return None
+    return Members(tuple(str(b["name"]) for b in data.get("bodies") or ()),
+                   tuple(str(j["name"]) for j in data.get("joints") or ()))
+
+
+def study_figure_attributes(column: str) -> tuple[str, str]:
+    """(units, long name) of a figure column (:func:`rbstab.io.chunk.figure_attributes`:
+    one body's ``<name>_<axis>``, a tree's ``<name>_<member>[_<axis>]``)."""
     return figure_attributes(column)
 
 
@@ -337,67 +348,60 @@ def _figure_names() -> dict[str, tuple[str, str]]:
     return {k: v for k, v in SUMMARY_FIGURES.items() if k not in METRICS_NOT_FIGURES}
 
 
-def _one_body_figure(name: str) -> bool:
-    """Whether ``name`` is a figure of one body's runs (a 3-vector's component included)."""
-    known = _figure_names()
-    stem, _, axis = name.rpartition("_")
-    return name == "converged" or name in known or (stem in known and axis in ("x", "y", "z"))
+def _metric_parts(name: str, members: Members | None) -> tuple[str, str | None, str | None] | None:
+    """(figure, member, axis) of a metric name (:func:`rbstab.io.chunk.split_figure_column`),
+    None for a name that is no figure of these runs (``converged``: ``("converged", None, None)``)."""
+    if name == "converged":
+        return name, None, None
+    parts = split_figure_column(name, *(members or ((), ())))
+    left_out = METRICS_NOT_FIGURES + (SIGN_LAW_FIGURES if members is not None else ())  # a tree has no sign law
+    return parts if parts is not None and parts[0] not in left_out else None
 
 
-def joints_of(config) -> tuple[str, ...] | None:
-    """The joint names of a chain's configuration (a :class:`rbstab.config.chains.ChainConfig`
-    or its resolved mapping), in order; None for a one-body configuration."""
-    data = config if isinstance(config, Mapping) else getattr(config, "resolved", None)
-    if not is_chain(data):
-        return None
-    return tuple(str(j["name"]) for j in data.get("joints") or ())
+def _allowed_words(members: Members | None) -> tuple[list[str], str]:
+    """(the whole metric names, the sentence listing what is allowed) of one body's runs,
+    or of a tree's with ``members``."""
+    known = ["converged", *_figure_names()]
+    if members is None:
+        return known, f"allowed: {', '.join(known)} (3-vectors also as <name>_x, _y, _z)"
+    known = [k for k in known if k not in SIGN_LAW_FIGURES]
+    return known, (f"allowed for a chain: {', '.join(known)}, each of every body or joint, or of one as "
+                   f"<name>_<body or joint> (3-vectors also _x, _y, _z after it; bodies: {', '.join(members.bodies)}; "
+                   f"joints: {', '.join(members.joints)})")
 
 
-def _allowed_words(joints: Sequence[str] | None) -> tuple[list[str], str]:
-    """(the metric names, the sentence listing what is allowed) of one body's runs, or of a
-    chain's with ``joints``."""
-    if joints is None:
-        known = [*_figure_names()]
-        return ["converged", *known], (f"allowed: converged, {', '.join(known)} (3-vectors also as <name>_x, "
-                                       "_y, _z)")
-    per_joint = [f"{f}_{j}" for f in JOINT_FIGURES for j in joints]
-    return (["converged", *CHAIN_FIGURES, *JOINT_FIGURES, *per_joint],
-            f"allowed for a chain: converged, {', '.join(CHAIN_FIGURES)}, {', '.join(per_joint)} "
-            f"(per joint: {', '.join(joints)}; {' or '.join(JOINT_FIGURES)} alone for every joint)")
-
-
-def check_metrics(names: Sequence[str], *, option: str = "--metric", joints: Sequence[str] | None = None) -> None:
+def check_metrics(names: Sequence[str], *, option: str = "--metric", members: Members | None = None) -> None:
     """Raise :class:`StudyInputError` for a name that is no summary figure of a run.
 
-    Allowed: the summary figures of :data:`rbstab.io.chunk.SUMMARY_FIGURES` (3-vectors as
-    the whole figure or one component ``<name>_x``, ``_y``, ``_z``) but the text
-    ``lyapunov_rate_check``, and ``converged`` (1 when the run succeeded and v(t_end) <=
-    lyapunov_ratio v(0), else 0). With ``joints`` (a chain's joint names, in order): the
-    chain's figures, :data:`CHAIN_FIGURES`, and :data:`JOINT_FIGURES` as a whole (every
-    joint) or one joint's ``<name>_<joint>``, and ``converged``.
+    Allowed: ``converged`` (1 when the run succeeded and v(t_end) <= lyapunov_ratio v(0),
+    else 0) and the summary figures of :data:`rbstab.io.chunk.SUMMARY_FIGURES` but the
+    text ``lyapunov_rate_check``: as a whole, a 3-vector's component ``<name>_x``, ``_y``,
+    ``_z``, and with ``members`` (a tree's body and joint names) one body's or joint's
+    ``<name>_<member>[_<axis>]``, as a sweep's columns are named.
     """
-    allowed, words = _allowed_words(joints)
+    allowed, words = _allowed_words(members)
     errors = []
     for name in names:
-        one_body = _one_body_figure(name)
-        if name in allowed or (joints is None and one_body):
+        if _metric_parts(name, members) is not None:
             continue
         close = difflib.get_close_matches(name, allowed, n=1)
         hint = f" (did you mean '{close[0]}'?)" if close else ""
-        what = "a figure of one body's runs, not of a chain's" if one_body else "not a summary figure"
-        stem = next((f for f in JOINT_FIGURES if name.startswith(f"{f}_")), None) if joints is not None else None
-        if stem is not None and not one_body:
-            what, hint = f"this chain has no joint {name[len(stem) + 1:]!r}", ""
+        what = "not a summary figure"
+        stem = max((f for f in _figure_names() if name.startswith(f"{f}_")), key=len, default=None)
+        if stem is not None and members is not None:
+            kind = SUMMARY_QUANTITIES[stem].member or "member"
+            what, hint = f"this chain has no {kind} {name[len(stem) + 1:].rpartition('_')[0] or name[len(stem) + 1:]!r}", ""
         errors.append(f"{option} {name!r}: {what}{hint}; {words}")
     if errors:
         raise StudyInputError(errors)
 
 
 def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: str = "--metric",
-                   joints: Sequence[str] | None = None) -> list[str]:
-    """The columns of ``available`` that ``names`` select: a name itself, or its components
-    ``<name>_x``, ``_y``, ``_z`` (with ``joints``, a chain's joint names: its joints'
-    ``<name>_<joint>``).
+                   members: Members | None = None) -> list[str]:
+    """The columns of ``available`` that ``names`` select: a name itself, or every column
+    of it (:func:`rbstab.io.chunk.split_figure_column`: a 3-vector's components, with
+    ``members`` a tree's members and their components; ``<name>_<member>`` that member's,
+    ``<name>_<axis>`` that component of every member).
 
     Raises
     ------
@@ -405,10 +409,15 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
         For a name with no column (a figure the variant does not have, e.g.
         ``final_controller_state`` of a variant without controller state).
     """
-    labels = ("x", "y", "z") if joints is None else tuple(joints)
+    split = {c: _metric_parts(c, members) for c in available}
+    rank = {m: i for i, m in enumerate((*members.bodies, *members.joints) if members else ())}
     out, errors = [], []
     for name in names:
-        parts = [name] if name in available else [f"{name}_{a}" for a in labels if f"{name}_{a}" in available]
+        want = _metric_parts(name, members)
+        parts = [name] if name in available else sorted((
+            c for c, got in split.items() if want is not None and got is not None and got[0] == want[0]
+            and want[1] in (None, got[1]) and want[2] in (None, got[2])),
+            key=lambda c: (rank.get(split[c][1], -1), "xyz".find(split[c][2] or "")))  # the tree's order
         if not parts:
             errors.append(f"{option} {name!r}: these runs have no such figure; they have "
                           f"{', '.join(c for c in available)}")
@@ -447,22 +456,21 @@ def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
     """The figures of the base configuration (one run in this process,
     :func:`figure_columns`; a chain's by :func:`run_one`): the columns a study's metrics
     are chosen from."""
-    joints = joints_of(config)
-    if joints is not None:
+    members = members_of(config)
+    if members is not None:
         result = run_one(config, engine)
-        return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO, joints)
+        return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO, members)
     (_, result), = simulate_many([config], engine=engine or DEFAULT_ENGINE, full=False)
     return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
 
 
 def figure_columns(summary: Mapping[str, Any], status: str, ratio: float,
-                   joints: Sequence[str] | None = None) -> dict[str, float]:
-    """A run's numeric summary figures as flat columns (as a sweep's index has them; a
-    chain's, with ``joints`` its joint names, :data:`CHAIN_FIGURES` and
-    :data:`JOINT_FIGURES` per joint) and ``converged`` (0 or 1)."""
-    if joints is not None:
-        summary = {k: v for k, v in summary.items() if k in CHAIN_FIGURES or k in JOINT_FIGURES}
-    columns = {k: float(v) for k, v in summary_columns(summary, joints).items()
+                   members: Members | None = None) -> dict[str, float]:
+    """A run's numeric summary figures as flat columns, as a sweep's index has them (a
+    tree's, with ``members`` its body and joint names, per body or joint), and
+    ``converged`` (0 or 1)."""
+    names = members or Members(None, None)
+    columns = {k: float(v) for k, v in summary_columns(summary, names.joints, names.bodies).items()
                if k not in METRICS_NOT_FIGURES and isinstance(v, (int, float, np.number))}
     columns["converged"] = float(converged(status == "success", summary.get("lyapunov_initial"),
                                               summary.get("lyapunov_final"), ratio))
@@ -539,24 +547,18 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     folder = Path(folder)
     mapping = {"name": folder.name, "base": dict(base), "table": design}
     spec = spec_from_mapping(mapping)
-    joints = joints_of(base)
-    ensure_compiled(say=log, sign_law=True, chain=joints is not None)
+    members = members_of(base)
+    ensure_compiled(say=log, sign_law=True, chain=members is not None)
     run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
               engine=engine, store=store,
               progress=progress, command_line=command_line)
     ds = open_sweep(folder)
-    if joints is None:
-        figures = _figure_names()
-        is_figure = lambda k: k in figures or k.rpartition("_")[0] in figures  # noqa: E731
-    else:
-        columns = {*CHAIN_FIGURES, *(f"{f}_{j}" for f in JOINT_FIGURES for j in joints)}
-        is_figure = columns.__contains__
     keep = [k for k, v in ds.data_vars.items() if v.dims == ("run",) and (k in ("status", "converged") or (
-            v.dtype.kind in "fiub" and is_figure(k)))]
+            v.dtype.kind in "fiub" and _metric_parts(k, members) is not None))]
     out = ds[keep].load()
     out["converged"] = out["converged"].astype(float)
-    for k in keep if joints is not None else ():  # a chain's per-joint figures: their units and names
-        units, long_name = study_figure_attributes(k, joints)
+    for k in keep:  # units and names where the sweep's columns lack them
+        units, long_name = study_figure_attributes(k)
         if units and not out[k].attrs.get("units"):
             out[k].attrs.update(units=units, long_name=long_name)
     return out

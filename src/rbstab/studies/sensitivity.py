@@ -49,7 +49,8 @@ from .design import (
     Varied,
     check_metrics,
     expand_metrics,
-    joints_of,
+    Members,
+    members_of,
     nominal_figures,
     parse_vary,
     run_design,
@@ -181,7 +182,7 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
                           + " or ".join(f"{t}:NAME" for t in TRANSFORMS))
         bare.append(name)
     varied: list[Varied] = []
-    for check in (lambda: check_metrics(bare, joints=joints_of(config)),
+    for check in (lambda: check_metrics(bare, members=members_of(config)),
                   lambda: varied.extend(parse_vary(vary, config.resolved))):
         try:
             check()
@@ -209,14 +210,14 @@ def split_transform(metric: str) -> tuple[str | None, str]:
 
 
 def _columns(metrics: Sequence[str], available: Sequence[str],
-             joints: Sequence[str] | None = None) -> list[tuple[str, str, str | None]]:
+             members: Members | None = None) -> list[tuple[str, str, str | None]]:
     """(label, column, transform) of every metric's columns (3-vectors per component, a
-    chain's figures per joint of ``joints``):
+    tree's figures per body or joint of ``members``):
     ``("log10:max_abs_constraint_error_x", "max_abs_constraint_error_x", "log10")``."""
     out: list[tuple[str, str, str | None]] = []
     for metric in metrics:
         transform, name = split_transform(metric)
-        for column in expand_metrics([name], available, joints=joints):
+        for column in expand_metrics([name], available, members=members):
             label = f"{transform}:{column}" if transform else column
             if label not in [o[0] for o in out]:
                 out.append((label, column, transform))
@@ -305,7 +306,7 @@ def analyze_results(plan: SensitivityDesign, results, *, num_resamples: int = 20
     StudyInputError
         If a metric is not a figure of these runs.
     """
-    columns = _columns(plan.metrics, list(results.data_vars), joints_of(plan.base))
+    columns = _columns(plan.metrics, list(results.data_vars), members_of(plan.base))
     names = [label for label, _, _ in columns]
     indices = INDICES[plan.method]
     table = {k: np.full((len(names), len(plan.factors)), np.nan) for k in indices}
@@ -417,7 +418,7 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
     folder = study_folder(output, name, config)
     plan = plan_sensitivity(config, vary, n=n, method=method, metrics=metrics, seed=seed)
     expand_metrics([split_transform(m)[1] for m in plan.metrics],
-                   list(nominal_figures(config, engine)), joints=joints_of(config))  # a figure these runs have
+                   list(nominal_figures(config, engine)), members=members_of(config))  # a figure these runs have
     check_same_inputs(folder / FILE, {"method": plan.method, "n": plan.n, "seed": plan.seed,
                                       "vary": json.dumps(vary_mapping(plan.varied)),
                                       "config": dump_yaml(plan.base.resolved)}, overwrite=overwrite)

@@ -65,8 +65,10 @@ from .design import (
     Varied,
     check_metrics,
     design_mappings,
+    expand_metrics,
     figure_columns,
-    joints_of,
+    Members,
+    members_of,
     nominal_figures,
     study_figure_attributes,
     parse_vary,
@@ -121,9 +123,9 @@ class Constraint:
         return f"{self.metric}{self.op}{self.limit:g}"
 
 
-def parse_constraint(text: str, *, option: str = "--subject-to", joints: Sequence[str] | None = None) -> Constraint:
-    """``"METRIC<=VALUE"`` or ``"METRIC>=VALUE"`` as a :class:`Constraint` (``joints``: a
-    chain's joint names, whose figures the metric is then, :func:`check_metrics`).
+def parse_constraint(text: str, *, option: str = "--subject-to", members: Members | None = None) -> Constraint:
+    """``"METRIC<=VALUE"`` or ``"METRIC>=VALUE"`` as a :class:`Constraint` (``members``: a
+    tree's body and joint names, whose figures the metric is then, :func:`check_metrics`).
 
     Raises
     ------
@@ -135,7 +137,7 @@ def parse_constraint(text: str, *, option: str = "--subject-to", joints: Sequenc
     if m is None or limit is None:
         raise StudyInputError([f"{option} {text!r}: expected METRIC<=VALUE or METRIC>=VALUE with a finite number, "
                                "e.g. 'max_abs_constraint_error_z<=0.05'"])
-    check_metrics([m["metric"]], option=option, joints=joints)
+    check_metrics([m["metric"]], option=option, members=members)
     return Constraint(m["metric"], m["op"], limit)
 
 
@@ -330,12 +332,12 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
     constraints: list[Constraint] = []
     varied: list[Varied] = []
     over_varied: list[Varied] = []
-    joints = joints_of(config)
+    members = members_of(config)
     checks = [
         lambda: varied.extend(parse_vary(vary, config.resolved, allowed=RANGES)),
-        lambda: check_metrics(list(minimize), option="--minimize", joints=joints),
-        lambda: check_metrics(list(maximize), option="--maximize", joints=joints),
-        *[(lambda t=t: constraints.append(parse_constraint(t, joints=joints))) for t in subject_to],
+        lambda: check_metrics(list(minimize), option="--minimize", members=members),
+        lambda: check_metrics(list(maximize), option="--maximize", members=members),
+        *[(lambda t=t: constraints.append(parse_constraint(t, members=members))) for t in subject_to],
         *([lambda: over_varied.extend(parse_vary(over, config.resolved, option="--over"))] if over else []),
     ]
     for check in checks:
@@ -569,7 +571,7 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         "constraints": json.dumps([str(c) for c in problem.constraints]),
         "vary": json.dumps(vary_mapping(problem.varied)), "config": dump_yaml(problem.base.resolved)},
         overwrite=overwrite)
-    ensure_compiled(say=log, sign_law=True, chain=joints_of(config) is not None)
+    ensure_compiled(say=log, sign_law=True, chain=members_of(config) is not None)
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
     folder.mkdir(parents=True, exist_ok=True)
@@ -654,7 +656,7 @@ def _threads_take(problem: TuningProblem) -> bool:
     kernels release the GIL (the runs one by one from their configurations would not)."""
     from ..simulator import uses_compiled_engine  # heavy: numba
 
-    if joints_of(problem.base) is not None:  # a chain's runs go one by one (integrate_chain_part)
+    if members_of(problem.base) is not None:  # a chain's runs go one by one (integrate_chain_part)
         return False
     return (not get_engine(problem.engine).gpu and uses_compiled_engine(problem.base, problem.engine)
             and not any(v.key.startswith(_OFF_BATCH_KEYS) for v in problem.varied)
@@ -704,12 +706,16 @@ def _check_scalar_metrics(problem: TuningProblem, available: Mapping[str, float]
     """Refuse an objective or constraint that is no single figure of these runs (a 3-vector
     figure without its component, a figure the variant does not have)."""
     errors = []
-    joints = joints_of(problem.base)
+    members = members_of(problem.base)
     for option, metric in [*((f"--{o.direction}", o.metric) for o in problem.objectives),
                            *(("--subject-to", c.metric) for c in problem.constraints)]:
         if metric not in available:
-            parts = [f"{metric}_{a}" for a in (joints or "xyz") if f"{metric}_{a}" in available]
-            whole = "a 3-vector; give one component" if joints is None else "a figure per joint; give one joint's"
+            try:
+                parts = expand_metrics([metric], list(available), members=members)
+            except StudyInputError:
+                parts = []
+            whole = "a 3-vector; give one component" if members is None else \
+                "a figure of several columns (per joint or body, per axis); give one"
             errors.append(f"{option} {metric!r}: " + (f"{whole} ({', '.join(parts)})" if parts
                           else f"these runs have no such figure; they have {', '.join(available)}"))
     if errors:
@@ -816,7 +822,7 @@ def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], pa
         values = table[column].to_numpy()
         if values.dtype == object:
             values = table[column].astype(str).to_numpy()
-        units, long_name = study_figure_attributes(column, joints_of(problem.base))
+        units, long_name = study_figure_attributes(column)
         data[column] = xr.Variable(("trial",), values, {"long_name": long_name, **({"units": units} if units else {})})
     ds = xr.Dataset(data, coords={"trial": table["trial"].to_numpy()})
     ds.attrs.update(provenance_attributes(f"rbstab tuning study {study.study_name}", command_line=command_line))
