@@ -47,8 +47,9 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
         --vary body.mass=uniform:[30,50] --metric max_abs_constraint_error --metric lyapunov_final
 
     CONFIG may be a chain (bodies and joints): its keys name a body or a joint by index or
-    name (bodies.1.mass, joints.hip.k_r.0, initial_state.trunk.theta.0), and its per-joint
-    figures give one metric a joint (max_abs_constraint_error_hip).
+    name (bodies.1.mass, joints.hip.k_r.0, initial_state.trunk.theta.0), and its metrics are
+    its figures per body or joint and axis, as its sweep's columns (max_abs_constraint_error_hip,
+    final_theta_trunk_x); a name without its member or axis gives one metric a column.
 
     Draws the design with SALib, runs it as a sweep (OUTPUT/<name>/sweep/: the same command
     again resumes it) and writes first-order and total Sobol' indices (or Morris mu*, sigma)

@@ -64,9 +64,9 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
         --minimize lyapunov_final --subject-to 'max_abs_constraint_error_z<=0.1'
 
     CONFIG may be a chain (bodies and joints): its keys name a body or a joint by index or
-    name (joints.hip.l_r.0, bodies.trunk.mass, also in --over), and its per-joint figures are
-    metrics one joint at a time (max_abs_constraint_error_hip); its runs are integrated one
-    by one.
+    name (joints.hip.l_r.0, bodies.trunk.mass, also in --over), and its metrics are its
+    figures per body or joint and axis, as its sweep's columns (max_abs_constraint_error_hip,
+    final_theta_trunk_x); a generation's runs of one chain are integrated together.
 
     Trials come a generation at a time (space-filling first, then the sampler); each trial
     is one run (with --over, one per uncertain body), and a generation's runs are

@@ -139,7 +139,7 @@ def run_generation(base: Mapping, design: pd.DataFrame, *, engine: str = "compil
                    size: int | None = None) -> GenerationRuns:
     """Plan the rows of ``design`` (absolute values, columns as in :mod:`rbstab.studies.design`)
     on ``base`` (a resolved configuration, one body's or a chain's) as a table of runs and
-    integrate it as one batch (a chain's runs each alone, :func:`integrate_chain_part`).
+    integrate it as one batch (a chain's runs from their configurations, :func:`integrate_chain_part`).
 
     ``executor`` (an :class:`rbstab.sweep.executors.Executor`, or None: this process) takes
     the table in ``size``-row slices (default: the rows split evenly over its workers). A
