@@ -12,8 +12,8 @@ configuration, bit for bit.
 
 A chain's runs (a table whose base is a chain's configuration) are built from their rows and
 integrated together on the engine, the runs of one chain in one call
-(:func:`integrate_chain_part`, :func:`rbstab.studies.design.run_chains`: the figures of
-:func:`rbstab.simulator.simulate`, per joint as ``<figure>_<joint>``).
+(:func:`rbstab.simulator.simulate_blocks`: the figures of :func:`rbstab.simulator.simulate`,
+per body or joint as its sweep's columns, ``<figure>_<member>[_<axis>]``).
 """
 
 from __future__ import annotations
@@ -28,16 +28,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..config import ConfigError, PhysicalPlausibilityWarning, config_from_mapping
+from ..config import ConfigError, PhysicalPlausibilityWarning
 from ..config.chains import any_config_from_mapping
-from ..config.loader import is_chain
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
-from ..engine.registry import DEFAULT_ENGINE, get_engine
+from ..engine.registry import get_engine
 from ..io.chunk import summary_table_columns
 from ..sweep.validate import key_path
-from .design import METRICS_NOT_FIGURES, design_mappings, figure_columns, members_of, run_chains
+from .design import METRICS_NOT_FIGURES, design_mappings, members_of
 
-__all__ = ["GenerationRuns", "run_generation", "integrate_part", "integrate_chain_part", "CALLS"]
+__all__ = ["GenerationRuns", "run_generation", "integrate_part", "CALLS"]
 
 #: Batches integrated in this process (a count per call of :func:`integrate_part`; tests read it).
 CALLS = {"batches": 0}
@@ -65,23 +64,24 @@ class GenerationRuns:
 
 def integrate_part(part, engine: str = "compiled") -> dict:
     """Integrate the runs of a :class:`rbstab.sweep.table.TableSlice`; return their figure
-    columns (``figures``: column -> values, ``ok``: success per run). The function an
-    executor runs: runs the compiled (or cuda) engine takes go as one
+    columns (``figures``: column -> values, shape (k,); a chain's per body or joint and
+    axis, as its sweep's columns; ``ok``: success per run, shape (k,)). The function an
+    executor runs: one body's runs that the compiled (or cuda) engine takes go as one
     :class:`rbstab.engine.RunBatch` through :func:`rbstab.simulator.simulate_batch` (the
-    summary figures only, no trace kept), the others (implicit methods, the pure sign law)
-    one by one from their configurations."""
-    from ..simulator import simulate_batch, simulate_many  # heavy: numba
+    summary figures only, no trace kept); the others (a chain's, implicit methods, the pure
+    sign law) from their configurations through :func:`rbstab.simulator.simulate_blocks`
+    (the runs of one chain in one call of ``engine``)."""
+    from ..simulator import simulate_batch, simulate_blocks  # heavy: numba
 
     CALLS["batches"] += 1
-    if any(is_chain(t) for t in part.templates):
-        return integrate_chain_part(part, engine)
     n = len(part)
     columns: dict[str, np.ndarray] = {}
     ok = np.zeros(n, dtype=bool)
+    members = members_of(part.templates[0]) if len(part.templates) else None
 
     def put(rows: Sequence[int], table: Mapping[str, Any], status: Sequence[str]) -> None:
         rows = np.asarray(rows, dtype=np.int64)
-        flat = summary_table_columns(table)
+        flat = summary_table_columns(table, *((members.joints, members.bodies) if members else ()))
         for key, values in flat.items():
             values = np.asarray(values)
             if key in METRICS_NOT_FIGURES or values.dtype.kind not in "fiub":
@@ -99,39 +99,18 @@ def integrate_part(part, engine: str = "compiled") -> dict:
 
     spec = get_engine(engine)
     engine_name = engine if spec.compiled else None
-    batch = part.batch() if engine_name else None
+    batch = part.batch() if engine_name and members is None else None
     fast = np.flatnonzero(batch.compiled) if batch is not None else np.empty(0, dtype=np.int64)
     if len(fast):
         for rows, block in simulate_batch(batch, fast, full=False, engine=engine_name, keep="none"):
             put(rows, block.summaries, block.status)
     slow = np.setdiff1d(np.arange(n), fast)
     if len(slow):
-        configs = [config_from_mapping(part.resolved(int(j)), source="<trial>") for j in slow]
-        for i, result in simulate_many(configs, engine=DEFAULT_ENGINE if spec.gpu else engine, full=False):
-            summary = {k: (np.asarray([v]) if not isinstance(v, (list, tuple, np.ndarray)) else np.asarray([v]))
-                       for k, v in result.summary.items()}
-            put([int(slow[i])], summary, [result.status])
-    return {"figures": columns, "ok": ok}
-
-
-def integrate_chain_part(part, engine: str = "compiled") -> dict:
-    """:func:`integrate_part` of a slice of a chain's runs: each run's configuration built
-    from its row (:func:`rbstab.config.chains.any_config_from_mapping`), all integrated by
-    :func:`rbstab.studies.design.run_chains` on ``engine`` (the runs of one chain in one
-    call). Returns ``figures`` (column -> values, shape (k,): the chain's figures, per joint
-    as ``<figure>_<joint>``, and ``converged``) and ``ok`` (success per run, shape (k,))."""
-    n = len(part)
-    columns: dict[str, np.ndarray] = {}
-    ok = np.zeros(n, dtype=bool)
-    rows = [part.resolved(j) for j in range(n)]
-    with warnings.catch_warnings():  # shown once, when the table was planned
-        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-        configs = [any_config_from_mapping(data, source="<trial>") for data in rows]
-    for j, (data, result) in enumerate(zip(rows, run_chains(configs, engine))):
-        ok[j] = result.status == "success"
-        for key, value in figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO,
-                                         members_of(data)).items():
-            columns.setdefault(key, np.full(n, np.nan))[j] = value
+        with warnings.catch_warnings():  # shown once, when the table was planned
+            warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+            configs = [any_config_from_mapping(part.resolved(int(j)), source="<trial>") for j in slow]
+        for rows, block in simulate_blocks(configs, engine=engine, full=False, keep="none"):
+            put(slow[rows], block.summaries, block.status)
     return {"figures": columns, "ok": ok}
 
 
@@ -139,7 +118,7 @@ def run_generation(base: Mapping, design: pd.DataFrame, *, engine: str = "compil
                    size: int | None = None) -> GenerationRuns:
     """Plan the rows of ``design`` (absolute values, columns as in :mod:`rbstab.studies.design`)
     on ``base`` (a resolved configuration, one body's or a chain's) as a table of runs and
-    integrate it as one batch (a chain's runs from their configurations, :func:`integrate_chain_part`).
+    integrate it as one batch (:func:`integrate_part`).
 
     ``executor`` (an :class:`rbstab.sweep.executors.Executor`, or None: this process) takes
     the table in ``size``-row slices (default: the rows split evenly over its workers). A

@@ -25,7 +25,8 @@ keys of chain sweeps: a body or a joint by index or name (``bodies.1.mass``,
 ``joints.hip.k_r.0``), an initial state by body name (``initial_state.trunk.theta.0``).
 Its summary figures are those of one body's runs, per body or joint as a sweep's columns
 name them (:func:`rbstab.io.chunk.summary_columns`: ``max_abs_constraint_error_hip`` [m],
-``final_theta_trunk_x`` [rad]); its runs are integrated by :func:`run_chains`.
+``final_theta_trunk_x`` [rad]); its runs are integrated as one body's, the runs of one
+chain together (:func:`rbstab.simulator.simulate_blocks`).
 """
 
 from __future__ import annotations
@@ -47,7 +48,7 @@ from ..config.paths import KeyPathError, plain_tree
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain
-from ..engine.registry import DEFAULT_ENGINE, get_engine
+from ..engine.registry import DEFAULT_ENGINE
 from ..io.chunk import SUMMARY_FIGURES, figure_attributes, split_figure_column, summary_columns
 from ..layout import SIGN_LAW_FIGURES
 from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
@@ -60,7 +61,7 @@ from ..sweep.validate import key_path
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
            "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns",
-           "JOINT_FIGURES", "Members", "members_of", "run_one", "run_chains", "study_figure_attributes"]
+           "JOINT_FIGURES", "Members", "members_of", "study_figure_attributes"]
 
 
 class StudyInputError(ConfigError):
@@ -427,41 +428,11 @@ def expand_metrics(names: Sequence[str], available: Sequence[str], *, option: st
     return out
 
 
-def run_chains(configs, engine: str | None = None) -> list:
-    """The runs of trees (:class:`rbstab.config.chains.ChainConfig`) in this process, the
-    summaries only kept (:func:`rbstab.simulator.simulate_blocks`: the runs of one tree
-    in one call of ``engine``, default compiled; on the GPU with ``cuda``). Returns their
-    :class:`rbstab.results.RunResult`, in order. The one place studies integrate trees.
-
-    Raises
-    ------
-    rbstab.engine.cuda.CudaUnavailable
-        For ``"cuda"`` where no GPU (or numba-cuda) can be used, before any run.
-    """
-    from ..simulator import simulate_blocks  # heavy: numba (a tree's kernels)
-
-    results: list = [None] * len(configs)
-    for members, block in simulate_blocks(configs, keep="none", engine=engine or DEFAULT_ENGINE):
-        for k, j in enumerate(members):
-            results[j] = block.result(k)
-    return results
-
-
-def run_one(config, engine: str | None = None):
-    """:func:`run_chains` of one chain."""
-    return run_chains([config], engine)[0]
-
-
 def nominal_figures(config, engine: str | None = None) -> dict[str, float]:
-    """The figures of the base configuration (one run in this process,
-    :func:`figure_columns`; a chain's by :func:`run_one`): the columns a study's metrics
-    are chosen from."""
-    members = members_of(config)
-    if members is not None:
-        result = run_one(config, engine)
-        return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO, members)
+    """The figures of the base configuration (one body's or a chain's; one run in this
+    process, :func:`figure_columns`): the columns a study's metrics are chosen from."""
     (_, result), = simulate_many([config], engine=engine or DEFAULT_ENGINE, full=False)
-    return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO)
+    return figure_columns(result.summary, result.status, DEFAULT_LYAPUNOV_RATIO, members_of(config))
 
 
 def figure_columns(summary: Mapping[str, Any], status: str, ratio: float,

@@ -656,7 +656,7 @@ def _threads_take(problem: TuningProblem) -> bool:
     kernels release the GIL (the runs one by one from their configurations would not)."""
     from ..simulator import uses_compiled_engine  # heavy: numba
 
-    if members_of(problem.base) is not None:  # a chain's runs: integrate_chain_part, from configurations
+    if members_of(problem.base) is not None:  # a chain's runs are built from their configurations
         return False
     return (not get_engine(problem.engine).gpu and uses_compiled_engine(problem.base, problem.engine)
             and not any(v.key.startswith(_OFF_BATCH_KEYS) for v in problem.varied)
