@@ -78,29 +78,19 @@ def _report(config, path: Path, mode: str) -> dict:
                                message=attrs["message"])
     check = rate_check_text(s, path)
     variant = attrs["variant"]
-    if variant == "chain":
-        if console.json:
-            console.emit({"name": config.name, "path": str(path), "variant": variant, "status": attrs["status"],
-                          "converged": settled == "converged", "message": attrs["message"],
-                          "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
-                          "replaced": _REPLACED[mode], "summary": s})
-        console.out(
-            f"{config.name}: {attrs['status']}, {settled} (a chain of {_bodies(len(attrs['joints'].split(',')))}, "
-            f"{attrs['wall_time']:.3g} s) v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
-            f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E_j| {np.max(s['max_abs_constraint_error']):.3g} m, "
-            f"rate check {check} -> {path}")
-        return attrs
+    chain = variant == "chain"  # a tree's file (of any number of bodies) names its joints
     if console.json:
-        console.emit({"name": config.name, "path": str(path), "variant": config.variant, "status": attrs["status"],
+        console.emit({"name": config.name, "path": str(path), "variant": variant, "status": attrs["status"],
                       "converged": settled == "converged", "message": attrs["message"],
                       "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
                       "replaced": _REPLACED[mode], "summary": s,
                       "rate_check_reason": check[len("fail ("):-1] if check.startswith("fail (") else None})
+    what = f"a chain of {_bodies(len(attrs['joints'].split(',')))}" if chain else variant
     console.out(
-        f"{config.name}: {attrs['status']}, {settled} ({config.variant}, {attrs['wall_time']:.3g} s) "
+        f"{config.name}: {attrs['status']}, {settled} ({what}, {attrs['wall_time']:.3g} s) "
         f"v {s['lyapunov_initial']:.4g} -> {s['lyapunov_final']:.4g} J, "
-        f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E| {max(s['max_abs_constraint_error']):.3g} m, "
-        f"rate check {check} -> {path}"
+        f"max dv/dt {s['max_lyapunov_rate']:.3g} W, max|E{'_j' if chain else ''}| "
+        f"{np.max(s['max_abs_constraint_error']):.3g} m, rate check {check} -> {path}"
     )
     console.detail("  solver " + ", ".join(f"{k[len('solver_'):]} {v}" for k, v in attrs.items()
                                           if k.startswith("solver_") and k != "solver_message"))

@@ -22,6 +22,20 @@ ROOT = Path(__file__).resolve().parents[1]
 SHORT = ["--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=501"]
 
 
+def test_run_json_of_a_chain_is_one_bodys_record(tmp_path):
+    """rbstab run --json: a chain's object has the keys of one body's (the rate check's
+    reason included), its variant "chain"."""
+    import json
+
+    result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "paper" / "case1_permanent.yaml"),
+                                      str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"), *SHORT, "--json",
+                                      "-o", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    body, chain = [json.loads(line) for line in result.stdout.splitlines() if line.startswith("{")]
+    assert set(body) == set(chain) and "rate_check_reason" in chain
+    assert (body["variant"], chain["variant"]) == ("permanent", "chain")
+
+
 @pytest.mark.parametrize("name", ["double_pendulum", "stance_ankle_hip", "knee"])
 def test_run_writes_a_chain_file_with_body_and_joint_dimensions(name, tmp_path):
     result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / f"{name}.yaml"), *SHORT,
