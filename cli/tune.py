@@ -96,12 +96,12 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     if result.best_trial is None:
         console.out("  no feasible trial")
     else:
-        from rbstab.studies.design import study_figure_attributes  # heavy: numpy (loaded by now)
+        from rbstab.io.chunk import figure_attributes  # heavy: numpy (loaded by now)
         from rbstab.layout import CONFIG_QUANTITIES, display_units  # light; beside its heavy neighbour
 
         metrics = [*minimize, *maximize]
         values = result.best_values
-        shown = ", ".join(f"{m} {v:.6g}" + (f" {u}" if (u := display_units(study_figure_attributes(m)[0]))
+        shown = ", ".join(f"{m} {v:.6g}" + (f" {u}" if (u := display_units(figure_attributes(m)[0]))
                                             not in ("", "1") else "") for m, v in zip(metrics, values))
         console.out(f"  best trial {result.best_trial}: {shown}")
         for key, value in result.best_params.items():

@@ -601,14 +601,15 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
         raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
     gpu = get_engine(engine).gpu
     get_engine(engine).check_available()  # before any run
-    trees = [i for i, config in enumerate(configs) if isinstance(config, ChainConfig)]
+    trees, bodies = [], []
+    for i, config in enumerate(configs):
+        (trees if isinstance(config, ChainConfig) else bodies).append(i)
     if trees:
         yield from _tree_runs(configs, trees, timeout, keep != "none", engine)
     groups: dict[tuple, list[int]] = {}
     shared: dict[tuple, Variant] = {}
-    for i, config in enumerate(configs):
-        if isinstance(config, ChainConfig):
-            continue
+    for i in bodies:
+        config = configs[i]
         if uses_compiled_engine(config, engine):
             size = _variant_of(config, shared).layout.size
             groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)

@@ -61,7 +61,7 @@ from ..sweep.validate import key_path
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
            "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns",
-           "JOINT_FIGURES", "Members", "members_of", "study_figure_attributes"]
+           "JOINT_FIGURES", "Members", "members_of"]
 
 
 class StudyInputError(ConfigError):
@@ -339,12 +339,6 @@ def members_of(config) -> Members | None:
                    tuple(str(j["name"]) for j in data.get("joints") or ()))
 
 
-def study_figure_attributes(column: str) -> tuple[str, str]:
-    """(units, long name) of a figure column (:func:`rbstab.io.chunk.figure_attributes`:
-    one body's ``<name>_<axis>``, a tree's ``<name>_<member>[_<axis>]``)."""
-    return figure_attributes(column)
-
-
 def _figure_names() -> dict[str, tuple[str, str]]:
     return {k: v for k, v in SUMMARY_FIGURES.items() if k not in METRICS_NOT_FIGURES}
 
@@ -529,7 +523,7 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     out = ds[keep].load()
     out["converged"] = out["converged"].astype(float)
     for k in keep:  # units and names where the sweep's columns lack them
-        units, long_name = study_figure_attributes(k)
+        units, long_name = figure_attributes(k)
         if units and not out[k].attrs.get("units"):
             out[k].attrs.update(units=units, long_name=long_name)
     return out

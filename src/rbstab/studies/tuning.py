@@ -56,6 +56,7 @@ from ..engine import ensure_compiled
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.atomic import write_text_atomic
+from ..io.chunk import figure_attributes
 from ..io.metadata import provenance_attributes
 from ..sweep.validate import key_path
 from ..warning_codes import coded
@@ -70,7 +71,6 @@ from .design import (
     Members,
     members_of,
     nominal_figures,
-    study_figure_attributes,
     parse_vary,
     study_folder,
     vary_mapping,
@@ -822,7 +822,7 @@ def _write_dataset(problem: TuningProblem, study, table, best: Sequence[int], pa
         values = table[column].to_numpy()
         if values.dtype == object:
             values = table[column].astype(str).to_numpy()
-        units, long_name = study_figure_attributes(column)
+        units, long_name = figure_attributes(column)
         data[column] = xr.Variable(("trial",), values, {"long_name": long_name, **({"units": units} if units else {})})
     ds = xr.Dataset(data, coords={"trial": table["trial"].to_numpy()})
     ds.attrs.update(provenance_attributes(f"rbstab tuning study {study.study_name}", command_line=command_line))
