@@ -47,8 +47,8 @@ from .engine.switching import integrate_sign_law, sign_law_outputs, switching_me
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
 from .model import DISTURBANCE_KINDS, PARAMETERS
-from .results import RunBlock, RunResult
-from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary
+from .results import RunBlock, RunResult, row
+from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.disturbances import apply_impulses, before
@@ -760,7 +760,8 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
     start = _time.perf_counter()
     trajectory = tree.integrate(config, timeout=timeout)
     compiled, time = trajectory.compiled, trajectory.time
-    outputs, summary = _chain_outputs(compiled, config, time, trajectory.states, trajectory.work)
+    outputs, summary = _chain_outputs(compiled, time, trajectory.states[None], trajectory.work[None])
+    outputs, summary = {key: value[0] for key, value in outputs.items()}, row(summary, 0)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,
                      _time.perf_counter() - start, summary)
@@ -778,14 +779,15 @@ def _tree_runs(configs: Sequence, trees: list[int], timeout: float | None, outpu
         yield [i], RunBlock.of(_simulate_tree(configs[i], timeout))
 
 
-def _chain_outputs(compiled, config, time: np.ndarray, states: np.ndarray, work: np.ndarray) -> tuple[dict, dict]:
-    """(outputs, summary) of a chain run's samples ``states`` at ``time`` and its
-    disturbances' work ``work`` there."""
+def _chain_outputs(compiled, time: np.ndarray, states: np.ndarray, work: np.ndarray) -> tuple[dict, dict]:
+    """(outputs, summary columns) of k runs of one chain: their samples ``states`` (k, m,
+    n_states) at ``time`` (m,) and their disturbances' work ``work`` (k, m) there
+    (:func:`rbstab.variants.chain.evaluate`, :func:`rbstab.summary.tree_summary_table`)."""
     from .variants import chain as C  # heavy: numba
 
     outputs = C.evaluate(compiled, time, states, work)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, tree_summary(time, outputs)
+    return outputs, tree_summary_table(time, outputs)
 
 
 def _chain_key(compiled, sim) -> bytes:
@@ -868,27 +870,18 @@ def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu:
     integration = (_time.perf_counter() - start) / len(members)
     for lo in range(0, len(members), POSTPROCESS_BLOCK):
         hi = min(lo + POSTPROCESS_BLOCK, len(members))
-        traces, summaries, status, message, seconds = [], [], [], [], []
-        for j in range(lo, hi):
-            t0 = _time.perf_counter()
-            run_outputs, summary = _chain_outputs(compiled, configs[members[j]], time, sol.samples[j], sol.work[j])
-            if outputs:
-                traces.append(run_outputs)
-            summaries.append(summary)
-            ended = _chain_end(compiled, sims[j], int(sol.status[j]), float(sol.t_stop[j]), sol.samples[j], y0[j],
-                               float(settings[j, 6]))
-            status.append(ended[0])
-            message.append(ended[1])
-            seconds.append(_time.perf_counter() - t0)
+        t0 = _time.perf_counter()
+        run_outputs, summaries = _chain_outputs(compiled, time, sol.samples[lo:hi], sol.work[lo:hi])
+        status, message = zip(*(_chain_end(compiled, sims[j], int(sol.status[j]), float(sol.t_stop[j]),
+                                           sol.samples[j], y0[j], float(settings[j, 6])) for j in range(lo, hi)))
         ok = sol.status[lo:hi] == SUCCESS
-        post = np.asarray(seconds)
+        post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
         yield members[lo:hi], RunBlock(
             configs=[configs[i] for i in members[lo:hi]],
             time=time if outputs else time[:0],
-            outputs={key: np.stack([t[key] for t in traces]) for key in traces[0]} if outputs else {},
-            summaries={key: np.array([s[key] for s in summaries], dtype=object if isinstance(summaries[0][key], str)
-                                     else None) for key in summaries[0]},
-            status=status, message=message,
+            outputs=run_outputs if outputs else {},
+            summaries=summaries,
+            status=list(status), message=list(message),
             solver={"nfev": sol.nfev[lo:hi].astype(np.int64), "n_steps": sol.n_steps[lo:hi].astype(np.int64),
                     "solver_status": np.where(ok, 0, -1).astype(np.int64)},
             wall_time=integration + post,

@@ -25,6 +25,7 @@ __all__ = [
     "summarize_many",
     "summary_table",
     "tree_summary",
+    "tree_summary_table",
     "LYAPUNOV_RATE_TOLERANCE",
     "MIN_CHECK_SAMPLES",
     "RATE_STENCIL",
@@ -600,17 +601,28 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
 
 def tree_summary(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
     """:func:`summarize` of a tree's run (:func:`rbstab.variants.chain.evaluate`'s outputs
-    plus ``lyapunov_rate_numerical``; NaN rows after a failure): its figures per body or
-    joint (:data:`rbstab.layout.SUMMARY_FIGURES`' ``member``; ``final_<block>`` (n_bodies,
-    3), ``final_controller_state`` (n_joints, 3) where a joint is ``embedded``,
-    ``fraction_saturated_*`` (n_members, 3)), except that ``max_abs_constraint_error`` [m]
-    is per joint the largest |E_j| (n_joints,): for a permanent joint, which reduced
-    coordinates hold by construction, the drift of its constraint (rounding)."""
-    figures = summarize(time, outputs)
+    plus ``lyapunov_rate_numerical``; NaN rows after a failure): :func:`tree_summary_table`
+    of the one run, as plain Python values."""
+    return row(tree_summary_table(time, {key: value[None] for key, value in outputs.items()}), 0)
+
+
+def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """:func:`summary_table` of k runs of one tree sampled at the same times (the outputs of
+    :func:`rbstab.variants.chain.evaluate` with a leading run axis, plus
+    ``lyapunov_rate_numerical`` (k, m); NaN rows after a failure): its figures per body or
+    joint (:data:`rbstab.layout.SUMMARY_FIGURES`' ``member``; ``final_<block>`` (k, n_bodies,
+    3), ``final_controller_state`` (k, n_joints, 3) where the runs hold a controller state,
+    ``fraction_saturated_*`` (k, n_members, 3)), except that ``max_abs_constraint_error`` [m]
+    is per joint the largest |E_j| (k, n_joints): for a permanent joint, which reduced
+    coordinates hold by construction, the drift of its constraint (rounding). Run i's
+    figures are those of its outputs alone."""
+    table = summary_table(time, outputs)
     if not np.isfinite(outputs["controller_state"]).any():
-        figures.pop("final_controller_state", None)
+        table.pop("final_controller_state", None)
     finite = np.isfinite(outputs["lyapunov"])
-    last = int(np.flatnonzero(finite)[-1]) if finite.any() else 0
-    error = np.linalg.norm(outputs["constraint_error"][: last + 1], axis=-1)
-    figures["max_abs_constraint_error"] = np.max(error, axis=0).tolist()
-    return figures
+    m = finite.shape[1]
+    last = np.where(finite.any(axis=1), m - 1 - np.argmax(finite[:, ::-1], axis=1), 0)
+    error = np.linalg.norm(outputs["constraint_error"], axis=-1)  # (k, m, n_joints)
+    taken = np.arange(m)[None, :, None] <= last[:, None, None]
+    table["max_abs_constraint_error"] = np.max(np.where(taken, error, -np.inf), axis=1)
+    return table

@@ -1064,7 +1064,9 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
 
 def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
              work: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Every output of a chain run's samples ``states`` (m, n_states) at ``time`` (m,):
+    """Every output of a chain run's samples ``states`` (m, n_states) at ``time`` (m,), or
+    of k runs' samples (k, m, n_states) at the same times (m,) (each output then has a
+    leading run axis, and run i's are those of its samples alone):
     per body (m, n, 3): theta, omega, position, velocity, force_h (H delivered, inertial);
     per joint (m, n, 3): constraint_error E_j, constraint_rate F_j, constraint_force
     Lambda_j (inertial, on the child at C), torque_n N_j (child frame, delivered),
@@ -1074,12 +1076,14 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     and constraint_force_saturated per joint (Lambda_j never for a permanent joint),
     force_h_saturated per body; scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
     terms lyapunov_kinetic, lyapunov_joint, lyapunov_body, lyapunov_gravity [J] (h in the
-    gravity term), disturbance_power [W], disturbance_work W [J] (``work`` (m,), the run's
-    integrated work at the samples; 0 where not given: it is a run's history, not a
-    state's) and disturbance_edges (the windows' edges at or before each sample,
+    gravity term), disturbance_power [W], disturbance_work W [J] (``work`` (m,) or (k, m),
+    the run's integrated work at the samples; 0 where not given: it is a run's history,
+    not a state's) and disturbance_edges (the windows' edges at or before each sample,
     :func:`disturbance_edges`)."""
-    time = np.ascontiguousarray(time, dtype=float)
-    states = np.ascontiguousarray(np.atleast_2d(states), dtype=float)
+    states = np.asarray(states, dtype=float)
+    lead = states.shape[:-1] if states.ndim > 1 else (1,)
+    time = np.ascontiguousarray(np.broadcast_to(np.asarray(time, dtype=float), lead)).reshape(-1)
+    states = np.ascontiguousarray(states).reshape(-1, states.shape[-1])
     m, n = states.shape[0], compiled.size
     joints, bodies, scalars, power = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5)), np.empty(m)
     flags = np.empty((m, n, 3, 3))
@@ -1100,6 +1104,6 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + compiled.offset
     out["lyapunov_rate"] = scalars[:, _RATE]
     out["disturbance_power"] = power
-    out["disturbance_work"] = np.zeros(m) if work is None else np.asarray(work, dtype=float).copy()
+    out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
     out["disturbance_edges"] = disturbance_edges(compiled, time)
-    return out
+    return {key: value.reshape(*lead, *value.shape[1:]) for key, value in out.items()}
