@@ -38,7 +38,9 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   last come back; each body's theta_1 ~ U(-0.1, 0.1) rad, omega ~ N(0, 0.2^2) rad/s) at
   each N of ``--chain-n``, beside the compiled CPU driver
   (:func:`rbstab.engine.integrate.integrate_chain_runs`) on every core at ``--chain-cpu-n``;
-  correctness on ``--check-n`` of its runs against the CPU driver (statuses, steps, final
+  the same sweep with a tree a run (the trunk's mass and inertia times U(0.8, 1.2) in each
+  run's records: a sweep over the chain's parameters, one launch);
+  correctness on ``--check-n`` of those runs against the CPU driver (statuses, steps, final
   states).
 
 Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
@@ -269,9 +271,11 @@ def kernel_rate(n: int, n_samples: int, launch: int | None = None) -> float:
 STANCE = str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
 
 
-def chain_runs(n: int, seed: int = 0):
-    """(system, y0 (n, n_state), settings rows (n, 7), method, n_samples) of n runs of the
-    stance example's initial-state sweep (module docstring)."""
+def chain_runs(n: int, seed: int = 0, parameters: bool = False):
+    """(system, y0 (n, n_state), settings rows (n, 7), method, n_samples, tree_of) of n runs
+    of the stance example's initial-state sweep (module docstring); ``parameters``: each
+    run also its own tree, the trunk's mass and inertia times U(0.8, 1.2) (``system`` holds
+    n trees, ``tree_of`` arange(n); else None)."""
     from rbstab.config.chains import load_any_config
     from rbstab.engine.settings import settings_rows
     from rbstab.engine.systems import tree_system
@@ -293,7 +297,15 @@ def chain_runs(n: int, seed: int = 0):
     sim = config.simulation
     rows = np.repeat(settings_rows([sim]), n, axis=0)
     rows[:, 6] = np.inf
-    return tree_system(compiled, sim.limits), C.full_state(compiled, z), rows, sim.method, sim.n_samples
+    system, tree_of = tree_system(compiled, sim.limits), None
+    if parameters:
+        params = np.repeat(system.params[None], n, axis=0)
+        scale = rng.uniform(0.8, 1.2, n)
+        params[:, 1]["mass"] *= scale
+        params[:, 1]["inertia"] *= scale[:, None, None]
+        system = system._replace(params=params, ppoints=np.repeat(system.ppoints[None], n, axis=0))
+        tree_of = np.arange(n)
+    return system, C.full_state(compiled, z), rows, sim.method, sim.n_samples, tree_of
 
 
 def chain_compile_info() -> str:
@@ -317,13 +329,15 @@ def chain_compile_info() -> str:
             f"or loaded in {loaded:.1f} s")
 
 
-def chain_gpu_rates(n: int) -> tuple[float, float]:
-    """(kernel, end-to-end) runs/s of n runs of the chain sweep (first and last samples back)."""
+def chain_gpu_rates(n: int, parameters: bool = False) -> tuple[float, float]:
+    """(kernel, end-to-end) runs/s of n runs of the chain sweep (first and last samples
+    back); ``parameters``: a tree a run (:func:`chain_runs`)."""
     from rbstab.engine.cuda import integrate_chain_runs_cuda
 
-    system, y0, rows, method, n_samples = chain_runs(n)
+    system, y0, rows, method, n_samples, tree_of = chain_runs(n, parameters=parameters)
     start = time.perf_counter()
-    sol = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=n_samples, stride=n_samples - 1)
+    sol = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=n_samples, stride=n_samples - 1,
+                                    tree_of=tree_of)
     return n / sol.kernel_seconds, n / (time.perf_counter() - start)
 
 
@@ -331,7 +345,7 @@ def _chain_cpu_part(args) -> None:
     from rbstab.engine.integrate import integrate_chain_runs
 
     n, seed = args
-    system, y0, rows, method, n_samples = chain_runs(n, seed)
+    system, y0, rows, method, n_samples, _ = chain_runs(n, seed)
     for lo in range(0, n, 64):
         integrate_chain_runs(system, y0[lo:lo + 64], rows[lo:lo + 64], method=method, n_samples=n_samples)
 
@@ -353,9 +367,9 @@ def chain_correctness(n: int) -> str:
     from rbstab.engine.cuda import integrate_chain_runs_cuda
     from rbstab.engine.integrate import integrate_chain_runs
 
-    system, y0, rows, method, n_samples = chain_runs(n)
-    cpu = integrate_chain_runs(system, y0, rows, method=method, n_samples=2)
-    gpu = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=2)
+    system, y0, rows, method, n_samples, tree_of = chain_runs(n, parameters=True)
+    cpu = integrate_chain_runs(system, y0, rows, method=method, n_samples=2, tree_of=tree_of)
+    gpu = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=2, tree_of=tree_of)
     final_cpu, final_gpu = cpu.samples[:, -1], gpu.samples[:, -1]
     rel = np.max(np.abs(final_gpu - final_cpu), axis=1) / np.max(np.abs(final_cpu), axis=1)
     steps = np.abs(gpu.n_steps - cpu.n_steps)
@@ -517,6 +531,9 @@ def chains(args) -> None:
     for n in args.chain_n:
         kernel, total = chain_gpu_rates(n)
         print(f"chains, stance sweep, {n:,} runs: kernel {kernel:,.0f} runs/s, end to end {total:,.0f} runs/s")
+        kernel, total = chain_gpu_rates(n, parameters=True)
+        print(f"chains, stance sweep, a tree a run, {n:,} runs: kernel {kernel:,.0f} runs/s, end to end "
+              f"{total:,.0f} runs/s")
     print(f"chains, CPU driver, {os.cpu_count()} processes, stance sweep: {chain_cpu_rate(args.chain_cpu_n):,.0f} runs/s")
     print(f"chains, correctness, {args.check_n} runs: {chain_correctness(args.check_n)}")
 

@@ -48,7 +48,7 @@ def pulsed_chain(theta: float, impulses: bool = False):
 
 
 def cases(root: str):
-    """name -> (configs of one chain: its runs)."""
+    """name -> (configs of chains of one structure: its runs)."""
     from rbstab.config.chains import load_any_config
 
     stance = os.path.join(root, "configs", "examples", "stance_ankle_hip.yaml")
@@ -60,6 +60,11 @@ def cases(root: str):
             ["simulation.max_steps=12"])],  # stopped by its step limit
         "knee": [load_any_config(knee, ["simulation.t_end=0.05", "simulation.n_samples=26", *extra]) for extra in (
             [], ["initial_state.shank.theta=[0.6, 0.1, 0]"])],
+        # chains of one structure, each run its own: the masses, gains, a parent point and the
+        # admissible region differ (one call, each run's tree its own record)
+        "params": [load_any_config(stance, [*short, "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in (
+            [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]"], ["joints.hip.parent_point=[0, 0.02, 0.4]"],
+            ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"])],  # leaves its region
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
     }
@@ -84,15 +89,26 @@ def main() -> None:
     for name, configs in cases(sys.argv[1]).items():
         start = time.perf_counter()
         sim = configs[0].simulation
-        system = tree_system(C.compile_chain(configs[0].chain), sim.limits)
+        systems = [tree_system(C.compile_chain(c.chain), c.simulation.limits) for c in configs]
+        system, tree_of = systems[0], None
+        if name == "params":  # a tree a run
+            system = system._replace(params=np.stack([s.params for s in systems]),
+                                     ppoints=np.stack([s.ppoints for s in systems]))
+            tree_of = np.arange(len(configs))
         y0 = np.array([C.initial_state(c) for c in configs])
         settings = settings_rows([c.simulation for c in configs])
-        cpu = integrate_chain_runs(system, y0, settings, method=sim.method, n_samples=sim.n_samples)
+        cpu = integrate_chain_runs(system, y0, settings, method=sim.method, n_samples=sim.n_samples, tree_of=tree_of)
         found = {"bodies": int(len(system.codes)), "status": cpu.status.tolist(), "n_steps": cpu.n_steps.tolist(),
                  "differences": []}
+        if tree_of is not None:  # each run as the run alone
+            for i, alone in enumerate(systems):
+                one = integrate_chain_runs(alone, y0[i:i + 1], settings[i:i + 1], method=sim.method,
+                                           n_samples=sim.n_samples)
+                if not (same(one.samples[0], cpu.samples[i]) and same(one.n_steps[0], cpu.n_steps[i])):
+                    found["differences"].append(["alone", i])
         for stride in (1, 3):
             gpu = integrate_chain_runs_cuda(system, y0, settings, method=sim.method, n_samples=sim.n_samples,
-                                            stride=stride)
+                                            stride=stride, tree_of=tree_of)
             for what in ("status", "t_stop", "nfev", "n_steps"):
                 if not same(getattr(cpu, what), getattr(gpu, what)):
                     found["differences"].append([stride, what, str(getattr(cpu, what)), str(getattr(gpu, what))])

@@ -16,7 +16,7 @@ from rbstab.config.chains import chain_config_from_mapping, chain_of, load_any_c
 from rbstab.engine.integrate import integrate_chain_runs, integrate_tree_chunk
 from rbstab.engine.settings import settings_records, settings_rows
 from rbstab.engine import method_number
-from rbstab.engine.systems import tree_system
+from rbstab.engine.systems import tree_rows, tree_system
 from rbstab.simulator import simulate
 from rbstab.variants import chain as C
 
@@ -108,10 +108,12 @@ def test_the_general_tree_rate_is_one_bodys_rate(path):
     # the compiled driver on the general rate (integrate_chain_runs takes one body's): the same
     # steps, so the same motion to the solver's tolerance, with the disturbances' work
     system = tree_system(compiled, sim.limits)
+    params, ppoints, tree_of = tree_rows(system, 1)
     settings = settings_records(settings_rows([sim]), method_number(sim.method))
     samples, work_done = np.empty((1, sim.n_samples, y.shape[1])), np.empty((1, sim.n_samples))
     ends = (np.empty(1, dtype=np.int64), np.empty(1), np.empty(1, dtype=np.int64), np.empty(1, dtype=np.int64))
-    integrate_tree_chunk(system, y[:1].copy(), settings, samples, work_done, ends)
+    integrate_tree_chunk(system._replace(params=params, ppoints=ppoints), tree_of, y[:1].copy(), settings, samples,
+                         work_done, ends)
     assert ends[0][0] == 0
     scale = 1.0 + np.abs(y).max(axis=0)
     assert np.max(np.abs(samples[0] - y) / scale) < 10 * sim.rtol
@@ -136,6 +138,36 @@ def _pulsed_chain(l_r):
                           "duration": 0.3, "body": "lower"}],
         "simulation": {"t_end": 1.0, "n_samples": 101, "method": "DOP853", "rtol": 1e-10, "atol": 1e-12},
     })
+
+
+def test_a_sweep_over_a_chains_parameters_is_one_call_and_each_run_is_the_run_alone(monkeypatch):
+    """Runs of stance chains with other masses, gains, a parent point and an admissible
+    region (one structure, every run another chain) go through the compiled driver in one
+    call, each run with its own tree; each run's status, message, outputs and summary are
+    those of the run alone, bit for bit (the region's run leaves it)."""
+    import rbstab.engine.integrate as integrate
+    from rbstab.simulator import simulate_blocks
+
+    overrides = [[], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]"],
+                 ["joints.hip.parent_point=[0, 0.02, 0.4]"],
+                 ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"]]
+    configs = [load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+                               ["simulation.t_end=0.3", "simulation.n_samples=31",
+                                "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in overrides]
+    calls = []
+    original = integrate.integrate_tree_chunk
+    monkeypatch.setattr(integrate, "integrate_tree_chunk", lambda system, *args: calls.append(len(system.params))
+                        or original(system, *args))
+    (members, block), = simulate_blocks(configs, keep="all")
+    assert members == [0, 1, 2, 3] and calls == [4]  # one call, four trees
+    assert block.status == ["success"] * 3 + ["failed"] and "trunk" in block.message[3]
+    for i, config in enumerate(configs):
+        (_, alone), = simulate_blocks([config], keep="all")
+        assert alone.message == [block.message[i]]
+        for key, values in alone.outputs.items():
+            assert np.array_equal(values[0], block.outputs[key][i], equal_nan=True), key
+        for key, values in alone.summaries.items():
+            assert np.asarray(values[0]).tobytes() == np.asarray(block.summaries[key][i]).tobytes(), key
 
 
 def test_a_pulses_work_on_a_chain_is_what_v_gains_without_damping():

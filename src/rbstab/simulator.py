@@ -561,8 +561,9 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
     into configs, RunBlock)``.
 
     The runs of trees (ChainConfig) that the engine takes are integrated by the compiled
-    driver, the runs of one tree (the same bodies, joints, gains and admissible region) with
-    the same method, sample count and t_end in one call (:func:`_tree_blocks`; ``keep``
+    driver, the runs of trees of one structure (the same bodies and joints and their laws;
+    any masses, gains, points and admissible regions) with the same method, sample count
+    and t_end in one call (:func:`_tree_blocks`; ``keep``
     ``"none"``: their blocks carry summaries and no traces), the others one by one
     (:func:`simulate`).
 
@@ -787,25 +788,50 @@ def _chain_outputs(compiled, time: np.ndarray, states: np.ndarray, work: np.ndar
 
     outputs = C.evaluate(compiled, time, states, work)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, tree_summary_table(time, outputs)
+    return outputs, tree_summary_table(time, outputs, embedded=bool(np.any(compiled.d_at >= 0)))
 
 
-def _chain_key(compiled, sim) -> bytes:
-    """What runs integrated in one call share: the chain's records and admissible region,
-    the method, sample count and t_end."""
-    parts = [np.ascontiguousarray(a).tobytes() for a in compiled.args]
-    limits = b"" if sim.limits is None else repr(sim.limits).encode()
-    return b"|".join([*parts, limits, str((sim.method, sim.n_samples, float(sim.t_end), compiled.offset)).encode()])
+def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
+                   work: np.ndarray, traces: bool = True) -> tuple[dict, dict]:
+    """:func:`_chain_outputs` of k runs of chains of one structure, run i's chain
+    ``compiled[i]``, the runs of one ``tree_of`` (one chain) at once; the columns in the
+    runs' order (the outputs empty unless ``traces``)."""
+    parts = np.unique(tree_of)
+    if len(parts) == 1:
+        outputs, table = _chain_outputs(compiled[0], time, states, work)
+        return outputs if traces else {}, table
+    k = len(compiled)
+    outputs, table = {}, {}
+    for t in parts:
+        rows = np.flatnonzero(tree_of == t)
+        found = _chain_outputs(compiled[rows[0]], time, states[rows], work[rows])
+        for into, columns in zip((outputs, table), found if traces else ({}, found[1])):
+            for key, values in columns.items():
+                if key not in into:
+                    into[key] = np.empty((k, *values.shape[1:]), dtype=values.dtype)
+                into[key][rows] = values
+    return outputs, table
+
+
+def _tree_structure(compiled, sim) -> bytes:
+    """What runs integrated in one call share: the structure of their chains (codes,
+    parents, embedded joints, names; whether one body's rate serves it), the method,
+    sample count and t_end; their records, parent points and admissible regions may
+    differ (:func:`rbstab.engine.systems.tree_rows`)."""
+    parts = [np.ascontiguousarray(a).tobytes() for a in (compiled.codes, compiled.parents, compiled.d_at)]
+    names = (compiled.chain.body_names, compiled.chain.joint_names, compiled.one_body)
+    return b"|".join([*parts, repr(names).encode(), str((sim.method, sim.n_samples, float(sim.t_end))).encode()])
 
 
 def _tree_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
                  engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
     on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of
-    one chain (the same bodies, joints, gains and admissible region) with the same method,
-    sample count and t_end in calls of :data:`POSTPROCESS_BLOCK` runs of
-    :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states: one
-    such group a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
+    chains of one structure (:func:`_tree_structure`: the same bodies and joints and their
+    laws; each run's masses, gains, points and admissible region its own) with the same
+    method, sample count and t_end in calls of :data:`POSTPROCESS_BLOCK` runs of
+    :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states or a
+    chain's parameters: one such group a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
     :class:`RunBlock`'s runs, in order, :data:`POSTPROCESS_BLOCK` runs a block at most
     (which bounds the samples and outputs held at once). ``outputs`` False: the block
     carries the summaries but no traces (a store of summaries). ``timeout`` [s] replaces each run's
@@ -829,57 +855,74 @@ def _tree_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bo
     if gpu:
         get_engine(engine).check_available()  # before any run
         from .engine.cuda import integrate_chain_runs_cuda as integrate  # heavy: numba-cuda (--engine cuda only)
-    groups: dict[bytes, tuple] = {}
+    groups: dict[bytes, list[int]] = {}
     by_chain: dict[int, object] = {}  # configs that share their Chain object share its compilation
+    compiled = []
     for i, config in enumerate(configs):
-        compiled = by_chain.get(id(config.chain))
-        if compiled is None:
-            compiled = by_chain[id(config.chain)] = C.compile_chain(config.chain)
-        key = _chain_key(compiled, config.simulation)
-        if key not in groups:
-            groups[key] = (compiled, [])
-        groups[key][1].append(i)
-    for compiled, members in groups.values():
+        found = by_chain.get(id(config.chain))
+        if found is None:
+            found = by_chain[id(config.chain)] = C.compile_chain(config.chain)
+        compiled.append(found)
+        groups.setdefault(_tree_structure(found, config.simulation), []).append(i)
+    for members in groups.values():
         per_call = POSTPROCESS_BLOCK
         if gpu:  # a launch takes as many runs as the host may hold the samples of
             n_samples = configs[members[0]].simulation.n_samples
-            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * n_samples * (compiled.n_states + 1)))
+            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * n_samples * (compiled[members[0]].n_states + 1)))
         for lo in range(0, len(members), per_call):
             yield from _chain_call(compiled, configs, members[lo: lo + per_call], integrate, gpu, timeout, outputs)
 
 
-def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu: bool, timeout: float | None,
+def _chain_call(compiled: list, configs: Sequence, members: list[int], integrate, gpu: bool, timeout: float | None,
                 outputs: bool) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`_tree_blocks` for the runs ``members`` of ``configs`` (one chain, one
-    method, sample count and t_end): one call of ``integrate``, then their outputs and
-    summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the outputs held at
-    once: those of that many runs)."""
+    """:func:`_tree_blocks` for the runs ``members`` of ``configs`` (chains of one
+    structure, ``compiled[i]`` run i's; one method, sample count and t_end): one call of
+    ``integrate`` with each distinct chain and admissible region once, then their outputs
+    and summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the outputs
+    held at once: those of that many runs)."""
     from .engine.systems import tree_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     start = _time.perf_counter()
     sims = [configs[i].simulation for i in members]
     sim = sims[0]
+    trees: dict[bytes, int] = {}  # each distinct chain and admissible region once
+    contents: dict[int, bytes] = {}
+    systems, tree_of = [], np.empty(len(members), dtype=np.int64)
+    for j, i in enumerate(members):
+        content = contents.get(id(compiled[i]))
+        if content is None:
+            content = contents[id(compiled[i])] = b"|".join(
+                [np.ascontiguousarray(a).tobytes() for a in compiled[i].args] + [repr(compiled[i].offset).encode()])
+        key = content + repr(sims[j].limits).encode()
+        if key not in trees:
+            trees[key] = len(systems)
+            systems.append(tree_system(compiled[i], sims[j].limits))
+        tree_of[j] = trees[key]
+    system = systems[0]
+    if len(systems) > 1:
+        system = system._replace(params=np.stack([s.params for s in systems]),
+                                 ppoints=np.stack([s.ppoints for s in systems]))
     y0 = np.array([C.initial_state(configs[i]) for i in members])
     settings = settings_rows(sims, timeout)
     limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
-    sol = integrate(tree_system(compiled, sim.limits), y0, settings, method=sim.method,
-                    n_samples=sim.n_samples, **limit)
+    sol = integrate(system, y0, settings, method=sim.method, n_samples=sim.n_samples, tree_of=tree_of, **limit)
     time = np.linspace(0.0, sim.t_end, sim.n_samples)
     time.flags.writeable = False
     integration = (_time.perf_counter() - start) / len(members)
     for lo in range(0, len(members), POSTPROCESS_BLOCK):
         hi = min(lo + POSTPROCESS_BLOCK, len(members))
         t0 = _time.perf_counter()
-        run_outputs, summaries = _chain_outputs(compiled, time, sol.samples[lo:hi], sol.work[lo:hi])
-        status, message = zip(*(_chain_end(compiled, sims[j], int(sol.status[j]), float(sol.t_stop[j]),
+        run_outputs, summaries = _trees_outputs([compiled[i] for i in members[lo:hi]], tree_of[lo:hi], time,
+                                                sol.samples[lo:hi], sol.work[lo:hi], outputs)
+        status, message = zip(*(_chain_end(compiled[members[j]], sims[j], int(sol.status[j]), float(sol.t_stop[j]),
                                            sol.samples[j], y0[j], float(settings[j, 6])) for j in range(lo, hi)))
         ok = sol.status[lo:hi] == SUCCESS
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
         yield members[lo:hi], RunBlock(
             configs=[configs[i] for i in members[lo:hi]],
             time=time if outputs else time[:0],
-            outputs=run_outputs if outputs else {},
+            outputs=run_outputs,
             summaries=summaries,
             status=list(status), message=list(message),
             solver={"nfev": sol.nfev[lo:hi].astype(np.int64), "n_steps": sol.n_steps[lo:hi].astype(np.int64),
@@ -887,7 +930,7 @@ def _chain_call(compiled, configs: Sequence, members: list[int], integrate, gpu:
             wall_time=integration + post,
             timing={"integration": np.full(hi - lo, integration), "postprocess": post},
             switching=[None] * (hi - lo),
-            joints=tuple(compiled.chain.joint_names), bodies=tuple(compiled.chain.body_names),
+            joints=tuple(compiled[members[0]].chain.joint_names), bodies=tuple(compiled[members[0]].chain.body_names),
         )
 
 

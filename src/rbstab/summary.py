@@ -24,7 +24,6 @@ __all__ = [
     "summarize",
     "summarize_many",
     "summary_table",
-    "tree_summary",
     "tree_summary_table",
     "LYAPUNOV_RATE_TOLERANCE",
     "MIN_CHECK_SAMPLES",
@@ -599,25 +598,18 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     return table
 
 
-def tree_summary(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict:
-    """:func:`summarize` of a tree's run (:func:`rbstab.variants.chain.evaluate`'s outputs
-    plus ``lyapunov_rate_numerical``; NaN rows after a failure): :func:`tree_summary_table`
-    of the one run, as plain Python values."""
-    return row(tree_summary_table(time, {key: value[None] for key, value in outputs.items()}), 0)
-
-
-def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], *, embedded: bool) -> dict[str, np.ndarray]:
     """:func:`summary_table` of k runs of one tree sampled at the same times (the outputs of
     :func:`rbstab.variants.chain.evaluate` with a leading run axis, plus
     ``lyapunov_rate_numerical`` (k, m); NaN rows after a failure): its figures per body or
     joint (:data:`rbstab.layout.SUMMARY_FIGURES`' ``member``; ``final_<block>`` (k, n_bodies,
-    3), ``final_controller_state`` (k, n_joints, 3) where the runs hold a controller state,
+    3), ``final_controller_state`` (k, n_joints, 3) where the tree has an ``embedded`` joint,
     ``fraction_saturated_*`` (k, n_members, 3)), except that ``max_abs_constraint_error`` [m]
     is per joint the largest |E_j| (k, n_joints): for a permanent joint, which reduced
     coordinates hold by construction, the drift of its constraint (rounding). Run i's
     figures are those of its outputs alone."""
     table = summary_table(time, outputs)
-    if not np.isfinite(outputs["controller_state"]).any():
+    if not embedded:
         table.pop("final_controller_state", None)
     finite = np.isfinite(outputs["lyapunov"])
     m = finite.shape[1]

@@ -87,12 +87,13 @@ from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
                        stream_sample, stream_start)
 from ..variants.chain import ChainWork
-from ..variants.tree import TreeWork, expand_samples, reduce_states, reduced_size
+from ..variants.tree import TreeWork, reduced_size
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample, sample_time
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
-from .systems import CHAIN, TreeSystem, disturbed_of, limited_of
+from .systems import (CHAIN, TreeSystem, disturbed_of, expand_tree_samples, limited_of, reduce_tree_states,
+                      tree_rows)
 from .tableaus import METHODS
 from .status import NOT_STARTED
 
@@ -487,11 +488,12 @@ def tree_launch_signature() -> tuple:
     """numba's types of a tree launch's arguments, in order (every array C-contiguous):
     the signature :func:`compiled_tree_kernel` compiles for every tree shape.
 
-    The tree, passed once and read by every thread (:class:`rbstab.engine.systems.TreeSystem`'s
-    arrays): params :data:`rbstab.model.PARAMETERS` (n,), codes, parents int64 (n,), ppoints
-    (n, 3), d_at, r_at, u_at, rd_at int64 (n,); its k runs: y0 (k, n_r) in the reduced
-    layout (:mod:`rbstab.variants.tree`), settings :data:`rbstab.engine.settings.SETTINGS`
-    (k,); n_samples int64 (the grid of each run: linspace(0, t_end, n_samples)); stride
+    The trees, passed once and read by every thread (:class:`rbstab.engine.systems.TreeSystem`'s
+    arrays for t trees of one structure, :func:`rbstab.engine.systems.tree_rows`): params
+    :data:`rbstab.model.PARAMETERS` (t, n), codes, parents int64 (n,), ppoints (t, n, 3),
+    d_at, r_at, u_at, rd_at int64 (n,); the k runs: tree_of int64 (k,) (each run's tree), y0
+    (k, n_r) in the reduced layout (:mod:`rbstab.variants.tree`), settings
+    :data:`rbstab.engine.settings.SETTINGS` (k,); n_samples int64 (the grid of each run: linspace(0, t_end, n_samples)); stride
     int64 (every stride-th sample kept); control int64 (2,) and limit_ns int64 as
     :func:`launch_signature`'s; then the outputs: status int64 (k,), t_stop (k,), nfev,
     n_steps int64 (k,), samples (k, n_kept, n_r) and work (k, n_kept) (the disturbances'
@@ -501,8 +503,8 @@ def tree_launch_signature() -> tuple:
 
     vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
     ints = int64[::1]
-    return (PARAMETERS_TYPE[::1], ints, ints, matrix, ints, ints, ints, ints, matrix, from_dtype(SETTINGS)[::1], int64,
-            int64, ints, int64, ints, vector, ints, ints, cube, matrix)
+    return (PARAMETERS_TYPE[:, ::1], ints, ints, cube, ints, ints, ints, ints, ints, matrix, from_dtype(SETTINGS)[::1],
+            int64, int64, ints, int64, ints, vector, ints, ints, cube, matrix)
 
 
 def tree_shape(codes, d_at) -> tuple[int, int, int]:
@@ -541,8 +543,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
     size = states - 6 * permanent + 1  # the integrated vector: the reduced state and W
     rows, columns = max(1, 3 * permanent), 6 * bodies - 3 * permanent
 
-    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y0s, settings, n_samples, stride, control,
-                 limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
+    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, n_samples, stride,
+                 control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
         K_all = cuda.local.array((n_rows, size), float64)
         Q_all = cuda.local.array((q_rows, size), float64)
         y_all = cuda.local.array(size, float64)
@@ -563,15 +565,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3, 3), float64),
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                            cuda.local.array(bodies, int64), chain)
-        p = TreeSystem(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, scratch)
         n_runs, n_state = y0s.shape[0], y0s.shape[1]
         n_kept = samples_o.shape[1]
-        disturbed = disturbed_of(p)
-        bounded = limited_of(p)
-        n_vec = n_state + 1 if disturbed else n_state  # the integrated vector: the state, then W
-        K, Q = K_all[:, :n_vec], Q_all[:, :n_vec]  # views of the first columns (a reshape needs numba's runtime)
-        y, f, y_new, work, sample = y_all[:n_vec], f_all[:n_vec], y_new_all[:n_vec], work_all[:n_vec], sample_all[:n_vec]
-        w = Work(K, Q, y_new, scale_all[:n_state], work)  # the error norms take the state's entries
         # the launch's deadline: set once, by the first thread to start
         now = globaltimer()
         deadline = cuda.atomic.cas(control, 1, 0, now + limit_ns)
@@ -580,9 +575,17 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
         passes = 0
         k = cuda.atomic.add(control, 0, 1)
         while k < n_runs:
+            tree = tree_of[k]
+            p = TreeSystem(params[tree], codes, parents, ppoints[tree], d_at, r_at, u_at, rd_at, scratch)
+            disturbed = disturbed_of(p)
+            n_vec = n_state + 1 if disturbed else n_state  # the integrated vector: the state, then W
+            K, Q = K_all[:, :n_vec], Q_all[:, :n_vec]  # views of the first columns (a reshape needs numba's runtime)
+            y, f, y_new = y_all[:n_vec], f_all[:n_vec], y_new_all[:n_vec]
+            work, sample = work_all[:n_vec], sample_all[:n_vec]
+            w = Work(K, Q, y_new, scale_all[:n_state], work)  # the error norms take the state's entries
             s = settings[k]
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-            flags = (limit, disturbed, bounded, n_samples)
+            flags = (limit, disturbed, limited_of(p), n_samples)
             sink = SampleRows(samples_o[k], work_o[k], stride)
             status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
@@ -826,17 +829,18 @@ class CudaChainSolution(ChunkSolution):
 
 
 def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: int, stride: int = 1,
-                              max_wall_time: float = math.inf) -> CudaChainSolution:
-    """Integrate k runs of one tree on the GPU, one thread a run: what
+                              max_wall_time: float = math.inf, tree_of=None) -> CudaChainSolution:
+    """Integrate k runs of trees of one structure on the GPU, one thread a run: what
     :func:`rbstab.engine.integrate.integrate_chain_runs` does on the CPU with a
-    :class:`~rbstab.engine.systems.TreeSystem` (the same arguments), the tree's records
+    :class:`~rbstab.engine.systems.TreeSystem` (the same arguments), the trees' records
     passed once for every run.
 
     Parameters
     ----------
     system : TreeSystem
         The tree (:func:`rbstab.engine.systems.tree_system`), of at most
-        :data:`MAX_TREE_BODIES` bodies.
+        :data:`MAX_TREE_BODIES` bodies, or t trees of one structure
+        (:func:`rbstab.engine.systems.tree_rows`).
     y0 : ndarray, shape (k, n_r) or (k, 12 n + 3 e)
         Initial states in the reduced layout (:mod:`rbstab.variants.tree`) or the maximal
         one, as :func:`rbstab.engine.integrate.integrate_chain_runs` takes them.
@@ -853,13 +857,16 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     max_wall_time : float
         Each launch's limit [s] from its first thread's start: no run starts after it
         (NOT_STARTED, t_stop 0, NaN samples), a run under way stops (TIMEOUT).
+    tree_of : ndarray of int, shape (k,), optional
+        The tree of each run, for a ``system`` of t trees (default: the first).
 
     Raises
     ------
     CudaUnavailable
         No GPU, driver or numba-cuda (:func:`check_available`).
     ValueError
-        For a tree of more than :data:`MAX_TREE_BODIES` bodies, or ``stride`` < 1.
+        For a tree of more than :data:`MAX_TREE_BODIES` bodies, ``stride`` < 1, or a
+        ``tree_of`` that does not index the trees.
     """
     check_available()
     n_bodies = int(np.shape(system.codes)[0])
@@ -868,14 +875,14 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     if stride < 1:
         raise ValueError(f"stride: found {stride}; expected an integer >= 1")
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
+    params, ppoints, tree_of = tree_rows(system, y0.shape[0], tree_of)
     if y0.shape[1] != reduced_size(system.codes, system.d_at):
-        y0 = reduce_states(*system[:8], y0)
+        y0 = reduce_tree_states(system, params, ppoints, tree_of, y0)
     k, n_state = y0.shape
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
     ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.codes, system.parents)]
     layout = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.d_at, system.r_at, system.u_at, system.rd_at)]
-    tree = (np.ascontiguousarray(system.params, dtype=PARAMETERS), *ints, np.ascontiguousarray(system.ppoints,
-                                                                                               dtype=float), *layout)
+    tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout)
     n_kept = len(range(0, n_samples, stride))
     fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at))
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
@@ -892,7 +899,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     d_tree = [cuda.to_device(a) for a in tree]
     for lo in range(0, k, per_launch):
         runs = slice(lo, min(k, lo + per_launch))
-        d_in = [cuda.to_device(a) for a in (y0[runs], records[runs])]
+        d_in = [cuda.to_device(a) for a in (tree_of[runs], y0[runs], records[runs])]
         d_out = [cuda.device_array(a[runs].shape, a.dtype) for a in out]
         control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
         begin, end = cuda.event(), cuda.event()
@@ -907,6 +914,6 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     status, t_stop, nfev, n_steps, reduced, work = out
     n_maximal = 12 * n_bodies + 3 * int(np.sum(layout[0] >= 0))
     samples = np.empty((k, n_kept, n_maximal))
-    expand_samples(reduced, *tree[:5], *layout[1:], samples)
+    expand_tree_samples(system, params, ppoints, tree_of, reduced, samples)
     return CudaChainSolution(samples, status, t_stop, nfev, n_steps, work, kernel_seconds=kernel_seconds,
                              seconds=_time.perf_counter() - start)

@@ -32,14 +32,15 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants.chain import is_one_body
-from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_work
+from ..variants.tree import reduced_size, tree_work
 from ..variants.disturbances import before
 from .rk import (DOP853, ERROR_ORDER, N_STAGES, dense_coefficients, dense_value, error_norm, initial_step,
                  method_number, rk_step)
 from .settings import settings_records, work_arrays
 from .status import DEFAULT_MAX_STEPS, NOT_FINITE, STEP_LIMIT, SUCCESS, TIMEOUT, TOO_SMALL_STEP
-from .systems import (CHAIN, TreeSystem, admissible, admissible_event, gimbal_event, system_breakpoint,
-                      system_disturbed, system_impulses, system_limited, system_margin, system_rate)
+from .systems import (CHAIN, TreeSystem, admissible, admissible_event, expand_tree_samples, gimbal_event,
+                      reduce_tree_states, system_breakpoint, system_disturbed, system_impulses, system_limited,
+                      system_margin, system_rate, tree_rows)
 from .tableaus import MAX_FACTOR, MIN_FACTOR, SAFETY
 
 __all__ = ["integrate_run", "integrate_chunk", "sample_time", "wall_clock", "CLOCK_EVERY", "ChunkSolution",
@@ -550,21 +551,25 @@ def integrate_chunk(codes, params, y0, settings, samples, work_done, ends):
 
 
 @jit(nogil=True)
-def integrate_tree_chunk(system, y0, settings, samples, work_done, ends):
-    """:func:`integrate_run` for k runs of one tree in reduced coordinates (``system``, a
-    :class:`~rbstab.engine.systems.TreeSystem`) from the initial states ``y0`` (k, n_r);
+def integrate_tree_chunk(system, tree_of, y0, settings, samples, work_done, ends):
+    """:func:`integrate_run` for k runs of trees of one structure in reduced coordinates
+    (``system``, a :class:`~rbstab.engine.systems.TreeSystem` whose ``params`` (t, n) and
+    ``ppoints`` (t, n, 3) hold t trees; run i integrates tree ``tree_of[i]``,
+    :func:`rbstab.engine.systems.tree_rows`) from the initial states ``y0`` (k, n_r);
     ``samples`` in the reduced layout; the other arguments as :func:`integrate_chunk`'s. The
-    call evaluates the tree with scratch arrays of its own (``system.work`` is None; threads
-    may integrate one system at once)."""
+    call evaluates the trees with scratch arrays of its own (``system.work`` is None;
+    threads may integrate one system at once)."""
     status, t_stop, nfev, n_steps = ends
     n = system.codes.shape[0]
     n_states = 12 * n
     for j in range(n):
         if system.d_at[j] >= 0:
             n_states += 3
-    own = TreeSystem(system.params, system.codes, system.parents, system.ppoints, system.d_at, system.r_at,
-                     system.u_at, system.rd_at, tree_work(n, n_states))
+    work = tree_work(n, n_states)
     for k in range(y0.shape[0]):
+        t = tree_of[k]
+        own = TreeSystem(system.params[t], system.codes, system.parents, system.ppoints[t], system.d_at,
+                         system.r_at, system.u_at, system.rd_at, work)
         status[k], t_stop[k], nfev[k], n_steps[k] = integrate_run(CHAIN, own, y0[k], settings[k], samples[k],
                                                                   work_done[k])
 
@@ -649,16 +654,18 @@ def integrate_runs(codes, params, y0, settings, *, method: str, n_samples: int,
     return ChunkSolution(samples, status, t_stop, nfev, n_steps, work)
 
 
-def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -> ChunkSolution:
-    """Integrate k runs of one tree of bodies (a chain) from the initial states ``y0`` with
-    the compiled driver, as :func:`integrate_runs` integrates one body's runs, in reduced
-    coordinates (:mod:`rbstab.variants.tree`).
+def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int, tree_of=None) -> ChunkSolution:
+    """Integrate k runs of trees of bodies (chains) of one structure from the initial states
+    ``y0`` with the compiled driver, as :func:`integrate_runs` integrates one body's runs,
+    in reduced coordinates (:mod:`rbstab.variants.tree`).
 
     Parameters
     ----------
     system : TreeSystem
         The tree (:func:`rbstab.engine.systems.tree_system`: its compiled description,
-        admissible region and reduced layout).
+        admissible region and reduced layout), or t trees of one structure (the same
+        codes, parents and layout): ``params`` (t, n) and ``ppoints`` (t, n, 3) stacked
+        (:func:`rbstab.engine.systems.tree_rows`).
     y0 : ndarray, shape (k, n_r) or (k, 12 n + 3 e)
         Initial states in the reduced layout or the maximal one (reduced here by
         :func:`rbstab.variants.tree.reduce_states`; the two layouts are one where no joint
@@ -670,33 +677,45 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int) -
         One of :data:`METHODS`.
     n_samples : int
         Samples per run, evenly spaced on [0, t_end] (>= 2).
+    tree_of : ndarray of int, shape (k,), optional
+        The tree of each run, for a ``system`` of t trees (default: the first).
 
     Returns
     -------
     ChunkSolution
         ``samples`` (k, n_samples, 12 n + 3 e): the maximal image of the states (Theta,
         Omega, X, V of every body, then each embedded joint's D).
+
+    Raises
+    ------
+    ValueError
+        For a ``tree_of`` that does not index the trees (:func:`~rbstab.engine.systems.tree_rows`).
     """
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
+    k = y0.shape[0]
+    params, ppoints, tree_of = tree_rows(system, k, tree_of)
     if y0.shape[1] != reduced_size(system.codes, system.d_at):
-        y0 = reduce_states(*system[:8], y0)
-    k, n = y0.shape
+        y0 = reduce_tree_states(system, params, ppoints, tree_of, y0)
+    n = y0.shape[1]
     samples = np.empty((k, n_samples, n))
     ends = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64))
     work = np.empty((k, n_samples))
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
+    codes, parents = system.codes, system.parents
     with np.errstate(all="ignore"):
-        if is_one_body(system.params, system.codes, system.parents, system.ppoints):
+        if all(is_one_body(params[t], codes, parents, ppoints[t]) for t in np.unique(tree_of)):
             # the paper's one-body model: one body's compiled rate, several times faster than
             # the general tree's, and its two spellings one model
-            integrate_chunk(np.repeat(system.codes, k), np.repeat(system.params, k), y0, records, samples, work, ends)
+            integrate_chunk(np.repeat(codes, k), np.ascontiguousarray(params[tree_of, 0]), y0, records, samples, work,
+                            ends)
         else:
-            integrate_tree_chunk(system, y0, records, samples, work, ends)
-    n_states = 12 * len(system.codes) + 3 * int(np.sum(system.d_at >= 0))
+            integrate_tree_chunk(system._replace(params=params, ppoints=ppoints), tree_of, y0, records, samples, work,
+                                 ends)
+    n_states = 12 * len(codes) + 3 * int(np.sum(system.d_at >= 0))
     if n == n_states:  # no permanent joint: the reduced layout is the maximal one
         return ChunkSolution(samples, *ends, work)
     maximal = np.empty((k, n_samples, n_states))
-    expand_samples(samples, *system[:8], maximal)
+    expand_tree_samples(system, params, ppoints, tree_of, samples, maximal)
     return ChunkSolution(maximal, *ends, work)
 
 

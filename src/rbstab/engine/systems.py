@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections import namedtuple
 
+import numpy as np
 from numba import types
 from numba.extending import overload
 
@@ -32,10 +33,10 @@ from ..model import set_limits
 from ..variants.chain import _relative, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
-from ..variants.tree import tree_expand, tree_layout, tree_rate, tree_velocities
+from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate, tree_velocities
 from .status import GIMBAL_LOCK, LEFT_REGION
 
-__all__ = ["CHAIN", "TreeSystem", "tree_system", "tree_margin",
+__all__ = ["CHAIN", "TreeSystem", "tree_system", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
            "admissible", "chain_bounds", "disturbed_of",
@@ -67,6 +68,63 @@ def tree_system(compiled, limits=None) -> TreeSystem:
     set_limits(params, limits)
     return TreeSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at,
                       *tree_layout(compiled).args, None)
+
+
+def tree_rows(system: TreeSystem, k: int, tree_of=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The trees of k runs of one structure (the same codes, parents and layout):
+    ``(params (t, n), ppoints (t, n, 3), tree_of (k,) int64)``, the records and parent
+    points of t trees and the tree each run integrates. ``system`` holds one tree
+    (``params`` (n,), ``ppoints`` (n, 3); ``tree_of`` None: every run's, t = 1) or t of them
+    (``params`` (t, n), ``ppoints`` (t, n, 3); ``tree_of`` (k,) indices into them).
+
+    Raises
+    ------
+    ValueError
+        For a ``tree_of`` of another length or with an index outside [0, t).
+    """
+    params, ppoints = np.asarray(system.params), np.asarray(system.ppoints, dtype=float)
+    if params.ndim == 1:
+        params, ppoints = params[None], ppoints[None]
+    t = params.shape[0]
+    tree_of = np.zeros(k, dtype=np.int64) if tree_of is None else np.ascontiguousarray(tree_of, dtype=np.int64)
+    if tree_of.shape != (k,) or (k and not 0 <= tree_of.min() <= tree_of.max() < t):
+        raise ValueError(f"tree_of: found shape {tree_of.shape} with indices in "
+                         f"[{tree_of.min() if tree_of.size else 0}, {tree_of.max() if tree_of.size else 0}]; "
+                         f"expected ({k},) indices into the {t} trees")
+    return np.ascontiguousarray(params), np.ascontiguousarray(ppoints), tree_of
+
+
+def _tree_parts(tree_of: np.ndarray):
+    """(tree, its runs or a slice of all) for each tree that runs integrate."""
+    trees = np.unique(tree_of)
+    if len(trees) == 1:
+        return [(int(trees[0]), slice(None))]
+    return [(int(t), np.flatnonzero(tree_of == t)) for t in trees]
+
+
+def reduce_tree_states(system: TreeSystem, params: np.ndarray, ppoints: np.ndarray, tree_of: np.ndarray,
+                       y: np.ndarray) -> np.ndarray:
+    """:func:`rbstab.variants.tree.reduce_states` of the maximal states ``y`` (k, 12 n + 3
+    e) of k runs, run i's of tree ``tree_of[i]`` (:func:`tree_rows`): (k, n_r)."""
+    out = np.empty((len(y), reduced_size(system.codes, system.d_at)))
+    for t, rows in _tree_parts(tree_of):
+        out[rows] = reduce_states(params[t], system.codes, system.parents, ppoints[t], *system[4:8], y[rows])
+    return out
+
+
+def expand_tree_samples(system: TreeSystem, params: np.ndarray, ppoints: np.ndarray, tree_of: np.ndarray,
+                        samples: np.ndarray, out: np.ndarray) -> None:
+    """:func:`rbstab.variants.tree.expand_samples` of k runs' reduced samples ``samples``
+    (k, m, n_r) into ``out`` (k, m, 12 n + 3 e), run i's by tree ``tree_of[i]``
+    (:func:`tree_rows`)."""
+    for t, rows in _tree_parts(tree_of):
+        if isinstance(rows, slice):
+            expand_samples(samples, params[t], system.codes, system.parents, ppoints[t], *system[4:8], out)
+            continue
+        part = np.empty((len(rows), *out.shape[1:]))
+        expand_samples(np.ascontiguousarray(samples[rows]), params[t], system.codes, system.parents, ppoints[t],
+                       *system[4:8], part)
+        out[rows] = part
 
 
 # -- one body's admissible region -------------------------------------------------------------
