@@ -42,7 +42,7 @@ def _run_lines(rows, ratio: float | None = None) -> None:
         f"{'max|E| [m]':>11}  rate check")
     for r in rows:
         v = f"{_fmt(r.get('lyapunov_initial', ''))} -> {_fmt(r.get('lyapunov_final', ''))}"
-        e = [v for k, v in r.items() if k.startswith("max_abs_constraint_error_")]  # per axis, or a chain's per joint
+        e = [v for k, v in r.items() if k.startswith("max_abs_constraint_error_")]  # per axis, or a chain's per joint and axis
         numbers = [abs(float(x)) for x in e if isinstance(x, (int, float)) and x == x]  # none/NaN: another chain's joint
         e = _fmt(max(numbers)) if numbers else ""
         switchings = [r.get(f"switching_count_{a}") for a in "xyz"]  # the pure sign law of sliding

@@ -19,7 +19,7 @@ from .sensitivity import study_error
 @click.option("--maximize", "maximize", multiple=True, metavar="METRIC", help="A summary figure to maximize.")
 @click.option("--subject-to", "subject_to", multiple=True, metavar="METRIC<=VALUE",
               help="A constraint, METRIC<=VALUE or METRIC>=VALUE, e.g. 'max_abs_constraint_error_z<=0.05' (a "
-              "chain's: 'max_abs_constraint_error_hip<=0.01'). Repeatable.")
+              "chain's: 'max_abs_constraint_error_hip_z<=0.01'). Repeatable.")
 @click.option("--over", "over", multiple=True, metavar="KEY=DISTRIBUTION", callback=keys_checked("--over"),
               help="Uncertain bodies: each trial runs --over-n bodies drawn from these distributions "
               "(e.g. body.mass=scale_uniform:[0.8,1.2]; a chain's: bodies.0.mass=scale_uniform:[0.9,1.1]) and "

@@ -602,19 +602,13 @@ def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], *, embe
     """:func:`summary_table` of k runs of one tree sampled at the same times (the outputs of
     :func:`rbstab.variants.chain.evaluate` with a leading run axis, plus
     ``lyapunov_rate_numerical`` (k, m); NaN rows after a failure): its figures per body or
-    joint (:data:`rbstab.layout.SUMMARY_FIGURES`' ``member``; ``final_<block>`` (k, n_bodies,
-    3), ``final_controller_state`` (k, n_joints, 3) where the tree has an ``embedded`` joint,
-    ``fraction_saturated_*`` (k, n_members, 3)), except that ``max_abs_constraint_error`` [m]
-    is per joint the largest |E_j| (k, n_joints): for a permanent joint, which reduced
-    coordinates hold by construction, the drift of its constraint (rounding). Run i's
+    joint and axis (:data:`rbstab.layout.SUMMARY_FIGURES`' ``member``; ``final_<block>`` (k,
+    n_bodies, 3), ``final_controller_state`` (k, n_joints, 3) where the tree has an
+    ``embedded`` joint, ``max_abs_constraint_error`` [m] (k, n_joints, 3): max |E_j,i| over
+    the samples, for a permanent joint, which reduced coordinates hold by construction, the
+    drift of its constraint (rounding); ``fraction_saturated_*`` (k, n_members, 3)). Run i's
     figures are those of its outputs alone."""
     table = summary_table(time, outputs)
     if not embedded:
         table.pop("final_controller_state", None)
-    finite = np.isfinite(outputs["lyapunov"])
-    m = finite.shape[1]
-    last = np.where(finite.any(axis=1), m - 1 - np.argmax(finite[:, ::-1], axis=1), 0)
-    error = np.linalg.norm(outputs["constraint_error"], axis=-1)  # (k, m, n_joints)
-    taken = np.arange(m)[None, :, None] <= last[:, None, None]
-    table["max_abs_constraint_error"] = np.max(np.where(taken, error, -np.inf), axis=1)
     return table

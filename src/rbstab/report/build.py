@@ -58,7 +58,7 @@ from .tables import (
     UNSTABLE_REST,
     SettleThresholds,
     chain_runs_table,
-    check_joint_metrics,
+    check_member_metrics,
     differing_parameters,
     format_value,
     metric_column,
@@ -533,7 +533,7 @@ def build_report(
     analyses, inputs = split_inputs(inputs)  # analysis files (rbstab analyze) and the rest
     data = load_inputs(inputs) if inputs or not (analyses or studies) else ReportInputs([], [], [])
     try:
-        check_joint_metrics(metrics, data.sweeps)
+        check_member_metrics(metrics, data.sweeps)
     except ValueError as exc:
         raise ReportError(str(exc)) from None
     data.paths.extend(p.resolve() for p in [*analyses, *studies])

@@ -36,8 +36,8 @@ __all__ = [
     "VECTOR_SUMMARY_METRICS",
     "allowed_metrics",
     "validate_metrics",
-    "joint_metric",
-    "check_joint_metrics",
+    "member_metric",
+    "check_member_metrics",
     "metric_value",
     "metric_label",
     "settling_time",
@@ -112,8 +112,8 @@ class SettleThresholds:
 
 
 def allowed_metrics() -> list[str]:
-    """Every name accepted by ``--metric``, sorted (besides a chain's per-joint figures,
-    :func:`joint_metric`)."""
+    """Every name accepted by ``--metric``, sorted (besides a chain's figures per body or
+    joint, :func:`member_metric`)."""
     names = set(SCALAR_SUMMARY_METRICS) | set(OTHER_METRICS)
     for key in VECTOR_SUMMARY_METRICS:
         names |= {key, *(f"{key}_{axis}" for axis in _AXES)}
@@ -130,49 +130,62 @@ def validate_metrics(names: Sequence[str]) -> list[str]:
     """
     allowed = allowed_metrics()
     names = [METRIC_ALIASES.get(n, n) for n in names]
-    unknown = [n for n in names if n not in allowed and joint_metric(n) is None]
+    unknown = [n for n in names if n not in allowed and member_metric(n) is None]
     if unknown:
         raise ValueError(f"unknown metric {', '.join(map(repr, unknown))}; allowed: {', '.join(allowed)}; and for a "
-                         f"chain's sweep {', '.join(f'{f}_<joint>' for f in _joint_figures())}")
+                         f"chain's sweep <figure>_<body or joint>[_<axis>] of the figures with an axis "
+                         f"(max_abs_constraint_error_hip, final_theta_trunk_x)")
     return list(dict.fromkeys(names))
 
 
-def _joint_figures() -> dict[str, str]:
-    from ..studies.design import JOINT_FIGURES  # a chain's per-joint summary figures -> units
-
-    return JOINT_FIGURES
-
-
-def joint_metric(name: str) -> tuple[str, str] | None:
-    """(figure, joint) of a chain's per-joint metric: ``<figure>_<joint>`` for a figure of
-    :data:`rbstab.studies.design.JOINT_FIGURES` (``max_abs_constraint_error_hip``); None
-    for any other name (one body's ``max_abs_constraint_error_x`` included)."""
-    for figure in _joint_figures():
-        joint = name[len(figure) + 1:] if name.startswith(f"{figure}_") else ""
-        if joint and not (figure in VECTOR_SUMMARY_METRICS and joint in _AXES):
-            return figure, joint
+def member_metric(name: str) -> tuple[str, str, int | None] | None:
+    """(figure, member, axis index or None) of a chain's metric of one body or joint:
+    ``<figure>_<member>[_<axis>]`` of a figure with an axis (:data:`VECTOR_SUMMARY_METRICS`;
+    ``max_abs_constraint_error_hip``: the largest over the hip's axes,
+    ``final_theta_trunk_x``: one column of the sweep, :func:`rbstab.io.chunk.summary_columns`);
+    None for any other name (one body's ``max_abs_constraint_error_x`` included)."""
+    for figure in sorted(VECTOR_SUMMARY_METRICS, key=len, reverse=True):
+        rest = name[len(figure) + 1:] if name.startswith(f"{figure}_") else ""
+        if not rest or rest in _AXES:
+            continue
+        member, _, axis = rest.rpartition("_")
+        if member and axis in _AXES:
+            return figure, member, _AXES.index(axis)
+        return figure, rest, None
     return None
 
 
-def check_joint_metrics(names: Sequence[str], sweeps: Sequence) -> None:
-    """Refuse a chain's per-joint metric (:func:`joint_metric`) that no sweep of ``sweeps``
-    (:class:`rbstab.report.load.SweepData`) has among its index's columns.
+def _member_metric_columns(name: str, columns) -> list[str]:
+    """The sweep columns a metric of one body or joint (:func:`member_metric`) reads: the
+    column of that name, or each axis's of its member; [] where the sweep has none."""
+    if name in columns:
+        return [name]
+    found = member_metric(name)
+    if found is None or found[2] is not None:
+        return []
+    figure, member, _ = found
+    axes = [f"{figure}_{member}_{axis}" for axis in _AXES]
+    return axes if all(c in columns for c in axes) else []
+
+
+def check_member_metrics(names: Sequence[str], sweeps: Sequence) -> None:
+    """Refuse a chain's metric of one body or joint (:func:`member_metric`) that no sweep of
+    ``sweeps`` (:class:`rbstab.report.load.SweepData`) has among its index's columns.
 
     Raises
     ------
     ValueError
-        Naming the metric and the per-joint columns the sweeps have.
+        Naming the metric and the members the sweeps have that figure of.
     """
     columns = {c for sweep in sweeps for c in sweep.index.columns}
     for name in names:
-        found = joint_metric(name)
-        if found is None:
+        found = member_metric(name)
+        if found is None or _member_metric_columns(name, columns):
             continue
-        figure, joint = found
-        held = sorted(c for c in columns if c.startswith(f"{figure}_") and joint_metric(c) is not None)
-        if name not in columns:
-            raise ValueError(f"metric {name!r}: no sweep of the report has it; the sweeps' chains have "
-                             f"{', '.join(held) if held else 'no such figure (one body, or no chain sweep)'}")
+        figure = found[0]
+        held = sorted({c.rpartition("_")[0] for c in _member_columns(columns, figure, None)})
+        raise ValueError(f"metric {name!r}: no sweep of the report has it; the sweeps' chains have "
+                         f"{', '.join(held) if held else 'no such figure (one body, or no chain sweep)'}")
 
 
 def _split_metric(name: str) -> tuple[str, int | None]:
@@ -186,11 +199,12 @@ def _split_metric(name: str) -> tuple[str, int | None]:
 
 def metric_label(name: str) -> str:
     """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
-    joint = joint_metric(name)
-    if joint is not None:
-        figure, member = joint
-        symbol = {"max_abs_constraint_error": "max |E_j|"}.get(figure, figure)
-        return f"{symbol} of joint {member} [{_joint_figures()[figure]}]"
+    found = member_metric(name)
+    if found is not None:
+        figure, member, comp = found
+        symbol, units = VECTOR_SUMMARY_METRICS[figure]
+        symbol = f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"
+        return f"{symbol} of {member} [{units}]" if units != "1" else f"{symbol} of {member}"
     base, comp = _split_metric(name)
     if base in VECTOR_SUMMARY_METRICS:
         symbol, units = VECTOR_SUMMARY_METRICS[base]
@@ -556,7 +570,7 @@ def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
         ``message``, the parameters, ``t_final`` [s], ``lyapunov_initial``,
         ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W], ``lyapunov_rate_mismatch`` [W],
         ``lyapunov_rate_mismatch_relative``, ``lyapunov_rate_check``,
-        ``max_lyapunov_increase`` [J], ``max_abs_constraint_error_<joint>`` [m], ``method``, ``nfev``, ``njev``, ``nlu``, ``wall_time`` [s].
+        ``max_lyapunov_increase`` [J], ``max_abs_constraint_error_<joint>_<axis>`` [m], ``method``, ``nfev``, ``njev``, ``nlu``, ``wall_time`` [s].
     """
     import pandas as pd  # heavy: pandas
 
@@ -569,9 +583,10 @@ def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
         row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
         row["max_lyapunov_increase"] = float(run.summary.get("max_lyapunov_increase", np.nan))
         joints = [str(j.get("name")) for j in run.flat_config.get("joints") or () if isinstance(j, dict)]
-        values = np.atleast_1d(np.asarray(run.summary.get("max_abs_constraint_error", []), dtype=float))
+        values = np.asarray(run.summary.get("max_abs_constraint_error", []), dtype=float).reshape(-1, 3)
         for name, value in zip(joints, values):
-            row[f"max_abs_constraint_error_{name}"] = float(value)
+            for axis, v in zip(_AXES, value):
+                row[f"max_abs_constraint_error_{name}_{axis}"] = float(v)
         rows.append(row | _solver(run))
     return pd.DataFrame(rows)
 
@@ -630,6 +645,9 @@ def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThreshol
         return table["converged"].astype(str).eq("True").astype(float).where(table["status"] == "success")
     if name in table.columns:
         return table[name].astype(float).where(table["status"] == "success")
+    member = _member_metric_columns(name, table.columns)
+    if member:  # one body's or joint's axes: the largest |component|
+        return table[member].astype(float).abs().max(axis=1, skipna=False).where(table["status"] == "success")
     base, comp = _split_metric(name)
     columns = [f"{base}_{axis}" for axis in _AXES]
     if base in VECTOR_SUMMARY_METRICS and comp is None and all(c in table.columns for c in columns):

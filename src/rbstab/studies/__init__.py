@@ -16,7 +16,7 @@
 A chain's configuration (:func:`rbstab.config.chains.load_any_config`) is studied alike, with
 a chain's keys (``bodies.1.mass``, ``joints.hip.k_r.0``, ``initial_state.trunk.theta.0``) and
 every figure of its runs, per body or joint as its sweep's columns name them
-(``max_abs_constraint_error_hip``, ``final_theta_trunk_x``), as metrics.
+(``max_abs_constraint_error_hip_z``, ``final_theta_trunk_x``), as metrics.
 
 Modules: :mod:`~rbstab.studies.design` (``--vary`` factors, design tables, their run as a
 sweep, metrics), :mod:`~rbstab.studies.sensitivity`, :mod:`~rbstab.studies.tuning` and

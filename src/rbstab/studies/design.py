@@ -24,7 +24,7 @@ A chain's configuration (``bodies`` and ``joints``, :mod:`rbstab.config.chains`)
 keys of chain sweeps: a body or a joint by index or name (``bodies.1.mass``,
 ``joints.hip.k_r.0``), an initial state by body name (``initial_state.trunk.theta.0``).
 Its summary figures are those of one body's runs, per body or joint as a sweep's columns
-name them (:func:`rbstab.io.chunk.summary_columns`: ``max_abs_constraint_error_hip`` [m],
+name them (:func:`rbstab.io.chunk.summary_columns`: ``max_abs_constraint_error_hip_z`` [m],
 ``final_theta_trunk_x`` [rad]); its runs are integrated as one body's, the runs of one
 chain together (:func:`rbstab.simulator.simulate_blocks`).
 """
@@ -61,7 +61,7 @@ from ..sweep.validate import key_path
 
 __all__ = ["StudyInputError", "Varied", "parse_vary", "column_names", "design_mappings", "run_design",
            "study_folder", "nominal_figures", "vary_mapping", "METRICS_NOT_FIGURES", "check_metrics", "expand_metrics", "figure_columns",
-           "JOINT_FIGURES", "Members", "members_of"]
+           "Members", "members_of"]
 
 
 class StudyInputError(ConfigError):
@@ -314,11 +314,6 @@ def study_folder(output: str | os.PathLike, name: str | None, config, *, option:
 
 
 # -- metrics ---------------------------------------------------------------------------------------
-
-#: A chain's summary figures per joint, one column a joint ``<name>_<joint>``: name -> units
-#: (max |E_j| over the samples; for a permanent joint, the drift of its constraint).
-JOINT_FIGURES = {"max_abs_constraint_error": "m"}
-
 
 class Members(NamedTuple):
     """The names of a tree's bodies and joints, in order: its figures' columns are named by
