@@ -88,6 +88,7 @@ __all__ = [
     "store_trace_dimensions",
     "trace_dimensions",
     "summary_columns",
+    "summary_from_columns",
     "summary_table_columns",
     "store_bytes_per_run",
     "SUMMARY_FIGURES",
@@ -198,6 +199,30 @@ def summary_columns(summary: Mapping[str, Any], joints: Sequence[str] | None = N
                 out[column] = float(values[at])
         else:
             out[key] = value
+    return out
+
+
+def summary_from_columns(row: Mapping[str, Any], joints: Sequence[str] | None = None,
+                         bodies: Sequence[str] | None = None) -> dict[str, Any]:
+    """The summary figures a row of :func:`summary_columns`' columns holds, as the run's
+    summary gives them (its inverse): a scalar as it is, one body's 3-vector as 3 floats, a
+    tree's (``joints``, ``bodies``: its joint and body names) per member as a float or 3 a
+    member; NaN for an entry the row lacks (None) of a figure it has; figures with no
+    column left out."""
+    out: dict[str, Any] = {}
+    for key in SUMMARY_QUANTITIES:
+        if key in row:
+            out[key] = math.nan if row[key] is None else row[key]
+            continue
+        for ndim in (1,) if joints is None else (2, 1):
+            columns = _figure_columns(key, ndim, joints, bodies)
+            if any(row.get(column) is not None for column, _ in columns):
+                value = np.full([max(at[d] for _, at in columns) + 1 for d in range(ndim)], math.nan)
+                for column, at in columns:
+                    if row.get(column) is not None:
+                        value[at] = row[column]
+                out[key] = value.tolist()
+                break
     return out
 
 

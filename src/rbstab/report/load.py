@@ -35,8 +35,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from ..io.chunk import SUMMARY_FIGURES, read_chunk_rows
-from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
+from ..io.chunk import read_chunk_rows, summary_from_columns
 from ..io.hdf5 import NotAResultFile, read_attributes
 from ..io.integrity import reading
 from ..kinds import CHAIN_RUN, RUN, STORE, SWEEP, inputs_in, is_plain_folder, kind_of
@@ -315,37 +314,14 @@ def load_chunk_runs(path: str | os.PathLike, sweep: str | None = None) -> list[R
 
 def _store_attributes(row: dict) -> dict:
     """A store file's row in the form of a run file's attributes (``name``, ``summary_*``...):
-    one body's figures per axis, a chain's per body or joint (the figure's member) and axis."""
+    one body's figures per axis, a chain's per body or joint (the figure's member) and axis
+    (:func:`rbstab.io.chunk.summary_from_columns`)."""
     attrs = {k: v for k, v in row.items()}
     attrs["name"] = row["run_id"]
     members = _member_names(row)
-    for key in SUMMARY_FIGURES:
-        if key in row:
-            attrs[f"summary_{key}"] = float("nan") if row[key] is None else row[key]
-            continue
-        names = members.get(SUMMARY_QUANTITIES[key].member) if members else None
-        found = _figure_parts(row, key, names)
-        if found is not None:
-            attrs[f"summary_{key}"] = found
+    figures = summary_from_columns(row, members.get("joint"), members.get("body"))
+    attrs.update({f"summary_{key}": value for key, value in figures.items()})
     return attrs
-
-
-def _figure_parts(row: dict, key: str, members: tuple[str, ...] | None):
-    """A figure's value from a store row's columns ``<key>_<axis>`` (one body: 3 floats) or
-    ``<key>_<member>[_<axis>]`` (a chain's ``members``: a float or 3 a member); None where
-    the row has none of them; NaN for an absent entry."""
-    def value(column):
-        found = row.get(column)
-        return float("nan") if found is None else found
-
-    if members is None:
-        parts = [f"{key}_{a}" for a in ("x", "y", "z")]
-        return [value(c) for c in parts] if any(row.get(c) is not None for c in parts) else None
-    if any(row.get(f"{key}_{m}_x") is not None for m in members):
-        return [[value(f"{key}_{m}_{a}") for a in ("x", "y", "z")] for m in members]
-    if any(row.get(f"{key}_{m}") is not None for m in members):
-        return [value(f"{key}_{m}") for m in members]
-    return None
 
 
 def _member_names(row: dict) -> dict[str, tuple[str, ...]]:
