@@ -333,9 +333,9 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
     assert np.isfinite(found.threshold).all() and found.body == "trunk" and found.at == at
     data = yaml.safe_load(source.read_text())
     data["simulation"]["limits"] = {"theta": [0.6, 0.6, 3.2]}
-    from rbstab.analysis.push import ChainPushes
+    from rbstab.analysis.push import Pushes
 
-    equilibrium = ChainPushes(config, "force", body="trunk", point=point).equilibrium
+    equilibrium = Pushes(config, "force", body="trunk", point=point).equilibrium
     data["initial_state"] = {b: {"theta": equilibrium[12 * i: 12 * i + 3].tolist()}
                              for i, b in enumerate(config.chain.body_names)}
     for u, threshold in zip(directions, found.threshold):
@@ -349,20 +349,35 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
             assert (result.status == "failed") == falls, (u, factor, result.message)
 
 
-def test_a_chain_push_at_t0_is_refused_outside_the_run_or_with_disturbances():
-    from rbstab.analysis.push import ChainPushes
+def test_a_chain_pushed_at_t0_keeps_its_own_disturbances_and_t0_is_inside_the_run():
+    """A chain's push is one more impulse entry of its disturbances: pushed at t0 = 0.5 s
+    with a pulse of its own from 0.1 s, the pushed run is the run of the configuration
+    with that impulse entry written in it (the same recovery verdict and v(t_end)); a t0
+    past t_end and an unknown body are refused in one line."""
+    from rbstab.analysis.push import Pushes
+    from rbstab.analysis.runs import Runs
 
     source = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    pulse = 'disturbances=[{kind: pulse, value: [0, 20, 0], start: 0.1, duration: 0.1, body: trunk}]'
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = load_any_config(source)
-        pulsed = load_any_config(source, ['disturbances=[{kind: pulse, value: [1, 0, 0], start: 0.1, duration: 0.1, '
-                                          'body: trunk}]'])
+        pulsed = load_any_config(source, [pulse, "simulation.limits.theta=[0.6, 0.6, 3.2]"])
     with pytest.raises(ValueError, match=r"--push-at: found 9; expected a time in \[0, simulation.t_end\)"):
-        ChainPushes(config, "torque", body="trunk", at=9.0)
-    with pytest.raises(ValueError, match="a chain with disturbances .* is pushed at t = 0"):
-        ChainPushes(pulsed, "torque", body="trunk", at=1.0)
-    assert ChainPushes(pulsed, "torque", body="trunk", at=0.0).at == 0.0
+        Pushes(config, "torque", body="trunk", at=9.0)
+    with pytest.raises(ValueError, match=r"--push-body: found 'arms'; expected the body of the chain that is pushed "
+                                         r"\(legs, trunk\)"):
+        Pushes(config, "torque", body="arms")
+    pushes = Pushes(pulsed, "torque", body="trunk", at=0.5, jobs=2)
+    vectors = np.array([[0.0, 5.0, 0.0], [0.0, 400.0, 0.0]])
+    recovered = pushes.recovered(vectors)
+    assert recovered.tolist() == [True, False]  # a small push recovers, a large one topples the trunk
+    data = pulsed.resolved
+    for vector, verdict in zip(vectors, recovered):
+        entry = {"kind": "impulse", "quantity": "torque", "value": vector.tolist(), "start": 0.5, "body": "trunk"}
+        own = chain_config_from_mapping({**pushes.config.resolved, "disturbances": [*data["disturbances"], entry]})
+        ok, _, v = Runs(own).outcomes(C.initial_state(own)[None])
+        assert bool(ok[0] == 1 and abs(v[0]) <= pushes.ratio * pushes.energy(vector)[0] + 1e-12) == verdict
 
 
 def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():

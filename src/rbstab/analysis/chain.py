@@ -3,9 +3,8 @@ chain's independent coordinates, the eigenvalues and Lyapunov's indirect verdict
 (:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, the
 Lyapunov certificate with its sublevel estimate checked against the chain's runs
 (:func:`rbstab.analysis.chain_certificate.certify_chain`), and
-the basin of attraction by simulation over a 2-D slice of initial states
-(:func:`chain_basin_map`), and the recovery of runs from drawn initial states
-(:func:`chain_states_recover`, for :func:`rbstab.analysis.push.basin_stability`).
+and the basin of attraction by simulation over a 2-D slice of initial states
+(:func:`chain_basin_map`).
 """
 
 from __future__ import annotations
@@ -18,14 +17,14 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .basin import DEFAULT_SAMPLES, BasinMap, time_to_converge
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
-from .chain_runs import chain_states, chain_states_recover, check_entries, final_lyapunov
+from .chain_runs import chain_states, check_entries
 from .dataset import analysis_content, analysis_dataset, certificate_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain, mode_shapes
 from .text import certificate_lines, mode_lines, mode_shape_lines, time_scale
 
-__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "chain_basin_map", "check_axes", "check_entries", "chain_states",
-           "chain_states_recover", "final_lyapunov"]
+__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "chain_basin_map", "check_axes", "check_entries",
+           "chain_states"]
 
 
 @dataclass(frozen=True)

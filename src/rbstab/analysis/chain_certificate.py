@@ -19,7 +19,7 @@ the samples and the local search, capped by the domain boundary), over the chain
   angle is not a coordinate).
 
 The level c is then checked against runs of the chain's compiled engine
-(:func:`rbstab.analysis.chain.final_lyapunov`) from states on {v = c}
+(:class:`rbstab.analysis.runs.Runs`) from states on {v = c}
 (:func:`rbstab.analysis.evidence.falsify_with`: a run that leaves the domain or
 ``simulation.limits`` or ends with v above its start lowers c below its start), and against
 the run from the configured initial state as for one body
@@ -36,7 +36,7 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
 from .certificate import DEFAULT_SAMPLES, Certificate, certify, constrained_boundary_level
-from .chain_runs import final_lyapunov
+from .runs import Runs
 from .evidence import FALSIFICATION_RUNS, check_initial_run, falsify_with
 
 __all__ = ["ChainModel", "certify_chain", "DEFAULT_CHAIN_SAMPLES"]
@@ -178,9 +178,7 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
         (:func:`rbstab.convergence.converged`): one not converged by t_end is run longer
         (:func:`rbstab.analysis.evidence.check_initial_run`).
     """
-    from ..engine.systems import tree_system  # heavy: numba
     from ..simulator import simulate  # heavy: numba
-    from ..variants import chain as C  # heavy: numba
 
     sim = config.simulation
     notes = []
@@ -196,14 +194,12 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
                           disturbed=disturbed, t_end=float(sim.t_end))
     if not certificate.positive_definite:
         return certificate, notes
-    system = tree_system(compiled, sim.limits)
+    runs = Runs(config)
 
     def run(x):
-        states = model.states(x)
-        ok, v1 = final_lyapunov(compiled, system, states, sim)
-        v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
+        ok, v0, v1 = runs.outcomes(model.states(x))
         with np.errstate(invalid="ignore"):
-            return ok & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
+            return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
     certificate = falsify_with(run, model, linearisation, certificate, runs=falsification_runs, seed=seed)
     impulses = [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]

@@ -1,18 +1,13 @@
-"""Runs of a chain of rigid bodies from chosen initial states on the compiled driver: the
-states (:func:`chain_states`: the configured initial state with entries set, the bodies the
-configuration places placed on their joints), whether the runs recover
-(:func:`chain_states_recover`, :func:`final_lyapunov`) and the check of the entries' keys
-(:func:`check_entries`). Used by the chain's basin map, certificate and pushes."""
+"""A chain's initial states with chosen entries (:func:`chain_states`: the configured
+initial state with entries set, the bodies the configuration places placed on their
+joints) and the check of the entries' keys (:func:`check_entries`): what the chain's basin
+map and basin stability run from (:class:`rbstab.analysis.runs.Runs`)."""
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
-from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
-
-__all__ = ["chain_states", "chain_states_recover", "check_entries", "final_lyapunov"]
+__all__ = ["chain_states", "check_entries"]
 
 #: The state blocks of a body in the chain's state, in order (12 entries a body).
 _BODY_BLOCKS = ("theta", "omega", "position", "velocity")
@@ -51,51 +46,6 @@ def chain_states(config, compiled, axes, values: np.ndarray) -> np.ndarray:
     if x_placed.any() or v_placed.any():
         states = np.array([C.place(compiled, y, x_placed, v_placed) for y in states])
     return states
-
-
-def chain_states_recover(config, axes, values: np.ndarray, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
-                         jobs: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """(whether each run converges by the sweeps' rule, :func:`rbstab.convergence.converged`,
-    without leaving the admissible region; v(0) [J]) of the chain's runs from the states
-    :func:`chain_states` gives ``values`` (N, len(axes)), on the compiled driver in ``jobs``
-    threads."""
-    from ..engine.systems import tree_system  # heavy: numba
-    from ..variants import chain as C  # heavy: numba
-
-    check_entries(config, axes)
-    compiled = C.compile_chain(config.chain)
-    states = chain_states(config, compiled, axes, values)
-    sim = config.simulation
-    ok, v1 = final_lyapunov(compiled, tree_system(compiled, sim.limits), states, sim, jobs=jobs)
-    v0 = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
-    return np.asarray(converged(ok, v0, v1, ratio), dtype=bool), v0
-
-
-def final_lyapunov(compiled, system, states: np.ndarray, simulation, *, jobs: int = 1) -> tuple[np.ndarray, np.ndarray]:
-    """(whether each run reached t_end inside the admissible region, v(t_end) [J], NaN for a
-    run that stopped) of the runs of one chain (``compiled``, its
-    :class:`~rbstab.engine.systems.TreeSystem` ``system``) from ``states`` (k, n_states)
-    with the settings ``simulation``, on the compiled driver in ``jobs`` threads (it
-    releases Python's lock); only the last sample is kept."""
-    from ..engine.integrate import integrate_chain_runs  # heavy: numba
-    from ..engine.settings import settings_rows  # heavy: numba
-    from ..engine.status import SUCCESS  # heavy: numba
-    from ..variants import chain as C  # heavy: numba
-
-    settings = settings_rows([simulation])
-
-    def final(rows):
-        sol = integrate_chain_runs(system, states[rows], np.repeat(settings, len(rows), axis=0),
-                                   method=simulation.method, n_samples=2)
-        return sol.status == SUCCESS, sol.samples[:, -1]
-
-    k = len(states)
-    slices = np.array_split(np.arange(k), max(1, min(int(jobs), k)))
-    with ThreadPoolExecutor(len(slices)) as pool:
-        parts = list(pool.map(final, slices))
-    ok = np.concatenate([p[0] for p in parts])
-    v1 = C.evaluate(compiled, np.full(k, float(simulation.t_end)), np.concatenate([p[1] for p in parts]))["lyapunov"]
-    return ok, v1
 
 
 def check_entries(config, axes) -> None:

@@ -42,10 +42,11 @@ from typing import Any, Callable
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
+from .runs import Runs
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
-           "ChainPushes", "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
-           "parse_ranges", "parse_push_range", "batch_outcomes", "integrate_batch", "runs_from_states",
+           "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
+           "parse_ranges", "parse_push_range", "runs_from_states",
            "unbounded_fall_note"]
 
 #: Quantity of a push -> the units of its magnitude.
@@ -64,8 +65,6 @@ SMALLEST_PUSH = 2.0 ** -30
 #: Refinement: the weakest directions searched around, new directions per round and
 #: each, and rounds (each round halves the cone).
 REFINE_WORST, REFINE_AROUND, REFINE_ROUNDS = 4, 6, 3
-#: Fewest runs of a batch slice sent to a worker.
-MIN_SLICE = 64
 
 
 def push_directions(n: int, seed: int = 0) -> np.ndarray:
@@ -136,60 +135,60 @@ def check_push_options(kind: str, *, point: Sequence[float] | None = None, direc
         raise ValueError("; ".join(problems))
 
 
-def _take(batch, rows: np.ndarray):
-    """The runs ``rows`` of a :class:`rbstab.engine.RunBatch` as a batch of their own."""
-    return type(batch)(**{f.name: getattr(batch, f.name)[rows] for f in dataclasses.fields(batch)})
-
-
-def batch_outcomes(batch, engine: str) -> np.ndarray:
-    """The outcomes of the k runs of ``batch`` (a :class:`rbstab.engine.RunBatch`) on
-    ``engine`` as one array of shape (3, k): success (1: status ``success``, else 0), v(0)
-    [J] and v(t_end) [J] (NaN for a run that stopped early). The function a worker runs."""
-    from ..simulator import simulate_batch  # heavy: numba
-
-    out = np.full((3, len(batch)), np.nan)
-    for rows, block in simulate_batch(batch, full=False, engine=engine, keep="none"):
-        out[0, rows] = [s == "success" for s in block.status]
-        out[1, rows] = block.summaries["lyapunov_initial"]
-        out[2, rows] = block.summaries["lyapunov_final"]
-    return out
-
-
 class Pushes:
-    """One configuration's pushes as batches of runs: the body at rest at its equilibrium,
-    pushed at ``at`` by the impulse of a (k, 3) array of vectors (:meth:`recovered`).
+    """One configuration's pushes as batches of runs: its bodies at rest (one body at its
+    equilibrium, a tree at its rest state), then body ``body`` pushed at ``at`` by the
+    impulse of each of a (k, 3) array of vectors (:meth:`recovered`). The push is one more
+    impulse entry of the configuration's disturbances, so a run keeps its own disturbances
+    and the push's exact bookkeeping (docs/disturbances.md; a tree's jump: docs/physics.md,
+    "A push on a chain"). One body's runs are a :class:`rbstab.engine.RunBatch` on
+    ``engine`` (in slices over ``executor``); a tree's, a tree a run in calls of the CPU's
+    compiled driver (in ``jobs`` threads).
 
     Parameters
     ----------
-    config : RunConfig
+    config : RunConfig or ChainConfig
         Validated; its own disturbances stay (the push is one more entry).
     kind : {"force", "torque"}
+    body : str, optional
+        The body pushed: one of a tree's bodies (required for a tree), None for one body.
     point : (3,) float, optional
-        R_p [m], body frame, from the centre of mass (force only; default 0).
+        R_p [m], the pushed body's frame, from its centre of mass (force only; default 0).
     at : float
         t0 [s], in [0, t_end).
     ratio : float
         Of :data:`RECOVERY_RULE`.
     engine : {"compiled", "cuda"}
+        One body's engine (a tree's runs: the CPU's compiled driver).
     executor : rbstab.sweep.executors.Executor, optional
-        Takes a batch in slices (None: this process).
+        Takes one body's batch in slices (None: this process).
+    jobs : int
+        Threads integrating a tree's batch (the compiled driver releases Python's lock).
 
     Raises
     ------
     ValueError
-        For a configuration that cannot take the push (no equilibrium at rest, the pure
-        sign law, four disturbances already, ``at`` beyond t_end).
+        One line, for a configuration that cannot take the push: no equilibrium at rest,
+        the pure sign law, four disturbances already, ``at`` beyond t_end, an unknown body,
+        a force at the pin of a body a permanent joint holds to the ground.
     """
 
-    def __init__(self, config, kind: str, *, point=None, at: float = 0.0, ratio: float = DEFAULT_LYAPUNOV_RATIO,
-                 engine: str = "compiled", executor=None) -> None:
-        from ..config import INITIAL_STATE_BLOCKS, ConfigError, PhysicalPlausibilityWarning, config_from_mapping  # heavy: pydantic
-        from ..engine.batch import batch_from_table  # heavy: numba
+    def __init__(self, config, kind: str, *, body: str | None = None, point=None, at: float = 0.0,
+                 ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
         from ..model import MAX_DISTURBANCES  # heavy: numba
 
         self.kind, self.at, self.ratio, self.engine, self.executor = kind, float(at), float(ratio), engine, executor
-        self.point = np.zeros(3) if point is None else np.asarray(point, dtype=float)
+        self.jobs = max(1, int(jobs))
+        self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
         self.units = PUSH_KINDS[kind]
+        self.body = body
+        self._tree = getattr(config, "chain", None)
+        if self._tree is not None:
+            names = list(self._tree.body_names)
+            if body not in names:
+                found = "none" if body is None else f"'{body}'"
+                raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
+                                 f"({', '.join(names)})")
         resolved = config.resolved
         t_end = float(resolved["simulation"]["t_end"])
         if not self.at < t_end:
@@ -198,16 +197,48 @@ class Pushes:
         if len(own) >= MAX_DISTURBANCES:
             raise ValueError(f"{config.name}: disturbances: found {len(own)} entries; a push needs one more and at most "
                              f"{MAX_DISTURBANCES} are allowed")
+        entry = {"kind": "impulse", "quantity": kind, "value": [1.0, 0.0, 0.0], "start": self.at}
+        if kind == "force":
+            entry["point"] = self.point.tolist()
+        if self._tree is not None:
+            joint = self._tree.joints[names.index(body)]
+            self._pin_check(joint.variant == "permanent" and joint.parent < 0, joint.child_point,
+                            f"'{body}' (joint '{joint.name}' holds it to the ground)")
+            self._setup_tree(config, own, {**entry, "body": body})
+        else:
+            self._setup_body(config, own, entry)
+        self.runs = 0
+        self.batches = 0
+
+    def _pin_check(self, pinned: bool, pin, what: str) -> None:
+        if self.kind == "force" and pinned and np.allclose(self.point, pin):
+            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of {what}: a force "
+                             "there moves nothing; push elsewhere or with --push torque")
+
+    def _pushed_config(self, config, data: dict):
+        """The configuration ``data`` (the pushed one, resolved) validated, its warnings
+        already shown with ``config``; a ValueError naming what is wrong."""
+        from ..config import ConfigError, PhysicalPlausibilityWarning  # heavy: pydantic
+        from ..config.chains import any_config_from_mapping  # heavy: pydantic
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
+                return any_config_from_mapping(data, source=f"{config.name} pushed")
+        except ConfigError as exc:
+            raise ValueError(f"{config.name}: " + "; ".join(exc.errors)) from None
+
+    def _setup_body(self, config, own: list, entry: dict) -> None:
+        """One body: its equilibrium, the pushed configuration's batch and its record."""
+        from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
+        from .linearise import linearise  # heavy: numba
+
         variant = config.make_variant()
-        if kind == "force" and variant.name == "permanent" and np.allclose(self.point, variant.body.attachment_point):
-            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of this "
-                             "permanent body (body.attachment_point): a force there moves nothing; push elsewhere "
-                             "or with --push torque")
+        if variant.name == "permanent":
+            self._pin_check(True, variant.body.attachment_point, "this permanent body (body.attachment_point)")
         if not variant.smooth:
             raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) takes no disturbances; "
                              "analyse a boundary-layer law (--boundary-layer PHI)")
-        from .linearise import linearise  # heavy: numba
-
         # the equilibrium of the undisturbed dynamics (the configuration's own disturbances act on the runs)
         calm = dataclasses.replace(config, gains=dataclasses.replace(config.gains, disturbances=()))
         lin = linearise(calm.make_variant() if own else variant)
@@ -215,42 +246,64 @@ class Pushes:
             raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
                              f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
         self.equilibrium = lin.equilibrium
+        resolved = config.resolved
         blocks = dict(zip(variant.layout.blocks, np.split(self.equilibrium, len(variant.layout.blocks))))
         initial = {key: (blocks[b].tolist() if b in blocks else list(resolved["initial_state"][key]))
                    for key, b in INITIAL_STATE_BLOCKS.items()}
-        entry = {"kind": "impulse", "quantity": kind, "value": [1.0, 0.0, 0.0], "start": self.at}
-        if kind == "force":
-            entry["point"] = self.point.tolist()
-        data = {**resolved, "initial_state": initial, "disturbances": own + [entry]}
-        try:
-            with warnings.catch_warnings():  # the configuration's own warnings were shown with it
-                warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-                pushed = config_from_mapping(data, source=f"{config.name} pushed")
-        except ConfigError as exc:
-            raise ValueError(f"{config.name}: " + "; ".join(exc.errors)) from None
+        pushed = self._pushed_config(config, {**resolved, "initial_state": initial, "disturbances": own + [entry]})
         self.config = pushed
         self.index = len(own)  # the push's entry in the record's disturbances
-        template = {k: v for k, v in pushed.resolved.items() if k != "name"}
-        self.base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
+        self._runs = Runs(pushed, engine=self.engine, executor=self.executor)
         # dT of a unit push: the kinetic energy of the jump from rest (quadratic in the push)
-        record = self.base.params[0].copy()
+        record = self._runs.base.params[0].copy()
         record["disturbance_count"] = 1.0
         for name in record.dtype.names:
             if name.startswith("disturbance_") and record[name].ndim:
                 record[name][0] = record[name][self.index]
         self._record = record
         self._permanent = variant.name == "permanent"
-        self.runs = 0
-        self.batches = 0
+
+    def _setup_tree(self, config, own: list, entry: dict) -> None:
+        """A tree: its rest state, the pushed configuration, its compiled description."""
+        from ..variants import chain as C  # heavy: numba
+
+        self.engine = "compiled"
+        compiled = C.compile_chain(self._tree)
+        rest, _ = C.rest_state(compiled)
+        if rest is None:
+            raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
+                             "potential falls without bound): a push from rest cannot be analysed")
+        self.equilibrium = rest
+        d_at = compiled.d_at
+        initial = {}
+        for i, name in enumerate(self._tree.body_names):
+            state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
+            if d_at[i] >= 0:
+                state["d"] = rest[d_at[i]: d_at[i] + 3]
+            initial[name] = {key: value.tolist() for key, value in state.items()}
+        pushed = self._pushed_config(config, {**config.resolved, "initial_state": initial,
+                                              "disturbances": own + [entry]})
+        self.config = pushed
+        self._runs = Runs(pushed, jobs=self.jobs)
+        self._index = list(self._tree.body_names).index(self.body)
+        self.index = sum(1 for d in own if d.get("body") == self.body)  # the push's entry in the body's record
 
     def energy(self, vectors: np.ndarray) -> np.ndarray:
-        """dT [J] of each push of ``vectors`` (k, 3) on the body at rest at its equilibrium."""
-        from ..variants.disturbances import apply_impulses  # heavy: numba
+        """dT [J] of each push of ``vectors`` (k, 3) on the bodies at rest."""
+        vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
         out = np.empty(len(vectors))
-        for i, p in enumerate(np.asarray(vectors, dtype=float)):
+        if self._tree is not None:
+            from ..variants import chain as C  # heavy: numba
+
+            for i, p in enumerate(vectors):
+                out[i] = C.chain_push(self.equilibrium.copy(), *self._runs.compiled.args[:4], self._index, self.point, p,
+                                      self.kind == "torque")
+            return out
+        from ..variants.disturbances import apply_impulses  # heavy: numba
+
+        for i, p in enumerate(vectors):
             self._record["disturbance_value"][0] = p
-            y = self.equilibrium.copy()
-            out[i] = apply_impulses(self._permanent, self.at, y, self._record)
+            out[i] = apply_impulses(self._permanent, self.at, self.equilibrium.copy(), self._record)
         return out
 
     def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
@@ -260,140 +313,15 @@ class Pushes:
         k = len(vectors)
         if k == 0:
             return np.zeros(0, dtype=bool)
-        energy = self.energy(vectors) if energy is None else energy
-        batch = _take(self.base, np.zeros(k, dtype=np.int64))
-        batch.params["disturbance_value"][:, self.index, :] = vectors
-        ok, _, v = integrate_batch(batch, self.engine, self.executor)
-        self.runs += k
-        self.batches += 1
-        with np.errstate(invalid="ignore"):
-            return (ok == 1) & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
-
-
-class ChainPushes:
-    """A chain's pushes as batches of runs, for :func:`rbstab.analysis.push.push_thresholds`
-    (the interface of :class:`rbstab.analysis.push.Pushes`): the chain at rest at its rest
-    state, pushed at t0 on body ``body`` (docs/physics.md, "A push on a chain";
-    :func:`rbstab.variants.chain.chain_push`), each pushed state one run of the compiled
-    driver to t_end, recovered by :data:`rbstab.analysis.push.RECOVERY_RULE`.
-
-    Parameters
-    ----------
-    config : ChainConfig
-    kind : {"force", "torque"}
-        A force impulse P [N s] (inertial frame) at ``point``, or a torque impulse L
-        [N m s] (the body's frame).
-    body : str
-        The body pushed (a name of the chain).
-    point : (3,) float, optional
-        R [m], the body's frame, from its centre of mass (force only; default 0).
-    at : float
-        t0 [s], in [0, t_end). A chain without disturbances rests at its rest state until
-        t0, and its rate does not depend on time: each run is the run pushed at 0 with
-        t_end - t0 left (a chain with disturbances, which act from t = 0, is pushed at 0).
-    ratio : float
-    jobs : int
-        Threads integrating a batch's slices (the compiled driver releases Python's lock).
-
-    Raises
-    ------
-    ValueError
-        One line: an unknown body, ``at`` outside [0, t_end) or not 0 for a chain with
-        disturbances, a force at the pin of a body held by a permanent joint to the
-        ground, or a chain without a rest state.
-    """
-
-    def __init__(self, config, kind: str, *, body: str | None, point=None, at: float = 0.0,
-                 ratio: float = DEFAULT_LYAPUNOV_RATIO, jobs: int = 1) -> None:
-        from ..engine.systems import tree_system  # heavy: numba
-        from ..variants import chain as C  # heavy: numba
-
-        names = list(config.chain.body_names)
-        if body not in names:
-            found = "none" if body is None else f"'{body}'"
-            raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
-                             f"({', '.join(names)})")
-        t_end = float(config.simulation.t_end)
-        if not 0.0 <= at < t_end:
-            raise ValueError(f"--push-at: found {at:g}; expected a time in [0, simulation.t_end) = [0, {t_end:g}) s")
-        if at != 0.0 and any(b.disturbances for b in config.chain.bodies):
-            raise ValueError(f"--push-at: found {at:g}; a chain with disturbances (which act from t = 0) is pushed at "
-                             "t = 0, from its rest state")
-        self.kind, self.body, self.at, self.ratio, self.jobs = kind, body, float(at), float(ratio), max(1, int(jobs))
-        self.engine, self.executor = "compiled", None
-        self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
-        self.units = PUSH_KINDS[kind]
-        self._index = names.index(body)
-        joint = config.chain.joints[self._index]
-        if (kind == "force" and joint.variant == "permanent" and joint.parent < 0
-                and np.allclose(self.point, joint.child_point)):
-            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of '{body}' "
-                             f"(joint '{joint.name}' holds it to the ground): a force there moves nothing; push "
-                             "elsewhere or with --push torque")
-        self.compiled = C.compile_chain(config.chain)
-        rest, _ = C.rest_state(self.compiled)
-        if rest is None:
-            raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
-                             "potential falls without bound): a push from rest cannot be analysed")
-        self.equilibrium = rest
-        # at rest until t0, then pushed: the run pushed at 0 over the time left (the rate does not depend on time)
-        self._simulation = dataclasses.replace(config.simulation, t_end=t_end - self.at)
-        self._system = tree_system(self.compiled, config.simulation.limits)
-        self.runs = 0
-        self.batches = 0
-
-    def _pushed(self, vector: np.ndarray) -> tuple[np.ndarray, float]:
-        from ..variants import chain as C  # heavy: numba
-
-        y = self.equilibrium.copy()
-        energy = C.chain_push(y, *self.compiled.args[:4], self._index, self.point, np.asarray(vector, dtype=float),
-                              self.kind == "torque")
-        return y, energy
-
-    def energy(self, vectors: np.ndarray) -> np.ndarray:
-        """dT [J] of each push of ``vectors`` (k, 3) on the chain at rest."""
-        return np.array([self._pushed(v)[1] for v in np.asarray(vectors, dtype=float).reshape(-1, 3)])
-
-    def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
-        """Whether the runs pushed by ``vectors`` (k, 3) recover; one batch (in ``jobs``
-        threads)."""
-        from .chain_runs import final_lyapunov  # heavy: numba (the chain's driver)
-
-        vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
-        k = len(vectors)
-        if k == 0:
-            return np.zeros(0, dtype=bool)
-        pushed = [self._pushed(v) for v in vectors]
-        states = np.array([y for y, _ in pushed])
-        energy = np.array([e for _, e in pushed]) if energy is None else np.asarray(energy, dtype=float)
-        ok, v = final_lyapunov(self.compiled, self._system, states, self._simulation, jobs=self.jobs)
+        energy = self.energy(vectors) if energy is None else np.asarray(energy, dtype=float)
+        member = 0 if self._tree is None else self._index
+        ok, _, v = self._runs.outcomes(np.repeat(self._runs.initial_state[None], k, axis=0),
+                                       (member, self.index, vectors))
+        ok = ok == 1
         self.runs += k
         self.batches += 1
         with np.errstate(invalid="ignore"):
             return ok & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
-
-
-def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
-    """:func:`batch_outcomes` of a batch, in slices of at least :data:`MIN_SLICE` runs
-    over ``executor``'s workers (None: this process)."""
-    workers = (executor.parallelism() or 1) if executor is not None else 1
-    if workers <= 1 or len(batch) < 2 * MIN_SLICE:
-        return batch_outcomes(batch, engine)
-    size = max(MIN_SLICE, -(-len(batch) // workers))
-    slices = [np.arange(lo, min(lo + size, len(batch))) for lo in range(0, len(batch), size)]
-    out = np.full((3, len(batch)), np.nan)
-    executor.plan(len(slices))
-    parts = ((rows, _take(batch, rows)) for rows in slices)
-    for (rows, _), result, exc in executor.imap_unordered(_integrate_slice, parts, engine):
-        if exc is not None:
-            raise exc
-        out[:, rows] = result
-    return out
-
-
-def _integrate_slice(item, engine: str):
-    """:func:`batch_outcomes` of an executor's item (rows, batch)."""
-    return batch_outcomes(item[1], engine)
 
 
 @dataclass
@@ -666,9 +594,8 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     ----------
     config : RunConfig or ChainConfig
         Validated. The runs use its body, controller, saturation, limits and simulation
-        settings; they start at rest at its equilibrium. A chain
-        (:class:`ChainPushes`) is pushed on ``body`` at ``at``, its
-        runs on the CPU's compiled driver in ``jobs`` threads.
+        settings; they start at rest at its equilibrium (:class:`Pushes`). A chain is
+        pushed on ``body``, its runs on the CPU's compiled driver in ``jobs`` threads.
     kind : {"force", "torque"}
     directions : int or array_like, shape (d, 3)
         n quasi-uniform directions (:func:`push_directions` with ``seed``), or the
@@ -708,10 +635,8 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     given = not np.isscalar(directions)
     check_push_options(kind, point=point, directions=directions, push_max=push_max, tol=tol, rungs=rungs, at=at)
     u = _unit(np.asarray(directions, dtype=float).reshape(-1, 3)) if given else push_directions(int(directions), seed)
-    if hasattr(config, "chain"):
-        pushes = ChainPushes(config, kind, body=body, point=point, at=at, ratio=ratio, jobs=jobs)
-    else:
-        pushes = Pushes(config, kind, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
+    pushes = Pushes(config, kind, body=body, point=point, at=at, ratio=ratio, engine=engine, executor=executor,
+                    jobs=jobs)
     found = push_thresholds(pushes, u, push_max=push_max, tol=tol, rungs=rungs)
     refined_u = np.zeros((0, 3))
     refined_t = np.zeros(0)
@@ -726,7 +651,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
                         refined_directions=refined_u, refined_thresholds=refined_t,
                         refined_unit_energy=pushes.energy(refined_u) if len(refined_u) else np.zeros(0),
                         engine=pushes.engine, runs=pushes.runs, batches=pushes.batches,
-                        seconds=_time.perf_counter() - start, body=getattr(pushes, "body", None))
+                        seconds=_time.perf_counter() - start, body=pushes.body)
 
 
 def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float, rungs: int,
@@ -901,7 +826,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
     config : RunConfig or ChainConfig
         Validated. A chain's entries are ``initial_state.<body>.<block>.<i>`` (the bodies
         the configuration places re-placed on their joints), its pushes act on ``body``
-        (:class:`ChainPushes`), its runs on the CPU's compiled
+        (:class:`Pushes`), its runs on the CPU's compiled
         driver in ``jobs`` threads.
     ranges : sequence of str
         ``KEY=LO:HI`` initial-state entries drawn uniformly (the other entries as
@@ -938,10 +863,8 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
             raise ValueError("--push-distribution: give the quantity pushed with --push force|torque")
         lo, hi = parse_push_range(push_range) if isinstance(push_range, str) else map(float, push_range)
         check_push_options(push, point=point, at=at)
-        if hasattr(config, "chain"):
-            pushes = ChainPushes(config, push, body=body, point=point, at=at, ratio=ratio, jobs=jobs)
-        else:
-            pushes = Pushes(config, push, point=point, at=at, ratio=ratio, engine=engine, executor=executor)
+        pushes = Pushes(config, push, body=body, point=point, at=at, ratio=ratio, engine=engine, executor=executor,
+                        jobs=jobs)
         u = _unit(rng.normal(size=(int(draws), 3)))
         magnitude = rng.uniform(lo, hi, size=int(draws))
         start_v = pushes.energy(magnitude[:, None] * u)
@@ -950,74 +873,58 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         units = [PUSH_KINDS[push], "1", "1", "1"]
         values = np.column_stack([magnitude, u])
         low, high = np.array([lo, -1.0, -1.0, -1.0]), np.array([hi, 1.0, 1.0, 1.0])
-        perturbation, rule = "push", RECOVERY_RULE
+        perturbation, rule, engine = "push", RECOVERY_RULE, pushes.engine
     else:
-        chain = hasattr(config, "chain")
-        variant = None if chain else config.make_variant()
-        axes = parse_ranges(ranges, None if chain else variant.layout)
+        tree = getattr(config, "chain", None) is not None
+        axes = parse_ranges(ranges, None if tree else config.make_variant().layout)
         low = np.array([lo for _, lo, _ in axes])
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
-        if chain:
-            from .chain_runs import chain_states_recover  # heavy: numba (the chain's driver)
-
-            recovered, start_v = chain_states_recover(config, [a for a, _, _ in axes], values, ratio=ratio, jobs=jobs)
-        else:
-            recovered, start_v = _states_recover(config, variant, axes, values, ratio, engine, executor)
+        runs = Runs(config, engine=engine, executor=executor, jobs=jobs)
+        ok, start_v, end_v = runs.outcomes(_drawn_states(config, runs, axes, values))
+        recovered = np.asarray(converged(ok == 1, start_v, end_v, ratio), dtype=bool)
         keys = [a.key for a, _, _ in axes]
         units = [a.units for a, _, _ in axes]
-        perturbation, rule = "initial_state", STATE_RULE
+        perturbation, rule, engine = "initial_state", STATE_RULE, runs.engine
     k, n = int(recovered.sum()), len(recovered)
     found = [separation(key, values[:, i], recovered) for i, key in enumerate(keys)]
     return BasinStability(name=config.name, perturbation=perturbation, keys=keys, units=units, low=low, high=high,
                           values=values, recovered=recovered, lyapunov_start=start_v, confidence=float(confidence),
                           interval=wilson_interval(k, n, confidence), separations=[s for s in found if s is not None],
-                          rule=rule, seed=int(seed), engine="compiled" if hasattr(config, "chain") else engine,
-                          kind=push if push_range is not None else None,
+                          rule=rule, seed=int(seed), engine=engine, kind=push if push_range is not None else None,
                           seconds=_time.perf_counter() - start)
 
 
-def _states_recover(config, variant, axes, values: np.ndarray, ratio: float, engine: str,
-                    executor) -> tuple[np.ndarray, np.ndarray]:
-    """(whether they converge by the sweeps' rule, v(0) [J]) of the runs from the
-    configured initial state with the drawn entries ``values`` (N, n_axes)."""
+def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
+    """The initial states (N, n_state) of the runs of ``runs``: the configured one with the
+    drawn entries ``values`` (N, n_axes) of ``axes`` (:func:`parse_ranges`); a tree's
+    bodies that the configuration places re-placed on their joints
+    (:func:`rbstab.analysis.chain_runs.chain_states`). ValueError (one line) for an entry
+    the state lacks, or one body's box that reaches gimbal lock."""
+    if runs.tree is not None:
+        from .chain_runs import chain_states, check_entries  # heavy: numba
+
+        check_entries(config, [a for a, _, _ in axes])
+        return chain_states(config, runs.compiled, [a for a, _, _ in axes], values)
     from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba
     from .basin import OUTSIDE  # heavy: numba
 
-    batch = _state_batch(config, variant, len(values))
-    blocks = list(variant.layout.blocks)
+    states = np.repeat(runs.initial_state[None], len(values), axis=0)
+    blocks = list(config.make_variant().layout.blocks)
     for j, (axis, lo, hi) in enumerate(axes):
         if axis.block == "theta" and axis.index == 1:
             limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
             if max(abs(lo), abs(hi)) >= limit:
                 raise ValueError(f"--basin-stability {axis.key}={lo:g}:{hi:g}: the box reaches |theta_2| >= "
                                  f"{limit:.4g} rad: {OUTSIDE.split(': ', 1)[1]}")
-        batch.y0[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
-
-    ok, v0, v1 = integrate_batch(batch, engine, executor)
-    return np.asarray(converged(ok == 1, v0, v1, ratio), dtype=bool), v0
+        states[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
+    return states
 
 
-def _state_batch(config, variant, k: int):
-    """A batch of k runs of ``config`` from its configured initial state (to be changed)."""
-    from ..engine.batch import batch_from_table  # heavy: numba
-
-    if not variant.smooth:
-        raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) runs one at a time; "
-                         "analyse a boundary-layer law (--boundary-layer PHI)")
-    template = {k: v for k, v in config.resolved.items() if k != "name"}
-    base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
-    return _take(base, np.zeros(k, dtype=np.int64))
-
-
-def runs_from_states(config, states: np.ndarray, *, engine: str = "compiled", executor=None) -> np.ndarray:
-    """The outcomes of the runs of ``config`` from ``states`` (k, n_state), the variant's
-    layout, as :func:`batch_outcomes` gives them: shape (3, k), success (1 or 0), v(0) and
-    v(t_end) [J] (NaN for a run that stopped early). One batch."""
-    variant = config.make_variant()
-    states = np.asarray(states, dtype=float).reshape(-1, variant.layout.size)
-    if not len(states):
-        return np.zeros((3, 0))
-    batch = _state_batch(config, variant, len(states))
-    batch.y0[:, :states.shape[1]] = states
-    return integrate_batch(batch, engine, executor)
+def runs_from_states(config, states: np.ndarray, *, engine: str = "compiled", executor=None,
+                     jobs: int = 1) -> np.ndarray:
+    """The outcomes of the runs of ``config`` (one body or a tree) from ``states`` (k,
+    n_state; :attr:`rbstab.analysis.runs.Runs.initial_state`'s layout): shape (3, k),
+    success (1 or 0), v(0) and v(t_end) [J] (NaN for a run that stopped early). One batch
+    (:meth:`rbstab.analysis.runs.Runs.outcomes`)."""
+    return Runs(config, engine=engine, executor=executor, jobs=jobs).outcomes(states)
