@@ -40,7 +40,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from rbstab.analysis import BasinAxis, chain_basin_map
+from rbstab.analysis import BasinAxis, basin_map
 from rbstab.analysis.push import push_analysis
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
@@ -301,9 +301,9 @@ def main() -> None:
                              ["simulation.limits.theta=[0.6, 0.6, 3.2]"])
     axes = [BasinAxis.parse("initial_state.legs.theta.0=-0.4:0.4:41"),
             BasinAxis.parse("initial_state.trunk.omega.0=-3:3:41")]
-    chain_basin_map(stance, [BasinAxis.parse("initial_state.legs.theta.0=-0.4:0.4:2"), axes[1]])  # compiled
+    basin_map(stance, [BasinAxis.parse("initial_state.legs.theta.0=-0.4:0.4:2"), axes[1]])  # compiled
     start = time.perf_counter()
-    found = chain_basin_map(stance, axes)
+    found = basin_map(stance, axes)
     print(f"  basin map of stance_ankle_hip (limits.theta 0.6 rad), 41 x 41 over legs theta_1 x trunk omega_1, "
           f"t_end 5 s: {time.perf_counter() - start:.2f} s ({found.counts()})")
     push_analysis(stance, "force", directions=np.array([[0.0, -1.0, 0.0]]), body="trunk", point=[0, 0, 0.2])

@@ -451,12 +451,12 @@ def _analyse_chains(paths, overrides, basin, out: Path, *, ratio: float, n_sampl
     """Each chain's rest state, linearisation, verdict and (``certificate``) Lyapunov
     certificate (``samples`` states, ``seed``; its c checked against every run of the
     command) and, with two ``basin`` axes, its
-    basin map (:func:`rbstab.analysis.chain_basin_map`), with ``push`` its smallest fatal
+    basin map (:func:`rbstab.analysis.basin_map`), with ``push`` its smallest fatal
     pushes (:func:`rbstab.analysis.push.push_analysis` on a named body), printed (or one
     JSON object each, "kind": "chain") and written to ``out``/<name>.analysis.nc. Every axis,
     the pushed body and the files to write are checked against every chain before anything
     runs."""
-    from rbstab.analysis import BasinAxis, analyze_chain, chain_basin_map, write_analysis  # heavy: numba, numpy
+    from rbstab.analysis import BasinAxis, analyze_chain, basin_map, write_analysis  # heavy: numba, numpy
     from rbstab.analysis.chain import check_axes, check_entries  # heavy: numba, numpy
     from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
     from rbstab.analysis.push import basin_stability, push_analysis  # heavy: numba, numpy
@@ -500,7 +500,7 @@ def _analyse_chains(paths, overrides, basin, out: Path, *, ratio: float, n_sampl
     for config in loaded:
         try:
             result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed, ratio=ratio)
-            found = chain_basin_map(config, axes, ratio=ratio, n_samples=n_samples) if axes else None
+            found = basin_map(config, axes, ratio=ratio, n_samples=n_samples, jobs=jobs) if axes else None
             pushed = push_analysis(config, ratio=ratio, jobs=jobs, **push) if push is not None else None
             stable = basin_stability(config, ratio=ratio, jobs=jobs, **stability) if stability is not None else None
             result = result.with_runs(basin=found, push=pushed, basin_stability=stable)

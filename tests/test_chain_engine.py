@@ -216,14 +216,14 @@ def test_a_chains_basin_map_runs_each_point_as_rbstab_run_would():
     """Each grid point of a chain's basin map is the run of the configuration with that
     initial state (the bodies the config places re-placed on their joints: a tilt of the
     legs carries the trunk); the same outcome and v(t_end)."""
-    from rbstab.analysis import BasinAxis, chain_basin_map
+    from rbstab.analysis import BasinAxis, basin_map
 
     overrides = ["simulation.t_end=1.5", "simulation.n_samples=151", "simulation.limits.theta=[0.6, 0.6, 3.2]"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", overrides)
     axes = [BasinAxis.parse("initial_state.legs.theta.0=-0.5:0.5:3"), BasinAxis.parse("initial_state.trunk.omega.0=-4:4:3")]
-    found = chain_basin_map(config, axes, n_samples=151)
+    found = basin_map(config, axes, n_samples=151)
     assert found.outcome.shape == (3, 3) and found.counts()["failed"] >= 1  # a fall leaves the region
     assert found.outcome[1, 1] < 2 and found.lyapunov_final[1, 1] < 0.1 * found.lyapunov_initial[1, 1]  # it recovers
     for i, j in ((0, 2), (1, 1), (2, 0)):

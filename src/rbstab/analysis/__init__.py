@@ -18,7 +18,7 @@
   stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
 - :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;
 - :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record;
-- :mod:`~rbstab.analysis.chain`: a chain's rest state, linearisation and verdict, and its basin map;
+- :mod:`~rbstab.analysis.chain`: a chain's rest state, linearisation and verdict;
   :mod:`~rbstab.analysis.chain_certificate`: its Lyapunov certificate in its independent coordinates.
 
 Method and limits: ``docs/analysis.md``.
@@ -27,7 +27,7 @@ Method and limits: ``docs/analysis.md``.
 from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, analyze, OutsideLimits, equilibrium_outside_limits
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
-from .chain import ChainAnalysis, analyze_chain, chain_basin_map
+from .chain import ChainAnalysis, analyze_chain
 from .dataset import is_analysis_file, read_analysis, write_analysis
 from .linearise import Linearisation, linearise, linearise_chain
 from .robustness import Robustness, robustness, wilson_interval
@@ -43,7 +43,6 @@ __all__ = [
     "linearise_chain",
     "Linearisation",
     "analyze_chain",
-    "chain_basin_map",
     "ChainAnalysis",
     "certify",
     "Certificate",

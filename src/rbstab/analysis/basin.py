@@ -20,8 +20,8 @@ resolution: the sample spacing t_end / (n_samples - 1)).
 
 from __future__ import annotations
 
+import contextlib
 import re
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -211,65 +211,24 @@ def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> fl
     return float(time[last[-1] + 1]) if last.size else float(time[0])
 
 
-def _grid_blocks(config, axes: Sequence[BasinAxis]) -> dict[str, np.ndarray]:
-    """The initial-state blocks of every grid point, row-major (first axis slowest): block
-    name -> shape (n0 * n1, 3); the configuration's values but at the axes' entries."""
-    from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
-
-    n = len(axes[0].values) * len(axes[1].values)
-    section = config.resolved["initial_state"]
-    blocks = {b: np.repeat(np.asarray(section[k], dtype=float)[None], n, axis=0) for k, b in INITIAL_STATE_BLOCKS.items()}
-    first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
-    blocks[axes[0].block][:, axes[0].index] = first.ravel()
-    blocks[axes[1].block][:, axes[1].index] = second.ravel()
-    return blocks
-
-
 #: Why a grid point outside the domain of the Euler-angle model is not run.
 OUTSIDE = ("initial state outside the domain: |theta_2| >= pi/2 - simulation.gimbal_margin, where B(theta) is "
            "singular (gimbal lock, eq 5)")
 
 
-def _point_configs(base, blocks: dict[str, np.ndarray], points: np.ndarray) -> list:
-    """(index, RunConfig) of the grid ``points`` (inside the domain): ``base`` with each
-    point's initial state, rebuilt without validating again (the base was validated, and
-    the grid's values are finite and inside the domain)."""
-    from ..config import INITIAL_STATE_BLOCKS, RunConfig  # heavy: yaml, pydantic
-
-    items = []
-    for i in points.tolist():
-        section = {k: blocks[b][i].tolist() for k, b in INITIAL_STATE_BLOCKS.items()}
-        resolved = {**base.resolved, "name": f"{base.name}-basin-{i}", "initial_state": section}
-        items.append((i, RunConfig.from_resolved(resolved, like=[base])))
-    return items
-
-
-def _run_block(items: list, ratio: float) -> list[tuple]:
-    """Run (index, RunConfig) items with the compiled engine; one tuple per item:
-    (index, outcome, time to converge, v(t_end), message)."""
-    from ..simulator import simulate_many  # heavy: numba
-
-    configs = [c for _, c in items]
-    rows = []
-    for j, result in simulate_many(configs):
-        v = result.outputs["lyapunov"]
-        t = time_to_converge(result.time, v, ratio) if result.ok else np.nan
-        outcome = 0 if np.isfinite(t) else (1 if result.ok else 2)
-        rows.append((items[j][0], outcome, t, float(v[-1]), "" if result.ok else result.message.split(" at t =")[0]))
-    return rows
-
-
-def _run_on_gpu(engine, base, variant, states: np.ndarray, points: np.ndarray, ratio: float) -> list[tuple]:
-    """:func:`_run_block`'s rows of the grid ``points`` (initial ``states`` (k, n_state))
-    on the GPU ``engine`` (:class:`rbstab.engine.Engine`): the runs share ``base``'s
-    variant, parameters and settings (a launch stops after its ``simulation.max_wall_time``)."""
+def _run_on_gpu(engine, config, variant, states: np.ndarray, points: np.ndarray, ratio: float,
+                n_samples: int) -> list[tuple]:
+    """(index, outcome, time to converge, v(t_end), message) of the grid ``points`` (initial
+    ``states`` (k, n_state)) of one body on the GPU ``engine`` (:class:`rbstab.engine.Engine`):
+    the runs share ``config``'s variant, parameters and settings but its ``n_samples`` (a
+    launch stops after its ``simulation.max_wall_time``)."""
     from ..engine import method_number  # heavy: numba
     from ..engine.settings import settings_records, settings_rows  # heavy: numba
     from ..engine.status import SUCCESS, status_message  # heavy: numba
     from ..summary import LAST_ABOVE, TAKEN  # heavy: numba
 
-    s = base.simulation
-    k, n = len(states), s.n_samples
+    s = config.simulation
+    k, n = len(states), int(n_samples)
     time = np.linspace(0.0, s.t_end, n)
     out = []
     for chunk in engine.entry_point()(np.full(k, variant.code), variant.parameters, states,
@@ -289,10 +248,16 @@ def _run_on_gpu(engine, base, variant, states: np.ndarray, points: np.ndarray, r
     return out
 
 
-def _blocks(items: list, jobs: int) -> list[list]:
-    """Contiguous blocks, 4 per job (both workers busy to the end), of at least 32 runs."""
-    size = max(32, -(-len(items) // (4 * jobs)))
-    return [items[i : i + size] for i in range(0, len(items), size)]
+def _on_cpu(runs, states: np.ndarray, points: np.ndarray, ratio: float, n_samples: int, t_end: float) -> list[tuple]:
+    """:func:`_run_on_gpu`'s rows of the grid ``points`` (initial ``states``) as runs of
+    ``runs`` (:class:`rbstab.analysis.runs.Runs`) on the CPU."""
+    ok, v, messages = runs.traces(states, n_samples)
+    time = np.linspace(0.0, t_end, int(n_samples))
+    rows = []
+    for k, i in enumerate(points.tolist()):
+        t = time_to_converge(time, v[k], ratio) if ok[k] else np.nan
+        rows.append((i, 0 if np.isfinite(t) else (1 if ok[k] else 2), t, float(v[k, -1]), messages[k]))
+    return rows
 
 
 def basin_map(
@@ -309,86 +274,86 @@ def basin_map(
 
     Parameters
     ----------
-    config : RunConfig
-        The configuration whose initial state the slice passes through; its variant,
-        body, gains and simulation settings are used for every run (``n_samples``
-        replaced).
+    config : RunConfig or ChainConfig
+        The configuration whose initial state the slice passes through; its bodies, laws,
+        gains and simulation settings are used for every run (``n_samples`` replaced). A
+        tree's entries are ``initial_state.<body>.<block>.<i>``; a body whose ``x`` (``v``)
+        the configuration leaves out is placed on its joint at every point, as the
+        configuration places it (E_j = 0, dE_j/dt = 0), so a tilt moves the bodies it
+        carries.
     axes : two BasinAxis
         Different keys.
     variant : Variant, optional
-        ``config.make_variant()`` if not given (its v gives ``lyapunov_initial``).
+        One body's v for ``lyapunov_initial`` (default: its configuration's).
     ratio : float
         Convergence ratio (0 < ratio < 1).
     n_samples : int
         Samples per run (>= 2).
     jobs : int
-        Local processes (1: in this process).
+        One body's runs: local processes (1: in this process); a tree's: threads.
     engine : {"compiled", "cuda"}
-        A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or the GPU's
-        (:mod:`rbstab.engine.cuda`: every point in one process, each run's time to converge
-        taken as it goes; the pure sign law and implicit methods stay on the CPU). The same
-        outcomes and times (on a GPU, up to its rounding).
+        A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or for one body the
+        GPU's (:mod:`rbstab.engine.cuda`: every point in one process, each run's time to
+        converge taken as it goes; the pure sign law and implicit methods stay on the CPU).
+        The same outcomes and times (on a GPU, up to its rounding). A tree's runs: the CPU's
+        compiled driver.
 
     Raises
     ------
     ValueError
-        For two equal keys.
+        For two equal keys, or a key that names no entry of the configuration's state
+        (a body of a tree it does not have, or a D its joint does not have).
     rbstab.engine.cuda.CudaUnavailable
         For ``engine="cuda"`` where no GPU, driver or numba-cuda is found.
     """
-    from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: yaml, pydantic
     from ..simulator import uses_compiled_engine  # heavy: numba
+    from .runs import Runs  # heavy: numba
 
     if len(axes) != 2 or axes[0].key == axes[1].key:
         raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
-    variant = variant if variant is not None else config.make_variant()
-    resolved = dict(config.resolved, simulation=dict(config.resolved["simulation"], n_samples=int(n_samples)))
-    with warnings.catch_warnings():  # the config's warnings were shown when it was loaded
-        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-        base = config_from_mapping(resolved)
+    tree = getattr(config, "chain", None) is not None
+    for axis in axes if not tree else ():
+        if axis.body is not None:
+            raise ValueError(f"--basin {axis.key!r}: names a body of a chain ('{axis.body}'); a one-body config's "
+                             "entries are initial_state.<block>.<i>")
     shape = (len(axes[0].values), len(axes[1].values))
-    blocks = _grid_blocks(config, axes)
-    states = variant.layout.join(**{b: blocks[b] for b in variant.layout.blocks})
-    # the one check an initial state of a valid configuration can fail (the grid's values are finite)
-    inside = np.abs(blocks["theta"][:, 1]) < np.pi / 2 - base.simulation.gimbal_margin
-    points = np.flatnonzero(inside)
-    outcome = np.full(len(states), 2, dtype=np.int8)
-    messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}
-    t_conv = np.full(len(states), np.nan)
-    v_final = np.full(len(states), np.nan)
-    if get_engine(engine).gpu and len(points) and uses_compiled_engine(base, engine):
-        results = [_run_on_gpu(get_engine(engine), base, variant, states[points], points, ratio)]
-    else:
-        results = _execute(_point_configs(base, blocks, points), ratio, jobs)
-    for rows in results:
-        for index, code, t, v1, message in rows:
-            outcome[index], t_conv[index], v_final[index] = code, t, v1
-            if message:
-                messages[message] = messages.get(message, 0) + 1
+    first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
+    gpu = get_engine(engine).gpu and not tree and uses_compiled_engine(config, engine)
+    with contextlib.ExitStack() as stack:
+        executor = None
+        if jobs > 1 and not tree and not gpu and first.size >= 64:
+            from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
+
+            executor = stack.enter_context(LocalExecutor(jobs, task="a basin map"))
+        runs = Runs(config, engine="compiled", executor=executor, jobs=jobs)
+        states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
+        # the one check an initial state of a valid configuration can fail (the grid's values are finite)
+        inside = np.ones(len(states), dtype=bool)
+        if not tree:
+            theta = list(config.make_variant().layout.blocks).index("theta")
+            inside = np.abs(states[:, 3 * theta + 1]) < np.pi / 2 - config.simulation.gimbal_margin
+        points = np.flatnonzero(inside)
+        outcome = np.full(len(states), 2, dtype=np.int8)
+        messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}
+        t_conv = np.full(len(states), np.nan)
+        v_final = np.full(len(states), np.nan)
+        rows = []
+        if len(points):
+            rows = (_run_on_gpu(get_engine(engine), config, variant or config.make_variant(), states[points], points,
+                                ratio, n_samples) if gpu
+                    else _on_cpu(runs, states[points], points, ratio, n_samples, config.simulation.t_end))
+    for index, code, t, v1, message in rows:
+        outcome[index], t_conv[index], v_final[index] = code, t, v1
+        if message:
+            messages[message] = messages.get(message, 0) + 1
     return BasinMap(
         axes=(axes[0], axes[1]),
         outcome=outcome.reshape(shape),
         time_to_converge=t_conv.reshape(shape),
-        lyapunov_initial=variant.lyapunov(states).reshape(shape),
+        lyapunov_initial=runs.lyapunov(states, variant).reshape(shape),
         lyapunov_final=v_final.reshape(shape),
         initial_states=states.reshape(*shape, -1),
         ratio=ratio,
         t_end=config.simulation.t_end,
         messages=messages,
     )
-
-
-def _execute(items: list, ratio: float, jobs: int):
-    """Yield the rows of :func:`_run_block` for every block of ``items``."""
-    if jobs <= 1 or len(items) < 64:
-        yield _run_block(items, ratio)
-        return
-
-    from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
-
-    with LocalExecutor(jobs, task="a basin map") as executor:
-        executor.plan(len(items))
-        for block, rows, exc in executor.imap_unordered(_run_block, _blocks(items, jobs), ratio):
-            if exc is not None:  # a worker that died: its points are failed runs, with the reason
-                rows = [(i, 2, np.nan, np.nan, f"worker error: {exc}") for i, _ in block]
-            yield rows

@@ -2,9 +2,8 @@
 chain's independent coordinates, the eigenvalues and Lyapunov's indirect verdict
 (:func:`rbstab.analysis.linearise.linearise_chain`), v at the configured initial state, the
 Lyapunov certificate with its sublevel estimate checked against the chain's runs
-(:func:`rbstab.analysis.chain_certificate.certify_chain`), and
-and the basin of attraction by simulation over a 2-D slice of initial states
-(:func:`chain_basin_map`).
+(:func:`rbstab.analysis.chain_certificate.certify_chain`); its basin map is
+:func:`rbstab.analysis.basin.basin_map`'s.
 """
 
 from __future__ import annotations
@@ -15,16 +14,15 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..layout import BLOCK_UNITS, STATE_BLOCKS
-from .basin import DEFAULT_SAMPLES, BasinMap, time_to_converge
+from .basin import BasinMap
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
-from .chain_runs import chain_states, check_entries
+from .chain_runs import check_entries
 from .dataset import analysis_content, analysis_dataset, certificate_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain, mode_shapes
 from .text import certificate_lines, mode_lines, mode_shape_lines, time_scale
 
-__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "chain_basin_map", "check_axes", "check_entries",
-           "chain_states"]
+__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "check_axes", "check_entries"]
 
 
 @dataclass(frozen=True)
@@ -96,7 +94,7 @@ class ChainAnalysis:
     ratio : float
         The convergence ratio of the command's runs.
     basin : BasinMap or None
-        :func:`chain_basin_map`.
+        :func:`rbstab.analysis.basin.basin_map`.
     push : PushAnalysis or None
         :func:`rbstab.analysis.push.push_analysis` on one of its bodies.
     basin_stability : BasinStability or None
@@ -262,70 +260,7 @@ def analyze_chain(config, *, certificate: bool = True, samples: int | None = Non
 
 def check_axes(config, axes) -> None:
     """ValueError (one line) where a basin axis names no entry of the chain's state
-    (:func:`chain_basin_map`'s keys), or the two are the same entry."""
+    (:func:`rbstab.analysis.basin.basin_map`'s keys), or the two are the same entry."""
     if len(axes) != 2 or axes[0].key == axes[1].key:
         raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
     check_entries(config, axes)
-
-
-def chain_basin_map(config, axes, *, ratio: float = DEFAULT_LYAPUNOV_RATIO,
-                    n_samples: int = DEFAULT_SAMPLES) -> BasinMap:
-    """The basin of attraction of a chain (:class:`rbstab.config.chains.ChainConfig`) over
-    the slice of initial states spanned by two ``axes`` (:class:`BasinAxis`, keys
-    ``initial_state.<body>.<block>.<i>``), every other entry the configuration's; each
-    grid point one run of the compiled driver, classified as a one-body basin map's
-    points are (:mod:`rbstab.analysis.basin`). A body whose ``x`` (``v``) the configuration
-    leaves out is placed on its joint at every point, as the configuration places it
-    (E_j = 0, dE_j/dt = 0), so a tilt moves the bodies it carries. ``initial_states``
-    holds the chain's full state (n_states) of each point.
-
-    Raises
-    ------
-    ValueError
-        For two equal keys, or a key that names no body of the chain (or a D its joint
-        does not have).
-    """
-    from ..engine.integrate import integrate_chain_runs  # heavy: numba
-    from ..engine.settings import settings_rows  # heavy: numba
-    from ..engine.status import GIMBAL_LOCK, SUCCESS, limit_of, status_message  # heavy: numba
-    from ..engine.systems import tree_system  # heavy: numba
-    from ..variants import chain as C  # heavy: numba
-
-    check_axes(config, axes)
-    compiled = C.compile_chain(config.chain)
-    shape = (len(axes[0].values), len(axes[1].values))
-    first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
-    states = chain_states(config, compiled, axes, np.column_stack([first.ravel(), second.ravel()]))
-    sim = config.simulation
-    settings = np.repeat(settings_rows([sim]), len(states), axis=0)
-    sol = integrate_chain_runs(tree_system(compiled, sim.limits), states, settings, method=sim.method,
-                               n_samples=int(n_samples))
-    time = np.linspace(0.0, sim.t_end, int(n_samples))
-    outcome = np.full(len(states), 2, dtype=np.int8)
-    t_conv = np.full(len(states), np.nan)
-    v_final = np.full(len(states), np.nan)
-    v_initial = C.evaluate(compiled, np.zeros(len(states)), states)["lyapunov"]
-    v = C.evaluate(compiled, np.tile(time, len(states)), sol.samples.reshape(-1, compiled.n_states))["lyapunov"]
-    v = v.reshape(len(states), -1)
-    messages: dict[str, int] = {}
-    for k in range(len(states)):
-        code = int(sol.status[k])
-        if code == SUCCESS:
-            t_conv[k], v_final[k] = time_to_converge(time, v[k], ratio), v[k, -1]
-            outcome[k] = 0 if np.isfinite(t_conv[k]) else 1
-            continue
-        if code == GIMBAL_LOCK:
-            finite = sol.samples[k][np.isfinite(sol.samples[k, :, 0])]
-            last = finite[-1] if len(finite) else states[k]  # the last sample before the stop
-            message = C.gimbal_lock_message(compiled, last, sim.gimbal_margin, float(sol.t_stop[k])).split(" at t =")[0]
-        elif limit_of(code) is not None:
-            quantity, axis = limit_of(code)
-            message = f"left the admissible region (simulation.limits): |{quantity}_{axis + 1}| of a body or joint"
-        else:
-            message = status_message(code, float(sol.t_stop[k]), sim.gimbal_margin, int(sim.max_steps),
-                                     sim.max_wall_time).split(" at t =")[0]
-        messages[message] = messages.get(message, 0) + 1
-    return BasinMap(axes=(axes[0], axes[1]), outcome=outcome.reshape(shape), time_to_converge=t_conv.reshape(shape),
-                    lyapunov_initial=v_initial.reshape(shape), lyapunov_final=v_final.reshape(shape),
-                    initial_states=states.reshape(*shape, -1), ratio=ratio, t_end=sim.t_end, messages=messages)
-

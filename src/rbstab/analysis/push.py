@@ -896,29 +896,25 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
 
 
 def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
-    """The initial states (N, n_state) of the runs of ``runs``: the configured one with the
-    drawn entries ``values`` (N, n_axes) of ``axes`` (:func:`parse_ranges`); a tree's
-    bodies that the configuration places re-placed on their joints
-    (:func:`rbstab.analysis.chain_runs.chain_states`). ValueError (one line) for an entry
-    the state lacks, or one body's box that reaches gimbal lock."""
+    """The initial states (N, n_state) of the runs of ``runs`` with the drawn entries
+    ``values`` (N, n_axes) of ``axes`` (:func:`parse_ranges`;
+    :meth:`rbstab.analysis.runs.Runs.states`). ValueError (one line) for an entry the state
+    lacks, or one body's box that reaches gimbal lock."""
+    entries = [a for a, _, _ in axes]
     if runs.tree is not None:
-        from .chain_runs import chain_states, check_entries  # heavy: numba
+        from .chain_runs import check_entries  # heavy: numba
 
-        check_entries(config, [a for a, _, _ in axes])
-        return chain_states(config, runs.compiled, [a for a, _, _ in axes], values)
-    from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba
-    from .basin import OUTSIDE  # heavy: numba
-
-    states = np.repeat(runs.initial_state[None], len(values), axis=0)
-    blocks = list(config.make_variant().layout.blocks)
-    for j, (axis, lo, hi) in enumerate(axes):
+        check_entries(config, entries)
+    for axis, lo, hi in axes if runs.tree is None else ():
         if axis.block == "theta" and axis.index == 1:
+            from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba
+            from .basin import OUTSIDE  # heavy: numba
+
             limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
             if max(abs(lo), abs(hi)) >= limit:
                 raise ValueError(f"--basin-stability {axis.key}={lo:g}:{hi:g}: the box reaches |theta_2| >= "
                                  f"{limit:.4g} rad: {OUTSIDE.split(': ', 1)[1]}")
-        states[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
-    return states
+    return runs.states(entries, values)
 
 
 def runs_from_states(config, states: np.ndarray, *, engine: str = "compiled", executor=None,

@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-__all__ = ["Runs", "batch_outcomes", "integrate_batch", "MIN_SLICE"]
+__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "MIN_SLICE"]
 
 #: Fewest runs of a batch slice sent to a worker.
 MIN_SLICE = 64
@@ -65,6 +65,28 @@ def _integrate_slice(item, engine: str):
     return batch_outcomes(item[1], engine)
 
 
+def batch_traces(batch, engine: str = "compiled") -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(whether each run of ``batch`` (a :class:`rbstab.engine.RunBatch`, one sample count)
+    reached t_end (k,), its v [J] at every sample (k, n_samples; NaN after a stop), why each
+    failed run stopped ('' for the others: its status message without its time)). The
+    function a worker runs."""
+    from ..simulator import simulate_batch  # heavy: numba
+
+    k = len(batch)
+    ok, v, messages = np.zeros(k, dtype=bool), np.full((k, int(batch.n_samples[0])), np.nan), [""] * k
+    for rows, block in simulate_batch(batch, full=False, engine=engine, keep="all"):
+        for j, i in enumerate(rows):
+            ok[i] = block.status[j] == "success"
+            messages[i] = "" if ok[i] else block.message[j].split(" at t =")[0]
+        v[rows] = block.outputs["lyapunov"]
+    return ok, v, messages
+
+
+def _trace_slice(item, engine: str):
+    """:func:`batch_traces` of an executor's item (rows, batch)."""
+    return batch_traces(item[1], engine)
+
+
 class Runs:
     """Batches of runs of one configuration from chosen initial states (module docstring).
 
@@ -88,10 +110,9 @@ class Runs:
     engine : str
         The engine the runs take.
 
-    Raises
-    ------
-    ValueError
-        For one body's pure sign law (``boundary_layer`` 0), which runs one at a time.
+    A batch of one body's runs needs an explicit method and no pure sign law
+    (``boundary_layer`` 0): :meth:`outcomes` refuses them (ValueError), :meth:`traces` runs
+    them one at a time.
     """
 
     def __init__(self, config, *, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
@@ -110,9 +131,6 @@ class Runs:
 
         self.engine = engine
         variant = config.make_variant()
-        if not variant.smooth:
-            raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) runs one at a time; "
-                             "analyse a boundary-layer law (--boundary-layer PHI)")
         template = {k: v for k, v in config.resolved.items() if k != "name"}
         self.base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
         self.initial_state = variant.initial_state(config.initial_state)
@@ -129,6 +147,10 @@ class Runs:
         if k == 0:
             return np.zeros((3, 0))
         if self.tree is None:
+            if not self.base.compiled[0]:
+                raise ValueError(f"{self.config.name}: the pure sign law (controller.boundary_layer 0) or an implicit "
+                                 "method runs one at a time; analyse a boundary-layer law (--boundary-layer PHI) "
+                                 "with an explicit method")
             batch = _take(self.base, np.zeros(k, dtype=np.int64))
             batch.y0[:, :states.shape[1]] = states
             if disturbance is not None:
@@ -159,12 +181,139 @@ class Runs:
                                        tree_of=None if tree_of is None else tree_of[rows])
             return sol.status == SUCCESS, sol.samples[:, -1]
 
-        slices = np.array_split(np.arange(k), max(1, min(self.jobs, k)))
-        with ThreadPoolExecutor(len(slices)) as pool:
-            parts = list(pool.map(final, slices))
+        parts = self._in_threads(final, k)
         out = np.empty((3, k))
         out[0] = np.concatenate([p[0] for p in parts])
         # v does not depend on the disturbances' values: the configuration's own chain gives it
         out[1] = C.evaluate(self.compiled, np.zeros(k), states)["lyapunov"]
         out[2] = C.evaluate(self.compiled, np.full(k, float(sim.t_end)), np.concatenate([p[1] for p in parts]))["lyapunov"]
         return out
+
+    def states(self, axes, values: np.ndarray) -> np.ndarray:
+        """The initial states (N, n_state) with the entries of ``axes``
+        (:class:`rbstab.analysis.basin.BasinAxis` or what has its ``key``, ``block``,
+        ``index``, ``body``) set to the rows of ``values`` (N, len(axes)), the others the
+        configured ones; a tree's bodies whose ``x`` (``v``) the configuration leaves out
+        placed on their joints (:func:`rbstab.analysis.chain_runs.chain_states`).
+
+        Raises
+        ------
+        ValueError
+            One line, for an entry the state lacks (a tree's body or D it does not have).
+        """
+        values = np.asarray(values, dtype=float).reshape(-1, len(axes))
+        if self.tree is not None:
+            from .chain_runs import chain_states  # heavy: numba
+
+            return chain_states(self.config, self.compiled, axes, values)
+        blocks = list(self.config.make_variant().layout.blocks)
+        states = np.repeat(self.initial_state[None], len(values), axis=0)
+        for j, axis in enumerate(axes):
+            states[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
+        return states
+
+    def lyapunov(self, states: np.ndarray, variant=None) -> np.ndarray:
+        """v [J] at t = 0 of each of ``states`` (N, n_state) (one body's: ``variant``'s v,
+        default its configuration's)."""
+        if self.tree is not None:
+            from ..variants import chain as C  # heavy: numba
+
+            return C.evaluate(self.compiled, np.zeros(len(states)), states)["lyapunov"]
+        return (variant if variant is not None else self.config.make_variant()).lyapunov(states)
+
+    def traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end]:
+        (whether each reached t_end inside its admissible region (k,), v [J] at its samples
+        (k, n_samples; NaN after a stop), why each failed run stopped: its status in words,
+        without the time ('' for the others))."""
+        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        k = len(states)
+        if self.tree is not None:
+            return self._tree_traces(states, int(n_samples))
+        if not self.base.compiled[0]:  # the pure sign law, an implicit method: run by run
+            return self._one_by_one(states, int(n_samples))
+        batch = _take(self.base, np.zeros(k, dtype=np.int64))
+        batch.y0[:, :states.shape[1]] = states
+        batch.n_samples[:] = int(n_samples)
+        workers = (self.executor.parallelism() or 1) if self.executor is not None else 1
+        if workers <= 1 or k < 2 * MIN_SLICE:
+            return batch_traces(batch, self.engine)
+        size = max(MIN_SLICE, -(-k // (4 * workers)))  # 4 slices a worker: every worker busy to the end
+        slices = [np.arange(lo, min(lo + size, k)) for lo in range(0, k, size)]
+        ok, v, messages = np.zeros(k, dtype=bool), np.full((k, int(n_samples)), np.nan), [""] * k
+        self.executor.plan(len(slices))
+        for (rows, _), result, exc in self.executor.imap_unordered(_trace_slice, ((r, _take(batch, r)) for r in slices),
+                                                                   self.engine):
+            if exc is not None:  # a worker that died: its runs failed, with the reason
+                result = (np.zeros(len(rows), dtype=bool), np.full((len(rows), int(n_samples)), np.nan),
+                          [f"worker error: {exc}"] * len(rows))
+            ok[rows], v[rows] = result[0], result[1]
+            for j, i in enumerate(rows.tolist()):
+                messages[i] = result[2][j]
+        return ok, v, messages
+
+    def _one_by_one(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """:meth:`traces` of one body's runs that no batch takes, each its configuration
+        (rebuilt from the validated one with its initial state) through
+        :func:`rbstab.simulator.simulate_many`."""
+        from ..config import INITIAL_STATE_BLOCKS, RunConfig  # heavy: pydantic
+        from ..simulator import simulate_many  # heavy: numba
+
+        layout = self.config.make_variant().layout
+        resolved = dict(self.config.resolved, simulation=dict(self.config.resolved["simulation"], n_samples=n_samples))
+        configs = []
+        for y in states:
+            blocks = layout.split(y)
+            section = {key: (blocks[b].tolist() if b in blocks else list(resolved["initial_state"][key]))
+                       for key, b in INITIAL_STATE_BLOCKS.items()}
+            configs.append(RunConfig.from_resolved({**resolved, "initial_state": section}, like=[self.config]))
+        k = len(states)
+        ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
+        for i, result in simulate_many(configs, engine="compiled"):
+            ok[i] = result.ok
+            v[i] = result.outputs["lyapunov"]
+            messages[i] = "" if result.ok else result.message.split(" at t =")[0]
+        return ok, v, messages
+
+    def _tree_traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        from ..engine.integrate import integrate_chain_runs  # heavy: numba
+        from ..engine.settings import settings_rows  # heavy: numba
+        from ..engine.status import GIMBAL_LOCK, SUCCESS, limit_of, status_message  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
+
+        sim = self.config.simulation
+        settings = settings_rows([sim])
+
+        def run(rows):
+            return integrate_chain_runs(self.system, states[rows], np.repeat(settings, len(rows), axis=0),
+                                        method=sim.method, n_samples=n_samples)
+
+        parts = self._in_threads(run, len(states))
+        samples = np.concatenate([p.samples for p in parts])
+        status = np.concatenate([p.status for p in parts])
+        t_stop = np.concatenate([p.t_stop for p in parts])
+        time = np.linspace(0.0, sim.t_end, n_samples)
+        v = C.evaluate(self.compiled, np.tile(time, len(states)), samples.reshape(-1, samples.shape[2]))["lyapunov"]
+        messages = []
+        for k, code in enumerate(status.tolist()):
+            if code == SUCCESS:
+                messages.append("")
+            elif code == GIMBAL_LOCK:
+                finite = samples[k][np.isfinite(samples[k, :, 0])]
+                last = finite[-1] if len(finite) else states[k]  # the last sample before the stop
+                messages.append(C.gimbal_lock_message(self.compiled, last, sim.gimbal_margin,
+                                                      float(t_stop[k])).split(" at t =")[0])
+            elif limit_of(code) is not None:
+                quantity, axis = limit_of(code)
+                messages.append(f"left the admissible region (simulation.limits): |{quantity}_{axis + 1}| of a body "
+                                "or joint")
+            else:
+                messages.append(status_message(code, float(t_stop[k]), sim.gimbal_margin, int(sim.max_steps),
+                                               sim.max_wall_time).split(" at t =")[0])
+        return status == SUCCESS, v.reshape(len(states), n_samples), messages
+
+    def _in_threads(self, run, k: int) -> list:
+        """``run`` of the rows of k runs in :attr:`jobs` threads' slices, the results in order."""
+        slices = np.array_split(np.arange(k), max(1, min(self.jobs, k)))
+        with ThreadPoolExecutor(len(slices)) as pool:
+            return list(pool.map(run, slices))
