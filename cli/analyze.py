@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import contextlib
-import math
 from pathlib import Path
 
 import click
 
 from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
 
-from ._common import check_engine, command_line, is_chain_file, load_configs, show_config_warnings, spec_error
+from ._common import check_engine, command_line, load_configs, show_config_warnings, spec_error
 from .console import get_console
 from .options import console_options, json_option, output_option, set_option
 
@@ -36,18 +35,23 @@ def _state_entries(option: str):
 
 
 def _parse_axes(texts, configs):
-    """Basin axes per config (parsed against each variant's states); ClickException if invalid."""
+    """Basin axes per config (parsed against each one body's states, or each tree's bodies
+    and joints); ClickException if invalid."""
     if not texts:
         return {}
     if len(texts) != 2:
         raise click.UsageError(f"--basin: give it exactly twice (two axes of the slice), found {len(texts)}")
     from rbstab.analysis import BasinAxis  # heavy: numba, numpy
+    from rbstab.analysis.chain import check_axes  # heavy: numba, numpy
 
     axes, problems = {}, []
     for config in configs:
-        layout = config.make_variant().layout
         try:
-            axes[config.name] = [BasinAxis.parse(t, layout) for t in texts]
+            if getattr(config, "chain", None) is not None:
+                axes[config.name] = [BasinAxis.parse(t) for t in texts]
+                check_axes(config, axes[config.name])
+            else:
+                axes[config.name] = [BasinAxis.parse(t, config.make_variant().layout) for t in texts]
         except ValueError as exc:
             problems.append(f"{config.name}: {exc}")
     if problems:
@@ -56,13 +60,17 @@ def _parse_axes(texts, configs):
 
 
 def _check_boundary_layer(configs, boundary_layer) -> None:
-    """--boundary-layer against every config (only the pure sign law takes it)."""
+    """--boundary-layer against every config (only one body's pure sign law takes it)."""
     from rbstab.analysis.analyze import analysed_config  # heavy: numba, numpy
 
     problems = []
     for config in configs:
         try:
-            analysed_config(config, boundary_layer)
+            if getattr(config, "chain", None) is not None and boundary_layer is not None:
+                raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to "
+                                 "replace (a sliding joint of a chain has its own boundary_layer > 0)")
+            if getattr(config, "chain", None) is None:
+                analysed_config(config, boundary_layer)
         except ValueError as exc:
             problems.append(f"{config.name}: {exc}")
     if problems:
@@ -164,14 +172,18 @@ def _check_push_targets(configs, ranges) -> None:
     """--basin-stability entries against every config's states (one line each)."""
     if not ranges:
         return
+    from rbstab.analysis.chain import check_entries  # heavy: numba, numpy
     from rbstab.analysis.push import parse_ranges  # heavy: numba, numpy
 
     problems = []
     for config in configs:
         try:
-            parse_ranges(ranges, config.make_variant().layout)
+            if getattr(config, "chain", None) is not None:
+                check_entries(config, [a for a, _, _ in parse_ranges(ranges, None)])
+            else:
+                parse_ranges(ranges, config.make_variant().layout)
         except ValueError as exc:
-            problems.append(f"{config.name}: {exc}")
+            problems.append(f"{config.name}: {str(exc).replace('--basin ', '--basin-stability ')}")
     if problems:
         raise click.ClickException("\n".join(problems))
 
@@ -189,21 +201,6 @@ def _split_specs(paths) -> tuple[list[str], list[str]]:
             data = None  # the config loader says what is wrong with it
         (specs if isinstance(data, dict) and "base" in data else configs).append(path)
     return configs, specs
-
-
-def _one_body_models(paths, overrides) -> list:
-    """--verify of chains: the one-body spelling of each
-    (:func:`rbstab.analysis.verify.verified_model`), whose analysis and proof are those of the
-    one-body model it is; any other chain is refused in one line saying why."""
-    from rbstab.analysis.verify import NotVerifiable, verified_model  # heavy: numpy
-
-    out = []
-    for config in load_configs(paths, overrides, chains=True):
-        try:
-            out.append(verified_model(config))
-        except NotVerifiable as exc:
-            raise click.ClickException(f"{config.name}: --verify: {exc}")
-    return out
 
 
 def _chain_spec_bodies(specs, overrides) -> dict[str, list[str]]:
@@ -362,35 +359,16 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     if basin or push_options or stability_options:
         check_engine(engine)
     configs, specs = _split_specs(configs)
-    chains = [c for c in configs if is_chain_file(c)]
-    trees = []  # one-body trees, verified as the one-body model they are
-    if verify and chains:
-        trees = _one_body_models(chains, overrides)
-        configs, chains = [c for c in configs if c not in chains], []
-    if chains:
-        asked = [name for name, given in (("--robustness", sweeps), ("a sweep spec", specs),
-                                          ("--boundary-layer", boundary_layer is not None)) if given]
-        if asked or len(chains) < len(configs):
-            what = ", ".join(asked) if asked else "one-body configs"
-            raise click.UsageError(f"{chains[0]} is a chain: rbstab analyze gives a chain's rest state, linearisation, "
-                                   "verdict, Lyapunov certificate, --basin map, --push thresholds and basin "
-                                   f"stability; {what} take one-body configs (give them in another command)")
-        if push_options is not None:
-            push_options = {**push_options, "body": push_body}
-        if stability_options is not None and stability_options.get("push") is not None:
-            stability_options = {**stability_options, "body": push_body}
-        _analyse_chains(chains, overrides, basin, Path(output), ratio=ratio, n_samples=basin_samples,
-                        push=push_options, stability=stability_options, jobs=jobs or default_jobs(),
-                        certificate=not no_certificate, samples=samples, seed=seed, overwrite=overwrite)
-        return
-    bodies = _chain_spec_bodies(specs, overrides)
+    loaded = load_configs(configs, overrides, chains=True)
+    trees = {c.name: list(c.chain.body_names) for c in loaded if getattr(c, "chain", None) is not None}
+    bodies = {**trees, **_chain_spec_bodies(specs, overrides)}
     pushed = push_options is not None or (stability_options is not None and stability_options.get("push"))
-    if push_body is not None and (configs or len(bodies) < len(specs)):
+    if push_body is not None and len(bodies) < len(loaded) + len(specs):
         raise click.UsageError("--push-body: names the body of a chain that is pushed; a one-body config has one")
-    for spec, names in bodies.items():
+    for what, names in bodies.items():
         if pushed and push_body not in names:
             found = "none" if push_body is None else f"'{push_body}'"
-            raise click.UsageError(f"--push-body: found {found} for {spec}; expected the body of the chain that is "
+            raise click.UsageError(f"--push-body: found {found} for {what}; expected the body of the chain that is "
                                    f"pushed ({', '.join(names)})")
     if push_body is not None:
         if push_options is not None:
@@ -403,7 +381,6 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
                                    "--push-distribution (the curves over its configurations)")
         if basin or sweeps:
             raise click.UsageError("--basin and --robustness take configs, not a sweep spec")
-    loaded = load_configs(configs, overrides) + trees
     _check_push_targets(loaded, stability_ranges)
     axes = _parse_axes(basin, loaded)
     _check_boundary_layer(loaded, boundary_layer)
@@ -415,7 +392,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     out = Path(output)
     if not overwrite:
         _check_targets(loaded, out)
-    ensure_compiled(say=console.info)
+    ensure_compiled(say=console.info, chain=bool(trees))
     for config in loaded:
         try:
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,
@@ -430,7 +407,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
             say(line)
         say(f"  -> {path}")
         if as_json:
-            console.emit({"kind": "configuration", **result.to_json()})
+            console.emit({"kind": result.kind, **result.to_json()})
     for spec in specs:
         _analyse_spec(spec, out, push_options, stability_options, ratio=ratio, engine=engine,
                       jobs=jobs or default_jobs(), samples=samples, seed=seed, certificate=not no_certificate,
@@ -443,102 +420,6 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         say(f"  -> {path}")
         if as_json:
             console.emit({"kind": "robustness", **result.to_json()})
-
-
-def _analyse_chains(paths, overrides, basin, out: Path, *, ratio: float, n_samples: int, push: dict | None,
-                    stability: dict | None, jobs: int, certificate: bool = True, samples: int = 10_000,
-                    seed: int = 0, overwrite: bool = False) -> None:
-    """Each chain's rest state, linearisation, verdict and (``certificate``) Lyapunov
-    certificate (``samples`` states, ``seed``; its c checked against every run of the
-    command) and, with two ``basin`` axes, its
-    basin map (:func:`rbstab.analysis.basin_map`), with ``push`` its smallest fatal
-    pushes (:func:`rbstab.analysis.push.push_analysis` on a named body), printed (or one
-    JSON object each, "kind": "chain") and written to ``out``/<name>.analysis.nc. Every axis,
-    the pushed body and the files to write are checked against every chain before anything
-    runs."""
-    from rbstab.analysis import BasinAxis, analyze_chain, basin_map, write_analysis  # heavy: numba, numpy
-    from rbstab.analysis.chain import check_axes, check_entries  # heavy: numba, numpy
-    from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
-    from rbstab.analysis.push import basin_stability, push_analysis  # heavy: numba, numpy
-    from rbstab.analysis.text import push_lines, stability_lines  # heavy: numba, numpy
-    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
-
-    console = get_console()
-    loaded = load_configs(paths, overrides, chains=True)
-    for options in (push, stability if stability and stability.get("push") else None):
-        if options is None:
-            continue
-        for config in loaded:
-            names = config.chain.body_names
-            if options["body"] not in names:
-                found = "none" if options["body"] is None else f"'{options['body']}'"
-                raise click.UsageError(f"--push-body: found {found} for {config.name}; expected the body of the "
-                                       f"chain that is pushed ({', '.join(names)})")
-    if stability is not None and stability.get("ranges"):
-        from rbstab.analysis.push import parse_ranges  # heavy: numba, numpy
-
-        try:
-            entries = [a for a, _, _ in parse_ranges(stability["ranges"], None)]
-            for config in loaded:
-                check_entries(config, entries)
-        except ValueError as exc:
-            raise click.ClickException(str(exc).replace("--basin ", "--basin-stability "))
-    axes = []
-    if basin:
-        if len(basin) != 2:
-            raise click.UsageError(f"--basin: give it exactly twice (two axes of the slice), found {len(basin)}")
-        try:
-            axes = [BasinAxis.parse(t) for t in basin]
-            for config in loaded:
-                check_axes(config, axes)
-        except ValueError as exc:
-            raise click.ClickException(str(exc))
-    if not overwrite:
-        _check_targets(loaded, out)
-    if certificate or axes or push is not None or stability is not None:
-        ensure_compiled(say=console.info, chain=True)
-    for config in loaded:
-        try:
-            result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed, ratio=ratio)
-            found = basin_map(config, axes, ratio=ratio, n_samples=n_samples, jobs=jobs) if axes else None
-            pushed = push_analysis(config, ratio=ratio, jobs=jobs, **push) if push is not None else None
-            stable = basin_stability(config, ratio=ratio, jobs=jobs, **stability) if stability is not None else None
-            result = result.with_runs(basin=found, push=pushed, basin_stability=stable)
-        except ValueError as exc:
-            raise click.ClickException(f"{config.name}: {exc}")
-        path = write_analysis(result, analysis_path(out, config.name), command_line=command_line())
-        if console.json:
-            c = result.certificate
-            push_json = None
-            if pushed:
-                push_json = pushed.to_json()
-                if c is not None and c.positive_definite:
-                    estimate = pushed.estimate(c.sublevel)
-                    push_json["estimate"] = estimate if math.isfinite(estimate) else None
-            console.emit({"kind": "chain", **result.as_dict(), **({"basin": _basin_json(found)} if found else {}),
-                          **({"push": push_json} if pushed else {}),
-                          **({"basin_stability": stable.to_json()} if stable else {})})
-            continue
-        console.out(result.text())
-        for line in push_lines(result) + stability_lines(result):
-            console.out(line)
-        if found is not None:
-            counts = ", ".join(f"{n} {name}" for name, n in found.counts().items())
-            a, b = found.axes
-            console.out(f"  basin map over {a.label} x {b.label} ({len(a.values)} x {len(b.values)} runs, t_end "
-                        f"{found.t_end:g} s): {counts}")
-            for message, n in found.messages.items():
-                console.out(f"    {n} failed: {message}")
-        console.out(f"  -> {path}")
-
-
-def _basin_json(found) -> dict:
-    """A chain's basin map as plain Python: the axes' keys and values, the outcome of every
-    point (rows: the first axis; 0 converged, 1 not converged, 2 failed), the counts and
-    the failures' messages."""
-    return {"axes": [{"key": a.key, "values": a.values.tolist()} for a in found.axes],
-            "outcome": found.outcome.tolist(), "counts": found.counts(), "messages": found.messages,
-            "t_end": found.t_end, "ratio": found.ratio}
 
 
 def _check_verifiable(loaded, specs) -> None:

@@ -568,3 +568,33 @@ def test_a_trees_v_changes_by_the_disturbances_work_and_its_analytic_rate_along_
             smooth &= np.abs(time - edge) > 0.002
         assert np.abs(numerical_rate(time, v) - out["lyapunov_rate"])[smooth].max() < 1e-3 * (
             1.0 + np.abs(out["lyapunov_rate"]).max())
+
+
+def test_rbstab_analyze_takes_one_body_and_a_chain_in_one_command(tmp_path):
+    """One command analyses a one-body config and a chain together (one path for both):
+    each writes its analysis file and its record, the chain's as rbstab.analyze gives it
+    for the chain alone; a --boundary-layer, which only one body's sign law takes, is
+    refused for the chain in one line before anything runs."""
+    import json
+
+    from click.testing import CliRunner
+
+    import rbstab
+    from rbstab.config.chains import load_any_config
+
+    from rbstab_cli.main import cli
+
+    chain = "configs/examples/stance_ankle_hip.yaml"
+    both = CliRunner().invoke(cli, ["analyze", "configs/paper/case1_permanent.yaml", chain, "--json",
+                                    "--no-certificate", "-o", str(tmp_path)])
+    assert both.exit_code == 0, both.output
+    records = [json.loads(line) for line in both.stdout.splitlines() if line.startswith("{")]
+    assert [r["kind"] for r in records] == ["configuration", "chain"]
+    assert (tmp_path / "case1_permanent.analysis.nc").is_file() and (tmp_path / "stance_ankle_hip.analysis.nc").is_file()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        alone = rbstab.analyze(load_any_config(chain), certificate=False)
+    assert alone.kind == "chain" and records[1]["eigenvalues"] == alone.to_json()["eigenvalues"]
+    refused = CliRunner().invoke(cli, ["analyze", chain, "--boundary-layer", "0.01", "-o", str(tmp_path / "no")])
+    assert refused.exit_code == 1 and "a chain has no pure sign law to replace" in refused.output
+    assert "Traceback" not in refused.output and not (tmp_path / "no").exists()

@@ -38,7 +38,7 @@ from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
 from .linearise import Linearisation, linearise, undisturbed
 from .push import basin_stability as stability_of
 from .push import push_analysis, unbounded_fall_note
-from .verify import NotVerifiable, check_verifiable, verify_analysis
+from .verify import NotVerifiable, check_verifiable, verified_model, verify_analysis
 
 __all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits",
            "equilibrium_outside_limits"]
@@ -90,6 +90,9 @@ class Analysis:
     verification: Any = None
     notes: list[str] = field(default_factory=list)
     timing: dict = field(default_factory=dict)
+
+    #: Its ``--json`` record's kind.
+    kind = "configuration"
 
     @property
     def name(self) -> str:
@@ -299,8 +302,14 @@ def analyze(
 
     Parameters
     ----------
-    config : RunConfig or path-like
-        A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
+    config : RunConfig, ChainConfig or path-like
+        A validated configuration, or a YAML file (:func:`rbstab.config.chains.load_any_config`).
+        A tree of bodies is analysed in its independent coordinates
+        (:func:`rbstab.analysis.chain.analyze_chain`, a
+        :class:`rbstab.analysis.chain.ChainAnalysis`), its basin map, pushes (on the body
+        ``push["body"]``) and basin stability run on the CPU's compiled driver in ``jobs``
+        threads; ``boundary_layer``, ``simulate``, ``engine`` and ``executor`` are one
+        body's.
     boundary_layer : float, optional
         phi [m] analysed in place of the pure sign law of ``sliding`` (default
         :data:`DEFAULT_BOUNDARY_LAYER`); see :func:`analysed_config`.
@@ -346,7 +355,7 @@ def analyze(
 
     Returns
     -------
-    Analysis
+    Analysis or ChainAnalysis
 
     Raises
     ------
@@ -365,12 +374,17 @@ def analyze(
         refuse_at_script_top_level("a basin map" if basin else "a push analysis")  # before anything is computed
 
     if isinstance(config, (str, os.PathLike)):
-        from ..config import load_config  # heavy: pydantic (the validator)
+        from ..config.chains import load_any_config  # heavy: pydantic (the validator)
 
-        config = load_config(config)
+        config = load_any_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
     if verify:
+        config = verified_model(config)  # a one-body tree: the one-body model it is
         check_verifiable(config)
+    if getattr(config, "chain", None) is not None:
+        return _analyze_tree(config, boundary_layer=boundary_layer, certificate=certificate, samples=samples,
+                             seed=seed, basin=basin, basin_samples=basin_samples, ratio=ratio, jobs=jobs, push=push,
+                             basin_stability=basin_stability, falsification_runs=falsification_runs)
     timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
@@ -438,6 +452,29 @@ def analyze(
             notes.append(f"verification: {exc}")
         timing["verification"] = _time.perf_counter() - t7
     return result
+
+
+def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, basin, basin_samples: int,
+                  ratio: float, jobs: int, push, basin_stability, falsification_runs: int):
+    """:func:`analyze` of a tree of bodies (:class:`rbstab.config.chains.ChainConfig`): its
+    rest state, linearisation and certificate (:func:`rbstab.analysis.chain.analyze_chain`),
+    then the basin map, the pushes on a named body (``push["body"]``) and the basin
+    stability of the same command, its runs on the CPU's compiled driver in ``jobs``
+    threads; a :class:`rbstab.analysis.chain.ChainAnalysis`."""
+    from .chain import analyze_chain, check_axes  # heavy: numba
+
+    if boundary_layer is not None:
+        raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace (a "
+                         "sliding joint of a chain has its own boundary_layer > 0)")
+    axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
+    if basin is not None:
+        check_axes(config, axes)
+    result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed,
+                           falsification_runs=falsification_runs, ratio=ratio)
+    return result.with_runs(
+        basin=basin_map(config, axes, ratio=ratio, n_samples=basin_samples, jobs=jobs) if axes else None,
+        push=push_analysis(config, **push, ratio=ratio, jobs=jobs) if push else None,
+        basin_stability=stability_of(config, **basin_stability, ratio=ratio, jobs=jobs) if basin_stability else None)
 
 
 def _workers(executor, jobs: int, push, stability):

@@ -118,6 +118,8 @@ class ChainAnalysis:
     verification = None
     #: A chain's analysis file's ``variant``, as its run file's.
     variant = "chain"
+    #: Its ``--json`` record's kind.
+    kind = "chain"
 
     @property
     def name(self) -> str:
@@ -170,6 +172,33 @@ class ChainAnalysis:
                 **time_scale_record(lin),
                 "initial_lyapunov": self.initial_lyapunov, "notes": list(self.notes),
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
+
+    def basin_inside(self) -> dict[str, int] | None:
+        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
+        if self.basin is None or self.certificate is None:
+            return None
+        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
+
+    def to_json(self) -> dict:
+        """The ``--json`` record: :meth:`as_dict`, with the basin map (the axes' keys and
+        values, every point's outcome (rows: the first axis; 0 converged, 1 not converged,
+        2 failed), the counts and the failures' messages), the pushes (with the push
+        estimate from {v <= c}, ``estimate``) and the basin stability of the command."""
+        record = self.as_dict()
+        if self.basin is not None:
+            b = self.basin
+            record["basin"] = {"axes": [{"key": a.key, "values": a.values.tolist()} for a in b.axes],
+                               "outcome": b.outcome.tolist(), "counts": b.counts(), "messages": b.messages,
+                               "t_end": b.t_end, "ratio": b.ratio}
+        if self.push is not None:
+            record["push"] = self.push.to_json()
+            c = self.certificate
+            if c is not None and c.positive_definite:
+                estimate = self.push.estimate(c.sublevel)
+                record["push"]["estimate"] = estimate if np.isfinite(estimate) else None
+        if self.basin_stability is not None:
+            record["basin_stability"] = self.basin_stability.to_json()
+        return record
 
     def angles(self) -> tuple[list[str], list[int]]:
         """(names ``<body>.theta_<i>``, positions in the linearisation's coordinates) of the

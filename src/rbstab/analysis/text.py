@@ -271,7 +271,10 @@ def rule_lines(rules, bar: float) -> list[str]:
 
 
 def describe(analysis) -> list[str]:
-    """Lines summarising an :class:`~rbstab.analysis.Analysis`."""
+    """Lines summarising an :class:`~rbstab.analysis.Analysis` or a
+    :class:`~rbstab.analysis.ChainAnalysis`."""
+    if analysis.variant == "chain":  # its rest state by body, mode shapes, certificate in its coordinates
+        return analysis.text().split("\n") + _basin_lines(analysis) + push_lines(analysis) + stability_lines(analysis)
     lin = analysis.linearisation
     layout = analysis.layout
     lines = [f"{analysis.name} ({analysis.variant}): {lin.verdict} (tolerance |Re s| <= {_g(lin.tolerance, 2)} 1/s)"]
