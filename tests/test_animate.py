@@ -72,13 +72,14 @@ def _rotation(theta: np.ndarray) -> np.ndarray:
 
 
 def _drawn(renderer: FrameRenderer, k: int) -> dict[str, np.ndarray]:
-    """Where frame k draws C, the anchor-to-C segment, the COM and the body axes."""
+    """Where frame k draws one body's C, its anchor-to-C segment, its COM and its axes (the
+    artists draw every body's: one here)."""
     art = renderer.artists
     art.update(k)
-    segment = np.array(art.error.get_data_3d()).T  # (2, 3): anchor, C
+    segment = np.array(art.error.get_data_3d()).T[:2]  # (2, 3): anchor, C (then a NaN row between segments)
     axes = np.array([np.array(line.get_data_3d()).T[1] - np.array(line.get_data_3d()).T[0] for line in art.axes])
-    return {"c": np.array(art.c.get_data_3d()).ravel(), "segment": segment,
-            "com": np.array(art.com.get_data_3d()).ravel(), "axes": axes.T}
+    return {"c": np.array(art.joints.get_data_3d()).T[0], "segment": segment,
+            "com": np.array(art.coms.get_data_3d()).ravel(), "axes": axes.T}
 
 
 @pytest.mark.parametrize("name", sorted(VARIANTS))
@@ -105,33 +106,34 @@ def test_drawn_c_is_x_plus_a_r_and_the_drawn_segment_is_the_stored_e_at_every_fr
     # between the samples: the drawn segment is the interpolated stored E, and X (from eq 4) is off
     # the linear interpolation of X by that of A R, at most dt^2/8 (|dOmega/dt| + |Omega|^2) |R|
     between = scene(run, n_frames=37)
-    np.testing.assert_allclose(between.point_c - between.anchor, between.constraint_error, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(between.point_c[:, 0] - between.anchor, between.constraint_error, rtol=0,
+                               atol=1e-12 * scale)
     dt = float(np.diff(s["time"]).max())
     omega = np.linalg.norm(s["omega"], axis=1)
     omega_dot = np.linalg.norm(np.diff(s["omega"], axis=0), axis=1) / np.diff(s["time"])
     bound = dt**2 / 8 * (omega_dot.max() + omega.max() ** 2) * np.linalg.norm(r)
     linear = np.stack([np.interp(between.time, s["time"], s["position"][:, j]) for j in range(3)], axis=1)
-    gap = np.linalg.norm(between.position - linear, axis=1).max()
+    gap = np.linalg.norm(between.position[:, 0] - linear, axis=1).max()
     assert gap <= bound, (gap, bound)
 
 
 def test_a_pinned_body_keeps_c_at_its_anchor_and_a_free_body_does_not(runs):
     pinned = scene(pick_run(runs["case1_permanent"]), n_frames=23)
     stored = np.abs(pick_run(runs["case1_permanent"]).series("constraint_error")["constraint_error"]).max()
-    assert np.abs(pinned.point_c - pinned.anchor).max() <= stored + 1e-12
+    assert np.abs(pinned.point_c[:, 0] - pinned.anchor).max() <= stored + 1e-12
     assert np.abs(pinned.position).max() > 0.05  # the body does swing about C
     free = scene(pick_run(runs["free_gravity"]), n_frames=23)
-    assert np.linalg.norm(free.point_c - free.anchor, axis=1).max() > 0.01
+    assert np.linalg.norm(free.point_c[:, 0] - free.anchor, axis=1).max() > 0.01
 
 
 def test_the_box_edges_are_the_columns_of_a_and_its_moments_are_the_bodys(runs, rng):
     sc = scene(pick_run(runs["case3_embedded"]), n_frames=9)
     for k in range(len(sc.time)):
-        corners = sc.corners[k]
+        corners = sc.corners[k, 0]
         for i, other in enumerate((4, 2, 1)):  # corner 0 and the corners across each edge from it
             edge = corners[other] - corners[0]
-            np.testing.assert_allclose(edge, sc.shape.sides[i] * sc.rotation[k][:, i], rtol=0, atol=1e-12)
-        np.testing.assert_allclose(corners.mean(axis=0), sc.position[k], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(edge, sc.shape.sides[i] * sc.rotation[k, 0][:, i], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(corners.mean(axis=0), sc.position[k, 0], rtol=0, atol=1e-12)
     # a realisable inertia: the uniform box of sides (a1, a2, a3) has j1 = m (a2^2 + a3^2) / 12 ...
     sides, mass = rng.uniform(0.1, 2.0, 3), rng.uniform(1.0, 100.0)
     moments = mass / 12 * np.array([sides[1] ** 2 + sides[2] ** 2, sides[0] ** 2 + sides[2] ** 2,
@@ -170,7 +172,7 @@ def test_the_scene_limits_hold_every_frame_with_equal_axes(runs):
     limits = np.array([ax.get_xlim(), ax.get_ylim(), ax.get_zlim()])
     widths = np.diff(limits, axis=1).ravel()
     np.testing.assert_allclose(widths, widths[0], rtol=1e-12)  # equal axes
-    points = np.concatenate([sc.corners.reshape(-1, 3), sc.point_c, sc.trace])
+    points = np.concatenate([sc.corners.reshape(-1, 3), sc.point_c.reshape(-1, 3), sc.trace.reshape(-1, 3)])
     assert np.all(points >= limits[:, 0]) and np.all(points <= limits[:, 1])
     for k in (7, 14):
         renderer.render(k)

@@ -17,8 +17,9 @@ pure functions of arrays, then drawn with matplotlib (``mpl_toolkits.mplot3d``,
 - the trace of the COM, the direction of gravity; the time, v(t) and |E| in a corner; a
   failed run is drawn up to its last finite sample, with its message.
 
-A chain run (:func:`chain_scene`) draws each body so, the segments from each centre of mass
-to its joints' points, each joint's two points joined by E_j, and the ground points.
+A chain run is drawn so, body by body (one body is a tree of one, held at R by its joint):
+each body's box and axes, the segments from each centre of mass to its joints' points, each
+joint's two points joined by E_j, and the ground points.
 
 The scene's limits are fixed over the animation and its axes are equal
 (:func:`scene_limits`). Outputs: an HTML snippet that plays offline (:func:`animation_html`,
@@ -65,8 +66,6 @@ __all__ = [
     "frame_times",
     "playback_frames",
     "scene",
-    "ChainScene",
-    "chain_scene",
     "scene_limits",
     "pick_run",
     "draw_animation",
@@ -218,55 +217,72 @@ def playback_frames(duration: float, fps: float, speed: float) -> int:
 
 @dataclass(frozen=True)
 class Scene:
-    """Everything drawn, per frame (k frames).
+    """Everything drawn of a run, per frame (k frames, n bodies, n joints: joint j holds body
+    j to its parent; one body is a tree of one, held to the ground at R by its joint).
 
     Attributes
     ----------
-    time : ndarray, shape (k,)
-        Frame times [s].
-    rotation : ndarray, shape (k, 3, 3)
-        A(Theta) at the frame times.
-    position : ndarray, shape (k, 3)
-        X [m], the COM.
-    point_c : ndarray, shape (k, 3)
-        C = X + A R [m].
-    anchor : ndarray, shape (3,)
-        R [m], inertial frame: where C is at X = 0, Theta = 0 (the origin of E).
+    time, lyapunov : ndarray, shape (k,)
+        Frame times [s]; the stored v [J], interpolated.
+    rotation : ndarray, shape (k, n, 3, 3)
+        A(Theta_i) of each body.
+    position : ndarray, shape (k, n, 3)
+        X_i [m], each body's COM.
+    corners : ndarray, shape (k, n, 8, 3)
+        Each body's box (:func:`box_corners`).
+    shapes : list of BodyShape
+        Each body's box; ``attachment_point`` its joint's R_c.
+    point_c : ndarray, shape (k, n, 3)
+        Each joint's point on its child, X_c + A_c R_c [m].
+    parent_point : ndarray, shape (k, n, 3)
+        Each joint's point on its parent, X_p + A_p R_p [m] (the ground point R_p itself,
+        where C is at E = 0: one body's anchor R).
+    anchor : ndarray, shape (g, 3)
+        The ground points of the joints held to the ground [m].
     constraint_error : ndarray, shape (k, 3)
-        The stored E [m], interpolated to the frame times.
-    lyapunov : ndarray, shape (k,)
-        The stored v [J], interpolated.
-    corners : ndarray, shape (k, 8, 3)
-        The box (:func:`box_corners`).
-    shape : BodyShape
-    trace : ndarray, shape (m, 3)
-        X at every stored sample up to the last frame (the COM's path).
-    trace_time : ndarray, shape (m,)
+        At each frame, the E_j of largest magnitude over the joints [m] (one body's E).
+    trace : ndarray, shape (m, n, 3)
+        Every stored X_i up to the last frame; ``trace_time`` (m,) their times.
+    bodies, joints : list of str
+        Their names (one body's: ``body``, ``controller``).
+    parents : list of int
+        Each joint's parent body (-1: the ground).
     label, variant, status, message : str
         The run's.
     t_failed : float or None
         Time of the last finite sample of a failed run; None for a successful run.
     gravity : ndarray, shape (3,)
-        g [m/s^2], inertial frame (``body.gravity``; zero when absent).
+        g [m/s^2], inertial frame (zero when absent).
     """
 
     time: np.ndarray
+    lyapunov: np.ndarray
     rotation: np.ndarray
     position: np.ndarray
+    corners: np.ndarray
+    shapes: list
     point_c: np.ndarray
+    parent_point: np.ndarray
     anchor: np.ndarray
     constraint_error: np.ndarray
-    lyapunov: np.ndarray
-    corners: np.ndarray
-    shape: BodyShape
     trace: np.ndarray
     trace_time: np.ndarray
+    bodies: list
+    joints: list
+    parents: list
     label: str = ""
     variant: str = ""
     status: str = "success"
     message: str = ""
     t_failed: float | None = None
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @property
+    def shape(self) -> BodyShape:
+        """The bodies' shapes as one for the notes: a side drawn thin on any body."""
+        thin = np.any([b.thin for b in self.shapes], axis=0)
+        first = self.shapes[0]
+        return BodyShape(first.sides, thin, first.principal_axes, first.attachment_point)
 
 
 def _interpolate(t: np.ndarray, samples: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -277,16 +293,20 @@ def _interpolate(t: np.ndarray, samples: np.ndarray, times: np.ndarray) -> np.nd
 
 
 def _trajectory(run: RunData, n_frames: int | None, fps: float, speed: float) -> tuple[dict, slice, np.ndarray]:
-    """(the run's stored theta, position, constraint_error, lyapunov with their time; the
-    samples up to its last finite one; the frame times): AnimationError where the file keeps
-    no trajectory, fewer than 2 finite samples, or more than :data:`MAX_FRAMES` frames."""
+    """(the run's stored theta, position, constraint_error, lyapunov with their time, each
+    with a body or joint axis (one body's: one); the samples up to its last finite one; the
+    frame times): AnimationError where the file keeps no trajectory, fewer than 2 finite
+    samples, or more than :data:`MAX_FRAMES` frames."""
     s = run.series("theta", "position", "constraint_error", "lyapunov")
     missing = [n for n in ("time", "theta", "position", "constraint_error", "lyapunov") if n not in s]
     if missing:
         raise AnimationError(f"{run.label}: no stored trajectory to animate (the file lacks {', '.join(missing)}; "
                              "a sweep's --store summary keeps none)")
+    for name in ("theta", "position", "constraint_error"):
+        if s[name].ndim == 2:  # one body's (n, 3): its one body or joint
+            s[name] = s[name][:, None]
     finite = np.isfinite(s["time"]) & np.isfinite(s["lyapunov"])
-    for name in ("theta", "position", "constraint_error"):  # (n, 3) for a body, (n, bodies or joints, 3) for a chain
+    for name in ("theta", "position", "constraint_error"):
         finite &= np.all(np.isfinite(s[name]).reshape(len(finite), -1), axis=1)
     last = int(np.flatnonzero(finite)[-1]) if finite.any() else -1
     if last < 1 or not finite[: last + 1].all():
@@ -300,13 +320,44 @@ def _trajectory(run: RunData, n_frames: int | None, fps: float, speed: float) ->
     return s, keep, frame_times(t[0], t[-1], count)
 
 
-def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> Scene:
-    """The :class:`Scene` of a run, from its stored series interpolated to the frame times.
+def _tree(config: dict) -> tuple[list[BodyShape], list[int], np.ndarray, list[str], list[str], np.ndarray]:
+    """(each body's BodyShape, its joint's R_c; each joint's parent index, -1 ground; each
+    joint's R_p (n, 3); the bodies' and joints' names; g) of a run's resolved configuration
+    (one body: its body ``body`` held to the ground at R by its joint ``controller``)."""
+    if "bodies" not in config:
+        shape = body_shape(config)
+        gravity = (config.get("body") or {}).get("gravity")
+        return ([shape], [-1], shape.attachment_point[None].copy(), ["body"], ["controller"],
+                np.asarray(gravity if gravity is not None else np.zeros(3), dtype=float).reshape(3))
+    try:
+        bodies, joints = list(config["bodies"]), list(config["joints"])
+        names = [b["name"] for b in bodies]
+        by_child = {j["child"]: j for j in joints}
+        shapes, parents, points = [], [], []
+        for body in bodies:
+            joint = by_child[body["name"]]
+            shape = body_shape({"body": {"mass": body["mass"], "inertia": body["inertia"],
+                                         "attachment_point": joint["child_point"]}})
+            shapes.append(shape)
+            parents.append(-1 if joint["parent"] == "ground" else names.index(joint["parent"]))
+            points.append(np.asarray(joint["parent_point"], dtype=float).reshape(3))
+        joint_names = [by_child[b]["name"] for b in names]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise AnimationError(f"the run's config has no usable bodies and joints ({exc})") from None
+    return (shapes, parents, np.array(points), names, joint_names,
+            np.asarray(config.get("gravity") or np.zeros(3), dtype=float).reshape(3))
 
-    Theta and E are interpolated linearly in time; X follows from eq 4, X = R + E - A R,
-    so that C = X + A R lies at the stored E from its anchor R at every frame (at a pinned
-    body's anchor) and X is the stored X at the sample times (between them it differs from
-    the linear interpolation of X by that of A R, O(dt^2 (|dOmega/dt| + |Omega|^2) |R|)).
+
+def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> Scene:
+    """The :class:`Scene` of a run (one body or a chain), from its stored series (Theta_i,
+    X_i, E_j, v) interpolated linearly to the frame times; the bodies' shapes, names and the
+    joints' points from its configuration.
+
+    A body held to the ground (one body's, or a chain's on a ground joint) follows eq 4 for
+    X: X = R_p + E - A R_c, so that its C lies at the stored E from its ground point at every
+    frame (at a pinned body's anchor) and X is the stored X at the sample times (between
+    them it differs from the linear interpolation of X by that of A R_c, O(dt^2
+    (|dOmega/dt| + |Omega|^2) |R_c|)); a body on another body's joint follows its stored X.
 
     Parameters
     ----------
@@ -330,144 +381,32 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
         If the run has no stored trajectory (a ``summary`` store) or fewer than 2 finite
         samples, or the frames would be more than :data:`MAX_FRAMES`.
     """
-    if run.variant == "chain":
-        return chain_scene(run, n_frames, fps, speed)
     s, keep, frames = _trajectory(run, n_frames, fps, speed)
     t = s["time"][keep]
-    shape = body_shape(run.config)
-    r = shape.attachment_point
-    rotation = rotation_matrix(_interpolate(t, s["theta"][keep], frames))
-    error = _interpolate(t, s["constraint_error"][keep], frames)
-    position = r + error - rotation @ r  # eq 4 for X: C sits at R + E, the stored E, at every frame
-    return Scene(
-        time=frames, rotation=rotation, position=position,
-        point_c=attachment_point(position, rotation, r),
-        anchor=r.copy(),
-        constraint_error=error,
-        lyapunov=_interpolate(t, s["lyapunov"][keep], frames),
-        corners=box_corners(position, rotation, shape), shape=shape,
-        trace=s["position"][keep], trace_time=t,
-        label=run.label, variant=run.variant, status=run.status, message=run.message,
-        t_failed=None if run.ok else float(t[-1]),
-        gravity=np.asarray((run.config.get("body") or {}).get("gravity") or np.zeros(3), dtype=float).reshape(3),
-    )
-
-
-@dataclass(frozen=True)
-class ChainScene:
-    """Everything drawn of a chain run, per frame (k frames, n bodies, n joints: joint j holds
-    body j to its parent).
-
-    Attributes
-    ----------
-    time, lyapunov : ndarray, shape (k,)
-        Frame times [s]; the stored v [J], interpolated.
-    rotation : ndarray, shape (k, n, 3, 3)
-        A(Theta_i) of each body.
-    position : ndarray, shape (k, n, 3)
-        X_i [m], each body's COM.
-    corners : ndarray, shape (k, n, 8, 3)
-        Each body's box (:func:`box_corners`).
-    shapes : list of BodyShape
-        Each body's box; ``attachment_point`` its joint's R_c.
-    point_c : ndarray, shape (k, n, 3)
-        Each joint's point on its child, X_c + A_c R_c [m].
-    parent_point : ndarray, shape (k, n, 3)
-        Each joint's point on its parent, X_p + A_p R_p [m] (the ground point R_p itself).
-    anchor : ndarray, shape (g, 3)
-        The ground points of the joints held to the ground [m].
-    constraint_error : ndarray, shape (k, 3)
-        At each frame, the E_j of largest magnitude over the joints [m].
-    trace : ndarray, shape (m, n, 3)
-        Every stored X_i up to the last frame; ``trace_time`` (m,) their times.
-    bodies, joints : list of str
-        Their names.
-    parents : list of int
-        Each joint's parent body (-1: the ground).
-    label, variant, status, message, t_failed, gravity
-        As :class:`Scene`'s.
-    """
-
-    time: np.ndarray
-    lyapunov: np.ndarray
-    rotation: np.ndarray
-    position: np.ndarray
-    corners: np.ndarray
-    shapes: list
-    point_c: np.ndarray
-    parent_point: np.ndarray
-    anchor: np.ndarray
-    constraint_error: np.ndarray
-    trace: np.ndarray
-    trace_time: np.ndarray
-    bodies: list
-    joints: list
-    parents: list
-    label: str = ""
-    variant: str = "chain"
-    status: str = "success"
-    message: str = ""
-    t_failed: float | None = None
-    gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    @property
-    def shape(self) -> BodyShape:
-        """The bodies' shapes as one for the notes: a side drawn thin on any body."""
-        thin = np.any([b.thin for b in self.shapes], axis=0)
-        first = self.shapes[0]
-        return BodyShape(first.sides, thin, first.principal_axes, first.attachment_point)
-
-
-def _chain_shapes(config: dict) -> tuple[list[BodyShape], list[int], np.ndarray]:
-    """(each body's BodyShape, its joint's R_c; each joint's parent index, -1 ground; each
-    joint's R_p (n, 3)) of a chain run's resolved configuration."""
-    try:
-        bodies, joints = list(config["bodies"]), list(config["joints"])
-        names = [b["name"] for b in bodies]
-        by_child = {j["child"]: j for j in joints}
-        shapes, parents, points = [], [], []
-        for body in bodies:
-            joint = by_child[body["name"]]
-            shape = body_shape({"body": {"mass": body["mass"], "inertia": body["inertia"],
-                                         "attachment_point": joint["child_point"]}})
-            shapes.append(shape)
-            parents.append(-1 if joint["parent"] == "ground" else names.index(joint["parent"]))
-            points.append(np.asarray(joint["parent_point"], dtype=float).reshape(3))
-    except (KeyError, TypeError, ValueError) as exc:
-        raise AnimationError(f"the run's config has no usable bodies and joints ({exc})") from None
-    return shapes, parents, np.array(points)
-
-
-def chain_scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> ChainScene:
-    """The :class:`ChainScene` of a chain run, from its stored series (Theta_i, X_i, E_j, v)
-    interpolated linearly to the frame times; the bodies' names and the joints' points from
-    its configuration. Raises AnimationError as :func:`scene` does."""
-    s, keep, frames = _trajectory(run, n_frames, fps, speed)
-    t = s["time"][keep]
-    shapes, parents, r_p = _chain_shapes(run.config)
+    shapes, parents, r_p, names, joint_names, gravity = _tree(run.config)
     n = len(shapes)
     theta, x, e = s["theta"][keep], s["position"][keep], s["constraint_error"][keep]
     if theta.shape[1] != n:
         raise AnimationError(f"{run.label}: the file holds {theta.shape[1]} bodies, its config {n}")
     rotation = np.stack([rotation_matrix(_interpolate(t, theta[:, i], frames)) for i in range(n)], axis=1)
-    position = np.stack([_interpolate(t, x[:, i], frames) for i in range(n)], axis=1)
     error = np.stack([_interpolate(t, e[:, j], frames) for j in range(n)], axis=1)
+    position = np.stack([r_p[i] + error[:, i] - rotation[:, i] @ shapes[i].attachment_point if parents[i] < 0
+                         else _interpolate(t, x[:, i], frames) for i in range(n)], axis=1)  # eq 4 on the ground
     point_c = np.stack([attachment_point(position[:, i], rotation[:, i], shapes[i].attachment_point)
                         for i in range(n)], axis=1)
     parent_point = np.stack([np.broadcast_to(r_p[j], (len(frames), 3)) if parents[j] < 0 else
                              attachment_point(position[:, parents[j]], rotation[:, parents[j]], r_p[j])
                              for j in range(n)], axis=1)
     largest = np.argmax(np.linalg.norm(error, axis=-1), axis=1)
-    names = [b["name"] for b in run.config["bodies"]]
-    return ChainScene(
+    return Scene(
         time=frames, lyapunov=_interpolate(t, s["lyapunov"][keep], frames), rotation=rotation, position=position,
         corners=np.stack([box_corners(position[:, i], rotation[:, i], shapes[i]) for i in range(n)], axis=1),
         shapes=shapes, point_c=point_c, parent_point=parent_point,
         anchor=np.array([r_p[j] for j in range(n) if parents[j] < 0]).reshape(-1, 3),
         constraint_error=error[np.arange(len(frames)), largest], trace=x, trace_time=t,
-        bodies=names, joints=[{j["child"]: j["name"] for j in run.config["joints"]}[b] for b in names], parents=parents,
-        label=run.label, status=run.status, message=run.message, t_failed=None if run.ok else float(t[-1]),
-        gravity=np.asarray(run.config.get("gravity") or np.zeros(3), dtype=float).reshape(3),
+        bodies=names, joints=joint_names, parents=parents,
+        label=run.label, variant=run.variant, status=run.status, message=run.message,
+        t_failed=None if run.ok else float(t[-1]), gravity=gravity,
     )
 
 
@@ -546,80 +485,43 @@ def _notes(sc: Scene) -> list[tuple[str, str]]:
 
 
 class _Artists:
-    """The artists of one animation and how frame k moves them."""
+    """The artists of an animation and how frame k moves them: a box a body (each its own
+    tint), each body's axes x_b, y_b, z_b from its COM, the segments from each COM to its
+    joints' points (the skeleton, grey), each joint's two points joined by E_j (orange: one
+    body's anchor R to its C), the COMs, the ground points and the trace of the last body's
+    COM; the time, v and |E| in a corner."""
+
+    _TINTS = ((0.45, 0.62, 0.85), (0.85, 0.62, 0.45), (0.5, 0.78, 0.5), (0.78, 0.55, 0.78),
+              (0.85, 0.8, 0.4), (0.5, 0.75, 0.8), (0.7, 0.7, 0.7), (0.9, 0.55, 0.6))
 
     def __init__(self, ax, sc: Scene) -> None:
         from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # heavy: mpl_toolkits
 
         self.sc = sc
         self.axes3d = ax
-        self.box = Poly3DCollection(self._faces(0), facecolor=(0.45, 0.62, 0.85, 0.28), edgecolor="0.2", linewidths=0.8)
-        ax.add_collection3d(self.box)
-        length = 0.6 * float(sc.shape.sides.max())
-        self.length = length
-        self.axes = [ax.plot([], [], [], color=c, lw=2.0, label=f"body axis ${'xyz'[i]}_b$")[0]
-                     for i, c in enumerate(AXIS_COLOURS)]
-        self.trace = ax.plot([], [], [], color=COM_COLOUR, lw=1.0, label="COM trace")[0]
-        self.com = ax.plot([], [], [], "o", color=COM_COLOUR, ms=4, label="COM X")[0]
-        a = sc.anchor
-        ax.plot([a[0]], [a[1]], [a[2]], "x", color=ANCHOR_COLOUR, ms=9, mew=2, label="anchor of C (E = 0)")
-        if np.any(sc.gravity):
-            _gravity_arrow(ax, sc.gravity)
-        self.error = ax.plot([], [], [], color=C_COLOUR, lw=2.5, label="E (anchor to C)")[0]
-        self.c = ax.plot([], [], [], "o", color=C_COLOUR, ms=6, label="C = X + A R")[0]
-        self.text = ax.text2D(0.01, 0.99, "", transform=ax.transAxes, va="top", ha="left", family="monospace",
-                              fontsize=8, bbox={"facecolor": "white", "edgecolor": "0.7", "alpha": 0.85})
-        self.trace_index = np.searchsorted(sc.trace_time, sc.time, side="right")
-
-    def _faces(self, k: int) -> list:
-        corners = self.sc.corners[k]
-        return [corners[list(face)] for face in BOX_FACES]
-
-    def update(self, k: int) -> list:
-        sc = self.sc
-        x = sc.position[k]
-        self.box.set_verts(self._faces(k))
-        for i, line in enumerate(self.axes):
-            tip = x + self.length * sc.rotation[k][:, i]
-            line.set_data_3d([x[0], tip[0]], [x[1], tip[1]], [x[2], tip[2]])
-        path = np.vstack([sc.trace[: self.trace_index[k]], x])
-        self.trace.set_data_3d(path[:, 0], path[:, 1], path[:, 2])
-        self.com.set_data_3d([x[0]], [x[1]], [x[2]])
-        c, a = sc.point_c[k], sc.anchor
-        self.error.set_data_3d([a[0], c[0]], [a[1], c[1]], [a[2], c[2]])
-        self.c.set_data_3d([c[0]], [c[1]], [c[2]])
-        self.text.set_text(_corner_text(sc, k))
-        return [self.box, *self.axes, self.trace, self.com, self.error, self.c, self.text]
-
-
-class _ChainArtists:
-    """The artists of a chain's animation: a box a body (its own colour), each joint's two
-    points joined by E_j (orange) and the segments from each body's COM to its joints'
-    points (the skeleton, grey), the COMs and the trace of the last body's COM."""
-
-    def __init__(self, ax, sc: ChainScene) -> None:
-        from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # heavy: mpl_toolkits
-
-        self.sc = sc
-        self.axes3d = ax
-        tints = [(0.45, 0.62, 0.85), (0.85, 0.62, 0.45), (0.5, 0.78, 0.5), (0.78, 0.55, 0.78),
-                 (0.85, 0.8, 0.4), (0.5, 0.75, 0.8), (0.7, 0.7, 0.7), (0.9, 0.55, 0.6)]
+        one = len(sc.bodies) == 1
         self.boxes = []
         for i, name in enumerate(sc.bodies):
-            box = Poly3DCollection(self._faces(0, i), facecolor=(*tints[i % len(tints)], 0.3), edgecolor="0.25",
-                                   linewidths=0.7, label=name)
+            box = Poly3DCollection(self._faces(0, i), facecolor=(*self._TINTS[i % len(self._TINTS)], 0.28),
+                                   edgecolor="0.2", linewidths=0.8, label=None if one else name)
             ax.add_collection3d(box)
             self.boxes.append(box)
+        self.length = 0.6 * float(max(shape.sides.max() for shape in sc.shapes))
+        self.axes = [ax.plot([], [], [], color=c, lw=2.0 if one else 1.2, label=f"body axis ${'xyz'[i]}_b$")[0]
+                     for i, c in enumerate(AXIS_COLOURS)]
         self.skeleton = ax.plot([], [], [], color="0.3", lw=1.2, label="COM to joints")[0]
-        self.coms = ax.plot([], [], [], "o", color=COM_COLOUR, ms=4, label="COMs X_i")[0]
-        self.trace = ax.plot([], [], [], color=COM_COLOUR, lw=0.8, ls=":", label=f"trace of {sc.bodies[-1]}")[0]
-        self.error = ax.plot([], [], [], color=C_COLOUR, lw=2.5, label="E_j (joint's points)")[0]
-        self.joints = ax.plot([], [], [], "o", color=C_COLOUR, ms=5, label="joints' points C")[0]
+        self.coms = ax.plot([], [], [], "o", color=COM_COLOUR, ms=4, label="COM X" if one else "COMs X_i")[0]
+        self.trace = ax.plot([], [], [], color=COM_COLOUR, lw=1.0, ls="-" if one else ":",
+                             label="COM trace" if one else f"trace of {sc.bodies[-1]}")[0]
         if len(sc.anchor):
             ax.plot(sc.anchor[:, 0], sc.anchor[:, 1], sc.anchor[:, 2], "x", color=ANCHOR_COLOUR, ms=9, mew=2,
-                    label="ground points")
+                    label="anchor of C (E = 0)" if one else "ground points")
         if np.any(sc.gravity):
             _gravity_arrow(ax, sc.gravity)
+        self.error = ax.plot([], [], [], color=C_COLOUR, lw=2.5, label="E (anchor to C)" if one else
+                             "E_j (joint's points)")[0]
+        self.joints = ax.plot([], [], [], "o", color=C_COLOUR, ms=6 if one else 5,
+                              label="C = X + A R" if one else "joints' points C")[0]
         self.text = ax.text2D(0.01, 0.99, "", transform=ax.transAxes, va="top", ha="left", family="monospace",
                               fontsize=8, bbox={"facecolor": "white", "edgecolor": "0.7", "alpha": 0.85})
         self.trace_index = np.searchsorted(sc.trace_time, sc.time, side="right")
@@ -643,6 +545,8 @@ class _ChainArtists:
         for i, box in enumerate(self.boxes):
             box.set_verts(self._faces(k, i))
         x = sc.position[k]
+        for a, line in enumerate(self.axes):
+            line.set_data_3d(*self._segments([(x[i], x[i] + self.length * sc.rotation[k, i][:, a]) for i in range(n)]))
         pairs = [(x[i], sc.point_c[k, i]) for i in range(n)]
         self.skeleton.set_data_3d(*self._segments(pairs + self._parent_pairs(k)))
         self.coms.set_data_3d(x[:, 0], x[:, 1], x[:, 2])
@@ -652,17 +556,12 @@ class _ChainArtists:
         path = np.vstack([sc.trace[: self.trace_index[k], -1], x[-1]])
         self.trace.set_data_3d(path[:, 0], path[:, 1], path[:, 2])
         self.text.set_text(_corner_text(sc, k))
-        return [*self.boxes, self.skeleton, self.coms, self.trace, self.error, self.joints, self.text]
+        return [*self.boxes, *self.axes, self.skeleton, self.coms, self.trace, self.error, self.joints, self.text]
 
     def _parent_pairs(self, k: int) -> list:
         """(a parent's COM, its point of joint j) for each joint with a parent body."""
         sc = self.sc
-        out = []
-        for j in range(len(sc.joints)):
-            p = sc.parents[j]
-            if p >= 0:
-                out.append((sc.position[k, p], sc.parent_point[k, j]))
-        return out
+        return [(sc.position[k, p], sc.parent_point[k, j]) for j, p in enumerate(sc.parents) if p >= 0]
 
 
 def _gravity_arrow(ax, gravity: np.ndarray) -> None:
@@ -696,7 +595,7 @@ def _figure(sc: Scene, view: tuple[float, float], size: tuple[float, float], dpi
     for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
         axis.set_major_locator(MaxNLocator(5))
     ax.view_init(elev=view[1], azim=view[0])
-    artists = (_ChainArtists if isinstance(sc, ChainScene) else _Artists)(ax, sc)
+    artists = _Artists(ax, sc)
     artists.update(0)
     fig.legend(loc="center right", fontsize=7, frameon=False, bbox_to_anchor=(0.995, 0.55))
     fig.text(0.5, 0.975, f"{sc.label} ({sc.variant})", ha="center", va="top", fontsize=10, parse_math=False)

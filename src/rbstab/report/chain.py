@@ -145,7 +145,7 @@ def _number(value, digits: int = 4) -> str:
 
 
 def _animation(run: RunData, frames: int) -> Animation | str:
-    """The animation of a chain run (:func:`rbstab.report.animate.chain_scene`), or a line
+    """The animation of a chain run (:func:`rbstab.report.animate.scene`), or a line
     saying why there is none."""
     # late: rbstab.report.animate imports numba (through rbstab.kinematics), heavy for a report without animations
     from .animate import AnimationError, animation_html, scene
