@@ -70,6 +70,7 @@ __all__ = [
     "pick_run",
     "draw_animation",
     "animation_html",
+    "report_animation",
     "write_animation",
     "write_still",
     "nearest_frame",
@@ -730,6 +731,32 @@ def animation_html(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
         page = Path(folder) / "animation.html"
         anim.save(str(page), writer=writer, dpi=dpi, savefig_kwargs={"pil_kwargs": {"quality": quality, "optimize": True}})
         return _offline(page.read_text(encoding="utf-8"))
+
+
+def report_animation(run: RunData, frames: int):
+    """A report's animation of a run, one body's or a chain's, with ``frames`` frames and its
+    caption (:class:`rbstab.report.render.Animation`), or a line saying why there is none."""
+    from .render import Animation
+
+    try:
+        sc = scene(run, n_frames=frames)
+    except AnimationError as exc:
+        return f"No animation: {exc}"
+    one = len(sc.bodies) == 1
+    return Animation(
+        f"{run.label}: the motion", f"{len(sc.time)} frames evenly over t = {sc.time[0]:.4g} to {sc.time[-1]:.4g} s, "
+        "interpolated from the stored trajectory: "
+        + ("the uniform box with the body's mass and principal moments, its axes x_b (red), y_b (green), z_b "
+           "(blue), the point C = X + A R (orange dot), its anchor R where E = 0 (black cross), the constraint "
+           "error E between them (orange segment), the COM's trace" if one else
+           "each body as the uniform box with its mass and principal moments, with its axes x_b (red), y_b "
+           "(green), z_b (blue), the segments from each centre of mass to its joints' points, each joint's points "
+           "joined by E_j (orange), the ground points (black crosses), the trace of the last body's centre of mass")
+        + " and the direction of gravity (purple, when not zero); slider and buttons under the view."
+        + (f" The run {run.status} at t = {sc.t_failed:.4g} s: the animation stops there." if sc.t_failed is not None
+           else ""),
+        animation_html(sc),
+    )
 
 
 def check_output(path: str | Path) -> str:

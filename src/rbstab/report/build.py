@@ -622,25 +622,11 @@ def _direct_run_sections(runs: Sequence[RunData], params: Sequence[str], out: Fi
 
 
 def _animation(run: RunData, frames: int) -> Animation | str:
-    """The animation of a run (:mod:`rbstab.report.animate`), or a line saying why there is none."""
+    """The animation of a run (:func:`rbstab.report.animate.report_animation`)."""
     # late: rbstab.report.animate imports numba (through rbstab.kinematics), heavy for a report without animations
-    from .animate import AnimationError, animation_html, scene
+    from .animate import report_animation
 
-    try:
-        sc = scene(run, n_frames=frames)
-    except AnimationError as exc:
-        return f"No animation: {exc}"
-    span = f"t = {sc.time[0]:.4g} to {sc.time[-1]:.4g} s"
-    return Animation(
-        f"{run.label}: the motion", f"{len(sc.time)} frames evenly over {span}, interpolated from the stored "
-        "trajectory: the uniform box with the body's mass and principal moments, its axes x_b (red), y_b "
-        "(green), z_b (blue), the point C = X + A R (orange dot), its anchor R where E = 0 (black cross), the "
-        "constraint error E between them (orange segment), the COM's trace and the direction of gravity "
-        "(purple, when not zero); slider and buttons under the view."
-        + (f" The run {run.status} at t = {sc.t_failed:.4g} s: the animation stops there." if sc.t_failed is not None
-           else ""),
-        animation_html(sc),
-    )
+    return report_animation(run, frames)
 
 
 def _sweep_section_with_files(sweep: SweepData, metrics: Sequence[str], out: FigureWriter,

@@ -17,7 +17,7 @@ from ..layout import QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS
 from .figures import (FigureFile, FigureWriter, _finish_time_axes, _label, _marker, _symbol, new_figure, set_scale,
                       shade_saturation)
 from .load import RunData, safe_filename
-from .render import Animation, Section, Table
+from .render import Section, Table
 
 __all__ = ["chain_sections", "chain_figures", "CHAIN_FIGURES"]
 
@@ -144,31 +144,10 @@ def _number(value, digits: int = 4) -> str:
     return f"{x:.{digits}g}" if np.isfinite(x) else "—"
 
 
-def _animation(run: RunData, frames: int) -> Animation | str:
-    """The animation of a chain run (:func:`rbstab.report.animate.scene`), or a line
-    saying why there is none."""
-    # late: rbstab.report.animate imports numba (through rbstab.kinematics), heavy for a report without animations
-    from .animate import AnimationError, animation_html, scene
-
-    try:
-        sc = scene(run, n_frames=frames)
-    except AnimationError as exc:
-        return f"No animation: {exc}"
-    return Animation(
-        f"{run.label}: the motion", f"{len(sc.time)} frames evenly over t = {sc.time[0]:.4g} to {sc.time[-1]:.4g} s, "
-        "interpolated from the stored trajectory: each body as the uniform box with its mass and principal moments, "
-        "the segments from each centre of mass to its joints' points, each joint's points joined by E_j (orange), "
-        "the ground points (black crosses), the trace of the last body's centre of mass and the direction of "
-        "gravity; slider and buttons under the view."
-        + (f" The run {run.status} at t = {sc.t_failed:.4g} s: the animation stops there." if sc.t_failed is not None
-           else ""),
-        animation_html(sc))
-
-
 def chain_sections(runs: Sequence[RunData], out: FigureWriter, frames: int = 0) -> list[Section]:
     """The section of the chain runs: a table (status, bodies, joints, v(0), v(t_end), the
     rate check, the largest max |E_j| over the joints), each run's animation
-    (``frames`` > 0) and figures."""
+    (``frames`` > 0, :func:`rbstab.report.animate.report_animation`) and figures."""
     if not runs:
         return []
     section = Section("Chains of bodies", "chains")
@@ -187,7 +166,9 @@ def chain_sections(runs: Sequence[RunData], out: FigureWriter, frames: int = 0) 
         if not run.ok:
             sub.blocks.append(f"FAILED: {run.message}")
         if frames:
-            sub.blocks.append(_animation(run, frames))
+            from .animate import report_animation  # heavy: numba (through rbstab.kinematics)
+
+            sub.blocks.append(report_animation(run, frames))
         sub.blocks.extend(chain_figures(run, out))
         section.blocks.append(sub)
     return [section]
