@@ -204,3 +204,31 @@ def test_a_chains_clipped_joint_torque_is_flagged_where_its_command_reaches_the_
     np.testing.assert_array_equal(summary["final_theta"], out["theta"][-1])
     rising = np.sum(out["lyapunov_rate"] > 0.0) * (result.time[1] - result.time[0])
     assert summary["time_lyapunov_rising"] == pytest.approx(rising, rel=1e-12)
+
+
+def test_a_chains_lyapunov_figure_is_one_bodys_with_v_minus_w(tmp_path, monkeypatch):
+    """A chain run's v figure is one body's: its terms (the tree's), v beside v - W for a
+    pushed chain (W from the file; the line drawn is the stored v - W), the analytic and
+    numerical dv/dt and their difference; the push marked on every panel."""
+    from rbstab.report.figures import FigureWriter, lyapunov_figure
+    from rbstab.report.load import load_inputs
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    push = 'disturbances=[{kind: impulse, quantity: torque, value: [0, 5, 0], start: 0.3, body: trunk}]'
+    done = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"), "-o",
+                                    str(tmp_path), "--set", "simulation.t_end=1", "--set", push])
+    assert done.exit_code == 0, done.output
+    (run,) = load_inputs([tmp_path / "stance_ankle_hip.h5"]).runs
+    lyapunov_figure(run, FigureWriter(tmp_path))
+    fig = saved["stance_ankle_hip_lyapunov"]
+    assert len(fig.axes) == 4  # v and its terms; v, v - W, W; dv/dt; analytic - numerical
+    s = run.series("lyapunov", "disturbance_work")
+    (work,) = [line for ax in fig.axes for line in ax.get_lines() if line.get_gid() == "lyapunov-minus-work"]
+    np.testing.assert_array_equal(work.get_ydata(), s["lyapunov"] - s["disturbance_work"])
+    assert s["disturbance_work"][-1] > 0.0
+    labels = [line.get_label() for line in fig.axes[0].get_lines()]
+    assert any("kinetic" in label for label in labels)
+    for ax in fig.axes:
+        (impulse,) = [line for line in ax.get_lines() if line.get_gid() == "disturbance-impulse"]
+        assert list(impulse.get_xdata()) == [0.3, 0.3]

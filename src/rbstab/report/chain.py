@@ -13,9 +13,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..layout import QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS
-from .figures import (FigureFile, FigureWriter, _finish_time_axes, _label, _marker, _symbol, new_figure, set_scale,
-                      shade_saturation)
+from ..layout import QUANTITIES, SATURATION_FLAGS
+from .figures import (FigureFile, FigureWriter, _finish_time_axes, _label, _marker, _symbol, lyapunov_figure, new_figure,
+                      set_scale, shade_saturation)
 from .load import RunData, safe_filename
 from .render import Section, Table
 
@@ -101,38 +101,15 @@ def _constraints_figure(run: RunData, out: FigureWriter) -> FigureFile:
                     "time; a symmetric-logarithmic axis where they span decades.")
 
 
-def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
-    s = run.series("lyapunov", "lyapunov_rate", "lyapunov_rate_numerical", *TREE_LYAPUNOV_TERMS)
-    t = s["time"]
-    fig, axes = new_figure(2, row_height=2.8)
-    ax = axes[0, 0]
-    ax.plot(t, s["lyapunov"], color="k", lw=1.8, label=f"${_symbol('lyapunov')}$")
-    for i, name in enumerate(n for n in TREE_LYAPUNOV_TERMS if n in s):
-        ax.plot(t, s[name], color=f"C{i}", lw=1.0, ls=_STYLES[i % 3], label=QUANTITIES[name].words)
-    set_scale(ax, np.concatenate([s[n] for n in ("lyapunov", *TREE_LYAPUNOV_TERMS) if n in s]))
-    ax.set_ylabel(_label("lyapunov"), fontsize=9)
-    rate = axes[1, 0]
-    rate.plot(t, s["lyapunov_rate"], color="C0", lw=2.2, alpha=0.6, label=r"$\dot v$ analytic")
-    if "lyapunov_rate_numerical" in s:
-        rate.plot(t, s["lyapunov_rate_numerical"], color="C3", ls="--", lw=1.0, label=r"$\dot v$ numerical")
-    set_scale(rate, s["lyapunov_rate"])
-    rate.set_ylabel(_label("lyapunov_rate"), fontsize=9)
-    _finish_time_axes(axes[:, 0], run, ncols=2)
-    _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
-    return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
-                    "The chain's v and its terms (the bodies' kinetic energies, the joints' potentials, the bodies' "
-                    "own feedback, gravity with h), and its analytic rate dv/dt (solid) beside the numerical "
-                    "derivative of v along the samples (dashed): docs/physics.md, 'Chains of rigid bodies'.")
-
-
 #: The figures of a chain run, in the page's order.
-CHAIN_FIGURES = (_bodies_figure, _joints_figure, _constraints_figure, _lyapunov_figure)
+CHAIN_FIGURES = (_bodies_figure, _joints_figure, _constraints_figure, lyapunov_figure)
 
 
 def chain_figures(run: RunData, out: FigureWriter) -> list[FigureFile]:
     """The figures of one chain run (:data:`CHAIN_FIGURES`): ``<label>_bodies`` (Theta_i,
     Omega_i), ``<label>_joints`` (Theta_j, N_j), ``<label>_constraints`` (|E_j|,
-    |Lambda_j|), ``<label>_lyapunov`` (v, its terms, dv/dt analytic and numerical)."""
+    |Lambda_j|), ``<label>_lyapunov`` (one body's figure of v: its terms, v - W with
+    disturbances, dv/dt analytic and numerical and their difference)."""
     return [make(run, out) for make in CHAIN_FIGURES]
 
 

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..layout import LYAPUNOV_TERMS, QUANTITIES, SATURATION_FLAGS, display_units
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS, display_units
 from .load import RunData, safe_filename
 from .tables import SettleThresholds
 
@@ -37,6 +37,7 @@ __all__ = [
     "run_figures",
     "RUN_FIGURES",
     "switching_figure",
+    "lyapunov_figure",
     "disturbance_marks",
     "saturated_intervals",
     "shade_saturation",
@@ -374,15 +375,19 @@ def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
                     + _marks_caption(run) + ".")
 
 
+#: The terms of v a file may hold: one body's (eq 25) and a tree's.
+_TERMS = tuple(dict.fromkeys((*LYAPUNOV_TERMS, *TREE_LYAPUNOV_TERMS)))
+
+
 def _lyapunov_terms_panel(ax, run: RunData) -> None:
-    """v (black) and its non-zero terms on a log axis; a term that takes negative values
-    (gravity) is drawn as its magnitude, labelled |v_g|."""
-    s = run.series("lyapunov", *LYAPUNOV_TERMS)
+    """v (black) and its non-zero terms (one body's, eq 25, or a tree's) on a log axis; a
+    term that takes negative values (gravity) is drawn as its magnitude, labelled |v_g|."""
+    s = run.series("lyapunov", *_TERMS)
     t = s["time"]
     drawn = [s["lyapunov"]]
     ax.plot(t, s["lyapunov"], color="k", lw=1.8, marker=_marker(s["lyapunov"]), label=f"${_symbol('lyapunov')}$")
-    for i, name in enumerate(LYAPUNOV_TERMS):
-        if name not in s or not np.nanmax(np.abs(s[name]), initial=0.0) > 0:
+    for i, name in enumerate(n for n in _TERMS if n in s):
+        if not np.nanmax(np.abs(s[name]), initial=0.0) > 0:
             continue
         term, label = s[name], f"${_symbol(name)}$ {QUANTITIES[name].words}"
         if np.nanmin(term) < 0:
@@ -415,7 +420,8 @@ def _disturbed(run: RunData) -> bool:
     return bool(run.config.get("disturbances")) and "disturbance_work" in run.series("disturbance_work")
 
 
-def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
+def lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
+    """``<label>_lyapunov`` of one body's or a chain's run (:func:`run_figures`)."""
     s = run.series("lyapunov_rate", "lyapunov_rate_numerical")
     t = s["time"]
     work = _disturbed(run)
@@ -436,8 +442,10 @@ def _lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
     diff.set_ylabel(rf"analytic $-$ numerical [{QUANTITIES['lyapunov_rate'].display_units}]", fontsize=9)
     _finish_time_axes(axes[:, 0], run, ncols=2)
     _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
+    terms = ("the bodies' kinetic energies, the joints' potentials, the bodies' own feedback, gravity with h"
+             if run.variant == "chain" else "translational, rotational, constraint controller, gravity")
     return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
-                    "v and its non-zero terms (translational, rotational, constraint controller, gravity; "
+                    f"v and its non-zero terms ({terms}; "
                     "logarithmic axis, a term that changes sign as its magnitude), "
                     + ("v beside v - W, W the work of the disturbances (with unsaturated gains v - W never rises), "
                        if work else "")
@@ -553,7 +561,7 @@ def _switching_raster(ax, run: RunData, s: dict, i: int) -> np.ndarray:
 #: The functions that draw the figures of a run, in the page's order (:func:`run_figures`):
 #: each ``make(run, out)`` writes one figure and returns its FigureFile, or None when the
 #: run does not have it.
-RUN_FIGURES = (_rotational_figure, _translational_figure, _lyapunov_figure, _forces_figure, _phase_figure,
+RUN_FIGURES = (_rotational_figure, _translational_figure, lyapunov_figure, _forces_figure, _phase_figure,
                switching_figure)
 
 
