@@ -307,7 +307,7 @@ def basin_map(
         For ``engine="cuda"`` where no GPU, driver or numba-cuda is found.
     """
     from ..simulator import uses_compiled_engine  # heavy: numba
-    from .runs import Runs  # heavy: numba
+    from .runs import MIN_SLICE, Runs  # heavy: numba
 
     if len(axes) != 2 or axes[0].key == axes[1].key:
         raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
@@ -321,7 +321,7 @@ def basin_map(
     gpu = get_engine(engine).gpu and not tree and uses_compiled_engine(config, engine)
     with contextlib.ExitStack() as stack:
         executor = None
-        if jobs > 1 and not tree and not gpu and first.size >= 64:
+        if jobs > 1 and not tree and not gpu and first.size >= 2 * MIN_SLICE:  # else one process runs them all
             from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
 
             executor = stack.enter_context(LocalExecutor(jobs, task="a basin map"))
