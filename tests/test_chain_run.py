@@ -83,7 +83,7 @@ def test_a_report_draws_and_animates_a_chains_bodies_and_joints(tmp_path):
     page = (report / "index.html").read_text()
     assert "Chains of bodies" in page and "legs, trunk" in page and "ankle, hip" in page
     assert "stance_ankle_hip: the motion" in page and "4 frames evenly" in page
-    for kind in ("bodies", "joints", "constraints", "lyapunov"):
+    for kind in ("rotational", "translational", "forces", "lyapunov"):  # one body's figures, a column a member
         assert (report / "figures" / f"stance_ankle_hip_{kind}.png").stat().st_size > 10_000
     assert (report / "figures" / "case1_permanent_rotational.png").exists()  # the one-body run as before
     import pandas as pd

@@ -252,7 +252,7 @@ def test_a_chain_sweep_on_a_dask_cluster_writes_the_local_sweeps_files(tmp_path)
 def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     """A thinned store keeps what a chain run's report draws (each joint's Theta_j, N_j,
     Lambda_j and v's terms besides one body's variables), in store files and in a file per
-    run: the report of a run's file draws its four figures."""
+    run: the report of a run's file draws its four figures (Lambda_j and N_j without H)."""
     out = tmp_path / "results"
     result = CliRunner().invoke(cli, ["sweep", STANCE, "--grid", "initial_state.trunk.theta.0=0.1", *SHORT,
                                       "--layout", layout, "-j", "1", "-o", str(out)])
@@ -261,7 +261,7 @@ def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     report = CliRunner().invoke(cli, ["report", str(file), "-o", str(tmp_path / "report")])
     assert report.exit_code == 0, report.output
     drawn = sorted(p.name.rpartition("_")[2] for p in (tmp_path / "report" / "figures").iterdir())
-    assert drawn == ["bodies.png", "constraints.png", "joints.png", "lyapunov.png"], drawn
+    assert drawn == ["forces.png", "lyapunov.png", "rotational.png", "translational.png"], drawn
     import pandas as pd
 
     summary = pd.read_csv(tmp_path / "report" / "summary.csv")  # a row per chain run, its figures per joint

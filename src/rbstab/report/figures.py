@@ -38,6 +38,7 @@ __all__ = [
     "RUN_FIGURES",
     "switching_figure",
     "lyapunov_figure",
+    "member_names",
     "disturbance_marks",
     "saturated_intervals",
     "shade_saturation",
@@ -314,17 +315,58 @@ def shade_saturation(ax, run: RunData, control: str, member: int | None = None) 
             ax.axvspan(t0, t1, color=f"C{k}", alpha=0.12, lw=0, gid=f"saturated-{control}-{k + 1}")
 
 
-def _vector_panels(axes, run: RunData, names: Sequence[str], scale: bool = False) -> dict:
-    """Each 3-vector of ``names`` in its own panel, components as solid, dashed, dotted lines."""
+def member_names(run: RunData, dimension: str) -> list[str]:
+    """The bodies or joints (``dimension``) of a chain run's file, in its order."""
+    import h5py  # heavy: h5py
+
+    with h5py.File(run.path, "r") as f:
+        return [n.decode() if isinstance(n, bytes) else str(n) for n in f[dimension][...]]
+
+
+def _members(run: RunData) -> dict[str, list[str]] | None:
+    """A chain run's bodies and joints by dimension (``body``, ``joint``); None for one body."""
+    return None if run.variant != "chain" else {d: member_names(run, d) for d in ("body", "joint")}
+
+
+def _component(var: str, k: int) -> str:
+    """The legend of component k of ``var``: theta_1, or (Theta_j)_1 for a symbol with an index."""
+    tex = QUANTITIES[var].component_tex or QUANTITIES[var].tex
+    return f"$({tex})_{k + 1}$" if "_" in tex else f"${_symbol(var, k)}$"
+
+
+def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False, row_height: float = 2.4):
+    """A figure of each 3-vector of ``names`` in a row of panels, components as solid,
+    dashed, dotted lines: one body's in one column, a chain's a column per body or joint (a
+    body's quantity in its body's column, a joint's in its joint's: joint i's child is body
+    i), each panel named by its member; saturated axes shaded (:func:`shade_saturation`).
+    Returns (the figure, its axes (rows, columns), the series)."""
     s = run.series(*names)
-    for ax, var in zip(axes, names):
-        for k in range(3):
-            ax.plot(s["time"], s[var][:, k], ls=_LINESTYLES[k], marker=_marker(s[var]), label=f"${_symbol(var, k)}$")
-        ax.set_ylabel(_label(var), fontsize=9)
-        if scale:
-            set_scale(ax, s[var])
-    _finish_time_axes(axes, run, ncols=3)
-    return s
+    members = _members(run)
+    n = 1 if members is None else len(members["body"])
+    fig, axes = new_figure(len(names), n, width=9.0 if n == 1 else 4.2 * n, row_height=row_height)
+    for row, var in enumerate(names):
+        for col in range(n):
+            ax = axes[row, col]
+            values = s[var] if members is None else s[var][:, col]
+            for k in range(3):
+                ax.plot(s["time"], values[:, k], ls=_LINESTYLES[k], marker=_marker(values), label=_component(var, k))
+            who = "" if members is None else f"{members[QUANTITIES[var].member][col]}\n"
+            ax.set_ylabel(who + _label(var), fontsize=9 if members is None else 8)
+            if scale:
+                set_scale(ax, values)
+            if var in SATURATION_FLAGS:
+                shade_saturation(ax, run, var, None if members is None else col)
+    for col in range(n):
+        _finish_time_axes(axes[:, col], run, ncols=3)
+    return fig, axes, s
+
+
+def _limited(run: RunData) -> bool:
+    """Whether the run's configuration limits a control (one body's controller, or a chain's
+    joints and bodies)."""
+    config = run.config
+    return bool((config.get("controller") or {}).get("saturation")
+                or any(m.get("saturation") for m in [*(config.get("joints") or ()), *(config.get("bodies") or ())]))
 
 
 # -- per run ----------------------------------------------------------------------------------------
@@ -347,27 +389,34 @@ def run_figures(run: RunData, out: FigureWriter) -> list[FigureFile]:
 
 
 def _rotational_figure(run: RunData, out: FigureWriter) -> FigureFile:
-    fig, axes = new_figure(2)
-    _vector_panels(axes[:, 0], run, ("theta", "omega"))
+    chain = run.variant == "chain"
+    fig, _, _ = _vector_figure(run, ("theta", "omega", "joint_theta") if chain else ("theta", "omega"))
     _suptitle(fig, run, "rotational states")
     return out.save(fig, f"{safe_filename(run.label)}_rotational", f"{run.label}: rotational states",
                     "Euler angles Theta and body angular velocity Omega against time (cf. the paper's Figs 3, 4, 6)"
+                    + (", a column a body, and each joint's relative orientation Theta_j (the Euler angles of "
+                       "A_parent' A_child), a column a joint" if chain else "")
                     + _marks_caption(run) + ".")
 
 
 def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
     names = ["position", "velocity", "controller_state", "constraint_error"]
-    names = [n for n in names if n in run.series(*names)]
-    fig, axes = new_figure(len(names))
-    s = _vector_panels(axes[:, 0], run, names)
+    held = run.series(*names)
+    names = [n for n in names if n in held and (n != "controller_state" or np.isfinite(held[n]).any())]
+    fig, axes, s = _vector_figure(run, names)
     e = s["constraint_error"]
-    peak = float(np.nanmax(np.abs(e))) if np.isfinite(e).any() else np.nan
-    if peak <= ROUND_OFF_E:  # E is zero up to round-off (permanent): a physical scale, said so
-        axes[-1, 0].set_ylim(-1e-3, 1e-3)
-        axes[-1, 0].text(0.02, 0.1, f"max |E| = {peak:.2g} m: zero to round-off (axis limits +-1 mm)",
-                         transform=axes[-1, 0].transAxes, fontsize=8, color="0.3")
+    for col in range(axes.shape[1]):
+        column = e if e.ndim == 2 else e[:, col]
+        peak = float(np.nanmax(np.abs(column))) if np.isfinite(column).any() else np.nan
+        if peak <= ROUND_OFF_E:  # E is zero up to round-off (permanent): a physical scale, said so
+            axes[-1, col].set_ylim(-1e-3, 1e-3)
+            axes[-1, col].text(0.02, 0.1, f"max |E| = {peak:.2g} m: zero to round-off (axis +-1 mm)",
+                               transform=axes[-1, col].transAxes, fontsize=8, color="0.3")
     _suptitle(fig, run, "translational states and constraint error")
     extra = " (X, V reconstructed from Theta, Omega: C is fixed, E = 0)" if run.variant == "permanent" else ""
+    if run.variant == "chain":
+        extra = (", a column a body and its joint (E_j = X_c + A_c R_c - X_p - A_p R_p; a permanent joint's zero to "
+                 "round-off, since reduced coordinates hold it)")
     return out.save(fig, f"{safe_filename(run.label)}_translational", f"{run.label}: translational states and constraint",
                     "Centre-of-mass position X and velocity V (inertial frame), "
                     + ("controller state D, " if "controller_state" in names else "")
@@ -455,21 +504,25 @@ def lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
 
 
 def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
-    names = ("constraint_force", "force_h", "torque_n")
-    if not all(n in run.series(*names) for n in names):
+    held = run.series("constraint_force", "force_h", "torque_n")
+    names = [n for n in ("constraint_force", "force_h", "torque_n") if n in held]  # a thinned chain store: Lambda, N
+    if not names:
         return None
-    fig, axes = new_figure(3)
-    _vector_panels(axes[:, 0], run, names, scale=True)
-    for ax, control in zip(axes[:, 0], names):
-        shade_saturation(ax, run, control)
+    fig, _, _ = _vector_figure(run, names, scale=True)
     _suptitle(fig, run, "constraint force and feedback")
-    limited = run.config.get("controller", {}).get("saturation")
+    chain = run.variant == "chain"
+    words = {"constraint_force": "the constraint force Lambda at C (inertial frame, eqs 20-22, 39, 40)",
+             "force_h": "the translational feedback H (inertial frame, eq 24)",
+             "torque_n": "the rotational feedback torque N (body frame, eq 23)"}
+    drawn = [words[n] for n in names]
+    listed = ", ".join(drawn[:-1]) + " and " + drawn[-1] if len(drawn) > 1 else drawn[0]
     return out.save(fig, f"{safe_filename(run.label)}_forces", f"{run.label}: forces and torque",
-                    "The constraint force Lambda at C and the translational feedback H (inertial frame, "
-                    "eqs 20-24, 39, 40) and the rotational feedback torque N (body frame, eq 23) against time, "
-                    "as delivered; a symmetric-logarithmic axis where a quantity spans more than two decades"
+                    listed[0].upper() + listed[1:] + " against time, as delivered"
+                    + ("; a column a body and its joint (Lambda_j on the child at C, N_j on the relative motion, "
+                       "child frame)" if chain else "")
+                    + "; a symmetric-logarithmic axis where a quantity spans more than two decades"
                     + ("; shaded in a component's colour where that axis is commanded at or beyond its limit "
-                       "(controller.saturation; clip delivers the limit there)" if limited else "")
+                       "(saturation; clip delivers the limit there)" if _limited(run) else "")
                     + _marks_caption(run) + ".")
 
 
@@ -497,6 +550,8 @@ def _phase_row(axes, run: RunData, x_var: str, y_var: str) -> None:
 
 
 def _phase_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
+    if run.variant == "chain":  # a portrait a component: one body's
+        return None
     held = run.series("constraint_error", "constraint_rate", "theta", "omega")
     e = held.get("constraint_error")
     constraint = "constraint_rate" in held and e is not None and np.nanmax(np.abs(e), initial=0.0) > ROUND_OFF_E
