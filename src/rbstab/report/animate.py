@@ -47,6 +47,7 @@ from ..engine.status import fell
 from ..io.atomic import atomic_path
 from ..kinematics import rotation_matrix
 from .load import RunData
+from .render import Animation
 
 __all__ = [
     "AnimationError",
@@ -736,8 +737,6 @@ def animation_html(sc: Scene, fps: float = FPS, view: tuple[float, float] = DEFA
 def report_animation(run: RunData, frames: int):
     """A report's animation of a run, one body's or a chain's, with ``frames`` frames and its
     caption (:class:`rbstab.report.render.Animation`), or a line saying why there is none."""
-    from .render import Animation
-
     try:
         sc = scene(run, n_frames=frames)
     except AnimationError as exc:
