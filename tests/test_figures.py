@@ -227,6 +227,7 @@ def _figures(folder: Path) -> Path:
     (np.exp(-np.linspace(0, 10, 200)) * np.cos(np.linspace(0, 40, 200)), "symlog"),  # a decaying oscillation
     (np.sin(np.linspace(0, 20, 200)), "linear"),  # no decay
     (np.linspace(1.0, 50.0, 200), "linear"),  # less than two decades
+    (np.r_[np.zeros(400), -np.linspace(3.0, 30.0, 200)], "linear"),  # one axis acted on, two at zero: one decade
     (np.zeros(10), "linear"),
     (np.full(10, np.nan), "linear"),
 ])

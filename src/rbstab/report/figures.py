@@ -179,7 +179,7 @@ def set_scale(ax, values, axis: str = "y") -> str:
     """Put ``ax``'s ``axis`` on a logarithmic scale when ``values`` span decades.
 
     A quantity spans decades when its largest magnitude is more than :data:`LOG_SPAN`
-    times the first quartile of its (non-zero, if none is negative) magnitudes. Then
+    times the first quartile of its non-zero magnitudes. Then
     ``"log"`` when no value is negative (zeros are not drawn), else ``"symlog"``
     (:func:`_symlog`); otherwise ``"linear"`` (the axis is left as it is). Returns the scale.
     """
@@ -187,7 +187,7 @@ def set_scale(ax, values, axis: str = "y") -> str:
     v = v[np.isfinite(v)]
     magnitude = np.abs(v)
     signed = bool(np.any(v < 0))
-    base = magnitude if signed else magnitude[magnitude > 0]
+    base = magnitude[magnitude > 0]  # a component that stays zero (an axis nothing acts on) spans nothing
     if base.size < 2 or base.max() <= LOG_SPAN * float(np.percentile(base, 25)):
         return "linear"
     if not signed:
