@@ -276,11 +276,12 @@ def _mark_disturbances(ax, run: RunData) -> None:
 
 
 def _finish_time_axes(axes, run: RunData, legend: bool = True, **legend_kw) -> None:
-    """Grid, legend titled with the run, failure and disturbance marks and the time label of
-    a column of panels."""
+    """Grid, legend above each panel (off its data; the figure's title names the run),
+    failure and disturbance marks and the time label of a column of panels."""
     for ax in axes:
         if legend:
-            ax.legend(title=run.label, loc="upper right", fontsize=8, title_fontsize=8, **legend_kw)
+            ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.0), borderaxespad=0.1, frameon=False, fontsize=8,
+                      handlelength=2.4, columnspacing=1.2, **legend_kw)
         ax.grid(alpha=0.3, which="both")
         _mark_failure(ax, run)
         _mark_disturbances(ax, run)
