@@ -275,6 +275,11 @@ def test_saturated_push_report_shades_the_limits_marks_the_pushes_and_draws_v_mi
     assert any(0.49 < a < 0.6 for a in starts) and any(2.49 < a < 2.6 for a in starts)  # after each push
     assert not _spans(n_panel, "saturated-torque_n-2") and not _spans(saved["saturated_push_forces"].axes[1],
                                                                       "saturated-force_h-1")
+    limits = sorted(line.get_ydata()[0] for line in n_panel.get_lines() if line.get_gid() == "limit-1")
+    assert limits == [-4.0, 4.0]  # N_1 reaches its limit: drawn
+    second = [line for line in n_panel.get_lines() if line.get_gid() == "limit-2"]
+    assert bool(second) == (np.abs(s["torque_n"][:, 1]).max() >= 2.0)  # where N_2 reaches half of its limit
+    assert not [line for line in n_panel.get_lines() if line.get_gid() == "limit-3"]  # N_3 has none
     for name in ("rotational", "translational", "lyapunov", "forces"):
         for ax in saved[f"saturated_push_{name}"].axes:
             (impulse,) = [line for line in ax.get_lines() if line.get_gid() == "disturbance-impulse"]

@@ -39,6 +39,7 @@ __all__ = [
     "switching_figure",
     "lyapunov_figure",
     "member_names",
+    "control_limits",
     "disturbance_marks",
     "saturated_intervals",
     "shade_saturation",
@@ -353,13 +354,53 @@ def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False, row_
                 ax.plot(s["time"], values[:, k], ls=_LINESTYLES[k], marker=_marker(values), label=_component(var, k))
             who = "" if members is None else f"{members[QUANTITIES[var].member][col]}\n"
             ax.set_ylabel(who + _label(var), fontsize=9 if members is None else 8)
+            drawn = _draw_limits(ax, values, control_limits(run, var, col)) if var in SATURATION_FLAGS else []
             if scale:
-                set_scale(ax, values)
+                set_scale(ax, np.concatenate([np.ravel(values), drawn]))  # the ticks reach the limits drawn
             if var in SATURATION_FLAGS:
                 shade_saturation(ax, run, var, None if members is None else col)
     for col in range(n):
         _finish_time_axes(axes[:, col], run, ncols=3)
     return fig, axes, s
+
+
+def control_limits(run: RunData, control: str, member: int = 0) -> np.ndarray | None:
+    """The limit of each axis of ``control`` (``torque_n``, ``force_h``,
+    ``constraint_force``) that the run's configuration sets, shape (3,), inf where an axis
+    has none; None without a limit. One body's ``controller.saturation``; a chain's joint
+    ``member`` (N_j, Lambda_j) or body ``member`` (H), found by its name in the file."""
+    config = run.config
+    if run.variant == "chain":
+        dimension, section = ("body", "bodies") if control == "force_h" else ("joint", "joints")
+        name = member_names(run, dimension)[member]
+        owner = next((m for m in config.get(section) or () if isinstance(m, dict) and m.get("name") == name), {})
+        saturation = owner.get("saturation")
+    else:
+        saturation = (config.get("controller") or {}).get("saturation")
+    value = (saturation or {}).get(control)
+    if value is None:
+        return None
+    limits = np.broadcast_to(np.asarray(value, dtype=float), (3,))
+    return limits if np.isfinite(limits).any() else None
+
+
+#: A limit is drawn on a control's panel where the control reaches this fraction of it.
+LIMIT_DRAWN_FROM = 0.5
+
+
+def _draw_limits(ax, values: np.ndarray, limits: np.ndarray | None) -> list[float]:
+    """The actuator's limits +-L_i of a control's panel, dotted in each component's colour,
+    for the axes whose values reach :data:`LIMIT_DRAWN_FROM` of theirs (a limit far beyond
+    the values would only flatten them); returns the values drawn. The lines' gid is
+    ``limit-<component>``."""
+    drawn = []
+    for k in range(3 if limits is not None else 0):
+        peak = np.nanmax(np.abs(values[:, k]), initial=0.0)
+        if np.isfinite(limits[k]) and peak >= LIMIT_DRAWN_FROM * limits[k]:
+            for sign in (1.0, -1.0):
+                ax.axhline(sign * limits[k], color=f"C{k}", ls=(0, (1, 2)), lw=1.1, gid=f"limit-{k + 1}")
+                drawn.append(sign * float(limits[k]))
+    return drawn
 
 
 def _limited(run: RunData) -> bool:
@@ -523,7 +564,8 @@ def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
                        "child frame)" if chain else "")
                     + "; a symmetric-logarithmic axis where a quantity spans more than two decades"
                     + ("; shaded in a component's colour where that axis is commanded at or beyond its limit "
-                       "(saturation; clip delivers the limit there)" if _limited(run) else "")
+                       "(saturation; clip delivers the limit there), the limit dotted where the control reaches "
+                       "half of it" if _limited(run) else "")
                     + _marks_caption(run) + ".")
 
 
