@@ -384,7 +384,7 @@ def analyze(
     if getattr(config, "chain", None) is not None:
         return _analyze_tree(config, boundary_layer=boundary_layer, certificate=certificate, samples=samples,
                              seed=seed, basin=basin, basin_samples=basin_samples, ratio=ratio, jobs=jobs, push=push,
-                             basin_stability=basin_stability, falsification_runs=falsification_runs)
+                             basin_stability=basin_stability, falsification_runs=falsification_runs, engine=engine)
     timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
@@ -455,12 +455,13 @@ def analyze(
 
 
 def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, basin, basin_samples: int,
-                  ratio: float, jobs: int, push, basin_stability, falsification_runs: int):
+                  ratio: float, jobs: int, push, basin_stability, falsification_runs: int, engine: str):
     """:func:`analyze` of a tree of bodies (:class:`rbstab.config.chains.ChainConfig`): its
     rest state, linearisation and certificate (:func:`rbstab.analysis.chain.analyze_chain`),
     then the basin map, the pushes on a named body (``push["body"]``) and the basin
     stability of the same command, its runs on the CPU's compiled driver in ``jobs``
-    threads; a :class:`rbstab.analysis.chain.ChainAnalysis`."""
+    threads (another ``engine`` is said in its notes); a
+    :class:`rbstab.analysis.chain.ChainAnalysis`."""
     from .chain import analyze_chain, check_axes  # heavy: numba
 
     if boundary_layer is not None:
@@ -471,6 +472,9 @@ def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, se
         check_axes(config, axes)
     result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed,
                            falsification_runs=falsification_runs, ratio=ratio)
+    if engine != DEFAULT_ENGINE and (axes or push or basin_stability):
+        result = dataclasses.replace(result, notes=result.notes + (
+            f"--engine {engine}: a chain's basin map, pushes and basin stability run on the CPU's compiled driver",))
     return result.with_runs(
         basin=basin_map(config, axes, ratio=ratio, n_samples=basin_samples, jobs=jobs) if axes else None,
         push=push_analysis(config, **push, ratio=ratio, jobs=jobs) if push else None,
