@@ -71,6 +71,7 @@ __all__ = [
     "uses_compiled_engine",
     "is_sign_law",
     "simulate_sign_law",
+    "tree_end",
 ]
 
 #: What :func:`simulate_blocks` keeps of the samples of a ``cuda`` run: every one, every
@@ -915,7 +916,7 @@ def _chain_call(compiled: list, configs: Sequence, members: list[int], integrate
         t0 = _time.perf_counter()
         run_outputs, summaries = _trees_outputs([compiled[i] for i in members[lo:hi]], tree_of[lo:hi], time,
                                                 sol.samples[lo:hi], sol.work[lo:hi], outputs)
-        status, message = zip(*(_chain_end(compiled[members[j]], sims[j], int(sol.status[j]), float(sol.t_stop[j]),
+        status, message = zip(*(tree_end(compiled[members[j]], sims[j], int(sol.status[j]), float(sol.t_stop[j]),
                                            sol.samples[j], y0[j], float(settings[j, 6])) for j in range(lo, hi)))
         ok = sol.status[lo:hi] == SUCCESS
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
@@ -934,9 +935,12 @@ def _chain_call(compiled: list, configs: Sequence, members: list[int], integrate
         )
 
 
-def _chain_end(compiled, sim, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray,
+def tree_end(compiled, sim, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray,
                wall_limit: float) -> tuple[str, str]:
-    """(status, message) of a chain run of the compiled driver that ended with ``code``."""
+    """(status, message) of a chain run of the compiled driver that ended with ``code`` at
+    ``t_stop`` [s]: ``compiled`` its chain, ``sim`` its settings, ``states`` (m, 12 n + 3 e)
+    its samples (the last finite one names the body or joint at a gimbal lock or a bound;
+    ``y0`` where none is finite), ``wall_limit`` [s] its wall-time limit."""
     from .variants import chain as C  # heavy: numba
 
     if code == SUCCESS:

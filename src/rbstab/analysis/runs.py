@@ -278,7 +278,8 @@ class Runs:
     def _tree_traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
         from ..engine.integrate import integrate_chain_runs  # heavy: numba
         from ..engine.settings import settings_rows  # heavy: numba
-        from ..engine.status import GIMBAL_LOCK, SUCCESS, limit_of, status_message  # heavy: numba
+        from ..engine.status import SUCCESS  # heavy: numba
+        from ..simulator import tree_end  # heavy: numba
         from ..variants import chain as C  # heavy: numba
 
         sim = self.config.simulation
@@ -294,22 +295,10 @@ class Runs:
         t_stop = np.concatenate([p.t_stop for p in parts])
         time = np.linspace(0.0, sim.t_end, n_samples)
         v = C.evaluate(self.compiled, np.tile(time, len(states)), samples.reshape(-1, samples.shape[2]))["lyapunov"]
-        messages = []
-        for k, code in enumerate(status.tolist()):
-            if code == SUCCESS:
-                messages.append("")
-            elif code == GIMBAL_LOCK:
-                finite = samples[k][np.isfinite(samples[k, :, 0])]
-                last = finite[-1] if len(finite) else states[k]  # the last sample before the stop
-                messages.append(C.gimbal_lock_message(self.compiled, last, sim.gimbal_margin,
-                                                      float(t_stop[k])).split(" at t =")[0])
-            elif limit_of(code) is not None:
-                quantity, axis = limit_of(code)
-                messages.append(f"left the admissible region (simulation.limits): |{quantity}_{axis + 1}| of a body "
-                                "or joint")
-            else:
-                messages.append(status_message(code, float(t_stop[k]), sim.gimbal_margin, int(sim.max_steps),
-                                               sim.max_wall_time).split(" at t =")[0])
+        messages = ["" if code == SUCCESS else
+                    tree_end(self.compiled, sim, code, float(t_stop[k]), samples[k], states[k],
+                             float(sim.max_wall_time))[1].split(" at t =")[0]
+                    for k, code in enumerate(status.tolist())]
         return status == SUCCESS, v.reshape(len(states), n_samples), messages
 
     def _in_threads(self, run, k: int) -> list:

@@ -336,25 +336,26 @@ def _component(var: str, k: int) -> str:
     return f"$({tex})_{k + 1}$" if "_" in tex else f"${_symbol(var, k)}$"
 
 
-def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False, row_height: float = 2.4):
+def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False):
     """A figure of each 3-vector of ``names`` in a row of panels, components as solid,
     dashed, dotted lines: one body's in one column, a chain's a column per body or joint (a
     body's quantity in its body's column, a joint's in its joint's: joint i's child is body
-    i), each panel named by its member; saturated axes shaded (:func:`shade_saturation`).
-    Returns (the figure, its axes (rows, columns), the series)."""
+    i), each panel named by its member; saturated axes shaded (:func:`shade_saturation`)
+    and the limits near the values dotted (:func:`_draw_limits`). Returns (the figure, its axes (rows, columns), the series)."""
     s = run.series(*names)
     members = _members(run)
     n = 1 if members is None else len(members["body"])
-    fig, axes = new_figure(len(names), n, width=9.0 if n == 1 else 4.2 * n, row_height=row_height)
+    fig, axes = new_figure(len(names), n, width=9.0 if n == 1 else 4.2 * n)
     for row, var in enumerate(names):
         for col in range(n):
             ax = axes[row, col]
             values = s[var] if members is None else s[var][:, col]
+            name = None if members is None else members[QUANTITIES[var].member][col]
             for k in range(3):
                 ax.plot(s["time"], values[:, k], ls=_LINESTYLES[k], marker=_marker(values), label=_component(var, k))
-            who = "" if members is None else f"{members[QUANTITIES[var].member][col]}\n"
+            who = "" if name is None else f"{name}\n"
             ax.set_ylabel(who + _label(var), fontsize=9 if members is None else 8)
-            drawn = _draw_limits(ax, values, control_limits(run, var, col)) if var in SATURATION_FLAGS else []
+            drawn = _draw_limits(ax, values, control_limits(run, var, name)) if var in SATURATION_FLAGS else []
             if scale:
                 set_scale(ax, np.concatenate([np.ravel(values), drawn]))  # the ticks reach the limits drawn
             if var in SATURATION_FLAGS:
@@ -364,15 +365,14 @@ def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False, row_
     return fig, axes, s
 
 
-def control_limits(run: RunData, control: str, member: int = 0) -> np.ndarray | None:
-    """The limit of each axis of ``control`` (``torque_n``, ``force_h``,
-    ``constraint_force``) that the run's configuration sets, shape (3,), inf where an axis
-    has none; None without a limit. One body's ``controller.saturation``; a chain's joint
-    ``member`` (N_j, Lambda_j) or body ``member`` (H), found by its name in the file."""
+def control_limits(run: RunData, control: str, name: str | None = None) -> np.ndarray | None:
+    """The limit of each axis of ``control`` (``torque_n`` [N m], ``force_h`` [N],
+    ``constraint_force`` [N]) that the run's configuration sets, shape (3,), inf where an
+    axis has none; None without a limit. One body's ``controller.saturation``; a chain's
+    joint (N_j, Lambda_j) or body (H) named ``name``."""
     config = run.config
     if run.variant == "chain":
-        dimension, section = ("body", "bodies") if control == "force_h" else ("joint", "joints")
-        name = member_names(run, dimension)[member]
+        section = "bodies" if control == "force_h" else "joints"
         owner = next((m for m in config.get(section) or () if isinstance(m, dict) and m.get("name") == name), {})
         saturation = owner.get("saturation")
     else:
