@@ -81,18 +81,28 @@ def test_a_report_draws_and_animates_a_chains_bodies_and_joints(tmp_path):
                                     "--animation-frames", "4"])
     assert made.exit_code == 0, made.output
     page = (report / "index.html").read_text()
-    assert "Chains of bodies" in page and "legs, trunk" in page and "ankle, hip" in page
+    tables = (report / "summary.md").read_text()  # one table of runs: the chain's figures by body and joint
+    assert "| stance_ankle_hip | stance_ankle_hip.h5 | chain | success |" in tables
+    assert "| stance_ankle_hip | legs [" in tables and "; trunk [" in tables and "| ankle [" in tables
+    assert "ankle: torque_n [120, 120, inf], clip; hip: torque_n [150, 150, inf], clip" in tables
     assert "stance_ankle_hip: the motion" in page and "4 frames evenly" in page
-    for kind in ("rotational", "translational", "forces", "lyapunov"):  # one body's figures, a column a member
+    for kind in ("rotational", "translational", "forces", "lyapunov", "phase"):  # one body's figures, by member
         assert (report / "figures" / f"stance_ankle_hip_{kind}.png").stat().st_size > 10_000
+    assert "H is zero throughout (no such feedback): not drawn" in page  # the stance has no K_t, L_t
+    for name in ("compare_rotational", "compare_translational", "compare_lyapunov", "norms"):  # with the body
+        assert (report / "figures" / f"{name}.png").stat().st_size > 10_000
     assert (report / "figures" / "case1_permanent_rotational.png").exists()  # the one-body run as before
     import pandas as pd
 
-    summary = pd.read_csv(report / "summary.csv").set_index("run")  # a row a run; the chain's figures per joint
+    summary = pd.read_csv(report / "summary.csv").set_index("run")  # a row a run; the chain's figures per member
     assert set(summary.index) == {"case1_permanent", "stance_ankle_hip"}
     assert np.isnan(summary.loc["stance_ankle_hip", "final_theta_1"]) and np.isnan(
         summary.loc["case1_permanent", "max_abs_constraint_error_hip_x"])
     assert summary.loc["stance_ankle_hip", [f"max_abs_constraint_error_hip_{a}" for a in "xyz"]].max() < 1e-6
+    chain = summary.loc["stance_ankle_hip"]
+    assert chain["final_theta_trunk_x"] == pytest.approx(rbstab.open_result(path)["theta"][-1, 1, 0].item())
+    assert chain["rest"] in ("settled", "not settled", "rest away from equilibrium", "unstable rest")
+    assert chain["fraction_saturated_torque_n_ankle_x"] == 0.0
     for name in ("a.gif", "a.png"):
         result = CliRunner().invoke(cli, ["animate", str(path), "-o", str(tmp_path / name), "--speed", "1"])
         assert result.exit_code == 0, result.output

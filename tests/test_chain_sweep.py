@@ -252,7 +252,9 @@ def test_a_chain_sweep_on_a_dask_cluster_writes_the_local_sweeps_files(tmp_path)
 def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     """A thinned store keeps what a chain run's report draws (each joint's Theta_j, N_j,
     Lambda_j and v's terms besides one body's variables), in store files and in a file per
-    run: the report of a run's file draws its four figures (Lambda_j and N_j without H)."""
+    run: the report of a run's file draws its four figures (Lambda_j and N_j without H) and
+    the norms |E_j|, |Omega| against the settling thresholds (no phase portraits: the store
+    holds no Omega_j)."""
     out = tmp_path / "results"
     result = CliRunner().invoke(cli, ["sweep", STANCE, "--grid", "initial_state.trunk.theta.0=0.1", *SHORT,
                                       "--layout", layout, "-j", "1", "-o", str(out)])
@@ -261,10 +263,11 @@ def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     report = CliRunner().invoke(cli, ["report", str(file), "-o", str(tmp_path / "report")])
     assert report.exit_code == 0, report.output
     drawn = sorted(p.name.rpartition("_")[2] for p in (tmp_path / "report" / "figures").iterdir())
-    assert drawn == ["forces.png", "lyapunov.png", "rotational.png", "translational.png"], drawn
+    assert drawn == ["forces.png", "lyapunov.png", "norms.png", "rotational.png", "translational.png"], drawn
     import pandas as pd
 
     summary = pd.read_csv(tmp_path / "report" / "summary.csv")  # a row per chain run, its figures per joint
     assert len(summary) == 1 and summary["variant"][0] == "chain" and summary["status"][0] == "success"
-    assert {"lyapunov_final", "max_abs_constraint_error_ankle_x", "max_abs_constraint_error_hip_z"} <= set(summary.columns)
+    assert {"lyapunov_final", "max_abs_constraint_error_ankle_x", "max_abs_constraint_error_hip_z", "final_theta_trunk_x",
+            "fraction_saturated_torque_n_ankle_x", "fraction_saturated_force_h_legs_z"} <= set(summary.columns)
     assert largest_error(summary, "hip")[0] < 1e-6

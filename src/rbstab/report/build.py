@@ -17,8 +17,7 @@ Layout of the report folder::
     summary.md            the tables of the page
     summary.csv           one row per run (direct runs and the runs of every sweep)
     sweep_<name>.csv      per sweep: index.csv plus the chosen metrics
-    (analysis files of ``rbstab analyze`` add their sections: rbstab.report.analysis;
-    chain runs theirs: rbstab.report.chain)
+    (analysis files of ``rbstab analyze`` add their sections: rbstab.report.analysis)
     figures/*.png|pdf|svg every figure, in each format asked (--figure-format)
     report.json           what the report was built from (inputs, options, version)
 """
@@ -42,8 +41,7 @@ from ..diagnostics import convergence_word
 from ..io.metadata import provenance_attributes
 from ..layout import SATURATION_FLAGS, SUMMARY_FIGURES
 from .analysis import analysis_sections, split_inputs
-from .chain import chain_sections
-from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures
+from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures, has_limits
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
 from .paper import PAPER_DOCS, compare_with_paper
 from .render import Animation, Section, Table, render_html, render_markdown, render_tables_markdown
@@ -57,7 +55,6 @@ from .tables import (
     SETTLED,
     UNSTABLE_REST,
     SettleThresholds,
-    chain_runs_table,
     check_member_metrics,
     differing_parameters,
     format_value,
@@ -256,18 +253,30 @@ def _f(value, digits: int = 4) -> str:
     return format_value(value, digits)
 
 
-def _vec(row, prefix: str) -> str:
-    values = [row[f"{prefix}_{i}"] for i in (1, 2, 3)]
-    return "-" if all(not np.isfinite(v) for v in values) else _f(values)
+def _vec(row, prefix: str, members: dict | None = None) -> str:
+    """A table cell of the 3-vector figure ``prefix`` of a row of :func:`runs_table`: one
+    body's ``[a, b, c]``; a chain's (``members``, :attr:`RunData.members`) each body's or
+    joint's, ``legs [a, b, c]; trunk [...]``."""
+    if members is None:
+        values = [row.get(f"{prefix}_{i}", np.nan) for i in (1, 2, 3)]
+        return "-" if all(not np.isfinite(v) for v in values) else _f(values)
+    cells = []
+    for name in members[SUMMARY_FIGURES[prefix].member]:
+        values = [row.get(f"{prefix}_{name}_{axis}", np.nan) for axis in "xyz"]
+        if any(np.isfinite(v) for v in values):
+            cells.append(f"{name} {_f(values)}")
+    return "; ".join(cells) or "-"
 
 
 def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[Section]:
     rows = df.to_dict("records")
+    members = [run.members for run in runs]
     s = Section("Runs", "runs")
     s.blocks.append(
         "One row per run; values read back from the result files (summary attributes written by "
         "the run). status success: the solver reached t_end; converged: besides, v(t_end) <= 0.001 v(0) "
-        "(not converged by t_end: still moving). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame."
+        "(not converged by t_end: still moving). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame; "
+        "a chain's per body (Theta, Omega, X, V) or joint (E_j, D_j), each named."
     )
     s.blocks.append(Table(
         "Runs: identity, solver statistics, status",
@@ -288,24 +297,24 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
     s.blocks.append(Table(
         "Final rotational state (at t_final)",
         ["run", "Theta [rad]", "Omega [rad/s]"],
-        [[r["run"], *(_vec(r, f"final_{b}") for b in ("theta", "omega"))] for r in rows],
+        [[r["run"], *(_vec(r, f"final_{b}", m) for b in ("theta", "omega"))] for r, m in zip(rows, members)],
     ))
-    has_d = any(np.isfinite(r["final_controller_state_1"]) for r in rows)
+    has_d = any(_vec(r, "final_controller_state", m) != "-" for r, m in zip(rows, members))
     blocks = ("position", "velocity", "controller_state") if has_d else ("position", "velocity")
     s.blocks.append(Table(
         "Final translational state (at t_final)",
         ["run", "X [m]", "V [m/s]", *(["D [m]"] if has_d else [])],
-        [[r["run"], *(_vec(r, f"final_{b}") for b in blocks)] for r in rows],
+        [[r["run"], *(_vec(r, f"final_{b}", m) for b in blocks)] for r, m in zip(rows, members)],
     ))
     s.blocks.append(Table(
         "Constraint error and Lyapunov function",
         ["run", "max |E| per axis [m]", "settling time [s]", "v(0) [J]", "v(t_end) [J]", "max dv/dt [W]",
          "max |analytic - numerical dv/dt| [W]", "relative", "rate check"],
-        [[r["run"], _vec(r, "max_abs_constraint_error"),
+        [[r["run"], _vec(r, "max_abs_constraint_error", m),
           _f(r["settling_time"]) if r["rest"] == SETTLED else r["rest"],
           _f(r["lyapunov_initial"]), _f(r["lyapunov_final"]), _f(r["max_lyapunov_rate"]),
           _f(r["lyapunov_rate_mismatch"]), _f(r["lyapunov_rate_mismatch_relative"], 3), str(r["lyapunov_rate_check"])]
-         for r in rows],
+         for r, m in zip(rows, members)],
     ))
     switching = _switching_table(runs)
     if switching is not None:
@@ -322,10 +331,11 @@ SATURATION_FIGURES = ("max_lyapunov_increase", "time_lyapunov_rising",
 
 
 def _saturation_table(runs: Sequence[RunData]) -> Table | None:
-    """The runs with actuators' limits (controller.saturation) or disturbances: how much v
-    rose, how long dv/dt > 0, and per axis of N, H, Lambda the fraction of the time at the
-    limit (None if no run has either); headers from the table of quantities."""
-    rows = [r for r in runs if r.config.get("disturbances") or r.config.get("controller", {}).get("saturation")]
+    """The runs with actuators' limits (one body's controller.saturation, a chain's joints'
+    and bodies') or disturbances: how much v rose, how long dv/dt > 0, and per axis of N, H,
+    Lambda the fraction of the time at the limit (a chain's per joint or body; None if no
+    run has limits or disturbances); headers from the table of quantities."""
+    rows = [r for r in runs if r.config.get("disturbances") or has_limits(r)]
     if not rows:
         return None
     figures = [SUMMARY_FIGURES[name] for name in SATURATION_FIGURES]
@@ -334,10 +344,30 @@ def _saturation_table(runs: Sequence[RunData]) -> Table | None:
         "its limit (docs/saturation.md, docs/disturbances.md)",
         ["run", "limits", "disturbances",
          *(q.symbol if q.units == "1" else f"{q.symbol} [{q.display_units}]" for q in figures)],
-        [[r.label, _limits_text(r.config.get("controller", {}).get("saturation")),
-          ", ".join(f"{d.get('kind')} at {d.get('start', 0)} s" for d in r.config.get("disturbances") or ()) or "-",
-          *(_f(r.summary.get(q.name), 3) for q in figures)] for r in rows],
+        [[r.label, _run_limits_text(r),
+          ", ".join(f"{d.get('kind')} at {d.get('start', 0)} s" + (f" on {d['body']}" if d.get("body") else "")
+                    for d in r.config.get("disturbances") or ()) or "-",
+          *(_figure_cell(r, q.name) for q in figures)] for r in rows],
     )
+
+
+def _figure_cell(run: RunData, name: str) -> str:
+    """A table cell of the summary figure ``name``: as it is, or a chain's per body or joint
+    (``ankle [a, b, c]; hip [...]``)."""
+    value, members = run.summary.get(name), run.members
+    if members is None or value is None or np.ndim(value) < 2:
+        return _f(value, 3)
+    return "; ".join(f"{m} {_f(v, 3)}" for m, v in zip(members[SUMMARY_FIGURES[name].member], value))
+
+
+def _run_limits_text(run: RunData) -> str:
+    """A run's actuators' limits as its config gives them: one body's ``torque_n 4, clip``, a
+    chain's by joint and body (``ankle: torque_n [120, 120, inf], clip``)."""
+    if run.members is None:
+        return _limits_text((run.config.get("controller") or {}).get("saturation"))
+    held = [m for m in [*(run.config.get("joints") or ()), *(run.config.get("bodies") or ())]
+            if isinstance(m, dict) and m.get("saturation")]
+    return "; ".join(f"{m.get('name')}: {_limits_text(m['saturation'])}" for m in held) or "-"
 
 
 def _limits_text(saturation) -> str:
@@ -565,11 +595,10 @@ def _write(data: ReportInputs, folder: Path, options: ReportOptions, metrics: Se
     """Every file of the report into ``folder`` (module docstring)."""
     (folder / "figures").mkdir()
     out = FigureWriter(folder, tuple(dict.fromkeys(options.figure_formats)), int(options.dpi))
-    runs = [r for r in data.runs if r.variant != "chain"]
+    runs = list(data.runs)
     params = differing_parameters(runs)
     frames = options.animation_frames if "html" in options.formats else 0
     sections = _direct_run_sections(runs, params, out, options.settle, frames, _jobs(options)) if runs else []
-    sections += chain_sections([r for r in data.runs if r.variant == "chain"], out, frames)
     for sweep in data.sweeps:
         sections.append(_sweep_section_with_files(sweep, metrics, out, options.settle))
     sections += analysis_sections(analyses, out)
@@ -641,14 +670,10 @@ def _write_summary_csv(data: ReportInputs, params: Sequence[str], folder: Path, 
     """``summary.csv``: every run, direct and swept, one row each."""
     import pandas as pd  # heavy: pandas
 
-    all_runs = [r for r in data.all_runs if r.variant != "chain"]
-    chains = [r for r in data.all_runs if r.variant == "chain"]  # their figures per joint: columns of their own
+    all_runs = list(data.all_runs)
     all_params = list(dict.fromkeys([*params, *differing_parameters(all_runs)]))
-    tables = [runs_table(all_runs, settle, all_params)] if all_runs else []
-    if chains:
-        tables.append(chain_runs_table(chains, params))
-    pd.concat(tables, ignore_index=True, sort=False).to_csv(folder / "summary.csv", index=False) if tables else \
-        pd.DataFrame().to_csv(folder / "summary.csv", index=False)
+    (runs_table(all_runs, settle, all_params) if all_runs else pd.DataFrame()).to_csv(folder / "summary.csv",
+                                                                                      index=False)
 
 
 def _intro(data: ReportInputs, created: str, settle: SettleThresholds) -> list[str]:

@@ -38,8 +38,8 @@ __all__ = [
     "RUN_FIGURES",
     "switching_figure",
     "lyapunov_figure",
-    "member_names",
     "control_limits",
+    "has_limits",
     "disturbance_marks",
     "saturated_intervals",
     "shade_saturation",
@@ -56,6 +56,9 @@ FIGURE_FORMATS = ("png", "pdf", "svg")
 LOG_SPAN = 100.0
 
 _LINESTYLES = ("-", "--", ":")
+#: Line styles of a chain's bodies or joints on the overlays of several runs, one a member
+#: (as many as a tree has bodies at most).
+_MEMBER_STYLES = ("-", "--", ":", "-.", (0, (5, 1)), (0, (3, 1, 1, 1)), (0, (1, 1)), (0, (5, 3, 1, 3, 1, 3)))
 #: A constraint error below this [m] is drawn on a +-1 mm axis and labelled round-off.
 ROUND_OFF_E = 1e-9
 
@@ -148,7 +151,10 @@ units_text = display_units
 def _symbol(var: str, component: int | None = None) -> str:
     """Mathtext symbol of quantity ``var`` (:data:`rbstab.layout.QUANTITIES`) or of its component."""
     q = QUANTITIES[var]
-    return q.tex if component is None else f"{q.component_tex or q.tex}_{component + 1}"
+    if component is None:
+        return q.tex
+    tex = q.component_tex or q.tex
+    return f"({tex})_{component + 1}" if "_" in tex else f"{tex}_{component + 1}"  # (\Theta_j)_1: one subscript each
 
 
 def _label(var: str, component: int | None = None) -> str:
@@ -317,25 +323,6 @@ def shade_saturation(ax, run: RunData, control: str, member: int | None = None) 
             ax.axvspan(t0, t1, color=f"C{k}", alpha=0.12, lw=0, gid=f"saturated-{control}-{k + 1}")
 
 
-def member_names(run: RunData, dimension: str) -> list[str]:
-    """The bodies or joints (``dimension``) of a chain run's file, in its order."""
-    import h5py  # heavy: h5py
-
-    with h5py.File(run.path, "r") as f:
-        return [n.decode() if isinstance(n, bytes) else str(n) for n in f[dimension][...]]
-
-
-def _members(run: RunData) -> dict[str, list[str]] | None:
-    """A chain run's bodies and joints by dimension (``body``, ``joint``); None for one body."""
-    return None if run.variant != "chain" else {d: member_names(run, d) for d in ("body", "joint")}
-
-
-def _component(var: str, k: int) -> str:
-    """The legend of component k of ``var``: theta_1, or (Theta_j)_1 for a symbol with an index."""
-    tex = QUANTITIES[var].component_tex or QUANTITIES[var].tex
-    return f"$({tex})_{k + 1}$" if "_" in tex else f"${_symbol(var, k)}$"
-
-
 def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False):
     """A figure of each 3-vector of ``names`` in a row of panels, components as solid,
     dashed, dotted lines: one body's in one column, a chain's a column per body or joint (a
@@ -343,7 +330,7 @@ def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False):
     i), each panel named by its member; saturated axes shaded (:func:`shade_saturation`)
     and the limits near the values dotted (:func:`_draw_limits`). Returns (the figure, its axes (rows, columns), the series)."""
     s = run.series(*names)
-    members = _members(run)
+    members = run.members
     n = 1 if members is None else len(members["body"])
     fig, axes = new_figure(len(names), n, width=9.0 if n == 1 else 4.2 * n)
     for row, var in enumerate(names):
@@ -352,7 +339,7 @@ def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False):
             values = s[var] if members is None else s[var][:, col]
             name = None if members is None else members[QUANTITIES[var].member][col]
             for k in range(3):
-                ax.plot(s["time"], values[:, k], ls=_LINESTYLES[k], marker=_marker(values), label=_component(var, k))
+                ax.plot(s["time"], values[:, k], ls=_LINESTYLES[k], marker=_marker(values), label=f"${_symbol(var, k)}$")
             who = "" if name is None else f"{name}\n"
             ax.set_ylabel(who + _label(var), fontsize=9 if members is None else 8)
             drawn = _draw_limits(ax, values, control_limits(run, var, name)) if var in SATURATION_FLAGS else []
@@ -371,7 +358,7 @@ def control_limits(run: RunData, control: str, name: str | None = None) -> np.nd
     axis has none; None without a limit. One body's ``controller.saturation``; a chain's
     joint (N_j, Lambda_j) or body (H) named ``name``."""
     config = run.config
-    if run.variant == "chain":
+    if run.members is not None:
         section = "bodies" if control == "force_h" else "joints"
         owner = next((m for m in config.get(section) or () if isinstance(m, dict) and m.get("name") == name), {})
         saturation = owner.get("saturation")
@@ -403,7 +390,7 @@ def _draw_limits(ax, values: np.ndarray, limits: np.ndarray | None) -> list[floa
     return drawn
 
 
-def _limited(run: RunData) -> bool:
+def has_limits(run: RunData) -> bool:
     """Whether the run's configuration limits a control (one body's controller, or a chain's
     joints and bodies)."""
     config = run.config
@@ -431,7 +418,7 @@ def run_figures(run: RunData, out: FigureWriter) -> list[FigureFile]:
 
 
 def _rotational_figure(run: RunData, out: FigureWriter) -> FigureFile:
-    chain = run.variant == "chain"
+    chain = run.members is not None
     fig, _, _ = _vector_figure(run, ("theta", "omega", "joint_theta") if chain else ("theta", "omega"))
     _suptitle(fig, run, "rotational states")
     return out.save(fig, f"{safe_filename(run.label)}_rotational", f"{run.label}: rotational states",
@@ -456,7 +443,7 @@ def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
                                transform=axes[-1, col].transAxes, fontsize=8, color="0.3")
     _suptitle(fig, run, "translational states and constraint error")
     extra = " (X, V reconstructed from Theta, Omega: C is fixed, E = 0)" if run.variant == "permanent" else ""
-    if run.variant == "chain":
+    if run.members is not None:
         extra = (", a column a body and its joint (E_j = X_c + A_c R_c - X_p - A_p R_p; a permanent joint's zero to "
                  "round-off, since reduced coordinates hold it)")
     return out.save(fig, f"{safe_filename(run.label)}_translational", f"{run.label}: translational states and constraint",
@@ -534,7 +521,7 @@ def lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
     _finish_time_axes(axes[:, 0], run, ncols=2)
     _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
     terms = ("the bodies' kinetic energies, the joints' potentials, the bodies' own feedback, gravity with h"
-             if run.variant == "chain" else "translational, rotational, constraint controller, gravity")
+             if run.members is not None else "translational, rotational, constraint controller, gravity")
     return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
                     f"v and its non-zero terms ({terms}; "
                     "logarithmic axis, a term that changes sign as its magnitude), "
@@ -548,11 +535,13 @@ def lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
 def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
     held = run.series("constraint_force", "force_h", "torque_n")
     names = [n for n in ("constraint_force", "force_h", "torque_n") if n in held]  # a thinned chain store: Lambda, N
+    unused = [n for n in names if n != "constraint_force" and not np.nanmax(np.abs(held[n]), initial=0.0) > 0.0]
+    names = [n for n in names if n not in unused]  # a feedback the run does not have (a chain's H without K_t, L_t)
     if not names:
         return None
     fig, _, _ = _vector_figure(run, names, scale=True)
     _suptitle(fig, run, "constraint force and feedback")
-    chain = run.variant == "chain"
+    chain = run.members is not None
     words = {"constraint_force": "the constraint force Lambda at C (inertial frame, eqs 20-22, 39, 40)",
              "force_h": "the translational feedback H (inertial frame, eq 24)",
              "torque_n": "the rotational feedback torque N (body frame, eq 23)"}
@@ -565,7 +554,8 @@ def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
                     + "; a symmetric-logarithmic axis where a quantity spans more than two decades"
                     + ("; shaded in a component's colour where that axis is commanded at or beyond its limit "
                        "(saturation; clip delivers the limit there), the limit dotted where the control reaches "
-                       "half of it" if _limited(run) else "")
+                       "half of it" if has_limits(run) else "")
+                    + "".join(f"; {QUANTITIES[n].symbol} is zero throughout (no such feedback): not drawn" for n in unused)
                     + _marks_caption(run) + ".")
 
 
@@ -577,10 +567,13 @@ def _marks_caption(run: RunData) -> str:
             "a step, sine or noise dashed where it starts")
 
 
-def _phase_row(axes, run: RunData, x_var: str, y_var: str) -> None:
+def _phase_row(axes, run: RunData, x_var: str, y_var: str, member: int | None = None) -> None:
+    """A row of portraits, ``y_var`` against ``x_var`` a component a panel: one body's, or
+    a chain's body or joint ``member`` (named on the row's first panel)."""
     s = run.series(x_var, y_var)
+    x_all, y_all = (s[x_var], s[y_var]) if member is None else (s[x_var][:, member], s[y_var][:, member])
     for k, ax in enumerate(axes):
-        x, y = s[x_var][:, k], s[y_var][:, k]
+        x, y = x_all[:, k], y_all[:, k]
         ok = np.isfinite(x) & np.isfinite(y)
         ax.plot(x[ok], y[ok], color=f"C{k}", lw=0.9)
         if ok.any():
@@ -589,24 +582,44 @@ def _phase_row(axes, run: RunData, x_var: str, y_var: str) -> None:
         ax.set_xlabel(_label(x_var, k), fontsize=8)
         ax.set_ylabel(_label(y_var, k), fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, title=run.label, title_fontsize=8)
+    if member is not None:
+        axes[0].set_title(run.members[QUANTITIES[x_var].member][member], fontsize=9, loc="left")
+    else:
+        axes[0].legend(fontsize=8, title=run.label, title_fontsize=8)
 
 
 def _phase_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
-    if run.variant == "chain":  # a portrait a component: one body's
-        return None
-    held = run.series("constraint_error", "constraint_rate", "theta", "omega")
+    """Phase portraits: one body's Theta_i against Omega_i, and E_i against F_i where E
+    exceeds round-off; a chain's the same of each joint, its Theta_j against Omega_j (the
+    child's orientation and angular velocity relative to its parent) and its E_j against F_j."""
+    members = run.members
+    pairs = [("joint_theta", "joint_omega"), ("constraint_error", "constraint_rate")] if members is not None else \
+        [("theta", "omega"), ("constraint_error", "constraint_rate")]
+    held = run.series(*(v for pair in pairs for v in pair))
+    if not all(v in held for v in pairs[0]):
+        return None  # a thinned store
     e = held.get("constraint_error")
-    constraint = "constraint_rate" in held and e is not None and np.nanmax(np.abs(e), initial=0.0) > ROUND_OFF_E
-    rows = [("theta", "omega")] + ([("constraint_error", "constraint_rate")] if constraint else [])
-    fig, axes = new_figure(len(rows), 3, width=12.0, row_height=3.4, sharex=False)
-    for row, (x_var, y_var) in zip(axes, rows):
-        _phase_row(row, run, x_var, y_var)
+    columns = [None] if members is None else range(len(members["joint"]))
+    rows = []
+    for j in columns:
+        rows.append((*pairs[0], j))
+        part = e if (e is None or j is None) else e[:, j]
+        if "constraint_rate" in held and part is not None and np.nanmax(np.abs(part), initial=0.0) > ROUND_OFF_E:
+            rows.append((*pairs[1], j))
+    constraint = any(r[0] == "constraint_error" for r in rows)
+    fig, axes = new_figure(len(rows), 3, width=12.0, row_height=3.4 if members is None else 3.0, sharex=False)
+    for row, (x_var, y_var, j) in zip(axes, rows):
+        _phase_row(row, run, x_var, y_var, j)
+    if members is not None:
+        axes[0, -1].legend(fontsize=8, loc="upper right")
     _suptitle(fig, run, "phase portraits")
     note = "" if constraint else " E is zero to round-off (or not stored): no E-F portraits."
+    words = ("Each Euler angle Theta_i against the body angular velocity Omega_i" if members is None else
+             "Each joint's relative Euler angle (Theta_j)_i against its relative angular velocity (Omega_j)_i "
+             "(child frame), a row a joint")
     return out.save(fig, f"{safe_filename(run.label)}_phase", f"{run.label}: phase portraits",
-                    "Each Euler angle Theta_i against the body angular velocity Omega_i"
-                    + (" and each component of the constraint error E_i against its rate F_i" if constraint else "")
+                    words + (" and each component of the constraint error E_i against its rate F_i"
+                             + (" where E_j exceeds round-off" if members is not None else "") if constraint else "")
                     + f", from the start (green circle) to the last sample (black square).{note}")
 
 
@@ -671,15 +684,22 @@ def _overlay(runs: Sequence[RunData], variables: Sequence[str], out: FigureWrite
     for r, var in enumerate(variables):
         for run, colour in zip(runs, colours(len(runs))):
             s = run.series(var)
-            for k in range(3 if var in s else 0):
-                axes[r, k].plot(s["time"], s[var][:, k], color=colour, lw=1.2, label=run.label)
+            if var not in s:
+                continue
+            members = run.members
+            names = [None] if members is None else members[QUANTITIES[var].member]
+            for j, member in enumerate(names):  # a chain's bodies or joints: a line style each
+                values = s[var] if member is None else s[var][:, j]
+                for k in range(3):
+                    axes[r, k].plot(s["time"], values[:, k], color=colour, lw=1.2, ls=_MEMBER_STYLES[j % len(_MEMBER_STYLES)],
+                                    label=run.label if member is None else f"{run.label}: {member}")
         for k in range(3):
             axes[r, k].set_ylabel(_label(var, k), fontsize=9)
             axes[r, k].grid(alpha=0.3)
     for k in range(3):
         axes[-1, k].set_xlabel(_label("time"))
     handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(runs), 4), fontsize=9)
+    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), fontsize=9)
     fig.suptitle(title, fontsize=11)
     return out.save(fig, name, f"Comparison: {title[0].lower()}{title[1:]}", caption)
 
@@ -716,7 +736,8 @@ def _norms_figure(runs: Sequence[RunData], out: FigureWriter, thresholds: Settle
     for run, colour in zip(runs, colours(len(runs))):
         s = run.series(*limits)
         for ax, (var, limit) in zip(axes[:, 0], limits.items()):
-            ax.plot(s["time"], np.maximum(np.linalg.norm(s[var], axis=1), limit * 1e-4), color=colour, label=run.label)
+            largest = np.linalg.norm(s[var], axis=-1).reshape(len(s["time"]), -1).max(axis=1)  # a chain's: every member's
+            ax.plot(s["time"], np.maximum(largest, limit * 1e-4), color=colour, label=run.label)
     for ax, (var, limit) in zip(axes[:, 0], limits.items()):
         ax.set_yscale("log")
         units = QUANTITIES[var].display_units
@@ -727,9 +748,12 @@ def _norms_figure(runs: Sequence[RunData], out: FigureWriter, thresholds: Settle
     axes[-1, 0].set_xlabel(_label("time"))
     fig.suptitle("Norms of the constraint error and of the angular velocity (settling thresholds dashed)", fontsize=11)
     return out.save(fig, "norms", "Constraint error and angular velocity norms",
-                    f"|E| and |Omega| (Euclidean norms, log scale; values below {thresholds.e * 1e-4:g} m and "
+                    f"|E| and |Omega| (Euclidean norms, a chain's largest over its joints and bodies, log scale; values below {thresholds.e * 1e-4:g} m and "
                     f"{thresholds.omega * 1e-4:g} rad/s drawn at those floors). A run has settled once both stay "
                     "under the dashed thresholds.")
+
+
+_MEMBER_WORDS = "; a chain's bodies (Theta, Omega, X, V) or joints (E_j) in line styles of their own, named in the legend."
 
 
 def comparison_figures(runs: Sequence[RunData], out: FigureWriter, thresholds: SettleThresholds) -> list[FigureFile]:
@@ -750,16 +774,19 @@ def comparison_figures(runs: Sequence[RunData], out: FigureWriter, thresholds: S
         ``compare_translational`` (X_k [m], V_k [m/s], E_k [m]), ``compare_lyapunov``
         (v [J], log scale when positive; dv/dt [W] analytic solid / numerical dashed), and
         ``norms`` (|E| [m] and |Omega| [rad/s], log scale, with the settling thresholds),
-        which is also drawn for a single run.
+        which is also drawn for a single run. A chain's run draws each body (Theta, Omega,
+        X, V) or joint (E_j) in a line style of its own; its norms are the largest over its
+        joints and bodies (what :func:`rbstab.report.tables.settling_time` bounds).
     """
     if len(runs) < 2:
         return [_norms_figure(runs, out, thresholds)]
+    tail = _MEMBER_WORDS if any(run.members is not None for run in runs) else "."
     return [
         _overlay(runs, ("theta", "omega"), out, "compare_rotational", "Rotational states",
-                 "Theta and Omega of every run, one column per component."),
+                 "Theta and Omega of every run, one column per component" + tail),
         _overlay(runs, ("position", "velocity", "constraint_error"), out, "compare_translational",
                  "Translational states and constraint error",
-                 "X, V and the constraint error E of every run, one column per component."),
+                 "X, V and the constraint error E of every run, one column per component" + tail),
         _compare_lyapunov(runs, out),
         _norms_figure(runs, out, thresholds),
     ]

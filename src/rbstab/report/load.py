@@ -142,6 +142,16 @@ class RunData:
         return self.status == "success"
 
     @property
+    def members(self) -> dict[str, tuple[str, ...]] | None:
+        """A tree's bodies and joints, ``{"body": names, "joint": names}`` in the order of
+        its file's ``body`` and ``joint`` dimensions (the ``bodies`` and ``joints``
+        attributes); None for one body."""
+        if self.variant != "chain":
+            return None
+        return {kind: tuple(n for n in str(self.attrs.get(name) or "").split(",") if n)
+                for kind, name in (("body", "bodies"), ("joint", "joints"))}
+
+    @property
     def flat_config(self) -> dict[str, Any]:
         """:func:`flatten_config` of :attr:`config`."""
         if "flat" not in self._cache:
@@ -321,6 +331,8 @@ def _store_attributes(row: dict) -> dict:
     members = _member_names(row)
     figures = summary_from_columns(row, members.get("joint"), members.get("body"))
     attrs.update({f"summary_{key}": value for key, value in figures.items()})
+    attrs.update({name: ",".join(members[kind]) for kind, name in (("body", "bodies"), ("joint", "joints"))
+                  if kind in members})  # as a run file's attributes name them
     return attrs
 
 

@@ -23,7 +23,7 @@ import numpy as np
 from ..analysis.linearise import MAX_REST_CHECKS, rest_verdict
 from ..config.identity import canonical_config
 from ..convergence import converged
-from ..io.chunk import read_chunk_series
+from ..io.chunk import read_chunk_series, summary_columns
 from ..layout import SATURATION_FLAGS, STATE_BLOCKS, SUMMARY_FIGURES
 from .load import RunData, SweepData
 
@@ -55,7 +55,6 @@ __all__ = [
     "differing_parameters",
     "format_value",
     "runs_table",
-    "chain_runs_table",
     "sweep_table",
     "metric_column",
 ]
@@ -433,8 +432,14 @@ def differing_parameters(runs: Sequence[RunData], exclude: Sequence[str] = ("nam
     -------
     list of str
         Keys of :func:`rbstab.report.load.flatten_config` (a key absent from some runs
-        counts as differing), in first-seen order; empty for fewer than two runs.
+        counts as differing), in first-seen order; empty for fewer than two runs. Runs of
+        one body and chains are compared among their own kind (their keys are another
+        spelling): the keys that differ among either.
     """
+    kinds = {run.members is None for run in runs}
+    if len(kinds) > 1:
+        found = [differing_parameters([r for r in runs if (r.members is None) == kind], exclude) for kind in (True, False)]
+        return list(dict.fromkeys([*found[0], *found[1]]))
     if len(runs) < 2:
         return []
     keys: dict[str, None] = {}
@@ -523,7 +528,12 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         ``lyapunov_rate_check``, ``max_lyapunov_increase`` [J], ``time_lyapunov_rising`` [s],
         ``fraction_saturated_torque_n_1..3``, ``_force_h_1..3``, ``_constraint_force_1..3``
         (NaN for a file without them), ``method``, ``nfev``, ``njev``, ``nlu``,
-        ``wall_time`` [s]. Values as stored in the files (full precision).
+        ``wall_time`` [s]. Values as stored in the files (full precision). A chain's run
+        has its figures per body or joint in columns of their own instead of the ``_1..3``
+        ones, as its sweeps' store them (:func:`rbstab.io.chunk.summary_columns`):
+        ``final_theta_<body>_<axis>`` ..., ``max_abs_constraint_error_<joint>_<axis>``,
+        ``fraction_saturated_torque_n_<joint>_<axis>`` ...; its settling time bounds every
+        joint's |E_j| and every body's |Omega| (:func:`settling_time`).
     """
     import pandas as pd  # heavy: pandas
 
@@ -538,11 +548,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
     for run, time, run_converged, verdict in zip(runs, times, v_converged, verdicts):
         row = _identity(run, parameters)
         row["t_final"] = float(run.summary.get("t_final", np.nan))
-        for block in STATE_BLOCKS:
-            for i, v in enumerate(_vector(run, f"final_{block}"), start=1):
-                row[f"final_{block}_{i}"] = v
-        for i, v in enumerate(_vector(run, "max_abs_constraint_error"), start=1):
-            row[f"max_abs_constraint_error_{i}"] = v
+        row.update(_figure_columns(run, [f"final_{block}" for block in STATE_BLOCKS] + ["max_abs_constraint_error"]))
         row["rest"] = rest_outcome(time, run_converged, verdict)
         row["rest_state"] = verdict
         row["settling_time"] = time if row["rest"] == SETTLED else float("nan")
@@ -552,43 +558,20 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
         for key in ("max_lyapunov_increase", "time_lyapunov_rising"):
             row[key] = float(run.summary.get(key, np.nan))
-        for _, figure in SATURATION_FLAGS.values():
-            for i, v in enumerate(_vector(run, figure), start=1):
-                row[f"{figure}_{i}"] = v
+        row.update(_figure_columns(run, [figure for _, figure in SATURATION_FLAGS.values()]))
         rows.append(row | _solver(run))
     return pd.DataFrame(rows)
 
 
-def chain_runs_table(runs: Sequence[RunData], parameters: Sequence[str] = ()):
-    """One row per chain run: identity, the ``parameters`` (dotted keys), the figures every
-    run has and each joint's largest |E_j|.
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns ``run``, ``file``, ``sweep``, ``variant`` (``chain``), ``status``,
-        ``message``, the parameters, ``t_final`` [s], ``lyapunov_initial``,
-        ``lyapunov_final`` [J], ``max_lyapunov_rate`` [W], ``lyapunov_rate_mismatch`` [W],
-        ``lyapunov_rate_mismatch_relative``, ``lyapunov_rate_check``,
-        ``max_lyapunov_increase`` [J], ``max_abs_constraint_error_<joint>_<axis>`` [m], ``method``, ``nfev``, ``njev``, ``nlu``, ``wall_time`` [s].
-    """
-    import pandas as pd  # heavy: pandas
-
-    rows = []
-    for run in runs:
-        row = _identity(run, parameters)
-        for key in ("t_final", "lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch",
-                    "lyapunov_rate_mismatch_relative"):
-            row[key] = float(run.summary.get(key, np.nan))
-        row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
-        row["max_lyapunov_increase"] = float(run.summary.get("max_lyapunov_increase", np.nan))
-        joints = [str(j.get("name")) for j in run.flat_config.get("joints") or () if isinstance(j, dict)]
-        values = np.asarray(run.summary.get("max_abs_constraint_error", []), dtype=float).reshape(-1, 3)
-        for name, value in zip(joints, values):
-            for axis, v in zip(_AXES, value):
-                row[f"max_abs_constraint_error_{name}_{axis}"] = float(v)
-        rows.append(row | _solver(run))
-    return pd.DataFrame(rows)
+def _figure_columns(run: RunData, figures: Sequence[str]) -> dict[str, float]:
+    """The columns of the summary figures ``figures`` (3-vectors) of a run: one body's as
+    ``<figure>_1..3`` (NaN where the file lacks one), a chain's per body or joint
+    (:func:`rbstab.io.chunk.summary_columns`; none where the file lacks it)."""
+    members = run.members
+    if members is None:
+        return {f"{figure}_{i}": v for figure in figures for i, v in enumerate(_vector(run, figure), start=1)}
+    held = {figure: run.summary[figure] for figure in figures if run.summary.get(figure) is not None}
+    return {key: float(v) for key, v in summary_columns(held, members["joint"], members["body"]).items()}
 
 
 def sweep_table(sweep: SweepData, metrics: Sequence[str], thresholds: SettleThresholds):
