@@ -18,6 +18,7 @@ import pytest
 from rbstab.analysis import analyze_chain
 from rbstab.analysis.certificate import certify, level_states
 from rbstab.analysis.runs import Runs
+from rbstab.analysis.text import describe
 from rbstab.analysis.chain_certificate import ChainModel
 from rbstab.analysis.linearise import linearise, linearise_chain
 from rbstab.config.chains import chain_config_from_mapping
@@ -143,7 +144,7 @@ def test_a_chain_too_weak_to_stand_has_no_level():
     cert = weak.certificate
     assert weak.verdict == "unstable" and not cert.positive_definite and cert.hessian_min_eigenvalue < 0
     assert cert.sublevel == 0 and not cert.holds and cert.runs_checked == 0
-    assert "no sublevel estimate" in weak.text()
+    assert "no sublevel estimate" in "\n".join(describe(weak))
 
 
 def test_a_negative_damper_is_found(planar):

@@ -308,8 +308,7 @@ def analyze(
         (:func:`rbstab.analysis.chain.analyze_chain`, a
         :class:`rbstab.analysis.chain.ChainAnalysis`), its basin map, pushes (on the body
         ``push["body"]``) and basin stability run on the CPU's compiled driver in ``jobs``
-        threads; ``boundary_layer``, ``simulate``, ``engine`` and ``executor`` are one
-        body's.
+        threads; ``boundary_layer``, ``engine`` and ``executor`` are one body's.
     boundary_layer : float, optional
         phi [m] analysed in place of the pure sign law of ``sliding`` (default
         :data:`DEFAULT_BOUNDARY_LAYER`); see :func:`analysed_config`.
@@ -383,8 +382,9 @@ def analyze(
         check_verifiable(config)
     if getattr(config, "chain", None) is not None:
         return _analyze_tree(config, boundary_layer=boundary_layer, certificate=certificate, samples=samples,
-                             seed=seed, basin=basin, basin_samples=basin_samples, ratio=ratio, jobs=jobs, push=push,
-                             basin_stability=basin_stability, falsification_runs=falsification_runs, engine=engine)
+                             seed=seed, simulate=simulate, basin=basin, basin_samples=basin_samples, ratio=ratio,
+                             jobs=jobs, push=push, basin_stability=basin_stability,
+                             falsification_runs=falsification_runs, engine=engine)
     timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
@@ -454,11 +454,13 @@ def analyze(
     return result
 
 
-def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, basin, basin_samples: int,
-                  ratio: float, jobs: int, push, basin_stability, falsification_runs: int, engine: str):
+def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, simulate: bool, basin,
+                  basin_samples: int, ratio: float, jobs: int, push, basin_stability, falsification_runs: int,
+                  engine: str):
     """:func:`analyze` of a tree of bodies (:class:`rbstab.config.chains.ChainConfig`): its
     rest state, linearisation and certificate (:func:`rbstab.analysis.chain.analyze_chain`),
-    then the basin map, the pushes on a named body (``push["body"]``) and the basin
+    the simulation from its configured initial state (``simulate``: its settling, as one
+    body's), then the basin map, the pushes on a named body (``push["body"]``) and the basin
     stability of the same command, its runs on the CPU's compiled driver in ``jobs``
     threads (another ``engine`` is said in its notes); a
     :class:`rbstab.analysis.chain.ChainAnalysis`."""
@@ -471,7 +473,8 @@ def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, se
     if basin is not None:
         check_axes(config, axes)
     result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed,
-                           falsification_runs=falsification_runs, ratio=ratio)
+                           falsification_runs=falsification_runs, ratio=ratio,
+                           settling=_settling(config, ratio) if simulate else None)
     if engine != DEFAULT_ENGINE and (axes or push or basin_stability):
         result = dataclasses.replace(result, notes=result.notes + (
             f"--engine {engine}: a chain's basin map, pushes and basin stability run on the CPU's compiled driver",))

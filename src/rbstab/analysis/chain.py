@@ -17,10 +17,9 @@ from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .basin import BasinMap
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
 from .chain_runs import check_entries
-from .dataset import analysis_content, analysis_dataset, certificate_record, time_scale_record
+from .dataset import analysis_content, analysis_dataset, certificate_record, settling_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain, mode_shapes
-from .text import certificate_lines, mode_lines, mode_shape_lines, time_scale
 
 __all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "check_axes", "check_entries"]
 
@@ -90,6 +89,9 @@ class ChainAnalysis:
     certificate : Certificate or None
         The Lyapunov certificate in the independent coordinates (its states, e.g.
         ``worst_state``, are z), None where not asked for.
+    settling : dict or None
+        The simulation from the configured initial state, as one body's
+        (:attr:`rbstab.analysis.Analysis.settling`); None where not asked for.
     notes : tuple of str
     ratio : float
         The convergence ratio of the command's runs.
@@ -107,19 +109,20 @@ class ChainAnalysis:
     rest_state: np.ndarray
     initial_lyapunov: float
     certificate: object = None
+    settling: dict | None = None
     notes: tuple = ()
     ratio: float = DEFAULT_LYAPUNOV_RATIO
     basin: BasinMap | None = None
     push: object = None
     basin_stability: object = None
-    #: Neither simulated from the configured initial state nor verified (one body's analysis
-    #: has them).
-    settling = None
+    #: Not verified (a tree of more than one body has more than 6 states).
     verification = None
     #: A chain's analysis file's ``variant``, as its run file's.
     variant = "chain"
     #: Its ``--json`` record's kind.
     kind = "chain"
+    #: The angles that bound the certificate's domain, in its text.
+    domain = "|theta_2| of a body or joint"
 
     @property
     def name(self) -> str:
@@ -171,6 +174,7 @@ class ChainAnalysis:
                 "modes": self._modes(),
                 **time_scale_record(lin),
                 "initial_lyapunov": self.initial_lyapunov, "notes": list(self.notes),
+                **({"simulation": settling_record(self.settling)} if self.settling is not None else {}),
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
 
     def basin_inside(self) -> dict[str, int] | None:
@@ -222,30 +226,6 @@ class ChainAnalysis:
         names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(3)]
         return {**certificate_record(self.certificate), "coordinates": names}
 
-    def text(self) -> str:
-        """A few lines for the terminal."""
-        lin = self.linearisation
-        lines = [f"{self.name}: {lin.verdict} (linearisation in {lin.equilibrium.size} independent coordinates)"]
-        for k, (body, block, _) in enumerate(self.coordinates):
-            if block in ("theta", "position", "controller_state"):
-                block_values = lin.equilibrium[3 * k: 3 * k + 3]
-                scale = max(1.0, float(np.abs(lin.equilibrium).max()))
-                values = ", ".join(f"{x:.6g}" for x in np.where(np.abs(block_values) < 1e-12 * scale, 0.0, block_values))
-                lines.append(f"  rest {body}.{block}: [{values}]")
-        if not lin.is_rest_point:
-            lines.append(f"  not a rest point to rounding: max |dz/dt| = {np.abs(lin.rest_residual).max():.3g}")
-        shown = ", ".join(f"{s.real:.4g}{s.imag:+.4g}j" for s in lin.eigenvalues[:6])
-        more = f" (+{lin.eigenvalues.size - 6} more)" if lin.eigenvalues.size > 6 else ""
-        lines.append(f"  eigenvalues [1/s], largest real part first: {shown}{more}")
-        lines.append(f"  {time_scale(lin.verdict, lin.slowest_time_constant, lin.shortest_e_folding_time)}; "
-                     f"v at the initial state {self.initial_lyapunov:.6g} J")
-        lines += mode_lines(lin)
-        lines += mode_shape_lines(lin, *self.angles())
-        lines += [f"  note: {n}" for n in self.notes]
-        if self.certificate is not None:
-            lines += certificate_lines(self.certificate, domain="|theta_2| of a body or joint")
-        return "\n".join(lines)
-
     def with_runs(self, basin=None, push=None, basin_stability=None) -> "ChainAnalysis":
         """This analysis with the basin map, pushes and basin stability of the same command,
         its certificate's c checked against their runs (:func:`rbstab.analysis.evidence.check_runs`;
@@ -257,14 +237,17 @@ class ChainAnalysis:
 
 
 def analyze_chain(config, *, certificate: bool = True, samples: int | None = None, seed: int = 0,
-                  falsification_runs: int | None = None, ratio: float = DEFAULT_LYAPUNOV_RATIO) -> ChainAnalysis:
+                  falsification_runs: int | None = None, ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                  settling: tuple | None = None) -> ChainAnalysis:
     """Rest state, linearisation, eigenvalues, verdict and (``certificate``) the Lyapunov
     certificate of a chain run (:class:`rbstab.config.chains.ChainConfig`).
 
     ``samples`` (default :data:`rbstab.analysis.chain_certificate.DEFAULT_CHAIN_SAMPLES`),
     ``seed``, ``falsification_runs`` (default
     :data:`rbstab.analysis.evidence.FALSIFICATION_RUNS`) and ``ratio`` are those of
-    :func:`rbstab.analysis.chain_certificate.certify_chain`.
+    :func:`rbstab.analysis.chain_certificate.certify_chain`. ``settling``: (the settling
+    record, the run) of the simulation from the configured initial state where it ran
+    (:attr:`ChainAnalysis.settling`; the certificate is checked against that run).
 
     Raises
     ------
@@ -279,12 +262,13 @@ def analyze_chain(config, *, certificate: bool = True, samples: int | None = Non
     rest = C.full_state(compiled, lin.equilibrium)
     v0 = C.lyapunov(compiled, C.initial_state(config))[0]
     found, notes = None, []
+    record, first = settling if settling is not None else (None, None)
     if certificate:
         found, notes = certify_chain(config, compiled, lin, coordinates,
                                      n_samples=DEFAULT_CHAIN_SAMPLES if samples is None else int(samples), seed=seed,
                                      falsification_runs=FALSIFICATION_RUNS if falsification_runs is None
-                                     else int(falsification_runs), ratio=ratio)
-    return ChainAnalysis(config, lin, coordinates, rest, float(v0), found, tuple(notes), ratio)
+                                     else int(falsification_runs), ratio=ratio, first=first)
+    return ChainAnalysis(config, lin, coordinates, rest, float(v0), found, record, tuple(notes), ratio)
 
 
 def check_axes(config, axes) -> None:

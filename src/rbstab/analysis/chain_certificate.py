@@ -157,7 +157,7 @@ def _undisturbed(compiled):
 
 def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: int = DEFAULT_CHAIN_SAMPLES,
                   seed: int = 0, falsification_runs: int = FALSIFICATION_RUNS,
-                  ratio: float = DEFAULT_LYAPUNOV_RATIO) -> tuple[Certificate, list[str]]:
+                  ratio: float = DEFAULT_LYAPUNOV_RATIO, first=None) -> tuple[Certificate, list[str]]:
     """(the certificate of a chain's rest state, notes) (module docstring).
 
     Parameters
@@ -177,6 +177,8 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
         Convergence of the run from the configured initial state
         (:func:`rbstab.convergence.converged`): one not converged by t_end is run longer
         (:func:`rbstab.analysis.evidence.check_initial_run`).
+    first : RunResult, optional
+        The run from the configured initial state where already run.
     """
     from ..simulator import simulate  # heavy: numba
 
@@ -203,5 +205,6 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
 
     certificate = falsify_with(run, model, linearisation, certificate, runs=falsification_runs, seed=seed)
     impulses = [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
-    certificate = check_initial_run(certificate, config, simulate, linearisation, ratio=ratio, impulses=impulses)
+    certificate = check_initial_run(certificate, config, simulate, linearisation, ratio=ratio, first=first,
+                                    impulses=impulses)
     return certificate, notes

@@ -66,6 +66,7 @@ from .thresholds import EXPLAINS_BAR
 
 __all__ = [
     "certificate_record",
+    "settling_record",
     "time_scale_record",
     "FORMAT",
     "SUFFIX",
@@ -587,6 +588,14 @@ def time_scale_record(lin) -> dict[str, float | None]:
             "shortest_e_folding_time": _finite(lin.shortest_e_folding_time)}
 
 
+def settling_record(settling: dict) -> dict[str, Any]:
+    """The ``--json`` record of an analysis's simulation from the configured initial state
+    (:attr:`rbstab.analysis.Analysis.settling`): ``status``, ``time_to_converge`` [s] (null:
+    not converged), ``ratio``, ``t_end`` [s]."""
+    return {"status": settling["status"], "time_to_converge": _finite(settling["time_to_converge"]),
+            "ratio": settling["ratio"], "t_end": settling["t_end"]}
+
+
 def json_record(analysis) -> dict[str, Any]:
     """The ``--json`` record of an analysis: plain JSON (non-finite numbers are null)."""
     lin = analysis.linearisation
@@ -611,9 +620,7 @@ def json_record(analysis) -> dict[str, Any]:
     if analysis.analysed is not analysis.config:
         record["analysed_boundary_layer"] = float(analysis.analysed.gains.boundary_layer)
     if analysis.settling is not None:
-        s = analysis.settling
-        record["simulation"] = {"status": s["status"], "time_to_converge": _finite(s["time_to_converge"]),
-                                "ratio": s["ratio"], "t_end": s["t_end"]}
+        record["simulation"] = settling_record(analysis.settling)
     c = analysis.certificate
     if c is not None:
         record["certificate"] = certificate_record(c)

@@ -272,25 +272,43 @@ def rule_lines(rules, bar: float) -> list[str]:
 
 def describe(analysis) -> list[str]:
     """Lines summarising an :class:`~rbstab.analysis.Analysis` or a
-    :class:`~rbstab.analysis.ChainAnalysis`."""
-    if analysis.variant == "chain":  # its rest state by body, mode shapes, certificate in its coordinates
-        return analysis.text().split("\n") + _basin_lines(analysis) + push_lines(analysis) + stability_lines(analysis)
+    :class:`~rbstab.analysis.ChainAnalysis`: the verdict, the notes, the equilibrium (a
+    chain's by body), the rest-point check, the table of modes (a chain's mode shapes on its
+    bodies' angles), the settling, the certificate, the verification, the basin map, the
+    pushes and the basin stability."""
     lin = analysis.linearisation
-    layout = analysis.layout
-    lines = [f"{analysis.name} ({analysis.variant}): {lin.verdict} (tolerance |Re s| <= {_g(lin.tolerance, 2)} 1/s)"]
+    tree = analysis.kind == "chain"
+    size = f"; {lin.equilibrium.size} independent coordinates" if tree else ""
+    lines = [f"{analysis.name} ({analysis.variant}): {lin.verdict} (tolerance |Re s| <= {_g(lin.tolerance, 2)} 1/s{size})"]
     lines += [f"  note: {n}" for n in analysis.notes]
-    lines.append(f"  equilibrium: {format_state(layout, lin.equilibrium)}")
+    lines.append(f"  equilibrium: {_equilibrium(analysis)}")
     rest = "yes" if lin.is_rest_point else "NO"
     lines.append(f"  rest point: {rest} (max |dy/dt| {_g(np.abs(lin.rest_residual).max(), 3)} <= "
                  f"{_g(lin.rest_tolerance, 3)})")
     lines += mode_lines(lin)
+    if tree:
+        lines += mode_shape_lines(lin, *analysis.angles())
     lines.append(_settling_line(analysis))
-    lines += certificate_lines(analysis.certificate)
+    lines += certificate_lines(analysis.certificate, domain=analysis.domain if tree else None)
     lines += _verification_lines(analysis)
     lines += _basin_lines(analysis)
     lines += push_lines(analysis)
     lines += stability_lines(analysis)
     return lines
+
+
+def _equilibrium(analysis) -> str:
+    """The equilibrium's state blocks, one body's (:func:`format_state`) or a chain's by body
+    (``legs: theta (0, 0, 0) rad, omega (0, 0, 0) rad s-1; trunk: ...``)."""
+    y = analysis.linearisation.equilibrium
+    if analysis.kind != "chain":
+        return format_state(analysis.layout, y)
+    y = np.where(np.abs(y) < ROUND_OFF_STATE, 0.0, y)
+    bodies: dict[str, list[str]] = {}
+    for k, (body, block, _) in enumerate(analysis.coordinates):
+        values = ", ".join(_g(v, 6) for v in y[3 * k: 3 * k + 3] + 0.0)
+        bodies.setdefault(body, []).append(f"{block} ({values}) {BLOCK_UNITS[block]}")
+    return "; ".join(f"{body}: {', '.join(parts)}" for body, parts in bodies.items())
 
 
 def describe_robustness(result) -> list[str]:
