@@ -44,8 +44,8 @@ from rbstab.analysis import BasinAxis, basin_map
 from rbstab.analysis.push import push_analysis
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
-from rbstab.config.chains import any_config_from_mapping as load_any_config_mapping
-from rbstab.config.chains import chain_of, load_any_config
+from rbstab.config.loader import config_from_mapping
+from rbstab.config.loader import chain_of, load_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
 from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import tree_system
@@ -178,7 +178,7 @@ def three_case3() -> dict:
 
 def _chain_rate_us(data: dict) -> float:
     """us an evaluation of the rate of the chain config ``data`` at its initial state."""
-    config = load_any_config_mapping(data)
+    config = config_from_mapping(data)
     compiled = C.compile_chain(config.chain)
     layout = R.tree_layout(compiled)
     y = R.reduce_state(compiled, layout, C.initial_state(config))
@@ -279,7 +279,7 @@ def main() -> None:
     print("runs, integration only (ms a run, best of 5): scipy's solve_ivp over the compiled rate | the compiled "
           "driver | rbstab run's whole run (compiled, with outputs and summary)")
     for name in ("double_pendulum", "stance_ankle_hip", "knee"):
-        config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml")
+        config = load_config(ROOT / "configs" / "examples" / f"{name}.yaml")
         compiled = C.compile_chain(config.chain)
         scipy_s = _best(lambda: R.integrate(config, compiled=compiled))
         driver_s = _best(_compiled_run(compiled, C.initial_state(config), config.simulation))
@@ -297,7 +297,7 @@ def main() -> None:
     as_chain = _best(_compiled_run(compiled, y0, sim))
     print(f"  case3_embedded, t_end {sim.t_end:g} s: one-body engine {1e3 * one:6.2f} ms, as a one-body chain on the "
           f"compiled driver {1e3 * as_chain:6.2f} ms ({as_chain / one:.2f}x)")
-    stance = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+    stance = load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
                              ["simulation.limits.theta=[0.6, 0.6, 3.2]"])
     axes = [BasinAxis.parse("initial_state.legs.theta.0=-0.4:0.4:41"),
             BasinAxis.parse("initial_state.trunk.omega.0=-3:3:41")]

@@ -276,14 +276,14 @@ def chain_runs(n: int, seed: int = 0, parameters: bool = False):
     of the stance example's initial-state sweep (module docstring); ``parameters``: each
     run also its own tree, the trunk's mass and inertia times U(0.8, 1.2) (``system`` holds
     n trees, ``tree_of`` arange(n); else None)."""
-    from rbstab.config.chains import load_any_config
+    from rbstab.config.loader import load_config
     from rbstab.engine.settings import settings_rows
     from rbstab.engine.systems import tree_system
     from rbstab.variants import chain as C
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=201",
+        config = load_config(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=201",
                                           "simulation.rtol=1e-8", "simulation.atol=1e-10"])
     compiled = C.compile_chain(config.chain)
     coordinates = C.independent_coordinates(compiled)

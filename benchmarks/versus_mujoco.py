@@ -26,7 +26,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from rbstab.config.chains import load_any_config
+from rbstab.config.loader import load_config
 from rbstab.engine.integrate import integrate_chain_runs
 from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import tree_system
@@ -54,7 +54,7 @@ def rbstab_run(rtol: float, k: int = 1):
     """(a function integrating k runs, the centres of mass at t_end (2, 3))."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(ROOT / "configs" / "examples" / "double_pendulum.yaml",
+        config = load_config(ROOT / "configs" / "examples" / "double_pendulum.yaml",
                                  [f"simulation.t_end={T_END}", "simulation.n_samples=2", f"simulation.rtol={rtol}",
                                   f"simulation.atol={rtol * 1e-2}"])
     compiled = C.compile_chain(config.chain)
@@ -99,7 +99,7 @@ def main() -> None:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        whole_config = load_any_config(ROOT / "configs" / "examples" / "double_pendulum.yaml",
+        whole_config = load_config(ROOT / "configs" / "examples" / "double_pendulum.yaml",
                                        [f"simulation.t_end={T_END}", "simulation.n_samples=201",
                                         "simulation.rtol=1e-8", "simulation.atol=1e-10"])
     whole = _best(lambda: simulate(whole_config))

@@ -45,36 +45,22 @@ def command_line() -> str:
     return " ".join(shlex.quote(a) for a in sys.argv)
 
 
-def load_one(path: str, overrides: Sequence[str], *, chains: bool = False):
-    """``(config, error, warnings)`` of one config file: the RunConfig (with ``chains``, a
-    ChainConfig for a chain's file) or None, the ConfigError or None, and its coded warning
-    lines (:mod:`rbstab.warning_codes`)."""
+def load_one(path: str, overrides: Sequence[str]):
+    """``(config, error, warnings)`` of one config file: the RunConfig or ChainConfig (one
+    body's or a tree's) or None, the ConfigError or None, and its coded warning lines
+    (:mod:`rbstab.warning_codes`)."""
     from rbstab.config import ConfigError, PhysicalPlausibilityWarning  # heavy: yaml
-    from rbstab.config.chains import load_any_config  # heavy: yaml, pydantic
 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", PhysicalPlausibilityWarning)
         try:
-            config = load_any_config(path, overrides) if chains else load_config(path, overrides)
+            config = load_config(path, overrides)
         except ConfigError as exc:
             return None, exc, []
     for w in caught:
         if not issubclass(w.category, PhysicalPlausibilityWarning):
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return config, None, list(config.warnings)
-
-
-def is_chain_file(path: str) -> bool:
-    """Whether ``path`` is a readable YAML mapping with ``bodies`` (a chain's config); False
-    for anything else, whose errors its loader reports."""
-    from rbstab.config import ConfigError  # heavy: yaml
-    from rbstab.config.loader import is_chain  # heavy: yaml, pydantic
-    from rbstab.config.yaml_io import read_yaml_file  # heavy: yaml
-
-    try:
-        return is_chain(read_yaml_file(path))
-    except (ConfigError, OSError):
-        return False
 
 
 def config_error_text(path: str, error) -> str:
@@ -95,9 +81,8 @@ def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str 
         console.warn(line, where)
 
 
-def load_configs(paths: Sequence[str], overrides: Sequence[str], *, chains: bool = False):
-    """Load and validate every config before anything runs (with ``chains``, a chain's file
-    gives its ChainConfig).
+def load_configs(paths: Sequence[str], overrides: Sequence[str]):
+    """Load and validate every config (one body's or a tree's) before anything runs.
 
     Shows each distinct warning once (e.g. an impossible inertia, ``W001``) on stderr;
     raises ``click.ClickException`` listing every invalid file, so the CLI exits non-zero
@@ -105,7 +90,7 @@ def load_configs(paths: Sequence[str], overrides: Sequence[str], *, chains: bool
     """
     configs, problems, found = [], [], {}
     for path in paths:
-        config, error, lines = load_one(path, overrides, chains=chains)
+        config, error, lines = load_one(path, overrides)
         if error is not None:
             problems.append(config_error_text(path, error))
             continue

@@ -359,7 +359,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     if basin or push_options or stability_options:
         check_engine(engine)
     configs, specs = _split_specs(configs)
-    loaded = load_configs(configs, overrides, chains=True)
+    loaded = load_configs(configs, overrides)
     trees = {c.name: list(c.chain.body_names) for c in loaded if getattr(c, "chain", None) is not None}
     bodies = {**trees, **_chain_spec_bodies(specs, overrides)}
     pushed = push_options is not None or (stability_options is not None and stability_options.get("push"))

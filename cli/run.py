@@ -157,7 +157,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
 
     if method is not None:
         overrides = (*overrides, f"simulation.method={method}")
-    loaded = load_configs(configs, overrides, chains=True)
+    loaded = load_configs(configs, overrides)
     _check_memory(loaded)
     out = Path(output)
     how = _check_targets(loaded, out, overwrite)

@@ -61,7 +61,7 @@ def sensitivity(config, n, method, metrics, resamples, confidence, jobs, schedul
     from rbstab.studies import StudyInputError, metric_records, sensitivity_analysis
     from rbstab.sweep import ExecutorError, SweepBusyError, SweepSpecError  # heavy: numba, numpy, pydantic, yaml
 
-    (base,) = load_configs([config], overrides, chains=True)
+    (base,) = load_configs([config], overrides)
     console = get_console()
     try:
         ds = sensitivity_analysis(base, vary, n=n, method=method, metrics=metrics, seed=seed, output=output,

@@ -80,7 +80,7 @@ def tune(config, trials, minimize, maximize, subject_to, over, over_n, over_seed
     from rbstab.studies import StudyInputError  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
     from rbstab.studies import tune as run_tuning  # heavy: h5py, numba, numpy, pandas, pydantic, xarray, yaml
 
-    (base,) = load_configs([config], overrides, chains=True)
+    (base,) = load_configs([config], overrides)
     console = get_console()
     try:
         result = run_tuning(base, vary, trials=trials, minimize=minimize, maximize=maximize, subject_to=subject_to,

@@ -37,9 +37,9 @@ def _check_config(path: str, overrides) -> dict:
     """One JSON-able record of a run config: valid or not, its settings, its warnings, its
     tree's bodies and joints (a one-body config's: its body held by its controller) and for
     a one-body config its variant."""
-    from rbstab.config.chains import ChainConfig, chain_of  # heavy: pydantic
+    from rbstab.config.loader import ChainConfig, chain_of  # heavy: pydantic
 
-    config, error, lines = load_one(path, overrides, chains=True)
+    config, error, lines = load_one(path, overrides)
     if config is None:
         return {"path": path, "kind": "config", "valid": False, "errors": list(error.errors),
                 "text": config_error_text(path, error)}

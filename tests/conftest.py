@@ -211,6 +211,6 @@ def tree_spelling(config):
     r.update(bodies=[tree_body], joints=[joint], initial_state={"body": state})
     for d in r.get("disturbances", []):
         d["body"] = "body"
-    from rbstab.config.chains import chain_config_from_mapping  # heavy: pydantic, numba
+    from rbstab.config.loader import config_from_mapping  # heavy: pydantic, numba
 
-    return chain_config_from_mapping(r)
+    return config_from_mapping(r)

@@ -24,12 +24,12 @@ def pulsed_chain(theta: float, impulses: bool = False):
     pulse of force on the lowest from 0.05 s to 0.15 s and an admissible region in theta;
     the upper body tilted ``theta`` [rad] about x. ``impulses``: also a torque impulse on the
     upper body at t = 0, and force impulses on the middle one at 0.12 s and at t_end."""
-    from rbstab.config.chains import chain_config_from_mapping
+    from rbstab.config.loader import config_from_mapping
 
     body = {"mass": 1.5, "inertia": [0.1, 0.1, 0.03]}
     joint = {"parent_point": [0, 0, -0.3], "child_point": [0, 0, 0.3], "variant": "permanent", "k_r": [20, 20, 5],
              "l_r": [1.0, 1.0, 1.0]}
-    return chain_config_from_mapping({
+    return config_from_mapping({
         "name": "pulsed3", "gravity": [0, 0, -9.81],
         "bodies": [{"name": name, **body} for name in ("upper", "middle", "lower")],
         "joints": [{"name": "shoulder", "parent": "ground", "child": "upper", **joint, "parent_point": [0, 0, 0]},
@@ -49,20 +49,20 @@ def pulsed_chain(theta: float, impulses: bool = False):
 
 def cases(root: str):
     """name -> (configs of chains of one structure: its runs)."""
-    from rbstab.config.chains import load_any_config
+    from rbstab.config.loader import load_config
 
     stance = os.path.join(root, "configs", "examples", "stance_ankle_hip.yaml")
     knee = os.path.join(root, "configs", "examples", "knee.yaml")
     short = ["simulation.t_end=0.3", "simulation.n_samples=31"]
     return {
-        "stance": [load_any_config(stance, [*short, *extra]) for extra in (
+        "stance": [load_config(stance, [*short, *extra]) for extra in (
             [], ["initial_state.trunk.theta=[-0.1, 0.02, 0]"], ["initial_state.legs.theta=[0.05, -0.01, 0]"],
             ["simulation.max_steps=12"])],  # stopped by its step limit
-        "knee": [load_any_config(knee, ["simulation.t_end=0.05", "simulation.n_samples=26", *extra]) for extra in (
+        "knee": [load_config(knee, ["simulation.t_end=0.05", "simulation.n_samples=26", *extra]) for extra in (
             [], ["initial_state.shank.theta=[0.6, 0.1, 0]"])],
         # chains of one structure, each run its own: the masses, gains, a parent point and the
         # admissible region differ (one call, each run's tree its own record)
-        "params": [load_any_config(stance, [*short, "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in (
+        "params": [load_config(stance, [*short, "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in (
             [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]"], ["joints.hip.parent_point=[0, 0.02, 0.4]"],
             ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"])],  # leaves its region
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves

@@ -74,7 +74,7 @@ def test_load_config_errors_name_the_key_and_the_value():
         rbstab.load_config(CASE1, {"body.mass": -1, "simulation.n_samples": 1})
     text = str(caught.value)
     assert "'body.mass': found -1" in text and "'simulation.n_samples': found 1" in text
-    with pytest.raises(ConfigError, match="found int; expected a path, a mapping or a RunConfig"):
+    with pytest.raises(ConfigError, match="found int; expected a path, a mapping, a RunConfig or a ChainConfig"):
         rbstab.load_config(3)
     with pytest.raises(ConfigError, match="config file not found"):
         rbstab.load_config(ROOT / "no-such.yaml")

@@ -21,7 +21,7 @@ from rbstab.analysis.runs import Runs
 from rbstab.analysis.text import describe
 from rbstab.analysis.chain_certificate import ChainModel
 from rbstab.analysis.linearise import linearise, linearise_chain
-from rbstab.config.chains import chain_config_from_mapping
+from rbstab.config.loader import config_from_mapping
 from rbstab.variants import chain as C
 
 M1, M2, I1, I2, C1, L1, C2 = 28.0, 42.0, 2.6, 2.3, 0.45, 0.9, 0.3
@@ -48,7 +48,7 @@ def _planar(k_r=K_R, l_r=L_R, **simulation):
     }
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return chain_config_from_mapping(data)
+        return config_from_mapping(data)
 
 
 @pytest.fixture(scope="module")
@@ -191,11 +191,11 @@ KNEE = "configs/examples/knee.yaml"
 
 
 def _knee(*overrides):
-    from rbstab.config.chains import load_any_config
+    from rbstab.config.loader import load_config
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return load_any_config(KNEE, list(overrides))
+        return load_config(KNEE, list(overrides))
 
 
 def test_the_knees_slow_run_does_not_lower_c():

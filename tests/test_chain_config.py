@@ -1,4 +1,4 @@
-"""Tests of chain configurations (rbstab.config.chains): the examples, every refused input
+"""Tests of chain configurations (rbstab.config.loader): the examples, every refused input
 (one line through ``rbstab validate``, nothing written), the chain of a one-body config,
 the placement of a child from its parent, and the names' round trip."""
 
@@ -16,8 +16,8 @@ import yaml
 from click.testing import CliRunner
 
 from rbstab.chain import GROUND, MAX_BODIES, Body, Joint, single
-from rbstab.config import ConfigError, PhysicalPlausibilityWarning, load_config
-from rbstab.config.chains import ChainConfig, chain_config_from_mapping, chain_of, load_any_config
+from rbstab.config import ConfigError, PhysicalPlausibilityWarning, RunConfig
+from rbstab.config.loader import ChainConfig, chain_of, config_from_mapping, load_config
 from rbstab.kinematics import euler_rate_matrix, rotation_matrix
 from rbstab.model import Saturation
 from rbstab_cli.main import cli
@@ -98,7 +98,7 @@ def test_a_one_body_config_validates_as_its_one_body_tree():
 
 
 def test_the_examples_mean_what_their_comments_say():
-    stance = load_any_config(EXAMPLES["stance_ankle_hip"])
+    stance = load_config(EXAMPLES["stance_ankle_hip"])
     assert isinstance(stance, ChainConfig)
     ankle, hip = stance.chain.joints
     np.testing.assert_array_equal(ankle.saturation.torque_n, [120, 120, math.inf])
@@ -111,20 +111,33 @@ def test_the_examples_mean_what_their_comments_say():
     gravity_stiffness = np.array([[a + b, b], [b, b]])
     np.testing.assert_allclose(gravity_stiffness, [[652, 147], [147, 147]], atol=0.5)
     assert np.all(np.linalg.eigvalsh(np.diag([ankle.k_r[0, 0], hip.k_r[0, 0]]) - gravity_stiffness) > 0)
-    pendulum = load_any_config(EXAMPLES["double_pendulum"])
+    pendulum = load_config(EXAMPLES["double_pendulum"])
     assert all(j.variant == "permanent" and not j.k_r.any() and not j.l_r.any() for j in pendulum.chain.joints)
-    knee = load_any_config(EXAMPLES["knee"])
+    knee = load_config(EXAMPLES["knee"])
     assert [j.variant for j in knee.chain.joints] == ["visco_elastic", "embedded"]
 
 
-def test_a_one_body_loader_refuses_a_chain_in_one_line_naming_the_commands_that_take_it():
+def test_one_loader_takes_both_spellings_and_refuses_a_mapping_that_mixes_them():
+    """load_config and config_from_mapping (and the API's rbstab.load_config) give a
+    ChainConfig for a tree's file or mapping and a RunConfig for one body's, overrides read
+    against the spelling's keys; a mapping with both body and bodies is one line."""
+    import rbstab
+
+    tree = load_config(EXAMPLES["stance_ankle_hip"], ["joints.ankle.k_r.0=400"])
+    assert isinstance(tree, ChainConfig) and tree.chain.joints[0].k_r[0, 0] == 400.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PhysicalPlausibilityWarning)  # case 1's printed inertia (W001)
+        one = load_config(ROOT / "configs" / "paper" / "case1_permanent.yaml", ["controller.k_r.0=300"])
+    assert isinstance(one, RunConfig) and one.gains.k_r[0, 0] == 300.0
+    again = config_from_mapping(tree.resolved, overrides=["joints.hip.l_r=[1, 2, 3]"])
+    assert isinstance(again, ChainConfig) and np.array_equal(np.diag(again.chain.joints[1].l_r), [1, 2, 3])
+    api = rbstab.load_config(tree, {"joints.hip.k_r.0": 600})
+    assert isinstance(api, ChainConfig) and api.chain.joints[1].k_r[0, 0] == 600.0
+    mixed = {**one.resolved, "bodies": tree.resolved["bodies"], "joints": tree.resolved["joints"]}
     with pytest.raises(ConfigError) as info:
-        load_config(EXAMPLES["double_pendulum"])
+        config_from_mapping(mixed)
     (line,) = info.value.errors
-    assert line.startswith("config key 'bodies': found a chain of bodies; expected a one-body config (body, "
-                           "controller) here: chains are taken by rbstab validate, run, show, report, animate, sweep, "
-                           "analyze")
-    assert line.endswith("sensitivity and tune")  # tests/test_chain_studies.py
+    assert line.startswith("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller")
 
 
 # -- refused input -------------------------------------------------------------------------------
@@ -308,7 +321,7 @@ def test_one_body_spelling_of_a_one_body_tree_is_the_one_body_config(path):
     reads back as the one-body config, every resolved key equal; a tree held elsewhere than
     at its own point, or of two bodies, has none."""
     from conftest import tree_spelling
-    from rbstab.config.chains import one_body_config
+    from rbstab.config.loader import one_body_config
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
@@ -326,8 +339,8 @@ def test_one_body_spelling_of_a_one_body_tree_is_the_one_body_config(path):
                                            if k not in ("x", "v")}}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert one_body_config(chain_config_from_mapping(moved)) is None
-        assert one_body_config(load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")) is None
+        assert one_body_config(config_from_mapping(moved)) is None
+        assert one_body_config(load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")) is None
 
 
 @pytest.mark.parametrize("path", ONE_BODY)
@@ -369,7 +382,7 @@ def test_the_two_spellings_of_one_body_are_one_chain(path):
         if config.variant == "permanent":  # x and v follow from theta and omega: let rbstab place them
             for key in ("x", "v"):
                 data["initial_state"]["body"].pop(key)
-        chained = chain_config_from_mapping(data)
+        chained = config_from_mapping(data)
     _assert_same(chained.chain, chain_of(config))  # the gains the variant does not use: None in both
     state = chained.initial_state["body"]
     for block in ("theta", "omega", "controller_state"):
@@ -401,7 +414,7 @@ def _point_error(config: ChainConfig, states) -> list[np.ndarray]:
 def test_a_child_left_without_x_and_v_is_placed_on_its_joint():
     """E_j = 0, and E_j stays 0 to first order along the motion: advanced by +-h (theta by
     B(theta) omega, x by v), E_j changes by O(h^2) only."""
-    config = chain_config_from_mapping(base())
+    config = config_from_mapping(base())
     assert config.placed == ("initial_state.legs.x", "initial_state.legs.v", "initial_state.trunk.x",
                              "initial_state.trunk.v")
     for e in _point_error(config, config.initial_state):
@@ -418,11 +431,11 @@ def test_a_child_left_without_x_and_v_is_placed_on_its_joint():
 def test_a_permanent_joint_given_its_placed_state_is_accepted():
     data = base()
     data["joints"][1]["variant"] = "permanent"
-    placed = chain_config_from_mapping(data).initial_state
+    placed = config_from_mapping(data).initial_state
     for name in ("legs", "trunk"):
         data["initial_state"][name]["x"] = placed[name]["position"].tolist()
         data["initial_state"][name]["v"] = placed[name]["velocity"].tolist()
-    again = chain_config_from_mapping(data)
+    again = config_from_mapping(data)
     assert again.placed == ()
     for name in ("legs", "trunk"):
         np.testing.assert_array_equal(again.initial_state[name]["position"], placed[name]["position"])
@@ -437,14 +450,14 @@ def test_names_round_trip_through_the_resolved_yaml(tmp_path):
                               "saturation": {"torque_n": 50, "constraint_force": [300, 300, .5e3]}})
     data["disturbances"] = [{"kind": "pulse", "value": [0, 30, 0], "point": [0, 0, 0.1], "start": 0.2,
                              "duration": 0.1, "body": "arm_L"}]
-    config = chain_config_from_mapping(data)
+    config = config_from_mapping(data)
     assert config.chain.body_names == ("legs", "trunk", "arm_L")
     assert config.chain.joint_names == ("ankle", "hip", "shoulder-L")  # ordered by their child
     assert list(config.chain.parents) == [GROUND, 0, 1]
     assert [len(b.disturbances) for b in config.chain.bodies] == [0, 0, 1]
     path = tmp_path / "again.yaml"
     path.write_text(config.to_yaml(), encoding="utf-8")
-    again = load_any_config(path)
+    again = load_config(path)
     assert again.name == "stance" and again.resolved == config.resolved
     _assert_same(again.chain, config.chain)
     assert list(again.initial_state) == ["legs", "trunk", "arm_L"]
@@ -456,10 +469,10 @@ def test_names_round_trip_through_the_resolved_yaml(tmp_path):
 def test_overrides_reach_a_chain_and_are_named_in_its_errors(tmp_path):
     path = tmp_path / "chain.yaml"
     path.write_text(yaml.safe_dump(base(), sort_keys=False), encoding="utf-8")
-    config = load_any_config(path, ["bodies.1.mass=50", "joints.1.k_c.0=1e5"])
+    config = load_config(path, ["bodies.1.mass=50", "joints.1.k_c.0=1e5"])
     assert config.chain.bodies[1].mass == 50.0 and config.chain.joints[1].k_c[0, 0] == 1e5
     with pytest.raises(ConfigError) as caught:
-        load_any_config(path, ["bodies.0.mass=-1"])
+        load_config(path, ["bodies.0.mass=-1"])
     assert caught.value.errors == ["config key 'bodies.0.mass': found -1; expected a number > 0 (kg) "
                                    "[from override 'bodies.0.mass=-1']"]
 
@@ -469,7 +482,7 @@ def test_a_chain_body_warns_like_a_one_body_config():
     data["bodies"][1]["inertia"] = [10, 8, 0.4]
     data["initial_state"]["legs"]["theta"] = [45, 0, 0]
     with pytest.warns(PhysicalPlausibilityWarning) as caught:
-        config = chain_config_from_mapping(data)
+        config = config_from_mapping(data)
     assert [str(w.message)[:40] for w in caught] == ["W005 initial_state.legs.theta: theta[0] ",
                                                     "W001 bodies.1.inertia ('trunk'): princip"]
     assert len(config.warnings) == 2
@@ -491,12 +504,12 @@ def test_validate_json_gives_the_chain_by_names():
 def test_singular_gains_written_are_noted_those_left_out_are_not():
     from rbstab.config import SemiDefiniteGainWarning
 
-    chain_config_from_mapping(base())  # k_t, l_t left out: no note (the autouse fixture makes one an error)
+    config_from_mapping(base())  # k_t, l_t left out: no note (the autouse fixture makes one an error)
     data = base()
     data["bodies"][0]["k_t"] = [0, 0, 0]
     data["joints"][1]["l_r"] = [0, 120, 40]
     with pytest.warns(SemiDefiniteGainWarning) as caught:
-        config = chain_config_from_mapping(data)
+        config = config_from_mapping(data)
     assert [str(w.message)[:40] for w in caught] == ["W002 bodies.0.k_t: positive semi-definit",
                                                     "W002 joints.1.l_r: positive semi-definit"]
     assert len(config.warnings) == 2

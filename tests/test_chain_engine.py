@@ -12,7 +12,7 @@ import pytest
 
 from conftest import tree_spelling
 from rbstab.config import load_config
-from rbstab.config.chains import chain_config_from_mapping, chain_of, load_any_config
+from rbstab.config.loader import config_from_mapping, chain_of, load_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_tree_chunk
 from rbstab.engine.settings import settings_records, settings_rows
 from rbstab.engine import method_number
@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_the_compiled_driver_takes_solve_ivps_steps_on_a_chain(name):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml",
+        config = load_config(ROOT / "configs" / "examples" / f"{name}.yaml",
                                  ["simulation.t_end=1.0", "simulation.n_samples=201"])
     reference = simulate(config, engine="scipy")
     compiled = simulate(config, engine="compiled")
@@ -125,7 +125,7 @@ def test_the_general_tree_rate_is_one_bodys_rate(path):
 def _pulsed_chain(l_r):
     """Two bodies on permanent (ball) joints under gravity with joint springs, damping
     ``l_r``, and a pulse of force on the lower body from 0.2 s to 0.5 s."""
-    return chain_config_from_mapping({
+    return config_from_mapping({
         "name": "pulsed", "gravity": [0, 0, -9.81],
         "bodies": [{"name": "upper", "mass": 2.0, "inertia": [0.2, 0.2, 0.05]},
                    {"name": "lower", "mass": 1.5, "inertia": [0.1, 0.1, 0.03]}],
@@ -151,7 +151,7 @@ def test_a_sweep_over_a_chains_parameters_is_one_call_and_each_run_is_the_run_al
     overrides = [[], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]"],
                  ["joints.hip.parent_point=[0, 0.02, 0.4]"],
                  ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"]]
-    configs = [load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+    configs = [load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
                                ["simulation.t_end=0.3", "simulation.n_samples=31",
                                 "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in overrides]
     calls = []
@@ -221,7 +221,7 @@ def test_a_chains_basin_map_runs_each_point_as_rbstab_run_would():
     overrides = ["simulation.t_end=1.5", "simulation.n_samples=151", "simulation.limits.theta=[0.6, 0.6, 3.2]"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", overrides)
+        config = load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", overrides)
     axes = [BasinAxis.parse("initial_state.legs.theta.0=-0.5:0.5:3"), BasinAxis.parse("initial_state.trunk.omega.0=-4:4:3")]
     found = basin_map(config, axes, n_samples=151)
     assert found.outcome.shape == (3, 3) and found.counts()["failed"] >= 1  # a fall leaves the region
@@ -230,7 +230,7 @@ def test_a_chains_basin_map_runs_each_point_as_rbstab_run_would():
         theta, omega = float(axes[0].values[i]), float(axes[1].values[j])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            point = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+            point = load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
                                     [*overrides, f"initial_state.legs.theta=[{theta!r}, 0, 0]",
                                      f"initial_state.trunk.omega=[{omega!r}, 0, 0]"])
         np.testing.assert_allclose(found.initial_states[i, j], C.initial_state(point), atol=1e-14)
@@ -259,7 +259,7 @@ def _arm(root: str, pulse: float | None = None):
         data["disturbances"] = [{"kind": "pulse", "value": [2 / pulse, 4 / pulse, 1 / pulse],
                                  "point": [0.05, 0.0, -0.2], "start": 0.0, "duration": pulse, "body": "lower"}]
         data["simulation"]["t_end"] = pulse
-    return chain_config_from_mapping(data)
+    return config_from_mapping(data)
 
 
 def test_a_push_on_a_chain_keeps_its_joints_and_is_the_limit_of_short_pulses():
@@ -326,7 +326,7 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
     limits = "simulation.limits.theta=[0.6, 0.6, 3.2]"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(source, [limits])
+        config = load_config(source, [limits])
     directions = np.array([[0.0, -1.0, 0.0], [0.6, 0.8, 0.0]])
     point = [0.0, 0.0, 0.2]
     found = push_analysis(config, "force", directions=directions, body="trunk", point=point, at=at, jobs=2)
@@ -345,7 +345,7 @@ def test_a_chains_smallest_fatal_push_is_where_a_short_pulse_starts_to_topple_it
                                      "start": at, "duration": pulse, "body": "trunk"}]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                result = simulate(chain_config_from_mapping(data))
+                result = simulate(config_from_mapping(data))
             assert (result.status == "failed") == falls, (u, factor, result.message)
 
 
@@ -361,8 +361,8 @@ def test_a_chain_pushed_at_t0_keeps_its_own_disturbances_and_t0_is_inside_the_ru
     pulse = 'disturbances=[{kind: pulse, value: [0, 20, 0], start: 0.1, duration: 0.1, body: trunk}]'
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(source)
-        pulsed = load_any_config(source, [pulse, "simulation.limits.theta=[0.6, 0.6, 3.2]"])
+        config = load_config(source)
+        pulsed = load_config(source, [pulse, "simulation.limits.theta=[0.6, 0.6, 3.2]"])
     with pytest.raises(ValueError, match=r"--push-at: found 9; expected a time in \[0, simulation.t_end\)"):
         Pushes(config, "torque", body="trunk", at=9.0)
     with pytest.raises(ValueError, match=r"--push-body: found 'arms'; expected the body of the chain that is pushed "
@@ -375,7 +375,7 @@ def test_a_chain_pushed_at_t0_keeps_its_own_disturbances_and_t0_is_inside_the_ru
     data = pulsed.resolved
     for vector, verdict in zip(vectors, recovered):
         entry = {"kind": "impulse", "quantity": "torque", "value": vector.tolist(), "start": 0.5, "body": "trunk"}
-        own = chain_config_from_mapping({**pushes.config.resolved, "disturbances": [*data["disturbances"], entry]})
+        own = config_from_mapping({**pushes.config.resolved, "disturbances": [*data["disturbances"], entry]})
         ok, _, v = Runs(own).outcomes(C.initial_state(own)[None])
         assert bool(ok[0] == 1 and abs(v[0]) <= pushes.ratio * pushes.energy(vector)[0] + 1e-12) == verdict
 
@@ -392,7 +392,7 @@ def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():
          "body": "lower"},
         {"kind": "impulse", "quantity": "torque", "value": [0.0, 0.5, 0.0], "start": 0.0, "body": "upper"}],
         "simulation": {**data["simulation"], "t_end": 0.6, "n_samples": 61, "rtol": 1e-10, "atol": 1e-12}}
-    config = chain_config_from_mapping(data)
+    config = config_from_mapping(data)
     compiled = C.compile_chain(config.chain)
     reference = simulate(config, engine="scipy")
     result = simulate(config, engine="compiled")
@@ -404,7 +404,7 @@ def test_an_impulse_in_a_chain_config_is_the_push_applied_where_it_starts():
     sol = integrate_chain_runs(tree_system(compiled), C.initial_state(config)[None], settings_rows([sim]),
                                method=sim.method, n_samples=sim.n_samples)
     at = 30  # t = 0.3 s
-    quiet = chain_config_from_mapping({**data, "disturbances": data["disturbances"][1:],
+    quiet = config_from_mapping({**data, "disturbances": data["disturbances"][1:],
                                        "simulation": {**data["simulation"], "t_end": 0.3, "n_samples": 31}})
     before = integrate_chain_runs(tree_system(C.compile_chain(quiet.chain)), C.initial_state(quiet)[None],
                                   settings_rows([quiet.simulation]), method=sim.method, n_samples=31).samples[0, -1]
@@ -429,7 +429,7 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
     short = ["simulation.t_end=2.0", "simulation.n_samples=21"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        configs = {name: load_any_config(stance, [*short, *extra]) for name, extra in (
+        configs = {name: load_config(stance, [*short, *extra]) for name, extra in (
             ("none", []), ("at 0", [step.format(0.0)]), ("at 1", [step.format(1.0)]))}
     v0 = {name: simulate(config).outputs["lyapunov"][0] for name, config in configs.items()}
     assert v0["at 0"] == v0["at 1"] == v0["none"] > 0.0
@@ -456,7 +456,7 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
     limit = np.pi / 2 - 0.3
 
     def config_of(upper, bend, spin=3.0):
-        return chain_config_from_mapping({
+        return config_from_mapping({
             "name": "turning", "gravity": [0, 0, 0],
             "bodies": [{"name": "upper", "mass": 2.0, "inertia": [0.2, 0.2, 0.05]},
                        {"name": "lower", "mass": 1.5, "inertia": [0.1, 0.1, 0.03]}],

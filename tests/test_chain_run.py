@@ -14,7 +14,7 @@ import yaml
 from click.testing import CliRunner
 
 import rbstab
-from rbstab.config.chains import load_any_config
+from rbstab.config.loader import load_config
 from rbstab.io.hdf5 import CHAIN_FORMAT, read_attributes
 from rbstab_cli.main import cli
 
@@ -45,7 +45,7 @@ def test_run_writes_a_chain_file_with_body_and_joint_dimensions(name, tmp_path):
     path = tmp_path / f"{name}.h5"
     attrs = read_attributes(path, data=True)  # every checksum verified
     assert attrs["rbstab_format"] == CHAIN_FORMAT and attrs["variant"] == "chain"
-    config = load_any_config(ROOT / "configs" / "examples" / f"{name}.yaml")
+    config = load_config(ROOT / "configs" / "examples" / f"{name}.yaml")
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         assert list(ds["body"].values) == list(config.chain.body_names)
         assert list(ds["joint"].values) == list(config.chain.joint_names)
@@ -132,7 +132,7 @@ def test_the_runs_of_one_chain_come_in_blocks_of_at_most_postprocess_block_runs(
 
     path = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
     n = POSTPROCESS_BLOCK + 3
-    configs = [load_any_config(path, ["simulation.t_end=0.2", "simulation.n_samples=21",
+    configs = [load_config(path, ["simulation.t_end=0.2", "simulation.n_samples=21",
                                       f"initial_state.trunk.theta.0={0.1 * k / n}"]) for k in range(n)]
     blocks = list(simulate_blocks(configs))
     assert [members for members, _ in blocks] == [list(range(POSTPROCESS_BLOCK)), list(range(POSTPROCESS_BLOCK, n))]
@@ -190,7 +190,7 @@ def test_a_chains_clipped_joint_torque_is_flagged_where_its_command_reaches_the_
     from the run's Theta_j and Omega_j) reaches the joint's limit, N_j is the clipped
     command, and the summary's fraction per joint and axis is the flags' mean; a body
     without limits on H and permanent joints (no Lambda law) are never flagged."""
-    config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+    config = load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
                              ["simulation.t_end=2.0", "simulation.n_samples=2001",
                               "initial_state.legs.theta.0=0.25"])
     result = rbstab.simulator.simulate(config)

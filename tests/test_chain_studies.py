@@ -18,7 +18,7 @@ from click.testing import CliRunner
 from rbstab_cli.main import cli
 
 import rbstab
-from rbstab.config.chains import any_config_from_mapping, load_any_config
+from rbstab.config.loader import config_from_mapping, load_config
 from rbstab.simulator import simulate
 from rbstab.studies import StudyInputError, read_sensitivity, tune
 from rbstab.layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
@@ -44,13 +44,13 @@ def _alone(config, values: dict):
     data = copy.deepcopy(config.resolved)
     for key, value in values.items():
         key_path(key, data).set(data, value)
-    return simulate(any_config_from_mapping(data))
+    return simulate(config_from_mapping(data))
 
 
 def test_the_chain_metrics_are_the_figures_of_a_chain_run():
     """A chain's study metrics are every numeric figure of its run, per body or joint (and
     axis) as a sweep's columns name them, with their values."""
-    config = load_any_config(PENDULUM, SHORT)
+    config = load_config(PENDULUM, SHORT)
     figures, run = nominal_figures(config), simulate(config).summary
     assert figures["max_abs_constraint_error_elbow_z"] == run["max_abs_constraint_error"][1][2]
     assert figures["final_theta_lower_z"] == run["final_theta"][1][2]
@@ -106,7 +106,7 @@ def test_sensitivity_of_a_chain_gives_each_rows_figures_of_simulate_chain(tmp_pa
     ds = read_sensitivity(out / "double_pendulum")
     assert list(ds["metric"].values) == list(records)
 
-    config = load_any_config(PENDULUM, SHORT)
+    config = load_config(PENDULUM, SHORT)
     plan = plan_sensitivity(config, PENDULUM_VARY, n=8)  # the same design, drawn again
     runs = rbstab.open_sweep(out / "double_pendulum" / "sweep")
     assert runs.sizes["run"] == len(plan.design) == 32
@@ -121,7 +121,7 @@ def test_sensitivity_of_a_chain_gives_each_rows_figures_of_simulate_chain(tmp_pa
 
 
 def test_tune_on_a_chain_reaches_the_grids_best_and_its_trials_are_simulate_chains(tmp_path):
-    config = load_any_config(STANCE, SHORT)
+    config = load_config(STANCE, SHORT)
     grid = {d: _alone(config, {"joints.hip.l_r.0": d}).summary for d in HIP_DAMPING}
     v = {d: s["lyapunov_final"] for d, s in grid.items()}
     best = min(v, key=v.get)
@@ -136,7 +136,7 @@ def test_tune_on_a_chain_reaches_the_grids_best_and_its_trials_are_simulate_chai
         assert row["lyapunov_final"] == v[damping]
         assert row["max_abs_constraint_error_hip_z"] == grid[damping]["max_abs_constraint_error"][1][2]
     # best.yaml is a chain's config that rbstab run takes: it gives the best trial's value
-    again = load_any_config(tmp_path / "stance_ankle_hip" / "best.yaml")
+    again = load_config(tmp_path / "stance_ankle_hip" / "best.yaml")
     assert again.resolved["joints"][1]["l_r"][0] == best
     assert simulate(again).summary["lyapunov_final"] == v[best]
     assert rbstab.studies.read_tuning(tmp_path / "stance_ankle_hip")["max_abs_constraint_error_hip_z"].attrs["units"] == "m"
@@ -146,7 +146,7 @@ OVER = ["bodies.trunk.mass=scale_uniform:[0.95,1.05]", "bodies.0.mass=uniform:[2
 
 
 def test_tune_over_uncertain_chain_bodies_takes_the_worst_of_simulate_chains_runs():
-    config = load_any_config(STANCE, SHORT)
+    config = load_config(STANCE, SHORT)
     problem = plan_tuning(config, ["joints.hip.l_r.0=uniform:[25,100]"], minimize=["lyapunov_final"],
                           subject_to=["max_abs_constraint_error_hip_z<=1"], over=OVER, over_n=3)
     masses = [(b["bodies.0.mass"], b["bodies.trunk.mass"]) for b in problem.bodies]
@@ -171,7 +171,7 @@ def test_tune_over_a_chain_from_the_command_line(tmp_path):
     assert record["n_trials"] == 4 and record["n_failed"] == 0 and set(record["best_params"]) == {"joints.hip.l_r.0"}
     tuning = rbstab.studies.read_tuning(out / "stance_ankle_hip")
     assert tuning.attrs["bodies"] == 3
-    assert load_any_config(out / "stance_ankle_hip" / "best.yaml").resolved["bodies"][1]["mass"] == 47.46  # nominal
+    assert load_config(out / "stance_ankle_hip" / "best.yaml").resolved["bodies"][1]["mass"] == 47.46  # nominal
 
 
 # -- refused input -------------------------------------------------------------------------------
@@ -217,7 +217,7 @@ def test_bad_chain_study_options_are_refused_in_one_line_and_nothing_is_written(
 
 
 def test_a_chain_study_from_python_lists_every_problem():
-    config = load_any_config(PENDULUM, SHORT)
+    config = load_config(PENDULUM, SHORT)
     with pytest.raises(StudyInputError) as info:
         plan_sensitivity(config, ["joints.knee.l_r.0=uniform:[1,2]", "bodies.lower.mass=choice:[]"], n=8,
                          metrics=["max_abs_constraint_error_hip"])

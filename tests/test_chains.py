@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 from conftest import paper_body, paper_gains
 from rbstab.chain import GROUND, Body, Chain, Joint, single
-from rbstab.config.chains import load_any_config
+from rbstab.config.loader import load_config
 from rbstab.model import Saturation
 from rbstab.variants import VARIANTS
 from rbstab.variants import chain as C
@@ -111,7 +111,7 @@ def test_analytic_lyapunov_rate_is_the_flow_derivative_of_v_for_random_chains(n,
 def _pendulum():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config("configs/examples/double_pendulum.yaml")
+        config = load_config("configs/examples/double_pendulum.yaml")
     return config, C.compile_chain(config.chain)
 
 
@@ -275,11 +275,11 @@ def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stif
     path = "configs/examples/stance_ankle_hip.yaml"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        stable = analyze_chain(load_any_config(path), certificate=False)
-        weak = analyze_chain(load_any_config(path, ["joints.ankle.k_r.0=400"]), certificate=False)
+        stable = analyze_chain(load_config(path), certificate=False)
+        weak = analyze_chain(load_config(path, ["joints.ankle.k_r.0=400"]), certificate=False)
     assert stable.verdict == "asymptotically stable" and stable.linearisation.is_rest_point
     assert weak.verdict == "unstable"
-    compiled = C.compile_chain(load_any_config(path).chain)
+    compiled = C.compile_chain(load_config(path).chain)
     assert abs(C.lyapunov(compiled, stable.rest_state)[0]) < 1e-9
     record = stable.as_dict()
     assert set(record["rest_state"]) == {"legs", "trunk"} and record["verdict"] == "asymptotically stable"
@@ -302,9 +302,9 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     path = "configs/examples/stance_ankle_hip.yaml"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        stable = analyze_chain(load_any_config(path), certificate=False)
-        weak = analyze_chain(load_any_config(path, ["joints.ankle.k_r.0=600"]), certificate=False)
-        undamped = analyze_chain(load_any_config("configs/examples/double_pendulum.yaml"), certificate=False)
+        stable = analyze_chain(load_config(path), certificate=False)
+        weak = analyze_chain(load_config(path, ["joints.ankle.k_r.0=600"]), certificate=False)
+        undamped = analyze_chain(load_config("configs/examples/double_pendulum.yaml"), certificate=False)
     records = [json.loads(json.dumps(r.as_dict(), allow_nan=False)) for r in (stable, weak, undamped)]  # strict JSON
     s0 = [r.linearisation.eigenvalues[0].real for r in (stable, weak, undamped)]
     assert records[0]["slowest_time_constant"] == pytest.approx(-1.0 / s0[0]) and s0[0] < 0
@@ -315,7 +315,7 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     assert records[1]["slowest_time_constant"] is None
     assert f"unstable: e-folding time {e_fold:.4g} s" in text(weak) and "time constant" not in text(weak)
     # a lean of the legs grows by e every e-folding time once the decaying modes have gone (~0.6 s each)
-    lean = load_any_config(path, ["joints.ankle.k_r.0=600", "simulation.t_end=8", "simulation.n_samples=801",
+    lean = load_config(path, ["joints.ankle.k_r.0=600", "simulation.t_end=8", "simulation.n_samples=801",
                                   "initial_state.legs.theta=[0.001, 0, 0]", "initial_state.trunk.theta=[0, 0, 0]"])
     run = simulate(lean)
     grown = np.interp([4.0, 4.0 + e_fold], run.time, run.outputs["theta"][:, 0, 0])
@@ -493,7 +493,7 @@ def test_rbstab_analyze_pushes_a_chains_body_across_a_spec(tmp_path):
     assert np.all(np.isfinite(minima)) and minima[0] != minima[1]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        heavy = load_any_config(stance, ["bodies.trunk.mass=60.0", "simulation.limits.theta=[0.6, 0.6, 3.2]"])
+        heavy = load_config(stance, ["bodies.trunk.mass=60.0", "simulation.limits.theta=[0.6, 0.6, 3.2]"])
     alone = push_analysis(heavy, "force", directions=np.array([[0.0, 1.0, 0.0]]), tol=0.01, body="trunk")
     assert minima[1] == alone.minimum
     refused_dir = tmp_path / "refused"
@@ -516,7 +516,7 @@ def test_v_is_zero_at_the_stance_rest_state_for_every_trunk_mass(mass):
     leaves the model's domain)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_any_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", [f"bodies.trunk.mass={mass}"])
+        config = load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", [f"bodies.trunk.mass={mass}"])
     compiled = C.compile_chain(config.chain)
     rest, _ = C.rest_state(compiled)
     v, rate = C.lyapunov(compiled, rest)
@@ -585,7 +585,7 @@ def test_rbstab_analyze_takes_one_body_and_a_chain_in_one_command(tmp_path):
     from click.testing import CliRunner
 
     import rbstab
-    from rbstab.config.chains import load_any_config
+    from rbstab.config.loader import load_config
 
     from rbstab_cli.main import cli
 
@@ -598,11 +598,11 @@ def test_rbstab_analyze_takes_one_body_and_a_chain_in_one_command(tmp_path):
     assert (tmp_path / "case1_permanent.analysis.nc").is_file() and (tmp_path / "stance_ankle_hip.analysis.nc").is_file()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        alone = rbstab.analyze(load_any_config(chain), certificate=False)
+        alone = rbstab.analyze(load_config(chain), certificate=False)
     assert alone.kind == "chain" and records[1]["eigenvalues"] == alone.to_json()["eigenvalues"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        on_gpu = rbstab.analyze(load_any_config(chain), certificate=False, engine="cuda", basin_samples=21,
+        on_gpu = rbstab.analyze(load_config(chain), certificate=False, engine="cuda", basin_samples=21,
                                 basin=["initial_state.legs.theta.0=-0.1:0.1:3", "initial_state.trunk.theta.0=0:0.1:2"])
     assert on_gpu.basin.outcome.shape == (3, 2)  # the CPU's driver ran them, and the notes say so
     assert any("--engine cuda: a chain's basin map" in note for note in on_gpu.notes)

@@ -540,7 +540,7 @@ def test_summary_from_columns_is_the_inverse_of_summary_columns():
     NaN, and a figure with no column is left out."""
     import warnings
 
-    from rbstab.config import load_any_config
+    from rbstab.config import load_config
     from rbstab.io.chunk import summary_columns, summary_from_columns
     from rbstab.simulator import simulate
 
@@ -549,7 +549,7 @@ def test_summary_from_columns_is_the_inverse_of_summary_columns():
     for path in (root / "configs" / "paper" / "case3_embedded.yaml", root / "configs" / "examples" / "knee.yaml"):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            config = load_any_config(path, short)
+            config = load_config(path, short)
         summary = simulate(config).summary
         chain = getattr(config, "chain", None)
         names = {} if chain is None else {"joints": chain.joint_names, "bodies": chain.body_names}

@@ -257,10 +257,10 @@ def test_a_chain_key_by_name_reaches_the_chain_and_a_one_body_key_stays_one():
     """A chain's keys by body or joint name (``initial_state.<body>``: a mapping by name)
     set what they name; a one-body key whose entry is one of the one-body section's fields
     is read as the one-body key, whatever a chain could name."""
-    from rbstab.config import load_any_config
+    from rbstab.config import load_config
     from rbstab.config.paths import parse_any_key
 
-    config = load_any_config(Path(__file__).parents[1] / "configs" / "examples" / "stance_ankle_hip.yaml",
+    config = load_config(Path(__file__).parents[1] / "configs" / "examples" / "stance_ankle_hip.yaml",
                              ["bodies.trunk.mass=50", "joints.hip.k_r.0=700", "initial_state.trunk.theta.0=0.02"])
     assert config.chain.bodies[1].mass == 50.0 and config.chain.joints[1].k_r[0, 0] == 700.0
     assert config.initial_state["trunk"]["theta"][0] == 0.02

@@ -19,7 +19,7 @@ from scipy.integrate import solve_ivp
 import reference_tree as T
 from reference import hat, rotation
 from rbstab.chain import Body, Chain, Joint
-from rbstab.config.chains import load_any_config
+from rbstab.config.loader import load_config
 from rbstab.model import Saturation
 from rbstab.simulator import simulate
 from rbstab.variants import VARIANTS
@@ -33,7 +33,7 @@ EXAMPLES = ROOT / "configs" / "examples"
 def _load(path, overrides=()):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # plausibility notes: not what these tests look at
-        return load_any_config(path, list(overrides))
+        return load_config(path, list(overrides))
 
 
 # -- (a) one body on a permanent joint ----------------------------------------------------------------
@@ -331,7 +331,7 @@ def test_the_compiled_reduced_rate_is_the_references(mix, rng):
 def test_the_compiled_reduced_rate_of_one_permanent_body_is_the_papers(path, rng):
     """A one-body tree on a permanent joint, in reduced coordinates, has the rate of rbstab's
     ``permanent`` variant (eq 21's 6 states) at random states."""
-    from rbstab.config.chains import chain_of
+    from rbstab.config.loader import chain_of
     from rbstab.variants import tree as R
 
     config = _load(path)

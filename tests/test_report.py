@@ -644,7 +644,7 @@ def test_a_chain_beside_a_slowly_unstable_upright_is_an_unstable_rest(tmp_path):
     near upright with v converged by the sweep's ratio 0.01: an unstable rest, not settled;
     with 1000 N m/rad it settles."""
     from rbstab.analysis.linearise import linearise_config
-    from rbstab.config.chains import any_config_from_mapping
+    from rbstab.config.loader import config_from_mapping
 
     spec = tmp_path / "upright.yaml"
     spec.write_text(yaml.safe_dump({"name": "upright", "base": str(ROOT / "configs/examples/stance_ankle_hip.yaml"),
@@ -654,7 +654,7 @@ def test_a_chain_beside_a_slowly_unstable_upright_is_an_unstable_rest(tmp_path):
                 "--set", "simulation.n_samples=501"))
     sweep = load_inputs([tmp_path / "sweeps" / "upright"]).sweeps[0]
     weak = next(r for r in sweep.runs if r.config["joints"][0]["k_r"][0] == 705)
-    growth = linearise_config(any_config_from_mapping(weak.config, default_name="weak")).eigenvalues[0].real
+    growth = linearise_config(config_from_mapping(weak.config, default_name="weak")).eigenvalues[0].real
     assert 0 < growth < 0.2 / 5.0  # grows by less than e^0.2 over t_end
     table = sweep_table(sweep, ["settling_time"], SettleThresholds()).set_index("ankle_k_r_0")
     assert table["converged"].astype(str).eq("True").all()  # by v alone both would count

@@ -103,16 +103,17 @@ def _override_lines(overrides: Overrides) -> list[str]:
     return list(overrides)
 
 
-def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Overrides = (),
-                *, name: str | None = None) -> "RunConfig":
-    """Read, override and validate a run configuration.
+def load_config(source: str | os.PathLike | Mapping | "RunConfig | ChainConfig", overrides: Overrides = (),
+                *, name: str | None = None) -> "RunConfig | ChainConfig":
+    """Read, override and validate a run configuration: one body's, or a tree's.
 
     Parameters
     ----------
-    source : path-like, Mapping or RunConfig
+    source : path-like, Mapping, RunConfig or ChainConfig
         A YAML file (its stem is the default ``name``), a mapping of the same shape (the
-        parsed YAML, see the README's "Configuration"), or a RunConfig (its ``resolved``
-        mapping, validated again with the overrides).
+        parsed YAML, see the README's "Configuration" and "Chains of bodies"), or a
+        validated configuration (its ``resolved`` mapping, validated again with the
+        overrides).
     overrides : sequence of str or Mapping
         ``["simulation.t_end=1.5", "initial_state.omega.0=5"]`` (values parsed as YAML, as
         ``rbstab run --set``) or ``{"simulation.t_end": 1.5, "controller.k_t": [1, 2, 3]}``.
@@ -122,11 +123,13 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Ov
 
     Returns
     -------
-    RunConfig
-        Frozen and validated: ``body`` (mass [kg], inertia [kg m^2] 3x3, attachment point R
-        [m] body frame, gravity g [m/s^2] inertial frame), ``gains`` (3x3), ``initial_state``,
-        ``simulation``, ``resolved`` (every default filled in), ``warnings`` (coded lines,
-        :mod:`rbstab.warning_codes`).
+    RunConfig or ChainConfig
+        Frozen and validated. One body's: ``body`` (mass [kg], inertia [kg m^2] 3x3,
+        attachment point R [m] body frame, gravity g [m/s^2] inertial frame), ``gains``
+        (3x3), ``initial_state``, ``simulation``, ``resolved`` (every default filled in),
+        ``warnings`` (coded lines, :mod:`rbstab.warning_codes`). A tree's: ``chain`` (its
+        bodies, joints and gravity, :class:`rbstab.chain.Chain`), ``initial_state`` by body,
+        ``simulation``, ``resolved``, ``warnings``.
 
     Raises
     ------
@@ -138,48 +141,36 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Ov
     rbstab.config.PhysicalPlausibilityWarning
         ``W001``/``W002`` (an inertia no real body has, a singular gain).
     """
-    from .config import RunConfig, apply_overrides, config_from_mapping  # heavy: yaml
+    from .config import ChainConfig, RunConfig, config_from_mapping  # heavy: yaml
     from .config import load_config as load_file  # heavy: yaml
 
     lines = _override_lines(overrides)
-    if isinstance(source, RunConfig):
+    if isinstance(source, RunConfig | ChainConfig):
         source = source.resolved
     if isinstance(source, Mapping):
         data = dict(source)
         if name is not None and "name" not in data:
             data["name"] = name
-        return config_from_mapping(apply_overrides(data, lines), default_name="run", source="<mapping>")
+        return config_from_mapping(data, default_name="run", source="<mapping>", overrides=lines)
     if not isinstance(source, (str, os.PathLike)):
         from .config import ConfigError  # heavy: yaml
 
-        raise ConfigError([f"load_config: found {type(source).__name__}; expected a path, a mapping or a RunConfig"])
+        raise ConfigError([f"load_config: found {type(source).__name__}; expected a path, a mapping, a RunConfig "
+                           "or a ChainConfig"])
     return load_file(source, lines)
 
 
-def _config(config: Any, overrides: Overrides, *, chains: bool = False) -> "RunConfig":
-    """A validated config of ``config`` (a path or a validated config) with ``overrides``;
-    with ``chains``, a chain's file gives its ChainConfig."""
-    from .config import RunConfig  # heavy: yaml
-    from .config.chains import ChainConfig, load_any_config  # heavy: yaml, pydantic
+def _config(config: Any, overrides: Overrides) -> "RunConfig | ChainConfig":
+    """A validated config of ``config`` (a path or a validated config) with ``overrides``."""
+    from .config import ChainConfig, RunConfig  # heavy: yaml
 
     if isinstance(config, RunConfig | ChainConfig) and not overrides:
-        if isinstance(config, ChainConfig) and not chains:
-            from .config import ConfigError  # heavy: yaml
-            from .config.loader import _NOT_RUN  # heavy: yaml, pydantic
-
-            raise ConfigError([_NOT_RUN], None)
         return config
-    if chains and isinstance(config, str | os.PathLike):
-        from .config.loader import is_chain  # heavy: yaml, pydantic
-        from .config.yaml_io import read_yaml_file  # heavy: yaml
-
-        if is_chain(read_yaml_file(config)):
-            return load_any_config(config, _override_lines(overrides))
     return load_config(config, overrides)
 
 
 def _is_chain_config(config: Any) -> bool:
-    from .config.chains import ChainConfig  # heavy: yaml, pydantic
+    from .config.loader import ChainConfig  # heavy: yaml, pydantic
 
     return isinstance(config, ChainConfig)
 
@@ -238,7 +229,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_EN
     """
     from .io.hdf5 import result_dataset  # heavy: numpy
 
-    config = _config(config, overrides, chains=True)
+    config = _config(config, overrides)
     result = _integrate(config, engine, timeout)
     return result_dataset(result, command_line=_python_command("simulate"))
 
@@ -349,7 +340,7 @@ def run(config: Any, output: str | os.PathLike = "results", *, overrides: Overri
     """
     from .io.hdf5 import write_result  # heavy: numpy
 
-    config = _config(config, overrides, chains=True)
+    config = _config(config, overrides)
     path = Path(output) / f"{config.name}.h5"
     check_overwrite(config, path, overwrite=overwrite)
     result = _integrate(config, engine, timeout)

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .config.chains import ChainConfig
+from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
@@ -405,7 +405,7 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
     ----------
     config : RunConfig or ChainConfig
         From :func:`rbstab.config.load_config` or
-        :func:`rbstab.config.chains.load_any_config` (already validated).
+        :func:`rbstab.config.load_config` (already validated).
     timeout : float, optional
         Wall-time limit of the integration [s], instead of ``simulation.max_wall_time``;
         past it the run fails with a message.
@@ -754,7 +754,7 @@ def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: 
 
 
 def _simulate_tree(config, timeout: float | None = None) -> RunResult:
-    """A tree's run (:class:`rbstab.config.chains.ChainConfig`) integrated by ``solve_ivp``
+    """A tree's run (:class:`rbstab.config.ChainConfig`) integrated by ``solve_ivp``
     (:func:`rbstab.variants.tree.integrate`, any method), with its outputs and summary;
     ``timeout`` [s] replaces ``simulation.max_wall_time``."""
     from .variants import tree  # heavy: numba (the tree's kernels compile on first use)
@@ -826,7 +826,7 @@ def _tree_structure(compiled, sim) -> bytes:
 
 def _tree_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
                  engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
-    """Integrate chain runs (:class:`rbstab.config.chains.ChainConfig`, compiled methods)
+    """Integrate chain runs (:class:`rbstab.config.ChainConfig`, compiled methods)
     on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of
     chains of one structure (:func:`_tree_structure`: the same bodies and joints and their
     laws; each run's masses, gains, points and admissible region its own) with the same

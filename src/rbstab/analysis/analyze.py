@@ -303,7 +303,7 @@ def analyze(
     Parameters
     ----------
     config : RunConfig, ChainConfig or path-like
-        A validated configuration, or a YAML file (:func:`rbstab.config.chains.load_any_config`).
+        A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
         A tree of bodies is analysed in its independent coordinates
         (:func:`rbstab.analysis.chain.analyze_chain`, a
         :class:`rbstab.analysis.chain.ChainAnalysis`), its basin map, pushes (on the body
@@ -373,9 +373,9 @@ def analyze(
         refuse_at_script_top_level("a basin map" if basin else "a push analysis")  # before anything is computed
 
     if isinstance(config, (str, os.PathLike)):
-        from ..config.chains import load_any_config  # heavy: pydantic (the validator)
+        from ..config.loader import load_config  # heavy: pydantic (the validator)
 
-        config = load_any_config(config)
+        config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
     if verify:
         config = verified_model(config)  # a one-body tree: the one-body model it is
@@ -457,7 +457,7 @@ def analyze(
 def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, simulate: bool, basin,
                   basin_samples: int, ratio: float, jobs: int, push, basin_stability, falsification_runs: int,
                   engine: str):
-    """:func:`analyze` of a tree of bodies (:class:`rbstab.config.chains.ChainConfig`): its
+    """:func:`analyze` of a tree of bodies (:class:`rbstab.config.ChainConfig`): its
     rest state, linearisation and certificate (:func:`rbstab.analysis.chain.analyze_chain`),
     the simulation from its configured initial state (``simulate``: its settling, as one
     body's), then the basin map, the pushes on a named body (``push["body"]``) and the basin

@@ -240,7 +240,7 @@ def analyze_chain(config, *, certificate: bool = True, samples: int | None = Non
                   falsification_runs: int | None = None, ratio: float = DEFAULT_LYAPUNOV_RATIO,
                   settling: tuple | None = None) -> ChainAnalysis:
     """Rest state, linearisation, eigenvalues, verdict and (``certificate``) the Lyapunov
-    certificate of a chain run (:class:`rbstab.config.chains.ChainConfig`).
+    certificate of a chain run (:class:`rbstab.config.ChainConfig`).
 
     ``samples`` (default :data:`rbstab.analysis.chain_certificate.DEFAULT_CHAIN_SAMPLES`),
     ``seed``, ``falsification_runs`` (default

@@ -162,7 +162,7 @@ def certify_chain(config, compiled, linearisation, coordinates, *, n_samples: in
 
     Parameters
     ----------
-    config : rbstab.config.chains.ChainConfig
+    config : rbstab.config.ChainConfig
         Its simulation settings (gimbal margin, limits, t_end) and initial state.
     compiled : CompiledChain
         Of ``config.chain``.

@@ -302,7 +302,7 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
 
 def linearise_config(config) -> Linearisation:
     """The linearisation at the rest state of a run configuration, as ``rbstab analyze``
-    finds it: of a chain (:class:`rbstab.config.chains.ChainConfig`) by
+    finds it: of a chain (:class:`rbstab.config.ChainConfig`) by
     :func:`linearise_chain`; of one body (:class:`rbstab.config.RunConfig`) by
     :func:`linearise` of its variant without disturbances (they act in time, not at rest).
 
@@ -342,12 +342,12 @@ def rest_verdict(config, name: str = "run") -> str:
     where there is none (the pure sign law, no rest state, a rest point the search did not
     reach, a configuration that does not validate today). Its warnings are not shown (the
     run gave them)."""
-    from ..config.chains import any_config_from_mapping  # heavy: pydantic
+    from ..config.loader import config_from_mapping  # heavy: pydantic
 
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            lin = linearise_config(any_config_from_mapping(config, default_name=name))
+            lin = linearise_config(config_from_mapping(config, default_name=name))
     except ValueError:  # ConfigError included
         return NO_LINEARISATION
     return lin.verdict if lin.is_rest_point else NO_LINEARISATION

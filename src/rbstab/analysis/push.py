@@ -93,7 +93,7 @@ def unbounded_fall_note(config) -> str | None:
     (``simulation.limits``): a run that falls may then swing through and come back to the
     equilibrium, counted as recovered (recovery then looks not monotone in the push); None
     otherwise."""
-    from ..config.chains import chain_of  # heavy: pydantic
+    from ..config.loader import chain_of  # heavy: pydantic
 
     if config.simulation.limits is not None or not np.any(chain_of(config).gravity != 0):
         return None
@@ -219,12 +219,12 @@ class Pushes:
         """The configuration ``data`` (the pushed one, resolved) validated, its warnings
         already shown with ``config``; a ValueError naming what is wrong."""
         from ..config import ConfigError, PhysicalPlausibilityWarning  # heavy: pydantic
-        from ..config.chains import any_config_from_mapping  # heavy: pydantic
+        from ..config.loader import config_from_mapping  # heavy: pydantic
 
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-                return any_config_from_mapping(data, source=f"{config.name} pushed")
+                return config_from_mapping(data, source=f"{config.name} pushed")
         except ConfigError as exc:
             raise ValueError(f"{config.name}: " + "; ".join(exc.errors)) from None
 

@@ -121,14 +121,14 @@ def _certificate(config, options: dict):
 def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
     """The record of one configuration (the function a worker runs): ``item`` its
     (run_id, resolved configuration)."""
-    from ..config.chains import any_config_from_mapping  # heavy: pydantic
+    from ..config.loader import config_from_mapping  # heavy: pydantic
     from .push import basin_stability, push_analysis  # heavy: numba (its engine)
 
     start = _time.perf_counter()
     run_id, resolved = item
     with warnings.catch_warnings(record=True):  # its lines are kept in the record, shown once by the caller
         warnings.simplefilter("always")
-        config = any_config_from_mapping(resolved, source=run_id)
+        config = config_from_mapping(resolved, source=run_id)
     record: dict[str, Any] = {"run_id": run_id, "warnings": list(config.warnings)}
     ratio = options["ratio"]
     cert = _certificate(config, options) if options.get("certificate", True) else None
@@ -237,13 +237,13 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
                "certificate_samples": int(DEFAULT_SAMPLES if certificate_samples is None else certificate_samples),
                "estimate": ESTIMATE_METHOD if certificate else None}
     if verify:
-        from ..config.chains import any_config_from_mapping  # heavy: pydantic
+        from ..config.loader import config_from_mapping  # heavy: pydantic
         from .verify import check_verifiable  # raises NotVerifiable (a ValueError) with its reason
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             if table.n:
-                check_verifiable(any_config_from_mapping(table.resolved(0)))
+                check_verifiable(config_from_mapping(table.resolved(0)))
         options["verify"] = True
     token = _options_hash(options)
     folder = Path(output) / f"{spec.name}{RECOVERY_SUFFIX}"
@@ -268,12 +268,12 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
     todo = [(rid, table.resolved(i)) for i, rid in enumerate(run_ids) if rid not in done]
     if say is not None:
         say(f"{spec.name}: {table.n} configurations, {len(done)} done before, {len(todo)} to compute")
-        from ..config.chains import any_config_from_mapping  # heavy: pydantic
+        from ..config.loader import config_from_mapping  # heavy: pydantic
         from .push import unbounded_fall_note  # heavy: numba
 
         with warnings.catch_warnings():  # shown once with the points' records
             warnings.simplefilter("ignore")
-            fall = unbounded_fall_note(any_config_from_mapping(table.resolved(0))) if table.n else None
+            fall = unbounded_fall_note(config_from_mapping(table.resolved(0))) if table.n else None
         if fall is not None:
             say(f"note: {fall}")
 

@@ -104,13 +104,13 @@ class Verification:
 def verified_model(config):
     """The one-body configuration the proof is of: ``config`` (a RunConfig), or the one-body
     spelling of a chain of one body held to the ground at its own point
-    (:func:`rbstab.config.chains.one_body_config`: the same model).
+    (:func:`rbstab.config.loader.one_body_config`: the same model).
 
     Raises
     ------
     NotVerifiable
         For any other chain (one line: why)."""
-    from ..config.chains import one_body_config  # heavy: pydantic
+    from ..config.loader import one_body_config  # heavy: pydantic
 
     body = one_body_config(config)
     if body is not None:

@@ -68,11 +68,11 @@ memory); samples are at least 1e-12 s apart. ``max_steps`` and ``max_wall_time``
 how long a run may take, not what it computes: they are not part of the run's
 ``config_hash`` (a run stopped by them is ``failed``; ``--retry-failed`` reruns it).
 
-A chain of bodies (``bodies`` and ``joints`` instead of ``body`` and ``controller``) is
-validated by the same schema into a :class:`ChainConfig` (:mod:`rbstab.config.chains`,
-:func:`load_any_config`); :func:`chain_of` gives the :class:`rbstab.chain.Chain` of any
-configuration, a one-body one being the one-body chain. :func:`load_config` and
-:func:`config_from_mapping` give one-body configurations and refuse a chain in one line.
+A tree of bodies (``bodies`` and ``joints`` instead of ``body`` and ``controller``) is
+validated by the same schema and the same loader into a :class:`ChainConfig`
+(:func:`load_config` and :func:`config_from_mapping` take either spelling,
+:mod:`rbstab.config.loader`); :func:`chain_of` gives the :class:`rbstab.chain.Chain` of any
+configuration, a one-body one being the one-body tree.
 
 A run's identity is :func:`config_hash` of its :func:`canonical_config` (the resolved
 configuration without ``name`` and the run limits, as canonical JSON;
@@ -102,10 +102,9 @@ from .yaml_io import dump_yaml, parse_yaml
 # The validator (pydantic) and RunConfig (numba's model) are imported on first use, so that
 # what only reads files (rbstab.open_sweep, rbstab show) does not load the compiler.
 _LAZY = {
-    "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "load_config"),
+    "loader": ("PER_RUN_SECTIONS", "RunConfig", "ChainConfig", "config_from_mapping", "load_config", "chain_of"),
     "paths": ("apply_overrides", "parse_key", "KeyPath", "KeyPathError"),
     "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
-    "chains": ("ChainConfig", "chain_of", "chain_config_from_mapping", "any_config_from_mapping", "load_any_config"),
 }
 
 
@@ -142,7 +141,4 @@ __all__ = [
     "INITIAL_STATE_BLOCKS",
     "ChainConfig",
     "chain_of",
-    "chain_config_from_mapping",
-    "any_config_from_mapping",
-    "load_any_config",
 ]

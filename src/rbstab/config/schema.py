@@ -935,7 +935,7 @@ class RunSchema(_Section):
 
 # -- chains of bodies ------------------------------------------------------------------------------
 # A chain configuration (``bodies`` and ``joints`` instead of ``body`` and ``controller``):
-# validated here like a one-body one; rbstab.config.chains builds its rbstab.chain.Chain.
+# validated here like a one-body one; rbstab.config.loader builds its rbstab.chain.Chain.
 
 #: Gains of a chain's body: the ground-anchored feedback H (eq 24), zero when absent.
 BODY_GAINS = ("k_t", "l_t")
@@ -1074,7 +1074,7 @@ def _names_list(names: Sequence[str]) -> str:
 
 class ChainSchema(_Section):
     """A chain configuration (pydantic model; the public result is
-    :class:`rbstab.config.chains.ChainConfig`): 1 to :data:`rbstab.chain.MAX_BODIES` bodies,
+    :class:`rbstab.config.ChainConfig`): 1 to :data:`rbstab.chain.MAX_BODIES` bodies,
     each held by exactly one joint to the ground or to a body listed before it (a tree)."""
 
     name: Annotated[Any, checked(run_name)] = Field(

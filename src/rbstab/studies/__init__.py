@@ -13,7 +13,7 @@
                   minimize=["lyapunov_final"], subject_to=["max_abs_constraint_error_z<=0.1"], trials=100)
     result.best_values, result.best_params      # and results/studies/case3_embedded/best.yaml
 
-A chain's configuration (:func:`rbstab.config.chains.load_any_config`) is studied alike, with
+A chain's configuration (:func:`rbstab.config.load_config`) is studied alike, with
 a chain's keys (``bodies.1.mass``, ``joints.hip.k_r.0``, ``initial_state.trunk.theta.0``) and
 every figure of its runs, per body or joint as its sweep's columns name them
 (``max_abs_constraint_error_hip_z``, ``final_theta_trunk_x``), as metrics.

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from ..config import ConfigError, PhysicalPlausibilityWarning
-from ..config.chains import any_config_from_mapping
+from ..config.loader import config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import get_engine
 from ..io.chunk import summary_table_columns
@@ -108,7 +108,7 @@ def integrate_part(part, engine: str = "compiled") -> dict:
     if len(slow):
         with warnings.catch_warnings():  # shown once, when the table was planned
             warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-            configs = [any_config_from_mapping(part.resolved(int(j)), source="<trial>") for j in slow]
+            configs = [config_from_mapping(part.resolved(int(j)), source="<trial>") for j in slow]
         for rows, block in simulate_blocks(configs, engine=engine, full=False, keep="none"):
             put(slow[rows], block.summaries, block.status)
     return {"figures": columns, "ok": ok}
@@ -174,7 +174,7 @@ def _invalid_rows(base: Mapping, design: pd.DataFrame) -> dict[int, str]:
         for key, values in mappings.items():
             key_path(key, base).set(data, values[i])
         try:
-            any_config_from_mapping(data, source="<trial>")
+            config_from_mapping(data, source="<trial>")
         except ConfigError as exc:
             out[i] = "; ".join(exc.errors)
     return out

@@ -20,7 +20,7 @@ columns named by dotted config keys: a number ``body.mass``, vector components
 runs one as a sweep (resumable: a run whose result exists is skipped) and returns its
 summary figures.
 
-A chain's configuration (``bodies`` and ``joints``, :mod:`rbstab.config.chains`) takes the
+A chain's configuration (``bodies`` and ``joints``, :mod:`rbstab.config.loader`) takes the
 keys of chain sweeps: a body or a joint by index or name (``bodies.1.mass``,
 ``joints.hip.k_r.0``), an initial state by body name (``initial_state.trunk.theta.0``).
 Its summary figures are those of one body's runs, per body or joint as a sweep's columns
@@ -325,7 +325,7 @@ class Members(NamedTuple):
 
 def members_of(config) -> Members | None:
     """The body and joint names of a chain's configuration (a
-    :class:`rbstab.config.chains.ChainConfig` or its resolved mapping); None for a one-body
+    :class:`rbstab.config.ChainConfig` or its resolved mapping); None for a one-body
     configuration."""
     data = config if isinstance(config, Mapping) else getattr(config, "resolved", None)
     if not is_chain(data):

@@ -50,7 +50,7 @@ import pandas as pd
 import xarray as xr
 
 from ..config import ConfigError, dump_yaml
-from ..config.chains import any_config_from_mapping
+from ..config.loader import config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine import ensure_compiled
 from ..results import plain
@@ -261,7 +261,7 @@ class TuningProblem:
             data = copy.deepcopy(base)
             for key, value in {**body, **settings}.items():
                 key_path(key, base).set(data, value)
-            out.append(any_config_from_mapping(data, source="<trial>"))
+            out.append(config_from_mapping(data, source="<trial>"))
         return out
 
     def evaluate(self, values: Mapping[str, Any]) -> tuple[dict[str, float], int]:

@@ -67,7 +67,7 @@ def numeric_array(value: Any) -> np.ndarray | None:
 
 
 def _dotted_key(key: Any) -> str:
-    """A config key path of one body or of a chain (:func:`rbstab.config.chains.parse_any_key`;
+    """A config key path of one body or of a chain (:func:`rbstab.config.loader.parse_any_key`;
     which kind the bases take is checked once they are read); its refusal is the line."""
     try:
         parse_any_key(key)

@@ -26,7 +26,7 @@ from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning
-from ..config.chains import any_config_from_mapping
+from ..config.loader import config_from_mapping
 from ..config.loader import is_chain
 from ..config.paths import KeyPath, parse_key
 from ..config.schema import ChainSchema
@@ -106,7 +106,7 @@ def _default(base: Base, key: str) -> Any:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         try:
-            return key_path(key, base.data).get(any_config_from_mapping(base.data, default_name=base.label).resolved)
+            return key_path(key, base.data).get(config_from_mapping(base.data, default_name=base.label).resolved)
         except ConfigError:  # KeyPathError included
             return None
 
@@ -119,7 +119,7 @@ def _validate_row(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index
         data = row_mapping(base, list(columns), [columns[k][i] for k in columns], "sweep-run")
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-            return any_config_from_mapping(data, source=f"base '{base.label}'"), []
+            return config_from_mapping(data, source=f"base '{base.label}'"), []
     except ConfigError as exc:
         return None, exc.errors
 

@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from ..config import PhysicalPlausibilityWarning, RunConfig
-from ..config.chains import any_config_from_mapping
+from ..config.loader import config_from_mapping
 from ..config.loader import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
@@ -139,7 +139,7 @@ def _config(task: RunTask):
     with warnings.catch_warnings():
         # shown once, as a digest, when the sweep was planned
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-        return any_config_from_mapping(task.config)
+        return config_from_mapping(task.config)
 
 
 def _error_record(task: RunTask, exc: BaseException) -> dict[str, Any]:

@@ -907,7 +907,7 @@ def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[fl
 
 
 def initial_state(config) -> np.ndarray:
-    """The initial state (n_states,) of a :class:`rbstab.config.chains.ChainConfig` (module
+    """The initial state (n_states,) of a :class:`rbstab.config.ChainConfig` (module
     docstring for the layout)."""
     d_at, size = _controller_states(config.chain)
     y = np.zeros(size)

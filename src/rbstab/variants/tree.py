@@ -548,7 +548,7 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y) -
 
 
 def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
-    """Integrate a run of a tree (:class:`rbstab.config.chains.ChainConfig`) in reduced
+    """Integrate a run of a tree (:class:`rbstab.config.ChainConfig`) in reduced
     coordinates (:func:`tree_rate`) with scipy's ``solve_ivp`` (``simulation``'s method,
     tolerances, steps), sampled at ``n_samples`` times on [0, t_end]: the reference of the
     compiled driver. It stops ``failed`` where any body's or joint's |theta_2| reaches pi/2 -
