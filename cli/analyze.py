@@ -172,7 +172,7 @@ def _check_push_targets(configs, ranges) -> None:
     """--basin-stability entries against every config's states (one line each)."""
     if not ranges:
         return
-    from rbstab.analysis.chain import check_entries  # heavy: numba, numpy
+    from rbstab.analysis.runs import check_entries  # heavy: numba, numpy
     from rbstab.analysis.push import parse_ranges  # heavy: numba, numpy
 
     problems = []

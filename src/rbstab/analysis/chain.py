@@ -16,12 +16,12 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .basin import BasinMap
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
-from .chain_runs import check_entries
+from .runs import check_entries
 from .dataset import analysis_content, analysis_dataset, certificate_record, settling_record, time_scale_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain, mode_shapes
 
-__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "check_axes", "check_entries"]
+__all__ = ["ChainAnalysis", "TreeCoordinates", "analyze_chain", "check_axes"]
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
-from .runs import Runs
+from .runs import Runs, check_entries
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
            "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
@@ -902,8 +902,6 @@ def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
     lacks, or one body's box that reaches gimbal lock."""
     entries = [a for a, _, _ in axes]
     if runs.tree is not None:
-        from .chain_runs import check_entries  # heavy: numba
-
         check_entries(config, entries)
     for axis, lo, hi in axes if runs.tree is None else ():
         if axis.block == "theta" and axis.index == 1:

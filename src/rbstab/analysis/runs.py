@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "MIN_SLICE"]
+__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "MIN_SLICE"]
 
 #: Fewest runs of a batch slice sent to a worker.
 MIN_SLICE = 64
@@ -194,7 +194,7 @@ class Runs:
         (:class:`rbstab.analysis.basin.BasinAxis` or what has its ``key``, ``block``,
         ``index``, ``body``) set to the rows of ``values`` (N, len(axes)), the others the
         configured ones; a tree's bodies whose ``x`` (``v``) the configuration leaves out
-        placed on their joints (:func:`rbstab.analysis.chain_runs.chain_states`).
+        placed on their joints (:func:`rbstab.variants.chain.place`).
 
         Raises
         ------
@@ -203,13 +203,26 @@ class Runs:
         """
         values = np.asarray(values, dtype=float).reshape(-1, len(axes))
         if self.tree is not None:
-            from .chain_runs import chain_states  # heavy: numba
-
-            return chain_states(self.config, self.compiled, axes, values)
+            return self._tree_states(axes, values)
         blocks = list(self.config.make_variant().layout.blocks)
         states = np.repeat(self.initial_state[None], len(values), axis=0)
         for j, axis in enumerate(axes):
             states[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
+        return states
+
+    def _tree_states(self, axes, values: np.ndarray) -> np.ndarray:
+        """:meth:`states` of a tree: its maximal states with the entries set, the bodies the
+        configuration places placed on their joints."""
+        from ..variants import chain as C  # heavy: numba
+
+        names = list(self.tree.body_names)
+        x_placed = np.array([f"initial_state.{b}.x" in self.config.placed for b in names])
+        v_placed = np.array([f"initial_state.{b}.v" in self.config.placed for b in names])
+        states = np.repeat(self.initial_state[None], len(values), axis=0)
+        for j, axis in enumerate(axes):
+            states[:, _state_offset(self.compiled, axis)] = values[:, j]
+        if x_placed.any() or v_placed.any():
+            states = np.array([C.place(self.compiled, y, x_placed, v_placed) for y in states])
         return states
 
     def lyapunov(self, states: np.ndarray, variant=None) -> np.ndarray:
@@ -306,3 +319,33 @@ class Runs:
         slices = np.array_split(np.arange(k), max(1, min(self.jobs, k)))
         with ThreadPoolExecutor(len(slices)) as pool:
             return list(pool.map(run, slices))
+
+
+#: The state blocks of a body in a tree's maximal state, in order (12 entries a body).
+_BODY_BLOCKS = ("theta", "omega", "position", "velocity")
+
+
+def _state_offset(compiled, axis) -> int:
+    """The index in a tree's maximal state of the entry ``axis`` names (``key``, ``body``,
+    ``block``, ``index``); ValueError naming what is allowed where it names no body of the
+    tree or a D its joint does not have."""
+    names = list(compiled.chain.body_names)
+    if axis.body not in names:
+        raise ValueError(f"--basin {axis.key!r}: no body '{axis.body}' in this chain (its bodies: {', '.join(names)}; "
+                         "keys initial_state.<body>.<theta|omega|x|v|d>.<0|1|2>)")
+    i = names.index(axis.body)
+    if axis.block == "controller_state":
+        if compiled.d_at[i] < 0:
+            raise ValueError(f"--basin {axis.key!r}: the joint of '{axis.body}' is not embedded (no D)")
+        return int(compiled.d_at[i]) + axis.index
+    return 12 * i + 3 * _BODY_BLOCKS.index(axis.block) + axis.index
+
+
+def check_entries(config, axes) -> None:
+    """ValueError (one line) where an axis (:class:`rbstab.analysis.basin.BasinAxis`) names
+    no entry of a tree's state (keys ``initial_state.<body>.<block>.<i>``)."""
+    from ..variants import chain as C  # heavy: numba
+
+    compiled = C.compile_chain(config.chain, offset=0.0)
+    for axis in axes:
+        _state_offset(compiled, axis)
