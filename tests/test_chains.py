@@ -283,6 +283,11 @@ def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stif
     assert abs(C.lyapunov(compiled, stable.rest_state)[0]) < 1e-9
     record = stable.as_dict()
     assert set(record["rest_state"]) == {"legs", "trunk"} and record["verdict"] == "asymptotically stable"
+    # one body's record besides: the coordinates and each mode's frequency, damping and time constant
+    lin = stable.linearisation
+    assert record["state"][:3] == ["legs.theta_1", "legs.theta_2", "legs.theta_3"] and len(record["state"]) == 12
+    np.testing.assert_array_equal(record["damping_ratio"], lin.damping_ratio)
+    assert record["time_constant"][0] == pytest.approx(-1.0 / lin.eigenvalues[0].real)
 
 
 def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():

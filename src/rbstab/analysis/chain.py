@@ -17,7 +17,7 @@ from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .basin import BasinMap
 from .chain_certificate import DEFAULT_CHAIN_SAMPLES, certify_chain
 from .runs import check_entries
-from .dataset import analysis_content, analysis_dataset, certificate_record, settling_record, time_scale_record
+from .dataset import analysis_content, analysis_dataset, certificate_record, json_record
 from .evidence import FALSIFICATION_RUNS, check_runs
 from .linearise import Linearisation, linearise_chain, mode_shapes
 
@@ -156,25 +156,28 @@ class ChainAnalysis:
     def verdict(self) -> str:
         return self.linearisation.verdict
 
+    @property
+    def state_names(self) -> list[str]:
+        """``<body>.<block>_<i>`` of each independent coordinate (:meth:`TreeCoordinates.state_names`)."""
+        return self.layout.state_names()
+
     def as_dict(self) -> dict:
-        """Plain Python (the ``--json`` form): rest state per body and block, eigenvalues as
-        [re, im] [1/s] with each one's mode shape on the bodies' angles (``modes``:
-        ``{"eigenvalue": [re, im], "shape": {"<body>.theta_<i>": [re, im]}}``, largest entry
-        1), verdict, ``slowest_time_constant`` [s] (null unless asymptotically
-        stable), ``shortest_e_folding_time`` [s] (null unless unstable), v at the initial
-        state [J], the certificate (the fields of
-        a one-body analysis's, :func:`rbstab.analysis.dataset.certificate_record`, with
-        ``coordinates`` naming the entries of ``worst_state``) and notes."""
+        """Plain Python (the ``--json`` form): one body's record
+        (:func:`rbstab.analysis.dataset.json_record`: the verdict, the coordinates ``state``
+        and the ``equilibrium`` in them, eigenvalues as [re, im] [1/s] with each one's
+        natural frequency, damping ratio, time constant and e-folding time,
+        ``slowest_time_constant`` [s] (null unless asymptotically stable),
+        ``shortest_e_folding_time`` [s] (null unless unstable), the simulation, notes ...),
+        with the rest state per body and block (``rest_state``), each eigenvalue's mode shape
+        on the bodies' angles (``modes``: ``{"eigenvalue": [re, im], "shape":
+        {"<body>.theta_<i>": [re, im]}}``, largest entry 1), v at the initial state [J]
+        and the certificate's ``coordinates`` naming the entries of ``worst_state``."""
         lin = self.linearisation
         rest = {}
         for k, (body, block, _) in enumerate(self.coordinates):
             rest.setdefault(body, {})[block] = lin.equilibrium[3 * k: 3 * k + 3].tolist()
-        return {"name": self.name, "verdict": lin.verdict, "rest_point": lin.is_rest_point, "rest_state": rest,
-                "eigenvalues": [[float(s.real), float(s.imag)] for s in lin.eigenvalues],
-                "modes": self._modes(),
-                **time_scale_record(lin),
-                "initial_lyapunov": self.initial_lyapunov, "notes": list(self.notes),
-                **({"simulation": settling_record(self.settling)} if self.settling is not None else {}),
+        return {**json_record(self), "rest_state": rest, "modes": self._modes(),
+                "initial_lyapunov": self.initial_lyapunov,
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
 
     def basin_inside(self) -> dict[str, int] | None:
@@ -184,24 +187,16 @@ class ChainAnalysis:
         return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
 
     def to_json(self) -> dict:
-        """The ``--json`` record: :meth:`as_dict`, with the basin map (the axes' keys and
+        """The ``--json`` record: :meth:`as_dict` (its pushes with the push estimate from
+        {v <= c}, its basin stability, as one body's), the basin map with the axes' keys and
         values, every point's outcome (rows: the first axis; 0 converged, 1 not converged,
-        2 failed), the counts and the failures' messages), the pushes (with the push
-        estimate from {v <= c}, ``estimate``) and the basin stability of the command."""
+        2 failed), the counts, those inside {v <= c} and the failures' messages."""
         record = self.as_dict()
         if self.basin is not None:
             b = self.basin
             record["basin"] = {"axes": [{"key": a.key, "values": a.values.tolist()} for a in b.axes],
                                "outcome": b.outcome.tolist(), "counts": b.counts(), "messages": b.messages,
-                               "t_end": b.t_end, "ratio": b.ratio}
-        if self.push is not None:
-            record["push"] = self.push.to_json()
-            c = self.certificate
-            if c is not None and c.positive_definite:
-                estimate = self.push.estimate(c.sublevel)
-                record["push"]["estimate"] = estimate if np.isfinite(estimate) else None
-        if self.basin_stability is not None:
-            record["basin_stability"] = self.basin_stability.to_json()
+                               "inside_estimate": self.basin_inside(), "t_end": b.t_end, "ratio": b.ratio}
         return record
 
     def angles(self) -> tuple[list[str], list[int]]:
