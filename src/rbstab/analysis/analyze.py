@@ -93,6 +93,8 @@ class Analysis:
 
     #: Its ``--json`` record's kind.
     kind = "configuration"
+    #: The angles that bound the certificate's domain, in its text (None: one body's theta_2).
+    domain = None
 
     @property
     def name(self) -> str:

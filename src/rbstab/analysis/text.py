@@ -289,7 +289,7 @@ def describe(analysis) -> list[str]:
     if tree:
         lines += mode_shape_lines(lin, *analysis.angles())
     lines.append(_settling_line(analysis))
-    lines += certificate_lines(analysis.certificate, domain=analysis.domain if tree else None)
+    lines += certificate_lines(analysis.certificate, domain=analysis.domain)
     lines += _verification_lines(analysis)
     lines += _basin_lines(analysis)
     lines += push_lines(analysis)

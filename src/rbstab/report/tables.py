@@ -548,7 +548,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
     for run, time, run_converged, verdict in zip(runs, times, v_converged, verdicts):
         row = _identity(run, parameters)
         row["t_final"] = float(run.summary.get("t_final", np.nan))
-        row.update(_figure_columns(run, [f"final_{block}" for block in STATE_BLOCKS] + ["max_abs_constraint_error"]))
+        row.update(_vector_columns(run, [f"final_{block}" for block in STATE_BLOCKS] + ["max_abs_constraint_error"]))
         row["rest"] = rest_outcome(time, run_converged, verdict)
         row["rest_state"] = verdict
         row["settling_time"] = time if row["rest"] == SETTLED else float("nan")
@@ -558,12 +558,12 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         row["lyapunov_rate_check"] = run.summary.get("lyapunov_rate_check", "")
         for key in ("max_lyapunov_increase", "time_lyapunov_rising"):
             row[key] = float(run.summary.get(key, np.nan))
-        row.update(_figure_columns(run, [figure for _, figure in SATURATION_FLAGS.values()]))
+        row.update(_vector_columns(run, [figure for _, figure in SATURATION_FLAGS.values()]))
         rows.append(row | _solver(run))
     return pd.DataFrame(rows)
 
 
-def _figure_columns(run: RunData, figures: Sequence[str]) -> dict[str, float]:
+def _vector_columns(run: RunData, figures: Sequence[str]) -> dict[str, float]:
     """The columns of the summary figures ``figures`` (3-vectors) of a run: one body's as
     ``<figure>_1..3`` (NaN where the file lacks one), a chain's per body or joint
     (:func:`rbstab.io.chunk.summary_columns`; none where the file lacks it)."""
