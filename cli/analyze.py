@@ -42,7 +42,7 @@ def _parse_axes(texts, configs):
     if len(texts) != 2:
         raise click.UsageError(f"--basin: give it exactly twice (two axes of the slice), found {len(texts)}")
     from rbstab.analysis import BasinAxis  # heavy: numba, numpy
-    from rbstab.analysis.chain import check_axes  # heavy: numba, numpy
+    from rbstab.analysis.runs import check_axes  # heavy: numba, numpy
 
     axes, problems = {}, []
     for config in configs:

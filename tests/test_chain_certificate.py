@@ -1,4 +1,4 @@
-"""The Lyapunov certificate of a chain (rbstab.analysis.chain_certificate), in its independent
+"""The Lyapunov certificate of a chain (rbstab.analysis.certificate.ChainModel), in its independent
 coordinates: on the planar double inverted pendulum with joint feedback, H_v and H_r are
 those written by hand (H_r semi-definite: the dampers act on the joints' relative rates
 only), the analytic dv/dt is the directional derivative of v along the flow, and no run
@@ -19,7 +19,7 @@ from rbstab.analysis import analyze_chain
 from rbstab.analysis.certificate import certify, level_states
 from rbstab.analysis.runs import Runs
 from rbstab.analysis.text import describe
-from rbstab.analysis.chain_certificate import ChainModel
+from rbstab.analysis.certificate import ChainModel
 from rbstab.analysis.linearise import linearise, linearise_chain
 from rbstab.config.loader import config_from_mapping
 from rbstab.variants import chain as C

@@ -16,18 +16,17 @@
   outcomes along one key (basin stability's rules);
 - :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin
   stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
-- :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together;
-- :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record;
-- :mod:`~rbstab.analysis.chain`: a chain's rest state, linearisation and verdict;
-  :mod:`~rbstab.analysis.chain_certificate`: its Lyapunov certificate in its independent coordinates.
+- :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together, for one body
+  and for a tree of bodies (in its independent coordinates);
+- :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record.
 
 Method and limits: ``docs/analysis.md``.
 """
 
-from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, analyze, OutsideLimits, equilibrium_outside_limits
+from .analyze import (DEFAULT_BOUNDARY_LAYER, Analysis, ChainAnalysis, OutsideLimits, analyze, analyze_chain,
+                      equilibrium_outside_limits)
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
-from .chain import ChainAnalysis, analyze_chain
 from .dataset import is_analysis_file, read_analysis, write_analysis
 from .linearise import Linearisation, linearise, linearise_chain
 from .robustness import Robustness, robustness, wilson_interval

@@ -8,6 +8,12 @@ for the settling time, the basin map (:mod:`~rbstab.analysis.basin`), the smalle
 pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for; last, the
 certificate's sublevel estimate checked against simulations (:mod:`~rbstab.analysis.evidence`:
 runs from {v = c}, and every run above).
+
+A tree of bodies (:class:`rbstab.config.ChainConfig`) takes the same steps in its
+independent coordinates (:func:`analyze_chain`, a :class:`ChainAnalysis`): its rest state
+and linearisation (:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over
+it as a :class:`~rbstab.analysis.certificate.ChainModel`, its runs on the CPU's compiled
+driver.
 """
 
 from __future__ import annotations
@@ -26,22 +32,23 @@ import numpy as np
 
 from .. import simulator
 from ..config.schema import limits_violation
-from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants import VARIANTS
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
-from .certificate import DEFAULT_SAMPLES, Certificate, certify
-from .dataset import analysis_content, analysis_dataset, json_record
-from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
-from .linearise import Linearisation, linearise, undisturbed
+from .certificate import DEFAULT_SAMPLES, Certificate, ChainModel, certify
+from .dataset import analysis_content, analysis_dataset, certificate_record, json_record
+from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify, falsify_with
+from .linearise import Linearisation, TreeCoordinates, linearise, linearise_chain, mode_shapes, undisturbed
 from .push import basin_stability as stability_of
 from .push import push_analysis, unbounded_fall_note
+from .runs import Runs, check_axes
 from .verify import NotVerifiable, check_verifiable, verified_model, verify_analysis
 
-__all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits",
-           "equilibrium_outside_limits"]
+__all__ = ["Analysis", "ChainAnalysis", "analyze", "analyze_chain", "DEFAULT_BOUNDARY_LAYER", "analysed_config",
+           "OutsideLimits", "equilibrium_outside_limits"]
 
 #: phi [m] put in place of the pure sign law (boundary_layer 0) of ``sliding``.
 DEFAULT_BOUNDARY_LAYER = 1e-3
@@ -144,6 +151,170 @@ class Analysis:
         """(coordinates, variables, global attributes) of its file
         (:func:`~rbstab.analysis.dataset.analysis_content`)."""
         return analysis_content(self, command_line)
+
+
+@dataclass(frozen=True)
+class ChainAnalysis:
+    """What :func:`analyze_chain` finds, with the basin map, pushes and basin stability of
+    the same command (:mod:`rbstab.analysis.dataset` writes it as one body's analysis,
+    its state blocks by body).
+
+    Attributes
+    ----------
+    config : ChainConfig
+        The configuration analysed.
+    linearisation : Linearisation
+        At the rest state, in the independent coordinates (``coordinates``).
+    coordinates : list of (str, str, int)
+        (body name, block, index into the full state) of each 3 entries of
+        ``linearisation.equilibrium`` (:func:`rbstab.variants.chain.independent_coordinates`).
+    rest_state : ndarray, shape (n_states,)
+        The full rest state (:func:`rbstab.variants.chain.rest_state`).
+    initial_lyapunov : float
+        v [J] at the configured initial state (zero at the rest state).
+    certificate : Certificate or None
+        The Lyapunov certificate in the independent coordinates (its states, e.g.
+        ``worst_state``, are z), None where not asked for.
+    settling : dict or None
+        The simulation from the configured initial state, as one body's
+        (:attr:`rbstab.analysis.Analysis.settling`); None where not asked for.
+    notes : tuple of str
+    ratio : float
+        The convergence ratio of the command's runs.
+    basin : BasinMap or None
+        :func:`rbstab.analysis.basin.basin_map`.
+    push : PushAnalysis or None
+        :func:`rbstab.analysis.push.push_analysis` on one of its bodies.
+    basin_stability : BasinStability or None
+        :func:`rbstab.analysis.push.basin_stability`.
+    """
+
+    config: object
+    linearisation: Linearisation
+    coordinates: list
+    rest_state: np.ndarray
+    initial_lyapunov: float
+    certificate: object = None
+    settling: dict | None = None
+    notes: tuple = ()
+    ratio: float = DEFAULT_LYAPUNOV_RATIO
+    basin: BasinMap | None = None
+    push: object = None
+    basin_stability: object = None
+    #: Not verified (a tree of more than one body has more than 6 states).
+    verification = None
+    #: A chain's analysis file's ``variant``, as its run file's.
+    variant = "chain"
+    #: Its ``--json`` record's kind.
+    kind = "chain"
+    #: The angles that bound the certificate's domain, in its text.
+    domain = "|theta_2| of a body or joint"
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def analysed(self):
+        """The configuration analysed (the one given)."""
+        return self.config
+
+    @property
+    def layout(self) -> TreeCoordinates:
+        """The linearisation's coordinates by body and block."""
+        return TreeCoordinates(tuple(self.coordinates), tuple(self.config.chain.body_names))
+
+    @property
+    def linear_settling_time(self) -> float:
+        """:meth:`Linearisation.settling_time` at :attr:`ratio` [s]."""
+        return self.linearisation.settling_time(self.ratio)
+
+    def to_dataset(self):
+        """The analysis as an :class:`xarray.Dataset` (its file's content, :mod:`~rbstab.analysis.dataset`)."""
+        return analysis_dataset(self)
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
+        return analysis_content(self, command_line)
+
+    @property
+    def verdict(self) -> str:
+        return self.linearisation.verdict
+
+    @property
+    def state_names(self) -> list[str]:
+        """``<body>.<block>_<i>`` of each independent coordinate (:meth:`TreeCoordinates.state_names`)."""
+        return self.layout.state_names()
+
+    def as_dict(self) -> dict:
+        """Plain Python (the ``--json`` form): one body's record
+        (:func:`rbstab.analysis.dataset.json_record`: the verdict, the coordinates ``state``
+        and the ``equilibrium`` in them, eigenvalues as [re, im] [1/s] with each one's
+        natural frequency, damping ratio, time constant and e-folding time,
+        ``slowest_time_constant`` [s] (null unless asymptotically stable),
+        ``shortest_e_folding_time`` [s] (null unless unstable), the simulation, notes ...),
+        with the rest state per body and block (``rest_state``), each eigenvalue's mode shape
+        on the bodies' angles (``modes``: ``{"eigenvalue": [re, im], "shape":
+        {"<body>.theta_<i>": [re, im]}}``, largest entry 1), v at the initial state [J]
+        and the certificate's ``coordinates`` naming the entries of ``worst_state``."""
+        lin = self.linearisation
+        rest = {}
+        for k, (body, block, _) in enumerate(self.coordinates):
+            rest.setdefault(body, {})[block] = lin.equilibrium[3 * k: 3 * k + 3].tolist()
+        return {**json_record(self), "rest_state": rest, "modes": self._modes(),
+                "initial_lyapunov": self.initial_lyapunov,
+                **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
+
+    def basin_inside(self) -> dict[str, int] | None:
+        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
+        if self.basin is None or self.certificate is None:
+            return None
+        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
+
+    def to_json(self) -> dict:
+        """The ``--json`` record: :meth:`as_dict` (its pushes with the push estimate from
+        {v <= c}, its basin stability, as one body's), the basin map with the axes' keys and
+        values, every point's outcome (rows: the first axis; 0 converged, 1 not converged,
+        2 failed), the counts, those inside {v <= c} and the failures' messages."""
+        record = self.as_dict()
+        if self.basin is not None:
+            b = self.basin
+            record["basin"] = {"axes": [{"key": a.key, "values": a.values.tolist()} for a in b.axes],
+                               "outcome": b.outcome.tolist(), "counts": b.counts(), "messages": b.messages,
+                               "inside_estimate": self.basin_inside(), "t_end": b.t_end, "ratio": b.ratio}
+        return record
+
+    def angles(self) -> tuple[list[str], list[int]]:
+        """(names ``<body>.theta_<i>``, positions in the linearisation's coordinates) of the
+        bodies' Euler angles among the independent coordinates."""
+        names, rows = [], []
+        for k, (body, block, _) in enumerate(self.coordinates):
+            if block == "theta":
+                names += [f"{body}.theta_{i + 1}" for i in range(3)]
+                rows += [3 * k + i for i in range(3)]
+        return names, rows
+
+    def _modes(self) -> list[dict]:
+        """Each eigenvalue's mode on the bodies' angles (:func:`mode_shapes`), for ``--json``."""
+        names, rows = self.angles()
+        shapes = mode_shapes(self.linearisation, rows)
+        return [{"eigenvalue": [float(s.real), float(s.imag)],
+                 "shape": {n: [float(c.real), float(c.imag)] for n, c in zip(names, shape)}}
+                for s, shape in zip(self.linearisation.eigenvalues, shapes)]
+
+    def _certificate_dict(self) -> dict:
+        names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(3)]
+        return {**certificate_record(self.certificate), "coordinates": names}
+
+    def with_runs(self, basin=None, push=None, basin_stability=None) -> "ChainAnalysis":
+        """This analysis with the basin map, pushes and basin stability of the same command,
+        its certificate's c checked against their runs (:func:`rbstab.analysis.evidence.check_runs`;
+        the run from the configured initial state was checked by :func:`analyze_chain`)."""
+        found = dataclasses.replace(self, basin=basin, push=push, basin_stability=basin_stability)
+        if self.certificate is None:
+            return found
+        return dataclasses.replace(found, certificate=check_runs(self.certificate, found))
 
 
 def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, list[str]]:
@@ -307,8 +478,7 @@ def analyze(
     config : RunConfig, ChainConfig or path-like
         A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
         A tree of bodies is analysed in its independent coordinates
-        (:func:`rbstab.analysis.chain.analyze_chain`, a
-        :class:`rbstab.analysis.chain.ChainAnalysis`), its basin map, pushes (on the body
+        (:func:`analyze_chain`, a :class:`ChainAnalysis`), its basin map, pushes (on the body
         ``push["body"]``) and basin stability run on the CPU's compiled driver in ``jobs``
         threads; ``boundary_layer``, ``engine`` and ``executor`` are one body's.
     boundary_layer : float, optional
@@ -458,16 +628,13 @@ def analyze(
 
 def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, simulate: bool, basin,
                   basin_samples: int, ratio: float, jobs: int, push, basin_stability, falsification_runs: int,
-                  engine: str):
+                  engine: str) -> "ChainAnalysis":
     """:func:`analyze` of a tree of bodies (:class:`rbstab.config.ChainConfig`): its
-    rest state, linearisation and certificate (:func:`rbstab.analysis.chain.analyze_chain`),
-    the simulation from its configured initial state (``simulate``: its settling, as one
-    body's), then the basin map, the pushes on a named body (``push["body"]``) and the basin
-    stability of the same command, its runs on the CPU's compiled driver in ``jobs``
-    threads (another ``engine`` is said in its notes); a
-    :class:`rbstab.analysis.chain.ChainAnalysis`."""
-    from .chain import analyze_chain, check_axes  # heavy: numba
-
+    rest state, linearisation and certificate (:func:`analyze_chain`), the simulation from
+    its configured initial state (``simulate``: its settling, as one body's), then the basin
+    map, the pushes on a named body (``push["body"]``) and the basin stability of the same
+    command, its runs on the CPU's compiled driver in ``jobs`` threads (another ``engine``
+    is said in its notes)."""
     if boundary_layer is not None:
         raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace (a "
                          "sliding joint of a chain has its own boundary_layer > 0)")
@@ -484,6 +651,88 @@ def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, se
         basin=basin_map(config, axes, ratio=ratio, n_samples=basin_samples, jobs=jobs) if axes else None,
         push=push_analysis(config, **push, ratio=ratio, jobs=jobs) if push else None,
         basin_stability=stability_of(config, **basin_stability, ratio=ratio, jobs=jobs) if basin_stability else None)
+
+
+def analyze_chain(config, *, certificate: bool = True, samples: int = DEFAULT_SAMPLES, seed: int = 0,
+                  falsification_runs: int = FALSIFICATION_RUNS, ratio: float = DEFAULT_LYAPUNOV_RATIO,
+                  settling: tuple | None = None) -> ChainAnalysis:
+    """Rest state, linearisation, eigenvalues, verdict and (``certificate``) the Lyapunov
+    certificate of a tree of bodies (:class:`rbstab.config.ChainConfig`), in its
+    independent coordinates (:func:`rbstab.analysis.linearise.linearise_chain`).
+
+    The certificate is one body's (:func:`rbstab.analysis.certificate.certify`) over the
+    tree as a :class:`~rbstab.analysis.certificate.ChainModel`, ``samples`` states drawn
+    with ``seed``. With disturbances its Hessians are of the undisturbed tree (the same h),
+    its sampled dv/dt of the disturbed one. Its level c is then checked against
+    ``falsification_runs`` runs of the compiled driver from states on {v = c} per level
+    tried (:func:`rbstab.analysis.evidence.falsify_with`: a run that leaves the domain or
+    ``simulation.limits`` or ends with v above its start lowers c below its start), and
+    against the run from the configured initial state
+    (:func:`rbstab.analysis.evidence.check_initial_run`, convergence by ``ratio``).
+    ``settling``: (the settling record, the run) of that simulation where it ran
+    (:attr:`ChainAnalysis.settling`).
+
+    Raises
+    ------
+    ValueError
+        Where the chain has no rest state near its reference configuration, or a joint has
+        no linearisation (:func:`rbstab.analysis.linearise.linearise_chain`).
+    """
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+
+    compiled = C.compile_chain(config.chain)
+    lin, coordinates = linearise_chain(compiled)
+    rest = C.full_state(compiled, lin.equilibrium)
+    v0 = C.lyapunov(compiled, C.initial_state(config))[0]
+    found, notes = None, []
+    record, first = settling if settling is not None else (None, None)
+    if certificate:
+        found, notes = _certify_tree(config, compiled, lin, coordinates, int(samples), seed, int(falsification_runs),
+                                     ratio, first)
+    return ChainAnalysis(config, lin, coordinates, rest, float(v0), found, record, tuple(notes), ratio)
+
+
+def _certify_tree(config, compiled, linearisation: Linearisation, coordinates, n_samples: int, seed: int,
+                  falsification_runs: int, ratio: float, first) -> tuple[Certificate, list[str]]:
+    """(the certificate of a tree's rest state, notes) (:func:`analyze_chain`); ``first``:
+    the run from the configured initial state where already run."""
+    sim = config.simulation
+    notes = []
+    quiet = _undisturbed_tree(compiled)
+    model = ChainModel(compiled if quiet is None else quiet, coordinates)
+    disturbed = None
+    if quiet is not None:
+        disturbed = ChainModel(compiled, coordinates)
+        notes.append("disturbances: the certificate's Hessians are of the undisturbed chain; its sampled dv/dt "
+                     "(each state at a time drawn in [0, t_end], impulses not seen) and the runs integrate the "
+                     "disturbed one")
+    found = certify(model, linearisation, gimbal_margin=sim.gimbal_margin, n_samples=n_samples, seed=seed,
+                    disturbed=disturbed, t_end=float(sim.t_end))
+    if not found.positive_definite:
+        return found, notes
+    runs = Runs(config)
+
+    def run(x):
+        ok, v0, v1 = runs.outcomes(model.states(x))
+        with np.errstate(invalid="ignore"):
+            return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
+
+    found = falsify_with(run, model, linearisation, found, runs=falsification_runs, seed=seed)
+    impulses = [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
+    found = check_initial_run(found, config, simulator.simulate, linearisation, ratio=ratio, first=first,
+                              impulses=impulses)
+    return found, notes
+
+
+def _undisturbed_tree(compiled):
+    """``compiled`` without its bodies' disturbances (the same h), or None where it has none."""
+    from ..variants import chain as C  # heavy: numba
+
+    chain = compiled.chain
+    if not any(b.disturbances for b in chain.bodies):
+        return None
+    bodies = tuple(dataclasses.replace(b, disturbances=()) for b in chain.bodies)
+    return C.compile_chain(dataclasses.replace(chain, bodies=bodies), offset=compiled.offset)
 
 
 def _workers(executor, jobs: int, push, stability):

@@ -36,7 +36,7 @@ each with its search (the history; :attr:`Certificate.settled`). It stays an *es
 The model is anything with the small protocol of :class:`Model` (v, the analytic dv/dt, the
 right-hand side f, the domain's angles, the least v on the domain boundary and the map to
 the state a run starts from): a one-body variant (:class:`VariantModel`, its own state) or a
-chain in its independent coordinates (:class:`rbstab.analysis.chain_certificate.ChainModel`,
+chain in its independent coordinates (:class:`ChainModel`,
 on the constraint manifold of its permanent joints).
 
 With disturbances (``disturbed``), the local part is of the undisturbed dynamics and the
@@ -56,7 +56,7 @@ import numpy as np
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from .derivatives import directional_derivative, hessian, jacobian
 
-__all__ = ["Certificate", "Model", "VariantModel", "as_model", "constrained_boundary_level", "certify", "checked",
+__all__ = ["Certificate", "Model", "VariantModel", "ChainModel", "as_model", "constrained_boundary_level", "certify", "checked",
            "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
            "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
@@ -83,6 +83,8 @@ RATE_DEFINITENESS = ("negative definite", "negative semi-definite", "indefinite"
 _DECADES = 6.0
 #: The samples reach this times the level of the domain boundary.
 _REACH = 1.5
+#: Step of the central differences of a chain's joint angle's gradient [units of its coordinates].
+_ANGLE_STEP = 1e-7
 #: Bound names of the sublevel estimate.
 BOUNDS = ("domain boundary", "dv/dt > 0 at a sampled state", "sampled state outside the domain",
           "non-finite value at a sampled state", "v not positive definite",
@@ -153,6 +155,114 @@ def as_model(model, n: int):
     """``model`` as a :class:`Model` of ``n`` coordinates: a variant wrapped in
     :class:`VariantModel`, a model as it is."""
     return model if hasattr(model, "angles") else VariantModel(model, n)
+
+
+class ChainModel:
+    """A compiled chain (:class:`rbstab.variants.chain.CompiledChain`) as a :class:`Model`
+    in its independent coordinates z (:func:`rbstab.variants.chain.independent_coordinates`:
+    Theta_i, Omega_i of every body; X_i, V_i of bodies whose joint is not ``permanent``; D of
+    embedded joints).
+
+    A state is :func:`rbstab.variants.chain.full_state` of z: the children of permanent
+    joints placed on their parents (E_j = F_j = 0), so every sample lies on the constraint
+    manifold, where the constraint power F_j' Lambda_j of the analytic rate vanishes. v and
+    the analytic dv/dt are :func:`rbstab.variants.chain.evaluate`'s at those states
+    (docs/physics.md, "v and dv/dt"); f is :func:`rbstab.variants.chain.reduced_rate`. The
+    domain is |theta_2| < pi/2 - gimbal_margin of every body and of every joint's relative
+    orientation Theta_j (the chain's runs stop at either); its boundary level is the least
+    v there at rest (:func:`constrained_boundary_level`: a joint's angle is not a
+    coordinate).
+
+    Attributes
+    ----------
+    compiled : CompiledChain
+    coordinates : list of (str, str, int)
+        :func:`rbstab.variants.chain.independent_coordinates`.
+    angle_names : list of str
+        The domain's angles, in the order of :meth:`angles`: ``"<body>.theta_2"`` of each
+        body, then ``"<joint>.theta_2"`` of each joint whose parent is a body.
+    angle_matrix : ndarray or None
+        (bodies, n) where every angle is a coordinate (no joint has a body for parent), else None.
+    """
+
+    def __init__(self, compiled, coordinates=None) -> None:
+        from ..variants import chain as C  # heavy: numba
+
+        self.compiled = compiled
+        self.coordinates = list(C.independent_coordinates(compiled) if coordinates is None else coordinates)
+        self._at = [int(at) for _, _, at in self.coordinates]
+        self.n = 3 * len(self.coordinates)
+        names = list(compiled.chain.body_names)
+        self._theta = [3 * self._at.index(12 * i) + 1 for i in range(compiled.size)]  # theta_2 of each body in z
+        self._parented = [j for j in range(compiled.size) if compiled.parents[j] >= 0]
+        self.angle_names = [f"{b}.theta_2" for b in names] + [f"{compiled.chain.joint_names[j]}.theta_2"
+                                                               for j in self._parented]
+        if self._parented:
+            self.angle_matrix = None
+        else:
+            self.angle_matrix = np.eye(self.n)[self._theta]
+
+    def states(self, x) -> np.ndarray:
+        """The chain's full states (k, n_states) of the independent coordinates ``x`` (k, n)
+        (:func:`rbstab.variants.chain.full_state`)."""
+        from ..variants import chain as C  # heavy: numba
+
+        return C.full_state(self.compiled, np.atleast_2d(np.asarray(x, dtype=float)))
+
+    # -- v, dv/dt, f ----------------------------------------------------------------------------
+    def _outputs(self, x, t=0.0) -> dict:
+        from ..variants import chain as C  # heavy: numba
+
+        y = self.states(x)
+        return C.evaluate(self.compiled, np.broadcast_to(np.asarray(t, dtype=float), len(y)).copy(), y)
+
+    def lyapunov(self, x):
+        """v [J] at each row of ``x`` (a float for one state (n,))."""
+        v = self._outputs(x)["lyapunov"]
+        return float(v[0]) if np.ndim(x) == 1 else v
+
+    def evaluate(self, x, t=0.0) -> dict:
+        """v [J], the analytic dv/dt [W] and the angles (:meth:`angles`) at each row of ``x``
+        at the times ``t`` [s]."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        out = self._outputs(x, t)
+        return {"lyapunov": out["lyapunov"], "lyapunov_rate": out["lyapunov_rate"],
+                "angles": self._angles_of(x, out)}
+
+    def rhs(self, t, x) -> np.ndarray:
+        """dz/dt at each row of ``x`` (:func:`rbstab.variants.chain.reduced_rate`)."""
+        from ..variants import chain as C  # heavy: numba
+
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        t = np.broadcast_to(np.asarray(t, dtype=float), len(x))
+        return np.array([C.reduced_rate(self.compiled, row, float(s)) for row, s in zip(x, t)]).reshape(x.shape)
+
+    # -- the domain ----------------------------------------------------------------------------
+    def angles(self, x) -> np.ndarray:
+        """(k, m) theta_2 [rad] of every body, then of every joint whose parent is a body."""
+        x = np.atleast_2d(np.asarray(x, dtype=float))
+        return self._angles_of(x, self._outputs(x) if self._parented else None)
+
+    def _angles_of(self, x: np.ndarray, out) -> np.ndarray:
+        body = x[:, self._theta]
+        if not self._parented:
+            return body
+        return np.concatenate([body, out["joint_theta"][:, self._parented, 1]], axis=1)
+
+    def angle_jacobian(self, x) -> np.ndarray:
+        """(m, n) d angles / dx at the state ``x`` (n,) (central differences)."""
+        if self.angle_matrix is not None:
+            return self.angle_matrix
+        x = np.asarray(x, dtype=float)
+        steps = _ANGLE_STEP * np.eye(self.n)
+        values = self.angles(np.concatenate([x + steps, x - steps]))
+        return ((values[: self.n] - values[self.n:]) / (2 * _ANGLE_STEP)).T
+
+    def boundary_level(self, y_e, hess, limit) -> float:
+        """The least v [J] on the domain boundary (any angle at +-limit), at rest."""
+        free = [3 * k + a for k, (_, block, _) in enumerate(self.coordinates)
+                if block in ("theta", "position", "controller_state") for a in range(3)]
+        return constrained_boundary_level(self, np.asarray(y_e, dtype=float), hess, limit, np.array(free))
 
 
 @dataclass(frozen=True)

@@ -104,7 +104,7 @@ def _var(dims, data, units: str, long_name: str, description: str = "") -> tuple
 def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = False) -> dict:
     """``<prefix>_<block>(axis)`` variables of a state vector ``y`` in ``layout`` (a
     :class:`~rbstab.layout.StateLayout`), or ``<prefix>_<block>(body, axis)`` in a chain's
-    (:class:`rbstab.analysis.chain.TreeCoordinates`: NaN for a body without the block)."""
+    (:class:`rbstab.analysis.linearise.TreeCoordinates`: NaN for a body without the block)."""
     out = {}
     for block, values in layout.split(np.asarray(y, dtype=float)).items():
         units = _rate_units(BLOCK_UNITS[block]) if rate else BLOCK_UNITS[block]

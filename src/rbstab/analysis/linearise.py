@@ -37,6 +37,7 @@ import math
 
 import numpy as np
 
+from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .derivatives import jacobian
 
 __all__ = [
@@ -298,6 +299,49 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
     z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
     rates = lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)])  # noqa: E731
     return _linearisation(rates, z, compiled.chain.gravity), coordinates
+
+
+@dataclass(frozen=True)
+class TreeCoordinates:
+    """A chain's independent coordinates (:func:`rbstab.variants.chain.independent_coordinates`)
+    as the layout of its linearisation's state z: 3 entries per (body, state block), the
+    blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has (Theta, Omega of every body; X,
+    V of one whose joint is not ``permanent``; D of an ``embedded`` joint's child), as
+    :class:`rbstab.layout.StateLayout` lays out one body's state.
+
+    Attributes
+    ----------
+    coordinates : tuple of (str, str, int)
+        (body name, block, index into the full state) of each 3 entries of z.
+    bodies : tuple of str
+        The chain's bodies, in order.
+    """
+
+    coordinates: tuple
+    bodies: tuple
+
+    @property
+    def blocks(self) -> tuple[str, ...]:
+        """The state blocks some body has, in :data:`rbstab.layout.STATE_BLOCKS`' order."""
+        present = {block for _, block, _ in self.coordinates}
+        return tuple(b for b in STATE_BLOCKS if b in present)
+
+    def state_names(self) -> list[str]:
+        """Scalar coordinate names ``<body>.<block>_<i>`` (``legs.theta_1``), in z's order."""
+        return [f"{body}.{block}_{i}" for body, block, _ in self.coordinates for i in (1, 2, 3)]
+
+    def state_units(self) -> list[str]:
+        """The units of each scalar coordinate (:data:`rbstab.layout.BLOCK_UNITS`), in z's order."""
+        return [BLOCK_UNITS[block] for _, block, _ in self.coordinates for _ in range(3)]
+
+    def split(self, z: np.ndarray) -> dict[str, np.ndarray]:
+        """Each block of ``z`` (n_z,) by body: {block: shape (n_bodies, 3)}, NaN for a body
+        without that block."""
+        z = np.asarray(z, dtype=float)
+        out = {b: np.full((len(self.bodies), 3), np.nan) for b in self.blocks}
+        for k, (body, block, _) in enumerate(self.coordinates):
+            out[block][self.bodies.index(body)] = z[3 * k: 3 * k + 3]
+        return out
 
 
 def linearise_config(config) -> Linearisation:

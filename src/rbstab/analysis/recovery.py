@@ -102,7 +102,7 @@ def _certificate(config, options: dict):
 
     samples, seed, ratio = int(options.get("certificate_samples", DEFAULT_SAMPLES)), options["seed"], options["ratio"]
     if hasattr(config, "chain"):
-        from .chain import analyze_chain  # heavy: numba
+        from .analyze import analyze_chain  # heavy: numba
 
         return analyze_chain(config, samples=samples, seed=seed, ratio=ratio).certificate
     from .certificate import certify  # heavy: numba

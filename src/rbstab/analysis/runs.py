@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "MIN_SLICE"]
+__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE"]
 
 #: Fewest runs of a batch slice sent to a worker.
 MIN_SLICE = 64
@@ -349,3 +349,11 @@ def check_entries(config, axes) -> None:
     compiled = C.compile_chain(config.chain, offset=0.0)
     for axis in axes:
         _state_offset(compiled, axis)
+
+
+def check_axes(config, axes) -> None:
+    """ValueError (one line) where a basin axis names no entry of the chain's state
+    (:func:`rbstab.analysis.basin.basin_map`'s keys), or the two are the same entry."""
+    if len(axes) != 2 or axes[0].key == axes[1].key:
+        raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
+    check_entries(config, axes)
