@@ -35,8 +35,8 @@ def _state_entries(option: str):
 
 
 def _parse_axes(texts, configs):
-    """Basin axes per config (parsed against each one body's states, or each tree's bodies
-    and joints); ClickException if invalid."""
+    """Basin axes per config (checked against each one's state: one body's blocks, a tree's
+    bodies); ClickException if invalid."""
     if not texts:
         return {}
     if len(texts) != 2:
@@ -47,11 +47,8 @@ def _parse_axes(texts, configs):
     axes, problems = {}, []
     for config in configs:
         try:
-            if getattr(config, "chain", None) is not None:
-                axes[config.name] = [BasinAxis.parse(t) for t in texts]
-                check_axes(config, axes[config.name])
-            else:
-                axes[config.name] = [BasinAxis.parse(t, config.make_variant().layout) for t in texts]
+            axes[config.name] = [BasinAxis.parse(t) for t in texts]
+            check_axes(config, axes[config.name])
         except ValueError as exc:
             problems.append(f"{config.name}: {exc}")
     if problems:
@@ -66,11 +63,7 @@ def _check_boundary_layer(configs, boundary_layer) -> None:
     problems = []
     for config in configs:
         try:
-            if getattr(config, "chain", None) is not None and boundary_layer is not None:
-                raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to "
-                                 "replace (a sliding joint of a chain has its own boundary_layer > 0)")
-            if getattr(config, "chain", None) is None:
-                analysed_config(config, boundary_layer)
+            analysed_config(config, boundary_layer)
         except ValueError as exc:
             problems.append(f"{config.name}: {exc}")
     if problems:
@@ -178,10 +171,7 @@ def _check_push_targets(configs, ranges) -> None:
     problems = []
     for config in configs:
         try:
-            if getattr(config, "chain", None) is not None:
-                check_entries(config, [a for a, _, _ in parse_ranges(ranges, None)])
-            else:
-                parse_ranges(ranges, config.make_variant().layout)
+            check_entries(config, [a for a, _, _ in parse_ranges(ranges)])
         except ValueError as exc:
             problems.append(f"{config.name}: {str(exc).replace('--basin ', '--basin-stability ')}")
     if problems:

@@ -25,6 +25,7 @@ from rbstab.analysis.basin import time_to_converge
 from rbstab.analysis.certificate import boundary_level
 from rbstab.analysis.derivatives import directional_derivative, hessian, jacobian, richardson
 from rbstab.analysis.linearise import modes, verdict
+from rbstab.analysis.runs import check_entries
 from rbstab.config import load_config
 from rbstab.kinematics import GIMBAL_LOCK_ANGLE
 from rbstab.model import Gains
@@ -299,16 +300,23 @@ def test_time_to_converge():
 
 
 def test_basin_axis_parsing():
-    layout = VARIANTS["permanent"].layout
-    axis = BasinAxis.parse("initial_state.omega.0=-60:60:41", layout)
+    axis = BasinAxis.parse("initial_state.omega.0=-60:60:41")
     assert axis.block == "omega" and axis.index == 0 and len(axis.values) == 41 and axis.units == "rad s-1"
     for bad, match in [("initial_state.omega.0=-60:60", "KEY=lo:hi:n"), ("controller.k_t.0=1:2:3", "not one entry of an initial state"),
                        ("initial_state.omega.3=1:2:3", "'initial_state.omega' is a list of 3; index it with 0..2, not '3'"),
                        ("initial_state.omega=1:2:3", "not one entry of an initial state"), ("initial_state.omega.1=2:1:3", "lo < hi"),
-                       ("initial_state.omega.1=1:2:1", "n >= 2"), ("initial_state.omega.1=a:2:3", "numbers"),
-                       ("initial_state.x.0=-1:1:3", "not a state of this variant")]:
+                       ("initial_state.omega.1=1:2:1", "n >= 2"), ("initial_state.omega.1=a:2:3", "numbers")]:
         with pytest.raises(ValueError, match=match):
-            BasinAxis.parse(bad, layout)
+            BasinAxis.parse(bad)
+    # whether the configuration's state has the entry: one body's variant's blocks, no body's name
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        permanent = load_config(ROOT / "configs" / "paper" / "case1_permanent.yaml")
+    for key, match in [("initial_state.x.0", r"'initial_state.x' is not a state of this variant \(its states: theta, omega\)"),
+                       ("initial_state.legs.theta.0", "names a body of a chain")]:
+        with pytest.raises(ValueError, match=match):
+            check_entries(permanent, [BasinAxis.parse(f"{key}=-1:1:3")])
+    check_entries(permanent, [axis])
 
 
 def test_basin_of_the_inverted_pendulum():

@@ -324,13 +324,19 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     right-hand side has no linearisation and v no Hessian there. Its boundary-layer law,
     sgn(E) -> tanh(E / phi), is analysed instead, with phi = ``boundary_layer`` (default
     :data:`DEFAULT_BOUNDARY_LAYER`). For every other configuration ``boundary_layer`` must
-    be None or the configured value.
+    be None or the configured value. A tree of bodies is analysed as given (a sliding joint
+    of a tree has its own ``boundary_layer`` > 0).
 
     Raises
     ------
     ValueError
         For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
     """
+    if getattr(config, "chain", None) is not None:
+        if boundary_layer is not None:
+            raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace "
+                             "(a sliding joint of a chain has its own boundary_layer > 0)")
+        return config, []
     sign_law = config.variant == "sliding" and not config.gains.boundary_layer
     if boundary_layer is not None and not (boundary_layer > 0 and math.isfinite(boundary_layer)):
         raise ValueError(f"--boundary-layer: found {boundary_layer}; expected a width phi > 0 [m]")
@@ -552,20 +558,19 @@ def analyze(
     if verify:
         config = verified_model(config)  # a one-body tree: the one-body model it is
         check_verifiable(config)
-    if getattr(config, "chain", None) is not None:
-        return _analyze_tree(config, boundary_layer=boundary_layer, certificate=certificate, samples=samples,
-                             seed=seed, simulate=simulate, basin=basin, basin_samples=basin_samples, ratio=ratio,
-                             jobs=jobs, push=push, basin_stability=basin_stability,
-                             falsification_runs=falsification_runs, engine=engine)
     timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
+    axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
+    if basin is not None:
+        check_axes(analysed, axes)
+    if getattr(config, "chain", None) is not None:
+        return _analyze_tree(config, certificate=certificate, samples=samples, seed=seed, simulate=simulate,
+                             axes=axes, basin_samples=basin_samples, ratio=ratio, jobs=jobs, push=push,
+                             basin_stability=basin_stability, falsification_runs=falsification_runs, engine=engine)
     disturbed = analysed.make_variant()
     variant, disturbed, disturbance_notes = _undisturbed(analysed, disturbed)
     notes += disturbance_notes
-    axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a, variant.layout) for a in basin or ()]
-    if basin is not None and len(axes) != 2:
-        raise ValueError(f"--basin: expected exactly two axes, found {len(axes)}")
     lin = linearise(variant)
     if not lin.is_rest_point and analysed.gains.saturation is not None:
         raise NoEquilibrium(_unheld(analysed))
@@ -626,7 +631,7 @@ def analyze(
     return result
 
 
-def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, seed: int, simulate: bool, basin,
+def _analyze_tree(config, *, certificate: bool, samples: int, seed: int, simulate: bool, axes: list,
                   basin_samples: int, ratio: float, jobs: int, push, basin_stability, falsification_runs: int,
                   engine: str) -> "ChainAnalysis":
     """:func:`analyze` of a tree of bodies (:class:`rbstab.config.ChainConfig`): its
@@ -634,13 +639,7 @@ def _analyze_tree(config, *, boundary_layer, certificate: bool, samples: int, se
     its configured initial state (``simulate``: its settling, as one body's), then the basin
     map, the pushes on a named body (``push["body"]``) and the basin stability of the same
     command, its runs on the CPU's compiled driver in ``jobs`` threads (another ``engine``
-    is said in its notes)."""
-    if boundary_layer is not None:
-        raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace (a "
-                         "sliding joint of a chain has its own boundary_layer > 0)")
-    axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
-    if basin is not None:
-        check_axes(config, axes)
+    is said in its notes); ``axes``: the basin map's, checked."""
     result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed,
                            falsification_runs=falsification_runs, ratio=ratio,
                            settling=_settling(config, ratio) if simulate else None)

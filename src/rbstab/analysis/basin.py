@@ -82,36 +82,23 @@ class BasinAxis:
     values: np.ndarray
 
     @classmethod
-    def parse(cls, text: str, layout=None) -> "BasinAxis":
-        """From ``KEY=lo:hi:n`` (``initial_state.omega.0=-60:60:41``).
-
-        Parameters
-        ----------
-        text : str
-        layout : StateLayout, optional
-            The variant's state layout: the key's block must be one of its states.
+    def parse(cls, text: str) -> "BasinAxis":
+        """From ``KEY=lo:hi:n`` (``initial_state.omega.0=-60:60:41``); whether a
+        configuration's state has that entry is :func:`rbstab.analysis.runs.check_entries`'.
 
         Raises
         ------
         ValueError
             Naming the text, what is wrong and what is allowed.
         """
-        from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
-
         match = _AXIS.match(text)
         if not match:
             raise ValueError(f"--basin {text!r}: expected KEY=lo:hi:n, e.g. initial_state.omega.0=-60:60:41")
         key = match["key"]
         try:
-            path = state_entry(key)
+            state_entry(key)
         except ValueError as exc:
             raise ValueError(f"--basin {text!r}: {exc}") from None
-        if layout is not None and path.entry is not None:
-            raise ValueError(f"--basin {text!r}: names a body of a chain ('{path.entry}'); a one-body config's entries "
-                             "are initial_state.<block>.<i>")
-        if layout is not None and INITIAL_STATE_BLOCKS[path.field] not in layout.blocks:
-            states = ", ".join(k for k, b in INITIAL_STATE_BLOCKS.items() if b in layout.blocks)
-            raise ValueError(f"--basin {text!r}: '{path.field_key}' is not a state of this variant (its states: {states})")
         try:
             lo, hi, n = float(match["lo"]), float(match["hi"]), int(match["n"])
         except ValueError:
@@ -307,15 +294,10 @@ def basin_map(
         For ``engine="cuda"`` where no GPU, driver or numba-cuda is found.
     """
     from ..simulator import uses_compiled_engine  # heavy: numba
-    from .runs import MIN_SLICE, Runs  # heavy: numba
+    from .runs import MIN_SLICE, Runs, check_axes  # heavy: numba
 
-    if len(axes) != 2 or axes[0].key == axes[1].key:
-        raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
+    check_axes(config, axes)
     tree = getattr(config, "chain", None) is not None
-    for axis in axes if not tree else ():
-        if axis.body is not None:
-            raise ValueError(f"--basin {axis.key!r}: names a body of a chain ('{axis.body}'); a one-body config's "
-                             "entries are initial_state.<block>.<i>")
     shape = (len(axes[0].values), len(axes[1].values))
     first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
     gpu = get_engine(engine).gpu and not tree and uses_compiled_engine(config, engine)

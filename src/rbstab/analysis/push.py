@@ -776,9 +776,10 @@ class BasinStability:
         }
 
 
-def parse_ranges(texts: Sequence[str], layout) -> list[tuple[Any, float, float]]:
-    """(BasinAxis of the entry, lo, hi) of each ``KEY=LO:HI`` (an initial-state entry of
-    ``layout``); ValueError naming the text otherwise."""
+def parse_ranges(texts: Sequence[str]) -> list[tuple[Any, float, float]]:
+    """(BasinAxis of the entry, lo, hi) of each ``KEY=LO:HI`` (an initial-state entry; a
+    configuration's state has it where :func:`rbstab.analysis.runs.check_entries` says so);
+    ValueError naming the text otherwise."""
     from .basin import BasinAxis  # heavy: numba (the basin map's engine)
 
     out = []
@@ -792,7 +793,7 @@ def parse_ranges(texts: Sequence[str], layout) -> list[tuple[Any, float, float]]
         except ValueError:
             raise ValueError(f"--basin-stability {text!r}: LO and HI must be numbers") from None
         try:
-            axis = BasinAxis.parse(f"{key}={lo!r}:{hi!r}:2", layout)
+            axis = BasinAxis.parse(f"{key}={lo!r}:{hi!r}:2")
         except ValueError as exc:
             raise ValueError(str(exc).replace("--basin", "--basin-stability").replace(":2", "")
                              .replace("KEY=lo:hi:n", "KEY=LO:HI")) from None
@@ -875,8 +876,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         low, high = np.array([lo, -1.0, -1.0, -1.0]), np.array([hi, 1.0, 1.0, 1.0])
         perturbation, rule, engine = "push", RECOVERY_RULE, pushes.engine
     else:
-        tree = getattr(config, "chain", None) is not None
-        axes = parse_ranges(ranges, None if tree else config.make_variant().layout)
+        axes = parse_ranges(ranges)
         low = np.array([lo for _, lo, _ in axes])
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
@@ -901,8 +901,10 @@ def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
     :meth:`rbstab.analysis.runs.Runs.states`). ValueError (one line) for an entry the state
     lacks, or one body's box that reaches gimbal lock."""
     entries = [a for a, _, _ in axes]
-    if runs.tree is not None:
+    try:
         check_entries(config, entries)
+    except ValueError as exc:
+        raise ValueError(str(exc).replace("--basin ", "--basin-stability ", 1)) from None
     for axis, lo, hi in axes if runs.tree is None else ():
         if axis.block == "theta" and axis.index == 1:
             from ..kinematics import GIMBAL_LOCK_ANGLE  # heavy: numba

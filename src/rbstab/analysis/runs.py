@@ -343,17 +343,32 @@ def _state_offset(compiled, axis) -> int:
 
 def check_entries(config, axes) -> None:
     """ValueError (one line) where an axis (:class:`rbstab.analysis.basin.BasinAxis`) names
-    no entry of a tree's state (keys ``initial_state.<body>.<block>.<i>``)."""
-    from ..variants import chain as C  # heavy: numba
+    no entry of ``config``'s state: one body's keys ``initial_state.<block>.<i>`` of a
+    block its variant has, a tree's ``initial_state.<body>.<block>.<i>`` of a body it has
+    (D of an embedded joint's child)."""
+    if getattr(config, "chain", None) is not None:
+        from ..variants import chain as C  # heavy: numba
 
-    compiled = C.compile_chain(config.chain, offset=0.0)
+        compiled = C.compile_chain(config.chain, offset=0.0)
+        for axis in axes:
+            _state_offset(compiled, axis)
+        return
+    from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
+
+    blocks = config.make_variant().layout.blocks
     for axis in axes:
-        _state_offset(compiled, axis)
+        if axis.body is not None:
+            raise ValueError(f"--basin {axis.key!r}: names a body of a chain ('{axis.body}'); a one-body config's "
+                             "entries are initial_state.<block>.<i>")
+        if axis.block not in blocks:
+            states = ", ".join(k for k, b in INITIAL_STATE_BLOCKS.items() if b in blocks)
+            raise ValueError(f"--basin {axis.key!r}: '{axis.key.rsplit('.', 1)[0]}' is not a state of this variant "
+                             f"(its states: {states})")
 
 
 def check_axes(config, axes) -> None:
-    """ValueError (one line) where a basin axis names no entry of the chain's state
-    (:func:`rbstab.analysis.basin.basin_map`'s keys), or the two are the same entry."""
+    """ValueError (one line) where the basin map's axes are not two, are the same entry or
+    one names no entry of ``config``'s state (:func:`check_entries`)."""
     if len(axes) != 2 or axes[0].key == axes[1].key:
         raise ValueError(f"--basin: expected two different keys, found {[a.key for a in axes]}")
     check_entries(config, axes)
