@@ -222,7 +222,7 @@ class Runs:
         for j, axis in enumerate(axes):
             states[:, _state_offset(self.compiled, axis)] = values[:, j]
         if x_placed.any() or v_placed.any():
-            states = np.array([C.place(self.compiled, y, x_placed, v_placed) for y in states])
+            states = C.place(self.compiled, states, x_placed, v_placed)
         return states
 
     def lyapunov(self, states: np.ndarray, variant=None) -> np.ndarray:

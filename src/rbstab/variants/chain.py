@@ -31,8 +31,7 @@ import numpy as np
 
 from ..chain import Chain
 from ..jit import jit
-from ..kinematics import (ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of,
-                          rotation_matrix, sub, vector)
+from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
 from ..layout import SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
@@ -656,6 +655,36 @@ def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
 
 
 # -- rest state and v ---------------------------------------------------------------------------
+@jit(forceinline=True)
+def _place_body(y, i, params, parents, ppoints, x_placed, v_placed):
+    """Place body i of the state ``y`` (n_states,) on its joint (:func:`place`): its X where
+    ``x_placed`` so that the joint's points coincide (E_i = 0), its V where ``v_placed`` so
+    that they move together (F_i = 0), from its parent's X, V, Theta, Omega (ground: X_p =
+    V_p = 0, A_p = I)."""
+    a = rotation_and_rate_of(vector(y, 12 * i))[0]
+    r_c = vector(params[i].attachment_point, 0)
+    point, rate = vector(ppoints[i], 0), ZERO
+    p = parents[i]
+    if p >= 0:
+        a_p = rotation_and_rate_of(vector(y, 12 * p))[0]
+        r_p = point
+        point = add(vector(y, 12 * p + 6), matvec(a_p, r_p))
+        rate = add(vector(y, 12 * p + 9), matvec(a_p, cross(vector(y, 12 * p + 3), r_p)))
+    if x_placed:
+        _put(y, 12 * i + 6, sub(point, matvec(a, r_c)))
+    if v_placed:
+        _put(y, 12 * i + 9, sub(rate, matvec(a, cross(vector(y, 12 * i + 3), r_c))))
+
+
+@jit
+def _place_rows(states, params, parents, ppoints, x_placed, v_placed):
+    """:func:`place` on each row of ``states`` (k, n_states), in place, parents first."""
+    for k in range(states.shape[0]):
+        for i in range(parents.shape[0]):
+            if x_placed[i] or v_placed[i]:
+                _place_body(states[k], i, params, parents, ppoints, x_placed[i], v_placed[i])
+
+
 @jit
 def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
     """Fill ``y`` (n_states,) with the state at rest of the configuration ``q`` (3 n + 3 f
@@ -680,14 +709,8 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
                 y[d_at[j] + c] = q[k + c]
             k += 3
     for i in range(n):
-        if codes[i] != PERMANENT:
-            continue
-        point = vector(ppoints[i], 0)
-        p = parents[i]
-        if p >= 0:
-            point = add(vector(y, 12 * p + 6), matvec(rotation_and_rate_of(vector(y, 12 * p))[0], point))
-        _put(y, 12 * i + 6, sub(point, matvec(rotation_and_rate_of(vector(y, 12 * i))[0],
-                                              vector(params[i].attachment_point, 0))))
+        if codes[i] == PERMANENT:
+            _place_body(y, i, params, parents, ppoints, True, False)
 
 
 @jit
@@ -844,9 +867,10 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     z = np.asarray(z, dtype=float)
     stack = np.atleast_2d(z)
     y = np.zeros((len(stack), compiled.n_states))
-    for k, (_, _, at) in enumerate(independent_coordinates(compiled)):
-        y[:, at: at + 3] = stack[:, 3 * k: 3 * k + 3]
-    y = _place(compiled, y, only_permanent=True)
+    columns = [at + c for _, _, at in independent_coordinates(compiled) for c in range(3)]
+    y[:, columns] = stack
+    permanent = compiled.codes == PERMANENT
+    _place_rows(y, compiled.params, compiled.parents, compiled.ppoints, permanent, permanent)
     return y if z.ndim == 2 else y[0]
 
 
@@ -871,24 +895,8 @@ def place(compiled: CompiledChain, y: np.ndarray, x_placed, v_placed) -> np.ndar
     first: X_c = X_p + A_p R_p - A_c R_c, V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x
     R_c) (ground: X_p = V_p = 0, A_p = I)."""
     y = np.array(y, dtype=float)
-    stack = y.reshape(-1, y.shape[-1])  # a view: rows of y
-    for i in range(compiled.size):
-        if not (x_placed[i] or v_placed[i]):
-            continue
-        parent, r_p = compiled.parents[i], compiled.ppoints[i]
-        a = rotation_matrix(np.ascontiguousarray(stack[:, 12 * i: 12 * i + 3]))
-        r_c = compiled.params[i]["attachment_point"]
-        if parent < 0:
-            point, rate = r_p, np.zeros(3)
-        else:
-            a_p = rotation_matrix(np.ascontiguousarray(stack[:, 12 * parent: 12 * parent + 3]))
-            point = stack[:, 12 * parent + 6: 12 * parent + 9] + a_p @ r_p
-            rate = stack[:, 12 * parent + 9: 12 * parent + 12] + np.einsum(
-                "kij,kj->ki", a_p, np.cross(stack[:, 12 * parent + 3: 12 * parent + 6], r_p))
-        if x_placed[i]:
-            stack[:, 12 * i + 6: 12 * i + 9] = point - a @ r_c
-        if v_placed[i]:
-            stack[:, 12 * i + 9: 12 * i + 12] = rate - np.einsum("kij,kj->ki", a, np.cross(stack[:, 12 * i + 3: 12 * i + 6], r_c))
+    _place_rows(y.reshape(-1, y.shape[-1]), compiled.params, compiled.parents, compiled.ppoints,
+                np.asarray(x_placed, dtype=np.bool_), np.asarray(v_placed, dtype=np.bool_))
     return y
 
 
