@@ -8,7 +8,8 @@ Prints (2 cores, warm numba cache):
 - ms the integration of the one-body Case 3 config on the one-body compiled engine and
   as a one-body chain on the compiled driver;
 - s a 41 x 41 basin map of the stance example (``rbstab analyze --basin``, one process)
-  and its smallest fatal push on the trunk over 64 directions (``--push``, 2 threads);
+  and its smallest fatal push on the trunk over 64 directions (``--push``, 2 threads), and
+  its analysis (``rbstab analyze``: the certificate and the simulation, one process);
 - us an evaluation of the rate of a serial chain of n = 1..8 bodies (alternating permanent
   and visco-elastic joints with feedback, gravity) as the compiled driver makes it (the
   reduced rate with scratch arrays of its own), and that per body, beside one evaluation of
@@ -40,7 +41,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from rbstab.analysis import BasinAxis, basin_map
+from rbstab.analysis import BasinAxis, analyze, basin_map
 from rbstab.analysis.push import push_analysis
 from rbstab.chain import GROUND, Body, Chain, Joint
 from rbstab.config import load_config
@@ -312,6 +313,13 @@ def main() -> None:
     print(f"  smallest fatal push of stance_ankle_hip (limits.theta 0.6 rad) on the trunk at (0, 0, 0.2) m, 64 "
           f"directions and the local search, 2 threads: {time.perf_counter() - start:.2f} s ({pushed.runs} runs; "
           f"minimum {pushed.minimum:.4g} N s along ({', '.join(f'{x:+.3f}' for x in pushed.minimum_direction)}))")
+    plain = load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
+    analyze(plain)  # compiled
+    start = time.perf_counter()
+    analysed = analyze(plain)
+    print(f"  analysis of stance_ankle_hip (rbstab analyze in one process: rest state, linearisation, the certificate "
+          f"of 10,000 states checked against runs, the simulation): {time.perf_counter() - start:.2f} s "
+          f"(c = {analysed.certificate.sublevel:.4g} J)")
     print("rate evaluations, compiled (us an evaluation; per body); one-body Case 3's rate for comparison:")
     code, p = variant.code, params[0]
     f = np.empty(y0.size)
