@@ -605,18 +605,20 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
     get_engine(engine).check_available()  # before any run
     trees, bodies = [], []
     for i, config in enumerate(configs):
-        (trees if isinstance(config, ChainConfig) else bodies).append(i)
+        if not uses_compiled_engine(config, engine):
+            yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
+        else:
+            (trees if isinstance(config, ChainConfig) else bodies).append(i)
     if trees:
-        yield from _tree_runs(configs, trees, timeout, keep != "none", engine)
+        for members, block in _tree_blocks([configs[i] for i in trees], timeout=timeout, outputs=keep != "none",
+                                           engine=engine):
+            yield [trees[j] for j in members], block
     groups: dict[tuple, list[int]] = {}
     shared: dict[tuple, Variant] = {}
     for i in bodies:
         config = configs[i]
-        if uses_compiled_engine(config, engine):
-            size = _variant_of(config, shared).layout.size
-            groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
-        else:
-            yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
+        size = _variant_of(config, shared).layout.size
+        groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
     for (method, n_samples, size), members in groups.items():
         if gpu:
             group = [configs[i] for i in members]
@@ -767,18 +769,6 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,
                      _time.perf_counter() - start, summary)
-
-
-def _tree_runs(configs: Sequence, trees: list[int], timeout: float | None, outputs: bool,
-               engine: str) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`simulate_blocks` for the runs ``trees`` (positions in ``configs``) of trees:
-    those ``engine`` takes in :func:`_tree_blocks`, the others one by one."""
-    taken = [i for i in trees if uses_compiled_engine(configs[i], engine)]
-    for members, block in _tree_blocks([configs[i] for i in taken], timeout=timeout, outputs=outputs,
-                                       engine=engine):
-        yield [taken[j] for j in members], block
-    for i in sorted(set(trees) - set(taken)):
-        yield [i], RunBlock.of(_simulate_tree(configs[i], timeout))
 
 
 def _chain_outputs(compiled, time: np.ndarray, states: np.ndarray, work: np.ndarray) -> tuple[dict, dict]:
