@@ -406,12 +406,6 @@ def _did_you_mean(word: str, choices: Sequence[str], prefix: str = "") -> str:
     return f"did you mean '{prefix}{match[0]}'?" if match else ""
 
 
-def _valid_name(value: Any) -> bool:
-    """Whether ``value`` is a valid run ``name`` (see :func:`run_name`)."""
-    return (isinstance(value, str) and len(value) <= MAX_NAME_LENGTH and bool(_NAME_PATTERN.fullmatch(value))
-            and set(value) != {"."})
-
-
 def run_name(value: Any) -> str:
     if not isinstance(value, str):
         raise Invalid(f"{kind_of(value)}, not a string")

@@ -57,7 +57,6 @@ from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_d
 from .metadata import (
     VARIABLE_DESCRIPTIONS,
     VARIABLE_UNITS,
-    git_state,
     provenance_attributes,
     summary_units,
     variable_attributes,
@@ -111,11 +110,6 @@ SWITCHING_VARIABLES = {
 
 #: Attributes of the dimension coordinates (HDF5 dimension scales) of a result file.
 COORDINATE_ATTRIBUTES = {name: variable_attributes(name) for name in ("time", "axis", "switching", "body", "joint")}
-
-
-def _git_commit() -> str:
-    """Commit of the rbstab checkout in use, or ``"unknown"`` (:func:`rbstab.io.metadata.git_state`)."""
-    return git_state()[0]
 
 
 def _attr_value(value: Any) -> Any:
