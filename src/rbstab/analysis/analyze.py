@@ -54,8 +54,43 @@ __all__ = ["Analysis", "ChainAnalysis", "analyze", "analyze_chain", "DEFAULT_BOU
 DEFAULT_BOUNDARY_LAYER = 1e-3
 
 
+class _Findings:
+    """What one body's and a tree's analyses share (:class:`Analysis`, :class:`ChainAnalysis`):
+    their name, verdict, coordinates' names, the basin points inside {v <= c} and their file."""
+
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def verdict(self) -> str:
+        """The linearisation's verdict (:func:`rbstab.analysis.linearise.verdict`)."""
+        return self.linearisation.verdict
+
+    @property
+    def state_names(self) -> list[str]:
+        """The name of each coordinate of the linearisation (``theta_1`` ...; a tree's
+        ``<body>.<block>_<i>``, :meth:`TreeCoordinates.state_names`)."""
+        return self.layout.state_names()
+
+    def basin_inside(self) -> dict[str, int] | None:
+        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
+        if self.basin is None or self.certificate is None:
+            return None
+        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
+
+    def to_dataset(self):
+        """The analysis as an :class:`xarray.Dataset` (the file's content, :mod:`~rbstab.analysis.dataset`)."""
+        return analysis_dataset(self)
+
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
+        return analysis_content(self, command_line)
+
+
 @dataclass
-class Analysis:
+class Analysis(_Findings):
     """Everything :func:`analyze` found for one configuration.
 
     Attributes
@@ -104,17 +139,8 @@ class Analysis:
     domain = None
 
     @property
-    def name(self) -> str:
-        return self.config.name
-
-    @property
     def variant(self) -> str:
         return self.config.variant
-
-    @property
-    def verdict(self) -> str:
-        """The linearisation's verdict (:func:`rbstab.analysis.linearise.verdict`)."""
-        return self.linearisation.verdict
 
     @property
     def layout(self):
@@ -122,39 +148,19 @@ class Analysis:
         return VARIANTS[self.analysed.variant].layout
 
     @property
-    def state_names(self) -> list[str]:
-        """``theta_1`` ... of :attr:`layout`."""
-        return self.layout.state_names()
-
-    @property
     def linear_settling_time(self) -> float:
         """Time [s] the slowest mode alone takes to bring v down by the convergence ratio:
         v ~ exp(-2 t / tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
         return self.linearisation.settling_time(self.settling["ratio"] if self.settling else DEFAULT_LYAPUNOV_RATIO)
-
-    def basin_inside(self) -> dict[str, int] | None:
-        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
-        if self.basin is None or self.certificate is None:
-            return None
-        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
 
     def to_json(self) -> dict[str, Any]:
         """The ``--json`` record: ``name``, ``variant``, ``equilibrium``, ``eigenvalues``
         ([re, im] pairs, real part descending), ``verdict`` and the rest of the analysis."""
         return json_record(self)
 
-    def to_dataset(self):
-        """The analysis as an :class:`xarray.Dataset` (the file's content, :mod:`~rbstab.analysis.dataset`)."""
-        return analysis_dataset(self)
-
-    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
-        """(coordinates, variables, global attributes) of its file
-        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
-        return analysis_content(self, command_line)
-
 
 @dataclass(frozen=True)
-class ChainAnalysis:
+class ChainAnalysis(_Findings):
     """What :func:`analyze_chain` finds, with the basin map, pushes and basin stability of
     the same command (:mod:`rbstab.analysis.dataset` writes it as one body's analysis,
     its state blocks by body).
@@ -211,10 +217,6 @@ class ChainAnalysis:
     domain = "|theta_2| of a body or joint"
 
     @property
-    def name(self) -> str:
-        return self.config.name
-
-    @property
     def analysed(self):
         """The configuration analysed (the one given)."""
         return self.config
@@ -228,24 +230,6 @@ class ChainAnalysis:
     def linear_settling_time(self) -> float:
         """:meth:`Linearisation.settling_time` at :attr:`ratio` [s]."""
         return self.linearisation.settling_time(self.ratio)
-
-    def to_dataset(self):
-        """The analysis as an :class:`xarray.Dataset` (its file's content, :mod:`~rbstab.analysis.dataset`)."""
-        return analysis_dataset(self)
-
-    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
-        """(coordinates, variables, global attributes) of its file
-        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
-        return analysis_content(self, command_line)
-
-    @property
-    def verdict(self) -> str:
-        return self.linearisation.verdict
-
-    @property
-    def state_names(self) -> list[str]:
-        """``<body>.<block>_<i>`` of each independent coordinate (:meth:`TreeCoordinates.state_names`)."""
-        return self.layout.state_names()
 
     def as_dict(self) -> dict:
         """Plain Python (the ``--json`` form): one body's record
@@ -265,12 +249,6 @@ class ChainAnalysis:
         return {**json_record(self), "rest_state": rest, "modes": self._modes(),
                 "initial_lyapunov": self.initial_lyapunov,
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
-
-    def basin_inside(self) -> dict[str, int] | None:
-        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
-        if self.basin is None or self.certificate is None:
-            return None
-        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
 
     def to_json(self) -> dict:
         """The ``--json`` record: :meth:`as_dict` (its pushes with the push estimate from
