@@ -214,26 +214,10 @@ def test_the_thread_executor_yields_every_result_and_error_as_data_from_threads_
 # -- no silent replacement -------------------------------------------------------------------------
 
 
-def test_a_report_of_other_inputs_is_not_replaced(tmp_path):
-    assert invoke("run", CASE1, CASE2, "-o", tmp_path, *SHORT, "-qq").exit_code == 0
-    out = tmp_path / "report"
-    assert invoke("report", tmp_path / "case1_permanent.h5", "-o", out, "--format", "md", "--no-animations",
-                  "-q").exit_code == 0
-    before = (out / "report.json").read_text()
-    other = invoke("report", tmp_path / "case2_visco_elastic.h5", "-o", out, "--format", "md", "-q")
-    assert other.exit_code == 1 and "holds a report of other inputs" in other.stderr
-    assert "--overwrite" in other.stderr and "Traceback" not in other.output
-    assert (out / "report.json").read_text() == before
-    same = invoke("report", tmp_path / "case1_permanent.h5", "-o", out, "--format", "md", "--no-animations", "-q")
-    assert same.exit_code == 0
-    forced = invoke("report", tmp_path / "case2_visco_elastic.h5", "-o", out, "--format", "md", "--overwrite",
-                    "--no-animations", "-q")
-    assert forced.exit_code == 0 and "case2" in (out / "report.json").read_text()
-
-
-def test_a_report_of_an_input_more_or_fewer_is_not_replaced_and_the_same_inputs_rebuild_it(tmp_path):
-    """The same set of inputs (in any order) rebuilds the report; a subset or a superset of
-    them is another comparison: refused, naming the folder and the inputs that differ."""
+def test_a_report_of_other_inputs_is_not_replaced_and_the_same_inputs_rebuild_it(tmp_path):
+    """The same set of inputs (in any order) rebuilds the report; a subset, a superset or
+    another set of them is another comparison: refused, naming the folder and the inputs
+    that differ, the report left as it was; --overwrite replaces it."""
     assert invoke("run", CASE1, CASE2, "-o", tmp_path, *SHORT, "-qq").exit_code == 0
     one, two = tmp_path / "case1_permanent.h5", tmp_path / "case2_visco_elastic.h5"
     out = tmp_path / "report"
@@ -251,6 +235,9 @@ def test_a_report_of_an_input_more_or_fewer_is_not_replaced_and_the_same_inputs_
     assert invoke("report", one, *fast, "--overwrite").exit_code == 0
     more = invoke("report", one, two, *fast)
     assert more.exit_code == 1 and f"only here: {two.resolve()}" in more.stderr
+    other = invoke("report", two, *fast)
+    assert other.exit_code == 1 and f"only here: {two.resolve()}" in other.stderr
+    assert f"only there: {one.resolve()}" in other.stderr and "Traceback" not in other.output
     assert json.loads((out / "report.json").read_text())["inputs"] == [str(one.resolve())]
 
 
