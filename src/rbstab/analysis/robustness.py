@@ -39,7 +39,7 @@ import numpy as np
 
 from ..config import config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
-from ..sweep.folder import open_sweep, resolved_config
+from ..sweep.folder import open_sweep, resolved_config, resolved_configs
 from .dataset import robustness_content, robustness_dataset
 from .linearise import MAX_REST_CHECKS, linearise, rest_verdict
 from .thresholds import SplitRule, split_rule, split_rules
@@ -268,16 +268,17 @@ def _unstable_rest(folder, ds, candidates: np.ndarray) -> tuple[np.ndarray, np.n
     base = ds["base"].values.astype(str) if "base" in ds.coords else np.full(ds.sizes["run"], "")
     unstable = np.zeros(ds.sizes["run"], dtype=bool)
     unchecked = np.zeros(ds.sizes["run"], dtype=bool)
-    verdicts: dict[tuple, bool | None] = {}
-    for i in np.flatnonzero(candidates):
-        key = (base[i], *(str(c[i]) for c in columns))
-        if key not in verdicts:
-            if len(verdicts) >= MAX_REST_CHECKS:
-                verdicts[key] = None
-            else:
-                verdicts[key] = rest_verdict(resolved_config(folder, str(ds["run_id"].values[i]))) == "unstable"
-        unstable[i] = verdicts[key] is True
-        unchecked[i] = verdicts[key] is None
+    runs = np.flatnonzero(candidates)
+    keys = [(base[i], *(str(c[i]) for c in columns)) for i in runs]
+    first: dict[tuple, str] = {}  # each physical configuration's first run, the first MAX_REST_CHECKS of them
+    for i, key in zip(runs, keys):
+        if key not in first and len(first) < MAX_REST_CHECKS:
+            first[key] = str(ds["run_id"].values[i])
+    configs = resolved_configs(folder, list(first.values()))  # each result file read once
+    verdicts = {key: rest_verdict(configs[run_id]) == "unstable" for key, run_id in first.items()}
+    for i, key in zip(runs, keys):
+        unstable[i] = verdicts.get(key) is True
+        unchecked[i] = key not in verdicts
     return unstable, unchecked
 
 

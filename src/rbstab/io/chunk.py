@@ -83,6 +83,7 @@ __all__ = [
     "read_chunk_series",
     "read_chunk_columns",
     "resolved_config",
+    "resolved_configs",
     "StoreTrace",
     "store_trace_shapes",
     "store_trace_dimensions",
@@ -1059,8 +1060,18 @@ def resolved_config(path: str | os.PathLike, row: int) -> dict:
     FileNotFoundError, NotAResultFile, DamagedResultError
         As :func:`read_chunk_rows`; IndexError for a row the file does not have.
     """
-    rows = read_chunk_rows(path)
-    return json.loads(rows[row]["config"]) | {"name": rows[row]["run_id"]}
+    return resolved_configs(path, [row])[0]
+
+
+def resolved_configs(path: str | os.PathLike, rows: Sequence[int]) -> list[dict]:
+    """:func:`resolved_config` of each of ``rows``, in that order, the file read once.
+
+    Raises
+    ------
+    As :func:`resolved_config`.
+    """
+    found = read_chunk_rows(path)
+    return [json.loads(found[k]["config"]) | {"name": found[k]["run_id"]} for k in rows]
 
 
 def _per_run(dataset, n_runs: int) -> bool:

@@ -90,6 +90,7 @@ __all__ = [
     "read_spec",
     "StoredRuns",
     "resolved_config",
+    "resolved_configs",
     "open_sweep",
     "DAMAGED_SUFFIX",
     "verify_index",
@@ -856,7 +857,7 @@ def resolved_config(folder: str | os.PathLike, run_id: str) -> dict:
     rebuilt from its result: a store file's template of the run with its parameters set
     (:func:`rbstab.io.chunk.resolved_config`), or a run file's ``config`` attribute.
     ``rbstab.config.config_from_mapping`` makes it a run configuration again (``rbstab run``
-    of it repeats the run).
+    of it repeats the run). Many runs: :func:`resolved_configs`.
 
     Raises
     ------
@@ -865,24 +866,45 @@ def resolved_config(folder: str | os.PathLike, run_id: str) -> dict:
     FileNotFoundError, ValueError
         As :func:`read_index`; a damaged store file as :func:`rbstab.io.chunk.read_chunk_rows`.
     """
+    return resolved_configs(folder, [run_id])[run_id]
+
+
+def resolved_configs(folder: str | os.PathLike, run_ids: Sequence[str]) -> dict[str, dict]:
+    """:func:`resolved_config` of each of ``run_ids``, {run id: configuration}, reading the
+    index once and each result file once (a store file is verified and read whole: one read
+    serves all its runs).
+
+    Raises
+    ------
+    As :func:`resolved_config`.
+    """
     import yaml  # heavy: yaml
 
-    from ..io.chunk import resolved_config as from_store  # heavy: numba, pydantic or h5py
+    from ..io.chunk import resolved_configs as from_store  # heavy: numba, pydantic or h5py
     from ..io.hdf5 import read_attributes  # heavy: numba, pydantic or h5py
 
     folder = Path(folder)
-    index = read_index(folder)
-    row = index[index["run_id"] == run_id]
-    if row.empty:
-        raise KeyError(f"{folder}: no run {run_id!r} in its index")
-    file, file_row = row["file"].iloc[0], row["file_row"].iloc[0] if "file_row" in row else None
-    if not isinstance(file, str) or not file:
-        raise KeyError(f"{folder}: run {run_id!r} has no result on disk (status {row['status'].iloc[0]})")
-    if file_row is not None and file_row == file_row:  # not NaN: a row of a store file
-        return from_store(folder / file, int(file_row))
-    config = yaml.safe_load(read_attributes(folder / file)["config"])
-    config["name"] = run_id
-    return config
+    index = read_index(folder).set_index("run_id", drop=False)
+    by_file: dict[str, list[tuple[str, int | None]]] = {}
+    for run_id in dict.fromkeys(run_ids):
+        if run_id not in index.index:
+            raise KeyError(f"{folder}: no run {run_id!r} in its index")
+        row = index.loc[run_id]
+        file, file_row = row["file"], row["file_row"] if "file_row" in index.columns else None
+        if not isinstance(file, str) or not file:
+            raise KeyError(f"{folder}: run {run_id!r} has no result on disk (status {row['status']})")
+        by_file.setdefault(file, []).append((run_id, None if file_row is None or file_row != file_row
+                                             else int(file_row)))
+    out = {}
+    for file, runs in by_file.items():
+        if runs[0][1] is not None:  # rows of a store file
+            out.update(zip((r for r, _ in runs), from_store(folder / file, [k for _, k in runs])))
+            continue
+        for run_id, _ in runs:
+            config = yaml.safe_load(read_attributes(folder / file)["config"])
+            config["name"] = run_id
+            out[run_id] = config
+    return out
 
 
 # -- the sweep as one dataset ---------------------------------------------------------------------
