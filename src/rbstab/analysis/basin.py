@@ -83,8 +83,8 @@ class BasinAxis:
 
     @classmethod
     def parse(cls, text: str) -> "BasinAxis":
-        """From ``KEY=lo:hi:n`` (``initial_state.omega.0=-60:60:41``); whether a
-        configuration's state has that entry is :func:`rbstab.analysis.runs.check_entries`'.
+        """From ``KEY=lo:hi:n`` (``initial_state.omega.0=-60:60:41``). Whether a
+        configuration's state has that entry: :func:`rbstab.analysis.runs.check_entries`.
 
         Raises
         ------

@@ -56,8 +56,8 @@ import numpy as np
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from .derivatives import directional_derivative, hessian, jacobian
 
-__all__ = ["Certificate", "Model", "VariantModel", "ChainModel", "as_model", "constrained_boundary_level", "certify", "checked",
-           "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
+__all__ = ["Certificate", "Model", "VariantModel", "ChainModel", "as_model", "constrained_boundary_level", "certify",
+           "checked", "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
            "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
 #: Eigenvalues of a scaled Hessian within this of zero (relative to the largest) are zero.

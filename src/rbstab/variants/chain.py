@@ -869,8 +869,7 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     y = np.zeros((len(stack), compiled.n_states))
     columns = [at + c for _, _, at in independent_coordinates(compiled) for c in range(3)]
     y[:, columns] = stack
-    permanent = compiled.codes == PERMANENT
-    _place_rows(y, compiled.params, compiled.parents, compiled.ppoints, permanent, permanent)
+    y = _place(compiled, y, only_permanent=True)
     return y if z.ndim == 2 else y[0]
 
 
