@@ -15,7 +15,7 @@ import warnings
 import numpy as np
 import pytest
 
-from rbstab.analysis import analyze_chain
+from rbstab.analysis import analyze
 from rbstab.analysis.certificate import certify, level_states
 from rbstab.analysis.runs import Runs
 from rbstab.analysis.text import describe
@@ -54,7 +54,7 @@ def _planar(k_r=K_R, l_r=L_R, **simulation):
 @pytest.fixture(scope="module")
 def planar():
     config = _planar()
-    return config, analyze_chain(config, samples=1000, seed=0)
+    return config, analyze(config, samples=1000, seed=0)
 
 
 def test_planar_pendulums_hessians_are_the_closed_forms(planar):
@@ -139,11 +139,12 @@ def test_a_one_body_chains_level_is_the_one_body_certificates(name):
 
 def test_a_chain_too_weak_to_stand_has_no_level():
     """With the ankle's stiffness below gravity's the upright rest state is a saddle of v:
-    H_v is not positive definite, c = 0, no run is made."""
-    _, weak = None, analyze_chain(_planar(k_r=(400.0, 300.0)), samples=200)
+    H_v is not positive definite, c = 0, no falsification run is made (the one counted is the
+    run from the configured initial state, as one body's)."""
+    weak = analyze(_planar(k_r=(400.0, 300.0)), samples=200)
     cert = weak.certificate
     assert weak.verdict == "unstable" and not cert.positive_definite and cert.hessian_min_eigenvalue < 0
-    assert cert.sublevel == 0 and not cert.holds and cert.runs_checked == 0
+    assert cert.sublevel == 0 and not cert.holds and cert.runs_checked == 1
     assert "no sublevel estimate" in "\n".join(describe(weak))
 
 
@@ -153,7 +154,7 @@ def test_a_negative_damper_is_found(planar):
     base = _planar()
     hip = dataclasses.replace(base.chain.joints[1], l_r=np.diag([1e2, -5.0, 1e2]))  # the schema refuses it
     config = dataclasses.replace(base, chain=dataclasses.replace(base.chain, joints=(base.chain.joints[0], hip)))
-    bad = analyze_chain(config, samples=500, falsification_runs=0).certificate
+    bad = analyze(config, samples=500, falsification_runs=0).certificate
     good = planar[1].certificate
     assert bad.positive_definite and bad.rate_definiteness == "indefinite" and not bad.holds
     assert bad.sublevel < 1e-3 * good.sublevel
@@ -205,7 +206,7 @@ def test_the_knees_slow_run_does_not_lower_c():
     from rbstab.simulator import simulate
 
     config = _knee()
-    cert = analyze_chain(config, samples=200, falsification_runs=0).certificate
+    cert = analyze(config, samples=200, falsification_runs=0).certificate
     assert cert.sublevel == cert.boundary_level and cert.sublevel_bound == "domain boundary"
     v = simulate(config).outputs["lyapunov"]
     assert v[-1] > 1e-3 * v[0] and v.max() <= cert.sublevel  # the premise: slow, never above c
@@ -216,7 +217,7 @@ def test_a_knee_run_that_leaves_its_admissible_region_lowers_c():
     """The knee with |omega_i| <= 3 rad/s as its admissible region: the shank's swing from
     inside {v <= c} leaves it; c is lowered below the start and the note says why."""
     config = _knee("simulation.limits.omega=[3,3,3]")
-    result = analyze_chain(config, samples=200, falsification_runs=0)
+    result = analyze(config, samples=200, falsification_runs=0)
     cert = result.certificate
     assert cert.sublevel < result.initial_lyapunov < cert.boundary_level
     assert cert.sublevel_bound.startswith("a simulated run from inside")

@@ -267,16 +267,16 @@ def test_a_one_body_chains_linearisation_is_todays(name):
     assert mine.verdict == theirs.verdict
 
 
-def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stiffness():
+def test_analyze_gives_the_stance_verdict_and_flips_it_below_gravitys_stiffness():
     """The stance example is stable upright (its K_r - G positive definite); with ankle
     stiffness below gravity's (652 N m/rad about x) it is unstable; v is zero at rest."""
-    from rbstab.analysis import analyze_chain
+    from rbstab.analysis import analyze
 
     path = "configs/examples/stance_ankle_hip.yaml"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        stable = analyze_chain(load_config(path), certificate=False)
-        weak = analyze_chain(load_config(path, ["joints.ankle.k_r.0=400"]), certificate=False)
+        stable = analyze(load_config(path), certificate=False, simulate=False)
+        weak = analyze(load_config(path, ["joints.ankle.k_r.0=400"]), certificate=False, simulate=False)
     assert stable.verdict == "asymptotically stable" and stable.linearisation.is_rest_point
     assert weak.verdict == "unstable"
     compiled = C.compile_chain(load_config(path).chain)
@@ -290,6 +290,28 @@ def test_analyze_chain_gives_the_stance_verdict_and_flips_it_below_gravitys_stif
     assert record["time_constant"][0] == pytest.approx(-1.0 / lin.eigenvalues[0].real)
 
 
+def test_a_tree_is_analysed_by_one_bodys_steps_its_limits_and_notes_included():
+    """A tree's analysis takes one body's steps: a rest state outside simulation.limits is
+    refused in one line naming the body (OutsideLimits), the configuration's warnings are
+    among its notes, and each part's time is recorded."""
+    import dataclasses
+
+    from rbstab.analysis import OutsideLimits, analyze
+    from rbstab.model import Limits
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_config("configs/examples/stance_ankle_hip.yaml")
+    low = dataclasses.replace(config, simulation=dataclasses.replace(config.simulation,
+                                                                     limits=Limits.of(position=[1.0, 1.0, 0.5])))
+    with pytest.raises(OutsideLimits, match=r"rest state lies outside simulation.limits: \|position_3\| of trunk > 0.5"):
+        analyze(low, certificate=False, simulate=False)
+    warned = dataclasses.replace(config, warnings=("W001 a warning of the configuration",))
+    found = analyze(warned, certificate=False, simulate=False)
+    assert "W001 a warning of the configuration" in found.notes
+    assert set(found.timing) == {"linearisation"}
+
+
 def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     """Stable stance: the slowest time constant; ankle stiffness 600 N m/rad (below what
     gravity and the hip need, ~713): the e-folding time of the growing mode, which a small
@@ -297,7 +319,7 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     eigenvalues): marginal, no number. Never a negative or astronomical time."""
     import json
 
-    from rbstab.analysis import analyze_chain
+    from rbstab.analysis import analyze
     from rbstab.analysis.text import describe
     from rbstab.simulator import simulate
 
@@ -307,9 +329,9 @@ def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():
     path = "configs/examples/stance_ankle_hip.yaml"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        stable = analyze_chain(load_config(path), certificate=False)
-        weak = analyze_chain(load_config(path, ["joints.ankle.k_r.0=600"]), certificate=False)
-        undamped = analyze_chain(load_config("configs/examples/double_pendulum.yaml"), certificate=False)
+        stable = analyze(load_config(path), certificate=False, simulate=False)
+        weak = analyze(load_config(path, ["joints.ankle.k_r.0=600"]), certificate=False, simulate=False)
+        undamped = analyze(load_config("configs/examples/double_pendulum.yaml"), certificate=False, simulate=False)
     records = [json.loads(json.dumps(r.as_dict(), allow_nan=False)) for r in (stable, weak, undamped)]  # strict JSON
     s0 = [r.linearisation.eigenvalues[0].real for r in (stable, weak, undamped)]
     assert records[0]["slowest_time_constant"] == pytest.approx(-1.0 / s0[0]) and s0[0] < 0

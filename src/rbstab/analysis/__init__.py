@@ -23,7 +23,7 @@
 Method and limits: ``docs/analysis.md``.
 """
 
-from .analyze import (DEFAULT_BOUNDARY_LAYER, Analysis, ChainAnalysis, OutsideLimits, analyze, analyze_chain,
+from .analyze import (DEFAULT_BOUNDARY_LAYER, Analysis, ChainAnalysis, OutsideLimits, analyze,
                       equilibrium_outside_limits)
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
@@ -41,7 +41,6 @@ __all__ = [
     "linearise",
     "linearise_chain",
     "Linearisation",
-    "analyze_chain",
     "ChainAnalysis",
     "certify",
     "Certificate",

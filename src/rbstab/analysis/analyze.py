@@ -10,10 +10,9 @@ certificate's sublevel estimate checked against simulations (:mod:`~rbstab.analy
 runs from {v = c}, and every run above).
 
 A tree of bodies (:class:`rbstab.config.ChainConfig`) takes the same steps in its
-independent coordinates (:func:`analyze_chain`, a :class:`ChainAnalysis`): its rest state
-and linearisation (:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over
-it as a :class:`~rbstab.analysis.certificate.ChainModel`, its runs on the CPU's compiled
-driver.
+independent coordinates (a :class:`ChainAnalysis`): its rest state and linearisation
+(:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over it as a
+:class:`~rbstab.analysis.certificate.ChainModel`, its runs on the CPU's compiled driver.
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ import numpy as np
 
 from .. import simulator
 from ..config.schema import limits_violation
-from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
+from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..variants import VARIANTS
@@ -40,14 +39,14 @@ from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, ChainModel, certify
 from .dataset import analysis_content, analysis_dataset, certificate_record, json_record
-from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify, falsify_with
+from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
 from .linearise import Linearisation, TreeCoordinates, linearise, linearise_chain, mode_shapes, undisturbed
 from .push import basin_stability as stability_of
 from .push import push_analysis, unbounded_fall_note
-from .runs import Runs, check_axes
+from .runs import check_axes
 from .verify import NotVerifiable, check_verifiable, verified_model, verify_analysis
 
-__all__ = ["Analysis", "ChainAnalysis", "analyze", "analyze_chain", "DEFAULT_BOUNDARY_LAYER", "analysed_config",
+__all__ = ["Analysis", "ChainAnalysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config",
            "OutsideLimits", "equilibrium_outside_limits"]
 
 #: phi [m] put in place of the pure sign law (boundary_layer 0) of ``sliding``.
@@ -91,17 +90,18 @@ class _Findings:
 
 @dataclass
 class Analysis(_Findings):
-    """Everything :func:`analyze` found for one configuration.
+    """Everything :func:`analyze` found for one configuration (a tree's: :class:`ChainAnalysis`).
 
     Attributes
     ----------
-    config : RunConfig
+    config : RunConfig or ChainConfig
         The configuration as given.
-    analysed : RunConfig
+    analysed : RunConfig or ChainConfig
         The configuration analysed (``config``, or it with a boundary layer, see notes).
     linearisation : Linearisation
     certificate : Certificate or None
-        None when not asked for.
+        None when not asked for. With disturbances, its Hessians are of the undisturbed
+        dynamics (the same equilibrium), its sampled dv/dt of the disturbed ones.
     settling : dict or None
         The simulation from the configured initial state: ``status``, ``message``,
         ``time_to_converge`` [s] (NaN when not converged), ``lyapunov_initial`` [J],
@@ -159,18 +159,15 @@ class Analysis(_Findings):
         return json_record(self)
 
 
-@dataclass(frozen=True)
-class ChainAnalysis(_Findings):
-    """What :func:`analyze_chain` finds, with the basin map, pushes and basin stability of
-    the same command (:mod:`rbstab.analysis.dataset` writes it as one body's analysis,
-    its state blocks by body).
+@dataclass
+class ChainAnalysis(Analysis):
+    """What :func:`analyze` finds for a tree of bodies (:class:`rbstab.config.ChainConfig`):
+    an :class:`Analysis` in the tree's independent coordinates
+    (:mod:`rbstab.analysis.dataset` writes it as one body's analysis, its state blocks by
+    body), with:
 
     Attributes
     ----------
-    config : ChainConfig
-        The configuration analysed.
-    linearisation : Linearisation
-        At the rest state, in the independent coordinates (``coordinates``).
     coordinates : list of (str, str, int)
         (body name, block, index into the full state) of each 3 entries of
         ``linearisation.equilibrium`` (:func:`rbstab.variants.chain.independent_coordinates`).
@@ -178,37 +175,14 @@ class ChainAnalysis(_Findings):
         The full rest state (:func:`rbstab.variants.chain.rest_state`).
     initial_lyapunov : float
         v [J] at the configured initial state (zero at the rest state).
-    certificate : Certificate or None
-        The Lyapunov certificate in the independent coordinates (its states, e.g.
-        ``worst_state``, are z), None where not asked for.
-    settling : dict or None
-        The simulation from the configured initial state, as one body's
-        (:attr:`rbstab.analysis.Analysis.settling`); None where not asked for.
-    notes : tuple of str
-    ratio : float
-        The convergence ratio of the command's runs.
-    basin : BasinMap or None
-        :func:`rbstab.analysis.basin.basin_map`.
-    push : PushAnalysis or None
-        :func:`rbstab.analysis.push.push_analysis` on one of its bodies.
-    basin_stability : BasinStability or None
-        :func:`rbstab.analysis.push.basin_stability`.
+
+    Its certificate's states (e.g. ``worst_state``) are the independent coordinates z.
     """
 
-    config: object
-    linearisation: Linearisation
-    coordinates: list
-    rest_state: np.ndarray
-    initial_lyapunov: float
-    certificate: object = None
-    settling: dict | None = None
-    notes: tuple = ()
-    ratio: float = DEFAULT_LYAPUNOV_RATIO
-    basin: BasinMap | None = None
-    push: object = None
-    basin_stability: object = None
-    #: Not verified (a tree of more than one body has more than 6 states).
-    verification = None
+    coordinates: list = field(default_factory=list)
+    rest_state: np.ndarray | None = None
+    initial_lyapunov: float = 0.0
+
     #: A chain's analysis file's ``variant``, as its run file's.
     variant = "chain"
     #: Its ``--json`` record's kind.
@@ -217,19 +191,9 @@ class ChainAnalysis(_Findings):
     domain = "|theta_2| of a body or joint"
 
     @property
-    def analysed(self):
-        """The configuration analysed (the one given)."""
-        return self.config
-
-    @property
     def layout(self) -> TreeCoordinates:
         """The linearisation's coordinates by body and block."""
         return TreeCoordinates(tuple(self.coordinates), tuple(self.config.chain.body_names))
-
-    @property
-    def linear_settling_time(self) -> float:
-        """:meth:`Linearisation.settling_time` at :attr:`ratio` [s]."""
-        return self.linearisation.settling_time(self.ratio)
 
     def as_dict(self) -> dict:
         """Plain Python (the ``--json`` form): one body's record
@@ -284,15 +248,6 @@ class ChainAnalysis(_Findings):
     def _certificate_dict(self) -> dict:
         names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(3)]
         return {**certificate_record(self.certificate), "coordinates": names}
-
-    def with_runs(self, basin=None, push=None, basin_stability=None) -> "ChainAnalysis":
-        """This analysis with the basin map, pushes and basin stability of the same command,
-        its certificate's c checked against their runs (:func:`rbstab.analysis.evidence.check_runs`;
-        the run from the configured initial state was checked by :func:`analyze_chain`)."""
-        found = dataclasses.replace(self, basin=basin, push=push, basin_stability=basin_stability)
-        if self.certificate is None:
-            return found
-        return dataclasses.replace(found, certificate=check_runs(self.certificate, found))
 
 
 def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, list[str]]:
@@ -429,11 +384,15 @@ def _domain_notes(linearisation: Linearisation, config) -> list[str]:
         notes.append(f"the equilibrium has theta_2 = {theta_2:.6g} rad, outside the model's domain |theta_2| < "
                      f"pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): the Euler angles are singular on the way "
                      "there, and no run reaches it")
-    if not linearisation.is_rest_point:
-        worst = float(np.abs(linearisation.rest_residual).max())
-        notes.append(f"the equilibrium is not a rest point: max |dy/dt| there is {worst:.3g}, above the "
-                     f"tolerance {linearisation.rest_tolerance:.3g} (the equilibrium search did not converge)")
-    return notes
+    return notes + _rest_point_notes(linearisation)
+
+
+def _rest_point_notes(linearisation: Linearisation) -> list[str]:
+    if linearisation.is_rest_point:
+        return []
+    worst = float(np.abs(linearisation.rest_residual).max())
+    return [f"the equilibrium is not a rest point: max |dy/dt| there is {worst:.3g}, above the tolerance "
+            f"{linearisation.rest_tolerance:.3g} (the equilibrium search did not converge)"]
 
 
 def analyze(
@@ -461,9 +420,11 @@ def analyze(
     ----------
     config : RunConfig, ChainConfig or path-like
         A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
-        A tree of bodies is analysed in its independent coordinates
-        (:func:`analyze_chain`, a :class:`ChainAnalysis`), its basin map, pushes (on the body
-        ``push["body"]``) and basin stability run on the CPU's compiled driver in ``jobs``
+        A tree of bodies is analysed in its independent coordinates (a
+        :class:`ChainAnalysis`: its rest state and linearisation by
+        :func:`~rbstab.analysis.linearise.linearise_chain`, the certificate over it as a
+        :class:`~rbstab.analysis.certificate.ChainModel`), its basin map, pushes (on the
+        body ``push["body"]``) and basin stability on the CPU's compiled driver in ``jobs``
         threads; ``boundary_layer``, ``engine`` and ``executor`` are one body's.
     boundary_layer : float, optional
         phi [m] analysed in place of the pure sign law of ``sliding`` (default
@@ -536,31 +497,19 @@ def analyze(
     if verify:
         config = verified_model(config)  # a one-body tree: the one-body model it is
         check_verifiable(config)
-    timing: dict[str, float] = {}
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
     if basin is not None:
         check_axes(analysed, axes)
-    if getattr(config, "chain", None) is not None:
-        return _analyze_tree(config, certificate=certificate, samples=samples, seed=seed, simulate=simulate,
-                             axes=axes, basin_samples=basin_samples, ratio=ratio, jobs=jobs, push=push,
-                             basin_stability=basin_stability, falsification_runs=falsification_runs, engine=engine)
-    disturbed = analysed.make_variant()
-    variant, disturbed, disturbance_notes = _undisturbed(analysed, disturbed)
-    notes += disturbance_notes
-    lin = linearise(variant)
-    if not lin.is_rest_point and analysed.gains.saturation is not None:
-        raise NoEquilibrium(_unheld(analysed))
-    outside = equilibrium_outside_limits(variant, lin.equilibrium)
-    if outside is not None:
-        raise OutsideLimits(outside)
-    notes += _domain_notes(lin, analysed) + _saturated_at_rest(lin, analysed) + list(config.warnings)
+    tree = getattr(analysed, "chain", None) is not None
+    result, model, disturbed = (_tree_findings if tree else _body_findings)(config, analysed, notes)
+    notes, timing = result.notes, result.timing
+    lin = result.linearisation
     t1 = _time.perf_counter()
     timing["linearisation"] = t1 - t0
-    result = Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes, timing=timing)
     if certificate:
-        result.certificate = certify(variant, lin, gimbal_margin=analysed.simulation.gimbal_margin,
+        result.certificate = certify(model, lin, gimbal_margin=analysed.simulation.gimbal_margin,
                                      n_samples=samples, seed=seed, disturbed=disturbed,
                                      t_end=analysed.simulation.t_end)
         timing["certificate"] = _time.perf_counter() - t1
@@ -569,34 +518,35 @@ def analyze(
         t2 = _time.perf_counter()
         result.settling, first = _settling(analysed, ratio)
         timing["simulation"] = _time.perf_counter() - t2
+    if tree and engine != DEFAULT_ENGINE and (axes or push or basin_stability):
+        notes.append(f"--engine {engine}: a chain's basin map, pushes and basin stability run on the CPU's "
+                     "compiled driver")
     if axes:
         t3 = _time.perf_counter()
-        result.basin = basin_map(analysed, axes, disturbed if disturbed is not None else variant, ratio=ratio,
-                                 n_samples=basin_samples, jobs=jobs, engine=engine)
+        result.basin = basin_map(analysed, axes, ratio=ratio, n_samples=basin_samples, jobs=jobs, engine=engine)
         timing["basin"] = _time.perf_counter() - t3
     if push or basin_stability or axes:
         fall = unbounded_fall_note(analysed)
         if fall is not None:
             notes.append(fall)
     if push or basin_stability:
-        with _workers(executor, jobs, push, basin_stability) as workers:
+        with _workers(None if tree else executor, 1 if tree else jobs, push, basin_stability) as workers:
             if push:
                 t4 = _time.perf_counter()
-                result.push = push_analysis(analysed, **push, ratio=ratio, engine=engine, executor=workers)
+                result.push = push_analysis(analysed, **push, ratio=ratio, engine=engine, executor=workers, jobs=jobs)
                 timing["push"] = _time.perf_counter() - t4
             if basin_stability:
                 t5 = _time.perf_counter()
                 result.basin_stability = stability_of(analysed, **basin_stability, ratio=ratio, engine=engine,
-                                                      executor=workers)
+                                                      executor=workers, jobs=jobs)
                 timing["basin_stability"] = _time.perf_counter() - t5
     if result.certificate is not None:
         t6 = _time.perf_counter()
-        # 32 runs a level: the CPU's engine (a GPU gains nothing there, and --engine is the maps')
-        checked = falsify(analysed, variant, lin, result.certificate, runs=falsification_runs, ratio=ratio,
-                          engine=DEFAULT_ENGINE, seed=seed)
+        # 32 runs a level on the CPU's engine (a GPU gains nothing there, and --engine is the maps')
+        checked = falsify(analysed, model, lin, result.certificate, runs=falsification_runs, seed=seed)
         if first is not None:
             checked = check_initial_run(checked, analysed, simulator.simulate, lin, ratio=ratio, first=first,
-                                        impulses=[d.start for d in analysed.gains.disturbances if d.kind == "impulse"])
+                                        impulses=_impulse_times(analysed))
         result.certificate = check_runs(checked, result)
         timing["checks"] = _time.perf_counter() - t6
     if verify:
@@ -609,96 +559,61 @@ def analyze(
     return result
 
 
-def _analyze_tree(config, *, certificate: bool, samples: int, seed: int, simulate: bool, axes: list,
-                  basin_samples: int, ratio: float, jobs: int, push, basin_stability, falsification_runs: int,
-                  engine: str) -> "ChainAnalysis":
-    """:func:`analyze` of a tree of bodies (:class:`rbstab.config.ChainConfig`): its
-    rest state, linearisation and certificate (:func:`analyze_chain`), the simulation from
-    its configured initial state (``simulate``: its settling, as one body's), then the basin
-    map, the pushes on a named body (``push["body"]``) and the basin stability of the same
-    command, its runs on the CPU's compiled driver in ``jobs`` threads (another ``engine``
-    is said in its notes); ``axes``: the basin map's, checked."""
-    result = analyze_chain(config, certificate=certificate, samples=samples, seed=seed,
-                           falsification_runs=falsification_runs, ratio=ratio,
-                           settling=_settling(config, ratio) if simulate else None)
-    if engine != DEFAULT_ENGINE and (axes or push or basin_stability):
-        result = dataclasses.replace(result, notes=result.notes + (
-            f"--engine {engine}: a chain's basin map, pushes and basin stability run on the CPU's compiled driver",))
-    return result.with_runs(
-        basin=basin_map(config, axes, ratio=ratio, n_samples=basin_samples, jobs=jobs) if axes else None,
-        push=push_analysis(config, **push, ratio=ratio, jobs=jobs) if push else None,
-        basin_stability=stability_of(config, **basin_stability, ratio=ratio, jobs=jobs) if basin_stability else None)
+def _body_findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
+    """(the :class:`Analysis` of one body's equilibrium and linearisation with its notes, the
+    certificate's model: the variant without disturbances, the variant with them or None)."""
+    variant, disturbed, disturbance_notes = _undisturbed(analysed, analysed.make_variant())
+    lin = linearise(variant)
+    if not lin.is_rest_point and analysed.gains.saturation is not None:
+        raise NoEquilibrium(_unheld(analysed))
+    outside = equilibrium_outside_limits(variant, lin.equilibrium)
+    if outside is not None:
+        raise OutsideLimits(outside)
+    notes = notes + disturbance_notes + _domain_notes(lin, analysed) + _saturated_at_rest(lin, analysed)
+    return Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes + list(config.warnings)), \
+        variant, disturbed
 
 
-def analyze_chain(config, *, certificate: bool = True, samples: int = DEFAULT_SAMPLES, seed: int = 0,
-                  falsification_runs: int = FALSIFICATION_RUNS, ratio: float = DEFAULT_LYAPUNOV_RATIO,
-                  settling: tuple | None = None) -> ChainAnalysis:
-    """Rest state, linearisation, eigenvalues, verdict and (``certificate``) the Lyapunov
-    certificate of a tree of bodies (:class:`rbstab.config.ChainConfig`), in its
-    independent coordinates (:func:`rbstab.analysis.linearise.linearise_chain`).
-
-    The certificate is one body's (:func:`rbstab.analysis.certificate.certify`) over the
-    tree as a :class:`~rbstab.analysis.certificate.ChainModel`, ``samples`` states drawn
-    with ``seed``. With disturbances its Hessians are of the undisturbed tree (the same h),
-    its sampled dv/dt of the disturbed one. Its level c is then checked against
-    ``falsification_runs`` runs of the compiled driver from states on {v = c} per level
-    tried (:func:`rbstab.analysis.evidence.falsify_with`: a run that leaves the domain or
-    ``simulation.limits`` or ends with v above its start lowers c below its start), and
-    against the run from the configured initial state
-    (:func:`rbstab.analysis.evidence.check_initial_run`, convergence by ``ratio``).
-    ``settling``: (the settling record, the run) of that simulation where it ran
-    (:attr:`ChainAnalysis.settling`).
-
-    Raises
-    ------
-    ValueError
-        Where the chain has no rest state near its reference configuration, or a joint has
-        no linearisation (:func:`rbstab.analysis.linearise.linearise_chain`).
-    """
+def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, Any, Any]:
+    """(the :class:`ChainAnalysis` of a tree's rest state and linearisation in its
+    independent coordinates with its notes, the certificate's model: the tree without its
+    bodies' disturbances (the same h), the tree with them or None)."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
-    compiled = C.compile_chain(config.chain)
-    lin, coordinates = linearise_chain(compiled)
-    rest = C.full_state(compiled, lin.equilibrium)
-    v0 = C.lyapunov(compiled, C.initial_state(config))[0]
-    found, notes = None, []
-    record, first = settling if settling is not None else (None, None)
-    if certificate:
-        found, notes = _certify_tree(config, compiled, lin, coordinates, int(samples), seed, int(falsification_runs),
-                                     ratio, first)
-    return ChainAnalysis(config, lin, coordinates, rest, float(v0), found, record, tuple(notes), ratio)
-
-
-def _certify_tree(config, compiled, linearisation: Linearisation, coordinates, n_samples: int, seed: int,
-                  falsification_runs: int, ratio: float, first) -> tuple[Certificate, list[str]]:
-    """(the certificate of a tree's rest state, notes) (:func:`analyze_chain`); ``first``:
-    the run from the configured initial state where already run."""
-    sim = config.simulation
-    notes = []
+    compiled = C.compile_chain(analysed.chain)
     quiet = _undisturbed_tree(compiled)
-    model = ChainModel(compiled if quiet is None else quiet, coordinates)
-    disturbed = None
+    calm = compiled if quiet is None else quiet
+    lin, coordinates = linearise_chain(calm)
+    rest = C.full_state(calm, lin.equilibrium)
+    sim = analysed.simulation
+    if sim.limits is not None:
+        margin, what = C._region_margin(compiled, rest, sim.limits)
+        if margin < 0:
+            raise OutsideLimits(f"the rest state lies outside simulation.limits: {what.replace(' reached ', ' > ')}")
+    angles, names = C._gimbal_angles(compiled, rest)
+    worst = int(np.argmax(np.abs(angles)))
+    limit = GIMBAL_LOCK_ANGLE - sim.gimbal_margin
+    if abs(angles[worst]) >= limit:
+        notes = notes + [f"the rest state has theta_2 = {angles[worst]:.6g} rad of {names[worst]}, outside the "
+                         f"model's domain |theta_2| < pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): no run "
+                         "reaches it"]
+    notes = notes + _rest_point_notes(lin)
+    model, disturbed = ChainModel(calm, coordinates), None
     if quiet is not None:
         disturbed = ChainModel(compiled, coordinates)
-        notes.append("disturbances: the certificate's Hessians are of the undisturbed chain; its sampled dv/dt "
-                     "(each state at a time drawn in [0, t_end], impulses not seen) and the runs integrate the "
-                     "disturbed one")
-    found = certify(model, linearisation, gimbal_margin=sim.gimbal_margin, n_samples=n_samples, seed=seed,
-                    disturbed=disturbed, t_end=float(sim.t_end))
-    if not found.positive_definite:
-        return found, notes
-    runs = Runs(config)
+        notes.append("disturbances: the rest state, the linearisation and the certificate's Hessians are of the "
+                     "undisturbed chain; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
+                     "impulses not seen) and the runs integrate the disturbed one")
+    v0 = C.lyapunov(compiled, C.initial_state(analysed))[0]
+    return ChainAnalysis(config=config, analysed=analysed, linearisation=lin, notes=notes + list(config.warnings),
+                         coordinates=coordinates, rest_state=rest, initial_lyapunov=float(v0)), model, disturbed
 
-    def run(x):
-        ok, v0, v1 = runs.outcomes(model.states(x))
-        with np.errstate(invalid="ignore"):
-            return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
-    found = falsify_with(run, model, linearisation, found, runs=falsification_runs, seed=seed)
-    impulses = [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
-    found = check_initial_run(found, config, simulator.simulate, linearisation, ratio=ratio, first=first,
-                              impulses=impulses)
-    return found, notes
+def _impulse_times(config) -> list[float]:
+    """Times [s] of the configuration's impulse disturbances (one body's or every body's of a tree)."""
+    from ..config.loader import chain_of  # heavy: pydantic
+
+    return [d.start for b in chain_of(config).bodies for d in b.disturbances if d.kind == "impulse"]
 
 
 def _undisturbed_tree(compiled):

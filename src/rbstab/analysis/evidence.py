@@ -45,7 +45,8 @@ from dataclasses import replace
 import numpy as np
 
 from ..convergence import ROUND_OFF, converged
-from .certificate import Certificate, checked, level_states
+from .certificate import Certificate, as_model, checked, level_states
+from .runs import Runs
 
 __all__ = ["falsify", "falsify_with", "check_runs", "check_initial_run", "contradiction", "FALSIFICATION_RUNS",
            "FALSIFICATION_ROUNDS", "SETTLING_TIME_CONSTANTS", "SETTLING_CONTINUATIONS", "SETTLING_LONGEST"]
@@ -67,35 +68,36 @@ def _state_text(y: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in y) + ")"
 
 
-def falsify(config, variant, linearisation, certificate: Certificate, *, runs: int = FALSIFICATION_RUNS,
-            ratio: float, engine: str = "compiled", executor=None, seed: int = 0) -> Certificate:
-    """``certificate`` after the falsification pass (module docstring).
+def falsify(config, model, linearisation, certificate: Certificate, *, runs: int = FALSIFICATION_RUNS,
+            seed: int = 0) -> Certificate:
+    """``certificate`` after the falsification pass (module docstring), its runs on the CPU's
+    compiled engine (:class:`rbstab.analysis.runs.Runs`: 32 runs a level, where a GPU gains
+    nothing).
 
     Parameters
     ----------
-    config : RunConfig
-        The configuration analysed (its runs: its body, controller, limits, settings).
-    variant : rbstab.variants.Variant
-        Its variant without disturbances (the v of the certificate).
+    config : RunConfig or ChainConfig
+        The configuration analysed (its runs: its bodies, laws, gains, disturbances, limits,
+        settings).
+    model : rbstab.variants.Variant or rbstab.analysis.certificate.Model
+        The certificate's model (its v; one body's variant, or a tree's
+        :class:`~rbstab.analysis.certificate.ChainModel` in its independent coordinates),
+        without disturbances.
     linearisation : rbstab.analysis.linearise.Linearisation
     certificate : Certificate
     runs : int
         States on {v = c} per level (0: no pass).
-    ratio : float
-        Unused (the pass's rule is v(t_end) <= v(0) inside the domain: module docstring).
-    engine, executor
-        As :func:`rbstab.analysis.push.runs_from_states` takes them.
     seed : int
         Of the random directions.
     """
-    from .push import runs_from_states  # heavy: numba (the batch engine)
+    batch, states = Runs(config), as_model(model, len(linearisation.equilibrium)).states
 
-    def run(y):
-        ok, v0, v1 = runs_from_states(config, y, engine=engine, executor=executor)
+    def run(x):
+        ok, v0, v1 = batch.outcomes(states(x))
         with np.errstate(invalid="ignore"):
             return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
-    return falsify_with(run, variant, linearisation, certificate, runs=runs, seed=seed)
+    return falsify_with(run, model, linearisation, certificate, runs=runs, seed=seed)
 
 
 def falsify_with(run, model, linearisation, certificate: Certificate, *, runs: int = FALSIFICATION_RUNS,

@@ -95,27 +95,20 @@ def _options_hash(options: Mapping[str, Any]) -> str:
 
 
 def _certificate(config, options: dict):
-    """The Lyapunov certificate of one configuration (a body's or a chain's, sampled and
-    falsified against the compiled engine's runs), None for a law without one (the pure
-    sign law)."""
+    """The Lyapunov certificate of one configuration, a body's or a tree's (:func:`rbstab.analysis.analyze`:
+    sampled, falsified against the compiled engine's runs and checked against the run from
+    the configured initial state), None for a law without one (the pure sign law) or a
+    configuration without an equilibrium inside its admissible region."""
+    from .analyze import NoEquilibrium, OutsideLimits, analyze  # heavy: numba
     from .certificate import DEFAULT_SAMPLES  # heavy: numba
 
-    samples, seed, ratio = int(options.get("certificate_samples", DEFAULT_SAMPLES)), options["seed"], options["ratio"]
-    if hasattr(config, "chain"):
-        from .analyze import analyze_chain  # heavy: numba
-
-        return analyze_chain(config, samples=samples, seed=seed, ratio=ratio).certificate
-    from .certificate import certify  # heavy: numba
-    from .evidence import FALSIFICATION_RUNS, falsify  # heavy: numba
-    from .linearise import linearise  # heavy: numba
-
-    variant = config.make_variant()
-    if not variant.smooth:
+    if getattr(config, "chain", None) is None and not config.make_variant().smooth:
         return None
-    lin = linearise(variant)
-    cert = certify(variant, lin, gimbal_margin=config.simulation.gimbal_margin, n_samples=samples, seed=seed)
-    return falsify(config, variant, lin, cert, runs=FALSIFICATION_RUNS, ratio=ratio, engine="compiled",
-                   seed=seed)  # 32 runs a level: the CPU's engine
+    try:
+        return analyze(config, samples=int(options.get("certificate_samples", DEFAULT_SAMPLES)), seed=options["seed"],
+                       ratio=options["ratio"]).certificate
+    except (NoEquilibrium, OutsideLimits):
+        return None
 
 
 def _point(item: tuple[str, dict], options: dict, engine: str) -> dict:
