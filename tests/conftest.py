@@ -27,6 +27,19 @@ D = np.diag
 SIMULATED = {"cuda_simulated.py": "test_cuda.py", "cuda_chains_simulated.py": "test_cuda_chains.py"}
 
 
+def pytest_configure(config):
+    """Each pytest-xdist worker on CPUs of its own (the machine's split evenly), inherited by
+    the commands it starts: a command's default ``-j`` (its CPUs) is then its share, as on a
+    machine running nothing else, instead of every command's worker processes competing for
+    every CPU."""
+    worker = getattr(config, "workerinput", None)
+    if worker is None or not hasattr(os, "sched_setaffinity"):
+        return
+    cpus, n, k = sorted(os.sched_getaffinity(0)), int(worker["workercount"]), int(worker["workerid"][2:])
+    if len(cpus) >= n:
+        os.sched_setaffinity(0, cpus[k * len(cpus) // n: (k + 1) * len(cpus) // n])
+
+
 def pytest_sessionstart(session):
     """Compile the engine's kernels (the engine, the sign law, chains) into the cache once,
     before any test (and before pytest-xdist starts its workers, which then load them
