@@ -446,7 +446,8 @@ def analyze(
         Convergence: |v(t)| <= ratio |v(0)| + 1e-12 J from then on
         (:data:`rbstab.convergence.SAMPLE_RULE`), 0 < ratio < 1.
     jobs : int
-        Local processes for the basin map.
+        Local processes for the basin map; threads for a tree's runs (its falsification
+        runs included).
     engine : {"compiled", "cuda"}
         The engine of the basin map (:func:`rbstab.analysis.basin.basin_map`), the pushes
         and the basin stability.
@@ -543,7 +544,7 @@ def analyze(
     if result.certificate is not None:
         t6 = _time.perf_counter()
         # 32 runs a level on the CPU's engine (a GPU gains nothing there, and --engine is the maps')
-        checked = falsify(analysed, model, lin, result.certificate, runs=falsification_runs, seed=seed)
+        checked = falsify(analysed, model, lin, result.certificate, runs=falsification_runs, seed=seed, jobs=jobs)
         if first is not None:
             checked = check_initial_run(checked, analysed, simulator.simulate, lin, ratio=ratio, first=first,
                                         impulses=_impulse_times(analysed))

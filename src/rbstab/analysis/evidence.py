@@ -69,7 +69,7 @@ def _state_text(y: np.ndarray) -> str:
 
 
 def falsify(config, model, linearisation, certificate: Certificate, *, runs: int = FALSIFICATION_RUNS,
-            seed: int = 0) -> Certificate:
+            seed: int = 0, jobs: int = 1) -> Certificate:
     """``certificate`` after the falsification pass (module docstring), its runs on the CPU's
     compiled engine (:class:`rbstab.analysis.runs.Runs`: 32 runs a level, where a GPU gains
     nothing).
@@ -89,8 +89,10 @@ def falsify(config, model, linearisation, certificate: Certificate, *, runs: int
         States on {v = c} per level (0: no pass).
     seed : int
         Of the random directions.
+    jobs : int
+        Threads integrating a tree's runs (:class:`rbstab.analysis.runs.Runs`).
     """
-    batch, states = Runs(config), as_model(model, len(linearisation.equilibrium)).states
+    batch, states = Runs(config, jobs=jobs), as_model(model, len(linearisation.equilibrium)).states
 
     def run(x):
         ok, v0, v1 = batch.outcomes(states(x))
