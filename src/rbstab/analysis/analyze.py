@@ -582,8 +582,8 @@ def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, A
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     compiled = C.compile_chain(analysed.chain)
-    quiet = _undisturbed_tree(compiled)
-    calm = compiled if quiet is None else quiet
+    quiet = undisturbed(analysed)
+    calm = compiled if quiet is analysed else C.compile_chain(quiet.chain, offset=compiled.offset)  # the same h
     lin, coordinates = linearise_chain(calm)
     rest = C.full_state(calm, lin.equilibrium)
     sim = analysed.simulation
@@ -600,7 +600,7 @@ def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, A
                          "reaches it"]
     notes = notes + _rest_point_notes(lin)
     model, disturbed = ChainModel(calm, coordinates), None
-    if quiet is not None:
+    if quiet is not analysed:
         disturbed = ChainModel(compiled, coordinates)
         notes.append("disturbances: the rest state, the linearisation and the certificate's Hessians are of the "
                      "undisturbed chain; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
@@ -615,17 +615,6 @@ def _impulse_times(config) -> list[float]:
     from ..config.loader import chain_of  # heavy: pydantic
 
     return [d.start for b in chain_of(config).bodies for d in b.disturbances if d.kind == "impulse"]
-
-
-def _undisturbed_tree(compiled):
-    """``compiled`` without its bodies' disturbances (the same h), or None where it has none."""
-    from ..variants import chain as C  # heavy: numba
-
-    chain = compiled.chain
-    if not any(b.disturbances for b in chain.bodies):
-        return None
-    bodies = tuple(dataclasses.replace(b, disturbances=()) for b in chain.bodies)
-    return C.compile_chain(dataclasses.replace(chain, bodies=bodies), offset=compiled.offset)
 
 
 def _workers(executor, jobs: int, push, stability):

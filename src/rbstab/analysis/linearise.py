@@ -346,9 +346,9 @@ class TreeCoordinates:
 
 def linearise_config(config) -> Linearisation:
     """The linearisation at the rest state of a run configuration, as ``rbstab analyze``
-    finds it: of a chain (:class:`rbstab.config.ChainConfig`) by
-    :func:`linearise_chain`; of one body (:class:`rbstab.config.RunConfig`) by
-    :func:`linearise` of its variant without disturbances (they act in time, not at rest).
+    finds it, without its disturbances (they act in time, not at rest: :func:`undisturbed`):
+    of a chain (:class:`rbstab.config.ChainConfig`) by :func:`linearise_chain`; of one body
+    (:class:`rbstab.config.RunConfig`) by :func:`linearise` of its variant.
 
     Raises
     ------
@@ -356,16 +356,24 @@ def linearise_config(config) -> Linearisation:
         Where there is none: the pure sign law of ``sliding``, a chain with no rest state
         near its reference configuration (:func:`linearise`, :func:`linearise_chain`).
     """
+    config = undisturbed(config)
     if hasattr(config, "chain"):
         from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
         return linearise_chain(C.compile_chain(config.chain))[0]
-    return linearise(undisturbed(config).make_variant())
+    return linearise(config.make_variant())
 
 
 def undisturbed(config):
-    """A one-body :class:`rbstab.config.RunConfig` without its disturbances (they act in
-    time, not at rest): what its equilibrium, linearisation and certificate see."""
+    """A configuration (one body's :class:`rbstab.config.RunConfig` or a tree's
+    :class:`rbstab.config.ChainConfig`) without its disturbances (they act in time, not at
+    rest): what its equilibrium or rest state, linearisation and certificate see;
+    ``config`` itself where it has none."""
+    tree = getattr(config, "chain", None)
+    if tree is not None:
+        if not any(b.disturbances for b in tree.bodies):
+            return config
+        return replace(config, chain=replace(tree, bodies=tuple(replace(b, disturbances=()) for b in tree.bodies)))
     if not config.gains.disturbances:
         return config
     return replace(config, gains=replace(config.gains, disturbances=()))
