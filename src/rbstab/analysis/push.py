@@ -231,7 +231,7 @@ class Pushes:
     def _setup_body(self, config, own: list, entry: dict) -> None:
         """One body: its equilibrium, the pushed configuration's batch and its record."""
         from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
-        from .linearise import linearise  # heavy: numba
+        from .linearise import linearise, undisturbed  # heavy: numba
 
         variant = config.make_variant()
         if variant.name == "permanent":
@@ -240,8 +240,7 @@ class Pushes:
             raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) takes no disturbances; "
                              "analyse a boundary-layer law (--boundary-layer PHI)")
         # the equilibrium of the undisturbed dynamics (the configuration's own disturbances act on the runs)
-        calm = dataclasses.replace(config, gains=dataclasses.replace(config.gains, disturbances=()))
-        lin = linearise(calm.make_variant() if own else variant)
+        lin = linearise(undisturbed(config).make_variant())
         if not lin.is_rest_point:
             raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
                              f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
