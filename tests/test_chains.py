@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 from conftest import paper_body, paper_gains
 from rbstab.chain import GROUND, Body, Chain, Joint, single
-from rbstab.config.loader import load_config
+from rbstab.config.loader import config_from_mapping, load_config
 from rbstab.model import Saturation
 from rbstab.variants import VARIANTS
 from rbstab.variants import chain as C
@@ -310,6 +310,19 @@ def test_a_tree_is_analysed_by_one_bodys_steps_its_limits_and_notes_included():
     found = analyze(warned, certificate=False, simulate=False)
     assert "W001 a warning of the configuration" in found.notes
     assert set(found.timing) == {"linearisation"}
+    # an arm whose centre of mass is beside its pin: gravity's torque at rest exceeds the 2 N m
+    # limit until the arm hangs at -0.54 rad, where the clipped torque holds it (slope 0)
+    pin = {"name": "pin", "parent": "ground", "parent_point": [0, 0, 0], "child": "arm", "child_point": [0.3, 0, 0.3],
+           "variant": "permanent", "k_r": [200, 200, 200], "l_r": [20, 20, 20]}
+    arm = {"name": "arm", "gravity": [0, 0, -9.81], "bodies": [{"name": "arm", "mass": 2.0, "inertia": [0.2, 0.2, 0.05]}],
+           "simulation": {"t_end": 2.0, "n_samples": 101}}
+    held = analyze(config_from_mapping({**arm, "joints": [pin]}), certificate=False, simulate=False)
+    assert held.verdict == "asymptotically stable" and not any("saturate" in n for n in held.notes)
+    clipped = analyze(config_from_mapping({**arm, "joints": [{**pin, "saturation": {"torque_n": 2.0}}]}),
+                      certificate=False, simulate=False)
+    assert clipped.linearisation.is_rest_point and clipped.rest_state[1] == pytest.approx(-0.5428, abs=1e-4)
+    assert clipped.verdict == "marginal" and ("at the rest state the actuators saturate (torque_n_2 of joint 'pin' at "
+                                              "its limit 2 N m)") in " ".join(clipped.notes)
 
 
 def test_a_chains_time_scale_is_a_time_constant_an_e_folding_time_or_none():

@@ -598,7 +598,7 @@ def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, A
         notes = notes + [f"the rest state has theta_2 = {angles[worst]:.6g} rad of {names[worst]}, outside the "
                          f"model's domain |theta_2| < pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): no run "
                          "reaches it"]
-    notes = notes + _rest_point_notes(lin)
+    notes = notes + _rest_point_notes(lin) + _tree_saturated_at_rest(calm, rest, lin)
     model, disturbed = ChainModel(calm, coordinates), None
     if quiet is not analysed:
         disturbed = ChainModel(compiled, coordinates)
@@ -608,6 +608,29 @@ def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, A
     v0 = C.lyapunov(compiled, C.initial_state(analysed))[0]
     return ChainAnalysis(config=config, analysed=analysed, linearisation=lin, notes=notes + list(config.warnings),
                          coordinates=coordinates, rest_state=rest, initial_lyapunov=float(v0)), model, disturbed
+
+
+def _tree_saturated_at_rest(compiled, rest: np.ndarray, linearisation: Linearisation) -> list[str]:
+    """A note naming each joint's or body's control at its limit at the rest state ``rest``
+    (the maximal state) of ``compiled``, as one body's (:func:`_saturated_at_rest`): the
+    linearisation there sees the actuator's slope at its limit (0 for clip beyond it)."""
+    from ..variants import chain as C  # heavy: numba
+
+    if not linearisation.is_rest_point:
+        return []
+    out, chain = C.evaluate(compiled, np.zeros(1), rest[None]), compiled.chain
+    at, shapes = [], set()
+    for key, unit, kind, members in (("torque_n", "N m", "joint", chain.joints),
+                                     ("constraint_force", "N", "joint", chain.joints),
+                                     ("force_h", "N", "body", chain.bodies)):
+        for m, i in zip(*np.nonzero(np.asarray(out[f"{key}_saturated"])[0])):
+            limits = members[m].saturation
+            at.append(f"{key}_{i + 1} of {kind} '{members[m].name}' at its limit {getattr(limits, key)[i]:g} {unit}")
+            shapes.add(limits.shape)
+    if not at:
+        return []
+    return [f"at the rest state the actuators saturate ({', '.join(at)}): the linearisation has the "
+            f"{'/'.join(sorted(shapes))} actuator's slope there"]
 
 
 def _impulse_times(config) -> list[float]:
