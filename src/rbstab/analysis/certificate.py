@@ -230,12 +230,10 @@ class ChainModel:
                 "angles": self._angles_of(x, out)}
 
     def rhs(self, t, x) -> np.ndarray:
-        """dz/dt at each row of ``x`` (:func:`rbstab.variants.chain.reduced_rate`)."""
-        from ..variants import chain as C  # heavy: numba
+        """dz/dt at each row of ``x`` (:func:`rbstab.analysis.linearise.reduced_rates`)."""
+        from .linearise import reduced_rates  # heavy: numba
 
-        x = np.atleast_2d(np.asarray(x, dtype=float))
-        t = np.broadcast_to(np.asarray(t, dtype=float), len(x))
-        return np.array([C.reduced_rate(self.compiled, row, float(s)) for row, s in zip(x, t)]).reshape(x.shape)
+        return reduced_rates(self.compiled, x, t)
 
     # -- the domain ----------------------------------------------------------------------------
     def angles(self, x) -> np.ndarray:

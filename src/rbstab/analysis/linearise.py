@@ -297,8 +297,24 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
                          "(a body falls without bound): there is no rest state to linearise at")
     coordinates = C.independent_coordinates(compiled)
     z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
-    rates = lambda rows: np.array([C.reduced_rate(compiled, r) for r in np.atleast_2d(rows)])  # noqa: E731
-    return _linearisation(rates, z, compiled.chain.gravity), coordinates
+    return _linearisation(lambda rows: reduced_rates(compiled, rows), z, compiled.chain.gravity), coordinates
+
+
+def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
+    """dz/dt (k, m) of the independent coordinates at each row of ``z`` (k, m) at the times
+    ``t`` [s] (a number or (k,)): :func:`rbstab.variants.chain.reduced_rate` of each row,
+    the bodies of the whole stack placed at once (:func:`rbstab.variants.chain.full_state`)."""
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+
+    z = np.atleast_2d(np.asarray(z, dtype=float))
+    t = np.broadcast_to(np.asarray(t, dtype=float), len(z))
+    y = C.full_state(compiled, z)
+    columns = [at + c for _, _, at in C.independent_coordinates(compiled) for c in range(3)]
+    dy, out = np.empty(compiled.n_states), np.empty_like(z)
+    for k in range(len(z)):
+        C.chain_rate(float(t[k]), y[k], *compiled.args, dy)
+        out[k] = dy[columns]
+    return out
 
 
 @dataclass(frozen=True)
