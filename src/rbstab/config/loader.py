@@ -65,7 +65,7 @@ from ..variants import VARIANTS, Variant
 from ..variants.base import limited_values
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies, unheld_weight
-from .paths import apply_overrides, plain_tree
+from .paths import apply_overrides, is_chain, plain_tree
 from .schema import (
     BODY_GAINS,
     CHAIN_TOP_LEVEL,
@@ -220,12 +220,6 @@ class RunConfig:
 
 _BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller (one body) or "
          "bodies and joints (a chain)")
-
-
-def is_chain(data: Any) -> bool:
-    """Whether a configuration mapping is a chain's (``bodies`` and ``joints`` instead of
-    ``body`` and ``controller``): it has ``bodies`` and no ``body``."""
-    return isinstance(data, Mapping) and "bodies" in data and "body" not in data
 
 
 def saturation_of(section: Mapping | None) -> Saturation | None:
@@ -481,10 +475,9 @@ def config_from_mapping(
         uses) that is positive semi-definite but singular (zero included): v is then not a
         strict Lyapunov function.
     """
-    tree = is_chain(data)
     if overrides and isinstance(data, Mapping):
-        data = apply_overrides(data, overrides, ChainSchema if tree else None)
-    build = _build_tree if tree else _build
+        data = apply_overrides(data, overrides)
+    build = _build_tree if is_chain(data) else _build
     return build(data, default_name=default_name, source=source, overrides=overrides)
 
 
@@ -515,13 +508,12 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig | 
     path = Path(path)
     source = str(path)
     data = read_yaml_file(path, "config file")
-    tree = is_chain(data)
     try:
         if isinstance(data, Mapping):
-            data = apply_overrides(data, overrides, ChainSchema if tree else None)
+            data = apply_overrides(data, overrides)
     except ConfigError as exc:
         raise ConfigError(exc.errors, source) from None
-    build = _build_tree if tree else _build
+    build = _build_tree if is_chain(data) else _build
     return build(data, default_name=path.stem, source=source, overrides=overrides)
 
 

@@ -36,7 +36,8 @@ from .errors import ConfigError
 from .schema import ChainSchema, RunSchema, field_check, kind_of, list_model, mapping_model, submodel
 from .yaml_io import parse_yaml
 
-__all__ = ["KeyPath", "KeyPathError", "parse_key", "parse_any_key", "apply_overrides", "plain_tree"]
+__all__ = ["KeyPath", "KeyPathError", "parse_key", "parse_any_key", "apply_overrides", "plain_tree", "is_chain",
+           "schema_of"]
 
 #: Longest key path taken (characters): longer is no key of the schema.
 MAX_KEY_LENGTH = 200
@@ -301,6 +302,19 @@ def _unknown(key: str, where: str, part: str, allowed: Sequence[str], model: Any
     return KeyPathError(key, f"{what}{hint} (allowed: {', '.join(allowed)})")
 
 
+def is_chain(data: Any) -> bool:
+    """Whether a configuration mapping is a chain's (``bodies`` and ``joints`` instead of
+    ``body`` and ``controller``): it has ``bodies`` and no ``body``."""
+    return isinstance(data, Mapping) and "bodies" in data and "body" not in data
+
+
+def schema_of(data: Any):
+    """The schema a configuration mapping's keys are read against: a chain's
+    (:class:`~rbstab.config.schema.ChainSchema`, :func:`is_chain`), else one body's
+    (:class:`~rbstab.config.schema.RunSchema`)."""
+    return ChainSchema if is_chain(data) else RunSchema
+
+
 @functools.lru_cache(maxsize=4096)  # the same keys for every run of a sweep
 def parse_key(key: str, root: Any = None) -> KeyPath:
     """The key path ``key`` (module docstring) checked against the schema.
@@ -431,7 +445,7 @@ def parse_any_key(key: str) -> KeyPath:
 
 def apply_overrides(data: Mapping, overrides: Sequence[str], root: Any = None) -> dict:
     """A deep copy of ``data`` with each ``key.path=value`` override applied, in order;
-    the keys read against ``root`` (a schema model; None: a one-body run's).
+    the keys read against ``root`` (a schema model; None: ``data``'s, :func:`schema_of`).
 
     The value is parsed as YAML (``controller.k_t=[1,2,3]``, ``simulation.t_end=1.5``,
     ``controller.variant=free``); the key is read by :func:`parse_key` and set by
@@ -444,6 +458,7 @@ def apply_overrides(data: Mapping, overrides: Sequence[str], root: Any = None) -
         the schema, an invalid YAML value, an index into a list that is not set).
     """
     result = plain_tree(data)
+    root = schema_of(data) if root is None else root
     problems = []
     for override in overrides:
         key, sep, text = override.partition("=")

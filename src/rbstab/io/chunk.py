@@ -1035,12 +1035,10 @@ def _config_text(templates: list, columns: Mapping[str, list], keys: Mapping[str
 
 
 def _resolved(templates: list, columns: Mapping[str, list], keys: Mapping[str, str], i: int) -> dict:
-    from ..config.loader import is_chain  # heavy: pydantic (rbstab.config's schema); reading a store stays light
-    from ..config.paths import parse_key  # heavy: pydantic
-    from ..config.schema import ChainSchema  # heavy: pydantic
+    from ..config.paths import parse_key, schema_of  # heavy: pydantic (rbstab.config's schema); reading a store stays light
 
     template = json.loads(json.dumps(templates[int(columns["template"][i])]))
-    schema = ChainSchema if is_chain(template) else None  # a chain's keys name its bodies and joints
+    schema = schema_of(template)  # a chain's keys name its bodies and joints
     for name, key in keys.items():
         value = columns[name][i]
         if not key.endswith(":scale") and not isinstance(value, str) and value is not None:

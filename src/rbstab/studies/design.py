@@ -43,8 +43,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..config import ConfigError, parse_yaml
-from ..config.loader import is_chain
-from ..config.paths import KeyPathError, plain_tree
+from ..config.paths import KeyPathError, is_chain, plain_tree
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain

@@ -71,9 +71,7 @@ from typing import Any
 import numpy as np
 
 from ..config import ConfigError, apply_overrides, parse_yaml as parse
-from ..config.paths import parse_any_key
-from ..config.loader import is_chain
-from ..config.paths import KeyPathError, parse_key
+from ..config.paths import KeyPathError, is_chain, parse_any_key, parse_key, schema_of
 from ..config.schema import ChainSchema
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import copy_tree, read_yaml_file
@@ -247,7 +245,7 @@ class SweepSpec:
 
     @property
     def is_chain(self) -> bool:
-        """Whether the bases are chains (:func:`rbstab.config.loader.is_chain`; a spec's bases
+        """Whether the bases are chains (:func:`rbstab.config.paths.is_chain`; a spec's bases
         are all chains or all one-body configurations)."""
         return bool(self.bases) and is_chain(self.bases[0].data)
 
@@ -558,8 +556,7 @@ def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) ->
         if b is None:
             continue
         try:
-            bases.append(Base(b.label, apply_overrides(b.data, overrides, ChainSchema if is_chain(b.data) else None),
-                              b.source))
+            bases.append(Base(b.label, apply_overrides(b.data, overrides), b.source))
         except ConfigError as exc:
             errors += exc.errors
     chains = [b.label for b in bases if is_chain(b.data)]
@@ -568,7 +565,7 @@ def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) ->
         errors.append(f"sweep key 'base': base '{chains[0]}' is a chain (bodies, joints) and base '{bodies}' one body "
                       "(body, controller); expected the bases of a sweep all chains or all one-body configs")
     elif bases:
-        errors += _keys_of_bases(schema, bool(chains))
+        errors += _keys_of_bases(schema, bases[0].data)
     labels = [b.label for b in bases]
     dups = sorted({x for x in labels if labels.count(x) > 1})
     if dups:
@@ -579,16 +576,17 @@ def _bases(schema: SweepSchema, source: str | None, overrides: Sequence[str]) ->
     return bases, errors
 
 
-def _keys_of_bases(schema: SweepSchema, chain: bool) -> list[str]:
-    """The problems of the varied keys read as keys of the bases' kind (``chain``: chains,
-    else one-body configurations)."""
+def _keys_of_bases(schema: SweepSchema, base: dict) -> list[str]:
+    """The problems of the varied keys read as keys of the bases' kind (that of ``base``,
+    one of them: chains or one-body configurations, :func:`rbstab.config.paths.schema_of`)."""
     keys = [("grid", k) for k in schema.grid] + [("zip", k) for k in schema.zip] + [
         ("random.params", k) for k in schema.random.params]
-    kind = "chains" if chain else "one-body configs"
+    root = schema_of(base)
+    kind = "chains" if root is ChainSchema else "one-body configs"
     errors = []
     for where, key in keys:
         try:
-            parse_key(key, ChainSchema if chain else None)
+            parse_key(key, root)
         except KeyPathError as exc:
             errors.append(f"sweep key '{where}.{key}': the bases are {kind}; {exc.errors[0]}")
     return errors

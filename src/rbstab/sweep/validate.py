@@ -27,9 +27,7 @@ from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning
 from ..config.loader import config_from_mapping
-from ..config.loader import is_chain
-from ..config.paths import KeyPath, parse_key
-from ..config.schema import ChainSchema
+from ..config.paths import KeyPath, parse_key, schema_of
 from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
                              samples_apart, starts_in_run, steps_suffice, within_bounds)
 from ..layout import LIMITED, VARIANT_LAYOUTS
@@ -81,7 +79,7 @@ def key_path(key: str, data: Mapping) -> KeyPath:
     rbstab.config.paths.KeyPathError
         If it names nothing of that schema.
     """
-    return parse_key(key, ChainSchema if is_chain(data) else None)
+    return parse_key(key, schema_of(data))
 
 
 def base_value(base: Base, key: str) -> tuple[np.ndarray | None, str | None]:

@@ -53,7 +53,7 @@ import numpy as np
 
 from ..config import PhysicalPlausibilityWarning, RunConfig
 from ..config.loader import config_from_mapping
-from ..config.loader import is_chain
+from ..config.paths import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
