@@ -165,6 +165,14 @@ class Pushes:
     jobs : int
         Threads integrating a tree's batch (the compiled driver releases Python's lock).
 
+    Attributes
+    ----------
+    equilibrium : ndarray, shape (n_states,)
+        Where every run starts (before the push): the bodies at rest, as the maximal state of
+        the tree (one body: of its one-body chain, :func:`rbstab.config.loader.chain_of`).
+    config : RunConfig or ChainConfig
+        The pushed configuration (its initial state at rest, the push one more impulse).
+
     Raises
     ------
     ValueError
@@ -175,20 +183,22 @@ class Pushes:
 
     def __init__(self, config, kind: str, *, body: str | None = None, point=None, at: float = 0.0,
                  ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
+        from ..config.loader import chain_of  # heavy: pydantic
         from ..model import MAX_DISTURBANCES  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
 
-        self.kind, self.at, self.ratio, self.engine, self.executor = kind, float(at), float(ratio), engine, executor
-        self.jobs = max(1, int(jobs))
+        self.kind, self.at, self.ratio = kind, float(at), float(ratio)
         self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
         self.units = PUSH_KINDS[kind]
         self.body = body
-        self._tree = getattr(config, "chain", None)
-        if self._tree is not None:
-            names = list(self._tree.body_names)
-            if body not in names:
-                found = "none" if body is None else f"'{body}'"
-                raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
-                                 f"({', '.join(names)})")
+        tree = getattr(config, "chain", None) is not None
+        chain = chain_of(config)  # one body: its one-body chain (the same model)
+        names = list(chain.body_names)
+        if tree and body not in names:
+            found = "none" if body is None else f"'{body}'"
+            raise ValueError(f"--push-body: found {found}; expected the body of the chain that is pushed "
+                             f"({', '.join(names)})")
+        self._member = names.index(body) if tree else 0
         resolved = config.resolved
         t_end = float(resolved["simulation"]["t_end"])
         if not self.at < t_end:
@@ -197,23 +207,29 @@ class Pushes:
         if len(own) >= MAX_DISTURBANCES:
             raise ValueError(f"{config.name}: disturbances: found {len(own)} entries; a push needs one more and at most "
                              f"{MAX_DISTURBANCES} are allowed")
+        joint = chain.joints[self._member]
+        if kind == "force" and joint.variant == "permanent" and joint.parent < 0 and np.allclose(self.point,
+                                                                                                   joint.child_point):
+            what = f"'{body}' (joint '{joint.name}' holds it to the ground)" if tree else \
+                "this permanent body (body.attachment_point)"
+            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of {what}: a force "
+                             "there moves nothing; push elsewhere or with --push torque")
+        if joint.variant == "sliding" and not joint.boundary_layer:  # one body's (a tree's is refused at load)
+            raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) takes no disturbances; "
+                             "analyse a boundary-layer law (--boundary-layer PHI)")
         entry = {"kind": "impulse", "quantity": kind, "value": [1.0, 0.0, 0.0], "start": self.at}
         if kind == "force":
             entry["point"] = self.point.tolist()
-        if self._tree is not None:
-            joint = self._tree.joints[names.index(body)]
-            self._pin_check(joint.variant == "permanent" and joint.parent < 0, joint.child_point,
-                            f"'{body}' (joint '{joint.name}' holds it to the ground)")
-            self._setup_tree(config, own, {**entry, "body": body})
-        else:
-            self._setup_body(config, own, entry)
+        self._compiled = C.compile_chain(chain, offset=0.0)  # dT does not depend on v's offset
+        self.equilibrium, initial = (_tree_rest if tree else _body_rest)(config, self._compiled)
+        if tree:
+            entry["body"] = body
+        self.config = self._pushed_config(config, {**resolved, "initial_state": initial, "disturbances": own + [entry]})
+        self.index = sum(1 for d in own if d.get("body") == body)  # the push's entry among its body's disturbances
+        self._runs = Runs(self.config, engine=engine, executor=executor, jobs=jobs)
+        self.engine = self._runs.engine
         self.runs = 0
         self.batches = 0
-
-    def _pin_check(self, pinned: bool, pin, what: str) -> None:
-        if self.kind == "force" and pinned and np.allclose(self.point, pin):
-            raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of {what}: a force "
-                             "there moves nothing; push elsewhere or with --push torque")
 
     def _pushed_config(self, config, data: dict):
         """The configuration ``data`` (the pushed one, resolved) validated, its warnings
@@ -228,82 +244,14 @@ class Pushes:
         except ConfigError as exc:
             raise ValueError(f"{config.name}: " + "; ".join(exc.errors)) from None
 
-    def _setup_body(self, config, own: list, entry: dict) -> None:
-        """One body: its equilibrium, the pushed configuration's batch and its record."""
-        from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
-        from .linearise import linearise, undisturbed  # heavy: numba
-
-        variant = config.make_variant()
-        if variant.name == "permanent":
-            self._pin_check(True, variant.body.attachment_point, "this permanent body (body.attachment_point)")
-        if not variant.smooth:
-            raise ValueError(f"{config.name}: the pure sign law (controller.boundary_layer 0) takes no disturbances; "
-                             "analyse a boundary-layer law (--boundary-layer PHI)")
-        # the equilibrium of the undisturbed dynamics (the configuration's own disturbances act on the runs)
-        lin = linearise(undisturbed(config).make_variant())
-        if not lin.is_rest_point:
-            raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
-                             f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
-        self.equilibrium = lin.equilibrium
-        resolved = config.resolved
-        blocks = dict(zip(variant.layout.blocks, np.split(self.equilibrium, len(variant.layout.blocks))))
-        initial = {key: (blocks[b].tolist() if b in blocks else list(resolved["initial_state"][key]))
-                   for key, b in INITIAL_STATE_BLOCKS.items()}
-        pushed = self._pushed_config(config, {**resolved, "initial_state": initial, "disturbances": own + [entry]})
-        self.config = pushed
-        self.index = len(own)  # the push's entry in the record's disturbances
-        self._runs = Runs(pushed, engine=self.engine, executor=self.executor)
-        # dT of a unit push: the kinetic energy of the jump from rest (quadratic in the push)
-        record = self._runs.base.params[0].copy()
-        record["disturbance_count"] = 1.0
-        for name in record.dtype.names:
-            if name.startswith("disturbance_") and record[name].ndim:
-                record[name][0] = record[name][self.index]
-        self._record = record
-        self._permanent = variant.name == "permanent"
-
-    def _setup_tree(self, config, own: list, entry: dict) -> None:
-        """A tree: its rest state, the pushed configuration, its compiled description."""
+    def energy(self, vectors: np.ndarray) -> np.ndarray:
+        """dT [J] of each push of ``vectors`` (k, 3) on the bodies at rest: the kinetic
+        energy of the jump (:func:`rbstab.variants.chain.chain_push`; quadratic in the push)."""
         from ..variants import chain as C  # heavy: numba
 
-        self.engine = "compiled"
-        compiled = C.compile_chain(self._tree)
-        rest, _ = C.rest_state(compiled)
-        if rest is None:
-            raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
-                             "potential falls without bound): a push from rest cannot be analysed")
-        self.equilibrium = rest
-        d_at = compiled.d_at
-        initial = {}
-        for i, name in enumerate(self._tree.body_names):
-            state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
-            if d_at[i] >= 0:
-                state["d"] = rest[d_at[i]: d_at[i] + 3]
-            initial[name] = {key: value.tolist() for key, value in state.items()}
-        pushed = self._pushed_config(config, {**config.resolved, "initial_state": initial,
-                                              "disturbances": own + [entry]})
-        self.config = pushed
-        self._runs = Runs(pushed, jobs=self.jobs)
-        self._index = list(self._tree.body_names).index(self.body)
-        self.index = sum(1 for d in own if d.get("body") == self.body)  # the push's entry in the body's record
-
-    def energy(self, vectors: np.ndarray) -> np.ndarray:
-        """dT [J] of each push of ``vectors`` (k, 3) on the bodies at rest."""
         vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
-        out = np.empty(len(vectors))
-        if self._tree is not None:
-            from ..variants import chain as C  # heavy: numba
-
-            for i, p in enumerate(vectors):
-                out[i] = C.chain_push(self.equilibrium.copy(), *self._runs.compiled.args[:4], self._index, self.point, p,
-                                      self.kind == "torque")
-            return out
-        from ..variants.disturbances import apply_impulses  # heavy: numba
-
-        for i, p in enumerate(vectors):
-            self._record["disturbance_value"][0] = p
-            out[i] = apply_impulses(self._permanent, self.at, self.equilibrium.copy(), self._record)
-        return out
+        return np.array([C.chain_push(self.equilibrium.copy(), *self._compiled.args[:4], self._member, self.point, p,
+                                      self.kind == "torque") for p in vectors], dtype=float)
 
     def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
         """Whether the runs pushed by ``vectors`` (k, 3) recover (:data:`RECOVERY_RULE`);
@@ -313,14 +261,53 @@ class Pushes:
         if k == 0:
             return np.zeros(0, dtype=bool)
         energy = self.energy(vectors) if energy is None else np.asarray(energy, dtype=float)
-        member = 0 if self._tree is None else self._index
         ok, _, v = self._runs.outcomes(np.repeat(self._runs.initial_state[None], k, axis=0),
-                                       (member, self.index, vectors))
+                                       (self._member, self.index, vectors))
         ok = ok == 1
         self.runs += k
         self.batches += 1
         with np.errstate(invalid="ignore"):
             return ok & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
+
+
+def _body_rest(config, compiled) -> tuple[np.ndarray, dict]:
+    """(the full state of one body at rest in its one-body chain ``compiled``, the
+    ``initial_state`` section that starts it there): the equilibrium of its undisturbed
+    dynamics (its own disturbances act on the runs), a permanent body placed on its pin."""
+    from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
+    from ..variants import chain as C  # heavy: numba
+    from .linearise import linearise, undisturbed  # heavy: numba
+
+    lin = linearise(undisturbed(config).make_variant())
+    if not lin.is_rest_point:
+        raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
+                         f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
+    layout = config.make_variant().layout
+    blocks = dict(zip(layout.blocks, np.split(lin.equilibrium, len(layout.blocks))))
+    rest = np.zeros(compiled.n_states)
+    for at, block in enumerate(("theta", "omega", "position", "velocity", "controller_state")):
+        if block in blocks:
+            rest[3 * at: 3 * at + 3] = blocks[block]
+    section = config.resolved["initial_state"]
+    initial = {key: (blocks[b].tolist() if b in blocks else list(section[key])) for key, b in INITIAL_STATE_BLOCKS.items()}
+    return C._place(compiled, rest, only_permanent=True), initial
+
+
+def _tree_rest(config, compiled) -> tuple[np.ndarray, dict]:
+    """(a tree's rest state, the ``initial_state`` section that starts it there)."""
+    from ..variants import chain as C  # heavy: numba
+
+    rest, _ = C.rest_state(compiled)
+    if rest is None:
+        raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
+                         "potential falls without bound): a push from rest cannot be analysed")
+    initial = {}
+    for i, name in enumerate(compiled.chain.body_names):
+        state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
+        if compiled.d_at[i] >= 0:
+            state["d"] = rest[compiled.d_at[i]: compiled.d_at[i] + 3]
+        initial[name] = {key: value.tolist() for key, value in state.items()}
+    return rest, initial
 
 
 @dataclass
