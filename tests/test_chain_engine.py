@@ -79,6 +79,18 @@ def test_one_bodys_two_spellings_are_one_model(path):
         np.testing.assert_allclose(found, expected, rtol=0, atol=1e-11 * scale, err_msg=key)
 
 
+def test_a_one_body_tree_with_the_pure_sign_law_is_refused_naming_its_one_body_spelling():
+    """The pure sign law (boundary_layer 0) runs event by event for one body only: its tree
+    spelling is refused in one line, which names the spelling that takes it where the tree
+    is one body held at its own point."""
+    from rbstab.config import ConfigError
+
+    sign_law = _one_body("examples/sliding.yaml", "controller.boundary_layer=0")
+    with pytest.raises(ConfigError, match=r"joints.controller.boundary_layer': found 0; .*written as one body "
+                                          r"\(body, controller\) it takes the sign law"):
+        tree_spelling(sign_law)
+
+
 @pytest.mark.parametrize("path", ONE_BODY)
 def test_the_general_tree_rate_is_one_bodys_rate(path):
     """The tree's rate in reduced coordinates (composite rigid bodies, Cholesky; the general

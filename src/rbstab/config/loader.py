@@ -714,9 +714,12 @@ def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, ove
     (boundary_layer 0: integrated event by event for one body only)."""
     for joint in chain.joints:
         if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
+            one_body = (chain.size == 1 and joint.parent == GROUND
+                        and np.array_equal(joint.parent_point, joint.child_point))
             _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
-                    "the pure sign law is integrated event by event for one body only; tanh(E/phi) in a chain",
-                    source, overrides, ("joints",))
+                    "the pure sign law is integrated event by event for one body only; tanh(E/phi) in a chain"
+                    + ("; this chain is one body held at its own point: written as one body (body, controller) it "
+                       "takes the sign law" if one_body else ""), source, overrides, ("joints",))
 
 
 def _refuse(key: str, found: str, expected: str, detail: str, source: str | None, overrides: Sequence[str],
