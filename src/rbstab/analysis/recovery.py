@@ -99,10 +99,11 @@ def _certificate(config, options: dict):
     sampled, falsified against the compiled engine's runs and checked against the run from
     the configured initial state), None for a law without one (the pure sign law) or a
     configuration without an equilibrium inside its admissible region."""
+    from ..config.loader import chain_of  # heavy: pydantic
     from .analyze import NoEquilibrium, OutsideLimits, analyze  # heavy: numba
     from .certificate import DEFAULT_SAMPLES  # heavy: numba
 
-    if getattr(config, "chain", None) is None and not config.make_variant().smooth:
+    if any(j.variant == "sliding" and not j.boundary_layer for j in chain_of(config).joints):
         return None
     try:
         return analyze(config, samples=int(options.get("certificate_samples", DEFAULT_SAMPLES)), seed=options["seed"],
