@@ -250,7 +250,6 @@ def _on_cpu(runs, states: np.ndarray, points: np.ndarray, ratio: float, n_sample
 def basin_map(
     config,
     axes: Sequence[BasinAxis],
-    variant=None,
     *,
     ratio: float = DEFAULT_LYAPUNOV_RATIO,
     n_samples: int = DEFAULT_SAMPLES,
@@ -270,8 +269,6 @@ def basin_map(
         carries.
     axes : two BasinAxis
         Different keys.
-    variant : Variant, optional
-        One body's v for ``lyapunov_initial`` (default: its configuration's).
     ratio : float
         Convergence ratio (0 < ratio < 1).
     n_samples : int
@@ -321,7 +318,7 @@ def basin_map(
         v_final = np.full(len(states), np.nan)
         rows = []
         if len(points):
-            rows = (_run_on_gpu(get_engine(engine), config, variant or config.make_variant(), states[points], points,
+            rows = (_run_on_gpu(get_engine(engine), config, config.make_variant(), states[points], points,
                                 ratio, n_samples) if gpu
                     else _on_cpu(runs, states[points], points, ratio, n_samples, config.simulation.t_end))
     for index, code, t, v1, message in rows:
@@ -332,7 +329,7 @@ def basin_map(
         axes=(axes[0], axes[1]),
         outcome=outcome.reshape(shape),
         time_to_converge=t_conv.reshape(shape),
-        lyapunov_initial=runs.lyapunov(states, variant).reshape(shape),
+        lyapunov_initial=runs.lyapunov(states).reshape(shape),
         lyapunov_final=v_final.reshape(shape),
         initial_states=states.reshape(*shape, -1),
         ratio=ratio,

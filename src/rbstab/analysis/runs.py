@@ -225,14 +225,13 @@ class Runs:
             states = C.place(self.compiled, states, x_placed, v_placed)
         return states
 
-    def lyapunov(self, states: np.ndarray, variant=None) -> np.ndarray:
-        """v [J] at t = 0 of each of ``states`` (N, n_state) (one body's: ``variant``'s v,
-        default its configuration's)."""
+    def lyapunov(self, states: np.ndarray) -> np.ndarray:
+        """v [J] at t = 0 of each of ``states`` (N, n_state)."""
         if self.tree is not None:
             from ..variants import chain as C  # heavy: numba
 
             return C.evaluate(self.compiled, np.zeros(len(states)), states)["lyapunov"]
-        return (variant if variant is not None else self.config.make_variant()).lyapunov(states)
+        return self.config.make_variant().lyapunov(states)
 
     def traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
         """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end]:
