@@ -588,10 +588,10 @@ def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, A
     rest = C.full_state(calm, lin.equilibrium)
     sim = analysed.simulation
     if sim.limits is not None:
-        margin, what = C._region_margin(compiled, rest, sim.limits)
+        margin, what = C.region_margin(compiled, rest, sim.limits)
         if margin < 0:
             raise OutsideLimits(f"the rest state lies outside simulation.limits: {what.replace(' reached ', ' > ')}")
-    angles, names = C._gimbal_angles(compiled, rest)
+    angles, names = C.gimbal_angles(compiled, rest)
     worst = int(np.argmax(np.abs(angles)))
     limit = GIMBAL_LOCK_ANGLE - sim.gimbal_margin
     if abs(angles[worst]) >= limit:

@@ -167,7 +167,7 @@ class ChainModel:
     joints placed on their parents (E_j = F_j = 0), so every sample lies on the constraint
     manifold, where the constraint power F_j' Lambda_j of the analytic rate vanishes. v and
     the analytic dv/dt are :func:`rbstab.variants.chain.evaluate`'s at those states
-    (docs/physics.md, "v and dv/dt"); f is :func:`rbstab.variants.chain.reduced_rate`. The
+    (docs/physics.md, "v and dv/dt"); f is :func:`rbstab.analysis.linearise.reduced_rates`. The
     domain is |theta_2| < pi/2 - gimbal_margin of every body and of every joint's relative
     orientation Theta_j (the chain's runs stop at either); its boundary level is the least
     v there at rest (:func:`constrained_boundary_level`: a joint's angle is not a

@@ -270,7 +270,7 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
 
     The rest state is :func:`rbstab.variants.chain.rest_state` (the least potential near
     the reference configuration); the Jacobian is that of
-    :func:`rbstab.variants.chain.reduced_rate` (Theta_i, Omega_i of every body; X_i, V_i of
+    :func:`reduced_rates` (Theta_i, Omega_i of every body; X_i, V_i of
     bodies whose joint is not ``permanent``; D of embedded joints) by central differences
     extrapolated to step zero, so a ``permanent`` joint's constraint is not a mode.
 
@@ -301,9 +301,12 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
 
 
 def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
-    """dz/dt (k, m) of the independent coordinates at each row of ``z`` (k, m) at the times
-    ``t`` [s] (a number or (k,)): :func:`rbstab.variants.chain.reduced_rate` of each row,
-    the bodies of the whole stack placed at once (:func:`rbstab.variants.chain.full_state`)."""
+    """dz/dt (k, m) of a tree's independent coordinates
+    (:func:`rbstab.variants.chain.independent_coordinates`) at each row of ``z`` (k, m) at
+    the times ``t`` [s] (a number or (k,)): the chain's rate
+    (:func:`rbstab.variants.chain.chain_rate`) at the full state of each row, the children of
+    permanent joints placed on their parents, the whole stack at once
+    (:func:`rbstab.variants.chain.full_state`), read at those coordinates."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     z = np.atleast_2d(np.asarray(z, dtype=float))

@@ -52,7 +52,7 @@ from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "is_one_body", "gimbal_lock_message", "independent_coordinates", "full_state",
-           "reduced_rate", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "region_margin", "gimbal_angles", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
@@ -873,13 +873,6 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     return y if z.ndim == 2 else y[0]
 
 
-def reduced_rate(compiled: CompiledChain, z: np.ndarray, t: float = 0.0) -> np.ndarray:
-    """dz/dt of the independent coordinates ``z`` (:func:`independent_coordinates`)."""
-    dy = np.empty(compiled.n_states)
-    chain_rate(float(t), full_state(compiled, z), *compiled.args, dy)
-    return np.concatenate([dy[at: at + 3] for _, _, at in independent_coordinates(compiled)])
-
-
 def _place(compiled: CompiledChain, y: np.ndarray, only_permanent: bool = False) -> np.ndarray:
     """``y`` with every body's (``only_permanent``: every permanent joint's child's) X, V
     placed on its parent's point (E_j = F_j = 0), parents first."""
@@ -957,7 +950,7 @@ class ChainTrajectory:
     work: np.ndarray
 
 
-def _gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, list[str]]:
+def gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """(theta_2 [rad] of every Euler angle a run integrates (each body's Theta, or the Theta_j
     of the permanent joint that holds it) and of every other joint's relative Theta_j off
     the ground, at the maximal state ``y``; the words naming each)."""
@@ -981,22 +974,22 @@ def _gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, 
 
 
 def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
-    """min of (pi/2 - margin - |theta_2|) [rad] over the angles of :func:`_gimbal_angles` at
+    """min of (pi/2 - margin - |theta_2|) [rad] over the angles of :func:`gimbal_angles` at
     the maximal state ``y``: the run stops where it reaches 0 (eq 1's B(Theta) is singular
     at |theta_2| = pi/2; the compiled driver's :func:`rbstab.engine.systems.tree_margin`)."""
-    return float(np.min(math.pi / 2 - margin - np.abs(_gimbal_angles(compiled, y)[0])))
+    return float(np.min(math.pi / 2 - margin - np.abs(gimbal_angles(compiled, y)[0])))
 
 
 def gimbal_lock_message(compiled: CompiledChain, y: np.ndarray, margin: float, t: float) -> str:
     """The message of a run stopped by gimbal lock at ``t`` [s], naming the body or joint
     whose |theta_2| is largest at the maximal state ``y`` (the event's, or the last sample
     before it); ``margin`` the run's ``simulation.gimbal_margin`` [rad]."""
-    angles, what = _gimbal_angles(compiled, y)
+    angles, what = gimbal_angles(compiled, y)
     return (f"gimbal lock: |theta_2| of {what[int(np.argmax(np.abs(angles)))]} reached pi/2 - {margin:g} rad "
             f"at t = {t:.6g} s; B(theta) is singular there (eq 5), so the Euler-angle model stops")
 
 
-def _region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
+def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
     """(min over bodies, joints and axes of bound - |q| [the quantity's units], the quantity
     that reaches its bound first, in words) of ``simulation.limits``: Theta, Omega, X, V of
     every body, E_j of every joint (not permanent); a run stops where it reaches 0."""

@@ -42,7 +42,7 @@ from .chain import (
     _cholesky_solve,
     ChainTrajectory,
     _gimbal_margin,
-    _region_margin,
+    region_margin,
     chain_impulses,
     compile_chain,
     impulse_times,
@@ -612,7 +612,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
     events = [lock]
     if sim.limits is not None:
         def region(t, yr):
-            return _region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
+            return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
 
         region.terminal = True
         events.append(region)
@@ -653,7 +653,7 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
             break
         if sol.status == 1:
             t_out = float(sol.t_events[1][0])
-            what = _region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
+            what = region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
             status = "failed"
             message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
             break
