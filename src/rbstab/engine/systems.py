@@ -94,21 +94,13 @@ def tree_rows(system: TreeSystem, k: int, tree_of=None) -> tuple[np.ndarray, np.
     return np.ascontiguousarray(params), np.ascontiguousarray(ppoints), tree_of
 
 
-def _tree_parts(tree_of: np.ndarray):
-    """(tree, its runs or a slice of all) for each tree that runs integrate."""
-    trees = np.unique(tree_of)
-    if len(trees) == 1:
-        return [(int(trees[0]), slice(None))]
-    return [(int(t), np.flatnonzero(tree_of == t)) for t in trees]
-
-
 def reduce_tree_states(system: TreeSystem, params: np.ndarray, ppoints: np.ndarray, tree_of: np.ndarray,
                        y: np.ndarray) -> np.ndarray:
     """:func:`rbstab.variants.tree.reduce_states` of the maximal states ``y`` (k, 12 n + 3
     e) of k runs, run i's of tree ``tree_of[i]`` (:func:`tree_rows`): (k, n_r)."""
     out = np.empty((len(y), reduced_size(system.codes, system.d_at)))
-    for t, rows in _tree_parts(tree_of):
-        out[rows] = reduce_states(params[t], system.codes, system.parents, ppoints[t], *system[4:8], y[rows])
+    reduce_states(params, system.codes, system.parents, ppoints, *system[4:8], np.ascontiguousarray(y, dtype=float),
+                  tree_of, out)
     return out
 
 
@@ -117,14 +109,7 @@ def expand_tree_samples(system: TreeSystem, params: np.ndarray, ppoints: np.ndar
     """:func:`rbstab.variants.tree.expand_samples` of k runs' reduced samples ``samples``
     (k, m, n_r) into ``out`` (k, m, 12 n + 3 e), run i's by tree ``tree_of[i]``
     (:func:`tree_rows`)."""
-    for t, rows in _tree_parts(tree_of):
-        if isinstance(rows, slice):
-            expand_samples(samples, params[t], system.codes, system.parents, ppoints[t], *system[4:8], out)
-            continue
-        part = np.empty((len(rows), *out.shape[1:]))
-        expand_samples(np.ascontiguousarray(samples[rows]), params[t], system.codes, system.parents, ppoints[t],
-                       *system[4:8], part)
-        out[rows] = part
+    expand_samples(samples, params, system.codes, system.parents, ppoints, *system[4:8], out, tree_of)
 
 
 # -- one body's admissible region -------------------------------------------------------------

@@ -51,7 +51,7 @@ from .chain import (
     CompiledChain,
     _put,
     _relative,
-    chain_core,
+    chain_evaluate,
     chain_wrenches,
     chain_work,
     euler_angles,
@@ -482,9 +482,10 @@ def tree_velocities(y, codes, parents, r_at, yr):
 
 
 @jit
-def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, out):
-    """The maximal image ``out`` (k, m, 12 n + 3 e) of reduced states ``samples`` (k, m,
-    n_r) row by row (NaN rows stay NaN)."""
+def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, out, tree_of):
+    """The maximal image ``out`` (k, m, 12 n + 3 e) of k runs' reduced states ``samples``
+    (k, m, n_r) row by row, run a's of the tree ``tree_of[a]`` (``params`` (t, n), ``ppoints``
+    (t, n, 3): t trees of one structure; NaN rows stay NaN)."""
     rot, rate = np.empty((codes.shape[0], 3, 3)), np.empty((codes.shape[0], 3, 3))
     permanent = False
     for i in range(codes.shape[0]):
@@ -493,9 +494,10 @@ def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, r
         out[:] = samples
         return
     for a in range(samples.shape[0]):
+        t = tree_of[a]
         for b in range(samples.shape[1]):
-            tree_expand(samples[a, b], params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, out[a, b], rot, rate,
-                        True)
+            tree_expand(samples[a, b], params[t], codes, parents, ppoints[t], d_at, r_at, u_at, rd_at, out[a, b], rot,
+                        rate, True)
 
 
 def expand_state(compiled: CompiledChain, layout: TreeLayout, yr: np.ndarray) -> np.ndarray:
@@ -511,7 +513,11 @@ def reduce_state(compiled: CompiledChain, layout: TreeLayout, y: np.ndarray) -> 
     """The reduced state (n_r,) of the chain's state ``y`` (12 n + 3 e,): Theta_j, Omega_j
     of each permanent joint (the joint's quantities of the chain), every other body's
     Theta, Omega, X, V, and D."""
-    return reduce_states(*compiled.args, *layout.args, np.asarray(y, dtype=float)[None])[0]
+    params, codes, parents, ppoints, d_at = compiled.args
+    out = np.empty((1, layout.n_r))
+    reduce_states(params[None], codes, parents, ppoints[None], d_at, *layout.args,
+                  np.ascontiguousarray(y, dtype=float)[None], np.zeros(1, np.int64), out)
+    return out[0]
 
 
 def reduced_size(codes, d_at) -> int:
@@ -521,30 +527,36 @@ def reduced_size(codes, d_at) -> int:
     return int(np.sum(np.where(codes == PERMANENT, 6, 12)) + 3 * np.sum(d_at >= 0))
 
 
-def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y) -> np.ndarray:
-    """:func:`reduce_state` of each row of ``y`` (k, 12 n + 3 e) of the tree of the arrays
-    ``params`` ... ``rd_at`` (a :class:`rbstab.engine.systems.TreeSystem`'s): (k, n_r). A
-    body whose joint is not permanent keeps its maximal entries; a permanent joint's child
-    is carried by its Theta_j, Omega_j (its position follows from its parent's)."""
-    y = np.ascontiguousarray(np.atleast_2d(y), dtype=float)
-    n, k = len(codes), len(y)
-    joints = np.empty((n, 7, 3))
-    out = np.empty((k, reduced_size(codes, d_at)))
-    permanent = bool(np.any(np.asarray(codes) == PERMANENT))
-    for row in range(k):
+@jit
+def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, tree_of, out):
+    """The reduced states ``out`` (k, n_r) of k runs' maximal states ``y`` (k, 12 n + 3 e),
+    run a's of the tree ``tree_of[a]`` (``params`` (t, n), ``ppoints`` (t, n, 3): t trees
+    of one structure, :class:`rbstab.engine.systems.TreeSystem`'s arrays): a body whose joint
+    is not permanent keeps its maximal entries; a permanent joint's child is carried by its
+    Theta_j, Omega_j (eq 32; its position follows from its parent's)."""
+    n = codes.shape[0]
+    permanent = False
+    for i in range(n):
+        permanent = permanent or codes[i] == PERMANENT
+    joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
+    dy, work = np.empty(y.shape[1]), chain_work(n)
+    for a in range(y.shape[0]):
         if permanent:
-            chain_core(0.0, y[row], params, codes, parents, ppoints, d_at, np.empty(y.shape[1]), joints,
-                       np.empty((n, 3)), np.empty(5))
+            t = tree_of[a]
+            chain_evaluate(0.0, y[a], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies, scalars, work)
         for i in range(n):
             at = r_at[i]
             if codes[i] == PERMANENT:
-                out[row, at: at + 3], out[row, at + 3: at + 6] = joints[i, _THETA_J], joints[i, _OMEGA_J]
+                for c in range(3):
+                    out[a, at + c] = joints[i, _THETA_J, c]
+                    out[a, at + 3 + c] = joints[i, _OMEGA_J, c]
             else:
-                out[row, at: at + 12] = y[row, 12 * i: 12 * i + 12]
+                for c in range(12):
+                    out[a, at + c] = y[a, 12 * i + c]
         for j in range(n):
             if d_at[j] >= 0:
-                out[row, rd_at[j]: rd_at[j] + 3] = y[row, d_at[j]: d_at[j] + 3]
-    return out
+                for c in range(3):
+                    out[a, rd_at[j] + c] = y[a, d_at[j] + c]
 
 
 def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
@@ -626,7 +638,9 @@ def integrate(config, *, timeout: float | None = None, compiled: CompiledChain |
 
     def trajectory(status, message, solver_status):
         full = np.full((time.size, compiled.n_states), np.nan)
-        expand_samples(np.ascontiguousarray(states[None, :, :n_r]), *tree, full[None])
+        params, codes, parents, ppoints, d_at = args
+        expand_samples(np.ascontiguousarray(states[None, :, :n_r]), params[None], codes, parents, ppoints[None], d_at,
+                       *layout.args, full[None], np.zeros(1, np.int64))
         done = states[:, n_r] if disturbed else np.where(np.isnan(states[:, 0]), np.nan, 0.0)
         return ChainTrajectory(time, full, status, message, {"nfev": nfev, "solver_status": solver_status,
                                                              "wall_time": _time.perf_counter() - start}, compiled,
