@@ -563,6 +563,31 @@ class ChainConfig:
         """``resolved`` as YAML (keys in schema order, lists in flow style)."""
         return dump_yaml(self.resolved)
 
+    @classmethod
+    def like(cls, resolved: Mapping, others: Sequence["ChainConfig"]) -> "ChainConfig | None":
+        """The ChainConfig of a ``resolved`` mapping that a validated ChainConfig gave (a
+        sweep's planned run sent to a worker), rebuilt without validating it again where one
+        of ``others`` differs from it only in ``name`` and ``initial_state``: it shares that
+        config's chain and settings (a sweep over initial states integrates one chain, compiled
+        once), its initial state placed from ``resolved`` as :func:`config_from_mapping`
+        places it; no warnings. None where none of ``others`` does (validate it with
+        :func:`config_from_mapping`).
+
+        Raises
+        ------
+        KeyError, TypeError, ValueError
+            For a mapping of another shape.
+        """
+        keys = set(resolved) - {"name", "initial_state"}
+        for other in others:
+            if keys == set(other.resolved) - {"name", "initial_state"} and all(
+                    resolved[key] == other.resolved[key] for key in keys):
+                states, placed, _ = _place_tree(resolved["initial_state"], other.chain, other.simulation.gimbal_margin,
+                                                None, ())
+                return dataclasses.replace(other, name=resolved["name"], initial_state=states, placed=placed,
+                                           resolved=resolved, warnings=())
+        return None
+
 
 def chain_of(config: RunConfig | ChainConfig) -> Chain:
     """The chain a configuration means: a chain config's own, or for a one-body config the
@@ -654,19 +679,37 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
     return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(run.gravity))
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b of two vectors (3,), without numpy.cross's overhead for one pair (a sweep validates each run)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
 def _tree_initial_state(run: ChainSchema, chain: Chain, source: str | None,
                    overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...], list]:
     """(each body's initial state, x and v placed where left out; the keys placed; each
     joint's E_j [m]). ConfigError for a permanent joint whose given x or v misses its
     constraint, or a joint's relative orientation at gimbal lock."""
-    states, placed, rotations, errors = {}, [], [], []
-    margin = run.simulation.gimbal_margin
-    for body, joint in zip(chain.bodies, chain.joints):
-        written = run.initial_state.get(body.name)
-        given = set() if written is None else written.model_fields_set
-        state = {block: np.array(getattr(written, key) if written is not None else np.zeros(3), dtype=float)
-                 for key, block in INITIAL_STATE_BLOCKS.items()}
-        a_c = rotation_matrix(state["theta"])
+    written = {}
+    for body in chain.bodies:
+        section = run.initial_state.get(body.name)
+        written[body.name] = ({} if section is None else
+                              {key: getattr(section, key) for key in INITIAL_STATE_BLOCKS if key in section.model_fields_set})
+    return _place_tree(written, chain, run.simulation.gimbal_margin, source, overrides)
+
+
+def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, source: str | None,
+                overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...], list]:
+    """:func:`_tree_initial_state` of the blocks each body's config gives (``written``: by
+    body name, its initial_state keys as written, each (3,); a block left out is zero, an x or
+    v left out placed from the parent's)."""
+    states, placed, errors = {}, [], []
+    written_of = [written.get(body.name) or {} for body in chain.bodies]
+    given_of = [set(w) for w in written_of]
+    blocks = [{block: np.array(w.get(key, np.zeros(3)), dtype=float) for key, block in INITIAL_STATE_BLOCKS.items()}
+              for w in written_of]
+    rotations = rotation_matrix(np.array([state["theta"] for state in blocks]))  # A_i of every body at once
+    for body, joint, written, given, state, a_c in zip(chain.bodies, chain.joints, written_of, given_of, blocks,
+                                                          rotations):
         if joint.parent == GROUND:
             x_p, v_p, a_p, omega_p = np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3)
             parent = GROUND_NAME
@@ -676,9 +719,9 @@ def _tree_initial_state(run: ChainSchema, chain: Chain, source: str | None,
             a_p, parent = rotations[joint.parent], p
         r_p, r_c = joint.parent_point, joint.child_point
         point_p = x_p + a_p @ r_p  # the parent's point, inertial frame
-        rate_p = v_p + a_p @ np.cross(omega_p, r_p)
+        rate_p = v_p + a_p @ _cross(omega_p, r_p)
         x_placed = point_p - a_c @ r_c
-        v_placed = rate_p - a_c @ np.cross(state["omega"], r_c)
+        v_placed = rate_p - a_c @ _cross(state["omega"], r_c)
         for key, block, target, what in (("x", "position", x_placed, "E_j"), ("v", "velocity", v_placed, "dE_j/dt")):
             if key not in given:
                 state[block] = target
@@ -687,7 +730,7 @@ def _tree_initial_state(run: ChainSchema, chain: Chain, source: str | None,
                 miss = float(np.linalg.norm(state[block] - target))
                 scale = max(1.0, float(np.abs(target).max()), float(np.abs(state[block]).max()))
                 if miss > CONSTRAINT_TOLERANCE * scale:
-                    _refuse(f"initial_state.{body.name}.{key}", short_repr(getattr(written, key)),
+                    _refuse(f"initial_state.{body.name}.{key}", short_repr(written[key]),
                             f"{key} = {short_repr([float(f'{t:.12g}') for t in target])} that holds the permanent "
                             f"joint '{joint.name}' to '{parent}' ({what} = 0)",
                             f"|{what}| = {miss:.6g} {'m' if key == 'x' else 'm/s'}; leave {key} out and rbstab "
@@ -701,7 +744,6 @@ def _tree_initial_state(run: ChainSchema, chain: Chain, source: str | None,
                     f"= {math.pi / 2 - margin:.6g}",
                     f"joint '{joint.name}' starts at its gimbal lock, theta_2 = {theta_2:.6g} rad (eq 1)",
                     source, overrides, ("initial_state", "simulation.gimbal_margin"))
-        rotations.append(a_c)
         errors.append(state["position"] + a_c @ r_c - point_p)
         for array in state.values():
             array.setflags(write=False)

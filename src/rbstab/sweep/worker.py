@@ -52,7 +52,7 @@ from typing import Any
 import numpy as np
 
 from ..config import PhysicalPlausibilityWarning, RunConfig
-from ..config.loader import config_from_mapping
+from ..config.loader import ChainConfig, config_from_mapping
 from ..config.paths import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
@@ -322,15 +322,23 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`,
     sharing the body, gains and settings of one of the last :data:`SHARED_CONFIGS` distinct
     configs where they are the same: a grid's inner axis); one that does not rebuild is
-    validated, for the message of what is wrong with it.
+    validated, for the message of what is wrong with it. A tree's run is validated again
+    unless it differs from one of the last :data:`SHARED_CONFIGS` validated ones only in
+    name and initial state (:meth:`rbstab.config.loader.ChainConfig.like`: it shares that
+    one's chain, so the chain is compiled once).
     """
     configs: list = []
     errors: list[dict[str, Any]] = []
     recent: list = []  # distinct rebuilt configs, the latest first
+    chains: list = []  # distinct validated chain configs, the latest first
     for task in tasks:
         try:
-            if is_chain(task.config):  # a tree's spelling: validated again
-                configs.append(_config(task))
+            if is_chain(task.config):  # a tree's spelling: validated again unless it shares a recent one's chain
+                config = ChainConfig.like(task.config, chains)
+                if config is None:
+                    config = _config(task)
+                    chains = [config, *chains[: SHARED_CONFIGS - 1]]
+                configs.append(config)
                 continue
             try:
                 config = RunConfig.from_resolved(task.config, like=recent)
