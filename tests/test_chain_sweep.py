@@ -271,3 +271,48 @@ def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     assert {"lyapunov_final", "max_abs_constraint_error_ankle_x", "max_abs_constraint_error_hip_z", "final_theta_trunk_x",
             "fraction_saturated_torque_n_ankle_x", "fraction_saturated_force_h_legs_z"} <= set(summary.columns)
     assert largest_error(summary, "hip")[0] < 1e-6
+
+
+def test_a_chain_sweep_over_initial_states_refuses_what_the_schema_refuses():
+    """Runs that differ only in their initial states are checked as config_from_mapping
+    checks them (the schema, each body's and each joint's gimbal lock, simulation.limits):
+    the runs refused are exactly those that validating each run alone refuses, with its
+    messages."""
+    import copy
+    import warnings
+
+    import yaml
+
+    from rbstab.config import ConfigError, config_from_mapping
+    from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
+
+    rng = np.random.default_rng(5)
+    n = 60
+    legs_theta_1 = rng.choice([0.0, 0.8, 1.6], size=n, p=[0.6, 0.3, 0.1])
+    trunk_theta_1 = rng.choice([0.0, -0.8, 0.3], size=n, p=[0.6, 0.2, 0.2])  # -0.8 after 0.8: the hip at gimbal lock
+    legs_omega_0 = rng.choice([0.0, 1.0, 3.0, np.nan], size=n, p=[0.6, 0.2, 0.1, 0.1])  # 3 > the bound 2
+    base = yaml.safe_load(Path(STANCE).read_text())
+    base["simulation"]["limits"] = {"omega": 2.0}
+    table = {"initial_state.legs.theta.1": legs_theta_1, "initial_state.trunk.theta.1": trunk_theta_1,
+             "initial_state.legs.omega.0": legs_omega_0}
+    expected = {}
+    for i in range(n):
+        data = copy.deepcopy(base)
+        data["name"] = "x"
+        data["initial_state"]["legs"]["theta"][1] = float(legs_theta_1[i])
+        data["initial_state"]["trunk"]["theta"][1] = float(trunk_theta_1[i])
+        data["initial_state"]["legs"]["omega"] = [float(legs_omega_0[i]), 0.0, 0.0]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                config_from_mapping(data)
+            except ConfigError as exc:
+                expected[i] = exc.errors
+    assert 0 < len(expected) < n and len({tuple(p) for p in expected.values()}) >= 4
+    with pytest.raises(SweepSpecError) as info:
+        plan_table(spec_from_mapping({"name": "v", "base": base, "table": table}))
+    lines = info.value.errors
+    assert lines[0] == f"{len(expected)} of {n} runs have an invalid configuration; nothing was run"
+    for i in sorted(expected)[:10]:
+        label = f"run r{i:04d} (base {base['name']}"
+        assert [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(label)] == expected[i], i

@@ -72,11 +72,13 @@ from .schema import (
     GAIN_NAMES,
     GROUND_NAME,
     INITIAL_STATE_BLOCKS,
+    InitialStateSchema,
     JOINT_GAINS,
     TOP_LEVEL,
     ChainSchema,
     RunSchema,
     SimulationSettings,
+    clear_of_gimbal_lock,
     limits_violation,
     problem_line,
     short_repr,
@@ -85,7 +87,7 @@ from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
 
 __all__ = ["RunConfig", "ChainConfig", "config_from_mapping", "load_config", "chain_of", "one_body_config",
            "PER_RUN_SECTIONS", "limits_of", "is_chain", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
-           "CONSTRAINT_TOLERANCE"]
+           "CONSTRAINT_TOLERANCE", "initial_state_fits"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
@@ -589,6 +591,32 @@ class ChainConfig:
         return None
 
 
+def initial_state_fits(config: ChainConfig, initial_state: Any) -> bool:
+    """Whether ``config`` with ``initial_state`` (a chain config's ``initial_state`` section
+    as written) in its place passes every check :func:`config_from_mapping` makes of that
+    section: its schema, the bodies it names, each body's and each joint's gimbal lock, the
+    points of the permanent joints and ``simulation.limits``. A sweep validates by it a run
+    that differs from a validated one only there; where it is False,
+    :func:`config_from_mapping` says why."""
+    try:
+        sections = plain_tree(initial_state)
+        if not isinstance(sections, Mapping) or not set(sections) <= {body.name for body in config.chain.bodies}:
+            return False
+        margin = config.simulation.gimbal_margin
+        written = {}
+        for name, section in sections.items():
+            state = InitialStateSchema.model_validate(section)
+            if not clear_of_gimbal_lock(state.theta[1], margin):
+                return False
+            written[name] = {key: getattr(state, key) for key in INITIAL_STATE_BLOCKS if key in state.model_fields_set}
+        states, _, errors = _place_tree(written, config.chain, margin, None, ())
+        _check_tree_limits(config.chain, states, errors, config.simulation.limits,
+                           config.resolved["simulation"].get("limits") or {}, None, ())
+    except (ConfigError, ValidationError, TypeError, ValueError):
+        return False
+    return True
+
+
 def chain_of(config: RunConfig | ChainConfig) -> Chain:
     """The chain a configuration means: a chain config's own, or for a one-body config the
     one-body chain (:func:`rbstab.chain.single`): its body (named ``body``) with the
@@ -772,18 +800,17 @@ def _refuse(key: str, found: str, expected: str, detail: str, source: str | None
 
 
 def _check_tree_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], errors: Sequence[np.ndarray],
-                  run: ChainSchema, source: str | None, overrides: Sequence[str]) -> None:
+                       limits: Limits | None, written: Mapping, source: str | None, overrides: Sequence[str]) -> None:
     """ConfigError when a body's initial theta, omega, x or v, or the E_j of a joint that is
-    not ``permanent``, lies outside ``simulation.limits`` (the same bounds for every body and
-    joint)."""
-    limits = simulation_settings(run.simulation).limits
+    not ``permanent``, lies outside ``limits`` (``simulation.limits``, the same bounds for
+    every body and joint; ``written``: its resolved section, for the message)."""
     if limits is None:
         return
     for joint, error in zip(chain.joints, errors):
         outside = np.flatnonzero(~(np.abs(error) <= limits.constraint_error))
         if joint.variant != "permanent" and outside.size:
             i = int(outside[0])
-            _refuse("simulation.limits.constraint_error", short_repr(run.simulation.limits.constraint_error),
+            _refuse("simulation.limits.constraint_error", short_repr(written.get("constraint_error")),
                     "bounds that contain the initial state",
                     f"joint '{joint.name}' starts outside: |E_{i + 1}| = {abs(error[i]):.6g} m > "
                     f"{limits.constraint_error[i]:g} m", source, overrides, ("simulation.limits", "initial_state"))
@@ -794,7 +821,7 @@ def _check_tree_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarra
             outside = np.flatnonzero(~(np.abs(value) <= bound))
             if outside.size:
                 i = int(outside[0])
-                _refuse(f"simulation.limits.{name}", short_repr(getattr(run.simulation.limits, name)),
+                _refuse(f"simulation.limits.{name}", short_repr(written.get(name)),
                         "bounds that contain the initial state",
                         f"body '{body.name}' starts outside: |{name}_{i + 1}| = {abs(value[i]):.6g} > {bound[i]:g}",
                         source, overrides, ("simulation.limits", "initial_state"))
@@ -860,7 +887,8 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
     chain = _chain(run, resolved.get("disturbances") or ())
     _check_engine_scope(chain, resolved, source, overrides)
     states, placed, errors = _tree_initial_state(run, chain, source, overrides)
-    _check_tree_limits(chain, states, errors, run, source, overrides)
+    simulation = simulation_settings(run.simulation)
+    _check_tree_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
+                       overrides)
     return ChainConfig(name=run.name, chain=chain, initial_state=states, placed=placed,
-                       simulation=simulation_settings(run.simulation), resolved=resolved,
-                       warnings=_tree_notes(chain, run, source))
+                       simulation=simulation, resolved=resolved, warnings=_tree_notes(chain, run, source))

@@ -40,6 +40,7 @@ __all__ = [
     "GAIN_UNITS",
     "GAIN_NAMES",
     "INITIAL_STATE_BLOCKS",
+    "InitialStateSchema",
     "SimulationSettings",
     "SOLVER_METHODS",
     "MAX_MAGNITUDE",
@@ -762,7 +763,10 @@ class _Disturbance(_Section):
         return self
 
 
-class _InitialState(_Section):
+class InitialStateSchema(_Section):
+    """One body's initial state: a one-body config's ``initial_state``, or an entry of a
+    chain config's (by body name)."""
+
     theta: Annotated[Any, checked(_theta)] = Field(
         default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['theta']})"
     )
@@ -851,8 +855,8 @@ class RunSchema(_Section):
     )
     body: _Body = Field(description=_mapping_of(_Body))
     controller: _Controller = Field(description=_mapping_of(_Controller))
-    initial_state: _InitialState = Field(
-        default_factory=_InitialState, description=_mapping_of(_InitialState)
+    initial_state: InitialStateSchema = Field(
+        default_factory=InitialStateSchema, description=_mapping_of(InitialStateSchema)
     )
     # validate_default: the theta check below must also run when the section is absent.
     simulation: _Simulation = Field(
@@ -1078,8 +1082,8 @@ class ChainSchema(_Section):
         description=f"a list of 1 to {MAX_BODIES} bodies, each {_mapping_of(_ChainBody)}")
     joints: list[_ChainJoint] = Field(
         description=f"a list of joints, one per body, each {_mapping_of(_ChainJoint)}")
-    initial_state: dict[str, _InitialState] = Field(
-        default_factory=dict, description=f"a mapping of body names to {_mapping_of(_InitialState)}")
+    initial_state: dict[str, InitialStateSchema] = Field(
+        default_factory=dict, description=f"a mapping of body names to {_mapping_of(InitialStateSchema)}")
     simulation: _Simulation = Field(
         default_factory=_Simulation, validate_default=True, description=_mapping_of(_Simulation))
     disturbances: list[_ChainDisturbance] | None = Field(
@@ -1113,14 +1117,14 @@ class ChainSchema(_Section):
     @classmethod
     def _by_body(cls, value: Any, info: ValidationInfo) -> Any:
         """A one-body ``initial_state`` (theta, omega, ... at its top) in a chain."""
-        blocks = set(_InitialState.model_fields)
+        blocks = set(InitialStateSchema.model_fields)
         if isinstance(value, Mapping) and value and set(value) <= blocks:
             names = [b.name for b in info.data.get("bodies") or ()]
             if not blocks & set(names):
                 raise PydanticCustomError("rbstab_invalid", "one-body initial state", {
                     "key": "initial_state", "found": f"keys {', '.join(map(str, value))}",
                     "expected": "body names as keys" + (f" ({_names_list(names)})" if names else "")
-                                + f", each {_mapping_of(_InitialState)}",
+                                + f", each {_mapping_of(InitialStateSchema)}",
                     "detail": "a chain's initial state is given per body"})
         return value
 

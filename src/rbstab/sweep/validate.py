@@ -26,7 +26,7 @@ from .spec import Base, SweepSpec, SweepSpecError
 from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning
-from ..config.loader import config_from_mapping
+from ..config.loader import config_from_mapping, initial_state_fits
 from ..config.paths import KeyPath, parse_key, schema_of
 from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
                              samples_apart, starts_in_run, steps_suffice, within_bounds)
@@ -404,6 +404,33 @@ def _templates(spec: SweepSpec, columns, base_index, template, first_of) -> tupl
     return out, notes, invalid, counted
 
 
+def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray, counted: np.ndarray,
+                    invalid_rows: dict) -> None:
+    """Validate each run of a chain's sweep not yet ``counted`` invalid (those the schema
+    refuses into ``invalid_rows``, and counted): a run that differs from one of the last
+    validated ones only in ``initial_state`` by :func:`rbstab.config.loader.initial_state_fits`
+    (the checks of that section), any other by the schema."""
+    recent: list[tuple[dict, Any]] = []  # (a validated run's mapping but its name and initial state, its config)
+    keys = list(columns)
+    for i in np.flatnonzero(~counted):
+        base = spec.bases[int(base_index[i])]
+        try:
+            data = row_mapping(base, keys, [columns[k][i] for k in keys], "sweep-run")
+        except ConfigError:
+            data = None
+        if data is not None:
+            rest = {k: v for k, v in data.items() if k not in ("name", "initial_state")}
+            if any(rest == other and initial_state_fits(config, data.get("initial_state"))
+                   for other, config in recent):
+                continue
+        config, problems = _validate_row(spec, columns, base_index, int(i))
+        if config is None:
+            invalid_rows[int(i)] = problems
+            counted[i] = True
+        elif data is not None:
+            recent = [(rest, config), *recent[:7]]
+
+
 def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray,
                      template: np.ndarray, first_of: np.ndarray) -> tuple[tuple, list[str]]:
     """Validate every run (module docstring); (templates, warning lines).
@@ -416,11 +443,7 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
     n = len(base_index)
     templates, notes, invalid_rows, counted = _templates(spec, columns, base_index, template, first_of)
     if spec.is_chain:  # a chain's checks are its schema's and its tree's: every run validated by them
-        for i in np.flatnonzero(~counted):
-            config, problems = _validate_row(spec, columns, base_index, int(i))
-            if config is None:
-                invalid_rows[int(i)] = problems
-                counted[i] = True
+        _validate_trees(spec, columns, base_index, counted, invalid_rows)
         _refuse_invalid(spec, columns, base_index, invalid_rows, counted)
         counts = np.bincount(template, minlength=len(notes))
         lines = {}
