@@ -41,12 +41,15 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   the same sweep with a tree a run (the trunk's mass and inertia times U(0.8, 1.2) in each
   run's records: a sweep over the chain's parameters, one launch);
   correctness on ``--check-n`` of those runs against the CPU driver (statuses, steps, final
-  states).
+  states); ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
+  the trunk's mass, ``--store summary``, at each N of ``--chain-sweep-n`` (20,000), with
+  ``--engine cuda`` and ``--engine compiled`` (the CPU's cores), process start to exit.
 
 Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
 
     python benchmarks/gpu.py [--n 10000 100000 1000000] [--sweep-n 1000000] [--check-n 256]
-                             [--chain-n 10000 100000] [--chain-cpu-n 2000] [--chains-only]
+                             [--chain-n 10000 100000] [--chain-cpu-n 2000] [--chain-sweep-n 20000]
+                             [--chains-only]
 
 ``--host-only`` (any machine, no GPU needed) measures what a ``--engine cuda`` sweep costs
 besides the GPU: the same ``rbstab sweep`` command with every launch replaced by a stub
@@ -485,6 +488,28 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
         shutil.rmtree(folder, ignore_errors=True)
 
 
+def chain_sweep_seconds(n: int, axis: str, engine: str) -> float:
+    """Wall seconds of ``rbstab sweep`` of n runs of the stance example (the **chains**
+    settings: rtol 1e-8, atol 1e-10, 2 s, 201 samples; ``--store summary``, the command's
+    default ``-j``) over ``axis`` (``"tilt"``: the legs' and the trunk's theta_1 ~ U(-0.1,
+    0.1) rad, one chain; ``"mass"``: the trunk's mass times U(0.8, 1.2), a chain a run) on
+    ``engine``, from process start to exit."""
+    random = {"tilt": ["initial_state.legs.theta.0=uniform:[-0.1,0.1]", "initial_state.trunk.theta.0=uniform:[-0.1,0.1]"],
+              "mass": ["bodies.trunk.mass=scale_uniform:[0.8,1.2]"]}[axis]
+    settings = ["simulation.t_end=2.0", "simulation.n_samples=201", "simulation.rtol=1e-8", "simulation.atol=1e-10"]
+    folder = Path(tempfile.mkdtemp())
+    try:
+        cmd = [RBSTAB, "sweep", STANCE, *[a for r in random for a in ("--random", r)], "-n", str(n), "--engine", engine,
+               "--store", "summary", "--no-progress", "-o", str(folder), *[a for o in settings for a in ("--set", o)]]
+        start = time.perf_counter()
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode != 0:
+            raise SystemExit(done.stderr)
+        return time.perf_counter() - start
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def ptx_only(shapes) -> None:
     """The ``ptxas -v`` lines of the one-body kernel and of the tree kernel of each tree
     shape of ``shapes`` (bodies, permanent joints, embedded joints; module docstring,
@@ -536,6 +561,12 @@ def chains(args) -> None:
               f"{total:,.0f} runs/s")
     print(f"chains, CPU driver, {os.cpu_count()} processes, stance sweep: {chain_cpu_rate(args.chain_cpu_n):,.0f} runs/s")
     print(f"chains, correctness, {args.check_n} runs: {chain_correctness(args.check_n)}")
+    chain_sweep_seconds(1000, "tilt", "cuda")  # each process's kernels loaded from the cache once
+    for n in args.chain_sweep_n:
+        for axis in ("tilt", "mass"):
+            cuda, compiled = (chain_sweep_seconds(n, axis, engine) for engine in ("cuda", "compiled"))
+            print(f"chains, rbstab sweep of the stance example over the {axis}, {n:,} runs: --engine cuda {cuda:.1f} s, "
+                  f"--engine compiled {compiled:.1f} s")
 
 
 def main() -> None:
@@ -549,6 +580,7 @@ def main() -> None:
     parser.add_argument("--cpu-n", type=int, default=20_000)
     parser.add_argument("--chain-n", type=int, nargs="+", default=[10_000, 100_000])
     parser.add_argument("--chain-cpu-n", type=int, default=2000)
+    parser.add_argument("--chain-sweep-n", type=int, nargs="+", default=[20_000])
     parser.add_argument("--chains-only", action="store_true", help="only the tree kernel's lines")
     parser.add_argument("--ptx-trees", nargs="+", default=["1:1:0", "1:0:1", "2:2:0", "8:8:0", "8:0:8"],
                         help="tree shapes of --ptx-only, BODIES:PERMANENT:EMBEDDED")
