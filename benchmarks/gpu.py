@@ -403,8 +403,15 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
                                  trace=None if stride is None else np.ones((k, n_trace, cuda.TRACE_COLUMNS)),
                                  kernel_seconds=0.0, seconds=0.0)
 
+    def chain_launch(system, y0, settings, *, method, n_samples, stride=1, max_wall_time=np.inf, tree_of=None):
+        k, n_kept = len(y0), len(range(0, n_samples, stride))  # every run at t_end, still at its initial state
+        return cuda.CudaChainSolution(np.repeat(np.asarray(y0, dtype=float)[:, None], n_kept, axis=1),
+                                      np.zeros(k, np.int64), np.asarray(settings, dtype=float)[:, 0].copy(),
+                                      np.full(k, 500), np.full(k, 40), np.zeros((k, n_kept)))
+
     cuda.check_available = lambda: None
     cuda.integrate_chunks_cuda = launches
+    cuda.integrate_chain_runs_cuda = chain_launch
 
     import sys
     import time
@@ -423,7 +430,7 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
 """
 
 
-def host_only(sizes: list[int], jobs: int | None) -> None:
+def host_only(sizes: list[int], jobs: int | None, chain_sizes: list[int] = ()) -> None:
     """``--host-only``: a ``--engine cuda`` sweep's time with the GPU's part taken away."""
     with tempfile.TemporaryDirectory() as stub:
         Path(stub, "sitecustomize.py").write_text(STUB)
@@ -434,6 +441,12 @@ def host_only(sizes: list[int], jobs: int | None) -> None:
         done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
         print(f"one worker, {131072} runs (run_table_chunk, --store summary): "
               f"{float(done.stdout.split()[-1]) * 1e6:.1f} us a run")
+        for axis in ("tilt", "mass"):  # a tree's runs: the sweep's host part
+            chain_sweep_seconds(200, axis, "cuda", env=env)  # the compile cache, warm
+            for n in chain_sizes:
+                wall = chain_sweep_seconds(n, axis, "cuda", env=env)
+                print(f"rbstab sweep of the stance example over the {axis} --engine cuda --store summary, N = {n}, "
+                      f"GPU stubbed: {wall:.1f} s ({wall / n * 1e6:.1f} us a run)")
         sweep_seconds(1000, "summary", env=env, jobs=jobs)  # the compile cache, warm
         for n in sizes:
             times: dict = {}
@@ -488,7 +501,7 @@ def sweep_seconds(n: int, store: str, *, env: dict | None = None, jobs: int | No
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def chain_sweep_seconds(n: int, axis: str, engine: str) -> float:
+def chain_sweep_seconds(n: int, axis: str, engine: str, env: dict | None = None) -> float:
     """Wall seconds of ``rbstab sweep`` of n runs of the stance example (the **chains**
     settings: rtol 1e-8, atol 1e-10, 2 s, 201 samples; ``--store summary``, the command's
     default ``-j``) over ``axis`` (``"tilt"``: the legs' and the trunk's theta_1 ~ U(-0.1,
@@ -502,7 +515,7 @@ def chain_sweep_seconds(n: int, axis: str, engine: str) -> float:
         cmd = [RBSTAB, "sweep", STANCE, *[a for r in random for a in ("--random", r)], "-n", str(n), "--engine", engine,
                "--store", "summary", "--no-progress", "-o", str(folder), *[a for o in settings for a in ("--set", o)]]
         start = time.perf_counter()
-        done = subprocess.run(cmd, capture_output=True, text=True)
+        done = subprocess.run(cmd, capture_output=True, text=True, env=env)
         if done.returncode != 0:
             raise SystemExit(done.stderr)
         return time.perf_counter() - start
@@ -591,7 +604,7 @@ def main() -> None:
         ptx_only([tuple(int(x) for x in shape.split(":")) for shape in args.ptx_trees])
         return
     if args.host_only:
-        host_only(args.sweep_n, args.jobs)
+        host_only(args.sweep_n, args.jobs, args.chain_sweep_n)
         return
     from rbstab.engine.cuda import check_available
 

@@ -733,8 +733,8 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
     states, placed, errors = {}, [], []
     written_of = [written.get(body.name) or {} for body in chain.bodies]
     given_of = [set(w) for w in written_of]
-    blocks = [{block: np.array(w.get(key, np.zeros(3)), dtype=float) for key, block in INITIAL_STATE_BLOCKS.items()}
-              for w in written_of]
+    blocks = [{block: np.array(w[key], dtype=float) if key in w else np.zeros(3)
+               for key, block in INITIAL_STATE_BLOCKS.items()} for w in written_of]
     rotations = rotation_matrix(np.array([state["theta"] for state in blocks]))  # A_i of every body at once
     for body, joint, written, given, state, a_c in zip(chain.bodies, chain.joints, written_of, given_of, blocks,
                                                           rotations):

@@ -63,9 +63,12 @@ def row_mapping(base: Base, keys: Sequence[str], values: Sequence[Any], name: st
         If a key cannot be set (it indexes into a value that is not a list).
     """
 
-    data = copy.deepcopy(base.data)
-    for key, value in zip(keys, values):
-        key_path(key, base.data).set(data, plain(value))
+    paths = [key_path(key, base.data) for key in keys]
+    data = dict(base.data)  # a section no key sets is the base's own object (read, never written)
+    for section in {path.steps[0] for path in paths} & set(data):
+        data[section] = copy.deepcopy(data[section])
+    for path, value in zip(paths, values):
+        path.set(data, plain(value))
     data["name"] = name
     return data
 
