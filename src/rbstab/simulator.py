@@ -764,44 +764,28 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
     start = _time.perf_counter()
     trajectory = tree.integrate(config, timeout=timeout)
     compiled, time = trajectory.compiled, trajectory.time
-    outputs, summary = _chain_outputs(compiled, time, trajectory.states[None], trajectory.work[None])
+    outputs, summary = _trees_outputs([compiled], np.zeros(1, dtype=np.int64), time, trajectory.states[None],
+                                      trajectory.work[None])
     outputs, summary = {key: value[0] for key, value in outputs.items()}, row(summary, 0)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,
                      _time.perf_counter() - start, summary)
 
 
-def _chain_outputs(compiled, time: np.ndarray, states: np.ndarray, work: np.ndarray) -> tuple[dict, dict]:
-    """(outputs, summary columns) of k runs of one chain: their samples ``states`` (k, m,
-    n_states) at ``time`` (m,) and their disturbances' work ``work`` (k, m) there
-    (:func:`rbstab.variants.chain.evaluate`, :func:`rbstab.summary.tree_summary_table`)."""
-    from .variants import chain as C  # heavy: numba
-
-    outputs = C.evaluate(compiled, time, states, work)
-    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, tree_summary_table(time, outputs, embedded=bool(np.any(compiled.d_at >= 0)))
-
-
 def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
                    work: np.ndarray, traces: bool = True) -> tuple[dict, dict]:
-    """:func:`_chain_outputs` of k runs of chains of one structure, run i's chain
-    ``compiled[i]``, the runs of one ``tree_of`` (one chain) at once; the columns in the
-    runs' order (the outputs empty unless ``traces``)."""
-    parts = np.unique(tree_of)
-    if len(parts) == 1:
-        outputs, table = _chain_outputs(compiled[0], time, states, work)
-        return outputs if traces else {}, table
-    k = len(compiled)
-    outputs, table = {}, {}
-    for t in parts:
-        rows = np.flatnonzero(tree_of == t)
-        found = _chain_outputs(compiled[rows[0]], time, states[rows], work[rows])
-        for into, columns in zip((outputs, table), found if traces else ({}, found[1])):
-            for key, values in columns.items():
-                if key not in into:
-                    into[key] = np.empty((k, *values.shape[1:]), dtype=values.dtype)
-                into[key][rows] = values
-    return outputs, table
+    """(outputs, summary columns) of k runs of chains of one structure, run i's chain
+    ``compiled[i]`` (the runs of one ``tree_of`` one chain): their samples ``states`` (k, m,
+    n_states) at ``time`` (m,) and their disturbances' work ``work`` (k, m) there, all at once
+    (:func:`rbstab.variants.chain.evaluate`, :func:`rbstab.summary.tree_summary_table`); the
+    outputs empty unless ``traces``."""
+    from .variants import chain as C  # heavy: numba
+
+    _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
+    outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index)
+    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+    table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)))
+    return outputs if traces else {}, table
 
 
 def _tree_structure(compiled, sim) -> bytes:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -535,11 +536,13 @@ def _saturation_flags(y, params, codes, joints, flags):
 
 
 @jit
-def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, bodies, scalars, power, flags):
-    """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,) into
-    ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m, 5), ``power`` (m,) the
-    disturbances' power [W] and ``flags`` (m, n, 3, 3) the saturation flags of N_j, H_j and
-    Lambda_j (:func:`_saturation_flags`); NaN rows where the state is NaN."""
+def chain_samples(times, states, params, codes, parents, ppoints, d_at, tree_of, joints, bodies, scalars, power, flags):
+    """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,),
+    sample k of the tree ``tree_of[k]`` (``params`` (t, n), ``ppoints`` (t, n, 3): t trees
+    of one structure), into ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m,
+    5), ``power`` (m,) the disturbances' power [W] and ``flags`` (m, n, 3, 3) the saturation
+    flags of N_j, H_j and Lambda_j (:func:`_saturation_flags`); NaN rows where the state is
+    NaN."""
     dy = np.empty(states.shape[1] + 1)
     work = chain_work(codes.shape[0])
     for k in range(states.shape[0]):
@@ -550,10 +553,11 @@ def chain_samples(times, states, params, codes, parents, ppoints, d_at, joints, 
             power[k] = np.nan
             flags[k] = np.nan
             continue
-        chain_evaluate(times[k], states[k], params, codes, parents, ppoints, d_at, dy, joints[k], bodies[k], scalars[k],
-                       work)
+        t = tree_of[k]
+        chain_evaluate(times[k], states[k], params[t], codes, parents, ppoints[t], d_at, dy, joints[k], bodies[k],
+                       scalars[k], work)
         power[k] = dy[states.shape[1]]
-        _saturation_flags(states[k], params, codes, joints[k], flags[k])
+        _saturation_flags(states[k], params[t], codes, joints[k], flags[k])
 
 
 # -- the compiled description ------------------------------------------------------------------
@@ -1062,8 +1066,8 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
     return sorted(times)
 
 
-def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
-             work: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray, states: np.ndarray,
+             work: np.ndarray | None = None, tree_of: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Every output of a chain run's samples ``states`` (m, n_states) at ``time`` (m,), or
     of k runs' samples (k, m, n_states) at the same times (m,) (each output then has a
     leading run axis, and run i's are those of its samples alone):
@@ -1079,31 +1083,42 @@ def evaluate(compiled: CompiledChain, time: np.ndarray, states: np.ndarray,
     gravity term), disturbance_power [W], disturbance_work W [J] (``work`` (m,) or (k, m),
     the run's integrated work at the samples; 0 where not given: it is a run's history,
     not a state's) and disturbance_edges (the windows' edges at or before each sample,
-    :func:`disturbance_edges`)."""
+    :func:`disturbance_edges`). ``compiled``: the chain, or the chains (a sequence, one
+    structure) of k runs' samples (k, m, n_states), run i's ``compiled[tree_of[i]]``."""
+    trees = [compiled] if isinstance(compiled, CompiledChain) else list(compiled)
+    first = trees[0]
     states = np.asarray(states, dtype=float)
     lead = states.shape[:-1] if states.ndim > 1 else (1,)
     time = np.ascontiguousarray(np.broadcast_to(np.asarray(time, dtype=float), lead)).reshape(-1)
     states = np.ascontiguousarray(states).reshape(-1, states.shape[-1])
-    m, n = states.shape[0], compiled.size
+    m, n = states.shape[0], first.size
+    rows = (np.zeros(m, dtype=np.int64) if tree_of is None else
+            np.repeat(np.asarray(tree_of, dtype=np.int64), m // max(len(tree_of), 1)))  # each sample's tree
+    params = np.stack([c.params for c in trees])
     joints, bodies, scalars, power = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5)), np.empty(m)
     flags = np.empty((m, n, 3, 3))
-    chain_samples(time, states, *compiled.args, joints, bodies, scalars, power, flags)
+    chain_samples(time, states, params, first.codes, first.parents, np.stack([c.ppoints for c in trees]), first.d_at,
+                  rows, joints, bodies, scalars, power, flags)
+    offset = np.array([c.offset for c in trees])[rows]  # h of each sample's tree
     blocks = states[:, : 12 * n].reshape(m, n, 4, 3)
     out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
     out["force_h"] = bodies
     for k in range(_OMEGA_J + 1):
         out[JOINT_OUTPUTS[k]] = joints[:, :, k]
-    embedded = compiled.d_at >= 0
+    embedded = first.d_at >= 0
     out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]
     out["lyapunov_kinetic"] = scalars[:, _KINETIC]
     out["lyapunov_joint"] = scalars[:, _JOINT]
     out["lyapunov_body"] = scalars[:, _BODY]
-    out["lyapunov_gravity"] = scalars[:, _GRAVITY] + compiled.offset
-    out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + compiled.offset
+    out["lyapunov_gravity"] = scalars[:, _GRAVITY] + offset
+    out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + offset
     out["lyapunov_rate"] = scalars[:, _RATE]
     out["disturbance_power"] = power
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
-    out["disturbance_edges"] = disturbance_edges(compiled, time)
+    out["disturbance_edges"] = np.zeros(m)
+    for t in np.flatnonzero(np.any(params["disturbance_count"] > 0, axis=1)):  # the trees with disturbances
+        at = rows == t
+        out["disturbance_edges"][at] = disturbance_edges(trees[t], time[at])
     return {key: value.reshape(*lead, *value.shape[1:]) for key, value in out.items()}
