@@ -42,6 +42,8 @@ _MAX_LISTED = 10  # invalid runs listed in an error, the rest counted
 #: Flagged runs validated one by one (for the count of invalid runs); beyond it, the runs
 #: the column checks flag are counted as invalid when every one validated so far was.
 _MAX_CONFIRMED = 2000
+#: Validated runs of a chain's sweep that a later run is compared with (a grid's inner axes).
+_RECENT_TREES = 8
 
 
 def _short(value: Any, limit: int = 40) -> str:
@@ -411,7 +413,7 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
                     invalid_rows: dict) -> None:
     """Validate each run of a chain's sweep not yet ``counted`` invalid (those the schema
     refuses into ``invalid_rows``, and counted): a run that differs from one of the last
-    validated ones only in ``initial_state`` by :func:`rbstab.config.loader.initial_state_fits`
+    :data:`_RECENT_TREES` validated ones only in ``initial_state`` by :func:`rbstab.config.loader.initial_state_fits`
     (the checks of that section), any other by the schema."""
     recent: list[tuple[dict, Any]] = []  # (a validated run's mapping but its name and initial state, its config)
     keys = list(columns)
@@ -431,7 +433,7 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
             invalid_rows[int(i)] = problems
             counted[i] = True
         elif data is not None:
-            recent = [(rest, config), *recent[:7]]
+            recent = [(rest, config), *recent[: _RECENT_TREES - 1]]
 
 
 def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray,

@@ -1093,7 +1093,7 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     states = np.ascontiguousarray(states).reshape(-1, states.shape[-1])
     m, n = states.shape[0], first.size
     rows = (np.zeros(m, dtype=np.int64) if tree_of is None else
-            np.repeat(np.asarray(tree_of, dtype=np.int64), m // max(len(tree_of), 1)))  # each sample's tree
+            np.repeat(np.asarray(tree_of, dtype=np.int64), lead[-1]))  # each sample's tree
     params = np.stack([c.params for c in trees])
     joints, bodies, scalars, power = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5)), np.empty(m)
     flags = np.empty((m, n, 3, 3))

@@ -533,7 +533,7 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
     run a's of the tree ``tree_of[a]`` (``params`` (t, n), ``ppoints`` (t, n, 3): t trees
     of one structure, :class:`rbstab.engine.systems.TreeSystem`'s arrays): a body whose joint
     is not permanent keeps its maximal entries; a permanent joint's child is carried by its
-    Theta_j, Omega_j (eq 32; its position follows from its parent's)."""
+    Theta_j, Omega_j (its position follows from its parent's, eq 32)."""
     n = codes.shape[0]
     permanent = False
     for i in range(n):
