@@ -149,7 +149,7 @@ def step_bounds(s, t, h_abs):
     return min(max(h_abs, 10 * spacing(t)), s.max_step)
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def attempt_step(code, p, s, span, y, f, h_abs, rejected, w):
     """One attempt of scipy's ``_step_impl`` loop: a step of size ``h_abs`` from (t, y)
     with rate f, accepted or not by its error norm.
@@ -231,7 +231,7 @@ def _margin_at(code, p, limit, x, interpolant, work):
     return system_margin(code, work, p, limit)[0]
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def _dip(code, p, limit, lo, hi, interpolant, work):
     """(x, margin) of the smallest margin on [lo, hi] of the step's interpolant, by golden
     section (the margin has one dip there)."""
@@ -252,7 +252,7 @@ def _dip(code, p, limit, lo, hi, interpolant, work):
     return (c, mc) if mc < md else (d, md)
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def grazing_exit(code, p, limit, margins, interpolant, work):
     """The fraction x in (0, 1] of a step at which its interpolant is outside the
     admissible region though inside at both ends (``margins`` = (at its start, at its end),
@@ -280,7 +280,7 @@ def grazing_exit(code, p, limit, margins, interpolant, work):
     return -1.0
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def step_exit(code, p, limit, crossed, margins, interpolant, work):
     """Where a step leaves the admissible region, as a fraction of it: 1 where the margin
     ``crossed`` zero between its ends (``margins``), the first point outside of a bound
@@ -318,7 +318,7 @@ def locate_event(code, p, limit, t_old, interpolant, work, x_out):
     return t_old + hi * h, hi, system_margin(code, work, p, limit)[1]
 
 
-@jit
+@jit(inline="always")
 def integrate_run(code, p, y0, s, samples, work_done):
     """Integrate one run with the settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`)
     and fill ``samples`` (n_samples, n_state) at linspace(0, s.t_end), and ``work_done``
@@ -337,7 +337,7 @@ def integrate_run(code, p, y0, s, samples, work_done):
     return status, t_stop, nfev, n_steps
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def restart(code, p, s, t, y, f, w):
     """Start again from a breakpoint t of the disturbances (its impulses applied to y) as a
     new solve_ivp from there would: y's rate at t into f and a new initial step (2
@@ -379,7 +379,7 @@ def _keep_rows(sink, code, p, j, t, sample, work):
     return keep
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def begin_run(code, p, s, y, f, w, limit, disturbed):
     """The start of a run from the state in ``y`` (its work W after it, 0): the impulses at
     t = 0 where ``disturbed``, the admissible margin (``limit`` = pi/2 - gimbal_margin), the
@@ -402,7 +402,7 @@ def begin_run(code, p, s, y, f, w, limit, disturbed):
     return True, SUCCESS, (0.0, t_bound, t_lim, h_abs, margin, False, 0, 2, 0)
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def run_pass(code, p, s, w, vectors, state, sink, flags, scheme):
     """One pass of a run's loop: one step attempt (:func:`attempt_step`) from the loop
     variables ``state`` (:func:`begin_run`'s), and for an accepted step what follows it: the
@@ -488,7 +488,7 @@ def run_pass(code, p, s, w, vectors, state, sink, flags, scheme):
     return t < t_end, SUCCESS, (t, t_bound, t_lim, h_abs, margin, False, j, nfev, n_steps)
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def drive_run(code, p, s, w, vectors, sink, flags, scheme, clock):
     """A run from the state in ``y`` (``vectors`` = (y, f, sample), the arguments of
     :func:`run_pass`, as ``sink``, ``flags``, ``scheme``): :func:`begin_run`, then passes of
@@ -515,7 +515,7 @@ def drive_run(code, p, s, w, vectors, sink, flags, scheme, clock):
     return status, state, passes
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def _run(code, p, y0, s, samples, work_done):
     """:func:`integrate_run` but the NaN rows; also returns the number of rows filled
     (:func:`drive_run`)."""

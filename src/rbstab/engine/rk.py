@@ -18,11 +18,11 @@ passes and reference-counts none of them: handed down every call as a tuple of a
 the tableau made numba reference-count each of its arrays in every step and stage, and
 the integration took ~10 % longer (A/B, Case 3).
 
-The helpers a step calls many times (:func:`rk_step`, :func:`error_norm`,
-:func:`dense_value` ...) are ``forceinline``: LLVM inlines them into the driver
-(:mod:`rbstab.engine.integrate`), which then passes and reference-counts no work array per
-call; the integration takes ~7 % less CPU (A/B in one process, Case 3), the same bits,
-and the cold compile no longer. The right-hand side stays a call (inlined as well, it
+The helpers of a step (:func:`error_norm`, :func:`dense_value` ...) are ``forceinline``
+and :func:`rk_step`, called from one place, ``inline="always"`` (:func:`rbstab.jit.jit`):
+they end up in the driver (:mod:`rbstab.engine.integrate`), which then passes and
+reference-counts no work array per call; the integration takes ~7 % less CPU (A/B in one
+process, Case 3), the same bits. The right-hand side stays a call (inlined as well, it
 gave nothing more: 0.592 against 0.597 ms a run).
 """
 
@@ -158,7 +158,7 @@ def _stage_state(y, h, a, K, s, out):
         out[i] = y[i] + out[i] * h
 
 
-@jit(forceinline=True)
+@jit(inline="always")
 def rk_step(code, p, t, t_lim, y, f, h, method, w):
     """One step from (t, y) (rate f) of size h: y_new and its rate in K[n_stages] (scipy's
     rk_step); no stage later than ``t_lim``.

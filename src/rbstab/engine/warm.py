@@ -36,9 +36,9 @@ __all__ = ["GROUPS", "warm_up", "ensure_compiled"]
 #: (parts of :func:`warm_up`).
 GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",), "chain": ("chains",)}
 #: Cold compile time of each part of :func:`warm_up` relative to the others (one core: rates
-#: ~43 s, outputs ~7 s, the sign law ~18 s, chains ~73 s), by which :func:`ensure_compiled`
+#: ~22 s, outputs ~8 s, the sign law ~22 s, chains ~84 s), by which :func:`ensure_compiled`
 #: shares them between its two processes.
-WEIGHTS = {"rates": 6, "outputs": 1, "switching": 3, "chains": 10}
+WEIGHTS = {"rates": 3, "outputs": 1, "switching": 3, "chains": 10}
 
 
 def _warm_up_chains() -> None:
@@ -117,7 +117,8 @@ def ensure_compiled(say=None, *, sign_law: bool = False, chain: bool = False) ->
     if not cold:
         return
     if say is not None:
-        say(f"rbstab: compiling the engine once (~30-60 s on 2 cores); cached in {CACHE_DIR}")
+        took = "~90 s" if "chain" in cold else "~25 s"
+        say(f"rbstab: compiling the engine once ({took} on 2 cores); cached in {CACHE_DIR}")
     start = time.perf_counter()
     here, there = [], []
     for part in sorted((p for g in cold for p in GROUPS[g]), key=WEIGHTS.get, reverse=True):
