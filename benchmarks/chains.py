@@ -27,9 +27,12 @@ Prints (2 cores, warm numba cache):
   in reduced coordinates (:func:`rbstab.variants.tree.tree_rate`: no constraint force);
 - s a sweep of the stance example over the trunk's mass (every run another chain: its
   rest state and h found again) and over the legs' initial tilt, ``--parameter-runs``
-  runs (default 1,000) on one worker process, and their ratio.
+  runs (default 1,000) on one worker process, and their ratio;
+- s ``rbstab run`` of the stance example with an empty compile cache (the engine's and a
+  tree's kernels compiled once, :func:`rbstab.engine.ensure_compiled`), beside a warm one.
 
 Run: python benchmarks/chains.py [--sweep-runs N] [--parameter-runs N] [--only-parameter] [--only-reduced]
+[--only-cold]
 """
 
 from __future__ import annotations
@@ -257,6 +260,27 @@ def parameter_vs_initial_state(n: int) -> None:
     print(f"  ratio trunk mass / legs tilt: {seconds['trunk mass'] / seconds['legs tilt']:.2f}")
 
 
+def cold_run() -> None:
+    """``rbstab run`` of the stance example, process start to exit, with an empty compile
+    cache (``NUMBA_CACHE_DIR``, compiling once) and warm (best of 3)."""
+    import os
+    import subprocess
+    import tempfile
+
+    def run(env=None) -> float:
+        with tempfile.TemporaryDirectory() as out:
+            start = time.perf_counter()
+            subprocess.run(["rbstab", "run", str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"), "-o", out],
+                           check=True, capture_output=True, env=env)
+            return time.perf_counter() - start
+
+    warm = min(run() for _ in range(3))
+    with tempfile.TemporaryDirectory() as cache:
+        cold = run(dict(os.environ, NUMBA_CACHE_DIR=cache))
+    print(f"rbstab run stance_ankle_hip: warm {warm:.2f} s, cold (compiling the engine and a tree's kernels) "
+          f"{cold:.1f} s")
+
+
 def main() -> None:
     import argparse
 
@@ -267,8 +291,12 @@ def main() -> None:
     parser.add_argument("--only-parameter", action="store_true", help="only those two sweeps")
     parser.add_argument("--only-reduced", action="store_true",
                         help="only the rates of serial chains of permanent joints, maximal and reduced")
+    parser.add_argument("--only-cold", action="store_true", help="only rbstab run with an empty compile cache")
     options = parser.parse_args()
     warnings.simplefilter("ignore")
+    if options.only_cold:
+        cold_run()
+        return
     if options.only_reduced:
         reduced_rates()
         return
@@ -341,6 +369,7 @@ def main() -> None:
     if options.sweep_runs:
         print("sweeps over initial states (2 local processes, store summary):")
         sweeps(options.sweep_runs)
+    cold_run()
 
 
 if __name__ == "__main__":
