@@ -6,8 +6,9 @@ N((16, 32, -16), 4^2), one body) and ``parameter`` (mass and inertia x U(0.5, 1.
 L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record). Prints:
 
 - **compile**: the GPU's compute mode, the kernel's registers and local memory a thread
-  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`; and the
-  same kernel without its steps for disturbances, ``kernel_function(..., disturbances=False)``), the
+  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`; with
+  ``--plain-kernel`` also the same kernel without its steps for disturbances,
+  ``kernel_function(..., disturbances=False)``, compiled on the spot), the
   occupancy they allow and the resident threads; the compile (or cache load) time in this
   process and a new process's first launch, its kernel loaded from the disk cache;
 - **deadline**: 300,000 runs, 100 samples kept, a 0.05 s limit: the kernel's time, the runs
@@ -49,7 +50,7 @@ Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
 
     python benchmarks/gpu.py [--n 10000 100000 1000000] [--sweep-n 1000000] [--check-n 256]
                              [--chain-n 10000 100000] [--chain-cpu-n 2000] [--chain-sweep-n 20000]
-                             [--chains-only]
+                             [--chains-only | --one-body-only] [--plain-kernel]
 
 ``--host-only`` (any machine, no GPU needed) measures what a ``--engine cuda`` sweep costs
 besides the GPU: the same ``rbstab sweep`` command with every launch replaced by a stub
@@ -201,7 +202,10 @@ def correctness(kind: str, n: int) -> str:
             f"CPU engine vs rtol 1e-11: median {np.median(own):.2g}, max {own.max():.2g}")
 
 
-def compile_info() -> str:
+def compile_info(plain_kernel: bool = False) -> str:
+    """The one-body kernel's compute mode, registers, local memory, occupancy and compile
+    (or load) time; ``plain_kernel``: also the same kernel without the driver's steps for
+    disturbances (compiled here, ~2 minutes, never cached)."""
     from numba import cuda
 
     from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_kernel, compute_mode, integrate_chunks_cuda,
@@ -218,8 +222,10 @@ def compile_info() -> str:
     sms = device.MULTIPROCESSOR_COUNT
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
     # the same kernel without the driver's steps for disturbances (breakpoints, impulses, work)
-    plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
-    plain_regs, plain_local = kernel_resources(plain, signature)
+    without = ""
+    if plain_kernel:
+        plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
+        without = " (without the driver's steps for disturbances: %d, %d B)" % kernel_resources(plain, signature)
     codes, params, y0, settings, n_samples = runs("parameter", 128)
     list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
     script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
@@ -229,7 +235,7 @@ def compile_info() -> str:
     again = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     name = device.name.decode() if isinstance(device.name, bytes) else device.name
     return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread "
-            f"(without the driver's steps for disturbances: {plain_regs}, {plain_local} B); "
+            f"{without}; "
             f"{per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}), "
             f"{per_sm * THREADS_PER_BLOCK * sms:,} resident threads on {sms} multiprocessors; "
             f"compiled or loaded in {loaded:.1f} s; a new process's first launch {float(again.stdout.split()[-1]):.2f} s "
@@ -595,6 +601,9 @@ def main() -> None:
     parser.add_argument("--chain-cpu-n", type=int, default=2000)
     parser.add_argument("--chain-sweep-n", type=int, nargs="+", default=[20_000])
     parser.add_argument("--chains-only", action="store_true", help="only the tree kernel's lines")
+    parser.add_argument("--one-body-only", action="store_true", help="all but the tree kernel's lines")
+    parser.add_argument("--plain-kernel", action="store_true",
+                        help="also the one-body kernel without its steps for disturbances (compiled, ~2 min)")
     parser.add_argument("--ptx-trees", nargs="+", default=["1:1:0", "1:0:1", "2:2:0", "8:8:0", "8:0:8"],
                         help="tree shapes of --ptx-only, BODIES:PERMANENT:EMBEDDED")
     parser.add_argument("--ptx-only", action="store_true",
@@ -612,7 +621,7 @@ def main() -> None:
     if args.chains_only:
         chains(args)
         return
-    print("compile:", compile_info())
+    print("compile:", compile_info(args.plain_kernel))
     print("deadline:", deadline())
     for n_samples in (2, 201, 2001):
         print(f"samples {n_samples:5d}, 270,336 runs: kernel {kernel_rate(270_336, n_samples):,.0f} runs/s")
@@ -634,7 +643,8 @@ def main() -> None:
     print(f"CPU engine, {os.cpu_count()} processes, parameter sweep: {cpu_rate('parameter', args.cpu_n):,.0f} runs/s")
     for kind in ("initial-state", "parameter"):
         print(f"correctness, {kind}, {args.check_n} runs: {correctness(kind, args.check_n)}")
-    chains(args)
+    if not args.one_body_only:
+        chains(args)
     sweep_seconds(1000, "summary")  # the kernel cache, warm
     for n in args.sweep_n:
         print(f"rbstab sweep --engine cuda --store summary, N = {n}: {sweep_seconds(n, 'summary', jobs=args.jobs):.1f} s")
