@@ -49,3 +49,42 @@ def test_tree_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
     from rbstab.engine.rk import DOP853
 
     ptx_for_sm_90(monkeypatch, tree_kernel_function(DOP853, (2, 2, 0)), tree_launch_signature())
+
+
+def _halved(x):
+    return 0.5 * x
+
+
+def _tripled(x):
+    return 3.0 * x
+
+
+@pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
+def test_functions_not_inlined_stay_calls_in_optimised_ptx(monkeypatch):
+    """A function of NOT_INLINED (the tree's rate) is a function of its own in the optimised
+    PTX, called where the kernel calls it, while NVVM inlines the others: a small one of
+    each, called twice."""
+    import re
+
+    import numba.cuda.dispatcher
+    from numba import cuda, float64
+
+    from rbstab.engine import cuda as engine_cuda
+    from rbstab.jit import jit
+
+    class Device:  # numba-cuda asks the current device's compute capability for called dispatchers
+        compute_capability = (9, 0)
+
+    monkeypatch.setattr(numba.cuda.dispatcher, "get_current_device", lambda: Device())
+    monkeypatch.setattr(engine_cuda, "NOT_INLINED", engine_cuda.NOT_INLINED | {(__name__, "_halved")})
+    engine_cuda.tree_kernel_function(2, (1, 1, 0))  # what sets the lowering up
+    halved, tripled = jit(cache=False)(_halved), jit(cache=False)(_tripled)
+
+    def kernel(x):
+        x[0] = halved(x[0]) + halved(x[1]) + tripled(x[2]) + tripled(x[3])
+
+    ptx, _ = cuda.compile_ptx(kernel, (float64[::1],), cc=(9, 0), opt=True)
+    functions = re.findall(r"^\.(?:visible |weak )?\.func\s+(?:\([^)]*\)\s*)?(\S+?)\(", ptx, re.M)
+    assert any("_halved" in name for name in functions), functions
+    assert not any("_tripled" in name for name in functions), functions
+    assert len(re.findall(r"call\.uni.*_halved", ptx, re.S)) >= 1

@@ -515,6 +515,37 @@ def tree_shape(codes, d_at) -> tuple[int, int, int]:
     return int(codes.size), int(np.sum(codes == PERMANENT)), int(np.sum(d_at >= 0))
 
 
+#: (module, name) of the compiled functions a CUDA kernel calls as functions of their own:
+#: NVVM inlines every call it may, and a tree's rate, region and impulses, called from six,
+#: six and three places of the driver, were as many copies of 5,000-11,500 lines of PTX each
+#: (the stance example's kernel: 174,000 lines, 69,000 with these calls). The kernel goes from
+#: Python to machine code 4.7x as fast (``benchmarks/gpu.py --ptx-only``); the rate, the work
+#: of a step, costs its call once per stage.
+NOT_INLINED = frozenset({("rbstab.variants.tree", "tree_rate"), ("rbstab.engine.systems", "tree_margin"),
+                         ("rbstab.engine.systems", "tree_impulses")})
+
+
+def _lower_not_inlined() -> None:
+    """Have numba-cuda lower the functions of :data:`NOT_INLINED` with LLVM's ``noinline``
+    attribute, once a process (numba-cuda has no option for it: its lowering's
+    ``setup_function`` is wrapped). Under the simulator nothing is lowered."""
+    if simulated():
+        return
+    from numba.cuda import lowering  # heavy: numba-cuda
+
+    setup = lowering.CUDALower.setup_function
+    if getattr(setup, "not_inlined", False):
+        return
+
+    def setup_function(self, fndesc):
+        setup(self, fndesc)
+        if (fndesc.modname, fndesc.qualname) in NOT_INLINED and "alwaysinline" not in self.function.attributes:
+            self.function.attributes.add("noinline")
+
+    setup_function.not_inlined = True
+    lowering.CUDALower.setup_function = setup_function
+
+
 def tree_kernel_function(method: int, shape: tuple[int, int, int]):
     """The Python function of the CUDA kernel of the runs of trees of ``shape`` (bodies n,
     permanent joints p, embedded joints e; :func:`tree_shape`) with method number ``method``
@@ -532,9 +563,11 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
     maximal image (12 n + 3 e), the mass matrix (n_u)^2 of
     :func:`rbstab.variants.tree.tree_rate` (n_u = 6 n - 3 p generalised velocities) and the
     permanent joints' impulsive system (3 p)^2 of
-    :func:`rbstab.variants.chain.chain_impulses`."""
+    :func:`rbstab.variants.chain.chain_impulses`. The tree's rate, region and impulses stay
+    functions of their own (:data:`NOT_INLINED`)."""
     from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
 
+    _lower_not_inlined()
     n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
     scheme = (method, int(N_STAGES[method]), method == DOP853)
     bodies, permanent, embedded = (int(x) for x in shape)
