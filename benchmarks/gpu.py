@@ -5,6 +5,9 @@ rtol 1e-6, atol 1e-8, t_end 2 s, 2001 samples. Two sweeps: ``initial-state`` (Om
 N((16, 32, -16), 4^2), one body) and ``parameter`` (mass and inertia x U(0.5, 1.5), K_c and
 L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record). Prints:
 
+- **compiled at once**: the CPU engine and the CUDA kernels the run needs, each compiled (or
+  loaded from the cache) in a process of its own, at once, before anything is timed: each
+  process's seconds (with an empty cache, each kernel's compile beside the others');
 - **compile**: the GPU's compute mode, the kernel's registers and local memory a thread
   (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`; with
   ``--plain-kernel`` also the same kernel without its steps for disturbances,
@@ -200,6 +203,35 @@ def correctness(kind: str, n: int) -> str:
     return (f"statuses equal {int(np.sum(gpu.status == cpu.status))}/{n}; steps equal {int(np.sum(steps == 0))}/{n} "
             f"(max {int(steps.max())} apart); final states rel. diff median {np.median(rel):.2g}, max {rel.max():.2g}; "
             f"CPU engine vs rtol 1e-11: median {np.median(own):.2g}, max {own.max():.2g}")
+
+
+#: What each process of :func:`compile_all` compiles (or loads from the cache).
+COMPILES = {
+    "cpu": "from rbstab.engine.warm import ensure_compiled; ensure_compiled(sign_law=True, chain=True)",
+    "one-body": "from rbstab.engine.cuda import compiled_kernel; from rbstab.engine.rk import DOP853; "
+                "compiled_kernel(DOP853, 15)",
+    "tree": "from rbstab.engine.cuda import compiled_tree_kernel; from rbstab.engine.rk import DOP853; "
+            "compiled_tree_kernel(DOP853, (2, 2, 0))",
+}
+
+
+def compile_all(parts) -> str:
+    """The kernels of ``parts`` (keys of :data:`COMPILES`: the CPU engine, the one-body and
+    the stance tree CUDA kernels) compiled at once, each in a process of its own (numba
+    compiles on one core), before anything is timed: each process's wall seconds."""
+    start = time.perf_counter()
+    running = {part: subprocess.Popen([sys.executable, "-c", COMPILES[part]], stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.PIPE, text=True) for part in parts}
+    took = {}
+    while running:
+        for part, proc in list(running.items()):
+            if proc.poll() is not None:
+                if proc.returncode != 0:
+                    raise SystemExit(f"compiling {part} failed:\n{proc.stderr.read()}")
+                took[part] = time.perf_counter() - start
+                del running[part]
+        time.sleep(0.5)
+    return ", ".join(f"{part} {seconds:.1f} s" for part, seconds in took.items())
 
 
 def compile_info(plain_kernel: bool = False) -> str:
@@ -618,6 +650,9 @@ def main() -> None:
     from rbstab.engine.cuda import check_available
 
     check_available()
+    parts = ["cpu"] + ([] if args.chains_only else ["one-body"]) + ([] if args.one_body_only else ["tree"])
+    print("compiled at once, each in a process of its own (empty cache: a compile; else a load):",
+          compile_all(parts))
     if args.chains_only:
         chains(args)
         return
