@@ -528,13 +528,14 @@ NOT_INLINED = frozenset({("rbstab.variants.tree", "tree_rate"), ("rbstab.engine.
 def _lower_not_inlined() -> None:
     """Have numba-cuda lower the functions of :data:`NOT_INLINED` with LLVM's ``noinline``
     attribute, once a process (numba-cuda has no option for it: its lowering's
-    ``setup_function`` is wrapped). Under the simulator nothing is lowered."""
+    ``setup_function`` is wrapped). Under the simulator nothing is lowered; a numba-cuda
+    without that method inlines them as it would (the same kernel, a longer compile)."""
     if simulated():
         return
     from numba.cuda import lowering  # heavy: numba-cuda
 
-    setup = lowering.CUDALower.setup_function
-    if getattr(setup, "not_inlined", False):
+    setup = getattr(getattr(lowering, "CUDALower", None), "setup_function", None)
+    if setup is None or getattr(setup, "not_inlined", False):
         return
 
     def setup_function(self, fndesc):
