@@ -273,6 +273,23 @@ def test_a_report_draws_a_thinned_chain_run(layout, tmp_path):
     assert largest_error(summary, "hip")[0] < 1e-6
 
 
+def test_a_chain_sweeps_report_names_the_keys_that_differ_as_the_sweep_does(tmp_path):
+    """The report's runs table (summary.csv) has a column per configuration key that differs
+    between the runs, named as ``--set`` and the sweep name it (a tree's bodies and joints
+    by name) and holding each run's value: ``bodies.trunk.mass``, ``joints.hip.k_r``, not
+    the whole ``bodies`` and ``joints`` lists."""
+    out = tmp_path / "results"
+    result = CliRunner().invoke(cli, ["sweep", STANCE, "--grid", "bodies.trunk.mass=40,50", "--grid",
+                                      "joints.hip.k_r.0=400,600", *SHORT, "-j", "1", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    report = CliRunner().invoke(cli, ["report", str(out / "stance_ankle_hip"), "-o", str(tmp_path / "report")])
+    assert report.exit_code == 0, report.output
+    summary = pd.read_csv(tmp_path / "report" / "summary.csv")
+    assert sorted(summary["bodies.trunk.mass"]) == [40.0, 40.0, 50.0, 50.0]
+    assert sorted(summary["joints.hip.k_r"].str.split(",").str[0].str.strip("[ ").astype(float)) == [400, 400, 600, 600]
+    assert not {"bodies", "joints"} & set(summary.columns)
+
+
 def test_a_chain_sweep_over_initial_states_refuses_what_the_schema_refuses():
     """Runs that differ only in their initial states are checked as config_from_mapping
     checks them (the schema, each body's and each joint's gimbal lock, simulation.limits):

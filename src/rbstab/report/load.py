@@ -68,7 +68,9 @@ class ReportInputError(ValueError):
 
 
 def flatten_config(config: Any, prefix: str = "") -> dict[str, Any]:
-    """Flatten nested mappings into dotted keys; lists (vectors, matrices) stay leaves.
+    """Flatten nested mappings into dotted keys, the keys of ``--set`` and of sweeps: a
+    list of named mappings (a tree's ``bodies`` and ``joints``) by its entries' names;
+    other lists (vectors, matrices, disturbances) stay leaves.
 
     Parameters
     ----------
@@ -80,8 +82,12 @@ def flatten_config(config: Any, prefix: str = "") -> dict[str, Any]:
     Returns
     -------
     dict
-        ``{"controller.k_t": [[...]], "simulation.t_end": 2.0, ...}``.
+        ``{"controller.k_t": [[...]], "simulation.t_end": 2.0, ...}``; a tree's
+        ``{"bodies.trunk.mass": 46.2, "joints.hip.k_r": [[...]], ...}``.
     """
+    if isinstance(config, list) and config and all(isinstance(e, dict) and isinstance(e.get("name"), str)
+                                                   for e in config):
+        config = {entry["name"]: entry for entry in config}
     if isinstance(config, dict):
         out: dict[str, Any] = {}
         for key, value in config.items():
