@@ -657,3 +657,23 @@ def test_a_chain_beside_a_slowly_unstable_upright_is_an_unstable_rest(tmp_path):
     assert table["report:rest_state"].to_dict() == {705: "unstable", 1000: "asymptotically stable"}
     assert table["report:settled"].to_dict() == {705: False, 1000: True}
     assert np.isnan(table.loc[705, "report:settling_time"]) and table.loc[1000, "report:settling_time"] > 0
+
+
+def test_configuration_keys_are_flattened_as_set_and_sweeps_name_them():
+    """The runs table's parameter columns are the keys of --set and of sweeps: mappings by
+    their keys, lists of mappings by their entries' names (a tree's bodies and joints) or
+    else by position (disturbances), vectors and matrices whole; each key leads to what a
+    sweep over it varies."""
+    from rbstab.config.paths import parse_any_key
+    from rbstab.report.load import flatten_config
+
+    config = {"simulation": {"t_end": 2.0}, "controller": {"k_t": [[1, 0], [0, 1]]},
+              "bodies": [{"name": "legs", "mass": 22.5}, {"name": "trunk", "mass": 46.2, "inertia": [3, 3, 0.4]}],
+              "disturbances": [{"kind": "impulse", "value": [0, 15, 0]}, {"kind": "pulse", "start": 1.0}]}
+    flat = flatten_config(config)
+    assert flat == {"simulation.t_end": 2.0, "controller.k_t": [[1, 0], [0, 1]], "bodies.legs.name": "legs",
+                    "bodies.legs.mass": 22.5, "bodies.trunk.name": "trunk", "bodies.trunk.mass": 46.2,
+                    "bodies.trunk.inertia": [3, 3, 0.4], "disturbances.0.kind": "impulse",
+                    "disturbances.0.value": [0, 15, 0], "disturbances.1.kind": "pulse", "disturbances.1.start": 1.0}
+    for key in ("bodies.trunk.mass", "disturbances.0.value", "controller.k_t"):
+        parse_any_key(key)  # a key of the grammar

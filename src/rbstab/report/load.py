@@ -69,8 +69,9 @@ class ReportInputError(ValueError):
 
 def flatten_config(config: Any, prefix: str = "") -> dict[str, Any]:
     """Flatten nested mappings into dotted keys, the keys of ``--set`` and of sweeps: a
-    list of named mappings (a tree's ``bodies`` and ``joints``) by its entries' names;
-    other lists (vectors, matrices, disturbances) stay leaves.
+    list of mappings by its entries' names where each has one (a tree's ``bodies`` and
+    ``joints``), else by position (``disturbances``); other lists (vectors, matrices)
+    stay leaves.
 
     Parameters
     ----------
@@ -83,11 +84,12 @@ def flatten_config(config: Any, prefix: str = "") -> dict[str, Any]:
     -------
     dict
         ``{"controller.k_t": [[...]], "simulation.t_end": 2.0, ...}``; a tree's
-        ``{"bodies.trunk.mass": 46.2, "joints.hip.k_r": [[...]], ...}``.
+        ``{"bodies.trunk.mass": 46.2, "joints.hip.k_r": [[...]], ...}``;
+        ``"disturbances.0.value"``.
     """
-    if isinstance(config, list) and config and all(isinstance(e, dict) and isinstance(e.get("name"), str)
-                                                   for e in config):
-        config = {entry["name"]: entry for entry in config}
+    if isinstance(config, list) and config and all(isinstance(e, dict) for e in config):
+        named = all(isinstance(e.get("name"), str) for e in config)
+        config = {(entry["name"] if named else str(i)): entry for i, entry in enumerate(config)}
     if isinstance(config, dict):
         out: dict[str, Any] = {}
         for key, value in config.items():
