@@ -191,7 +191,7 @@ def attempt_step(code, p, s, span, y, f, h_abs, rejected, w):
     return REJECTED, t, 0.0, h_abs * (factor if factor > MIN_FACTOR else MIN_FACTOR)
 
 
-@jit
+@jit(_nrt=False)
 def step(code, p, s, span, y, f, h_abs, w):
     """One accepted step from (t, y) with rate f (scipy's ``_step_impl``), with the run's
     settings ``s`` (:data:`~rbstab.engine.settings.SETTINGS`) and work arrays ``w``
@@ -294,7 +294,7 @@ def step_exit(code, p, limit, crossed, margins, interpolant, work):
     return grazing_exit(code, p, limit, margins, interpolant, work)
 
 
-@jit
+@jit(_nrt=False)
 def locate_event(code, p, limit, t_old, interpolant, work, x_out):
     """Where the interpolant leaves the admissible region (:func:`admissible_event` of
     variant ``code``, record ``p``, gimbal-lock angle ``limit``) in [t_old, t_old + x_out
@@ -362,7 +362,7 @@ def keep_sample(sink, code, p, j, t, sample, work):
     raise NotImplementedError("compiled code only")
 
 
-@overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy"})
+@overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy", "_nrt": False})
 def _keep_rows(sink, code, p, j, t, sample, work):
     if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is SampleRows):
         return None

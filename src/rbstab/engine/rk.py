@@ -88,7 +88,7 @@ RK_P = _stacked([getattr(t, "P", np.zeros((0, 0))) for t in _T], (max(N_STAGES) 
 DOP853_E3, DOP853_E5, DOP853_D = TABLEAUS["DOP853"].E3, TABLEAUS["DOP853"].E5, TABLEAUS["DOP853"].D
 
 
-@jit
+@jit(_nrt=False)
 def rms_norm(x, scale):
     """RMS norm of x / scale (scipy's ``norm``) over the entries of ``scale`` (the state's:
     an integrated work W after them is not part of any norm)."""
@@ -99,7 +99,7 @@ def rms_norm(x, scale):
     return math.sqrt(total) / math.sqrt(n)
 
 
-@jit
+@jit(_nrt=False)
 def initial_step(code, p, s, t0, t_bound, t_lim, y0, f0, w):
     """scipy's ``select_initial_step`` from t0 towards t_bound (Hairer, Norsett & Wanner,
     II.4); its one right-hand-side call at min(t0 + h0, t_lim).
@@ -208,7 +208,7 @@ def error_norm(K, h, scale, method):
     return abs(h) * err5_2 / math.sqrt(denom * n)
 
 
-@jit
+@jit(_nrt=False)
 def dense_coefficients(code, p, t_old, t_lim, y_old, h, method, w):
     """The interpolant of the step from y_old to y_new into ``w.Q`` (rows of coefficients;
     ``w``: the run's :class:`rbstab.engine.settings.Work`, its stage rates ``w.K``).

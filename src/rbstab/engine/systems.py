@@ -159,7 +159,7 @@ def admissible(code, y, p, limit):
 
 
 # -- a chain's admissible region ------------------------------------------------------------------
-@jit
+@jit(_nrt=False)
 def chain_bounds(y, params, codes, parents, ppoints, margin, status):
     """(margin, status) after the bounds ``params[0].limits`` of ``simulation.limits`` on a
     chain's maximal state ``y`` (:class:`TreeSystem`'s arrays): every body's Theta, Omega,
@@ -193,7 +193,7 @@ def chain_bounds(y, params, codes, parents, ppoints, margin, status):
     return margin, status
 
 
-@jit
+@jit(_nrt=False)
 def _chain_breakpoint(params, t, t_end):
     out = t_end
     for i in range(params.shape[0]):
@@ -201,7 +201,7 @@ def _chain_breakpoint(params, t, t_end):
     return out
 
 
-@jit
+@jit(_nrt=False)
 def _chain_disturbed(params):
     for i in range(params.shape[0]):
         if params[i].disturbance_count > 0.0:
@@ -210,7 +210,7 @@ def _chain_disturbed(params):
 
 
 # -- a tree in reduced coordinates: its region and impulses on its maximal image -------------------------
-@jit
+@jit(_nrt=False)
 def tree_margin(y, p, limit):
     """(margin, status) of the admissible region at the reduced state ``y`` (a
     :class:`TreeSystem` ``p``; as :func:`admissible_event`'s): the gimbal lock, ``limit`` -
@@ -243,7 +243,7 @@ def tree_margin(y, p, limit):
     return chain_bounds(w.y, p.params, p.codes, p.parents, p.ppoints, margin, GIMBAL_LOCK)
 
 
-@jit
+@jit(_nrt=False)
 def tree_impulses(t, y, p):
     """:func:`rbstab.variants.chain.chain_impulses` on the maximal image of the reduced state
     ``y`` (the permanent joints' impulsive reactions keep them held), the jumps of the
@@ -291,7 +291,7 @@ def system_impulses(code, t, y, p):
     raise NotImplementedError("compiled code only")
 
 
-_INLINE = {"forceinline": True, "error_model": "numpy"}
+_INLINE = {"forceinline": True, "error_model": "numpy", "_nrt": False}
 
 
 def _is_body(p) -> bool:

@@ -163,7 +163,7 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
                    chain_work(codes.shape[0]))
 
 
-@jit
+@jit(forceinline=True, _nrt=False)
 def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
     rotations A_i and B(Theta_i) into ``work.rot``, ``work.rate`` (``rotations``: the caller
@@ -280,7 +280,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     return n_permanent, power, work_power, dissipation, size
 
 
-@jit
+@jit(forceinline=True, _nrt=False)
 def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work):
     """The state rate of a chain and everything it is made of, at time ``t`` [s].
 
@@ -372,7 +372,7 @@ def _add_mobility(matrix, row, col, sign, mass, g, i, u, w):
             matrix[row + r, col + k] += sign * ((1.0 / mass if r == k else 0.0) + column[r])
 
 
-@jit
+@jit(_nrt=False)
 def _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, k, work, with_velocity):
     """The constraint forces Lambda_j of the ``k`` permanent joints with d^2E_j/dt^2 = 0
     (the stacked eq 15), added to ``torque``, ``force`` and written to ``joints``.
@@ -451,7 +451,7 @@ def chain_push(y, params, codes, parents, ppoints, body, point, value, torque_pu
                            chain_work(codes.shape[0]))
 
 
-@jit
+@jit(_nrt=False)
 def chain_push_with(y, params, codes, parents, ppoints, body, point, value, torque_push, work):
     """Apply a push to the chain's state ``y`` (n_states,) in place and return its energy dT
     [J] (the jump of the kinetic energy): a force impulse ``value`` P [N s] (inertial frame)
@@ -493,7 +493,7 @@ def chain_push_with(y, params, codes, parents, ppoints, body, point, value, torq
     return after - before
 
 
-@jit
+@jit(_nrt=False)
 def chain_impulses(t, y, params, codes, parents, ppoints, work):
     """Apply the impulses of every body's disturbances that start at ``t`` [s] to the state
     ``y`` in place (:func:`chain_push_with`, one after the other); returns their energy, the
@@ -517,7 +517,7 @@ def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
                np.empty((codes.shape[0], 3)), np.empty(5))
 
 
-@jit
+@jit(forceinline=True, _nrt=False)
 def _saturation_flags(y, params, codes, joints, flags):
     """The actuators' saturation flags of one evaluated state into ``flags`` (n, 3, 3): per
     joint j, the axes of N_j, of H of body j (its child) and of Lambda_j commanded at or

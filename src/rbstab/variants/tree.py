@@ -163,7 +163,7 @@ def _moment_row(second, i, r, cs, point, m, shift):
             s_r[2] + c_r * point[2] + p_r * cs[2] - m * p_r * point[2] + (shift if r == 2 else 0.0))
 
 
-@jit
+@jit(_nrt=False)
 def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, rot, rate, angles):
     """The maximal image ``y`` (12 n + 3 e,; the chain's layout) of the reduced state ``yr``,
     parents first; ``rot`` (n, 3, 3) receives each A_i and ``rate`` (n, 3, 3) the B of each
@@ -272,7 +272,7 @@ def _envelope_cholesky_solve(matrix, rhs, codes, u_at, start):
             rhs[r] = total / matrix[r, r]
 
 
-@jit
+@jit(_nrt=False)
 def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work):
     """The rate of a tree in reduced coordinates (docs/physics.md, "A tree in reduced
     coordinates"; for one body on a permanent joint, eq 21).
@@ -460,7 +460,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
                 dyr[at + 9 + k] = rhs[u + 3 + k]
 
 
-@jit
+@jit(_nrt=False)
 def tree_velocities(y, codes, parents, r_at, yr):
     """Write the generalised velocities of the maximal state ``y`` (12 n + 3 e,) into the
     reduced state ``yr`` (n_r,; ``r_at`` its layout): Omega_j = Omega_c - A_rel' Omega_p
