@@ -180,7 +180,7 @@ def _is_chain_config(config: Any) -> bool:
 
 def _integrate(config, engine: str, timeout: float | None) -> "RunResult":
     """The run (one body or a tree), the compiled kernels made first (once per machine,
-    ~25 s on 2 cores, ~90 s with a tree's, cached)."""
+    ~25 s on 2 cores, ~65 s with a tree's, cached)."""
     from .engine import ensure_compiled  # heavy: numba, numpy
     from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
     from .simulator import simulate as integrate  # heavy: numba, numpy
@@ -224,7 +224,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_EN
 
     Notes
     -----
-    The first run on a machine compiles the engine (~25 s on 2 cores, ~90 s with a
+    The first run on a machine compiles the engine (~25 s on 2 cores, ~65 s with a
     tree's kernels), cached for every later run and process (:mod:`rbstab.jit`).
     """
     from .io.hdf5 import result_dataset  # heavy: numpy

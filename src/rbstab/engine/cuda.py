@@ -520,9 +520,8 @@ def tree_shape(codes, d_at) -> tuple[int, int, int]:
 #: six and three places of the driver, were as many copies of 5,000-11,500 lines of PTX each
 #: (the stance example's kernel: 174,000 lines, 69,000 with these calls). The kernel goes from
 #: Python to machine code 4.7x as fast (``benchmarks/gpu.py --ptx-only``). The CPU driver
-#: keeps them inlined: there the same calls made a chain's runs 20-25 % slower (the rate's
-#: alone; numba counts the references of every array a call passes) and its compile 22 %
-#: shorter.
+#: keeps them inlined: there the same calls made a chain's runs 10-15 % slower and its
+#: cold compile 17 % shorter.
 NOT_INLINED = frozenset({("rbstab.variants.tree", "tree_rate"), ("rbstab.engine.systems", "tree_margin"),
                          ("rbstab.engine.systems", "tree_impulses")})
 

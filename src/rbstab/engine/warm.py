@@ -117,7 +117,7 @@ def ensure_compiled(say=None, *, sign_law: bool = False, chain: bool = False) ->
     if not cold:
         return
     if say is not None:
-        took = "~90 s" if "chain" in cold else "~25 s"
+        took = "~65 s" if "chain" in cold else "~25 s"
         say(f"rbstab: compiling the engine once ({took} on 2 cores); cached in {CACHE_DIR}")
     start = time.perf_counter()
     here, there = [], []
