@@ -142,7 +142,8 @@ def test_a_generation_is_one_engine_batch(config, tmp_path, monkeypatch):
     batch = rbstab.simulator.simulate_batch
 
     def counted(runs, rows=None, **kwargs):
-        calls.append(len(runs) if rows is None else len(rows))
+        if kwargs.get("configs") is None:  # a study's batch (simulate_blocks passes the configs it runs)
+            calls.append(len(runs) if rows is None else len(rows))
         return batch(runs, rows, **kwargs)
 
     monkeypatch.setattr(rbstab.simulator, "simulate_batch", counted)

@@ -39,6 +39,7 @@ import numpy as np
 
 from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
+from .engine.batch import MAX_STATE
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
 from .engine.integrate import admissible
@@ -601,7 +602,6 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
         raise ValueError(f"chunk_size: found {chunk_size}; expected an integer >= 1")
     if keep not in KEEP:
         raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
-    gpu = get_engine(engine).gpu
     get_engine(engine).check_available()  # before any run
     trees, bodies = [], []
     for i, config in enumerate(configs):
@@ -613,47 +613,33 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
         for members, block in _tree_blocks([configs[i] for i in trees], timeout=timeout, outputs=keep != "none",
                                            engine=engine):
             yield [trees[j] for j in members], block
-    groups: dict[tuple, list[int]] = {}
+    if bodies:
+        chosen = [configs[i] for i in bodies]
+        for rows, block in simulate_batch(_batch_of(chosen, timeout), chunk_size=chunk_size, full=full, engine=engine,
+                                          keep=keep, configs=chosen):
+            yield [bodies[r] for r in rows], block
+
+
+def _batch_of(configs: Sequence["RunConfig"], timeout: float | None) -> RunBatch:
+    """The :class:`~rbstab.engine.RunBatch` of one-body configurations the compiled engine
+    takes (``timeout`` [s], if given, each run's ``max_wall_time``)."""
     shared: dict[tuple, Variant] = {}
-    for i in bodies:
-        config = configs[i]
-        size = _variant_of(config, shared).layout.size
-        groups.setdefault((config.simulation.method, config.simulation.n_samples, size), []).append(i)
-    for (method, n_samples, size), members in groups.items():
-        if gpu:
-            group = [configs[i] for i in members]
-            variants = [_variant_of(c, shared) for c in group]
-            runs = (np.array([v.code for v in variants], dtype=np.int64), _parameter_rows(variants),
-                    np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, group)]),
-                    settings_rows([c.simulation for c in group], timeout))
-            yield from _cuda_blocks(runs, group, members, method, n_samples, full, keep)
-            continue
-        buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
-        for lo in range(0, len(members), chunk_size):
-            chunk = members[lo : lo + chunk_size]
-            start = _time.perf_counter()
-            chunk_configs = [configs[i] for i in chunk]
-            variants = [_variant_of(c, shared) for c in chunk_configs]
-            codes = np.array([v.code for v in variants], dtype=np.int64)
-            params = _parameter_rows(variants)
-            settings = settings_rows([c.simulation for c in chunk_configs], timeout)
-            sol = integrate_runs(
-                codes,
-                params,
-                np.stack([v.initial_state(c.initial_state) for v, c in zip(variants, chunk_configs)]),
-                settings,
-                method=method,
-                n_samples=n_samples,
-                out=buffer,
-            )
-            share = (_time.perf_counter() - start) / len(chunk)
-            for runs, block in _chunk_blocks(chunk_configs, codes, params, sol, share, settings, full):
-                yield [chunk[j] for j in runs], block
+    variants = [_variant_of(c, shared) for c in configs]
+    n_state = np.array([v.layout.size for v in variants], dtype=np.int64)
+    y0 = np.zeros((len(configs), MAX_STATE))
+    for i, (variant, config) in enumerate(zip(variants, configs)):
+        y0[i, : n_state[i]] = variant.initial_state(config.initial_state)
+    settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
+    settings["method"] = [method_number(c.simulation.method) for c in configs]
+    return RunBatch(params=_parameter_rows(variants), y0=y0, n_state=n_state,
+                    variant=np.array([v.code for v in variants], dtype=np.int64), settings=settings,
+                    n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
+                    compiled=np.ones(len(configs), dtype=bool))
 
 
 def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
                    chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = DEFAULT_ENGINE,
-                   keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
+                   keep: str = "all", configs: Sequence | None = None) -> Iterator[tuple[list[int], RunBlock]]:
     """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
     ``(rows of the batch, RunBlock)``.
 
@@ -661,7 +647,7 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     results bit for bit, from the batch's arrays (no configuration object): runs of one
     method, sample count and state size are integrated ``chunk_size`` at a time by
     :func:`rbstab.engine.integrate_runs` and post-processed :data:`POSTPROCESS_BLOCK` at a
-    time. The blocks' ``configs`` are None.
+    time. The blocks' ``configs`` are ``configs``' entries of their rows (None where not given).
 
     Parameters
     ----------
@@ -675,6 +661,8 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     engine : {"compiled", "cuda"}
         The CPU engine, or the GPU as :func:`simulate_blocks` runs it (``keep``: the
         samples that come back, :data:`KEEP`; ``chunk_size`` not read).
+    configs : sequence of RunConfig, optional
+        The runs' configurations, one a row of the batch (what their results carry).
 
     Raises
     ------
@@ -696,7 +684,8 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
         if get_engine(engine).gpu:
             runs = (batch.variant[members], batch.params[members], batch.y0[members, :size],
                     batch.settings_rows(members))
-            yield from _cuda_blocks(runs, [None] * len(members), members, METHODS[method], n_samples, full, keep)
+            yield from _cuda_blocks(runs, _configs_of(configs, members), members, METHODS[method], n_samples, full,
+                                    keep)
             continue
         buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
         for lo in range(0, len(members), chunk_size):
@@ -708,8 +697,13 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
             sol = integrate_runs(codes, params, batch.y0[chunk, :size], settings, method=METHODS[method],
                                  n_samples=n_samples, out=buffer)
             share = (_time.perf_counter() - start) / len(chunk)
-            for runs, block in _chunk_blocks([None] * len(chunk), codes, params, sol, share, settings, full):
+            for runs, block in _chunk_blocks(_configs_of(configs, chunk), codes, params, sol, share, settings, full):
                 yield [int(chunk[j]) for j in runs], block
+
+
+def _configs_of(configs: Sequence | None, rows) -> list:
+    """``configs``' entries at ``rows`` (None each where there are no configs)."""
+    return [None] * len(rows) if configs is None else [configs[int(i)] for i in rows]
 
 
 def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: int, full: bool,

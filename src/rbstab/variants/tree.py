@@ -163,7 +163,7 @@ def _moment_row(second, i, r, cs, point, m, shift):
             s_r[2] + c_r * point[2] + p_r * cs[2] - m * p_r * point[2] + (shift if r == 2 else 0.0))
 
 
-@jit(_nrt=False)
+@jit(forceinline=True, _nrt=False)
 def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, rot, rate, angles):
     """The maximal image ``y`` (12 n + 3 e,; the chain's layout) of the reduced state ``yr``,
     parents first; ``rot`` (n, 3, 3) receives each A_i and ``rate`` (n, 3, 3) the B of each
