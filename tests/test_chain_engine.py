@@ -77,6 +77,13 @@ def test_one_bodys_two_spellings_are_one_model(path):
         scale = 1.0 + np.abs(expected).max()
         found = chain.outputs[key] if key == "lyapunov" else chain.outputs[key][:, 0]
         np.testing.assert_allclose(found, expected, rtol=0, atol=1e-11 * scale, err_msg=key)
+    # v's terms, grouped by carrier in a tree's file and as eq 25 in one body's (docs/physics.md)
+    expected = sum(body.outputs[f"lyapunov_{t}"] for t in ("translational", "rotational", "constraint"))
+    grouped = sum(chain.outputs[f"lyapunov_{t}"] for t in ("kinetic", "joint", "body"))
+    scale = 1.0 + np.abs(expected).max()
+    np.testing.assert_allclose(grouped, expected, rtol=0, atol=1e-11 * scale)
+    np.testing.assert_allclose(chain.outputs["lyapunov_gravity"], body.outputs["lyapunov_gravity"], rtol=0,
+                               atol=1e-11 * (1.0 + np.abs(body.outputs["lyapunov"]).max()))
 
 
 def test_a_one_body_tree_with_the_pure_sign_law_is_refused_naming_its_one_body_spelling():
