@@ -524,26 +524,6 @@ def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.
                        "n_steps": np.asarray(n_steps, dtype=np.int64)}}
 
 
-def _variant_of(config: "RunConfig", shared: dict) -> Variant:
-    """``config.make_variant()``, one for the configs that share their body and gains objects
-    (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``): its parameters record
-    and equilibrium are computed once for them."""
-    key = (config.variant, config.body, config.gains, config.simulation.limits)  # identity: eq=False dataclasses
-    variant = shared.get(key)
-    if variant is None:
-        variant = shared[key] = config.make_variant()
-    return variant
-
-
-def _parameter_rows(variants: Sequence[Variant]) -> np.ndarray:
-    """The variants' :data:`~rbstab.model.PARAMETERS` records, shape (k,) (a record at a time:
-    ``numpy.concatenate`` of structured arrays costs ~40 us a record)."""
-    rows = np.empty(len(variants), dtype=PARAMETERS)
-    for i, variant in enumerate(variants):
-        rows[i] = variant.parameters[0]
-    return rows
-
-
 def simulate_many(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                   chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                   full: bool = True) -> Iterator[tuple[int, RunResult]]:
@@ -622,17 +602,24 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
 
 def _batch_of(configs: Sequence["RunConfig"], timeout: float | None) -> RunBatch:
     """The :class:`~rbstab.engine.RunBatch` of one-body configurations the compiled engine
-    takes (``timeout`` [s], if given, each run's ``max_wall_time``)."""
+    takes (``timeout`` [s], if given, each run's ``max_wall_time``). The configs that share
+    their body and gains objects (:meth:`rbstab.config.RunConfig.from_resolved` with
+    ``like``) share one variant: its parameters record and equilibrium computed once."""
     shared: dict[tuple, Variant] = {}
-    variants = [_variant_of(c, shared) for c in configs]
-    n_state = np.array([v.layout.size for v in variants], dtype=np.int64)
-    y0 = np.zeros((len(configs), MAX_STATE))
-    for i, (variant, config) in enumerate(zip(variants, configs)):
+    params, y0 = np.empty(len(configs), dtype=PARAMETERS), np.zeros((len(configs), MAX_STATE))
+    n_state, codes = np.empty(len(configs), dtype=np.int64), np.empty(len(configs), dtype=np.int64)
+    for i, config in enumerate(configs):
+        key = (config.variant, config.body, config.gains, config.simulation.limits)  # identity: eq=False dataclasses
+        variant = shared.get(key)
+        if variant is None:
+            variant = shared[key] = config.make_variant()
+        params[i] = variant.parameters[0]  # a record at a time (numpy.concatenate: ~40 us a record)
+        n_state[i], codes[i] = variant.layout.size, variant.code
         y0[i, : n_state[i]] = variant.initial_state(config.initial_state)
     settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
     settings["method"] = [method_number(c.simulation.method) for c in configs]
-    return RunBatch(params=_parameter_rows(variants), y0=y0, n_state=n_state,
-                    variant=np.array([v.code for v in variants], dtype=np.int64), settings=settings,
+    return RunBatch(params=params, y0=y0, n_state=n_state,
+                    variant=codes, settings=settings,
                     n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
                     compiled=np.ones(len(configs), dtype=bool))
 
