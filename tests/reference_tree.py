@@ -381,31 +381,31 @@ def constraint_forces(tree, v_dot, forces):
 
 # -- v and dv/dt -----------------------------------------------------------------------------------
 def lyapunov(tree, y):
-    """(the terms of v without the constant h: kinetic, joint, body feedback, gravity [J];
-    dv/dt analytic [W]):
+    """(the terms of v without the constant h, eq 25's grouping summed over the bodies and
+    joints: translational, rotational, constraint, gravity [J]; dv/dt analytic [W]):
 
-        v = sum_i (m_i V_i'V_i / 2 + Omega_i'J_i Omega_i / 2) + sum_j Theta_j'K_r Theta_j / 2
-            + sum_visco E_j'K_c E_j / 2 + sum_i (X_i'K_t X_i / 2 - X_i'G_i)
+        v = sum_i (m_i V_i'V_i / 2 + X_i'K_t X_i / 2) + sum_i Omega_i'J_i Omega_i / 2
+            + sum_j Theta_j'K_r Theta_j / 2 + sum_visco E_j'K_c E_j / 2 - sum_i X_i'G_i
         dv/dt = -sum_j Omega_j'L_r Omega_j - sum_i V_i'L_t V_i - sum_visco F_j'L_c F_j
                 + sum_j Omega_j'(N_j - N_j,commanded)
 
     No term of the permanent joints' Lambda_j: in these coordinates F_j is 0 identically."""
     ev = evaluate(tree, y)
     conf, forces = ev.conf, ev.forces
-    kinetic = sum(0.5 * b.mass * ev.v[i] @ ev.v[i] + 0.5 * ev.omega[i] @ b.inertia @ ev.omega[i]
-                  for i, b in enumerate(tree.bodies))
-    joint = 0.0
+    translational = sum(0.5 * b.mass * ev.v[i] @ ev.v[i] + 0.5 * conf.position[i] @ b.k_t @ conf.position[i]
+                        for i, b in enumerate(tree.bodies))
+    rotational = sum(0.5 * ev.omega[i] @ b.inertia @ ev.omega[i] for i, b in enumerate(tree.bodies))
+    constraint = 0.0
     dv_dt = 0.0
     for j, jt in enumerate(tree.joints):
-        joint += 0.5 * conf.theta_j[j] @ jt.k_r @ conf.theta_j[j]
+        rotational += 0.5 * conf.theta_j[j] @ jt.k_r @ conf.theta_j[j]
         dv_dt += -ev.omega_j[j] @ jt.l_r @ ev.omega_j[j] + ev.omega_j[j] @ (forces.n_j[j] - forces.n_command[j])
         if jt.law == VISCO_ELASTIC:
-            joint += 0.5 * forces.e[j] @ jt.k_c @ forces.e[j]
+            constraint += 0.5 * forces.e[j] @ jt.k_c @ forces.e[j]
             dv_dt -= forces.f[j] @ jt.l_c @ forces.f[j]
-    body = sum(0.5 * conf.position[i] @ b.k_t @ conf.position[i] for i, b in enumerate(tree.bodies))
     gravity = -sum(b.mass * tree.gravity @ conf.position[i] for i, b in enumerate(tree.bodies))
     dv_dt -= sum(ev.v[i] @ b.l_t @ ev.v[i] for i, b in enumerate(tree.bodies))
-    return (kinetic, joint, body, gravity), dv_dt
+    return (translational, rotational, constraint, gravity), dv_dt
 
 
 # -- a push -----------------------------------------------------------------------------------------

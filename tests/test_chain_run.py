@@ -238,7 +238,7 @@ def test_a_chains_lyapunov_figure_is_one_bodys_with_v_minus_w(tmp_path, monkeypa
     np.testing.assert_array_equal(work.get_ydata(), s["lyapunov"] - s["disturbance_work"])
     assert s["disturbance_work"][-1] > 0.0
     labels = [line.get_label() for line in fig.axes[0].get_lines()]
-    assert any("kinetic" in label for label in labels)
+    assert any("translational" in label for label in labels) and any("rotational" in label for label in labels)
     for ax in fig.axes:
         (impulse,) = [line for line in ax.get_lines() if line.get_gid() == "disturbance-impulse"]
         assert list(impulse.get_xdata()) == [0.3, 0.3]

@@ -32,7 +32,6 @@ __all__ = [
     "STATE_BLOCKS",
     "BLOCK_UNITS",
     "LYAPUNOV_TERMS",
-    "TREE_LYAPUNOV_TERMS",
     "SATURATION_FLAGS",
     "OUTPUT_VECTORS",
     "OUTPUT_SCALARS",
@@ -297,12 +296,14 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
              "it); 0 elsewhere, without limits and for permanent's pin", r"\Lambda_{sat}", "constraint force saturated", 3,
              member="joint"),
     Quantity("lyapunov_translational", "v_t", "J", "translational term v_t of the Lyapunov function",
-             "v_t = V'MV/2 + X'K_t X/2 (eq 25)", "v_t", "translational"),
+             "v_t = V'MV/2 + X'K_t X/2 (eq 25; a chain's: summed over its bodies)", "v_t", "translational"),
     Quantity("lyapunov_rotational", "v_r", "J", "rotational term v_r of the Lyapunov function",
-             "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25)", "v_r", "rotational"),
+             "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25; a chain's: Omega_i'J_i Omega_i/2 summed over "
+             "its bodies and Theta_j'K_r Theta_j/2 over its joints, relative angles)", "v_r", "rotational"),
     Quantity("lyapunov_constraint", "v_c", "J", "constraint controller term of the Lyapunov function",
              "energy stored in the constraint controller (eqs 41, 44; "
-             "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent)",
+             "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent; a chain's: summed "
+             "over its joints)",
              "v_c", "constraint controller"),
     Quantity("lyapunov_gravity", "v_g", "J", "gravity term of the Lyapunov function",
              "-X'G plus the constant h that makes v zero at the equilibrium (eq 30)", "v_g", "gravity"),
@@ -338,12 +339,6 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("joint_omega", "Omega_j", "rad s-1", "relative angular velocity Omega_j of a joint (child frame)",
              "Omega_j = Omega_child - A_rel' Omega_parent, child frame (docs/physics.md, chains)",
              r"\Omega_j", "joint angular velocity", 3, member="joint"),
-    Quantity("lyapunov_kinetic", "v_k", "J", "kinetic term of a chain's Lyapunov function",
-             "sum over the bodies of V'mV/2 + Omega'J Omega/2 (eq 25)", "v_k", "kinetic"),
-    Quantity("lyapunov_joint", "v_j", "J", "joint term of a chain's Lyapunov function",
-             "sum over the joints of Theta_j'K_r Theta_j/2 and the point law's energy (eqs 41, 44)", "v_j", "joints"),
-    Quantity("lyapunov_body", "v_b", "J", "body feedback term of a chain's Lyapunov function",
-             "sum over the bodies of X'K_t X/2 (eq 24's feedback)", "v_b", "body feedback"),
     Quantity("lyapunov_rate_numerical", "dv/dt", "W", "numerical derivative dv/dt of the sampled Lyapunov function",
              "dv/dt by differentiating v along the dense-output samples "
              "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "
@@ -374,8 +369,6 @@ SATURATION_FLAGS = {control: (f"{control}_saturated", f"fraction_saturated_{cont
                     for control in ("torque_n", "force_h", "constraint_force")}
 #: Names of the terms of v, in the order they are summed.
 LYAPUNOV_TERMS = ("lyapunov_translational", "lyapunov_rotational", "lyapunov_constraint", "lyapunov_gravity")
-#: Names of the terms of a tree's v (:func:`rbstab.variants.chain.evaluate`), in the order they are summed.
-TREE_LYAPUNOV_TERMS = ("lyapunov_kinetic", "lyapunov_joint", "lyapunov_body", "lyapunov_gravity")
 #: The vector outputs (3 columns each), in order.
 OUTPUT_VECTORS = tuple(q.name for q in OUTPUTS.values() if q.size == 3)
 #: The scalar outputs after the vectors, one column each, in order.

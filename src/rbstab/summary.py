@@ -15,7 +15,7 @@ import numpy as np
 from .convergence import within_bound
 from .results import row
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS, TREE_LYAPUNOV_TERMS
+from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -392,7 +392,7 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
     """E [J] of k runs, shape (k,): the largest over the samples of the summed magnitudes
     of v's terms (|v| when the outputs lack them), the size of what v's rounding and the
     solver's error act on."""
-    terms = [np.abs(outputs[key]) for key in dict.fromkeys((*LYAPUNOV_TERMS, *TREE_LYAPUNOV_TERMS)) if key in outputs]
+    terms = [np.abs(outputs[key]) for key in LYAPUNOV_TERMS if key in outputs]
     magnitude = sum(terms[1:], terms[0]) if terms else np.abs(outputs["lyapunov"])
     return np.max(magnitude, axis=1)
 

@@ -27,7 +27,8 @@ A chain run's file (:func:`write_result` of a tree's run, ``rbstab_format`` :dat
 ``axis``); ``constraint_error``, ``constraint_rate``, ``constraint_force``, ``torque_n``,
 ``controller_state``, ``joint_theta``, ``joint_omega`` along (``time``, ``joint``,
 ``axis``); v, its terms
-(``lyapunov_kinetic``, ``lyapunov_joint``, ``lyapunov_body``, ``lyapunov_gravity``) and
+(``lyapunov_translational``, ``lyapunov_rotational``, ``lyapunov_constraint``,
+``lyapunov_gravity``, each summed over the bodies and joints) and
 rates along ``time``; the global attributes ``bodies`` and ``joints`` list the names.
 
 Open with ``xarray.open_dataset(path, engine="h5netcdf")``, or :func:`read_dataset`
@@ -49,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
-from ..layout import QUANTITIES, SUMMARY_MAX_SAMPLES, TREE_LYAPUNOV_TERMS, summary_stride
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, SUMMARY_MAX_SAMPLES, summary_stride
 from ..results import RunResult, plain
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
@@ -132,7 +133,7 @@ SUMMARY_VARIABLES = (
 #: Variables of a chain's ``thinned`` file: :data:`SUMMARY_VARIABLES` and what its report
 #: draws besides (each joint's Theta_j, N_j with its saturation flags and Lambda_j, and v's terms).
 CHAIN_SUMMARY_VARIABLES = SUMMARY_VARIABLES + (
-    "joint_theta", "torque_n", "torque_n_saturated", "constraint_force", *TREE_LYAPUNOV_TERMS,
+    "joint_theta", "torque_n", "torque_n_saturated", "constraint_force", *LYAPUNOV_TERMS,
 )
 
 

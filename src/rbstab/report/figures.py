@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..layout import LYAPUNOV_TERMS, QUANTITIES, SATURATION_FLAGS, TREE_LYAPUNOV_TERMS, display_units
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, SATURATION_FLAGS, display_units
 from .load import RunData, safe_filename
 from .tables import SettleThresholds
 
@@ -453,18 +453,14 @@ def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
                     + _marks_caption(run) + ".")
 
 
-#: The terms of v a file may hold: one body's (eq 25) and a tree's.
-_TERMS = tuple(dict.fromkeys((*LYAPUNOV_TERMS, *TREE_LYAPUNOV_TERMS)))
-
-
 def _lyapunov_terms_panel(ax, run: RunData) -> None:
-    """v (black) and its non-zero terms (one body's, eq 25, or a tree's) on a log axis; a
-    term that takes negative values (gravity) is drawn as its magnitude, labelled |v_g|."""
-    s = run.series("lyapunov", *_TERMS)
+    """v (black) and its non-zero terms (eq 25) on a log axis; a term that takes negative
+    values (gravity) is drawn as its magnitude, labelled |v_g|."""
+    s = run.series("lyapunov", *LYAPUNOV_TERMS)
     t = s["time"]
     drawn = [s["lyapunov"]]
     ax.plot(t, s["lyapunov"], color="k", lw=1.8, marker=_marker(s["lyapunov"]), label=f"${_symbol('lyapunov')}$")
-    for i, name in enumerate(n for n in _TERMS if n in s):
+    for i, name in enumerate(n for n in LYAPUNOV_TERMS if n in s):
         if not np.nanmax(np.abs(s[name]), initial=0.0) > 0:
             continue
         term, label = s[name], f"${_symbol(name)}$ {QUANTITIES[name].words}"
@@ -520,8 +516,8 @@ def lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
     diff.set_ylabel(rf"analytic $-$ numerical [{QUANTITIES['lyapunov_rate'].display_units}]", fontsize=9)
     _finish_time_axes(axes[:, 0], run, ncols=2)
     _suptitle(fig, run, f"Lyapunov function and its rate (check: {run.summary.get('lyapunov_rate_check', '?')})")
-    terms = ("the bodies' kinetic energies, the joints' potentials, the bodies' own feedback, gravity with h"
-             if run.members is not None else "translational, rotational, constraint controller, gravity")
+    terms = "translational, rotational, constraint controller, gravity" + (
+        ", each summed over the bodies and joints" if run.members is not None else "")
     return out.save(fig, f"{safe_filename(run.label)}_lyapunov", f"{run.label}: Lyapunov function",
                     f"v and its non-zero terms ({terms}; "
                     "logarithmic axis, a term that changes sign as its magnitude), "

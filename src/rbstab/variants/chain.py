@@ -33,7 +33,7 @@ import numpy as np
 from ..chain import Chain
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
-from ..layout import SATURATION_FLAGS, VARIANT_CODES
+from ..layout import LYAPUNOV_TERMS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     Gains,
@@ -61,13 +61,13 @@ BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_sa
 JOINT_OUTPUTS = ("constraint_error", "constraint_rate", "constraint_force", "torque_n", "controller_state",
                  "joint_theta", "joint_omega", "torque_n_saturated", "constraint_force_saturated")
 #: Scalar outputs of :func:`evaluate`, each (n_samples,).
-SCALAR_OUTPUTS = ("lyapunov", "lyapunov_rate", "lyapunov_kinetic", "lyapunov_joint", "lyapunov_body",
-                  "lyapunov_gravity")
+SCALAR_OUTPUTS = ("lyapunov", "lyapunov_rate", "lyapunov_translational", "lyapunov_rotational",
+                  "lyapunov_constraint", "lyapunov_gravity")
 
 # Rows of the per-joint record the compiled core fills.
 _E, _F, _LAMBDA, _N, _D, _THETA_J, _OMEGA_J = range(7)
-# Entries of the scalar record: the terms of v (h not included) and dv/dt.
-_KINETIC, _JOINT, _BODY, _GRAVITY, _RATE = range(5)
+# Entries of the scalar record: the terms of v (eq 25's grouping; h not included) and dv/dt.
+_TRANSLATIONAL, _ROTATIONAL, _CONSTRAINT, _GRAVITY, _RATE = range(5)
 
 #: Scratch arrays of one evaluation of a chain of n bodies (:func:`chain_work`): ``rot``,
 #: ``rate`` (n, 3, 3) A_i and B(Theta_i); ``torque``, ``force`` (n, 3) the wrench on each body
@@ -171,17 +171,17 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     everything but those Lambda_j into ``work.torque`` (body frame, the gyroscopic term
     -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
     (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H
-    into ``bodies``; the kinetic, joint, body-feedback and gravity terms of v into
-    ``scalars[:4]``; dD/dt of embedded joints into ``dy``. Returns (the number of permanent
+    into ``bodies``; the translational, rotational, constraint and gravity terms of v (eq
+    25's grouping, summed over the bodies and joints) into ``scalars[:4]``; dD/dt of embedded joints into ``dy``. Returns (the number of permanent
     joints, the saturation deficit power, the disturbances' power, the dissipation [W], the
     state's size 12 n + 3 e)."""
     n = codes.shape[0]
     rot, rate, torque, force = work.rot, work.rate, work.torque, work.force
     torque[:] = 0.0
     force[:] = 0.0
-    kinetic = 0.0
-    joint_energy = 0.0
-    body_energy = 0.0
+    translational = 0.0
+    rotational = 0.0
+    constraint = 0.0
     gravity = 0.0
     dissipation = 0.0
     power = 0.0
@@ -211,8 +211,8 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             tq, fc = add(tq, torque_d), add(fc, force_d)
             work_power += disturbance_power(force_d, torque_d, omega, v)
         _acc_add(torque, force, i, tq, fc)
-        kinetic += 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(omega, p.inertia)
-        body_energy += 0.5 * quadratic_form(x, p.k_t)
+        translational += 0.5 * p.mass * dot(v, v) + 0.5 * quadratic_form(x, p.k_t)
+        rotational += 0.5 * quadratic_form(omega, p.inertia)
         gravity -= dot(x, p.weight)
         dissipation += quadratic_form(v, p.l_t)
     n_permanent = 0
@@ -241,7 +241,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         n_j = torque_n(b_j, theta_j, omega_j, p)
         if p.saturation > 0.0:
             power += dot(omega_j, sub(n_j, torque_n_command(b_j, theta_j, omega_j, p)))
-        joint_energy += 0.5 * quadratic_form(theta_j, p.k_r)
+        rotational += 0.5 * quadratic_form(theta_j, p.k_r)
         dissipation += quadratic_form(omega_j, p.l_r)
         _acc_add(torque, force, j, n_j, ZERO)
         if q >= 0:
@@ -258,7 +258,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             if p.saturation > 0.0:
                 lam_c, _ = constraint_force_command(codes[j], e, f, d, p)
                 power += dot(f, sub(lam, lam_c))
-            joint_energy += constraint_energy(codes[j], e, d, p)
+            constraint += constraint_energy(codes[j], e, d, p)
             dissipation += constraint_dissipation(codes[j], f, d_rate, p)
             _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], lam)), lam)
             if q >= 0:
@@ -273,9 +273,9 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         _put(joints[j, _D], 0, d)
         _put(joints[j, _THETA_J], 0, theta_j)
         _put(joints[j, _OMEGA_J], 0, omega_j)
-    scalars[_KINETIC] = kinetic
-    scalars[_JOINT] = joint_energy
-    scalars[_BODY] = body_energy
+    scalars[_TRANSLATIONAL] = translational
+    scalars[_ROTATIONAL] = rotational
+    scalars[_CONSTRAINT] = constraint
     scalars[_GRAVITY] = gravity
     return n_permanent, power, work_power, dissipation, size
 
@@ -291,8 +291,8 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     Writes dy/dt into ``dy`` (n_states,; with one more entry, the disturbances' power after
     the state, the rate of their work W); per joint (n, 7, 3) into ``joints``: E_j, F_j,
     Lambda_j (inertial), N_j (child frame, delivered), D_j, Theta_j, Omega_j; per body
-    (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the kinetic, joint,
-    body-feedback and gravity terms of v (without h) and dv/dt (analytic: minus the
+    (n, 3) into ``bodies``: H (delivered); into ``scalars`` (5,): the translational,
+    rotational, constraint and gravity terms of v (eq 25's grouping, without h) and dv/dt (analytic: minus the
     dissipations, plus the saturation deficit, disturbance and permanent-constraint
     powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
     (:class:`ChainWork`).
@@ -720,10 +720,12 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
 @jit
 def rest_potential(q, params, codes, parents, ppoints, d_at, y, dy, work):
     """The potential [J] (joint and body feedback, point laws, gravity; h not included) of
-    the configuration ``q`` (:func:`rest_configuration`, written into ``y``)."""
+    the configuration ``q`` (:func:`rest_configuration`, written into ``y``): v's terms at
+    rest, whose kinetic parts are zero."""
     rest_configuration(q, params, codes, parents, ppoints, d_at, y)
     chain_evaluate(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars, work)
-    return work.scalars[_JOINT] + work.scalars[_BODY] + work.scalars[_GRAVITY]
+    s = work.scalars
+    return s[_TRANSLATIONAL] + s[_ROTATIONAL] + s[_CONSTRAINT] + s[_GRAVITY]
 
 
 @jit
@@ -907,7 +909,8 @@ def _terms(compiled: CompiledChain, t: float, y: np.ndarray):
 def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[float, float]:
     """(v [J], dv/dt [W] analytic) at the state ``y`` (n_states,) and time ``t`` [s]."""
     _, _, scalars = _terms(compiled, t, y)
-    return float(scalars[:_RATE].sum() + compiled.offset), float(scalars[_RATE])
+    terms = (scalars[_TRANSLATIONAL], scalars[_ROTATIONAL], scalars[_CONSTRAINT], scalars[_GRAVITY] + compiled.offset)
+    return float(sum(terms)), float(scalars[_RATE])
 
 
 def initial_state(config) -> np.ndarray:
@@ -1079,7 +1082,8 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     at or beyond its limit, else 0.0 (:func:`rbstab.model.saturated`): torque_n_saturated
     and constraint_force_saturated per joint (Lambda_j never for a permanent joint),
     force_h_saturated per body; scalars (m,): lyapunov v [J], lyapunov_rate dv/dt [W] (analytic) and the
-    terms lyapunov_kinetic, lyapunov_joint, lyapunov_body, lyapunov_gravity [J] (h in the
+    terms lyapunov_translational, lyapunov_rotational, lyapunov_constraint, lyapunov_gravity [J] (eq 25's
+    grouping; h in the
     gravity term), disturbance_power [W], disturbance_work W [J] (``work`` (m,) or (k, m),
     the run's integrated work at the samples; 0 where not given: it is a run's history,
     not a state's) and disturbance_edges (the windows' edges at or before each sample,
@@ -1109,11 +1113,11 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]
-    out["lyapunov_kinetic"] = scalars[:, _KINETIC]
-    out["lyapunov_joint"] = scalars[:, _JOINT]
-    out["lyapunov_body"] = scalars[:, _BODY]
+    out["lyapunov_translational"] = scalars[:, _TRANSLATIONAL]
+    out["lyapunov_rotational"] = scalars[:, _ROTATIONAL]
+    out["lyapunov_constraint"] = scalars[:, _CONSTRAINT]
     out["lyapunov_gravity"] = scalars[:, _GRAVITY] + offset
-    out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + offset
+    out["lyapunov"] = sum(out[term] for term in LYAPUNOV_TERMS)  # in eq 25's order, as one body's
     out["lyapunov_rate"] = scalars[:, _RATE]
     out["disturbance_power"] = power
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
