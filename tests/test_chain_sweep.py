@@ -333,3 +333,55 @@ def test_a_chain_sweep_over_initial_states_refuses_what_the_schema_refuses():
     for i in sorted(expected)[:10]:
         label = f"run r{i:04d} (base {base['name']}"
         assert [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(label)] == expected[i], i
+
+
+def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
+    """A worker's batch of a chain sweep's runs (records, parent points, initial states and h
+    built from the table's columns, no configuration per run) holds, for every run, what
+    compile_chain, the loader's placement and rest_offset give its validated configuration,
+    bit for bit: keys of bodies, joints (gains, points, limits; by name or position), gravity,
+    disturbances, the admissible region and initial states."""
+    import copy
+    import warnings
+
+    from rbstab.config import config_from_mapping
+    from rbstab.config.yaml_io import read_yaml_file
+    from rbstab.engine.batch import TreeBatch
+    from rbstab.model import set_limits
+    from rbstab.sweep import plan_table, spec_from_mapping
+    from rbstab.variants import chain as C
+
+    rng = np.random.default_rng(3)
+    n = 4
+    stance = read_yaml_file(STANCE)
+    pushed = copy.deepcopy(stance)
+    pushed["simulation"]["limits"] = {"theta": 0.6}
+    pushed["disturbances"] = [
+        {"kind": "impulse", "quantity": "torque", "value": [0, 5, 0], "start": 0.3, "body": "trunk"},
+        {"kind": "step", "value": [1, 0, 0], "start": 0.1, "body": "legs", "point": [0, 0, 0.1]}]
+    cases = [
+        (stance, {"bodies.trunk.mass": rng.uniform(40, 55, n), "initial_state.legs.theta.0": rng.uniform(-.1, .1, n)}),
+        (stance, {"bodies.0.mass": rng.uniform(20, 25, n), "joints.1.l_r.2": rng.uniform(10, 30, n)}),  # by position
+        (stance, {"joints.hip.k_r.0": rng.uniform(400, 600, n), "joints.hip.child_point.2": rng.uniform(-.35, -.3, n),
+                  "gravity.2": rng.uniform(-10, -9, n), "joints.ankle.saturation.torque_n.0": rng.uniform(100, 200, n),
+                  "initial_state.trunk.omega.1": rng.uniform(-.1, .1, n)}),
+        (pushed, {"disturbances.0.value.1": rng.uniform(1, 9, n), "disturbances.1.start": rng.uniform(0, 1, n),
+                  "bodies.legs.inertia.0": rng.uniform(1.5, 2.0, n), "simulation.limits.theta.0": rng.uniform(.5, .7, n)}),
+    ]
+    for base, table in cases:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            part = plan_table(spec_from_mapping({"name": "v", "base": base, "table": table})).slice(np.arange(n))
+        batch = part.batch()
+        assert isinstance(batch, TreeBatch) and batch.compiled.all()
+        for j in range(n):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                config = config_from_mapping(part.resolved(j))
+            compiled = C.compile_chain(config.chain)
+            records = compiled.params.copy()
+            set_limits(records, config.simulation.limits)
+            assert batch.params[j].tobytes() == records.tobytes(), (table, j)
+            np.testing.assert_array_equal(batch.ppoints[j], compiled.ppoints)
+            np.testing.assert_array_equal(batch.y0[j, :batch.n_state[j]], C.initial_state(config))
+            assert batch.offset[j] == compiled.offset and batch.n_samples[j] == config.simulation.n_samples

@@ -39,7 +39,7 @@ import numpy as np
 
 from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
-from .engine.batch import MAX_STATE
+from .engine.batch import MAX_STATE, TreeBatch
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
 from .engine.integrate import admissible
@@ -47,7 +47,7 @@ from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, 
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
-from .model import DISTURBANCE_KINDS, PARAMETERS
+from .model import DISTURBANCE_KINDS, PARAMETERS, set_limits
 from .results import RunBlock, RunResult, row
 from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary_table
 from .variants import Variant
@@ -545,8 +545,8 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
     The runs of trees (ChainConfig) that the engine takes are integrated by the compiled
     driver, the runs of trees of one structure (the same bodies and joints and their laws;
     any masses, gains, points and admissible regions) with the same method, sample count
-    and t_end in one call (:func:`_tree_blocks`; ``keep``
-    ``"none"``: their blocks carry summaries and no traces), the others one by one
+    and t_end in one call (:func:`simulate_batch` of their :class:`~rbstab.engine.batch.TreeBatch`;
+    ``keep`` ``"none"``: their blocks carry summaries and no traces), the others one by one
     (:func:`simulate`).
 
     With ``engine="compiled"`` every run of one body that the compiled engine takes
@@ -590,9 +590,9 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
         else:
             (trees if isinstance(config, ChainConfig) else bodies).append(i)
     if trees:
-        for members, block in _tree_blocks([configs[i] for i in trees], timeout=timeout, outputs=keep != "none",
-                                           engine=engine):
-            yield [trees[j] for j in members], block
+        chosen = [configs[i] for i in trees]
+        for rows, block in simulate_batch(_tree_batch_of(chosen, timeout), engine=engine, keep=keep, configs=chosen):
+            yield [trees[r] for r in rows], block
     if bodies:
         chosen = [configs[i] for i in bodies]
         for rows, block in simulate_batch(_batch_of(chosen, timeout), chunk_size=chunk_size, full=full, engine=engine,
@@ -624,30 +624,33 @@ def _batch_of(configs: Sequence["RunConfig"], timeout: float | None) -> RunBatch
                     compiled=np.ones(len(configs), dtype=bool))
 
 
-def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
+def simulate_batch(batch: RunBatch | TreeBatch, rows: Sequence[int] | np.ndarray | None = None, *,
                    chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = DEFAULT_ENGINE,
                    keep: str = "all", configs: Sequence | None = None) -> Iterator[tuple[list[int], RunBlock]]:
-    """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
+    """Integrate runs of a :class:`rbstab.engine.RunBatch` (one body's) or a
+    :class:`rbstab.engine.batch.TreeBatch` (trees') with the compiled engine; yields
     ``(rows of the batch, RunBlock)``.
 
     What :func:`simulate_blocks` does for the configurations of those runs, with the same
-    results bit for bit, from the batch's arrays (no configuration object): runs of one
-    method, sample count and state size are integrated ``chunk_size`` at a time by
+    results bit for bit, from the batch's arrays (no configuration object): one body's runs
+    of one method, sample count and state size are integrated ``chunk_size`` at a time by
     :func:`rbstab.engine.integrate_runs` and post-processed :data:`POSTPROCESS_BLOCK` at a
-    time. The blocks' ``configs`` are ``configs``' entries of their rows (None where not given).
+    time; trees' as :func:`_tree_batch_blocks` says. The blocks' ``configs`` are
+    ``configs``' entries of their rows (None where not given).
 
     Parameters
     ----------
-    batch : RunBatch
+    batch : RunBatch or TreeBatch
     rows : sequence of int, optional
         The runs to integrate (default: every run with ``batch.compiled``).
     chunk_size : int
         Runs per compiled call (the trajectories held at once).
     full : bool
-        Every output (else all but :data:`rbstab.layout.LEFT_OUT`).
+        Every output (else all but :data:`rbstab.layout.LEFT_OUT`; trees' runs: every output).
     engine : {"compiled", "cuda"}
         The CPU engine, or the GPU as :func:`simulate_blocks` runs it (``keep``: the
-        samples that come back, :data:`KEEP`; ``chunk_size`` not read).
+        samples that come back, :data:`KEEP`; ``chunk_size`` not read). A tree's run keeps
+        every sample, or none with ``keep`` ``"none"``.
     configs : sequence of RunConfig, optional
         The runs' configurations, one a row of the batch (what their results carry).
 
@@ -664,6 +667,9 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
         bad = int(rows[np.flatnonzero(~batch.compiled[rows])[0]])
         raise ValueError(f"run {bad} of the batch: the compiled engine does not take it (its method or the "
                          "pure sign law); run it with simulate()")
+    if isinstance(batch, TreeBatch):
+        yield from _tree_batch_blocks(batch, rows, engine, keep != "none", configs)
+        return
     methods, samples, sizes = batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]
     # the groups, in np.unique's order (a set of the rows: numpy's unique of rows sorts them all)
     for method, n_samples, size in sorted(set(zip(methods.tolist(), samples.tolist(), sizes.tolist()))):
@@ -769,114 +775,126 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     return outputs if traces else {}, table
 
 
-def _tree_structure(compiled, sim) -> bytes:
-    """What runs integrated in one call share: the structure of their chains (codes,
-    parents, embedded joints, names; whether one body's rate serves it), the method,
-    sample count and t_end; their records, parent points and admissible regions may
-    differ (:func:`rbstab.engine.systems.tree_rows`)."""
-    parts = [np.ascontiguousarray(a).tobytes() for a in (compiled.codes, compiled.parents, compiled.d_at)]
-    names = (compiled.chain.body_names, compiled.chain.joint_names, compiled.one_body)
-    return b"|".join([*parts, repr(names).encode(), str((sim.method, sim.n_samples, float(sim.t_end))).encode()])
-
-
-def _tree_blocks(configs: Sequence, *, timeout: float | None = None, outputs: bool = True,
-                 engine: str = DEFAULT_ENGINE) -> Iterator[tuple[list[int], RunBlock]]:
-    """Integrate chain runs (:class:`rbstab.config.ChainConfig`, compiled methods)
-    on the compiled driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of
-    chains of one structure (:func:`_tree_structure`: the same bodies and joints and their
-    laws; each run's masses, gains, points and admissible region its own) with the same
-    method, sample count and t_end in calls of :data:`POSTPROCESS_BLOCK` runs of
-    :func:`rbstab.engine.integrate.integrate_chain_runs` (a sweep over initial states or a
-    chain's parameters: one such group a chunk). Yields ``(members, block)``: the positions in ``configs`` of a
-    :class:`RunBlock`'s runs, in order, :data:`POSTPROCESS_BLOCK` runs a block at most
-    (which bounds the samples and outputs held at once). ``outputs`` False: the block
-    carries the summaries but no traces (a store of summaries). ``timeout`` [s] replaces each run's
-    ``simulation.max_wall_time``. ``engine`` ``"cuda"``: the runs of a call are one launch
-    on the GPU (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit the largest
-    ``max_wall_time`` of its runs; as many runs as :data:`CUDA_CHAIN_SAMPLE_BYTES` of
-    samples), the outputs and summaries computed from their samples as the CPU driver's;
-    any other engine: the CPU driver.
-
-    Raises
-    ------
-    ValueError
-        For an unknown engine.
-    rbstab.engine.cuda.CudaUnavailable
-        For ``"cuda"`` where no GPU (or numba-cuda) can be used, before any run.
-    """
-    from .engine.integrate import integrate_chain_runs  # heavy: numba
+def _tree_batch_of(configs: Sequence, timeout: float | None) -> TreeBatch:
+    """The :class:`~rbstab.engine.batch.TreeBatch` of chain configurations
+    (:class:`rbstab.config.ChainConfig`; ``timeout`` [s], if given, each run's
+    ``max_wall_time``): configs that share their Chain object share its compilation (a
+    sweep over initial states compiles its chain once)."""
     from .variants import chain as C  # heavy: numba
+
+    by_chain: dict[int, int] = {}
+    trees: list = []
+    tree = np.empty(len(configs), dtype=np.int64)
+    for i, config in enumerate(configs):
+        t = by_chain.get(id(config.chain))
+        if t is None:
+            t = by_chain[id(config.chain)] = len(trees)
+            trees.append(C.compile_chain(config.chain))
+        tree[i] = t
+    n, width = len(configs), max((c.size for c in trees), default=1)
+    params, ppoints = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3))
+    y0, n_state = np.zeros((n, max((c.n_states for c in trees), default=0))), np.zeros(n, dtype=np.int64)
+    for i, config in enumerate(configs):
+        c = trees[tree[i]]
+        params[i, : c.size] = c.params
+        set_limits(params[i, : c.size], config.simulation.limits)
+        ppoints[i, : c.size], n_state[i] = c.ppoints, c.n_states
+        y0[i, : c.n_states] = C.initial_state(config)
+    settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
+    settings["method"] = [method_number(c.simulation.method) for c in configs]
+    return TreeBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints,
+                     offset=np.array([trees[t].offset for t in tree], dtype=float), y0=y0, n_state=n_state,
+                     settings=settings, n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
+                     compiled=np.ones(n, dtype=bool))
+
+
+def _structure(batch: TreeBatch, i: int) -> tuple:
+    """What the runs integrated in one call share (run ``i``'s): the structure of their tree
+    (codes, parents, embedded joints, names; whether one body's rate serves it), the method,
+    sample count and t_end; their records, parent points and admissible regions may differ
+    (:func:`rbstab.engine.systems.tree_rows`)."""
+    from .variants.chain import is_one_body  # heavy: numba
+
+    tree = batch.trees[int(batch.tree[i])]
+    n = tree.size
+    one_body = is_one_body(batch.params[i, :n], tree.codes, tree.parents, batch.ppoints[i, :n])
+    return (tree.codes.tobytes(), tree.parents.tobytes(), tree.d_at.tobytes(), tree.chain.body_names,
+            tree.chain.joint_names, one_body, int(batch.settings["method"][i]), int(batch.n_samples[i]),
+            float(batch.settings["t_end"][i]))
+
+
+def _tree_batch_blocks(batch: TreeBatch, rows: np.ndarray, engine: str, outputs: bool,
+                       configs: Sequence | None) -> Iterator[tuple[list[int], RunBlock]]:
+    """:func:`simulate_batch` of the runs ``rows`` of a :class:`TreeBatch` on the compiled
+    driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of one structure
+    (:func:`_structure`: the same bodies and joints and their laws; each run's masses, gains,
+    points and admissible region its own) with the same method, sample count and t_end in
+    calls of :data:`POSTPROCESS_BLOCK` runs of
+    :func:`rbstab.engine.integrate.integrate_chain_runs`, each distinct tree once in a call.
+    ``outputs`` False: the blocks carry the summaries and no traces. On the GPU the runs of
+    a call are one launch (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit
+    the largest ``max_wall_time`` of its runs; as many runs as
+    :data:`CUDA_CHAIN_SAMPLE_BYTES` of samples)."""
+    from .engine.integrate import integrate_chain_runs  # heavy: numba
 
     integrate, gpu = integrate_chain_runs, get_engine(engine).gpu
     if gpu:
         get_engine(engine).check_available()  # before any run
         from .engine.cuda import integrate_chain_runs_cuda as integrate  # heavy: numba-cuda (--engine cuda only)
-    groups: dict[bytes, list[int]] = {}
-    by_chain: dict[int, object] = {}  # configs that share their Chain object share its compilation
-    compiled = []
-    for i, config in enumerate(configs):
-        found = by_chain.get(id(config.chain))
-        if found is None:
-            found = by_chain[id(config.chain)] = C.compile_chain(config.chain)
-        compiled.append(found)
-        groups.setdefault(_tree_structure(found, config.simulation), []).append(i)
+    groups: dict[tuple, list[int]] = {}
+    for i in rows.tolist():
+        groups.setdefault(_structure(batch, i), []).append(i)
     for members in groups.values():
         per_call = POSTPROCESS_BLOCK
         if gpu:  # a launch takes as many runs as the host may hold the samples of
-            n_samples = configs[members[0]].simulation.n_samples
-            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * n_samples * (compiled[members[0]].n_states + 1)))
+            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * int(batch.n_samples[members[0]])
+                                                          * (int(batch.n_state[members[0]]) + 1)))
         for lo in range(0, len(members), per_call):
-            yield from _chain_call(compiled, configs, members[lo: lo + per_call], integrate, gpu, timeout, outputs)
+            yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, outputs, configs)
 
 
-def _chain_call(compiled: list, configs: Sequence, members: list[int], integrate, gpu: bool, timeout: float | None,
-                outputs: bool) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`_tree_blocks` for the runs ``members`` of ``configs`` (chains of one
-    structure, ``compiled[i]`` run i's; one method, sample count and t_end): one call of
-    ``integrate`` with each distinct chain and admissible region once, then their outputs
-    and summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the outputs
-    held at once: those of that many runs)."""
-    from .engine.systems import tree_system  # heavy: numba
+def _tree_call(batch: TreeBatch, members: list[int], integrate, gpu: bool, outputs: bool,
+               configs: Sequence | None) -> Iterator[tuple[list[int], RunBlock]]:
+    """:func:`_tree_batch_blocks` for the runs ``members`` of ``batch`` (one structure,
+    method, sample count and t_end): one call of ``integrate`` with each distinct tree and
+    admissible region once, then their outputs and summaries :data:`POSTPROCESS_BLOCK` runs
+    at a time, a RunBlock each (the outputs held at once: those of that many runs)."""
+    from .engine.systems import TreeSystem  # heavy: numba
     from .variants import chain as C  # heavy: numba
+    from .variants.tree import tree_layout  # heavy: numba
 
     start = _time.perf_counter()
-    sims = [configs[i].simulation for i in members]
-    sim = sims[0]
-    trees: dict[bytes, int] = {}  # each distinct chain and admissible region once
-    contents: dict[int, bytes] = {}
-    systems, tree_of = [], np.empty(len(members), dtype=np.int64)
-    for j, i in enumerate(members):
-        content = contents.get(id(compiled[i]))
-        if content is None:
-            content = contents[id(compiled[i])] = b"|".join(
-                [np.ascontiguousarray(a).tobytes() for a in compiled[i].args] + [repr(compiled[i].offset).encode()])
-        key = content + repr(sims[j].limits).encode()
-        if key not in trees:
-            trees[key] = len(systems)
-            systems.append(tree_system(compiled[i], sims[j].limits))
-        tree_of[j] = trees[key]
-    system = systems[0]
-    if len(systems) > 1:
-        system = system._replace(params=np.stack([s.params for s in systems]),
-                                 ppoints=np.stack([s.ppoints for s in systems]))
-    y0 = np.array([C.initial_state(configs[i]) for i in members])
-    settings = settings_rows(sims, timeout)
+    structure = batch.trees[int(batch.tree[members[0]])]
+    n, n_states = structure.size, structure.n_states
+    params, ppoints = batch.params[members, :n], batch.ppoints[members, :n]
+    keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
+                     for j, i in enumerate(members)], dtype=object)
+    _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)
+    tree_of = tree_of.ravel().astype(np.int64)
+    trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
+                            batch.offset[members[j]]) for j in first]
+    system = TreeSystem(np.ascontiguousarray(params[first]), structure.codes, structure.parents,
+                        np.ascontiguousarray(ppoints[first]), structure.d_at, *tree_layout(structure).args, None)
+    y0 = batch.y0[members, :n_states]
+    settings = batch.settings_rows(members)
+    method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
     limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
-    sol = integrate(system, y0, settings, method=sim.method, n_samples=sim.n_samples, tree_of=tree_of, **limit)
-    time = np.linspace(0.0, sim.t_end, sim.n_samples)
+    sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **limit)
+    time = np.linspace(0.0, float(settings[0, 0]), n_samples)
     time.flags.writeable = False
     integration = (_time.perf_counter() - start) / len(members)
     for lo in range(0, len(members), POSTPROCESS_BLOCK):
         hi = min(lo + POSTPROCESS_BLOCK, len(members))
         t0 = _time.perf_counter()
-        run_outputs, summaries = _trees_outputs([compiled[i] for i in members[lo:hi]], tree_of[lo:hi], time,
+        run_outputs, summaries = _trees_outputs([trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time,
                                                 sol.samples[lo:hi], sol.work[lo:hi], outputs)
-        status, message = zip(*(tree_end(compiled[members[j]], sims[j], int(sol.status[j]), float(sol.t_stop[j]),
-                                           sol.samples[j], y0[j], float(settings[j, 6])) for j in range(lo, hi)))
+        status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
+                                          sol.samples[j], y0[j], settings[j], params[j, 0]["limits"])
+                                 for j in range(lo, hi)))
         ok = sol.status[lo:hi] == SUCCESS
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
         yield members[lo:hi], RunBlock(
-            configs=[configs[i] for i in members[lo:hi]],
+            configs=_configs_of(configs, members[lo:hi]),
             time=time if outputs else time[:0],
             outputs=run_outputs,
             summaries=summaries,
@@ -886,25 +904,27 @@ def _chain_call(compiled: list, configs: Sequence, members: list[int], integrate
             wall_time=integration + post,
             timing={"integration": np.full(hi - lo, integration), "postprocess": post},
             switching=[None] * (hi - lo),
-            joints=tuple(compiled[members[0]].chain.joint_names), bodies=tuple(compiled[members[0]].chain.body_names),
+            joints=tuple(structure.chain.joint_names), bodies=tuple(structure.chain.body_names),
         )
 
 
-def tree_end(compiled, sim, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray,
-               wall_limit: float) -> tuple[str, str]:
+def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray, settings: np.ndarray,
+             bounds: np.ndarray) -> tuple[str, str]:
     """(status, message) of a chain run of the compiled driver that ended with ``code`` at
-    ``t_stop`` [s]: ``compiled`` its chain, ``sim`` its settings, ``states`` (m, 12 n + 3 e)
-    its samples (the last finite one names the body or joint at a gimbal lock or a bound;
-    ``y0`` where none is finite), ``wall_limit`` [s] its wall-time limit."""
+    ``t_stop`` [s]: ``compiled`` its chain, ``settings`` its row (7,) of
+    :data:`rbstab.engine.settings.SETTING_COLUMNS`, ``bounds`` (5, 3) its admissible region
+    (a record's ``limits``), ``states`` (m, 12 n + 3 e) its samples (the last finite one
+    names the body or joint at a gimbal lock or a bound; ``y0`` where none is finite)."""
     from .variants import chain as C  # heavy: numba
 
+    margin = float(settings[4])
     if code == SUCCESS:
-        return "success", status_message(code, t_stop, sim.gimbal_margin)
+        return "success", status_message(code, t_stop, margin)
     finite = states[np.isfinite(states[:, 0])]
     last = finite[-1] if len(finite) else y0  # the last sample before the stop
     if code == GIMBAL_LOCK:
-        return "failed", C.gimbal_lock_message(compiled, last, sim.gimbal_margin, t_stop)
+        return "failed", C.gimbal_lock_message(compiled, last, margin, t_stop)
     if limit_of(code) is not None:
         return "failed", (f"left the admissible region (simulation.limits): "
-                          f"{C.nearest_bound(compiled, last, sim.limits, limit_of(code))} at t = {t_stop:.6g} s")
-    return "failed", status_message(code, t_stop, sim.gimbal_margin, int(sim.max_steps), wall_limit)
+                          f"{C.nearest_bound(compiled, last, bounds, limit_of(code))} at t = {t_stop:.6g} s")
+    return "failed", status_message(code, t_stop, margin, int(settings[5]), float(settings[6]))

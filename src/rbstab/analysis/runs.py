@@ -308,8 +308,8 @@ class Runs:
         time = np.linspace(0.0, sim.t_end, n_samples)
         v = C.evaluate(self.compiled, np.tile(time, len(states)), samples.reshape(-1, samples.shape[2]))["lyapunov"]
         messages = ["" if code == SUCCESS else
-                    tree_end(self.compiled, sim, code, float(t_stop[k]), samples[k], states[k],
-                             float(sim.max_wall_time))[1].split(" at t =")[0]
+                    tree_end(self.compiled, code, float(t_stop[k]), samples[k], states[k], settings[0],
+                             np.asarray(self.system.params).reshape(-1)[0]["limits"])[1].split(" at t =")[0]
                     for k, code in enumerate(status.tolist())]
         return status == SUCCESS, v.reshape(len(states), n_samples), messages
 

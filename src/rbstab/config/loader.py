@@ -87,7 +87,7 @@ from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
 
 __all__ = ["RunConfig", "ChainConfig", "config_from_mapping", "load_config", "chain_of", "one_body_config",
            "PER_RUN_SECTIONS", "limits_of", "is_chain", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
-           "CONSTRAINT_TOLERANCE", "initial_state_fits"]
+           "CONSTRAINT_TOLERANCE", "initial_state_fits", "placed_initial_state"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
 #: not cache their YAML).
@@ -589,6 +589,20 @@ class ChainConfig:
                 return dataclasses.replace(other, name=resolved["name"], initial_state=states, placed=placed,
                                            resolved=resolved, warnings=())
         return None
+
+
+def placed_initial_state(initial_state: Mapping, chain: Chain, margin: float) -> dict[str, dict[str, np.ndarray]]:
+    """:attr:`ChainConfig.initial_state` of a validated chain config's ``initial_state``
+    section (as resolved: by body name, the blocks written) for ``chain``: each body's
+    blocks, the x and v left out placed from the parent's, as :func:`config_from_mapping`
+    places them (``margin``: ``simulation.gimbal_margin``).
+
+    Raises
+    ------
+    ConfigError
+        For a section validation would refuse (a permanent joint's point off its parent's, a
+        joint at its gimbal lock)."""
+    return _place_tree(initial_state, chain, margin, None, ())[0]
 
 
 def initial_state_fits(config: ChainConfig, initial_state: Any) -> bool:

@@ -20,22 +20,26 @@ h is 0.
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.paths import parse_key
+from ..config.loader import config_from_mapping, placed_initial_state
+from ..config.paths import parse_any_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import VARIANTS
+from ..variants import chain as C
 from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
 from .tableaus import METHODS
 
-__all__ = ["RunBatch", "batch_from_table", "MAX_STATE", "NOT_COMPILED"]
+__all__ = ["RunBatch", "batch_from_table", "TreeBatch", "tree_batch_from_table", "MAX_STATE", "NOT_COMPILED"]
 
 #: The largest state of any variant (the second axis of :attr:`RunBatch.y0`).
 MAX_STATE = max(STATE_SIZE)
@@ -44,8 +48,23 @@ MAX_STATE = max(STATE_SIZE)
 NOT_COMPILED = -1
 
 
+class _Batch:
+    """What a batch of runs of either model answers from its ``settings`` (n,)."""
+
+    settings: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.settings)
+
+    def settings_rows(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """The settings of ``rows`` as floats, shape (k, 7): t_end, rtol, atol, max_step,
+        gimbal_margin, max_steps, max_wall_time (what
+        :func:`rbstab.engine.integrate_runs` takes)."""
+        return settings_rows(self.settings[rows])
+
+
 @dataclass(frozen=True)
-class RunBatch:
+class RunBatch(_Batch):
     """n runs as arrays (module docstring); every field has the run axis first.
 
     Attributes
@@ -82,15 +101,6 @@ class RunBatch:
     n_samples: np.ndarray
     compiled: np.ndarray
 
-    def __len__(self) -> int:
-        return len(self.params)
-
-    def settings_rows(self, rows: np.ndarray | slice = slice(None)) -> np.ndarray:
-        """The settings of ``rows`` as floats, shape (k, 7): t_end, rtol, atol, max_step,
-        gimbal_margin, max_steps, max_wall_time (what
-        :func:`rbstab.engine.integrate_runs` takes)."""
-        return settings_rows(self.settings[rows])
-
 
 class _Fields:
     """Each run's value of every numeric field the batch reads, as written (a 3-list stays
@@ -107,24 +117,36 @@ class _Fields:
         for key in keys:
             if "." not in key or columns[key].dtype == object:
                 continue  # a template's own value (runs share a template's non-numeric values)
-            path = parse_key(key)
+            path = parse_any_key(key)
             self.varied.setdefault((path.section, path.name), []).append((path.index, columns[key]))
 
-    def get(self, section: str, name: str, default=None, *, shape: tuple | None = None) -> np.ndarray:
-        """The field of every run (``name`` dotted inside a subsection), shape (n, *shape):
-        ``shape`` (3, 3) makes a matrix of a 3-list (its diagonal), as the configuration's
-        loader does, and (3,) 3 numbers of one; ``default`` for a template without the field
-        (None: a ValueError)."""
+    def get(self, section: str, name: str = "", default=None, *, shape: tuple | None = None,
+            only: int | None = None) -> np.ndarray:
+        """The field of every run (``name`` dotted inside a subsection or a list section's
+        entry, ``bodies.trunk.mass``; "" the section itself, ``gravity``), shape (n,
+        *shape): ``shape`` (3, 3) makes a matrix of a 3-list (its diagonal), as the
+        configuration's loader does, and (3,) 3 numbers of one; ``default`` for a template
+        without the field (None: a ValueError). ``only``: the runs of that template alone,
+        shape (its runs, *shape)."""
         out = None
-        for t, rows in self.groups:
-            written = parse_key(f"{section}.{name}").get(self.templates[t], None)
+        groups = self.groups if only is None else [g for g in self.groups if g[0] == only]
+        key = f"{section}.{name}" if name else section
+        for t, rows in groups:
+            written = parse_any_key(key).get(self.templates[t], None)
+            aliases = [(section, name)]  # a list section's entry varied by its name or its position
+            entry, _, rest = name.partition(".")
+            listed = self.templates[t].get(section)
+            if rest and isinstance(listed, list):
+                at = next((k for k, e in enumerate(listed) if isinstance(e, Mapping) and e.get("name") == entry), None)
+                if at is not None:
+                    aliases.append((section, f"{at}.{rest}"))
             if written is None:
                 if default is None:
                     raise ValueError(f"no {section}.{name} in template {int(t)}")
                 written = default
             written_shape = (3,) if shape == (3,) else np.shape(written)
             value = np.broadcast_to(np.array(written, dtype=float), (len(rows), *written_shape)).copy()
-            for index, column in self.varied.get((section, name), ()):
+            for index, column in (v for alias in aliases for v in self.varied.get(alias, ())):
                 part = np.asarray(column[rows], dtype=float)
                 if shape == (3,) and not index and part.ndim == 1:
                     part = np.broadcast_to(part[:, None], (len(rows), 3))
@@ -135,9 +157,13 @@ class _Fields:
             if shape == (3, 3) and value.ndim == 2:  # 3 numbers: a diagonal
                 value = value[:, :, None] * np.eye(3)
             if out is None:
-                out = np.empty((self.n, *value.shape[1:]))
-            out[rows] = value
+                out = np.empty((self.n if only is None else len(rows), *value.shape[1:]))
+            out[rows if only is None else slice(None)] = value
         return out
+
+    def rows(self, t: int) -> np.ndarray:
+        """The runs of template ``t``."""
+        return next((rows for u, rows in self.groups if u == t), np.zeros(0, dtype=np.int64))
 
     def text(self, section: str, name: str) -> np.ndarray:
         """A template's text field (``controller.variant``, ``simulation.method``) of every run."""
@@ -203,16 +229,9 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     used = {g: np.isin(names, [v for v, cls in VARIANTS.items() if g in cls.required_gains])
             for g in (*GAIN_NAMES, "k_s")}
     p = np.zeros(n, dtype=PARAMETERS)
-    mass = f.get("body", "mass")
-    inertia = f.get("body", "inertia", shape=(3, 3))
-    r = f.get("body", "attachment_point")
     gravity = f.get("body", "gravity")
-    p["mass"], p["inertia"], p["attachment_point"] = mass, inertia, r
-    p["inertia_inv"] = _inverse(inertia)
-    r_hat = _hat(r)
-    p["pivot_inertia"] = pivot = inertia - (mass[:, None, None] * r_hat) @ r_hat
-    p["pivot_inertia_inv"] = _inverse(pivot)
-    p["weight"] = mass[:, None] * gravity
+    _rigid(p, f.get("body", "mass"), f.get("body", "inertia", shape=(3, 3)), f.get("body", "attachment_point"),
+           gravity)
     for g in GAIN_NAMES:
         rows = np.flatnonzero(used[g])
         if len(rows):
@@ -231,10 +250,36 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
         for field, key in (("torque_limit", "torque_n"), ("force_limit", "force_h"),
                            ("constraint_force_limit", "constraint_force")):
             p[field][saturated] = f.get("controller", f"saturation.{key}", math.inf, shape=(3,))[saturated]
-    _disturbances(p, f, templates)
-    _limits(p, f, templates)
+    for t, rows in f.groups:
+        if templates[t].get("disturbances"):
+            part = p[rows]
+            _disturbances(part, f, t, range(len(templates[t]["disturbances"])))
+            p[rows] = part
+    set_limits(p, _bounds(f, templates))
     p["lyapunov_offset"] = _offsets(p, names, gravity)
-    settings = np.zeros(n, dtype=SETTINGS)
+    settings = _settings(f, templates, timeout)
+    sign_law = sliding & (p["boundary_layer"] == 0)
+    return RunBatch(params=p, y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
+                    variant=code, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
+                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law)
+
+
+def _rigid(p: np.ndarray, mass: np.ndarray, inertia: np.ndarray, r: np.ndarray, gravity: np.ndarray) -> None:
+    """The body's fields of the records ``p`` (k,) (:func:`rbstab.model.parameters`): m [kg],
+    J and J^-1, R [m], J_p = J - m [R]x [R]x and J_p^-1, the weight m g [N], from each run's
+    mass (k,), inertia (k, 3, 3), point R (k, 3) and gravity (k, 3)."""
+    p["mass"], p["inertia"], p["attachment_point"] = mass, inertia, r
+    p["inertia_inv"] = _inverse(inertia)
+    r_hat = _hat(r)
+    p["pivot_inertia"] = pivot = inertia - (mass[:, None, None] * r_hat) @ r_hat
+    p["pivot_inertia_inv"] = _inverse(pivot)
+    p["weight"] = mass[:, None] * gravity
+
+
+def _settings(f: _Fields, templates: Sequence[Mapping], timeout: float | None) -> np.ndarray:
+    """The runs' :data:`~rbstab.engine.settings.SETTINGS` (``timeout`` [s]: every run's
+    ``max_wall_time``; the method's index, or :data:`NOT_COMPILED`)."""
+    settings = np.zeros(f.n, dtype=SETTINGS)
     for name in SETTING_COLUMNS:
         value = f.get("simulation", name, np.inf) if name in ("max_step", "max_wall_time") else f.get("simulation", name)
         settings[name] = value
@@ -242,48 +287,37 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
         settings["max_wall_time"] = float(timeout)
     settings["method"] = f.of_templates([METHODS.index(m) if m in METHODS else NOT_COMPILED
                                          for m in (t["simulation"]["method"] for t in templates)])
-    sign_law = sliding & (p["boundary_layer"] == 0)
-    return RunBatch(params=p, y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
-                    variant=code, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
-                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law)
+    return settings
 
 
-def _disturbances(p: np.ndarray, f: _Fields, templates: Sequence[Mapping]) -> None:
-    """The disturbances' fields of every run (:func:`rbstab.model.set_disturbances`): the
-    entries of its template, each number as written there or in a column
-    (``disturbances.0.value.1``)."""
-    lists = [t.get("disturbances") or () for t in templates]
-    count = f.of_templates([len(d) for d in lists], dtype=float)
-    if not count.any():
-        return
-    p["disturbance_count"] = count
-    for i in range(int(count.max())):
-        entry = [d[i] if i < len(d) else None for d in lists]
-        rows = np.flatnonzero(count > i)
-        p["disturbance_kind"][:, i] = f.of_templates([DISTURBANCE_KINDS[e["kind"]] if e else 0 for e in entry],
-                                                    dtype=float)
-        p["disturbance_torque"][:, i] = f.of_templates(
-            [DISTURBANCE_QUANTITIES[e.get("quantity", "force")] if e else 0 for e in entry], dtype=float)
-        noise = f.of_templates([bool(e) and e["kind"] == "noise" for e in entry], dtype=bool)
-        value = f.get("disturbances", f"{i}.value", [0.0, 0.0, 0.0], shape=(3,))
-        rms = f.get("disturbances", f"{i}.rms", [0.0, 0.0, 0.0], shape=(3,))
-        p["disturbance_value"][rows, i] = np.where(noise[:, None], rms, value)[rows]
-        p["disturbance_point"][rows, i] = f.get("disturbances", f"{i}.point", [0.0, 0.0, 0.0], shape=(3,))[rows]
+def _disturbances(p: np.ndarray, f: _Fields, t: int, entries: Sequence[int]) -> None:
+    """The disturbances' fields (:func:`rbstab.model.set_disturbances`) of the records ``p``
+    of template ``t``'s runs: the ``entries`` of its ``disturbances`` list (positions), each
+    number as written there or in a column (``disturbances.0.value.1``)."""
+    listed = f.templates[t].get("disturbances") or ()
+    p["disturbance_count"] = len(entries)
+    for i, at in enumerate(entries):
+        e = listed[at]
+        p["disturbance_kind"][:, i] = DISTURBANCE_KINDS[e["kind"]]
+        p["disturbance_torque"][:, i] = DISTURBANCE_QUANTITIES[e.get("quantity", "force")]
+        value = f.get("disturbances", f"{at}.{'rms' if e['kind'] == 'noise' else 'value'}", [0.0, 0.0, 0.0],
+                      shape=(3,), only=t)
+        p["disturbance_value"][:, i] = value
+        p["disturbance_point"][:, i] = f.get("disturbances", f"{at}.point", [0.0, 0.0, 0.0], shape=(3,), only=t)
         for field, default in (("start", 0.0), ("duration", 0.0), ("frequency", 0.0), ("phase", 0.0), ("seed", 0.0)):
-            p[f"disturbance_{field}"][rows, i] = f.get("disturbances", f"{i}.{field}", default)[rows]
-        p["disturbance_band"][rows, i] = f.get("disturbances", f"{i}.band", [0.0, 0.0])[rows]
+            p[f"disturbance_{field}"][:, i] = f.get("disturbances", f"{at}.{field}", default, only=t)
+        p["disturbance_band"][:, i] = f.get("disturbances", f"{at}.band", [0.0, 0.0], only=t)
 
 
-def _limits(p: np.ndarray, f: _Fields, templates: Sequence[Mapping]) -> None:
-    """The admissible region of every run (:func:`rbstab.model.set_limits`): each bound of
-    its template's ``simulation.limits`` as written there or in a column
-    (``simulation.limits.theta.1``), inf where absent."""
+def _bounds(f: _Fields, templates: Sequence[Mapping]) -> np.ndarray | None:
+    """The admissible region of every run (:func:`rbstab.model.set_limits`), (n, 5, 3): each
+    bound of its template's ``simulation.limits`` as written there or in a column
+    (``simulation.limits.theta.1``), inf where absent; None where no run has one."""
     bounded = f.of_templates([bool(t["simulation"].get("limits")) for t in templates], dtype=bool)
     if not bounded.any():
-        set_limits(p, None)
-        return
-    set_limits(p, np.stack([np.where(bounded[:, None], f.get("simulation", f"limits.{name}", math.inf, shape=(3,)),
-                                     np.inf) for name in LIMITED], axis=1))
+        return None
+    return np.stack([np.where(bounded[:, None], f.get("simulation", f"limits.{name}", math.inf, shape=(3,)), np.inf)
+                     for name in LIMITED], axis=1)
 
 
 def _initial_states(f: _Fields, code: np.ndarray) -> np.ndarray:
@@ -309,3 +343,171 @@ def _offsets(p: np.ndarray, names: np.ndarray, gravity: np.ndarray) -> np.ndarra
     found = np.array([record_offset(p[heavy[i]], gravity[heavy[i]], names[heavy[i]]) for i in first])
     out[heavy] = found[inverse.ravel()]
     return out
+
+
+# -- trees -----------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TreeBatch(_Batch):
+    """n runs of trees (chains of 1-8 bodies, :class:`rbstab.config.ChainConfig`) as
+    arrays: what :func:`rbstab.simulator.simulate_batch` integrates with no configuration
+    object per run. Every field has the run axis first.
+
+    Attributes
+    ----------
+    trees : tuple of rbstab.variants.chain.CompiledChain
+        The trees the runs are made of: their structure (laws, parents, embedded joints,
+        names) is each run's; their records and points are a template's (each run's own
+        are below).
+    tree : ndarray of int64, shape (n,)
+        Each run's tree, an index into ``trees``.
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (n, B)
+        Body i's record with joint i's gains and limits and the run's admissible region
+        (``attachment_point``: joint i's R_c), as
+        :func:`rbstab.variants.chain.compile_chain` makes it; B the most bodies of any
+        tree, a smaller tree's rows padded with zero records.
+    ppoints : ndarray, shape (n, B, 3)
+        Each joint's R_p [m].
+    offset : ndarray, shape (n,)
+        h [J] of each run's tree (:func:`rbstab.variants.chain.rest_offset`).
+    y0 : ndarray, shape (n, S)
+        Initial states in the maximal layout (12 n + 3 e: Theta, Omega, X, V of every
+        body, then each embedded joint's D), zero-padded to the largest.
+    n_state : ndarray of int64, shape (n,)
+    settings, n_samples, compiled
+        As :class:`RunBatch`'s (``compiled``: the method is one of
+        :data:`rbstab.engine.METHODS`).
+    """
+
+    trees: tuple
+    tree: np.ndarray
+    params: np.ndarray
+    ppoints: np.ndarray
+    offset: np.ndarray
+    y0: np.ndarray
+    n_state: np.ndarray
+    settings: np.ndarray
+    n_samples: np.ndarray
+    compiled: np.ndarray
+
+
+def tree_batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
+                          template: np.ndarray, *, timeout: float | None = None) -> TreeBatch:
+    """The :class:`TreeBatch` of n runs of trees given as a table (the arguments as
+    :func:`batch_from_table`'s, the templates chains'): each template validated once, every
+    run's records built from the columns at once, bit for bit those of
+    :func:`rbstab.variants.chain.compile_chain` for its validated configuration; its initial
+    state placed as the configuration's loader places it; h once per distinct tree.
+
+    Raises
+    ------
+    ValueError
+        If a key does not fit its template's value, or a template lacks a field.
+    rbstab.config.ConfigError
+        For a template or run the sweep's validation would have refused.
+    """
+    f = _Fields(templates, keys, columns, np.asarray(template, dtype=np.int64))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the sweep reported each template's warnings when it planned it
+        configs = [config_from_mapping({**t, "name": "template"}) for t in templates]
+    trees = tuple(C.compile_chain(c.chain, offset=0.0) for c in configs)
+    n = f.n
+    width = max((c.size for c in trees), default=1)
+    params, ppoints = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3))
+    y0, n_state = np.zeros((n, max((c.n_states for c in trees), default=0))), np.zeros(n, dtype=np.int64)
+    offset = np.zeros(n)
+    bounds = _bounds(f, templates)
+    gravity = f.get("gravity", shape=(3,))
+    for t, rows in f.groups:
+        tree = trees[t]
+        for i in range(tree.size):
+            p = np.zeros(len(rows), dtype=PARAMETERS)
+            _tree_record(p, f, t, tree.chain, i, gravity[rows])
+            set_limits(p, None if bounds is None else bounds[rows])
+            params[rows, i] = p
+            ppoints[rows, i] = f.get("joints", f"{tree.chain.joint_names[i]}.parent_point", shape=(3,), only=t)
+        n_state[rows] = tree.n_states
+        y0[rows, : tree.n_states] = _tree_initial_states(f, t, keys, columns, configs[t], params[rows, : tree.size],
+                                                         ppoints[rows, : tree.size])
+        offset[rows] = _tree_offsets(tree, params[rows, : tree.size], ppoints[rows, : tree.size], gravity[rows])
+    settings = _settings(f, templates, timeout)
+    return TreeBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
+                     n_state=n_state, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
+                     compiled=settings["method"] != NOT_COMPILED)
+
+
+def _tree_record(p: np.ndarray, f: _Fields, t: int, chain, i: int, gravity: np.ndarray) -> None:
+    """The records ``p`` of body i of template ``t``'s runs with its joint's gains and limits
+    (:func:`rbstab.variants.chain.compile_chain`'s, ``chain`` the template's): each field as
+    written there or in a column (``bodies.trunk.mass``, ``joints.hip.k_r.0``)."""
+    body, joint = chain.bodies[i], chain.joints[i]
+
+    def of(section: str, name: str, default=None, shape=None):
+        owner = body.name if section == "bodies" else joint.name
+        return f.get(section, f"{owner}.{name}", default, shape=shape, only=t)
+
+    zero = [0.0, 0.0, 0.0]
+    _rigid(p, of("bodies", "mass"), of("bodies", "inertia", shape=(3, 3)), of("joints", "child_point", shape=(3,)),
+           gravity)
+    for name in ("k_t", "l_t"):
+        p[name] = of("bodies", name, zero, shape=(3, 3))
+    for name in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d"):
+        p[name] = of("joints", name, zero, shape=(3, 3))
+    if joint.l_d is not None:
+        p["l_d_inv"] = _inverse(p["l_d"])
+    p["k_s"] = of("joints", "k_s", 0.0)
+    p["boundary_layer"] = of("joints", "boundary_layer", 0.0)
+    if joint.saturation is not None or body.saturation is not None:
+        p["torque_limit"] = of("joints", "saturation.torque_n", math.inf, shape=(3,)) if joint.saturation else math.inf
+        p["constraint_force_limit"] = (of("joints", "saturation.constraint_force", math.inf, shape=(3,))
+                                       if joint.saturation else math.inf)
+        p["force_limit"] = of("bodies", "saturation.force_h", math.inf, shape=(3,)) if body.saturation else math.inf
+        p["saturation"] = SATURATION_SHAPES[(body.saturation or joint.saturation).shape]
+    listed = f.templates[t].get("disturbances") or ()
+    mine = [at for at, d in enumerate(listed) if d.get("body", body.name if chain.size == 1 else None) == body.name]
+    if mine:
+        _disturbances(p, f, t, mine)
+
+
+def _tree_initial_states(f: _Fields, t: int, keys: Sequence[str], columns: Mapping[str, np.ndarray], config,
+                         params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
+    """The initial states (k, n_states) of template ``t``'s k runs (``config``: the
+    template's, validated; ``params`` (k, n), ``ppoints`` (k, n, 3): the runs' records):
+    each run's ``initial_state`` section, the template's with the run's values of the
+    varied ``initial_state.*`` keys, placed as the loader places it
+    (:func:`rbstab.config.loader.placed_initial_state`: x and v left out follow the parent's)."""
+    rows = f.rows(t)
+    section = f.templates[t]["initial_state"]
+    varied = [(parse_any_key(k), columns[k]) for k in keys if k.partition(".")[0] == "initial_state"]
+    moved = any(k.partition(".")[0] == "joints" and k.split(".")[2:3] in (["parent_point"], ["child_point"])
+                for k in keys)  # the joints' points of the runs differ: each run's chain places it
+    margin = f.get("simulation", "gimbal_margin", only=t)
+    chain = config.chain
+    out = np.empty((len(rows), config.chain.size * 12 + 3 * sum(j.variant == "embedded" for j in chain.joints)))
+    for a, r in enumerate(rows):
+        written = section
+        if varied:
+            data = {"initial_state": {body: {k: list(v) if isinstance(v, list) else v for k, v in blocks.items()}
+                                      for body, blocks in section.items()}}
+            for path, column in varied:
+                value = column[r]
+                path.set(data, value.tolist() if isinstance(value, np.ndarray | np.generic) else value)
+            written = data["initial_state"]
+        if moved:
+            chain = dataclasses.replace(config.chain, joints=tuple(
+                dataclasses.replace(j, parent_point=ppoints[a, i].copy(), child_point=params[a, i]["attachment_point"].copy())
+                for i, j in enumerate(config.chain.joints)))
+        out[a] = C.state_vector(chain, placed_initial_state(written, chain, float(margin[a])))
+    return out
+
+
+def _tree_offsets(tree, params: np.ndarray, ppoints: np.ndarray, gravity: np.ndarray) -> np.ndarray:
+    """h [J] of k runs of the tree ``tree`` (its structure) with the records ``params`` (k,
+    n), parent points ``ppoints`` (k, n, 3) and gravity (k, 3):
+    :func:`rbstab.variants.chain.rest_offset` once per distinct tree."""
+    keys = np.array([params[a].tobytes() + ppoints[a].tobytes() + gravity[a].tobytes() for a in range(len(params))],
+                    dtype=object)
+    if not len(keys):
+        return np.zeros(0)
+    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
+    found = np.array([C.rest_offset(C.with_records(tree, params[a], ppoints[a], gravity=gravity[a])) for a in first])
+    return found[inverse.ravel()]

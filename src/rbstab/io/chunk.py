@@ -413,15 +413,15 @@ def trace_dimensions(block) -> tuple[dict[str, tuple[str, ...]], dict[str, tuple
     "body", "axis")`` (:data:`rbstab.io.hdf5.BODY_VARIABLES`), its per-joint ones ``("time",
     "joint"[, "axis"])``, as in a chain's run file; labels ``body`` and ``joint`` with the
     chain's names (none for one body)."""
-    chain = getattr(block.configs[0], "chain", None) if len(block.configs) else None
+    chain = block.joints is not None
     dims: dict[str, tuple[str, ...]] = {}
     for name, value in block.outputs.items():
         extra = np.ndim(value) - 2  # the dimensions after (run, time)
-        if chain is not None and extra >= 1:
+        if chain and extra >= 1:
             dims[name] = ("time", "body" if name in BODY_VARIABLES else "joint", "axis")[: extra + 1]
         else:
             dims[name] = ("time", "axis")[: extra + 1]
-    labels = {} if chain is None else {"body": tuple(chain.body_names), "joint": tuple(chain.joint_names)}
+    labels = {"body": tuple(block.bodies), "joint": tuple(block.joints)} if chain else {}
     return dims, labels
 
 

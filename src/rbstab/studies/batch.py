@@ -66,11 +66,11 @@ def integrate_part(part, engine: str = "compiled") -> dict:
     """Integrate the runs of a :class:`rbstab.sweep.table.TableSlice`; return their figure
     columns (``figures``: column -> values, shape (k,); a chain's per body or joint and
     axis, as its sweep's columns; ``ok``: success per run, shape (k,)). The function an
-    executor runs: one body's runs that the compiled (or cuda) engine takes go as one
-    :class:`rbstab.engine.RunBatch` through :func:`rbstab.simulator.simulate_batch` (the
-    summary figures only, no trace kept); the others (a chain's, implicit methods, the pure
-    sign law) from their configurations through :func:`rbstab.simulator.simulate_blocks`
-    (the runs of one chain in one call of ``engine``)."""
+    executor runs: the runs that the compiled (or cuda) engine takes go as one batch
+    (:meth:`rbstab.sweep.table.TableSlice.batch`: one body's or trees') through
+    :func:`rbstab.simulator.simulate_batch` (the summary figures only, no trace kept); the
+    others (implicit methods, the pure sign law) from their configurations through
+    :func:`rbstab.simulator.simulate_blocks`."""
     from ..simulator import simulate_batch, simulate_blocks  # heavy: numba
 
     CALLS["batches"] += 1
@@ -99,7 +99,7 @@ def integrate_part(part, engine: str = "compiled") -> dict:
 
     spec = get_engine(engine)
     engine_name = engine if spec.compiled else None
-    batch = part.batch() if engine_name and members is None else None
+    batch = part.batch() if engine_name else None
     fast = np.flatnonzero(batch.compiled) if batch is not None else np.empty(0, dtype=np.int64)
     if len(fast):
         for rows, block in simulate_batch(batch, fast, full=False, engine=engine_name, keep="none"):

@@ -547,8 +547,7 @@ def _table_batch(part, options: WorkerOptions):
     """The slice's :class:`~rbstab.engine.RunBatch` where the worker integrates it as one
     (compiled or cuda engine, store files), else None; None also for a slice the batch cannot be
     built from, whose runs then go one by one (each run's problem, if any, its own record)."""
-    if not get_engine(options.engine).compiled or options.layout != "chunk" or not len(part) or any(
-            is_chain(t) for t in part.templates):
+    if not get_engine(options.engine).compiled or options.layout != "chunk" or not len(part):
         return None
     try:
         return part.batch(options.timeout)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import math
 from collections import namedtuple
 from collections.abc import Sequence
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,7 +34,7 @@ import numpy as np
 from ..chain import Chain
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
-from ..layout import LYAPUNOV_TERMS, SATURATION_FLAGS, VARIANT_CODES
+from ..layout import LIMITED, LYAPUNOV_TERMS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     Gains,
@@ -53,7 +54,7 @@ from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "is_one_body", "gimbal_lock_message", "independent_coordinates", "full_state",
-           "region_margin", "gimbal_angles", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "region_margin", "gimbal_angles", "state_vector", "with_records", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
@@ -612,6 +613,19 @@ def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoi
             and bool(np.array_equal(ppoints[0], params[0]["attachment_point"])))
 
 
+def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarray, offset: float = 0.0,
+                 gravity: np.ndarray | None = None) -> CompiledChain:
+    """``compiled``'s structure (codes, parents, embedded joints, names) with another run's
+    records ``params`` (n,), parent points ``ppoints`` (n, 3) [m] and h ``offset`` [J] (a
+    run of a :class:`rbstab.engine.batch.TreeBatch`); ``gravity`` (3,) [m/s^2] the chain's
+    where None."""
+    chain = compiled.chain if gravity is None else dataclasses.replace(compiled.chain,
+                                                                       gravity=np.asarray(gravity, dtype=float))
+    params, ppoints = np.ascontiguousarray(params), np.ascontiguousarray(ppoints, dtype=float)
+    return CompiledChain(chain, params, compiled.codes, compiled.parents, ppoints, compiled.d_at, compiled.n_states,
+                         float(offset), (params, compiled.codes, compiled.parents, ppoints, compiled.d_at))
+
+
 def _record(chain: Chain, i: int) -> np.ndarray:
     body, joint = chain.bodies[i], chain.joints[i]
     limits = [np.full(3, math.inf)] * 3
@@ -916,10 +930,16 @@ def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[fl
 def initial_state(config) -> np.ndarray:
     """The initial state (n_states,) of a :class:`rbstab.config.ChainConfig` (module
     docstring for the layout)."""
-    d_at, size = _controller_states(config.chain)
+    return state_vector(config.chain, config.initial_state)
+
+
+def state_vector(chain: Chain, states) -> np.ndarray:
+    """The state (n_states,) of ``chain`` whose bodies have the blocks ``states`` (by body
+    name, then block: :attr:`rbstab.config.ChainConfig.initial_state`'s form)."""
+    d_at, size = _controller_states(chain)
     y = np.zeros(size)
-    for i, body in enumerate(config.chain.bodies):
-        state = config.initial_state[body.name]
+    for i, body in enumerate(chain.bodies):
+        state = states[body.name]
         for k, block in enumerate(("theta", "omega", "position", "velocity")):
             y[12 * i + 3 * k: 12 * i + 3 * k + 3] = state[block]
         if d_at[i] >= 0:
@@ -1025,13 +1045,14 @@ def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float
     return worst, what
 
 
-def nearest_bound(compiled: CompiledChain, y: np.ndarray, limits, which: tuple[str, int]) -> str:
+def nearest_bound(compiled: CompiledChain, y: np.ndarray, bounds: np.ndarray, which: tuple[str, int]) -> str:
     """In words, the body or joint whose |q_i| is nearest its bound of ``simulation.limits``
-    at the state ``y``: ``which`` = (q, i), q one of :data:`rbstab.layout.LIMITED`
+    (``bounds`` (5, 3), :data:`rbstab.layout.LIMITED`'s order, a record's ``limits``) at the
+    state ``y``: ``which`` = (q, i), q one of :data:`rbstab.layout.LIMITED`
     (``constraint_error``: E_j of a non-permanent joint), i the axis (0-2); e.g.
     ``"|theta_1| of trunk reached 0.2"``."""
     quantity, axis = which
-    bound = float(np.asarray(getattr(limits, quantity), dtype=float)[axis])
+    bound = float(np.asarray(bounds, dtype=float)[LIMITED.index(quantity), axis])
     n = compiled.size
     if quantity == "constraint_error":
         joints = np.empty((n, 7, 3))
