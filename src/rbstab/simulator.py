@@ -39,7 +39,7 @@ import numpy as np
 
 from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
-from .engine.batch import MAX_STATE, TreeBatch
+from .engine.batch import MAX_STATE, TreeBatch, tree_batch
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
 from .engine.integrate import admissible
@@ -47,7 +47,7 @@ from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, 
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
-from .model import DISTURBANCE_KINDS, PARAMETERS, set_limits
+from .model import DISTURBANCE_KINDS, PARAMETERS
 from .results import RunBlock, RunResult, row
 from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary_table
 from .variants import Variant
@@ -591,7 +591,7 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
             (trees if isinstance(config, ChainConfig) else bodies).append(i)
     if trees:
         chosen = [configs[i] for i in trees]
-        for rows, block in simulate_batch(_tree_batch_of(chosen, timeout), engine=engine, keep=keep, configs=chosen):
+        for rows, block in simulate_batch(tree_batch(chosen, timeout), engine=engine, keep=keep, configs=chosen):
             yield [trees[r] for r in rows], block
     if bodies:
         chosen = [configs[i] for i in bodies]
@@ -773,39 +773,6 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
     table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)))
     return outputs if traces else {}, table
-
-
-def _tree_batch_of(configs: Sequence, timeout: float | None) -> TreeBatch:
-    """The :class:`~rbstab.engine.batch.TreeBatch` of chain configurations
-    (:class:`rbstab.config.ChainConfig`; ``timeout`` [s], if given, each run's
-    ``max_wall_time``): configs that share their Chain object share its compilation (a
-    sweep over initial states compiles its chain once)."""
-    from .variants import chain as C  # heavy: numba
-
-    by_chain: dict[int, int] = {}
-    trees: list = []
-    tree = np.empty(len(configs), dtype=np.int64)
-    for i, config in enumerate(configs):
-        t = by_chain.get(id(config.chain))
-        if t is None:
-            t = by_chain[id(config.chain)] = len(trees)
-            trees.append(C.compile_chain(config.chain))
-        tree[i] = t
-    n, width = len(configs), max((c.size for c in trees), default=1)
-    params, ppoints = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3))
-    y0, n_state = np.zeros((n, max((c.n_states for c in trees), default=0))), np.zeros(n, dtype=np.int64)
-    for i, config in enumerate(configs):
-        c = trees[tree[i]]
-        params[i, : c.size] = c.params
-        set_limits(params[i, : c.size], config.simulation.limits)
-        ppoints[i, : c.size], n_state[i] = c.ppoints, c.n_states
-        y0[i, : c.n_states] = C.initial_state(config)
-    settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
-    settings["method"] = [method_number(c.simulation.method) for c in configs]
-    return TreeBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints,
-                     offset=np.array([trees[t].offset for t in tree], dtype=float), y0=y0, n_state=n_state,
-                     settings=settings, n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
-                     compiled=np.ones(n, dtype=bool))
 
 
 def _structure(batch: TreeBatch, i: int) -> tuple:

@@ -36,10 +36,10 @@ from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATUR
 from ..variants import VARIANTS
 from ..variants import chain as C
 from ..variants.registry import record_offset
-from .settings import SETTING_COLUMNS, SETTINGS, settings_rows
+from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
-__all__ = ["RunBatch", "batch_from_table", "TreeBatch", "tree_batch_from_table", "MAX_STATE", "NOT_COMPILED"]
+__all__ = ["RunBatch", "batch_from_table", "TreeBatch", "tree_batch", "tree_batch_from_table", "MAX_STATE", "NOT_COMPILED"]
 
 #: The largest state of any variant (the second axis of :attr:`RunBatch.y0`).
 MAX_STATE = max(STATE_SIZE)
@@ -388,6 +388,38 @@ class TreeBatch(_Batch):
     settings: np.ndarray
     n_samples: np.ndarray
     compiled: np.ndarray
+
+
+def tree_batch(configs: Sequence, timeout: float | None = None) -> TreeBatch:
+    """The :class:`TreeBatch` of validated chain configurations
+    (:class:`rbstab.config.ChainConfig`; ``timeout`` [s], if given, each run's
+    ``max_wall_time``): configs that share their Chain object share its compilation (a
+    sweep over initial states compiles its chain once)."""
+    by_chain: dict[int, int] = {}
+    trees: list = []
+    tree = np.empty(len(configs), dtype=np.int64)
+    for i, config in enumerate(configs):
+        t = by_chain.get(id(config.chain))
+        if t is None:
+            t = by_chain[id(config.chain)] = len(trees)
+            trees.append(C.compile_chain(config.chain))
+        tree[i] = t
+    n, width = len(configs), max((c.size for c in trees), default=1)
+    params, ppoints = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3))
+    y0, n_state = np.zeros((n, max((c.n_states for c in trees), default=0))), np.zeros(n, dtype=np.int64)
+    for i, config in enumerate(configs):
+        c = trees[tree[i]]
+        params[i, : c.size] = c.params
+        set_limits(params[i, : c.size], config.simulation.limits)
+        ppoints[i, : c.size], n_state[i] = c.ppoints, c.n_states
+        y0[i, : c.n_states] = C.initial_state(config)
+    settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
+    settings["method"] = [METHODS.index(c.simulation.method) if c.simulation.method in METHODS else NOT_COMPILED
+                          for c in configs]
+    return TreeBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints,
+                     offset=np.array([trees[t].offset for t in tree], dtype=float), y0=y0, n_state=n_state,
+                     settings=settings, n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
+                     compiled=settings["method"] != NOT_COMPILED)
 
 
 def tree_batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],

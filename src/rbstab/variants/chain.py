@@ -34,7 +34,7 @@ import numpy as np
 from ..chain import Chain
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
-from ..layout import LIMITED, LYAPUNOV_TERMS, SATURATION_FLAGS, VARIANT_CODES
+from ..layout import LIMITED, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     Gains,
@@ -923,8 +923,7 @@ def _terms(compiled: CompiledChain, t: float, y: np.ndarray):
 def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[float, float]:
     """(v [J], dv/dt [W] analytic) at the state ``y`` (n_states,) and time ``t`` [s]."""
     _, _, scalars = _terms(compiled, t, y)
-    terms = (scalars[_TRANSLATIONAL], scalars[_ROTATIONAL], scalars[_CONSTRAINT], scalars[_GRAVITY] + compiled.offset)
-    return float(sum(terms)), float(scalars[_RATE])
+    return float(scalars[:_RATE].sum() + compiled.offset), float(scalars[_RATE])
 
 
 def initial_state(config) -> np.ndarray:
@@ -1138,7 +1137,7 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     out["lyapunov_rotational"] = scalars[:, _ROTATIONAL]
     out["lyapunov_constraint"] = scalars[:, _CONSTRAINT]
     out["lyapunov_gravity"] = scalars[:, _GRAVITY] + offset
-    out["lyapunov"] = sum(out[term] for term in LYAPUNOV_TERMS)  # in eq 25's order, as one body's
+    out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + offset
     out["lyapunov_rate"] = scalars[:, _RATE]
     out["disturbance_power"] = power
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
