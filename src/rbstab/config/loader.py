@@ -565,31 +565,6 @@ class ChainConfig:
         """``resolved`` as YAML (keys in schema order, lists in flow style)."""
         return dump_yaml(self.resolved)
 
-    @classmethod
-    def like(cls, resolved: Mapping, others: Sequence["ChainConfig"]) -> "ChainConfig | None":
-        """The ChainConfig of a ``resolved`` mapping that a validated ChainConfig gave (a
-        sweep's planned run sent to a worker), rebuilt without validating it again where one
-        of ``others`` differs from it only in ``name`` and ``initial_state``: it shares that
-        config's chain and settings (a sweep over initial states integrates one chain, compiled
-        once), its initial state placed from ``resolved`` as :func:`config_from_mapping`
-        places it; no warnings. None where none of ``others`` does (validate it with
-        :func:`config_from_mapping`).
-
-        Raises
-        ------
-        KeyError, TypeError, ValueError
-            For a mapping of another shape.
-        """
-        keys = set(resolved) - {"name", "initial_state"}
-        for other in others:
-            if keys == set(other.resolved) - {"name", "initial_state"} and all(
-                    resolved[key] == other.resolved[key] for key in keys):
-                states, placed, _ = _place_tree(resolved["initial_state"], other.chain, other.simulation.gimbal_margin,
-                                                None, ())
-                return dataclasses.replace(other, name=resolved["name"], initial_state=states, placed=placed,
-                                           resolved=resolved, warnings=())
-        return None
-
 
 def placed_initial_state(initial_state: Mapping, chain: Chain, margin: float) -> dict[str, dict[str, np.ndarray]]:
     """:attr:`ChainConfig.initial_state` of a validated chain config's ``initial_state``

@@ -18,10 +18,9 @@ Engines
   run of the chunk whose method the engine takes (RK23, RK45, DOP853) is integrated in its
   batches, whatever its variant, body and gains (a tree's runs with the runs of the same
   tree); the others (implicit methods, the pure
-  sign law of ``sliding``) go through scipy. Configurations are validated once per group of runs
-  that differ only in name and initial state: the sweep validated every run when it was
-  planned, and the other runs of a group take the group's validated config with their
-  own name and initial state.
+  sign law of ``sliding``) go through scipy. The sweep validated every run when it was
+  planned: a chunk of a table goes as one batch of arrays (:func:`run_table_chunk`); runs
+  given one by one are rebuilt from their resolved configurations.
 
 Layouts
 -------
@@ -52,7 +51,7 @@ from typing import Any
 import numpy as np
 
 from ..config import PhysicalPlausibilityWarning, RunConfig
-from ..config.loader import ChainConfig, config_from_mapping
+from ..config.loader import config_from_mapping
 from ..config.paths import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
@@ -322,23 +321,16 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
     rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`,
     sharing the body, gains and settings of one of the last :data:`SHARED_CONFIGS` distinct
     configs where they are the same: a grid's inner axis); one that does not rebuild is
-    validated, for the message of what is wrong with it. A tree's run is validated again
-    unless it differs from one of the last :data:`SHARED_CONFIGS` validated ones only in
-    name and initial state (:meth:`rbstab.config.loader.ChainConfig.like`: it shares that
-    one's chain, so the chain is compiled once).
+    validated, for the message of what is wrong with it. A tree's run is validated again (a
+    chunk of them goes as columns, :func:`run_table_chunk`; these are the runs that do not).
     """
     configs: list = []
     errors: list[dict[str, Any]] = []
     recent: list = []  # distinct rebuilt configs, the latest first
-    chains: list = []  # distinct validated chain configs, the latest first
     for task in tasks:
         try:
-            if is_chain(task.config):  # a tree's spelling: validated again unless it shares a recent one's chain
-                config = ChainConfig.like(task.config, chains)
-                if config is None:
-                    config = _config(task)
-                    chains = [config, *chains[: SHARED_CONFIGS - 1]]
-                configs.append(config)
+            if is_chain(task.config):
+                configs.append(_config(task))
                 continue
             try:
                 config = RunConfig.from_resolved(task.config, like=recent)
