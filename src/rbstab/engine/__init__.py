@@ -11,7 +11,8 @@ compiled right-hand side.
 
 :func:`batch_from_table` gives many runs as one :class:`RunBatch` of arrays (parameter
 records, initial states, variant codes, settings), the input of an engine that depends on
-no configuration object.
+no configuration object; :func:`tree_batch_from_table` (or :func:`tree_batch` of chain
+configs) gives chains' runs as one :class:`TreeBatch`.
 
 :data:`ENGINES` (:mod:`rbstab.engine.registry`) names the engines (``compiled``, ``scipy``,
 ``cuda``) with what each integrates. The names below are imported on first use, so that
@@ -22,7 +23,7 @@ import importlib
 
 #: Public name -> the submodule defining it (PEP 562: imported on first use).
 _SOURCES = {
-    **dict.fromkeys(["RunBatch", "batch_from_table"], "batch"),
+    **dict.fromkeys(["RunBatch", "batch_from_table", "TreeBatch", "tree_batch", "tree_batch_from_table"], "batch"),
     **dict.fromkeys(["ChunkSolution", "integrate_runs"], "integrate"),
     "method_number": "rk",
     **dict.fromkeys(["DEFAULT_MAX_STEPS", "status_message"], "status"),
@@ -46,5 +47,6 @@ def __dir__() -> list[str]:
 
 
 __all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message",
-           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table", "ENGINES", "DEFAULT_ENGINE",
+           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table", "TreeBatch", "tree_batch",
+           "tree_batch_from_table", "ENGINES", "DEFAULT_ENGINE",
            "Engine", "get_engine"]
