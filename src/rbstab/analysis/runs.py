@@ -153,6 +153,7 @@ class Runs:
                                  "with an explicit method")
             batch = _take(self.base, np.zeros(k, dtype=np.int64))
             batch.y0[:, :states.shape[1]] = states
+            batch.n_samples[:] = 2  # v(0) and v(t_end): two samples (a run's steps do not depend on them)
             if disturbance is not None:
                 batch.params["disturbance_value"][:, disturbance[1], :] = disturbance[2]
             return integrate_batch(batch, self.engine, self.executor)
