@@ -454,7 +454,7 @@ _LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUT
 POSTPROCESS_BLOCK = 32
 #: Bytes of samples a chain's GPU launch brings back to the host at most (every sample of
 #: its runs, which their summaries read): the runs of a launch of
-#: :func:`_tree_blocks` with the CUDA engine.
+#: :func:`_tree_batch_blocks` with the CUDA engine.
 CUDA_CHAIN_SAMPLE_BYTES = 2 * 2**30
 
 
