@@ -826,9 +826,8 @@ def _tree_call(batch: TreeBatch, members: list[int], integrate, gpu: bool, outpu
     method, sample count and t_end): one call of ``integrate`` with each distinct tree and
     admissible region once, then their outputs and summaries :data:`POSTPROCESS_BLOCK` runs
     at a time, a RunBlock each (the outputs held at once: those of that many runs)."""
-    from .engine.systems import TreeSystem  # heavy: numba
+    from .engine.systems import tree_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
-    from .variants.tree import tree_layout  # heavy: numba
 
     start = _time.perf_counter()
     structure = batch.trees[int(batch.tree[members[0]])]
@@ -840,8 +839,8 @@ def _tree_call(batch: TreeBatch, members: list[int], integrate, gpu: bool, outpu
     tree_of = tree_of.ravel().astype(np.int64)
     trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
                             batch.offset[members[j]]) for j in first]
-    system = TreeSystem(np.ascontiguousarray(params[first]), structure.codes, structure.parents,
-                        np.ascontiguousarray(ppoints[first]), structure.d_at, *tree_layout(structure).args, None)
+    system = tree_system(structure)._replace(params=np.ascontiguousarray(params[first]),
+                                             ppoints=np.ascontiguousarray(ppoints[first]))  # each distinct tree once
     y0 = batch.y0[members, :n_states]
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])

@@ -39,7 +39,8 @@ from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
-__all__ = ["RunBatch", "batch_from_table", "TreeBatch", "tree_batch", "tree_batch_from_table", "MAX_STATE", "NOT_COMPILED"]
+__all__ = ["RunBatch", "batch_from_table", "TreeBatch", "tree_batch", "tree_batch_from_table", "MAX_STATE",
+           "NOT_COMPILED"]
 
 #: The largest state of any variant (the second axis of :attr:`RunBatch.y0`).
 MAX_STATE = max(STATE_SIZE)
@@ -285,9 +286,14 @@ def _settings(f: _Fields, templates: Sequence[Mapping], timeout: float | None) -
         settings[name] = value
     if timeout is not None:
         settings["max_wall_time"] = float(timeout)
-    settings["method"] = f.of_templates([METHODS.index(m) if m in METHODS else NOT_COMPILED
-                                         for m in (t["simulation"]["method"] for t in templates)])
+    settings["method"] = f.of_templates([_method(t["simulation"]["method"]) for t in templates])
     return settings
+
+
+def _method(name: str) -> int:
+    """A run's ``settings["method"]``: the index of ``name`` in :data:`METHODS`, else
+    :data:`NOT_COMPILED` (an implicit method, integrated by scipy)."""
+    return METHODS.index(name) if name in METHODS else NOT_COMPILED
 
 
 def _disturbances(p: np.ndarray, f: _Fields, t: int, entries: Sequence[int]) -> None:
@@ -414,8 +420,7 @@ def tree_batch(configs: Sequence, timeout: float | None = None) -> TreeBatch:
         ppoints[i, : c.size], n_state[i] = c.ppoints, c.n_states
         y0[i, : c.n_states] = C.initial_state(config)
     settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
-    settings["method"] = [METHODS.index(c.simulation.method) if c.simulation.method in METHODS else NOT_COMPILED
-                          for c in configs]
+    settings["method"] = [_method(c.simulation.method) for c in configs]
     return TreeBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints,
                      offset=np.array([trees[t].offset for t in tree], dtype=float), y0=y0, n_state=n_state,
                      settings=settings, n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
@@ -459,7 +464,7 @@ def tree_batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], col
             ppoints[rows, i] = f.get("joints", f"{tree.chain.joint_names[i]}.parent_point", shape=(3,), only=t)
         n_state[rows] = tree.n_states
         y0[rows, : tree.n_states] = _tree_initial_states(f, t, keys, columns, configs[t], params[rows, : tree.size],
-                                                         ppoints[rows, : tree.size])
+                                                         ppoints[rows, : tree.size])  # (k, n_states)
         offset[rows] = _tree_offsets(tree, params[rows, : tree.size], ppoints[rows, : tree.size], gravity[rows])
     settings = _settings(f, templates, timeout)
     return TreeBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
@@ -509,12 +514,13 @@ def _tree_initial_states(f: _Fields, t: int, keys: Sequence[str], columns: Mappi
     (:func:`rbstab.config.loader.placed_initial_state`: x and v left out follow the parent's)."""
     rows = f.rows(t)
     section = f.templates[t]["initial_state"]
-    varied = [(parse_any_key(k), columns[k]) for k in keys if k.partition(".")[0] == "initial_state"]
-    moved = any(k.partition(".")[0] == "joints" and k.split(".")[2:3] in (["parent_point"], ["child_point"])
-                for k in keys)  # the joints' points of the runs differ: each run's chain places it
+    paths = [(parse_any_key(k), k) for k in keys]
+    varied = [(path, columns[k]) for path, k in paths if path.section == "initial_state"]
+    # the joints' points of the runs differ: each run's chain places it
+    moved = any(path.section == "joints" and path.field in ("parent_point", "child_point") for path, _ in paths)
     margin = f.get("simulation", "gimbal_margin", only=t)
     chain = config.chain
-    out = np.empty((len(rows), config.chain.size * 12 + 3 * sum(j.variant == "embedded" for j in chain.joints)))
+    out = []
     for a, r in enumerate(rows):
         written = section
         if varied:
@@ -526,10 +532,11 @@ def _tree_initial_states(f: _Fields, t: int, keys: Sequence[str], columns: Mappi
             written = data["initial_state"]
         if moved:
             chain = dataclasses.replace(config.chain, joints=tuple(
-                dataclasses.replace(j, parent_point=ppoints[a, i].copy(), child_point=params[a, i]["attachment_point"].copy())
+                dataclasses.replace(j, parent_point=ppoints[a, i].copy(),
+                                    child_point=params[a, i]["attachment_point"].copy())
                 for i, j in enumerate(config.chain.joints)))
-        out[a] = C.state_vector(chain, placed_initial_state(written, chain, float(margin[a])))
-    return out
+        out.append(C.state_vector(chain, placed_initial_state(written, chain, float(margin[a]))))
+    return np.array(out)
 
 
 def _tree_offsets(tree, params: np.ndarray, ppoints: np.ndarray, gravity: np.ndarray) -> np.ndarray:

@@ -173,7 +173,8 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
     (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H
     into ``bodies``; the translational, rotational, constraint and gravity terms of v (eq
-    25's grouping, summed over the bodies and joints) into ``scalars[:4]``; dD/dt of embedded joints into ``dy``. Returns (the number of permanent
+    25's grouping, summed over the bodies and joints) into ``scalars[:4]``; dD/dt of
+    embedded joints into ``dy``. Returns (the number of permanent
     joints, the saturation deficit power, the disturbances' power, the dissipation [W], the
     state's size 12 n + 3 e)."""
     n = codes.shape[0]
@@ -1100,11 +1101,14 @@ _H_AT, _POWER_AT = OUTPUTS["force_h"].offset, OUTPUTS["disturbance_power"].offse
 
 @jit
 def one_body_samples(code, times, states, params, rows, joints, bodies, scalars, power, flags):
-    """What :func:`chain_samples` writes, for trees that are the paper's one-body model
+    """What :func:`chain_samples` writes (the same arguments: ``states`` (m, n_states) at
+    ``times`` (m,) [s], ``params`` (t, 1) records, ``rows`` (m,) each sample's tree; into
+    ``joints`` (m, 1, 7, 3), ``bodies`` (m, 1, 3), ``scalars`` (m, 5), ``power`` (m,) [W],
+    ``flags`` (m, 1, 3, 3)), for trees that are the paper's one-body model
     (:func:`is_one_body`; ``code`` their joint's law): the one-body model's compiled outputs
-    (:func:`rbstab.variants.kernels.output_row`: the same quantities, v's terms without h
-    where the records' h is 0) of each sample, its state in the one-body layout (a permanent
-    joint's: Theta, Omega)."""
+    (:func:`rbstab.variants.kernels.output_row`, eqs 20-25: the same quantities, v's terms
+    without h where the records' h is 0) of each sample, its state in the one-body layout (a
+    permanent joint's: Theta, Omega)."""
     buffer = np.empty(N_OUTPUTS)
     size = 6 if code == PERMANENT else states.shape[1]
     for s in range(states.shape[0]):
