@@ -280,7 +280,7 @@ def disturbed() -> dict:
         spec = spec_from_mapping({"name": "d", "base": os.path.join(sys.argv[1], base), "zip": {
             "simulation.t_end": [0.2]}}, overrides=["simulation.n_samples=201", *overrides])
         runs = plan_table(spec).slice(np.arange(1)).batch()
-        p = runs.params[0]
+        p = runs.params[0, 0]
         kinds |= {names[float(k)] for k in p["disturbance_kind"][: int(p["disturbance_count"])]}
         found = {engine: [(block.result(0), block.stride, block.variants[0]) for _, block in
                           simulate_batch(runs, engine=engine, keep="thinned")] for engine in ("compiled", "cuda")}
@@ -300,7 +300,7 @@ def disturbed() -> dict:
             impulse = {"value": p["disturbance_value"][i].tolist(), "point": p["disturbance_point"][i].tolist(),
                        "torque": bool(p["disturbance_torque"][i]), "mass": float(p["mass"]),
                        "inertia": p["inertia"].tolist()}
-            runs.params["disturbance_value"][0, i] = 0.0
+            runs.params["disturbance_value"][0, 0, i] = 0.0
             (_, block), = simulate_batch(runs, engine="compiled", keep="thinned")
             without = block.result(0).outputs
             keys = ("theta", "omega", "velocity", "disturbance_work")

@@ -346,7 +346,7 @@ def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
 
     from rbstab.config import config_from_mapping
     from rbstab.config.yaml_io import read_yaml_file
-    from rbstab.engine.batch import TreeBatch
+    from rbstab.engine.batch import RunBatch
     from rbstab.model import set_limits
     from rbstab.sweep import plan_table, spec_from_mapping
     from rbstab.variants import chain as C
@@ -373,7 +373,7 @@ def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
             warnings.simplefilter("ignore")
             part = plan_table(spec_from_mapping({"name": "v", "base": base, "table": table})).slice(np.arange(n))
         batch = part.batch()
-        assert isinstance(batch, TreeBatch) and batch.compiled.all()
+        assert isinstance(batch, RunBatch) and batch.compiled.all() and not batch.one_body.any()
         for j in range(n):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")

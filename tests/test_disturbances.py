@@ -264,8 +264,8 @@ def test_batch_records_carry_the_disturbances_as_columns():
     config = config_from_mapping(_mapping("visco_elastic", PUSHES))
     batch = batch_from_table([config.resolved], ["disturbances.0.value.1"],
                              {"disturbances.0.value.1": np.array([5.0, 7.0])}, np.array([0, 0]))
-    assert batch.params[0].tobytes() == config.make_variant().parameters[0].tobytes()
-    assert batch.params[1]["disturbance_value"][0, 1] == 7.0
+    assert batch.params[0, 0].tobytes() == config.make_variant().parameters[0].tobytes()
+    assert batch.params[1, 0]["disturbance_value"][0, 1] == 7.0
 
 
 def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed():

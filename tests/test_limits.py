@@ -242,9 +242,9 @@ def test_sweep_batches_carry_each_runs_limits_and_show_failures_as_not_ok():
         batch = table.slice(np.arange(3)).batch()
         for i in range(3):
             config = config_from_mapping(table.slice(np.arange(3)).resolved(i))
-            np.testing.assert_array_equal(batch.params[i], config.make_variant().parameters[0])
+            np.testing.assert_array_equal(batch.params[i, 0], config.make_variant().parameters[0])
         runs = run_generation(base, design)
-    np.testing.assert_array_equal(batch.params["limits"][:, 0], [[1.0, 0.6, 1.0], [1.0, 0.6, 1.0], [1.0, 2.0, 1.0]])
+    np.testing.assert_array_equal(batch.params["limits"][:, 0, 0], [[1.0, 0.6, 1.0], [1.0, 0.6, 1.0], [1.0, 2.0, 1.0]])
     assert runs.ok.tolist() == [False, True, True]  # 0.5 t reaches 0.6 at 1.2 s < t_end; 0.2 t does not
 
 

@@ -15,6 +15,7 @@ import yaml
 from rbstab.config import config_from_mapping
 from rbstab.engine import METHODS, RunBatch, batch_from_table
 from rbstab.engine.batch import MAX_STATE, NOT_COMPILED
+from rbstab.layout import VARIANT_CODES
 from rbstab.engine.settings import settings_rows
 from rbstab.simulator import is_sign_law, uses_compiled_engine
 from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
@@ -60,7 +61,9 @@ def _check(table, rows, timeout=None) -> RunBatch:
     assert isinstance(batch, RunBatch) and len(batch) == len(rows)
     for j in range(len(rows)):
         record, y0, settings, compiled, config = _expected(part.resolved(j))
-        assert batch.params[j].tobytes() == record.tobytes(), f"run {j}: {config.variant}"
+        assert batch.params[j, 0].tobytes() == record.tobytes(), f"run {j}: {config.variant}"
+        assert batch.offset[j] == record["lyapunov_offset"] and batch.one_body[j]
+        assert batch.codes[j] == VARIANT_CODES[config.variant] and batch.ppoints[j, 0].tobytes() == record["attachment_point"].tobytes()
         size = len(y0)
         assert batch.n_state[j] == size and batch.y0[j, :size].tobytes() == y0.tobytes()
         assert not batch.y0[j, size:].any() and batch.y0.shape[1] == MAX_STATE
@@ -160,14 +163,14 @@ def test_batch_of_saturated_runs():
     })
     table = plan_table(spec)
     batch = _check(table, np.arange(table.n))
-    assert batch.params["saturation"].tolist() == [1.0, 1.0, 2.0, 2.0]
-    np.testing.assert_array_equal(batch.params["constraint_force_limit"][0], [np.inf] * 3)
-    np.testing.assert_array_equal(batch.params["force_limit"][3], [900.0] * 3)
+    assert batch.params["saturation"][:, 0].tolist() == [1.0, 1.0, 2.0, 2.0]
+    np.testing.assert_array_equal(batch.params["constraint_force_limit"][0, 0], [np.inf] * 3)
+    np.testing.assert_array_equal(batch.params["force_limit"][3, 0], [900.0] * 3)
     entry = spec_from_mapping({"name": "e", "base": saturated, "grid": {"controller.saturation.torque_n.1": [80.0, 90.0],
                                                                         "controller.saturation.force_h": [50.0]}})
     batch = _check(plan_table(entry), np.arange(2))
-    np.testing.assert_array_equal(batch.params["torque_limit"][1], [120.0, 90.0, 120.0])
-    np.testing.assert_array_equal(batch.params["force_limit"][1], [50.0] * 3)
+    np.testing.assert_array_equal(batch.params["torque_limit"][1, 0], [120.0, 90.0, 120.0])
+    np.testing.assert_array_equal(batch.params["force_limit"][1, 0], [50.0] * 3)
     unlimited_entry = spec_from_mapping({"name": "u", "base": str(BASES[1]),
                                          "grid": {"controller.saturation.torque_n.1": [80.0]}})
     with pytest.raises(SweepSpecError, match="controller.saturation.torque_n' is not set"):

@@ -39,7 +39,7 @@ import numpy as np
 
 from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
-from .engine.batch import MAX_STATE, TreeBatch, tree_batch
+from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.settings import settings_records, settings_rows
 from .engine.integrate import admissible
@@ -542,12 +542,13 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
     """Run many validated configurations (RunConfig or ChainConfig); yields ``(indices
     into configs, RunBlock)``.
 
-    The runs of trees (ChainConfig) that the engine takes are integrated by the compiled
-    driver, the runs of trees of one structure (the same bodies and joints and their laws;
-    any masses, gains, points and admissible regions) with the same method, sample count
-    and t_end in one call (:func:`simulate_batch` of their :class:`~rbstab.engine.batch.TreeBatch`;
-    ``keep`` ``"none"``: their blocks carry summaries and no traces), the others one by one
-    (:func:`simulate`).
+    The runs the compiled engine takes (:func:`uses_compiled_engine`) are one
+    :class:`~rbstab.engine.RunBatch` (:func:`rbstab.engine.batch.batch_of`) integrated by
+    :func:`simulate_batch`; the others go through :func:`simulate` one by one (a block of
+    one run each). A chain's runs of one structure (the same bodies and joints and their
+    laws; any masses, gains, points and admissible regions) with the same method, sample
+    count and t_end are integrated in one call (``keep`` ``"none"``: their blocks carry
+    summaries and no traces).
 
     With ``engine="compiled"`` every run of one body that the compiled engine takes
     (:func:`uses_compiled_engine`) is integrated by :func:`rbstab.engine.integrate_runs`,
@@ -583,64 +584,36 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
     if keep not in KEEP:
         raise ValueError(f"keep: found {keep!r}; expected one of {', '.join(KEEP)}")
     get_engine(engine).check_available()  # before any run
-    trees, bodies = [], []
+    chosen = []
     for i, config in enumerate(configs):
         if not uses_compiled_engine(config, engine):
             yield [i], RunBlock.of(simulate(config, timeout, engine="scipy"))
         else:
-            (trees if isinstance(config, ChainConfig) else bodies).append(i)
-    if trees:
-        chosen = [configs[i] for i in trees]
-        for rows, block in simulate_batch(tree_batch(chosen, timeout), engine=engine, keep=keep, configs=chosen):
-            yield [trees[r] for r in rows], block
-    if bodies:
-        chosen = [configs[i] for i in bodies]
-        for rows, block in simulate_batch(_batch_of(chosen, timeout), chunk_size=chunk_size, full=full, engine=engine,
-                                          keep=keep, configs=chosen):
-            yield [bodies[r] for r in rows], block
+            chosen.append(i)
+    if chosen:
+        runs = [configs[i] for i in chosen]
+        for rows, block in simulate_batch(batch_of(runs, timeout), chunk_size=chunk_size, full=full, engine=engine,
+                                          keep=keep, configs=runs):
+            yield [chosen[r] for r in rows], block
 
 
-def _batch_of(configs: Sequence["RunConfig"], timeout: float | None) -> RunBatch:
-    """The :class:`~rbstab.engine.RunBatch` of one-body configurations the compiled engine
-    takes (``timeout`` [s], if given, each run's ``max_wall_time``). The configs that share
-    their body and gains objects (:meth:`rbstab.config.RunConfig.from_resolved` with
-    ``like``) share one variant: its parameters record and equilibrium computed once."""
-    shared: dict[tuple, Variant] = {}
-    params, y0 = np.empty(len(configs), dtype=PARAMETERS), np.zeros((len(configs), MAX_STATE))
-    n_state, codes = np.empty(len(configs), dtype=np.int64), np.empty(len(configs), dtype=np.int64)
-    for i, config in enumerate(configs):
-        key = (config.variant, config.body, config.gains, config.simulation.limits)  # identity: eq=False dataclasses
-        variant = shared.get(key)
-        if variant is None:
-            variant = shared[key] = config.make_variant()
-        params[i] = variant.parameters[0]  # a record at a time (numpy.concatenate: ~40 us a record)
-        n_state[i], codes[i] = variant.layout.size, variant.code
-        y0[i, : n_state[i]] = variant.initial_state(config.initial_state)
-    settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
-    settings["method"] = [method_number(c.simulation.method) for c in configs]
-    return RunBatch(params=params, y0=y0, n_state=n_state,
-                    variant=codes, settings=settings,
-                    n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
-                    compiled=np.ones(len(configs), dtype=bool))
-
-
-def simulate_batch(batch: RunBatch | TreeBatch, rows: Sequence[int] | np.ndarray | None = None, *,
+def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = None, *,
                    chunk_size: int = POSTPROCESS_BLOCK, full: bool = True, engine: str = DEFAULT_ENGINE,
                    keep: str = "all", configs: Sequence | None = None) -> Iterator[tuple[list[int], RunBlock]]:
-    """Integrate runs of a :class:`rbstab.engine.RunBatch` (one body's) or a
-    :class:`rbstab.engine.batch.TreeBatch` (trees') with the compiled engine; yields
+    """Integrate runs of a :class:`rbstab.engine.RunBatch` with the compiled engine; yields
     ``(rows of the batch, RunBlock)``.
 
     What :func:`simulate_blocks` does for the configurations of those runs, with the same
-    results bit for bit, from the batch's arrays (no configuration object): one body's runs
-    of one method, sample count and state size are integrated ``chunk_size`` at a time by
-    :func:`rbstab.engine.integrate_runs` and post-processed :data:`POSTPROCESS_BLOCK` at a
-    time; trees' as :func:`_tree_batch_blocks` says. The blocks' ``configs`` are
+    results bit for bit, from the batch's arrays (no configuration object): the runs in the
+    one-body spelling (``batch.one_body``) of one method, sample count and state size are
+    integrated by one body's kernels, ``chunk_size`` at a time
+    (:func:`rbstab.engine.integrate_runs`), and post-processed :data:`POSTPROCESS_BLOCK` at
+    a time; trees' as :func:`_tree_batch_blocks` says. The blocks' ``configs`` are
     ``configs``' entries of their rows (None where not given).
 
     Parameters
     ----------
-    batch : RunBatch or TreeBatch
+    batch : RunBatch
     rows : sequence of int, optional
         The runs to integrate (default: every run with ``batch.compiled``).
     chunk_size : int
@@ -667,15 +640,16 @@ def simulate_batch(batch: RunBatch | TreeBatch, rows: Sequence[int] | np.ndarray
         bad = int(rows[np.flatnonzero(~batch.compiled[rows])[0]])
         raise ValueError(f"run {bad} of the batch: the compiled engine does not take it (its method or the "
                          "pure sign law); run it with simulate()")
-    if isinstance(batch, TreeBatch):
-        yield from _tree_batch_blocks(batch, rows, engine, keep != "none", configs)
-        return
+    one_body = batch.one_body[rows]
+    if not one_body.all():
+        yield from _tree_batch_blocks(batch, rows[~one_body], engine, keep != "none", configs)
+    rows, codes = rows[one_body], batch.codes
     methods, samples, sizes = batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]
     # the groups, in np.unique's order (a set of the rows: numpy's unique of rows sorts them all)
     for method, n_samples, size in sorted(set(zip(methods.tolist(), samples.tolist(), sizes.tolist()))):
         members = rows[(methods == method) & (samples == n_samples) & (sizes == size)]
         if get_engine(engine).gpu:
-            runs = (batch.variant[members], batch.params[members], batch.y0[members, :size],
+            runs = (codes[members], batch.params[members, 0], batch.y0[members, :size],
                     batch.settings_rows(members))
             yield from _cuda_blocks(runs, _configs_of(configs, members), members, METHODS[method], n_samples, full,
                                     keep)
@@ -684,13 +658,13 @@ def simulate_batch(batch: RunBatch | TreeBatch, rows: Sequence[int] | np.ndarray
         for lo in range(0, len(members), chunk_size):
             chunk = members[lo : lo + chunk_size]
             start = _time.perf_counter()
-            codes = batch.variant[chunk]
-            params = batch.params[chunk]
+            params = batch.params[chunk, 0]
             settings = batch.settings_rows(chunk)
-            sol = integrate_runs(codes, params, batch.y0[chunk, :size], settings, method=METHODS[method],
+            sol = integrate_runs(codes[chunk], params, batch.y0[chunk, :size], settings, method=METHODS[method],
                                  n_samples=n_samples, out=buffer)
             share = (_time.perf_counter() - start) / len(chunk)
-            for runs, block in _chunk_blocks(_configs_of(configs, chunk), codes, params, sol, share, settings, full):
+            for runs, block in _chunk_blocks(_configs_of(configs, chunk), codes[chunk], params, sol, share, settings,
+                                             full):
                 yield [int(chunk[j]) for j in runs], block
 
 
@@ -775,7 +749,7 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     return outputs if traces else {}, table
 
 
-def _structure(batch: TreeBatch, i: int) -> tuple:
+def _structure(batch: RunBatch, i: int) -> tuple:
     """What the runs integrated in one call share (run ``i``'s): the structure of their tree
     (codes, parents, embedded joints, names; whether one body's rate serves it), the method,
     sample count and t_end; their records, parent points and admissible regions may differ
@@ -790,9 +764,9 @@ def _structure(batch: TreeBatch, i: int) -> tuple:
             float(batch.settings["t_end"][i]))
 
 
-def _tree_batch_blocks(batch: TreeBatch, rows: np.ndarray, engine: str, outputs: bool,
+def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, outputs: bool,
                        configs: Sequence | None) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`simulate_batch` of the runs ``rows`` of a :class:`TreeBatch` on the compiled
+    """:func:`simulate_batch` of the runs ``rows`` of a :class:`RunBatch` on the compiled
     driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of one structure
     (:func:`_structure`: the same bodies and joints and their laws; each run's masses, gains,
     points and admissible region its own) with the same method, sample count and t_end in
@@ -820,7 +794,7 @@ def _tree_batch_blocks(batch: TreeBatch, rows: np.ndarray, engine: str, outputs:
             yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, outputs, configs)
 
 
-def _tree_call(batch: TreeBatch, members: list[int], integrate, gpu: bool, outputs: bool,
+def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, outputs: bool,
                configs: Sequence | None) -> Iterator[tuple[list[int], RunBlock]]:
     """:func:`_tree_batch_blocks` for the runs ``members`` of ``batch`` (one structure,
     method, sample count and t_end): one call of ``integrate`` with each distinct tree and

@@ -12,7 +12,6 @@ executor's workers); a tree's, a tree a run in calls of the CPU's compiled drive
 
 from __future__ import annotations
 
-import dataclasses
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -21,11 +20,6 @@ __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_e
 
 #: Fewest runs of a batch slice sent to a worker.
 MIN_SLICE = 64
-
-
-def _take(batch, rows: np.ndarray):
-    """The runs ``rows`` of a :class:`rbstab.engine.RunBatch` as a batch of their own."""
-    return type(batch)(**{f.name: getattr(batch, f.name)[rows] for f in dataclasses.fields(batch)})
 
 
 def batch_outcomes(batch, engine: str) -> np.ndarray:
@@ -52,7 +46,7 @@ def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
     slices = [np.arange(lo, min(lo + size, len(batch))) for lo in range(0, len(batch), size)]
     out = np.full((3, len(batch)), np.nan)
     executor.plan(len(slices))
-    parts = ((rows, _take(batch, rows)) for rows in slices)
+    parts = ((rows, batch.take(rows)) for rows in slices)
     for (rows, _), result, exc in executor.imap_unordered(_integrate_slice, parts, engine):
         if exc is not None:
             raise exc
@@ -151,11 +145,11 @@ class Runs:
                 raise ValueError(f"{self.config.name}: the pure sign law (controller.boundary_layer 0) or an implicit "
                                  "method runs one at a time; analyse a boundary-layer law (--boundary-layer PHI) "
                                  "with an explicit method")
-            batch = _take(self.base, np.zeros(k, dtype=np.int64))
+            batch = self.base.take(np.zeros(k, dtype=np.int64))
             batch.y0[:, :states.shape[1]] = states
             batch.n_samples[:] = 2  # v(0) and v(t_end): two samples (a run's steps do not depend on them)
             if disturbance is not None:
-                batch.params["disturbance_value"][:, disturbance[1], :] = disturbance[2]
+                batch.params["disturbance_value"][:, 0, disturbance[1], :] = disturbance[2]
             return integrate_batch(batch, self.engine, self.executor)
         return self._tree_outcomes(states, disturbance)
 
@@ -245,7 +239,7 @@ class Runs:
             return self._tree_traces(states, int(n_samples))
         if not self.base.compiled[0]:  # the pure sign law, an implicit method: run by run
             return self._one_by_one(states, int(n_samples))
-        batch = _take(self.base, np.zeros(k, dtype=np.int64))
+        batch = self.base.take(np.zeros(k, dtype=np.int64))
         batch.y0[:, :states.shape[1]] = states
         batch.n_samples[:] = int(n_samples)
         workers = (self.executor.parallelism() or 1) if self.executor is not None else 1
@@ -255,7 +249,7 @@ class Runs:
         slices = [np.arange(lo, min(lo + size, k)) for lo in range(0, k, size)]
         ok, v, messages = np.zeros(k, dtype=bool), np.full((k, int(n_samples)), np.nan), [""] * k
         self.executor.plan(len(slices))
-        for (rows, _), result, exc in self.executor.imap_unordered(_trace_slice, ((r, _take(batch, r)) for r in slices),
+        for (rows, _), result, exc in self.executor.imap_unordered(_trace_slice, ((r, batch.take(r)) for r in slices),
                                                                    self.engine):
             if exc is not None:  # a worker that died: its runs failed, with the reason
                 result = (np.zeros(len(rows), dtype=bool), np.full((len(rows), int(n_samples)), np.nan),

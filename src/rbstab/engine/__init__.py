@@ -9,10 +9,10 @@ not depend on the other runs of its call. Implicit methods (Radau, BDF, LSODA) a
 here: :func:`rbstab.simulator.simulate` runs them through ``solve_ivp`` with the same
 compiled right-hand side.
 
-:func:`batch_from_table` gives many runs as one :class:`RunBatch` of arrays (parameter
-records, initial states, variant codes, settings), the input of an engine that depends on
-no configuration object; :func:`tree_batch_from_table` (or :func:`tree_batch` of chain
-configs) gives chains' runs as one :class:`TreeBatch`.
+:func:`batch_from_table` gives many runs (one body's or trees') as one :class:`RunBatch`
+of arrays (each run's tree, parameter records, initial states, settings), the input of an
+engine that depends on no configuration object; :func:`batch_of` the same batch of
+validated configurations.
 
 :data:`ENGINES` (:mod:`rbstab.engine.registry`) names the engines (``compiled``, ``scipy``,
 ``cuda``) with what each integrates. The names below are imported on first use, so that
@@ -23,7 +23,7 @@ import importlib
 
 #: Public name -> the submodule defining it (PEP 562: imported on first use).
 _SOURCES = {
-    **dict.fromkeys(["RunBatch", "batch_from_table", "TreeBatch", "tree_batch", "tree_batch_from_table"], "batch"),
+    **dict.fromkeys(["RunBatch", "batch_from_table", "batch_of"], "batch"),
     **dict.fromkeys(["ChunkSolution", "integrate_runs"], "integrate"),
     "method_number": "rk",
     **dict.fromkeys(["DEFAULT_MAX_STEPS", "status_message"], "status"),
@@ -47,6 +47,6 @@ def __dir__() -> list[str]:
 
 
 __all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message",
-           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table", "TreeBatch", "tree_batch",
-           "tree_batch_from_table", "ENGINES", "DEFAULT_ENGINE",
+           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table", "batch_of", "ENGINES",
+           "DEFAULT_ENGINE",
            "Engine", "get_engine"]

@@ -3,19 +3,19 @@
 A sweep's runs are a table (:class:`rbstab.sweep.table.RunTable`): a few validated resolved
 configurations (*templates*) and, per run, its template and the values of the varied dotted
 keys. :func:`batch_from_table` turns a table (or a slice of one) into a :class:`RunBatch`
-with vectorised numpy: one :data:`rbstab.model.PARAMETERS` record per run (the derived
-fields J^-1, J_p and J_p^-1, G and L_d^-1 by batched ``numpy.linalg``), the initial states,
-the variant codes and the integration settings (:data:`rbstab.engine.settings.SETTINGS`).
-No configuration object is made per run; the records are bit for bit those of
-:func:`rbstab.model.parameters` for each run's validated configuration.
+with vectorised numpy: each run a tree of bodies (one body: its one-body tree), one
+:data:`rbstab.model.PARAMETERS` record per body and joint (the derived fields J^-1, J_p and
+J_p^-1, G and L_d^-1 by batched ``numpy.linalg``), the initial states and the integration
+settings (:data:`rbstab.engine.settings.SETTINGS`). No configuration object is made per
+run; the records are bit for bit those of the runs' validated configurations.
+:func:`batch_of` makes the same batch of validated configurations.
 
 A batch depends on no integrator: the compiled CPU engine
 (:func:`rbstab.simulator.simulate_batch`) and any other engine take its arrays as they are.
 
-One part is computed run by run: the constant h of v (``lyapunov_offset``) of a body under
-gravity, which is the minimum of a stored energy found by ``scipy.optimize`` (once per
-distinct parameter record; a sweep over initial states computes it once). Without gravity
-h is 0.
+One part is computed per distinct tree, not per run: the constant h of v (its rest state's
+stored energy, ``scipy.optimize``; a sweep over initial states computes it once). Without
+gravity h is 0.
 """
 
 from __future__ import annotations
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.loader import config_from_mapping, placed_initial_state
-from ..config.paths import parse_any_key
+from ..config.loader import ChainConfig, RunConfig, chain_of, config_from_mapping, placed_initial_state
+from ..config.paths import is_chain, parse_any_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import VARIANTS
@@ -39,10 +39,9 @@ from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
-__all__ = ["RunBatch", "batch_from_table", "TreeBatch", "tree_batch", "tree_batch_from_table", "MAX_STATE",
-           "NOT_COMPILED"]
+__all__ = ["RunBatch", "batch_from_table", "batch_of", "MAX_STATE", "NOT_COMPILED"]
 
-#: The largest state of any variant (the second axis of :attr:`RunBatch.y0`).
+#: The largest state of any variant (the second axis of a one-body table's :attr:`RunBatch.y0`).
 MAX_STATE = max(STATE_SIZE)
 #: ``RunBatch.settings["method"]`` of a run whose method is not one of
 #: :data:`rbstab.engine.METHODS` (Radau, BDF, LSODA: integrated by scipy).
@@ -66,22 +65,37 @@ class _Batch:
 
 @dataclass(frozen=True)
 class RunBatch(_Batch):
-    """n runs as arrays (module docstring); every field has the run axis first.
+    """n runs as arrays (module docstring): every run a tree of 1-8 bodies (one body: its
+    one-body tree, :func:`rbstab.config.loader.chain_of`). Every field has the run axis
+    first.
 
     Attributes
     ----------
-    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (n,)
-        Each run's physical parameters (SI units; body quantities in the body frame,
-        gravity and the weight in the inertial frame); gains a variant does not use are 0.
-    y0 : ndarray of float64, shape (n, MAX_STATE)
-        Initial states: the first ``n_state[i]`` entries of row i are the state of run i in
-        its variant's layout (:data:`rbstab.layout.VARIANT_LAYOUTS`: theta [rad], omega
-        [rad/s] (body frame), position X [m], velocity V [m/s], controller state D [m]),
-        the rest 0.
+    trees : tuple of rbstab.variants.chain.CompiledChain
+        The trees the runs are made of: their structure (laws, parents, embedded joints,
+        names) is each run's; their records and points are a template's (each run's own
+        are below).
+    tree : ndarray of int64, shape (n,)
+        Each run's tree, an index into ``trees``.
+    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (n, B)
+        Body i's record with joint i's gains and limits and the run's admissible region
+        (``attachment_point``: joint i's R_c), as
+        :func:`rbstab.variants.chain.compile_chain` makes it (SI units; body quantities in
+        the body frame, gravity and the weight in the inertial frame); B the most bodies of
+        any tree, a smaller tree's rows padded with zero records. A one-body run's record is
+        :func:`rbstab.model.parameters`' with its ``lyapunov_offset``.
+    ppoints : ndarray, shape (n, B, 3)
+        Each joint's R_p [m].
+    offset : ndarray, shape (n,)
+        h [J] of each run (:func:`rbstab.variants.chain.rest_offset`).
+    y0 : ndarray, shape (n, S)
+        Initial states, zero-padded to the largest: a tree's in its maximal layout (12 n +
+        3 e: Theta [rad], Omega [rad/s] (body frame), X [m], V [m/s] of every body, then
+        each embedded joint's D [m]); a run of ``one_body`` in its variant's layout
+        (:data:`rbstab.layout.VARIANT_LAYOUTS`: the same but for a permanent joint's 6
+        states, Theta and Omega, the reduced state).
     n_state : ndarray of int64, shape (n,)
-        State size of each run (6, 12 or 15).
-    variant : ndarray of int64, shape (n,)
-        Variant code of each run (:data:`rbstab.layout.VARIANT_CODES`).
+        The size of each run's ``y0``.
     settings : ndarray of :data:`rbstab.engine.settings.SETTINGS`, shape (n,)
         t_end [s], rtol, atol, max_step [s] (inf: none), gimbal_margin [rad], max_steps,
         max_wall_time [s] (inf: none) and method (its index in
@@ -92,15 +106,34 @@ class RunBatch(_Batch):
         Whether a compiled engine integrates the run: its method is one of
         :data:`rbstab.engine.METHODS` and it is not the pure sign law of ``sliding``
         (``boundary_layer`` 0, integrated by :mod:`rbstab.engine.switching`).
+    one_body : ndarray of bool, shape (n,)
+        Runs of configurations in the one-body spelling (``body`` and ``controller``):
+        integrated by one body's compiled kernels, their results in one body's names and
+        file format (:data:`rbstab.layout.OUTPUTS`).
     """
 
+    trees: tuple
+    tree: np.ndarray
     params: np.ndarray
+    ppoints: np.ndarray
+    offset: np.ndarray
     y0: np.ndarray
     n_state: np.ndarray
-    variant: np.ndarray
     settings: np.ndarray
     n_samples: np.ndarray
     compiled: np.ndarray
+    one_body: np.ndarray
+
+    def take(self, rows: np.ndarray) -> "RunBatch":
+        """The runs ``rows`` (int indices, repeats allowed) as a batch of their own (copies)."""
+        return dataclasses.replace(self, **{f.name: getattr(self, f.name)[rows] for f in dataclasses.fields(self)
+                                            if f.name != "trees"})
+
+    @property
+    def codes(self) -> np.ndarray:
+        """Each run's first joint's law (:data:`rbstab.layout.VARIANT_CODES`), shape (n,):
+        a one-body run's variant."""
+        return np.array([t.codes[0] for t in self.trees], dtype=np.int64)[self.tree]
 
 
 class _Fields:
@@ -191,15 +224,19 @@ def _hat(r: np.ndarray) -> np.ndarray:
 
 def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
                      template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
-    """The :class:`RunBatch` of n runs given as a table.
+    """The :class:`RunBatch` of n runs given as a table: one body's (templates in the
+    one-body spelling) or trees' (``bodies`` and ``joints``; a table's templates are all one
+    or all the other).
 
     Parameters
     ----------
     templates : sequence of mapping
-        Validated resolved configurations (``RunConfig.resolved``; ``name`` ignored).
+        Validated resolved configurations (``RunConfig.resolved``, ``ChainConfig.resolved``;
+        ``name`` ignored).
     keys : sequence of str
         Dotted config keys set on a run's template, in order (``body.mass``,
-        ``controller.k_c``, ``controller.k_c.0``, ``initial_state.omega`` ...); keys of
+        ``controller.k_c.0``, ``initial_state.omega``, ``bodies.trunk.mass``,
+        ``joints.hip.k_r.0`` ...); keys of
         non-numeric values (object columns) are their template's own.
     columns : mapping of str to ndarray
         key -> the runs' values, shape (n, ...).
@@ -211,20 +248,35 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     Returns
     -------
     RunBatch
-        ``params[i]`` equals, bit for bit, :func:`rbstab.model.parameters` of run i's
-        validated configuration with its ``lyapunov_offset``.
+        One body's run i: ``params[i, 0]`` equals, bit for bit, :func:`rbstab.model.parameters`
+        of its validated configuration with its ``lyapunov_offset``. A tree's run: its
+        records are those of :func:`rbstab.variants.chain.compile_chain` for its validated
+        configuration, its initial state placed as the configuration's loader places it
+        (:func:`rbstab.config.loader.placed_initial_state`), h once per distinct tree.
 
     Raises
     ------
     ValueError
         If a key does not fit its template's value (a configuration the sweep's validation
         would have refused), or a template lacks a field.
+    rbstab.config.ConfigError
+        For a tree's template or run the sweep's validation would have refused.
     """
+    if len(templates) and is_chain(templates[0]):
+        return _trees_from_table(templates, keys, columns, template, timeout=timeout)
+    return _bodies_from_table(templates, keys, columns, template, timeout=timeout)
+
+
+def _bodies_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
+                       template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
+    """:func:`batch_from_table` of one-body templates: every record at once (vectorised
+    numpy), each template's one-body tree its runs' structure."""
     f = _Fields(templates, keys, columns, np.asarray(template, dtype=np.int64))
     n = f.n
     if n == 0:
-        return RunBatch(np.zeros(0, PARAMETERS), np.zeros((0, MAX_STATE)), np.zeros(0, np.int64),
-                        np.zeros(0, np.int64), np.zeros(0, SETTINGS), np.zeros(0, np.int64), np.zeros(0, bool))
+        return RunBatch((), np.zeros(0, np.int64), np.zeros((0, 1), PARAMETERS), np.zeros((0, 1, 3)), np.zeros(0),
+                        np.zeros((0, MAX_STATE)), np.zeros(0, np.int64), np.zeros(0, SETTINGS), np.zeros(0, np.int64),
+                        np.zeros(0, bool), np.zeros(0, bool))
     names = f.text("controller", "variant")
     code = f.of_templates([VARIANT_CODES[t["controller"]["variant"]] for t in templates], dtype=np.int64)
     used = {g: np.isin(names, [v for v, cls in VARIANTS.items() if g in cls.required_gains])
@@ -260,9 +312,17 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     p["lyapunov_offset"] = _offsets(p, names, gravity)
     settings = _settings(f, templates, timeout)
     sign_law = sliding & (p["boundary_layer"] == 0)
-    return RunBatch(params=p, y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
-                    variant=code, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
-                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law)
+    return RunBatch(trees=tuple(_one_body_tree(t) for t in templates), tree=f.template.copy(), params=p[:, None],
+                    ppoints=p["attachment_point"][:, None].copy(), offset=p["lyapunov_offset"].copy(),
+                    y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
+                    settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
+                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law, one_body=np.ones(n, dtype=bool))
+
+
+def _one_body_tree(template: Mapping):
+    """The compiled one-body tree (:func:`rbstab.config.loader.chain_of`, h 0: each run's
+    own is in the batch) of a validated one-body resolved configuration."""
+    return C.compile_chain(chain_of(RunConfig.from_resolved({**template, "name": "template"})), offset=0.0)
 
 
 def _rigid(p: np.ndarray, mass: np.ndarray, inertia: np.ndarray, r: np.ndarray, gravity: np.ndarray) -> None:
@@ -352,96 +412,59 @@ def _offsets(p: np.ndarray, names: np.ndarray, gravity: np.ndarray) -> np.ndarra
 
 
 # -- trees -----------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class TreeBatch(_Batch):
-    """n runs of trees (chains of 1-8 bodies, :class:`rbstab.config.ChainConfig`) as
-    arrays: what :func:`rbstab.simulator.simulate_batch` integrates with no configuration
-    object per run. Every field has the run axis first.
-
-    Attributes
-    ----------
-    trees : tuple of rbstab.variants.chain.CompiledChain
-        The trees the runs are made of: their structure (laws, parents, embedded joints,
-        names) is each run's; their records and points are a template's (each run's own
-        are below).
-    tree : ndarray of int64, shape (n,)
-        Each run's tree, an index into ``trees``.
-    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (n, B)
-        Body i's record with joint i's gains and limits and the run's admissible region
-        (``attachment_point``: joint i's R_c), as
-        :func:`rbstab.variants.chain.compile_chain` makes it; B the most bodies of any
-        tree, a smaller tree's rows padded with zero records.
-    ppoints : ndarray, shape (n, B, 3)
-        Each joint's R_p [m].
-    offset : ndarray, shape (n,)
-        h [J] of each run's tree (:func:`rbstab.variants.chain.rest_offset`).
-    y0 : ndarray, shape (n, S)
-        Initial states in the maximal layout (12 n + 3 e: Theta, Omega, X, V of every
-        body, then each embedded joint's D), zero-padded to the largest.
-    n_state : ndarray of int64, shape (n,)
-    settings, n_samples, compiled
-        As :class:`RunBatch`'s (``compiled``: the method is one of
-        :data:`rbstab.engine.METHODS`).
-    """
-
-    trees: tuple
-    tree: np.ndarray
-    params: np.ndarray
-    ppoints: np.ndarray
-    offset: np.ndarray
-    y0: np.ndarray
-    n_state: np.ndarray
-    settings: np.ndarray
-    n_samples: np.ndarray
-    compiled: np.ndarray
-
-
-def tree_batch(configs: Sequence, timeout: float | None = None) -> TreeBatch:
-    """The :class:`TreeBatch` of validated chain configurations
-    (:class:`rbstab.config.ChainConfig`; ``timeout`` [s], if given, each run's
-    ``max_wall_time``): configs that share their Chain object share its compilation (a
-    sweep over initial states compiles its chain once)."""
-    by_chain: dict[int, int] = {}
+def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
+    """The :class:`RunBatch` of validated configurations (:class:`rbstab.config.RunConfig`,
+    :class:`rbstab.config.ChainConfig`; ``timeout`` [s], if given, each run's
+    ``max_wall_time``). Configs that share their Chain object share its compilation (a
+    sweep over initial states compiles its chain once); one-body configs that share their
+    body and gains objects (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``)
+    share one variant, its record and equilibrium computed once."""
     trees: list = []
-    tree = np.empty(len(configs), dtype=np.int64)
+    structures: dict = {}  # a chain's id, or a one-body variant's name -> its tree
+    shared: dict[tuple, object] = {}
+    n = len(configs)
+    tree, n_state = np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    one_body = np.array([not isinstance(c, ChainConfig) for c in configs], dtype=bool)
+    runs = []  # each run's (records, parent points, initial state)
     for i, config in enumerate(configs):
-        t = by_chain.get(id(config.chain))
+        key = config.variant if one_body[i] else id(config.chain)
+        t = structures.get(key)
         if t is None:
-            t = by_chain[id(config.chain)] = len(trees)
-            trees.append(C.compile_chain(config.chain))
-        tree[i] = t
-    n, width = len(configs), max((c.size for c in trees), default=1)
-    params, ppoints = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3))
-    y0, n_state = np.zeros((n, max((c.n_states for c in trees), default=0))), np.zeros(n, dtype=np.int64)
-    for i, config in enumerate(configs):
-        c = trees[tree[i]]
-        params[i, : c.size] = c.params
-        set_limits(params[i, : c.size], config.simulation.limits)
-        ppoints[i, : c.size], n_state[i] = c.ppoints, c.n_states
-        y0[i, : c.n_states] = C.initial_state(config)
+            t = structures[key] = len(trees)
+            trees.append(C.compile_chain(chain_of(config), offset=0.0 if one_body[i] else None))
+        tree[i], c = t, trees[t]
+        if one_body[i]:
+            part = (config.variant, config.body, config.gains, config.simulation.limits)  # identity: eq=False
+            variant = shared.get(part)
+            if variant is None:
+                variant = shared[part] = config.make_variant()
+            records = variant.parameters  # (1,), its h in lyapunov_offset
+            runs.append((records, records["attachment_point"], variant.initial_state(config.initial_state)))
+        else:
+            records = c.params.copy()
+            set_limits(records, config.simulation.limits)
+            runs.append((records, c.ppoints, C.initial_state(config)))
+    width, size = max((c.size for c in trees), default=1), max((len(r[2]) for r in runs), default=0)
+    params, ppoints, y0 = np.zeros((n, width), dtype=PARAMETERS), np.zeros((n, width, 3)), np.zeros((n, size))
+    offset = np.zeros(n)
+    for i, (records, points, state) in enumerate(runs):
+        params[i, : len(records)], ppoints[i, : len(records)], n_state[i] = records, points, len(state)
+        y0[i, : len(state)] = state
+        offset[i] = records[0]["lyapunov_offset"] if one_body[i] else trees[tree[i]].offset
     settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
     settings["method"] = [_method(c.simulation.method) for c in configs]
-    return TreeBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints,
-                     offset=np.array([trees[t].offset for t in tree], dtype=float), y0=y0, n_state=n_state,
-                     settings=settings, n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
-                     compiled=settings["method"] != NOT_COMPILED)
+    sliding = np.array([one and c.variant == "sliding" for one, c in zip(one_body, configs)], dtype=bool)
+    sign_law = sliding & (params[:, 0]["boundary_layer"] == 0)
+    return RunBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints, offset=offset, y0=y0,
+                    n_state=n_state, settings=settings,
+                    n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
+                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law, one_body=one_body)
 
 
-def tree_batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
-                          template: np.ndarray, *, timeout: float | None = None) -> TreeBatch:
-    """The :class:`TreeBatch` of n runs of trees given as a table (the arguments as
-    :func:`batch_from_table`'s, the templates chains'): each template validated once, every
-    run's records built from the columns at once, bit for bit those of
-    :func:`rbstab.variants.chain.compile_chain` for its validated configuration; its initial
-    state placed as the configuration's loader places it; h once per distinct tree.
-
-    Raises
-    ------
-    ValueError
-        If a key does not fit its template's value, or a template lacks a field.
-    rbstab.config.ConfigError
-        For a template or run the sweep's validation would have refused.
-    """
+def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
+                      template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
+    """:func:`batch_from_table` of trees' templates: each template validated once, every
+    run's records built from the columns at once."""
     f = _Fields(templates, keys, columns, np.asarray(template, dtype=np.int64))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the sweep reported each template's warnings when it planned it
@@ -467,9 +490,9 @@ def tree_batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], col
                                                          ppoints[rows, : tree.size])  # (k, n_states)
         offset[rows] = _tree_offsets(tree, params[rows, : tree.size], ppoints[rows, : tree.size], gravity[rows])
     settings = _settings(f, templates, timeout)
-    return TreeBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
-                     n_state=n_state, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
-                     compiled=settings["method"] != NOT_COMPILED)
+    return RunBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
+                    n_state=n_state, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
+                    compiled=settings["method"] != NOT_COMPILED, one_body=np.zeros(n, dtype=bool))
 
 
 def _tree_record(p: np.ndarray, f: _Fields, t: int, chain, i: int, gravity: np.ndarray) -> None:

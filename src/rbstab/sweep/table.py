@@ -39,8 +39,7 @@ from .spec import SweepSpec, SweepSpecError
 from .validate import base_value, key_path
 from .validate import validate_columns
 from ..config import canonical_config
-from ..config.paths import is_chain
-from ..engine.batch import batch_from_table, tree_batch_from_table
+from ..engine.batch import batch_from_table
 from ..io.chunk import store_bytes_per_run
 from .folder import parameter_name
 
@@ -141,12 +140,8 @@ class TableSlice:
     def batch(self, timeout: float | None = None):
         """The slice's runs as one batch of arrays (parameter records, initial states,
         settings; ``timeout`` [s] replaces each run's ``simulation.max_wall_time``): a
-        :class:`rbstab.engine.RunBatch` of one body's runs
-        (:func:`rbstab.engine.batch_from_table`), a
-        :class:`rbstab.engine.batch.TreeBatch` of trees'
-        (:func:`rbstab.engine.batch.tree_batch_from_table`)."""
-        build = tree_batch_from_table if any(is_chain(t) for t in self.templates) else batch_from_table
-        return build(self.templates, self.keys, self.columns, self.template, timeout=timeout)
+        :class:`rbstab.engine.RunBatch` (:func:`rbstab.engine.batch_from_table`)."""
+        return batch_from_table(self.templates, self.keys, self.columns, self.template, timeout=timeout)
 
     def resolved(self, j: int) -> dict:
         """The resolved configuration of run ``j`` of the slice (``name`` = its run id)."""

@@ -618,7 +618,7 @@ def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarra
                  gravity: np.ndarray | None = None) -> CompiledChain:
     """``compiled``'s structure (codes, parents, embedded joints, names) with another run's
     records ``params`` (n,), parent points ``ppoints`` (n, 3) [m] and h ``offset`` [J] (a
-    run of a :class:`rbstab.engine.batch.TreeBatch`); ``gravity`` (3,) [m/s^2] the chain's
+    run of a :class:`rbstab.engine.RunBatch`); ``gravity`` (3,) [m/s^2] the chain's
     where None."""
     chain = compiled.chain if gravity is None else dataclasses.replace(compiled.chain,
                                                                        gravity=np.asarray(gravity, dtype=float))
