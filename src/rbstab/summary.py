@@ -303,10 +303,10 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
     if whole.size:
         parts.append((whole, _table(time, {key: value[whole] for key, value in outputs.items()},
                                     None if checked is None else checked[whole])))
-    for j in np.flatnonzero(last != n - 1):  # failed runs: their finite samples only
-        i = int(last[j])
-        parts.append(([j], _table(time[: i + 1], {key: value[j : j + 1, : i + 1] for key, value in outputs.items()},
-                                  None if checked is None else checked[j : j + 1, : i + 1])))
+    for i in np.unique(last[last != n - 1]).tolist():  # failed runs: their finite samples only, by their number
+        runs = np.flatnonzero(last == i)
+        parts.append((runs, _table(time[: i + 1], {key: value[runs, : i + 1] for key, value in outputs.items()},
+                                   None if checked is None else checked[runs, : i + 1])))
     table = {key: np.empty((k, *value.shape[1:]), dtype=value.dtype) for key, value in parts[0][1].items()}
     for runs, part in parts:
         for key, values in part.items():

@@ -4,10 +4,10 @@ simulations are (pushes, basin stability, the certificate's falsification runs).
 :class:`Runs` takes a validated configuration, one body or a tree, and gives the outcome of
 each run of a batch from a given initial state, optionally with its own value of one
 impulse of the configuration's disturbances (a push): whether it reached t_end inside its
-admissible region, v at its start and v(t_end). One body's runs are a
-:class:`rbstab.engine.RunBatch` on the compiled or CUDA engine (in slices over an
-executor's workers); a tree's, a tree a run in calls of the CPU's compiled driver
-(:func:`rbstab.engine.integrate.integrate_chain_runs`, in threads).
+admissible region, v at its start and v(t_end). The runs are a
+:class:`rbstab.engine.RunBatch` (:func:`rbstab.engine.batch.batch_of` of the configuration,
+one row a run) integrated by :func:`rbstab.simulator.simulate_batch` on the compiled or
+CUDA engine, in slices over an executor's workers or in threads.
 """
 
 from __future__ import annotations
@@ -36,10 +36,20 @@ def batch_outcomes(batch, engine: str) -> np.ndarray:
     return out
 
 
-def integrate_batch(batch, engine: str, executor=None) -> np.ndarray:
+def integrate_batch(batch, engine: str, executor=None, jobs: int = 1) -> np.ndarray:
     """:func:`batch_outcomes` of a batch, in slices of at least :data:`MIN_SLICE` runs
-    over ``executor``'s workers (None: this process)."""
-    workers = (executor.parallelism() or 1) if executor is not None else 1
+    over ``executor``'s workers, or where there is none in ``jobs`` slices over as many
+    threads (the compiled driver releases Python's lock)."""
+    if executor is None:
+        if jobs <= 1 or len(batch) < 2:
+            return batch_outcomes(batch, engine)
+        out = np.full((3, len(batch)), np.nan)
+        slices = np.array_split(np.arange(len(batch)), min(jobs, len(batch)))
+        with ThreadPoolExecutor(len(slices)) as pool:
+            for rows, result in zip(slices, pool.map(lambda rows: batch_outcomes(batch.take(rows), engine), slices)):
+                out[:, rows] = result
+        return out
+    workers = executor.parallelism() or 1
     if workers <= 1 or len(batch) < 2 * MIN_SLICE:
         return batch_outcomes(batch, engine)
     size = max(MIN_SLICE, -(-len(batch) // workers))
@@ -89,11 +99,12 @@ class Runs:
     config : RunConfig or ChainConfig
         Validated: its bodies, laws, gains, disturbances, admissible region and settings.
     engine : {"compiled", "cuda"}
-        One body's engine (a tree's runs: the CPU's compiled driver).
+        The engine of the runs (:func:`rbstab.simulator.simulate_batch`).
     executor : rbstab.sweep.executors.Executor, optional
-        Takes one body's batches in slices (None: this process).
+        Takes the batches in slices (None: this process).
     jobs : int
-        Threads integrating a tree's batches (the compiled driver releases Python's lock).
+        Without an executor, the threads that integrate a batch's slices (the compiled
+        driver releases Python's lock).
 
     Attributes
     ----------
@@ -104,30 +115,30 @@ class Runs:
     engine : str
         The engine the runs take.
 
-    A batch of one body's runs needs an explicit method and no pure sign law
-    (``boundary_layer`` 0): :meth:`outcomes` refuses them (ValueError), :meth:`traces` runs
-    them one at a time.
+    A batch needs an explicit method and no pure sign law (``boundary_layer`` 0):
+    :meth:`outcomes` refuses them (ValueError); :meth:`traces` runs one body's one at a
+    time.
     """
 
     def __init__(self, config, *, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
-        self.config, self.executor, self.jobs = config, executor, max(1, int(jobs))
+        from ..engine.batch import batch_of  # heavy: numba
+
+        self.config, self.engine, self.executor, self.jobs = config, engine, executor, max(1, int(jobs))
+        self.base = batch_of([config])
+        self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
         self.tree = getattr(config, "chain", None)
         if self.tree is not None:
-            from ..engine.systems import tree_system  # heavy: numba
             from ..variants import chain as C  # heavy: numba
 
-            self.engine = "compiled"
-            self.compiled = C.compile_chain(self.tree)
-            self.system = tree_system(self.compiled, config.simulation.limits)
-            self.initial_state = C.initial_state(config)
-            return
-        from ..engine.batch import batch_from_table  # heavy: numba
+            self.compiled = C.with_records(self.base.trees[0], self.base.params[0], self.base.ppoints[0],
+                                           self.base.offset[0])
 
-        self.engine = engine
-        variant = config.make_variant()
-        template = {k: v for k, v in config.resolved.items() if k != "name"}
-        self.base = batch_from_table([template], [], {}, np.zeros(1, dtype=np.int32))
-        self.initial_state = variant.initial_state(config.initial_state)
+    def _batch(self, states: np.ndarray, n_samples: int):
+        """The base run from each of ``states`` (k, n_state), sampled ``n_samples`` times."""
+        batch = self.base.take(np.zeros(len(states), dtype=np.int64))
+        batch.y0[:, : states.shape[1]] = states
+        batch.n_samples[:] = n_samples
+        return batch
 
     def outcomes(self, states: np.ndarray, disturbance: tuple | None = None) -> np.ndarray:
         """The outcomes of the runs from ``states`` (k, n_state), shape (3, k): success (1:
@@ -135,54 +146,20 @@ class Runs:
         v(t_end) [J] (NaN for a run that stopped early). ``disturbance`` = (body, entry,
         values (k, 3)): each run's value of the configuration's disturbance ``entry`` (its
         index among body ``body``'s, in the order listed; one body: body 0) instead of the
-        configured one. One batch."""
+        configured one. One batch, its runs sampled twice (a run's steps do not depend on
+        its samples)."""
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
-        k = len(states)
-        if k == 0:
+        if len(states) == 0:
             return np.zeros((3, 0))
-        if self.tree is None:
-            if not self.base.compiled[0]:
-                raise ValueError(f"{self.config.name}: the pure sign law (controller.boundary_layer 0) or an implicit "
-                                 "method runs one at a time; analyse a boundary-layer law (--boundary-layer PHI) "
-                                 "with an explicit method")
-            batch = self.base.take(np.zeros(k, dtype=np.int64))
-            batch.y0[:, :states.shape[1]] = states
-            batch.n_samples[:] = 2  # v(0) and v(t_end): two samples (a run's steps do not depend on them)
-            if disturbance is not None:
-                batch.params["disturbance_value"][:, 0, disturbance[1], :] = disturbance[2]
-            return integrate_batch(batch, self.engine, self.executor)
-        return self._tree_outcomes(states, disturbance)
-
-    def _tree_outcomes(self, states: np.ndarray, disturbance: tuple | None) -> np.ndarray:
-        from ..engine.integrate import integrate_chain_runs  # heavy: numba
-        from ..engine.settings import settings_rows  # heavy: numba
-        from ..engine.status import SUCCESS  # heavy: numba
-        from ..variants import chain as C  # heavy: numba
-
-        k = len(states)
-        system, tree_of = self.system, None
-        if disturbance is not None:  # a tree a run, with its own value
+        if not self.base.compiled[0]:
+            raise ValueError(f"{self.config.name}: the pure sign law (controller.boundary_layer 0) or an implicit "
+                             "method runs one at a time; analyse a boundary-layer law (--boundary-layer PHI) "
+                             "with an explicit method")
+        batch = self._batch(states, 2)
+        if disturbance is not None:
             body, entry, values = disturbance
-            params = np.repeat(system.params[None], k, axis=0)
-            params["disturbance_value"][:, body, entry] = values
-            system = system._replace(params=params, ppoints=np.repeat(system.ppoints[None], k, axis=0))
-            tree_of = np.arange(k)
-        sim = self.config.simulation
-        settings = settings_rows([sim])
-
-        def final(rows):
-            sol = integrate_chain_runs(system, states[rows], np.repeat(settings, len(rows), axis=0),
-                                       method=sim.method, n_samples=2,
-                                       tree_of=None if tree_of is None else tree_of[rows])
-            return sol.status == SUCCESS, sol.samples[:, -1]
-
-        parts = self._in_threads(final, k)
-        out = np.empty((3, k))
-        out[0] = np.concatenate([p[0] for p in parts])
-        # v does not depend on the disturbances' values: the configuration's own chain gives it
-        out[1] = C.evaluate(self.compiled, np.zeros(k), states)["lyapunov"]
-        out[2] = C.evaluate(self.compiled, np.full(k, float(sim.t_end)), np.concatenate([p[1] for p in parts]))["lyapunov"]
-        return out
+            batch.params["disturbance_value"][:, body, entry] = values
+        return integrate_batch(batch, self.engine, self.executor, self.jobs)
 
     def states(self, axes, values: np.ndarray) -> np.ndarray:
         """The initial states (N, n_state) with the entries of ``axes``
@@ -232,27 +209,31 @@ class Runs:
         """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end]:
         (whether each reached t_end inside its admissible region (k,), v [J] at its samples
         (k, n_samples; NaN after a stop), why each failed run stopped: its status in words,
-        without the time ('' for the others))."""
+        without the time ('' for the others)), in slices over the executor's workers or
+        :attr:`jobs` threads."""
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
-        k = len(states)
-        if self.tree is not None:
-            return self._tree_traces(states, int(n_samples))
-        if not self.base.compiled[0]:  # the pure sign law, an implicit method: run by run
-            return self._one_by_one(states, int(n_samples))
-        batch = self.base.take(np.zeros(k, dtype=np.int64))
-        batch.y0[:, :states.shape[1]] = states
-        batch.n_samples[:] = int(n_samples)
-        workers = (self.executor.parallelism() or 1) if self.executor is not None else 1
-        if workers <= 1 or k < 2 * MIN_SLICE:
+        k, n_samples = len(states), int(n_samples)
+        if not self.base.compiled[0] and self.tree is None:  # the pure sign law, an implicit method: run by run
+            return self._one_by_one(states, n_samples)
+        batch = self._batch(states, n_samples)
+        workers = (self.executor.parallelism() or 1) if self.executor is not None else self.jobs
+        if workers <= 1 or k < (2 * MIN_SLICE if self.executor is not None else 2):
             return batch_traces(batch, self.engine)
         size = max(MIN_SLICE, -(-k // (4 * workers)))  # 4 slices a worker: every worker busy to the end
         slices = [np.arange(lo, min(lo + size, k)) for lo in range(0, k, size)]
-        ok, v, messages = np.zeros(k, dtype=bool), np.full((k, int(n_samples)), np.nan), [""] * k
-        self.executor.plan(len(slices))
-        for (rows, _), result, exc in self.executor.imap_unordered(_trace_slice, ((r, batch.take(r)) for r in slices),
-                                                                   self.engine):
+        if self.executor is None:
+            slices = np.array_split(np.arange(k), min(workers, k))
+        ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
+        if self.executor is None:
+            with ThreadPoolExecutor(len(slices)) as pool:
+                done = [((rows, None), result, None) for rows, result in
+                        zip(slices, pool.map(lambda rows: batch_traces(batch.take(rows), self.engine), slices))]
+        else:
+            self.executor.plan(len(slices))
+            done = self.executor.imap_unordered(_trace_slice, ((r, batch.take(r)) for r in slices), self.engine)
+        for (rows, _), result, exc in done:
             if exc is not None:  # a worker that died: its runs failed, with the reason
-                result = (np.zeros(len(rows), dtype=bool), np.full((len(rows), int(n_samples)), np.nan),
+                result = (np.zeros(len(rows), dtype=bool), np.full((len(rows), n_samples), np.nan),
                           [f"worker error: {exc}"] * len(rows))
             ok[rows], v[rows] = result[0], result[1]
             for j, i in enumerate(rows.tolist()):
@@ -281,38 +262,6 @@ class Runs:
             v[i] = result.outputs["lyapunov"]
             messages[i] = "" if result.ok else result.message.split(" at t =")[0]
         return ok, v, messages
-
-    def _tree_traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
-        from ..engine.integrate import integrate_chain_runs  # heavy: numba
-        from ..engine.settings import settings_rows  # heavy: numba
-        from ..engine.status import SUCCESS  # heavy: numba
-        from ..simulator import tree_end  # heavy: numba
-        from ..variants import chain as C  # heavy: numba
-
-        sim = self.config.simulation
-        settings = settings_rows([sim])
-
-        def run(rows):
-            return integrate_chain_runs(self.system, states[rows], np.repeat(settings, len(rows), axis=0),
-                                        method=sim.method, n_samples=n_samples)
-
-        parts = self._in_threads(run, len(states))
-        samples = np.concatenate([p.samples for p in parts])
-        status = np.concatenate([p.status for p in parts])
-        t_stop = np.concatenate([p.t_stop for p in parts])
-        time = np.linspace(0.0, sim.t_end, n_samples)
-        v = C.evaluate(self.compiled, np.tile(time, len(states)), samples.reshape(-1, samples.shape[2]))["lyapunov"]
-        messages = ["" if code == SUCCESS else
-                    tree_end(self.compiled, code, float(t_stop[k]), samples[k], states[k], settings[0],
-                             np.asarray(self.system.params).reshape(-1)[0]["limits"])[1].split(" at t =")[0]
-                    for k, code in enumerate(status.tolist())]
-        return status == SUCCESS, v.reshape(len(states), n_samples), messages
-
-    def _in_threads(self, run, k: int) -> list:
-        """``run`` of the rows of k runs in :attr:`jobs` threads' slices, the results in order."""
-        slices = np.array_split(np.arange(k), max(1, min(self.jobs, k)))
-        with ThreadPoolExecutor(len(slices)) as pool:
-            return list(pool.map(run, slices))
 
 
 #: The state blocks of a body in a tree's maximal state, in order (12 entries a body).
