@@ -122,7 +122,23 @@ def main() -> None:
         found["result"] += [key for key in ref.summary if str(ref.summary[key]) != str(got.summary[key])]
         found["seconds"] = round(time.perf_counter() - start, 2)
         report[name] = found
+    report["runs"] = analysis_runs(cases(sys.argv[1])["stance"])
     print(json.dumps(report))
+
+
+def analysis_runs(configs) -> dict:
+    """An analysis's runs of a tree (rbstab.analysis.runs.Runs: pushes, basin stability,
+    basin maps) on the GPU against the CPU: the outcomes and the traces of v of the runs
+    from the configs' initial states."""
+    from rbstab.analysis.runs import Runs
+    from rbstab.variants import chain as C
+
+    states = np.array([C.initial_state(c) for c in configs[:3]])
+    cpu, gpu = (Runs(configs[0], engine=engine) for engine in ("compiled", "cuda"))
+    outcomes = cpu.outcomes(states), gpu.outcomes(states)
+    traces = cpu.traces(states, 7), gpu.traces(states, 7)
+    return {"success": outcomes[0][0].tolist(), "outcomes": same(*outcomes),
+            "traces": [same(a, b) if isinstance(a, np.ndarray) else a == b for a, b in zip(*traces)]}
 
 
 if __name__ == "__main__":

@@ -38,6 +38,15 @@ def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bo
     assert found["result"] == []
 
 
+def test_simulated_analysis_runs_of_a_tree_are_the_cpus(simulated):
+    """An analysis's runs of the stance example (rbstab.analysis.runs.Runs, what pushes,
+    basin stability and basin maps integrate) on the GPU: the outcomes (success, v(0),
+    v(t_end)) and the traces of v (with why each run stopped) of the CPU's, bit for bit."""
+    found = simulated["runs"]
+    assert found["success"] == [1.0, 1.0, 1.0]
+    assert found["outcomes"] and found["traces"] == [True, True, True]
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
 def test_tree_kernel_compiles_to_ptx_for_sm_90(monkeypatch):

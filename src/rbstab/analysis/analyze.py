@@ -12,7 +12,7 @@ runs from {v = c}, and every run above).
 A tree of bodies (:class:`rbstab.config.ChainConfig`) takes the same steps in its
 independent coordinates (a :class:`ChainAnalysis`): its rest state and linearisation
 (:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over it as a
-:class:`~rbstab.analysis.certificate.ChainModel`, its runs on the CPU's compiled driver.
+:class:`~rbstab.analysis.certificate.ChainModel`, its runs on the same engines.
 """
 
 from __future__ import annotations
@@ -424,8 +424,8 @@ def analyze(
         :class:`ChainAnalysis`: its rest state and linearisation by
         :func:`~rbstab.analysis.linearise.linearise_chain`, the certificate over it as a
         :class:`~rbstab.analysis.certificate.ChainModel`), its basin map, pushes (on the
-        body ``push["body"]``) and basin stability on the CPU's compiled driver in ``jobs``
-        threads; ``boundary_layer``, ``engine`` and ``executor`` are one body's.
+        body ``push["body"]``) and basin stability on ``engine``, on the CPU in ``jobs``
+        threads; ``boundary_layer`` and ``executor`` are one body's.
     boundary_layer : float, optional
         phi [m] analysed in place of the pure sign law of ``sliding`` (default
         :data:`DEFAULT_BOUNDARY_LAYER`); see :func:`analysed_config`.
@@ -519,9 +519,6 @@ def analyze(
         t2 = _time.perf_counter()
         result.settling, first = _settling(analysed, ratio)
         timing["simulation"] = _time.perf_counter() - t2
-    if tree and engine != DEFAULT_ENGINE and (axes or push or basin_stability):
-        notes.append(f"--engine {engine}: a chain's basin map, pushes and basin stability run on the CPU's "
-                     "compiled driver")
     if axes:
         t3 = _time.perf_counter()
         result.basin = basin_map(analysed, axes, ratio=ratio, n_samples=basin_samples, jobs=jobs, engine=engine)

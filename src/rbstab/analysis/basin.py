@@ -276,11 +276,11 @@ def basin_map(
     jobs : int
         One body's runs: local processes (1: in this process); a tree's: threads.
     engine : {"compiled", "cuda"}
-        A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or for one body the
-        GPU's (:mod:`rbstab.engine.cuda`: every point in one process, each run's time to
-        converge taken as it goes; the pure sign law and implicit methods stay on the CPU).
-        The same outcomes and times (on a GPU, up to its rounding). A tree's runs: the CPU's
-        compiled driver.
+        A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or the GPU's
+        (:mod:`rbstab.engine.cuda`: every point in one process; one body's time to converge
+        taken as a run goes, a tree's from its samples; the pure sign law and implicit
+        methods stay on the CPU). The same outcomes and times (on a GPU, up to its
+        rounding).
 
     Raises
     ------
@@ -304,7 +304,7 @@ def basin_map(
             from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
 
             executor = stack.enter_context(LocalExecutor(jobs, task="a basin map"))
-        runs = Runs(config, engine="compiled", executor=executor, jobs=jobs)
+        runs = Runs(config, engine=engine if tree else "compiled", executor=executor, jobs=jobs)
         states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
         # the one check an initial state of a valid configuration can fail (the grid's values are finite)
         inside = np.ones(len(states), dtype=bool)

@@ -141,9 +141,8 @@ class Pushes:
     impulse of each of a (k, 3) array of vectors (:meth:`recovered`). The push is one more
     impulse entry of the configuration's disturbances, so a run keeps its own disturbances
     and the push's exact bookkeeping (docs/disturbances.md; a tree's jump: docs/physics.md,
-    "A push on a chain"). One body's runs are a :class:`rbstab.engine.RunBatch` on
-    ``engine`` (in slices over ``executor``); a tree's, a tree a run in calls of the CPU's
-    compiled driver (in ``jobs`` threads).
+    "A push on a chain"). The runs are a :class:`rbstab.engine.RunBatch` on ``engine``
+    (:class:`rbstab.analysis.runs.Runs`: in slices over ``executor``, or ``jobs`` threads).
 
     Parameters
     ----------
@@ -159,11 +158,12 @@ class Pushes:
     ratio : float
         Of :data:`RECOVERY_RULE`.
     engine : {"compiled", "cuda"}
-        One body's engine (a tree's runs: the CPU's compiled driver).
+        The engine of the runs (:func:`rbstab.simulator.simulate_batch`).
     executor : rbstab.sweep.executors.Executor, optional
-        Takes one body's batch in slices (None: this process).
+        Takes the batch in slices (None: this process).
     jobs : int
-        Threads integrating a tree's batch (the compiled driver releases Python's lock).
+        Without an executor, the threads integrating the batch's slices (the compiled
+        driver releases Python's lock).
 
     Attributes
     ----------
@@ -581,7 +581,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
     config : RunConfig or ChainConfig
         Validated. The runs use its body, controller, saturation, limits and simulation
         settings; they start at rest at its equilibrium (:class:`Pushes`). A chain is
-        pushed on ``body``, its runs on the CPU's compiled driver in ``jobs`` threads.
+        pushed on ``body``.
     kind : {"force", "torque"}
     directions : int or array_like, shape (d, 3)
         n quasi-uniform directions (:func:`push_directions` with ``seed``), or the
@@ -813,8 +813,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
     config : RunConfig or ChainConfig
         Validated. A chain's entries are ``initial_state.<body>.<block>.<i>`` (the bodies
         the configuration places re-placed on their joints), its pushes act on ``body``
-        (:class:`Pushes`), its runs on the CPU's compiled
-        driver in ``jobs`` threads.
+        (:class:`Pushes`).
     ranges : sequence of str
         ``KEY=LO:HI`` initial-state entries drawn uniformly (the other entries as
         configured); a draw recovers when it converges by the sweeps' rule

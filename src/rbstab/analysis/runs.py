@@ -16,6 +16,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from ..engine.registry import get_engine
+
 __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE"]
 
 #: Fewest runs of a batch slice sent to a worker.
@@ -103,8 +105,8 @@ class Runs:
     executor : rbstab.sweep.executors.Executor, optional
         Takes the batches in slices (None: this process).
     jobs : int
-        Without an executor, the threads that integrate a batch's slices (the compiled
-        driver releases Python's lock).
+        Without an executor, the threads that integrate a batch's slices on the CPU (the
+        compiled driver releases Python's lock).
 
     Attributes
     ----------
@@ -123,7 +125,9 @@ class Runs:
     def __init__(self, config, *, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
         from ..engine.batch import batch_of  # heavy: numba
 
-        self.config, self.engine, self.executor, self.jobs = config, engine, executor, max(1, int(jobs))
+        # one GPU takes a batch in one process, from one thread
+        self.config, self.engine, self.executor = config, engine, executor
+        self.jobs = 1 if get_engine(engine).gpu else max(1, int(jobs))
         self.base = batch_of([config])
         self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
         self.tree = getattr(config, "chain", None)
