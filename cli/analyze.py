@@ -268,7 +268,8 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.option("--basin-samples", type=click.IntRange(min=2), default=201, show_default=True, metavar="N",
               help="Samples per basin run (the time-to-converge resolution is t_end / (N - 1)).")
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None, metavar="N",
-              help="Local processes for the basin map  [default: all CPUs].")
+              help="Threads for a configuration's runs (basin map, pushes, basin stability); local processes "
+              "for a spec's configurations  [default: all CPUs].")
 @click.option("--engine", type=click.Choice([e.name for e in ENGINES.values() if e.compiled]), default=DEFAULT_ENGINE,
               show_default=True,
               help="The basin map's engine: the CPU's, or cuda: an NVIDIA GPU, one thread a grid point "

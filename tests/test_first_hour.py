@@ -162,13 +162,16 @@ def test_a_script_calling_a_parallel_api_at_its_top_level_is_refused_before_anyt
         print("top")
         rbstab.run({str(CASE2)!r}, {str(out)!r}, overrides=["simulation.t_end=0.1", "simulation.n_samples=11"])
         rbstab.analyze({str(CASE2)!r}, certificate=False, simulate=False, basin_samples=16, jobs=2,
-                       basin=["initial_state.omega.0=-5:5:9", "initial_state.omega.1=-5:5:9"])
+                       basin=["initial_state.omega.0=-5:5:9", "initial_state.omega.1=-5:5:9"])  # threads: runs
+        print("analysed")
+        rbstab.sweep_dataset({str(CASE2.parents[1] / "sweeps" / "gains.yaml")!r}, {str(out)!r}, jobs=2)
         print("never")
     """))
     done = subprocess.run([sys.executable, "-W", "ignore", str(script)], capture_output=True, text=True, timeout=300,
                           cwd=tmp_path)
     assert done.returncode == 1 and done.stdout.count("top") == 1 and "never" not in done.stdout
-    assert f"rbstab.analyze() at the top level of {script} (line 5)" in done.stderr
+    assert "analysed" in done.stdout, done.stderr
+    assert f"rbstab.sweep_dataset() at the top level of {script} (line 8)" in done.stderr
     assert 'if __name__ == "__main__":' in done.stderr and "nothing was run" in done.stderr
 
 

@@ -17,7 +17,6 @@ independent coordinates (a :class:`ChainAnalysis`): its rest state and linearisa
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import math
 import os
@@ -446,8 +445,8 @@ def analyze(
         Convergence: |v(t)| <= ratio |v(0)| + 1e-12 J from then on
         (:data:`rbstab.convergence.SAMPLE_RULE`), 0 < ratio < 1.
     jobs : int
-        Local processes for the basin map; threads for a tree's runs (its falsification
-        runs included).
+        Threads that integrate the runs of the basin map, the pushes, the basin stability
+        and the certificate's falsification (the compiled driver releases Python's lock).
     engine : {"compiled", "cuda"}
         The engine of the basin map (:func:`rbstab.analysis.basin.basin_map`), the pushes
         and the basin stability.
@@ -459,8 +458,7 @@ def analyze(
         Keyword arguments of :func:`rbstab.analysis.push.basin_stability` (``ranges`` or
         ``push`` and ``push_range``, ``draws``, ``confidence`` ...).
     executor : rbstab.sweep.executors.Executor, optional
-        Workers of the pushes and the basin stability (default: ``jobs`` local processes
-        where jobs > 1).
+        Workers of the pushes and the basin stability (default: none, ``jobs`` threads).
     falsification_runs : int
         Runs of the certificate's falsification pass from states on {v = c}
         (:func:`rbstab.analysis.evidence.falsify`; 0: none). Whatever it is, c is checked
@@ -485,11 +483,6 @@ def analyze(
     ValueError
         For an invalid option (the message names it, the value found and what is allowed).
     """
-    if (basin or push or basin_stability) and jobs > 1 and executor is None:
-        from ..sweep.executors import refuse_at_script_top_level  # heavy: multiprocessing
-
-        refuse_at_script_top_level("a basin map" if basin else "a push analysis")  # before anything is computed
-
     if isinstance(config, (str, os.PathLike)):
         from ..config.loader import load_config  # heavy: pydantic (the validator)
 
@@ -527,17 +520,15 @@ def analyze(
         fall = unbounded_fall_note(analysed)
         if fall is not None:
             notes.append(fall)
-    if push or basin_stability:
-        with _workers(None if tree else executor, 1 if tree else jobs, push, basin_stability) as workers:
-            if push:
-                t4 = _time.perf_counter()
-                result.push = push_analysis(analysed, **push, ratio=ratio, engine=engine, executor=workers, jobs=jobs)
-                timing["push"] = _time.perf_counter() - t4
-            if basin_stability:
-                t5 = _time.perf_counter()
-                result.basin_stability = stability_of(analysed, **basin_stability, ratio=ratio, engine=engine,
-                                                      executor=workers, jobs=jobs)
-                timing["basin_stability"] = _time.perf_counter() - t5
+    if push:
+        t4 = _time.perf_counter()
+        result.push = push_analysis(analysed, **push, ratio=ratio, engine=engine, executor=executor, jobs=jobs)
+        timing["push"] = _time.perf_counter() - t4
+    if basin_stability:
+        t5 = _time.perf_counter()
+        result.basin_stability = stability_of(analysed, **basin_stability, ratio=ratio, engine=engine,
+                                              executor=executor, jobs=jobs)
+        timing["basin_stability"] = _time.perf_counter() - t5
     if result.certificate is not None:
         t6 = _time.perf_counter()
         # 32 runs a level on the CPU's engine (a GPU gains nothing there, and --engine is the maps')
@@ -635,19 +626,6 @@ def _impulse_times(config) -> list[float]:
     from ..config.loader import chain_of  # heavy: pydantic
 
     return [d.start for b in chain_of(config).bodies for d in b.disturbances if d.kind == "impulse"]
-
-
-def _workers(executor, jobs: int, push, stability):
-    """The executor of the pushes and the basin stability: ``executor``, else ``jobs``
-    local processes where jobs > 1 and there are enough runs to share, else none."""
-    directions = (push or {}).get("directions", 64)
-    many = bool(push) and (directions if np.isscalar(directions) else len(directions)) >= 16
-    many = many or bool(stability) and int(stability.get("draws", 0)) >= 256
-    if executor is not None or jobs <= 1 or not many:
-        return contextlib.nullcontext(executor)
-    from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
-
-    return LocalExecutor(jobs, task="a push analysis")
 
 
 def _undisturbed(config, variant) -> tuple:

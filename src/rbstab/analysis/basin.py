@@ -2,8 +2,8 @@
 
 Two initial-state entries (``initial_state.omega.0`` ...) vary over even grids; every
 other entry keeps the configuration's value. Each grid point is one run of the compiled
-engine (:func:`rbstab.simulator.simulate_many`, many runs per compiled call; the chunks
-go to local processes through :class:`rbstab.sweep.LocalExecutor` when ``jobs > 1``), and
+engine (:class:`rbstab.analysis.runs.Runs`, many runs per compiled call, in ``jobs``
+threads), and
 is classified by the rule a sweep classifies its runs with
 (:func:`rbstab.convergence.converged`), applied from every sample on:
 
@@ -20,7 +20,6 @@ resolution: the sample spacing t_end / (n_samples - 1)).
 
 from __future__ import annotations
 
-import contextlib
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -274,7 +273,7 @@ def basin_map(
     n_samples : int
         Samples per run (>= 2).
     jobs : int
-        One body's runs: local processes (1: in this process); a tree's: threads.
+        Threads that integrate the runs (the compiled driver releases Python's lock).
     engine : {"compiled", "cuda"}
         A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or the GPU's
         (:mod:`rbstab.engine.cuda`: every point in one process; one body's time to converge
@@ -291,36 +290,30 @@ def basin_map(
         For ``engine="cuda"`` where no GPU, driver or numba-cuda is found.
     """
     from ..simulator import uses_compiled_engine  # heavy: numba
-    from .runs import MIN_SLICE, Runs, check_axes  # heavy: numba
+    from .runs import Runs, check_axes  # heavy: numba
 
     check_axes(config, axes)
     tree = getattr(config, "chain", None) is not None
     shape = (len(axes[0].values), len(axes[1].values))
     first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
     gpu = get_engine(engine).gpu and not tree and uses_compiled_engine(config, engine)
-    with contextlib.ExitStack() as stack:
-        executor = None
-        if jobs > 1 and not tree and not gpu and first.size >= 2 * MIN_SLICE:  # else one process runs them all
-            from ..sweep.executors import LocalExecutor  # heavy: multiprocessing
-
-            executor = stack.enter_context(LocalExecutor(jobs, task="a basin map"))
-        runs = Runs(config, engine=engine if tree else "compiled", executor=executor, jobs=jobs)
-        states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
-        # the one check an initial state of a valid configuration can fail (the grid's values are finite)
-        inside = np.ones(len(states), dtype=bool)
-        if not tree:
-            theta = list(config.make_variant().layout.blocks).index("theta")
-            inside = np.abs(states[:, 3 * theta + 1]) < np.pi / 2 - config.simulation.gimbal_margin
-        points = np.flatnonzero(inside)
-        outcome = np.full(len(states), 2, dtype=np.int8)
-        messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}
-        t_conv = np.full(len(states), np.nan)
-        v_final = np.full(len(states), np.nan)
-        rows = []
-        if len(points):
-            rows = (_run_on_gpu(get_engine(engine), config, config.make_variant(), states[points], points,
-                                ratio, n_samples) if gpu
-                    else _on_cpu(runs, states[points], points, ratio, n_samples, config.simulation.t_end))
+    runs = Runs(config, engine=engine if tree else "compiled", jobs=jobs)
+    states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
+    # the one check an initial state of a valid configuration can fail (the grid's values are finite)
+    inside = np.ones(len(states), dtype=bool)
+    if not tree:
+        theta = list(config.make_variant().layout.blocks).index("theta")
+        inside = np.abs(states[:, 3 * theta + 1]) < np.pi / 2 - config.simulation.gimbal_margin
+    points = np.flatnonzero(inside)
+    outcome = np.full(len(states), 2, dtype=np.int8)
+    messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}
+    t_conv = np.full(len(states), np.nan)
+    v_final = np.full(len(states), np.nan)
+    rows = []
+    if len(points):
+        rows = (_run_on_gpu(get_engine(engine), config, config.make_variant(), states[points], points,
+                            ratio, n_samples) if gpu
+                else _on_cpu(runs, states[points], points, ratio, n_samples, config.simulation.t_end))
     for index, code, t, v1, message in rows:
         outcome[index], t_conv[index], v_final[index] = code, t, v1
         if message:
