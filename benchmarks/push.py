@@ -72,7 +72,7 @@ def main() -> None:
         n = 256 // scale
         seconds, tail = timed(["analyze", str(config), *common, "--push", "torque", "--push-directions", str(n)])
         print(f"1. {n} directions, tolerance 1e-3, local search: {seconds:.2f} s end to end on {a.jobs} "
-              f"process(es) (target 10 s for 256)\n{tail}\n")
+              f"thread(s) (target 10 s for 256)\n{tail}\n")
         n = 10_000 // scale
         seconds, tail = timed(["analyze", str(config), *common, "--basin-stability", "initial_state.theta.0=-0.95:0.95",
                                "--basin-stability", "initial_state.omega.0=-6:6", "-n", str(n)])
