@@ -335,12 +335,64 @@ def test_a_chain_sweep_over_initial_states_refuses_what_the_schema_refuses():
         assert [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(label)] == expected[i], i
 
 
+def test_a_chain_sweeps_parameter_columns_refuse_exactly_the_runs_each_validated_alone_refuses():
+    """The columns of a chain's parameters (a body's mass and inertia, a joint's
+    gains and limits, gravity) are checked at once against their fields' rules, beside an
+    initial-state key: the runs refused are exactly those that validating each run alone
+    refuses, with its messages."""
+    import copy
+    import warnings
+
+    import yaml
+
+    from rbstab.config import ConfigError, config_from_mapping
+    from rbstab.config.paths import parse_any_key
+    from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
+
+    rng = np.random.default_rng(7)
+    n = 80
+
+    def some(good, bad):  # mostly good values, now and then a bad one
+        return np.where(rng.random(n) < 0.9, good, rng.choice(bad, size=n))
+
+    table = {"bodies.trunk.mass": some(rng.uniform(40, 55, n), [0.0, -3.0, np.nan]),
+             "bodies.legs.inertia.1": some(rng.uniform(1.5, 2.0, n), [-0.1, 0.0]),
+             "joints.1.l_r.2": some(rng.uniform(10, 30, n), [-1.0]),
+             "joints.hip.k_r.0": some(rng.uniform(400, 600, n), [-5.0, np.inf]),
+             "joints.ankle.saturation.torque_n.1": some(rng.uniform(100, 200, n), [0.0]),
+             "gravity.2": some(rng.uniform(-10, -9, n), [np.nan]),
+             "initial_state.legs.theta.1": some(np.zeros(n), [1.6])}
+    base = yaml.safe_load(Path(STANCE).read_text())
+    base["joints"][0]["saturation"] = {"torque_n": 150.0}
+    expected = {}
+    for i in range(n):
+        data = copy.deepcopy(base)
+        data["name"] = "x"
+        for key, column in table.items():
+            parse_any_key(key).set(data, float(column[i]))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                config_from_mapping(data)
+            except ConfigError as exc:
+                expected[i] = exc.errors
+    assert 0 < len(expected) < n and len({tuple(p) for p in expected.values()}) >= 5
+    with pytest.raises(SweepSpecError) as info:
+        plan_table(spec_from_mapping({"name": "v", "base": base, "table": table}))
+    lines = info.value.errors
+    assert lines[0] == f"{len(expected)} of {n} runs have an invalid configuration; nothing was run"
+    for i in sorted(expected)[:10]:
+        label = f"run r{i:04d} (base {base['name']}"
+        assert [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(label)] == expected[i], i
+
+
 def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
     """A worker's batch of a chain sweep's runs (records, parent points, initial states and h
     built from the table's columns, no configuration per run) holds, for every run, what
     compile_chain, the loader's placement and rest_offset give its validated configuration,
     bit for bit: keys of bodies, joints (gains, points, limits; by name or position), gravity,
-    disturbances, the admissible region and initial states."""
+    disturbances, the admissible region and initial states; whole vectors and matrices (a
+    grid's axes) as entries."""
     import copy
     import warnings
 
@@ -368,13 +420,18 @@ def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
         (pushed, {"disturbances.0.value.1": rng.uniform(1, 9, n), "disturbances.1.start": rng.uniform(0, 1, n),
                   "bodies.legs.inertia.0": rng.uniform(1.5, 2.0, n), "simulation.limits.theta.0": rng.uniform(.5, .7, n)}),
     ]
+    whole = {"gravity": [[0, 0, -9.0], [0, 0, -10.0]], "joints.hip.k_r": [[400, 400, 300], [500, 450, 350]],
+             "bodies.trunk.saturation.force_h": [200.0, 300.0]}  # whole vectors and matrices, a grid's axes
+    cases.append((stance, whole))
     for base, table in cases:
+        design = {"grid": table} if table is whole else {"table": table}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            part = plan_table(spec_from_mapping({"name": "v", "base": base, "table": table})).slice(np.arange(n))
+            planned = plan_table(spec_from_mapping({"name": "v", "base": base, **design}))
+        part = planned.slice(np.arange(planned.n))
         batch = part.batch()
         assert isinstance(batch, RunBatch) and batch.compiled.all() and not batch.one_body.any()
-        for j in range(n):
+        for j in range(planned.n):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 config = config_from_mapping(part.resolved(j))

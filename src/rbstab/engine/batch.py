@@ -39,7 +39,7 @@ from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
-__all__ = ["RunBatch", "batch_from_table", "batch_of", "MAX_STATE", "NOT_COMPILED"]
+__all__ = ["RunBatch", "batch_from_table", "batch_of", "TableFields", "MAX_STATE", "NOT_COMPILED"]
 
 #: The largest state of any variant (the second axis of a one-body table's :attr:`RunBatch.y0`).
 MAX_STATE = max(STATE_SIZE)
@@ -136,9 +136,10 @@ class RunBatch(_Batch):
         return np.array([t.codes[0] for t in self.trees], dtype=np.int64)[self.tree]
 
 
-class _Fields:
-    """Each run's value of every numeric field the batch reads, as written (a 3-list stays
-    shape (3,)), from the templates and the varied keys (:func:`batch_from_table`)."""
+class TableFields:
+    """Each run's value of every numeric field of a table of runs (:func:`batch_from_table`'s
+    arguments), as written (a 3-list stays shape (3,)): the templates' values with the
+    varied keys' set, a key of a list section's entry by its name or its position."""
 
     def __init__(self, templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
                  template: np.ndarray) -> None:
@@ -149,7 +150,7 @@ class _Fields:
                        for t in present]
         self.varied: dict[tuple[str, str], list[tuple[tuple[int, ...], np.ndarray]]] = {}
         for key in keys:
-            if "." not in key or columns[key].dtype == object:
+            if columns[key].dtype == object:
                 continue  # a template's own value (runs share a template's non-numeric values)
             path = parse_any_key(key)
             self.varied.setdefault((path.section, path.name), []).append((path.index, columns[key]))
@@ -271,7 +272,7 @@ def _bodies_from_table(templates: Sequence[Mapping], keys: Sequence[str], column
                        template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
     """:func:`batch_from_table` of one-body templates: every record at once (vectorised
     numpy), each template's one-body tree its runs' structure."""
-    f = _Fields(templates, keys, columns, np.asarray(template, dtype=np.int64))
+    f = TableFields(templates, keys, columns, np.asarray(template, dtype=np.int64))
     n = f.n
     if n == 0:
         return RunBatch((), np.zeros(0, np.int64), np.zeros((0, 1), PARAMETERS), np.zeros((0, 1, 3)), np.zeros(0),
@@ -337,7 +338,7 @@ def _rigid(p: np.ndarray, mass: np.ndarray, inertia: np.ndarray, r: np.ndarray, 
     p["weight"] = mass[:, None] * gravity
 
 
-def _settings(f: _Fields, templates: Sequence[Mapping], timeout: float | None) -> np.ndarray:
+def _settings(f: TableFields, templates: Sequence[Mapping], timeout: float | None) -> np.ndarray:
     """The runs' :data:`~rbstab.engine.settings.SETTINGS` (``timeout`` [s]: every run's
     ``max_wall_time``; the method's index, or :data:`NOT_COMPILED`)."""
     settings = np.zeros(f.n, dtype=SETTINGS)
@@ -356,7 +357,7 @@ def _method(name: str) -> int:
     return METHODS.index(name) if name in METHODS else NOT_COMPILED
 
 
-def _disturbances(p: np.ndarray, f: _Fields, t: int, entries: Sequence[int]) -> None:
+def _disturbances(p: np.ndarray, f: TableFields, t: int, entries: Sequence[int]) -> None:
     """The disturbances' fields (:func:`rbstab.model.set_disturbances`) of the records ``p``
     of template ``t``'s runs: the ``entries`` of its ``disturbances`` list (positions), each
     number as written there or in a column (``disturbances.0.value.1``)."""
@@ -375,7 +376,7 @@ def _disturbances(p: np.ndarray, f: _Fields, t: int, entries: Sequence[int]) -> 
         p["disturbance_band"][:, i] = f.get("disturbances", f"{at}.band", [0.0, 0.0], only=t)
 
 
-def _bounds(f: _Fields, templates: Sequence[Mapping]) -> np.ndarray | None:
+def _bounds(f: TableFields, templates: Sequence[Mapping]) -> np.ndarray | None:
     """The admissible region of every run (:func:`rbstab.model.set_limits`), (n, 5, 3): each
     bound of its template's ``simulation.limits`` as written there or in a column
     (``simulation.limits.theta.1``), inf where absent; None where no run has one."""
@@ -386,7 +387,7 @@ def _bounds(f: _Fields, templates: Sequence[Mapping]) -> np.ndarray | None:
                      for name in LIMITED], axis=1)
 
 
-def _initial_states(f: _Fields, code: np.ndarray) -> np.ndarray:
+def _initial_states(f: TableFields, code: np.ndarray) -> np.ndarray:
     """The runs' initial states, zero-padded to :data:`MAX_STATE` (:attr:`RunBatch.y0`)."""
     blocks = {block: f.get("initial_state", key, [0.0, 0.0, 0.0]) for key, block in INITIAL_STATE_BLOCKS.items()}
     y0 = np.zeros((f.n, MAX_STATE))
@@ -465,7 +466,7 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
                       template: np.ndarray, *, timeout: float | None = None) -> RunBatch:
     """:func:`batch_from_table` of trees' templates: each template validated once, every
     run's records built from the columns at once."""
-    f = _Fields(templates, keys, columns, np.asarray(template, dtype=np.int64))
+    f = TableFields(templates, keys, columns, np.asarray(template, dtype=np.int64))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the sweep reported each template's warnings when it planned it
         configs = [config_from_mapping({**t, "name": "template"}) for t in templates]
@@ -495,7 +496,7 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
                     compiled=settings["method"] != NOT_COMPILED, one_body=np.zeros(n, dtype=bool))
 
 
-def _tree_record(p: np.ndarray, f: _Fields, t: int, chain, i: int, gravity: np.ndarray) -> None:
+def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: np.ndarray) -> None:
     """The records ``p`` of body i of template ``t``'s runs with its joint's gains and limits
     (:func:`rbstab.variants.chain.compile_chain`'s, ``chain`` the template's): each field as
     written there or in a column (``bodies.trunk.mass``, ``joints.hip.k_r.0``)."""
@@ -528,7 +529,7 @@ def _tree_record(p: np.ndarray, f: _Fields, t: int, chain, i: int, gravity: np.n
         _disturbances(p, f, t, mine)
 
 
-def _tree_initial_states(f: _Fields, t: int, keys: Sequence[str], columns: Mapping[str, np.ndarray], config,
+def _tree_initial_states(f: TableFields, t: int, keys: Sequence[str], columns: Mapping[str, np.ndarray], config,
                          params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
     """The initial states (k, n_states) of template ``t``'s k runs (``config``: the
     template's, validated; ``params`` (k, n), ``ppoints`` (k, n, 3): the runs' records):

@@ -27,7 +27,7 @@ from .schema import numeric_array
 from ..results import plain
 from ..config import ConfigError, PhysicalPlausibilityWarning
 from ..config.loader import config_from_mapping, initial_state_fits
-from ..config.paths import KeyPath, parse_key, schema_of
+from ..config.paths import KeyPath, parse_any_key, parse_key, schema_of
 from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
                              samples_apart, starts_in_run, steps_suffice, within_bounds)
 from ..layout import LIMITED, VARIANT_LAYOUTS
@@ -35,6 +35,7 @@ from ..variants import VARIANTS
 from ..variants.base import limited_values
 from ..config.physics import SINGULAR_RTOL
 from ..config.physics import inertia_warnings
+from ..engine.batch import TableFields
 
 __all__ = ["validate_columns", "row_mapping", "base_value", "invalid_report", "key_path"]
 
@@ -409,20 +410,72 @@ def _templates(spec: SweepSpec, columns, base_index, template, first_of) -> tupl
     return out, notes, invalid, counted
 
 
+#: A chain's fields whose only check is their own rule (the schema's constraint of the field,
+#: :attr:`rbstab.config.paths.KeyPath.rule`): a body's mass, inertia, K_t, L_t and limits of
+#: H, a joint's gains and limits, gravity. No other check reads their values (the joints'
+#: points, laws and boundary layers, the initial state, the settings and the disturbances
+#: are read by the tree's checks and by each other's).
+_TREE_PARAMETERS = {"bodies": {"mass", "inertia", "k_t", "l_t", "saturation"},
+                    "joints": {"k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "saturation"}}
+
+
+def _tree_parameter(key: str, column: np.ndarray) -> bool:
+    """Whether ``key`` (a chain's) sets numbers of a field of :data:`_TREE_PARAMETERS` or
+    gravity."""
+    if column.dtype == object:
+        return False
+    path = parse_any_key(key)
+    field = path.name.split(".")[1] if path.name.count(".") else ""
+    return path.section == "gravity" or field in _TREE_PARAMETERS.get(path.section, ())
+
+
+def _tree_parameter_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray], templates: Sequence,
+                          template: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The runs among ``rows`` (of valid templates) whose value of a field the parameter
+    ``keys`` set breaks the field's rule, checked on the columns (each field whole: a
+    template's matrix with the varied entries set); every run where a field cannot be
+    assembled (the schema decides)."""
+    flagged = np.zeros(len(template), dtype=bool)
+    if not keys or not len(rows):
+        return flagged
+    fields = TableFields(templates, keys, {k: columns[k][rows] for k in keys}, template[rows])
+    shapes = {("matrix",): (3, 3), ("limits",): (3,), ("vector",): (3,)}
+    for section, name in {(p.section, p.name) for p in map(parse_any_key, keys)}:
+        rule = parse_any_key(f"{section}.{name}" if name else section).rule
+        try:
+            with np.errstate(invalid="ignore"):  # an infinite entry of a diagonal: NaN off it, flagged below
+                values = fields.get(section, name, shape=shapes.get(rule[:1]))
+        except (ValueError, TypeError, IndexError):
+            flagged[rows] = True
+            continue
+        integer = all(columns[k].dtype.kind == "i" for k in keys if parse_any_key(k).name == name)
+        flagged[rows] |= _rule_bad(rule, values, integer)
+    return flagged
+
+
 def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray, counted: np.ndarray,
-                    invalid_rows: dict) -> None:
+                    invalid_rows: dict, templates: Sequence, template: np.ndarray) -> None:
     """Validate each run of a chain's sweep not yet ``counted`` invalid (those the schema
-    refuses into ``invalid_rows``, and counted): a run that differs from one of the last
-    :data:`_RECENT_TREES` validated ones only in ``initial_state`` by :func:`rbstab.config.loader.initial_state_fits`
-    (the checks of that section), any other by the schema."""
-    recent: list[tuple[dict, Any]] = []  # (a validated run's mapping but its name and initial state, its config)
+    refuses into ``invalid_rows``, and counted). The parameters' columns
+    (:data:`_TREE_PARAMETERS`) are checked against their fields' rules at once; a run they
+    flag is validated by the schema. Any other run that differs from one of the last
+    :data:`_RECENT_TREES` validated ones only in its parameters and ``initial_state`` passes
+    where :func:`rbstab.config.loader.initial_state_fits` takes its initial state (the
+    checks of that section); the others are validated by the schema."""
     keys = list(columns)
+    params = [k for k in keys if _tree_parameter(k, columns[k])]
+    others = [k for k in keys if k not in params]
+    valid = np.array([t is not None for t in templates], dtype=bool)[template] & ~counted
+    flagged = _tree_parameter_flags(params, columns, [t or {} for t in templates], template, np.flatnonzero(valid))
+    recent: list[tuple[dict, Any]] = []  # (a validated run's mapping but its parameters, name and initial state, its config)
     for i in np.flatnonzero(~counted):
         base = spec.bases[int(base_index[i])]
-        try:
-            data = row_mapping(base, keys, [columns[k][i] for k in keys], "sweep-run")
-        except ConfigError:
-            data = None
+        data = None
+        if not flagged[i]:
+            try:
+                data = row_mapping(base, others, [columns[k][i] for k in others], "sweep-run")
+            except ConfigError:
+                data = None
         if data is not None:
             rest = {k: v for k, v in data.items() if k not in ("name", "initial_state")}
             if any(rest == other and initial_state_fits(config, data.get("initial_state"))
@@ -448,7 +501,7 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
     n = len(base_index)
     templates, notes, invalid_rows, counted = _templates(spec, columns, base_index, template, first_of)
     if spec.is_chain:  # a chain's checks are its schema's and its tree's: every run validated by them
-        _validate_trees(spec, columns, base_index, counted, invalid_rows)
+        _validate_trees(spec, columns, base_index, counted, invalid_rows, templates, template)
         _refuse_invalid(spec, columns, base_index, invalid_rows, counted)
         counts = np.bincount(template, minlength=len(notes))
         lines = {}
