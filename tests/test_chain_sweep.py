@@ -295,13 +295,7 @@ def test_a_chain_sweep_over_initial_states_refuses_what_the_schema_refuses():
     checks them (the schema, each body's and each joint's gimbal lock, simulation.limits):
     the runs refused are exactly those that validating each run alone refuses, with its
     messages."""
-    import copy
-    import warnings
-
     import yaml
-
-    from rbstab.config import ConfigError, config_from_mapping
-    from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
 
     rng = np.random.default_rng(5)
     n = 60
@@ -312,20 +306,38 @@ def test_a_chain_sweep_over_initial_states_refuses_what_the_schema_refuses():
     base["simulation"]["limits"] = {"omega": 2.0}
     table = {"initial_state.legs.theta.1": legs_theta_1, "initial_state.trunk.theta.1": trunk_theta_1,
              "initial_state.legs.omega.0": legs_omega_0}
+
+    def written(data, i):
+        data["initial_state"]["legs"]["theta"][1] = float(legs_theta_1[i])
+        data["initial_state"]["trunk"]["theta"][1] = float(trunk_theta_1[i])
+        data["initial_state"]["legs"]["omega"] = [float(legs_omega_0[i]), 0.0, 0.0]
+
+    _refused_as_each_run_alone(base, table, written, kinds=4)
+
+
+def _refused_as_each_run_alone(base: dict, table: dict, written, kinds: int) -> None:
+    """A sweep of ``base`` over the columns ``table`` is refused listing exactly the runs
+    that validating each alone refuses (run i: ``base`` with ``written(data, i)``'s values),
+    each with its messages; at least ``kinds`` different problems among them."""
+    import copy
+    import warnings
+
+    from rbstab.config import ConfigError, config_from_mapping
+    from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
+
+    n = len(next(iter(table.values())))
     expected = {}
     for i in range(n):
         data = copy.deepcopy(base)
         data["name"] = "x"
-        data["initial_state"]["legs"]["theta"][1] = float(legs_theta_1[i])
-        data["initial_state"]["trunk"]["theta"][1] = float(trunk_theta_1[i])
-        data["initial_state"]["legs"]["omega"] = [float(legs_omega_0[i]), 0.0, 0.0]
+        written(data, i)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             try:
                 config_from_mapping(data)
             except ConfigError as exc:
                 expected[i] = exc.errors
-    assert 0 < len(expected) < n and len({tuple(p) for p in expected.values()}) >= 4
+    assert 0 < len(expected) < n and len({tuple(p) for p in expected.values()}) >= kinds
     with pytest.raises(SweepSpecError) as info:
         plan_table(spec_from_mapping({"name": "v", "base": base, "table": table}))
     lines = info.value.errors
@@ -340,14 +352,9 @@ def test_a_chain_sweeps_parameter_columns_refuse_exactly_the_runs_each_validated
     gains and limits, gravity) are checked at once against their fields' rules, beside an
     initial-state key: the runs refused are exactly those that validating each run alone
     refuses, with its messages."""
-    import copy
-    import warnings
-
     import yaml
 
-    from rbstab.config import ConfigError, config_from_mapping
     from rbstab.config.paths import parse_any_key
-    from rbstab.sweep import SweepSpecError, plan_table, spec_from_mapping
 
     rng = np.random.default_rng(7)
     n = 80
@@ -364,26 +371,12 @@ def test_a_chain_sweeps_parameter_columns_refuse_exactly_the_runs_each_validated
              "initial_state.legs.theta.1": some(np.zeros(n), [1.6])}
     base = yaml.safe_load(Path(STANCE).read_text())
     base["joints"][0]["saturation"] = {"torque_n": 150.0}
-    expected = {}
-    for i in range(n):
-        data = copy.deepcopy(base)
-        data["name"] = "x"
+
+    def written(data, i):
         for key, column in table.items():
             parse_any_key(key).set(data, float(column[i]))
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            try:
-                config_from_mapping(data)
-            except ConfigError as exc:
-                expected[i] = exc.errors
-    assert 0 < len(expected) < n and len({tuple(p) for p in expected.values()}) >= 5
-    with pytest.raises(SweepSpecError) as info:
-        plan_table(spec_from_mapping({"name": "v", "base": base, "table": table}))
-    lines = info.value.errors
-    assert lines[0] == f"{len(expected)} of {n} runs have an invalid configuration; nothing was run"
-    for i in sorted(expected)[:10]:
-        label = f"run r{i:04d} (base {base['name']}"
-        assert [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(label)] == expected[i], i
+
+    _refused_as_each_run_alone(base, table, written, kinds=5)
 
 
 def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
