@@ -139,7 +139,7 @@ class RunBatch(_Batch):
 class TableFields:
     """Each run's value of every numeric field of a table of runs (:func:`batch_from_table`'s
     arguments), as written (a 3-list stays shape (3,)): the templates' values with the
-    varied keys' set, a key of a list section's entry by its name or its position."""
+    varied keys' values set (a key of a list section's entry by its name or its position)."""
 
     def __init__(self, templates: Sequence[Mapping], keys: Sequence[str], columns: Mapping[str, np.ndarray],
                  template: np.ndarray) -> None:

@@ -10,6 +10,11 @@ made on the columns: the rules are the schema's own functions
 :func:`~rbstab.config.schema.samples_apart`, :func:`~rbstab.config.schema.steps_suffice`),
 applied to a column instead of a value. The runs these checks flag are validated one by one by the schema,
 whose messages name the run, the key, the value and what is allowed.
+
+A chain's sweep checks its parameters' columns (masses, inertias, gains, limits, gravity)
+so; its other runs are validated by the chain's schema and tree checks, a run that differs
+from one validated before only in its parameters and initial state by its initial state's
+checks (:func:`_validate_trees`).
 """
 
 from __future__ import annotations
@@ -500,7 +505,7 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
     """
     n = len(base_index)
     templates, notes, invalid_rows, counted = _templates(spec, columns, base_index, template, first_of)
-    if spec.is_chain:  # a chain's checks are its schema's and its tree's: every run validated by them
+    if spec.is_chain:  # its parameters' columns at once, the rest by its schema's and its tree's checks
         _validate_trees(spec, columns, base_index, counted, invalid_rows, templates, template)
         _refuse_invalid(spec, columns, base_index, invalid_rows, counted)
         counts = np.bincount(template, minlength=len(notes))
