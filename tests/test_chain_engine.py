@@ -86,6 +86,31 @@ def test_one_bodys_two_spellings_are_one_model(path):
                                    err_msg=key)
 
 
+def test_one_batch_takes_both_spellings_and_each_run_is_the_run_alone():
+    """One batch of one-body configs and trees mixed (a permanent and an embedded body, the
+    stance and the knee): each run's result, through simulate_many, is its simulate() alone,
+    bit for bit, and each keeps its spelling's outputs (one body's (m, 3), a tree's (m, n, 3))."""
+    from rbstab.engine.batch import batch_of
+    from rbstab.simulator import simulate_many
+
+    paths = ["paper/case1_permanent", "examples/stance_ankle_hip", "paper/case3_embedded", "examples/knee"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        configs = [load_config(ROOT / "configs" / f"{p}.yaml", ["simulation.t_end=0.5", "simulation.n_samples=51"])
+                   for p in paths]
+    batch = batch_of(configs)
+    assert batch.one_body.tolist() == [True, False, True, False] and batch.compiled.all()
+    assert batch.params.shape == (4, 2) and batch.n_state.tolist() == [6, 24, 15, 27]
+    together = dict(simulate_many(configs))
+    for i, config in enumerate(configs):
+        alone = simulate(config)
+        assert together[i].status == alone.status == "success"
+        assert together[i].outputs.keys() == alone.outputs.keys()
+        for key, value in alone.outputs.items():
+            np.testing.assert_array_equal(together[i].outputs[key], value, err_msg=f"{config.name}: {key}")
+        assert together[i].outputs["theta"].ndim == (2 if batch.one_body[i] else 3)
+
+
 def test_a_one_body_tree_with_the_pure_sign_law_is_refused_naming_its_one_body_spelling():
     """The pure sign law (boundary_layer 0) runs event by event for one body only: its tree
     spelling is refused in one line, which names the spelling that takes it where the tree
