@@ -344,3 +344,32 @@ def test_free_body_without_gravity_fails_only_where_the_push_reaches_the_theta_l
     largest_tilt = math.exp(-zeta * w_n * t_star) * math.sin(w_d * t_star) / (j * w_d)
     np.testing.assert_allclose(found.threshold, b / largest_tilt, rtol=2e-4)
     assert found.monotone
+
+
+def test_an_analysis_in_threads_takes_slices_in_order_and_an_interrupt_cancels_those_not_started():
+    """The analyses' runs in threads (rbstab.analysis.runs._in_threads): slices of at most
+    THREAD_SLICE runs, at least one a thread, their results in order; an exception in the
+    calling thread (Ctrl-C's KeyboardInterrupt) cancels the slices not started, so it does
+    not wait for the whole batch."""
+    import threading
+
+    from rbstab.analysis.runs import THREAD_SLICE, _in_threads
+
+    parts = _in_threads(lambda rows: rows.sum(), 1000, 2)
+    slices = [rows for rows, _ in parts]
+    assert len(slices) >= 2 and max(len(r) for r in slices) <= THREAD_SLICE
+    np.testing.assert_array_equal(np.concatenate(slices), np.arange(1000))
+    assert [total for _, total in parts] == [int(r.sum()) for r in slices]
+    assert len(_in_threads(lambda rows: 0, 64, 2)) == 2  # a push's round: a slice a thread
+    started, release = [], threading.Event()
+
+    def work(rows):
+        started.append(len(rows))
+        if len(started) == 1:
+            raise KeyboardInterrupt
+        release.wait(0.5)
+
+    with pytest.raises(KeyboardInterrupt):
+        _in_threads(work, 40 * THREAD_SLICE, 1)
+    release.set()
+    assert len(started) < 40

@@ -22,6 +22,9 @@ __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_e
 
 #: Fewest runs of a batch slice sent to a worker.
 MIN_SLICE = 64
+#: Most runs of a batch slice a thread takes: an interrupt (Ctrl-C) waits for the slices
+#: running, not for the whole batch.
+THREAD_SLICE = 256
 
 
 def batch_outcomes(batch, engine: str) -> np.ndarray:
@@ -40,16 +43,14 @@ def batch_outcomes(batch, engine: str) -> np.ndarray:
 
 def integrate_batch(batch, engine: str, executor=None, jobs: int = 1) -> np.ndarray:
     """:func:`batch_outcomes` of a batch, in slices of at least :data:`MIN_SLICE` runs
-    over ``executor``'s workers, or where there is none in ``jobs`` slices over as many
-    threads (the compiled driver releases Python's lock)."""
+    over ``executor``'s workers, or where there is none over ``jobs`` threads
+    (:func:`_in_threads`; the compiled driver releases Python's lock)."""
     if executor is None:
         if jobs <= 1 or len(batch) < 2:
             return batch_outcomes(batch, engine)
         out = np.full((3, len(batch)), np.nan)
-        slices = np.array_split(np.arange(len(batch)), min(jobs, len(batch)))
-        with ThreadPoolExecutor(len(slices)) as pool:
-            for rows, result in zip(slices, pool.map(lambda rows: batch_outcomes(batch.take(rows), engine), slices)):
-                out[:, rows] = result
+        for rows, result in _in_threads(lambda rows: batch_outcomes(batch.take(rows), engine), len(batch), jobs):
+            out[:, rows] = result
         return out
     workers = executor.parallelism() or 1
     if workers <= 1 or len(batch) < 2 * MIN_SLICE:
@@ -64,6 +65,19 @@ def integrate_batch(batch, engine: str, executor=None, jobs: int = 1) -> np.ndar
             raise exc
         out[:, rows] = result
     return out
+
+
+def _in_threads(function, k: int, jobs: int) -> list:
+    """``(rows, function(rows))`` of k runs in order: ``rows`` slices of at most
+    :data:`THREAD_SLICE` runs (``jobs`` of them at least), ``function`` of them in ``jobs``
+    threads. An interrupt (Ctrl-C) cancels the slices not started and waits for those
+    running."""
+    slices = np.array_split(np.arange(k), max(min(jobs, k), -(-k // THREAD_SLICE)))
+    pool = ThreadPoolExecutor(min(jobs, len(slices)))
+    try:
+        return list(zip(slices, pool.map(function, slices)))
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _integrate_slice(item, engine: str):
@@ -223,16 +237,13 @@ class Runs:
         workers = (self.executor.parallelism() or 1) if self.executor is not None else self.jobs
         if workers <= 1 or k < (2 * MIN_SLICE if self.executor is not None else 2):
             return batch_traces(batch, self.engine)
-        size = max(MIN_SLICE, -(-k // (4 * workers)))  # 4 slices a worker: every worker busy to the end
-        slices = [np.arange(lo, min(lo + size, k)) for lo in range(0, k, size)]
-        if self.executor is None:
-            slices = np.array_split(np.arange(k), min(workers, k))
         ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
         if self.executor is None:
-            with ThreadPoolExecutor(len(slices)) as pool:
-                done = [((rows, None), result, None) for rows, result in
-                        zip(slices, pool.map(lambda rows: batch_traces(batch.take(rows), self.engine), slices))]
+            done = [((rows, None), result, None) for rows, result in
+                    _in_threads(lambda rows: batch_traces(batch.take(rows), self.engine), k, workers)]
         else:
+            size = max(MIN_SLICE, -(-k // (4 * workers)))  # 4 slices a worker: every worker busy to the end
+            slices = [np.arange(lo, min(lo + size, k)) for lo in range(0, k, size)]
             self.executor.plan(len(slices))
             done = self.executor.imap_unordered(_trace_slice, ((r, batch.take(r)) for r in slices), self.engine)
         for (rows, _), result, exc in done:
