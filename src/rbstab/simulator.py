@@ -41,13 +41,13 @@ from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch, integrate_runs, method_number
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
-from .engine.settings import settings_records, settings_rows
+from .engine.settings import settings_records
 from .engine.integrate import admissible
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
-from .model import DISTURBANCE_KINDS, PARAMETERS
+from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
 from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary_table
 from .variants import Variant
