@@ -38,8 +38,8 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   its occupancy;
   kernel and end-to-end runs/s of an initial-state sweep of the stance example
   (``configs/examples/stance_ankle_hip.yaml``: 2 bodies on permanent joints, saturated
-  torques; DOP853, rtol 1e-8, atol 1e-10, t_end 2 s, 201 samples of which the first and
-  last come back; each body's theta_1 ~ U(-0.1, 0.1) rad, omega ~ N(0, 0.2^2) rad/s) at
+  torques; DOP853, rtol 1e-8, atol 1e-10, t_end 2 s, 201 samples streamed into each run's
+  summary on the device, none coming back; end to end with the summary table); each body's theta_1 ~ U(-0.1, 0.1) rad, omega ~ N(0, 0.2^2) rad/s) at
   each N of ``--chain-n``, beside the compiled CPU driver
   (:func:`rbstab.engine.integrate.integrate_chain_runs`) on every core at ``--chain-cpu-n``;
   the same sweep with a tree a run (the trunk's mass and inertia times U(0.8, 1.2) in each
@@ -368,14 +368,18 @@ def chain_compile_info() -> str:
 
 
 def chain_gpu_rates(n: int, parameters: bool = False) -> tuple[float, float]:
-    """(kernel, end-to-end) runs/s of n runs of the chain sweep (first and last samples
-    back); ``parameters``: a tree a run (:func:`chain_runs`)."""
+    """(kernel, end-to-end) runs/s of n runs of the chain sweep (the summaries streamed, no
+    sample back; end to end with the summary table); ``parameters``: a tree a run
+    (:func:`chain_runs`)."""
     from rbstab.engine.cuda import integrate_chain_runs_cuda
+    from rbstab.summary import tree_stream_table
 
     system, y0, rows, method, n_samples, tree_of = chain_runs(n, parameters=parameters)
     start = time.perf_counter()
-    sol = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=n_samples, stride=n_samples - 1,
+    sol = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=n_samples, stride=None,
                                     tree_of=tree_of)
+    tree_stream_table(np.linspace(0.0, float(rows[0, 0]), n_samples), sol.acc, sol.members, sol.last,
+                      len(system.codes), np.asarray(system.d_at))
     return n / sol.kernel_seconds, n / (time.perf_counter() - start)
 
 
@@ -423,7 +427,7 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
     import numpy as np
     import rbstab.engine.cuda as cuda
     from rbstab.layout import N_OUTPUTS
-    from rbstab.summary import ACCUMULATOR_SIZE, TAKEN
+    from rbstab.summary import ACCUMULATOR_SIZE, MEMBER_SLOTS, TAKEN
 
     def launches(codes, params, y0, settings, *, n_samples, stride=None, full=False, max_wall_time=np.inf,
                  ratio=1e-3):
@@ -438,11 +442,17 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
                                  trace=None if stride is None else np.ones((k, n_trace, cuda.TRACE_COLUMNS)),
                                  kernel_seconds=0.0, seconds=0.0)
 
-    def chain_launch(system, y0, settings, *, method, n_samples, stride=1, max_wall_time=np.inf, tree_of=None):
-        k, n_kept = len(y0), len(range(0, n_samples, stride))  # every run at t_end, still at its initial state
-        return cuda.CudaChainSolution(np.repeat(np.asarray(y0, dtype=float)[:, None], n_kept, axis=1),
-                                      np.zeros(k, np.int64), np.asarray(settings, dtype=float)[:, 0].copy(),
-                                      np.full(k, 500), np.full(k, 40), np.zeros((k, n_kept)))
+    def chain_launch(system, y0, settings, *, method, n_samples, stride=1, max_wall_time=np.inf, tree_of=None,
+                     offsets=None):
+        # every run at t_end, still at its initial state (maximal), a full accumulator
+        k, n_kept = len(y0), 0 if stride is None else len(range(0, n_samples, stride))
+        y0 = np.asarray(y0, dtype=float)
+        acc = np.ones((k, ACCUMULATOR_SIZE))
+        acc[:, TAKEN] = n_samples
+        return cuda.CudaChainSolution(np.repeat(y0[:, None], n_kept, axis=1), np.zeros(k, np.int64),
+                                      np.asarray(settings, dtype=float)[:, 0].copy(), np.full(k, 500),
+                                      np.full(k, 40), np.zeros((k, n_kept)), acc=acc,
+                                      members=np.zeros((k, len(system.codes), MEMBER_SLOTS)), last=y0.copy())
 
     cuda.check_available = lambda: None
     cuda.integrate_chunks_cuda = launches

@@ -60,10 +60,10 @@ def cases(root: str):
             ["simulation.max_steps=12"])],  # stopped by its step limit
         "knee": [load_config(knee, ["simulation.t_end=0.05", "simulation.n_samples=26", *extra]) for extra in (
             [], ["initial_state.shank.theta=[0.6, 0.1, 0]"])],
-        # chains of one structure, each run its own: the masses, gains, a parent point and the
-        # admissible region differ (one call, each run's tree its own record)
+        # chains of one structure, each run its own: the masses, gains, a torque limit (the hip's
+        # clipped), a parent point and the admissible region differ (one call, each run's tree its own record)
         "params": [load_config(stance, [*short, "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in (
-            [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]"], ["joints.hip.parent_point=[0, 0.02, 0.4]"],
+            [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]", "joints.hip.saturation.torque_n=[5, 5, .inf]"], ["joints.hip.parent_point=[0, 0.02, 0.4]"],
             ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"])],  # leaves its region
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
@@ -120,10 +120,40 @@ def main() -> None:
         found["result"] = [what for what in ("status", "message", "solver") if getattr(ref, what) != getattr(got, what)]
         found["result"] += [key for key in ref.outputs if not same(ref.outputs[key], got.outputs[key])]
         found["result"] += [key for key in ref.summary if str(ref.summary[key]) != str(got.summary[key])]
+        found["streamed"] = streamed_summaries(configs)
         found["seconds"] = round(time.perf_counter() - start, 2)
         report[name] = found
     report["runs"] = analysis_runs(cases(sys.argv[1])["stance"])
     print(json.dumps(report))
+
+
+def streamed_summaries(configs) -> list:
+    """The figures of the configs' runs as one batch with no samples kept (``keep="none"``:
+    the tree kernel's streamed summaries, :func:`rbstab.summary.tree_stream_table`) that
+    differ from the CPU's (:func:`rbstab.summary.tree_summary_table` of its samples): [figure,
+    largest difference relative to the figure's scale] (none: they are equal bit for bit)."""
+    from rbstab.engine.batch import batch_of
+    from rbstab.simulator import simulate_batch
+
+    batch = batch_of(configs)
+    tables = []
+    for engine in ("compiled", "cuda"):
+        blocks = list(simulate_batch(batch, full=False, engine=engine, keep="none"))
+        assert len(blocks) == 1 and list(blocks[0][0]) == list(range(len(configs)))
+        tables.append(blocks[0][1].summaries)
+    cpu, gpu = tables
+    differences = [[key, "missing"] for key in cpu.keys() ^ gpu.keys()]
+    for key in cpu.keys() & gpu.keys():
+        if not same(cpu[key], gpu[key]):
+            a, b = np.asarray(cpu[key]), np.asarray(gpu[key])
+            if a.dtype == object or a.shape != b.shape:
+                if a.tolist() != b.tolist():
+                    differences.append([key, "not equal"])
+                continue
+            scale = max(1e-300, float(np.nanmax(np.abs(a), initial=0.0)))
+            nan_same = bool(np.array_equal(np.isnan(a), np.isnan(b)))
+            differences.append([key, float(np.nanmax(np.abs(a - b), initial=0.0)) / scale if nan_same else "NaN"])
+    return sorted(differences)
 
 
 def analysis_runs(configs) -> dict:

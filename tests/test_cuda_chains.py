@@ -30,12 +30,15 @@ def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bo
     admissible region, a tree a run in one call (each run as the run alone): every run's status, t_stop, nfev, n_steps and its state and work W at every
     sample (and every 3rd, stride 3) equal the CPU driver's; simulate(engine="cuda")
     gives simulate(engine="compiled")'s status, message, solver counts, outputs and
-    summary."""
+    summary; and the runs' summaries streamed on the device with no sample kept (a sweep's
+    --store summary; the hip's clipped torque counted in one run) are the CPU's, computed
+    from its samples, figure by figure, bit for bit."""
     found = simulated[case]
     assert found["bodies"] == bodies
     assert found["status"] == status
     assert found["differences"] == []
     assert found["result"] == []
+    assert found["streamed"] == []
 
 
 def test_simulated_analysis_runs_of_a_tree_are_the_cpus(simulated):

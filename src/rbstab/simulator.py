@@ -49,7 +49,8 @@ from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
 from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
-from .summary import NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_summary_table
+from .summary import (NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_stream_table,
+                      tree_summary_table)
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.disturbances import apply_impulses, before
@@ -452,9 +453,9 @@ _LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUT
 #: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
 #: default number of runs per compiled call (the trajectories held at once).
 POSTPROCESS_BLOCK = 32
-#: Bytes of samples a chain's GPU launch brings back to the host at most (every sample of
-#: its runs, which their summaries read): the runs of a launch of
-#: :func:`_tree_batch_blocks` with the CUDA engine.
+#: Bytes of samples a chain's GPU launch brings back to the host at most where its runs'
+#: outputs are kept (every sample; summaries alone bring back a state a run): the runs of a
+#: launch of :func:`_tree_batch_blocks` with the CUDA engine.
 CUDA_CHAIN_SAMPLE_BYTES = 2 * 2**30
 
 
@@ -774,8 +775,9 @@ def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, outputs: 
     :func:`rbstab.engine.integrate.integrate_chain_runs`, each distinct tree once in a call.
     ``outputs`` False: the blocks carry the summaries and no traces. On the GPU the runs of
     a call are one launch (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit
-    the largest ``max_wall_time`` of its runs; as many runs as
-    :data:`CUDA_CHAIN_SAMPLE_BYTES` of samples)."""
+    the largest ``max_wall_time`` of its runs); their summaries are streamed on the device
+    (:func:`rbstab.summary.tree_stream_table`) and their samples come back only with
+    ``outputs`` (then as many runs a call as :data:`CUDA_CHAIN_SAMPLE_BYTES` of samples)."""
     from .engine.integrate import integrate_chain_runs  # heavy: numba
 
     integrate, gpu = integrate_chain_runs, get_engine(engine).gpu
@@ -787,9 +789,9 @@ def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, outputs: 
         groups.setdefault(_structure(batch, i), []).append(i)
     for members in groups.values():
         per_call = POSTPROCESS_BLOCK
-        if gpu:  # a launch takes as many runs as the host may hold the samples of
-            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * int(batch.n_samples[members[0]])
-                                                          * (int(batch.n_state[members[0]]) + 1)))
+        if gpu:  # a launch takes as many runs as the host may hold the samples of (none: their summaries)
+            kept = int(batch.n_samples[members[0]]) if outputs else 1
+            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * kept * (int(batch.n_state[members[0]]) + 1)))
         for lo in range(0, len(members), per_call):
             yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, outputs, configs)
 
@@ -818,18 +820,24 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, output
     y0 = batch.y0[members, :n_states]
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
-    limit = {"max_wall_time": float(np.max(settings[:, 6]))} if gpu else {}  # a launch's limit
-    sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **limit)
+    # on the GPU: a launch's limit, each tree's h, and the summaries streamed (the samples kept for the outputs only)
+    gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "offsets": [t.offset for t in trees],
+                   "stride": 1 if outputs else None} if gpu else {}
+    sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **gpu_options)
     time = np.linspace(0.0, float(settings[0, 0]), n_samples)
     time.flags.writeable = False
     integration = (_time.perf_counter() - start) / len(members)
     for lo in range(0, len(members), POSTPROCESS_BLOCK):
         hi = min(lo + POSTPROCESS_BLOCK, len(members))
         t0 = _time.perf_counter()
-        run_outputs, summaries = _trees_outputs([trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time,
-                                                sol.samples[lo:hi], sol.work[lo:hi], outputs)
+        run_outputs, summaries = ({}, {}) if gpu and not outputs else _trees_outputs(
+            [trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi], outputs)
+        if gpu:
+            summaries = tree_stream_table(time, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
+                                          structure.d_at)
         status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
-                                          sol.samples[j], y0[j], settings[j], params[j, 0]["limits"])
+                                          sol.last[j][None] if gpu else sol.samples[j], y0[j], settings[j],
+                                          params[j, 0]["limits"])
                                  for j in range(lo, hi)))
         ok = sol.status[lo:hi] == SUCCESS
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))

@@ -36,6 +36,10 @@ __all__ = [
     "stream_sample",
     "stream_finish",
     "stream_table",
+    "tree_stream_table",
+    "stream_member_start",
+    "stream_member",
+    "MEMBER_SLOTS",
     "short_stencils",
 ]
 
@@ -523,6 +527,34 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
                 _compare(acc, q, _numerical_rate(acc, start, weights[q]), start, w, trace, stride)
 
 
+#: Slots of a tree member's streamed figures (:func:`stream_member`, :func:`tree_stream_table`):
+#: max |E_j| (3), then the samples with each axis of N_j, of H of its child body and of
+#: Lambda_j flagged at its limit (3 each, in the order of SATURATION_FLAGS).
+MEMBER_SLOTS = 3 + _FLAG_SLOTS
+
+
+@jit(forceinline=True)
+def stream_member_start(members):
+    """Reset a run's member slots ``members`` (n, :data:`MEMBER_SLOTS`)."""
+    for i in range(members.shape[0]):
+        for a in range(3):
+            members[i, a] = -math.inf
+        for a in range(3, MEMBER_SLOTS):
+            members[i, a] = 0.0
+
+
+@jit(forceinline=True)
+def stream_member(members, i, error, flags):
+    """Take one sample of tree member i (joint i and its child body) into ``members`` (n,
+    :data:`MEMBER_SLOTS`): ``error`` E_i (3,) [m], ``flags`` (3, 3) the saturation flags of
+    N_i, H_i and Lambda_i (1.0 or 0.0 an axis)."""
+    for a in range(3):
+        members[i, a] = _max(members[i, a], abs(error[a]))
+    for c in range(3):
+        for a in range(3):
+            members[i, 3 + 3 * c + a] += flags[c, a]
+
+
 @jit(forceinline=True)
 def stream_finish(acc, first, weights, short, trace, stride):
     """The numerical dv/dt of the last samples of a run that stopped before the end of its
@@ -572,24 +604,66 @@ def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) ->
     layout : rbstab.layout.StateLayout
         The runs' state layout (which state blocks have a ``final_`` figure).
     """
-    taken = acc[:, TAKEN].astype(np.int64)
-    last_index = np.maximum(taken - 1, 0)
-    table: dict[str, np.ndarray] = {"t_final": time[last_index]}
+    finals = {}
     for b in STATE_BLOCKS:
         if b == "controller_state" and b not in layout.blocks:
             continue
         q = OUTPUTS[b]
-        table[f"final_{b}"] = last[:, q.offset: q.offset + 3].copy()
+        finals[b] = last[:, q.offset: q.offset + 3].copy()
+    flags = [acc[:, SATURATED + 3 * c: SATURATED + 3 * c + 3] for c in range(len(SATURATION_FLAGS))]
+    return _streamed(time, acc, finals, acc[:, MAX_ERROR: MAX_ERROR + 3], flags)
+
+
+def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, last: np.ndarray, n_bodies: int,
+                      d_at: np.ndarray) -> dict[str, np.ndarray]:
+    """:func:`tree_summary_table`'s columns from streamed accumulators (the CUDA tree kernel).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        The runs' sample grid [s].
+    acc : ndarray, shape (k, ACCUMULATOR_SIZE)
+        Each run's accumulator after :func:`stream_finish` (v, its terms, dv/dt and the
+        disturbances' edges of the tree).
+    members : ndarray, shape (k, n_bodies, MEMBER_SLOTS)
+        Each run's member slots (:func:`stream_member`).
+    last : ndarray, shape (k, 12 n_bodies + 3 e)
+        Each run's maximal state at its last sample taken (NaN for a run with none).
+    n_bodies : int
+    d_at : ndarray of int, shape (n_bodies,)
+        Where each embedded joint's D sits in the state (-1: none).
+    """
+    k = len(acc)
+    blocks = last[:, : 12 * n_bodies].reshape(k, n_bodies, 4, 3)
+    finals = {b: blocks[:, :, i].copy() for i, b in enumerate(STATE_BLOCKS[:4])}
+    if np.any(d_at >= 0):
+        finals["controller_state"] = np.full((k, n_bodies, 3), np.nan)
+        for j in np.flatnonzero(d_at >= 0):
+            finals["controller_state"][:, j] = last[:, d_at[j]: d_at[j] + 3]
+    flags = [members[:, :, 3 + 3 * c: 6 + 3 * c] for c in range(len(SATURATION_FLAGS))]
+    return _streamed(time, acc, finals, members[:, :, :3], flags)
+
+
+def _streamed(time: np.ndarray, acc: np.ndarray, finals: dict, errors: np.ndarray, flags: list) -> dict[str, np.ndarray]:
+    """:func:`summary_table`'s columns of k runs from their accumulators ``acc`` (k,
+    ACCUMULATOR_SIZE): ``finals`` the state blocks at their last samples, ``errors`` max
+    |E| and ``flags`` the samples flagged of each control (in the order of SATURATION_FLAGS),
+    (k, 3) or (k, n, 3) per member."""
+    taken = acc[:, TAKEN].astype(np.int64)
+    last_index = np.maximum(taken - 1, 0)
+    table: dict[str, np.ndarray] = {"t_final": time[last_index]}
+    for b, value in finals.items():
+        table[f"final_{b}"] = value
     none = taken == 0
-    table["max_abs_constraint_error"] = np.where(none[:, None], np.nan, acc[:, MAX_ERROR: MAX_ERROR + 3])
+    table["max_abs_constraint_error"] = np.where(none.reshape(-1, *[1] * (errors.ndim - 1)), np.nan, errors)
     table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL])
-    table["lyapunov_final"] = last[:, _V_AT].copy()
+    table["lyapunov_final"] = np.where(none, np.nan, acc[np.arange(len(acc)), V_RING + last_index % RATE_STENCIL])
     table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
     table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
     table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
     with np.errstate(all="ignore"):
         for c, (_, figure) in enumerate(SATURATION_FLAGS.values()):
-            table[figure] = acc[:, SATURATED + 3 * c: SATURATED + 3 * c + 3] / taken[:, None]
+            table[figure] = flags[c] / taken.reshape(-1, *[1] * (flags[c].ndim - 1))
     span = time[last_index] - time[0]
     with np.errstate(all="ignore"):
         scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)

@@ -11,7 +11,8 @@ next pass with the others of its warp, instead of stalling them. Only the kernel
 are written here: work arrays in thread-local memory, a persistent grid whose threads take
 the next run from an atomic counter when theirs ends, the launch's one deadline, and what
 becomes of a run's samples (:class:`StreamSink`: outputs and the streamed summary of
-:mod:`rbstab.summary`; a tree's raw samples).
+:mod:`rbstab.summary`; a tree's :class:`TreeStreamSink`: its streamed summary and, if asked,
+its samples).
 
 A run with disturbances (``disturbance_count`` > 0, read once a run) is integrated as the
 CPU engine integrates it (docs/disturbances.md): its impulses at t = 0 are applied before
@@ -44,11 +45,13 @@ functions (:mod:`rbstab.engine.systems`; the physics is
 :func:`rbstab.variants.tree.tree_rate`, compiled as a device function with scratch arrays
 in thread-local memory sized for the tree's shape: a kernel per number of bodies, 1 to
 :data:`MAX_TREE_BODIES`, of permanent joints and of embedded joints, :func:`tree_shape`),
-every launch one tree (its records passed once, read by every thread), each run with its
-own initial state and settings. A run gives its status, stop time, counts and its state
-(and W) at every ``stride``-th sample, as the CPU driver's
-(:func:`rbstab.engine.integrate.integrate_chain_runs`); the outputs and summary are the
-host's (:func:`rbstab.simulator.simulate_blocks`).
+every launch trees of one structure (their records passed once, read by every thread),
+each run with its own tree, initial state and settings. A run gives its status, stop time,
+counts, its summary streamed as it goes (each sample evaluated on the device,
+:func:`tree_stream_sample`; :func:`rbstab.summary.tree_stream_table` makes the figures),
+its state at its last sample and, if asked, its state (and W) at every ``stride``-th
+sample, as the CPU driver's (:func:`rbstab.engine.integrate.integrate_chain_runs`), from
+which the host computes the outputs.
 
 Not here: the pure sign law of ``sliding`` (``boundary_layer: 0``), whose event-driven
 integrator (:mod:`rbstab.engine.switching`) stays on the CPU, and the implicit methods.
@@ -80,14 +83,15 @@ from numba import cuda, from_dtype, types  # noqa: E402
 from numba.extending import overload  # noqa: E402
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
-from ..jit import CACHE_DIR, cache_is_warm, mark_warm
+from ..jit import CACHE_DIR, cache_is_warm, jit, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import N_OUTPUTS
+from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS
 from ..model import PARAMETERS
-from ..summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, short_stencils, stencil_weights, stream_finish,
-                       stream_sample, stream_start)
-from ..variants.chain import ChainWork
-from ..variants.tree import TreeWork, reduced_size
+from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, NUMERICAL_RATE_AT, short_stencils, stencil_weights,
+                       stream_finish, stream_member, stream_member_start, stream_sample, stream_start)
+from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate
+from ..variants.disturbances import edges_up_to
+from ..variants.tree import TreeWork, reduced_size, tree_expand
 from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample, sample_time
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
@@ -234,6 +238,68 @@ def _keep_streamed(sink, code, p, j, t, sample, work):
         if sink.disturbed:
             sink.row[DISTURBANCE_WORK_AT] = work
         stream_sample(sink.acc, j, sink.row, sink.first, sink.weights, sink.trace, sink.stride, sink.ratio)
+    return keep
+
+
+#: Where a tree run's samples go in the tree kernel: each is evaluated
+#: (:func:`tree_stream_sample`) and streamed into the summary's accumulator ``acc``
+#: (:func:`rbstab.summary.stream_sample`: v, its terms, dv/dt, the disturbances' edges, with
+#: the grid's ``first``, ``weights`` and the convergence ``ratio``; ``row`` the outputs'
+#: scratch, ``trace`` of no rows) and each member's slots ``members`` (n,
+#: :data:`rbstab.summary.MEMBER_SLOTS`; ``flags`` (n, 3, 3) scratch); ``offset`` is the tree's
+#: h [J] (v's zero); ``last`` (n_r + 1,) receives the reduced state and W of the sample;
+#: ``rows`` (a :class:`rbstab.engine.integrate.SampleRows`) keeps every ``stride``-th sample
+#: while it has rows.
+TreeStreamSink = namedtuple("TreeStreamSink", ["acc", "members", "row", "flags", "last", "first", "weights", "trace",
+                                               "ratio", "offset", "rows"])
+_V_AT, _RATE_AT, _EDGES_AT = (OUTPUTS[name].offset for name in ("lyapunov", "lyapunov_rate", "disturbance_edges"))
+_TERMS_AT = tuple(OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
+
+
+@jit(_nrt=False)
+def tree_stream_sample(sink, p, j, t, sample, work):
+    """Sample j at time t [s] of a tree run (:class:`TreeStreamSink` ``sink``; the reduced
+    state and W [J] ``work`` in ``sample``) on its maximal image: every joint's and body's
+    quantities (:func:`rbstab.variants.chain.chain_evaluate`) and saturation flags, the
+    terms of v (eq 25's grouping; h in the gravity term), v, the analytic dv/dt and the
+    disturbances' edges summed over the bodies' records, as the host's
+    :func:`rbstab.variants.chain.evaluate` of the sample gives them, streamed into the
+    accumulators."""
+    w, n = p.work, p.codes.shape[0]
+    cw = w.chain
+    tree_expand(sample, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, cw.rot,
+                cw.rate, True)
+    chain_evaluate(t, w.y, p.params, p.codes, p.parents, p.ppoints, p.d_at, w.dy, cw.joints, cw.bodies, cw.scalars, cw)
+    _saturation_flags(w.y, p.params, p.codes, cw.joints, sink.flags)
+    row, terms = sink.row, cw.scalars
+    edges = 0.0
+    for i in range(n):
+        stream_member(sink.members, i, cw.joints[i, _E], sink.flags[i])
+        edges += edges_up_to(p.params[i], t)
+    for c in range(4):
+        row[_TERMS_AT[c]] = terms[c]
+    row[_TERMS_AT[3]] += sink.offset
+    row[_V_AT] = terms[0] + terms[1] + terms[2] + terms[3] + sink.offset
+    row[_RATE_AT] = terms[4]
+    row[_EDGES_AT] = edges
+    stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.trace, 1, sink.ratio)
+    for i in range(sink.last.shape[0] - 1):
+        sink.last[i] = sample[i]
+    sink.last[sink.last.shape[0] - 1] = work
+
+
+@overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy", "_nrt": False})
+def _keep_tree_streamed(sink, code, p, j, t, sample, work):
+    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is TreeStreamSink):
+        return None
+
+    def keep(sink, code, p, j, t, sample, work):
+        tree_stream_sample(sink, p, j, t, sample, work)
+        rows = sink.rows
+        if j % rows.stride == 0 and j // rows.stride < rows.samples.shape[0]:
+            for i in range(rows.samples.shape[1]):
+                rows.samples[j // rows.stride, i] = sample[i]
+            rows.work[j // rows.stride] = work
     return keep
 
 
@@ -491,20 +557,25 @@ def tree_launch_signature() -> tuple:
     The trees, passed once and read by every thread (:class:`rbstab.engine.systems.TreeSystem`'s
     arrays for t trees of one structure, :func:`rbstab.engine.systems.tree_rows`): params
     :data:`rbstab.model.PARAMETERS` (t, n), codes, parents int64 (n,), ppoints (t, n, 3),
-    d_at, r_at, u_at, rd_at int64 (n,); the k runs: tree_of int64 (k,) (each run's tree), y0
-    (k, n_r) in the reduced layout (:mod:`rbstab.variants.tree`), settings
-    :data:`rbstab.engine.settings.SETTINGS` (k,); n_samples int64 (the grid of each run: linspace(0, t_end, n_samples)); stride
-    int64 (every stride-th sample kept); control int64 (2,) and limit_ns int64 as
+    d_at, r_at, u_at, rd_at int64 (n,), offsets (t,) each tree's h [J]; the k runs: tree_of
+    int64 (k,) (each run's tree), y0 (k, n_r) in the reduced layout
+    (:mod:`rbstab.variants.tree`), settings :data:`rbstab.engine.settings.SETTINGS` (k,);
+    the grid's ``first`` int64 (n_samples,), ``weights`` (n_samples, w) and ``short`` (w, w,
+    w) (:mod:`rbstab.summary`; the grid linspace(0, t_end, n_samples)); stride int64
+    (every stride-th sample kept); ratio float64; control int64 (2,) and limit_ns int64 as
     :func:`launch_signature`'s; then the outputs: status int64 (k,), t_stop (k,), nfev,
-    n_steps int64 (k,), samples (k, n_kept, n_r) and work (k, n_kept) (the disturbances'
-    work W [J]) at the kept samples.
+    n_steps int64 (k,), acc (k, ACCUMULATOR_SIZE) and members (k, n, MEMBER_SLOTS) the
+    streamed summary (:class:`TreeStreamSink`), last (k, n_r + 1) the reduced state and W at
+    each run's last sample (NaN for a run with none), samples (k, n_kept, n_r) and work (k,
+    n_kept) (the disturbances' work W [J]) at the kept samples (n_kept 0: none kept).
     """
     from numba import float64, from_dtype, int64  # heavy: numba
 
     vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
     ints = int64[::1]
-    return (PARAMETERS_TYPE[:, ::1], ints, ints, cube, ints, ints, ints, ints, ints, matrix, from_dtype(SETTINGS)[::1],
-            int64, int64, ints, int64, ints, vector, ints, ints, cube, matrix)
+    return (PARAMETERS_TYPE[:, ::1], ints, ints, cube, ints, ints, ints, ints, vector, ints, matrix,
+            from_dtype(SETTINGS)[::1], ints, matrix, cube, int64, float64, ints, int64, ints, vector, ints, ints,
+            matrix, cube, matrix, cube, matrix)
 
 
 def tree_shape(codes, d_at) -> tuple[int, int, int]:
@@ -516,14 +587,14 @@ def tree_shape(codes, d_at) -> tuple[int, int, int]:
 
 
 #: (module, name) of the compiled functions a CUDA kernel calls as functions of their own:
-#: NVVM inlines every call it may, and a tree's rate, region and impulses, called from six,
-#: six and three places of the driver, were as many copies of 5,000-11,500 lines of PTX each
+#: NVVM inlines every call it may, and a tree's rate, region and impulses (and a sample's
+#: evaluation, :func:`tree_stream_sample`), called from six, six and three places of the driver, were as many copies of 5,000-11,500 lines of PTX each
 #: (the stance example's kernel: 174,000 lines, 69,000 with these calls). The kernel goes from
 #: Python to machine code 4.7x as fast (``benchmarks/gpu.py --ptx-only``). The CPU driver
 #: keeps them inlined: there the same calls made a chain's runs 10-15 % slower and its
 #: cold compile 17 % shorter.
 NOT_INLINED = frozenset({("rbstab.variants.tree", "tree_rate"), ("rbstab.engine.systems", "tree_margin"),
-                         ("rbstab.engine.systems", "tree_impulses")})
+                         ("rbstab.engine.systems", "tree_impulses"), ("rbstab.engine.cuda", "tree_stream_sample")})
 
 
 def _lower_not_inlined() -> None:
@@ -558,8 +629,9 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
     the persistent grid and the launch's one deadline) on a
     :class:`~rbstab.engine.systems.TreeSystem`, whose functions (:mod:`rbstab.engine.systems`)
     the passes call as the CPU driver's do; a sample is the reduced state there (and W),
-    written to device memory (:class:`~rbstab.engine.integrate.SampleRows`) as the CPU
-    driver's samples are; the outputs and summary are computed from them on the host. Its
+    evaluated and streamed into the run's summary (:class:`TreeStreamSink`), and, while the
+    launch's ``samples`` have rows, written to device memory as the CPU driver's samples are
+    (the host computes the outputs from them). Its
     thread-local arrays are sized for the tree's shape (the stack a thread grows with the
     tree): the reduced state (n_r = 12 n - 6 p + 3 e entries) and its Runge-Kutta stages, the
     maximal image (12 n + 3 e), the mass matrix (n_u)^2 of
@@ -578,8 +650,9 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
     size = states - 6 * permanent + 1  # the integrated vector: the reduced state and W
     rows, columns = max(1, 3 * permanent), 6 * bodies - 3 * permanent
 
-    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, n_samples, stride,
-                 control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, samples_o, work_o):
+    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, offsets, tree_of, y0s, settings, first,
+                 weights, short, stride, ratio, control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, acc_o,
+                 members_o, last_o, samples_o, work_o):
         K_all = cuda.local.array((n_rows, size), float64)
         Q_all = cuda.local.array((q_rows, size), float64)
         y_all = cuda.local.array(size, float64)
@@ -588,6 +661,9 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
         scale_all = cuda.local.array(size, float64)
         work_all = cuda.local.array(size, float64)
         sample_all = cuda.local.array(size, float64)
+        row = cuda.local.array(N_OUTPUTS, float64)
+        saturated = cuda.local.array((bodies, 3, 3), float64)
+        no_trace = acc_o[:0]  # a trace of no rows (the outputs are the host's)
         chain = ChainWork(cuda.local.array((bodies, 3, 3), float64), cuda.local.array((bodies, 3, 3), float64),
                           cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                           cuda.local.array((bodies, 3, 3), float64),
@@ -601,7 +677,7 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                            cuda.local.array(bodies, int64), chain)
         n_runs, n_state = y0s.shape[0], y0s.shape[1]
-        n_kept = samples_o.shape[1]
+        n_samples, n_kept = first.shape[0], samples_o.shape[1]
         # the launch's deadline: set once, by the first thread to start
         now = globaltimer()
         deadline = cuda.atomic.cas(control, 1, 0, now + limit_ns)
@@ -621,7 +697,15 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
             s = settings[k]
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
             flags = (limit, disturbed, limited_of(p), n_samples)
-            sink = SampleRows(samples_o[k], work_o[k], stride)
+            acc, members, last = acc_o[k], members_o[k], last_o[k]
+            stream_start(acc)
+            stream_member_start(members)
+            for i in range(N_OUTPUTS):  # what the tree's samples do not set (one body's E, flags)
+                row[i] = 0.0
+            for i in range(last.shape[0]):
+                last[i] = math.nan
+            sink = TreeStreamSink(acc, members, row, saturated, last, first, weights, no_trace, ratio, offsets[tree],
+                                  SampleRows(samples_o[k], work_o[k], stride))
             status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
                 for i in range(n_state):
@@ -632,6 +716,7 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                                                   (deadline, passes))
             t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
             # its end: every output of the run written, whether it ran or not
+            stream_finish(acc, first, weights, short, no_trace, 1)
             status_o[k] = status
             t_stop_o[k] = t
             nfev_o[k] = nfev
@@ -647,7 +732,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
 
 
 #: The compiled functions the tree kernel calls (the simulator hands them numpy's arrays).
-TREE_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of")
+TREE_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of", "stream_start", "stream_member_start",
+                         "stream_finish")
 
 
 @functools.lru_cache(maxsize=None)
@@ -855,20 +941,27 @@ def _launch(fn, blocks: int, runs, stencils, options, n_trace: int, limit_ns):
 class CudaChainSolution(ChunkSolution):
     """:class:`rbstab.engine.integrate.ChunkSolution` of tree runs on the GPU
     (:func:`integrate_chain_runs_cuda`): ``samples`` (k, n_kept, 12 n + 3 e) the maximal
-    image of the state and ``work`` (k, n_kept) at every ``stride``-th sample;
-    ``kernel_seconds`` the launches' time on the GPU (CUDA events) [s], ``seconds`` their
-    wall time (transfers and the maximal image included) [s]."""
+    image of the state and ``work`` (k, n_kept) at every ``stride``-th sample (none kept:
+    n_kept 0); the streamed summary, ``acc`` (k, ACCUMULATOR_SIZE) and ``members`` (k, n,
+    MEMBER_SLOTS) (:func:`rbstab.summary.tree_stream_table` turns them into figures);
+    ``last`` (k, 12 n + 3 e) the maximal image at each run's last sample (NaN for a run with
+    none); ``kernel_seconds`` the launches' time on the GPU (CUDA events) [s], ``seconds``
+    their wall time (transfers and the maximal image included) [s]."""
 
+    acc: np.ndarray | None = None
+    members: np.ndarray | None = None
+    last: np.ndarray | None = None
     kernel_seconds: float = 0.0
     seconds: float = 0.0
 
 
-def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: int, stride: int = 1,
-                              max_wall_time: float = math.inf, tree_of=None) -> CudaChainSolution:
+def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: int, stride: int | None = 1,
+                              max_wall_time: float = math.inf, tree_of=None, offsets=None) -> CudaChainSolution:
     """Integrate k runs of trees of one structure on the GPU, one thread a run: what
     :func:`rbstab.engine.integrate.integrate_chain_runs` does on the CPU with a
     :class:`~rbstab.engine.systems.TreeSystem` (the same arguments), the trees' records
-    passed once for every run.
+    passed once for every run, each run's summary streamed as it goes (its samples kept only
+    where asked).
 
     Parameters
     ----------
@@ -885,15 +978,17 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     method : str
         One of :data:`METHODS`.
     n_samples : int
-        Samples per run, evenly spaced on [0, t_end] (>= 2).
-    stride : int
+        Samples per run, evenly spaced on [0, t_end] (>= 2); the summary is taken over them.
+    stride : int or None
         Keep every ``stride``-th sample (``samples`` has ``len(range(0, n_samples,
-        stride))`` rows a run).
+        stride))`` rows a run); None: keep none (the summary alone).
     max_wall_time : float
         Each launch's limit [s] from its first thread's start: no run starts after it
         (NOT_STARTED, t_stop 0, NaN samples), a run under way stops (TIMEOUT).
     tree_of : ndarray of int, shape (k,), optional
         The tree of each run, for a ``system`` of t trees (default: the first).
+    offsets : array_like, shape (t,), optional
+        Each tree's h [J], v's zero (:func:`rbstab.variants.chain.rest_offset`; default 0).
 
     Raises
     ------
@@ -907,18 +1002,19 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     n_bodies = int(np.shape(system.codes)[0])
     if not 1 <= n_bodies <= MAX_TREE_BODIES:
         raise ValueError(f"bodies: found {n_bodies}; the CUDA engine takes 1 to {MAX_TREE_BODIES}")
-    if stride < 1:
-        raise ValueError(f"stride: found {stride}; expected an integer >= 1")
+    if stride is not None and stride < 1:
+        raise ValueError(f"stride: found {stride}; expected an integer >= 1 or None")
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
     params, ppoints, tree_of = tree_rows(system, y0.shape[0], tree_of)
+    offsets = np.zeros(len(params)) if offsets is None else np.ascontiguousarray(offsets, dtype=float)
     if y0.shape[1] != reduced_size(system.codes, system.d_at):
         y0 = reduce_tree_states(system, params, ppoints, tree_of, y0)
     k, n_state = y0.shape
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
     ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.codes, system.parents)]
     layout = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.d_at, system.r_at, system.u_at, system.rd_at)]
-    tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout)
-    n_kept = len(range(0, n_samples, stride))
+    tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout, offsets)
+    n_kept = 0 if stride is None else len(range(0, n_samples, stride))
     fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at))
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
         _NO_LIMIT_NS)
@@ -927,28 +1023,37 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         free = 2**30
     else:
         free, _ = cuda.current_context().get_memory_info()
-    per_launch = max(1, int(free * TRACE_MEMORY_SHARE) // (8 * n_kept * (n_state + 1)))
+    per_run = 8 * (n_kept * (n_state + 1) + ACCUMULATOR_SIZE + n_bodies * MEMBER_SLOTS + n_state + 1 + 8)
+    per_launch = max(1, int(free * TRACE_MEMORY_SHARE) // per_run)
     out = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64),
+           np.empty((k, ACCUMULATOR_SIZE)), np.empty((k, n_bodies, MEMBER_SLOTS)), np.empty((k, n_state + 1)),
            np.empty((k, n_kept, n_state)), np.empty((k, n_kept)))
     kernel_seconds, start = 0.0, _time.perf_counter()
     d_tree = [cuda.to_device(a) for a in tree]
-    for lo in range(0, k, per_launch):
-        runs = slice(lo, min(k, lo + per_launch))
-        d_in = [cuda.to_device(a) for a in (tree_of[runs], y0[runs], records[runs])]
-        d_out = [cuda.device_array(a[runs].shape, a.dtype) for a in out]
-        control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
-        begin, end = cuda.event(), cuda.event()
-        begin.record()
-        fn[blocks, THREADS_PER_BLOCK](*d_tree, *d_in, np.int64(n_samples), np.int64(stride), control, limit_ns,
-                                      *d_out)
-        end.record()
-        end.synchronize()
-        kernel_seconds += begin.elapsed_time(end) / 1e3
-        for a, d in zip(out, d_out):
-            a[runs] = d.copy_to_host()
-    status, t_stop, nfev, n_steps, reduced, work = out
+    # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
+    for t_end in dict.fromkeys(records["t_end"].tolist()):
+        grid = np.linspace(0.0, t_end, n_samples)
+        stencils = [cuda.to_device(np.ascontiguousarray(a)) for a in (*stencil_weights(grid), short_stencils(grid))]
+        group = np.flatnonzero(records["t_end"] == t_end)
+        for lo in range(0, len(group), per_launch):
+            runs = group[lo: lo + per_launch]
+            d_in = [cuda.to_device(a) for a in (tree_of[runs], y0[runs], records[runs])]
+            d_out = [cuda.device_array(a[runs].shape, a.dtype) for a in out]
+            control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
+            begin, end = cuda.event(), cuda.event()
+            begin.record()
+            fn[blocks, THREADS_PER_BLOCK](*d_tree, *d_in, *stencils, np.int64(stride or 1), DEFAULT_LYAPUNOV_RATIO, control,
+                                          limit_ns, *d_out)
+            end.record()
+            end.synchronize()
+            kernel_seconds += begin.elapsed_time(end) / 1e3
+            for a, d in zip(out, d_out):
+                a[runs] = d.copy_to_host()
+    status, t_stop, nfev, n_steps, acc, members, last, reduced, work = out
     n_maximal = 12 * n_bodies + 3 * int(np.sum(layout[0] >= 0))
-    samples = np.empty((k, n_kept, n_maximal))
+    samples, last_state = np.empty((k, n_kept, n_maximal)), np.empty((k, 1, n_maximal))
     expand_tree_samples(system, params, ppoints, tree_of, reduced, samples)
-    return CudaChainSolution(samples, status, t_stop, nfev, n_steps, work, kernel_seconds=kernel_seconds,
+    expand_tree_samples(system, params, ppoints, tree_of, np.ascontiguousarray(last[:, None, :n_state]), last_state)
+    return CudaChainSolution(samples, status, t_stop, nfev, n_steps, work, acc=acc, members=members,
+                             last=last_state[:, 0], kernel_seconds=kernel_seconds,
                              seconds=_time.perf_counter() - start)
