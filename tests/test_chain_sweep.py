@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import xarray as xr
+import yaml
 from click.testing import CliRunner
 
 import rbstab
@@ -435,3 +436,21 @@ def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
             np.testing.assert_array_equal(batch.ppoints[j], compiled.ppoints)
             np.testing.assert_array_equal(batch.y0[j, :batch.n_state[j]], C.initial_state(config))
             assert batch.offset[j] == compiled.offset and batch.n_samples[j] == config.simulation.n_samples
+
+
+@pytest.mark.parametrize("grid, runs", [
+    ({"bodies.trunk.inertia.2": [0.42, 7.0, 8.0]}, "2 of 3 runs"),  # one moment, the body by its name
+    ({"bodies.1.inertia": [[2.97, 2.97, 0.42], [1.0, 1.0, 3.0]]}, "1 of 2 runs"),  # the whole, by its position
+])
+def test_a_chain_sweep_warns_of_each_runs_inertia_once_with_its_count(grid, runs, tmp_path):
+    """A body's inertia varied in a chain's sweep is checked run by run (the template's is
+    valid): one warning line for the body's key, with how many runs break the triangle
+    inequality and the first one's moments, as one body's sweep warns; the legs, not
+    varied, have none."""
+    spec = tmp_path / "inertia.yaml"
+    spec.write_text(yaml.safe_dump({"name": "inertia", "base": STANCE, "grid": grid}))
+    result = CliRunner().invoke(cli, ["sweep", str(spec), "--dry-run", "-o", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    lines = [line for line in result.output.splitlines() if "W001" in line]
+    assert len(lines) == 1, result.output
+    assert "bodies.1.inertia ('trunk')" in lines[0] and "triangle inequality" in lines[0] and runs in lines[0], lines

@@ -508,12 +508,7 @@ def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_in
     if spec.is_chain:  # its parameters' columns at once, the rest by its schema's and its tree's checks
         _validate_trees(spec, columns, base_index, counted, invalid_rows, templates, template)
         _refuse_invalid(spec, columns, base_index, invalid_rows, counted)
-        counts = np.bincount(template, minlength=len(notes))
-        lines = {}
-        for t, messages in enumerate(notes):
-            for message in messages:
-                lines[message] = lines.get(message, 0) + int(counts[t])
-        return tuple(templates), [f"{k} of {n} runs: {message}" for message, k in lines.items()]
+        return tuple(templates), _tree_warning_lines(columns, templates, notes, template, n)
     valid = [t if t is not None else {} for t in templates]
     fields = _Fields(columns, valid, template)
     variants = [t.get("controller", {}).get("variant", "") for t in valid]  # per template
@@ -548,27 +543,67 @@ def _warning_lines(spec: SweepSpec, fields: _Fields, notes: Sequence[Sequence[st
     message of the first run with it>"``; the triangle inequality of a varied inertia is
     checked on the column."""
 
+    varied_inertia = fields.varied("body", "inertia")
+    first, count = _template_lines(notes, template, lambda key: varied_inertia and "body.inertia" in key)
+    got = fields.get("body", "inertia") if varied_inertia else None
+    if got is not None:
+        _add_inertia_line(first, count, full_matrices(got[0]), "")
+    return [f"{count[k]} of {n} runs: {first[k]}" for k in first]
+
+
+def _template_lines(notes: Sequence[Sequence[str]], template: np.ndarray, skip) -> tuple[dict, dict]:
+    """(key -> the first message, key -> its runs) of the templates' warnings ``notes`` over
+    their runs (a message's key: its text before the first colon), those of a key ``skip``
+    says checked on the columns left out."""
     counts = np.bincount(template, minlength=len(notes))
     first: dict[str, str] = {}
     count: dict[str, int] = {}
-    varied_inertia = fields.varied("body", "inertia")
     for t, lines in enumerate(notes):
         for message in lines:
             key = message.partition(":")[0]
-            if varied_inertia and "body.inertia" in key:
+            if skip(key):
                 continue
             first.setdefault(key, message)
             count[key] = count.get(key, 0) + int(counts[t])
-    got = fields.get("body", "inertia") if varied_inertia else None
-    if got is not None:
-        values = got[0]
-        j = np.sort(values, axis=1) if values.ndim == 2 else np.linalg.eigvalsh(np.nan_to_num(values))
-        violate = (j[:, 2] > (j[:, 0] + j[:, 1]) * (1 + 1e-12))
-        if violate.any():
-            i = int(np.flatnonzero(violate)[0])
-            (message,) = inertia_warnings(full_matrices(values[i:i + 1])[0])
-            key = message.partition(":")[0]
-            first[key], count[key] = message, int(violate.sum())
+    return first, count
+
+
+def _add_inertia_line(first: dict, count: dict, values: np.ndarray, label: str) -> None:
+    """The triangle inequality of each run's inertia ``values`` (n, 3, 3) [kg m^2]: the first
+    violating run's warning (:func:`rbstab.config.physics.inertia_warnings`; ``label`` for
+    its key instead of ``body.inertia``, a chain's body) and their count into ``first`` and
+    ``count``."""
+    with np.errstate(invalid="ignore"):
+        j = np.linalg.eigvalsh(np.nan_to_num(values))
+    violate = j[:, 2] > (j[:, 0] + j[:, 1]) * (1 + 1e-12)
+    if violate.any():
+        (message,) = inertia_warnings(values[int(np.flatnonzero(violate)[0])])
+        if label:
+            message = message.replace(" body.inertia:", f" {label}:", 1)
+        key = message.partition(":")[0]
+        first[key], count[key] = message, int(violate.sum())
+
+
+def _tree_warning_lines(columns: Mapping[str, np.ndarray], templates: Sequence, notes: Sequence[Sequence[str]],
+                        template: np.ndarray, n: int) -> list[str]:
+    """:func:`_warning_lines` of a chain's sweep: its templates' warnings over their runs,
+    the triangle inequality of a body's varied inertia checked on the columns, run by run."""
+    bodies = [b.get("name") for b in (templates[0] or {}).get("bodies", [])]
+    varied = set()
+    for key, column in columns.items():
+        path = parse_any_key(key)
+        entry, _, field = path.name.partition(".")
+        if column.dtype != object and path.section == "bodies" and field.partition(".")[0] == "inertia":
+            varied.add(bodies[int(entry)] if entry.isdigit() and int(entry) < len(bodies) else entry)
+    labels = {name: f"bodies.{i}.inertia ('{name}')" for i, name in enumerate(bodies) if name in varied}
+    first, count = _template_lines(notes, template, lambda key: any(label in key for label in labels.values()))
+    fields = TableFields([t or {} for t in templates], list(columns), columns, template)
+    for name, label in labels.items():
+        try:
+            values = fields.get("bodies", f"{name}.inertia", shape=(3, 3))
+        except (ValueError, TypeError, IndexError):
+            continue
+        _add_inertia_line(first, count, values, label)
     return [f"{count[k]} of {n} runs: {first[k]}" for k in first]
 
 
