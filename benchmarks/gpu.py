@@ -45,7 +45,7 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   the same sweep with a tree a run (the trunk's mass and inertia times U(0.8, 1.2) in each
   run's records: a sweep over the chain's parameters, one launch);
   correctness on ``--check-n`` of those runs against the CPU driver (statuses, steps, final
-  states); ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
+  states, and the summaries streamed on the GPU against the CPU's from its samples); ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
   the trunk's mass, ``--store summary``, at each N of ``--chain-sweep-n`` (20,000), with
   ``--engine cuda`` and ``--engine compiled`` (the CPU's cores), process start to exit.
 
@@ -309,21 +309,28 @@ def kernel_rate(n: int, n_samples: int, launch: int | None = None) -> float:
 STANCE = str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
 
 
-def chain_runs(n: int, seed: int = 0, parameters: bool = False):
-    """(system, y0 (n, n_state), settings rows (n, 7), method, n_samples, tree_of) of n runs
-    of the stance example's initial-state sweep (module docstring); ``parameters``: each
-    run also its own tree, the trunk's mass and inertia times U(0.8, 1.2) (``system`` holds
-    n trees, ``tree_of`` arange(n); else None)."""
+def stance_chain():
+    """(the stance example's configuration with the **chains** settings, its compiled chain)."""
     from rbstab.config.loader import load_config
-    from rbstab.engine.settings import settings_rows
-    from rbstab.engine.systems import tree_system
     from rbstab.variants import chain as C
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = load_config(STANCE, ["simulation.t_end=2.0", "simulation.n_samples=201",
-                                          "simulation.rtol=1e-8", "simulation.atol=1e-10"])
-    compiled = C.compile_chain(config.chain)
+                                      "simulation.rtol=1e-8", "simulation.atol=1e-10"])
+    return config, C.compile_chain(config.chain)
+
+
+def chain_runs(n: int, seed: int = 0, parameters: bool = False):
+    """(system, y0 (n, n_state), settings rows (n, 7), method, n_samples, tree_of) of n runs
+    of the stance example's initial-state sweep (module docstring); ``parameters``: each
+    run also its own tree, the trunk's mass and inertia times U(0.8, 1.2) (``system`` holds
+    n trees, ``tree_of`` arange(n); else None)."""
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.systems import tree_system
+    from rbstab.variants import chain as C
+
+    config, compiled = stance_chain()
     coordinates = C.independent_coordinates(compiled)
     rng = np.random.default_rng(seed)
     z = np.zeros((n, 3 * len(coordinates)))
@@ -405,18 +412,34 @@ def chain_cpu_rate(n: int, cores: int | None = None) -> float:
 
 
 def chain_correctness(n: int) -> str:
-    """The GPU's chain runs against the CPU driver's: statuses, steps, final states."""
+    """The GPU's chain runs against the CPU driver's: statuses, steps, final states, and the
+    figures streamed on the GPU (no sample back) against the CPU's from its samples (the
+    largest difference of v(0), v(t_end), max dv/dt and the rate check's mismatch, relative
+    to max |v(0)|)."""
     from rbstab.engine.cuda import integrate_chain_runs_cuda
     from rbstab.engine.integrate import integrate_chain_runs
+    from rbstab.simulator import _trees_outputs
+    from rbstab.summary import tree_stream_table
+    from rbstab.variants import chain as C
 
     system, y0, rows, method, n_samples, tree_of = chain_runs(n, parameters=True)
-    cpu = integrate_chain_runs(system, y0, rows, method=method, n_samples=2, tree_of=tree_of)
-    gpu = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=2, tree_of=tree_of)
-    final_cpu, final_gpu = cpu.samples[:, -1], gpu.samples[:, -1]
+    cpu = integrate_chain_runs(system, y0, rows, method=method, n_samples=n_samples, tree_of=tree_of)
+    gpu = integrate_chain_runs_cuda(system, y0, rows, method=method, n_samples=n_samples, stride=None,
+                                    tree_of=tree_of)
+    final_cpu, final_gpu = cpu.samples[:, -1], gpu.last
     rel = np.max(np.abs(final_gpu - final_cpu), axis=1) / np.max(np.abs(final_cpu), axis=1)
     steps = np.abs(gpu.n_steps - cpu.n_steps)
+    time_grid = np.linspace(0.0, float(rows[0, 0]), n_samples)
+    structure = stance_chain()[1]  # each run's records, h 0 on both sides
+    trees = [C.with_records(structure, system.params[t], system.ppoints[t]) for t in range(len(system.params))]
+    _, table = _trees_outputs([trees[t] for t in tree_of], tree_of, time_grid, cpu.samples, cpu.work, False)
+    streamed = tree_stream_table(time_grid, gpu.acc, gpu.members, gpu.last, len(system.codes), np.asarray(system.d_at))
+    scale = np.max(np.abs(table["lyapunov_initial"]))
+    worst = max(float(np.nanmax(np.abs(streamed[k] - table[k]))) for k in
+                ("lyapunov_initial", "lyapunov_final", "max_lyapunov_rate", "lyapunov_rate_mismatch")) / scale
     return (f"statuses equal {int(np.sum(gpu.status == cpu.status))}/{n}; steps equal {int(np.sum(steps == 0))}/{n} "
-            f"(max {int(steps.max())} apart); final states rel. diff median {np.median(rel):.2g}, max {rel.max():.2g}")
+            f"(max {int(steps.max())} apart); final states rel. diff median {np.median(rel):.2g}, max {rel.max():.2g}; "
+            f"streamed summaries against the CPU's: largest difference {worst:.2g} of max |v(0)|")
 
 
 #: The stub of ``--host-only``: every launch of the CUDA engine returns its runs finished
