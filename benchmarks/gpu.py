@@ -39,13 +39,15 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   kernel and end-to-end runs/s of an initial-state sweep of the stance example
   (``configs/examples/stance_ankle_hip.yaml``: 2 bodies on permanent joints, saturated
   torques; DOP853, rtol 1e-8, atol 1e-10, t_end 2 s, 201 samples streamed into each run's
-  summary on the device, none coming back; end to end with the summary table); each body's theta_1 ~ U(-0.1, 0.1) rad, omega ~ N(0, 0.2^2) rad/s) at
+  summary on the device, none coming back, the end-to-end figure with the summary table; each body's
+  theta_1 ~ U(-0.1, 0.1) rad, omega ~ N(0, 0.2^2) rad/s) at
   each N of ``--chain-n``, beside the compiled CPU driver
   (:func:`rbstab.engine.integrate.integrate_chain_runs`) on every core at ``--chain-cpu-n``;
   the same sweep with a tree a run (the trunk's mass and inertia times U(0.8, 1.2) in each
   run's records: a sweep over the chain's parameters, one launch);
   correctness on ``--check-n`` of those runs against the CPU driver (statuses, steps, final
-  states, and the summaries streamed on the GPU against the CPU's from its samples); ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
+  states, and the summaries streamed on the GPU against the CPU's from its samples);
+  ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
   the trunk's mass, ``--store summary``, at each N of ``--chain-sweep-n`` (20,000), with
   ``--engine cuda`` and ``--engine compiled`` (the CPU's cores), process start to exit.
 

@@ -63,7 +63,8 @@ def cases(root: str):
         # chains of one structure, each run its own: the masses, gains, a torque limit (the hip's
         # clipped), a parent point and the admissible region differ (one call, each run's tree its own record)
         "params": [load_config(stance, [*short, "initial_state.trunk.theta=[-0.1, 0.02, 0]", *extra]) for extra in (
-            [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]", "joints.hip.saturation.torque_n=[5, 5, .inf]"], ["joints.hip.parent_point=[0, 0.02, 0.4]"],
+            [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]", "joints.hip.saturation.torque_n=[5, 5, .inf]"],
+            ["joints.hip.parent_point=[0, 0.02, 0.4]"],
             ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"])],  # leaves its region
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],

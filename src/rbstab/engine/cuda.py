@@ -587,12 +587,13 @@ def tree_shape(codes, d_at) -> tuple[int, int, int]:
 
 
 #: (module, name) of the compiled functions a CUDA kernel calls as functions of their own:
-#: NVVM inlines every call it may, and a tree's rate, region and impulses (and a sample's
-#: evaluation, :func:`tree_stream_sample`), called from six, six and three places of the driver, were as many copies of 5,000-11,500 lines of PTX each
+#: NVVM inlines every call it may, and a tree's rate, region and impulses, called from six,
+#: six and three places of the driver, were as many copies of 5,000-11,500 lines of PTX each
 #: (the stance example's kernel: 174,000 lines, 69,000 with these calls). The kernel goes from
 #: Python to machine code 4.7x as fast (``benchmarks/gpu.py --ptx-only``). The CPU driver
 #: keeps them inlined: there the same calls made a chain's runs 10-15 % slower and its
-#: cold compile 17 % shorter.
+#: cold compile 17 % shorter. A sample's evaluation (:func:`tree_stream_sample`, the
+#: streamed summary's) is one more such function.
 NOT_INLINED = frozenset({("rbstab.variants.tree", "tree_rate"), ("rbstab.engine.systems", "tree_margin"),
                          ("rbstab.engine.systems", "tree_impulses"), ("rbstab.engine.cuda", "tree_stream_sample")})
 
