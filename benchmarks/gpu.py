@@ -468,7 +468,7 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
                                  kernel_seconds=0.0, seconds=0.0)
 
     def chain_launch(system, y0, settings, *, method, n_samples, stride=1, max_wall_time=np.inf, tree_of=None,
-                     offsets=None):
+                     ratio=1e-3):
         # every run at t_end, still at its initial state (maximal), a full accumulator
         k, n_kept = len(y0), 0 if stride is None else len(range(0, n_samples, stride))
         y0 = np.asarray(y0, dtype=float)

@@ -125,6 +125,7 @@ def main() -> None:
         found["seconds"] = round(time.perf_counter() - start, 2)
         report[name] = found
     report["runs"] = analysis_runs(cases(sys.argv[1])["stance"])
+    report["basin"] = basin(cases(sys.argv[1])["params"][3])
     print(json.dumps(report))
 
 
@@ -155,6 +156,22 @@ def streamed_summaries(configs) -> list:
             nan_same = bool(np.array_equal(np.isnan(a), np.isnan(b)))
             differences.append([key, float(np.nanmax(np.abs(a - b), initial=0.0)) / scale if nan_same else "NaN"])
     return sorted(differences)
+
+
+def basin(config) -> dict:
+    """A basin map of a stance chain with an admissible region (rbstab.analysis.basin_map:
+    on the GPU each run's time to converge streamed, no sample back) against the CPU's: its
+    counts, and the fields that differ (outcome, time to converge, v(0), v(t_end), the
+    failures' messages)."""
+    from rbstab.analysis.basin import BasinAxis, basin_map
+
+    axes = [BasinAxis.parse("initial_state.legs.theta.0=-0.06:0.06:3"),
+            BasinAxis.parse("initial_state.trunk.omega.0=-1:1:3")]
+    cpu, gpu = (basin_map(config, axes, ratio=0.5, n_samples=31, engine=engine) for engine in ("compiled", "cuda"))
+    fields = ("outcome", "time_to_converge", "lyapunov_initial", "lyapunov_final")
+    return {"counts": cpu.counts(), "messages": sorted(cpu.messages),
+            "differences": [f for f in fields if not same(getattr(cpu, f), getattr(gpu, f))]
+            + ([] if cpu.messages == gpu.messages else ["messages"])}
 
 
 def analysis_runs(configs) -> dict:

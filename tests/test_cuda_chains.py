@@ -50,6 +50,17 @@ def test_simulated_analysis_runs_of_a_tree_are_the_cpus(simulated):
     assert found["outcomes"] and found["traces"] == [True, True, True]
 
 
+def test_simulated_basin_map_of_a_tree_streams_the_cpus_map(simulated):
+    """A basin map of a stance chain with an admissible region on the GPU (each run's time to
+    converge streamed, no sample back; rbstab.analysis.runs.Runs.streamed): every point's
+    outcome, time to converge, v(0) and v(t_end), and the failures' messages, are the CPU's
+    from its samples, bit for bit, with points of every outcome."""
+    found = simulated["basin"]
+    assert found["differences"] == []
+    assert all(found["counts"][outcome] > 0 for outcome in ("converged", "not converged", "failed")), found
+    assert found["messages"] == ["left the admissible region (simulation.limits): |theta_1| of trunk reached 0.101"]
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
 def test_tree_kernel_compiles_to_ptx_for_sm_90(monkeypatch):

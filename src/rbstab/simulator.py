@@ -802,7 +802,7 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, output
     method, sample count and t_end): one call of ``integrate`` with each distinct tree and
     admissible region once, then their outputs and summaries :data:`POSTPROCESS_BLOCK` runs
     at a time, a RunBlock each (the outputs held at once: those of that many runs)."""
-    from .engine.systems import tree_system  # heavy: numba
+    from .engine.systems import tree_system, with_offsets  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     start = _time.perf_counter()
@@ -821,8 +821,9 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, output
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
     # on the GPU: a launch's limit, each tree's h, and the summaries streamed (the samples kept for the outputs only)
-    gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "offsets": [t.offset for t in trees],
-                   "stride": 1 if outputs else None} if gpu else {}
+    gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "stride": 1 if outputs else None} if gpu else {}
+    if gpu:
+        system = with_offsets(system, [t.offset for t in trees])
     sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **gpu_options)
     time = np.linspace(0.0, float(settings[0, 0]), n_samples)
     time.flags.writeable = False

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine.registry import DEFAULT_ENGINE, get_engine
-from ..layout import BLOCK_UNITS, OUTPUTS
+from ..layout import BLOCK_UNITS
 
 __all__ = ["state_entry", "BasinAxis", "BasinMap", "basin_map", "time_to_converge", "OUTCOMES", "DEFAULT_SAMPLES"]
 
@@ -202,41 +202,21 @@ OUTSIDE = ("initial state outside the domain: |theta_2| >= pi/2 - simulation.gim
            "singular (gimbal lock, eq 5)")
 
 
-def _run_on_gpu(engine, config, variant, states: np.ndarray, points: np.ndarray, ratio: float,
-                n_samples: int) -> list[tuple]:
+def _on_gpu(runs, states: np.ndarray, points: np.ndarray, ratio: float, n_samples: int, t_end: float) -> list[tuple]:
     """(index, outcome, time to converge, v(t_end), message) of the grid ``points`` (initial
-    ``states`` (k, n_state)) of one body on the GPU ``engine`` (:class:`rbstab.engine.Engine`):
-    the runs share ``config``'s variant, parameters and settings but its ``n_samples`` (a
-    launch stops after its ``simulation.max_wall_time``)."""
-    from ..engine import method_number  # heavy: numba
-    from ..engine.settings import settings_records, settings_rows  # heavy: numba
-    from ..engine.status import SUCCESS, status_message  # heavy: numba
-    from ..summary import LAST_ABOVE, TAKEN  # heavy: numba
-
-    s = config.simulation
-    k, n = len(states), int(n_samples)
-    time = np.linspace(0.0, s.t_end, n)
-    out = []
-    for chunk in engine.entry_point()(np.full(k, variant.code), variant.parameters, states,
-                                       settings_records(settings_rows([s]), method_number(s.method)).repeat(k), n_samples=n,
-                                       max_wall_time=s.max_wall_time, ratio=ratio):
-        last_above = chunk.acc[:, LAST_ABOVE].astype(np.int64)
-        ok = chunk.status == SUCCESS
-        t = np.where(ok & (last_above < n - 1), time[np.minimum(last_above + 1, n - 1)], np.nan)
-        code = np.where(np.isfinite(t), 0, np.where(ok, 1, 2))
-        v1 = np.where(chunk.acc[:, TAKEN] == n, chunk.last[:, OUTPUTS["lyapunov"].offset], np.nan)
-        message = [""] * len(ok)
-        for i in np.flatnonzero(~ok).tolist():  # failed runs: few
-            message[i] = status_message(int(chunk.status[i]), float(chunk.t_stop[i]), s.gimbal_margin,
-                                        s.max_steps, s.max_wall_time,
-                                        limits=variant.parameters[0]["limits"]).split(" at t =")[0]
-        out += zip(points[chunk.runs].tolist(), code.tolist(), t.tolist(), v1.tolist(), message)
-    return out
+    ``states`` (k, n_state)) as runs of ``runs`` (:class:`rbstab.analysis.runs.Runs`) on the
+    GPU, each run's time to converge taken as it goes (:meth:`~rbstab.analysis.runs.Runs.streamed`)."""
+    ok, last_above, v_final, messages = runs.streamed(states, n_samples, ratio)
+    n = int(n_samples)
+    time = np.linspace(0.0, t_end, n)
+    t = np.where(ok & (last_above < n - 1), time[np.minimum(last_above + 1, n - 1)], np.nan)
+    code = np.where(np.isfinite(t), 0, np.where(ok, 1, 2))
+    return list(zip(points.tolist(), code.tolist(), t.tolist(), v_final.tolist(), messages))
 
 
 def _on_cpu(runs, states: np.ndarray, points: np.ndarray, ratio: float, n_samples: int, t_end: float) -> list[tuple]:
-    """:func:`_run_on_gpu`'s rows of the grid ``points`` (initial ``states``) as runs of
-    ``runs`` (:class:`rbstab.analysis.runs.Runs`) on the CPU."""
+    """:func:`_on_gpu`'s rows of the grid ``points`` (initial ``states``) as runs of
+    ``runs`` (:class:`rbstab.analysis.runs.Runs`) on the CPU, from each run's samples of v."""
     ok, v, messages = runs.traces(states, n_samples)
     time = np.linspace(0.0, t_end, int(n_samples))
     rows = []
@@ -276,10 +256,9 @@ def basin_map(
         Threads that integrate the runs (the compiled driver releases Python's lock).
     engine : {"compiled", "cuda"}
         A compiled engine of :data:`rbstab.engine.ENGINES`: the CPU's, or the GPU's
-        (:mod:`rbstab.engine.cuda`: every point in one process; one body's time to converge
-        taken as a run goes, a tree's from its samples; the pure sign law and implicit
-        methods stay on the CPU). The same outcomes and times (on a GPU, up to its
-        rounding).
+        (:mod:`rbstab.engine.cuda`: every point in one process, each run's time to converge
+        taken as it goes; the pure sign law and implicit methods stay on the CPU). The same
+        outcomes and times (on a GPU, up to its rounding).
 
     Raises
     ------
@@ -293,15 +272,14 @@ def basin_map(
     from .runs import Runs, check_axes  # heavy: numba
 
     check_axes(config, axes)
-    tree = getattr(config, "chain", None) is not None
     shape = (len(axes[0].values), len(axes[1].values))
     first, second = np.meshgrid(axes[0].values, axes[1].values, indexing="ij")
-    gpu = get_engine(engine).gpu and not tree and uses_compiled_engine(config, engine)
-    runs = Runs(config, engine=engine if tree else "compiled", jobs=jobs)
+    gpu = get_engine(engine).gpu and uses_compiled_engine(config, engine)
+    runs = Runs(config, engine=engine if gpu else "compiled", jobs=jobs)
     states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
     # the one check an initial state of a valid configuration can fail (the grid's values are finite)
     inside = np.ones(len(states), dtype=bool)
-    if not tree:
+    if runs.tree is None:  # a tree's runs fail at t = 0 with the body or joint named
         theta = list(config.make_variant().layout.blocks).index("theta")
         inside = np.abs(states[:, 3 * theta + 1]) < np.pi / 2 - config.simulation.gimbal_margin
     points = np.flatnonzero(inside)
@@ -311,9 +289,7 @@ def basin_map(
     v_final = np.full(len(states), np.nan)
     rows = []
     if len(points):
-        rows = (_run_on_gpu(get_engine(engine), config, config.make_variant(), states[points], points,
-                            ratio, n_samples) if gpu
-                else _on_cpu(runs, states[points], points, ratio, n_samples, config.simulation.t_end))
+        rows = (_on_gpu if gpu else _on_cpu)(runs, states[points], points, ratio, n_samples, config.simulation.t_end)
     for index, code, t, v1, message in rows:
         outcome[index], t_conv[index], v_final[index] = code, t, v1
         if message:

@@ -255,6 +255,50 @@ class Runs:
                 messages[i] = result[2][j]
         return ok, v, messages
 
+    def streamed(self, states: np.ndarray, n_samples: int, ratio: float) -> tuple:
+        """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end] on
+        the GPU engine, each run's samples streamed into its summary and none brought back
+        (:func:`rbstab.engine.cuda.integrate_chunks_cuda`, or
+        :func:`~rbstab.engine.cuda.integrate_chain_runs_cuda` for a tree; a launch's limit
+        ``simulation.max_wall_time``): (whether each reached t_end inside its admissible
+        region (k,), the index of its last sample not converged
+        (:func:`rbstab.convergence.converged` with v(0) and ``ratio``; -1: none) (k,), v(t_end)
+        [J] (k,; NaN for a run that stopped early), why each failed run stopped: its status in
+        words, without the time ('' for the others))."""
+        from ..engine.cuda import integrate_chain_runs_cuda, integrate_chunks_cuda  # heavy: numba-cuda
+        from ..engine.status import SUCCESS, status_message  # heavy: numba
+        from ..engine.systems import tree_system, with_offsets  # heavy: numba
+        from ..simulator import tree_end  # heavy: numba
+        from ..summary import ACCUMULATOR_SIZE, LAST_ABOVE, RATE_STENCIL, TAKEN, V_RING  # heavy: numba
+
+        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        k, n, s = len(states), int(n_samples), self.config.simulation
+        batch = self._batch(states, n)
+        bounds = batch.params[0, 0]["limits"]
+        status, t_stop, acc = np.empty(k, dtype=np.int64), np.empty(k), np.empty((k, ACCUMULATOR_SIZE))
+        if self.tree is None:
+            for chunk in integrate_chunks_cuda(batch.codes, batch.params[:1, 0], states, batch.settings, n_samples=n,
+                                               max_wall_time=s.max_wall_time, ratio=ratio):
+                status[chunk.runs], t_stop[chunk.runs], acc[chunk.runs] = chunk.status, chunk.t_stop, chunk.acc
+        else:
+            size = self.compiled.size
+            system = tree_system(self.compiled)._replace(params=batch.params[0, :size], ppoints=batch.ppoints[0, :size])
+            sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), states, batch.settings_rows(),
+                                            method=s.method, n_samples=n, stride=None, max_wall_time=s.max_wall_time,
+                                            ratio=ratio)
+            status, t_stop, acc = sol.status, sol.t_stop, sol.acc
+        ok = status == SUCCESS
+        taken = acc[:, TAKEN].astype(np.int64)
+        v_final = np.where(taken == n, acc[np.arange(k), V_RING + (taken - 1) % RATE_STENCIL], np.nan)
+        messages = [""] * k
+        for i in np.flatnonzero(~ok).tolist():  # failed runs: few
+            message = (status_message(int(status[i]), float(t_stop[i]), s.gimbal_margin, s.max_steps,
+                                      s.max_wall_time, limits=bounds) if self.tree is None else
+                       tree_end(self.compiled, int(status[i]), float(t_stop[i]), sol.last[i][None], states[i],
+                                batch.settings_rows()[i], bounds)[1])
+            messages[i] = message.split(" at t =")[0]
+        return ok, acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
+
     def _one_by_one(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
         """:meth:`traces` of one body's runs that no batch takes, each its configuration
         (rebuilt from the validated one with its initial state) through

@@ -247,7 +247,7 @@ def _keep_streamed(sink, code, p, j, t, sample, work):
 #: the grid's ``first``, ``weights`` and the convergence ``ratio``; ``row`` the outputs'
 #: scratch, ``trace`` of no rows) and each member's slots ``members`` (n,
 #: :data:`rbstab.summary.MEMBER_SLOTS`; ``flags`` (n, 3, 3) scratch); ``offset`` is the tree's
-#: h [J] (v's zero); ``last`` (n_r + 1,) receives the reduced state and W of the sample;
+#: h [J] (v's zero: its first record's ``lyapunov_offset``); ``last`` (n_r + 1,) receives the reduced state and W of the sample;
 #: ``rows`` (a :class:`rbstab.engine.integrate.SampleRows`) keeps every ``stride``-th sample
 #: while it has rows.
 TreeStreamSink = namedtuple("TreeStreamSink", ["acc", "members", "row", "flags", "last", "first", "weights", "trace",
@@ -556,8 +556,9 @@ def tree_launch_signature() -> tuple:
 
     The trees, passed once and read by every thread (:class:`rbstab.engine.systems.TreeSystem`'s
     arrays for t trees of one structure, :func:`rbstab.engine.systems.tree_rows`): params
-    :data:`rbstab.model.PARAMETERS` (t, n), codes, parents int64 (n,), ppoints (t, n, 3),
-    d_at, r_at, u_at, rd_at int64 (n,), offsets (t,) each tree's h [J]; the k runs: tree_of
+    :data:`rbstab.model.PARAMETERS` (t, n) (a tree's h [J], v's zero, its first record's
+    ``lyapunov_offset``), codes, parents int64 (n,), ppoints (t, n, 3), d_at, r_at, u_at,
+    rd_at int64 (n,); the k runs: tree_of
     int64 (k,) (each run's tree), y0 (k, n_r) in the reduced layout
     (:mod:`rbstab.variants.tree`), settings :data:`rbstab.engine.settings.SETTINGS` (k,);
     the grid's ``first`` int64 (n_samples,), ``weights`` (n_samples, w) and ``short`` (w, w,
@@ -573,7 +574,7 @@ def tree_launch_signature() -> tuple:
 
     vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
     ints = int64[::1]
-    return (PARAMETERS_TYPE[:, ::1], ints, ints, cube, ints, ints, ints, ints, vector, ints, matrix,
+    return (PARAMETERS_TYPE[:, ::1], ints, ints, cube, ints, ints, ints, ints, ints, matrix,
             from_dtype(SETTINGS)[::1], ints, matrix, cube, int64, float64, ints, int64, ints, vector, ints, ints,
             matrix, cube, matrix, cube, matrix)
 
@@ -651,7 +652,7 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
     size = states - 6 * permanent + 1  # the integrated vector: the reduced state and W
     rows, columns = max(1, 3 * permanent), 6 * bodies - 3 * permanent
 
-    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, offsets, tree_of, y0s, settings, first,
+    def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, first,
                  weights, short, stride, ratio, control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, acc_o,
                  members_o, last_o, samples_o, work_o):
         K_all = cuda.local.array((n_rows, size), float64)
@@ -705,7 +706,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                 row[i] = 0.0
             for i in range(last.shape[0]):
                 last[i] = math.nan
-            sink = TreeStreamSink(acc, members, row, saturated, last, first, weights, no_trace, ratio, offsets[tree],
+            sink = TreeStreamSink(acc, members, row, saturated, last, first, weights, no_trace, ratio,
+                                  params[tree, 0].lyapunov_offset,
                                   SampleRows(samples_o[k], work_o[k], stride))
             status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
@@ -957,7 +959,8 @@ class CudaChainSolution(ChunkSolution):
 
 
 def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: int, stride: int | None = 1,
-                              max_wall_time: float = math.inf, tree_of=None, offsets=None) -> CudaChainSolution:
+                              max_wall_time: float = math.inf, tree_of=None,
+                              ratio: float = DEFAULT_LYAPUNOV_RATIO) -> CudaChainSolution:
     """Integrate k runs of trees of one structure on the GPU, one thread a run: what
     :func:`rbstab.engine.integrate.integrate_chain_runs` does on the CPU with a
     :class:`~rbstab.engine.systems.TreeSystem` (the same arguments), the trees' records
@@ -969,7 +972,8 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     system : TreeSystem
         The tree (:func:`rbstab.engine.systems.tree_system`), of at most
         :data:`MAX_TREE_BODIES` bodies, or t trees of one structure
-        (:func:`rbstab.engine.systems.tree_rows`).
+        (:func:`rbstab.engine.systems.tree_rows`); each tree's h [J] (v's zero) its first
+        record's ``lyapunov_offset`` (:func:`rbstab.engine.systems.with_offsets`).
     y0 : ndarray, shape (k, n_r) or (k, 12 n + 3 e)
         Initial states in the reduced layout (:mod:`rbstab.variants.tree`) or the maximal
         one, as :func:`rbstab.engine.integrate.integrate_chain_runs` takes them.
@@ -988,8 +992,9 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         (NOT_STARTED, t_stop 0, NaN samples), a run under way stops (TIMEOUT).
     tree_of : ndarray of int, shape (k,), optional
         The tree of each run, for a ``system`` of t trees (default: the first).
-    offsets : array_like, shape (t,), optional
-        Each tree's h [J], v's zero (:func:`rbstab.variants.chain.rest_offset`; default 0).
+    ratio : float
+        The convergence ratio of each run's last sample not converged (the accumulator's
+        ``LAST_ABOVE``, as :func:`integrate_chunks_cuda`'s).
 
     Raises
     ------
@@ -1007,14 +1012,13 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         raise ValueError(f"stride: found {stride}; expected an integer >= 1 or None")
     y0 = np.ascontiguousarray(np.atleast_2d(y0), dtype=float)
     params, ppoints, tree_of = tree_rows(system, y0.shape[0], tree_of)
-    offsets = np.zeros(len(params)) if offsets is None else np.ascontiguousarray(offsets, dtype=float)
     if y0.shape[1] != reduced_size(system.codes, system.d_at):
         y0 = reduce_tree_states(system, params, ppoints, tree_of, y0)
     k, n_state = y0.shape
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
     ints = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.codes, system.parents)]
     layout = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.d_at, system.r_at, system.u_at, system.rd_at)]
-    tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout, offsets)
+    tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout)
     n_kept = 0 if stride is None else len(range(0, n_samples, stride))
     fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at))
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
@@ -1043,7 +1047,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
             control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
             begin, end = cuda.event(), cuda.event()
             begin.record()
-            fn[blocks, THREADS_PER_BLOCK](*d_tree, *d_in, *stencils, np.int64(stride or 1), DEFAULT_LYAPUNOV_RATIO, control,
+            fn[blocks, THREADS_PER_BLOCK](*d_tree, *d_in, *stencils, np.int64(stride or 1), float(ratio), control,
                                           limit_ns, *d_out)
             end.record()
             end.synchronize()

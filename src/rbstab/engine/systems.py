@@ -36,7 +36,7 @@ from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate, tree_velocities
 from .status import GIMBAL_LOCK, LEFT_REGION
 
-__all__ = ["CHAIN", "TreeSystem", "tree_system", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
+__all__ = ["CHAIN", "TreeSystem", "tree_system", "with_offsets", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
            "system_disturbed", "system_breakpoint", "system_impulses", "gimbal_event", "admissible_event",
            "admissible", "chain_bounds", "disturbed_of",
@@ -68,6 +68,16 @@ def tree_system(compiled, limits=None) -> TreeSystem:
     set_limits(params, limits)
     return TreeSystem(params, compiled.codes, compiled.parents, compiled.ppoints, compiled.d_at,
                       *tree_layout(compiled).args, None)
+
+
+def with_offsets(system: TreeSystem, offsets) -> TreeSystem:
+    """``system`` (one tree, or t trees of one structure) with each tree's h [J] (``offsets``:
+    a number, or (t,)) in its first record's ``lyapunov_offset``, in a copy of the records:
+    the v the CUDA tree kernel streams (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`);
+    the trees' rates and outputs read no h from the records."""
+    params = np.array(system.params, copy=True)
+    params[..., 0]["lyapunov_offset"] = offsets
+    return system._replace(params=params)
 
 
 def tree_rows(system: TreeSystem, k: int, tree_of=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
