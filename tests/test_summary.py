@@ -182,3 +182,32 @@ def test_summary_figures_are_numpys_reductions(with_checked):
         n_checked = n if checked is None else int(checked[j].sum())
         assert summary.get("lyapunov_rate_checked", 1.0) == n_checked / n
     assert np.isnan(error[1, 2]) and np.isnan(max_rate[3]) and rise[2] == 0.0
+
+
+def test_a_streamed_tree_run_without_samples_has_no_figures():
+    """The figures of tree runs the GPU never started (a launch's deadline): their
+    accumulators as the kernel leaves them (no sample taken) and a NaN last state give NaN
+    for every figure, per member for the per-member ones, but t_final (the grid's start) and
+    the time v rose (0 s), as the CPU's table of a run without a finite sample, and no rate
+    check."""
+    from rbstab.summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_weights, stream_finish,
+                                stream_member_start, stream_start, tree_stream_table)
+
+    time = np.linspace(0.0, 1.0, 11)
+    first, weights = stencil_weights(time)
+    acc, members = np.empty((2, ACCUMULATOR_SIZE)), np.empty((2, 2, MEMBER_SLOTS))
+    for k in range(2):  # what the kernel does for a run it does not start
+        stream_start(acc[k])
+        stream_member_start(members[k])
+        stream_finish(acc[k], first, weights, short_stencils(time), np.empty((0, 1)), 1)
+    last = np.full((2, 27), np.nan)
+    d_at = np.array([-1, 24])  # the second joint embedded: its D after the two bodies' 24 states
+    table = tree_stream_table(time, acc, members, last, 2, d_at)
+    assert table["t_final"].tolist() == table["time_lyapunov_rising"].tolist() == [0.0, 0.0]
+    for key, value in table.items():
+        if key == "lyapunov_rate_check":
+            assert value.tolist() == ["n/a", "n/a"]
+        elif key not in ("t_final", "time_lyapunov_rising"):
+            assert np.isnan(value).all(), key
+    assert table["final_theta"].shape == table["max_abs_constraint_error"].shape == (2, 2, 3)
+    assert table["final_controller_state"].shape == table["fraction_saturated_torque_n"].shape == (2, 2, 3)
