@@ -47,6 +47,8 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   run's records: a sweep over the chain's parameters, one launch);
   correctness on ``--check-n`` of those runs against the CPU driver (statuses, steps, final
   states, and the summaries streamed on the GPU against the CPU's from its samples);
+  Case 3's initial-state sweep at each N of ``--chain-n`` on the one-body kernel and on the
+  tree kernel of its one-body tree (kernel runs/s of each, statuses, v(0) and v(t_end));
   ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
   the trunk's mass, ``--store summary``, at each N of ``--chain-sweep-n`` (20,000), with
   ``--engine cuda`` and ``--engine compiled`` (the CPU's cores), process start to exit.
@@ -355,6 +357,48 @@ def chain_runs(n: int, seed: int = 0, parameters: bool = False):
     return system, C.full_state(compiled, z), rows, sim.method, sim.n_samples, tree_of
 
 
+def body_as_tree(n: int) -> str:
+    """Case 3's initial-state sweep (n runs, rtol 1e-6, summaries streamed, no sample back)
+    on the one-body kernel and on the tree kernel of its one-body tree (1 body on an
+    embedded joint: :func:`rbstab.config.loader.chain_of`): kernel runs/s of each, and the
+    runs' agreement (statuses, v(0) and v(t_end) relative to max |v(0)|). What decides
+    whether the one-body kernel stays a specialisation of the tree kernel."""
+    from rbstab.config.loader import chain_of, load_config
+    from rbstab.engine.cuda import integrate_chain_runs_cuda, integrate_chunks_cuda
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.status import SUCCESS
+    from rbstab.engine.systems import tree_system, with_offsets
+    from rbstab.summary import LAST_ABOVE, RATE_STENCIL, TAKEN, V_INITIAL, V_RING
+    from rbstab.variants import chain as C
+
+    codes, params, y0, settings, n_samples = runs("initial-state", n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_config(CASE3, ["simulation.rtol=1e-6", "simulation.atol=1e-8"])
+    compiled = C.compile_chain(chain_of(config))
+    system = with_offsets(tree_system(compiled, config.simulation.limits), compiled.offset)
+    rows = settings_rows([config.simulation]).repeat(n, axis=0)
+    rows[:, 6] = np.inf
+    body = list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
+    tree = integrate_chain_runs_cuda(system, y0, rows, method=config.simulation.method, n_samples=n_samples,
+                                     stride=None)
+    body_kernel = sum(c.kernel_seconds for c in body)
+    acc = np.concatenate([c.acc for c in body])
+    status = np.concatenate([c.status for c in body])
+
+    def v_end(a):
+        taken = a[:, TAKEN].astype(np.int64)
+        return a[np.arange(len(a)), V_RING + (taken - 1) % RATE_STENCIL]
+
+    scale = np.max(np.abs(acc[:, V_INITIAL]))
+    worst = max(np.max(np.abs(acc[:, V_INITIAL] - tree.acc[:, V_INITIAL])), np.max(np.abs(v_end(acc) - v_end(tree.acc))))
+    return (f"one-body kernel {n / body_kernel:,.0f} runs/s, tree kernel (1:0:1) {n / tree.kernel_seconds:,.0f} runs/s "
+            f"({body_kernel / tree.kernel_seconds:.2f}x the one-body kernel's rate); statuses equal "
+            f"{int(np.sum(status == tree.status))}/{n} ({int(np.sum(tree.status == SUCCESS))} success), last sample not "
+            f"converged equal {int(np.sum(acc[:, LAST_ABOVE] == tree.acc[:, LAST_ABOVE]))}/{n}; v(0), v(t_end) "
+            f"largest difference {worst / scale:.2g} of max |v(0)|")
+
+
 def chain_compile_info() -> str:
     """The stance example's tree kernel's (2 bodies on permanent joints) registers, local
     memory, occupancy and compile (or load) time."""
@@ -644,6 +688,9 @@ def chains(args) -> None:
               f"{total:,.0f} runs/s")
     print(f"chains, CPU driver, {os.cpu_count()} processes, stance sweep: {chain_cpu_rate(args.chain_cpu_n):,.0f} runs/s")
     print(f"chains, correctness, {args.check_n} runs: {chain_correctness(args.check_n)}")
+    for n in args.chain_n:
+        print(f"chains, Case 3's initial-state sweep as one body and as its one-body tree, {n:,} runs: "
+              f"{body_as_tree(n)}")
     chain_sweep_seconds(1000, "tilt", "cuda")  # each process's kernels loaded from the cache once
     for n in args.chain_sweep_n:
         for axis in ("tilt", "mass"):
