@@ -735,18 +735,18 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
 
 
 def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
-                   work: np.ndarray, traces: bool = True) -> tuple[dict, dict]:
+                   work: np.ndarray, traces: bool = True, summary: bool = True) -> tuple[dict, dict]:
     """(outputs, summary columns) of k runs of chains of one structure, run i's chain
     ``compiled[i]`` (the runs of one ``tree_of`` one chain): their samples ``states`` (k, m,
     n_states) at ``time`` (m,) and their disturbances' work ``work`` (k, m) there, all at once
     (:func:`rbstab.variants.chain.evaluate`, :func:`rbstab.summary.tree_summary_table`); the
-    outputs empty unless ``traces``."""
+    outputs empty unless ``traces``, the summary unless ``summary`` (the GPU streams it)."""
     from .variants import chain as C  # heavy: numba
 
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
     outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)))
+    table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0))) if summary else {}
     return outputs if traces else {}, table
 
 
@@ -832,8 +832,9 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, output
         hi = min(lo + POSTPROCESS_BLOCK, len(members))
         t0 = _time.perf_counter()
         run_outputs, summaries = ({}, {}) if gpu and not outputs else _trees_outputs(
-            [trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi], outputs)
-        if gpu:
+            [trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi], outputs,
+            summary=not gpu)
+        if gpu:  # the summaries streamed on the device
             summaries = tree_stream_table(time, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
                                           structure.d_at)
         status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
