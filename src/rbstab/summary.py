@@ -37,6 +37,7 @@ __all__ = [
     "stream_finish",
     "stream_table",
     "tree_stream_table",
+    "streamed_final_lyapunov",
     "stream_member_start",
     "stream_member",
     "MEMBER_SLOTS",
@@ -644,6 +645,14 @@ def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, la
     return _streamed(time, acc, finals, members[:, :, :3], flags)
 
 
+def streamed_final_lyapunov(acc: np.ndarray) -> np.ndarray:
+    """v [J] at each run's last sample taken, from its accumulator's ring, shape (k,) of
+    ``acc`` (k, ACCUMULATOR_SIZE) after :func:`stream_finish`; NaN for a run with none."""
+    taken = acc[:, TAKEN].astype(np.int64)
+    v = acc[np.arange(len(acc)), V_RING + np.maximum(taken - 1, 0) % RATE_STENCIL]
+    return np.where(taken == 0, np.nan, v)
+
+
 def _streamed(time: np.ndarray, acc: np.ndarray, finals: dict, errors: np.ndarray, flags: list) -> dict[str, np.ndarray]:
     """:func:`summary_table`'s columns of k runs from their accumulators ``acc`` (k,
     ACCUMULATOR_SIZE): ``finals`` the state blocks at their last samples, ``errors`` max
@@ -657,7 +666,7 @@ def _streamed(time: np.ndarray, acc: np.ndarray, finals: dict, errors: np.ndarra
     none = taken == 0
     table["max_abs_constraint_error"] = np.where(none.reshape(-1, *[1] * (errors.ndim - 1)), np.nan, errors)
     table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL])
-    table["lyapunov_final"] = np.where(none, np.nan, acc[np.arange(len(acc)), V_RING + last_index % RATE_STENCIL])
+    table["lyapunov_final"] = streamed_final_lyapunov(acc)
     table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
     table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
     table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)

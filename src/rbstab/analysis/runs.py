@@ -269,12 +269,12 @@ class Runs:
         from ..engine.status import SUCCESS, status_message  # heavy: numba
         from ..engine.systems import tree_system, with_offsets  # heavy: numba
         from ..simulator import tree_end  # heavy: numba
-        from ..summary import ACCUMULATOR_SIZE, LAST_ABOVE, RATE_STENCIL, TAKEN, V_RING  # heavy: numba
+        from ..summary import ACCUMULATOR_SIZE, LAST_ABOVE, TAKEN, streamed_final_lyapunov  # heavy: numba
 
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
         k, n, s = len(states), int(n_samples), self.config.simulation
         batch = self._batch(states, n)
-        bounds = batch.params[0, 0]["limits"]
+        bounds, settings = batch.params[0, 0]["limits"], batch.settings_rows()
         status, t_stop, acc = np.empty(k, dtype=np.int64), np.empty(k), np.empty((k, ACCUMULATOR_SIZE))
         if self.tree is None:
             for chunk in integrate_chunks_cuda(batch.codes, batch.params[:1, 0], states, batch.settings, n_samples=n,
@@ -283,19 +283,18 @@ class Runs:
         else:
             size = self.compiled.size
             system = tree_system(self.compiled)._replace(params=batch.params[0, :size], ppoints=batch.ppoints[0, :size])
-            sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), states, batch.settings_rows(),
+            sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), states, settings,
                                             method=s.method, n_samples=n, stride=None, max_wall_time=s.max_wall_time,
                                             ratio=ratio)
             status, t_stop, acc = sol.status, sol.t_stop, sol.acc
         ok = status == SUCCESS
-        taken = acc[:, TAKEN].astype(np.int64)
-        v_final = np.where(taken == n, acc[np.arange(k), V_RING + (taken - 1) % RATE_STENCIL], np.nan)
+        v_final = np.where(acc[:, TAKEN] == n, streamed_final_lyapunov(acc), np.nan)  # NaN: stopped early
         messages = [""] * k
         for i in np.flatnonzero(~ok).tolist():  # failed runs: few
             message = (status_message(int(status[i]), float(t_stop[i]), s.gimbal_margin, s.max_steps,
                                       s.max_wall_time, limits=bounds) if self.tree is None else
                        tree_end(self.compiled, int(status[i]), float(t_stop[i]), sol.last[i][None], states[i],
-                                batch.settings_rows()[i], bounds)[1])
+                                settings[i], bounds)[1])
             messages[i] = message.split(" at t =")[0]
         return ok, acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
 
