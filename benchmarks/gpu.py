@@ -8,21 +8,20 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
 - **compiled at once**: the CPU engine and the CUDA kernels the run needs, each compiled (or
   loaded from the cache) in a process of its own, at once, before anything is timed: each
   process's seconds (with an empty cache, each kernel's compile beside the others');
-- **compile**: the GPU's compute mode, the kernel's registers and local memory a thread
-  (the kernel every launch runs: :func:`rbstab.engine.cuda.launch_signature`; with
-  ``--plain-kernel`` also the same kernel without its steps for disturbances,
-  ``kernel_function(..., disturbances=False)``, compiled on the spot), the
-  occupancy they allow and the resident threads; the compile (or cache load) time in this
-  process and a new process's first launch, its kernel loaded from the disk cache;
+- **compile**: the GPU's compute mode, one body's kernel's registers and local memory a
+  thread (:func:`rbstab.engine.cuda.compiled_tree_kernel` for one body on an embedded
+  joint), the occupancy they allow and the resident threads; the compile (or cache load)
+  time in this process and a new process's first launch, its kernel loaded from the disk
+  cache;
 - **deadline**: 300,000 runs, 100 samples kept, a 0.05 s limit: the kernel's time, the runs
-  finished, stopped and not started, and whether every unstarted run's trace is NaN (and
-  no buffer kept an earlier launch's numbers);
-- **samples** and **launch size**: kernel runs/s with 2, 201 and 2001 samples a run (no
-  trace) and with 8,192 / 33,792 / 131,072 / 270,336 runs a launch;
+  finished, stopped and not started, and whether every unstarted run's samples and last
+  state are NaN;
+- **samples** and **launch size**: kernel runs/s with 2, 201 and 2001 samples a run (none
+  kept) and with 8,192 / 33,792 / 131,072 / 270,336 runs a launch;
 - **kernel** and **end to end** runs/s at each N of ``--n`` (10^4, 10^5, 10^6), with no
-  trace (the summary store's) and with a thinned trace (201 samples a run): kernel time by
-  CUDA events; end to end, from the host's arrays to the results in host memory
-  (:func:`rbstab.engine.cuda.integrate_chunks_cuda`);
+  sample kept (the summary store's) and with a thinned trace (201 samples a run): kernel
+  time by CUDA events; end to end, from the host's arrays to the results in host memory
+  (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda` on Case 3's one-body tree);
 - **disturbed**: kernel runs/s of the parameter sweep at the smallest N of ``--n`` with
   saturating actuators and disturbances (:data:`DISTURBED`: every actuator limit, a noise, an
   impulse and a pulse), beside the same runs without them (the same kernel takes both);
@@ -47,8 +46,9 @@ L_c x U(0.5, 2), K_t x U(0.7, 1.4) and a random Omega: every run another record)
   run's records: a sweep over the chain's parameters, one launch);
   correctness on ``--check-n`` of those runs against the CPU driver (statuses, steps, final
   states, and the summaries streamed on the GPU against the CPU's from its samples);
-  Case 3's initial-state sweep at each N of ``--chain-n`` on the one-body kernel and on the
-  tree kernel of its one-body tree (kernel runs/s of each, statuses, v(0) and v(t_end));
+  Case 3's initial-state sweep at each N of ``--chain-n`` on one body's kernel and on the
+  general tree kernel of its one-body tree (kernel runs/s of each, statuses, v(0) and
+  v(t_end));
   ``rbstab sweep`` of the stance example over the legs' and trunk's tilt and over
   the trunk's mass, ``--store summary``, at each N of ``--chain-sweep-n`` (20,000), with
   ``--engine cuda`` and ``--engine compiled`` (the CPU's cores), process start to exit.
@@ -57,7 +57,7 @@ Usage (on a machine with an NVIDIA GPU and ``pip install -e ".[cuda]"``)::
 
     python benchmarks/gpu.py [--n 10000 100000 1000000] [--sweep-n 1000000] [--check-n 256]
                              [--chain-n 10000 100000] [--chain-cpu-n 2000] [--chain-sweep-n 20000]
-                             [--chains-only | --one-body-only] [--plain-kernel]
+                             [--chains-only | --one-body-only]
 
 ``--host-only`` (any machine, no GPU needed) measures what a ``--engine cuda`` sweep costs
 besides the GPU: the same ``rbstab sweep`` command with every launch replaced by a stub
@@ -70,7 +70,7 @@ worker's seconds a run in a process of its own
     python benchmarks/gpu.py --host-only [--sweep-n 100000 1000000] [--jobs N]
 
 ``--ptx-only`` (any machine with numba-cuda's compilers and CUDA's ``ptxas``; no GPU
-needed) compiles the one-body kernel (DOP853, 15 states) and the tree kernel (DOP853) for
+needed) compiles one body's kernel (DOP853, an embedded joint) and the tree kernel (DOP853) for
 each tree shape of ``--ptx-trees`` (bodies:permanent joints:embedded joints; default one
 body on a permanent and on an embedded joint, the stance example's 2:2:0, and 8 bodies on
 permanent and on embedded joints) to optimised PTX for sm_90 and prints what ``ptxas -v``
@@ -147,15 +147,46 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: tuple[str,
     return np.full(n, variant.code), params, y0, settings_records(rows, method_number(s.method)), s.n_samples
 
 
+@functools.lru_cache(maxsize=4)
+def one_body_trees(kind: str, n: int, rtol: float = 1e-6, extra: tuple[str, ...] = ()):
+    """(system, y0 (n, 15), settings rows (n, 7), tree_of (n,), n_samples) of the n runs of
+    :func:`runs` as the GPU takes them: Case 3's one-body tree
+    (:func:`rbstab.config.loader.chain_of`) with each run's record, one tree for the
+    initial-state sweep, a tree a run for the parameter sweep, each with its h."""
+    import rbstab
+    from rbstab.config.loader import chain_of
+    from rbstab.engine.systems import tree_system, with_offsets
+    from rbstab.variants.chain import compile_chain
+
+    codes, params, y0, settings, n_samples = runs(kind, n, rtol=rtol, extra=extra)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = rbstab.load_config(CASE3, list(extra))
+    trees = params[:1] if kind == "initial-state" else params
+    system = tree_system(compile_chain(chain_of(config), offset=0.0))._replace(
+        params=np.ascontiguousarray(trees[:, None]), ppoints=np.ascontiguousarray(trees["attachment_point"][:, None]))
+    tree_of = np.zeros(n, dtype=np.int64) if kind == "initial-state" else np.arange(n)
+    rows = np.column_stack([settings[name] for name in settings.dtype.names[:-1]])
+    return with_offsets(system, trees["lyapunov_offset"]), y0, rows, tree_of, n_samples
+
+
+def gpu_runs(kind: str, n: int, stride=None, extra: tuple[str, ...] = (), n_samples: int | None = None,
+             part: slice = slice(None), max_wall_time: float = np.inf):
+    """The GPU's solution (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`) of the runs
+    ``part`` of :func:`one_body_trees`, every ``stride``-th sample kept (None: none)."""
+    from rbstab.engine.cuda import integrate_chain_runs_cuda
+
+    system, y0, rows, tree_of, default = one_body_trees(kind, n, extra=extra)
+    return integrate_chain_runs_cuda(system, y0[part], rows[part], method="DOP853", n_samples=n_samples or default,
+                                     stride=stride, tree_of=tree_of[part], max_wall_time=max_wall_time)
+
+
 def gpu_rates(kind: str, n: int, stride, extra: tuple[str, ...] = ()):
     """(kernel, end-to-end) runs/s of n runs of sweep ``kind`` (overrides ``extra``)."""
-    from rbstab.engine.cuda import integrate_chunks_cuda
-
-    codes, params, y0, settings, n_samples = runs(kind, n, extra=extra)
+    one_body_trees(kind, n, extra=extra)  # the host's arrays, built before the clock starts
     start = time.perf_counter()
-    kernel = sum(c.kernel_seconds for c in integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples,
-                                                                  stride=stride))
-    return n / kernel, n / (time.perf_counter() - start)
+    sol = gpu_runs(kind, n, stride, extra)
+    return n / sol.kernel_seconds, n / (time.perf_counter() - start)
 
 
 def _cpu_part(args):
@@ -185,21 +216,15 @@ def cpu_rate(kind: str, n: int) -> float:
 
 def correctness(kind: str, n: int) -> str:
     from rbstab.engine import integrate_runs
-    from rbstab.engine.cuda import integrate_chunks_cuda
 
     codes, params, y0, settings, n_samples = runs(kind, n)
     rows = np.column_stack([settings[name] for name in settings.dtype.names[:-1]])
     cpu = integrate_runs(codes, params, y0, rows, method="DOP853", n_samples=2)
-    (gpu,) = [c for c in integrate_chunks_cuda(codes, params, y0, settings, n_samples=2, stride=1)]
+    gpu = gpu_runs(kind, n, stride=1, n_samples=2)
     fine_codes, fine_params, fine_y0, fine_settings, _ = runs(kind, n, rtol=1e-11)
     fine_rows = np.column_stack([fine_settings[name] for name in fine_settings.dtype.names[:-1]])
     fine = integrate_runs(fine_codes, fine_params, fine_y0, fine_rows, method="DOP853", n_samples=2)
-    from rbstab.layout import OUTPUTS
-
-    state = np.concatenate([np.arange(OUTPUTS[b].offset, OUTPUTS[b].offset + 3)
-                            for b in ("theta", "omega", "position", "velocity", "controller_state")])
-    final_gpu = gpu.trace[:, -1, state]
-    final_cpu, final_fine = cpu.samples[:, -1], fine.samples[:, -1]
+    final_gpu, final_cpu, final_fine = gpu.samples[:, -1], cpu.samples[:, -1], fine.samples[:, -1]
     scale = np.max(np.abs(final_cpu), axis=1)
     rel = np.max(np.abs(final_gpu - final_cpu), axis=1) / scale
     own = np.max(np.abs(final_cpu - final_fine), axis=1) / scale
@@ -212,8 +237,8 @@ def correctness(kind: str, n: int) -> str:
 #: What each process of :func:`compile_all` compiles (or loads from the cache).
 COMPILES = {
     "cpu": "from rbstab.engine.warm import ensure_compiled; ensure_compiled(sign_law=True, chain=True)",
-    "one-body": "from rbstab.engine.cuda import compiled_kernel; from rbstab.engine.rk import DOP853; "
-                "compiled_kernel(DOP853, 15)",
+    "one-body": "from rbstab.engine.cuda import compiled_tree_kernel; from rbstab.engine.rk import DOP853; "
+                "compiled_tree_kernel(DOP853, (1, 0, 1), True)",
     "tree": "from rbstab.engine.cuda import compiled_tree_kernel; from rbstab.engine.rk import DOP853; "
             "compiled_tree_kernel(DOP853, (2, 2, 0))",
 }
@@ -235,40 +260,31 @@ def compile_all(parts) -> str:
         return ", ".join(pool.map(compile_one, parts))
 
 
-def compile_info(plain_kernel: bool = False) -> str:
-    """The one-body kernel's compute mode, registers, local memory, occupancy and compile
-    (or load) time; ``plain_kernel``: also the same kernel without the driver's steps for
-    disturbances (compiled here, ~2 minutes, never cached)."""
+def compile_info() -> str:
+    """One body's kernel's (Case 3: an embedded joint) compute mode, registers, local
+    memory, occupancy and compile (or load) time."""
     from numba import cuda
 
-    from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_kernel, compute_mode, integrate_chunks_cuda,
-                                    kernel_function, kernel_resources, launch_signature, occupancy)
+    from rbstab.engine.cuda import (THREADS_PER_BLOCK, compiled_tree_kernel, compute_mode, kernel_resources,
+                                    occupancy, tree_launch_signature)
     from rbstab.engine.rk import DOP853
 
     start = time.perf_counter()
-    fn = compiled_kernel(DOP853, 15)
+    fn = compiled_tree_kernel(DOP853, (1, 0, 1), True)
     loaded = time.perf_counter() - start
-    signature = launch_signature(15)
+    signature = tree_launch_signature()
     regs, local = kernel_resources(fn, signature)
     device = cuda.get_current_device()
     per_sm = occupancy(fn, signature)
     sms = device.MULTIPROCESSOR_COUNT
     share = per_sm * THREADS_PER_BLOCK / device.MAX_THREADS_PER_MULTIPROCESSOR
-    # the same kernel without the driver's steps for disturbances (breakpoints, impulses, work)
-    without = ""
-    if plain_kernel:
-        plain = cuda.jit(signature)(kernel_function(DOP853, 15, disturbances=False))
-        without = " (without the driver's steps for disturbances: %d, %d B)" % kernel_resources(plain, signature)
-    codes, params, y0, settings, n_samples = runs("parameter", 128)
-    list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
+    gpu_runs("parameter", 128)
     script = (f"import sys, time; sys.path.insert(0, {str(ROOT / 'benchmarks')!r}); import gpu; "
-              "from rbstab.engine.cuda import integrate_chunks_cuda; a = gpu.runs('parameter', 128); "
-              "t = time.perf_counter(); list(integrate_chunks_cuda(*a[:4], n_samples=a[4])); "
+              "gpu.one_body_trees('parameter', 128); t = time.perf_counter(); gpu.gpu_runs('parameter', 128); "
               "print(time.perf_counter() - t)")
     again = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     name = device.name.decode() if isinstance(device.name, bytes) else device.name
-    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread "
-            f"{without}; "
+    return (f"{name}, compute mode {compute_mode()}: {regs} registers, {local} B local memory a thread; "
             f"{per_sm} blocks of {THREADS_PER_BLOCK} a multiprocessor (occupancy {share:.0%}), "
             f"{per_sm * THREADS_PER_BLOCK * sms:,} resident threads on {sms} multiprocessors; "
             f"compiled or loaded in {loaded:.1f} s; a new process's first launch {float(again.stdout.split()[-1]):.2f} s "
@@ -277,35 +293,22 @@ def compile_info(plain_kernel: bool = False) -> str:
 
 def deadline(n: int = 300_000, n_samples: int = 100, limit: float = 0.05) -> str:
     """A launch stopped by its limit: its kernel time and what its runs report."""
-    from rbstab.engine.cuda import integrate_chunks_cuda
     from rbstab.engine.status import NOT_STARTED, SUCCESS, TIMEOUT
 
-    codes, params, y0, settings, _ = runs("parameter", n)
-    list(integrate_chunks_cuda(codes[:4096], params[:4096], y0[:4096], settings[:4096], n_samples=n_samples,
-                               stride=1))  # the buffers hold an earlier launch's numbers
-    lines = []
-    for chunk in integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples, stride=1,
-                                       max_wall_time=limit):
-        unstarted = chunk.status == NOT_STARTED
-        nan = bool(np.isnan(chunk.trace[unstarted][..., -1]).all() and np.isnan(chunk.last[unstarted]).all())
-        lines.append(f"{len(chunk.runs):,} runs, limit {limit} s: kernel {chunk.kernel_seconds:.3f} s; "
-                     f"{int(np.sum(chunk.status == SUCCESS)):,} finished, {int(np.sum(chunk.status == TIMEOUT)):,} "
-                     f"stopped, {int(unstarted.sum()):,} not started (their dv/dt and last outputs NaN: {nan})")
-    return "; ".join(lines)
+    sol = gpu_runs("parameter", n, stride=1, n_samples=n_samples, max_wall_time=limit)
+    unstarted = sol.status == NOT_STARTED
+    nan = bool(np.isnan(sol.samples[unstarted]).all() and np.isnan(sol.last[unstarted]).all())
+    return (f"{n:,} runs, limit {limit} s: kernel {sol.kernel_seconds:.3f} s; "
+            f"{int(np.sum(sol.status == SUCCESS)):,} finished, {int(np.sum(sol.status == TIMEOUT)):,} "
+            f"stopped, {int(unstarted.sum()):,} not started (their samples and last state NaN: {nan})")
 
 
 def kernel_rate(n: int, n_samples: int, launch: int | None = None) -> float:
-    """Kernel runs/s of the parameter sweep, no trace, ``n_samples`` a run, launches of
-    ``launch`` runs (one call each)."""
-    from rbstab.engine.cuda import integrate_chunks_cuda
-
-    codes, params, y0, settings, _ = runs("parameter", n)
+    """Kernel runs/s of the parameter sweep, no sample kept, ``n_samples`` a run, launches
+    of ``launch`` runs (one call each)."""
     launch = launch or n
-    seconds = 0.0
-    for lo in range(0, n, launch):
-        part = slice(lo, lo + launch)
-        seconds += sum(c.kernel_seconds for c in integrate_chunks_cuda(codes[part], params[part], y0[part],
-                                                                       settings[part], n_samples=n_samples))
+    seconds = sum(gpu_runs("parameter", n, n_samples=n_samples, part=slice(lo, lo + launch)).kernel_seconds
+                  for lo in range(0, n, launch))
     return n / seconds
 
 
@@ -359,41 +362,30 @@ def chain_runs(n: int, seed: int = 0, parameters: bool = False):
 
 def body_as_tree(n: int) -> str:
     """Case 3's initial-state sweep (n runs, rtol 1e-6, summaries streamed, no sample back)
-    on the one-body kernel and on the tree kernel of its one-body tree (1 body on an
-    embedded joint: :func:`rbstab.config.loader.chain_of`): kernel runs/s of each, and the
-    runs' agreement (statuses, v(0) and v(t_end) relative to max |v(0)|). What decides
-    whether the one-body kernel stays a specialisation of the tree kernel."""
-    from rbstab.config.loader import chain_of, load_config
-    from rbstab.engine.cuda import integrate_chain_runs_cuda, integrate_chunks_cuda
-    from rbstab.engine.settings import settings_rows
+    on one body's kernel (the body's record and rate) and on the general tree kernel of its
+    one-body tree (1 body on an embedded joint, reduced coordinates): kernel runs/s of each,
+    and the runs' agreement (statuses, v(0) and v(t_end) relative to max |v(0)|). What
+    decides whether the tree kernel keeps its one-body specialisation."""
+    import rbstab.engine.cuda as engine
     from rbstab.engine.status import SUCCESS
-    from rbstab.engine.systems import tree_system, with_offsets
     from rbstab.summary import LAST_ABOVE, V_INITIAL, streamed_final_lyapunov
-    from rbstab.variants import chain as C
 
-    codes, params, y0, settings, n_samples = runs("initial-state", n)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        config = load_config(CASE3, ["simulation.rtol=1e-6", "simulation.atol=1e-8"])
-    compiled = C.compile_chain(chain_of(config))
-    system = with_offsets(tree_system(compiled, config.simulation.limits), compiled.offset)
-    rows = settings_rows([config.simulation]).repeat(n, axis=0)
-    rows[:, 6] = np.inf
-    body = list(integrate_chunks_cuda(codes, params, y0, settings, n_samples=n_samples))
-    tree = integrate_chain_runs_cuda(system, y0, rows, method=config.simulation.method, n_samples=n_samples,
-                                     stride=None)
-    body_kernel = sum(c.kernel_seconds for c in body)
-    acc = np.concatenate([c.acc for c in body])
-    status = np.concatenate([c.status for c in body])
-
-    scale = np.max(np.abs(acc[:, V_INITIAL]))
-    worst = max(np.max(np.abs(acc[:, V_INITIAL] - tree.acc[:, V_INITIAL])), np.nanmax(np.abs(streamed_final_lyapunov(acc) -
-                                                                   streamed_final_lyapunov(tree.acc))))
-    return (f"one-body kernel {n / body_kernel:,.0f} runs/s, tree kernel (1:0:1) {n / tree.kernel_seconds:,.0f} runs/s "
-            f"({body_kernel / tree.kernel_seconds:.2f}x the one-body kernel's rate); statuses equal "
-            f"{int(np.sum(status == tree.status))}/{n} ({int(np.sum(tree.status == SUCCESS))} success), last sample not "
-            f"converged equal {int(np.sum(acc[:, LAST_ABOVE] == tree.acc[:, LAST_ABOVE]))}/{n}; v(0), v(t_end) "
-            f"largest difference {worst / scale:.2g} of max |v(0)|")
+    body = gpu_runs("initial-state", n)
+    one_body = engine.is_one_body
+    engine.is_one_body = lambda *args: False  # the general tree's kernel for the same trees
+    try:
+        tree = gpu_runs("initial-state", n)
+    finally:
+        engine.is_one_body = one_body
+    scale = np.max(np.abs(body.acc[:, V_INITIAL]))
+    worst = max(np.max(np.abs(body.acc[:, V_INITIAL] - tree.acc[:, V_INITIAL])),
+                np.nanmax(np.abs(streamed_final_lyapunov(body.acc) - streamed_final_lyapunov(tree.acc))))
+    return (f"one body's kernel {n / body.kernel_seconds:,.0f} runs/s, the general tree kernel (1:0:1) "
+            f"{n / tree.kernel_seconds:,.0f} runs/s ({body.kernel_seconds / tree.kernel_seconds:.2f}x one body's "
+            f"rate); statuses equal {int(np.sum(body.status == tree.status))}/{n} "
+            f"({int(np.sum(tree.status == SUCCESS))} success), last sample not converged equal "
+            f"{int(np.sum(body.acc[:, LAST_ABOVE] == tree.acc[:, LAST_ABOVE]))}/{n}; v(0), v(t_end) largest difference "
+            f"{worst / scale:.2g} of max |v(0)|")
 
 
 def chain_compile_info() -> str:
@@ -492,21 +484,7 @@ import os
 if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
     import numpy as np
     import rbstab.engine.cuda as cuda
-    from rbstab.layout import N_OUTPUTS
     from rbstab.summary import ACCUMULATOR_SIZE, MEMBER_SLOTS, TAKEN
-
-    def launches(codes, params, y0, settings, *, n_samples, stride=None, full=False, max_wall_time=np.inf,
-                 ratio=1e-3):
-        n_trace = 0 if stride is None else len(range(0, n_samples, stride))
-        for t_end in dict.fromkeys(settings["t_end"].tolist()):
-            runs = np.flatnonzero(settings["t_end"] == t_end)
-            k = len(runs)
-            acc = np.ones((k, ACCUMULATOR_SIZE))
-            acc[:, TAKEN] = n_samples
-            yield cuda.CudaChunk(runs=runs, status=np.zeros(k, np.int64), t_stop=np.full(k, t_end),
-                                 nfev=np.full(k, 500), n_steps=np.full(k, 40), last=np.ones((k, N_OUTPUTS)), acc=acc,
-                                 trace=None if stride is None else np.ones((k, n_trace, cuda.TRACE_COLUMNS)),
-                                 kernel_seconds=0.0, seconds=0.0)
 
     def chain_launch(system, y0, settings, *, method, n_samples, stride=1, max_wall_time=np.inf, tree_of=None,
                      ratio=1e-3):
@@ -518,10 +496,10 @@ if os.environ.get("RBSTAB_BENCHMARK_STUB_GPU"):
         return cuda.CudaChainSolution(np.repeat(y0[:, None], n_kept, axis=1), np.zeros(k, np.int64),
                                       np.asarray(settings, dtype=float)[:, 0].copy(), np.full(k, 500),
                                       np.full(k, 40), np.zeros((k, n_kept)), acc=acc,
-                                      members=np.zeros((k, len(system.codes), MEMBER_SLOTS)), last=y0.copy())
+                                      members=np.zeros((k, len(system.codes), MEMBER_SLOTS)), last=y0.copy(),
+                                      rates=np.zeros((k, n_kept)))
 
     cuda.check_available = lambda: None
-    cuda.integrate_chunks_cuda = launches
     cuda.integrate_chain_runs_cuda = chain_launch
 
     import sys
@@ -635,7 +613,7 @@ def chain_sweep_seconds(n: int, axis: str, engine: str, env: dict | None = None)
 
 
 def ptx_only(shapes) -> None:
-    """The ``ptxas -v`` lines of the one-body kernel and of the tree kernel of each tree
+    """The ``ptxas -v`` lines of one body's kernel and of the tree kernel of each tree
     shape of ``shapes`` (bodies, permanent joints, embedded joints; module docstring,
     ``--ptx-only``)."""
     import re
@@ -643,7 +621,7 @@ def ptx_only(shapes) -> None:
     import numba.cuda.dispatcher
     from numba import cuda
 
-    from rbstab.engine.cuda import kernel_function, launch_signature, tree_kernel_function, tree_launch_signature
+    from rbstab.engine.cuda import tree_kernel_function, tree_launch_signature
     from rbstab.engine.rk import DOP853
 
     ptxas = shutil.which("ptxas")
@@ -654,7 +632,8 @@ def ptx_only(shapes) -> None:
         compute_capability = (9, 0)
 
     numba.cuda.dispatcher.get_current_device = lambda: Device()
-    kernels = {"one-body kernel (DOP853, 15 states)": (kernel_function(DOP853, 15), launch_signature(15))}
+    kernels = {"one body's kernel (DOP853, an embedded joint)": (tree_kernel_function(DOP853, (1, 0, 1), True),
+                                                                tree_launch_signature())}
     for n, p, e in shapes:
         kernels[f"tree kernel (DOP853, {n} bodies, {p} permanent and {e} embedded joints)"] = (
             tree_kernel_function(DOP853, (n, p, e)), tree_launch_signature())
@@ -710,8 +689,6 @@ def main() -> None:
     parser.add_argument("--chain-sweep-n", type=int, nargs="+", default=[20_000])
     parser.add_argument("--chains-only", action="store_true", help="only the tree kernel's lines")
     parser.add_argument("--one-body-only", action="store_true", help="all but the tree kernel's lines")
-    parser.add_argument("--plain-kernel", action="store_true",
-                        help="also the one-body kernel without its steps for disturbances (compiled, ~2 min)")
     parser.add_argument("--ptx-trees", nargs="+", default=["1:1:0", "1:0:1", "2:2:0", "8:8:0", "8:0:8"],
                         help="tree shapes of --ptx-only, BODIES:PERMANENT:EMBEDDED")
     parser.add_argument("--ptx-only", action="store_true",
@@ -732,7 +709,7 @@ def main() -> None:
     if args.chains_only:
         chains(args)
         return
-    print("compile:", compile_info(args.plain_kernel))
+    print("compile:", compile_info())
     print("deadline:", deadline())
     for n_samples in (2, 201, 2001):
         print(f"samples {n_samples:5d}, 270,336 runs: kernel {kernel_rate(270_336, n_samples):,.0f} runs/s")
@@ -744,7 +721,7 @@ def main() -> None:
         for n in args.n:
             for stride, label in ((None, "none"), (10, "201")):
                 if stride and n > 100_000:
-                    continue  # 201 samples x 10^6 runs: the traces alone take 61 GB
+                    continue  # 201 samples x 10^6 runs: the samples alone take 26 GB
                 kernel, total = gpu_rates(kind, n, stride)
                 print(f"{kind:14s} {n:9d} {label:>8s} {kernel:14,.0f} {total:18,.0f}")
     n = min(args.n)

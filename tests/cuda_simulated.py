@@ -1,10 +1,12 @@
-"""The CUDA engine under numba's CUDA simulator against the CPU engine, run by tests/test_cuda.py
-in a process of its own (the simulator is chosen when numba starts: ``NUMBA_ENABLE_CUDASIM=1``).
+"""The CUDA engine's one-body runs under numba's CUDA simulator against the CPU engine, run by
+tests/test_cuda.py in a process of its own (the simulator is chosen when numba starts:
+``NUMBA_ENABLE_CUDASIM=1``).
 
 Prints one JSON object: for each run of every variant and method (runs that reach t_end and
 runs stopped by their step limit), which of its status, message, solver counts, summary
-figures and outputs at the samples differ from the CPU engine's, for each ``keep``; and
-whether a basin map's outcomes, times to converge and v(t_end) equal the CPU engine's.
+figures and outputs at the samples differ from the CPU engine's, for each ``keep``; whether
+a basin map's outcomes, times to converge and v(t_end) equal the CPU engine's; a launch's
+deadline; the types every launch passes.
 """
 
 from __future__ import annotations
@@ -94,83 +96,82 @@ def main() -> None:
 
 
 def record_launches() -> set:
-    """Record numba's types of every simulated launch's arguments, with the runs' state
-    size: the set the launches of this process add to."""
+    """Record numba's types of every simulated launch's arguments, with its kernel's tree
+    shape and whether it is one body's: the set the launches of this process add to."""
     import numba
 
     import rbstab.engine.cuda as engine
 
     recorded = set()
-    compiled = engine.compiled_kernel
+    compiled = engine.compiled_tree_kernel
 
     class Recording:
-        def __init__(self, fn, n_state):
-            self.fn, self.n_state = fn, n_state
+        def __init__(self, fn, kernel):
+            self.fn, self.kernel = fn, kernel
 
         def __getitem__(self, grid):
             launch = self.fn[grid]
 
             def call(*args):
-                recorded.add((self.n_state, tuple(str(numba.typeof(engine._plain(a))) for a in args)))
+                recorded.add((self.kernel, tuple(str(numba.typeof(engine._plain(a))) for a in args)))
                 return launch(*args)
 
             return call
 
-    engine.compiled_kernel = lambda method, n_state: Recording(compiled(method, n_state), n_state)
+    engine.compiled_tree_kernel = lambda method, shape, one_body=False: Recording(compiled(method, shape, one_body),
+                                                                                 (*shape, one_body))
     return recorded
 
 
 def signatures(recorded: set) -> dict:
-    """Whether every launch passed the arguments of rbstab.engine.cuda.launch_signature."""
-    from rbstab.engine.cuda import launch_signature
+    """Whether every launch passed the arguments of rbstab.engine.cuda.tree_launch_signature."""
+    from rbstab.engine.cuda import tree_launch_signature
 
-    expected = {(n, tuple(str(t) for t in launch_signature(n))) for n, _ in recorded}
-    return {"launches": len(recorded), "state_sizes": sorted({n for n, _ in recorded}),
-            "mismatched": sorted(map(str, recorded - expected))}
+    expected = tuple(str(t) for t in tree_launch_signature())
+    return {"launches": len(recorded), "kernels": [list(k) for k in sorted({kernel for kernel, _ in recorded})],
+            "mismatched": sorted(str(kernel) for kernel, types in recorded if types != expected)}
 
 
 def deadline() -> dict:
     """Two launches of 600 Case 3 runs on a grid of 4 blocks: the first with no limit, the
-    second with a 1 ns limit after every buffer of the process was poisoned (set to 7):
-    what the second's runs report (every run is written, none starts after the deadline)."""
+    second with a 1 ns limit, every device array it gets poisoned (set to 7): what the
+    second's runs report (every run is written, none starts after the deadline)."""
     import rbstab
     import rbstab.engine.cuda as engine
-    from rbstab.engine import method_number
-    from rbstab.engine.settings import settings_records
+    from rbstab.config.loader import chain_of
+    from rbstab.engine.settings import settings_rows
     from rbstab.engine.status import NOT_STARTED, status_message
+    from rbstab.engine.systems import tree_system, with_offsets
+    from rbstab.variants.chain import compile_chain
 
     config = rbstab.load_config(os.path.join(sys.argv[1], "configs/paper/case3_embedded.yaml"),
                                 ["simulation.t_end=0.002"])
-    variant, s = config.make_variant(), config.simulation
+    compiled = compile_chain(chain_of(config))
+    system = with_offsets(tree_system(compiled, config.simulation.limits), compiled.offset)
     k = 600
-    y0 = np.repeat(variant.initial_state(config.initial_state)[None], k, axis=0)
-    row = np.array([[s.t_end, s.rtol, s.atol, s.max_step, s.gimbal_margin, s.max_steps, s.max_wall_time]])
-    settings = settings_records(row, method_number(s.method)).repeat(k)
-    engine._resident_blocks = lambda fn, n_state: 4
+    y0 = np.repeat(config.make_variant().initial_state(config.initial_state)[None], k, axis=0)
+    rows = np.repeat(settings_rows([config.simulation]), k, axis=0)
+    engine._resident_blocks = lambda fn, signature: 4
 
     def launch(limit):
-        (chunk,) = engine.integrate_chunks_cuda(np.full(k, variant.code), variant.parameters, y0, settings,
-                                                n_samples=5, stride=1, max_wall_time=limit)
-        return chunk
+        return engine.integrate_chain_runs_cuda(system, y0, rows, method=config.simulation.method, n_samples=5,
+                                                max_wall_time=limit)
 
     first = launch(np.inf)
-    for device, _ in engine._BUFFERS.values():
-        device.copy_to_device(np.full(device.shape, 7, dtype=device.dtype))
-    second = launch(1e-9)
-    # the outputs at a NaN state (the CPU engine's rows after a stop; some do not depend on it)
-    from rbstab.layout import N_OUTPUTS
-    from rbstab.variants.kernels import output_row
-
-    nan_state = np.full(N_OUTPUTS, np.nan)
-    output_row(variant.code, 0.0, np.full(y0.shape[1], np.nan), variant.parameters[0], nan_state, False)
+    allocate = engine.cuda.device_array
+    engine.cuda.device_array = lambda shape, dtype=np.float64: engine.cuda.to_device(np.full(shape, 7, dtype=dtype))
+    try:
+        second = launch(1e-9)
+    finally:
+        engine.cuda.device_array = allocate
+    outputs = (second.acc, second.members, second.last, second.samples, second.work)
     return {"first_success": int(np.sum(first.status == 0)),
             "not_started": int(np.sum(second.status == NOT_STARTED)),
             "t_stop_zero": bool(np.all(second.t_stop == 0)),
             "nfev_zero": bool(np.all(second.nfev == 0)) and bool(np.all(second.n_steps == 0)),
             "last_nan": bool(np.all(np.isnan(second.last))),
-            "trace_nan_state": bool(np.array_equal(second.trace[..., :-1], np.broadcast_to(
-                nan_state, second.trace[..., :-1].shape), equal_nan=True) and np.isnan(second.trace[..., -1]).all()),
-            "poison_left": int(np.sum(second.acc == 7) + np.sum(second.trace == 7) + np.sum(second.last == 7)),
+            "samples_nan": bool(np.all(np.isnan(second.samples)) and np.all(np.isnan(second.work))),
+            "poison_left": int(sum(np.sum(a == 7) for a in outputs)),
             "message": status_message(NOT_STARTED, 0.0, 0.0, max_wall_time=1e-9)}
 
 
@@ -301,7 +302,7 @@ def disturbed() -> dict:
                        "torque": bool(p["disturbance_torque"][i]), "mass": float(p["mass"]),
                        "inertia": p["inertia"].tolist()}
             runs.params["disturbance_value"][0, 0, i] = 0.0
-            (_, block), = simulate_batch(runs, engine="compiled", keep="thinned")
+            (_, block), = simulate_batch(runs, engine="compiled")
             without = block.result(0).outputs
             keys = ("theta", "omega", "velocity", "disturbance_work")
             last_jump.append({"earlier_equal": all(np.array_equal(ref.outputs[k][:-1], without[k][:-1]) for k in keys),

@@ -15,12 +15,8 @@ import numpy as np
 import pytest
 
 import rbstab
-from rbstab.engine import integrate_runs
 from rbstab.layout import N_OUTPUTS
-from rbstab.summary import (ACCUMULATOR_SIZE, NUMERICAL_RATE_AT, numerical_rate, short_stencils, stencil_weights,
-                            stream_finish, stream_sample, stream_start, stream_table, summary_table)
-from rbstab.variants.base import split_outputs
-from rbstab.variants.kernels import run_outputs
+from rbstab.summary import ACCUMULATOR_SIZE, short_stencils, stencil_weights, stream_finish, stream_start
 
 from conftest import ROOT, simulated_once
 from reference import rotation
@@ -45,18 +41,6 @@ GPU = _has_gpu()
 
 
 # -- the streamed summary (compiled for the CPU here) -------------------------------------------------
-def _run_columns(config, n_samples):
-    variant = config.make_variant()
-    sol = integrate_runs([variant.code], variant.parameters, variant.initial_state(config.initial_state)[None],
-                         [[config.simulation.t_end, config.simulation.rtol, config.simulation.atol,
-                           config.simulation.max_step, config.simulation.gimbal_margin, config.simulation.max_steps,
-                           np.inf]], method=config.simulation.method, n_samples=n_samples)
-    columns = np.empty((N_OUTPUTS, 1, n_samples))
-    times = np.linspace(0.0, config.simulation.t_end, n_samples)[None]
-    run_outputs(np.array([variant.code]), variant.parameters, times, sol.samples, columns, False)
-    return variant, columns
-
-
 SATURATED_FALL = ["initial_state.theta=[0.45,0,0]"]  # the torque limit cannot hold it: flags set
 PUSHED = str(ROOT / "configs" / "examples" / "saturated_push.yaml")
 PUSHES = ["disturbances.1.start=0.7"]  # the impulse at 0.5 s and the pulse inside the run: 3 edges
@@ -67,45 +51,58 @@ PUSHES = ["disturbances.1.start=0.7"]  # the impulse at 0.5 s and the pulse insi
     (CASE3, ["simulation.max_steps=3"]), (SATURATED, SATURATED_FALL), (SATURATED, [*SATURATED_FALL, "simulation.max_steps=6"]),
     (PUSHED, PUSHES), (PUSHED, [*PUSHES, "simulation.max_steps=12"])],
     ids=["whole", "stopped", "short", "shorter", "saturated", "saturated-stopped", "pushed", "pushed-stopped"])
-def test_streamed_summary_is_summary_table(path, overrides):
-    """Fed a run's output rows one sample at a time, stream_sample / stream_finish /
-    stream_table give summary_table's figures (the same numbers, the saturated time fractions
-    of a run whose torque is at its limit among them, and the rate check of a pushed run,
-    which leaves out the stencils across a push) and numerical_rate's dv/dt; for a run
-    stopped early, the dv/dt of its first samples up to rounding."""
+def test_streamed_summary_of_one_body_is_the_cpus(path, overrides):
+    """Fed a one-body run's samples one at a time, as the GPU's one-body kernel feeds them,
+    body_stream_sample / stream_finish / tree_stream_table give the CPU engine's figures
+    from the run's samples, the same numbers: the saturated time fractions of a run whose
+    torque is at its limit among them, the rate check of a pushed run (which leaves out the
+    stencils across a push), and the figures of runs stopped after a few samples (the
+    one-sided stencils of their own samples); and numerical_rate's dv/dt at the samples, for
+    a run stopped early the first samples' up to rounding."""
+    from rbstab.engine.cuda import TreeStreamSink, body_stream_sample
+    from rbstab.engine.integrate import SampleRows
+    from rbstab.simulator import simulate
+    from rbstab.summary import MEMBER_SLOTS, stream_member_start, tree_stream_table
+
     n = 101
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = rbstab.load_config(path, ["simulation.t_end=1.0", f"simulation.n_samples={n}", *overrides])
-    variant, columns = _run_columns(config, n)
-    time = np.linspace(0.0, 1.0, n)
-    outputs = split_outputs(columns, variant.layout, False)
-    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    expected = summary_table(time, outputs)
-    first, weights = stencil_weights(time)
-    acc = np.empty(ACCUMULATOR_SIZE)
-    trace = np.full((n, N_OUTPUTS + 1), -1.0)
-    stream_start(acc)
-    taken = int(np.isfinite(columns[0, 0]).sum())
+    result = simulate(config)
+    variant = config.make_variant()
+    states = np.column_stack([result.outputs[b] for b in variant.layout.blocks])
+    samples = np.column_stack([states, result.outputs["disturbance_work"]])  # the state, then W
+    taken = int(np.isfinite(states[:, 0]).sum())
     assert (taken == n) == ("simulation.max_steps" not in " ".join(overrides))
+    time = np.linspace(0.0, 1.0, n)
+    first, weights = stencil_weights(time)
+    acc, members, last = np.empty(ACCUMULATOR_SIZE), np.empty((1, MEMBER_SLOTS)), np.empty(samples.shape[1])
+    rates = np.full(n, -1.0)
+    sink = TreeStreamSink(acc, members, np.zeros(N_OUTPUTS), np.empty((1, 3, 3)), last, first, weights, 1e-3, 0.0,
+                          SampleRows(np.empty((0, states.shape[1])), np.empty(0), 1), rates)
+    stream_start(acc)
+    stream_member_start(members)
     for i in range(taken):
-        stream_sample(acc, i, np.ascontiguousarray(columns[:, 0, i]), first, weights, trace, 1, 1e-3)
-    stream_finish(acc, first, weights, short_stencils(time), trace, 1)
-    last = columns[:, 0, taken - 1][None]
-    got = stream_table(time, acc[None], last, variant.layout)
-    assert list(got) == list(expected)
-    for key in expected:
-        assert str(got[key]) == str(expected[key]), key
-    assert (got["fraction_saturated_torque_n"][0, 0] > 0) == (path != CASE3)
+        body_stream_sample(sink, variant.code, variant.parameters[0], i, time[i], samples[i], samples[i, -1])
+    stream_finish(acc, first, weights, short_stencils(time), rates, 1)
+    assert np.array_equal(last, samples[taken - 1])
+    embedded = "controller_state" in variant.layout.blocks
+    maximal = np.concatenate([result.outputs[b][taken - 1] for b in ("theta", "omega", "position", "velocity",
+                                                                       *(["controller_state"] if embedded else []))])
+    got = tree_stream_table(time, acc[None], members[None], maximal[None], 1, np.array([12 if embedded else -1]))
+    assert set(got) == set(result.summary)
+    for key, value in got.items():
+        found = value[0, 0] if value.ndim == 3 else value[0]
+        assert str(np.asarray(found).tolist()) == str(np.asarray(result.summary[key]).tolist()), key
+    assert (got["fraction_saturated_torque_n"][0, 0, 0] > 0) == (path != CASE3)
     if path == PUSHED and taken == n:  # across the pushes the numerical dv/dt is no derivative: left out
         assert str(got["lyapunov_rate_check"][0]) == "pass"
-    rate = outputs["lyapunov_rate_numerical"][0, :taken]
-    streamed = trace[:taken, NUMERICAL_RATE_AT]
+    rate = result.outputs["lyapunov_rate_numerical"][:taken]
     if taken == n or taken < 7:  # the whole grid's stencils, or the first samples' own (short_stencils)
-        np.testing.assert_array_equal(streamed, rate)
+        np.testing.assert_array_equal(rates[:taken], rate)
     else:  # the whole grid's stencils, not the first samples' own: rounding
-        np.testing.assert_allclose(streamed, rate, rtol=0, atol=1e-12 * np.max(np.abs(outputs["lyapunov"][0, :taken])))
-    np.testing.assert_array_equal(trace[:taken, :N_OUTPUTS], columns[:, 0, :taken].T)
+        np.testing.assert_allclose(rates[:taken], rate, rtol=0, atol=1e-12 * np.max(np.abs(result.outputs["lyapunov"][:taken])))
+    assert np.all(rates[taken:] == -1.0)  # the samples never taken: the kernel's NaN rows
 
 
 # -- the driver under the CUDA simulator ------------------------------------------------------------------
@@ -129,13 +126,13 @@ def test_simulated_driver_covers_every_variant_and_method(simulated):
 
 @pytest.mark.parametrize("keep", ["all", "thinned", "none"])
 def test_simulated_driver_is_the_cpu_engine_bit_for_bit(simulated, keep):
-    """Status, message, nfev, steps, every summary figure and every output at the kept
-    samples equal the CPU engine's, but the numerical dv/dt of a run stopped early (the
-    whole grid's stencils: rounding)."""
+    """Status, message, nfev, steps, every summary figure (streamed on the device) and every
+    output at the kept samples equal the CPU engine's, but a thinned trace's numerical dv/dt
+    of a run stopped early (taken on the device with the whole grid's stencils: rounding)."""
     found = simulated[keep]
     assert found["runs"] == 52
     for run, what, status, relative in found["differences"]:
-        assert what == "lyapunov_rate_numerical" and status == "failed", (run, what, status, relative)
+        assert keep == "thinned" and what == "lyapunov_rate_numerical" and status == "failed", (run, what, status)
         assert relative < 1e-12
 
 
@@ -236,24 +233,26 @@ def test_simulated_sweep_writes_the_cpu_engines_store(tmp_path, store):
 
 
 def test_simulated_launch_has_one_deadline_and_writes_every_run(simulated):
-    """A launch of 600 runs on 4 blocks with a 1 ns limit, every buffer of the process
-    poisoned first (what an earlier launch left there): no thread of any block starts a run
-    after the launch's deadline, and every run's outputs are written: NOT_STARTED with its
-    reason, t_stop 0, no evaluations, NaN outputs (the CPU engine's rows after a stop)."""
+    """A launch of 600 runs on 4 blocks with a 1 ns limit, every device array it gets
+    poisoned first (what memory may hold): no thread of any block starts a run after the
+    launch's deadline, and every run's outputs are written: NOT_STARTED with its reason,
+    t_stop 0, no evaluations, NaN samples and last state (the CPU engine's rows after a
+    stop)."""
     found = simulated["deadline"]
     assert found["first_success"] == 600
     assert found["not_started"] == 600
-    assert found["t_stop_zero"] and found["nfev_zero"] and found["last_nan"] and found["trace_nan_state"]
+    assert found["t_stop_zero"] and found["nfev_zero"] and found["last_nan"] and found["samples_nan"]
     assert found["poison_left"] == 0
     assert found["message"].startswith("not run:") and "1e-09 s" in found["message"]
 
 
 def test_simulated_launches_pass_the_compiled_signature(simulated):
-    """Every launch of the simulated runs (each variant's state size) passes exactly the
-    types of launch_signature, the signature the GPU's kernel is compiled for (and the PTX
-    test compiles): C-contiguous arrays, the aligned settings record."""
+    """Every launch of the simulated runs (one body's three kernels: permanent, embedded and
+    the others' joint) passes exactly the types of tree_launch_signature, the signature the
+    GPU's kernels are compiled for (and the PTX tests compile): C-contiguous arrays, the
+    aligned settings record."""
     found = simulated["signatures"]
-    assert found["state_sizes"] == [6, 12, 15] and found["launches"] >= 3
+    assert found["kernels"] == [[1, 0, 0, True], [1, 0, 1, True], [1, 1, 0, True]] and found["launches"] >= 3
     assert found["mismatched"] == []
 
 
@@ -295,13 +294,13 @@ def ptx_for_sm_90(monkeypatch, function, signature) -> str:
 
 @pytest.mark.slow
 @pytest.mark.skipif(not _compilers(), reason="NVVM and NVRTC (numba-cuda[cu12]'s compiler wheels) are not installed")
-def test_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
-    """The kernel every launch runs (every variant's physics, DOP853, outputs, streamed
-    summary; launch_signature's types) compiles for CUDA from the CPU engine's source."""
-    from rbstab.engine.cuda import kernel_function, launch_signature
+def test_one_body_kernel_compiles_to_ptx_for_sm_90(monkeypatch):
+    """One body's kernel (every variant's physics, DOP853, outputs, streamed summary;
+    tree_launch_signature's types) compiles for CUDA from the CPU engine's source."""
+    from rbstab.engine.cuda import tree_kernel_function, tree_launch_signature
     from rbstab.engine.rk import DOP853
 
-    ptx_for_sm_90(monkeypatch, kernel_function(DOP853, 15), launch_signature(15))
+    ptx_for_sm_90(monkeypatch, tree_kernel_function(DOP853, (1, 0, 1), True), tree_launch_signature())
 
 
 def _kernel_cache_keys() -> tuple[str, str]:
@@ -311,10 +310,10 @@ def _kernel_cache_keys() -> tuple[str, str]:
 
     from numba.cuda.serialize import dumps
 
-    from rbstab.engine.cuda import kernel_function, tree_kernel_function
+    from rbstab.engine.cuda import tree_kernel_function
 
     return tuple(hashlib.sha256(f.__code__.co_code + dumps(tuple(c.cell_contents for c in f.__closure__ or ())))
-                 .hexdigest() for f in (kernel_function(2, 15), tree_kernel_function(2, (2, 2, 0))))
+                 .hexdigest() for f in (tree_kernel_function(2, (1, 0, 1), True), tree_kernel_function(2, (2, 2, 0))))
 
 
 def test_kernel_cache_key_is_the_same_in_every_process():
@@ -339,17 +338,20 @@ def test_kernel_cache_key_is_the_same_in_every_process():
 def test_each_kernel_has_cache_files_of_its_own():
     """numba-cuda saves a kernel's cache index without a lock (read, update, write): two
     processes compiling two kernels that shared an index file could leave an entry naming the
-    other's code. Each (method, state size) kernel has index files of its own, as two
-    processes find them."""
+    other's code. Each (method, tree shape, one body or not) kernel has index files of its
+    own, as two processes find them."""
     from rbstab.engine.rk import DOP853, method_number
 
     RK45 = method_number("RK45")
 
-    script = ("import sys; from numba.cuda.dispatcher import CUDACache; from rbstab.engine.cuda import kernel_function\n"
-              "print(CUDACache(kernel_function(int(sys.argv[1]), int(sys.argv[2])))._cache_file._index_path)")
-    paths = [subprocess.run([sys.executable, "-c", script, str(m), str(n)], capture_output=True, text=True,
-                            check=True).stdout.strip() for m, n in ((DOP853, 15), (RK45, 15), (DOP853, 12))]
-    assert len(set(paths)) == 3, paths
+    script = ("import sys; from numba.cuda.dispatcher import CUDACache; "
+              "from rbstab.engine.cuda import tree_kernel_function\n"
+              "f = tree_kernel_function(int(sys.argv[1]), (1, 0, int(sys.argv[2])), sys.argv[3] == '1')\n"
+              "print(CUDACache(f)._cache_file._index_path)")
+    paths = [subprocess.run([sys.executable, "-c", script, str(m), e, b], capture_output=True, text=True,
+                            check=True).stdout.strip()
+             for m, e, b in ((DOP853, "1", "1"), (RK45, "1", "1"), (DOP853, "0", "1"), (DOP853, "1", "0"))]
+    assert len(set(paths)) == 4, paths
     assert all(p.endswith(".nbi") for p in paths)
 
 
@@ -369,7 +371,7 @@ def jit(signature, cache):
         return Compiled(function.__name__)
     return compile
 cuda.jit = jit
-print(engine.compiled_kernel(int(sys.argv[1]), 15))
+print(engine.compiled_tree_kernel(int(sys.argv[1]), (1, 0, 1), True))
 """
 
 
@@ -390,10 +392,10 @@ def test_processes_compiling_at_once_take_turns(tmp_path):
                               stderr=subprocess.PIPE, text=True) for m in (DOP853, DOP853, RK45)]
     outs = [p.communicate(timeout=120) for p in procs]
     assert all(p.returncode == 0 for p in procs), [e for _, e in outs]
-    assert [o.strip() for o, _ in outs] == ["run_all_DOP853_15", "run_all_DOP853_15", "run_all_RK45_15"]
+    assert [o.strip() for o, _ in outs] == ["run_body1_0p1e_DOP853", "run_body1_0p1e_DOP853", "run_body1_0p1e_RK45"]
     notices = "".join(e for _, e in outs)
-    assert notices.count("compiling the CUDA kernel for DOP853") == 1
-    assert notices.count("compiling the CUDA kernel for RK45") == 1
+    assert notices.count("compiling the CUDA kernel for one body's embedded joint with DOP853") == 1
+    assert notices.count("compiling the CUDA kernel for one body's embedded joint with RK45") == 1
     assert time.perf_counter() - start >= 2.0  # the two DOP853 processes waited for each other
 
 
@@ -506,7 +508,7 @@ def test_kernel_resources_ask_the_dispatcher_by_signature():
     """numba-cuda's dispatcher takes a signature object (``sig.args``) in
     ``get_regs_per_thread`` and ``get_local_mem_per_thread``, not the tuple of argument
     types: the occupancy of every launch on a GPU reads them."""
-    from rbstab.engine.cuda import kernel_resources, launch_signature, tree_launch_signature
+    from rbstab.engine.cuda import kernel_resources, tree_launch_signature
 
     class Dispatcher:  # what numba-cuda's CUDADispatcher does with the signature it is given
         def get_regs_per_thread(self, signature):
@@ -515,7 +517,7 @@ def test_kernel_resources_ask_the_dispatcher_by_signature():
         def get_local_mem_per_thread(self, signature):
             return 7000 if signature.args == self.args else 0
 
-    for args in (launch_signature(15), tree_launch_signature()):
-        fn = Dispatcher()
-        fn.args = tuple(args)
-        assert kernel_resources(fn, args) == (200, 7000)
+    args = tree_launch_signature()
+    fn = Dispatcher()
+    fn.args = tuple(args)
+    assert kernel_resources(fn, args) == (200, 7000)

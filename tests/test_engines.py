@@ -136,11 +136,14 @@ def test_runs_of_any_parameters_share_a_chunk_and_implicit_methods_fall_back(mon
     configs = (configs_with_spins(data, SPINS[:2]) + configs_with_spins(stiff, SPINS[:2])
                + configs_with_spins(visco, SPINS[:1]) + configs_with_spins(radau, SPINS[:1]))
     calls, solo = [], []
-    real_integrate, real_simulate = simulate_module.integrate_runs, simulate_module.simulate
-    monkeypatch.setattr(simulate_module, "integrate_runs", lambda c, *a, **k: calls.append(len(c)) or real_integrate(c, *a, **k))
+    from rbstab.engine import integrate as driver
+
+    real_integrate, real_simulate = driver.integrate_chain_runs, simulate_module.simulate
+    monkeypatch.setattr(driver, "integrate_chain_runs",
+                        lambda s, y0, *a, **k: calls.append(len(y0)) or real_integrate(s, y0, *a, **k))
     monkeypatch.setattr(simulate_module, "simulate", lambda c, *a, **k: solo.append(c.name) or real_simulate(c, *a, **k))
     got = dict(simulate_many(configs, chunk_size=3))
-    # two state sizes (15 embedded, 12 visco_elastic): chunks of at most 3 per size
+    # two laws (embedded, visco_elastic): chunks of at most 3 per law
     assert sorted(calls) == [1, 1, 3]
     assert solo == ["run0"] and configs[5].simulation.method == "Radau"
     assert got[5].ok and got[5].solver["njev"] > 0  # the scipy path (an implicit method)

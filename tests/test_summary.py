@@ -199,7 +199,7 @@ def test_a_streamed_tree_run_without_samples_has_no_figures():
     for k in range(2):  # what the kernel does for a run it does not start
         stream_start(acc[k])
         stream_member_start(members[k])
-        stream_finish(acc[k], first, weights, short_stencils(time), np.empty((0, 1)), 1)
+        stream_finish(acc[k], first, weights, short_stencils(time), np.empty(0), 1)
     last = np.full((2, 27), np.nan)
     d_at = np.array([-1, 24])  # the second joint embedded: its D after the two bodies' 24 states
     table = tree_stream_table(time, acc, members, last, 2, d_at)

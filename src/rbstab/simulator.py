@@ -6,8 +6,9 @@ The engines (:data:`rbstab.engine.ENGINES`) share the compiled model
 (:mod:`rbstab.variants.kernels`):
 
 - ``compiled`` (the default): :mod:`rbstab.engine`, scipy's RK23, RK45 and DOP853
-  compiled with the model, the steps ``solve_ivp`` takes; every run of a call may have its
-  own variant, body, gains and settings.
+  compiled with the model, the steps ``solve_ivp`` takes; every run a tree (one body its
+  one-body tree, integrated by one body's rate), every run of a call with its own
+  bodies, gains and settings.
 - ``scipy`` (the reference, and the path of the implicit methods Radau, BDF, LSODA):
   :func:`scipy.integrate.solve_ivp` on the compiled right-hand side.
 - ``cuda``: the compiled engine's steps on an NVIDIA GPU (:mod:`rbstab.engine.cuda`).
@@ -38,10 +39,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .config.loader import ChainConfig
-from .engine import METHODS, RunBatch, integrate_runs, method_number
+from .engine import METHODS, RunBatch
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
-from .engine.settings import settings_records
 from .engine.integrate import admissible
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
@@ -49,8 +49,7 @@ from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
 from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
-from .summary import (NUMERICAL_RATE_AT, numerical_rate, stream_table, summarize, summary_table, tree_stream_table,
-                      tree_summary_table)
+from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
 from .variants.disturbances import apply_impulses, before
@@ -76,9 +75,9 @@ __all__ = [
     "tree_end",
 ]
 
-#: What :func:`simulate_blocks` keeps of the samples of a ``cuda`` run: every one, every
-#: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store) or none
-#: (the summary figures only).
+#: What :func:`simulate_blocks` keeps of the samples of a run: every one, on the GPU every
+#: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store's; the CPU
+#: keeps every one), or none (the summary figures only; on the GPU no sample comes back).
 KEEP = ("all", "thinned", "none")
 
 
@@ -459,54 +458,6 @@ POSTPROCESS_BLOCK = 32
 CUDA_CHAIN_SAMPLE_BYTES = 2 * 2**30
 
 
-def _chunk_blocks(configs, codes, params, sol, share: float, settings: np.ndarray,
-                  full: bool) -> Iterator[tuple[list[int], RunBlock]]:
-    """(runs of the chunk, their RunBlock) of one integrated chunk, post-processed
-    :data:`POSTPROCESS_BLOCK` runs at a time (a block per ``t_end`` of those runs); every
-    output if ``full``, else all but :data:`rbstab.layout.LEFT_OUT`. ``configs``: the
-    runs' RunConfigs, or None each (a :class:`~rbstab.engine.RunBatch`'s runs);
-    ``settings``: their rows (k, 7) of :func:`rbstab.engine.integrate_runs`."""
-    k, n_samples, _ = sol.samples.shape
-    for lo in range(0, k, POSTPROCESS_BLOCK):
-        t0 = _time.perf_counter()
-        hi = min(lo + POSTPROCESS_BLOCK, k)
-        columns = np.empty((N_OUTPUTS, hi - lo, n_samples))
-        times = np.linspace(0.0, settings[lo:hi, 0], n_samples, axis=1)
-        with np.errstate(all="ignore"):
-            run_outputs(codes[lo:hi], params[lo:hi], times, sol.samples[lo:hi], columns, full)
-        if sol.work is not None:
-            columns[OUTPUTS["disturbance_work"].offset] = sol.work[lo:hi]
-        # the runs of a chunk share the state size, so the same named outputs; runs with
-        # the same sample times get their numerical dv/dt and summaries at once (the same
-        # numbers as each alone), and one array of those times
-        by_t_end: dict[float, list[int]] = {}
-        for j in range(lo, hi):
-            by_t_end.setdefault(float(settings[j, 0]), []).append(j)
-        parts = []
-        for t_end, members in by_t_end.items():
-            part = columns if len(members) == hi - lo else columns[:, [j - lo for j in members]]
-            outputs = split_outputs(part, _LAYOUTS[int(codes[lo])], full)
-            time = np.linspace(0.0, t_end, n_samples)
-            time.flags.writeable = False  # shared by the runs' results
-            outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-            parts.append((members, time, outputs, summary_table(time, outputs)))
-        per_run = (_time.perf_counter() - t0) / (hi - lo)
-        for members, time, outputs, summaries in parts:
-            k = len(members)
-            yield members, RunBlock(
-                configs=[configs[j] for j in members],
-                time=time,
-                outputs=outputs,
-                summaries=summaries,
-                **_ends(sol.status[members], sol.t_stop[members], sol.nfev[members], sol.n_steps[members],
-                        settings[members], params[members]["limits"]),
-                wall_time=np.full(k, share + per_run),
-                timing={"integration": np.full(k, share), "postprocess": np.full(k, per_run)},
-                switching=[None] * k,
-                variants=[_VARIANT_NAMES[code] for code in codes[members].tolist()],
-            )
-
-
 def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.ndarray, settings: np.ndarray,
           limits: np.ndarray) -> dict:
     """A :class:`RunBlock`'s ``status``, ``message`` and ``solver`` of k runs of the compiled
@@ -545,33 +496,25 @@ def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENG
 
     The runs the compiled engine takes (:func:`uses_compiled_engine`) are one
     :class:`~rbstab.engine.RunBatch` (:func:`rbstab.engine.batch.batch_of`) integrated by
-    :func:`simulate_batch`; the others go through :func:`simulate` one by one (a block of
-    one run each). A chain's runs of one structure (the same bodies and joints and their
-    laws; any masses, gains, points and admissible regions) with the same method, sample
-    count and t_end are integrated in one call (``keep`` ``"none"``: their blocks carry
-    summaries and no traces).
+    :func:`simulate_batch`: every run a tree (one body its one-body tree), the runs of one
+    structure (the same bodies, joints and laws; any masses, gains, points, settings and
+    admissible regions) with the same method, sample count and t_end integrated together,
+    ``chunk_size`` runs a call on the CPU (:func:`rbstab.engine.integrate.integrate_chain_runs`);
+    a run's result does not depend on the other runs of its call. The others go through
+    :func:`simulate` one by one (a block of one run each). The outputs (with ``full``
+    False all but :data:`rbstab.layout.LEFT_OUT` for one body, which neither the summary
+    nor a thinned store reads) are evaluated :data:`POSTPROCESS_BLOCK` runs at a time, a
+    block each (one read-only ``time`` array); ``keep`` ``"none"``: the blocks carry
+    summaries and no traces. Each run's ``wall_time`` is its share of its call's
+    integration plus its own post-processing [s] (split in ``timing``). ``timeout`` [s],
+    if given, replaces each run's ``simulation.max_wall_time``.
 
-    With ``engine="compiled"`` every run of one body that the compiled engine takes
-    (:func:`uses_compiled_engine`) is integrated by :func:`rbstab.engine.integrate_runs`,
-    ``chunk_size`` runs per call, whatever its variant, body, gains and settings (a call
-    takes runs of one method, sample count and state size); the others go through
-    :func:`simulate` one by one (a block of one run each). A run's result does not depend
-    on the other runs of the call. The calls of a kind of run fill one buffer of
-    trajectories (``chunk_size * n_samples * n_state`` floats; nothing a result holds
-    points into it), and the outputs (with ``full`` False all but
-    :data:`rbstab.layout.LEFT_OUT`, which neither the summary nor a thinned store reads:
-    ~20 % less time; the runs that go through :func:`simulate` have every output) are
-    evaluated :data:`POSTPROCESS_BLOCK` runs at a time: a block is those of them with the
-    same ``t_end`` (one read-only ``time`` array). Each run's ``wall_time`` is its share
-    of its call's integration plus its own post-processing [s] (split in ``timing``).
-    ``timeout`` [s], if given, replaces each run's ``simulation.max_wall_time``.
-
-    With ``engine="cuda"`` the same runs go to the GPU (:mod:`rbstab.engine.cuda`), all
-    those of a method and state size in as few launches as their traces allow
-    (``chunk_size`` is not read): a block per launch, its outputs at the samples ``keep``
-    says (:data:`KEEP`; ``stride`` tells which), its summaries computed on the GPU as
-    the runs went, every run's ``wall_time`` its share of the launch. ``timeout``, if
-    given, is each launch's limit; the runs' ``simulation.max_wall_time`` is not read.
+    With ``engine="cuda"`` the same runs go to the GPU (:mod:`rbstab.engine.cuda`), a
+    call a launch (``chunk_size`` is not read): the summaries computed on the GPU as the
+    runs go, the samples brought back as ``keep`` says (:data:`KEEP`; ``stride`` tells
+    which), every run's
+    ``wall_time`` its share of the launch. ``timeout``, if given, is each launch's limit;
+    the runs' ``simulation.max_wall_time`` is not read.
 
     Raises
     ------
@@ -605,12 +548,10 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     ``(rows of the batch, RunBlock)``.
 
     What :func:`simulate_blocks` does for the configurations of those runs, with the same
-    results bit for bit, from the batch's arrays (no configuration object): the runs in the
-    one-body spelling (``batch.one_body``) of one method, sample count and state size are
-    integrated by one body's kernels, ``chunk_size`` at a time
-    (:func:`rbstab.engine.integrate_runs`), and post-processed :data:`POSTPROCESS_BLOCK` at
-    a time; trees' as :func:`_tree_batch_blocks` says. The blocks' ``configs`` are
-    ``configs``' entries of their rows (None where not given).
+    results bit for bit, from the batch's arrays (no configuration object), as
+    :func:`_tree_batch_blocks` says; a run in the one-body spelling (``batch.one_body``)
+    has one body's outputs, figures and messages (:func:`_body_outputs`). The blocks'
+    ``configs`` are ``configs``' entries of their rows (None where not given).
 
     Parameters
     ----------
@@ -620,11 +561,12 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     chunk_size : int
         Runs per compiled call (the trajectories held at once).
     full : bool
-        Every output (else all but :data:`rbstab.layout.LEFT_OUT`; trees' runs: every output).
+        Every output (else one body's all but :data:`rbstab.layout.LEFT_OUT`).
     engine : {"compiled", "cuda"}
-        The CPU engine, or the GPU as :func:`simulate_blocks` runs it (``keep``: the
-        samples that come back, :data:`KEEP`; ``chunk_size`` not read). A tree's run keeps
-        every sample, or none with ``keep`` ``"none"``.
+        The CPU engine, or the GPU as :func:`simulate_blocks` runs it (``chunk_size`` not
+        read).
+    keep : {"all", "thinned", "none"}
+        The samples kept (:data:`KEEP`).
     configs : sequence of RunConfig, optional
         The runs' configurations, one a row of the batch (what their results carry).
 
@@ -641,80 +583,12 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
         bad = int(rows[np.flatnonzero(~batch.compiled[rows])[0]])
         raise ValueError(f"run {bad} of the batch: the compiled engine does not take it (its method or the "
                          "pure sign law); run it with simulate()")
-    one_body = batch.one_body[rows]
-    if not one_body.all():
-        yield from _tree_batch_blocks(batch, rows[~one_body], engine, keep != "none", configs)
-    rows, codes = rows[one_body], batch.codes
-    methods, samples, sizes = batch.settings["method"][rows], batch.n_samples[rows], batch.n_state[rows]
-    # the groups, in np.unique's order (a set of the rows: numpy's unique of rows sorts them all)
-    for method, n_samples, size in sorted(set(zip(methods.tolist(), samples.tolist(), sizes.tolist()))):
-        members = rows[(methods == method) & (samples == n_samples) & (sizes == size)]
-        if get_engine(engine).gpu:
-            runs = (codes[members], batch.params[members, 0], batch.y0[members, :size],
-                    batch.settings_rows(members))
-            yield from _cuda_blocks(runs, _configs_of(configs, members), members, METHODS[method], n_samples, full,
-                                    keep)
-            continue
-        buffer = np.empty((min(chunk_size, len(members)), n_samples, size))
-        for lo in range(0, len(members), chunk_size):
-            chunk = members[lo : lo + chunk_size]
-            start = _time.perf_counter()
-            params = batch.params[chunk, 0]
-            settings = batch.settings_rows(chunk)
-            sol = integrate_runs(codes[chunk], params, batch.y0[chunk, :size], settings, method=METHODS[method],
-                                 n_samples=n_samples, out=buffer)
-            share = (_time.perf_counter() - start) / len(chunk)
-            for runs, block in _chunk_blocks(_configs_of(configs, chunk), codes[chunk], params, sol, share, settings,
-                                             full):
-                yield [int(chunk[j]) for j in runs], block
+    yield from _tree_batch_blocks(batch, rows, engine, keep, configs, full, chunk_size)
 
 
 def _configs_of(configs: Sequence | None, rows) -> list:
     """``configs``' entries at ``rows`` (None each where there are no configs)."""
     return [None] * len(rows) if configs is None else [configs[int(i)] for i in rows]
-
-
-def _cuda_blocks(runs: tuple, configs: list, positions, method: str, n_samples: int, full: bool,
-                 keep: str) -> Iterator[tuple[list[int], RunBlock]]:
-    """:func:`simulate_blocks` (``configs``: the runs' RunConfigs) or :func:`simulate_batch`
-    (``configs``: None each) of runs of one method, sample count and state size on the
-    GPU. ``runs``: their (codes, params, y0, settings rows (k, 7)); ``positions``: their
-    indices in the caller's runs. A launch stops after the largest ``max_wall_time`` of its
-    runs (``--timeout`` where given)."""
-    from .engine.cuda import integrate_chunks_cuda  # heavy: numba-cuda (--engine cuda only)
-
-    codes, params, y0, settings = runs
-    stride = {"all": 1, "thinned": summary_stride(n_samples), "none": None}[keep]
-    chunks = integrate_chunks_cuda(codes, params, y0, settings_records(settings, method_number(method)),
-                                   n_samples=n_samples, stride=stride, full=full,
-                                   max_wall_time=float(np.max(settings[:, 6])) if len(settings) else np.inf)
-    for chunk in chunks:
-        members = chunk.runs.tolist()
-        k = len(members)
-        grid = np.linspace(0.0, float(settings[members[0], 0]), n_samples)
-        layout = _LAYOUTS[int(codes[members[0]])]
-        if chunk.trace is None:
-            time, outputs = grid[:0], {}
-        else:
-            time = grid[::stride]
-            columns = np.moveaxis(chunk.trace, 2, 0)
-            outputs = split_outputs(columns[:N_OUTPUTS], layout, full)
-            outputs["lyapunov_rate_numerical"] = columns[NUMERICAL_RATE_AT]
-        time.flags.writeable = False
-        share = chunk.seconds / k
-        yield np.asarray(positions)[chunk.runs].tolist(), RunBlock(
-            configs=[configs[j] for j in members],
-            time=time,
-            outputs=outputs,
-            summaries=stream_table(grid, chunk.acc, chunk.last, layout),
-            **_ends(chunk.status, chunk.t_stop, chunk.nfev, chunk.n_steps, settings[chunk.runs],
-                    params[chunk.runs]["limits"]),
-            wall_time=np.full(k, share),
-            timing={"integration": np.full(k, share), "postprocess": np.zeros(k)},
-            switching=[None] * k,
-            stride=stride or 1,
-            variants=[_VARIANT_NAMES[code] for code in codes[chunk.runs].tolist()],
-        )
 
 
 def _simulate_tree(config, timeout: float | None = None) -> RunResult:
@@ -752,8 +626,9 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
 
 def _structure(batch: RunBatch, i: int) -> tuple:
     """What the runs integrated in one call share (run ``i``'s): the structure of their tree
-    (codes, parents, embedded joints, names; whether one body's rate serves it), the method,
-    sample count and t_end; their records, parent points and admissible regions may differ
+    (codes, parents, embedded joints, names; whether one body's rate serves it), the
+    spelling of their configurations, the method, sample count and t_end; their records,
+    parent points and admissible regions may differ
     (:func:`rbstab.engine.systems.tree_rows`)."""
     from .variants.chain import is_one_body  # heavy: numba
 
@@ -761,23 +636,25 @@ def _structure(batch: RunBatch, i: int) -> tuple:
     n = tree.size
     one_body = is_one_body(batch.params[i, :n], tree.codes, tree.parents, batch.ppoints[i, :n])
     return (tree.codes.tobytes(), tree.parents.tobytes(), tree.d_at.tobytes(), tree.chain.body_names,
-            tree.chain.joint_names, one_body, int(batch.settings["method"][i]), int(batch.n_samples[i]),
-            float(batch.settings["t_end"][i]))
+            tree.chain.joint_names, one_body, bool(batch.one_body[i]), int(batch.settings["method"][i]),
+            int(batch.n_samples[i]), float(batch.settings["t_end"][i]))
 
 
-def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, outputs: bool,
-                       configs: Sequence | None) -> Iterator[tuple[list[int], RunBlock]]:
+def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, keep: str,
+                       configs: Sequence | None, full: bool = True,
+                       chunk_size: int = POSTPROCESS_BLOCK) -> Iterator[tuple[list[int], RunBlock]]:
     """:func:`simulate_batch` of the runs ``rows`` of a :class:`RunBatch` on the compiled
     driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of one structure
     (:func:`_structure`: the same bodies and joints and their laws; each run's masses, gains,
     points and admissible region its own) with the same method, sample count and t_end in
-    calls of :data:`POSTPROCESS_BLOCK` runs of
-    :func:`rbstab.engine.integrate.integrate_chain_runs`, each distinct tree once in a call.
-    ``outputs`` False: the blocks carry the summaries and no traces. On the GPU the runs of
-    a call are one launch (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit
-    the largest ``max_wall_time`` of its runs); their summaries are streamed on the device
-    (:func:`rbstab.summary.tree_stream_table`) and their samples come back only with
-    ``outputs`` (then as many runs a call as :data:`CUDA_CHAIN_SAMPLE_BYTES` of samples)."""
+    calls of ``chunk_size`` runs of :func:`rbstab.engine.integrate.integrate_chain_runs`,
+    each distinct tree once in a call.
+    ``keep`` (:data:`KEEP`) ``"none"``: the blocks carry the summaries and no traces;
+    ``full`` False: without :data:`rbstab.layout.LEFT_OUT`. On the GPU the runs of a call
+    are one launch (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; its limit the
+    largest ``max_wall_time`` of its runs); their summaries are streamed on the device
+    (:func:`rbstab.summary.tree_stream_table`) and the samples ``keep`` asks for come back
+    (as many runs a call as :data:`CUDA_CHAIN_SAMPLE_BYTES` of samples)."""
     from .engine.integrate import integrate_chain_runs  # heavy: numba
 
     integrate, gpu = integrate_chain_runs, get_engine(engine).gpu
@@ -788,27 +665,33 @@ def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, outputs: 
     for i in rows.tolist():
         groups.setdefault(_structure(batch, i), []).append(i)
     for members in groups.values():
-        per_call = POSTPROCESS_BLOCK
+        per_call, n_samples = chunk_size, int(batch.n_samples[members[0]])
+        stride = {"all": 1, "thinned": summary_stride(n_samples) if gpu else 1, "none": None}[keep]
         if gpu:  # a launch takes as many runs as the host may hold the samples of (none: their summaries)
-            kept = int(batch.n_samples[members[0]]) if outputs else 1
-            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * kept * (int(batch.n_state[members[0]]) + 1)))
+            kept = 1 if stride is None else len(range(0, n_samples, stride))
+            per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * kept * (int(batch.n_state[members[0]]) + 2)))
         for lo in range(0, len(members), per_call):
-            yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, outputs, configs)
+            yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, stride, configs, full)
 
 
-def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, outputs: bool,
-               configs: Sequence | None) -> Iterator[tuple[list[int], RunBlock]]:
+def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride: int | None,
+               configs: Sequence | None, full: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
     """:func:`_tree_batch_blocks` for the runs ``members`` of ``batch`` (one structure,
     method, sample count and t_end): one call of ``integrate`` with each distinct tree and
-    admissible region once, then their outputs and summaries :data:`POSTPROCESS_BLOCK` runs
-    at a time, a RunBlock each (the outputs held at once: those of that many runs)."""
+    admissible region once, then their outputs at every ``stride``-th sample (None: no
+    outputs) and summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the
+    outputs held at once: those of that many runs). Runs in the one-body spelling get one
+    body's outputs, figures and messages (:func:`_body_outputs`; ``full`` False: without
+    :data:`rbstab.layout.LEFT_OUT`)."""
     from .engine.systems import tree_system, with_offsets  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     start = _time.perf_counter()
+    one_body = bool(batch.one_body[members[0]])
     structure = batch.trees[int(batch.tree[members[0]])]
-    n, n_states = structure.size, structure.n_states
+    n, n_states = structure.size, batch.n_state[members[0]]
     params, ppoints = batch.params[members, :n], batch.ppoints[members, :n]
+    params["lyapunov_offset"] = 0.0  # h is the batch's offset (a one-body record's copy of it: not read twice)
     keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
                      for j, i in enumerate(members)], dtype=object)
     _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)
@@ -821,41 +704,82 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, output
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
     # on the GPU: a launch's limit, each tree's h, and the summaries streamed (the samples kept for the outputs only)
-    gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "stride": 1 if outputs else None} if gpu else {}
+    gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "stride": stride} if gpu else {}
     if gpu:
         system = with_offsets(system, [t.offset for t in trees])
     sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **gpu_options)
-    time = np.linspace(0.0, float(settings[0, 0]), n_samples)
+    grid = np.linspace(0.0, float(settings[0, 0]), n_samples)
+    time = grid[:: stride or 1] if gpu else grid  # the samples that came back
     time.flags.writeable = False
     integration = (_time.perf_counter() - start) / len(members)
     for lo in range(0, len(members), POSTPROCESS_BLOCK):
         hi = min(lo + POSTPROCESS_BLOCK, len(members))
         t0 = _time.perf_counter()
-        run_outputs, summaries = ({}, {}) if gpu and not outputs else _trees_outputs(
-            [trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi], outputs,
-            summary=not gpu)
+        if gpu and stride is None:
+            traces, summaries = {}, {}
+        elif one_body:
+            traces, summaries = _body_outputs(batch, members[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi],
+                                                   full, summary=not gpu)
+        else:
+            traces, summaries = _trees_outputs([trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time,
+                                                    sol.samples[lo:hi], sol.work[lo:hi], stride is not None,
+                                                    summary=not gpu)
         if gpu:  # the summaries streamed on the device
-            summaries = tree_stream_table(time, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
+            summaries = tree_stream_table(grid, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
                                           structure.d_at)
-        status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
-                                          sol.last[j][None] if gpu else sol.samples[j], y0[j], settings[j],
-                                          params[j, 0]["limits"])
-                                 for j in range(lo, hi)))
-        ok = sol.status[lo:hi] == SUCCESS
+            if one_body:  # one body's figures: without the member axis
+                summaries = {key: value[:, 0] if value.ndim > 1 else value for key, value in summaries.items()}
+            if stride is not None and stride > 1:  # a thinned trace's dv/dt: of the whole grid, on the device
+                traces["lyapunov_rate_numerical"] = sol.rates[lo:hi]
+        if one_body:  # one body's messages (the run's own names none)
+            ends = _ends(sol.status[lo:hi], sol.t_stop[lo:hi], sol.nfev[lo:hi], sol.n_steps[lo:hi],
+                         settings[lo:hi], params[lo:hi, 0]["limits"])
+        else:
+            status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
+                                              sol.last[j][None] if gpu else sol.samples[j], y0[j], settings[j],
+                                              params[j, 0]["limits"])
+                                     for j in range(lo, hi)))
+            ok = sol.status[lo:hi] == SUCCESS
+            ends = {"status": list(status), "message": list(message),
+                    "solver": {"nfev": sol.nfev[lo:hi].astype(np.int64),
+                               "n_steps": sol.n_steps[lo:hi].astype(np.int64),
+                               "solver_status": np.where(ok, 0, -1).astype(np.int64)}}
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
         yield members[lo:hi], RunBlock(
             configs=_configs_of(configs, members[lo:hi]),
-            time=time if outputs else time[:0],
-            outputs=run_outputs,
+            time=time if stride is not None else time[:0],
+            outputs=traces,
             summaries=summaries,
-            status=list(status), message=list(message),
-            solver={"nfev": sol.nfev[lo:hi].astype(np.int64), "n_steps": sol.n_steps[lo:hi].astype(np.int64),
-                    "solver_status": np.where(ok, 0, -1).astype(np.int64)},
+            **ends,
             wall_time=integration + post,
             timing={"integration": np.full(hi - lo, integration), "postprocess": post},
             switching=[None] * (hi - lo),
-            joints=tuple(structure.chain.joint_names), bodies=tuple(structure.chain.body_names),
+            stride=stride if gpu and stride else 1,
+            **({"variants": [_VARIANT_NAMES[code] for code in batch.codes[members[lo:hi]].tolist()]} if one_body else
+               {"joints": tuple(structure.chain.joint_names), "bodies": tuple(structure.chain.body_names)}),
         )
+
+
+def _body_outputs(batch: RunBatch, rows: list[int], time: np.ndarray, samples: np.ndarray, work: np.ndarray,
+                  full: bool, summary: bool = True) -> tuple[dict, dict]:
+    """(outputs, summary columns) of the runs ``rows`` of ``batch`` in the one-body
+    spelling (one law, the paper's one body): one body's compiled outputs
+    (:func:`rbstab.variants.kernels.run_outputs`, every output, or all but
+    :data:`rbstab.layout.LEFT_OUT` unless ``full``) of their samples ``samples`` (k, m, 12
+    + 3 e; a permanent joint's Theta, Omega first) at ``time`` (m,) with the disturbances'
+    work ``work`` (k, m), in one body's names and shapes, and :func:`summary_table` (unless
+    ``summary``: the GPU streams it)."""
+    codes = batch.codes[rows]
+    layout = _LAYOUTS[int(codes[0])]
+    if samples.shape[2] != layout.size:  # a permanent joint's: its state is Theta, Omega
+        samples = np.ascontiguousarray(samples[:, :, : layout.size])
+    columns = np.empty((N_OUTPUTS, len(rows), len(time)))
+    with np.errstate(all="ignore"):
+        run_outputs(codes, np.ascontiguousarray(batch.params[rows, 0]), time[None], samples, columns, full)
+    columns[OUTPUTS["disturbance_work"].offset] = work
+    outputs = split_outputs(columns, layout, full)
+    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+    return outputs, summary_table(time, outputs) if summary else {}
 
 
 def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray, settings: np.ndarray,

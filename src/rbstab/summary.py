@@ -15,7 +15,7 @@ import numpy as np
 from .convergence import within_bound
 from .results import row
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
+from .layout import LYAPUNOV_TERMS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -31,11 +31,9 @@ __all__ = [
     "ACCUMULATOR_SIZE",
     "LAST_ABOVE",
     "V_INITIAL",
-    "NUMERICAL_RATE_AT",
     "stream_start",
     "stream_sample",
     "stream_finish",
-    "stream_table",
     "tree_stream_table",
     "streamed_final_lyapunov",
     "stream_member_start",
@@ -404,31 +402,23 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 
 # -- the summary figures as a run goes (the CUDA engine: no run keeps its samples) -----------------
 #: Slots of a streaming summary's accumulator (:func:`stream_sample`, :func:`stream_finish`,
-#: :func:`stream_table`): max |E_i| (3), v(0), max dv/dt, running min of v, largest rise of
-#: v above it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the
-#: samples taken, the last sample not converged (:func:`rbstab.convergence.converged`
-#: with v(0) and its v; -1 for none), the samples with dv/dt > 0, the samples with each
-#: axis of N, H and Lambda flagged at its limit (:data:`rbstab.layout.SATURATION_FLAGS`),
-#: and the last :data:`RATE_STENCIL` values of v, of dv/dt and of the disturbances' edges
-#: (rings).
-MAX_ERROR = 0  # 3 slots
-V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(3, 13)
-SATURATED = 13  # 3 slots a control, in the order of SATURATION_FLAGS
+#: :func:`tree_stream_table`): v(0), max dv/dt, running min of v, largest rise of v above
+#: it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the samples
+#: taken, the last sample not converged (:func:`rbstab.convergence.converged` with v(0) and
+#: its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL`
+#: values of v, of dv/dt and of the disturbances' edges (rings).
+V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(10)
 _FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
-V_RING = SATURATED + _FLAG_SLOTS
+V_RING = RISING + 1
 RATE_RING = V_RING + RATE_STENCIL
 EDGE_RING = RATE_RING + RATE_STENCIL
 ACCUMULATOR_SIZE = EDGE_RING + RATE_STENCIL
-_ERROR_AT = OUTPUTS["constraint_error"].offset
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
 _EDGES_AT = OUTPUTS["disturbance_edges"].offset
-_N_FLAGS_AT, _H_FLAGS_AT, _LAMBDA_FLAGS_AT = (OUTPUTS[flags].offset for flags, _ in SATURATION_FLAGS.values())
 #: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
 _within_bound = jit(forceinline=True)(within_bound)
 _T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
-#: Column of a streamed trace's row that holds the numerical dv/dt (after the outputs).
-NUMERICAL_RATE_AT = N_OUTPUTS
 
 
 @jit(forceinline=True)
@@ -451,8 +441,6 @@ def stream_start(acc):
     acc[TAKEN] = 0.0
     acc[LAST_ABOVE] = -1.0
     acc[RISING] = 0.0
-    for i in range(_FLAG_SLOTS):
-        acc[SATURATED + i] = 0.0
 
 
 @jit(forceinline=True)
@@ -465,36 +453,34 @@ def _numerical_rate(acc, start, w):
 
 
 @jit(forceinline=True)
-def _compare(acc, i, numerical, start, w, trace, stride):
+def _compare(acc, i, numerical, start, w, rates, stride):
     """Take sample i's numerical dv/dt, from the stencil of the w samples from ``start``: into
     the mismatch (0 for a stencil across a disturbance's edge, as :func:`summary_table`
-    counts it), and into the trace's row when the trace keeps sample i."""
+    counts it), and into ``rates`` where they keep sample i."""
     if acc[EDGE_RING + start % RATE_STENCIL] == acc[EDGE_RING + (start + w - 1) % RATE_STENCIL]:
         acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], abs(acc[RATE_RING + i % RATE_STENCIL] - numerical))
     else:
         acc[MAX_MISMATCH] = _max(acc[MAX_MISMATCH], 0.0)
-    if i % stride == 0 and i // stride < trace.shape[0]:
-        trace[i // stride, NUMERICAL_RATE_AT] = numerical
+    if i % stride == 0 and i // stride < rates.shape[0]:
+        rates[i // stride] = numerical
 
 
 @jit(forceinline=True)
-def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
+def stream_sample(acc, i, row, first, weights, ratio, rates, stride):
     """Take sample i (0, 1, ... in order) of a run into ``acc`` (:data:`ACCUMULATOR_SIZE`):
     ``row`` its outputs, shape (N_OUTPUTS,), at the offsets of :data:`rbstab.layout.OUTPUTS`
-    (read: E [m], inertial frame; v [J] and its terms, eq 25; analytic dv/dt [W]).
+    (read: v [J] and its terms, eq 25; analytic dv/dt [W]; the disturbances' edges).
 
     ``first``, ``weights``: :func:`stencil_weights` of the run's whole sample grid [s],
-    shapes (n,) and (n, w) [1/s], w <= :data:`RATE_STENCIL`; a sample's numerical dv/dt is taken when the last
-    sample of its stencil arrives. ``trace`` (n_trace, N_OUTPUTS + 1): every ``stride``-th
-    sample's row and numerical dv/dt (column :data:`NUMERICAL_RATE_AT`) go there (a trace
-    of 0 rows keeps none). The figures are those of :func:`summary_table`, the same numbers
-    for a run that fills its grid. ``ratio``: the convergence ratio of the last sample not
-    converged (what a basin map's time to converge reads).
+    shapes (n,) and (n, w) [1/s], w <= :data:`RATE_STENCIL`; a sample's numerical dv/dt is
+    taken when the last sample of its stencil arrives; ``rates`` (n_kept,) receive every
+    ``stride``-th sample's (NaN until its stencil is complete; 0 entries: none kept). The
+    figures are those of :func:`summary_table`, the same numbers for a run that fills its
+    grid. ``ratio``: the convergence ratio of the last sample not converged (what a basin
+    map's time to converge reads).
     """
     v = row[_V_AT]
     rate = row[_RATE_AT]
-    for a in range(3):
-        acc[MAX_ERROR + a] = _max(acc[MAX_ERROR + a], abs(row[_ERROR_AT + a]))
     if i == 0:
         acc[V_INITIAL] = v
         acc[V_MIN] = v
@@ -502,10 +488,6 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
     if rate > 0.0:
         acc[RISING] += 1.0
-    for a in range(3):
-        acc[SATURATED + a] += row[_N_FLAGS_AT + a]
-        acc[SATURATED + 3 + a] += row[_H_FLAGS_AT + a]
-        acc[SATURATED + 6 + a] += row[_LAMBDA_FLAGS_AT + a]
     v0 = acc[V_INITIAL]
     if not _within_bound(v0, v, ratio):
         acc[LAST_ABOVE] = i
@@ -516,16 +498,14 @@ def stream_sample(acc, i, row, first, weights, trace, stride, ratio):
     acc[RATE_RING + i % RATE_STENCIL] = rate
     acc[EDGE_RING + i % RATE_STENCIL] = row[_EDGES_AT]
     acc[TAKEN] = i + 1
-    if i % stride == 0 and i // stride < trace.shape[0]:
-        for c in range(row.shape[0]):
-            trace[i // stride, c] = row[c]
-        trace[i // stride, NUMERICAL_RATE_AT] = math.nan  # until its stencil is complete
+    if i % stride == 0 and i // stride < rates.shape[0]:
+        rates[i // stride] = math.nan  # until its stencil is complete
     w = weights.shape[1]
     start = i - (w - 1)  # the samples whose stencil ends at i start there
     if start >= 0:
         for q in range(max(0, i - w + 1), i + 1):
             if first[q] == start:
-                _compare(acc, q, _numerical_rate(acc, start, weights[q]), start, w, trace, stride)
+                _compare(acc, q, _numerical_rate(acc, start, weights[q]), start, w, rates, stride)
 
 
 #: Slots of a tree member's streamed figures (:func:`stream_member`, :func:`tree_stream_table`):
@@ -557,7 +537,7 @@ def stream_member(members, i, error, flags):
 
 
 @jit(forceinline=True)
-def stream_finish(acc, first, weights, short, trace, stride):
+def stream_finish(acc, first, weights, short, rates, stride):
     """The numerical dv/dt of the last samples of a run that stopped before the end of its
     grid (n_taken < n), one-sided on its own samples as :func:`numerical_rate` takes a
     run's finite samples: with the whole grid's weights (the same up to rounding), or for a
@@ -572,12 +552,12 @@ def stream_finish(acc, first, weights, short, trace, stride):
             acc[MAX_MISMATCH] = math.nan
             return
         for i in range(taken):
-            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), 0, taken, trace, stride)
+            _compare(acc, i, _numerical_rate(acc, 0, short[taken, i, :taken]), 0, taken, rates, stride)
         return
     start = taken - w
     for i in range(max(0, taken - w), taken):
         if first[i] + w - 1 > taken - 1:  # its stencil on the whole grid reaches past the run
-            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), start, w, trace, stride)
+            _compare(acc, i, _numerical_rate(acc, start, weights[i + n - taken]), start, w, rates, stride)
 
 
 def short_stencils(time: np.ndarray) -> np.ndarray:
@@ -589,30 +569,6 @@ def short_stencils(time: np.ndarray) -> np.ndarray:
     for m in range(2, w):
         short[m, :m, :m] = stencil_weights(time[:m])[1]
     return short
-
-
-def stream_table(time: np.ndarray, acc: np.ndarray, last: np.ndarray, layout) -> dict[str, np.ndarray]:
-    """:func:`summary_table`'s columns from streamed accumulators.
-
-    Parameters
-    ----------
-    time : ndarray, shape (n,)
-        The runs' sample grid [s].
-    acc : ndarray, shape (k, ACCUMULATOR_SIZE)
-        Each run's accumulator after :func:`stream_finish`.
-    last : ndarray, shape (k, N_OUTPUTS)
-        Each run's outputs at its last sample taken (NaN for a run with none).
-    layout : rbstab.layout.StateLayout
-        The runs' state layout (which state blocks have a ``final_`` figure).
-    """
-    finals = {}
-    for b in STATE_BLOCKS:
-        if b == "controller_state" and b not in layout.blocks:
-            continue
-        q = OUTPUTS[b]
-        finals[b] = last[:, q.offset: q.offset + 3].copy()
-    flags = [acc[:, SATURATED + 3 * c: SATURATED + 3 * c + 3] for c in range(len(SATURATION_FLAGS))]
-    return _streamed(time, acc, finals, acc[:, MAX_ERROR: MAX_ERROR + 3], flags)
 
 
 def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, last: np.ndarray, n_bodies: int,
@@ -635,14 +591,32 @@ def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, la
         Where each embedded joint's D sits in the state (-1: none).
     """
     k = len(acc)
+    taken = acc[:, TAKEN].astype(np.int64)
+    last_index = np.maximum(taken - 1, 0)
+    table: dict[str, np.ndarray] = {"t_final": time[last_index]}
     blocks = last[:, : 12 * n_bodies].reshape(k, n_bodies, 4, 3)
-    finals = {b: blocks[:, :, i].copy() for i, b in enumerate(STATE_BLOCKS[:4])}
+    for i, b in enumerate(STATE_BLOCKS[:4]):
+        table[f"final_{b}"] = blocks[:, :, i].copy()
     if np.any(d_at >= 0):
-        finals["controller_state"] = np.full((k, n_bodies, 3), np.nan)
+        table["final_controller_state"] = np.full((k, n_bodies, 3), np.nan)
         for j in np.flatnonzero(d_at >= 0):
-            finals["controller_state"][:, j] = last[:, d_at[j]: d_at[j] + 3]
-    flags = [members[:, :, 3 + 3 * c: 6 + 3 * c] for c in range(len(SATURATION_FLAGS))]
-    return _streamed(time, acc, finals, members[:, :, :3], flags)
+            table["final_controller_state"][:, j] = last[:, d_at[j]: d_at[j] + 3]
+    none = taken == 0
+    table["max_abs_constraint_error"] = np.where(none[:, None, None], np.nan, members[:, :, :3])
+    table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL])
+    table["lyapunov_final"] = streamed_final_lyapunov(acc)
+    table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
+    table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
+    table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
+    with np.errstate(all="ignore"):
+        for c, (_, figure) in enumerate(SATURATION_FLAGS.values()):
+            table[figure] = members[:, :, 3 + 3 * c: 6 + 3 * c] / taken[:, None, None]
+    span = time[last_index] - time[0]
+    with np.errstate(all="ignore"):
+        scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
+    largest = acc[:, MAX_MISMATCH]
+    table.update(_rate_check(largest, scales, (taken >= MIN_CHECK_SAMPLES) & np.isfinite(largest)))
+    return table
 
 
 def streamed_final_lyapunov(acc: np.ndarray) -> np.ndarray:
@@ -651,34 +625,6 @@ def streamed_final_lyapunov(acc: np.ndarray) -> np.ndarray:
     taken = acc[:, TAKEN].astype(np.int64)
     v = acc[np.arange(len(acc)), V_RING + np.maximum(taken - 1, 0) % RATE_STENCIL]
     return np.where(taken == 0, np.nan, v)
-
-
-def _streamed(time: np.ndarray, acc: np.ndarray, finals: dict, errors: np.ndarray, flags: list) -> dict[str, np.ndarray]:
-    """:func:`summary_table`'s columns of k runs from their accumulators ``acc`` (k,
-    ACCUMULATOR_SIZE): ``finals`` the state blocks at their last samples, ``errors`` max
-    |E| and ``flags`` the samples flagged of each control (in the order of SATURATION_FLAGS),
-    (k, 3) or (k, n, 3) per member."""
-    taken = acc[:, TAKEN].astype(np.int64)
-    last_index = np.maximum(taken - 1, 0)
-    table: dict[str, np.ndarray] = {"t_final": time[last_index]}
-    for b, value in finals.items():
-        table[f"final_{b}"] = value
-    none = taken == 0
-    table["max_abs_constraint_error"] = np.where(none.reshape(-1, *[1] * (errors.ndim - 1)), np.nan, errors)
-    table["lyapunov_initial"] = np.where(none, np.nan, acc[:, V_INITIAL])
-    table["lyapunov_final"] = streamed_final_lyapunov(acc)
-    table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
-    table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
-    table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
-    with np.errstate(all="ignore"):
-        for c, (_, figure) in enumerate(SATURATION_FLAGS.values()):
-            table[figure] = flags[c] / taken.reshape(-1, *[1] * (flags[c].ndim - 1))
-    span = time[last_index] - time[0]
-    with np.errstate(all="ignore"):
-        scales = np.maximum(acc[:, MAX_ABS_RATE], acc[:, ENERGY] / span)
-    largest = acc[:, MAX_MISMATCH]
-    table.update(_rate_check(largest, scales, (taken >= MIN_CHECK_SAMPLES) & np.isfinite(largest)))
-    return table
 
 
 def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], *, embedded: bool) -> dict[str, np.ndarray]:

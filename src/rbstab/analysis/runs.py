@@ -145,11 +145,11 @@ class Runs:
         self.base = batch_of([config])
         self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
         self.tree = getattr(config, "chain", None)
-        if self.tree is not None:
-            from ..variants import chain as C  # heavy: numba
+        from ..variants import chain as C  # heavy: numba
 
-            self.compiled = C.with_records(self.base.trees[0], self.base.params[0], self.base.ppoints[0],
-                                           self.base.offset[0])
+        size = self.base.trees[0].size  # the compiled tree (one body's: its one-body tree)
+        self.compiled = C.with_records(self.base.trees[0], self.base.params[0, :size], self.base.ppoints[0, :size],
+                                       self.base.offset[0])
 
     def _batch(self, states: np.ndarray, n_samples: int):
         """The base run from each of ``states`` (k, n_state), sampled ``n_samples`` times."""
@@ -258,45 +258,35 @@ class Runs:
     def streamed(self, states: np.ndarray, n_samples: int, ratio: float) -> tuple:
         """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end] on
         the GPU engine, each run's samples streamed into its summary and none brought back
-        (:func:`rbstab.engine.cuda.integrate_chunks_cuda`, or
-        :func:`~rbstab.engine.cuda.integrate_chain_runs_cuda` for a tree; a launch's limit
+        (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; a launch's limit
         ``simulation.max_wall_time``): (whether each reached t_end inside its admissible
         region (k,), the index of its last sample not converged
         (:func:`rbstab.convergence.converged` with v(0) and ``ratio``; -1: none) (k,), v(t_end)
         [J] (k,; NaN for a run that stopped early), why each failed run stopped: its status in
         words, without the time ('' for the others))."""
-        from ..engine.cuda import integrate_chain_runs_cuda, integrate_chunks_cuda  # heavy: numba-cuda
+        from ..engine.cuda import integrate_chain_runs_cuda  # heavy: numba-cuda
         from ..engine.status import SUCCESS, status_message  # heavy: numba
         from ..engine.systems import tree_system, with_offsets  # heavy: numba
         from ..simulator import tree_end  # heavy: numba
-        from ..summary import ACCUMULATOR_SIZE, LAST_ABOVE, TAKEN, streamed_final_lyapunov  # heavy: numba
+        from ..summary import LAST_ABOVE, TAKEN, streamed_final_lyapunov  # heavy: numba
 
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
         k, n, s = len(states), int(n_samples), self.config.simulation
         batch = self._batch(states, n)
-        bounds, settings = batch.params[0, 0]["limits"], batch.settings_rows()
-        status, t_stop, acc = np.empty(k, dtype=np.int64), np.empty(k), np.empty((k, ACCUMULATOR_SIZE))
-        if self.tree is None:
-            for chunk in integrate_chunks_cuda(batch.codes, batch.params[:1, 0], states, batch.settings, n_samples=n,
-                                               max_wall_time=s.max_wall_time, ratio=ratio):
-                status[chunk.runs], t_stop[chunk.runs], acc[chunk.runs] = chunk.status, chunk.t_stop, chunk.acc
-        else:
-            size = self.compiled.size
-            system = tree_system(self.compiled)._replace(params=batch.params[0, :size], ppoints=batch.ppoints[0, :size])
-            sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), states, settings,
-                                            method=s.method, n_samples=n, stride=None, max_wall_time=s.max_wall_time,
-                                            ratio=ratio)
-            status, t_stop, acc = sol.status, sol.t_stop, sol.acc
-        ok = status == SUCCESS
-        v_final = np.where(acc[:, TAKEN] == n, streamed_final_lyapunov(acc), np.nan)  # NaN: stopped early
+        bounds, settings, size = batch.params[0, 0]["limits"], batch.settings_rows(), self.compiled.size
+        system = tree_system(self.compiled)._replace(params=batch.params[0, :size], ppoints=batch.ppoints[0, :size])
+        sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), states, settings, method=s.method,
+                                        n_samples=n, stride=None, max_wall_time=s.max_wall_time, ratio=ratio)
+        ok = sol.status == SUCCESS
+        v_final = np.where(sol.acc[:, TAKEN] == n, streamed_final_lyapunov(sol.acc), np.nan)  # NaN: stopped early
         messages = [""] * k
         for i in np.flatnonzero(~ok).tolist():  # failed runs: few
-            message = (status_message(int(status[i]), float(t_stop[i]), s.gimbal_margin, s.max_steps,
-                                      s.max_wall_time, limits=bounds) if self.tree is None else
-                       tree_end(self.compiled, int(status[i]), float(t_stop[i]), sol.last[i][None], states[i],
-                                settings[i], bounds)[1])
+            code, t = int(sol.status[i]), float(sol.t_stop[i])
+            message = (status_message(code, t, s.gimbal_margin, s.max_steps, s.max_wall_time, limits=bounds)
+                       if self.base.one_body[0] else
+                       tree_end(self.compiled, code, t, sol.last[i][None], states[i], settings[i], bounds)[1])
             messages[i] = message.split(" at t =")[0]
-        return ok, acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
+        return ok, sol.acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
 
     def _one_by_one(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
         """:meth:`traces` of one body's runs that no batch takes, each its configuration

@@ -10,9 +10,19 @@ breakpoints and impulses), the step limit and the clock read between them (here 
 next pass with the others of its warp, instead of stalling them. Only the kernels' frames
 are written here: work arrays in thread-local memory, a persistent grid whose threads take
 the next run from an atomic counter when theirs ends, the launch's one deadline, and what
-becomes of a run's samples (:class:`StreamSink`: outputs and the streamed summary of
-:mod:`rbstab.summary`; a tree's :class:`TreeStreamSink`: its streamed summary and, if asked,
-its samples).
+becomes of a run's samples (:class:`TreeStreamSink`: its streamed summary of
+:mod:`rbstab.summary` and, if asked, its samples).
+
+Every run is a tree of 1 to :data:`MAX_TREE_BODIES` bodies (:func:`tree_kernel_function`,
+:func:`integrate_chain_runs_cuda`): the driver runs on the tree's
+:class:`~rbstab.engine.systems.TreeSystem` through the system's functions
+(:mod:`rbstab.engine.systems`; the physics is :func:`rbstab.variants.tree.tree_rate`,
+compiled as a device function with scratch arrays in thread-local memory sized for the
+tree's shape: a kernel per number of bodies, of permanent joints and of embedded joints,
+:func:`tree_shape`), or, where every tree of a launch is the paper's one body, on the
+body's record with one body's rate (a kernel of its own, as on the CPU). A launch takes
+trees of one structure (their records passed once, read by every thread), each run with
+its own tree, initial state and settings.
 
 A run with disturbances (``disturbance_count`` > 0, read once a run) is integrated as the
 CPU engine integrates it (docs/disturbances.md): its impulses at t = 0 are applied before
@@ -24,34 +34,22 @@ of the disturbances is one more entry of the integrated vector after the state (
 their power; each impulse adds its jump of kinetic energy; left out of the error norms),
 sampled with the state as each sample's ``disturbance_work``.
 
-A run gives what the CPU engine gives, computed as it goes: its status, stop time,
-right-hand-side evaluations and steps, the outputs at its last sample, the summary
-figures (:func:`rbstab.summary.stream_table`) and, if asked, every ``stride``-th sample's
-outputs and numerical dv/dt (a thinned trace). Under numba's CUDA simulator
+A run gives what the CPU driver (:func:`rbstab.engine.integrate.integrate_chain_runs`)
+gives, computed as it goes: its status, stop time, right-hand-side evaluations and steps,
+its summary streamed (each sample evaluated on the device, :func:`tree_stream_sample` or
+:func:`body_stream_sample`; :func:`rbstab.summary.tree_stream_table` makes the figures),
+its state at its last sample and, if asked, its state (and W) at every ``stride``-th
+sample, from which the host computes the outputs. Under numba's CUDA simulator
 (``NUMBA_ENABLE_CUDASIM=1``) the same driver runs as Python over the CPU-compiled
 functions and gives the CPU engine's bits.
 
 A launch has one deadline, ``max_wall_time`` after its first thread started: no run starts
 after it (such a run ends NOT_STARTED), a run under way stops at the next clock reading
-(TIMEOUT), and every run's outputs are written, started or not, so no buffer keeps what
-an earlier launch left in it. The grid is as many blocks as the compiled kernel's
-registers let the GPU hold at once (:func:`occupancy`); the kernel is compiled for the
-one argument signature every launch uses (:func:`launch_signature`), once per version,
-under a file lock that other processes wait on (:func:`compiled_kernel`).
-
-Trees of bodies (:func:`tree_kernel_function`, :func:`integrate_chain_runs_cuda`): the
-same driver on a tree's :class:`~rbstab.engine.systems.TreeSystem` through the system's
-functions (:mod:`rbstab.engine.systems`; the physics is
-:func:`rbstab.variants.tree.tree_rate`, compiled as a device function with scratch arrays
-in thread-local memory sized for the tree's shape: a kernel per number of bodies, 1 to
-:data:`MAX_TREE_BODIES`, of permanent joints and of embedded joints, :func:`tree_shape`),
-every launch trees of one structure (their records passed once, read by every thread),
-each run with its own tree, initial state and settings. A run gives its status, stop time,
-counts, its summary streamed as it goes (each sample evaluated on the device,
-:func:`tree_stream_sample`; :func:`rbstab.summary.tree_stream_table` makes the figures),
-its state at its last sample and, if asked, its state (and W) at every ``stride``-th
-sample, as the CPU driver's (:func:`rbstab.engine.integrate.integrate_chain_runs`), from
-which the host computes the outputs.
+(TIMEOUT), and every run's outputs are written, started or not. The grid is as many
+blocks as the compiled kernel's registers let the GPU hold at once (:func:`occupancy`);
+each kernel is compiled for the one argument signature every launch uses
+(:func:`tree_launch_signature`), once per version, under a file lock that other
+processes wait on (:func:`compiled_tree_kernel`).
 
 Not here: the pure sign law of ``sliding`` (``boundary_layer: 0``), whose event-driven
 integrator (:mod:`rbstab.engine.switching`) stays on the CPU, and the implicit methods.
@@ -68,7 +66,6 @@ import time as _time
 from collections import namedtuple
 from dataclasses import dataclass
 from types import FunctionType
-from typing import Iterator
 
 import numpy as np
 
@@ -85,15 +82,15 @@ from numba.extending import overload  # noqa: E402
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..jit import CACHE_DIR, cache_is_warm, jit, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS
+from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS
 from ..model import PARAMETERS
-from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, NUMERICAL_RATE_AT, short_stencils, stencil_weights,
+from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_weights,
                        stream_finish, stream_member, stream_member_start, stream_sample, stream_start)
-from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate
+from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate, is_one_body
 from ..variants.disturbances import edges_up_to
 from ..variants.tree import TreeWork, reduced_size, tree_expand
-from ..variants.kernels import DISTURBANCE_WORK_AT, PERMANENT, output_row
-from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample, sample_time
+from ..variants.kernels import PERMANENT, output_row
+from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
 from .systems import (CHAIN, TreeSystem, disturbed_of, expand_tree_samples, limited_of, reduce_tree_states,
@@ -101,18 +98,15 @@ from .systems import (CHAIN, TreeSystem, disturbed_of, expand_tree_samples, limi
 from .tableaus import METHODS
 from .status import NOT_STARTED
 
-__all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "CudaChunk",
-           "integrate_chunks_cuda", "launch_signature", "kernel_function", "compiled_kernel", "occupancy",
-           "TRACE_COLUMNS", "THREADS_PER_BLOCK", "MAX_TREE_BODIES", "tree_launch_signature", "tree_shape",
-           "tree_kernel_function", "compiled_tree_kernel", "integrate_chain_runs_cuda"]
+__all__ = ["CudaUnavailable", "INSTALL_HINT", "check_available", "compute_mode", "occupancy", "THREADS_PER_BLOCK",
+           "MAX_TREE_BODIES", "tree_launch_signature", "tree_shape", "tree_kernel_function", "compiled_tree_kernel",
+           "integrate_chain_runs_cuda"]
 
 #: How to get what ``--engine cuda`` needs.
 INSTALL_HINT = 'pip install "rbstab[cuda]" (numba-cuda and the CUDA 12 wheels) and an NVIDIA driver'
-#: Columns of a trace's row: the outputs (N_OUTPUTS) and the numerical dv/dt.
-TRACE_COLUMNS = N_OUTPUTS + 1
 #: Threads per block (runs of a warp step together; 128-256 within ~7 % on an H100).
 THREADS_PER_BLOCK = 128
-#: Share of the device's free memory the traces of one launch may take (up to four worker
+#: Share of the device's free memory the samples of one launch may take (up to four worker
 #: processes may share a GPU, each taking this share of what is free when it launches).
 TRACE_MEMORY_SHARE = 0.25
 #: Longest launch limit [ns] (the deadline is the GPU clock plus it, in an int64).
@@ -219,41 +213,21 @@ _register_gpu_clock()
 
 
 # -- the kernel ---------------------------------------------------------------------------------------
-#: Where the one-body kernel's samples go (:func:`rbstab.engine.integrate.keep_sample`): each
-#: sample's outputs into ``row`` (N_OUTPUTS,; :func:`rbstab.variants.kernels.output_row`
-#: with ``full``, and the work W where the run is ``disturbed``), streamed into the summary's
-#: accumulator ``acc`` and every ``stride``-th into ``trace`` (:func:`rbstab.summary.stream_sample`
-#: with the grid's ``first``, ``weights`` and the convergence ``ratio``).
-StreamSink = namedtuple("StreamSink", ["acc", "row", "first", "weights", "trace", "stride", "ratio", "full",
-                                       "disturbed"])
-
-
-@overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy"})
-def _keep_streamed(sink, code, p, j, t, sample, work):
-    if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is StreamSink):
-        return None
-
-    def keep(sink, code, p, j, t, sample, work):
-        output_row(code, t, sample, p, sink.row, sink.full)
-        if sink.disturbed:
-            sink.row[DISTURBANCE_WORK_AT] = work
-        stream_sample(sink.acc, j, sink.row, sink.first, sink.weights, sink.trace, sink.stride, sink.ratio)
-    return keep
-
-
 #: Where a tree run's samples go in the tree kernel: each is evaluated
 #: (:func:`tree_stream_sample`) and streamed into the summary's accumulator ``acc``
 #: (:func:`rbstab.summary.stream_sample`: v, its terms, dv/dt, the disturbances' edges, with
 #: the grid's ``first``, ``weights`` and the convergence ``ratio``; ``row`` the outputs'
-#: scratch, ``trace`` of no rows) and each member's slots ``members`` (n,
+#: scratch) and each member's slots ``members`` (n,
 #: :data:`rbstab.summary.MEMBER_SLOTS`; ``flags`` (n, 3, 3) scratch); ``offset`` is the tree's
 #: h [J] (v's zero: its first record's ``lyapunov_offset``); ``last`` (n_r + 1,) receives the reduced state and W of the sample;
 #: ``rows`` (a :class:`rbstab.engine.integrate.SampleRows`) keeps every ``stride``-th sample
-#: while it has rows.
-TreeStreamSink = namedtuple("TreeStreamSink", ["acc", "members", "row", "flags", "last", "first", "weights", "trace",
-                                               "ratio", "offset", "rows"])
+#: while it has rows, and ``rates`` its numerical dv/dt [W] (:func:`rbstab.summary.stream_sample`).
+TreeStreamSink = namedtuple("TreeStreamSink", ["acc", "members", "row", "flags", "last", "first", "weights", "ratio",
+                                               "offset", "rows", "rates"])
 _V_AT, _RATE_AT, _EDGES_AT = (OUTPUTS[name].offset for name in ("lyapunov", "lyapunov_rate", "disturbance_edges"))
 _TERMS_AT = tuple(OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
+_ERROR_AT = OUTPUTS["constraint_error"].offset
+_FLAGS_AT = tuple(OUTPUTS[name].offset for name, _ in SATURATION_FLAGS.values())
 
 
 @jit(_nrt=False)
@@ -282,7 +256,26 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     row[_V_AT] = terms[0] + terms[1] + terms[2] + terms[3] + sink.offset
     row[_RATE_AT] = terms[4]
     row[_EDGES_AT] = edges
-    stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.trace, 1, sink.ratio)
+    stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
+    for i in range(sink.last.shape[0] - 1):
+        sink.last[i] = sample[i]
+    sink.last[sink.last.shape[0] - 1] = work
+
+
+@jit(_nrt=False)
+def body_stream_sample(sink, code, p, j, t, sample, work):
+    """:func:`tree_stream_sample` of a run of the paper's one body (``p`` its record,
+    ``code`` its joint's law, :func:`rbstab.variants.chain.is_one_body`): one body's compiled
+    outputs (:func:`rbstab.variants.kernels.output_row`, h the record's), as the host's
+    :func:`rbstab.variants.chain.evaluate` gives them for such a tree, streamed into the
+    accumulators and the member slots of its one joint."""
+    row, flags = sink.row, sink.flags
+    output_row(code, t, sample, p, row, True)
+    for k in range(3):
+        for c in range(3):
+            flags[0, k, c] = row[_FLAGS_AT[k] + c]
+    stream_member(sink.members, 0, row[_ERROR_AT:_ERROR_AT + 3], flags[0])
+    stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
     for i in range(sink.last.shape[0] - 1):
         sink.last[i] = sample[i]
     sink.last[sink.last.shape[0] - 1] = work
@@ -292,9 +285,13 @@ def tree_stream_sample(sink, p, j, t, sample, work):
 def _keep_tree_streamed(sink, code, p, j, t, sample, work):
     if not (isinstance(sink, types.BaseNamedTuple) and sink.instance_class is TreeStreamSink):
         return None
+    one_body = isinstance(p, types.Record)
 
     def keep(sink, code, p, j, t, sample, work):
-        tree_stream_sample(sink, p, j, t, sample, work)
+        if one_body:
+            body_stream_sample(sink, code, p, j, t, sample, work)
+        else:
+            tree_stream_sample(sink, p, j, t, sample, work)
         rows = sink.rows
         if j % rows.stride == 0 and j // rows.stride < rows.samples.shape[0]:
             for i in range(rows.samples.shape[1]):
@@ -303,156 +300,12 @@ def _keep_tree_streamed(sink, code, p, j, t, sample, work):
     return keep
 
 
-def launch_signature(n_state: int) -> tuple:
-    """numba's types of a launch's arguments, in order, for runs of ``n_state`` states: the
-    one signature :func:`compiled_kernel` compiles and every launch passes (every array
-    C-contiguous).
-
-    codes int64 (k,); params :data:`rbstab.model.PARAMETERS` (k,) or (1,); y0 (k,
-    n_state); settings :data:`rbstab.engine.settings.SETTINGS` (k,); the grid's ``first``
-    int64 (n,), ``weights`` (n, w) and ``short`` (w, w, w) (:mod:`rbstab.summary`); stride
-    int64; full bool; ratio float64; control int64 (2,): the next run and the launch's
-    deadline [ns] (0 until its first thread sets it); limit_ns int64; then the outputs:
-    status int64 (k,), t_stop (k,), nfev, n_steps int64 (k,), last (k, N_OUTPUTS), acc (k,
-    ACCUMULATOR_SIZE), trace (k or 1, n_trace, TRACE_COLUMNS).
-    """
-    from numba import boolean, float64, from_dtype, int64  # heavy: numba
-
-    vector, matrix, cube = float64[::1], float64[:, ::1], float64[:, :, ::1]
-    ints = int64[::1]
-    return (ints, PARAMETERS_TYPE[::1], matrix, from_dtype(SETTINGS)[::1], ints, matrix, cube, int64,
-            boolean, float64, ints, int64, ints, vector, ints, ints, matrix, matrix, cube)
-
-
 #: numba's type of a :data:`rbstab.model.PARAMETERS` record, a global of the kernels (not a
 #: closure variable): numba-cuda keys its disk cache on the pickled closure, and a numba type
 #: pickles with its type code, which depends on the types a process made before (a sweep's
 #: worker, forked from a server that loaded the CPU kernels, numbers them otherwise than a
 #: new process, so the kernel would be compiled again in every worker).
 PARAMETERS_TYPE = from_dtype(PARAMETERS)
-
-
-def kernel_function(method: int, n_state: int, disturbances: bool = True):
-    """The Python function of the CUDA kernel of the runs of method number ``method`` and
-    ``n_state`` states (the shapes of its thread-local work arrays); see
-    :func:`launch_signature` for its arguments. Its name names the two, so that each
-    (method, state size) kernel has cache files of its own on disk.
-
-    ``disturbances`` False gives a kernel without the driver's steps for disturbances
-    (breakpoints, impulses, the work W after the state in its work arrays), wrong for a
-    run with disturbances: what ``benchmarks/gpu.py`` compares the registers and local
-    memory of the kernel with."""
-    from numba import float64  # heavy: numba (this module is imported only by --engine cuda)
-
-    n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
-    scheme = (method, int(N_STAGES[method]), method == DOP853)
-    n_vec = n_state + 1 if disturbances else n_state  # the integrated vector: the state, then W
-
-    def run_all(codes, params, y0s, settings, first, weights, short, stride, full, ratio, control, limit_ns,
-                status_o, t_stop_o, nfev_o, n_steps_o, last_o, acc_o, trace_o):
-        K = cuda.local.array((n_rows, n_vec), float64)
-        Q = cuda.local.array((q_rows, n_vec), float64)
-        y = cuda.local.array(n_vec, float64)
-        f = cuda.local.array(n_vec, float64)
-        y_new = cuda.local.array(n_vec, float64)
-        scale = cuda.local.array(n_state, float64)  # the error norms take the state's entries
-        work = cuda.local.array(n_vec, float64)
-        sample = cuda.local.array(n_vec, float64)
-        row = cuda.local.array(N_OUTPUTS, float64)
-        acc = cuda.local.array(ACCUMULATOR_SIZE, float64)
-        record = cuda.local.array(1, PARAMETERS_TYPE)
-        w = Work(K, Q, y_new, scale, work)
-        n_runs = y0s.shape[0]
-        n_samples = first.shape[0]
-        # the launch's deadline: set once, by the first thread to start
-        now = globaltimer()
-        deadline = cuda.atomic.cas(control, 1, 0, now + limit_ns)
-        if deadline == 0:
-            deadline = now + limit_ns
-        passes = 0
-        k = cuda.atomic.add(control, 0, 1)
-        while k < n_runs:
-            # a run: its start (none after the launch's deadline)
-            code = codes[k]
-            # the run's record copied to thread-local memory: its fields are read at every
-            # right-hand side, and the copy reads it from device memory once, coalesced
-            shared = min(k, params.shape[0] - 1)  # one record for every run, or a record a run
-            source = params[shared: shared + 1].view(np.float64)
-            copy = record.view(np.float64)
-            for i in range(copy.shape[0]):
-                copy[i] = source[i]
-            p = record[0]
-            s = settings[k]
-            trace = trace_o[min(k, trace_o.shape[0] - 1)]
-            limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
-            disturbed = disturbances and disturbed_of(p)
-            flags = (limit, disturbed, limited_of(p), n_samples)
-            stream_start(acc)
-            for i in range(N_OUTPUTS):  # outputs not computed (rbstab.layout.LEFT_OUT) stay NaN
-                row[i] = math.nan
-            sink = StreamSink(acc, row, first, weights, trace, stride, ratio, full, disturbed)
-            status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
-            if globaltimer() <= deadline:
-                for i in range(n_state):
-                    y[i] = y0s[k, i]
-                for i in range(n_state, n_vec):
-                    y[i] = 0.0  # W [J] from 0 to t
-                status, state, passes = drive_run(code, p, s, w, (y, f, sample), sink, flags, scheme, (deadline, passes))
-            t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
-            # its end: every output of the run written, whether it ran or not
-            stream_finish(acc, first, weights, short, trace, stride)
-            status_o[k] = status
-            t_stop_o[k] = t
-            nfev_o[k] = nfev
-            n_steps_o[k] = n_steps
-            for i in range(N_OUTPUTS):
-                last_o[k, i] = row[i] if j > 0 else math.nan
-            for i in range(ACCUMULATOR_SIZE):
-                acc_o[k, i] = acc[i]
-            # the samples after a stop: the outputs of a NaN state, as the CPU engine's
-            for i in range(n_state):
-                sample[i] = math.nan
-            for i in range(-(-j // stride) * stride, min(n_samples, trace.shape[0] * stride), stride):
-                output_row(code, sample_time(i, n_samples, s.t_end), sample, p, row, full)
-                for c in range(N_OUTPUTS):
-                    trace[i // stride, c] = row[c]
-                trace[i // stride, NUMERICAL_RATE_AT] = math.nan
-            k = cuda.atomic.add(control, 0, 1)
-
-    run_all.__name__ = run_all.__qualname__ = f"run_all_{METHODS[method]}_{n_state}" + (
-        "" if disturbances else "_undisturbed")
-    return run_all
-
-
-@functools.lru_cache(maxsize=None)
-def compiled_kernel(method: int, n_state: int):
-    """The CUDA kernel of the runs of method number ``method`` and ``n_state`` states,
-    compiled for :func:`launch_signature` (or loaded from the disk cache beside the CPU
-    kernels, :data:`rbstab.jit.CACHE_DIR`), once per process.
-
-    Processes that need it at once take turns under a file lock in the cache folder: the
-    first compiles it (and says so in one line on stderr, once for this version), the
-    others load what it saved. Launched as ``kernel[blocks, THREADS_PER_BLOCK](*arguments)``
-    (:func:`launch_signature`).
-    """
-    _cuda()
-    function = kernel_function(method, n_state)
-    if simulated():
-        return cuda.jit(_simulator_function(function))
-    from numba.cuda.core import config  # optional: numba-cuda
-
-    config.CACHE_DIR = str(CACHE_DIR)
-    group = f"cuda-{METHODS[method]}-{n_state}"
-    what = f"the CUDA kernel for {METHODS[method]} with {n_state} states"
-    with _compile_lock(group):
-        warm = cache_is_warm(group)
-        if not warm:
-            print(f"rbstab: compiling {what} (once for this version; cached in {CACHE_DIR})", file=sys.stderr,
-                  flush=True)
-        fn = cuda.jit(launch_signature(n_state), cache=True)(function)  # compiles, or loads from the cache
-        _say_cache_miss(fn, warm, what)
-        mark_warm(group)
-    return fn
 
 
 def _say_cache_miss(fn, warm: bool, what: str) -> None:
@@ -485,8 +338,8 @@ def _compile_lock(group: str):
 
 def kernel_resources(fn, signature: tuple) -> tuple[int, int]:
     """(registers, local memory [B]) a thread of the compiled kernel ``fn`` on the current
-    device, ``signature`` the argument types it was compiled for (:func:`launch_signature`
-    or :func:`tree_launch_signature`). numba-cuda's dispatcher looks a kernel up by a
+    device, ``signature`` the argument types it was compiled for
+    (:func:`tree_launch_signature`). numba-cuda's dispatcher looks a kernel up by a
     signature object (its ``args``), not by the tuple of argument types."""
     from numba import types  # heavy: numba
     from numba.core.typing import signature as make_signature  # heavy: numba
@@ -511,11 +364,6 @@ def occupancy(fn, signature: tuple) -> int:
     return max(1, min(by_registers, by_threads, device.MAX_BLOCKS_PER_MULTIPROCESSOR))
 
 
-#: The compiled functions the kernel calls (the simulator hands them numpy's arrays).
-DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of", "output_row", "sample_time", "stream_start",
-                    "stream_finish")
-
-
 def _plain(value):
     """The numpy array or record behind the simulator's wrappers of a kernel's arguments
     (in a named tuple: a tuple of them, a tree's system)."""
@@ -533,7 +381,7 @@ def _unwrapping(function):
     return call
 
 
-def _simulator_function(function, device_functions=DEVICE_FUNCTIONS):
+def _simulator_function(function, device_functions):
     """``function`` with the compiled functions it calls (``device_functions``, names of
     this module's globals) taking the simulator's arguments: under the simulator a kernel
     runs as Python and calls rbstab's CPU-compiled functions, which take numpy's arrays and
@@ -563,12 +411,13 @@ def tree_launch_signature() -> tuple:
     (:mod:`rbstab.variants.tree`), settings :data:`rbstab.engine.settings.SETTINGS` (k,);
     the grid's ``first`` int64 (n_samples,), ``weights`` (n_samples, w) and ``short`` (w, w,
     w) (:mod:`rbstab.summary`; the grid linspace(0, t_end, n_samples)); stride int64
-    (every stride-th sample kept); ratio float64; control int64 (2,) and limit_ns int64 as
-    :func:`launch_signature`'s; then the outputs: status int64 (k,), t_stop (k,), nfev,
+    (every stride-th sample kept); ratio float64; control int64 (2,): the next run and the
+    launch's deadline [ns] (0 until its first thread sets it); limit_ns int64; then the outputs: status int64 (k,), t_stop (k,), nfev,
     n_steps int64 (k,), acc (k, ACCUMULATOR_SIZE) and members (k, n, MEMBER_SLOTS) the
     streamed summary (:class:`TreeStreamSink`), last (k, n_r + 1) the reduced state and W at
-    each run's last sample (NaN for a run with none), samples (k, n_kept, n_r) and work (k,
-    n_kept) (the disturbances' work W [J]) at the kept samples (n_kept 0: none kept).
+    each run's last sample (NaN for a run with none), samples (k, n_kept, n_r), work (k,
+    n_kept) (the disturbances' work W [J]) and rates (k, n_kept) (v's numerical dv/dt [W]) at
+    the kept samples (n_kept 0: none kept).
     """
     from numba import float64, from_dtype, int64  # heavy: numba
 
@@ -576,7 +425,7 @@ def tree_launch_signature() -> tuple:
     ints = int64[::1]
     return (PARAMETERS_TYPE[:, ::1], ints, ints, cube, ints, ints, ints, ints, ints, matrix,
             from_dtype(SETTINGS)[::1], ints, matrix, cube, int64, float64, ints, int64, ints, vector, ints, ints,
-            matrix, cube, matrix, cube, matrix)
+            matrix, cube, matrix, cube, matrix, matrix)
 
 
 def tree_shape(codes, d_at) -> tuple[int, int, int]:
@@ -621,14 +470,21 @@ def _lower_not_inlined() -> None:
     lowering.CUDALower.setup_function = setup_function
 
 
-def tree_kernel_function(method: int, shape: tuple[int, int, int]):
+def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: bool = False):
     """The Python function of the CUDA kernel of the runs of trees of ``shape`` (bodies n,
     permanent joints p, embedded joints e; :func:`tree_shape`) with method number ``method``
     (:func:`tree_launch_signature`: one tree, k runs, one thread a run). Its name names
     them, so that each kernel has cache files of its own.
 
-    The driver is :func:`kernel_function`'s (:func:`rbstab.engine.integrate.drive_run`,
-    the persistent grid and the launch's one deadline) on a
+    ``one_body``: every tree of its launches is the paper's one body
+    (:func:`rbstab.variants.chain.is_one_body`), integrated as the CPU driver integrates it:
+    the system is the body's record (copied to thread-local memory once a run: its fields
+    are read at every right-hand side), its rate one body's and its samples evaluated by one
+    body's outputs (:func:`body_stream_sample`); the same states and figures as a general
+    tree's to rounding, the CPU's bit for bit.
+
+    The driver is :func:`rbstab.engine.integrate.drive_run` (with the persistent grid and
+    the launch's one deadline) on a
     :class:`~rbstab.engine.systems.TreeSystem`, whose functions (:mod:`rbstab.engine.systems`)
     the passes call as the CPU driver's do; a sample is the reduced state there (and W),
     evaluated and streamed into the run's summary (:class:`TreeStreamSink`), and, while the
@@ -654,7 +510,7 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
 
     def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, first,
                  weights, short, stride, ratio, control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, acc_o,
-                 members_o, last_o, samples_o, work_o):
+                 members_o, last_o, samples_o, work_o, rates_o):
         K_all = cuda.local.array((n_rows, size), float64)
         Q_all = cuda.local.array((q_rows, size), float64)
         y_all = cuda.local.array(size, float64)
@@ -665,7 +521,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
         sample_all = cuda.local.array(size, float64)
         row = cuda.local.array(N_OUTPUTS, float64)
         saturated = cuda.local.array((bodies, 3, 3), float64)
-        no_trace = acc_o[:0]  # a trace of no rows (the outputs are the host's)
+        if one_body:
+            record = cuda.local.array(1, PARAMETERS_TYPE)
         chain = ChainWork(cuda.local.array((bodies, 3, 3), float64), cuda.local.array((bodies, 3, 3), float64),
                           cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                           cuda.local.array((bodies, 3, 3), float64),
@@ -689,7 +546,14 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
         k = cuda.atomic.add(control, 0, 1)
         while k < n_runs:
             tree = tree_of[k]
-            p = TreeSystem(params[tree], codes, parents, ppoints[tree], d_at, r_at, u_at, rd_at, scratch)
+            if one_body:
+                source, copy = params[tree, 0:1].view(np.float64), record.view(np.float64)
+                for i in range(copy.shape[0]):
+                    copy[i] = source[i]
+                code, p = codes[0], record[0]
+            else:
+                code, p = CHAIN, TreeSystem(params[tree], codes, parents, ppoints[tree], d_at, r_at, u_at, rd_at,
+                                            scratch)
             disturbed = disturbed_of(p)
             n_vec = n_state + 1 if disturbed else n_state  # the integrated vector: the state, then W
             K, Q = K_all[:, :n_vec], Q_all[:, :n_vec]  # views of the first columns (a reshape needs numba's runtime)
@@ -706,20 +570,20 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                 row[i] = 0.0
             for i in range(last.shape[0]):
                 last[i] = math.nan
-            sink = TreeStreamSink(acc, members, row, saturated, last, first, weights, no_trace, ratio,
+            sink = TreeStreamSink(acc, members, row, saturated, last, first, weights, ratio,
                                   params[tree, 0].lyapunov_offset,
-                                  SampleRows(samples_o[k], work_o[k], stride))
+                                  SampleRows(samples_o[k], work_o[k], stride), rates_o[k])
             status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
                 for i in range(n_state, n_vec):
                     y[i] = 0.0  # W [J] from 0 to t
-                status, state, passes = drive_run(CHAIN, p, s, w, (y, f, sample), sink, flags, scheme,
+                status, state, passes = drive_run(code, p, s, w, (y, f, sample), sink, flags, scheme,
                                                   (deadline, passes))
             t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
             # its end: every output of the run written, whether it ran or not
-            stream_finish(acc, first, weights, short, no_trace, 1)
+            stream_finish(acc, first, weights, short, rates_o[k], stride)
             status_o[k] = status
             t_stop_o[k] = t
             nfev_o[k] = nfev
@@ -728,9 +592,11 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int]):
                 for c in range(n_state):
                     samples_o[k, i, c] = math.nan
                 work_o[k, i] = math.nan
+                rates_o[k, i] = math.nan
             k = cuda.atomic.add(control, 0, 1)
 
-    run_tree.__name__ = run_tree.__qualname__ = f"run_tree{bodies}_{permanent}p{embedded}e_{METHODS[method]}"
+    run_tree.__name__ = run_tree.__qualname__ = (f"run_{'body' if one_body else 'tree'}{bodies}_{permanent}p"
+                                                 f"{embedded}e_{METHODS[method]}")
     return run_tree
 
 
@@ -740,21 +606,27 @@ TREE_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of", "stream_star
 
 
 @functools.lru_cache(maxsize=None)
-def compiled_tree_kernel(method: int, shape: tuple[int, int, int]):
-    """The CUDA kernel of the runs of trees of ``shape`` (:func:`tree_shape`) with method
-    number ``method``, compiled for :func:`tree_launch_signature` or loaded from the disk
-    cache, once per process, as :func:`compiled_kernel`."""
+def compiled_tree_kernel(method: int, shape: tuple[int, int, int], one_body: bool = False):
+    """The CUDA kernel of the runs of trees of ``shape`` (:func:`tree_shape`; ``one_body``
+    as :func:`tree_kernel_function`'s) with method number ``method``, compiled for
+    :func:`tree_launch_signature` (or loaded from the disk cache beside the CPU kernels,
+    :data:`rbstab.jit.CACHE_DIR`), once per process.
+
+    Processes that need it at once take turns under a file lock in the cache folder: the
+    first compiles it (and says so in one line on stderr, once for this version), the
+    others load what it saved."""
     _cuda()
-    function = tree_kernel_function(method, shape)
+    function = tree_kernel_function(method, shape, one_body)
     if simulated():
         return cuda.jit(_simulator_function(function, TREE_DEVICE_FUNCTIONS))
     from numba.cuda.core import config  # optional: numba-cuda
 
     config.CACHE_DIR = str(CACHE_DIR)
     n, p, e = shape
-    group = f"cuda-tree{n}-{p}p{e}e-{METHODS[method]}"
-    what = (f"the CUDA kernel for trees of {n} bodies ({p} permanent joints, {e} embedded) with "
-            f"{METHODS[method]}")
+    group = f"cuda-{'body' if one_body else 'tree'}{n}-{p}p{e}e-{METHODS[method]}"
+    what = (f"the CUDA kernel for one body's {('permanent', 'embedded', 'other')[0 if p else 1 if e else 2]} joint"
+            if one_body else f"the CUDA kernel for trees of {n} bodies ({p} permanent joints, {e} embedded)")
+    what += f" with {METHODS[method]}"
     with _compile_lock(group):
         warm = cache_is_warm(group)
         if not warm:
@@ -767,177 +639,12 @@ def compiled_tree_kernel(method: int, shape: tuple[int, int, int]):
 
 
 # -- from Python ----------------------------------------------------------------------------------------
-@dataclass
-class CudaChunk:
-    """What the GPU gives for some runs of a call of :func:`integrate_chunks_cuda`.
-
-    Attributes
-    ----------
-    runs : ndarray of int, shape (k,)
-        The runs' positions in the call (runs of one ``t_end``, in order).
-    status : ndarray of int, shape (k,)
-        How each run ended (:mod:`rbstab.engine.status`); TIMEOUT with t_stop 0 for a run
-        the launch's limit left unstarted.
-    t_stop : ndarray, shape (k,)
-        Where each run stopped [s].
-    nfev, n_steps : ndarray of int, shape (k,)
-    last : ndarray, shape (k, N_OUTPUTS)
-        The outputs at each run's last sample (NaN for a run with none).
-    acc : ndarray, shape (k, ACCUMULATOR_SIZE)
-        The streamed summary (:func:`rbstab.summary.stream_table` turns it into figures).
-    trace : ndarray, shape (k, n_trace, TRACE_COLUMNS) or None
-        Every ``stride``-th sample's outputs and numerical dv/dt; after a run stopped, the
-        outputs of a NaN state (as the CPU engine's).
-    kernel_seconds : float
-        The kernel's time on the GPU (CUDA events) [s].
-    seconds : float
-        The launch's wall time (transfers, kernel and results to the host) [s].
-    """
-
-    runs: np.ndarray
-    status: np.ndarray
-    t_stop: np.ndarray
-    nfev: np.ndarray
-    n_steps: np.ndarray
-    last: np.ndarray
-    acc: np.ndarray
-    trace: np.ndarray | None
-    kernel_seconds: float
-    seconds: float
-
-
-def integrate_chunks_cuda(codes, params, y0, settings, *, n_samples: int, stride: int | None = None,
-                          full: bool = False, max_wall_time: float = math.inf,
-                          ratio: float = DEFAULT_LYAPUNOV_RATIO) -> Iterator[CudaChunk]:
-    """Integrate k runs of one method and state size on the GPU; yields a
-    :class:`CudaChunk` per launch (the runs of one ``t_end`` at a time, in order, as many a
-    launch as :data:`TRACE_MEMORY_SHARE` of the device's free memory holds of their traces).
-
-    Parameters
-    ----------
-    codes : array_like of int, shape (k,)
-        Variant codes; no pure-sign-law mode.
-    params : ndarray of :data:`rbstab.model.PARAMETERS`, shape (k,) or (1,)
-        Each run's record, or one that every run shares (a basin map's).
-    y0 : ndarray, shape (k, n_state)
-    settings : ndarray of :data:`rbstab.engine.settings.SETTINGS`, shape (k,)
-        Every run with the same ``method``; ``max_wall_time`` is not read (see below).
-    n_samples : int
-        Samples per run, evenly spaced on [0, t_end] (>= 2); the summary figures are
-        taken over them.
-    stride : int or None
-        Keep every ``stride``-th sample's outputs (a trace); None: none.
-    full : bool
-        Every output at the kept samples, or all but :data:`rbstab.layout.LEFT_OUT`.
-    max_wall_time : float
-        Each launch's limit [s] from its first thread's start: no run starts after it
-        (NOT_STARTED, t_stop 0, NaN outputs), a run under way stops (TIMEOUT).
-    ratio : float
-        The convergence ratio of each run's last sample not converged (the accumulator's
-        ``LAST_ABOVE``: :func:`rbstab.convergence.converged` with v(0) and its v).
-
-    Raises
-    ------
-    CudaUnavailable
-        No GPU, driver or numba-cuda (:func:`check_available`).
-    ValueError
-        For runs of several methods.
-    """
-    check_available()
-    settings = np.ascontiguousarray(settings, dtype=SETTINGS)
-    methods = np.unique(settings["method"])
-    if len(methods) > 1:
-        raise ValueError(f"settings: runs of methods {methods.tolist()} in one call; expected one")
-    y0 = np.ascontiguousarray(y0, dtype=float)
-    k, n_state = y0.shape
-    codes = np.ascontiguousarray(codes, dtype=np.int64)
-    params = np.ascontiguousarray(params, dtype=PARAMETERS)
-    n_trace = 0 if stride is None else len(range(0, n_samples, stride))
-    method = int(methods[0]) if len(methods) else 0
-    fn = compiled_kernel(method, n_state)
-    limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
-        _NO_LIMIT_NS)
-    per_launch = _runs_per_launch(n_trace)
-    blocks = _resident_blocks(fn, launch_signature(n_state))
-    # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
-    for t_end in dict.fromkeys(settings["t_end"].tolist()):
-        grid = np.linspace(0.0, t_end, n_samples)
-        stencils = tuple(np.ascontiguousarray(a) for a in (*stencil_weights(grid), short_stencils(grid)))
-        group = np.flatnonzero(settings["t_end"] == t_end)
-        for lo in range(0, len(group), per_launch):
-            runs = group[lo: lo + per_launch]
-            start = _time.perf_counter()
-            out = _launch(fn, blocks, (codes[runs], params if len(params) == 1 else params[runs], y0[runs],
-                                       settings[runs]), stencils, (stride or n_samples, full, ratio), n_trace,
-                          limit_ns)
-            yield CudaChunk(runs, *out, seconds=_time.perf_counter() - start)
-
-
 def _resident_blocks(fn, signature: tuple) -> int:
     """The grid of a launch: the blocks the GPU holds at once (:func:`occupancy` on every
     multiprocessor), each thread taking runs until none is left (a persistent grid)."""
     if simulated():
         return 1
     return occupancy(fn, signature) * cuda.get_current_device().MULTIPROCESSOR_COUNT
-
-
-def _runs_per_launch(n_trace: int) -> int:
-    """Most runs a launch takes: those whose traces fit in :data:`TRACE_MEMORY_SHARE` of the
-    device's free memory (no limit without traces)."""
-    if not n_trace:
-        return sys.maxsize
-    if simulated():
-        free = 2**30
-    else:
-        free, _ = cuda.current_context().get_memory_info()
-    return max(1, int(free * TRACE_MEMORY_SHARE) // (8 * TRACE_COLUMNS * n_trace))
-
-
-#: A process's buffers, reused by its launches: name -> (device array, page-locked host
-#: array), each of the largest size a launch asked for so far.
-_BUFFERS: dict[str, tuple] = {}
-
-
-def _buffer(name: str, shape: tuple, dtype) -> tuple:
-    """(device array, page-locked host array) of ``shape`` and ``dtype``: views of the
-    process's buffer ``name``, allocated again only when a launch needs more than it holds.
-    Nothing is filled: the kernel writes every element a launch reads back."""
-    dtype = np.dtype(dtype)
-    size = int(np.prod(shape))
-    held = _BUFFERS.get(name)
-    if held is None or held[0].size < size or held[0].dtype != dtype:
-        _BUFFERS.pop(name, None)
-        held = _BUFFERS[name] = (cuda.device_array(max(size, 1), dtype), cuda.pinned_array(max(size, 1), dtype))
-    device, host = held
-    return device[:size].reshape(shape), host[:size].reshape(shape)
-
-
-def _launch(fn, blocks: int, runs, stencils, options, n_trace: int, limit_ns):
-    """One launch over ``runs`` (codes, params, y0, settings) with the grid's ``stencils``
-    (first, weights, short) and ``options`` (stride, full, ratio): the host arrays of
-    :class:`CudaChunk` (copies of the process's page-locked buffers) and the kernel's time."""
-    stride, full, ratio = options
-    k = len(runs[0])
-    shapes = {"status": ((k,), np.int64), "t_stop": ((k,), np.float64), "nfev": ((k,), np.int64),
-              "n_steps": ((k,), np.int64), "last": ((k, N_OUTPUTS), np.float64),
-              "acc": ((k, ACCUMULATOR_SIZE), np.float64)}
-    if n_trace:
-        shapes["trace"] = ((k, n_trace, TRACE_COLUMNS), np.float64)
-    buffers = {name: _buffer(name, shape, dtype) for name, (shape, dtype) in shapes.items()}
-    d_in = [cuda.to_device(a) for a in (*runs, *stencils)]
-    control = cuda.to_device(np.zeros(2, dtype=np.int64))  # the next run; the deadline (set on the GPU)
-    no_trace = () if n_trace else (cuda.device_array((1, 0, TRACE_COLUMNS)),)
-    arguments = (*d_in, np.int64(stride), bool(full), float(ratio), control, limit_ns,
-                 *(device for device, _ in buffers.values()), *no_trace)
-    start, end = cuda.event(), cuda.event()
-    start.record()
-    fn[blocks, THREADS_PER_BLOCK](*arguments)
-    end.record()
-    end.synchronize()
-    kernel_seconds = start.elapsed_time(end) / 1e3
-    host = {name: np.array(device.copy_to_host(pinned)) for name, (device, pinned) in buffers.items()}
-    trace = host.pop("trace") if n_trace else None
-    return (*host.values(), trace, kernel_seconds)
 
 
 @dataclass
@@ -948,12 +655,15 @@ class CudaChainSolution(ChunkSolution):
     n_kept 0); the streamed summary, ``acc`` (k, ACCUMULATOR_SIZE) and ``members`` (k, n,
     MEMBER_SLOTS) (:func:`rbstab.summary.tree_stream_table` turns them into figures);
     ``last`` (k, 12 n + 3 e) the maximal image at each run's last sample (NaN for a run with
-    none); ``kernel_seconds`` the launches' time on the GPU (CUDA events) [s], ``seconds``
-    their wall time (transfers and the maximal image included) [s]."""
+    none); ``rates`` (k, n_kept) v's numerical dv/dt [W] at the kept samples (the whole
+    grid's stencils, :func:`rbstab.summary.numerical_rate`'s); ``kernel_seconds`` the
+    launches' time on the GPU (CUDA events) [s], ``seconds`` their wall time (transfers and
+    the maximal image included) [s]."""
 
     acc: np.ndarray | None = None
     members: np.ndarray | None = None
     last: np.ndarray | None = None
+    rates: np.ndarray | None = None
     kernel_seconds: float = 0.0
     seconds: float = 0.0
 
@@ -994,7 +704,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         The tree of each run, for a ``system`` of t trees (default: the first).
     ratio : float
         The convergence ratio of each run's last sample not converged (the accumulator's
-        ``LAST_ABOVE``, as :func:`integrate_chunks_cuda`'s).
+        ``LAST_ABOVE``: :func:`rbstab.convergence.converged` with v(0) and its v).
 
     Raises
     ------
@@ -1020,7 +730,8 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     layout = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.d_at, system.r_at, system.u_at, system.rd_at)]
     tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout)
     n_kept = 0 if stride is None else len(range(0, n_samples, stride))
-    fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at))
+    one_body = all(is_one_body(params[t], system.codes, system.parents, ppoints[t]) for t in np.unique(tree_of))
+    fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at), one_body)
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
         _NO_LIMIT_NS)
     blocks = _resident_blocks(fn, tree_launch_signature())
@@ -1028,11 +739,11 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         free = 2**30
     else:
         free, _ = cuda.current_context().get_memory_info()
-    per_run = 8 * (n_kept * (n_state + 1) + ACCUMULATOR_SIZE + n_bodies * MEMBER_SLOTS + n_state + 1 + 8)
+    per_run = 8 * (n_kept * (n_state + 2) + ACCUMULATOR_SIZE + n_bodies * MEMBER_SLOTS + n_state + 1 + 8)
     per_launch = max(1, int(free * TRACE_MEMORY_SHARE) // per_run)
     out = (np.empty(k, dtype=np.int64), np.empty(k), np.empty(k, dtype=np.int64), np.empty(k, dtype=np.int64),
            np.empty((k, ACCUMULATOR_SIZE)), np.empty((k, n_bodies, MEMBER_SLOTS)), np.empty((k, n_state + 1)),
-           np.empty((k, n_kept, n_state)), np.empty((k, n_kept)))
+           np.empty((k, n_kept, n_state)), np.empty((k, n_kept)), np.empty((k, n_kept)))
     kernel_seconds, start = 0.0, _time.perf_counter()
     d_tree = [cuda.to_device(a) for a in tree]
     # the numerical dv/dt's stencils are those of each run's own grid: a launch per t_end
@@ -1054,11 +765,11 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
             kernel_seconds += begin.elapsed_time(end) / 1e3
             for a, d in zip(out, d_out):
                 a[runs] = d.copy_to_host()
-    status, t_stop, nfev, n_steps, acc, members, last, reduced, work = out
+    status, t_stop, nfev, n_steps, acc, members, last, reduced, work, rates = out
     n_maximal = 12 * n_bodies + 3 * int(np.sum(layout[0] >= 0))
     samples, last_state = np.empty((k, n_kept, n_maximal)), np.empty((k, 1, n_maximal))
     expand_tree_samples(system, params, ppoints, tree_of, reduced, samples)
     expand_tree_samples(system, params, ppoints, tree_of, np.ascontiguousarray(last[:, None, :n_state]), last_state)
     return CudaChainSolution(samples, status, t_stop, nfev, n_steps, work, acc=acc, members=members,
-                             last=last_state[:, 0], kernel_seconds=kernel_seconds,
+                             last=last_state[:, 0], rates=rates, kernel_seconds=kernel_seconds,
                              seconds=_time.perf_counter() - start)

@@ -358,7 +358,7 @@ SampleRows = namedtuple("SampleRows", ["samples", "work", "stride"])
 def keep_sample(sink, code, p, j, t, sample, work):
     """Hand sample j of a run (at time t [s]: the state in ``sample``, the disturbances' work
     W ``work`` [J]) of the system (``code``, ``p``) to ``sink``: a :class:`SampleRows`, or
-    the CUDA kernel's streamed summary (:class:`rbstab.engine.cuda.StreamSink`)."""
+    the CUDA kernel's streamed summary (:class:`rbstab.engine.cuda.TreeStreamSink`)."""
     raise NotImplementedError("compiled code only")
 
 

@@ -4,10 +4,11 @@ its batch entry point. The simulator, the sweep's workers and runner, the basin 
 studies and the command line ask this table; none compares an engine's name.
 
 - ``compiled`` (the default): scipy's RK23, RK45 and DOP853 compiled with the model
-  (:func:`rbstab.engine.integrate_runs`), many runs per call, the steps ``solve_ivp`` takes.
+  (:func:`rbstab.engine.integrate.integrate_chain_runs`), many runs per call, the steps
+  ``solve_ivp`` takes.
 - ``scipy`` (the reference): one :func:`scipy.integrate.solve_ivp` call per run, any method.
 - ``cuda``: the compiled engine's steps on an NVIDIA GPU, one thread a run
-  (:func:`rbstab.engine.cuda.integrate_chunks_cuda`).
+  (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`).
 
 With every engine, a run whose method the engine does not integrate (Radau, BDF, LSODA on
 ``compiled`` or ``cuda``) goes through ``solve_ivp``, and the pure sign law of ``sliding``
@@ -19,7 +20,6 @@ This module imports nothing heavy: the command line reads it at start-up.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 
 __all__ = ["Engine", "ENGINES", "DEFAULT_ENGINE", "COMPILED_METHODS", "get_engine"]
@@ -50,8 +50,6 @@ class Engine:
         ``solve_ivp`` a run; for a compiled engine enough runs that the costs of a chunk
         (a task's round trip, opening a file) are small, and few enough that every worker
         gets work early.
-    entry : str
-        Its batch entry point, ``"module:function"`` (:meth:`entry_point`).
     """
 
     name: str
@@ -59,7 +57,6 @@ class Engine:
     methods: tuple[str, ...] | None
     gpu: bool
     chunk_size: int
-    entry: str
 
     @property
     def compiled(self) -> bool:
@@ -93,22 +90,16 @@ class Engine:
 
             cuda.check_available()
 
-    def entry_point(self):
-        """The function :attr:`entry` names (its module imported now)."""
-        module, _, name = self.entry.partition(":")
-        return getattr(importlib.import_module(module), name)
-
 
 #: Engine name -> :class:`Engine`, the default first.
 ENGINES = {
     engine.name: engine
     for engine in (
         Engine("compiled", "RK23, RK45 and DOP853 compiled with the model, many runs per call (the default)",
-               COMPILED_METHODS, gpu=False, chunk_size=256, entry="rbstab.engine.integrate:integrate_runs"),
-        Engine("scipy", "one solve_ivp call per run, the reference", None, gpu=False, chunk_size=1,
-               entry="scipy.integrate:solve_ivp"),
+               COMPILED_METHODS, gpu=False, chunk_size=256),
+        Engine("scipy", "one solve_ivp call per run, the reference", None, gpu=False, chunk_size=1),
         Engine("cuda", "on an NVIDIA GPU, one thread a run (pip install \"rbstab[cuda]\")", COMPILED_METHODS,
-               gpu=True, chunk_size=8192, entry="rbstab.engine.cuda:integrate_chunks_cuda"),
+               gpu=True, chunk_size=8192),
     )
 }
 #: The engine of a run or sweep that names none.
