@@ -624,20 +624,29 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     return outputs if traces else {}, table
 
 
-def _structure(batch: RunBatch, i: int) -> tuple:
-    """What the runs integrated in one call share (run ``i``'s): the structure of their tree
-    (codes, parents, embedded joints, names; whether one body's rate serves it), the
-    spelling of their configurations, the method, sample count and t_end; their records,
-    parent points and admissible regions may differ
-    (:func:`rbstab.engine.systems.tree_rows`)."""
-    from .variants.chain import is_one_body  # heavy: numba
-
-    tree = batch.trees[int(batch.tree[i])]
-    n = tree.size
-    one_body = is_one_body(batch.params[i, :n], tree.codes, tree.parents, batch.ppoints[i, :n])
-    return (tree.codes.tobytes(), tree.parents.tobytes(), tree.d_at.tobytes(), tree.chain.body_names,
-            tree.chain.joint_names, one_body, bool(batch.one_body[i]), int(batch.settings["method"][i]),
-            int(batch.n_samples[i]), float(batch.settings["t_end"][i]))
+def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
+    """``rows`` of ``batch`` in groups, in order of first appearance, of what the runs
+    integrated in one call share: the structure of their tree (codes, parents, embedded
+    joints, names; whether one body's rate serves it), the spelling of their configurations,
+    the method, sample count and t_end; their records, parent points and admissible regions
+    may differ (:func:`rbstab.engine.systems.tree_rows`)."""
+    structures: dict[tuple, int] = {}
+    shape = np.empty(len(batch.trees), dtype=np.int64)  # each tree's structure
+    alone = np.empty(len(batch.trees), dtype=bool)  # a body held to the ground
+    for t, tree in enumerate(batch.trees):
+        key = (tree.codes.tobytes(), tree.parents.tobytes(), tree.d_at.tobytes(), tree.chain.body_names,
+               tree.chain.joint_names)
+        shape[t] = structures.setdefault(key, len(structures))
+        alone[t] = tree.size == 1 and tree.parents[0] < 0
+    tree = batch.tree[rows]
+    one_body = alone[tree] & np.all(batch.ppoints[rows, 0] == batch.params[rows, 0]["attachment_point"], axis=1)
+    keys = np.column_stack([shape[tree], one_body, batch.one_body[rows], batch.settings["method"][rows],
+                            batch.n_samples[rows], batch.settings["t_end"][rows]]).astype(float)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    order = np.argsort(inverse, kind="stable")
+    members = np.split(rows[order], np.cumsum(np.bincount(inverse))[:-1])
+    return [members[g] for g in np.argsort(first)]
 
 
 def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, keep: str,
@@ -645,7 +654,7 @@ def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, keep: str
                        chunk_size: int = POSTPROCESS_BLOCK) -> Iterator[tuple[list[int], RunBlock]]:
     """:func:`simulate_batch` of the runs ``rows`` of a :class:`RunBatch` on the compiled
     driver (the CPU's, or the GPU's with ``engine`` ``"cuda"``): the runs of one structure
-    (:func:`_structure`: the same bodies and joints and their laws; each run's masses, gains,
+    (:func:`_groups`: the same bodies and joints and their laws; each run's masses, gains,
     points and admissible region its own) with the same method, sample count and t_end in
     calls of ``chunk_size`` runs of :func:`rbstab.engine.integrate.integrate_chain_runs`,
     each distinct tree once in a call.
@@ -661,17 +670,14 @@ def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, keep: str
     if gpu:
         get_engine(engine).check_available()  # before any run
         from .engine.cuda import integrate_chain_runs_cuda as integrate  # heavy: numba-cuda (--engine cuda only)
-    groups: dict[tuple, list[int]] = {}
-    for i in rows.tolist():
-        groups.setdefault(_structure(batch, i), []).append(i)
-    for members in groups.values():
+    for members in _groups(batch, rows):
         per_call, n_samples = chunk_size, int(batch.n_samples[members[0]])
         stride = {"all": 1, "thinned": summary_stride(n_samples) if gpu else 1, "none": None}[keep]
         if gpu:  # a launch takes as many runs as the host may hold the samples of (none: their summaries)
             kept = 1 if stride is None else len(range(0, n_samples, stride))
             per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * kept * (int(batch.n_state[members[0]]) + 2)))
         for lo in range(0, len(members), per_call):
-            yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, stride, configs, full)
+            yield from _tree_call(batch, members[lo: lo + per_call].tolist(), integrate, gpu, stride, configs, full)
 
 
 def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride: int | None,
@@ -680,9 +686,10 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
     method, sample count and t_end): one call of ``integrate`` with each distinct tree and
     admissible region once, then their outputs at every ``stride``-th sample (None: no
     outputs) and summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the
-    outputs held at once: those of that many runs). Runs in the one-body spelling get one
-    body's outputs, figures and messages (:func:`_body_outputs`; ``full`` False: without
-    :data:`rbstab.layout.LEFT_OUT`)."""
+    outputs held at once: those of that many runs; the GPU's summaries alone: a block). Runs
+    in the one-body spelling get one body's outputs, figures and messages
+    (:func:`_body_outputs`; ``full`` False: without :data:`rbstab.layout.LEFT_OUT`), each
+    run its own tree (one record)."""
     from .engine.systems import tree_system, with_offsets  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
@@ -692,28 +699,32 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
     n, n_states = structure.size, batch.n_state[members[0]]
     params, ppoints = batch.params[members, :n], batch.ppoints[members, :n]
     params["lyapunov_offset"] = 0.0  # h is the batch's offset (a one-body record's copy of it: not read twice)
-    keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
-                     for j, i in enumerate(members)], dtype=object)
-    _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)
-    tree_of = tree_of.ravel().astype(np.int64)
-    trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
-                            batch.offset[members[j]]) for j in first]
+    if one_body:
+        first, tree_of, trees = np.arange(len(members)), np.arange(len(members)), None
+    else:  # each distinct tree once
+        keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
+                         for j, i in enumerate(members)], dtype=object)
+        _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)
+        tree_of = tree_of.ravel().astype(np.int64)
+        trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
+                                batch.offset[members[j]]) for j in first]
     system = tree_system(structure)._replace(params=np.ascontiguousarray(params[first]),
-                                             ppoints=np.ascontiguousarray(ppoints[first]))  # each distinct tree once
+                                             ppoints=np.ascontiguousarray(ppoints[first]))
     y0 = batch.y0[members, :n_states]
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
     # on the GPU: a launch's limit, each tree's h, and the summaries streamed (the samples kept for the outputs only)
     gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "stride": stride} if gpu else {}
     if gpu:
-        system = with_offsets(system, [t.offset for t in trees])
+        system = with_offsets(system, batch.offset[np.asarray(members)[first]])
     sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **gpu_options)
     grid = np.linspace(0.0, float(settings[0, 0]), n_samples)
     time = grid[:: stride or 1] if gpu else grid  # the samples that came back
     time.flags.writeable = False
     integration = (_time.perf_counter() - start) / len(members)
-    for lo in range(0, len(members), POSTPROCESS_BLOCK):
-        hi = min(lo + POSTPROCESS_BLOCK, len(members))
+    block = len(members) if gpu and stride is None else POSTPROCESS_BLOCK
+    for lo in range(0, len(members), block):
+        hi = min(lo + block, len(members))
         t0 = _time.perf_counter()
         if gpu and stride is None:
             traces, summaries = {}, {}

@@ -730,7 +730,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
     layout = [np.ascontiguousarray(a, dtype=np.int64) for a in (system.d_at, system.r_at, system.u_at, system.rd_at)]
     tree = (params.astype(PARAMETERS, copy=False), *ints, ppoints, *layout)
     n_kept = 0 if stride is None else len(range(0, n_samples, stride))
-    one_body = all(is_one_body(params[t], system.codes, system.parents, ppoints[t]) for t in np.unique(tree_of))
+    one_body = is_one_body(params, system.codes, system.parents, ppoints)
     fn = compiled_tree_kernel(method_number(method), tree_shape(system.codes, system.d_at), one_body)
     limit_ns = np.int64(min(max_wall_time * 1e9, _NO_LIMIT_NS)) if math.isfinite(max_wall_time) else np.int64(
         _NO_LIMIT_NS)

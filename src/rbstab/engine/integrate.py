@@ -703,7 +703,7 @@ def integrate_chain_runs(system, y0, settings, *, method: str, n_samples: int, t
     records = settings_records(np.asarray(settings, dtype=float).reshape(k, -1), method_number(method))
     codes, parents = system.codes, system.parents
     with np.errstate(all="ignore"):
-        if all(is_one_body(params[t], codes, parents, ppoints[t]) for t in np.unique(tree_of)):
+        if is_one_body(params, codes, parents, ppoints):
             # the paper's one-body model: one body's compiled rate, several times faster than
             # the general tree's, and its two spellings one model
             integrate_chunk(np.repeat(codes, k), np.ascontiguousarray(params[tree_of, 0]), y0, records, samples, work,

@@ -604,14 +604,15 @@ class CompiledChain:
 
 
 def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoints: np.ndarray) -> bool:
-    """Whether a tree (its records, codes, parents and parent points as in
-    :class:`CompiledChain`) is the paper's one-body model: one body held by its joint to
+    """Whether a tree (its records (n,), codes, parents and parent points (n, 3) as in
+    :class:`CompiledChain`), or every one of t trees of one structure (records (t, n),
+    parent points (t, n, 3)), is the paper's one-body model: one body held by its joint to
     the ground at the point R_p = R_c, where its point C rests with its centre of mass at the
     origin (E = X + A R - R, eq 4; the one-body spelling's body and controller). One body's
     compiled rate (:func:`rbstab.variants.kernels.state_rate`) and its h then serve the
     tree: its reduced state is the body's state."""
     return (codes.shape[0] == 1 and parents[0] < 0
-            and bool(np.array_equal(ppoints[0], params[0]["attachment_point"])))
+            and bool(np.all(np.asarray(ppoints)[..., 0, :] == params[..., 0]["attachment_point"])))
 
 
 def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarray, offset: float = 0.0,
