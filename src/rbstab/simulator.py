@@ -642,6 +642,8 @@ def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
     one_body = alone[tree] & np.all(batch.ppoints[rows, 0] == batch.params[rows, 0]["attachment_point"], axis=1)
     keys = np.column_stack([shape[tree], one_body, batch.one_body[rows], batch.settings["method"][rows],
                             batch.n_samples[rows], batch.settings["t_end"][rows]]).astype(float)
+    if np.all(keys == keys[:1]):  # one group (a sweep's usual batch)
+        return [rows] if len(rows) else []
     _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     inverse = inverse.ravel()
     order = np.argsort(inverse, kind="stable")
@@ -677,10 +679,10 @@ def _tree_batch_blocks(batch: RunBatch, rows: np.ndarray, engine: str, keep: str
             kept = 1 if stride is None else len(range(0, n_samples, stride))
             per_call = max(1, CUDA_CHAIN_SAMPLE_BYTES // (8 * kept * (int(batch.n_state[members[0]]) + 2)))
         for lo in range(0, len(members), per_call):
-            yield from _tree_call(batch, members[lo: lo + per_call].tolist(), integrate, gpu, stride, configs, full)
+            yield from _tree_call(batch, members[lo: lo + per_call], integrate, gpu, stride, configs, full)
 
 
-def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride: int | None,
+def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, stride: int | None,
                configs: Sequence | None, full: bool = True) -> Iterator[tuple[list[int], RunBlock]]:
     """:func:`_tree_batch_blocks` for the runs ``members`` of ``batch`` (one structure,
     method, sample count and t_end): one call of ``integrate`` with each distinct tree and
@@ -690,33 +692,34 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
     in the one-body spelling get one body's outputs, figures and messages
     (:func:`_body_outputs`; ``full`` False: without :data:`rbstab.layout.LEFT_OUT`), each
     run its own tree (one record)."""
-    from .engine.systems import tree_system, with_offsets  # heavy: numba
+    from .engine.systems import tree_system  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     start = _time.perf_counter()
     one_body = bool(batch.one_body[members[0]])
     structure = batch.trees[int(batch.tree[members[0]])]
     n, n_states = structure.size, batch.n_state[members[0]]
-    params, ppoints = batch.params[members, :n], batch.ppoints[members, :n]
-    params["lyapunov_offset"] = 0.0  # h is the batch's offset (a one-body record's copy of it: not read twice)
-    if one_body:
-        first, tree_of, trees = np.arange(len(members)), np.arange(len(members)), None
+    params, ppoints = batch.params[members, :n], batch.ppoints[members, :n]  # copies
+    # h, v's zero: where the GPU streams v, in the first record (rbstab.engine.systems.with_offsets); on the CPU
+    # the batch's offset, added by the host (a one-body record's copy of it is not read twice)
+    params[:, 0]["lyapunov_offset"] = batch.offset[members] if gpu else 0.0
+    limits = params[:, 0]["limits"]  # each run's admissible region
+    if one_body:  # each run its own tree
+        tree_of, trees = np.arange(len(members)), None
     else:  # each distinct tree once
         keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
-                         for j, i in enumerate(members)], dtype=object)
+                         for j, i in enumerate(members.tolist())], dtype=object)
         _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)
         tree_of = tree_of.ravel().astype(np.int64)
         trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
                                 batch.offset[members[j]]) for j in first]
-    system = tree_system(structure)._replace(params=np.ascontiguousarray(params[first]),
-                                             ppoints=np.ascontiguousarray(ppoints[first]))
+        params, ppoints = params[first], ppoints[first]
+    system = tree_system(structure)._replace(params=np.ascontiguousarray(params), ppoints=np.ascontiguousarray(ppoints))
     y0 = batch.y0[members, :n_states]
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
     # on the GPU: a launch's limit, each tree's h, and the summaries streamed (the samples kept for the outputs only)
     gpu_options = {"max_wall_time": float(np.max(settings[:, 6])), "stride": stride} if gpu else {}
-    if gpu:
-        system = with_offsets(system, batch.offset[np.asarray(members)[first]])
     sol = integrate(system, y0, settings, method=method, n_samples=n_samples, tree_of=tree_of, **gpu_options)
     grid = np.linspace(0.0, float(settings[0, 0]), n_samples)
     time = grid[:: stride or 1] if gpu else grid  # the samples that came back
@@ -729,12 +732,12 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
         if gpu and stride is None:
             traces, summaries = {}, {}
         elif one_body:
-            traces, summaries = _body_outputs(batch, members[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi],
-                                                   full, summary=not gpu)
+            traces, summaries = _body_outputs(batch, members[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi], full,
+                                              summary=not gpu)
         else:
             traces, summaries = _trees_outputs([trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time,
-                                                    sol.samples[lo:hi], sol.work[lo:hi], stride is not None,
-                                                    summary=not gpu)
+                                               sol.samples[lo:hi], sol.work[lo:hi], stride is not None,
+                                               summary=not gpu)
         if gpu:  # the summaries streamed on the device
             summaries = tree_stream_table(grid, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
                                           structure.d_at)
@@ -744,11 +747,11 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
                 traces["lyapunov_rate_numerical"] = sol.rates[lo:hi]
         if one_body:  # one body's messages (the run's own names none)
             ends = _ends(sol.status[lo:hi], sol.t_stop[lo:hi], sol.nfev[lo:hi], sol.n_steps[lo:hi],
-                         settings[lo:hi], params[lo:hi, 0]["limits"])
+                         settings[lo:hi], limits[lo:hi])
         else:
             status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
                                               sol.last[j][None] if gpu else sol.samples[j], y0[j], settings[j],
-                                              params[j, 0]["limits"])
+                                              limits[j])
                                      for j in range(lo, hi)))
             ok = sol.status[lo:hi] == SUCCESS
             ends = {"status": list(status), "message": list(message),
@@ -756,7 +759,7 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
                                "n_steps": sol.n_steps[lo:hi].astype(np.int64),
                                "solver_status": np.where(ok, 0, -1).astype(np.int64)}}
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
-        yield members[lo:hi], RunBlock(
+        yield members[lo:hi].tolist(), RunBlock(
             configs=_configs_of(configs, members[lo:hi]),
             time=time if stride is not None else time[:0],
             outputs=traces,
@@ -771,7 +774,7 @@ def _tree_call(batch: RunBatch, members: list[int], integrate, gpu: bool, stride
         )
 
 
-def _body_outputs(batch: RunBatch, rows: list[int], time: np.ndarray, samples: np.ndarray, work: np.ndarray,
+def _body_outputs(batch: RunBatch, rows: np.ndarray, time: np.ndarray, samples: np.ndarray, work: np.ndarray,
                   full: bool, summary: bool = True) -> tuple[dict, dict]:
     """(outputs, summary columns) of the runs ``rows`` of ``batch`` in the one-body
     spelling (one law, the paper's one body): one body's compiled outputs
