@@ -789,7 +789,8 @@ def _body_outputs(batch: RunBatch, rows: np.ndarray, time: np.ndarray, samples: 
         samples = np.ascontiguousarray(samples[:, :, : layout.size])
     columns = np.empty((N_OUTPUTS, len(rows), len(time)))
     with np.errstate(all="ignore"):
-        run_outputs(codes, np.ascontiguousarray(batch.params[rows, 0]), time[None], samples, columns, full)
+        # (a writable copy of the times: the signature the engine compiles, not a read-only one)
+        run_outputs(codes, np.ascontiguousarray(batch.params[rows, 0]), np.array(time[None]), samples, columns, full)
     columns[OUTPUTS["disturbance_work"].offset] = work
     outputs = split_outputs(columns, layout, full)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
