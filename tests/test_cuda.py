@@ -52,15 +52,17 @@ PUSHES = ["disturbances.1.start=0.7"]  # the impulse at 0.5 s and the pulse insi
     (PUSHED, PUSHES), (PUSHED, [*PUSHES, "simulation.max_steps=12"])],
     ids=["whole", "stopped", "short", "shorter", "saturated", "saturated-stopped", "pushed", "pushed-stopped"])
 def test_streamed_summary_of_one_body_is_the_cpus(path, overrides):
-    """Fed a one-body run's samples one at a time, as the GPU's one-body kernel feeds them,
-    body_stream_sample / stream_finish / tree_stream_table give the CPU engine's figures
+    """Fed a one-body run's samples one at a time, as the GPU's one-body kernel feeds them
+    (keep_sample of its TreeStreamSink with the body's record: body_stream_sample, the kept
+    rows, the last sample), stream_finish / tree_stream_table give the CPU engine's figures
     from the run's samples, the same numbers: the saturated time fractions of a run whose
     torque is at its limit among them, the rate check of a pushed run (which leaves out the
     stencils across a push), and the figures of runs stopped after a few samples (the
     one-sided stencils of their own samples); and numerical_rate's dv/dt at the samples, for
     a run stopped early the first samples' up to rounding."""
-    from rbstab.engine.cuda import TreeStreamSink, body_stream_sample
-    from rbstab.engine.integrate import SampleRows
+    from rbstab.engine.cuda import TreeStreamSink
+    from rbstab.engine.integrate import SampleRows, keep_sample
+    from rbstab.jit import jit
     from rbstab.simulator import simulate
     from rbstab.summary import MEMBER_SLOTS, stream_member_start, tree_stream_table
 
@@ -78,14 +80,18 @@ def test_streamed_summary_of_one_body_is_the_cpus(path, overrides):
     first, weights = stencil_weights(time)
     acc, members, last = np.empty(ACCUMULATOR_SIZE), np.empty((1, MEMBER_SLOTS)), np.empty(samples.shape[1])
     rates = np.full(n, -1.0)
+    kept = SampleRows(np.full((n, states.shape[1]), -1.0), np.full(n, -1.0), 1)
     sink = TreeStreamSink(acc, members, np.zeros(N_OUTPUTS), np.empty((1, 3, 3)), last, first, weights, 1e-3, 0.0,
-                          SampleRows(np.empty((0, states.shape[1])), np.empty(0), 1), rates)
+                          kept, rates)
+    keep = jit(lambda sink, code, p, j, t, sample, work: keep_sample(sink, code, p, j, t, sample, work))
     stream_start(acc)
     stream_member_start(members)
     for i in range(taken):
-        body_stream_sample(sink, variant.code, variant.parameters[0], i, time[i], samples[i], samples[i, -1])
+        keep(sink, variant.code, variant.parameters[0], i, time[i], samples[i], samples[i, -1])
     stream_finish(acc, first, weights, short_stencils(time), rates, 1)
     assert np.array_equal(last, samples[taken - 1])
+    assert np.array_equal(kept.samples[:taken], states[:taken]) and np.array_equal(kept.work[:taken],
+                                                                                  samples[:taken, -1])
     embedded = "controller_state" in variant.layout.blocks
     maximal = np.concatenate([result.outputs[b][taken - 1] for b in ("theta", "omega", "position", "velocity",
                                                                        *(["controller_state"] if embedded else []))])
@@ -101,7 +107,8 @@ def test_streamed_summary_of_one_body_is_the_cpus(path, overrides):
     if taken == n or taken < 7:  # the whole grid's stencils, or the first samples' own (short_stencils)
         np.testing.assert_array_equal(rates[:taken], rate)
     else:  # the whole grid's stencils, not the first samples' own: rounding
-        np.testing.assert_allclose(rates[:taken], rate, rtol=0, atol=1e-12 * np.max(np.abs(result.outputs["lyapunov"][:taken])))
+        scale = np.max(np.abs(result.outputs["lyapunov"][:taken]))
+        np.testing.assert_allclose(rates[:taken], rate, rtol=0, atol=1e-12 * scale)
     assert np.all(rates[taken:] == -1.0)  # the samples never taken: the kernel's NaN rows
 
 

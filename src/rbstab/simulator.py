@@ -630,16 +630,20 @@ def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
     joints, names; whether one body's rate serves it), the spelling of their configurations,
     the method, sample count and t_end; their records, parent points and admissible regions
     may differ (:func:`rbstab.engine.systems.tree_rows`)."""
+    from .variants.chain import one_body_mask  # heavy: numba
+
     structures: dict[tuple, int] = {}
     shape = np.empty(len(batch.trees), dtype=np.int64)  # each tree's structure
-    alone = np.empty(len(batch.trees), dtype=bool)  # a body held to the ground
     for t, tree in enumerate(batch.trees):
         key = (tree.codes.tobytes(), tree.parents.tobytes(), tree.d_at.tobytes(), tree.chain.body_names,
                tree.chain.joint_names)
         shape[t] = structures.setdefault(key, len(structures))
-        alone[t] = tree.size == 1 and tree.parents[0] < 0
     tree = batch.tree[rows]
-    one_body = alone[tree] & np.all(batch.ppoints[rows, 0] == batch.params[rows, 0]["attachment_point"], axis=1)
+    one_body = np.zeros(len(rows), dtype=bool)
+    points, attachment = batch.ppoints[rows, 0], batch.params["attachment_point"][rows, 0]  # the field alone copied
+    for t in np.unique(tree).tolist():
+        at = tree == t
+        one_body[at] = one_body_mask(batch.trees[t].codes, batch.trees[t].parents, points[at], attachment[at])
     keys = np.column_stack([shape[tree], one_body, batch.one_body[rows], batch.settings["method"][rows],
                             batch.n_samples[rows], batch.settings["t_end"][rows]]).astype(float)
     if np.all(keys == keys[:1]):  # one group (a sweep's usual batch)

@@ -257,9 +257,6 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     row[_RATE_AT] = terms[4]
     row[_EDGES_AT] = edges
     stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
-    for i in range(sink.last.shape[0] - 1):
-        sink.last[i] = sample[i]
-    sink.last[sink.last.shape[0] - 1] = work
 
 
 @jit(_nrt=False)
@@ -276,9 +273,6 @@ def body_stream_sample(sink, code, p, j, t, sample, work):
             flags[0, k, c] = row[_FLAGS_AT[k] + c]
     stream_member(sink.members, 0, row[_ERROR_AT:_ERROR_AT + 3], flags[0])
     stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
-    for i in range(sink.last.shape[0] - 1):
-        sink.last[i] = sample[i]
-    sink.last[sink.last.shape[0] - 1] = work
 
 
 @overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy", "_nrt": False})
@@ -292,6 +286,10 @@ def _keep_tree_streamed(sink, code, p, j, t, sample, work):
             body_stream_sample(sink, code, p, j, t, sample, work)
         else:
             tree_stream_sample(sink, p, j, t, sample, work)
+        last = sink.last  # the reduced state and W of the run's last sample
+        for i in range(last.shape[0] - 1):
+            last[i] = sample[i]
+        last[last.shape[0] - 1] = work
         rows = sink.rows
         if j % rows.stride == 0 and j // rows.stride < rows.samples.shape[0]:
             for i in range(rows.samples.shape[1]):
@@ -412,7 +410,8 @@ def tree_launch_signature() -> tuple:
     the grid's ``first`` int64 (n_samples,), ``weights`` (n_samples, w) and ``short`` (w, w,
     w) (:mod:`rbstab.summary`; the grid linspace(0, t_end, n_samples)); stride int64
     (every stride-th sample kept); ratio float64; control int64 (2,): the next run and the
-    launch's deadline [ns] (0 until its first thread sets it); limit_ns int64; then the outputs: status int64 (k,), t_stop (k,), nfev,
+    launch's deadline [ns] (0 until its first thread sets it); limit_ns int64; then the
+    outputs: status int64 (k,), t_stop (k,), nfev,
     n_steps int64 (k,), acc (k, ACCUMULATOR_SIZE) and members (k, n, MEMBER_SLOTS) the
     streamed summary (:class:`TreeStreamSink`), last (k, n_r + 1) the reduced state and W at
     each run's last sample (NaN for a run with none), samples (k, n_kept, n_r), work (k,

@@ -53,7 +53,7 @@ from .kernels import PERMANENT, constraint_dissipation, constraint_energy, const
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "is_one_body", "gimbal_lock_message", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "is_one_body", "one_body_mask", "gimbal_lock_message", "independent_coordinates", "full_state",
            "region_margin", "gimbal_angles", "state_vector", "with_records", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -603,6 +603,15 @@ class CompiledChain:
         return is_one_body(self.params, self.codes, self.parents, self.ppoints)
 
 
+def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray) -> np.ndarray:
+    """Which of t trees of one structure (joint variant ``codes`` (n,), ``parents`` (n,))
+    are the paper's one-body model (:func:`is_one_body`): ``points`` (t, 3) their first
+    joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame); shape (t,) of bool."""
+    if codes.shape[0] != 1 or parents[0] >= 0:
+        return np.zeros(len(points), dtype=bool)
+    return np.all(points == attachment, axis=-1)
+
+
 def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoints: np.ndarray) -> bool:
     """Whether a tree (its records (n,), codes, parents and parent points (n, 3) as in
     :class:`CompiledChain`), or every one of t trees of one structure (records (t, n),
@@ -611,8 +620,8 @@ def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoi
     origin (E = X + A R - R, eq 4; the one-body spelling's body and controller). One body's
     compiled rate (:func:`rbstab.variants.kernels.state_rate`) and its h then serve the
     tree: its reduced state is the body's state."""
-    return (codes.shape[0] == 1 and parents[0] < 0
-            and bool(np.all(np.asarray(ppoints)[..., 0, :] == params[..., 0]["attachment_point"])))
+    return bool(np.all(one_body_mask(codes, parents, np.reshape(np.asarray(ppoints)[..., 0, :], (-1, 3)),
+                                     np.reshape(params[..., 0]["attachment_point"], (-1, 3)))))
 
 
 def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarray, offset: float = 0.0,
