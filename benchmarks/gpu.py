@@ -662,11 +662,11 @@ def chains(args) -> None:
         kernel, total = chain_gpu_rates(n, parameters=True)
         print(f"chains, stance sweep, a tree a run, {n:,} runs: kernel {kernel:,.0f} runs/s, end to end "
               f"{total:,.0f} runs/s")
-    print(f"chains, CPU driver, {os.cpu_count()} processes, stance sweep: {chain_cpu_rate(args.chain_cpu_n):,.0f} runs/s")
-    print(f"chains, correctness, {args.check_n} runs: {chain_correctness(args.check_n)}")
     for n in args.chain_n:
         print(f"chains, Case 3's initial-state sweep as one body and as its one-body tree, {n:,} runs: "
               f"{body_as_tree(n)}")
+    print(f"chains, correctness, {args.check_n} runs: {chain_correctness(args.check_n)}")
+    print(f"chains, CPU driver, {os.cpu_count()} processes, stance sweep: {chain_cpu_rate(args.chain_cpu_n):,.0f} runs/s")
     chain_sweep_seconds(1000, "tilt", "cuda")  # each process's kernels loaded from the cache once
     for n in args.chain_sweep_n:
         for axis in ("tilt", "mass"):

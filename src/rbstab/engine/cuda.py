@@ -494,8 +494,10 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
     maximal image (12 n + 3 e), the mass matrix (n_u)^2 of
     :func:`rbstab.variants.tree.tree_rate` (n_u = 6 n - 3 p generalised velocities) and the
     permanent joints' impulsive system (3 p)^2 of
-    :func:`rbstab.variants.chain.chain_impulses`. The tree's rate, region and impulses stay
-    functions of their own (:data:`NOT_INLINED`)."""
+    :func:`rbstab.variants.chain.chain_impulses`. Every run integrates its work W after the
+    state (its rate 0 without disturbances), so that each vector's size is known when the
+    kernel is compiled. The tree's rate, region and impulses stay functions of their own
+    (:data:`NOT_INLINED`)."""
     from numba import float64, int64  # heavy: numba (this module is imported only by --engine cuda)
 
     _lower_not_inlined()
@@ -505,19 +507,20 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
     states = 12 * bodies + 3 * embedded  # the maximal image
     rates = states + 1  # its rate, and W's
     size = states - 6 * permanent + 1  # the integrated vector: the reduced state and W
+    n_state = size - 1
     rows, columns = max(1, 3 * permanent), 6 * bodies - 3 * permanent
 
     def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, first,
                  weights, short, stride, ratio, control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, acc_o,
                  members_o, last_o, samples_o, work_o, rates_o):
-        K_all = cuda.local.array((n_rows, size), float64)
-        Q_all = cuda.local.array((q_rows, size), float64)
-        y_all = cuda.local.array(size, float64)
-        f_all = cuda.local.array(size, float64)
-        y_new_all = cuda.local.array(size, float64)
-        scale_all = cuda.local.array(size, float64)
-        work_all = cuda.local.array(size, float64)
-        sample_all = cuda.local.array(size, float64)
+        K = cuda.local.array((n_rows, size), float64)  # sizes known when compiled: the state, then W
+        Q = cuda.local.array((q_rows, size), float64)
+        y = cuda.local.array(size, float64)
+        f = cuda.local.array(size, float64)
+        y_new = cuda.local.array(size, float64)
+        scale = cuda.local.array(n_state, float64)  # the error norms take the state's entries
+        work = cuda.local.array(size, float64)
+        sample = cuda.local.array(size, float64)
         row = cuda.local.array(N_OUTPUTS, float64)
         saturated = cuda.local.array((bodies, 3, 3), float64)
         if one_body:
@@ -534,7 +537,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3, 3), float64),
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                            cuda.local.array(bodies, int64), chain)
-        n_runs, n_state = y0s.shape[0], y0s.shape[1]
+        w = Work(K, Q, y_new, scale, work)
+        n_runs = y0s.shape[0]
         n_samples, n_kept = first.shape[0], samples_o.shape[1]
         # the launch's deadline: set once, by the first thread to start
         now = globaltimer()
@@ -554,11 +558,6 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
                 code, p = CHAIN, TreeSystem(params[tree], codes, parents, ppoints[tree], d_at, r_at, u_at, rd_at,
                                             scratch)
             disturbed = disturbed_of(p)
-            n_vec = n_state + 1 if disturbed else n_state  # the integrated vector: the state, then W
-            K, Q = K_all[:, :n_vec], Q_all[:, :n_vec]  # views of the first columns (a reshape needs numba's runtime)
-            y, f, y_new = y_all[:n_vec], f_all[:n_vec], y_new_all[:n_vec]
-            work, sample = work_all[:n_vec], sample_all[:n_vec]
-            w = Work(K, Q, y_new, scale_all[:n_state], work)  # the error norms take the state's entries
             s = settings[k]
             limit = GIMBAL_LOCK_ANGLE - s.gimbal_margin
             flags = (limit, disturbed, limited_of(p), n_samples)
@@ -576,8 +575,7 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
             if globaltimer() <= deadline:
                 for i in range(n_state):
                     y[i] = y0s[k, i]
-                for i in range(n_state, n_vec):
-                    y[i] = 0.0  # W [J] from 0 to t
+                y[n_state] = 0.0  # W [J] from 0 to t (its rate 0 without disturbances)
                 status, state, passes = drive_run(code, p, s, w, (y, f, sample), sink, flags, scheme,
                                                   (deadline, passes))
             t, j, nfev, n_steps = state[0], state[6], state[7], state[8]
