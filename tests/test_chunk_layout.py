@@ -422,7 +422,10 @@ def test_open_sweep_gives_the_runs_and_the_grid_with_missing_runs_as_nan(tmp_pat
     out = run_sweep(s, tmp_path, jobs=2, chunk_size=1, progress=False)
     files = chunk_files(out.directory)
     assert len(files) == 4
-    with xr.open_mfdataset(files, engine="h5netcdf") as ds:  # default arguments: combined by the run coordinate
+    # combined by the run coordinate, as docs/sweeps.md reads them, also under xarray's coming defaults
+    coming = {"use_new_combine_kwarg_defaults": True} if "use_new_combine_kwarg_defaults" in xr.get_options() else {}
+    with xr.set_options(**coming), xr.open_mfdataset(files, engine="h5netcdf", join="outer",
+                                                     compat="no_conflicts") as ds:
         assert list(ds["run"].values) == [0, 1, 2, 3] and {"k_c_0", "variant", "run_id"} <= set(ds.coords)
     index = pd.read_csv(out.index_path)
     ds = open_sweep(out.directory)

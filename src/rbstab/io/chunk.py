@@ -5,7 +5,8 @@ executes (a chunk of up to a few hundred runs, any runs) is written as one file
 ``runs/chunk-<first run_id>-<random>.h5`` (the file, its dimensions and coordinates by
 h5netcdf, the variables by h5py with the dimension scales attached), a netCDF-4 file (HDF5
 with dimension scales) that ``ncdump``, ``xarray.open_dataset(p, engine="h5netcdf")``
-and ``xarray.open_mfdataset(paths, engine="h5netcdf")`` (default arguments) read:
+and ``xarray.open_mfdataset(paths, engine="h5netcdf", join="outer", compat="no_conflicts")``
+read (the files of a sweep of several variants hold different variables):
 
 - dimension ``run``, its coordinate the run's position in the sweep's run list (int,
   increasing within a file, so ``open_mfdataset`` orders files by it); coordinates along
