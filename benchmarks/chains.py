@@ -2,7 +2,7 @@
 
 Prints (2 cores, warm numba cache):
 - ms a run of each chain example: its integration by scipy's ``solve_ivp`` over the
-  compiled reduced rate (``rbstab.variants.tree.integrate``, ``--engine scipy``) and by the
+  compiled reduced rate (``rbstab.simulator.solve_tree``, ``--engine scipy``) and by the
   compiled driver (``rbstab.engine.integrate.integrate_chain_runs``), and the whole run
   ``rbstab run`` makes (``rbstab.simulator.simulate``: with its outputs and summary);
 - ms the integration of the one-body paper cases on the one-body compiled engine and
@@ -53,7 +53,7 @@ from rbstab.config.loader import chain_of, load_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_runs
 from rbstab.engine.settings import settings_rows
 from rbstab.engine.systems import tree_system
-from rbstab.simulator import simulate
+from rbstab.simulator import simulate, solve_tree
 from rbstab.variants import chain as C
 from rbstab.variants import tree as R
 from rbstab.variants.kernels import state_rate
@@ -312,7 +312,7 @@ def main() -> None:
     for name in ("double_pendulum", "stance_ankle_hip", "knee"):
         config = load_config(ROOT / "configs" / "examples" / f"{name}.yaml")
         compiled = C.compile_chain(config.chain)
-        scipy_s = _best(lambda: R.integrate(config, compiled=compiled))
+        scipy_s = _best(lambda: solve_tree(config, compiled=compiled))
         driver_s = _best(_compiled_run(compiled, C.initial_state(config), config.simulation))
         whole_s = _best(lambda: simulate(config))
         print(f"  {name:18s} {config.chain.size} bodies, t_end {config.simulation.t_end:g} s: {1e3 * scipy_s:8.1f} | "

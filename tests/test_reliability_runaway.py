@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
-from rbstab.config import config_from_mapping
+from rbstab.config import config_from_mapping, load_config
 from rbstab.simulator import simulate, solve
 from rbstab.sweep import run_sweep, spec_from_mapping
 
@@ -40,6 +40,20 @@ def test_a_run_past_its_wall_time_limit_stops(engine):
     assert result.wall_time < 2.0
     ok = simulate(_config(), engine=engine, timeout=60.0)  # a budget a run meets changes nothing
     assert ok.ok and ok.summary == simulate(_config(), engine=engine).summary
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_trees_run_stops_at_its_limits_with_one_bodys_messages(engine):
+    """A tree's run, on the compiled driver and on the scipy reference, stops at
+    ``simulation.max_steps`` and past its wall-time limit, with the words one body's runs
+    end with."""
+    stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    steps = simulate(load_config(stance, ["simulation.max_steps=20"]), engine=engine)
+    assert steps.status == "failed"
+    assert steps.message.startswith("step limit: 20 steps taken (simulation.max_steps), reaching only t = ")
+    slow = simulate(load_config(stance, ["simulation.t_end=1000", "simulation.n_samples=11"]), engine=engine,
+                    timeout=0.05)
+    assert slow.status == "failed" and slow.message.startswith("timeout: the run exceeded 0.05 s of wall time")
 
 
 def test_a_first_step_failure_is_a_failed_run():

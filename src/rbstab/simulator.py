@@ -52,7 +52,7 @@ from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
-from .variants.disturbances import apply_impulses, before
+from .variants.disturbances import apply_impulses, before, next_breakpoint
 from .variants.kernels import run_outputs, state_powers
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -67,6 +67,7 @@ __all__ = [
     "simulate_batch",
     "RunBlock",
     "solve",
+    "solve_tree",
     "admissible_region_event",
     "evaluate_outputs",
     "uses_compiled_engine",
@@ -347,6 +348,137 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
     return t_eval, states, "success", message, solver, work
 
 
+def solve_tree(config, timeout: float | None = None, compiled=None):
+    """Integrate a run of a tree (:class:`rbstab.config.ChainConfig`) in reduced
+    coordinates (:func:`rbstab.variants.tree.tree_rate`) with scipy's ``solve_ivp``
+    (``simulation``'s method, tolerances, steps), sampled at ``n_samples`` times on [0,
+    t_end]: the reference of the compiled driver. It stops ``failed`` where any body's or
+    joint's |theta_2| reaches pi/2 - ``gimbal_margin`` or the state leaves
+    ``simulation.limits`` (the rows after are NaN). The edges of the disturbances' windows split the
+    run: a new ``solve_ivp`` from each edge (the rate evaluated below the next one), from
+    the state just after the impulses that start there (a sample at that time shows it; the
+    permanent joints' impulsive reactions, :func:`rbstab.variants.chain.chain_impulses`,
+    keep them held). ``states`` are the maximal image (12 n + 3 e) of the samples; ``work``
+    the disturbances' work W [J] there, integrated with the state where the chain has
+    disturbances (its rate their power, left out of the error norm, as the compiled
+    driver's; each impulse adds its energy). Like one body's :func:`solve`, it stops
+    ``failed`` after ``simulation.max_steps`` steps or ``timeout`` [s] of wall time (default
+    ``simulation.max_wall_time``), keeping the samples of the disturbances' windows before
+    that one. Returns a
+    :class:`rbstab.variants.chain.ChainTrajectory`."""
+    from scipy.integrate import solve_ivp  # heavy: scipy
+
+    from .variants.chain import (ChainTrajectory, _gimbal_margin, chain_impulses, compile_chain,  # heavy: numba
+                                 gimbal_lock_message, impulse_times, initial_state, region_margin)
+    from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_layout, tree_rate,  # heavy: numba
+                                tree_velocities, tree_work)
+
+    sim = config.simulation
+    compiled = compile_chain(config.chain) if compiled is None else compiled
+    layout = tree_layout(compiled)
+    n = compiled.size
+    args, tree = compiled.args, (*compiled.args, *layout.args)
+    n_r = layout.n_r
+    disturbed = bool(np.any(compiled.params["disturbance_count"] > 0.0))
+    # W after the state where the chain has disturbances: its rate their power, out of the error norm
+    y = np.append(reduce_state(compiled, layout, initial_state(config)), [0.0] if disturbed else [])
+    atol = np.append(np.full(n_r, sim.atol), [np.inf] if disturbed else [])
+    time = np.linspace(0.0, sim.t_end, sim.n_samples)
+    dy = np.empty(y.size)
+    work = tree_work(n, compiled.n_states)
+    rot, rate = np.empty((n, 3, 3)), np.empty((n, 3, 3))
+    start = _time.perf_counter()
+    limit = float(timeout if timeout is not None else sim.max_wall_time)
+    max_steps = int(sim.max_steps)
+
+    def maximal(yr):
+        full = np.empty(compiled.n_states)
+        tree_expand(np.ascontiguousarray(yr), *tree, full, rot, rate, True)
+        return full
+
+    below = [np.inf]  # the float below the segment's end: no evaluation at or after an edge
+
+    def reduced_rate(t, yr):
+        tree_rate(min(t, below[0]), np.ascontiguousarray(yr), *tree, dy, work)
+        return dy.copy()
+
+    rhs = _with_deadline(reduced_rate, limit)
+
+    def jump(t, yr):
+        """Apply the impulses that start at t to ``yr`` (in place; their energy added to W)."""
+        full = maximal(yr[:n_r])
+        energy = chain_impulses(t, full, *args[:4], work.chain)
+        if energy != 0.0:
+            tree_velocities(full, compiled.codes, compiled.parents, layout.r_at, yr)
+            if disturbed:
+                yr[n_r] += energy
+
+    def lock(t, yr):
+        return _gimbal_margin(compiled, maximal(yr[:n_r]), sim.gimbal_margin)
+
+    lock.terminal = True
+    events = [lock]
+    if sim.limits is not None:
+        def region(t, yr):
+            return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
+
+        region.terminal = True
+        events.append(region)
+    events.append(_step_counter(max_steps))  # raises RunLimit past max_steps, shared by the segments
+    jumps = impulse_times(compiled, sim.t_end)
+    edges = [0.0]  # every edge of a disturbance's window: no step crosses one
+    while edges[-1] < sim.t_end:
+        edges.append(min(next_breakpoint(p, edges[-1], float(sim.t_end)) for p in compiled.params))
+    states = np.full((time.size, y.size), np.nan)
+    nfev = 0
+    status, message = "success", "The solver successfully reached the end of the integration interval."
+
+    def trajectory(status, message, solver_status):
+        full = np.full((time.size, compiled.n_states), np.nan)
+        params, codes, parents, ppoints, d_at = args
+        expand_samples(np.ascontiguousarray(states[None, :, :n_r]), params[None], codes, parents, ppoints[None], d_at,
+                       *layout.args, full[None], np.zeros(1, np.int64))
+        done = states[:, n_r] if disturbed else np.where(np.isnan(states[:, 0]), np.nan, 0.0)
+        return ChainTrajectory(time, full, status, message, {"nfev": nfev, "solver_status": solver_status,
+                                                             "wall_time": _time.perf_counter() - start}, compiled,
+                               done)
+
+    for a, b in zip(edges[:-1], edges[1:]):
+        jump(a, y)
+        below[0] = np.nextafter(b, a) if b < sim.t_end else np.inf
+        rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
+        t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
+        try:
+            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
+                            max_step=sim.max_step, events=events)
+        except RunLimit as exc:
+            return trajectory("failed", status_message(exc.status, exc.t, sim.gimbal_margin, max_steps, limit), -1)
+        nfev += int(sol.nfev)
+        got = min(sol.y.shape[1], rows.size)
+        states[rows[:got]] = sol.y[:, :got].T
+        if sol.status == 1 and len(sol.t_events[0]):
+            t_lock = float(sol.t_events[0][0])
+            status = "failed"
+            message = gimbal_lock_message(compiled, maximal(sol.y_events[0][0][:n_r]), sim.gimbal_margin, t_lock)
+            break
+        if sol.status == 1:
+            t_out = float(sol.t_events[1][0])
+            what = region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
+            status = "failed"
+            message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
+            break
+        if sol.status != 0:
+            status, message = "failed", str(sol.message)
+            break
+        y = sol.y[:, -1].copy()
+    else:
+        if sim.t_end in jumps:  # an impulse at t_end: the last sample shows the state after it
+            y = states[-1].copy()
+            jump(sim.t_end, y)
+            states[-1] = y
+    return trajectory(status, message, 0 if status == "success" else 1)
+
+
 def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray,
                      work: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Every output variable along sampled ``states`` (shape (n, n_state)) at ``time`` (n,),
@@ -399,7 +531,7 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
     A tree's run with a method the engine takes is integrated by the compiled driver
     (:func:`simulate_blocks`: the same steps as ``solve_ivp``'s, the admissible region's
     events located on the step's interpolant); with scipy's engine or methods, by
-    ``solve_ivp`` (:func:`rbstab.variants.tree.integrate`). Its outputs and summary are per
+    ``solve_ivp`` (:func:`solve_tree`). Its outputs and summary are per
     body and joint; a failed run's rows after the failure are NaN.
 
     Parameters
@@ -593,12 +725,10 @@ def _configs_of(configs: Sequence | None, rows) -> list:
 
 def _simulate_tree(config, timeout: float | None = None) -> RunResult:
     """A tree's run (:class:`rbstab.config.ChainConfig`) integrated by ``solve_ivp``
-    (:func:`rbstab.variants.tree.integrate`, any method), with its outputs and summary;
+    (:func:`solve_tree`, any method), with its outputs and summary;
     ``timeout`` [s] replaces ``simulation.max_wall_time``."""
-    from .variants import tree  # heavy: numba (the tree's kernels compile on first use)
-
     start = _time.perf_counter()
-    trajectory = tree.integrate(config, timeout=timeout)
+    trajectory = solve_tree(config, timeout)
     compiled, time = trajectory.compiled, trajectory.time
     outputs, summary = _trees_outputs([compiled], np.zeros(1, dtype=np.int64), time, trajectory.states[None],
                                       trajectory.work[None])

@@ -29,7 +29,6 @@ joint i is ``permanent``, else Theta, Omega, X, V (12); then the 3 states D [m] 
 from __future__ import annotations
 
 import math
-import time as _time
 from collections import namedtuple
 from dataclasses import dataclass
 
@@ -40,13 +39,6 @@ from ..kinematics import add, cross, matTvec, matvec, rotation_and_rate_of, sub,
 from .chain import (
     _OMEGA_J,
     _cholesky_solve,
-    ChainTrajectory,
-    _gimbal_margin,
-    region_margin,
-    chain_impulses,
-    compile_chain,
-    impulse_times,
-    initial_state,
     _THETA_J,
     CompiledChain,
     _put,
@@ -55,13 +47,11 @@ from .chain import (
     chain_wrenches,
     chain_work,
     euler_angles,
-    gimbal_lock_message,
 )
-from .disturbances import next_breakpoint
 from .kernels import PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "tree_velocities",
-           "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state", "integrate"]
+           "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state"]
 
 
 @dataclass(frozen=True)
@@ -557,127 +547,3 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
             if d_at[j] >= 0:
                 for c in range(3):
                     out[a, rd_at[j] + c] = y[a, d_at[j] + c]
-
-
-def integrate(config, *, timeout: float | None = None, compiled: CompiledChain | None = None) -> ChainTrajectory:
-    """Integrate a run of a tree (:class:`rbstab.config.ChainConfig`) in reduced
-    coordinates (:func:`tree_rate`) with scipy's ``solve_ivp`` (``simulation``'s method,
-    tolerances, steps), sampled at ``n_samples`` times on [0, t_end]: the reference of the
-    compiled driver. It stops ``failed`` where any body's or joint's |theta_2| reaches pi/2 -
-    ``gimbal_margin`` or the state leaves ``simulation.limits`` (the rows after are NaN), or
-    after ``timeout`` [s] of wall time. The edges of the disturbances' windows split the
-    run: a new ``solve_ivp`` from each edge (the rate evaluated below the next one), from
-    the state just after the impulses that start there (a sample at that time shows it; the
-    permanent joints' impulsive reactions, :func:`rbstab.variants.chain.chain_impulses`,
-    keep them held). ``states`` are the maximal image (12 n + 3 e) of the samples; ``work``
-    the disturbances' work W [J] there, integrated with the state where the chain has
-    disturbances (its rate their power, left out of the error norm, as the compiled
-    driver's; each impulse adds its energy)."""
-    from scipy.integrate import solve_ivp  # heavy: scipy, only where a tree is integrated by scipy
-
-    sim = config.simulation
-    compiled = compile_chain(config.chain) if compiled is None else compiled
-    layout = tree_layout(compiled)
-    n = compiled.size
-    args, tree = compiled.args, (*compiled.args, *layout.args)
-    n_r = layout.n_r
-    disturbed = bool(np.any(compiled.params["disturbance_count"] > 0.0))
-    # W after the state where the chain has disturbances: its rate their power, out of the error norm
-    y = np.append(reduce_state(compiled, layout, initial_state(config)), [0.0] if disturbed else [])
-    atol = np.append(np.full(n_r, sim.atol), [np.inf] if disturbed else [])
-    time = np.linspace(0.0, sim.t_end, sim.n_samples)
-    dy = np.empty(y.size)
-    work = tree_work(n, compiled.n_states)
-    rot, rate = np.empty((n, 3, 3)), np.empty((n, 3, 3))
-    start = _time.perf_counter()
-    limit = timeout if timeout is not None else sim.max_wall_time
-
-    class _Timeout(Exception):
-        pass
-
-    def maximal(yr):
-        full = np.empty(compiled.n_states)
-        tree_expand(np.ascontiguousarray(yr), *tree, full, rot, rate, True)
-        return full
-
-    below = [math.inf]  # the float below the segment's end: no evaluation at or after an edge
-
-    def rhs(t, yr):
-        if limit is not None and math.isfinite(limit) and _time.perf_counter() - start > limit:
-            raise _Timeout
-        tree_rate(min(t, below[0]), np.ascontiguousarray(yr), *tree, dy, work)
-        return dy.copy()
-
-    def jump(t, yr):
-        """Apply the impulses that start at t to ``yr`` (in place; their energy added to W)."""
-        full = maximal(yr[:n_r])
-        energy = chain_impulses(t, full, *args[:4], work.chain)
-        if energy != 0.0:
-            tree_velocities(full, compiled.codes, compiled.parents, layout.r_at, yr)
-            if disturbed:
-                yr[n_r] += energy
-
-    def lock(t, yr):
-        return _gimbal_margin(compiled, maximal(yr[:n_r]), sim.gimbal_margin)
-
-    lock.terminal = True
-    events = [lock]
-    if sim.limits is not None:
-        def region(t, yr):
-            return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
-
-        region.terminal = True
-        events.append(region)
-    jumps = impulse_times(compiled, sim.t_end)
-    edges = [0.0]  # every edge of a disturbance's window: no step crosses one
-    while edges[-1] < sim.t_end:
-        edges.append(min(next_breakpoint(p, edges[-1], float(sim.t_end)) for p in compiled.params))
-    states = np.full((time.size, y.size), np.nan)
-    nfev = 0
-    status, message = "success", "The solver successfully reached the end of the integration interval."
-
-    def trajectory(status, message, solver_status):
-        full = np.full((time.size, compiled.n_states), np.nan)
-        params, codes, parents, ppoints, d_at = args
-        expand_samples(np.ascontiguousarray(states[None, :, :n_r]), params[None], codes, parents, ppoints[None], d_at,
-                       *layout.args, full[None], np.zeros(1, np.int64))
-        done = states[:, n_r] if disturbed else np.where(np.isnan(states[:, 0]), np.nan, 0.0)
-        return ChainTrajectory(time, full, status, message, {"nfev": nfev, "solver_status": solver_status,
-                                                             "wall_time": _time.perf_counter() - start}, compiled,
-                               done)
-
-    for a, b in zip(edges[:-1], edges[1:]):
-        jump(a, y)
-        below[0] = math.nextafter(b, a) if b < sim.t_end else math.inf
-        rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
-        t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
-        try:
-            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
-                            max_step=sim.max_step, events=events)
-        except _Timeout:
-            states[:] = np.nan
-            return trajectory("failed", f"wall-time limit of {limit:g} s reached", -1)
-        nfev += int(sol.nfev)
-        got = min(sol.y.shape[1], rows.size)
-        states[rows[:got]] = sol.y[:, :got].T
-        if sol.status == 1 and len(sol.t_events[0]):
-            t_lock = float(sol.t_events[0][0])
-            status = "failed"
-            message = gimbal_lock_message(compiled, maximal(sol.y_events[0][0][:n_r]), sim.gimbal_margin, t_lock)
-            break
-        if sol.status == 1:
-            t_out = float(sol.t_events[1][0])
-            what = region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
-            status = "failed"
-            message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
-            break
-        if sol.status != 0:
-            status, message = "failed", str(sol.message)
-            break
-        y = sol.y[:, -1].copy()
-    else:
-        if sim.t_end in jumps:  # an impulse at t_end: the last sample shows the state after it
-            y = states[-1].copy()
-            jump(sim.t_end, y)
-            states[-1] = y
-    return trajectory(status, message, 0 if status == "success" else 1)
