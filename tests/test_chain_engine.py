@@ -486,6 +486,27 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
 
 
 @pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_tree_leaves_its_region_falling_through_a_bound_or_thrown_out_by_an_impulse(engine):
+    """The stance example's trunk starts on its bound of theta (|theta_1| = 0.05 rad) and
+    moves inward: the run goes on to t_end, as one body's would (a region is left falling
+    through a bound). A trunk pushed at t = 1 s past its bound of omega (0.5 rad/s) stops
+    there, at the impulse, on either engine; the scipy reference names the trunk."""
+    stance = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    on_bound = simulate(load_config(stance, ["simulation.limits.theta=[0.05,0.05,3]", "simulation.t_end=1",
+                                             "simulation.n_samples=101"]), engine=engine)
+    assert on_bound.ok, on_bound.message
+    pushed = simulate(load_config(stance, [
+        "simulation.limits.omega=[0.5,0.5,0.5]", "simulation.t_end=2", "simulation.n_samples=201",
+        "disturbances=[{kind: impulse, body: trunk, value: [0, 60, 0], point: [0, 0, 0.3], start: 1.0}]"]),
+        engine=engine)
+    assert pushed.status == "failed" and pushed.message.endswith("reached 0.5 at t = 1 s"), pushed.message
+    assert pushed.message.startswith("left the admissible region (simulation.limits): |omega_1| of ")
+    if engine == "scipy":
+        assert "of trunk" in pushed.message
+    assert np.isfinite(pushed.outputs["lyapunov"][:100]).all() and np.isnan(pushed.outputs["lyapunov"][100:]).all()
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
 def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
     """Two bodies on permanent joints set turning about y at 3 rad/s, no gravity, no gains,
     gimbal_margin 0.3 rad: the lower body's own Euler angles pass theta_2 = pi/2 - 0.3,

@@ -416,14 +416,21 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     def lock(t, yr):
         return _gimbal_margin(compiled, maximal(yr[:n_r]), sim.gimbal_margin)
 
-    lock.terminal = True
-    events = [lock]
-    if sim.limits is not None:
-        def region(t, yr):
-            return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
+    def region(t, yr):
+        return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
 
-        region.terminal = True
-        events.append(region)
+    def left(t, yr):
+        """The message where the state at t (a segment's start: after the impulses there)
+        lies outside the admissible region, else None (a start on its boundary is inside)."""
+        full = maximal(yr[:n_r])
+        if _gimbal_margin(compiled, full, sim.gimbal_margin) < 0:
+            return gimbal_lock_message(compiled, full, sim.gimbal_margin, t)
+        margin, what = (0.0, "") if sim.limits is None else region_margin(compiled, full, sim.limits)
+        return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s" if margin < 0 else None
+
+    events = [lock] + ([] if sim.limits is None else [region])
+    for event in events:  # terminal, falling through zero (leaving the region), as one body's
+        event.terminal, event.direction = True, -1
     events.append(_step_counter(max_steps))  # raises RunLimit past max_steps, shared by the segments
     jumps = impulse_times(compiled, sim.t_end)
     edges = [0.0]  # every edge of a disturbance's window: no step crosses one
@@ -445,6 +452,10 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
 
     for a, b in zip(edges[:-1], edges[1:]):
         jump(a, y)
+        outside = left(a, y)
+        if outside is not None:
+            status, message = "failed", outside
+            break
         below[0] = np.nextafter(b, a) if b < sim.t_end else np.inf
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
