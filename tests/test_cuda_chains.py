@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from conftest import simulated_once
+from rbstab.engine.status import limit_status
 
 numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
 from test_cuda import _compilers, ptx_for_sm_90  # noqa: E402
@@ -20,8 +21,8 @@ def simulated(tmp_path_factory):
 
 
 @pytest.mark.parametrize("case, bodies, status", [
-    ("stance", 2, [0, 0, 0, -3]), ("params", 2, [0, 0, 0, 2]), ("knee", 2, [0, 0]), ("pulsed3", 3, [0, 2]),
-    ("pushed3", 3, [0, 2])])
+    ("stance", 2, [0, 0, 0, -3]), ("params", 2, [0, 0, 0, limit_status(0, 0, 1)]), ("knee", 2, [0, 0]),
+    ("pulsed3", 3, [0, limit_status(0, 0, 2)]), ("pushed3", 3, [0, limit_status(0, 0, 2)])])  # |theta_1| of body 1, 2
 def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bodies, status):
     """The stance example (permanent joints, saturated torques; one run stopped by its step
     limit), the knee (visco-elastic and embedded joints), three bodies with a pulse and an

@@ -43,10 +43,10 @@ from .engine import METHODS, RunBatch
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.integrate import admissible
-from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, status_message
+from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, limit_part, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .layout import OUTPUTS, VARIANT_LAYOUTS, summary_stride
+from .layout import LIMITED, OUTPUTS, VARIANT_LAYOUTS, summary_stride
 from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
@@ -947,8 +947,9 @@ def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndar
     """(status, message) of a chain run of the compiled driver that ended with ``code`` at
     ``t_stop`` [s]: ``compiled`` its chain, ``settings`` its row (7,) of
     :data:`rbstab.engine.settings.SETTING_COLUMNS`, ``bounds`` (5, 3) its admissible region
-    (a record's ``limits``), ``states`` (m, 12 n + 3 e) its samples (the last finite one
-    names the body or joint at a gimbal lock or a bound; ``y0`` where none is finite)."""
+    (a record's ``limits``; the code names the bound, its axis and the body or joint that
+    reached it), ``states`` (m, 12 n + 3 e) its samples (the last finite one names the body
+    or joint at a gimbal lock; ``y0`` where none is finite)."""
     from .variants import chain as C  # heavy: numba
 
     margin = float(settings[4])
@@ -958,7 +959,12 @@ def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndar
     last = finite[-1] if len(finite) else y0  # the last sample before the stop
     if code == GIMBAL_LOCK:
         return "failed", C.gimbal_lock_message(compiled, last, margin, t_stop)
-    if limit_of(code) is not None:
-        return "failed", (f"left the admissible region (simulation.limits): "
-                          f"{C.nearest_bound(compiled, last, bounds, limit_of(code))} at t = {t_stop:.6g} s")
+    which = limit_of(code)
+    if which is not None:
+        quantity, axis = which
+        part = limit_part(code)
+        bound = float(np.asarray(bounds, dtype=float)[LIMITED.index(quantity), axis])
+        what = (f"|E_{axis + 1}| of joint {compiled.chain.joint_names[part]}" if quantity == "constraint_error" else
+                f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[part]}")
+        return "failed", f"left the admissible region (simulation.limits): {what} reached {bound:g} at t = {t_stop:.6g} s"
     return "failed", status_message(code, t_stop, margin, int(settings[5]), float(settings[6]))

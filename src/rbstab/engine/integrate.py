@@ -585,8 +585,8 @@ class ChunkSolution:
         The state at linspace(0, t_end, n_samples) of each run; NaN after it stopped.
     status : ndarray of int, shape (k,)
         How each run ended (:mod:`rbstab.engine.status`: 0 reached t_end, 1 gimbal lock,
-        2-16 the admissible region left (:func:`rbstab.engine.status.limit_of` names the
-        bound), negative a failure).
+        2 and above the admissible region left (:func:`rbstab.engine.status.limit_of` and
+        :func:`~rbstab.engine.status.limit_part` name the bound), negative a failure).
     t_stop : ndarray, shape (k,)
         Where each run stopped [s] (the event time for gimbal lock and the region).
     nfev, n_steps : ndarray of int, shape (k,)

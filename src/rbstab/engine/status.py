@@ -16,10 +16,11 @@ code    name                 the run ...
 -4      ``TIMEOUT``          ran past ``simulation.max_wall_time``
 -5      ``SWITCHING_LIMIT``  located its largest number of switchings (pure sign law)
 -6      ``NOT_STARTED``      was not started: its GPU launch had reached its wall-time limit
-2-16    ``LEFT_REGION + k``  left the admissible region (``simulation.limits``): |q_i|
-                             reached its bound (the event time returned), k = 3 j + i
-                             for the quantity j of :data:`rbstab.layout.LIMITED` and the
-                             axis i (:func:`limit_status`, :func:`limit_of`)
+>= 2    ``LEFT_REGION + k``  left the admissible region (``simulation.limits``): |q_i|
+                             reached its bound (the event time returned), k = 15 b +
+                             3 j + i for the quantity j of :data:`rbstab.layout.LIMITED`,
+                             the axis i and body (or joint) b of a tree, 0 for one body
+                             (:func:`limit_status`, :func:`limit_of`, :func:`limit_part`)
 ======  ===================  ==========================================================
 
 A run whose code is not :data:`SUCCESS` has status ``"failed"``, with
@@ -48,6 +49,8 @@ __all__ = [
     "LEFT_REGION",
     "limit_status",
     "limit_of",
+    "limit_part",
+    "PART_CODES",
     "STATUSES",
     "SUCCESS_MESSAGE",
     "TOO_SMALL_STEP_MESSAGE",
@@ -62,22 +65,32 @@ __all__ = [
 SUCCESS, GIMBAL_LOCK, TOO_SMALL_STEP, NOT_FINITE, STEP_LIMIT, TIMEOUT, SWITCHING_LIMIT, NOT_STARTED = (
     0, 1, -1, -2, -3, -4, -5, -6)
 
-#: The first code of a run that left the admissible region: LEFT_REGION + 3 j + i for the
-#: bound of quantity j (:data:`rbstab.layout.LIMITED`) on axis i.
+#: The first code of a run that left the admissible region: LEFT_REGION + PART_CODES b +
+#: 3 j + i for the bound of quantity j (:data:`rbstab.layout.LIMITED`) on axis i, reached
+#: by body (or joint) b of a tree (0 for one body).
 LEFT_REGION = 2
+#: The region's codes of each body or joint: an axis of each quantity of :data:`rbstab.layout.LIMITED`.
+PART_CODES = 3 * len(LIMITED)
 
 
-def limit_status(quantity: int, axis: int) -> int:
+def limit_status(quantity: int, axis: int, part: int = 0) -> int:
     """The status code of a run whose |q_i| reached its bound: q the ``quantity``-th of
-    :data:`rbstab.layout.LIMITED`, i = ``axis`` (0, 1, 2)."""
-    return LEFT_REGION + 3 * quantity + axis
+    :data:`rbstab.layout.LIMITED`, i = ``axis`` (0, 1, 2), of body (or, for E, joint)
+    ``part`` of a tree (0 for one body)."""
+    return LEFT_REGION + PART_CODES * part + 3 * quantity + axis
 
 
 def limit_of(status: int) -> tuple[str, int] | None:
     """(the bounded quantity's name in :data:`rbstab.layout.LIMITED`, the axis 0-2) of a
     status code of :func:`limit_status`, or None for another code."""
     k = int(status) - LEFT_REGION
-    return (LIMITED[k // 3], k % 3) if 0 <= k < 3 * len(LIMITED) else None
+    return (LIMITED[k % PART_CODES // 3], k % 3) if k >= 0 else None
+
+
+def limit_part(status: int) -> int:
+    """The body (or, for E, joint) of a tree whose bound a status code of
+    :func:`limit_status` names (0 for one body)."""
+    return (int(status) - LEFT_REGION) // PART_CODES
 
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).

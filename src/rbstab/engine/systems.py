@@ -34,7 +34,7 @@ from ..variants.chain import _relative, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate, tree_velocities
-from .status import GIMBAL_LOCK, LEFT_REGION
+from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES
 
 __all__ = ["CHAIN", "TreeSystem", "tree_system", "with_offsets", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
@@ -174,14 +174,15 @@ def chain_bounds(y, params, codes, parents, ppoints, margin, status):
     """(margin, status) after the bounds ``params[0].limits`` of ``simulation.limits`` on a
     chain's maximal state ``y`` (:class:`TreeSystem`'s arrays): every body's Theta, Omega,
     X, V and every non-permanent joint's E_j, as :func:`admissible_event`'s (status: the
-    quantity and axis; which body or joint reached it is not in the code)."""
+    quantity, the axis and the body or joint, :func:`rbstab.engine.status.limit_status`)."""
     n = codes.shape[0]
     p0 = params[0]
     for i in range(n):
-        margin, status = _bound_margin(vector(y, 12 * i), p0.limits[0], 0, margin, status)
-        margin, status = _bound_margin(vector(y, 12 * i + 3), p0.limits[1], 1, margin, status)
-        margin, status = _bound_margin(vector(y, 12 * i + 6), p0.limits[2], 2, margin, status)
-        margin, status = _bound_margin(vector(y, 12 * i + 9), p0.limits[3], 3, margin, status)
+        part = PART_CODES // 3 * i  # _bound_margin's quantity index j, offset to body i's codes
+        margin, status = _bound_margin(vector(y, 12 * i), p0.limits[0], part, margin, status)
+        margin, status = _bound_margin(vector(y, 12 * i + 3), p0.limits[1], part + 1, margin, status)
+        margin, status = _bound_margin(vector(y, 12 * i + 6), p0.limits[2], part + 2, margin, status)
+        margin, status = _bound_margin(vector(y, 12 * i + 9), p0.limits[3], part + 3, margin, status)
     for j in range(n):
         if codes[j] == PERMANENT:
             continue
@@ -199,7 +200,7 @@ def chain_bounds(y, params, codes, parents, ppoints, margin, status):
             e = (point[0] - y[12 * q + 6] - (b[0][0] * s[0] + b[0][1] * s[1] + b[0][2] * s[2]),
                  point[1] - y[12 * q + 7] - (b[1][0] * s[0] + b[1][1] * s[1] + b[1][2] * s[2]),
                  point[2] - y[12 * q + 8] - (b[2][0] * s[0] + b[2][1] * s[1] + b[2][2] * s[2]))
-        margin, status = _bound_margin(e, p0.limits[4], 4, margin, status)
+        margin, status = _bound_margin(e, p0.limits[4], PART_CODES // 3 * j + 4, margin, status)
     return margin, status
 
 

@@ -34,7 +34,7 @@ import numpy as np
 from ..chain import Chain
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
-from ..layout import LIMITED, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
+from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     Gains,
@@ -54,7 +54,7 @@ from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "is_one_body", "one_body_mask", "gimbal_lock_message", "independent_coordinates", "full_state",
-           "region_margin", "gimbal_angles", "state_vector", "with_records", "nearest_bound", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "region_margin", "gimbal_angles", "state_vector", "with_records", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
@@ -1053,26 +1053,6 @@ def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float
                 worst = float(margin[axis])
                 what = f"|E_{axis + 1}| of joint {compiled.chain.joint_names[j]} reached {bound[axis]:g}"
     return worst, what
-
-
-def nearest_bound(compiled: CompiledChain, y: np.ndarray, bounds: np.ndarray, which: tuple[str, int]) -> str:
-    """In words, the body or joint whose |q_i| is nearest its bound of ``simulation.limits``
-    (``bounds`` (5, 3), :data:`rbstab.layout.LIMITED`'s order, a record's ``limits``) at the
-    state ``y``: ``which`` = (q, i), q one of :data:`rbstab.layout.LIMITED`
-    (``constraint_error``: E_j of a non-permanent joint), i the axis (0-2); e.g.
-    ``"|theta_1| of trunk reached 0.2"``."""
-    quantity, axis = which
-    bound = float(np.asarray(bounds, dtype=float)[LIMITED.index(quantity), axis])
-    n = compiled.size
-    if quantity == "constraint_error":
-        joints = np.empty((n, 7, 3))
-        chain_core(0.0, np.ascontiguousarray(y, dtype=float), *compiled.args, np.empty(compiled.n_states), joints,
-                   np.empty((n, 3)), np.empty(5))
-        values = np.where(compiled.codes == PERMANENT, -np.inf, np.abs(joints[:, _E, axis]))
-        return f"|E_{axis + 1}| of joint {compiled.chain.joint_names[int(np.argmax(values))]} reached {bound:g}"
-    k = ("theta", "omega", "position", "velocity").index(quantity)
-    values = np.abs(np.asarray(y)[: 12 * n].reshape(n, 4, 3)[:, k, axis])
-    return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[int(np.argmax(values))]} reached {bound:g}"
 
 
 def disturbance_edges(compiled: CompiledChain, time: np.ndarray) -> np.ndarray:
