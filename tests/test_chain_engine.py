@@ -486,6 +486,23 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
 
 
 @pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_trees_solver_counts_are_one_bodys(engine):
+    """A tree's run reports the solver counts one body's does (scipy's nfev, njev, nlu and
+    solver_status, the compiled driver's steps too): an implicit method's Jacobians and LU
+    decompositions counted, the compiled driver's status code (a step limit: STEP_LIMIT)."""
+    from rbstab.engine.status import STEP_LIMIT
+
+    examples, short = ROOT / "configs" / "examples", ["simulation.t_end=0.2", "simulation.n_samples=21"]
+    knee = simulate(load_config(examples / "knee.yaml", short), engine=engine)
+    body = simulate(load_config(examples / "free_gravity.yaml", short), engine=engine)
+    assert set(knee.solver) == set(body.solver)
+    radau = simulate(load_config(examples / "knee.yaml", [*short, "simulation.method=Radau"]), engine=engine)
+    assert radau.ok and radau.solver["njev"] > 0 and radau.solver["nlu"] > 0
+    stopped = simulate(load_config(examples / "knee.yaml", [*short, "simulation.max_steps=5"]), engine=engine)
+    assert stopped.solver["solver_status"] == (STEP_LIMIT if engine == "compiled" else -1)
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
 def test_a_tree_leaves_its_region_falling_through_a_bound_or_thrown_out_by_an_impulse(engine):
     """The stance example's trunk starts on its bound of theta (|theta_1| = 0.05 rad) and
     moves inward: the run goes on to t_end, as one body's would (a region is left falling

@@ -437,7 +437,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     while edges[-1] < sim.t_end:
         edges.append(min(next_breakpoint(p, edges[-1], float(sim.t_end)) for p in compiled.params))
     states = np.full((time.size, y.size), np.nan)
-    nfev = 0
+    counts = {"nfev": 0, "njev": 0, "nlu": 0}
     status, message = "success", "The solver successfully reached the end of the integration interval."
 
     def trajectory(status, message, solver_status):
@@ -446,7 +446,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         expand_samples(np.ascontiguousarray(states[None, :, :n_r]), params[None], codes, parents, ppoints[None], d_at,
                        *layout.args, full[None], np.zeros(1, np.int64))
         done = states[:, n_r] if disturbed else np.where(np.isnan(states[:, 0]), np.nan, 0.0)
-        return ChainTrajectory(time, full, status, message, {"nfev": nfev, "solver_status": solver_status,
+        return ChainTrajectory(time, full, status, message, {**counts, "solver_status": solver_status,
                                                              "wall_time": _time.perf_counter() - start}, compiled,
                                done)
 
@@ -464,7 +464,8 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
                             max_step=sim.max_step, events=events)
         except RunLimit as exc:
             return trajectory("failed", status_message(exc.status, exc.t, sim.gimbal_margin, max_steps, limit), -1)
-        nfev += int(sol.nfev)
+        for key in counts:
+            counts[key] += int(getattr(sol, key))
         got = min(sol.y.shape[1], rows.size)
         states[rows[:got]] = sol.y[:, :got].T
         if sol.status == 1 and len(sol.t_events[0]):
@@ -614,9 +615,16 @@ def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.
         message[j] = status_message(int(status[j]), float(t_stop[j]), float(settings[j, 4]), int(settings[j, 5]),
                                     float(settings[j, 6]), limits=limits[j])
     return {"status": np.where(ok, "success", "failed").tolist(), "message": message.tolist(),
-            "solver": {"nfev": np.asarray(nfev, dtype=np.int64), "njev": np.zeros(len(status), dtype=np.int64),
-                       "nlu": np.zeros(len(status), dtype=np.int64), "solver_status": status,
-                       "n_steps": np.asarray(n_steps, dtype=np.int64)}}
+            "solver": _compiled_solver(nfev, n_steps, status)}
+
+
+def _compiled_solver(nfev, n_steps, status) -> dict:
+    """The solver counts of runs of the compiled driver (k,) each, as scipy's names them (no
+    Jacobian, no LU), with their status codes (:mod:`rbstab.engine.status`)."""
+    status = np.asarray(status, dtype=np.int64)
+    zeros = np.zeros(len(status), dtype=np.int64)
+    return {"nfev": np.asarray(nfev, dtype=np.int64), "njev": zeros, "nlu": zeros.copy(), "solver_status": status,
+            "n_steps": np.asarray(n_steps, dtype=np.int64)}
 
 
 def simulate_many(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
@@ -898,11 +906,8 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
                                               sol.last[j][None] if gpu else sol.samples[j], y0[j], settings[j],
                                               limits[j])
                                      for j in range(lo, hi)))
-            ok = sol.status[lo:hi] == SUCCESS
             ends = {"status": list(status), "message": list(message),
-                    "solver": {"nfev": sol.nfev[lo:hi].astype(np.int64),
-                               "n_steps": sol.n_steps[lo:hi].astype(np.int64),
-                               "solver_status": np.where(ok, 0, -1).astype(np.int64)}}
+                    "solver": _compiled_solver(sol.nfev[lo:hi], sol.n_steps[lo:hi], sol.status[lo:hi])}
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
         yield members[lo:hi].tolist(), RunBlock(
             configs=_configs_of(configs, members[lo:hi]),
