@@ -485,6 +485,21 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
     assert np.abs(v[:10]).max() < 1e-9 and v[-1] > 1e-3  # at rest until the torque starts, then moved
 
 
+@pytest.mark.parametrize("path", ["examples/knee.yaml", "paper/case1_permanent.yaml"])
+def test_batches_of_runs_refuse_an_implicit_method_naming_it(path):
+    """The analysis's batches of runs (basin maps, the certificate's checks, pushes) take
+    an explicit method: with Radau, a tree's and one body's say so, naming the methods that
+    run (not the pure sign law, which neither config has)."""
+    from rbstab.analysis.runs import Runs
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        config = load_config(ROOT / "configs" / path, ["simulation.method=Radau"])
+    runs = Runs(config)
+    with pytest.raises(ValueError, match=r"^simulation.method Radau is implicit: .*\(RK23, RK45, DOP853\)"):
+        runs.outcomes(runs.initial_state[None])
+
+
 @pytest.mark.parametrize("engine", ["compiled", "scipy"])
 def test_a_trees_solver_counts_are_one_bodys(engine):
     """A tree's run reports the solver counts one body's does (scipy's nfev, njev, nlu and

@@ -17,6 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ..engine.registry import get_engine
+from ..engine.tableaus import METHODS
 
 __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE"]
 
@@ -170,9 +171,13 @@ class Runs:
         if len(states) == 0:
             return np.zeros((3, 0))
         if not self.base.compiled[0]:
-            raise ValueError(f"{self.config.name}: the pure sign law (controller.boundary_layer 0) or an implicit "
-                             "method runs one at a time; analyse a boundary-layer law (--boundary-layer PHI) "
-                             "with an explicit method")
+            method = self.config.simulation.method
+            if method not in METHODS:
+                raise ValueError(f"simulation.method {method} is implicit: the analysis integrates its states in "
+                                 f"batches, which take an explicit method ({', '.join(METHODS)}); set "
+                                 "simulation.method to one of them (--set simulation.method=DOP853)")
+            raise ValueError("the pure sign law (controller.boundary_layer 0) runs one at a time; analyse a "
+                             "boundary-layer law (--boundary-layer PHI)")
         batch = self._batch(states, 2)
         if disturbance is not None:
             body, entry, values = disturbance
