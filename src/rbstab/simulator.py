@@ -426,7 +426,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         if _gimbal_margin(compiled, full, sim.gimbal_margin) < 0:
             return gimbal_lock_message(compiled, full, sim.gimbal_margin, t)
         margin, what = (0.0, "") if sim.limits is None else region_margin(compiled, full, sim.limits)
-        return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s" if margin < 0 else None
+        return _tree_left_region(what, t) if margin < 0 else None
 
     events = [lock] + ([] if sim.limits is None else [region])
     for event in events:  # terminal, falling through zero (leaving the region), as one body's
@@ -477,7 +477,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
             t_out = float(sol.t_events[1][0])
             what = region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
             status = "failed"
-            message = f"left the admissible region (simulation.limits): {what} at t = {t_out:.6g} s"
+            message = _tree_left_region(what, t_out)
             break
         if sol.status != 0:
             status, message = "failed", str(sol.message)
@@ -947,6 +947,12 @@ def _body_outputs(batch: RunBatch, rows: np.ndarray, time: np.ndarray, samples: 
     return outputs, summary_table(time, outputs) if summary else {}
 
 
+def _tree_left_region(what: str, t: float) -> str:
+    """The message of a tree's run that left its admissible region at t [s] through the
+    bound ``what`` (:func:`rbstab.variants.chain.bound_reached`), on every engine."""
+    return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s"
+
+
 def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray, settings: np.ndarray,
              bounds: np.ndarray) -> tuple[str, str]:
     """(status, message) of a chain run of the compiled driver that ended with ``code`` at
@@ -967,9 +973,6 @@ def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndar
     which = limit_of(code)
     if which is not None:
         quantity, axis = which
-        part = limit_part(code)
         bound = float(np.asarray(bounds, dtype=float)[LIMITED.index(quantity), axis])
-        what = (f"|E_{axis + 1}| of joint {compiled.chain.joint_names[part]}" if quantity == "constraint_error" else
-                f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[part]}")
-        return "failed", f"left the admissible region (simulation.limits): {what} reached {bound:g} at t = {t_stop:.6g} s"
+        return "failed", _tree_left_region(C.bound_reached(compiled, quantity, axis, limit_part(code), bound), t_stop)
     return "failed", status_message(code, t_stop, margin, int(settings[5]), float(settings[6]))

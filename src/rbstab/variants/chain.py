@@ -54,7 +54,7 @@ from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "is_one_body", "one_body_mask", "gimbal_lock_message", "independent_coordinates", "full_state",
-           "region_margin", "gimbal_angles", "state_vector", "with_records", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
@@ -1026,20 +1026,29 @@ def gimbal_lock_message(compiled: CompiledChain, y: np.ndarray, margin: float, t
             f"at t = {t:.6g} s; B(theta) is singular there (eq 5), so the Euler-angle model stops")
 
 
+def bound_reached(compiled: CompiledChain, quantity: str, axis: int, part: int, bound: float) -> str:
+    """In words, the bound ``bound`` (the quantity's units) of ``simulation.limits`` that
+    body ``part`` of the tree reached on ``axis`` (0-2) of ``quantity`` (one of
+    :data:`rbstab.layout.LIMITED`; for ``constraint_error``, E_j of joint ``part``); e.g.
+    ``"|theta_1| of trunk reached 0.2"``."""
+    if quantity == "constraint_error":
+        return f"|E_{axis + 1}| of joint {compiled.chain.joint_names[part]} reached {bound:g}"
+    return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[part]} reached {bound:g}"
+
+
 def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
     """(min over bodies, joints and axes of bound - |q| [the quantity's units], the quantity
     that reaches its bound first, in words) of ``simulation.limits``: Theta, Omega, X, V of
     every body, E_j of every joint (not permanent); a run stops where it reaches 0."""
     n = compiled.size
     worst, what = math.inf, ""
-    names = compiled.chain.body_names
     for k, block in enumerate(("theta", "omega", "position", "velocity")):
         bound = np.asarray(getattr(limits, block), dtype=float)
         values = np.abs(y[: 12 * n].reshape(n, 4, 3)[:, k])
         margin = bound[None, :] - values
         i, axis = np.unravel_index(int(np.argmin(margin)), margin.shape)
         if margin[i, axis] < worst:
-            worst, what = float(margin[i, axis]), f"|{block}_{axis + 1}| of {names[i]} reached {bound[axis]:g}"
+            worst, what = float(margin[i, axis]), bound_reached(compiled, block, int(axis), int(i), bound[axis])
     bound = np.asarray(limits.constraint_error, dtype=float)
     if np.isfinite(bound).any():
         joints = np.empty((n, 7, 3))
@@ -1051,7 +1060,7 @@ def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float
             axis = int(np.argmin(margin))
             if margin[axis] < worst:
                 worst = float(margin[axis])
-                what = f"|E_{axis + 1}| of joint {compiled.chain.joint_names[j]} reached {bound[axis]:g}"
+                what = bound_reached(compiled, "constraint_error", axis, j, bound[axis])
     return worst, what
 
 
