@@ -364,8 +364,25 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     driver's; each impulse adds its energy). Like one body's :func:`solve`, it stops
     ``failed`` after ``simulation.max_steps`` steps or ``timeout`` [s] of wall time (default
     ``simulation.max_wall_time``), keeping the samples of the disturbances' windows before
-    that one. Returns a
-    :class:`rbstab.variants.chain.ChainTrajectory`."""
+    that one.
+
+    Parameters
+    ----------
+    config : ChainConfig
+        Validated (any method of ``solve_ivp``).
+    timeout : float, optional
+        Wall-time limit [s]; default ``simulation.max_wall_time``.
+    compiled : CompiledChain, optional
+        ``config``'s compiled tree (:func:`rbstab.variants.chain.compile_chain`), if at hand.
+
+    Returns
+    -------
+    ChainTrajectory
+        ``time`` (n_samples,) [s]; ``states`` (n_samples, 12 n + 3 e), the maximal image
+        (inertial frame for X, V; body frames for Omega), NaN after a stop; ``work``
+        (n_samples,) [J]; ``status``, ``message``; ``solver`` (nfev, njev, nlu,
+        solver_status: scipy's, -1 at a step or wall-time limit; wall_time [s]). A
+        physical or numerical failure is a ``"failed"`` status, never an exception."""
     from scipy.integrate import solve_ivp  # heavy: scipy
 
     from .variants.chain import (ChainTrajectory, _gimbal_margin, chain_impulses, compile_chain,  # heavy: numba
