@@ -56,6 +56,29 @@ def test_a_trees_run_stops_at_its_limits_with_one_bodys_messages(engine):
     assert slow.status == "failed" and slow.message.startswith("timeout: the run exceeded 0.05 s of wall time")
 
 
+@pytest.mark.parametrize("name", ["paper/case3_embedded", "examples/saturated_push", "examples/stance_ankle_hip"])
+def test_a_stopped_run_keeps_its_samples_and_both_engines_stop_at_one_step(name):
+    """At ``simulation.max_steps`` the scipy reference stops where the compiled driver
+    stops (the end of the last step allowed), with the samples up to there: one body, one
+    body with an impulse and a pulse (W to the stop), a tree. Past a wall-time limit it
+    keeps its samples too."""
+    config = load_config(ROOT / "configs" / f"{name}.yaml", ["simulation.max_steps=20"])
+    runs = {engine: simulate(config, engine=engine) for engine in ("compiled", "scipy")}
+    compiled, scipy = runs["compiled"], runs["scipy"]
+    assert scipy.status == compiled.status == "failed"
+    assert scipy.message.startswith("step limit: 20 steps taken")
+    t_stop = float(scipy.message.rsplit("t = ", 1)[1].split()[0])
+    assert t_stop == pytest.approx(float(compiled.message.rsplit("t = ", 1)[1].split()[0]), rel=1e-5)
+    kept = np.isfinite(scipy.outputs["lyapunov"])
+    assert np.array_equal(kept, np.isfinite(compiled.outputs["lyapunov"]))
+    assert kept[0] and kept.sum() == np.sum(scipy.time <= t_stop) < scipy.time.size
+    for key in ("lyapunov", "disturbance_work"):
+        assert np.allclose(scipy.outputs[key][kept], compiled.outputs[key][kept], rtol=1e-6, atol=1e-9)
+    slow = simulate(load_config(ROOT / "configs" / f"{name}.yaml", ["simulation.t_end=1000"]), engine="scipy",
+                    timeout=0.05)
+    assert slow.message.startswith("timeout") and 0 < np.isfinite(slow.outputs["lyapunov"]).sum() < slow.time.size
+
+
 def test_a_first_step_failure_is_a_failed_run():
     """A right-hand side that is NaN at once: scipy fails before its first sample
     (``sol.y`` is then an empty list, which raised AttributeError)."""

@@ -60,7 +60,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "RunResult",
-    "RunTimeout",
+    "RunLimits",
     "simulate",
     "simulate_many",
     "simulate_blocks",
@@ -114,45 +114,53 @@ def _event_message(variant: Variant, event, sol, settings) -> str:
                           limits=variant.parameters[0]["limits"])
 
 
-class RunLimit(Exception):
-    """Raised inside ``solve_ivp``'s callbacks when a run reaches one of its limits."""
+class RunLimits:
+    """A terminal ``solve_ivp`` event (falling through zero) that ends a run before
+    ``t_end`` [s] at its limits, as the compiled driver ends it: once ``max_steps`` steps
+    are accepted, or once ``timeout`` [s] of wall time have passed, read after each accepted
+    step. ``solve_ivp`` calls it at each integration's start and after every accepted step;
+    at a limit it is ``t_stop - t`` with ``t_stop`` that step's end, where the integration
+    then ends with its samples up to ``t_stop`` kept. One instance counts the steps of every
+    integration of a run (its disturbances' windows, from each one's start).
 
-    def __init__(self, status: int, t: float) -> None:
-        super().__init__(status, t)
-        self.status = status
-        self.t = t
+    Attributes
+    ----------
+    status : int or None
+        :data:`rbstab.engine.status.STEP_LIMIT` or ``TIMEOUT`` once a limit is reached.
+    t_stop : float or None
+        Where the run stopped [s].
+    """
 
+    terminal = True
+    direction = -1
 
-class RunTimeout(RunLimit):
-    """The run exceeded its wall-time limit (``simulation.max_wall_time`` or ``timeout``)."""
+    def __init__(self, max_steps: int, timeout: float, t_end: float) -> None:
+        self.max_steps, self.t_end = max_steps, t_end
+        self.deadline = _time.perf_counter() + timeout if timeout < np.inf else np.inf
+        self.steps = 0
+        self.t_last: float | None = None
+        self.status: int | None = None
+        self.t_stop: float | None = None
 
-
-def _with_deadline(rhs, timeout: float):
-    """``rhs`` that raises :class:`RunTimeout` once ``timeout`` seconds have passed."""
-    if timeout == np.inf:
-        return rhs
-    deadline = _time.perf_counter() + timeout
-
-    def timed_rhs(t, y):
-        if _time.perf_counter() > deadline:
-            raise RunTimeout(TIMEOUT, t)
-        return rhs(t, y)
-
-    return timed_rhs
-
-
-def _step_counter(max_steps: int):
-    """A solve_ivp event that never fires and raises :class:`RunLimit` at step ``max_steps + 1``:
-    ``solve_ivp`` evaluates its events once at t = 0 and once after every accepted step."""
-    calls = [0]
-
-    def event(t: float, y: np.ndarray) -> float:
-        calls[0] += 1
-        if calls[0] > max_steps + 1:
-            raise RunLimit(STEP_LIMIT, t)
+    def __call__(self, t: float, y: np.ndarray) -> float:
+        if self.t_stop is not None:
+            return self.t_stop - t
+        if self.t_last is not None and t > self.t_last:  # after an accepted step (not a start)
+            self.steps += 1
+            if t < self.t_end:
+                if self.steps >= self.max_steps:
+                    self.status = STEP_LIMIT
+                elif _time.perf_counter() > self.deadline:
+                    self.status = TIMEOUT
+            if self.status is not None:
+                self.t_stop = t
+                return 0.0
+        self.t_last = t
         return 1.0
 
-    return event
+    def message(self, gimbal_margin: float, timeout: float) -> str:
+        """The run's message at the limit it reached (:func:`status_message`)."""
+        return status_message(self.status, self.t_stop, gimbal_margin, self.max_steps, timeout)
 
 
 def solve(
@@ -171,7 +179,8 @@ def solve(
         ``gimbal_margin`` [rad].
     timeout : float, optional
         Wall-time limit [s]; default ``settings.max_wall_time``. Past it, or after
-        ``settings.max_steps`` steps, the run stops with status ``"failed"``.
+        ``settings.max_steps`` steps, the run stops with status ``"failed"`` at its last
+        step, its samples up to there kept (:class:`RunLimits`).
 
     Returns
     -------
@@ -205,28 +214,28 @@ def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = N
     outside = _left_region(variant, region, 0.0, y0, settings)
     if outside is not None:
         return t_eval, states, "failed", outside, no_solver, zero
+    limits = RunLimits(max_steps, timeout, settings.t_end)
     with np.errstate(all="ignore"):
         try:
             sol = solve_ivp(
-                _with_deadline(variant.rhs, timeout),
+                variant.rhs,
                 (0.0, settings.t_end),
                 y0,
                 method=settings.method,
                 t_eval=t_eval,
-                events=[region, _step_counter(max_steps)],
+                events=[region, limits],
                 rtol=settings.rtol,
                 atol=settings.atol,
                 max_step=settings.max_step,
             )
-        except RunLimit as exc:
-            message = status_message(exc.status, exc.t, settings.gimbal_margin, max_steps, timeout)
-            return t_eval, states, "failed", message, no_solver, zero
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             return t_eval, states, "failed", f"solver error: {exc}", no_solver, zero
     y = np.asarray(sol.y, dtype=float)  # a list when the first step failed
     n = y.shape[1] if y.ndim == 2 else 0
     states[:n] = y.T[:n]
     solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
+    if limits.status is not None:
+        return t_eval, states, "failed", limits.message(settings.gimbal_margin, timeout), solver, zero
     if sol.status == 1:
         return t_eval, states, "failed", _event_message(variant, region, sol, settings), solver, zero
     if sol.status != 0:
@@ -288,8 +297,8 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
         timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
     p = variant.parameters[0]
     permanent = variant.name == "permanent"
-    rhs = _with_deadline(variant.rhs, timeout)
-    counter = _step_counter(max_steps)
+    rhs = variant.rhs
+    limits = RunLimits(max_steps, timeout, settings.t_end)
     edges = _breakpoints(p, t_end)
     y = np.array(y0, dtype=float)
     w = 0.0
@@ -308,11 +317,8 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
             try:
                 sol = solve_ivp(lambda t, z, lim=lim: rhs(min(t, lim), z), (a, b), y, method=settings.method,
                                 t_eval=t_eval[inside], dense_output=True,
-                                events=[region, counter],
+                                events=[region, limits],
                                 rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
-            except RunLimit as exc:
-                message = status_message(exc.status, exc.t, settings.gimbal_margin, max_steps, timeout)
-                return t_eval, states, "failed", message, solver, work
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 return t_eval, states, "failed", f"solver error: {exc}", solver, work
             for key in ("nfev", "njev", "nlu"):
@@ -331,6 +337,8 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
                     if len(mine):
                         work[mine] = w + _step_work(variant, piece, lo, t_eval[mine])
                     w += float(_step_work(variant, piece, lo, hi)[0])
+            if limits.status is not None:
+                return t_eval, states, "failed", limits.message(settings.gimbal_margin, timeout), solver, work
             if sol.status == 1:
                 return t_eval, states, "failed", _event_message(variant, region, sol, settings), solver, work
             if sol.status != 0:
@@ -363,8 +371,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     disturbances (its rate their power, left out of the error norm, as the compiled
     driver's; each impulse adds its energy). Like one body's :func:`solve`, it stops
     ``failed`` after ``simulation.max_steps`` steps or ``timeout`` [s] of wall time (default
-    ``simulation.max_wall_time``), keeping the samples of the disturbances' windows before
-    that one.
+    ``simulation.max_wall_time``), keeping the samples up to its last step (:class:`RunLimits`).
 
     Parameters
     ----------
@@ -381,7 +388,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         ``time`` (n_samples,) [s]; ``states`` (n_samples, 12 n + 3 e), the maximal image
         (inertial frame for X, V; body frames for Omega), NaN after a stop; ``work``
         (n_samples,) [J]; ``status``, ``message``; ``solver`` (nfev, njev, nlu,
-        solver_status: scipy's, -1 at a step or wall-time limit; wall_time [s]). A
+        solver_status: scipy's, 1 at a stop before t_end; wall_time [s]). A
         physical or numerical failure is a ``"failed"`` status, never an exception."""
     from scipy.integrate import solve_ivp  # heavy: scipy
 
@@ -419,7 +426,6 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         tree_rate(min(t, below[0]), np.ascontiguousarray(yr), *tree, dy, work)
         return dy.copy()
 
-    rhs = _with_deadline(reduced_rate, limit)
 
     def jump(t, yr):
         """Apply the impulses that start at t to ``yr`` (in place; their energy added to W)."""
@@ -448,7 +454,8 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     events = [lock] + ([] if sim.limits is None else [region])
     for event in events:  # terminal, falling through zero (leaving the region), as one body's
         event.terminal, event.direction = True, -1
-    events.append(_step_counter(max_steps))  # raises RunLimit past max_steps, shared by the segments
+    limits = RunLimits(max_steps, limit, sim.t_end)  # shared by the segments
+    events.append(limits)
     jumps = impulse_times(compiled, sim.t_end)
     edges = [0.0]  # every edge of a disturbance's window: no step crosses one
     while edges[-1] < sim.t_end:
@@ -476,15 +483,15 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         below[0] = np.nextafter(b, a) if b < sim.t_end else np.inf
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
-        try:
-            sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
-                            max_step=sim.max_step, events=events)
-        except RunLimit as exc:
-            return trajectory("failed", status_message(exc.status, exc.t, sim.gimbal_margin, max_steps, limit), -1)
+        sol = solve_ivp(reduced_rate, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
+                        max_step=sim.max_step, events=events)
         for key in counts:
             counts[key] += int(getattr(sol, key))
         got = min(sol.y.shape[1], rows.size)
         states[rows[:got]] = sol.y[:, :got].T
+        if limits.status is not None:
+            status, message = "failed", limits.message(sim.gimbal_margin, limit)
+            break
         if sol.status == 1 and len(sol.t_events[0]):
             t_lock = float(sol.t_events[0][0])
             status = "failed"
