@@ -472,7 +472,9 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
     others = [k for k in keys if k not in params]
     valid = np.array([t is not None for t in templates], dtype=bool)[template] & ~counted
     flagged = _tree_parameter_flags(params, columns, [t or {} for t in templates], template, np.flatnonzero(valid))
-    recent: list[tuple[dict, Any]] = []  # (a validated run's mapping but its parameters, name and initial state, its config)
+    # (a validated run's mapping but its parameters, name and initial state; its config; the
+    # initial_state section last found to fit it, as written)
+    recent: list[list] = []
     for i in np.flatnonzero(~counted):
         base = spec.bases[int(base_index[i])]
         data = None
@@ -483,15 +485,18 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
                 data = None
         if data is not None:
             rest = {k: v for k, v in data.items() if k not in ("name", "initial_state")}
-            if any(rest == other and initial_state_fits(config, data.get("initial_state"))
-                   for other, config in recent):
+            initial = data.get("initial_state")
+            match = next((entry for entry in recent if entry[0] == rest
+                          and (entry[2] == initial or initial_state_fits(entry[1], initial))), None)
+            if match is not None:
+                match[2] = initial
                 continue
         config, problems = _validate_row(spec, columns, base_index, int(i))
         if config is None:
             invalid_rows[int(i)] = problems
             counted[i] = True
         elif data is not None:
-            recent = [(rest, config), *recent[: _RECENT_TREES - 1]]
+            recent = [[rest, config, initial], *recent[: _RECENT_TREES - 1]]
 
 
 def validate_columns(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray,
