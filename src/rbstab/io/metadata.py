@@ -78,7 +78,8 @@ PER_RUN = {
     "solver_nfev": ("1", "right-hand side evaluations"),
     "solver_njev": ("1", "Jacobian evaluations"),
     "solver_nlu": ("1", "LU decompositions"),
-    "solver_status": ("1", "solve_ivp status (0 success, -1 failure, 1 stopped by an event)"),
+    "solver_status": ("1", "scipy engine: solve_ivp status (0 success, -1 failure, 1 stopped by an event or a "
+                           "limit); compiled and cuda engines: the run's status code (rbstab.engine.status)"),
     "config": ("", "resolved configuration without its name, canonical JSON"),
     "config_hash": ("", "SHA-256 of config without simulation.max_steps and max_wall_time"),
 }
