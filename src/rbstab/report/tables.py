@@ -287,7 +287,7 @@ def rest_words(thresholds: SettleThresholds) -> str:
     """What :func:`rest_outcome`'s words mean, for the pages of a report."""
     return (f"Settled: |E| <= {thresholds.e:g} m and |Omega| <= {thresholds.omega:g} rad/s (Euclidean norms) from "
             "the settling time to t_end, v converged (|v(t_end)| <= ratio |v(0)|: the sweep's ratio, 0.001 for a run "
-            "given directly) and the rest state v is zero at not linearly unstable. Otherwise: 'not settled' "
+            "given directly) and the rest state where v is zero is not linearly unstable. Otherwise: 'not settled' "
             "(above a threshold at t_end, or failed); 'rest away from equilibrium' (below the thresholds but v "
             "not converged: at rest, or creeping, away from the rest state v is zero at, e.g. leaning); 'unstable "
             "rest' (below the thresholds and v converged, but the linearisation at that rest state is unstable: "
