@@ -485,19 +485,32 @@ def test_v_of_a_chain_is_zero_at_its_undisturbed_rest_whenever_a_disturbance_sta
     assert np.abs(v[:10]).max() < 1e-9 and v[-1] > 1e-3  # at rest until the torque starts, then moved
 
 
-@pytest.mark.parametrize("path", ["examples/knee.yaml", "paper/case1_permanent.yaml"])
-def test_batches_of_runs_refuse_an_implicit_method_naming_it(path):
-    """The analysis's batches of runs (basin maps, the certificate's checks, pushes) take
-    an explicit method: with Radau, a tree's and one body's say so, naming the methods that
-    run (not the pure sign law, which neither config has)."""
+@pytest.mark.parametrize("path, body", [("examples/knee.yaml", 1), ("examples/saturated_push.yaml", 0)])
+def test_the_analysis_runs_an_implicit_methods_states_one_at_a_time(path, body):
+    """The analysis's runs from chosen states (basin maps, the certificate's checks,
+    pushes) of a configuration with an implicit method, which no batch takes, run one at a
+    time on the scipy engine: a tree's and one body's give the outcomes (reached t_end, v(0),
+    v(t_end)) of the same runs integrated by DOP853 in a batch, a push's value (the
+    disturbance of the given body and entry) included."""
     from rbstab.analysis.runs import Runs
 
+    push = (['disturbances=[{body: shank, kind: impulse, quantity: torque, value: [1, 0, 0], start: 0.2}]'] if body
+            else ["disturbances.0.start=0.2", "disturbances.1.start=0.6"])
+    settings = ["simulation.t_end=1.0", "simulation.n_samples=11", "simulation.rtol=1e-10", "simulation.atol=1e-12",
+                "simulation.limits.omega=[20, 20, .inf]", *push]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_config(ROOT / "configs" / path, ["simulation.method=Radau"])
-    runs = Runs(config)
-    with pytest.raises(ValueError, match=r"^simulation.method Radau is implicit: .*\(RK23, RK45, DOP853\)"):
-        runs.outcomes(runs.initial_state[None])
+        runs = {method: Runs(load_config(ROOT / "configs" / path, [*settings, f"simulation.method={method}"]))
+                for method in ("Radau", "DOP853")}
+    states = runs["DOP853"].initial_state[None].repeat(3, axis=0)
+    states[1, 3:6] += 0.5  # a spin
+    pushes = np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [60.0, 0.0, 0.0]])  # the last one fatal for both
+    one, batch = (r.outcomes(states, disturbance=(body, 0, pushes)) for r in (runs["Radau"], runs["DOP853"]))
+    assert one.shape == batch.shape == (3, 3)
+    assert np.array_equal(one[0], batch[0]) and one[0].tolist() == [1.0, 1.0, 0.0]
+    assert np.allclose(one[1], batch[1], rtol=1e-12, atol=0.0)
+    assert np.allclose(one[2, :2], batch[2, :2], rtol=1e-6, atol=1e-9 * np.abs(batch[1]).max())
+    assert np.isnan(one[2, 2]) and np.isnan(batch[2, 2])
 
 
 @pytest.mark.parametrize("engine", ["compiled", "scipy"])

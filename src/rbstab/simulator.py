@@ -326,8 +326,9 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
             solver["solver_status"] = int(sol.status)
             where = np.flatnonzero(inside)
             yy = np.asarray(sol.y, dtype=float)
-            n = yy.shape[1] if yy.ndim == 2 else 0
-            states[where[:n]] = yy.T[:n]
+            n = yy.shape[1] if yy.ndim == 2 else 0  # none: a window between two samples
+            if n:
+                states[where[:n]] = yy.T[:n]
             if sol.sol is not None:  # W along each step, and to each sample inside it
                 ts = sol.sol.ts
                 for i, piece in enumerate(sol.sol.interpolants):
@@ -483,8 +484,9 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         below[0] = np.nextafter(b, a) if b < sim.t_end else np.inf
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
-        sol = solve_ivp(reduced_rate, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
-                        max_step=sim.max_step, events=events)
+        with np.errstate(all="ignore"):  # a run that blows up ends failed, as one body's (solve)
+            sol = solve_ivp(reduced_rate, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
+                            max_step=sim.max_step, events=events)
         for key in counts:
             counts[key] += int(getattr(sol, key))
         got = min(sol.y.shape[1], rows.size)

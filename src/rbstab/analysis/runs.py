@@ -7,17 +7,20 @@ impulse of the configuration's disturbances (a push): whether it reached t_end i
 admissible region, v at its start and v(t_end). The runs are a
 :class:`rbstab.engine.RunBatch` (:func:`rbstab.engine.batch.batch_of` of the configuration,
 one row a run) integrated by :func:`rbstab.simulator.simulate_batch` on the compiled or
-CUDA engine, in slices over an executor's workers or in threads.
+CUDA engine, in slices over an executor's workers or in threads. Runs no batch takes (an
+implicit method, the pure sign law) are integrated one at a time, each its configuration
+with its initial state, by :func:`rbstab.simulator.simulate_many` (the scipy engine or the
+sign law's event-driven integrator).
 """
 
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 
 import numpy as np
 
 from ..engine.registry import get_engine
-from ..engine.tableaus import METHODS
 
 __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE"]
 
@@ -38,7 +41,7 @@ def batch_outcomes(batch, engine: str) -> np.ndarray:
     for rows, block in simulate_batch(batch, full=False, engine=engine, keep="none"):
         out[0, rows] = [s == "success" for s in block.status]
         out[1, rows] = block.summaries["lyapunov_initial"]
-        out[2, rows] = block.summaries["lyapunov_final"]
+        out[2, rows] = np.where(out[0, rows] == 1, block.summaries["lyapunov_final"], np.nan)  # not its last sample
     return out
 
 
@@ -132,9 +135,8 @@ class Runs:
     engine : str
         The engine the runs take.
 
-    A batch needs an explicit method and no pure sign law (``boundary_layer`` 0):
-    :meth:`outcomes` refuses them (ValueError); :meth:`traces` runs one body's one at a
-    time.
+    A batch needs an explicit method and no pure sign law (``boundary_layer`` 0); other
+    runs are integrated one at a time (module docstring).
     """
 
     def __init__(self, config, *, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
@@ -170,14 +172,9 @@ class Runs:
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
         if len(states) == 0:
             return np.zeros((3, 0))
-        if not self.base.compiled[0]:
-            method = self.config.simulation.method
-            if method not in METHODS:
-                raise ValueError(f"simulation.method {method} is implicit: the analysis integrates its states in "
-                                 f"batches, which take an explicit method ({', '.join(METHODS)}); set "
-                                 "simulation.method to one of them (--set simulation.method=DOP853)")
-            raise ValueError("the pure sign law (controller.boundary_layer 0) runs one at a time; analyse a "
-                             "boundary-layer law (--boundary-layer PHI)")
+        if not self.base.compiled[0]:  # an implicit method, the pure sign law: run by run
+            ok, v, _ = self._one_by_one(states, 2, disturbance)
+            return np.array([ok.astype(float), v[:, 0], v[:, -1]])
         batch = self._batch(states, 2)
         if disturbance is not None:
             body, entry, values = disturbance
@@ -236,7 +233,7 @@ class Runs:
         :attr:`jobs` threads."""
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
         k, n_samples = len(states), int(n_samples)
-        if not self.base.compiled[0] and self.tree is None:  # the pure sign law, an implicit method: run by run
+        if not self.base.compiled[0]:  # an implicit method, the pure sign law: run by run
             return self._one_by_one(states, n_samples)
         batch = self._batch(states, n_samples)
         workers = (self.executor.parallelism() or 1) if self.executor is not None else self.jobs
@@ -293,28 +290,51 @@ class Runs:
             messages[i] = message.split(" at t =")[0]
         return ok, sol.acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
 
-    def _one_by_one(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
-        """:meth:`traces` of one body's runs that no batch takes, each its configuration
-        (rebuilt from the validated one with its initial state) through
-        :func:`rbstab.simulator.simulate_many`."""
-        from ..config import INITIAL_STATE_BLOCKS, RunConfig  # heavy: pydantic
+    def _one_by_one(self, states: np.ndarray, n_samples: int,
+                    disturbance: tuple | None = None) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """:meth:`traces` of runs that no batch takes (an implicit method, the pure sign
+        law), each the validated configuration with its initial state (and ``disturbance``'s
+        value, as :meth:`outcomes` takes it) through :func:`rbstab.simulator.simulate_many`."""
         from ..simulator import simulate_many  # heavy: numba
 
-        layout = self.config.make_variant().layout
-        resolved = dict(self.config.resolved, simulation=dict(self.config.resolved["simulation"], n_samples=n_samples))
-        configs = []
-        for y in states:
-            blocks = layout.split(y)
-            section = {key: (blocks[b].tolist() if b in blocks else list(resolved["initial_state"][key]))
-                       for key, b in INITIAL_STATE_BLOCKS.items()}
-            configs.append(RunConfig.from_resolved({**resolved, "initial_state": section}, like=[self.config]))
         k = len(states)
+        values = np.broadcast_to(np.asarray(disturbance[2], dtype=float), (k, 3)) if disturbance else None
+        configs = [self._config_at(y, n_samples, None if values is None else (*disturbance[:2], values[i]))
+                   for i, y in enumerate(states)]
         ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
-        for i, result in simulate_many(configs, engine="compiled"):
+        for i, result in simulate_many(configs, engine="compiled", full=False):
             ok[i] = result.ok
             v[i] = result.outputs["lyapunov"]
             messages[i] = "" if result.ok else result.message.split(" at t =")[0]
         return ok, v, messages
+
+    def _config_at(self, y: np.ndarray, n_samples: int, disturbance: tuple | None):
+        """The configuration of the run from ``y`` (n_state,; :attr:`initial_state`'s
+        layout) sampled ``n_samples`` times; with ``disturbance`` = (body, entry, value (3,)),
+        that entry of that body's disturbances (one body: body 0) of that value."""
+        def pushed(entries):
+            return tuple(replace(d, value=np.array(disturbance[2], dtype=float)) if j == disturbance[1] else d
+                         for j, d in enumerate(entries))
+
+        simulation = replace(self.config.simulation, n_samples=n_samples)
+        if self.tree is None:
+            blocks = self.config.make_variant().layout.split(y)
+            config = replace(self.config, initial_state={**self.config.initial_state, **blocks}, simulation=simulation)
+            if disturbance is not None:
+                config = replace(config, gains=replace(config.gains, disturbances=pushed(config.gains.disturbances)))
+            return config
+        d_at = self.compiled.d_at
+        initial = {body.name: {block: y[12 * i + 3 * k: 12 * i + 3 * k + 3].copy() for k, block in enumerate(_BODY_BLOCKS)}
+                   for i, body in enumerate(self.tree.bodies)}
+        for i, body in enumerate(self.tree.bodies):
+            if d_at[i] >= 0:
+                initial[body.name]["controller_state"] = y[d_at[i]: d_at[i] + 3].copy()
+        chain = self.tree
+        if disturbance is not None:
+            bodies = list(chain.bodies)
+            bodies[disturbance[0]] = replace(bodies[disturbance[0]], disturbances=pushed(bodies[disturbance[0]].disturbances))
+            chain = replace(chain, bodies=tuple(bodies))
+        return replace(self.config, chain=chain, initial_state=initial, simulation=simulation)
 
 
 #: The state blocks of a body in a tree's maximal state, in order (12 entries a body).
