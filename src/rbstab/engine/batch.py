@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.loader import RunConfig, chain_of, config_from_mapping, placed_initial_state
+from ..config.loader import RunConfig, chain_of, config_from_mapping
 from ..config.paths import is_chain, parse_any_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
@@ -480,16 +480,17 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
     gravity = f.get("gravity", shape=(3,))
     for t, rows in f.groups:
         tree = trees[t]
+        records, points = np.zeros((len(rows), tree.size), dtype=PARAMETERS), np.zeros((len(rows), tree.size, 3))
         for i in range(tree.size):
             p = np.zeros(len(rows), dtype=PARAMETERS)
             _tree_record(p, f, t, tree.chain, i, gravity[rows])
             set_limits(p, None if bounds is None else bounds[rows])
-            params[rows, i] = p
-            ppoints[rows, i] = f.get("joints", f"{tree.chain.joint_names[i]}.parent_point", shape=(3,), only=t)
+            records[:, i] = p
+            points[:, i] = f.get("joints", f"{tree.chain.joint_names[i]}.parent_point", shape=(3,), only=t)
+        params[rows, : tree.size], ppoints[rows, : tree.size] = records, points
         n_state[rows] = tree.n_states
-        y0[rows, : tree.n_states] = _tree_initial_states(f, t, keys, columns, configs[t], params[rows, : tree.size],
-                                                         ppoints[rows, : tree.size])  # (k, n_states)
-        offset[rows] = _tree_offsets(tree, params[rows, : tree.size], ppoints[rows, : tree.size], gravity[rows])
+        y0[rows, : tree.n_states] = _tree_initial_states(f, t, keys, columns, configs[t], tree, records, points)
+        offset[rows] = _tree_offsets(tree, records, points, gravity[rows])
     settings = _settings(f, templates, timeout)
     return RunBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
                     n_state=n_state, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
@@ -530,37 +531,42 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
 
 
 def _tree_initial_states(f: TableFields, t: int, keys: Sequence[str], columns: Mapping[str, np.ndarray], config,
-                         params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
-    """The initial states (k, n_states) of template ``t``'s k runs (``config``: the
-    template's, validated; ``params`` (k, n), ``ppoints`` (k, n, 3): the runs' records):
-    each run's ``initial_state`` section, the template's with the run's values of the
-    varied ``initial_state.*`` keys, placed as the loader places it
-    (:func:`rbstab.config.loader.placed_initial_state`: x and v left out follow the parent's)."""
+                         tree, params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
+    """The initial states (k, n_states) of template ``t``'s k runs as columns (``config``:
+    the template's, validated; ``tree`` its compiled tree; ``params`` (k, n), ``ppoints``
+    (k, n, 3): the runs' records): the template's state with the runs' values of the varied
+    ``initial_state.*`` keys set, then the x and v the template leaves out and no key sets
+    placed as the loader places them (:func:`rbstab.variants.chain.place`: on the parent's
+    point, parents first), with each run's joint points."""
     rows = f.rows(t)
-    section = f.templates[t]["initial_state"]
-    paths = [(parse_any_key(k), k) for k in keys]
-    varied = [(path, columns[k]) for path, k in paths if path.section == "initial_state"]
-    # the joints' points of the runs differ: each run's chain places it
-    moved = any(path.section == "joints" and path.field in ("parent_point", "child_point") for path, _ in paths)
-    margin = f.get("simulation", "gimbal_margin", only=t)
-    chain = config.chain
-    out = []
-    for a, r in enumerate(rows):
-        written = section
-        if varied:
-            data = {"initial_state": {body: {k: list(v) if isinstance(v, list) else v for k, v in blocks.items()}
-                                      for body, blocks in section.items()}}
-            for path, column in varied:
-                value = column[r]
-                path.set(data, value.tolist() if isinstance(value, np.ndarray | np.generic) else value)
-            written = data["initial_state"]
-        if moved:
-            chain = dataclasses.replace(config.chain, joints=tuple(
-                dataclasses.replace(j, parent_point=ppoints[a, i].copy(),
-                                    child_point=params[a, i]["attachment_point"].copy())
-                for i, j in enumerate(config.chain.joints)))
-        out.append(C.state_vector(chain, placed_initial_state(written, chain, float(margin[a]))))
-    return np.array(out)
+    names = list(config.chain.body_names)
+    y = np.repeat(C.state_vector(config.chain, config.initial_state)[None], len(rows), axis=0)
+    placed = {"x": np.array([f"initial_state.{b}.x" in config.placed for b in names]),
+              "v": np.array([f"initial_state.{b}.v" in config.placed for b in names])}
+    moved = False  # whether the runs' joint points differ: each run is placed on its own
+    for k in keys:
+        path = parse_any_key(k)
+        if path.section == "joints" and path.field in ("parent_point", "child_point"):
+            moved = True
+        if path.section != "initial_state":
+            continue
+        body, block = path.steps[1], path.steps[2]
+        i = names.index(body)
+        at = int(tree.d_at[i]) if block == "d" else 12 * i + 3 * ("theta", "omega", "x", "v").index(block)
+        if block in placed and placed[block][i]:  # written by the runs: not placed, its entries not set zero
+            placed[block][i] = False
+            y[:, at: at + 3] = 0.0
+        values = np.asarray(columns[k][rows], dtype=float)
+        if len(path.steps) > 3:
+            y[:, at + int(path.steps[3])] = values
+        else:
+            y[:, at: at + 3] = values.reshape(len(rows), 3)
+    if not (placed["x"].any() or placed["v"].any()):
+        return y
+    if not moved:
+        return C.place(C.with_records(tree, params[0], ppoints[0]), y, placed["x"], placed["v"])
+    return np.array([C.place(C.with_records(tree, params[a], ppoints[a]), y[a], placed["x"], placed["v"])
+                     for a in range(len(rows))])
 
 
 def _tree_offsets(tree, params: np.ndarray, ppoints: np.ndarray, gravity: np.ndarray) -> np.ndarray:
