@@ -118,6 +118,44 @@ def test_column_validation_refuses_what_the_schema_refuses():
     assert lines[-1] == f"... and {len(expected) - 10} more invalid runs"
 
 
+def test_a_trees_initial_state_columns_refuse_what_the_schema_refuses():
+    """A tree's sweep over initial states and a parameter, its initial states checked as
+    columns: the runs refused are exactly those that validating each run alone refuses,
+    with its messages: a body's and a joint's relative theta_2 at the gimbal lock (the
+    ankle's grounded legs, the hip's trunk on them), non-finite and huge entries, and a mass
+    out of bounds."""
+    from rbstab.config.yaml_io import read_yaml_file
+
+    rng = np.random.default_rng(7)
+    n = 80
+    legs_1 = rng.choice([0.0, 0.7, 1.5707, 1.6], size=n)
+    trunk = np.stack([rng.choice([0.0, np.nan, 3e12], size=n, p=[0.8, 0.1, 0.1]),
+                      rng.choice([0.0, 0.8, 1.5, -0.8707], size=n), np.zeros(n)], axis=1)  # legs 0.7: hip at lock
+    mass = rng.choice([47.46, -1.0], size=n, p=[0.9, 0.1])
+    path = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"
+    table = {"initial_state.legs.theta[1]": legs_1, "initial_state.trunk.theta[0]": np.full(n, 0.03),
+             "initial_state.trunk.theta[1]": trunk[:, 1],
+             "initial_state.trunk.omega[0]": trunk[:, 0], "bodies.trunk.mass": mass}
+    spec = spec_from_mapping({"name": "v", "base": read_yaml_file(path), "table": table})
+    expected = {}
+    for i in range(n):
+        data = read_yaml_file(path)
+        data["initial_state"]["legs"]["theta"][1] = float(legs_1[i])
+        data["initial_state"]["trunk"]["theta"][:2] = [0.03, float(trunk[i, 1])]
+        data["initial_state"]["trunk"]["omega"] = [float(trunk[i, 0]), 0.0, 0.0]
+        data["bodies"][1]["mass"] = float(mass[i])
+        _, problems = _validated_alone(data)
+        if problems:
+            expected[i] = problems
+    assert 10 < len(expected) < n - 10
+    with pytest.raises(SweepSpecError) as info:
+        plan_table(spec)
+    lines = info.value.errors
+    assert lines[0] == f"{len(expected)} of {n} runs have an invalid configuration; nothing was run"
+    for i in sorted(expected)[:10]:
+        assert [line.split("): ", 1)[1] for line in lines[1:] if line.startswith(f"run r{i:04d} ")] == expected[i], i
+
+
 def test_a_10000_run_zip_spec_is_read_and_planned(tmp_path):
     """An explicit design of 10,000 runs (mass, inertia matrix, K_c, L_c, K_t, Omega per
     run), as a design-of-experiments tool writes it, is within the YAML reader's limits;

@@ -39,7 +39,7 @@ from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
-__all__ = ["RunBatch", "batch_from_table", "batch_of", "TableFields", "MAX_STATE", "NOT_COMPILED"]
+__all__ = ["RunBatch", "batch_from_table", "batch_of", "TableFields", "tree_initial_states", "MAX_STATE", "NOT_COMPILED"]
 
 #: The largest state of any variant (the second axis of a one-body table's :attr:`RunBatch.y0`).
 MAX_STATE = max(STATE_SIZE)
@@ -489,7 +489,7 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
             points[:, i] = f.get("joints", f"{tree.chain.joint_names[i]}.parent_point", shape=(3,), only=t)
         params[rows, : tree.size], ppoints[rows, : tree.size] = records, points
         n_state[rows] = tree.n_states
-        y0[rows, : tree.n_states] = _tree_initial_states(f, t, keys, columns, configs[t], tree, records, points)
+        y0[rows, : tree.n_states] = tree_initial_states(configs[t], tree, keys, columns, rows, records, points)
         offset[rows] = _tree_offsets(tree, records, points, gravity[rows])
     settings = _settings(f, templates, timeout)
     return RunBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
@@ -530,15 +530,16 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
         _disturbances(p, f, t, mine)
 
 
-def _tree_initial_states(f: TableFields, t: int, keys: Sequence[str], columns: Mapping[str, np.ndarray], config,
-                         tree, params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
-    """The initial states (k, n_states) of template ``t``'s k runs as columns (``config``:
-    the template's, validated; ``tree`` its compiled tree; ``params`` (k, n), ``ppoints``
-    (k, n, 3): the runs' records): the template's state with the runs' values of the varied
-    ``initial_state.*`` keys set, then the x and v the template leaves out and no key sets
-    placed as the loader places them (:func:`rbstab.variants.chain.place`: on the parent's
-    point, parents first), with each run's joint points."""
-    rows = f.rows(t)
+def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str, np.ndarray], rows: np.ndarray,
+                        params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
+    """The maximal initial states (k, n_states) of the k runs ``rows`` of a table of one
+    tree's runs as columns (``config``: their template's, validated; ``tree`` its compiled
+    tree; ``params`` (k, n), ``ppoints`` (k, n, 3): the runs' records, or the template's
+    (1, n), (1, n, 3) where no key moves a joint's point): the template's state with the
+    runs' values of the varied ``initial_state.*`` keys (``keys``, their ``columns``) set,
+    then the x and v the template leaves out and no key sets placed as the loader places
+    them (:func:`rbstab.variants.chain.place`: on the parent's point, parents first), with
+    each run's joint points."""
     names = list(config.chain.body_names)
     y = np.repeat(C.state_vector(config.chain, config.initial_state)[None], len(rows), axis=0)
     placed = {"x": np.array([f"initial_state.{b}.x" in config.placed for b in names]),

@@ -12,9 +12,10 @@ applied to a column instead of a value. The runs these checks flag are validated
 whose messages name the run, the key, the value and what is allowed.
 
 A chain's sweep checks its parameters' columns (masses, inertias, gains, limits, gravity)
-so; its other runs are validated by the chain's schema and tree checks, a run that differs
-from one validated before only in its parameters and initial state by its initial state's
-checks (:func:`_validate_trees`).
+so, and where the other varied keys are initial-state entries, its initial states as
+columns too (:func:`_tree_state_flags`); its other runs are validated by the chain's
+schema and tree checks, a run that differs from one validated before only in its
+parameters and initial state by its initial state's checks (:func:`_validate_trees`).
 """
 
 from __future__ import annotations
@@ -458,20 +459,94 @@ def _tree_parameter_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray]
     return flagged
 
 
+#: How close to the gimbal lock [rad] a run's |theta_2| (a body's or a joint's) may come
+#: before the columns' check of its initial state leaves it to the schema (which computes
+#: the same angle in another order).
+_LOCK_SLACK = 1e-9
+
+
+def _tree_state_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray], templates: Sequence,
+                      template: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """The runs among ``rows`` (of valid templates, which differ from their template only
+    in the parameters :func:`_tree_parameter_flags` checks and the ``initial_state``
+    entries ``keys``) that a check of :func:`rbstab.config.loader.initial_state_fits` may
+    refuse, checked on the columns: each varied entry a finite number of magnitude at most
+    MAX_MAGNITUDE; each body's |theta_2| and each joint's relative |theta_2| (the placed
+    state's, :func:`rbstab.engine.batch.tree_initial_states`) below pi/2 - gimbal_margin
+    by :data:`_LOCK_SLACK`. Every run of a template whose checks read more (its
+    ``simulation.limits``; a written x or v of a permanent joint's child, held to its
+    parent's point; a key of a body or D it lacks) is flagged: the schema decides."""
+    from ..chain import GROUND  # heavy: numba (with the compiled tree below)
+    from ..engine.batch import tree_initial_states  # heavy: numba
+    from ..kinematics import rotation_matrix  # heavy: numba
+    from ..variants import chain as C  # heavy: numba
+
+    flagged = np.zeros(len(template), dtype=bool)
+    if not len(rows):
+        return flagged
+    paths = [parse_any_key(k) for k in keys]
+    for k, path in zip(keys, paths):
+        values = columns[k][rows]
+        if values.dtype == object or (len(path.steps) == 3 and values.reshape(len(rows), -1).shape[1] != 3):
+            flagged[rows] = True  # not numbers of the entry's shape: the schema says what they are
+            return flagged
+        flat = values.reshape(len(rows), -1)
+        flagged[rows] |= ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
+    for t in np.unique(template[rows]).tolist():
+        mine = rows[template[rows] == t]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the sweep reports each template's warnings
+            config = config_from_mapping({**templates[t], "name": "template"})
+        chain, names = config.chain, list(config.chain.body_names)
+        given = {(p.steps[1], p.steps[2]) for p in paths}
+        tree = C.compile_chain(chain, offset=0.0)
+        if (config.simulation.limits is not None or not {body for body, _ in given} <= set(names)
+                or any(block == "d" and tree.d_at[names.index(body)] < 0 for body, block in given)
+                or any(j.variant == "permanent" and ((b.name, key) in given or f"initial_state.{b.name}.{key}"
+                                                     not in config.placed)
+                       for b, j in zip(chain.bodies, chain.joints) for key in ("x", "v"))):
+            flagged[mine] = True
+            continue
+        with np.errstate(invalid="ignore"):
+            y = tree_initial_states(config, tree, keys, columns, mine, tree.params[None], tree.ppoints[None])
+            bound = np.pi / 2 - config.simulation.gimbal_margin - _LOCK_SLACK
+            n = len(names)
+            rotation = rotation_matrix(y[:, : 12 * n].reshape(len(mine), n, 12)[:, :, :3])  # A_i (k, n, 3, 3)
+            bad = ~(np.abs(y[:, 12 * np.arange(n) + 1]) < bound).all(axis=1)
+            for i, joint in enumerate(chain.joints):
+                if joint.parent != GROUND:  # A_rel = A_p' A_c; A_rel[0, 2] = sin(theta_2)
+                    sine = np.einsum("km,km->k", rotation[:, joint.parent, :, 0], rotation[:, i, :, 2])
+                    bad |= ~(np.abs(np.arcsin(np.clip(sine, -1.0, 1.0))) < bound)
+        flagged[mine] |= bad
+    return flagged
+
+
 def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_index: np.ndarray, counted: np.ndarray,
                     invalid_rows: dict, templates: Sequence, template: np.ndarray) -> None:
     """Validate each run of a chain's sweep not yet ``counted`` invalid (those the schema
     refuses into ``invalid_rows``, and counted). The parameters' columns
     (:data:`_TREE_PARAMETERS`) are checked against their fields' rules at once; a run they
-    flag is validated by the schema. Any other run that differs from one of the last
-    :data:`_RECENT_TREES` validated ones only in its parameters and ``initial_state`` passes
-    where :func:`rbstab.config.loader.initial_state_fits` takes its initial state (the
-    checks of that section); the others are validated by the schema."""
+    flag is validated by the schema. Where every other varied key is an ``initial_state``
+    entry, the initial states are checked as columns too (:func:`_tree_state_flags`) and
+    only the runs either check flags are validated by the schema. Otherwise a run that
+    differs from one of the last :data:`_RECENT_TREES` validated ones only in its
+    parameters and ``initial_state`` passes where
+    :func:`rbstab.config.loader.initial_state_fits` takes its initial state (the checks of
+    that section); the others are validated by the schema."""
     keys = list(columns)
     params = [k for k in keys if _tree_parameter(k, columns[k])]
     others = [k for k in keys if k not in params]
     valid = np.array([t is not None for t in templates], dtype=bool)[template] & ~counted
     flagged = _tree_parameter_flags(params, columns, [t or {} for t in templates], template, np.flatnonzero(valid))
+    states = [k for k in others if parse_any_key(k).section == "initial_state"]
+    if others and states == others:  # parameters and initial states: both checked as columns
+        flagged |= _tree_state_flags(states, columns, templates, template, np.flatnonzero(valid))
+        for i in np.flatnonzero(flagged & ~counted):
+            config, problems = _validate_row(spec, columns, base_index, int(i))
+            if config is None:
+                invalid_rows[int(i)] = problems
+                counted[i] = True
+        return
     # (a validated run's mapping but its parameters, name and initial state; its config; the
     # initial_state section last found to fit it, as written)
     recent: list[list] = []
