@@ -796,7 +796,10 @@ def rest_acceleration(q, params, codes, parents, ppoints, d_at, y, dy, work, out
 
 
 def _undisturbed(params: np.ndarray) -> np.ndarray:
-    """A copy of the records ``params`` without their disturbances."""
+    """The records ``params`` without their disturbances: a copy where they have some
+    (``params`` itself, read only, where they have none)."""
+    if not np.any(params["disturbance_count"]):
+        return params
     params = params.copy()
     params["disturbance_count"] = 0.0
     return params
@@ -808,7 +811,10 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     BFGS) over the configuration (every Theta_i, X_i of bodies whose joint is not
     ``permanent``, D of embedded joints; a permanent joint's child placed on its parent)
     from the reference configuration (Theta = 0, every body placed on its joint, E_j = 0);
-    (None, nan) where the potential has no minimum there (it falls without bound). The
+    (None, nan) where the potential has no minimum there (it falls without bound); then
+    polished to a rest point to rounding (scipy's ``root``: the accelerations zero). A
+    reference configuration already at rest (gradient within the tolerance, accelerations
+    zero, as an upright stance's) is taken as it is, without the solvers' setup. The
     rest state is the undisturbed chain's: its disturbances do not move it (nor v's zero)."""
     from scipy.optimize import minimize, root  # heavy: scipy, only where a rest state is sought
 
@@ -830,21 +836,31 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
         rest_acceleration(np.asarray(q, dtype=float), *args, out)
         return out
 
-    result = minimize(potential_and_gradient, q0, jac=True, method="BFGS", options={"gtol": 1e-11, "maxiter": 5000})
-    value = float(result.fun)
-    if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
-        return None, math.nan
-    q = result.x
-    try:
-        with np.errstate(all="ignore"):
-            polished = root(acceleration, q, method="hybr", options={"xtol": 1e-13})
-    except (np.linalg.LinAlgError, ValueError):  # the polish left for a singular configuration
-        polished = None  # (its rate not finite): the minimiser's rest point stands
-    if (polished is not None and np.all(np.isfinite(polished.fun))
-            and np.linalg.norm(polished.fun) < np.linalg.norm(acceleration(q))):
-        q = polished.x  # a rest point to rounding: the minimiser's gradient tolerance is not
+    q = q0
+    value, gradient = potential_and_gradient(q0)
+    if not (np.isfinite(value) and np.max(np.abs(gradient)) <= _REST_GTOL):  # else BFGS stops at once, at q0
+        result = minimize(potential_and_gradient, q0, jac=True, method="BFGS",
+                          options={"gtol": _REST_GTOL, "maxiter": 5000})
+        value = float(result.fun)
+        if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
+            return None, math.nan
+        q = result.x
+    residual = acceleration(q)
+    if np.any(residual != 0.0):  # a rest point to rounding: the minimiser's gradient tolerance is not
+        try:
+            with np.errstate(all="ignore"):
+                polished = root(acceleration, q, method="hybr", options={"xtol": 1e-13})
+        except (np.linalg.LinAlgError, ValueError):  # the polish left for a singular configuration
+            polished = None  # (its rate not finite): the minimiser's rest point stands
+        if (polished is not None and np.all(np.isfinite(polished.fun))
+                and np.linalg.norm(polished.fun) < np.linalg.norm(residual)):
+            q = polished.x
     value = rest_potential(q, *args)
     return y.copy(), float(value)
+
+
+#: The gradient tolerance [J per unit of a coordinate] of :func:`rest_state`'s minimisation.
+_REST_GTOL = 1e-11
 
 
 def rest_offset(compiled: CompiledChain) -> float:
