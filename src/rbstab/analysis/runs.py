@@ -299,7 +299,9 @@ class Runs:
 
         k = len(states)
         values = np.broadcast_to(np.asarray(disturbance[2], dtype=float), (k, 3)) if disturbance else None
-        configs = [self._config_at(y, n_samples, None if values is None else (*disturbance[:2], values[i]))
+        simulation = replace(self.config.simulation, n_samples=n_samples)
+        layout = self.config.make_variant().layout if self.tree is None else None
+        configs = [self._config_at(y, simulation, layout, None if values is None else (*disturbance[:2], values[i]))
                    for i, y in enumerate(states)]
         ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
         for i, result in simulate_many(configs, engine="compiled", full=False):
@@ -308,17 +310,17 @@ class Runs:
             messages[i] = "" if result.ok else result.message.split(" at t =")[0]
         return ok, v, messages
 
-    def _config_at(self, y: np.ndarray, n_samples: int, disturbance: tuple | None):
+    def _config_at(self, y: np.ndarray, simulation, layout, disturbance: tuple | None):
         """The configuration of the run from ``y`` (n_state,; :attr:`initial_state`'s
-        layout) sampled ``n_samples`` times; with ``disturbance`` = (body, entry, value (3,)),
-        that entry of that body's disturbances (one body: body 0) of that value."""
+        layout: one body's variant ``layout``, or a tree's maximal state) with the settings
+        ``simulation``; with ``disturbance`` = (body, entry, value (3,)), that entry of that
+        body's disturbances (one body: body 0) of that value."""
         def pushed(entries):
             return tuple(replace(d, value=np.array(disturbance[2], dtype=float)) if j == disturbance[1] else d
                          for j, d in enumerate(entries))
 
-        simulation = replace(self.config.simulation, n_samples=n_samples)
         if self.tree is None:
-            blocks = self.config.make_variant().layout.split(y)
+            blocks = layout.split(y)
             config = replace(self.config, initial_state={**self.config.initial_state, **blocks}, simulation=simulation)
             if disturbance is not None:
                 config = replace(config, gains=replace(config.gains, disturbances=pushed(config.gains.disturbances)))
