@@ -297,7 +297,6 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
         timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
     p = variant.parameters[0]
     permanent = variant.name == "permanent"
-    rhs = variant.rhs
     limits = RunLimits(max_steps, timeout, settings.t_end)
     edges = _breakpoints(p, t_end)
     y = np.array(y0, dtype=float)
@@ -315,7 +314,7 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
             lim = b if last else before(b)
             inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
             try:
-                sol = solve_ivp(lambda t, z, lim=lim: rhs(min(t, lim), z), (a, b), y, method=settings.method,
+                sol = solve_ivp(lambda t, z, lim=lim: variant.rhs(min(t, lim), z), (a, b), y, method=settings.method,
                                 t_eval=t_eval[inside], dense_output=True,
                                 events=[region, limits],
                                 rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
@@ -426,7 +425,6 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     def reduced_rate(t, yr):
         tree_rate(min(t, below[0]), np.ascontiguousarray(yr), *tree, dy, work)
         return dy.copy()
-
 
     def jump(t, yr):
         """Apply the impulses that start at t to ``yr`` (in place; their energy added to W)."""

@@ -490,15 +490,14 @@ def _tree_state_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray], te
         if values.dtype == object or (len(path.steps) == 3 and values.reshape(len(rows), -1).shape[1] != 3):
             flagged[rows] = True  # not numbers of the entry's shape: the schema says what they are
             return flagged
-        flat = values.reshape(len(rows), -1)
-        flagged[rows] |= ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
+        flagged[rows] |= _rule_bad(("vector",), values, False)  # finite, magnitude: each entry's own rule
+    given = {(p.steps[1], p.steps[2]) for p in paths}  # (body, block) of each varied entry
     for t in np.unique(template[rows]).tolist():
         mine = rows[template[rows] == t]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the sweep reports each template's warnings
             config = config_from_mapping({**templates[t], "name": "template"})
         chain, names = config.chain, list(config.chain.body_names)
-        given = {(p.steps[1], p.steps[2]) for p in paths}
         tree = C.compile_chain(chain, offset=0.0)
         if (config.simulation.limits is not None or not {body for body, _ in given} <= set(names)
                 or any(block == "d" and tree.d_at[names.index(body)] < 0 for body, block in given)
