@@ -532,14 +532,15 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
 
 def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str, np.ndarray], rows: np.ndarray,
                         params: np.ndarray, ppoints: np.ndarray) -> np.ndarray:
-    """The maximal initial states (k, n_states) of the k runs ``rows`` of a table of one
-    tree's runs as columns (``config``: their template's, validated; ``tree`` its compiled
+    """The maximal initial states (k, n_states: Theta [rad], Omega [rad/s, body frame], X
+    [m], V [m/s, inertial frame] of each body, then each embedded joint's D [m]) of the k
+    runs ``rows`` of a table of one tree's runs as columns (``config``: their template's, validated; ``tree`` its compiled
     tree; ``params`` (k, n), ``ppoints`` (k, n, 3): the runs' records, or the template's
     (1, n), (1, n, 3) where no key moves a joint's point): the template's state with the
     runs' values of the varied ``initial_state.*`` keys (``keys``, their ``columns``) set,
     then the x and v the template leaves out and no key sets placed as the loader places
     them (:func:`rbstab.variants.chain.place`: on the parent's point, parents first), with
-    each run's joint points."""
+    each run's joint points. The runs are validated: nothing is checked or raised here."""
     names = list(config.chain.body_names)
     y = np.repeat(C.state_vector(config.chain, config.initial_state)[None], len(rows), axis=0)
     placed = {"x": np.array([f"initial_state.{b}.x" in config.placed for b in names]),
