@@ -561,7 +561,7 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
     ground joint's Theta_j, reaches the margin and the run stops there, at
     (pi/2 - 0.3 - 1.0) / 3 s. Its message names the joint whose angle locked: the shoulder;
     the elbow, where the lower body starts bent 1.2 rad and turning, the upper at rest."""
-    from rbstab.engine.status import GIMBAL_LOCK, SUCCESS
+    from rbstab.engine.status import SUCCESS, gimbal_status
 
     limit = np.pi / 2 - 0.3
 
@@ -595,7 +595,7 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
         lower = on.outputs["theta"][:, 1, 1]
         t_stop = locked.time[np.isfinite(locked.outputs["lyapunov"])][-1]
     else:
-        assert on.status[0] == SUCCESS and locked.status[0] == GIMBAL_LOCK
+        assert on.status[0] == SUCCESS and locked.status[0] == gimbal_status(0, True)  # the shoulder's Theta_j
         lower = on.samples[0, :, 13]
         t_stop = locked.t_stop[0]
     assert np.abs(lower).max() > limit + 0.1  # the lower body's own angles passed the margin
@@ -604,3 +604,28 @@ def test_only_the_angles_a_tree_integrates_meet_gimbal_lock(engine):
         result = simulate(config_of(upper, bend, spin), engine=engine)
         assert result.status == "failed"
         assert result.message.startswith(f"gimbal lock: |theta_2| of joint {joint}'s Theta_j reached pi/2 - 0.3 rad")
+
+
+@pytest.mark.parametrize("engine", ["compiled", "scipy"])
+def test_a_gimbal_lock_names_the_body_that_reached_it_not_the_one_furthest_at_the_last_sample(engine):
+    """Two bodies, each on a free joint to the ground, no gravity, no gains: 'tilted' rests
+    at theta_2 = 1.0 rad, 'spinner' starts at 0 turning about y at 3 rad/s and reaches
+    pi/2 - 0.3 rad at (pi/2 - 0.3) / 3 = 0.42 s. Sampled at 0, 0.5 and 1 s, the last sample
+    before the stop is the start, where 'tilted' is the one nearer the lock; the message
+    names the spinner on both engines (the compiled driver's status code names it)."""
+    config = config_from_mapping({
+        "name": "two_free", "gravity": [0, 0, 0],
+        "bodies": [{"name": "tilted", "mass": 2.0, "inertia": [0.2, 0.2, 0.05]},
+                   {"name": "spinner", "mass": 1.5, "inertia": [0.1, 0.1, 0.03]}],
+        "joints": [{"name": "a", "parent": "ground", "parent_point": [0, 0, 0], "child": "tilted",
+                    "child_point": [0, 0, 0], "variant": "free", "k_r": [0, 0, 0], "l_r": [0, 0, 0]},
+                   {"name": "b", "parent": "ground", "parent_point": [1, 0, 0], "child": "spinner",
+                    "child_point": [0, 0, 0], "variant": "free", "k_r": [0, 0, 0], "l_r": [0, 0, 0]}],
+        "initial_state": {"tilted": {"theta": [0.0, 1.0, 0.0]}, "spinner": {"omega": [0.0, 3.0, 0.0]}},
+        "simulation": {"t_end": 1.0, "n_samples": 3, "method": "DOP853", "rtol": 1e-10, "atol": 1e-12,
+                       "gimbal_margin": 0.3},
+    })
+    result = simulate(config, engine=engine)
+    assert result.status == "failed"
+    assert result.message.startswith("gimbal lock: |theta_2| of body spinner's Theta reached pi/2 - 0.3 rad at t = ")
+    assert float(result.message.split("at t = ")[1].split(" s")[0]) == pytest.approx((np.pi / 2 - 0.3) / 3, rel=1e-5)

@@ -54,6 +54,12 @@ def test_status_table_names_every_code_once():
     assert status.status_message(status.STEP_LIMIT, 0.25, 1e-3, 50).startswith("step limit: 50 steps")
     with pytest.raises(KeyError):
         status.status_message(99, 0.0, 1e-3)
+    # a tree's codes: each bound and each gimbal lock of each of its 8 bodies and joints, each read back alone
+    bounds = [status.limit_status(j, i, b) for b in range(8) for j in range(5) for i in range(3)]
+    locks = [status.gimbal_status(b, joint) for b in range(8) for joint in (False, True)]
+    assert len(set(bounds + locks)) == len(bounds) + len(locks) and not set(bounds + locks) & set(codes.values())
+    assert [status.gimbal_of(c) for c in locks] == [(b, joint) for b in range(8) for joint in (False, True)]
+    assert all(status.limit_of(c) is None for c in locks) and all(status.gimbal_of(c) is None for c in bounds)
 
 
 def test_method_tables_hold_each_tableau_zero_padded():

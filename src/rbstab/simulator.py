@@ -43,7 +43,7 @@ from .engine import METHODS, RunBatch
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
 from .engine.integrate import admissible
-from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, limit_of, limit_part, status_message
+from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, limit_of, limit_part, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import LIMITED, OUTPUTS, VARIANT_LAYOUTS, summary_stride
@@ -393,7 +393,8 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     from scipy.integrate import solve_ivp  # heavy: scipy
 
     from .variants.chain import (ChainTrajectory, _gimbal_margin, chain_impulses, compile_chain,  # heavy: numba
-                                 gimbal_lock_message, impulse_times, initial_state, region_margin)
+                                 gimbal_lock_message, impulse_times, initial_state, locked_part,
+                                 region_margin)
     from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_layout, tree_rate,  # heavy: numba
                                 tree_velocities, tree_work)
 
@@ -446,7 +447,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         lies outside the admissible region, else None (a start on its boundary is inside)."""
         full = maximal(yr[:n_r])
         if _gimbal_margin(compiled, full, sim.gimbal_margin) < 0:
-            return gimbal_lock_message(compiled, full, sim.gimbal_margin, t)
+            return gimbal_lock_message(compiled, *locked_part(compiled, full), sim.gimbal_margin, t)
         margin, what = (0.0, "") if sim.limits is None else region_margin(compiled, full, sim.limits)
         return _tree_left_region(what, t) if margin < 0 else None
 
@@ -495,7 +496,8 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         if sol.status == 1 and len(sol.t_events[0]):
             t_lock = float(sol.t_events[0][0])
             status = "failed"
-            message = gimbal_lock_message(compiled, maximal(sol.y_events[0][0][:n_r]), sim.gimbal_margin, t_lock)
+            message = gimbal_lock_message(compiled, *locked_part(compiled, maximal(sol.y_events[0][0][:n_r])),
+                                          sim.gimbal_margin, t_lock)
             break
         if sol.status == 1:
             t_out = float(sol.t_events[1][0])
@@ -926,8 +928,7 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
             ends = _ends(sol.status[lo:hi], sol.t_stop[lo:hi], sol.nfev[lo:hi], sol.n_steps[lo:hi],
                          settings[lo:hi], limits[lo:hi])
         else:
-            status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]),
-                                              sol.last[j][None] if gpu else sol.samples[j], y0[j], settings[j],
+            status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]), settings[j],
                                               limits[j])
                                      for j in range(lo, hi)))
             ends = {"status": list(status), "message": list(message),
@@ -977,23 +978,22 @@ def _tree_left_region(what: str, t: float) -> str:
     return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s"
 
 
-def tree_end(compiled, code: int, t_stop: float, states: np.ndarray, y0: np.ndarray, settings: np.ndarray,
-             bounds: np.ndarray) -> tuple[str, str]:
+def tree_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np.ndarray) -> tuple[str, str]:
     """(status, message) of a chain run of the compiled driver that ended with ``code`` at
     ``t_stop`` [s]: ``compiled`` its chain, ``settings`` its row (7,) of
     :data:`rbstab.engine.settings.SETTING_COLUMNS`, ``bounds`` (5, 3) its admissible region
-    (a record's ``limits``; the code names the bound, its axis and the body or joint that
-    reached it), ``states`` (m, 12 n + 3 e) its samples (the last finite one names the body
-    or joint at a gimbal lock; ``y0`` where none is finite)."""
+    (a record's ``limits``). A gimbal lock's code names the body or joint
+    (:func:`rbstab.engine.status.gimbal_of`), a bound's the quantity, its axis and the body
+    or joint that reached it."""
     from .variants import chain as C  # heavy: numba
 
     margin = float(settings[4])
     if code == SUCCESS:
         return "success", status_message(code, t_stop, margin)
-    finite = states[np.isfinite(states[:, 0])]
-    last = finite[-1] if len(finite) else y0  # the last sample before the stop
-    if code == GIMBAL_LOCK:
-        return "failed", C.gimbal_lock_message(compiled, last, margin, t_stop)
+    # a one-body tree runs one body's compiled form: its lock, GIMBAL_LOCK, is of its one angle set
+    locked = (0, bool(compiled.codes[0] == C.PERMANENT)) if code == GIMBAL_LOCK else gimbal_of(code)
+    if locked is not None:
+        return "failed", C.gimbal_lock_message(compiled, *locked, margin, t_stop)
     which = limit_of(code)
     if which is not None:
         quantity, axis = which

@@ -579,11 +579,12 @@ def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, A
         margin, what = C.region_margin(compiled, rest, sim.limits)
         if margin < 0:
             raise OutsideLimits(f"the rest state lies outside simulation.limits: {what.replace(' reached ', ' > ')}")
-    angles, names = C.gimbal_angles(compiled, rest)
+    angles, parts = C.gimbal_angles(compiled, rest)
     worst = int(np.argmax(np.abs(angles)))
     limit = GIMBAL_LOCK_ANGLE - sim.gimbal_margin
     if abs(angles[worst]) >= limit:
-        notes = notes + [f"the rest state has theta_2 = {angles[worst]:.6g} rad of {names[worst]}, outside the "
+        notes = notes + [f"the rest state has theta_2 = {angles[worst]:.6g} rad of "
+                         f"{C.gimbal_part_name(compiled, *parts[worst])}, outside the "
                          f"model's domain |theta_2| < pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): no run "
                          "reaches it"]
     notes = notes + _rest_point_notes(lin) + _tree_saturated_at_rest(calm, rest, lin)

@@ -286,7 +286,7 @@ class Runs:
             code, t = int(sol.status[i]), float(sol.t_stop[i])
             message = (status_message(code, t, s.gimbal_margin, s.max_steps, s.max_wall_time, limits=bounds)
                        if self.base.one_body[0] else
-                       tree_end(self.compiled, code, t, sol.last[i][None], states[i], settings[i], bounds)[1])
+                       tree_end(self.compiled, code, t, settings[i], bounds)[1])
             messages[i] = message.split(" at t =")[0]
         return ok, sol.acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
 

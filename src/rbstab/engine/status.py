@@ -16,11 +16,14 @@ code    name                 the run ...
 -4      ``TIMEOUT``          ran past ``simulation.max_wall_time``
 -5      ``SWITCHING_LIMIT``  located its largest number of switchings (pure sign law)
 -6      ``NOT_STARTED``      was not started: its GPU launch had reached its wall-time limit
->= 2    ``LEFT_REGION + k``  left the admissible region (``simulation.limits``): |q_i|
+2-999   ``LEFT_REGION + k``  left the admissible region (``simulation.limits``): |q_i|
                              reached its bound (the event time returned), k = 15 b +
                              3 j + i for the quantity j of :data:`rbstab.layout.LIMITED`,
                              the axis i and body (or joint) b of a tree, 0 for one body
                              (:func:`limit_status`, :func:`limit_of`, :func:`limit_part`)
+>=1000  ``TREE_GIMBAL + k``  a tree's gimbal lock (the event time returned): k = 2 b for
+                             body b's Theta, 2 b + 1 for joint b's Theta_j
+                             (:func:`gimbal_status`, :func:`gimbal_of`)
 ======  ===================  ==========================================================
 
 A run whose code is not :data:`SUCCESS` has status ``"failed"``, with
@@ -50,6 +53,9 @@ __all__ = [
     "limit_status",
     "limit_of",
     "limit_part",
+    "TREE_GIMBAL",
+    "gimbal_status",
+    "gimbal_of",
     "PART_CODES",
     "STATUSES",
     "SUCCESS_MESSAGE",
@@ -84,13 +90,31 @@ def limit_of(status: int) -> tuple[str, int] | None:
     """(the bounded quantity's name in :data:`rbstab.layout.LIMITED`, the axis 0-2) of a
     status code of :func:`limit_status`, or None for another code."""
     k = int(status) - LEFT_REGION
-    return (LIMITED[k % PART_CODES // 3], k % 3) if k >= 0 else None
+    return (LIMITED[k % PART_CODES // 3], k % 3) if 0 <= k < TREE_GIMBAL - LEFT_REGION else None
 
 
 def limit_part(status: int) -> int:
     """The body (or, for E, joint) of a tree whose bound a status code of
     :func:`limit_status` names (0 for one body)."""
     return (int(status) - LEFT_REGION) // PART_CODES
+
+
+#: The first code of a tree's gimbal lock, after every code of the admissible region.
+TREE_GIMBAL = 1000
+
+
+def gimbal_status(part: int, joint: bool) -> int:
+    """The status code of a tree's run stopped where |theta_2| reached pi/2 - gimbal_margin:
+    of body ``part``'s Theta, or with ``joint`` of joint ``part``'s relative Theta_j (the
+    joint whose child is body ``part``)."""
+    return TREE_GIMBAL + 2 * part + int(joint)
+
+
+def gimbal_of(status: int) -> tuple[int, bool] | None:
+    """(the part, whether it is the joint's Theta_j) of a status code of :func:`gimbal_status`,
+    or None for another code."""
+    k = int(status) - TREE_GIMBAL
+    return (k // 2, bool(k % 2)) if k >= 0 else None
 
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).

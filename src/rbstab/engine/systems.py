@@ -34,7 +34,7 @@ from ..variants.chain import _relative, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate, tree_velocities
-from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES
+from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES, TREE_GIMBAL
 
 __all__ = ["CHAIN", "TreeSystem", "tree_system", "with_offsets", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
@@ -231,16 +231,19 @@ def tree_margin(y, p, limit):
     (the B(Theta_j) of its feedback, eq 23); with ``simulation.limits`` also
     :func:`chain_bounds` on the maximal image. The Euler angles of a permanent joint's
     child are not the state's: they pass pi/2 without harm. The maximal image is made only
-    where a bound or such a joint asks for it."""
+    where a bound or such a joint asks for it. The status of a gimbal lock names the body
+    or joint nearest it (:func:`rbstab.engine.status.gimbal_status`)."""
     n = p.codes.shape[0]
-    margin = math.inf
+    margin, status = math.inf, TREE_GIMBAL
     limited = p.params[0].limited != 0.0
     relative = False
     for i in range(n):
-        margin = min(margin, limit - abs(y[p.r_at[i] + 1]))
+        m = limit - abs(y[p.r_at[i] + 1])
+        if m < margin:
+            margin, status = m, TREE_GIMBAL + 2 * i + (1 if p.codes[i] == PERMANENT else 0)
         relative = relative or (p.codes[i] != PERMANENT and p.parents[i] >= 0)
     if not (limited or relative):
-        return margin, GIMBAL_LOCK
+        return margin, status
     w = p.work
     tree_expand(y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, w.chain.rot,
                 w.chain.rate, True)
@@ -248,10 +251,12 @@ def tree_margin(y, p, limit):
         q = p.parents[j]
         if p.codes[j] != PERMANENT and q >= 0:
             rel = _relative(rotation_and_rate_of(vector(w.y, 12 * q))[0], rotation_and_rate_of(vector(w.y, 12 * j))[0])
-            margin = min(margin, limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2])))))
+            m = limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2]))))
+            if m < margin:
+                margin, status = m, TREE_GIMBAL + 2 * j + 1
     if not limited:
-        return margin, GIMBAL_LOCK
-    return chain_bounds(w.y, p.params, p.codes, p.parents, p.ppoints, margin, GIMBAL_LOCK)
+        return margin, status
+    return chain_bounds(w.y, p.params, p.codes, p.parents, p.ppoints, margin, status)
 
 
 @jit(_nrt=False)

@@ -53,7 +53,7 @@ from .kernels import PERMANENT, constraint_dissipation, constraint_energy, const
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "is_one_body", "one_body_mask", "gimbal_lock_message", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "is_one_body", "one_body_mask", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
            "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -1003,27 +1003,35 @@ class ChainTrajectory:
     work: np.ndarray
 
 
-def gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, list[str]]:
+def gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, list[tuple[int, bool]]]:
     """(theta_2 [rad] of every Euler angle a run integrates (each body's Theta, or the Theta_j
     of the permanent joint that holds it) and of every other joint's relative Theta_j off
-    the ground, at the maximal state ``y``; the words naming each)."""
+    the ground, at the maximal state ``y``; the part each is: (body or joint index, whether
+    it is the joint's Theta_j), as :func:`rbstab.engine.status.gimbal_status` numbers them)."""
     n = compiled.size
     joints = np.empty((n, 7, 3))
     chain_core(0.0, np.ascontiguousarray(y, dtype=float), *compiled.args, np.empty(compiled.n_states), joints,
                np.empty((n, 3)), np.empty(5))
-    bodies, names = compiled.chain.body_names, compiled.chain.joint_names
-    angles, what = [], []
+    angles, parts = [], []
     for i in range(n):
         if compiled.codes[i] == PERMANENT:
             angles.append(joints[i, _THETA_J, 1])
-            what.append(f"joint {names[i]}'s Theta_j")
+            parts.append((i, True))
             continue
         angles.append(float(np.asarray(y)[12 * i + 1]))
-        what.append(f"body {bodies[i]}'s Theta")
+        parts.append((i, False))
         if compiled.parents[i] >= 0:
             angles.append(joints[i, _THETA_J, 1])
-            what.append(f"joint {names[i]}'s Theta_j")
-    return np.array(angles, dtype=float), what
+            parts.append((i, True))
+    return np.array(angles, dtype=float), parts
+
+
+def gimbal_part_name(compiled: CompiledChain, part: int, joint: bool) -> str:
+    """In words, the Euler angles of :func:`gimbal_angles`' ``(part, joint)``: ``"body
+    trunk's Theta"`` or ``"joint hip's Theta_j"``."""
+    if joint:
+        return f"joint {compiled.chain.joint_names[part]}'s Theta_j"
+    return f"body {compiled.chain.body_names[part]}'s Theta"
 
 
 def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
@@ -1033,12 +1041,18 @@ def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> flo
     return float(np.min(math.pi / 2 - margin - np.abs(gimbal_angles(compiled, y)[0])))
 
 
-def gimbal_lock_message(compiled: CompiledChain, y: np.ndarray, margin: float, t: float) -> str:
-    """The message of a run stopped by gimbal lock at ``t`` [s], naming the body or joint
-    whose |theta_2| is largest at the maximal state ``y`` (the event's, or the last sample
-    before it); ``margin`` the run's ``simulation.gimbal_margin`` [rad]."""
-    angles, what = gimbal_angles(compiled, y)
-    return (f"gimbal lock: |theta_2| of {what[int(np.argmax(np.abs(angles)))]} reached pi/2 - {margin:g} rad "
+def locked_part(compiled: CompiledChain, y: np.ndarray) -> tuple[int, bool]:
+    """The part of :func:`gimbal_angles` whose |theta_2| is largest at the maximal state ``y``
+    (at a gimbal-lock event: the one that reached the lock)."""
+    angles, parts = gimbal_angles(compiled, y)
+    return parts[int(np.argmax(np.abs(angles)))]
+
+
+def gimbal_lock_message(compiled: CompiledChain, part: int, joint: bool, margin: float, t: float) -> str:
+    """The message of a run stopped by gimbal lock at ``t`` [s] where |theta_2| of body
+    ``part``'s Theta (or, with ``joint``, joint ``part``'s Theta_j) reached pi/2 - ``margin``
+    (the run's ``simulation.gimbal_margin`` [rad])."""
+    return (f"gimbal lock: |theta_2| of {gimbal_part_name(compiled, part, joint)} reached pi/2 - {margin:g} rad "
             f"at t = {t:.6g} s; B(theta) is singular there (eq 5), so the Euler-angle model stops")
 
 
