@@ -194,59 +194,6 @@ def solve(
     return _solve(variant, y0, settings, timeout)[:5]
 
 
-def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = None):
-    """:func:`solve`, and the disturbances' work W [J] at the samples (n_samples,), zero
-    without disturbances (:func:`_solve_disturbed`)."""
-    from scipy.integrate import solve_ivp  # heavy: scipy
-
-    from .config.schema import SimulationSettings  # heavy: pydantic, yaml
-
-    if variant.gains.disturbances:
-        return _solve_disturbed(variant, y0, settings, timeout)
-    t_eval = np.linspace(0.0, settings.t_end, settings.n_samples)
-    zero = np.zeros(settings.n_samples)
-    states = np.full((settings.n_samples, variant.layout.size), np.nan)
-    max_steps = int(getattr(settings, "max_steps", SimulationSettings.max_steps))
-    if timeout is None:
-        timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
-    no_solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}
-    region = admissible_region_event(variant, settings.gimbal_margin)
-    outside = _left_region(variant, region, 0.0, y0, settings)
-    if outside is not None:
-        return t_eval, states, "failed", outside, no_solver, zero
-    limits = RunLimits(max_steps, timeout, settings.t_end)
-    with np.errstate(all="ignore"):
-        try:
-            sol = solve_ivp(
-                variant.rhs,
-                (0.0, settings.t_end),
-                y0,
-                method=settings.method,
-                t_eval=t_eval,
-                events=[region, limits],
-                rtol=settings.rtol,
-                atol=settings.atol,
-                max_step=settings.max_step,
-            )
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-            return t_eval, states, "failed", f"solver error: {exc}", no_solver, zero
-    y = np.asarray(sol.y, dtype=float)  # a list when the first step failed
-    n = y.shape[1] if y.ndim == 2 else 0
-    states[:n] = y.T[:n]
-    solver = {"nfev": int(sol.nfev), "njev": int(sol.njev), "nlu": int(sol.nlu), "solver_status": int(sol.status)}
-    if limits.status is not None:
-        return t_eval, states, "failed", limits.message(settings.gimbal_margin, timeout), solver, zero
-    if sol.status == 1:
-        return t_eval, states, "failed", _event_message(variant, region, sol, settings), solver, zero
-    if sol.status != 0:
-        return t_eval, states, "failed", f"solver failed: {sol.message}", solver, zero
-    if not np.all(np.isfinite(states)):
-        bad = int(np.argmin(np.all(np.isfinite(states), axis=1)))
-        states[bad:] = np.nan
-        return t_eval, states, "failed", f"non-finite state at t = {t_eval[bad]:.6g} s", solver, zero
-    return t_eval, states, "success", str(sol.message), solver, zero
-
-
 #: Gauss-Legendre nodes on [0, 1] and weights (5 points: exact for a power of degree 9
 #: along a step; DOP853's interpolant is of degree 7, and 3 points left ~1e-8 of W) of the
 #: reference's quadrature of W (the compiled engines integrate W with the state instead:
@@ -278,12 +225,13 @@ def _step_work(variant: Variant, dense, t0: float, t1: np.ndarray) -> np.ndarray
     return span * (power.reshape(len(t1), len(_GAUSS_NODES)) @ _GAUSS_WEIGHTS)
 
 
-def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float | None):
-    """:func:`_solve` of a run with disturbances: one ``solve_ivp`` from each breakpoint
-    (an edge of a disturbance's window) to the next, its right-hand side clamped to the
+def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = None):
+    """:func:`solve`, and the disturbances' work W [J] at the samples (n_samples,). The
+    edges of the disturbances' windows split the run (docs/disturbances.md): one
+    ``solve_ivp`` from each breakpoint to the next, its right-hand side clamped to the
     float below the next one, the impulses that start at a breakpoint applied to the state
-    there; W integrated along each step's interpolant (docs/disturbances.md). A sample at a
-    breakpoint shows the state just after it."""
+    there; W integrated along each step's interpolant, zero without disturbances. A sample
+    at a breakpoint shows the state just after it."""
     from scipy.integrate import solve_ivp  # heavy: scipy
 
     from .config.schema import SimulationSettings  # heavy: pydantic, yaml
@@ -291,7 +239,8 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
     t_end, n_samples = float(settings.t_end), int(settings.n_samples)
     t_eval = np.linspace(0.0, t_end, n_samples)
     states = np.full((n_samples, variant.layout.size), np.nan)
-    work = np.full(n_samples, np.nan)
+    disturbed = bool(variant.gains.disturbances)
+    work = np.full(n_samples, np.nan) if disturbed else np.zeros(n_samples)
     max_steps = int(getattr(settings, "max_steps", SimulationSettings.max_steps))
     if timeout is None:
         timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
@@ -301,7 +250,7 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
     edges = _breakpoints(p, t_end)
     y = np.array(y0, dtype=float)
     w = 0.0
-    solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": 0}
+    solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}  # -1: no solver ran
     message = ""
     region = admissible_region_event(variant, settings.gimbal_margin)
     with np.errstate(all="ignore"):
@@ -313,10 +262,10 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
             last = b == t_end
             lim = b if last else before(b)
             inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
+            rate = (lambda t, z, lim=lim: variant.rhs(min(t, lim), z)) if disturbed else variant.rhs
             try:
-                sol = solve_ivp(lambda t, z, lim=lim: variant.rhs(min(t, lim), z), (a, b), y, method=settings.method,
-                                t_eval=t_eval[inside], dense_output=True,
-                                events=[region, limits],
+                sol = solve_ivp(rate, (a, b), y, method=settings.method, t_eval=t_eval[inside],
+                                dense_output=disturbed, events=[region, limits],
                                 rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
             except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
                 return t_eval, states, "failed", f"solver error: {exc}", solver, work
@@ -324,8 +273,8 @@ def _solve_disturbed(variant: Variant, y0: np.ndarray, settings, timeout: float 
                 solver[key] += int(getattr(sol, key))
             solver["solver_status"] = int(sol.status)
             where = np.flatnonzero(inside)
-            yy = np.asarray(sol.y, dtype=float)
-            n = yy.shape[1] if yy.ndim == 2 else 0  # none: a window between two samples
+            yy = np.asarray(sol.y, dtype=float)  # a list when the first step failed
+            n = yy.shape[1] if yy.ndim == 2 else 0  # none: also a window between two samples
             if n:
                 states[where[:n]] = yy.T[:n]
             if sol.sol is not None:  # W along each step, and to each sample inside it
