@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from rbstab.engine.registry import DEFAULT_ENGINE, ENGINES
+from rbstab.layout import is_chain
 
 from ._common import check_engine, command_line, load_configs, show_config_warnings, spec_error
 from .console import get_console
@@ -351,7 +352,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
         check_engine(engine)
     configs, specs = _split_specs(configs)
     loaded = load_configs(configs, overrides)
-    trees = {c.name: list(c.chain.body_names) for c in loaded if getattr(c, "chain", None) is not None}
+    trees = {c.name: list(c.chain.body_names) for c in loaded if is_chain(c)}
     bodies = {**trees, **_chain_spec_bodies(specs, overrides)}
     pushed = push_options is not None or (stability_options is not None and stability_options.get("push"))
     if push_body is not None and len(bodies) < len(loaded) + len(specs):

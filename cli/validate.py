@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import click
 
+from rbstab.layout import is_chain
+
 from ._common import config_error_text, load_one, show_config_warnings
 from .console import get_console
 from .options import console_options, json_option, set_option
@@ -37,7 +39,7 @@ def _check_config(path: str, overrides) -> dict:
     """One JSON-able record of a run config: valid or not, its settings, its warnings, its
     tree's bodies and joints (a one-body config's: its body held by its controller) and for
     a one-body config its variant."""
-    from rbstab.config.loader import ChainConfig, chain_of  # heavy: pydantic
+    from rbstab.config.loader import chain_of  # heavy: pydantic
 
     config, error, lines = load_one(path, overrides)
     if config is None:
@@ -45,7 +47,7 @@ def _check_config(path: str, overrides) -> dict:
                 "text": config_error_text(path, error)}
     sim = config.simulation
     record = {"path": path, "kind": "config", "valid": True, "name": config.name}
-    if not isinstance(config, ChainConfig):
+    if not is_chain(config):
         record["variant"] = config.variant
     record["chain"] = _chain_record(chain_of(config))
     return record | {"t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}

@@ -21,7 +21,7 @@ from rbstab.config import (
     load_config,
     parse_key,
 )
-from rbstab.config.loader import is_chain
+from rbstab.layout import is_chain
 from rbstab.layout import BLOCK_UNITS
 from rbstab.variants import VARIANTS
 

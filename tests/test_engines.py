@@ -23,7 +23,7 @@ from click.testing import CliRunner
 
 from rbstab import simulator as simulate_module
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
-from rbstab.config.loader import is_chain
+from rbstab.layout import is_chain
 from rbstab.io.hdf5 import SUMMARY_VARIABLES, read_attributes, read_summary, summary_stride, write_run
 from rbstab.simulator import simulate, simulate_many
 from rbstab.summary import LYAPUNOV_RATE_TOLERANCE, numerical_rate

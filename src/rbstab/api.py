@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from .engine.registry import DEFAULT_ENGINE
+from .layout import is_chain
 
 if TYPE_CHECKING:  # pragma: no cover
     import xarray
@@ -169,12 +170,6 @@ def _config(config: Any, overrides: Overrides) -> "RunConfig | ChainConfig":
     return load_config(config, overrides)
 
 
-def _is_chain_config(config: Any) -> bool:
-    from .config.loader import ChainConfig  # heavy: yaml, pydantic
-
-    return isinstance(config, ChainConfig)
-
-
 # -- one run ------------------------------------------------------------------------------------
 
 
@@ -185,7 +180,7 @@ def _integrate(config, engine: str, timeout: float | None) -> "RunResult":
     from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
     from .simulator import simulate as integrate  # heavy: numba, numpy
 
-    tree = _is_chain_config(config)
+    tree = is_chain(config)
     if tree or uses_compiled_engine(config, engine):
         ensure_compiled(sign_law=is_sign_law(config), chain=tree)
     return integrate(config, timeout, engine=engine)

@@ -18,12 +18,15 @@ A plain-data module at the bottom of the layers (no compiled code, no rbstab imp
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 __all__ = [
     "is_index",
+    "is_chain",
     "Quantity",
     "QUANTITIES",
     "OUTPUTS",
@@ -196,6 +199,16 @@ def is_index(part: str) -> bool:
     leading zero (``str.isdigit`` also takes '²' and '١', which ``int`` refuses or reads as
     another number). The grammar of keys: :func:`rbstab.config.paths.parse_key`."""
     return part.isascii() and part.isdigit() and (part == "0" or not part.startswith("0"))
+
+
+def is_chain(data: Any) -> bool:
+    """Whether a configuration is in a chain's spelling (``bodies`` and ``joints`` instead of
+    ``body`` and ``controller``): a mapping with ``bodies`` and no ``body``, or a validated
+    configuration (:class:`rbstab.config.RunConfig`, :class:`rbstab.config.ChainConfig`)
+    of such a mapping. The one test of a configuration's spelling: the model is the same
+    (a one-body config is its one-body tree, :func:`rbstab.config.chain_of`)."""
+    data = getattr(data, "resolved", data)
+    return isinstance(data, Mapping) and "bodies" in data and "body" not in data
 
 
 #: A chain's keys as the one-body keys of the same quantity (or a quantity of their own):

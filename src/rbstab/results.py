@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from .layout import is_chain
+
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
 
@@ -169,6 +171,7 @@ class RunBlock:
 def members(config) -> dict:
     """``joints`` and ``bodies`` of a chain config (its joint and body names, as a
     :class:`RunBlock` takes them); empty for one body's."""
-    chain = getattr(config, "chain", None)
-    return {} if chain is None else {"joints": tuple(chain.joint_names), "bodies": tuple(chain.body_names)}
+    if not is_chain(config):
+        return {}
+    return {"joints": tuple(config.chain.joint_names), "bodies": tuple(config.chain.body_names)}
 

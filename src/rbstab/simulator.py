@@ -38,7 +38,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .config.loader import ChainConfig
 from .engine import METHODS, RunBatch
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
@@ -46,7 +45,7 @@ from .engine.integrate import admissible
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, limit_of, limit_part, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .layout import LIMITED, OUTPUTS, VARIANT_LAYOUTS, summary_stride
+from .layout import LIMITED, OUTPUTS, VARIANT_LAYOUTS, is_chain, summary_stride
 from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
@@ -489,7 +488,7 @@ def uses_compiled_engine(config, engine: str = DEFAULT_ENGINE) -> bool:
 
 def is_sign_law(config) -> bool:
     """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0) of one body."""
-    return not isinstance(config, ChainConfig) and config.variant == "sliding" and not config.gains.boundary_layer
+    return not is_chain(config) and config.variant == "sliding" and not config.gains.boundary_layer
 
 
 def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunResult:
@@ -548,7 +547,7 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
         return simulate_sign_law(config, timeout)
     if compiled:
         return next(simulate_many([config], engine=engine, timeout=timeout))[1]
-    if isinstance(config, ChainConfig):
+    if is_chain(config):
         return _simulate_tree(config, timeout)
     start = _time.perf_counter()
     variant = config.make_variant()

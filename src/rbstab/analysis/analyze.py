@@ -33,6 +33,7 @@ from ..config.schema import limits_violation
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..layout import is_chain
 from ..variants import VARIANTS
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
@@ -264,7 +265,7 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     ValueError
         For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
     """
-    if getattr(config, "chain", None) is not None:
+    if is_chain(config):
         if boundary_layer is not None:
             raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace "
                              "(a sliding joint of a chain has its own boundary_layer > 0)")
@@ -496,7 +497,7 @@ def analyze(
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
     if basin is not None:
         check_axes(analysed, axes)
-    tree = getattr(analysed, "chain", None) is not None
+    tree = is_chain(analysed)
     result, model, disturbed = (_tree_findings if tree else _body_findings)(config, analysed, notes)
     notes, timing = result.notes, result.timing
     lin = result.linearisation

@@ -37,7 +37,7 @@ import math
 
 import numpy as np
 
-from ..layout import BLOCK_UNITS, STATE_BLOCKS
+from ..layout import BLOCK_UNITS, STATE_BLOCKS, is_chain
 from .derivatives import jacobian
 
 __all__ = [
@@ -376,7 +376,7 @@ def linearise_config(config) -> Linearisation:
         near its reference configuration (:func:`linearise`, :func:`linearise_chain`).
     """
     config = undisturbed(config)
-    if hasattr(config, "chain"):
+    if is_chain(config):
         from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
         return linearise_chain(C.compile_chain(config.chain))[0]
@@ -388,8 +388,8 @@ def undisturbed(config):
     :class:`rbstab.config.ChainConfig`) without its disturbances (they act in time, not at
     rest): what its equilibrium or rest state, linearisation and certificate see;
     ``config`` itself where it has none."""
-    tree = getattr(config, "chain", None)
-    if tree is not None:
+    if is_chain(config):
+        tree = config.chain
         if not any(b.disturbances for b in tree.bodies):
             return config
         return replace(config, chain=replace(tree, bodies=tuple(replace(b, disturbances=()) for b in tree.bodies)))

@@ -42,6 +42,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
+from ..layout import is_chain
 from .runs import Runs, check_entries
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
@@ -191,7 +192,7 @@ class Pushes:
         self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
         self.units = PUSH_KINDS[kind]
         self.body = body
-        tree = getattr(config, "chain", None) is not None
+        tree = is_chain(config)
         chain = chain_of(config)  # one body: its one-body chain (the same model)
         names = list(chain.body_names)
         if tree and body not in names:

@@ -21,6 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..engine.registry import get_engine
+from ..layout import is_chain
 
 __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE"]
 
@@ -147,7 +148,7 @@ class Runs:
         self.jobs = 1 if get_engine(engine).gpu else max(1, int(jobs))
         self.base = batch_of([config])
         self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
-        self.tree = getattr(config, "chain", None)
+        self.tree = config.chain if is_chain(config) else None
         from ..variants import chain as C  # heavy: numba
 
         size = self.base.trees[0].size  # the compiled tree (one body's: its one-body tree)
@@ -364,7 +365,7 @@ def check_entries(config, axes) -> None:
     no entry of ``config``'s state: one body's keys ``initial_state.<block>.<i>`` of a
     block its variant has, a tree's ``initial_state.<body>.<block>.<i>`` of a body it has
     (D of an embedded joint's child)."""
-    if getattr(config, "chain", None) is not None:
+    if is_chain(config):
         from ..variants import chain as C  # heavy: numba
 
         compiled = C.compile_chain(config.chain, offset=0.0)

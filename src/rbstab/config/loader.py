@@ -65,7 +65,8 @@ from ..variants import VARIANTS, Variant
 from ..variants.base import limited_values
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies, unheld_weight
-from .paths import apply_overrides, is_chain, plain_tree
+from ..layout import is_chain
+from .paths import apply_overrides, plain_tree
 from .schema import (
     BODY_GAINS,
     CHAIN_TOP_LEVEL,
@@ -86,7 +87,7 @@ from .schema import (
 from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
 
 __all__ = ["RunConfig", "ChainConfig", "config_from_mapping", "load_config", "chain_of", "one_body_config",
-           "PER_RUN_SECTIONS", "limits_of", "is_chain", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
+           "PER_RUN_SECTIONS", "limits_of", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
            "CONSTRAINT_TOLERANCE", "initial_state_fits", "placed_initial_state"]
 
 #: Top-level sections in which most runs of a sweep differ (:meth:`RunConfig.to_yaml` does
@@ -444,7 +445,7 @@ def config_from_mapping(
 ) -> RunConfig | ChainConfig:
     """Validate a configuration mapping (the parsed YAML): a :class:`RunConfig` for one
     body's (``body``, ``controller``), a :class:`ChainConfig` for a tree's (``bodies``,
-    ``joints``, :func:`is_chain`).
+    ``joints``, :func:`rbstab.layout.is_chain`).
 
     Parameters
     ----------
@@ -613,7 +614,7 @@ def chain_of(config: RunConfig | ChainConfig) -> Chain:
     ``controller``) at C = ``attachment_point`` to the ground point R (where C is at the
     equilibrium X = 0, Theta = 0: E = X + A R - R, eq 4) with the variant's law, K_r, L_r and
     the limits of N and Lambda. Same equations, same numbers."""
-    if isinstance(config, ChainConfig):
+    if is_chain(config):
         return config.chain
     gains, sat = config.gains, config.gains.saturation
     body = Body(
@@ -636,7 +637,7 @@ def one_body_config(config: RunConfig | ChainConfig) -> RunConfig | None:
     limits of H, its joint's point as ``attachment_point``, law, gains and limits as
     ``controller``, gravity, initial state, disturbances and simulation, the inverse of
     :func:`chain_of` (the same model: the same runs, bit for bit); None for any other chain."""
-    if not isinstance(config, ChainConfig):
+    if not is_chain(config):
         return config
     r = config.resolved
     if len(r["bodies"]) != 1:

@@ -31,12 +31,12 @@ from typing import Any
 
 import numpy as np
 
-from ..layout import is_index
+from ..layout import is_chain, is_index
 from .errors import ConfigError
 from .schema import ChainSchema, RunSchema, field_check, kind_of, list_model, mapping_model, submodel
 from .yaml_io import parse_yaml
 
-__all__ = ["KeyPath", "KeyPathError", "parse_key", "parse_any_key", "apply_overrides", "plain_tree", "is_chain",
+__all__ = ["KeyPath", "KeyPathError", "parse_key", "parse_any_key", "apply_overrides", "plain_tree",
            "schema_of"]
 
 #: Longest key path taken (characters): longer is no key of the schema.
@@ -302,15 +302,9 @@ def _unknown(key: str, where: str, part: str, allowed: Sequence[str], model: Any
     return KeyPathError(key, f"{what}{hint} (allowed: {', '.join(allowed)})")
 
 
-def is_chain(data: Any) -> bool:
-    """Whether a configuration mapping is a chain's (``bodies`` and ``joints`` instead of
-    ``body`` and ``controller``): it has ``bodies`` and no ``body``."""
-    return isinstance(data, Mapping) and "bodies" in data and "body" not in data
-
-
 def schema_of(data: Any):
     """The schema a configuration mapping's keys are read against: a chain's
-    (:class:`~rbstab.config.schema.ChainSchema`, :func:`is_chain`), else one body's
+    (:class:`~rbstab.config.schema.ChainSchema`, :func:`rbstab.layout.is_chain`), else one body's
     (:class:`~rbstab.config.schema.RunSchema`)."""
     return ChainSchema if is_chain(data) else RunSchema
 

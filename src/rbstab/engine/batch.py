@@ -30,8 +30,8 @@ import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
 from ..config.loader import RunConfig, chain_of, config_from_mapping
-from ..config.paths import is_chain, parse_any_key
-from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS
+from ..config.paths import parse_any_key
+from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS, is_chain
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import VARIANTS
 from ..variants import chain as C
@@ -425,7 +425,7 @@ def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
     shared: dict[tuple, object] = {}
     n = len(configs)
     tree, n_state = np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
-    one_body = np.array([not is_chain(c.resolved) for c in configs], dtype=bool)  # the spelling, as a table's
+    one_body = np.array([not is_chain(c) for c in configs], dtype=bool)  # the spelling, as a table's
     runs = []  # each run's (records, parent points, initial state)
     for i, config in enumerate(configs):
         key = config.variant if one_body[i] else id(config.chain)

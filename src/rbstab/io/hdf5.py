@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from ..config import canonical_config, config_hash
-from ..layout import LYAPUNOV_TERMS, QUANTITIES, SUMMARY_MAX_SAMPLES, summary_stride
+from ..layout import LYAPUNOV_TERMS, QUANTITIES, SUMMARY_MAX_SAMPLES, is_chain, summary_stride
 from ..results import RunResult, plain
 from .atomic import write_bytes_atomic
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, NotAResultFile, content_digest, data_digest_of,
@@ -146,7 +146,7 @@ def result_attributes(
     ``config_yaml`` is ``result.config.to_yaml()`` when the caller already has it.
     """
     config_yaml = result.config.to_yaml() if config_yaml is None else config_yaml
-    chain = getattr(result.config, "chain", None)
+    chain = result.config.chain if is_chain(result.config) else None
     if chain is None:
         identity = {"rbstab_format": FORMAT, "name": result.name, "variant": result.config.variant}
         title = f"rbstab run {result.name} ({result.config.variant} controller)"
@@ -321,9 +321,9 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
 def _chain_dimensions(result: "RunResult", outputs: dict[str, np.ndarray]) -> tuple[dict | None, dict | None]:
     """(labels, dims) of :func:`_file_image` for a chain run's ``outputs``: ``body`` and
     ``joint`` with their names; (None, None) for one body's run."""
-    chain = getattr(result.config, "chain", None)
-    if chain is None:
+    if not is_chain(result.config):
         return None, None
+    chain = result.config.chain
     dims = {key: "body" if key in BODY_VARIABLES else "joint" for key, values in outputs.items() if values.ndim >= 2}
     return {"body": chain.body_names, "joint": chain.joint_names}, dims
 
@@ -354,7 +354,7 @@ def write_run(
     if store == "thinned":
         stride = attrs["store_stride"]
         time = time[::stride]
-        kept = CHAIN_SUMMARY_VARIABLES if getattr(result.config, "chain", None) is not None else SUMMARY_VARIABLES
+        kept = CHAIN_SUMMARY_VARIABLES if is_chain(result.config) else SUMMARY_VARIABLES
         outputs = {k: v[::stride] for k, v in outputs.items() if k in kept}
     elif store == "summary":
         time, outputs = time[:0], {}

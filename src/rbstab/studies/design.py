@@ -43,13 +43,13 @@ import numpy as np
 from pydantic import ValidationError
 
 from ..config import ConfigError, parse_yaml
-from ..config.paths import KeyPathError, is_chain, plain_tree
+from ..config.paths import KeyPathError, plain_tree
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..engine import ensure_compiled
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE
 from ..io.chunk import SUMMARY_FIGURES, figure_attributes, split_figure_column, summary_columns
-from ..layout import SIGN_LAW_FIGURES
+from ..layout import SIGN_LAW_FIGURES, is_chain
 from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
 from ..simulator import simulate_many
 from ..sweep.folder import open_sweep

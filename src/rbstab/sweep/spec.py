@@ -71,10 +71,11 @@ from typing import Any
 import numpy as np
 
 from ..config import ConfigError, apply_overrides, parse_yaml as parse
-from ..config.paths import KeyPathError, is_chain, parse_any_key, parse_key, schema_of
+from ..config.paths import KeyPathError, parse_any_key, parse_key, schema_of
 from ..config.schema import ChainSchema
 from ..config.schema import kind_of as _kind
 from ..config.yaml_io import copy_tree, read_yaml_file
+from ..layout import is_chain
 from ..results import plain
 from .schema import DEFAULT_LYAPUNOV_RATIO, DISTRIBUTIONS, SweepSchema, SweepSpecError, validate_spec
 
@@ -245,7 +246,7 @@ class SweepSpec:
 
     @property
     def is_chain(self) -> bool:
-        """Whether the bases are chains (:func:`rbstab.config.paths.is_chain`; a spec's bases
+        """Whether the bases are chains (:func:`rbstab.layout.is_chain`; a spec's bases
         are all chains or all one-body configurations)."""
         return bool(self.bases) and is_chain(self.bases[0].data)
 

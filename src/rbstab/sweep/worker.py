@@ -52,10 +52,10 @@ import numpy as np
 
 from ..config import PhysicalPlausibilityWarning, RunConfig
 from ..config.loader import config_from_mapping
-from ..config.paths import is_chain
 from ..engine.registry import get_engine
 from ..io.chunk import ChunkWriter, StoreRow, StoreRows, chunk_file_name
 from ..io.hdf5 import write_run
+from ..layout import is_chain
 from ..results import plain
 from ..simulator import simulate, simulate_batch, simulate_blocks, uses_compiled_engine
 from .folder import NOT_IN_INDEX, index_part, row_from_attributes
