@@ -66,6 +66,10 @@ def cases(root: str):
             [], ["bodies.trunk.mass=40.0", "joints.hip.k_r=[700, 700, 100]", "joints.hip.saturation.torque_n=[5, 5, .inf]"],
             ["joints.hip.parent_point=[0, 0.02, 0.4]"],
             ["simulation.limits.theta=[0.101, 1.0, 1.0]", "initial_state.trunk.omega=[-0.5, 0, 0]"])],  # leaves its region
+        # gimbal lock: of the hip's Theta_j (the trunk's joint), then of the ankle's (the legs')
+        "locked": [load_config(stance, [*short, *extra]) for extra in (
+            ["initial_state.trunk.theta=[0, 1.3, 0]", "initial_state.trunk.omega=[0, 4, 0]"],
+            ["initial_state.legs.theta=[0, 1.2, 0]", "initial_state.legs.omega=[0, 6, 0]"])],
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
     }
