@@ -233,6 +233,33 @@ def test_the_planar_stances_mode_shapes_are_the_closed_forms():
     assert [sign for _, sign in sorted(signs)][0] == 1 and [sign for _, sign in sorted(signs)][-1] == -1
 
 
+def test_a_symmetric_trees_double_real_modes_are_real():
+    """A column of 8 axisymmetric bodies on permanent joints with the same feedback about x
+    and y: each mode about x has its twin about y, a real one a double eigenvalue.
+    Rounding in the Jacobian would make a pair Re s +- 1e-13 i of it (zeta -1 with a
+    phase between theta_1 and theta_2); its eigenvalues are real and its mode shapes are
+    real eigenvectors, the eigen equation holding for every mode."""
+    from rbstab.analysis.linearise import linearise_config, mode_shapes
+
+    names = [f"b{i}" for i in range(8)]
+    config = config_from_mapping({
+        "name": "column", "gravity": [0, 0, -9.81],
+        "bodies": [{"name": n, "mass": 5.0, "inertia": [0.1, 0.1, 0.02]} for n in names],
+        "joints": [{"name": f"j{i}", "parent": "ground" if i == 0 else names[i - 1],
+                    "parent_point": [0, 0, 0] if i == 0 else [0, 0, 0.15], "child": n, "child_point": [0, 0, -0.15],
+                    "variant": "permanent", "k_r": [400, 400, 100], "l_r": [40, 40, 10]} for i, n in enumerate(names)],
+        "simulation": {"t_end": 1.0}})
+    lin = linearise_config(config)
+    s = lin.eigenvalues
+    real = np.flatnonzero(s.imag == 0)
+    assert lin.verdict == "unstable" and s[0].real > 0 and s[0] == s[1]  # the column falls, about x or y
+    assert not np.any((np.abs(s.imag) <= lin.tolerance) & (s.imag != 0))
+    assert sum(np.sum(s == value) == 2 for value in s[real]) >= 4  # real modes about x with their twins about y
+    full = mode_shapes(lin, range(s.size))
+    np.testing.assert_allclose(lin.jacobian @ full.T, full.T * s, atol=1e-6 * np.abs(lin.jacobian).max())
+    assert np.all(full[real].imag == 0)
+
+
 def test_a_stiff_visco_elastic_joint_approaches_the_permanent_joint():
     """The double pendulum with a visco-elastic elbow of stiffness k_c: its motion differs from
     the ball joint's by O(1/k_c)."""

@@ -172,7 +172,10 @@ def mode_shapes(lin: Linearisation, rows) -> np.ndarray:
     eigenvalue's nearest eigenvalue of the matrix, none taken twice), on the state entries
     ``rows`` (m indices) only: shape (n, m) complex, each row divided by its entry of largest
     modulus (so that entry is 1; the others give their size and phase relative to it; a row
-    that is zero on ``rows`` stays zero)."""
+    that is zero on ``rows`` stays zero). A real eigenvalue's are real: for one of
+    multiplicity k with k independent eigenvectors, the k right singular vectors of A - s I
+    of the smallest singular values (a basis of its eigenspace, where rounding made a
+    complex pair of it)."""
     w, v = np.linalg.eig(lin.jacobian)
     free = list(range(w.size))
     order = []
@@ -180,7 +183,14 @@ def mode_shapes(lin: Linearisation, rows) -> np.ndarray:
         k = min(free, key=lambda i: abs(w[i] - s))
         free.remove(k)
         order.append(k)
-    shapes = v[np.ix_(list(rows), order)].T
+    v = v[:, order].astype(complex)
+    scale = max(1.0, float(np.linalg.norm(lin.jacobian, 2))) if w.size else 1.0
+    for s in np.unique(lin.eigenvalues.real[lin.eigenvalues.imag == 0]):
+        same = np.flatnonzero(lin.eigenvalues == s)
+        _, sigma, vt = np.linalg.svd(lin.jacobian - s * np.eye(len(w)))
+        if sigma[-len(same)] <= 1e-6 * scale:  # k independent eigenvectors (not a Jordan block)
+            v[:, same] = vt[-len(same):].T
+    shapes = v[list(rows)].T
     pivot = shapes[np.arange(shapes.shape[0]), np.argmax(np.abs(shapes), axis=1)]
     return shapes / np.where(pivot == 0, 1.0, pivot)[:, None]
 
@@ -251,16 +261,20 @@ def _linearisation(rates, y_e: np.ndarray, gravity: np.ndarray) -> Linearisation
     """The Linearisation of the vectorised ``rates`` ((k, n) -> (k, n)) at ``y_e`` (n,)."""
     residual = rates(y_e[None])[0]
     jac, error = jacobian(rates, y_e)
-    eigenvalues = sort_eigenvalues(np.linalg.eigvals(jac))
+    eigenvalues = np.linalg.eigvals(jac)
     radius = float(np.abs(eigenvalues).max()) if eigenvalues.size else 0.0
+    tolerance = EIGENVALUE_RTOL * max(1.0, radius)
+    # a real eigenvalue of multiplicity 2 (two symmetric modes) comes out of the Jacobian's
+    # rounding as a pair Re s +- i tiny: real within the tolerance that decides Re s
+    eigenvalues = np.where(np.abs(eigenvalues.imag) <= tolerance, eigenvalues.real + 0j, eigenvalues)
     return Linearisation(
         equilibrium=y_e,
         rest_residual=residual,
         rest_tolerance=rest_tolerance(jac, y_e, gravity),
         jacobian=jac,
         jacobian_error=error,
-        eigenvalues=eigenvalues,
-        tolerance=EIGENVALUE_RTOL * max(1.0, radius),
+        eigenvalues=sort_eigenvalues(eigenvalues),
+        tolerance=tolerance,
     )
 
 
