@@ -182,12 +182,12 @@ def test_push_sphere_colour_scale_separates_the_thresholds_that_matter():
 
 
 def test_a_fatal_push_inside_the_estimate_lowers_c_in_an_analysis():
-    """t_end = 0.2 s is too short for any push to die down by the recovery rule: every push
-    is fatal, far inside the sublevel set the samples and the search leave; the analysis
-    lowers c below the weakest fatal push's dT, names that push, and the push estimate
-    lies below the threshold."""
+    """An admissible region of |Omega_1| <= 0.05 rad/s: a torque push of 0.03 N m s leaves
+    it at once (fatal), with dT far inside the sublevel set the samples and the search leave
+    (which do not see the bound on Omega); the analysis lowers c below the weakest fatal
+    push's dT, names that push, and the push estimate lies below the threshold."""
     data = dict(_quiet(load_config, PENDULUM).resolved)
-    data["simulation"] = {**data["simulation"], "t_end": 0.2, "n_samples": 201}
+    data["simulation"] = {**data["simulation"], "n_samples": 201, "limits": {"omega": [0.05, 0.05, 100.0]}}
     config = _quiet(config_from_mapping, data)
     result = analyze(config, samples=200, simulate=False, falsification_runs=0,
                      push={"kind": "torque", "directions": [[1, 0, 0]], "tol": 0.1})

@@ -44,16 +44,24 @@ def _planar_recovers(impulse: float) -> bool:
     """The pendulum tilting about its x axis alone, written on its own: J_p theta'' =
     clip(-K theta - D theta', +-N_max) + m g L sin(theta), pushed at rest by a torque
     impulse (theta'(0) = impulse / J_p); it recovers when |v(t_end)| <= ratio dT + 1e-12 J,
-    v = J_p theta'^2 / 2 + K theta^2 / 2 - m g L (1 - cos theta), dT = impulse^2 / (2 J_p)."""
+    v = J_p theta'^2 / 2 + K theta^2 / 2 - m g L (1 - cos theta), dT = impulse^2 / (2 J_p).
+    A run still settling at t_end (0 <= v <= dT) is judged at 2, 4, then 8 t_end (the
+    slowest time constant, 2 J_p / D = 0.11 s, asks for less than 2 t_end)."""
 
     def rhs(t, y):
         torque = min(max(-K * y[0] - D * y[1], -N_MAX), N_MAX)
         return [y[1], (torque + M * G * LENGTH * math.sin(y[0])) / J_P]
 
     w0 = impulse / J_P
-    theta, w = solve_ivp(rhs, (0.0, T_END), [0.0, w0], method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]
-    v = 0.5 * J_P * w * w + 0.5 * K * theta * theta - M * G * LENGTH * (1.0 - math.cos(theta))
-    return abs(v) <= RATIO * 0.5 * J_P * w0 * w0 + 1e-12
+    dT = 0.5 * J_P * w0 * w0
+    for t_end in (T_END, 2 * T_END, 4 * T_END, 8 * T_END):
+        theta, w = solve_ivp(rhs, (0.0, t_end), [0.0, w0], method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]
+        v = 0.5 * J_P * w * w + 0.5 * K * theta * theta - M * G * LENGTH * (1.0 - math.cos(theta))
+        if abs(v) <= RATIO * dT + 1e-12:
+            return True
+        if not -1e-12 <= v <= dT + 1e-12:
+            return False
+    return False
 
 
 def test_the_kinetic_energy_of_a_push_is_that_of_the_jump(pendulum):
@@ -63,15 +71,17 @@ def test_the_kinetic_energy_of_a_push_is_that_of_the_jump(pendulum):
 
 
 def test_threshold_matches_an_independent_planar_model_and_flags_non_monotone_recovery(pendulum):
-    """Along x, with the ladder's top at 2 N m s: the threshold is the planar model's first
-    fatal impulse from below within the tolerance, and a recovering rung above it (the
-    planar model recovers there too) flags the direction as not monotone."""
-    found = push_analysis(pendulum, "torque", directions=[[1.0, 0.0, 0.0]], push_max=2.0, tol=1e-3, rungs=16)
+    """Along x, with the ladder's top at 2 N m s in 50 rungs: the threshold is the planar
+    model's first fatal rung, bisected from the rung below within the tolerance (a push of
+    0.96 N m s swings the pendulum out and v rises above dT before it comes back: fatal by
+    the rule), and a recovering rung above it (the planar model recovers there too, one of
+    them only after t_end) flags the direction as not monotone."""
+    found = push_analysis(pendulum, "torque", directions=[[1.0, 0.0, 0.0]], push_max=2.0, tol=1e-3, rungs=50)
     threshold = float(found.threshold[0])
-    # the planar model: scan from below to the first fatal impulse, then bisect
-    grid = np.arange(0.05, 2.0, 0.05)
+    # the planar model: the same ladder from below to the first fatal rung, then bisect
+    grid = 2.0 * np.arange(1, 51) / 50
     fatal = next(p for p in grid if not _planar_recovers(p))
-    lo, hi = fatal - 0.05, fatal
+    lo, hi = fatal - 0.04, fatal
     while hi - lo > 1e-5 * hi:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if _planar_recovers(mid) else (lo, mid)
@@ -85,7 +95,11 @@ def test_doubling_brackets_the_threshold_and_every_direction_advances_together(p
     """Without --push-max the doubling finds each direction's top; the thresholds of two
     directions symmetric under the body's symmetry (x, y: J_xx = J_yy, K_r, L_r alike)
     agree, and the local search is not run for given directions."""
-    found = push_analysis(pendulum, "torque", directions=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], tol=1e-3)
+    # bounded tilts: a fall ends at 0.6 rad about either axis (about y it would end at the
+    # gimbal lock, about x swing through and come back)
+    limited = config_from_mapping({**pendulum.resolved, "simulation": {**pendulum.resolved["simulation"],
+                                                                     "limits": {"theta": [0.6, 0.6, 3.2]}}})
+    found = push_analysis(limited, "torque", directions=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], tol=1e-3)
     t = found.threshold
     assert np.all(np.isfinite(t)) and abs(t[0] - t[1]) <= 1e-3 * t[0]
     assert np.all(found.thresholds.recovering < t) and np.all(t - found.thresholds.recovering <= 1e-3 * t)
@@ -373,3 +387,28 @@ def test_an_analysis_in_threads_takes_slices_in_order_and_an_interrupt_cancels_t
         _in_threads(work, 40 * THREAD_SLICE, 1)
     release.set()
     assert len(started) < 40
+
+
+def test_a_push_still_settling_at_t_end_is_judged_at_a_longer_t_end_not_counted_fatal():
+    """The stance example (slowest time constant 0.6 s: v takes ~2.1 s to fall by 1e-3) with
+    its tilt bounded at 0.6 rad, pushed on the trunk: with t_end 1 s every run that will
+    recover is still settling at t_end; run longer, each direction's threshold is the one
+    t_end 5 s gives (a fall ends at the bound long before either), and the runs continued are
+    counted. Basin stability over the legs' tilt likewise: t_end 0.5 s gives t_end 5 s's
+    outcome for every draw."""
+    stance = str(ROOT / "configs/examples/stance_ankle_hip.yaml")
+    limits = "simulation.limits.theta=[0.6,0.6,3.2]"
+    directions = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+    found = {}
+    for t_end in (1.0, 5.0):
+        config = load_config(stance, [limits, f"simulation.t_end={t_end}", "simulation.n_samples=101"])
+        found[t_end] = push_analysis(config, "force", directions=directions, point=[0, 0, 0.2], body="trunk")
+    assert np.all(np.isfinite(found[5.0].threshold)) and np.all(found[5.0].threshold > 10.0)
+    np.testing.assert_allclose(found[1.0].threshold, found[5.0].threshold, rtol=2e-3)
+    assert found[1.0].continued > 0 and found[1.0].continued_to > 2.0 and found[5.0].continued == 0
+    draws = {}
+    for t_end in (0.5, 5.0):
+        config = load_config(stance, [limits, f"simulation.t_end={t_end}", "simulation.n_samples=51"])
+        draws[t_end] = basin_stability(config, ranges=["initial_state.legs.theta.0=-0.5:0.5"], draws=40, seed=3)
+    assert 0 < draws[5.0].recovered.sum() < 40
+    np.testing.assert_array_equal(draws[0.5].recovered, draws[5.0].recovered)

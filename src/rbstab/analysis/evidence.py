@@ -22,9 +22,9 @@ the run and why. The runs are
   sample or the run fails (gimbal lock, it left ``simulation.limits``, or the solver
   failed). A run still settling at t_end (never above c, not yet converged by the
   convergence rule) is no contradiction: it is run again to a longer t_end
-  (:data:`SETTLING_TIME_CONSTANTS` slowest time constants of the linearisation, at least
-  twice t_end; then twice that, at most :data:`SETTLING_CONTINUATIONS` times and to
-  :data:`SETTLING_LONGEST` times t_end) and counts only if the longer run contradicts c;
+  (:func:`rbstab.analysis.runs.longer_horizon`: 8 slowest time constants of the
+  linearisation, at least twice t_end; then twice that, at most 3 times and to 16 times
+  t_end) and counts only if the longer run contradicts c;
   one that has still not converged then is named in a note and not counted (one that has
   converged, too). An impulse disturbance is a jump of v, not a rate: the run is
   judged piece by piece between impulses, each piece from its first sample after the
@@ -39,31 +39,21 @@ the run and why. The runs are
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
 
 from ..convergence import ROUND_OFF, converged
 from .certificate import Certificate, as_model, checked, level_states
-from .runs import Runs
+from .runs import SETTLING_CONTINUATIONS, Runs, continued, longer_horizon
 
 __all__ = ["falsify", "falsify_with", "check_runs", "check_initial_run", "contradiction", "FALSIFICATION_RUNS",
-           "FALSIFICATION_ROUNDS", "SETTLING_TIME_CONSTANTS", "SETTLING_CONTINUATIONS", "SETTLING_LONGEST"]
+           "FALSIFICATION_ROUNDS"]
 
 #: Runs of the falsification pass from states on {v = c}.
 FALSIFICATION_RUNS = 32
 #: Levels the pass tries at most (each half the start of the run that did not recover).
 FALSIFICATION_ROUNDS = 6
-#: A run from inside {v <= c} still settling at t_end is run again to this many slowest time
-#: constants of the linearisation (v ~ exp(-2 t / tau): e^-16 of its start), at least twice t_end ...
-SETTLING_TIME_CONSTANTS = 8.0
-#: ... and, still settling, to twice that, at most this many times in all ...
-SETTLING_CONTINUATIONS = 3
-#: ... and never beyond this many times t_end.
-SETTLING_LONGEST = 16.0
-
-
 def _state_text(y: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in y) + ")"
 
@@ -191,23 +181,6 @@ def contradiction(time, lyapunov, ok: bool, message: str, sublevel: float, impul
     return None
 
 
-#: Most samples of a run continued past its t_end (the configured spacing kept up to this).
-_CONTINUED_SAMPLES = 200_001
-
-
-def _continued(config, t_end: float):
-    """``config`` (a RunConfig or ChainConfig) run to ``t_end`` [s]: its sample spacing and
-    its step limit per second kept (up to :data:`_CONTINUED_SAMPLES` samples and
-    :data:`rbstab.config.schema.MAX_STEPS_LIMIT` steps)."""
-    from ..config.schema import MAX_STEPS_LIMIT  # heavy: pydantic
-
-    sim = config.simulation
-    scale = t_end / float(sim.t_end)
-    samples = min(max(int(sim.n_samples), _CONTINUED_SAMPLES), math.ceil((int(sim.n_samples) - 1) * scale) + 1)
-    steps = min(MAX_STEPS_LIMIT, math.ceil(int(sim.max_steps) * scale))
-    return replace(config, simulation=replace(sim, t_end=float(t_end), n_samples=samples, max_steps=steps))
-
-
 def check_initial_run(certificate: Certificate, config, simulate, linearisation, *, ratio: float, first=None,
                       impulses=(), name: str = "the run from the configured initial state") -> Certificate:
     """``certificate`` checked against the run from ``config``'s initial state (module
@@ -252,12 +225,11 @@ def check_initial_run(certificate: Certificate, config, simulate, linearisation,
         pieces = [(rows[np.isfinite(v[rows])], after) for rows, after in _pieces(time, impulses)]
         starts = [(float(v[rows[0]]), after) for rows, after in pieces if rows.size]  # where each piece started
         settling = run.ok and not converged(True, v0, v[-1], ratio) and bool(starts) and starts[-1][0] <= c
-        longer = min(SETTLING_LONGEST * t_end, 2.0 * horizon if k else
-                     max(2.0 * t_end, SETTLING_TIME_CONSTANTS * tau if math.isfinite(tau) else 0.0))
+        longer = longer_horizon(t_end, horizon, k, tau)
         if not settling or k == SETTLING_CONTINUATIONS or longer <= horizon:
             break
         horizon = longer
-        run = simulate(_continued(config, horizon))
+        run = simulate(continued(config, horizon))
     out = checked(certificate, [v0], [True], lambda i: name)
     if settling:
         note = (f"{name} started inside {{v <= c}} at v = {starts[-1][0]:.4g} J"

@@ -54,7 +54,8 @@ __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes"
 PUSH_KINDS = {"force": "N s", "torque": "N m s"}
 #: When a pushed run recovers, as text.
 RECOVERY_RULE = (f"recovered = status == 'success' (t_end reached inside simulation.limits) and "
-                 f"|v(t_end)| <= ratio * dT + {ROUND_OFF:g} J, dT the kinetic energy the push gave the body at rest")
+                 f"|v(t_end)| <= ratio * dT + {ROUND_OFF:g} J, dT the kinetic energy the push gave the body at rest; "
+                 "a run still settling at t_end (v(t_end) <= dT) judged at a longer t_end")
 #: Default ladder rungs and relative tolerance of a threshold.
 DEFAULT_RUNGS = 16
 DEFAULT_TOL = 1e-3
@@ -232,6 +233,16 @@ class Pushes:
         self.runs = 0
         self.batches = 0
 
+    @property
+    def continued(self) -> int:
+        """Runs still settling at t_end that were run again to a longer t_end."""
+        return self._runs.continued
+
+    @property
+    def continued_to(self) -> float:
+        """The longest t_end [s] such runs were run to (0: none)."""
+        return self._runs.continued_to
+
     def _pushed_config(self, config, data: dict):
         """The configuration ``data`` (the pushed one, resolved) validated, its warnings
         already shown with ``config``; a ValueError naming what is wrong."""
@@ -262,13 +273,15 @@ class Pushes:
         if k == 0:
             return np.zeros(0, dtype=bool)
         energy = self.energy(vectors) if energy is None else np.asarray(energy, dtype=float)
-        ok, _, v = self._runs.outcomes(np.repeat(self._runs.initial_state[None], k, axis=0),
-                                       (self._member, self.index, vectors))
-        ok = ok == 1
+
+        def rule(ok, v0, v, rows):
+            with np.errstate(invalid="ignore"):
+                return (ok == 1) & np.isfinite(v) & (np.abs(v) <= self.ratio * energy[rows] + ROUND_OFF)
+
         self.runs += k
         self.batches += 1
-        with np.errstate(invalid="ignore"):
-            return ok & np.isfinite(v) & (np.abs(v) <= self.ratio * energy + ROUND_OFF)
+        return self._runs.recoveries(np.repeat(self._runs.initial_state[None], k, axis=0), rule, energy,
+                                     (self._member, self.index, vectors), self.ratio)[0]
 
 
 def _body_rest(config, compiled) -> tuple[np.ndarray, dict]:
@@ -455,6 +468,10 @@ class PushAnalysis:
         Wall time [s].
     body : str or None
         A chain's body pushed (``point`` and a torque in its frame); None for one body.
+    continued : int
+        Runs still settling at t_end run again to a longer t_end (:meth:`Runs.recoveries`).
+    continued_to : float
+        The longest t_end [s] they were run to (0: none).
     """
 
     name: str
@@ -476,6 +493,8 @@ class PushAnalysis:
     seconds: float = 0.0
     refined_unit_energy: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
     body: str | None = None
+    continued: int = 0
+    continued_to: float = 0.0
 
     def fatal_starts(self) -> tuple[np.ndarray, Callable[[int], str]]:
         """(v [J] just after the smallest fatal push of each direction, the grid's then the
@@ -566,6 +585,7 @@ class PushAnalysis:
             "minimum": {"threshold": num(self.minimum), "direction": self.minimum_direction.tolist(),
                         "before_refinement": num(self.grid_minimum), "lowered_by": self.refinement_gain},
             "runs": self.runs,
+            "continued": {"runs": self.continued, "to": self.continued_to},
             "engine": self.engine,
         }
 
@@ -638,7 +658,8 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
                         refined_directions=refined_u, refined_thresholds=refined_t,
                         refined_unit_energy=pushes.energy(refined_u) if len(refined_u) else np.zeros(0),
                         engine=pushes.engine, runs=pushes.runs, batches=pushes.batches,
-                        seconds=_time.perf_counter() - start, body=pushes.body)
+                        seconds=_time.perf_counter() - start, body=pushes.body,
+                        continued=pushes.continued, continued_to=pushes.continued_to)
 
 
 def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float, rungs: int,
@@ -677,7 +698,8 @@ def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float,
 # -- basin stability ---------------------------------------------------------------------------
 
 #: The recovery rule of drawn initial states: the sweeps' convergence rule.
-STATE_RULE = "recovered = converged by the sweeps' rule (docs/sweeps.md), inside simulation.limits"
+STATE_RULE = ("recovered = converged by the sweeps' rule (docs/sweeps.md), inside simulation.limits; a run still "
+              "settling at t_end (v(t_end) <= v(0)) judged at a longer t_end")
 
 
 @dataclass
@@ -867,8 +889,8 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
         high = np.array([hi for _, _, hi in axes])
         values = rng.uniform(low, high, size=(int(draws), len(axes)))
         runs = Runs(config, engine=engine, executor=executor, jobs=jobs)
-        ok, start_v, end_v = runs.outcomes(_drawn_states(config, runs, axes, values))
-        recovered = np.asarray(converged(ok == 1, start_v, end_v, ratio), dtype=bool)
+        recovered, start_v = runs.recoveries(_drawn_states(config, runs, axes, values),
+                                             lambda ok, v0, v1, rows: converged(ok == 1, v0, v1, ratio), ratio=ratio)
         keys = [a.key for a, _, _ in axes]
         units = [a.units for a, _, _ in axes]
         perturbation, rule, engine = "initial_state", STATE_RULE, runs.engine

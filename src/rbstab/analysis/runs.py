@@ -15,21 +15,58 @@ sign law's event-driven integrator).
 
 from __future__ import annotations
 
+import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 
 import numpy as np
 
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
 from ..engine.registry import get_engine
 from ..layout import is_chain
+from .linearise import linearise_config
 
-__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE"]
+__all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE",
+           "continued", "longer_horizon", "SETTLING_TIME_CONSTANTS", "SETTLING_CONTINUATIONS", "SETTLING_LONGEST"]
 
 #: Fewest runs of a batch slice sent to a worker.
 MIN_SLICE = 64
 #: Most runs of a batch slice a thread takes: an interrupt (Ctrl-C) waits for the slices
 #: running, not for the whole batch.
 THREAD_SLICE = 256
+#: A run still settling at t_end (not yet recovered, never above its start) is run again to
+#: this many slowest time constants of the linearisation (v ~ exp(-2 t / tau): e^-16 of its
+#: start), at least twice t_end ...
+SETTLING_TIME_CONSTANTS = 8.0
+#: ... and, still settling, to twice that, at most this many times in all ...
+SETTLING_CONTINUATIONS = 3
+#: ... and never beyond this many times t_end.
+SETTLING_LONGEST = 16.0
+#: Most samples of a run continued past its t_end (the configured spacing kept up to this).
+_CONTINUED_SAMPLES = 200_001
+
+
+def longer_horizon(t_end: float, horizon: float, k: int, tau: float,
+                   time_constants: float = SETTLING_TIME_CONSTANTS) -> float:
+    """The t_end [s] of the k-th continuation (k = 0, 1, ...) of a run of ``t_end`` still
+    settling at ``horizon``: ``time_constants`` x ``tau`` (the slowest time constant [s];
+    NaN: unknown) and at least 2 t_end first, then twice ``horizon``, never beyond
+    SETTLING_LONGEST x t_end."""
+    first = max(2.0 * t_end, time_constants * tau if math.isfinite(tau) else 0.0)
+    return min(SETTLING_LONGEST * t_end, 2.0 * horizon if k else first)
+
+
+def continued(config, t_end: float):
+    """``config`` (a RunConfig or ChainConfig) run to ``t_end`` [s]: its sample spacing and
+    its step limit per second kept (up to :data:`_CONTINUED_SAMPLES` samples and
+    :data:`rbstab.config.schema.MAX_STEPS_LIMIT` steps)."""
+    from ..config.schema import MAX_STEPS_LIMIT  # heavy: pydantic
+
+    sim = config.simulation
+    scale = t_end / float(sim.t_end)
+    samples = min(max(int(sim.n_samples), _CONTINUED_SAMPLES), math.ceil((int(sim.n_samples) - 1) * scale) + 1)
+    steps = min(MAX_STEPS_LIMIT, math.ceil(int(sim.max_steps) * scale))
+    return replace(config, simulation=replace(sim, t_end=float(t_end), n_samples=samples, max_steps=steps))
 
 
 def batch_outcomes(batch, engine: str) -> np.ndarray:
@@ -146,6 +183,7 @@ class Runs:
         # one GPU takes a batch in one process, from one thread
         self.config, self.engine, self.executor = config, engine, executor
         self.jobs = 1 if get_engine(engine).gpu else max(1, int(jobs))
+        self.continued, self.continued_to = 0, 0.0  # runs :meth:`recoveries` continued, and how far [s]
         self.base = batch_of([config])
         self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
         self.tree = config.chain if is_chain(config) else None
@@ -181,6 +219,56 @@ class Runs:
             body, entry, values = disturbance
             batch.params["disturbance_value"][:, body, entry] = values
         return integrate_batch(batch, self.engine, self.executor, self.jobs)
+
+    def recoveries(self, states: np.ndarray, rule, start: np.ndarray | None = None,
+                   disturbance: tuple | None = None, ratio: float = DEFAULT_LYAPUNOV_RATIO
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """(whether each run from ``states`` (k, n_state) recovers, v at its start [J]), each
+        shape (k,): ``rule(ok, v0, v1, rows)`` of its :meth:`outcomes` (``rows`` the runs'
+        indices into ``states``; a bool array), a run still settling at t_end judged at a
+        longer t_end. Still settling: it reached t_end, did not recover by ``rule`` and ended
+        with v between 0 and ``start`` (k,) [J], its v just after the perturbation (default:
+        v at its start). Such runs are run again to
+        :func:`longer_horizon`, at most :data:`SETTLING_CONTINUATIONS` times: first to 1.5 times
+        the time the slowest mode takes to bring v down by ``ratio`` (v ~ exp(-2 t / tau),
+        tau the linearisation's slowest time constant, found when first needed): t_end bounds
+        what a run can show of convergence, not whether it recovers. ``disturbance`` as
+        :meth:`outcomes` takes it."""
+        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        ok, v0, v1 = self.outcomes(states, disturbance)
+        first = v0
+        start = v0 if start is None else np.asarray(start, dtype=float)
+        rows = np.arange(len(states))
+        recovered = np.asarray(rule(ok, v0, v1, rows), dtype=bool).copy()
+        t_end = horizon = float(self.config.simulation.t_end)
+        tau = None
+        for k in range(SETTLING_CONTINUATIONS):
+            slack = ROUND_OFF * np.maximum(np.abs(start[rows]), 1.0)
+            with np.errstate(invalid="ignore"):  # on its way down to v = 0: v in [0, its start]
+                settling = (ok == 1) & np.isfinite(v1) & ~recovered[rows] & (v1 >= -slack) & (v1 <= start[rows] + slack)
+            rows = rows[settling]
+            if not len(rows):
+                break
+            tau = self._slowest_time_constant() if tau is None else tau
+            longer = longer_horizon(t_end, horizon, k, tau, 1.5 * math.log(1.0 / ratio) / 2.0)
+            if longer <= horizon:
+                break
+            horizon = longer
+            runs = Runs(continued(self.config, horizon), engine=self.engine, executor=self.executor, jobs=self.jobs)
+            self.continued += len(rows) if k == 0 else 0
+            self.continued_to = max(self.continued_to, horizon)
+            values = None if disturbance is None else (*disturbance[:2], np.asarray(disturbance[2])[rows])
+            ok, v0, v1 = runs.outcomes(states[rows], values)
+            recovered[rows] = rule(ok, v0, v1, rows)
+        return recovered, first
+
+    def _slowest_time_constant(self) -> float:
+        """The slowest time constant [s] of the configuration's linearisation at rest
+        (:func:`rbstab.analysis.linearise.linearise_config`), NaN where it has none."""
+        try:
+            return float(linearise_config(self.config).slowest_time_constant)
+        except ValueError:
+            return math.nan
 
     def states(self, axes, values: np.ndarray) -> np.ndarray:
         """The initial states (N, n_state) with the entries of ``axes``
