@@ -10,6 +10,7 @@ A plain-data module at the bottom of the layers (no compiled code, no rbstab imp
   the kernels' output offsets (:mod:`rbstab.variants.kernels`) are derived from it;
 - :data:`SUMMARY_FIGURES`: the summary figures of a run (:mod:`rbstab.summary`), the same
   way;
+- :func:`is_chain`: whether a configuration is in a chain's spelling (its keys' layout);
 - :class:`StateLayout`: where each state block lives in ``y`` (``split``, ``join``: blocks
   along the last axis); :data:`VARIANT_LAYOUTS`: each controller variant's layout and,
   by its order, the variant's code in the compiled kernels (:data:`VARIANT_CODES`).

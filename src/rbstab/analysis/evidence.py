@@ -54,6 +54,8 @@ __all__ = ["falsify", "falsify_with", "check_runs", "check_initial_run", "contra
 FALSIFICATION_RUNS = 32
 #: Levels the pass tries at most (each half the start of the run that did not recover).
 FALSIFICATION_ROUNDS = 6
+
+
 def _state_text(y: np.ndarray) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in y) + ")"
 

@@ -55,7 +55,7 @@ PUSH_KINDS = {"force": "N s", "torque": "N m s"}
 #: When a pushed run recovers, as text.
 RECOVERY_RULE = (f"recovered = status == 'success' (t_end reached inside simulation.limits) and "
                  f"|v(t_end)| <= ratio * dT + {ROUND_OFF:g} J, dT the kinetic energy the push gave the body at rest; "
-                 "a run still settling at t_end (v(t_end) <= dT) judged at a longer t_end")
+                 "a run still settling at t_end (0 <= v(t_end) <= dT) judged at a longer t_end")
 #: Default ladder rungs and relative tolerance of a threshold.
 DEFAULT_RUNGS = 16
 DEFAULT_TOL = 1e-3
@@ -236,7 +236,7 @@ class Pushes:
     @property
     def continued(self) -> int:
         """Runs still settling at t_end that were run again to a longer t_end."""
-        return self._runs.continued
+        return self._runs.continued_runs
 
     @property
     def continued_to(self) -> float:
@@ -699,7 +699,7 @@ def _refine(pushes: Pushes, u: np.ndarray, threshold: np.ndarray, *, tol: float,
 
 #: The recovery rule of drawn initial states: the sweeps' convergence rule.
 STATE_RULE = ("recovered = converged by the sweeps' rule (docs/sweeps.md), inside simulation.limits; a run still "
-              "settling at t_end (v(t_end) <= v(0)) judged at a longer t_end")
+              "settling at t_end (0 <= v(t_end) <= v(0)) judged at a longer t_end")
 
 
 @dataclass

@@ -183,7 +183,9 @@ class Runs:
         # one GPU takes a batch in one process, from one thread
         self.config, self.engine, self.executor = config, engine, executor
         self.jobs = 1 if get_engine(engine).gpu else max(1, int(jobs))
-        self.continued, self.continued_to = 0, 0.0  # runs :meth:`recoveries` continued, and how far [s]
+        self.continued_runs, self.continued_to = 0, 0.0  # runs :meth:`recoveries` continued, and how far [s]
+        self._tau: float | None = None  # the slowest time constant [s], once a run needs it
+        self._longer: dict[float, Runs] = {}  # the runs of each longer t_end, built once
         self.base = batch_of([config])
         self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
         self.tree = config.chain if is_chain(config) else None
@@ -241,7 +243,6 @@ class Runs:
         rows = np.arange(len(states))
         recovered = np.asarray(rule(ok, v0, v1, rows), dtype=bool).copy()
         t_end = horizon = float(self.config.simulation.t_end)
-        tau = None
         for k in range(SETTLING_CONTINUATIONS):
             slack = ROUND_OFF * np.maximum(np.abs(start[rows]), 1.0)
             with np.errstate(invalid="ignore"):  # on its way down to v = 0: v in [0, its start]
@@ -249,13 +250,17 @@ class Runs:
             rows = rows[settling]
             if not len(rows):
                 break
-            tau = self._slowest_time_constant() if tau is None else tau
-            longer = longer_horizon(t_end, horizon, k, tau, 1.5 * math.log(1.0 / ratio) / 2.0)
+            if self._tau is None:
+                self._tau = self._slowest_time_constant()
+            longer = longer_horizon(t_end, horizon, k, self._tau, 1.5 * math.log(1.0 / ratio) / 2.0)
             if longer <= horizon:
                 break
             horizon = longer
-            runs = Runs(continued(self.config, horizon), engine=self.engine, executor=self.executor, jobs=self.jobs)
-            self.continued += len(rows) if k == 0 else 0
+            if horizon not in self._longer:
+                self._longer[horizon] = Runs(continued(self.config, horizon), engine=self.engine,
+                                             executor=self.executor, jobs=self.jobs)
+            runs = self._longer[horizon]
+            self.continued_runs += len(rows) if k == 0 else 0
             self.continued_to = max(self.continued_to, horizon)
             values = None if disturbance is None else (*disturbance[:2], np.asarray(disturbance[2])[rows])
             ok, v0, v1 = runs.outcomes(states[rows], values)

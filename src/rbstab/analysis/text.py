@@ -193,8 +193,8 @@ def push_lines(analysis) -> list[str]:
     lines = [f"  smallest fatal {p.kind} push{where}, t0 = {_g(p.at)} s, over {len(t)} directions ({frame}; "
              f"relative tolerance {_g(p.tol)}; {p.runs} runs on {p.engine}):"]
     if p.continued:
-        lines.append(f"    {p.continued} runs still settling at t_end (v below dT, not yet converged) were run again "
-                     f"to at most {_g(p.continued_to)} s (from the slowest time constant) and judged there")
+        lines.append(f"    {p.continued} runs still settling at t_end (v between 0 and dT, not yet converged) were run "
+                     f"again to at most {_g(p.continued_to)} s and judged there")
     if not finite.any():
         lines.append(f"    none: every push up to the ladders' top recovered ({_g(np.max(p.thresholds.ladder))} {p.units})")
         return lines

@@ -60,12 +60,12 @@ from pydantic import BaseModel, ValidationError
 
 from ..chain import GROUND, Body, Chain, Joint, single
 from ..kinematics import rotation_matrix
+from ..layout import is_chain
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS, Variant
 from ..variants.base import limited_values
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies, unheld_weight
-from ..layout import is_chain
 from .paths import apply_overrides, plain_tree
 from .schema import (
     BODY_GAINS,
