@@ -68,20 +68,20 @@ def _report(config, path: Path, mode: str) -> dict:
     """Print the run's line (or JSON object) from its file's attributes; return them."""
     import numpy as np  # heavy
 
-    from rbstab.diagnostics import convergence_word  # heavy: numpy
+    from rbstab.diagnostics import CONVERGED, outcome  # heavy: numpy
     from rbstab.io.hdf5 import read_attributes  # heavy: numpy
 
     console = get_console()
     attrs = read_attributes(path, verify=False)
     s = {k[len("summary_"):]: v for k, v in attrs.items() if k.startswith("summary_")}
-    settled = convergence_word(attrs["status"], s["lyapunov_initial"], s["lyapunov_final"],
-                               message=attrs["message"])
+    settled = outcome(attrs["status"], attrs["message"], s["lyapunov_initial"], s["lyapunov_final"],
+                      s.get("max_lyapunov_increase"), disturbed=_disturbed(config.resolved))
     check = rate_check_text(s, path)
     variant = attrs["variant"]
     chain = variant == "chain"  # a tree's file (of any number of bodies) names its joints
     if console.json:
         console.emit({"name": config.name, "path": str(path), "variant": variant, "status": attrs["status"],
-                      "converged": settled == "converged", "message": attrs["message"],
+                      "converged": settled == "converged", "outcome": settled, "message": attrs["message"],
                       "wall_time": attrs["wall_time"], "config_hash": attrs["config_hash"],
                       "replaced": _REPLACED[mode], "summary": s,
                       "rate_check_reason": check[len("fail ("):-1] if check.startswith("fail (") else None})
@@ -94,7 +94,29 @@ def _report(config, path: Path, mode: str) -> dict:
     )
     console.detail("  solver " + ", ".join(f"{k[len('solver_'):]} {v}" for k, v in attrs.items()
                                           if k.startswith("solver_") and k != "solver_message"))
+    if attrs["status"] == "success" and settled != CONVERGED:
+        _why_not_converged(config, s)
     return attrs
+
+
+def _why_not_converged(config, summary: dict) -> None:
+    """What a run that reached t_end without converging may hide: v ended above v(0) with
+    nothing feeding it energy, and a body under gravity without an admissible region (W009)."""
+    from rbstab.diagnostics import risen_without_disturbance, unbounded_fall_note  # heavy: numpy
+
+    console = get_console()
+    if not _disturbed(config.resolved):
+        risen = risen_without_disturbance(summary["lyapunov_initial"], summary["lyapunov_final"])
+        if risen:
+            click.echo(f"  {config.name}: {risen}", err=True)
+    note = unbounded_fall_note(config)
+    if note is not None:
+        console.warn(note, config.name)
+
+
+def _disturbed(resolved) -> bool:
+    """Whether a resolved configuration (a mapping) has disturbances."""
+    return bool(resolved.get("disturbances"))
 
 
 def _bodies(n: int) -> str:
@@ -134,10 +156,11 @@ def _load_kernels(loaded) -> None:
 def run(configs, output, overrides, method, overwrite, as_json) -> None:
     """Run CONFIG... and write OUTPUT/<name>.h5 for each.
 
-    Each line says the solver's status (success: t_end reached) and whether the run
-    converged (v(t_end) <= 0.001 v(0), the rule of sweeps) or was "not converged by
-    t_end" (still moving: a longer t_end, other gains). With --json: one object per config
-    ("name", "path", "status", "converged", "message", "summary", "rate_check_reason",
+    Each line says the solver's status (success: t_end reached) and the run's outcome:
+    converged (v(t_end) <= 0.001 of the energy it had to lose, the rule of sweeps), still
+    settling (a longer t_end, other gains), moving away (v(t_end) < 0), fell or could not be
+    computed (README, "What a run prints"). With --json: one object per config ("name",
+    "path", "status", "converged", "outcome", "message", "summary", "rate_check_reason",
     "replaced": null, "identical" or "other").
 
     Every config is validated, and the output folder checked, before the first one runs.

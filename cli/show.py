@@ -30,15 +30,15 @@ _METRICS = ("lyapunov_final", "max_abs_constraint_error", "max_lyapunov_rate", "
 
 
 def _run_lines(rows, ratio: float | None = None) -> None:
-    """One line per run: id, status, converged (with the sweep's ``ratio``), v(0) -> v(t_end),
-    max dv/dt, max |E_i|, rate check."""
+    """One line per run: id, status, outcome (:func:`rbstab.diagnostics.outcome`, with the
+    sweep's ``ratio``), v(0) -> v(t_end), max dv/dt, max |E_i|, rate check."""
     from rbstab.convergence import DEFAULT_LYAPUNOV_RATIO  # heavy: numpy
 
     ratio = DEFAULT_LYAPUNOV_RATIO if ratio is None else ratio
     out = get_console().out
-    from rbstab.diagnostics import convergence_word  # heavy: numpy
+    from rbstab.diagnostics import outcome  # heavy: numpy
 
-    out(f"  {'run':<20} {'status':<8} {'converged':<9} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
+    out(f"  {'run':<20} {'status':<8} {'outcome':<21} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
         f"{'max|E| [m]':>11}  rate check")
     for r in rows:
         v = f"{_fmt(r.get('lyapunov_initial', ''))} -> {_fmt(r.get('lyapunov_final', ''))}"
@@ -48,9 +48,9 @@ def _run_lines(rows, ratio: float | None = None) -> None:
         switchings = [r.get(f"switching_count_{a}") for a in "xyz"]  # the pure sign law of sliding
         located = (f"  {int(sum(switchings))} switchings"
                    if all(isinstance(x, (int, float)) and x == x for x in switchings) else "")
-        settled = "yes" if convergence_word(r["status"], r.get("lyapunov_initial"), r.get("lyapunov_final"),
-                                            ratio) == "converged" else "no"
-        out(f"  {r['run_id']:<20} {r['status']:<8} {settled:<9} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
+        ended = r.get("outcome") or outcome(r["status"], r.get("message"), r.get("lyapunov_initial"),
+                                            r.get("lyapunov_final"), r.get("max_lyapunov_increase"), ratio)
+        out(f"  {r['run_id']:<20} {r['status']:<8} {ended:<21} {v:<24} {_fmt(r.get('max_lyapunov_rate', '')):>14} "
             f"{e:>11}  {r.get('lyapunov_rate_check', '')}{located}")
         if r["status"] != "success":
             out(f"    {r.get('message', '')}")
@@ -90,6 +90,7 @@ def _parameter_values(index, column: str) -> dict:
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
     from rbstab.sweep.folder import read_index, read_parameters, read_spec  # heavy: numpy
+    from rbstab.diagnostics import OUTCOMES, outcomes  # heavy: numba, numpy
     from rbstab.engine.status import fell_mask  # heavy: numba, numpy (rbstab.engine)
 
     index = read_index(path)  # checksum verified
@@ -99,10 +100,21 @@ def sweep_overview(path: str) -> dict:
     converged = int(index["converged"].astype(str).eq("True").sum()) if "converged" in index else 0
     counts = {s: int(n) for s, n in index["status"].value_counts().items()}
     n_fell = int(fell_mask(index["status"], index["message"]).sum()) if "message" in index else 0
+    ratio = (spec.get("convergence") or {}).get("lyapunov_ratio")
+    if "outcome" in index:
+        ended = index["outcome"].astype(str).to_numpy()
+    else:  # an index written before the outcome column
+        def column(name):
+            return index[name].to_numpy() if name in index else [None] * len(index)
+
+        ended = outcomes(index["status"].astype(str).to_numpy(), column("message"), column("lyapunov_initial"),
+                         column("lyapunov_final"), column("max_lyapunov_increase"),
+                         *([float(ratio)] if ratio is not None else []))
     return {
         "path": path, "kind": "sweep", "name": spec.get("name", Path(path).name), "n_runs": len(index),
-        "status": counts, "n_fell": n_fell, "n_converged": converged,
-        "lyapunov_ratio": (spec.get("convergence") or {}).get("lyapunov_ratio"),
+        "status": counts, "outcomes": {w: int((ended == w).sum()) for w in OUTCOMES if (ended == w).any()},
+        "n_fell": n_fell, "n_converged": converged,
+        "lyapunov_ratio": ratio,
         "parameters": {column: {"key": key, **_parameter_values(index, column)}
                        for column, key in read_parameters(path, index).items() if column in index},
         "metrics": {m: s for m in _METRICS if (s := _spread(index, m)) is not None},
@@ -123,10 +135,9 @@ def _show_sweep(path: str) -> None:
         console.emit(info)
     n = info["n_runs"]
     console.out(f"{path}")
-    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{v} {k}" for k, v in info["status"].items())
-                + (f" ({info['n_fell']} of them fell)" if info["n_fell"] else ""))
+    console.out(f"  sweep      {info['name']}: {n} runs, " + ", ".join(f"{v} {k}" for k, v in info["outcomes"].items()))
     console.out(f"  converged  {info['n_converged']} of {n} ({100.0 * info['n_converged'] / max(n, 1):.1f}%; "
-                f"v(t_end) <= {info['lyapunov_ratio']} v(0))")
+                f"v(t_end) <= {info['lyapunov_ratio']} of the energy to lose)")
     for column, p in info["parameters"].items():
         shown = (", ".join(_fmt(v) for v in p["values"]) + (" ..." if p["n_values"] > len(p["values"]) else "")
                  if "values" in p else f"{_fmt(p['min'])} .. {_fmt(p['max'])}")
@@ -147,18 +158,19 @@ def _show_result(path: str) -> None:
     """A run's result file: identity, status, solver statistics, summary figures."""
     from rbstab.io.hdf5 import read_summary  # heavy: numpy
 
-    from rbstab.diagnostics import convergence_word  # heavy: numpy
+    from rbstab.diagnostics import outcome  # heavy: numpy
 
     from .run import rate_check_text  # heavy: rbstab.api
 
     console = get_console()
     info = read_summary(path)  # every checksum verified
     summary = info["summary"]
-    settled = convergence_word(info["status"], summary.get("lyapunov_initial"), summary.get("lyapunov_final"),
-                               message=info.get("message"))
+    settled = outcome(info["status"], info.get("message"), summary.get("lyapunov_initial"),
+                      summary.get("lyapunov_final"), summary.get("max_lyapunov_increase"),
+                      disturbed=_file_disturbed(path))
     check = rate_check_text(summary, Path(path))
     if console.json:
-        console.emit({"path": path, "kind": "run", **info, "converged": settled == "converged",
+        console.emit({"path": path, "kind": "run", **info, "converged": settled == "converged", "outcome": settled,
                       "rate_check_reason": check[len("fail ("):-1] if check.startswith("fail (") else None})
     console.out(f"{path}")
     console.out(f"  name       {info['name']}  (variant {info['variant']})")
@@ -178,6 +190,20 @@ def _show_result(path: str) -> None:
     width = max([32, *(len(key) for key in summary)])
     for key, value in summary.items():
         console.out(f"  {key:<{width}} {check if key == 'lyapunov_rate_check' else _fmt(value, names.get(key))}")
+
+
+def _file_disturbed(path: str) -> bool | None:
+    """Whether a result file's configuration has disturbances (None: not readable)."""
+    import h5py  # heavy
+    import yaml  # heavy
+
+    try:
+        with h5py.File(path, "r") as f:
+            text = f.attrs.get("config", "")
+        text = text.decode() if isinstance(text, bytes) else text
+        return bool((yaml.safe_load(text) or {}).get("disturbances"))
+    except (OSError, yaml.YAMLError, AttributeError):
+        return None
 
 
 def _expand(path: str) -> list[str]:
@@ -213,9 +239,13 @@ def _show(path: str) -> None:
 
 
 def _show_run(path: str, run_id: str) -> None:
-    """The resolved configuration of one run of a sweep folder, rebuilt from its result."""
+    """One run of a sweep folder: its status, outcome and summary figures (its index row) as
+    YAML comments, then its resolved configuration rebuilt from its result, so that the
+    output is a config file for ``rbstab run``."""
     from rbstab.config import dump_yaml  # heavy: numpy, pydantic
-    from rbstab.sweep.folder import is_sweep_folder, resolved_config  # heavy: numpy, pydantic
+    from rbstab.diagnostics import outcome  # heavy: numpy
+    from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES  # heavy: numpy
+    from rbstab.sweep.folder import is_sweep_folder, read_index, resolved_config  # heavy: numpy, pydantic
 
     if not is_sweep_folder(path):
         raise ValueError(f"{path}: --run needs a sweep folder (sweep.yaml and index.arrow or index.csv)")
@@ -223,17 +253,34 @@ def _show_run(path: str, run_id: str) -> None:
         config = resolved_config(path, run_id)
     except KeyError as exc:
         raise ValueError(exc.args[0]) from None
+    index = read_index(path)
+    rows = index[index["run_id"].astype(str) == run_id].to_dict("records")
+    row = {k: v for k, v in rows[0].items() if not (isinstance(v, float) and v != v)} if rows else {}
+    ended = row.get("outcome") or outcome(row.get("status", "pending"), row.get("message"),
+                                          row.get("lyapunov_initial"), row.get("lyapunov_final"),
+                                          row.get("max_lyapunov_increase"))
     console = get_console()
     if console.json:
-        console.emit({"path": path, "kind": "config", "run_id": run_id, "config": config})
+        console.emit({"path": path, "kind": "config", "run_id": run_id, "status": row.get("status"),
+                      "outcome": ended, "message": row.get("message"),
+                      "summary": {k: v for k, v in row.items() if isinstance(v, (int, float)) and k != "run"},
+                      "config": config})
     console.out(f"# {path}: run {run_id} (rbstab run of this file repeats it)")
+    console.out(f"# status   {row.get('status', 'pending')}, {ended}" +
+                (f": {row['message']}" if row.get("status", "success") != "success" and row.get("message") else ""))
+    units = {**{k: u for k, (u, _) in SUMMARY_FIGURES.items()}, **{k: u for k, (u, _) in PER_RUN.items()}}
+    for key, value in row.items():
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and key not in ("run", "file_row"):
+            unit = next((u for name, u in units.items() if key == name or key.startswith(name + "_")), "")
+            console.out(f"#   {key:<40} {_fmt(value)}" + (f" [{unit}]" if unit and unit != "1" else ""))
     console.out(dump_yaml(config).rstrip())
 
 
 @click.command("show")
 @click.argument("files", nargs=-1, required=True, type=click.Path())
 @click.option("--run", "run_id", metavar="ID", default=None,
-              help="With a sweep folder: print the resolved configuration of run ID (rebuilt from its result).")
+              help="With a sweep folder: print run ID's status, outcome and summary figures, then its resolved "
+                   "configuration (rebuilt from its result) as YAML.")
 @json_option
 @console_options
 def show(files, run_id, as_json) -> None:
@@ -243,7 +290,8 @@ def show(files, run_id, as_json) -> None:
     fraction, the varied parameters, the spread of the main figures and its first runs
     (-v: all). A folder of sweeps or of result files (e.g. results/) shows each of them.
     With --json: one object per file or sweep ("kind": run, store, sweep or error).
-    --run ID prints a sweep run's configuration as YAML (a config file for rbstab run).
+    --run ID prints a sweep run's status, outcome and summary figures as comments, then its
+    configuration as YAML (a config file for rbstab run).
     """
     console = get_console()
     bad = shown = 0

@@ -321,25 +321,30 @@ def _execute(spec, output, ex, *, path, **options):
         raise spec_error(path, exc.errors)
 
 
+def _ended(status: str, message) -> str:
+    """The outcome of a run that did not reach t_end, in the words of ``rbstab run``."""
+    from rbstab.diagnostics import outcome  # heavy: numpy
+
+    return outcome(status, message if isinstance(message, str) else None, None, None)
+
+
 def _say_outcome(outcome) -> None:
     """The sweep's warnings, counts, files and problems."""
 
     console = get_console()
     for line in outcome.warnings:
         console.warn(line)
-    c = outcome.counts
     pct = 100.0 * outcome.n_converged / outcome.n_runs if outcome.n_runs else 0.0
+    ended = ", ".join(f"{count} {word}" for word, count in outcome.outcomes.items() if count)
     console.out(
         f"{outcome.name}: {outcome.n_runs} runs ({outcome.n_skipped} skipped, {outcome.n_executed} run now): "
-        f"{c.get('success', 0)} success, {outcome.n_fell} fell, {c.get('failed', 0) - outcome.n_fell} failed, "
-        f"{c.get('error', 0)} error, "
-        f"{c.get('pending', 0)} pending; converged {outcome.n_converged} ({pct:.1f}%)"
+        f"{ended or 'none'} ({pct:.1f}% converged)"
     )
     console.out(f"  index   {outcome.index_path}")
     console.out(f"  summary {outcome.summary_path}")
     shown = len(outcome.problems) if console.verbosity >= 1 else 20
     for run_id, status, message in outcome.problems[:shown]:
-        click.echo(f"  {run_id}: {status}: {message}", err=True)
+        click.echo(f"  {run_id}: {_ended(status, message)}: {message}", err=True)
     if len(outcome.problems) > shown:
         click.echo(f"  ... and {len(outcome.problems) - shown} more (-v lists them; see the index)", err=True)
     if outcome.tracebacks:

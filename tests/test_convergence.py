@@ -70,8 +70,11 @@ def test_the_rule_as_text_is_the_rule_of_the_code(tmp_path):
     from rbstab.convergence import RULE, SAMPLE_RULE
     from rbstab.sweep.folder import summarize_columns
 
-    assert "|lyapunov_final| <= lyapunov_ratio * |lyapunov_initial| + 1e-12 J" in RULE and f"{ROUND_OFF:g}" in RULE
-    assert SAMPLE_RULE == "|v| <= ratio |v(0)| + 1e-12 J"
+    assert ("|lyapunov_final| <= lyapunov_ratio * max(|lyapunov_initial|, lyapunov_initial + max_lyapunov_increase)"
+            " + 1e-12 J") in RULE and f"{ROUND_OFF:g}" in RULE
+    assert SAMPLE_RULE.startswith("|v| <= ratio v_ref + 1e-12 J, v_ref = max(|v(0)|, v(0) + the largest rise")
+    # the text's reference is the code's: v(0) plus the largest rise
+    assert converged(True, 1.0, 0.0015, 1e-3, 1.0) and not converged(True, 1.0, 0.0015, 1e-3, 0.0)
     index = pd.DataFrame({"run_id": ["r0"], "base": ["b"], "status": ["success"], "converged": [True],
                           "wall_time": [0.1]})
     assert summarize_columns(index, name="s", ratio=1e-3)["convergence"]["definition"] == RULE

@@ -32,12 +32,13 @@ def invoke(*args):
 def test_run_and_show_say_whether_the_run_converged(tmp_path):
     moving = invoke("run", CASE2, "-o", tmp_path, *SHORT, "--no-warn", "W001", "--json")
     assert moving.exit_code == 0, moving.output
-    assert "case2_visco_elastic: success, not converged by t_end" in moving.stderr
+    assert "case2_visco_elastic: success, still settling (" in moving.stderr
     assert json.loads(moving.stdout)["converged"] is False
+    assert json.loads(moving.stdout)["outcome"] == "still settling"
     settled = invoke("run", CASE2, "-o", tmp_path, "--set", "name=long", "--no-warn", "W001")
     assert "long: success, converged (" in settled.stdout
     shown = invoke("show", tmp_path / "case2_visco_elastic.h5")
-    assert "status     success, not converged by t_end:" in shown.stdout
+    assert "status     success, still settling:" in shown.stdout
 
 
 def test_robustness_speaks_of_converged_by_t_end_and_suggests_a_longer_t_end(tmp_path):
@@ -357,7 +358,7 @@ def test_the_report_says_converged_beside_the_status(tmp_path):
     assert invoke("report", tmp_path / "case2_visco_elastic.h5", "-o", tmp_path / "r", "--format", "md",
                   "--no-animations", "-q").exit_code == 0
     page = (tmp_path / "r" / "index.md").read_text()
-    assert "| status | converged |" in page and "| success | not converged by t_end |" in page
+    assert "| status | outcome |" in page and "| success | still settling |" in page
 
 
 def test_analyze_does_not_replace_the_analysis_of_another_configuration(tmp_path):

@@ -1,11 +1,12 @@
-"""What a run's figures mean, in words: converged or not, why a rate check failed, round-off.
+"""What a run's figures mean, in words: its outcome, why a rate check failed, round-off.
 
-The lines ``rbstab run``, ``rbstab show`` and the report print beside a run's figures:
+The words ``rbstab run``, ``rbstab show``, a sweep's line and index and the report give a
+run, one vocabulary (:data:`OUTCOMES`):
 
-- :func:`convergence_word`: ``converged`` or ``not converged by t_end`` (the rule of
-  :mod:`rbstab.convergence`, the one sweeps use) beside the solver's ``success``: a run
-  that reached t_end has not necessarily come to rest; for a failed run, ``fell before
-  t_end`` or ``stopped before t_end`` (:func:`rbstab.engine.status.fell`).
+- :func:`outcome` of one run and :func:`outcomes` of many: ``converged``, ``still settling``,
+  ``moving away``, ``fell``, ``could not be computed`` (or ``pending``, a sweep's run not yet
+  done), from the run's status and message (:func:`rbstab.engine.status.fell`) and v
+  (the rule of :mod:`rbstab.convergence`).
 - :func:`rate_check_reason`: why the check of the analytic dv/dt against the numerical
   derivative of v failed (the largest mismatch, when, the likely cause and its fix).
 - :func:`chop`: a number at round-off level (below the tolerance that produced it) as 0.
@@ -19,33 +20,130 @@ from typing import Any
 
 import numpy as np
 
-from .convergence import DEFAULT_LYAPUNOV_RATIO, converged
-from .engine.status import fell
+from .convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged, floats
+from .engine.status import fell, fell_mask
 from .summary import LYAPUNOV_RATE_TOLERANCE
 
-__all__ = ["CONVERGED", "NOT_CONVERGED", "convergence_word", "rate_check_reason", "file_rate_check_reason",
+__all__ = ["CONVERGED", "SETTLING", "MOVING_AWAY", "FELL", "NOT_COMPUTED", "PENDING", "OUTCOMES", "outcome",
+           "outcomes", "risen_without_disturbance", "unbounded_fall_note", "rate_check_reason", "file_rate_check_reason",
            "largest_mismatch_time", "samples_for_rate_check",
            "chop", "NOISE_LIMIT"]
 
-#: The words beside a run's solver status.
-CONVERGED, NOT_CONVERGED = "converged", "not converged by t_end"
+#: How a run ended, in every command's words (:func:`outcome`).
+CONVERGED = "converged"
+SETTLING = "still settling"
+MOVING_AWAY = "moving away"
+FELL = "fell"
+NOT_COMPUTED = "could not be computed"
+PENDING = "pending"
+#: Each outcome and what it means (the README and ``sweep_summary.json`` quote them).
+OUTCOMES = {
+    CONVERGED: "reached t_end with v(t_end) within the convergence rule: lost all but the ratio (0.1 %) of the "
+               "energy it had to lose (v(0), plus the largest rise of v: a push)",
+    SETTLING: "reached t_end not converged with v(t_end) >= 0: still moving toward the equilibrium, or too short "
+              "a t_end (rbstab analyze gives the slowest mode's settling time)",
+    MOVING_AWAY: "reached t_end not converged with v(t_end) < 0: below the energy of the equilibrium v is zero at, "
+                 "where it cannot return while dv/dt <= 0 (a slow fall, or a rest away from the equilibrium); or, "
+                 "with no disturbance, with v(t_end) above v(0): the actuators did not hold the body (a fall)",
+    FELL: "stopped at a gimbal lock or where it left the admissible region (simulation.limits): a result",
+    NOT_COMPUTED: "stopped before t_end for a numerical reason (solver failure, non-finite state, step or "
+                  "wall-time limit, an exception): no result of its physics",
+    PENDING: "a sweep's run not run yet",
+}
 
 #: rtol (n_samples - 1) above which the solver's noise, differentiated over the sample
 #: spacing, alone can fail the rate check of a conservative run (docs/physics.md).
 NOISE_LIMIT = 3e-5
 
 
-def convergence_word(status: str, lyapunov_initial: Any, lyapunov_final: Any,
-                     ratio: float = DEFAULT_LYAPUNOV_RATIO, *, message: str | None = None) -> str:
-    """:data:`CONVERGED` or :data:`NOT_CONVERGED` for a run that reached t_end.
+def outcome(status: str, message: str | None, lyapunov_initial: Any, lyapunov_final: Any,
+            max_increase: Any = None, ratio: float = DEFAULT_LYAPUNOV_RATIO, *, disturbed: bool | None = None) -> str:
+    """How a run ended: one of :data:`OUTCOMES`.
 
-    A failed run, given its ``message``, is ``fell before t_end`` (gimbal lock, the
-    admissible region left: a result of its physics) or ``stopped before t_end`` (it could
-    not be computed further); its message says why and when. Without the message,
-    :data:`NOT_CONVERGED`."""
-    if status not in ("success", "pending") and message is not None:
-        return f"{'fell' if fell(status, message) else 'stopped'} before t_end"
-    return CONVERGED if converged(status == "success", lyapunov_initial, lyapunov_final, ratio) else NOT_CONVERGED
+    Parameters
+    ----------
+    status : str
+        ``"success"`` (t_end reached), ``"failed"``, ``"error"`` or ``"pending"``.
+    message : str or None
+        Why a failed run stopped (:func:`rbstab.engine.status.fell` reads it).
+    lyapunov_initial, lyapunov_final : float
+        v(0) and v(t_end) [J].
+    max_increase : float, optional
+        The largest rise of v above its running minimum [J] (``max_lyapunov_increase``;
+        :func:`rbstab.convergence.converged`).
+    ratio : float
+        The convergence ratio.
+    disturbed : bool, optional
+        Whether the run had disturbances (None: not known). Without any, v(t_end) above
+        |v(0)| is energy nothing fed the body: :data:`MOVING_AWAY`.
+
+    Returns
+    -------
+    str
+        :data:`PENDING`; :data:`FELL` or :data:`NOT_COMPUTED` for a run that did not reach
+        t_end; else :data:`CONVERGED`, :data:`MOVING_AWAY` (v(t_end) < 0, or above |v(0)|
+        without a disturbance) or :data:`SETTLING`.
+    """
+    if status == "pending":
+        return PENDING
+    if status != "success":
+        return FELL if fell(status, message) else NOT_COMPUTED
+    if converged(True, lyapunov_initial, lyapunov_final, ratio, max_increase):
+        return CONVERGED
+    away = outcomes(["success"], [None], [lyapunov_initial], [lyapunov_final], None, ratio,
+                    disturbed=None if disturbed is None else [disturbed])[0]
+    return away
+
+
+def outcomes(status, message, lyapunov_initial, lyapunov_final, max_increase=None,
+             ratio: float = DEFAULT_LYAPUNOV_RATIO, *, disturbed=None) -> np.ndarray:
+    """:func:`outcome` of n runs at once: arrays (or lists, pandas columns) of shape (n,)
+    (``disturbed``: bool, or None where not known); an object array of str, shape (n,)."""
+    status = np.asarray(status, dtype=object)
+    v0, v1 = floats(lyapunov_initial), floats(lyapunov_final)
+    success = status == "success"
+    out = np.full(len(status), SETTLING, dtype=object)
+    with np.errstate(invalid="ignore"):
+        away = v1 < 0.0
+        if disturbed is not None:
+            undisturbed = np.asarray([d is False or d == 0 for d in np.asarray(disturbed, dtype=object)], dtype=bool)
+            away |= undisturbed & (v1 > np.abs(v0) + ROUND_OFF)
+        out[success & away] = MOVING_AWAY
+    out[np.asarray(converged(success, lyapunov_initial, v1, ratio, max_increase), dtype=bool) & success] = CONVERGED
+    fallen = fell_mask(status, message)
+    out[~success] = NOT_COMPUTED
+    out[fallen] = FELL
+    out[status == "pending"] = PENDING
+    return out
+
+
+def unbounded_fall_note(config) -> str | None:
+    """The warning W009 where ``config`` (a validated configuration) is a body under gravity
+    without an admissible region (``simulation.limits``): a run that falls then swings on,
+    through the ground, and may come back to the equilibrium (counted as recovered) or read
+    as still settling; None otherwise."""
+    from .config.loader import chain_of  # heavy: pydantic
+    from .warning_codes import coded
+
+    if config.simulation.limits is not None or not np.any(chain_of(config).gravity != 0):
+        return None
+    return coded("W009", "simulation.limits: none on a body under gravity: a run that falls swings on without end "
+                         "(through the ground) and reads as still settling, or comes back and counts as recovered; "
+                         "set simulation.limits (e.g. theta: [0.6, 0.6, .inf]) to end a fall where it becomes one")
+
+
+def risen_without_disturbance(lyapunov_initial: Any, lyapunov_final: Any) -> str:
+    """A clause for a run without disturbances whose v(t_end) ended above v(0) [J]: nothing
+    fed it energy, so its actuators could not hold it (saturated) or v is not a Lyapunov
+    function there (empty otherwise)."""
+    try:
+        v0, v1 = float(lyapunov_initial), float(lyapunov_final)
+    except (TypeError, ValueError):
+        return ""
+    if not (math.isfinite(v0) and math.isfinite(v1)) or v1 <= abs(v0) + ROUND_OFF:
+        return ""
+    return (f"v rose from {v0:.4g} J to {v1:.4g} J without a disturbance: the actuators did not hold the body "
+            "(saturated torques, or an unstable equilibrium): a fall unless simulation.limits ends it")
 
 
 def samples_for_rate_check(n_samples: int, relative_mismatch: float, tolerance: float) -> int:

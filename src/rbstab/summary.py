@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from .convergence import within_bound
+from .convergence import lyapunov_reference, within_bound
 from .results import row
 from .jit import jit
 from .layout import LYAPUNOV_TERMS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
@@ -404,8 +404,8 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: Slots of a streaming summary's accumulator (:func:`stream_sample`, :func:`stream_finish`,
 #: :func:`tree_stream_table`): v(0), max dv/dt, running min of v, largest rise of v above
 #: it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the samples
-#: taken, the last sample not converged (:func:`rbstab.convergence.converged` with v(0) and
-#: its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL`
+#: taken, the last sample not converged (:func:`rbstab.convergence.converged` with v(0), the
+#: largest rise of v so far and its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL`
 #: values of v, of dv/dt and of the disturbances' edges (rings).
 V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(10)
 _FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
@@ -418,6 +418,7 @@ _RATE_AT = OUTPUTS["lyapunov_rate"].offset
 _EDGES_AT = OUTPUTS["disturbance_edges"].offset
 #: The convergence rule's bound (:func:`rbstab.convergence.within_bound`), compiled.
 _within_bound = jit(forceinline=True)(within_bound)
+_reference = jit(forceinline=True)(lyapunov_reference)
 _T0, _T1, _T2, _T3 = (OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
 
 
@@ -488,8 +489,7 @@ def stream_sample(acc, i, row, first, weights, ratio, rates, stride):
     acc[MAX_INCREASE] = _max(acc[MAX_INCREASE], v - acc[V_MIN])
     if rate > 0.0:
         acc[RISING] += 1.0
-    v0 = acc[V_INITIAL]
-    if not _within_bound(v0, v, ratio):
+    if not _within_bound(_reference(acc[V_INITIAL], acc[MAX_INCREASE]), v, ratio):
         acc[LAST_ABOVE] = i
     acc[MAX_RATE] = _max(acc[MAX_RATE], rate)
     acc[MAX_ABS_RATE] = _max(acc[MAX_ABS_RATE], abs(rate))

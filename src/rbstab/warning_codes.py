@@ -84,6 +84,12 @@ WARNING_CODES: dict[str, WarningCode] = {
             "minimum and the run's v means nothing; give them a joint to the ground or a k_t",
         ),
         WarningCode(
+            "W009", "simulation.limits", "a body under gravity without an admissible region",
+            "a run that falls is not stopped: it swings on (through the ground) and reads as still settling or "
+            "moving away, or swings back and counts as recovered; set simulation.limits (theta, position) where "
+            "a fall begins, and the run then reads 'fell' (docs/physics.md)",
+        ),
+        WarningCode(
             "W006", "rbstab tune", "a tuned value lies within 1 % of its search range's edge",
             "the optimum may lie beyond the range searched: widen that --vary range and tune again",
         ),

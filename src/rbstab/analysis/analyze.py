@@ -42,7 +42,8 @@ from .dataset import analysis_content, analysis_dataset, certificate_record, jso
 from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
 from .linearise import Linearisation, TreeCoordinates, linearise, linearise_chain, mode_shapes, undisturbed
 from .push import basin_stability as stability_of
-from .push import push_analysis, unbounded_fall_note
+from ..diagnostics import unbounded_fall_note
+from .push import push_analysis
 from .runs import check_axes
 from .verify import NotVerifiable, check_verifiable, verified_model, verify_analysis
 

@@ -179,8 +179,8 @@ class BasinMap:
 
 def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> float:
     """First sample time from which every sample has converged
-    (:func:`rbstab.convergence.converged` with v(0) and the sample's v) [s]; NaN if
-    v(t_end) has not.
+    (:func:`rbstab.convergence.converged` with v(0), the largest rise of v up to the sample
+    and the sample's v) [s]; NaN if v(t_end) has not.
 
     Parameters
     ----------
@@ -190,7 +190,10 @@ def time_to_converge(time: np.ndarray, lyapunov: np.ndarray, ratio: float) -> fl
         v [J] at ``time`` (NaN after a failure: never converged).
     ratio : float
     """
-    above = ~converged(True, lyapunov[0], lyapunov, ratio)
+    v = np.asarray(lyapunov, dtype=float)
+    with np.errstate(invalid="ignore"):
+        rise = np.maximum.accumulate(v - np.minimum.accumulate(v))  # the largest rise so far
+    above = ~converged(True, v[0], v, ratio, rise)
     if above[-1]:
         return float("nan")
     last = np.flatnonzero(above)

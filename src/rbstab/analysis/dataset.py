@@ -462,7 +462,7 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
     attrs = dict(
         rbstab_format=FORMAT, kind="robustness", name=f"{result.sweep}.robustness", sweep=result.sweep,
         folder=result.folder, confidence=result.confidence, lyapunov_ratio=result.ratio,
-        stability="status success and |v(t_end)| <= lyapunov_ratio |v(0)| in the sweep's simulation, and the rest "
+        stability="status success and |v(t_end)| <= lyapunov_ratio v_ref (rbstab.convergence) in the sweep's simulation, and the rest "
                   "state where v is zero is not linearly unstable (an unstable rest: not stable)",
         **provenance_attributes(f"rbstab analyze --robustness {result.sweep}", command_line=command_line),
     )

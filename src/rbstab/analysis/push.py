@@ -48,7 +48,7 @@ from .runs import Runs, check_entries
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
            "push_directions", "push_thresholds", "push_analysis", "basin_stability", "check_push_options",
            "parse_ranges", "parse_push_range", "runs_from_states",
-           "unbounded_fall_note"]
+]
 
 #: Quantity of a push -> the units of its magnitude.
 PUSH_KINDS = {"force": "N s", "torque": "N m s"}
@@ -88,20 +88,6 @@ def push_directions(n: int, seed: int = 0) -> np.ndarray:
 def _unit(vectors: np.ndarray) -> np.ndarray:
     norm = np.linalg.norm(vectors, axis=-1, keepdims=True)
     return vectors / norm
-
-
-def unbounded_fall_note(config) -> str | None:
-    """One line where ``config`` is a body under gravity without an admissible region
-    (``simulation.limits``): a run that falls may then swing through and come back to the
-    equilibrium, counted as recovered (recovery then looks not monotone in the push); None
-    otherwise."""
-    from ..config.loader import chain_of  # heavy: pydantic
-
-    if config.simulation.limits is not None or not np.any(chain_of(config).gravity != 0):
-        return None
-    return ("no admissible region on a body under gravity: without simulation.limits a run that falls can swing "
-            "through and come back, and counts as recovered (recovery then looks not monotone); set "
-            "simulation.limits (e.g. theta: [0.6, 0.6, .inf]) to end a fall where it becomes one")
 
 
 def check_push_options(kind: str, *, point: Sequence[float] | None = None, directions: Any = None,

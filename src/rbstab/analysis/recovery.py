@@ -263,7 +263,7 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
     if say is not None:
         say(f"{spec.name}: {table.n} configurations, {len(done)} done before, {len(todo)} to compute")
         from ..config.loader import config_from_mapping  # heavy: pydantic
-        from .push import unbounded_fall_note  # heavy: numba
+        from ..diagnostics import unbounded_fall_note  # heavy: numba
 
         with warnings.catch_warnings():  # shown once with the points' records
             warnings.simplefilter("ignore")

@@ -3,7 +3,7 @@ interval, and the parameters that separate stable from unstable runs.
 
 The sweep folder is read through :func:`rbstab.open_sweep`; a run is *stable* when it
 converged (:func:`rbstab.convergence.converged`: it reached t_end and |v(t_end)| <=
-lyapunov_ratio |v(0)| + 1e-12 J) with the sweep's ratio, and the rest state v is zero at
+lyapunov_ratio v_ref + 1e-12 J, v_ref the energy it had to lose) with the sweep's ratio, and the rest state v is zero at
 is not linearly unstable: stability as seen in simulation over the sweep's t_end, not a
 proof. (A run that converged beside an unstable rest state has not yet drifted away: an
 *unstable rest*, counted as not stable. The rest state is linearised once per distinct
@@ -311,7 +311,8 @@ def robustness(path: str | os.PathLike, confidence: float = DEFAULT_CONFIDENCE) 
     ratio = float(ratio) if ratio is not None and np.isfinite(float(ratio)) else DEFAULT_LYAPUNOV_RATIO
     v0 = np.asarray(ds["lyapunov_initial"].values, dtype=float)
     v1 = np.asarray(ds["lyapunov_final"].values, dtype=float)
-    stable = converged(status == "success", v0, v1, ratio)
+    rise = ds["max_lyapunov_increase"].values if "max_lyapunov_increase" in ds else None
+    stable = converged(status == "success", v0, v1, ratio, rise)
     disagree = has_result & (stable != (np.asarray(ds["converged"].values, dtype=bool) & (status == "success")))
     unstable_rest, unchecked = _unstable_rest(path, ds, stable)
     stable &= ~unstable_rest

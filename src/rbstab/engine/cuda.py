@@ -701,7 +701,7 @@ def integrate_chain_runs_cuda(system, y0, settings, *, method: str, n_samples: i
         The tree of each run, for a ``system`` of t trees (default: the first).
     ratio : float
         The convergence ratio of each run's last sample not converged (the accumulator's
-        ``LAST_ABOVE``: :func:`rbstab.convergence.converged` with v(0) and its v).
+        ``LAST_ABOVE``: :func:`rbstab.convergence.converged` with v(0), the largest rise of v so far and its v).
 
     Raises
     ------

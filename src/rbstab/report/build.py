@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..diagnostics import convergence_word
+from ..diagnostics import OUTCOMES, outcome, outcomes
 from ..io.metadata import provenance_attributes
 from ..layout import SATURATION_FLAGS, SUMMARY_FIGURES
 from .analysis import analysis_sections, split_inputs
@@ -274,19 +274,21 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
     s = Section("Runs", "runs")
     s.blocks.append(
         "One row per run; values read back from the result files (summary attributes written by "
-        "the run). status success: the solver reached t_end; converged: besides, v(t_end) <= 0.001 v(0) "
-        "(not converged by t_end: still moving). Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame; "
+        "the run). status success: the solver reached t_end. Outcome: "
+        + "; ".join(f"{word}: {meaning}" for word, meaning in OUTCOMES.items() if word != "pending")
+        + ". Vectors are [component 1, 2, 3]; E, X, V, D in the inertial frame, Omega in the body frame; "
         "a chain's per body (Theta, Omega, X, V) or joint (E_j, D_j), each named."
     )
     s.blocks.append(Table(
         "Runs: identity, solver statistics, status",
-        ["run", "file", "variant", "status", "converged", "t_final [s]", "method", "nfev", "njev", "nlu",
+        ["run", "file", "variant", "status", "outcome", "t_final [s]", "method", "nfev", "njev", "nlu",
          "wall time [s]", "message"],
         [[r["run"], Path(r["file"]).name, r["variant"], r["status"],
-          convergence_word(r["status"], r["lyapunov_initial"], r["lyapunov_final"], message=r["message"]),
+          outcome(r["status"], r["message"], r["lyapunov_initial"], r["lyapunov_final"], r.get("max_lyapunov_increase"),
+                  disturbed=bool(run.config.get("disturbances"))),
           _f(r["t_final"]), str(r["method"]),
           _f(r["nfev"]), _f(r["njev"]), _f(r["nlu"]), _f(r["wall_time"], 3), r["message"] if r["status"] != "success" else ""]
-         for r in rows],
+         for r, run in zip(rows, runs)],
     ))
     if params:
         s.blocks.append(Table(
@@ -427,13 +429,26 @@ def _truthy(value) -> bool:
     return str(value).strip().lower() in ("true", "1", "yes")
 
 
+def _outcomes(table) -> np.ndarray:
+    """Each run's outcome (:func:`rbstab.diagnostics.outcome`): the index's ``outcome``
+    column, or for an index without it, from its status, message and v."""
+    if "outcome" in table.columns:
+        return table["outcome"].astype(str).to_numpy()
+    n = len(table)
+    column = {c: (table[c].to_numpy() if c in table.columns else np.full(n, None, dtype=object))
+              for c in ("message", "lyapunov_initial", "lyapunov_final", "max_lyapunov_increase")}
+    return outcomes(table["status"].astype(str).to_numpy(), column["message"], column["lyapunov_initial"],
+                    column["lyapunov_final"], column["max_lyapunov_increase"])
+
+
 def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, settle: SettleThresholds) -> Section:
     s = Section(f"Sweep {sweep.name}", f"sweep-{safe_filename(sweep.name)}")
     n = len(table)
     ok = table["status"].astype(str) == "success"
+    ended = _outcomes(table)
     facts = [
         f"folder: {sweep.path}",
-        f"{n} runs: " + ", ".join(f"{count} {status}" for status, count in table["status"].astype(str).value_counts().items()),
+        f"{n} runs: " + ", ".join(f"{int((ended == word).sum())} {word}" for word in OUTCOMES if (ended == word).any()),
         "parameters: " + (", ".join(sweep.parameters) or "none found in index.csv"),
         "varied: " + (", ".join(f"{p} ({table[p].astype(str).nunique()} values)" for p in sweep.varied) or "none"),
     ]
@@ -462,13 +477,13 @@ def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, set
     failed = table[~ok]
     if len(failed):
         s.blocks.append(Table(
-            f"Failed runs of {sweep.name}",
-            ["run_id", *sweep.varied, "status", "message"],
-            [[str(r["run_id"]), *(_f(r[p], 6) for p in sweep.varied), str(r["status"]), str(r["message"])]
-             for r in failed.to_dict("records")],
+            f"Runs of {sweep.name} that did not reach t_end",
+            ["run_id", *sweep.varied, "status", "outcome", "message"],
+            [[str(r["run_id"]), *(_f(r[p], 6) for p in sweep.varied), str(r["status"]), str(word), str(r["message"])]
+             for r, word in zip(failed.to_dict("records"), ended[~ok.to_numpy()])],
         ))
     else:
-        s.blocks.append("No run failed.")
+        s.blocks.append("Every run reached t_end.")
     if not sweep.varied:
         s.blocks.append("No parameter varies between the runs of this sweep: no metric plots.")
     s.blocks.extend(figures)

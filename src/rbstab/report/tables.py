@@ -263,7 +263,7 @@ def rest_outcome(settling_time: float, converged: bool, verdict: str) -> str:
         :func:`run_settling_time` [s] (NaN: |E| or |Omega| above its threshold at t_end, or
         a failed run).
     converged : bool
-        Whether v converged, |v(t_end)| <= ratio |v(0)| + round-off (:mod:`rbstab.convergence`).
+        Whether v converged, |v(t_end)| <= ratio v_ref + round-off (:mod:`rbstab.convergence`).
     verdict : str
         Of the linearisation at the rest state of the run's configuration
         (:func:`rest_verdicts`; ``""`` where not known).
@@ -286,7 +286,7 @@ def rest_outcome(settling_time: float, converged: bool, verdict: str) -> str:
 def rest_words(thresholds: SettleThresholds) -> str:
     """What :func:`rest_outcome`'s words mean, for the pages of a report."""
     return (f"Settled: |E| <= {thresholds.e:g} m and |Omega| <= {thresholds.omega:g} rad/s (Euclidean norms) from "
-            "the settling time to t_end, v converged (|v(t_end)| <= ratio |v(0)|: the sweep's ratio, 0.001 for a run "
+            "the settling time to t_end, v converged (|v(t_end)| <= ratio v_ref, v_ref the energy it had to lose: the sweep's ratio, 0.001 for a run "
             "given directly) and the rest state where v is zero is not linearly unstable. Otherwise: 'not settled' "
             "(above a threshold at t_end, or failed); 'rest away from equilibrium' (below the thresholds but v "
             "not converged: at rest, or creeping, away from the rest state v is zero at, e.g. leaning); 'unstable "
@@ -541,8 +541,7 @@ def runs_table(runs: Sequence[RunData], thresholds: SettleThresholds, parameters
         parameters = differing_parameters(runs)
     settle_store_runs(runs, thresholds)
     times = [run_settling_time(run, thresholds) for run in runs]
-    v_converged = [bool(converged(run.ok, run.summary.get("lyapunov_initial"), run.summary.get("lyapunov_final")))
-                   for run in runs]
+    v_converged = [_run_converged(run) for run in runs]
     verdicts = rest_verdicts(runs, [bool(np.isfinite(t)) and c for t, c in zip(times, v_converged)])
     rows = []
     for run, time, run_converged, verdict in zip(runs, times, v_converged, verdicts):
@@ -617,8 +616,14 @@ def _converged(table, sweep: SweepData) -> list[bool]:
     for an index without it :func:`rbstab.convergence.converged` of the run's summary."""
     if "converged" in table.columns:
         return list(table["converged"].astype(str).eq("True") & table["status"].astype(str).eq("success"))
-    return [run is not None and bool(converged(run.ok, run.summary.get("lyapunov_initial"),
-                                                run.summary.get("lyapunov_final"))) for run in sweep.runs]
+    return [run is not None and _run_converged(run) for run in sweep.runs]
+
+
+def _run_converged(run: RunData) -> bool:
+    """:func:`rbstab.convergence.converged` of a run's summary (the default ratio)."""
+    s = run.summary
+    return bool(converged(run.ok, s.get("lyapunov_initial"), s.get("lyapunov_final"),
+                          max_increase=s.get("max_lyapunov_increase")))
 
 
 def _index_metric(table, name: str, sweep: SweepData, thresholds: SettleThresholds):

@@ -95,7 +95,7 @@ def integrate_part(part, engine: str = "compiled") -> dict:
         column = columns.setdefault("converged", np.full(n, np.nan))
         column[rows] = np.asarray(converged(success, np.asarray(flat["lyapunov_initial"], dtype=float),
                                             np.asarray(flat["lyapunov_final"], dtype=float),
-                                            DEFAULT_LYAPUNOV_RATIO), dtype=float)
+                                            DEFAULT_LYAPUNOV_RATIO, flat.get("max_lyapunov_increase")), dtype=float)
 
     spec = get_engine(engine)
     engine_name = engine if spec.compiled else None

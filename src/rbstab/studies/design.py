@@ -432,7 +432,8 @@ def figure_columns(summary: Mapping[str, Any], status: str, ratio: float,
     columns = {k: float(v) for k, v in summary_columns(summary, names.joints, names.bodies).items()
                if k not in METRICS_NOT_FIGURES and isinstance(v, (int, float, np.number))}
     columns["converged"] = float(converged(status == "success", summary.get("lyapunov_initial"),
-                                              summary.get("lyapunov_final"), ratio))
+                                              summary.get("lyapunov_final"), ratio,
+                                              summary.get("max_lyapunov_increase")))
     return columns
 
 

@@ -58,6 +58,7 @@ from pathlib import Path
 from typing import Any
 
 from ..convergence import RULE, converged
+from ..diagnostics import OUTCOMES, outcomes
 from ..engine.status import fell_mask
 from ..io.atomic import atomic_path, write_text_atomic
 from ..layout import is_index, parameter_attributes
@@ -125,7 +126,7 @@ STATUSES = ("success", "failed", "error", "pending")
 DAMAGED_SUFFIX = ".damaged"
 _SOLVER = ("solver_nfev", "solver_njev", "solver_nlu", "solver_status")
 _HEAD = ("run_id", "run", "base")
-_MIDDLE = ("variant", "status", "converged", "message", "wall_time")
+_MIDDLE = ("variant", "status", "converged", "outcome", "message", "wall_time")
 _TAIL = (*_SOLVER, "config_hash", "file", "file_row")
 #: Values of a stored row that the index leaves out (the config text is most of a row's bytes).
 NOT_IN_INDEX = ("config", "created", "store", "template")
@@ -363,10 +364,16 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
             message = pc.replace_with_mask(message, failed, pa.array(raised, pa.large_string()))
     done["status"] = status
     done["message"] = message if message.null_count < n else pa.nulls(n)  # no text at all: as pandas infers it
-    v0, v1 = (pd.to_numeric(pd.Series(done[c], copy=False), errors="coerce").to_numpy(dtype=float) if c in done
-              else np.full(n, np.nan) for c in ("lyapunov_initial", "lyapunov_final"))
+    v0, v1, rise = (pd.to_numeric(pd.Series(done[c], copy=False), errors="coerce").to_numpy(dtype=float)
+                    if c in done else np.full(n, np.nan)
+                    for c in ("lyapunov_initial", "lyapunov_final", "max_lyapunov_increase"))
     success = pc.equal(status, "success").to_numpy(zero_copy_only=False)
-    done["converged"] = np.asarray(converged(success, v0, v1, ratio), dtype=bool)
+    done["converged"] = np.asarray(converged(success, v0, v1, ratio, rise), dtype=bool)
+    templates = getattr(table, "templates", None)
+    disturbed = (np.array([bool(t.get("disturbances")) for t in templates])[np.asarray(table.template)]
+                 if templates is not None else None)
+    done["outcome"] = pa.array(outcomes(status.to_numpy(zero_copy_only=False), message.to_numpy(zero_copy_only=False),
+                                        v0, v1, rise, ratio, disturbed=disturbed).tolist(), pa.large_string())
     if "file" in done:
         file = _arrow_array(done["file"])
         if pa.types.is_large_string(file.type) or pa.types.is_string(file.type):
@@ -383,6 +390,7 @@ def write_table_index(directory: Path, table, results, errors: Mapping[str, str]
     statuses = status.dictionary_encode().to_pandas()
     counted = pd.DataFrame({"base": head["base"].dictionary_encode().to_pandas(),
                             "status": statuses, "converged": done["converged"],
+                            "outcome": done["outcome"].to_pandas(),
                             "fell": fell_mask(statuses, message.to_numpy(zero_copy_only=False)),
                             **({"wall_time": done["wall_time"]} if "wall_time" in done else {})})
     summary = summarize_columns(counted, name=name, ratio=ratio, parameters=table.parameters())
@@ -637,8 +645,8 @@ def _arrow_frame(table):
 
 def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str, str] | None = None) -> dict:
     """The content of ``sweep_summary.json`` of an index (a DataFrame with ``base``,
-    ``status``, ``converged``, ``fell`` and ``wall_time`` columns): counts, converged
-    fraction, the failed runs that fell (``n_fell``: :func:`rbstab.engine.status.fell`),
+    ``status``, ``converged``, ``outcome``, ``fell`` and ``wall_time`` columns): counts (per
+    status and per outcome, :data:`rbstab.diagnostics.OUTCOMES`), converged fraction, the failed runs that fell (``n_fell``: :func:`rbstab.engine.status.fell`),
     per base, parameters (name -> config key)."""
     import pandas as pd  # heavy: pandas
 
@@ -647,7 +655,10 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
         status.update({str(k): int(v) for k, v in frame["status"].value_counts().items()})
         n, converged = len(frame), int(frame["converged"].sum())
         n_fell = int(frame["fell"].sum()) if "fell" in frame else 0
-        return {"n_runs": n, "status": status, "n_converged": converged, "n_fell": n_fell,
+        ended = {word: 0 for word in OUTCOMES}
+        if "outcome" in frame:
+            ended.update({str(k): int(v) for k, v in frame["outcome"].value_counts().items()})
+        return {"n_runs": n, "status": status, "outcomes": ended, "n_converged": converged, "n_fell": n_fell,
                 "fraction_converged": converged / n if n else 0.0}
 
     out: dict[str, Any] = {"name": name, **counts(index)}
@@ -655,6 +666,7 @@ def summarize_columns(index, *, name: str, ratio: float, parameters: Mapping[str
         "lyapunov_ratio": ratio,
         "definition": RULE,
     }
+    out["outcome_definitions"] = dict(OUTCOMES)
     bases = pd.unique(index["base"]).tolist()
     if len(bases) > 1:
         out["by_base"] = {b: counts(index[index["base"] == b]) for b in bases}

@@ -184,6 +184,7 @@ class SweepOutcome:
     n_skipped: int = 0
     n_executed: int = 0
     counts: dict = field(default_factory=dict)
+    outcomes: dict = field(default_factory=dict)
     n_converged: int = 0
     n_fell: int = 0
     problems: list = field(default_factory=list)
@@ -691,6 +692,7 @@ def _finish(spec: SweepSpec, table, results: list, errors: dict, outcome: SweepO
     outcome.index_seconds = time.perf_counter() - start
     outcome.index_file = summary["index"]
     outcome.counts = dict(summary["status"])
+    outcome.outcomes = dict(summary["outcomes"])
     outcome.n_converged = summary["n_converged"]
     outcome.n_fell = summary["n_fell"]
 
