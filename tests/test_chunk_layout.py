@@ -373,7 +373,7 @@ def test_report_and_show_read_chunk_sweeps(tmp_path):
     assert shown.exit_code == 0, shown.output
     assert "store file: 3 runs" in shown.output
     shown = CliRunner().invoke(cli, ["show", str(out.directory)])
-    assert shown.exit_code == 0 and "3 success" in shown.output
+    assert shown.exit_code == 0 and "chk: 3 runs, 3 still settling" in shown.output  # by outcome
     assert all(run_id in shown.output for run_id in sweep.run_ids)
 
 

@@ -165,7 +165,7 @@ def test_show_summarises_a_sweep_folder(sweep_folder):
     result = invoke("show", folder)
     assert result.exit_code == 0, result.output
     out = result.stdout
-    assert "sweep      case3_embedded: 3 runs, 3 success" in out
+    assert "sweep      case3_embedded: 3 runs, 3 still settling" in out  # by outcome
     assert "varied     mass (body.mass): 30, 41, 52  [3 values]" in out
     assert "lyapunov_final             [J] min " in out
     assert len(re.findall(r"^  r\d{4}-\w{8} +success ", out, re.M)) == 3  # one line per run

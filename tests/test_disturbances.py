@@ -306,32 +306,35 @@ def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed(
 EXAMPLE = Path(__file__).resolve().parents[1] / "configs" / "examples" / "saturated_push.yaml"
 
 
-def _sweep(tmp_path, name: str, body: str):
+def _sweep(tmp_path, name: str, body: str, *sets: str):
     spec = tmp_path / f"{name}.yaml"
     spec.write_text(f"name: {name}\nbase: {EXAMPLE}\n{body}")
     cli = Path(sys.executable).parent / "rbstab"
     return subprocess.run([str(cli), "sweep", str(spec), "-o", str(tmp_path / "out"), "-j", "1", "--no-progress",
-                           "--set", "simulation.n_samples=2001"], capture_output=True, text=True)
+                           "--set", "simulation.n_samples=2001", *sets], capture_output=True, text=True)
 
 
 def test_a_sweep_varies_a_push_and_a_torque_limit_end_to_end(tmp_path):
     """The shipped saturated push swept over the impulse (disturbances.0.value.0, a grid) and
     the torque limit (controller.saturation.torque_n), and zipped over the whole impulse and
-    3 limits: every run succeeds with its values as columns; a lower limit saturates longer,
-    and the strong push with the 3 N m limit (below m g L sin of the tilt it reaches) falls
-    while 6 N m holds it."""
+    3 limits, with an admissible region of 1.2 rad: the values are columns; a lower limit
+    saturates longer, and the strong push with the 3 N m limit (below m g L sin of the tilt
+    it reaches) falls while 6 N m holds it (without the region it swings over and back up,
+    and converges)."""
     import pandas as pd
 
+    fall = ("--set", "simulation.limits.theta=[1.2, 1.2, .inf]")  # past it the pendulum has fallen
     done = _sweep(tmp_path, "grid", "grid:\n  disturbances.0.value.0: [0.2, 1.0]\n"
-                                    "  controller.saturation.torque_n: [3.0, 6.0]\n")
+                                    "  controller.saturation.torque_n: [3.0, 6.0]\n", *fall)
     assert done.returncode == 0, done.stderr
     index = pd.read_csv(tmp_path / "out" / "grid" / "index.csv").set_index(["value_0", "torque_n"])
-    assert (index["status"] == "success").all() and len(index) == 4
+    assert len(index) == 4 and index["outcome"].to_dict() == {
+        (0.2, 3.0): "converged", (0.2, 6.0): "converged", (1.0, 3.0): "fell", (1.0, 6.0): "converged"}
     fraction = index["fraction_saturated_torque_n_x"]
     assert fraction[0.2, 3.0] > fraction[0.2, 6.0] and fraction[1.0, 3.0] > fraction[1.0, 6.0] > fraction[0.2, 6.0]
     assert index["converged"].to_dict() == {(0.2, 3.0): True, (0.2, 6.0): True, (1.0, 3.0): False, (1.0, 6.0): True}
     done = _sweep(tmp_path, "zipped", "zip:\n  disturbances.0.value: [[0.2, 0, 0], [1.0, 0, 0]]\n"
-                                      "  controller.saturation.torque_n: [[3, 3, .inf], [6, 6, .inf]]\n")
+                                      "  controller.saturation.torque_n: [[3, 3, .inf], [6, 6, .inf]]\n", *fall)
     assert done.returncode == 0, done.stderr
     zipped = pd.read_csv(tmp_path / "out" / "zipped" / "index.csv")
     assert zipped[["value_0", "torque_n_0"]].values.tolist() == [[0.2, 3.0], [1.0, 6.0]]

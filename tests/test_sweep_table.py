@@ -136,10 +136,15 @@ def test_a_trees_initial_state_columns_refuse_what_the_schema_refuses():
     table = {"initial_state.legs.theta[1]": legs_1, "initial_state.trunk.theta[0]": np.full(n, 0.03),
              "initial_state.trunk.theta[1]": trunk[:, 1],
              "initial_state.trunk.omega[0]": trunk[:, 0], "bodies.trunk.mass": mass}
-    spec = spec_from_mapping({"name": "v", "base": read_yaml_file(path), "table": table})
+    def base():  # without the example's admissible region, which most of these states leave
+        data = read_yaml_file(path)
+        del data["simulation"]["limits"]
+        return data
+
+    spec = spec_from_mapping({"name": "v", "base": base(), "table": table})
     expected = {}
     for i in range(n):
-        data = read_yaml_file(path)
+        data = base()
         data["initial_state"]["legs"]["theta"][1] = float(legs_1[i])
         data["initial_state"]["trunk"]["theta"][:2] = [0.03, float(trunk[i, 1])]
         data["initial_state"]["trunk"]["omega"] = [float(trunk[i, 0]), 0.0, 0.0]

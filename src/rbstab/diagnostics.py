@@ -22,7 +22,7 @@ import numpy as np
 
 from .convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged, floats
 from .engine.status import fell, fell_mask
-from .summary import LYAPUNOV_RATE_TOLERANCE
+from .warning_codes import coded
 
 __all__ = ["CONVERGED", "SETTLING", "MOVING_AWAY", "FELL", "NOT_COMPUTED", "PENDING", "OUTCOMES", "outcome",
            "outcomes", "risen_without_disturbance", "unbounded_fall_note", "rate_check_reason", "file_rate_check_reason",
@@ -123,7 +123,6 @@ def unbounded_fall_note(config) -> str | None:
     through the ground, and may come back to the equilibrium (counted as recovered) or read
     as still settling; None otherwise."""
     from .config.loader import chain_of  # heavy: pydantic
-    from .warning_codes import coded
 
     if config.simulation.limits is not None or not np.any(chain_of(config).gravity != 0):
         return None
@@ -180,6 +179,8 @@ def rate_check_reason(summary: Mapping[str, Any], *, n_samples: int, t_end: floa
         too sparse for t_end 20 s (spacing 0.02 s): more samples, e.g. --set
         simulation.n_samples=4001"``.
     """
+    from .summary import LYAPUNOV_RATE_TOLERANCE  # heavy: numba (a sweep's reader needs none)
+
     if summary.get("lyapunov_rate_check") != "fail":
         return ""
     relative = float(summary.get("lyapunov_rate_mismatch_relative", float("nan")))

@@ -137,7 +137,7 @@ def _facts(ds) -> list[str]:
     if "time_to_converge" in ds:
         ttc = _scalar(ds, "time_to_converge")
         simulated = f"converged at {_f(ttc)} s" if np.isfinite(ttc) else \
-            f"still settling at t_end ({a.get('simulation_status')})"
+            f"not converged by t_end ({a.get('simulation_status')})"
         alone = _scalar(ds, "linear_settling_time")
         facts.append(f"{scale}"
                      + (f" (alone it would take {_f(alone)} s to bring v down by the ratio "
