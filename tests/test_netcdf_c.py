@@ -1,4 +1,5 @@
-"""netCDF-C reads rbstab's files: sweep store files (``runs/chunk-*.h5``) and run files.
+"""netCDF-C reads rbstab's files: sweep store files (``runs/chunk-*.h5``) and run files,
+one body's and a tree's (a file written before of a tree is read by rbstab as before).
 
 The files are written through h5py and h5netcdf; they are meant to be netCDF-4, which the
 netCDF-C library (that of ``ncdump``, NCO, CDO, R's ncdf4, Julia's NCDatasets, ...) reads.
@@ -10,6 +11,7 @@ the same Dataset as its ``h5netcdf`` engine. The ``ncdump`` binary is used when 
 
 from __future__ import annotations
 
+import copy
 import json
 import shutil
 import subprocess
@@ -19,6 +21,7 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
+from click.testing import CliRunner
 
 try:  # any ImportError: not installed, or a wheel whose libnetcdf does not load
     import netCDF4
@@ -27,10 +30,14 @@ except ImportError as exc:
                 allow_module_level=True)
 
 from rbstab.config import load_config  # noqa: E402
+from rbstab.config.loader import config_from_mapping  # noqa: E402
+from rbstab.config.yaml_io import read_yaml_file  # noqa: E402
 from rbstab.io.chunk import ChunkWriter, StoreRow  # noqa: E402
-from rbstab.io.hdf5 import write_result  # noqa: E402
+from rbstab.io.hdf5 import read_attributes, read_dataset, read_summary, result_dataset, write_result  # noqa: E402
+from rbstab.results import plain  # noqa: E402
 from rbstab.simulator import simulate  # noqa: E402
 from rbstab.sweep import run_sweep, spec_from_mapping  # noqa: E402
+from rbstab_cli.main import cli  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
@@ -70,22 +77,26 @@ def _h5_attrs(obj) -> dict:
     return {k: obj.attrs[k] for k in obj.attrs if k not in HIDDEN}
 
 
-def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
+def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True, checksums: bool = True) -> None:
     """netCDF-C opens ``path`` as netCDF-4 and reads every variable as h5py does: on the
     dimensions of the HDF5 dimension scales attached to it, with the same shapes, types,
-    attributes and values (NaN where NaN), text as str, Fletcher-32 on every non-empty numeric variable; xarray's ``netcdf4`` engine
-    gives the Dataset its ``h5netcdf`` engine gives. ``attribute_order``: also the order
-    the attributes were written in (netCDF-C numbers them by HDF5's creation order, which
-    only a dataset made with ``track_order`` keeps)."""
+    attributes and values (NaN where NaN), text as str, Fletcher-32 on every non-empty
+    numeric variable (``checksums``: the files of runs and stores have them); xarray's
+    ``netcdf4`` engine gives the Dataset its ``h5netcdf`` engine gives. rbstab's files are
+    flat: no groups (a file with one would need each group compared too). ``attribute_order``:
+    also the order the attributes were written in (netCDF-C numbers them by HDF5's creation
+    order, which only a dataset made with ``track_order`` keeps)."""
     import xarray as xr
 
     with h5py.File(path, "r") as h5, netCDF4.Dataset(path) as nc:
+        assert not nc.groups and not any(isinstance(h5[k], h5py.Group) for k in h5), "a group: compare it too"
         nc.set_auto_mask(False)
         assert nc.data_model == "NETCDF4"
         datasets = [k for k in h5 if isinstance(h5[k], h5py.Dataset)]
         names = [k for k in datasets if not _dimension_only(h5[k])]  # a dimension without a variable is no variable
         assert sorted(nc.variables) == sorted(names)
         scales = {k: h5[k].shape[0] for k in datasets if h5[k].is_scale}
+        dimids = {int(h5[k].attrs["_Netcdf4Dimid"]): k for k in scales if "_Netcdf4Dimid" in h5[k].attrs}
         assert {k: len(d) for k, d in nc.dimensions.items()} == scales
         expected = _h5_attrs(h5)
         assert list(nc.ncattrs()) == list(expected) or not attribute_order
@@ -94,9 +105,14 @@ def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
             assert _same(nc.getncattr(key), value), f"global attribute {key}"
         for name in names:
             var, ds = nc.variables[name], h5[name]
-            # a dimension's coordinate is its scale; any other dataset has scales attached
-            dims = (name,) if ds.is_scale else tuple(
-                d[0].name.rpartition("/")[2] if len(d) else f"(no scale on axis {i})" for i, d in enumerate(ds.dims))
+            # a dimension's coordinate is its scale; any other dataset has scales attached; a
+            # variable of more dimensions named as its first (an analysis file's push_direction)
+            # is that dimension's scale, its dimensions in _Netcdf4Coordinates
+            if ds.is_scale and ds.ndim > 1:
+                dims = tuple(dimids[int(i)] for i in ds.attrs["_Netcdf4Coordinates"])
+            else:
+                dims = (name,) if ds.is_scale else tuple(d[0].name.rpartition("/")[2] if len(d) else
+                                                         f"(no scale on axis {i})" for i, d in enumerate(ds.dims))
             assert var.dimensions == dims, name
             assert var.shape == ds.shape, name
             expected = _h5_attrs(ds)
@@ -115,7 +131,7 @@ def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
             else:
                 assert var.dtype == ds.dtype, name
                 np.testing.assert_array_equal(var[...], ds[...], err_msg=name)  # NaN equals NaN
-                assert var.filters()["fletcher32"] or ds.size == 0, name
+                assert var.filters()["fletcher32"] or ds.size == 0 or not checksums, name
     with xr.open_dataset(path, engine="h5netcdf") as a, xr.open_dataset(path, engine="netcdf4") as b:
         xr.testing.assert_identical(a.load(), b.load())
 
@@ -285,6 +301,123 @@ def test_netcdf_c_reads_a_sign_law_run_file_with_its_switchings(tmp_path):
         assert nc["switching_time"].dimensions == ("switching",) and nc["switching_time"].units == "s"
         assert nc["sliding_mode"].dimensions == ("time", "axis")
         np.testing.assert_array_equal(nc["switching_time"][...], result.switching.time)
+
+
+# -- a tree's run files ----------------------------------------------------------------------------
+
+EXAMPLES = ROOT / "configs" / "examples"
+#: A tree's run kept short.
+TREE_SHORT = {"t_end": 0.2, "n_samples": 21}
+#: A tree's run file written before its per-body and per-joint summary figures were stored
+#: flattened (as 2-D attributes, which netCDF-C does not open): configs/examples/stance_ankle_hip.yaml
+#: with simulation.t_end=0.1 and n_samples=11.
+OLD_CHAIN_RUN = Path(__file__).resolve().parent / "data" / "chain_run_file_e43b44e.h5"
+
+
+def _example(name: str) -> dict:
+    return read_yaml_file(EXAMPLES / f"{name}.yaml")
+
+
+def _trees() -> dict[str, dict]:
+    """Trees of each kind, as mappings: two bodies with saturated joint torques (the stance),
+    an embedded joint (the knee), one body in the bodies/joints spelling, three bodies
+    pushed by disturbances."""
+    stance = _example("stance_ankle")
+    one = {"name": "one_tree", "gravity": stance["body"]["gravity"],
+           "bodies": [{"name": "body", "mass": stance["body"]["mass"], "inertia": stance["body"]["inertia"]}],
+           "joints": [{"name": "ankle", "parent": "ground", "parent_point": [0.0, 0.0, 0.0], "child": "body",
+                       "child_point": stance["body"]["attachment_point"], "variant": "permanent",
+                       "k_r": stance["controller"]["k_r"], "l_r": stance["controller"]["l_r"]}],
+           "initial_state": {"body": {"theta": stance["initial_state"]["theta"]}}}
+    three = copy.deepcopy(_example("double_pendulum"))
+    three["name"] = "three_pushed"
+    three["bodies"].append({"name": "hand", "mass": 0.5, "inertia": [0.01, 0.01, 0.001]})
+    three["joints"].append({"name": "wrist", "parent": "lower", "parent_point": [0.0, 0.0, -0.5], "child": "hand",
+                            "child_point": [0.0, 0.0, 0.1], "variant": "permanent", "k_r": [1, 1, 1],
+                            "l_r": [0.1, 0.1, 0.1]})
+    three["initial_state"]["hand"] = {"theta": [0.2, 0.0, 0.0]}
+    three["disturbances"] = [
+        {"kind": "impulse", "quantity": "torque", "value": [0, 0.5, 0], "start": 0.05, "body": "hand"},
+        {"kind": "step", "value": [1, 0, 0], "start": 0.1, "body": "upper", "point": [0, 0, 0.1]}]
+    trees = {"saturated": _example("stance_ankle_hip"), "embedded": _example("knee"), "one_body": one,
+             "three_pushed": three}
+    for tree in trees.values():
+        tree["simulation"] = {**tree.get("simulation", {}), **TREE_SHORT}
+    return trees
+
+
+@pytest.fixture(scope="module")
+def tree_runs():
+    return {name: simulate(config_from_mapping(tree)) for name, tree in _trees().items()}
+
+
+def _equal(a, b) -> bool:
+    """Summary figures equal, NaN where NaN, a list as its array."""
+    try:
+        np.testing.assert_equal(a, b)
+    except AssertionError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("store", ["full", "thinned", "summary"])
+@pytest.mark.parametrize("tree", ["saturated", "embedded", "one_body", "three_pushed"])
+def test_netcdf_c_reads_a_chain_run_file(tree_runs, tree, store, tmp_path):
+    """A tree's run file is netCDF-4: its figures per body or joint (n_members, 3) are 1-D
+    attributes with their shapes in shape_of_summary, and read back in their shape."""
+    result = tree_runs[tree]
+    assert result.status == "success", result.message
+    chain = result.config.chain
+    path = write_result(result, tmp_path / f"{tree}.h5", store=store)
+    assert_netcdf_c_reads(path, attribute_order=False)
+    with netCDF4.Dataset(path) as nc:
+        assert nc.getncattr("rbstab_format") == "rbstab-chain-run-1"
+        assert {k: len(nc.dimensions[k]) for k in ("body", "joint")} == {"body": chain.size,
+                                                                         "joint": len(chain.joint_names)}
+        shapes = json.loads(nc.getncattr("shape_of_summary"))
+        assert shapes["final_theta"] == [chain.size, 3]
+        assert shapes["max_abs_constraint_error"] == [len(chain.joint_names), 3]
+        assert set(shapes) == {k for k, v in result.summary.items() if np.ndim(v) == 2}
+        for key, shape in shapes.items():
+            np.testing.assert_array_equal(np.reshape(nc.getncattr(f"summary_{key}"), shape), result.summary[key])
+    # as rbstab reads it: the run's figures in their shape, the attributes of the run in memory
+    assert _equal(read_summary(path)["summary"], plain(result.summary))
+    attrs = read_attributes(path)
+    assert "shape_of_summary" not in attrs and _equal(attrs["summary_final_theta"], result.summary["final_theta"])
+    if store == "full":
+        ds, memory = read_dataset(path), result_dataset(result)
+        assert set(ds.attrs) == set(memory.attrs)
+        for key in (k for k in memory.attrs if k.startswith("summary_")):
+            assert _equal(ds.attrs[key], memory.attrs[key]), key
+            assert np.shape(ds.attrs[key]) == np.shape(memory.attrs[key]), key
+
+
+def test_a_chain_run_file_written_before_reads_as_one_written_now(tmp_path):
+    """A tree's file of 2-D summary attributes (as rbstab wrote them before) reads as before:
+    read_attributes, read_summary, read_dataset and rbstab show give its figures in the shape
+    they give a file written now, with the values the file holds."""
+    with h5py.File(OLD_CHAIN_RUN, "r") as h5:
+        stored = {k: h5.attrs[k] for k in h5.attrs if k.startswith("summary_")}
+        assert "shape_of_summary" not in h5.attrs and stored["summary_final_theta"].shape == (2, 3)
+    result = simulate(load_config(EXAMPLES / "stance_ankle_hip.yaml", ["simulation.t_end=0.1",
+                                                                       "simulation.n_samples=11"]))
+    new = write_result(result, tmp_path / "stance_ankle_hip.h5")
+    old_attrs, new_attrs = read_attributes(OLD_CHAIN_RUN), read_attributes(new)
+    assert set(old_attrs) == set(new_attrs)
+    old_ds, new_ds = read_dataset(OLD_CHAIN_RUN), read_dataset(new)
+    assert set(old_ds.attrs) == set(new_ds.attrs)
+    for key, value in stored.items():
+        assert _equal(old_attrs[key], plain(value)) and _equal(old_ds.attrs[key], value), key
+        assert np.shape(old_attrs[key]) == np.shape(new_attrs[key]), key
+        assert np.shape(old_ds.attrs[key]) == np.shape(new_ds.attrs[key]), key
+        assert type(old_ds.attrs[key]) is type(new_ds.attrs[key]), key
+    assert read_summary(OLD_CHAIN_RUN)["summary"].keys() == read_summary(new)["summary"].keys()
+    shown = [CliRunner().invoke(cli, ["show", str(p)]) for p in (OLD_CHAIN_RUN, new)]
+    assert all(r.exit_code == 0 for r in shown), [r.output for r in shown]
+    lines = [[line.split()[0] for line in r.output.splitlines()[1:] if line.startswith("  ")] for r in shown]
+    assert lines[0] == lines[1]  # the same figures, each on its line
+    final = [next(line for line in r.output.splitlines() if line.strip().startswith("final_theta")) for r in shown]
+    assert "legs [" in final[0] and "trunk [" in final[0] and final[0].count("[") == final[1].count("[")
 
 
 # -- ncdump ---------------------------------------------------------------------------------------
