@@ -1,18 +1,22 @@
-"""netCDF-C reads rbstab's files: sweep store files (``runs/chunk-*.h5``) and run files,
-one body's and a tree's (a file written before of a tree is read by rbstab as before).
+"""netCDF-C reads every file rbstab writes: run files (one body's and a tree's; a tree's
+file written before is read by rbstab as before), sweep store files (``runs/chunk-*.h5``, one body's and a tree's), analysis files (one body's and
+a tree's with the push, basin and basin stability parts, a sweep's robustness, a spec's
+recovery curves) and the files of studies (``sensitivity.nc``, ``tuning.nc``).
 
 The files are written through h5py and h5netcdf; they are meant to be netCDF-4, which the
 netCDF-C library (that of ``ncdump``, NCO, CDO, R's ncdf4, Julia's NCDatasets, ...) reads.
 netCDF-C is reached here through its Python binding ``netCDF4`` (whose wheels bundle
 libnetcdf): every variable with the dimensions, attributes and values that h5py and
 h5netcdf read, the Fletcher-32 checksums honoured, and xarray's ``netcdf4`` engine giving
-the same Dataset as its ``h5netcdf`` engine. The ``ncdump`` binary is used when on PATH.
+the same Dataset as its ``h5netcdf`` engine. Where a file says ``Conventions = "CF-..."``,
+its ``units`` are UDUNITS strings and text has none. The ``ncdump`` binary is used when on PATH.
 """
 
 from __future__ import annotations
 
 import copy
 import json
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -418,6 +422,101 @@ def test_a_chain_run_file_written_before_reads_as_one_written_now(tmp_path):
     assert lines[0] == lines[1]  # the same figures, each on its line
     final = [next(line for line in r.output.splitlines() if line.strip().startswith("final_theta")) for r in shown]
     assert "legs [" in final[0] and "trunk [" in final[0] and final[0].count("[") == final[1].count("[")
+
+
+# -- every other kind of file ------------------------------------------------------------------------
+
+
+def _rbstab(*args: str) -> None:
+    result = CliRunner().invoke(cli, [*args, "-q"], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+
+
+@pytest.fixture(scope="module")
+def files(sweeps, tmp_path_factory) -> dict[str, Path]:
+    """One file of each kind the run files and one body's stores above leave out, each with
+    every part it can have: a tree's store file; the analysis files of one body and of a tree
+    (certificate, basin map, pushes, basin stability; one body's also verified); a sweep's
+    robustness; a spec's recovery curves; the studies' files."""
+    out = tmp_path_factory.mktemp("kinds")
+    found = {}
+    tree = run_sweep(spec_from_mapping({"name": "tree", "base": str(EXAMPLES / "stance_ankle_hip.yaml"),
+                                        "grid": {"joints.hip.k_r.0": [400.0, 500.0]}},
+                                       overrides=[f"simulation.{k}={v}" for k, v in TREE_SHORT.items()]),
+                     out, jobs=1, chunk_size=2, layout="chunk", store="thinned", progress=False)
+    (found["tree_store"],) = _files(tree)
+    pendulum, stance = str(EXAMPLES / "saturated_pendulum.yaml"), str(EXAMPLES / "stance_ankle_hip.yaml")
+    _rbstab("analyze", pendulum, "-o", str(out), "--samples", "300", "-j", "1", "--set", "simulation.n_samples=201",
+            "--push", "torque", "--push-directions", "4", "--push-tol", "1e-2", "--basin",
+            "initial_state.omega.0=-1:1:3", "--basin", "initial_state.omega.1=-1:1:2", "--basin-samples", "51",
+            "--basin-stability", "initial_state.omega.0=-1:1", "-n", "4", "--verify")
+    found["analysis"] = out / "saturated_pendulum.analysis.nc"
+    _rbstab("analyze", stance, "-o", str(out), "--samples", "200", "-j", "1", "--set", "simulation.t_end=1",
+            "--push", "torque", "--push-body", "trunk", "--push-directions", "3", "--push-tol", "1e-2", "--basin",
+            "initial_state.legs.theta.0=-0.1:0.1:3", "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2",
+            "--basin-samples", "51", "--basin-stability", "initial_state.trunk.theta.0=-0.1:0.1", "-n", "4")
+    found["chain_analysis"] = out / "stance_ankle_hip.analysis.nc"
+    _rbstab("analyze", "--robustness", str(sweeps["full"].directory), "-o", str(out))
+    found["robustness"] = out / "ncc_full.robustness.analysis.nc"
+    spec = out / "limits.yaml"
+    spec.write_text(f"name: limits\nbase: {pendulum}\ngrid:\n  controller.k_r.0: [200.0, 300.0]\n")
+    _rbstab("analyze", str(spec), "-o", str(out), "--set", "simulation.n_samples=201", "--push", "torque",
+            "--push-direction", "1,0,0", "--push-tol", "1e-2", "-j", "1", "--samples", "300")
+    found["recovery"] = out / "limits.recovery.analysis.nc"
+    short = [a for k, v in TREE_SHORT.items() for a in ("--set", f"simulation.{k}={v}")]
+    _rbstab("sensitivity", str(EXAMPLES / "double_pendulum.yaml"), "-n", "4", *short, "-o", str(out), "-j", "1",
+            "--no-progress", "--vary=bodies.1.mass=uniform:[0.5,2]",
+            "--vary=initial_state.upper.theta.0=uniform:[0.3,0.9]")
+    found["sensitivity"] = out / "double_pendulum" / "sensitivity.nc"
+    _rbstab("tune", stance, "--trials", "4", "--generation", "4", "--vary", "joints.hip.l_r.0=uniform:[25,100]",
+            "--minimize", "lyapunov_final", *short, "-o", str(out))
+    found["tuning"] = out / "stance_ankle_hip" / "tuning.nc"
+    return found
+
+
+#: Some variables of each kind of :func:`files`: each part it was made with.
+PARTS = {"tree_store": ["theta", "joint_theta", "final_theta_trunk_x"],
+         "analysis": ["jacobian", "basin_outcome", "push_threshold", "stability_value", "sublevel_verified_box"],
+         "chain_analysis": ["equilibrium_theta", "lyapunov_hessian", "basin_outcome", "push_threshold",
+                            "stability_value"],
+         "robustness": ["stable_fraction", "run_value"], "recovery": ["push_minimum", "controller.k_r.0"],
+         "sensitivity": ["S1", "ST"], "tuning": ["lyapunov_final", "joints.hip.l_r.0"]}
+
+
+@pytest.mark.parametrize("kind", list(PARTS))
+def test_netcdf_c_reads_each_other_kind_of_file(files, kind):
+    path = files[kind]
+    assert_netcdf_c_reads(path, attribute_order=False, checksums=kind == "tree_store")
+    with netCDF4.Dataset(path) as nc:
+        assert set(PARTS[kind]) <= set(nc.variables), set(PARTS[kind]) - set(nc.variables)
+
+
+#: A UDUNITS-2 string as rbstab writes them: "1", or symbols of SI units, each with an
+#: integer power, separated by spaces (``N m s``, ``rad s-1``, ``N m rad-1``).
+UDUNITS = re.compile(r"1|(?:(?:kg|m|s|rad|N|J|W|Hz)(?:-?[1-9])?)(?: (?:kg|m|s|rad|N|J|W|Hz)(?:-?[1-9])?)*")
+#: Variables of analysis files whose entries are in different units (per state, per parameter).
+MIXED_UNITS = ("jacobian", "jacobian_error", "lyapunov_hessian", "rate_hessian", "threshold", "run_value",
+               "stability_value", "stability_low", "stability_threshold_low")
+
+
+def test_units_are_udunits_where_a_file_claims_cf(files, sweeps, tree_runs, tmp_path):
+    """Every file says Conventions = "CF-1.10": each numeric variable's units (where it has
+    one: a variable whose entries are in different units has none) is a UDUNITS string; text
+    has no units (CF 3.1)."""
+    paths = [*files.values(), _files(sweeps["thinned"])[0],
+             write_result(simulate(load_config(CASE3, SHORT)), tmp_path / "case3.h5"),
+             write_result(tree_runs["three_pushed"], tmp_path / "three.h5")]
+    for path in paths:
+        with netCDF4.Dataset(path) as nc:
+            assert nc.getncattr("Conventions") == "CF-1.10", path
+            for name, var in nc.variables.items():
+                units = getattr(var, "units", None)
+                if var.dtype is str or var.dtype.kind == "S":
+                    assert units is None, f"{path.name}: {name} is text, with units {units!r}"
+                elif units is not None:
+                    assert UDUNITS.fullmatch(units), f"{path.name}: {name}: units {units!r}"
+            for name in set(MIXED_UNITS) & set(nc.variables):
+                assert "units" not in nc[name].ncattrs(), f"{path.name}: {name} (entries in different units)"
 
 
 # -- ncdump ---------------------------------------------------------------------------------------
