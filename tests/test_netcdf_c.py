@@ -1,16 +1,22 @@
-"""netCDF-C reads rbstab's files: sweep store files (``runs/chunk-*.h5``) and run files.
+"""netCDF-C reads every file rbstab writes: run files (one body's and a tree's; a tree's
+file written before is read by rbstab as before), sweep store files (``runs/chunk-*.h5``, one body's and a tree's), analysis files (one body's and
+a tree's with the push, basin and basin stability parts, a sweep's robustness, a spec's
+recovery curves) and the files of studies (``sensitivity.nc``, ``tuning.nc``).
 
 The files are written through h5py and h5netcdf; they are meant to be netCDF-4, which the
 netCDF-C library (that of ``ncdump``, NCO, CDO, R's ncdf4, Julia's NCDatasets, ...) reads.
 netCDF-C is reached here through its Python binding ``netCDF4`` (whose wheels bundle
 libnetcdf): every variable with the dimensions, attributes and values that h5py and
 h5netcdf read, the Fletcher-32 checksums honoured, and xarray's ``netcdf4`` engine giving
-the same Dataset as its ``h5netcdf`` engine. The ``ncdump`` binary is used when on PATH.
+the same Dataset as its ``h5netcdf`` engine. Where a file says ``Conventions = "CF-..."``,
+its ``units`` are UDUNITS strings and text has none. The ``ncdump`` binary is used when on PATH.
 """
 
 from __future__ import annotations
 
+import copy
 import json
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -19,6 +25,7 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
+from click.testing import CliRunner
 
 try:  # any ImportError: not installed, or a wheel whose libnetcdf does not load
     import netCDF4
@@ -27,10 +34,14 @@ except ImportError as exc:
                 allow_module_level=True)
 
 from rbstab.config import load_config  # noqa: E402
+from rbstab.config.loader import config_from_mapping  # noqa: E402
+from rbstab.config.yaml_io import read_yaml_file  # noqa: E402
 from rbstab.io.chunk import ChunkWriter, StoreRow  # noqa: E402
-from rbstab.io.hdf5 import write_result  # noqa: E402
+from rbstab.io.hdf5 import read_attributes, read_dataset, read_summary, result_dataset, write_result  # noqa: E402
+from rbstab.results import plain  # noqa: E402
 from rbstab.simulator import simulate  # noqa: E402
 from rbstab.sweep import run_sweep, spec_from_mapping  # noqa: E402
+from rbstab_cli.main import cli  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE3 = ROOT / "configs" / "paper" / "case3_embedded.yaml"
@@ -70,22 +81,26 @@ def _h5_attrs(obj) -> dict:
     return {k: obj.attrs[k] for k in obj.attrs if k not in HIDDEN}
 
 
-def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
+def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True, checksums: bool = True) -> None:
     """netCDF-C opens ``path`` as netCDF-4 and reads every variable as h5py does: on the
     dimensions of the HDF5 dimension scales attached to it, with the same shapes, types,
-    attributes and values (NaN where NaN), text as str, Fletcher-32 on every non-empty numeric variable; xarray's ``netcdf4`` engine
-    gives the Dataset its ``h5netcdf`` engine gives. ``attribute_order``: also the order
-    the attributes were written in (netCDF-C numbers them by HDF5's creation order, which
-    only a dataset made with ``track_order`` keeps)."""
+    attributes and values (NaN where NaN), text as str, Fletcher-32 on every non-empty
+    numeric variable (``checksums``: the files of runs and stores have them); xarray's
+    ``netcdf4`` engine gives the Dataset its ``h5netcdf`` engine gives. rbstab's files are
+    flat: no groups (a file with one would need each group compared too). ``attribute_order``:
+    also the order the attributes were written in (netCDF-C numbers them by HDF5's creation
+    order, which only a dataset made with ``track_order`` keeps)."""
     import xarray as xr
 
     with h5py.File(path, "r") as h5, netCDF4.Dataset(path) as nc:
+        assert not nc.groups and not any(isinstance(h5[k], h5py.Group) for k in h5), "a group: compare it too"
         nc.set_auto_mask(False)
         assert nc.data_model == "NETCDF4"
         datasets = [k for k in h5 if isinstance(h5[k], h5py.Dataset)]
         names = [k for k in datasets if not _dimension_only(h5[k])]  # a dimension without a variable is no variable
         assert sorted(nc.variables) == sorted(names)
         scales = {k: h5[k].shape[0] for k in datasets if h5[k].is_scale}
+        dimids = {int(h5[k].attrs["_Netcdf4Dimid"]): k for k in scales if "_Netcdf4Dimid" in h5[k].attrs}
         assert {k: len(d) for k, d in nc.dimensions.items()} == scales
         expected = _h5_attrs(h5)
         assert list(nc.ncattrs()) == list(expected) or not attribute_order
@@ -94,9 +109,14 @@ def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
             assert _same(nc.getncattr(key), value), f"global attribute {key}"
         for name in names:
             var, ds = nc.variables[name], h5[name]
-            # a dimension's coordinate is its scale; any other dataset has scales attached
-            dims = (name,) if ds.is_scale else tuple(
-                d[0].name.rpartition("/")[2] if len(d) else f"(no scale on axis {i})" for i, d in enumerate(ds.dims))
+            # a dimension's coordinate is its scale; any other dataset has scales attached; a
+            # variable of more dimensions named as its first (an analysis file's push_direction)
+            # is that dimension's scale, its dimensions in _Netcdf4Coordinates
+            if ds.is_scale and ds.ndim > 1:
+                dims = tuple(dimids[int(i)] for i in ds.attrs["_Netcdf4Coordinates"])
+            else:
+                dims = (name,) if ds.is_scale else tuple(d[0].name.rpartition("/")[2] if len(d) else
+                                                         f"(no scale on axis {i})" for i, d in enumerate(ds.dims))
             assert var.dimensions == dims, name
             assert var.shape == ds.shape, name
             expected = _h5_attrs(ds)
@@ -115,7 +135,7 @@ def assert_netcdf_c_reads(path: Path, *, attribute_order: bool = True) -> None:
             else:
                 assert var.dtype == ds.dtype, name
                 np.testing.assert_array_equal(var[...], ds[...], err_msg=name)  # NaN equals NaN
-                assert var.filters()["fletcher32"] or ds.size == 0, name
+                assert var.filters()["fletcher32"] or ds.size == 0 or not checksums, name
     with xr.open_dataset(path, engine="h5netcdf") as a, xr.open_dataset(path, engine="netcdf4") as b:
         xr.testing.assert_identical(a.load(), b.load())
 
@@ -285,6 +305,218 @@ def test_netcdf_c_reads_a_sign_law_run_file_with_its_switchings(tmp_path):
         assert nc["switching_time"].dimensions == ("switching",) and nc["switching_time"].units == "s"
         assert nc["sliding_mode"].dimensions == ("time", "axis")
         np.testing.assert_array_equal(nc["switching_time"][...], result.switching.time)
+
+
+# -- a tree's run files ----------------------------------------------------------------------------
+
+EXAMPLES = ROOT / "configs" / "examples"
+#: A tree's run kept short.
+TREE_SHORT = {"t_end": 0.2, "n_samples": 21}
+#: A tree's run file written before its per-body and per-joint summary figures were stored
+#: flattened (as 2-D attributes, which netCDF-C does not open): configs/examples/stance_ankle_hip.yaml
+#: with simulation.t_end=0.1 and n_samples=11.
+OLD_CHAIN_RUN = Path(__file__).resolve().parent / "data" / "chain_run_file_e43b44e.h5"
+
+
+def _example(name: str) -> dict:
+    return read_yaml_file(EXAMPLES / f"{name}.yaml")
+
+
+def _trees() -> dict[str, dict]:
+    """Trees of each kind, as mappings: two bodies with saturated joint torques (the stance),
+    an embedded joint (the knee), one body in the bodies/joints spelling, three bodies
+    pushed by disturbances."""
+    stance = _example("stance_ankle")
+    one = {"name": "one_tree", "gravity": stance["body"]["gravity"],
+           "bodies": [{"name": "body", "mass": stance["body"]["mass"], "inertia": stance["body"]["inertia"]}],
+           "joints": [{"name": "ankle", "parent": "ground", "parent_point": [0.0, 0.0, 0.0], "child": "body",
+                       "child_point": stance["body"]["attachment_point"], "variant": "permanent",
+                       "k_r": stance["controller"]["k_r"], "l_r": stance["controller"]["l_r"]}],
+           "initial_state": {"body": {"theta": stance["initial_state"]["theta"]}}}
+    three = copy.deepcopy(_example("double_pendulum"))
+    three["name"] = "three_pushed"
+    three["bodies"].append({"name": "hand", "mass": 0.5, "inertia": [0.01, 0.01, 0.001]})
+    three["joints"].append({"name": "wrist", "parent": "lower", "parent_point": [0.0, 0.0, -0.5], "child": "hand",
+                            "child_point": [0.0, 0.0, 0.1], "variant": "permanent", "k_r": [1, 1, 1],
+                            "l_r": [0.1, 0.1, 0.1]})
+    three["initial_state"]["hand"] = {"theta": [0.2, 0.0, 0.0]}
+    three["disturbances"] = [
+        {"kind": "impulse", "quantity": "torque", "value": [0, 0.5, 0], "start": 0.05, "body": "hand"},
+        {"kind": "step", "value": [1, 0, 0], "start": 0.1, "body": "upper", "point": [0, 0, 0.1]}]
+    trees = {"saturated": _example("stance_ankle_hip"), "embedded": _example("knee"), "one_body": one,
+             "three_pushed": three}
+    for tree in trees.values():
+        tree["simulation"] = {**tree.get("simulation", {}), **TREE_SHORT}
+    return trees
+
+
+@pytest.fixture(scope="module")
+def tree_runs():
+    return {name: simulate(config_from_mapping(tree)) for name, tree in _trees().items()}
+
+
+def _equal(a, b) -> bool:
+    """Summary figures equal, NaN where NaN, a list as its array."""
+    try:
+        np.testing.assert_equal(a, b)
+    except AssertionError:
+        return False
+    return True
+
+
+@pytest.mark.parametrize("store", ["full", "thinned", "summary"])
+@pytest.mark.parametrize("tree", ["saturated", "embedded", "one_body", "three_pushed"])
+def test_netcdf_c_reads_a_chain_run_file(tree_runs, tree, store, tmp_path):
+    """A tree's run file is netCDF-4: its figures per body or joint (n_members, 3) are 1-D
+    attributes with their shapes in shape_of_summary, and read back in their shape."""
+    result = tree_runs[tree]
+    assert result.status == "success", result.message
+    chain = result.config.chain
+    path = write_result(result, tmp_path / f"{tree}.h5", store=store)
+    assert_netcdf_c_reads(path, attribute_order=False)
+    with netCDF4.Dataset(path) as nc:
+        assert nc.getncattr("rbstab_format") == "rbstab-chain-run-1"
+        assert {k: len(nc.dimensions[k]) for k in ("body", "joint")} == {"body": chain.size,
+                                                                         "joint": len(chain.joint_names)}
+        shapes = json.loads(nc.getncattr("shape_of_summary"))
+        assert shapes["final_theta"] == [chain.size, 3]
+        assert shapes["max_abs_constraint_error"] == [len(chain.joint_names), 3]
+        assert set(shapes) == {k for k, v in result.summary.items() if np.ndim(v) == 2}
+        for key, shape in shapes.items():
+            np.testing.assert_array_equal(np.reshape(nc.getncattr(f"summary_{key}"), shape), result.summary[key])
+    # as rbstab reads it: the run's figures in their shape, the attributes of the run in memory
+    assert _equal(read_summary(path)["summary"], plain(result.summary))
+    attrs = read_attributes(path)
+    assert "shape_of_summary" not in attrs and _equal(attrs["summary_final_theta"], result.summary["final_theta"])
+    if store == "full":
+        ds, memory = read_dataset(path), result_dataset(result)
+        assert set(ds.attrs) == set(memory.attrs)
+        for key in (k for k in memory.attrs if k.startswith("summary_")):
+            assert _equal(ds.attrs[key], memory.attrs[key]), key
+            assert np.shape(ds.attrs[key]) == np.shape(memory.attrs[key]), key
+
+
+def test_a_chain_run_file_written_before_reads_as_one_written_now(tmp_path):
+    """A tree's file of 2-D summary attributes (as rbstab wrote them before) reads as before:
+    read_attributes, read_summary, read_dataset and rbstab show give its figures in the shape
+    they give a file written now, with the values the file holds."""
+    with h5py.File(OLD_CHAIN_RUN, "r") as h5:
+        stored = {k: h5.attrs[k] for k in h5.attrs if k.startswith("summary_")}
+        assert "shape_of_summary" not in h5.attrs and stored["summary_final_theta"].shape == (2, 3)
+    result = simulate(load_config(EXAMPLES / "stance_ankle_hip.yaml", ["simulation.t_end=0.1",
+                                                                       "simulation.n_samples=11"]))
+    new = write_result(result, tmp_path / "stance_ankle_hip.h5")
+    old_attrs, new_attrs = read_attributes(OLD_CHAIN_RUN), read_attributes(new)
+    assert set(old_attrs) == set(new_attrs)
+    old_ds, new_ds = read_dataset(OLD_CHAIN_RUN), read_dataset(new)
+    assert set(old_ds.attrs) == set(new_ds.attrs)
+    for key, value in stored.items():
+        assert _equal(old_attrs[key], plain(value)) and _equal(old_ds.attrs[key], value), key
+        assert np.shape(old_attrs[key]) == np.shape(new_attrs[key]), key
+        assert np.shape(old_ds.attrs[key]) == np.shape(new_ds.attrs[key]), key
+        assert type(old_ds.attrs[key]) is type(new_ds.attrs[key]), key
+    assert read_summary(OLD_CHAIN_RUN)["summary"].keys() == read_summary(new)["summary"].keys()
+    shown = [CliRunner().invoke(cli, ["show", str(p)]) for p in (OLD_CHAIN_RUN, new)]
+    assert all(r.exit_code == 0 for r in shown), [r.output for r in shown]
+    lines = [[line.split()[0] for line in r.output.splitlines()[1:] if line.startswith("  ")] for r in shown]
+    assert lines[0] == lines[1]  # the same figures, each on its line
+    final = [next(line for line in r.output.splitlines() if line.strip().startswith("final_theta")) for r in shown]
+    assert "legs [" in final[0] and "trunk [" in final[0] and final[0].count("[") == final[1].count("[")
+
+
+# -- every other kind of file ------------------------------------------------------------------------
+
+
+def _rbstab(*args: str) -> None:
+    result = CliRunner().invoke(cli, [*args, "-q"], catch_exceptions=False)
+    assert result.exit_code == 0, result.output
+
+
+@pytest.fixture(scope="module")
+def files(sweeps, tmp_path_factory) -> dict[str, Path]:
+    """One file of each kind the run files and one body's stores above leave out, each with
+    every part it can have: a tree's store file; the analysis files of one body and of a tree
+    (certificate, basin map, pushes, basin stability; one body's also verified); a sweep's
+    robustness; a spec's recovery curves; the studies' files."""
+    out = tmp_path_factory.mktemp("kinds")
+    found = {}
+    tree = run_sweep(spec_from_mapping({"name": "tree", "base": str(EXAMPLES / "stance_ankle_hip.yaml"),
+                                        "grid": {"joints.hip.k_r.0": [400.0, 500.0]}},
+                                       overrides=[f"simulation.{k}={v}" for k, v in TREE_SHORT.items()]),
+                     out, jobs=1, chunk_size=2, layout="chunk", store="thinned", progress=False)
+    (found["tree_store"],) = _files(tree)
+    pendulum, stance = str(EXAMPLES / "saturated_pendulum.yaml"), str(EXAMPLES / "stance_ankle_hip.yaml")
+    _rbstab("analyze", pendulum, "-o", str(out), "--samples", "300", "-j", "1", "--set", "simulation.n_samples=201",
+            "--push", "torque", "--push-directions", "4", "--push-tol", "1e-2", "--basin",
+            "initial_state.omega.0=-1:1:3", "--basin", "initial_state.omega.1=-1:1:2", "--basin-samples", "51",
+            "--basin-stability", "initial_state.omega.0=-1:1", "-n", "4", "--verify")
+    found["analysis"] = out / "saturated_pendulum.analysis.nc"
+    _rbstab("analyze", stance, "-o", str(out), "--samples", "200", "-j", "1", "--set", "simulation.t_end=1",
+            "--push", "torque", "--push-body", "trunk", "--push-directions", "3", "--push-tol", "1e-2", "--basin",
+            "initial_state.legs.theta.0=-0.1:0.1:3", "--basin", "initial_state.trunk.theta.0=-0.1:0.1:2",
+            "--basin-samples", "51", "--basin-stability", "initial_state.trunk.theta.0=-0.1:0.1", "-n", "4")
+    found["chain_analysis"] = out / "stance_ankle_hip.analysis.nc"
+    _rbstab("analyze", "--robustness", str(sweeps["full"].directory), "-o", str(out))
+    found["robustness"] = out / "ncc_full.robustness.analysis.nc"
+    spec = out / "limits.yaml"
+    spec.write_text(f"name: limits\nbase: {pendulum}\ngrid:\n  controller.k_r.0: [200.0, 300.0]\n")
+    _rbstab("analyze", str(spec), "-o", str(out), "--set", "simulation.n_samples=201", "--push", "torque",
+            "--push-direction", "1,0,0", "--push-tol", "1e-2", "-j", "1", "--samples", "300")
+    found["recovery"] = out / "limits.recovery.analysis.nc"
+    short = [a for k, v in TREE_SHORT.items() for a in ("--set", f"simulation.{k}={v}")]
+    _rbstab("sensitivity", str(EXAMPLES / "double_pendulum.yaml"), "-n", "4", *short, "-o", str(out), "-j", "1",
+            "--no-progress", "--vary=bodies.1.mass=uniform:[0.5,2]",
+            "--vary=initial_state.upper.theta.0=uniform:[0.3,0.9]")
+    found["sensitivity"] = out / "double_pendulum" / "sensitivity.nc"
+    _rbstab("tune", stance, "--trials", "4", "--generation", "4", "--vary", "joints.hip.l_r.0=uniform:[25,100]",
+            "--minimize", "lyapunov_final", *short, "-o", str(out))
+    found["tuning"] = out / "stance_ankle_hip" / "tuning.nc"
+    return found
+
+
+#: Some variables of each kind of :func:`files`: each part it was made with.
+PARTS = {"tree_store": ["theta", "joint_theta", "final_theta_trunk_x"],
+         "analysis": ["jacobian", "basin_outcome", "push_threshold", "stability_value", "sublevel_verified_box"],
+         "chain_analysis": ["equilibrium_theta", "lyapunov_hessian", "basin_outcome", "push_threshold",
+                            "stability_value"],
+         "robustness": ["stable_fraction", "run_value"], "recovery": ["push_minimum", "controller.k_r.0"],
+         "sensitivity": ["S1", "ST"], "tuning": ["lyapunov_final", "joints.hip.l_r.0"]}
+
+
+@pytest.mark.parametrize("kind", list(PARTS))
+def test_netcdf_c_reads_each_other_kind_of_file(files, kind):
+    path = files[kind]
+    assert_netcdf_c_reads(path, attribute_order=False, checksums=kind == "tree_store")
+    with netCDF4.Dataset(path) as nc:
+        assert set(PARTS[kind]) <= set(nc.variables), set(PARTS[kind]) - set(nc.variables)
+
+
+#: A UDUNITS-2 string as rbstab writes them: "1", or symbols of SI units, each with an
+#: integer power, separated by spaces (``N m s``, ``rad s-1``, ``N m rad-1``).
+UDUNITS = re.compile(r"1|(?:(?:kg|m|s|rad|N|J|W|Hz)(?:-?[1-9])?)(?: (?:kg|m|s|rad|N|J|W|Hz)(?:-?[1-9])?)*")
+#: Variables of analysis files whose entries are in different units (per state, per parameter).
+MIXED_UNITS = ("jacobian", "jacobian_error", "lyapunov_hessian", "rate_hessian", "threshold", "run_value",
+               "stability_value", "stability_low", "stability_threshold_low")
+
+
+def test_units_are_udunits_where_a_file_claims_cf(files, sweeps, tree_runs, tmp_path):
+    """Every file says Conventions = "CF-1.10": each numeric variable's units (where it has
+    one: a variable whose entries are in different units has none) is a UDUNITS string; text
+    has no units (CF 3.1)."""
+    paths = [*files.values(), _files(sweeps["thinned"])[0],
+             write_result(simulate(load_config(CASE3, SHORT)), tmp_path / "case3.h5"),
+             write_result(tree_runs["three_pushed"], tmp_path / "three.h5")]
+    for path in paths:
+        with netCDF4.Dataset(path) as nc:
+            assert nc.getncattr("Conventions") == "CF-1.10", path
+            for name, var in nc.variables.items():
+                units = getattr(var, "units", None)
+                if var.dtype is str or var.dtype.kind == "S":
+                    assert units is None, f"{path.name}: {name} is text, with units {units!r}"
+                elif units is not None:
+                    assert UDUNITS.fullmatch(units), f"{path.name}: {name}: units {units!r}"
+            for name in set(MIXED_UNITS) & set(nc.variables):
+                assert "units" not in nc[name].ncattrs(), f"{path.name}: {name} (entries in different units)"
 
 
 # -- ncdump ---------------------------------------------------------------------------------------

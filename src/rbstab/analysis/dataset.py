@@ -1,14 +1,17 @@
 """Analysis files: the results of :func:`rbstab.analyze` and of :func:`rbstab.analysis.robustness`
 as netCDF-4 (HDF5) files, their reader, and the ``--json`` record.
 
-The conventions of the run results (:mod:`rbstab.io.hdf5`): every variable has ``units``
-(CF/UDUNITS spelling) and ``long_name`` (and ``description`` where a formula helps),
-3-vectors are split by state block over the ``axis`` dimension (x, y, z), and the global
-attributes say what the file is and where it came from (``rbstab_format``, ``name``,
-``config``, ``config_hash`` and :func:`rbstab.io.metadata.provenance_attributes`:
-``Conventions``, ``rbstab_version``, ``git_commit``, ``git_dirty``, library versions,
-``command_line``, ``created``). Open with ``xarray.open_dataset(path, engine="h5netcdf")`` or
-:func:`read_analysis`.
+The conventions of the run results (:mod:`rbstab.io.hdf5`): every variable has
+``long_name`` (and ``description`` where a formula helps) and every numeric one ``units``
+(CF/UDUNITS spelling; text has none), 3-vectors are split by state block over the ``axis``
+dimension (x, y, z), and the global attributes say what the file is and where it came from
+(``rbstab_format``, ``name``, ``config``, ``config_hash`` and
+:func:`rbstab.io.metadata.provenance_attributes`: ``Conventions``, ``rbstab_version``,
+``git_commit``, ``git_dirty``, library versions, ``command_line``, ``created``). A variable
+whose entries are in different units (``jacobian``, the Hessians, a value per parameter or
+drawn key) has no ``units``: no CF units string gives them; its long name or description
+says where they are. Open with ``xarray.open_dataset(path)`` (engine ``h5netcdf`` or
+``netcdf4``) or :func:`read_analysis`.
 
 Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
 
@@ -93,12 +96,17 @@ def _rate_units(units: str) -> str:
     return units[: -len("s-1")] + "s-2" if units.endswith("s-1") else f"{units} s-1"
 
 
-def _var(dims, data, units: str, long_name: str, description: str = "") -> tuple:
-    """(dims, data, attrs) of one variable of a file."""
-    attrs = {"units": units, "long_name": long_name}
+def _var(dims, data, units: str | None, long_name: str, description: str = "") -> tuple:
+    """(dims, data, attrs) of one variable of a file: ``units`` (CF/UDUNITS) on numbers; none
+    on text (CF 3.1), nor where ``units`` is None: entries in different units (a matrix over
+    the state, a value per parameter), which no CF units string gives; the long name or
+    description says where each entry's units are."""
+    data = np.asarray(data)
+    attrs = {"units": units} if units is not None and data.dtype.kind not in "OSU" else {}
+    attrs["long_name"] = long_name
     if description:
         attrs["description"] = description
-    return tuple(dims), np.asarray(data), attrs
+    return tuple(dims), data, attrs
 
 
 def _blocks(prefix: str, layout, y: np.ndarray, long_name: str, rate: bool = False) -> dict:
@@ -127,16 +135,16 @@ def _linearisation_variables(analysis) -> dict:
     layout = analysis.layout
     s = lin.eigenvalues
     omega_n, zeta, tau = lin.natural_frequency, lin.damping_ratio, lin.time_constant
-    mixed = "mixed: (units of state) s-1 / (units of state_wrt), see state_units"
+    mixed = "entries in mixed units: (units of state) s-1 / (units of state_wrt), from state_units"
     return {
         **_blocks("equilibrium", layout, lin.equilibrium, "equilibrium state y_e"),
         **_blocks("rest_residual", layout, lin.rest_residual, "dy/dt at the equilibrium (zero at a rest point)",
                   rate=True),
         "rest_tolerance": _var((), lin.rest_tolerance, "1", "bound on |dy/dt| of the rest check (SI rates)"),
-        "jacobian": _var(("state", "state_wrt"), lin.jacobian, mixed, "Jacobian A = d(dy/dt)/dy at the equilibrium",
-                         "central differences of the compiled right-hand side, extrapolated to step zero"),
-        "jacobian_error": _var(("state", "state_wrt"), lin.jacobian_error, mixed,
-                               "error estimate of each entry of the Jacobian (Richardson table)"),
+        "jacobian": _var(("state", "state_wrt"), lin.jacobian, None, "Jacobian A = d(dy/dt)/dy at the equilibrium",
+                         f"central differences of the compiled right-hand side, extrapolated to step zero; {mixed}"),
+        "jacobian_error": _var(("state", "state_wrt"), lin.jacobian_error, None,
+                               "error estimate of each entry of the Jacobian (Richardson table)", mixed),
         "eigenvalue_real": _var(("mode",), s.real, "s-1", "real part of the eigenvalue s of A"),
         "eigenvalue_imag": _var(("mode",), s.imag, "rad s-1", "imaginary part of the eigenvalue s of A"),
         "natural_frequency": _var(("mode",), omega_n, "rad s-1", "natural frequency |s|"),
@@ -178,15 +186,16 @@ def _certificate_variables(analysis) -> dict:
     if c is None:
         return {}
     layout = analysis.layout
-    per_unit = "mixed: per unit of state and of state_wrt (see state_units)"
+    per_unit = "per unit of state and of state_wrt (from state_units)"
     return {
         "lyapunov_equilibrium": _var((), c.lyapunov_equilibrium, "J", "v at the equilibrium"),
-        "lyapunov_hessian": _var(("state", "state_wrt"), c.lyapunov_hessian, f"J, {per_unit}",
-                                 "Hessian of the Lyapunov function v at the equilibrium"),
-        "hessian_min_eigenvalue": _var((), c.hessian_min_eigenvalue, "1",
+        "lyapunov_hessian": _var(("state", "state_wrt"), c.lyapunov_hessian, None,
+                                 "Hessian of the Lyapunov function v at the equilibrium",
+                                 f"entries in mixed units: J {per_unit}"),
+        "hessian_min_eigenvalue": _var((), c.hessian_min_eigenvalue, None,
                                        "smallest eigenvalue of the Hessian of v (mixed units)"),
-        "rate_hessian": _var(("state", "state_wrt"), c.rate_hessian, f"W, {per_unit}",
-                             "Hessian of the analytic dv/dt at the equilibrium"),
+        "rate_hessian": _var(("state", "state_wrt"), c.rate_hessian, None, "Hessian of the analytic dv/dt at the "
+                             "equilibrium", f"entries in mixed units: W {per_unit}"),
         "rate_eigenvalue": _var(("rate_mode",), c.rate_eigenvalues, "s-1",
                                 "generalised eigenvalue mu of (Hessian of dv/dt, Hessian of v)",
                                 "all mu < 0: negative definite; some mu = 0: semi-definite (LaSalle)"),
@@ -301,13 +310,15 @@ def _stability_variables(analysis) -> tuple[dict, dict, dict]:
     coords = {"stability_key": _var(("stability_key",), np.array(b.keys, dtype=object), "1", "what was drawn")}
     variables = {
         "stability_units": _var(("stability_key",), np.array(b.units, dtype=object), "1", "units of each key"),
-        "stability_value": _var(("draw", "stability_key"), b.values, "1",
+        "stability_value": _var(("draw", "stability_key"), b.values, None,
                                 "the draws (units per key: stability_units)"),
         "stability_recovered": _var(("draw",), b.recovered.astype(np.int8), "1", "the draw recovered (1) or not (0)"),
         "stability_lyapunov_start": _var(("draw",), b.lyapunov_start, "J", "v where the draw starts (of the drawn "
                                          "state, or just after the drawn push)"),
-        "stability_low": _var(("stability_key",), b.low, "1", "low end of the uniform box"),
-        "stability_high": _var(("stability_key",), b.high, "1", "high end of the uniform box"),
+        "stability_low": _var(("stability_key",), b.low, None, "low end of the uniform box (units per key: "
+                              "stability_units)"),
+        "stability_high": _var(("stability_key",), b.high, None, "high end of the uniform box (units per key: "
+                               "stability_units)"),
         "stability_auc": _var(("stability_key",), auc, "1", "P(recovered value > failed value) (ties half)",
                               "a one-sided measure: about 0.5 also where the recovered draws lie inside or "
                               "outside an interval (stability_recovered_side)"),
@@ -316,9 +327,9 @@ def _stability_variables(analysis) -> tuple[dict, dict, dict]:
                                          "below: x < threshold_high; above: x > threshold_low; inside: threshold_low "
                                          "< x < threshold_high; outside: x < threshold_low or x > threshold_high; "
                                          "empty where the key's draws all recovered or all failed"),
-        "stability_threshold_low": _var(("stability_key",), low, "1", "lower threshold of the key's rule (units per "
+        "stability_threshold_low": _var(("stability_key",), low, None, "lower threshold of the key's rule (units per "
                                         "key: stability_units; NaN where the rule has none)"),
-        "stability_threshold_high": _var(("stability_key",), high, "1", "upper threshold of the key's rule (units "
+        "stability_threshold_high": _var(("stability_key",), high, None, "upper threshold of the key's rule (units "
                                          "per key: stability_units; NaN where the rule has none)"),
         "stability_balanced_accuracy": _var(("stability_key",), accuracy, "1", "balanced accuracy of the key's rule",
                                             "mean of the fractions of the recovered and of the failed draws the rule "
@@ -438,22 +449,24 @@ def robustness_content(result, command_line: str | None = None) -> tuple[dict, d
         "stable_fraction_low": _var(("group",), [g.interval[0] for g in groups], "1", "Wilson interval, lower"),
         "stable_fraction_high": _var(("group",), [g.interval[1] for g in groups], "1", "Wilson interval, upper"),
         "auc": _var(gp, table["auc"], "1", "P(value of a stable run > value of an unstable run)"),
-        "threshold": _var(gp, table["threshold"], "1", "best single threshold (units of the parameter)"),
+        "threshold": _var(gp, table["threshold"], None, "best single threshold (units of the parameter)"),
         "stable_side": _var(gp, side, "1", "side of the threshold where the stable runs lie"),
         "balanced_accuracy": _var(gp, table["balanced_accuracy"], "1", "balanced accuracy of the threshold"),
         "rule_side": _var(gp, rule_side, "1", "where the stable runs lie in the best rule of one or two "
                           "thresholds: below, above, inside, outside"),
-        "rule_low": _var(gp, rule["rule_low"], "1", "the rule's lower threshold (units of the parameter; NaN: none)"),
-        "rule_high": _var(gp, rule["rule_high"], "1", "the rule's upper threshold (units of the parameter; NaN: none)"),
+        "rule_low": _var(gp, rule["rule_low"], None, "the rule's lower threshold (units of the parameter; NaN: "
+                         "none)"),
+        "rule_high": _var(gp, rule["rule_high"], None, "the rule's upper threshold (units of the parameter; NaN: "
+                          "none)"),
         "rule_balanced_accuracy": _var(gp, rule["rule_balanced_accuracy"], "1", "balanced accuracy of the rule"),
         "rule_explains": _var(gp, explains, "1", f"the rule's balanced accuracy reaches {EXPLAINS_BAR:g}: it "
                               "explains which runs converged"),
-        **{k: _var(gp, table[k], "1", k.replace("_", " ") + " value (units of the parameter)")
+        **{k: _var(gp, table[k], None, k.replace("_", " ") + " value (units of the parameter)")
            for k in ("stable_min", "stable_max", "unstable_min", "unstable_max")},
         "run_group": _var(("run",), np.asarray(result.runs["base"], dtype=object), "1", "group of the run"),
         "run_stable": _var(("run",), np.asarray(result.runs["stable"], dtype=np.int8), "1", "run converged (1)"),
         "run_value": _var(("run", "parameter"), np.stack([result.runs["values"][p] for p in parameters], axis=1)
-                          if parameters else np.zeros((len(result.runs["base"]), 0)), "1",
+                          if parameters else np.zeros((len(result.runs["base"]), 0)), None,
                           "parameter value of the run (units of the parameter)"),
     }
     coords = {"group": _var(("group",), np.array([g.base for g in groups], dtype=object), "1", "base configuration"),

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
+from ..layout import parameter_attributes
 
 __all__ = ["Recovery", "recovery_across", "recovery_content", "RECOVERY_SUFFIX"]
 
@@ -332,8 +333,8 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
                              "the configuration's run id in the spec's table")}
     for key in result.keys:
         values = np.asarray(result.values[key])
-        coords[key] = _var(("point",), values if values.dtype.kind in "fiub" else values.astype(object), "1",
-                           f"varied key {key}")
+        coords[key] = _var(("point",), values if values.dtype.kind in "fiub" else values.astype(object),
+                           parameter_attributes(key).get("units"), f"varied key {key}")
         coords[key][2]["config_key"] = key
     data: dict[str, tuple] = {
         "sublevel": _var(("point",), [r["sublevel"] for r in result.records], "J",

@@ -30,8 +30,16 @@ A chain run's file (:func:`write_result` of a tree's run, ``rbstab_format`` :dat
 (``lyapunov_translational``, ``lyapunov_rotational``, ``lyapunov_constraint``,
 ``lyapunov_gravity``, each summed over the bodies and joints) and
 rates along ``time``; the global attributes ``bodies`` and ``joints`` list the names.
+Its summary figures of one 3-vector per body or joint (shape ``(n_bodies, 3)`` or
+``(n_joints, 3)``, rows in the order of ``bodies`` or ``joints``) are stored flattened
+(row-major: ``legs_x, legs_y, legs_z, trunk_x, ...``), as netCDF-4 allows only 1-D
+attributes; the global attribute ``shape_of_summary`` (JSON, :data:`SUMMARY_SHAPES`) gives
+each one's shape, ``{"final_theta": [2, 3], ...}``. :func:`read_attributes` and
+:func:`read_dataset` give them back in their shape, as they read the files written before
+(whose 2-D attributes netCDF-C does not open).
 
-Open with ``xarray.open_dataset(path, engine="h5netcdf")``, or :func:`read_dataset`
+Open with ``xarray.open_dataset(path)`` (either of xarray's netCDF engines, ``netcdf4``
+or ``h5netcdf``), or :func:`read_dataset`
 (checksums verified first); :func:`result_dataset` gives the same Dataset for a run in
 memory, from the same tables (:func:`variable_attributes`, :data:`COORDINATE_ATTRIBUTES`,
 :func:`result_attributes`). Files are written to a
@@ -43,6 +51,7 @@ Fletcher-32 checksum and the file the SHA-256 of its attributes and text
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 from typing import Any
@@ -86,6 +95,7 @@ __all__ = [
     "is_run_file",
     "is_chain_run_file",
     "CHAIN_FORMAT",
+    "SUMMARY_SHAPES",
     "NotAResultFile",
 ]
 
@@ -117,6 +127,55 @@ def _attr_value(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return np.asarray(value, dtype=float)
     return value
+
+
+#: Global attribute of a chain run's file: the shape of each summary figure of more than one
+#: dimension, stored flattened (row-major), as JSON: ``{"final_theta": [2, 3], ...}``.
+SUMMARY_SHAPES = "shape_of_summary"
+
+
+def _netcdf_attributes(attrs: dict[str, Any]) -> dict[str, Any]:
+    """``attrs`` as a netCDF-4 file can hold them: every summary figure of more than one
+    dimension (a chain's per body or joint 3-vectors, shape (n_members, 3)) flattened in
+    row-major order, and their shapes in :data:`SUMMARY_SHAPES` after ``units_of_summary``.
+    Any other attribute as it is (1-D at most)."""
+    shapes = {key[len("summary_"):]: list(np.shape(value)) for key, value in attrs.items()
+              if key.startswith("summary_") and np.ndim(value) > 1}
+    if not shapes:
+        return attrs
+    text = json.dumps(shapes, separators=(",", ":"))
+    out = {}
+    for key, value in attrs.items():
+        out[key] = np.ravel(value) if key.startswith("summary_") and key[len("summary_"):] in shapes else value
+        if key == "units_of_summary":
+            out[SUMMARY_SHAPES] = text
+    out.setdefault(SUMMARY_SHAPES, text)
+    return out
+
+
+def _summary_in_shape(attrs: dict[str, Any], path: str | os.PathLike) -> dict[str, Any]:
+    """Global attributes as read (numpy values) with the summary figures that
+    :func:`_netcdf_attributes` flattened back in their shape (row-major) and
+    :data:`SUMMARY_SHAPES` left out: a file of either layout reads the same (one whose
+    figures are 2-D attributes, as written before, has no :data:`SUMMARY_SHAPES`).
+
+    Raises
+    ------
+    NotAResultFile
+        If :data:`SUMMARY_SHAPES` is not JSON of shapes that fit the figures.
+    """
+    text = attrs.pop(SUMMARY_SHAPES, None)
+    if text is None:
+        return attrs
+    try:
+        for name, shape in json.loads(attribute_value(text)).items():
+            key = f"summary_{name}"
+            if key in attrs:
+                attrs[key] = np.reshape(np.asarray(attrs[key]), [int(n) for n in shape])
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise NotAResultFile(f"{path}: the {SUMMARY_SHAPES} attribute does not fit the summary figures ({exc})"
+                             ) from None
+    return attrs
 
 
 #: What a result file stores (``rbstab sweep --store``): ``full``, every variable at every
@@ -305,7 +364,7 @@ def _file_image(time: np.ndarray, outputs: dict[str, np.ndarray], attrs: dict[st
             scale.close()
         if switching is not None:
             _write_events(w, root, switching)
-        for key, value in attrs.items():
+        for key, value in _netcdf_attributes(attrs).items():
             w.attr(root, key, value)
         f.flush()
         w.attr(root, DIGEST_ATTR, content_digest(f))
@@ -452,6 +511,7 @@ def read_dataset(path: str | os.PathLike):
         ds = ds.load()
     for key in (DIGEST_ATTR, DATA_DIGEST_ATTR):
         ds.attrs.pop(key, None)
+    ds.attrs = _summary_in_shape(dict(ds.attrs), path)
     return ds
 
 
@@ -528,12 +588,13 @@ def read_attributes(path: str | os.PathLike, *, verify: bool = True, data: bool 
     """
     path = Path(path)
     with open_result(path) as f:
-        attrs = {k: attribute_value(v) for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
-        if attrs.get("rbstab_format") in RUN_FORMATS and verify:
+        raw = {k: v for k, v in f.attrs.items() if k not in (DIGEST_ATTR, DATA_DIGEST_ATTR)}
+        run = attribute_value(raw.get("rbstab_format")) in RUN_FORMATS
+        if run and verify:
             verify_open_file(f, path, data=data)
-    if attrs.get("rbstab_format") not in RUN_FORMATS:
+    if not run:
         raise NotAResultFile(f"{path}: not an rbstab run result (no rbstab_format = {FORMAT!r} attribute)")
-    return attrs
+    return {k: attribute_value(v) for k, v in _summary_in_shape(raw, path).items()}
 
 
 def read_summary(path: str | os.PathLike) -> dict[str, Any]:
