@@ -12,7 +12,8 @@ from rbstab.api import run as run_one
 from rbstab.resources import memory_problem
 from rbstab.warning_codes import coded
 
-from ._common import MachineFault, NotComputed, command_line, load_configs, prepare_output
+from ._common import (MachineFault, NotComputed, command_line, load_configs, prepare_output, show_config_warnings,
+                      stiffness_warnings)
 from .console import get_console
 from .options import console_options, json_option, method_option, output_option, set_option
 
@@ -165,6 +166,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")),
                     chain=any(not hasattr(c, "body") for c in loaded))
     _load_kernels(loaded)
+    show_config_warnings(stiffness_warnings(loaded), len(loaded))
     not_computed = 0
     for written, config in enumerate(loaded):
         try:
