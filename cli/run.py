@@ -53,14 +53,17 @@ _REPLACED = {"new": None, "identical": "identical", "replace": "other"}
 
 
 def rate_check_text(summary: dict, path: Path) -> str:
-    """``pass``, ``n/a``, or ``fail (<why>)`` (:func:`rbstab.diagnostics.file_rate_check_reason`)."""
+    """``pass``, ``n/a``, or ``fail (<why>)`` (:func:`rbstab.diagnostics.file_rate_check_reason`,
+    with the fastest mode of the run's linearisation at rest)."""
     from rbstab.diagnostics import file_rate_check_reason  # heavy: numpy, h5py
 
     check = str(summary.get("lyapunov_rate_check", "n/a"))
     if check != "fail":
         return check
+    from rbstab.analysis.stiffness import fastest_rate  # heavy: numba, scipy
+
     try:
-        return f"fail ({file_rate_check_reason(path, summary)})"
+        return f"fail ({file_rate_check_reason(path, summary, fastest_rate)})"
     except (OSError, KeyError):
         return check
 

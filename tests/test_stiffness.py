@@ -1,13 +1,16 @@
-"""A stiff mode said before it runs (W008)."""
+"""A stiff mode said before it runs (W008), and the rate check's samples against the fastest mode."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 
 from conftest import ROOT
 from rbstab.analysis.stiffness import STABILITY_LIMIT
+from rbstab.config.schema import MAX_SAMPLES
+from rbstab.diagnostics import rate_check_reason
 from rbstab.engine.tableaus import TABLEAUS
 from rbstab_cli.main import cli
 
@@ -15,10 +18,41 @@ KNEE = ROOT / "configs" / "examples" / "knee.yaml"
 STIFF_KNEE = ["--set", "joints.knee.k_r=[1e11, 1e11, 1e11]"]  # N m/rad: |s| 5.57e6 1/s
 SHIPPED = sorted((ROOT / "configs").glob("*/*.yaml"))
 
+#: A standing triple inverted pendulum (ankle, knee, hip; segments of a 70 kg, 1.75 m adult
+#: after Winter's table, both legs together, their lateral offset of 0.09 m in J_y and J_z),
+#: with the default samples (2001) over 5 s: its fastest mode, |s| 826 1/s, is not resolved.
+TRIPLE = {
+    "name": "triple",
+    "gravity": [0.0, 0.0, -9.81],
+    "bodies": [{"name": "shanks", "mass": 6.51, "inertia": [0.110, 0.163, 0.066]},
+               {"name": "thighs", "mass": 14.0, "inertia": [0.270, 0.383, 0.15]},
+               {"name": "trunk", "mass": 47.46, "inertia": [2.97, 2.97, 0.42]}],
+    "joints": [
+        {"name": "ankle", "parent": "ground", "parent_point": [0, 0, 0], "child": "shanks",
+         "child_point": [0, 0, -0.244], "variant": "permanent", "k_r": [1500, 1500, 100], "l_r": [300, 300, 30]},
+        {"name": "knee", "parent": "shanks", "parent_point": [0, 0, 0.186], "child": "thighs",
+         "child_point": [0, 0, -0.243], "variant": "permanent", "k_r": [1000, 1000, 100], "l_r": [100, 100, 20]},
+        {"name": "hip", "parent": "thighs", "parent_point": [0, 0, 0.186], "child": "trunk",
+         "child_point": [0, 0, -0.316], "variant": "permanent", "k_r": [500, 500, 100], "l_r": [100, 100, 20]},
+    ],
+    "initial_state": {"shanks": {"theta": [0.03, 0, 0]}, "thighs": {"theta": [0, 0, 0]},
+                      "trunk": {"theta": [-0.05, 0, 0]}},
+    "simulation": {"t_end": 5.0},
+}
+#: What the triple pendulum's failed rate check says (the fastest mode's time constant, the samples).
+UNRESOLVED = ("likely the samples (spacing 0.0025 s) do not resolve the fastest mode at rest (time constant "
+              "1/|s| 0.0012 s): 28001 samples resolve it, e.g. --set simulation.n_samples=28001")
 
 
 def invoke(*args):
     return CliRunner().invoke(cli, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def triple(tmp_path_factory):
+    path = tmp_path_factory.mktemp("triple") / "triple.yaml"
+    path.write_text(yaml.safe_dump(TRIPLE), encoding="utf-8")
+    return path
 
 
 @pytest.mark.parametrize("method", sorted(STABILITY_LIMIT))
@@ -71,3 +105,22 @@ def test_a_sweep_warns_once_per_template_before_it_runs(tmp_path):
                  "--set", "simulation.max_steps=100", "-o", tmp_path, "-j", "1")
     assert ran.exit_code == 3, ran.output  # both stopped at the step limit: not computed
     assert ran.stderr.count("W008") == 1 and ran.stderr.index("W008") < ran.stderr.index("2 runs on 1 local process")
+
+
+def test_a_rate_check_that_does_not_resolve_the_fastest_mode_says_so_and_what_to_set(triple, tmp_path):
+    result = invoke("run", triple, "-o", tmp_path)
+    assert result.exit_code == 0, result.output
+    assert "rate check fail (largest |analytic - numerical dv/dt| 0.862 W = 0.09 P > 0.001 P at t = 0 s; " \
+           f"{UNRESOLVED} (docs/physics.md))" in result.stdout
+    assert "rate check pass" in invoke("run", triple, "-o", tmp_path, "--set", "simulation.n_samples=28001",
+                                        "--overwrite").stdout
+
+
+def test_a_fastest_mode_no_run_can_sample_gives_the_longest_t_end_that_resolves_it():
+    failed = {"lyapunov_rate_check": "fail", "lyapunov_rate_mismatch": 3.4e13, "lyapunov_rate_mismatch_relative": 1.0}
+    reason = rate_check_reason(failed, n_samples=10001, t_end=5.0, rtol=1e-9, fastest=5.57e6)
+    assert reason.endswith(f"which takes 1.9e+08 samples, more than a run holds ({MAX_SAMPLES}): set "
+                           "simulation.t_end <= 0.27 s, or a softer gain (docs/physics.md)"), reason
+    resolved = rate_check_reason(failed, n_samples=10001, t_end=5.0, rtol=1e-9, fastest=100.0)  # 0.05 of 1/|s|
+    assert resolved == rate_check_reason(failed, n_samples=10001, t_end=5.0, rtol=1e-9)
+    assert "too sparse" in resolved
