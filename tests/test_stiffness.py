@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import yaml
@@ -42,6 +44,9 @@ TRIPLE = {
 #: What the triple pendulum's failed rate check says (the fastest mode's time constant, the samples).
 UNRESOLVED = ("likely the samples (spacing 0.0025 s) do not resolve the fastest mode at rest (time constant "
               "1/|s| 0.0012 s): 28001 samples resolve it, e.g. --set simulation.n_samples=28001")
+#: A failed rate check's reason: the mismatch against the tolerance, then the fix.
+REASON = re.compile(r"rate check fail: largest \|analytic - numerical dv/dt\| \S+ W = \S+ P > 0.001 P; likely .*"
+                    r"--set simulation\.n_samples=\d+")
 
 
 def invoke(*args):
@@ -124,3 +129,24 @@ def test_a_fastest_mode_no_run_can_sample_gives_the_longest_t_end_that_resolves_
     resolved = rate_check_reason(failed, n_samples=10001, t_end=5.0, rtol=1e-9, fastest=100.0)  # 0.05 of 1/|s|
     assert resolved == rate_check_reason(failed, n_samples=10001, t_end=5.0, rtol=1e-9)
     assert "too sparse" in resolved
+
+
+def test_every_listing_of_a_failed_rate_check_gives_its_reason(triple, tmp_path):
+    import rbstab
+
+    swept = invoke("sweep", triple, "--grid", "bodies.trunk.mass=40,47.46", "-o", tmp_path, "-j", "1")
+    assert swept.exit_code == 0, swept.output
+    folder = tmp_path / "triple"
+    store = next((folder / "runs").glob("chunk-*.h5"))
+    for shown in (invoke("show", folder), invoke("show", store)):
+        assert shown.exit_code == 0, shown.output
+        lines = shown.stdout.splitlines()
+        failed = [i for i, line in enumerate(lines) if line.rstrip().endswith("  fail")]
+        assert len(failed) == 2, shown.stdout
+        assert all(REASON.search(lines[i + 1]) for i in failed), shown.stdout
+    run = invoke("run", triple, "-o", tmp_path / "runs")
+    assert run.exit_code == 0, run.output
+    report = rbstab.write_report(tmp_path / "runs" / "triple.h5", tmp_path / "report", formats=("md",), jobs=1)
+    summary = (report / "summary.md").read_text()
+    assert f"- triple: rate check fail: largest \\|analytic - numerical dv/dt\\| 0.862 W = 0.09 P > 0.001 P at " \
+           f"t = 0 s; {UNRESOLVED}".replace("|s|", "\\|s\\|") in summary
