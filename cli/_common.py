@@ -14,6 +14,7 @@ import click
 
 from rbstab.api import load_config
 from rbstab.engine.registry import get_engine
+from rbstab.layout import is_chain
 
 from .console import get_console
 
@@ -79,6 +80,41 @@ def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str 
     for line, which in names.items():
         where = "" if n_configs == 1 else which[0] if len(which) == 1 else f"{len(which)} of {n_configs} {noun}"
         console.warn(line, where)
+
+
+def _stiffness_checked(*, chain: bool, sign_law: bool = False) -> bool:
+    """Whether W008 is to be checked (not silenced); if so, the kernels the linearisation
+    runs are compiled first where they are not yet (said as ``rbstab run`` says it)."""
+    console = get_console()
+    if console.silences("W008"):
+        return False
+    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+
+    ensure_compiled(say=console.info, sign_law=sign_law, chain=chain)
+    return True
+
+
+def stiffness_warnings(configs) -> dict[str, list[str]]:
+    """Each config's W008 line (a stiff mode holds its explicit method to very many steps:
+    :func:`rbstab.analysis.stiffness.stiffness_warning`, one linearisation each, 4-120 ms),
+    by name: ``{name: [line]}`` for those that have one; none where W008 is silenced."""
+    if not configs or not _stiffness_checked(chain=any(is_chain(c) for c in configs)):
+        return {}
+    from rbstab.analysis.stiffness import stiffness_warning  # heavy: numba, scipy
+
+    return {c.name: [line] for c in configs if (line := stiffness_warning(c))}
+
+
+def template_stiffness_warnings(loaded, table, *, sign_law: bool = False) -> list[str]:
+    """The W008 lines of a planned sweep's templates
+    (:func:`rbstab.analysis.stiffness.sweep_stiffness_warnings`); none where W008 is silenced.
+    ``sign_law``: compile the sign law's kernels too where they are not yet (a sweep that
+    runs compiles them all at once)."""
+    if not _stiffness_checked(chain=loaded.is_chain, sign_law=sign_law):
+        return []
+    from rbstab.analysis.stiffness import sweep_stiffness_warnings  # heavy: numba, scipy
+
+    return sweep_stiffness_warnings(table)
 
 
 def load_configs(paths: Sequence[str], overrides: Sequence[str]):

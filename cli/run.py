@@ -12,7 +12,8 @@ from rbstab.api import run as run_one
 from rbstab.resources import memory_problem
 from rbstab.warning_codes import coded
 
-from ._common import MachineFault, NotComputed, command_line, load_configs, prepare_output
+from ._common import (MachineFault, NotComputed, command_line, load_configs, prepare_output, show_config_warnings,
+                      stiffness_warnings)
 from .console import get_console
 from .options import console_options, json_option, method_option, output_option, set_option
 
@@ -52,14 +53,17 @@ _REPLACED = {"new": None, "identical": "identical", "replace": "other"}
 
 
 def rate_check_text(summary: dict, path: Path) -> str:
-    """``pass``, ``n/a``, or ``fail (<why>)`` (:func:`rbstab.diagnostics.file_rate_check_reason`)."""
+    """``pass``, ``n/a``, or ``fail (<why>)`` (:func:`rbstab.diagnostics.file_rate_check_reason`,
+    with the fastest mode of the run's linearisation at rest)."""
     from rbstab.diagnostics import file_rate_check_reason  # heavy: numpy, h5py
 
     check = str(summary.get("lyapunov_rate_check", "n/a"))
     if check != "fail":
         return check
+    from rbstab.analysis.stiffness import fastest_rate  # heavy: numba, scipy
+
     try:
-        return f"fail ({file_rate_check_reason(path, summary)})"
+        return f"fail ({file_rate_check_reason(path, summary, fastest_rate)})"
     except (OSError, KeyError):
         return check
 
@@ -188,6 +192,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")),
                     chain=any(not hasattr(c, "body") for c in loaded))
     _load_kernels(loaded)
+    show_config_warnings(stiffness_warnings(loaded), len(loaded))
     not_computed = 0
     for written, config in enumerate(loaded):
         try:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import difflib
+import json
 from pathlib import Path
 
 import click
@@ -29,14 +30,21 @@ _MAX_LISTED = 20
 _METRICS = ("lyapunov_final", "max_abs_constraint_error", "max_lyapunov_rate", "wall_time")
 
 
-def _run_lines(rows, ratio: float | None = None) -> None:
+def _failed_checks(rows) -> list[str]:
+    """The run ids of the ``rows`` whose rate check failed."""
+    return [r["run_id"] for r in rows if r.get("lyapunov_rate_check") == "fail"]
+
+
+def _run_lines(rows, ratio: float | None = None, configs=None) -> None:
     """One line per run: id, status, outcome (:func:`rbstab.diagnostics.outcome`, with the
-    sweep's ``ratio``), v(0) -> v(t_end), max dv/dt, max |E_i|, rate check."""
+    sweep's ``ratio``), v(0) -> v(t_end), max dv/dt, max |E_i|, rate check; below a failed
+    rate check its reason, from the run's resolved configuration in ``configs`` (run id ->
+    mapping; :func:`rbstab.diagnostics.simulation_rate_check_reason`)."""
     from rbstab.convergence import DEFAULT_LYAPUNOV_RATIO  # heavy: numpy
 
     ratio = DEFAULT_LYAPUNOV_RATIO if ratio is None else ratio
     out = get_console().out
-    from rbstab.diagnostics import outcome  # heavy: numpy
+    from rbstab.diagnostics import outcome, simulation_rate_check_reason  # heavy: numpy
 
     out(f"  {'run':<20} {'status':<8} {'outcome':<21} {'v(0) -> v(t_end) [J]':<24} {'max dv/dt [W]':>14} "
         f"{'max|E| [m]':>11}  rate check")
@@ -54,6 +62,8 @@ def _run_lines(rows, ratio: float | None = None) -> None:
             f"{e:>11}  {r.get('lyapunov_rate_check', '')}{located}")
         if r["status"] != "success":
             out(f"    {r.get('message', '')}")
+        if r["run_id"] in (configs or {}):
+            out(f"    rate check fail: {simulation_rate_check_reason(r, configs[r['run_id']]['simulation'])}")
 
 
 def _show_chunk(path: str) -> None:
@@ -67,7 +77,8 @@ def _show_chunk(path: str) -> None:
         console.emit({"path": path, "kind": "store", "n_runs": len(rows), "store": first.get("store"), "runs": rows})
     console.out(f"{path}")
     console.out(f"  store file: {len(rows)} runs, store {first.get('store', '?')}, created {first.get('created', '?')}")
-    _run_lines(rows)
+    failed = set(_failed_checks(rows))
+    _run_lines(rows, configs={r["run_id"]: json.loads(r["config"]) for r in rows if r["run_id"] in failed})
 
 
 def _spread(index, column: str) -> dict | None:
@@ -127,6 +138,7 @@ def _show_sweep(path: str) -> None:
     """A sweep folder: counts per status, converged fraction, varied parameters, the spread
     of the main figures, the first runs (every run with -v)."""
     from rbstab.io.chunk import PER_RUN, SUMMARY_FIGURES  # heavy: numpy
+    from rbstab.sweep.folder import resolved_configs  # heavy: numpy, pydantic
 
     console = get_console()
     info = sweep_overview(path)
@@ -147,9 +159,13 @@ def _show_sweep(path: str) -> None:
         console.out(f"  {metric:<26} [{units.get(metric, '')}] min {_fmt(s['min'])}, median {_fmt(s['median'])}, "
                     f"max {_fmt(s['max'])}")
     listed = n if console.verbosity >= 1 else _MAX_LISTED
-    rows = index.head(listed).to_dict("records")
-    _run_lines([{k: ("" if isinstance(v, float) and v != v else v) for k, v in r.items()} for r in rows],
-               info["lyapunov_ratio"])
+    rows = [{k: ("" if isinstance(v, float) and v != v else v) for k, v in r.items()}
+            for r in index.head(listed).to_dict("records")]
+    try:
+        configs = resolved_configs(path, _failed_checks(rows))
+    except (OSError, ValueError, KeyError):  # a result file gone or damaged: the runs without their reasons
+        configs = {}
+    _run_lines(rows, info["lyapunov_ratio"], configs)
     if n > listed:
         console.out(f"  ... and {n - listed} more runs (-v lists them; the index, rbstab.open_sweep)")
 

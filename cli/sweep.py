@@ -14,7 +14,7 @@ from rbstab.api import execute_sweep
 from rbstab.engine.registry import get_engine
 from rbstab.warning_codes import coded
 
-from ._common import MachineFault, NotComputed, check_engine, command_line, spec_error
+from ._common import MachineFault, NotComputed, check_engine, command_line, spec_error, template_stiffness_warnings
 from .console import get_console
 from .options import console_options, engine_option, keys_checked, output_option, set_option
 
@@ -229,12 +229,16 @@ def sweep(spec, output, jobs, executor, scheduler, connect_timeout, overrides, g
         ex.start()
     try:
         loaded = _load(spec, overrides)  # read once; None: invalid, said with every problem below
-        if not overwrite and loaded is not None:
-            _check_folder(loaded, output)
+        table = _plan(loaded)  # planned once; None: invalid, said with every problem below
+        if not overwrite and table is not None:
+            _check_folder(loaded, output, table)
+        if table is not None:
+            for line in template_stiffness_warnings(loaded, table, sign_law=True):  # before anything runs
+                get_console().warn(line)
         outcome = _execute(spec if loaded is None else loaded, output, ex, path=spec, jobs=jobs, scheduler=scheduler,
                            connect_timeout=connect_timeout, overrides=overrides if loaded is None else (),
                            timeout=timeout, retry_failed=retry_failed, engine=engine,
-                           chunk_size=chunk_size, store=store, layout=layout, index=index,
+                           chunk_size=chunk_size, store=store, layout=layout, index=index, table=table,
                            progress=False if get_console().verbosity < 0 else progress)
     finally:
         if not isinstance(ex, str):
@@ -255,22 +259,34 @@ def _load(spec, overrides):
         return None
 
 
-def _check_folder(loaded, output) -> None:
+def _plan(loaded):
+    """The planned runs of the loaded spec (:func:`rbstab.sweep.table.plan_table`), or None
+    for an invalid spec or run (the sweep then says why)."""
+    from rbstab.sweep import SweepSpecError  # heavy: numba, pandas, pydantic (~0.4-0.7 s at the start)
+    from rbstab.sweep.table import plan_table  # heavy: numba, pydantic (~0.4 s at the start)
+
+    if loaded is None:
+        return None
+    try:
+        return plan_table(loaded)
+    except SweepSpecError:
+        return None
+
+
+def _check_folder(loaded, output, table) -> None:
     """Refuse, before anything runs or is written, a sweep whose folder holds a sweep with
     runs this one does not have (another --grid, another spec of the same name): its index
     would be replaced. The same sweep again (resume), or one that only adds runs, goes on."""
-    from rbstab.sweep import SweepSpecError  # heavy: numba, pandas, pydantic (~0.4-0.7 s at the start)
     from rbstab.sweep.folder import is_sweep_folder, read_index  # heavy: numpy (~0.1 s at the start)
-    from rbstab.sweep.table import plan_table  # heavy: numba, pydantic (~0.4 s at the start)
 
     folder = Path(output) / loaded.name
     if not is_sweep_folder(folder):
         return
     try:
         before = set(read_index(folder)["run_id"].astype(str))
-        now = set(plan_table(loaded).ids())
-    except (OSError, ValueError, KeyError, SweepSpecError):
-        return  # a damaged folder or an invalid sweep: the sweep itself says so
+    except (OSError, ValueError, KeyError):
+        return  # a damaged folder: the sweep itself says so
+    now = set(table.ids())
     gone = before - now
     if gone:
         raise click.ClickException(
@@ -293,7 +309,7 @@ def _dry_run(spec, overrides, *, store: str, layout: str, jobs: int | None) -> N
         table = plan_table(loaded)
     except SweepSpecError as exc:
         raise spec_error(spec, exc.errors)
-    for line in table.warnings:
+    for line in [*table.warnings, *template_stiffness_warnings(loaded, table)]:
         console.warn(line)
     workers = jobs or default_jobs()
     size, seconds = estimate(table, store, workers)

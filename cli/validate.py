@@ -6,7 +6,8 @@ import click
 
 from rbstab.layout import is_chain
 
-from ._common import config_error_text, load_one, show_config_warnings
+from ._common import (config_error_text, load_one, show_config_warnings, stiffness_warnings,
+                      template_stiffness_warnings)
 from .console import get_console
 from .options import console_options, json_option, set_option
 
@@ -32,7 +33,7 @@ def _check_spec(path: str, overrides) -> dict:
     except SweepSpecError as exc:
         return {"path": path, "kind": "sweep", "valid": False, "errors": list(exc.errors)}
     return {"path": path, "kind": "sweep", "valid": True, "name": loaded.name, "n_runs": table.n,
-            "warnings": list(table.warnings)}
+            "warnings": [*table.warnings, *template_stiffness_warnings(loaded, table)]}
 
 
 def _check_config(path: str, overrides) -> dict:
@@ -50,6 +51,7 @@ def _check_config(path: str, overrides) -> dict:
     if not is_chain(config):
         record["variant"] = config.variant
     record["chain"] = _chain_record(chain_of(config))
+    lines = [*lines, *stiffness_warnings([config]).get(config.name, [])]
     return record | {"t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
 
 

@@ -67,7 +67,7 @@ def test_a_failed_rate_check_says_why_and_what_to_do(tmp_path):
     assert result.exit_code == 0, result.output
     line = result.stdout
     assert "rate check fail (largest |analytic - numerical dv/dt|" in line
-    assert "at t = " in line and "samples are too sparse for t_end 20 s" in line
+    assert "at t = " in line and "the samples (spacing 0.2 s) do not resolve the fastest mode at rest" in line
     suggested = int(line.split("simulation.n_samples=")[1].split()[0])
     again = invoke("run", CASE1, "-o", tmp_path, "--no-warn", "W001", "--set", "simulation.t_end=20",
                    "--set", f"simulation.n_samples={suggested}", "--overwrite")

@@ -26,7 +26,8 @@ from .warning_codes import coded
 
 __all__ = ["CONVERGED", "SETTLING", "MOVING_AWAY", "FELL", "NOT_COMPUTED", "PENDING", "OUTCOMES", "outcome",
            "outcomes", "risen_without_disturbance", "unbounded_fall_note", "rate_check_reason", "file_rate_check_reason",
-           "largest_mismatch_time", "samples_for_rate_check",
+           "simulation_rate_check_reason",
+           "largest_mismatch_time", "samples_for_rate_check", "samples_to_resolve", "RESOLVING_SPACING",
            "chop", "NOISE_LIMIT"]
 
 #: How a run ended, in every command's words (:func:`outcome`).
@@ -153,13 +154,46 @@ def samples_for_rate_check(n_samples: int, relative_mismatch: float, tolerance: 
     Case 1 with t_end 20 s: 101 samples 0.5 P, 571 samples 0.061 P, 2901 samples 0.001 P,
     3201 pass)."""
     factor = 2.0 * (relative_mismatch / tolerance) ** (1.0 / 2.0)
-    wanted = (n_samples - 1) * max(factor, 1.5) + 1
+    return _round_samples((n_samples - 1) * max(factor, 1.5) + 1)
+
+
+def _round_samples(wanted: float) -> int:
+    """``wanted`` samples rounded up to two significant digits, plus one (``20651`` -> 21001)."""
     step = 10 ** max(0, int(math.floor(math.log10(wanted))) - 1)
     return int(math.ceil(wanted / step) * step) + 1
 
 
+#: The sample spacing times |s| of a mode at most which the rate check's numerical
+#: derivative resolves it: about 7 samples per time constant 1/|s|. Measured by the fastest
+#: mode of each configuration, largest spacing x |s| that failed / smallest that passed:
+#: free_gravity 0.48 / 0.24, Case 2 0.56 / 0.28, Case 3 1.5 / 0.74, the stance 1.2 / 0.61,
+#: the knee 3.2 / 1.6, a triple pendulum 0.41 / 0.21.
+RESOLVING_SPACING = 0.15
+
+
+def samples_to_resolve(rate: float, t_end: float) -> int:
+    """Samples on [0, ``t_end``] [s] whose spacing resolves a mode of |s| = ``rate`` [1/s]
+    (:data:`RESOLVING_SPACING`), rounded up to a round number."""
+    return _round_samples(t_end * rate / RESOLVING_SPACING + 1)
+
+
+def _unresolved_mode(rate: float, t_end: float, spacing: float) -> str:
+    """The cause and fix of a failed rate check whose samples (``spacing`` [s]) do not
+    resolve the fastest mode (|s| = ``rate`` [1/s]) of a run of ``t_end`` [s]."""
+    from .config.schema import MAX_SAMPLES  # heavy: pydantic
+
+    cause = (f"likely the samples (spacing {spacing:.3g} s) do not resolve the fastest mode at rest "
+             f"(time constant 1/|s| {1.0 / rate:.2g} s)")
+    wanted = samples_to_resolve(rate, t_end)
+    if wanted <= MAX_SAMPLES:
+        return f"{cause}: {wanted} samples resolve it, e.g. --set simulation.n_samples={wanted} (docs/physics.md)"
+    longest = (MAX_SAMPLES - 1) * RESOLVING_SPACING / rate
+    return (f"{cause}, which takes {wanted:.2g} samples, more than a run holds ({MAX_SAMPLES}): "
+            f"set simulation.t_end <= {longest:.2g} s, or a softer gain (docs/physics.md)")
+
+
 def rate_check_reason(summary: Mapping[str, Any], *, n_samples: int, t_end: float, rtol: float,
-                      where: float | None = None) -> str:
+                      where: float | None = None, fastest: float | None = None) -> str:
     """Why a run's rate check failed, in one clause (empty when it did not fail).
 
     Parameters
@@ -171,6 +205,10 @@ def rate_check_reason(summary: Mapping[str, Any], *, n_samples: int, t_end: floa
         The run's ``simulation`` settings.
     where : float, optional
         The time of the largest mismatch [s] (:func:`largest_mismatch_time`).
+    fastest : float, optional
+        |s| [1/s] of the fastest mode of the run's linearisation at rest
+        (:func:`rbstab.analysis.stiffness.fastest_rate`): where the sample spacing does not
+        resolve it (:data:`RESOLVING_SPACING`), the reason says so and gives the samples that do.
 
     Returns
     -------
@@ -192,9 +230,19 @@ def rate_check_reason(summary: Mapping[str, Any], *, n_samples: int, t_end: floa
         return (f"{text}; likely the solver's noise through the numerical derivative (rtol {rtol:g} x "
                 f"{n_samples - 1} sample intervals > {NOISE_LIMIT:g}): tighten it, e.g. --set "
                 f"simulation.rtol={NOISE_LIMIT / (n_samples - 1) / 3:.1g} (docs/physics.md)")
+    if fastest is not None and spacing * fastest > RESOLVING_SPACING:
+        return f"{text}; {_unresolved_mode(fastest, t_end, spacing)}"
     wanted = samples_for_rate_check(n_samples, relative, LYAPUNOV_RATE_TOLERANCE)
     return (f"{text}; likely the samples are too sparse for t_end {t_end:g} s (spacing {spacing:.3g} s) "
             f"to differentiate v: more samples, e.g. --set simulation.n_samples={wanted} (docs/physics.md)")
+
+
+def simulation_rate_check_reason(summary: Mapping[str, Any], simulation: Mapping[str, Any], *,
+                                 where: float | None = None, fastest: float | None = None) -> str:
+    """:func:`rate_check_reason` of a run with its ``simulation`` settings (a mapping: the
+    ``simulation`` section of its resolved configuration, ``n_samples``, ``t_end`` [s], ``rtol``)."""
+    return rate_check_reason(summary, n_samples=int(simulation["n_samples"]), t_end=float(simulation["t_end"]),
+                             rtol=float(simulation["rtol"]), where=where, fastest=fastest)
 
 
 def largest_mismatch_time(time, rate, numerical) -> float | None:
@@ -206,9 +254,11 @@ def largest_mismatch_time(time, rate, numerical) -> float | None:
     return float(np.asarray(time, dtype=float)[finite][np.argmax(difference[finite])])
 
 
-def file_rate_check_reason(path, summary: Mapping[str, Any]) -> str:
+def file_rate_check_reason(path, summary: Mapping[str, Any], fastest=None) -> str:
     """:func:`rate_check_reason` of a result file (its samples, its config's rtol, and the
-    time of the largest mismatch read from it); empty unless its check failed."""
+    time of the largest mismatch read from it); empty unless its check failed. ``fastest``,
+    given, is called with the file's resolved configuration (a mapping) for the |s| [1/s] of
+    its fastest mode or None (:func:`rbstab.analysis.stiffness.fastest_rate`)."""
     if summary.get("lyapunov_rate_check") != "fail":
         return ""
     import h5py  # heavy
@@ -221,13 +271,12 @@ def file_rate_check_reason(path, summary: Mapping[str, Any]) -> str:
     if isinstance(config, bytes):
         config = config.decode()
     try:
-        simulation = (yaml.safe_load(config) or {}).get("simulation", {})
+        resolved = yaml.safe_load(config) or {}
     except yaml.YAMLError:
-        simulation = {}
-    t_end = float(simulation.get("t_end", time[-1]))
-    n_samples = int(simulation.get("n_samples", len(time)))
-    rtol = float(simulation.get("rtol", 1e-8))
-    return rate_check_reason(summary, n_samples=n_samples, t_end=t_end, rtol=rtol, where=where)
+        resolved = {}
+    simulation = {"t_end": time[-1], "n_samples": len(time), "rtol": 1e-8, **resolved.get("simulation", {})}
+    return simulation_rate_check_reason(summary, simulation, where=where,
+                                        fastest=fastest(resolved) if fastest is not None and resolved else None)
 
 
 def chop(values, tolerance: float):

@@ -93,6 +93,15 @@ WARNING_CODES: dict[str, WarningCode] = {
             "W006", "rbstab tune", "a tuned value lies within 1 % of its search range's edge",
             "the optimum may lie beyond the range searched: widen that --vary range and tune again",
         ),
+        WarningCode(
+            "W008", "simulation.method", "a stiff mode holds the explicit method to very many steps",
+            "the fastest mode of the linearisation at rest bounds an explicit method's step to its stability "
+            "limit (h |s| <= 2.5 RK23, 3.3 RK45, 6.4 DOP853) whatever the tolerances; an implicit method "
+            "(Radau, BDF, LSODA) is held only to the accuracy they ask, far fewer steps once that mode has died "
+            "out (while the motion excites it, every method follows it; a mode the motion never excites, out "
+            "of the plane of a planar swing, does not hold the explicit method back). Or is the gain meant to "
+            "be this stiff? (docs/performance.md)",
+        ),
     )
 }
 

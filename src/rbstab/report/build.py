@@ -61,6 +61,7 @@ from .tables import (
     metric_column,
     metric_label,
     rest_words,
+    run_rate_check_reason,
     runs_table,
     sweep_table,
     validate_metrics,
@@ -318,6 +319,9 @@ def _runs_sections(runs: Sequence[RunData], df, params: Sequence[str]) -> list[S
           _f(r["lyapunov_rate_mismatch"]), _f(r["lyapunov_rate_mismatch_relative"], 3), str(r["lyapunov_rate_check"])]
          for r, m in zip(rows, members)],
     ))
+    failed = [f"{run.label}: rate check fail: {reason}" for run in runs if (reason := run_rate_check_reason(run))]
+    if failed:
+        s.blocks.append(failed)
     switching = _switching_table(runs)
     if switching is not None:
         s.blocks.append(switching)

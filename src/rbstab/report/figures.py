@@ -27,7 +27,7 @@ import numpy as np
 from .. import __version__
 from ..layout import LYAPUNOV_TERMS, QUANTITIES, SATURATION_FLAGS, display_units
 from .load import RunData, safe_filename
-from .tables import SettleThresholds
+from .tables import SettleThresholds, run_rate_check_reason
 
 __all__ = [
     "FigureFile",
@@ -525,7 +525,13 @@ def lyapunov_figure(run: RunData, out: FigureWriter) -> FigureFile:
                        if work else "")
                     + "its analytic rate dv/dt (solid) and the numerical derivative of v along "
                     "the samples (dashed; symmetric-logarithmic axis where it spans decades), and their difference "
-                    "(cf. the paper's Figs 3, 4, 6)" + _marks_caption(run) + ".")
+                    "(cf. the paper's Figs 3, 4, 6)" + _marks_caption(run) + _rate_check_caption(run) + ".")
+
+
+def _rate_check_caption(run: RunData) -> str:
+    """``"; rate check fail: <why>"`` (:func:`rbstab.report.tables.run_rate_check_reason`), or ``""``."""
+    reason = run_rate_check_reason(run)
+    return f"; rate check fail: {reason}" if reason else ""
 
 
 def _forces_figure(run: RunData, out: FigureWriter) -> FigureFile | None:

@@ -21,8 +21,10 @@ from typing import Any
 import numpy as np
 
 from ..analysis.linearise import MAX_REST_CHECKS, rest_verdict
+from ..analysis.stiffness import fastest_rate
 from ..config.identity import canonical_config
 from ..convergence import converged
+from ..diagnostics import largest_mismatch_time, simulation_rate_check_reason
 from ..io.chunk import read_chunk_series, summary_columns
 from ..layout import SATURATION_FLAGS, STATE_BLOCKS, SUMMARY_FIGURES
 from .load import RunData, SweepData
@@ -42,6 +44,7 @@ __all__ = [
     "metric_label",
     "settling_time",
     "run_settling_time",
+    "run_rate_check_reason",
     "SETTLED",
     "NOT_SETTLED",
     "REST_AWAY",
@@ -340,6 +343,28 @@ def rest_verdicts(runs: Sequence[RunData | None], wanted: Sequence[bool]) -> lis
             run._cache[_REST_KEY] = verdict
         out.append(verdict)
     return out
+
+
+_RATE_CHECK_KEY = ("rate_check_reason",)
+
+
+def run_rate_check_reason(run: RunData) -> str:
+    """Why a run's rate check failed, ``""`` unless it did: the mismatch against the
+    tolerance and the fix (:func:`rbstab.diagnostics.simulation_rate_check_reason`, with the
+    time of the largest mismatch where the file holds both rates and the fastest mode of
+    the run's linearisation at rest, :func:`rbstab.analysis.stiffness.fastest_rate`).
+    Cached per run."""
+    if run.summary.get("lyapunov_rate_check") != "fail":
+        return ""
+    if _RATE_CHECK_KEY not in run._cache:
+        s = run.series("lyapunov_rate", "lyapunov_rate_numerical")
+        where = (largest_mismatch_time(s["time"], s["lyapunov_rate"], s["lyapunov_rate_numerical"])
+                 if "lyapunov_rate_numerical" in s and "lyapunov_rate" in s else None)
+        run._cache[_RATE_CHECK_KEY] = simulation_rate_check_reason(
+            run.summary, run.config["simulation"], where=where, fastest=fastest_rate(run.config))
+        if run.sweep is not None:
+            run.drop_series()  # a sweep may hold thousands of runs: keep only the text
+    return run._cache[_RATE_CHECK_KEY]
 
 
 def _settling_key(thresholds: SettleThresholds) -> tuple:
