@@ -45,6 +45,9 @@ __all__ = [
     "shade_saturation",
     "comparison_figures",
     "set_scale",
+    "value_scale",
+    "colour_norm",
+    "linear_threshold",
 ]
 
 #: Default resolution of the raster (PNG) files [dots per inch].
@@ -182,35 +185,68 @@ def colours(n: int) -> list:
     return [colormaps["viridis"](x) for x in np.linspace(0, 0.95, n)]
 
 
-def set_scale(ax, values, axis: str = "y") -> str:
-    """Put ``ax``'s ``axis`` on a logarithmic scale when ``values`` span decades.
+def value_scale(values) -> str:
+    """The scale that shows ``values``: ``"log"`` or ``"symlog"`` where they span decades,
+    else ``"linear"``.
 
     A quantity spans decades when its largest magnitude is more than :data:`LOG_SPAN`
-    times the first quartile of its non-zero magnitudes. Then
-    ``"log"`` when no value is negative (zeros are not drawn), else ``"symlog"``
-    (:func:`_symlog`); otherwise ``"linear"`` (the axis is left as it is). Returns the scale.
+    times the first quartile of its non-zero magnitudes. Then ``"log"`` when no value is
+    negative (zeros are not drawn), else ``"symlog"`` (signs mixed: linear near zero,
+    :func:`linear_threshold`). NaN and infinite values are left out.
     """
     v = np.asarray(values, dtype=float).ravel()
     v = v[np.isfinite(v)]
     magnitude = np.abs(v)
-    signed = bool(np.any(v < 0))
     base = magnitude[magnitude > 0]  # a component that stays zero (an axis nothing acts on) spans nothing
     if base.size < 2 or base.max() <= LOG_SPAN * float(np.percentile(base, 25)):
         return "linear"
-    if not signed:
+    return "symlog" if np.any(v < 0) else "log"
+
+
+def set_scale(ax, values, axis: str = "y") -> str:
+    """Put ``ax``'s ``axis`` on the scale :func:`value_scale` gives ``values``: a
+    logarithmic one, a symmetric-log one (:func:`_symlog`), or as it is (``"linear"``).
+    Returns the scale."""
+    scale = value_scale(values)
+    if scale == "log":
         (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
-        return "log"
-    _symlog(ax, v, axis)
-    return "symlog"
+    elif scale == "symlog":
+        v = np.asarray(values, dtype=float).ravel()
+        _symlog(ax, v[np.isfinite(v)], axis)
+    return scale
+
+
+def colour_norm(values):
+    """The colour scale of a map of ``values`` (:func:`value_scale`): None (linear), a
+    ``LogNorm`` from the smallest positive value to the largest, or a ``SymLogNorm``
+    symmetric about zero (linear within :func:`linear_threshold`), for a diverging map."""
+    from matplotlib.colors import LogNorm, SymLogNorm  # heavy: matplotlib
+
+    scale = value_scale(values)
+    if scale == "linear":
+        return None
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if scale == "log":
+        return LogNorm(vmin=float(v[v > 0].min()), vmax=float(v.max()))
+    peak = float(np.abs(v).max())
+    return SymLogNorm(linthresh=linear_threshold(v), linscale=0.5, vmin=-peak, vmax=peak)
+
+
+def linear_threshold(values: np.ndarray) -> float:
+    """Where a symmetric-log scale of finite ``values`` turns linear: the power of ten at or
+    below the 5th percentile of their magnitudes (at least 1e-6 of the peak)."""
+    magnitude = np.abs(values)
+    peak = float(magnitude.max())
+    return 10.0 ** math.floor(math.log10(max(float(np.percentile(magnitude, 5)), 1e-6 * peak)))
 
 
 def _symlog(ax, values: np.ndarray, axis: str) -> None:
-    """Symmetric-log scale: linear within a power of ten near the 5th percentile of the
-    magnitudes (at least 1e-6 of the peak); labelled at 0 and at powers of ten inside the
-    values' range, at most 5 decades each side."""
+    """Symmetric-log scale: linear within :func:`linear_threshold`; labelled at 0 and at
+    powers of ten inside the values' range, at most 5 decades each side."""
     magnitude = np.abs(values)
     peak = float(magnitude.max())
-    low = math.floor(math.log10(max(float(np.percentile(magnitude, 5)), 1e-6 * peak)))
+    low = round(math.log10(linear_threshold(values)))
     top = math.floor(math.log10(peak))
     decades = list(range(top, low, -max(1, math.ceil((top - low) / 5))))
     ticks = [-(10.0 ** k) for k in decades if -(10.0 ** k) >= values.min()] + [0.0]

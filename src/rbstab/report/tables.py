@@ -41,6 +41,7 @@ __all__ = [
     "check_member_metrics",
     "metric_value",
     "metric_label",
+    "metric_units",
     "settling_time",
     "run_settling_time",
     "SETTLED",
@@ -87,7 +88,7 @@ METRIC_ALIASES = {"nfev": "solver_nfev", **{
     f"{key}_{i}": f"{key}_{axis}" for key in VECTOR_SUMMARY_METRICS for i, axis in zip("123", "xyz")}}
 _AXES = ("x", "y", "z")
 #: Metrics plotted against the varied parameters of a sweep when no ``--metric`` is given.
-DEFAULT_METRICS = ("max_abs_constraint_error", "lyapunov_final")
+DEFAULT_METRICS = ("settling_time", "peak_sway", "com_excursion", "max_abs_constraint_error", "lyapunov_final")
 
 
 @dataclass(frozen=True)
@@ -196,25 +197,37 @@ def _split_metric(name: str) -> tuple[str, int | None]:
     return name, None
 
 
-def metric_label(name: str) -> str:
-    """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
+def _symbol_units(name: str) -> tuple[str, str]:
+    """(symbol, units as an axis writes them) of a metric (:func:`allowed_metrics`, or a
+    chain's :func:`member_metric`)."""
     found = member_metric(name)
     if found is not None:
         figure, member, comp = found
         symbol, units = VECTOR_SUMMARY_METRICS[figure]
         symbol = f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"
-        return f"{symbol} of {member} [{units}]" if units != "1" else f"{symbol} of {member}"
+        return f"{symbol} of {member}", units
     base, comp = _split_metric(name)
     if base in VECTOR_SUMMARY_METRICS:
         symbol, units = VECTOR_SUMMARY_METRICS[base]
-        symbol = f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"
-    else:
-        symbol, units = {**SCALAR_SUMMARY_METRICS, **OTHER_METRICS}[base]
+        return (f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"), units
+    return {**SCALAR_SUMMARY_METRICS, **OTHER_METRICS}[base]
+
+
+def metric_units(name: str) -> str:
+    """Units of a metric as an axis writes them (``"m"``, ``"rad/s"``; ``"1"``: none)."""
+    return _symbol_units(name)[1]
+
+
+def metric_label(name: str) -> str:
+    """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
+    symbol, units = _symbol_units(name)
     return f"{symbol} [{units}]" if units != "1" else symbol
 
 
 def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresholds: SettleThresholds) -> float:
-    """First sample time after which |E| and |Omega| stay under their thresholds.
+    """First sample time after which |E| and |Omega| stay under their thresholds: one run's
+    :func:`rbstab.summary.settling_times` (the summary figure ``settling_time``'s rule) with
+    ``thresholds``.
 
     Parameters
     ----------
