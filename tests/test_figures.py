@@ -391,3 +391,30 @@ def test_a_sweep_metric_is_left_out_when_it_is_round_off_or_has_no_value(name, v
 
     found = left_out(name, values)
     assert (found is None) if why is None else (why in found)
+
+
+def test_a_basin_map_without_a_certificate_has_no_contour_in_its_legend(tmp_path, monkeypatch):
+    """The basin map's legend names the contour v = c only where it is drawn: not under
+    --no-certificate (c NaN), nor where the slice lies inside it; its axes carry the keys'
+    units as an axis writes them."""
+    import xarray as xr
+
+    from rbstab.report.analysis import _basin_figure
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    x, y = np.linspace(-1.0, 1.0, 3), np.linspace(-0.1, 0.1, 3)
+    ds = xr.Dataset({"basin_outcome": (("bx", "by"), np.array([[0, 1, 2], [0, 0, 1], [0, 0, 0]])),
+                     "basin_time_to_converge": (("bx", "by"), np.full((3, 3), 0.5)),
+                     "basin_lyapunov_initial": (("bx", "by"), np.add.outer(x ** 2, 10 * y ** 2))},
+                    coords={"basin_x": ("bx", x, {"config_key": "initial_state.omega.0", "units": "rad s-1"}),
+                            "basin_y": ("by", y, {"config_key": "initial_state.theta.0", "units": "rad"})},
+                    attrs={"basin_ratio": 1e-3, "basin_t_end": 1.0})
+    for c, contour in ((None, False), (0.5, True), (50.0, False)):
+        with_c = ds if c is None else ds.assign(sublevel=c)
+        _basin_figure(with_c, FigureWriter(_figures(tmp_path)), f"b{c}", "b")
+        ax = saved[f"b{c}_basin"].axes[0]
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert not any("nan" in label for label in labels)
+        assert any("sublevel estimate" in label for label in labels) == contour, (c, labels)
+        assert ax.get_xlabel() == "initial_state.omega.0 [rad/s]"
