@@ -418,3 +418,23 @@ def test_a_basin_map_without_a_certificate_has_no_contour_in_its_legend(tmp_path
         assert not any("nan" in label for label in labels)
         assert any("sublevel estimate" in label for label in labels) == contour, (c, labels)
         assert ax.get_xlabel() == "initial_state.omega.0 [rad/s]"
+
+
+def test_a_chains_centre_of_mass_is_drawn_as_its_displacement(tmp_path, monkeypatch):
+    """A chain's translational figure draws each body's X - X(0), its start written under
+    the axis label: centimetres of sway are not drawn beside the legs' 0.475 m height."""
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    _ok("run", ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", "-o", tmp_path,
+        "--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=51")
+    run = load_inputs([tmp_path / "stance_ankle_hip.h5"]).runs[0]
+    run_figures(run, FigureWriter(_figures(tmp_path)))
+    position = run.series("position")["position"]
+    axes = saved["stance_ankle_hip_translational"].axes
+    for col, body in enumerate(("legs", "trunk")):
+        ax = axes[col]  # the first row: the position
+        words, start = ax.get_ylabel().split("\n")[1:]
+        assert words == "COM position change $X - X(0)$ [m]" and f"{position[0, col, 2]:.3g}" in start
+        for k, line in enumerate(ax.get_lines()[:3]):
+            np.testing.assert_array_equal(line.get_ydata(), position[:, col, k] - position[0, col, k])
+    assert np.ptp(axes[0].get_lines()[2].get_ydata()) < 0.01 < position[0, 0, 2]  # the height moves by millimetres
