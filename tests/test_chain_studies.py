@@ -22,7 +22,7 @@ from rbstab.config.loader import config_from_mapping, load_config
 from rbstab.simulator import simulate
 from rbstab.studies import StudyInputError, read_sensitivity, tune
 from rbstab.layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
-from rbstab.studies.design import Members, check_metrics, expand_metrics, nominal_figures
+from rbstab.studies.design import Members, check_metrics, expand_metrics, members_of, nominal_figures
 from rbstab.studies.sensitivity import plan_sensitivity
 from rbstab.studies.tuning import plan_tuning
 from rbstab.sweep.validate import key_path
@@ -88,6 +88,25 @@ def test_a_chain_metric_names_its_columns_by_member_and_axis():
     with pytest.raises(StudyInputError, match="not a summary figure"):
         check_metrics(["switching_count"], members=members)
     check_metrics(["switching_count", "final_theta_x"])  # one body's runs: the sign law's figure, a component
+
+
+def test_settling_time_sway_and_excursion_are_metrics_of_both_studies():
+    """The balance figures (settling time [s], peak sway and centre-of-mass excursion [m]) are
+    metrics of a chain's and of one body's studies: accepted by rbstab sensitivity's
+    --metric and rbstab tune's --minimize and --subject-to, one column each, with the run's
+    values."""
+    balance = ["settling_time", "peak_sway", "com_excursion"]
+    config = load_config(STANCE, SHORT)
+    check_metrics(balance, members=Members(("legs", "trunk"), ("ankle", "hip")))
+    check_metrics(balance)
+    assert plan_sensitivity(config, ["joints.hip.l_r.0=uniform:[50,100]"], n=4, metrics=balance).metrics == tuple(balance)
+    plan_tuning(config, ["joints.hip.l_r.0=uniform:[50,100]"], minimize=["settling_time"],
+                subject_to=["peak_sway<=0.05", "com_excursion<=0.05"])
+    figures, run = nominal_figures(config), simulate(config).summary
+    assert expand_metrics(balance, list(figures), members=members_of(config)) == balance
+    for name in balance:
+        np.testing.assert_equal(figures[name], run[name])
+    assert 0.0 < run["peak_sway"] <= run["com_excursion"] < 0.05  # the lean's centimetre, back upright
 
 
 def test_sensitivity_of_a_chain_gives_each_rows_figures_of_simulate_chain(tmp_path):

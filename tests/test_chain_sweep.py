@@ -131,6 +131,31 @@ def test_a_chain_sweep_of_summaries_writes_store_files_with_the_run_layouts_figu
     np.testing.assert_array_equal(ds["lyapunov_final"].values, chunk["lyapunov_final"].values)
 
 
+def test_a_summary_stores_settling_time_is_the_summary_figure_the_traces_give(tmp_path):
+    """A chain sweep stored without traces (--store summary) has the settling time of each
+    run's summary figure (every sample taken as it ran) in its report, the same as the
+    report takes from the traces of a thinned store at the default thresholds; at other
+    thresholds it has none."""
+    from rbstab.report import load_inputs
+    from rbstab.report.tables import SettleThresholds, sweep_table
+
+    grid = ["--grid", "joints.hip.l_r.0=100,140", "--set", "simulation.t_end=3", "--set", "simulation.n_samples=201"]
+    tables = {}
+    for store in ("thinned", "summary"):
+        result = CliRunner().invoke(cli, ["sweep", STANCE, *grid, "--store", store, "-j", "1", "-o", str(tmp_path / store)])
+        assert result.exit_code == 0, result.output
+        (sweep,) = load_inputs([tmp_path / store / "stance_ankle_hip"]).sweeps
+        tables[store] = sweep_table(sweep, ["settling_time"], SettleThresholds())
+        if store == "summary":
+            other = sweep_table(sweep, ["settling_time"], SettleThresholds(e=0.001))
+            assert other["report:settling_time"].isna().all()
+    thinned, summary = tables["thinned"], tables["summary"]
+    assert thinned["report:rest"].tolist() == summary["report:rest"].tolist() == ["settled", "settled"]
+    np.testing.assert_array_equal(summary["report:settling_time"], thinned["report:settling_time"])
+    np.testing.assert_array_equal(summary["report:settling_time"], summary["settling_time"])
+    assert (summary["settling_time"] > 0.2).all()
+
+
 def test_a_chain_settles_when_every_joint_and_body_has():
     from rbstab.report.tables import SettleThresholds, settling_time
 

@@ -295,3 +295,146 @@ def test_saturated_push_report_shades_the_limits_marks_the_pushes_and_draws_v_mi
     fraction = run.summary["fraction_saturated_torque_n"]
     assert "fraction of time N_i saturated" in page and f"{fraction[0]:.3g}" in page
     assert "impulse at 0.5 s, pulse at 2.5 s" in page
+
+
+# -- the figures of a sweep --------------------------------------------------------------------------------
+
+#: The stance example's ankle stiffness and hip damping, as its sweep's columns and entries name them.
+ANKLE, HIP = "ankle_k_r_0", "hip_l_r_0"
+ENTRIES = {ANKLE: "joints.ankle.k_r.0", HIP: "joints.hip.l_r.0"}
+
+
+def _sweep_table(metrics: dict, varied=(ANKLE, HIP)):
+    """A SweepData of a 3 x 3 grid (one varied parameter: a line of 9 runs) and its report
+    table, each metric's values given (9 a metric), every run a success."""
+    import pandas as pd
+
+    from rbstab.report.load import SweepData
+
+    grid = np.array([(a, h) for h in (20.0, 100.0, 400.0) for a in (700.0, 1000.0, 1300.0)])
+    table = pd.DataFrame({ANKLE: grid[:, 0], HIP: grid[:, 1], "status": "success", "report:rest": ""})
+    if len(varied) == 1:
+        table[HIP] = 100.0
+    for name, values in metrics.items():
+        table[f"report:{name}"] = values
+    axes = {p: table[p] for p in (ANKLE, HIP)}
+    sweep = SweepData(Path("sw"), "sw", {}, table, [None] * len(table), [ANKLE, HIP], list(varied), axes, ENTRIES)
+    return sweep, table
+
+
+#: v(t_end) [J] of a chain's sweep: both signs, over decades (the stance's falls end below its zero).
+SIGNED = [0.0115, 0.0107, 2.3e-6, -0.0061, 2.0e-4, 8.2e-6, -0.0044, 1.8e-3, 3.2e-5]
+#: A centre-of-mass excursion [m] over three decades, and a peak sway [m] within one.
+DECADES = [2e-5, 1e-4, 3e-3, 2e-2, 1e-3, 5e-4, 2e-4, 3e-5, 1e-2]
+NARROW = [0.022, 0.024, 0.026, 0.0034, 0.0099, 0.012, 0.015, 0.0073, 0.0115]
+#: max |E| [m] of permanent joints: rounding.
+ROUNDING = [2.2e-16, 2.2e-16, 6.9e-18, 2.2e-16, 0.0, 2.2e-16, 1.1e-16, 2.2e-16, 2.2e-16]
+
+
+def test_a_sweeps_heatmaps_have_units_and_scales_for_decades_and_leave_round_off_out(tmp_path, monkeypatch):
+    """A heatmap's axes are the entries --grid sets with their units; its colours on a
+    symmetric-log scale about zero (a diverging map) where signs mix over decades, a
+    logarithmic one where positive values span decades, a linear one otherwise; a metric at
+    round-off in every run gets a sentence, no figure."""
+    from matplotlib.colors import LogNorm, SymLogNorm
+
+    from rbstab.report.sweep_figures import sweep_figures
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    metrics = {"lyapunov_final": SIGNED, "com_excursion": DECADES, "peak_sway": NARROW,
+               "max_abs_constraint_error": ROUNDING}
+    sweep, table = _sweep_table(metrics)
+    drawn = sweep_figures(sweep, table, list(metrics), FigureWriter(_figures(tmp_path)))
+    notes = [d for d in drawn if isinstance(d, str)]
+    assert [f.path for f in drawn if not isinstance(f, str)] == [
+        f"figures/sweep_sw_heatmap_{name}.png" for name in ("lyapunov_final", "com_excursion", "peak_sway")]
+    assert len(notes) == 1 and notes[0].startswith("max |E| (largest component) [m]: round-off in every run")
+    maps = {name: saved[f"sweep_sw_heatmap_{name}"].axes[0] for name in ("lyapunov_final", "com_excursion", "peak_sway")}
+    for ax in maps.values():
+        assert ax.get_xlabel() == "joints.ankle.k_r.0 [N m/rad]"
+        assert ax.get_ylabel() == "joints.hip.l_r.0 [N m s/rad]"
+    signed = maps["lyapunov_final"].images[0]
+    assert isinstance(signed.norm, SymLogNorm) and signed.norm.vmin == -signed.norm.vmax == -0.0115
+    assert signed.get_cmap().name == "RdBu_r"
+    assert isinstance(maps["com_excursion"].images[0].norm, LogNorm)
+    assert type(maps["peak_sway"].images[0].norm).__name__ == "Normalize"  # within a decade: linear
+
+
+def test_a_sweeps_panels_have_units_and_scales_for_decades(tmp_path, monkeypatch):
+    """With one varied parameter, its axis is labelled with its entry and units, and each
+    metric's axis takes the scale of its values."""
+    from rbstab.report.sweep_figures import sweep_figures
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    metrics = {"lyapunov_final": SIGNED, "com_excursion": DECADES, "peak_sway": NARROW}
+    sweep, table = _sweep_table(metrics, varied=(ANKLE,))
+    sweep_figures(sweep, table, list(metrics), FigureWriter(_figures(tmp_path)))
+    axes = saved[f"sweep_sw_{ANKLE}"].axes
+    assert [ax.get_yscale() for ax in axes] == ["symlog", "log", "linear"]
+    assert axes[-1].get_xlabel() == "joints.ankle.k_r.0 [N m/rad]"
+    assert [ax.get_ylabel() for ax in axes] == ["v(t_end) [J]", "COM excursion [m]", "peak sway [m]"]
+
+
+@pytest.mark.parametrize("name, values, why", [
+    ("max_abs_constraint_error", ROUNDING, "round-off in every run"),
+    ("max_abs_constraint_error", [*ROUNDING[:-1], 1e-7], None),  # one joint that moves: drawn
+    ("lyapunov_final", [1e-13, -4e-14, 0.0], "round-off in every run"),
+    ("peak_sway", [np.nan, np.nan], "no successful run has a value"),  # e.g. no gravity
+    ("settling_time", [np.nan, np.nan], None),  # not settled anywhere: its cells say how each ended
+    ("converged", [0.0, 0.0], None),  # dimensionless: 0 is a value, not round-off
+    ("time_lyapunov_rising", [0.0, 0.0], None),  # a time: whole samples
+])
+def test_a_sweep_metric_is_left_out_when_it_is_round_off_or_has_no_value(name, values, why):
+    from rbstab.report.sweep_figures import left_out
+
+    found = left_out(name, values)
+    assert (found is None) if why is None else (why in found)
+
+
+def test_a_basin_map_without_a_certificate_has_no_contour_in_its_legend(tmp_path, monkeypatch):
+    """The basin map's legend names the contour v = c only where it is drawn: not under
+    --no-certificate (c NaN), nor where the slice lies inside it; its axes carry the keys'
+    units as an axis writes them."""
+    import xarray as xr
+
+    from rbstab.report.analysis import _basin_figure
+
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    x, y = np.linspace(-1.0, 1.0, 3), np.linspace(-0.1, 0.1, 3)
+    ds = xr.Dataset({"basin_outcome": (("bx", "by"), np.array([[0, 1, 2], [0, 0, 1], [0, 0, 0]])),
+                     "basin_time_to_converge": (("bx", "by"), np.full((3, 3), 0.5)),
+                     "basin_lyapunov_initial": (("bx", "by"), np.add.outer(x ** 2, 10 * y ** 2))},
+                    coords={"basin_x": ("bx", x, {"config_key": "initial_state.omega.0", "units": "rad s-1"}),
+                            "basin_y": ("by", y, {"config_key": "initial_state.theta.0", "units": "rad"})},
+                    attrs={"basin_ratio": 1e-3, "basin_t_end": 1.0})
+    for c, contour in ((None, False), (0.5, True), (50.0, False)):
+        with_c = ds if c is None else ds.assign(sublevel=c)
+        _basin_figure(with_c, FigureWriter(_figures(tmp_path)), f"b{c}", "b")
+        ax = saved[f"b{c}_basin"].axes[0]
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert not any("nan" in label for label in labels)
+        assert any("sublevel estimate" in label for label in labels) == contour, (c, labels)
+        assert ax.get_xlabel() == "initial_state.omega.0 [rad/s]"
+
+
+def test_a_chains_centre_of_mass_is_drawn_as_its_displacement(tmp_path, monkeypatch):
+    """A chain's translational figure draws each body's X - X(0), its start written under
+    the axis label: centimetres of sway are not drawn beside the legs' 0.475 m height."""
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    _ok("run", ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", "-o", tmp_path,
+        "--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=51")
+    run = load_inputs([tmp_path / "stance_ankle_hip.h5"]).runs[0]
+    run_figures(run, FigureWriter(_figures(tmp_path)))
+    position = run.series("position")["position"]
+    axes = saved["stance_ankle_hip_translational"].axes
+    for col, body in enumerate(("legs", "trunk")):
+        ax = axes[col]  # the first row: the position
+        words, start = ax.get_ylabel().split("\n")[1:]
+        assert words == "COM position change $X - X(0)$ [m]" and f"{position[0, col, 2]:.3g}" in start
+        for k, line in enumerate(ax.get_lines()[:3]):
+            np.testing.assert_array_equal(line.get_ydata(), position[:, col, k] - position[0, col, k])
+    assert np.ptp(axes[0].get_lines()[2].get_ydata()) < 0.01 < position[0, 0, 2]  # the height moves by millimetres

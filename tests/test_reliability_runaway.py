@@ -39,7 +39,8 @@ def test_a_run_past_its_wall_time_limit_stops(engine):
     assert result.status == "failed" and result.message.startswith("timeout: the run exceeded 0.05 s of wall time")
     assert result.wall_time < 2.0
     ok = simulate(_config(), engine=engine, timeout=60.0)  # a budget a run meets changes nothing
-    assert ok.ok and ok.summary == simulate(_config(), engine=engine).summary
+    assert ok.ok
+    np.testing.assert_equal(ok.summary, simulate(_config(), engine=engine).summary)
 
 
 @pytest.mark.parametrize("engine", ["compiled", "scipy"])

@@ -211,3 +211,58 @@ def test_a_streamed_tree_run_without_samples_has_no_figures():
             assert np.isnan(value).all(), key
     assert table["final_theta"].shape == table["max_abs_constraint_error"].shape == (2, 2, 3)
     assert table["final_controller_state"].shape == table["fraction_saturated_torque_n"].shape == (2, 2, 3)
+
+
+def test_balance_figures_are_their_definitions():
+    """settling_time, com_excursion and peak_sway of k runs of a two-body tree, against their
+    definitions written out with numpy: the first sample time after which every |E_j| <=
+    SETTLE_E and every |Omega_i| <= SETTLE_OMEGA (NaN for a run not settled at its end, or
+    stopped early), the largest |c - c(0)| of the whole-body centre of mass c = sum m_i X_i /
+    sum m_i, and the largest part of it perpendicular to gravity (NaN without gravity);
+    NaN for both without the bodies' records."""
+    from rbstab.layout import SETTLE_E, SETTLE_OMEGA
+    from rbstab.model import PARAMETERS
+    from rbstab.summary import summarize_many
+
+    rng = np.random.default_rng(5)
+    k, n = 4, 60
+    time = np.linspace(0.0, 3.0, n)
+    outputs = {key: rng.normal(size=(k, n)) for key in TERMS}
+    outputs["lyapunov"] = sum(outputs[key] for key in TERMS)
+    outputs["lyapunov_rate"] = outputs["lyapunov_rate_numerical"] = rng.normal(size=(k, n))
+    decay = np.exp(-3.0 * time)[None, :, None, None]
+    outputs["omega"] = 0.5 * rng.normal(size=(k, n, 2, 3)) * decay
+    outputs["constraint_error"] = 0.05 * rng.normal(size=(k, n, 2, 3)) * decay
+    outputs["omega"][1, -1, 1, 0] = 0.1  # the trunk still turning at the end: not settled
+    outputs["position"] = rng.normal(size=(k, n, 2, 3)) * 0.1 + np.array([[0.0, 0.0, 0.5], [0.0, 0.0, 1.2]])
+    for key in ("lyapunov", "omega", "constraint_error", "position"):
+        outputs[key][3, 40:] = np.nan  # run 3 stopped at its 40th sample
+    params = np.zeros((k, 2), dtype=PARAMETERS)
+    params["mass"] = [[22.5, 47.5], [10.0, 1.0], [3.0, 3.0], [70.0, 5.0]]
+    gravity = np.array([[0.0, 0.0, -9.81], [0.0, -9.81, 0.0], [0.0, 0.0, 0.0], [3.0, 0.0, -9.0]])
+    params["weight"] = params["mass"][:, :, None] * gravity[:, None, :]
+
+    largest_e = np.linalg.norm(outputs["constraint_error"], axis=-1).max(axis=-1)
+    largest_omega = np.linalg.norm(outputs["omega"], axis=-1).max(axis=-1)
+    mass = params["mass"]
+    centre = np.einsum("ki,knij->knj", mass, outputs["position"]) / mass.sum(axis=1)[:, None, None]
+    moved = centre - centre[:, :1]
+    for j, summary in enumerate(summarize_many(time, outputs, params=params)):
+        taken = 40 if j == 3 else n
+        inside = (largest_e[j, :taken] <= SETTLE_E) & (largest_omega[j, :taken] <= SETTLE_OMEGA)
+        if j in (1, 3):
+            assert np.isnan(summary["settling_time"]), j
+        else:
+            assert inside[-1] and not inside.all()
+            assert summary["settling_time"] == time[np.flatnonzero(~inside)[-1] + 1]
+        d = moved[j, :taken]
+        np.testing.assert_allclose(summary["com_excursion"], np.linalg.norm(d, axis=1).max(), rtol=1e-13)
+        if j == 2:
+            assert np.isnan(summary["peak_sway"])  # no gravity: no horizontal
+        else:
+            up = gravity[j] / np.linalg.norm(gravity[j])
+            horizontal = d - np.outer(d @ up, up)
+            np.testing.assert_allclose(summary["peak_sway"], np.linalg.norm(horizontal, axis=1).max(), rtol=1e-12)
+            assert summary["peak_sway"] < summary["com_excursion"]
+    for summary in summarize_many(time, outputs):  # without the records: no centre of mass
+        assert np.isnan(summary["com_excursion"]) and np.isnan(summary["peak_sway"])

@@ -9,7 +9,7 @@ A plain-data module at the bottom of the layers (no compiled code, no rbstab imp
   The file metadata (:mod:`rbstab.io.metadata`), the report's tables and axis labels and
   the kernels' output offsets (:mod:`rbstab.variants.kernels`) are derived from it;
 - :data:`SUMMARY_FIGURES`: the summary figures of a run (:mod:`rbstab.summary`), the same
-  way;
+  way, and :data:`SETTLE_E`, :data:`SETTLE_OMEGA`: the bounds of its settling time;
 - :func:`is_chain`: whether a configuration is in a chain's spelling (its keys' layout);
 - :class:`StateLayout`: where each state block lives in ``y`` (``split``, ``join``: blocks
   along the last axis); :data:`VARIANT_LAYOUTS`: each controller variant's layout and,
@@ -32,6 +32,8 @@ __all__ = [
     "QUANTITIES",
     "OUTPUTS",
     "SUMMARY_FIGURES",
+    "SETTLE_E",
+    "SETTLE_OMEGA",
     "SIGN_LAW_FIGURES",
     "STATE_BLOCKS",
     "BLOCK_UNITS",
@@ -404,6 +406,14 @@ def summary_stride(n_samples: int) -> int:
 
 
 # -- the summary figures of a run (rbstab.summary computes them) --------------------------------
+#: Thresholds of the summary figure ``settling_time`` (:func:`rbstab.summary.settling_times`):
+#: on |E| [m], the Euclidean norm of each joint's constraint error, and on |Omega| [rad/s],
+#: that of each body's angular velocity (also ``rbstab report``'s defaults, ``--settle-e``,
+#: ``--settle-omega``).
+SETTLE_E = 0.005
+SETTLE_OMEGA = 0.05
+
+
 def _final(block: str, long_name: str) -> Quantity:
     """The summary figure ``final_<block>``: the state block at the last finite sample."""
     q = OUTPUTS[block]
@@ -428,6 +438,14 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("max_lyapunov_increase", "max rise of v", "J", "largest rise of v above its running minimum"),
     Quantity("time_lyapunov_rising", "time with dv/dt > 0", "s",
              "time with analytic dv/dt > 0 (samples times their spacing)"),
+    Quantity("settling_time", "settling time", "s",
+             f"first sample time from which every |E_j| <= {SETTLE_E:g} m and every |Omega_i| <= {SETTLE_OMEGA:g} "
+             "rad/s until t_end (NaN: not settled at t_end, or stopped early)"),
+    Quantity("com_excursion", "COM excursion", "m",
+             "largest distance of the whole-body centre of mass from its initial position"),
+    Quantity("peak_sway", "peak sway", "m",
+             "largest horizontal distance (perpendicular to gravity) of the whole-body centre of mass from its "
+             "initial position (NaN without gravity)"),
     Quantity("fraction_saturated_torque_n", "fraction of time N_i saturated", "1",
              "fraction of the samples with N_i commanded at or beyond its limit (body frame)", size=3, member="joint"),
     Quantity("fraction_saturated_force_h", "fraction of time H_i saturated", "1",

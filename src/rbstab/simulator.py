@@ -501,7 +501,7 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
                                   timeout=timeout)
     solved = _time.perf_counter()
     outputs, checked = sign_law_outputs(variant, solution)
-    summary = {**summarize(solution.time, outputs, checked), **switching_summary(solution)}
+    summary = {**summarize(solution.time, outputs, checked, variant.parameters), **switching_summary(solution)}
     message = solution.message + switching_message(solution, config.simulation.method)
     result = RunResult(config=config, time=solution.time, outputs=outputs, status=solution.status, message=message,
                        solver=solution.solver, summary=summary, switching=solution.switchings)
@@ -556,7 +556,7 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
     solved = _time.perf_counter()
     outputs = evaluate_outputs(variant, time, states, work)
     result = RunResult(config=config, time=time, outputs=outputs, status=status, message=message,
-                       solver=solver, summary=summarize(time, outputs))
+                       solver=solver, summary=summarize(time, outputs, params=variant.parameters))
     end = _time.perf_counter()
     result.wall_time = end - start
     result.timing = {"integration": solved - start, "postprocess": end - solved}
@@ -743,7 +743,8 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
     outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0))) if summary else {}
+    table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)),
+                               params=np.stack([c.params for c in compiled])) if summary else {}
     return outputs if traces else {}, table
 
 
@@ -917,7 +918,7 @@ def _body_outputs(batch: RunBatch, rows: np.ndarray, time: np.ndarray, samples: 
     columns[OUTPUTS["disturbance_work"].offset] = work
     outputs = split_outputs(columns, layout, full)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, summary_table(time, outputs) if summary else {}
+    return outputs, summary_table(time, outputs, params=batch.params[rows, 0]) if summary else {}
 
 
 def _tree_left_region(what: str, t: float) -> str:

@@ -15,7 +15,7 @@ import numpy as np
 from .convergence import lyapunov_reference, within_bound
 from .results import row
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, OUTPUTS, SATURATION_FLAGS, STATE_BLOCKS
+from .layout import LYAPUNOV_TERMS, OUTPUTS, SATURATION_FLAGS, SETTLE_E, SETTLE_OMEGA, STATE_BLOCKS
 
 __all__ = [
     "numerical_rate",
@@ -40,6 +40,15 @@ __all__ = [
     "stream_member",
     "MEMBER_SLOTS",
     "short_stencils",
+    "settling_times",
+    "balance_columns",
+    "stream_settle",
+    "stream_centre",
+    "stream_tree_balance",
+    "stream_body_balance",
+    "largest_norm",
+    "centre_of_mass",
+    "total_weight",
 ]
 
 #: Relative tolerance of the check "analytic dv/dt agrees with the numerical derivative
@@ -218,7 +227,8 @@ def piecewise_numerical_rate(time: np.ndarray, values: np.ndarray, breaks: np.nd
     return rate, checked & np.isfinite(rate)
 
 
-def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> dict:
+def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None,
+              params: np.ndarray | None = None) -> dict:
     """Summary figures of a run.
 
     Parameters
@@ -239,6 +249,13 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         (largest rise of v above its running minimum: 0 for a non-increasing v),
         ``time_lyapunov_rising`` [s] (the samples with analytic dv/dt > 0 times the
         spacing: 0 where the paper's theorem holds; saturating actuators can make v rise),
+        ``settling_time`` [s] (:func:`settling_times` with :data:`rbstab.layout.SETTLE_E`,
+        :data:`rbstab.layout.SETTLE_OMEGA`: the first sample time after which every |E_j| and |Omega_i|
+        stays within them; NaN when the last sample is not, or the run stopped early),
+        ``com_excursion`` [m] (the largest distance of the whole-body centre of mass
+        sum m_i X_i / sum m_i from its initial position) and ``peak_sway`` [m] (the largest
+        horizontal distance of it from its initial position: the part perpendicular to
+        gravity; NaN without gravity), both NaN without ``params``,
         ``fraction_saturated_torque_n``, ``_force_h``, ``_constraint_force`` (3 floats each,
         per axis: the fraction of the samples whose ``<control>_saturated`` flag is set, the
         control commanded at or beyond its limit; 0 without limits),
@@ -256,6 +273,9 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         The samples the rate check compares (default: all), e.g. those whose numerical rate
         lies on one smooth piece (:func:`piecewise_numerical_rate`); given, the summary also
         holds ``lyapunov_rate_checked``, the fraction of the samples compared.
+    params : ndarray, optional
+        The run's :data:`rbstab.model.PARAMETERS` records, one a body (a record, or shape
+        (bodies,)): the masses and weights of the centre of mass's figures.
 
     Notes
     -----
@@ -265,10 +285,12 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
     run. See docs/physics.md for the measured noise.
     """
     return summarize_many(time, {k: v[None] for k, v in outputs.items()},
-                          None if checked is None else np.asarray(checked, dtype=bool)[None])[0]
+                          None if checked is None else np.asarray(checked, dtype=bool)[None],
+                          None if params is None else np.asarray(params).reshape(1, -1))[0]
 
 
-def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None) -> list[dict]:
+def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None,
+                   params: np.ndarray | None = None) -> list[dict]:
     """:func:`summarize` of k runs sampled at the same times, at once.
 
     Parameters
@@ -279,18 +301,20 @@ def summarize_many(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np
         The runs' variables with a leading run axis: shape (k, n, 3) or (k, n).
     checked : ndarray of bool, shape (k, n), optional
         See :func:`summarize`.
+    params : ndarray, shape (k,) or (k, bodies), optional
+        Each run's records (:func:`summarize`).
 
     Returns
     -------
     list of k dicts
         The same figures (the same numbers) as :func:`summarize` of each run alone.
     """
-    table = summary_table(time, outputs, checked)
+    table = summary_table(time, outputs, checked, params)
     return [row(table, j) for j in range(outputs["lyapunov"].shape[0])]
 
 
-def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None
-                  ) -> dict[str, np.ndarray]:
+def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None,
+                  params: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """:func:`summarize_many` as columns: figure -> its k values, shape (k,) or (k, 3) for
     a 3-vector figure (floats; ``lyapunov_rate_check`` an object array of str), the
     figures in :func:`summarize`'s order; the same numbers (:func:`rbstab.results.row` gives run j's, as :func:`summarize` does)."""
@@ -301,15 +325,16 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
     last = np.where(finite.any(axis=1), n - 1 - np.argmax(finite[:, ::-1], axis=1), 0)
     whole = np.flatnonzero(last == n - 1)
     if whole.size == k:
-        return _table(time, outputs, checked)
+        return _table(time, outputs, checked, params)
     parts = []  # (runs, their table)
     if whole.size:
         parts.append((whole, _table(time, {key: value[whole] for key, value in outputs.items()},
-                                    None if checked is None else checked[whole])))
+                                    None if checked is None else checked[whole], None if params is None else params[whole])))
     for i in np.unique(last[last != n - 1]).tolist():  # failed runs: their finite samples only, by their number
         runs = np.flatnonzero(last == i)
         parts.append((runs, _table(time[: i + 1], {key: value[runs, : i + 1] for key, value in outputs.items()},
-                                   None if checked is None else checked[runs, : i + 1])))
+                                   None if checked is None else checked[runs, : i + 1],
+                                   None if params is None else params[runs], complete=False)))
     table = {key: np.empty((k, *value.shape[1:]), dtype=value.dtype) for key, value in parts[0][1].items()}
     for runs, part in parts:
         for key, values in part.items():
@@ -317,10 +342,12 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
     return table
 
 
-def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None
-           ) -> dict[str, np.ndarray]:
+def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None,
+           params: np.ndarray | None = None, complete: bool = True) -> dict[str, np.ndarray]:
     """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays), as
-    columns; the rate check over the ``checked`` samples (k, n) only, when given."""
+    columns; the rate check over the ``checked`` samples (k, n) only, when given; the
+    centre of mass's figures with the bodies' records ``params`` (k, bodies) only, else
+    NaN; ``complete`` False: the runs stopped before the end of their grid (no settling time)."""
     v = outputs["lyapunov"]
     rate = outputs["lyapunov_rate"]
     k, n = v.shape
@@ -334,6 +361,14 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
     table["max_lyapunov_rate"] = np.max(rate, axis=1)
     table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1)
     table["time_lyapunov_rising"] = np.sum(rate > 0.0, axis=1) * _spacing(time)
+    acc = np.full((k, ACCUMULATOR_SIZE), np.nan)
+    acc[:, TAKEN], acc[:, LAST_UNSETTLED] = n, n - 1
+    if "omega" in outputs:
+        _settle_rows(_per_sample(outputs["constraint_error"]), _per_sample(outputs["omega"]), SETTLE_E, SETTLE_OMEGA,
+                     acc)
+    if params is not None:
+        _centre_rows(_per_sample(outputs["position"]), np.ascontiguousarray(params).reshape(k, -1), acc)
+    table.update(balance_columns(time, acc, complete))
     for flags, figure in SATURATION_FLAGS.values():
         if flags in outputs:
             table[figure] = _over_samples(np.sum, outputs[flags]) / n
@@ -405,14 +440,18 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: :func:`tree_stream_table`): v(0), max dv/dt, running min of v, largest rise of v above
 #: it, max |analytic - numerical dv/dt|, max |dv/dt|, the energy scale E, the samples
 #: taken, the last sample not converged (:func:`rbstab.convergence.converged` with v(0), the
-#: largest rise of v so far and its v; -1 for none), the samples with dv/dt > 0, and the last :data:`RATE_STENCIL`
-#: values of v, of dv/dt and of the disturbances' edges (rings).
+#: largest rise of v so far and its v; -1 for none), the samples with dv/dt > 0, the last
+#: :data:`RATE_STENCIL` values of v, of dv/dt and of the disturbances' edges (rings), then the
+#: balance figures' (:func:`stream_balance`): the last sample not settled (-1 for none), the
+#: largest distance and horizontal distance of the centre of mass from its start, and that start (3).
 V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(10)
 _FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
 V_RING = RISING + 1
 RATE_RING = V_RING + RATE_STENCIL
 EDGE_RING = RATE_RING + RATE_STENCIL
-ACCUMULATOR_SIZE = EDGE_RING + RATE_STENCIL
+LAST_UNSETTLED = EDGE_RING + RATE_STENCIL
+MAX_EXCURSION, MAX_SWAY, COM_START = LAST_UNSETTLED + 1, LAST_UNSETTLED + 2, LAST_UNSETTLED + 3
+ACCUMULATOR_SIZE = COM_START + 3
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
 _EDGES_AT = OUTPUTS["disturbance_edges"].offset
@@ -442,6 +481,7 @@ def stream_start(acc):
     acc[TAKEN] = 0.0
     acc[LAST_ABOVE] = -1.0
     acc[RISING] = 0.0
+    acc[LAST_UNSETTLED] = -1.0
 
 
 @jit(forceinline=True)
@@ -571,6 +611,195 @@ def short_stencils(time: np.ndarray) -> np.ndarray:
     return short
 
 
+# -- the balance figures: settling time, centre-of-mass excursion and sway -------------------------------
+# One definition for every engine: the CPU's tables (:func:`settling_times`, :func:`summary_table`)
+# and the GPU's streams (:func:`stream_tree_balance`, :func:`stream_body_balance`) take each
+# sample with the same compiled functions; :func:`balance_columns` makes the figures.
+_ERROR_AT, _OMEGA_AT, _POSITION_AT = (OUTPUTS[name].offset for name in ("constraint_error", "omega", "position"))
+
+
+@jit(forceinline=True)
+def _norm3(x, y, z):
+    """The Euclidean norm of (x, y, z), its terms summed in order."""
+    return math.sqrt(x * x + y * y + z * z)
+
+
+@jit(forceinline=True)
+def largest_norm(values, start, stride, count):
+    """The largest Euclidean norm of ``count`` 3-vectors of ``values`` (1-D), vector i at
+    ``values[start + stride i:][:3]``: 0 for none, NaN where one is NaN."""
+    largest = 0.0
+    for i in range(count):
+        at = start + stride * i
+        largest = _max(largest, _norm3(values[at], values[at + 1], values[at + 2]))
+    return largest
+
+
+@jit(forceinline=True)
+def centre_of_mass(values, start, stride, params):
+    """The whole-body centre of mass (x, y, z) [m] of the bodies of ``params`` (n,
+    :data:`rbstab.model.PARAMETERS` records: their masses [kg]), body i's X_i at
+    ``values[start + stride i:][:3]``: sum m_i X_i / sum m_i; one body's X as it is."""
+    n = params.shape[0]
+    if n == 1:
+        return values[start], values[start + 1], values[start + 2]
+    x, y, z, total = 0.0, 0.0, 0.0, 0.0
+    for i in range(n):
+        m = params[i].mass
+        at = start + stride * i
+        x += m * values[at]
+        y += m * values[at + 1]
+        z += m * values[at + 2]
+        total += m
+    return x / total, y / total, z / total
+
+
+@jit(forceinline=True)
+def total_weight(params):
+    """The summed weight m_i g (x, y, z) [N] of the bodies of ``params`` (n records): its
+    direction is gravity's, the vertical of :func:`stream_centre`."""
+    x, y, z = 0.0, 0.0, 0.0
+    for i in range(params.shape[0]):
+        w = params[i].weight
+        x += w[0]
+        y += w[1]
+        z += w[2]
+    return x, y, z
+
+
+@jit(forceinline=True)
+def stream_settle(acc, i, largest_error, largest_omega, e_bound, omega_bound):
+    """Take sample i into the settling time's slot of ``acc``: the last sample whose largest
+    |E_j| [m] or largest |Omega_i| [rad/s] is above its bound (or NaN)."""
+    if not (largest_error <= e_bound and largest_omega <= omega_bound):
+        acc[LAST_UNSETTLED] = i
+
+
+@jit(forceinline=True)
+def stream_centre(acc, i, cx, cy, cz, gx, gy, gz):
+    """Take sample i's whole-body centre of mass c (cx, cy, cz) [m] into ``acc``: the
+    largest |c - c(0)| and the largest horizontal |c - c(0)|, its part perpendicular to
+    (gx, gy, gz) (gravity's direction; NaN where it is zero: no horizontal)."""
+    if i == 0:
+        acc[COM_START], acc[COM_START + 1], acc[COM_START + 2] = cx, cy, cz
+    dx, dy, dz = cx - acc[COM_START], cy - acc[COM_START + 1], cz - acc[COM_START + 2]
+    acc[MAX_EXCURSION] = _max(acc[MAX_EXCURSION], _norm3(dx, dy, dz))
+    g = _norm3(gx, gy, gz)
+    sway = math.nan
+    if g > 0.0:
+        ux, uy, uz = gx / g, gy / g, gz / g
+        along = dx * ux + dy * uy + dz * uz
+        sway = _norm3(dx - along * ux, dy - along * uy, dz - along * uz)
+    acc[MAX_SWAY] = _max(acc[MAX_SWAY], sway)
+
+
+@jit(forceinline=True)
+def stream_tree_balance(acc, i, y, errors, params):
+    """Take sample i of a tree run into the balance slots of ``acc``: ``y`` its maximal
+    state (12 a body: Theta, Omega, X, V), ``errors`` (n, 3) each joint's E_j [m],
+    ``params`` (n,) its records; the settling time's bounds :data:`rbstab.layout.SETTLE_E`, :data:`rbstab.layout.SETTLE_OMEGA`."""
+    n = params.shape[0]
+    largest_error = 0.0
+    for j in range(n):
+        largest_error = _max(largest_error, _norm3(errors[j, 0], errors[j, 1], errors[j, 2]))
+    stream_settle(acc, i, largest_error, largest_norm(y, 3, 12, n), SETTLE_E, SETTLE_OMEGA)
+    cx, cy, cz = centre_of_mass(y, 6, 12, params)
+    gx, gy, gz = total_weight(params)
+    stream_centre(acc, i, cx, cy, cz, gx, gy, gz)
+
+
+@jit(forceinline=True)
+def stream_body_balance(acc, i, row, p):
+    """:func:`stream_tree_balance` of sample i of one body's run: ``row`` its outputs
+    (N_OUTPUTS,), ``p`` its record (its weight)."""
+    stream_settle(acc, i, largest_norm(row, _ERROR_AT, 3, 1), largest_norm(row, _OMEGA_AT, 3, 1), SETTLE_E,
+                  SETTLE_OMEGA)
+    w = p.weight
+    stream_centre(acc, i, row[_POSITION_AT], row[_POSITION_AT + 1], row[_POSITION_AT + 2], w[0], w[1], w[2])
+
+
+@jit(nogil=True)
+def _settle_rows(error, omega, e_bound, omega_bound, acc):
+    """:func:`stream_settle` of every sample of k runs: ``error`` (k, n, 3 joints) [m],
+    ``omega`` (k, n, 3 bodies) [rad/s] (C-contiguous), into ``acc`` (k, ACCUMULATOR_SIZE)."""
+    n_error, n_omega = error.shape[2] // 3, omega.shape[2] // 3
+    for r in range(error.shape[0]):
+        acc[r, LAST_UNSETTLED] = -1.0
+        for i in range(error.shape[1]):
+            stream_settle(acc[r], i, largest_norm(error[r, i], 0, 3, n_error), largest_norm(omega[r, i], 0, 3, n_omega),
+                          e_bound, omega_bound)
+
+
+@jit(nogil=True)
+def _centre_rows(position, params, acc):
+    """:func:`stream_centre` of every sample of k runs: ``position`` (k, n, 3 bodies) [m]
+    (C-contiguous), ``params`` (k, bodies) records, into ``acc`` (k, ACCUMULATOR_SIZE)."""
+    for r in range(position.shape[0]):
+        acc[r, MAX_EXCURSION] = -math.inf
+        acc[r, MAX_SWAY] = -math.inf
+        gx, gy, gz = total_weight(params[r])
+        for i in range(position.shape[1]):
+            cx, cy, cz = centre_of_mass(position[r, i], 0, 3, params[r])
+            stream_centre(acc[r], i, cx, cy, cz, gx, gy, gz)
+
+
+def _per_sample(values: np.ndarray) -> np.ndarray:
+    """k runs' 3-vectors (k, n, 3) or (k, n, m, 3) as (k, n, 3 m), C-contiguous floats."""
+    values = np.ascontiguousarray(values, dtype=float)
+    return values.reshape(values.shape[0], values.shape[1], -1)
+
+
+def _settled_at(time: np.ndarray, last: np.ndarray, complete: np.ndarray | bool) -> np.ndarray:
+    """The settling time [s] of runs whose last sample not settled is ``last`` (-1: none):
+    the next sample's time; NaN where that is the grid's last sample or the run is not
+    ``complete`` (it stopped before the end of its grid ``time``)."""
+    n = len(time)
+    last = last.astype(np.int64)
+    return np.where(np.asarray(complete) & (last < n - 1), time[np.clip(last + 1, 0, n - 1)], np.nan)
+
+
+def settling_times(time: np.ndarray, error: np.ndarray, omega: np.ndarray, e_bound: float = SETTLE_E,
+                   omega_bound: float = SETTLE_OMEGA) -> np.ndarray:
+    """Settling time of k runs: the first sample time after which |E| and |Omega| stay
+    within their bounds (the summary figure ``settling_time``).
+
+    Parameters
+    ----------
+    time : ndarray, shape (n,)
+        Sample times [s].
+    error : ndarray, shape (k, n, 3), or (k, n, joints, 3) for chains
+        Constraint error E [m] (every joint's must hold).
+    omega : ndarray, shape (k, n, 3), or (k, n, bodies, 3) for chains
+        Angular velocity Omega [rad/s] (every body's must hold).
+    e_bound, omega_bound : float
+        Bounds on the Euclidean norms |E| [m] and |Omega| [rad/s].
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        The earliest ``time[i]`` such that every ``|E_j| <= e_bound`` and every
+        ``|Omega_i| <= omega_bound`` at every sample from ``i`` to the end [s]; NaN when the
+        last sample is outside the bounds or not finite (a failed run never settles).
+        Resolution: the sample spacing.
+    """
+    k = error.shape[0]
+    acc = np.empty((k, ACCUMULATOR_SIZE))
+    _settle_rows(_per_sample(error), _per_sample(omega), float(e_bound), float(omega_bound), acc)
+    return _settled_at(np.asarray(time, dtype=float), acc[:, LAST_UNSETTLED], True)
+
+
+def balance_columns(time: np.ndarray, acc: np.ndarray, complete: np.ndarray | bool) -> dict[str, np.ndarray]:
+    """The balance figures of k runs from their accumulators ``acc`` (k, ACCUMULATOR_SIZE)
+    after every sample taken (:func:`stream_settle`, :func:`stream_centre`), ``time`` (n,)
+    their grid [s], ``complete`` (k,) whether each reached its end: ``settling_time`` [s]
+    (with :data:`rbstab.layout.SETTLE_E`, :data:`rbstab.layout.SETTLE_OMEGA`; NaN unless settled at the end of a
+    complete run), ``com_excursion`` and ``peak_sway`` [m] (NaN for a run without a sample)."""
+    taken = acc[:, TAKEN] > 0
+    return {"settling_time": _settled_at(time, acc[:, LAST_UNSETTLED], np.asarray(complete) & taken),
+            "com_excursion": np.where(taken, acc[:, MAX_EXCURSION], np.nan),
+            "peak_sway": np.where(taken, acc[:, MAX_SWAY], np.nan)}
+
+
 def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, last: np.ndarray, n_bodies: int,
                       d_at: np.ndarray) -> dict[str, np.ndarray]:
     """:func:`tree_summary_table`'s columns from streamed accumulators (the CUDA tree kernel).
@@ -608,6 +837,7 @@ def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, la
     table["max_lyapunov_rate"] = np.where(none, np.nan, acc[:, MAX_RATE])
     table["max_lyapunov_increase"] = np.where(none, np.nan, acc[:, MAX_INCREASE])
     table["time_lyapunov_rising"] = acc[:, RISING] * _spacing(time)
+    table.update(balance_columns(time, acc, taken == len(time)))
     with np.errstate(all="ignore"):
         for c, (_, figure) in enumerate(SATURATION_FLAGS.values()):
             table[figure] = members[:, :, 3 + 3 * c: 6 + 3 * c] / taken[:, None, None]
@@ -627,7 +857,8 @@ def streamed_final_lyapunov(acc: np.ndarray) -> np.ndarray:
     return np.where(taken == 0, np.nan, v)
 
 
-def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], *, embedded: bool) -> dict[str, np.ndarray]:
+def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], *, embedded: bool,
+                       params: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """:func:`summary_table` of k runs of one tree sampled at the same times (the outputs of
     :func:`rbstab.variants.chain.evaluate` with a leading run axis, plus
     ``lyapunov_rate_numerical`` (k, m); NaN rows after a failure): its figures per body or
@@ -636,8 +867,9 @@ def tree_summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], *, embe
     ``embedded`` joint, ``max_abs_constraint_error`` [m] (k, n_joints, 3): max |E_j,i| over
     the samples, for a permanent joint, which reduced coordinates hold by construction, the
     drift of its constraint (rounding); ``fraction_saturated_*`` (k, n_members, 3)). Run i's
-    figures are those of its outputs alone."""
-    table = summary_table(time, outputs)
+    figures are those of its outputs alone; ``params`` (k, n_bodies) the runs' records (the
+    centre of mass's figures, :func:`summarize`)."""
+    table = summary_table(time, outputs, params=params)
     if not embedded:
         table.pop("final_controller_state", None)
     return table

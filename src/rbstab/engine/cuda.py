@@ -84,8 +84,9 @@ from ..jit import CACHE_DIR, cache_is_warm, jit, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS
 from ..model import PARAMETERS
-from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_weights,
-                       stream_finish, stream_member, stream_member_start, stream_sample, stream_start)
+from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_weights, stream_body_balance,
+                       stream_finish, stream_member, stream_member_start, stream_sample, stream_start,
+                       stream_tree_balance)
 from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate, is_one_body
 from ..variants.disturbances import edges_up_to
 from ..variants.tree import TreeWork, reduced_size, tree_expand
@@ -238,7 +239,7 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     terms of v (eq 25's grouping; h in the gravity term), v, the analytic dv/dt and the
     disturbances' edges summed over the bodies' records, as the host's
     :func:`rbstab.variants.chain.evaluate` of the sample gives them, streamed into the
-    accumulators."""
+    accumulators, with the balance figures' (:func:`rbstab.summary.stream_tree_balance`)."""
     w, n = p.work, p.codes.shape[0]
     cw = w.chain
     tree_expand(sample, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, cw.rot,
@@ -257,6 +258,7 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     row[_RATE_AT] = terms[4]
     row[_EDGES_AT] = edges
     stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
+    stream_tree_balance(sink.acc, j, w.y, cw.joints[:, _E], p.params)
 
 
 @jit(_nrt=False)
@@ -273,6 +275,7 @@ def body_stream_sample(sink, code, p, j, t, sample, work):
             flags[0, k, c] = row[_FLAGS_AT[k] + c]
     stream_member(sink.members, 0, row[_ERROR_AT:_ERROR_AT + 3], flags[0])
     stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
+    stream_body_balance(sink.acc, j, row, p)
 
 
 @overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy", "_nrt": False})

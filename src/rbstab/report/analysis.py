@@ -23,6 +23,7 @@ import numpy as np
 from ..analysis.thresholds import EXPLAINS_BAR
 from ..convergence import RULE
 from ..kinds import ANALYSIS, RUN, STORE, inputs_in, is_plain_folder
+from ..layout import display_units
 from .figures import DPI, FigureFile, FigureWriter
 from .load import ReportInputError, safe_filename
 from .push import push_blocks, recovery_section, stability_blocks
@@ -294,20 +295,22 @@ def _basin_figure(ds, out: FigureWriter, stem: str, name: str) -> FigureFile:
     fig.colorbar(mesh, ax=ax2, label="time to converge [s]")
     handles = [Patch(color=col, label=lab) for col, lab in zip(_OUTCOME_COLOURS, ("converged", "not converged",
                                                                                  "failed"))]
+    contour = bool(c > 0 and np.nanmin(v0) < c < np.nanmax(v0))  # c NaN without a certificate: no contour
     for ax in (ax1, ax2):
-        if c > 0 and np.nanmin(v0) < c < np.nanmax(v0):
+        if contour:
             ax.contour(x.values, y.values, v0, levels=[c], colors="k", linewidths=1.5)
-        ax.set_xlabel(f"{x.attrs.get('config_key')} [{x.attrs.get('units')}]")
+        ax.set_xlabel(f"{x.attrs.get('config_key')} [{display_units(x.attrs.get('units'))}]")
         ax.grid(alpha=0.2)
-    ax1.set_ylabel(f"{y.attrs.get('config_key')} [{y.attrs.get('units')}]")
-    handles.append(Patch(facecolor="none", edgecolor="k", label=f"v = {c:.4g} J (sublevel estimate)"))
+    ax1.set_ylabel(f"{y.attrs.get('config_key')} [{display_units(y.attrs.get('units'))}]")
+    if contour:
+        handles.append(Patch(facecolor="none", edgecolor="k", label=f"v = {c:.4g} J (sublevel estimate)"))
     ax1.legend(handles=handles, fontsize=8, loc="upper right")
     fig.suptitle(f"{name}: basin of attraction (converged: |v| <= {ds.attrs.get('basin_ratio')} |v(0)| by "
                  f"t_end = {ds.attrs.get('basin_t_end')} s)", fontsize=10)
     return out.save(fig, f"{stem}_basin", f"{name}: basin map",
                     "Outcome of the simulation from each initial state of the slice (left) and its time to "
                     "converge (right); black: the contour v = c of the certificate's sublevel estimate "
-                    "(absent when the slice lies wholly inside or outside it).")
+                    "(absent without a certificate, or when the slice lies wholly inside or outside it).")
 
 
 def _basin_facts(ds) -> list[str]:

@@ -45,6 +45,9 @@ __all__ = [
     "shade_saturation",
     "comparison_figures",
     "set_scale",
+    "value_scale",
+    "colour_norm",
+    "linear_threshold",
 ]
 
 #: Default resolution of the raster (PNG) files [dots per inch].
@@ -182,35 +185,68 @@ def colours(n: int) -> list:
     return [colormaps["viridis"](x) for x in np.linspace(0, 0.95, n)]
 
 
-def set_scale(ax, values, axis: str = "y") -> str:
-    """Put ``ax``'s ``axis`` on a logarithmic scale when ``values`` span decades.
+def value_scale(values) -> str:
+    """The scale that shows ``values``: ``"log"`` or ``"symlog"`` where they span decades,
+    else ``"linear"``.
 
     A quantity spans decades when its largest magnitude is more than :data:`LOG_SPAN`
-    times the first quartile of its non-zero magnitudes. Then
-    ``"log"`` when no value is negative (zeros are not drawn), else ``"symlog"``
-    (:func:`_symlog`); otherwise ``"linear"`` (the axis is left as it is). Returns the scale.
+    times the first quartile of its non-zero magnitudes. Then ``"log"`` when no value is
+    negative (zeros are not drawn), else ``"symlog"`` (signs mixed: linear near zero,
+    :func:`linear_threshold`). NaN and infinite values are left out.
     """
     v = np.asarray(values, dtype=float).ravel()
     v = v[np.isfinite(v)]
     magnitude = np.abs(v)
-    signed = bool(np.any(v < 0))
     base = magnitude[magnitude > 0]  # a component that stays zero (an axis nothing acts on) spans nothing
     if base.size < 2 or base.max() <= LOG_SPAN * float(np.percentile(base, 25)):
         return "linear"
-    if not signed:
+    return "symlog" if np.any(v < 0) else "log"
+
+
+def set_scale(ax, values, axis: str = "y") -> str:
+    """Put ``ax``'s ``axis`` on the scale :func:`value_scale` gives ``values``: a
+    logarithmic one, a symmetric-log one (:func:`_symlog`), or as it is (``"linear"``).
+    Returns the scale."""
+    scale = value_scale(values)
+    if scale == "log":
         (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
-        return "log"
-    _symlog(ax, v, axis)
-    return "symlog"
+    elif scale == "symlog":
+        v = np.asarray(values, dtype=float).ravel()
+        _symlog(ax, v[np.isfinite(v)], axis)
+    return scale
+
+
+def colour_norm(values):
+    """The colour scale of a map of ``values`` (:func:`value_scale`): None (linear), a
+    ``LogNorm`` from the smallest positive value to the largest, or a ``SymLogNorm``
+    symmetric about zero (linear within :func:`linear_threshold`), for a diverging map."""
+    from matplotlib.colors import LogNorm, SymLogNorm  # heavy: matplotlib
+
+    scale = value_scale(values)
+    if scale == "linear":
+        return None
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if scale == "log":
+        return LogNorm(vmin=float(v[v > 0].min()), vmax=float(v.max()))
+    peak = float(np.abs(v).max())
+    return SymLogNorm(linthresh=linear_threshold(v), linscale=0.5, vmin=-peak, vmax=peak)
+
+
+def linear_threshold(values: np.ndarray) -> float:
+    """Where a symmetric-log scale of finite ``values`` turns linear: the power of ten at or
+    below the 5th percentile of their magnitudes (at least 1e-6 of the peak)."""
+    magnitude = np.abs(values)
+    peak = float(magnitude.max())
+    return 10.0 ** math.floor(math.log10(max(float(np.percentile(magnitude, 5)), 1e-6 * peak)))
 
 
 def _symlog(ax, values: np.ndarray, axis: str) -> None:
-    """Symmetric-log scale: linear within a power of ten near the 5th percentile of the
-    magnitudes (at least 1e-6 of the peak); labelled at 0 and at powers of ten inside the
-    values' range, at most 5 decades each side."""
+    """Symmetric-log scale: linear within :func:`linear_threshold`; labelled at 0 and at
+    powers of ten inside the values' range, at most 5 decades each side."""
     magnitude = np.abs(values)
     peak = float(magnitude.max())
-    low = math.floor(math.log10(max(float(np.percentile(magnitude, 5)), 1e-6 * peak)))
+    low = round(math.log10(linear_threshold(values)))
     top = math.floor(math.log10(peak))
     decades = list(range(top, low, -max(1, math.ceil((top - low) / 5))))
     ticks = [-(10.0 ** k) for k in decades if -(10.0 ** k) >= values.min()] + [0.0]
@@ -323,12 +359,14 @@ def shade_saturation(ax, run: RunData, control: str, member: int | None = None) 
             ax.axvspan(t0, t1, color=f"C{k}", alpha=0.12, lw=0, gid=f"saturated-{control}-{k + 1}")
 
 
-def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False):
+def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False, from_start: Sequence[str] = ()):
     """A figure of each 3-vector of ``names`` in a row of panels, components as solid,
     dashed, dotted lines: one body's in one column, a chain's a column per body or joint (a
     body's quantity in its body's column, a joint's in its joint's: joint i's child is body
     i), each panel named by its member; saturated axes shaded (:func:`shade_saturation`)
-    and the limits near the values dotted (:func:`_draw_limits`). Returns (the figure, its axes (rows, columns), the series)."""
+    and the limits near the values dotted (:func:`_draw_limits`); the quantities of
+    ``from_start`` drawn as their change since the first sample, q - q(0), q(0) written
+    under the axis label. Returns (the figure, its axes (rows, columns), the series)."""
     s = run.series(*names)
     members = run.members
     n = 1 if members is None else len(members["body"])
@@ -338,10 +376,17 @@ def _vector_figure(run: RunData, names: Sequence[str], scale: bool = False):
             ax = axes[row, col]
             values = s[var] if members is None else s[var][:, col]
             name = None if members is None else members[QUANTITIES[var].member][col]
+            label = _label(var)
+            if var in from_start and len(values):  # q - q(0), and q(0) under the label
+                start = values[0].copy()
+                values = values - start
+                q = QUANTITIES[var]
+                label = (f"{q.words} change ${q.tex} - {q.tex}(0)$ [{q.display_units}]\n"
+                         f"${q.tex}(0)$ = [{', '.join(f'{v:.3g}' for v in start)}]")
             for k in range(3):
                 ax.plot(s["time"], values[:, k], ls=_LINESTYLES[k], marker=_marker(values), label=f"${_symbol(var, k)}$")
             who = "" if name is None else f"{name}\n"
-            ax.set_ylabel(who + _label(var), fontsize=9 if members is None else 8)
+            ax.set_ylabel(who + label, fontsize=9 if members is None else 8)
             drawn = _draw_limits(ax, values, control_limits(run, var, name)) if var in SATURATION_FLAGS else []
             if scale:
                 set_scale(ax, np.concatenate([np.ravel(values), drawn]))  # the ticks reach the limits drawn
@@ -432,7 +477,9 @@ def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
     names = ["position", "velocity", "controller_state", "constraint_error"]
     held = run.series(*names)
     names = [n for n in names if n in held and (n != "controller_state" or np.isfinite(held[n]).any())]
-    fig, axes, s = _vector_figure(run, names)
+    chain = run.members is not None
+    # a chain's centre-of-mass positions as their change since t = 0: centimetres of sway, not a metre of height
+    fig, axes, s = _vector_figure(run, names, from_start=("position",) if chain else ())
     e = s["constraint_error"]
     for col in range(axes.shape[1]):
         column = e if e.ndim == 2 else e[:, col]
@@ -443,11 +490,12 @@ def _translational_figure(run: RunData, out: FigureWriter) -> FigureFile:
                                transform=axes[-1, col].transAxes, fontsize=8, color="0.3")
     _suptitle(fig, run, "translational states and constraint error")
     extra = " (X, V reconstructed from Theta, Omega: C is fixed, E = 0)" if run.variant == "permanent" else ""
-    if run.members is not None:
+    if chain:
         extra = (", a column a body and its joint (E_j = X_c + A_c R_c - X_p - A_p R_p; a permanent joint's zero to "
                  "round-off, since reduced coordinates hold it)")
     return out.save(fig, f"{safe_filename(run.label)}_translational", f"{run.label}: translational states and constraint",
-                    "Centre-of-mass position X and velocity V (inertial frame), "
+                    ("Each body's centre-of-mass displacement X - X(0) (X(0) under the axis label) and velocity V "
+                     if chain else "Centre-of-mass position X and velocity V ") + "(inertial frame), "
                     + ("controller state D, " if "controller_state" in names else "")
                     + f"and the constraint error E = X + A R - R against time (cf. the paper's Figs 5, 7){extra}"
                     + _marks_caption(run) + ".")

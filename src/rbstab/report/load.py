@@ -234,6 +234,10 @@ class SweepData:
         The parameters that take more than one value.
     axes : dict of str -> pandas.Series
         Value of each parameter for each row of ``index`` (numbers, or text for a list).
+    entries : dict of str -> str
+        The dotted config entry each parameter of :attr:`axes` sets, as ``--grid`` names it
+        (``joints.ankle.k_r.0``, ``body.mass:scale``, ``controller.k_c`` for a list;
+        ``variant`` and ``base`` themselves).
     """
 
     path: Path
@@ -244,6 +248,7 @@ class SweepData:
     parameters: list[str]
     varied: list[str]
     axes: dict = field(default_factory=dict)
+    entries: dict = field(default_factory=dict)
 
     @property
     def run_ids(self) -> list[str]:
@@ -485,9 +490,11 @@ def load_sweep(path: str | os.PathLike) -> SweepData:
     if problems:
         raise ReportInputError(problems)
     random = spec.get("random") if isinstance(spec.get("random"), dict) else {}
-    axes = _parameter_axes(index, read_parameters(folder, index), set((random or {}).get("params") or {}))
+    parameters = read_parameters(folder, index)
+    axes = _parameter_axes(index, parameters, set((random or {}).get("params") or {}))
     varied = [c for c, v in axes.items() if v.astype(str).nunique(dropna=False) > 1]
-    return SweepData(folder, folder.name, spec, index, runs, list(axes), varied, axes)
+    return SweepData(folder, folder.name, spec, index, runs, list(axes), varied, axes,
+                     {name: parameters.get(name, name) for name in axes})
 
 
 def _unique_labels(runs: Iterable[RunData]) -> None:

@@ -26,7 +26,8 @@ from ..config.identity import canonical_config
 from ..convergence import converged
 from ..diagnostics import largest_mismatch_time, simulation_rate_check_reason
 from ..io.chunk import read_chunk_series, summary_columns
-from ..layout import SATURATION_FLAGS, STATE_BLOCKS, SUMMARY_FIGURES
+from ..layout import SATURATION_FLAGS, SETTLE_E, SETTLE_OMEGA, STATE_BLOCKS, SUMMARY_FIGURES
+from ..summary import settling_times
 from .load import RunData, SweepData
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "check_member_metrics",
     "metric_value",
     "metric_label",
+    "metric_units",
     "settling_time",
     "run_settling_time",
     "run_rate_check_reason",
@@ -62,10 +64,10 @@ __all__ = [
     "metric_column",
 ]
 
-#: Default threshold on |E| (Euclidean norm) for the settling time [m].
-DEFAULT_SETTLE_E = 0.005
-#: Default threshold on |Omega| (Euclidean norm) for the settling time [rad/s].
-DEFAULT_SETTLE_OMEGA = 0.05
+#: Default threshold on |E| (Euclidean norm) for the settling time [m]: the summary figure's.
+DEFAULT_SETTLE_E = SETTLE_E
+#: Default threshold on |Omega| (Euclidean norm) for the settling time [rad/s]: the summary figure's.
+DEFAULT_SETTLE_OMEGA = SETTLE_OMEGA
 
 #: Scalar summary figures usable as ``--metric`` (name -> (symbol, units)), from
 #: :data:`rbstab.layout.SUMMARY_FIGURES` (the numbers; not the text of the rate check).
@@ -79,7 +81,6 @@ SCALAR_SUMMARY_METRICS = {
 VECTOR_SUMMARY_METRICS = {name: (q.symbol, q.display_units) for name, q in SUMMARY_FIGURES.items() if q.size == 3}
 #: Figures of a run that are not summary attributes (name -> (symbol, units)).
 OTHER_METRICS = {
-    "settling_time": ("settling time", "s"),
     "wall_time": ("wall time", "s"),
     "solver_nfev": ("right-hand side evaluations", "1"),
     "converged": ("converged (1) or not (0)", "1"),
@@ -90,7 +91,7 @@ METRIC_ALIASES = {"nfev": "solver_nfev", **{
     f"{key}_{i}": f"{key}_{axis}" for key in VECTOR_SUMMARY_METRICS for i, axis in zip("123", "xyz")}}
 _AXES = ("x", "y", "z")
 #: Metrics plotted against the varied parameters of a sweep when no ``--metric`` is given.
-DEFAULT_METRICS = ("max_abs_constraint_error", "lyapunov_final")
+DEFAULT_METRICS = ("settling_time", "peak_sway", "com_excursion", "max_abs_constraint_error", "lyapunov_final")
 
 
 @dataclass(frozen=True)
@@ -199,25 +200,37 @@ def _split_metric(name: str) -> tuple[str, int | None]:
     return name, None
 
 
-def metric_label(name: str) -> str:
-    """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
+def _symbol_units(name: str) -> tuple[str, str]:
+    """(symbol, units as an axis writes them) of a metric (:func:`allowed_metrics`, or a
+    chain's :func:`member_metric`)."""
     found = member_metric(name)
     if found is not None:
         figure, member, comp = found
         symbol, units = VECTOR_SUMMARY_METRICS[figure]
         symbol = f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"
-        return f"{symbol} of {member} [{units}]" if units != "1" else f"{symbol} of {member}"
+        return f"{symbol} of {member}", units
     base, comp = _split_metric(name)
     if base in VECTOR_SUMMARY_METRICS:
         symbol, units = VECTOR_SUMMARY_METRICS[base]
-        symbol = f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"
-    else:
-        symbol, units = {**SCALAR_SUMMARY_METRICS, **OTHER_METRICS}[base]
+        return (f"{symbol}_{_AXES[comp]}" if comp is not None else f"{symbol} (largest component)"), units
+    return {**SCALAR_SUMMARY_METRICS, **OTHER_METRICS}[base]
+
+
+def metric_units(name: str) -> str:
+    """Units of a metric as an axis writes them (``"m"``, ``"rad/s"``; ``"1"``: none)."""
+    return _symbol_units(name)[1]
+
+
+def metric_label(name: str) -> str:
+    """Axis label of a metric with its units, e.g. ``"max |E| [m]"``."""
+    symbol, units = _symbol_units(name)
     return f"{symbol} [{units}]" if units != "1" else symbol
 
 
 def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresholds: SettleThresholds) -> float:
-    """First sample time after which |E| and |Omega| stay under their thresholds.
+    """First sample time after which |E| and |Omega| stay under their thresholds: one run's
+    :func:`rbstab.summary.settling_times` (the summary figure ``settling_time``'s rule) with
+    ``thresholds``.
 
     Parameters
     ----------
@@ -237,15 +250,10 @@ def settling_time(time: np.ndarray, error: np.ndarray, omega: np.ndarray, thresh
         sample from ``i`` to the end [s]; NaN when the last sample is outside the bounds
         or not finite (a failed run never settles). Resolution: the sample spacing.
     """
-    with np.errstate(invalid="ignore"):
-        largest_error = np.linalg.norm(error, axis=-1).reshape(len(time), -1).max(axis=1, initial=0.0)
-        largest_omega = np.linalg.norm(omega, axis=-1).reshape(len(time), -1).max(axis=1, initial=0.0)
-        inside = (largest_error <= thresholds.e) & (largest_omega <= thresholds.omega)
-    if len(inside) == 0 or not inside[-1]:
+    if len(time) == 0:
         return float("nan")
-    outside = np.flatnonzero(~inside)
-    i = int(outside[-1]) + 1 if outside.size else 0
-    return float(time[i])
+    return float(settling_times(time, np.asarray(error)[None], np.asarray(omega)[None], thresholds.e,
+                                thresholds.omega)[0])
 
 
 #: How a successful run ends (:func:`rest_outcome`), in the report's words.
@@ -374,7 +382,10 @@ def _settling_key(thresholds: SettleThresholds) -> tuple:
 def run_settling_time(run: RunData, thresholds: SettleThresholds) -> float:
     """:func:`settling_time` of a run's stored ``constraint_error`` and ``omega`` [s].
 
-    NaN for a failed run (its trajectory stops before ``t_end``). Cached per run and
+    NaN for a failed run (its trajectory stops before ``t_end``). A run without these
+    series (a summary store) has its summary figure ``settling_time`` at the default
+    thresholds (:data:`DEFAULT_SETTLE_E`, :data:`DEFAULT_SETTLE_OMEGA`; computed from every
+    sample as it ran), NaN at others or where the file has none. Cached per run and
     thresholds; the series of a sweep's run are not kept in memory.
     """
     if not run.ok:
@@ -383,8 +394,12 @@ def run_settling_time(run: RunData, thresholds: SettleThresholds) -> float:
     if key not in run._cache:
         s = run.series("constraint_error", "omega")
         held = all(n in s for n in ("time", "constraint_error", "omega"))  # not in a summary store
-        run._cache[key] = settling_time(s["time"], s["constraint_error"], s["omega"], thresholds) if held \
-            else float("nan")
+        if held:
+            run._cache[key] = settling_time(s["time"], s["constraint_error"], s["omega"], thresholds)
+        elif thresholds == SettleThresholds():
+            run._cache[key] = float(run.summary.get("settling_time", np.nan))
+        else:
+            run._cache[key] = float("nan")
         if run.sweep is not None:
             run.drop_series()  # a sweep may hold thousands of runs: keep only the figure
     return run._cache[key]
