@@ -407,19 +407,22 @@ def test_a_chain_run_file_written_before_reads_as_one_written_now(tmp_path):
                                                                        "simulation.n_samples=11"]))
     new = write_result(result, tmp_path / "stance_ankle_hip.h5")
     old_attrs, new_attrs = read_attributes(OLD_CHAIN_RUN), read_attributes(new)
-    assert set(old_attrs) == set(new_attrs)
+    # the balance figures came later: a file written before has the others
+    later = {f"summary_{name}" for name in ("settling_time", "peak_sway", "com_excursion")}
+    assert set(old_attrs) == set(new_attrs) - later
     old_ds, new_ds = read_dataset(OLD_CHAIN_RUN), read_dataset(new)
-    assert set(old_ds.attrs) == set(new_ds.attrs)
+    assert set(old_ds.attrs) == set(new_ds.attrs) - later
     for key, value in stored.items():
         assert _equal(old_attrs[key], plain(value)) and _equal(old_ds.attrs[key], value), key
         assert np.shape(old_attrs[key]) == np.shape(new_attrs[key]), key
         assert np.shape(old_ds.attrs[key]) == np.shape(new_ds.attrs[key]), key
         assert type(old_ds.attrs[key]) is type(new_ds.attrs[key]), key
-    assert read_summary(OLD_CHAIN_RUN)["summary"].keys() == read_summary(new)["summary"].keys()
+    later_names = {k[len("summary_"):] for k in later}
+    assert read_summary(OLD_CHAIN_RUN)["summary"].keys() == read_summary(new)["summary"].keys() - later_names
     shown = [CliRunner().invoke(cli, ["show", str(p)]) for p in (OLD_CHAIN_RUN, new)]
     assert all(r.exit_code == 0 for r in shown), [r.output for r in shown]
     lines = [[line.split()[0] for line in r.output.splitlines()[1:] if line.startswith("  ")] for r in shown]
-    assert lines[0] == lines[1]  # the same figures, each on its line
+    assert lines[0] == [name for name in lines[1] if name not in later_names]  # the same figures, each on its line
     final = [next(line for line in r.output.splitlines() if line.strip().startswith("final_theta")) for r in shown]
     assert "legs [" in final[0] and "trunk [" in final[0] and final[0].count("[") == final[1].count("[")
 

@@ -140,7 +140,7 @@ def _sweep(folder: Path, name: str, grid: dict, n_fell: int, *options: str) -> P
     result = _invoke("sweep", spec, "-o", folder / "sweeps", "-j", "2", "--no-progress", *SHORT, *options)
     assert isinstance(result.exception, (SystemExit, type(None))), result.exception  # no crash
     assert result.exit_code == 0, (result.output, result.exception)  # a run that fell is a result
-    line = next(x for x in result.output.splitlines() if x.startswith(f"{name}: ") and "skipped" in x)  # counts by outcome
+    line = next(x for x in result.output.splitlines() if x.startswith(f"{name}: ") and " skipped, " in x)  # counts by outcome
     assert (f"{n_fell} fell" in line) == bool(n_fell) and "could not be computed" not in line, line
     assert (folder / "sweeps" / name / "index.csv").is_file()
     return folder / "sweeps" / name
