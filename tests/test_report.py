@@ -353,12 +353,12 @@ def test_sweep_report_lists_failures_plots_metrics_and_the_stable_fraction(sweep
                 "--metric", "max_abs_constraint_error", "--metric", "settling_time"))
     md = (out / "index.md").read_text()
     # failed runs with their messages (from index.csv: the file's message, or the worker's)
-    failed = _md_table(md, "Failed runs of grid")
+    failed = _md_table(md, "Runs of grid that did not reach t_end")
     assert [r[0] for r in failed] == [_run_id(sweeps["grid"], GIMBAL_THETA_2, 32.0)]
-    assert "gimbal lock" in failed[0][-1]
-    failed = _md_table(md, "Failed runs of with_error")
-    assert [(r[0], r[-2]) for r in failed] == [(_run_id(sweeps["line"], GIMBAL_THETA_2), "failed"),
-                                               ("r9999-deadbeef", "error")]
+    assert "gimbal lock" in failed[0][-1] and failed[0][-2] == "fell"
+    failed = _md_table(md, "Runs of with_error that did not reach t_end")
+    assert [(r[0], r[-3], r[-2]) for r in failed] == [(_run_id(sweeps["line"], GIMBAL_THETA_2), "failed", "fell"),
+                                                      ("r9999-deadbeef", "error", "could not be computed")]
     assert "worker raised MemoryError" in failed[1][-1]
     # the stable fraction, as the sweep recorded it (converged column)
     index = pd.read_csv(sweeps["grid"] / "index.csv")

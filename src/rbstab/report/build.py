@@ -435,14 +435,16 @@ def _truthy(value) -> bool:
 
 def _outcomes(table) -> np.ndarray:
     """Each run's outcome (:func:`rbstab.diagnostics.outcome`): the index's ``outcome``
-    column, or for an index without it, from its status, message and v."""
-    if "outcome" in table.columns:
-        return table["outcome"].astype(str).to_numpy()
+    column, and for a row without it (an index written before it, a row added by hand),
+    from its status, message and v."""
     n = len(table)
     column = {c: (table[c].to_numpy() if c in table.columns else np.full(n, None, dtype=object))
-              for c in ("message", "lyapunov_initial", "lyapunov_final", "max_lyapunov_increase")}
-    return outcomes(table["status"].astype(str).to_numpy(), column["message"], column["lyapunov_initial"],
-                    column["lyapunov_final"], column["max_lyapunov_increase"])
+              for c in ("message", "lyapunov_initial", "lyapunov_final", "max_lyapunov_increase", "outcome")}
+    found = outcomes(table["status"].astype(str).to_numpy(), column["message"], column["lyapunov_initial"],
+                     column["lyapunov_final"], column["max_lyapunov_increase"])
+    given = np.array([isinstance(v, str) and v != "" for v in column["outcome"]], dtype=bool)
+    found[given] = column["outcome"][given]
+    return found
 
 
 def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, settle: SettleThresholds) -> Section:
