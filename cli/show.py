@@ -100,8 +100,8 @@ def _parameter_values(index, column: str) -> dict:
 
 def sweep_overview(path: str) -> dict:
     """What ``rbstab show`` says about a sweep folder, as one JSON-able mapping."""
-    from rbstab.sweep.folder import read_index, read_parameters, read_spec  # heavy: numpy
-    from rbstab.diagnostics import OUTCOMES, outcomes  # heavy: numba, numpy
+    from rbstab.sweep.folder import index_outcomes, read_index, read_parameters, read_spec  # heavy: numpy
+    from rbstab.diagnostics import OUTCOMES  # heavy: numpy
     from rbstab.engine.status import fell_mask  # heavy: numba, numpy (rbstab.engine)
 
     index = read_index(path)  # checksum verified
@@ -112,15 +112,7 @@ def sweep_overview(path: str) -> dict:
     counts = {s: int(n) for s, n in index["status"].value_counts().items()}
     n_fell = int(fell_mask(index["status"], index["message"]).sum()) if "message" in index else 0
     ratio = (spec.get("convergence") or {}).get("lyapunov_ratio")
-    if "outcome" in index:
-        ended = index["outcome"].astype(str).to_numpy()
-    else:  # an index written before the outcome column
-        def column(name):
-            return index[name].to_numpy() if name in index else [None] * len(index)
-
-        ended = outcomes(index["status"].astype(str).to_numpy(), column("message"), column("lyapunov_initial"),
-                         column("lyapunov_final"), column("max_lyapunov_increase"),
-                         *([float(ratio)] if ratio is not None else []))
+    ended = index_outcomes(index, *([float(ratio)] if ratio is not None else []))
     return {
         "path": path, "kind": "sweep", "name": spec.get("name", Path(path).name), "n_runs": len(index),
         "status": counts, "outcomes": {w: int((ended == w).sum()) for w in OUTCOMES if (ended == w).any()},

@@ -91,9 +91,21 @@ def outcome(status: str, message: str | None, lyapunov_initial: Any, lyapunov_fi
         return FELL if fell(status, message) else NOT_COMPUTED
     if converged(True, lyapunov_initial, lyapunov_final, ratio, max_increase):
         return CONVERGED
-    away = outcomes(["success"], [None], [lyapunov_initial], [lyapunov_final], None, ratio,
-                    disturbed=None if disturbed is None else [disturbed])[0]
-    return away
+    away = _moving_away(floats(lyapunov_initial), floats(lyapunov_final), disturbed is False)
+    return MOVING_AWAY if bool(away) else SETTLING
+
+
+def _risen(v0, v1):
+    """Whether v(t_end) ``v1`` lies above |v(0)| + round-off [J] (numbers or arrays)."""
+    with np.errstate(invalid="ignore"):
+        return v1 > np.abs(v0) + ROUND_OFF
+
+
+def _moving_away(v0, v1, undisturbed):
+    """Whether a run that reached t_end unconverged is :data:`MOVING_AWAY`: v(t_end) < 0, or
+    without a disturbance (``undisturbed``) above |v(0)| (numbers or arrays)."""
+    with np.errstate(invalid="ignore"):
+        return (v1 < 0.0) | (undisturbed & _risen(v0, v1))
 
 
 def outcomes(status, message, lyapunov_initial, lyapunov_final, max_increase=None,
@@ -104,12 +116,9 @@ def outcomes(status, message, lyapunov_initial, lyapunov_final, max_increase=Non
     v0, v1 = floats(lyapunov_initial), floats(lyapunov_final)
     success = status == "success"
     out = np.full(len(status), SETTLING, dtype=object)
-    with np.errstate(invalid="ignore"):
-        away = v1 < 0.0
-        if disturbed is not None:
-            undisturbed = np.asarray([d is False or d == 0 for d in np.asarray(disturbed, dtype=object)], dtype=bool)
-            away |= undisturbed & (v1 > np.abs(v0) + ROUND_OFF)
-        out[success & away] = MOVING_AWAY
+    undisturbed = (np.zeros(len(status), dtype=bool) if disturbed is None else
+                   np.asarray([d is False or d == 0 for d in np.asarray(disturbed, dtype=object)], dtype=bool))
+    out[success & _moving_away(v0, v1, undisturbed)] = MOVING_AWAY
     out[np.asarray(converged(success, lyapunov_initial, v1, ratio, max_increase), dtype=bool) & success] = CONVERGED
     fallen = fell_mask(status, message)
     out[~success] = NOT_COMPUTED
@@ -140,7 +149,7 @@ def risen_without_disturbance(lyapunov_initial: Any, lyapunov_final: Any) -> str
         v0, v1 = float(lyapunov_initial), float(lyapunov_final)
     except (TypeError, ValueError):
         return ""
-    if not (math.isfinite(v0) and math.isfinite(v1)) or v1 <= abs(v0) + ROUND_OFF:
+    if not (math.isfinite(v0) and _risen(v0, v1)):
         return ""
     return (f"v rose from {v0:.4g} J to {v1:.4g} J without a disturbance: the actuators did not hold the body "
             "(saturated torques, or an unstable equilibrium): a fall unless simulation.limits ends it")

@@ -37,9 +37,10 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__
-from ..diagnostics import OUTCOMES, outcome, outcomes
+from ..diagnostics import OUTCOMES, outcome
 from ..io.metadata import provenance_attributes
 from ..layout import SATURATION_FLAGS, SUMMARY_FIGURES
+from ..sweep.folder import index_outcomes
 from .analysis import analysis_sections, split_inputs
 from .figures import DPI, FIGURE_FORMATS, RUN_FIGURES, FigureWriter, comparison_figures, has_limits
 from .load import ReportInputs, RunData, SweepData, load_inputs, safe_filename
@@ -433,25 +434,11 @@ def _truthy(value) -> bool:
     return str(value).strip().lower() in ("true", "1", "yes")
 
 
-def _outcomes(table) -> np.ndarray:
-    """Each run's outcome (:func:`rbstab.diagnostics.outcome`): the index's ``outcome``
-    column, and for a row without it (an index written before it, a row added by hand),
-    from its status, message and v."""
-    n = len(table)
-    column = {c: (table[c].to_numpy() if c in table.columns else np.full(n, None, dtype=object))
-              for c in ("message", "lyapunov_initial", "lyapunov_final", "max_lyapunov_increase", "outcome")}
-    found = outcomes(table["status"].astype(str).to_numpy(), column["message"], column["lyapunov_initial"],
-                     column["lyapunov_final"], column["max_lyapunov_increase"])
-    given = np.array([isinstance(v, str) and v != "" for v in column["outcome"]], dtype=bool)
-    found[given] = column["outcome"][given]
-    return found
-
-
 def _sweep_section(sweep: SweepData, table, metrics: Sequence[str], figures, settle: SettleThresholds) -> Section:
     s = Section(f"Sweep {sweep.name}", f"sweep-{safe_filename(sweep.name)}")
     n = len(table)
     ok = table["status"].astype(str) == "success"
-    ended = _outcomes(table)
+    ended = index_outcomes(table)
     facts = [
         f"folder: {sweep.path}",
         f"{n} runs: " + ", ".join(f"{int((ended == word).sum())} {word}" for word in OUTCOMES if (ended == word).any()),

@@ -57,13 +57,14 @@ from itertools import product
 from pathlib import Path
 from typing import Any
 
-from ..convergence import RULE, converged
+from ..convergence import DEFAULT_LYAPUNOV_RATIO, RULE, converged
 from ..diagnostics import OUTCOMES, outcomes
 from ..engine.status import fell_mask
 from ..io.atomic import atomic_path, write_text_atomic
 from ..layout import is_index, parameter_attributes
 
 __all__ = [
+    "index_outcomes",
     "SPEC_FILE",
     "INDEX_FILE",
     "INDEX_ARROW_FILE",
@@ -563,6 +564,23 @@ def verify_index(folder: str | os.PathLike) -> bool:
             f"{folder / SPEC_FILE} -o {folder.parent}"
         )
     return True
+
+
+def index_outcomes(index, ratio: float = DEFAULT_LYAPUNOV_RATIO):
+    """Each run's outcome (:data:`rbstab.diagnostics.OUTCOMES`) from an index (a DataFrame
+    as :func:`read_index` gives it): its ``outcome`` column, and for a row without one (an
+    index written before the column, a row added by hand) :func:`rbstab.diagnostics.outcomes`
+    of its status, message and v with the sweep's ``ratio``. An object array of str, shape (runs,)."""
+    import numpy as np  # heavy: numpy
+
+    n = len(index)
+    column = {c: (index[c].to_numpy() if c in index.columns else np.full(n, None, dtype=object))
+              for c in ("message", "lyapunov_initial", "lyapunov_final", "max_lyapunov_increase", "outcome")}
+    found = outcomes(index["status"].astype(str).to_numpy(), column["message"], column["lyapunov_initial"],
+                     column["lyapunov_final"], column["max_lyapunov_increase"], ratio)
+    given = np.array([isinstance(v, str) and v != "" for v in column["outcome"]], dtype=bool)
+    found[given] = column["outcome"][given]
+    return found
 
 
 def read_index(folder: str | os.PathLike, *, verify: bool = True):
