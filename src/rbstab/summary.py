@@ -41,6 +41,7 @@ __all__ = [
     "MEMBER_SLOTS",
     "short_stencils",
     "settling_times",
+    "warm_up_balance",
     "balance_columns",
     "stream_settle",
     "stream_centre",
@@ -741,6 +742,15 @@ def _centre_rows(position, params, acc):
         for i in range(position.shape[1]):
             cx, cy, cz = centre_of_mass(position[r, i], 0, 3, params[r])
             stream_centre(acc[r], i, cx, cy, cz, gx, gy, gz)
+
+
+def warm_up_balance(params: np.ndarray) -> None:
+    """Compile (or load from the cache) the balance figures' kernels of :func:`summary_table`
+    on a tiny input (:func:`rbstab.engine.warm_up`), so that a run's wall time is its own:
+    ``params`` (1,) :data:`rbstab.model.PARAMETERS` records."""
+    acc = np.zeros((1, ACCUMULATOR_SIZE))
+    _settle_rows(np.zeros((1, 2, 3)), np.zeros((1, 2, 3)), SETTLE_E, SETTLE_OMEGA, acc)
+    _centre_rows(np.zeros((1, 2, 3)), np.ascontiguousarray(params).reshape(1, -1), acc)
 
 
 def _per_sample(values: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ import numpy as np
 from ..jit import CACHE_DIR, cache_is_warm, mark_warm
 from ..chain import GROUND, Body, Joint, single
 from ..model import PARAMETERS
-from ..summary import numerical_rate
+from ..summary import numerical_rate, warm_up_balance
 from ..variants import chain as C
 from ..variants.base import N_OUTPUTS
 from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
@@ -59,8 +59,9 @@ def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
     ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
-    integrator), ``outputs`` (every output at the samples and the numerical dv/dt,
-    :func:`rbstab.summary.numerical_rate`) and ``switching`` (the sign
+    integrator), ``outputs`` (every output at the samples, the numerical dv/dt,
+    :func:`rbstab.summary.numerical_rate`, and the balance figures,
+    :func:`rbstab.summary.warm_up_balance`) and ``switching`` (the sign
     law's event-driven integrator, :mod:`rbstab.engine.switching`) and ``chains`` (a
     chain's rate, compiled driver and outputs, :mod:`rbstab.engine.systems`);
     :func:`ensure_compiled` compiles some in a second process at the same time.
@@ -85,6 +86,7 @@ def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
                 run_outputs(np.array([code]), params, times, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
     if "outputs" in wanted:
         numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
+        warm_up_balance(params)  # the summary's settling time and centre of mass
     if "rates" in wanted:
         admissible(0, np.zeros(12), params[0], 1.0)  # the scipy reference's event
         settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
