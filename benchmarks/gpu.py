@@ -116,6 +116,7 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: tuple[str,
     overrides ``extra`` (e.g. :data:`DISTURBED`); the last few kept (a parameter sweep's
     records take ~70 us a run to build). Read-only: callers slice, never write."""
     import rbstab
+    from rbstab.variants.paper import paper_form, paper_initial_state
     from rbstab.engine import method_number
     from rbstab.engine.settings import settings_records
     from rbstab.model import Gains, RigidBody, parameters
@@ -124,15 +125,15 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: tuple[str,
         warnings.simplefilter("ignore")
         config = rbstab.load_config(CASE3, [f"simulation.rtol={rtol}", "simulation.atol=1e-8" if rtol > 1e-9
                                             else "simulation.atol=1e-13", *extra])
-    variant = config.make_variant()
+    variant = paper_form(config)
     rng = np.random.default_rng(seed)
-    y0 = np.repeat(variant.initial_state(config.initial_state)[None], n, axis=0)
+    y0 = np.repeat(paper_initial_state(config, variant)[None], n, axis=0)
     y0[:, 3:6] = rng.normal([16, 32, -16], 4, size=(n, 3))
     base = variant.parameters
     if kind == "initial-state":
         params = np.repeat(base, n)
     else:
-        body, gains = config.body, config.gains
+        body, gains = variant.body, variant.gains
         params = np.empty(n, dtype=base.dtype)
         scale = rng.uniform(0.5, 1.5, n)
         kc, lc, kt = rng.uniform(0.5, 2, n), rng.uniform(0.5, 2, n), rng.uniform(0.7, 1.4, n)
@@ -151,10 +152,9 @@ def runs(kind: str, n: int, seed: int = 0, rtol: float = 1e-6, extra: tuple[str,
 def one_body_trees(kind: str, n: int, rtol: float = 1e-6, extra: tuple[str, ...] = ()):
     """(system, y0 (n, 15), settings rows (n, 7), tree_of (n,), n_samples) of the n runs of
     :func:`runs` as the GPU takes them: Case 3's one-body tree
-    (:func:`rbstab.config.loader.chain_of`) with each run's record, one tree for the
+    (:attr:`rbstab.config.RunConfig.chain`) with each run's record, one tree for the
     initial-state sweep, a tree a run for the parameter sweep, each with its h."""
     import rbstab
-    from rbstab.config.loader import chain_of
     from rbstab.engine.systems import tree_system, with_offsets
     from rbstab.variants.chain import compile_chain
 
@@ -163,7 +163,7 @@ def one_body_trees(kind: str, n: int, rtol: float = 1e-6, extra: tuple[str, ...]
         warnings.simplefilter("ignore")
         config = rbstab.load_config(CASE3, list(extra))
     trees = params[:1] if kind == "initial-state" else params
-    system = tree_system(compile_chain(chain_of(config), offset=0.0))._replace(
+    system = tree_system(compile_chain(config.chain, offset=0.0))._replace(
         params=np.ascontiguousarray(trees[:, None]), ppoints=np.ascontiguousarray(trees["attachment_point"][:, None]))
     tree_of = np.zeros(n, dtype=np.int64) if kind == "initial-state" else np.arange(n)
     rows = np.column_stack([settings[name] for name in settings.dtype.names[:-1]])

@@ -59,6 +59,7 @@ _early_blas_threads()
 
 import numpy as np  # noqa: E402
 
+from rbstab.variants.paper import paper_form
 from rbstab.config import PhysicalPlausibilityWarning, load_config  # noqa: E402
 from rbstab.variants import VARIANTS  # noqa: E402
 
@@ -80,7 +81,7 @@ def paper_variant(name: str):
     ]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-        return load_config(CASE3, overrides).make_variant()
+        return paper_form(load_config(CASE3, overrides))
 
 
 def random_states(variant, n: int, seed: int = 0) -> np.ndarray:

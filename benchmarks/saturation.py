@@ -39,13 +39,14 @@ def runs(n: int, shape: str | None, seed: int = 0, scale_limits: float = 1.0, no
     """(codes, params, y0, settings rows) of n Case 3 runs, with every limit under ``shape``
     (times ``scale_limits``) and, if ``noise``, the disturbance :data:`NOISE`."""
     import rbstab
+    from rbstab.variants.paper import paper_form, paper_initial_state
     from rbstab.engine.settings import settings_rows
     from rbstab.model import SATURATION_SHAPES
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = rbstab.load_config(CASE3, [NOISE] if noise else [])
-    variant = config.make_variant()
+    variant = paper_form(config)
     rng = np.random.default_rng(seed)
     params = np.repeat(variant.parameters, n)
     scale = rng.uniform(0.5, 1.5, n)
@@ -58,7 +59,7 @@ def runs(n: int, shape: str | None, seed: int = 0, scale_limits: float = 1.0, no
         params["force_limit"] = 2000.0 * scale_limits
         params["constraint_force_limit"] = 5000.0 * scale_limits
         params["saturation"] = SATURATION_SHAPES[shape]
-    y0 = np.repeat(variant.initial_state(config.initial_state)[None], n, axis=0)
+    y0 = np.repeat(paper_initial_state(config, variant)[None], n, axis=0)
     y0[:, 3:6] = rng.normal([16, 32, -16], 4, size=(n, 3))
     return np.full(n, variant.code), params, y0, np.repeat(settings_rows([config.simulation]), n, axis=0)
 

@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 EXAMPLE = ROOT / "configs" / "examples" / "sliding.yaml"
 WELL_CONDITIONED = 0.5  # [s]: before the switchings accumulate (see docs/sliding.md)
 
+from rbstab.variants.paper import paper_form, paper_initial_state
 from rbstab.config import PhysicalPlausibilityWarning  # noqa: E402
 
 warnings.simplefilter("ignore", PhysicalPlausibilityWarning)  # Table 1's inertia (the config says so)
@@ -94,8 +95,8 @@ def reference_section(best, steps):
     from rbstab.engine.switching import integrate_sign_law
 
     c = best.config
-    variant = c.make_variant()
-    y0 = variant.initial_state(c.initial_state)
+    variant = paper_form(c)
+    y0 = paper_initial_state(c, variant)
     time_ = best.time
     ours = best.outputs["position"]
     print("\n## the plain sign law by fixed-step RK4 (no events) against ours: max |X - X_ours| [m]")
@@ -140,8 +141,8 @@ def resolution_section(best, resolutions):
     from rbstab.engine.switching import integrate_sign_law
 
     c = best.config
-    variant = c.make_variant()
-    y0 = variant.initial_state(c.initial_state)
+    variant = paper_form(c)
+    y0 = paper_initial_state(c, variant)
     runs = {r: integrate_sign_law(variant, y0, c.simulation, resolution=r) for r in resolutions}
     finest = runs[min(resolutions)].states[:, 6:9]
     print(f"\n## the switching resolution: max |X - X_finest| [m], the finest is {min(resolutions):g} m")

@@ -47,7 +47,7 @@ def command_line() -> str:
 
 
 def load_one(path: str, overrides: Sequence[str]):
-    """``(config, error, warnings)`` of one config file: the RunConfig or ChainConfig (one
+    """``(config, error, warnings)`` of one config file: the RunConfig (one
     body's or a tree's) or None, the ConfigError or None, and its coded warning lines
     (:mod:`rbstab.warning_codes`)."""
     from rbstab.config import ConfigError, PhysicalPlausibilityWarning  # heavy: yaml

@@ -40,7 +40,6 @@ def _check_config(path: str, overrides) -> dict:
     """One JSON-able record of a run config: valid or not, its settings, its warnings, its
     tree's bodies and joints (a one-body config's: its body held by its controller) and for
     a one-body config its variant."""
-    from rbstab.config.loader import chain_of  # heavy: pydantic
 
     config, error, lines = load_one(path, overrides)
     if config is None:
@@ -49,8 +48,8 @@ def _check_config(path: str, overrides) -> dict:
     sim = config.simulation
     record = {"path": path, "kind": "config", "valid": True, "name": config.name}
     if not is_chain(config):
-        record["variant"] = config.variant
-    record["chain"] = _chain_record(chain_of(config))
+        record["variant"] = config.chain.joints[0].variant
+    record["chain"] = _chain_record(config.chain)
     lines = [*lines, *stiffness_warnings([config]).get(config.name, [])]
     return record | {"t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
 

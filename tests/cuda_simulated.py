@@ -63,7 +63,8 @@ def main() -> None:
         return out
 
     reference = collect("compiled", "all")
-    report = {"variants": sorted({c.variant for c in runs}), "methods": sorted({c.simulation.method for c in runs}),
+    report = {"variants": sorted({c.chain.joints[0].variant for c in runs}),
+              "methods": sorted({c.simulation.method for c in runs}),
               "statuses": sorted({r.status for r, _ in reference.values()}),
               "left_region": sorted({r.message.split(" = ")[0] for r, _ in reference.values()
                                      if r.message.startswith("left the admissible region")})}
@@ -138,18 +139,18 @@ def deadline() -> dict:
     second's runs report (every run is written, none starts after the deadline)."""
     import rbstab
     import rbstab.engine.cuda as engine
-    from rbstab.config.loader import chain_of
     from rbstab.engine.settings import settings_rows
+    from rbstab.variants.paper import paper_initial_state
     from rbstab.engine.status import NOT_STARTED, status_message
     from rbstab.engine.systems import tree_system, with_offsets
     from rbstab.variants.chain import compile_chain
 
     config = rbstab.load_config(os.path.join(sys.argv[1], "configs/paper/case3_embedded.yaml"),
                                 ["simulation.t_end=0.002"])
-    compiled = compile_chain(chain_of(config))
+    compiled = compile_chain(config.chain)
     system = with_offsets(tree_system(compiled, config.simulation.limits), compiled.offset)
     k = 600
-    y0 = np.repeat(config.make_variant().initial_state(config.initial_state)[None], k, axis=0)
+    y0 = np.repeat(paper_initial_state(config)[None], k, axis=0)
     rows = np.repeat(settings_rows([config.simulation]), k, axis=0)
     engine._resident_blocks = lambda fn, signature: 4
 

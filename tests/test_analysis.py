@@ -20,6 +20,7 @@ from conftest import PAPER_CONFIGS, ROOT, paper_body, paper_gains
 from reference import Model
 from scipy.optimize import linear_sum_assignment
 
+from rbstab.variants.paper import paper_form
 from rbstab.analysis import BasinAxis, analyze, basin_map, certify, linearise
 from rbstab.analysis.basin import time_to_converge
 from rbstab.analysis.certificate import boundary_level
@@ -102,8 +103,8 @@ def test_free_body_eigenvalues_are_the_per_axis_closed_forms(seed):
 
 def test_inverted_pendulum_closed_form_unstable_and_confirmed_by_simulation():
     config = _inverted_pendulum(k_r=100.0)  # k_r < m g L = 41 * 10 * 0.42 = 172.2 N m/rad: it falls
-    lin = linearise(config.make_variant())
-    j_p = np.diag(config.body.pivot_inertia)
+    lin = linearise(paper_form(config))
+    j_p = np.diag(paper_form(config).body.pivot_inertia)
     m_g_l = 41.0 * 10.0 * 0.42
     expected = np.concatenate([_quadratic_roots(j_p[i], 60.0 if i < 2 else 42.0, 100.0 - (m_g_l if i < 2 else 0.0))
                                for i in range(3)])
@@ -125,7 +126,7 @@ def test_inverted_pendulum_closed_form_unstable_and_confirmed_by_simulation():
     assert grown[1] / grown[0] == pytest.approx(np.e, rel=0.01)  # |theta_2| < 0.06 rad: sin nearly linear
     assert np.nanmax(np.abs(theta)) > 0.5 or not result.ok
     # the same pendulum held up by k_r > m g L is stable, with the same closed form
-    stiff = linearise(_inverted_pendulum(k_r=400.0).make_variant())
+    stiff = linearise(paper_form(_inverted_pendulum(k_r=400.0)))
     expected = np.concatenate([_quadratic_roots(j_p[i], 60.0 if i < 2 else 42.0, 400.0 - (m_g_l if i < 2 else 0.0))
                                for i in range(3)])
     assert np.all(_match(stiff.eigenvalues, expected) <= 1e-9 * np.abs(expected).max())
@@ -234,7 +235,7 @@ def test_certificate_fails_with_negative_damping():
 
 
 def test_inverted_pendulum_v_is_not_positive_definite():
-    variant = _inverted_pendulum(k_r=100.0).make_variant()
+    variant = paper_form(_inverted_pendulum(k_r=100.0))
     cert = certify(variant, linearise(variant), gimbal_margin=1e-3, n_samples=100)
     assert not cert.positive_definite and cert.hessian_min_eigenvalue < 0
     assert not cert.holds and cert.sublevel == 0.0
@@ -244,7 +245,7 @@ def test_boundary_level_with_gravity_matches_a_direct_minimisation():
     from scipy.optimize import minimize
 
     config = load_config(ROOT / "configs/paper/case1_permanent.yaml")
-    variant = config.make_variant()
+    variant = paper_form(config)
     lin = linearise(variant)
     h_v, _ = hessian(variant.lyapunov, lin.equilibrium)
     limit = GIMBAL_LOCK_ANGLE - 1e-3
@@ -276,9 +277,9 @@ def test_paper_cases_are_asymptotically_stable_with_certificates(path):
 def test_sign_law_is_analysed_with_a_boundary_layer():
     config = load_config(ROOT / "configs/examples/sliding.yaml", ["controller.boundary_layer=0"])
     with pytest.raises(ValueError, match="no linearisation"):
-        linearise(config.make_variant())
+        linearise(paper_form(config))
     result = analyze(config, boundary_layer=2e-3, certificate=False, simulate=False)
-    assert result.analysed.gains.boundary_layer == 2e-3 and result.config.gains.boundary_layer == 0
+    assert paper_form(result.analysed).gains.boundary_layer == 2e-3 and paper_form(result.config).gains.boundary_layer == 0
     assert "does not exist" in result.notes[0]
     assert result.to_json()["analysed_boundary_layer"] == 2e-3
     # the linearised sliding force is a spring K_s / phi at C: stiffer phi, faster modes

@@ -59,11 +59,11 @@ def test_load_config_from_a_file_a_mapping_or_a_config():
     from_file = rbstab.load_config(CASE3, ["simulation.t_end=0.5", "initial_state.omega.0=5"])
     from_mapping_overrides = rbstab.load_config(CASE3, {"simulation.t_end": 0.5, "initial_state.omega.0": 5})
     assert from_file.resolved == from_mapping_overrides.resolved
-    assert from_file.simulation.t_end == 0.5 and from_file.initial_state["omega"][0] == 5
+    assert from_file.simulation.t_end == 0.5 and from_file.initial_state["body"]["omega"][0] == 5
     again = rbstab.load_config(from_file.resolved)
     assert again.resolved == from_file.resolved
     derived = rbstab.load_config(from_file, {"body.mass": 30.0})
-    assert derived.body.mass == 30.0 and from_file.body.mass == 41.0
+    assert derived.chain.bodies[0].mass == 30.0 and from_file.chain.bodies[0].mass == 41.0
     unnamed = {k: v for k, v in from_file.resolved.items() if k != "name"}
     assert rbstab.load_config(unnamed).name == "run"
     assert rbstab.load_config(unnamed, name="mine").name == "mine"
@@ -74,7 +74,7 @@ def test_load_config_errors_name_the_key_and_the_value():
         rbstab.load_config(CASE1, {"body.mass": -1, "simulation.n_samples": 1})
     text = str(caught.value)
     assert "'body.mass': found -1" in text and "'simulation.n_samples': found 1" in text
-    with pytest.raises(ConfigError, match="found int; expected a path, a mapping, a RunConfig or a ChainConfig"):
+    with pytest.raises(ConfigError, match="found int; expected a path, a mapping or a RunConfig"):
         rbstab.load_config(3)
     with pytest.raises(ConfigError, match="config file not found"):
         rbstab.load_config(ROOT / "no-such.yaml")

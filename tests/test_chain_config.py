@@ -15,11 +15,13 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from rbstab.variants.paper import paper_form
 from rbstab.chain import GROUND, MAX_BODIES, Body, Joint, single
 from rbstab.config import ConfigError, PhysicalPlausibilityWarning, RunConfig
-from rbstab.config.loader import ChainConfig, chain_of, config_from_mapping, load_config
+from rbstab.config.loader import config_from_mapping, load_config
 from rbstab.kinematics import euler_rate_matrix, rotation_matrix
 from rbstab.model import Saturation
+from rbstab.variants import VARIANTS
 from rbstab_cli.main import cli
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -99,7 +101,7 @@ def test_a_one_body_config_validates_as_its_one_body_tree():
 
 def test_the_examples_mean_what_their_comments_say():
     stance = load_config(EXAMPLES["stance_ankle_hip"])
-    assert isinstance(stance, ChainConfig)
+    assert isinstance(stance, RunConfig)
     ankle, hip = stance.chain.joints
     np.testing.assert_array_equal(ankle.saturation.torque_n, [120, 120, math.inf])
     np.testing.assert_array_equal(hip.saturation.torque_n, [150, 150, math.inf])
@@ -118,21 +120,21 @@ def test_the_examples_mean_what_their_comments_say():
 
 
 def test_one_loader_takes_both_spellings_and_refuses_a_mapping_that_mixes_them():
-    """load_config and config_from_mapping (and the API's rbstab.load_config) give a
-    ChainConfig for a tree's file or mapping and a RunConfig for one body's, overrides read
-    against the spelling's keys; a mapping with both body and bodies is one line."""
+    """load_config and config_from_mapping (and the API's rbstab.load_config) give one type,
+    a RunConfig, for a tree's file or mapping and for one body's, overrides read against the
+    spelling's keys; a mapping with both body and bodies is one line."""
     import rbstab
 
     tree = load_config(EXAMPLES["stance_ankle_hip"], ["joints.ankle.k_r.0=400"])
-    assert isinstance(tree, ChainConfig) and tree.chain.joints[0].k_r[0, 0] == 400.0
+    assert isinstance(tree, RunConfig) and tree.chain.joints[0].k_r[0, 0] == 400.0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)  # case 1's printed inertia (W001)
         one = load_config(ROOT / "configs" / "paper" / "case1_permanent.yaml", ["controller.k_r.0=300"])
-    assert isinstance(one, RunConfig) and one.gains.k_r[0, 0] == 300.0
+    assert isinstance(one, RunConfig) and paper_form(one).gains.k_r[0, 0] == 300.0
     again = config_from_mapping(tree.resolved, overrides=["joints.hip.l_r=[1, 2, 3]"])
-    assert isinstance(again, ChainConfig) and np.array_equal(np.diag(again.chain.joints[1].l_r), [1, 2, 3])
+    assert isinstance(again, RunConfig) and np.array_equal(np.diag(again.chain.joints[1].l_r), [1, 2, 3])
     api = rbstab.load_config(tree, {"joints.hip.k_r.0": 600})
-    assert isinstance(api, ChainConfig) and api.chain.joints[1].k_r[0, 0] == 600.0
+    assert isinstance(api, RunConfig) and api.chain.joints[1].k_r[0, 0] == 600.0
     mixed = {**one.resolved, "bodies": tree.resolved["bodies"], "joints": tree.resolved["joints"]}
     with pytest.raises(ConfigError) as info:
         config_from_mapping(mixed)
@@ -284,17 +286,37 @@ ONE_BODY = ["paper/case1_permanent.yaml", "paper/case2_visco_elastic.yaml", "pap
 
 
 def _expected_chain(config):
-    """The one-body chain written out from the one-body config's own fields."""
-    g = config.gains
-    sat = g.saturation
+    """The one-body chain written out from the one-body config's resolved sections (what
+    the file says: a list of 3 numbers a diagonal matrix, a limit left out inf)."""
+    r = config.resolved
+    body_section, ctrl = r["body"], r["controller"]
+    used = VARIANTS[ctrl["variant"]].required_gains
+
+    def matrix(value):
+        value = np.array(value, dtype=float)
+        return np.diag(value) if value.ndim == 1 else value
+
+    def gain(name):
+        return matrix(ctrl[name]) if name in used else None
+
+    written = ctrl.get("saturation")
     inf = np.full(3, math.inf)
-    body = Body("body", config.body.mass, config.body.inertia, g.k_t, g.l_t,
-                None if sat is None else Saturation(inf, sat.force_h, inf, sat.shape), g.disturbances)
-    joint = Joint("controller", GROUND, 0, config.body.attachment_point, config.body.attachment_point,
-                  config.variant, g.k_r, g.l_r,
-                  g.k_c, g.l_c, g.k_d, g.l_d, g.k_s, g.boundary_layer,
-                  None if sat is None else Saturation(sat.torque_n, inf, sat.constraint_force, sat.shape))
-    return single(body, joint, config.body.gravity)
+
+    def limit(key):
+        value = (written or {}).get(key)
+        return inf.copy() if value is None else np.broadcast_to(np.array(value, dtype=float), (3,)).copy()
+
+    shape = None if written is None else written.get("shape", "clip")
+    point = np.array(body_section["attachment_point"], dtype=float)
+    body = Body("body", float(body_section["mass"]), matrix(body_section["inertia"]), gain("k_t"), gain("l_t"),
+                None if written is None else Saturation(inf, limit("force_h"), inf, shape),
+                paper_form(config).gains.disturbances)
+    joint = Joint("controller", GROUND, 0, point, point, ctrl["variant"], gain("k_r"), gain("l_r"),
+                  gain("k_c"), gain("l_c"), gain("k_d"), gain("l_d"),
+                  float(ctrl["k_s"]) if "k_s" in used else None,
+                  float(ctrl.get("boundary_layer", 0.0)) if "k_s" in used else 0.0,
+                  None if written is None else Saturation(limit("torque_n"), inf, limit("constraint_force"), shape))
+    return single(body, joint, np.array(body_section["gravity"], dtype=float))
 
 
 def _assert_same(a, b, where=""):
@@ -316,31 +338,33 @@ def _assert_same(a, b, where=""):
 
 
 @pytest.mark.parametrize("path", ONE_BODY)
-def test_one_body_spelling_of_a_one_body_tree_is_the_one_body_config(path):
-    """one_body_config undoes chain_of: the same body written as a tree (bodies, joints)
-    reads back as the one-body config, every resolved key equal; a tree held elsewhere than
-    at its own point, or of two bodies, has none."""
+def test_both_spellings_of_one_body_have_one_paper_form(path):
+    """The paper's one-body model (paper_form) of the same body written as a tree (bodies,
+    joints) is the one-body config's, record for record, and both spellings compile to one
+    tree; a tree held elsewhere than at its own point, or of two bodies, has none."""
     from conftest import tree_spelling
-    from rbstab.config.loader import one_body_config
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         config = load_config(ROOT / "configs" / path)
         tree = tree_spelling(config)
-    assert one_body_config(tree).resolved == config.resolved
+    one, other = paper_form(config), paper_form(tree)
+    assert type(one) is type(other)
+    for name in one.parameters.dtype.names:
+        np.testing.assert_array_equal(one.parameters[name], other.parameters[name], err_msg=name)
     from rbstab.variants.chain import compile_chain
 
-    back, given = (compile_chain(c, offset=0.0) for c in (chain_of(one_body_config(tree)), tree.chain))
+    back, given = (compile_chain(c.chain, offset=0.0) for c in (config, tree))
     for a, b in zip(back.args, given.args):  # the same records: one model
         np.testing.assert_array_equal(a, b)
     moved = dict(tree.resolved, joints=[dict(tree.resolved["joints"][0], parent_point=[0.0, 0.0, 0.0])])
-    if config.variant == "permanent":  # its initial x, v placed from the joint
+    if config.chain.joints[0].variant == "permanent":  # its initial x, v placed from the joint
         moved["initial_state"] = {"body": {k: v for k, v in tree.resolved["initial_state"]["body"].items()
                                            if k not in ("x", "v")}}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        assert one_body_config(config_from_mapping(moved)) is None
-        assert one_body_config(load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")) is None
+        assert paper_form(config_from_mapping(moved)) is None
+        assert paper_form(load_config(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")) is None
 
 
 @pytest.mark.parametrize("path", ONE_BODY)
@@ -348,7 +372,7 @@ def test_chain_of_a_one_body_config_is_its_one_body_chain(path):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         config = load_config(ROOT / "configs" / path)
-    chain = chain_of(config)
+    chain = config.chain
     _assert_same(chain, _expected_chain(config))
     assert chain.size == 1 and chain.body_names == ("body",) and chain.joint_names == ("controller",)
     assert list(chain.parents) == [GROUND]
@@ -379,24 +403,24 @@ def test_the_two_spellings_of_one_body_are_one_chain(path):
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
         config = load_config(ROOT / "configs" / path)
         data = _as_chain_mapping(config)
-        if config.variant == "permanent":  # x and v follow from theta and omega: let rbstab place them
+        if config.chain.joints[0].variant == "permanent":  # x and v follow from theta and omega: let rbstab place them
             for key in ("x", "v"):
                 data["initial_state"]["body"].pop(key)
         chained = config_from_mapping(data)
-    _assert_same(chained.chain, chain_of(config))  # the gains the variant does not use: None in both
+    _assert_same(chained.chain, config.chain)  # the gains the variant does not use: None in both
     state = chained.initial_state["body"]
     for block in ("theta", "omega", "controller_state"):
-        np.testing.assert_array_equal(state[block], config.initial_state[block])
-    if config.variant != "permanent":
-        np.testing.assert_array_equal(state["position"], config.initial_state["position"])
-        np.testing.assert_array_equal(state["velocity"], config.initial_state["velocity"])
+        np.testing.assert_array_equal(state[block], config.initial_state["body"][block])
+    if config.chain.joints[0].variant != "permanent":
+        np.testing.assert_array_equal(state["position"], config.initial_state["body"]["position"])
+        np.testing.assert_array_equal(state["velocity"], config.initial_state["body"]["velocity"])
     assert chained.simulation == config.simulation
 
 
 # -- placement, the permanent constraint, names ------------------------------------------------------
 
 
-def _point_error(config: ChainConfig, states) -> list[np.ndarray]:
+def _point_error(config: RunConfig, states) -> list[np.ndarray]:
     """E_j = X_c + A_c R_c - X_p - A_p R_p of every joint, from the states' theta and x."""
     out = []
     for joint in config.chain.joints:

@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from conftest import tree_spelling
+from rbstab.variants.paper import paper_form
 from rbstab.config import load_config
-from rbstab.config.loader import config_from_mapping, chain_of, load_config
+from rbstab.config.loader import config_from_mapping, load_config
 from rbstab.engine.integrate import integrate_chain_runs, integrate_tree_chunk
 from rbstab.engine.settings import settings_records, settings_rows
 from rbstab.engine import method_number
@@ -67,10 +68,10 @@ def test_one_bodys_two_spellings_are_one_model(path):
     body, chain = simulate(config), simulate(tree)
     assert body.status == chain.status == "success"
     assert body.solver["nfev"] == chain.solver["nfev"]
-    blocks = ("theta", "omega") if config.variant == "permanent" else ("theta", "omega", "position", "velocity")
+    blocks = ("theta", "omega") if config.chain.joints[0].variant == "permanent" else ("theta", "omega", "position", "velocity")
     for key in blocks:
         np.testing.assert_array_equal(chain.outputs[key][:, 0], body.outputs[key], err_msg=key)
-    if config.variant == "embedded":
+    if config.chain.joints[0].variant == "embedded":
         np.testing.assert_array_equal(chain.outputs["controller_state"][:, 0], body.outputs["controller_state"])
     if "disturbance_work" in body.outputs:
         np.testing.assert_array_equal(chain.outputs["disturbance_work"], body.outputs["disturbance_work"])
@@ -136,10 +137,10 @@ def test_the_general_tree_rate_is_one_bodys_rate(path):
     config = _one_body(path)
     sim = config.simulation
     body = simulate(config)
-    variant = config.make_variant()
+    variant = paper_form(config)
     y = np.ascontiguousarray(np.column_stack([body.outputs[b] for b in variant.layout.blocks]))
     time = np.ascontiguousarray(body.time)
-    compiled = C.compile_chain(chain_of(config), offset=0.0)
+    compiled = C.compile_chain(config.chain, offset=0.0)
     layout = T.tree_layout(compiled)
     assert layout.n_r == y.shape[1]  # the one-body state is the tree's reduced state
     work = T.tree_work(1, compiled.n_states)

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import rbstab
+from rbstab.variants.paper import paper_form
 from rbstab.layout import N_OUTPUTS
 from rbstab.summary import ACCUMULATOR_SIZE, short_stencils, stencil_weights, stream_finish, stream_start
 
@@ -71,7 +72,7 @@ def test_streamed_summary_of_one_body_is_the_cpus(path, overrides):
         warnings.simplefilter("ignore")
         config = rbstab.load_config(path, ["simulation.t_end=1.0", f"simulation.n_samples={n}", *overrides])
     result = simulate(config)
-    variant = config.make_variant()
+    variant = paper_form(config)
     states = np.column_stack([result.outputs[b] for b in variant.layout.blocks])
     samples = np.column_stack([states, result.outputs["disturbance_work"]])  # the state, then W
     taken = int(np.isfinite(states[:, 0]).sum())

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from reference import NOISE_TONES, disturbed_rates, hat, impulse_jump, noise_phases, noise_value, rotation
+from rbstab.variants.paper import paper_form
 from rbstab.config import ConfigError, config_from_mapping
 from rbstab.model import Disturbance
 from rbstab.simulator import simulate
@@ -57,7 +58,7 @@ def test_state_rate_adds_what_the_numpy_reference_adds(name):
     step and a noise (reference.py sums its sines one by one)."""
     config = config_from_mapping(_mapping(name, [*PUSHES[:3], NOISE]))
     plain = config_from_mapping(_mapping(name))
-    variant, undisturbed = config.make_variant(), plain.make_variant()
+    variant, undisturbed = paper_form(config), paper_form(plain)
     rng = np.random.default_rng(4)
     for t in (0.35, 0.2, 1.3, 0.05):
         y = rng.normal(size=variant.layout.size) * 0.3
@@ -65,14 +66,14 @@ def test_state_rate_adds_what_the_numpy_reference_adds(name):
         theta = y[:3]
         if name == "permanent":
             from reference import disturbance_wrench
-            body = config.body
-            force, torque = disturbance_wrench(config.gains.disturbances, theta, t)
+            body = paper_form(config).body
+            force, torque = disturbance_wrench(paper_form(config).gains.disturbances, theta, t)
             r = np.asarray(body.attachment_point)
             j_p = body.inertia - body.mass * hat(r) @ hat(r)
             expected = np.linalg.solve(j_p, torque - np.cross(r, rotation(theta).T @ force))
             np.testing.assert_allclose(delta[3:6], expected, rtol=1e-11, atol=1e-12)
             continue
-        d_omega, d_v = disturbed_rates(config.body, config.gains.disturbances, theta, t)
+        d_omega, d_v = disturbed_rates(paper_form(config).body, paper_form(config).gains.disturbances, theta, t)
         np.testing.assert_allclose(delta[3:6], d_omega, rtol=1e-11, atol=1e-12)
         np.testing.assert_allclose(delta[9:12], d_v, rtol=1e-11, atol=1e-12)
         np.testing.assert_array_equal(delta[:3], 0.0)
@@ -146,13 +147,13 @@ def test_impulse_jumps_the_velocities(name, quantity):
     plain = simulate(config_from_mapping(_mapping(name, (), t_end=0.5, n_samples=101, gravity=(0, 0, 0))))
     before = {k: plain.outputs[k][-1] for k in ("theta", "omega", "velocity")}
     np.testing.assert_allclose(r.outputs["theta"][j], before["theta"], atol=1e-12)
-    d = config.gains.disturbances[0]
-    d_omega, d_v = impulse_jump(config.body, d, before["theta"], permanent=name == "permanent")
+    d = paper_form(config).gains.disturbances[0]
+    d_omega, d_v = impulse_jump(paper_form(config).body, d, before["theta"], permanent=name == "permanent")
     np.testing.assert_allclose(r.outputs["omega"][j] - before["omega"], d_omega, rtol=1e-9, atol=1e-11)
     if name == "free":
         np.testing.assert_allclose(r.outputs["velocity"][j] - before["velocity"], d_v, rtol=1e-9, atol=1e-11)
         a = rotation(before["theta"])
-        jump_l = a @ config.body.inertia @ (r.outputs["omega"][j] - before["omega"])
+        jump_l = a @ paper_form(config).body.inertia @ (r.outputs["omega"][j] - before["omega"])
         expected = np.cross(a @ d.point, d.value) if quantity == "force" else a @ d.value
         np.testing.assert_allclose(jump_l, expected, rtol=1e-9, atol=1e-11)
     dw = r.outputs["disturbance_work"][j] - r.outputs["disturbance_work"][j - 1]
@@ -186,12 +187,12 @@ def test_noise_rms_and_band():
     spectrum inside the band, and it is the same for the same seed."""
     push = {"kind": "noise", "rms": [5.0, 2.0, 0.0], "band": [0.5, 5.0], "seed": 7, "start": 0.0}
     config = config_from_mapping(_mapping("free", [push], gravity=(0, 0, 0)))
-    plain = config_from_mapping(_mapping("free", (), gravity=(0, 0, 0))).make_variant()
-    variant = config.make_variant()
+    plain = paper_form(config_from_mapping(_mapping("free", (), gravity=(0, 0, 0))))
+    variant = paper_form(config)
     dt, n = 0.01, 2 ** 15  # 327 s
     y = np.zeros((n, 12))
     t = np.arange(n) * dt
-    force = np.array([variant.rhs(ti, y[0])[9:12] - plain.rhs(ti, y[0])[9:12] for ti in t]) * config.body.mass
+    force = np.array([variant.rhs(ti, y[0])[9:12] - plain.rhs(ti, y[0])[9:12] for ti in t]) * paper_form(config).body.mass
     rms = np.sqrt(np.mean(force ** 2, axis=0))
     np.testing.assert_allclose(rms[:2], [5.0, 2.0], rtol=0.05)
     assert rms[2] == 0.0
@@ -199,7 +200,7 @@ def test_noise_rms_and_band():
     f = np.fft.rfftfreq(n, dt)
     outside = spectrum[(f < 0.4) | (f > 5.1)].sum() / spectrum.sum()
     assert outside < 1e-3
-    again = config_from_mapping(_mapping("free", [push], gravity=(0, 0, 0))).make_variant()
+    again = paper_form(config_from_mapping(_mapping("free", [push], gravity=(0, 0, 0))))
     np.testing.assert_array_equal(again.rhs(3.3, y[0]), variant.rhs(3.3, y[0]))
 
 
@@ -209,11 +210,11 @@ def test_noise_is_its_sines_summed_one_by_one():
     [0, 10] s, axis by axis; seeds and axes draw other phases, and an axis of RMS 0 is 0."""
     push = dict(NOISE, start=0.5, rms=[3.0, 0.0, 2.0], seed=2 ** 31 - 1)
     config = config_from_mapping(_mapping("free", [push], t_end=12.0, gravity=(0, 0, 0)))
-    plain = config_from_mapping(_mapping("free", (), t_end=12.0, gravity=(0, 0, 0))).make_variant()
-    variant, d = config.make_variant(), config.gains.disturbances[0]
+    plain = paper_form(config_from_mapping(_mapping("free", (), t_end=12.0, gravity=(0, 0, 0))))
+    variant, d = paper_form(config), paper_form(config).gains.disturbances[0]
     y = np.zeros(12)
     t = np.random.default_rng(3).uniform(0.5, 10.5, 400)
-    got = np.array([variant.rhs(ti, y)[9:12] - plain.rhs(ti, y)[9:12] for ti in t]) * config.body.mass
+    got = np.array([variant.rhs(ti, y)[9:12] - plain.rhs(ti, y)[9:12] for ti in t]) * paper_form(config).body.mass
     expected = np.array([noise_value(d, ti) for ti in t])
     assert np.all(np.abs(got - expected) <= 2e-13 * np.array(push["rms"])), np.max(np.abs(got - expected), axis=0)
     assert np.max(np.abs(expected[:, 0])) > 3.0 and np.all(got[:, 1] == 0.0)
@@ -276,7 +277,7 @@ def test_batch_records_carry_the_disturbances_as_columns():
     config = config_from_mapping(_mapping("visco_elastic", PUSHES))
     batch = batch_from_table([config.resolved], ["disturbances.0.value.1"],
                              {"disturbances.0.value.1": np.array([5.0, 7.0])}, np.array([0, 0]))
-    assert batch.params[0, 0].tobytes() == config.make_variant().parameters[0].tobytes()
+    assert batch.params[0, 0].tobytes() == paper_form(config).parameters[0].tobytes()
     assert batch.params[1, 0]["disturbance_value"][0, 1] == 7.0
 
 
@@ -292,7 +293,7 @@ def test_analysis_linearises_the_undisturbed_dynamics_and_samples_the_disturbed(
     pushed = config_from_mapping(_mapping(disturbances=[{"kind": "step", "value": [0, 6, 0], "point": [0, 0, 0.1]}]))
     calm = config_from_mapping(_mapping())
     a, b = (analyze(c, samples=300, simulate=False) for c in (pushed, calm))
-    assert np.max(np.abs(pushed.make_variant().rhs(0.0, a.linearisation.equilibrium))) > 1.0  # not at rest, pushed
+    assert np.max(np.abs(paper_form(pushed).rhs(0.0, a.linearisation.equilibrium))) > 1.0  # not at rest, pushed
     assert a.linearisation.is_rest_point
     np.testing.assert_array_equal(a.linearisation.eigenvalues, b.linearisation.eigenvalues)
     np.testing.assert_array_equal(a.certificate.rate_hessian, b.certificate.rate_hessian)

@@ -21,6 +21,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from rbstab.variants.paper import paper_form
 from rbstab import simulator as simulate_module
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.layout import is_chain
@@ -103,7 +104,7 @@ VARIANT_CASES = [(p, ()) for p in CONFIGS] + [
                          ids=[f"{p.stem}{'-' + o[0] if o else ''}" for p, o in VARIANT_CASES])
 def test_compiled_agrees_with_scipy_for_every_variant(path, overrides):
     data = base_data(path, overrides)
-    smooth = config_from_mapping(data).make_variant().smooth
+    smooth = paper_form(config_from_mapping(data)).smooth
     configs = configs_with_spins(data, SPINS if smooth else SPINS[:2])
     rtol = configs[0].simulation.rtol
     got = dict(simulate_many(configs, engine="compiled"))
@@ -115,7 +116,7 @@ def test_compiled_agrees_with_scipy_for_every_variant(path, overrides):
         if not smooth:  # the pure sign law chatters: round-off decides the switches
             for direction in (np.inf, -np.inf):
                 moved = copy.deepcopy(config.resolved)
-                moved["initial_state"]["omega"] = np.nextafter(config.initial_state["omega"], direction).tolist()
+                moved["initial_state"]["omega"] = np.nextafter(config.initial_state["body"]["omega"], direction).tolist()
                 sensitivity.append(simulate(config_from_mapping(moved), engine="scipy"))
         assert_close(got[i], ref, rtol, sensitivity)
         near = [got[i].summary["lyapunov_rate_mismatch_relative"], ref.summary["lyapunov_rate_mismatch_relative"]]
@@ -217,13 +218,13 @@ def test_outputs_not_full_are_the_full_outputs_but_those_left_out():
     from rbstab.layout import LEFT_OUT
 
     configs = [c for path in CONFIGS for c in configs_with_spins(base_data(path), SPINS[:1])]
-    assert {c.variant for c in configs} >= {"free", "permanent", "sliding", "visco_elastic", "embedded"}
+    assert {c.chain.joints[0].variant for c in configs} >= {"free", "permanent", "sliding", "visco_elastic", "embedded"}
     full = dict(simulate_many(configs))
     lean = dict(simulate_many(configs, full=False))
     for i, config in enumerate(configs):
-        assert set(lean[i].outputs) == set(full[i].outputs) - set(LEFT_OUT), config.variant
+        assert set(lean[i].outputs) == set(full[i].outputs) - set(LEFT_OUT), config.chain.joints[0].variant
         for key, value in lean[i].outputs.items():
-            assert np.array_equal(value, full[i].outputs[key], equal_nan=True), (config.variant, key)
+            assert np.array_equal(value, full[i].outputs[key], equal_nan=True), (config.chain.joints[0].variant, key)
         np.testing.assert_equal(lean[i].summary, full[i].summary)
 
 
@@ -294,9 +295,9 @@ def test_group_configs_equal_validated_configs():
     for config, run in zip(configs, runs):
         assert config.to_yaml() == run.config.to_yaml()
         assert config.name == run.run_id
-        for block, value in run.config.initial_state.items():
-            assert np.array_equal(config.initial_state[block], value)
-            assert not config.initial_state[block].flags.writeable
+        for block, value in run.config.initial_state["body"].items():
+            assert np.array_equal(config.initial_state["body"][block], value)
+            assert not config.initial_state["body"][block].flags.writeable
 
 
 def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch):
@@ -309,8 +310,10 @@ def test_runs_of_one_config_share_a_variant_and_give_each_ones_bits(monkeypatch)
     configs, errors = _group_configs(tasks)
     assert not errors
     made = []
-    real = type(configs[0]).make_variant
-    monkeypatch.setattr(type(configs[0]), "make_variant", lambda self: made.append(self.name) or real(self))
+    import rbstab.engine.batch as batch
+
+    real = batch.paper_form
+    monkeypatch.setattr(batch, "paper_form", lambda config: made.append(config.name) or real(config))
     got = dict(simulate_many(configs, chunk_size=3))  # 4 compiled calls into one buffer
     assert len(made) == 2  # one variant per gravity
     monkeypatch.undo()

@@ -12,6 +12,7 @@ import pytest
 from click.testing import CliRunner
 from conftest import ROOT
 
+from rbstab.variants.paper import paper_form
 from rbstab.analysis import analyze, read_analysis
 from rbstab.analysis.certificate import BOUNDS, certify, checked
 from rbstab.analysis.linearise import linearise
@@ -45,8 +46,8 @@ def _exact_level(config) -> float:
     -Omega'L_r Omega while N is not clipped; clipped about axis 1 (|K_r1 theta_1| > N_max)
     it is omega_1 (K_r1 theta_1 - N_max) > 0 for small omega_1 > 0. The infimum of v over
     those states is v at rest at theta_1 = N_max / K_r1 (the tilt axes alike)."""
-    variant = config.make_variant()
-    theta_s = config.gains.saturation.torque_n[0] / config.gains.k_r[0, 0]
+    variant = paper_form(config)
+    theta_s = paper_form(config).gains.saturation.torque_n[0] / paper_form(config).gains.k_r[0, 0]
     return float(variant.lyapunov(np.array([[theta_s, 0, 0, 0, 0, 0]]))[0])
 
 
@@ -58,7 +59,7 @@ def test_local_search_finds_the_sliver_sampling_misses(load):
     high; the local search from them lands on the exact infimum, and never below it (a
     state below it with dv/dt > 0 would be spurious)."""
     config = load()
-    variant = config.make_variant()
+    variant = paper_form(config)
     cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=250)
     exact = _exact_level(config)
     assert cert.sublevel_sampled > 1.5 * exact  # sampling alone misses
@@ -70,7 +71,7 @@ def test_local_search_finds_the_sliver_sampling_misses(load):
 
 def test_a_run_that_contradicts_c_lowers_it_and_is_named():
     config = _quiet(load_config, PENDULUM)
-    variant = config.make_variant()
+    variant = paper_form(config)
     cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
     c = cert.sublevel
     same = checked(cert, [0.5 * c, 2.0 * c, np.nan], [True, False, False], lambda i: f"run {i}")
@@ -91,7 +92,7 @@ def test_a_basin_point_still_settling_is_no_counterexample_and_one_that_fails_or
     from rbstab.analysis.evidence import check_runs
 
     config = _quiet(load_config, PENDULUM)
-    variant = config.make_variant()
+    variant = paper_form(config)
     cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
     c = cert.sublevel
     axes = [BasinAxis.parse("initial_state.omega.0=-1:1:2"), BasinAxis.parse("initial_state.omega.1=-1:1:2")]

@@ -17,6 +17,7 @@ import warnings
 import numpy as np
 import pytest
 
+from rbstab.variants.paper import paper_form, paper_initial_state
 from rbstab.config import ConfigError, config_from_mapping
 from rbstab.engine import integrate_runs
 from rbstab.engine.settings import settings_rows
@@ -48,8 +49,8 @@ def _config(limits, *, variant="free", omega=(0.0, 0.5, 0.0), v=(0.0, 0.0, 0.0),
 
 def _t_stop(config):
     """(status code, t_stop [s]) of the compiled engine."""
-    variant = config.make_variant()
-    sol = integrate_runs([variant.code], variant.parameters, variant.initial_state(config.initial_state)[None],
+    variant = paper_form(config)
+    sol = integrate_runs([variant.code], variant.parameters, paper_initial_state(config, variant)[None],
                          settings_rows([config.simulation]), method=config.simulation.method,
                          n_samples=config.simulation.n_samples)
     return int(sol.status[0]), float(sol.t_stop[0])
@@ -145,8 +146,8 @@ def test_a_state_outside_stops_at_zero_and_without_limits_gimbal_lock_is_as_befo
     """integrate_runs from a state outside the region (the API takes any state) stops at
     t = 0 with no step; without bounds the event is the gimbal lock's alone."""
     config = _config({"omega": 1.0})
-    variant = config.make_variant()
-    y0 = variant.initial_state(config.initial_state)
+    variant = paper_form(config)
+    y0 = paper_initial_state(config, variant)
     y0[4] = 1.5
     sol = integrate_runs([variant.code], variant.parameters, y0[None], settings_rows([config.simulation]),
                          method="DOP853", n_samples=11)
@@ -161,11 +162,11 @@ def test_record_fields_and_status_codes():
     """PARAMETERS' ``limits`` rows follow rbstab.layout.LIMITED, inf where unbounded, and
     ``limited`` says whether any is finite; a status code names each (quantity, axis)."""
     config = _config({"theta": [1.0, 0.6, 3.2], "constraint_error": 0.05})
-    p = config.make_variant().parameters[0]
+    p = paper_form(config).parameters[0]
     assert p["limited"] == 1.0
     np.testing.assert_array_equal(p["limits"], [[1.0, 0.6, 3.2], [np.inf] * 3, [np.inf] * 3, [np.inf] * 3,
                                                 [0.05] * 3])
-    none = parameters(config.body, config.gains)
+    none = parameters(paper_form(config).body, paper_form(config).gains)
     assert none["limited"] == 0.0 and np.isinf(none["limits"]).all()
     assert Limits.of().bounded is False and Limits.of(omega=3).bounded
     codes = {limit_status(j, i) for j in range(5) for i in range(3)}
@@ -221,7 +222,7 @@ def test_resolved_without_limits_is_unchanged_and_with_them_rebuilds():
     bounded = _config({"theta": [1.0, 0.6, 3.2]})
     assert bounded.resolved["simulation"]["limits"] == {"theta": [1.0, 0.6, 3.2]}
     rebuilt = RunConfig.from_resolved(bounded.resolved)
-    np.testing.assert_array_equal(rebuilt.make_variant().parameters["limits"], bounded.make_variant().parameters["limits"])
+    np.testing.assert_array_equal(paper_form(rebuilt).parameters["limits"], paper_form(bounded).parameters["limits"])
 
 
 # -- sweeps and analyses ----------------------------------------------------------------------------
@@ -242,7 +243,7 @@ def test_sweep_batches_carry_each_runs_limits_and_show_failures_as_not_ok():
         batch = table.slice(np.arange(3)).batch()
         for i in range(3):
             config = config_from_mapping(table.slice(np.arange(3)).resolved(i))
-            np.testing.assert_array_equal(batch.params[i, 0], config.make_variant().parameters[0])
+            np.testing.assert_array_equal(batch.params[i, 0], paper_form(config).parameters[0])
         runs = run_generation(base, design)
     np.testing.assert_array_equal(batch.params["limits"][:, 0, 0], [[1.0, 0.6, 1.0], [1.0, 0.6, 1.0], [1.0, 2.0, 1.0]])
     assert runs.ok.tolist() == [False, True, True]  # 0.5 t reaches 0.6 at 1.2 s < t_end; 0.2 t does not

@@ -18,6 +18,7 @@ from scipy.integrate import solve_ivp
 
 import reference_tree as T
 from reference import hat, rotation
+from rbstab.variants.paper import paper_form
 from rbstab.chain import Body, Chain, Joint
 from rbstab.config.loader import load_config
 from rbstab.model import Saturation
@@ -44,13 +45,13 @@ def test_one_permanent_body_is_the_papers_reduced_system(path, rng):
     (eq 21) and, at random states, the rate, Lambda (eq 20), v and dv/dt of rbstab's
     ``permanent`` variant (with the ankle's clipped torque where the config limits it)."""
     config = _load(path)
-    body, gains = config.body, config.gains
+    body, gains = paper_form(config).body, paper_form(config).gains
     sat = gains.saturation
     tree = T.Tree((T.Body(body.mass, body.inertia, gains.k_t, gains.l_t),),
                   (T.Joint(T.GROUND, body.attachment_point, body.attachment_point, T.PERMANENT, gains.k_r, gains.l_r,
                            torque_limit=None if sat is None else np.asarray(sat.torque_n, float)),),
                   body.gravity)
-    variant = VARIANTS[config.variant](body, gains)
+    variant = VARIANTS[config.chain.joints[0].variant](body, gains)
     r, m = body.attachment_point, body.mass
     clipped = 0
     for _ in range(20):
@@ -331,12 +332,11 @@ def test_the_compiled_reduced_rate_is_the_references(mix, rng):
 def test_the_compiled_reduced_rate_of_one_permanent_body_is_the_papers(path, rng):
     """A one-body tree on a permanent joint, in reduced coordinates, has the rate of rbstab's
     ``permanent`` variant (eq 21's 6 states) at random states."""
-    from rbstab.config.loader import chain_of
     from rbstab.variants import tree as R
 
     config = _load(path)
-    variant = VARIANTS[config.variant](config.body, config.gains)
-    compiled = C.compile_chain(chain_of(config), offset=0.0)
+    variant = VARIANTS[config.chain.joints[0].variant](paper_form(config).body, paper_form(config).gains)
+    compiled = C.compile_chain(config.chain, offset=0.0)
     layout = R.tree_layout(compiled)
     assert layout.n_r == 6
     work = R.tree_work(1, compiled.n_states)

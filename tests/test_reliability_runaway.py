@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import yaml
 
+from rbstab.variants.paper import paper_form, paper_initial_state
 from rbstab.config import config_from_mapping, load_config
 from rbstab.simulator import simulate, solve
 from rbstab.sweep import run_sweep, spec_from_mapping
@@ -83,8 +84,8 @@ def test_a_stopped_run_keeps_its_samples_and_both_engines_stop_at_one_step(name)
 def test_a_first_step_failure_is_a_failed_run():
     """A right-hand side that is NaN at once: scipy fails before its first sample
     (``sol.y`` is then an empty list, which raised AttributeError)."""
-    variant = _config().make_variant()
-    y0 = variant.initial_state(_config().initial_state)
+    variant = paper_form(_config())
+    y0 = paper_initial_state(_config(), variant)
     y0[3] = np.nan
     time, states, status, message, _ = solve(variant, y0, settings(t_end=0.5, n_samples=51, method="RK45"))
     assert status == "failed" and states.shape == (51, y0.size) and np.isnan(states).all()

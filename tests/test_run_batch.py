@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import yaml
 
+from rbstab.variants.paper import paper_form, paper_initial_state
 from rbstab.config import config_from_mapping
 from rbstab.engine import METHODS, RunBatch, batch_from_table
 from rbstab.engine.batch import MAX_STATE, NOT_COMPILED
@@ -50,8 +51,8 @@ def _expected(resolved: dict):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         config = config_from_mapping(resolved)
-    variant = config.make_variant()
-    return (variant.parameters[0], variant.initial_state(config.initial_state), settings_rows([config.simulation])[0],
+    variant = paper_form(config)
+    return (variant.parameters[0], paper_initial_state(config, variant), settings_rows([config.simulation])[0],
             uses_compiled_engine(config) and not is_sign_law(config), config)
 
 
@@ -61,9 +62,9 @@ def _check(table, rows, timeout=None) -> RunBatch:
     assert isinstance(batch, RunBatch) and len(batch) == len(rows)
     for j in range(len(rows)):
         record, y0, settings, compiled, config = _expected(part.resolved(j))
-        assert batch.params[j, 0].tobytes() == record.tobytes(), f"run {j}: {config.variant}"
+        assert batch.params[j, 0].tobytes() == record.tobytes(), f"run {j}: {config.chain.joints[0].variant}"
         assert batch.offset[j] == record["lyapunov_offset"] and batch.one_body[j]
-        assert batch.codes[j] == VARIANT_CODES[config.variant] and batch.ppoints[j, 0].tobytes() == record["attachment_point"].tobytes()
+        assert batch.codes[j] == VARIANT_CODES[config.chain.joints[0].variant] and batch.ppoints[j, 0].tobytes() == record["attachment_point"].tobytes()
         size = len(y0)
         assert batch.n_state[j] == size and batch.y0[j, :size].tobytes() == y0.tobytes()
         assert not batch.y0[j, size:].any() and batch.y0.shape[1] == MAX_STATE

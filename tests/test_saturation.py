@@ -14,6 +14,7 @@ import pytest
 
 from conftest import paper_body, paper_gains
 from reference import Model
+from rbstab.variants.paper import paper_form
 from rbstab.engine import integrate_runs
 from rbstab.model import RigidBody, Saturation
 from rbstab.variants import VARIANTS
@@ -166,14 +167,14 @@ def _load(*overrides):
 def test_saturation_keys_give_the_limits():
     """A number limits every axis, a list each one, a missing limit none; no section: no limits."""
     config = _load("controller.saturation={torque_n: 120, force_h: [800, 700, .inf], shape: smooth}")
-    sat = config.gains.saturation
+    sat = paper_form(config).gains.saturation
     np.testing.assert_array_equal(sat.torque_n, [120.0] * 3)
     np.testing.assert_array_equal(sat.force_h, [800.0, 700.0, np.inf])
     np.testing.assert_array_equal(sat.constraint_force, [np.inf] * 3)
     assert sat.shape == "smooth"
-    record = config.make_variant().parameters[0]
+    record = paper_form(config).parameters[0]
     assert record["saturation"] == 2.0 and record["torque_limit"].tolist() == [120.0] * 3
-    assert _load().gains.saturation is None and _load().make_variant().parameters[0]["saturation"] == 0.0
+    assert paper_form(_load()).gains.saturation is None and paper_form(_load()).parameters[0]["saturation"] == 0.0
 
 
 @pytest.mark.parametrize("override, found", [

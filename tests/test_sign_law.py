@@ -18,6 +18,7 @@ from scipy.special import lambertw
 
 from conftest import ROOT, initial_blocks, paper_body, paper_gains
 from reference import Model, hat, rotation
+from rbstab.variants.paper import paper_form, paper_initial_state
 from rbstab.config import apply_overrides, config_from_mapping, parse_yaml
 from rbstab.engine.switching import CROSSING, SLIDING_ENDS, SLIDING_STARTS, integrate_sign_law
 from rbstab.io.hdf5 import read_summary
@@ -220,7 +221,7 @@ def test_sign_law_run_locates_switchings_and_v_never_increases(example_run):
     assert s["lyapunov_rate_check"] == "pass" and s["lyapunov_rate_checked"] > 0.2
     # every sample on its piece's side, the force -K_s sigma off the surfaces, |Lambda| <= K_s on them
     e, lam, sigma = r.outputs["constraint_error"], r.outputs["constraint_force"], r.outputs["sliding_mode"]
-    k_s = r.config.gains.k_s
+    k_s = paper_form(r.config).gains.k_s
     side = sigma != 0
     assert np.all((np.sign(e[side]) == sigma[side]) | (np.abs(e[side]) < 1e-12))
     np.testing.assert_array_equal(lam[side], -k_s * sigma[side])
@@ -236,8 +237,8 @@ def test_sign_law_run_is_the_plain_sign_law_integrated_finely():
     reference converges irregularly, at first order or a little better)."""
     config = example("simulation.t_end=0.5", "simulation.n_samples=501")
     run = simulate(config)
-    variant = config.make_variant()
-    y0 = variant.initial_state(config.initial_state)
+    variant = paper_form(config)
+    y0 = paper_initial_state(config, variant)
     errors = []
     for n_steps in (250_000, 2_000_000):
         reference = fixed_step_sign_law(variant, y0, 0.5, n_steps, 500)

@@ -17,6 +17,7 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from rbstab.variants.paper import paper_form
 from rbstab.io.chunk import read_chunk_rows
 from rbstab.sweep import (
     SweepBusyError,
@@ -107,13 +108,13 @@ def test_grid_zip_random_count_order_and_ids():
     assert runs[12].params["body.mass"] != runs[0].params["body.mass"]
     # the varied values reach the validated configs
     for r in runs:
-        assert r.config.variant == r.params["controller.variant"]
+        assert r.config.chain.joints[0].variant == r.params["controller.variant"]
         assert r.config.resolved["controller"]["k_c"] == r.params["controller.k_c"]
-        assert r.config.body.mass == r.params["body.mass"]
-        assert r.config.initial_state["velocity"].tolist() == r.params["initial_state.v"]
-        assert r.config.initial_state["omega"][0] == r.params["initial_state.omega.0"]
-        assert r.config.initial_state["omega"][1:].tolist() == [32.0, -16.0]  # untouched entries
-        assert r.config.initial_state["theta"][2] == r.params["initial_state.theta.2"]
+        assert paper_form(r.config).body.mass == r.params["body.mass"]
+        assert r.config.initial_state["body"]["velocity"].tolist() == r.params["initial_state.v"]
+        assert r.config.initial_state["body"]["omega"][0] == r.params["initial_state.omega.0"]
+        assert r.config.initial_state["body"]["omega"][1:].tolist() == [32.0, -16.0]  # untouched entries
+        assert r.config.initial_state["body"]["theta"][2] == r.params["initial_state.theta.2"]
     # the id ends with the first 8 hex digits of the run's identity (its base and its values)
     for r in runs:
         assert len(r.config_hash) == 32 and r.config_hash.startswith(r.run_id.split("-")[1])
@@ -173,7 +174,7 @@ def test_distributions_bounds_shapes_and_moments():
     assert np.all(np.abs(omega.mean(axis=0) - [11, 30, -25]) <= 4 * np.array([2, 20, 10]) / np.sqrt(12 * 400))
     assert np.all(np.abs(v.mean(axis=0) - [0, 1, -1]) <= 4 * np.array([0.1, 0.2, 0.3]) / np.sqrt(400))
     np.testing.assert_allclose(v.std(axis=0), [0.1, 0.2, 0.3], rtol=0.2)
-    variants = {r.config.variant for r in runs}
+    variants = {r.config.chain.joints[0].variant for r in runs}
     assert variants == {"visco_elastic", "embedded"}
 
 
@@ -188,8 +189,8 @@ def test_dotted_keys_into_default_lists_and_matrices():
     }
     runs = expand(spec_from_mapping(spec))
     assert len(runs) == 4
-    assert runs[3].config.initial_state["omega"].tolist() == [0.0, 7.0, 0.0]
-    assert runs[3].config.gains.k_t[2, 2] == 3500 and runs[3].config.gains.k_t[0, 0] == 4100
+    assert runs[3].config.initial_state["body"]["omega"].tolist() == [0.0, 7.0, 0.0]
+    assert paper_form(runs[3].config).gains.k_t[2, 2] == 3500 and paper_form(runs[3].config).gains.k_t[0, 0] == 4100
     assert runs[0].params == {"initial_state.omega.1": 5.0, "controller.k_t.2.2": 3000}
 
 
@@ -269,7 +270,7 @@ def test_overrides_apply_to_bases_and_spec(tmp_path):
     assert loaded.name == "renamed" and len(runs) == 4
     assert [r.base for r in runs] == ["case1_permanent"] * 2 + ["case3_embedded"] * 2
     assert {r.config.simulation.t_end for r in runs} == {0.3}
-    assert [r.config.body.mass for r in runs] == [30.0, 50.0, 30.0, 50.0]
+    assert [paper_form(r.config).body.mass for r in runs] == [30.0, 50.0, 30.0, 50.0]
     with pytest.raises(SweepSpecError, match="the sweep varies 'controller.k_r'"):
         load_spec(path, ["controller.k_r=[1, 1, 1]"])
 
@@ -277,7 +278,7 @@ def test_overrides_apply_to_bases_and_spec(tmp_path):
 def test_shipped_example_specs():
     gains = expand(load_spec(ROOT / "configs" / "sweeps" / "gains.yaml"))
     assert len(gains) == 6
-    assert [(r.config.variant, r.params["controller.k_c"][0]) for r in gains[:2]] == [
+    assert [(r.config.chain.joints[0].variant, r.params["controller.k_c"][0]) for r in gains[:2]] == [
         ("visco_elastic", 4100), ("embedded", 4100)
     ]
     robust = expand(load_spec(ROOT / "configs" / "sweeps" / "robustness.yaml"))
@@ -287,8 +288,8 @@ def test_shipped_example_specs():
         assert (a.base, b.base) == ("case1_permanent", "case3_embedded")
         assert a.params == b.params
         assert 0.5 <= a.params["body.mass:scale"] <= 1.5
-        assert a.config.body.mass == 41.0 * a.params["body.mass:scale"]
-        assert a.config.gains.k_r.tolist() == b.config.gains.k_r.tolist()  # gains fixed
+        assert paper_form(a.config).body.mass == 41.0 * a.params["body.mass:scale"]
+        assert paper_form(a.config).gains.k_r.tolist() == paper_form(b.config).gains.k_r.tolist()  # gains fixed
 
 
 def test_dry_run_lists_runs_and_writes_nothing(tmp_path):
@@ -657,12 +658,13 @@ def test_planned_configs_equal_a_whole_validation_of_each_run(vary):
                               "grid": {"initial_state.theta.0": [0.0, 0.1]},
                               "random": {"n": 3, "seed": 2, "params": params}})
     runs = expand(spec)
-    assert len(runs) == 12 and {r.variant for r in runs} == {"embedded", "permanent"}
+    assert len(runs) == 12 and {r.config.chain.joints[0].variant for r in runs} == {"embedded", "permanent"}
     for run in runs:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             alone = config_from_mapping(run.config.resolved)
         assert alone.resolved == run.config.resolved
-        assert np.array_equal(alone.gains.k_t, run.config.gains.k_t)
-        assert all(np.array_equal(alone.initial_state[k], run.config.initial_state[k]) for k in alone.initial_state)
+        assert np.array_equal(paper_form(alone).gains.k_t, paper_form(run.config).gains.k_t)
+        assert all(np.array_equal(alone.initial_state["body"][k], run.config.initial_state["body"][k])
+               for k in alone.initial_state["body"])
         assert alone.warnings == run.config.warnings

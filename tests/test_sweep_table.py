@@ -16,6 +16,7 @@ import yaml
 from click.testing import CliRunner
 
 import rbstab
+from rbstab.variants.paper import paper_form
 from rbstab.config import ConfigError, config_from_mapping
 from rbstab.sweep import SweepSpecError, expand, load_spec, plan_table, resolved_config, run_sweep, spec_from_mapping
 from rbstab_cli.main import cli
@@ -52,10 +53,10 @@ def test_design_table_from_csv_dataframe_and_mapping(tmp_path):
     from_mapping = expand(spec_from_mapping({**spec, "table": {k: design[k].to_numpy() for k in design}}))
     assert [r.run_id for r in from_file] == [r.run_id for r in from_frame] == [r.run_id for r in from_mapping]
     run = from_file[1]
-    assert run.config.body.mass == 45.0 and run.variant == "visco_elastic"
-    assert run.config.body.inertia.tolist() == [[10.0, 0.0, 0.0], [0.0, 8.0, 0.0], [0.0, 0.0, 0.4]]
-    assert run.config.initial_state["omega"].tolist() == [16.0, 30.0, -16.0]
-    assert [r.variant for r in from_file] == ["embedded", "visco_elastic", "embedded"]
+    assert paper_form(run.config).body.mass == 45.0 and run.config.chain.joints[0].variant == "visco_elastic"
+    assert paper_form(run.config).body.inertia.tolist() == [[10.0, 0.0, 0.0], [0.0, 8.0, 0.0], [0.0, 0.0, 0.4]]
+    assert run.config.initial_state["body"]["omega"].tolist() == [16.0, 30.0, -16.0]
+    assert [r.config.chain.joints[0].variant for r in from_file] == ["embedded", "visco_elastic", "embedded"]
     # from the command line, with a dry run: nothing written
     result = CliRunner().invoke(cli, ["sweep", str(CASE3), "--table", str(tmp_path / "design.csv"), "--dry-run",
                                       "-o", str(tmp_path / "out")])

@@ -14,6 +14,7 @@ from conftest import ROOT
 
 pytest.importorskip("flint")
 
+from rbstab.variants.paper import paper_form
 from rbstab.analysis import NotVerifiable, Verification, read_analysis, verify_sublevel  # noqa: E402
 from rbstab.analysis.push import runs_from_states  # noqa: E402
 from rbstab.analysis.verify import potential  # noqa: E402
@@ -51,7 +52,7 @@ def _inside(variant, level: float, n: int, seed: int) -> np.ndarray:
 def test_verified_level_is_never_contradicted(verified):
     config, result = verified
     assert isinstance(result, Verification) and result.level > 0 and result.boxes > 0
-    variant = config.make_variant()
+    variant = paper_form(config)
     y = _inside(variant, result.level, 10_000, seed=1)
     # dv/dt at every state: the analytic rate and the rate of v along the right-hand side
     rate = variant.evaluate(y)["lyapunov_rate"]
@@ -69,7 +70,7 @@ def test_verified_level_is_never_contradicted(verified):
 def test_potential_is_v_at_rest(verified):
     """P(Theta) of the interval kernel is the variant's v at Omega = 0 (same constant h)."""
     config, _ = verified
-    variant = config.make_variant()
+    variant = paper_form(config)
     theta = np.random.default_rng(3).normal(scale=0.4, size=(20, 3))
     v = variant.lyapunov(np.hstack([theta, np.zeros((20, 3))]))
     p = [potential(config, t) for t in theta]
@@ -80,7 +81,7 @@ def test_verified_level_is_near_the_checked_estimate(verified):
     config, result = verified
     # the sufficient condition's onset: the static torque K_r theta reaching the limit about a tilt axis
     # (the equilibrium at 0, theta along axis 1): P there is the closed form's least failing level
-    p = config.make_variant().parameters[0]
+    p = paper_form(config).parameters[0]
     k, limit = float(p["k_r"][0, 0]), float(p["torque_limit"][0])
     onset = potential(config, np.array([limit / k, 0.0, 0.0]))
     assert result.level <= onset
@@ -92,11 +93,11 @@ def test_refused_at_a_level_holding_a_second_rest_point(path):
     """At rest at theta* = arcsin(limit / (m g L)) the clipped torque holds the body against
     gravity: a rest point other than the equilibrium, which a level P(theta*) contains."""
     config = load_config(path)
-    p = config.make_variant().parameters[0]
+    p = paper_form(config).parameters[0]
     mgl = float(p["mass"]) * 9.81 * float(-p["attachment_point"][2])
     theta_s = math.asin(float(p["torque_limit"][0]) / mgl)
     rest = np.array([theta_s, 0, 0, 0, 0, 0.0])
-    assert np.abs(config.make_variant().rhs(0.0, rest)).max() < 1e-9 * mgl  # it is a rest point
+    assert np.abs(paper_form(config).rhs(0.0, rest)).max() < 1e-9 * mgl  # it is a rest point
     level = potential(config, rest[:3])
     assert verify_sublevel(config).level < level
     with pytest.raises(NotVerifiable, match="not proven: box theta in .*reaches its limit"):
@@ -197,7 +198,7 @@ def test_interval_enclosures_hold_the_model_at_every_point():
     from rbstab.analysis.verify import _Model
 
     config = load_config(ROOT / "configs/paper/case1_permanent.yaml")
-    variant = config.make_variant()
+    variant = paper_form(config)
     model = _Model(variant, arb)
     rng = np.random.default_rng(5)
 

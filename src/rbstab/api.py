@@ -104,13 +104,13 @@ def _override_lines(overrides: Overrides) -> list[str]:
     return list(overrides)
 
 
-def load_config(source: str | os.PathLike | Mapping | "RunConfig | ChainConfig", overrides: Overrides = (),
-                *, name: str | None = None) -> "RunConfig | ChainConfig":
+def load_config(source: str | os.PathLike | Mapping | "RunConfig", overrides: Overrides = (),
+                *, name: str | None = None) -> "RunConfig":
     """Read, override and validate a run configuration: one body's, or a tree's.
 
     Parameters
     ----------
-    source : path-like, Mapping, RunConfig or ChainConfig
+    source : path-like, Mapping, RunConfig
         A YAML file (its stem is the default ``name``), a mapping of the same shape (the
         parsed YAML, see the README's "Configuration" and "Chains of bodies"), or a
         validated configuration (its ``resolved`` mapping, validated again with the
@@ -124,7 +124,7 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig | ChainConfig",
 
     Returns
     -------
-    RunConfig or ChainConfig
+    RunConfig
         Frozen and validated. One body's: ``body`` (mass [kg], inertia [kg m^2] 3x3,
         attachment point R [m] body frame, gravity g [m/s^2] inertial frame), ``gains``
         (3x3), ``initial_state``, ``simulation``, ``resolved`` (every default filled in),
@@ -142,11 +142,11 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig | ChainConfig",
     rbstab.config.PhysicalPlausibilityWarning
         ``W001``/``W002`` (an inertia no real body has, a singular gain).
     """
-    from .config import ChainConfig, RunConfig, config_from_mapping  # heavy: yaml
+    from .config import RunConfig, config_from_mapping  # heavy: yaml
     from .config import load_config as load_file  # heavy: yaml
 
     lines = _override_lines(overrides)
-    if isinstance(source, RunConfig | ChainConfig):
+    if isinstance(source, RunConfig):
         source = source.resolved
     if isinstance(source, Mapping):
         data = dict(source)
@@ -156,16 +156,16 @@ def load_config(source: str | os.PathLike | Mapping | "RunConfig | ChainConfig",
     if not isinstance(source, (str, os.PathLike)):
         from .config import ConfigError  # heavy: yaml
 
-        raise ConfigError([f"load_config: found {type(source).__name__}; expected a path, a mapping, a RunConfig "
-                           "or a ChainConfig"])
+        raise ConfigError([f"load_config: found {type(source).__name__}; expected a path, a mapping or a "
+                           "RunConfig"])
     return load_file(source, lines)
 
 
-def _config(config: Any, overrides: Overrides) -> "RunConfig | ChainConfig":
+def _config(config: Any, overrides: Overrides) -> "RunConfig":
     """A validated config of ``config`` (a path or a validated config) with ``overrides``."""
-    from .config import ChainConfig, RunConfig  # heavy: yaml
+    from .config import RunConfig  # heavy: yaml
 
-    if isinstance(config, RunConfig | ChainConfig) and not overrides:
+    if isinstance(config, RunConfig) and not overrides:
         return config
     return load_config(config, overrides)
 
@@ -192,7 +192,7 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_EN
 
     Parameters
     ----------
-    config : RunConfig, ChainConfig, path-like or Mapping
+    config : RunConfig, path-like or Mapping
         A validated config (one body or a chain), or what :func:`load_config` takes (a
         chain's file too).
     overrides : sequence of str or Mapping

@@ -132,9 +132,8 @@ def unbounded_fall_note(config) -> str | None:
     without an admissible region (``simulation.limits``): a run that falls then swings on,
     through the ground, and may come back to the equilibrium (counted as recovered) or read
     as still settling; None otherwise."""
-    from .config.loader import chain_of  # heavy: pydantic
 
-    if config.simulation.limits is not None or not np.any(chain_of(config).gravity != 0):
+    if config.simulation.limits is not None or not np.any(config.chain.gravity != 0):
         return None
     return coded("W009", "simulation.limits: none on a body under gravity: a run that falls swings on without end "
                          "(through the ground) and reads as still settling, or comes back and counts as recovered; "

@@ -39,7 +39,7 @@ class RunResult:
 
     Attributes
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The validated configuration that was run (a chain's: :func:`rbstab.simulator.simulate`).
     time : ndarray, shape (n_samples,)
         Sample times [s], evenly spaced on [0, t_end]. From :func:`rbstab.simulator.simulate_many`'s
@@ -120,7 +120,7 @@ class RunBlock:
         Samples of the runs' grid (``simulation.n_samples`` on [0, t_end]) from one entry
         of ``time`` to the next: 1, or a thinned trace of the ``cuda`` engine.
     variants : list of str
-        Each run's controller variant (``config.variant``; given where ``configs`` are None;
+        Each run's controller variant (its one joint's law; given where ``configs`` are None;
         ``chain`` for a chain's runs).
     joints, bodies : tuple of str, optional
         The joint and body names of a block of one chain's runs: its per-joint and per-body
@@ -144,7 +144,7 @@ class RunBlock:
 
     def __post_init__(self) -> None:
         if self.variants is None:
-            self.variants = ["chain" if self.joints is not None else c.variant for c in self.configs]
+            self.variants = ["chain" if self.joints is not None else c.chain.joints[0].variant for c in self.configs]
 
     def __len__(self) -> int:
         return len(self.status)

@@ -51,6 +51,7 @@ from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
 from .variants import Variant
 from .variants.base import N_OUTPUTS, split_outputs
+from .variants.paper import paper_form, paper_initial_state
 from .variants.disturbances import apply_impulses, before, next_breakpoint
 from .variants.kernels import run_outputs, state_powers
 
@@ -305,7 +306,7 @@ def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = N
 
 
 def solve_tree(config, timeout: float | None = None, compiled=None):
-    """Integrate a run of a tree (:class:`rbstab.config.ChainConfig`) in reduced
+    """Integrate a run of a tree (:class:`rbstab.config.RunConfig`) in reduced
     coordinates (:func:`rbstab.variants.tree.tree_rate`) with scipy's ``solve_ivp``
     (``simulation``'s method, tolerances, steps), sampled at ``n_samples`` times on [0,
     t_end]: the reference of the compiled driver. It stops ``failed`` where any body's or
@@ -323,7 +324,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
 
     Parameters
     ----------
-    config : ChainConfig
+    config : RunConfig
         Validated (any method of ``solve_ivp``).
     timeout : float, optional
         Wall-time limit [s]; default ``simulation.max_wall_time``.
@@ -481,14 +482,14 @@ def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray,
 
 
 def uses_compiled_engine(config, engine: str = DEFAULT_ENGINE) -> bool:
-    """Whether ``engine`` integrates ``config`` (a RunConfig or ChainConfig) in its batches
+    """Whether ``engine`` integrates ``config`` (a RunConfig) in its batches
     (:meth:`rbstab.engine.Engine.takes`; ValueError for an unknown engine)."""
     return get_engine(engine).takes(config.simulation.method, is_sign_law(config))
 
 
 def is_sign_law(config) -> bool:
     """Whether ``config`` is the pure sign law of ``sliding`` (``boundary_layer`` 0) of one body."""
-    return not is_chain(config) and config.variant == "sliding" and not config.gains.boundary_layer
+    return any(j.variant == "sliding" and not j.boundary_layer for j in config.chain.joints)
 
 
 def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunResult:
@@ -496,8 +497,8 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     :func:`simulate`; ``timeout`` [s] replaces ``simulation.max_wall_time``); the result's
     ``switching`` holds the located events."""
     start = _time.perf_counter()
-    variant = config.make_variant()
-    solution = integrate_sign_law(variant, variant.initial_state(config.initial_state), config.simulation,
+    variant = paper_form(config)
+    solution = integrate_sign_law(variant, paper_initial_state(config, variant), config.simulation,
                                   timeout=timeout)
     solved = _time.perf_counter()
     outputs, checked = sign_law_outputs(variant, solution)
@@ -522,7 +523,7 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         From :func:`rbstab.config.load_config` or
         :func:`rbstab.config.load_config` (already validated).
     timeout : float, optional
@@ -550,8 +551,8 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
     if is_chain(config):
         return _simulate_tree(config, timeout)
     start = _time.perf_counter()
-    variant = config.make_variant()
-    y0 = variant.initial_state(config.initial_state)
+    variant = paper_form(config)
+    y0 = paper_initial_state(config, variant)
     time, states, status, message, solver, work = _solve(variant, y0, config.simulation, timeout)
     solved = _time.perf_counter()
     outputs = evaluate_outputs(variant, time, states, work)
@@ -616,7 +617,7 @@ def simulate_many(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGIN
 def simulate_blocks(configs: Sequence["RunConfig"], *, engine: str = DEFAULT_ENGINE,
                     chunk_size: int = POSTPROCESS_BLOCK, timeout: float | None = None,
                     full: bool = True, keep: str = "all") -> Iterator[tuple[list[int], RunBlock]]:
-    """Run many validated configurations (RunConfig or ChainConfig); yields ``(indices
+    """Run many validated configurations (RunConfig); yields ``(indices
     into configs, RunBlock)``.
 
     The runs the compiled engine takes (:func:`uses_compiled_engine`) are one
@@ -717,7 +718,7 @@ def _configs_of(configs: Sequence | None, rows) -> list:
 
 
 def _simulate_tree(config, timeout: float | None = None) -> RunResult:
-    """A tree's run (:class:`rbstab.config.ChainConfig`) integrated by ``solve_ivp``
+    """A tree's run (:class:`rbstab.config.RunConfig`) integrated by ``solve_ivp``
     (:func:`solve_tree`, any method), with its outputs and summary;
     ``timeout`` [s] replaces ``simulation.max_wall_time``."""
     start = _time.perf_counter()

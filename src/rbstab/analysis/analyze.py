@@ -9,7 +9,7 @@ pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for; last
 certificate's sublevel estimate checked against simulations (:mod:`~rbstab.analysis.evidence`:
 runs from {v = c}, and every run above).
 
-A tree of bodies (:class:`rbstab.config.ChainConfig`) takes the same steps in its
+A tree of bodies (:class:`rbstab.config.RunConfig`) takes the same steps in its
 independent coordinates (a :class:`ChainAnalysis`): its rest state and linearisation
 (:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over it as a
 :class:`~rbstab.analysis.certificate.ChainModel`, its runs on the same engines.
@@ -35,6 +35,7 @@ from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import is_chain
 from ..variants import VARIANTS
+from ..variants.paper import paper_form
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, ChainModel, certify
@@ -45,7 +46,7 @@ from .push import basin_stability as stability_of
 from ..diagnostics import unbounded_fall_note
 from .push import push_analysis
 from .runs import check_axes
-from .verify import NotVerifiable, check_verifiable, verified_model, verify_analysis
+from .verify import NotVerifiable, check_verifiable, verify_analysis
 
 __all__ = ["Analysis", "ChainAnalysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config",
            "OutsideLimits", "equilibrium_outside_limits"]
@@ -95,9 +96,9 @@ class Analysis(_Findings):
 
     Attributes
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The configuration as given.
-    analysed : RunConfig or ChainConfig
+    analysed : RunConfig
         The configuration analysed (``config``, or it with a boundary layer, see notes).
     linearisation : Linearisation
     certificate : Certificate or None
@@ -141,12 +142,12 @@ class Analysis(_Findings):
 
     @property
     def variant(self) -> str:
-        return self.config.variant
+        return self.config.chain.joints[0].variant
 
     @property
     def layout(self):
         """The analysed variant's :class:`~rbstab.layout.StateLayout`."""
-        return VARIANTS[self.analysed.variant].layout
+        return VARIANTS[self.analysed.chain.joints[0].variant].layout
 
     @property
     def linear_settling_time(self) -> float:
@@ -162,7 +163,7 @@ class Analysis(_Findings):
 
 @dataclass
 class ChainAnalysis(Analysis):
-    """What :func:`analyze` finds for a tree of bodies (:class:`rbstab.config.ChainConfig`):
+    """What :func:`analyze` finds for a tree of bodies (:class:`rbstab.config.RunConfig`):
     an :class:`Analysis` in the tree's independent coordinates
     (:mod:`rbstab.analysis.dataset` writes it as one body's analysis, its state blocks by
     body), with:
@@ -271,11 +272,12 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
             raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace "
                              "(a sliding joint of a chain has its own boundary_layer > 0)")
         return config, []
-    sign_law = config.variant == "sliding" and not config.gains.boundary_layer
+    joint = config.chain.joints[0]
+    sign_law = joint.variant == "sliding" and not joint.boundary_layer
     if boundary_layer is not None and not (boundary_layer > 0 and math.isfinite(boundary_layer)):
         raise ValueError(f"--boundary-layer: found {boundary_layer}; expected a width phi > 0 [m]")
     if not sign_law:
-        if boundary_layer is not None and boundary_layer != config.gains.boundary_layer:
+        if boundary_layer is not None and boundary_layer != joint.boundary_layer:
             raise ValueError(f"--boundary-layer: {config.name} is not the pure sign law of sliding "
                              "(boundary_layer 0); change its law with --set controller.boundary_layer=...")
         return config, []
@@ -339,9 +341,9 @@ def equilibrium_outside_limits(variant, equilibrium: np.ndarray) -> str | None:
 def _unheld(config) -> str:
     """Why a configuration with actuator limits has no rest point: the controls that its
     equilibrium without limits commands beyond their limits."""
-    unlimited = dataclasses.replace(config, gains=dataclasses.replace(config.gains, saturation=None)).make_variant()
+    unlimited = paper_form(config, saturation=False)
     commanded = _commanded(config, linearise(unlimited).equilibrium)
-    sat = config.gains.saturation
+    sat = paper_form(config).gains.saturation
     beyond = []
     for key, limit, unit in (("torque_n", sat.torque_n, "N m"), ("force_h", sat.force_h, "N"),
                              ("constraint_force", sat.constraint_force, "N")):
@@ -355,7 +357,7 @@ def _unheld(config) -> str:
 def _commanded(config, y: np.ndarray) -> dict[str, np.ndarray]:
     """N, H and Lambda [N m, N, N] that the feedback and constraint law of ``config``
     command at the state ``y`` (before the actuators' limits)."""
-    unlimited = dataclasses.replace(config, gains=dataclasses.replace(config.gains, saturation=None)).make_variant()
+    unlimited = paper_form(config, saturation=False)
     out = unlimited.evaluate(np.asarray(y)[None])
     return {key: np.abs(np.asarray(out[key])[0]) for key in ("torque_n", "force_h", "constraint_force")}
 
@@ -363,7 +365,7 @@ def _commanded(config, y: np.ndarray) -> dict[str, np.ndarray]:
 def _saturated_at_rest(linearisation: Linearisation, config) -> list[str]:
     """A note naming each control that sits at or beyond its limit at the equilibrium: the
     linearisation there sees the actuator's slope at its limit (0 for clip beyond it)."""
-    sat = config.gains.saturation
+    sat = paper_form(config).gains.saturation
     if sat is None or not linearisation.is_rest_point:
         return []
     commanded = _commanded(config, linearisation.equilibrium)
@@ -419,7 +421,7 @@ def analyze(
 
     Parameters
     ----------
-    config : RunConfig, ChainConfig or path-like
+    config : RunConfig or path-like
         A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
         A tree of bodies is analysed in its independent coordinates (a
         :class:`ChainAnalysis`: its rest state and linearisation by
@@ -491,14 +493,13 @@ def analyze(
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
     if verify:
-        config = verified_model(config)  # a one-body tree: the one-body model it is
         check_verifiable(config)
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
     if basin is not None:
         check_axes(analysed, axes)
-    tree = is_chain(analysed)
+    tree = paper_form(analysed) is None  # the paper's one-body model, in either spelling, is analysed as such
     result, model, disturbed = (_tree_findings if tree else _body_findings)(config, analysed, notes)
     notes, timing = result.notes, result.timing
     lin = result.linearisation
@@ -553,9 +554,9 @@ def analyze(
 def _body_findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
     """(the :class:`Analysis` of one body's equilibrium and linearisation with its notes, the
     certificate's model: the variant without disturbances, the variant with them or None)."""
-    variant, disturbed, disturbance_notes = _undisturbed(analysed, analysed.make_variant())
+    variant, disturbed, disturbance_notes = _undisturbed(paper_form(analysed))
     lin = linearise(variant)
-    if not lin.is_rest_point and analysed.gains.saturation is not None:
+    if not lin.is_rest_point and variant.gains.saturation is not None:
         raise NoEquilibrium(_unheld(analysed))
     outside = equilibrium_outside_limits(variant, lin.equilibrium)
     if outside is not None:
@@ -626,18 +627,19 @@ def _tree_saturated_at_rest(compiled, rest: np.ndarray, linearisation: Linearisa
 
 def _impulse_times(config) -> list[float]:
     """Times [s] of the configuration's impulse disturbances (one body's or every body's of a tree)."""
-    from ..config.loader import chain_of  # heavy: pydantic
 
-    return [d.start for b in chain_of(config).bodies for d in b.disturbances if d.kind == "impulse"]
+    return [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
 
 
-def _undisturbed(config, variant) -> tuple:
-    """(the variant without ``config``'s disturbances, ``variant`` with them or None when it
-    has none, a note saying which dynamics each part of the analysis sees)."""
-    if not config.gains.disturbances:
+def _undisturbed(variant) -> tuple:
+    """(``variant`` without its disturbances, ``variant`` with them or None when it has none,
+    a note saying which dynamics each part of the analysis sees)."""
+    disturbances = variant.gains.disturbances
+    if not disturbances:
         return variant, None, []
-    kinds = ", ".join(dict.fromkeys(d.kind for d in config.gains.disturbances))
-    return undisturbed(config).make_variant(), variant, [
+    kinds = ", ".join(dict.fromkeys(d.kind for d in disturbances))
+    calm = type(variant)(variant.body, dataclasses.replace(variant.gains, disturbances=()), variant.limits)
+    return calm, variant, [
         f"disturbances ({kinds}): the equilibrium, the linearisation and the certificate's Hessians are of the "
         "undisturbed dynamics; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
         "impulses not seen) and the simulations integrate the disturbed dynamics"]

@@ -242,7 +242,7 @@ def basin_map(
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The configuration whose initial state the slice passes through; its bodies, laws,
         gains and simulation settings are used for every run (``n_samples`` replaced). A
         tree's entries are ``initial_state.<body>.<block>.<i>``; a body whose ``x`` (``v``)
@@ -283,7 +283,9 @@ def basin_map(
     # the one check an initial state of a valid configuration can fail (the grid's values are finite)
     inside = np.ones(len(states), dtype=bool)
     if runs.tree is None:  # a tree's runs fail at t = 0 with the body or joint named
-        theta = list(config.make_variant().layout.blocks).index("theta")
+        from ..variants.paper import paper_form  # heavy: numba
+
+        theta = list(paper_form(config).layout.blocks).index("theta")
         inside = np.abs(states[:, 3 * theta + 1]) < np.pi / 2 - config.simulation.gimbal_margin
     points = np.flatnonzero(inside)
     outcome = np.full(len(states), 2, dtype=np.int8)

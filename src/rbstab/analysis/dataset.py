@@ -358,7 +358,7 @@ def _text_attributes(analysis) -> dict[str, Any]:
         "notes": "\n".join(analysis.notes),
     }
     if analysis.analysed is not analysis.config:
-        attrs["analysed_boundary_layer"] = float(analysis.analysed.gains.boundary_layer)
+        attrs["analysed_boundary_layer"] = float(analysis.analysed.chain.joints[0].boundary_layer)
     if c is not None:
         attrs.update(certificate_holds=int(c.holds), certificate_argument=c.argument,
                      rate_definiteness=c.rate_definiteness, positive_definite=int(c.positive_definite),
@@ -631,7 +631,7 @@ def json_record(analysis) -> dict[str, Any]:
         "notes": list(analysis.notes),
     }
     if analysis.analysed is not analysis.config:
-        record["analysed_boundary_layer"] = float(analysis.analysed.gains.boundary_layer)
+        record["analysed_boundary_layer"] = float(analysis.analysed.chain.joints[0].boundary_layer)
     if analysis.settling is not None:
         record["simulation"] = settling_record(analysis.settling)
     c = analysis.certificate

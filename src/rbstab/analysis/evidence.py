@@ -68,7 +68,7 @@ def falsify(config, model, linearisation, certificate: Certificate, *, runs: int
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The configuration analysed (its runs: its bodies, laws, gains, disturbances, limits,
         settings).
     model : rbstab.variants.Variant or rbstab.analysis.certificate.Model
@@ -193,7 +193,7 @@ def check_initial_run(certificate: Certificate, config, simulate, linearisation,
     Parameters
     ----------
     certificate : Certificate
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The configuration analysed (its ``simulation``: t_end, samples, step limit).
     simulate : callable
         ``simulate(config)`` -> a :class:`rbstab.results.RunResult` (``time`` [s],

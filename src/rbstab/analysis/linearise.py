@@ -380,8 +380,8 @@ class TreeCoordinates:
 def linearise_config(config) -> Linearisation:
     """The linearisation at the rest state of a run configuration, as ``rbstab analyze``
     finds it, without its disturbances (they act in time, not at rest: :func:`undisturbed`):
-    of a chain (:class:`rbstab.config.ChainConfig`) by :func:`linearise_chain`; of one body
-    (:class:`rbstab.config.RunConfig`) by :func:`linearise` of its variant.
+    of a tree by :func:`linearise_chain`; of one body in one body's spelling by
+    :func:`linearise` of its paper form (:func:`rbstab.variants.paper.paper_form`).
 
     Raises
     ------
@@ -394,22 +394,19 @@ def linearise_config(config) -> Linearisation:
         from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
         return linearise_chain(C.compile_chain(config.chain))[0]
-    return linearise(config.make_variant())
+    from ..variants.paper import paper_form  # heavy: numba
+
+    return linearise(paper_form(config))
 
 
 def undisturbed(config):
-    """A configuration (one body's :class:`rbstab.config.RunConfig` or a tree's
-    :class:`rbstab.config.ChainConfig`) without its disturbances (they act in time, not at
-    rest): what its equilibrium or rest state, linearisation and certificate see;
-    ``config`` itself where it has none."""
-    if is_chain(config):
-        tree = config.chain
-        if not any(b.disturbances for b in tree.bodies):
-            return config
-        return replace(config, chain=replace(tree, bodies=tuple(replace(b, disturbances=()) for b in tree.bodies)))
-    if not config.gains.disturbances:
+    """A run configuration (:class:`rbstab.config.RunConfig`) without its disturbances (they
+    act in time, not at rest): what its equilibrium or rest state, linearisation and
+    certificate see; ``config`` itself where it has none."""
+    tree = config.chain
+    if not any(b.disturbances for b in tree.bodies):
         return config
-    return replace(config, gains=replace(config.gains, disturbances=()))
+    return replace(config, chain=replace(tree, bodies=tuple(replace(b, disturbances=()) for b in tree.bodies)))
 
 
 #: :func:`rest_verdict` where the configuration has no linearisation.

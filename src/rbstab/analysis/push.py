@@ -134,7 +134,7 @@ class Pushes:
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         Validated; its own disturbances stay (the push is one more entry).
     kind : {"force", "torque"}
     body : str, optional
@@ -158,7 +158,7 @@ class Pushes:
     equilibrium : ndarray, shape (n_states,)
         Where every run starts (before the push): the bodies at rest, as the maximal state of
         the tree (one body: of its one-body chain, :func:`rbstab.config.loader.chain_of`).
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The pushed configuration (its initial state at rest, the push one more impulse).
 
     Raises
@@ -171,7 +171,6 @@ class Pushes:
 
     def __init__(self, config, kind: str, *, body: str | None = None, point=None, at: float = 0.0,
                  ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
-        from ..config.loader import chain_of  # heavy: pydantic
         from ..model import MAX_DISTURBANCES  # heavy: numba
         from ..variants import chain as C  # heavy: numba
 
@@ -180,7 +179,7 @@ class Pushes:
         self.units = PUSH_KINDS[kind]
         self.body = body
         tree = is_chain(config)
-        chain = chain_of(config)  # one body: its one-body chain (the same model)
+        chain = config.chain  # one body: its one-body chain (the same model)
         names = list(chain.body_names)
         if tree and body not in names:
             found = "none" if body is None else f"'{body}'"
@@ -276,13 +275,14 @@ def _body_rest(config, compiled) -> tuple[np.ndarray, dict]:
     dynamics (its own disturbances act on the runs), a permanent body placed on its pin."""
     from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
     from ..variants import chain as C  # heavy: numba
+    from ..variants.paper import paper_form  # heavy: numba
     from .linearise import linearise, undisturbed  # heavy: numba
 
-    lin = linearise(undisturbed(config).make_variant())
+    lin = linearise(paper_form(undisturbed(config)))
     if not lin.is_rest_point:
         raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
                          f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
-    layout = config.make_variant().layout
+    layout = paper_form(config).layout
     blocks = dict(zip(layout.blocks, np.split(lin.equilibrium, len(layout.blocks))))
     rest = np.zeros(compiled.n_states)
     for at, block in enumerate(("theta", "omega", "position", "velocity", "controller_state")):
@@ -585,7 +585,7 @@ def push_analysis(config, kind: str, *, directions: int | np.ndarray = 64, point
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         Validated. The runs use its body, controller, saturation, limits and simulation
         settings; they start at rest at its equilibrium (:class:`Pushes`). A chain is
         pushed on ``body``.
@@ -819,7 +819,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         Validated. A chain's entries are ``initial_state.<body>.<block>.<i>`` (the bodies
         the configuration places re-placed on their joints), its pushes act on ``body``
         (:class:`Pushes`).

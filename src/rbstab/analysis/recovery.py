@@ -100,11 +100,10 @@ def _certificate(config, options: dict):
     sampled, falsified against the compiled engine's runs and checked against the run from
     the configured initial state), None for a law without one (the pure sign law) or a
     configuration without an equilibrium inside its admissible region."""
-    from ..config.loader import chain_of  # heavy: pydantic
     from .analyze import NoEquilibrium, OutsideLimits, analyze  # heavy: numba
     from .certificate import DEFAULT_SAMPLES  # heavy: numba
 
-    if any(j.variant == "sliding" and not j.boundary_layer for j in chain_of(config).joints):
+    if any(j.variant == "sliding" and not j.boundary_layer for j in config.chain.joints):
         return None
     try:
         return analyze(config, samples=int(options.get("certificate_samples", DEFAULT_SAMPLES)), seed=options["seed"],

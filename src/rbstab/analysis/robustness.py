@@ -41,7 +41,7 @@ from ..config import config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, converged
 from ..sweep.folder import open_sweep, resolved_config, resolved_configs
 from .dataset import robustness_content, robustness_dataset
-from .linearise import MAX_REST_CHECKS, linearise, rest_verdict
+from .linearise import MAX_REST_CHECKS, linearise_config, rest_verdict
 from .thresholds import SplitRule, split_rule, split_rules
 
 __all__ = ["Separation", "RobustnessGroup", "Robustness", "robustness", "wilson_interval", "separation",
@@ -249,7 +249,7 @@ def _t_end_hint(folder, run_id: str, ratio: float) -> dict | None:
     its configuration linearised at its equilibrium; None unless asymptotically stable."""
     try:
         config = config_from_mapping(resolved_config(folder, run_id))
-        lin = linearise(config.make_variant())
+        lin = linearise_config(config)
     except Exception:  # noqa: BLE001 - a hint only: a run that cannot be rebuilt gives none
         return None
     if lin.verdict != "asymptotically stable":

@@ -57,7 +57,7 @@ def longer_horizon(t_end: float, horizon: float, k: int, tau: float,
 
 
 def continued(config, t_end: float):
-    """``config`` (a RunConfig or ChainConfig) run to ``t_end`` [s]: its sample spacing and
+    """``config`` (a RunConfig) run to ``t_end`` [s]: its sample spacing and
     its step limit per second kept (up to :data:`_CONTINUED_SAMPLES` samples and
     :data:`rbstab.config.schema.MAX_STEPS_LIMIT` steps)."""
     from ..config.schema import MAX_STEPS_LIMIT  # heavy: pydantic
@@ -154,7 +154,7 @@ class Runs:
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         Validated: its bodies, laws, gains, disturbances, admissible region and settings.
     engine : {"compiled", "cuda"}
         The engine of the runs (:func:`rbstab.simulator.simulate_batch`).
@@ -290,7 +290,7 @@ class Runs:
         values = np.asarray(values, dtype=float).reshape(-1, len(axes))
         if self.tree is not None:
             return self._tree_states(axes, values)
-        blocks = list(self.config.make_variant().layout.blocks)
+        blocks = list(_paper_form(self.config).layout.blocks)
         states = np.repeat(self.initial_state[None], len(values), axis=0)
         for j, axis in enumerate(axes):
             states[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
@@ -317,7 +317,7 @@ class Runs:
             from ..variants import chain as C  # heavy: numba
 
             return C.evaluate(self.compiled, np.zeros(len(states)), states)["lyapunov"]
-        return self.config.make_variant().lyapunov(states)
+        return _paper_form(self.config).lyapunov(states)
 
     def traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
         """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end]:
@@ -394,7 +394,7 @@ class Runs:
         k = len(states)
         values = np.broadcast_to(np.asarray(disturbance[2], dtype=float), (k, 3)) if disturbance else None
         simulation = replace(self.config.simulation, n_samples=n_samples)
-        layout = self.config.make_variant().layout if self.tree is None else None
+        layout = _paper_form(self.config).layout if self.tree is None else None
         configs = [self._config_at(y, simulation, layout, None if values is None else (*disturbance[:2], values[i]))
                    for i, y in enumerate(states)]
         ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
@@ -415,10 +415,12 @@ class Runs:
 
         if self.tree is None:
             blocks = layout.split(y)
-            config = replace(self.config, initial_state={**self.config.initial_state, **blocks}, simulation=simulation)
+            (name,) = self.config.initial_state
+            chain = self.config.chain
             if disturbance is not None:
-                config = replace(config, gains=replace(config.gains, disturbances=pushed(config.gains.disturbances)))
-            return config
+                chain = replace(chain, bodies=(replace(chain.bodies[0], disturbances=pushed(chain.bodies[0].disturbances)),))
+            return replace(self.config, chain=chain, simulation=simulation,
+                           initial_state={name: {**self.config.initial_state[name], **blocks}})
         d_at = self.compiled.d_at
         initial = {body.name: {block: y[12 * i + 3 * k: 12 * i + 3 * k + 3].copy() for k, block in enumerate(_BODY_BLOCKS)}
                    for i, body in enumerate(self.tree.bodies)}
@@ -431,6 +433,13 @@ class Runs:
             bodies[disturbance[0]] = replace(bodies[disturbance[0]], disturbances=pushed(bodies[disturbance[0]].disturbances))
             chain = replace(chain, bodies=tuple(bodies))
         return replace(self.config, chain=chain, initial_state=initial, simulation=simulation)
+
+
+def _paper_form(config):
+    """:func:`rbstab.variants.paper.paper_form` of ``config`` (one body's spelling)."""
+    from ..variants.paper import paper_form  # heavy: numba
+
+    return paper_form(config)
 
 
 #: The state blocks of a body in a tree's maximal state, in order (12 entries a body).
@@ -467,7 +476,7 @@ def check_entries(config, axes) -> None:
         return
     from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
 
-    blocks = config.make_variant().layout.blocks
+    blocks = _paper_form(config).layout.blocks
     for axis in axes:
         if axis.body is not None:
             raise ValueError(f"--basin {axis.key!r}: names a body of a chain ('{axis.body}'); a one-body config's "

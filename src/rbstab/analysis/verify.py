@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..variants.paper import paper_form
 
 __all__ = ["Verification", "NotVerifiable", "verify_sublevel", "verify_analysis", "check_verifiable",
            "potential", "DEFAULT_RTOL"]
@@ -102,19 +103,16 @@ class Verification:
 
 # -- what is covered ----------------------------------------------------------------------------
 def verified_model(config):
-    """The one-body configuration the proof is of: ``config`` (a RunConfig), or the one-body
-    spelling of a chain of one body held to the ground at its own point
-    (:func:`rbstab.config.loader.one_body_config`: the same model).
+    """The configuration the proof is of: ``config`` where its tree is the paper's one-body
+    model, one body held to the ground at its own point in either spelling
+    (:func:`rbstab.variants.paper.paper_form`).
 
     Raises
     ------
     NotVerifiable
-        For any other chain (one line: why)."""
-    from ..config.loader import one_body_config  # heavy: pydantic
-
-    body = one_body_config(config)
-    if body is not None:
-        return body
+        For any other tree (one line: why)."""
+    if paper_form(config) is not None:
+        return config
     bodies = config.chain.size
     if bodies > 1:
         raise NotVerifiable(f"the proof covers one body held to the ground at its own point, the reduced 6-state "
@@ -129,12 +127,12 @@ def check_verifiable(config) -> None:
     unless the configuration's analysis (:func:`verified_model`'s) runs on the reduced
     6-state model with what the proof covers: clipped torque limits, diagonal positive L_r,
     H unlimited, no disturbances, no bounds of X, V or E in ``simulation.limits``."""
-    config = verified_model(config)
-    variant = config.variant
+    model = paper_form(verified_model(config))
+    variant = model.name
     if variant != "permanent":
         raise NotVerifiable(f"controller.variant: found {variant!r} (its analysis runs on more than 6 states); "
                             "--verify covers the reduced 6-state model of 'permanent'")
-    gains = config.gains
+    gains = model.gains
     l_r = np.asarray(gains.l_r, dtype=float)
     if np.any(l_r - np.diag(np.diag(l_r))):
         raise NotVerifiable(f"controller.l_r: found a non-diagonal L_r {l_r.tolist()}; --verify needs a diagonal "
@@ -374,7 +372,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
 
     Parameters
     ----------
-    config : RunConfig, ChainConfig or path-like
+    config : RunConfig or path-like
         A ``permanent`` configuration, or a chain that is one (:func:`verified_model`,
         :func:`check_verifiable`).
     level : float, optional
@@ -402,7 +400,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     check_verifiable(config)
     arb = _arb()
     t0 = _time.perf_counter()
-    variant = config.make_variant()
+    variant = paper_form(config)
     model = _Model(variant, arb)
     equilibrium = np.asarray(variant.equilibrium, dtype=float)[:3]
     gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
@@ -549,5 +547,5 @@ def verify_analysis(analysis, *, rtol: float = DEFAULT_RTOL) -> Verification:
 def potential(config, theta: np.ndarray) -> float:
     """P(Theta) [J] of the module docstring at one Theta (3,) [rad], by the interval
     kernel (its ball's midpoint): v at rest."""
-    variant = config.make_variant()
+    variant = paper_form(config)
     return _Model(variant, _arb()).point(np.asarray(theta, dtype=float))

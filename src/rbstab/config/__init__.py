@@ -69,10 +69,10 @@ how long a run may take, not what it computes: they are not part of the run's
 ``config_hash`` (a run stopped by them is ``failed``; ``--retry-failed`` reruns it).
 
 A tree of bodies (``bodies`` and ``joints`` instead of ``body`` and ``controller``) is
-validated by the same schema and the same loader into a :class:`ChainConfig`
-(:func:`load_config` and :func:`config_from_mapping` take either spelling,
-:mod:`rbstab.config.loader`); :func:`chain_of` gives the :class:`rbstab.chain.Chain` of any
-configuration, a one-body one being the one-body tree.
+validated by the same loader into the same :class:`RunConfig` (:func:`load_config` and
+:func:`config_from_mapping` take either spelling, :mod:`rbstab.config.loader`): its
+``chain`` is the :class:`rbstab.chain.Chain` of any configuration, a one-body one being the
+tree of one body held to the ground at its own point.
 
 A run's identity is :func:`config_hash` of its :func:`canonical_config` (the resolved
 configuration without ``name`` and the run limits, as canonical JSON;
@@ -102,7 +102,7 @@ from .yaml_io import dump_yaml, parse_yaml
 # The validator (pydantic) and RunConfig (numba's model) are imported on first use, so that
 # what only reads files (rbstab.open_sweep, rbstab show) does not load the compiler.
 _LAZY = {
-    "loader": ("PER_RUN_SECTIONS", "RunConfig", "ChainConfig", "config_from_mapping", "load_config", "chain_of"),
+    "loader": ("PER_RUN_SECTIONS", "RunConfig", "config_from_mapping", "load_config"),
     "paths": ("apply_overrides", "parse_key", "KeyPath", "KeyPathError"),
     "schema": ("GAIN_NAMES", "GAIN_UNITS", "INITIAL_STATE_BLOCKS", "SimulationSettings"),
 }
@@ -139,6 +139,4 @@ __all__ = [
     "GAIN_NAMES",
     "GAIN_UNITS",
     "INITIAL_STATE_BLOCKS",
-    "ChainConfig",
-    "chain_of",
 ]

@@ -1,11 +1,11 @@
 """The validated, frozen run configurations and the one loader that builds them.
 
 :func:`load_config` (a YAML file) and :func:`config_from_mapping` (its parsed mapping) take
-either spelling of the model: ``body`` and ``controller``, one body held by its controller (a
-:class:`RunConfig`), or ``bodies`` and ``joints``, a tree of bodies (a :class:`ChainConfig`
-holding its :class:`rbstab.chain.Chain`); a mapping that mixes them is refused in one line.
-:func:`chain_of` gives the tree any configuration means (a one-body config is the one-body
-tree) and :func:`one_body_config` the one-body spelling of a one-body tree.
+either spelling of the model, ``body`` and ``controller`` (one body held by its controller) or
+``bodies`` and ``joints`` (a tree of bodies), and give one type, a :class:`RunConfig` holding
+the tree (:class:`rbstab.chain.Chain`; one body's is the tree of one body held to the ground
+at its own point); a mapping that mixes them is refused in one line. Errors and the
+``resolved`` configuration keep the keys written.
 
 A tree's schema (the keys are public; units in brackets; each block validated as in a one-body
 config, :mod:`rbstab.config`)::
@@ -62,7 +62,7 @@ from ..chain import GROUND, Body, Chain, Joint, single
 from ..kinematics import rotation_matrix
 from ..layout import is_chain
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
-from ..variants import VARIANTS, Variant
+from ..variants import VARIANTS
 from ..variants.base import limited_values
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies, unheld_weight
@@ -86,7 +86,7 @@ from .schema import (
 )
 from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
 
-__all__ = ["RunConfig", "ChainConfig", "config_from_mapping", "load_config", "chain_of", "one_body_config",
+__all__ = ["RunConfig", "config_from_mapping", "load_config",
            "PER_RUN_SECTIONS", "limits_of", "simulation_settings", "resolved_simulation", "ONE_BODY_NAMES",
            "CONSTRAINT_TOLERANCE", "initial_state_fits", "placed_initial_state"]
 
@@ -95,31 +95,44 @@ __all__ = ["RunConfig", "ChainConfig", "config_from_mapping", "load_config", "ch
 PER_RUN_SECTIONS = ("name", "initial_state")
 #: The sections that :meth:`RunConfig.from_resolved` compares to share a rebuilt config's objects.
 _SHARED_SECTIONS = ("body", "controller", "simulation", "disturbances")
+#: The names of the body and the joint of a one-body config's tree (its sections' names).
+ONE_BODY_NAMES = ("body", "controller")
+#: How far [m, m/s] a ``permanent`` joint's given initial state may miss its constraint
+#: (E_j = 0, dE_j/dt = 0), relative to the lengths and speeds involved (at least 1).
+CONSTRAINT_TOLERANCE = 1e-9
+_INF3 = np.full(3, math.inf)
 
 
 @dataclass(frozen=True, eq=False)
 class RunConfig:
-    """A validated run: everything the integrator needs, read-only.
+    """A validated run: everything the integrator needs, read-only; either spelling.
+
+    The model is always a tree of bodies (:class:`rbstab.chain.Chain`): a one-body
+    configuration (``body``, ``controller``) is the tree of its body (named ``body``) held by
+    its joint (named ``controller``) at C = ``attachment_point`` to the same point R of the
+    ground (E = X + A R - R, eq 4), with the controller's law, K_r, L_r, point gains and the
+    limits of N and Lambda on the joint and K_t, L_t and the limits of H on the body. The
+    paper's one-body equations of such a tree: :func:`rbstab.variants.paper.paper_form`.
 
     Attributes
     ----------
     name : str
         Run name, ``[A-Za-z0-9_.-]+`` (used as a file name).
-    variant : str
-        Key of :data:`rbstab.variants.VARIANTS`.
-    body : RigidBody
-        Mass [kg], inertia [kg m^2] (3x3), attachment point R [m], gravity g [m/s^2].
-    gains : Gains
-        The gains the variant uses (its ``required_gains``, and ``boundary_layer`` for
-        sliding), each 3x3; gains configured but unused are None here (see ``resolved``).
-    initial_state : dict of str to ndarray, shape (3,)
-        Keyed by the state blocks of :mod:`rbstab.layout` (``theta``, ``omega``,
-        ``position``, ``velocity``, ``controller_state``), all five always present.
+    chain : Chain
+        The bodies (topological order, as listed), their joints and gravity.
+    initial_state : dict of str to dict of str to ndarray, shape (3,)
+        By body name, then by the state blocks of :mod:`rbstab.layout` (``theta``,
+        ``omega``, ``position``, ``velocity``, ``controller_state``; the last that of the
+        body's joint), all present. In a tree's spelling, positions and velocities left out
+        are placed from the parent's (module docstring); in one body's, blocks left out are
+        zero, as written.
+    placed : tuple of str
+        ``initial_state.<body>.x`` and ``.v`` keys that rbstab placed.
     simulation : SimulationSettings
     resolved : dict
-        The whole configuration as plain Python with every default filled in and gains as
-        written; ``config_from_mapping(resolved)`` rebuilds an identical RunConfig.
-        ``max_step`` is None when infinite.
+        The whole configuration as plain Python, in the spelling written, with every default
+        filled in and gains as written; ``config_from_mapping(resolved)`` rebuilds an
+        identical config. ``max_step`` is None when infinite.
     warnings : tuple of str
         Physical-plausibility warnings and notes (also emitted as
         :class:`PhysicalPlausibilityWarning`, :class:`SemiDefiniteGainWarning` for
@@ -127,12 +140,11 @@ class RunConfig:
     """
 
     name: str
-    variant: str
-    body: RigidBody
-    gains: Gains
-    initial_state: dict[str, np.ndarray]
+    chain: Chain
+    initial_state: dict[str, dict[str, np.ndarray]]
     simulation: SimulationSettings
     resolved: dict
+    placed: tuple[str, ...] = ()
     warnings: tuple[str, ...] = ()
 
     def to_yaml(self) -> str:
@@ -147,8 +159,8 @@ class RunConfig:
         Parameters
         ----------
         initial_state : Mapping or None
-            The ``initial_state`` section as in a YAML file (keys ``theta``, ``omega``,
-            ``x``, ``v``, ``d``; absent keys are zero).
+            The ``initial_state`` section as in a YAML file (one body's: keys ``theta``,
+            ``omega``, ``x``, ``v``, ``d``, absent keys zero; a tree's: by body name).
         name : str, optional
             New ``name`` (must be valid; default: this config's).
         source : str, optional
@@ -160,20 +172,21 @@ class RunConfig:
             For an invalid section or name.
         """
         data = {**self.resolved, "name": self.name if name is None else name, "initial_state": initial_state}
-        return _build(data, default_name=None, source=source)
+        build = _build_tree if is_chain(data) else _build
+        return build(data, default_name=None, source=source)
 
     @classmethod
     def from_resolved(cls, resolved: Mapping, *, like: Sequence["RunConfig"] = ()) -> "RunConfig":
-        """Rebuild the RunConfig of a ``resolved`` mapping without validating it again.
+        """Rebuild the RunConfig of a one-body ``resolved`` mapping without validating it again.
 
         For a mapping that a validated RunConfig gave (``config.resolved``, e.g. a sweep's
         planned run sent to a worker): "validate once, at the boundary". It gives what
         :func:`config_from_mapping` gives, without the warnings, in a few microseconds.
 
         ``like``: other rebuilt configs (a sweep's runs before this one). The new config
-        shares the ``body``, ``gains`` and ``simulation`` objects of the first of them with
-        the same ``body``, ``controller`` and ``simulation`` sections, so that runs that
-        differ only in name and initial state share one variant
+        shares the ``chain`` and ``simulation`` objects of the first of them with the same
+        ``body``, ``controller``, ``simulation`` and ``disturbances`` sections, so that runs
+        that differ only in name and initial state share one model
         (:func:`rbstab.simulator.simulate_many`). "The same" is Python's ``==``: sections
         that differ only in the sign of a zero (-0.0 == 0.0) count as the same.
 
@@ -182,7 +195,8 @@ class RunConfig:
         KeyError, TypeError, ValueError
             For a mapping of another shape (validate it with :func:`config_from_mapping`).
         """
-        initial_state = {block: _array(resolved["initial_state"][key]) for key, block in INITIAL_STATE_BLOCKS.items()}
+        initial_state = {ONE_BODY_NAMES[0]: {block: _array(resolved["initial_state"][key])
+                                             for key, block in INITIAL_STATE_BLOCKS.items()}}
         for other in like:
             if all(resolved.get(key) == other.resolved.get(key) for key in _SHARED_SECTIONS):
                 return dataclasses.replace(other, name=resolved["name"], initial_state=initial_state,
@@ -198,12 +212,11 @@ class RunConfig:
         )
         max_step = sim["max_step"]
         wall = sim.get("max_wall_time", SimulationSettings.max_wall_time)  # absent in files of rbstab < 0.2
+        rigid = RigidBody(float(body["mass"]), _matrix(body["inertia"]), _array(body["attachment_point"]),
+                          _array(body["gravity"]))
         return cls(
             name=resolved["name"],
-            variant=ctrl["variant"],
-            body=RigidBody(float(body["mass"]), _matrix(body["inertia"]), _array(body["attachment_point"]),
-                           _array(body["gravity"])),
-            gains=gains,
+            chain=_one_body_chain(rigid, gains, ctrl["variant"]),
             initial_state=initial_state,
             simulation=SimulationSettings(
                 t_end=float(sim["t_end"]), n_samples=int(sim["n_samples"]), method=sim["method"],
@@ -216,9 +229,24 @@ class RunConfig:
             resolved=resolved,
         )
 
-    def make_variant(self) -> Variant:
-        """The variant object, ``VARIANTS[variant](body, gains, simulation.limits)``."""
-        return VARIANTS[self.variant](self.body, self.gains, self.simulation.limits)
+
+def _one_body_chain(body: RigidBody, gains: Gains, variant: str) -> Chain:
+    """The one-body tree of a one-body configuration (:class:`RunConfig`): ``body`` (named
+    ``body``) with K_t, L_t and the limits of H, held by its joint (named ``controller``) at
+    C = R to the ground point R with the ``variant``'s law, K_r, L_r, point gains and the
+    limits of N and Lambda; the disturbances on the body."""
+    sat = gains.saturation
+    tree_body = Body(
+        name=ONE_BODY_NAMES[0], mass=body.mass, inertia=body.inertia, k_t=gains.k_t, l_t=gains.l_t,
+        saturation=None if sat is None else Saturation(_INF3.copy(), sat.force_h, _INF3.copy(), sat.shape),
+        disturbances=gains.disturbances)
+    joint = Joint(
+        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=body.attachment_point,
+        child_point=body.attachment_point, variant=variant, k_r=gains.k_r, l_r=gains.l_r,
+        k_c=gains.k_c, l_c=gains.l_c, k_d=gains.k_d, l_d=gains.l_d, k_s=gains.k_s,
+        boundary_layer=gains.boundary_layer,
+        saturation=None if sat is None else Saturation(sat.torque_n, _INF3.copy(), sat.constraint_force, sat.shape))
+    return single(tree_body, joint, body.gravity)
 
 
 _BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either body and controller (one body) or "
@@ -325,10 +353,8 @@ def _build(
     found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
     return RunConfig(
         name=run.name,
-        variant=ctrl.variant,
-        body=body,
-        gains=gains,
-        initial_state=initial_state,
+        chain=_one_body_chain(body, gains, ctrl.variant),
+        initial_state={ONE_BODY_NAMES[0]: initial_state},
         simulation=simulation,
         resolved=dump,  # plain dicts, lists, str and numbers (the validators make new lists; tested)
         warnings=found_warnings,
@@ -442,10 +468,10 @@ def _related(a: str, b: str) -> bool:
 
 def config_from_mapping(
     data: Mapping, *, default_name: str | None = None, source: str | None = None, overrides: Sequence[str] = ()
-) -> RunConfig | ChainConfig:
-    """Validate a configuration mapping (the parsed YAML): a :class:`RunConfig` for one
-    body's (``body``, ``controller``), a :class:`ChainConfig` for a tree's (``bodies``,
-    ``joints``, :func:`rbstab.layout.is_chain`).
+) -> RunConfig:
+    """Validate a configuration mapping (the parsed YAML) in either spelling, one body's
+    (``body``, ``controller``) or a tree's (``bodies``, ``joints``,
+    :func:`rbstab.layout.is_chain`), into a :class:`RunConfig`.
 
     Parameters
     ----------
@@ -484,7 +510,7 @@ def config_from_mapping(
     return build(data, default_name=default_name, source=source, overrides=overrides)
 
 
-def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig | ChainConfig:
+def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig:
     """Read a YAML configuration file, apply ``key.path=value`` overrides, validate it
     (:func:`config_from_mapping`: one body's or a tree's).
 
@@ -521,54 +547,10 @@ def load_config(path: str | Path, overrides: Sequence[str] = ()) -> RunConfig | 
 
 
 # -- a tree's spelling (bodies, joints) ---------------------------------------------------------
-#: The names of the body and the joint of a one-body config's chain (its sections' names).
-ONE_BODY_NAMES = ("body", "controller")
-#: How far [m, m/s] a ``permanent`` joint's given initial state may miss its constraint
-#: (E_j = 0, dE_j/dt = 0), relative to the lengths and speeds involved (at least 1).
-CONSTRAINT_TOLERANCE = 1e-9
-_INF3 = np.full(3, math.inf)
-
-
-@dataclass(frozen=True, eq=False)
-class ChainConfig:
-    """A validated chain run: everything the integrator needs, read-only.
-
-    Attributes
-    ----------
-    name : str
-        Run name (a file name).
-    chain : Chain
-        The bodies (topological order, as listed), their joints and gravity.
-    initial_state : dict of str to dict of str to ndarray, shape (3,)
-        By body name, then by the state blocks of :mod:`rbstab.layout` (``theta``,
-        ``omega``, ``position``, ``velocity``, ``controller_state``; the last that of the
-        body's joint), all present; positions and velocities left out of the config placed
-        from the parent's (module docstring).
-    placed : tuple of str
-        ``initial_state.<body>.x`` and ``.v`` keys that rbstab placed.
-    simulation : SimulationSettings
-    resolved : dict
-        The configuration as plain Python with every default filled in (the placed x, v
-        left out); ``config_from_mapping(resolved)`` rebuilds an identical config.
-    warnings : tuple of str
-        Physical-plausibility warnings (also emitted as :class:`PhysicalPlausibilityWarning`).
-    """
-
-    name: str
-    chain: Chain
-    initial_state: dict[str, dict[str, np.ndarray]]
-    placed: tuple[str, ...]
-    simulation: SimulationSettings
-    resolved: dict
-    warnings: tuple[str, ...] = ()
-
-    def to_yaml(self) -> str:
-        """``resolved`` as YAML (keys in schema order, lists in flow style)."""
-        return dump_yaml(self.resolved)
 
 
 def placed_initial_state(initial_state: Mapping, chain: Chain, margin: float) -> dict[str, dict[str, np.ndarray]]:
-    """:attr:`ChainConfig.initial_state` of a validated chain config's ``initial_state``
+    """:attr:`RunConfig.initial_state` of a validated chain config's ``initial_state``
     section (as resolved: by body name, the blocks written) for ``chain``: each body's
     blocks, the x and v left out placed from the parent's, as :func:`config_from_mapping`
     places them (``margin``: ``simulation.gimbal_margin``).
@@ -581,7 +563,7 @@ def placed_initial_state(initial_state: Mapping, chain: Chain, margin: float) ->
     return _place_tree(initial_state, chain, margin, None, ())[0]
 
 
-def initial_state_fits(config: ChainConfig, initial_state: Any) -> bool:
+def initial_state_fits(config: RunConfig, initial_state: Any) -> bool:
     """Whether ``config`` with ``initial_state`` (a chain config's ``initial_state`` section
     as written) in its place passes every check :func:`config_from_mapping` makes of that
     section: its schema, the bodies it names, each body's and each joint's gimbal lock, the
@@ -605,62 +587,6 @@ def initial_state_fits(config: ChainConfig, initial_state: Any) -> bool:
     except (ConfigError, ValidationError, TypeError, ValueError):
         return False
     return True
-
-
-def chain_of(config: RunConfig | ChainConfig) -> Chain:
-    """The chain a configuration means: a chain config's own, or for a one-body config the
-    one-body chain (:func:`rbstab.chain.single`): its body (named ``body``) with the
-    ground-anchored feedback K_t, L_t and the limits of H, held by its joint (named
-    ``controller``) at C = ``attachment_point`` to the ground point R (where C is at the
-    equilibrium X = 0, Theta = 0: E = X + A R - R, eq 4) with the variant's law, K_r, L_r and
-    the limits of N and Lambda. Same equations, same numbers."""
-    if is_chain(config):
-        return config.chain
-    gains, sat = config.gains, config.gains.saturation
-    body = Body(
-        name=ONE_BODY_NAMES[0], mass=config.body.mass, inertia=config.body.inertia, k_t=gains.k_t, l_t=gains.l_t,
-        saturation=None if sat is None else Saturation(_INF3.copy(), sat.force_h, _INF3.copy(), sat.shape),
-        disturbances=gains.disturbances)
-    joint = Joint(
-        name=ONE_BODY_NAMES[1], parent=GROUND, child=0, parent_point=config.body.attachment_point,
-        child_point=config.body.attachment_point, variant=config.variant, k_r=gains.k_r, l_r=gains.l_r,
-        k_c=gains.k_c, l_c=gains.l_c, k_d=gains.k_d, l_d=gains.l_d, k_s=gains.k_s,
-        boundary_layer=gains.boundary_layer,
-        saturation=None if sat is None else Saturation(sat.torque_n, _INF3.copy(), sat.constraint_force, sat.shape))
-    return single(body, joint, config.body.gravity)
-
-
-def one_body_config(config: RunConfig | ChainConfig) -> RunConfig | None:
-    """The one-body spelling of a configuration: a one-body config itself; a chain that is
-    the paper's one-body model (one body held by its joint to the ground at R_p = R_c,
-    :func:`rbstab.variants.chain.is_one_body`) with its body's mass, inertia, K_t, L_t and
-    limits of H, its joint's point as ``attachment_point``, law, gains and limits as
-    ``controller``, gravity, initial state, disturbances and simulation, the inverse of
-    :func:`chain_of` (the same model: the same runs, bit for bit); None for any other chain."""
-    if not is_chain(config):
-        return config
-    r = config.resolved
-    if len(r["bodies"]) != 1:
-        return None
-    (body,), (joint,) = r["bodies"], r["joints"]
-    if joint["parent"] != GROUND_NAME or list(joint["parent_point"]) != list(joint["child_point"]):
-        return None
-    placed = ("name", "parent", "parent_point", "child", "child_point", "saturation")
-    controller = {k: v for k, v in joint.items() if k not in placed} | {"k_t": body["k_t"], "l_t": body["l_t"]}
-    limits = {**(joint.get("saturation") or {}), **(body.get("saturation") or {})}
-    if limits:
-        controller["saturation"] = limits
-    mapping = {"name": r["name"],
-               "body": {"mass": body["mass"], "inertia": body["inertia"], "attachment_point": joint["child_point"],
-                        "gravity": r["gravity"]},
-               "controller": controller,
-               "initial_state": dict(r.get("initial_state", {}).get(body["name"], {})),
-               "simulation": r["simulation"]}
-    if r.get("disturbances"):
-        mapping["disturbances"] = [{k: v for k, v in d.items() if k != "body"} for d in r["disturbances"]]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the chain's own warnings were shown
-        return config_from_mapping(mapping, source=f"the one-body spelling of {config.name}")
 
 
 def _gain(value: Any) -> np.ndarray:
@@ -868,7 +794,7 @@ def _tree_notes(chain: Chain, run: ChainSchema, source: str | None) -> tuple[str
     return tuple(lines)
 
 
-def _build_tree(data: Any, *, default_name: str | None, source: str | None, overrides: Sequence[str] = ()) -> ChainConfig:
+def _build_tree(data: Any, *, default_name: str | None, source: str | None, overrides: Sequence[str] = ()) -> RunConfig:
     if not isinstance(data, Mapping):
         what = "the configuration is empty" if data is None else f"top level: found {short_repr(data)}"
         raise ConfigError([f"{what}; expected {CHAIN_TOP_LEVEL}"], source)
@@ -880,5 +806,5 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
     simulation = simulation_settings(run.simulation)
     _check_tree_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
                        overrides)
-    return ChainConfig(name=run.name, chain=chain, initial_state=states, placed=placed,
-                       simulation=simulation, resolved=resolved, warnings=_tree_notes(chain, run, source))
+    return RunConfig(name=run.name, chain=chain, initial_state=states, placed=placed,
+                     simulation=simulation, resolved=resolved, warnings=_tree_notes(chain, run, source))

@@ -1072,7 +1072,7 @@ def _names_list(names: Sequence[str]) -> str:
 
 class ChainSchema(_Section):
     """A chain configuration (pydantic model; the public result is
-    :class:`rbstab.config.ChainConfig`): 1 to :data:`rbstab.chain.MAX_BODIES` bodies,
+    :class:`rbstab.config.RunConfig`): 1 to :data:`rbstab.chain.MAX_BODIES` bodies,
     each held by exactly one joint to the ground or to a body listed before it (a tree)."""
 
     name: Annotated[Any, checked(run_name)] = Field(

@@ -29,12 +29,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.loader import RunConfig, chain_of, config_from_mapping
+from ..config.loader import RunConfig, config_from_mapping
 from ..config.paths import parse_any_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS, is_chain
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
 from ..variants import VARIANTS
 from ..variants import chain as C
+from ..variants.paper import paper_form, paper_initial_state
 from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
@@ -66,7 +67,7 @@ class _Batch:
 @dataclass(frozen=True)
 class RunBatch(_Batch):
     """n runs as arrays (module docstring): every run a tree of 1-8 bodies (one body: its
-    one-body tree, :func:`rbstab.config.loader.chain_of`). Every field has the run axis
+    one-body tree, :attr:`rbstab.config.RunConfig.chain`). Every field has the run axis
     first.
 
     Attributes
@@ -232,7 +233,7 @@ def batch_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns:
     Parameters
     ----------
     templates : sequence of mapping
-        Validated resolved configurations (``RunConfig.resolved``, ``ChainConfig.resolved``;
+        Validated resolved configurations (``RunConfig.resolved``;
         ``name`` ignored).
     keys : sequence of str
         Dotted config keys set on a run's template, in order (``body.mass``,
@@ -321,9 +322,9 @@ def _bodies_from_table(templates: Sequence[Mapping], keys: Sequence[str], column
 
 
 def _one_body_tree(template: Mapping):
-    """The compiled one-body tree (:func:`rbstab.config.loader.chain_of`, h 0: each run's
+    """The compiled one-body tree (:attr:`rbstab.config.RunConfig.chain`, h 0: each run's
     own is in the batch) of a validated one-body resolved configuration."""
-    return C.compile_chain(chain_of(RunConfig.from_resolved({**template, "name": "template"})), offset=0.0)
+    return C.compile_chain(RunConfig.from_resolved({**template, "name": "template"}).chain, offset=0.0)
 
 
 def _rigid(p: np.ndarray, mass: np.ndarray, inertia: np.ndarray, r: np.ndarray, gravity: np.ndarray) -> None:
@@ -415,7 +416,7 @@ def _offsets(p: np.ndarray, names: np.ndarray, gravity: np.ndarray) -> np.ndarra
 # -- trees -----------------------------------------------------------------------------------------
 def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
     """The :class:`RunBatch` of validated configurations (:class:`rbstab.config.RunConfig`,
-    :class:`rbstab.config.ChainConfig`; ``timeout`` [s], if given, each run's
+    :class:`rbstab.config.RunConfig`; ``timeout`` [s], if given, each run's
     ``max_wall_time``). Configs that share their Chain object share its compilation (a
     sweep over initial states compiles its chain once); one-body configs that share their
     body and gains objects (:meth:`rbstab.config.RunConfig.from_resolved` with ``like``)
@@ -428,19 +429,20 @@ def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
     one_body = np.array([not is_chain(c) for c in configs], dtype=bool)  # the spelling, as a table's
     runs = []  # each run's (records, parent points, initial state)
     for i, config in enumerate(configs):
-        key = config.variant if one_body[i] else id(config.chain)
+        key = config.chain.joints[0].variant if one_body[i] else id(config.chain)
         t = structures.get(key)
         if t is None:
             t = structures[key] = len(trees)
-            trees.append(C.compile_chain(chain_of(config), offset=0.0 if one_body[i] else None))
+            trees.append(C.compile_chain(config.chain, offset=0.0 if one_body[i] else None))
         tree[i], c = t, trees[t]
         if one_body[i]:
-            part = (config.variant, config.body, config.gains, config.simulation.limits)  # identity: eq=False
+            part = (id(config.chain), id(config.simulation.limits))  # the objects of configs alike (eq=False)
             variant = shared.get(part)
             if variant is None:
-                variant = shared[part] = config.make_variant()
+                variant = shared[part] = (paper_form(config), config)  # the config keeps the ids alive
+            variant = variant[0]
             records = variant.parameters  # (1,), its h in lyapunov_offset
-            runs.append((records, records["attachment_point"], variant.initial_state(config.initial_state)))
+            runs.append((records, records["attachment_point"], paper_initial_state(config, variant)))
         else:
             records = c.params.copy()
             set_limits(records, config.simulation.limits)
@@ -454,7 +456,8 @@ def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
         offset[i] = records[0]["lyapunov_offset"] if one_body[i] else trees[tree[i]].offset
     settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
     settings["method"] = [_method(c.simulation.method) for c in configs]
-    sliding = np.array([one and c.variant == "sliding" for one, c in zip(one_body, configs)], dtype=bool)
+    sliding = np.array([one and c.chain.joints[0].variant == "sliding" for one, c in zip(one_body, configs)],
+                       dtype=bool)
     sign_law = sliding & (params[:, 0]["boundary_layer"] == 0)
     return RunBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints, offset=offset, y0=y0,
                     n_state=n_state, settings=settings,

@@ -207,8 +207,9 @@ def result_attributes(
     config_yaml = result.config.to_yaml() if config_yaml is None else config_yaml
     chain = result.config.chain if is_chain(result.config) else None
     if chain is None:
-        identity = {"rbstab_format": FORMAT, "name": result.name, "variant": result.config.variant}
-        title = f"rbstab run {result.name} ({result.config.variant} controller)"
+        variant = result.config.chain.joints[0].variant  # one body's spelling: its controller's law
+        identity = {"rbstab_format": FORMAT, "name": result.name, "variant": variant}
+        title = f"rbstab run {result.name} ({variant} controller)"
     else:
         identity = {"rbstab_format": CHAIN_FORMAT, "name": result.name, "variant": "chain",
                     "bodies": ",".join(chain.body_names), "joints": ",".join(chain.joint_names)}

@@ -324,7 +324,7 @@ class Members(NamedTuple):
 
 def members_of(config) -> Members | None:
     """The body and joint names of a chain's configuration (a
-    :class:`rbstab.config.ChainConfig` or its resolved mapping); None for a one-body
+    :class:`rbstab.config.RunConfig` or its resolved mapping); None for a one-body
     configuration."""
     data = config if isinstance(config, Mapping) else getattr(config, "resolved", None)
     if not is_chain(data):
@@ -478,7 +478,7 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     ----------
     base : Mapping
         The base configuration (``RunConfig.resolved``, or a chain's
-        ``ChainConfig.resolved``: its runs go into store files, as a chain sweep's);
+        ``RunConfig.resolved``: its runs go into store files, as a chain sweep's);
         each row's values are set on it.
     design : pandas.DataFrame
         Absolute values, one row per run, columns as in the module docstring.

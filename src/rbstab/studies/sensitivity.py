@@ -145,7 +145,7 @@ def plan_sensitivity(config, vary: Sequence[str] | Mapping[str, Any], *, n: int,
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The base configuration (validated); a chain's takes the keys and figures of chains
         (:mod:`rbstab.studies.design`).
     vary : sequence of str or Mapping
@@ -382,7 +382,7 @@ def sensitivity_analysis(config, vary: Sequence[str] | Mapping[str, Any], *, n: 
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The base configuration: one body's, or a chain's (keys and figures of chains,
         :mod:`rbstab.studies.design`).
     vary, n, method, metrics, seed

@@ -301,7 +301,7 @@ def plan_tuning(config, vary: Sequence[str] | Mapping[str, Any], *, minimize: Se
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The base configuration: one body's, or a chain's (keys and figures of chains,
         :mod:`rbstab.studies.design`).
     vary : sequence of str or Mapping
@@ -496,7 +496,7 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
 
     Parameters
     ----------
-    config : RunConfig or ChainConfig
+    config : RunConfig
         The base configuration: one body's, or a chain's (keys and figures of chains,
         :mod:`rbstab.studies.design`).
     vary, minimize, maximize, subject_to, over, over_n, over_seed, quantile, sampler, engine

@@ -47,11 +47,6 @@ class PlannedRun:
     config: Any
     config_hash: str
 
-    @property
-    def variant(self) -> str:
-        """The run's controller variant."""
-        return self.config.variant
-
 
 def _value(column, i: int) -> Any:
     value = column[i]

@@ -319,7 +319,7 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
 
     The sweep validated every run when it planned it: each task's resolved config is
     rebuilt without a second validation (:meth:`rbstab.config.RunConfig.from_resolved`,
-    sharing the body, gains and settings of one of the last :data:`SHARED_CONFIGS` distinct
+    sharing the tree and settings of one of the last :data:`SHARED_CONFIGS` distinct
     configs where they are the same: a grid's inner axis); one that does not rebuild is
     validated, for the message of what is wrong with it. A tree's run is validated again (a
     chunk of them goes as columns, :func:`run_table_chunk`; these are the runs that do not).
@@ -334,8 +334,8 @@ def _group_configs(tasks: Sequence[RunTask], sink=None) -> tuple[list, list[dict
                 continue
             try:
                 config = RunConfig.from_resolved(task.config, like=recent)
-                if not recent or config.body is not recent[0].body:
-                    recent = [config, *[c for c in recent if c.body is not config.body][: SHARED_CONFIGS - 1]]
+                if not recent or config.chain is not recent[0].chain:
+                    recent = [config, *[c for c in recent if c.chain is not config.chain][: SHARED_CONFIGS - 1]]
             except Exception:
                 config = _config(task)
             configs.append(config)

@@ -954,14 +954,14 @@ def lyapunov(compiled: CompiledChain, y: np.ndarray, t: float = 0.0) -> tuple[fl
 
 
 def initial_state(config) -> np.ndarray:
-    """The initial state (n_states,) of a :class:`rbstab.config.ChainConfig` (module
+    """The initial state (n_states,) of a :class:`rbstab.config.RunConfig` (module
     docstring for the layout)."""
     return state_vector(config.chain, config.initial_state)
 
 
 def state_vector(chain: Chain, states) -> np.ndarray:
     """The state (n_states,) of ``chain`` whose bodies have the blocks ``states`` (by body
-    name, then block: :attr:`rbstab.config.ChainConfig.initial_state`'s form)."""
+    name, then block: :attr:`rbstab.config.RunConfig.initial_state`'s form)."""
     d_at, size = _controller_states(chain)
     y = np.zeros(size)
     for i, body in enumerate(chain.bodies):

@@ -1,0 +1,87 @@
+"""The paper's one-body form of a run: the tree of one body held to the ground at its own point.
+
+A tree of one body whose joint holds the body's point C (``child_point`` R, body frame) to
+the same point of the ground (``parent_point`` = R, inertial frame) is the paper's model
+(eqs 1-24): one body with the constraint error E = X + A R - R (eq 4), zero at the
+equilibrium X = 0, Theta = 0, held by its joint's law (the variant) with the joint's K_r,
+L_r and point gains and the body's ground-anchored K_t, L_t. :func:`paper_form` gives that
+model as the :class:`~rbstab.variants.base.Variant` of its law, whatever the spelling of
+its configuration (``body``/``controller`` or ``bodies``/``joints``): the analyses that
+hold for the paper's equations (the linearisation, the certificate, ``--verify``, the
+sign law) take it from here. Any other tree has no paper form (None).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from ..chain import GROUND, Chain
+from ..model import Gains, Limits, RigidBody, Saturation
+from .base import Variant
+from .registry import VARIANTS
+
+__all__ = ["paper_form", "has_paper_form", "paper_initial_state"]
+
+_INF3 = np.full(3, np.inf)
+
+
+def has_paper_form(chain: Chain) -> bool:
+    """Whether ``chain`` is one body held to the ground at its own point (R_p = R_c)."""
+    if chain.size != 1:
+        return False
+    joint = chain.joints[0]
+    return joint.parent == GROUND and np.array_equal(joint.parent_point, joint.child_point)
+
+
+def _saturation(body_limits: Saturation | None, joint_limits: Saturation | None) -> Saturation | None:
+    """One body's :class:`Saturation` (N, H, Lambda) of its body's limits of H and its joint's of N and Lambda."""
+    if body_limits is None and joint_limits is None:
+        return None
+    shape = (joint_limits or body_limits).shape
+    return Saturation(_INF3.copy() if joint_limits is None else joint_limits.torque_n,
+                      _INF3.copy() if body_limits is None else body_limits.force_h,
+                      _INF3.copy() if joint_limits is None else joint_limits.constraint_force, shape)
+
+
+def paper_form(config: Any, *, saturation: bool = True, disturbances: bool = True) -> Variant | None:
+    """The paper's one-body model of a validated run configuration, or None.
+
+    Parameters
+    ----------
+    config : rbstab.config.RunConfig
+        Its ``chain`` and ``simulation.limits`` are read.
+    saturation : bool
+        False: the model without its actuators' limits (the paper's linear feedback).
+    disturbances : bool
+        False: the model without its disturbances.
+
+    Returns
+    -------
+    Variant or None
+        ``VARIANTS[law](body, gains, simulation.limits)``: the body's mass, inertia, the
+        joint's point as the attachment point R [m] and gravity; the joint's K_r, L_r, point
+        gains, K_s and boundary layer with the body's K_t, L_t; the limits of N and Lambda
+        (the joint's) and of H (the body's); the body's disturbances. None where the chain
+        is not one body held to the ground at its own point (:func:`has_paper_form`).
+    """
+    chain = config.chain
+    if not has_paper_form(chain):
+        return None
+    body, joint = chain.bodies[0], chain.joints[0]
+    gains = Gains(k_t=body.k_t, l_t=body.l_t, k_r=joint.k_r, l_r=joint.l_r, k_c=joint.k_c, l_c=joint.l_c,
+                  k_d=joint.k_d, l_d=joint.l_d, k_s=joint.k_s, boundary_layer=joint.boundary_layer,
+                  saturation=_saturation(body.saturation, joint.saturation) if saturation else None,
+                  disturbances=body.disturbances if disturbances else ())
+    rigid = RigidBody(mass=body.mass, inertia=body.inertia, attachment_point=joint.child_point,
+                      gravity=chain.gravity)
+    limits: Limits | None = config.simulation.limits
+    return VARIANTS[joint.variant](rigid, gains, limits)
+
+
+def paper_initial_state(config: Any, variant: Variant | None = None) -> np.ndarray:
+    """The paper form's initial state (its layout's size,) of ``config``: its one body's
+    blocks (``variant``: its :func:`paper_form`, made if not given)."""
+    variant = paper_form(config) if variant is None else variant
+    return variant.initial_state(config.initial_state[config.chain.bodies[0].name])
