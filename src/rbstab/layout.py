@@ -13,7 +13,9 @@ A plain-data module at the bottom of the layers (no compiled code, no rbstab imp
 - :func:`is_chain`: whether a configuration is in a chain's spelling (its keys' layout);
 - :class:`StateLayout`: where each state block lives in ``y`` (``split``, ``join``: blocks
   along the last axis); :data:`VARIANT_LAYOUTS`: each controller variant's layout and,
-  by its order, the variant's code in the compiled kernels (:data:`VARIANT_CODES`).
+  by its order, the variant's code in the compiled kernels (:data:`VARIANT_CODES`);
+- :class:`JointKind` and :data:`JOINT_KINDS`: the joint-kind table (a joint's coordinates
+  in a tree's reduced state; :data:`JOINT_KIND_OF` each variant's kind).
 """
 
 from __future__ import annotations
@@ -57,6 +59,12 @@ __all__ = [
     "VARIANT_LAYOUTS",
     "VARIANT_CODES",
     "STATE_SIZE",
+    "JointKind",
+    "JOINT_KINDS",
+    "JOINT_KIND_OF",
+    "REDUCED_STATES",
+    "VELOCITIES",
+    "point_fixed",
 ]
 
 
@@ -544,3 +552,66 @@ VARIANT_LAYOUTS = {
 VARIANT_CODES = {name: code for code, name in enumerate(VARIANT_LAYOUTS)}
 #: Scalar states of each variant, by code.
 STATE_SIZE = tuple(layout.size for layout in VARIANT_LAYOUTS.values())
+
+
+@dataclass(frozen=True)
+class JointKind:
+    """A joint kind: the coordinates that carry a child relative to its parent in a tree's
+    reduced state (a row of the joint-kind table, docs/physics.md "Joint kinds").
+
+    Attributes
+    ----------
+    name : str
+        The kind's name.
+    states : StateLayout
+        The child's blocks in the reduced state: its coordinates q, then its velocities u.
+    n_q, n_v : int
+        Sizes of q and of u (the columns of its motion subspace S).
+    point_fixed : bool
+        Whether the joint holds the child's point C to its parent's point by construction
+        (E_j = F_j = 0, no point law, its Lambda_j the reaction); else the child keeps its
+        own X, V and a point law pulls C.
+    coordinates : str
+        What q and u are, with units and frames.
+    domain : str
+        Where the coordinates are valid (the run fails at its edge).
+    """
+
+    name: str
+    states: StateLayout
+    n_q: int
+    n_v: int
+    point_fixed: bool
+    coordinates: str
+    domain: str
+
+    def __post_init__(self) -> None:
+        if self.states.size != self.n_q + self.n_v:
+            raise ValueError(f"joint kind {self.name}: {self.states.size} states for n_q + n_v = {self.n_q + self.n_v}")
+
+
+#: The joint kinds by name (docs/physics.md, "Joint kinds"): the one place that says how
+#: many reduced states and generalised velocities a joint's child has.
+JOINT_KINDS = {
+    "ball": JointKind("ball", REDUCED, 3, 3, True,
+                      "Theta_j [rad], the Euler angles of A_rel = A_p' A_c (eq 2); Omega_j [rad/s], child frame",
+                      "|theta_2| < pi/2 - simulation.gimbal_margin"),
+    "free": JointKind("free", FULL_BODY, 6, 6, False,
+                      "Theta [rad], X [m] (inertial); Omega [rad/s] (body frame), V [m/s] (inertial)",
+                      "the body's |theta_2| < pi/2 - simulation.gimbal_margin"),
+}
+#: Each joint law (a joint's ``variant``, :data:`VARIANT_LAYOUTS`) -> its joint kind: the
+#: paper's ``permanent`` joint is the ball in Euler angles, the four point laws pull a free body.
+JOINT_KIND_OF = {"free": "free", "permanent": "ball", "sliding": "free", "visco_elastic": "free", "embedded": "free"}
+#: Each variant's joint kind's reduced states and generalised velocities, by variant code
+#: (the compiled kernels read these; an embedded joint's D comes after the bodies).
+REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].states.size for v in VARIANT_LAYOUTS], dtype=np.int64)
+VELOCITIES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].n_v for v in VARIANT_LAYOUTS], dtype=np.int64)
+
+
+def point_fixed(variant: str) -> bool:
+    """Whether a joint of law ``variant`` holds its child's point by construction (its kind's
+    :attr:`JointKind.point_fixed`: ``permanent``); False for a name that is no law (a value
+    validation refuses elsewhere)."""
+    kind = JOINT_KIND_OF.get(variant) if isinstance(variant, str) else None
+    return kind is not None and JOINT_KINDS[kind].point_fixed

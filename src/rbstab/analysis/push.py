@@ -42,7 +42,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
-from ..layout import is_chain
+from ..layout import is_chain, point_fixed
 from .runs import Runs, check_entries
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
@@ -195,7 +195,7 @@ class Pushes:
             raise ValueError(f"{config.name}: disturbances: found {len(own)} entries; a push needs one more and at most "
                              f"{MAX_DISTURBANCES} are allowed")
         joint = chain.joints[self._member]
-        if kind == "force" and joint.variant == "permanent" and joint.parent < 0 and np.allclose(self.point,
+        if kind == "force" and point_fixed(joint.variant) and joint.parent < 0 and np.allclose(self.point,
                                                                                                    joint.child_point):
             what = f"'{body}' (joint '{joint.name}' holds it to the ground)" if tree else \
                 "this permanent body (body.attachment_point)"

@@ -60,7 +60,7 @@ from pydantic import BaseModel, ValidationError
 
 from ..chain import GROUND, Body, Chain, Joint, single
 from ..kinematics import rotation_matrix
-from ..layout import is_chain
+from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS
 from ..variants.base import limited_values
@@ -670,7 +670,7 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
             if key not in given:
                 state[block] = target
                 placed.append(f"initial_state.{body.name}.{key}")
-            elif joint.variant == "permanent":
+            elif point_fixed(joint.variant):
                 miss = float(np.linalg.norm(state[block] - target))
                 scale = max(1.0, float(np.abs(target).max()), float(np.abs(state[block]).max()))
                 if miss > CONSTRAINT_TOLERANCE * scale:
@@ -724,7 +724,7 @@ def _check_tree_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarra
         return
     for joint, error in zip(chain.joints, errors):
         outside = np.flatnonzero(~(np.abs(error) <= limits.constraint_error))
-        if joint.variant != "permanent" and outside.size:
+        if not point_fixed(joint.variant) and outside.size:
             i = int(outside[0])
             _refuse("simulation.limits.constraint_error", short_repr(written.get("constraint_error")),
                     "bounds that contain the initial state",

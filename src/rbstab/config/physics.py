@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ..layout import point_fixed
 from ..warning_codes import coded
 
 __all__ = ["inertia_warnings", "angle_warnings", "semidefinite_notes", "unheld_weight", "unheld_bodies",
@@ -198,7 +199,7 @@ def unheld_weight(
     """
     weight = mass * np.asarray(gravity, float)
     size = np.linalg.norm(weight)
-    if not size or variant == "permanent":
+    if not size or point_fixed(variant):
         return None
     k_t = gains["k_t"]
     diagonal = k_t.diagonal()

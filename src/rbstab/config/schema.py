@@ -30,7 +30,7 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 from ..chain import MAX_BODIES
-from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units
+from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units, point_fixed
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES, Limits
 from ..variants import VARIANTS
 from .physics import SINGULAR_RTOL
@@ -643,7 +643,7 @@ class _Controller(_Section):
         limit = None if self.saturation is None else self.saturation.constraint_force
         if limit is None:
             return self
-        if self.variant == "permanent":
+        if point_fixed(self.variant):
             raise PydanticCustomError("rbstab_invalid", "limit on the pin", {
                 "key": "controller.saturation.constraint_force", "found": short_repr(limit),
                 "expected": "no limit with variant 'permanent'",
@@ -896,7 +896,7 @@ class RunSchema(_Section):
     def _limits_fit_the_variant(self) -> "RunSchema":
         """A bound of E on ``permanent``, whose C is pinned (E = 0 at every instant)."""
         limits = self.simulation.limits
-        if limits is not None and limits.constraint_error is not None and self.controller.variant == "permanent":
+        if limits is not None and limits.constraint_error is not None and point_fixed(self.controller.variant):
             raise PydanticCustomError("rbstab_invalid", "bound of E on the pin", {
                 "key": "simulation.limits.constraint_error", "found": short_repr(limits.constraint_error),
                 "expected": "no bound with variant 'permanent'",
@@ -1044,7 +1044,7 @@ class _ChainJoint(_Section):
         limit = None if self.saturation is None else self.saturation.constraint_force
         if limit is None:
             return self
-        if self.variant == "permanent" or (self.variant == "sliding" and float(self.boundary_layer) == 0.0):
+        if point_fixed(self.variant) or (self.variant == "sliding" and float(self.boundary_layer) == 0.0):
             raise PydanticCustomError("rbstab_invalid", "limit on the pin", {
                 "subkey": "saturation.constraint_force", "found": short_repr(limit),
                 "expected": "no limit with variant 'permanent' or the pure sign law (boundary_layer: 0)",
@@ -1222,7 +1222,7 @@ class ChainSchema(_Section):
                                    f"joint '{sign_law[0]}' has it; give it a boundary layer > 0")
         limits = self.simulation.limits
         if (limits is not None and limits.constraint_error is not None
-                and all(j.variant == "permanent" for j in self.joints)):
+                and all(point_fixed(j.variant) for j in self.joints)):
             raise _chain_error("simulation.limits.constraint_error", short_repr(limits.constraint_error),
                                "no bound when every joint is 'permanent'",
                                "their points are pinned: E = 0 at every instant")

@@ -36,7 +36,7 @@ from ..config.loader import config_from_mapping, initial_state_fits
 from ..config.paths import KeyPath, parse_any_key, parse_key, schema_of
 from ..config.schema import (INITIAL_STATE_BLOCKS, MAX_MAGNITUDE, MIN_INVERTED, clear_of_gimbal_lock, inside_limits,
                              samples_apart, starts_in_run, steps_suffice, within_bounds)
-from ..layout import LIMITED, VARIANT_LAYOUTS
+from ..layout import LIMITED, VARIANT_LAYOUTS, point_fixed
 from ..variants import VARIANTS
 from ..variants.base import limited_values
 from ..config.physics import SINGULAR_RTOL
@@ -343,7 +343,7 @@ def _joint_flags(fields: _Fields, variants: Sequence[str], n: int) -> np.ndarray
         pulls = np.ones(n, dtype=bool) if gravity is None else np.any(gravity[0] != 0, axis=1)
         for variant in sorted(set(variants)):
             rows = np.isin(fields.template, [t for t, v in enumerate(variants) if v == variant]) & pulls
-            if variant == "permanent" or not rows.any():
+            if point_fixed(variant) or not rows.any():
                 continue
 
             k_t = fields.get("controller", "k_t")
@@ -501,7 +501,7 @@ def _tree_state_flags(keys: Sequence[str], columns: Mapping[str, np.ndarray], te
         tree = C.compile_chain(chain, offset=0.0)
         if (config.simulation.limits is not None or not {body for body, _ in given} <= set(names)
                 or any(block == "d" and tree.d_at[names.index(body)] < 0 for body, block in given)
-                or any(j.variant == "permanent" and ((b.name, key) in given or f"initial_state.{b.name}.{key}"
+                or any(point_fixed(j.variant) and ((b.name, key) in given or f"initial_state.{b.name}.{key}"
                                                      not in config.placed)
                        for b, j in zip(chain.bodies, chain.joints) for key in ("x", "v"))):
             flagged[mine] = True

@@ -20,10 +20,12 @@ its momentum is projected on the columns of the joints above it), and M is solve
 Cholesky within its envelope (group by group of the bodies permanent joints hold
 together). No constraint force enters the rate and no constraint drifts.
 
-Reduced state layout (``n_r``): body ``i`` at ``y[r_at[i]:]``: Theta_j, Omega_j (6) where
-joint i is ``permanent``, else Theta, Omega, X, V (12); then the 3 states D [m] of each
-``embedded`` joint, in joint order (``rd_at``). Generalised velocities u (``n_u``): Omega_j
-(3) or (Omega, V) (6) per body, at ``u_at[i]``.
+Reduced state layout (``n_r``): body ``i`` at ``y[r_at[i]:]``, the states of its joint's
+kind (:data:`rbstab.layout.JOINT_KINDS`, :data:`rbstab.layout.REDUCED_STATES` by variant
+code): Theta_j, Omega_j (6) where joint i is ``permanent`` (a ball), else Theta, Omega, X, V
+(12, free); then the 3 states D [m] of each ``embedded`` joint, in joint order (``rd_at``).
+Generalised velocities u (``n_u``): Omega_j (3) or (Omega, V) (6) per body
+(:data:`rbstab.layout.VELOCITIES`), at ``u_at[i]``.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ import numpy as np
 
 from ..jit import jit
 from ..kinematics import add, cross, matTvec, matvec, rotation_and_rate_of, sub, vector
+from ..layout import REDUCED_STATES, VELOCITIES
 from .chain import (
     _OMEGA_J,
     _cholesky_solve,
@@ -86,9 +89,8 @@ def tree_layout(compiled: CompiledChain) -> TreeLayout:
     r = u = 0
     for i in range(n):
         r_at[i], u_at[i] = r, u
-        permanent = compiled.codes[i] == PERMANENT
-        r += 6 if permanent else 12
-        u += 3 if permanent else 6
+        r += REDUCED_STATES[compiled.codes[i]]
+        u += VELOCITIES[compiled.codes[i]]
     for j in range(n):
         if compiled.d_at[j] >= 0:
             rd_at[j] = r
@@ -226,7 +228,7 @@ def _envelope_cholesky_solve(matrix, rhs, codes, u_at, start):
     n = codes.shape[0]
     for i in range(n):
         s_i = start[i]
-        end_i = u_at[i] + (3 if codes[i] == PERMANENT else 6)
+        end_i = u_at[i] + VELOCITIES[codes[i]]
         for c in range(u_at[i], end_i):
             total = matrix[c, c]
             for k in range(s_i, c):
@@ -238,26 +240,26 @@ def _envelope_cholesky_solve(matrix, rhs, codes, u_at, start):
                 if s_j > c:
                     continue
                 first = max(s_i, s_j)
-                for r in range(max(c + 1, u_at[j]), u_at[j] + (3 if codes[j] == PERMANENT else 6)):
+                for r in range(max(c + 1, u_at[j]), u_at[j] + VELOCITIES[codes[j]]):
                     total = matrix[r, c]
                     for k in range(first, c):
                         total -= matrix[r, k] * matrix[c, k]
                     matrix[r, c] = total / diagonal
     for i in range(n):
         s_i = start[i]
-        for r in range(u_at[i], u_at[i] + (3 if codes[i] == PERMANENT else 6)):
+        for r in range(u_at[i], u_at[i] + VELOCITIES[codes[i]]):
             total = rhs[r]
             for k in range(s_i, r):
                 total -= matrix[r, k] * rhs[k]
             rhs[r] = total / matrix[r, r]
     for j in range(n - 1, -1, -1):
-        end_j = u_at[j] + (3 if codes[j] == PERMANENT else 6)
+        end_j = u_at[j] + VELOCITIES[codes[j]]
         for r in range(end_j - 1, u_at[j] - 1, -1):
             total = rhs[r]
             for i in range(j, n):
                 if start[i] > r:
                     continue
-                for k in range(max(r + 1, u_at[i]), u_at[i] + (3 if codes[i] == PERMANENT else 6)):
+                for k in range(max(r + 1, u_at[i]), u_at[i] + VELOCITIES[codes[i]]):
                     total -= matrix[k, r] * rhs[k]
             rhs[r] = total / matrix[r, r]
 
@@ -287,7 +289,7 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
     torque, force = cw.torque, cw.force
     n_u = 0
     for i in range(n):
-        n_u += 3 if codes[i] == PERMANENT else 6
+        n_u += VELOCITIES[codes[i]]
     if n_u == 6 * n:  # no permanent joint: M = diag(J_i, m_i I), each body's own Newton-Euler equations
         for i in range(n):
             at, p = r_at[i], params[i]
@@ -299,7 +301,7 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
         _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_u)
     n_r = 0
     for i in range(n):
-        n_r += 6 if codes[i] == PERMANENT else 12
+        n_r += REDUCED_STATES[codes[i]]
     for j in range(n):
         if d_at[j] >= 0:
             n_r += 3
@@ -380,7 +382,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
     start = work.start
     for i in range(n):  # M's envelope: a row's columns from its group's first (parents come first)
         start[i] = _group_start(i, codes, parents, u_at)
-        for a in range(u_at[i], u_at[i] + (3 if codes[i] == PERMANENT else 6)):
+        for a in range(u_at[i], u_at[i] + VELOCITIES[codes[i]]):
             rhs[a] = 0.0
             for b in range(start[i], a + 1):
                 matrix[a, b] = 0.0
@@ -514,7 +516,7 @@ def reduced_size(codes, d_at) -> int:
     """n_r: the size of the reduced state of a tree of joint variant codes ``codes`` (n,)
     whose embedded joints' D sit at ``d_at`` (n,; -1: none)."""
     codes, d_at = np.asarray(codes), np.asarray(d_at)
-    return int(np.sum(np.where(codes == PERMANENT, 6, 12)) + 3 * np.sum(d_at >= 0))
+    return int(np.sum(REDUCED_STATES[codes]) + 3 * np.sum(d_at >= 0))
 
 
 @jit
