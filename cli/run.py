@@ -9,6 +9,7 @@ import click
 
 from rbstab.api import ResultExistsError, check_overwrite
 from rbstab.api import run as run_one
+from rbstab.layout import is_chain
 from rbstab.resources import memory_problem
 from rbstab.warning_codes import coded
 
@@ -134,12 +135,12 @@ def _load_kernels(loaded) -> None:
     from rbstab.engine import warm_up  # heavy: numba, numpy
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
 
-    chains = ["chains"] if any(not hasattr(c, "body") for c in loaded) else []
-    loaded = [c for c in loaded if hasattr(c, "body")]
+    chains = ["chains"] if any(is_chain(c) for c in loaded) else []
+    loaded = [c for c in loaded if not is_chain(c)]  # one body's spelling: the one-body kernels
     parts = (["rates", "outputs"] if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
         ["switching"] if any(is_sign_law(c) for c in loaded) else []) + chains
     start = time.perf_counter()
-    if any(c.body.weight.any() for c in loaded):
+    if any(c.chain.gravity.any() for c in loaded):
         import scipy.optimize  # noqa: F401  (heavy: scipy) the equilibrium under gravity
     if parts:
         warm_up(",".join(parts))
@@ -189,8 +190,8 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     out = Path(output)
     how = _check_targets(loaded, out, overwrite)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
-    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if hasattr(c, "body")),
-                    chain=any(not hasattr(c, "body") for c in loaded))
+    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if not is_chain(c)),
+                    chain=any(is_chain(c) for c in loaded))
     _load_kernels(loaded)
     show_config_warnings(stiffness_warnings(loaded), len(loaded))
     not_computed = 0

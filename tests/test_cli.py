@@ -246,3 +246,26 @@ def test_sweep_chunk_size_help_gives_the_defaults():
     assert (f"[default: {STORE_CHUNK_SIZE} runs a store file, {SUMMARY_CHUNK_SIZE} with --store summary" in text)
     assert (f"{get_engine('compiled').chunk_size} with the compiled engine, {get_engine('scipy').chunk_size} "
             "with scipy]") in text
+
+
+def test_run_compiles_the_kernel_groups_of_the_spellings_it_runs(tmp_path, monkeypatch):
+    """rbstab run asks for the tree's kernel group only where a config is written as a tree
+    (a paper case's cold start compiles the one-body group alone), and for the sign law's
+    only where a one-body config has it."""
+    import rbstab.engine
+
+    asked = []
+    monkeypatch.setattr(rbstab.engine, "ensure_compiled", lambda say=None, **groups: asked.append(groups))
+    short = ["--set", "simulation.t_end=0.01", "--set", "simulation.n_samples=3"]
+    for config, expected in ((PAPER_CONFIGS[0], {"sign_law": False, "chain": False}),
+                             (ROOT / "configs" / "examples" / "sliding.yaml", {"sign_law": False, "chain": False}),
+                             (ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", {"sign_law": False, "chain": True})):
+        asked.clear()
+        result = CliRunner().invoke(cli, ["run", str(config), *short, "-o", str(tmp_path / config.stem)])
+        assert result.exit_code == 0, result.output
+        assert asked[0] == expected, config.name  # the command's own call, before any run
+    asked.clear()
+    result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "sliding.yaml"), *short,
+                                      "--set", "controller.boundary_layer=0", "-o", str(tmp_path / "sign")])
+    assert result.exit_code == 0, result.output
+    assert asked[0] == {"sign_law": True, "chain": False}
