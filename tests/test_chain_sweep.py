@@ -479,3 +479,19 @@ def test_a_chain_sweep_warns_of_each_runs_inertia_once_with_its_count(grid, runs
     lines = [line for line in result.output.splitlines() if "W001" in line]
     assert len(lines) == 1, result.output
     assert "bodies.1.inertia ('trunk')" in lines[0] and "triangle inequality" in lines[0] and runs in lines[0], lines
+
+
+def test_robustness_of_a_tree_sweep_that_ends_too_soon_suggests_a_longer_t_end(tmp_path):
+    """A tree's sweep whose runs reach t_end still settling gets the hint a one-body sweep
+    gets: t_end from the slowest time constant of the tree's linearisation at rest."""
+    from rbstab.analysis import robustness
+    from rbstab.analysis.text import describe_robustness
+    from rbstab.sweep import run_sweep, spec_from_mapping
+
+    base = rbstab.load_config(STANCE, ["simulation.t_end=0.3", "simulation.n_samples=31"]).resolved
+    spec = spec_from_mapping({"name": "short", "base": base, "grid": {"bodies.trunk.mass": [30.0, 34.0]}})
+    run_sweep(spec, tmp_path, jobs=1, progress=False)
+    (group,) = robustness(tmp_path / "short").groups
+    assert group.n_stable == 0 and group.t_end_hint is not None
+    assert group.t_end_hint["settling_time"] > 0.3 and group.t_end_hint["tau"] > 0
+    assert "t_end = 0.3 s may be too short" in "\n".join(describe_robustness(robustness(tmp_path / "short")))
