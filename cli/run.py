@@ -136,9 +136,10 @@ def _load_kernels(loaded) -> None:
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
 
     chains = ["chains"] if any(is_chain(c) for c in loaded) else []
+    switching = ["switching"] if any(is_sign_law(c) for c in loaded) else []  # either spelling
     loaded = [c for c in loaded if not is_chain(c)]  # one body's spelling: the one-body kernels
     parts = (["rates", "outputs"] if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
-        ["switching"] if any(is_sign_law(c) for c in loaded) else []) + chains
+        switching) + chains
     start = time.perf_counter()
     if any(c.chain.gravity.any() for c in loaded):
         import scipy.optimize  # noqa: F401  (heavy: scipy) the equilibrium under gravity
@@ -190,7 +191,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     out = Path(output)
     how = _check_targets(loaded, out, overwrite)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
-    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded if not is_chain(c)),
+    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded),
                     chain=any(is_chain(c) for c in loaded))
     _load_kernels(loaded)
     show_config_warnings(stiffness_warnings(loaded), len(loaded))

@@ -112,16 +112,42 @@ def test_one_batch_takes_both_spellings_and_each_run_is_the_run_alone():
         assert together[i].outputs["theta"].ndim == (2 if batch.one_body[i] else 3)
 
 
-def test_a_one_body_tree_with_the_pure_sign_law_is_refused_naming_its_one_body_spelling():
-    """The pure sign law (boundary_layer 0) runs event by event for one body only: its tree
-    spelling is refused in one line, which names the spelling that takes it where the tree
-    is one body held at its own point."""
-    from rbstab.config import ConfigError
+def test_the_pure_sign_law_runs_alike_in_both_spellings_of_one_body(tmp_path):
+    """The pure sign law (boundary_layer 0) is the paper's one body's: written as a tree held
+    at its own point it runs event by event as written as one body, the same bits in a tree's
+    names and shapes (a body and a joint axis of one), the same switchings, a tree's file;
+    its analysis replaces the sign law by the same boundary layer; in any other tree it is
+    refused in one line."""
+    import xarray as xr
 
-    sign_law = _one_body("examples/sliding.yaml", "controller.boundary_layer=0")
-    with pytest.raises(ConfigError, match=r"joints.controller.boundary_layer': found 0; .*written as one body "
-                                          r"\(body, controller\) it takes the sign law"):
-        tree_spelling(sign_law)
+    from rbstab.analysis.analyze import analyze
+    from rbstab.config import ConfigError
+    from rbstab.io.hdf5 import write_result
+
+    body = _one_body("examples/sliding.yaml", "controller.boundary_layer=0", "simulation.t_end=0.4")
+    tree = tree_spelling(body)
+    alone, as_tree = simulate(body), simulate(tree)
+    assert as_tree.outputs["theta"].shape == (len(as_tree.time), 1, 3)
+    for key, value in alone.outputs.items():
+        got = as_tree.outputs[key]
+        np.testing.assert_array_equal(got[:, 0] if got.ndim == 3 else got, value, err_msg=key)
+    np.testing.assert_array_equal(as_tree.outputs["joint_theta"], as_tree.outputs["theta"])
+    for name in ("time", "axis", "kind"):
+        np.testing.assert_array_equal(getattr(as_tree.switching, name), getattr(alone.switching, name))
+    np.testing.assert_array_equal(as_tree.summary["switching_count"], np.asarray(alone.summary["switching_count"])[None])
+    assert np.sum(alone.summary["switching_count"]) > 0
+    np.testing.assert_array_equal(as_tree.summary["final_theta"], np.asarray(alone.summary["final_theta"])[None])
+    write_result(as_tree, tmp_path / "tree.h5")
+    with xr.open_dataset(tmp_path / "tree.h5") as ds:
+        assert ds["theta"].dims == ("time", "body", "axis") and ds.sizes["switching"] == len(alone.switching.time)
+    a, b = (analyze(c, samples=200, simulate=False) for c in (body, tree))
+    assert b.notes[0] == a.notes[0] and "pure sign law" in a.notes[0]
+    np.testing.assert_array_equal(b.linearisation.eigenvalues, a.linearisation.eigenvalues)
+    moved = dict(tree.resolved, joints=[dict(tree.resolved["joints"][0], parent_point=[0.0, 0.0, 0.0])])
+    with pytest.raises(ConfigError, match=r"joints.controller.boundary_layer': found 0; expected a boundary layer "
+                                          r"> 0 \[m\] in a chain \(the pure sign law is integrated event by event "
+                                          r"for one body held to the ground at its own point only"):
+        config_from_mapping(moved)
 
 
 @pytest.mark.parametrize("path", ONE_BODY)

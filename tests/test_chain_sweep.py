@@ -495,3 +495,32 @@ def test_robustness_of_a_tree_sweep_that_ends_too_soon_suggests_a_longer_t_end(t
     assert group.n_stable == 0 and group.t_end_hint is not None
     assert group.t_end_hint["settling_time"] > 0.3 and group.t_end_hint["tau"] > 0
     assert "t_end = 0.3 s may be too short" in "\n".join(describe_robustness(robustness(tmp_path / "short")))
+
+
+def test_a_sweep_of_the_sign_law_gives_one_bodys_figures_in_either_spelling(tmp_path):
+    """The pure sign law swept over K_s in the tree's spelling of one body (its runs go event
+    by event, outside the compiled batch) gives the figures the one-body spelling's sweep
+    gives, run for run: one model whatever the spelling."""
+    import sys
+    import warnings
+
+    sys.path.insert(0, str(ROOT / "tests"))
+    from conftest import tree_spelling
+    from rbstab.sweep import run_sweep, spec_from_mapping
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        body = rbstab.load_config(ROOT / "configs" / "examples" / "sliding.yaml",
+                                  ["controller.boundary_layer=0", "simulation.t_end=0.2", "simulation.n_samples=41"])
+    tree = tree_spelling(body)
+    for name, base, key in (("body", body.resolved, "controller.k_s"), ("tree", tree.resolved, "joints.controller.k_s")):
+        run_sweep(spec_from_mapping({"name": name, "base": base, "grid": {key: [300.0, 600.0]}}), tmp_path, jobs=1,
+                  progress=False)
+    a, b = (pd.read_csv(tmp_path / name / "index.csv") for name in ("body", "tree"))
+    assert list(a["status"]) == list(b["status"]) == ["success", "success"]
+    for figure in ("lyapunov_final", "lyapunov_initial", "max_lyapunov_rate", "switching_count"):
+        columns = sorted(c for c in a.columns if c.startswith(figure))
+        assert columns, figure
+        for column in columns:  # one body's <figure>_x is its tree's <figure>_controller_x
+            tree_column = column if column == figure else f"{figure}_controller{column[len(figure):]}"
+            np.testing.assert_array_equal(a[column].to_numpy(), b[tree_column].to_numpy(), err_msg=column)

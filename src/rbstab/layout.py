@@ -469,14 +469,15 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
              "pass, fail or n/a: analytic dv/dt agrees with the numerical derivative"),
     Quantity("lyapunov_rate_checked", "fraction of samples rate-checked", "1",
              "fraction of the samples the rate check compares (pure sign law: on one smooth piece)"),
-    # runs of the pure sign law of sliding
-    Quantity("switching_count", "crossings of E_i = 0", "1", "crossings of E_i = 0 located", size=3),
-    Quantity("sliding_time", "sliding time", "s", "time C slid on E_i = 0 (equivalent force)", size=3),
-    Quantity("sliding_starts", "sliding starts", "1", "times sliding on E_i = 0 started", size=3),
+    # runs of the pure sign law of sliding (its joint's E_i)
+    Quantity("switching_count", "crossings of E_i = 0", "1", "crossings of E_i = 0 located", size=3, member="joint"),
+    Quantity("sliding_time", "sliding time", "s", "time C slid on E_i = 0 (equivalent force)", size=3,
+             member="joint"),
+    Quantity("sliding_starts", "sliding starts", "1", "times sliding on E_i = 0 started", size=3, member="joint"),
     Quantity("min_switching_interval", "shortest interval between crossings", "s",
-             "shortest time between two crossings of E_i = 0", size=3),
+             "shortest time between two crossings of E_i = 0", size=3, member="joint"),
     Quantity("chattering", "chattering (total variation of Lambda_i)", "N s-1",
-             "total variation of Lambda_i from its jumps, per second", size=3),
+             "total variation of Lambda_i from its jumps, per second", size=3, member="joint"),
     Quantity("switching_resolution", "switching resolution", "m",
              "switching resolution: excursions smaller than this start sliding"),
 )}

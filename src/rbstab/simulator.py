@@ -45,7 +45,7 @@ from .engine.integrate import admissible
 from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, limit_of, limit_part, status_message
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .kinematics import GIMBAL_LOCK_ANGLE
-from .layout import LIMITED, OUTPUTS, VARIANT_LAYOUTS, is_chain, summary_stride
+from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
 from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
@@ -503,6 +503,8 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     solved = _time.perf_counter()
     outputs, checked = sign_law_outputs(variant, solution)
     summary = {**summarize(solution.time, outputs, checked, variant.parameters), **switching_summary(solution)}
+    if is_chain(config):  # written as a tree: its results in a tree's names and shapes
+        outputs, summary = _as_one_body_tree(outputs, summary)
     message = solution.message + switching_message(solution, config.simulation.method)
     result = RunResult(config=config, time=solution.time, outputs=outputs, status=solution.status, message=message,
                        solver=solution.solver, summary=summary, switching=solution.switchings)
@@ -510,6 +512,20 @@ def simulate_sign_law(config: "RunConfig", timeout: float | None = None) -> RunR
     result.wall_time = end - start
     result.timing = {"integration": solved - start, "postprocess": end - solved}
     return result
+
+
+def _as_one_body_tree(outputs: dict, summary: dict) -> tuple[dict, dict]:
+    """One body's outputs (m samples) and summary as those of its one-body tree (a config
+    written as a tree): every body's or joint's quantity (:attr:`rbstab.layout.Quantity.member`)
+    with an axis of one, (m, 1, 3) and (1, 3); the ground joint's Theta_j, Omega_j the body's
+    own Theta, Omega (A_p = I, Omega_p = 0); D NaN where the joint has none, as in a tree's outputs."""
+    tree = {key: value[:, None] if getattr(QUANTITIES.get(key), "member", None) else value
+            for key, value in outputs.items()}
+    tree["joint_theta"], tree["joint_omega"] = tree["theta"].copy(), tree["omega"].copy()
+    tree.setdefault("controller_state", np.full_like(tree["theta"], np.nan))  # a joint without D, as a tree's
+    table = {key: np.asarray(value)[None] if getattr(SUMMARY_FIGURES.get(key), "member", None) else value
+             for key, value in summary.items()}
+    return tree, table
 
 
 def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:

@@ -258,16 +258,17 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     The pure sign law of ``sliding`` (boundary_layer 0) has no derivative at E = 0: its
     right-hand side has no linearisation and v no Hessian there. Its boundary-layer law,
     sgn(E) -> tanh(E / phi), is analysed instead, with phi = ``boundary_layer`` (default
-    :data:`DEFAULT_BOUNDARY_LAYER`). For every other configuration ``boundary_layer`` must
-    be None or the configured value. A tree of bodies is analysed as given (a sliding joint
-    of a tree has its own ``boundary_layer`` > 0).
+    :data:`DEFAULT_BOUNDARY_LAYER`), in either spelling of the one body that takes it. For
+    every other configuration ``boundary_layer`` must be None or the configured value; a
+    tree of several bodies is analysed as given (its sliding joints have their own
+    ``boundary_layer`` > 0).
 
     Raises
     ------
     ValueError
         For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
     """
-    if is_chain(config):
+    if config.chain.size > 1:
         if boundary_layer is not None:
             raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace "
                              "(a sliding joint of a chain has its own boundary_layer > 0)")
@@ -276,18 +277,18 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     sign_law = joint.variant == "sliding" and not joint.boundary_layer
     if boundary_layer is not None and not (boundary_layer > 0 and math.isfinite(boundary_layer)):
         raise ValueError(f"--boundary-layer: found {boundary_layer}; expected a width phi > 0 [m]")
+    key = f"joints.{joint.name}.boundary_layer" if is_chain(config) else "controller.boundary_layer"  # as written
     if not sign_law:
         if boundary_layer is not None and boundary_layer != joint.boundary_layer:
             raise ValueError(f"--boundary-layer: {config.name} is not the pure sign law of sliding "
-                             "(boundary_layer 0); change its law with --set controller.boundary_layer=...")
+                             f"(boundary_layer 0); change its law with --set {key}=...")
         return config, []
     phi = DEFAULT_BOUNDARY_LAYER if boundary_layer is None else float(boundary_layer)
-    resolved = dict(config.resolved, controller=dict(config.resolved["controller"], boundary_layer=phi))
     from ..config import PhysicalPlausibilityWarning, config_from_mapping  # heavy: pydantic (the validator)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", PhysicalPlausibilityWarning)
-        analysed = config_from_mapping(resolved)
+        analysed = config_from_mapping(config.resolved, overrides=[f"{key}={phi!r}"])
     note = (f"{config.name} uses the pure sign law Lambda = -K_s sgn(E) (boundary_layer 0): the right-hand "
             "side is not differentiable at E = 0, so the linearisation does not exist there (and v = "
             f"... + K_s |E|_1 has no Hessian). Analysed instead: the boundary-layer law tanh(E / phi), phi = "

@@ -64,6 +64,7 @@ from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS
 from ..variants.base import limited_values
+from ..variants.paper import has_paper_form
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies, unheld_weight
 from .paths import apply_overrides, plain_tree
@@ -696,16 +697,16 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
 
 
 def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, overrides: Sequence[str]) -> None:
-    """Refuse what the chain engine does not integrate: a sliding joint's pure sign law
-    (boundary_layer 0: integrated event by event for one body only)."""
+    """Refuse what no engine integrates: a sliding joint's pure sign law (boundary_layer 0,
+    integrated event by event for the paper's one body, :func:`rbstab.variants.paper.paper_form`)
+    in any other tree."""
+    if has_paper_form(chain):
+        return
     for joint in chain.joints:
         if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
-            one_body = (chain.size == 1 and joint.parent == GROUND
-                        and np.array_equal(joint.parent_point, joint.child_point))
             _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
-                    "the pure sign law is integrated event by event for one body only; tanh(E/phi) in a chain"
-                    + ("; this chain is one body held at its own point: written as one body (body, controller) it "
-                       "takes the sign law" if one_body else ""), source, overrides, ("joints",))
+                    "the pure sign law is integrated event by event for one body held to the ground at its own "
+                    "point only; tanh(E/phi) in a chain", source, overrides, ("joints",))
 
 
 def _refuse(key: str, found: str, expected: str, detail: str, source: str | None, overrides: Sequence[str],

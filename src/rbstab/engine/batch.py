@@ -456,9 +456,9 @@ def batch_of(configs: Sequence, timeout: float | None = None) -> RunBatch:
         offset[i] = records[0]["lyapunov_offset"] if one_body[i] else trees[tree[i]].offset
     settings = settings_records(settings_rows([c.simulation for c in configs], timeout), 0)
     settings["method"] = [_method(c.simulation.method) for c in configs]
-    sliding = np.array([one and c.chain.joints[0].variant == "sliding" for one, c in zip(one_body, configs)],
-                       dtype=bool)
-    sign_law = sliding & (params[:, 0]["boundary_layer"] == 0)
+    # the pure sign law (the paper's one body in either spelling: the loader refuses it in any other tree)
+    sign_law = np.array([any(j.variant == "sliding" and not j.boundary_layer for j in c.chain.joints)
+                         for c in configs], dtype=bool)
     return RunBatch(trees=tuple(trees), tree=tree, params=params, ppoints=ppoints, offset=offset, y0=y0,
                     n_state=n_state, settings=settings,
                     n_samples=np.array([c.simulation.n_samples for c in configs], dtype=np.int64),
@@ -495,9 +495,14 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
         y0[rows, : tree.n_states] = tree_initial_states(configs[t], tree, keys, columns, rows, records, points)
         offset[rows] = _tree_offsets(tree, records, points, gravity[rows])
     settings = _settings(f, templates, timeout)
+    sign_law = np.zeros(n, dtype=bool)  # a sliding joint without a boundary layer (only the paper's one body has one)
+    for t, rows in f.groups:
+        sliding = np.flatnonzero(trees[t].codes == VARIANT_CODES["sliding"])
+        if len(sliding):
+            sign_law[rows] = np.any(params["boundary_layer"][np.ix_(rows, sliding)] == 0, axis=1)
     return RunBatch(trees=trees, tree=f.template.copy(), params=params, ppoints=ppoints, offset=offset, y0=y0,
                     n_state=n_state, settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
-                    compiled=settings["method"] != NOT_COMPILED, one_body=np.zeros(n, dtype=bool))
+                    compiled=(settings["method"] != NOT_COMPILED) & ~sign_law, one_body=np.zeros(n, dtype=bool))
 
 
 def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: np.ndarray) -> None:
