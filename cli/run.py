@@ -145,7 +145,7 @@ def _load_kernels(loaded) -> None:
         import scipy.optimize  # noqa: F401  (heavy: scipy) the equilibrium under gravity
     if parts:
         warm_up(",".join(parts))
-    if parts or any(c.body.weight.any() for c in loaded):
+    if parts or any(c.chain.gravity.any() for c in loaded):
         get_console().detail(f"compiled kernels loaded in {time.perf_counter() - start:.2f} s "
                              "(not in the runs' wall time)")
 
