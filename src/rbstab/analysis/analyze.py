@@ -17,7 +17,6 @@ independent coordinates (a :class:`ChainAnalysis`): its rest state and linearisa
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import time as _time
@@ -555,7 +554,7 @@ def analyze(
 def _body_findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
     """(the :class:`Analysis` of one body's equilibrium and linearisation with its notes, the
     certificate's model: the variant without disturbances, the variant with them or None)."""
-    variant, disturbed, disturbance_notes = _undisturbed(paper_form(analysed))
+    variant, disturbed, disturbance_notes = _undisturbed(analysed)
     lin = linearise(variant)
     if not lin.is_rest_point and variant.gains.saturation is not None:
         raise NoEquilibrium(_unheld(analysed))
@@ -632,15 +631,15 @@ def _impulse_times(config) -> list[float]:
     return [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
 
 
-def _undisturbed(variant) -> tuple:
-    """(``variant`` without its disturbances, ``variant`` with them or None when it has none,
-    a note saying which dynamics each part of the analysis sees)."""
+def _undisturbed(config) -> tuple:
+    """(the paper form of ``config`` without its disturbances, with them or None when it has
+    none, a note saying which dynamics each part of the analysis sees)."""
+    variant = paper_form(config)
     disturbances = variant.gains.disturbances
     if not disturbances:
         return variant, None, []
     kinds = ", ".join(dict.fromkeys(d.kind for d in disturbances))
-    calm = type(variant)(variant.body, dataclasses.replace(variant.gains, disturbances=()), variant.limits)
-    return calm, variant, [
+    return paper_form(config, disturbances=False), variant, [
         f"disturbances ({kinds}): the equilibrium, the linearisation and the certificate's Hessians are of the "
         "undisturbed dynamics; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
         "impulses not seen) and the simulations integrate the disturbed dynamics"]

@@ -37,9 +37,6 @@ from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form,
 from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
-    Gains,
-    RigidBody,
-    Saturation,
     force_h,
     force_h_command,
     gyroscopic,
@@ -50,6 +47,7 @@ from ..model import (
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
 from .kernels import PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command, output_row, saturation_effects
+from .paper import body_model
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
@@ -638,21 +636,8 @@ def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarra
 
 
 def _record(chain: Chain, i: int) -> np.ndarray:
-    body, joint = chain.bodies[i], chain.joints[i]
-    limits = [np.full(3, math.inf)] * 3
-    shape = "clip"
-    if joint.saturation is not None:
-        limits[0], limits[2], shape = joint.saturation.torque_n, joint.saturation.constraint_force, joint.saturation.shape
-    if body.saturation is not None:
-        limits[1], shape = body.saturation.force_h, body.saturation.shape
-    limited = joint.saturation is not None or body.saturation is not None
-    gains = Gains(k_t=body.k_t, l_t=body.l_t, k_r=joint.k_r, l_r=joint.l_r, k_c=joint.k_c, l_c=joint.l_c,
-                  k_d=joint.k_d, l_d=joint.l_d, k_s=joint.k_s, boundary_layer=joint.boundary_layer,
-                  saturation=Saturation(*limits, shape) if limited else None, disturbances=body.disturbances)
-    rigid = RigidBody(mass=body.mass, inertia=np.asarray(body.inertia, dtype=float),
-                      attachment_point=np.asarray(joint.child_point, dtype=float),
-                      gravity=np.asarray(chain.gravity, dtype=float))
-    return parameters(rigid, gains)
+    """The :data:`rbstab.model.PARAMETERS` record of body ``i`` and its joint (h 0)."""
+    return parameters(*body_model(chain, i))
 
 
 def _controller_states(chain: Chain) -> tuple[np.ndarray, int]:

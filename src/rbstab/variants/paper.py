@@ -13,6 +13,7 @@ sign law) take it from here. Any other tree has no paper form (None).
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import numpy as np
@@ -22,9 +23,7 @@ from ..model import Gains, Limits, RigidBody, Saturation
 from .base import Variant
 from .registry import VARIANTS
 
-__all__ = ["paper_form", "has_paper_form", "paper_initial_state"]
-
-_INF3 = np.full(3, np.inf)
+__all__ = ["paper_form", "has_paper_form", "paper_initial_state", "body_model"]
 
 
 def has_paper_form(chain: Chain) -> bool:
@@ -35,14 +34,29 @@ def has_paper_form(chain: Chain) -> bool:
     return joint.parent == GROUND and np.array_equal(joint.parent_point, joint.child_point)
 
 
-def _saturation(body_limits: Saturation | None, joint_limits: Saturation | None) -> Saturation | None:
-    """One body's :class:`Saturation` (N, H, Lambda) of its body's limits of H and its joint's of N and Lambda."""
-    if body_limits is None and joint_limits is None:
-        return None
-    shape = (joint_limits or body_limits).shape
-    return Saturation(_INF3.copy() if joint_limits is None else joint_limits.torque_n,
-                      _INF3.copy() if body_limits is None else body_limits.force_h,
-                      _INF3.copy() if joint_limits is None else joint_limits.constraint_force, shape)
+def body_model(chain: Chain, i: int) -> tuple[RigidBody, Gains]:
+    """Body ``i`` of ``chain`` with its joint, as the paper writes one body: the body (Table 1:
+    mass [kg], inertia [kg m^2] about the centre of mass, body frame; its joint's point R_c
+    [m], body frame, as the attachment point; gravity [m/s^2], inertial frame) and the gains
+    of eqs 22-24 (the joint's K_r, L_r, point gains, K_s and boundary layer, the body's K_t,
+    L_t), the limits of N and Lambda (the joint's) and of H (the body's; the body's shape
+    where both have limits), the body's disturbances. A chain's record of body i and its
+    joint is :func:`rbstab.model.parameters` of these (:mod:`rbstab.variants.chain`)."""
+    body, joint = chain.bodies[i], chain.joints[i]
+    limits = [np.full(3, np.inf)] * 3
+    shape = "clip"
+    if joint.saturation is not None:
+        limits[0], limits[2], shape = joint.saturation.torque_n, joint.saturation.constraint_force, joint.saturation.shape
+    if body.saturation is not None:
+        limits[1], shape = body.saturation.force_h, body.saturation.shape
+    limited = joint.saturation is not None or body.saturation is not None
+    gains = Gains(k_t=body.k_t, l_t=body.l_t, k_r=joint.k_r, l_r=joint.l_r, k_c=joint.k_c, l_c=joint.l_c,
+                  k_d=joint.k_d, l_d=joint.l_d, k_s=joint.k_s, boundary_layer=joint.boundary_layer,
+                  saturation=Saturation(*limits, shape) if limited else None, disturbances=body.disturbances)
+    rigid = RigidBody(mass=body.mass, inertia=np.asarray(body.inertia, dtype=float),
+                      attachment_point=np.asarray(joint.child_point, dtype=float),
+                      gravity=np.asarray(chain.gravity, dtype=float))
+    return rigid, gains
 
 
 def paper_form(config: Any, *, saturation: bool = True, disturbances: bool = True) -> Variant | None:
@@ -60,24 +74,19 @@ def paper_form(config: Any, *, saturation: bool = True, disturbances: bool = Tru
     Returns
     -------
     Variant or None
-        ``VARIANTS[law](body, gains, simulation.limits)``: the body's mass, inertia, the
-        joint's point as the attachment point R [m] and gravity; the joint's K_r, L_r, point
-        gains, K_s and boundary layer with the body's K_t, L_t; the limits of N and Lambda
-        (the joint's) and of H (the body's); the body's disturbances. None where the chain
-        is not one body held to the ground at its own point (:func:`has_paper_form`).
+        ``VARIANTS[law](body, gains, simulation.limits)`` of :func:`body_model` of the one
+        body: the same record as the chain's. None where the chain is not one body held to
+        the ground at its own point (:func:`has_paper_form`).
     """
     chain = config.chain
     if not has_paper_form(chain):
         return None
-    body, joint = chain.bodies[0], chain.joints[0]
-    gains = Gains(k_t=body.k_t, l_t=body.l_t, k_r=joint.k_r, l_r=joint.l_r, k_c=joint.k_c, l_c=joint.l_c,
-                  k_d=joint.k_d, l_d=joint.l_d, k_s=joint.k_s, boundary_layer=joint.boundary_layer,
-                  saturation=_saturation(body.saturation, joint.saturation) if saturation else None,
-                  disturbances=body.disturbances if disturbances else ())
-    rigid = RigidBody(mass=body.mass, inertia=body.inertia, attachment_point=joint.child_point,
-                      gravity=chain.gravity)
+    rigid, gains = body_model(chain, 0)
+    if not saturation or not disturbances:
+        gains = dataclasses.replace(gains, saturation=gains.saturation if saturation else None,
+                                    disturbances=gains.disturbances if disturbances else ())
     limits: Limits | None = config.simulation.limits
-    return VARIANTS[joint.variant](rigid, gains, limits)
+    return VARIANTS[chain.joints[0].variant](rigid, gains, limits)
 
 
 def paper_initial_state(config: Any, variant: Variant | None = None) -> np.ndarray:
