@@ -48,12 +48,11 @@ from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
 from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
-from .summary import numerical_rate, summarize, summary_table, tree_stream_table, tree_summary_table
+from .summary import numerical_rate, summarize, tree_stream_table, tree_summary_table
 from .variants import Variant
-from .variants.base import N_OUTPUTS, split_outputs
 from .variants.paper import paper_form, paper_initial_state
 from .variants.disturbances import apply_impulses, before, next_breakpoint
-from .variants.kernels import run_outputs, state_powers
+from .variants.kernels import state_powers
 
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
@@ -528,6 +527,22 @@ def _as_one_body_tree(outputs: dict, summary: dict) -> tuple[dict, dict]:
     return tree, table
 
 
+def _as_one_body(outputs: dict, summary: dict, embedded: bool) -> tuple[dict, dict]:
+    """The outputs (k runs, m samples) and summary columns of k runs of a one-body tree as
+    those of one body (a config written as one body; the inverse of
+    :func:`_as_one_body_tree`): every body's or joint's quantity
+    (:attr:`rbstab.layout.Quantity.member`) without its axis of one, (k, m, 3) and (k, 3);
+    without the ground joint's Theta_j, Omega_j (the body's Theta, Omega) and D where the
+    joint is not ``embedded``."""
+    dropped = {"joint_theta", "joint_omega", *(() if embedded else ("controller_state",))}
+    order = sorted(set(outputs) - dropped, key=lambda key: _OUTPUT_ORDER.get(key, len(_OUTPUT_ORDER)))  # one body's
+    body = {key: outputs[key][:, :, 0] if getattr(QUANTITIES.get(key), "member", None) else outputs[key]
+            for key in order}
+    table = {key: value[:, 0] if getattr(SUMMARY_FIGURES.get(key), "member", None) else value
+             for key, value in summary.items()}
+    return body, table
+
+
 def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGINE) -> RunResult:
     """Run one validated configuration: one body, or a tree of bodies.
 
@@ -580,8 +595,10 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
     return result
 
 
-#: Variant code -> its state layout, its name.
-_LAYOUTS, _VARIANT_NAMES = tuple(VARIANT_LAYOUTS.values()), tuple(VARIANT_LAYOUTS)
+#: One body's outputs' order in its files (:data:`rbstab.layout.OUTPUTS`; the numerical dv/dt after them).
+_OUTPUT_ORDER = {key: i for i, key in enumerate(OUTPUTS)}
+#: Variant code -> its name.
+_VARIANT_NAMES = tuple(VARIANT_LAYOUTS)
 
 #: Runs whose outputs :func:`simulate_many` evaluates together before yielding them; bounds
 #: the memory of outputs held at once (36 columns per sample) to this many runs. Also its
@@ -692,7 +709,7 @@ def simulate_batch(batch: RunBatch, rows: Sequence[int] | np.ndarray | None = No
     What :func:`simulate_blocks` does for the configurations of those runs, with the same
     results bit for bit, from the batch's arrays (no configuration object), as
     :func:`_tree_batch_blocks` says; a run in the one-body spelling (``batch.one_body``)
-    has one body's outputs, figures and messages (:func:`_body_outputs`). The blocks'
+    has one body's outputs, figures and messages (:func:`_as_one_body`). The blocks'
     ``configs`` are ``configs``' entries of their rows (None where not given).
 
     Parameters
@@ -749,19 +766,20 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
 
 
 def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
-                   work: np.ndarray, traces: bool = True, summary: bool = True) -> tuple[dict, dict]:
+                   work: np.ndarray, traces: bool = True, summary: bool = True, full: bool = True) -> tuple[dict, dict]:
     """(outputs, summary columns) of k runs of chains of one structure, run i's chain
     ``compiled[i]`` (the runs of one ``tree_of`` one chain): their samples ``states`` (k, m,
     n_states) at ``time`` (m,) and their disturbances' work ``work`` (k, m) there, all at once
     (:func:`rbstab.variants.chain.evaluate`, :func:`rbstab.summary.tree_summary_table`); the
-    outputs empty unless ``traces``, the summary unless ``summary`` (the GPU streams it)."""
+    outputs empty unless ``traces``, the summary unless ``summary`` (the GPU streams it);
+    ``full`` False: one body's without :data:`rbstab.layout.LEFT_OUT`."""
     from .variants import chain as C  # heavy: numba
 
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
-    outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index)
+    outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index, full=full)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
     table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)),
-                               params=np.stack([c.params for c in compiled])) if summary else {}
+                               params=C.records_of(compiled)) if summary else {}
     return outputs if traces else {}, table
 
 
@@ -835,9 +853,8 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
     outputs) and summaries :data:`POSTPROCESS_BLOCK` runs at a time, a RunBlock each (the
     outputs held at once: those of that many runs; the GPU's summaries alone: a block). Runs
     in the one-body spelling get one body's outputs, figures and messages
-    (:func:`_body_outputs`; ``full`` False: without :data:`rbstab.layout.LEFT_OUT`), each
-    run its own tree (one record)."""
-    from .engine.systems import tree_system  # heavy: numba
+    (:func:`_as_one_body`; ``full`` False: without :data:`rbstab.layout.LEFT_OUT`)."""
+    from .engine.systems import tree_system, with_offsets  # heavy: numba
     from .variants import chain as C  # heavy: numba
 
     start = _time.perf_counter()
@@ -845,21 +862,20 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
     structure = batch.trees[int(batch.tree[members[0]])]
     n, n_states = structure.size, batch.n_state[members[0]]
     params, ppoints = batch.params[members, :n], batch.ppoints[members, :n]  # copies
-    # h, v's zero: where the GPU streams v, in the first record (rbstab.engine.systems.with_offsets); on the CPU
-    # the batch's offset, added by the host (a one-body record's copy of it is not read twice)
-    params[:, 0]["lyapunov_offset"] = batch.offset[members] if gpu else 0.0
+    # h, v's zero: each tree's offset, added to v by its outputs (the records' 0: one body's outputs read theirs);
+    # where the GPU streams v, in the first record of the launch's copy (rbstab.engine.systems.with_offsets)
+    params[:, 0]["lyapunov_offset"] = 0.0
     limits = params[:, 0]["limits"]  # each run's admissible region
-    if one_body:  # each run its own tree
-        tree_of, trees = np.arange(len(members)), None
-    else:  # each distinct tree once
-        keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
-                         for j, i in enumerate(members.tolist())], dtype=object)
-        _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)
-        tree_of = tree_of.ravel().astype(np.int64)
-        trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
-                                batch.offset[members[j]]) for j in first]
-        params, ppoints = params[first], ppoints[first]
+    keys = np.array([params[j].tobytes() + ppoints[j].tobytes() + batch.offset[i].tobytes()
+                     for j, i in enumerate(members.tolist())], dtype=object)
+    _, first, tree_of = np.unique(keys, return_index=True, return_inverse=True)  # each distinct tree once
+    tree_of = tree_of.ravel().astype(np.int64)
+    trees = [C.with_records(batch.trees[int(batch.tree[members[j]])], params[j], ppoints[j],
+                            batch.offset[members[j]]) for j in first]
+    params, ppoints = params[first], ppoints[first]
     system = tree_system(structure)._replace(params=np.ascontiguousarray(params), ppoints=np.ascontiguousarray(ppoints))
+    if gpu:
+        system = with_offsets(system, batch.offset[members[first]])
     y0 = batch.y0[members, :n_states]
     settings = batch.settings_rows(members)
     method, n_samples = METHODS[int(batch.settings["method"][members[0]])], int(batch.n_samples[members[0]])
@@ -876,21 +892,17 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
         t0 = _time.perf_counter()
         if gpu and stride is None:
             traces, summaries = {}, {}
-        elif one_body:
-            traces, summaries = _body_outputs(batch, members[lo:hi], time, sol.samples[lo:hi], sol.work[lo:hi], full,
-                                              summary=not gpu)
         else:
             traces, summaries = _trees_outputs([trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time,
                                                sol.samples[lo:hi], sol.work[lo:hi], stride is not None,
-                                               summary=not gpu)
+                                               summary=not gpu, full=full)
         if gpu:  # the summaries streamed on the device
             summaries = tree_stream_table(grid, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
                                           structure.d_at)
-            if one_body:  # one body's figures: without the member axis
-                summaries = {key: value[:, 0] if value.ndim > 1 else value for key, value in summaries.items()}
             if stride is not None and stride > 1:  # a thinned trace's dv/dt: of the whole grid, on the device
                 traces["lyapunov_rate_numerical"] = sol.rates[lo:hi]
-        if one_body:  # one body's messages (the run's own names none)
+        if one_body:  # one body's names, shapes and messages (the run's own names none)
+            traces, summaries = _as_one_body(traces, summaries, bool(np.any(structure.d_at >= 0)))
             ends = _ends(sol.status[lo:hi], sol.t_stop[lo:hi], sol.nfev[lo:hi], sol.n_steps[lo:hi],
                          settings[lo:hi], limits[lo:hi])
         else:
@@ -913,29 +925,6 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
             **({"variants": [_VARIANT_NAMES[code] for code in batch.codes[members[lo:hi]].tolist()]} if one_body else
                {"joints": tuple(structure.chain.joint_names), "bodies": tuple(structure.chain.body_names)}),
         )
-
-
-def _body_outputs(batch: RunBatch, rows: np.ndarray, time: np.ndarray, samples: np.ndarray, work: np.ndarray,
-                  full: bool, summary: bool = True) -> tuple[dict, dict]:
-    """(outputs, summary columns) of the runs ``rows`` of ``batch`` in the one-body
-    spelling (one law, the paper's one body): one body's compiled outputs
-    (:func:`rbstab.variants.kernels.run_outputs`, every output, or all but
-    :data:`rbstab.layout.LEFT_OUT` unless ``full``) of their samples ``samples`` (k, m, 12
-    + 3 e; a permanent joint's Theta, Omega first) at ``time`` (m,) with the disturbances'
-    work ``work`` (k, m), in one body's names and shapes, and :func:`summary_table` (unless
-    ``summary``: the GPU streams it)."""
-    codes = batch.codes[rows]
-    layout = _LAYOUTS[int(codes[0])]
-    if samples.shape[2] != layout.size:  # a permanent joint's: its state is Theta, Omega
-        samples = np.ascontiguousarray(samples[:, :, : layout.size])
-    columns = np.empty((N_OUTPUTS, len(rows), len(time)))
-    with np.errstate(all="ignore"):
-        # (a writable copy of the times: the signature the engine compiles, not a read-only one)
-        run_outputs(codes, np.ascontiguousarray(batch.params[rows, 0]), np.array(time[None]), samples, columns, full)
-    columns[OUTPUTS["disturbance_work"].offset] = work
-    outputs = split_outputs(columns, layout, full)
-    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs, summary_table(time, outputs, params=batch.params[rows, 0]) if summary else {}
 
 
 def _tree_left_region(what: str, t: float) -> str:

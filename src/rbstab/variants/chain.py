@@ -34,7 +34,7 @@ import numpy as np
 from ..chain import Chain
 from ..jit import jit
 from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
-from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
+from ..layout import LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     force_h,
@@ -45,13 +45,13 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
-    constraint_force_command, output_row, saturation_effects
+from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
+    constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "is_one_body", "one_body_mask", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "records_of", "is_one_body", "one_body_mask", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
            "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -536,28 +536,51 @@ def _saturation_flags(y, params, codes, joints, flags):
 
 
 @jit
-def chain_samples(times, states, params, codes, parents, ppoints, d_at, tree_of, joints, bodies, scalars, power, flags):
+def chain_samples(times, states, params, codes, parents, ppoints, d_at, tree_of, joints, bodies, scalars, power, flags,
+                  blocks):
     """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,),
-    sample k of the tree ``tree_of[k]`` (``params`` (t, n), ``ppoints`` (t, n, 3): t trees
-    of one structure), into ``joints`` (m, n, 7, 3), ``bodies`` (m, n, 3), ``scalars`` (m,
-    5), ``power`` (m,) the disturbances' power [W] and ``flags`` (m, n, 3, 3) the saturation
-    flags of N_j, H_j and Lambda_j (:func:`_saturation_flags`); NaN rows where the state is
-    NaN."""
+    sample s of the tree ``tree_of[s]`` (``params`` (t, n), ``ppoints`` (t, n, 3): t trees
+    of one structure), each output component's samples side by side (numpy then reduces and
+    copies a column of 3-vectors as one stride, not 3 numbers at a time): into ``joints``
+    (n, 7, 3, m) (:func:`chain_evaluate`'s), ``bodies`` (n, 3, m), ``scalars`` (5, m),
+    ``power`` (m,) the disturbances' power [W], ``flags`` (n, 3, 3, m) the saturation flags
+    of N_j, H_j and Lambda_j (:func:`_saturation_flags`) and ``blocks`` (n, 4, 3, m) each
+    body's Theta, Omega, X, V; NaN where the state is NaN."""
+    n = codes.shape[0]
     dy = np.empty(states.shape[1] + 1)
-    work = chain_work(codes.shape[0])
-    for k in range(states.shape[0]):
-        if states[k, 0] != states[k, 0]:
-            joints[k] = np.nan
-            bodies[k] = np.nan
-            scalars[k] = np.nan
-            power[k] = np.nan
-            flags[k] = np.nan
-            continue
-        t = tree_of[k]
-        chain_evaluate(times[k], states[k], params[t], codes, parents, ppoints[t], d_at, dy, joints[k], bodies[k],
-                       scalars[k], work)
-        power[k] = dy[states.shape[1]]
-        _saturation_flags(states[k], params[t], codes, joints[k], flags[k])
+    work = chain_work(n)
+    joint, body, scalar, flag = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.empty((n, 3, 3))
+    for s in range(states.shape[0]):
+        if states[s, 0] != states[s, 0]:
+            joint[:] = np.nan
+            body[:] = np.nan
+            scalar[:] = np.nan
+            flag[:] = np.nan
+            power[s] = np.nan
+        else:
+            t = tree_of[s]
+            chain_evaluate(times[s], states[s], params[t], codes, parents, ppoints[t], d_at, dy, joint, body, scalar,
+                           work)
+            power[s] = dy[states.shape[1]]
+            _saturation_flags(states[s], params[t], codes, joint, flag)
+        _put_sample(s, states[s], joint, body, scalar, flag, joints, bodies, scalars, flags, blocks)
+
+
+@jit(forceinline=True)
+def _put_sample(s, y, joint, body, scalar, flag, joints, bodies, scalars, flags, blocks):
+    """Sample s's outputs (one state's: ``joint`` (n, 7, 3), ``body`` (n, 3), ``scalar`` (5,),
+    ``flag`` (n, 3, 3), the state ``y``) into column s of :func:`chain_samples`' outputs."""
+    for i in range(joint.shape[0]):
+        for c in range(3):
+            for k in range(7):
+                joints[i, k, c, s] = joint[i, k, c]
+            for k in range(3):
+                flags[i, k, c, s] = flag[i, k, c]
+            for k in range(4):
+                blocks[i, k, c, s] = y[12 * i + 3 * k + c]
+            bodies[i, c, s] = body[i, c]
+    for k in range(5):
+        scalars[k, s] = scalar[k]
 
 
 # -- the compiled description ------------------------------------------------------------------
@@ -620,6 +643,15 @@ def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoi
     tree: its reduced state is the body's state."""
     return bool(np.all(one_body_mask(codes, parents, np.reshape(np.asarray(ppoints)[..., 0, :], (-1, 3)),
                                      np.reshape(params[..., 0]["attachment_point"], (-1, 3)))))
+
+
+def records_of(trees: Sequence[CompiledChain]) -> np.ndarray:
+    """The records (t, n) of t chains of one structure, stacked (numpy's ``stack`` of
+    structured arrays costs ~0.1 ms a chain)."""
+    out = np.empty((len(trees), trees[0].size), dtype=trees[0].params.dtype)
+    for t, tree in enumerate(trees):
+        out[t] = tree.params
+    return out
 
 
 def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarray, offset: float = 0.0,
@@ -1104,42 +1136,63 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
     return sorted(times)
 
 
-#: Where :func:`rbstab.variants.kernels.output_row` writes what :func:`chain_samples` records
-#: per joint (E_j, F_j, Lambda_j, N_j, D_j, Theta_j, Omega_j), per body (H) and as saturation flags.
-_ONE_BODY_JOINT = np.array([OUTPUTS[name].offset for name in ("constraint_error", "constraint_rate", "constraint_force",
-                                                               "torque_n", "controller_state", "theta", "omega")])
-_ONE_BODY_FLAGS = np.array([OUTPUTS[name].offset for name, _ in SATURATION_FLAGS.values()])
-_ONE_BODY_SCALARS = np.array([OUTPUTS[name].offset for name in (*LYAPUNOV_TERMS, "lyapunov_rate")])
-_H_AT, _POWER_AT = OUTPUTS["force_h"].offset, OUTPUTS["disturbance_power"].offset
+def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows) -> dict[str, np.ndarray]:
+    """:func:`evaluate`'s outputs of m samples of trees of ``first``'s structure
+    (:func:`chain_samples`; ``params`` (t, n), ``ppoints`` (t, n, 3), ``rows`` (m,) each
+    sample's tree), each (m, ...) a view of a component-major buffer, v's terms without h and
+    ``scalars`` (m, 5) with dv/dt."""
+    m, n = states.shape[0], first.size
+    joints, bodies, scalars, power = np.empty((n, 7, 3, m)), np.empty((n, 3, m)), np.empty((5, m)), np.empty(m)
+    flags, blocks = np.empty((n, 3, 3, m)), np.empty((n, 4, 3, m))
+    chain_samples(time, states, params, first.codes, first.parents, ppoints, first.d_at, rows, joints, bodies, scalars,
+                  power, flags, blocks)
+    joints, bodies, flags = joints.transpose(3, 0, 1, 2), bodies.transpose(2, 0, 1), flags.transpose(3, 0, 1, 2)
+    blocks, scalars = blocks.transpose(3, 0, 1, 2), scalars.T
+    out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
+    out["force_h"] = bodies
+    for k in range(_OMEGA_J + 1):
+        out[JOINT_OUTPUTS[k]] = joints[:, :, k]
+    out["controller_state"][:, first.d_at < 0] = np.nan
+    for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
+        out[name] = flags[:, :, k]
+    for k, name in enumerate(LYAPUNOV_TERMS):
+        out[name] = scalars[:, k]
+    out["lyapunov_rate"], out["disturbance_power"], out["scalars"] = scalars[:, _RATE], power, scalars
+    return out
 
 
-@jit
-def one_body_samples(code, times, states, params, rows, joints, bodies, scalars, power, flags):
-    """What :func:`chain_samples` writes (the same arguments: ``states`` (m, n_states) at
-    ``times`` (m,) [s], ``params`` (t, 1) records, ``rows`` (m,) each sample's tree; into
-    ``joints`` (m, 1, 7, 3), ``bodies`` (m, 1, 3), ``scalars`` (m, 5), ``power`` (m,) [W],
-    ``flags`` (m, 1, 3, 3)), for trees that are the paper's one-body model
-    (:func:`is_one_body`; ``code`` their joint's law): the one-body model's compiled outputs
-    (:func:`rbstab.variants.kernels.output_row`, eqs 20-25: the same quantities, v's terms
-    without h where the records' h is 0) of each sample, its state in the one-body layout (a
-    permanent joint's: Theta, Omega)."""
-    buffer = np.empty(N_OUTPUTS)
+def _one_body_outputs(code, time, states, params, lead, tree_of, full) -> dict[str, np.ndarray]:
+    """:func:`evaluate`'s outputs of m samples (runs of ``lead[-1]`` samples each, run i's of the tree
+    ``tree_of[i]``) of trees that are the paper's one-body model (:func:`is_one_body`; ``code``
+    their joint's law): :func:`rbstab.variants.kernels.run_outputs` (eqs 20-25, an output a
+    row; v's terms without h where the records' h is 0), each (m, 1, 3) or (m,) a view of its
+    rows; a permanent joint's state is Theta, Omega."""
+    m, per_run = states.shape[0], lead[-1]
+    runs = m // per_run
+    trees = np.zeros(runs, dtype=np.int64) if tree_of is None else np.asarray(tree_of, dtype=np.int64)
     size = 6 if code == PERMANENT else states.shape[1]
-    for s in range(states.shape[0]):
-        output_row(code, times[s], states[s, :size], params[rows[s], 0], buffer, True)
-        for c in range(3):
-            for k in range(7):
-                joints[s, 0, k, c] = buffer[_ONE_BODY_JOINT[k] + c]
-            for k in range(3):
-                flags[s, 0, k, c] = buffer[_ONE_BODY_FLAGS[k] + c]
-            bodies[s, 0, c] = buffer[_H_AT + c]
-        for k in range(5):
-            scalars[s, k] = buffer[_ONE_BODY_SCALARS[k]]
-        power[s] = buffer[_POWER_AT]
+    columns = np.empty((N_OUTPUTS, runs, per_run))
+    run_outputs(np.full(runs, code, dtype=np.int64), np.ascontiguousarray(params[trees, 0]), time.reshape(runs, -1),
+                np.ascontiguousarray(states[:, :size]).reshape(runs, per_run, size), columns, full)
+    columns = columns.reshape(N_OUTPUTS, m)
+    out = {name: columns[q.columns].T[:, None] if q.size == 3 else columns[q.offset]
+           for name, q in OUTPUTS.items() if (full or name not in LEFT_OUT) and name not in _NOT_EVALUATED}
+    out["joint_theta"], out["joint_omega"] = out["theta"], out["omega"]  # the ground joint's: A_p = I, Omega_p = 0
+    if code != EMBEDDED:
+        out["controller_state"] = np.full((m, 1, 3), np.nan)
+    return out
+
+
+#: One body's outputs :func:`evaluate` makes itself (the run's history, not its samples').
+_NOT_EVALUATED = ("disturbance_work", "disturbance_edges", "lyapunov")
+#: :func:`evaluate`'s outputs, in order.
+_EVALUATED = (*BODY_OUTPUTS[:5], *JOINT_OUTPUTS[:7], *(name for name, _ in SATURATION_FLAGS.values()), *LYAPUNOV_TERMS,
+              "lyapunov", "lyapunov_rate", "disturbance_power", "disturbance_work", "disturbance_edges")
 
 
 def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray, states: np.ndarray,
-             work: np.ndarray | None = None, tree_of: np.ndarray | None = None) -> dict[str, np.ndarray]:
+             work: np.ndarray | None = None, tree_of: np.ndarray | None = None,
+             full: bool = True) -> dict[str, np.ndarray]:
     """Every output of a chain run's samples ``states`` (m, n_states) at ``time`` (m,), or
     of k runs' samples (k, m, n_states) at the same times (m,) (each output then has a
     leading run axis, and run i's are those of its samples alone):
@@ -1157,7 +1210,9 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     the run's integrated work at the samples; 0 where not given: it is a run's history,
     not a state's) and disturbance_edges (the windows' edges at or before each sample,
     :func:`disturbance_edges`). ``compiled``: the chain, or the chains (a sequence, one
-    structure) of k runs' samples (k, m, n_states), run i's ``compiled[tree_of[i]]``."""
+    structure) of k runs' samples (k, m, n_states), run i's ``compiled[tree_of[i]]``.
+    ``full`` False: the paper's one body's without :data:`rbstab.layout.LEFT_OUT`, which it
+    then does not compute (neither a summary nor its thinned store reads them)."""
     trees = [compiled] if isinstance(compiled, CompiledChain) else list(compiled)
     first = trees[0]
     states = np.asarray(states, dtype=float)
@@ -1167,39 +1222,22 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     m, n = states.shape[0], first.size
     rows = (np.zeros(m, dtype=np.int64) if tree_of is None else
             np.repeat(np.asarray(tree_of, dtype=np.int64), lead[-1]))  # each sample's tree
-    params = np.stack([c.params for c in trees])
-    joints, bodies, scalars, power = np.empty((m, n, 7, 3)), np.empty((m, n, 3)), np.empty((m, 5)), np.empty(m)
-    flags = np.empty((m, n, 3, 3))
-    one_body = all(c.one_body for c in trees)
-    if one_body:  # the paper's one body: its own compiled outputs (eq 20's Lambda; Case 1 1.4x faster)
-        one_body_samples(int(first.codes[0]), time, states, params, rows, joints, bodies, scalars, power, flags)
-    else:
-        chain_samples(time, states, params, first.codes, first.parents, np.stack([c.ppoints for c in trees]),
-                      first.d_at, rows, joints, bodies, scalars, power, flags)
+    params = records_of(trees)
     offset = np.array([c.offset for c in trees])[rows]  # h of each sample's tree
-    blocks = states[:, : 12 * n].reshape(m, n, 4, 3)
-    out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
-    out["force_h"] = bodies
-    for k in range(_OMEGA_J + 1):
-        out[JOINT_OUTPUTS[k]] = joints[:, :, k]
-    embedded = first.d_at >= 0
-    out["controller_state"] = np.where(embedded[None, :, None], out["controller_state"], np.nan)
-    for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
-        out[name] = flags[:, :, k]
-    out["lyapunov_translational"] = scalars[:, _TRANSLATIONAL]
-    out["lyapunov_rotational"] = scalars[:, _ROTATIONAL]
-    out["lyapunov_constraint"] = scalars[:, _CONSTRAINT]
-    out["lyapunov_gravity"] = scalars[:, _GRAVITY] + offset
-    if one_body:  # summed as one body's file sums it: the two spellings' v bit for bit
+    one_body = all(c.one_body for c in trees)
+    if one_body:  # the paper's one body: its own compiled outputs (eq 20's Lambda; 1.4x faster)
+        out = _one_body_outputs(int(first.codes[0]), time, states, params, lead, tree_of, full)
+    else:
+        out = _tree_outputs(time, states, params, first, np.stack([c.ppoints for c in trees]), rows)
+        out["lyapunov"] = out.pop("scalars")[:, :_RATE].sum(axis=1) + offset
+    out["lyapunov_gravity"] = out["lyapunov_gravity"] + offset
+    if "lyapunov" not in out:  # summed as one body's file sums it: the two spellings' v bit for bit
         out["lyapunov"] = (out["lyapunov_translational"] + out["lyapunov_rotational"] + out["lyapunov_constraint"]
                            + out["lyapunov_gravity"])
-    else:
-        out["lyapunov"] = scalars[:, :_RATE].sum(axis=1) + offset
-    out["lyapunov_rate"] = scalars[:, _RATE]
-    out["disturbance_power"] = power
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
     out["disturbance_edges"] = np.zeros(m)
     for t in np.flatnonzero(np.any(params["disturbance_count"] > 0, axis=1)):  # the trees with disturbances
         at = rows == t
         out["disturbance_edges"][at] = disturbance_edges(trees[t], time[at])
-    return {key: value.reshape(*lead, *value.shape[1:]) for key, value in out.items()}
+    return {key: out[key].reshape(*lead, *out[key].shape[1:]) for key in _EVALUATED
+            if full or not one_body or key not in LEFT_OUT}
