@@ -55,11 +55,22 @@ def _warm_up_chains() -> None:
     C.evaluate(compiled, np.zeros(1), y[None])
 
 
+def _warm_up_paper_permanent() -> None:
+    """A run of the paper's one body on a permanent joint as every one-body run goes
+    (:func:`rbstab.engine.integrate.integrate_chain_runs`): its reduced samples (Theta,
+    Omega) expanded to the chain's state (:func:`rbstab.variants.tree.expand_samples`)."""
+    eye, point = np.eye(3), np.array([0.0, 0.0, -1.0])
+    chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, point, point, "permanent", eye, eye), -point)
+    compiled = C.compile_chain(chain, offset=0.0)
+    settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3, 10.0, np.inf]])
+    integrate_chain_runs(tree_system(compiled), np.zeros((1, 6)), settings, method="DOP853", n_samples=2)
+
+
 def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
     ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
-    integrator), ``outputs`` (every output at the samples, the numerical dv/dt,
+    integrator, and what a one-body run on it needs), ``outputs`` (every output at the samples, the numerical dv/dt,
     :func:`rbstab.summary.numerical_rate`, and the balance figures,
     :func:`rbstab.summary.warm_up_balance`) and ``switching`` (the sign
     law's event-driven integrator, :mod:`rbstab.engine.switching`) and ``chains`` (a
@@ -92,6 +103,7 @@ def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
         settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3]])
         for method in METHODS:
             integrate_runs([0], params, np.zeros((1, 12)), settings, method=method, n_samples=2)
+        _warm_up_paper_permanent()
 
 
 def _start_warm_up(parts: str):

@@ -1139,8 +1139,7 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
 def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows) -> dict[str, np.ndarray]:
     """:func:`evaluate`'s outputs of m samples of trees of ``first``'s structure
     (:func:`chain_samples`; ``params`` (t, n), ``ppoints`` (t, n, 3), ``rows`` (m,) each
-    sample's tree), each (m, ...) a view of a component-major buffer, v's terms without h and
-    ``scalars`` (m, 5) with dv/dt."""
+    sample's tree), each (m, ...) a view of a component-major buffer; v and its terms without h."""
     m, n = states.shape[0], first.size
     joints, bodies, scalars, power = np.empty((n, 7, 3, m)), np.empty((n, 3, m)), np.empty((5, m)), np.empty(m)
     flags, blocks = np.empty((n, 3, 3, m)), np.empty((n, 4, 3, m))
@@ -1157,7 +1156,8 @@ def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows) -> 
         out[name] = flags[:, :, k]
     for k, name in enumerate(LYAPUNOV_TERMS):
         out[name] = scalars[:, k]
-    out["lyapunov_rate"], out["disturbance_power"], out["scalars"] = scalars[:, _RATE], power, scalars
+    out["lyapunov"] = scalars[:, :_RATE].sum(axis=1)
+    out["lyapunov_rate"], out["disturbance_power"] = scalars[:, _RATE], power
     return out
 
 
@@ -1183,7 +1183,8 @@ def _one_body_outputs(code, time, states, params, lead, tree_of, full) -> dict[s
     return out
 
 
-#: One body's outputs :func:`evaluate` makes itself (the run's history, not its samples').
+#: One body's outputs :func:`evaluate` makes itself (v with the tree's h; W and the windows' edges: the run's
+#: history, not its samples').
 _NOT_EVALUATED = ("disturbance_work", "disturbance_edges", "lyapunov")
 #: :func:`evaluate`'s outputs, in order.
 _EVALUATED = (*BODY_OUTPUTS[:5], *JOINT_OUTPUTS[:7], *(name for name, _ in SATURATION_FLAGS.values()), *LYAPUNOV_TERMS,
@@ -1227,13 +1228,14 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     one_body = all(c.one_body for c in trees)
     if one_body:  # the paper's one body: its own compiled outputs (eq 20's Lambda; 1.4x faster)
         out = _one_body_outputs(int(first.codes[0]), time, states, params, lead, tree_of, full)
-    else:
-        out = _tree_outputs(time, states, params, first, np.stack([c.ppoints for c in trees]), rows)
-        out["lyapunov"] = out.pop("scalars")[:, :_RATE].sum(axis=1) + offset
-    out["lyapunov_gravity"] = out["lyapunov_gravity"] + offset
-    if "lyapunov" not in out:  # summed as one body's file sums it: the two spellings' v bit for bit
+        out["lyapunov_gravity"] = out["lyapunov_gravity"] + offset
+        # summed as one body's file sums it: the two spellings' v bit for bit
         out["lyapunov"] = (out["lyapunov_translational"] + out["lyapunov_rotational"] + out["lyapunov_constraint"]
                            + out["lyapunov_gravity"])
+    else:
+        out = _tree_outputs(time, states, params, first, np.stack([c.ppoints for c in trees]), rows)
+        out["lyapunov_gravity"] = out["lyapunov_gravity"] + offset
+        out["lyapunov"] = out["lyapunov"] + offset
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
     out["disturbance_edges"] = np.zeros(m)
     for t in np.flatnonzero(np.any(params["disturbance_count"] > 0, axis=1)):  # the trees with disturbances
