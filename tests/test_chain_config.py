@@ -507,8 +507,8 @@ def test_a_chain_body_warns_like_a_one_body_config():
     data["initial_state"]["legs"]["theta"] = [45, 0, 0]
     with pytest.warns(PhysicalPlausibilityWarning) as caught:
         config = config_from_mapping(data)
-    assert [str(w.message)[:40] for w in caught] == ["W005 initial_state.legs.theta: theta[0] ",
-                                                    "W001 bodies.1.inertia ('trunk'): princip"]
+    assert [str(w.message)[:40] for w in caught] == ["W001 bodies.1.inertia ('trunk'): princip",
+                                                    "W005 initial_state.legs.theta: theta[0] "]
     assert len(config.warnings) == 2
 
 

@@ -72,7 +72,7 @@ __all__ = [
     "uses_compiled_engine",
     "is_sign_law",
     "simulate_sign_law",
-    "tree_end",
+    "run_end",
 ]
 
 #: What :func:`simulate_blocks` keeps of the samples of a run: every one, on the GPU every
@@ -610,18 +610,17 @@ POSTPROCESS_BLOCK = 32
 CUDA_CHAIN_SAMPLE_BYTES = 2 * 2**30
 
 
-def _ends(status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray, n_steps: np.ndarray, settings: np.ndarray,
-          limits: np.ndarray) -> dict:
+def _ends(trees: Sequence, tree_of: np.ndarray, status: np.ndarray, t_stop: np.ndarray, nfev: np.ndarray,
+          n_steps: np.ndarray, settings: np.ndarray, limits: np.ndarray, one_body: bool) -> dict:
     """A :class:`RunBlock`'s ``status``, ``message`` and ``solver`` of k runs of the compiled
-    engine, from their status codes (:mod:`rbstab.engine.status`), stop times [s],
-    right-hand-side evaluations, steps, settings rows (k, 7) and admissible regions (k, 5,
-    3; the ``limits`` of their records)."""
+    engine (:func:`run_end`, each run's tree ``trees[tree_of[j]]``), from their status codes
+    (:mod:`rbstab.engine.status`), stop times [s], right-hand-side evaluations, steps,
+    settings rows (k, 7) and admissible regions (k, 5, 3; the ``limits`` of their records)."""
     status = np.asarray(status, dtype=np.int64)
     ok = status == SUCCESS
     message = np.full(len(status), status_message(SUCCESS, 0.0, 0.0), dtype=object)
     for j in np.flatnonzero(~ok).tolist():  # failed runs: few
-        message[j] = status_message(int(status[j]), float(t_stop[j]), float(settings[j, 4]), int(settings[j, 5]),
-                                    float(settings[j, 6]), limits=limits[j])
+        message[j] = run_end(trees[tree_of[j]], int(status[j]), float(t_stop[j]), settings[j], limits[j], one_body)
     return {"status": np.where(ok, "success", "failed").tolist(), "message": message.tolist(),
             "solver": _compiled_solver(nfev, n_steps, status)}
 
@@ -901,16 +900,10 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
                                           structure.d_at)
             if stride is not None and stride > 1:  # a thinned trace's dv/dt: of the whole grid, on the device
                 traces["lyapunov_rate_numerical"] = sol.rates[lo:hi]
-        if one_body:  # one body's names, shapes and messages (the run's own names none)
+        if one_body:  # one body's names and shapes
             traces, summaries = _as_one_body(traces, summaries, bool(np.any(structure.d_at >= 0)))
-            ends = _ends(sol.status[lo:hi], sol.t_stop[lo:hi], sol.nfev[lo:hi], sol.n_steps[lo:hi],
-                         settings[lo:hi], limits[lo:hi])
-        else:
-            status, message = zip(*(tree_end(trees[tree_of[j]], int(sol.status[j]), float(sol.t_stop[j]), settings[j],
-                                              limits[j])
-                                     for j in range(lo, hi)))
-            ends = {"status": list(status), "message": list(message),
-                    "solver": _compiled_solver(sol.nfev[lo:hi], sol.n_steps[lo:hi], sol.status[lo:hi])}
+        ends = _ends(trees, tree_of[lo:hi], sol.status[lo:hi], sol.t_stop[lo:hi], sol.nfev[lo:hi], sol.n_steps[lo:hi],
+                     settings[lo:hi], limits[lo:hi], one_body)
         post = np.full(hi - lo, (_time.perf_counter() - t0) / (hi - lo))
         yield members[lo:hi].tolist(), RunBlock(
             configs=_configs_of(configs, members[lo:hi]),
@@ -933,25 +926,25 @@ def _tree_left_region(what: str, t: float) -> str:
     return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s"
 
 
-def tree_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np.ndarray) -> tuple[str, str]:
-    """(status, message) of a chain run of the compiled driver that ended with ``code`` at
-    ``t_stop`` [s]: ``compiled`` its chain, ``settings`` its row (7,) of
+def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np.ndarray,
+            one_body: bool = False) -> str:
+    """The message of a run of the compiled driver that ended with ``code`` at ``t_stop``
+    [s]: ``compiled`` its tree, ``settings`` its row (7,) of
     :data:`rbstab.engine.settings.SETTING_COLUMNS`, ``bounds`` (5, 3) its admissible region
     (a record's ``limits``). A gimbal lock's code names the body or joint
     (:func:`rbstab.engine.status.gimbal_of`), a bound's the quantity, its axis and the body
-    or joint that reached it."""
+    or joint that reached it; with ``one_body`` (a run written as one body, whose words have
+    no body or joint names) neither is named."""
     from .variants import chain as C  # heavy: numba
 
     margin = float(settings[4])
-    if code == SUCCESS:
-        return "success", status_message(code, t_stop, margin)
     # a one-body tree runs one body's compiled form: its lock, GIMBAL_LOCK, is of its one angle set
     locked = (0, bool(compiled.codes[0] == C.PERMANENT)) if code == GIMBAL_LOCK else gimbal_of(code)
-    if locked is not None:
-        return "failed", C.gimbal_lock_message(compiled, *locked, margin, t_stop)
     which = limit_of(code)
-    if which is not None:
-        quantity, axis = which
-        bound = float(np.asarray(bounds, dtype=float)[LIMITED.index(quantity), axis])
-        return "failed", _tree_left_region(C.bound_reached(compiled, quantity, axis, limit_part(code), bound), t_stop)
-    return "failed", status_message(code, t_stop, margin, int(settings[5]), float(settings[6]))
+    if one_body or (locked is None and which is None):
+        return status_message(code, t_stop, margin, int(settings[5]), float(settings[6]), limits=bounds)
+    if locked is not None:
+        return C.gimbal_lock_message(compiled, *locked, margin, t_stop)
+    quantity, axis = which
+    bound = float(np.asarray(bounds, dtype=float)[LIMITED.index(quantity), axis])
+    return _tree_left_region(C.bound_reached(compiled, quantity, axis, limit_part(code), bound), t_stop)

@@ -361,9 +361,9 @@ class Runs:
         [J] (k,; NaN for a run that stopped early), why each failed run stopped: its status in
         words, without the time ('' for the others))."""
         from ..engine.cuda import integrate_chain_runs_cuda  # heavy: numba-cuda
-        from ..engine.status import SUCCESS, status_message  # heavy: numba
+        from ..engine.status import SUCCESS  # heavy: numba
         from ..engine.systems import tree_system, with_offsets  # heavy: numba
-        from ..simulator import tree_end  # heavy: numba
+        from ..simulator import run_end  # heavy: numba
         from ..summary import LAST_ABOVE, TAKEN, streamed_final_lyapunov  # heavy: numba
 
         states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
@@ -378,10 +378,7 @@ class Runs:
         messages = [""] * k
         for i in np.flatnonzero(~ok).tolist():  # failed runs: few
             code, t = int(sol.status[i]), float(sol.t_stop[i])
-            message = (status_message(code, t, s.gimbal_margin, s.max_steps, s.max_wall_time, limits=bounds)
-                       if self.base.one_body[0] else
-                       tree_end(self.compiled, code, t, settings[i], bounds)[1])
-            messages[i] = message.split(" at t =")[0]
+            messages[i] = run_end(self.compiled, code, t, settings[i], bounds, self.base.one_body[0]).split(" at t =")[0]
         return ok, sol.acc[:, LAST_ABOVE].astype(np.int64), v_final, messages
 
     def _one_by_one(self, states: np.ndarray, n_samples: int,

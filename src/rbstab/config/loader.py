@@ -63,7 +63,6 @@ from ..kinematics import rotation_matrix
 from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS
-from ..variants.base import limited_values
 from ..variants.paper import has_paper_form
 from .errors import ConfigError, PhysicalPlausibilityWarning, SemiDefiniteGainWarning
 from .physics import angle_warnings, inertia_warnings, semidefinite_notes, unheld_bodies, unheld_weight
@@ -340,7 +339,6 @@ def _build(
     used_gains = {g: getattr(gains, g) for g in (*GAIN_NAMES, "k_s") if g in used}
     _check_weight(ctrl, body, gains, used_gains, source, overrides)
     initial_state = {block: _array(getattr(run.initial_state, key)) for key, block in INITIAL_STATE_BLOCKS.items()}
-    _check_limits(ctrl.variant, body, initial_state, simulation.limits, sim.limits, source, overrides)
     dump = run.model_dump()
     dump["controller"] = {k: v for k, v in dump["controller"].items() if v is not None}
     if dump.get("disturbances") is None:
@@ -349,12 +347,20 @@ def _build(
         dump["disturbances"] = [{k: v for k, v in d.items() if v is not None} for d in dump["disturbances"]]
         gains = dataclasses.replace(gains, disturbances=disturbances_of(dump["disturbances"]))
     resolved_simulation(dump["simulation"], sim)
+    chain = _one_body_chain(body, gains, ctrl.variant)
+    if simulation.limits is not None:  # the state as a tree places it: a permanent body's x, v from its pin
+        given = {key: getattr(run.initial_state, key) for key in INITIAL_STATE_BLOCKS
+                 if not (point_fixed(ctrl.variant) and key in ("x", "v"))}
+        states, _, errors = _place_tree({ONE_BODY_NAMES[0]: given}, chain, simulation.gimbal_margin, source, overrides)
+        _check_limits(chain, states, errors, simulation.limits, sim.limits.model_dump(), source, overrides,
+                      one_body=True)
     definite = VARIANTS[ctrl.variant].definite_gains or tuple(used_gains)
     as_written = {g: getattr(ctrl, g) for g in used_gains if g in definite}  # 3 numbers: no numpy needed
-    found_warnings = _emit_notes(body, as_written, source, stacklevel=4, theta=run.initial_state.theta)
+    found_warnings = _notes(chain, ["body.inertia"], [("initial_state.theta", run.initial_state.theta)],
+                            [("controller.", as_written)], source)
     return RunConfig(
         name=run.name,
-        chain=_one_body_chain(body, gains, ctrl.variant),
+        chain=chain,
         initial_state={ONE_BODY_NAMES[0]: initial_state},
         simulation=simulation,
         resolved=dump,  # plain dicts, lists, str and numbers (the validators make new lists; tested)
@@ -390,19 +396,6 @@ def resolved_simulation(dump: dict, sim) -> None:
         dump["limits"] = {k: v for k, v in dump["limits"].items() if v is not None}
 
 
-def _emit_notes(body: RigidBody, gains_as_written: Mapping[str, Any], source: str | None, *,
-                stacklevel: int, theta: Any = (0.0, 0.0, 0.0)) -> tuple[str, ...]:
-    """Warn of the physical-plausibility problems of ``body`` and the singular gains of
-    ``gains_as_written`` (the gains the variant uses, as validated); returns their lines.
-    ``stacklevel``: that of ``warnings.warn``, naming the caller of the public function."""
-    notes = [(m, PhysicalPlausibilityWarning) for m in inertia_warnings(body.inertia)]
-    notes += [(m, SemiDefiniteGainWarning) for m in semidefinite_notes(gains_as_written)]
-    notes += [(m, PhysicalPlausibilityWarning) for m in angle_warnings(theta)]
-    for message, category in notes:
-        warnings.warn(f"{source}: {message}" if source else message, category, stacklevel=stacklevel)
-    return tuple(message for message, _ in notes)
-
-
 def _validated(data: dict, default_name: str | None, source: str | None, overrides: Sequence[str],
                schema: type[BaseModel] = RunSchema) -> Any:
     """``data`` (a plain tree, ``name`` set from ``default_name`` if absent) through the
@@ -432,27 +425,6 @@ def _check_weight(ctrl, body: RigidBody, gains: Gains, used_gains: dict, source:
     found = short_repr(getattr(ctrl, key.partition(".")[2]))
     line = f"config key '{key}': found {found}; expected gains that hold the weight ({detail})"
     inputs = ("body.mass", "body.gravity", "controller.variant", *(f"controller.{g}" for g in used_gains))
-    related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
-    raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
-
-
-def _check_limits(variant: str, body: RigidBody, initial_state: Mapping[str, np.ndarray], limits: Limits | None,
-                  written: Any, source: str | None, overrides: Sequence[str]) -> None:
-    """ConfigError when the initial state lies outside the admissible region ``limits``
-    (:func:`rbstab.config.schema.inside_limits` of its bounded quantities; ``written``: the
-    validated ``simulation.limits`` section, for the message)."""
-    if limits is None:
-        return
-    cls = VARIANTS[variant]
-    y0 = cls.layout.join(**{b: initial_state[b] for b in cls.layout.blocks})
-    found = limits_violation(limited_values(cls.code, y0[None], body.attachment_point)[0], limits.array)
-    if found is None:
-        return
-    key, detail = found
-    bound = short_repr(getattr(written, key.rpartition(".")[2]))
-    line = (f"config key '{key}': found {bound}; expected bounds that contain the initial state "
-            f"(the initial state lies outside simulation.limits: {detail})")
-    inputs = ("simulation.limits", "initial_state", "body.attachment_point")
     related = [o for o in overrides if any(_related(o.partition("=")[0].strip(), k) for k in inputs)]
     raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
 
@@ -583,7 +555,7 @@ def initial_state_fits(config: RunConfig, initial_state: Any) -> bool:
                 return False
             written[name] = {key: getattr(state, key) for key in INITIAL_STATE_BLOCKS if key in state.model_fields_set}
         states, _, errors = _place_tree(written, config.chain, margin, None, ())
-        _check_tree_limits(config.chain, states, errors, config.simulation.limits,
+        _check_limits(config.chain, states, errors, config.simulation.limits,
                            config.resolved["simulation"].get("limits") or {}, None, ())
     except (ConfigError, ValidationError, TypeError, ValueError):
         return False
@@ -716,32 +688,30 @@ def _refuse(key: str, found: str, expected: str, detail: str, source: str | None
     raise ConfigError([line + "".join(f" [from override {_short_override(o)}]" for o in related)], source)
 
 
-def _check_tree_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], errors: Sequence[np.ndarray],
-                       limits: Limits | None, written: Mapping, source: str | None, overrides: Sequence[str]) -> None:
-    """ConfigError when a body's initial theta, omega, x or v, or the E_j of a joint that is
-    not ``permanent``, lies outside ``limits`` (``simulation.limits``, the same bounds for
-    every body and joint; ``written``: its resolved section, for the message)."""
+def _check_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], errors: Sequence[np.ndarray],
+                  limits: Limits | None, written: Mapping, source: str | None, overrides: Sequence[str], *,
+                  one_body: bool = False) -> None:
+    """ConfigError when a body's initial theta, omega, x or v, or E_j of the joint that holds
+    it (not a point-fixed joint: E_j = 0 there), lies outside ``limits`` (``simulation.limits``,
+    the same bounds for every body and joint; ``states`` each body's placed initial state,
+    ``errors`` each joint's E_j [m]; ``written``: the section as validated, for the message).
+    ``one_body``: the configuration is written as one body (its words name no body)."""
     if limits is None:
         return
-    for joint, error in zip(chain.joints, errors):
-        outside = np.flatnonzero(~(np.abs(error) <= limits.constraint_error))
-        if not point_fixed(joint.variant) and outside.size:
-            i = int(outside[0])
-            _refuse("simulation.limits.constraint_error", short_repr(written.get("constraint_error")),
-                    "bounds that contain the initial state",
-                    f"joint '{joint.name}' starts outside: |E_{i + 1}| = {abs(error[i]):.6g} m > "
-                    f"{limits.constraint_error[i]:g} m", source, overrides, ("simulation.limits", "initial_state"))
-    for name, bound in (("theta", limits.theta), ("omega", limits.omega), ("position", limits.position),
-                        ("velocity", limits.velocity)):
-        for body in chain.bodies:
-            value = states[body.name][name]
-            outside = np.flatnonzero(~(np.abs(value) <= bound))
-            if outside.size:
-                i = int(outside[0])
-                _refuse(f"simulation.limits.{name}", short_repr(written.get(name)),
-                        "bounds that contain the initial state",
-                        f"body '{body.name}' starts outside: |{name}_{i + 1}| = {abs(value[i]):.6g} > {bound[i]:g}",
-                        source, overrides, ("simulation.limits", "initial_state"))
+    for body, joint, error in zip(chain.bodies, chain.joints, errors):
+        state = states[body.name]
+        values = [state["theta"], state["omega"], state["position"], state["velocity"],
+                  np.zeros(3) if point_fixed(joint.variant) else error]
+        found = limits_violation(values, limits.array)
+        if found is None:
+            continue
+        key, phrase = found
+        who = ("the initial state lies outside simulation.limits" if one_body else
+               f"joint '{joint.name}' starts outside" if key.endswith("constraint_error") else
+               f"body '{body.name}' starts outside")
+        inputs = ("simulation.limits", "initial_state", *(("body.attachment_point",) if one_body else ()))
+        _refuse(key, short_repr(written.get(key.rpartition(".")[2])), "bounds that contain the initial state",
+                f"{who}: {phrase}", source, overrides, inputs)
 
 
 def _tree_resolved(run: ChainSchema) -> dict:
@@ -768,24 +738,21 @@ def _tree_resolved(run: ChainSchema) -> dict:
     return dump
 
 
-def _tree_notes(chain: Chain, run: ChainSchema, source: str | None) -> tuple[str, ...]:
-    """Warn of each body's physical-plausibility problems (its inertia, its angles in degrees)
-    and note the singular gains written (W002; a gain left out is zero by intent: a passive
-    joint, no ground-anchored feedback)."""
+def _notes(chain: Chain, inertia_keys: Sequence[str], angles: Sequence[tuple[str, Any]],
+           gains: Sequence[tuple[str, Mapping[str, Any]]], source: str | None) -> tuple[str, ...]:
+    """Warn of each body's physical-plausibility problems (its inertia, under the key
+    ``inertia_keys[i]``; its initial angles in ``angles``: (key, theta)), the singular gains
+    written (W002, once per (key prefix, gains by name) of ``gains``; a gain left out is
+    zero by intent: a passive joint, no ground-anchored feedback) and the groups of bodies
+    nothing holds (W007); returns the lines. Warned at the level of the caller of the
+    public function that built the configuration."""
     lines = []
-    for i, (body, written) in enumerate(zip(chain.bodies, run.bodies)):  # the one-body lines, this body's keys
-        lines += [m.replace(" body.inertia:", f" bodies.{i}.inertia ('{body.name}'):", 1)
-                  for m in inertia_warnings(body.inertia)]
-        state = run.initial_state.get(body.name)
-        if state is not None:
-            lines += [m.replace(" initial_state.theta:", f" initial_state.{body.name}.theta:", 1)
-                      for m in angle_warnings(state.theta)]
-        lines += [m.replace("controller.", f"bodies.{i}.") for m in semidefinite_notes(
-            {g: getattr(written, g) for g in BODY_GAINS})]
-    for i, joint in enumerate(run.joints):
-        used = VARIANTS[joint.variant].required_gains
-        lines += [m.replace("controller.", f"joints.{i}.") for m in semidefinite_notes(
-            {g: getattr(joint, g) for g in (*JOINT_GAINS, "k_s") if g in used or g in ("k_r", "l_r")})]
+    for body, key in zip(chain.bodies, inertia_keys):
+        lines += [m.replace(" body.inertia:", f" {key}:", 1) for m in inertia_warnings(body.inertia)]
+    for key, theta in angles:
+        lines += [m.replace(" initial_state.theta:", f" {key}:", 1) for m in angle_warnings(theta)]
+    for prefix, written in gains:
+        lines += [m.replace("controller.", prefix) for m in semidefinite_notes(written)]
     lines += unheld_bodies([b.name for b in chain.bodies], [b.mass for b in chain.bodies], [b.k_t for b in chain.bodies],
                            [(None if j.parent == GROUND else j.parent, j.child, j.variant) for j in chain.joints],
                            chain.gravity)
@@ -805,7 +772,15 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
     _check_engine_scope(chain, resolved, source, overrides)
     states, placed, errors = _tree_initial_state(run, chain, source, overrides)
     simulation = simulation_settings(run.simulation)
-    _check_tree_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
-                       overrides)
+    _check_limits(chain, states, errors, simulation.limits, resolved["simulation"].get("limits") or {}, source,
+                  overrides)
+    gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]
+    gains += [(f"joints.{i}.", {g: getattr(j, g) for g in (*JOINT_GAINS, "k_s")
+                                if g in VARIANTS[j.variant].required_gains or g in ("k_r", "l_r")})
+              for i, j in enumerate(run.joints)]
+    angles = [(f"initial_state.{b.name}.theta", run.initial_state[b.name].theta) for b in chain.bodies
+              if b.name in run.initial_state]
+    notes = _notes(chain, [f"bodies.{i}.inertia ('{b.name}')" for i, b in enumerate(chain.bodies)], angles, gains,
+                   source)
     return RunConfig(name=run.name, chain=chain, initial_state=states, placed=placed,
-                     simulation=simulation, resolved=resolved, warnings=_tree_notes(chain, run, source))
+                     simulation=simulation, resolved=resolved, warnings=notes)
