@@ -17,13 +17,13 @@ import warnings
 import numpy as np
 import pytest
 from conftest import PAPER_CONFIGS, ROOT, paper_body, paper_gains
+from paper_model import VariantModel
 from reference import Model
 from scipy.optimize import linear_sum_assignment
 
 from rbstab.variants.paper import paper_form
 from rbstab.analysis import BasinAxis, analyze, basin_map, certify, linearise
 from rbstab.analysis.basin import time_to_converge
-from rbstab.analysis.certificate import boundary_level
 from rbstab.analysis.derivatives import directional_derivative, hessian, jacobian, richardson
 from rbstab.analysis.linearise import modes, verdict
 from rbstab.analysis.runs import check_entries
@@ -201,7 +201,7 @@ def test_free_body_certificate_closed_forms():
     body, gains = paper_body(), paper_gains()
     variant = VARIANTS["free"](body, gains)
     lin = linearise(variant)
-    cert = certify(variant, lin, gimbal_margin=1e-3, n_samples=2000)
+    cert = certify(VariantModel(variant), lin, gimbal_margin=1e-3, n_samples=2000)
     # v = Theta'K_r Theta/2 + Omega'J Omega/2 + X'K_t X/2 + m V'V/2 (eq 25)
     expected = np.zeros((12, 12))
     for k, block in enumerate((gains.k_r, body.inertia, gains.k_t, body.mass * np.eye(3))):
@@ -227,7 +227,7 @@ def test_certificate_fails_with_negative_damping():
     variant = VARIANTS["free"](body, gains)
     lin = linearise(variant)
     assert lin.verdict == "unstable"
-    cert = certify(variant, lin, gimbal_margin=1e-3, n_samples=2000)
+    cert = certify(VariantModel(variant), lin, gimbal_margin=1e-3, n_samples=2000)
     assert cert.rate_definiteness == "indefinite" and not cert.holds
     assert cert.sublevel_bound in ("dv/dt > 0 at a sampled state", "dv/dt > 0 at a state found by the local search")
     assert cert.sublevel <= cert.sublevel_sampled < 1e-3 * cert.boundary_level
@@ -236,7 +236,7 @@ def test_certificate_fails_with_negative_damping():
 
 def test_inverted_pendulum_v_is_not_positive_definite():
     variant = paper_form(_inverted_pendulum(k_r=100.0))
-    cert = certify(variant, linearise(variant), gimbal_margin=1e-3, n_samples=100)
+    cert = certify(VariantModel(variant), linearise(variant), gimbal_margin=1e-3, n_samples=100)
     assert not cert.positive_definite and cert.hessian_min_eigenvalue < 0
     assert not cert.holds and cert.sublevel == 0.0
 
@@ -249,7 +249,7 @@ def test_boundary_level_with_gravity_matches_a_direct_minimisation():
     lin = linearise(variant)
     h_v, _ = hessian(variant.lyapunov, lin.equilibrium)
     limit = GIMBAL_LOCK_ANGLE - 1e-3
-    found = boundary_level(variant, lin.equilibrium, h_v, limit)
+    found = VariantModel(variant).boundary_level(lin.equilibrium, h_v, limit)
     direct = min(
         minimize(lambda q, s=side: variant.lyapunov(np.array([q[0], s, q[1], 0, 0, 0]))[()], [0.0, 0.0],
                  method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-12}).fun

@@ -14,6 +14,7 @@ import warnings
 
 import numpy as np
 import pytest
+from paper_model import VariantModel
 
 from rbstab.analysis import analyze
 from rbstab.analysis.certificate import certify, level_states
@@ -130,7 +131,7 @@ def test_a_one_body_chains_level_is_the_one_body_certificates(name):
     variant, compiled = _one_body(name, (0.0, 0.0, -9.81))
     lin_chain, coordinates = linearise_chain(compiled)
     mine = certify(ChainModel(compiled, coordinates), lin_chain, gimbal_margin=0.1, n_samples=1000)
-    theirs = certify(variant, linearise(variant), gimbal_margin=0.1, n_samples=1000)
+    theirs = certify(VariantModel(variant), linearise(variant), gimbal_margin=0.1, n_samples=1000)
     np.testing.assert_allclose(mine.lyapunov_hessian, theirs.lyapunov_hessian, rtol=1e-6, atol=1e-6)
     assert mine.boundary_level == pytest.approx(theirs.boundary_level, rel=1e-6)
     assert mine.sublevel == pytest.approx(theirs.sublevel, rel=1e-6) and mine.sublevel > 0

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from conftest import ROOT
+from paper_model import VariantModel
 
 from rbstab.variants.paper import paper_form
 from rbstab.analysis import analyze, read_analysis
@@ -60,7 +61,7 @@ def test_local_search_finds_the_sliver_sampling_misses(load):
     state below it with dv/dt > 0 would be spurious)."""
     config = load()
     variant = paper_form(config)
-    cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=250)
+    cert = certify(VariantModel(variant), linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=250)
     exact = _exact_level(config)
     assert cert.sublevel_sampled > 1.5 * exact  # sampling alone misses
     assert cert.sublevel_bound == BOUNDS[5]
@@ -72,7 +73,7 @@ def test_local_search_finds_the_sliver_sampling_misses(load):
 def test_a_run_that_contradicts_c_lowers_it_and_is_named():
     config = _quiet(load_config, PENDULUM)
     variant = paper_form(config)
-    cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
+    cert = certify(VariantModel(variant), linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
     c = cert.sublevel
     same = checked(cert, [0.5 * c, 2.0 * c, np.nan], [True, False, False], lambda i: f"run {i}")
     assert same.sublevel == c and same.runs_checked == 2 and not same.notes  # outside, or recovered
@@ -93,7 +94,7 @@ def test_a_basin_point_still_settling_is_no_counterexample_and_one_that_fails_or
 
     config = _quiet(load_config, PENDULUM)
     variant = paper_form(config)
-    cert = certify(variant, linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
+    cert = certify(VariantModel(variant), linearise(variant), gimbal_margin=config.simulation.gimbal_margin, n_samples=100)
     c = cert.sublevel
     axes = [BasinAxis.parse("initial_state.omega.0=-1:1:2"), BasinAxis.parse("initial_state.omega.1=-1:1:2")]
 

@@ -17,14 +17,13 @@
 - :mod:`~rbstab.analysis.push`: the smallest fatal push of each direction and basin
   stability; :mod:`~rbstab.analysis.recovery`: both across a sweep spec's configurations;
 - :mod:`~rbstab.analysis.analyze`: :func:`analyze`, which ties them together, for one body
-  and for a tree of bodies (in its independent coordinates);
+  or a tree of bodies (as its compiled tree, in its independent coordinates);
 - :mod:`~rbstab.analysis.dataset`: the analysis files (netCDF-4) and the ``--json`` record.
 
 Method and limits: ``docs/analysis.md``.
 """
 
-from .analyze import (DEFAULT_BOUNDARY_LAYER, Analysis, ChainAnalysis, OutsideLimits, analyze,
-                      equilibrium_outside_limits)
+from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, NoEquilibrium, OutsideLimits, analyze
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
 from .dataset import is_analysis_file, read_analysis, write_analysis
@@ -37,11 +36,10 @@ __all__ = [
     "Analysis",
     "DEFAULT_BOUNDARY_LAYER",
     "OutsideLimits",
-    "equilibrium_outside_limits",
+    "NoEquilibrium",
     "linearise",
     "linearise_chain",
     "Linearisation",
-    "ChainAnalysis",
     "certify",
     "Certificate",
     "basin_map",

@@ -9,10 +9,11 @@ pushes and the basin stability (:mod:`~rbstab.analysis.push`) if asked for; last
 certificate's sublevel estimate checked against simulations (:mod:`~rbstab.analysis.evidence`:
 runs from {v = c}, and every run above).
 
-A tree of bodies (:class:`rbstab.config.RunConfig`) takes the same steps in its
-independent coordinates (a :class:`ChainAnalysis`): its rest state and linearisation
-(:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over it as a
-:class:`~rbstab.analysis.certificate.ChainModel`, its runs on the same engines.
+Every configuration, one body or a tree of bodies (:class:`rbstab.config.RunConfig`), is
+analysed as its compiled tree in the tree's independent coordinates: its rest state and
+linearisation (:func:`~rbstab.analysis.linearise.linearise_chain`), the certificate over it
+as a :class:`~rbstab.analysis.certificate.ChainModel`, its runs on the same engines. The
+paper's one body is written and shown as one body's analysis (:attr:`Analysis.one_body`).
 """
 
 from __future__ import annotations
@@ -34,64 +35,30 @@ from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import is_chain
 from ..variants import VARIANTS
-from ..variants.paper import paper_form
+from ..variants.paper import has_paper_form
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, ChainModel, certify
 from .dataset import analysis_content, analysis_dataset, certificate_record, json_record
 from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
-from .linearise import Linearisation, TreeCoordinates, linearise, linearise_chain, mode_shapes, undisturbed
+from .linearise import Linearisation, TreeCoordinates, linearise_chain, mode_shapes, undisturbed
 from .push import basin_stability as stability_of
 from ..diagnostics import unbounded_fall_note
 from .push import push_analysis
 from .runs import check_axes
 from .verify import NotVerifiable, check_verifiable, verify_analysis
 
-__all__ = ["Analysis", "ChainAnalysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config",
-           "OutsideLimits", "equilibrium_outside_limits"]
+__all__ = ["Analysis", "analyze", "DEFAULT_BOUNDARY_LAYER", "analysed_config", "OutsideLimits", "NoEquilibrium"]
 
 #: phi [m] put in place of the pure sign law (boundary_layer 0) of ``sliding``.
 DEFAULT_BOUNDARY_LAYER = 1e-3
 
 
-class _Findings:
-    """What one body's and a tree's analyses share (:class:`Analysis`, :class:`ChainAnalysis`):
-    their name, verdict, coordinates' names, the basin points inside {v <= c} and their file."""
-
-    @property
-    def name(self) -> str:
-        return self.config.name
-
-    @property
-    def verdict(self) -> str:
-        """The linearisation's verdict (:func:`rbstab.analysis.linearise.verdict`)."""
-        return self.linearisation.verdict
-
-    @property
-    def state_names(self) -> list[str]:
-        """The name of each coordinate of the linearisation (``theta_1`` ...; a tree's
-        ``<body>.<block>_<i>``, :meth:`TreeCoordinates.state_names`)."""
-        return self.layout.state_names()
-
-    def basin_inside(self) -> dict[str, int] | None:
-        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
-        if self.basin is None or self.certificate is None:
-            return None
-        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
-
-    def to_dataset(self):
-        """The analysis as an :class:`xarray.Dataset` (the file's content, :mod:`~rbstab.analysis.dataset`)."""
-        return analysis_dataset(self)
-
-    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
-        """(coordinates, variables, global attributes) of its file
-        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
-        return analysis_content(self, command_line)
-
-
 @dataclass
-class Analysis(_Findings):
-    """Everything :func:`analyze` found for one configuration (a tree's: :class:`ChainAnalysis`).
+class Analysis:
+    """Everything :func:`analyze` found for one configuration, one body or a tree of bodies,
+    in the tree's independent coordinates (:func:`rbstab.variants.chain.independent_coordinates`;
+    the paper's one body's are its own state, Theta, Omega[, X, V][, D]).
 
     Attributes
     ----------
@@ -100,9 +67,11 @@ class Analysis(_Findings):
     analysed : RunConfig
         The configuration analysed (``config``, or it with a boundary layer, see notes).
     linearisation : Linearisation
+        At the rest state, in the independent coordinates.
     certificate : Certificate or None
         None when not asked for. With disturbances, its Hessians are of the undisturbed
-        dynamics (the same equilibrium), its sampled dv/dt of the disturbed ones.
+        dynamics (the same equilibrium), its sampled dv/dt of the disturbed ones; its states
+        (e.g. ``worst_state``) are the independent coordinates.
     settling : dict or None
         The simulation from the configured initial state: ``status``, ``message``,
         ``time_to_converge`` [s] (NaN when not converged), ``lyapunov_initial`` [J],
@@ -120,6 +89,17 @@ class Analysis(_Findings):
         domain, the configuration's warnings).
     timing : dict of str -> float
         Seconds per part.
+    coordinates : list of (str, str, int)
+        (body name, block, index into the full state) of each 3 entries of
+        ``linearisation.equilibrium``.
+    rest_state : ndarray, shape (n_states,)
+        The full rest state (:func:`rbstab.variants.chain.full_state` of the equilibrium).
+    initial_lyapunov : float
+        v [J] at the configured initial state (zero at the rest state).
+    one_body : bool
+        The paper's one body (:func:`rbstab.variants.paper.has_paper_form`, in either spelling):
+        its file, record and text are one body's (its variant's state layout, no body
+        names); else a tree's (``variant`` chain, state blocks by body).
     """
 
     config: Any
@@ -133,20 +113,48 @@ class Analysis(_Findings):
     verification: Any = None
     notes: list[str] = field(default_factory=list)
     timing: dict = field(default_factory=dict)
+    coordinates: list = field(default_factory=list)
+    rest_state: np.ndarray | None = None
+    initial_lyapunov: float = 0.0
+    one_body: bool = False
 
-    #: Its ``--json`` record's kind.
-    kind = "configuration"
-    #: The angles that bound the certificate's domain, in its text (None: one body's theta_2).
-    domain = None
+    @property
+    def name(self) -> str:
+        return self.config.name
+
+    @property
+    def kind(self) -> str:
+        """Its ``--json`` record's kind: ``configuration`` (one body) or ``chain``."""
+        return "configuration" if self.one_body else "chain"
 
     @property
     def variant(self) -> str:
-        return self.config.chain.joints[0].variant
+        """One body's law; a tree's analysis file's ``variant``, as its run file's: ``chain``."""
+        return self.config.chain.joints[0].variant if self.one_body else "chain"
+
+    @property
+    def domain(self) -> str | None:
+        """The angles that bound the certificate's domain, in its text (None: one body's theta_2)."""
+        return None if self.one_body else "|theta_2| of a body or joint"
+
+    @property
+    def verdict(self) -> str:
+        """The linearisation's verdict (:func:`rbstab.analysis.linearise.verdict`)."""
+        return self.linearisation.verdict
 
     @property
     def layout(self):
-        """The analysed variant's :class:`~rbstab.layout.StateLayout`."""
-        return VARIANTS[self.analysed.chain.joints[0].variant].layout
+        """The linearisation's coordinates: one body's variant's
+        :class:`~rbstab.layout.StateLayout`, a tree's :class:`TreeCoordinates` by body and block."""
+        if self.one_body:
+            return VARIANTS[self.analysed.chain.joints[0].variant].layout
+        return TreeCoordinates(tuple(self.coordinates), tuple(self.config.chain.body_names))
+
+    @property
+    def state_names(self) -> list[str]:
+        """The name of each coordinate of the linearisation (``theta_1`` ...; a tree's
+        ``<body>.<block>_<i>``, :meth:`TreeCoordinates.state_names`)."""
+        return self.layout.state_names()
 
     @property
     def linear_settling_time(self) -> float:
@@ -154,59 +162,33 @@ class Analysis(_Findings):
         v ~ exp(-2 t / tau), so tau ln(1/ratio) / 2 (NaN unless asymptotically stable)."""
         return self.linearisation.settling_time(self.settling["ratio"] if self.settling else DEFAULT_LYAPUNOV_RATIO)
 
-    def to_json(self) -> dict[str, Any]:
-        """The ``--json`` record: ``name``, ``variant``, ``equilibrium``, ``eigenvalues``
-        ([re, im] pairs, real part descending), ``verdict`` and the rest of the analysis."""
-        return json_record(self)
+    def basin_inside(self) -> dict[str, int] | None:
+        """Outcome counts of the basin points inside the sublevel estimate {v <= c}."""
+        if self.basin is None or self.certificate is None:
+            return None
+        return self.basin.counts(self.basin.lyapunov_initial <= self.certificate.sublevel)
 
+    def to_dataset(self):
+        """The analysis as an :class:`xarray.Dataset` (the file's content, :mod:`~rbstab.analysis.dataset`)."""
+        return analysis_dataset(self)
 
-@dataclass
-class ChainAnalysis(Analysis):
-    """What :func:`analyze` finds for a tree of bodies (:class:`rbstab.config.RunConfig`):
-    an :class:`Analysis` in the tree's independent coordinates
-    (:mod:`rbstab.analysis.dataset` writes it as one body's analysis, its state blocks by
-    body), with:
-
-    Attributes
-    ----------
-    coordinates : list of (str, str, int)
-        (body name, block, index into the full state) of each 3 entries of
-        ``linearisation.equilibrium`` (:func:`rbstab.variants.chain.independent_coordinates`).
-    rest_state : ndarray, shape (n_states,)
-        The full rest state (:func:`rbstab.variants.chain.rest_state`).
-    initial_lyapunov : float
-        v [J] at the configured initial state (zero at the rest state).
-
-    Its certificate's states (e.g. ``worst_state``) are the independent coordinates z.
-    """
-
-    coordinates: list = field(default_factory=list)
-    rest_state: np.ndarray | None = None
-    initial_lyapunov: float = 0.0
-
-    #: A chain's analysis file's ``variant``, as its run file's.
-    variant = "chain"
-    #: Its ``--json`` record's kind.
-    kind = "chain"
-    #: The angles that bound the certificate's domain, in its text.
-    domain = "|theta_2| of a body or joint"
-
-    @property
-    def layout(self) -> TreeCoordinates:
-        """The linearisation's coordinates by body and block."""
-        return TreeCoordinates(tuple(self.coordinates), tuple(self.config.chain.body_names))
+    def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
+        """(coordinates, variables, global attributes) of its file
+        (:func:`~rbstab.analysis.dataset.analysis_content`)."""
+        return analysis_content(self, command_line)
 
     def as_dict(self) -> dict:
-        """Plain Python (the ``--json`` form): one body's record
-        (:func:`rbstab.analysis.dataset.json_record`: the verdict, the coordinates ``state``
-        and the ``equilibrium`` in them, eigenvalues as [re, im] [1/s] with each one's
-        natural frequency, damping ratio, time constant and e-folding time,
-        ``slowest_time_constant`` [s] (null unless asymptotically stable),
-        ``shortest_e_folding_time`` [s] (null unless unstable), the simulation, notes ...),
-        with the rest state per body and block (``rest_state``), each eigenvalue's mode shape
-        on the bodies' angles (``modes``: ``{"eigenvalue": [re, im], "shape":
+        """Plain Python (the ``--json`` form, :func:`rbstab.analysis.dataset.json_record`): the
+        verdict, the coordinates ``state`` and the ``equilibrium`` in them, eigenvalues as
+        [re, im] [1/s] with each one's natural frequency, damping ratio, time constant and
+        e-folding time, ``slowest_time_constant`` [s] (null unless asymptotically stable),
+        ``shortest_e_folding_time`` [s] (null unless unstable), the simulation, notes ...; a
+        tree's with the rest state per body and block (``rest_state``), each eigenvalue's mode
+        shape on the bodies' angles (``modes``: ``{"eigenvalue": [re, im], "shape":
         {"<body>.theta_<i>": [re, im]}}``, largest entry 1), v at the initial state [J]
         and the certificate's ``coordinates`` naming the entries of ``worst_state``."""
+        if self.one_body:
+            return json_record(self)
         lin = self.linearisation
         rest = {}
         for k, (body, block, _) in enumerate(self.coordinates):
@@ -216,12 +198,13 @@ class ChainAnalysis(Analysis):
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
 
     def to_json(self) -> dict:
-        """The ``--json`` record: :meth:`as_dict` (its pushes with the push estimate from
-        {v <= c}, its basin stability, as one body's), the basin map with the axes' keys and
-        values, every point's outcome (rows: the first axis; 0 converged, 1 not converged,
-        2 failed), the counts, those inside {v <= c} and the failures' messages."""
+        """The ``--json`` record: :meth:`as_dict` (one body's: ``name``, ``variant``,
+        ``equilibrium``, ``eigenvalues`` ([re, im] pairs, real part descending), ``verdict``
+        and the rest of the analysis); a tree's with the basin map's axes' keys and values,
+        every point's outcome (rows: the first axis; 0 converged, 1 not converged, 2
+        failed), the counts, those inside {v <= c} and the failures' messages."""
         record = self.as_dict()
-        if self.basin is not None:
+        if self.basin is not None and not self.one_body:
             b = self.basin
             record["basin"] = {"axes": [{"key": a.key, "values": a.values.tolist()} for a in b.axes],
                                "outcome": b.outcome.tolist(), "counts": b.counts(), "messages": b.messages,
@@ -322,72 +305,113 @@ class OutsideLimits(ValueError):
     naming the bound): every run there leaves it, so no push or initial state recovers."""
 
 
-def equilibrium_outside_limits(variant, equilibrium: np.ndarray) -> str | None:
-    """Why ``equilibrium`` (n_state,), the state :func:`rbstab.analysis.linearise.linearise`
-    linearises at, lies outside ``variant.limits`` (the configuration's
-    ``simulation.limits``), in one line ("the equilibrium lies outside simulation.limits:
-    |theta_2| = 0.7 rad > 0.6 rad (simulation.limits.theta)"), or None where it lies inside
-    (or there are no limits)."""
-    if variant.limits is None:
-        return None
-    found = limits_violation(variant.limited_values(np.asarray(equilibrium, dtype=float)[None])[0],
-                             variant.limits.array)
-    if found is None:
-        return None
-    key, detail = found
-    return f"the equilibrium lies outside simulation.limits: {detail} ({key})"
+#: The controls an actuator limits: (output, the record's limit field, units, whose: joint or body).
+_CONTROLS = (("torque_n", "torque_limit", "N m", "joint"), ("force_h", "force_limit", "N", "body"),
+             ("constraint_force", "constraint_force_limit", "N", "joint"))
 
 
-def _unheld(config) -> str:
+def _part(compiled, kind: str, i: int, one_body: bool) -> str:
+    """How a message names body or joint ``i`` (nothing for one body)."""
+    if one_body:
+        return ""
+    names = compiled.chain.joint_names if kind == "joint" else compiled.chain.body_names
+    return f" of {kind} '{names[i]}'"
+
+
+def _commanded(compiled, y: np.ndarray) -> dict[str, np.ndarray]:
+    """|N_j|, |H_i|, |Lambda_j| [N m, N, N] (each (n, 3)) that the feedback and point laws of
+    ``compiled`` command at its full state ``y`` (before the actuators' limits)."""
+    from ..variants import chain as C  # heavy: numba
+
+    params = compiled.params.copy()
+    params["saturation"] = 0.0
+    out = C.evaluate(C.with_records(compiled, params, compiled.ppoints, compiled.offset), np.zeros(1), y[None])
+    return {key: np.abs(np.asarray(out[key], dtype=float)[0]) for key, _, _, _ in _CONTROLS}
+
+
+def _beyond(compiled, y: np.ndarray, one_body: bool, at_limit: bool) -> list[str]:
+    """Each control commanded at ``y`` beyond its limit (``at_limit``: at or beyond), in words."""
+    commanded, out = _commanded(compiled, y), []
+    for key, field_name, unit, kind in _CONTROLS:
+        limits = np.asarray(compiled.params[field_name], dtype=float)  # (n, 3)
+        for i, axis in zip(*np.nonzero((commanded[key] >= limits) if at_limit else (commanded[key] > limits))):
+            word = ">=" if at_limit else ">"
+            out.append(f"|{key}_{axis + 1}|{_part(compiled, kind, i, one_body)} = {commanded[key][i, axis]:.4g} "
+                       f"{unit} {word} its limit {limits[i, axis]:g} {unit}")
+    return out
+
+
+def _unheld(compiled, one_body: bool) -> str:
     """Why a configuration with actuator limits has no rest point: the controls that its
-    equilibrium without limits commands beyond their limits."""
-    unlimited = paper_form(config, saturation=False)
-    commanded = _commanded(config, linearise(unlimited).equilibrium)
-    sat = paper_form(config).gains.saturation
-    beyond = []
-    for key, limit, unit in (("torque_n", sat.torque_n, "N m"), ("force_h", sat.force_h, "N"),
-                             ("constraint_force", sat.constraint_force, "N")):
-        beyond += [f"|{key}_{i + 1}| = {commanded[key][i]:.4g} {unit} > its limit {limit[i]:g} {unit}"
-                   for i in range(3) if commanded[key][i] > limit[i]]
+    rest state without limits commands beyond their limits."""
+    from ..variants import chain as C  # heavy: numba
+
+    params = compiled.params.copy()
+    params["saturation"] = 0.0
+    rest, _ = C.rest_state(C.with_records(compiled, params, compiled.ppoints, compiled.offset))
+    beyond = [] if rest is None else _beyond(compiled, rest, one_body, at_limit=False)
     why = ("; without the limits the equilibrium would need " + ", ".join(beyond)) if beyond else ""
-    return (f"no equilibrium: with its actuators' limits (controller.saturation) no state is at rest{why}; "
+    where = "controller.saturation" if one_body else "saturation"
+    return (f"no equilibrium: with its actuators' limits ({where}) no state is at rest{why}; "
             "there is nothing to linearise or certify (rbstab run shows where the body goes)")
 
 
-def _commanded(config, y: np.ndarray) -> dict[str, np.ndarray]:
-    """N, H and Lambda [N m, N, N] that the feedback and constraint law of ``config``
-    command at the state ``y`` (before the actuators' limits)."""
-    unlimited = paper_form(config, saturation=False)
-    out = unlimited.evaluate(np.asarray(y)[None])
-    return {key: np.abs(np.asarray(out[key])[0]) for key in ("torque_n", "force_h", "constraint_force")}
-
-
-def _saturated_at_rest(linearisation: Linearisation, config) -> list[str]:
-    """A note naming each control that sits at or beyond its limit at the equilibrium: the
-    linearisation there sees the actuator's slope at its limit (0 for clip beyond it)."""
-    sat = paper_form(config).gains.saturation
-    if sat is None or not linearisation.is_rest_point:
+def _saturated_at_rest(compiled, rest: np.ndarray, linearisation: Linearisation, one_body: bool) -> list[str]:
+    """A note naming each control that sits at or beyond its limit at the rest state ``rest``
+    (the full state): the linearisation there sees the actuator's slope at its limit (0 for
+    clip beyond it)."""
+    shapes = {s.shape for s in [*(b.saturation for b in compiled.chain.bodies),
+                                *(j.saturation for j in compiled.chain.joints)] if s is not None}
+    if not shapes or not linearisation.is_rest_point:
         return []
-    commanded = _commanded(config, linearisation.equilibrium)
-    at = [f"|{key}_{i + 1}| = {commanded[key][i]:.4g} >= its limit {limit[i]:g}"
-          for key, limit in (("torque_n", sat.torque_n), ("force_h", sat.force_h),
-                             ("constraint_force", sat.constraint_force))
-          for i in range(3) if commanded[key][i] >= limit[i]]
+    at = _beyond(compiled, rest, one_body, at_limit=True)
     if not at:
         return []
-    return [f"at the equilibrium the actuators saturate ({', '.join(at)}, as commanded): the linearisation "
-            f"has the {sat.shape} actuator's slope there"]
+    return [f"at the {_REST[one_body]} the actuators saturate ({', '.join(at)}, as commanded): the linearisation "
+            f"has the {'/'.join(sorted(shapes))} actuator's slope there"]
 
 
-def _domain_notes(linearisation: Linearisation, config) -> list[str]:
-    notes = []
-    limit = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
-    theta_2 = float(linearisation.equilibrium[1])
-    if abs(theta_2) >= limit:
-        notes.append(f"the equilibrium has theta_2 = {theta_2:.6g} rad, outside the model's domain |theta_2| < "
-                     f"pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): the Euler angles are singular on the way "
-                     "there, and no run reaches it")
-    return notes + _rest_point_notes(linearisation)
+#: How the notes name the state analysed: one body's equilibrium, a tree's rest state.
+_REST = {True: "equilibrium", False: "rest state"}
+
+
+def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str | None:
+    """Why the rest state ``rest`` (full state) lies outside ``limits``
+    (``simulation.limits``) in one line ("the equilibrium lies outside simulation.limits:
+    |theta_2| = 0.7 rad > 0.6 rad (simulation.limits.theta)"; a tree's names the body or
+    joint), or None where it lies inside (or there are no limits)."""
+    from ..variants import chain as C  # heavy: numba
+
+    if limits is None:
+        return None
+    errors = np.asarray(C.evaluate(compiled, np.zeros(1), rest[None])["constraint_error"], dtype=float)[0]
+    n = compiled.size
+    for i in range(n):
+        fixed = compiled.codes[i] == C.PERMANENT
+        values = [*rest[12 * i: 12 * i + 12].reshape(4, 3), np.zeros(3) if fixed else errors[i]]
+        found = limits_violation(values, limits.array)
+        if found is not None:
+            key, detail = found
+            kind = "joint" if key.endswith("constraint_error") else "body"
+            detail = detail.replace("| = ", f"|{_part(compiled, kind, i, one_body)} = ", 1)
+            return f"the {_REST[one_body]} lies outside simulation.limits: {detail} ({key})"
+    return None
+
+
+def _domain_notes(compiled, rest: np.ndarray, margin: float, one_body: bool) -> list[str]:
+    """A note where the rest state has a body's or joint's |theta_2| outside the model's
+    domain pi/2 - ``margin`` (``simulation.gimbal_margin`` [rad])."""
+    from ..variants import chain as C  # heavy: numba
+
+    angles, parts = C.gimbal_angles(compiled, rest)
+    worst = int(np.argmax(np.abs(angles)))
+    limit = GIMBAL_LOCK_ANGLE - margin
+    if abs(angles[worst]) < limit:
+        return []
+    of = "" if one_body else f" of {C.gimbal_part_name(compiled, *parts[worst])}"
+    return [f"the {_REST[one_body]} has theta_2 = {angles[worst]:.6g} rad{of}, outside the model's domain "
+            f"|theta_2| < pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): the Euler angles are singular on the way "
+            "there, and no run reaches it"]
 
 
 def _rest_point_notes(linearisation: Linearisation) -> list[str]:
@@ -423,12 +447,11 @@ def analyze(
     ----------
     config : RunConfig or path-like
         A validated configuration, or a YAML file (:func:`rbstab.config.load_config`).
-        A tree of bodies is analysed in its independent coordinates (a
-        :class:`ChainAnalysis`: its rest state and linearisation by
-        :func:`~rbstab.analysis.linearise.linearise_chain`, the certificate over it as a
-        :class:`~rbstab.analysis.certificate.ChainModel`), its basin map, pushes (on the
-        body ``push["body"]``) and basin stability on ``engine``, on the CPU in ``jobs``
-        threads; ``boundary_layer`` and ``executor`` are one body's.
+        Analysed as its compiled tree in the tree's independent coordinates (its rest state
+        and linearisation by :func:`~rbstab.analysis.linearise.linearise_chain`, the
+        certificate over it as a :class:`~rbstab.analysis.certificate.ChainModel`), its
+        basin map, pushes (on the body ``push["body"]``) and basin stability on ``engine``,
+        on the CPU in ``jobs`` threads; ``boundary_layer`` is one body's.
     boundary_layer : float, optional
         phi [m] analysed in place of the pure sign law of ``sliding`` (default
         :data:`DEFAULT_BOUNDARY_LAYER`); see :func:`analysed_config`.
@@ -474,7 +497,7 @@ def analyze(
 
     Returns
     -------
-    Analysis or ChainAnalysis
+    Analysis
 
     Raises
     ------
@@ -499,8 +522,7 @@ def analyze(
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
     if basin is not None:
         check_axes(analysed, axes)
-    tree = paper_form(analysed) is None  # the paper's one-body model, in either spelling, is analysed as such
-    result, model, disturbed = (_tree_findings if tree else _body_findings)(config, analysed, notes)
+    result, model, disturbed = _findings(config, analysed, notes)
     notes, timing = result.notes, result.timing
     lin = result.linearisation
     t1 = _time.perf_counter()
@@ -551,98 +573,44 @@ def analyze(
     return result
 
 
-def _body_findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
-    """(the :class:`Analysis` of one body's equilibrium and linearisation with its notes, the
-    certificate's model: the variant without disturbances, the variant with them or None)."""
-    variant, disturbed, disturbance_notes = _undisturbed(analysed)
-    lin = linearise(variant)
-    if not lin.is_rest_point and variant.gains.saturation is not None:
-        raise NoEquilibrium(_unheld(analysed))
-    outside = equilibrium_outside_limits(variant, lin.equilibrium)
-    if outside is not None:
-        raise OutsideLimits(outside)
-    notes = notes + disturbance_notes + _domain_notes(lin, analysed) + _saturated_at_rest(lin, analysed)
-    return Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes + list(config.warnings)), \
-        variant, disturbed
-
-
-def _tree_findings(config, analysed, notes: list[str]) -> tuple[ChainAnalysis, Any, Any]:
-    """(the :class:`ChainAnalysis` of a tree's rest state and linearisation in its
-    independent coordinates with its notes, the certificate's model: the tree without its
-    bodies' disturbances (the same h), the tree with them or None)."""
+def _findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
+    """(the :class:`Analysis` of the rest state and linearisation in the tree's independent
+    coordinates with its notes, the certificate's model: the tree without its bodies'
+    disturbances (the same h), the tree with them or None)."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
+    one_body = has_paper_form(analysed.chain)
     compiled = C.compile_chain(analysed.chain)
     quiet = undisturbed(analysed)
     calm = compiled if quiet is analysed else C.compile_chain(quiet.chain, offset=compiled.offset)  # the same h
     lin, coordinates = linearise_chain(calm)
+    saturated = any(p.saturation is not None for p in (*analysed.chain.bodies, *analysed.chain.joints))
+    if not lin.is_rest_point and saturated:
+        raise NoEquilibrium(_unheld(calm, one_body))
     rest = C.full_state(calm, lin.equilibrium)
     sim = analysed.simulation
-    if sim.limits is not None:
-        margin, what = C.region_margin(compiled, rest, sim.limits)
-        if margin < 0:
-            raise OutsideLimits(f"the rest state lies outside simulation.limits: {what.replace(' reached ', ' > ')}")
-    angles, parts = C.gimbal_angles(compiled, rest)
-    worst = int(np.argmax(np.abs(angles)))
-    limit = GIMBAL_LOCK_ANGLE - sim.gimbal_margin
-    if abs(angles[worst]) >= limit:
-        notes = notes + [f"the rest state has theta_2 = {angles[worst]:.6g} rad of "
-                         f"{C.gimbal_part_name(compiled, *parts[worst])}, outside the "
-                         f"model's domain |theta_2| < pi/2 - gimbal_margin = {limit:.6g} rad (eq 5): no run "
-                         "reaches it"]
-    notes = notes + _rest_point_notes(lin) + _tree_saturated_at_rest(calm, rest, lin)
+    outside = _outside_limits(calm, rest, sim.limits, one_body)
+    if outside is not None:
+        raise OutsideLimits(outside)
+    notes = notes + _domain_notes(calm, rest, sim.gimbal_margin, one_body) + _rest_point_notes(lin)
+    notes += _saturated_at_rest(calm, rest, lin, one_body)
     model, disturbed = ChainModel(calm, coordinates), None
     if quiet is not analysed:
         disturbed = ChainModel(compiled, coordinates)
-        notes.append("disturbances: the rest state, the linearisation and the certificate's Hessians are of the "
-                     "undisturbed chain; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
-                     "impulses not seen) and the runs integrate the disturbed one")
+        kinds = ", ".join(dict.fromkeys(d.kind for b in analysed.chain.bodies for d in b.disturbances))
+        notes.append(f"disturbances ({kinds}): the {_REST[one_body]}, the linearisation and the certificate's "
+                     "Hessians are of the undisturbed dynamics; the certificate's sampled dv/dt (each state at a "
+                     "time drawn in [0, t_end], impulses not seen) and the simulations integrate the disturbed "
+                     "dynamics")
     v0 = C.lyapunov(compiled, C.initial_state(analysed))[0]
-    return ChainAnalysis(config=config, analysed=analysed, linearisation=lin, notes=notes + list(config.warnings),
-                         coordinates=coordinates, rest_state=rest, initial_lyapunov=float(v0)), model, disturbed
-
-
-def _tree_saturated_at_rest(compiled, rest: np.ndarray, linearisation: Linearisation) -> list[str]:
-    """A note naming each joint's or body's control at its limit at the rest state ``rest``
-    (the maximal state) of ``compiled``, as one body's (:func:`_saturated_at_rest`): the
-    linearisation there sees the actuator's slope at its limit (0 for clip beyond it)."""
-    from ..variants import chain as C  # heavy: numba
-
-    if not linearisation.is_rest_point:
-        return []
-    out, chain = C.evaluate(compiled, np.zeros(1), rest[None]), compiled.chain
-    at, shapes = [], set()
-    for key, unit, kind, members in (("torque_n", "N m", "joint", chain.joints),
-                                     ("constraint_force", "N", "joint", chain.joints),
-                                     ("force_h", "N", "body", chain.bodies)):
-        for m, i in zip(*np.nonzero(np.asarray(out[f"{key}_saturated"])[0])):
-            limits = members[m].saturation
-            at.append(f"{key}_{i + 1} of {kind} '{members[m].name}' at its limit {getattr(limits, key)[i]:g} {unit}")
-            shapes.add(limits.shape)
-    if not at:
-        return []
-    return [f"at the rest state the actuators saturate ({', '.join(at)}): the linearisation has the "
-            f"{'/'.join(sorted(shapes))} actuator's slope there"]
+    return Analysis(config=config, analysed=analysed, linearisation=lin, notes=notes + list(config.warnings),
+                    coordinates=coordinates, rest_state=rest, initial_lyapunov=float(v0), one_body=one_body), \
+        model, disturbed
 
 
 def _impulse_times(config) -> list[float]:
-    """Times [s] of the configuration's impulse disturbances (one body's or every body's of a tree)."""
-
+    """Times [s] of the configuration's impulse disturbances (every body's)."""
     return [d.start for b in config.chain.bodies for d in b.disturbances if d.kind == "impulse"]
-
-
-def _undisturbed(config) -> tuple:
-    """(the paper form of ``config`` without its disturbances, with them or None when it has
-    none, a note saying which dynamics each part of the analysis sees)."""
-    variant = paper_form(config)
-    disturbances = variant.gains.disturbances
-    if not disturbances:
-        return variant, None, []
-    kinds = ", ".join(dict.fromkeys(d.kind for d in disturbances))
-    return paper_form(config, disturbances=False), variant, [
-        f"disturbances ({kinds}): the equilibrium, the linearisation and the certificate's Hessians are of the "
-        "undisturbed dynamics; the certificate's sampled dv/dt (each state at a time drawn in [0, t_end], "
-        "impulses not seen) and the simulations integrate the disturbed dynamics"]
 
 
 def _check_options(samples: int, basin_samples: int, ratio: float, jobs: int) -> None:

@@ -2,7 +2,7 @@
 dv/dt <= 0 on sampled states, and a sublevel set of v as an inner estimate of the region
 of attraction.
 
-v is the variant's Lyapunov function as the runs record it (eqs 25, 30, 31, 41, 44; zero
+v is the configuration's Lyapunov function as the runs record it (eqs 25, 30, 31, 41, 44; zero
 at the equilibrium by the constant h), and the analytic dv/dt its ``lyapunov_rate``
 (eqs 29, 37, 43, 46). Local part, at the equilibrium y_e:
 
@@ -35,9 +35,9 @@ each with its search (the history; :attr:`Certificate.settled`). It stays an *es
 
 The model is anything with the small protocol of :class:`Model` (v, the analytic dv/dt, the
 right-hand side f, the domain's angles, the least v on the domain boundary and the map to
-the state a run starts from): a one-body variant (:class:`VariantModel`, its own state) or a
-chain in its independent coordinates (:class:`ChainModel`,
-on the constraint manifold of its permanent joints).
+the state a run starts from): the compiled tree in its independent coordinates
+(:class:`ChainModel`, on the constraint manifold of its permanent joints; one body's are its
+own state).
 
 With disturbances (``disturbed``), the local part is of the undisturbed dynamics and the
 sampled part of the disturbed ones: each sampled state at a time drawn uniformly in
@@ -56,7 +56,8 @@ import numpy as np
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from .derivatives import directional_derivative, hessian, jacobian
 
-__all__ = ["Certificate", "Model", "VariantModel", "ChainModel", "as_model", "constrained_boundary_level", "certify",
+__all__ = ["Certificate", "Model", "ChainModel", "coordinate_boundary_level",
+           "constrained_boundary_level", "certify",
            "checked", "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
            "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
@@ -120,43 +121,6 @@ class Model(Protocol):
     def states(self, x: np.ndarray) -> np.ndarray: ...
 
 
-class VariantModel:
-    """A one-body variant (:class:`rbstab.variants.Variant`) as a :class:`Model` in its own
-    state of ``n`` entries: the domain |theta_2| < limit (eq 5, linear: ``y[1]``), the
-    boundary level of :func:`boundary_level`, runs from the state itself."""
-
-    def __init__(self, variant, n: int) -> None:
-        self.variant = variant
-        self.angle_matrix = np.eye(n)[1:2]
-
-    def lyapunov(self, x):
-        return self.variant.lyapunov(x)
-
-    def evaluate(self, x, t=0.0):
-        return self.variant.evaluate(x, t)
-
-    def rhs(self, t, x):
-        return self.variant.rhs(t, x)
-
-    def angles(self, x):
-        return np.atleast_2d(x)[:, 1:2]
-
-    def angle_jacobian(self, x):
-        return self.angle_matrix
-
-    def boundary_level(self, y_e, hess, limit):
-        return boundary_level(self.variant, y_e, hess, limit)
-
-    def states(self, x):
-        return np.atleast_2d(x)
-
-
-def as_model(model, n: int):
-    """``model`` as a :class:`Model` of ``n`` coordinates: a variant wrapped in
-    :class:`VariantModel`, a model as it is."""
-    return model if hasattr(model, "angles") else VariantModel(model, n)
-
-
 class ChainModel:
     """A compiled chain (:class:`rbstab.variants.chain.CompiledChain`) as a :class:`Model`
     in its independent coordinates z (:func:`rbstab.variants.chain.independent_coordinates`:
@@ -213,8 +177,7 @@ class ChainModel:
     def _outputs(self, x, t=0.0) -> dict:
         from ..variants import chain as C  # heavy: numba
 
-        y = self.states(x)
-        return C.evaluate(self.compiled, np.broadcast_to(np.asarray(t, dtype=float), len(y)).copy(), y)
+        return C.evaluate(self.compiled, t, self.states(x))
 
     def lyapunov(self, x):
         """v [J] at each row of ``x`` (a float for one state (n,))."""
@@ -257,10 +220,15 @@ class ChainModel:
         return ((values[: self.n] - values[self.n:]) / (2 * _ANGLE_STEP)).T
 
     def boundary_level(self, y_e, hess, limit) -> float:
-        """The least v [J] on the domain boundary (any angle at +-limit), at rest."""
+        """The least v [J] on the domain boundary (any angle at +-limit), at rest: where every
+        angle is a coordinate (no joint has a body for parent), :func:`coordinate_boundary_level`;
+        else :func:`constrained_boundary_level`."""
         free = [3 * k + a for k, (_, block, _) in enumerate(self.coordinates)
                 if block in ("theta", "position", "controller_state") for a in range(3)]
-        return constrained_boundary_level(self, np.asarray(y_e, dtype=float), hess, limit, np.array(free))
+        y_e = np.asarray(y_e, dtype=float)
+        if self.angle_matrix is not None:
+            return coordinate_boundary_level(self.lyapunov, y_e, hess, limit, self._theta, free)
+        return constrained_boundary_level(self, y_e, hess, limit, np.array(free))
 
 
 @dataclass(frozen=True)
@@ -424,12 +392,6 @@ def _pbh_observable(jac: np.ndarray, rate_hessian: np.ndarray, root: np.ndarray,
     return True
 
 
-def _configuration_indices(layout) -> np.ndarray:
-    """Indices of the configuration coordinates (theta, position, controller_state)."""
-    blocks = [layout.slice(b) for b in layout.blocks if b in ("theta", "position", "controller_state")]
-    return np.concatenate([np.arange(s.start, s.stop) for s in blocks])
-
-
 #: Steps of the Richardson tables of a Newton step (its direction need not be exact: the
 #: value it reaches is evaluated as it is).
 _NEWTON_LEVELS = 10
@@ -462,25 +424,29 @@ def _newton_minimum(f, q: np.ndarray, iterations: int = 30) -> float:
     return value
 
 
-def boundary_level(variant, y_e: np.ndarray, hess: np.ndarray, limit: float) -> float:
-    """The least v [J] on the domain boundary theta_2 = +-limit, at rest, minimised over the
-    other configuration coordinates (Newton steps from the quadratic model's minimiser)."""
-    free = np.array([i for i in _configuration_indices(variant.layout) if i != 1])
+def coordinate_boundary_level(lyapunov, y_e: np.ndarray, hess: np.ndarray, limit: float, angles,
+                              configuration) -> float:
+    """The least v [J] on the domain boundary of a model whose angles are coordinates (the
+    indices ``angles`` into y): for each angle and side, v (``lyapunov``, (k, n) -> (k,)) at
+    rest with that angle at +-limit, minimised over the other ``configuration`` coordinates
+    (Newton steps from the quadratic model's minimiser; the rest at y_e)."""
     levels = []
-    for side in (limit, -limit):
+    for a in angles:
+        free = np.array([i for i in configuration if i != a], dtype=int)
+        for side in (limit, -limit):
 
-        def v_on_boundary(q, side=side):
-            y = np.tile(y_e, (len(q), 1))
-            y[:, 1] = side
-            y[:, free] = q
-            return variant.lyapunov(y)
+            def v_on_boundary(q, side=side, a=a, free=free):
+                y = np.tile(y_e, (len(q), 1))
+                y[:, a] = side
+                y[:, free] = q
+                return lyapunov(y)
 
-        if not len(free):
-            levels.append(float(v_on_boundary(np.zeros((1, 0)))[0]))
-            continue
-        start = y_e[free] - np.linalg.solve(hess[np.ix_(free, free)], hess[free, 1] * (side - y_e[1]))
-        with np.errstate(all="ignore"):
-            levels.append(_newton_minimum(v_on_boundary, start))
+            if not len(free):
+                levels.append(float(v_on_boundary(np.zeros((1, 0)))[0]))
+                continue
+            start = y_e[free] - np.linalg.solve(hess[np.ix_(free, free)], hess[free, a] * (side - y_e[a]))
+            with np.errstate(all="ignore"):
+                levels.append(_newton_minimum(v_on_boundary, start))
     return min(levels)
 
 
@@ -550,7 +516,7 @@ def _samples(y_e: np.ndarray, root: np.ndarray, top: float, n: int, rng) -> np.n
 
 
 def certify(
-    variant,
+    model,
     linearisation,
     *,
     gimbal_margin: float,
@@ -559,32 +525,29 @@ def certify(
     disturbed=None,
     t_end: float = 0.0,
 ) -> Certificate:
-    """The certificate of ``variant``'s equilibrium (module docstring).
+    """The certificate of ``model``'s equilibrium (module docstring).
 
     Parameters
     ----------
-    variant : rbstab.variants.Variant or Model
-        Smooth (``variant.smooth``); a variant is taken in its own state
-        (:class:`VariantModel`), a :class:`Model` in its coordinates.
+    model : Model
+        Smooth (no pure sign law), in its coordinates (:class:`ChainModel`).
     linearisation : rbstab.analysis.linearise.Linearisation
-        Of ``variant`` (its equilibrium, Jacobian and eigenvalues, in the model's coordinates).
+        Of ``model`` (its equilibrium, Jacobian and eigenvalues, in the model's coordinates).
     gimbal_margin : float
         [rad]: the domain is |theta_2| < pi/2 - gimbal_margin (eq 5).
     n_samples : int
         States sampled for the dv/dt check (>= 1).
     seed : int
         Of the sampling (numpy's default generator).
-    disturbed : rbstab.variants.Variant or Model, optional
-        ``variant`` with its disturbances, whose dv/dt the samples check, each at a time
-        drawn uniformly in [0, ``t_end``] [s] (default: ``variant`` itself, at t = 0).
+    disturbed : Model, optional
+        ``model`` with its disturbances, whose dv/dt the samples check, each at a time
+        drawn uniformly in [0, ``t_end``] [s] (default: ``model`` itself, at t = 0).
     """
     y_e = linearisation.equilibrium
-    variant = as_model(variant, len(y_e))
-    disturbed = as_model(disturbed, len(y_e)) if disturbed is not None else None
-    h_v, _ = hessian(variant.lyapunov, y_e)
-    h_r, _ = hessian(lambda y: variant.evaluate(y)["lyapunov_rate"], y_e)
+    h_v, _ = hessian(model.lyapunov, y_e)
+    h_r, _ = hessian(lambda y: model.evaluate(y)["lyapunov_rate"], y_e)
     positive = bool(np.all(np.diag(h_v) > 0) and _scaled_eigenvalues(h_v)[0] > DEFINITE_RTOL)
-    v_e = float(variant.lyapunov(y_e))
+    v_e = float(model.lyapunov(y_e))
     limit = GIMBAL_LOCK_ANGLE - gimbal_margin
     nan = np.full(0, np.nan)
     common = dict(lyapunov_equilibrium=v_e, lyapunov_hessian=h_v, hessian_min_eigenvalue=float(np.linalg.eigvalsh(h_v)[0]),
@@ -600,11 +563,11 @@ def certify(
     root = q @ np.diag(1.0 / np.sqrt(w)) @ q.T  # S = H_v^(-1/2)
     mu = np.linalg.eigvalsh(root @ h_r @ root)  # H_r w = mu H_v w
     observable = _pbh_observable(linearisation.jacobian, h_r, root, linearisation.eigenvalues)
-    level = variant.boundary_level(y_e, h_v, limit)
+    level = model.boundary_level(y_e, h_v, limit)
     rng = np.random.default_rng(seed)
     states = _samples(y_e, root, _REACH * level, n_samples, rng)
     times = rng.uniform(0.0, t_end, n_samples) if disturbed is not None else np.zeros(n_samples)
-    dynamics = disturbed if disturbed is not None else variant
+    dynamics = disturbed if disturbed is not None else model
     sampled = _sampled_rates(dynamics, linearisation, states, limit, times)
     sampled_c, bound = _sublevel(level, sampled)
     search = _LevelSearch(dynamics, linearisation, root, limit, _REACH * level * 10.0 ** -_DECADES)
@@ -643,8 +606,8 @@ class _LevelSearch:
     as a sample is (the numerical dv/dt of :func:`_sampled_rates`, above its error): only a
     confirmed dv/dt > 0 lowers c."""
 
-    def __init__(self, variant, linearisation, root: np.ndarray, limit: float, floor: float) -> None:
-        self.variant, self.linearisation, self.root, self.limit = variant, linearisation, root, limit
+    def __init__(self, model, linearisation, root: np.ndarray, limit: float, floor: float) -> None:
+        self.model, self.linearisation, self.root, self.limit = model, linearisation, root, limit
         self.floor = floor  # the least level sampled: below it v and dv/dt are round-off
         self.seen: set = set()  # the samples searched from (the history's prefixes share them)
         self.climbed: list = []  # where the climbs ended (states)
@@ -661,8 +624,8 @@ class _LevelSearch:
         """(v, dv/dt, the angles or None) at the states z (k, n): the angles where the model's
         ``evaluate`` gives them (``"angles"``) and they are not linear in the state."""
         with np.errstate(all="ignore"):
-            out = self.variant.evaluate(self._states(z), t)
-        angles = out.get("angles") if self.variant.angle_matrix is None else None
+            out = self.model.evaluate(self._states(z), t)
+        angles = out.get("angles") if self.model.angle_matrix is None else None
         return (np.asarray(out["lyapunov"], dtype=float), np.asarray(out["lyapunov_rate"], dtype=float),
                 None if angles is None else np.asarray(angles, dtype=float))
 
@@ -689,7 +652,7 @@ class _LevelSearch:
         """|angle| <= limit for each of the model's angles: linear constraints in z where the
         angles are linear in the state, else with their Jacobian."""
         lim = self.limit
-        matrix = self.variant.angle_matrix
+        matrix = self.model.angle_matrix
         out = []
         if matrix is not None:
             for row_y in matrix:
@@ -701,11 +664,11 @@ class _LevelSearch:
             return out
         def angles(z):
             found = self._gradients(z, t)[4]
-            return self.variant.angles(self._states(z))[0] if found is None else found
+            return self.model.angles(self._states(z))[0] if found is None else found
 
         def jac(z):
             found = self._gradients(z, t)[5]
-            return self.variant.angle_jacobian(self._states(z)[0]) @ self.root if found is None else found
+            return self.model.angle_jacobian(self._states(z)[0]) @ self.root if found is None else found
 
         return [{"type": "ineq", "fun": lambda z: (lim - angles(z)) / lim, "jac": lambda z: -jac(z) / lim},
                 {"type": "ineq", "fun": lambda z: (lim + angles(z)) / lim, "jac": lambda z: jac(z) / lim}]
@@ -746,7 +709,7 @@ class _LevelSearch:
         """v at the states z (k, n) whose numerical dv/dt is positive (the samples' test), inf elsewhere."""
         if not len(z):
             return np.zeros(0)
-        checked = _sampled_rates(self.variant, self.linearisation, self._states(z), self.limit, t)
+        checked = _sampled_rates(self.model, self.linearisation, self._states(z), self.limit, t)
         v = checked["sample_lyapunov"]
         return np.where(checked["_positive"] & np.isfinite(v) & (v >= self.floor), v, np.inf)
 
@@ -795,24 +758,24 @@ class _LevelSearch:
         return float(levels.min()), runs
 
 
-def _sampled_rates(variant, linearisation, y: np.ndarray, limit: float, t: np.ndarray) -> dict:
+def _sampled_rates(model, linearisation, y: np.ndarray, limit: float, t: np.ndarray) -> dict:
     """v, numerical and analytic dv/dt at the states ``y`` (NaN outside the domain) at the
     times ``t`` [s] (1, or one a state), the worst state and the rate mismatch (fields of
     :class:`Certificate`)."""
     with np.errstate(invalid="ignore"):
-        outside = np.any(np.abs(variant.angles(y)) >= limit, axis=1)
+        outside = np.any(np.abs(model.angles(y)) >= limit, axis=1)
     inside = ~outside
     t = np.broadcast_to(t, len(y))
     with np.errstate(all="ignore"):
-        out = variant.evaluate(y, t)
+        out = model.evaluate(y, t)
         v = np.array(out["lyapunov"])
         analytic = np.where(inside, out["lyapunov_rate"], np.nan)
         rate = np.full(len(y), np.nan)
         error = np.full(len(y), np.nan)
         rho = max(float(np.abs(linearisation.eigenvalues).max()), 1e-3)
         if inside.any():
-            f = variant.rhs(t[inside], y[inside])
-            rate[inside], error[inside] = directional_derivative(variant.lyapunov, y[inside], f, 1.0 / rho)
+            f = model.rhs(t[inside], y[inside])
+            rate[inside], error[inside] = directional_derivative(model.lyapunov, y[inside], f, 1.0 / rho)
         power = np.abs(analytic) + rho * np.abs(v)
         relative = rate / np.where(power > 0, power, 1.0)
     positive = inside & (rate > np.maximum(10.0 * error, RATE_RTOL * power))
@@ -894,9 +857,9 @@ def checked(certificate: Certificate, lyapunov_start, recovered, name, reasons=N
     return replace(out, sublevel=c, sublevel_bound=BOUNDS[6], notes=certificate.notes + (note,))
 
 
-def level_states(variant, linearisation, certificate: Certificate, n: int, seed: int = 0) -> np.ndarray:
-    """n states on the level set {v = c} (c the certificate's sublevel) of ``variant`` (a
-    variant or a :class:`Model`, in its coordinates: map them with ``Model.states``): along the
+def level_states(model, linearisation, certificate: Certificate, n: int, seed: int = 0) -> np.ndarray:
+    """n states on the level set {v = c} (c the certificate's sublevel) of ``model`` (a
+    :class:`Model`, in its coordinates: map them with ``Model.states``): along the
     directions from y_e of the states where the local search's climbs ended (dv/dt largest on
     their level sets; up to n / 2 of them), of the worst sampled state, and random ones, in
     the coordinates z of y = y_e + S z, each at the first radius where v reaches c
@@ -917,7 +880,7 @@ def level_states(variant, linearisation, certificate: Certificate, n: int, seed:
 
     def v_at(r):
         with np.errstate(all="ignore"):
-            return np.asarray(variant.lyapunov(y_e + (r[:, None] * u) @ root.T), dtype=float)
+            return np.asarray(model.lyapunov(y_e + (r[:, None] * u) @ root.T), dtype=float)
 
     lo = np.zeros(n)
     hi = np.full(n, np.sqrt(2.0 * c))

@@ -44,7 +44,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..convergence import ROUND_OFF, converged
-from .certificate import Certificate, as_model, checked, level_states
+from .certificate import Certificate, checked, level_states
 from .runs import SETTLING_CONTINUATIONS, Runs, continued, longer_horizon
 
 __all__ = ["falsify", "falsify_with", "check_runs", "check_initial_run", "contradiction", "FALSIFICATION_RUNS",
@@ -71,8 +71,8 @@ def falsify(config, model, linearisation, certificate: Certificate, *, runs: int
     config : RunConfig
         The configuration analysed (its runs: its bodies, laws, gains, disturbances, limits,
         settings).
-    model : rbstab.variants.Variant or rbstab.analysis.certificate.Model
-        The certificate's model (its v; one body's variant, or a tree's
+    model : rbstab.analysis.certificate.Model
+        The certificate's model (its v: the tree's
         :class:`~rbstab.analysis.certificate.ChainModel` in its independent coordinates),
         without disturbances.
     linearisation : rbstab.analysis.linearise.Linearisation
@@ -84,10 +84,10 @@ def falsify(config, model, linearisation, certificate: Certificate, *, runs: int
     jobs : int
         Threads integrating a tree's runs (:class:`rbstab.analysis.runs.Runs`).
     """
-    batch, states = Runs(config, jobs=jobs), as_model(model, len(linearisation.equilibrium)).states
+    batch, states = Runs(config, jobs=jobs), model.states
 
     def run(x):
-        ok, v0, v1 = batch.outcomes(states(x))
+        ok, v0, v1 = batch.outcomes(batch.of_full(states(x)))
         with np.errstate(invalid="ignore"):
             return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 
@@ -98,8 +98,8 @@ def falsify_with(run, model, linearisation, certificate: Certificate, *, runs: i
                  seed: int = 0) -> Certificate:
     """``certificate`` after the falsification pass (module docstring) with the runs of
     ``run``: ``run(x)`` -> (whether each run from the states ``x`` (k, n; the model's
-    coordinates) recovered by the pass's rule, v [J] where each starts); ``model`` a variant
-    or a :class:`rbstab.analysis.certificate.Model` (its v: the certificate's)."""
+    coordinates) recovered by the pass's rule, v [J] where each starts); ``model`` a
+    :class:`rbstab.analysis.certificate.Model` (its v: the certificate's)."""
     if runs < 1 or not certificate.positive_definite:
         return certificate
     for _ in range(FALSIFICATION_ROUNDS):

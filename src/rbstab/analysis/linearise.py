@@ -37,7 +37,7 @@ import math
 
 import numpy as np
 
-from ..layout import BLOCK_UNITS, STATE_BLOCKS, is_chain
+from ..layout import BLOCK_UNITS, STATE_BLOCKS
 from .derivatives import jacobian
 
 __all__ = [
@@ -380,23 +380,18 @@ class TreeCoordinates:
 def linearise_config(config) -> Linearisation:
     """The linearisation at the rest state of a run configuration, as ``rbstab analyze``
     finds it, without its disturbances (they act in time, not at rest: :func:`undisturbed`):
-    of a tree by :func:`linearise_chain`; of one body in one body's spelling by
-    :func:`linearise` of its paper form (:func:`rbstab.variants.paper.paper_form`).
+    :func:`linearise_chain` of its compiled tree (one body's: its one-body tree, in its
+    variant's own state).
 
     Raises
     ------
     ValueError
-        Where there is none: the pure sign law of ``sliding``, a chain with no rest state
-        near its reference configuration (:func:`linearise`, :func:`linearise_chain`).
+        Where there is none: the pure sign law of ``sliding``, a tree with no rest state
+        near its reference configuration (:func:`linearise_chain`).
     """
-    config = undisturbed(config)
-    if is_chain(config):
-        from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
-        return linearise_chain(C.compile_chain(config.chain))[0]
-    from ..variants.paper import paper_form  # heavy: numba
-
-    return linearise(paper_form(config))
+    return linearise_chain(C.compile_chain(undisturbed(config).chain))[0]
 
 
 def undisturbed(config):

@@ -42,7 +42,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF, converged
-from ..layout import is_chain, point_fixed
+from ..layout import VARIANT_LAYOUTS, is_chain, point_fixed
 from .runs import Runs, check_entries
 
 __all__ = ["PUSH_KINDS", "RECOVERY_RULE", "STATE_RULE", "PushAnalysis", "Pushes", "Thresholds", "BasinStability",
@@ -208,7 +208,7 @@ class Pushes:
         if kind == "force":
             entry["point"] = self.point.tolist()
         self._compiled = C.compile_chain(chain, offset=0.0)  # dT does not depend on v's offset
-        self.equilibrium, initial = (_tree_rest if tree else _body_rest)(config, self._compiled)
+        self.equilibrium, initial = _rest(config, tree)
         if tree:
             entry["body"] = body
         self.config = self._pushed_config(config, {**resolved, "initial_state": initial, "disturbances": own + [entry]})
@@ -269,45 +269,37 @@ class Pushes:
                                      (self._member, self.index, vectors), self.ratio)[0]
 
 
-def _body_rest(config, compiled) -> tuple[np.ndarray, dict]:
-    """(the full state of one body at rest in its one-body chain ``compiled``, the
-    ``initial_state`` section that starts it there): the equilibrium of its undisturbed
-    dynamics (its own disturbances act on the runs), a permanent body placed on its pin."""
+def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
+    """(the full state of the configuration's tree at rest, the ``initial_state`` section that
+    starts it there as the configuration writes it: by body name where ``tree``, else one
+    body's keys, those its variant's state lacks as configured): the rest state of the
+    undisturbed tree (its own disturbances act on the runs;
+    :func:`rbstab.analysis.linearise.linearise_chain`)."""
     from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
     from ..variants import chain as C  # heavy: numba
-    from ..variants.paper import paper_form  # heavy: numba
-    from .linearise import linearise, undisturbed  # heavy: numba
+    from .linearise import linearise_chain, undisturbed  # heavy: numba
 
-    lin = linearise(paper_form(undisturbed(config)))
+    calm = C.compile_chain(undisturbed(config).chain, offset=0.0)
+    try:
+        lin, _ = linearise_chain(calm)
+    except ValueError:
+        raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
+                         "potential falls without bound): a push from rest cannot be analysed") from None
     if not lin.is_rest_point:
         raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
                          f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
-    layout = paper_form(config).layout
-    blocks = dict(zip(layout.blocks, np.split(lin.equilibrium, len(layout.blocks))))
-    rest = np.zeros(compiled.n_states)
-    for at, block in enumerate(("theta", "omega", "position", "velocity", "controller_state")):
-        if block in blocks:
-            rest[3 * at: 3 * at + 3] = blocks[block]
-    section = config.resolved["initial_state"]
-    initial = {key: (blocks[b].tolist() if b in blocks else list(section[key])) for key, b in INITIAL_STATE_BLOCKS.items()}
-    return C._place(compiled, rest, only_permanent=True), initial
-
-
-def _tree_rest(config, compiled) -> tuple[np.ndarray, dict]:
-    """(a tree's rest state, the ``initial_state`` section that starts it there)."""
-    from ..variants import chain as C  # heavy: numba
-
-    rest, _ = C.rest_state(compiled)
-    if rest is None:
-        raise ValueError(f"{config.name}: the chain has no rest state near its reference configuration (its "
-                         "potential falls without bound): a push from rest cannot be analysed")
-    initial = {}
-    for i, name in enumerate(compiled.chain.body_names):
+    rest = C.full_state(calm, lin.equilibrium)
+    states = {}
+    for i, name in enumerate(calm.chain.body_names):
         state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
-        if compiled.d_at[i] >= 0:
-            state["d"] = rest[compiled.d_at[i]: compiled.d_at[i] + 3]
-        initial[name] = {key: value.tolist() for key, value in state.items()}
-    return rest, initial
+        if calm.d_at[i] >= 0:
+            state["d"] = rest[calm.d_at[i]: calm.d_at[i] + 3]
+        states[name] = {key: value.tolist() for key, value in state.items()}
+    if tree:
+        return rest, states
+    blocks = VARIANT_LAYOUTS[config.chain.joints[0].variant].blocks
+    section, (state,) = config.resolved["initial_state"], states.values()
+    return rest, {key: state[key] if b in blocks else list(section[key]) for key, b in INITIAL_STATE_BLOCKS.items()}
 
 
 @dataclass

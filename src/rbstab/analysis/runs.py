@@ -195,6 +195,13 @@ class Runs:
         self.compiled = C.with_records(self.base.trees[0], self.base.params[0, :size], self.base.ppoints[0, :size],
                                        self.base.offset[0])
 
+    def of_full(self, states: np.ndarray) -> np.ndarray:
+        """The initial states (k, n_state) of the runs from the full states ``states`` (k,
+        n_states) of the configuration's tree (:mod:`rbstab.variants.chain`'s layout): a
+        tree's as they are; one body's in its variant's layout, which is the full state's
+        first n_state entries (Theta, Omega[, X, V][, D])."""
+        return np.asarray(states, dtype=float)[:, : len(self.initial_state)]
+
     def _batch(self, states: np.ndarray, n_samples: int):
         """The base run from each of ``states`` (k, n_state), sampled ``n_samples`` times."""
         batch = self.base.take(np.zeros(len(states), dtype=np.int64))

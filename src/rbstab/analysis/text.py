@@ -274,9 +274,8 @@ def rule_lines(rules, bar: float) -> list[str]:
 
 
 def describe(analysis) -> list[str]:
-    """Lines summarising an :class:`~rbstab.analysis.Analysis` or a
-    :class:`~rbstab.analysis.ChainAnalysis`: the verdict, the notes, the equilibrium (a
-    chain's by body), the rest-point check, the table of modes (a chain's mode shapes on its
+    """Lines summarising an :class:`~rbstab.analysis.Analysis`: the verdict, the notes, the
+    equilibrium (a chain's by body), the rest-point check, the table of modes (a chain's mode shapes on its
     bodies' angles), the settling, the certificate, the verification, the basin map, the
     pushes and the basin stability."""
     lin = analysis.linearisation

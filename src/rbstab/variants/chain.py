@@ -27,6 +27,7 @@ import math
 from collections import namedtuple
 from collections.abc import Sequence
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -618,10 +619,21 @@ class CompiledChain:
     def size(self) -> int:
         return int(self.codes.shape[0])
 
-    @property
+    @functools.cached_property
     def one_body(self) -> bool:
         """Whether the chain is the paper's one-body model (:func:`is_one_body`)."""
         return is_one_body(self.params, self.codes, self.parents, self.ppoints)
+
+    @functools.cached_property
+    def independent_columns(self) -> np.ndarray:
+        """The full state's entries (3 k,) of the independent coordinates z
+        (:func:`independent_coordinates`, in order), int64."""
+        return np.array([at + c for _, _, at in independent_coordinates(self) for c in range(3)], dtype=np.int64)
+
+    @functools.cached_property
+    def permanent(self) -> np.ndarray:
+        """(n,) bool: the bodies a permanent joint holds (placed on their parents)."""
+        return self.codes == PERMANENT
 
 
 def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray) -> np.ndarray:
@@ -929,11 +941,10 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     (:func:`independent_coordinates`, 3 entries each): the children of permanent joints
     placed on their parents (E_j = F_j = 0). A stack ``z`` (k, m) gives (k, n_states)."""
     z = np.asarray(z, dtype=float)
-    stack = np.atleast_2d(z)
+    stack = z.reshape(1, -1) if z.ndim == 1 else z
     y = np.zeros((len(stack), compiled.n_states))
-    columns = [at + c for _, _, at in independent_coordinates(compiled) for c in range(3)]
-    y[:, columns] = stack
-    y = _place(compiled, y, only_permanent=True)
+    y[:, compiled.independent_columns] = stack
+    _place_rows(y, compiled.params, compiled.parents, compiled.ppoints, compiled.permanent, compiled.permanent)
     return y if z.ndim == 2 else y[0]
 
 
@@ -1169,14 +1180,14 @@ def _one_body_outputs(code, time, states, params, lead, tree_of, full) -> dict[s
     rows; a permanent joint's state is Theta, Omega."""
     m, per_run = states.shape[0], lead[-1]
     runs = m // per_run
-    trees = np.zeros(runs, dtype=np.int64) if tree_of is None else np.asarray(tree_of, dtype=np.int64)
+    records = (np.repeat(params[:1, 0], runs) if tree_of is None else
+               np.ascontiguousarray(params[np.asarray(tree_of, dtype=np.int64), 0]))
     size = 6 if code == PERMANENT else states.shape[1]
     columns = np.empty((N_OUTPUTS, runs, per_run))
-    run_outputs(np.full(runs, code, dtype=np.int64), np.ascontiguousarray(params[trees, 0]), time.reshape(runs, -1),
+    run_outputs(np.full(runs, code, dtype=np.int64), records, time.reshape(runs, -1),
                 np.ascontiguousarray(states[:, :size]).reshape(runs, per_run, size), columns, full)
     columns = columns.reshape(N_OUTPUTS, m)
-    out = {name: columns[q.columns].T[:, None] if q.size == 3 else columns[q.offset]
-           for name, q in OUTPUTS.items() if (full or name not in LEFT_OUT) and name not in _NOT_EVALUATED}
+    out = {name: columns[at].T[:, None] if vector else columns[at] for name, at, vector in _ONE_BODY_ROWS[full]}
     out["joint_theta"], out["joint_omega"] = out["theta"], out["omega"]  # the ground joint's: A_p = I, Omega_p = 0
     if code != EMBEDDED:
         out["controller_state"] = np.full((m, 1, 3), np.nan)
@@ -1186,9 +1197,16 @@ def _one_body_outputs(code, time, states, params, lead, tree_of, full) -> dict[s
 #: One body's outputs :func:`evaluate` makes itself (v with the tree's h; W and the windows' edges: the run's
 #: history, not its samples').
 _NOT_EVALUATED = ("disturbance_work", "disturbance_edges", "lyapunov")
+#: The rows of :func:`_one_body_outputs`' outputs (with ``full`` and without): (name, its
+#: rows of the kernel's columns, whether a 3-vector).
+_ONE_BODY_ROWS = {full: tuple((name, q.columns if q.size == 3 else q.offset, q.size == 3) for name, q in OUTPUTS.items()
+                              if (full or name not in LEFT_OUT) and name not in _NOT_EVALUATED)
+                  for full in (False, True)}
 #: :func:`evaluate`'s outputs, in order.
 _EVALUATED = (*BODY_OUTPUTS[:5], *JOINT_OUTPUTS[:7], *(name for name, _ in SATURATION_FLAGS.values()), *LYAPUNOV_TERMS,
               "lyapunov", "lyapunov_rate", "disturbance_power", "disturbance_work", "disturbance_edges")
+#: :func:`evaluate`'s outputs of the paper's one body with ``full`` False.
+_EVALUATED_BRIEF = tuple(key for key in _EVALUATED if key not in LEFT_OUT)
 
 
 def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray, states: np.ndarray,
@@ -1223,8 +1241,8 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
     m, n = states.shape[0], first.size
     rows = (np.zeros(m, dtype=np.int64) if tree_of is None else
             np.repeat(np.asarray(tree_of, dtype=np.int64), lead[-1]))  # each sample's tree
-    params = records_of(trees)
-    offset = np.array([c.offset for c in trees])[rows]  # h of each sample's tree
+    params = first.params[None] if len(trees) == 1 else records_of(trees)
+    offset = first.offset if len(trees) == 1 else np.array([c.offset for c in trees])[rows]  # h of each sample's tree
     one_body = all(c.one_body for c in trees)
     if one_body:  # the paper's one body: its own compiled outputs (eq 20's Lambda; 1.4x faster)
         out = _one_body_outputs(int(first.codes[0]), time, states, params, lead, tree_of, full)
@@ -1238,8 +1256,11 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
         out["lyapunov"] = out["lyapunov"] + offset
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)
     out["disturbance_edges"] = np.zeros(m)
-    for t in np.flatnonzero(np.any(params["disturbance_count"] > 0, axis=1)):  # the trees with disturbances
-        at = rows == t
-        out["disturbance_edges"][at] = disturbance_edges(trees[t], time[at])
-    return {key: out[key].reshape(*lead, *out[key].shape[1:]) for key in _EVALUATED
-            if full or not one_body or key not in LEFT_OUT}
+    for t, tree in enumerate(trees):
+        if np.any(tree.params["disturbance_count"] > 0):  # a tree with disturbances
+            at = rows == t
+            out["disturbance_edges"][at] = disturbance_edges(tree, time[at])
+    keys = _EVALUATED if full or not one_body else _EVALUATED_BRIEF
+    if len(lead) == 1:
+        return {key: out[key] for key in keys}
+    return {key: out[key].reshape(*lead, *out[key].shape[1:]) for key in keys}

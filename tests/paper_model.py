@@ -1,0 +1,45 @@
+"""The paper's one-body variant (:class:`rbstab.variants.Variant`, in its own state) as a
+certificate model (:class:`rbstab.analysis.certificate.Model`): the second formulation the
+tree's analysis (:class:`rbstab.analysis.certificate.ChainModel`) is compared with, and the
+model of the certificate's closed-form checks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rbstab.analysis.certificate import coordinate_boundary_level
+
+
+class VariantModel:
+    """A one-body variant as a :class:`~rbstab.analysis.certificate.Model` in its own state:
+    the domain |theta_2| < limit (eq 5, linear: ``y[1]``), the least v on its boundary
+    minimised over the other configuration coordinates (Theta, X, D), runs from the state
+    itself."""
+
+    def __init__(self, variant) -> None:
+        self.variant = variant
+        self.angle_matrix = np.eye(variant.layout.size)[1:2]
+
+    def lyapunov(self, x):
+        return self.variant.lyapunov(x)
+
+    def evaluate(self, x, t=0.0):
+        return self.variant.evaluate(x, t)
+
+    def rhs(self, t, x):
+        return self.variant.rhs(t, x)
+
+    def angles(self, x):
+        return np.atleast_2d(x)[:, 1:2]
+
+    def angle_jacobian(self, x):
+        return self.angle_matrix
+
+    def boundary_level(self, y_e, hess, limit):
+        layout = self.variant.layout
+        configuration = np.concatenate([np.arange(layout.slice(b).start, layout.slice(b).stop) for b in layout.blocks
+                                        if b in ("theta", "position", "controller_state")])
+        return coordinate_boundary_level(self.variant.lyapunov, y_e, hess, limit, [1], configuration)
+
+    def states(self, x):
+        return np.atleast_2d(x)
