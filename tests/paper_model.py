@@ -1,13 +1,26 @@
-"""The paper's one-body variant (:class:`rbstab.variants.Variant`, in its own state) as a
-certificate model (:class:`rbstab.analysis.certificate.Model`): the second formulation the
-tree's analysis (:class:`rbstab.analysis.certificate.ChainModel`) is compared with, and the
-model of the certificate's closed-form checks."""
+"""The paper's one-body variant (:class:`rbstab.variants.Variant`, in its own state) as an
+analysis model: its linearisation at its own equilibrium (:func:`linearise`) and its
+certificate model (:class:`VariantModel`, a :class:`rbstab.analysis.certificate.Model`): the
+second formulation the tree's analysis (:func:`rbstab.analysis.linearise.linearise_chain`,
+:class:`rbstab.analysis.certificate.ChainModel`) is compared with, and the model of the
+linearisation's and certificate's closed-form checks."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from rbstab.analysis.certificate import coordinate_boundary_level
+from rbstab.analysis.linearise import Linearisation, linearisation
+
+
+def linearise(variant) -> Linearisation:
+    """Equilibrium (``variant.equilibrium``), rest check, Jacobian and eigenvalues of a
+    one-body variant in its own state; ValueError for the pure sign law (no Jacobian at E = 0)."""
+    if not variant.smooth:
+        raise ValueError(f"{variant.name}: the right-hand side is not differentiable (the pure sign law, "
+                         "boundary_layer 0): there is no linearisation")
+    return linearisation(lambda y: variant.rhs(0.0, y), np.asarray(variant.equilibrium, dtype=float),
+                         variant.body.gravity)
 
 
 class VariantModel:

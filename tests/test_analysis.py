@@ -17,15 +17,15 @@ import warnings
 import numpy as np
 import pytest
 from conftest import PAPER_CONFIGS, ROOT, paper_body, paper_gains
-from paper_model import VariantModel
+from paper_model import VariantModel, linearise
 from reference import Model
 from scipy.optimize import linear_sum_assignment
 
 from rbstab.variants.paper import paper_form
-from rbstab.analysis import BasinAxis, analyze, basin_map, certify, linearise
+from rbstab.analysis import BasinAxis, analyze, basin_map, certify
 from rbstab.analysis.basin import time_to_converge
 from rbstab.analysis.derivatives import directional_derivative, hessian, jacobian, richardson
-from rbstab.analysis.linearise import modes, verdict
+from rbstab.analysis.linearise import linearise_config, modes, verdict
 from rbstab.analysis.runs import check_entries
 from rbstab.config import load_config
 from rbstab.kinematics import GIMBAL_LOCK_ANGLE
@@ -277,7 +277,7 @@ def test_paper_cases_are_asymptotically_stable_with_certificates(path):
 def test_sign_law_is_analysed_with_a_boundary_layer():
     config = load_config(ROOT / "configs/examples/sliding.yaml", ["controller.boundary_layer=0"])
     with pytest.raises(ValueError, match="no linearisation"):
-        linearise(paper_form(config))
+        linearise_config(config)
     result = analyze(config, boundary_layer=2e-3, certificate=False, simulate=False)
     assert paper_form(result.analysed).gains.boundary_layer == 2e-3 and paper_form(result.config).gains.boundary_layer == 0
     assert "does not exist" in result.notes[0]

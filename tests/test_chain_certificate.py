@@ -14,14 +14,14 @@ import warnings
 
 import numpy as np
 import pytest
-from paper_model import VariantModel
+from paper_model import VariantModel, linearise
 
 from rbstab.analysis import analyze
 from rbstab.analysis.certificate import certify, level_states
 from rbstab.analysis.runs import Runs
 from rbstab.analysis.text import describe
 from rbstab.analysis.certificate import ChainModel
-from rbstab.analysis.linearise import linearise, linearise_chain
+from rbstab.analysis.linearise import linearise_chain
 from rbstab.config.loader import config_from_mapping
 from rbstab.variants import chain as C
 

@@ -283,8 +283,10 @@ def test_a_stiff_visco_elastic_joint_approaches_the_permanent_joint():
 def test_a_one_body_chains_linearisation_is_todays(name):
     """Under gravity, the one-body chain's rest state in its independent coordinates
     ((Theta, Omega) for permanent, the body's state otherwise) and its eigenvalues equal the
-    single body's (``rbstab.analysis.linearise``)."""
-    from rbstab.analysis.linearise import linearise, linearise_chain
+    single body's (the paper's variant's, ``paper_model.linearise``)."""
+    from paper_model import linearise
+
+    from rbstab.analysis.linearise import linearise_chain
 
     variant, compiled = _one_body(name, (0.0, 0.0, -9.81))
     mine, coordinates = linearise_chain(compiled)

@@ -11,12 +11,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from conftest import ROOT
-from paper_model import VariantModel
+from paper_model import VariantModel, linearise
 
 from rbstab.variants.paper import paper_form
 from rbstab.analysis import analyze, read_analysis
 from rbstab.analysis.certificate import BOUNDS, certify, checked
-from rbstab.analysis.linearise import linearise
 from rbstab.config import config_from_mapping, load_config
 from rbstab_cli.main import cli
 

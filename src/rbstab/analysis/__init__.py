@@ -27,7 +27,7 @@ from .analyze import DEFAULT_BOUNDARY_LAYER, Analysis, NoEquilibrium, OutsideLim
 from .basin import BasinAxis, BasinMap, basin_map
 from .certificate import Certificate, certify
 from .dataset import is_analysis_file, read_analysis, write_analysis
-from .linearise import Linearisation, linearise, linearise_chain
+from .linearise import Linearisation, linearise_chain
 from .robustness import Robustness, robustness, wilson_interval
 from .verify import NotVerifiable, Verification, verify_analysis, verify_sublevel
 
@@ -37,7 +37,6 @@ __all__ = [
     "DEFAULT_BOUNDARY_LAYER",
     "OutsideLimits",
     "NoEquilibrium",
-    "linearise",
     "linearise_chain",
     "Linearisation",
     "certify",

@@ -1,10 +1,10 @@
 """The equilibrium, the rest check, the Jacobian there and its eigenvalues (modes, verdict).
 
-The equilibrium is the variant's (:attr:`rbstab.variants.Variant.equilibrium`: the
-minimum of the stored energy nearest the origin, polished to a rest point; the origin
-without gravity). The Jacobian is that of the right-hand side the integrators use
-(``Variant.rhs``, the compiled kernels of :mod:`rbstab.variants.kernels`) in the
-variant's own state (the reduced 6-state (Theta, Omega) system for ``permanent``, eq 21),
+The equilibrium is the compiled tree's rest state (:func:`linearise_chain`:
+:func:`rbstab.variants.chain.rest_state`, the least stored energy near the reference
+configuration, polished to a rest point; the origin without gravity). The Jacobian is that
+of the tree's right-hand side (:func:`reduced_rates`) in its independent coordinates (one
+body's: its own state, the reduced 6-state (Theta, Omega) system for ``permanent``, eq 21),
 by central differences extrapolated to step zero (:mod:`rbstab.analysis.derivatives`).
 
 Per eigenvalue s (python-control's ``damp`` conventions):
@@ -230,35 +230,11 @@ def rest_tolerance(jac: np.ndarray, equilibrium: np.ndarray, gravity: np.ndarray
     return REST_RTOL * scale
 
 
-def linearise(variant) -> Linearisation:
-    """Equilibrium, rest check, Jacobian and eigenvalues of ``variant``.
-
-    Parameters
-    ----------
-    variant : rbstab.variants.Variant
-        With a smooth right-hand side (``variant.smooth``; the pure sign law of
-        ``sliding`` has no Jacobian at E = 0).
-
-    Returns
-    -------
-    Linearisation
-
-    Raises
-    ------
-    ValueError
-        For a variant whose right-hand side is not smooth.
-    """
-    if not variant.smooth:
-        raise ValueError(
-            f"{variant.name}: the right-hand side is not differentiable (the pure sign law, "
-            "boundary_layer 0): there is no linearisation; analyse a boundary-layer law"
-        )
-    return _linearisation(lambda y: variant.rhs(0.0, y), np.asarray(variant.equilibrium, dtype=float),
-                          variant.body.gravity)
-
-
-def _linearisation(rates, y_e: np.ndarray, gravity: np.ndarray) -> Linearisation:
-    """The Linearisation of the vectorised ``rates`` ((k, n) -> (k, n)) at ``y_e`` (n,)."""
+def linearisation(rates, y_e: np.ndarray, gravity: np.ndarray) -> Linearisation:
+    """The :class:`Linearisation` of the vectorised right-hand side ``rates`` ((k, n) -> (k,
+    n)) at the equilibrium ``y_e`` (n,) of a model under ``gravity`` (3,) [m/s^2]: its rest
+    residual and tolerance, its Jacobian (:func:`rbstab.analysis.derivatives.jacobian`) and
+    eigenvalues."""
     residual = rates(y_e[None])[0]
     jac, error = jacobian(rates, y_e)
     eigenvalues = np.linalg.eigvals(jac)
@@ -311,7 +287,7 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
                          "(a body falls without bound): there is no rest state to linearise at")
     coordinates = C.independent_coordinates(compiled)
     z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
-    return _linearisation(lambda rows: reduced_rates(compiled, rows), z, compiled.chain.gravity), coordinates
+    return linearisation(lambda rows: reduced_rates(compiled, rows), z, compiled.chain.gravity), coordinates
 
 
 def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
