@@ -282,11 +282,8 @@ def basin_map(
     states = runs.states(axes, np.column_stack([first.ravel(), second.ravel()]))
     # the one check an initial state of a valid configuration can fail (the grid's values are finite)
     inside = np.ones(len(states), dtype=bool)
-    if runs.tree is None:  # a tree's runs fail at t = 0 with the body or joint named
-        from ..variants.paper import paper_form  # heavy: numba
-
-        theta = list(paper_form(config).layout.blocks).index("theta")
-        inside = np.abs(states[:, 3 * theta + 1]) < np.pi / 2 - config.simulation.gimbal_margin
+    if runs.tree is None:  # one body's theta_2 (a tree's runs fail at t = 0 with the body or joint named)
+        inside = np.abs(states[:, 1]) < np.pi / 2 - config.simulation.gimbal_margin
     points = np.flatnonzero(inside)
     outcome = np.full(len(states), 2, dtype=np.int8)
     messages: dict[str, int] = {OUTSIDE: int(len(states) - len(points))} if len(points) < len(states) else {}

@@ -87,7 +87,7 @@ def falsify(config, model, linearisation, certificate: Certificate, *, runs: int
     batch, states = Runs(config, jobs=jobs), model.states
 
     def run(x):
-        ok, v0, v1 = batch.outcomes(batch.of_full(states(x)))
+        ok, v0, v1 = batch.outcomes(states(x))
         with np.errstate(invalid="ignore"):
             return (ok == 1) & np.isfinite(v1) & (v1 <= v0 + ROUND_OFF), v0
 

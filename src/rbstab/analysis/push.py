@@ -882,7 +882,7 @@ def basin_stability(config, *, ranges: Sequence[str] = (), push: str | None = No
 
 
 def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
-    """The initial states (N, n_state) of the runs of ``runs`` with the drawn entries
+    """The initial states (N, n_states) of the runs of ``runs`` with the drawn entries
     ``values`` (N, n_axes) of ``axes`` (:func:`parse_ranges`;
     :meth:`rbstab.analysis.runs.Runs.states`). ValueError (one line) for an entry the state
     lacks, or one body's box that reaches gimbal lock."""
@@ -906,7 +906,7 @@ def _drawn_states(config, runs: Runs, axes, values: np.ndarray) -> np.ndarray:
 def runs_from_states(config, states: np.ndarray, *, engine: str = "compiled", executor=None,
                      jobs: int = 1) -> np.ndarray:
     """The outcomes of the runs of ``config`` (one body or a tree) from ``states`` (k,
-    n_state; :attr:`rbstab.analysis.runs.Runs.initial_state`'s layout): shape (3, k),
+    n_states; :attr:`rbstab.analysis.runs.Runs.initial_state`'s layout, the full state): shape (3, k),
     success (1 or 0), v(0) and v(t_end) [J] (NaN for a run that stopped early). One batch
     (:meth:`rbstab.analysis.runs.Runs.outcomes`)."""
     return Runs(config, engine=engine, executor=executor, jobs=jobs).outcomes(states)

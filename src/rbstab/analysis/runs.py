@@ -23,7 +23,7 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
 from ..engine.registry import get_engine
-from ..layout import is_chain
+from ..layout import VARIANT_LAYOUTS, is_chain
 from .linearise import linearise_config
 
 __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE",
@@ -166,10 +166,11 @@ class Runs:
 
     Attributes
     ----------
-    initial_state : ndarray, shape (n_state,)
-        The configured initial state: one body's in its variant's layout
-        (:data:`rbstab.layout.VARIANT_LAYOUTS`), a tree's maximal state (Theta, Omega, X, V
-        of each body, then each embedded joint's D; :mod:`rbstab.variants.chain`).
+    initial_state : ndarray, shape (n_states,)
+        The configured initial state, the tree's full state (Theta, Omega, X, V of each
+        body, then each embedded joint's D; :mod:`rbstab.variants.chain`; one body's, its
+        one-body tree's), the bodies permanent joints hold placed on them. Every state the
+        methods take is such a full state.
     engine : str
         The engine the runs take.
 
@@ -187,37 +188,45 @@ class Runs:
         self._tau: float | None = None  # the slowest time constant [s], once a run needs it
         self._longer: dict[float, Runs] = {}  # the runs of each longer t_end, built once
         self.base = batch_of([config])
-        self.initial_state = self.base.y0[0, : self.base.n_state[0]].copy()
         self.tree = config.chain if is_chain(config) else None
         from ..variants import chain as C  # heavy: numba
 
         size = self.base.trees[0].size  # the compiled tree (one body's: its one-body tree)
         self.compiled = C.with_records(self.base.trees[0], self.base.params[0, :size], self.base.ppoints[0, :size],
                                        self.base.offset[0])
+        # a run's state in the batch: one body's in its variant's layout, the full state's first entries
+        self._n_state = int(self.base.n_state[0])
+        full = np.zeros(self.compiled.n_states)
+        full[: self._n_state] = self.base.y0[0, : self._n_state]
+        self.initial_state = C.place(self.compiled, full, self.compiled.permanent, self.compiled.permanent)
 
-    def of_full(self, states: np.ndarray) -> np.ndarray:
-        """The initial states (k, n_state) of the runs from the full states ``states`` (k,
-        n_states) of the configuration's tree (:mod:`rbstab.variants.chain`'s layout): a
-        tree's as they are; one body's in its variant's layout, which is the full state's
-        first n_state entries (Theta, Omega[, X, V][, D])."""
-        return np.asarray(states, dtype=float)[:, : len(self.initial_state)]
+    def _rows(self, states) -> np.ndarray:
+        """``states`` as a stack (k, n_states) of full states; ValueError for another width."""
+        states = np.asarray(states, dtype=float)
+        states = states[None] if states.ndim == 1 else states
+        if states.ndim != 2 or states.shape[1] != len(self.initial_state):
+            raise ValueError(f"states: found shape {states.shape}; expected (k, {len(self.initial_state)}), full "
+                             "states of the configuration's tree")
+        return states
 
     def _batch(self, states: np.ndarray, n_samples: int):
-        """The base run from each of ``states`` (k, n_state), sampled ``n_samples`` times."""
+        """The base run from each of the full states ``states`` (k, n_states), sampled
+        ``n_samples`` times (one body's run from the state's first entries, its variant's
+        layout: Theta, Omega[, X, V][, D])."""
         batch = self.base.take(np.zeros(len(states), dtype=np.int64))
-        batch.y0[:, : states.shape[1]] = states
+        batch.y0[:, : self._n_state] = states[:, : self._n_state]
         batch.n_samples[:] = n_samples
         return batch
 
     def outcomes(self, states: np.ndarray, disturbance: tuple | None = None) -> np.ndarray:
-        """The outcomes of the runs from ``states`` (k, n_state), shape (3, k): success (1:
+        """The outcomes of the runs from ``states`` (k, n_states), shape (3, k): success (1:
         t_end reached inside the admissible region, else 0), v at the start [J] and
         v(t_end) [J] (NaN for a run that stopped early). ``disturbance`` = (body, entry,
         values (k, 3)): each run's value of the configuration's disturbance ``entry`` (its
         index among body ``body``'s, in the order listed; one body: body 0) instead of the
         configured one. One batch, its runs sampled twice (a run's steps do not depend on
         its samples)."""
-        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        states = self._rows(states)
         if len(states) == 0:
             return np.zeros((3, 0))
         if not self.base.compiled[0]:  # an implicit method, the pure sign law: run by run
@@ -232,7 +241,7 @@ class Runs:
     def recoveries(self, states: np.ndarray, rule, start: np.ndarray | None = None,
                    disturbance: tuple | None = None, ratio: float = DEFAULT_LYAPUNOV_RATIO
                    ) -> tuple[np.ndarray, np.ndarray]:
-        """(whether each run from ``states`` (k, n_state) recovers, v at its start [J]), each
+        """(whether each run from ``states`` (k, n_states) recovers, v at its start [J]), each
         shape (k,): ``rule(ok, v0, v1, rows)`` of its :meth:`outcomes` (``rows`` the runs'
         indices into ``states``; a bool array), a run still settling at t_end judged at a
         longer t_end. Still settling: it reached t_end, did not recover by ``rule`` and ended
@@ -243,7 +252,7 @@ class Runs:
         tau the linearisation's slowest time constant, found when first needed): t_end bounds
         what a run can show of convergence, not whether it recovers. ``disturbance`` as
         :meth:`outcomes` takes it."""
-        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        states = self._rows(states)
         ok, v0, v1 = self.outcomes(states, disturbance)
         first = v0
         start = v0 if start is None else np.asarray(start, dtype=float)
@@ -283,7 +292,7 @@ class Runs:
             return math.nan
 
     def states(self, axes, values: np.ndarray) -> np.ndarray:
-        """The initial states (N, n_state) with the entries of ``axes``
+        """The initial states (N, n_states) with the entries of ``axes``
         (:class:`rbstab.analysis.basin.BasinAxis` or what has its ``key``, ``block``,
         ``index``, ``body``) set to the rows of ``values`` (N, len(axes)), the others the
         configured ones; a tree's bodies whose ``x`` (``v``) the configuration leaves out
@@ -294,45 +303,31 @@ class Runs:
         ValueError
             One line, for an entry the state lacks (a tree's body or D it does not have).
         """
-        values = np.asarray(values, dtype=float).reshape(-1, len(axes))
-        if self.tree is not None:
-            return self._tree_states(axes, values)
-        blocks = list(_paper_form(self.config).layout.blocks)
-        states = np.repeat(self.initial_state[None], len(values), axis=0)
-        for j, axis in enumerate(axes):
-            states[:, 3 * blocks.index(axis.block) + axis.index] = values[:, j]
-        return states
-
-    def _tree_states(self, axes, values: np.ndarray) -> np.ndarray:
-        """:meth:`states` of a tree: its maximal states with the entries set, the bodies the
-        configuration places placed on their joints."""
         from ..variants import chain as C  # heavy: numba
 
-        names = list(self.tree.body_names)
-        x_placed = np.array([f"initial_state.{b}.x" in self.config.placed for b in names])
-        v_placed = np.array([f"initial_state.{b}.v" in self.config.placed for b in names])
+        values = np.asarray(values, dtype=float).reshape(-1, len(axes))
+        names = list(self.compiled.chain.body_names)
+        placed = self.compiled.permanent  # a permanent joint's child always, the bodies the configuration places
+        x_placed = placed | np.array([f"initial_state.{b}.x" in self.config.placed for b in names])
+        v_placed = placed | np.array([f"initial_state.{b}.v" in self.config.placed for b in names])
         states = np.repeat(self.initial_state[None], len(values), axis=0)
         for j, axis in enumerate(axes):
             states[:, _state_offset(self.compiled, axis)] = values[:, j]
-        if x_placed.any() or v_placed.any():
-            states = C.place(self.compiled, states, x_placed, v_placed)
-        return states
+        return C.place(self.compiled, states, x_placed, v_placed)
 
     def lyapunov(self, states: np.ndarray) -> np.ndarray:
-        """v [J] at t = 0 of each of ``states`` (N, n_state)."""
-        if self.tree is not None:
-            from ..variants import chain as C  # heavy: numba
+        """v [J] at t = 0 of each of ``states`` (N, n_states)."""
+        from ..variants import chain as C  # heavy: numba
 
-            return C.evaluate(self.compiled, np.zeros(len(states)), states)["lyapunov"]
-        return _paper_form(self.config).lyapunov(states)
+        return C.evaluate(self.compiled, np.zeros(len(states)), states)["lyapunov"]
 
     def traces(self, states: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray, list[str]]:
-        """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end]:
+        """The runs from ``states`` (k, n_states) sampled ``n_samples`` times on [0, t_end]:
         (whether each reached t_end inside its admissible region (k,), v [J] at its samples
         (k, n_samples; NaN after a stop), why each failed run stopped: its status in words,
         without the time ('' for the others)), in slices over the executor's workers or
         :attr:`jobs` threads."""
-        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        states = self._rows(states)
         k, n_samples = len(states), int(n_samples)
         if not self.base.compiled[0]:  # an implicit method, the pure sign law: run by run
             return self._one_by_one(states, n_samples)
@@ -359,7 +354,7 @@ class Runs:
         return ok, v, messages
 
     def streamed(self, states: np.ndarray, n_samples: int, ratio: float) -> tuple:
-        """The runs from ``states`` (k, n_state) sampled ``n_samples`` times on [0, t_end] on
+        """The runs from ``states`` (k, n_states) sampled ``n_samples`` times on [0, t_end] on
         the GPU engine, each run's samples streamed into its summary and none brought back
         (:func:`rbstab.engine.cuda.integrate_chain_runs_cuda`; a launch's limit
         ``simulation.max_wall_time``): (whether each reached t_end inside its admissible
@@ -373,12 +368,13 @@ class Runs:
         from ..simulator import run_end  # heavy: numba
         from ..summary import LAST_ABOVE, TAKEN, streamed_final_lyapunov  # heavy: numba
 
-        states = np.asarray(states, dtype=float).reshape(-1, len(self.initial_state))
+        states = self._rows(states)
         k, n, s = len(states), int(n_samples), self.config.simulation
         batch = self._batch(states, n)
         bounds, settings, size = batch.params[0, 0]["limits"], batch.settings_rows(), self.compiled.size
         system = tree_system(self.compiled)._replace(params=batch.params[0, :size], ppoints=batch.ppoints[0, :size])
-        sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), states, settings, method=s.method,
+        sol = integrate_chain_runs_cuda(with_offsets(system, batch.offset[0]), batch.y0[:, : self._n_state], settings,
+                                        method=s.method,
                                         n_samples=n, stride=None, max_wall_time=s.max_wall_time, ratio=ratio)
         ok = sol.status == SUCCESS
         v_final = np.where(sol.acc[:, TAKEN] == n, streamed_final_lyapunov(sol.acc), np.nan)  # NaN: stopped early
@@ -398,8 +394,7 @@ class Runs:
         k = len(states)
         values = np.broadcast_to(np.asarray(disturbance[2], dtype=float), (k, 3)) if disturbance else None
         simulation = replace(self.config.simulation, n_samples=n_samples)
-        layout = _paper_form(self.config).layout if self.tree is None else None
-        configs = [self._config_at(y, simulation, layout, None if values is None else (*disturbance[:2], values[i]))
+        configs = [self._config_at(y, simulation, None if values is None else (*disturbance[:2], values[i]))
                    for i, y in enumerate(states)]
         ok, v, messages = np.zeros(k, dtype=bool), np.full((k, n_samples), np.nan), [""] * k
         for i, result in simulate_many(configs, engine="compiled", full=False):
@@ -408,30 +403,21 @@ class Runs:
             messages[i] = "" if result.ok else result.message.split(" at t =")[0]
         return ok, v, messages
 
-    def _config_at(self, y: np.ndarray, simulation, layout, disturbance: tuple | None):
-        """The configuration of the run from ``y`` (n_state,; :attr:`initial_state`'s
-        layout: one body's variant ``layout``, or a tree's maximal state) with the settings
-        ``simulation``; with ``disturbance`` = (body, entry, value (3,)), that entry of that
-        body's disturbances (one body: body 0) of that value."""
+    def _config_at(self, y: np.ndarray, simulation, disturbance: tuple | None):
+        """The configuration of the run from the full state ``y`` (n_states,) with the
+        settings ``simulation``; with ``disturbance`` = (body, entry, value (3,)), that entry
+        of that body's disturbances (one body: body 0) of that value."""
         def pushed(entries):
             return tuple(replace(d, value=np.array(disturbance[2], dtype=float)) if j == disturbance[1] else d
                          for j, d in enumerate(entries))
 
-        if self.tree is None:
-            blocks = layout.split(y)
-            (name,) = self.config.initial_state
-            chain = self.config.chain
-            if disturbance is not None:
-                chain = replace(chain, bodies=(replace(chain.bodies[0], disturbances=pushed(chain.bodies[0].disturbances)),))
-            return replace(self.config, chain=chain, simulation=simulation,
-                           initial_state={name: {**self.config.initial_state[name], **blocks}})
-        d_at = self.compiled.d_at
-        initial = {body.name: {block: y[12 * i + 3 * k: 12 * i + 3 * k + 3].copy() for k, block in enumerate(_BODY_BLOCKS)}
-                   for i, body in enumerate(self.tree.bodies)}
-        for i, body in enumerate(self.tree.bodies):
+        chain, d_at = self.config.chain, self.compiled.d_at
+        initial = {}
+        for i, body in enumerate(chain.bodies):
+            state = {block: y[12 * i + 3 * k: 12 * i + 3 * k + 3].copy() for k, block in enumerate(_BODY_BLOCKS)}
             if d_at[i] >= 0:
-                initial[body.name]["controller_state"] = y[d_at[i]: d_at[i] + 3].copy()
-        chain = self.tree
+                state["controller_state"] = y[d_at[i]: d_at[i] + 3].copy()
+            initial[body.name] = {**self.config.initial_state[body.name], **state}
         if disturbance is not None:
             bodies = list(chain.bodies)
             bodies[disturbance[0]] = replace(bodies[disturbance[0]], disturbances=pushed(bodies[disturbance[0]].disturbances))
@@ -439,15 +425,10 @@ class Runs:
         return replace(self.config, chain=chain, initial_state=initial, simulation=simulation)
 
 
-def _paper_form(config):
-    """:func:`rbstab.variants.paper.paper_form` of ``config`` (one body's spelling)."""
-    from ..variants.paper import paper_form  # heavy: numba
-
-    return paper_form(config)
-
-
 #: The state blocks of a body in a tree's maximal state, in order (12 entries a body).
 _BODY_BLOCKS = ("theta", "omega", "position", "velocity")
+#: Each block's first entry in its body's 12.
+_BODY_OFFSET = {block: 3 * k for k, block in enumerate(_BODY_BLOCKS)}
 
 
 def _state_offset(compiled, axis) -> int:
@@ -455,6 +436,9 @@ def _state_offset(compiled, axis) -> int:
     ``block``, ``index``); ValueError naming what is allowed where it names no body of the
     tree or a D its joint does not have."""
     names = list(compiled.chain.body_names)
+    if axis.body is None and len(names) == 1:  # one body's key, initial_state.<block>.<i>
+        return _BODY_OFFSET[axis.block] + axis.index if axis.block != "controller_state" else \
+            int(compiled.d_at[0]) + axis.index
     if axis.body not in names:
         raise ValueError(f"--basin {axis.key!r}: no body '{axis.body}' in this chain (its bodies: {', '.join(names)}; "
                          "keys initial_state.<body>.<theta|omega|x|v|d>.<0|1|2>)")
@@ -463,7 +447,7 @@ def _state_offset(compiled, axis) -> int:
         if compiled.d_at[i] < 0:
             raise ValueError(f"--basin {axis.key!r}: the joint of '{axis.body}' is not embedded (no D)")
         return int(compiled.d_at[i]) + axis.index
-    return 12 * i + 3 * _BODY_BLOCKS.index(axis.block) + axis.index
+    return 12 * i + _BODY_OFFSET[axis.block] + axis.index
 
 
 def check_entries(config, axes) -> None:
@@ -480,7 +464,7 @@ def check_entries(config, axes) -> None:
         return
     from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
 
-    blocks = _paper_form(config).layout.blocks
+    blocks = VARIANT_LAYOUTS[config.chain.joints[0].variant].blocks
     for axis in axes:
         if axis.body is not None:
             raise ValueError(f"--basin {axis.key!r}: names a body of a chain ('{axis.body}'); a one-body config's "
