@@ -308,7 +308,7 @@ def _analyse_spec(path, out: Path, push, stability, *, ratio, engine, jobs, samp
 @click.option("--verify", is_flag=True,
               help="Prove a sublevel bound {v <= c} positively invariant and inside the region of attraction "
               "(interval arithmetic, branch and bound; the reduced 6-state model of permanent with clipped "
-              "torque limits: a one-body config, or a chain of one body held at its own point). Needs "
+              "torque limits: a one-body config, or a chain of one body on a permanent joint to the ground). Needs "
               "python-flint (pip install \"rbstab[verify]\").")
 @click.option("--overwrite", is_flag=True,
               help="Replace an analysis file of another configuration of the same name (without it: refused).")

@@ -17,7 +17,7 @@ pytest.importorskip("flint")
 from rbstab.variants.paper import paper_form
 from rbstab.analysis import NotVerifiable, Verification, read_analysis, verify_sublevel  # noqa: E402
 from rbstab.analysis.push import runs_from_states  # noqa: E402
-from rbstab.analysis.verify import potential  # noqa: E402
+from rbstab.analysis.verify import DEFAULT_RTOL, potential  # noqa: E402
 from rbstab.config import load_config  # noqa: E402
 from rbstab_cli.main import cli  # noqa: E402
 
@@ -202,7 +202,8 @@ def test_interval_enclosures_hold_the_model_at_every_point():
 
     config = load_config(ROOT / "configs/paper/case1_permanent.yaml")
     variant = paper_form(config)
-    model = _Model(variant, arb)
+    p = variant.parameters[0]
+    model = _Model(p, p["attachment_point"], p["lyapunov_offset"], arb)  # held at its own point: R_p = R_c
     rng = np.random.default_rng(5)
 
     def v_at(theta):
@@ -230,3 +231,28 @@ def test_interval_enclosures_hold_the_model_at_every_point():
                 assert inside(tau[a], n[a], 1e-9 * (1 + abs(n[a])))
                 for b in range(3):
                     assert inside(hess[a][b], hs[a, b], 1e-3 * (1 + abs(hs[a, b])))
+
+
+def test_a_body_held_elsewhere_than_its_own_point_is_verified_as_its_translate():
+    """One body on a permanent joint whose ground point R_p is not its own point R_c: with
+    K_t = 0 the body is the one-body model moved by R_p - R_c, its potential the same up to
+    the constant h takes away, so its proof gives the one-body model's level (to the search's
+    tolerance; and that level itself is proven for it). With K_t != 0 (the ground-anchored
+    spring is not moved with it) the level differs."""
+    from conftest import tree_spelling
+
+    from rbstab.config import config_from_mapping
+
+    config = load_config(PENDULUM)
+    tree = dict(tree_spelling(config).resolved)
+    joint = dict(tree["joints"][0])
+    joint["parent_point"] = [0.3, -0.2, 1.5]  # C held 0.3, -0.2, 1.5 m from the origin; R_c = (0, 0, -0.5)
+    moved = config_from_mapping({**tree, "joints": [joint]})
+    assert moved.chain.joints[0].parent_point.tolist() != moved.chain.joints[0].child_point.tolist()
+    mine, theirs = verify_sublevel(moved), verify_sublevel(config)
+    assert mine.level == pytest.approx(theirs.level, rel=DEFAULT_RTOL) and mine.level > 0
+    assert verify_sublevel(moved, level=theirs.level).level == theirs.level
+    bodies = [{**tree["bodies"][0], "k_t": [10.0, 10.0, 10.0]}]  # K_t X at rest: ~1.5 N m about C, under the 4 N m limit
+    sprung = verify_sublevel(config_from_mapping({**tree, "bodies": bodies, "joints": [joint]}))
+    anchored = verify_sublevel(config_from_mapping({**tree, "bodies": bodies}))
+    assert sprung.level > 0 and abs(sprung.level - anchored.level) > 1e-3 * anchored.level

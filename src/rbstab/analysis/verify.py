@@ -3,10 +3,13 @@ reduced (6-state, ``permanent``) model proven positively invariant and attracted
 equilibrium, with outward-rounded interval arithmetic (python-flint's ``arb`` balls) and
 branch and bound over boxes of the Euler angles Theta.
 
-The argument (docs/analysis.md, "verified"). For the pinned body (eqs 21, 31, 32, 34),
-v = 0.5 Omega' J_p Omega + P(Theta) with the potential
+The argument (docs/analysis.md, "verified"). For the pinned body (eqs 21, 31, 32, 34; its
+point C at R_c in its frame, held at the ground point R_p), v = 0.5 Omega' J_p Omega + P(Theta)
+with the potential
 
-    P(Theta) = 0.5 Theta' K_r Theta + 0.5 X' K_t X - X' G + h,   X = R - A(Theta) R,
+    P(Theta) = 0.5 Theta' K_r Theta + 0.5 X' K_t X - X' G + h,   X = R_p - A(Theta) R_c
+
+(the paper's one body: R_p = R_c = R),
 
 and along the flow, with N the torque the actuators deliver and tau = -B' K_r Theta the
 static part of the commanded torque (eq 23), and L_r diagonal,
@@ -46,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..variants.paper import paper_form
+from ..layout import is_chain
 
 __all__ = ["Verification", "NotVerifiable", "verify_sublevel", "verify_analysis", "check_verifiable",
            "potential", "DEFAULT_RTOL"]
@@ -103,54 +106,60 @@ class Verification:
 
 # -- what is covered ----------------------------------------------------------------------------
 def verified_model(config):
-    """The configuration the proof is of: ``config`` where its tree is the paper's one-body
-    model, one body held to the ground at its own point in either spelling
-    (:func:`rbstab.variants.paper.paper_form`).
+    """The configuration the proof is of: ``config`` where its tree is one body held to the
+    ground by its joint (in either spelling, the ground point anywhere).
 
     Raises
     ------
     NotVerifiable
-        For any other tree (one line: why)."""
-    if paper_form(config) is not None:
-        return config
+        For a tree of several bodies (one line: why)."""
     bodies = config.chain.size
     if bodies > 1:
-        raise NotVerifiable(f"the proof covers one body held to the ground at its own point, the reduced 6-state "
-                            f"model of 'permanent' (eq 21); this chain has {bodies} bodies (interval arithmetic "
-                            "bounds one body's v and dv/dt)")
-    raise NotVerifiable(f"the proof covers one body held to the ground at its own point (parent_point = "
-                        f"child_point); joint {config.chain.joint_names[0]} holds it elsewhere")
+        raise NotVerifiable(f"the proof covers one body held to the ground by a permanent joint, the reduced "
+                            f"6-state model of 'permanent' (eq 21); this chain has {bodies} bodies (interval "
+                            "arithmetic bounds one body's v and dv/dt)")
+    return config
+
+
+def _key(config, owner: str, name: str) -> str:
+    """The key of the joint's (``owner`` ``"joint"``) or the body's gain or limit ``name`` as
+    the configuration writes it (one body's: ``controller.<name>``)."""
+    if not is_chain(config):
+        return f"controller.{name}"
+    chain = config.chain
+    return f"joints.{chain.joint_names[0]}.{name}" if owner == "joint" else f"bodies.{chain.body_names[0]}.{name}"
 
 
 def check_verifiable(config) -> None:
     """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
-    unless the configuration's analysis (:func:`verified_model`'s) runs on the reduced
-    6-state model with what the proof covers: clipped torque limits, diagonal positive L_r,
-    H unlimited, no disturbances, no bounds of X, V or E in ``simulation.limits``."""
-    model = paper_form(verified_model(config))
-    variant = model.name
-    if variant != "permanent":
-        raise NotVerifiable(f"controller.variant: found {variant!r} (its analysis runs on more than 6 states); "
-                            "--verify covers the reduced 6-state model of 'permanent'")
-    gains = model.gains
-    l_r = np.asarray(gains.l_r, dtype=float)
+    unless the configuration is one body on a permanent joint to the ground, the reduced
+    6-state model (:func:`verified_model`), with what the proof covers: clipped torque
+    limits, diagonal positive L_r, H unlimited, no disturbances, no bounds of X, V or E in
+    ``simulation.limits``."""
+    chain = verified_model(config).chain
+    body, joint = chain.bodies[0], chain.joints[0]
+    if joint.variant != "permanent":
+        raise NotVerifiable(f"{_key(config, 'joint', 'variant')}: found {joint.variant!r} (its analysis runs on more "
+                            "than 6 states); --verify covers the reduced 6-state model of 'permanent'")
+    l_r = np.asarray(joint.l_r, dtype=float)
     if np.any(l_r - np.diag(np.diag(l_r))):
-        raise NotVerifiable(f"controller.l_r: found a non-diagonal L_r {l_r.tolist()}; --verify needs a diagonal "
-                            "L_r (the saturation deficit power is bounded axis by axis)")
+        raise NotVerifiable(f"{_key(config, 'joint', 'l_r')}: found a non-diagonal L_r {l_r.tolist()}; --verify needs "
+                            "a diagonal L_r (the saturation deficit power is bounded axis by axis)")
     if np.any(np.diag(l_r) <= 0.0):
-        raise NotVerifiable(f"controller.l_r: found {np.diag(l_r).tolist()}; --verify needs every L_r_i > 0 "
-                            "(LaSalle's argument: dv/dt = 0 only where Omega = 0)")
-    sat = gains.saturation
+        raise NotVerifiable(f"{_key(config, 'joint', 'l_r')}: found {np.diag(l_r).tolist()}; --verify needs every "
+                            "L_r_i > 0 (LaSalle's argument: dv/dt = 0 only where Omega = 0)")
+    sat = joint.saturation or body.saturation
     if sat is not None:
         if sat.shape != "clip":
-            raise NotVerifiable(f"controller.saturation.shape: found {sat.shape!r}; --verify covers 'clip' "
-                                "(a smooth saturation delivers less than the commanded torque at every state, "
+            raise NotVerifiable(f"{_key(config, 'joint', 'saturation.shape')}: found {sat.shape!r}; --verify covers "
+                                "'clip' (a smooth saturation delivers less than the commanded torque at every state, "
                                 "so its deficit power is not zero where no limit is reached)")
-        if np.any(np.isfinite(sat.force_h)) and (np.any(gains.k_t) or np.any(gains.l_t)):
-            raise NotVerifiable(f"controller.saturation.force_h: found {np.asarray(sat.force_h).tolist()}; "
+        force_h = np.full(3, np.inf) if body.saturation is None else np.asarray(body.saturation.force_h, dtype=float)
+        if np.any(np.isfinite(force_h)) and (np.any(body.k_t) or np.any(body.l_t)):
+            raise NotVerifiable(f"{_key(config, 'body', 'saturation.force_h')}: found {force_h.tolist()}; "
                                 "--verify covers unlimited H (or K_t = L_t = 0)")
-    if gains.disturbances:
-        raise NotVerifiable(f"disturbances: found {len(gains.disturbances)}; --verify covers the undisturbed "
+    if body.disturbances:
+        raise NotVerifiable(f"disturbances: found {len(body.disturbances)}; --verify covers the undisturbed "
                             "body (a disturbance is not a property of a sublevel set)")
     limits = config.simulation.limits
     if limits is not None:
@@ -215,18 +224,24 @@ def _dot(a, b):
 
 
 class _Model:
-    """P, grad P, the Hessian of P and tau = -B' K_r Theta over a box of Theta, in arb."""
+    """P, grad P, the Hessian of P and tau = -B' K_r Theta over a box of Theta, in arb, of
+    the body of record ``p`` (:data:`rbstab.model.PARAMETERS`: C at R_c =
+    ``attachment_point`` in its frame) on its joint at the ground point ``ground`` R_p (3,)
+    [m], X = R_p - A R_c, with h = ``offset`` [J]."""
 
-    def __init__(self, variant, arb) -> None:
-        p = variant.parameters[0]
+    def __init__(self, p, ground, offset: float, arb) -> None:
         self.arb = arb
         self.zero, self.one = arb(0), arb(1)
         self.k_r = np.asarray(p["k_r"], dtype=float)
         self.k_t = np.asarray(p["k_t"], dtype=float)
         self.diag_kr = not np.any(self.k_r - np.diag(np.diag(self.k_r)))
         self.R = [arb(float(x)) for x in p["attachment_point"]]
+        self.ground = [arb(float(x)) for x in ground]
         self.G = [arb(float(x)) for x in p["weight"]]
-        self.h = arb(float(p["lyapunov_offset"]))
+        self.h = arb(float(offset))
+        self.reach = float(np.linalg.norm(p["attachment_point"]) + np.linalg.norm(ground))  # |X| at most
+        self.weight, self.offset = float(np.linalg.norm(p["weight"])), float(offset)
+        self.pivot_inertia = np.asarray(p["pivot_inertia"], dtype=float)
         self.K_r = [[arb(float(x)) for x in row] for row in self.k_r]
         self.K_t = [[arb(float(x)) for x in row] for row in self.k_t]
         self.has_kt = bool(np.any(self.k_t))
@@ -265,7 +280,7 @@ class _Model:
         rots = [_rot(a, cos[a], sin[a], zero, one) for a in range(3)]
         drots = [_drot(a, cos[a], sin[a], zero) for a in range(3)]
         w = self._w(rots, self.R)
-        x = [self.R[i] - w[i] for i in range(3)]
+        x = [self.ground[i] - w[i] for i in range(3)]
         kx = _mv(self.K_t, x) if self.has_kt else [zero, zero, zero]
         force = [self.G[i] - kx[i] for i in range(3)]  # G - K_t X
         p_val = self._spring(theta, lo, hi) - _dot(x, self.G) + self.h
@@ -332,7 +347,7 @@ def _convex_box(model: _Model, centre: np.ndarray, radius: float) -> float:
     return 0.0
 
 
-def _domain(config, variant, model: _Model, level_cap: float):
+def _domain(config, model: _Model, level_cap: float):
     """The box D of Theta, (3, 2) [rad]: |theta_2| <= pi/2 - gimbal margin, the bounds of
     ``simulation.limits.theta``, and otherwise wide enough that the spring alone holds every
     P <= level_cap inside it."""
@@ -340,9 +355,8 @@ def _domain(config, variant, model: _Model, level_cap: float):
     limits = config.simulation.limits
     theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
     k_min = float(np.linalg.eigvalsh(model.k_r).min())
-    p = variant.parameters[0]
-    # P >= 0.5 k_min |Theta|^2 - 2 |R| |G| + h  (0.5 X'K_t X >= 0, |X| <= 2 |R|)
-    floor = -2.0 * np.linalg.norm(p["attachment_point"]) * np.linalg.norm(p["weight"]) + float(p["lyapunov_offset"])
+    # P >= 0.5 k_min |Theta|^2 - (|R_p| + |R_c|) |G| + h  (0.5 X'K_t X >= 0, |X| <= |R_p| + |R_c|)
+    floor = -model.reach * model.weight + model.offset
     # and with a diagonal K_r, P >= 0.5 k_i theta_i^2 + that floor for each i
     k = np.diag(model.k_r) if model.diag_kr else np.full(3, k_min)
     half = np.sqrt(np.maximum(2.0 * (level_cap - floor) / k, 0.0)) * 1.05 + 1e-3
@@ -400,14 +414,12 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     check_verifiable(config)
     arb = _arb()
     t0 = _time.perf_counter()
-    variant = paper_form(config)
-    model = _Model(variant, arb)
-    equilibrium = np.asarray(variant.equilibrium, dtype=float)[:3]
+    model, equilibrium = _model(config, arb)
     gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
     # an upper bound of the least P on the faces |theta_2| = gimbal: no c above it can be proven
     face = [model.point(np.array([s1, sg * gimbal, 0.0])) for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0)]
     level_cap = min(face) if level is None else max(float(level), 0.0)
-    domain = _domain(config, variant, model, level_cap)
+    domain = _domain(config, model, level_cap)
     limits = config.simulation.limits
     theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
     omega_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[1]
@@ -514,7 +526,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
         # strictly below the lower bound: no failing Theta has P <= c
         result_level = result_level * (1.0 - 1e-9) if result_level > 0 else result_level
     # Omega's bounds of simulation.limits: 0.5 Omega' J_p Omega <= c - min P
-    jp_inv = np.linalg.inv(np.asarray(variant.parameters[0]["pivot_inertia"], dtype=float))
+    jp_inv = np.linalg.inv(model.pivot_inertia)
     for i in range(3):
         if np.isfinite(omega_limit[i]):
             cap = (p_floor or 0.0) + 0.5 * omega_limit[i] ** 2 / jp_inv[i, i] * (1.0 - 1e-9)
@@ -547,5 +559,16 @@ def verify_analysis(analysis, *, rtol: float = DEFAULT_RTOL) -> Verification:
 def potential(config, theta: np.ndarray) -> float:
     """P(Theta) [J] of the module docstring at one Theta (3,) [rad], by the interval
     kernel (its ball's midpoint): v at rest."""
-    variant = paper_form(config)
-    return _Model(variant, _arb()).point(np.asarray(theta, dtype=float))
+    return _model(config, _arb())[0].point(np.asarray(theta, dtype=float))
+
+
+def _model(config, arb) -> tuple[_Model, np.ndarray]:
+    """(the interval kernel of the body of ``config``'s one-body tree, its equilibrium Theta_e
+    (3,) [rad]: the tree's rest state, :func:`rbstab.analysis.linearise.linearise_chain`,
+    with the tree's h)."""
+    from ..variants import chain as C  # heavy: numba
+    from .linearise import linearise_chain, undisturbed  # heavy: numba
+
+    compiled = C.compile_chain(undisturbed(config).chain)
+    lin, _ = linearise_chain(compiled)
+    return _Model(compiled.params[0], compiled.ppoints[0], compiled.offset, arb), np.asarray(lin.equilibrium[:3])
