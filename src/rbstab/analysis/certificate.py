@@ -177,7 +177,7 @@ class ChainModel:
     def _outputs(self, x, t=0.0) -> dict:
         from ..variants import chain as C  # heavy: numba
 
-        return C.evaluate(self.compiled, t, self.states(x))
+        return C.evaluate(self.compiled, t, self.states(x), full=False)  # v, dv/dt and the angles only
 
     def lyapunov(self, x):
         """v [J] at each row of ``x`` (a float for one state (n,))."""

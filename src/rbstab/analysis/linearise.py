@@ -294,20 +294,17 @@ def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
     """dz/dt (k, m) of a tree's independent coordinates
     (:func:`rbstab.variants.chain.independent_coordinates`) at each row of ``z`` (k, m) at
     the times ``t`` [s] (a number or (k,)): the chain's rate
-    (:func:`rbstab.variants.chain.chain_rate`) at the full state of each row, the children of
+    (:func:`rbstab.variants.chain.chain_rates`) at the full state of each row, the children of
     permanent joints placed on their parents, the whole stack at once
     (:func:`rbstab.variants.chain.full_state`), read at those coordinates."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     z = np.atleast_2d(np.asarray(z, dtype=float))
-    t = np.broadcast_to(np.asarray(t, dtype=float), len(z))
+    t = np.ascontiguousarray(np.broadcast_to(np.asarray(t, dtype=float), len(z)))
     y = C.full_state(compiled, z)
-    columns = [at + c for _, _, at in C.independent_coordinates(compiled) for c in range(3)]
-    dy, out = np.empty(compiled.n_states), np.empty_like(z)
-    for k in range(len(z)):
-        C.chain_rate(float(t[k]), y[k], *compiled.args, dy)
-        out[k] = dy[columns]
-    return out
+    dy = np.empty_like(y)
+    C.chain_rates(t, y, *compiled.args, dy)
+    return dy[:, compiled.independent_columns]
 
 
 @dataclass(frozen=True)

@@ -518,6 +518,16 @@ def chain_rate(t, y, params, codes, parents, ppoints, d_at, dy):
                np.empty((codes.shape[0], 3)), np.empty(5))
 
 
+@jit
+def chain_rates(times, states, params, codes, parents, ppoints, d_at, out):
+    """:func:`chain_rate` of each row of ``states`` (k, n_states) at ``times`` (k,) [s] into
+    the rows of ``out`` (k, n_states) (for callers in Python: one call for a stack)."""
+    n = codes.shape[0]
+    joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
+    for k in range(states.shape[0]):
+        chain_core(times[k], states[k], params, codes, parents, ppoints, d_at, out[k], joints, bodies, scalars)
+
+
 @jit(forceinline=True, _nrt=False)
 def _saturation_flags(y, params, codes, joints, flags):
     """The actuators' saturation flags of one evaluated state into ``flags`` (n, 3, 3): per
