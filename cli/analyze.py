@@ -384,7 +384,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     out = Path(output)
     if not overwrite:
         _check_targets(loaded, out)
-    ensure_compiled(say=console.info, chain=bool(trees))
+    ensure_compiled(say=console.info, chain=bool(trees), analysis=True)
     for config in loaded:
         try:
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,

@@ -248,6 +248,21 @@ def test_sweep_chunk_size_help_gives_the_defaults():
             "with scipy]") in text
 
 
+def test_analyze_compiles_what_an_analysis_adds_to_the_engine(tmp_path, monkeypatch):
+    """rbstab analyze asks for the analysis's kernels (the tree's rest state and rates) with
+    the engine's for one body, and for the tree's group where a config is written as a tree."""
+    import rbstab.engine
+
+    asked = []
+    monkeypatch.setattr(rbstab.engine, "ensure_compiled", lambda say=None, **groups: asked.append(groups))
+    for config, chain in ((PAPER_CONFIGS[0], False), (ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", True)):
+        asked.clear()
+        result = CliRunner().invoke(cli, ["analyze", str(config), "--no-certificate", "--no-simulation", "-o",
+                                          str(tmp_path / config.stem)])
+        assert result.exit_code == 0, result.output
+        assert asked[0] == {"chain": chain, "analysis": True}, config.name
+
+
 def test_run_compiles_the_kernel_groups_of_the_spellings_it_runs(tmp_path, monkeypatch):
     """rbstab run asks for the tree's kernel group only where a config is written as a tree
     (a paper case's cold start compiles the one-body group alone), and for the sign law's

@@ -32,18 +32,20 @@ __all__ = ["GROUPS", "warm_up", "ensure_compiled"]
 
 #: Kernel groups, each compiled (and marked warm in the cache) as a whole: the engine's
 #: right-hand side, integrator and outputs; the sign law's event-driven integrator, which
-#: only pure-sign-law runs need; a chain's rate, driver and outputs, which only chains need
-#: (parts of :func:`warm_up`).
-GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",), "chain": ("chains",)}
+#: only pure-sign-law runs need; a chain's rate, driver and outputs, which only chains need;
+#: what an analysis of one body adds to the engine's (the tree's rest state and its
+#: rates at many states), which the chain group also compiles (parts of :func:`warm_up`).
+GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",), "chain": ("chains",), "analysis": ("rest",)}
 #: Cold compile time of each part of :func:`warm_up` relative to the others (one core: rates
-#: ~22 s, outputs ~8 s, the sign law ~22 s, chains ~84 s), by which :func:`ensure_compiled`
-#: shares them between its two processes.
-WEIGHTS = {"rates": 3, "outputs": 1, "switching": 3, "chains": 10}
+#: ~22 s, outputs ~8 s, the sign law ~22 s, chains ~84 s, rest ~14 s), by which
+#: :func:`ensure_compiled` shares them between its two processes.
+WEIGHTS = {"rates": 3, "outputs": 1, "switching": 3, "chains": 10, "rest": 2}
 
 
 def _warm_up_chains() -> None:
-    """A one-body chain's run on the compiled driver, its outputs and its rest state (the
-    kernels every chain uses: their argument types do not depend on the chain's size)."""
+    """A one-body chain's run on the compiled driver, its outputs, its rest state and its rates
+    at a stack of states (the kernels every chain uses: their argument types do not depend on
+    the chain's size)."""
     eye = np.eye(3)
     chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, np.zeros(3), np.array([0.0, 0.0, -1.0]),
                                                  "permanent", eye, eye), np.array([0.0, 0.0, -1.0]))
@@ -53,6 +55,20 @@ def _warm_up_chains() -> None:
     for limits in (None, np.ones((5, 3))):
         integrate_chain_runs(tree_system(compiled, limits), y[None], settings, method="DOP853", n_samples=2)
     C.evaluate(compiled, np.zeros(1), y[None])
+    C.chain_rates(np.zeros(1), y[None], *compiled.args, np.empty((1, len(y))))  # an analysis's linearisation
+
+
+def _warm_up_rest() -> None:
+    """What an analysis of one body compiles beyond a run's kernels: the rest state of a
+    one-body tree under gravity (:func:`rbstab.variants.chain.rest_state`: the potential, its
+    gradient and the accelerations), its full states and its rates at a stack of states
+    (:func:`rbstab.variants.chain.chain_rates`)."""
+    eye, point = np.eye(3), np.array([0.0, 0.0, -1.0])
+    chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, point, np.zeros(3), "permanent", eye, eye),
+                   point)
+    compiled = C.compile_chain(chain)  # h: the rest state's potential
+    y = C.full_state(compiled, np.zeros((1, 6)))
+    C.chain_rates(np.zeros(1), y, *compiled.args, np.empty_like(y))
 
 
 def _warm_up_paper_permanent() -> None:
@@ -66,15 +82,16 @@ def _warm_up_paper_permanent() -> None:
     integrate_chain_runs(tree_system(compiled), np.zeros((1, 6)), settings, method="DOP853", n_samples=2)
 
 
-def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
+def warm_up(parts: str = "rates,outputs,switching,chains,rest") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
     ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
     integrator, and what a one-body run on it needs), ``outputs`` (every output at the samples, the numerical dv/dt,
     :func:`rbstab.summary.numerical_rate`, and the balance figures,
     :func:`rbstab.summary.warm_up_balance`) and ``switching`` (the sign
-    law's event-driven integrator, :mod:`rbstab.engine.switching`) and ``chains`` (a
-    chain's rate, compiled driver and outputs, :mod:`rbstab.engine.systems`);
+    law's event-driven integrator, :mod:`rbstab.engine.switching`), ``chains`` (a
+    chain's rate, compiled driver and outputs, :mod:`rbstab.engine.systems`) and ``rest`` (an
+    analysis's: a tree's rest state and its rates at a stack of states);
     :func:`ensure_compiled` compiles some in a second process at the same time.
     """
     wanted = set(parts.split(","))
@@ -86,6 +103,8 @@ def warm_up(parts: str = "rates,outputs,switching,chains") -> None:
         warm_up_sign_law(params)
     if "chains" in wanted:
         _warm_up_chains()
+    if "rest" in wanted:
+        _warm_up_rest()
     for code, n in enumerate(STATE_SIZE):
         y = np.zeros((1, n))
         if "rates" in wanted:
@@ -118,15 +137,16 @@ def _start_warm_up(parts: str):
         return None
 
 
-def ensure_compiled(say=None, *, sign_law: bool = False, chain: bool = False) -> None:
+def ensure_compiled(say=None, *, sign_law: bool = False, chain: bool = False, analysis: bool = False) -> None:
     """Compile the engine's kernels into the cache unless that was done before.
 
     ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
     stderr; nothing is said when the cache is warm. ``sign_law``: also the sign law's
-    integrator; ``chain``: also a chain's kernels (:data:`GROUPS`). The parts are compiled in two processes at once (numba
-    compiles on one core; each writes its own kernels into the cache folder).
+    integrator; ``chain``: also a chain's kernels; ``analysis``: also what an analysis adds (its
+    rest state, :data:`GROUPS`; a chain's kernels include them). The parts are compiled in two
+    processes at once (numba compiles on one core; each writes its own kernels into the cache folder).
     """
-    wanted = {"engine": True, "sign_law": sign_law, "chain": chain}
+    wanted = {"engine": True, "sign_law": sign_law, "chain": chain, "analysis": analysis and not chain}
     cold = [g for g, want in wanted.items() if want and not cache_is_warm(g)]
     if not cold:
         return

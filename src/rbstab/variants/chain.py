@@ -787,7 +787,7 @@ def rest_potential(q, params, codes, parents, ppoints, d_at, y, dy, work):
     the configuration ``q`` (:func:`rest_configuration`, written into ``y``): v's terms at
     rest, whose kinetic parts are zero."""
     rest_configuration(q, params, codes, parents, ppoints, d_at, y)
-    chain_evaluate(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars, work)
+    chain_core(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars)
     s = work.scalars
     return s[_TRANSLATIONAL] + s[_ROTATIONAL] + s[_CONSTRAINT] + s[_GRAVITY]
 
@@ -815,7 +815,7 @@ def rest_acceleration(q, params, codes, parents, ppoints, d_at, y, dy, work, out
     into ``out``: dOmega_i/dt of every body, dV_i/dt of bodies whose joint is not
     permanent, dD/dt of embedded joints."""
     rest_configuration(q, params, codes, parents, ppoints, d_at, y)
-    chain_evaluate(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars, work)
+    chain_core(0.0, y, params, codes, parents, ppoints, d_at, dy, work.joints, work.bodies, work.scalars)
     n = codes.shape[0]
     k = 0
     for i in range(n):
