@@ -84,13 +84,14 @@ def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str 
 
 def _stiffness_checked(*, chain: bool, sign_law: bool = False) -> bool:
     """Whether W008 is to be checked (not silenced); if so, the kernels the linearisation
-    runs are compiled first where they are not yet (said as ``rbstab run`` says it)."""
+    runs (the analysis's: a tree's rest state) are compiled first where they are not yet
+    (said as ``rbstab run`` says it)."""
     console = get_console()
     if console.silences("W008"):
         return False
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
 
-    ensure_compiled(say=console.info, sign_law=sign_law, chain=chain)
+    ensure_compiled(say=console.info, sign_law=sign_law, chain=chain, analysis=True)
     return True
 
 

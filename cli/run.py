@@ -192,7 +192,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     how = _check_targets(loaded, out, overwrite)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
     ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded),
-                    chain=any(is_chain(c) for c in loaded))
+                    chain=any(is_chain(c) for c in loaded), analysis=not get_console().silences("W008"))
     _load_kernels(loaded)
     show_config_warnings(stiffness_warnings(loaded), len(loaded))
     not_computed = 0

@@ -265,16 +265,19 @@ def test_analyze_compiles_what_an_analysis_adds_to_the_engine(tmp_path, monkeypa
 
 def test_run_compiles_the_kernel_groups_of_the_spellings_it_runs(tmp_path, monkeypatch):
     """rbstab run asks for the tree's kernel group only where a config is written as a tree
-    (a paper case's cold start compiles the one-body group alone), and for the sign law's
-    only where a one-body config has it."""
+    (a paper case's cold start compiles the one-body group and the analysis's rest state,
+    which its W008 check linearises), and for the sign law's only where a one-body config
+    has it."""
     import rbstab.engine
 
     asked = []
     monkeypatch.setattr(rbstab.engine, "ensure_compiled", lambda say=None, **groups: asked.append(groups))
     short = ["--set", "simulation.t_end=0.01", "--set", "simulation.n_samples=3"]
-    for config, expected in ((PAPER_CONFIGS[0], {"sign_law": False, "chain": False}),
-                             (ROOT / "configs" / "examples" / "sliding.yaml", {"sign_law": False, "chain": False}),
-                             (ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", {"sign_law": False, "chain": True})):
+    for config, expected in ((PAPER_CONFIGS[0], {"sign_law": False, "chain": False, "analysis": True}),
+                             (ROOT / "configs" / "examples" / "sliding.yaml",
+                              {"sign_law": False, "chain": False, "analysis": True}),
+                             (ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
+                              {"sign_law": False, "chain": True, "analysis": True})):
         asked.clear()
         result = CliRunner().invoke(cli, ["run", str(config), *short, "-o", str(tmp_path / config.stem)])
         assert result.exit_code == 0, result.output
@@ -283,4 +286,4 @@ def test_run_compiles_the_kernel_groups_of_the_spellings_it_runs(tmp_path, monke
     result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "sliding.yaml"), *short,
                                       "--set", "controller.boundary_layer=0", "-o", str(tmp_path / "sign")])
     assert result.exit_code == 0, result.output
-    assert asked[0] == {"sign_law": True, "chain": False}
+    assert asked[0] == {"sign_law": True, "chain": False, "analysis": True}
