@@ -318,14 +318,21 @@ def _part(compiled, kind: str, i: int, one_body: bool) -> str:
     return f" of {kind} '{names[i]}'"
 
 
+def _unlimited(compiled):
+    """``compiled`` without its actuators' limits (every record's saturation off), the same h."""
+    from ..variants import chain as C  # heavy: numba
+
+    params = compiled.params.copy()
+    params["saturation"] = 0.0
+    return C.with_records(compiled, params, compiled.ppoints, compiled.offset)
+
+
 def _commanded(compiled, y: np.ndarray) -> dict[str, np.ndarray]:
     """|N_j|, |H_i|, |Lambda_j| [N m, N, N] (each (n, 3)) that the feedback and point laws of
     ``compiled`` command at its full state ``y`` (before the actuators' limits)."""
     from ..variants import chain as C  # heavy: numba
 
-    params = compiled.params.copy()
-    params["saturation"] = 0.0
-    out = C.evaluate(C.with_records(compiled, params, compiled.ppoints, compiled.offset), np.zeros(1), y[None])
+    out = C.evaluate(_unlimited(compiled), np.zeros(1), y[None])
     return {key: np.abs(np.asarray(out[key], dtype=float)[0]) for key, _, _, _ in _CONTROLS}
 
 
@@ -346,9 +353,7 @@ def _unheld(compiled, one_body: bool) -> str:
     rest state without limits commands beyond their limits."""
     from ..variants import chain as C  # heavy: numba
 
-    params = compiled.params.copy()
-    params["saturation"] = 0.0
-    rest, _ = C.rest_state(C.with_records(compiled, params, compiled.ppoints, compiled.offset))
+    rest, _ = C.rest_state(_unlimited(compiled))
     beyond = [] if rest is None else _beyond(compiled, rest, one_body, at_limit=False)
     why = ("; without the limits the equilibrium would need " + ", ".join(beyond)) if beyond else ""
     where = "controller.saturation" if one_body else "saturation"
