@@ -263,25 +263,33 @@ def parameter_vs_initial_state(n: int) -> None:
     print(f"  ratio trunk mass / legs tilt: {seconds['trunk mass'] / seconds['legs tilt']:.2f}")
 
 
-def cold_run() -> None:
-    """``rbstab run`` of the stance example, process start to exit, with an empty compile
-    cache (``NUMBA_CACHE_DIR``, compiling once) and warm (best of 3)."""
+def cold_run(repeat: int = 2) -> None:
+    """``rbstab run`` of the stance example and of a paper case (Case 1), process start to
+    exit, with an empty compile cache (``NUMBA_CACHE_DIR``, compiling the kernels each
+    model needs once: a tree's, the paper's one body's), alternated ``repeat`` times, and
+    warm (best of 3); the stance's cold run over the paper case's."""
     import os
     import subprocess
     import tempfile
 
-    def run(env=None) -> float:
+    def run(path, env=None) -> float:
         with tempfile.TemporaryDirectory() as out:
             start = time.perf_counter()
-            subprocess.run(["rbstab", "run", str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml"), "-o", out],
-                           check=True, capture_output=True, env=env)
+            subprocess.run(["rbstab", "run", str(path), "-o", out], check=True, capture_output=True, env=env)
             return time.perf_counter() - start
 
-    warm = min(run() for _ in range(3))
-    with tempfile.TemporaryDirectory() as cache:
-        cold = run(dict(os.environ, NUMBA_CACHE_DIR=cache))
-    print(f"rbstab run stance_ankle_hip: warm {warm:.2f} s, cold (compiling the engine and a tree's kernels) "
-          f"{cold:.1f} s")
+    stance, paper = ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", ROOT / "configs" / "paper" / \
+        "case1_permanent.yaml"
+    warm = min(run(stance) for _ in range(3))
+    cold: dict = {stance: [], paper: []}
+    for _ in range(repeat):
+        for path in (stance, paper):
+            with tempfile.TemporaryDirectory() as cache:
+                cold[path].append(run(path, dict(os.environ, NUMBA_CACHE_DIR=cache)))
+    print(f"rbstab run stance_ankle_hip: warm {warm:.2f} s, cold (a tree's kernels compiled) "
+          f"{' / '.join(f'{t:.1f}' for t in cold[stance])} s; case1_permanent cold (the one body's) "
+          f"{' / '.join(f'{t:.1f}' for t in cold[paper])} s; ratio {min(cold[stance]) / min(cold[paper]):.2f} "
+          "(best of each)")
 
 
 def main() -> None:

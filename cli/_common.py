@@ -14,7 +14,6 @@ import click
 
 from rbstab.api import load_config
 from rbstab.engine.registry import get_engine
-from rbstab.layout import is_chain
 
 from .console import get_console
 
@@ -82,7 +81,7 @@ def show_config_warnings(found: dict[str, list[str]], n_configs: int, noun: str 
         console.warn(line, where)
 
 
-def _stiffness_checked(*, chain: bool, sign_law: bool = False) -> bool:
+def _stiffness_checked(*, one_body: bool, chain: bool, sign_law: bool = False) -> bool:
     """Whether W008 is to be checked (not silenced); if so, the kernels the linearisation
     runs (the analysis's: a tree's rest state) are compiled first where they are not yet
     (said as ``rbstab run`` says it)."""
@@ -91,7 +90,7 @@ def _stiffness_checked(*, chain: bool, sign_law: bool = False) -> bool:
         return False
     from rbstab.engine import ensure_compiled  # heavy: numba, numpy
 
-    ensure_compiled(say=console.info, sign_law=sign_law, chain=chain, analysis=True)
+    ensure_compiled(say=console.info, one_body=one_body, sign_law=sign_law, chain=chain, analysis=True)
     return True
 
 
@@ -99,7 +98,11 @@ def stiffness_warnings(configs) -> dict[str, list[str]]:
     """Each config's W008 line (a stiff mode holds its explicit method to very many steps:
     :func:`rbstab.analysis.stiffness.stiffness_warning`, one linearisation each, 4-120 ms),
     by name: ``{name: [line]}`` for those that have one; none where W008 is silenced."""
-    if not configs or not _stiffness_checked(chain=any(is_chain(c) for c in configs)):
+    if not configs:
+        return {}
+    from rbstab.engine import kernel_groups  # heavy: numba, numpy
+
+    if not _stiffness_checked(**kernel_groups(configs)):
         return {}
     from rbstab.analysis.stiffness import stiffness_warning  # heavy: numba, scipy
 
@@ -111,7 +114,7 @@ def template_stiffness_warnings(loaded, table, *, sign_law: bool = False) -> lis
     (:func:`rbstab.analysis.stiffness.sweep_stiffness_warnings`); none where W008 is silenced.
     ``sign_law``: compile the sign law's kernels too where they are not yet (a sweep that
     runs compiles them all at once)."""
-    if not _stiffness_checked(chain=loaded.is_chain, sign_law=sign_law):
+    if not _stiffness_checked(one_body=not loaded.is_chain, chain=loaded.is_chain, sign_law=sign_law):
         return []
     from rbstab.analysis.stiffness import sweep_stiffness_warnings  # heavy: numba, scipy
 

@@ -340,7 +340,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     from rbstab.analysis import robustness, write_analysis  # heavy: numba, numpy
     from rbstab.analysis.dataset import analysis_path  # heavy: numba, numpy
     from rbstab.analysis.text import describe, describe_robustness  # heavy: numba, numpy
-    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+    from rbstab.engine import ensure_compiled, kernel_groups  # heavy: numba, numpy
     from rbstab.sweep.executors import default_jobs  # heavy: multiprocessing (every command's start-up)
 
     if not configs and not sweeps:
@@ -384,7 +384,7 @@ def analyze(configs, output, as_json, basin, sweeps, overrides, boundary_layer, 
     out = Path(output)
     if not overwrite:
         _check_targets(loaded, out)
-    ensure_compiled(say=console.info, chain=bool(trees), analysis=True)
+    ensure_compiled(say=console.info, **kernel_groups(loaded), analysis=True)
     for config in loaded:
         try:
             result = run_analysis(config, boundary_layer=boundary_layer, certificate=not no_certificate,

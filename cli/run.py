@@ -9,7 +9,6 @@ import click
 
 from rbstab.api import ResultExistsError, check_overwrite
 from rbstab.api import run as run_one
-from rbstab.layout import is_chain
 from rbstab.resources import memory_problem
 from rbstab.warning_codes import coded
 
@@ -132,13 +131,14 @@ def _load_kernels(loaded) -> None:
     """Load the compiled kernels from numba's cache (and scipy's optimizers, which find the
     equilibrium under gravity) before the first run, so that its ``wall_time`` is its own
     (the load, ~0.4-0.7 s, is said with -v)."""
-    from rbstab.engine import warm_up  # heavy: numba, numpy
+    from rbstab.engine import GROUPS, warm_up  # heavy: numba, numpy
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
+    from rbstab.variants.paper import has_paper_form  # heavy: numba, numpy
 
-    chains = ["chains"] if any(is_chain(c) for c in loaded) else []
+    chains = list(GROUPS["chain"]) if any(not has_paper_form(c.chain) for c in loaded) else []
     switching = ["switching"] if any(is_sign_law(c) for c in loaded) else []  # either spelling
-    loaded = [c for c in loaded if not is_chain(c)]  # one body's spelling: the one-body kernels
-    parts = (["rates", "outputs"] if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
+    loaded = [c for c in loaded if has_paper_form(c.chain)]  # the paper's one body: the one-body kernels
+    parts = (list(GROUPS["engine"]) if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
         switching) + chains
     start = time.perf_counter()
     if any(c.chain.gravity.any() for c in loaded):
@@ -179,7 +179,7 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     be written (full disk, read-only folder) stops the command with one line (status 4);
     files written before are complete, and no temporary file is left.
     """
-    from rbstab.engine import ensure_compiled  # heavy: numba, numpy
+    from rbstab.engine import ensure_compiled, kernel_groups  # heavy: numba, numpy
     from rbstab.io.atomic import describe_os_error  # heavy at start-up: hashlib, socket
     from rbstab.engine.status import computed  # heavy: numba, numpy (rbstab.engine)
     from rbstab.simulator import is_sign_law  # heavy: numba, numpy
@@ -191,8 +191,8 @@ def run(configs, output, overrides, method, overwrite, as_json) -> None:
     out = Path(output)
     how = _check_targets(loaded, out, overwrite)
     prepare_output(out, [f"{c.name}.h5" for c in loaded])
-    ensure_compiled(say=get_console().info, sign_law=any(is_sign_law(c) for c in loaded),
-                    chain=any(is_chain(c) for c in loaded), analysis=not get_console().silences("W008"))
+    ensure_compiled(say=get_console().info, **kernel_groups(loaded), sign_law=any(is_sign_law(c) for c in loaded),
+                    analysis=not get_console().silences("W008"))
     _load_kernels(loaded)
     show_config_warnings(stiffness_warnings(loaded), len(loaded))
     not_computed = 0

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from click.testing import CliRunner
+import yaml
 
 from conftest import PAPER_CONFIGS, ROOT
 from rbstab.io.hdf5 import read_summary
@@ -250,7 +251,8 @@ def test_sweep_chunk_size_help_gives_the_defaults():
 
 def test_analyze_compiles_what_an_analysis_adds_to_the_engine(tmp_path, monkeypatch):
     """rbstab analyze asks for the analysis's kernels (the tree's rest state and rates) with
-    the engine's for one body, and for the tree's group where a config is written as a tree."""
+    the one-body group for the paper's one body, and for the tree's group (not the one
+    body's) for a tree."""
     import rbstab.engine
 
     asked = []
@@ -260,24 +262,31 @@ def test_analyze_compiles_what_an_analysis_adds_to_the_engine(tmp_path, monkeypa
         result = CliRunner().invoke(cli, ["analyze", str(config), "--no-certificate", "--no-simulation", "-o",
                                           str(tmp_path / config.stem)])
         assert result.exit_code == 0, result.output
-        assert asked[0] == {"chain": chain, "analysis": True}, config.name
+        assert asked[0] == {"one_body": not chain, "chain": chain, "analysis": True}, config.name
 
 
-def test_run_compiles_the_kernel_groups_of_the_spellings_it_runs(tmp_path, monkeypatch):
-    """rbstab run asks for the tree's kernel group only where a config is written as a tree
-    (a paper case's cold start compiles the one-body group and the analysis's rest state,
-    which its W008 check linearises), and for the sign law's only where a one-body config
-    has it."""
+def test_run_compiles_the_kernel_groups_of_the_models_it_runs(tmp_path, monkeypatch):
+    """rbstab run asks for the one-body group where a model is the paper's one body, in
+    either spelling, and for the tree's group only where a model is another tree (a paper
+    case's cold start compiles the one-body group and the analysis's rest state, which its
+    W008 check linearises; a tree's, the tree's group alone), and for the sign law's only
+    where a one-body config has it."""
     import rbstab.engine
 
     asked = []
     monkeypatch.setattr(rbstab.engine, "ensure_compiled", lambda say=None, **groups: asked.append(groups))
     short = ["--set", "simulation.t_end=0.01", "--set", "simulation.n_samples=3"]
-    for config, expected in ((PAPER_CONFIGS[0], {"sign_law": False, "chain": False, "analysis": True}),
-                             (ROOT / "configs" / "examples" / "sliding.yaml",
-                              {"sign_law": False, "chain": False, "analysis": True}),
-                             (ROOT / "configs" / "examples" / "stance_ankle_hip.yaml",
-                              {"sign_law": False, "chain": True, "analysis": True})):
+    one_body = {"one_body": True, "sign_law": False, "chain": False, "analysis": True}
+    tree = {"one_body": False, "sign_law": False, "chain": True, "analysis": True}
+    as_tree = tmp_path / "as_tree.yaml"  # the paper's one body written as a tree: its model is one body's
+    as_tree.write_text(yaml.safe_dump({
+        "name": "as_tree", "gravity": [0, 0, 0],
+        "bodies": [{"name": "b", "mass": 1.0, "inertia": [1.0, 1.0, 1.0]}],
+        "joints": [{"name": "j", "parent": "ground", "child": "b", "variant": "visco_elastic",
+                    "parent_point": [0, 0, 0], "child_point": [0, 0, 0], "k_r": [1, 1, 1], "l_r": [1, 1, 1],
+                    "k_c": [1, 1, 1], "l_c": [1, 1, 1]}]}))
+    for config, expected in ((PAPER_CONFIGS[0], one_body), (ROOT / "configs" / "examples" / "sliding.yaml", one_body),
+                             (ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", tree), (as_tree, one_body)):
         asked.clear()
         result = CliRunner().invoke(cli, ["run", str(config), *short, "-o", str(tmp_path / config.stem)])
         assert result.exit_code == 0, result.output
@@ -286,4 +295,4 @@ def test_run_compiles_the_kernel_groups_of_the_spellings_it_runs(tmp_path, monke
     result = CliRunner().invoke(cli, ["run", str(ROOT / "configs" / "examples" / "sliding.yaml"), *short,
                                       "--set", "controller.boundary_layer=0", "-o", str(tmp_path / "sign")])
     assert result.exit_code == 0, result.output
-    assert asked[0] == {"sign_law": True, "chain": False, "analysis": True}
+    assert asked[0] == {**one_body, "sign_law": True}

@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from conftest import initial_blocks, paper_body, paper_gains
-from rbstab.engine import METHODS, integrate_runs, status, tableaus
+from rbstab.engine import GROUPS, METHODS, integrate_runs, status, tableaus
 from rbstab.variants import VARIANTS
 
 GRAVITY = {"free": (0.0, 0.0, -10.0), "permanent": (0.0, 0.0, -10.0)}
@@ -199,7 +199,7 @@ _UNWARMED = r"""
 import sys, warnings
 import numba
 from rbstab.engine import warm_up
-warm_up("rates,outputs")
+warm_up(sys.argv[1])
 from rbstab.config import load_config
 from rbstab.simulator import simulate
 
@@ -216,8 +216,22 @@ def signatures():
 
 before = signatures()
 warnings.simplefilter("ignore")
-for path in sys.argv[1:]:
-    simulate(load_config(path, ["simulation.t_end=0.01", "simulation.n_samples=3"]))
+short = ["simulation.t_end=0.01", "simulation.n_samples=3"]
+for path in sys.argv[3:]:
+    simulate(load_config(path, short))
+if sys.argv[2]:  # the first config's analysis and a sweep of two runs over the key sys.argv[2]
+    import tempfile
+    from pathlib import Path
+
+    import rbstab
+    from rbstab.analysis import analyze
+    from rbstab.sweep.executors import ThreadExecutor
+
+    analyze(load_config(sys.argv[3], short), samples=200, falsification_runs=2)
+    out = Path(tempfile.mkdtemp())
+    (out / "spec.yaml").write_text(f"name: s\nbase: {sys.argv[3]}\ngrid:\n  {sys.argv[2]}: [1.0, 2.0]\n"
+                                   "  simulation.t_end: [0.01]\n")
+    rbstab.execute_sweep(out / "spec.yaml", out, executor=ThreadExecutor(1))
 after = signatures()
 print(sorted(name for name, count in after.items() if count > before.get(name, 0)))
 """
@@ -227,7 +241,8 @@ def test_a_one_body_run_uses_only_the_kernels_the_engine_group_warms():
     """rbstab run of a paper case compiles (or loads) the engine group before its first run
     (rbstab.engine.ensure_compiled): its runs, every law and the permanent joint's reduced
     samples expanded, then call no kernel the group left out (one would be compiled inside
-    the first run, its wall time and the user's wait: ~10 s)."""
+    the first run, its wall time and the user's wait: ~10 s); an analysis (with the
+    analysis group) and a sweep's runs neither."""
     import subprocess
     import sys
 
@@ -235,5 +250,24 @@ def test_a_one_body_run_uses_only_the_kernels_the_engine_group_warms():
 
     paths = [str(p) for p in sorted((ROOT / "configs" / "paper").glob("*.yaml"))]
     paths.append(str(ROOT / "configs" / "examples" / "sliding.yaml"))
-    found = subprocess.run([sys.executable, "-c", _UNWARMED, *paths], capture_output=True, text=True, check=True)
+    parts = ",".join((*GROUPS["engine"], *GROUPS["analysis"]))
+    found = subprocess.run([sys.executable, "-c", _UNWARMED, parts, "body.mass", *paths],
+                           capture_output=True, text=True, check=True)
+    assert found.stdout.strip() == "[]", found.stdout + found.stderr
+
+
+def test_a_tree_run_uses_only_the_kernels_the_chain_group_warms():
+    """A tree's run (rbstab run of a chain example: ball joints, visco-elastic and embedded
+    point laws, a knee's stiff ligaments), its analysis and a sweep's runs call no kernel
+    beyond the chain group's, which a tree-only command compiles without the one-body
+    group's."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    paths = [str(ROOT / "configs" / "examples" / f"{name}.yaml") for name in ("stance_ankle_hip", "double_pendulum",
+                                                                              "knee")]
+    found = subprocess.run([sys.executable, "-c", _UNWARMED, ",".join(GROUPS["chain"]), "bodies.trunk.mass", *paths],
+                           capture_output=True, text=True, check=True)
     assert found.stdout.strip() == "[]", found.stdout + found.stderr

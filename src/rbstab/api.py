@@ -174,15 +174,15 @@ def _config(config: Any, overrides: Overrides) -> "RunConfig":
 
 
 def _integrate(config, engine: str, timeout: float | None) -> "RunResult":
-    """The run (one body or a tree), the compiled kernels made first (once per machine,
-    ~25 s on 2 cores, ~65 s with a tree's, cached)."""
-    from .engine import ensure_compiled  # heavy: numba, numpy
+    """The run (one body or a tree), the compiled kernels its model needs made first (once
+    per machine and version, cached: :func:`rbstab.engine.ensure_compiled`)."""
+    from .engine import ensure_compiled, kernel_groups  # heavy: numba, numpy
     from .simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
     from .simulator import simulate as integrate  # heavy: numba, numpy
 
     tree = is_chain(config)
     if tree or uses_compiled_engine(config, engine):
-        ensure_compiled(sign_law=is_sign_law(config), chain=tree)
+        ensure_compiled(sign_law=is_sign_law(config), **kernel_groups([config]))
     return integrate(config, timeout, engine=engine)
 
 
@@ -219,8 +219,9 @@ def simulate(config: Any, overrides: Overrides = (), *, engine: str = DEFAULT_EN
 
     Notes
     -----
-    The first run on a machine compiles the engine (~25 s on 2 cores, ~65 s with a
-    tree's kernels), cached for every later run and process (:mod:`rbstab.jit`).
+    The first run on a machine compiles the kernels its model needs (the paper's one
+    body's ~1 min on 2 cores, a tree's ~2 min), cached for every later run and process
+    (:mod:`rbstab.jit`).
     """
     from .io.hdf5 import result_dataset  # heavy: numpy
 
@@ -448,7 +449,8 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
     loaded = _load_spec(spec, overrides)
     ex, owned = _sweep_executor(executor, scheduler, connect_timeout)
     try:
-        ensure_compiled(say=log, sign_law=True, chain=loaded.is_chain)  # once, before any worker starts
+        ensure_compiled(say=log, one_body=not loaded.is_chain, sign_law=not loaded.is_chain,
+                        chain=loaded.is_chain)  # once, before any worker starts
         return run_sweep(loaded, output, executor=ex, jobs=jobs, log=log, **options)
     finally:
         if owned:

@@ -80,7 +80,13 @@ def jit(*args, **kwargs):
     the run's loop, a run), are ``@jit(inline="always")``: every function numba compiles
     on its own is optimised and emitted with everything it calls linked in, so a stack of
     ``forceinline`` parts compiles the driver once per level (a chain's driver took 2.7x
-    as long that way, the one-body engine's 1.6x).
+    as long that way, the one-body engine's 1.6x). Numba passes ``forceinline`` on to a
+    function that does not set it when a ``forceinline`` caller compiles it first, and
+    keeps that compilation for every later caller: a function that the driver's
+    ``forceinline`` overloads call (:mod:`rbstab.engine.systems`) therefore says which it
+    is, so that its code does not depend on which caller compiled it first (the tree's rate
+    and admissible margin inlined into the steps; its impulses, rare, a call, compiled once
+    rather than at each of the driver's three places that apply them).
 
     The functions a run's loops call with arrays (a step, a stage's rate, a sample's
     outputs, the admissible region, the overloads of :mod:`rbstab.engine.systems`) take

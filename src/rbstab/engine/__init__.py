@@ -28,7 +28,7 @@ _SOURCES = {
     "method_number": "rk",
     **dict.fromkeys(["DEFAULT_MAX_STEPS", "status_message"], "status"),
     "METHODS": "tableaus",
-    **dict.fromkeys(["GROUPS", "ensure_compiled", "warm_up"], "warm"),
+    **dict.fromkeys(["GROUPS", "ensure_compiled", "kernel_groups", "warm_up"], "warm"),
     **dict.fromkeys(["ENGINES", "DEFAULT_ENGINE", "Engine", "get_engine"], "registry"),
 }
 
@@ -47,6 +47,6 @@ def __dir__() -> list[str]:
 
 
 __all__ = ["METHODS", "DEFAULT_MAX_STEPS", "ChunkSolution", "method_number", "integrate_runs", "status_message",
-           "warm_up", "ensure_compiled", "GROUPS", "RunBatch", "batch_from_table", "batch_of", "ENGINES",
+           "warm_up", "ensure_compiled", "kernel_groups", "GROUPS", "RunBatch", "batch_from_table", "batch_of", "ENGINES",
            "DEFAULT_ENGINE",
            "Engine", "get_engine"]

@@ -221,7 +221,7 @@ def _chain_disturbed(params):
 
 
 # -- a tree in reduced coordinates: its region and impulses on its maximal image -------------------------
-@jit(_nrt=False)
+@jit(_nrt=False, forceinline=True)
 def tree_margin(y, p, limit):
     """(margin, status) of the admissible region at the reduced state ``y`` (a
     :class:`TreeSystem` ``p``; as :func:`admissible_event`'s): the gimbal lock, ``limit`` -
@@ -259,7 +259,7 @@ def tree_margin(y, p, limit):
     return chain_bounds(w.y, p.params, p.codes, p.parents, p.ppoints, margin, status)
 
 
-@jit(_nrt=False)
+@jit(_nrt=False, forceinline=False)
 def tree_impulses(t, y, p):
     """:func:`rbstab.variants.chain.chain_impulses` on the maximal image of the reduced state
     ``y`` (the permanent joints' impulsive reactions keep them held), the jumps of the

@@ -17,58 +17,89 @@ from pathlib import Path
 import numpy as np
 
 from ..jit import CACHE_DIR, cache_is_warm, mark_warm
+from ..kinematics import rotation_matrix
 from ..chain import GROUND, Body, Joint, single
 from ..model import PARAMETERS
 from ..summary import numerical_rate, warm_up_balance
 from ..variants import chain as C
 from ..variants.base import N_OUTPUTS
+from ..variants.paper import has_paper_form
 from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
 from .integrate import admissible, integrate_chain_runs, integrate_runs
 from .switching import warm_up as warm_up_sign_law
 from .systems import tree_system
 from .tableaus import METHODS
 
-__all__ = ["GROUPS", "warm_up", "ensure_compiled"]
+__all__ = ["GROUPS", "warm_up", "ensure_compiled", "kernel_groups"]
 
-#: Kernel groups, each compiled (and marked warm in the cache) as a whole: the engine's
-#: right-hand side, integrator and outputs; the sign law's event-driven integrator, which
-#: only pure-sign-law runs need; a chain's rate, driver and outputs, which only chains need;
-#: what an analysis of one body adds to the engine's (the tree's rest state and its
-#: rates at many states), which the chain group also compiles (parts of :func:`warm_up`).
-GROUPS = {"engine": ("rates", "outputs"), "sign_law": ("switching",), "chain": ("chains",), "analysis": ("rest",)}
+#: Kernel groups, each compiled (and marked warm in the cache) as a whole: one body's
+#: right-hand side, integrator and outputs (the paper's one body, in either spelling); the
+#: sign law's event-driven integrator, which only pure-sign-law runs need; a tree's
+#: driver and outputs, which only trees of other shapes need; what an analysis of one
+#: body adds (the tree's rest state and its rates at many states), which the chain group
+#: also compiles. Both run groups share the summary's kernels (parts of :func:`warm_up`).
+GROUPS = {"engine": ("rates", "outputs", "summary"), "sign_law": ("switching",), "chain": ("driver", "chains", "summary"),
+          "analysis": ("rest",)}
 #: Cold compile time of each part of :func:`warm_up` relative to the others (one core: rates
-#: ~22 s, outputs ~8 s, the sign law ~22 s, chains ~84 s, rest ~14 s), by which
-#: :func:`ensure_compiled` shares them between its two processes.
-WEIGHTS = {"rates": 3, "outputs": 1, "switching": 3, "chains": 10, "rest": 2}
+#: ~60 s, outputs ~15 s, summary ~8 s, the sign law ~22 s, a tree's driver ~95 s, its
+#: outputs and rest state ~55 s, rest ~35 s), by which :func:`ensure_compiled` shares them
+#: between its two processes.
+WEIGHTS = {"rates": 6, "outputs": 2, "summary": 1, "switching": 2, "driver": 10, "chains": 6, "rest": 3}
 
 
-def _warm_up_chains() -> None:
-    """A one-body chain's run on the compiled driver, its outputs, its rest state and its rates
-    at a stack of states (the kernels every chain uses: their argument types do not depend on
-    the chain's size)."""
+def _tree_example():
+    """A one-body tree that is not the paper's one body (its joint's points differ), so that
+    it runs on the tree's kernels."""
     eye = np.eye(3)
-    chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, np.zeros(3), np.array([0.0, 0.0, -1.0]),
-                                                 "permanent", eye, eye), np.array([0.0, 0.0, -1.0]))
-    compiled = C.compile_chain(chain)
+    return single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, np.zeros(3), np.array([0.0, 0.0, -1.0]),
+                                                "permanent", eye, eye), np.array([0.0, 0.0, -1.0]))
+
+
+def _warm_up_driver() -> None:
+    """A tree's run on the compiled driver, with and without an admissible region (the
+    driver's argument types do not depend on the tree's size)."""
+    compiled = C.compile_chain(_tree_example(), offset=0.0)
     y = C._place(compiled, np.zeros(compiled.n_states))
     settings = np.array([[1e-3, 1e-3, 1e-6, np.inf, 1e-3, 10.0, np.inf]])
     for limits in (None, np.ones((5, 3))):
         integrate_chain_runs(tree_system(compiled, limits), y[None], settings, method="DOP853", n_samples=2)
+
+
+def _warm_up_states(compiled, y) -> None:
+    """An analysis's kernels at the states ``y`` (k, n_states) of a tree: its rates at a
+    stack of states (the linearisation; sample times writable and read-only, two
+    signatures), its full states and a state's quantities (v and its terms, the gimbal
+    angles, the admissible margin: :func:`rbstab.variants.chain.chain_core` from Python)."""
+    fixed = np.zeros(len(y))
+    fixed.setflags(write=False)
+    for times in (np.zeros(len(y)), fixed):
+        C.chain_rates(times, y, *compiled.args, np.empty_like(y))
+    n = compiled.size
+    C.chain_core(0.0, y[0], *compiled.args, np.empty(y.shape[1]), np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5))
+
+
+def _warm_up_chains() -> None:
+    """What a tree's run needs beside its driver: its bodies placed on their joints (the
+    loader's rotations), its h (the rest state under gravity), its outputs at the samples
+    (of a batch's runs: their times a writable copy; of a run: its time grid, read-only; two
+    signatures) and what an analysis adds (:func:`_warm_up_states`)."""
+    rotation_matrix(np.zeros((1, 3)))
+    compiled = C.compile_chain(_tree_example())
+    y = C._place(compiled, np.zeros(compiled.n_states))
+    C.evaluate(compiled, np.zeros(1), np.stack([y[None], y[None]]))
     C.evaluate(compiled, np.zeros(1), y[None])
-    C.chain_rates(np.zeros(1), y[None], *compiled.args, np.empty((1, len(y))))  # an analysis's linearisation
+    _warm_up_states(compiled, y[None])
 
 
 def _warm_up_rest() -> None:
     """What an analysis of one body compiles beyond a run's kernels: the rest state of a
     one-body tree under gravity (:func:`rbstab.variants.chain.rest_state`: the potential, its
-    gradient and the accelerations), its full states and its rates at a stack of states
-    (:func:`rbstab.variants.chain.chain_rates`)."""
+    gradient and the accelerations) and its kernels at a state (:func:`_warm_up_states`)."""
     eye, point = np.eye(3), np.array([0.0, 0.0, -1.0])
     chain = single(Body("body", 1.0, eye), Joint("joint", GROUND, 0, point, np.zeros(3), "permanent", eye, eye),
                    point)
     compiled = C.compile_chain(chain)  # h: the rest state's potential
-    y = C.full_state(compiled, np.zeros((1, 6)))
-    C.chain_rates(np.zeros(1), y, *compiled.args, np.empty_like(y))
+    _warm_up_states(compiled, C.full_state(compiled, np.zeros((1, 6))))
 
 
 def _warm_up_paper_permanent() -> None:
@@ -82,16 +113,18 @@ def _warm_up_paper_permanent() -> None:
     integrate_chain_runs(tree_system(compiled), np.zeros((1, 6)), settings, method="DOP853", n_samples=2)
 
 
-def warm_up(parts: str = "rates,outputs,switching,chains,rest") -> None:
+def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest") -> None:
     """Compile (or load from the cache) every kernel a run uses, on a tiny input.
 
-    ``parts``: comma-separated, any of ``rates`` (the right-hand side and the Runge-Kutta
-    integrator, and what a one-body run on it needs), ``outputs`` (every output at the samples, the numerical dv/dt,
+    ``parts``: comma-separated, any of ``rates`` (one body's right-hand side and the
+    Runge-Kutta integrator, and what a one-body run on it needs), ``outputs`` (one body's
+    outputs at the samples), ``summary`` (the numerical dv/dt,
     :func:`rbstab.summary.numerical_rate`, and the balance figures,
-    :func:`rbstab.summary.warm_up_balance`) and ``switching`` (the sign
-    law's event-driven integrator, :mod:`rbstab.engine.switching`), ``chains`` (a
-    chain's rate, compiled driver and outputs, :mod:`rbstab.engine.systems`) and ``rest`` (an
-    analysis's: a tree's rest state and its rates at a stack of states);
+    :func:`rbstab.summary.warm_up_balance`), ``switching`` (the sign law's event-driven
+    integrator, :mod:`rbstab.engine.switching`), ``driver`` (a tree's rate on the compiled
+    driver, :mod:`rbstab.engine.systems`), ``chains`` (a tree's h, outputs and rates at a
+    stack of states) and ``rest`` (an analysis's: a tree's rest state and its rates at a
+    stack of states);
     :func:`ensure_compiled` compiles some in a second process at the same time.
     """
     wanted = set(parts.split(","))
@@ -101,6 +134,8 @@ def warm_up(parts: str = "rates,outputs,switching,chains,rest") -> None:
         params[name] = np.eye(3)
     if "switching" in wanted:
         warm_up_sign_law(params)
+    if "driver" in wanted:
+        _warm_up_driver()
     if "chains" in wanted:
         _warm_up_chains()
     if "rest" in wanted:
@@ -114,7 +149,7 @@ def warm_up(parts: str = "rates,outputs,switching,chains,rest") -> None:
             fixed.setflags(write=False)
             for times in (np.zeros((1, 1)), fixed):
                 run_outputs(np.array([code]), params, times, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
-    if "outputs" in wanted:
+    if "summary" in wanted:
         numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
         warm_up_balance(params)  # the summary's settling time and centre of mass
     if "rates" in wanted:
@@ -137,25 +172,37 @@ def _start_warm_up(parts: str):
         return None
 
 
-def ensure_compiled(say=None, *, sign_law: bool = False, chain: bool = False, analysis: bool = False) -> None:
+def kernel_groups(configs) -> dict[str, bool]:
+    """Which run kernels validated configurations (:class:`rbstab.config.RunConfig`) need,
+    as :func:`ensure_compiled`'s ``one_body`` and ``chain``: the paper's one body's for a
+    model that is one body held to the ground at its own point
+    (:func:`rbstab.variants.paper.has_paper_form`, either spelling), a tree's for any other."""
+    paper = [has_paper_form(c.chain) for c in configs]
+    return {"one_body": any(paper), "chain": not all(paper)}
+
+
+def ensure_compiled(say=None, *, one_body: bool = True, sign_law: bool = False, chain: bool = False,
+                    analysis: bool = False) -> None:
     """Compile the engine's kernels into the cache unless that was done before.
 
     ``say``: called with one line (str) before a cold compile, e.g. ``click.echo`` to
-    stderr; nothing is said when the cache is warm. ``sign_law``: also the sign law's
-    integrator; ``chain``: also a chain's kernels; ``analysis``: also what an analysis adds (its
-    rest state, :data:`GROUPS`; a chain's kernels include them). The parts are compiled in two
+    stderr; nothing is said when the cache is warm. ``one_body``: the paper's one body's
+    kernels (a configuration whose model is one body held to the ground at its own point,
+    :func:`rbstab.variants.paper.has_paper_form`); ``sign_law``: the sign law's integrator;
+    ``chain``: a tree's kernels (any other model); ``analysis``: what an analysis adds (its
+    rest state, :data:`GROUPS`; a tree's kernels include them). The parts are compiled in two
     processes at once (numba compiles on one core; each writes its own kernels into the cache folder).
     """
-    wanted = {"engine": True, "sign_law": sign_law, "chain": chain, "analysis": analysis and not chain}
+    wanted = {"engine": one_body, "sign_law": sign_law, "chain": chain, "analysis": analysis and not chain}
     cold = [g for g, want in wanted.items() if want and not cache_is_warm(g)]
     if not cold:
         return
     if say is not None:
-        took = "~65 s" if "chain" in cold else "~25 s"
+        took = "~2 min" if "chain" in cold else "~1 min"
         say(f"rbstab: compiling the engine once ({took} on 2 cores); cached in {CACHE_DIR}")
     start = time.perf_counter()
     here, there = [], []
-    for part in sorted((p for g in cold for p in GROUPS[g]), key=WEIGHTS.get, reverse=True):
+    for part in sorted({p for g in cold for p in GROUPS[g]}, key=lambda p: (-WEIGHTS[p], p)):
         lighter = here if sum(map(WEIGHTS.get, here)) <= sum(map(WEIGHTS.get, there)) else there
         lighter.append(part)
     parts = here + there

@@ -571,7 +571,8 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         "constraints": json.dumps([str(c) for c in problem.constraints]),
         "vary": json.dumps(vary_mapping(problem.varied)), "config": dump_yaml(problem.base.resolved)},
         overwrite=overwrite)
-    ensure_compiled(say=log, sign_law=True, chain=members_of(config) is not None)
+    tree = members_of(config) is not None
+    ensure_compiled(say=log, one_body=not tree, sign_law=not tree, chain=tree)
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
     folder.mkdir(parents=True, exist_ok=True)

@@ -264,7 +264,7 @@ def _envelope_cholesky_solve(matrix, rhs, codes, u_at, start):
             rhs[r] = total / matrix[r, r]
 
 
-@jit(_nrt=False)
+@jit(_nrt=False, forceinline=True)
 def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work):
     """The rate of a tree in reduced coordinates (docs/physics.md, "A tree in reduced
     coordinates"; for one body on a permanent joint, eq 21).
