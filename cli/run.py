@@ -131,15 +131,12 @@ def _load_kernels(loaded) -> None:
     """Load the compiled kernels from numba's cache (and scipy's optimizers, which find the
     equilibrium under gravity) before the first run, so that its ``wall_time`` is its own
     (the load, ~0.4-0.7 s, is said with -v)."""
-    from rbstab.engine import GROUPS, warm_up  # heavy: numba, numpy
+    from rbstab.engine import GROUPS, kernel_groups, warm_up  # heavy: numba, numpy
     from rbstab.simulator import is_sign_law, uses_compiled_engine  # heavy: numba, numpy
-    from rbstab.variants.paper import has_paper_form  # heavy: numba, numpy
 
-    chains = list(GROUPS["chain"]) if any(not has_paper_form(c.chain) for c in loaded) else []
-    switching = ["switching"] if any(is_sign_law(c) for c in loaded) else []  # either spelling
-    loaded = [c for c in loaded if has_paper_form(c.chain)]  # the paper's one body: the one-body kernels
-    parts = (list(GROUPS["engine"]) if any(uses_compiled_engine(c, "compiled") for c in loaded) else []) + (
-        switching) + chains
+    groups = {**kernel_groups(loaded), "sign_law": any(is_sign_law(c) for c in loaded)}  # either spelling
+    groups["engine"] = kernel_groups([c for c in loaded if uses_compiled_engine(c, "compiled")])["one_body"]
+    parts = [p for group in ("engine", "sign_law", "chain") if groups[group] for p in GROUPS[group]]
     start = time.perf_counter()
     if any(c.chain.gravity.any() for c in loaded):
         import scipy.optimize  # noqa: F401  (heavy: scipy) the equilibrium under gravity

@@ -524,3 +524,26 @@ def test_a_sweep_of_the_sign_law_gives_one_bodys_figures_in_either_spelling(tmp_
         for column in columns:  # one body's <figure>_x is its tree's <figure>_controller_x
             tree_column = column if column == figure else f"{figure}_controller{column[len(figure):]}"
             np.testing.assert_array_equal(a[column].to_numpy(), b[tree_column].to_numpy(), err_msg=column)
+
+
+
+def test_a_sweep_compiles_the_one_body_kernels_where_a_run_may_be_the_paper_one_body():
+    """A sweep asks for the one-body kernel group (before its workers start) for a one-body
+    base and for a tree base of one body (its runs may be the paper's one body: joint points
+    equal), not for a tree of several bodies."""
+    from conftest import PAPER_CONFIGS
+    from rbstab.config import config_from_mapping
+    from rbstab.sweep import spec_from_mapping
+
+    one_tree = {"name": "one_tree", "gravity": [0, 0, 0],
+                "bodies": [{"name": "b", "mass": 1.0, "inertia": [1.0, 1.0, 1.0]}],
+                "joints": [{"name": "j", "parent": "ground", "child": "b", "variant": "visco_elastic",
+                            "parent_point": [0, 0, 0], "child_point": [0, 0, 0], "k_r": [1, 1, 1],
+                            "l_r": [1, 1, 1], "k_c": [1, 1, 1], "l_c": [1, 1, 1]}]}
+    found = {}
+    for name, base, key in (("paper", rbstab.load_config(PAPER_CONFIGS[0]).resolved, "body.mass"),
+                            ("stance", rbstab.load_config(STANCE).resolved, "bodies.trunk.mass"),
+                            ("one_tree", config_from_mapping(one_tree).resolved, "bodies.b.mass")):
+        spec = spec_from_mapping({"name": "s", "base": base, "grid": {key: [1.0, 2.0]}})
+        found[name] = (spec.may_run_one_body, spec.is_chain)
+    assert found == {"paper": (True, False), "stance": (False, True), "one_tree": (True, True)}

@@ -449,8 +449,8 @@ def execute_sweep(spec: Any, output: str | os.PathLike = "results/sweeps", *, ov
     loaded = _load_spec(spec, overrides)
     ex, owned = _sweep_executor(executor, scheduler, connect_timeout)
     try:
-        ensure_compiled(say=log, one_body=not loaded.is_chain, sign_law=not loaded.is_chain,
-                        chain=loaded.is_chain)  # once, before any worker starts
+        one_body = loaded.may_run_one_body  # compiled once, before any worker starts
+        ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=loaded.is_chain)
         return run_sweep(loaded, output, executor=ex, jobs=jobs, log=log, **options)
     finally:
         if owned:

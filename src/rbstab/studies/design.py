@@ -508,7 +508,8 @@ def run_design(base: Mapping, design, folder: str | os.PathLike, *, jobs: int | 
     mapping = {"name": folder.name, "base": dict(base), "table": design}
     spec = spec_from_mapping(mapping)
     members = members_of(base)
-    ensure_compiled(say=log, one_body=members is None, sign_law=members is None, chain=members is not None)
+    one_body = spec.may_run_one_body
+    ensure_compiled(say=log, one_body=one_body, sign_law=one_body, chain=spec.is_chain)
     run_sweep(spec, folder.parent, executor=executor or "local", jobs=jobs, scheduler=scheduler, log=log,
               engine=engine, store=store,
               progress=progress, command_line=command_line)

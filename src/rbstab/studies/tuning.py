@@ -52,7 +52,7 @@ import xarray as xr
 from ..config import ConfigError, dump_yaml
 from ..config.loader import config_from_mapping
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
-from ..engine import ensure_compiled
+from ..engine import ensure_compiled, kernel_groups
 from ..results import plain
 from ..engine.registry import DEFAULT_ENGINE, get_engine
 from ..io.atomic import write_text_atomic
@@ -571,8 +571,8 @@ def tune(config, vary: Sequence[str] | Mapping[str, Any], *, trials: int, minimi
         "constraints": json.dumps([str(c) for c in problem.constraints]),
         "vary": json.dumps(vary_mapping(problem.varied)), "config": dump_yaml(problem.base.resolved)},
         overwrite=overwrite)
-    tree = members_of(config) is not None
-    ensure_compiled(say=log, one_body=not tree, sign_law=not tree, chain=tree)
+    groups = kernel_groups([config])
+    ensure_compiled(say=log, **groups, sign_law=groups["one_body"])
     _check_scalar_metrics(problem, nominal_figures(config, engine))
     name = folder.name
     folder.mkdir(parents=True, exist_ok=True)

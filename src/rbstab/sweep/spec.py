@@ -251,6 +251,14 @@ class SweepSpec:
         return bool(self.bases) and is_chain(self.bases[0].data)
 
     @property
+    def may_run_one_body(self) -> bool:
+        """Whether a run may be the paper's one body (:func:`rbstab.variants.paper.has_paper_form`):
+        a one-body base, or a tree base of one body (its runs' joint points decide), so that
+        the one-body kernels are compiled before the workers start
+        (:func:`rbstab.engine.ensure_compiled`)."""
+        return any(not is_chain(b.data) or len(b.data.get("bodies") or ()) == 1 for b in self.bases)
+
+    @property
     def varied_keys(self) -> list[str]:
         """Every dotted key the sweep varies: grid, zip, table, then random keys."""
         keys = list(self.grid) + list(self.zip) + (list(self.table.columns) if self.table is not None else [])
