@@ -256,3 +256,16 @@ def test_a_body_held_elsewhere_than_its_own_point_is_verified_as_its_translate()
     sprung = verify_sublevel(config_from_mapping({**tree, "bodies": bodies, "joints": [joint]}))
     anchored = verify_sublevel(config_from_mapping({**tree, "bodies": bodies}))
     assert sprung.level > 0 and abs(sprung.level - anchored.level) > 1e-3 * anchored.level
+
+
+def test_refused_for_a_reference_posture():
+    """The proof's potential is the paper's spring about Theta = 0: a joint with a reference
+    posture is refused in one line naming the key."""
+    from conftest import tree_spelling
+
+    from rbstab.config import config_from_mapping
+
+    tree = dict(tree_spelling(load_config(PENDULUM)).resolved)
+    joint = {**tree["joints"][0], "theta_ref": [0.1, 0.0, 0.0]}
+    with pytest.raises(NotVerifiable, match=r"joints\.\w+\.theta_ref: found \[0\.1, 0\.0, 0\.0\]"):
+        verify_sublevel(config_from_mapping({**tree, "joints": [joint]}))

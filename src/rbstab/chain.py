@@ -87,8 +87,8 @@ class Joint:
         ``free``, ``permanent``, ``sliding``, ``visco_elastic`` or ``embedded``: the law of
         the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p).
     k_r, l_r : ndarray, shape (3, 3)
-        N_j = -B(Theta_j)' K_r Theta_j - L_r Omega_j [N m] (eq 23 on the relative orientation Theta_j and
-        the relative angular velocity Omega_j, child frame).
+        N_j = -B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j [N m] (eq 23 on the relative
+        orientation Theta_j and the relative angular velocity Omega_j, child frame).
     k_c, l_c : ndarray, shape (3, 3), or None
         Point-law stiffness [N/m] and damping [N s/m] (eqs 22, 40).
     k_d, l_d : ndarray, shape (3, 3), or None
@@ -101,6 +101,10 @@ class Joint:
         The limits of N_j (``torque_n`` [N m], child frame) and of Lambda_j
         (``constraint_force`` [N], inertial frame; inf for ``permanent``, whose Lambda_j is
         the pin's reaction); its ``force_h`` is inf. None: unlimited.
+    theta_ref : ndarray, shape (3,)
+        Theta_ref [rad]: the joint's reference posture, the relative Euler angles at which its
+        spring is relaxed (N_j's stiffness term and v's term 1/2 (Theta_j - Theta_ref)' K_r
+        (Theta_j - Theta_ref) are zero there); zero: the paper's eq 23.
     """
 
     name: str
@@ -118,6 +122,7 @@ class Joint:
     k_s: float | None = None
     boundary_layer: float = 0.0
     saturation: Saturation | None = None
+    theta_ref: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True, eq=False)

@@ -230,6 +230,8 @@ _CHAIN_KEYS = {
     "joints": {"parent_point": Quantity("joints.parent_point", "R_p", "m",
                                         "joint point R_p on the parent (its body frame; inertial for the ground)"),
                "child_point": Quantity("joints.child_point", "R_c", "m", "joint point R_c of C on the child (body frame)"),
+               "theta_ref": Quantity("joints.theta_ref", "Theta_ref", "rad",
+                                     "reference posture Theta_ref of a joint (relative Euler angles)"),
                **{g: f"controller.{g}" for g in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "boundary_layer")}},
     "initial_state": {b: f"initial_state.{b}" for b in ("theta", "omega", "x", "v", "d")},
 }
@@ -303,7 +305,8 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
              "H = -K_t X - L_t V, translational feedback, inertial frame (eq 24)", "H", "feedback force", 3,
              member="body"),
     Quantity("torque_n", "N", "N m", "rotational feedback torque N (body frame)",
-             "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23)", "N", "feedback torque", 3,
+             "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23; a chain's joint: "
+             "-B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j, child frame)", "N", "feedback torque", 3,
              member="joint"),
     Quantity("torque_n_saturated", "N saturated", "1", "N_i at or beyond its limit, 1 or 0 (body frame)",
              "1 where the commanded N_i (eq 23) is at or beyond its limit, |N_i| >= controller.saturation.torque_n_i "
@@ -323,7 +326,8 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
              "v_t = V'MV/2 + X'K_t X/2 (eq 25; a chain's: summed over its bodies)", "v_t", "translational"),
     Quantity("lyapunov_rotational", "v_r", "J", "rotational term v_r of the Lyapunov function",
              "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25; a chain's: Omega_i'J_i Omega_i/2 summed over "
-             "its bodies and Theta_j'K_r Theta_j/2 over its joints, relative angles)", "v_r", "rotational"),
+             "its bodies and dTheta_j'K_r dTheta_j/2 over its joints, dTheta_j = Theta_j - Theta_ref the relative "
+             "angles from the joint's reference posture)", "v_r", "rotational"),
     Quantity("lyapunov_constraint", "v_c", "J", "constraint controller term of the Lyapunov function",
              "energy stored in the constraint controller (eqs 41, 44; "
              "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent; a chain's: summed "

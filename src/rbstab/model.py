@@ -261,7 +261,9 @@ _VECTOR = (np.float64, (3,))
 #: region (:class:`Limits`): ``limited`` (1 when any bound is finite; 0, as in a record of
 #: zeros: none, ``limits`` not read) and ``limits`` (5, 3), the bounds of |theta_i| [rad],
 #: |Omega_i| [rad/s], |X_i| [m], |V_i| [m/s], |E_i| [m] in the rows of
-#: :data:`rbstab.layout.LIMITED` (inf: none).
+#: :data:`rbstab.layout.LIMITED` (inf: none); last a tree joint's reference posture
+#: ``theta_ref`` Theta_ref [rad] (:class:`rbstab.chain.Joint`; the paper's one body: zero,
+#: not read).
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -300,6 +302,7 @@ PARAMETERS = np.dtype(
         ("disturbance_seed", np.float64, (MAX_DISTURBANCES,)),
         ("limited", np.float64),
         ("limits", np.float64, (len(LIMITED), 3)),
+        ("theta_ref", *_VECTOR),
     ],
     align=True,
 )

@@ -798,10 +798,12 @@ def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
         shape[t] = structures.setdefault(key, len(structures))
     tree = batch.tree[rows]
     one_body = np.zeros(len(rows), dtype=bool)
-    points, attachment = batch.ppoints[rows, 0], batch.params["attachment_point"][rows, 0]  # the field alone copied
+    points = batch.ppoints[rows, 0]
+    attachment, reference = batch.params["attachment_point"][rows, 0], batch.params["theta_ref"][rows, 0]  # fields alone
     for t in np.unique(tree).tolist():
         at = tree == t
-        one_body[at] = one_body_mask(batch.trees[t].codes, batch.trees[t].parents, points[at], attachment[at])
+        one_body[at] = one_body_mask(batch.trees[t].codes, batch.trees[t].parents, points[at], attachment[at],
+                                     reference[at])
     keys = np.column_stack([shape[tree], one_body, batch.one_body[rows], batch.settings["method"][rows],
                             batch.n_samples[rows], batch.settings["t_end"][rows]]).astype(float)
     if np.all(keys == keys[:1]):  # one group (a sweep's usual batch)

@@ -133,7 +133,8 @@ def _key(config, owner: str, name: str) -> str:
 def check_verifiable(config) -> None:
     """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
     unless the configuration is one body on a permanent joint to the ground, the reduced
-    6-state model (:func:`verified_model`), with what the proof covers: clipped torque
+    6-state model (:func:`verified_model`), with what the proof covers: no reference
+    posture, clipped torque
     limits, diagonal positive L_r, H unlimited, no disturbances, no bounds of X, V or E in
     ``simulation.limits``."""
     chain = verified_model(config).chain
@@ -141,6 +142,9 @@ def check_verifiable(config) -> None:
     if joint.variant != "permanent":
         raise NotVerifiable(f"{_key(config, 'joint', 'variant')}: found {joint.variant!r} (its analysis runs on more "
                             "than 6 states); --verify covers the reduced 6-state model of 'permanent'")
+    if np.any(joint.theta_ref):
+        raise NotVerifiable(f"{_key(config, 'joint', 'theta_ref')}: found {np.asarray(joint.theta_ref).tolist()}; "
+                            "--verify covers the spring relaxed at Theta = 0 (no reference posture)")
     l_r = np.asarray(joint.l_r, dtype=float)
     if np.any(l_r - np.diag(np.diag(l_r))):
         raise NotVerifiable(f"{_key(config, 'joint', 'l_r')}: found a non-diagonal L_r {l_r.tolist()}; --verify needs "

@@ -592,7 +592,8 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
             **{g: _matrix(getattr(j, g)) if g in used else None for g in ("k_c", "l_c", "k_d", "l_d")},
             k_s=float(j.k_s) if "k_s" in used else None,
             boundary_layer=float(j.boundary_layer) if "k_s" in used else 0.0,
-            saturation=_saturation(j.saturation, ("torque_n", "constraint_force"))))
+            saturation=_saturation(j.saturation, ("torque_n", "constraint_force")),
+            theta_ref=np.zeros(3) if j.theta_ref is None else _array(j.theta_ref)))
     return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(run.gravity))
 
 

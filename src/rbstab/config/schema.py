@@ -1018,6 +1018,9 @@ class _ChainJoint(_Section):
     boundary_layer: Annotated[Any, checked(bounded_number(ge=0))] = Field(
         0.0, description="a number >= 0 (m; 0 = pure sign function)")
     saturation: _JointSaturation | None = Field(None, description=_mapping_of(_JointSaturation) + " (optional)")
+    theta_ref: Annotated[Any, checked(optional(_theta))] = Field(
+        None, description="3 numbers (rad; the reference posture Theta_ref, the relative Euler angles at which the "
+                          "joint's spring K_r is relaxed; optional, default 0)")
 
     @model_validator(mode="before")
     @classmethod
@@ -1227,10 +1230,12 @@ class ChainSchema(_Section):
                                "no bound when every joint is 'permanent'",
                                "their points are pinned: E = 0 at every instant")
         margin = float(self.simulation.gimbal_margin)
-        for name, state in self.initial_state.items():
-            if not clear_of_gimbal_lock(state.theta[1], margin):
+        angles = [(f"initial_state.{name}.theta", state.theta) for name, state in self.initial_state.items()]
+        angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints if j.theta_ref is not None]
+        for key, theta in angles:
+            if not clear_of_gimbal_lock(theta[1], margin):
                 limit = math.pi / 2 - margin
-                raise _chain_error(f"initial_state.{name}.theta", short_repr(state.theta),
+                raise _chain_error(key, short_repr(theta),
                                    "3 numbers (rad) with theta_2 in (-pi/2 + gimbal_margin, pi/2 - gimbal_margin) "
                                    f"= ({-limit:.6g}, {limit:.6g})",
                                    f"B(theta) is singular at |theta_2| = pi/2 (gimbal lock, eq 1); "

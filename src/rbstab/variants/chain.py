@@ -34,7 +34,8 @@ import numpy as np
 
 from ..chain import Chain
 from ..jit import jit
-from ..kinematics import ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, sub, vector
+from ..kinematics import (ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, rotation_matrix,
+                          sub, vector)
 from ..layout import LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
@@ -52,7 +53,7 @@ from .paper import body_model
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "records_of", "is_one_body", "one_body_mask", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "reference_posture", "records_of", "is_one_body", "one_body_mask", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
            "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -239,10 +240,11 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             omega_j = sub(omega_c, matTvec(rel, omega_p))
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
-        n_j = torque_n(b_j, theta_j, omega_j, p)
+        strain = sub(theta_j, p.theta_ref)  # the spring's: Theta_j - Theta_ref (eq 23 about the reference posture)
+        n_j = torque_n(b_j, strain, omega_j, p)
         if p.saturation > 0.0:
-            power += dot(omega_j, sub(n_j, torque_n_command(b_j, theta_j, omega_j, p)))
-        rotational += 0.5 * quadratic_form(theta_j, p.k_r)
+            power += dot(omega_j, sub(n_j, torque_n_command(b_j, strain, omega_j, p)))
+        rotational += 0.5 * quadratic_form(strain, p.k_r)
         dissipation += quadratic_form(omega_j, p.l_r)
         _acc_add(torque, force, j, n_j, ZERO)
         if q >= 0:
@@ -646,13 +648,15 @@ class CompiledChain:
         return self.codes == PERMANENT
 
 
-def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray) -> np.ndarray:
+def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray,
+                  reference: np.ndarray) -> np.ndarray:
     """Which of t trees of one structure (joint variant ``codes`` (n,), ``parents`` (n,))
     are the paper's one-body model (:func:`is_one_body`): ``points`` (t, 3) their first
-    joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame); shape (t,) of bool."""
+    joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame), ``reference`` (t, 3)
+    its Theta_ref [rad]; shape (t,) of bool."""
     if codes.shape[0] != 1 or parents[0] >= 0:
         return np.zeros(len(points), dtype=bool)
-    return np.all(points == attachment, axis=-1)
+    return np.all(points == attachment, axis=-1) & ~np.any(reference, axis=-1)
 
 
 def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoints: np.ndarray) -> bool:
@@ -660,11 +664,14 @@ def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoi
     :class:`CompiledChain`), or every one of t trees of one structure (records (t, n),
     parent points (t, n, 3)), is the paper's one-body model: one body held by its joint to
     the ground at the point R_p = R_c, where its point C rests with its centre of mass at the
-    origin (E = X + A R - R, eq 4; the one-body spelling's body and controller). One body's
+    origin (E = X + A R - R, eq 4; the one-body spelling's body and controller), its spring
+    relaxed at Theta = 0 (no reference posture). One body's
     compiled rate (:func:`rbstab.variants.kernels.state_rate`) and its h then serve the
     tree: its reduced state is the body's state."""
+    first = params[..., 0]
     return bool(np.all(one_body_mask(codes, parents, np.reshape(np.asarray(ppoints)[..., 0, :], (-1, 3)),
-                                     np.reshape(params[..., 0]["attachment_point"], (-1, 3)))))
+                                     np.reshape(first["attachment_point"], (-1, 3)),
+                                     np.reshape(first["theta_ref"], (-1, 3)))))
 
 
 def records_of(trees: Sequence[CompiledChain]) -> np.ndarray:
@@ -691,7 +698,9 @@ def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarra
 
 def _record(chain: Chain, i: int) -> np.ndarray:
     """The :data:`rbstab.model.PARAMETERS` record of body ``i`` and its joint (h 0)."""
-    return parameters(*body_model(chain, i))
+    p = parameters(*body_model(chain, i))
+    p["theta_ref"] = chain.joints[i].theta_ref
+    return p
 
 
 def _controller_states(chain: Chain) -> tuple[np.ndarray, int]:
@@ -849,7 +858,8 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     (joint and body feedback, point laws, gravity) found by a local minimisation (scipy's
     BFGS) over the configuration (every Theta_i, X_i of bodies whose joint is not
     ``permanent``, D of embedded joints; a permanent joint's child placed on its parent)
-    from the reference configuration (Theta = 0, every body placed on its joint, E_j = 0);
+    from the reference configuration (every joint at its reference posture Theta_j =
+    Theta_ref, :func:`reference_posture`, every body placed on its joint, E_j = 0);
     (None, nan) where the potential has no minimum there (it falls without bound); then
     polished to a rest point to rounding (scipy's ``root``: the accelerations zero). A
     reference configuration already at rest (gradient within the tolerance, accelerations
@@ -860,7 +870,8 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     n = compiled.size
     free = [i for i in range(n) if compiled.codes[i] != PERMANENT]
     q0 = np.zeros(3 * n + 3 * len(free) + 3 * int(np.sum(compiled.d_at >= 0)))
-    placed = _place(compiled, np.zeros(compiled.n_states))
+    placed = _place(compiled, reference_posture(compiled))
+    q0[: 3 * n] = placed[: 12 * n].reshape(n, 12)[:, :3].ravel()
     for k, i in enumerate(free):
         q0[3 * n + 3 * k: 3 * n + 3 * k + 3] = placed[12 * i + 6: 12 * i + 9]
     y, dy, work = np.empty(compiled.n_states), np.empty(compiled.n_states), chain_work(n)
@@ -902,11 +913,28 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
 _REST_GTOL = 1e-11
 
 
+def reference_posture(compiled: CompiledChain) -> np.ndarray:
+    """The state (n_states,) whose bodies hold every joint at its reference posture, Theta_j
+    = Theta_ref [rad] (A_c = A_p A(Theta_ref), parents first; the ground's A_p = I), at rest;
+    X, V and D zero (:func:`place` puts the bodies on their joints)."""
+    y = np.zeros(compiled.n_states)
+    rotations = []
+    for i in range(compiled.size):
+        a = rotation_matrix(compiled.params[i]["theta_ref"])
+        q = int(compiled.parents[i])
+        if q >= 0:
+            a = rotations[q] @ a
+        rotations.append(a)
+        y[12 * i: 12 * i + 3] = (math.atan2(-a[1, 2], a[2, 2]), math.asin(min(1.0, max(-1.0, a[0, 2]))),
+                                 math.atan2(-a[0, 1], a[0, 0]))  # as euler_angles reads them
+    return y
+
+
 def rest_offset(compiled: CompiledChain) -> float:
     """h [J] with v = 0 at the chain's rest state (:func:`rest_state`); 0 without gravity
-    (the potential's least value is then 0 at the reference configuration) or where the
-    potential has no minimum."""
-    if not np.any(compiled.chain.gravity):
+    and reference postures (the potential's least value is then 0 at the reference
+    configuration) or where the potential has no minimum."""
+    if not np.any(compiled.chain.gravity) and not np.any(compiled.params["theta_ref"]):
         return 0.0
     if compiled.one_body:  # the one-body model's own h, as its one-body spelling has it
         return record_offset(compiled.params[0], compiled.chain.gravity, _VARIANT_NAMES[int(compiled.codes[0])])

@@ -1,0 +1,142 @@
+"""A joint's reference posture Theta_ref (``joints.<name>.theta_ref``): its spring acts on
+Theta_j - Theta_ref, v's spring term is 1/2 (Theta_j - Theta_ref)' K_r (Theta_j - Theta_ref),
+and the rest state is where the springs balance gravity. Checked against a closed-form
+balance, MuJoCo's hinge springs (``springref``) and v's own bookkeeping."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from rbstab.config import ConfigError, config_from_mapping
+from rbstab.simulator import simulate
+from rbstab.variants import chain as C
+from rbstab.variants.paper import has_paper_form
+
+ROD_INERTIA = [0.08343, 0.08343, 0.02]  # kg m^2; a rod 1 m long, its axis z
+
+
+def _rods(n, k, l, reference, theta, gravity=-9.81, t_end=2.0, n_samples=21):
+    """A chain config of ``n`` rods (1 kg, 1 m, each held at its top end, the next hanging
+    from its bottom end) on ball joints with K_r = k I, L_r = l I and ``reference`` (n, 3)
+    [rad], released at rest from the absolute Euler angles ``theta`` (n, 3)."""
+    names = [f"rod{i}" for i in range(n)]
+    return {
+        "name": "rods", "gravity": [0.0, 0.0, gravity],
+        "bodies": [{"name": b, "mass": 1.0, "inertia": ROD_INERTIA} for b in names],
+        "joints": [{"name": f"joint{i}", "parent": "ground" if i == 0 else names[i - 1],
+                    "parent_point": [0.0, 0.0, 0.0] if i == 0 else [0.0, 0.0, -0.5], "child": b,
+                    "child_point": [0.0, 0.0, 0.5], "variant": "permanent", "k_r": [k] * 3, "l_r": [l] * 3,
+                    "theta_ref": list(map(float, reference[i]))} for i, b in enumerate(names)],
+        "initial_state": {b: {"theta": list(map(float, theta[i]))} for i, b in enumerate(names)},
+        "simulation": {"t_end": t_end, "n_samples": n_samples, "method": "DOP853", "rtol": 1e-11, "atol": 1e-12},
+    }
+
+
+def test_a_hanging_rod_rests_where_its_spring_balances_gravity():
+    """One rod, its reference posture about x: the rest state is the root of the planar
+    balance k (theta - theta_ref) + m g l sin(theta) = 0 (l = 0.5 m to its centre of mass),
+    found by scipy's brentq alone; v is zero there (h), and a damped run released from
+    Theta = 0 settles on it."""
+    k, theta_ref, m, g, l = 4.0, 1.1, 1.0, 9.81, 0.5
+    config = config_from_mapping(_rods(1, k, 2.0, [[theta_ref, 0, 0]], [[0, 0, 0]], t_end=30.0, n_samples=301))
+    balance = brentq(lambda th: k * (th - theta_ref) + m * g * l * math.sin(th), 0.0, theta_ref)
+    assert 0.2 < balance < theta_ref - 0.2  # gravity pulls the rod well back from its reference
+    compiled = C.compile_chain(config.chain)
+    y, _ = C.rest_state(compiled)
+    np.testing.assert_allclose(y[:3], [balance, 0.0, 0.0], atol=1e-9)
+    assert C.lyapunov(compiled, y)[0] == pytest.approx(0.0, abs=1e-12)
+    result = simulate(config)
+    assert result.status == "success"
+    np.testing.assert_allclose(result.outputs["joint_theta"][-1, 0], [balance, 0.0, 0.0], atol=1e-6)
+    assert result.outputs["lyapunov"][-1] == pytest.approx(0.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("damping", [0.0, 0.3])
+def test_planar_rods_with_reference_postures_move_as_mujocos_hinge_springs(damping):
+    """Two rods swinging in the y-z plane on ball joints whose springs and dampers are
+    isotropic and whose references turn about x: the motion stays planar, each joint a
+    hinge about x with MuJoCo's passive torque -k (q - springref) - d dq/dt. Both centres of
+    mass follow MuJoCo's (RK4 at 1e-4 s) to 1e-6 m; without damping v stays constant."""
+    mujoco = pytest.importorskip("mujoco")
+    k, reference, q0 = 3.0, (0.3, -0.4), (0.6, 0.6)
+    config = config_from_mapping(_rods(2, k, damping, [[reference[0], 0, 0], [reference[1], 0, 0]],
+                                       [[q0[0], 0, 0], [q0[0] + q0[1], 0, 0]]))
+    result = simulate(config)
+    assert result.status == "success"
+    out = result.outputs
+    if damping == 0.0:
+        assert np.ptp(out["lyapunov"]) < 1e-8 * np.abs(out["lyapunov_rotational"]).max()
+    else:
+        assert np.all(np.diff(out["lyapunov"]) <= 1e-10)
+    hinge = f'type="hinge" axis="1 0 0" stiffness="{k}" damping="{damping}"'
+    xml = f"""<mujoco><compiler angle="radian"/><option gravity="0 0 -9.81" timestep="1e-4" integrator="RK4"/>
+      <worldbody><body name="rod0" pos="0 0 0"><joint {hinge} springref="{reference[0]}"/>
+        <inertial pos="0 0 -0.5" mass="1" diaginertia="{' '.join(map(str, ROD_INERTIA))}"/>
+        <body name="rod1" pos="0 0 -1"><joint {hinge} springref="{reference[1]}"/>
+          <inertial pos="0 0 -0.5" mass="1" diaginertia="{' '.join(map(str, ROD_INERTIA))}"/>
+        </body></body></worldbody></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    data.qpos[:] = q0
+    mujoco.mj_forward(model, data)
+    for s, t in enumerate(result.time):
+        if s:
+            mujoco.mj_step(model, data, nstep=int(round((t - result.time[s - 1]) / 1e-4)))
+        np.testing.assert_allclose(out["position"][s], data.xipos[1:3], atol=1e-6, err_msg=f"t = {t}")
+    assert np.abs(out["joint_theta"][:, :, 1:]).max() < 1e-9  # planar
+
+
+def test_without_gravity_a_damped_joint_settles_at_its_reference_and_v_never_rises():
+    """No gravity: the reference posture is the rest state (h = 0); released from Theta = 0
+    a damped joint turns to Theta_j = Theta_ref about all three axes, v falling to 0."""
+    reference = [0.4, -0.3, 0.5]
+    config = config_from_mapping(_rods(1, 5.0, 1.5, [reference], [[0, 0, 0]], gravity=0.0, t_end=40.0,
+                                       n_samples=401))
+    assert C.compile_chain(config.chain).offset == 0.0
+    result = simulate(config)
+    out = result.outputs
+    np.testing.assert_allclose(out["joint_theta"][-1, 0], reference, atol=1e-6)
+    assert out["lyapunov"][0] == pytest.approx(0.5 * 5.0 * np.dot(reference, reference), rel=1e-12)
+    assert np.all(np.diff(out["lyapunov"]) <= 1e-12) and out["lyapunov"][-1] < 1e-10
+
+
+def test_a_reference_posture_takes_a_one_body_tree_off_the_papers_form():
+    """One body held at its own point is the paper's one body only with its spring relaxed
+    at Theta = 0; a reference written as zeros keeps it."""
+    data = _rods(1, 4.0, 1.0, [[0.2, 0.0, 0.0]], [[0, 0, 0]])
+    data["joints"][0]["parent_point"] = data["joints"][0]["child_point"]
+    assert not has_paper_form(config_from_mapping(data).chain)
+    assert not C.compile_chain(config_from_mapping(data).chain).one_body
+    data["joints"][0]["theta_ref"] = [0.0, 0.0, 0.0]
+    assert has_paper_form(config_from_mapping(data).chain)
+
+
+@pytest.mark.parametrize("value, expected", [
+    ([0.0, 1.6, 0.0], "theta_2 in (-pi/2, pi/2)"),
+    ([0.0, -1.5705, 0.0], "theta_2 in (-pi/2 + gimbal_margin"),
+    ([0.0, 0.2], "3 numbers"),
+    ("up", "3 numbers"),
+])
+def test_a_reference_posture_out_of_the_euler_angles_domain_is_refused_naming_its_key(value, expected):
+    data = _rods(2, 4.0, 1.0, [[0, 0, 0], [0, 0, 0]], [[0, 0, 0], [0, 0, 0]])
+    data["joints"][1]["theta_ref"] = value
+    with pytest.raises(ConfigError) as raised:
+        config_from_mapping(data)
+    message = str(raised.value)
+    assert "joints.1.theta_ref" in message or "joints.joint1.theta_ref" in message
+    assert expected in message
+
+
+def test_the_paper_spelling_has_no_reference_posture():
+    """``controller.theta_ref`` is no key: the one-body spelling is the paper's feedback."""
+    from rbstab.config import load_config
+
+    data = copy.deepcopy(load_config("configs/paper/case1_permanent.yaml").resolved)
+    data["controller"]["theta_ref"] = [0.1, 0.0, 0.0]
+    with pytest.raises(ConfigError, match="controller.theta_ref"):
+        config_from_mapping(data)
