@@ -63,14 +63,15 @@ def _chain_record(chain) -> dict:
         "bodies": [{"name": b.name, "mass": b.mass} for b in chain.bodies],
         "joints": [{"name": j.name, "parent": "ground" if j.parent == GROUND else names[j.parent],
                     "child": names[j.child], "variant": j.variant, "parent_point": j.parent_point.tolist(),
-                    "child_point": j.child_point.tolist(), "theta_ref": j.theta_ref.tolist()} for j in chain.joints],
+                    "child_point": j.child_point.tolist(), "theta_ref": j.theta_ref.tolist(),
+                    "passive": j.passive is not None} for j in chain.joints],
     }
 
 
 def _tree(chain: dict) -> list[str]:
     """The chain as an indented tree, one line a joint: parent -> child (its mass): the
-    joint's name, variant and points (the parent's, the child's C) [m], and its reference
-    posture [rad] where it has one."""
+    joint's name, variant and points (the parent's, the child's C) [m], its reference
+    posture [rad] where it has one and whether it has a passive torque."""
     mass = {b["name"]: b["mass"] for b in chain["bodies"]}
     children: dict[str, list[dict]] = {}
     for joint in chain["joints"]:
@@ -85,7 +86,8 @@ def _tree(chain: dict) -> list[str]:
         for j in children.get(parent, ()):
             lines.append(f"{'  ' * depth}{parent} -> {j['child']} ({mass[j['child']]:g} kg): {j['name']}, "
                          f"{j['variant']}, {point(j['parent_point'])} -> {point(j['child_point'])} m"
-                         + (f", theta_ref {point(j['theta_ref'])} rad" if any(j.get("theta_ref") or ()) else ""))
+                         + (f", theta_ref {point(j['theta_ref'])} rad" if any(j.get("theta_ref") or ()) else "")
+                         + (", passive torque" if j.get("passive") else ""))
             walk(j["child"], depth + 1)
 
     walk("ground", 1)

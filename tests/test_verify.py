@@ -258,14 +258,26 @@ def test_a_body_held_elsewhere_than_its_own_point_is_verified_as_its_translate()
     assert sprung.level > 0 and abs(sprung.level - anchored.level) > 1e-3 * anchored.level
 
 
-def test_refused_for_a_reference_posture():
-    """The proof's potential is the paper's spring about Theta = 0: a joint with a reference
-    posture is refused in one line naming the key."""
+
+def test_a_reference_posture_moves_the_proven_set_with_it():
+    """Without gravity and limits, v = 1/2 Omega' J Omega + 1/2 dTheta' K_r dTheta about the
+    reference posture, so the largest proven level is the least P on the gimbal-lock face
+    nearest the reference, 1/2 k_2 (pi/2 - gimbal_margin - |theta_ref_2|)^2 (diagonal K_r; 246 J
+    without the reference),
+    and the equilibrium is the reference itself."""
     from conftest import tree_spelling
 
     from rbstab.config import config_from_mapping
 
-    tree = dict(tree_spelling(load_config(PENDULUM)).resolved)
-    joint = {**tree["joints"][0], "theta_ref": [0.1, 0.0, 0.0]}
-    with pytest.raises(NotVerifiable, match=r"joints\.\w+\.theta_ref: found \[0\.1, 0\.0, 0\.0\]"):
-        verify_sublevel(config_from_mapping({**tree, "joints": [joint]}))
+    tree = dict(tree_spelling(load_config(PENDULUM, ["controller.saturation=null"])).resolved)
+    reference = [0.2, 0.3, -0.1]
+    config = config_from_mapping({**tree, "gravity": [0.0, 0.0, 0.0],
+                                  "joints": [{**tree["joints"][0], "theta_ref": reference}]})
+    k_r = config.chain.joints[0].k_r
+    assert not np.any(k_r - np.diag(np.diag(k_r)))
+    k = np.diag(k_r)
+    result = verify_sublevel(config)
+    face = 0.5 * k[1] * (np.pi / 2 - config.simulation.gimbal_margin - reference[1]) ** 2
+    assert 0.97 * face <= result.level <= face  # the search resolves the face to its box widths
+    assert "domain boundary |theta_2|" in result.reason
+    assert potential(config, np.array(reference)) == pytest.approx(0.0, abs=1e-12)

@@ -26,7 +26,7 @@ import numpy as np
 
 from .model import Disturbance, Saturation
 
-__all__ = ["GROUND", "MAX_BODIES", "Body", "Joint", "Chain", "single"]
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Joint", "Chain", "single"]
 
 #: The parent index of a joint to the ground.
 GROUND = -1
@@ -63,6 +63,25 @@ class Body:
     l_t: np.ndarray = field(default_factory=lambda: _ZERO3.copy())
     saturation: Saturation | None = None
     disturbances: tuple[Disturbance, ...] = ()
+
+
+@dataclass(frozen=True, eq=False)
+class Passive:
+    """A joint's passive visco-elastic torque (ligaments, cartilage, a joint capsule; MJCF's
+    joint ``stiffness``, ``damping`` and ``springref``), never limited by an actuator:
+    N_p = -B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j [N m], child frame.
+
+    Attributes
+    ----------
+    k_r, l_r : ndarray, shape (3, 3)
+        Its stiffness [N m/rad] and damping [N m s/rad], symmetric positive semi-definite.
+    theta_ref : ndarray, shape (3,)
+        Theta_ref [rad]: the relative Euler angles at which its spring is relaxed.
+    """
+
+    k_r: np.ndarray
+    l_r: np.ndarray
+    theta_ref: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +124,9 @@ class Joint:
         Theta_ref [rad]: the joint's reference posture, the relative Euler angles at which its
         spring is relaxed (N_j's stiffness term and v's term 1/2 (Theta_j - Theta_ref)' K_r
         (Theta_j - Theta_ref) are zero there); zero: the paper's eq 23.
+    passive : Passive or None
+        The joint's passive torque, added to the feedback N_j (which ``saturation`` limits)
+        and never limited; None: none, the paper's joint.
     """
 
     name: str
@@ -123,6 +145,7 @@ class Joint:
     boundary_layer: float = 0.0
     saturation: Saturation | None = None
     theta_ref: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    passive: Passive | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -245,6 +245,11 @@ def _config_quantity(config_key: str) -> tuple[Quantity | None, str]:
     if config_key == "gravity":
         return CONFIG_QUANTITIES["body.gravity"], ""
     parts = config_key.split(".")
+    passive = len(parts) == 4 and parts[0] == "joints" and parts[2] == "passive"  # a joint's passive torque
+    if passive and parts[3] in ("k_r", "l_r", "theta_ref"):
+        q = _CHAIN_KEYS["joints"][parts[3]]
+        q = q if isinstance(q, Quantity) else CONFIG_QUANTITIES[q]
+        return q, f" (joint {parts[1]}, passive)"
     if len(parts) == 3 and parts[2] in _CHAIN_KEYS.get(parts[0], {}):
         kind = "joint" if parts[0] == "joints" else "body"
         q = _CHAIN_KEYS[parts[0]][parts[2]]
@@ -306,7 +311,8 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
              member="body"),
     Quantity("torque_n", "N", "N m", "rotational feedback torque N (body frame)",
              "N = -B' K_r Theta - L_r Omega, rotational feedback, body frame (eq 23; a chain's joint: "
-             "-B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j, child frame)", "N", "feedback torque", 3,
+             "-B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j through its limits plus its passive torque, child "
+             "frame)", "N", "feedback torque", 3,
              member="joint"),
     Quantity("torque_n_saturated", "N saturated", "1", "N_i at or beyond its limit, 1 or 0 (body frame)",
              "1 where the commanded N_i (eq 23) is at or beyond its limit, |N_i| >= controller.saturation.torque_n_i "
@@ -327,7 +333,8 @@ OUTPUTS: dict[str, Quantity] = {q.name: q for q in _in_order((
     Quantity("lyapunov_rotational", "v_r", "J", "rotational term v_r of the Lyapunov function",
              "v_r = Omega'J Omega/2 + Theta'K_r Theta/2 (eq 25; a chain's: Omega_i'J_i Omega_i/2 summed over "
              "its bodies and dTheta_j'K_r dTheta_j/2 over its joints, dTheta_j = Theta_j - Theta_ref the relative "
-             "angles from the joint's reference posture)", "v_r", "rotational"),
+             "angles from the joint's reference posture, and its passive spring's term of that form)", "v_r",
+             "rotational"),
     Quantity("lyapunov_constraint", "v_c", "J", "constraint controller term of the Lyapunov function",
              "energy stored in the constraint controller (eqs 41, 44; "
              "K_s |E|_1 or its boundary-layer smoothing for sliding; 0 for free and permanent; a chain's: summed "

@@ -261,9 +261,12 @@ _VECTOR = (np.float64, (3,))
 #: region (:class:`Limits`): ``limited`` (1 when any bound is finite; 0, as in a record of
 #: zeros: none, ``limits`` not read) and ``limits`` (5, 3), the bounds of |theta_i| [rad],
 #: |Omega_i| [rad/s], |X_i| [m], |V_i| [m/s], |E_i| [m] in the rows of
-#: :data:`rbstab.layout.LIMITED` (inf: none); last a tree joint's reference posture
-#: ``theta_ref`` Theta_ref [rad] (:class:`rbstab.chain.Joint`; the paper's one body: zero,
-#: not read).
+#: :data:`rbstab.layout.LIMITED` (inf: none); last what a tree's joint adds to the paper's
+#: feedback (:class:`rbstab.chain.Joint`; the paper's one body: zero, not read): its
+#: reference posture ``theta_ref`` Theta_ref [rad] and its passive torque
+#: (:class:`rbstab.chain.Passive`): ``passive`` (1 where the joint has one; 0, as in a
+#: record of zeros: none, the next fields not read), ``passive_k_r`` [N m/rad],
+#: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad].
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -303,6 +306,10 @@ PARAMETERS = np.dtype(
         ("limited", np.float64),
         ("limits", np.float64, (len(LIMITED), 3)),
         ("theta_ref", *_VECTOR),
+        ("passive", np.float64),
+        ("passive_k_r", *_MATRIX),
+        ("passive_l_r", *_MATRIX),
+        ("passive_theta_ref", *_VECTOR),
     ],
     align=True,
 )

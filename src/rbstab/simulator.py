@@ -788,7 +788,7 @@ def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
     joints, names; whether one body's rate serves it), the spelling of their configurations,
     the method, sample count and t_end; their records, parent points and admissible regions
     may differ (:func:`rbstab.engine.systems.tree_rows`)."""
-    from .variants.chain import one_body_mask  # heavy: numba
+    from .variants.chain import one_body_mask, papers_feedback  # heavy: numba
 
     structures: dict[tuple, int] = {}
     shape = np.empty(len(batch.trees), dtype=np.int64)  # each tree's structure
@@ -798,12 +798,12 @@ def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
         shape[t] = structures.setdefault(key, len(structures))
     tree = batch.tree[rows]
     one_body = np.zeros(len(rows), dtype=bool)
-    points = batch.ppoints[rows, 0]
-    attachment, reference = batch.params["attachment_point"][rows, 0], batch.params["theta_ref"][rows, 0]  # fields alone
+    points, attachment = batch.ppoints[rows, 0], batch.params["attachment_point"][rows, 0]  # the field alone copied
+    papers = papers_feedback(batch.params["theta_ref"][rows, 0], batch.params["passive"][rows, 0])
     for t in np.unique(tree).tolist():
         at = tree == t
         one_body[at] = one_body_mask(batch.trees[t].codes, batch.trees[t].parents, points[at], attachment[at],
-                                     reference[at])
+                                     papers[at])
     keys = np.column_stack([shape[tree], one_body, batch.one_body[rows], batch.settings["method"][rows],
                             batch.n_samples[rows], batch.settings["t_end"][rows]]).astype(float)
     if np.all(keys == keys[:1]):  # one group (a sweep's usual batch)

@@ -318,21 +318,25 @@ def _part(compiled, kind: str, i: int, one_body: bool) -> str:
     return f" of {kind} '{names[i]}'"
 
 
-def _unlimited(compiled):
-    """``compiled`` without its actuators' limits (every record's saturation off), the same h."""
+def _unlimited(compiled, passive: bool = True):
+    """``compiled`` without its actuators' limits (every record's saturation off; without
+    ``passive``, its joints' passive torques off too), the same h."""
     from ..variants import chain as C  # heavy: numba
 
     params = compiled.params.copy()
     params["saturation"] = 0.0
+    if not passive:
+        params["passive"] = 0.0
     return C.with_records(compiled, params, compiled.ppoints, compiled.offset)
 
 
 def _commanded(compiled, y: np.ndarray) -> dict[str, np.ndarray]:
     """|N_j|, |H_i|, |Lambda_j| [N m, N, N] (each (n, 3)) that the feedback and point laws of
-    ``compiled`` command at its full state ``y`` (before the actuators' limits)."""
+    ``compiled`` command at its full state ``y`` (before the actuators' limits; N_j without
+    the joints' passive torques, which no actuator delivers)."""
     from ..variants import chain as C  # heavy: numba
 
-    out = C.evaluate(_unlimited(compiled), np.zeros(1), y[None])
+    out = C.evaluate(_unlimited(compiled, passive=False), np.zeros(1), y[None])
     return {key: np.abs(np.asarray(out[key], dtype=float)[0]) for key, _, _, _ in _CONTROLS}
 
 

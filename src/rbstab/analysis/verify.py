@@ -133,8 +133,8 @@ def _key(config, owner: str, name: str) -> str:
 def check_verifiable(config) -> None:
     """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
     unless the configuration is one body on a permanent joint to the ground, the reduced
-    6-state model (:func:`verified_model`), with what the proof covers: no reference
-    posture, clipped torque
+    6-state model (:func:`verified_model`), with what the proof covers: no passive torque,
+    clipped torque
     limits, diagonal positive L_r, H unlimited, no disturbances, no bounds of X, V or E in
     ``simulation.limits``."""
     chain = verified_model(config).chain
@@ -142,9 +142,9 @@ def check_verifiable(config) -> None:
     if joint.variant != "permanent":
         raise NotVerifiable(f"{_key(config, 'joint', 'variant')}: found {joint.variant!r} (its analysis runs on more "
                             "than 6 states); --verify covers the reduced 6-state model of 'permanent'")
-    if np.any(joint.theta_ref):
-        raise NotVerifiable(f"{_key(config, 'joint', 'theta_ref')}: found {np.asarray(joint.theta_ref).tolist()}; "
-                            "--verify covers the spring relaxed at Theta = 0 (no reference posture)")
+    if joint.passive is not None:
+        raise NotVerifiable(f"{_key(config, 'joint', 'passive')}: found a passive torque; --verify covers the "
+                            "joint's feedback alone (its interval model has one spring and one damper)")
     l_r = np.asarray(joint.l_r, dtype=float)
     if np.any(l_r - np.diag(np.diag(l_r))):
         raise NotVerifiable(f"{_key(config, 'joint', 'l_r')}: found a non-diagonal L_r {l_r.tolist()}; --verify needs "
@@ -228,16 +228,18 @@ def _dot(a, b):
 
 
 class _Model:
-    """P, grad P, the Hessian of P and tau = -B' K_r Theta over a box of Theta, in arb, of
-    the body of record ``p`` (:data:`rbstab.model.PARAMETERS`: C at R_c =
-    ``attachment_point`` in its frame) on its joint at the ground point ``ground`` R_p (3,)
-    [m], X = R_p - A R_c, with h = ``offset`` [J]."""
+    """P, grad P, the Hessian of P and tau = -B' K_r (Theta - Theta_ref) over a box of Theta,
+    in arb, of the body of record ``p`` (:data:`rbstab.model.PARAMETERS`: C at R_c =
+    ``attachment_point`` in its frame, the joint's reference posture ``theta_ref``) on its
+    joint at the ground point ``ground`` R_p (3,) [m], X = R_p - A R_c, with h = ``offset`` [J]."""
 
     def __init__(self, p, ground, offset: float, arb) -> None:
         self.arb = arb
         self.zero, self.one = arb(0), arb(1)
         self.k_r = np.asarray(p["k_r"], dtype=float)
         self.k_t = np.asarray(p["k_t"], dtype=float)
+        self.reference = np.asarray(p["theta_ref"], dtype=float)
+        self.reference_arb = [arb(float(x)) for x in self.reference]
         self.diag_kr = not np.any(self.k_r - np.diag(np.diag(self.k_r)))
         self.R = [arb(float(x)) for x in p["attachment_point"]]
         self.ground = [arb(float(x)) for x in ground]
@@ -259,21 +261,27 @@ class _Model:
         """Rx Ry Rz vec with the given factors."""
         return _mv(rots[0], _mv(rots[1], _mv(rots[2], vec)))
 
+    def _strain(self, theta):
+        """Theta - Theta_ref (arb balls)."""
+        return [theta[i] - self.reference_arb[i] for i in range(3)]
+
     def _spring(self, theta, lo, hi):
-        """0.5 Theta' K_r Theta, tight for a diagonal K_r (squares of intervals)."""
+        """0.5 dTheta' K_r dTheta, dTheta = Theta - Theta_ref, tight for a diagonal K_r
+        (squares of intervals)."""
         arb = self.arb
         if self.diag_kr:
             total = self.zero
             for i in range(3):
-                a, b = lo[i], hi[i]
+                a, b = lo[i] - self.reference[i], hi[i] - self.reference[i]  # their signs exact, as the difference's
                 sq_hi = max(a * a, b * b)
                 sq_lo = 0.0 if a <= 0.0 <= b else min(a * a, b * b)
                 sq = arb(sq_lo).union(arb(sq_hi)) if sq_lo != sq_hi else arb(sq_lo)
-                # sq_lo, sq_hi were rounded: widen by their rounding
+                # a, b and their squares were rounded (3 roundings, relative 3.3e-16): widen by that
                 sq = sq + arb(0, 4e-16 * sq_hi + 1e-300)
                 total = total + 0.5 * self.K_r[i][i] * sq
             return total
-        return 0.5 * _dot(theta, _mv(self.K_r, theta))
+        strain = self._strain(theta)
+        return 0.5 * _dot(strain, _mv(self.K_r, strain))
 
     def evaluate(self, lo, hi, hessian: bool = False):
         """(P, grad P, tau) over the box [lo, hi] (arb balls); with ``hessian`` also the
@@ -294,9 +302,9 @@ class _Model:
         for a in range(3):
             f = [drots[b] if b == a else rots[b] for b in range(3)]
             dw.append(self._w(f, self.R))
-        kth = _mv(self.K_r, theta)
+        kth = _mv(self.K_r, self._strain(theta))
         grad = [kth[a] + _dot(force, dw[a]) for a in range(3)]
-        # tau = -B' K_r Theta, B of eq 1 (physics notes)
+        # tau = -B' K_r (Theta - Theta_ref), B of eq 1 (physics notes)
         c2, s2, c3, s3 = cos[1], sin[1], cos[2], sin[2]
         tau = [-(c3 / c2 * kth[0] + s3 * kth[1] - s2 * c3 / c2 * kth[2]),
                -(-s3 / c2 * kth[0] + c3 * kth[1] + s2 * s3 / c2 * kth[2]),
@@ -353,20 +361,19 @@ def _convex_box(model: _Model, centre: np.ndarray, radius: float) -> float:
 
 def _domain(config, model: _Model, level_cap: float):
     """The box D of Theta, (3, 2) [rad]: |theta_2| <= pi/2 - gimbal margin, the bounds of
-    ``simulation.limits.theta``, and otherwise wide enough that the spring alone holds every
-    P <= level_cap inside it."""
+    ``simulation.limits.theta``, and otherwise wide enough about the reference posture that
+    the spring alone holds every P <= level_cap inside it."""
     gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
     limits = config.simulation.limits
     theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
     k_min = float(np.linalg.eigvalsh(model.k_r).min())
-    # P >= 0.5 k_min |Theta|^2 - (|R_p| + |R_c|) |G| + h  (0.5 X'K_t X >= 0, |X| <= |R_p| + |R_c|)
+    # P >= 0.5 k_min |dTheta|^2 - (|R_p| + |R_c|) |G| + h  (0.5 X'K_t X >= 0, |X| <= |R_p| + |R_c|)
     floor = -model.reach * model.weight + model.offset
-    # and with a diagonal K_r, P >= 0.5 k_i theta_i^2 + that floor for each i
+    # and with a diagonal K_r, P >= 0.5 k_i (theta_i - theta_ref_i)^2 + that floor for each i
     k = np.diag(model.k_r) if model.diag_kr else np.full(3, k_min)
     half = np.sqrt(np.maximum(2.0 * (level_cap - floor) / k, 0.0)) * 1.05 + 1e-3
-    half[1] = min(half[1], gimbal)
-    half = np.minimum(half, theta_limit)
-    return np.column_stack([-half, half])
+    bound = np.minimum(theta_limit, [np.inf, gimbal, np.inf])
+    return np.column_stack([np.maximum(model.reference - half, -bound), np.minimum(model.reference + half, bound)])
 
 
 @dataclass(order=True)
@@ -421,13 +428,14 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     model, equilibrium = _model(config, arb)
     gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
     # an upper bound of the least P on the faces |theta_2| = gimbal: no c above it can be proven
-    face = [model.point(np.array([s1, sg * gimbal, 0.0])) for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0)]
+    face = [model.point(np.array([model.reference[0] + s1, sg * gimbal, model.reference[2]]))
+            for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0)]
     level_cap = min(face) if level is None else max(float(level), 0.0)
     domain = _domain(config, model, level_cap)
     limits = config.simulation.limits
     theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
     omega_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[1]
-    radius = _convex_box(model, equilibrium, 0.05 * float(np.min(domain[:, 1])))
+    radius = _convex_box(model, equilibrium, 0.025 * float(np.min(domain[:, 1] - domain[:, 0])))
     if radius == 0.0:
         raise NotVerifiable("the interval Hessian of P is not positive definite on any box around the equilibrium "
                             f"theta = {np.round(equilibrium, 6).tolist()} rad")
@@ -478,10 +486,10 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
                    + [(a, 1) for a in range(3) if hi[a] >= domain[a, 1]])
         if on_face:
             a, s = on_face[0]
-            what = ("the gimbal-lock margin" if a == 1 and domain[1, 1] >= gimbal
-                    else "simulation.limits.theta" if domain[a, 1] >= theta_limit[a] else "the search domain")
-            failures.append(f"the level set reaches the domain boundary |theta_{a + 1}| = {domain[a, 1]:.4g} rad "
-                            f"({what})")
+            edge = abs(domain[a, s])
+            what = ("the gimbal-lock margin" if a == 1 and edge >= gimbal
+                    else "simulation.limits.theta" if edge >= theta_limit[a] else "the search domain")
+            failures.append(f"the level set reaches the domain boundary |theta_{a + 1}| = {edge:.4g} rad ({what})")
             pt = 0.5 * (lo + hi)
             pt[a] = domain[a, s]
             if model.point(pt) < best_bad:

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, single
+from ..chain import GROUND, Body, Chain, Joint, Passive, single
 from ..kinematics import rotation_matrix
 from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
@@ -593,7 +593,10 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
             k_s=float(j.k_s) if "k_s" in used else None,
             boundary_layer=float(j.boundary_layer) if "k_s" in used else 0.0,
             saturation=_saturation(j.saturation, ("torque_n", "constraint_force")),
-            theta_ref=np.zeros(3) if j.theta_ref is None else _array(j.theta_ref)))
+            theta_ref=np.zeros(3) if j.theta_ref is None else _array(j.theta_ref),
+            passive=None if j.passive is None else Passive(
+                k_r=_gain(j.passive.k_r), l_r=_gain(j.passive.l_r),
+                theta_ref=np.zeros(3) if j.passive.theta_ref is None else _array(j.passive.theta_ref))))
     return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(run.gravity))
 
 
@@ -722,8 +725,9 @@ def _tree_resolved(run: ChainSchema) -> dict:
     for section in ("bodies", "joints"):
         dump[section] = [{k: v for k, v in entry.items() if v is not None} for entry in dump[section]]
         for entry in dump[section]:
-            if "saturation" in entry:
-                entry["saturation"] = {k: v for k, v in entry["saturation"].items() if v is not None}
+            for part in ("saturation", "passive"):
+                if part in entry:
+                    entry[part] = {k: v for k, v in entry[part].items() if v is not None}
     states = {}
     for body in run.bodies:  # every body, in order; a state's x, v only where written
         state = run.initial_state.get(body.name)

@@ -981,6 +981,17 @@ class _JointSaturation(_Section):
     shape: Annotated[Any, checked(_shape)] = Field("clip", description=f"one of {', '.join(SATURATION_SHAPES)}")
 
 
+class _JointPassive(_Section):
+    """A joint's passive visco-elastic torque (ligaments, cartilage): never limited."""
+
+    k_r: _gain_type("k_r") = Field(None, validate_default=True, description=(
+        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite (N m/rad; default 0)"))
+    l_r: _gain_type("l_r") = Field(None, validate_default=True, description=(
+        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite (N m s/rad; default 0)"))
+    theta_ref: Annotated[Any, checked(optional(_theta))] = Field(
+        None, description="3 numbers (rad; the relative Euler angles at which its spring is relaxed; default 0)")
+
+
 class _ChainBody(_Section):
     """One body of a chain (Table 1) and its optional ground-anchored feedback (eq 24)."""
 
@@ -1021,6 +1032,8 @@ class _ChainJoint(_Section):
     theta_ref: Annotated[Any, checked(optional(_theta))] = Field(
         None, description="3 numbers (rad; the reference posture Theta_ref, the relative Euler angles at which the "
                           "joint's spring K_r is relaxed; optional, default 0)")
+    passive: _JointPassive | None = Field(None, description=_mapping_of(_JointPassive) + " (optional: the "
+                                                            "joint's passive torque, added to N_j and never limited)")
 
     @model_validator(mode="before")
     @classmethod
@@ -1232,6 +1245,8 @@ class ChainSchema(_Section):
         margin = float(self.simulation.gimbal_margin)
         angles = [(f"initial_state.{name}.theta", state.theta) for name, state in self.initial_state.items()]
         angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints if j.theta_ref is not None]
+        angles += [(f"joints.{j.name}.passive.theta_ref", j.passive.theta_ref) for j in self.joints
+                   if j.passive is not None and j.passive.theta_ref is not None]
         for key, theta in angles:
             if not clear_of_gimbal_lock(theta[1], margin):
                 limit = math.pi / 2 - margin

@@ -527,6 +527,11 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
     p["k_s"] = of("joints", "k_s", 0.0)
     p["boundary_layer"] = of("joints", "boundary_layer", 0.0)
     p["theta_ref"] = of("joints", "theta_ref", zero, shape=(3,))
+    if joint.passive is not None:
+        p["passive"] = 1.0
+        p["passive_k_r"] = of("joints", "passive.k_r", zero, shape=(3, 3))
+        p["passive_l_r"] = of("joints", "passive.l_r", zero, shape=(3, 3))
+        p["passive_theta_ref"] = of("joints", "passive.theta_ref", zero, shape=(3,))
     if joint.saturation is not None or body.saturation is not None:
         p["torque_limit"] = of("joints", "saturation.torque_n", math.inf, shape=(3,)) if joint.saturation else math.inf
         p["constraint_force_limit"] = (of("joints", "saturation.constraint_force", math.inf, shape=(3,))

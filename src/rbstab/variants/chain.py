@@ -53,7 +53,7 @@ from .paper import body_model
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
-           "lyapunov", "rest_state", "rest_offset", "reference_posture", "records_of", "is_one_body", "one_body_mask", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
+           "lyapunov", "rest_state", "rest_offset", "reference_posture", "records_of", "is_one_body", "one_body_mask", "papers_feedback", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
            "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
@@ -246,6 +246,11 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             power += dot(omega_j, sub(n_j, torque_n_command(b_j, strain, omega_j, p)))
         rotational += 0.5 * quadratic_form(strain, p.k_r)
         dissipation += quadratic_form(omega_j, p.l_r)
+        if p.passive > 0.0:  # the passive torque, never limited: eq 23's form with its own gains and reference
+            strain = sub(theta_j, p.passive_theta_ref)
+            n_j = sub(sub(n_j, matTvec(b_j, matvec(p.passive_k_r, strain))), matvec(p.passive_l_r, omega_j))
+            rotational += 0.5 * quadratic_form(strain, p.passive_k_r)
+            dissipation += quadratic_form(omega_j, p.passive_l_r)
         _acc_add(torque, force, j, n_j, ZERO)
         if q >= 0:
             reaction = matvec(rel, n_j)
@@ -535,13 +540,14 @@ def _saturation_flags(y, params, codes, joints, flags):
     """The actuators' saturation flags of one evaluated state into ``flags`` (n, 3, 3): per
     joint j, the axes of N_j, of H of body j (its child) and of Lambda_j commanded at or
     beyond their limits, 1.0 or 0.0 (:func:`rbstab.variants.kernels.saturation_effects`
-    of joint j's Theta_j, Omega_j, B(Theta_j), E_j, F_j, D_j and body j's X, V, as one
-    body's; ``joints`` (n, 7, 3) as :func:`chain_evaluate` filled it)."""
+    of joint j's Theta_j - Theta_ref, Omega_j, B(Theta_j), E_j, F_j, D_j and body j's X, V,
+    as one body's; ``joints`` (n, 7, 3) as :func:`chain_evaluate` filled it)."""
     for j in range(codes.shape[0]):
         theta_j = vector(joints[j, _THETA_J], 0)
         _, b_j = rotation_and_rate_of(theta_j)
-        _, n_flags, h_flags, lam_flags = saturation_effects(
-            codes[j], theta_j, vector(joints[j, _OMEGA_J], 0), vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
+        _, n_flags, h_flags, lam_flags = saturation_effects(  # N_j commanded on Theta_j - Theta_ref
+            codes[j], sub(theta_j, params[j].theta_ref), vector(joints[j, _OMEGA_J], 0), vector(y, 12 * j + 6),
+            vector(y, 12 * j + 9), b_j,
             vector(joints[j, _E], 0), vector(joints[j, _F], 0), vector(joints[j, _D], 0), params[j])
         _put(flags[j, 0], 0, n_flags)
         _put(flags[j, 1], 0, h_flags)
@@ -648,15 +654,22 @@ class CompiledChain:
         return self.codes == PERMANENT
 
 
+def papers_feedback(theta_ref: np.ndarray, passive: np.ndarray) -> np.ndarray:
+    """Whether each joint has the paper's feedback alone, eq 23: its spring relaxed at Theta
+    = 0 and no passive torque, from its records' ``theta_ref`` (..., 3) and ``passive`` (...)
+    fields; bool (...)."""
+    return ~np.any(theta_ref, axis=-1) & (passive == 0.0)
+
+
 def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray,
-                  reference: np.ndarray) -> np.ndarray:
+                  papers: np.ndarray) -> np.ndarray:
     """Which of t trees of one structure (joint variant ``codes`` (n,), ``parents`` (n,))
     are the paper's one-body model (:func:`is_one_body`): ``points`` (t, 3) their first
-    joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame), ``reference`` (t, 3)
-    its Theta_ref [rad]; shape (t,) of bool."""
+    joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame), ``papers`` (t,) whether
+    its feedback is the paper's (:func:`papers_feedback`); shape (t,) of bool."""
     if codes.shape[0] != 1 or parents[0] >= 0:
         return np.zeros(len(points), dtype=bool)
-    return np.all(points == attachment, axis=-1) & ~np.any(reference, axis=-1)
+    return np.all(points == attachment, axis=-1) & papers
 
 
 def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoints: np.ndarray) -> bool:
@@ -665,13 +678,13 @@ def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoi
     parent points (t, n, 3)), is the paper's one-body model: one body held by its joint to
     the ground at the point R_p = R_c, where its point C rests with its centre of mass at the
     origin (E = X + A R - R, eq 4; the one-body spelling's body and controller), its spring
-    relaxed at Theta = 0 (no reference posture). One body's
+    relaxed at Theta = 0 and no passive torque (the paper's feedback). One body's
     compiled rate (:func:`rbstab.variants.kernels.state_rate`) and its h then serve the
     tree: its reduced state is the body's state."""
     first = params[..., 0]
     return bool(np.all(one_body_mask(codes, parents, np.reshape(np.asarray(ppoints)[..., 0, :], (-1, 3)),
                                      np.reshape(first["attachment_point"], (-1, 3)),
-                                     np.reshape(first["theta_ref"], (-1, 3)))))
+                                     np.reshape(papers_feedback(first["theta_ref"], first["passive"]), (-1,)))))
 
 
 def records_of(trees: Sequence[CompiledChain]) -> np.ndarray:
@@ -699,7 +712,12 @@ def with_records(compiled: CompiledChain, params: np.ndarray, ppoints: np.ndarra
 def _record(chain: Chain, i: int) -> np.ndarray:
     """The :data:`rbstab.model.PARAMETERS` record of body ``i`` and its joint (h 0)."""
     p = parameters(*body_model(chain, i))
-    p["theta_ref"] = chain.joints[i].theta_ref
+    joint = chain.joints[i]
+    p["theta_ref"] = joint.theta_ref
+    if joint.passive is not None:
+        p["passive"] = 1.0
+        p["passive_k_r"], p["passive_l_r"] = joint.passive.k_r, joint.passive.l_r
+        p["passive_theta_ref"] = joint.passive.theta_ref
     return p
 
 
@@ -932,9 +950,10 @@ def reference_posture(compiled: CompiledChain) -> np.ndarray:
 
 def rest_offset(compiled: CompiledChain) -> float:
     """h [J] with v = 0 at the chain's rest state (:func:`rest_state`); 0 without gravity
-    and reference postures (the potential's least value is then 0 at the reference
-    configuration) or where the potential has no minimum."""
-    if not np.any(compiled.chain.gravity) and not np.any(compiled.params["theta_ref"]):
+    and reference postures, the passive springs' included (the potential's least value is
+    then 0 at the reference configuration) or where the potential has no minimum."""
+    if (not np.any(compiled.chain.gravity) and not np.any(compiled.params["theta_ref"])
+            and not np.any(compiled.params["passive_theta_ref"])):
         return 0.0
     if compiled.one_body:  # the one-body model's own h, as its one-body spelling has it
         return record_offset(compiled.params[0], compiled.chain.gravity, _VARIANT_NAMES[int(compiled.codes[0])])

@@ -28,12 +28,12 @@ __all__ = ["paper_form", "has_paper_form", "paper_initial_state", "body_model"]
 
 def has_paper_form(chain: Chain) -> bool:
     """Whether ``chain`` is one body held to the ground at its own point (R_p = R_c) by the
-    paper's feedback (its spring relaxed at Theta = 0: no reference posture)."""
+    paper's feedback (its spring relaxed at Theta = 0, no passive torque)."""
     if chain.size != 1:
         return False
     joint = chain.joints[0]
     return (joint.parent == GROUND and np.array_equal(joint.parent_point, joint.child_point)
-            and not np.any(joint.theta_ref))
+            and not np.any(joint.theta_ref) and joint.passive is None)
 
 
 def body_model(chain: Chain, i: int) -> tuple[RigidBody, Gains]:

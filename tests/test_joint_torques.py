@@ -1,7 +1,10 @@
-"""A joint's reference posture Theta_ref (``joints.<name>.theta_ref``): its spring acts on
-Theta_j - Theta_ref, v's spring term is 1/2 (Theta_j - Theta_ref)' K_r (Theta_j - Theta_ref),
-and the rest state is where the springs balance gravity. Checked against a closed-form
-balance, MuJoCo's hinge springs (``springref``) and v's own bookkeeping."""
+"""A joint's torques beyond the paper's feedback: its reference posture Theta_ref
+(``joints.<name>.theta_ref``: its spring acts on Theta_j - Theta_ref, v's spring term is
+1/2 (Theta_j - Theta_ref)' K_r (Theta_j - Theta_ref), the rest state is where the springs
+balance gravity) and its passive torque (``joints.<name>.passive``: ligaments, never
+limited, beside the feedback its actuator limits). Checked against a closed-form balance,
+MuJoCo's hinge springs (``stiffness``, ``damping``, ``springref``) and position servos
+(``kp``, ``kv``, ``forcerange``), and v's own bookkeeping."""
 
 from __future__ import annotations
 
@@ -140,3 +143,86 @@ def test_the_paper_spelling_has_no_reference_posture():
     data["controller"]["theta_ref"] = [0.1, 0.0, 0.0]
     with pytest.raises(ConfigError, match="controller.theta_ref"):
         config_from_mapping(data)
+
+
+def _planar_mujoco(mujoco, passive, servo, limit, dt=1e-4):
+    """MuJoCo's two rods on hinges about x (radians): each joint's ``passive`` (stiffness,
+    damping, springref) and a position servo ``servo`` (kp, kv, target) whose force is
+    clamped to [-limit, limit] N m."""
+    joints, actuators = "", ""
+    for i, ((k, d, ref), (kp, kv, _)) in enumerate(zip(passive, servo)):
+        joints += f'<joint name="j{i}" type="hinge" axis="1 0 0" stiffness="{k}" damping="{d}" springref="{ref}"/>|'
+        actuators += (f'<position joint="j{i}" kp="{kp}" kv="{kv}" forcelimited="true" '
+                      f'forcerange="{-limit} {limit}"/>')
+    first, second = joints.split("|")[:2]
+    inertia = " ".join(map(str, ROD_INERTIA))
+    xml = f"""<mujoco><compiler angle="radian"/><option gravity="0 0 -9.81" timestep="{dt}" integrator="RK4"/>
+      <worldbody><body name="rod0" pos="0 0 0">{first}
+        <inertial pos="0 0 -0.5" mass="1" diaginertia="{inertia}"/>
+        <body name="rod1" pos="0 0 -1">{second}<inertial pos="0 0 -0.5" mass="1" diaginertia="{inertia}"/>
+        </body></body></worldbody><actuator>{actuators}</actuator></mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    data.ctrl[:] = [target for _, _, target in servo]
+    return model, data
+
+
+def test_passive_torques_and_saturating_servos_move_as_mujocos():
+    """Two rods in a plane, each joint a ligament (a passive spring and damper about its own
+    rest angle, never limited) and a muscle (a feedback toward another reference, clipped
+    at 1.5 N m, which it reaches): both centres of mass follow MuJoCo's hinges with
+    ``stiffness``, ``damping``, ``springref`` and a ``position`` servo with ``kv`` and
+    ``forcerange`` to 1e-6 m. v's analytic rate, with the clipped feedback's deficit power
+    (which may be positive: v may rise), is the derivative of its 1 ms samples."""
+    mujoco = pytest.importorskip("mujoco")
+    passive, servo, limit = [(2.0, 0.2, 0.4), (1.5, 0.1, -0.3)], [(8.0, 0.5, -0.2), (6.0, 0.4, 0.5)], 1.5
+    data = _rods(2, 0.0, 0.0, [[0, 0, 0], [0, 0, 0]], [[0.9, 0, 0], [0.9 - 0.8, 0, 0]], n_samples=2001)
+    for joint, (k, d, ref), (kp, kv, target) in zip(data["joints"], passive, servo):
+        joint.update(k_r=[kp] * 3, l_r=[kv] * 3, theta_ref=[target, 0.0, 0.0],
+                     saturation={"torque_n": limit}, passive={"k_r": [k] * 3, "l_r": [d] * 3, "theta_ref": [ref, 0, 0]})
+    config = config_from_mapping(data)
+    result = simulate(config)
+    assert result.status == "success"
+    out = result.outputs
+    assert out["torque_n_saturated"][:, :, 0].any()  # the muscles reach their limit
+    assert result.summary["lyapunov_rate_check"] == "pass"
+    model, state = _planar_mujoco(mujoco, passive, servo, limit)
+    state.qpos[:] = [0.9, -0.8]
+    mujoco.mj_forward(model, state)
+    for s, t in enumerate(result.time):
+        if s:
+            mujoco.mj_step(model, state, nstep=int(round((t - result.time[s - 1]) / 1e-4)))
+        np.testing.assert_allclose(out["position"][s], state.xipos[1:3], atol=1e-6, err_msg=f"t = {t}")
+
+
+def test_a_passive_torque_is_the_feedback_it_equals_where_no_limit_acts():
+    """Without limits a passive spring and damper equals the same gains and reference
+    written as the joint's feedback: the same motion, v and dv/dt (to rounding)."""
+    base = _rods(2, 0.0, 0.0, [[0, 0, 0], [0, 0, 0]], [[0.5, 0.2, 0], [0.1, -0.3, 0.2]], n_samples=101)
+    gains = [([30, 20, 10], [2, 1, 0.5], [0.1, -0.2, 0.3]), ([15, 25, 5], [1, 2, 0.3], [-0.3, 0.1, 0.0])]
+    feedback, passive = copy.deepcopy(base), copy.deepcopy(base)
+    for a, b, (k, l, ref) in zip(feedback["joints"], passive["joints"], gains):
+        a.update(k_r=k, l_r=l, theta_ref=ref)
+        b.update(passive={"k_r": k, "l_r": l, "theta_ref": ref})
+    one, other = simulate(config_from_mapping(feedback)), simulate(config_from_mapping(passive))
+    for key in ("position", "omega", "joint_theta", "torque_n", "lyapunov", "lyapunov_rate"):
+        scale = max(1.0, float(np.abs(one.outputs[key]).max()))
+        np.testing.assert_allclose(other.outputs[key], one.outputs[key], rtol=0, atol=1e-9 * scale, err_msg=key)
+
+
+def test_a_passive_torque_takes_a_one_body_tree_off_the_papers_form():
+    data = _rods(1, 4.0, 1.0, [[0.0, 0.0, 0.0]], [[0.2, 0, 0]])
+    data["joints"][0]["parent_point"] = data["joints"][0]["child_point"]
+    assert has_paper_form(config_from_mapping(data).chain)
+    data["joints"][0]["passive"] = {"k_r": [1.0, 1.0, 1.0]}
+    config = config_from_mapping(data)
+    assert not has_paper_form(config.chain) and not C.compile_chain(config.chain).one_body
+
+
+def test_a_passive_torques_keys_have_the_units_of_the_feedbacks():
+    from rbstab.layout import parameter_attributes
+
+    for name in ("k_r", "l_r", "theta_ref"):
+        mine = parameter_attributes(f"joints.hip.passive.{name}.0")
+        theirs = parameter_attributes(f"joints.hip.{name}.0")
+        assert mine["units"] == theirs["units"] and "(joint hip, passive)" in mine["long_name"]
