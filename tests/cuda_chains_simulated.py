@@ -20,7 +20,8 @@ import numpy as np
 
 
 def pulsed_chain(theta: float, impulses: bool = False):
-    """Three bodies hanging on permanent (ball) joints under gravity with joint springs, a
+    """Three bodies hanging on permanent (ball) joints under gravity with joint springs (the
+    elbow's relaxed at a reference posture, the wrist's with a passive torque too), a
     pulse of force on the lowest from 0.05 s to 0.15 s and an admissible region in theta;
     the upper body tilted ``theta`` [rad] about x. ``impulses``: also a torque impulse on the
     upper body at t = 0, and force impulses on the middle one at 0.12 s and at t_end."""
@@ -33,8 +34,9 @@ def pulsed_chain(theta: float, impulses: bool = False):
         "name": "pulsed3", "gravity": [0, 0, -9.81],
         "bodies": [{"name": name, **body} for name in ("upper", "middle", "lower")],
         "joints": [{"name": "shoulder", "parent": "ground", "child": "upper", **joint, "parent_point": [0, 0, 0]},
-                   {"name": "elbow", "parent": "upper", "child": "middle", **joint},
-                   {"name": "wrist", "parent": "middle", "child": "lower", **joint}],
+                   {"name": "elbow", "parent": "upper", "child": "middle", **joint, "theta_ref": [0.05, 0.0, 0.0]},
+                   {"name": "wrist", "parent": "middle", "child": "lower", **joint,
+                    "passive": {"k_r": [3.0, 3.0, 1.0], "l_r": [0.1, 0.1, 0.1], "theta_ref": [0.1, 0.0, 0.0]}}],
         "initial_state": {"upper": {"theta": [theta, 0.0, 0.0]}},
         "disturbances": [{"kind": "pulse", "value": [0.0, 20.0, 1.0], "point": [0.0, 0.05, -0.2], "start": 0.05,
                           "duration": 0.1, "body": "lower"},

@@ -397,9 +397,10 @@ def test_a_chain_sweeps_parameter_columns_refuse_exactly_the_runs_each_validated
              "initial_state.legs.theta.1": some(np.zeros(n), [1.6]),
              "joints.hip.theta_ref.1": some(rng.uniform(-0.2, 0.2, n), [1.6, 1.5705]),
              "joints.hip.passive.theta_ref.1": some(rng.uniform(-0.2, 0.2, n), [-1.5705]),
-             "joints.hip.passive.l_r.0": some(rng.uniform(0, 20, n), [-1.0])}
+             "joints.hip.passive.l_r.0": some(rng.uniform(0, 20, n), [-1.0]),
+             "joints.ankle.saturation.torque_n_lower.2": some(rng.uniform(-200, -100, n), [0.0, 5.0])}
     base = yaml.safe_load(Path(STANCE).read_text())
-    base["joints"][0]["saturation"] = {"torque_n": 150.0}
+    base["joints"][0]["saturation"] = {"torque_n": 150.0, "torque_n_lower": [-150.0, -150.0, -150.0]}
     base["joints"][1]["theta_ref"] = [0.0, 0.0, 0.0]  # an entry is set where the list is written
     base["joints"][1]["passive"] = {"l_r": [10.0, 10.0, 10.0], "theta_ref": [0.0, 0.0, 0.0]}
 
@@ -434,6 +435,7 @@ def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
     pushed, bent = copy.deepcopy(stance), copy.deepcopy(stance)
     bent["joints"][1]["theta_ref"] = [0.0, 0.1, 0.0]
     bent["joints"][0]["passive"] = {"k_r": [300.0, 200.0, 50.0], "theta_ref": [0.0, 0.05, 0.0]}
+    bent["joints"][1]["saturation"] = {"torque_n": [200.0, 150.0, 100.0], "torque_n_lower": -80.0}
     pushed["simulation"]["limits"] = {"theta": 0.6}
     pushed["disturbances"] = [
         {"kind": "impulse", "quantity": "torque", "value": [0, 5, 0], "start": 0.3, "body": "trunk"},
@@ -442,7 +444,8 @@ def test_a_chain_sweeps_batch_is_each_runs_compiled_chain_bit_for_bit():
         (stance, {"bodies.trunk.mass": rng.uniform(40, 55, n), "initial_state.legs.theta.0": rng.uniform(-.1, .1, n)}),
         (bent, {"bodies.0.mass": rng.uniform(20, 25, n), "joints.1.l_r.2": rng.uniform(10, 30, n),  # by position
                 "joints.hip.theta_ref.1": rng.uniform(-.2, .2, n), "joints.ankle.passive.k_r.1": rng.uniform(0, 400, n),
-                "joints.0.passive.theta_ref.1": rng.uniform(-.1, .1, n)}),
+                "joints.0.passive.theta_ref.1": rng.uniform(-.1, .1, n),
+                "joints.hip.saturation.torque_n_lower": rng.uniform(-90, -50, n)}),
         (stance, {"joints.hip.k_r.0": rng.uniform(400, 600, n), "joints.hip.child_point.2": rng.uniform(-.35, -.3, n),
                   "gravity.2": rng.uniform(-10, -9, n), "joints.ankle.saturation.torque_n.0": rng.uniform(100, 200, n),
                   "initial_state.trunk.omega.1": rng.uniform(-.1, .1, n)}),

@@ -145,15 +145,15 @@ def test_the_paper_spelling_has_no_reference_posture():
         config_from_mapping(data)
 
 
-def _planar_mujoco(mujoco, passive, servo, limit, dt=1e-4):
+def _planar_mujoco(mujoco, passive, servo, ranges, dt=1e-4):
     """MuJoCo's two rods on hinges about x (radians): each joint's ``passive`` (stiffness,
     damping, springref) and a position servo ``servo`` (kp, kv, target) whose force is
-    clamped to [-limit, limit] N m."""
+    clamped to its ``ranges`` entry [lower, upper] N m."""
     joints, actuators = "", ""
-    for i, ((k, d, ref), (kp, kv, _)) in enumerate(zip(passive, servo)):
+    for i, ((k, d, ref), (kp, kv, _), (lower, upper)) in enumerate(zip(passive, servo, ranges)):
         joints += f'<joint name="j{i}" type="hinge" axis="1 0 0" stiffness="{k}" damping="{d}" springref="{ref}"/>|'
         actuators += (f'<position joint="j{i}" kp="{kp}" kv="{kv}" forcelimited="true" '
-                      f'forcerange="{-limit} {limit}"/>')
+                      f'forcerange="{lower} {upper}"/>')
     first, second = joints.split("|")[:2]
     inertia = " ".join(map(str, ROD_INERTIA))
     xml = f"""<mujoco><compiler angle="radian"/><option gravity="0 0 -9.81" timestep="{dt}" integrator="RK4"/>
@@ -167,26 +167,29 @@ def _planar_mujoco(mujoco, passive, servo, limit, dt=1e-4):
     return model, data
 
 
-def test_passive_torques_and_saturating_servos_move_as_mujocos():
+@pytest.mark.parametrize("ranges", [[(-1.5, 1.5), (-1.5, 1.5)], [(-0.8, 2.0), (-2.5, 1.0)]])
+def test_passive_torques_and_saturating_servos_move_as_mujocos(ranges):
     """Two rods in a plane, each joint a ligament (a passive spring and damper about its own
     rest angle, never limited) and a muscle (a feedback toward another reference, clipped
-    at 1.5 N m, which it reaches): both centres of mass follow MuJoCo's hinges with
-    ``stiffness``, ``damping``, ``springref`` and a ``position`` servo with ``kv`` and
-    ``forcerange`` to 1e-6 m. v's analytic rate, with the clipped feedback's deficit power
-    (which may be positive: v may rise), is the derivative of its 1 ms samples."""
+    to [lower, upper], which it reaches; symmetric or stronger one way): both centres of
+    mass follow MuJoCo's hinges with ``stiffness``, ``damping``, ``springref`` and a
+    ``position`` servo with ``kv`` and ``forcerange`` to 1e-6 m. v's analytic rate, with
+    the clipped feedback's deficit power (which may be positive: v may rise), is the
+    derivative of its 1 ms samples."""
     mujoco = pytest.importorskip("mujoco")
-    passive, servo, limit = [(2.0, 0.2, 0.4), (1.5, 0.1, -0.3)], [(8.0, 0.5, -0.2), (6.0, 0.4, 0.5)], 1.5
+    passive, servo = [(2.0, 0.2, 0.4), (1.5, 0.1, -0.3)], [(8.0, 0.5, -0.2), (6.0, 0.4, 0.5)]
     data = _rods(2, 0.0, 0.0, [[0, 0, 0], [0, 0, 0]], [[0.9, 0, 0], [0.9 - 0.8, 0, 0]], n_samples=2001)
-    for joint, (k, d, ref), (kp, kv, target) in zip(data["joints"], passive, servo):
-        joint.update(k_r=[kp] * 3, l_r=[kv] * 3, theta_ref=[target, 0.0, 0.0],
-                     saturation={"torque_n": limit}, passive={"k_r": [k] * 3, "l_r": [d] * 3, "theta_ref": [ref, 0, 0]})
+    for joint, (k, d, ref), (kp, kv, target), (lower, upper) in zip(data["joints"], passive, servo, ranges):
+        saturation = {"torque_n": upper} if lower == -upper else {"torque_n": upper, "torque_n_lower": lower}
+        joint.update(k_r=[kp] * 3, l_r=[kv] * 3, theta_ref=[target, 0.0, 0.0], saturation=saturation,
+                     passive={"k_r": [k] * 3, "l_r": [d] * 3, "theta_ref": [ref, 0, 0]})
     config = config_from_mapping(data)
     result = simulate(config)
     assert result.status == "success"
     out = result.outputs
-    assert out["torque_n_saturated"][:, :, 0].any()  # the muscles reach their limit
+    assert out["torque_n_saturated"][:, :, 0].any()  # the muscles reach their limits
     assert result.summary["lyapunov_rate_check"] == "pass"
-    model, state = _planar_mujoco(mujoco, passive, servo, limit)
+    model, state = _planar_mujoco(mujoco, passive, servo, ranges)
     state.qpos[:] = [0.9, -0.8]
     mujoco.mj_forward(model, state)
     for s, t in enumerate(result.time):
@@ -226,3 +229,21 @@ def test_a_passive_torques_keys_have_the_units_of_the_feedbacks():
         mine = parameter_attributes(f"joints.hip.passive.{name}.0")
         theirs = parameter_attributes(f"joints.hip.{name}.0")
         assert mine["units"] == theirs["units"] and "(joint hip, passive)" in mine["long_name"]
+
+
+def test_asymmetric_torque_limits_take_a_one_body_tree_off_the_papers_form_and_are_checked():
+    """Lower limits of N of their own (torque_n_lower) are a tree's: one body held at its
+    own point with them runs on the tree's kernels, with lower = -torque_n it is the
+    paper's one body; a lower limit >= 0 is refused naming its key."""
+    data = _rods(1, 4.0, 1.0, [[0.0, 0.0, 0.0]], [[0.2, 0, 0]])
+    joint = data["joints"][0]
+    joint["parent_point"] = joint["child_point"]
+    joint["saturation"] = {"torque_n": [2.0, 2.0, 2.0], "torque_n_lower": [-2.0, -2.0, -2.0]}
+    assert has_paper_form(config_from_mapping(data).chain)
+    joint["saturation"]["torque_n_lower"] = [-1.0, -2.0, -2.0]
+    config = config_from_mapping(data)
+    assert not has_paper_form(config.chain) and not C.compile_chain(config.chain).one_body
+    np.testing.assert_array_equal(C.compile_chain(config.chain).params["torque_floor"][0], [-1.0, -2.0, -2.0])
+    joint["saturation"]["torque_n_lower"] = [-1.0, 0.0, -2.0]
+    with pytest.raises(ConfigError, match=r"joints\.0\.saturation\.torque_n_lower|joints\.joint0\.saturation"):
+        config_from_mapping(data)

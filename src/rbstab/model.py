@@ -21,7 +21,7 @@ from .kinematics import cross, hat, matTvec, matvec, neg, sub
 __all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "Disturbance", "DISTURBANCE_KINDS",
            "DISTURBANCE_QUANTITIES", "MAX_DISTURBANCES", "NOISE_TONES", "Limits", "PARAMETERS", "parameters",
            "set_disturbances", "set_limits", "gyroscopic",
-           "saturate", "saturated", "torque_n_command", "force_h_command", "torque_n", "force_h"]
+           "saturate", "saturated", "saturate_between", "saturated_between", "torque_n_command", "force_h_command", "torque_n", "force_h"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,12 +91,17 @@ class Saturation:
         Limits of Lambda [N], inertial frame (eqs 22, 39, 40; not ``permanent``'s pin).
     shape : str
         A key of :data:`SATURATION_SHAPES`.
+    torque_n_lower : ndarray, shape (3,), or None
+        Lower limits of a tree joint's N [N m], each < 0 (-inf: none), ``torque_n`` then its
+        upper limits: lower_i <= N_i <= torque_n_i (an actuator stronger one way, MJCF's
+        ``forcerange``). None: -``torque_n``, the paper's symmetric limits.
     """
 
     torque_n: np.ndarray
     force_h: np.ndarray
     constraint_force: np.ndarray
     shape: str = "clip"
+    torque_n_lower: np.ndarray | None = None
 
 
 #: The kinds of a disturbance by name, and their codes in :data:`PARAMETERS`'s
@@ -263,7 +268,8 @@ _VECTOR = (np.float64, (3,))
 #: |Omega_i| [rad/s], |X_i| [m], |V_i| [m/s], |E_i| [m] in the rows of
 #: :data:`rbstab.layout.LIMITED` (inf: none); last what a tree's joint adds to the paper's
 #: feedback (:class:`rbstab.chain.Joint`; the paper's one body: zero, not read): its
-#: reference posture ``theta_ref`` Theta_ref [rad] and its passive torque
+#: reference posture ``theta_ref`` Theta_ref [rad], the lower limits of N ``torque_floor``
+#: [N m] (-``torque_limit`` unless :class:`Saturation` gives its own) and its passive torque
 #: (:class:`rbstab.chain.Passive`): ``passive`` (1 where the joint has one; 0, as in a
 #: record of zeros: none, the next fields not read), ``passive_k_r`` [N m/rad],
 #: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad].
@@ -306,6 +312,7 @@ PARAMETERS = np.dtype(
         ("limited", np.float64),
         ("limits", np.float64, (len(LIMITED), 3)),
         ("theta_ref", *_VECTOR),
+        ("torque_floor", *_VECTOR),
         ("passive", np.float64),
         ("passive_k_r", *_MATRIX),
         ("passive_l_r", *_MATRIX),
@@ -342,6 +349,7 @@ def parameters(body: RigidBody, gains: Gains, lyapunov_offset: float = 0.0,
     sat = gains.saturation
     if sat is not None:
         p["torque_limit"] = sat.torque_n
+        p["torque_floor"] = -np.asarray(sat.torque_n) if sat.torque_n_lower is None else sat.torque_n_lower
         p["force_limit"] = sat.force_h
         p["constraint_force_limit"] = sat.constraint_force
         p["saturation"] = SATURATION_SHAPES[sat.shape]
@@ -408,6 +416,32 @@ def saturate(u, limit, shape):
     limit_i] (``shape`` 1) or limit_i tanh(u_i / limit_i) (``shape`` 2); ``limit`` (3,),
     inf where unlimited (:data:`SATURATION_SHAPES`)."""
     return (_saturate(u[0], limit[0], shape), _saturate(u[1], limit[1], shape), _saturate(u[2], limit[2], shape))
+
+
+@jit(forceinline=True)
+def _saturate_between(u, lower, upper, shape):
+    """One axis through an actuator whose output lies in [``lower``, ``upper``] (lower < 0 <
+    upper, infinite: none): ``shape`` 1 clips, 2 is ``upper`` tanh(u / upper) for u > 0 and
+    -``lower`` tanh(u / lower) below (each side the symmetric shape of its own limit)."""
+    if u >= 0.0:
+        return _saturate(u, upper, shape)
+    return -_saturate(-u, -lower, shape)
+
+
+@jit(forceinline=True)
+def saturate_between(u, lower, upper, shape):
+    """The 3-vector ``u`` through actuators with the limits ``lower`` (3,) and ``upper``
+    (3,) per axis (:func:`_saturate_between`); with lower = -upper, :func:`saturate`."""
+    return (_saturate_between(u[0], lower[0], upper[0], shape), _saturate_between(u[1], lower[1], upper[1], shape),
+            _saturate_between(u[2], lower[2], upper[2], shape))
+
+
+@jit(forceinline=True)
+def saturated_between(u, lower, upper):
+    """1.0 on each axis where ``u`` is at or beyond its limit, u_i >= upper_i or u_i <=
+    lower_i, else 0.0 (:func:`saturated` for limits of each sign)."""
+    return (1.0 if u[0] >= upper[0] or u[0] <= lower[0] else 0.0, 1.0 if u[1] >= upper[1] or u[1] <= lower[1] else 0.0,
+            1.0 if u[2] >= upper[2] or u[2] <= lower[2] else 0.0)
 
 
 @jit(forceinline=True)

@@ -799,7 +799,8 @@ def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
     tree = batch.tree[rows]
     one_body = np.zeros(len(rows), dtype=bool)
     points, attachment = batch.ppoints[rows, 0], batch.params["attachment_point"][rows, 0]  # the field alone copied
-    papers = papers_feedback(batch.params["theta_ref"][rows, 0], batch.params["passive"][rows, 0])
+    papers = papers_feedback(*(batch.params[name][rows, 0] for name in ("theta_ref", "passive", "torque_floor",
+                                                                         "torque_limit")))  # the fields alone
     for t in np.unique(tree).tolist():
         at = tree == t
         one_body[at] = one_body_mask(batch.trees[t].codes, batch.trees[t].parents, points[at], attachment[at],

@@ -331,23 +331,42 @@ def _unlimited(compiled, passive: bool = True):
 
 
 def _commanded(compiled, y: np.ndarray) -> dict[str, np.ndarray]:
-    """|N_j|, |H_i|, |Lambda_j| [N m, N, N] (each (n, 3)) that the feedback and point laws of
+    """N_j, H_i, Lambda_j [N m, N, N] (each (n, 3)) that the feedback and point laws of
     ``compiled`` command at its full state ``y`` (before the actuators' limits; N_j without
     the joints' passive torques, which no actuator delivers)."""
     from ..variants import chain as C  # heavy: numba
 
     out = C.evaluate(_unlimited(compiled, passive=False), np.zeros(1), y[None])
-    return {key: np.abs(np.asarray(out[key], dtype=float)[0]) for key, _, _, _ in _CONTROLS}
+    return {key: np.asarray(out[key], dtype=float)[0] for key, _, _, _ in _CONTROLS}
 
 
 def _beyond(compiled, y: np.ndarray, one_body: bool, at_limit: bool) -> list[str]:
-    """Each control commanded at ``y`` beyond its limit (``at_limit``: at or beyond), in words."""
+    """Each control commanded at ``y`` beyond its limit (``at_limit``: at or beyond), in words:
+    |u_i| against its limit, and N_j against its lower limit where that is its own."""
     commanded, out = _commanded(compiled, y), []
+    word = ">=" if at_limit else ">"
     for key, field_name, unit, kind in _CONTROLS:
         limits = np.asarray(compiled.params[field_name], dtype=float)  # (n, 3)
-        for i, axis in zip(*np.nonzero((commanded[key] >= limits) if at_limit else (commanded[key] > limits))):
-            word = ">=" if at_limit else ">"
-            out.append(f"|{key}_{axis + 1}|{_part(compiled, kind, i, one_body)} = {commanded[key][i, axis]:.4g} "
+        value = commanded[key]
+        if key == "torque_n":  # N_j between its lower and upper limits
+            lower = np.asarray(compiled.params["torque_floor"], dtype=float)
+            own = lower != -limits  # lower limits of their own: signed comparisons
+            upper = (value >= limits) if at_limit else (value > limits)
+            below = (value <= lower) if at_limit else (value < lower)
+            symmetric = (np.abs(value) >= limits) if at_limit else (np.abs(value) > limits)
+            for i, axis in zip(*np.nonzero(np.where(own, upper | below, symmetric))):
+                name = f"{key}_{axis + 1}{_part(compiled, kind, i, one_body)}"
+                if not own[i, axis]:
+                    out.append(f"|{name}| = {abs(value[i, axis]):.4g} {unit} {word} its limit {limits[i, axis]:g} {unit}")
+                elif upper[i, axis]:
+                    out.append(f"{name} = {value[i, axis]:.4g} {unit} {word} its upper limit {limits[i, axis]:g} {unit}")
+                else:
+                    out.append(f"{name} = {value[i, axis]:.4g} {unit} {'<=' if at_limit else '<'} its lower limit "
+                               f"{lower[i, axis]:g} {unit}")
+            continue
+        value = np.abs(value)
+        for i, axis in zip(*np.nonzero((value >= limits) if at_limit else (value > limits))):
+            out.append(f"|{key}_{axis + 1}|{_part(compiled, kind, i, one_body)} = {value[i, axis]:.4g} "
                        f"{unit} {word} its limit {limits[i, axis]:g} {unit}")
     return out
 

@@ -134,7 +134,7 @@ def check_verifiable(config) -> None:
     """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
     unless the configuration is one body on a permanent joint to the ground, the reduced
     6-state model (:func:`verified_model`), with what the proof covers: no passive torque,
-    clipped torque
+    symmetric clipped torque
     limits, diagonal positive L_r, H unlimited, no disturbances, no bounds of X, V or E in
     ``simulation.limits``."""
     chain = verified_model(config).chain
@@ -142,6 +142,11 @@ def check_verifiable(config) -> None:
     if joint.variant != "permanent":
         raise NotVerifiable(f"{_key(config, 'joint', 'variant')}: found {joint.variant!r} (its analysis runs on more "
                             "than 6 states); --verify covers the reduced 6-state model of 'permanent'")
+    if joint.saturation is not None and joint.saturation.torque_n_lower is not None and not np.array_equal(
+            joint.saturation.torque_n_lower, -np.asarray(joint.saturation.torque_n)):
+        raise NotVerifiable(f"{_key(config, 'joint', 'saturation.torque_n_lower')}: found "
+                            f"{np.asarray(joint.saturation.torque_n_lower).tolist()}; --verify covers symmetric limits "
+                            "of N (|N_i| <= torque_n_i)")
     if joint.passive is not None:
         raise NotVerifiable(f"{_key(config, 'joint', 'passive')}: found a passive torque; --verify covers the "
                             "joint's feedback alone (its interval model has one spring and one damper)")

@@ -255,7 +255,8 @@ _BOTH = ("config key 'bodies': found both 'body' and 'bodies'; expected either b
 
 def saturation_of(section: Mapping | None) -> Saturation | None:
     """The :class:`rbstab.model.Saturation` of a validated ``controller.saturation``
-    mapping (a limit missing or null: inf on every axis; a number: on every axis)."""
+    mapping, or of a joint's (a limit missing or null: inf on every axis; a number: on every
+    axis; ``torque_n_lower`` missing: None, the symmetric limits)."""
     if section is None:
         return None
 
@@ -263,7 +264,9 @@ def saturation_of(section: Mapping | None) -> Saturation | None:
         value = section.get(key)
         return np.broadcast_to(np.array(math.inf if value is None else value, dtype=float), (3,)).copy()
 
-    return Saturation(limits("torque_n"), limits("force_h"), limits("constraint_force"), section.get("shape", "clip"))
+    lower = None if section.get("torque_n_lower") is None else limits("torque_n_lower")
+    return Saturation(limits("torque_n"), limits("force_h"), limits("constraint_force"), section.get("shape", "clip"),
+                      lower)
 
 
 def limits_of(section: Mapping | None) -> Limits | None:
@@ -592,7 +595,7 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
             **{g: _matrix(getattr(j, g)) if g in used else None for g in ("k_c", "l_c", "k_d", "l_d")},
             k_s=float(j.k_s) if "k_s" in used else None,
             boundary_layer=float(j.boundary_layer) if "k_s" in used else 0.0,
-            saturation=_saturation(j.saturation, ("torque_n", "constraint_force")),
+            saturation=_saturation(j.saturation, ("torque_n", "torque_n_lower", "constraint_force")),
             theta_ref=np.zeros(3) if j.theta_ref is None else _array(j.theta_ref),
             passive=None if j.passive is None else Passive(
                 k_r=_gain(j.passive.k_r), l_r=_gain(j.passive.l_r),

@@ -598,6 +598,15 @@ _limits.shape = (VECTOR_LENGTH,)
 _LIMITS = Annotated[Any, checked(optional(_limits))]
 
 
+def _lower_limits(value: Any) -> float | list[float]:
+    """An actuator's lower limit on every axis (a number < 0; -.inf: none) or one per axis (3)."""
+    return _per_axis(value, bounded_number(lt=0, allow_inf=True))
+
+
+_lower_limits.rule = ("limits", {"gt": None, "ge": None, "lt": 0, "le": None, "allow_inf": True, "integer": False})
+_lower_limits.shape = (VECTOR_LENGTH,)
+
+
 def _shape(value: Any) -> str:
     if not isinstance(value, str):
         raise Invalid(f"{kind_of(value)}, not a string")
@@ -975,7 +984,10 @@ class _JointSaturation(_Section):
     """What a joint's actuators can deliver: its torque N_j and its point force Lambda_j."""
 
     torque_n: _LIMITS = Field(None, description="|N_i| <= limit (N m, child frame): a number > 0 or 3 of them "
-                                                "(.inf: none)")
+                                                "(.inf: none; with torque_n_lower, the upper limits)")
+    torque_n_lower: Annotated[Any, checked(optional(_lower_limits))] = Field(
+        None, description="N_i >= lower limit (N m, child frame): a number < 0 or 3 of them (-.inf: none; optional, "
+                          "default -torque_n: an actuator stronger one way, as MJCF's forcerange)")
     constraint_force: _LIMITS = Field(None, description="|Lambda_i| <= limit (N, inertial frame): a number > 0 "
                                                         "or 3 of them (not permanent)")
     shape: Annotated[Any, checked(_shape)] = Field("clip", description=f"one of {', '.join(SATURATION_SHAPES)}")

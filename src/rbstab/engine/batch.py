@@ -305,6 +305,7 @@ def _bodies_from_table(templates: Sequence[Mapping], keys: Sequence[str], column
         for field, key in (("torque_limit", "torque_n"), ("force_limit", "force_h"),
                            ("constraint_force_limit", "constraint_force")):
             p[field][saturated] = f.get("controller", f"saturation.{key}", math.inf, shape=(3,))[saturated]
+        p["torque_floor"][saturated] = -p["torque_limit"][saturated]
     for t, rows in f.groups:
         if templates[t].get("disturbances"):
             part = p[rows]
@@ -534,6 +535,8 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
         p["passive_theta_ref"] = of("joints", "passive.theta_ref", zero, shape=(3,))
     if joint.saturation is not None or body.saturation is not None:
         p["torque_limit"] = of("joints", "saturation.torque_n", math.inf, shape=(3,)) if joint.saturation else math.inf
+        lower = of("joints", "saturation.torque_n_lower", math.nan, shape=(3,)) if joint.saturation else math.nan
+        p["torque_floor"] = np.where(np.isnan(lower), -p["torque_limit"], lower)  # unwritten: -torque_n
         p["constraint_force_limit"] = (of("joints", "saturation.constraint_force", math.inf, shape=(3,))
                                        if joint.saturation else math.inf)
         p["force_limit"] = of("bodies", "saturation.force_h", math.inf, shape=(3,)) if body.saturation else math.inf

@@ -43,7 +43,8 @@ from ..model import (
     force_h_command,
     gyroscopic,
     parameters,
-    torque_n,
+    saturate_between,
+    saturated_between,
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
@@ -241,9 +242,11 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
         strain = sub(theta_j, p.theta_ref)  # the spring's: Theta_j - Theta_ref (eq 23 about the reference posture)
-        n_j = torque_n(b_j, strain, omega_j, p)
-        if p.saturation > 0.0:
-            power += dot(omega_j, sub(n_j, torque_n_command(b_j, strain, omega_j, p)))
+        n_j = torque_n_command(b_j, strain, omega_j, p)
+        if p.saturation > 0.0:  # through the actuator's limits, [torque_floor, torque_limit] per axis
+            commanded = n_j
+            n_j = saturate_between(commanded, p.torque_floor, p.torque_limit, p.saturation)
+            power += dot(omega_j, sub(n_j, commanded))
         rotational += 0.5 * quadratic_form(strain, p.k_r)
         dissipation += quadratic_form(omega_j, p.l_r)
         if p.passive > 0.0:  # the passive torque, never limited: eq 23's form with its own gains and reference
@@ -540,15 +543,19 @@ def _saturation_flags(y, params, codes, joints, flags):
     """The actuators' saturation flags of one evaluated state into ``flags`` (n, 3, 3): per
     joint j, the axes of N_j, of H of body j (its child) and of Lambda_j commanded at or
     beyond their limits, 1.0 or 0.0 (:func:`rbstab.variants.kernels.saturation_effects`
-    of joint j's Theta_j - Theta_ref, Omega_j, B(Theta_j), E_j, F_j, D_j and body j's X, V,
-    as one body's; ``joints`` (n, 7, 3) as :func:`chain_evaluate` filled it)."""
+    of joint j's E_j, F_j, D_j and body j's X, V, as one body's; N_j's from its command on
+    Theta_j - Theta_ref, Omega_j, B(Theta_j) between its lower and upper limits; ``joints`` (n, 7, 3) as :func:`chain_evaluate` filled it)."""
     for j in range(codes.shape[0]):
         theta_j = vector(joints[j, _THETA_J], 0)
         _, b_j = rotation_and_rate_of(theta_j)
-        _, n_flags, h_flags, lam_flags = saturation_effects(  # N_j commanded on Theta_j - Theta_ref
-            codes[j], sub(theta_j, params[j].theta_ref), vector(joints[j, _OMEGA_J], 0), vector(y, 12 * j + 6),
-            vector(y, 12 * j + 9), b_j,
+        strain, omega_j = sub(theta_j, params[j].theta_ref), vector(joints[j, _OMEGA_J], 0)
+        _, _, h_flags, lam_flags = saturation_effects(
+            codes[j], strain, omega_j, vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
             vector(joints[j, _E], 0), vector(joints[j, _F], 0), vector(joints[j, _D], 0), params[j])
+        n_flags = ZERO
+        if params[j].saturation > 0.0:  # N_j commanded on Theta_j - Theta_ref, between its two limits
+            n_flags = saturated_between(torque_n_command(b_j, strain, omega_j, params[j]), params[j].torque_floor,
+                                        params[j].torque_limit)
         _put(flags[j, 0], 0, n_flags)
         _put(flags[j, 1], 0, h_flags)
         _put(flags[j, 2], 0, lam_flags)
@@ -654,11 +661,11 @@ class CompiledChain:
         return self.codes == PERMANENT
 
 
-def papers_feedback(theta_ref: np.ndarray, passive: np.ndarray) -> np.ndarray:
+def papers_feedback(theta_ref: np.ndarray, passive: np.ndarray, floor: np.ndarray, limit: np.ndarray) -> np.ndarray:
     """Whether each joint has the paper's feedback alone, eq 23: its spring relaxed at Theta
-    = 0 and no passive torque, from its records' ``theta_ref`` (..., 3) and ``passive`` (...)
-    fields; bool (...)."""
-    return ~np.any(theta_ref, axis=-1) & (passive == 0.0)
+    = 0, no passive torque and symmetric limits of N, from its records' ``theta_ref`` (...,
+    3), ``passive`` (...), ``torque_floor`` and ``torque_limit`` (..., 3) fields; bool (...)."""
+    return ~np.any(theta_ref, axis=-1) & (passive == 0.0) & np.all(floor == -limit, axis=-1)
 
 
 def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray,
@@ -684,7 +691,8 @@ def is_one_body(params: np.ndarray, codes: np.ndarray, parents: np.ndarray, ppoi
     first = params[..., 0]
     return bool(np.all(one_body_mask(codes, parents, np.reshape(np.asarray(ppoints)[..., 0, :], (-1, 3)),
                                      np.reshape(first["attachment_point"], (-1, 3)),
-                                     np.reshape(papers_feedback(first["theta_ref"], first["passive"]), (-1,)))))
+                                     np.reshape(papers_feedback(first["theta_ref"], first["passive"],
+                                                                first["torque_floor"], first["torque_limit"]), (-1,)))))
 
 
 def records_of(trees: Sequence[CompiledChain]) -> np.ndarray:

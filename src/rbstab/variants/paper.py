@@ -28,12 +28,15 @@ __all__ = ["paper_form", "has_paper_form", "paper_initial_state", "body_model"]
 
 def has_paper_form(chain: Chain) -> bool:
     """Whether ``chain`` is one body held to the ground at its own point (R_p = R_c) by the
-    paper's feedback (its spring relaxed at Theta = 0, no passive torque)."""
+    paper's feedback (its spring relaxed at Theta = 0, no passive torque, symmetric torque
+    limits)."""
     if chain.size != 1:
         return False
     joint = chain.joints[0]
+    lower = None if joint.saturation is None else joint.saturation.torque_n_lower
     return (joint.parent == GROUND and np.array_equal(joint.parent_point, joint.child_point)
-            and not np.any(joint.theta_ref) and joint.passive is None)
+            and not np.any(joint.theta_ref) and joint.passive is None
+            and (lower is None or np.array_equal(lower, -np.asarray(joint.saturation.torque_n))))
 
 
 def body_model(chain: Chain, i: int) -> tuple[RigidBody, Gains]:
@@ -46,15 +49,16 @@ def body_model(chain: Chain, i: int) -> tuple[RigidBody, Gains]:
     joint is :func:`rbstab.model.parameters` of these (:mod:`rbstab.variants.chain`)."""
     body, joint = chain.bodies[i], chain.joints[i]
     limits = [np.full(3, np.inf)] * 3
-    shape = "clip"
+    shape, lower = "clip", None
     if joint.saturation is not None:
         limits[0], limits[2], shape = joint.saturation.torque_n, joint.saturation.constraint_force, joint.saturation.shape
+        lower = joint.saturation.torque_n_lower
     if body.saturation is not None:
         limits[1], shape = body.saturation.force_h, body.saturation.shape
     limited = joint.saturation is not None or body.saturation is not None
     gains = Gains(k_t=body.k_t, l_t=body.l_t, k_r=joint.k_r, l_r=joint.l_r, k_c=joint.k_c, l_c=joint.l_c,
                   k_d=joint.k_d, l_d=joint.l_d, k_s=joint.k_s, boundary_layer=joint.boundary_layer,
-                  saturation=Saturation(*limits, shape) if limited else None, disturbances=body.disturbances)
+                  saturation=Saturation(*limits, shape, lower) if limited else None, disturbances=body.disturbances)
     rigid = RigidBody(mass=body.mass, inertia=np.asarray(body.inertia, dtype=float),
                       attachment_point=np.asarray(joint.child_point, dtype=float),
                       gravity=np.asarray(chain.gravity, dtype=float))
