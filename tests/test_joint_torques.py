@@ -247,3 +247,19 @@ def test_asymmetric_torque_limits_take_a_one_body_tree_off_the_papers_form_and_a
     joint["saturation"]["torque_n_lower"] = [-1.0, 0.0, -2.0]
     with pytest.raises(ConfigError, match=r"joints\.0\.saturation\.torque_n_lower|joints\.joint0\.saturation"):
         config_from_mapping(data)
+
+
+def test_an_analysis_names_the_limit_each_actuated_torque_meets_at_rest():
+    """At the rest state the feedback's command (the passive torque left out: no actuator
+    delivers it) is compared with each limit: an axis past its upper limit and one below its
+    own lower limit are named with their signs."""
+    from rbstab.analysis import analyze
+
+    data = _rods(1, 20.0, 2.0, [[0.8, -0.3, 0.2]], [[0, 0, 0]])
+    data["joints"][0].update(saturation={"torque_n": [3.0, 30.0, 3.0], "torque_n_lower": [-30.0, -2.0, -30.0]},
+                             passive={"k_r": [5.0, 5.0, 5.0], "l_r": [0.5, 0.5, 0.5], "theta_ref": [-0.2, 0.0, 0.0]})
+    found = analyze(config_from_mapping(data), certificate=False, simulate=False)
+    note = next(n for n in found.notes if "saturate" in n)
+    assert "torque_n_1 of joint 'joint0' = " in note and ">= its upper limit 3 N m" in note
+    assert "torque_n_2 of joint 'joint0' = -" in note and "<= its lower limit -2 N m" in note
+    assert "torque_n_3" not in note

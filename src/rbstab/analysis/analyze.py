@@ -355,9 +355,11 @@ def _beyond(compiled, y: np.ndarray, one_body: bool, at_limit: bool) -> list[str
             below = (value <= lower) if at_limit else (value < lower)
             symmetric = (np.abs(value) >= limits) if at_limit else (np.abs(value) > limits)
             for i, axis in zip(*np.nonzero(np.where(own, upper | below, symmetric))):
-                name = f"{key}_{axis + 1}{_part(compiled, kind, i, one_body)}"
+                part = _part(compiled, kind, i, one_body)
+                name = f"{key}_{axis + 1}{part}"
                 if not own[i, axis]:
-                    out.append(f"|{name}| = {abs(value[i, axis]):.4g} {unit} {word} its limit {limits[i, axis]:g} {unit}")
+                    out.append(f"|{key}_{axis + 1}|{part} = {abs(value[i, axis]):.4g} {unit} {word} its limit "
+                               f"{limits[i, axis]:g} {unit}")
                 elif upper[i, axis]:
                     out.append(f"{name} = {value[i, axis]:.4g} {unit} {word} its upper limit {limits[i, axis]:g} {unit}")
                 else:
