@@ -281,3 +281,60 @@ def test_a_reference_posture_moves_the_proven_set_with_it():
     assert 0.97 * face <= result.level <= face  # the search resolves the face to its box widths
     assert "domain boundary |theta_2|" in result.reason
     assert potential(config, np.array(reference)) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_passive_spring_adds_to_the_proven_potential():
+    """Without gravity and limits the feedback's spring about Theta_ref and a passive spring
+    about Theta_p sum to one spring K = K_r + K_p about c = K^-1 (K_r Theta_ref + K_p Theta_p)
+    plus a constant that h removes: the proven level is the least of that sum on the nearest
+    gimbal-lock face, 1/2 k_2 (pi/2 - gimbal_margin - c_2)^2 (diagonal springs)."""
+    from conftest import tree_spelling
+
+    from rbstab.config import config_from_mapping
+
+    tree = dict(tree_spelling(load_config(PENDULUM, ["controller.saturation=null"])).resolved)
+    reference, passive = [0.2, 0.3, -0.1], {"k_r": [100.0, 300.0, 20.0], "l_r": [1.0, 1.0, 1.0],
+                                            "theta_ref": [0.0, -0.2, 0.1]}
+    config = config_from_mapping({**tree, "gravity": [0.0, 0.0, 0.0],
+                                  "joints": [{**tree["joints"][0], "theta_ref": reference, "passive": passive}]})
+    k_r, k_p = np.diag(config.chain.joints[0].k_r), np.array(passive["k_r"])
+    k = k_r + k_p
+    centre = (k_r * reference + k_p * np.array(passive["theta_ref"])) / k
+    result = verify_sublevel(config)
+    face = 0.5 * k[1] * (np.pi / 2 - config.simulation.gimbal_margin - centre[1]) ** 2
+    assert 0.97 * face <= result.level <= face
+    assert potential(config, centre) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_verified_level_with_a_passive_spring_and_saturation_is_never_contradicted():
+    """The saturated pendulum with a passive spring and damper and a reference posture (so
+    the tree's kernels, not the paper's, run it): inside its proven level dv/dt <= 0 at
+    every sampled state, and runs from the outermost ones recover."""
+    from conftest import tree_spelling
+
+    from rbstab.config import config_from_mapping
+    from rbstab.variants import chain as C
+
+    tree = dict(tree_spelling(load_config(PENDULUM)).resolved)
+    passive = {"k_r": [20.0, 20.0, 5.0], "l_r": [2.0, 2.0, 0.5], "theta_ref": [0.02, 0.0, 0.0]}
+    config = config_from_mapping({**tree, "joints": [{**tree["joints"][0], "theta_ref": [0.0, 0.02, 0.0],
+                                                      "passive": passive}]})
+    result = verify_sublevel(config)
+    assert result.level > 0
+    compiled = C.compile_chain(config.chain)
+    assert not compiled.one_body
+    rng = np.random.default_rng(4)
+    rest = C.rest_state(compiled)[0][:3]
+    j_p = np.diag(compiled.params[0]["pivot_inertia"])
+    k = np.diag(compiled.params[0]["k_r"] + compiled.params[0]["passive_k_r"])
+    half = np.sqrt(2.0 * result.level / np.concatenate([k, j_p]))  # about the level set on each axis
+    z = np.concatenate([rest, np.zeros(3)]) + rng.uniform(-1.0, 1.0, size=(20_000, 6)) * half
+    y = C.full_state(compiled, z)
+    terms = np.array([C.lyapunov(compiled, row) for row in y])
+    inside = terms[:, 0] <= result.level
+    assert inside.sum() > 500 and (~inside).sum() > 500  # the box reaches past the level set
+    rate = terms[inside, 1]
+    assert np.all(rate <= 1e-9 * (1.0 + np.abs(rate))), f"dv/dt > 0 inside the verified set: {rate.max():g} W"
+    outermost = y[inside][np.argsort(terms[inside, 0])[::-1][:100]]
+    ok, v0, v1 = runs_from_states(config, outermost)
+    assert np.all(ok == 1) and np.all(v1 < 0.5 * v0), "a run from inside the verified set did not recover"

@@ -7,16 +7,17 @@ The argument (docs/analysis.md, "verified"). For the pinned body (eqs 21, 31, 32
 point C at R_c in its frame, held at the ground point R_p), v = 0.5 Omega' J_p Omega + P(Theta)
 with the potential
 
-    P(Theta) = 0.5 Theta' K_r Theta + 0.5 X' K_t X - X' G + h,   X = R_p - A(Theta) R_c
+    P(Theta) = 0.5 dTheta' K_r dTheta + 0.5 dTheta_p' K_p dTheta_p + 0.5 X' K_t X - X' G + h,
+    X = R_p - A(Theta) R_c,  dTheta = Theta - Theta_ref,  dTheta_p = Theta - Theta_p
 
-(the paper's one body: R_p = R_c = R),
+(the paper's one body: R_p = R_c = R, Theta_ref = 0, no passive spring K_p, damper L_p),
 
-and along the flow, with N the torque the actuators deliver and tau = -B' K_r Theta the
+and along the flow, with N the torque the actuators deliver and tau = -B' K_r dTheta the
 static part of the commanded torque (eq 23), and L_r diagonal,
 
-    dv/dt = sum_i Omega_i (sat_i(tau_i - l_i Omega_i) - tau_i) - V' L_t V      (eq 37)
+    dv/dt = sum_i Omega_i (sat_i(tau_i - l_i Omega_i) - tau_i) - Omega' L_p Omega - V' L_t V   (eq 37)
 
-(H unlimited). Where |tau_i| < limit_i, sat_i(tau_i) = tau_i, and since a clip is
+(H unlimited; the passive torque is never limited, so it adds its damping alone). Where |tau_i| < limit_i, sat_i(tau_i) = tau_i, and since a clip is
 monotone each term is -l_i Omega_i^2 when axis i does not saturate and negative for
 Omega_i != 0 when it does: the saturation deficit power is never positive, and dv/dt < 0
 wherever Omega != 0. The proof at a level c therefore needs, on every Theta of a box
@@ -133,8 +134,7 @@ def _key(config, owner: str, name: str) -> str:
 def check_verifiable(config) -> None:
     """Raise :class:`NotVerifiable` (one line: the key, the value found, what is covered)
     unless the configuration is one body on a permanent joint to the ground, the reduced
-    6-state model (:func:`verified_model`), with what the proof covers: no passive torque,
-    symmetric clipped torque
+    6-state model (:func:`verified_model`), with what the proof covers: symmetric clipped torque
     limits, diagonal positive L_r, H unlimited, no disturbances, no bounds of X, V or E in
     ``simulation.limits``."""
     chain = verified_model(config).chain
@@ -147,9 +147,6 @@ def check_verifiable(config) -> None:
         raise NotVerifiable(f"{_key(config, 'joint', 'saturation.torque_n_lower')}: found "
                             f"{np.asarray(joint.saturation.torque_n_lower).tolist()}; --verify covers symmetric limits "
                             "of N (|N_i| <= torque_n_i)")
-    if joint.passive is not None:
-        raise NotVerifiable(f"{_key(config, 'joint', 'passive')}: found a passive torque; --verify covers the "
-                            "joint's feedback alone (its interval model has one spring and one damper)")
     l_r = np.asarray(joint.l_r, dtype=float)
     if np.any(l_r - np.diag(np.diag(l_r))):
         raise NotVerifiable(f"{_key(config, 'joint', 'l_r')}: found a non-diagonal L_r {l_r.tolist()}; --verify needs "
@@ -233,19 +230,26 @@ def _dot(a, b):
 
 
 class _Model:
-    """P, grad P, the Hessian of P and tau = -B' K_r (Theta - Theta_ref) over a box of Theta,
-    in arb, of the body of record ``p`` (:data:`rbstab.model.PARAMETERS`: C at R_c =
-    ``attachment_point`` in its frame, the joint's reference posture ``theta_ref``) on its
-    joint at the ground point ``ground`` R_p (3,) [m], X = R_p - A R_c, with h = ``offset`` [J]."""
+    """P, grad P, the Hessian of P and tau = -B' K_r (Theta - Theta_ref) (the feedback's
+    spring alone: what the actuator delivers) over a box of Theta, in arb, of the body of
+    record ``p`` (:data:`rbstab.model.PARAMETERS`: C at R_c = ``attachment_point`` in its
+    frame; the joint's springs, its feedback's about ``theta_ref`` and its passive one about
+    ``passive_theta_ref``) on its joint at the ground point ``ground`` R_p (3,) [m], X = R_p
+    - A R_c, with h = ``offset`` [J]. ``k_r`` and ``reference`` are the springs' sum: K =
+    K_r + K_p and the Theta where it is relaxed, K^-1 (K_r Theta_ref + K_p Theta_p) (their
+    sum is 1/2 (Theta - that)' K (Theta - that) plus a constant >= 0)."""
 
     def __init__(self, p, ground, offset: float, arb) -> None:
         self.arb = arb
         self.zero, self.one = arb(0), arb(1)
-        self.k_r = np.asarray(p["k_r"], dtype=float)
-        self.k_t = np.asarray(p["k_t"], dtype=float)
-        self.reference = np.asarray(p["theta_ref"], dtype=float)
-        self.reference_arb = [arb(float(x)) for x in self.reference]
+        self.springs = [self._spring_of(p["k_r"], p["theta_ref"], arb)]  # the feedback's first
+        if p["passive"] > 0.0:
+            self.springs.append(self._spring_of(p["passive_k_r"], p["passive_theta_ref"], arb))
+        self.k_r = sum(k for k, _, _, _, _ in self.springs)
+        moment = sum(k @ r for k, r, _, _, _ in self.springs)
+        self.reference = np.linalg.lstsq(self.k_r, moment, rcond=None)[0] if len(self.springs) > 1 else self.springs[0][1]
         self.diag_kr = not np.any(self.k_r - np.diag(np.diag(self.k_r)))
+        self.k_t = np.asarray(p["k_t"], dtype=float)
         self.R = [arb(float(x)) for x in p["attachment_point"]]
         self.ground = [arb(float(x)) for x in ground]
         self.G = [arb(float(x)) for x in p["weight"]]
@@ -253,7 +257,6 @@ class _Model:
         self.reach = float(np.linalg.norm(p["attachment_point"]) + np.linalg.norm(ground))  # |X| at most
         self.weight, self.offset = float(np.linalg.norm(p["weight"])), float(offset)
         self.pivot_inertia = np.asarray(p["pivot_inertia"], dtype=float)
-        self.K_r = [[arb(float(x)) for x in row] for row in self.k_r]
         self.K_t = [[arb(float(x)) for x in row] for row in self.k_t]
         self.has_kt = bool(np.any(self.k_t))
         self.limit = np.asarray(p["torque_limit"], dtype=float) if p["saturation"] > 0 else np.full(3, np.inf)
@@ -266,27 +269,37 @@ class _Model:
         """Rx Ry Rz vec with the given factors."""
         return _mv(rots[0], _mv(rots[1], _mv(rots[2], vec)))
 
-    def _strain(self, theta):
-        """Theta - Theta_ref (arb balls)."""
-        return [theta[i] - self.reference_arb[i] for i in range(3)]
+    @staticmethod
+    def _spring_of(k, reference, arb):
+        """(K (3, 3), Theta_ref (3,), K in arb, Theta_ref in arb, whether K is diagonal) of a spring."""
+        k, reference = np.array(k, dtype=float), np.array(reference, dtype=float)
+        return (k, reference, [[arb(float(x)) for x in row] for row in k], [arb(float(x)) for x in reference],
+                not np.any(k - np.diag(np.diag(k))))
 
     def _spring(self, theta, lo, hi):
-        """0.5 dTheta' K_r dTheta, dTheta = Theta - Theta_ref, tight for a diagonal K_r
-        (squares of intervals)."""
+        """The springs' 0.5 dTheta' K dTheta, dTheta = Theta - their reference, summed; tight
+        for a diagonal K (squares of intervals)."""
         arb = self.arb
-        if self.diag_kr:
-            total = self.zero
+        total = self.zero
+        for k, reference, k_arb, reference_arb, diagonal in self.springs:
+            if not diagonal:
+                strain = [theta[i] - reference_arb[i] for i in range(3)]
+                total = total + 0.5 * _dot(strain, _mv(k_arb, strain))
+                continue
             for i in range(3):
-                a, b = lo[i] - self.reference[i], hi[i] - self.reference[i]  # their signs exact, as the difference's
+                a, b = lo[i] - reference[i], hi[i] - reference[i]  # their signs exact, as the difference's
                 sq_hi = max(a * a, b * b)
                 sq_lo = 0.0 if a <= 0.0 <= b else min(a * a, b * b)
                 sq = arb(sq_lo).union(arb(sq_hi)) if sq_lo != sq_hi else arb(sq_lo)
                 # a, b and their squares were rounded (3 roundings, relative 3.3e-16): widen by that
                 sq = sq + arb(0, 4e-16 * sq_hi + 1e-300)
-                total = total + 0.5 * self.K_r[i][i] * sq
-            return total
-        strain = self._strain(theta)
-        return 0.5 * _dot(strain, _mv(self.K_r, strain))
+                total = total + 0.5 * k_arb[i][i] * sq
+        return total
+
+    def _stiffness(self, theta):
+        """Each spring's K dTheta (arb balls), the feedback's first."""
+        return [_mv(k_arb, [theta[i] - reference_arb[i] for i in range(3)]) for _, _, k_arb, reference_arb, _ in
+                self.springs]
 
     def evaluate(self, lo, hi, hessian: bool = False):
         """(P, grad P, tau) over the box [lo, hi] (arb balls); with ``hessian`` also the
@@ -307,8 +320,9 @@ class _Model:
         for a in range(3):
             f = [drots[b] if b == a else rots[b] for b in range(3)]
             dw.append(self._w(f, self.R))
-        kth = _mv(self.K_r, self._strain(theta))
-        grad = [kth[a] + _dot(force, dw[a]) for a in range(3)]
+        springs = self._stiffness(theta)
+        kth = springs[0]  # the feedback's: the actuator's torque at rest
+        grad = [sum((s[a] for s in springs[1:]), kth[a]) + _dot(force, dw[a]) for a in range(3)]
         # tau = -B' K_r (Theta - Theta_ref), B of eq 1 (physics notes)
         c2, s2, c3, s3 = cos[1], sin[1], cos[2], sin[2]
         tau = [-(c3 / c2 * kth[0] + s3 * kth[1] - s2 * c3 / c2 * kth[2]),
@@ -327,7 +341,8 @@ class _Model:
                     f[a], f[b] = drots[a], drots[b]
                 dd = self._w(f, self.R)
                 kdw = _mv(self.K_t, dw[b]) if self.has_kt else [zero, zero, zero]
-                hess[a][b] = hess[b][a] = self.K_r[a][b] + _dot(dw[a], kdw) + _dot(force, dd)
+                spring = sum((k_arb[a][b] for _, _, k_arb, _, _ in self.springs[1:]), self.springs[0][2][a][b])
+                hess[a][b] = hess[b][a] = spring + _dot(dw[a], kdw) + _dot(force, dd)
         return p_val, grad, tau, hess
 
     def point(self, theta: np.ndarray) -> float:
