@@ -342,34 +342,24 @@ def _commanded(compiled, y: np.ndarray) -> dict[str, np.ndarray]:
 
 def _beyond(compiled, y: np.ndarray, one_body: bool, at_limit: bool) -> list[str]:
     """Each control commanded at ``y`` beyond its limit (``at_limit``: at or beyond), in words:
-    |u_i| against its limit, and N_j against its lower limit where that is its own."""
+    |u_i| against a symmetric limit; u_i against its upper or its lower limit where the
+    lower is its own (N_j's ``torque_floor``)."""
     commanded, out = _commanded(compiled, y), []
-    word = ">=" if at_limit else ">"
+    above, below = (">=", "<=") if at_limit else (">", "<")
     for key, field_name, unit, kind in _CONTROLS:
-        limits = np.asarray(compiled.params[field_name], dtype=float)  # (n, 3)
+        upper = np.asarray(compiled.params[field_name], dtype=float)  # (n, 3)
+        lower = np.asarray(compiled.params["torque_floor"], dtype=float) if key == "torque_n" else -upper
         value = commanded[key]
-        if key == "torque_n":  # N_j between its lower and upper limits
-            lower = np.asarray(compiled.params["torque_floor"], dtype=float)
-            own = lower != -limits  # lower limits of their own: signed comparisons
-            upper = (value >= limits) if at_limit else (value > limits)
-            below = (value <= lower) if at_limit else (value < lower)
-            symmetric = (np.abs(value) >= limits) if at_limit else (np.abs(value) > limits)
-            for i, axis in zip(*np.nonzero(np.where(own, upper | below, symmetric))):
-                part = _part(compiled, kind, i, one_body)
-                name = f"{key}_{axis + 1}{part}"
-                if not own[i, axis]:
-                    out.append(f"|{key}_{axis + 1}|{part} = {abs(value[i, axis]):.4g} {unit} {word} its limit "
-                               f"{limits[i, axis]:g} {unit}")
-                elif upper[i, axis]:
-                    out.append(f"{name} = {value[i, axis]:.4g} {unit} {word} its upper limit {limits[i, axis]:g} {unit}")
-                else:
-                    out.append(f"{name} = {value[i, axis]:.4g} {unit} {'<=' if at_limit else '<'} its lower limit "
-                               f"{lower[i, axis]:g} {unit}")
-            continue
-        value = np.abs(value)
-        for i, axis in zip(*np.nonzero((value >= limits) if at_limit else (value > limits))):
-            out.append(f"|{key}_{axis + 1}|{_part(compiled, kind, i, one_body)} = {value[i, axis]:.4g} "
-                       f"{unit} {word} its limit {limits[i, axis]:g} {unit}")
+        high = (value >= upper) if at_limit else (value > upper)
+        low = (value <= lower) if at_limit else (value < lower)
+        for i, axis in zip(*np.nonzero(high | low)):
+            part, u = _part(compiled, kind, i, one_body), value[i, axis]
+            if lower[i, axis] == -upper[i, axis]:
+                out.append(f"|{key}_{axis + 1}|{part} = {abs(u):.4g} {unit} {above} its limit {upper[i, axis]:g} {unit}")
+            elif high[i, axis]:
+                out.append(f"{key}_{axis + 1}{part} = {u:.4g} {unit} {above} its upper limit {upper[i, axis]:g} {unit}")
+            else:
+                out.append(f"{key}_{axis + 1}{part} = {u:.4g} {unit} {below} its lower limit {lower[i, axis]:g} {unit}")
     return out
 
 
