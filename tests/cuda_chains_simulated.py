@@ -49,6 +49,22 @@ def pulsed_chain(theta: float, impulses: bool = False):
     })
 
 
+def hinged_chain(theta: float):
+    """:func:`pulsed_chain` with the elbow and the wrist hinges about oblique axes (the
+    elbow's feedback clipped, stronger one way; the wrist's with a passive torque)."""
+    from rbstab.config.loader import config_from_mapping
+
+    data = pulsed_chain(theta).resolved
+    data["name"] = "hinged3"
+    for joint, axis in zip(data["joints"][1:], ([1.0, 0.2, 0.0], [0.3, 1.0, 0.4])):
+        joint.update(variant="hinge", axis=axis, k_r=20.0, l_r=1.0, theta_ref=0.05)
+    data["joints"][1]["saturation"] = {"torque_n": 0.5, "torque_n_lower": -0.2}
+    data["joints"][2]["passive"] = {"k_r": 3.0, "l_r": 0.1, "theta_ref": 0.1}
+    data["initial_state"] = {"upper": data["initial_state"]["upper"], "middle": {"q": -0.2, "u": -0.5},
+                             "lower": {"q": 0.1}}
+    return config_from_mapping(data)
+
+
 def cases(root: str):
     """name -> (configs of chains of one structure: its runs)."""
     from rbstab.config.loader import load_config
@@ -74,6 +90,7 @@ def cases(root: str):
             ["initial_state.legs.theta=[0, 1.2, 0]", "initial_state.legs.omega=[0, 6, 0]"])],
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
+        "hinged3": [hinged_chain(theta) for theta in (0.2, 0.4)],
     }
 
 

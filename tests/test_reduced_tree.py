@@ -303,20 +303,22 @@ def test_the_joint_kind_table_gives_each_law_its_reduced_coordinates():
     """Each joint law's kind (docs/physics.md, "Joint kinds"): ``permanent`` is the ball,
     whose child is carried by eq 21's reduced states (Theta_j, Omega_j: the one-body
     ``permanent`` layout) with its point held; the four point laws pull a free body (its 12
-    body states, the one-body layouts less D); a kind has n_q + n_v states, and a row whose
-    sizes disagree is refused. The sizes a tree's layout reads from the table are checked
-    against the reference in test_the_compiled_reduced_rate_is_the_references."""
-    from rbstab.layout import JOINT_KIND_OF, JOINT_KINDS, REDUCED, VARIANT_LAYOUTS, JointKind, point_fixed
+    body states, the one-body layouts less D); the hinge holds its point and has one angle
+    and its rate. The sizes a tree's layout reads from the table are checked against the
+    reference in test_the_compiled_reduced_rate_is_the_references."""
+    from rbstab.layout import JOINT_CODES, JOINT_KIND_OF, JOINT_KINDS, REDUCED_STATES, VARIANT_LAYOUTS, VELOCITIES, \
+        point_fixed
 
-    assert set(JOINT_KIND_OF) == set(VARIANT_LAYOUTS) and set(JOINT_KIND_OF.values()) <= set(JOINT_KINDS)
+    assert set(JOINT_KIND_OF) == set(VARIANT_LAYOUTS) | {"hinge"} and set(JOINT_KIND_OF.values()) == set(JOINT_KINDS)
     for law, layout in VARIANT_LAYOUTS.items():
         kind = JOINT_KINDS[JOINT_KIND_OF[law]]
-        assert kind.states.size == kind.n_q + kind.n_v
         assert kind.point_fixed == point_fixed(law) == (law == "permanent")
-        assert kind.states.blocks == tuple(b for b in layout.blocks if b != "controller_state")
-    assert not point_fixed("hinge") and not point_fixed(None)
-    with pytest.raises(ValueError, match="6 states for n_q \\+ n_v = 5"):
-        JointKind("bad", REDUCED, 3, 2, True, "", "")
+        assert kind.size == layout.size - (3 if "controller_state" in layout.blocks else 0)
+        assert JOINT_CODES[law] == list(VARIANT_LAYOUTS).index(law)
+    hinge = JOINT_KINDS["hinge"]
+    assert (hinge.n_q, hinge.n_v, hinge.point_fixed, point_fixed("hinge")) == (1, 1, True, True)
+    assert (REDUCED_STATES[JOINT_CODES["hinge"]], VELOCITIES[JOINT_CODES["hinge"]]) == (2, 1)
+    assert not point_fixed("ball") and not point_fixed(None)
 
 
 # -- the compiled reduced rate (rbstab.variants.tree) against the reference ------------------------------

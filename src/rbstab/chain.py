@@ -20,13 +20,14 @@ config is the one-body chain :func:`single` builds: its joint to the ground is t
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .model import Disturbance, Saturation
 
-__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Joint", "Chain", "single"]
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Joint", "Chain", "single", "hinge", "hinge_vectors"]
 
 #: The parent index of a joint to the ground.
 GROUND = -1
@@ -104,7 +105,8 @@ class Joint:
         R_c [m]: the point C, child body frame, from its centre of mass.
     variant : str
         ``free``, ``permanent``, ``sliding``, ``visco_elastic`` or ``embedded``: the law of
-        the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p).
+        the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p); or ``hinge``:
+        the point held and the child turned about ``axis`` only (:func:`hinge`).
     k_r, l_r : ndarray, shape (3, 3)
         N_j = -B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j [N m] (eq 23 on the relative
         orientation Theta_j and the relative angular velocity Omega_j, child frame).
@@ -127,6 +129,8 @@ class Joint:
     passive : Passive or None
         The joint's passive torque, added to the feedback N_j (which ``saturation`` limits)
         and never limited; None: none, the paper's joint.
+    axis : ndarray, shape (3,)
+        A hinge's unit axis a (the parent's and the child's frames); zero for any other joint.
     """
 
     name: str
@@ -146,6 +150,55 @@ class Joint:
     saturation: Saturation | None = None
     theta_ref: np.ndarray = field(default_factory=lambda: np.zeros(3))
     passive: Passive | None = None
+    axis: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def hinge_vectors(axis, k=0.0, l=0.0, q_ref=0.0, lower=-math.inf, upper=math.inf):
+    """A hinge's feedback written as a ball's (docs/physics.md, "Joint kinds"): its child
+    turned by the angle q [rad] about the unit axis a = ``axis`` / |axis| (the parent's and
+    the child's frames), its feedback n = -k (q - ``q_ref``) - l dq/dt [N m] about a (``k``
+    [N m/rad], ``l`` [N m s/rad]) delivered between ``lower`` < 0 < ``upper`` [N m] (inf:
+    none). As the joint's 3-vectors in its child's frame, Theta_j = q a (the rotation
+    vector), Omega_j = a dq/dt and N_j = n a, its gains are K_r = k a a', L_r = l a a',
+    Theta_ref = q_ref a and its per-axis limits a_i [lower, upper] (ordered by a_i's sign,
+    none where a_i = 0): eq 23 with B = I then gives n, its term 1/2 k (q - q_ref)^2 of v and
+    its saturation, axis by axis. Each argument may have leading dimensions (a column of
+    runs: axis (..., 3), the others (...)).
+
+    Returns (a (..., 3), K_r (..., 3, 3), L_r (..., 3, 3), Theta_ref (..., 3), the lower
+    and upper per-axis limits (..., 3)). ValueError for an axis of zero length."""
+    axis = np.asarray(axis, dtype=float)
+    norm = np.linalg.norm(axis, axis=-1, keepdims=True)
+    if not np.all(norm > 0.0):
+        raise ValueError("a hinge's axis of zero length")
+    a = axis / norm
+    k, l, q_ref, lower, upper = (np.asarray(x, dtype=float)[..., None] for x in (k, l, q_ref, lower, upper))
+    outer = a[..., :, None] * a[..., None, :]
+    with np.errstate(invalid="ignore"):  # 0 x inf: an axis a has no part of has no limit
+        low = np.where(a > 0, a * lower, np.where(a < 0, a * upper, -math.inf))
+        high = np.where(a > 0, a * upper, np.where(a < 0, a * lower, math.inf))
+    return a, k[..., None] * outer, l[..., None] * outer, q_ref * a, low, high
+
+
+def hinge(name: str, parent: int, child: int, parent_point, child_point, axis, k: float = 0.0, l: float = 0.0,
+          q_ref: float = 0.0, limits: tuple[float, float] | None = None, shape: str = "clip",
+          passive: tuple[float, float, float] | None = None) -> Joint:
+    """A hinge joint (docs/physics.md, "Joint kinds"): the child's point C held to the
+    parent's point, the child turned about ``axis`` with the feedback of gains ``k``, ``l``
+    and reference angle ``q_ref`` delivered between ``limits`` (lower < 0 < upper [N m];
+    None: unlimited, ``shape`` their :data:`rbstab.model.SATURATION_SHAPES` key) and a
+    passive torque of that form, ``passive`` (k, l, q_ref), never limited; written as a
+    ball's by :func:`hinge_vectors`. ValueError for an axis of zero length."""
+    lower, upper = (-math.inf, math.inf) if limits is None else limits
+    a, k_r, l_r, theta_ref, low, high = hinge_vectors(axis, k, l, q_ref, lower, upper)
+    infinite = np.full(3, math.inf)
+    saturation = None if limits is None else Saturation(high, infinite, infinite, shape, low)
+    if passive is not None:
+        _, p_k, p_l, p_ref, _, _ = hinge_vectors(axis, *passive)
+        passive = Passive(p_k, p_l, p_ref)
+    return Joint(name=name, parent=parent, child=child, parent_point=np.asarray(parent_point, dtype=float),
+                 child_point=np.asarray(child_point, dtype=float), variant="hinge", k_r=k_r, l_r=l_r,
+                 saturation=saturation, theta_ref=theta_ref, passive=passive, axis=a)
 
 
 @dataclass(frozen=True, eq=False)

@@ -30,6 +30,10 @@ from .jit import jit
 
 __all__ = [
     "GIMBAL_LOCK_ANGLE",
+    "IDENTITY",
+    "axis_rotation",
+    "axis_angle",
+    "euler_angles_of",
     "vector",
     "add",
     "sub",
@@ -143,6 +147,33 @@ def rotation_and_rate_of(theta):
     return a, b
 
 
+#: The identity's rows: B of a hinge's rotation vector q a (its rate is Omega_j = a dq/dt).
+IDENTITY = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+@jit(forceinline=True)
+def axis_rotation(axis, q):
+    """The rotation by ``q`` [rad] about the unit ``axis`` a (3-tuple), exp(q hat(a)) =
+    cos q I + sin q hat(a) + (1 - cos q) a a' (Rodrigues); a tuple of rows. It leaves a
+    fixed: a is the same in the frames it relates."""
+    c, s = math.cos(q), math.sin(q)
+    v = 1.0 - c
+    x, y, z = axis[0], axis[1], axis[2]
+    return ((c + v * x * x, v * x * y - s * z, v * x * z + s * y),
+            (v * x * y + s * z, c + v * y * y, v * y * z - s * x),
+            (v * x * z - s * y, v * y * z + s * x, c + v * z * z))
+
+
+@jit(forceinline=True)
+def axis_angle(rot, axis):
+    """The angle q [rad] in (-pi, pi] of the rotation ``rot`` (rows) about the unit ``axis``
+    a, the inverse of :func:`axis_rotation` there: sin q = a . vee(rot - rot') / 2, cos q =
+    (tr rot - 1) / 2."""
+    s = 0.5 * (axis[0] * (rot[2][1] - rot[1][2]) + axis[1] * (rot[0][2] - rot[2][0])
+               + axis[2] * (rot[1][0] - rot[0][1]))
+    return math.atan2(s, 0.5 * (rot[0][0] + rot[1][1] + rot[2][2] - 1.0))
+
+
 @jit
 def _rotation_and_rate_rows(theta, a_out, b_out):
     for n in range(theta.shape[0]):
@@ -182,6 +213,15 @@ def rotation_matrix(theta: np.ndarray) -> np.ndarray:
     ``theta``: shape (3,) or (..., 3) [rad]; returns shape (3, 3) or (..., 3, 3).
     """
     return rotation_and_rate(theta)[0]
+
+
+def euler_angles_of(a: np.ndarray) -> np.ndarray:
+    """Theta [rad] (3,) with A(Theta) = ``a`` (3, 3) (eq 2): |theta_2| <= pi/2, theta_1,
+    theta_3 in (-pi, pi] (a[0, 2] = s2, a[1, 2] = -s1 c2, a[2, 2] = c1 c2, a[0, 1] = -c2 s3,
+    a[0, 0] = c2 c3)."""
+    a = np.asarray(a, dtype=float)
+    return np.array([math.atan2(-a[1, 2], a[2, 2]), math.asin(min(1.0, max(-1.0, a[0, 2]))),
+                     math.atan2(-a[0, 1], a[0, 0])])
 
 
 def euler_rate_matrix(theta: np.ndarray) -> np.ndarray:

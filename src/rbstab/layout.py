@@ -62,6 +62,7 @@ __all__ = [
     "JointKind",
     "JOINT_KINDS",
     "JOINT_KIND_OF",
+    "JOINT_CODES",
     "REDUCED_STATES",
     "VELOCITIES",
     "point_fixed",
@@ -575,10 +576,9 @@ class JointKind:
     ----------
     name : str
         The kind's name.
-    states : StateLayout
-        The child's blocks in the reduced state: its coordinates q, then its velocities u.
     n_q, n_v : int
-        Sizes of q and of u (the columns of its motion subspace S).
+        Sizes of its coordinates q and of its velocities u (the columns of its motion
+        subspace S); the child's reduced states are q, then u (n_q + n_v).
     point_fixed : bool
         Whether the joint holds the child's point C to its parent's point by construction
         (E_j = F_j = 0, no point law, its Lambda_j the reaction); else the child keeps its
@@ -590,35 +590,43 @@ class JointKind:
     """
 
     name: str
-    states: StateLayout
     n_q: int
     n_v: int
     point_fixed: bool
     coordinates: str
     domain: str
 
-    def __post_init__(self) -> None:
-        if self.states.size != self.n_q + self.n_v:
-            raise ValueError(f"joint kind {self.name}: {self.states.size} states for n_q + n_v = {self.n_q + self.n_v}")
+    @property
+    def size(self) -> int:
+        """n_q + n_v: the child's reduced states."""
+        return self.n_q + self.n_v
 
 
 #: The joint kinds by name (docs/physics.md, "Joint kinds"): the one place that says how
 #: many reduced states and generalised velocities a joint's child has.
 JOINT_KINDS = {
-    "ball": JointKind("ball", REDUCED, 3, 3, True,
+    "ball": JointKind("ball", 3, 3, True,
                       "Theta_j [rad], the Euler angles of A_rel = A_p' A_c (eq 2); Omega_j [rad/s], child frame",
                       "|theta_2| < pi/2 - simulation.gimbal_margin"),
-    "free": JointKind("free", FULL_BODY, 6, 6, False,
+    "free": JointKind("free", 6, 6, False,
                       "Theta [rad], X [m] (inertial); Omega [rad/s] (body frame), V [m/s] (inertial)",
                       "the body's |theta_2| < pi/2 - simulation.gimbal_margin"),
+    "hinge": JointKind("hinge", 1, 1, True,
+                       "q [rad], the angle of A_rel = exp(q [a]x) about the joint's unit axis a (the parent's and "
+                       "the child's frames, which it leaves fixed); u = dq/dt [rad/s]",
+                       "every q (a hinge has no singular angle)"),
 }
-#: Each joint law (a joint's ``variant``, :data:`VARIANT_LAYOUTS`) -> its joint kind: the
-#: paper's ``permanent`` joint is the ball in Euler angles, the four point laws pull a free body.
-JOINT_KIND_OF = {"free": "free", "permanent": "ball", "sliding": "free", "visco_elastic": "free", "embedded": "free"}
-#: Each variant's joint kind's reduced states and generalised velocities, by variant code
-#: (the compiled kernels read these; an embedded joint's D comes after the bodies).
-REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].states.size for v in VARIANT_LAYOUTS], dtype=np.int64)
-VELOCITIES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].n_v for v in VARIANT_LAYOUTS], dtype=np.int64)
+#: Each joint's ``variant`` -> its joint kind: the paper's ``permanent`` joint is the ball in
+#: Euler angles, the four point laws pull a free body, ``hinge`` turns the child about an axis.
+JOINT_KIND_OF = {"free": "free", "permanent": "ball", "sliding": "free", "visco_elastic": "free", "embedded": "free",
+                 "hinge": "hinge"}
+#: Each joint's ``variant`` -> its code in the compiled kernels: the paper's laws by their
+#: :data:`VARIANT_CODES`, then the kinds that have no one-body form of the paper (``hinge``).
+JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES)}
+#: Each joint code's reduced states and generalised velocities (the compiled kernels read
+#: these; an embedded joint's D comes after the bodies).
+REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].size for v in JOINT_CODES], dtype=np.int64)
+VELOCITIES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].n_v for v in JOINT_CODES], dtype=np.int64)
 
 
 def point_fixed(variant: str) -> bool:

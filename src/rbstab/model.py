@@ -272,7 +272,8 @@ _VECTOR = (np.float64, (3,))
 #: [N m] (-``torque_limit`` unless :class:`Saturation` gives its own) and its passive torque
 #: (:class:`rbstab.chain.Passive`): ``passive`` (1 where the joint has one; 0, as in a
 #: record of zeros: none, the next fields not read), ``passive_k_r`` [N m/rad],
-#: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad].
+#: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad]; and a hinge's unit ``axis``
+#: a (the parent's and the child's frames; zero for any other joint).
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -317,6 +318,7 @@ PARAMETERS = np.dtype(
         ("passive_k_r", *_MATRIX),
         ("passive_l_r", *_MATRIX),
         ("passive_theta_ref", *_VECTOR),
+        ("axis", *_VECTOR),
     ],
     align=True,
 )

@@ -380,7 +380,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         full = maximal(yr[:n_r])
         energy = chain_impulses(t, full, *args[:4], work.chain)
         if energy != 0.0:
-            tree_velocities(full, compiled.codes, compiled.parents, layout.r_at, yr)
+            tree_velocities(full, compiled.params, compiled.codes, compiled.parents, layout.r_at, yr)
             if disturbed:
                 yr[n_r] += energy
 

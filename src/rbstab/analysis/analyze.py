@@ -248,8 +248,13 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     Raises
     ------
     ValueError
-        For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
+        For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law;
+        for a tree with a hinge.
     """
+    hinges = [j.name for j in config.chain.joints if j.variant == "hinge"]
+    if hinges:
+        raise ValueError(f"joint '{hinges[0]}' is a hinge; rbstab analyze takes trees of ball "
+                         "(permanent) and point-law joints (a tree with hinges runs, sweeps and reports)")
     if config.chain.size > 1:
         if boundary_layer is not None:
             raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace "

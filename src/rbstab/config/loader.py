@@ -58,8 +58,8 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, Passive, single
-from ..kinematics import rotation_matrix
+from ..chain import GROUND, Body, Chain, Joint, Passive, hinge, single
+from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix
 from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS
@@ -72,6 +72,7 @@ from .schema import (
     CHAIN_TOP_LEVEL,
     GAIN_NAMES,
     GROUND_NAME,
+    HINGE_STATE,
     INITIAL_STATE_BLOCKS,
     InitialStateSchema,
     JOINT_GAINS,
@@ -587,9 +588,21 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
         for b in run.bodies)
     joints = []
     for j in sorted(run.joints, key=lambda j: index[j.child]):
+        parent = GROUND if j.parent == GROUND_NAME else index[j.parent]
+        if j.variant == "hinge":
+            sat, passive = j.saturation, j.passive
+            upper = math.inf if sat is None or sat.torque_n is None else float(sat.torque_n)
+            lower = -upper if sat is None or sat.torque_n_lower is None else float(sat.torque_n_lower)
+            joints.append(hinge(
+                j.name, parent, index[j.child], _array(j.parent_point), _array(j.child_point), _array(j.axis),
+                float(j.k_r or 0.0), float(j.l_r or 0.0), float(j.theta_ref or 0.0),
+                None if sat is None else (lower, upper), "clip" if sat is None else sat.shape,
+                None if passive is None else (float(passive.k_r or 0.0), float(passive.l_r or 0.0),
+                                              float(passive.theta_ref or 0.0))))
+            continue
         used = VARIANTS[j.variant].required_gains
         joints.append(Joint(
-            name=j.name, parent=GROUND if j.parent == GROUND_NAME else index[j.parent], child=index[j.child],
+            name=j.name, parent=parent, child=index[j.child],
             parent_point=_array(j.parent_point), child_point=_array(j.child_point), variant=j.variant,
             k_r=_gain(j.k_r), l_r=_gain(j.l_r),
             **{g: _matrix(getattr(j, g)) if g in used else None for g in ("k_c", "l_c", "k_d", "l_d")},
@@ -617,15 +630,17 @@ def _tree_initial_state(run: ChainSchema, chain: Chain, source: str | None,
     for body in chain.bodies:
         section = run.initial_state.get(body.name)
         written[body.name] = ({} if section is None else
-                              {key: getattr(section, key) for key in INITIAL_STATE_BLOCKS if key in section.model_fields_set})
+                              {key: getattr(section, key) for key in (*INITIAL_STATE_BLOCKS, *HINGE_STATE)
+                               if key in section.model_fields_set})
     return _place_tree(written, chain, run.simulation.gimbal_margin, source, overrides)
 
 
 def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, source: str | None,
                 overrides: Sequence[str]) -> tuple[dict[str, dict[str, np.ndarray]], tuple[str, ...], list]:
     """:func:`_tree_initial_state` of the blocks each body's config gives (``written``: by
-    body name, its initial_state keys as written, each (3,); a block left out is zero, an x or
-    v left out placed from the parent's)."""
+    body name, its initial_state keys as written, each (3,), a hinge's child's q and u numbers;
+    a block left out is zero, an x or v left out placed from the parent's; a hinge's child
+    turned by q about its axis from its parent, Omega = A_rel' Omega_p + a u)."""
     states, placed, errors = {}, [], []
     written_of = [written.get(body.name) or {} for body in chain.bodies]
     given_of = [set(w) for w in written_of]
@@ -641,6 +656,12 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
             p = chain.bodies[joint.parent].name
             x_p, v_p, omega_p = states[p]["position"], states[p]["velocity"], states[p]["omega"]
             a_p, parent = rotations[joint.parent], p
+        if joint.variant == "hinge":
+            rel = np.array(axis_rotation(tuple(joint.axis), float(written.get("q", 0.0))))
+            a_c = a_p @ rel
+            rotations[joint.child] = a_c
+            state["theta"] = euler_angles_of(a_c)
+            state["omega"] = rel.T @ omega_p + joint.axis * float(written.get("u", 0.0))
         r_p, r_c = joint.parent_point, joint.child_point
         point_p = x_p + a_p @ r_p  # the parent's point, inertial frame
         rate_p = v_p + a_p @ _cross(omega_p, r_p)
@@ -662,7 +683,7 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
                             source, overrides, ("initial_state", "joints", "bodies"))
         relative = a_p.T @ a_c  # A_rel = A_p' A_c; with A = Rx Ry Rz, A_rel[0, 2] = sin(theta_2)
         theta_2 = math.asin(max(-1.0, min(1.0, float(relative[0, 2]))))
-        if joint.parent != GROUND and abs(theta_2) >= math.pi / 2 - margin:
+        if joint.parent != GROUND and joint.variant != "hinge" and abs(theta_2) >= math.pi / 2 - margin:
             _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
                     f"an orientation of '{body.name}' relative to '{parent}' with |theta_2| < pi/2 - gimbal_margin "
                     f"= {math.pi / 2 - margin:.6g}",
@@ -678,9 +699,15 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
 def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, overrides: Sequence[str]) -> None:
     """Refuse what no engine integrates: a sliding joint's pure sign law (boundary_layer 0,
     integrated event by event for the paper's one body, :func:`rbstab.variants.paper.paper_form`)
-    in any other tree."""
+    in any other tree; an impulse in a tree with a hinge."""
     if has_paper_form(chain):
         return
+    hinges = [j.name for j in chain.joints if j.variant == "hinge"]
+    for i, entry in enumerate(resolved.get("disturbances") or ()):
+        if hinges and entry.get("kind") == "impulse":
+            _refuse(f"disturbances.{i}.kind", "'impulse'", "pulse, step, sine or noise in a tree with a hinge",
+                    f"joint '{hinges[0]}' is a hinge: an impulse's jump is solved in ball and point-law joints only; "
+                    "a short pulse (duration) acts as a push", source, overrides, ("disturbances", "joints"))
     for joint in chain.joints:
         if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
             _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
@@ -732,11 +759,15 @@ def _tree_resolved(run: ChainSchema) -> dict:
                 if part in entry:
                     entry[part] = {k: v for k, v in entry[part].items() if v is not None}
     states = {}
-    for body in run.bodies:  # every body, in order; a state's x, v only where written
+    hinged = {j.child for j in run.joints if j.variant == "hinge"}
+    for body in run.bodies:  # every body, in order; a state's x, v only where written; a hinge's child's q, u
         state = run.initial_state.get(body.name)
         written = dump["initial_state"].get(body.name) or {"theta": [0.0] * 3, "omega": [0.0] * 3, "d": [0.0] * 3}
+        if body.name in hinged:
+            states[body.name] = {k: written.get(k) or 0.0 for k in HINGE_STATE}
+            continue
         states[body.name] = {k: v for k, v in written.items()
-                             if k not in ("x", "v") or (state is not None and k in state.model_fields_set)}
+                             if k not in ("x", "v", *HINGE_STATE) or (state is not None and k in state.model_fields_set)}
     dump["initial_state"] = states
     if dump.get("disturbances") is None:
         dump.pop("disturbances", None)
@@ -785,9 +816,10 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
     gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]
     gains += [(f"joints.{i}.", {g: getattr(j, g) for g in (*JOINT_GAINS, "k_s")
                                 if g in VARIANTS[j.variant].required_gains or g in ("k_r", "l_r")})
-              for i, j in enumerate(run.joints)]
+              for i, j in enumerate(run.joints) if j.variant != "hinge"]  # a hinge's are numbers >= 0
+    hinged = {j.child for j in run.joints if j.variant == "hinge"}
     angles = [(f"initial_state.{b.name}.theta", run.initial_state[b.name].theta) for b in chain.bodies
-              if b.name in run.initial_state]
+              if b.name in run.initial_state and b.name not in hinged]
     notes = _notes(chain, [f"bodies.{i}.inertia ('{b.name}')" for i, b in enumerate(chain.bodies)], angles, gains,
                    source)
     return RunConfig(name=run.name, chain=chain, initial_state=states, placed=placed,

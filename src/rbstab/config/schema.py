@@ -425,6 +425,46 @@ def _variant(value: Any) -> str:
     return value
 
 
+#: A tree joint's ``variant``: the paper's laws (:data:`rbstab.variants.VARIANTS`) and the
+#: joint kinds that have no one-body form (:data:`rbstab.layout.JOINT_KIND_OF`).
+JOINT_VARIANTS = (*VARIANTS, "hinge")
+
+
+def _joint_variant(value: Any) -> str:
+    if not isinstance(value, str):
+        raise Invalid(f"{kind_of(value)}, not a string")
+    if value not in JOINT_VARIANTS:
+        raise Invalid(_did_you_mean(value, list(JOINT_VARIANTS)))
+    return value
+
+
+def _axis(value: Any) -> list[int | float]:
+    """A hinge's axis: 3 numbers, not all zero (it is normalised)."""
+    axis = _vector(value)
+    if not math.hypot(*axis) > 0.0:
+        raise Invalid("an axis of zero length", "3 numbers, not all zero (the axis, normalised)")
+    return axis
+
+
+def _joint_gain(value: Any) -> Any:
+    """A joint's spring or damper: a number >= 0 (a hinge's, about its axis) or a positive
+    semi-definite 3x3 (:func:`_psd_matrix`; the kind decides which it must be)."""
+    if isinstance(value, (list, tuple)):
+        return _psd_matrix(value)
+    return bounded_number(ge=0)(value)
+
+
+def _joint_angles(value: Any) -> Any:
+    """A reference posture: a number (a hinge's q_ref, rad) or 3 Euler angles (:func:`_theta`)."""
+    if isinstance(value, (list, tuple)):
+        return _theta(value)
+    return _as_number(value)
+
+
+_joint_gain.rule, _joint_gain.shape = ("matrix", "semi-definite"), (3, 3)
+_joint_angles.rule, _joint_angles.shape = ("theta",), (3,)
+
+
 def _method(value: Any) -> str:
     methods = SOLVER_METHODS
     expected = f"one of {', '.join(methods)} (scipy solve_ivp methods)"
@@ -535,6 +575,9 @@ def _gain_type(name: str) -> Any:
     else:
         check = _psd_matrix
     return Annotated[Any, checked(optional(check))]
+
+
+_JOINT_GAIN = Annotated[Any, checked(optional(_joint_gain))]
 
 
 def _gain(name: str) -> Any:
@@ -785,6 +828,21 @@ class InitialStateSchema(_Section):
     d: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['controller_state']})")
 
 
+class _ChainInitialState(InitialStateSchema):
+    """One body's initial state in a chain: its blocks, or a hinge's child's joint angle and rate."""
+
+    q: Annotated[Any, checked(optional(bounded_number(gt=-math.pi, lt=math.pi)))] = Field(
+        None, description="a number in (-pi, pi) (rad): the angle q of the hinge that holds the body (only for a "
+                          "hinge's child; default 0)")
+    u: Annotated[Any, checked(optional(_as_number))] = Field(
+        None, description="a number (rad/s): dq/dt of the hinge that holds the body (only for a hinge's child; "
+                          "default 0)")
+
+
+#: A hinge's child's initial-state keys, and the blocks its hinge places instead.
+HINGE_STATE = ("q", "u")
+
+
 class _Limits(_Section):
     """The admissible region (:class:`rbstab.model.Limits`): |q_i| <= bound."""
 
@@ -996,12 +1054,15 @@ class _JointSaturation(_Section):
 class _JointPassive(_Section):
     """A joint's passive visco-elastic torque (ligaments, cartilage): never limited."""
 
-    k_r: _gain_type("k_r") = Field(None, validate_default=True, description=(
-        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite (N m/rad; default 0)"))
-    l_r: _gain_type("l_r") = Field(None, validate_default=True, description=(
-        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite (N m s/rad; default 0)"))
-    theta_ref: Annotated[Any, checked(optional(_theta))] = Field(
-        None, description="3 numbers (rad; the relative Euler angles at which its spring is relaxed; default 0)")
+    k_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
+        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
+        "(N m/rad; default 0)"))
+    l_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
+        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
+        "(N m s/rad; default 0)"))
+    theta_ref: Annotated[Any, checked(optional(_joint_angles))] = Field(
+        None, description="3 numbers (rad; the relative Euler angles at which its spring is relaxed); a hinge's: a "
+                          "number (rad; default 0)")
 
 
 class _ChainBody(_Section):
@@ -1029,9 +1090,17 @@ class _ChainJoint(_Section):
         default_factory=_zero, description="3 numbers (the point C, m, the child's body frame from its centre of "
                                            "mass)")
     # ``variant`` before the gains: their validators read it from ``info.data``.
-    variant: Annotated[Any, checked(_variant)] = Field(description=f"one of {', '.join(VARIANTS)}")
-    k_r: _gain_type("k_r") = _gain("k_r")
-    l_r: _gain_type("l_r") = _gain("l_r")
+    variant: Annotated[Any, checked(_joint_variant)] = Field(
+        description=f"one of {', '.join(JOINT_VARIANTS)} (hinge: the point held, the child turned about axis)")
+    axis: Annotated[Any, checked(optional(_axis))] = Field(
+        None, description="a hinge's axis a: 3 numbers, not all zero (the parent's and the child's frames, which "
+                          "it leaves fixed; normalised); only with variant hinge")
+    k_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
+        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
+        f"about its axis ({GAIN_UNITS['k_r']})"))
+    l_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
+        "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
+        f"about its axis ({GAIN_UNITS['l_r']})"))
     k_c: _gain_type("k_c") = _gain("k_c")
     l_c: _gain_type("l_c") = _gain("l_c")
     k_d: _gain_type("k_d") = _gain("k_d")
@@ -1041,9 +1110,10 @@ class _ChainJoint(_Section):
     boundary_layer: Annotated[Any, checked(bounded_number(ge=0))] = Field(
         0.0, description="a number >= 0 (m; 0 = pure sign function)")
     saturation: _JointSaturation | None = Field(None, description=_mapping_of(_JointSaturation) + " (optional)")
-    theta_ref: Annotated[Any, checked(optional(_theta))] = Field(
+    theta_ref: Annotated[Any, checked(optional(_joint_angles))] = Field(
         None, description="3 numbers (rad; the reference posture Theta_ref, the relative Euler angles at which the "
-                          "joint's spring K_r is relaxed; optional, default 0)")
+                          "joint's spring K_r is relaxed); a hinge's: a number, its angle q_ref (rad; optional, "
+                          "default 0)")
     passive: _JointPassive | None = Field(None, description=_mapping_of(_JointPassive) + " (optional: the "
                                                             "joint's passive torque, added to N_j and never limited)")
 
@@ -1062,9 +1132,41 @@ class _ChainJoint(_Section):
     @classmethod
     def _required_by_variant(cls, value: Any, info: ValidationInfo) -> Any:
         variant = info.data.get("variant")  # absent if the variant itself is invalid
-        if value is None and variant is not None and info.field_name in VARIANTS[variant].required_gains:
+        if value is None and variant in VARIANTS and info.field_name in VARIANTS[variant].required_gains:
             raise PydanticCustomError("rbstab_missing", "missing", {"detail": f"required by variant '{variant}'"})
         return value
+
+    @model_validator(mode="after")
+    def _fits_the_kind(self) -> "_ChainJoint":
+        """A hinge's axis, and its gains, reference and torque limits as numbers about it; a
+        ball's or a free body's as 3-vectors or 3x3 matrices, and no axis."""
+        hinge = self.variant == "hinge"
+        saturation, passive = self.saturation, self.passive
+        values = [("k_r", self.k_r), ("l_r", self.l_r), ("theta_ref", self.theta_ref)]
+        values += [] if passive is None else [(f"passive.{k}", getattr(passive, k)) for k in ("k_r", "l_r", "theta_ref")]
+        values += [] if saturation is None else [(f"saturation.{k}", getattr(saturation, k))
+                                                 for k in ("torque_n", "torque_n_lower")]
+        if hinge and self.axis is None:
+            raise PydanticCustomError("rbstab_missing", "missing", {
+                "subkey": "axis", "expected": "3 numbers, not all zero (the hinge's axis)",
+                "detail": "required by variant 'hinge'"})
+        if not hinge and self.axis is not None:
+            raise PydanticCustomError("rbstab_invalid", "an axis", {
+                "subkey": "axis", "found": short_repr(self.axis), "expected": "no axis",
+                "detail": f"an axis is a hinge's (variant: hinge); a '{self.variant}' joint turns about all three"})
+        for key, value in values:
+            if value is None:
+                continue
+            if hinge and isinstance(value, (list, tuple)):
+                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
+                    "subkey": key, "found": short_repr(value),
+                    "expected": "a number: a hinge's feedback, reference and limits act about its axis"})
+            if not hinge and not isinstance(value, (list, tuple)) and not key.startswith("saturation."):
+                what = "3 numbers (rad)" if key.endswith("theta_ref") else "3 numbers (a diagonal) or a 3x3 list of lists"
+                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
+                    "subkey": key, "found": short_repr(value),
+                    "expected": f"{what} (a single number is a hinge's, variant: hinge)"})
+        return self
 
     @model_validator(mode="after")
     def _saturation_fits_the_variant(self) -> "_ChainJoint":
@@ -1110,8 +1212,8 @@ class ChainSchema(_Section):
         description=f"a list of 1 to {MAX_BODIES} bodies, each {_mapping_of(_ChainBody)}")
     joints: list[_ChainJoint] = Field(
         description=f"a list of joints, one per body, each {_mapping_of(_ChainJoint)}")
-    initial_state: dict[str, InitialStateSchema] = Field(
-        default_factory=dict, description=f"a mapping of body names to {_mapping_of(InitialStateSchema)}")
+    initial_state: dict[str, _ChainInitialState] = Field(
+        default_factory=dict, description=f"a mapping of body names to {_mapping_of(_ChainInitialState)}")
     simulation: _Simulation = Field(
         default_factory=_Simulation, validate_default=True, description=_mapping_of(_Simulation))
     disturbances: list[_ChainDisturbance] | None = Field(
@@ -1254,11 +1356,21 @@ class ChainSchema(_Section):
             raise _chain_error("simulation.limits.constraint_error", short_repr(limits.constraint_error),
                                "no bound when every joint is 'permanent'",
                                "their points are pinned: E = 0 at every instant")
+        hinged = {j.child for j in self.joints if j.variant == "hinge"}
+        for name, state in self.initial_state.items():  # a hinge's child: its q, u; any other body: its blocks
+            given = state.model_fields_set & (set(HINGE_STATE) if name not in hinged else set(INITIAL_STATE_BLOCKS))
+            for key in sorted(given):
+                raise _chain_error(f"initial_state.{name}.{key}", short_repr(getattr(state, key)),
+                                   ("q (rad) and u (rad/s), its hinge's angle and rate" if name in hinged else
+                                    f"{', '.join(INITIAL_STATE_BLOCKS)}: the blocks of its state"),
+                                   f"'{name}' is {'' if name in hinged else 'not '}a hinge's child"
+                                   + ("; its hinge places and turns it" if name in hinged else ""))
         margin = float(self.simulation.gimbal_margin)
         angles = [(f"initial_state.{name}.theta", state.theta) for name, state in self.initial_state.items()]
-        angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints if j.theta_ref is not None]
+        angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints
+                   if j.theta_ref is not None and j.variant != "hinge"]
         angles += [(f"joints.{j.name}.passive.theta_ref", j.passive.theta_ref) for j in self.joints
-                   if j.passive is not None and j.passive.theta_ref is not None]
+                   if j.passive is not None and j.passive.theta_ref is not None and j.variant != "hinge"]
         for key, theta in angles:
             if not clear_of_gimbal_lock(theta[1], margin):
                 limit = math.pi / 2 - margin

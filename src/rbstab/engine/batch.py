@@ -28,8 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..chain import hinge_vectors
 from ..config import GAIN_NAMES, INITIAL_STATE_BLOCKS
-from ..config.loader import RunConfig, config_from_mapping
+from ..config.loader import RunConfig, config_from_mapping, placed_initial_state
 from ..config.paths import parse_any_key
 from ..layout import LIMITED, STATE_SIZE, VARIANT_CODES, VARIANT_LAYOUTS, is_chain
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATURATION_SHAPES, set_limits
@@ -509,7 +510,8 @@ def _trees_from_table(templates: Sequence[Mapping], keys: Sequence[str], columns
 def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: np.ndarray) -> None:
     """The records ``p`` of body i of template ``t``'s runs with its joint's gains and limits
     (:func:`rbstab.variants.chain.compile_chain`'s, ``chain`` the template's): each field as
-    written there or in a column (``bodies.trunk.mass``, ``joints.hip.k_r.0``)."""
+    written there or in a column (``bodies.trunk.mass``, ``joints.hip.k_r.0``); a hinge's
+    numbers about its axis as :func:`rbstab.chain.hinge_vectors` writes them."""
     body, joint = chain.bodies[i], chain.joints[i]
 
     def of(section: str, name: str, default=None, shape=None):
@@ -521,22 +523,41 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
            gravity)
     for name in ("k_t", "l_t"):
         p[name] = of("bodies", name, zero, shape=(3, 3))
+    hinged = joint.variant == "hinge"  # its gains, reference and limits numbers about its axis
     for name in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d"):
-        p[name] = of("joints", name, zero, shape=(3, 3))
+        if not (hinged and name in ("k_r", "l_r")):
+            p[name] = of("joints", name, zero, shape=(3, 3))
     if joint.l_d is not None:
         p["l_d_inv"] = _inverse(p["l_d"])
     p["k_s"] = of("joints", "k_s", 0.0)
     p["boundary_layer"] = of("joints", "boundary_layer", 0.0)
-    p["theta_ref"] = of("joints", "theta_ref", zero, shape=(3,))
-    if joint.passive is not None:
+    if not hinged:
+        p["theta_ref"] = of("joints", "theta_ref", zero, shape=(3,))
+    if joint.passive is not None and not hinged:
         p["passive"] = 1.0
         p["passive_k_r"] = of("joints", "passive.k_r", zero, shape=(3, 3))
         p["passive_l_r"] = of("joints", "passive.l_r", zero, shape=(3, 3))
         p["passive_theta_ref"] = of("joints", "passive.theta_ref", zero, shape=(3,))
+    if hinged:
+        upper = of("joints", "saturation.torque_n", math.inf) if joint.saturation else math.inf
+        lower = of("joints", "saturation.torque_n_lower", math.nan) if joint.saturation else math.nan
+        axis = of("joints", "axis", shape=(3,))
+        p["axis"], p["k_r"], p["l_r"], p["theta_ref"], floor, limit = hinge_vectors(
+            axis, of("joints", "k_r", 0.0), of("joints", "l_r", 0.0), of("joints", "theta_ref", 0.0),
+            np.where(np.isnan(lower), -upper, lower), upper)
+        if joint.passive is not None:
+            p["passive"] = 1.0
+            _, p["passive_k_r"], p["passive_l_r"], p["passive_theta_ref"], _, _ = hinge_vectors(
+                axis, of("joints", "passive.k_r", 0.0), of("joints", "passive.l_r", 0.0),
+                of("joints", "passive.theta_ref", 0.0))
     if joint.saturation is not None or body.saturation is not None:
-        p["torque_limit"] = of("joints", "saturation.torque_n", math.inf, shape=(3,)) if joint.saturation else math.inf
-        lower = of("joints", "saturation.torque_n_lower", math.nan, shape=(3,)) if joint.saturation else math.nan
-        p["torque_floor"] = np.where(np.isnan(lower), -p["torque_limit"], lower)  # unwritten: -torque_n
+        if hinged:
+            p["torque_limit"], p["torque_floor"] = limit, floor
+        else:
+            p["torque_limit"] = (of("joints", "saturation.torque_n", math.inf, shape=(3,)) if joint.saturation
+                                 else math.inf)
+            lower = of("joints", "saturation.torque_n_lower", math.nan, shape=(3,)) if joint.saturation else math.nan
+            p["torque_floor"] = np.where(np.isnan(lower), -p["torque_limit"], lower)  # unwritten: -torque_n
         p["constraint_force_limit"] = (of("joints", "saturation.constraint_force", math.inf, shape=(3,))
                                        if joint.saturation else math.inf)
         p["force_limit"] = of("bodies", "saturation.force_h", math.inf, shape=(3,)) if body.saturation else math.inf
@@ -559,6 +580,9 @@ def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str,
     them (:func:`rbstab.variants.chain.place`: on the parent's point, parents first), with
     each run's joint points. The runs are validated: nothing is checked or raised here."""
     names = list(config.chain.body_names)
+    varied = [k for k in keys if parse_any_key(k).section == "initial_state"]
+    if varied and any(j.variant == "hinge" for j in config.chain.joints):  # a hinge turns what it carries
+        return _hinged_initial_states(config, varied, columns, rows)
     y = np.repeat(C.state_vector(config.chain, config.initial_state)[None], len(rows), axis=0)
     placed = {"x": np.array([f"initial_state.{b}.x" in config.placed for b in names]),
               "v": np.array([f"initial_state.{b}.v" in config.placed for b in names])}
@@ -586,6 +610,29 @@ def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str,
         return C.place(C.with_records(tree, params[0], ppoints[0]), y, placed["x"], placed["v"])
     return np.array([C.place(C.with_records(tree, params[a], ppoints[a]), y[a], placed["x"], placed["v"])
                      for a in range(len(rows))])
+
+
+def _hinged_initial_states(config, keys: Sequence[str], columns: Mapping[str, np.ndarray],
+                           rows: np.ndarray) -> np.ndarray:
+    """:func:`tree_initial_states` of a tree with a hinge, whose angle turns every body it
+    carries: each run's ``initial_state`` section (the template's with the run's values of the
+    ``initial_state.*`` ``keys``) placed as the loader places it
+    (:func:`rbstab.config.loader.placed_initial_state`), on the template's joints."""
+    template = config.resolved["initial_state"]
+    out = np.empty((len(rows), C.state_vector(config.chain, config.initial_state).size))
+    for a, r in enumerate(rows):
+        written = {body: {key: np.array(value, dtype=float) for key, value in state.items()}
+                   for body, state in template.items()}
+        for k in keys:
+            steps = parse_any_key(k).steps
+            value = written.setdefault(steps[1], {}).setdefault(steps[2], np.zeros(3))
+            if len(steps) > 3:
+                value[int(steps[3])] = columns[k][r]
+            else:
+                written[steps[1]][steps[2]] = np.asarray(columns[k][r], dtype=float)
+        out[a] = C.state_vector(config.chain, placed_initial_state(written, config.chain,
+                                                                   config.simulation.gimbal_margin))
+    return out
 
 
 def _tree_offsets(tree, params: np.ndarray, ppoints: np.ndarray, gravity: np.ndarray) -> np.ndarray:

@@ -18,7 +18,7 @@ Every run is a tree of 1 to :data:`MAX_TREE_BODIES` bodies (:func:`tree_kernel_f
 :class:`~rbstab.engine.systems.TreeSystem` through the system's functions
 (:mod:`rbstab.engine.systems`; the physics is :func:`rbstab.variants.tree.tree_rate`,
 compiled as a device function with scratch arrays in thread-local memory sized for the
-tree's shape: a kernel per number of bodies, of permanent joints and of embedded joints,
+tree's shape: a kernel per number of bodies, of permanent joints, of embedded joints and of hinges,
 :func:`tree_shape`), or, where every tree of a launch is the paper's one body, on the
 body's record with one body's rate (a kernel of its own, as on the CPU). A launch takes
 trees of one structure (their records passed once, read by every thread), each run with
@@ -82,7 +82,7 @@ from numba.extending import overload  # noqa: E402
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..jit import CACHE_DIR, cache_is_warm, jit, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS
+from ..layout import LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, REDUCED_STATES, SATURATION_FLAGS, VELOCITIES
 from ..model import PARAMETERS
 from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_weights, stream_body_balance,
                        stream_finish, stream_member, stream_member_start, stream_sample, stream_start,
@@ -90,7 +90,7 @@ from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_w
 from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate, is_one_body
 from ..variants.disturbances import edges_up_to
 from ..variants.tree import TreeWork, reduced_size, tree_expand
-from ..variants.kernels import PERMANENT, output_row
+from ..variants.kernels import FREE, HINGE, PERMANENT, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
@@ -430,12 +430,12 @@ def tree_launch_signature() -> tuple:
             matrix, cube, matrix, cube, matrix, matrix)
 
 
-def tree_shape(codes, d_at) -> tuple[int, int, int]:
-    """(bodies, permanent joints, embedded joints) of a tree of joint variant codes
+def tree_shape(codes, d_at) -> tuple[int, int, int, int]:
+    """(bodies, permanent joints, embedded joints, hinges) of a tree of joint codes
     ``codes`` (n,) whose embedded joints' D sit at ``d_at`` (n,; -1: none): what sizes the
     tree kernel's thread-local arrays (:func:`tree_kernel_function`)."""
     codes, d_at = np.asarray(codes), np.asarray(d_at)
-    return int(codes.size), int(np.sum(codes == PERMANENT)), int(np.sum(d_at >= 0))
+    return int(codes.size), int(np.sum(codes == PERMANENT)), int(np.sum(d_at >= 0)), int(np.sum(codes == HINGE))
 
 
 #: (module, name) of the compiled functions a CUDA kernel calls as functions of their own:
@@ -472,9 +472,9 @@ def _lower_not_inlined() -> None:
     lowering.CUDALower.setup_function = setup_function
 
 
-def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: bool = False):
+def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = False):
     """The Python function of the CUDA kernel of the runs of trees of ``shape`` (bodies n,
-    permanent joints p, embedded joints e; :func:`tree_shape`) with method number ``method``
+    permanent joints p, embedded joints e, hinges h (0 where left out); :func:`tree_shape`) with method number ``method``
     (:func:`tree_launch_signature`: one tree, k runs, one thread a run). Its name names
     them, so that each kernel has cache files of its own.
 
@@ -493,9 +493,9 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
     launch's ``samples`` have rows, written to device memory as the CPU driver's samples are
     (the host computes the outputs from them). Its
     thread-local arrays are sized for the tree's shape (the stack a thread grows with the
-    tree): the reduced state (n_r = 12 n - 6 p + 3 e entries) and its Runge-Kutta stages, the
+    tree): the reduced state (n_r = 12 n - 6 p - 10 h + 3 e entries) and its Runge-Kutta stages, the
     maximal image (12 n + 3 e), the mass matrix (n_u)^2 of
-    :func:`rbstab.variants.tree.tree_rate` (n_u = 6 n - 3 p generalised velocities) and the
+    :func:`rbstab.variants.tree.tree_rate` (n_u = 6 n - 3 p - 5 h generalised velocities) and the
     permanent joints' impulsive system (3 p)^2 of
     :func:`rbstab.variants.chain.chain_impulses`. Every run integrates its work W after the
     state (its rate 0 without disturbances), so that each vector's size is known when the
@@ -506,12 +506,16 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
     _lower_not_inlined()
     n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
     scheme = (method, int(N_STAGES[method]), method == DOP853)
-    bodies, permanent, embedded = (int(x) for x in shape)
+    bodies, permanent, embedded, hinges = (*(int(x) for x in shape), 0)[:4]
+    free = bodies - permanent - hinges
     states = 12 * bodies + 3 * embedded  # the maximal image
     rates = states + 1  # its rate, and W's
-    size = states - 6 * permanent + 1  # the integrated vector: the reduced state and W
+    # the integrated vector: the reduced state (the joint kinds' sizes, rbstab.layout.JOINT_KINDS) and W
+    size = (free * int(REDUCED_STATES[FREE]) + permanent * int(REDUCED_STATES[PERMANENT])
+            + hinges * int(REDUCED_STATES[HINGE]) + 3 * embedded + 1)
     n_state = size - 1
-    rows, columns = max(1, 3 * permanent), 6 * bodies - 3 * permanent
+    rows = max(1, 3 * permanent)
+    columns = free * int(VELOCITIES[FREE]) + permanent * int(VELOCITIES[PERMANENT]) + hinges * int(VELOCITIES[HINGE])
 
     def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, first,
                  weights, short, stride, ratio, control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, acc_o,
@@ -533,7 +537,8 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
                           cuda.local.array((bodies, 3, 3), float64),
                           cuda.local.array((rows, rows), float64), cuda.local.array(rows, float64),
                           cuda.local.array(bodies, int64), cuda.local.array((bodies, 7, 3), float64),
-                          cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64))
+                          cuda.local.array((bodies, 3), float64), cuda.local.array(5, float64),
+                          cuda.local.array(bodies, float64))
         scratch = TreeWork(cuda.local.array(states, float64), cuda.local.array(rates, float64),
                            cuda.local.array((bodies, 6), float64), cuda.local.array((columns, columns), float64),
                            cuda.local.array(columns, float64), cuda.local.array(bodies, float64),
@@ -596,7 +601,7 @@ def tree_kernel_function(method: int, shape: tuple[int, int, int], one_body: boo
             k = cuda.atomic.add(control, 0, 1)
 
     run_tree.__name__ = run_tree.__qualname__ = (f"run_{'body' if one_body else 'tree'}{bodies}_{permanent}p"
-                                                 f"{embedded}e_{METHODS[method]}")
+                                                 f"{embedded}e{f'{hinges}h' if hinges else ''}_{METHODS[method]}")
     return run_tree
 
 
@@ -606,7 +611,7 @@ TREE_DEVICE_FUNCTIONS = ("drive_run", "disturbed_of", "limited_of", "stream_star
 
 
 @functools.lru_cache(maxsize=None)
-def compiled_tree_kernel(method: int, shape: tuple[int, int, int], one_body: bool = False):
+def compiled_tree_kernel(method: int, shape: tuple[int, ...], one_body: bool = False):
     """The CUDA kernel of the runs of trees of ``shape`` (:func:`tree_shape`; ``one_body``
     as :func:`tree_kernel_function`'s) with method number ``method``, compiled for
     :func:`tree_launch_signature` (or loaded from the disk cache beside the CPU kernels,
@@ -622,10 +627,11 @@ def compiled_tree_kernel(method: int, shape: tuple[int, int, int], one_body: boo
     from numba.cuda.core import config  # optional: numba-cuda
 
     config.CACHE_DIR = str(CACHE_DIR)
-    n, p, e = shape
-    group = f"cuda-{'body' if one_body else 'tree'}{n}-{p}p{e}e-{METHODS[method]}"
+    n, p, e, h = (*shape, 0)[:4]
+    group = f"cuda-{'body' if one_body else 'tree'}{n}-{p}p{e}e{f'{h}h' if h else ''}-{METHODS[method]}"
     what = (f"the CUDA kernel for one body's {('permanent', 'embedded', 'other')[0 if p else 1 if e else 2]} joint"
-            if one_body else f"the CUDA kernel for trees of {n} bodies ({p} permanent joints, {e} embedded)")
+            if one_body else f"the CUDA kernel for trees of {n} bodies ({p} permanent joints, {e} embedded"
+                             f"{f', {h} hinges' if h else ''})")
     what += f" with {METHODS[method]}"
     with _compile_lock(group):
         warm = cache_is_warm(group)

@@ -32,8 +32,9 @@ from ..kinematics import rotation_and_rate_of, vector
 from ..model import set_limits
 from ..variants.chain import _relative, chain_impulses
 from ..variants.disturbances import apply_impulses, next_breakpoint
-from ..variants.kernels import PERMANENT, limited_quantities, state_rate
-from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate, tree_velocities
+from ..variants.kernels import HINGE, PERMANENT, limited_quantities, state_rate
+from ..variants.tree import (expand_samples, point_fixed_code, reduce_states, reduced_size, tree_expand, tree_layout,
+                             tree_rate, tree_velocities)
 from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES, TREE_GIMBAL
 
 __all__ = ["CHAIN", "TreeSystem", "tree_system", "with_offsets", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
@@ -173,7 +174,7 @@ def admissible(code, y, p, limit):
 def chain_bounds(y, params, codes, parents, ppoints, margin, status):
     """(margin, status) after the bounds ``params[0].limits`` of ``simulation.limits`` on a
     chain's maximal state ``y`` (:class:`TreeSystem`'s arrays): every body's Theta, Omega,
-    X, V and every non-permanent joint's E_j, as :func:`admissible_event`'s (status: the
+    X, V and every joint's E_j but a point-fixed one's, as :func:`admissible_event`'s (status: the
     quantity, the axis and the body or joint, :func:`rbstab.engine.status.limit_status`)."""
     n = codes.shape[0]
     p0 = params[0]
@@ -184,7 +185,7 @@ def chain_bounds(y, params, codes, parents, ppoints, margin, status):
         margin, status = _bound_margin(vector(y, 12 * i + 6), p0.limits[2], part + 2, margin, status)
         margin, status = _bound_margin(vector(y, 12 * i + 9), p0.limits[3], part + 3, margin, status)
     for j in range(n):
-        if codes[j] == PERMANENT:
+        if point_fixed_code(codes[j]):
             continue
         a = rotation_and_rate_of(vector(y, 12 * j))[0]
         r = params[j].attachment_point
@@ -238,10 +239,12 @@ def tree_margin(y, p, limit):
     limited = p.params[0].limited != 0.0
     relative = False
     for i in range(n):
+        if p.codes[i] == HINGE:  # no Euler angles: its q has no singular value
+            continue
         m = limit - abs(y[p.r_at[i] + 1])
         if m < margin:
             margin, status = m, TREE_GIMBAL + 2 * i + (1 if p.codes[i] == PERMANENT else 0)
-        relative = relative or (p.codes[i] != PERMANENT and p.parents[i] >= 0)
+        relative = relative or (not point_fixed_code(p.codes[i]) and p.parents[i] >= 0)
     if not (limited or relative):
         return margin, status
     w = p.work
@@ -249,7 +252,7 @@ def tree_margin(y, p, limit):
                 w.chain.rate, True)
     for j in range(n):
         q = p.parents[j]
-        if p.codes[j] != PERMANENT and q >= 0:
+        if not point_fixed_code(p.codes[j]) and q >= 0:
             rel = _relative(rotation_and_rate_of(vector(w.y, 12 * q))[0], rotation_and_rate_of(vector(w.y, 12 * j))[0])
             m = limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2]))))
             if m < margin:
@@ -269,7 +272,7 @@ def tree_impulses(t, y, p):
                 w.chain.rate, True)
     jump = chain_impulses(t, w.y, p.params, p.codes, p.parents, p.ppoints, w.chain)
     if jump != 0.0:
-        tree_velocities(w.y, p.codes, p.parents, p.r_at, y)
+        tree_velocities(w.y, p.params, p.codes, p.parents, p.r_at, y)
     return jump
 
 

@@ -524,8 +524,8 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
                     invalid_rows: dict, templates: Sequence, template: np.ndarray) -> None:
     """Validate each run of a chain's sweep not yet ``counted`` invalid (those the schema
     refuses into ``invalid_rows``, and counted). The parameters' columns
-    (:data:`_TREE_PARAMETERS`) are checked against their fields' rules at once; a run they
-    flag is validated by the schema. Where every other varied key is an ``initial_state``
+    (:data:`_TREE_PARAMETERS`) are checked against their fields' rules at once (a hinge's,
+    numbers about its axis, by the schema); a run they flag is validated by the schema. Where every other varied key is an ``initial_state``
     entry, the initial states are checked as columns too (:func:`_tree_state_flags`) and
     only the runs either check flags are validated by the schema. Otherwise a run that
     differs from one of the last :data:`_RECENT_TREES` validated ones only in its
@@ -533,7 +533,9 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
     :func:`rbstab.config.loader.initial_state_fits` takes its initial state (the checks of
     that section); the others are validated by the schema."""
     keys = list(columns)
-    params = [k for k in keys if _tree_parameter(k, columns[k])]
+    hinges = {j.get("name") for t in templates if t for j in t.get("joints") or () if j.get("variant") == "hinge"}
+    params = [k for k in keys if _tree_parameter(k, columns[k])
+              and not (parse_any_key(k).section == "joints" and parse_any_key(k).steps[1] in hinges)]
     others = [k for k in keys if k not in params]
     valid = np.array([t is not None for t in templates], dtype=bool)[template] & ~counted
     flagged = _tree_parameter_flags(params, columns, [t or {} for t in templates], template, np.flatnonzero(valid))

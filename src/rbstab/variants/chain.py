@@ -34,9 +34,9 @@ import numpy as np
 
 from ..chain import Chain
 from ..jit import jit
-from ..kinematics import (ZERO, add, cross, dot, matTvec, matvec, quadratic_form, rotation_and_rate_of, rotation_matrix,
-                          sub, vector)
-from ..layout import LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
+from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec, quadratic_form,
+                          rotation_and_rate_of, rotation_matrix, sub, vector)
+from ..layout import JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     force_h,
@@ -48,7 +48,7 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import EMBEDDED, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
+from .kernels import EMBEDDED, HINGE, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
 from .registry import record_offset
@@ -77,10 +77,11 @@ _TRANSLATIONAL, _ROTATIONAL, _CONSTRAINT, _GRAVITY, _RATE = range(5)
 #: the inertial frame [1/(kg m^2)]; ``matrix`` (3n, 3n) and ``rhs`` (3n,) the permanent joints'
 #: linear system; ``which`` (n,) int64 the permanent joints; ``joints`` (n, 7, 3),
 #: ``bodies`` (n, 3), ``scalars`` (5,) the per-joint, per-body and scalar records
-#: :func:`chain_core` fills. The compiled driver holds one per chain (in its system), so an
+#: :func:`chain_core` fills; ``angle`` (n,) each hinge's q [rad] where the caller gives it
+#: (:func:`chain_wrenches`' ``rotations``). The compiled driver holds one per chain (in its system), so an
 #: evaluation allocates nothing.
 ChainWork = namedtuple("ChainWork", ["rot", "rate", "torque", "force", "g", "matrix", "rhs",
-                                     "which", "joints", "bodies", "scalars"])
+                                     "which", "joints", "bodies", "scalars", "angle"])
 
 
 @jit
@@ -88,7 +89,7 @@ def chain_work(n):
     """Scratch arrays (:class:`ChainWork`) of a chain of ``n`` bodies."""
     return ChainWork(np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3)),
                      np.empty((3 * n, 3 * n)), np.empty(3 * n), np.empty(n, dtype=np.int64),
-                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5))
+                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.empty(n))
 
 
 # -- compiled core --------------------------------------------------------------------------
@@ -105,6 +106,22 @@ def _relative(a_p, a_c):
         (a_p[0][2] * a_c[0][0] + a_p[1][2] * a_c[1][0] + a_p[2][2] * a_c[2][0],
          a_p[0][2] * a_c[0][1] + a_p[1][2] * a_c[1][1] + a_p[2][2] * a_c[2][1],
          a_p[0][2] * a_c[0][2] + a_p[1][2] * a_c[1][2] + a_p[2][2] * a_c[2][2]),
+    )
+
+
+@jit(forceinline=True)
+def compose(a_p, rel):
+    """A_p A_rel as a tuple of rows."""
+    return (
+        (a_p[0][0] * rel[0][0] + a_p[0][1] * rel[1][0] + a_p[0][2] * rel[2][0],
+         a_p[0][0] * rel[0][1] + a_p[0][1] * rel[1][1] + a_p[0][2] * rel[2][1],
+         a_p[0][0] * rel[0][2] + a_p[0][1] * rel[1][2] + a_p[0][2] * rel[2][2]),
+        (a_p[1][0] * rel[0][0] + a_p[1][1] * rel[1][0] + a_p[1][2] * rel[2][0],
+         a_p[1][0] * rel[0][1] + a_p[1][1] * rel[1][1] + a_p[1][2] * rel[2][1],
+         a_p[1][0] * rel[0][2] + a_p[1][1] * rel[1][2] + a_p[1][2] * rel[2][2]),
+        (a_p[2][0] * rel[0][0] + a_p[2][1] * rel[1][0] + a_p[2][2] * rel[2][0],
+         a_p[2][0] * rel[0][1] + a_p[2][1] * rel[1][1] + a_p[2][2] * rel[2][1],
+         a_p[2][0] * rel[0][2] + a_p[2][1] * rel[1][2] + a_p[2][2] * rel[2][2]),
     )
 
 
@@ -169,7 +186,8 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
 def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
     rotations A_i and B(Theta_i) into ``work.rot``, ``work.rate`` (``rotations``: the caller
-    has put A_i there already, and B(Theta_j) of each joint to the ground); the wrench on each body of
+    has put A_i there already, B(Theta_j) of each joint to the ground and each hinge's q
+    into ``work.angle``; else a hinge's q is read from A_rel in (-pi, pi]); the wrench on each body of
     everything but those Lambda_j into ``work.torque`` (body frame, the gyroscopic term
     -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
     (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H
@@ -239,6 +257,10 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             theta_j = euler_angles(rel)
             b_j = _euler_rate_of(rel)
             omega_j = sub(omega_c, matTvec(rel, omega_p))
+        if codes[j] == HINGE:  # its coordinate as the rotation vector q a, whose rate is Omega_j
+            axis = vector(p.axis, 0)
+            angle = work.angle[j] if rotations else axis_angle(rel, axis)
+            theta_j, b_j = (angle * axis[0], angle * axis[1], angle * axis[2]), IDENTITY
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
         strain = sub(theta_j, p.theta_ref)  # the spring's: Theta_j - Theta_ref (eq 23 about the reference posture)
@@ -264,7 +286,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             d = vector(y, d_at[j])
         if codes[j] == PERMANENT:
             n_permanent += 1
-        else:
+        elif codes[j] != HINGE:
             lam, d_rate = constraint_force(codes[j], e, f, d, p)
             if p.saturation > 0.0:
                 lam_c, _ = constraint_force_command(codes[j], e, f, d, p)
@@ -306,13 +328,18 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     rotational, constraint and gravity terms of v (eq 25's grouping, without h) and dv/dt (analytic: minus the
     dissipations, plus the saturation deficit, disturbance and permanent-constraint
     powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
-    (:class:`ChainWork`).
+    (:class:`ChainWork`). A tree with a hinge is integrated in reduced coordinates only
+    (:mod:`rbstab.variants.tree`): here its point-fixed joints' reactions are left out
+    (Lambda_j zero) and dy/dt is not its motion; every other output is.
     """
     n = codes.shape[0]
     rot, rate, torque, force = work.rot, work.rate, work.torque, work.force
     n_permanent, power, work_power, dissipation, size = chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy,
                                                                        joints, bodies, scalars, work)
-    if n_permanent > 0:
+    hinged = False
+    for j in range(n):
+        hinged = hinged or codes[j] == HINGE
+    if n_permanent > 0 and not hinged:
         _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent, work, True)
         for j in range(n):
             if codes[j] == PERMANENT:
@@ -548,6 +575,8 @@ def _saturation_flags(y, params, codes, joints, flags):
     for j in range(codes.shape[0]):
         theta_j = vector(joints[j, _THETA_J], 0)
         _, b_j = rotation_and_rate_of(theta_j)
+        if codes[j] == HINGE:  # theta_j = q a: its rate is Omega_j
+            b_j = IDENTITY
         strain, omega_j = sub(theta_j, params[j].theta_ref), vector(joints[j, _OMEGA_J], 0)
         _, _, h_flags, lam_flags = saturation_effects(
             codes[j], strain, omega_j, vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
@@ -657,8 +686,8 @@ class CompiledChain:
 
     @functools.cached_property
     def permanent(self) -> np.ndarray:
-        """(n,) bool: the bodies a permanent joint holds (placed on their parents)."""
-        return self.codes == PERMANENT
+        """(n,) bool: the bodies a point-fixed joint holds (placed on their parents)."""
+        return (self.codes == PERMANENT) | (self.codes == HINGE)
 
 
 def papers_feedback(theta_ref: np.ndarray, passive: np.ndarray, floor: np.ndarray, limit: np.ndarray) -> np.ndarray:
@@ -670,11 +699,11 @@ def papers_feedback(theta_ref: np.ndarray, passive: np.ndarray, floor: np.ndarra
 
 def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, attachment: np.ndarray,
                   papers: np.ndarray) -> np.ndarray:
-    """Which of t trees of one structure (joint variant ``codes`` (n,), ``parents`` (n,))
-    are the paper's one-body model (:func:`is_one_body`): ``points`` (t, 3) their first
+    """Which of t trees of one structure (joint codes ``codes`` (n,), ``parents`` (n,))
+    are the paper's one-body model (one of its five laws) (:func:`is_one_body`): ``points`` (t, 3) their first
     joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame), ``papers`` (t,) whether
     its feedback is the paper's (:func:`papers_feedback`); shape (t,) of bool."""
-    if codes.shape[0] != 1 or parents[0] >= 0:
+    if codes.shape[0] != 1 or parents[0] >= 0 or codes[0] == HINGE:
         return np.zeros(len(points), dtype=bool)
     return np.all(points == attachment, axis=-1) & papers
 
@@ -722,6 +751,7 @@ def _record(chain: Chain, i: int) -> np.ndarray:
     p = parameters(*body_model(chain, i))
     joint = chain.joints[i]
     p["theta_ref"] = joint.theta_ref
+    p["axis"] = joint.axis
     if joint.passive is not None:
         p["passive"] = 1.0
         p["passive_k_r"], p["passive_l_r"] = joint.passive.k_r, joint.passive.l_r
@@ -747,7 +777,7 @@ def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
     params = np.zeros(n, dtype=PARAMETERS)
     for i in range(n):
         params[i] = _record(chain, i)
-    codes = np.array([VARIANT_CODES[j.variant] for j in chain.joints], dtype=np.int64)
+    codes = np.array([JOINT_CODES[j.variant] for j in chain.joints], dtype=np.int64)
     parents = np.array([j.parent for j in chain.joints], dtype=np.int64)
     ppoints = np.array([np.asarray(j.parent_point, dtype=float) for j in chain.joints]).reshape(n, 3)
     d_at, size = _controller_states(chain)
@@ -790,19 +820,30 @@ def _place_rows(states, params, parents, ppoints, x_placed, v_placed):
 
 @jit
 def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
-    """Fill ``y`` (n_states,) with the state at rest of the configuration ``q`` (3 n + 3 f
-    + 3 e,: every Theta_i [rad], then X_i [m, inertial] of the f bodies whose joint is not
-    ``permanent``, then D [m] of the e embedded joints);
-    every Omega, V zero; X of a permanent joint's child placed on its parent's point
-    (E_j = 0), parents first: X_c = X_p + A_p R_p - A_c R_c."""
+    """Fill ``y`` (n_states,) with the state at rest of the configuration ``q``
+    (:func:`rest_coordinates`: each body's Theta_i [rad], a hinge's child's q [rad] instead;
+    then X_i [m, inertial] of the bodies whose joint is not point-fixed, then D [m] of the
+    embedded joints); every Omega, V zero; a hinge's child turned by q about its axis from
+    its parent (A_c = A_p exp(q [a]x)); X of a point-fixed joint's child placed on its
+    parent's point (E_j = 0), parents first: X_c = X_p + A_p R_p - A_c R_c."""
     n = codes.shape[0]
     for k in range(y.shape[0]):
         y[k] = 0.0
-    k = 3 * n
+    k = 0
     for i in range(n):
-        for c in range(3):
-            y[12 * i + c] = q[3 * i + c]
-        if codes[i] != PERMANENT:
+        if codes[i] == HINGE:
+            rel = axis_rotation(vector(params[i].axis, 0), q[k])
+            a = rel
+            if parents[i] >= 0:
+                a = compose(rotation_and_rate_of(vector(y, 12 * parents[i]))[0], rel)
+            _put(y, 12 * i, euler_angles(a))
+            k += 1
+        else:
+            for c in range(3):
+                y[12 * i + c] = q[k + c]
+            k += 3
+    for i in range(n):
+        if codes[i] != PERMANENT and codes[i] != HINGE:
             for c in range(3):
                 y[12 * i + 6 + c] = q[k + c]
             k += 3
@@ -812,7 +853,7 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
                 y[d_at[j] + c] = q[k + c]
             k += 3
     for i in range(n):
-        if codes[i] == PERMANENT:
+        if codes[i] == PERMANENT or codes[i] == HINGE:
             _place_body(y, i, params, parents, ppoints, True, False)
 
 
@@ -894,12 +935,8 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     from scipy.optimize import minimize, root  # heavy: scipy, only where a rest state is sought
 
     n = compiled.size
-    free = [i for i in range(n) if compiled.codes[i] != PERMANENT]
-    q0 = np.zeros(3 * n + 3 * len(free) + 3 * int(np.sum(compiled.d_at >= 0)))
-    placed = _place(compiled, reference_posture(compiled))
-    q0[: 3 * n] = placed[: 12 * n].reshape(n, 12)[:, :3].ravel()
-    for k, i in enumerate(free):
-        q0[3 * n + 3 * k: 3 * n + 3 * k + 3] = placed[12 * i + 6: 12 * i + 9]
+    q0 = rest_coordinates(compiled, _place(compiled, reference_posture(compiled)))
+    hinged = bool(np.any(compiled.codes == HINGE))  # the maximal rates leave out a hinge's reactions
     y, dy, work = np.empty(compiled.n_states), np.empty(compiled.n_states), chain_work(n)
     args = (_undisturbed(compiled.params), *compiled.args[1:], y, dy, work)
 
@@ -921,7 +958,7 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
         if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
             return None, math.nan
         q = result.x
-    residual = acceleration(q)
+    residual = np.zeros(1) if hinged else acceleration(q)  # a hinge's tree: the minimiser's rest point
     if np.any(residual != 0.0):  # a rest point to rounding: the minimiser's gradient tolerance is not
         try:
             with np.errstate(all="ignore"):
@@ -939,20 +976,38 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
 _REST_GTOL = 1e-11
 
 
+def rest_coordinates(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
+    """The configuration (:func:`rest_configuration`'s ``q``) of the state ``y``
+    (n_states,): each body's Theta_i [rad] (a hinge's child: its q [rad], in (-pi, pi]),
+    X_i [m] of the bodies whose joint is not point-fixed, D [m] of the embedded joints."""
+    n, y = compiled.size, np.asarray(y, dtype=float)
+    joints = np.empty((n, 7, 3))
+    chain_core(0.0, np.ascontiguousarray(y), *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)),
+               np.empty(5))
+    angles = [[float(compiled.params[i]["axis"] @ joints[i, _THETA_J])] if compiled.codes[i] == HINGE
+              else list(y[12 * i: 12 * i + 3]) for i in range(n)]
+    positions = [list(y[12 * i + 6: 12 * i + 9]) for i in range(n) if compiled.codes[i] not in (PERMANENT, HINGE)]
+    states = [list(y[d: d + 3]) for d in compiled.d_at if d >= 0]
+    return np.array([x for part in (*angles, *positions, *states) for x in part], dtype=float)
+
+
 def reference_posture(compiled: CompiledChain) -> np.ndarray:
     """The state (n_states,) whose bodies hold every joint at its reference posture, Theta_j
-    = Theta_ref [rad] (A_c = A_p A(Theta_ref), parents first; the ground's A_p = I), at rest;
-    X, V and D zero (:func:`place` puts the bodies on their joints)."""
+    = Theta_ref [rad] (A_c = A_p A(Theta_ref), parents first; the ground's A_p = I; a hinge's
+    A(Theta_ref) the rotation by a . Theta_ref about its axis a), at rest; X, V and D zero
+    (:func:`place` puts the bodies on their joints)."""
     y = np.zeros(compiled.n_states)
     rotations = []
     for i in range(compiled.size):
         a = rotation_matrix(compiled.params[i]["theta_ref"])
+        if compiled.codes[i] == HINGE:
+            axis = compiled.params[i]["axis"]
+            a = np.array(axis_rotation(tuple(axis), float(axis @ compiled.params[i]["theta_ref"])))
         q = int(compiled.parents[i])
         if q >= 0:
             a = rotations[q] @ a
         rotations.append(a)
-        y[12 * i: 12 * i + 3] = (math.atan2(-a[1, 2], a[2, 2]), math.asin(min(1.0, max(-1.0, a[0, 2]))),
-                                 math.atan2(-a[0, 1], a[0, 0]))  # as euler_angles reads them
+        y[12 * i: 12 * i + 3] = euler_angles_of(a)
     return y
 
 
@@ -1016,7 +1071,7 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
 def _place(compiled: CompiledChain, y: np.ndarray, only_permanent: bool = False) -> np.ndarray:
     """``y`` with every body's (``only_permanent``: every permanent joint's child's) X, V
     placed on its parent's point (E_j = F_j = 0), parents first."""
-    chosen = compiled.codes == PERMANENT if only_permanent else np.ones(compiled.size, dtype=bool)
+    chosen = compiled.permanent if only_permanent else np.ones(compiled.size, dtype=bool)
     return place(compiled, y, chosen, chosen)
 
 
@@ -1107,6 +1162,8 @@ def gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, l
                np.empty((n, 3)), np.empty(5))
     angles, parts = [], []
     for i in range(n):
+        if compiled.codes[i] == HINGE:  # no Euler angles
+            continue
         if compiled.codes[i] == PERMANENT:
             angles.append(joints[i, _THETA_J, 1])
             parts.append((i, True))
@@ -1162,7 +1219,7 @@ def bound_reached(compiled: CompiledChain, quantity: str, axis: int, part: int, 
 def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
     """(min over bodies, joints and axes of bound - |q| [the quantity's units], the quantity
     that reaches its bound first, in words) of ``simulation.limits``: Theta, Omega, X, V of
-    every body, E_j of every joint (not permanent); a run stops where it reaches 0."""
+    every body, E_j of every joint (not point-fixed); a run stops where it reaches 0."""
     n = compiled.size
     worst, what = math.inf, ""
     for k, block in enumerate(("theta", "omega", "position", "velocity")):
@@ -1177,7 +1234,7 @@ def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float
         joints = np.empty((n, 7, 3))
         chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)), np.empty(5))
         for j in range(n):
-            if compiled.codes[j] == PERMANENT:
+            if compiled.codes[j] in (PERMANENT, HINGE):
                 continue
             margin = bound - np.abs(joints[j, _E])
             axis = int(np.argmin(margin))

@@ -37,10 +37,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..jit import jit
-from ..kinematics import add, cross, matTvec, matvec, rotation_and_rate_of, sub, vector
+from ..kinematics import IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, rotation_and_rate_of, sub, vector
 from ..layout import REDUCED_STATES, VELOCITIES
 from .chain import (
     _OMEGA_J,
+    compose,
     _cholesky_solve,
     _THETA_J,
     CompiledChain,
@@ -51,7 +52,7 @@ from .chain import (
     chain_work,
     euler_angles,
 )
-from .kernels import PERMANENT
+from .kernels import HINGE, PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "tree_velocities",
            "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state"]
@@ -122,19 +123,20 @@ def tree_work(n, n_states):
 
 
 @jit(forceinline=True)
-def _compose(a_p, rel):
-    """A_p A_rel as a tuple of rows."""
-    return (
-        (a_p[0][0] * rel[0][0] + a_p[0][1] * rel[1][0] + a_p[0][2] * rel[2][0],
-         a_p[0][0] * rel[0][1] + a_p[0][1] * rel[1][1] + a_p[0][2] * rel[2][1],
-         a_p[0][0] * rel[0][2] + a_p[0][1] * rel[1][2] + a_p[0][2] * rel[2][2]),
-        (a_p[1][0] * rel[0][0] + a_p[1][1] * rel[1][0] + a_p[1][2] * rel[2][0],
-         a_p[1][0] * rel[0][1] + a_p[1][1] * rel[1][1] + a_p[1][2] * rel[2][1],
-         a_p[1][0] * rel[0][2] + a_p[1][1] * rel[1][2] + a_p[1][2] * rel[2][2]),
-        (a_p[2][0] * rel[0][0] + a_p[2][1] * rel[1][0] + a_p[2][2] * rel[2][0],
-         a_p[2][0] * rel[0][1] + a_p[2][1] * rel[1][1] + a_p[2][2] * rel[2][1],
-         a_p[2][0] * rel[0][2] + a_p[2][1] * rel[1][2] + a_p[2][2] * rel[2][2]),
-    )
+def point_fixed_code(code):
+    """Whether a joint of ``code`` holds its child's point by construction (its kind's
+    :attr:`rbstab.layout.JointKind.point_fixed`: the ball ``permanent`` and the hinge)."""
+    return code == PERMANENT or code == HINGE
+
+
+@jit(forceinline=True)
+def _column(a_i, code, axis, col):
+    """Column ``col`` of a point-fixed joint's motion subspace in the inertial frame: the
+    unit angular velocity A_i e_col of a ball's child (Omega_j's axis col), A_i a of a
+    hinge's (its axis ``axis``)."""
+    if code == HINGE:
+        return matvec(a_i, axis)
+    return (a_i[0][col], a_i[1][col], a_i[2][col])
 
 
 @jit(forceinline=True)
@@ -159,24 +161,30 @@ def _moment_row(second, i, r, cs, point, m, shift):
 def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, rot, rate, angles):
     """The maximal image ``y`` (12 n + 3 e,; the chain's layout) of the reduced state ``yr``,
     parents first; ``rot`` (n, 3, 3) receives each A_i and ``rate`` (n, 3, 3) the B of each
-    body's reduced angles (B(Theta_j) for a permanent joint's child, else B(Theta_i)). A
-    permanent joint's child (ground: A_p = I, Omega_p = V_p = 0, X_p + A_p R_p = R_p):
+    body's reduced angles (B(Theta_j) for a permanent joint's child, I for a hinge's, else
+    B(Theta_i)). A point-fixed joint's child (ground: A_p = I, Omega_p = V_p = 0, X_p + A_p
+    R_p = R_p; a hinge's A(Theta_j) is exp(q [a]x) and its Omega_j is a dq/dt):
 
         A_c = A_p A(Theta_j),  Omega_c = A_rel' Omega_p + Omega_j,
         X_c = X_p + A_p R_p - A_c R_c,  V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x R_c)
 
-    and Theta_c = Theta_j on the ground, else read from A_c (|theta_2| <= pi/2) where
+    and Theta_c = Theta_j on a permanent joint to the ground, else read from A_c (|theta_2| <= pi/2) where
     ``angles`` (the rate reads A_c, not Theta_c)."""
     n = codes.shape[0]
     for i in range(n):
         s = r_at[i]
-        if codes[i] != PERMANENT:
+        if not point_fixed_code(codes[i]):
             for k in range(12):
                 y[12 * i + k] = yr[s + k]
             a, b = rotation_and_rate_of(vector(yr, s))
         else:
-            rel, b = rotation_and_rate_of(vector(yr, s))
-            omega_j = vector(yr, s + 3)
+            if codes[i] == HINGE:  # A_rel = exp(q [a]x), Omega_j = a dq/dt
+                axis = vector(params[i].axis, 0)
+                rel, b = axis_rotation(axis, yr[s]), IDENTITY
+                omega_j = (yr[s + 1] * axis[0], yr[s + 1] * axis[1], yr[s + 1] * axis[2])
+            else:
+                rel, b = rotation_and_rate_of(vector(yr, s))
+                omega_j = vector(yr, s + 3)
             r_c, r_p = vector(params[i].attachment_point, 0), vector(ppoints[i], 0)
             q = parents[i]
             if q < 0:
@@ -186,11 +194,11 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
             else:
                 a_p = _rows(rot, q)
                 omega_p = vector(y, 12 * q + 3)
-                a = _compose(a_p, rel)
+                a = compose(a_p, rel)
                 omega = add(matTvec(rel, omega_p), omega_j)
                 point = add(vector(y, 12 * q + 6), matvec(a_p, r_p))
                 rate_p = add(vector(y, 12 * q + 9), matvec(a_p, cross(omega_p, r_p)))
-            if q < 0:
+            if q < 0 and codes[i] == PERMANENT:
                 _put(y, 12 * i, vector(yr, s))
             elif angles:
                 _put(y, 12 * i, euler_angles(a))
@@ -213,7 +221,7 @@ def _group_start(i, codes, parents, u_at):
     chain it to up to a body whose joint is not permanent (or the ground's child). Body i's
     rows of M are zero before it (parents come first in the body order)."""
     k = i
-    while codes[k] == PERMANENT and parents[k] >= 0:
+    while point_fixed_code(codes[k]) and parents[k] >= 0:
         k = parents[k]
     return u_at[k]
 
@@ -284,6 +292,9 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
     n = codes.shape[0]
     y, dy, cw = work.y, work.dy, work.chain
     tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
+    for i in range(n):
+        if codes[i] == HINGE:  # its q as the state holds it, beyond (-pi, pi] too
+            cw.angle[i] = yr[r_at[i]]
     _, _, work_power, _, _ = chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, cw.joints, cw.bodies,
                                             cw.scalars, cw, True)
     torque, force = cw.torque, cw.force
@@ -323,7 +334,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
     mass, first, second, f_net, n_net = work.mass, work.first, work.second, work.force, work.moment
     # kappa_i, outward: each body's (dOmega_i/dt, dV_i/dt) at du/dt = 0
     for i in range(n):
-        if codes[i] != PERMANENT:
+        if not point_fixed_code(codes[i]):
             for r in range(6):
                 kappa[i, r] = 0.0
             continue
@@ -332,6 +343,9 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
         a_c = _rows(rot, i)
         omega_c = vector(y, 12 * i + 3)
         omega_j = vector(yr, r_at[i] + 3)
+        if codes[i] == HINGE:  # a dq/dt: a is fixed in the child's frame
+            rate_q = yr[r_at[i] + 1]
+            omega_j = (rate_q * params[i].axis[0], rate_q * params[i].axis[1], rate_q * params[i].axis[2])
         dw_c = cross(omega_c, omega_j)
         dv_c = (0.0, 0.0, 0.0)
         if q >= 0:
@@ -367,7 +381,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
         _put(n_net[i], 0, add(tau, cross(x, rf)))
     for i in range(n - 1, -1, -1):
         q = parents[i]
-        if codes[i] == PERMANENT and q >= 0:
+        if point_fixed_code(codes[i]) and q >= 0:
             mass[q] += mass[i]
             for r in range(3):
                 first[q, r] += first[i, r]
@@ -389,8 +403,10 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
     for i in range(n):
         at = u_at[i]
         a_i = _rows(rot, i)
+        axis_i = vector(params[i].axis, 0)
+        fixed = point_fixed_code(codes[i])
         point = vector(y, 12 * i + 6)
-        if codes[i] == PERMANENT:
+        if fixed:
             point = add(point, matvec(a_i, vector(params[i].attachment_point, 0)))
         m = mass[i]
         c = sub(vector(first[i], 0), (m * point[0], m * point[1], m * point[2]))  # first moment about P
@@ -400,33 +416,33 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
         moment_p = sub(vector(n_net[i], 0), cross(point, vector(f_net[i], 0)))  # residual moment about P
         inertia_p = (_moment_row(second, i, 0, cs, point, m, shift), _moment_row(second, i, 1, cs, point, m, shift),
                      _moment_row(second, i, 2, cs, point, m, shift))
-        for col in range(3):
-            e = (a_i[0][col], a_i[1][col], a_i[2][col])
+        for col in range(VELOCITIES[codes[i]] if fixed else 3):  # the rotational columns
+            e = _column(a_i, codes[i], axis_i, col)
             f = cross(e, c)
             inertia_e = matvec(inertia_p, e)
             row = at + col
-            rhs[row] = e[0] * moment_p[0] + e[1] * moment_p[1] + e[2] * moment_p[2]
+            rhs[row] = dot(e, moment_p)
             for col2 in range(col + 1):
-                matrix[row, at + col2] = (a_i[0][col2] * inertia_e[0] + a_i[1][col2] * inertia_e[1]
-                                          + a_i[2][col2] * inertia_e[2])
-            if codes[i] != PERMANENT:
+                matrix[row, at + col2] = dot(_column(a_i, codes[i], axis_i, col2), inertia_e)
+            if not fixed:
                 for l in range(3):
                     matrix[at + 3 + l, row] = f[l]
             k = i
-            while codes[k] == PERMANENT and parents[k] >= 0:
+            while point_fixed_code(codes[k]) and parents[k] >= 0:
                 k = parents[k]
                 a_k = _rows(rot, k)
+                axis_k = vector(params[k].axis, 0)
+                fixed_k = point_fixed_code(codes[k])
                 point_k = vector(y, 12 * k + 6)
-                if codes[k] == PERMANENT:
+                if fixed_k:
                     point_k = add(point_k, matvec(a_k, vector(params[k].attachment_point, 0)))
                 moment_k = add(inertia_e, cross(sub(point, point_k), f))
-                for col2 in range(3):
-                    matrix[row, u_at[k] + col2] = (a_k[0][col2] * moment_k[0] + a_k[1][col2] * moment_k[1]
-                                                   + a_k[2][col2] * moment_k[2])
-                if codes[k] != PERMANENT:
+                for col2 in range(VELOCITIES[codes[k]] if fixed_k else 3):
+                    matrix[row, u_at[k] + col2] = dot(_column(a_k, codes[k], axis_k, col2), moment_k)
+                if not fixed_k:
                     for l in range(3):
                         matrix[row, u_at[k] + 3 + l] = f[l]
-        if codes[i] != PERMANENT:
+        if not fixed:
             for l in range(3):
                 rhs[at + 3 + l] = f_net[i, l]
                 for l2 in range(l + 1):
@@ -440,7 +456,10 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
         _envelope_cholesky_solve(matrix, rhs, codes, u_at, start)
     for i in range(n):
         at, u = r_at[i], u_at[i]
-        if codes[i] == PERMANENT:
+        if codes[i] == HINGE:
+            dyr[at] = yr[at + 1]
+            dyr[at + 1] = rhs[u]
+        elif codes[i] == PERMANENT:
             _put(dyr, at, matvec(_rows(cw.rate, i), vector(yr, at + 3)))
             for k in range(3):
                 dyr[at + 3 + k] = rhs[u + k]
@@ -453,14 +472,15 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
 
 
 @jit(_nrt=False)
-def tree_velocities(y, codes, parents, r_at, yr):
+def tree_velocities(y, params, codes, parents, r_at, yr):
     """Write the generalised velocities of the maximal state ``y`` (12 n + 3 e,) into the
     reduced state ``yr`` (n_r,; ``r_at`` its layout): Omega_j = Omega_c - A_rel' Omega_p
-    [rad/s, child frame] of a permanent joint's child (ground: its Omega), Omega [rad/s, body
-    frame] and V [m/s, inertial] of every other body; its configuration is left as it is."""
+    [rad/s, child frame] of a permanent joint's child (ground: its Omega), a . Omega_j of a
+    hinge's (``params``: the records, its axis a), Omega [rad/s, body frame] and V [m/s,
+    inertial] of every other body; its configuration is left as it is."""
     for i in range(codes.shape[0]):
         at = r_at[i]
-        if codes[i] != PERMANENT:
+        if not point_fixed_code(codes[i]):
             for k in range(3):
                 yr[at + 3 + k] = y[12 * i + 3 + k]
                 yr[at + 9 + k] = y[12 * i + 9 + k]
@@ -470,7 +490,10 @@ def tree_velocities(y, codes, parents, r_at, yr):
         if q >= 0:
             rel = _relative(rotation_and_rate_of(vector(y, 12 * q))[0], rotation_and_rate_of(vector(y, 12 * i))[0])
             omega = sub(omega, matTvec(rel, vector(y, 12 * q + 3)))
-        _put(yr, at + 3, omega)
+        if codes[i] == HINGE:
+            yr[at + 1] = dot(vector(params[i].axis, 0), omega)
+        else:
+            _put(yr, at + 3, omega)
 
 
 @jit
@@ -481,7 +504,7 @@ def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, r
     rot, rate = np.empty((codes.shape[0], 3, 3)), np.empty((codes.shape[0], 3, 3))
     permanent = False
     for i in range(codes.shape[0]):
-        permanent = permanent or codes[i] == PERMANENT
+        permanent = permanent or point_fixed_code(codes[i])
     if not permanent:  # the two layouts are one
         out[:] = samples
         return
@@ -529,7 +552,7 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
     n = codes.shape[0]
     permanent = False
     for i in range(n):
-        permanent = permanent or codes[i] == PERMANENT
+        permanent = permanent or point_fixed_code(codes[i])
     joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
     dy, work = np.empty(y.shape[1]), chain_work(n)
     for a in range(y.shape[0]):
@@ -538,7 +561,11 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
             chain_evaluate(0.0, y[a], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies, scalars, work)
         for i in range(n):
             at = r_at[i]
-            if codes[i] == PERMANENT:
+            if codes[i] == HINGE:  # Theta_j = q a, Omega_j = a dq/dt
+                axis = vector(params[tree_of[a], i].axis, 0)
+                out[a, at] = dot(axis, vector(joints[i, _THETA_J], 0))
+                out[a, at + 1] = dot(axis, vector(joints[i, _OMEGA_J], 0))
+            elif codes[i] == PERMANENT:
                 for c in range(3):
                     out[a, at + c] = joints[i, _THETA_J, c]
                     out[a, at + 3 + c] = joints[i, _OMEGA_J, c]

@@ -1,0 +1,229 @@
+"""The hinge joint (``variant: hinge``, docs/physics.md "Joint kinds"): a row of the joint-kind
+table whose child is carried by one angle q about an axis a and its rate u (S = a), its
+feedback -k (q - q_ref) - l u about a delivered between asymmetric limits, and a passive
+torque of that form. Checked against MuJoCo's hinges (springs, dampers, springref, position
+servos with a forcerange) on trees with oblique axes, against the ball joint it equals in
+planar motion, against a closed-form balance, and against v's own bookkeeping."""
+
+from __future__ import annotations
+
+import copy
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from rbstab.config import ConfigError, config_from_mapping
+from rbstab.simulator import simulate
+from rbstab.variants import chain as C
+
+INERTIA = [0.08, 0.07, 0.02]  # kg m^2, about each body's centre of mass
+CHILD_POINT = [0.0, 0.02, 0.5]  # m: each joint's point C, above the body's centre of mass
+PARENT_POINT = [0.05, 0.0, -0.5]  # m: where the next body hangs, below the parent's centre of mass
+AXES = [[1.0, 0.3, -0.2], [0.2, 1.0, 0.5], [-0.4, 0.1, 1.0]]  # not unit: normalised by the loader
+
+
+def _hinges(k, l, q_ref, q0, u0, t_end=2.0, n_samples=11):
+    """Three bodies hanging from the ground on hinges about the oblique ``AXES``, joint i
+    with spring ``k[i]``, damper ``l[i]`` and reference ``q_ref[i]``, released at q0, u0."""
+    names = [f"b{i}" for i in range(3)]
+    return {
+        "name": "hinges", "gravity": [0.0, 0.0, -9.81],
+        "bodies": [{"name": b, "mass": 1.0 + 0.2 * i, "inertia": INERTIA} for i, b in enumerate(names)],
+        "joints": [{"name": f"j{i}", "parent": "ground" if i == 0 else names[i - 1],
+                    "parent_point": [0.0, 0.0, 0.0] if i == 0 else PARENT_POINT, "child": b,
+                    "child_point": CHILD_POINT, "variant": "hinge", "axis": AXES[i], "k_r": k[i], "l_r": l[i],
+                    "theta_ref": q_ref[i]} for i, b in enumerate(names)],
+        "initial_state": {b: {"q": q0[i], "u": u0[i]} for i, b in enumerate(names)},
+        "simulation": {"t_end": t_end, "n_samples": n_samples, "method": "DOP853", "rtol": 1e-11, "atol": 1e-12},
+    }
+
+
+def _mujoco_hinges(mujoco, k, l, q_ref, servos=(), dt=1e-4):
+    """MuJoCo's model of :func:`_hinges` (each body's frame at its joint's point, unrotated:
+    q = 0 is rbstab's), with a position servo (joint, kp, kv, target, lower, upper) each."""
+    def vec(x):
+        return " ".join(map(repr, map(float, x)))
+
+    def body(i):
+        pos = np.zeros(3) if i == 0 else np.subtract(PARENT_POINT, CHILD_POINT)
+        inner = body(i + 1) if i < 2 else ""
+        return (f'<body name="b{i}" pos="{vec(pos)}"><joint name="j{i}" type="hinge" axis="{vec(AXES[i])}" '
+                f'stiffness="{k[i]}" damping="{l[i]}" springref="{q_ref[i]}"/>'
+                f'<inertial pos="{vec(np.negative(CHILD_POINT))}" mass="{1.0 + 0.2 * i}" diaginertia="{vec(INERTIA)}"/>'
+                f"{inner}</body>")
+
+    actuators = "".join(f'<position joint="j{j}" kp="{kp}" kv="{kv}" forcelimited="true" forcerange="{lo} {hi}"/>'
+                        for j, kp, kv, _, lo, hi in servos)
+    xml = (f'<mujoco><compiler angle="radian"/><option gravity="0 0 -9.81" timestep="{dt}" integrator="RK4"/>'
+           f"<worldbody>{body(0)}</worldbody><actuator>{actuators}</actuator></mujoco>")
+    model = mujoco.MjModel.from_xml_string(xml)
+    return model, mujoco.MjData(model)
+
+
+def _follow(mujoco, model, state, result, q0, u0, dt=1e-4):
+    """The largest distance [m] between rbstab's and MuJoCo's centres of mass at the samples."""
+    state.qpos[:], state.qvel[:] = q0, u0
+    mujoco.mj_forward(model, state)
+    worst = 0.0
+    for s, t in enumerate(result.time):
+        if s:
+            mujoco.mj_step(model, state, nstep=int(round((t - result.time[s - 1]) / dt)))
+        worst = max(worst, float(np.abs(result.outputs["position"][s] - state.xipos[1:]).max()))
+    return worst
+
+
+def test_a_tree_of_oblique_hinges_moves_as_mujocos():
+    """Springs, dampers and reference angles about three oblique axes, under gravity: every
+    centre of mass follows MuJoCo's (RK4 at 1e-4 s) to 1e-6 m over 2 s, each joint's
+    Theta_j is q a and Omega_j is a dq/dt, and v falls with its analytic rate."""
+    mujoco = pytest.importorskip("mujoco")
+    k, l, q_ref, q0, u0 = [3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5]
+    result = simulate(config_from_mapping(_hinges(k, l, q_ref, q0, u0, n_samples=2001)))
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    out = result.outputs
+    axes = np.array(AXES) / np.linalg.norm(AXES, axis=1, keepdims=True)
+    np.testing.assert_allclose(out["joint_theta"][0], np.array(q0)[:, None] * axes, atol=1e-12)
+    np.testing.assert_allclose(out["joint_omega"][0], np.array(u0)[:, None] * axes, atol=1e-12)
+    assert np.all(np.diff(out["lyapunov"]) <= 1e-10)
+    model, state = _mujoco_hinges(mujoco, k, l, q_ref)
+    assert _follow(mujoco, model, state, result, q0, u0) < 1e-6
+
+
+@pytest.mark.parametrize("lower, upper", [(-0.6, 0.6), (-0.3, 1.2)])
+def test_hinge_servos_that_saturate_move_as_mujocos(lower, upper):
+    """Each joint a ligament (passive spring and damper, never limited) and a muscle (a
+    feedback toward its own target, clipped to [lower, upper] N m about the oblique axis,
+    which it reaches): MuJoCo's hinges with a ``position`` servo's kv and forcerange, to
+    1e-6 m; the saturation flags mark the axis components of a limited hinge together."""
+    mujoco = pytest.importorskip("mujoco")
+    k, l, q_ref, q0, u0 = [1.0, 0.5, 0.3], [0.05, 0.05, 0.02], [0.1, 0.0, -0.2], [0.6, -0.5, 0.7], [0.0, 1.0, 0.0]
+    servos = [(0, 6.0, 0.4, -0.3, lower, upper), (1, 4.0, 0.3, 0.4, lower, upper)]
+    data = _hinges([0.0] * 3, [0.0] * 3, [0.0] * 3, q0, u0, n_samples=2001)
+    for joint, kk, ll, ref in zip(data["joints"], k, l, q_ref):
+        joint["passive"] = {"k_r": kk, "l_r": ll, "theta_ref": ref}
+    for j, kp, kv, target, lo, hi in servos:
+        data["joints"][j].update(k_r=kp, l_r=kv, theta_ref=target, saturation={"torque_n": hi, "torque_n_lower": lo})
+    result = simulate(config_from_mapping(data))
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    flags = result.outputs["torque_n_saturated"]
+    assert flags[:, :2].any() and not flags[:, 2].any()
+    assert np.all(flags[:, :2] == flags[:, :2, :1])  # every component of a hinge's torque at once
+    model, state = _mujoco_hinges(mujoco, k, l, q_ref, servos)
+    state.ctrl[:] = [target for _, _, _, target, _, _ in servos]
+    assert _follow(mujoco, model, state, result, q0, u0) < 1e-6
+
+
+def test_a_hinge_is_the_ball_it_equals_in_planar_motion():
+    """Two rods on hinges about x move as the same rods on ball joints with isotropic gains
+    released in the y-z plane (whose motion stays there): the same centres of mass, joint
+    angles, torques and v."""
+    hinges = _hinges([4.0, 2.0, 1.0], [0.3, 0.2, 0.1], [0.2, -0.1, 0.0], [0.4, -0.3, 0.2], [0.5, 0.0, -0.2],
+                     n_samples=51)
+    balls = copy.deepcopy(hinges)
+    for joint in (*hinges["joints"], *balls["joints"]):
+        joint["axis"], joint["child_point"] = [2.0, 0.0, 0.0], [0.0, 0.0, 0.5]
+        joint["parent_point"] = joint["parent_point"] if joint["parent"] == "ground" else [0.0, 0.0, -0.5]
+    angles = np.cumsum([s["q"] for s in hinges["initial_state"].values()])
+    rates = np.cumsum([s["u"] for s in hinges["initial_state"].values()])
+    for joint in balls["joints"]:
+        joint.pop("axis")
+        joint.update(variant="permanent", k_r=[joint["k_r"]] * 3, l_r=[joint["l_r"]] * 3,
+                     theta_ref=[joint["theta_ref"], 0.0, 0.0])
+    balls["initial_state"] = {b: {"theta": [float(a), 0.0, 0.0], "omega": [float(w), 0.0, 0.0]}
+                              for b, a, w in zip(hinges["initial_state"], angles, rates)}
+    one, other = simulate(config_from_mapping(hinges)), simulate(config_from_mapping(balls))
+    for key in ("position", "velocity", "joint_theta", "joint_omega", "torque_n", "lyapunov", "lyapunov_rate"):
+        scale = max(1.0, float(np.abs(other.outputs[key]).max()))
+        np.testing.assert_allclose(one.outputs[key], other.outputs[key], rtol=0, atol=1e-8 * scale, err_msg=key)
+
+
+def test_a_hanging_rod_on_a_hinge_rests_where_its_spring_balances_gravity():
+    """One rod on a hinge about x, its spring relaxed at q_ref: the rest state is the root of
+    k (q - q_ref) + m g d sin(q) = 0 (d = 0.5 m to its centre of mass), v is zero there, and
+    a damped run settles on it; undamped, v stays constant."""
+    k, q_ref, m, g, d = 4.0, 1.1, 1.0, 9.81, 0.5
+    data = _hinges([k] * 3, [2.0] * 3, [q_ref] * 3, [0.0] * 3, [0.0] * 3, t_end=30.0, n_samples=301)
+    data["bodies"], data["joints"] = data["bodies"][:1], data["joints"][:1]
+    data["bodies"][0]["mass"] = m
+    data["joints"][0].update(axis=[1.0, 0.0, 0.0], child_point=[0.0, 0.0, d])
+    data["initial_state"] = {"b0": {"q": 0.0}}
+    balance = brentq(lambda q: k * (q - q_ref) + m * g * d * math.sin(q), 0.0, q_ref)
+    config = config_from_mapping(data)
+    compiled = C.compile_chain(config.chain)
+    y, _ = C.rest_state(compiled)
+    assert C.rest_coordinates(compiled, y) == pytest.approx([balance], abs=1e-9)
+    assert C.lyapunov(compiled, y)[0] == pytest.approx(0.0, abs=1e-12)
+    result = simulate(config)
+    np.testing.assert_allclose(result.outputs["joint_theta"][-1, 0], [balance, 0.0, 0.0], atol=1e-6)
+    assert result.outputs["lyapunov"][-1] == pytest.approx(0.0, abs=1e-9)
+    data["joints"][0]["l_r"] = 0.0
+    undamped = simulate(config_from_mapping(data)).outputs
+    assert np.ptp(undamped["lyapunov"]) < 1e-8 * np.abs(undamped["lyapunov_rotational"]).max()
+
+
+def test_a_hinge_sweep_gives_each_runs_own_result(tmp_path):
+    """A sweep over a hinge's gain and its child's initial angle (the bodies it carries turn
+    with it) gives each run the figures its own config gives."""
+    import pandas as pd
+
+    from rbstab.sweep import run_sweep, spec_from_mapping
+
+    data = _hinges([3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5],
+                   n_samples=21)
+    grid = {"joints.j1.k_r": [1.0, 4.0], "initial_state.b0.q": [0.1, -0.6]}
+    run_sweep(spec_from_mapping({"name": "hinges", "base": data, "grid": grid}), tmp_path, jobs=1, progress=False)
+    index = pd.read_csv(tmp_path / "hinges" / "index.csv")
+    assert len(index) == 4 and set(index["status"]) == {"success"}
+    for _, row in index.iterrows():
+        changed = copy.deepcopy(data)
+        changed["joints"][1]["k_r"] = float(row["j1_k_r"])
+        changed["initial_state"]["b0"]["q"] = float(row["b0_q"])
+        alone = simulate(config_from_mapping(changed)).summary
+        assert row["lyapunov_final"] == pytest.approx(alone["lyapunov_final"], rel=1e-12)
+        final = [row[f"final_position_b2_{axis}"] for axis in "xyz"]
+        np.testing.assert_allclose(final, np.asarray(alone["final_position"])[2], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("change, key, expected", [
+    (lambda d: d["joints"][1].update(axis=[0, 0, 0]), "joints.1.axis", "zero length"),
+    (lambda d: d["joints"][1].pop("axis"), "joints.1.axis", "missing"),
+    (lambda d: d["joints"][1].update(k_r=[1.0, 2.0, 3.0]), "joints.1.k_r", "a number"),
+    (lambda d: d["joints"][1].update(k_r=-1.0), "joints.1.k_r", ">= 0"),
+    (lambda d: d["joints"][1].update(theta_ref=[0.1, 0.0, 0.0]), "joints.1.theta_ref", "a number"),
+    (lambda d: d["joints"][1].update(saturation={"torque_n": [1.0, 1.0, 1.0]}), "joints.1.saturation.torque_n",
+     "a number"),
+    (lambda d: d["joints"][1].update(variant="permanent", k_r=2.0), "joints.1.axis", "no axis"),
+    (lambda d: d["joints"][1].update(variant="permanent", k_r=2.0) or d["joints"][1].pop("axis"),
+     "joints.1.k_r", "a single number is a hinge's"),
+    (lambda d: d["initial_state"]["b1"].update(theta=[0.1, 0.0, 0.0]), "initial_state.b1.theta", "a hinge's child"),
+    (lambda d: d["initial_state"]["b1"].update(q=4.0), "initial_state.b1.q", "(-pi, pi)"),
+    (lambda d: d.update(disturbances=[{"body": "b2", "kind": "impulse", "value": [1, 0, 0], "start": 0.5}]),
+     "disturbances.0.kind", "a tree with a hinge"),
+])
+def test_a_hinges_bad_input_is_refused_in_one_line_naming_its_key(change, key, expected):
+    data = _hinges([3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5])
+    change(data)
+    with pytest.raises(ConfigError) as raised:
+        config_from_mapping(data)
+    message = str(raised.value)
+    assert key in message.replace("joints.j1.", "joints.1.") and expected in message, message
+
+
+def test_a_ball_jointed_body_has_no_hinge_angle():
+    data = _hinges([3.0] * 3, [0.1] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3)
+    data["joints"][2].update(variant="permanent", k_r=[1.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0] * 3)
+    data["joints"][2].pop("axis")
+    with pytest.raises(ConfigError, match="initial_state.b2.q.*not a hinge's child"):
+        config_from_mapping(data)
+    data["initial_state"]["b2"] = {"theta": [0.1, 0.2, 0.0]}
+    assert simulate(config_from_mapping(data)).status == "success"  # hinges and a ball in one tree
+
+
+def test_a_tree_with_a_hinge_is_not_analysed_but_says_so():
+    from rbstab.analysis.analyze import analysed_config
+
+    config = config_from_mapping(_hinges([3.0] * 3, [0.1] * 3, [0.0] * 3, [0.1] * 3, [0.0] * 3))
+    with pytest.raises(ValueError, match="joint 'j0' is a hinge"):
+        analysed_config(config)
