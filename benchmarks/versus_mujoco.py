@@ -1,4 +1,5 @@
-"""The double pendulum against MuJoCo: what a run costs each engine, side by side.
+"""The double pendulum and the hinged stance against MuJoCo: what a run costs each engine,
+side by side.
 
 ``configs/examples/double_pendulum.yaml`` (two rods on ball joints, gravity, no feedback),
 2 s from its initial state. Prints, best of 5 (one process, warm caches):
@@ -13,6 +14,10 @@
   2,000 runs in one process (:func:`rbstab.simulator.simulate_many`, as a sweep's worker runs them);
 - the ratio rbstab / MuJoCo a run, and each engine's largest distance [m] of a centre of mass
   at t = 2 s from an rbstab run at rtol 1e-12 (its accuracy at those settings).
+
+The same for ``configs/examples/stance_hinges.yaml`` (three hinges, the feedback as MuJoCo's
+position servos, the ankle's clamped to its forcerange, the knee's ligaments as its stiffness
+and damping: :func:`reference_mujoco.hinge_tree`), 2 s from its initial state.
 
 Run: python benchmarks/versus_mujoco.py  (MuJoCo: pip install -e ".[test]")
 """
@@ -35,7 +40,7 @@ from rbstab.variants import chain as C
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
-from reference_mujoco import double_pendulum  # noqa: E402  (MuJoCo's model of the example)
+from reference_mujoco import double_pendulum, hinge_tree  # noqa: E402  (MuJoCo's models of the examples)
 
 T_END = 2.0
 DT = 2e-3
@@ -53,11 +58,11 @@ def _best(f, repeat=5) -> float:
     return min(times)
 
 
-def rbstab_run(rtol: float, k: int = 1):
-    """(a function integrating k runs, the centres of mass at t_end (2, 3))."""
+def rbstab_run(rtol: float, k: int = 1, example: str = "double_pendulum"):
+    """(a function integrating k runs, the centres of mass at t_end (n, 3), the config)."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        config = load_config(ROOT / "configs" / "examples" / "double_pendulum.yaml",
+        config = load_config(ROOT / "configs" / "examples" / f"{example}.yaml",
                                  [f"simulation.t_end={T_END}", "simulation.n_samples=2", f"simulation.rtol={rtol}",
                                   f"simulation.atol={rtol * 1e-2}"])
     compiled = C.compile_chain(config.chain)
@@ -69,23 +74,29 @@ def rbstab_run(rtol: float, k: int = 1):
     def run():
         return integrate_chain_runs(system, y0, rows, method="DOP853", n_samples=2)
 
-    final = run().samples[0, -1]
-    return run, np.array([final[6:9], final[18:21]]), config
+    final = run().samples[0, -1, : 12 * compiled.size].reshape(-1, 12)[:, 6:9]  # the maximal image: X of each body
+    return run, final, config
 
 
-def mujoco_run(config):
-    """(a function running MuJoCo's RK4 over 2 s, the centres of mass at t_end (2, 3))."""
-    model, data, start = double_pendulum(config, DT)
+def mujoco_run(config, hinges: bool = False):
+    """(a function running MuJoCo's RK4 over 2 s, the centres of mass at t_end (n, 3))."""
+    if hinges:
+        model, data, start, rate = hinge_tree(config, DT)
+        ctrl = data.ctrl.copy()
+    else:
+        (model, data, start), rate, ctrl = double_pendulum(config, DT), 0.0, None
     steps = int(round(T_END / DT))
 
     def run():
         mujoco.mj_resetData(model, data)
-        data.qpos[:] = start
+        data.qpos[:], data.qvel[:] = start, rate
+        if ctrl is not None:
+            data.ctrl[:] = ctrl
         mujoco.mj_forward(model, data)
         mujoco.mj_step(model, data, nstep=steps)
 
     run()
-    return run, data.xipos[1:3].copy()
+    return run, data.xipos[1:].copy()
 
 
 def main() -> None:
@@ -110,6 +121,18 @@ def main() -> None:
     swept = _best(lambda: sum(1 for _ in simulate_many([whole_config] * SWEEP, full=False)), repeat=2) / SWEEP
     print(f"  in a sweep of {SWEEP} runs in one process (outputs at 201 samples, summary): {1e3 * swept:.3f} ms a run, "
           f"{swept / theirs:.2f}x MuJoCo")
+    print(f"  largest distance of a centre of mass at t = 2 s from rbstab at rtol 1e-12: rbstab "
+          f"{np.abs(final - reference).max():.2g} m, MuJoCo {np.abs(mj_final - reference).max():.2g} m")
+
+    run, final, config = rbstab_run(1e-8, example="stance_hinges")
+    _, reference, _ = rbstab_run(1e-12, example="stance_hinges")
+    batch, _, _ = rbstab_run(1e-8, k=100, example="stance_hinges")
+    mj, mj_final = mujoco_run(config, hinges=True)
+    ours, theirs = _best(run), _best(mj)
+    per_run_batch = _best(batch) / 100
+    print(f"hinged stance (3 hinges, clamped ankle servo), 2 s: MuJoCo RK4 dt {DT:g}: {1e3 * theirs:.3f} ms a run; "
+          f"rbstab DOP853 rtol 1e-8: {1e3 * ours:.3f} ms a run ({1e3 * per_run_batch:.3f} ms a run in calls of 100)")
+    print(f"  ratio rbstab / MuJoCo: {ours / theirs:.2f} ({per_run_batch / theirs:.2f} in calls of 100)")
     print(f"  largest distance of a centre of mass at t = 2 s from rbstab at rtol 1e-12: rbstab "
           f"{np.abs(final - reference).max():.2g} m, MuJoCo {np.abs(mj_final - reference).max():.2g} m")
 

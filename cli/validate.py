@@ -55,7 +55,8 @@ def _check_config(path: str, overrides) -> dict:
 
 
 def _chain_record(chain) -> dict:
-    """A chain's bodies and joints, JSON-able, parents by name (``ground``: the inertial frame)."""
+    """A chain's bodies and joints, JSON-able, parents by name (``ground``: the inertial frame); a
+    hinge's unit axis and its reference angle q_ref [rad]."""
     from rbstab.chain import GROUND  # heavy: numpy
 
     names = chain.body_names
@@ -63,15 +64,17 @@ def _chain_record(chain) -> dict:
         "bodies": [{"name": b.name, "mass": b.mass} for b in chain.bodies],
         "joints": [{"name": j.name, "parent": "ground" if j.parent == GROUND else names[j.parent],
                     "child": names[j.child], "variant": j.variant, "parent_point": j.parent_point.tolist(),
-                    "child_point": j.child_point.tolist(), "theta_ref": j.theta_ref.tolist(),
+                    "child_point": j.child_point.tolist(),
+                    **({"axis": j.axis.tolist(), "theta_ref": float(j.axis @ j.theta_ref)} if j.variant == "hinge"
+                       else {"theta_ref": j.theta_ref.tolist()}),
                     "passive": j.passive is not None} for j in chain.joints],
     }
 
 
 def _tree(chain: dict) -> list[str]:
     """The chain as an indented tree, one line a joint: parent -> child (its mass): the
-    joint's name, variant and points (the parent's, the child's C) [m], its reference
-    posture [rad] where it has one and whether it has a passive torque."""
+    joint's name, variant (a hinge's with its axis) and points (the parent's, the child's C)
+    [m], its reference posture [rad] where it has one and whether it has a passive torque."""
     mass = {b["name"]: b["mass"] for b in chain["bodies"]}
     children: dict[str, list[dict]] = {}
     for joint in chain["joints"]:
@@ -84,9 +87,15 @@ def _tree(chain: dict) -> list[str]:
 
     def walk(parent: str, depth: int) -> None:
         for j in children.get(parent, ()):
+            reference = j.get("theta_ref")
+            if isinstance(reference, (int, float)):  # a hinge's angle
+                reference = f"{reference:g}" if reference else None
+            elif reference is not None:
+                reference = point(reference) if any(reference) else None
+            kind = f"hinge about {point(j['axis'])}" if j["variant"] == "hinge" else j["variant"]
             lines.append(f"{'  ' * depth}{parent} -> {j['child']} ({mass[j['child']]:g} kg): {j['name']}, "
-                         f"{j['variant']}, {point(j['parent_point'])} -> {point(j['child_point'])} m"
-                         + (f", theta_ref {point(j['theta_ref'])} rad" if any(j.get("theta_ref") or ()) else "")
+                         f"{kind}, {point(j['parent_point'])} -> {point(j['child_point'])} m"
+                         + (f", theta_ref {reference} rad" if reference else "")
                          + (", passive torque" if j.get("passive") else ""))
             walk(j["child"], depth + 1)
 

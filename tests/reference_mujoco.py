@@ -1,5 +1,6 @@
-"""MuJoCo's model of ``configs/examples/double_pendulum.yaml``: an independent reference for
-rbstab's chains (tests/test_chains.py) and the side-by-side timing of
+"""MuJoCo's model of ``configs/examples/double_pendulum.yaml`` and of a tree of hinges (from
+its config's resolved sections alone): independent references for rbstab's chains
+(tests/test_chains.py, tests/test_hinge.py) and the side-by-side timing of
 benchmarks/versus_mujoco.py. MuJoCo is a test dependency (pip install -e ".[test]")."""
 
 from __future__ import annotations
@@ -31,3 +32,61 @@ def double_pendulum(config, timestep: float):
     for k, a in enumerate((a1, a1.T @ a2)):
         mujoco.mju_mat2Quat(qpos0[4 * k: 4 * k + 4], a.flatten())
     return model, data, qpos0
+
+
+def hinge_tree(config, timestep: float):
+    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges, built
+    from its resolved sections alone: each body's frame at its joint's point, unrotated (q =
+    0 is rbstab's), its centre of mass at -child_point with the full inertia; each hinge's
+    ``axis``, its passive torque as the joint's ``stiffness``, ``damping`` and ``springref``,
+    its feedback as a ``position`` servo (kp = k_r, kv = l_r, the target theta_ref set in
+    ``data.ctrl``) whose force is clamped to [torque_n_lower, torque_n] where it has
+    limits; gravity as the config's; MuJoCo's RK4 at ``timestep`` [s]. qpos0, qvel0: the
+    initial q, u of each joint (0 where not written)."""
+    data = config.resolved
+    bodies = {b["name"]: b for b in data["bodies"]}
+    joints = {j["child"]: j for j in data["joints"]}
+    children: dict[str, list[str]] = {}
+    for j in data["joints"]:
+        children.setdefault(j["parent"], []).append(j["child"])
+
+    def vec(x):
+        return " ".join(repr(float(v)) for v in np.ravel(x))
+
+    def body(name):
+        j, b = joints[name], bodies[name]
+        assert j["variant"] == "hinge", j["variant"]
+        pos = np.asarray(j["parent_point"], dtype=float)
+        if j["parent"] != "ground":  # the parent's frame sits at its own joint's point
+            pos = pos - np.asarray(joints[j["parent"]]["child_point"], dtype=float)
+        inertia = np.asarray(b["inertia"], dtype=float)
+        inertia = np.diag(inertia) if inertia.ndim == 1 else inertia
+        passive = j.get("passive") or {}
+        inner = "".join(body(c) for c in children.get(name, ()))
+        return (f'<body name="{name}" pos="{vec(pos)}"><joint name="{j["name"]}" type="hinge" axis="{vec(j["axis"])}" '
+                f'stiffness="{passive.get("k_r", 0.0)}" damping="{passive.get("l_r", 0.0)}" '
+                f'springref="{passive.get("theta_ref", 0.0)}"/>'
+                f'<inertial pos="{vec(np.negative(j["child_point"]))}" mass="{b["mass"]}" '
+                f'fullinertia="{vec([inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]])}"/>'
+                f"{inner}</body>")
+
+    actuators = ""
+    for j in data["joints"]:
+        limits = j.get("saturation") or {}
+        upper = limits.get("torque_n", float("inf"))
+        lower = limits.get("torque_n_lower", -upper)
+        clamp = (f' forcelimited="true" forcerange="{lower} {upper}"' if np.isfinite(upper) or np.isfinite(lower)
+                 else "")
+        actuators += f'<position joint="{j["name"]}" kp="{j.get("k_r", 0.0)}" kv="{j.get("l_r", 0.0)}"{clamp}/>'
+    xml = (f'<mujoco><compiler angle="radian"/><option gravity="{vec(data["gravity"])}" timestep="{timestep}" '
+           f'integrator="RK4"/><worldbody>{"".join(body(c) for c in children["ground"])}</worldbody>'
+           f"<actuator>{actuators}</actuator></mujoco>")
+    model = mujoco.MjModel.from_xml_string(xml)
+    state = mujoco.MjData(model)
+    state.ctrl[:] = [j.get("theta_ref", 0.0) for j in data["joints"]]
+    order = [model.joint(j["name"]).qposadr[0] for j in data["joints"]]
+    qpos0, qvel0 = np.zeros(model.nq), np.zeros(model.nv)
+    for j, at in zip(data["joints"], order):
+        written = data["initial_state"].get(j["child"]) or {}
+        qpos0[at], qvel0[at] = written.get("q", 0.0), written.get("u", 0.0)
+    return model, state, qpos0, qvel0

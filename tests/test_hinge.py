@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from rbstab.config import ConfigError, config_from_mapping
+from rbstab.config import ConfigError, config_from_mapping, load_config
 from rbstab.simulator import simulate
 from rbstab.variants import chain as C
 
@@ -40,31 +40,14 @@ def _hinges(k, l, q_ref, q0, u0, t_end=2.0, n_samples=11):
     }
 
 
-def _mujoco_hinges(mujoco, k, l, q_ref, servos=(), dt=1e-4):
-    """MuJoCo's model of :func:`_hinges` (each body's frame at its joint's point, unrotated:
-    q = 0 is rbstab's), with a position servo (joint, kp, kv, target, lower, upper) each."""
-    def vec(x):
-        return " ".join(map(repr, map(float, x)))
+def _follow(config, result, dt=1e-4):
+    """The largest distance [m] between rbstab's centres of mass at the samples of
+    ``result`` and MuJoCo's (:func:`reference_mujoco.hinge_tree` of ``config``, RK4 at ``dt``)."""
+    mujoco = pytest.importorskip("mujoco")
+    from reference_mujoco import hinge_tree
 
-    def body(i):
-        pos = np.zeros(3) if i == 0 else np.subtract(PARENT_POINT, CHILD_POINT)
-        inner = body(i + 1) if i < 2 else ""
-        return (f'<body name="b{i}" pos="{vec(pos)}"><joint name="j{i}" type="hinge" axis="{vec(AXES[i])}" '
-                f'stiffness="{k[i]}" damping="{l[i]}" springref="{q_ref[i]}"/>'
-                f'<inertial pos="{vec(np.negative(CHILD_POINT))}" mass="{1.0 + 0.2 * i}" diaginertia="{vec(INERTIA)}"/>'
-                f"{inner}</body>")
-
-    actuators = "".join(f'<position joint="j{j}" kp="{kp}" kv="{kv}" forcelimited="true" forcerange="{lo} {hi}"/>'
-                        for j, kp, kv, _, lo, hi in servos)
-    xml = (f'<mujoco><compiler angle="radian"/><option gravity="0 0 -9.81" timestep="{dt}" integrator="RK4"/>'
-           f"<worldbody>{body(0)}</worldbody><actuator>{actuators}</actuator></mujoco>")
-    model = mujoco.MjModel.from_xml_string(xml)
-    return model, mujoco.MjData(model)
-
-
-def _follow(mujoco, model, state, result, q0, u0, dt=1e-4):
-    """The largest distance [m] between rbstab's and MuJoCo's centres of mass at the samples."""
-    state.qpos[:], state.qvel[:] = q0, u0
+    model, state, qpos0, qvel0 = hinge_tree(config, dt)
+    state.qpos[:], state.qvel[:] = qpos0, qvel0
     mujoco.mj_forward(model, state)
     worst = 0.0
     for s, t in enumerate(result.time):
@@ -78,17 +61,16 @@ def test_a_tree_of_oblique_hinges_moves_as_mujocos():
     """Springs, dampers and reference angles about three oblique axes, under gravity: every
     centre of mass follows MuJoCo's (RK4 at 1e-4 s) to 1e-6 m over 2 s, each joint's
     Theta_j is q a and Omega_j is a dq/dt, and v falls with its analytic rate."""
-    mujoco = pytest.importorskip("mujoco")
     k, l, q_ref, q0, u0 = [3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5]
-    result = simulate(config_from_mapping(_hinges(k, l, q_ref, q0, u0, n_samples=2001)))
+    config = config_from_mapping(_hinges(k, l, q_ref, q0, u0, n_samples=2001))
+    result = simulate(config)
     assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
     out = result.outputs
     axes = np.array(AXES) / np.linalg.norm(AXES, axis=1, keepdims=True)
     np.testing.assert_allclose(out["joint_theta"][0], np.array(q0)[:, None] * axes, atol=1e-12)
     np.testing.assert_allclose(out["joint_omega"][0], np.array(u0)[:, None] * axes, atol=1e-12)
     assert np.all(np.diff(out["lyapunov"]) <= 1e-10)
-    model, state = _mujoco_hinges(mujoco, k, l, q_ref)
-    assert _follow(mujoco, model, state, result, q0, u0) < 1e-6
+    assert _follow(config, result) < 1e-6
 
 
 @pytest.mark.parametrize("lower, upper", [(-0.6, 0.6), (-0.3, 1.2)])
@@ -97,7 +79,6 @@ def test_hinge_servos_that_saturate_move_as_mujocos(lower, upper):
     feedback toward its own target, clipped to [lower, upper] N m about the oblique axis,
     which it reaches): MuJoCo's hinges with a ``position`` servo's kv and forcerange, to
     1e-6 m; the saturation flags mark the axis components of a limited hinge together."""
-    mujoco = pytest.importorskip("mujoco")
     k, l, q_ref, q0, u0 = [1.0, 0.5, 0.3], [0.05, 0.05, 0.02], [0.1, 0.0, -0.2], [0.6, -0.5, 0.7], [0.0, 1.0, 0.0]
     servos = [(0, 6.0, 0.4, -0.3, lower, upper), (1, 4.0, 0.3, 0.4, lower, upper)]
     data = _hinges([0.0] * 3, [0.0] * 3, [0.0] * 3, q0, u0, n_samples=2001)
@@ -105,14 +86,13 @@ def test_hinge_servos_that_saturate_move_as_mujocos(lower, upper):
         joint["passive"] = {"k_r": kk, "l_r": ll, "theta_ref": ref}
     for j, kp, kv, target, lo, hi in servos:
         data["joints"][j].update(k_r=kp, l_r=kv, theta_ref=target, saturation={"torque_n": hi, "torque_n_lower": lo})
-    result = simulate(config_from_mapping(data))
+    config = config_from_mapping(data)
+    result = simulate(config)
     assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
     flags = result.outputs["torque_n_saturated"]
     assert flags[:, :2].any() and not flags[:, 2].any()
     assert np.all(flags[:, :2] == flags[:, :2, :1])  # every component of a hinge's torque at once
-    model, state = _mujoco_hinges(mujoco, k, l, q_ref, servos)
-    state.ctrl[:] = [target for _, _, _, target, _, _ in servos]
-    assert _follow(mujoco, model, state, result, q0, u0) < 1e-6
+    assert _follow(config, result) < 1e-6
 
 
 def test_a_hinge_is_the_ball_it_equals_in_planar_motion():
@@ -163,6 +143,24 @@ def test_a_hanging_rod_on_a_hinge_rests_where_its_spring_balances_gravity():
     assert np.ptp(undamped["lyapunov"]) < 1e-8 * np.abs(undamped["lyapunov_rotational"]).max()
 
 
+def test_a_spring_wound_past_half_a_turn_keeps_its_energy_in_the_files():
+    """A wheel on a hinge about the vertical with a soft spring, spun up to wind it about
+    5.7 rad (no singular angle; q is continued from sample to sample): the outputs' q
+    passes pi without a jump and v stays constant, as its undamped run must."""
+    data = _hinges([0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3, t_end=1.0, n_samples=201)
+    data["bodies"], data["joints"] = data["bodies"][:1], data["joints"][:1]
+    data["joints"][0].update(axis=[0.0, 0.0, 1.0], k_r=1.0, child_point=[0.0, 0.0, 0.0])
+    data["initial_state"] = {"b0": {"q": 0.0, "u": 40.0}}
+    result = simulate(config_from_mapping(data))
+    out = result.outputs
+    q = out["joint_theta"][:, 0, 2]
+    amplitude = 40.0 * math.sqrt(INERTIA[2] / 1.0)  # u0 / omega_n
+    assert amplitude * (1 - 1e-3) < q.max() <= amplitude * (1 + 1e-9) and q.max() > math.pi + 2.0
+    assert np.abs(np.diff(q)).max() < 0.3
+    assert np.ptp(out["lyapunov"]) < 1e-9 * out["lyapunov"].max()
+    assert result.summary["lyapunov_rate_check"] == "pass"
+
+
 def test_a_hinge_sweep_gives_each_runs_own_result(tmp_path):
     """A sweep over a hinge's gain and its child's initial angle (the bodies it carries turn
     with it) gives each run the figures its own config gives."""
@@ -184,6 +182,25 @@ def test_a_hinge_sweep_gives_each_runs_own_result(tmp_path):
         assert row["lyapunov_final"] == pytest.approx(alone["lyapunov_final"], rel=1e-12)
         final = [row[f"final_position_b2_{axis}"] for axis in "xyz"]
         np.testing.assert_allclose(final, np.asarray(alone["final_position"])[2], rtol=0, atol=1e-12)
+
+
+def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
+    """configs/examples/stance_hinges.yaml (ankle, knee and hip hinges, its ankle stronger
+    toward the toes): from its lean it comes back upright as MuJoCo's model of it does (to
+    1e-6 m), v never rising; leaning 0.3 rad
+    forward, further than the ankle's 120 N m can hold (m g h sin 0.3 = 194 N m), it leaves
+    the admissible region: a fall reads as a fall."""
+    example = "configs/examples/stance_hinges.yaml"
+    config = load_config(example, ["simulation.t_end=3", "simulation.n_samples=3001"])
+    result = simulate(config)
+    out = result.outputs
+    assert _follow(config, result) < 1e-6  # MuJoCo's hinges and clamped servos
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    assert np.all(np.diff(out["lyapunov"]) <= 1e-9) and out["lyapunov"][-1] < 1e-3 * out["lyapunov"][0]
+    assert np.abs(out["joint_theta"][-1]).max() < 2e-3
+    deep = simulate(load_config(example, ["simulation.t_end=3", "initial_state.shanks.q=0.3"]))
+    assert deep.status == "failed" and "left the admissible region" in deep.message
+    assert deep.outputs["torque_n_saturated"][:, 0, 0].any()  # the ankle at its limit toward the toes
 
 
 @pytest.mark.parametrize("change, key, expected", [

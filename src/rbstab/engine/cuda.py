@@ -239,11 +239,16 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     terms of v (eq 25's grouping; h in the gravity term), v, the analytic dv/dt and the
     disturbances' edges summed over the bodies' records, as the host's
     :func:`rbstab.variants.chain.evaluate` of the sample gives them, streamed into the
-    accumulators, with the balance figures' (:func:`rbstab.summary.stream_tree_balance`)."""
+    accumulators, with the balance figures' (:func:`rbstab.summary.stream_tree_balance`); a
+    hinge's angle is the sample's (the host's continues it from sample to sample: the same
+    turn)."""
     w, n = p.work, p.codes.shape[0]
     cw = w.chain
     tree_expand(sample, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, cw.rot,
                 cw.rate, True)
+    for i in range(n):  # a hinge's angle read nearest the sample's own
+        if p.codes[i] == HINGE:
+            cw.angle[i] = sample[p.r_at[i]]
     chain_evaluate(t, w.y, p.params, p.codes, p.parents, p.ppoints, p.d_at, w.dy, cw.joints, cw.bodies, cw.scalars, cw)
     _saturation_flags(w.y, p.params, p.codes, cw.joints, sink.flags)
     row, terms = sink.row, cw.scalars

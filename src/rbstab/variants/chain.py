@@ -77,8 +77,9 @@ _TRANSLATIONAL, _ROTATIONAL, _CONSTRAINT, _GRAVITY, _RATE = range(5)
 #: the inertial frame [1/(kg m^2)]; ``matrix`` (3n, 3n) and ``rhs`` (3n,) the permanent joints'
 #: linear system; ``which`` (n,) int64 the permanent joints; ``joints`` (n, 7, 3),
 #: ``bodies`` (n, 3), ``scalars`` (5,) the per-joint, per-body and scalar records
-#: :func:`chain_core` fills; ``angle`` (n,) each hinge's q [rad] where the caller gives it
-#: (:func:`chain_wrenches`' ``rotations``). The compiled driver holds one per chain (in its system), so an
+#: :func:`chain_core` fills; ``angle`` (n,) each hinge's q [rad]: given by the caller
+#: (:func:`chain_wrenches`' ``rotations``), else the last one read (0 in a new work: a
+#: new run starts from it). The compiled driver holds one per chain (in its system), so an
 #: evaluation allocates nothing.
 ChainWork = namedtuple("ChainWork", ["rot", "rate", "torque", "force", "g", "matrix", "rhs",
                                      "which", "joints", "bodies", "scalars", "angle"])
@@ -89,7 +90,7 @@ def chain_work(n):
     """Scratch arrays (:class:`ChainWork`) of a chain of ``n`` bodies."""
     return ChainWork(np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3)),
                      np.empty((3 * n, 3 * n)), np.empty(3 * n), np.empty(n, dtype=np.int64),
-                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.empty(n))
+                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.zeros(n))
 
 
 # -- compiled core --------------------------------------------------------------------------
@@ -123,6 +124,12 @@ def compose(a_p, rel):
          a_p[2][0] * rel[0][1] + a_p[2][1] * rel[1][1] + a_p[2][2] * rel[2][1],
          a_p[2][0] * rel[0][2] + a_p[2][1] * rel[1][2] + a_p[2][2] * rel[2][2]),
     )
+
+
+@jit(forceinline=True)
+def _nearest_turn(angle, reference):
+    """``angle`` [rad] plus the whole turns 2 pi k that bring it nearest ``reference``."""
+    return angle + 2.0 * math.pi * math.floor((reference - angle) / (2.0 * math.pi) + 0.5)
 
 
 @jit(forceinline=True)
@@ -187,7 +194,9 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
     rotations A_i and B(Theta_i) into ``work.rot``, ``work.rate`` (``rotations``: the caller
     has put A_i there already, B(Theta_j) of each joint to the ground and each hinge's q
-    into ``work.angle``; else a hinge's q is read from A_rel in (-pi, pi]); the wrench on each body of
+    into ``work.angle``; else a hinge's q is read from A_rel, the angle nearest the last one
+    read into ``work.angle``, which it replaces: q continued from sample to sample of a run
+    that turns a hinge by less than pi between them); the wrench on each body of
     everything but those Lambda_j into ``work.torque`` (body frame, the gyroscopic term
     -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
     (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H
@@ -259,7 +268,10 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             omega_j = sub(omega_c, matTvec(rel, omega_p))
         if codes[j] == HINGE:  # its coordinate as the rotation vector q a, whose rate is Omega_j
             axis = vector(p.axis, 0)
-            angle = work.angle[j] if rotations else axis_angle(rel, axis)
+            angle = work.angle[j]
+            if not rotations:
+                angle = _nearest_turn(axis_angle(rel, axis), angle)
+                work.angle[j] = angle
             theta_j, b_j = (angle * axis[0], angle * axis[1], angle * axis[2]), IDENTITY
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
@@ -592,7 +604,7 @@ def _saturation_flags(y, params, codes, joints, flags):
 
 @jit
 def chain_samples(times, states, params, codes, parents, ppoints, d_at, tree_of, joints, bodies, scalars, power, flags,
-                  blocks):
+                  blocks, per_run):
     """:func:`chain_evaluate` at every sample: ``states`` (m, n_states) at ``times`` (m,),
     sample s of the tree ``tree_of[s]`` (``params`` (t, n), ``ppoints`` (t, n, 3): t trees
     of one structure), each output component's samples side by side (numpy then reduces and
@@ -600,12 +612,16 @@ def chain_samples(times, states, params, codes, parents, ppoints, d_at, tree_of,
     (n, 7, 3, m) (:func:`chain_evaluate`'s), ``bodies`` (n, 3, m), ``scalars`` (5, m),
     ``power`` (m,) the disturbances' power [W], ``flags`` (n, 3, 3, m) the saturation flags
     of N_j, H_j and Lambda_j (:func:`_saturation_flags`) and ``blocks`` (n, 4, 3, m) each
-    body's Theta, Omega, X, V; NaN where the state is NaN."""
+    body's Theta, Omega, X, V; NaN where the state is NaN. The samples are runs of
+    ``per_run`` samples each: a hinge's angle is continued from sample to sample of a run
+    (:func:`chain_wrenches`), from (-pi, pi] at its first."""
     n = codes.shape[0]
     dy = np.empty(states.shape[1] + 1)
     work = chain_work(n)
     joint, body, scalar, flag = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.empty((n, 3, 3))
     for s in range(states.shape[0]):
+        if s % per_run == 0:
+            work.angle[:] = 0.0
         if states[s, 0] != states[s, 0]:
             joint[:] = np.nan
             body[:] = np.nan
@@ -1269,15 +1285,16 @@ def impulse_times(compiled: CompiledChain, t_end: float) -> list[float]:
     return sorted(times)
 
 
-def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows) -> dict[str, np.ndarray]:
+def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows, per_run) -> dict[str, np.ndarray]:
     """:func:`evaluate`'s outputs of m samples of trees of ``first``'s structure
     (:func:`chain_samples`; ``params`` (t, n), ``ppoints`` (t, n, 3), ``rows`` (m,) each
-    sample's tree), each (m, ...) a view of a component-major buffer; v and its terms without h."""
+    sample's tree, runs of ``per_run`` samples), each (m, ...) a view of a component-major
+    buffer; v and its terms without h."""
     m, n = states.shape[0], first.size
     joints, bodies, scalars, power = np.empty((n, 7, 3, m)), np.empty((n, 3, m)), np.empty((5, m)), np.empty(m)
     flags, blocks = np.empty((n, 3, 3, m)), np.empty((n, 4, 3, m))
     chain_samples(time, states, params, first.codes, first.parents, ppoints, first.d_at, rows, joints, bodies, scalars,
-                  power, flags, blocks)
+                  power, flags, blocks, per_run)
     joints, bodies, flags = joints.transpose(3, 0, 1, 2), bodies.transpose(2, 0, 1), flags.transpose(3, 0, 1, 2)
     blocks, scalars = blocks.transpose(3, 0, 1, 2), scalars.T
     out = {name: blocks[:, :, k] for k, name in enumerate(BODY_OUTPUTS[:4])}
@@ -1373,7 +1390,7 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
         out["lyapunov"] = (out["lyapunov_translational"] + out["lyapunov_rotational"] + out["lyapunov_constraint"]
                            + out["lyapunov_gravity"])
     else:
-        out = _tree_outputs(time, states, params, first, np.stack([c.ppoints for c in trees]), rows)
+        out = _tree_outputs(time, states, params, first, np.stack([c.ppoints for c in trees]), rows, lead[-1])
         out["lyapunov_gravity"] = out["lyapunov_gravity"] + offset
         out["lyapunov"] = out["lyapunov"] + offset
     out["disturbance_work"] = np.zeros(m) if work is None else np.array(work, dtype=float).reshape(-1)

@@ -558,6 +558,7 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
     for a in range(y.shape[0]):
         if permanent:
             t = tree_of[a]
+            work.angle[:] = 0.0  # a hinge's angle read in (-pi, pi]
             chain_evaluate(0.0, y[a], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies, scalars, work)
         for i in range(n):
             at = r_at[i]
