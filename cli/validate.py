@@ -56,7 +56,7 @@ def _check_config(path: str, overrides) -> dict:
 
 def _chain_record(chain) -> dict:
     """A chain's bodies and joints, JSON-able, parents by name (``ground``: the inertial frame); a
-    hinge's unit axis and its reference angle q_ref [rad]."""
+    hinge's unit axis, its reference angle q_ref [rad] and its range's ends [rad]."""
     from rbstab.chain import GROUND  # heavy: numpy
 
     names = chain.body_names
@@ -67,6 +67,7 @@ def _chain_record(chain) -> dict:
                     "child_point": j.child_point.tolist(),
                     **({"axis": j.axis.tolist(), "theta_ref": float(j.axis @ j.theta_ref)} if j.variant == "hinge"
                        else {"theta_ref": j.theta_ref.tolist()}),
+                    **({"range": [j.stop.lower, j.stop.upper]} if j.stop is not None else {}),
                     "passive": j.passive is not None} for j in chain.joints],
     }
 
@@ -74,7 +75,8 @@ def _chain_record(chain) -> dict:
 def _tree(chain: dict) -> list[str]:
     """The chain as an indented tree, one line a joint: parent -> child (its mass): the
     joint's name, variant (a hinge's with its axis) and points (the parent's, the child's C)
-    [m], its reference posture [rad] where it has one and whether it has a passive torque."""
+    [m], its reference posture [rad] where it has one, whether it has a passive torque and
+    a hinge's range [rad]."""
     mass = {b["name"]: b["mass"] for b in chain["bodies"]}
     children: dict[str, list[dict]] = {}
     for joint in chain["joints"]:
@@ -96,7 +98,8 @@ def _tree(chain: dict) -> list[str]:
             lines.append(f"{'  ' * depth}{parent} -> {j['child']} ({mass[j['child']]:g} kg): {j['name']}, "
                          f"{kind}, {point(j['parent_point'])} -> {point(j['child_point'])} m"
                          + (f", theta_ref {reference} rad" if reference else "")
-                         + (", passive torque" if j.get("passive") else ""))
+                         + (", passive torque" if j.get("passive") else "")
+                         + (f", range {point(j['range'])} rad (a stop)" if j.get("range") else ""))
             walk(j["child"], depth + 1)
 
     walk("ground", 1)

@@ -41,8 +41,10 @@ def hinge_tree(config, timestep: float):
     ``axis``, its passive torque as the joint's ``stiffness``, ``damping`` and ``springref``,
     its feedback as a ``position`` servo (kp = k_r, kv = l_r, the target theta_ref set in
     ``data.ctrl``) whose force is clamped to [torque_n_lower, torque_n] where it has
-    limits; gravity as the config's; MuJoCo's RK4 at ``timestep`` [s]. qpos0, qvel0: the
-    initial q, u of each joint (0 where not written)."""
+    limits; gravity as the config's; MuJoCo's RK4 at ``timestep`` [s]. A hinge's ``range``
+    is left out (MuJoCo's limit is a constraint of its own solver, not rbstab's stop): a
+    run compared with it stays inside its ranges. qpos0, qvel0: the initial q, u of each
+    joint (0 where not written)."""
     data = config.resolved
     bodies = {b["name"]: b for b in data["bodies"]}
     joints = {j["child"]: j for j in data["joints"]}

@@ -161,6 +161,71 @@ def test_a_spring_wound_past_half_a_turn_keeps_its_energy_in_the_files():
     assert result.summary["lyapunov_rate_check"] == "pass"
 
 
+def _rod_on_a_stop(stop, q0=0.0, u0=0.0, t_end=2.0, n_samples=2001):
+    """One rod (1 kg, its centre of mass 0.5 m below its hinge about x) with no feedback and
+    the range ``stop`` ({lower, upper, k_r, l_r})."""
+    data = _hinges([0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3, [0.0] * 3, t_end=t_end, n_samples=n_samples)
+    data["bodies"], data["joints"] = data["bodies"][:1], data["joints"][:1]
+    data["bodies"][0]["mass"] = 1.0
+    data["joints"][0].update(axis=[1.0, 0.0, 0.0], child_point=[0.0, 0.0, 0.5], range=stop)
+    data["initial_state"] = {"b0": {"q": q0, "u": u0}}
+    return data
+
+
+def test_a_swinging_rod_bounces_off_an_undamped_stop_keeping_its_energy():
+    """Released from -1.2 rad, the rod swings through the bottom into its range's upper end
+    at 0.6 rad, where the stop's spring (5,000 N m/rad) turns it back: q passes the end by
+    about sqrt(2 E / k) and no more, and v (gravity's and the stop's energy) stays constant."""
+    result = simulate(config_from_mapping(_rod_on_a_stop({"lower": -2.0, "upper": 0.6, "k_r": 5000.0}, q0=-1.2)))
+    out = result.outputs
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    q = out["joint_theta"][:, 0, 0]
+    energy = 9.81 * 0.5 * (math.cos(0.6) - math.cos(1.2))  # kinetic energy [J] at the stop's end
+    assert 0.6 < q.max() < 0.6 + 1.05 * math.sqrt(2.0 * energy / 5000.0)
+    assert q.max() > 0.6 + 0.9 * math.sqrt(2.0 * energy / 5000.0)
+    assert q[-1] < 0.6 and np.ptp(out["lyapunov"]) < 1e-7 * np.abs(out["lyapunov"]).max()
+
+
+def test_a_rod_rests_on_its_stop_where_the_stop_balances_gravity():
+    """The range [0.5, 1] keeps the rod from hanging straight: its rest state is the root of
+    k (q - 0.5) + m g d sin(q) = 0 just below the lower end, v is zero there, and a run
+    released inside the range with a damped stop settles on it, v never rising."""
+    stop = {"lower": 0.5, "upper": 1.0, "k_r": 200.0, "l_r": 5.0}
+    balance = brentq(lambda q: 200.0 * (q - 0.5) + 9.81 * 0.5 * math.sin(q), 0.0, 0.5)
+    config = config_from_mapping(_rod_on_a_stop(stop, q0=0.8, t_end=10.0, n_samples=1001))
+    compiled = C.compile_chain(config.chain)
+    y, _ = C.rest_state(compiled)
+    assert C.rest_coordinates(compiled, y) == pytest.approx([balance], abs=1e-9)
+    assert C.lyapunov(compiled, y)[0] == pytest.approx(0.0, abs=1e-12)
+    out = simulate(config).outputs
+    assert out["joint_theta"][-1, 0, 0] == pytest.approx(balance, abs=1e-6)
+    assert np.all(np.diff(out["lyapunov"]) <= 1e-9)
+
+
+@pytest.mark.parametrize("quantity, value", [("force", [0.0, 2.0, 1.0]), ("torque", [0.3, -0.2, 0.1])])
+def test_a_push_on_a_tree_of_hinges_is_the_limit_of_short_pulses(quantity, value):
+    """An impulse on the lowest body of the oblique hinges (undamped, under gravity) makes
+    the generalised velocities jump by M^-1 S' P: v jumps by its energy and v - W stays
+    constant, and the motion after it is that after a pulse of the same impulse over 1e-5 s
+    (to its O(duration) difference)."""
+    base = _hinges([3.0, 2.0, 1.0], [0.0] * 3, [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5], t_end=0.6,
+                   n_samples=61)
+    push = {"body": "b2", "kind": "impulse", "quantity": quantity, "value": value, "start": 0.2,
+            **({"point": [0.0, 0.05, -0.1]} if quantity == "force" else {})}
+    result = simulate(config_from_mapping({**base, "disturbances": [push]}))
+    out = result.outputs
+    assert result.status == "success"
+    balance = out["lyapunov"] - out["disturbance_work"]
+    assert np.ptp(balance) < 1e-8 * np.abs(out["lyapunov"]).max()
+    assert out["disturbance_work"][-1] != 0.0
+    duration = 1e-5
+    pulse = {**push, "kind": "pulse", "duration": duration, "value": [x / duration for x in value]}
+    pulsed = simulate(config_from_mapping({**base, "disturbances": [pulse]})).outputs
+    np.testing.assert_allclose(out["position"][-1], pulsed["position"][-1], atol=1e-4)
+    np.testing.assert_allclose(out["joint_omega"][-1], pulsed["joint_omega"][-1], atol=1e-3)
+    assert np.abs(out["position"][-1] - simulate(config_from_mapping(base)).outputs["position"][-1]).max() > 1e-2
+
+
 def test_a_hinge_sweep_gives_each_runs_own_result(tmp_path):
     """A sweep over a hinge's gain and its child's initial angle (the bodies it carries turn
     with it) gives each run the figures its own config gives."""
@@ -216,8 +281,14 @@ def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
      "joints.1.k_r", "a single number is a hinge's"),
     (lambda d: d["initial_state"]["b1"].update(theta=[0.1, 0.0, 0.0]), "initial_state.b1.theta", "a hinge's child"),
     (lambda d: d["initial_state"]["b1"].update(q=4.0), "initial_state.b1.q", "(-pi, pi)"),
-    (lambda d: d.update(disturbances=[{"body": "b2", "kind": "impulse", "value": [1, 0, 0], "start": 0.5}]),
-     "disturbances.0.kind", "a tree with a hinge"),
+    (lambda d: d["joints"][1].update(range={"lower": 0.5, "upper": 0.2, "k_r": 100.0}), "joints.1.range.upper",
+     "> lower"),
+    (lambda d: d["joints"][1].update(range={"lower": 0.0, "upper": 0.2, "k_r": 0.0}), "joints.1.range.k_r", "> 0"),
+    (lambda d: d["joints"][1].update(range={"lower": 0.0, "upper": 0.2, "k_r": 100.0}), "joints.1.theta_ref",
+     "in the range [0, 0.2]"),
+    (lambda d: d["joints"][1].update(variant="permanent", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0] * 3,
+                                     range={"lower": 0.0, "upper": 0.2, "k_r": 100.0}) or d["joints"][1].pop("axis"),
+     "joints.1.range", "a range is a hinge's"),
 ])
 def test_a_hinges_bad_input_is_refused_in_one_line_naming_its_key(change, key, expected):
     data = _hinges([3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5])

@@ -27,7 +27,7 @@ import numpy as np
 
 from .model import Disturbance, Saturation
 
-__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Joint", "Chain", "single", "hinge", "hinge_vectors"]
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Joint", "Chain", "single", "hinge", "hinge_vectors"]
 
 #: The parent index of a joint to the ground.
 GROUND = -1
@@ -86,6 +86,29 @@ class Passive:
 
 
 @dataclass(frozen=True, eq=False)
+class Stop:
+    """A hinge's range of motion as a stop (a knee's hyperextension, MJCF's joint ``range``):
+    beyond either end of [``lower``, ``upper``] a one-sided spring and damper, never limited,
+    n_s = -k_r (q - end) - l_r dq/dt [N m] about the hinge's axis; its energy 1/2 k_r (q -
+    end)^2 is v's and its dissipation l_r (dq/dt)^2 is in dv/dt there; zero inside.
+
+    Attributes
+    ----------
+    lower, upper : float
+        The range's ends [rad], lower < upper (-inf, inf: none on that side).
+    k_r : float
+        The stop's stiffness [N m/rad], > 0.
+    l_r : float
+        Its damping [N m s/rad], >= 0.
+    """
+
+    lower: float
+    upper: float
+    k_r: float
+    l_r: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
 class Joint:
     """One joint: the law holding the child's point C to a point of its parent, and the
     rotational feedback across it.
@@ -131,6 +154,8 @@ class Joint:
         and never limited; None: none, the paper's joint.
     axis : ndarray, shape (3,)
         A hinge's unit axis a (the parent's and the child's frames); zero for any other joint.
+    stop : Stop or None
+        A hinge's range of motion as a stop; None: no range.
     """
 
     name: str
@@ -151,6 +176,7 @@ class Joint:
     theta_ref: np.ndarray = field(default_factory=lambda: np.zeros(3))
     passive: Passive | None = None
     axis: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    stop: Stop | None = None
 
 
 def hinge_vectors(axis, k=0.0, l=0.0, q_ref=0.0, lower=-math.inf, upper=math.inf):
@@ -182,13 +208,14 @@ def hinge_vectors(axis, k=0.0, l=0.0, q_ref=0.0, lower=-math.inf, upper=math.inf
 
 def hinge(name: str, parent: int, child: int, parent_point, child_point, axis, k: float = 0.0, l: float = 0.0,
           q_ref: float = 0.0, limits: tuple[float, float] | None = None, shape: str = "clip",
-          passive: tuple[float, float, float] | None = None) -> Joint:
+          passive: tuple[float, float, float] | None = None, stop: Stop | None = None) -> Joint:
     """A hinge joint (docs/physics.md, "Joint kinds"): the child's point C held to the
     parent's point, the child turned about ``axis`` with the feedback of gains ``k``, ``l``
     and reference angle ``q_ref`` delivered between ``limits`` (lower < 0 < upper [N m];
     None: unlimited, ``shape`` their :data:`rbstab.model.SATURATION_SHAPES` key) and a
-    passive torque of that form, ``passive`` (k, l, q_ref), never limited; written as a
-    ball's by :func:`hinge_vectors`. ValueError for an axis of zero length."""
+    passive torque of that form, ``passive`` (k, l, q_ref), never limited, and its range's
+    ``stop``; written as a ball's by :func:`hinge_vectors`. ValueError for an axis of zero
+    length."""
     lower, upper = (-math.inf, math.inf) if limits is None else limits
     a, k_r, l_r, theta_ref, low, high = hinge_vectors(axis, k, l, q_ref, lower, upper)
     infinite = np.full(3, math.inf)
@@ -198,7 +225,7 @@ def hinge(name: str, parent: int, child: int, parent_point, child_point, axis, k
         passive = Passive(p_k, p_l, p_ref)
     return Joint(name=name, parent=parent, child=child, parent_point=np.asarray(parent_point, dtype=float),
                  child_point=np.asarray(child_point, dtype=float), variant="hinge", k_r=k_r, l_r=l_r,
-                 saturation=saturation, theta_ref=theta_ref, passive=passive, axis=a)
+                 saturation=saturation, theta_ref=theta_ref, passive=passive, axis=a, stop=stop)
 
 
 @dataclass(frozen=True, eq=False)

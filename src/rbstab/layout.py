@@ -233,8 +233,18 @@ _CHAIN_KEYS = {
                "child_point": Quantity("joints.child_point", "R_c", "m", "joint point R_c of C on the child (body frame)"),
                "theta_ref": Quantity("joints.theta_ref", "Theta_ref", "rad",
                                      "reference posture Theta_ref of a joint (relative Euler angles)"),
+               "axis": Quantity("joints.axis", "a", "1", "axis a of a hinge (the parent's and the child's frames)"),
                **{g: f"controller.{g}" for g in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "boundary_layer")}},
     "initial_state": {b: f"initial_state.{b}" for b in ("theta", "omega", "x", "v", "d")},
+}
+
+
+#: A hinge's range keys (``joints.<name>.range.<field>``): its ends and its stop's gains.
+_RANGE_KEYS = {
+    "lower": Quantity("joints.range.lower", "q_min", "rad", "lower end of a hinge's range"),
+    "upper": Quantity("joints.range.upper", "q_max", "rad", "upper end of a hinge's range"),
+    "k_r": Quantity("joints.range.k_r", "K_stop", "N m rad-1", "stiffness of a hinge's stop beyond its range"),
+    "l_r": Quantity("joints.range.l_r", "L_stop", "N m s rad-1", "damping of a hinge's stop beyond its range"),
 }
 
 
@@ -251,6 +261,8 @@ def _config_quantity(config_key: str) -> tuple[Quantity | None, str]:
         q = _CHAIN_KEYS["joints"][parts[3]]
         q = q if isinstance(q, Quantity) else CONFIG_QUANTITIES[q]
         return q, f" (joint {parts[1]}, passive)"
+    if len(parts) == 4 and parts[0] == "joints" and parts[2] == "range" and parts[3] in _RANGE_KEYS:
+        return _RANGE_KEYS[parts[3]], f" (joint {parts[1]})"
     if len(parts) == 3 and parts[2] in _CHAIN_KEYS.get(parts[0], {}):
         kind = "joint" if parts[0] == "joints" else "body"
         q = _CHAIN_KEYS[parts[0]][parts[2]]

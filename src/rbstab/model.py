@@ -272,8 +272,10 @@ _VECTOR = (np.float64, (3,))
 #: [N m] (-``torque_limit`` unless :class:`Saturation` gives its own) and its passive torque
 #: (:class:`rbstab.chain.Passive`): ``passive`` (1 where the joint has one; 0, as in a
 #: record of zeros: none, the next fields not read), ``passive_k_r`` [N m/rad],
-#: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad]; and a hinge's unit ``axis``
-#: a (the parent's and the child's frames; zero for any other joint).
+#: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad]; a hinge's unit ``axis``
+#: a (the parent's and the child's frames; zero for any other joint) and its range's stop
+#: (:class:`rbstab.chain.Stop`): ``stop`` (1 where it has one; 0: none, the next fields not
+#: read), ``range_lower``, ``range_upper`` [rad], ``stop_k`` [N m/rad] and ``stop_l`` [N m s/rad].
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -319,6 +321,11 @@ PARAMETERS = np.dtype(
         ("passive_l_r", *_MATRIX),
         ("passive_theta_ref", *_VECTOR),
         ("axis", *_VECTOR),
+        ("stop", np.float64),
+        ("range_lower", np.float64),
+        ("range_upper", np.float64),
+        ("stop_k", np.float64),
+        ("stop_l", np.float64),
     ],
     align=True,
 )

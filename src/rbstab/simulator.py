@@ -313,8 +313,8 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     ``simulation.limits`` (the rows after are NaN). The edges of the disturbances' windows split the
     run: a new ``solve_ivp`` from each edge (the rate evaluated below the next one), from
     the state just after the impulses that start there (a sample at that time shows it; the
-    permanent joints' impulsive reactions, :func:`rbstab.variants.chain.chain_impulses`,
-    keep them held). ``states`` are the maximal image (12 n + 3 e) of the samples; ``work``
+    generalised velocities jump, :func:`rbstab.variants.tree.tree_impulses`: the joints'
+    impulsive reactions keep them joints). ``states`` are the maximal image (12 n + 3 e) of the samples; ``work``
     the disturbances' work W [J] there, integrated with the state where the chain has
     disturbances (its rate their power, left out of the error norm, as the compiled
     driver's; each impulse adds its energy). Like one body's :func:`solve`, it stops
@@ -340,11 +340,11 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         physical or numerical failure is a ``"failed"`` status, never an exception."""
     from scipy.integrate import solve_ivp  # heavy: scipy
 
-    from .variants.chain import (ChainTrajectory, _gimbal_margin, chain_impulses, compile_chain,  # heavy: numba
+    from .variants.chain import (ChainTrajectory, _gimbal_margin, compile_chain,  # heavy: numba
                                  gimbal_lock_message, impulse_times, initial_state, locked_part,
                                  region_margin)
-    from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_layout, tree_rate,  # heavy: numba
-                                tree_velocities, tree_work)
+    from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_impulses, tree_layout,  # heavy: numba
+                                tree_rate, tree_work)
 
     sim = config.simulation
     compiled = compile_chain(config.chain) if compiled is None else compiled
@@ -377,12 +377,9 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
 
     def jump(t, yr):
         """Apply the impulses that start at t to ``yr`` (in place; their energy added to W)."""
-        full = maximal(yr[:n_r])
-        energy = chain_impulses(t, full, *args[:4], work.chain)
-        if energy != 0.0:
-            tree_velocities(full, compiled.params, compiled.codes, compiled.parents, layout.r_at, yr)
-            if disturbed:
-                yr[n_r] += energy
+        energy = tree_impulses(t, yr, *tree, work)
+        if energy != 0.0 and disturbed:
+            yr[n_r] += energy
 
     def lock(t, yr):
         return _gimbal_margin(compiled, maximal(yr[:n_r]), sim.gimbal_margin)

@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, Passive, hinge, single
+from ..chain import GROUND, Body, Chain, Joint, Passive, Stop, hinge, single
 from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix
 from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
@@ -598,7 +598,9 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
                 float(j.k_r or 0.0), float(j.l_r or 0.0), float(j.theta_ref or 0.0),
                 None if sat is None else (lower, upper), "clip" if sat is None else sat.shape,
                 None if passive is None else (float(passive.k_r or 0.0), float(passive.l_r or 0.0),
-                                              float(passive.theta_ref or 0.0))))
+                                              float(passive.theta_ref or 0.0)),
+                None if j.range is None else Stop(float(j.range.lower), float(j.range.upper), float(j.range.k_r),
+                                                  float(j.range.l_r))))
             continue
         used = VARIANTS[j.variant].required_gains
         joints.append(Joint(
@@ -699,15 +701,9 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
 def _check_engine_scope(chain: Chain, resolved: Mapping, source: str | None, overrides: Sequence[str]) -> None:
     """Refuse what no engine integrates: a sliding joint's pure sign law (boundary_layer 0,
     integrated event by event for the paper's one body, :func:`rbstab.variants.paper.paper_form`)
-    in any other tree; an impulse in a tree with a hinge."""
+    in any other tree."""
     if has_paper_form(chain):
         return
-    hinges = [j.name for j in chain.joints if j.variant == "hinge"]
-    for i, entry in enumerate(resolved.get("disturbances") or ()):
-        if hinges and entry.get("kind") == "impulse":
-            _refuse(f"disturbances.{i}.kind", "'impulse'", "pulse, step, sine or noise in a tree with a hinge",
-                    f"joint '{hinges[0]}' is a hinge: an impulse's jump is solved in ball and point-law joints only; "
-                    "a short pulse (duration) acts as a push", source, overrides, ("disturbances", "joints"))
     for joint in chain.joints:
         if joint.variant == "sliding" and joint.boundary_layer <= 0.0:
             _refuse(f"joints.{joint.name}.boundary_layer", "0", "a boundary layer > 0 [m] in a chain",
@@ -755,7 +751,7 @@ def _tree_resolved(run: ChainSchema) -> dict:
     for section in ("bodies", "joints"):
         dump[section] = [{k: v for k, v in entry.items() if v is not None} for entry in dump[section]]
         for entry in dump[section]:
-            for part in ("saturation", "passive"):
+            for part in ("saturation", "passive", "range"):
                 if part in entry:
                     entry[part] = {k: v for k, v in entry[part].items() if v is not None}
     states = {}

@@ -1065,6 +1065,27 @@ class _JointPassive(_Section):
                           "number (rad; default 0)")
 
 
+class _JointRange(_Section):
+    """A hinge's range of motion as a stop: beyond either end a one-sided spring and damper."""
+
+    lower: Annotated[Any, checked(bounded_number(allow_inf=True))] = Field(
+        description="a number (rad; the range's lower end, -.inf: none)")
+    upper: Annotated[Any, checked(bounded_number(allow_inf=True))] = Field(
+        description="a number > lower (rad; the range's upper end, .inf: none)")
+    k_r: Annotated[Any, checked(bounded_number(gt=0))] = Field(
+        description="a number > 0 (N m/rad; the stop's stiffness beyond an end)")
+    l_r: Annotated[Any, checked(bounded_number(ge=0))] = Field(
+        0.0, description="a number >= 0 (N m s/rad; the stop's damping beyond an end; default 0)")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "_JointRange":
+        if not float(self.lower) < float(self.upper):
+            raise PydanticCustomError("rbstab_invalid", "an empty range", {
+                "subkey": "upper", "found": short_repr(self.upper),
+                "expected": f"a number > lower = {float(self.lower):g} (rad)"})
+        return self
+
+
 class _ChainBody(_Section):
     """One body of a chain (Table 1) and its optional ground-anchored feedback (eq 24)."""
 
@@ -1116,6 +1137,8 @@ class _ChainJoint(_Section):
                           "default 0)")
     passive: _JointPassive | None = Field(None, description=_mapping_of(_JointPassive) + " (optional: the "
                                                             "joint's passive torque, added to N_j and never limited)")
+    range: _JointRange | None = Field(None, description=_mapping_of(_JointRange) + " (optional, a hinge's: its "
+                                                       "range of motion, a stop beyond either end)")
 
     @model_validator(mode="before")
     @classmethod
@@ -1154,6 +1177,21 @@ class _ChainJoint(_Section):
             raise PydanticCustomError("rbstab_invalid", "an axis", {
                 "subkey": "axis", "found": short_repr(self.axis), "expected": "no axis",
                 "detail": f"an axis is a hinge's (variant: hinge); a '{self.variant}' joint turns about all three"})
+        if not hinge and self.range is not None:
+            raise PydanticCustomError("rbstab_invalid", "a range", {
+                "subkey": "range", "found": "a range", "expected": "no range",
+                "detail": f"a range is a hinge's (of its angle q); a '{self.variant}' joint has none"})
+        bounds = None if self.range is None else (float(self.range.lower), float(self.range.upper))
+        springs = [("theta_ref", self.theta_ref, self.k_r)]
+        springs += [] if passive is None else [("passive.theta_ref", passive.theta_ref, passive.k_r)]
+        for key, value, stiffness in springs:  # a spring's rest angle (0 where not written) inside the range
+            value = 0.0 if value is None else value
+            if (bounds is not None and isinstance(value, (int, float)) and isinstance(stiffness, (int, float))
+                    and stiffness > 0 and not bounds[0] <= value <= bounds[1]):
+                raise PydanticCustomError("rbstab_invalid", "a reference beyond the range", {
+                    "subkey": key, "found": short_repr(value),
+                    "expected": f"an angle in the range [{bounds[0]:g}, {bounds[1]:g}] (rad)",
+                    "detail": "the spring would be relaxed where the stop pushes back"})
         for key, value in values:
             if value is None:
                 continue

@@ -545,6 +545,11 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
         p["axis"], p["k_r"], p["l_r"], p["theta_ref"], floor, limit = hinge_vectors(
             axis, of("joints", "k_r", 0.0), of("joints", "l_r", 0.0), of("joints", "theta_ref", 0.0),
             np.where(np.isnan(lower), -upper, lower), upper)
+        if joint.stop is not None:
+            p["stop"] = 1.0
+            for name, field in (("lower", "range_lower"), ("upper", "range_upper"), ("k_r", "stop_k"),
+                                ("l_r", "stop_l")):
+                p[field] = of("joints", f"range.{name}")
         if joint.passive is not None:
             p["passive"] = 1.0
             _, p["passive_k_r"], p["passive_l_r"], p["passive_theta_ref"], _, _ = hinge_vectors(

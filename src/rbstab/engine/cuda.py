@@ -501,8 +501,8 @@ def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = F
     tree): the reduced state (n_r = 12 n - 6 p - 10 h + 3 e entries) and its Runge-Kutta stages, the
     maximal image (12 n + 3 e), the mass matrix (n_u)^2 of
     :func:`rbstab.variants.tree.tree_rate` (n_u = 6 n - 3 p - 5 h generalised velocities) and the
-    permanent joints' impulsive system (3 p)^2 of
-    :func:`rbstab.variants.chain.chain_impulses`. Every run integrates its work W after the
+    permanent joints' reaction system (3 p)^2 of a sample's Lambda_j
+    (:func:`rbstab.variants.chain.chain_evaluate`). Every run integrates its work W after the
     state (its rate 0 without disturbances), so that each vector's size is known when the
     kernel is compiled. The tree's rate, region and impulses stay functions of their own
     (:data:`NOT_INLINED`)."""

@@ -30,11 +30,12 @@ from numba.extending import overload
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
 from ..model import set_limits
-from ..variants.chain import _relative, chain_impulses
+from ..variants.chain import _relative
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import HINGE, PERMANENT, limited_quantities, state_rate
 from ..variants.tree import (expand_samples, point_fixed_code, reduce_states, reduced_size, tree_expand, tree_layout,
-                             tree_rate, tree_velocities)
+                             tree_rate)
+from ..variants.tree import tree_impulses as reduced_impulses
 from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES, TREE_GIMBAL
 
 __all__ = ["CHAIN", "TreeSystem", "tree_system", "with_offsets", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
@@ -264,15 +265,10 @@ def tree_margin(y, p, limit):
 
 @jit(_nrt=False, forceinline=False)
 def tree_impulses(t, y, p):
-    """:func:`rbstab.variants.chain.chain_impulses` on the maximal image of the reduced state
-    ``y`` (the permanent joints' impulsive reactions keep them held), the jumps of the
-    generalised velocities written back into ``y``; returns their energy [J]."""
-    w = p.work
-    tree_expand(y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, w.chain.rot,
-                w.chain.rate, True)
-    jump = chain_impulses(t, w.y, p.params, p.codes, p.parents, p.ppoints, w.chain)
-    if jump != 0.0:
-        tree_velocities(w.y, p.params, p.codes, p.parents, p.r_at, y)
+    """:func:`rbstab.variants.tree.tree_impulses` of the reduced state ``y`` (its generalised
+    velocities jump by M^-1 S' P: the joints' impulsive reactions keep them joints); returns
+    their energy [J]."""
+    return reduced_impulses(t, y, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, p.work)
     return jump
 
 

@@ -288,6 +288,16 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             n_j = sub(sub(n_j, matTvec(b_j, matvec(p.passive_k_r, strain))), matvec(p.passive_l_r, omega_j))
             rotational += 0.5 * quadratic_form(strain, p.passive_k_r)
             dissipation += quadratic_form(omega_j, p.passive_l_r)
+        if p.stop > 0.0:  # a hinge's range: a one-sided spring and damper beyond either end, never limited
+            axis = vector(p.axis, 0)
+            angle = dot(theta_j, axis)  # q
+            beyond = max(angle - p.range_upper, 0.0) + min(angle - p.range_lower, 0.0)
+            if beyond != 0.0:
+                rate_q = dot(omega_j, axis)
+                n_stop = -p.stop_k * beyond - p.stop_l * rate_q
+                n_j = add(n_j, (n_stop * axis[0], n_stop * axis[1], n_stop * axis[2]))
+                rotational += 0.5 * p.stop_k * beyond * beyond
+                dissipation += p.stop_l * rate_q * rate_q
         _acc_add(torque, force, j, n_j, ZERO)
         if q >= 0:
             reaction = matvec(rel, n_j)
@@ -772,6 +782,10 @@ def _record(chain: Chain, i: int) -> np.ndarray:
         p["passive"] = 1.0
         p["passive_k_r"], p["passive_l_r"] = joint.passive.k_r, joint.passive.l_r
         p["passive_theta_ref"] = joint.passive.theta_ref
+    if joint.stop is not None:
+        p["stop"] = 1.0
+        p["range_lower"], p["range_upper"] = joint.stop.lower, joint.stop.upper
+        p["stop_k"], p["stop_l"] = joint.stop.k_r, joint.stop.l_r
     return p
 
 

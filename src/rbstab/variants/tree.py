@@ -52,9 +52,11 @@ from .chain import (
     chain_work,
     euler_angles,
 )
+from .disturbances import IMPULSE
 from .kernels import HINGE, PERMANENT
 
-__all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate", "tree_velocities",
+__all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
+           "tree_push", "tree_impulses",
            "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state"]
 
 
@@ -309,7 +311,7 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
             _put(dyr, at + 6, vector(y, 12 * i + 9))
             _put(dyr, at + 9, (force[i, 0] / p.mass, force[i, 1] / p.mass, force[i, 2] / p.mass))
     else:
-        _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_u)
+        _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work)
     n_r = 0
     for i in range(n):
         n_r += REDUCED_STATES[codes[i]]
@@ -323,15 +325,13 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
 
 
 @jit(forceinline=True)
-def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_u):
-    """:func:`tree_rate`'s generalised accelerations of a tree with permanent joints, after
+def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
+    """:func:`tree_rate`'s generalised accelerations of a tree with point-fixed joints, after
     its applied wrenches (``work.chain``'s ``torque``, ``force``, rotations at ``work.y``):
-    kappa, the composite rigid bodies, M and Q - b, the solve; writes every body's rates
-    into ``dyr``."""
+    kappa, then :func:`_generalised_solve`; writes every body's rates into ``dyr``."""
     n = codes.shape[0]
-    y, kappa, matrix, rhs, cw = work.y, work.kappa, work.matrix, work.rhs, work.chain
-    rot, torque, force = cw.rot, cw.torque, cw.force
-    mass, first, second, f_net, n_net = work.mass, work.first, work.second, work.force, work.moment
+    y, kappa, rhs, cw = work.y, work.kappa, work.rhs, work.chain
+    rot = cw.rot
     # kappa_i, outward: each body's (dOmega_i/dt, dV_i/dt) at du/dt = 0
     for i in range(n):
         if not point_fixed_code(codes[i]):
@@ -358,6 +358,39 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
         dv_c = sub(dv_c, matvec(a_c, add(cross(dw_c, r_c), cross(omega_c, cross(omega_c, r_c)))))
         _put(kappa[i], 0, dw_c)
         _put(kappa[i], 3, dv_c)
+    _generalised_solve(params, codes, parents, u_at, work)
+    for i in range(n):
+        at, u = r_at[i], u_at[i]
+        if codes[i] == HINGE:
+            dyr[at] = yr[at + 1]
+            dyr[at + 1] = rhs[u]
+        elif codes[i] == PERMANENT:
+            _put(dyr, at, matvec(_rows(cw.rate, i), vector(yr, at + 3)))
+            for k in range(3):
+                dyr[at + 3 + k] = rhs[u + k]
+        else:
+            _put(dyr, at, matvec(_rows(cw.rate, i), vector(y, 12 * i + 3)))
+            _put(dyr, at + 6, vector(y, 12 * i + 9))
+            for k in range(3):
+                dyr[at + 3 + k] = rhs[u + k]
+                dyr[at + 9 + k] = rhs[u + 3 + k]
+
+
+@jit(forceinline=True)
+def _generalised_solve(params, codes, parents, u_at, work):
+    """M x = sum_i S_i' (w_i - M_i kappa_i) into ``work.rhs`` (n_u,): the tree's mass matrix
+    M (at the rotations ``work.chain.rot`` and positions ``work.y``) and the wrenches
+    ``work.chain``'s ``torque`` (body frame), ``force`` (inertial) less each body's
+    ``work.kappa`` (its accelerations at du/dt = 0), by composite rigid bodies and the
+    Cholesky solve within M's envelope: x the generalised accelerations, or the jump of u
+    of impulsive wrenches with kappa zero."""
+    n = codes.shape[0]
+    y, kappa, matrix, rhs, cw = work.y, work.kappa, work.matrix, work.rhs, work.chain
+    rot, torque, force = cw.rot, cw.torque, cw.force
+    mass, first, second, f_net, n_net = work.mass, work.first, work.second, work.force, work.moment
+    n_u = 0
+    for i in range(n):
+        n_u += VELOCITIES[codes[i]]
     # composite rigid bodies, leaves first: each body with the bodies that permanent joints hang
     # from it: mass, first moment sum m X, second moment about the origin sum (A J A' + m [X]x' [X]x)
     # (inertial frame), and the residual wrench sum (w_b - M_b kappa_b): force, moment about the origin
@@ -454,46 +487,70 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work, n_
         _cholesky_solve(matrix, rhs, n_u)
     else:
         _envelope_cholesky_solve(matrix, rhs, codes, u_at, start)
-    for i in range(n):
-        at, u = r_at[i], u_at[i]
-        if codes[i] == HINGE:
-            dyr[at] = yr[at + 1]
-            dyr[at + 1] = rhs[u]
-        elif codes[i] == PERMANENT:
-            _put(dyr, at, matvec(_rows(cw.rate, i), vector(yr, at + 3)))
-            for k in range(3):
-                dyr[at + 3 + k] = rhs[u + k]
-        else:
-            _put(dyr, at, matvec(_rows(cw.rate, i), vector(y, 12 * i + 3)))
-            _put(dyr, at + 6, vector(y, 12 * i + 9))
-            for k in range(3):
-                dyr[at + 3 + k] = rhs[u + k]
-                dyr[at + 9 + k] = rhs[u + 3 + k]
+
+
+@jit(forceinline=True)
+def _kinetic_energy(y, params):
+    """The kinetic energy [J] of the maximal state ``y``: sum 1/2 (m V'V + Omega' J Omega)."""
+    total = 0.0
+    for i in range(params.shape[0]):
+        v, omega = vector(y, 12 * i + 9), vector(y, 12 * i + 3)
+        total += 0.5 * params[i].mass * dot(v, v) + 0.5 * dot(omega, matvec(params[i].inertia, omega))
+    return total
 
 
 @jit(_nrt=False)
-def tree_velocities(y, params, codes, parents, r_at, yr):
-    """Write the generalised velocities of the maximal state ``y`` (12 n + 3 e,) into the
-    reduced state ``yr`` (n_r,; ``r_at`` its layout): Omega_j = Omega_c - A_rel' Omega_p
-    [rad/s, child frame] of a permanent joint's child (ground: its Omega), a . Omega_j of a
-    hinge's (``params``: the records, its axis a), Omega [rad/s, body frame] and V [m/s,
-    inertial] of every other body; its configuration is left as it is."""
-    for i in range(codes.shape[0]):
-        at = r_at[i]
-        if not point_fixed_code(codes[i]):
-            for k in range(3):
-                yr[at + 3 + k] = y[12 * i + 3 + k]
-                yr[at + 9 + k] = y[12 * i + 9 + k]
-            continue
-        omega = vector(y, 12 * i + 3)
-        q = parents[i]
-        if q >= 0:
-            rel = _relative(rotation_and_rate_of(vector(y, 12 * q))[0], rotation_and_rate_of(vector(y, 12 * i))[0])
-            omega = sub(omega, matTvec(rel, vector(y, 12 * q + 3)))
+def tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, body, point, value, torque_push, work):
+    """Apply a push to the reduced state ``yr`` in place and return its energy dT [J] (the
+    jump of the kinetic energy): a force impulse ``value`` P [N s] (inertial frame) at
+    ``point`` R [m] of body ``body`` (its frame, from its centre of mass), or with
+    ``torque_push`` a torque impulse L [N m s] (its frame). The generalised velocities jump
+    by du = M^-1 S' P (the joints' impulsive reactions keep them joints: Jourdain's
+    principle at an instant, docs/physics.md "A push on a chain"), the configuration stays.
+    ``work``: :class:`TreeWork`."""
+    n = codes.shape[0]
+    y, cw, kappa = work.y, work.chain, work.kappa
+    tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
+    before = _kinetic_energy(y, params)
+    cw.torque[:] = 0.0
+    cw.force[:] = 0.0
+    kappa[:] = 0.0
+    v = (value[0], value[1], value[2])
+    if torque_push:
+        _put(cw.torque[body], 0, v)
+    else:
+        _put(cw.torque[body], 0, cross((point[0], point[1], point[2]), matTvec(_rows(cw.rot, body), v)))
+        _put(cw.force[body], 0, v)
+    _generalised_solve(params, codes, parents, u_at, work)
+    rhs = work.rhs
+    for i in range(n):
+        at, u = r_at[i], u_at[i]
         if codes[i] == HINGE:
-            yr[at + 1] = dot(vector(params[i].axis, 0), omega)
+            yr[at + 1] += rhs[u]
+        elif codes[i] == PERMANENT:
+            for k in range(3):
+                yr[at + 3 + k] += rhs[u + k]
         else:
-            _put(yr, at + 3, omega)
+            for k in range(3):
+                yr[at + 3 + k] += rhs[u + k]
+                yr[at + 9 + k] += rhs[u + 3 + k]
+    tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
+    return _kinetic_energy(y, params) - before
+
+
+@jit(_nrt=False)
+def tree_impulses(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, work):
+    """Apply the impulses of every body's disturbances that start at ``t`` [s] to the reduced
+    state ``yr`` in place (:func:`tree_push`, one after the other); returns their energy, the
+    jump of the kinetic energy [J] (0 where none starts at t). ``work``: :class:`TreeWork`."""
+    jump = 0.0
+    for i in range(codes.shape[0]):
+        p = params[i]
+        for k in range(int(p.disturbance_count)):
+            if p.disturbance_kind[k] == IMPULSE and p.disturbance_start[k] == t:
+                jump += tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, i,
+                                  p.disturbance_point[k], p.disturbance_value[k], p.disturbance_torque[k] != 0.0, work)
+    return jump
 
 
 @jit
