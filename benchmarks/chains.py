@@ -1,7 +1,7 @@
 """Chains of rigid bodies: what a run and an evaluation of the chain's rate cost.
 
 Prints (2 cores, warm numba cache):
-- ms a run of each chain example: its integration by scipy's ``solve_ivp`` over the
+- ms a run of each chain example (the hinged stance's too): its integration by scipy's ``solve_ivp`` over the
   compiled reduced rate (``rbstab.simulator.solve_tree``, ``--engine scipy``) and by the
   compiled driver (``rbstab.engine.integrate.integrate_chain_runs``), and the whole run
   ``rbstab run`` makes (``rbstab.simulator.simulate``: with its outputs and summary);
@@ -27,7 +27,8 @@ Prints (2 cores, warm numba cache):
   in reduced coordinates (:func:`rbstab.variants.tree.tree_rate`: no constraint force);
 - s a sweep of the stance example over the trunk's mass (every run another chain: its
   rest state and h found again) and over the legs' initial tilt, ``--parameter-runs``
-  runs (default 1,000) on one worker process, and their ratio;
+  runs (default 1,000) on one worker process, and their ratio; the same for the hinged
+  stance (``stance_hinges``: over the trunk's mass and the shanks' initial angle);
 - s ``rbstab run`` of the stance example with an empty compile cache (the engine's and a
   tree's kernels compiled once, :func:`rbstab.engine.ensure_compiled`), beside a warm one.
 
@@ -235,10 +236,11 @@ def sweeps(n: int) -> None:
               f"alone take {1e-3 * rate * nfev[chain]:.2f} ms ({rate:.3f} us each)")
 
 
-def parameter_vs_initial_state(n: int) -> None:
-    """Wall seconds of ``rbstab sweep`` of the stance example (t_end 2 s, ``--store
+def parameter_vs_initial_state(n: int, example: str = "stance_ankle_hip",
+                               tilt: tuple = ("legs tilt", "initial_state.legs.theta.0=uniform:[-0.1,0.1]")) -> None:
+    """Wall seconds of ``rbstab sweep`` of a stance example (t_end 2 s, ``--store
     summary``, one worker process: ``-j 1``) over the trunk's mass (every run another
-    chain, so another rest state and h) and over the legs' initial tilt (one chain), each
+    chain, so another rest state and h) and over an initial tilt (one chain), each
     the best of two after a 20-run sweep of its own (the worker's kernels loaded), and
     their ratio."""
     import subprocess
@@ -246,10 +248,9 @@ def parameter_vs_initial_state(n: int) -> None:
     import tempfile
 
     rbstab = str(Path(sys.executable).parent / "rbstab")
-    stance = str(ROOT / "configs" / "examples" / "stance_ankle_hip.yaml")
+    stance = str(ROOT / "configs" / "examples" / f"{example}.yaml")
     seconds = {}
-    for label, axis in (("trunk mass", "bodies.trunk.mass=uniform:[40,55]"),
-                        ("legs tilt", "initial_state.legs.theta.0=uniform:[-0.1,0.1]")):
+    for label, axis in (("trunk mass", "bodies.trunk.mass=uniform:[40,55]"), tilt):
         for runs in (20, n, n):
             with tempfile.TemporaryDirectory() as folder:
                 start = time.perf_counter()
@@ -258,9 +259,9 @@ def parameter_vs_initial_state(n: int) -> None:
                                check=True, capture_output=True)
                 if runs == n:
                     seconds[label] = min(seconds.get(label, np.inf), time.perf_counter() - start)
-        print(f"  stance_ankle_hip over the {label}: {n} runs in {seconds[label]:.2f} s "
+        print(f"  {example} over the {label}: {n} runs in {seconds[label]:.2f} s "
               f"({1e3 * seconds[label] / n:.2f} ms a run, start to exit)")
-    print(f"  ratio trunk mass / legs tilt: {seconds['trunk mass'] / seconds['legs tilt']:.2f}")
+    print(f"  ratio trunk mass / {tilt[0]}: {seconds['trunk mass'] / seconds[tilt[0]]:.2f}")
 
 
 def cold_run(repeat: int = 2) -> None:
@@ -314,11 +315,13 @@ def main() -> None:
     if options.parameter_runs:
         print("a sweep over a parameter against one over an initial state (one worker process, store summary):")
         parameter_vs_initial_state(options.parameter_runs)
+        parameter_vs_initial_state(options.parameter_runs, "stance_hinges",
+                                   ("shanks tilt", "initial_state.shanks.q=uniform:[-0.1,0.1]"))
         if options.only_parameter:
             return
     print("runs, integration only (ms a run, best of 5): scipy's solve_ivp over the compiled rate | the compiled "
           "driver | rbstab run's whole run (compiled, with outputs and summary)")
-    for name in ("double_pendulum", "stance_ankle_hip", "knee"):
+    for name in ("double_pendulum", "stance_ankle_hip", "knee", "stance_hinges"):
         config = load_config(ROOT / "configs" / "examples" / f"{name}.yaml")
         compiled = C.compile_chain(config.chain)
         scipy_s = _best(lambda: solve_tree(config, compiled=compiled))
