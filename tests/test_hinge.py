@@ -70,6 +70,7 @@ def test_a_tree_of_oblique_hinges_moves_as_mujocos():
     np.testing.assert_allclose(out["joint_theta"][0], np.array(q0)[:, None] * axes, atol=1e-12)
     np.testing.assert_allclose(out["joint_omega"][0], np.array(u0)[:, None] * axes, atol=1e-12)
     assert np.all(np.diff(out["lyapunov"]) <= 1e-10)
+    assert np.isnan(out["constraint_force"]).all()  # the hinges' reactions: not computed, not zero
     assert _follow(config, result) < 1e-6
 
 
@@ -252,7 +253,8 @@ def test_a_hinge_sweep_gives_each_runs_own_result(tmp_path):
 def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
     """configs/examples/stance_hinges.yaml (ankle, knee and hip hinges, its ankle stronger
     toward the toes): from its lean it comes back upright as MuJoCo's model of it does (to
-    1e-6 m), v never rising; leaning 0.3 rad
+    1e-6 m), v never rising; pushed forward at the trunk from quiet stance (13 N s, its
+    ankle at its limit) it comes back; leaning 0.3 rad
     forward, further than the ankle's 120 N m can hold (m g h sin 0.3 = 194 N m), it leaves
     the admissible region: a fall reads as a fall."""
     example = "configs/examples/stance_hinges.yaml"
@@ -263,6 +265,11 @@ def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
     assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
     assert np.all(np.diff(out["lyapunov"]) <= 1e-9) and out["lyapunov"][-1] < 1e-3 * out["lyapunov"][0]
     assert np.abs(out["joint_theta"][-1]).max() < 2e-3
+    pushed = simulate(load_config(example, [
+        "simulation.t_end=6", "initial_state.shanks.q=0", "initial_state.trunk.q=0",
+        "disturbances=[{kind: impulse, body: trunk, value: [0, -13, 0], point: [0, 0, 0.2], start: 0.5}]"]))
+    assert pushed.status == "success" and np.abs(pushed.outputs["joint_theta"][-1]).max() < 1e-2  # a push from quiet
+    assert pushed.outputs["disturbance_work"][-1] > 0.0 and pushed.outputs["torque_n_saturated"][:, 0, 0].any()
     deep = simulate(load_config(example, ["simulation.t_end=3", "initial_state.shanks.q=0.3"]))
     assert deep.status == "failed" and "left the admissible region" in deep.message
     assert deep.outputs["torque_n_saturated"][:, 0, 0].any()  # the ankle at its limit toward the toes

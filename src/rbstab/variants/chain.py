@@ -352,7 +352,8 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
     (:class:`ChainWork`). A tree with a hinge is integrated in reduced coordinates only
     (:mod:`rbstab.variants.tree`): here its point-fixed joints' reactions are left out
-    (Lambda_j zero) and dy/dt is not its motion; every other output is.
+    (Lambda_j zero; :func:`evaluate` gives NaN) and dy/dt is not its motion; every other
+    output is.
     """
     n = codes.shape[0]
     rot, rate, torque, force = work.rot, work.rate, work.torque, work.force
@@ -1316,6 +1317,8 @@ def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows, per
     for k in range(_OMEGA_J + 1):
         out[JOINT_OUTPUTS[k]] = joints[:, :, k]
     out["controller_state"][:, first.d_at < 0] = np.nan
+    if np.any(first.codes == HINGE):  # the point-fixed joints' reactions are not computed there
+        out["constraint_force"][:, first.permanent] = np.nan
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]
     for k, name in enumerate(LYAPUNOV_TERMS):
