@@ -65,6 +65,7 @@ __all__ = [
     "JOINT_CODES",
     "REDUCED_STATES",
     "VELOCITIES",
+    "POINT_FIXED",
     "point_fixed",
 ]
 
@@ -639,6 +640,8 @@ JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES)}
 #: these; an embedded joint's D comes after the bodies).
 REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].size for v in JOINT_CODES], dtype=np.int64)
 VELOCITIES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].n_v for v in JOINT_CODES], dtype=np.int64)
+#: Whether each joint code's kind holds its child's point by construction (:attr:`JointKind.point_fixed`).
+POINT_FIXED = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].point_fixed for v in JOINT_CODES], dtype=np.bool_)
 
 
 def point_fixed(variant: str) -> bool:

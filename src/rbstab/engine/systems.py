@@ -29,12 +29,12 @@ from numba.extending import overload
 
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
+from ..layout import POINT_FIXED
 from ..model import set_limits
 from ..variants.chain import _relative
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import HINGE, PERMANENT, limited_quantities, state_rate
-from ..variants.tree import (expand_samples, point_fixed_code, reduce_states, reduced_size, tree_expand, tree_layout,
-                             tree_rate)
+from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate
 from ..variants.tree import tree_impulses as reduced_impulses
 from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES, TREE_GIMBAL
 
@@ -186,7 +186,7 @@ def chain_bounds(y, params, codes, parents, ppoints, margin, status):
         margin, status = _bound_margin(vector(y, 12 * i + 6), p0.limits[2], part + 2, margin, status)
         margin, status = _bound_margin(vector(y, 12 * i + 9), p0.limits[3], part + 3, margin, status)
     for j in range(n):
-        if point_fixed_code(codes[j]):
+        if POINT_FIXED[codes[j]]:
             continue
         a = rotation_and_rate_of(vector(y, 12 * j))[0]
         r = params[j].attachment_point
@@ -245,7 +245,7 @@ def tree_margin(y, p, limit):
         m = limit - abs(y[p.r_at[i] + 1])
         if m < margin:
             margin, status = m, TREE_GIMBAL + 2 * i + (1 if p.codes[i] == PERMANENT else 0)
-        relative = relative or (not point_fixed_code(p.codes[i]) and p.parents[i] >= 0)
+        relative = relative or (not POINT_FIXED[p.codes[i]] and p.parents[i] >= 0)
     if not (limited or relative):
         return margin, status
     w = p.work
@@ -253,7 +253,7 @@ def tree_margin(y, p, limit):
                 w.chain.rate, True)
     for j in range(n):
         q = p.parents[j]
-        if not point_fixed_code(p.codes[j]) and q >= 0:
+        if not POINT_FIXED[p.codes[j]] and q >= 0:
             rel = _relative(rotation_and_rate_of(vector(w.y, 12 * q))[0], rotation_and_rate_of(vector(w.y, 12 * j))[0])
             m = limit - abs(math.asin(min(1.0, max(-1.0, rel[0][2]))))
             if m < margin:

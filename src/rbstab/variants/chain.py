@@ -36,7 +36,7 @@ from ..chain import Chain
 from ..jit import jit
 from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec, quadratic_form,
                           rotation_and_rate_of, rotation_matrix, sub, vector)
-from ..layout import JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, SATURATION_FLAGS, VARIANT_CODES
+from ..layout import JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     force_h,
@@ -714,7 +714,7 @@ class CompiledChain:
     @functools.cached_property
     def permanent(self) -> np.ndarray:
         """(n,) bool: the bodies a point-fixed joint holds (placed on their parents)."""
-        return (self.codes == PERMANENT) | (self.codes == HINGE)
+        return POINT_FIXED[self.codes]
 
 
 def papers_feedback(theta_ref: np.ndarray, passive: np.ndarray, floor: np.ndarray, limit: np.ndarray) -> np.ndarray:
@@ -874,7 +874,7 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
                 y[12 * i + c] = q[k + c]
             k += 3
     for i in range(n):
-        if codes[i] != PERMANENT and codes[i] != HINGE:
+        if not POINT_FIXED[codes[i]]:
             for c in range(3):
                 y[12 * i + 6 + c] = q[k + c]
             k += 3
@@ -884,7 +884,7 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
                 y[d_at[j] + c] = q[k + c]
             k += 3
     for i in range(n):
-        if codes[i] == PERMANENT or codes[i] == HINGE:
+        if POINT_FIXED[codes[i]]:
             _place_body(y, i, params, parents, ppoints, True, False)
 
 
@@ -1017,7 +1017,7 @@ def rest_coordinates(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
                np.empty(5))
     angles = [[float(compiled.params[i]["axis"] @ joints[i, _THETA_J])] if compiled.codes[i] == HINGE
               else list(y[12 * i: 12 * i + 3]) for i in range(n)]
-    positions = [list(y[12 * i + 6: 12 * i + 9]) for i in range(n) if compiled.codes[i] not in (PERMANENT, HINGE)]
+    positions = [list(y[12 * i + 6: 12 * i + 9]) for i in range(n) if not POINT_FIXED[compiled.codes[i]]]
     states = [list(y[d: d + 3]) for d in compiled.d_at if d >= 0]
     return np.array([x for part in (*angles, *positions, *states) for x in part], dtype=float)
 
@@ -1265,7 +1265,7 @@ def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float
         joints = np.empty((n, 7, 3))
         chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)), np.empty(5))
         for j in range(n):
-            if compiled.codes[j] in (PERMANENT, HINGE):
+            if POINT_FIXED[compiled.codes[j]]:
                 continue
             margin = bound - np.abs(joints[j, _E])
             axis = int(np.argmin(margin))

@@ -38,7 +38,7 @@ import numpy as np
 
 from ..jit import jit
 from ..kinematics import IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, rotation_and_rate_of, sub, vector
-from ..layout import REDUCED_STATES, VELOCITIES
+from ..layout import POINT_FIXED, REDUCED_STATES, VELOCITIES
 from .chain import (
     _OMEGA_J,
     compose,
@@ -125,13 +125,6 @@ def tree_work(n, n_states):
 
 
 @jit(forceinline=True)
-def point_fixed_code(code):
-    """Whether a joint of ``code`` holds its child's point by construction (its kind's
-    :attr:`rbstab.layout.JointKind.point_fixed`: the ball ``permanent`` and the hinge)."""
-    return code == PERMANENT or code == HINGE
-
-
-@jit(forceinline=True)
 def _column(a_i, code, axis, col):
     """Column ``col`` of a point-fixed joint's motion subspace in the inertial frame: the
     unit angular velocity A_i e_col of a ball's child (Omega_j's axis col), A_i a of a
@@ -175,7 +168,7 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
     n = codes.shape[0]
     for i in range(n):
         s = r_at[i]
-        if not point_fixed_code(codes[i]):
+        if not POINT_FIXED[codes[i]]:
             for k in range(12):
                 y[12 * i + k] = yr[s + k]
             a, b = rotation_and_rate_of(vector(yr, s))
@@ -223,7 +216,7 @@ def _group_start(i, codes, parents, u_at):
     chain it to up to a body whose joint is not permanent (or the ground's child). Body i's
     rows of M are zero before it (parents come first in the body order)."""
     k = i
-    while point_fixed_code(codes[k]) and parents[k] >= 0:
+    while POINT_FIXED[codes[k]] and parents[k] >= 0:
         k = parents[k]
     return u_at[k]
 
@@ -334,7 +327,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
     rot = cw.rot
     # kappa_i, outward: each body's (dOmega_i/dt, dV_i/dt) at du/dt = 0
     for i in range(n):
-        if not point_fixed_code(codes[i]):
+        if not POINT_FIXED[codes[i]]:
             for r in range(6):
                 kappa[i, r] = 0.0
             continue
@@ -414,7 +407,7 @@ def _generalised_solve(params, codes, parents, u_at, work):
         _put(n_net[i], 0, add(tau, cross(x, rf)))
     for i in range(n - 1, -1, -1):
         q = parents[i]
-        if point_fixed_code(codes[i]) and q >= 0:
+        if POINT_FIXED[codes[i]] and q >= 0:
             mass[q] += mass[i]
             for r in range(3):
                 first[q, r] += first[i, r]
@@ -437,7 +430,7 @@ def _generalised_solve(params, codes, parents, u_at, work):
         at = u_at[i]
         a_i = _rows(rot, i)
         axis_i = vector(params[i].axis, 0)
-        fixed = point_fixed_code(codes[i])
+        fixed = POINT_FIXED[codes[i]]
         point = vector(y, 12 * i + 6)
         if fixed:
             point = add(point, matvec(a_i, vector(params[i].attachment_point, 0)))
@@ -461,11 +454,11 @@ def _generalised_solve(params, codes, parents, u_at, work):
                 for l in range(3):
                     matrix[at + 3 + l, row] = f[l]
             k = i
-            while point_fixed_code(codes[k]) and parents[k] >= 0:
+            while POINT_FIXED[codes[k]] and parents[k] >= 0:
                 k = parents[k]
                 a_k = _rows(rot, k)
                 axis_k = vector(params[k].axis, 0)
-                fixed_k = point_fixed_code(codes[k])
+                fixed_k = POINT_FIXED[codes[k]]
                 point_k = vector(y, 12 * k + 6)
                 if fixed_k:
                     point_k = add(point_k, matvec(a_k, vector(params[k].attachment_point, 0)))
@@ -561,7 +554,7 @@ def expand_samples(samples, params, codes, parents, ppoints, d_at, r_at, u_at, r
     rot, rate = np.empty((codes.shape[0], 3, 3)), np.empty((codes.shape[0], 3, 3))
     permanent = False
     for i in range(codes.shape[0]):
-        permanent = permanent or point_fixed_code(codes[i])
+        permanent = permanent or POINT_FIXED[codes[i]]
     if not permanent:  # the two layouts are one
         out[:] = samples
         return
@@ -609,7 +602,7 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
     n = codes.shape[0]
     permanent = False
     for i in range(n):
-        permanent = permanent or point_fixed_code(codes[i])
+        permanent = permanent or POINT_FIXED[codes[i]]
     joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
     dy, work = np.empty(y.shape[1]), chain_work(n)
     for a in range(y.shape[0]):
