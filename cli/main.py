@@ -21,6 +21,7 @@ from rbstab import __version__
 
 from ._common import MachineFault
 from .analyze import analyze
+from .importer import import_
 from .animate import animate
 from .report import report
 from .run import run
@@ -112,6 +113,7 @@ cli.add_command(analyze)
 cli.add_command(sensitivity)
 cli.add_command(tune)
 cli.add_command(animate)
+cli.add_command(import_)
 
 
 def main() -> None:

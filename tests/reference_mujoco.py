@@ -1,9 +1,13 @@
 """MuJoCo's model of ``configs/examples/double_pendulum.yaml`` and of a tree of hinges (from
 its config's resolved sections alone): independent references for rbstab's chains
 (tests/test_chains.py, tests/test_hinge.py) and the side-by-side timing of
-benchmarks/versus_mujoco.py. MuJoCo is a test dependency (pip install -e ".[test]")."""
+benchmarks/versus_mujoco.py; and MuJoCo simulating a model file that ``rbstab import`` read
+(tests/test_import.py, benchmarks/imported.py). MuJoCo is a test dependency (pip install -e ".[test]")."""
 
 from __future__ import annotations
+
+import xml.etree.ElementTree as ElementTree
+from pathlib import Path
 
 import mujoco
 import numpy as np
@@ -92,3 +96,47 @@ def hinge_tree(config, timestep: float):
         written = data["initial_state"].get(j["child"]) or {}
         qpos0[at], qvel0[at] = written.get("q", 0.0), written.get("u", 0.0)
     return model, state, qpos0, qvel0
+
+
+def mujoco_model(path):
+    """MuJoCo's model of the MJCF or URDF file at ``path`` (a URDF's visual and collision
+    elements left out: its meshes need not exist; geometry plays no part)."""
+    text = Path(path).read_text()
+    root = ElementTree.fromstring(text)
+    if root.tag == "robot":
+        for link in root.iter("link"):
+            for element in [*link.findall("visual"), *link.findall("collision")]:
+                link.remove(element)
+        return mujoco.MjModel.from_xml_string(ElementTree.tostring(root, encoding="unicode"))
+    return mujoco.MjModel.from_xml_path(str(path))
+
+
+def largest_distance(path, config, result, keyframe=None, initial=None, dt=1e-4):
+    """The largest distance [m] between rbstab's centres of mass and MuJoCo's (each body with
+    the bodies welded to it), at the samples of ``result``: MuJoCo simulating the file at
+    ``path`` from the keyframe (or qpos0 with ``initial``'s q, u added) with RK4 at ``dt``."""
+    model = mujoco_model(path)
+    model.opt.integrator, model.opt.timestep = mujoco.mjtIntegrator.mjINT_RK4, dt
+    data = mujoco.MjData(model)
+    if keyframe is not None:
+        mujoco.mj_resetDataKeyframe(model, data, model.key(keyframe).id)
+    for body, state in (initial or {}).items():
+        joint = model.joint(model.body(body).jntadr[0])
+        data.qpos[joint.qposadr[0]] += state.get("q", 0.0)
+        data.qvel[joint.dofadr[0]] += state.get("u", 0.0)
+    carrier = list(range(model.nbody))
+    for b in range(1, model.nbody):
+        if model.body_jntnum[b] == 0:
+            carrier[b] = carrier[model.body_parentid[b]]
+    names = [b["name"] for b in config.resolved["bodies"]]
+    groups = [[c for c in range(model.nbody) if carrier[c] == model.body(n).id] for n in names]
+    mujoco.mj_forward(model, data)
+    worst = 0.0
+    for s, t in enumerate(result.time):
+        if s:
+            mujoco.mj_step(model, data, nstep=int(round((t - result.time[s - 1]) / dt)))
+        for i, group in enumerate(groups):
+            m = model.body_mass[group]
+            centre = (m[:, None] * data.xipos[group]).sum(axis=0) / m.sum()
+            worst = max(worst, float(np.abs(result.outputs["position"][s, i] - centre).max()))
+    return worst

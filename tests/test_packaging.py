@@ -23,7 +23,7 @@ LOCAL = {"rbstab", "rbstab_cli"}
 
 #: Imported modules that a plain install need not have, and the extra that brings each
 #: (their import is guarded: a clear message names the extra).
-OPTIONAL = {"distributed": "dask", "flint": "verify"}
+OPTIONAL = {"distributed": "dask", "flint": "verify", "mujoco": "import"}
 
 
 def _imported_modules() -> dict[str, Path]:

@@ -1,0 +1,430 @@
+"""An MJCF or URDF model -> an rbstab config (commented YAML text), through MuJoCo's compiler.
+
+MuJoCo (the ``mujoco`` package, extra ``import``) compiles the file: MJCF as MuJoCo reads
+it, URDF with its fixed joints fused and its geometry (``visual``, ``collision``) left out.
+The compiled model is read in its reference pose (``qpos0``, where every hinge's q is 0):
+
+- every body's frame is parallel to the model's world frame there and sits at its centre of
+  mass; its inertia tensor [kg m^2] is written in those axes (MuJoCo's principal moments
+  turned by the inertial frame's rotation); a body without a joint is welded to its
+  parent: its mass and inertia join the parent's (about their common centre of mass), or
+  the ground's when no joint lies between it and the world (left out);
+- each ``hinge`` becomes a joint ``variant: hinge`` about its world axis (``xaxis``) at its
+  world anchor (``xanchor``): ``parent_point`` and ``child_point`` are the anchor from the
+  parent's and the child's centres of mass (from the world origin for the ground);
+  q = qpos - qpos0 (a joint's ``ref`` is rbstab's q = 0);
+- its passive torque is the joint's ``stiffness``, ``damping`` and ``springref``
+  (theta_ref = qpos_spring - qpos0);
+- its feedback is the ``position`` servo (any affine actuator on the joint: force = kp ctrl
+  + b0 + b1 length + b2 velocity, length = gear qpos): k_r = -b1 gear^2, l_r = -b2 gear^2,
+  theta_ref from the control (the keyframe's, else 0, within ``ctrlrange``), delivered
+  between forcerange x gear (and the joint's ``actuatorfrcrange``); a ``motor`` with zero
+  control gives no torque;
+- its ``range`` becomes a stop (``range.k_r``, ``range.l_r``): MuJoCo's soft limit at full
+  impedance as a spring and damper on the joint's effective inertia I = 1 / dof_invweight0
+  (solref = (timeconst, dampratio): k = I / (timeconst dampratio)^2, l = 2 I / timeconst;
+  solref < 0: k = -solref[0] I, l = -solref[1] I);
+- gravity is ``option/gravity`` (zero where the model disables it); the initial state is a
+  keyframe's q, u or the reference pose at rest.
+
+What rbstab cannot represent is refused, one line each naming the model's element: ball,
+slide and free joints, two joints in one body, tendons, equality constraints, muscles and
+actuators with activation dynamics, armature, dry friction, gravity compensation, fluid
+forces, a constant actuator torque. Contacts are left out with a note.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ElementTree
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ConfigError
+from .yaml_io import read_text_limited
+
+__all__ = ["ImportedModel", "import_model"]
+
+#: Largest model file read [bytes] (a whole-body MJCF model is ~100 kB).
+_MAX_MODEL_BYTES = 64 * 2**20
+#: Column at which a written line's comment starts.
+_COMMENT_COLUMN = 44
+
+
+@dataclass
+class ImportedModel:
+    """A model's config: ``text`` (commented YAML that loads and runs as written),
+    ``notes`` (one line each: a gain the model lacks written as zero, what was left out)."""
+
+    name: str
+    text: str
+    notes: list[str] = field(default_factory=list)
+
+
+def _number(x: float) -> str:
+    x = float(x)
+    if math.isinf(x):
+        return ".inf" if x > 0 else "-.inf"
+    return repr(float(f"{x:.15g}") + 0.0)  # 15 digits: 0.186, not 0.18599999999999994; -0.0 -> 0.0
+
+
+def _vector(v, scale: float | None = None) -> str:
+    """3 numbers (or a 3x3 matrix) on one line, entries below 1e-14 of ``scale`` (default:
+    the largest entry) written as 0: the rounding of a rotation, not a value."""
+    v = np.asarray(v, dtype=float)
+    tiny = 1e-14 * (float(np.abs(v).max()) if scale is None else scale)
+    v = np.where(np.abs(v) <= tiny, 0.0, v)
+    if v.ndim == 2:
+        return "[" + ", ".join(_vector(row, scale=0.0) for row in v) + "]"
+    return "[" + ", ".join(_number(x) for x in v) + "]"
+
+
+def _line(indent: int, text: str, comment: str = "") -> str:
+    line = " " * indent + text
+    return f"{line.ljust(_COMMENT_COLUMN - 1)} # {comment}" if comment else line
+
+
+_NAME_RULE = re.compile(r"[^A-Za-z0-9_-]")
+
+
+class _Names:
+    """rbstab names (letters, digits, '_' and '-', starting with a letter or '_', unique)
+    for the model's, which may be empty or hold other characters."""
+
+    def __init__(self, reserved=()) -> None:
+        self.used = set(reserved)
+
+    def __call__(self, name: str, fallback: str) -> str:
+        base = _NAME_RULE.sub("_", name) or fallback
+        base = base if re.match(r"[A-Za-z_]", base) else "_" + base
+        out, n = base[:60], 1
+        while out in self.used:
+            n += 1
+            out = f"{base[:56]}_{n}"
+        self.used.add(out)
+        return out
+
+
+def _compile(path: Path):
+    """(mujoco module, model, format name, notes) of the file at ``path``; ConfigError in one
+    line for a file that is not XML, not MJCF or URDF, or that MuJoCo's compiler refuses."""
+    where = str(path)
+    try:
+        import mujoco  # optional: the 'import' extra
+    except ImportError:
+        raise ConfigError([f"model file {where}: importing a model needs MuJoCo's compiler, the 'mujoco' "
+                           "package (pip install 'rbstab[import]')"]) from None
+    text = read_text_limited(path, "model file", limit=_MAX_MODEL_BYTES)
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        raise ConfigError([f"model file {where}: not an XML file ({exc}); expected an MJCF (<mujoco>) or URDF "
+                           "(<robot>) model"]) from None
+    notes = []
+    if root.tag == "robot":
+        kind = "URDF"
+        for link in root.iter("link"):
+            for element in [*link.findall("visual"), *link.findall("collision")]:
+                link.remove(element)
+        notes.append(f"{where}: the URDF's geometry (visual, collision) is left out: rbstab has no contact model")
+        compile_ = lambda: mujoco.MjModel.from_xml_string(ElementTree.tostring(root, encoding="unicode"))  # noqa: E731
+    elif root.tag == "mujoco":
+        kind = "MJCF"
+        compile_ = lambda: mujoco.MjModel.from_xml_path(str(path))  # noqa: E731
+    else:
+        raise ConfigError([f"model file {where}: its root element is <{root.tag}>; expected <mujoco> (MJCF) or "
+                           "<robot> (URDF)"])
+    try:
+        model = compile_()
+    except Exception as exc:  # MuJoCo's compiler reports every problem as a ValueError-like error
+        message = re.sub(r"^Error:\s*", "", " ".join(str(exc).split()))
+        raise ConfigError([f"model file {where}: MuJoCo's compiler refused it: {message}"]) from None
+    return mujoco, model, kind, notes
+
+
+def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel:
+    """The rbstab config of the MJCF or URDF model at ``path`` (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        An MJCF (``<mujoco>``) or URDF (``<robot>``) file.
+    keyframe : str, optional
+        The name of the model's keyframe whose qpos, qvel and ctrl give the initial state and
+        the servos' targets; default: the reference pose at rest, zero controls.
+
+    Returns
+    -------
+    ImportedModel
+
+    Raises
+    ------
+    ConfigError
+        One line per problem, naming the file and the model's element: an unreadable file,
+        one MuJoCo's compiler refuses, a keyframe that does not exist, what rbstab cannot
+        represent (module docstring).
+    """
+    path = Path(path)
+    mujoco, model, kind, notes = _compile(path)
+    where = str(path)
+    errors: list[str] = []
+
+    def element(tag: str, obj, more: str = "") -> str:
+        return f'<{tag} name="{obj.name}"{more}>' if obj.name else f"<{tag}{more}> #{obj.id}"
+
+    # What rbstab cannot represent, each in one line.
+    joint_kind = {int(mujoco.mjtJoint.mjJNT_FREE): "a free joint (a floating base)",
+                  int(mujoco.mjtJoint.mjJNT_BALL): "a ball joint (its gimbal-free quaternion form is not a joint kind "
+                                                   "of rbstab's; its Euler-angle ball, variant permanent, is written "
+                                                   "by hand)",
+                  int(mujoco.mjtJoint.mjJNT_SLIDE): "a slide joint (not a joint kind of rbstab's)"}
+    for j in range(model.njnt):
+        joint = model.joint(j)
+        if int(model.jnt_type[j]) in joint_kind:
+            errors.append(f"model file {where}: {element('joint', joint)} is {joint_kind[int(model.jnt_type[j])]}; "
+                          "rbstab imports hinge joints")
+            continue
+        dof = int(model.jnt_dofadr[j])
+        for attribute, values, why in (("armature", model.dof_armature, "rotor inertia"),
+                                       ("frictionloss", model.dof_frictionloss, "dry friction")):
+            if values[dof] != 0.0:
+                errors.append(f"model file {where}: {element('joint', joint)} has {attribute}="
+                              f"{float(values[dof]):g}; expected 0 ({why} is not modelled)")
+    for b in range(1, model.nbody):
+        if model.body_jntnum[b] > 1:
+            errors.append(f"model file {where}: {element('body', model.body(b))} has {int(model.body_jntnum[b])} "
+                          "joints; expected at most one (a universal joint is not a joint kind of rbstab's)")
+        if model.body_gravcomp[b] != 0.0:
+            errors.append(f"model file {where}: {element('body', model.body(b))} has gravcomp="
+                          f"{float(model.body_gravcomp[b]):g}; expected 0 (gravity compensation is not modelled)")
+    if model.ntendon:
+        errors.append(f"model file {where}: it has {model.ntendon} <tendon>s ({element('tendon', model.tendon(0))}, "
+                      "...); tendons are not modelled")
+    if model.neq:
+        errors.append(f"model file {where}: it has {model.neq} <equality> constraints (closed loops); rbstab's models "
+                      "are trees")
+    if model.opt.density or model.opt.viscosity:
+        errors.append(f"model file {where}: <option density={model.opt.density:g} viscosity={model.opt.viscosity:g}>;"
+                      " expected 0 (fluid forces are not modelled)")
+
+    # Keyframe.
+    key = None
+    if keyframe is not None:
+        names = [model.key(k).name for k in range(model.nkey)]
+        if keyframe not in names:
+            errors.append(f"model file {where}: keyframe {keyframe!r} not found; its keyframes: "
+                          + (", ".join(repr(n) for n in names) if names else "none"))
+        else:
+            key = names.index(keyframe)
+    elif model.nkey:
+        notes.append(f"{where}: initial state: the reference pose at rest (its keyframes: "
+                     + ", ".join(repr(model.key(k).name) for k in range(model.nkey)) + "; --keyframe NAME)")
+    ctrl = np.array(model.key_ctrl[key]) if key is not None else np.zeros(model.nu)
+
+    # Actuators: the joints' feedback.
+    feedback: dict[int, dict] = {}
+    motors: dict[int, list[str]] = {}
+    for a in range(model.nu):
+        actuator = model.actuator(a)
+        name = element("actuator", actuator)
+        if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT):
+            errors.append(f"model file {where}: {name} acts on a tendon, site or body; rbstab's actuators act on a "
+                          "joint")
+            continue
+        if int(model.actuator_dyntype[a]) != int(mujoco.mjtDyn.mjDYN_NONE):
+            errors.append(f"model file {where}: {name} has activation dynamics (a muscle, a filter or an "
+                          "integrator); expected none")
+            continue
+        if int(model.actuator_gaintype[a]) != int(mujoco.mjtGain.mjGAIN_FIXED) or int(
+                model.actuator_biastype[a]) not in (int(mujoco.mjtBias.mjBIAS_NONE), int(mujoco.mjtBias.mjBIAS_AFFINE)):
+            errors.append(f"model file {where}: {name} is not an affine actuator (a muscle or a user gain); expected "
+                          "a position or velocity servo or a motor")
+            continue
+        j = int(model.actuator_trnid[a, 0])
+        gear = float(model.actuator_gear[a, 0])
+        u = float(ctrl[a])
+        if model.actuator_ctrllimited[a]:
+            u = min(max(u, float(model.actuator_ctrlrange[a, 0])), float(model.actuator_ctrlrange[a, 1]))
+        kp = float(model.actuator_gainprm[a, 0])
+        b0, b1, b2 = (float(x) for x in model.actuator_biasprm[a, :3])
+        if int(model.actuator_biastype[a]) == int(mujoco.mjtBias.mjBIAS_NONE):
+            b0 = b1 = b2 = 0.0
+        k, l = -b1 * gear**2, -b2 * gear**2
+        # torque = gear force = gear (kp u + b0 + b1 gear qpos0) - k q - l dq/dt
+        bias = gear * (kp * u + b0 + b1 * gear * float(model.qpos0[model.jnt_qposadr[j]]))
+        if k == 0.0 and l == 0.0:
+            if bias != 0.0:
+                errors.append(f"model file {where}: {name} gives the constant torque {bias:g} N m at its control "
+                              f"{u:g}; a joint's torque is its feedback (a zero control, or a servo)")
+            else:
+                motors.setdefault(j, []).append(name)
+            continue
+        if k < 0.0 or l < 0.0:
+            errors.append(f"model file {where}: {name} has stiffness {k:g} N m/rad and damping {l:g} N m s/rad "
+                          "(-biasprm gear^2); expected both >= 0")
+            continue
+        if bias != 0.0 and k == 0.0:
+            errors.append(f"model file {where}: {name} adds the constant torque {bias:g} N m to its damping; "
+                          "expected a position servo or a zero control")
+            continue
+        if j in feedback:
+            errors.append(f"model file {where}: {feedback[j]['source']} and {name} both act on joint "
+                          f"{model.joint(j).name!r}; expected one servo per joint")
+            continue
+        lower, upper = -math.inf, math.inf
+        if model.actuator_forcelimited[a]:
+            lower, upper = sorted(gear * float(x) for x in model.actuator_forcerange[a])
+        if model.jnt_actfrclimited[j]:
+            lower = max(lower, float(model.jnt_actfrcrange[j, 0]))
+            upper = min(upper, float(model.jnt_actfrcrange[j, 1]))
+        if not lower < 0.0 < upper:
+            errors.append(f"model file {where}: {name} delivers torques in [{lower:g}, {upper:g}] N m (forcerange x "
+                          "gear); expected a range that holds 0")
+            continue
+        feedback[j] = {"source": name, "k_r": k, "l_r": l, "theta_ref": bias / k if k else 0.0,
+                       "lower": lower, "upper": upper, "gear": gear, "ctrl": u}
+    if errors:
+        raise ConfigError(errors)
+
+    # The reference pose.
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    owner = list(range(model.nbody))  # the body that carries each body: itself or a welded ancestor
+    for b in range(1, model.nbody):
+        if model.body_jntnum[b] == 0:
+            owner[b] = owner[int(model.body_parentid[b])]
+    body_names = _Names(reserved=("ground",))
+    joint_names = _Names()
+    carried = [b for b in range(1, model.nbody) if owner[b] == b]
+    name_of = {b: body_names(model.body(b).name, f"body{b}") for b in carried}
+    grounded = [b for b in range(1, model.nbody) if owner[b] == 0]
+    if grounded:
+        notes.append(f"{where}: " + ", ".join(model.body(b).name or f"#{b}" for b in grounded)
+                     + " without a joint to the world: part of the ground, left out")
+    welded = {b: [c for c in range(1, model.nbody) if owner[c] == b and c != b] for b in carried}
+    lines_bodies, com = [], {0: np.zeros(3)}
+    for b in carried:
+        parts = [b, *welded[b]]
+        masses = np.array([float(model.body_mass[c]) for c in parts])
+        mass = float(masses.sum())
+        if mass <= 0.0:
+            raise ConfigError([f"model file {where}: {element('body', model.body(b))} has no mass; expected a "
+                               "mass > 0 (an <inertial> element)"])
+        centre = (masses[:, None] * data.xipos[parts]).sum(axis=0) / mass
+        inertia = np.zeros((3, 3))
+        for c, m in zip(parts, masses):
+            frame = data.ximat[c].reshape(3, 3)
+            d = data.xipos[c] - centre
+            inertia += frame @ np.diag(model.body_inertia[c]) @ frame.T + m * (d @ d * np.eye(3) - np.outer(d, d))
+        inertia = 0.5 * (inertia + inertia.T)
+        com[b] = centre
+        source = element("body", model.body(b)) + (
+            " with " + ", ".join(element("body", model.body(c)) for c in welded[b]) + " welded to it"
+            if welded[b] else "")
+        diagonal = np.allclose(inertia, np.diag(np.diag(inertia)), rtol=0, atol=1e-14 * np.abs(inertia).max())
+        lines_bodies += [_line(2, f"- name: {name_of[b]}", source),
+                         _line(4, f"mass: {_number(mass)}", "[kg]"),
+                         _line(4, f"inertia: {_vector(np.diag(inertia) if diagonal else inertia)}",
+                               "[kg m^2] about the centre of mass, world axes")]
+        if welded[b]:
+            notes.append(f"{where}: " + ", ".join(element("body", model.body(c)) for c in welded[b])
+                         + f" without a joint: welded to {name_of[b]} (mass and inertia added)")
+
+    lines_joints, initial, unheld = [], [], []
+    for b in carried:
+        j = int(model.body_jntadr[b])
+        joint = model.joint(j)
+        jname = joint_names(joint.name, f"joint{j}")
+        parent = owner[int(model.body_parentid[b])]
+        anchor, axis = np.array(data.xanchor[j]), np.array(data.xaxis[j])
+        qpos0 = float(model.qpos0[model.jnt_qposadr[j]])
+        dof = int(model.jnt_dofadr[j])
+        source = element("joint", joint, ' type="hinge"')
+        lines_joints += [
+            _line(2, f"- name: {jname}", source),
+            _line(4, f"parent: {name_of[parent] if parent else 'ground'}"),
+            _line(4, f"parent_point: {_vector(anchor - com[parent], scale=1.0)}",
+                  "[m] the anchor, " + ("inertial frame" if not parent else f"from the centre of mass of {name_of[parent]}")),
+            _line(4, f"child: {name_of[b]}"),
+            _line(4, f"child_point: {_vector(anchor - com[b], scale=1.0)}", f"[m] the anchor, from the centre of mass of "
+                                                                          f"{name_of[b]}"),
+            _line(4, "variant: hinge", "q = qpos - qpos0 [rad]" + (f" (ref {qpos0:g})" if qpos0 else "")),
+            _line(4, f"axis: {_vector(axis)}", "the joint's axis, world frame"),
+        ]
+        servo = feedback.get(j)
+        if servo is not None:
+            lines_joints += [
+                _line(4, f"k_r: {_number(servo['k_r'])}", f"[N m/rad] {servo['source']}: kp gear^2"),
+                _line(4, f"l_r: {_number(servo['l_r'])}", "[N m s/rad] kv gear^2"),
+                _line(4, f"theta_ref: {_number(servo['theta_ref'])}",
+                      f"[rad] its target at control {servo['ctrl']:g}, gear {servo['gear']:g}")]
+            if math.isfinite(servo["lower"]) or math.isfinite(servo["upper"]):
+                lines_joints.append(_line(4, f"saturation: {{torque_n: {_number(servo['upper'])}, "
+                                             f"torque_n_lower: {_number(servo['lower'])}}}",
+                                          "[N m] forcerange x gear, actuatorfrcrange"))
+        else:
+            lines_joints += [_line(4, "k_r: 0.0", "[N m/rad] no servo on this joint"),
+                             _line(4, "l_r: 0.0", "[N m s/rad]")]
+            unheld.append(jname)
+        if j in motors:
+            notes.append(f"{where}: {', '.join(motors[j])} on joint {jname}: a motor at zero control, no torque"
+                         + (f" (its limits [{model.jnt_actfrcrange[j, 0]:g}, {model.jnt_actfrcrange[j, 1]:g}] N m)"
+                            if model.jnt_actfrclimited[j] else ""))
+        stiffness, damping = float(model.jnt_stiffness[j]), float(model.dof_damping[dof])
+        if stiffness or damping:
+            spring = float(model.qpos_spring[model.jnt_qposadr[j]]) - qpos0
+            lines_joints.append(_line(4, f"passive: {{k_r: {_number(stiffness)}, l_r: {_number(damping)}, "
+                                         f"theta_ref: {_number(spring)}}}",
+                                      "[N m/rad, N m s/rad, rad] stiffness, damping, springref"))
+        if model.jnt_limited[j]:
+            inertia = 1.0 / float(model.dof_invweight0[dof])
+            timeconst, ratio = (float(x) for x in model.jnt_solref[j])
+            k, l = ((inertia / (timeconst * ratio) ** 2, 2.0 * inertia / timeconst) if timeconst > 0
+                    else (-timeconst * inertia, -ratio * inertia))
+            lower, upper = (float(x) - qpos0 for x in model.jnt_range[j])
+            lines_joints.append(_line(4, f"range: {{lower: {_number(lower)}, upper: {_number(upper)}, "
+                                         f"k_r: {_number(k)}, l_r: {_number(l)}}}",
+                                      f"[rad] a stop: solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} kg m^2"))
+        q = float(model.key_qpos[key, model.jnt_qposadr[j]]) - qpos0 if key is not None else 0.0
+        u = float(model.key_qvel[key, dof]) if key is not None else 0.0
+        if not -math.pi < q < math.pi:
+            raise ConfigError([f"model file {where}: keyframe {keyframe!r} puts {source} at q = {q:g} rad from "
+                               "its reference; expected a number in (-pi, pi)"])
+        initial.append(_line(2, f"{name_of[b]}: {{q: {_number(q)}, u: {_number(u)}}}", f"[rad, rad/s] {jname}"))
+    if unheld:
+        notes.append(f"{where}: no servo on {', '.join(unheld)}: their k_r and l_r are written as 0 (passive torques "
+                     "and gravity only)")
+    n_contacts = int(np.count_nonzero((model.geom_contype | model.geom_conaffinity) != 0)) if model.ngeom else 0
+    if n_contacts and kind == "MJCF":
+        notes.append(f"{where}: {n_contacts} geoms' contacts left out: rbstab has no contact model")
+
+    gravity = np.zeros(3) if model.opt.disableflags & int(mujoco.mjtDisableBit.mjDSBL_GRAVITY) else model.opt.gravity
+    step = float(model.opt.timestep)
+    n_samples = int(round(5.0 / step)) + 1 if 5.0 / step <= 100_000 else 100_001
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", path.stem) or "model"
+    if key is not None:
+        header_key = f"keyframe {keyframe!r}"
+    else:
+        header_key = "the reference pose at rest"
+    text = "\n".join([
+        f"# {path.name}: imported from {kind} by `rbstab import` (MuJoCo's compiler).",
+        "# Every body's frame is parallel to the model's world frame in its reference pose (qpos0, each",
+        "# hinge's q = 0 there) at its centre of mass; points [m], inertias [kg m^2] in those axes.",
+        f"# Initial state: {header_key}.",
+        f"name: {name}",
+        _line(0, f"gravity: {_vector(gravity, scale=1.0)}", "[m/s^2] <option gravity>"),
+        "bodies:", *lines_bodies,
+        "joints:", *lines_joints,
+        "initial_state:", *initial,
+        "simulation:",
+        _line(2, "t_end: 5.0", "[s] choose"),
+        _line(2, f"n_samples: {n_samples}", f"one sample each <option timestep> ({step:g} s)"),
+        _line(2, "method: DOP853"),
+        _line(2, "rtol: 1.0e-9"),
+        _line(2, "atol: 1.0e-11"),
+        "",
+    ])
+    return ImportedModel(name=name, text=text, notes=notes)

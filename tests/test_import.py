@@ -1,0 +1,193 @@
+"""``rbstab import`` (rbstab.config.model_import): MJCF and URDF models through MuJoCo's
+compiler become configs that run as written. Checked against MuJoCo simulating the same
+file (RK4 at 1e-4 s): every body's centre of mass to 1e-6 m; the refusals in one line
+naming the model's element, nothing written."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from rbstab.config import config_from_mapping
+from rbstab.config.model_import import import_model
+from rbstab.config.yaml_io import parse_yaml
+from rbstab.simulator import simulate
+from rbstab_cli.main import cli
+
+mujoco = pytest.importorskip("mujoco")
+from reference_mujoco import largest_distance, mujoco_model  # noqa: E402  (MuJoCo simulating the file itself)
+
+MODELS = Path(__file__).resolve().parents[1] / "configs" / "examples" / "models"
+
+#: Welded bodies, rotated body and inertial frames, a joint's ref and springref, oblique axes,
+#: a servo with a gear and a forcerange, a motor at zero control, gravity off the vertical.
+OBLIQUE = """<mujoco model="oblique">
+  <compiler angle="radian"/>
+  <option gravity="0.3 -0.2 -9.81" timestep="0.002"/>
+  <worldbody>
+    <body name="base" pos="0.1 0.2 0.3" quat="0.9 0.1 0.3 -0.2">
+      <geom type="box" size="0.1 0.1 0.1"/>
+      <body name="a" pos="0 0 0.1" euler="0.3 -0.2 0.5">
+        <joint name="ja" type="hinge" axis="1 0.3 -0.2" pos="0.02 0 0.05" ref="0.2" stiffness="3"
+               springref="0.5" damping="0.1" range="-1.5 2.5" limited="true"/>
+        <inertial pos="0.01 0.02 -0.3" quat="0.8 0.2 -0.1 0.4" mass="1.2" diaginertia="0.08 0.07 0.02"/>
+        <body name="a_tip" pos="0 0.05 -0.6" euler="0.1 0.2 0.3">
+          <inertial pos="0.03 0 0" mass="0.3" diaginertia="0.003 0.002 0.001"/>
+        </body>
+        <body name="b" pos="0.05 0 -0.6" euler="-0.4 0.1 0.2">
+          <joint name="jb" type="hinge" axis="0.2 1 0.5" damping="0.05"/>
+          <inertial pos="0 0.02 -0.25" mass="0.9" fullinertia="0.05 0.045 0.02 0.001 -0.002 0.0005"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="servo" joint="jb" kp="4" kv="0.3" gear="2" forcelimited="true" forcerange="-0.5 1.5"/>
+    <motor name="drive" joint="ja"/>
+  </actuator>
+  <keyframe><key name="start" qpos="0.7 -0.4" qvel="0.3 -0.5" ctrl="0.3 0"/></keyframe>
+</mujoco>
+"""
+
+
+def _imported(path, keyframe=None, t_end=2.0, n_samples=201, initial=None):
+    """The config ``rbstab import`` writes for ``path``, run for ``t_end`` s with tight
+    tolerances; ``initial``: {body: {q, u}} written over its initial state."""
+    imported = import_model(path, keyframe=keyframe)
+    data = parse_yaml(imported.text)
+    data["simulation"].update(t_end=t_end, n_samples=n_samples, rtol=1e-11, atol=1e-12)
+    for body, state in (initial or {}).items():
+        data["initial_state"][body].update(state)
+    return imported, config_from_mapping(data)
+
+
+def test_the_shipped_stance_is_what_import_writes_and_moves_as_mujoco():
+    """configs/examples/stance_imported.yaml is what ``rbstab import`` writes for
+    configs/examples/models/stance.xml at its keyframe ``lean``; run, it follows MuJoCo's
+    simulation of the XML (servos, the knee's springs) to
+    1e-6 m while the knee stays inside its range (where MuJoCo's limit and rbstab's stop
+    both act nowhere)."""
+    path = MODELS / "stance.xml"
+    shipped = (MODELS.parent / "stance_imported.yaml").read_text()
+    imported, config = _imported(path, keyframe="lean", n_samples=2001)
+    assert imported.text == shipped
+    result = simulate(config)
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    knee = result.outputs["joint_theta"][:, 1, 0]
+    assert -2.4 < knee.min() and knee.max() < 0.05
+    assert largest_distance(path, config, result, keyframe="lean") < 1e-6
+
+
+def test_rotated_frames_welded_bodies_refs_and_gears_move_as_mujoco(tmp_path):
+    """Body and inertial frames turned every way, a body welded to its parent (its mass and
+    inertia joined) and one welded to the world (left out), a joint's ``ref`` and
+    ``springref``, oblique axes, a servo with gear 2, a forcerange and a keyframe's control,
+    a motor at zero control, oblique gravity: every centre of mass as MuJoCo's to 1e-6 m."""
+    path = tmp_path / "oblique.xml"
+    path.write_text(OBLIQUE)
+    imported, config = _imported(path, keyframe="start")
+    assert [b["name"] for b in config.resolved["bodies"]] == ["a", "b"]
+    assert any("a_tip" in n and "welded to a" in n for n in imported.notes)
+    assert any("base" in n and "part of the ground" in n for n in imported.notes)
+    assert any("drive" in n and "zero control" in n for n in imported.notes)
+    servo = config.resolved["joints"][1]
+    assert servo["k_r"] == pytest.approx(16.0) and servo["l_r"] == pytest.approx(1.2)
+    assert servo["theta_ref"] == pytest.approx(0.15)  # ctrl 0.3 over gear 2
+    assert servo["saturation"]["torque_n"] == pytest.approx(3.0)
+    assert servo["saturation"]["torque_n_lower"] == pytest.approx(-1.0)
+    result = simulate(config)
+    assert result.status == "success"
+    assert result.outputs["torque_n_saturated"][:, 1].any()  # the servo at its forcerange
+    theta = result.outputs["joint_theta"][:, 0] @ np.asarray(config.resolved["joints"][0]["axis"])
+    assert -1.5 - 0.2 < theta.min() and theta.max() < 2.5 - 0.2  # inside the range: the stop idle
+    assert largest_distance(path, config, result, keyframe="start") < 1e-6
+
+
+def test_a_urdf_arm_with_a_fixed_hand_moves_as_mujoco():
+    """configs/examples/models/arm.urdf (its hand fused to the forearm by its fixed joint, a
+    meshed visual left out, no springs: k_r written as 0 and named) swings from a raised
+    pose under gravity and damping as MuJoCo's model of the same URDF, to 1e-6 m."""
+    path = MODELS / "arm.urdf"
+    start = {"upper_arm": {"q": 0.5, "u": 0.0}, "forearm": {"q": -1.0, "u": 1.0}}
+    imported, config = _imported(path, initial=start)
+    assert any("no servo on shoulder, elbow" in n for n in imported.notes)
+    assert config.resolved["bodies"][1]["mass"] == pytest.approx(1.12 + 0.42)
+    result = simulate(config)
+    assert result.status == "success"
+    elbow = result.outputs["joint_theta"][:, 1, 1]
+    assert -2.6 < elbow.min() and elbow.max() < 0.1  # inside the range: MuJoCo's limit and the stop idle
+    assert largest_distance(path, config, result, initial=start) < 1e-6
+
+
+def test_import_writes_a_config_that_runs(tmp_path):
+    """The CLI writes the config (refusing to replace it without --overwrite) and notes the
+    zero gains on stderr; ``rbstab run`` runs it as written."""
+    out = tmp_path / "arm.yaml"
+    runner = CliRunner()
+    first = runner.invoke(cli, ["import", str(MODELS / "arm.urdf"), "-o", str(out)])
+    assert first.exit_code == 0, first.output
+    assert "no servo on shoulder, elbow" in first.stderr
+    again = runner.invoke(cli, ["import", str(MODELS / "arm.urdf"), "-o", str(out)])
+    assert again.exit_code == 1 and "--overwrite" in again.output
+    run = runner.invoke(cli, ["run", str(out), "-o", str(tmp_path), "--set", "simulation.t_end=0.2",
+                              "--set", "simulation.n_samples=21"])
+    assert run.exit_code == 0, run.output
+    assert (tmp_path / "arm.h5").exists()
+
+
+@pytest.mark.parametrize("change, element", [
+    (('type="hinge" axis="0.2 1 0.5"', 'type="ball"'), '<joint name="jb">'),
+    (('type="hinge" axis="0.2 1 0.5"', 'type="slide" axis="0.2 1 0.5"'), '<joint name="jb">'),
+    (('<joint name="jb"', '<joint name="jb2" type="hinge" axis="1 0 0"/><joint name="jb"'), '<body name="b">'),
+    (('</worldbody>', '</worldbody><tendon><fixed name="t"><joint joint="ja" coef="1"/></fixed></tendon>'),
+     '<tendon name="t">'),
+    (('<motor name="drive" joint="ja"/>', '<muscle name="drive" joint="ja"/>'), '<actuator name="drive">'),
+    (('damping="0.05"', 'damping="0.05" armature="0.01"'), '<joint name="jb">'),
+])
+def test_what_rbstab_cannot_represent_is_refused_in_one_line(tmp_path, change, element):
+    """A ball, slide or second joint in a body, a tendon, a muscle, armature: one line naming
+    the element, exit 1, nothing written."""
+    path, out = tmp_path / "model.xml", tmp_path / "config.yaml"
+    path.write_text(OBLIQUE.replace(*change).replace('ctrl="0.3 0"', ""))
+    result = CliRunner().invoke(cli, ["import", str(path), "-o", str(out)])
+    assert result.exit_code == 1, result.output
+    assert element in result.output and "Traceback" not in result.output
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("text, keyframe, expected", [
+    (OBLIQUE, "none", "keyframe 'none' not found; its keyframes: 'start'"),
+    ("<mujoco><worldbody>", None, "not an XML file"),
+    ("<model/>", None, "its root element is <model>"),
+    ("<mujoco><worldbody><body><joint type='hinge'/></body></worldbody></mujoco>", None,
+     "MuJoCo's compiler refused it"),
+])
+def test_bad_model_files_and_keyframes_are_refused_in_one_line(tmp_path, text, keyframe, expected):
+    path, out = tmp_path / "model.xml", tmp_path / "config.yaml"
+    path.write_text(text)
+    args = ["import", str(path), "-o", str(out)] + (["--keyframe", keyframe] if keyframe else [])
+    result = CliRunner().invoke(cli, args)
+    assert result.exit_code == 1 and expected in result.output, result.output
+    assert not out.exists()
+
+
+def test_a_missing_model_file_is_refused(tmp_path):
+    result = CliRunner().invoke(cli, ["import", str(tmp_path / "missing.xml")])
+    assert result.exit_code == 1 and "model file not found" in result.output
+
+
+def test_stop_gains_are_mujocos_soft_limit_on_the_effective_inertia():
+    """The knee's range: MuJoCo's solref (0.02, 1) on the knee's inertia at the reference
+    pose, I = 1 / dof_invweight0: k = I / 0.02^2, l = 2 I / 0.02."""
+    _, config = _imported(MODELS / "stance.xml")
+    model = mujoco_model(MODELS / "stance.xml")
+    inertia = 1.0 / model.dof_invweight0[1]
+    stop = config.resolved["joints"][1]["range"]
+    assert (stop["lower"], stop["upper"]) == (-2.4, 0.05)
+    assert stop["k_r"] == pytest.approx(inertia / 0.02**2, rel=1e-12)
+    assert stop["l_r"] == pytest.approx(2 * inertia / 0.02, rel=1e-12)
+    assert math.isfinite(stop["k_r"])
