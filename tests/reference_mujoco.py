@@ -140,3 +140,30 @@ def largest_distance(path, config, result, keyframe=None, initial=None, dt=1e-4)
             centre = (m[:, None] * data.xipos[group]).sum(axis=0) / m.sum()
             worst = max(worst, float(np.abs(result.outputs["position"][s, i] - centre).max()))
     return worst
+
+
+def eigenvalues_at(path, q, keyframe=None, step=1e-6):
+    """The eigenvalues [1/s] of MuJoCo's continuous-time linearisation of the hinge model at
+    ``path`` at rest at the joint angles ``q`` (nv,) [rad] from its reference pose (qpos =
+    qpos0 + q), the controls the keyframe's (else 0): A = [[0, I], [d qacc/d qpos, d qacc/d
+    qvel]] by central differences of ``mj_forward``'s qacc (steps ``step``)."""
+    model = mujoco_model(path)
+    data = mujoco.MjData(model)
+    if keyframe is not None:
+        data.ctrl[:] = model.key_ctrl[model.key(keyframe).id]
+    n = model.nv
+    at = model.qpos0 + np.asarray(q, dtype=float)
+
+    def acceleration(qpos, qvel):
+        data.qpos[:], data.qvel[:] = qpos, qvel
+        mujoco.mj_forward(model, data)
+        return data.qacc.copy()
+
+    jac = np.zeros((2 * n, 2 * n))
+    jac[:n, n:] = np.eye(n)
+    for k in range(n):
+        dq = np.zeros(n)
+        dq[k] = step
+        jac[n:, k] = (acceleration(at + dq, 0 * dq) - acceleration(at - dq, 0 * dq)) / (2 * step)
+        jac[n:, n + k] = (acceleration(at, dq) - acceleration(at, -dq)) / (2 * step)
+    return np.linalg.eigvals(jac), acceleration(at, np.zeros(n))

@@ -96,10 +96,10 @@ def test_hinge_servos_that_saturate_move_as_mujocos(lower, upper):
     assert _follow(config, result) < 1e-6
 
 
-def test_a_hinge_is_the_ball_it_equals_in_planar_motion():
-    """Two rods on hinges about x move as the same rods on ball joints with isotropic gains
-    released in the y-z plane (whose motion stays there): the same centres of mass, joint
-    angles, torques and v."""
+def _planar_twins():
+    """Three rods on hinges about x (springs, dampers, references, gravity) released in the
+    y-z plane, and the same rods on ball joints with isotropic gains released there too
+    (whose motion stays there): two config mappings."""
     hinges = _hinges([4.0, 2.0, 1.0], [0.3, 0.2, 0.1], [0.2, -0.1, 0.0], [0.4, -0.3, 0.2], [0.5, 0.0, -0.2],
                      n_samples=51)
     balls = copy.deepcopy(hinges)
@@ -114,6 +114,13 @@ def test_a_hinge_is_the_ball_it_equals_in_planar_motion():
                      theta_ref=[joint["theta_ref"], 0.0, 0.0])
     balls["initial_state"] = {b: {"theta": [float(a), 0.0, 0.0], "omega": [float(w), 0.0, 0.0]}
                               for b, a, w in zip(hinges["initial_state"], angles, rates)}
+    return hinges, balls
+
+
+def test_a_hinge_is_the_ball_it_equals_in_planar_motion():
+    """Rods on hinges about x move as the same rods on ball joints with isotropic gains
+    released in the y-z plane: the same centres of mass, joint angles, torques and v."""
+    hinges, balls = _planar_twins()
     one, other = simulate(config_from_mapping(hinges)), simulate(config_from_mapping(balls))
     for key in ("position", "velocity", "joint_theta", "joint_omega", "torque_n", "lyapunov", "lyapunov_rate"):
         scale = max(1.0, float(np.abs(other.outputs[key]).max()))
@@ -316,9 +323,38 @@ def test_a_ball_jointed_body_has_no_hinge_angle():
     assert simulate(config_from_mapping(data)).status == "success"  # hinges and a ball in one tree
 
 
-def test_a_tree_with_a_hinge_is_not_analysed_but_says_so():
-    from rbstab.analysis.analyze import analysed_config
+def test_a_hinge_trees_linearisation_is_its_ball_twins_in_plane():
+    """rbstab analyze of a hinge tree, linearised in its q and u: the rest state's joint
+    angles are the ball twin's (whose linearisation is in the bodies' Euler angles, another
+    formulation), and each of its 6 eigenvalues is one of the twin's 18 (the in-plane modes,
+    which decouple at a planar rest state) to 1e-7 relative; the modes are shown on q."""
+    from rbstab.analysis import analyze
 
-    config = config_from_mapping(_hinges([3.0] * 3, [0.1] * 3, [0.0] * 3, [0.1] * 3, [0.0] * 3))
-    with pytest.raises(ValueError, match="joint 'j0' is a hinge"):
-        analysed_config(config)
+    hinges, balls = (config_from_mapping(data) for data in _planar_twins())
+    one = analyze(hinges, certificate=False, simulate=False)
+    other = analyze(balls, certificate=False, simulate=False)
+    assert one.layout.state_names() == ["b0.q", "b0.u", "b1.q", "b1.u", "b2.q", "b2.u"]
+    rest = one.linearisation.equilibrium[::2]
+    absolute = other.layout.split(other.linearisation.equilibrium)["theta"][:, 0]
+    np.testing.assert_allclose(np.cumsum(rest), absolute, rtol=0, atol=1e-9)
+    assert abs(rest[0] - 0.2) > 1e-3  # gravity bends it off its references
+    assert len(one.linearisation.eigenvalues) == 6 and len(other.linearisation.eigenvalues) == 18
+    for s in one.linearisation.eigenvalues:
+        assert np.min(np.abs(other.linearisation.eigenvalues - s)) <= 1e-7 * abs(s)
+    assert one.verdict == other.verdict == "asymptotically stable"
+    assert [m["shape"].keys() for m in one.as_dict()["modes"]][0] == {"b0.q", "b1.q", "b2.q"}
+
+
+def test_a_hinge_trees_analysis_says_what_it_leaves_out():
+    """No certificate (a note says why), and the options that need one (--verify) or that
+    perturb Euler-angle states (--push, --basin, --basin-stability) refused in one line."""
+    from rbstab.analysis import analyze
+
+    hinges = config_from_mapping(_planar_twins()[0])
+    analysis = analyze(hinges, simulate=False)
+    assert analysis.certificate is None
+    assert any("no Lyapunov certificate: joint 'j0' is a hinge" in n for n in analysis.notes)
+    with pytest.raises(ValueError, match="--push: joint 'j0' is a hinge"):
+        analyze(hinges, push={"kind": "force"})
+    with pytest.raises(ValueError, match="--verify: joint 'j0' is a hinge"):
+        analyze(hinges, verify=True)

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from rbstab.analysis import analyze
 from rbstab.config import config_from_mapping
 from rbstab.config.model_import import import_model
 from rbstab.config.yaml_io import parse_yaml
@@ -19,7 +20,7 @@ from rbstab.simulator import simulate
 from rbstab_cli.main import cli
 
 mujoco = pytest.importorskip("mujoco")
-from reference_mujoco import largest_distance, mujoco_model  # noqa: E402  (MuJoCo simulating the file itself)
+from reference_mujoco import eigenvalues_at, largest_distance, mujoco_model  # noqa: E402  (MuJoCo on the file itself)
 
 MODELS = Path(__file__).resolve().parents[1] / "configs" / "examples" / "models"
 
@@ -121,6 +122,29 @@ def test_a_urdf_arm_with_a_fixed_hand_moves_as_mujoco():
     elbow = result.outputs["joint_theta"][:, 1, 1]
     assert -2.6 < elbow.min() and elbow.max() < 0.1  # inside the range: MuJoCo's limit and the stop idle
     assert largest_distance(path, config, result, initial=start) < 1e-6
+
+
+@pytest.mark.parametrize("model, keyframe", [("stance.xml", "lean"), ("arm.urdf", None), ("oblique", "start")])
+def test_imported_models_have_mujocos_rest_state_and_eigenvalues(tmp_path, model, keyframe):
+    """``rbstab analyze`` of an imported hinge tree: its rest state (springs and servos
+    balancing gravity) is MuJoCo's (qacc there below 1e-8 rad/s^2) and its eigenvalues,
+    linearised in the hinges' q and u, are those of MuJoCo's dynamics linearised by central
+    differences at that state, to 1e-4 relative."""
+    path = MODELS / model
+    if model == "oblique":
+        path = tmp_path / "oblique.xml"
+        path.write_text(OBLIQUE)
+    _, config = _imported(path, keyframe=keyframe)
+    analysis = analyze(config, certificate=False, simulate=False)
+    coordinates = analysis.layout.state_names()
+    q = [analysis.linearisation.equilibrium[k] for k, name in enumerate(coordinates) if name.endswith(".q")]
+    assert len(q) == len(coordinates) // 2 and analysis.linearisation.is_rest_point
+    theirs, acceleration = eigenvalues_at(path, q, keyframe=keyframe)
+    assert np.abs(acceleration).max() < 1e-8
+    ours = analysis.linearisation.eigenvalues
+    assert len(ours) == len(theirs)
+    for s in theirs:  # each of MuJoCo's eigenvalues is one of rbstab's
+        assert np.min(np.abs(ours - s)) <= 1e-4 * abs(s), (s, ours)
 
 
 def test_import_writes_a_config_that_runs(tmp_path):

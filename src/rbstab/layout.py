@@ -39,6 +39,7 @@ __all__ = [
     "SIGN_LAW_FIGURES",
     "STATE_BLOCKS",
     "BLOCK_UNITS",
+    "BLOCK_SIZES",
     "LYAPUNOV_TERMS",
     "SATURATION_FLAGS",
     "OUTPUT_VECTORS",
@@ -410,7 +411,8 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
 #: The state blocks (3-vectors) a layout may hold, in the order of the outputs.
 STATE_BLOCKS = ("theta", "omega", "position", "velocity", "controller_state")
 #: Units of each state block (CF spelling; the files' ``units`` attribute).
-BLOCK_UNITS = {b: OUTPUTS[b].units for b in STATE_BLOCKS}
+BLOCK_UNITS = {**{b: OUTPUTS[b].units for b in STATE_BLOCKS},  # and the joints' blocks of a tree's reduced state
+               "joint_theta": "rad", "joint_omega": "rad s-1", "q": "rad", "u": "rad s-1"}
 #: The controls an actuator delivers (:class:`rbstab.model.Saturation`'s limits) -> the output
 #: that flags their axes at or beyond the limit and the summary figure of the fraction of the
 #: samples so flagged.
@@ -600,6 +602,9 @@ class JointKind:
         What q and u are, with units and frames.
     domain : str
         Where the coordinates are valid (the run fails at its edge).
+    blocks : tuple of (str, int)
+        The child's reduced states as named blocks (name, entries), in order: what a tree's
+        linearisation calls them (:data:`BLOCK_UNITS` gives their units).
     """
 
     name: str
@@ -608,6 +613,7 @@ class JointKind:
     point_fixed: bool
     coordinates: str
     domain: str
+    blocks: tuple
 
     @property
     def size(self) -> int:
@@ -620,15 +626,19 @@ class JointKind:
 JOINT_KINDS = {
     "ball": JointKind("ball", 3, 3, True,
                       "Theta_j [rad], the Euler angles of A_rel = A_p' A_c (eq 2); Omega_j [rad/s], child frame",
-                      "|theta_2| < pi/2 - simulation.gimbal_margin"),
+                      "|theta_2| < pi/2 - simulation.gimbal_margin", (("joint_theta", 3), ("joint_omega", 3))),
     "free": JointKind("free", 6, 6, False,
                       "Theta [rad], X [m] (inertial); Omega [rad/s] (body frame), V [m/s] (inertial)",
-                      "the body's |theta_2| < pi/2 - simulation.gimbal_margin"),
+                      "the body's |theta_2| < pi/2 - simulation.gimbal_margin",
+                      (("theta", 3), ("omega", 3), ("position", 3), ("velocity", 3))),
     "hinge": JointKind("hinge", 1, 1, True,
                        "q [rad], the angle of A_rel = exp(q [a]x) about the joint's unit axis a (the parent's and "
                        "the child's frames, which it leaves fixed); u = dq/dt [rad/s]",
-                       "every q (a hinge has no singular angle)"),
+                       "every q (a hinge has no singular angle)", (("q", 1), ("u", 1))),
 }
+#: Entries of each block of a tree's reduced state (:attr:`JointKind.blocks`; an embedded
+#: joint's D: ``controller_state``, 3).
+BLOCK_SIZES = {**{b: size for kind in JOINT_KINDS.values() for b, size in kind.blocks}, "controller_state": 3}
 #: Each joint's ``variant`` -> its joint kind: the paper's ``permanent`` joint is the ball in
 #: Euler angles, the four point laws pull a free body, ``hinge`` turns the child about an axis.
 JOINT_KIND_OF = {"free": "free", "permanent": "ball", "sliding": "free", "visco_elastic": "free", "embedded": "free",

@@ -33,7 +33,7 @@ from ..config.schema import limits_violation
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import is_chain
+from ..layout import BLOCK_SIZES, is_chain
 from ..variants import VARIANTS
 from ..variants.paper import has_paper_form
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
@@ -41,7 +41,7 @@ from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
 from .certificate import DEFAULT_SAMPLES, Certificate, ChainModel, certify
 from .dataset import analysis_content, analysis_dataset, certificate_record, json_record
 from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
-from .linearise import Linearisation, TreeCoordinates, linearise_chain, mode_shapes, undisturbed
+from .linearise import Linearisation, TreeCoordinates, coordinates_state, linearise_chain, mode_shapes, undisturbed
 from .push import basin_stability as stability_of
 from ..diagnostics import unbounded_fall_note
 from .push import push_analysis
@@ -191,8 +191,8 @@ class Analysis:
             return json_record(self)
         lin = self.linearisation
         rest = {}
-        for k, (body, block, _) in enumerate(self.coordinates):
-            rest.setdefault(body, {})[block] = lin.equilibrium[3 * k: 3 * k + 3].tolist()
+        for (body, block, _), at in zip(self.coordinates, self.layout.offsets()):
+            rest.setdefault(body, {})[block] = lin.equilibrium[at: at + BLOCK_SIZES[block]].tolist()
         return {**json_record(self), "rest_state": rest, "modes": self._modes(),
                 "initial_lyapunov": self.initial_lyapunov,
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
@@ -213,13 +213,14 @@ class Analysis:
 
     def angles(self) -> tuple[list[str], list[int]]:
         """(names ``<body>.theta_<i>``, positions in the linearisation's coordinates) of the
-        bodies' Euler angles among the independent coordinates."""
-        names, rows = [], []
-        for k, (body, block, _) in enumerate(self.coordinates):
-            if block == "theta":
-                names += [f"{body}.theta_{i + 1}" for i in range(3)]
-                rows += [3 * k + i for i in range(3)]
-        return names, rows
+        bodies' Euler angles among the independent coordinates; in a tree with a hinge, the
+        joints' angles (a hinge's child's ``<body>.q``, a ball's ``<body>.joint_theta_<i>``)
+        and a free body's Euler angles."""
+        layout = self.layout
+        every = layout.state_names()
+        rows = [at + i for (_, block, _), at in zip(self.coordinates, layout.offsets())
+                if block in ("theta", "joint_theta", "q") for i in range(BLOCK_SIZES[block])]
+        return [every[r] for r in rows], rows
 
     def _modes(self) -> list[dict]:
         """Each eigenvalue's mode on the bodies' angles (:func:`mode_shapes`), for ``--json``."""
@@ -248,13 +249,8 @@ def analysed_config(config, boundary_layer: float | None = None) -> tuple[Any, l
     Raises
     ------
     ValueError
-        For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law;
-        for a tree with a hinge.
+        For a ``boundary_layer`` <= 0, or given for a configuration that is not the sign law.
     """
-    hinges = [j.name for j in config.chain.joints if j.variant == "hinge"]
-    if hinges:
-        raise ValueError(f"joint '{hinges[0]}' is a hinge; rbstab analyze takes trees of ball "
-                         "(permanent) and point-law joints (a tree with hinges runs, sweeps and reports)")
     if config.chain.size > 1:
         if boundary_layer is not None:
             raise ValueError(f"--boundary-layer: found {boundary_layer:g}; a chain has no pure sign law to replace "
@@ -351,12 +347,13 @@ def _beyond(compiled, y: np.ndarray, one_body: bool, at_limit: bool) -> list[str
     lower is its own (N_j's ``torque_floor``)."""
     commanded, out = _commanded(compiled, y), []
     above, below = (">=", "<=") if at_limit else (">", "<")
+    limited = (np.asarray(compiled.params["saturation"]) != 0)[:, None]  # a record without limits holds none
     for key, field_name, unit, kind in _CONTROLS:
         upper = np.asarray(compiled.params[field_name], dtype=float)  # (n, 3)
         lower = np.asarray(compiled.params["torque_floor"], dtype=float) if key == "torque_n" else -upper
         value = commanded[key]
-        high = (value >= upper) if at_limit else (value > upper)
-        low = (value <= lower) if at_limit else (value < lower)
+        high = limited & ((value >= upper) if at_limit else (value > upper))
+        low = limited & ((value <= lower) if at_limit else (value < lower))
         for i, axis in zip(*np.nonzero(high | low)):
             part, u = _part(compiled, kind, i, one_body), value[i, axis]
             if lower[i, axis] == -upper[i, axis]:
@@ -412,7 +409,7 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
     errors = np.asarray(C.evaluate(compiled, np.zeros(1), rest[None])["constraint_error"], dtype=float)[0]
     n = compiled.size
     for i in range(n):
-        fixed = compiled.codes[i] == C.PERMANENT
+        fixed = compiled.permanent[i]  # a point-fixed joint (ball, hinge): E_j = 0 by construction
         values = [*rest[12 * i: 12 * i + 12].reshape(4, 3), np.zeros(3) if fixed else errors[i]]
         found = limits_violation(values, limits.array)
         if found is not None:
@@ -429,6 +426,8 @@ def _domain_notes(compiled, rest: np.ndarray, margin: float, one_body: bool) -> 
     from ..variants import chain as C  # heavy: numba
 
     angles, parts = C.gimbal_angles(compiled, rest)
+    if not np.size(angles):  # a tree of hinges: no Euler angles, no singular one
+        return []
     worst = int(np.argmax(np.abs(angles)))
     limit = GIMBAL_LOCK_ANGLE - margin
     if abs(angles[worst]) < limit:
@@ -540,10 +539,21 @@ def analyze(
 
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
+    hinges = [j.name for j in config.chain.joints if j.variant == "hinge"]
+    asked = [name for name, given in (("--verify", verify), ("--basin", basin), ("--push", push),
+                                      ("--basin-stability", basin_stability)) if given]
+    if hinges and asked:
+        raise ValueError(f"{asked[0]}: joint '{hinges[0]}' is a hinge; a tree with a hinge has its rest state, "
+                         "linearisation, modes and settling analysed (its pushes and basins: rbstab sweep over its "
+                         "initial state)")
     if verify:
         check_verifiable(config)
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
+    if hinges and certificate:
+        certificate = False
+        notes = [*notes, f"no Lyapunov certificate: joint '{hinges[0]}' is a hinge (the certificate's domain is "
+                         "written for Euler angles); the verdict is the linearisation's"]
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
     if basin is not None:
         check_axes(analysed, axes)
@@ -612,16 +622,17 @@ def _findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
     saturated = any(p.saturation is not None for p in (*analysed.chain.bodies, *analysed.chain.joints))
     if not lin.is_rest_point and saturated:
         raise NoEquilibrium(_unheld(calm, one_body))
-    rest = C.full_state(calm, lin.equilibrium)
+    rest = coordinates_state(calm, lin.equilibrium)
     sim = analysed.simulation
     outside = _outside_limits(calm, rest, sim.limits, one_body)
     if outside is not None:
         raise OutsideLimits(outside)
     notes = notes + _domain_notes(calm, rest, sim.gimbal_margin, one_body) + _rest_point_notes(lin)
     notes += _saturated_at_rest(calm, rest, lin, one_body)
-    model, disturbed = ChainModel(calm, coordinates), None
+    model = None if calm.hinged else ChainModel(calm, coordinates)  # a hinge's tree: no certificate
+    disturbed = None
     if quiet is not analysed:
-        disturbed = ChainModel(compiled, coordinates)
+        disturbed = None if calm.hinged else ChainModel(compiled, coordinates)
         kinds = ", ".join(dict.fromkeys(d.kind for b in analysed.chain.bodies for d in b.disturbances))
         notes.append(f"disturbances ({kinds}): the {_REST[one_body]}, the linearisation and the certificate's "
                      "Hessians are of the undisturbed dynamics; the certificate's sampled dv/dt (each state at a "

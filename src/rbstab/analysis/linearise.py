@@ -37,13 +37,15 @@ import math
 
 import numpy as np
 
-from ..layout import BLOCK_UNITS, STATE_BLOCKS
+from ..layout import BLOCK_SIZES, BLOCK_UNITS, JOINT_KIND_OF, JOINT_KINDS
 from .derivatives import jacobian
 
 __all__ = [
     "Linearisation",
     "linearise",
     "linearise_chain",
+    "coordinates_of",
+    "coordinates_state",
     "linearise_config",
     "undisturbed",
     "rest_verdict",
@@ -285,9 +287,57 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
     if y_rest is None:
         raise ValueError("the chain's potential has no minimum near its reference configuration "
                          "(a body falls without bound): there is no rest state to linearise at")
-    coordinates = C.independent_coordinates(compiled)
-    z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
+    coordinates = coordinates_of(compiled)
+    if compiled.hinged:  # the reduced state at rest
+        from ..variants.tree import reduce_state, tree_layout  # heavy: numba
+
+        z = reduce_state(compiled, tree_layout(compiled), y_rest)
+    else:
+        z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
     return linearisation(lambda rows: reduced_rates(compiled, rows), z, compiled.chain.gravity), coordinates
+
+
+def coordinates_of(compiled) -> list[tuple[str, str, int]]:
+    """The coordinates of a chain's linearisation: (body name, block, index into the state)
+    of each block, :data:`rbstab.layout.BLOCK_SIZES` entries each. Without a hinge its
+    independent coordinates in the full state (:func:`rbstab.variants.chain.independent_coordinates`:
+    Theta_i, Omega_i of every body, X_i, V_i of bodies whose joint is not ``permanent``, D);
+    with one its reduced state (:func:`rbstab.variants.tree.tree_layout`): each body's blocks
+    of its joint kind (:attr:`rbstab.layout.JointKind.blocks`: a hinge's child's ``q``
+    [rad] and ``u`` [rad/s], 1 entry each; a ball's child's ``joint_theta``,
+    ``joint_omega`` (Theta_j, Omega_j); a free body's ``theta``, ``omega``, ``position``,
+    ``velocity``), then D of embedded joints."""
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+
+    if not compiled.hinged:
+        return C.independent_coordinates(compiled)
+    from ..variants.tree import tree_layout  # heavy: numba
+
+    layout, names, out = tree_layout(compiled), compiled.chain.body_names, []
+    for i, joint in enumerate(compiled.chain.joints):
+        at = int(layout.r_at[i])
+        for block, size in JOINT_KINDS[JOINT_KIND_OF[joint.variant]].blocks:
+            out.append((names[i], block, at))
+            at += size
+    return out + [(names[j], "controller_state", int(layout.rd_at[j])) for j in range(compiled.size)
+                  if layout.rd_at[j] >= 0]
+
+
+def coordinates_state(compiled, z: np.ndarray) -> np.ndarray:
+    """The full state (n_states,) of the linearisation's coordinates ``z``
+    (:func:`coordinates_of`): :func:`rbstab.variants.chain.full_state`, or with a hinge the
+    maximal image of the reduced state (:func:`rbstab.variants.tree.expand_state`). A stack
+    ``z`` (k, m) gives (k, n_states)."""
+    from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
+
+    if not compiled.hinged:
+        return C.full_state(compiled, z)
+    from ..variants.tree import expand_state, tree_layout  # heavy: numba
+
+    z = np.asarray(z, dtype=float)
+    layout = tree_layout(compiled)
+    y = np.array([expand_state(compiled, layout, row) for row in np.atleast_2d(z)])
+    return y if z.ndim == 2 else y[0]
 
 
 def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
@@ -296,11 +346,21 @@ def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
     the times ``t`` [s] (a number or (k,)): the chain's rate
     (:func:`rbstab.variants.chain.chain_rates`) at the full state of each row, the children of
     permanent joints placed on their parents, the whole stack at once
-    (:func:`rbstab.variants.chain.full_state`), read at those coordinates."""
+    (:func:`rbstab.variants.chain.full_state`), read at those coordinates; a tree with a
+    hinge: the rate of its reduced state (:func:`rbstab.variants.tree.tree_rate`)."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     z = np.atleast_2d(np.asarray(z, dtype=float))
     t = np.ascontiguousarray(np.broadcast_to(np.asarray(t, dtype=float), len(z)))
+    if compiled.hinged:  # z is the reduced state: the tree's own rate
+        from ..variants.tree import tree_layout, tree_rate, tree_work  # heavy: numba
+
+        layout = tree_layout(compiled)
+        work = tree_work(compiled.size, compiled.n_states)
+        out = np.empty((len(z), layout.n_r + 1))
+        for k, row in enumerate(np.ascontiguousarray(z)):
+            tree_rate(t[k], row, *compiled.args, *layout.args, out[k], work)
+        return out[:, : layout.n_r]
     y = C.full_state(compiled, z)
     dy = np.empty_like(y)
     C.chain_rates(t, y, *compiled.args, dy)
@@ -310,15 +370,17 @@ def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
 @dataclass(frozen=True)
 class TreeCoordinates:
     """A chain's independent coordinates (:func:`rbstab.variants.chain.independent_coordinates`)
-    as the layout of its linearisation's state z: 3 entries per (body, state block), the
-    blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has (Theta, Omega of every body; X,
-    V of one whose joint is not ``permanent``; D of an ``embedded`` joint's child), as
-    :class:`rbstab.layout.StateLayout` lays out one body's state.
+    as the layout of its linearisation's state z: :data:`rbstab.layout.BLOCK_SIZES` entries
+    per (body, state block), the blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has
+    (Theta, Omega of every body; X, V of one whose joint is not ``permanent``; D of an
+    ``embedded`` joint's child), as :class:`rbstab.layout.StateLayout` lays out one body's
+    state; a tree with a hinge: its reduced state's blocks (a hinge's child's q and u, 1
+    entry each; a ball's child's Theta_j, Omega_j; a free body's Theta, Omega, X, V).
 
     Attributes
     ----------
     coordinates : tuple of (str, str, int)
-        (body name, block, index into the full state) of each 3 entries of z.
+        (body name, block, index into the full or reduced state) of each block of z.
     bodies : tuple of str
         The chain's bodies, in order.
     """
@@ -328,25 +390,32 @@ class TreeCoordinates:
 
     @property
     def blocks(self) -> tuple[str, ...]:
-        """The state blocks some body has, in :data:`rbstab.layout.STATE_BLOCKS`' order."""
+        """The state blocks some body has, in :data:`rbstab.layout.BLOCK_UNITS`' order
+        (:data:`rbstab.layout.STATE_BLOCKS`, then the joints' blocks of a reduced state)."""
         present = {block for _, block, _ in self.coordinates}
-        return tuple(b for b in STATE_BLOCKS if b in present)
+        return tuple(b for b in BLOCK_UNITS if b in present)
+
+    def offsets(self) -> list[int]:
+        """Where each (body, block) starts in z (its entries: :data:`rbstab.layout.BLOCK_SIZES`)."""
+        return list(np.cumsum([0] + [BLOCK_SIZES[block] for _, block, _ in self.coordinates])[:-1])
 
     def state_names(self) -> list[str]:
-        """Scalar coordinate names ``<body>.<block>_<i>`` (``legs.theta_1``), in z's order."""
-        return [f"{body}.{block}_{i}" for body, block, _ in self.coordinates for i in (1, 2, 3)]
+        """Scalar coordinate names ``<body>.<block>_<i>`` (``legs.theta_1``), a one-entry
+        block's ``<body>.<block>`` (a hinge's ``shank.q``), in z's order."""
+        return [f"{body}.{block}_{i}" if BLOCK_SIZES[block] > 1 else f"{body}.{block}"
+                for body, block, _ in self.coordinates for i in range(1, BLOCK_SIZES[block] + 1)]
 
     def state_units(self) -> list[str]:
         """The units of each scalar coordinate (:data:`rbstab.layout.BLOCK_UNITS`), in z's order."""
-        return [BLOCK_UNITS[block] for _, block, _ in self.coordinates for _ in range(3)]
+        return [BLOCK_UNITS[block] for _, block, _ in self.coordinates for _ in range(BLOCK_SIZES[block])]
 
     def split(self, z: np.ndarray) -> dict[str, np.ndarray]:
         """Each block of ``z`` (n_z,) by body: {block: shape (n_bodies, 3)}, NaN for a body
-        without that block."""
+        without that block (a one-entry block, a hinge's q or u: its first column)."""
         z = np.asarray(z, dtype=float)
         out = {b: np.full((len(self.bodies), 3), np.nan) for b in self.blocks}
-        for k, (body, block, _) in enumerate(self.coordinates):
-            out[block][self.bodies.index(body)] = z[3 * k: 3 * k + 3]
+        for (body, block, _), at in zip(self.coordinates, self.offsets()):
+            out[block][self.bodies.index(body), : BLOCK_SIZES[block]] = z[at: at + BLOCK_SIZES[block]]
         return out
 
 

@@ -277,7 +277,7 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
     :func:`rbstab.analysis.linearise.linearise_chain`)."""
     from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
     from ..variants import chain as C  # heavy: numba
-    from .linearise import linearise_chain, undisturbed  # heavy: numba
+    from .linearise import coordinates_state, linearise_chain, undisturbed  # heavy: numba
 
     calm = C.compile_chain(undisturbed(config).chain, offset=0.0)
     try:
@@ -288,7 +288,7 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
     if not lin.is_rest_point:
         raise ValueError(f"{config.name}: the body has no equilibrium at rest (dy/dt = "
                          f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
-    rest = C.full_state(calm, lin.equilibrium)
+    rest = coordinates_state(calm, lin.equilibrium)
     states = {}
     for i, name in enumerate(calm.chain.body_names):
         state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))

@@ -712,6 +712,11 @@ class CompiledChain:
         return np.array([at + c for _, _, at in independent_coordinates(self) for c in range(3)], dtype=np.int64)
 
     @functools.cached_property
+    def hinged(self) -> bool:
+        """Whether a joint is a hinge (the tree's linearisation is then in its reduced state)."""
+        return bool(np.any(self.codes == HINGE))
+
+    @functools.cached_property
     def permanent(self) -> np.ndarray:
         """(n,) bool: the bodies a point-fixed joint holds (placed on their parents)."""
         return POINT_FIXED[self.codes]
@@ -1073,7 +1078,8 @@ def independent_coordinates(compiled: CompiledChain) -> list[tuple[str, str, int
     """The chain's independent coordinates, in the order of :func:`full_state`'s ``z``:
     (body name, block, index into the full state) for Theta_i, Omega_i of every body, X_i,
     V_i of bodies whose joint is not ``permanent`` (a permanent joint's child is placed on
-    its parent), and D of embedded joints (block ``controller_state``), 3 entries each."""
+    its parent), and D of embedded joints (block ``controller_state``), 3 entries each (a
+    tree with a hinge is linearised in its reduced state instead)."""
     out = []
     names = compiled.chain.body_names
     for i in range(compiled.size):
