@@ -345,16 +345,68 @@ def test_a_hinge_trees_linearisation_is_its_ball_twins_in_plane():
     assert [m["shape"].keys() for m in one.as_dict()["modes"]][0] == {"b0.q", "b1.q", "b2.q"}
 
 
+def test_a_hinge_trees_certificate_holds_where_its_runs_converge():
+    """The Lyapunov certificate of three rods on hinges, in q and u: v positive definite,
+    its analytic dv/dt the derivative of v along the reduced rate at the samples (to 1e-6 of
+    the power scale), its estimate bounded by the domain (a hinge's |q| at pi/2 -
+    gimbal_margin), and runs from states on the level set {v = c} (written as each hinge's
+    initial q and u, through the config) stay inside {v <= c} and come back."""
+    from rbstab.analysis import analyze
+    from rbstab.analysis.certificate import ChainModel, level_states
+    from rbstab.variants import chain as C
+
+    data = _planar_twins()[0]
+    data["simulation"].update(t_end=30.0, n_samples=301)
+    config = config_from_mapping(data)
+    analysis = analyze(config, samples=500, falsification_runs=0, simulate=False)
+    c = analysis.certificate
+    assert c.positive_definite and 0 < c.sublevel < np.inf and c.sublevel_bound == "domain boundary"
+    assert c.rate_mismatch < 1e-6
+    model = ChainModel(C.compile_chain(config.chain))
+    names = analysis.layout.state_names()
+    for z in level_states(model, analysis.linearisation, c, 4, seed=3):
+        start = {name.split(".")[0]: {} for name in names}
+        for name, value in zip(names, z):
+            body, block = name.split(".")
+            start[body][block] = float(value)
+        result = simulate(config_from_mapping({**data, "initial_state": start}))
+        v = result.outputs["lyapunov"]
+        assert result.status == "success" and v[0] == pytest.approx(c.sublevel, rel=1e-6)
+        assert v.max() <= v[0] * (1 + 1e-9) and v[-1] < 0.5 * v[0]  # its slowest mode: tau 110 s
+
+
+def test_a_hinged_stances_smallest_fatal_push_is_where_its_plain_runs_start_to_fall():
+    """The push analysis of the hinged stance (a push backward on the trunk, from the rest
+    state written as each hinge's q, u): a plain run with that impulse 2 % weaker comes back,
+    2 % stronger leaves the admissible region (a fall), and the push estimate of the
+    certificate lies below it."""
+    from rbstab.analysis import analyze
+
+    config = load_config("configs/examples/stance_hinges.yaml", ["simulation.n_samples=501"])
+    push = {"kind": "force", "body": "trunk", "point": (0.0, 0.0, 0.2), "directions": [(0.0, 1.0, 0.0)]}
+    analysis = analyze(config, push=push, samples=500, falsification_runs=0, simulate=False)
+    threshold = float(analysis.push.thresholds.threshold[0])
+    assert 1.0 < threshold < 30.0
+    for scale, falls in ((0.98, False), (1.02, True)):
+        entry = {"kind": "impulse", "quantity": "force", "body": "trunk", "value": [0.0, scale * threshold, 0.0],
+                 "point": [0.0, 0.0, 0.2], "start": 0.0}
+        data = {**config.resolved, "initial_state": {}, "disturbances": [entry],
+                "simulation": {**config.resolved["simulation"], "t_end": 15.0, "n_samples": 301}}
+        result = simulate(config_from_mapping(data))
+        assert (result.status == "failed" and "left the admissible region" in result.message) is falls
+        if not falls:
+            v = result.outputs["lyapunov"]
+            assert v[-1] < 1e-3 * v[1]
+    assert analysis.push.estimate(analysis.certificate.sublevel) < threshold
+
+
 def test_a_hinge_trees_analysis_says_what_it_leaves_out():
-    """No certificate (a note says why), and the options that need one (--verify) or that
-    perturb Euler-angle states (--push, --basin, --basin-stability) refused in one line."""
+    """--basin, --basin-stability (their axes and ranges are Euler-angle blocks) and --verify
+    are refused in one line."""
     from rbstab.analysis import analyze
 
     hinges = config_from_mapping(_planar_twins()[0])
-    analysis = analyze(hinges, simulate=False)
-    assert analysis.certificate is None
-    assert any("no Lyapunov certificate: joint 'j0' is a hinge" in n for n in analysis.notes)
-    with pytest.raises(ValueError, match="--push: joint 'j0' is a hinge"):
-        analyze(hinges, push={"kind": "force"})
+    with pytest.raises(ValueError, match="--basin-stability: joint 'j0' is a hinge"):
+        analyze(hinges, basin_stability={"ranges": {}})
     with pytest.raises(ValueError, match="--verify: joint 'j0' is a hinge"):
         analyze(hinges, verify=True)

@@ -135,7 +135,10 @@ class Analysis:
     @property
     def domain(self) -> str | None:
         """The angles that bound the certificate's domain, in its text (None: one body's theta_2)."""
-        return None if self.one_body else "|theta_2| of a body or joint"
+        if self.one_body:
+            return None
+        hinged = any(j.variant == "hinge" for j in self.analysed.chain.joints)
+        return "|theta_2| of a body or joint, or a hinge's |q|," if hinged else "|theta_2| of a body or joint"
 
     @property
     def verdict(self) -> str:
@@ -231,7 +234,7 @@ class Analysis:
                 for s, shape in zip(self.linearisation.eigenvalues, shapes)]
 
     def _certificate_dict(self) -> dict:
-        names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(3)]
+        names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(BLOCK_SIZES[block])]
         return {**certificate_record(self.certificate), "coordinates": names}
 
 
@@ -540,20 +543,17 @@ def analyze(
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
     hinges = [j.name for j in config.chain.joints if j.variant == "hinge"]
-    asked = [name for name, given in (("--verify", verify), ("--basin", basin), ("--push", push),
+    asked = [name for name, given in (("--verify", verify), ("--basin", basin),
                                       ("--basin-stability", basin_stability)) if given]
     if hinges and asked:
         raise ValueError(f"{asked[0]}: joint '{hinges[0]}' is a hinge; a tree with a hinge has its rest state, "
-                         "linearisation, modes and settling analysed (its pushes and basins: rbstab sweep over its "
-                         "initial state)")
+                         "linearisation, modes, certificate, settling and pushes analysed (its basin: rbstab sweep "
+                         "over its initial state)")
     if verify:
         check_verifiable(config)
     t0 = _time.perf_counter()
     analysed, notes = analysed_config(config, boundary_layer)
-    if hinges and certificate:
-        certificate = False
-        notes = [*notes, f"no Lyapunov certificate: joint '{hinges[0]}' is a hinge (the certificate's domain is "
-                         "written for Euler angles); the verdict is the linearisation's"]
+
     axes = [a if isinstance(a, BasinAxis) else BasinAxis.parse(a) for a in basin or ()]
     if basin is not None:
         check_axes(analysed, axes)
@@ -629,10 +629,9 @@ def _findings(config, analysed, notes: list[str]) -> tuple[Analysis, Any, Any]:
         raise OutsideLimits(outside)
     notes = notes + _domain_notes(calm, rest, sim.gimbal_margin, one_body) + _rest_point_notes(lin)
     notes += _saturated_at_rest(calm, rest, lin, one_body)
-    model = None if calm.hinged else ChainModel(calm, coordinates)  # a hinge's tree: no certificate
-    disturbed = None
+    model, disturbed = ChainModel(calm, coordinates), None
     if quiet is not analysed:
-        disturbed = None if calm.hinged else ChainModel(compiled, coordinates)
+        disturbed = ChainModel(compiled, coordinates)
         kinds = ", ".join(dict.fromkeys(d.kind for b in analysed.chain.bodies for d in b.disturbances))
         notes.append(f"disturbances ({kinds}): the {_REST[one_body]}, the linearisation and the certificate's "
                      "Hessians are of the undisturbed dynamics; the certificate's sampled dv/dt (each state at a "

@@ -54,6 +54,7 @@ from typing import Protocol
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
+from ..layout import BLOCK_SIZES
 from .derivatives import directional_derivative, hessian, jacobian
 
 __all__ = ["Certificate", "Model", "ChainModel", "coordinate_boundary_level",
@@ -150,13 +151,24 @@ class ChainModel:
     """
 
     def __init__(self, compiled, coordinates=None) -> None:
-        from ..variants import chain as C  # heavy: numba
+        from .linearise import coordinates_of  # heavy: numba
 
         self.compiled = compiled
-        self.coordinates = list(C.independent_coordinates(compiled) if coordinates is None else coordinates)
+        self.coordinates = list(coordinates_of(compiled) if coordinates is None else coordinates)
         self._at = [int(at) for _, _, at in self.coordinates]
-        self.n = 3 * len(self.coordinates)
+        self.n = sum(BLOCK_SIZES[block] for _, block, _ in self.coordinates)
         names = list(compiled.chain.body_names)
+        if compiled.hinged:  # reduced coordinates: every angle of the domain is one of them
+            self._theta, self.angle_names, at = [], [], 0
+            for i, (body, block, _) in enumerate(self.coordinates):
+                if block in ("theta", "joint_theta", "q"):
+                    part = compiled.chain.joint_names[names.index(body)] if block != "theta" else body
+                    self._theta.append(at + (0 if block == "q" else 1))
+                    self.angle_names.append(f"{part}.{'q' if block == 'q' else 'theta_2'}")
+                at += BLOCK_SIZES[block]
+            self._parented = []
+            self.angle_matrix = np.eye(self.n)[self._theta]
+            return
         self._theta = [3 * self._at.index(12 * i) + 1 for i in range(compiled.size)]  # theta_2 of each body in z
         self._parented = [j for j in range(compiled.size) if compiled.parents[j] >= 0]
         self.angle_names = [f"{b}.theta_2" for b in names] + [f"{compiled.chain.joint_names[j]}.theta_2"
@@ -168,16 +180,22 @@ class ChainModel:
 
     def states(self, x) -> np.ndarray:
         """The chain's full states (k, n_states) of the independent coordinates ``x`` (k, n)
-        (:func:`rbstab.variants.chain.full_state`)."""
-        from ..variants import chain as C  # heavy: numba
+        (:func:`rbstab.analysis.linearise.coordinates_state`)."""
+        from .linearise import coordinates_state  # heavy: numba
 
-        return C.full_state(self.compiled, np.atleast_2d(np.asarray(x, dtype=float)))
+        return coordinates_state(self.compiled, np.atleast_2d(np.asarray(x, dtype=float)))
 
     # -- v, dv/dt, f ----------------------------------------------------------------------------
     def _outputs(self, x, t=0.0) -> dict:
         from ..variants import chain as C  # heavy: numba
 
-        return C.evaluate(self.compiled, t, self.states(x), full=False)  # v, dv/dt and the angles only
+        states = self.states(x)
+        if not self.compiled.hinged:
+            return C.evaluate(self.compiled, t, states, full=False)  # v, dv/dt and the angles only
+        # each state a run of its own: a hinge's angle read in (-pi, pi], not continued from the row before
+        t = np.broadcast_to(np.asarray(t, dtype=float), len(states))
+        out = C.evaluate(self.compiled, t[:, None], states[:, None], full=False)
+        return {key: value[:, 0] for key, value in out.items()}
 
     def lyapunov(self, x):
         """v [J] at each row of ``x`` (a float for one state (n,))."""
@@ -223,8 +241,10 @@ class ChainModel:
         """The least v [J] on the domain boundary (any angle at +-limit), at rest: where every
         angle is a coordinate (no joint has a body for parent), :func:`coordinate_boundary_level`;
         else :func:`constrained_boundary_level`."""
-        free = [3 * k + a for k, (_, block, _) in enumerate(self.coordinates)
-                if block in ("theta", "position", "controller_state") for a in range(3)]
+        starts = np.cumsum([0] + [BLOCK_SIZES[block] for _, block, _ in self.coordinates])
+        free = [int(at) + a for (_, block, _), at in zip(self.coordinates, starts)
+                if block in ("theta", "position", "controller_state", "joint_theta", "q")
+                for a in range(BLOCK_SIZES[block])]
         y_e = np.asarray(y_e, dtype=float)
         if self.angle_matrix is not None:
             return coordinate_boundary_level(self.lyapunov, y_e, hess, limit, self._theta, free)

@@ -326,18 +326,20 @@ def coordinates_of(compiled) -> list[tuple[str, str, int]]:
 def coordinates_state(compiled, z: np.ndarray) -> np.ndarray:
     """The full state (n_states,) of the linearisation's coordinates ``z``
     (:func:`coordinates_of`): :func:`rbstab.variants.chain.full_state`, or with a hinge the
-    maximal image of the reduced state (:func:`rbstab.variants.tree.expand_state`). A stack
+    maximal image of the reduced state (:func:`rbstab.variants.tree.expand_samples`). A stack
     ``z`` (k, m) gives (k, n_states)."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
 
     if not compiled.hinged:
         return C.full_state(compiled, z)
-    from ..variants.tree import expand_state, tree_layout  # heavy: numba
+    from ..variants.tree import expand_samples, tree_layout  # heavy: numba
 
     z = np.asarray(z, dtype=float)
-    layout = tree_layout(compiled)
-    y = np.array([expand_state(compiled, layout, row) for row in np.atleast_2d(z)])
-    return y if z.ndim == 2 else y[0]
+    rows = np.ascontiguousarray(np.atleast_2d(z))
+    y = np.empty((1, len(rows), compiled.n_states))
+    expand_samples(rows[None], compiled.params[None], compiled.codes, compiled.parents, compiled.ppoints[None],
+                   compiled.d_at, *tree_layout(compiled).args, y, np.zeros(1, dtype=np.int64))
+    return y[0] if z.ndim == 2 else y[0, 0]
 
 
 def reduced_rates(compiled, z, t=0.0) -> np.ndarray:

@@ -277,7 +277,7 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
     :func:`rbstab.analysis.linearise.linearise_chain`)."""
     from ..config import INITIAL_STATE_BLOCKS  # heavy: pydantic
     from ..variants import chain as C  # heavy: numba
-    from .linearise import coordinates_state, linearise_chain, undisturbed  # heavy: numba
+    from .linearise import TreeCoordinates, coordinates_of, coordinates_state, linearise_chain, undisturbed  # heavy
 
     calm = C.compile_chain(undisturbed(config).chain, offset=0.0)
     try:
@@ -290,7 +290,13 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
                          f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
     rest = coordinates_state(calm, lin.equilibrium)
     states = {}
+    hinge = {(body, block): float(lin.equilibrium[at]) for (body, block, _), at
+             in zip(coordinates_of(calm), TreeCoordinates(tuple(coordinates_of(calm)), ()).offsets())
+             if block in ("q", "u")}  # a hinge's child starts from its q, u
     for i, name in enumerate(calm.chain.body_names):
+        if (name, "q") in hinge:
+            states[name] = {"q": hinge[name, "q"], "u": hinge[name, "u"]}
+            continue
         state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
         if calm.d_at[i] >= 0:
             state["d"] = rest[calm.d_at[i]: calm.d_at[i] + 3]
