@@ -40,7 +40,7 @@ def test_functions_are_functions_and_modules_modules():
 
     import rbstab.api as api
     import rbstab.sweep.runner as runner
-    from rbstab.simulator import RunResult, solve
+    from rbstab.simulator import RunResult, solve_tree
 
     assert rbstab.simulate is api.simulate and inspect.isfunction(rbstab.simulate)
     assert rbstab.sweep_dataset is api.sweep_dataset and rbstab.write_report is api.write_report
@@ -48,7 +48,7 @@ def test_functions_are_functions_and_modules_modules():
     assert list(inspect.signature(rbstab.write_report).parameters)[:2] == ["inputs", "output"]
     for module in (rbstab.simulator, rbstab.sweep, rbstab.report):
         assert type(module) is types.ModuleType and not callable(module)
-    assert rbstab.simulator.solve is solve and rbstab.simulator.RunResult is RunResult
+    assert rbstab.simulator.solve_tree is solve_tree and rbstab.simulator.RunResult is RunResult
     assert runner.__name__ == "rbstab.sweep.runner" and rbstab.sweep.load_spec is not None
     assert type(rbstab) is types.ModuleType
     with pytest.raises(AttributeError, match="no attribute 'simulat'"):

@@ -24,7 +24,7 @@ from rbstab.config import (
     parse_key,
 )
 from rbstab.layout import is_chain
-from rbstab.layout import BLOCK_UNITS
+from rbstab.layout import STATE_BLOCKS
 from rbstab.variants import VARIANTS
 
 REPO = Path(__file__).resolve().parents[1]
@@ -167,7 +167,7 @@ def test_valid_mapping_gives_frozen_runconfig():
     assert (cfg.name, cfg.chain.joints[0].variant) == ("base", "embedded")
     np.testing.assert_array_equal(paper_form(cfg).gains.k_t, np.diag([4100, 4100, 3280]))
     assert paper_form(cfg).gains.k_t.shape == (3, 3)
-    assert set(cfg.initial_state) == {"body"} and set(cfg.initial_state["body"]) == set(BLOCK_UNITS)
+    assert set(cfg.initial_state) == {"body"} and set(cfg.initial_state["body"]) == set(STATE_BLOCKS)
     np.testing.assert_array_equal(cfg.initial_state["body"]["theta"], [0, 0, 0])
     np.testing.assert_array_equal(cfg.initial_state["body"]["controller_state"], [0, 0, 0])
     np.testing.assert_array_equal(paper_form(cfg).body.gravity, [0, 0, 0])

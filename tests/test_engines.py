@@ -109,11 +109,15 @@ def test_compiled_agrees_with_scipy_for_every_variant(path, overrides):
     rtol = configs[0].simulation.rtol
     got = dict(simulate_many(configs, engine="compiled"))
     assert sorted(got) == list(range(len(configs)))
+    # a clipped actuator's kinks: where the steps land on them decides the error there, and the scipy
+    # reference (the one-body tree's rate) rounds otherwise than the compiled engine (one body's own)
+    kinked = any(part.saturation is not None and part.saturation.shape == "clip"
+                 for part in (*configs[0].chain.bodies, *configs[0].chain.joints))
     for i, config in enumerate(configs):
         ref = simulate(config, engine="scipy")
         assert ref.ok, ref.message
         sensitivity = []
-        if not smooth:  # the pure sign law chatters: round-off decides the switches
+        if not smooth or kinked:  # the pure sign law chatters: round-off decides the switches
             for direction in (np.inf, -np.inf):
                 moved = copy.deepcopy(config.resolved)
                 moved["initial_state"]["omega"] = np.nextafter(config.initial_state["body"]["omega"], direction).tolist()

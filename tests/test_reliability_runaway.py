@@ -7,12 +7,11 @@ import numpy as np
 import pytest
 import yaml
 
-from rbstab.variants.paper import paper_form, paper_initial_state
 from rbstab.config import config_from_mapping, load_config
-from rbstab.simulator import simulate, solve
+from rbstab.simulator import simulate
 from rbstab.sweep import run_sweep, spec_from_mapping
 
-from conftest import ROOT, settings
+from conftest import ROOT
 from test_reliability_faults import SerialExecutor
 
 CASE3 = yaml.safe_load((ROOT / "configs" / "paper" / "case3_embedded.yaml").read_text())
@@ -81,14 +80,21 @@ def test_a_stopped_run_keeps_its_samples_and_both_engines_stop_at_one_step(name)
     assert slow.message.startswith("timeout") and 0 < np.isfinite(slow.outputs["lyapunov"]).sum() < slow.time.size
 
 
-def test_a_first_step_failure_is_a_failed_run():
-    """A right-hand side that is NaN at once: scipy fails before its first sample
-    (``sol.y`` is then an empty list, which raised AttributeError)."""
-    variant = paper_form(_config())
-    y0 = paper_initial_state(_config(), variant)
-    y0[3] = np.nan
-    time, states, status, message, _ = solve(variant, y0, settings(t_end=0.5, n_samples=51, method="RK45"))
-    assert status == "failed" and states.shape == (51, y0.size) and np.isnan(states).all()
+def test_a_first_step_failure_is_a_failed_run(monkeypatch):
+    """A state that is NaN at once: scipy's engine fails before its first sample (``sol.y``
+    is then an empty list), a failed run of NaN rows."""
+    from rbstab.simulator import solve_tree
+    from rbstab.variants import chain as C
+
+    config = load_config(ROOT / "configs" / "paper" / "case3_embedded.yaml",
+                         ["simulation.t_end=0.5", "simulation.n_samples=51", "simulation.method=RK45"])
+    start = C.initial_state(config)
+    start[3] = np.nan  # Omega_1
+
+    monkeypatch.setattr(C, "initial_state", lambda config: start)
+    trajectory = solve_tree(config)
+    assert trajectory.status == "failed" and trajectory.states.shape[0] == 51
+    assert np.isnan(trajectory.states).all()
 
 
 def test_a_sweep_records_a_runaway_run_and_goes_on(tmp_path):

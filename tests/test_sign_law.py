@@ -302,7 +302,7 @@ def test_a_large_force_slides_on_every_axis_and_is_the_permanent_constraint():
     sol = integrate_sign_law(sliding, y0, settings)
     assert sol.status == "success" and np.all(sol.modes == 0)
     assert list(sol.switchings.kind) == [SLIDING_STARTS] * 3
-    from rbstab.simulator import solve
+    from paper_model import solve
 
     _, reduced, status, _, _ = solve(pinned, pinned.initial_state(blocks), settings)
     assert status == "success"

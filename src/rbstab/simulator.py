@@ -32,6 +32,7 @@ message.
 
 from __future__ import annotations
 
+import math
 import time as _time
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING
@@ -41,18 +42,15 @@ import numpy as np
 from .engine import METHODS, RunBatch
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
-from .engine.integrate import admissible
-from .engine.status import GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, limit_of, limit_part, status_message
+from .engine.status import (GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, gimbal_status, limit_of, limit_part,
+                            limit_status, status_message)
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
-from .kinematics import GIMBAL_LOCK_ANGLE
 from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
-from .model import DISTURBANCE_KINDS
 from .results import RunBlock, RunResult, row
 from .summary import numerical_rate, summarize, tree_stream_table, tree_summary_table
 from .variants import Variant
 from .variants.paper import paper_form, paper_initial_state
-from .variants.disturbances import apply_impulses, before, next_breakpoint
-from .variants.kernels import state_powers
+from .variants.disturbances import next_breakpoint
 
 if TYPE_CHECKING:  # pragma: no cover
     from .config import RunConfig
@@ -65,10 +63,7 @@ __all__ = [
     "simulate_blocks",
     "simulate_batch",
     "RunBlock",
-    "solve",
     "solve_tree",
-    "admissible_region_event",
-    "evaluate_outputs",
     "uses_compiled_engine",
     "is_sign_law",
     "simulate_sign_law",
@@ -79,38 +74,6 @@ __all__ = [
 #: ``summary_stride``-th (:func:`rbstab.layout.summary_stride`, a thinned store's; the CPU
 #: keeps every one), or none (the summary figures only; on the GPU no sample comes back).
 KEEP = ("all", "thinned", "none")
-
-
-def admissible_region_event(variant: Variant, margin: float):
-    """Terminal solve_ivp event of the admissible region of ``variant``'s run: the compiled
-    :func:`rbstab.engine.systems.admissible_event`, zero when |theta_2| reaches pi/2 -
-    ``margin`` [rad] (gimbal lock, eq 5) or a component reaches its bound of
-    ``simulation.limits`` (``variant.limits``), falling through it. ``event.status(y)`` is
-    the status code of the bound reached at the state y (:mod:`rbstab.engine.status`)."""
-    code, p, limit = variant.code, variant._parameters_without_offset[0], GIMBAL_LOCK_ANGLE - margin
-
-    def event(t: float, y: np.ndarray) -> float:
-        return admissible(code, np.ascontiguousarray(y, dtype=float), p, limit)[0]
-
-    event.terminal = True
-    event.direction = -1
-    event.status = lambda y: int(admissible(code, np.ascontiguousarray(y, dtype=float), p, limit)[1])
-    return event
-
-
-def _left_region(variant: Variant, event, t: float, y: np.ndarray, settings) -> str | None:
-    """The message of a run at (t, y) outside the admissible region (``event``:
-    :func:`admissible_region_event`; the state at the start, or just after an impulse), or
-    None inside it."""
-    if event(t, y) >= 0:
-        return None
-    return status_message(event.status(y), t, settings.gimbal_margin, limits=variant.parameters[0]["limits"])
-
-
-def _event_message(variant: Variant, event, sol, settings) -> str:
-    """The message of a run that ``solve_ivp`` stopped at its ``event`` (the first event)."""
-    return status_message(event.status(sol.y_events[0][0]), float(sol.t_events[0][0]), settings.gimbal_margin,
-                          limits=variant.parameters[0]["limits"])
 
 
 class RunLimits:
@@ -162,148 +125,6 @@ class RunLimits:
         return status_message(self.status, self.t_stop, gimbal_margin, self.max_steps, timeout)
 
 
-def solve(
-    variant: Variant, y0: np.ndarray, settings, timeout: float | None = None
-) -> tuple[np.ndarray, np.ndarray, str, str, dict]:
-    """Integrate ``variant`` from ``y0`` with :func:`scipy.integrate.solve_ivp`.
-
-    Parameters
-    ----------
-    variant : Variant
-        Right-hand side provider.
-    y0 : ndarray, shape (n_state,)
-        Initial state in ``variant.layout``.
-    settings : SimulationSettings
-        ``t_end`` [s], ``n_samples``, ``method``, ``rtol``, ``atol``, ``max_step`` [s],
-        ``gimbal_margin`` [rad].
-    timeout : float, optional
-        Wall-time limit [s]; default ``settings.max_wall_time``. Past it, or after
-        ``settings.max_steps`` steps, the run stops with status ``"failed"`` at its last
-        step, its samples up to there kept (:class:`RunLimits`).
-
-    Returns
-    -------
-    time : ndarray, shape (n_samples,)
-    states : ndarray, shape (n_samples, n_state)
-        Dense-output samples; NaN after a failure.
-    status, message : str
-    solver : dict
-        ``nfev``, ``njev``, ``nlu``, ``solver_status``.
-    """
-    return _solve(variant, y0, settings, timeout)[:5]
-
-
-#: Gauss-Legendre nodes on [0, 1] and weights (5 points: exact for a power of degree 9
-#: along a step; DOP853's interpolant is of degree 7, and 3 points left ~1e-8 of W) of the
-#: reference's quadrature of W (the compiled engines integrate W with the state instead:
-#: two formulations of one integral).
-_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(5)
-_GAUSS_NODES, _GAUSS_WEIGHTS = 0.5 * (_GAUSS_NODES + 1.0), 0.5 * _GAUSS_WEIGHTS
-
-
-def _breakpoints(p: np.void, t_end: float) -> list[float]:
-    """0, the edges of the disturbances' windows inside (0, t_end) in order, and t_end."""
-    edges = {0.0, float(t_end)}
-    for i in range(int(p["disturbance_count"])):
-        t0 = float(p["disturbance_start"][i])
-        edges.add(t0)
-        if p["disturbance_kind"][i] == DISTURBANCE_KINDS["pulse"]:
-            edges.add(t0 + float(p["disturbance_duration"][i]))
-    return sorted(e for e in edges if 0.0 <= e <= t_end)
-
-
-def _step_work(variant: Variant, dense, t0: float, t1: np.ndarray) -> np.ndarray:
-    """The disturbances' work [J] from t0 to each of ``t1`` along ``dense`` (one step's
-    interpolant; 5-point Gauss-Legendre)."""
-    t1 = np.atleast_1d(np.asarray(t1, dtype=float))
-    span = t1 - t0
-    nodes = (t0 + span[:, None] * _GAUSS_NODES[None, :]).ravel()
-    ys = np.ascontiguousarray(np.asarray(dense(nodes), dtype=float).T.reshape(len(nodes), -1))
-    power = np.empty(len(nodes))
-    state_powers(variant.code, nodes, ys, variant.parameters, power)
-    return span * (power.reshape(len(t1), len(_GAUSS_NODES)) @ _GAUSS_WEIGHTS)
-
-
-def _solve(variant: Variant, y0: np.ndarray, settings, timeout: float | None = None):
-    """:func:`solve`, and the disturbances' work W [J] at the samples (n_samples,). The
-    edges of the disturbances' windows split the run (docs/disturbances.md): one
-    ``solve_ivp`` from each breakpoint to the next, its right-hand side clamped to the
-    float below the next one, the impulses that start at a breakpoint applied to the state
-    there; W integrated along each step's interpolant, zero without disturbances. A sample
-    at a breakpoint shows the state just after it."""
-    from scipy.integrate import solve_ivp  # heavy: scipy
-
-    from .config.schema import SimulationSettings  # heavy: pydantic, yaml
-
-    t_end, n_samples = float(settings.t_end), int(settings.n_samples)
-    t_eval = np.linspace(0.0, t_end, n_samples)
-    states = np.full((n_samples, variant.layout.size), np.nan)
-    disturbed = bool(variant.gains.disturbances)
-    work = np.full(n_samples, np.nan) if disturbed else np.zeros(n_samples)
-    max_steps = int(getattr(settings, "max_steps", SimulationSettings.max_steps))
-    if timeout is None:
-        timeout = float(getattr(settings, "max_wall_time", SimulationSettings.max_wall_time))
-    p = variant.parameters[0]
-    permanent = variant.name == "permanent"
-    limits = RunLimits(max_steps, timeout, settings.t_end)
-    edges = _breakpoints(p, t_end)
-    y = np.array(y0, dtype=float)
-    w = 0.0
-    solver = {"nfev": 0, "njev": 0, "nlu": 0, "solver_status": -1}  # -1: no solver ran
-    message = ""
-    region = admissible_region_event(variant, settings.gimbal_margin)
-    with np.errstate(all="ignore"):
-        for a, b in zip(edges[:-1], edges[1:]):
-            w += apply_impulses(permanent, a, y, p)
-            outside = _left_region(variant, region, a, y, settings)
-            if outside is not None:
-                return t_eval, states, "failed", outside, solver, work
-            last = b == t_end
-            lim = b if last else before(b)
-            inside = (t_eval >= a) & ((t_eval <= b) if last else (t_eval < b))
-            rate = (lambda t, z, lim=lim: variant.rhs(min(t, lim), z)) if disturbed else variant.rhs
-            try:
-                sol = solve_ivp(rate, (a, b), y, method=settings.method, t_eval=t_eval[inside],
-                                dense_output=disturbed, events=[region, limits],
-                                rtol=settings.rtol, atol=settings.atol, max_step=settings.max_step)
-            except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
-                return t_eval, states, "failed", f"solver error: {exc}", solver, work
-            for key in ("nfev", "njev", "nlu"):
-                solver[key] += int(getattr(sol, key))
-            solver["solver_status"] = int(sol.status)
-            where = np.flatnonzero(inside)
-            yy = np.asarray(sol.y, dtype=float)  # a list when the first step failed
-            n = yy.shape[1] if yy.ndim == 2 else 0  # none: also a window between two samples
-            if n:
-                states[where[:n]] = yy.T[:n]
-            if sol.sol is not None:  # W along each step, and to each sample inside it
-                ts = sol.sol.ts
-                for i, piece in enumerate(sol.sol.interpolants):
-                    lo, hi = ts[i], ts[i + 1]
-                    mine = where[:n][(t_eval[where[:n]] >= lo) & (t_eval[where[:n]] <= hi)]
-                    mine = mine[np.isnan(work[mine])]
-                    if len(mine):
-                        work[mine] = w + _step_work(variant, piece, lo, t_eval[mine])
-                    w += float(_step_work(variant, piece, lo, hi)[0])
-            if limits.status is not None:
-                return t_eval, states, "failed", limits.message(settings.gimbal_margin, timeout), solver, work
-            if sol.status == 1:
-                return t_eval, states, "failed", _event_message(variant, region, sol, settings), solver, work
-            if sol.status != 0:
-                return t_eval, states, "failed", f"solver failed: {sol.message}", solver, work
-            if not last:
-                y = np.array(sol.sol(b), dtype=float)
-            message = str(sol.message)
-    jump = apply_impulses(permanent, t_end, y, p)
-    if jump != 0.0:
-        states[-1], work[-1] = y, work[-1] + jump
-    if not np.all(np.isfinite(states)):
-        bad = int(np.argmin(np.all(np.isfinite(states), axis=1)))
-        states[bad:] = np.nan
-        return t_eval, states, "failed", f"non-finite state at t = {t_eval[bad]:.6g} s", solver, work
-    return t_eval, states, "success", message, solver, work
-
-
 def solve_tree(config, timeout: float | None = None, compiled=None):
     """Integrate a run of a tree (:class:`rbstab.config.RunConfig`) in reduced
     coordinates (:func:`rbstab.variants.tree.tree_rate`) with scipy's ``solve_ivp``
@@ -317,8 +138,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     impulsive reactions keep them joints). ``states`` are the maximal image (12 n + 3 e) of the samples; ``work``
     the disturbances' work W [J] there, integrated with the state where the chain has
     disturbances (its rate their power, left out of the error norm, as the compiled
-    driver's; each impulse adds its energy). Like one body's :func:`solve`, it stops
-    ``failed`` after ``simulation.max_steps`` steps or ``timeout`` [s] of wall time (default
+    driver's; each impulse adds its energy). It stops ``failed`` after ``simulation.max_steps`` steps or ``timeout`` [s] of wall time (default
     ``simulation.max_wall_time``), keeping the samples up to its last step (:class:`RunLimits`).
 
     Parameters
@@ -340,9 +160,9 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         physical or numerical failure is a ``"failed"`` status, never an exception."""
     from scipy.integrate import solve_ivp  # heavy: scipy
 
-    from .variants.chain import (ChainTrajectory, _gimbal_margin, compile_chain,  # heavy: numba
-                                 gimbal_lock_message, impulse_times, initial_state, locked_part,
-                                 region_margin)
+    from .engine.settings import settings_rows  # heavy: numba
+    from .variants.chain import (ChainTrajectory, _gimbal_margin, compile_chain, impulse_times,  # heavy: numba
+                                 initial_state, locked_part, region_margin)
     from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_impulses, tree_layout,  # heavy: numba
                                 tree_rate, tree_work)
 
@@ -355,7 +175,11 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     disturbed = bool(np.any(compiled.params["disturbance_count"] > 0.0))
     # W after the state where the chain has disturbances: its rate their power, out of the error norm
     y = np.append(reduce_state(compiled, layout, initial_state(config)), [0.0] if disturbed else [])
-    atol = np.append(np.full(n_r, sim.atol), [np.inf] if disturbed else [])
+    # W's atol inf keeps it out of the error, but scipy's RMS norm still divides by its entry:
+    # both tolerances scaled by sqrt(n_r / (n_r + 1)) give the norm over the state alone (the compiled driver's)
+    shrink = math.sqrt(n_r / (n_r + 1)) if disturbed else 1.0
+    atol = np.append(np.full(n_r, shrink * sim.atol), [np.inf] if disturbed else [])
+    rtol = shrink * sim.rtol
     time = np.linspace(0.0, sim.t_end, sim.n_samples)
     dy = np.empty(y.size)
     work = tree_work(n, compiled.n_states)
@@ -387,14 +211,27 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     def region(t, yr):
         return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
 
+    row = settings_rows([sim], timeout)[0]
+    bounds = np.full((len(LIMITED), 3), np.inf) if sim.limits is None else sim.limits.array
+    one_body = not is_chain(config)  # written as one body: one body's words
+
+    def end(t, full, lock):
+        """The message of a run stopped at t at the state ``full`` by gimbal lock (``lock``)
+        or by its admissible region, in the compiled driver's words (:func:`run_end`)."""
+        if lock:
+            code = GIMBAL_LOCK if one_body else gimbal_status(*locked_part(compiled, full))
+        else:
+            code = limit_status(*region_margin(compiled, full, sim.limits)[1])
+        return run_end(compiled, code, t, row, bounds, one_body)
+
     def left(t, yr):
         """The message where the state at t (a segment's start: after the impulses there)
         lies outside the admissible region, else None (a start on its boundary is inside)."""
         full = maximal(yr[:n_r])
         if _gimbal_margin(compiled, full, sim.gimbal_margin) < 0:
-            return gimbal_lock_message(compiled, *locked_part(compiled, full), sim.gimbal_margin, t)
-        margin, what = (0.0, "") if sim.limits is None else region_margin(compiled, full, sim.limits)
-        return _tree_left_region(what, t) if margin < 0 else None
+            return end(t, full, True)
+        margin = 0.0 if sim.limits is None else region_margin(compiled, full, sim.limits)[0]
+        return end(t, full, False) if margin < 0 else None
 
     events = [lock] + ([] if sim.limits is None else [region])
     for event in events:  # terminal, falling through zero (leaving the region), as one body's
@@ -428,27 +265,26 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         below[0] = np.nextafter(b, a) if b < sim.t_end else np.inf
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = np.append(time[rows], b) if b < sim.t_end else time[rows]
-        with np.errstate(all="ignore"):  # a run that blows up ends failed, as one body's (solve)
-            sol = solve_ivp(reduced_rate, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=atol,
-                            max_step=sim.max_step, events=events)
+        try:
+            with np.errstate(all="ignore"):  # a run that blows up ends failed
+                sol = solve_ivp(reduced_rate, (a, b), y, method=sim.method, t_eval=t_eval, rtol=rtol, atol=atol,
+                                max_step=sim.max_step, events=events)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # a state scipy refuses (not finite)
+            status, message = "failed", f"solver error: {exc}"
+            break
         for key in counts:
             counts[key] += int(getattr(sol, key))
-        got = min(sol.y.shape[1], rows.size)
-        states[rows[:got]] = sol.y[:, :got].T
+        solved = np.asarray(sol.y, dtype=float)  # an empty list where the first step failed
+        got = min(solved.shape[1] if solved.ndim == 2 else 0, rows.size)
+        states[rows[:got]] = solved[:, :got].T
         if limits.status is not None:
             status, message = "failed", limits.message(sim.gimbal_margin, limit)
             break
         if sol.status == 1 and len(sol.t_events[0]):
-            t_lock = float(sol.t_events[0][0])
-            status = "failed"
-            message = gimbal_lock_message(compiled, *locked_part(compiled, maximal(sol.y_events[0][0][:n_r])),
-                                          sim.gimbal_margin, t_lock)
+            status, message = "failed", end(float(sol.t_events[0][0]), maximal(sol.y_events[0][0][:n_r]), True)
             break
         if sol.status == 1:
-            t_out = float(sol.t_events[1][0])
-            what = region_margin(compiled, maximal(sol.y_events[1][0][:n_r]), sim.limits)[1]
-            status = "failed"
-            message = _tree_left_region(what, t_out)
+            status, message = "failed", end(float(sol.t_events[1][0]), maximal(sol.y_events[1][0][:n_r]), False)
             break
         if sol.status != 0:
             status, message = "failed", str(sol.message)
@@ -460,21 +296,6 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
             jump(sim.t_end, y)
             states[-1] = y
     return trajectory(status, message, 0 if status == "success" else 1)
-
-
-def evaluate_outputs(variant: Variant, time: np.ndarray, states: np.ndarray,
-                     work: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """Every output variable along sampled ``states`` (shape (n, n_state)) at ``time`` (n,),
-    with ``work`` (n,) the disturbances' work W [J] at the samples (default 0).
-
-    Adds ``lyapunov_rate_numerical`` [W], the derivative of v along the samples
-    (:func:`rbstab.summary.numerical_rate`), to :meth:`Variant.evaluate`.
-    """
-    outputs = variant.evaluate(states, time)
-    if work is not None:
-        outputs["disturbance_work"][...] = work
-    outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    return outputs
 
 
 def uses_compiled_engine(config, engine: str = DEFAULT_ENGINE) -> bool:
@@ -576,20 +397,7 @@ def simulate(config, timeout: float | None = None, *, engine: str = DEFAULT_ENGI
         return simulate_sign_law(config, timeout)
     if compiled:
         return next(simulate_many([config], engine=engine, timeout=timeout))[1]
-    if is_chain(config):
-        return _simulate_tree(config, timeout)
-    start = _time.perf_counter()
-    variant = paper_form(config)
-    y0 = paper_initial_state(config, variant)
-    time, states, status, message, solver, work = _solve(variant, y0, config.simulation, timeout)
-    solved = _time.perf_counter()
-    outputs = evaluate_outputs(variant, time, states, work)
-    result = RunResult(config=config, time=time, outputs=outputs, status=status, message=message,
-                       solver=solver, summary=summarize(time, outputs, params=variant.parameters))
-    end = _time.perf_counter()
-    result.wall_time = end - start
-    result.timing = {"integration": solved - start, "postprocess": end - solved}
-    return result
+    return _simulate_tree(config, timeout)
 
 
 #: One body's outputs' order in its files (:data:`rbstab.layout.OUTPUTS`; the numerical dv/dt after them).
@@ -747,14 +555,17 @@ def _configs_of(configs: Sequence | None, rows) -> list:
 
 
 def _simulate_tree(config, timeout: float | None = None) -> RunResult:
-    """A tree's run (:class:`rbstab.config.RunConfig`) integrated by ``solve_ivp``
-    (:func:`solve_tree`, any method), with its outputs and summary;
+    """A run (:class:`rbstab.config.RunConfig`: a tree, or one body as its one-body tree)
+    integrated by ``solve_ivp`` (:func:`solve_tree`, any method), with its outputs and
+    summary (one body's names and shapes for a config written as one body);
     ``timeout`` [s] replaces ``simulation.max_wall_time``."""
     start = _time.perf_counter()
     trajectory = solve_tree(config, timeout)
     compiled, time = trajectory.compiled, trajectory.time
     outputs, summary = _trees_outputs([compiled], np.zeros(1, dtype=np.int64), time, trajectory.states[None],
                                       trajectory.work[None])
+    if not is_chain(config):  # written as one body: one body's names and shapes
+        outputs, summary = _as_one_body(outputs, summary, bool(np.any(compiled.d_at >= 0)))
     outputs, summary = {key: value[0] for key, value in outputs.items()}, row(summary, 0)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
     return RunResult(config, time, outputs, trajectory.status, trajectory.message, solver,

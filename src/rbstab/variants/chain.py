@@ -1253,19 +1253,20 @@ def bound_reached(compiled: CompiledChain, quantity: str, axis: int, part: int, 
     return f"|{quantity}_{axis + 1}| of {compiled.chain.body_names[part]} reached {bound:g}"
 
 
-def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, str]:
-    """(min over bodies, joints and axes of bound - |q| [the quantity's units], the quantity
-    that reaches its bound first, in words) of ``simulation.limits``: Theta, Omega, X, V of
-    every body, E_j of every joint (not point-fixed); a run stops where it reaches 0."""
+def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float, tuple[int, int, int]]:
+    """(min over bodies, joints and axes of bound - |q| [the quantity's units], the bound
+    reached first: (its quantity's index in :data:`rbstab.layout.LIMITED`, the axis, the body
+    or joint)) of ``simulation.limits``: Theta, Omega, X, V of every body, E_j of every joint
+    (not point-fixed); a run stops where it reaches 0."""
     n = compiled.size
-    worst, what = math.inf, ""
+    worst, code = math.inf, (0, 0, 0)
     for k, block in enumerate(("theta", "omega", "position", "velocity")):
         bound = np.asarray(getattr(limits, block), dtype=float)
         values = np.abs(y[: 12 * n].reshape(n, 4, 3)[:, k])
         margin = bound[None, :] - values
         i, axis = np.unravel_index(int(np.argmin(margin)), margin.shape)
         if margin[i, axis] < worst:
-            worst, what = float(margin[i, axis]), bound_reached(compiled, block, int(axis), int(i), bound[axis])
+            worst, code = float(margin[i, axis]), (k, int(axis), int(i))
     bound = np.asarray(limits.constraint_error, dtype=float)
     if np.isfinite(bound).any():
         joints = np.empty((n, 7, 3))
@@ -1276,9 +1277,8 @@ def region_margin(compiled: CompiledChain, y: np.ndarray, limits) -> tuple[float
             margin = bound - np.abs(joints[j, _E])
             axis = int(np.argmin(margin))
             if margin[axis] < worst:
-                worst = float(margin[axis])
-                what = bound_reached(compiled, "constraint_error", axis, j, bound[axis])
-    return worst, what
+                worst, code = float(margin[axis]), (4, axis, j)
+    return worst, code
 
 
 def disturbance_edges(compiled: CompiledChain, time: np.ndarray) -> np.ndarray:
