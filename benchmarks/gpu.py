@@ -71,9 +71,9 @@ worker's seconds a run in a process of its own
 
 ``--ptx-only`` (any machine with numba-cuda's compilers and CUDA's ``ptxas``; no GPU
 needed) compiles one body's kernel (DOP853, an embedded joint) and the tree kernel (DOP853) for
-each tree shape of ``--ptx-trees`` (bodies:permanent joints:embedded joints; default one
-body on a permanent and on an embedded joint, the stance example's 2:2:0, and 8 bodies on
-permanent and on embedded joints) to optimised PTX for sm_90 and prints what ``ptxas -v``
+each tree shape of ``--ptx-trees`` (bodies:permanent joints:embedded joints[:hinges];
+default one body on a permanent and on an embedded joint, the stance example's 2:2:0, and
+8 bodies on permanent and on embedded joints; 3:0:0:3 is the hinged stance) to optimised PTX for sm_90 and prints what ``ptxas -v``
 reports for each: the registers, the stack frame (local memory) and the spill stores and
 loads a thread, with each compile's seconds::
 
@@ -614,7 +614,7 @@ def chain_sweep_seconds(n: int, axis: str, engine: str, env: dict | None = None)
 
 def ptx_only(shapes) -> None:
     """The ``ptxas -v`` lines of one body's kernel and of the tree kernel of each tree
-    shape of ``shapes`` (bodies, permanent joints, embedded joints; module docstring,
+    shape of ``shapes`` (bodies, permanent joints, embedded joints[, hinges]; module docstring,
     ``--ptx-only``)."""
     import re
 
@@ -634,9 +634,10 @@ def ptx_only(shapes) -> None:
     numba.cuda.dispatcher.get_current_device = lambda: Device()
     kernels = {"one body's kernel (DOP853, an embedded joint)": (tree_kernel_function(DOP853, (1, 0, 1), True),
                                                                 tree_launch_signature())}
-    for n, p, e in shapes:
-        kernels[f"tree kernel (DOP853, {n} bodies, {p} permanent and {e} embedded joints)"] = (
-            tree_kernel_function(DOP853, (n, p, e)), tree_launch_signature())
+    for shape in shapes:
+        n, p, e, h = (*shape, 0)[:4]
+        kernels[f"tree kernel (DOP853, {n} bodies, {p} permanent, {e} embedded and {h} hinge joints)"] = (
+            tree_kernel_function(DOP853, (n, p, e, h)), tree_launch_signature())
     for name, (function, signature) in kernels.items():
         start = time.perf_counter()
         ptx, _ = cuda.compile_ptx(function, signature, cc=(9, 0), opt=True)
