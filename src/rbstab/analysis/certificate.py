@@ -124,9 +124,10 @@ class Model(Protocol):
 
 class ChainModel:
     """A compiled chain (:class:`rbstab.variants.chain.CompiledChain`) as a :class:`Model`
-    in its independent coordinates z (:func:`rbstab.variants.chain.independent_coordinates`:
+    in its linearisation's coordinates z (:func:`rbstab.analysis.linearise.coordinates_of`:
     Theta_i, Omega_i of every body; X_i, V_i of bodies whose joint is not ``permanent``; D of
-    embedded joints).
+    embedded joints; a tree with a hinge: its reduced state, every angle of the domain a
+    coordinate, a hinge's |q| among them).
 
     A state is :func:`rbstab.variants.chain.full_state` of z: the children of permanent
     joints placed on their parents (E_j = F_j = 0), so every sample lies on the constraint

@@ -290,12 +290,10 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
                          f"{np.max(np.abs(lin.rest_residual)):.3g} there): a push from rest cannot be analysed")
     rest = coordinates_state(calm, lin.equilibrium)
     states = {}
-    hinge = {(body, block): float(lin.equilibrium[at]) for (body, block, _), at
-             in zip(coordinates_of(calm), TreeCoordinates(tuple(coordinates_of(calm)), ()).offsets())
-             if block in ("q", "u")}  # a hinge's child starts from its q, u
+    reduced = TreeCoordinates(tuple(coordinates_of(calm)), tuple(calm.chain.body_names)).split(lin.equilibrium)
     for i, name in enumerate(calm.chain.body_names):
-        if (name, "q") in hinge:
-            states[name] = {"q": hinge[name, "q"], "u": hinge[name, "u"]}
+        if calm.codes[i] == C.HINGE:  # a hinge's child starts from its q, u
+            states[name] = {"q": float(reduced["q"][i, 0]), "u": float(reduced["u"][i, 0])}
             continue
         state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
         if calm.d_at[i] >= 0:

@@ -145,37 +145,15 @@ def _compile(path: Path):
     return mujoco, model, kind, notes
 
 
-def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel:
-    """The rbstab config of the MJCF or URDF model at ``path`` (see the module docstring).
+def _element(tag: str, obj, more: str = "") -> str:
+    """How a message names a model's element: ``<joint name="knee">``, or its index where unnamed."""
+    return f'<{tag} name="{obj.name}"{more}>' if obj.name else f"<{tag}{more}> #{obj.id}"
 
-    Parameters
-    ----------
-    path : str or Path
-        An MJCF (``<mujoco>``) or URDF (``<robot>``) file.
-    keyframe : str, optional
-        The name of the model's keyframe whose qpos, qvel and ctrl give the initial state and
-        the servos' targets; default: the reference pose at rest, zero controls.
 
-    Returns
-    -------
-    ImportedModel
-
-    Raises
-    ------
-    ConfigError
-        One line per problem, naming the file and the model's element: an unreadable file,
-        one MuJoCo's compiler refuses, a keyframe that does not exist, what rbstab cannot
-        represent (module docstring).
-    """
-    path = Path(path)
-    mujoco, model, kind, notes = _compile(path)
-    where = str(path)
+def _refusals(mujoco, model, where: str) -> list[str]:
+    """One line per element of the compiled ``model`` rbstab cannot represent (the module
+    docstring's list; the actuators: :func:`_servos`)."""
     errors: list[str] = []
-
-    def element(tag: str, obj, more: str = "") -> str:
-        return f'<{tag} name="{obj.name}"{more}>' if obj.name else f"<{tag}{more}> #{obj.id}"
-
-    # What rbstab cannot represent, each in one line.
     joint_kind = {int(mujoco.mjtJoint.mjJNT_FREE): "a free joint (a floating base)",
                   int(mujoco.mjtJoint.mjJNT_BALL): "a ball joint (its gimbal-free quaternion form is not a joint kind "
                                                    "of rbstab's; its Euler-angle ball, variant permanent, is written "
@@ -184,24 +162,24 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
     for j in range(model.njnt):
         joint = model.joint(j)
         if int(model.jnt_type[j]) in joint_kind:
-            errors.append(f"model file {where}: {element('joint', joint)} is {joint_kind[int(model.jnt_type[j])]}; "
+            errors.append(f"model file {where}: {_element('joint', joint)} is {joint_kind[int(model.jnt_type[j])]}; "
                           "rbstab imports hinge joints")
             continue
         dof = int(model.jnt_dofadr[j])
         for attribute, values, why in (("armature", model.dof_armature, "rotor inertia"),
                                        ("frictionloss", model.dof_frictionloss, "dry friction")):
             if values[dof] != 0.0:
-                errors.append(f"model file {where}: {element('joint', joint)} has {attribute}="
+                errors.append(f"model file {where}: {_element('joint', joint)} has {attribute}="
                               f"{float(values[dof]):g}; expected 0 ({why} is not modelled)")
     for b in range(1, model.nbody):
         if model.body_jntnum[b] > 1:
-            errors.append(f"model file {where}: {element('body', model.body(b))} has {int(model.body_jntnum[b])} "
+            errors.append(f"model file {where}: {_element('body', model.body(b))} has {int(model.body_jntnum[b])} "
                           "joints; expected at most one (a universal joint is not a joint kind of rbstab's)")
         if model.body_gravcomp[b] != 0.0:
-            errors.append(f"model file {where}: {element('body', model.body(b))} has gravcomp="
+            errors.append(f"model file {where}: {_element('body', model.body(b))} has gravcomp="
                           f"{float(model.body_gravcomp[b]):g}; expected 0 (gravity compensation is not modelled)")
     if model.ntendon:
-        errors.append(f"model file {where}: it has {model.ntendon} <tendon>s ({element('tendon', model.tendon(0))}, "
+        errors.append(f"model file {where}: it has {model.ntendon} <tendon>s ({_element('tendon', model.tendon(0))}, "
                       "...); tendons are not modelled")
     if model.neq:
         errors.append(f"model file {where}: it has {model.neq} <equality> constraints (closed loops); rbstab's models "
@@ -209,27 +187,19 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
     if model.opt.density or model.opt.viscosity:
         errors.append(f"model file {where}: <option density={model.opt.density:g} viscosity={model.opt.viscosity:g}>;"
                       " expected 0 (fluid forces are not modelled)")
+    return errors
 
-    # Keyframe.
-    key = None
-    if keyframe is not None:
-        names = [model.key(k).name for k in range(model.nkey)]
-        if keyframe not in names:
-            errors.append(f"model file {where}: keyframe {keyframe!r} not found; its keyframes: "
-                          + (", ".join(repr(n) for n in names) if names else "none"))
-        else:
-            key = names.index(keyframe)
-    elif model.nkey:
-        notes.append(f"{where}: initial state: the reference pose at rest (its keyframes: "
-                     + ", ".join(repr(model.key(k).name) for k in range(model.nkey)) + "; --keyframe NAME)")
-    ctrl = np.array(model.key_ctrl[key]) if key is not None else np.zeros(model.nu)
 
-    # Actuators: the joints' feedback.
+def _servos(mujoco, model, where: str, ctrl: np.ndarray, errors: list[str]) -> tuple[dict, dict]:
+    """(joint id -> its feedback: ``source``, ``k_r`` [N m/rad], ``l_r`` [N m s/rad],
+    ``theta_ref`` [rad] from q = 0, torque limits ``lower``, ``upper`` [N m], ``gear``,
+    ``ctrl``; joint id -> the motors at zero control on it) of the model's actuators at the
+    controls ``ctrl`` (nu,); what cannot be represented appended to ``errors``, one line each."""
     feedback: dict[int, dict] = {}
     motors: dict[int, list[str]] = {}
     for a in range(model.nu):
         actuator = model.actuator(a)
-        name = element("actuator", actuator)
+        name = _element("actuator", actuator)
         if int(model.actuator_trntype[a]) != int(mujoco.mjtTrn.mjTRN_JOINT):
             errors.append(f"model file {where}: {name} acts on a tendon, site or body; rbstab's actuators act on a "
                           "joint")
@@ -286,6 +256,51 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             continue
         feedback[j] = {"source": name, "k_r": k, "l_r": l, "theta_ref": bias / k if k else 0.0,
                        "lower": lower, "upper": upper, "gear": gear, "ctrl": u}
+    return feedback, motors
+
+
+def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel:
+    """The rbstab config of the MJCF or URDF model at ``path`` (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        An MJCF (``<mujoco>``) or URDF (``<robot>``) file.
+    keyframe : str, optional
+        The name of the model's keyframe whose qpos, qvel and ctrl give the initial state and
+        the servos' targets; default: the reference pose at rest, zero controls.
+
+    Returns
+    -------
+    ImportedModel
+
+    Raises
+    ------
+    ConfigError
+        One line per problem, naming the file and the model's element: an unreadable file,
+        one MuJoCo's compiler refuses, a keyframe that does not exist, what rbstab cannot
+        represent (module docstring).
+    """
+    path = Path(path)
+    mujoco, model, kind, notes = _compile(path)
+    where = str(path)
+    errors = _refusals(mujoco, model, where)
+
+    # Keyframe.
+    key = None
+    if keyframe is not None:
+        names = [model.key(k).name for k in range(model.nkey)]
+        if keyframe not in names:
+            errors.append(f"model file {where}: keyframe {keyframe!r} not found; its keyframes: "
+                          + (", ".join(repr(n) for n in names) if names else "none"))
+        else:
+            key = names.index(keyframe)
+    elif model.nkey:
+        notes.append(f"{where}: initial state: the reference pose at rest (its keyframes: "
+                     + ", ".join(repr(model.key(k).name) for k in range(model.nkey)) + "; --keyframe NAME)")
+    ctrl = np.array(model.key_ctrl[key]) if key is not None else np.zeros(model.nu)
+
+    feedback, motors = _servos(mujoco, model, where, ctrl, errors)
     if errors:
         raise ConfigError(errors)
 
@@ -311,7 +326,7 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
         masses = np.array([float(model.body_mass[c]) for c in parts])
         mass = float(masses.sum())
         if mass <= 0.0:
-            raise ConfigError([f"model file {where}: {element('body', model.body(b))} has no mass; expected a "
+            raise ConfigError([f"model file {where}: {_element('body', model.body(b))} has no mass; expected a "
                                "mass > 0 (an <inertial> element)"])
         centre = (masses[:, None] * data.xipos[parts]).sum(axis=0) / mass
         inertia = np.zeros((3, 3))
@@ -321,8 +336,8 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             inertia += frame @ np.diag(model.body_inertia[c]) @ frame.T + m * (d @ d * np.eye(3) - np.outer(d, d))
         inertia = 0.5 * (inertia + inertia.T)
         com[b] = centre
-        source = element("body", model.body(b)) + (
-            " with " + ", ".join(element("body", model.body(c)) for c in welded[b]) + " welded to it"
+        source = _element("body", model.body(b)) + (
+            " with " + ", ".join(_element("body", model.body(c)) for c in welded[b]) + " welded to it"
             if welded[b] else "")
         diagonal = np.allclose(inertia, np.diag(np.diag(inertia)), rtol=0, atol=1e-14 * np.abs(inertia).max())
         lines_bodies += [_line(2, f"- name: {name_of[b]}", source),
@@ -330,7 +345,7 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
                          _line(4, f"inertia: {_vector(np.diag(inertia) if diagonal else inertia)}",
                                "[kg m^2] about the centre of mass, world axes")]
         if welded[b]:
-            notes.append(f"{where}: " + ", ".join(element("body", model.body(c)) for c in welded[b])
+            notes.append(f"{where}: " + ", ".join(_element("body", model.body(c)) for c in welded[b])
                          + f" without a joint: welded to {name_of[b]} (mass and inertia added)")
 
     lines_joints, initial, unheld = [], [], []
@@ -342,7 +357,7 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
         anchor, axis = np.array(data.xanchor[j]), np.array(data.xaxis[j])
         qpos0 = float(model.qpos0[model.jnt_qposadr[j]])
         dof = int(model.jnt_dofadr[j])
-        source = element("joint", joint, ' type="hinge"')
+        source = _element("joint", joint, ' type="hinge"')
         lines_joints += [
             _line(2, f"- name: {jname}", source),
             _line(4, f"parent: {name_of[parent] if parent else 'ground'}"),
