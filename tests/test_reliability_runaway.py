@@ -80,6 +80,21 @@ def test_a_stopped_run_keeps_its_samples_and_both_engines_stop_at_one_step(name)
     assert slow.message.startswith("timeout") and 0 < np.isfinite(slow.outputs["lyapunov"]).sum() < slow.time.size
 
 
+def test_a_stop_inside_a_window_without_samples_keeps_the_samples_before_it():
+    """A step limit met inside the pulse's window (2.5 to 2.55 s) when no sample lies in it:
+    scipy's segment returns no sample (``sol.y`` an empty list); the run stops failed where
+    the compiled driver stops, with the samples before the window (past the saturation's
+    kinks the two engines' steps differ in the last digits, so each is read on its own)."""
+    overrides = ["simulation.t_end=1000", "simulation.n_samples=11", "simulation.max_steps=102"]
+    config = load_config(ROOT / "configs" / "examples" / "saturated_push.yaml", overrides)
+    runs = {engine: simulate(config, engine=engine) for engine in ("compiled", "scipy")}
+    stops = [float(run.message.rsplit("t = ", 1)[1].split()[0]) for run in runs.values()]
+    assert all(run.message.startswith("step limit: 102 steps taken") for run in runs.values())
+    assert all(2.5 < stop < 2.55 for stop in stops)
+    for run in runs.values():
+        assert np.isfinite(run.outputs["lyapunov"]).tolist() == [True] + [False] * 10
+
+
 def test_a_first_step_failure_is_a_failed_run(monkeypatch):
     """A state that is NaN at once: scipy's engine fails before its first sample (``sol.y``
     is then an empty list), a failed run of NaN rows."""

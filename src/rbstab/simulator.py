@@ -276,7 +276,8 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
             counts[key] += int(getattr(sol, key))
         solved = np.asarray(sol.y, dtype=float)  # an empty list where the first step failed
         got = min(solved.shape[1] if solved.ndim == 2 else 0, rows.size)
-        states[rows[:got]] = solved[:, :got].T
+        if got:
+            states[rows[:got]] = solved[:, :got].T
         if limits.status is not None:
             status, message = "failed", limits.message(sim.gimbal_margin, limit)
             break
