@@ -111,10 +111,10 @@ def mujoco_model(path):
     return mujoco.MjModel.from_xml_path(str(path))
 
 
-def largest_distance(path, config, result, keyframe=None, initial=None, dt=1e-4):
-    """The largest distance [m] between rbstab's centres of mass and MuJoCo's (each body with
-    the bodies welded to it), at the samples of ``result``: MuJoCo simulating the file at
-    ``path`` from the keyframe (or qpos0 with ``initial``'s q, u added) with RK4 at ``dt``."""
+def _simulated(path, result, keyframe=None, initial=None, dt=1e-4):
+    """(model, data) of MuJoCo simulating the file at ``path`` from the keyframe (or qpos0
+    with ``initial``'s {body: {q, u}} added) with RK4 at ``dt`` [s], yielded at each sample
+    time of ``result`` (after ``mj_forward`` and ``mj_rnePostConstraint``: ``cfrc_int``)."""
     model = mujoco_model(path)
     model.opt.integrator, model.opt.timestep = mujoco.mjtIntegrator.mjINT_RK4, dt
     data = mujoco.MjData(model)
@@ -124,22 +124,47 @@ def largest_distance(path, config, result, keyframe=None, initial=None, dt=1e-4)
         joint = model.joint(model.body(body).jntadr[0])
         data.qpos[joint.qposadr[0]] += state.get("q", 0.0)
         data.qvel[joint.dofadr[0]] += state.get("u", 0.0)
+    for s, t in enumerate(result.time):
+        if s:
+            mujoco.mj_step(model, data, nstep=int(round((t - result.time[s - 1]) / dt)))
+        mujoco.mj_forward(model, data)
+        mujoco.mj_rnePostConstraint(model, data)
+        yield model, data
+
+
+def _carriers(model, config):
+    """Each of ``config``'s bodies as MuJoCo's body ids: the body and those welded to it."""
     carrier = list(range(model.nbody))
     for b in range(1, model.nbody):
         if model.body_jntnum[b] == 0:
             carrier[b] = carrier[model.body_parentid[b]]
     names = [b["name"] for b in config.resolved["bodies"]]
-    groups = [[c for c in range(model.nbody) if carrier[c] == model.body(n).id] for n in names]
-    mujoco.mj_forward(model, data)
-    worst = 0.0
-    for s, t in enumerate(result.time):
-        if s:
-            mujoco.mj_step(model, data, nstep=int(round((t - result.time[s - 1]) / dt)))
+    return [[c for c in range(model.nbody) if carrier[c] == model.body(n).id] for n in names]
+
+
+def largest_distance(path, config, result, keyframe=None, initial=None, dt=1e-4):
+    """The largest distance [m] between rbstab's centres of mass and MuJoCo's (each body with
+    the bodies welded to it), at the samples of ``result``: MuJoCo simulating the file at
+    ``path`` from the keyframe (or qpos0 with ``initial``'s q, u added) with RK4 at ``dt``."""
+    worst, groups = 0.0, None
+    for s, (model, data) in enumerate(_simulated(path, result, keyframe, initial, dt)):
+        groups = groups or _carriers(model, config)
         for i, group in enumerate(groups):
             m = model.body_mass[group]
             centre = (m[:, None] * data.xipos[group]).sum(axis=0) / m.sum()
             worst = max(worst, float(np.abs(result.outputs["position"][s, i] - centre).max()))
     return worst
+
+
+def interaction_forces(path, config, result, keyframe=None, initial=None, dt=1e-4):
+    """(samples, bodies, 3) the force [N] (world frame) that each of ``config``'s bodies
+    receives from its parent, MuJoCo's ``cfrc_int`` (its linear part), at the samples of
+    ``result``, MuJoCo simulating the file as :func:`largest_distance` does."""
+    forces, groups = [], None
+    for model, data in _simulated(path, result, keyframe, initial, dt):
+        groups = groups or _carriers(model, config)
+        forces.append([data.cfrc_int[group[0], 3:].copy() for group in groups])
+    return np.array(forces)
 
 
 def eigenvalues_at(path, q, keyframe=None, step=1e-6):

@@ -20,7 +20,7 @@ from rbstab.simulator import simulate
 from rbstab_cli.main import cli
 
 mujoco = pytest.importorskip("mujoco")
-from reference_mujoco import eigenvalues_at, largest_distance, mujoco_model  # noqa: E402  (MuJoCo on the file itself)
+from reference_mujoco import eigenvalues_at, interaction_forces, largest_distance, mujoco_model  # noqa: E402
 
 MODELS = Path(__file__).resolve().parents[1] / "configs" / "examples" / "models"
 
@@ -55,6 +55,16 @@ OBLIQUE = """<mujoco model="oblique">
 """
 
 
+def _reactions_are_mujocos(path, config, result, **start):
+    """Every joint's reaction Lambda_j [N] at every sample is the force MuJoCo's body receives
+    from its parent (``cfrc_int``'s linear part) simulating the same file, to 1e-6 of the
+    largest; returns that largest."""
+    theirs = interaction_forces(path, config, result, **start)
+    scale = float(np.abs(theirs).max())
+    np.testing.assert_allclose(result.outputs["constraint_force"], theirs, rtol=0, atol=1e-6 * scale)
+    return scale
+
+
 def _imported(path, keyframe=None, t_end=2.0, n_samples=201, initial=None):
     """The config ``rbstab import`` writes for ``path``, run for ``t_end`` s with tight
     tolerances; ``initial``: {body: {q, u}} written over its initial state."""
@@ -81,6 +91,8 @@ def test_the_shipped_stance_is_what_import_writes_and_moves_as_mujoco():
     knee = result.outputs["joint_theta"][:, 1, 0]
     assert -2.4 < knee.min() and knee.max() < 0.05
     assert largest_distance(path, config, result, keyframe="lean") < 1e-6
+    weight = 9.81 * sum(b["mass"] for b in config.resolved["bodies"])
+    assert _reactions_are_mujocos(path, config, result, keyframe="lean") > 0.9 * weight
 
 
 def test_rotated_frames_welded_bodies_refs_and_gears_move_as_mujoco(tmp_path):
@@ -106,6 +118,7 @@ def test_rotated_frames_welded_bodies_refs_and_gears_move_as_mujoco(tmp_path):
     theta = result.outputs["joint_theta"][:, 0] @ np.asarray(config.resolved["joints"][0]["axis"])
     assert -1.5 - 0.2 < theta.min() and theta.max() < 2.5 - 0.2  # inside the range: the stop idle
     assert largest_distance(path, config, result, keyframe="start") < 1e-6
+    _reactions_are_mujocos(path, config, result, keyframe="start")
 
 
 def test_a_urdf_arm_with_a_fixed_hand_moves_as_mujoco():
@@ -122,6 +135,7 @@ def test_a_urdf_arm_with_a_fixed_hand_moves_as_mujoco():
     elbow = result.outputs["joint_theta"][:, 1, 1]
     assert -2.6 < elbow.min() and elbow.max() < 0.1  # inside the range: MuJoCo's limit and the stop idle
     assert largest_distance(path, config, result, initial=start) < 1e-6
+    _reactions_are_mujocos(path, config, result, initial=start)
 
 
 @pytest.mark.parametrize("model, keyframe", [("stance.xml", "lean"), ("arm.urdf", None), ("oblique", "start")])

@@ -349,6 +349,29 @@ def test_the_compiled_reduced_rate_is_the_references(mix, rng):
             np.testing.assert_allclose(work.chain.scalars[:4], terms, rtol=0, atol=1e-12 * (1 + np.abs(terms).max()))
 
 
+@pytest.mark.parametrize("mix", sorted(LAW_MIXES))
+def test_reactions_from_the_reduced_motion_are_the_references(mix, rng):
+    """A point-fixed joint's Lambda_j recovered from the reduced rate (every body's
+    acceleration, Newton's law on the bodies it carries, leaves first) equals the reference's
+    (the stacked eq 15 solved for the constraint forces) at random states of random trees;
+    the rows of the other joints are left as they were."""
+    from rbstab.variants import tree as R
+
+    for _ in range(3):
+        tree = _random_tree(rng, LAW_MIXES[mix])
+        compiled = C.compile_chain(_chain(tree), offset=0.0)
+        layout = R.tree_layout(compiled)
+        work, fixed = R.tree_work(tree.size, compiled.n_states), compiled.permanent
+        for _ in range(4):
+            y = _random_state(rng, tree)
+            out = np.full((tree.size, 3), 7.0)
+            R.tree_reactions(0.0, y, *compiled.args, *layout.args, np.empty(layout.n_r + 1), work,
+                             np.empty((tree.size, 6)), out)
+            ev = T.evaluate(tree, y)
+            np.testing.assert_allclose(out[fixed], ev.lam[fixed], rtol=0, atol=1e-11 * (1 + np.abs(ev.lam).max()))
+            assert np.all(out[~fixed] == 7.0)
+
+
 @pytest.mark.parametrize("path", [EXAMPLES / "stance_ankle.yaml", ROOT / "configs" / "paper" / "case1_permanent.yaml"],
                          ids=["stance_ankle", "case1_permanent"])
 def test_the_compiled_reduced_rate_of_one_permanent_body_is_the_papers(path, rng):

@@ -56,7 +56,7 @@ from .disturbances import IMPULSE
 from .kernels import HINGE, PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
-           "tree_push", "tree_impulses",
+           "tree_push", "tree_impulses", "tree_reactions", "reaction_samples",
            "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state"]
 
 
@@ -331,26 +331,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
             for r in range(6):
                 kappa[i, r] = 0.0
             continue
-        q = parents[i]
-        r_c = vector(params[i].attachment_point, 0)
-        a_c = _rows(rot, i)
-        omega_c = vector(y, 12 * i + 3)
-        omega_j = vector(yr, r_at[i] + 3)
-        if codes[i] == HINGE:  # a dq/dt: a is fixed in the child's frame
-            rate_q = yr[r_at[i] + 1]
-            omega_j = (rate_q * params[i].axis[0], rate_q * params[i].axis[1], rate_q * params[i].axis[2])
-        dw_c = cross(omega_c, omega_j)
-        dv_c = (0.0, 0.0, 0.0)
-        if q >= 0:
-            r_p = vector(ppoints[i], 0)
-            a_p = _rows(rot, q)
-            omega_p = vector(y, 12 * q + 3)
-            dw_p, dv_p = vector(kappa[q], 0), vector(kappa[q], 3)
-            dw_c = add(matTvec(_relative(a_p, a_c), dw_p), dw_c)
-            dv_c = add(dv_p, matvec(a_p, add(cross(dw_p, r_p), cross(omega_p, cross(omega_p, r_p)))))
-        dv_c = sub(dv_c, matvec(a_c, add(cross(dw_c, r_c), cross(omega_c, cross(omega_c, r_c)))))
-        _put(kappa[i], 0, dw_c)
-        _put(kappa[i], 3, dv_c)
+        _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, (0.0, 0.0, 0.0), kappa)
     _generalised_solve(params, codes, parents, u_at, work)
     for i in range(n):
         at, u = r_at[i], u_at[i]
@@ -367,6 +348,34 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
             for k in range(3):
                 dyr[at + 3 + k] = rhs[u + k]
                 dyr[at + 9 + k] = rhs[u + 3 + k]
+
+
+@jit(forceinline=True)
+def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, dw_j, acc):
+    """Point-fixed joint i's child's (dOmega_c/dt [rad/s^2, child frame], dV_c/dt [m/s^2,
+    inertial]) into ``acc[i]`` (n, 6), its parent's already in ``acc[parents[i]]`` (the
+    ground's zero), its joint's dOmega_j/dt ``dw_j``: the time derivative of
+    :func:`tree_expand`'s Omega_c = A_rel' Omega_p + Omega_j and V_c (kappa_i with dw_j = 0)."""
+    q = parents[i]
+    r_c = vector(params[i].attachment_point, 0)
+    a_c = _rows(rot, i)
+    omega_c = vector(y, 12 * i + 3)
+    omega_j = vector(yr, r_at[i] + 3)
+    if codes[i] == HINGE:  # a dq/dt: a is fixed in the child's frame
+        rate_q = yr[r_at[i] + 1]
+        omega_j = (rate_q * params[i].axis[0], rate_q * params[i].axis[1], rate_q * params[i].axis[2])
+    dw_c = add(dw_j, cross(omega_c, omega_j))
+    dv_c = (0.0, 0.0, 0.0)
+    if q >= 0:
+        r_p = vector(ppoints[i], 0)
+        a_p = _rows(rot, q)
+        omega_p = vector(y, 12 * q + 3)
+        dw_p, dv_p = vector(acc[q], 0), vector(acc[q], 3)
+        dw_c = add(matTvec(_relative(a_p, a_c), dw_p), dw_c)
+        dv_c = add(dv_p, matvec(a_p, add(cross(dw_p, r_p), cross(omega_p, cross(omega_p, r_p)))))
+    dv_c = sub(dv_c, matvec(a_c, add(cross(dw_c, r_c), cross(omega_c, cross(omega_c, r_c)))))
+    _put(acc[i], 0, dw_c)
+    _put(acc[i], 3, dv_c)
 
 
 @jit(forceinline=True)
@@ -493,6 +502,119 @@ def _kinetic_energy(y, params):
 
 
 @jit(_nrt=False)
+def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work, total, out):
+    """Lambda_j [N] (inertial frame) of every point-fixed joint j (a ball's, a hinge's): the
+    force its parent (or the ground) applies to body j at C_j, into ``out[j]`` (n, 3; other
+    rows untouched). From the motion (:func:`tree_rate` at ``t`` [s] and the reduced state
+    ``yr``: every body's accelerations, an outward recursion from du/dt) and Newton's law on
+    the bodies that joint j carries, leaves first:
+
+        Lambda_j = m_j dV_j/dt - F_j + sum over point-fixed children c of Lambda_c
+
+    with F_j the applied force on body j (gravity, feedback H, the point laws' forces of the
+    joints at it, disturbances; inertial). A reaction's torque is left out. ``dyr`` (n_r +
+    1,), ``work`` (:class:`TreeWork`) and ``total`` (n, 6) scratch: ``total[i]`` receives
+    body i's (dOmega_i/dt [rad/s^2, body frame], dV_i/dt [m/s^2])."""
+    n = codes.shape[0]
+    tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work)
+    fixed = False
+    for i in range(n):
+        fixed = fixed or POINT_FIXED[codes[i]]
+    if not fixed:
+        return
+    y, rhs, cw = work.y, work.rhs, work.chain
+    rot, force = cw.rot, cw.force
+    for i in range(n):  # outward: each body's accelerations with du/dt (kappa's recursion, du/dt added)
+        u = u_at[i]
+        if not POINT_FIXED[codes[i]]:
+            for r in range(6):
+                total[i, r] = rhs[u + r]
+        elif codes[i] == HINGE:  # dOmega_j/dt = a du/dt
+            axis = vector(params[i].axis, 0)
+            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot,
+                                   (rhs[u] * axis[0], rhs[u] * axis[1], rhs[u] * axis[2]), total)
+        else:
+            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, vector(rhs, u), total)
+    for i in range(n):  # then each body's m dV/dt - F, and leaves first the reactions they pass up
+        m = params[i].mass
+        for k in range(3):
+            total[i, k] = m * total[i, 3 + k] - force[i, k]
+    for i in range(n - 1, -1, -1):
+        if POINT_FIXED[codes[i]]:
+            for k in range(3):
+                out[i, k] = total[i, k]
+                if parents[i] >= 0:
+                    total[parents[i], k] += total[i, k]
+
+
+@jit
+def reaction_samples(times, states, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, per_run, out):
+    """:func:`tree_reactions` at every sample: ``states`` (m, 12 n + 3 e) the maximal states
+    at ``times`` (m,) [s], sample s of the tree ``tree_of[s]`` (``params`` (t, n),
+    ``ppoints`` (t, n, 3)), runs of ``per_run`` samples (a hinge's angle continued from
+    sample to sample of a run, from (-pi, pi] at its first, as
+    :func:`rbstab.variants.chain.chain_samples` continues it); Lambda_j into ``out`` (n, 3,
+    m), NaN where the state is NaN, rows of joints that are not point-fixed untouched."""
+    n = codes.shape[0]
+    n_r = reduced_size_of(codes, d_at)
+    yr, dyr = np.empty(n_r), np.empty(n_r + 1)
+    dy = np.empty(states.shape[1] + 1)
+    joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
+    reading, work = chain_work(n), tree_work(n, states.shape[1])
+    total, sample = np.empty((n, 6)), np.empty((n, 3))
+    for s in range(states.shape[0]):
+        if s % per_run == 0:
+            reading.angle[:] = 0.0
+        if states[s, 0] != states[s, 0]:
+            sample[:] = np.nan
+        else:
+            t = tree_of[s]
+            chain_evaluate(times[s], states[s], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies,
+                           scalars, reading)
+            _reduced_from(states[s], params[t], codes, d_at, r_at, rd_at, joints, yr)
+            tree_reactions(times[s], yr, params[t], codes, parents, ppoints[t], d_at, r_at, u_at, rd_at, dyr, work,
+                           total, sample)
+        for i in range(n):
+            if POINT_FIXED[codes[i]]:
+                for k in range(3):
+                    out[i, k, s] = sample[i, k]
+
+
+@jit(forceinline=True)
+def reduced_size_of(codes, d_at):
+    """n_r of a tree of joint codes ``codes`` whose embedded joints' D sit at ``d_at`` (-1: none)."""
+    n_r = 0
+    for i in range(codes.shape[0]):
+        n_r += REDUCED_STATES[codes[i]] + (3 if d_at[i] >= 0 else 0)
+    return n_r
+
+
+@jit(forceinline=True)
+def _reduced_from(y, params, codes, d_at, r_at, rd_at, joints, out):
+    """The reduced state ``out`` (n_r,) of the maximal state ``y`` whose joints' Theta_j,
+    Omega_j :func:`rbstab.variants.chain.chain_evaluate` wrote into ``joints`` (a hinge's q
+    the angle it continued): q = a . Theta_j, u = a . Omega_j of a hinge; Theta_j, Omega_j of
+    a ball; every other body's Theta, Omega, X, V; D."""
+    for i in range(codes.shape[0]):
+        at = r_at[i]
+        if codes[i] == HINGE:
+            axis = vector(params[i].axis, 0)
+            out[at] = dot(axis, vector(joints[i, _THETA_J], 0))
+            out[at + 1] = dot(axis, vector(joints[i, _OMEGA_J], 0))
+        elif codes[i] == PERMANENT:
+            for c in range(3):
+                out[at + c] = joints[i, _THETA_J, c]
+                out[at + 3 + c] = joints[i, _OMEGA_J, c]
+        else:
+            for c in range(12):
+                out[at + c] = y[12 * i + c]
+    for j in range(codes.shape[0]):
+        if d_at[j] >= 0:
+            for c in range(3):
+                out[rd_at[j] + c] = y[d_at[j] + c]
+
+
+@jit(_nrt=False)
 def tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, body, point, value, torque_push, work):
     """Apply a push to the reduced state ``yr`` in place and return its energy dT [J] (the
     jump of the kinetic energy): a force impulse ``value`` P [N s] (inertial frame) at
@@ -588,8 +710,7 @@ def reduce_state(compiled: CompiledChain, layout: TreeLayout, y: np.ndarray) -> 
 def reduced_size(codes, d_at) -> int:
     """n_r: the size of the reduced state of a tree of joint variant codes ``codes`` (n,)
     whose embedded joints' D sit at ``d_at`` (n,; -1: none)."""
-    codes, d_at = np.asarray(codes), np.asarray(d_at)
-    return int(np.sum(REDUCED_STATES[codes]) + 3 * np.sum(d_at >= 0))
+    return int(reduced_size_of(np.asarray(codes, dtype=np.int64), np.asarray(d_at, dtype=np.int64)))
 
 
 @jit
@@ -606,24 +727,8 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
     joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
     dy, work = np.empty(y.shape[1]), chain_work(n)
     for a in range(y.shape[0]):
+        t = tree_of[a]
         if permanent:
-            t = tree_of[a]
             work.angle[:] = 0.0  # a hinge's angle read in (-pi, pi]
             chain_evaluate(0.0, y[a], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies, scalars, work)
-        for i in range(n):
-            at = r_at[i]
-            if codes[i] == HINGE:  # Theta_j = q a, Omega_j = a dq/dt
-                axis = vector(params[tree_of[a], i].axis, 0)
-                out[a, at] = dot(axis, vector(joints[i, _THETA_J], 0))
-                out[a, at + 1] = dot(axis, vector(joints[i, _OMEGA_J], 0))
-            elif codes[i] == PERMANENT:
-                for c in range(3):
-                    out[a, at + c] = joints[i, _THETA_J, c]
-                    out[a, at + 3 + c] = joints[i, _OMEGA_J, c]
-            else:
-                for c in range(12):
-                    out[a, at + c] = y[a, 12 * i + c]
-        for j in range(n):
-            if d_at[j] >= 0:
-                for c in range(3):
-                    out[a, rd_at[j] + c] = y[a, d_at[j] + c]
+        _reduced_from(y[a], params[t], codes, d_at, r_at, rd_at, joints, out[a])
