@@ -408,12 +408,12 @@ def test_a_hinged_stances_smallest_fatal_push_is_where_its_plain_runs_start_to_f
 
 
 def test_a_hinge_trees_analysis_says_what_it_leaves_out():
-    """--basin, --basin-stability (their axes and ranges are Euler-angle blocks) and --verify
-    are refused in one line."""
+    """--basin and --basin-stability (their axes and ranges are Euler-angle blocks) are
+    refused in one line."""
     from rbstab.analysis import analyze
 
     hinges = config_from_mapping(_planar_twins()[0])
     with pytest.raises(ValueError, match="--basin-stability: joint 'j0' is a hinge"):
         analyze(hinges, basin_stability={"ranges": {}})
-    with pytest.raises(ValueError, match="--verify: joint 'j0' is a hinge"):
-        analyze(hinges, verify=True)
+    with pytest.raises(ValueError, match="--basin: joint 'j0' is a hinge"):
+        analyze(hinges, basin=["initial_state.b0.q=-0.1:0.1:3"])

@@ -29,7 +29,7 @@ Layout of ``<name>.analysis.nc`` (``kind = "configuration"``)::
     worst_state_<block>(axis), sublevel, sublevel_sampled, boundary_level, ... (scalars),
     sublevel_history, sublevel_history_samples (sublevel_step)
     verification (--verify): sublevel_verified, sublevel_verified_boxes, sublevel_verified_seconds
-    (scalars), sublevel_verified_box (axis, bound)
+    (scalars), sublevel_verified_box (axis, bound; a tree of hinges': (hinge, bound), each hinge's q)
     basin: basin_outcome (flag_values 0 1 2: converged, not converged, failed),
     basin_time_to_converge, basin_lyapunov_initial, basin_lyapunov_final (basin_x, basin_y)
     push: push_direction(push_direction, axis), push_threshold, push_recovering,
@@ -230,10 +230,13 @@ def _verification_variables(analysis) -> dict:
     return {
         "sublevel_verified": _var((), w.level, "J", "c of {v <= c} proven positively invariant and inside the region "
                                   "of attraction (interval arithmetic, branch and bound over Theta boxes)"),
-        "sublevel_verified_boxes": _var((), int(w.boxes), "1", "Theta boxes of the proof"),
+        "sublevel_verified_boxes": _var((), int(w.boxes), "1", "boxes of the proof (of Theta, or of the hinges' q)"),
         "sublevel_verified_seconds": _var((), float(w.seconds), "s", "wall time of the proof"),
         "sublevel_verified_box": _var(("axis", "bound"), np.asarray(w.box, dtype=float), "rad",
-                                      "the Theta box that stops c from being larger [low, high]"),
+                                      "the Theta box that stops c from being larger [low, high]")
+        if w.coordinates == "theta" else
+        _var(("hinge", "bound"), np.asarray(w.box, dtype=float), "rad",
+             "the box of the hinges' angles q (in the joints' order) that stops c from being larger [low, high]"),
     }
 
 
@@ -398,6 +401,9 @@ def analysis_content(analysis, command_line: str | None = None) -> tuple[dict, d
            if hasattr(layout, "bodies") else {}),
         **({"bound": _var(("bound",), np.array(["low", "high"], dtype=object), "1", "end of an interval")}
            if getattr(analysis, "verification", None) is not None else {}),
+        **({"hinge": _var(("hinge",), np.array(analysis.analysed.chain.joint_names, dtype=object), "1",
+                          "hinge joint whose angle q the verified box bounds")}
+           if getattr(getattr(analysis, "verification", None), "coordinates", "theta") == "q" else {}),
         **basin_coords,
         **push_coords,
         **stability_coords,

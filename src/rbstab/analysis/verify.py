@@ -33,6 +33,12 @@ Then {v <= c} n D is positively invariant, dv/dt = 0 only where Omega = 0, and t
 largest invariant set there consists of rest points (grad P = 0 with Omega = 0): only the
 equilibrium. By LaSalle's invariance principle every run from the set converges to it.
 
+A tree of at most 3 hinges (:class:`_HingeModel`) is proven the same way over boxes of
+the hinges' angles q: v = 1/2 u' M(q) u + P(q), P the hinges' springs and stops, gravity
+on X_i(q) and h; tau_j = -k_j (q_j - q_ref_j) between the servo's own lower and upper
+limits; the domain half a turn either side of each reference, and every body's Euler
+angles inside ``simulation.limits.theta`` (docs/analysis.md, "The verified bound").
+
 The largest such c is found at once: c is a lower bound of P over the set of Theta that
 fail 1-3, computed by best-first branch and bound (boxes ordered by their lower bound of
 P, bisected along their widest side scaled by sqrt(K_r)) to a relative tolerance; the box
@@ -89,6 +95,9 @@ class Verification:
         Half-width [rad] of the box around the equilibrium where P is proven strictly convex.
     method : str
         ``"interval arithmetic"``.
+    coordinates : str
+        What the boxes are of: ``"theta"`` (one body's Euler angles) or ``"q"`` (a tree of
+        hinges: each hinge's angle, in the joints' order; ``box`` then has a row each).
     """
 
     level: float
@@ -98,6 +107,7 @@ class Verification:
     box: np.ndarray = field(default_factory=lambda: np.zeros((3, 2)))
     equilibrium_box: float = 0.0
     method: str = "interval arithmetic"
+    coordinates: str = "theta"
 
     @property
     def summary(self) -> str:
@@ -106,19 +116,33 @@ class Verification:
 
 
 # -- what is covered ----------------------------------------------------------------------------
+def _hinged(config) -> bool:
+    return any(j.variant == "hinge" for j in config.chain.joints)
+
+
 def verified_model(config):
     """The configuration the proof is of: ``config`` where its tree is one body held to the
-    ground by its joint (in either spelling, the ground point anywhere).
+    ground by its joint (in either spelling, the ground point anywhere), or a tree of at
+    most 3 hinges (6 states).
 
     Raises
     ------
     NotVerifiable
-        For a tree of several bodies (one line: why)."""
+        For another tree of several bodies (one line: why)."""
     bodies = config.chain.size
+    if _hinged(config):
+        others = [j.name for j in config.chain.joints if j.variant != "hinge"]
+        if others:
+            raise NotVerifiable(f"joints.{others[0]}.variant: found {config.chain.joints[config.chain.joint_names.index(others[0])].variant!r} "
+                                "in a tree with a hinge; --verify covers a tree whose every joint is a hinge")
+        if bodies > 3:
+            raise NotVerifiable(f"this tree has {bodies} hinges ({2 * bodies} states); --verify covers at most 3 "
+                                "(6 states: interval arithmetic over boxes of their angles)")
+        return config
     if bodies > 1:
         raise NotVerifiable(f"the proof covers one body held to the ground by a permanent joint, the reduced "
-                            f"6-state model of 'permanent' (eq 21); this chain has {bodies} bodies (interval "
-                            "arithmetic bounds one body's v and dv/dt)")
+                            f"6-state model of 'permanent' (eq 21), or a tree of at most 3 hinges; this chain has "
+                            f"{bodies} bodies")
     return config
 
 
@@ -138,6 +162,9 @@ def check_verifiable(config) -> None:
     limits, diagonal positive L_r, H unlimited, no disturbances, no bounds of X, V or E in
     ``simulation.limits``."""
     chain = verified_model(config).chain
+    if _hinged(config):
+        _check_hinges(config)
+        return
     body, joint = chain.bodies[0], chain.joints[0]
     if joint.variant != "permanent":
         raise NotVerifiable(f"{_key(config, 'joint', 'variant')}: found {joint.variant!r} (its analysis runs on more "
@@ -173,6 +200,40 @@ def check_verifiable(config) -> None:
         if np.any(np.isfinite(bounds[2:])):
             raise NotVerifiable("simulation.limits: found bounds of x, v or e; --verify covers bounds of "
                                 "theta and omega")
+
+
+def _check_hinges(config) -> None:
+    """:func:`check_verifiable` of a tree of hinges: every hinge's l_r > 0, clipped limits
+    (either side its own), no body feedback, no disturbances, bounds of theta alone (below
+    pi/2) in ``simulation.limits``."""
+    chain = config.chain
+    for joint in chain.joints:
+        axis = np.asarray(joint.axis, dtype=float)
+        axis = axis / np.linalg.norm(axis)
+        l_r = float(axis @ np.asarray(joint.l_r, dtype=float) @ axis)
+        if not l_r > 0.0:
+            raise NotVerifiable(f"joints.{joint.name}.l_r: found {l_r:g}; --verify needs every hinge's l_r > 0 "
+                                "(LaSalle's argument: dv/dt = 0 only where every dq/dt = 0)")
+        if joint.saturation is not None and joint.saturation.shape != "clip":
+            raise NotVerifiable(f"joints.{joint.name}.saturation.shape: found {joint.saturation.shape!r}; --verify "
+                                "covers 'clip' (a smooth saturation delivers less than the commanded torque at every "
+                                "state)")
+    for body in chain.bodies:
+        if np.any(body.k_t) or np.any(body.l_t):
+            raise NotVerifiable(f"bodies.{body.name}.k_t: found body feedback H; --verify of a tree of hinges "
+                                "covers joint torques alone")
+        if body.disturbances:
+            raise NotVerifiable(f"bodies.{body.name}.disturbances: found {len(body.disturbances)}; --verify covers "
+                                "the undisturbed tree (a disturbance is not a property of a sublevel set)")
+    limits = config.simulation.limits
+    if limits is not None:
+        bounds = np.asarray(limits.array, dtype=float)
+        if np.any(np.isfinite(bounds[1:])):
+            raise NotVerifiable("simulation.limits: found bounds of omega, x, v or e; --verify of a tree of hinges "
+                                "covers bounds of theta")
+        if np.any(np.isfinite(bounds[0]) & (bounds[0] >= GIMBAL_LOCK_ANGLE)):
+            raise NotVerifiable(f"simulation.limits.theta: found {bounds[0].tolist()}; --verify of a tree of hinges "
+                                "covers bounds below pi/2")
 
 
 # -- interval kernels (3-vectors and 3x3 matrices as lists of arb) -----------------------------
@@ -350,25 +411,321 @@ class _Model:
         p_val = self.evaluate(theta, theta)[0]
         return float(p_val.mid())
 
+    # the search's view of the model (shared with :class:`_HingeModel`)
+    dim = 3
+    coordinates = "theta"
+
+    def torque_fails(self, tau, i: int) -> bool:
+        """Whether the commanded torque tau_i (arb) may reach its limit."""
+        lim = self.limit_arb[i]
+        return lim is not None and not (abs(tau[i]) < lim)
+
+    def torque_reached(self, tau, i: int) -> bool:
+        """Whether it reaches its limit for certain (at a point)."""
+        lim = self.limit_arb[i]
+        return lim is not None and bool(abs(tau[i]) > lim)
+
+    def torque_text(self, i: int) -> str:
+        return f"the commanded torque |N_{i + 1}| (at Omega = 0) reaches its limit {self.limit[i]:g} N m"
+
+    def scale(self) -> np.ndarray:
+        """The boxes' sides are compared in these units per rad (the springs' sqrt(J))."""
+        return np.sqrt(np.diag(self.k_r))
+
+    def region(self, lo, hi):
+        """One body's bounds of theta are the domain's faces: (inside, outside, text) = (True, False, "")."""
+        return True, False, ""
+
+    def level_cap(self, config) -> float:
+        """An upper bound of the least P on the faces |theta_2| = gimbal: no c above it can be proven."""
+        gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
+        return min(self.point(np.array([self.reference[0] + s1, sg * gimbal, self.reference[2]]))
+                   for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0))
+
+    def domain(self, config, level_cap: float) -> np.ndarray:
+        return _domain(config, self, level_cap)
+
+    def boundary(self, config, a: int, edge: float) -> str:
+        """The domain's face theta_a = edge [rad] in words, with what makes it one."""
+        gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
+        limits = config.simulation.limits
+        theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
+        edge = abs(edge)
+        what = ("the gimbal-lock margin" if a == 1 and edge >= gimbal
+                else "simulation.limits.theta" if edge >= theta_limit[a] else "the search domain")
+        return f"|theta_{a + 1}| = {edge:.4g} rad ({what})"
+
+
+class _Jet:
+    """A function of the box's coordinates as its value, gradient and (optionally) Hessian,
+    each in arb, with +, - and * (forward-mode differentiation over interval arithmetic)."""
+
+    __slots__ = ("v", "g", "h")
+
+    def __init__(self, v, g, h=None) -> None:
+        self.v, self.g, self.h = v, g, h
+
+    def __add__(self, o):
+        if not isinstance(o, _Jet):
+            return _Jet(self.v + o, self.g, self.h)
+        h = None if self.h is None else [[a + b for a, b in zip(r, q)] for r, q in zip(self.h, o.h)]
+        return _Jet(self.v + o.v, [a + b for a, b in zip(self.g, o.g)], h)
+
+    __radd__ = __add__
+
+    def __neg__(self):
+        return _Jet(-self.v, [-a for a in self.g], None if self.h is None else [[-a for a in r] for r in self.h])
+
+    def __sub__(self, o):
+        return self + (-o)
+
+    def __rsub__(self, o):
+        return (-self) + o
+
+    def __mul__(self, o):
+        if not isinstance(o, _Jet):
+            return _Jet(self.v * o, [a * o for a in self.g], None if self.h is None else [[a * o for a in r]
+                                                                                          for r in self.h])
+        g = [self.v * b + o.v * a for a, b in zip(self.g, o.g)]
+        h = None
+        if self.h is not None:
+            n = len(self.g)
+            h = [[self.v * o.h[k][m] + o.v * self.h[k][m] + self.g[k] * o.g[m] + self.g[m] * o.g[k]
+                  for m in range(n)] for k in range(n)]
+        return _Jet(self.v * o.v, g, h)
+
+    __rmul__ = __mul__
+
+
+class _HingeModel:
+    """P, grad P, its Hessian and each hinge's static commanded torque tau_j = -k_j (q_j -
+    q_ref_j) over a box of the hinges' angles q (one per body: a tree of hinges), in arb: v
+    at rest is P(q) = sum_j [1/2 k_j (q_j - q_ref_j)^2 + 1/2 kp_j (q_j - qp_j)^2 + the range's
+    stop, 1/2 k_s (q_j - end)^2 beyond either end] - sum_i G_i' X_i(q) + h (docs/physics.md,
+    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) parents first (:func:`rbstab.variants.tree.tree_expand`),
+    differentiated forward (:class:`_Jet`). ``compiled``: the chain
+    (:class:`rbstab.variants.chain.CompiledChain`), h = its offset."""
+
+    coordinates = "q"
+
+    def __init__(self, compiled, arb) -> None:
+        self.arb, self.zero, self.one = arb, arb(0), arb(1)
+        params = compiled.params
+        self.dim = n = compiled.size
+        self.names = list(compiled.chain.joint_names)
+        self.bodies = list(compiled.chain.body_names)
+        self.parents = [int(q) for q in compiled.parents]
+        axes = [np.asarray(p["axis"], dtype=float) for p in params]
+        self.axes = [[arb(float(x)) for x in a] for a in axes]
+        quad = [(float(a @ p["k_r"] @ a), float(a @ p["theta_ref"])) for a, p in zip(axes, params)]
+        passive = [(float(a @ p["passive_k_r"] @ a), float(a @ p["passive_theta_ref"])) if p["passive"] > 0
+                   else (0.0, 0.0) for a, p in zip(axes, params)]
+        self.springs = [(k, r, kp, rp) for (k, r), (kp, rp) in zip(quad, passive)]
+        total = np.array([k + kp for k, _, kp, _ in self.springs])
+        self.k_r = np.diag(total)
+        self.reference = np.array([(k * r + kp * rp) / (k + kp) if k + kp > 0 else r
+                                   for k, r, kp, rp in self.springs])
+        self.stops = [(float(p["range_lower"]), float(p["range_upper"]), float(p["stop_k"])) if p["stop"] > 0 else None
+                      for p in params]
+        self.R_c = [[arb(float(x)) for x in p["attachment_point"]] for p in params]
+        self.R_p = [[arb(float(x)) for x in r] for r in compiled.ppoints]
+        self.G = [[arb(float(x)) for x in p["weight"]] for p in params]
+        self.h = arb(float(compiled.offset))
+        limits = compiled.params[0]["limits"][0] if compiled.params[0]["limited"] > 0 else np.full(3, np.inf)
+        self.theta_limit = np.asarray(limits, dtype=float)  # |theta_i| of each body's Euler angles (eq 2)
+        self.upper, self.lower = np.full(n, np.inf), np.full(n, -np.inf)
+        for j, (a, p) in enumerate(zip(axes, params)):
+            if p["saturation"] > 0:  # the per-axis limits a_i [lower, upper] back as numbers about a
+                i = int(np.argmax(np.abs(a)))
+                high, low = float(p["torque_limit"][i]) / a[i], float(p["torque_floor"][i]) / a[i]
+                self.lower[j], self.upper[j] = min(high, low), max(high, low)
+
+    def torque_fails(self, tau, i: int) -> bool:
+        ok = (not np.isfinite(self.upper[i]) or bool(tau[i] < self.arb(self.upper[i]))) and \
+             (not np.isfinite(self.lower[i]) or bool(tau[i] > self.arb(self.lower[i])))
+        return not ok
+
+    def torque_reached(self, tau, i: int) -> bool:
+        return (np.isfinite(self.upper[i]) and bool(tau[i] > self.arb(self.upper[i]))) or \
+            (np.isfinite(self.lower[i]) and bool(tau[i] < self.arb(self.lower[i])))
+
+    def torque_text(self, i: int) -> str:
+        return (f"the commanded torque of {self.names[i]} (at rest) reaches its limits "
+                f"[{self.lower[i]:g}, {self.upper[i]:g}] N m")
+
+    def scale(self) -> np.ndarray:
+        k = np.diag(self.k_r)
+        return np.sqrt(np.maximum(k, 1e-9 * max(float(k.max()), 1.0)))
+
+    def _outer(self) -> np.ndarray:
+        """The largest box searched: half a turn either side of each hinge's reference."""
+        return np.column_stack([self.reference - math.pi, self.reference + math.pi])
+
+    def level_cap(self, config) -> float:
+        """An upper bound of the least P on the largest box's faces (points on each)."""
+        outer, points = self._outer(), []
+        for a in range(self.dim):
+            for side in (0, 1):
+                q = self.reference.copy()
+                q[a] = outer[a, side]
+                points.append(self.point(q))
+        return min(points)
+
+    def domain(self, config, level_cap: float) -> np.ndarray:
+        """The largest box, narrowed where a spring alone holds every P <= ``level_cap`` inside."""
+        g = sum(float(np.linalg.norm([float(x.mid()) for x in w])) for w in self.G)
+        reach = sum(float(np.linalg.norm([float(x.mid()) for x in r])) for r in self.R_c + self.R_p)
+        floor = -g * reach + float(self.h.mid())  # |X_i| <= the sum of every |R|: -G'X >= -|G| that
+        k = np.diag(self.k_r)
+        with np.errstate(divide="ignore"):
+            half = np.where(k > 0, np.sqrt(np.maximum(2.0 * (level_cap - floor) / np.where(k > 0, k, 1.0), 0.0)) * 1.05
+                            + 1e-3, np.inf)
+        outer = self._outer()
+        return np.column_stack([np.maximum(self.reference - half, outer[:, 0]),
+                                np.minimum(self.reference + half, outer[:, 1])])
+
+    def boundary(self, config, a: int, edge: float) -> str:
+        return f"q of {self.names[a]} = {edge:.4g} rad (the search domain: half a turn from the reference)"
+
+    def _square(self, lo: float, hi: float, centre: float):
+        """(x - centre)^2 over [lo, hi], tight (0 where the interval holds the centre)."""
+        a, b = lo - centre, hi - centre
+        sq_hi = max(a * a, b * b)
+        sq_lo = 0.0 if a <= 0.0 <= b else min(a * a, b * b)
+        sq = self.arb(sq_lo).union(self.arb(sq_hi)) if sq_lo != sq_hi else self.arb(sq_lo)
+        return sq + self.arb(0, 4e-16 * sq_hi + 1e-300)
+
+    def _spring(self, j, x, lo, hi, hessian):
+        """Hinge j's springs and stop as a jet: value tight, gradient and Hessian in arb."""
+        arb, n = self.arb, self.dim
+        k, r, kp, rp = self.springs[j]
+        value = 0.5 * arb(k) * self._square(lo, hi, r) + 0.5 * arb(kp) * self._square(lo, hi, rp)
+        slope = arb(k) * (x - arb(r)) + arb(kp) * (x - arb(rp))
+        curvature = arb(k + kp)
+        stop = self.stops[j]
+        if stop is not None:  # beyond an end: 1/2 k_s (q - end)^2; a box across it: from 0
+            lower, upper, k_s = stop
+            for end, a, b in ((upper, max(lo, upper), hi), (lower, lo, min(hi, lower))):
+                if a > b or (a == b and a == end):
+                    continue  # the box lies inside the range on that side
+                across = (lo < upper < hi) if end == upper else (lo < lower < hi)
+                value = value + 0.5 * arb(k_s) * self._square(a, b, end)
+                delta = _ball(arb, a - end, b - end)
+                slope = slope + arb(k_s) * (delta.union(arb(0)) if across else delta)
+                curvature = curvature + (arb(k_s).union(arb(0)) if across else arb(k_s))
+        g = [self.zero] * n
+        g[j] = slope
+        h = None
+        if hessian:
+            h = [[self.zero] * n for _ in range(n)]
+            h[j][j] = curvature
+        return _Jet(value, g, h)
+
+    def evaluate(self, lo, hi, hessian: bool = False):
+        """(P, grad P, tau) over the box [lo, hi] (arb balls); with ``hessian`` also the
+        Hessian of P (dim x dim)."""
+        arb, n, zero, one = self.arb, self.dim, self.zero, self.one
+        q = [_ball(arb, lo[j], hi[j]) for j in range(n)]
+        total = _Jet(self.h, [zero] * n, [[zero] * n for _ in range(n)] if hessian else None)
+        rotations, positions = [], []  # each body's A_i and X_i
+        for j in range(n):
+            total = total + self._spring(j, q[j], lo[j], hi[j], hessian)
+            c, s = q[j].cos(), q[j].sin()
+            g_s, g_c = [zero] * n, [zero] * n
+            g_s[j], g_c[j] = c, -s
+            h_s = h_c = None
+            if hessian:
+                h_s, h_c = [[zero] * n for _ in range(n)], [[zero] * n for _ in range(n)]
+                h_s[j][j], h_c[j][j] = -s, -c
+            sin, cos = _Jet(s, g_s, h_s), _Jet(c, g_c, h_c)
+            vers = one - cos
+            x, y, z = self.axes[j]
+            rel = [[cos + vers * (x * x), vers * (x * y) - sin * z, vers * (x * z) + sin * y],
+                   [vers * (x * y) + sin * z, cos + vers * (y * y), vers * (y * z) - sin * x],
+                   [vers * (x * z) - sin * y, vers * (y * z) + sin * x, cos + vers * (z * z)]]
+            parent = self.parents[j]
+            if parent < 0:
+                a, anchor = rel, list(self.R_p[j])
+            else:
+                a_p = rotations[parent]
+                a = [[a_p[r][0] * rel[0][col] + a_p[r][1] * rel[1][col] + a_p[r][2] * rel[2][col] for col in range(3)]
+                     for r in range(3)]
+                offset = _mv(a_p, self.R_p[j])
+                anchor = [positions[parent][r] + offset[r] for r in range(3)]
+            rotations.append(a)
+            arm = _mv(a, self.R_c[j])
+            x_j = [anchor[r] - arm[r] for r in range(3)]
+            positions.append(x_j)
+            for r in range(3):
+                total = total - x_j[r] * self.G[j][r]
+        tau = [-(arb(k) * (q[j] - arb(r))) for j, (k, r, _, _) in enumerate(self.springs)]
+        value = total.v if isinstance(total, _Jet) else total
+        if not hessian:
+            return value, total.g, tau
+        return value, total.g, tau, total.h
+
+    def point(self, q: np.ndarray) -> float:
+        """P at a point (float, for the search's ordering only)."""
+        return float(self.evaluate(q, q)[0].mid())
+
+    def region(self, lo, hi):
+        """(whether every body's Euler angles (eq 2) lie inside ``simulation.limits.theta``
+        for certain over the box, whether some lie outside for certain, the first body
+        and bound not certainly kept) from the bodies' rotations in arb: with A = Rx Ry Rz
+        and cos theta_2 > 0, |theta_1| < L iff A_33 > 0 and |A_23| < tan(L) A_33, |theta_2| < L
+        iff |A_13| < sin(L), |theta_3| < L iff A_11 > 0 and |A_12| < tan(L) A_11."""
+        if not np.any(np.isfinite(self.theta_limit)):
+            return True, False, ""
+        arb, n = self.arb, self.dim
+        rotations, inside, outside, text = [], True, False, ""
+        for j in range(n):
+            x = _ball(arb, lo[j], hi[j])
+            c, s = x.cos(), x.sin()
+            v = 1 - c
+            ax, ay, az = self.axes[j]
+            rel = [[c + v * ax * ax, v * ax * ay - s * az, v * ax * az + s * ay],
+                   [v * ax * ay + s * az, c + v * ay * ay, v * ay * az - s * ax],
+                   [v * ax * az - s * ay, v * ay * az + s * ax, c + v * az * az]]
+            parent = self.parents[j]
+            a = rel if parent < 0 else [[sum((rotations[parent][r][k] * rel[k][col] for k in range(3)), arb(0))
+                                        for col in range(3)] for r in range(3)]
+            rotations.append(a)
+            for i, (num, den) in enumerate(((a[1][2], a[2][2]), (a[0][2], None), (a[0][1], a[0][0]))):
+                bound = self.theta_limit[i]
+                if not np.isfinite(bound):
+                    continue
+                if den is None:
+                    keeps, leaves = abs(num) < arb(math.sin(bound)), abs(num) > arb(math.sin(bound))
+                else:
+                    keeps = den > 0 and abs(num) < arb(math.tan(bound)) * den
+                    leaves = den < 0 or abs(num) > arb(math.tan(bound)) * den
+                if not keeps and inside:
+                    inside, text = False, f"|theta_{i + 1}| of {self.bodies[j]} may reach simulation.limits.theta = {bound:g} rad"
+                outside = outside or bool(leaves)
+        return inside, outside, text
+
 
 def _positive_definite(hess) -> bool:
-    """Every symmetric matrix in the interval matrix is positive definite (leading minors
-    bounded away from zero, Sylvester)."""
-    m1 = hess[0][0]
-    m2 = hess[0][0] * hess[1][1] - hess[0][1] * hess[1][0]
-    m3 = (hess[0][0] * (hess[1][1] * hess[2][2] - hess[1][2] * hess[2][1])
-          - hess[0][1] * (hess[1][0] * hess[2][2] - hess[1][2] * hess[2][0])
-          + hess[0][2] * (hess[1][0] * hess[2][1] - hess[1][1] * hess[2][0]))
-    return bool(m1 > 0 and m2 > 0 and m3 > 0)
+    """Every symmetric matrix in the interval matrix (1 x 1 to 3 x 3) is positive definite
+    (leading minors bounded away from zero, Sylvester)."""
+    minors = [hess[0][0]]
+    if len(hess) > 1:
+        minors.append(hess[0][0] * hess[1][1] - hess[0][1] * hess[1][0])
+    if len(hess) > 2:
+        minors.append(hess[0][0] * (hess[1][1] * hess[2][2] - hess[1][2] * hess[2][1])
+                      - hess[0][1] * (hess[1][0] * hess[2][2] - hess[1][2] * hess[2][0])
+                      + hess[0][2] * (hess[1][0] * hess[2][1] - hess[1][1] * hess[2][0]))
+    return all(bool(m > 0) for m in minors)
 
 
-def _convex_box(model: _Model, centre: np.ndarray, radius: float) -> float:
+def _convex_box(model, centre: np.ndarray, radius: float) -> float:
     """The largest half-width <= ``radius`` (halving) of a box around ``centre`` on which
-    the interval Hessian of P is positive definite (on each of 8 sub-boxes); 0 if none."""
+    the interval Hessian of P is positive definite (on each of its 2^dim corner sub-boxes); 0 if none."""
+    dim = model.dim
     for _ in range(24):
         ok = True
-        for corner in range(8):
-            sign = np.array([1.0 if corner >> i & 1 else -1.0 for i in range(3)])
+        for corner in range(2 ** dim):
+            sign = np.array([1.0 if corner >> i & 1 else -1.0 for i in range(dim)])
             a, b = centre, centre + sign * radius
             if not _positive_definite(model.evaluate(np.minimum(a, b), np.maximum(a, b), hessian=True)[3]):
                 ok = False
@@ -446,21 +803,17 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     arb = _arb()
     t0 = _time.perf_counter()
     model, equilibrium = _model(config, arb)
-    gimbal = GIMBAL_LOCK_ANGLE - config.simulation.gimbal_margin
-    # an upper bound of the least P on the faces |theta_2| = gimbal: no c above it can be proven
-    face = [model.point(np.array([model.reference[0] + s1, sg * gimbal, model.reference[2]]))
-            for s1 in (-1.0, 0.0, 1.0) for sg in (-1.0, 1.0)]
-    level_cap = min(face) if level is None else max(float(level), 0.0)
-    domain = _domain(config, model, level_cap)
+    dim, name = model.dim, model.coordinates
+    level_cap = model.level_cap(config) if level is None else max(float(level), 0.0)
+    domain = model.domain(config, level_cap)
     limits = config.simulation.limits
-    theta_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[0]
     omega_limit = np.full(3, np.inf) if limits is None else np.asarray(limits.array, dtype=float)[1]
     radius = _convex_box(model, equilibrium, 0.025 * float(np.min(domain[:, 1] - domain[:, 0])))
     if radius == 0.0:
         raise NotVerifiable("the interval Hessian of P is not positive definite on any box around the equilibrium "
-                            f"theta = {np.round(equilibrium, 6).tolist()} rad")
+                            f"{name} = {np.round(equilibrium, 6).tolist()} rad")
     e_lo, e_hi = equilibrium - radius, equilibrium + radius
-    scale = np.sqrt(np.diag(model.k_r))  # sides in units of the spring's sqrt(J)
+    scale = model.scale()  # sides in units of the springs' sqrt(J)
     min_width = _MIN_WIDTH * float(np.max((domain[:, 1] - domain[:, 0]) * scale))
 
     heap: list[_Item] = []
@@ -470,11 +823,11 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
         nonlocal counter
         counter += 1
         p_val, grad, tau = model.evaluate(lo, hi)
-        # mean-value form: P(mid) + grad P(box) (Theta - mid), intersected with the plain one
+        # mean-value form: P(mid) + grad P(box) (q - mid), intersected with the plain one
         mid = 0.5 * (lo + hi)
         p_mid = model.evaluate(mid, mid)[0]
         mvf = p_mid
-        for a in range(3):  # Theta_a - mid_a over the box, in arb (no float rounding)
+        for a in range(dim):  # q_a - mid_a over the box, in arb (no float rounding)
             mvf = mvf + grad[a] * (_ball(arb, lo[a], hi[a]) - arb(float(mid[a])))
         try:
             p_val = p_val.intersection(mvf)
@@ -486,7 +839,7 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
     best_bad = math.inf  # least P found at a point that fails (for the stopping rule only)
     point_failure = ""
     p_floor = None
-    reason, bad_box = "", np.zeros((3, 2))
+    reason, bad_box = "", np.zeros((dim, 2))
     result_level = None
     while heap:
         item = heapq.heappop(heap)
@@ -502,28 +855,27 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
             reason = reason or "the search's tolerance"
             break
         failures = []
-        on_face = ([(a, 0) for a in range(3) if lo[a] <= domain[a, 0]]
-                   + [(a, 1) for a in range(3) if hi[a] >= domain[a, 1]])
+        on_face = ([(a, 0) for a in range(dim) if lo[a] <= domain[a, 0]]
+                   + [(a, 1) for a in range(dim) if hi[a] >= domain[a, 1]])
         if on_face:
-            a, s = on_face[0]
-            edge = abs(domain[a, s])
-            what = ("the gimbal-lock margin" if a == 1 and edge >= gimbal
-                    else "simulation.limits.theta" if edge >= theta_limit[a] else "the search domain")
-            failures.append(f"the level set reaches the domain boundary |theta_{a + 1}| = {edge:.4g} rad ({what})")
+            a, side = on_face[0]
+            edge = domain[a, side]
+            failures.append(f"the level set reaches the domain boundary {model.boundary(config, a, edge)}")
             pt = 0.5 * (lo + hi)
-            pt[a] = domain[a, s]
+            pt[a] = edge
             if model.point(pt) < best_bad:
                 best_bad, point_failure = model.point(pt), failures[-1]
-        for i in range(3):
-            lim = model.limit_arb[i]
-            if lim is None:
-                continue
-            if not (abs(tau[i]) < lim):
-                failures.append(f"the commanded torque |N_{i + 1}| (at Omega = 0) reaches its limit "
-                                f"{model.limit[i]:g} N m")
+        inside, _, text = model.region(lo, hi)
+        if not inside:
+            failures.append(f"the level set reaches the admissible region's boundary: {text}")
+            mid = 0.5 * (lo + hi)
+            if model.region(mid, mid)[1] and model.point(mid) < best_bad:
+                best_bad, point_failure = model.point(mid), failures[-1]
+        for i in range(dim):
+            if model.torque_fails(tau, i):
+                failures.append(model.torque_text(i))
                 mid = 0.5 * (lo + hi)
-                t_mid = model.evaluate(mid, mid)[2][i]
-                if abs(t_mid) > lim and model.point(mid) < best_bad:
+                if model.torque_reached(model.evaluate(mid, mid)[2], i) and model.point(mid) < best_bad:
                     best_bad, point_failure = model.point(mid), failures[-1]
         inside_e = bool(np.all(lo >= e_lo) and np.all(hi <= e_hi))
         if not inside_e and not any(g > 0 or g < 0 for g in grad):
@@ -531,14 +883,14 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
         if not failures:
             continue
         if level is not None and best_bad <= level:  # a point of the box fails below the level
-            raise NotVerifiable(f"v <= {level:g} J not proven: box theta in "
+            raise NotVerifiable(f"v <= {level:g} J not proven: box {name} in "
                                 f"{_fmt_box(np.column_stack([lo, hi]))}: {point_failure}")
         widths = (hi - lo) * scale
         if float(np.max(widths)) <= min_width or counter >= max_boxes:
             reason = failures[0] + (" (box limit reached)" if counter >= max_boxes else "")
             bad_box = np.column_stack([lo, hi])
             if level is not None:
-                raise NotVerifiable(f"v <= {level:g} J not proven: box theta in "
+                raise NotVerifiable(f"v <= {level:g} J not proven: box {name} in "
                                     f"{_fmt_box(bad_box)}: {reason}")
             result_level = item.key
             break
@@ -555,12 +907,12 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
         result_level = math.inf if level is None else float(level)
     if level is None:
         result_level = min(result_level, level_cap)
-        # strictly below the lower bound: no failing Theta has P <= c
+        # strictly below the lower bound: no failing point has P <= c
         result_level = result_level * (1.0 - 1e-9) if result_level > 0 else result_level
-    # Omega's bounds of simulation.limits: 0.5 Omega' J_p Omega <= c - min P
-    jp_inv = np.linalg.inv(model.pivot_inertia)
+    # Omega's bounds of simulation.limits (one body): 0.5 Omega' J_p Omega <= c - min P
     for i in range(3):
         if np.isfinite(omega_limit[i]):
+            jp_inv = np.linalg.inv(model.pivot_inertia)
             cap = (p_floor or 0.0) + 0.5 * omega_limit[i] ** 2 / jp_inv[i, i] * (1.0 - 1e-9)
             if cap < result_level:
                 if level is not None:
@@ -569,13 +921,13 @@ def verify_sublevel(config, level: float | None = None, *, rtol: float = DEFAULT
                 result_level = cap
                 reason = f"|Omega_{i + 1}| may reach simulation.limits.omega = {omega_limit[i]:g} rad/s"
     if level is None and not result_level > 0.0:
-        raise NotVerifiable(f"no level c > 0 proven: box theta in {_fmt_box(bad_box)}: {reason}")
+        raise NotVerifiable(f"no level c > 0 proven: box {name} in {_fmt_box(bad_box)}: {reason}")
     if level is not None:
         reason = f"v <= {level:g} J proven"
     else:
-        reason = f"box theta in {_fmt_box(bad_box)}: {reason}"
+        reason = f"box {name} in {_fmt_box(bad_box)}: {reason}"
     return Verification(level=float(result_level), boxes=counter, seconds=_time.perf_counter() - t0,
-                        reason=reason, box=bad_box, equilibrium_box=radius)
+                        reason=reason, box=bad_box, equilibrium_box=radius, coordinates=name)
 
 
 def _fmt_box(box: np.ndarray) -> str:
@@ -594,13 +946,18 @@ def potential(config, theta: np.ndarray) -> float:
     return _model(config, _arb())[0].point(np.asarray(theta, dtype=float))
 
 
-def _model(config, arb) -> tuple[_Model, np.ndarray]:
-    """(the interval kernel of the body of ``config``'s one-body tree, its equilibrium Theta_e
-    (3,) [rad]: the tree's rest state, :func:`rbstab.analysis.linearise.linearise_chain`,
-    with the tree's h)."""
+def _model(config, arb):
+    """(the interval kernel of ``config``'s tree, its equilibrium (the tree's rest state,
+    :func:`rbstab.analysis.linearise.linearise_chain`, with the tree's h): one body's
+    :class:`_Model` and Theta_e (3,) [rad], or a tree of hinges' :class:`_HingeModel` and
+    each hinge's q at rest (n,) [rad])."""
     from ..variants import chain as C  # heavy: numba
     from .linearise import linearise_chain, undisturbed  # heavy: numba
 
     compiled = C.compile_chain(undisturbed(config).chain)
     lin, _ = linearise_chain(compiled)
+    if compiled.hinged:
+        from ..variants.tree import tree_layout  # heavy: numba
+
+        return _HingeModel(compiled, arb), np.asarray(lin.equilibrium)[tree_layout(compiled).r_at]
     return _Model(compiled.params[0], compiled.ppoints[0], compiled.offset, arb), np.asarray(lin.equilibrium[:3])

@@ -1,0 +1,155 @@
+"""``rbstab analyze --verify`` of a tree of hinges (at most 3: 6 states): {v <= c} proven
+positively invariant and inside the region of attraction by interval arithmetic over boxes
+of the hinges' angles q. Checked against the compiled model (v at rest, its gradient and
+Hessian inside the kernel's enclosures, stops and passive springs included), a closed form
+(one inverted rod: the level where its clipped servo first reaches its limit, and a second
+rest point above it), the sampled certificate, and runs from the level set that stay inside
+and come back."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("flint")
+
+from rbstab.analysis import NotVerifiable, verify_sublevel  # noqa: E402
+from rbstab.analysis.verify import _model, potential  # noqa: E402
+from rbstab.config import config_from_mapping, load_config  # noqa: E402
+from rbstab.simulator import simulate  # noqa: E402
+from rbstab.variants import chain as C  # noqa: E402
+from rbstab.variants.tree import expand_state, tree_layout  # noqa: E402
+
+from conftest import ROOT  # noqa: E402
+
+STANCE = ROOT / "configs/examples/stance_hinges.yaml"
+
+
+def _rod(k=60.0, l=8.0, limit=6.0, mass=2.0, d=0.5):
+    """One rod standing on a hinge about x (its centre of mass d [m] above the hinge), a
+    servo k, l clipped to +-limit [N m]: P(q) = 1/2 k q^2 + m g d (cos q - 1)."""
+    return {
+        "name": "rod", "gravity": [0.0, 0.0, -9.81],
+        "bodies": [{"name": "rod", "mass": mass, "inertia": [0.2, 0.2, 0.01]}],
+        "joints": [{"name": "ankle", "parent": "ground", "parent_point": [0.0, 0.0, 0.0], "child": "rod",
+                    "child_point": [0.0, 0.0, -d], "variant": "hinge", "axis": [1.0, 0.0, 0.0], "k_r": k,
+                    "l_r": l, "saturation": {"torque_n": limit}}],
+        "initial_state": {"rod": {"q": 0.0}},
+        "simulation": {"t_end": 10.0, "n_samples": 201},
+    }
+
+
+def _v_at_rest(compiled, layout, q) -> float:
+    """The compiled model's v [J] at the hinges' angles q (n,) and u = 0."""
+    yr = np.zeros(layout.n_r)
+    yr[layout.r_at] = q
+    y = expand_state(compiled, layout, yr)
+    n = compiled.size
+    scalars = np.empty(5)
+    C.chain_core(0.0, y, *compiled.args, np.empty(compiled.n_states), np.empty((n, 7, 3)), np.empty((n, 3)), scalars)
+    return float(scalars[:4].sum() + compiled.offset)
+
+
+def test_the_interval_kernel_holds_the_compiled_v_its_gradient_and_hessian():
+    """The hinged stance (an asymmetric saturating ankle, the knee's passive spring and its
+    stop, gravity): on random small boxes of q, some across the knee's stop, the compiled
+    v at rest lies in P(box), its central-difference gradient and Hessian in the kernel's."""
+    from flint import arb
+
+    config = load_config(STANCE)
+    model, equilibrium = _model(config, arb)
+    compiled = C.compile_chain(config.chain)
+    layout = tree_layout(compiled)
+    rng = np.random.default_rng(7)
+    h = 1e-4
+    eye = np.eye(3) * h
+
+    def v(q):
+        return _v_at_rest(compiled, layout, q)
+
+    def inside(ball, x, slack):
+        return float(ball.lower()) - slack <= x <= float(ball.upper()) + slack
+
+    centres = [equilibrium + rng.normal(scale=0.3, size=3) for _ in range(8)]
+    centres += [np.array([0.1, upper, -0.2]) for upper in (0.049, 0.051, 0.06)]  # the knee's stop at 0.05 rad
+    for centre in centres:
+        lo = centre - rng.uniform(0.0005, 0.002, 3)
+        hi = centre + rng.uniform(0.0005, 0.002, 3)
+        p_box, grad, _, hess = model.evaluate(lo, hi, hessian=True)
+        for x in rng.uniform(lo, hi, (6, 3)):
+            v0 = v(x)
+            assert inside(p_box, v0, 1e-9 * (1 + abs(v0)))
+            g = [(v(x + eye[a]) - v(x - eye[a])) / (2 * h) for a in range(3)]
+            for a in range(3):
+                assert inside(grad[a], g[a], 1e-5 * (1 + abs(g[a])))
+                for b in range(3):
+                    if lo[1] < 0.05 < hi[1] or abs(x[1] - 0.05) < 2 * h:
+                        continue  # the stop's second derivative jumps there
+                    hs = (v(x + eye[a] + eye[b]) - v(x + eye[a] - eye[b]) - v(x - eye[a] + eye[b])
+                          + v(x - eye[a] - eye[b])) / (4 * h * h)
+                    assert inside(hess[a][b], hs, 2e-3 * (1 + abs(hs)))
+    assert potential(config, equilibrium) == pytest.approx(0.0, abs=1e-9)  # v's zero at the rest state
+
+
+def test_one_rods_level_is_where_its_servo_first_reaches_its_limit():
+    """One inverted rod: the proof stops where the static torque -k q reaches the clip
+    (q* = limit / k; the closed form P(q*) of v at rest), within the search's tolerance; a
+    level holding the second rest point (m g d sin q = limit, where the clipped servo holds
+    the rod against gravity) is refused, naming the box and the limit."""
+    k, limit, mass, d = 60.0, 6.0, 2.0, 0.5
+    config = config_from_mapping(_rod(k=k, limit=limit, mass=mass, d=d))
+    mgd = mass * 9.81 * d
+
+    def closed(q):
+        return 0.5 * k * q * q + mgd * (math.cos(q) - 1.0)
+
+    onset = closed(limit / k)
+    result = verify_sublevel(config)
+    assert (1 - 0.011) * onset <= result.level <= onset, (result.level, onset)
+    assert "ankle" in result.reason and "[-6, 6] N m" in result.reason
+    assert potential(config, np.array([0.3])) == pytest.approx(closed(0.3), rel=1e-12)
+    second = math.asin(limit / mgd)  # at rest there: the clipped servo balances gravity
+    with pytest.raises(NotVerifiable, match=r"not proven: box q in .*ankle.*reaches its limits"):
+        verify_sublevel(config, level=closed(second))
+
+
+def test_the_hinged_stances_verified_level_holds_where_its_runs_go():
+    """The hinged stance's verified c lies at or below the sampled certificate's estimate
+    (to the search's tolerance), and runs from states on {v = c} (the directions where the
+    certificate's search found dv/dt largest, and random ones), written as each hinge's
+    initial q and u, never rise above c, never leave the admissible region and come back."""
+    from rbstab.analysis import analyze
+    from rbstab.analysis.certificate import ChainModel, level_states
+
+    config = load_config(STANCE, ["simulation.n_samples=301", "simulation.t_end=8"])
+    analysis = analyze(config, samples=500, falsification_runs=0, simulate=False, verify=True)
+    proven, estimate = analysis.verification.level, analysis.certificate.sublevel
+    assert 0.0 < proven <= estimate * (1 + 0.02), (proven, estimate)
+    model = ChainModel(C.compile_chain(config.chain))
+    names = analysis.layout.state_names()
+    at_level = dataclasses.replace(analysis.certificate, sublevel=proven)
+    for z in level_states(model, analysis.linearisation, at_level, 6, seed=11):
+        start = {name.split(".")[0]: {} for name in names}
+        for name, value in zip(names, z):
+            body, block = name.split(".")
+            start[body][block] = float(value)
+        result = simulate(config_from_mapping({**config.resolved, "initial_state": start}))
+        v = result.outputs["lyapunov"]
+        assert result.status == "success", result.message
+        assert v[0] == pytest.approx(proven, rel=1e-6)
+        assert v.max() <= v[0] * (1 + 1e-9) and v[-1] < 0.05 * v[0]
+
+
+@pytest.mark.parametrize("change, expected", [
+    (lambda d: d["joints"][0].update(l_r=0.0), "joints.ankle.l_r: found 0"),
+    (lambda d: d["joints"][0]["saturation"].update(shape="smooth"), "joints.ankle.saturation.shape"),
+    (lambda d: d["simulation"].update(limits={"omega": [5.0, 5.0, 5.0]}), "simulation.limits"),
+])
+def test_what_the_hinge_proof_does_not_cover_is_refused_in_one_line(change, expected):
+    data = _rod()
+    change(data)
+    with pytest.raises(NotVerifiable, match=expected):
+        verify_sublevel(config_from_mapping(data))
