@@ -388,6 +388,7 @@ def test_a_hinged_stances_smallest_fatal_push_is_where_its_plain_runs_start_to_f
     2 % stronger leaves the admissible region (a fall), and the push estimate of the
     certificate lies below it."""
     from rbstab.analysis import analyze
+    from rbstab.analysis.basin import time_to_converge
 
     config = load_config("configs/examples/stance_hinges.yaml", ["simulation.n_samples=501"])
     push = {"kind": "force", "body": "trunk", "point": (0.0, 0.0, 0.2), "directions": [(0.0, 1.0, 0.0)]}
@@ -408,12 +409,41 @@ def test_a_hinged_stances_smallest_fatal_push_is_where_its_plain_runs_start_to_f
 
 
 def test_a_hinge_trees_analysis_says_what_it_leaves_out():
-    """--basin and --basin-stability (their axes and ranges are Euler-angle blocks) are
-    refused in one line."""
+    """--basin-stability (its ranges are Euler-angle blocks) is refused in one line, and so is
+    a basin axis that is not a hinge's q or u."""
     from rbstab.analysis import analyze
 
     hinges = config_from_mapping(_planar_twins()[0])
     with pytest.raises(ValueError, match="--basin-stability: joint 'j0' is a hinge"):
         analyze(hinges, basin_stability={"ranges": {}})
-    with pytest.raises(ValueError, match="--basin: joint 'j0' is a hinge"):
-        analyze(hinges, basin=["initial_state.b0.q=-0.1:0.1:3"])
+    with pytest.raises(ValueError, match="maps its basin over its hinges' angles and rates"):
+        analyze(hinges, certificate=False, simulate=False,
+                basin=["initial_state.b0.theta.0=-0.1:0.1:3", "initial_state.b1.q=-0.1:0.1:3"])
+
+
+def test_a_hinge_trees_basin_map_is_its_plain_runs():
+    """The basin map of the hinged stance over the shanks' lean q and the trunk's rate u: at
+    every point v(0) and the outcome (converged, not converged, failed: left the admissible
+    region) are those of the plain run from that initial state written as q and u."""
+    from rbstab.analysis import analyze
+    from rbstab.analysis.basin import time_to_converge
+
+    config = load_config("configs/examples/stance_hinges.yaml", ["simulation.n_samples=501"])
+    axes = ["initial_state.shanks.q=-0.1:0.1:3", "initial_state.trunk.u=-1:1:3"]
+    basin = analyze(config, certificate=False, simulate=False, basin=axes).basin
+    assert [a.label for a in basin.axes] == ["shanks q [rad]", "trunk u [rad s-1]"]
+    assert set(basin.outcome.ravel()) == {0, 1, 2}
+    for i, q in enumerate(basin.axes[0].values):
+        for j, u in enumerate(basin.axes[1].values):
+            start = copy.deepcopy(config.resolved["initial_state"])
+            start["shanks"]["q"], start["trunk"]["u"] = float(q), float(u)
+            result = simulate(config_from_mapping({**config.resolved, "initial_state": start}))
+            v = result.outputs["lyapunov"]
+            assert v[0] == pytest.approx(basin.lyapunov_initial[i, j], rel=1e-12)
+            if result.status == "failed":
+                assert basin.outcome[i, j] == 2 and "left the admissible region" in result.message
+            else:
+                converged = np.isfinite(time_to_converge(result.time, v, basin.ratio))
+                assert basin.outcome[i, j] == (0 if converged else 1)
+
+

@@ -36,6 +36,8 @@ __all__ = ["state_entry", "BasinAxis", "BasinMap", "basin_map", "time_to_converg
 OUTCOMES = ("converged", "not converged", "failed")
 #: Samples per basin run (the time-to-converge resolution is t_end / (DEFAULT_SAMPLES - 1)).
 DEFAULT_SAMPLES = 201
+#: A hinge's child's initial-state entries (its angle q and rate u), keys without an index.
+HINGE_ENTRIES = ("q", "u")
 _AXIS = re.compile(r"^\s*(?P<key>[^=]+?)\s*=\s*(?P<lo>[^:]+):(?P<hi>[^:]+):(?P<n>[^:]+)\s*$")
 
 
@@ -58,10 +60,12 @@ def state_entry(key: str):
         path = parse_any_key(key)
     except KeyPathError as exc:
         raise ValueError(exc.problem) from None
-    if path.section != "initial_state" or len(path.index) != 1:
+    hinge = path.section == "initial_state" and path.entry is not None and path.field in HINGE_ENTRIES
+    if path.section != "initial_state" or (len(path.index) != 1 and not hinge):
         allowed = ", ".join(f"initial_state.{k}.0..{parse_key(f'initial_state.{k}').shape[0] - 1}"
                             for k in INITIAL_STATE_BLOCKS)
-        raise ValueError(f"'{key}' is not one entry of an initial state; allowed: {allowed}")
+        raise ValueError(f"'{key}' is not one entry of an initial state; allowed: {allowed} (a tree's: "
+                         "initial_state.<body>.<block>.<i>, and a hinge's child's initial_state.<body>.<q|u>)")
     return path
 
 
@@ -109,16 +113,16 @@ class BasinAxis:
 
     @property
     def block(self) -> str:
-        """The state block (``theta`` ... ``controller_state``)."""
+        """The state block (``theta`` ... ``controller_state``, or a hinge's ``q``, ``u``)."""
         from ..config import INITIAL_STATE_BLOCKS  # heavy: yaml
 
-        return INITIAL_STATE_BLOCKS[state_entry(self.key).field]
+        field = state_entry(self.key).field
+        return field if field in HINGE_ENTRIES else INITIAL_STATE_BLOCKS[field]
 
     @property
     def index(self) -> int:
-        """The component (0, 1, 2)."""
-        (index,) = state_entry(self.key).index
-        return index
+        """The component (0, 1, 2; 0 for a hinge's q or u)."""
+        return (*state_entry(self.key).index, 0)[0]
 
     @property
     def body(self) -> str | None:
@@ -134,6 +138,8 @@ class BasinAxis:
         """``omega_1 [rad s-1]`` (component numbered from 1, as in the paper; a chain's
         ``legs theta_1 [rad]``)."""
         body = f"{self.body} " if self.body is not None else ""
+        if self.block in HINGE_ENTRIES:
+            return f"{body}{self.block} [{self.units}]"
         return f"{body}{self.block}_{self.index + 1} [{self.units}]"
 
 

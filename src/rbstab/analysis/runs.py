@@ -306,6 +306,18 @@ class Runs:
         from ..variants import chain as C  # heavy: numba
 
         values = np.asarray(values, dtype=float).reshape(-1, len(axes))
+        if self.compiled.hinged:  # the hinges' q, u set in the reduced state: a hinge turns what it carries
+            from ..variants.tree import expand_samples, reduce_state, tree_layout  # heavy: numba
+
+            layout = tree_layout(self.compiled)
+            reduced = np.repeat(reduce_state(self.compiled, layout, self.initial_state)[None], len(values), axis=0)
+            for j, axis in enumerate(axes):
+                reduced[:, _reduced_offset(self.compiled, axis)] = values[:, j]
+            params, codes, parents, ppoints, d_at = self.compiled.args
+            states = np.empty((1, len(values), self.compiled.n_states))
+            expand_samples(reduced[None], params[None], codes, parents, ppoints[None], d_at, *layout.args, states,
+                           np.zeros(1, np.int64))
+            return states[0]
         names = list(self.compiled.chain.body_names)
         placed = self.compiled.permanent  # a permanent joint's child always, the bodies the configuration places
         x_placed = placed | np.array([f"initial_state.{b}.x" in self.config.placed for b in names])
@@ -431,10 +443,32 @@ _BODY_BLOCKS = ("theta", "omega", "position", "velocity")
 _BODY_OFFSET = {block: 3 * k for k, block in enumerate(_BODY_BLOCKS)}
 
 
+def _reduced_offset(compiled, axis) -> int:
+    """The index in a tree's reduced state (:func:`rbstab.variants.tree.tree_layout`) of a
+    hinge's child's q or u that ``axis`` names; ValueError naming what is allowed where the
+    body is not a hinge's child, or where ``axis`` names another entry of a tree with a hinge."""
+    from ..variants.kernels import HINGE  # heavy: numba
+    from ..variants.tree import tree_layout  # heavy: numba
+
+    names = list(compiled.chain.body_names)
+    hinged = [b for b, code in zip(names, compiled.codes) if code == HINGE]
+    allowed = f"initial_state.<{'|'.join(hinged)}>.<q|u>"
+    if axis.block not in ("q", "u"):
+        raise ValueError(f"--basin {axis.key!r}: a tree with a hinge maps its basin over its hinges' angles and rates "
+                         f"({allowed})")
+    if axis.body not in hinged:
+        raise ValueError(f"--basin {axis.key!r}: '{axis.body}' is not a hinge's child (those: {', '.join(hinged)}; "
+                         f"keys {allowed})")
+    i = names.index(axis.body)
+    return int(tree_layout(compiled).r_at[i]) + (0 if axis.block == "q" else 1)
+
+
 def _state_offset(compiled, axis) -> int:
     """The index in a tree's maximal state of the entry ``axis`` names (``key``, ``body``,
     ``block``, ``index``); ValueError naming what is allowed where it names no body of the
-    tree or a D its joint does not have."""
+    tree or a D its joint does not have (a tree with a hinge: :func:`_reduced_offset`)."""
+    if compiled.hinged:
+        return _reduced_offset(compiled, axis)
     names = list(compiled.chain.body_names)
     if axis.body is None and len(names) == 1:  # one body's key, initial_state.<block>.<i>
         return _BODY_OFFSET[axis.block] + axis.index if axis.block != "controller_state" else \
