@@ -409,13 +409,14 @@ def test_a_hinged_stances_smallest_fatal_push_is_where_its_plain_runs_start_to_f
 
 
 def test_a_hinge_trees_analysis_says_what_it_leaves_out():
-    """--basin-stability (its ranges are Euler-angle blocks) is refused in one line, and so is
-    a basin axis that is not a hinge's q or u."""
+    """A basin axis or a basin-stability range that is not a hinge's q or u is refused in one
+    line naming the keys allowed."""
     from rbstab.analysis import analyze
 
     hinges = config_from_mapping(_planar_twins()[0])
-    with pytest.raises(ValueError, match="--basin-stability: joint 'j0' is a hinge"):
-        analyze(hinges, basin_stability={"ranges": {}})
+    with pytest.raises(ValueError, match=r"initial_state.<b0\|b1\|b2>.<q\|u>"):
+        analyze(hinges, certificate=False, simulate=False,
+                basin_stability={"ranges": ["initial_state.b0.omega.0=-1:1"], "draws": 4})
     with pytest.raises(ValueError, match="maps its basin over its hinges' angles and rates"):
         analyze(hinges, certificate=False, simulate=False,
                 basin=["initial_state.b0.theta.0=-0.1:0.1:3", "initial_state.b1.q=-0.1:0.1:3"])
@@ -447,3 +448,25 @@ def test_a_hinge_trees_basin_map_is_its_plain_runs():
                 assert basin.outcome[i, j] == (0 if converged else 1)
 
 
+def test_a_hinge_trees_basin_stability_counts_its_plain_runs():
+    """Basin stability of the hinged stance over the shanks' lean q and the trunk's rate u:
+    each draw recovers exactly where the plain run from that initial state (written as q and
+    u), long enough for its slowest mode (30 s; a draw still settling at t_end is judged at
+    a longer one), converges by the sweeps' rule."""
+    from rbstab.analysis import analyze
+    from rbstab.convergence import converged
+
+    config = load_config("configs/examples/stance_hinges.yaml", ["simulation.n_samples=501"])
+    ranges = ["initial_state.shanks.q=-0.1:0.1", "initial_state.trunk.u=-1:1"]
+    stability = analyze(config, certificate=False, simulate=False,
+                        basin_stability={"ranges": ranges, "draws": 12, "seed": 2}).basin_stability
+    assert 0 < stability.recovered.sum() < 12
+    for (q, u), recovered in zip(stability.values, stability.recovered):
+        start = copy.deepcopy(config.resolved["initial_state"])
+        start["shanks"]["q"], start["trunk"]["u"] = float(q), float(u)
+        simulation = {**config.resolved["simulation"], "t_end": 30.0, "n_samples": 3001}
+        result = simulate(config_from_mapping({**config.resolved, "initial_state": start, "simulation": simulation}))
+        v = result.outputs["lyapunov"]
+        plain = converged(result.status == "success", v[0], v[-1],
+                          max_increase=result.summary["max_lyapunov_increase"])
+        assert bool(recovered) == bool(plain)

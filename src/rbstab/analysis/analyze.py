@@ -542,11 +542,6 @@ def analyze(
 
         config = load_config(config)
     _check_options(samples, basin_samples, ratio, jobs)
-    hinges = [j.name for j in config.chain.joints if j.variant == "hinge"]
-    if hinges and basin_stability:
-        raise ValueError(f"--basin-stability: joint '{hinges[0]}' is a hinge; a tree with a hinge has its rest state, "
-                         "linearisation, modes, certificate, --verify, --basin over its hinges' q and u, settling and "
-                         "pushes analysed")
     if verify:
         check_verifiable(config)
     t0 = _time.perf_counter()
