@@ -470,3 +470,33 @@ def test_a_hinge_trees_basin_stability_counts_its_plain_runs():
         plain = converged(result.status == "success", v[0], v[-1],
                           max_increase=result.summary["max_lyapunov_increase"])
         assert bool(recovered) == bool(plain)
+
+
+def test_an_animation_draws_each_hinges_axis_through_its_point(tmp_path):
+    """The animation of three rods on oblique hinges: each hinge's axis is drawn through its
+    point as A_c a (a fixed in the child's frame), which is also A_p a (the rotation about a
+    leaves it); a tree of balls draws none."""
+    from click.testing import CliRunner
+
+    from rbstab.report.animate import _figure, pick_run, scene
+    from rbstab_cli.main import cli
+
+    out = tmp_path / "results"
+    data = _hinges([4.0, 2.0, 1.0], [0.3, 0.2, 0.1], [0.2, -0.1, 0.0], [0.4, -0.3, 0.2], [0.5, 0.0, -0.2],
+                   n_samples=21)
+    path = tmp_path / "hinges.yaml"
+    import yaml
+
+    path.write_text(yaml.safe_dump(data))
+    assert CliRunner().invoke(cli, ["run", str(path), "-o", str(out)]).exit_code == 0
+    sc = scene(pick_run(out / "hinges.h5"), n_frames=5)
+    axes = np.array(AXES) / np.linalg.norm(AXES, axis=1, keepdims=True)
+    np.testing.assert_allclose(sc.hinge_axis, np.einsum("kiab,ib->kia", sc.rotation, axes), atol=1e-12)
+    for j, parent in enumerate([-1, 0, 1]):  # the axis the parent's frame holds: A_p a
+        held = np.broadcast_to(axes[j], (5, 3)) if parent < 0 else np.einsum("kab,b->ka", sc.rotation[:, parent],
+                                                                              axes[j])
+        np.testing.assert_allclose(sc.hinge_axis[:, j], held, atol=1e-3)  # frames interpolated from samples
+    fig = _figure(sc, (-60.0, 20.0), (6.0, 5.0), 60)[0]
+    assert "hinge axes" in [line.get_label() for line in fig.axes[0].get_lines()]
+    result = CliRunner().invoke(cli, ["animate", str(out / "hinges.h5"), "-o", str(tmp_path / "a.png")])
+    assert result.exit_code == 0, result.output

@@ -19,7 +19,7 @@ pure functions of arrays, then drawn with matplotlib (``mpl_toolkits.mplot3d``,
 
 A chain run is drawn so, body by body (one body is a tree of one, held at R by its joint):
 each body's box and axes, the segments from each centre of mass to its joints' points, each
-joint's two points joined by E_j, and the ground points.
+joint's two points joined by E_j, each hinge's axis through its point, and the ground points.
 
 The scene's limits are fixed over the animation and its axes are equal
 (:func:`scene_limits`). Outputs: an HTML snippet that plays offline (:func:`animation_html`,
@@ -255,6 +255,8 @@ class Scene:
         Time of the last finite sample of a failed run; None for a successful run.
     gravity : ndarray, shape (3,)
         g [m/s^2], inertial frame (zero when absent).
+    hinge_axis : ndarray, shape (k, n, 3)
+        Each hinge's unit axis A_c a in the inertial frame (NaN for any other joint).
     """
 
     time: np.ndarray
@@ -278,6 +280,7 @@ class Scene:
     message: str = ""
     t_failed: float | None = None
     gravity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    hinge_axis: np.ndarray | None = None
 
     @property
     def shape(self) -> BodyShape:
@@ -350,6 +353,21 @@ def _tree(config: dict) -> tuple[list[BodyShape], list[int], np.ndarray, list[st
             np.asarray(config.get("gravity") or np.zeros(3), dtype=float).reshape(3))
 
 
+def _hinge_axes(config: dict) -> np.ndarray:
+    """Each body's joint's unit axis a (n, 3) where it is a hinge (the child's frame), NaN
+    for any other joint (one body's: NaN)."""
+    if "bodies" not in config:
+        return np.full((1, 3), np.nan)
+    by_child = {j["child"]: j for j in config["joints"]}
+    out = np.full((len(config["bodies"]), 3), np.nan)
+    for i, body in enumerate(config["bodies"]):
+        joint = by_child[body["name"]]
+        if joint.get("variant") == "hinge" and joint.get("axis") is not None:
+            axis = np.asarray(joint["axis"], dtype=float).reshape(3)
+            out[i] = axis / np.linalg.norm(axis)
+    return out
+
+
 def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: float = SPEED) -> Scene:
     """The :class:`Scene` of a run (one body or a chain), from its stored series (Theta_i,
     X_i, E_j, v) interpolated linearly to the frame times; the bodies' shapes, names and the
@@ -400,6 +418,7 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
                              attachment_point(position[:, parents[j]], rotation[:, parents[j]], r_p[j])
                              for j in range(n)], axis=1)
     largest = np.argmax(np.linalg.norm(error, axis=-1), axis=1)
+    hinge_axis = np.einsum("kiab,ib->kia", rotation, _hinge_axes(run.config))  # A_c a: a turns with the child
     return Scene(
         time=frames, lyapunov=_interpolate(t, s["lyapunov"][keep], frames), rotation=rotation, position=position,
         corners=np.stack([box_corners(position[:, i], rotation[:, i], shapes[i]) for i in range(n)], axis=1),
@@ -408,7 +427,7 @@ def scene(run: RunData, n_frames: int | None = None, fps: float = FPS, speed: fl
         constraint_error=error[np.arange(len(frames)), largest], trace=x, trace_time=t,
         bodies=names, joints=joint_names, parents=parents,
         label=run.label, variant=run.variant, status=run.status, message=run.message,
-        t_failed=None if run.ok else float(t[-1]), gravity=gravity,
+        t_failed=None if run.ok else float(t[-1]), gravity=gravity, hinge_axis=hinge_axis,
     )
 
 
@@ -524,6 +543,9 @@ class _Artists:
                              "E_j (joint's points)")[0]
         self.joints = ax.plot([], [], [], "o", color=C_COLOUR, ms=6 if one else 5,
                               label="C = X + A R" if one else "joints' points C")[0]
+        self.hinged = [] if sc.hinge_axis is None else \
+            [j for j in range(len(sc.joints)) if np.all(np.isfinite(sc.hinge_axis[0, j]))]
+        self.hinges = ax.plot([], [], [], color="k", lw=2.0, label="hinge axes")[0] if self.hinged else None
         self.text = ax.text2D(0.01, 0.99, "", transform=ax.transAxes, va="top", ha="left", family="monospace",
                               fontsize=8, bbox={"facecolor": "white", "edgecolor": "0.7", "alpha": 0.85})
         self.trace_index = np.searchsorted(sc.trace_time, sc.time, side="right")
@@ -558,7 +580,14 @@ class _Artists:
         path = np.vstack([sc.trace[: self.trace_index[k], -1], x[-1]])
         self.trace.set_data_3d(path[:, 0], path[:, 1], path[:, 2])
         self.text.set_text(_corner_text(sc, k))
-        return [*self.boxes, *self.axes, self.skeleton, self.coms, self.trace, self.error, self.joints, self.text]
+        moved = [*self.boxes, *self.axes, self.skeleton, self.coms, self.trace, self.error, self.joints, self.text]
+        if self.hinges is not None:  # each hinge's axis through its point, as long as the body axes
+            half = 0.5 * self.length
+            self.hinges.set_data_3d(*self._segments([(sc.point_c[k, j] - half * sc.hinge_axis[k, j],
+                                                      sc.point_c[k, j] + half * sc.hinge_axis[k, j])
+                                                     for j in self.hinged]))
+            moved.append(self.hinges)
+        return moved
 
     def _parent_pairs(self, k: int) -> list:
         """(a parent's COM, its point of joint j) for each joint with a parent body."""
