@@ -500,3 +500,29 @@ def test_an_animation_draws_each_hinges_axis_through_its_point(tmp_path):
     assert "hinge axes" in [line.get_label() for line in fig.axes[0].get_lines()]
     result = CliRunner().invoke(cli, ["animate", str(out / "hinges.h5"), "-o", str(tmp_path / "a.png")])
     assert result.exit_code == 0, result.output
+
+
+def test_the_whole_bodys_centre_of_mass_moves_under_gravity_and_the_ground_reaction():
+    """The hinged stance swaying back to upright: the whole-body centre of mass X_com is
+    sum m_i X_i / sum m_i, its velocity V_com is dX_com/dt (central differences), and
+    Newton's law for the whole body holds with the ankle's reaction as the only force
+    besides gravity: M dV_com/dt = M g + Lambda_ankle; the summary's COM excursion and peak
+    sway are X_com's largest distances from its start."""
+    config = load_config("configs/examples/stance_hinges.yaml", ["simulation.t_end=2", "simulation.n_samples=8001"])
+    result = simulate(config)
+    out, dt = result.outputs, float(result.time[1] - result.time[0])
+    mass = np.array([b["mass"] for b in config.resolved["bodies"]])
+    com = out["com_position"]
+    np.testing.assert_allclose(com, np.einsum("n,mnc->mc", mass, out["position"]) / mass.sum(), atol=1e-14)
+    np.testing.assert_allclose(out["com_velocity"][1:-1], (com[2:] - com[:-2]) / (2 * dt), atol=1e-5)
+    acceleration = (out["com_velocity"][2:] - out["com_velocity"][:-2]) / (2 * dt)
+    gravity = np.array([0.0, 0.0, -9.81])
+    newton = mass.sum() * (acceleration - gravity)
+    ankle = out["constraint_force"][1:-1, 0]
+    kinks = np.abs(np.diff(out["torque_n_saturated"][:, 0, 0]))  # the clipped ankle: the rate jumps there
+    smooth = np.convolve(kinks, np.ones(4), mode="same")[:-1] == 0
+    np.testing.assert_allclose(newton[smooth], ankle[smooth], atol=1e-3 * np.abs(ankle).max())
+    assert np.ptp(ankle[:, 1]) > 10.0  # the ground's horizontal push moves
+    drift = np.linalg.norm(com - com[0], axis=1)
+    assert result.summary["com_excursion"] == pytest.approx(drift.max(), rel=1e-12)
+    assert result.summary["peak_sway"] == pytest.approx(np.linalg.norm((com - com[0])[:, :2], axis=1).max(), rel=1e-12)

@@ -389,6 +389,11 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("joint_omega", "Omega_j", "rad s-1", "relative angular velocity Omega_j of a joint (child frame)",
              "Omega_j = Omega_child - A_rel' Omega_parent, child frame (docs/physics.md, chains)",
              r"\Omega_j", "joint angular velocity", 3, member="joint"),
+    Quantity("com_position", "X_com", "m", "whole-body centre of mass (inertial frame)",
+             "X_com = sum m_i X_i / sum m_i over a tree's bodies, inertial frame", r"X_{com}", "whole-body COM", 3),
+    Quantity("com_velocity", "V_com", "m s-1", "velocity of the whole-body centre of mass (inertial frame)",
+             "V_com = sum m_i V_i / sum m_i over a tree's bodies, inertial frame", r"V_{com}",
+             "whole-body COM velocity", 3),
     Quantity("lyapunov_rate_numerical", "dv/dt", "W", "numerical derivative dv/dt of the sampled Lyapunov function",
              "dv/dt by differentiating v along the dense-output samples "
              "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "

@@ -353,7 +353,8 @@ def _as_one_body(outputs: dict, summary: dict, embedded: bool) -> tuple[dict, di
     (:attr:`rbstab.layout.Quantity.member`) without its axis of one, (k, m, 3) and (k, 3);
     without the ground joint's Theta_j, Omega_j (the body's Theta, Omega) and D where the
     joint is not ``embedded``."""
-    dropped = {"joint_theta", "joint_omega", *(() if embedded else ("controller_state",))}
+    dropped = {"joint_theta", "joint_omega", "com_position", "com_velocity",  # one body's COM is its X, V
+               *(() if embedded else ("controller_state",))}
     order = sorted(set(outputs) - dropped, key=lambda key: _OUTPUT_ORDER.get(key, len(_OUTPUT_ORDER)))  # one body's
     body = {key: outputs[key][:, :, 0] if getattr(QUANTITIES.get(key), "member", None) else outputs[key]
             for key in order}
@@ -585,10 +586,35 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
 
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
     outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index, full=full)
+    if traces and full and compiled[0].hinged:
+        _reactions(compiled[0], [compiled[i] for i in first], index, time, states, outputs["constraint_force"])
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
+    mass = C.records_of(compiled)["mass"]  # (k, n): the whole body's centre of mass, sum m_i X_i / sum m_i
+    for name, block in (("com_position", "position"), ("com_velocity", "velocity")):
+        outputs[name] = np.einsum("kn,kmnc->kmc", mass, outputs[block]) / mass.sum(axis=1)[:, None, None]
     table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)),
                                params=C.records_of(compiled)) if summary else {}
     return outputs if traces else {}, table
+
+
+def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
+               out: np.ndarray) -> None:
+    """Lambda_j [N] of the point-fixed joints of k runs of trees with a hinge (run i's tree
+    ``trees[tree_of[i]]``, of ``structure``'s shape) from their reduced motion
+    (:func:`rbstab.variants.tree.reaction_samples`) at their samples ``states`` (k, m,
+    n_states), written into ``out`` (k, m, n, 3) where :func:`rbstab.variants.chain.evaluate`
+    leaves them NaN."""
+    from .variants import chain as C  # heavy: numba
+    from .variants.tree import reaction_samples, tree_layout  # heavy: numba
+
+    k, m = states.shape[:2]
+    reactions = np.full((structure.size, 3, k * m), np.nan)
+    params, ppoints = C.records_of(trees), np.stack([t.ppoints for t in trees])
+    reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), params, structure.codes,
+                     structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
+                     np.repeat(np.asarray(tree_of, dtype=np.int64), m), m, reactions)
+    fixed = structure.permanent
+    out[:, :, fixed] = reactions.transpose(2, 0, 1).reshape(k, m, structure.size, 3)[:, :, fixed]
 
 
 def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:

@@ -63,8 +63,8 @@ from ..config import canonical_config, config_hash
 from ..layout import SUMMARY_FIGURES as SUMMARY_QUANTITIES
 from ..results import RunBlock, RunResult
 from .atomic import as_os_error, atomic_path, check_free_space
-from .hdf5 import (BODY_VARIABLES, CHAIN_SUMMARY_VARIABLES, SUMMARY_VARIABLES, NotAResultFile, attribute_value,
-                   summary_stride)
+from .hdf5 import (BODY_VARIABLES, CHAIN_SUMMARY_VARIABLES, SUMMARY_VARIABLES, TREE_VARIABLES, NotAResultFile,
+                   attribute_value, summary_stride)
 from .integrity import (DATA_DIGEST_ATTR, DIGEST_ATTR, DamagedResultError, content_digest, data_digest, data_digest_of,
                         fletcher32_chunks, open_result, reading, verify_open_file)
 from .metadata import PER_RUN, SUMMARY_FIGURES, provenance_attributes, variable_attributes
@@ -418,7 +418,7 @@ def trace_dimensions(block) -> tuple[dict[str, tuple[str, ...]], dict[str, tuple
     dims: dict[str, tuple[str, ...]] = {}
     for name, value in block.outputs.items():
         extra = np.ndim(value) - 2  # the dimensions after (run, time)
-        if chain and extra >= 1:
+        if chain and extra >= 1 and name not in TREE_VARIABLES:
             dims[name] = ("time", "body" if name in BODY_VARIABLES else "joint", "axis")[: extra + 1]
         else:
             dims[name] = ("time", "axis")[: extra + 1]

@@ -384,12 +384,16 @@ def _chain_dimensions(result: "RunResult", outputs: dict[str, np.ndarray]) -> tu
     if not is_chain(result.config):
         return None, None
     chain = result.config.chain
-    dims = {key: "body" if key in BODY_VARIABLES else "joint" for key, values in outputs.items() if values.ndim >= 2}
+    dims = {key: "body" if key in BODY_VARIABLES else "joint" for key, values in outputs.items()
+            if values.ndim >= 2 and key not in TREE_VARIABLES}
     return {"body": chain.body_names, "joint": chain.joint_names}, dims
 
 
-#: A chain file's variables along ``body`` (the others with a second dimension are along ``joint``).
+#: A chain file's variables along ``body`` (the others with a second dimension are along
+#: ``joint``, but for :data:`TREE_VARIABLES`).
 BODY_VARIABLES = tuple(q.name for q in QUANTITIES.values() if q.member == "body")
+#: A chain file's vectors of the whole tree: (time, axis).
+TREE_VARIABLES = ("com_position", "com_velocity")
 
 
 def write_run(

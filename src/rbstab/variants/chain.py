@@ -352,7 +352,7 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     powers; the last is F_j' Lambda_j, zero on the constraint). ``work``: scratch arrays
     (:class:`ChainWork`). A tree with a hinge is integrated in reduced coordinates only
     (:mod:`rbstab.variants.tree`): here its point-fixed joints' reactions are left out
-    (Lambda_j zero here; :func:`evaluate` takes them from the reduced motion,
+    (Lambda_j zero here, NaN in :func:`evaluate`'s outputs; from the reduced motion:
     :func:`rbstab.variants.tree.reaction_samples`) and dy/dt is not its motion; every other
     output is.
     """
@@ -1324,12 +1324,8 @@ def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows, per
     for k in range(_OMEGA_J + 1):
         out[JOINT_OUTPUTS[k]] = joints[:, :, k]
     out["controller_state"][:, first.d_at < 0] = np.nan
-    if np.any(first.codes == HINGE):  # the point-fixed joints' reactions from the reduced motion
-        from .tree import reaction_samples, tree_layout  # tree imports this module
-
-        reactions = joints[:, :, _LAMBDA].transpose(1, 2, 0)  # (n, 3, m): the buffer's own layout
-        reaction_samples(time, states, params, first.codes, first.parents, ppoints, first.d_at,
-                         *tree_layout(first).args, rows, per_run, reactions)
+    if np.any(first.codes == HINGE):  # not computed here: rbstab.variants.tree.reaction_samples
+        out["constraint_force"][:, first.permanent] = np.nan
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]
     for k, name in enumerate(LYAPUNOV_TERMS):
