@@ -157,14 +157,24 @@ def largest_distance(path, config, result, keyframe=None, initial=None, dt=1e-4)
 
 
 def interaction_forces(path, config, result, keyframe=None, initial=None, dt=1e-4):
-    """(samples, bodies, 3) the force [N] (world frame) that each of ``config``'s bodies
-    receives from its parent, MuJoCo's ``cfrc_int`` (its linear part), at the samples of
-    ``result``, MuJoCo simulating the file as :func:`largest_distance` does."""
-    forces, groups = [], None
+    """((samples, bodies, 3) the force [N] (world frame) that each of ``config``'s bodies
+    receives from its parent, MuJoCo's ``cfrc_int`` (its linear part); (samples, 3) the
+    centre of pressure [m] of the first body's joint: the point of the plane through the
+    origin perpendicular to gravity about which that joint's force and moment (``cfrc_int``'s
+    torque, moved from the tree's centre of mass to the joint's anchor) have no moment along
+    the plane) at the samples of ``result``, MuJoCo simulating the file as
+    :func:`largest_distance` does."""
+    forces, pressure, groups = [], [], None
+    up = -np.asarray(config.resolved["gravity"], dtype=float)
+    up /= np.linalg.norm(up)
     for model, data in _simulated(path, result, keyframe, initial, dt):
         groups = groups or _carriers(model, config)
         forces.append([data.cfrc_int[group[0], 3:].copy() for group in groups])
-    return np.array(forces)
+        root = groups[0][0]
+        force, anchor = data.cfrc_int[root, 3:], data.xanchor[model.body_jntadr[root]]
+        moment = data.cfrc_int[root, :3] + np.cross(data.subtree_com[model.body_rootid[root]] - anchor, force)
+        pressure.append(anchor - (force * (anchor @ up) - np.cross(up, moment)) / (force @ up))
+    return np.array(forces), np.array(pressure)
 
 
 def eigenvalues_at(path, q, keyframe=None, step=1e-6):

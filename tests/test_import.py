@@ -58,10 +58,13 @@ OBLIQUE = """<mujoco model="oblique">
 def _reactions_are_mujocos(path, config, result, **start):
     """Every joint's reaction Lambda_j [N] at every sample is the force MuJoCo's body receives
     from its parent (``cfrc_int``'s linear part) simulating the same file, to 1e-6 of the
-    largest; returns that largest."""
-    theirs = interaction_forces(path, config, result, **start)
+    largest, and the first joint's centre of pressure is the one of MuJoCo's force and moment
+    there to 1e-6 m; returns the largest force."""
+    theirs, pressure = interaction_forces(path, config, result, **start)
     scale = float(np.abs(theirs).max())
     np.testing.assert_allclose(result.outputs["constraint_force"], theirs, rtol=0, atol=1e-6 * scale)
+    np.testing.assert_allclose(result.outputs["centre_of_pressure"][:, 0], pressure, rtol=0, atol=1e-6)
+    assert np.all(np.isnan(result.outputs["centre_of_pressure"][:, 1:]))  # joints off the ground: none
     return scale
 
 

@@ -366,7 +366,7 @@ def test_reactions_from_the_reduced_motion_are_the_references(mix, rng):
             y = _random_state(rng, tree)
             out = np.full((tree.size, 3), 7.0)
             R.tree_reactions(0.0, y, *compiled.args, *layout.args, np.empty(layout.n_r + 1), work,
-                             np.empty((tree.size, 6)), out)
+                             np.empty((tree.size, 6)), out, np.empty((tree.size, 3)))
             ev = T.evaluate(tree, y)
             np.testing.assert_allclose(out[fixed], ev.lam[fixed], rtol=0, atol=1e-11 * (1 + np.abs(ev.lam).max()))
             assert np.all(out[~fixed] == 7.0)

@@ -125,9 +125,9 @@ def test_the_hinged_stances_verified_level_holds_where_its_runs_go():
     from rbstab.analysis.certificate import ChainModel, level_states
 
     config = load_config(STANCE, ["simulation.n_samples=301", "simulation.t_end=8"])
-    analysis = analyze(config, samples=500, falsification_runs=0, simulate=False, verify=True)
-    proven, estimate = analysis.verification.level, analysis.certificate.sublevel
-    assert 0.0 < proven <= estimate * (1 + 0.02), (proven, estimate)
+    analysis = analyze(config, samples=300, falsification_runs=0, simulate=False)
+    proven, estimate = verify_sublevel(config, rtol=0.05).level, analysis.certificate.sublevel
+    assert 0.9 * estimate < proven <= estimate * (1 + 0.02), (proven, estimate)
     model = ChainModel(C.compile_chain(config.chain))
     names = analysis.layout.state_names()
     at_level = dataclasses.replace(analysis.certificate, sublevel=proven)

@@ -394,6 +394,12 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("com_velocity", "V_com", "m s-1", "velocity of the whole-body centre of mass (inertial frame)",
              "V_com = sum m_i V_i / sum m_i over a tree's bodies, inertial frame", r"V_{com}",
              "whole-body COM velocity", 3),
+    Quantity("centre_of_pressure", "P_cop", "m", "centre of pressure of a joint to the ground (inertial frame)",
+             "the point of the ground plane (through the origin, perpendicular to gravity) about which the ground's "
+             "force Lambda_j and moment on the bodies the joint carries have no moment along the plane: "
+             "P = C - (Lambda h - n x M) / (n . Lambda), n the plane's upward normal, h the height of the joint's "
+             "point C, M the moment about C (docs/physics.md); NaN for other joints, without gravity, or where "
+             "the ground does not push up", r"P_{cop}", "centre of pressure", 3, member="joint"),
     Quantity("lyapunov_rate_numerical", "dv/dt", "W", "numerical derivative dv/dt of the sampled Lyapunov function",
              "dv/dt by differentiating v along the dense-output samples "
              "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "

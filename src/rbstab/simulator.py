@@ -353,7 +353,7 @@ def _as_one_body(outputs: dict, summary: dict, embedded: bool) -> tuple[dict, di
     (:attr:`rbstab.layout.Quantity.member`) without its axis of one, (k, m, 3) and (k, 3);
     without the ground joint's Theta_j, Omega_j (the body's Theta, Omega) and D where the
     joint is not ``embedded``."""
-    dropped = {"joint_theta", "joint_omega", "com_position", "com_velocity",  # one body's COM is its X, V
+    dropped = {"joint_theta", "joint_omega", "com_position", "com_velocity", "centre_of_pressure",  # its X, V
                *(() if embedded else ("controller_state",))}
     order = sorted(set(outputs) - dropped, key=lambda key: _OUTPUT_ORDER.get(key, len(_OUTPUT_ORDER)))  # one body's
     body = {key: outputs[key][:, :, 0] if getattr(QUANTITIES.get(key), "member", None) else outputs[key]
@@ -565,7 +565,7 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
     trajectory = solve_tree(config, timeout)
     compiled, time = trajectory.compiled, trajectory.time
     outputs, summary = _trees_outputs([compiled], np.zeros(1, dtype=np.int64), time, trajectory.states[None],
-                                      trajectory.work[None])
+                                      trajectory.work[None], tree=is_chain(config))
     if not is_chain(config):  # written as one body: one body's names and shapes
         outputs, summary = _as_one_body(outputs, summary, bool(np.any(compiled.d_at >= 0)))
     outputs, summary = {key: value[0] for key, value in outputs.items()}, row(summary, 0)
@@ -575,46 +575,68 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
 
 
 def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
-                   work: np.ndarray, traces: bool = True, summary: bool = True, full: bool = True) -> tuple[dict, dict]:
+                   work: np.ndarray, traces: bool = True, summary: bool = True, full: bool = True,
+                   tree: bool = True) -> tuple[dict, dict]:
     """(outputs, summary columns) of k runs of chains of one structure, run i's chain
     ``compiled[i]`` (the runs of one ``tree_of`` one chain): their samples ``states`` (k, m,
     n_states) at ``time`` (m,) and their disturbances' work ``work`` (k, m) there, all at once
     (:func:`rbstab.variants.chain.evaluate`, :func:`rbstab.summary.tree_summary_table`); the
     outputs empty unless ``traces``, the summary unless ``summary`` (the GPU streams it);
-    ``full`` False: one body's without :data:`rbstab.layout.LEFT_OUT`."""
+    ``full`` False: one body's without :data:`rbstab.layout.LEFT_OUT`; ``tree`` False (runs
+    written as one body): without the whole tree's centre of mass and centre of pressure."""
     from .variants import chain as C  # heavy: numba
 
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
     outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index, full=full)
-    if traces and full and compiled[0].hinged:
-        _reactions(compiled[0], [compiled[i] for i in first], index, time, states, outputs["constraint_force"])
+    if traces and full and (compiled[0].hinged or (tree and np.any(compiled[0].permanent & (compiled[0].parents < 0)))):
+        _reactions(compiled[0], [compiled[i] for i in first], index, time, states, outputs)
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
-    mass = C.records_of(compiled)["mass"]  # (k, n): the whole body's centre of mass, sum m_i X_i / sum m_i
-    for name, block in (("com_position", "position"), ("com_velocity", "velocity")):
-        outputs[name] = np.einsum("kn,kmnc->kmc", mass, outputs[block]) / mass.sum(axis=1)[:, None, None]
+    if traces and tree:  # the whole body's centre of mass, sum m_i X_i / sum m_i
+        mass = C.records_of(compiled)["mass"]  # (k, n)
+        for name, block in (("com_position", "position"), ("com_velocity", "velocity")):
+            outputs[name] = np.einsum("kn,kmnc->kmc", mass, outputs[block]) / mass.sum(axis=1)[:, None, None]
     table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)),
                                params=C.records_of(compiled)) if summary else {}
     return outputs if traces else {}, table
 
 
 def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
-               out: np.ndarray) -> None:
-    """Lambda_j [N] of the point-fixed joints of k runs of trees with a hinge (run i's tree
-    ``trees[tree_of[i]]``, of ``structure``'s shape) from their reduced motion
-    (:func:`rbstab.variants.tree.reaction_samples`) at their samples ``states`` (k, m,
-    n_states), written into ``out`` (k, m, n, 3) where :func:`rbstab.variants.chain.evaluate`
-    leaves them NaN."""
+               outputs: dict) -> None:
+    """From the reduced motion (:func:`rbstab.variants.tree.reaction_samples`) of k runs of
+    trees with a point-fixed joint to the ground (run i's tree ``trees[tree_of[i]]``, of
+    ``structure``'s shape) at their samples ``states`` (k, m, n_states): Lambda_j [N] of the
+    point-fixed joints where :func:`rbstab.variants.chain.evaluate` leaves them NaN (a tree
+    with a hinge) into ``outputs["constraint_force"]`` (k, m, n, 3), and each joint to the
+    ground's centre of pressure into ``outputs["centre_of_pressure"]`` (k, m, n, 3; NaN for
+    the other joints): on the ground plane through the origin perpendicular to g, the point
+    P = C - (Lambda h - n x M) / (n . Lambda) (n the upward normal, h = n . C the height of
+    the joint's point C, M the ground's moment about C), NaN where n . Lambda <= 0 or g = 0."""
     from .variants import chain as C  # heavy: numba
     from .variants.tree import reaction_samples, tree_layout  # heavy: numba
 
-    k, m = states.shape[:2]
-    reactions = np.full((structure.size, 3, k * m), np.nan)
+    k, m, n = states.shape[0], states.shape[1], structure.size
+    reactions, moments = np.full((n, 3, k * m), np.nan), np.full((n, 3, k * m), np.nan)
     params, ppoints = C.records_of(trees), np.stack([t.ppoints for t in trees])
     reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), params, structure.codes,
                      structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
-                     np.repeat(np.asarray(tree_of, dtype=np.int64), m), m, reactions)
-    fixed = structure.permanent
-    out[:, :, fixed] = reactions.transpose(2, 0, 1).reshape(k, m, structure.size, 3)[:, :, fixed]
+                     np.repeat(np.asarray(tree_of, dtype=np.int64), m), m, reactions, moments)
+    force = reactions.transpose(2, 0, 1).reshape(k, m, n, 3)
+    if structure.hinged:
+        fixed = structure.permanent
+        outputs["constraint_force"][:, :, fixed] = force[:, :, fixed]
+    moment = moments.transpose(2, 0, 1).reshape(k, m, n, 3)
+    gravity = np.asarray(structure.chain.gravity, dtype=float)
+    cop = np.full((k, m, n, 3), np.nan)
+    if np.any(gravity):
+        up = -gravity / np.linalg.norm(gravity)
+        point = ppoints[np.asarray(tree_of)][:, None]  # (k, 1, n, 3): each joint's point C (the ground's R_p)
+        height = point @ up
+        normal = force @ up
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cop = point - (force * height[..., None] - np.cross(up, moment)) / normal[..., None]
+        cop[~(normal > 0)] = np.nan
+        cop[:, :, ~(structure.permanent & (structure.parents < 0))] = np.nan
+    outputs["centre_of_pressure"] = cop
 
 
 def _groups(batch: RunBatch, rows: np.ndarray) -> list[np.ndarray]:
@@ -732,7 +754,7 @@ def _tree_call(batch: RunBatch, members: np.ndarray, integrate, gpu: bool, strid
         else:
             traces, summaries = _trees_outputs([trees[t] for t in tree_of[lo:hi]], tree_of[lo:hi], time,
                                                sol.samples[lo:hi], sol.work[lo:hi], stride is not None,
-                                               summary=not gpu, full=full)
+                                               summary=not gpu, full=full, tree=not one_body)
         if gpu:  # the summaries streamed on the device
             summaries = tree_stream_table(grid, sol.acc[lo:hi], sol.members[lo:hi], sol.last[lo:hi], n,
                                           structure.d_at)

@@ -24,6 +24,7 @@ from ..summary import numerical_rate, warm_up_balance
 from ..variants import chain as C
 from ..variants.base import N_OUTPUTS
 from ..variants.paper import has_paper_form
+from ..variants.tree import reaction_samples, tree_layout
 from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
 from .integrate import admissible, integrate_chain_runs, integrate_runs
 from .switching import warm_up as warm_up_sign_law
@@ -88,6 +89,10 @@ def _warm_up_chains() -> None:
     y = C._place(compiled, np.zeros(compiled.n_states))
     C.evaluate(compiled, np.zeros(1), np.stack([y[None], y[None]]))
     C.evaluate(compiled, np.zeros(1), y[None])
+    reactions = np.zeros((compiled.size, 3, 1))  # and the joints to the ground's reactions and moments
+    reaction_samples(np.zeros(1), y[None], C.records_of([compiled]), compiled.codes, compiled.parents,
+                     compiled.ppoints[None], compiled.d_at, *tree_layout(compiled).args, np.zeros(1, np.int64), 1,
+                     reactions, reactions.copy())
     _warm_up_states(compiled, y[None])
 
 

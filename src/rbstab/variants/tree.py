@@ -52,7 +52,7 @@ from .chain import (
     chain_work,
     euler_angles,
 )
-from .disturbances import IMPULSE
+from .disturbances import IMPULSE, disturbance_wrench
 from .kernels import HINGE, PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
@@ -502,7 +502,7 @@ def _kinetic_energy(y, params):
 
 
 @jit(_nrt=False)
-def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work, total, out):
+def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work, total, out, moment):
     """Lambda_j [N] (inertial frame) of every point-fixed joint j (a ball's, a hinge's): the
     force its parent (or the ground) applies to body j at C_j, into ``out[j]`` (n, 3; other
     rows untouched). From the motion (:func:`tree_rate` at ``t`` [s] and the reduced state
@@ -512,9 +512,17 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
         Lambda_j = m_j dV_j/dt - F_j + sum over point-fixed children c of Lambda_c
 
     with F_j the applied force on body j (gravity, feedback H, the point laws' forces of the
-    joints at it, disturbances; inertial). A reaction's torque is left out. ``dyr`` (n_r +
-    1,), ``work`` (:class:`TreeWork`) and ``total`` (n, 6) scratch: ``total[i]`` receives
-    body i's (dOmega_i/dt [rad/s^2, body frame], dV_i/dt [m/s^2])."""
+    joints at it, disturbances; inertial). Into ``moment[r]`` (n, 3; other rows untouched) of
+    each joint r to the ground whose bodies all hang on point-fixed joints: the ground's whole
+    moment on them about its point C_r [N m, inertial] (the joint's torque and its reaction's),
+    from their angular momentum about C_r,
+
+        M_r = sum_b [A_b (J_b dOmega_b/dt + Omega_b x J_b Omega_b - T_b) + (X_b - C_r) x (m_b dV_b/dt - F_b)]
+
+    (T_b the disturbances' torque on body b about its centre of mass; the joints' torques
+    between the bodies cancel); NaN where a body it carries hangs on a point law. ``dyr``
+    (n_r + 1,), ``work`` (:class:`TreeWork`) and ``total`` (n, 6) scratch: ``total[i]``
+    receives body i's (dOmega_i/dt [rad/s^2, body frame], dV_i/dt [m/s^2])."""
     n = codes.shape[0]
     tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work)
     fixed = False
@@ -535,6 +543,32 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
                                    (rhs[u] * axis[0], rhs[u] * axis[1], rhs[u] * axis[2]), total)
         else:
             _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, vector(rhs, u), total)
+    for r in range(n):  # the ground's moment on the bodies of each joint to the ground
+        if parents[r] < 0 and POINT_FIXED[codes[r]]:
+            for k in range(3):
+                moment[r, k] = 0.0
+    for b in range(n):
+        root, held = b, POINT_FIXED[codes[b]]
+        while parents[root] >= 0:
+            root = parents[root]
+            held = held and POINT_FIXED[codes[root]]
+        if not POINT_FIXED[codes[root]]:
+            continue
+        if not held:
+            for k in range(3):
+                moment[root, k] = np.nan
+            continue
+        p = params[b]
+        a_b = _rows(rot, b)
+        omega = vector(y, 12 * b + 3)
+        _, t_b = disturbance_wrench(t, a_b, p)
+        jw = matvec(p.inertia, omega)
+        spin = add(matvec(p.inertia, vector(total[b], 0)), cross(omega, jw))
+        arm = sub(vector(y, 12 * b + 6), vector(ppoints[root], 0))
+        lin = (p.mass * total[b, 3] - force[b, 0], p.mass * total[b, 4] - force[b, 1], p.mass * total[b, 5] - force[b, 2])
+        m_b = add(matvec(a_b, sub(spin, t_b)), cross(arm, lin))
+        for k in range(3):
+            moment[root, k] += m_b[k]
     for i in range(n):  # then each body's m dV/dt - F, and leaves first the reactions they pass up
         m = params[i].mass
         for k in range(3):
@@ -548,36 +582,42 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
 
 
 @jit
-def reaction_samples(times, states, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, per_run, out):
+def reaction_samples(times, states, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, per_run, out,
+                     moments):
     """:func:`tree_reactions` at every sample: ``states`` (m, 12 n + 3 e) the maximal states
     at ``times`` (m,) [s], sample s of the tree ``tree_of[s]`` (``params`` (t, n),
     ``ppoints`` (t, n, 3)), runs of ``per_run`` samples (a hinge's angle continued from
     sample to sample of a run, from (-pi, pi] at its first, as
     :func:`rbstab.variants.chain.chain_samples` continues it); Lambda_j into ``out`` (n, 3,
-    m), NaN where the state is NaN, rows of joints that are not point-fixed untouched."""
+    m), NaN where the state is NaN, rows of joints that are not point-fixed untouched; the
+    ground's moments into ``moments`` (n, 3, m) at the joints to the ground (the others
+    untouched)."""
     n = codes.shape[0]
     n_r = reduced_size_of(codes, d_at)
     yr, dyr = np.empty(n_r), np.empty(n_r + 1)
     dy = np.empty(states.shape[1] + 1)
     joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
     reading, work = chain_work(n), tree_work(n, states.shape[1])
-    total, sample = np.empty((n, 6)), np.empty((n, 3))
+    total, sample, moment = np.empty((n, 6)), np.empty((n, 3)), np.empty((n, 3))
     for s in range(states.shape[0]):
         if s % per_run == 0:
             reading.angle[:] = 0.0
         if states[s, 0] != states[s, 0]:
             sample[:] = np.nan
+            moment[:] = np.nan
         else:
             t = tree_of[s]
             chain_evaluate(times[s], states[s], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies,
                            scalars, reading)
             _reduced_from(states[s], params[t], codes, d_at, r_at, rd_at, joints, yr)
             tree_reactions(times[s], yr, params[t], codes, parents, ppoints[t], d_at, r_at, u_at, rd_at, dyr, work,
-                           total, sample)
+                           total, sample, moment)
         for i in range(n):
             if POINT_FIXED[codes[i]]:
                 for k in range(3):
                     out[i, k, s] = sample[i, k]
+                    if parents[i] < 0:
+                        moments[i, k, s] = moment[i, k]
 
 
 @jit(forceinline=True)
