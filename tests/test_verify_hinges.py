@@ -147,6 +147,11 @@ def test_the_hinged_stances_verified_level_holds_where_its_runs_go():
     (lambda d: d["joints"][0].update(l_r=0.0), "joints.ankle.l_r: found 0"),
     (lambda d: d["joints"][0]["saturation"].update(shape="smooth"), "joints.ankle.saturation.shape"),
     (lambda d: d["simulation"].update(limits={"omega": [5.0, 5.0, 5.0]}), "simulation.limits"),
+    (lambda d: (d["bodies"].append({"name": "head", "mass": 1.0, "inertia": [0.01, 0.01, 0.01]}),
+                d["joints"].append({"name": "neck", "parent": "rod", "parent_point": [0.0, 0.0, 0.5], "child": "head",
+                                    "child_point": [0.0, 0.0, -0.1], "variant": "permanent", "k_r": [5.0] * 3,
+                                    "l_r": [1.0] * 3})),
+     "joints.neck.variant: found 'permanent' in a tree with a hinge"),
 ])
 def test_what_the_hinge_proof_does_not_cover_is_refused_in_one_line(change, expected):
     data = _rod()

@@ -131,10 +131,10 @@ def verified_model(config):
         For another tree of several bodies (one line: why)."""
     bodies = config.chain.size
     if _hinged(config):
-        others = [j.name for j in config.chain.joints if j.variant != "hinge"]
+        others = [j for j in config.chain.joints if j.variant != "hinge"]
         if others:
-            raise NotVerifiable(f"joints.{others[0]}.variant: found {config.chain.joints[config.chain.joint_names.index(others[0])].variant!r} "
-                                "in a tree with a hinge; --verify covers a tree whose every joint is a hinge")
+            raise NotVerifiable(f"joints.{others[0].name}.variant: found {others[0].variant!r} in a tree with a "
+                                "hinge; --verify covers a tree whose every joint is a hinge")
         if bodies > 3:
             raise NotVerifiable(f"this tree has {bodies} hinges ({2 * bodies} states); --verify covers at most 3 "
                                 "(6 states: interval arithmetic over boxes of their angles)")
@@ -502,8 +502,8 @@ class _HingeModel:
     q_ref_j) over a box of the hinges' angles q (one per body: a tree of hinges), in arb: v
     at rest is P(q) = sum_j [1/2 k_j (q_j - q_ref_j)^2 + 1/2 kp_j (q_j - qp_j)^2 + the range's
     stop, 1/2 k_s (q_j - end)^2 beyond either end] - sum_i G_i' X_i(q) + h (docs/physics.md,
-    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) parents first (:func:`rbstab.variants.tree.tree_expand`),
-    differentiated forward (:class:`_Jet`). ``compiled``: the chain
+    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) parents first
+    (:func:`rbstab.variants.tree.tree_expand`), differentiated forward (:class:`_Jet`). ``compiled``: the chain
     (:class:`rbstab.variants.chain.CompiledChain`), h = its offset."""
 
     coordinates = "q"
@@ -700,7 +700,8 @@ class _HingeModel:
                     keeps = den > 0 and abs(num) < arb(math.tan(bound)) * den
                     leaves = den < 0 or abs(num) > arb(math.tan(bound)) * den
                 if not keeps and inside:
-                    inside, text = False, f"|theta_{i + 1}| of {self.bodies[j]} may reach simulation.limits.theta = {bound:g} rad"
+                    inside = False
+                    text = f"|theta_{i + 1}| of {self.bodies[j]} may reach simulation.limits.theta = {bound:g} rad"
                 outside = outside or bool(leaves)
         return inside, outside, text
 

@@ -565,7 +565,8 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
         jw = matvec(p.inertia, omega)
         spin = add(matvec(p.inertia, vector(total[b], 0)), cross(omega, jw))
         arm = sub(vector(y, 12 * b + 6), vector(ppoints[root], 0))
-        lin = (p.mass * total[b, 3] - force[b, 0], p.mass * total[b, 4] - force[b, 1], p.mass * total[b, 5] - force[b, 2])
+        lin = (p.mass * total[b, 3] - force[b, 0], p.mass * total[b, 4] - force[b, 1],
+               p.mass * total[b, 5] - force[b, 2])
         m_b = add(matvec(a_b, sub(spin, t_b)), cross(arm, lin))
         for k in range(3):
             moment[root, k] += m_b[k]
