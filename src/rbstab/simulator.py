@@ -564,9 +564,10 @@ def _simulate_tree(config, timeout: float | None = None) -> RunResult:
     start = _time.perf_counter()
     trajectory = solve_tree(config, timeout)
     compiled, time = trajectory.compiled, trajectory.time
+    one_body = not is_chain(config)  # written as one body: one body's names and shapes
     outputs, summary = _trees_outputs([compiled], np.zeros(1, dtype=np.int64), time, trajectory.states[None],
-                                      trajectory.work[None], tree=is_chain(config))
-    if not is_chain(config):  # written as one body: one body's names and shapes
+                                      trajectory.work[None], tree=not one_body)
+    if one_body:
         outputs, summary = _as_one_body(outputs, summary, bool(np.any(compiled.d_at >= 0)))
     outputs, summary = {key: value[0] for key, value in outputs.items()}, row(summary, 0)
     solver = {k: v for k, v in trajectory.solver.items() if k != "wall_time"}
@@ -604,7 +605,8 @@ def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray
                outputs: dict) -> None:
     """From the reduced motion (:func:`rbstab.variants.tree.reaction_samples`) of k runs of
     trees with a point-fixed joint to the ground (run i's tree ``trees[tree_of[i]]``, of
-    ``structure``'s shape) at their samples ``states`` (k, m, n_states): Lambda_j [N] of the
+    ``structure``'s shape) at their samples ``states`` (k, m, n_states) with their joints'
+    angles and rates (``outputs``' ``joint_theta``, ``joint_omega``): Lambda_j [N] of the
     point-fixed joints where :func:`rbstab.variants.chain.evaluate` leaves them NaN (a tree
     with a hinge) into ``outputs["constraint_force"]`` (k, m, n, 3), and each joint to the
     ground's centre of pressure into ``outputs["centre_of_pressure"]`` (k, m, n, 3; NaN for
@@ -617,9 +619,10 @@ def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray
     k, m, n = states.shape[0], states.shape[1], structure.size
     reactions, moments = np.full((n, 3, k * m), np.nan), np.full((n, 3, k * m), np.nan)
     params, ppoints = C.records_of(trees), np.stack([t.ppoints for t in trees])
-    reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), params, structure.codes,
-                     structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
-                     np.repeat(np.asarray(tree_of, dtype=np.int64), m), m, reactions, moments)
+    angles = [np.ascontiguousarray(outputs[name]).reshape(k * m, n, 3) for name in ("joint_theta", "joint_omega")]
+    reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), *angles, params,
+                     structure.codes, structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
+                     np.repeat(np.asarray(tree_of, dtype=np.int64), m), reactions, moments)
     force = reactions.transpose(2, 0, 1).reshape(k, m, n, 3)
     if structure.hinged:
         fixed = structure.permanent

@@ -90,8 +90,9 @@ def _warm_up_chains() -> None:
     C.evaluate(compiled, np.zeros(1), np.stack([y[None], y[None]]))
     C.evaluate(compiled, np.zeros(1), y[None])
     reactions = np.zeros((compiled.size, 3, 1))  # and the joints to the ground's reactions and moments
-    reaction_samples(np.zeros(1), y[None], C.records_of([compiled]), compiled.codes, compiled.parents,
-                     compiled.ppoints[None], compiled.d_at, *tree_layout(compiled).args, np.zeros(1, np.int64), 1,
+    angles = np.zeros((1, compiled.size, 3))
+    reaction_samples(np.zeros(1), y[None], angles, angles, C.records_of([compiled]), compiled.codes, compiled.parents,
+                     compiled.ppoints[None], compiled.d_at, *tree_layout(compiled).args, np.zeros(1, np.int64),
                      reactions, reactions.copy())
     _warm_up_states(compiled, y[None])
 

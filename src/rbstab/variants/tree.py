@@ -583,34 +583,28 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
 
 
 @jit
-def reaction_samples(times, states, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, per_run, out,
-                     moments):
+def reaction_samples(times, states, joint_theta, joint_omega, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at,
+                     tree_of, out, moments):
     """:func:`tree_reactions` at every sample: ``states`` (m, 12 n + 3 e) the maximal states
-    at ``times`` (m,) [s], sample s of the tree ``tree_of[s]`` (``params`` (t, n),
-    ``ppoints`` (t, n, 3)), runs of ``per_run`` samples (a hinge's angle continued from
-    sample to sample of a run, from (-pi, pi] at its first, as
-    :func:`rbstab.variants.chain.chain_samples` continues it); Lambda_j into ``out`` (n, 3,
-    m), NaN where the state is NaN, rows of joints that are not point-fixed untouched; the
-    ground's moments into ``moments`` (n, 3, m) at the joints to the ground (the others
-    untouched)."""
+    at ``times`` (m,) [s] with their joints' Theta_j [rad], Omega_j [rad/s, child frame]
+    ``joint_theta``, ``joint_omega`` (m, n, 3; as :func:`rbstab.variants.chain.evaluate`
+    gives them: a hinge's q continued from sample to sample of a run), sample s of the tree
+    ``tree_of[s]`` (``params`` (t, n), ``ppoints`` (t, n, 3)); Lambda_j [N, inertial] into
+    ``out`` (n, 3, m), NaN where the state is NaN, rows of joints that are not point-fixed
+    untouched; the ground's moments [N m, inertial] into ``moments`` (n, 3, m) at the
+    point-fixed joints to the ground (the others untouched)."""
     n = codes.shape[0]
     n_r = reduced_size_of(codes, d_at)
     yr, dyr = np.empty(n_r), np.empty(n_r + 1)
-    dy = np.empty(states.shape[1] + 1)
-    joints, bodies, scalars = np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5)
-    reading, work = chain_work(n), tree_work(n, states.shape[1])
+    work = tree_work(n, states.shape[1])
     total, sample, moment = np.empty((n, 6)), np.empty((n, 3)), np.empty((n, 3))
     for s in range(states.shape[0]):
-        if s % per_run == 0:
-            reading.angle[:] = 0.0
         if states[s, 0] != states[s, 0]:
             sample[:] = np.nan
             moment[:] = np.nan
         else:
             t = tree_of[s]
-            chain_evaluate(times[s], states[s], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies,
-                           scalars, reading)
-            _reduced_from(states[s], params[t], codes, d_at, r_at, rd_at, joints, yr)
+            _reduced_from(states[s], params[t], codes, d_at, r_at, rd_at, joint_theta[s], joint_omega[s], yr)
             tree_reactions(times[s], yr, params[t], codes, parents, ppoints[t], d_at, r_at, u_at, rd_at, dyr, work,
                            total, sample, moment)
         for i in range(n):
@@ -631,21 +625,21 @@ def reduced_size_of(codes, d_at):
 
 
 @jit(forceinline=True)
-def _reduced_from(y, params, codes, d_at, r_at, rd_at, joints, out):
+def _reduced_from(y, params, codes, d_at, r_at, rd_at, theta_j, omega_j, out):
     """The reduced state ``out`` (n_r,) of the maximal state ``y`` whose joints' Theta_j,
-    Omega_j :func:`rbstab.variants.chain.chain_evaluate` wrote into ``joints`` (a hinge's q
-    the angle it continued): q = a . Theta_j, u = a . Omega_j of a hinge; Theta_j, Omega_j of
-    a ball; every other body's Theta, Omega, X, V; D."""
+    Omega_j (n, 3) are ``theta_j``, ``omega_j`` (:func:`rbstab.variants.chain.chain_evaluate`'s;
+    a hinge's q the angle it continued): q = a . Theta_j, u = a . Omega_j of a hinge;
+    Theta_j, Omega_j of a ball; every other body's Theta, Omega, X, V; D."""
     for i in range(codes.shape[0]):
         at = r_at[i]
         if codes[i] == HINGE:
             axis = vector(params[i].axis, 0)
-            out[at] = dot(axis, vector(joints[i, _THETA_J], 0))
-            out[at + 1] = dot(axis, vector(joints[i, _OMEGA_J], 0))
+            out[at] = dot(axis, vector(theta_j[i], 0))
+            out[at + 1] = dot(axis, vector(omega_j[i], 0))
         elif codes[i] == PERMANENT:
             for c in range(3):
-                out[at + c] = joints[i, _THETA_J, c]
-                out[at + 3 + c] = joints[i, _OMEGA_J, c]
+                out[at + c] = theta_j[i, c]
+                out[at + 3 + c] = omega_j[i, c]
         else:
             for c in range(12):
                 out[at + c] = y[12 * i + c]
@@ -772,4 +766,4 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
         if permanent:
             work.angle[:] = 0.0  # a hinge's angle read in (-pi, pi]
             chain_evaluate(0.0, y[a], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies, scalars, work)
-        _reduced_from(y[a], params[t], codes, d_at, r_at, rd_at, joints, out[a])
+        _reduced_from(y[a], params[t], codes, d_at, r_at, rd_at, joints[:, _THETA_J], joints[:, _OMEGA_J], out[a])
