@@ -65,6 +65,19 @@ def hinged_chain(theta: float):
     return config_from_mapping(data)
 
 
+def ranged_chain(rate: float):
+    """:func:`hinged_chain` (tilted 0.2 rad) with the elbow's range [-0.23, 0.5] rad an
+    admissible region, the elbow's q starting at -0.2 rad with the rate ``rate`` [rad/s]
+    (-0.5: its q reaches -0.204 rad; -1.5 leaves the range)."""
+    from rbstab.config.loader import config_from_mapping
+
+    data = hinged_chain(0.2).resolved
+    data["name"] = "ranged3"
+    data["joints"][1]["range"] = {"lower": -0.23, "upper": 0.5, "kind": "region"}
+    data["initial_state"]["middle"]["u"] = rate
+    return config_from_mapping(data)
+
+
 def cases(root: str):
     """name -> (configs of chains of one structure: its runs)."""
     from rbstab.config.loader import load_config
@@ -91,6 +104,7 @@ def cases(root: str):
         "pulsed3": [pulsed_chain(theta) for theta in (0.2, 0.4)],  # the second leaves
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
         "hinged3": [hinged_chain(theta) for theta in (0.2, 0.4)],
+        "ranged3": [ranged_chain(rate) for rate in (-0.5, -1.5)],  # the second leaves
     }
 
 

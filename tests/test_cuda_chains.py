@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 
 from conftest import simulated_once
-from rbstab.engine.status import gimbal_status, limit_status
+from rbstab.engine.status import gimbal_status, limit_status, range_status
 
 numba_cuda = pytest.importorskip("numba_cuda", reason="numba-cuda is not installed (pip install -e '.[test]')")
 from test_cuda import _compilers, ptx_for_sm_90  # noqa: E402
@@ -23,14 +23,16 @@ def simulated(tmp_path_factory):
 @pytest.mark.parametrize("case, bodies, status", [
     ("stance", 2, [0, 0, 0, -3]), ("params", 2, [0, 0, 0, limit_status(0, 0, 1)]), ("knee", 2, [0, 0]),
     ("pulsed3", 3, [0, limit_status(0, 0, 2)]), ("pushed3", 3, [0, limit_status(0, 0, 2)]),  # |theta_1| of body 1, 2
-    ("hinged3", 3, [0, limit_status(0, 0, 2)]),
+    ("hinged3", 3, [0, limit_status(0, 0, 2)]), ("ranged3", 3, [0, range_status(1, False)]),
     ("locked", 2, [gimbal_status(1, True), gimbal_status(0, True)])])  # the hip's, the ankle's Theta_j
 def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bodies, status):
     """The stance example (permanent joints, saturated torques; one run stopped by its step
     limit; two stopped at the gimbal lock of the hip's and of the ankle's Theta_j, the
     message naming it), the knee (visco-elastic and embedded joints), three bodies with a pulse and an
     admissible region that one run leaves, the same with impulses at 0, inside the run
-    and at t_end, and with two hinges (one clipped, one with a passive torque); runs of stance chains with other masses, gains, a parent point and an
+    and at t_end, and with two hinges (one clipped, one with a passive torque), one run
+    leaving the elbow's range (an admissible region) at its lower end;
+    runs of stance chains with other masses, gains, a parent point and an
     admissible region, a tree a run in one call (each run as the run alone): every run's status, t_stop, nfev, n_steps and its state and work W at every
     sample (and every 3rd, stride 3) equal the CPU driver's; simulate(engine="cuda")
     gives simulate(engine="compiled")'s status, message, solver counts, outputs and

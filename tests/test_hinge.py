@@ -8,6 +8,7 @@ planar motion, against a closed-form balance, and against v's own bookkeeping.""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -217,6 +218,61 @@ def test_a_rod_rests_on_its_stop_where_the_stop_balances_gravity():
     assert np.all(np.diff(out["lyapunov"]) <= 1e-9)
 
 
+def test_a_run_that_leaves_a_range_that_is_an_admissible_region_stops_there_on_every_engine():
+    """The middle hinge's range [-0.6, 0.1] as an admissible region (``kind: region``): no
+    torque acts inside it (the samples before the stop are the unbounded run's, bit for
+    bit), and the run stops, fell, where q reaches 0.1 (the unbounded run's crossing, by its
+    dense output), on the compiled driver and on scipy's methods alike, naming the joint and
+    the end."""
+    from rbstab.engine.integrate import integrate_chain_runs
+    from rbstab.engine.settings import settings_rows
+    from rbstab.engine.status import fell, range_status
+    from rbstab.engine.systems import tree_system
+    from rbstab.variants.tree import reduce_state, tree_layout
+
+    data = _hinges([3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5], t_end=3.0,
+                   n_samples=301)
+    free = simulate(config_from_mapping(data))
+    data["joints"][1]["range"] = {"lower": -0.6, "upper": 0.1, "kind": "region"}
+    config = config_from_mapping(data)
+    compiled = C.compile_chain(config.chain)
+    system, layout = tree_system(compiled), tree_layout(compiled)
+    y0 = reduce_state(compiled, layout, C.initial_state(config))[None]
+    ends = integrate_chain_runs(system, y0, settings_rows([config.simulation]), method="DOP853", n_samples=2)
+    assert ends.status.tolist() == [range_status(1, True)]
+    t_stop = float(ends.t_stop[0])
+    axis = np.array(AXES[1]) / np.linalg.norm(AXES[1])
+    data["simulation"].update(t_end=t_stop, n_samples=2)
+    del data["joints"][1]["range"]
+    assert simulate(config_from_mapping(data)).outputs["joint_theta"][-1, 1] @ axis == pytest.approx(0.1, abs=1e-9)
+    for method in ("DOP853", "RK45", "Radau"):
+        result = simulate(dataclasses.replace(config, simulation=dataclasses.replace(config.simulation,
+                                                                                        method=method)))
+        assert fell(result.status, result.message), result.message
+        assert result.message.startswith("left the admissible region (joints.j1.range): the angle q of joint j1 "
+                                         "reached its upper end 0.1 rad at t = "), result.message
+        assert float(result.message.rsplit("t = ", 1)[1].split()[0]) == pytest.approx(t_stop, abs=1e-5)
+        kept = ~np.isnan(result.outputs["lyapunov"])
+        assert kept.sum() == 1 + int(t_stop / 0.01)
+        if method == "DOP853":
+            np.testing.assert_array_equal(result.outputs["position"][kept], free.outputs["position"][kept])
+
+
+def test_a_run_that_falls_before_its_second_sample_counts_its_rising_time_on_the_grid():
+    """A pulse that pushes v up from t = 0 and a range left at 5 ms, before the second sample
+    (0.01 s): the one sample kept, rising, counts one sample spacing, as the GPU's streamed
+    summary counts it."""
+    data = _hinges([3.0, 2.0, 1.0], [0.0] * 3, [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, -1.0, -0.5], t_end=1.0,
+                   n_samples=101)
+    data["joints"][1]["range"] = {"lower": -0.405, "upper": 0.5, "kind": "region"}
+    data["disturbances"] = [{"kind": "pulse", "quantity": "torque", "value": [-5.0, 0.0, 0.0], "start": 0.0,
+                             "duration": 1.0, "body": "b2"}]
+    result = simulate(config_from_mapping(data))
+    assert result.message.startswith("left the admissible region (joints.j1.range)")
+    assert result.outputs["lyapunov_rate"][0] > 0.0 and np.isnan(result.outputs["lyapunov_rate"][1])
+    assert result.summary["time_lyapunov_rising"] == pytest.approx(0.01, rel=1e-12)
+
+
 @pytest.mark.parametrize("quantity, value", [("force", [0.0, 2.0, 1.0]), ("torque", [0.3, -0.2, 0.1])])
 def test_a_push_on_a_tree_of_hinges_is_the_limit_of_short_pulses(quantity, value):
     """An impulse on the lowest body of the oblique hinges (undamped, under gravity) makes
@@ -262,6 +318,27 @@ def test_a_hinge_sweep_gives_each_runs_own_result(tmp_path):
         assert row["lyapunov_final"] == pytest.approx(alone["lyapunov_final"], rel=1e-12)
         final = [row[f"final_position_b2_{axis}"] for axis in "xyz"]
         np.testing.assert_allclose(final, np.asarray(alone["final_position"])[2], rtol=0, atol=1e-12)
+
+
+def test_a_sweep_over_a_regions_end_gives_each_run_its_own_fall(tmp_path):
+    """A sweep over the upper end of a hinge's range that is an admissible region: each
+    run falls where its own config falls, or reaches t_end, as that config run alone."""
+    import pandas as pd
+
+    from rbstab.sweep import run_sweep, spec_from_mapping
+
+    data = _hinges([3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5],
+                   n_samples=21)
+    data["joints"][1]["range"] = {"lower": -0.6, "upper": 0.1, "kind": "region"}
+    grid = {"joints.j1.range.upper": [0.05, 0.1, 2.0]}
+    run_sweep(spec_from_mapping({"name": "ranged", "base": data, "grid": grid}), tmp_path, jobs=1, progress=False)
+    index = pd.read_csv(tmp_path / "ranged" / "index.csv")
+    assert sorted(index["status"]) == ["failed", "failed", "success"]
+    for _, row in index.iterrows():
+        changed = copy.deepcopy(data)
+        changed["joints"][1]["range"]["upper"] = float(row["j1_upper"])
+        alone = simulate(config_from_mapping(changed))
+        assert (row["status"], row["message"]) == (alone.status, alone.message)
 
 
 def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
@@ -310,6 +387,13 @@ def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
     (lambda d: d["joints"][1].update(variant="permanent", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0] * 3,
                                      range={"lower": 0.0, "upper": 0.2, "k_r": 100.0}) or d["joints"][1].pop("axis"),
      "joints.1.range", "a range is a hinge's"),
+    (lambda d: d["joints"][1].update(range={"lower": -0.6, "upper": 0.2}), "joints.1.range.k_r", "required by a stop"),
+    (lambda d: d["joints"][1].update(range={"lower": -0.6, "upper": 0.2, "kind": "region", "l_r": 1.0}),
+     "joints.1.range.l_r", "no l_r"),
+    (lambda d: d["joints"][1].update(range={"lower": -0.6, "upper": 0.2, "kind": "wall"}), "joints.1.range.kind",
+     "region"),
+    (lambda d: d["joints"][1].update(range={"lower": -0.35, "upper": 0.2, "kind": "region"}), "initial_state.b1.q",
+     "joints.j1.range [-0.35, 0.2]"),
 ])
 def test_a_hinges_bad_input_is_refused_in_one_line_naming_its_key(change, key, expected):
     data = _hinges([3.0, 2.0, 1.0], [0.1, 0.2, 0.05], [0.2, -0.3, 0.4], [0.5, -0.4, 0.8], [0.3, 0.0, -0.5])

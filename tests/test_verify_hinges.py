@@ -116,6 +116,19 @@ def test_one_rods_level_is_where_its_servo_first_reaches_its_limit():
         verify_sublevel(config, level=closed(second))
 
 
+def test_a_range_that_is_an_admissible_region_bounds_the_proven_level():
+    """The rod's range [-0.04, 0.05] rad as an admissible region, inside the clip's onset
+    (0.1 rad): the proof's domain ends there, so c stops at P(-0.04), the nearer end's,
+    within the search's tolerance, naming the range."""
+    k, mgd = 60.0, 2.0 * 9.81 * 0.5
+    data = _rod(k=k)
+    data["joints"][0]["range"] = {"lower": -0.04, "upper": 0.05, "kind": "region"}
+    result = verify_sublevel(config_from_mapping(data))
+    edge = 0.5 * k * 0.04 ** 2 + mgd * (math.cos(0.04) - 1.0)
+    assert (1 - 0.011) * edge <= result.level <= edge, (result.level, edge)
+    assert "q of ankle = -0.04 rad (joints.ankle.range, an admissible region)" in result.reason
+
+
 def test_the_hinged_stances_verified_level_holds_where_its_runs_go():
     """The hinged stance's verified c lies at or below the sampled certificate's estimate
     (to the search's tolerance), and runs from states on {v = c} (the directions where the

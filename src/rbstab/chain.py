@@ -27,7 +27,8 @@ import numpy as np
 
 from .model import Disturbance, Saturation
 
-__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Joint", "Chain", "single", "hinge", "hinge_vectors"]
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Region", "Joint", "Chain", "single", "hinge",
+           "hinge_vectors"]
 
 #: The parent index of a joint to the ground.
 GROUND = -1
@@ -109,6 +110,17 @@ class Stop:
 
 
 @dataclass(frozen=True, eq=False)
+class Region:
+    """A hinge's range of motion as an admissible region: a run whose angle q leaves
+    [``lower``, ``upper``] [rad] (lower < upper; -inf, inf: no end on that side) stops where
+    it reaches an end, and fell (as one that leaves ``simulation.limits``); no torque acts
+    inside it."""
+
+    lower: float
+    upper: float
+
+
+@dataclass(frozen=True, eq=False)
 class Joint:
     """One joint: the law holding the child's point C to a point of its parent, and the
     rotational feedback across it.
@@ -155,7 +167,9 @@ class Joint:
     axis : ndarray, shape (3,)
         A hinge's unit axis a (the parent's and the child's frames); zero for any other joint.
     stop : Stop or None
-        A hinge's range of motion as a stop; None: no range.
+        A hinge's range of motion as a stop; None: none.
+    region : Region or None
+        A hinge's range of motion as an admissible region (not with ``stop``); None: none.
     """
 
     name: str
@@ -177,6 +191,7 @@ class Joint:
     passive: Passive | None = None
     axis: np.ndarray = field(default_factory=lambda: np.zeros(3))
     stop: Stop | None = None
+    region: Region | None = None
 
 
 def hinge_vectors(axis, k=0.0, l=0.0, q_ref=0.0, lower=-math.inf, upper=math.inf):
@@ -208,14 +223,15 @@ def hinge_vectors(axis, k=0.0, l=0.0, q_ref=0.0, lower=-math.inf, upper=math.inf
 
 def hinge(name: str, parent: int, child: int, parent_point, child_point, axis, k: float = 0.0, l: float = 0.0,
           q_ref: float = 0.0, limits: tuple[float, float] | None = None, shape: str = "clip",
-          passive: tuple[float, float, float] | None = None, stop: Stop | None = None) -> Joint:
+          passive: tuple[float, float, float] | None = None, stop: Stop | None = None,
+          region: Region | None = None) -> Joint:
     """A hinge joint (docs/physics.md, "Joint kinds"): the child's point C held to the
     parent's point, the child turned about ``axis`` with the feedback of gains ``k``, ``l``
     and reference angle ``q_ref`` delivered between ``limits`` (lower < 0 < upper [N m];
     None: unlimited, ``shape`` their :data:`rbstab.model.SATURATION_SHAPES` key) and a
-    passive torque of that form, ``passive`` (k, l, q_ref), never limited, and its range's
-    ``stop``; written as a ball's by :func:`hinge_vectors`. ValueError for an axis of zero
-    length."""
+    passive torque of that form, ``passive`` (k, l, q_ref), never limited, and its range as a
+    ``stop`` or as an admissible ``region``; written as a ball's by :func:`hinge_vectors`.
+    ValueError for an axis of zero length."""
     lower, upper = (-math.inf, math.inf) if limits is None else limits
     a, k_r, l_r, theta_ref, low, high = hinge_vectors(axis, k, l, q_ref, lower, upper)
     infinite = np.full(3, math.inf)
@@ -225,7 +241,8 @@ def hinge(name: str, parent: int, child: int, parent_point, child_point, axis, k
         passive = Passive(p_k, p_l, p_ref)
     return Joint(name=name, parent=parent, child=child, parent_point=np.asarray(parent_point, dtype=float),
                  child_point=np.asarray(child_point, dtype=float), variant="hinge", k_r=k_r, l_r=l_r,
-                 saturation=saturation, theta_ref=theta_ref, passive=passive, axis=a, stop=stop)
+                 saturation=saturation, theta_ref=theta_ref, passive=passive, axis=a, stop=stop,
+                 region=region)
 
 
 @dataclass(frozen=True, eq=False)

@@ -275,7 +275,9 @@ _VECTOR = (np.float64, (3,))
 #: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad]; a hinge's unit ``axis``
 #: a (the parent's and the child's frames; zero for any other joint) and its range's stop
 #: (:class:`rbstab.chain.Stop`): ``stop`` (1 where it has one; 0: none, the next fields not
-#: read), ``range_lower``, ``range_upper`` [rad], ``stop_k`` [N m/rad] and ``stop_l`` [N m s/rad].
+#: read), ``range_lower``, ``range_upper`` [rad], ``stop_k`` [N m/rad] and ``stop_l`` [N m s/rad],
+#: or its range as an admissible region (:class:`rbstab.chain.Region`): ``region`` 1 (a run
+#: whose q leaves [``range_lower``, ``range_upper``] stops there, fell; 0: none).
 PARAMETERS = np.dtype(
     [
         ("mass", np.float64),
@@ -326,6 +328,7 @@ PARAMETERS = np.dtype(
         ("range_upper", np.float64),
         ("stop_k", np.float64),
         ("stop_l", np.float64),
+        ("region", np.float64),
     ],
     align=True,
 )

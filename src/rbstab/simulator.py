@@ -42,8 +42,8 @@ import numpy as np
 from .engine import METHODS, RunBatch
 from .engine.batch import batch_of
 from .engine.registry import DEFAULT_ENGINE, get_engine
-from .engine.status import (GIMBAL_LOCK, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, gimbal_status, limit_of, limit_part,
-                            limit_status, status_message)
+from .engine.status import (GIMBAL_LOCK, RANGE_LEFT, STEP_LIMIT, SUCCESS, TIMEOUT, gimbal_of, gimbal_status, limit_of,
+                            limit_part, limit_status, range_of, status_message)
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
 from .results import RunBlock, RunResult, row
@@ -165,6 +165,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
                                  initial_state, locked_part, region_margin)
     from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_impulses, tree_layout,  # heavy: numba
                                 tree_rate, tree_work)
+    from .variants.tree import range_margin as hinge_ranges  # heavy: numba
 
     sim = config.simulation
     compiled = compile_chain(config.chain) if compiled is None else compiled
@@ -211,29 +212,38 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     def region(t, yr):
         return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
 
+    def ranged(t, yr):
+        return hinge_ranges(np.ascontiguousarray(yr[:n_r]), compiled.params, compiled.codes, layout.r_at, np.inf, 0,
+                            RANGE_LEFT)[0]
+
     row = settings_rows([sim], timeout)[0]
     bounds = np.full((len(LIMITED), 3), np.inf) if sim.limits is None else sim.limits.array
     one_body = not is_chain(config)  # written as one body: one body's words
 
-    def end(t, full, lock):
-        """The message of a run stopped at t at the state ``full`` by gimbal lock (``lock``)
-        or by its admissible region, in the compiled driver's words (:func:`run_end`)."""
-        if lock:
+    def end(t, yr, event):
+        """The message of a run stopped at t at the reduced state ``yr`` by the event
+        ``event`` (gimbal lock, its bounds or a hinge's range), in the compiled driver's
+        words (:func:`run_end`)."""
+        full = maximal(yr[:n_r])
+        if event is lock:
             code = GIMBAL_LOCK if one_body else gimbal_status(*locked_part(compiled, full))
-        else:
+        elif event is region:
             code = limit_status(*region_margin(compiled, full, sim.limits)[1])
+        else:
+            code = hinge_ranges(np.ascontiguousarray(yr[:n_r]), compiled.params, compiled.codes, layout.r_at, np.inf,
+                                0, RANGE_LEFT)[1]
         return run_end(compiled, code, t, row, bounds, one_body)
 
     def left(t, yr):
         """The message where the state at t (a segment's start: after the impulses there)
         lies outside the admissible region, else None (a start on its boundary is inside)."""
-        full = maximal(yr[:n_r])
-        if _gimbal_margin(compiled, full, sim.gimbal_margin) < 0:
-            return end(t, full, True)
-        margin = 0.0 if sim.limits is None else region_margin(compiled, full, sim.limits)[0]
-        return end(t, full, False) if margin < 0 else None
+        for event in events[:-1]:
+            if event(t, yr) < 0:
+                return end(t, yr, event)
+        return None
 
-    events = [lock] + ([] if sim.limits is None else [region])
+    events = [lock] + ([] if sim.limits is None else [region]) + (
+        [ranged] if np.any(compiled.params["region"] > 0.0) else [])
     for event in events:  # terminal, falling through zero (leaving the region), as one body's
         event.terminal, event.direction = True, -1
     limits = RunLimits(max_steps, limit, sim.t_end)  # shared by the segments
@@ -281,11 +291,9 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         if limits.status is not None:
             status, message = "failed", limits.message(sim.gimbal_margin, limit)
             break
-        if sol.status == 1 and len(sol.t_events[0]):
-            status, message = "failed", end(float(sol.t_events[0][0]), maximal(sol.y_events[0][0][:n_r]), True)
-            break
-        if sol.status == 1:
-            status, message = "failed", end(float(sol.t_events[1][0]), maximal(sol.y_events[1][0][:n_r]), False)
+        if sol.status == 1:  # the first terminal event that occurred
+            k = next(k for k in range(len(events) - 1) if len(sol.t_events[k]))
+            status, message = "failed", end(float(sol.t_events[k][0]), sol.y_events[k][0], events[k])
             break
         if sol.status != 0:
             status, message = "failed", str(sol.message)
@@ -789,6 +797,15 @@ def _tree_left_region(what: str, t: float) -> str:
     return f"left the admissible region (simulation.limits): {what} at t = {t:.6g} s"
 
 
+def _range_left(compiled, joint: int, upper: bool, t: float) -> str:
+    """The message of a tree's run whose hinge ``joint`` reached an end of its range (an
+    admissible region) at t [s], on every engine."""
+    name = compiled.chain.joint_names[joint]
+    end = float(compiled.params[joint]["range_upper" if upper else "range_lower"])
+    return (f"left the admissible region (joints.{name}.range): the angle q of joint {name} reached its "
+            f"{'upper' if upper else 'lower'} end {end:g} rad at t = {t:.6g} s")
+
+
 def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np.ndarray,
             one_body: bool = False) -> str:
     """The message of a run of the compiled driver that ended with ``code`` at ``t_stop``
@@ -796,7 +813,8 @@ def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np
     :data:`rbstab.engine.settings.SETTING_COLUMNS`, ``bounds`` (5, 3) its admissible region
     (a record's ``limits``). A gimbal lock's code names the body or joint
     (:func:`rbstab.engine.status.gimbal_of`), a bound's the quantity, its axis and the body
-    or joint that reached it; with ``one_body`` (a run written as one body, whose words have
+    or joint that reached it, a hinge's range (:func:`rbstab.engine.status.range_of`) the
+    joint and the end; with ``one_body`` (a run written as one body, whose words have
     no body or joint names) neither is named."""
     from .variants import chain as C  # heavy: numba
 
@@ -804,6 +822,9 @@ def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np
     # a one-body tree runs one body's compiled form: its lock, GIMBAL_LOCK, is of its one angle set
     locked = (0, bool(compiled.codes[0] == C.PERMANENT)) if code == GIMBAL_LOCK else gimbal_of(code)
     which = limit_of(code)
+    ranged = range_of(code)
+    if ranged is not None:
+        return _range_left(compiled, *ranged, t_stop)
     if one_body or (locked is None and which is None):
         return status_message(code, t_stop, margin, int(settings[5]), float(settings[6]), limits=bounds)
     if locked is not None:

@@ -335,7 +335,7 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
         runs = np.flatnonzero(last == i)
         parts.append((runs, _table(time[: i + 1], {key: value[runs, : i + 1] for key, value in outputs.items()},
                                    None if checked is None else checked[runs, : i + 1],
-                                   None if params is None else params[runs], complete=False)))
+                                   None if params is None else params[runs], complete=False, spacing=_spacing(time))))
     table = {key: np.empty((k, *value.shape[1:]), dtype=value.dtype) for key, value in parts[0][1].items()}
     for runs, part in parts:
         for key, values in part.items():
@@ -344,11 +344,13 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
 
 
 def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None,
-           params: np.ndarray | None = None, complete: bool = True) -> dict[str, np.ndarray]:
+           params: np.ndarray | None = None, complete: bool = True,
+           spacing: float | None = None) -> dict[str, np.ndarray]:
     """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays), as
     columns; the rate check over the ``checked`` samples (k, n) only, when given; the
     centre of mass's figures with the bodies' records ``params`` (k, bodies) only, else
-    NaN; ``complete`` False: the runs stopped before the end of their grid (no settling time)."""
+    NaN; ``complete`` False: the runs stopped before the end of their grid (no settling
+    time), whose ``spacing`` [s] is given (a run stopped before its second sample has one)."""
     v = outputs["lyapunov"]
     rate = outputs["lyapunov_rate"]
     k, n = v.shape
@@ -361,7 +363,7 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
     table["lyapunov_final"] = v[:, n - 1].copy()
     table["max_lyapunov_rate"] = np.max(rate, axis=1)
     table["max_lyapunov_increase"] = np.max(v - np.minimum.accumulate(v, axis=1), axis=1)
-    table["time_lyapunov_rising"] = np.sum(rate > 0.0, axis=1) * _spacing(time)
+    table["time_lyapunov_rising"] = np.sum(rate > 0.0, axis=1) * (_spacing(time) if spacing is None else spacing)
     acc = np.full((k, ACCUMULATOR_SIZE), np.nan)
     acc[:, TAKEN], acc[:, LAST_UNSETTLED] = n, n - 1
     if "omega" in outputs:

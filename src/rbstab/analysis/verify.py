@@ -527,6 +527,9 @@ class _HingeModel:
                                    for k, r, kp, rp in self.springs])
         self.stops = [(float(p["range_lower"]), float(p["range_upper"]), float(p["stop_k"])) if p["stop"] > 0 else None
                       for p in params]
+        # a range that is an admissible region: the domain's faces there (a run that reaches one fell)
+        self.ranges = np.array([(p["range_lower"], p["range_upper"]) if p["region"] > 0 else (-np.inf, np.inf)
+                                for p in params], dtype=float)
         self.R_c = [[arb(float(x)) for x in p["attachment_point"]] for p in params]
         self.R_p = [[arb(float(x)) for x in r] for r in compiled.ppoints]
         self.G = [[arb(float(x)) for x in p["weight"]] for p in params]
@@ -558,8 +561,10 @@ class _HingeModel:
         return np.sqrt(np.maximum(k, 1e-9 * max(float(k.max()), 1.0)))
 
     def _outer(self) -> np.ndarray:
-        """The largest box searched: half a turn either side of each hinge's reference."""
-        return np.column_stack([self.reference - math.pi, self.reference + math.pi])
+        """The largest box searched: half a turn either side of each hinge's reference, within
+        its range where that is an admissible region."""
+        return np.column_stack([np.maximum(self.reference - math.pi, self.ranges[:, 0]),
+                                np.minimum(self.reference + math.pi, self.ranges[:, 1])])
 
     def level_cap(self, config) -> float:
         """An upper bound of the least P on the largest box's faces (points on each)."""
@@ -572,7 +577,8 @@ class _HingeModel:
         return min(points)
 
     def domain(self, config, level_cap: float) -> np.ndarray:
-        """The largest box, narrowed where a spring alone holds every P <= ``level_cap`` inside."""
+        """The largest box within the hinges' ranges that are admissible regions, narrowed
+        where a spring alone holds every P <= ``level_cap`` inside."""
         g = sum(float(np.linalg.norm([float(x.mid()) for x in w])) for w in self.G)
         reach = sum(float(np.linalg.norm([float(x.mid()) for x in r])) for r in self.R_c + self.R_p)
         floor = -g * reach + float(self.h.mid())  # |X_i| <= the sum of every |R|: -G'X >= -|G| that
@@ -585,6 +591,8 @@ class _HingeModel:
                                 np.minimum(self.reference + half, outer[:, 1])])
 
     def boundary(self, config, a: int, edge: float) -> str:
+        if edge in self.ranges[a]:
+            return f"q of {self.names[a]} = {edge:.4g} rad (joints.{self.names[a]}.range, an admissible region)"
         return f"q of {self.names[a]} = {edge:.4g} rad (the search domain: half a turn from the reference)"
 
     def _square(self, lo: float, hi: float, centre: float):

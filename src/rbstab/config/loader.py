@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, Passive, Stop, hinge, single
+from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, single
 from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix
 from ..layout import is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
@@ -599,8 +599,7 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
                 None if sat is None else (lower, upper), "clip" if sat is None else sat.shape,
                 None if passive is None else (float(passive.k_r or 0.0), float(passive.l_r or 0.0),
                                               float(passive.theta_ref or 0.0)),
-                None if j.range is None else Stop(float(j.range.lower), float(j.range.upper), float(j.range.k_r),
-                                                  float(j.range.l_r))))
+                _stop(j.range), _region(j.range)))
             continue
         used = VARIANTS[j.variant].required_gains
         joints.append(Joint(
@@ -742,6 +741,20 @@ def _check_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], 
         inputs = ("simulation.limits", "initial_state", *(("body.attachment_point",) if one_body else ()))
         _refuse(key, short_repr(written.get(key.rpartition(".")[2])), "bounds that contain the initial state",
                 f"{who}: {phrase}", source, overrides, inputs)
+
+
+def _stop(written) -> Stop | None:
+    """A hinge's ``range`` as a stop (``kind: stop``), else None."""
+    if written is None or written.kind != "stop":
+        return None
+    return Stop(float(written.lower), float(written.upper), float(written.k_r), float(written.l_r or 0.0))
+
+
+def _region(written) -> Region | None:
+    """A hinge's ``range`` as an admissible region (``kind: region``), else None."""
+    if written is None or written.kind != "region":
+        return None
+    return Region(float(written.lower), float(written.upper))
 
 
 def _tree_resolved(run: ChainSchema) -> dict:

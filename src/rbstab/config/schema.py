@@ -1065,17 +1065,26 @@ class _JointPassive(_Section):
                           "number (rad; default 0)")
 
 
+#: What a hinge's range means: a stop (a one-sided spring and damper beyond either end) or an
+#: admissible region (a run whose angle leaves it stops there, fell).
+RANGE_KINDS = ("stop", "region")
+
+
 class _JointRange(_Section):
-    """A hinge's range of motion as a stop: beyond either end a one-sided spring and damper."""
+    """A hinge's range of motion: a stop (beyond either end a one-sided spring and damper)
+    or an admissible region (a run that leaves it fell)."""
 
     lower: Annotated[Any, checked(bounded_number(allow_inf=True))] = Field(
         description="a number (rad; the range's lower end, -.inf: none)")
     upper: Annotated[Any, checked(bounded_number(allow_inf=True))] = Field(
         description="a number > lower (rad; the range's upper end, .inf: none)")
-    k_r: Annotated[Any, checked(bounded_number(gt=0))] = Field(
-        description="a number > 0 (N m/rad; the stop's stiffness beyond an end)")
-    l_r: Annotated[Any, checked(bounded_number(ge=0))] = Field(
-        0.0, description="a number >= 0 (N m s/rad; the stop's damping beyond an end; default 0)")
+    kind: Annotated[Any, checked(_choice(RANGE_KINDS))] = Field(
+        "stop", description="stop (default: beyond either end a one-sided spring k_r and damper l_r) or region (an "
+                            "admissible region: a run whose angle leaves it stops there and fell; no k_r, l_r)")
+    k_r: Annotated[Any, checked(optional(bounded_number(gt=0)))] = Field(
+        None, description="a number > 0 (N m/rad; the stop's stiffness beyond an end; required by a stop)")
+    l_r: Annotated[Any, checked(optional(bounded_number(ge=0)))] = Field(
+        None, description="a number >= 0 (N m s/rad; the stop's damping beyond an end; a stop's, default 0)")
 
     @model_validator(mode="after")
     def _ordered(self) -> "_JointRange":
@@ -1083,6 +1092,16 @@ class _JointRange(_Section):
             raise PydanticCustomError("rbstab_invalid", "an empty range", {
                 "subkey": "upper", "found": short_repr(self.upper),
                 "expected": f"a number > lower = {float(self.lower):g} (rad)"})
+        if self.kind == "stop" and self.k_r is None:
+            raise PydanticCustomError("rbstab_missing", "missing", {
+                "subkey": "k_r", "expected": "a number > 0 (N m/rad; the stop's stiffness beyond an end)",
+                "detail": "required by a stop (range.kind: stop, the default; kind: region for an admissible region)"})
+        for key in ("k_r", "l_r") if self.kind == "region" else ():
+            if getattr(self, key) is not None:
+                raise PydanticCustomError("rbstab_invalid", "a region's spring", {
+                    "subkey": key, "found": short_repr(getattr(self, key)), "expected": f"no {key}",
+                    "detail": "an admissible region (range.kind: region) pushes nothing back; a stop (kind: stop) "
+                              "has a spring and damper"})
         return self
 
 
@@ -1191,7 +1210,8 @@ class _ChainJoint(_Section):
                 raise PydanticCustomError("rbstab_invalid", "a reference beyond the range", {
                     "subkey": key, "found": short_repr(value),
                     "expected": f"an angle in the range [{bounds[0]:g}, {bounds[1]:g}] (rad)",
-                    "detail": "the spring would be relaxed where the stop pushes back"})
+                    "detail": "the spring would be relaxed where the stop pushes back" if self.range.kind == "stop"
+                              else "the spring would be relaxed outside the admissible region"})
         for key, value in values:
             if value is None:
                 continue
@@ -1403,6 +1423,17 @@ class ChainSchema(_Section):
                                     f"{', '.join(INITIAL_STATE_BLOCKS)}: the blocks of its state"),
                                    f"'{name}' is {'' if name in hinged else 'not '}a hinge's child"
                                    + ("; its hinge places and turns it" if name in hinged else ""))
+        for j in self.joints:  # a hinge's start inside the admissible region of its range
+            if j.variant != "hinge" or j.range is None or j.range.kind != "region":
+                continue
+            state = self.initial_state.get(j.child)
+            q = 0.0 if state is None or state.q is None else float(state.q)
+            if not float(j.range.lower) <= q <= float(j.range.upper):
+                raise _chain_error(f"initial_state.{j.child}.q", short_repr(q),
+                                   f"an angle in joints.{j.name}.range [{float(j.range.lower):g}, "
+                                   f"{float(j.range.upper):g}] (rad)",
+                                   f"the range of joint '{j.name}' is an admissible region (kind: region), and the "
+                                   "run would start outside it")
         margin = float(self.simulation.gimbal_margin)
         angles = [(f"initial_state.{name}.theta", state.theta) for name, state in self.initial_state.items()]
         angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints

@@ -34,9 +34,10 @@ from ..model import set_limits
 from ..variants.chain import _relative
 from ..variants.disturbances import apply_impulses, next_breakpoint
 from ..variants.kernels import HINGE, PERMANENT, limited_quantities, state_rate
-from ..variants.tree import expand_samples, reduce_states, reduced_size, tree_expand, tree_layout, tree_rate
+from ..variants.tree import (expand_samples, range_margin, reduce_states, reduced_size, tree_expand, tree_layout,
+                             tree_rate)
 from ..variants.tree import tree_impulses as reduced_impulses
-from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES, TREE_GIMBAL
+from .status import GIMBAL_LOCK, LEFT_REGION, PART_CODES, RANGE_LEFT, TREE_GIMBAL
 
 __all__ = ["CHAIN", "TreeSystem", "tree_system", "with_offsets", "tree_rows", "reduce_tree_states", "expand_tree_samples", "tree_margin",
            "tree_impulses", "system_rate", "system_margin", "system_limited",
@@ -230,7 +231,8 @@ def tree_margin(y, p, limit):
     |theta_2| (``limit`` = pi/2 - gimbal_margin [rad]), of the Euler angles the state holds
     (each body's Theta, or the Theta_j of the permanent joint that holds it: eq 1's B is
     singular at |theta_2| = pi/2) and of every other joint's relative Theta_j off the ground
-    (the B(Theta_j) of its feedback, eq 23); with ``simulation.limits`` also
+    (the B(Theta_j) of its feedback, eq 23); each hinge's range that is an admissible
+    region (:func:`rbstab.variants.tree.range_margin`); with ``simulation.limits`` also
     :func:`chain_bounds` on the maximal image. The Euler angles of a permanent joint's
     child are not the state's: they pass pi/2 without harm. The maximal image is made only
     where a bound or such a joint asks for it. The status of a gimbal lock names the body
@@ -246,6 +248,7 @@ def tree_margin(y, p, limit):
         if m < margin:
             margin, status = m, TREE_GIMBAL + 2 * i + (1 if p.codes[i] == PERMANENT else 0)
         relative = relative or (not POINT_FIXED[p.codes[i]] and p.parents[i] >= 0)
+    margin, status = range_margin(y, p.params, p.codes, p.r_at, margin, status, RANGE_LEFT)
     if not (limited or relative):
         return margin, status
     w = p.work

@@ -793,6 +793,9 @@ def _record(chain: Chain, i: int) -> np.ndarray:
         p["stop"] = 1.0
         p["range_lower"], p["range_upper"] = joint.stop.lower, joint.stop.upper
         p["stop_k"], p["stop_l"] = joint.stop.k_r, joint.stop.l_r
+    if joint.region is not None:
+        p["region"] = 1.0
+        p["range_lower"], p["range_upper"] = joint.region.lower, joint.region.upper
     return p
 
 
@@ -1225,8 +1228,9 @@ def gimbal_part_name(compiled: CompiledChain, part: int, joint: bool) -> str:
 def _gimbal_margin(compiled: CompiledChain, y: np.ndarray, margin: float) -> float:
     """min of (pi/2 - margin - |theta_2|) [rad] over the angles of :func:`gimbal_angles` at
     the maximal state ``y``: the run stops where it reaches 0 (eq 1's B(Theta) is singular
-    at |theta_2| = pi/2; the compiled driver's :func:`rbstab.engine.systems.tree_margin`)."""
-    return float(np.min(math.pi / 2 - margin - np.abs(gimbal_angles(compiled, y)[0])))
+    at |theta_2| = pi/2; the compiled driver's :func:`rbstab.engine.systems.tree_margin`);
+    inf for a tree of hinges (no Euler angles)."""
+    return float(np.min(math.pi / 2 - margin - np.abs(gimbal_angles(compiled, y)[0]), initial=math.inf))
 
 
 def locked_part(compiled: CompiledChain, y: np.ndarray) -> tuple[int, bool]:

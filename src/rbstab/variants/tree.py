@@ -56,7 +56,7 @@ from .disturbances import IMPULSE, disturbance_wrench
 from .kernels import HINGE, PERMANENT
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
-           "tree_push", "tree_impulses", "tree_reactions", "reaction_samples",
+           "tree_push", "tree_impulses", "range_margin", "tree_reactions", "reaction_samples",
            "expand_samples", "reduce_state", "reduce_states", "reduced_size", "expand_state"]
 
 
@@ -208,6 +208,26 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
         if d_at[j] >= 0:
             for k in range(3):
                 y[d_at[j] + k] = yr[rd_at[j] + k]
+
+
+@jit(forceinline=True)
+def range_margin(yr, params, codes, r_at, margin, status, first):
+    """(margin, status) after the ranges that are admissible regions (a record's ``region``)
+    of the hinges of the reduced state ``yr``: q - lower and upper - q [rad] of each,
+    smaller than ``margin``, replace it and ``status`` with ``first`` + 2 j (its lower end)
+    or ``first`` + 2 j + 1 (its upper end) for joint j (``first``:
+    :data:`rbstab.engine.status.RANGE_LEFT`)."""
+    for j in range(codes.shape[0]):
+        if codes[j] != HINGE or params[j].region == 0.0:
+            continue
+        q = yr[r_at[j]]
+        m = q - params[j].range_lower
+        if m < margin:
+            margin, status = m, first + 2 * j
+        m = params[j].range_upper - q
+        if m < margin:
+            margin, status = m, first + 2 * j + 1
+    return margin, status
 
 
 @jit(forceinline=True)
