@@ -420,15 +420,43 @@ def test_a_basin_map_without_a_certificate_has_no_contour_in_its_legend(tmp_path
         assert ax.get_xlabel() == "initial_state.omega.0 [rad/s]"
 
 
+def _drawn_example(name: str, tmp_path, monkeypatch) -> tuple[dict, object]:
+    """(the figures of a 0.5 s run of configs/examples/<name>.yaml by file stem, the run)."""
+    saved = {}
+    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
+    _ok("run", ROOT / "configs" / "examples" / f"{name}.yaml", "-o", tmp_path,
+        "--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=51")
+    run = load_inputs([tmp_path / f"{name}.h5"]).runs[0]
+    run_figures(run, FigureWriter(_figures(tmp_path)))
+    return saved, run
+
+
+def test_a_trees_balance_draws_its_centre_of_mass_and_centre_of_pressure(tmp_path, monkeypatch):
+    """A tree on the ground gets a balance figure: the whole-body COM and the ankle's centre
+    of pressure along x and y (g along -z), and the ground's push n'Lambda beside the total
+    weight, as the file holds them; one body's run has none."""
+    saved, run = _drawn_example("stance_hinges", tmp_path, monkeypatch)
+    s = run.series("com_position", "centre_of_pressure", "constraint_force")
+    axes = saved["stance_hinges_balance"].axes
+    for k, ax in enumerate(axes[:2]):
+        com, cop = (line.get_ydata() for line in ax.get_lines()[:2])
+        np.testing.assert_array_equal(com, s["com_position"][:, k])
+        np.testing.assert_array_equal(cop, s["centre_of_pressure"][:, 0, k])
+        assert "ankle" in ax.get_lines()[1].get_label() and len(ax.get_lines()) == 2  # the only joint to the ground
+    push, weight = axes[2].get_lines()[:2]
+    np.testing.assert_array_equal(push.get_ydata(), s["constraint_force"][:, 0, 2])
+    assert weight.get_ydata()[0] == pytest.approx(9.81 * (6.51 + 14.0 + 47.46), rel=1e-12)
+    assert np.ptp(s["centre_of_pressure"][:, 0, 1]) > 0.01  # it moves: the trace is not a flat line
+    saved.clear()
+    _ok("run", PAPER / "case1_permanent.yaml", "-o", tmp_path, "--set", "simulation.n_samples=51")
+    run_figures(load_inputs([tmp_path / "case1_permanent.h5"]).runs[0], FigureWriter(_figures(tmp_path)))
+    assert saved and not any(name.endswith("_balance") for name in saved)
+
+
 def test_a_chains_centre_of_mass_is_drawn_as_its_displacement(tmp_path, monkeypatch):
     """A chain's translational figure draws each body's X - X(0), its start written under
     the axis label: centimetres of sway are not drawn beside the legs' 0.475 m height."""
-    saved = {}
-    monkeypatch.setattr(FigureWriter, "_savefig", lambda self, fig, path, fmt: saved.setdefault(path.stem, fig))
-    _ok("run", ROOT / "configs" / "examples" / "stance_ankle_hip.yaml", "-o", tmp_path,
-        "--set", "simulation.t_end=0.5", "--set", "simulation.n_samples=51")
-    run = load_inputs([tmp_path / "stance_ankle_hip.h5"]).runs[0]
-    run_figures(run, FigureWriter(_figures(tmp_path)))
+    saved, run = _drawn_example("stance_ankle_hip", tmp_path, monkeypatch)
     position = run.series("position")["position"]
     axes = saved["stance_ankle_hip_translational"].axes
     for col, body in enumerate(("legs", "trunk")):

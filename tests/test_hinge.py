@@ -492,6 +492,22 @@ def test_a_hinged_stances_smallest_fatal_push_is_where_its_plain_runs_start_to_f
     assert analysis.push.estimate(analysis.certificate.sublevel) < threshold
 
 
+def test_a_pushs_energy_on_a_hinge_tree_is_the_jump_its_run_takes():
+    """The push analysis's energy of a push on the hinged stance's trunk at rest is the work
+    W the run with that impulse receives at t = 0 (its generalised velocities' jump, the
+    hinges' impulsive reactions keeping them hinges), not a free body's."""
+    from rbstab.analysis.push import Pushes
+
+    config = load_config("configs/examples/stance_hinges.yaml", ["simulation.t_end=0.1", "simulation.n_samples=3"])
+    pushes = Pushes(config, "force", body="trunk", point=(0.0, 0.0, 0.2))
+    energy = pushes.energy(np.array([[0.0, 10.0, 0.0]]))[0]
+    entry = {"kind": "impulse", "quantity": "force", "body": "trunk", "value": [0.0, 10.0, 0.0],
+             "point": [0.0, 0.0, 0.2], "start": 0.0}
+    result = simulate(config_from_mapping({**pushes.config.resolved, "disturbances": [entry]}))
+    assert energy == pytest.approx(result.outputs["disturbance_work"][0], rel=1e-12)
+    assert energy < 10.0 ** 2 / (2 * 47.46) + 0.2 ** 2 * 10.0 ** 2 / (2 * 2.97)  # the trunk alone, free: more
+
+
 def test_a_hinge_trees_analysis_says_what_it_leaves_out():
     """A basin axis or a basin-stability range that is not a hinge's q or u is refused in one
     line naming the keys allowed."""

@@ -25,6 +25,7 @@ from rbstab.model import Saturation
 from rbstab.simulator import simulate
 from rbstab.variants import VARIANTS
 from rbstab.variants import chain as C
+from rbstab.variants.disturbances import IMPULSE
 
 D = np.diag
 ROOT = Path(__file__).resolve().parents[1]
@@ -410,8 +411,12 @@ def _maximal_run(compiled, y0, sim, at=None):
     edges = [0.0, sim.t_end] if at is None else [0.0, at, sim.t_end]
     y, out, jump = y0.copy(), np.empty((time.size, y0.size)), 0.0
     for a, b in zip(edges[:-1], edges[1:]):
-        if a > 0.0:
-            jump += C.chain_impulses(a, y, *compiled.args[:4], C.chain_work(compiled.size))
+        if a > 0.0:  # every impulse that starts at a, one after the other, on the maximal state
+            for i, p in enumerate(compiled.params):
+                for k in range(int(p["disturbance_count"])):
+                    if p["disturbance_kind"][k] == IMPULSE and p["disturbance_start"][k] == a:
+                        jump += C.chain_push(y, *compiled.args[:4], i, p["disturbance_point"][k],
+                                             p["disturbance_value"][k], bool(p["disturbance_torque"][k]))
         rows = np.flatnonzero((time >= a) & ((time < b) if b < sim.t_end else (time <= b)))
         t_eval = time[rows] if b == sim.t_end else np.append(time[rows], b)
         sol = solve_ivp(rhs, (a, b), y, method=sim.method, t_eval=t_eval, rtol=sim.rtol, atol=sim.atol)

@@ -173,6 +173,7 @@ class Pushes:
                  ratio: float = DEFAULT_LYAPUNOV_RATIO, engine: str = "compiled", executor=None, jobs: int = 1) -> None:
         from ..model import MAX_DISTURBANCES  # heavy: numba
         from ..variants import chain as C  # heavy: numba
+        from ..variants.tree import reduce_state, tree_layout  # heavy: numba
 
         self.kind, self.at, self.ratio = kind, float(at), float(ratio)
         self.point = np.zeros(3) if point is None or kind == "torque" else np.asarray(point, dtype=float)
@@ -209,6 +210,8 @@ class Pushes:
             entry["point"] = self.point.tolist()
         self._compiled = C.compile_chain(chain, offset=0.0)  # dT does not depend on v's offset
         self.equilibrium, initial = _rest(config, tree)
+        self._layout = tree_layout(self._compiled)
+        self._rest_reduced = reduce_state(self._compiled, self._layout, self.equilibrium)
         if tree:
             entry["body"] = body
         self.config = self._pushed_config(config, {**resolved, "initial_state": initial, "disturbances": own + [entry]})
@@ -243,12 +246,14 @@ class Pushes:
 
     def energy(self, vectors: np.ndarray) -> np.ndarray:
         """dT [J] of each push of ``vectors`` (k, 3) on the bodies at rest: the kinetic
-        energy of the jump (:func:`rbstab.variants.chain.chain_push`; quadratic in the push)."""
-        from ..variants import chain as C  # heavy: numba
+        energy of the jump of the generalised velocities (:func:`rbstab.variants.tree.tree_push`;
+        quadratic in the push)."""
+        from ..variants.tree import tree_push, tree_work  # heavy: numba
 
         vectors = np.asarray(vectors, dtype=float).reshape(-1, 3)
-        return np.array([C.chain_push(self.equilibrium.copy(), *self._compiled.args[:4], self._member, self.point, p,
-                                      self.kind == "torque") for p in vectors], dtype=float)
+        work = tree_work(self._compiled.size, self._compiled.n_states)
+        return np.array([tree_push(self._rest_reduced.copy(), *self._compiled.args, *self._layout.args, self._member,
+                                   self.point, p, self.kind == "torque", work) for p in vectors], dtype=float)
 
     def recovered(self, vectors: np.ndarray, energy: np.ndarray | None = None) -> np.ndarray:
         """Whether the runs pushed by ``vectors`` (k, 3) recover (:data:`RECOVERY_RULE`);

@@ -37,7 +37,6 @@ from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATUR
 from ..variants import VARIANTS
 from ..variants import chain as C
 from ..variants.paper import paper_form, paper_initial_state
-from ..variants.registry import record_offset
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
@@ -313,10 +312,13 @@ def _bodies_from_table(templates: Sequence[Mapping], keys: Sequence[str], column
             _disturbances(part, f, t, range(len(templates[t]["disturbances"])))
             p[rows] = part
     set_limits(p, _bounds(f, templates))
-    p["lyapunov_offset"] = _offsets(p, names, gravity)
+    trees = tuple(_one_body_tree(t) for t in templates)
+    for t, rows in f.groups:
+        p["lyapunov_offset"][rows] = _tree_offsets(trees[t], p[rows, None], p["attachment_point"][rows, None],
+                                                   gravity[rows])
     settings = _settings(f, templates, timeout)
     sign_law = sliding & (p["boundary_layer"] == 0)
-    return RunBatch(trees=tuple(_one_body_tree(t) for t in templates), tree=f.template.copy(), params=p[:, None],
+    return RunBatch(trees=trees, tree=f.template.copy(), params=p[:, None],
                     ppoints=p["attachment_point"][:, None].copy(), offset=p["lyapunov_offset"].copy(),
                     y0=_initial_states(f, code), n_state=np.asarray(STATE_SIZE, dtype=np.int64)[code],
                     settings=settings, n_samples=f.get("simulation", "n_samples").astype(np.int64),
@@ -399,20 +401,6 @@ def _initial_states(f: TableFields, code: np.ndarray) -> np.ndarray:
         if len(rows):
             y0[rows, : layout.size] = np.concatenate([blocks[b][rows] for b in layout.blocks], axis=1)
     return y0
-
-
-def _offsets(p: np.ndarray, names: np.ndarray, gravity: np.ndarray) -> np.ndarray:
-    """h [J] of each run (``Variant.lyapunov_offset``): 0 without gravity, else the
-    variant's equilibrium, once per distinct record."""
-    out = np.zeros(len(p))
-    heavy = np.flatnonzero(np.any(p["weight"] != 0, axis=1))
-    if not len(heavy):
-        return out
-    keys = np.array([p[i].tobytes() + gravity[i].tobytes() + names[i].encode() for i in heavy], dtype=object)
-    _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    found = np.array([record_offset(p[heavy[i]], gravity[heavy[i]], names[heavy[i]]) for i in first])
-    out[heavy] = found[inverse.ravel()]
-    return out
 
 
 # -- trees -----------------------------------------------------------------------------------------
@@ -643,11 +631,17 @@ def _hinged_initial_states(config, keys: Sequence[str], columns: Mapping[str, np
 def _tree_offsets(tree, params: np.ndarray, ppoints: np.ndarray, gravity: np.ndarray) -> np.ndarray:
     """h [J] of k runs of the tree ``tree`` (its structure) with the records ``params`` (k,
     n), parent points ``ppoints`` (k, n, 3) and gravity (k, 3):
-    :func:`rbstab.variants.chain.rest_offset` once per distinct tree."""
-    keys = np.array([params[a].tobytes() + ppoints[a].tobytes() + gravity[a].tobytes() for a in range(len(params))],
-                    dtype=object)
-    if not len(keys):
-        return np.zeros(0)
+    :func:`rbstab.variants.chain.rest_offset` once per distinct tree (0 without gravity and
+    reference postures)."""
+    out = np.zeros(len(params))
+    posed = np.any(gravity != 0, axis=1) | np.any(params["theta_ref"] != 0, axis=(1, 2)) | np.any(
+        params["passive_theta_ref"] != 0, axis=(1, 2))
+    rows = np.flatnonzero(posed)
+    if not len(rows):
+        return out
+    keys = np.array([params[a].tobytes() + ppoints[a].tobytes() + gravity[a].tobytes() for a in rows], dtype=object)
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    found = np.array([C.rest_offset(C.with_records(tree, params[a], ppoints[a], gravity=gravity[a])) for a in first])
-    return found[inverse.ravel()]
+    found = np.array([C.rest_offset(C.with_records(tree, params[rows[a]], ppoints[rows[a]], gravity=gravity[rows[a]]))
+                      for a in first])
+    out[rows] = found[inverse.ravel()]
+    return out

@@ -455,7 +455,9 @@ def run_figures(run: RunData, out: FigureWriter) -> list[FigureFile]:
         Figs 3, 4, 6), ``<label>_translational`` (X [m], V [m/s], D [m] for ``embedded``,
         E [m]; Figs 5, 7), ``<label>_lyapunov`` (v [J] and its terms, log scale; analytic
         and numerical dv/dt [W]; their difference [W]), ``<label>_forces`` (Lambda [N],
-        H [N], N [N m]), ``<label>_phase`` (E_i against F_i, Theta_i against Omega_i) and,
+        H [N], N [N m]), for a tree on the ground ``<label>_balance`` (:func:`_balance_figure`:
+        the centre of mass and the centres of pressure [m], the ground's push [N]),
+        ``<label>_phase`` (E_i against F_i, Theta_i against Omega_i) and,
         for a run of the pure sign law, ``<label>_switching`` (:func:`switching_figure`).
         A figure whose variables the file does not hold (a thinned store) is left out.
     """
@@ -673,6 +675,60 @@ def _phase_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
                     + f", from the start (green circle) to the last sample (black square).{note}")
 
 
+def _horizontal_axes(gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(e_1, e_2, n): two orthonormal directions of the ground plane (perpendicular to
+    gravity g) and its upward normal n = -g/|g|; e_1 the inertial axis with the largest part
+    in the plane, projected (g along -z: e_1 = x, e_2 = y)."""
+    n = -gravity / np.linalg.norm(gravity)
+    axes = np.eye(3) - np.outer(np.eye(3) @ n, n)
+    e1 = axes[int(np.argmax(np.linalg.norm(axes, axis=1)))]
+    e1 = e1 / np.linalg.norm(e1)
+    return e1 + 0.0, np.cross(n, e1) + 0.0, n  # + 0.0: no -0 in the labels
+
+
+def _balance_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
+    """A tree's balance on the ground (None for a run without a centre of pressure): the
+    whole-body centre of mass and each ground joint's centre of pressure along the two
+    directions of the ground plane, and the ground's push n'Lambda_j beside the total
+    weight, against time (posturography's COM-COP traces)."""
+    held = run.series("com_position", "centre_of_pressure", "constraint_force")
+    if run.members is None or not {"com_position", "centre_of_pressure"} <= set(held):
+        return None
+    cop = held["centre_of_pressure"]
+    ground = [j for j in range(cop.shape[1]) if np.isfinite(cop[:, j]).any()]
+    gravity = np.asarray(run.config.get("gravity") or [0.0, 0.0, 0.0], dtype=float)
+    if not ground or not np.any(gravity):
+        return None
+    e1, e2, n = _horizontal_axes(gravity)
+    time, com = held["time"], held["com_position"]
+    fig, axes = new_figure(3 if "constraint_force" in held else 2, 1)
+    for ax, e, k in zip(axes[:2, 0], (e1, e2), (1, 2)):
+        ax.plot(time, com @ e, color="k", label="COM")
+        for c, j in zip(colours(len(ground)), ground):
+            ax.plot(time, cop[:, j] @ e, color=c, marker=_marker(cop[:, j, 0]),
+                    label=f"COP, {run.members['joint'][j]}")
+        ax.set_ylabel(f"along $e_{k}$ = [{', '.join(f'{v:.3g}' for v in e)}] [m]", fontsize=8)
+    if "constraint_force" in held:
+        ax = axes[2, 0]
+        for c, j in zip(colours(len(ground)), ground):
+            ax.plot(time, held["constraint_force"][:, j] @ n, color=c,
+                    label=f"$n' \\Lambda$, {run.members['joint'][j]}")
+        weight = float(np.linalg.norm(gravity)) * float(sum(b["mass"] for b in run.config.get("bodies") or ()))
+        ax.axhline(weight, color="0.4", ls=":", lw=0.9, label="total weight")
+        ax.set_ylabel("ground's push [N]", fontsize=8)
+    _finish_time_axes(axes[:, 0], run, ncols=3)
+    _suptitle(fig, run, "balance: centre of mass and centre of pressure")
+    return out.save(fig, f"{safe_filename(run.label)}_balance", f"{run.label}: balance",
+                    "The whole-body centre of mass (black) and the centre of pressure of each joint to the ground "
+                    "(its point on the ground plane, perpendicular to g, where the ground's force and moment have no "
+                    "moment along the plane; docs/physics.md, 'The centre of pressure') along the plane's two "
+                    "directions e_1, e_2 [m]"
+                    + (", and the ground's push n' Lambda_j [N] (n = -g/|g|) beside the total weight (dotted)"
+                       if "constraint_force" in held else "")
+                    + " against time; the centre of pressure is undefined (not drawn) where the ground does not push"
+                    + _marks_caption(run) + ".")
+
+
 def switching_figure(run: RunData, out: FigureWriter) -> FigureFile | None:
     """The located events of a pure-sign-law run (None for other runs): per axis of E, the
     crossings of E_i = 0 against time with the sliding intervals shaded, and the histogram
@@ -722,8 +778,8 @@ def _switching_raster(ax, run: RunData, s: dict, i: int) -> np.ndarray:
 #: The functions that draw the figures of a run, in the page's order (:func:`run_figures`):
 #: each ``make(run, out)`` writes one figure and returns its FigureFile, or None when the
 #: run does not have it.
-RUN_FIGURES = (_rotational_figure, _translational_figure, lyapunov_figure, _forces_figure, _phase_figure,
-               switching_figure)
+RUN_FIGURES = (_rotational_figure, _translational_figure, lyapunov_figure, _forces_figure, _balance_figure,
+               _phase_figure, switching_figure)
 
 
 # -- several runs -----------------------------------------------------------------------------------

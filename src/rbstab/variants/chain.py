@@ -55,7 +55,7 @@ from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "reference_posture", "records_of", "is_one_body", "one_body_mask", "papers_feedback", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
-           "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_impulses", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
@@ -553,22 +553,6 @@ def chain_push_with(y, params, codes, parents, ppoints, body, point, value, torq
         _put(y, 12 * i + 9, v_i)
         after += 0.5 * p.mass * dot(v_i, v_i) + 0.5 * quadratic_form(omega, p.inertia)
     return after - before
-
-
-@jit(_nrt=False)
-def chain_impulses(t, y, params, codes, parents, ppoints, work):
-    """Apply the impulses of every body's disturbances that start at ``t`` [s] to the state
-    ``y`` in place (:func:`chain_push_with`, one after the other); returns their energy, the
-    jump of the kinetic energy [J] (0 where none starts at t). ``work``: scratch arrays
-    (:class:`ChainWork`)."""
-    jump = 0.0
-    for i in range(codes.shape[0]):
-        p = params[i]
-        for k in range(int(p.disturbance_count)):
-            if p.disturbance_kind[k] == IMPULSE and p.disturbance_start[k] == t:
-                jump += chain_push_with(y, params, codes, parents, ppoints, i, p.disturbance_point[k],
-                                        p.disturbance_value[k], p.disturbance_torque[k] != 0.0, work)
-    return jump
 
 
 @jit
