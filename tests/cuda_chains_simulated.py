@@ -78,6 +78,21 @@ def ranged_chain(rate: float):
     return config_from_mapping(data)
 
 
+def stopped_chain(theta: float):
+    """:func:`pulsed_chain` with the wrist's Euler angles within a stop (its theta_1 beyond
+    [-0.03, 0.15] rad pushed back) and the shoulder's within an admissible region (theta_1
+    in [-0.003, 0.42] rad: the upper body tilted 0.2 rad swings out of it through its lower
+    end, the one tilted 0.4 rad leaves simulation.limits first)."""
+    from rbstab.config.loader import config_from_mapping
+
+    data = pulsed_chain(theta).resolved
+    data["name"] = "stopped3"
+    data["joints"][0]["range"] = {"lower": [-0.003, -1.0, -1.0], "upper": [0.42, 1.0, 1.0], "kind": "region"}
+    data["joints"][2]["range"] = {"lower": [-0.03, -1.0, -1.0], "upper": [0.15, 1.0, 1.0], "k_r": [80.0, 80.0, 80.0],
+                                  "l_r": 0.5}
+    return config_from_mapping(data)
+
+
 def cases(root: str):
     """name -> (configs of chains of one structure: its runs)."""
     from rbstab.config.loader import load_config
@@ -105,6 +120,7 @@ def cases(root: str):
         "pushed3": [pulsed_chain(theta, impulses=True) for theta in (0.2, 0.4)],
         "hinged3": [hinged_chain(theta) for theta in (0.2, 0.4)],
         "ranged3": [ranged_chain(rate) for rate in (-0.5, -1.5)],  # the second leaves
+        "stopped3": [stopped_chain(theta) for theta in (0.2, 0.4)],  # both leave: the region, simulation.limits
     }
 
 

@@ -23,7 +23,8 @@ def simulated(tmp_path_factory):
 @pytest.mark.parametrize("case, bodies, status", [
     ("stance", 2, [0, 0, 0, -3]), ("params", 2, [0, 0, 0, limit_status(0, 0, 1)]), ("knee", 2, [0, 0]),
     ("pulsed3", 3, [0, limit_status(0, 0, 2)]), ("pushed3", 3, [0, limit_status(0, 0, 2)]),  # |theta_1| of body 1, 2
-    ("hinged3", 3, [0, limit_status(0, 0, 2)]), ("ranged3", 3, [0, range_status(1, False)]),
+    ("hinged3", 3, [0, limit_status(0, 0, 2)]), ("ranged3", 3, [0, range_status(1, 0, False)]),
+    ("stopped3", 3, [range_status(0, 0, False), limit_status(0, 0, 2)]),
     ("locked", 2, [gimbal_status(1, True), gimbal_status(0, True)])])  # the hip's, the ankle's Theta_j
 def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bodies, status):
     """The stance example (permanent joints, saturated torques; one run stopped by its step
@@ -31,7 +32,8 @@ def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bo
     message naming it), the knee (visco-elastic and embedded joints), three bodies with a pulse and an
     admissible region that one run leaves, the same with impulses at 0, inside the run
     and at t_end, and with two hinges (one clipped, one with a passive torque), one run
-    leaving the elbow's range (an admissible region) at its lower end;
+    leaving the elbow's range (an admissible region) at its lower end, and with ball joints'
+    ranges (the elbow's stop, the shoulder's region, which one run leaves);
     runs of stance chains with other masses, gains, a parent point and an
     admissible region, a tree a run in one call (each run as the run alone): every run's status, t_stop, nfev, n_steps and its state and work W at every
     sample (and every 3rd, stride 3) equal the CPU driver's; simulate(engine="cuda")

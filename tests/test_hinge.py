@@ -239,7 +239,7 @@ def test_a_run_that_leaves_a_range_that_is_an_admissible_region_stops_there_on_e
     system, layout = tree_system(compiled), tree_layout(compiled)
     y0 = reduce_state(compiled, layout, C.initial_state(config))[None]
     ends = integrate_chain_runs(system, y0, settings_rows([config.simulation]), method="DOP853", n_samples=2)
-    assert ends.status.tolist() == [range_status(1, True)]
+    assert ends.status.tolist() == [range_status(1, 0, True)]
     t_stop = float(ends.t_stop[0])
     axis = np.array(AXES[1]) / np.linalg.norm(AXES[1])
     data["simulation"].update(t_end=t_stop, n_samples=2)
@@ -384,9 +384,14 @@ def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
     (lambda d: d["joints"][1].update(range={"lower": 0.0, "upper": 0.2, "k_r": 0.0}), "joints.1.range.k_r", "> 0"),
     (lambda d: d["joints"][1].update(range={"lower": 0.0, "upper": 0.2, "k_r": 100.0}), "joints.1.theta_ref",
      "in the range [0, 0.2]"),
-    (lambda d: d["joints"][1].update(variant="permanent", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0] * 3,
-                                     range={"lower": 0.0, "upper": 0.2, "k_r": 100.0}) or d["joints"][1].pop("axis"),
-     "joints.1.range", "a range is a hinge's"),
+    (lambda d: d["joints"][1].update(variant="visco_elastic", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0] * 3,
+                                     k_c=[10.0] * 3, l_c=[1.0] * 3, range={"lower": 0.0, "upper": 0.2, "k_r": 100.0})
+     or d["joints"][1].pop("axis"), "joints.1.range", "a range is a hinge's (of its angle q) or a ball's"),
+    (lambda d: d["joints"][1].update(range={"lower": [0.0] * 3, "upper": 0.2, "k_r": 100.0}), "joints.1.range.lower",
+     "a number: a hinge's range is of its angle q"),
+    (lambda d: d["joints"][1].update(variant="permanent", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0, 0.3, 0.0],
+                                     range={"lower": [-1, -0.2, -1], "upper": [1, 0.2, 1], "kind": "region"})
+     or d["joints"][1].pop("axis"), "joints.1.theta_ref", "in the range theta_1 in [-1, 1], theta_2 in [-0.2, 0.2]"),
     (lambda d: d["joints"][1].update(range={"lower": -0.6, "upper": 0.2}), "joints.1.range.k_r", "required by a stop"),
     (lambda d: d["joints"][1].update(range={"lower": -0.6, "upper": 0.2, "kind": "region", "l_r": 1.0}),
      "joints.1.range.l_r", "no l_r"),

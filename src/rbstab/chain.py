@@ -88,36 +88,38 @@ class Passive:
 
 @dataclass(frozen=True, eq=False)
 class Stop:
-    """A hinge's range of motion as a stop (a knee's hyperextension, MJCF's joint ``range``):
-    beyond either end of [``lower``, ``upper``] a one-sided spring and damper, never limited,
-    n_s = -k_r (q - end) - l_r dq/dt [N m] about the hinge's axis; its energy 1/2 k_r (q -
-    end)^2 is v's and its dissipation l_r (dq/dt)^2 is in dv/dt there; zero inside.
+    """A joint's range of motion as a stop (a knee's hyperextension, MJCF's joint ``range``):
+    beyond either end of [``lower``, ``upper``] a one-sided spring and damper on each
+    coordinate, never limited: a hinge's n_s = -k_r (q - end) - l_r dq/dt [N m] about its
+    axis; a ball's on each Euler angle theta_i of Theta_j, N_s = B(Theta_j)' f with f_i =
+    -k_r,i (theta_i - end_i) - l_r,i dtheta_i/dt. Its energy 1/2 k_r (q - end)^2 is v's and
+    its dissipation l_r (dq/dt)^2 is in dv/dt there; zero inside.
 
     Attributes
     ----------
-    lower, upper : float
+    lower, upper : float, or ndarray of shape (3,) for a ball
         The range's ends [rad], lower < upper (-inf, inf: none on that side).
-    k_r : float
+    k_r : float, or ndarray of shape (3,) for a ball
         The stop's stiffness [N m/rad], > 0.
-    l_r : float
+    l_r : float, or ndarray of shape (3,) for a ball
         Its damping [N m s/rad], >= 0.
     """
 
-    lower: float
-    upper: float
-    k_r: float
-    l_r: float = 0.0
+    lower: float | np.ndarray
+    upper: float | np.ndarray
+    k_r: float | np.ndarray
+    l_r: float | np.ndarray = 0.0
 
 
 @dataclass(frozen=True, eq=False)
 class Region:
-    """A hinge's range of motion as an admissible region: a run whose angle q leaves
-    [``lower``, ``upper``] [rad] (lower < upper; -inf, inf: no end on that side) stops where
-    it reaches an end, and fell (as one that leaves ``simulation.limits``); no torque acts
-    inside it."""
+    """A joint's range of motion as an admissible region: a run whose hinge angle q, or one of
+    whose ball's Euler angles Theta_j, leaves [``lower``, ``upper``] [rad] (lower < upper;
+    -inf, inf: no end on that side; a ball's (3,) each) stops where it reaches an end, and
+    fell (as one that leaves ``simulation.limits``); no torque acts inside it."""
 
-    lower: float
-    upper: float
+    lower: float | np.ndarray
+    upper: float | np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -167,9 +169,10 @@ class Joint:
     axis : ndarray, shape (3,)
         A hinge's unit axis a (the parent's and the child's frames); zero for any other joint.
     stop : Stop or None
-        A hinge's range of motion as a stop; None: none.
+        A hinge's or a ball's (``permanent``) range of motion as a stop; None: none.
     region : Region or None
-        A hinge's range of motion as an admissible region (not with ``stop``); None: none.
+        A hinge's or a ball's range of motion as an admissible region (not with ``stop``);
+        None: none.
     """
 
     name: str

@@ -169,6 +169,9 @@ def check_verifiable(config) -> None:
     if joint.variant != "permanent":
         raise NotVerifiable(f"{_key(config, 'joint', 'variant')}: found {joint.variant!r} (its analysis runs on more "
                             "than 6 states); --verify covers the reduced 6-state model of 'permanent'")
+    if joint.stop is not None or joint.region is not None:
+        raise NotVerifiable(f"{_key(config, 'joint', 'range')}: found a range of the ball's Euler angles; --verify "
+                            "of one body covers the paper's joint (its bounds of theta in simulation.limits)")
     if joint.saturation is not None and joint.saturation.torque_n_lower is not None and not np.array_equal(
             joint.saturation.torque_n_lower, -np.asarray(joint.saturation.torque_n)):
         raise NotVerifiable(f"{_key(config, 'joint', 'saturation.torque_n_lower')}: found "
@@ -525,10 +528,10 @@ class _HingeModel:
         self.k_r = np.diag(total)
         self.reference = np.array([(k * r + kp * rp) / (k + kp) if k + kp > 0 else r
                                    for k, r, kp, rp in self.springs])
-        self.stops = [(float(p["range_lower"]), float(p["range_upper"]), float(p["stop_k"])) if p["stop"] > 0 else None
-                      for p in params]
+        self.stops = [(float(p["range_lower"][0]), float(p["range_upper"][0]), float(p["stop_k"][0]))
+                      if p["stop"] > 0 else None for p in params]
         # a range that is an admissible region: the domain's faces there (a run that reaches one fell)
-        self.ranges = np.array([(p["range_lower"], p["range_upper"]) if p["region"] > 0 else (-np.inf, np.inf)
+        self.ranges = np.array([(p["range_lower"][0], p["range_upper"][0]) if p["region"] > 0 else (-np.inf, np.inf)
                                 for p in params], dtype=float)
         self.R_c = [[arb(float(x)) for x in p["attachment_point"]] for p in params]
         self.R_p = [[arb(float(x)) for x in r] for r in compiled.ppoints]

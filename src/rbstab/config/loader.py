@@ -84,6 +84,7 @@ from .schema import (
     limits_violation,
     problem_line,
     short_repr,
+    within_range,
 )
 from .yaml_io import dump_yaml, dump_yaml_sections, read_yaml_file
 
@@ -599,7 +600,7 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
                 None if sat is None else (lower, upper), "clip" if sat is None else sat.shape,
                 None if passive is None else (float(passive.k_r or 0.0), float(passive.l_r or 0.0),
                                               float(passive.theta_ref or 0.0)),
-                _stop(j.range), _region(j.range)))
+                _stop(j.range, None), _region(j.range, None)))
             continue
         used = VARIANTS[j.variant].required_gains
         joints.append(Joint(
@@ -613,7 +614,8 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
             theta_ref=np.zeros(3) if j.theta_ref is None else _array(j.theta_ref),
             passive=None if j.passive is None else Passive(
                 k_r=_gain(j.passive.k_r), l_r=_gain(j.passive.l_r),
-                theta_ref=np.zeros(3) if j.passive.theta_ref is None else _array(j.passive.theta_ref))))
+                theta_ref=np.zeros(3) if j.passive.theta_ref is None else _array(j.passive.theta_ref)),
+            stop=_stop(j.range, 3), region=_region(j.range, 3)))
     return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(run.gravity))
 
 
@@ -684,6 +686,16 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
                             source, overrides, ("initial_state", "joints", "bodies"))
         relative = a_p.T @ a_c  # A_rel = A_p' A_c; with A = Rx Ry Rz, A_rel[0, 2] = sin(theta_2)
         theta_2 = math.asin(max(-1.0, min(1.0, float(relative[0, 2]))))
+        region = joint.region
+        if region is not None and joint.variant != "hinge":  # a ball's Theta_j inside its range's region
+            theta_j = euler_angles_of(relative)
+            if not np.all((region.lower <= theta_j) & (theta_j <= region.upper)):
+                _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
+                        f"an orientation of '{body.name}' relative to '{parent}' with joints.{joint.name}.range's "
+                        + within_range((region.lower, region.upper)),
+                        f"Theta_j = {short_repr([float(f'{x:.6g}') for x in theta_j])} rad; the range is an "
+                        "admissible region (kind: region), and the run would start outside it",
+                        source, overrides, ("initial_state", "joints"))
         if joint.parent != GROUND and joint.variant != "hinge" and abs(theta_2) >= math.pi / 2 - margin:
             _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
                     f"an orientation of '{body.name}' relative to '{parent}' with |theta_2| < pi/2 - gimbal_margin "
@@ -743,18 +755,28 @@ def _check_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], 
                 f"{who}: {phrase}", source, overrides, inputs)
 
 
-def _stop(written) -> Stop | None:
-    """A hinge's ``range`` as a stop (``kind: stop``), else None."""
+def _range_value(value: Any, shape: int | None) -> float | np.ndarray:
+    """A range's number as a hinge's float (``shape`` None), or a ball's 3 (one broadcast)."""
+    if shape is None:
+        return float(value)
+    out = np.broadcast_to(np.asarray(value, dtype=float), (shape,)).copy()
+    out.setflags(write=False)
+    return out
+
+
+def _stop(written, shape: int | None) -> Stop | None:
+    """A hinge's (``shape`` None) or a ball's (3) ``range`` as a stop (``kind: stop``), else None."""
     if written is None or written.kind != "stop":
         return None
-    return Stop(float(written.lower), float(written.upper), float(written.k_r), float(written.l_r or 0.0))
+    return Stop(*(_range_value(v, shape) for v in (written.lower, written.upper, written.k_r, written.l_r or 0.0)))
 
 
-def _region(written) -> Region | None:
-    """A hinge's ``range`` as an admissible region (``kind: region``), else None."""
+def _region(written, shape: int | None) -> Region | None:
+    """A hinge's (``shape`` None) or a ball's (3) ``range`` as an admissible region (``kind:
+    region``), else None."""
     if written is None or written.kind != "region":
         return None
-    return Region(float(written.lower), float(written.upper))
+    return Region(_range_value(written.lower, shape), _range_value(written.upper, shape))
 
 
 def _tree_resolved(run: ChainSchema) -> dict:

@@ -65,6 +65,7 @@ __all__ = [
     "clear_of_gimbal_lock",
     "inside_limits",
     "limits_violation",
+    "within_range",
     "samples_apart",
     "steps_suffice",
     "Invalid",
@@ -1065,33 +1066,58 @@ class _JointPassive(_Section):
                           "number (rad; default 0)")
 
 
-#: What a hinge's range means: a stop (a one-sided spring and damper beyond either end) or an
-#: admissible region (a run whose angle leaves it stops there, fell).
+#: What a joint's range means: a stop (a one-sided spring and damper beyond either end) or an
+#: admissible region (a run whose coordinate leaves it stops there, fell).
 RANGE_KINDS = ("stop", "region")
 
 
-class _JointRange(_Section):
-    """A hinge's range of motion: a stop (beyond either end a one-sided spring and damper)
-    or an admissible region (a run that leaves it fell)."""
+def _per_coordinate(**bounds) -> Callable[[Any], Any]:
+    """A check of a range's number: one (a hinge's; a ball's for each Euler angle) or 3 (a
+    ball's, one per Euler angle of Theta_j) within ``bounds`` (:func:`bounded_number`'s)."""
+    def check(value: Any) -> Any:
+        return _per_axis(value, bounded_number(**bounds))
 
-    lower: Annotated[Any, checked(bounded_number(allow_inf=True))] = Field(
-        description="a number (rad; the range's lower end, -.inf: none)")
-    upper: Annotated[Any, checked(bounded_number(allow_inf=True))] = Field(
-        description="a number > lower (rad; the range's upper end, .inf: none)")
+    check.rule = ("limits", {"gt": None, "ge": None, "lt": None, "le": None, "allow_inf": False, "integer": False,
+                             **bounds})
+    check.shape = (VECTOR_LENGTH,)
+    return check
+
+
+def within_range(bounds: tuple[np.ndarray, np.ndarray]) -> str:
+    """What a range (lower, upper) allows, as a message writes it: ``an angle in the range [0,
+    0.2] (rad)`` (a hinge's), or each Euler angle in its own (a ball's)."""
+    lower, upper = np.broadcast_arrays(*bounds)
+    if lower.ndim == 0:
+        return f"an angle in the range [{float(lower):g}, {float(upper):g}] (rad)"
+    return "Euler angles in the range " + ", ".join(f"theta_{i + 1} in [{float(a):g}, {float(b):g}]"
+                                                     for i, (a, b) in enumerate(zip(lower, upper))) + " (rad)"
+
+
+class _JointRange(_Section):
+    """A hinge's or a ball's range of motion: a stop (beyond either end a one-sided spring
+    and damper) or an admissible region (a run that leaves it fell)."""
+
+    lower: Annotated[Any, checked(_per_coordinate(allow_inf=True))] = Field(
+        description="a number (rad; the range's lower end, -.inf: none); a ball's: 3, one per Euler angle of Theta_j")
+    upper: Annotated[Any, checked(_per_coordinate(allow_inf=True))] = Field(
+        description="a number > lower (rad; the range's upper end, .inf: none); a ball's: 3")
     kind: Annotated[Any, checked(_choice(RANGE_KINDS))] = Field(
         "stop", description="stop (default: beyond either end a one-sided spring k_r and damper l_r) or region (an "
                             "admissible region: a run whose angle leaves it stops there and fell; no k_r, l_r)")
-    k_r: Annotated[Any, checked(optional(bounded_number(gt=0)))] = Field(
-        None, description="a number > 0 (N m/rad; the stop's stiffness beyond an end; required by a stop)")
-    l_r: Annotated[Any, checked(optional(bounded_number(ge=0)))] = Field(
-        None, description="a number >= 0 (N m s/rad; the stop's damping beyond an end; a stop's, default 0)")
+    k_r: Annotated[Any, checked(optional(_per_coordinate(gt=0)))] = Field(
+        None, description="a number > 0 (N m/rad; the stop's stiffness beyond an end; required by a stop); a ball's: "
+                          "one or 3")
+    l_r: Annotated[Any, checked(optional(_per_coordinate(ge=0)))] = Field(
+        None, description="a number >= 0 (N m s/rad; the stop's damping beyond an end; a stop's, default 0); a "
+                          "ball's: one or 3")
 
     @model_validator(mode="after")
     def _ordered(self) -> "_JointRange":
-        if not float(self.lower) < float(self.upper):
+        lower, upper = np.broadcast_arrays(np.asarray(self.lower, dtype=float), np.asarray(self.upper, dtype=float))
+        if not np.all(lower < upper):
             raise PydanticCustomError("rbstab_invalid", "an empty range", {
                 "subkey": "upper", "found": short_repr(self.upper),
-                "expected": f"a number > lower = {float(self.lower):g} (rad)"})
+                "expected": f"a number > lower = {short_repr(self.lower)} (rad), each entry"})
         if self.kind == "stop" and self.k_r is None:
             raise PydanticCustomError("rbstab_missing", "missing", {
                 "subkey": "k_r", "expected": "a number > 0 (N m/rad; the stop's stiffness beyond an end)",
@@ -1196,20 +1222,28 @@ class _ChainJoint(_Section):
             raise PydanticCustomError("rbstab_invalid", "an axis", {
                 "subkey": "axis", "found": short_repr(self.axis), "expected": "no axis",
                 "detail": f"an axis is a hinge's (variant: hinge); a '{self.variant}' joint turns about all three"})
-        if not hinge and self.range is not None:
+        if self.range is not None and self.variant not in ("hinge", "permanent"):
             raise PydanticCustomError("rbstab_invalid", "a range", {
                 "subkey": "range", "found": "a range", "expected": "no range",
-                "detail": f"a range is a hinge's (of its angle q); a '{self.variant}' joint has none"})
-        bounds = None if self.range is None else (float(self.range.lower), float(self.range.upper))
+                "detail": f"a range is a hinge's (of its angle q) or a ball's (permanent: of its Euler angles "
+                          f"Theta_j); a '{self.variant}' joint has none"})
+        for key in ("lower", "upper", "k_r", "l_r"):  # a hinge's numbers
+            value = None if self.range is None else getattr(self.range, key)
+            if hinge and isinstance(value, (list, tuple)):
+                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
+                    "subkey": f"range.{key}", "found": short_repr(value),
+                    "expected": "a number: a hinge's range is of its angle q"})
+        bounds = None if self.range is None else (np.asarray(self.range.lower, dtype=float),
+                                                  np.asarray(self.range.upper, dtype=float))
         springs = [("theta_ref", self.theta_ref, self.k_r)]
         springs += [] if passive is None else [("passive.theta_ref", passive.theta_ref, passive.k_r)]
         for key, value, stiffness in springs:  # a spring's rest angle (0 where not written) inside the range
-            value = 0.0 if value is None else value
-            if (bounds is not None and isinstance(value, (int, float)) and isinstance(stiffness, (int, float))
-                    and stiffness > 0 and not bounds[0] <= value <= bounds[1]):
+            value = np.asarray(0.0 if value is None else value, dtype=float)
+            if (bounds is not None and value.shape in ((), (3,)) and np.any(np.asarray(stiffness or 0.0) != 0)
+                    and not np.all((bounds[0] <= value) & (value <= bounds[1]))):
                 raise PydanticCustomError("rbstab_invalid", "a reference beyond the range", {
-                    "subkey": key, "found": short_repr(value),
-                    "expected": f"an angle in the range [{bounds[0]:g}, {bounds[1]:g}] (rad)",
+                    "subkey": key, "found": short_repr(value.tolist()),
+                    "expected": within_range(bounds),
                     "detail": "the spring would be relaxed where the stop pushes back" if self.range.kind == "stop"
                               else "the spring would be relaxed outside the admissible region"})
         for key, value in values:

@@ -533,16 +533,16 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
         p["axis"], p["k_r"], p["l_r"], p["theta_ref"], floor, limit = hinge_vectors(
             axis, of("joints", "k_r", 0.0), of("joints", "l_r", 0.0), of("joints", "theta_ref", 0.0),
             np.where(np.isnan(lower), -upper, lower), upper)
-        if joint.stop is not None or joint.region is not None:
-            p["stop" if joint.stop is not None else "region"] = 1.0
-            for name, field in (("lower", "range_lower"), ("upper", "range_upper"), ("k_r", "stop_k"),
-                                ("l_r", "stop_l"))[:4 if joint.stop is not None else 2]:
-                p[field] = of("joints", f"range.{name}")
         if joint.passive is not None:
             p["passive"] = 1.0
             _, p["passive_k_r"], p["passive_l_r"], p["passive_theta_ref"], _, _ = hinge_vectors(
                 axis, of("joints", "passive.k_r", 0.0), of("joints", "passive.l_r", 0.0),
                 of("joints", "passive.theta_ref", 0.0))
+    if joint.stop is not None or joint.region is not None:  # a hinge's q (entry 0), a ball's Theta_j
+        p["stop" if joint.stop is not None else "region"] = 1.0
+        for name, field in (("lower", "range_lower"), ("upper", "range_upper"), ("k_r", "stop_k"),
+                            ("l_r", "stop_l"))[:4 if joint.stop is not None else 2]:
+            p[field] = of("joints", f"range.{name}", 0.0 if name == "l_r" else None, shape=(3,))
     if joint.saturation is not None or body.saturation is not None:
         if hinged:
             p["torque_limit"], p["torque_floor"] = limit, floor

@@ -24,9 +24,10 @@ code    name                 the run ...
 >=1000  ``TREE_GIMBAL + k``  a tree's gimbal lock (the event time returned): k = 2 b for
                              body b's Theta, 2 b + 1 for joint b's Theta_j
                              (:func:`gimbal_status`, :func:`gimbal_of`)
->=2000  ``RANGE_LEFT + k``   a hinge's angle q left the admissible region of its range
-                             (the event time returned): k = 2 b at its lower end, 2 b + 1
-                             at its upper end, of joint b (:func:`range_status`,
+>=2000  ``RANGE_LEFT + k``   a joint's coordinate left the admissible region of its range
+                             (the event time returned): k = 6 b + 2 i at its lower end,
+                             6 b + 2 i + 1 at its upper end, of coordinate i (a hinge's q:
+                             0; a ball's Euler angles: 0-2) of joint b (:func:`range_status`,
                              :func:`range_of`)
 ======  ===================  ==========================================================
 
@@ -124,22 +125,23 @@ def gimbal_of(status: int) -> tuple[int, bool] | None:
     return (k // 2, bool(k % 2)) if 0 <= k < RANGE_LEFT - TREE_GIMBAL else None
 
 
-#: The first code of a run whose hinge left the admissible region of its range, after every
-#: code of a tree's gimbal lock.
+#: The first code of a run whose joint's coordinate left the admissible region of its range,
+#: after every code of a tree's gimbal lock.
 RANGE_LEFT = 2000
 
 
-def range_status(joint: int, upper: bool) -> int:
-    """The status code of a tree's run stopped where joint ``joint``'s angle q reached the
-    lower end of its range (an admissible region), or with ``upper`` its upper end."""
-    return RANGE_LEFT + 2 * joint + int(upper)
+def range_status(joint: int, coordinate: int, upper: bool) -> int:
+    """The status code of a tree's run stopped where ``coordinate`` (a hinge's q: 0; a ball's
+    Euler angles: 0-2) of joint ``joint`` reached the lower end of its range (an admissible
+    region), or with ``upper`` its upper end."""
+    return RANGE_LEFT + 6 * joint + 2 * coordinate + int(upper)
 
 
-def range_of(status: int) -> tuple[int, bool] | None:
-    """(the joint, whether it reached the upper end) of a status code of :func:`range_status`,
-    or None for another code."""
+def range_of(status: int) -> tuple[int, int, bool] | None:
+    """(the joint, its coordinate, whether it reached the upper end) of a status code of
+    :func:`range_status`, or None for another code."""
     k = int(status) - RANGE_LEFT
-    return (k // 2, bool(k % 2)) if k >= 0 else None
+    return (k // 6, k % 6 // 2, bool(k % 2)) if k >= 0 else None
 
 
 #: Accepted steps after which a run stops as failed (a run that would never finish).

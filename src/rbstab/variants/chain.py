@@ -189,6 +189,21 @@ def chain_core(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, 
                    chain_work(codes.shape[0]))
 
 
+@jit(forceinline=True)
+def _stop(n_j, energy, dissipation, angle, rate, direction, p, i):
+    """(N_j, v's term, the dissipation [W]) with the stop of coordinate i of a joint (its record
+    ``p``: ends ``range_lower[i]``, ``range_upper[i]``, gains ``stop_k[i]``, ``stop_l[i]``) at
+    ``angle`` [rad] and its ``rate`` [rad/s] added: beyond an end, by delta = angle - end,
+    the torque n_s = -k delta - l rate along ``direction`` (the coordinate's row of B, whose
+    power on Omega_j is n_s rate), the energy 1/2 k delta^2 and the dissipation l rate^2."""
+    beyond = max(angle - p.range_upper[i], 0.0) + min(angle - p.range_lower[i], 0.0)
+    if beyond == 0.0:
+        return n_j, energy, dissipation
+    n_s = -p.stop_k[i] * beyond - p.stop_l[i] * rate
+    return (add(n_j, (n_s * direction[0], n_s * direction[1], n_s * direction[2])),
+            energy + 0.5 * p.stop_k[i] * beyond * beyond, dissipation + p.stop_l[i] * rate * rate)
+
+
 @jit(forceinline=True, _nrt=False)
 def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
@@ -288,16 +303,15 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             n_j = sub(sub(n_j, matTvec(b_j, matvec(p.passive_k_r, strain))), matvec(p.passive_l_r, omega_j))
             rotational += 0.5 * quadratic_form(strain, p.passive_k_r)
             dissipation += quadratic_form(omega_j, p.passive_l_r)
-        if p.stop > 0.0:  # a hinge's range: a one-sided spring and damper beyond either end, never limited
-            axis = vector(p.axis, 0)
-            angle = dot(theta_j, axis)  # q
-            beyond = max(angle - p.range_upper, 0.0) + min(angle - p.range_lower, 0.0)
-            if beyond != 0.0:
-                rate_q = dot(omega_j, axis)
-                n_stop = -p.stop_k * beyond - p.stop_l * rate_q
-                n_j = add(n_j, (n_stop * axis[0], n_stop * axis[1], n_stop * axis[2]))
-                rotational += 0.5 * p.stop_k * beyond * beyond
-                dissipation += p.stop_l * rate_q * rate_q
+        if p.stop > 0.0:  # its range: beyond either end of a coordinate a one-sided spring and damper, never limited
+            if codes[j] == HINGE:  # q = a'Theta_j, its rate a'Omega_j, its torque along a
+                axis = vector(p.axis, 0)
+                n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis),
+                                                     dot(omega_j, axis), axis, p, 0)
+            else:  # a ball's Euler angle theta_i, its rate (B Omega_j)_i, its torque B' e_i
+                for i in range(3):
+                    n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, theta_j[i],
+                                                         dot(b_j[i], omega_j), b_j[i], p, i)
         _acc_add(torque, force, j, n_j, ZERO)
         if q >= 0:
             reaction = matvec(rel, n_j)

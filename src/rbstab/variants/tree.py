@@ -213,20 +213,22 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
 @jit(forceinline=True)
 def range_margin(yr, params, codes, r_at, margin, status, first):
     """(margin, status) after the ranges that are admissible regions (a record's ``region``)
-    of the hinges of the reduced state ``yr``: q - lower and upper - q [rad] of each,
-    smaller than ``margin``, replace it and ``status`` with ``first`` + 2 j (its lower end)
-    or ``first`` + 2 j + 1 (its upper end) for joint j (``first``:
-    :data:`rbstab.engine.status.RANGE_LEFT`)."""
+    of the reduced state ``yr``'s joint coordinates, a hinge's q and a ball's Euler angles
+    Theta_j (entries 0 and 0-2 of its ``range_lower``, ``range_upper``): coordinate - lower
+    and upper - coordinate [rad] of each, smaller than ``margin``, replace it and ``status``
+    with ``first`` + 6 j + 2 i (the lower end of coordinate i of joint j) or ``first`` + 6 j
+    + 2 i + 1 (its upper end) (``first``: :data:`rbstab.engine.status.RANGE_LEFT`)."""
     for j in range(codes.shape[0]):
-        if codes[j] != HINGE or params[j].region == 0.0:
+        if params[j].region == 0.0 or not (codes[j] == HINGE or codes[j] == PERMANENT):
             continue
-        q = yr[r_at[j]]
-        m = q - params[j].range_lower
-        if m < margin:
-            margin, status = m, first + 2 * j
-        m = params[j].range_upper - q
-        if m < margin:
-            margin, status = m, first + 2 * j + 1
+        for i in range(1 if codes[j] == HINGE else 3):
+            q = yr[r_at[j] + i]
+            m = q - params[j].range_lower[i]
+            if m < margin:
+                margin, status = m, first + 6 * j + 2 * i
+            m = params[j].range_upper[i] - q
+            if m < margin:
+                margin, status = m, first + 6 * j + 2 * i + 1
     return margin, status
 
 
