@@ -141,6 +141,27 @@ def test_a_urdf_arm_with_a_fixed_hand_moves_as_mujoco():
     _reactions_are_mujocos(path, config, result, initial=start)
 
 
+def test_the_shipped_ball_arm_is_what_import_writes_and_moves_as_mujoco():
+    """configs/examples/arm_imported.yaml is what ``rbstab import`` writes for
+    configs/examples/models/arm.xml at its keyframe ``swing`` (the shoulder a ball with a
+    damper, turned and turning about all three axes; the elbow a hinge with ligaments and a
+    servo); run, it follows MuJoCo's simulation of the XML to 1e-6 m and its reactions to
+    1e-6 of the largest, the elbow inside its range."""
+    path = MODELS / "arm.xml"
+    shipped = (MODELS.parent / "arm_imported.yaml").read_text()
+    imported, config = _imported(path, keyframe="swing")
+    assert imported.text == shipped
+    assert any("gimbal lock" in n for n in imported.notes)
+    assert config.resolved["joints"][0]["variant"] == "permanent"
+    result = simulate(config)
+    assert result.status == "success"
+    theta = result.outputs["joint_theta"]
+    assert np.ptp(theta[:, 0], axis=0).min() > 0.05  # the shoulder turns about every axis
+    assert -0.05 < theta[:, 1, 0].min() and theta[:, 1, 0].max() < 2.6  # MuJoCo's limit and the stop idle
+    assert largest_distance(path, config, result, keyframe="swing") < 1e-6
+    _reactions_are_mujocos(path, config, result, keyframe="swing")
+
+
 @pytest.mark.parametrize("model, keyframe", [("stance.xml", "lean"), ("arm.urdf", None), ("oblique", "start")])
 def test_imported_models_have_mujocos_rest_state_and_eigenvalues(tmp_path, model, keyframe):
     """``rbstab analyze`` of an imported hinge tree: its rest state (springs and servos
@@ -190,14 +211,33 @@ def test_import_writes_a_config_that_runs(tmp_path):
     (('damping="0.05"', 'damping="0.05" armature="0.01"'), '<joint name="jb">'),
 ])
 def test_what_rbstab_cannot_represent_is_refused_in_one_line(tmp_path, change, element):
-    """A ball, slide or second joint in a body, a tendon, a muscle, armature: one line naming
-    the element, exit 1, nothing written."""
+    """A ball with a servo, a slide or second joint in a body, a tendon, a muscle, armature:
+    one line naming the element, exit 1, nothing written."""
     path, out = tmp_path / "model.xml", tmp_path / "config.yaml"
     path.write_text(OBLIQUE.replace(*change).replace('ctrl="0.3 0"', ""))
     result = CliRunner().invoke(cli, ["import", str(path), "-o", str(out)])
     assert result.exit_code == 1, result.output
     assert element in result.output and "Traceback" not in result.output
     assert not out.exists()
+
+
+@pytest.mark.parametrize("change, expected", [
+    (('damping="0.5"', 'stiffness="2" damping="0.5"'),
+     "stiffness=2; expected 0 (MuJoCo's ball spring acts on the rotation vector"),
+    (('damping="0.5"', 'damping="0.5" range="0 1.2" limited="true"'), "a ball joint with a range (a cone"),
+    (('<position name="elbow_muscles"', '<motor name="m" joint="shoulder"/><position name="elbow_muscles"'),
+     "acts on the ball joint"),
+])
+def test_a_ball_that_rbstab_cannot_represent_is_refused_saying_why(tmp_path, change, expected):
+    """The arm's ball shoulder with a spring, a range or an actuator: refused, naming the
+    shoulder and why."""
+    from rbstab.config import ConfigError
+
+    path = tmp_path / "arm.xml"
+    path.write_text((MODELS / "arm.xml").read_text().replace(*change).replace(' ctrl="0.8"', ""))
+    with pytest.raises(ConfigError) as raised:
+        import_model(path)
+    assert expected in str(raised.value) and "shoulder" in str(raised.value), str(raised.value)
 
 
 @pytest.mark.parametrize("text, keyframe, expected", [

@@ -15,6 +15,12 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   q = qpos - qpos0 (a joint's ``ref`` is rbstab's q = 0);
 - its passive torque is the joint's ``stiffness``, ``damping`` and ``springref``
   (theta_ref = qpos_spring - qpos0);
+- each ``ball`` becomes a joint ``variant: permanent`` at its anchor (the ball in the relative
+  Euler angles Theta_j, zero in the reference pose; a run stops at their gimbal lock), its
+  ``damping`` a passive damper on Omega_j; its child starts at the keyframe's orientation
+  and angular velocity (its Euler angles from the reference pose, body frame). A ball with
+  ``stiffness`` (MuJoCo's spring on the rotation vector), a range (a cone) or an actuator is
+  refused;
 - its feedback is the ``position`` servo (any affine actuator on the joint: force = kp ctrl
   + b0 + b1 length + b2 velocity, length = gear qpos): k_r = -b1 gear^2, l_r = -b2 gear^2,
   theta_ref from the control (the keyframe's, else 0, within ``ctrlrange``), delivered
@@ -27,10 +33,11 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
 - gravity is ``option/gravity`` (zero where the model disables it); the initial state is a
   keyframe's q, u or the reference pose at rest.
 
-What rbstab cannot represent is refused, one line each naming the model's element: ball,
-slide and free joints, two joints in one body, tendons, equality constraints, muscles and
-actuators with activation dynamics, armature, dry friction, gravity compensation, fluid
-forces, a constant actuator torque. Contacts are left out with a note.
+What rbstab cannot represent is refused, one line each naming the model's element: a ball
+with stiffness, a range or an actuator, slide and free joints, two joints in one body,
+tendons, equality constraints, muscles and actuators with activation dynamics, armature, dry
+friction, gravity compensation, fluid forces, a constant actuator torque. Contacts are left
+out with a note.
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..kinematics import euler_angles_of
 from .errors import ConfigError
 from .yaml_io import read_text_limited
 
@@ -155,22 +163,27 @@ def _refusals(mujoco, model, where: str) -> list[str]:
     docstring's list; the actuators: :func:`_servos`)."""
     errors: list[str] = []
     joint_kind = {int(mujoco.mjtJoint.mjJNT_FREE): "a free joint (a floating base)",
-                  int(mujoco.mjtJoint.mjJNT_BALL): "a ball joint (its gimbal-free quaternion form is not a joint kind "
-                                                   "of rbstab's; its Euler-angle ball, variant permanent, is written "
-                                                   "by hand)",
                   int(mujoco.mjtJoint.mjJNT_SLIDE): "a slide joint (not a joint kind of rbstab's)"}
+    ball = int(mujoco.mjtJoint.mjJNT_BALL)
     for j in range(model.njnt):
         joint = model.joint(j)
         if int(model.jnt_type[j]) in joint_kind:
             errors.append(f"model file {where}: {_element('joint', joint)} is {joint_kind[int(model.jnt_type[j])]}; "
-                          "rbstab imports hinge joints")
+                          "rbstab imports hinge and ball joints")
             continue
         dof = int(model.jnt_dofadr[j])
         for attribute, values, why in (("armature", model.dof_armature, "rotor inertia"),
                                        ("frictionloss", model.dof_frictionloss, "dry friction")):
-            if values[dof] != 0.0:
+            if np.any(values[dof:dof + (3 if int(model.jnt_type[j]) == ball else 1)] != 0.0):
                 errors.append(f"model file {where}: {_element('joint', joint)} has {attribute}="
                               f"{float(values[dof]):g}; expected 0 ({why} is not modelled)")
+        if int(model.jnt_type[j]) == ball and model.jnt_stiffness[j] != 0.0:
+            errors.append(f"model file {where}: {_element('joint', joint)} is a ball joint with stiffness="
+                          f"{float(model.jnt_stiffness[j]):g}; expected 0 (MuJoCo's ball spring acts on the rotation "
+                          "vector, rbstab's ball on its Euler angles: a ball imports with damping alone)")
+        if int(model.jnt_type[j]) == ball and model.jnt_limited[j]:
+            errors.append(f"model file {where}: {_element('joint', joint)} is a ball joint with a range (a cone of "
+                          "its rotation angle); expected none (rbstab's ball ranges bound its Euler angles)")
     for b in range(1, model.nbody):
         if model.body_jntnum[b] > 1:
             errors.append(f"model file {where}: {_element('body', model.body(b))} has {int(model.body_jntnum[b])} "
@@ -214,6 +227,10 @@ def _servos(mujoco, model, where: str, ctrl: np.ndarray, errors: list[str]) -> t
                           "a position or velocity servo or a motor")
             continue
         j = int(model.actuator_trnid[a, 0])
+        if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_BALL):
+            errors.append(f"model file {where}: {name} acts on the ball joint {_element('joint', model.joint(j))}; "
+                          "rbstab imports actuators on hinge joints")
+            continue
         gear = float(model.actuator_gear[a, 0])
         u = float(ctrl[a])
         if model.actuator_ctrllimited[a]:
@@ -349,23 +366,52 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
                          + f" without a joint: welded to {name_of[b]} (mass and inertia added)")
 
     lines_joints, initial, unheld = [], [], []
+    keyed = None  # the keyframe's state, where a ball's child starts from its orientation there
+    balls = [b for b in carried if int(model.jnt_type[int(model.body_jntadr[b])]) == int(mujoco.mjtJoint.mjJNT_BALL)]
+    if key is not None and balls:
+        keyed = mujoco.MjData(model)
+        mujoco.mj_resetDataKeyframe(model, keyed, key)
+        mujoco.mj_forward(model, keyed)
     for b in carried:
         j = int(model.body_jntadr[b])
         joint = model.joint(j)
         jname = joint_names(joint.name, f"joint{j}")
         parent = owner[int(model.body_parentid[b])]
         anchor, axis = np.array(data.xanchor[j]), np.array(data.xaxis[j])
-        qpos0 = float(model.qpos0[model.jnt_qposadr[j]])
         dof = int(model.jnt_dofadr[j])
-        source = _element("joint", joint, ' type="hinge"')
         lines_joints += [
-            _line(2, f"- name: {jname}", source),
+            _line(2, f"- name: {jname}", _element("joint", joint, ' type="ball"' if b in balls else ' type="hinge"')),
             _line(4, f"parent: {name_of[parent] if parent else 'ground'}"),
             _line(4, f"parent_point: {_vector(anchor - com[parent], scale=1.0)}",
                   "[m] the anchor, " + ("inertial frame" if not parent else f"from the centre of mass of {name_of[parent]}")),
             _line(4, f"child: {name_of[b]}"),
             _line(4, f"child_point: {_vector(anchor - com[b], scale=1.0)}", f"[m] the anchor, from the centre of mass of "
                                                                           f"{name_of[b]}"),
+        ]
+        if b in balls:
+            lines_joints += [_line(4, "variant: permanent", "a ball: Theta_j, the Euler angles of A_parent' A_child "
+                                                            "[rad], 0 in the reference pose"),
+                             _line(4, "k_r: [0.0, 0.0, 0.0]", "[N m/rad] no servo on a ball"),
+                             _line(4, "l_r: [0.0, 0.0, 0.0]", "[N m s/rad]")]
+            unheld.append(jname)
+            notes.append(f"{where}: the ball joint {jname} is written in Euler angles (variant permanent): a run "
+                         "stops at their gimbal lock, |theta_2| = pi/2, where MuJoCo's quaternion turns on")
+            damping = [float(x) for x in model.dof_damping[dof:dof + 3]]
+            if any(damping):
+                lines_joints.append(_line(4, f"passive: {{k_r: [0.0, 0.0, 0.0], l_r: {_vector(np.array(damping))}}}",
+                                          "[N m s/rad] damping on Omega_j (child frame)"))
+            if keyed is None:
+                theta, omega = np.zeros(3), np.zeros(3)
+            else:  # the body's turn from the reference pose, and its angular velocity in its own frame
+                turn = keyed.xmat[b].reshape(3, 3) @ data.xmat[b].reshape(3, 3).T
+                theta, omega = euler_angles_of(turn), turn.T @ keyed.cvel[b, :3]
+            initial.append(_line(2, f"{name_of[b]}: {{theta: {_vector(theta, scale=1.0)}, omega: "
+                                    f"{_vector(omega, scale=1.0)}}}",
+                                 f"[rad, rad/s] {jname}: Euler angles, body frame"))
+            continue
+        qpos0 = float(model.qpos0[model.jnt_qposadr[j]])
+        source = _element("joint", joint, ' type="hinge"')
+        lines_joints += [
             _line(4, "variant: hinge", "q = qpos - qpos0 [rad]" + (f" (ref {qpos0:g})" if qpos0 else "")),
             _line(4, f"axis: {_vector(axis)}", "the joint's axis, world frame"),
         ]
