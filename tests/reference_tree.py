@@ -1,10 +1,15 @@
 """An independent plain-numpy model of a tree of rigid bodies in reduced coordinates
 (docs/physics.md, "A tree in reduced coordinates").
 
-What a physicist would write by hand from that section: a ``permanent`` joint is held by
-construction, its child carried by the joint's relative orientation Theta_j and relative
-angular velocity Omega_j (child frame); a body on any other joint (here ``free`` or
-``visco_elastic``) keeps its own Theta, Omega, X, V. The equations of motion are the bodies'
+What a physicist would write by hand from that section: a ``permanent`` joint (a ball) is
+held by construction, its child carried by the joint's relative orientation Theta_j and
+relative angular velocity Omega_j (child frame); a ``hinge`` likewise by its angle q about
+its unit axis a (A_rel = exp(q [a]x) by Rodrigues' formula, Omega_j = a dq/dt); a body on any
+other joint (here ``free`` or ``visco_elastic``) keeps its own Theta, Omega, X, V. A ball's
+or a hinge's range may be a stop: beyond either end of each coordinate (a ball's Euler
+angles, a hinge's q) a one-sided spring and damper on that coordinate and its rate, as a
+torque whose power is the coordinate's generalised force times its rate (docs/physics.md,
+"Joint kinds"). The equations of motion are the bodies'
 Newton-Euler equations projected on the generalised velocities u (Jourdain's principle):
 
     M(q) du/dt = Q - b,   M = sum_i S_i' M_i S_i,   Q = sum_i S_i' w_i,
@@ -32,8 +37,8 @@ import numpy as np
 from reference import euler_rate, hat, rotation
 
 GROUND = -1
-PERMANENT, FREE, VISCO_ELASTIC = "permanent", "free", "visco_elastic"
-LAWS = (PERMANENT, FREE, VISCO_ELASTIC)
+PERMANENT, FREE, VISCO_ELASTIC, HINGE = "permanent", "free", "visco_elastic", "hinge"
+LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE)
 
 
 def _zero():
@@ -57,7 +62,10 @@ class Joint:
     (``parent`` < j, or GROUND: R_p in the inertial frame) by ``law``, with the rotational
     feedback N_j = -B(Theta_j)' K_r Theta_j - L_r Omega_j (eq 23 on the relative motion),
     clipped to +-``torque_limit`` [N m] axis by axis where given; K_c, L_c: the
-    visco-elastic law Lambda_j = -K_c E_j - L_c F_j (eq 40)."""
+    visco-elastic law Lambda_j = -K_c E_j - L_c F_j (eq 40). A ``hinge``: the unit ``axis``
+    a, its feedback n = -k q - l dq/dt about a with k = ``k_r``[0, 0], l = ``l_r``[0, 0],
+    clipped to +-``torque_limit``[0]. ``stop``: (lower, upper, k, l) of each coordinate (3 a
+    ball's Euler angles, entry 0 a hinge's q) or None."""
 
     parent: int
     parent_point: np.ndarray
@@ -68,6 +76,8 @@ class Joint:
     k_c: np.ndarray = field(default_factory=_zero)
     l_c: np.ndarray = field(default_factory=_zero)
     torque_limit: np.ndarray | None = None
+    axis: np.ndarray | None = None
+    stop: tuple | None = None
 
 
 @dataclass(frozen=True)
@@ -83,7 +93,11 @@ class Tree:
         return len(self.bodies)
 
     def permanent(self, i):
-        return self.joints[i].law == PERMANENT
+        """Whether joint i holds its child's point by construction (a ball or a hinge)."""
+        return self.joints[i].law in (PERMANENT, HINGE)
+
+    def hinge(self, i):
+        return self.joints[i].law == HINGE
 
     def children(self, i):
         return [k for k, joint in enumerate(self.joints) if joint.parent == i]
@@ -91,31 +105,38 @@ class Tree:
 
 # -- layout -----------------------------------------------------------------------------------
 def state_blocks(tree):
-    """Where each body's states start in y: 6 (Theta_j, Omega_j) for a permanent joint's
-    child, 12 (Theta, Omega, X, V) for any other; and the state's size."""
+    """Where each body's states start in y: 2 (q, dq/dt) for a hinge's child, 6 (Theta_j,
+    Omega_j) for a ball's, 12 (Theta, Omega, X, V) for any other; and the state's size."""
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 6 if tree.permanent(i) else 12
+        at += 2 if tree.hinge(i) else 6 if tree.permanent(i) else 12
     return starts, at
 
 
 def velocity_blocks(tree):
-    """Where each body's generalised velocities start in u: 3 (Omega_j) or 6 (Omega, V)."""
+    """Where each body's generalised velocities start in u: 1 (dq/dt), 3 (Omega_j) or 6
+    (Omega, V)."""
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 3 if tree.permanent(i) else 6
+        at += 1 if tree.hinge(i) else 3 if tree.permanent(i) else 6
     return starts, at
 
 
 def generalised_velocities(tree, y):
-    """u: Omega_j of each permanent joint's child, (Omega, V) of every other body."""
+    """u: dq/dt of each hinge's child, Omega_j of each ball's, (Omega, V) of every other body."""
     starts, _ = state_blocks(tree)
     parts = []
     for i, s in enumerate(starts):
-        parts.append(y[s + 3: s + 6] if tree.permanent(i) else np.concatenate([y[s + 3: s + 6], y[s + 9: s + 12]]))
+        parts.append(y[s + 1: s + 2] if tree.hinge(i) else y[s + 3: s + 6] if tree.permanent(i)
+                     else np.concatenate([y[s + 3: s + 6], y[s + 9: s + 12]]))
     return np.concatenate(parts)
+
+
+def axis_rotation(axis, q):
+    """exp(q [a]x) = cos q I + sin q [a]x + (1 - cos q) a a' (Rodrigues)."""
+    return math.cos(q) * np.eye(3) + math.sin(q) * hat(axis) + (1.0 - math.cos(q)) * np.outer(axis, axis)
 
 
 def cross(a, b):
@@ -155,7 +176,12 @@ def configuration(tree, y):
     for c, joint in enumerate(tree.joints):
         s = starts[c]
         a_p, x_p = parent_frame(tree, conf, c)
-        if tree.permanent(c):
+        if tree.hinge(c):  # Theta_j: the rotation vector q a
+            theta_j = y[s] * joint.axis
+            a_rel = axis_rotation(joint.axis, y[s])
+            a_c = a_p @ a_rel
+            x_c = x_p + a_p @ joint.parent_point - a_c @ joint.child_point
+        elif tree.permanent(c):
             theta_j = y[s: s + 3]
             a_rel = rotation(theta_j)
             a_c = a_p @ a_rel
@@ -195,10 +221,12 @@ def motion(tree, conf, u, du):
             a_p, w_p, v_p, dw_p, dv_p = conf.rot[p], omega[p], v[p], omega_dot[p], v_dot[p]
         a_c, a_rel, r_p, r_c = conf.rot[c], conf.rel[c], joint.parent_point, joint.child_point
         if tree.permanent(c):
-            omega_j[c] = u[s: s + 3]
+            hinged = tree.hinge(c)  # Omega_j = a dq/dt, a fixed in the child's frame
+            omega_j[c] = joint.axis * u[s] if hinged else u[s: s + 3]
             omega[c] = a_rel.T @ w_p + omega_j[c]
             v[c] = v_p + a_p @ cross(w_p, r_p) - a_c @ cross(omega[c], r_c)
-            omega_dot[c] = a_rel.T @ dw_p + du[s: s + 3] + cross(omega[c], omega_j[c])
+            omega_j_dot = joint.axis * du[s] if hinged else du[s: s + 3]
+            omega_dot[c] = a_rel.T @ dw_p + omega_j_dot + cross(omega[c], omega_j[c])
             v_dot[c] = (dv_p + a_p @ (cross(dw_p, r_p) + cross(w_p, cross(w_p, r_p)))
                         - a_c @ (cross(omega_dot[c], r_c) + cross(omega[c], cross(omega[c], r_c))))
         else:
@@ -249,11 +277,36 @@ def point_motion(tree, conf, omega, v, j):
 
 def joint_torque(joint, theta_j, omega_j):
     """(N_j delivered, N_j commanded) [N m], child frame: N = -B(Theta_j)' K_r Theta_j - L_r Omega_j
-    (eq 23 on the relative motion), clipped to the joint's limits."""
+    (eq 23 on the relative motion), clipped to the joint's limits; a hinge's n a, n = -k q - l
+    dq/dt clipped to +-its limit; plus its stop (never limited)."""
+    if joint.law == HINGE:
+        q, rate = theta_j @ joint.axis, omega_j @ joint.axis
+        n = -joint.k_r[0, 0] * q - joint.l_r[0, 0] * rate
+        delivered = n if joint.torque_limit is None else min(max(n, -joint.torque_limit[0]), joint.torque_limit[0])
+        stop = stop_terms(joint, np.array([q]), np.array([rate]))[0][0] * joint.axis
+        return delivered * joint.axis + stop, n * joint.axis + stop
     command = -euler_rate(theta_j).T @ joint.k_r @ theta_j - joint.l_r @ omega_j
-    if joint.torque_limit is None:
-        return command, command
-    return np.clip(command, -joint.torque_limit, joint.torque_limit), command
+    delivered = command if joint.torque_limit is None else np.clip(command, -joint.torque_limit, joint.torque_limit)
+    if joint.stop is None:
+        return delivered, command
+    b = euler_rate(theta_j)
+    stop = b.T @ stop_terms(joint, theta_j, b @ omega_j)[0]
+    return delivered + stop, command + stop
+
+
+def stop_terms(joint, coordinates, rates):
+    """(f (k,) [N m] the stop's generalised force on each coordinate, its energy [J], its
+    dissipation [W]) of the joint's ``stop`` at its ``coordinates`` and their ``rates``
+    (k,): beyond an end, delta = coordinate - end, f = -k delta - l rate, the energy 1/2 k
+    delta^2 and the dissipation l rate^2; zero inside (and without a stop)."""
+    f = np.zeros(len(coordinates))
+    if joint.stop is None:
+        return f, 0.0, 0.0
+    lower, upper, k, l = (np.asarray(x, dtype=float)[: len(coordinates)] for x in joint.stop)
+    delta = np.maximum(coordinates - upper, 0.0) + np.minimum(coordinates - lower, 0.0)
+    beyond = delta != 0.0
+    f = np.where(beyond, -k * delta - l * rates, 0.0)
+    return f, float(np.sum(0.5 * k * delta ** 2)), float(np.sum(np.where(beyond, l * rates ** 2, 0.0)))
 
 
 @dataclass
@@ -346,7 +399,9 @@ def evaluate(tree, y):
     dy = np.zeros(size)
     for i, s0 in enumerate(starts):
         k = ustarts[i]
-        if tree.permanent(i):
+        if tree.hinge(i):
+            dy[s0], dy[s0 + 1] = u[k], du[k]
+        elif tree.permanent(i):
             dy[s0: s0 + 3] = euler_rate(conf.theta_j[i]) @ omega_j[i]
             dy[s0 + 3: s0 + 6] = du[k: k + 3]
         else:
@@ -379,6 +434,15 @@ def constraint_forces(tree, v_dot, forces):
     return lam
 
 
+def coordinates(tree, ev, j):
+    """(joint j's coordinates, their rates) at the evaluation ``ev``: a hinge's q and dq/dt
+    (1,), a ball's or a free body's relative Euler angles Theta_j and dTheta_j/dt (3,)."""
+    joint, theta_j, omega_j = tree.joints[j], ev.conf.theta_j[j], ev.omega_j[j]
+    if joint.law == HINGE:
+        return np.array([theta_j @ joint.axis]), np.array([omega_j @ joint.axis])
+    return theta_j, euler_rate(theta_j) @ omega_j
+
+
 # -- v and dv/dt -----------------------------------------------------------------------------------
 def lyapunov(tree, y):
     """(the terms of v without the constant h, eq 25's grouping summed over the bodies and
@@ -398,8 +462,17 @@ def lyapunov(tree, y):
     constraint = 0.0
     dv_dt = 0.0
     for j, jt in enumerate(tree.joints):
-        rotational += 0.5 * conf.theta_j[j] @ jt.k_r @ conf.theta_j[j]
+        if jt.law == HINGE:  # 1/2 k q^2, l (dq/dt)^2 about its axis
+            q, rate = conf.theta_j[j] @ jt.axis, ev.omega_j[j] @ jt.axis
+            _, energy, dissipation = stop_terms(jt, np.array([q]), np.array([rate]))
+            rotational += 0.5 * jt.k_r[0, 0] * q * q + energy
+            dv_dt += -jt.l_r[0, 0] * rate * rate - dissipation + ev.omega_j[j] @ (forces.n_j[j] - forces.n_command[j])
+            continue
+        b = euler_rate(conf.theta_j[j])
+        _, energy, dissipation = stop_terms(jt, conf.theta_j[j], b @ ev.omega_j[j])
+        rotational += 0.5 * conf.theta_j[j] @ jt.k_r @ conf.theta_j[j] + energy
         dv_dt += -ev.omega_j[j] @ jt.l_r @ ev.omega_j[j] + ev.omega_j[j] @ (forces.n_j[j] - forces.n_command[j])
+        dv_dt -= dissipation
         if jt.law == VISCO_ELASTIC:
             constraint += 0.5 * forces.e[j] @ jt.k_c @ forces.e[j]
             dv_dt -= forces.f[j] @ jt.l_c @ forces.f[j]
@@ -427,6 +500,9 @@ def push(tree, y, body, point, impulse):
     ustarts, _ = velocity_blocks(tree)
     for i, s0 in enumerate(starts):
         k = ustarts[i]
+        if tree.hinge(i):
+            after[s0 + 1] += du[k]
+            continue
         after[s0 + 3: s0 + 6] += du[k: k + 3]
         if not tree.permanent(i):
             after[s0 + 9: s0 + 12] += du[k + 3: k + 6]
@@ -462,6 +538,12 @@ def reduced_state(tree, y12):
             continue
         a_p, w_p = (np.eye(3), np.zeros(3)) if p == GROUND else (rot[p], y12[12 * p + 3: 12 * p + 6])
         a_rel = a_p.T @ rot[c]
+        omega_j = y12[12 * c + 3: 12 * c + 6] - a_rel.T @ w_p
+        if tree.hinge(c):  # sin q = a . vee(A_rel), cos q = (tr A_rel - 1) / 2
+            vee = 0.5 * np.array([a_rel[2, 1] - a_rel[1, 2], a_rel[0, 2] - a_rel[2, 0], a_rel[1, 0] - a_rel[0, 1]])
+            out[s] = math.atan2(joint.axis @ vee, 0.5 * (np.trace(a_rel) - 1.0))
+            out[s + 1] = joint.axis @ omega_j
+            continue
         out[s: s + 3] = euler_angles(a_rel)
-        out[s + 3: s + 6] = y12[12 * c + 3: 12 * c + 6] - a_rel.T @ w_p
+        out[s + 3: s + 6] = omega_j
     return out

@@ -4,10 +4,12 @@ one body on a permanent joint is the paper's reduced system (eqs 18-21, 32-35); 
 double pendulum moves as the maximal-coordinate chain, with the same constraint forces; v is
 conserved without damping and its rate is -sum Omega_j' L_r Omega_j; random trees of
 permanent, free and visco-elastic joints have the chain's accelerations, Lambda_j, v and
-dv/dt; a push in reduced coordinates is the chain's push."""
+dv/dt; random trees with hinges and stops have the reference's reduced rate; a push in
+reduced coordinates is the chain's push."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import warnings
 from pathlib import Path
@@ -19,7 +21,7 @@ from scipy.integrate import solve_ivp
 import reference_tree as T
 from reference import hat, rotation
 from rbstab.variants.paper import paper_form
-from rbstab.chain import Body, Chain, Joint
+from rbstab.chain import Body, Chain, Joint, Stop, hinge
 from rbstab.config.loader import load_config
 from rbstab.model import Saturation
 from rbstab.simulator import simulate
@@ -275,6 +277,77 @@ def test_random_trees_have_the_chains_accelerations_forces_and_v(mix, rng):
             terms, rate = T.lyapunov(tree, y)
             np.testing.assert_allclose(terms, scalars[:4], atol=1e-12 * (1 + np.abs(scalars[:4]).max()))
             assert rate == pytest.approx(scalars[4], rel=1e-11, abs=1e-11)
+
+
+def _jointed_tree(rng, laws):
+    """A random tree of ``laws`` (hinges about random axes, balls, free and visco-elastic
+    joints; body feedback, clipped joint torques, gravity) whose hinges and balls have
+    stops on their coordinates, narrow enough that random states press them."""
+    tree = _random_tree(rng, [T.PERMANENT if law == T.HINGE else law for law in laws])
+    joints = []
+    for joint, law in zip(tree.joints, laws):
+        n = 1 if law == T.HINGE else 3
+        stop = (-rng.uniform(0.05, 0.3, n), rng.uniform(0.05, 0.3, n), rng.uniform(50.0, 200.0, n),
+                rng.uniform(0.0, 5.0, n)) if law in (T.HINGE, T.PERMANENT) else None
+        axis = rng.normal(size=3)
+        joints.append(dataclasses.replace(joint, law=law, stop=stop, axis=axis / np.linalg.norm(axis) if law == T.HINGE
+                                          else None))
+    return dataclasses.replace(tree, joints=tuple(joints))
+
+
+def _jointed_chain(tree):
+    """rbstab's chain of a tree of :func:`_jointed_tree`: a hinge its gains about its axis."""
+    chain = _chain(dataclasses.replace(tree, joints=tuple(dataclasses.replace(j, law=T.PERMANENT)
+                                                          if j.law == T.HINGE else j for j in tree.joints)))
+    joints = []
+    for i, (joint, mine) in enumerate(zip(tree.joints, chain.joints)):
+        stop = None if joint.stop is None else Stop(*(x if joint.law != T.HINGE else float(x[0]) for x in joint.stop))
+        if joint.law == T.HINGE:
+            limit = None if joint.torque_limit is None else (-float(joint.torque_limit[0]),
+                                                             float(joint.torque_limit[0]))
+            joints.append(hinge(mine.name, joint.parent, i, joint.parent_point, joint.child_point, joint.axis,
+                                float(joint.k_r[0, 0]), float(joint.l_r[0, 0]), limits=limit, stop=stop))
+        else:
+            joints.append(dataclasses.replace(mine, stop=stop))
+    return dataclasses.replace(chain, joints=tuple(joints))
+
+
+@pytest.mark.parametrize("laws", [[T.HINGE] * 4, [T.HINGE, T.PERMANENT, T.HINGE, T.FREE],
+                                  [T.FREE, T.HINGE, T.VISCO_ELASTIC, T.PERMANENT]],
+                         ids=["hinges", "mixed", "free_root"])
+def test_random_trees_of_hinges_balls_and_stops_have_the_references_rate_and_v(laws, rng):
+    """At random reduced states of random trees of hinges (random axes), balls, free and
+    visco-elastic joints, the hinges and balls pressing their stops (a ball's on each Euler
+    angle, N_s = B' f), rbstab's reduced-coordinate rate (tree_rate) is the plain-numpy
+    reference's to 1e-11, with its joint torques and the terms of v."""
+    from rbstab.variants.tree import tree_layout, tree_rate, tree_work
+
+    for _ in range(3):
+        tree = _jointed_tree(rng, laws)
+        compiled = C.compile_chain(_jointed_chain(tree), offset=0.0)
+        layout = tree_layout(compiled)
+        starts, size = T.state_blocks(tree)
+        assert layout.n_r == size and list(layout.r_at) == starts
+        pressed = 0
+        for _ in range(4):
+            y = rng.normal(scale=0.3, size=size)
+            for i, s in enumerate(starts):  # angular rates of 2 rad/s
+                if tree.hinge(i):
+                    y[s + 1] = rng.normal(scale=2.0)
+                else:
+                    y[s + 3: s + 6] = rng.normal(scale=2.0, size=3)
+            ev = T.evaluate(tree, y)
+            work = tree_work(compiled.size, compiled.n_states)
+            dy = np.empty(size)
+            tree_rate(0.0, y, *compiled.args, *layout.args, dy, work)
+            np.testing.assert_allclose(dy, ev.dy, rtol=0, atol=1e-11 * np.abs(ev.dy).max())
+            n_j = work.chain.joints[:, 3]
+            np.testing.assert_allclose(n_j, ev.forces.n_j, rtol=0, atol=1e-11 * (1 + np.abs(ev.forces.n_j).max()))
+            terms, _ = T.lyapunov(tree, y)
+            scalars = work.chain.scalars[:4]
+            np.testing.assert_allclose(scalars, terms, rtol=0, atol=1e-11 * (1 + np.abs(terms).max()))
+            pressed += sum(T.stop_terms(j, *T.coordinates(tree, ev, k))[1] > 0 for k, j in enumerate(tree.joints))
+        assert pressed > 0  # the stops act
 
 
 def test_a_push_in_reduced_coordinates_is_the_chains_push():
