@@ -102,6 +102,36 @@ def test_equilibrium_under_gravity_is_a_rest_point_with_zero_v(name):
         assert variant.lyapunov(y) > 0.0
 
 
+@pytest.mark.parametrize("name", ALL)
+def test_all_records_equilibria_at_once_are_each_records_descent(name, rng, monkeypatch):
+    """h of 60 records (masses, gains and attachment points varied, some torques clipped)
+    found all at once (rbstab.variants.registry.record_offsets: Newton's method on every
+    record together from 0, a record by itself where that finds no minimum) is the h of the
+    minimum of each record's stored energy downhill from 0 (BFGS and a root polish) to 1e-12
+    of its scale, and a record alone gets the bits it gets in the batch."""
+    from rbstab.variants import base
+    from rbstab.variants.registry import VARIANTS, record_offset, record_offsets
+
+    variant = _variant(name, (0.0, 0.0, -10.0))
+    records = np.repeat(variant.parameters, 60)
+    records["mass"] *= rng.uniform(0.5, 1.5, 60)
+    records["weight"] = records["mass"][:, None] * np.array([0.0, 0.0, -10.0])
+    records["k_r"] *= rng.uniform(0.3, 2.0, 60)[:, None, None]
+    records["attachment_point"] += rng.normal(scale=0.1, size=(60, 3))
+    clipped = rng.random(60) < 0.3
+    records["saturation"][clipped], records["torque_limit"][clipped] = 1.0, 5.0
+    records["torque_floor"][clipped] = -5.0
+    gravity = np.repeat([[0.0, 0.0, -10.0]], 60, axis=0)
+    ours = record_offsets(records, gravity, name)
+    _, alone, found = base.rest_equilibria(VARIANTS[name], records[7:8])
+    assert not found[0] or alone[0] == ours[7]
+    with monkeypatch.context() as m:  # every record by the descent
+        m.setattr(base, "rest_equilibria", lambda cls, r: (None, np.full(len(r), np.nan), np.zeros(len(r), bool)))
+        theirs = np.array([record_offset(r, g, name) for r, g in zip(records, gravity)])
+    assert np.ptp(theirs) > 0.1 * np.abs(theirs).max()  # the records differ
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-12 * np.abs(theirs).max())
+
+
 def test_free_equilibrium_is_K_t_inverse_G():
     variant = _variant("free", (0.0, 0.0, -10.0))
     body, gains = variant.body, variant.gains

@@ -241,12 +241,13 @@ _CHAIN_KEYS = {
 }
 
 
-#: A hinge's range keys (``joints.<name>.range.<field>``): its ends and its stop's gains.
+#: A joint's range keys (``joints.<name>.range.<field>``, a hinge's q or a ball's Euler
+#: angles): its ends and its stop's gains.
 _RANGE_KEYS = {
-    "lower": Quantity("joints.range.lower", "q_min", "rad", "lower end of a hinge's range"),
-    "upper": Quantity("joints.range.upper", "q_max", "rad", "upper end of a hinge's range"),
-    "k_r": Quantity("joints.range.k_r", "K_stop", "N m rad-1", "stiffness of a hinge's stop beyond its range"),
-    "l_r": Quantity("joints.range.l_r", "L_stop", "N m s rad-1", "damping of a hinge's stop beyond its range"),
+    "lower": Quantity("joints.range.lower", "q_min", "rad", "lower end of a joint's range"),
+    "upper": Quantity("joints.range.upper", "q_max", "rad", "upper end of a joint's range"),
+    "k_r": Quantity("joints.range.k_r", "K_stop", "N m rad-1", "stiffness of a joint's stop beyond its range"),
+    "l_r": Quantity("joints.range.l_r", "L_stop", "N m s rad-1", "damping of a joint's stop beyond its range"),
 }
 
 

@@ -37,6 +37,7 @@ from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, PARAMETERS, SATUR
 from ..variants import VARIANTS
 from ..variants import chain as C
 from ..variants.paper import paper_form, paper_initial_state
+from ..variants.registry import record_offsets
 from .settings import SETTING_COLUMNS, SETTINGS, settings_records, settings_rows
 from .tableaus import METHODS
 
@@ -641,7 +642,10 @@ def _tree_offsets(tree, params: np.ndarray, ppoints: np.ndarray, gravity: np.nda
         return out
     keys = np.array([params[a].tobytes() + ppoints[a].tobytes() + gravity[a].tobytes() for a in rows], dtype=object)
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
-    found = np.array([C.rest_offset(C.with_records(tree, params[rows[a]], ppoints[rows[a]], gravity=gravity[rows[a]]))
-                      for a in first])
+    if tree.one_body:  # the paper's one body: every distinct record's equilibrium at once
+        found = record_offsets(params[rows[first], 0], gravity[rows[first]], tree.chain.joints[0].variant)
+    else:
+        found = np.array([C.rest_offset(C.with_records(tree, params[rows[a]], ppoints[rows[a]],
+                                                       gravity=gravity[rows[a]])) for a in first])
     out[rows] = found[inverse.ravel()]
     return out

@@ -42,7 +42,7 @@ from ..layout import (  # the table of outputs lives with the layout: files and 
 from ..model import PARAMETERS, Gains, Limits, RigidBody, parameters
 from .kernels import run_outputs, state_rates
 
-__all__ = ["Variant", "LYAPUNOV_TERMS", "N_OUTPUTS", "split_outputs", "limited_values"]
+__all__ = ["Variant", "LYAPUNOV_TERMS", "N_OUTPUTS", "split_outputs", "limited_values", "rest_equilibria"]
 
 
 # -- the protocol -----------------------------------------------------------------------------
@@ -192,8 +192,18 @@ class Variant:
         n = 3 * len(self._configuration_blocks)
         if not np.any(self.body.weight):
             return self._rest_state(np.zeros(n)), 0.0
+        if self.smooth:  # Newton's method from 0 (:func:`rest_equilibria`), as a batch of records computes it
+            p, h, found = rest_equilibria(type(self), self._undisturbed)
+            if found[0]:
+                return self._rest_state(p[0]), float(h[0])
+        return self._descended_equilibrium()
+
+    def _descended_equilibrium(self) -> tuple[np.ndarray, float]:
+        """The minimum of the stored energy downhill from 0 (BFGS, polished to a rest point
+        of the dynamics; Nelder-Mead for the pure sign law) and h there."""
         from scipy.optimize import minimize, root  # heavy: scipy
 
+        n = 3 * len(self._configuration_blocks)
         if self.smooth:
             # the minimum of the stored energy, polished to a rest point of the dynamics
             p = minimize(self._potential, np.zeros(n), method="BFGS").x
@@ -219,6 +229,90 @@ class Variant:
     def lyapunov_offset(self) -> float:
         """The constant h [J] that makes v zero at :attr:`equilibrium` (eq 30)."""
         return self._equilibrium[1]
+
+
+#: Newton's iterations of :func:`rest_equilibria` (each halving its step at most 30 times) and
+#: the residual [rad/s^2, m/s^2, m/s] at which it stops: the root polish's of one variant.
+_NEWTON_STEPS, _NEWTON_RESIDUAL = 60, 1e-13
+
+
+def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the configuration blocks p (k, n) of the equilibrium, h [J] (k,), found (k,) bool) of
+    the variant class ``cls`` (smooth) with each of the :data:`~rbstab.model.PARAMETERS`
+    ``records`` (k,) (read without h and disturbances), all at once; each row's numbers are
+    those of the record alone (no row's arithmetic reads another's). From the
+    configuration 0, Newton's method on the rest accelerations (their Jacobian by central
+    differences, the step halved until their norm falls) to 1e-13; ``found`` where it
+    converged to the minimum of the stored energy downhill from 0 (v no higher than at 0,
+    the linearisation there stable: -dF/dp's eigenvalues real and positive), or where 0 is
+    already a rest point (as a descent from it stops there); elsewhere h is NaN (and
+    :attr:`Variant.equilibrium` descends from 0 by BFGS instead)."""
+    layout = cls.layout
+    conf = np.concatenate([np.arange(layout.slice(b).start, layout.slice(b).stop)
+                           for b in layout.blocks if b in ("theta", "position", "controller_state")])
+    rates = np.concatenate([np.arange(layout.slice(b).start, layout.slice(b).stop)
+                            for b in ("omega", "velocity", "controller_state") if b in layout.blocks])
+    records = records.copy()
+    records["lyapunov_offset"], records["disturbance_count"] = 0.0, 0.0
+    k, n = len(records), len(conf)
+
+    def at_rest(p: np.ndarray) -> np.ndarray:
+        y = np.zeros((len(p), layout.size))
+        y[:, conf] = p
+        return y
+
+    def acceleration(p: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        out = np.empty((len(p), layout.size))
+        state_rates(cls.code, np.zeros(1), at_rest(p), records[rows], out)
+        return out[:, rates]
+
+    def potential(p: np.ndarray) -> np.ndarray:
+        out = np.empty((N_OUTPUTS, k, 1))
+        run_outputs(np.full(k, cls.code), records, np.zeros((1, 1)), at_rest(p)[:, None, :], out, True)
+        return out[OUTPUTS["lyapunov"].offset, :, 0]
+
+    def jacobian(p: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        jac = np.empty((len(rows), n, n))
+        step = 1e-7 * (1.0 + np.abs(p))
+        for c in range(n):
+            d = np.zeros_like(p)
+            d[:, c] = step[:, c]
+            jac[:, :, c] = (acceleration(p + d, rows) - acceleration(p - d, rows)) / (2.0 * step[:, c:c + 1])
+        return jac
+
+    p = np.zeros((k, n))
+    f = acceleration(p, np.arange(k))
+    at_zero = np.linalg.norm(f, axis=1) == 0.0
+    stuck = np.zeros(k, dtype=bool)  # a singular Jacobian (a clipped torque): left to the caller
+    for _ in range(_NEWTON_STEPS):
+        rows = np.flatnonzero((np.linalg.norm(f, axis=1) > _NEWTON_RESIDUAL) & ~stuck)
+        if not len(rows):
+            break
+        jac = jacobian(p[rows], rows)
+        with np.errstate(all="ignore"):
+            singular = ~(np.linalg.cond(jac) < 1e12)
+        stuck[rows[singular]] = True
+        rows, jac = rows[~singular], jac[~singular]
+        if not len(rows):
+            break
+        step = -np.linalg.solve(jac, f[rows][..., None])[..., 0]
+        size, norm = np.ones(len(rows)), np.linalg.norm(f[rows], axis=1)
+        for _ in range(30):
+            trial = p[rows] + size[:, None] * step
+            f_trial = acceleration(trial, rows)
+            worse = ~(np.linalg.norm(f_trial, axis=1) < norm)
+            if not worse.any():
+                break
+            size = np.where(worse, 0.5 * size, size)
+        p[rows], f[rows] = trial, f_trial
+    value = potential(p)
+    found = at_zero | ((np.linalg.norm(f, axis=1) <= _NEWTON_RESIDUAL) & ~stuck)
+    found &= at_zero | (value <= potential(np.zeros((k, n))) + 1e-12 * np.abs(value))
+    rows = np.flatnonzero(found & ~at_zero)
+    if len(rows):
+        eigenvalues = np.linalg.eigvals(-jacobian(p[rows], rows))
+        found[rows] = np.all((np.abs(eigenvalues.imag) <= 1e-9 * np.abs(eigenvalues)) & (eigenvalues.real > 0), axis=1)
+    return p, np.where(found, -value, np.nan), found
 
 
 def limited_values(code: int, y: np.ndarray, attachment_point: np.ndarray) -> np.ndarray:

@@ -14,9 +14,9 @@ import numpy as np
 
 from ..layout import FULL_BODY
 from ..model import Gains, RigidBody
-from .base import Variant
+from .base import Variant, rest_equilibria
 
-__all__ = ["VARIANTS", "Free", "Permanent", "Sliding", "ViscoElastic", "Embedded", "record_offset"]
+__all__ = ["VARIANTS", "Free", "Permanent", "Sliding", "ViscoElastic", "Embedded", "record_offset", "record_offsets"]
 
 
 class Free(Variant):
@@ -116,3 +116,17 @@ def record_offset(record: np.void, gravity: np.ndarray, name: str) -> float:
                   k_s=float(record["k_s"]) if "k_s" in used else None,
                   boundary_layer=float(record["boundary_layer"]) if "k_s" in used else 0.0)
     return cls(body, gains).lyapunov_offset
+
+
+def record_offsets(records: np.ndarray, gravity: np.ndarray, name: str) -> np.ndarray:
+    """:func:`record_offset` of each of the records (k,) under ``gravity`` (k, 3) [m/s^2]
+    with the variant ``name``'s law: all at once where the law is smooth
+    (:func:`rbstab.variants.base.rest_equilibria`; each record's h as it alone gives it),
+    record by record where that finds no minimum (or for the pure sign law)."""
+    out = np.full(len(records), np.nan)
+    smooth = np.flatnonzero(records["boundary_layer"] > 0.0) if name == "sliding" else np.arange(len(records))
+    if len(smooth):
+        out[smooth] = rest_equilibria(VARIANTS[name], records[smooth])[1]
+    for i in np.flatnonzero(np.isnan(out)):
+        out[i] = record_offset(records[i], gravity[i], name)
+    return out
