@@ -139,11 +139,6 @@ class KeyPath:
         entry = "" if self.entry is None else str(self.entry)
         return ".".join(p for p in (entry, self.field) if p)
 
-    @property
-    def field_key(self) -> str:
-        """The key without its indices (``initial_state.omega``)."""
-        return ".".join(p for p in (self.section, self.name) if p)
-
     @functools.cached_property  # read by every get and set (a sweep sets its keys in every run)
     def steps(self) -> tuple:
         """The walk into a mapping: keys (str) and list positions (int; a str entry a name)."""
