@@ -239,8 +239,9 @@ _NEWTON_STEPS, _NEWTON_RESIDUAL = 60, 1e-13
 def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(the configuration blocks p (k, n) of the equilibrium, h [J] (k,), found (k,) bool) of
     the variant class ``cls`` (smooth) with each of the :data:`~rbstab.model.PARAMETERS`
-    ``records`` (k,) (read without h and disturbances), all at once; each row's numbers are
-    those of the record alone (no row's arithmetic reads another's). From the
+    ``records`` (k,) (read without h, disturbances and actuator limits: v's minimum, which
+    no limit moves), all at once; each row's numbers are those of the record alone (no
+    row's arithmetic reads another's). From the
     configuration 0, Newton's method on the rest accelerations (their Jacobian by central
     differences, the step halved until their norm falls) to 1e-13; ``found`` where it
     converged to the minimum of the stored energy downhill from 0 (v no higher than at 0,
@@ -253,7 +254,7 @@ def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray
     rates = np.concatenate([np.arange(layout.slice(b).start, layout.slice(b).stop)
                             for b in ("omega", "velocity", "controller_state") if b in layout.blocks])
     records = records.copy()
-    records["lyapunov_offset"], records["disturbance_count"] = 0.0, 0.0
+    records["lyapunov_offset"], records["disturbance_count"], records["saturation"] = 0.0, 0.0, 0.0
     k, n = len(records), len(conf)
 
     def at_rest(p: np.ndarray) -> np.ndarray:
@@ -283,7 +284,7 @@ def rest_equilibria(cls: type[Variant], records: np.ndarray) -> tuple[np.ndarray
     p = np.zeros((k, n))
     f = acceleration(p, np.arange(k))
     at_zero = np.linalg.norm(f, axis=1) == 0.0
-    stuck = np.zeros(k, dtype=bool)  # a singular Jacobian (a clipped torque): left to the caller
+    stuck = np.zeros(k, dtype=bool)  # a singular Jacobian: left to the caller
     for _ in range(_NEWTON_STEPS):
         rows = np.flatnonzero((np.linalg.norm(f, axis=1) > _NEWTON_RESIDUAL) & ~stuck)
         if not len(rows):
