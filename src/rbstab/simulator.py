@@ -165,7 +165,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
                                  initial_state, locked_part, region_margin)
     from .variants.tree import (expand_samples, reduce_state, tree_expand, tree_impulses, tree_layout,  # heavy: numba
                                 tree_rate, tree_work)
-    from .variants.tree import range_margin as hinge_ranges  # heavy: numba
+    from .variants.tree import range_margin  # heavy: numba
 
     sim = config.simulation
     compiled = compile_chain(config.chain) if compiled is None else compiled
@@ -212,9 +212,13 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
     def region(t, yr):
         return region_margin(compiled, maximal(yr[:n_r]), sim.limits)[0]
 
+    def ranges(yr):
+        """(margin, status) of the joints' ranges that are admissible regions at ``yr``."""
+        return range_margin(np.ascontiguousarray(yr[:n_r]), compiled.params, compiled.codes, layout.r_at, np.inf, 0,
+                            RANGE_LEFT)
+
     def ranged(t, yr):
-        return hinge_ranges(np.ascontiguousarray(yr[:n_r]), compiled.params, compiled.codes, layout.r_at, np.inf, 0,
-                            RANGE_LEFT)[0]
+        return ranges(yr)[0]
 
     row = settings_rows([sim], timeout)[0]
     bounds = np.full((len(LIMITED), 3), np.inf) if sim.limits is None else sim.limits.array
@@ -222,7 +226,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
 
     def end(t, yr, event):
         """The message of a run stopped at t at the reduced state ``yr`` by the event
-        ``event`` (gimbal lock, its bounds or a hinge's range), in the compiled driver's
+        ``event`` (gimbal lock, its bounds or a joint's range), in the compiled driver's
         words (:func:`run_end`)."""
         full = maximal(yr[:n_r])
         if event is lock:
@@ -230,8 +234,7 @@ def solve_tree(config, timeout: float | None = None, compiled=None):
         elif event is region:
             code = limit_status(*region_margin(compiled, full, sim.limits)[1])
         else:
-            code = hinge_ranges(np.ascontiguousarray(yr[:n_r]), compiled.params, compiled.codes, layout.r_at, np.inf,
-                                0, RANGE_LEFT)[1]
+            code = ranges(yr)[1]
         return run_end(compiled, code, t, row, bounds, one_body)
 
     def left(t, yr):
@@ -816,8 +819,8 @@ def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np
     :data:`rbstab.engine.settings.SETTING_COLUMNS`, ``bounds`` (5, 3) its admissible region
     (a record's ``limits``). A gimbal lock's code names the body or joint
     (:func:`rbstab.engine.status.gimbal_of`), a bound's the quantity, its axis and the body
-    or joint that reached it, a hinge's range (:func:`rbstab.engine.status.range_of`) the
-    joint and the end; with ``one_body`` (a run written as one body, whose words have
+    or joint that reached it, a joint's range (:func:`rbstab.engine.status.range_of`) the
+    joint, its coordinate and the end; with ``one_body`` (a run written as one body, whose words have
     no body or joint names) neither is named."""
     from .variants import chain as C  # heavy: numba
 

@@ -231,8 +231,8 @@ def tree_margin(y, p, limit):
     |theta_2| (``limit`` = pi/2 - gimbal_margin [rad]), of the Euler angles the state holds
     (each body's Theta, or the Theta_j of the permanent joint that holds it: eq 1's B is
     singular at |theta_2| = pi/2) and of every other joint's relative Theta_j off the ground
-    (the B(Theta_j) of its feedback, eq 23); each hinge's range that is an admissible
-    region (:func:`rbstab.variants.tree.range_margin`); with ``simulation.limits`` also
+    (the B(Theta_j) of its feedback, eq 23); each hinge's or ball's range that is an
+    admissible region (:func:`rbstab.variants.tree.range_margin`); with ``simulation.limits`` also
     :func:`chain_bounds` on the maximal image. The Euler angles of a permanent joint's
     child are not the state's: they pass pi/2 without harm. The maximal image is made only
     where a bound or such a joint asks for it. The status of a gimbal lock names the body
