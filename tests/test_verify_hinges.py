@@ -129,6 +129,25 @@ def test_a_range_that_is_an_admissible_region_bounds_the_proven_level():
     assert "q of ankle = -0.04 rad (joints.ankle.range, an admissible region)" in result.reason
 
 
+def test_a_rest_state_outside_a_range_that_is_an_admissible_region_is_refused_by_the_analysis():
+    """The rod hanging on its hinge, gravity tilted so that it rests at q = 0.0043 rad: with
+    its range [-0.001, 0.001] as an admissible region, the analysis says the rest state lies
+    outside it, naming the joint and the end; with [-0.05, 0.05] it analyses."""
+    from rbstab.analysis import analyze
+    from rbstab.analysis.analyze import OutsideLimits
+
+    data = _rod(k=60.0)
+    data["joints"][0]["child_point"] = [0.0, 0.0, 0.5]
+    data["gravity"] = [0.0, 0.3, -9.81]
+    data["joints"][0]["range"] = {"lower": -0.05, "upper": 0.05, "kind": "region"}
+    rest = analyze(config_from_mapping(data), simulate=False, certificate=False).linearisation.equilibrium
+    assert 0.004 < rest[0] < 0.005
+    data["joints"][0]["range"] = {"lower": -0.001, "upper": 0.001, "kind": "region"}
+    with pytest.raises(OutsideLimits, match=r"outside joints.ankle.range \(an admissible region\): its q is above "
+                                            r"0.001 rad"):
+        analyze(config_from_mapping(data), simulate=False, certificate=False)
+
+
 def test_the_hinged_stances_verified_level_holds_where_its_runs_go():
     """The hinged stance's verified c lies at or below the sampled certificate's estimate
     (to the search's tolerance), and runs from states on {v = c} (the directions where the

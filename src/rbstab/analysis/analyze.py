@@ -402,11 +402,24 @@ _REST = {True: "equilibrium", False: "rest state"}
 
 def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str | None:
     """Why the rest state ``rest`` (full state) lies outside ``limits``
-    (``simulation.limits``) in one line ("the equilibrium lies outside simulation.limits:
-    |theta_2| = 0.7 rad > 0.6 rad (simulation.limits.theta)"; a tree's names the body or
-    joint), or None where it lies inside (or there are no limits)."""
+    (``simulation.limits``) or a joint's range that is an admissible region, in one line
+    ("the equilibrium lies outside simulation.limits: |theta_2| = 0.7 rad > 0.6 rad
+    (simulation.limits.theta)"; a tree's names the body or joint), or None where it lies
+    inside (or there are no limits)."""
+    from ..engine.status import RANGE_LEFT, range_of  # heavy: numba
     from ..variants import chain as C  # heavy: numba
+    from ..variants.tree import range_margin, reduce_state, tree_layout  # heavy: numba
 
+    layout = tree_layout(compiled)
+    margin, status = range_margin(reduce_state(compiled, layout, rest), compiled.params, compiled.codes, layout.r_at,
+                                  np.inf, 0, RANGE_LEFT)
+    if margin < 0:
+        joint, coordinate, upper = range_of(status)
+        name = compiled.chain.joint_names[joint]
+        end = float(compiled.params[joint]["range_upper" if upper else "range_lower"][coordinate])
+        what = "q" if compiled.chain.joints[joint].variant == "hinge" else f"theta_{coordinate + 1} of Theta_j"
+        return (f"the {_REST[one_body]} lies outside joints.{name}.range (an admissible region): its {what} is "
+                f"{'above' if upper else 'below'} {end:g} rad")
     if limits is None:
         return None
     errors = np.asarray(C.evaluate(compiled, np.zeros(1), rest[None])["constraint_error"], dtype=float)[0]
