@@ -406,23 +406,24 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
     ("the equilibrium lies outside simulation.limits: |theta_2| = 0.7 rad > 0.6 rad
     (simulation.limits.theta)"; a tree's names the body or joint), or None where it lies
     inside (or there are no limits)."""
-    from ..engine.status import RANGE_LEFT, range_of  # heavy: numba
     from ..variants import chain as C  # heavy: numba
-    from ..variants.tree import range_margin, reduce_state, tree_layout  # heavy: numba
 
-    layout = tree_layout(compiled)
-    margin, status = range_margin(reduce_state(compiled, layout, rest), compiled.params, compiled.codes, layout.r_at,
-                                  np.inf, 0, RANGE_LEFT)
-    if margin < 0:
-        joint, coordinate, upper = range_of(status)
-        name = compiled.chain.joint_names[joint]
-        end = float(compiled.params[joint]["range_upper" if upper else "range_lower"][coordinate])
-        what = "q" if compiled.chain.joints[joint].variant == "hinge" else f"theta_{coordinate + 1} of Theta_j"
-        return (f"the {_REST[one_body]} lies outside joints.{name}.range (an admissible region): its {what} is "
-                f"{'above' if upper else 'below'} {end:g} rad")
+    outputs = C.evaluate(compiled, np.zeros(1), rest[None])
+    for j, joint in enumerate(compiled.chain.joints):  # a hinge's q (about its axis) or a ball's Theta_j
+        if joint.region is None:
+            continue
+        theta_j = np.asarray(outputs["joint_theta"], dtype=float)[0, j]
+        values = np.atleast_1d(joint.axis @ theta_j if joint.variant == "hinge" else theta_j)
+        ends = [np.broadcast_to(np.asarray(end, dtype=float), values.shape)
+                for end in (joint.region.lower, joint.region.upper)]
+        for i, (value, lower, upper) in enumerate(zip(values, *ends)):
+            if not lower <= value <= upper:
+                what = "q" if joint.variant == "hinge" else f"theta_{i + 1} of Theta_j"
+                return (f"the {_REST[one_body]} lies outside joints.{joint.name}.range (an admissible region): its "
+                        f"{what} is {'above' if value > upper else 'below'} {upper if value > upper else lower:g} rad")
     if limits is None:
         return None
-    errors = np.asarray(C.evaluate(compiled, np.zeros(1), rest[None])["constraint_error"], dtype=float)[0]
+    errors = np.asarray(outputs["constraint_error"], dtype=float)[0]
     n = compiled.size
     for i in range(n):
         fixed = compiled.permanent[i]  # a point-fixed joint (ball, hinge): E_j = 0 by construction
