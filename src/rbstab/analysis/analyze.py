@@ -408,6 +408,8 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
     inside (or there are no limits)."""
     from ..variants import chain as C  # heavy: numba
 
+    if limits is None and all(joint.region is None for joint in compiled.chain.joints):
+        return None
     outputs = C.evaluate(compiled, np.zeros(1), rest[None])
     for j, joint in enumerate(compiled.chain.joints):  # a hinge's q (about its axis) or a ball's Theta_j
         if joint.region is None:

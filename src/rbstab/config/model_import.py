@@ -203,6 +203,31 @@ def _refusals(mujoco, model, where: str) -> list[str]:
     return errors
 
 
+def _ball(model, data, keyed, b: int, jname: str, body: str) -> tuple[list[str], str]:
+    """(the joint's lines after its points, the initial-state line of its child ``body``) of
+    the ball joint of MuJoCo body ``b``: ``variant: permanent`` with no servo, its damping a
+    passive damper on Omega_j (MuJoCo's ``dof_damping`` on the ball's angular velocity, child
+    frame), its child's Euler angles and angular velocity (body frame) at the keyframe
+    (``keyed``, the data at it; ``data`` at the reference pose) or zero (``keyed`` None)."""
+    lines = [_line(4, "variant: permanent", "a ball: Theta_j, the Euler angles of A_parent' A_child [rad], 0 in the "
+                                            "reference pose"),
+             _line(4, "k_r: [0.0, 0.0, 0.0]", "[N m/rad] no servo on a ball"),
+             _line(4, "l_r: [0.0, 0.0, 0.0]", "[N m s/rad]")]
+    dof = int(model.jnt_dofadr[int(model.body_jntadr[b])])
+    damping = np.array(model.dof_damping[dof:dof + 3], dtype=float)
+    if np.any(damping):
+        lines.append(_line(4, f"passive: {{k_r: [0.0, 0.0, 0.0], l_r: {_vector(damping)}}}",
+                           "[N m s/rad] damping on Omega_j (child frame)"))
+    if keyed is None:
+        theta, omega = np.zeros(3), np.zeros(3)
+    else:  # the body's turn from the reference pose, and its angular velocity in its own frame
+        turn = keyed.xmat[b].reshape(3, 3) @ data.xmat[b].reshape(3, 3).T
+        theta, omega = euler_angles_of(turn), turn.T @ keyed.cvel[b, :3]
+    start = _line(2, f"{body}: {{theta: {_vector(theta, scale=1.0)}, omega: {_vector(omega, scale=1.0)}}}",
+                  f"[rad, rad/s] {jname}: Euler angles, body frame")
+    return lines, start
+
+
 def _servos(mujoco, model, where: str, ctrl: np.ndarray, errors: list[str]) -> tuple[dict, dict]:
     """(joint id -> its feedback: ``source``, ``k_r`` [N m/rad], ``l_r`` [N m s/rad],
     ``theta_ref`` [rad] from q = 0, torque limits ``lower``, ``upper`` [N m], ``gear``,
@@ -389,25 +414,12 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
                                                                           f"{name_of[b]}"),
         ]
         if b in balls:
-            lines_joints += [_line(4, "variant: permanent", "a ball: Theta_j, the Euler angles of A_parent' A_child "
-                                                            "[rad], 0 in the reference pose"),
-                             _line(4, "k_r: [0.0, 0.0, 0.0]", "[N m/rad] no servo on a ball"),
-                             _line(4, "l_r: [0.0, 0.0, 0.0]", "[N m s/rad]")]
+            joint_lines, start = _ball(model, data, keyed, b, jname, name_of[b])
+            lines_joints += joint_lines
+            initial.append(start)
             unheld.append(jname)
             notes.append(f"{where}: the ball joint {jname} is written in Euler angles (variant permanent): a run "
                          "stops at their gimbal lock, |theta_2| = pi/2, where MuJoCo's quaternion turns on")
-            damping = [float(x) for x in model.dof_damping[dof:dof + 3]]
-            if any(damping):
-                lines_joints.append(_line(4, f"passive: {{k_r: [0.0, 0.0, 0.0], l_r: {_vector(np.array(damping))}}}",
-                                          "[N m s/rad] damping on Omega_j (child frame)"))
-            if keyed is None:
-                theta, omega = np.zeros(3), np.zeros(3)
-            else:  # the body's turn from the reference pose, and its angular velocity in its own frame
-                turn = keyed.xmat[b].reshape(3, 3) @ data.xmat[b].reshape(3, 3).T
-                theta, omega = euler_angles_of(turn), turn.T @ keyed.cvel[b, :3]
-            initial.append(_line(2, f"{name_of[b]}: {{theta: {_vector(theta, scale=1.0)}, omega: "
-                                    f"{_vector(omega, scale=1.0)}}}",
-                                 f"[rad, rad/s] {jname}: Euler angles, body frame"))
             continue
         qpos0 = float(model.qpos0[model.jnt_qposadr[j]])
         source = _element("joint", joint, ' type="hinge"')

@@ -119,8 +119,9 @@ def record_offset(record: np.void, gravity: np.ndarray, name: str) -> float:
 
 
 def record_offsets(records: np.ndarray, gravity: np.ndarray, name: str) -> np.ndarray:
-    """:func:`record_offset` of each of the records (k,) under ``gravity`` (k, 3) [m/s^2]
-    with the variant ``name``'s law: all at once where the law is smooth
+    """h [J], shape (k,): :func:`record_offset` of each of the :data:`rbstab.model.PARAMETERS`
+    ``records`` (k,) under ``gravity`` (k, 3) [m/s^2, inertial frame] with the variant
+    ``name``'s law (a key of :data:`VARIANTS`; KeyError otherwise): all at once where the law is smooth
     (:func:`rbstab.variants.base.rest_equilibria`; each record's h as it alone gives it),
     record by record where that finds no minimum (or for the pure sign law)."""
     out = np.full(len(records), np.nan)
