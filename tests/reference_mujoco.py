@@ -38,17 +38,41 @@ def double_pendulum(config, timestep: float):
     return model, data, qpos0
 
 
+def _coordinates(j) -> list[dict]:
+    """Each coordinate of a hinge or universal joint ``j`` (its resolved section) as one
+    MuJoCo hinge: name, axis, passive stiffness, damping, springref, servo kp, kv, target and
+    force range, and its index (a universal joint's two hinges, in order, share one body)."""
+    universal = j["variant"] == "universal"
+    axes = j["axis"] if universal else [j["axis"]]
+
+    def entry(section, key, k, default):
+        value = (section or {}).get(key, default)
+        return float(np.broadcast_to(np.asarray(value, dtype=float), (2,))[k]) if universal else float(value)
+
+    out = []
+    for k, axis in enumerate(axes):
+        passive, limits = j.get("passive") or {}, j.get("saturation") or {}
+        upper = entry(limits, "torque_n", k, float("inf"))
+        out.append({"name": f"{j['name']}_{k + 1}" if universal else j["name"], "axis": axis, "index": k,
+                    "stiffness": entry(passive, "k_r", k, 0.0), "damping": entry(passive, "l_r", k, 0.0),
+                    "springref": entry(passive, "theta_ref", k, 0.0), "kp": entry(j, "k_r", k, 0.0),
+                    "kv": entry(j, "l_r", k, 0.0), "target": entry(j, "theta_ref", k, 0.0), "upper": upper,
+                    "lower": entry(limits, "torque_n_lower", k, -upper)})
+    return out
+
+
 def hinge_tree(config, timestep: float):
-    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges, built
-    from its resolved sections alone: each body's frame at its joint's point, unrotated (q =
-    0 is rbstab's), its centre of mass at -child_point with the full inertia; each hinge's
-    ``axis``, its passive torque as the joint's ``stiffness``, ``damping`` and ``springref``,
-    its feedback as a ``position`` servo (kp = k_r, kv = l_r, the target theta_ref set in
-    ``data.ctrl``) whose force is clamped to [torque_n_lower, torque_n] where it has
-    limits; gravity as the config's; MuJoCo's RK4 at ``timestep`` [s]. A hinge's ``range``
-    is left out (MuJoCo's limit is a constraint of its own solver, not rbstab's stop): a
-    run compared with it stays inside its ranges. qpos0, qvel0: the initial q, u of each
-    joint (0 where not written)."""
+    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges or
+    universal joints, built from its resolved sections alone: each body's frame at its
+    joint's point, unrotated (q = 0 is rbstab's), its centre of mass at -child_point with
+    the full inertia; each hinge's ``axis`` (a universal joint's: two hinges in its body, in
+    order, as MuJoCo composes them), its passive torque as the joint's ``stiffness``,
+    ``damping`` and ``springref``, its feedback as a ``position`` servo (kp = k_r, kv = l_r,
+    the target theta_ref set in ``data.ctrl``) whose force is clamped to [torque_n_lower,
+    torque_n] where it has limits; gravity as the config's; MuJoCo's RK4 at ``timestep``
+    [s]. A ``range`` is left out (MuJoCo's limit is a constraint of its own solver, not
+    rbstab's stop): a run compared with it stays inside its ranges. qpos0, qvel0: the
+    initial q, u of each coordinate (0 where not written)."""
     data = config.resolved
     bodies = {b["name"]: b for b in data["bodies"]}
     joints = {j["child"]: j for j in data["joints"]}
@@ -61,40 +85,38 @@ def hinge_tree(config, timestep: float):
 
     def body(name):
         j, b = joints[name], bodies[name]
-        assert j["variant"] == "hinge", j["variant"]
+        assert j["variant"] in ("hinge", "universal"), j["variant"]
         pos = np.asarray(j["parent_point"], dtype=float)
         if j["parent"] != "ground":  # the parent's frame sits at its own joint's point
             pos = pos - np.asarray(joints[j["parent"]]["child_point"], dtype=float)
         inertia = np.asarray(b["inertia"], dtype=float)
         inertia = np.diag(inertia) if inertia.ndim == 1 else inertia
-        passive = j.get("passive") or {}
         inner = "".join(body(c) for c in children.get(name, ()))
-        return (f'<body name="{name}" pos="{vec(pos)}"><joint name="{j["name"]}" type="hinge" axis="{vec(j["axis"])}" '
-                f'stiffness="{passive.get("k_r", 0.0)}" damping="{passive.get("l_r", 0.0)}" '
-                f'springref="{passive.get("theta_ref", 0.0)}"/>'
+        hinges = "".join(f'<joint name="{c["name"]}" type="hinge" axis="{vec(c["axis"])}" stiffness="{c["stiffness"]}" '
+                         f'damping="{c["damping"]}" springref="{c["springref"]}"/>' for c in _coordinates(j))
+        return (f'<body name="{name}" pos="{vec(pos)}">{hinges}'
                 f'<inertial pos="{vec(np.negative(j["child_point"]))}" mass="{b["mass"]}" '
                 f'fullinertia="{vec([inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]])}"/>'
                 f"{inner}</body>")
 
+    coordinates = [(j, c) for j in data["joints"] for c in _coordinates(j)]
     actuators = ""
-    for j in data["joints"]:
-        limits = j.get("saturation") or {}
-        upper = limits.get("torque_n", float("inf"))
-        lower = limits.get("torque_n_lower", -upper)
-        clamp = (f' forcelimited="true" forcerange="{lower} {upper}"' if np.isfinite(upper) or np.isfinite(lower)
-                 else "")
-        actuators += f'<position joint="{j["name"]}" kp="{j.get("k_r", 0.0)}" kv="{j.get("l_r", 0.0)}"{clamp}/>'
+    for _, c in coordinates:
+        clamp = (f' forcelimited="true" forcerange="{c["lower"]} {c["upper"]}"'
+                 if np.isfinite(c["upper"]) or np.isfinite(c["lower"]) else "")
+        actuators += f'<position joint="{c["name"]}" kp="{c["kp"]}" kv="{c["kv"]}"{clamp}/>'
     xml = (f'<mujoco><compiler angle="radian"/><option gravity="{vec(data["gravity"])}" timestep="{timestep}" '
            f'integrator="RK4"/><worldbody>{"".join(body(c) for c in children["ground"])}</worldbody>'
            f"<actuator>{actuators}</actuator></mujoco>")
     model = mujoco.MjModel.from_xml_string(xml)
     state = mujoco.MjData(model)
-    state.ctrl[:] = [j.get("theta_ref", 0.0) for j in data["joints"]]
-    order = [model.joint(j["name"]).qposadr[0] for j in data["joints"]]
+    state.ctrl[:] = [c["target"] for _, c in coordinates]
     qpos0, qvel0 = np.zeros(model.nq), np.zeros(model.nv)
-    for j, at in zip(data["joints"], order):
+    for j, c in coordinates:
         written = data["initial_state"].get(j["child"]) or {}
-        qpos0[at], qvel0[at] = written.get("q", 0.0), written.get("u", 0.0)
+        at = model.joint(c["name"]).qposadr[0]
+        qpos0[at], qvel0[at] = (np.ravel(written.get(key, 0.0))[c["index"] if np.size(written.get(key, 0.0)) > 1 else 0]
+                                for key in ("q", "u"))
     return model, state, qpos0, qvel0
 
 

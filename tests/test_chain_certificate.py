@@ -65,7 +65,7 @@ def test_planar_pendulums_hessians_are_the_closed_forms(planar):
     (the joints' relative rates are 6), and LaSalle's PBH condition holds."""
     _, result = planar
     cert = result.certificate
-    names = [(b, k) for b, k, _ in result.coordinates]
+    names = [(b, k) for b, k, _, _ in result.coordinates]
     assert names == [("legs", "theta"), ("legs", "omega"), ("trunk", "theta"), ("trunk", "omega")]
     tilt, rate = [1, 7], [4, 10]
     k1, k2 = K_R

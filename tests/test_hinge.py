@@ -386,7 +386,7 @@ def test_the_hinged_stance_example_comes_back_upright_and_a_deep_lean_falls():
      "in the range [0, 0.2]"),
     (lambda d: d["joints"][1].update(variant="visco_elastic", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0] * 3,
                                      k_c=[10.0] * 3, l_c=[1.0] * 3, range={"lower": 0.0, "upper": 0.2, "k_r": 100.0})
-     or d["joints"][1].pop("axis"), "joints.1.range", "a range is a hinge's (of its angle q) or a ball's"),
+     or d["joints"][1].pop("axis"), "joints.1.range", "a range is a hinge's (of its angle q), a universal"),
     (lambda d: d["joints"][1].update(range={"lower": [0.0] * 3, "upper": 0.2, "k_r": 100.0}), "joints.1.range.lower",
      "a number: a hinge's range is of its angle q"),
     (lambda d: d["joints"][1].update(variant="permanent", k_r=[2.0] * 3, l_r=[0.1] * 3, theta_ref=[0.0, 0.3, 0.0],

@@ -378,12 +378,12 @@ def test_the_joint_kind_table_gives_each_law_its_reduced_coordinates():
     whose child is carried by eq 21's reduced states (Theta_j, Omega_j: the one-body
     ``permanent`` layout) with its point held; the four point laws pull a free body (its 12
     body states, the one-body layouts less D); the hinge holds its point and has one angle
-    and its rate. The sizes a tree's layout reads from the table are checked against the
+    and its rate, the universal joint two. The sizes a tree's layout reads from the table are checked against the
     reference in test_the_compiled_reduced_rate_is_the_references."""
     from rbstab.layout import JOINT_CODES, JOINT_KIND_OF, JOINT_KINDS, REDUCED_STATES, VARIANT_LAYOUTS, VELOCITIES, \
         point_fixed
 
-    assert set(JOINT_KIND_OF) == set(VARIANT_LAYOUTS) | {"hinge"} and set(JOINT_KIND_OF.values()) == set(JOINT_KINDS)
+    assert set(JOINT_KIND_OF) == set(VARIANT_LAYOUTS) | {"hinge", "universal"} and set(JOINT_KIND_OF.values()) == set(JOINT_KINDS)
     for law, layout in VARIANT_LAYOUTS.items():
         kind = JOINT_KINDS[JOINT_KIND_OF[law]]
         assert kind.point_fixed == point_fixed(law) == (law == "permanent")
@@ -392,6 +392,9 @@ def test_the_joint_kind_table_gives_each_law_its_reduced_coordinates():
     hinge = JOINT_KINDS["hinge"]
     assert (hinge.n_q, hinge.n_v, hinge.point_fixed, point_fixed("hinge")) == (1, 1, True, True)
     assert (REDUCED_STATES[JOINT_CODES["hinge"]], VELOCITIES[JOINT_CODES["hinge"]]) == (2, 1)
+    universal = JOINT_KINDS["universal"]
+    assert (universal.n_q, universal.n_v, universal.point_fixed, point_fixed("universal")) == (2, 2, True, True)
+    assert (REDUCED_STATES[JOINT_CODES["universal"]], VELOCITIES[JOINT_CODES["universal"]]) == (4, 2)
     assert not point_fixed("ball") and not point_fixed(None)
 
 

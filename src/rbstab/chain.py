@@ -27,7 +27,7 @@ import numpy as np
 
 from .model import Disturbance, Saturation
 
-__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Region", "Joint", "Chain", "single", "hinge",
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Region", "Joint", "Chain", "single", "hinge", "universal",
            "hinge_vectors"]
 
 #: The parent index of a joint to the ground.
@@ -143,7 +143,9 @@ class Joint:
     variant : str
         ``free``, ``permanent``, ``sliding``, ``visco_elastic`` or ``embedded``: the law of
         the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p); or ``hinge``:
-        the point held and the child turned about ``axis`` only (:func:`hinge`).
+        the point held and the child turned about ``axis`` only (:func:`hinge`); or
+        ``universal``: the point held and the child turned about ``axis`` then ``axis_2``
+        (:func:`universal`).
     k_r, l_r : ndarray, shape (3, 3)
         N_j = -B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j [N m] (eq 23 on the relative
         orientation Theta_j and the relative angular velocity Omega_j, child frame).
@@ -167,12 +169,15 @@ class Joint:
         The joint's passive torque, added to the feedback N_j (which ``saturation`` limits)
         and never limited; None: none, the paper's joint.
     axis : ndarray, shape (3,)
-        A hinge's unit axis a (the parent's and the child's frames); zero for any other joint.
+        A hinge's unit axis a (the parent's and the child's frames), a universal joint's
+        first a_1 (the parent's frame); zero for any other joint.
+    axis_2 : ndarray, shape (3,)
+        A universal joint's second unit axis a_2 (the child's frame); zero for any other joint.
     stop : Stop or None
-        A hinge's or a ball's (``permanent``) range of motion as a stop; None: none.
-    region : Region or None
-        A hinge's or a ball's range of motion as an admissible region (not with ``stop``);
+        A hinge's, a universal joint's or a ball's (``permanent``) range of motion as a stop;
         None: none.
+    region : Region or None
+        Such a joint's range of motion as an admissible region (not with ``stop``); None: none.
     """
 
     name: str
@@ -193,6 +198,7 @@ class Joint:
     theta_ref: np.ndarray = field(default_factory=lambda: np.zeros(3))
     passive: Passive | None = None
     axis: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    axis_2: np.ndarray = field(default_factory=lambda: np.zeros(3))
     stop: Stop | None = None
     region: Region | None = None
 
@@ -246,6 +252,47 @@ def hinge(name: str, parent: int, child: int, parent_point, child_point, axis, k
                  child_point=np.asarray(child_point, dtype=float), variant="hinge", k_r=k_r, l_r=l_r,
                  saturation=saturation, theta_ref=theta_ref, passive=passive, axis=a, stop=stop,
                  region=region)
+
+
+def universal(name: str, parent: int, child: int, parent_point, child_point, axes, k=(0.0, 0.0), l=(0.0, 0.0),
+              q_ref=(0.0, 0.0), limits: tuple | None = None, shape: str = "clip", passive: tuple | None = None,
+              stop: Stop | None = None, region: Region | None = None) -> Joint:
+    """A universal joint (docs/physics.md, "Joint kinds"): the child's point C held to the
+    parent's point, the child turned by q_1 about the unit axis a_1 (the parent's frame),
+    then by q_2 about a_2 (the child's frame), ``axes`` = (a_1, a_2) (each normalised, not
+    parallel). Its feedback Q_k = -k_k (q_k - q_ref_k) - l_k dq_k/dt [N m] on each
+    coordinate (``k`` [N m/rad], ``l`` [N m s/rad], ``q_ref`` [rad]: 2 numbers each) is
+    delivered between ``limits`` ((lower_1, lower_2), (upper_1, upper_2)) [N m], lower < 0 <
+    upper; None: unlimited), ``passive`` (k, l, q_ref) of that form never limited, its range
+    a ``stop`` or an admissible ``region`` (2 numbers per end). The records hold the
+    coordinates' entries 0 and 1 of 3-vectors: K_r = diag(k_1, k_2, 0), L_r, Theta_ref,
+    the limits. ValueError for an axis of zero length or two parallel axes."""
+    a = np.asarray(axes, dtype=float).reshape(2, 3)
+    norm = np.linalg.norm(a, axis=-1, keepdims=True)
+    if not np.all(norm > 0.0):
+        raise ValueError("a universal joint's axis of zero length")
+    a = a / norm
+    if np.linalg.norm(np.cross(a[0], a[1])) < PARALLEL_AXES:
+        raise ValueError("a universal joint's two axes are parallel")
+
+    def entries(values, fill=0.0):
+        return np.array([*np.broadcast_to(np.asarray(values, dtype=float), (2,)), fill])
+
+    saturation = None
+    if limits is not None:
+        low, high = limits
+        infinite = np.full(3, math.inf)
+        saturation = Saturation(entries(high, math.inf), infinite, infinite, shape, entries(low, -math.inf))
+    if passive is not None:
+        passive = Passive(np.diag(entries(passive[0])), np.diag(entries(passive[1])), entries(passive[2]))
+    return Joint(name=name, parent=parent, child=child, parent_point=np.asarray(parent_point, dtype=float),
+                 child_point=np.asarray(child_point, dtype=float), variant="universal", k_r=np.diag(entries(k)),
+                 l_r=np.diag(entries(l)), saturation=saturation, theta_ref=entries(q_ref), passive=passive, axis=a[0],
+                 axis_2=a[1], stop=stop, region=region)
+
+
+#: |a_1 x a_2| below which a universal joint's axes are parallel (its coordinates degenerate).
+PARALLEL_AXES = 1e-6
 
 
 @dataclass(frozen=True, eq=False)

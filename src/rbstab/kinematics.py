@@ -33,6 +33,11 @@ __all__ = [
     "IDENTITY",
     "axis_rotation",
     "axis_angle",
+    "turn_angle",
+    "universal_rotation",
+    "universal_angles",
+    "universal_columns",
+    "universal_rate",
     "euler_angles_of",
     "vector",
     "add",
@@ -172,6 +177,63 @@ def axis_angle(rot, axis):
     s = 0.5 * (axis[0] * (rot[2][1] - rot[1][2]) + axis[1] * (rot[0][2] - rot[2][0])
                + axis[2] * (rot[1][0] - rot[0][1]))
     return math.atan2(s, 0.5 * (rot[0][0] + rot[1][1] + rot[2][2] - 1.0))
+
+
+@jit(forceinline=True)
+def turn_angle(axis, x, y):
+    """The angle [rad] in (-pi, pi] of the turn about the unit ``axis`` a that takes the
+    vector ``x``'s part across a into the direction of ``y``'s (both not along a)."""
+    xa, ya = dot(axis, x), dot(axis, y)
+    xp = (x[0] - xa * axis[0], x[1] - xa * axis[1], x[2] - xa * axis[2])
+    yp = (y[0] - ya * axis[0], y[1] - ya * axis[1], y[2] - ya * axis[2])
+    return math.atan2(dot(axis, cross(xp, yp)), dot(xp, yp))
+
+
+@jit(forceinline=True)
+def universal_rotation(a_1, a_2, q_1, q_2):
+    """A universal joint's A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x) (rows) of its unit axes
+    ``a_1`` (the parent's frame), ``a_2`` (the child's frame) and angles [rad]."""
+    m, n = axis_rotation(a_1, q_1), axis_rotation(a_2, q_2)
+    return ((m[0][0] * n[0][0] + m[0][1] * n[1][0] + m[0][2] * n[2][0],
+             m[0][0] * n[0][1] + m[0][1] * n[1][1] + m[0][2] * n[2][1],
+             m[0][0] * n[0][2] + m[0][1] * n[1][2] + m[0][2] * n[2][2]),
+            (m[1][0] * n[0][0] + m[1][1] * n[1][0] + m[1][2] * n[2][0],
+             m[1][0] * n[0][1] + m[1][1] * n[1][1] + m[1][2] * n[2][1],
+             m[1][0] * n[0][2] + m[1][1] * n[1][2] + m[1][2] * n[2][2]),
+            (m[2][0] * n[0][0] + m[2][1] * n[1][0] + m[2][2] * n[2][0],
+             m[2][0] * n[0][1] + m[2][1] * n[1][1] + m[2][2] * n[2][1],
+             m[2][0] * n[0][2] + m[2][1] * n[1][2] + m[2][2] * n[2][2]))
+
+
+@jit(forceinline=True)
+def universal_angles(rot, a_1, a_2):
+    """(q_1, q_2) [rad], each in (-pi, pi], of the rotation ``rot`` = :func:`universal_rotation`
+    (a_1 and a_2 not parallel): rot a_2 = exp(q_1 [a_1]x) a_2 and rot' a_1 = exp(-q_2 [a_2]x) a_1."""
+    return turn_angle(a_1, a_2, matvec(rot, a_2)), -turn_angle(a_2, a_1, matTvec(rot, a_1))
+
+
+@jit(forceinline=True)
+def universal_columns(a_1, a_2, q_2):
+    """A universal joint's motion subspace in the child's frame, (s_1, s_2): Omega_j = s_1
+    dq_1/dt + s_2 dq_2/dt [rad/s] with s_1 = exp(-q_2 [a_2]x) a_1, s_2 = a_2."""
+    return matTvec(axis_rotation(a_2, q_2), a_1), a_2
+
+
+@jit(forceinline=True)
+def universal_rate(a_1, a_2, q_2):
+    """A universal joint's B (rows), the map of Omega_j [rad/s, child frame] to (dq_1/dt,
+    dq_2/dt, 0) on its motion subspace (:func:`universal_columns`): rows 1-2 G^-1 S' (G = S'S
+    = [[1, c], [c, 1]], c = a_1 . a_2, constant: the turn about a_2 keeps s_1's angle to
+    it), row 3 the unit normal n = s_1 x s_2 / |s_1 x s_2|; so B S = [I; 0], and N = B' f
+    has the generalised forces S' N = (f_1, f_2)."""
+    s_1, s_2 = universal_columns(a_1, a_2, q_2)
+    c = dot(a_1, a_2)
+    d = 1.0 / (1.0 - c * c)
+    n = cross(s_1, s_2)
+    size = 1.0 / math.sqrt(dot(n, n))
+    return ((d * (s_1[0] - c * s_2[0]), d * (s_1[1] - c * s_2[1]), d * (s_1[2] - c * s_2[2])),
+            (d * (s_2[0] - c * s_1[0]), d * (s_2[1] - c * s_1[1]), d * (s_2[2] - c * s_1[2])),
+            (size * n[0], size * n[1], size * n[2]))
 
 
 @jit

@@ -39,7 +39,6 @@ __all__ = [
     "SIGN_LAW_FIGURES",
     "STATE_BLOCKS",
     "BLOCK_UNITS",
-    "BLOCK_SIZES",
     "LYAPUNOV_TERMS",
     "SATURATION_FLAGS",
     "OUTPUT_VECTORS",
@@ -66,6 +65,7 @@ __all__ = [
     "JOINT_CODES",
     "REDUCED_STATES",
     "VELOCITIES",
+    "AXES",
     "POINT_FIXED",
     "point_fixed",
 ]
@@ -647,23 +647,29 @@ JOINT_KINDS = {
                        "q [rad], the angle of A_rel = exp(q [a]x) about the joint's unit axis a (the parent's and "
                        "the child's frames, which it leaves fixed); u = dq/dt [rad/s]",
                        "every q (a hinge has no singular angle)", (("q", 1), ("u", 1))),
+    "universal": JointKind("universal", 2, 2, True,
+                           "q = (q_1, q_2) [rad], A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x): a turn about the unit axis "
+                           "a_1 (the parent's frame), then about the unit axis a_2 (the child's frame); u = dq/dt "
+                           "[rad/s]",
+                           "every q (a_1 and a_2 not parallel: the joint has no singular angle)",
+                           (("q", 2), ("u", 2))),
 }
-#: Entries of each block of a tree's reduced state (:attr:`JointKind.blocks`; an embedded
-#: joint's D: ``controller_state``, 3).
-BLOCK_SIZES = {**{b: size for kind in JOINT_KINDS.values() for b, size in kind.blocks}, "controller_state": 3}
 #: Each joint's ``variant`` -> its joint kind: the paper's ``permanent`` joint is the ball in
 #: Euler angles, the four point laws pull a free body, ``hinge`` turns the child about an axis.
 JOINT_KIND_OF = {"free": "free", "permanent": "ball", "sliding": "free", "visco_elastic": "free", "embedded": "free",
-                 "hinge": "hinge"}
+                 "hinge": "hinge", "universal": "universal"}
 #: Each joint's ``variant`` -> its code in the compiled kernels: the paper's laws by their
 #: :data:`VARIANT_CODES`, then the kinds that have no one-body form of the paper (``hinge``).
-JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES)}
+JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES), "universal": len(VARIANT_CODES) + 1}
 #: Each joint code's reduced states and generalised velocities (the compiled kernels read
 #: these; an embedded joint's D comes after the bodies).
 REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].size for v in JOINT_CODES], dtype=np.int64)
 VELOCITIES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].n_v for v in JOINT_CODES], dtype=np.int64)
 #: Whether each joint code's kind holds its child's point by construction (:attr:`JointKind.point_fixed`).
 POINT_FIXED = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].point_fixed for v in JOINT_CODES], dtype=np.bool_)
+#: Each joint code's axes: the turns about fixed axes its coordinates are (a hinge's 1, a
+#: universal's 2; 0 for the ball's Euler angles and the free body).
+AXES = np.array([{"hinge": 1, "universal": 2}.get(JOINT_KIND_OF[v], 0) for v in JOINT_CODES], dtype=np.int64)
 
 
 def point_fixed(variant: str) -> bool:

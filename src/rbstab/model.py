@@ -273,9 +273,10 @@ _VECTOR = (np.float64, (3,))
 #: (:class:`rbstab.chain.Passive`): ``passive`` (1 where the joint has one; 0, as in a
 #: record of zeros: none, the next fields not read), ``passive_k_r`` [N m/rad],
 #: ``passive_l_r`` [N m s/rad] and ``passive_theta_ref`` [rad]; a hinge's unit ``axis``
-#: a (the parent's and the child's frames; zero for any other joint) and the range of a
-#: hinge's or a ball's coordinates (entry 0 a hinge's q, entries 0-2 a ball's Euler angles
-#: Theta_j) as a stop (:class:`rbstab.chain.Stop`): ``stop`` (1 where it has one; 0: none,
+#: a (the parent's and the child's frames; zero for any other joint), a universal joint's
+#: unit ``axis`` a_1 (the parent's frame) and ``axis_2`` a_2 (the child's frame; zero for
+#: any other joint), and the range of a joint's coordinates (entry 0 a hinge's q, entries
+#: 0-1 a universal joint's q_1, q_2, entries 0-2 a ball's Euler angles Theta_j) as a stop (:class:`rbstab.chain.Stop`): ``stop`` (1 where it has one; 0: none,
 #: the next fields not read), ``range_lower``, ``range_upper`` [rad], ``stop_k`` [N m/rad]
 #: and ``stop_l`` [N m s/rad], or as an admissible region (:class:`rbstab.chain.Region`):
 #: ``region`` 1 (a run whose coordinate leaves [``range_lower``, ``range_upper``] stops
@@ -325,6 +326,7 @@ PARAMETERS = np.dtype(
         ("passive_l_r", *_MATRIX),
         ("passive_theta_ref", *_VECTOR),
         ("axis", *_VECTOR),
+        ("axis_2", *_VECTOR),
         ("stop", np.float64),
         ("range_lower", *_VECTOR),
         ("range_upper", *_VECTOR),

@@ -802,11 +802,13 @@ def _tree_left_region(what: str, t: float) -> str:
 
 def _range_left(compiled, joint: int, coordinate: int, upper: bool, t: float) -> str:
     """The message of a tree's run whose joint ``joint``'s ``coordinate`` (a hinge's q, a
-    ball's Euler angle) reached an end of its range (an admissible region) at t [s], on
+    universal joint's q_1 or q_2, a ball's Euler angle) reached an end of its range (an admissible region) at t [s], on
     every engine."""
     name = compiled.chain.joint_names[joint]
     end = float(compiled.params[joint]["range_upper" if upper else "range_lower"][coordinate])
-    what = (f"the angle q of joint {name}" if compiled.chain.joints[joint].variant == "hinge" else
+    variant = compiled.chain.joints[joint].variant
+    what = (f"the angle q of joint {name}" if variant == "hinge" else
+            f"the angle q_{coordinate + 1} of joint {name}" if variant == "universal" else
             f"theta_{coordinate + 1} of joint {name}'s Euler angles Theta_j")
     return (f"left the admissible region (joints.{name}.range): {what} reached its "
             f"{'upper' if upper else 'lower'} end {end:g} rad at t = {t:.6g} s")

@@ -33,7 +33,7 @@ from ..config.schema import limits_violation
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
 from ..engine.registry import DEFAULT_ENGINE
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import BLOCK_SIZES, is_chain
+from ..layout import is_chain
 from ..variants import VARIANTS
 from ..variants.paper import has_paper_form
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
@@ -137,8 +137,8 @@ class Analysis:
         """The angles that bound the certificate's domain, in its text (None: one body's theta_2)."""
         if self.one_body:
             return None
-        hinged = any(j.variant == "hinge" for j in self.analysed.chain.joints)
-        return "|theta_2| of a body or joint, or a hinge's |q|," if hinged else "|theta_2| of a body or joint"
+        hinged = any(j.variant in ("hinge", "universal") for j in self.analysed.chain.joints)
+        return "|theta_2| of a body or joint, or a joint's |q|," if hinged else "|theta_2| of a body or joint"
 
     @property
     def verdict(self) -> str:
@@ -194,8 +194,8 @@ class Analysis:
             return json_record(self)
         lin = self.linearisation
         rest = {}
-        for (body, block, _), at in zip(self.coordinates, self.layout.offsets()):
-            rest.setdefault(body, {})[block] = lin.equilibrium[at: at + BLOCK_SIZES[block]].tolist()
+        for (body, block, _, size), at in zip(self.coordinates, self.layout.offsets()):
+            rest.setdefault(body, {})[block] = lin.equilibrium[at: at + size].tolist()
         return {**json_record(self), "rest_state": rest, "modes": self._modes(),
                 "initial_lyapunov": self.initial_lyapunov,
                 **({"certificate": self._certificate_dict()} if self.certificate is not None else {})}
@@ -221,8 +221,8 @@ class Analysis:
         and a free body's Euler angles."""
         layout = self.layout
         every = layout.state_names()
-        rows = [at + i for (_, block, _), at in zip(self.coordinates, layout.offsets())
-                if block in ("theta", "joint_theta", "q") for i in range(BLOCK_SIZES[block])]
+        rows = [at + i for (_, block, _, size), at in zip(self.coordinates, layout.offsets())
+                if block in ("theta", "joint_theta", "q") for i in range(size)]
         return [every[r] for r in rows], rows
 
     def _modes(self) -> list[dict]:
@@ -234,7 +234,7 @@ class Analysis:
                 for s, shape in zip(self.linearisation.eigenvalues, shapes)]
 
     def _certificate_dict(self) -> dict:
-        names = [f"{body}.{block}.{i}" for body, block, _ in self.coordinates for i in range(BLOCK_SIZES[block])]
+        names = [f"{body}.{block}.{i}" for body, block, _, size in self.coordinates for i in range(size)]
         return {**certificate_record(self.certificate), "coordinates": names}
 
 
@@ -415,12 +415,13 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
         if joint.region is None:
             continue
         theta_j = np.asarray(outputs["joint_theta"], dtype=float)[0, j]
-        values = np.atleast_1d(joint.axis @ theta_j if joint.variant == "hinge" else theta_j)
+        values = np.atleast_1d(joint.axis @ theta_j if joint.variant == "hinge" else
+                               theta_j[:2] if joint.variant == "universal" else theta_j)
         ends = [np.broadcast_to(np.asarray(end, dtype=float), values.shape)
                 for end in (joint.region.lower, joint.region.upper)]
         for i, (value, lower, upper) in enumerate(zip(values, *ends)):
             if not lower <= value <= upper:
-                what = "q" if joint.variant == "hinge" else f"theta_{i + 1} of Theta_j"
+                what = {"hinge": "q", "universal": f"q_{i + 1}"}.get(joint.variant, f"theta_{i + 1} of Theta_j")
                 return (f"the {_REST[one_body]} lies outside joints.{joint.name}.range (an admissible region): its "
                         f"{what} is {'above' if value > upper else 'below'} {upper if value > upper else lower:g} rad")
     if limits is None:

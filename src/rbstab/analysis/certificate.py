@@ -54,7 +54,6 @@ from typing import Protocol
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import BLOCK_SIZES
 from .derivatives import directional_derivative, hessian, jacobian
 
 __all__ = ["Certificate", "Model", "ChainModel", "coordinate_boundary_level",
@@ -156,17 +155,20 @@ class ChainModel:
 
         self.compiled = compiled
         self.coordinates = list(coordinates_of(compiled) if coordinates is None else coordinates)
-        self._at = [int(at) for _, _, at in self.coordinates]
-        self.n = sum(BLOCK_SIZES[block] for _, block, _ in self.coordinates)
+        self._at = [int(at) for _, _, at, _ in self.coordinates]
+        self.n = sum(size for _, _, _, size in self.coordinates)
         names = list(compiled.chain.body_names)
         if compiled.hinged:  # reduced coordinates: every angle of the domain is one of them
             self._theta, self.angle_names, at = [], [], 0
-            for i, (body, block, _) in enumerate(self.coordinates):
-                if block in ("theta", "joint_theta", "q"):
-                    part = compiled.chain.joint_names[names.index(body)] if block != "theta" else body
-                    self._theta.append(at + (0 if block == "q" else 1))
-                    self.angle_names.append(f"{part}.{'q' if block == 'q' else 'theta_2'}")
-                at += BLOCK_SIZES[block]
+            for i, (body, block, _, size) in enumerate(self.coordinates):
+                part = compiled.chain.joint_names[names.index(body)] if block != "theta" else body
+                if block in ("theta", "joint_theta"):
+                    self._theta.append(at + 1)
+                    self.angle_names.append(f"{part}.theta_2")
+                elif block == "q":  # a hinge's q, a universal joint's q_1, q_2
+                    self._theta += [at + k for k in range(size)]
+                    self.angle_names += [f"{part}.q" if size == 1 else f"{part}.q_{k + 1}" for k in range(size)]
+                at += size
             self._parented = []
             self.angle_matrix = np.eye(self.n)[self._theta]
             return
@@ -242,10 +244,10 @@ class ChainModel:
         """The least v [J] on the domain boundary (any angle at +-limit), at rest: where every
         angle is a coordinate (no joint has a body for parent), :func:`coordinate_boundary_level`;
         else :func:`constrained_boundary_level`."""
-        starts = np.cumsum([0] + [BLOCK_SIZES[block] for _, block, _ in self.coordinates])
-        free = [int(at) + a for (_, block, _), at in zip(self.coordinates, starts)
+        starts = np.cumsum([0] + [size for _, _, _, size in self.coordinates])
+        free = [int(at) + a for (_, block, _, size), at in zip(self.coordinates, starts)
                 if block in ("theta", "position", "controller_state", "joint_theta", "q")
-                for a in range(BLOCK_SIZES[block])]
+                for a in range(size)]
         y_e = np.asarray(y_e, dtype=float)
         if self.angle_matrix is not None:
             return coordinate_boundary_level(self.lyapunov, y_e, hess, limit, self._theta, free)

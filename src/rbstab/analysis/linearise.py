@@ -37,7 +37,7 @@ import math
 
 import numpy as np
 
-from ..layout import BLOCK_SIZES, BLOCK_UNITS, JOINT_KIND_OF, JOINT_KINDS
+from ..layout import BLOCK_UNITS, JOINT_KIND_OF, JOINT_KINDS
 from .derivatives import jacobian
 
 __all__ = [
@@ -293,18 +293,18 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
 
         z = reduce_state(compiled, tree_layout(compiled), y_rest)
     else:
-        z = np.concatenate([y_rest[at: at + 3] for _, _, at in coordinates])
+        z = np.concatenate([y_rest[at: at + 3] for _, _, at, _ in coordinates])
     return linearisation(lambda rows: reduced_rates(compiled, rows), z, compiled.chain.gravity), coordinates
 
 
-def coordinates_of(compiled) -> list[tuple[str, str, int]]:
-    """The coordinates of a chain's linearisation: (body name, block, index into the state)
-    of each block, :data:`rbstab.layout.BLOCK_SIZES` entries each. Without a hinge its
+def coordinates_of(compiled) -> list[tuple[str, str, int, int]]:
+    """The coordinates of a chain's linearisation: (body name, block, index into the state,
+    its entries) of each block. Without a hinge its
     independent coordinates in the full state (:func:`rbstab.variants.chain.independent_coordinates`:
     Theta_i, Omega_i of every body, X_i, V_i of bodies whose joint is not ``permanent``, D);
     with one its reduced state (:func:`rbstab.variants.tree.tree_layout`): each body's blocks
     of its joint kind (:attr:`rbstab.layout.JointKind.blocks`: a hinge's child's ``q``
-    [rad] and ``u`` [rad/s], 1 entry each; a ball's child's ``joint_theta``,
+    [rad] and ``u`` [rad/s], 1 entry each, a universal joint's 2 each; a ball's child's ``joint_theta``,
     ``joint_omega`` (Theta_j, Omega_j); a free body's ``theta``, ``omega``, ``position``,
     ``velocity``), then D of embedded joints."""
     from ..variants import chain as C  # heavy: numba (the chain's kernels compile on first use)
@@ -317,9 +317,9 @@ def coordinates_of(compiled) -> list[tuple[str, str, int]]:
     for i, joint in enumerate(compiled.chain.joints):
         at = int(layout.r_at[i])
         for block, size in JOINT_KINDS[JOINT_KIND_OF[joint.variant]].blocks:
-            out.append((names[i], block, at))
+            out.append((names[i], block, at, size))
             at += size
-    return out + [(names[j], "controller_state", int(layout.rd_at[j])) for j in range(compiled.size)
+    return out + [(names[j], "controller_state", int(layout.rd_at[j]), 3) for j in range(compiled.size)
                   if layout.rd_at[j] >= 0]
 
 
@@ -372,8 +372,7 @@ def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
 @dataclass(frozen=True)
 class TreeCoordinates:
     """A chain's independent coordinates (:func:`rbstab.variants.chain.independent_coordinates`)
-    as the layout of its linearisation's state z: :data:`rbstab.layout.BLOCK_SIZES` entries
-    per (body, state block), the blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has
+    as the layout of its linearisation's state z: each (body, state block) with its entries, the blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has
     (Theta, Omega of every body; X, V of one whose joint is not ``permanent``; D of an
     ``embedded`` joint's child), as :class:`rbstab.layout.StateLayout` lays out one body's
     state; a tree with a hinge: its reduced state's blocks (a hinge's child's q and u, 1
@@ -381,8 +380,8 @@ class TreeCoordinates:
 
     Attributes
     ----------
-    coordinates : tuple of (str, str, int)
-        (body name, block, index into the full or reduced state) of each block of z.
+    coordinates : tuple of (str, str, int, int)
+        (body name, block, index into the full or reduced state, entries) of each block of z.
     bodies : tuple of str
         The chain's bodies, in order.
     """
@@ -394,30 +393,30 @@ class TreeCoordinates:
     def blocks(self) -> tuple[str, ...]:
         """The state blocks some body has, in :data:`rbstab.layout.BLOCK_UNITS`' order
         (:data:`rbstab.layout.STATE_BLOCKS`, then the joints' blocks of a reduced state)."""
-        present = {block for _, block, _ in self.coordinates}
+        present = {block for _, block, _, _ in self.coordinates}
         return tuple(b for b in BLOCK_UNITS if b in present)
 
     def offsets(self) -> list[int]:
-        """Where each (body, block) starts in z (its entries: :data:`rbstab.layout.BLOCK_SIZES`)."""
-        return list(np.cumsum([0] + [BLOCK_SIZES[block] for _, block, _ in self.coordinates])[:-1])
+        """Where each (body, block) starts in z."""
+        return list(np.cumsum([0] + [size for _, _, _, size in self.coordinates])[:-1])
 
     def state_names(self) -> list[str]:
         """Scalar coordinate names ``<body>.<block>_<i>`` (``legs.theta_1``), a one-entry
         block's ``<body>.<block>`` (a hinge's ``shank.q``), in z's order."""
-        return [f"{body}.{block}_{i}" if BLOCK_SIZES[block] > 1 else f"{body}.{block}"
-                for body, block, _ in self.coordinates for i in range(1, BLOCK_SIZES[block] + 1)]
+        return [f"{body}.{block}_{i}" if size > 1 else f"{body}.{block}"
+                for body, block, _, size in self.coordinates for i in range(1, size + 1)]
 
     def state_units(self) -> list[str]:
         """The units of each scalar coordinate (:data:`rbstab.layout.BLOCK_UNITS`), in z's order."""
-        return [BLOCK_UNITS[block] for _, block, _ in self.coordinates for _ in range(BLOCK_SIZES[block])]
+        return [BLOCK_UNITS[block] for _, block, _, size in self.coordinates for _ in range(size)]
 
     def split(self, z: np.ndarray) -> dict[str, np.ndarray]:
         """Each block of ``z`` (n_z,) by body: {block: shape (n_bodies, 3)}, NaN for a body
         without that block (a one-entry block, a hinge's q or u: its first column)."""
         z = np.asarray(z, dtype=float)
         out = {b: np.full((len(self.bodies), 3), np.nan) for b in self.blocks}
-        for (body, block, _), at in zip(self.coordinates, self.offsets()):
-            out[block][self.bodies.index(body), : BLOCK_SIZES[block]] = z[at: at + BLOCK_SIZES[block]]
+        for (body, block, _, size), at in zip(self.coordinates, self.offsets()):
+            out[block][self.bodies.index(body), :size] = z[at: at + size]
         return out
 
 

@@ -297,8 +297,10 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
     states = {}
     reduced = TreeCoordinates(tuple(coordinates_of(calm)), tuple(calm.chain.body_names)).split(lin.equilibrium)
     for i, name in enumerate(calm.chain.body_names):
-        if calm.codes[i] == C.HINGE:  # a hinge's child starts from its q, u
-            states[name] = {"q": float(reduced["q"][i, 0]), "u": float(reduced["u"][i, 0])}
+        if calm.codes[i] in (C.HINGE, C.UNIVERSAL):  # a hinge's (a universal joint's) child starts from its q, u
+            m = 1 if calm.codes[i] == C.HINGE else 2
+            states[name] = {key: float(reduced[key][i, 0]) if m == 1 else reduced[key][i, :m].tolist()
+                            for key in ("q", "u")}
             continue
         state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
         if calm.d_at[i] >= 0:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..layout import BLOCK_SIZES, BLOCK_UNITS
+from ..layout import BLOCK_UNITS
 from .certificate import BOUNDS
 from .linearise import mode_shapes
 from .thresholds import EXPLAINS_BAR
@@ -307,8 +307,8 @@ def _equilibrium(analysis) -> str:
         return format_state(analysis.layout, y)
     y = np.where(np.abs(y) < ROUND_OFF_STATE, 0.0, y)
     bodies: dict[str, list[str]] = {}
-    for (body, block, _), at in zip(analysis.coordinates, analysis.layout.offsets()):
-        values = ", ".join(_g(v, 6) for v in y[at: at + BLOCK_SIZES[block]] + 0.0)
+    for (body, block, _, size), at in zip(analysis.coordinates, analysis.layout.offsets()):
+        values = ", ".join(_g(v, 6) for v in y[at: at + size] + 0.0)
         bodies.setdefault(body, []).append(f"{block} ({values}) {BLOCK_UNITS[block]}")
     return "; ".join(f"{body}: {', '.join(parts)}" for body, parts in bodies.items())
 

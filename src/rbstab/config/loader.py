@@ -58,9 +58,9 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, single
-from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix
-from ..layout import is_chain, point_fixed
+from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, single, universal
+from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix, universal_columns, universal_rotation
+from ..layout import AXES, JOINT_CODES, is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
 from ..variants import VARIANTS
 from ..variants.paper import has_paper_form
@@ -72,6 +72,7 @@ from .schema import (
     CHAIN_TOP_LEVEL,
     GAIN_NAMES,
     GROUND_NAME,
+    AXES_VARIANTS,
     HINGE_STATE,
     INITIAL_STATE_BLOCKS,
     InitialStateSchema,
@@ -602,6 +603,17 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
                                               float(passive.theta_ref or 0.0)),
                 _stop(j.range, None), _region(j.range, None)))
             continue
+        if j.variant == "universal":
+            sat, passive = j.saturation, j.passive
+            upper = math.inf if sat is None or sat.torque_n is None else sat.torque_n
+            lower = np.negative(upper) if sat is None or sat.torque_n_lower is None else sat.torque_n_lower
+            joints.append(universal(
+                j.name, parent, index[j.child], _array(j.parent_point), _array(j.child_point), _array(j.axis),
+                j.k_r or 0.0, j.l_r or 0.0, j.theta_ref or 0.0, None if sat is None else (lower, upper),
+                "clip" if sat is None else sat.shape,
+                None if passive is None else (passive.k_r or 0.0, passive.l_r or 0.0, passive.theta_ref or 0.0),
+                _stop(j.range, 2), _region(j.range, 2)))
+            continue
         used = VARIANTS[j.variant].required_gains
         joints.append(Joint(
             name=j.name, parent=parent, child=index[j.child],
@@ -659,12 +671,19 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
             p = chain.bodies[joint.parent].name
             x_p, v_p, omega_p = states[p]["position"], states[p]["velocity"], states[p]["omega"]
             a_p, parent = rotations[joint.parent], p
-        if joint.variant == "hinge":
-            rel = np.array(axis_rotation(tuple(joint.axis), float(written.get("q", 0.0))))
+        if joint.variant in AXES_VARIANTS:
+            q = np.broadcast_to(np.asarray(written.get("q", 0.0), dtype=float), (AXES[JOINT_CODES[joint.variant]],))
+            u = np.broadcast_to(np.asarray(written.get("u", 0.0), dtype=float), q.shape)
+            if joint.variant == "hinge":
+                rel, columns = np.array(axis_rotation(tuple(joint.axis), float(q[0]))), joint.axis[None]
+            else:
+                a_1, a_2 = tuple(joint.axis), tuple(joint.axis_2)
+                rel = np.array(universal_rotation(a_1, a_2, float(q[0]), float(q[1])))
+                columns = np.array(universal_columns(a_1, a_2, float(q[1])))
             a_c = a_p @ rel
             rotations[joint.child] = a_c
             state["theta"] = euler_angles_of(a_c)
-            state["omega"] = rel.T @ omega_p + joint.axis * float(written.get("u", 0.0))
+            state["omega"] = rel.T @ omega_p + u @ columns
         r_p, r_c = joint.parent_point, joint.child_point
         point_p = x_p + a_p @ r_p  # the parent's point, inertial frame
         rate_p = v_p + a_p @ _cross(omega_p, r_p)
@@ -687,7 +706,7 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
         relative = a_p.T @ a_c  # A_rel = A_p' A_c; with A = Rx Ry Rz, A_rel[0, 2] = sin(theta_2)
         theta_2 = math.asin(max(-1.0, min(1.0, float(relative[0, 2]))))
         region = joint.region
-        if region is not None and joint.variant != "hinge":  # a ball's Theta_j inside its range's region
+        if region is not None and joint.variant == "permanent":  # a ball's Theta_j inside its range's region
             theta_j = euler_angles_of(relative)
             if not np.all((region.lower <= theta_j) & (theta_j <= region.upper)):
                 _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
@@ -696,7 +715,7 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
                         f"Theta_j = {short_repr([float(f'{x:.6g}') for x in theta_j])} rad; the range is an "
                         "admissible region (kind: region), and the run would start outside it",
                         source, overrides, ("initial_state", "joints"))
-        if joint.parent != GROUND and joint.variant != "hinge" and abs(theta_2) >= math.pi / 2 - margin:
+        if joint.parent != GROUND and joint.variant not in AXES_VARIANTS and abs(theta_2) >= math.pi / 2 - margin:
             _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
                     f"an orientation of '{body.name}' relative to '{parent}' with |theta_2| < pi/2 - gimbal_margin "
                     f"= {math.pi / 2 - margin:.6g}",
@@ -755,11 +774,12 @@ def _check_limits(chain: Chain, states: Mapping[str, Mapping[str, np.ndarray]], 
                 f"{who}: {phrase}", source, overrides, inputs)
 
 
-def _range_value(value: Any, shape: int | None) -> float | np.ndarray:
-    """A range's number as a hinge's float (``shape`` None), or a ball's 3 (one broadcast)."""
+def _range_value(value: Any, shape: int | None, fill: float = 0.0) -> float | np.ndarray:
+    """A range's number as a hinge's float (``shape`` None), or a ball's 3 or a universal
+    joint's 2 (``shape``; one broadcast), as 3 entries (a universal joint's third ``fill``)."""
     if shape is None:
         return float(value)
-    out = np.broadcast_to(np.asarray(value, dtype=float), (shape,)).copy()
+    out = np.concatenate([np.broadcast_to(np.asarray(value, dtype=float), (shape,)), [fill] * (3 - shape)])
     out.setflags(write=False)
     return out
 
@@ -768,7 +788,8 @@ def _stop(written, shape: int | None) -> Stop | None:
     """A hinge's (``shape`` None) or a ball's (3) ``range`` as a stop (``kind: stop``), else None."""
     if written is None or written.kind != "stop":
         return None
-    return Stop(*(_range_value(v, shape) for v in (written.lower, written.upper, written.k_r, written.l_r or 0.0)))
+    return Stop(*(_range_value(v, shape, fill) for v, fill in ((written.lower, -math.inf), (written.upper, math.inf),
+                                                              (written.k_r, 0.0), (written.l_r or 0.0, 0.0))))
 
 
 def _region(written, shape: int | None) -> Region | None:
@@ -776,7 +797,7 @@ def _region(written, shape: int | None) -> Region | None:
     region``), else None."""
     if written is None or written.kind != "region":
         return None
-    return Region(_range_value(written.lower, shape), _range_value(written.upper, shape))
+    return Region(_range_value(written.lower, shape, -math.inf), _range_value(written.upper, shape, math.inf))
 
 
 def _tree_resolved(run: ChainSchema) -> dict:
@@ -790,7 +811,7 @@ def _tree_resolved(run: ChainSchema) -> dict:
                 if part in entry:
                     entry[part] = {k: v for k, v in entry[part].items() if v is not None}
     states = {}
-    hinged = {j.child for j in run.joints if j.variant == "hinge"}
+    hinged = {j.child for j in run.joints if j.variant in AXES_VARIANTS}
     for body in run.bodies:  # every body, in order; a state's x, v only where written; a hinge's child's q, u
         state = run.initial_state.get(body.name)
         written = dump["initial_state"].get(body.name) or {"theta": [0.0] * 3, "omega": [0.0] * 3, "d": [0.0] * 3}
@@ -847,8 +868,8 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
     gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]
     gains += [(f"joints.{i}.", {g: getattr(j, g) for g in (*JOINT_GAINS, "k_s")
                                 if g in VARIANTS[j.variant].required_gains or g in ("k_r", "l_r")})
-              for i, j in enumerate(run.joints) if j.variant != "hinge"]  # a hinge's are numbers >= 0
-    hinged = {j.child for j in run.joints if j.variant == "hinge"}
+              for i, j in enumerate(run.joints) if j.variant not in AXES_VARIANTS]  # numbers >= 0 per coordinate
+    hinged = {j.child for j in run.joints if j.variant in AXES_VARIANTS}
     angles = [(f"initial_state.{b.name}.theta", run.initial_state[b.name].theta) for b in chain.bodies
               if b.name in run.initial_state and b.name not in hinged]
     notes = _notes(chain, [f"bodies.{i}.inertia ('{b.name}')" for i, b in enumerate(chain.bodies)], angles, gains,

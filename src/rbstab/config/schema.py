@@ -29,7 +29,7 @@ from pydantic import (
 )
 from pydantic_core import PydanticCustomError
 
-from ..chain import MAX_BODIES
+from ..chain import MAX_BODIES, PARALLEL_AXES
 from ..layout import BLOCK_UNITS, LIMITED, LIMITED_COMPONENTS, OUTPUTS, display_units, point_fixed
 from ..model import DISTURBANCE_KINDS, DISTURBANCE_QUANTITIES, MAX_DISTURBANCES, SATURATION_SHAPES, Limits
 from ..variants import VARIANTS
@@ -428,7 +428,26 @@ def _variant(value: Any) -> str:
 
 #: A tree joint's ``variant``: the paper's laws (:data:`rbstab.variants.VARIANTS`) and the
 #: joint kinds that have no one-body form (:data:`rbstab.layout.JOINT_KIND_OF`).
-JOINT_VARIANTS = (*VARIANTS, "hinge")
+JOINT_VARIANTS = (*VARIANTS, "hinge", "universal")
+#: The joint kinds whose coordinates are turns about fixed axes: their child's initial state
+#: is q, u; their gains, references and limits are numbers per coordinate.
+AXES_VARIANTS = ("hinge", "universal")
+
+
+def _pair(value: Any, check: Callable[[Any], Any]) -> list:
+    """``check`` of each of 2 entries (a universal joint's, one per coordinate)."""
+    out = []
+    for i, x in enumerate(value):
+        try:
+            out.append(check(x))
+        except Invalid as exc:
+            raise Invalid(f"entry [{i}] is {exc.detail or _out_of_bounds(x, check)}") from None
+    return out
+
+
+def _is_pair(value: Any) -> bool:
+    """Whether ``value`` is a list of 2 entries that are not lists (a universal joint's numbers)."""
+    return isinstance(value, (list, tuple)) and len(value) == 2 and not any(isinstance(x, (list, tuple)) for x in value)
 
 
 def _joint_variant(value: Any) -> str:
@@ -439,8 +458,14 @@ def _joint_variant(value: Any) -> str:
     return value
 
 
-def _axis(value: Any) -> list[int | float]:
-    """A hinge's axis: 3 numbers, not all zero (it is normalised)."""
+def _axis(value: Any) -> list:
+    """A hinge's axis: 3 numbers, not all zero (it is normalised); a universal joint's two
+    axes: 2 such lists, not parallel."""
+    if isinstance(value, (list, tuple)) and len(value) == 2 and all(isinstance(a, (list, tuple)) for a in value):
+        axes = _pair(value, _axis)
+        if np.linalg.norm(np.cross(*(np.asarray(a, dtype=float) / np.linalg.norm(a) for a in axes))) < PARALLEL_AXES:
+            raise Invalid("two parallel axes", "2 lists of 3 numbers, the axes a_1 and a_2 not parallel")
+        return axes
     axis = _vector(value)
     if not math.hypot(*axis) > 0.0:
         raise Invalid("an axis of zero length", "3 numbers, not all zero (the axis, normalised)")
@@ -448,15 +473,21 @@ def _axis(value: Any) -> list[int | float]:
 
 
 def _joint_gain(value: Any) -> Any:
-    """A joint's spring or damper: a number >= 0 (a hinge's, about its axis) or a positive
-    semi-definite 3x3 (:func:`_psd_matrix`; the kind decides which it must be)."""
+    """A joint's spring or damper: a number >= 0 (a hinge's, about its axis), 2 of them (a
+    universal joint's, one per coordinate) or a positive semi-definite 3x3
+    (:func:`_psd_matrix`; the kind decides which it must be)."""
+    if _is_pair(value):
+        return _pair(value, bounded_number(ge=0))
     if isinstance(value, (list, tuple)):
         return _psd_matrix(value)
     return bounded_number(ge=0)(value)
 
 
 def _joint_angles(value: Any) -> Any:
-    """A reference posture: a number (a hinge's q_ref, rad) or 3 Euler angles (:func:`_theta`)."""
+    """A reference posture: a number (a hinge's q_ref, rad), 2 (a universal joint's) or 3
+    Euler angles (:func:`_theta`)."""
+    if _is_pair(value):
+        return _pair(value, _as_number)
     if isinstance(value, (list, tuple)):
         return _theta(value)
     return _as_number(value)
@@ -609,11 +640,12 @@ class _Body(_Section):
     gravity: _VECTOR = Field(default_factory=_zero, description="3 numbers (g, inertial frame, m/s^2)")
 
 
-def _per_axis(value: Any, check: Callable[[Any], Any]) -> Any:
-    """``check`` of one number (every axis), or of each of 3 (a list: one per axis)."""
+def _per_axis(value: Any, check: Callable[[Any], Any], lengths: tuple[int, ...] = (3,)) -> Any:
+    """``check`` of one number (every axis), or of each of 3 (a list: one per axis; with 2
+    in ``lengths``, 2: a universal joint's, one per coordinate)."""
     if isinstance(value, (list, tuple)):
-        if len(value) != 3:
-            raise Invalid(f"{len(value)} entries, not 3")
+        if len(value) not in lengths:
+            raise Invalid(f"{len(value)} entries, not {' or '.join(map(str, lengths[::-1]))}")
         out = []
         for i, x in enumerate(value):
             try:
@@ -649,6 +681,20 @@ def _lower_limits(value: Any) -> float | list[float]:
 
 _lower_limits.rule = ("limits", {"gt": None, "ge": None, "lt": 0, "le": None, "allow_inf": True, "integer": False})
 _lower_limits.shape = (VECTOR_LENGTH,)
+
+
+def _joint_limits(value: Any) -> float | list[float]:
+    """A joint's actuator limits: :func:`_limits`, or 2 (a universal joint's, per coordinate)."""
+    return _per_axis(value, bounded_number(gt=0, allow_inf=True), (2, 3))
+
+
+def _joint_lower_limits(value: Any) -> float | list[float]:
+    """A joint's lower actuator limits: :func:`_lower_limits`, or 2 (a universal joint's)."""
+    return _per_axis(value, bounded_number(lt=0, allow_inf=True), (2, 3))
+
+
+_joint_limits.rule, _joint_limits.shape = _limits.rule, _limits.shape
+_joint_lower_limits.rule, _joint_lower_limits.shape = _lower_limits.rule, _lower_limits.shape
 
 
 def _shape(value: Any) -> str:
@@ -829,15 +875,30 @@ class InitialStateSchema(_Section):
     d: _VECTOR = Field(default_factory=_zero, description=f"3 numbers ({BLOCK_UNITS['controller_state']})")
 
 
+def _joint_coordinate(value: Any) -> Any:
+    """A joint's angle in (-pi, pi) [rad]: a hinge's number, or a universal joint's 2."""
+    check = bounded_number(gt=-math.pi, lt=math.pi)
+    return _pair(value, check) if _is_pair(value) else check(value)
+
+
+def _joint_rate(value: Any) -> Any:
+    """A joint's angular rate [rad/s]: a hinge's number, or a universal joint's 2."""
+    return _pair(value, _as_number) if _is_pair(value) else _as_number(value)
+
+
+_joint_coordinate.rule, _joint_coordinate.shape = bounded_number(gt=-math.pi, lt=math.pi).rule, (2,)
+_joint_rate.shape = (2,)
+
+
 class _ChainInitialState(InitialStateSchema):
     """One body's initial state in a chain: its blocks, or a hinge's child's joint angle and rate."""
 
-    q: Annotated[Any, checked(optional(bounded_number(gt=-math.pi, lt=math.pi)))] = Field(
+    q: Annotated[Any, checked(optional(_joint_coordinate))] = Field(
         None, description="a number in (-pi, pi) (rad): the angle q of the hinge that holds the body (only for a "
-                          "hinge's child; default 0)")
-    u: Annotated[Any, checked(optional(_as_number))] = Field(
+                          "hinge's child; default 0); a universal joint's child's: 2, q_1 and q_2")
+    u: Annotated[Any, checked(optional(_joint_rate))] = Field(
         None, description="a number (rad/s): dq/dt of the hinge that holds the body (only for a hinge's child; "
-                          "default 0)")
+                          "default 0); a universal joint's child's: 2")
 
 
 #: A hinge's child's initial-state keys, and the blocks its hinge places instead.
@@ -1042,9 +1103,10 @@ class _BodySaturation(_Section):
 class _JointSaturation(_Section):
     """What a joint's actuators can deliver: its torque N_j and its point force Lambda_j."""
 
-    torque_n: _LIMITS = Field(None, description="|N_i| <= limit (N m, child frame): a number > 0 or 3 of them "
-                                                "(.inf: none; with torque_n_lower, the upper limits)")
-    torque_n_lower: Annotated[Any, checked(optional(_lower_limits))] = Field(
+    torque_n: Annotated[Any, checked(optional(_joint_limits))] = Field(
+        None, description="|N_i| <= limit (N m, child frame): a number > 0 or 3 of them (a universal joint's: 2, one "
+                          "per coordinate) (.inf: none; with torque_n_lower, the upper limits)")
+    torque_n_lower: Annotated[Any, checked(optional(_joint_lower_limits))] = Field(
         None, description="N_i >= lower limit (N m, child frame): a number < 0 or 3 of them (-.inf: none; optional, "
                           "default -torque_n: an actuator stronger one way, as MJCF's forcerange)")
     constraint_force: _LIMITS = Field(None, description="|Lambda_i| <= limit (N, inertial frame): a number > 0 "
@@ -1075,7 +1137,7 @@ def _per_coordinate(**bounds) -> Callable[[Any], Any]:
     """A check of a range's number: one (a hinge's; a ball's for each Euler angle) or 3 (a
     ball's, one per Euler angle of Theta_j) within ``bounds`` (:func:`bounded_number`'s)."""
     def check(value: Any) -> Any:
-        return _per_axis(value, bounded_number(**bounds))
+        return _per_axis(value, bounded_number(**bounds), (2, 3))
 
     check.rule = ("limits", {"gt": None, "ge": None, "lt": None, "le": None, "allow_inf": False, "integer": False,
                              **bounds})
@@ -1089,6 +1151,9 @@ def within_range(bounds: tuple[np.ndarray, np.ndarray]) -> str:
     lower, upper = np.broadcast_arrays(*bounds)
     if lower.ndim == 0:
         return f"an angle in the range [{float(lower):g}, {float(upper):g}] (rad)"
+    if lower.shape == (2,):
+        return "angles in the range " + ", ".join(f"q_{i + 1} in [{float(a):g}, {float(b):g}]"
+                                                  for i, (a, b) in enumerate(zip(lower, upper))) + " (rad)"
     return "Euler angles in the range " + ", ".join(f"theta_{i + 1} in [{float(a):g}, {float(b):g}]"
                                                      for i, (a, b) in enumerate(zip(lower, upper))) + " (rad)"
 
@@ -1157,10 +1222,12 @@ class _ChainJoint(_Section):
                                            "mass)")
     # ``variant`` before the gains: their validators read it from ``info.data``.
     variant: Annotated[Any, checked(_joint_variant)] = Field(
-        description=f"one of {', '.join(JOINT_VARIANTS)} (hinge: the point held, the child turned about axis)")
+        description=f"one of {', '.join(JOINT_VARIANTS)} (hinge: the point held, the child turned about axis; "
+                    "universal: about its two axes)")
     axis: Annotated[Any, checked(optional(_axis))] = Field(
         None, description="a hinge's axis a: 3 numbers, not all zero (the parent's and the child's frames, which "
-                          "it leaves fixed; normalised); only with variant hinge")
+                          "it leaves fixed; normalised); only with variant hinge; a universal joint's: 2 such lists, "
+                          "a_1 (the parent's frame) and a_2 (the child's frame), not parallel")
     k_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
         "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
         f"about its axis ({GAIN_UNITS['k_r']})"))
@@ -1207,57 +1274,68 @@ class _ChainJoint(_Section):
     @model_validator(mode="after")
     def _fits_the_kind(self) -> "_ChainJoint":
         """A hinge's axis, and its gains, reference and torque limits as numbers about it; a
+        universal joint's two axes and its numbers per coordinate (one for both, or 2); a
         ball's or a free body's as 3-vectors or 3x3 matrices, and no axis."""
-        hinge = self.variant == "hinge"
+        hinge, universal = self.variant == "hinge", self.variant == "universal"
         saturation, passive = self.saturation, self.passive
         values = [("k_r", self.k_r), ("l_r", self.l_r), ("theta_ref", self.theta_ref)]
         values += [] if passive is None else [(f"passive.{k}", getattr(passive, k)) for k in ("k_r", "l_r", "theta_ref")]
         values += [] if saturation is None else [(f"saturation.{k}", getattr(saturation, k))
                                                  for k in ("torque_n", "torque_n_lower")]
-        if hinge and self.axis is None:
-            raise PydanticCustomError("rbstab_missing", "missing", {
-                "subkey": "axis", "expected": "3 numbers, not all zero (the hinge's axis)",
-                "detail": "required by variant 'hinge'"})
-        if not hinge and self.axis is not None:
+        values += [] if self.range is None else [(f"range.{k}", getattr(self.range, k))
+                                                 for k in ("lower", "upper", "k_r", "l_r")]
+        two_axes = self.axis is not None and isinstance(self.axis[0], (list, tuple))
+        if (hinge or universal) and (self.axis is None or two_axes != universal):
+            raise PydanticCustomError("rbstab_missing" if self.axis is None else "rbstab_invalid", "an axis", {
+                "subkey": "axis", **({} if self.axis is None else {"found": short_repr(self.axis)}),
+                "expected": ("2 lists of 3 numbers, not parallel (the universal joint's axes a_1, a_2)" if universal
+                             else "3 numbers, not all zero (the hinge's axis)"),
+                "detail": f"required by variant '{self.variant}'"})
+        if not (hinge or universal) and self.axis is not None:
             raise PydanticCustomError("rbstab_invalid", "an axis", {
                 "subkey": "axis", "found": short_repr(self.axis), "expected": "no axis",
-                "detail": f"an axis is a hinge's (variant: hinge); a '{self.variant}' joint turns about all three"})
-        if self.range is not None and self.variant not in ("hinge", "permanent"):
+                "detail": f"an axis is a hinge's or a universal joint's; a '{self.variant}' joint turns about all three"})
+        if self.range is not None and self.variant not in ("hinge", "universal", "permanent"):
             raise PydanticCustomError("rbstab_invalid", "a range", {
                 "subkey": "range", "found": "a range", "expected": "no range",
-                "detail": f"a range is a hinge's (of its angle q) or a ball's (permanent: of its Euler angles "
-                          f"Theta_j); a '{self.variant}' joint has none"})
-        for key in ("lower", "upper", "k_r", "l_r"):  # a hinge's numbers
-            value = None if self.range is None else getattr(self.range, key)
-            if hinge and isinstance(value, (list, tuple)):
+                "detail": f"a range is a hinge's (of its angle q), a universal joint's (of q_1, q_2) or a ball's "
+                          f"(permanent: of its Euler angles Theta_j); a '{self.variant}' joint has none"})
+        for key, value in values:
+            if value is None:
+                continue
+            listed = isinstance(value, (list, tuple))
+            if hinge and listed:
                 raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
-                    "subkey": f"range.{key}", "found": short_repr(value),
-                    "expected": "a number: a hinge's range is of its angle q"})
-        bounds = None if self.range is None else (np.asarray(self.range.lower, dtype=float),
-                                                  np.asarray(self.range.upper, dtype=float))
+                    "subkey": key, "found": short_repr(value),
+                    "expected": "a number: a hinge's range is of its angle q" if key.startswith("range.") else
+                                "a number: a hinge's feedback, reference and limits act about its axis"})
+            if universal and listed and not _is_pair(value):
+                raise PydanticCustomError("rbstab_invalid", "a universal joint's numbers", {
+                    "subkey": key, "found": short_repr(value),
+                    "expected": "a number (both coordinates) or 2 numbers (q_1's, q_2's)"})
+            if not (hinge or universal) and _is_pair(value):
+                raise PydanticCustomError("rbstab_invalid", "a universal joint's numbers", {
+                    "subkey": key, "found": short_repr(value),
+                    "expected": "a number or 3 numbers (2 numbers are a universal joint's, variant: universal)"})
+            if not (hinge or universal or listed or key.startswith(("saturation.", "range."))):
+                what = "3 numbers (rad)" if key.endswith("theta_ref") else "3 numbers (a diagonal) or a 3x3 list of lists"
+                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
+                    "subkey": key, "found": short_repr(value),
+                    "expected": f"{what} (a single number is a hinge's, variant: hinge)"})
+        bounds = None if self.range is None else tuple(
+            np.broadcast_to(np.asarray(end, dtype=float), (2,) if universal else np.shape(end))
+            for end in (self.range.lower, self.range.upper))
         springs = [("theta_ref", self.theta_ref, self.k_r)]
         springs += [] if passive is None else [("passive.theta_ref", passive.theta_ref, passive.k_r)]
         for key, value, stiffness in springs:  # a spring's rest angle (0 where not written) inside the range
             value = np.asarray(0.0 if value is None else value, dtype=float)
-            if (bounds is not None and value.shape in ((), (3,)) and np.any(np.asarray(stiffness or 0.0) != 0)
+            if (bounds is not None and np.any(np.asarray(stiffness or 0.0) != 0)
                     and not np.all((bounds[0] <= value) & (value <= bounds[1]))):
                 raise PydanticCustomError("rbstab_invalid", "a reference beyond the range", {
                     "subkey": key, "found": short_repr(value.tolist()),
                     "expected": within_range(bounds),
                     "detail": "the spring would be relaxed where the stop pushes back" if self.range.kind == "stop"
                               else "the spring would be relaxed outside the admissible region"})
-        for key, value in values:
-            if value is None:
-                continue
-            if hinge and isinstance(value, (list, tuple)):
-                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
-                    "subkey": key, "found": short_repr(value),
-                    "expected": "a number: a hinge's feedback, reference and limits act about its axis"})
-            if not hinge and not isinstance(value, (list, tuple)) and not key.startswith("saturation."):
-                what = "3 numbers (rad)" if key.endswith("theta_ref") else "3 numbers (a diagonal) or a 3x3 list of lists"
-                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
-                    "subkey": key, "found": short_repr(value),
-                    "expected": f"{what} (a single number is a hinge's, variant: hinge)"})
         return self
 
     @model_validator(mode="after")
@@ -1448,32 +1526,43 @@ class ChainSchema(_Section):
             raise _chain_error("simulation.limits.constraint_error", short_repr(limits.constraint_error),
                                "no bound when every joint is 'permanent'",
                                "their points are pinned: E = 0 at every instant")
-        hinged = {j.child for j in self.joints if j.variant == "hinge"}
+        turned = {j.child: j.variant for j in self.joints if j.variant in AXES_VARIANTS}
         for name, state in self.initial_state.items():  # a hinge's child: its q, u; any other body: its blocks
-            given = state.model_fields_set & (set(HINGE_STATE) if name not in hinged else set(INITIAL_STATE_BLOCKS))
+            given = state.model_fields_set & (set(HINGE_STATE) if name not in turned else set(INITIAL_STATE_BLOCKS))
             for key in sorted(given):
+                kind = "universal joint" if turned.get(name) == "universal" else "hinge"
                 raise _chain_error(f"initial_state.{name}.{key}", short_repr(getattr(state, key)),
-                                   ("q (rad) and u (rad/s), its hinge's angle and rate" if name in hinged else
+                                   (f"q (rad) and u (rad/s), its {kind}'s angle and rate" if name in turned else
                                     f"{', '.join(INITIAL_STATE_BLOCKS)}: the blocks of its state"),
-                                   f"'{name}' is {'' if name in hinged else 'not '}a hinge's child"
-                                   + ("; its hinge places and turns it" if name in hinged else ""))
-        for j in self.joints:  # a hinge's start inside the admissible region of its range
-            if j.variant != "hinge" or j.range is None or j.range.kind != "region":
+                                   (f"'{name}' is a {kind}'s child; its {kind} places and turns it" if name in turned
+                                    else f"'{name}' is not a hinge's child"))
+            for key in ("q", "u") if name in turned else ():
+                value = getattr(state, key)
+                if value is not None and _is_pair(value) != (turned[name] == "universal"):
+                    raise _chain_error(f"initial_state.{name}.{key}", short_repr(value),
+                                       "2 numbers (a universal joint's q_1, q_2)" if turned[name] == "universal"
+                                       else "a number (a hinge's angle)", f"'{name}' is a {turned[name]} joint's child")
+        for j in self.joints:  # a start inside the admissible region of its range
+            if j.variant not in AXES_VARIANTS or j.range is None or j.range.kind != "region":
                 continue
             state = self.initial_state.get(j.child)
-            q = 0.0 if state is None or state.q is None else float(state.q)
-            if not float(j.range.lower) <= q <= float(j.range.upper):
-                raise _chain_error(f"initial_state.{j.child}.q", short_repr(q),
-                                   f"an angle in joints.{j.name}.range [{float(j.range.lower):g}, "
-                                   f"{float(j.range.upper):g}] (rad)",
+            q = np.asarray(0.0 if state is None or state.q is None else state.q, dtype=float)
+            bounds = tuple(np.broadcast_to(np.asarray(end, dtype=float), (2,) if j.variant == "universal" else ())
+                           for end in (j.range.lower, j.range.upper))
+            if not np.all((bounds[0] <= q) & (q <= bounds[1])):
+                lower, upper = np.broadcast_arrays(*bounds)
+                raise _chain_error(f"initial_state.{j.child}.q", short_repr(q.tolist()),
+                                   f"an angle in joints.{j.name}.range [{float(lower):g}, {float(upper):g}] (rad)"
+                                   if lower.ndim == 0 else f"angles in joints.{j.name}.range: "
+                                   + within_range(bounds).removeprefix("angles in the range "),
                                    f"the range of joint '{j.name}' is an admissible region (kind: region), and the "
                                    "run would start outside it")
         margin = float(self.simulation.gimbal_margin)
         angles = [(f"initial_state.{name}.theta", state.theta) for name, state in self.initial_state.items()]
         angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints
-                   if j.theta_ref is not None and j.variant != "hinge"]
+                   if j.theta_ref is not None and j.variant not in AXES_VARIANTS]
         angles += [(f"joints.{j.name}.passive.theta_ref", j.passive.theta_ref) for j in self.joints
-                   if j.passive is not None and j.passive.theta_ref is not None and j.variant != "hinge"]
+                   if j.passive is not None and j.passive.theta_ref is not None and j.variant not in AXES_VARIANTS]
         for key, theta in angles:
             if not clear_of_gimbal_lock(theta[1], margin):
                 limit = math.pi / 2 - margin

@@ -162,7 +162,7 @@ class TableFields:
         """The field of every run (``name`` dotted inside a subsection or a list section's
         entry, ``bodies.trunk.mass``; "" the section itself, ``gravity``), shape (n,
         *shape): ``shape`` (3, 3) makes a matrix of a 3-list (its diagonal), as the
-        configuration's loader does, and (3,) 3 numbers of one; ``default`` for a template
+        configuration's loader does, (3,) 3 numbers of one and (2,) 2 (a universal joint's); ``default`` for a template
         without the field (None: a ValueError). ``only``: the runs of that template alone,
         shape (its runs, *shape)."""
         out = None
@@ -181,12 +181,12 @@ class TableFields:
                 if default is None:
                     raise ValueError(f"no {section}.{name} in template {int(t)}")
                 written = default
-            written_shape = (3,) if shape == (3,) else np.shape(written)
+            written_shape = shape if shape in ((3,), (2,)) else np.shape(written)
             value = np.broadcast_to(np.array(written, dtype=float), (len(rows), *written_shape)).copy()
             for index, column in (v for alias in aliases for v in self.varied.get(alias, ())):
                 part = np.asarray(column[rows], dtype=float)
-                if shape == (3,) and not index and part.ndim == 1:
-                    part = np.broadcast_to(part[:, None], (len(rows), 3))
+                if shape in ((3,), (2,)) and not index and part.ndim == 1:
+                    part = np.broadcast_to(part[:, None], (len(rows), shape[0]))
                 if index:
                     value[(slice(None), *index)] = part
                 else:
@@ -209,6 +209,13 @@ class TableFields:
     def of_templates(self, values: Sequence, dtype=None) -> np.ndarray:
         """Each run's entry of ``values`` (a value a template)."""
         return np.asarray(values, dtype=dtype)[self.template]
+
+
+def _coordinates(values: np.ndarray, fill: float, diagonal: bool = False) -> np.ndarray:
+    """A universal joint's numbers per coordinate ``values`` (k, 2) as its records' 3-vectors
+    (k, 3), the third ``fill``, or (``diagonal``) the diagonal matrices (k, 3, 3) of those."""
+    out = np.concatenate([values, np.full((len(values), 1), fill)], axis=1)
+    return out[:, :, None] * np.eye(3) if diagonal else out
 
 
 def _inverse(matrices: np.ndarray) -> np.ndarray:
@@ -514,15 +521,15 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
         p[name] = of("bodies", name, zero, shape=(3, 3))
     hinged = joint.variant == "hinge"  # its gains, reference and limits numbers about its axis
     for name in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d"):
-        if not (hinged and name in ("k_r", "l_r")):
+        if not (joint.variant in ("hinge", "universal") and name in ("k_r", "l_r")):
             p[name] = of("joints", name, zero, shape=(3, 3))
     if joint.l_d is not None:
         p["l_d_inv"] = _inverse(p["l_d"])
     p["k_s"] = of("joints", "k_s", 0.0)
     p["boundary_layer"] = of("joints", "boundary_layer", 0.0)
-    if not hinged:
+    if joint.variant not in ("hinge", "universal"):
         p["theta_ref"] = of("joints", "theta_ref", zero, shape=(3,))
-    if joint.passive is not None and not hinged:
+    if joint.passive is not None and joint.variant not in ("hinge", "universal"):
         p["passive"] = 1.0
         p["passive_k_r"] = of("joints", "passive.k_r", zero, shape=(3, 3))
         p["passive_l_r"] = of("joints", "passive.l_r", zero, shape=(3, 3))
@@ -539,13 +546,32 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
             _, p["passive_k_r"], p["passive_l_r"], p["passive_theta_ref"], _, _ = hinge_vectors(
                 axis, of("joints", "passive.k_r", 0.0), of("joints", "passive.l_r", 0.0),
                 of("joints", "passive.theta_ref", 0.0))
-    if joint.stop is not None or joint.region is not None:  # a hinge's q (entry 0), a ball's Theta_j
+    universal = joint.variant == "universal"  # its numbers per coordinate, entries 0-1 of the records' 3-vectors
+    if universal:
+        p["axis"], p["axis_2"] = (a / np.linalg.norm(a, axis=-1, keepdims=True)
+                                  for a in np.moveaxis(of("joints", "axis", shape=(2, 3)), 1, 0))
+        p["k_r"], p["l_r"] = (_coordinates(of("joints", name, 0.0, shape=(2,)), 0.0, True) for name in ("k_r", "l_r"))
+        p["theta_ref"] = _coordinates(of("joints", "theta_ref", 0.0, shape=(2,)), 0.0)
+        upper = of("joints", "saturation.torque_n", math.inf, shape=(2,)) if joint.saturation else np.full(2, math.inf)
+        lower = of("joints", "saturation.torque_n_lower", math.nan, shape=(2,)) if joint.saturation else np.nan
+        limit, floor = _coordinates(upper, math.inf), _coordinates(np.where(np.isnan(lower), -upper, lower), -math.inf)
+        if joint.passive is not None:
+            p["passive"] = 1.0
+            p["passive_k_r"], p["passive_l_r"] = (_coordinates(of("joints", f"passive.{name}", 0.0, shape=(2,)), 0.0,
+                                                               True) for name in ("k_r", "l_r"))
+            p["passive_theta_ref"] = _coordinates(of("joints", "passive.theta_ref", 0.0, shape=(2,)), 0.0)
+    if joint.stop is not None or joint.region is not None:  # a hinge's q (entry 0), a universal's q_1, q_2, a ball's
         p["stop" if joint.stop is not None else "region"] = 1.0
         for name, field in (("lower", "range_lower"), ("upper", "range_upper"), ("k_r", "stop_k"),
                             ("l_r", "stop_l"))[:4 if joint.stop is not None else 2]:
-            p[field] = of("joints", f"range.{name}", 0.0 if name == "l_r" else None, shape=(3,))
+            default = 0.0 if name == "l_r" else None
+            if universal:
+                p[field] = _coordinates(of("joints", f"range.{name}", default, shape=(2,)),
+                                        {"lower": -math.inf, "upper": math.inf}.get(name, 0.0))
+            else:
+                p[field] = of("joints", f"range.{name}", default, shape=(3,))
     if joint.saturation is not None or body.saturation is not None:
-        if hinged:
+        if hinged or universal:
             p["torque_limit"], p["torque_floor"] = limit, floor
         else:
             p["torque_limit"] = (of("joints", "saturation.torque_n", math.inf, shape=(3,)) if joint.saturation
@@ -575,7 +601,7 @@ def tree_initial_states(config, tree, keys: Sequence[str], columns: Mapping[str,
     each run's joint points. The runs are validated: nothing is checked or raised here."""
     names = list(config.chain.body_names)
     varied = [k for k in keys if parse_any_key(k).section == "initial_state"]
-    if varied and any(j.variant == "hinge" for j in config.chain.joints):  # a hinge turns what it carries
+    if varied and any(j.variant in ("hinge", "universal") for j in config.chain.joints):  # q turns what it carries
         return _hinged_initial_states(config, varied, columns, rows)
     y = np.repeat(C.state_vector(config.chain, config.initial_state)[None], len(rows), axis=0)
     placed = {"x": np.array([f"initial_state.{b}.x" in config.placed for b in names]),

@@ -29,11 +29,11 @@ from numba.extending import overload
 
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
-from ..layout import POINT_FIXED
+from ..layout import AXES, POINT_FIXED
 from ..model import set_limits
 from ..variants.chain import _relative
 from ..variants.disturbances import apply_impulses, next_breakpoint
-from ..variants.kernels import HINGE, PERMANENT, limited_quantities, state_rate
+from ..variants.kernels import PERMANENT, limited_quantities, state_rate
 from ..variants.tree import (expand_samples, range_margin, reduce_states, reduced_size, tree_expand, tree_layout,
                              tree_rate)
 from ..variants.tree import tree_impulses as reduced_impulses
@@ -242,7 +242,7 @@ def tree_margin(y, p, limit):
     limited = p.params[0].limited != 0.0
     relative = False
     for i in range(n):
-        if p.codes[i] == HINGE:  # no Euler angles: its q has no singular value
+        if AXES[p.codes[i]] > 0:  # no Euler angles: a hinge's or a universal joint's q has no singular value
             continue
         m = limit - abs(y[p.r_at[i] + 1])
         if m < margin:

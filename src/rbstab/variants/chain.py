@@ -34,9 +34,11 @@ import numpy as np
 
 from ..chain import Chain
 from ..jit import jit
-from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec, quadratic_form,
-                          rotation_and_rate_of, rotation_matrix, sub, vector)
-from ..layout import JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES
+from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec, neg,
+                          quadratic_form,
+                          rotation_and_rate_of, rotation_matrix, sub, universal_angles, universal_rate, universal_rotation,
+                          vector)
+from ..layout import AXES, JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     force_h,
@@ -48,7 +50,7 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import EMBEDDED, HINGE, PERMANENT, constraint_dissipation, constraint_energy, constraint_force, \
+from .kernels import EMBEDDED, HINGE, PERMANENT, UNIVERSAL, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
 from .registry import record_offset
@@ -77,7 +79,8 @@ _TRANSLATIONAL, _ROTATIONAL, _CONSTRAINT, _GRAVITY, _RATE = range(5)
 #: the inertial frame [1/(kg m^2)]; ``matrix`` (3n, 3n) and ``rhs`` (3n,) the permanent joints'
 #: linear system; ``which`` (n,) int64 the permanent joints; ``joints`` (n, 7, 3),
 #: ``bodies`` (n, 3), ``scalars`` (5,) the per-joint, per-body and scalar records
-#: :func:`chain_core` fills; ``angle`` (n,) each hinge's q [rad]: given by the caller
+#: :func:`chain_core` fills; ``angle`` (n, 2) each hinge's q (column 0), each universal
+#: joint's q_1, q_2 [rad]: given by the caller
 #: (:func:`chain_wrenches`' ``rotations``), else the last one read (0 in a new work: a
 #: new run starts from it). The compiled driver holds one per chain (in its system), so an
 #: evaluation allocates nothing.
@@ -90,7 +93,7 @@ def chain_work(n):
     """Scratch arrays (:class:`ChainWork`) of a chain of ``n`` bodies."""
     return ChainWork(np.empty((n, 3, 3)), np.empty((n, 3, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3, 3)),
                      np.empty((3 * n, 3 * n)), np.empty(3 * n), np.empty(n, dtype=np.int64),
-                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.zeros(n))
+                     np.empty((n, 7, 3)), np.empty((n, 3)), np.empty(5), np.zeros((n, 2)))
 
 
 # -- compiled core --------------------------------------------------------------------------
@@ -204,6 +207,53 @@ def _stop(n_j, energy, dissipation, angle, rate, direction, p, i):
             energy + 0.5 * p.stop_k[i] * beyond * beyond, dissipation + p.stop_l[i] * rate * rate)
 
 
+@jit(forceinline=True)
+def _feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipation, power):
+    """A joint's torque N_j [N m] (child frame): eq 23 about the reference posture (``strain``
+    = Theta_j - Theta_ref, ``b_j`` = B(Theta_j); a hinge's written as a ball's, B = I) through
+    its actuators' limits [torque_floor, torque_limit] per axis, plus the passive torque of
+    eq 23's form with its own gains and reference, never limited; returns it with v's
+    rotational term, the dissipation [W] and the saturation deficit power [W] accumulated."""
+    n_j = torque_n_command(b_j, strain, omega_j, p)
+    if p.saturation > 0.0:
+        commanded = n_j
+        n_j = saturate_between(commanded, p.torque_floor, p.torque_limit, p.saturation)
+        power += dot(omega_j, sub(n_j, commanded))
+    rotational += 0.5 * quadratic_form(strain, p.k_r)
+    dissipation += quadratic_form(omega_j, p.l_r)
+    if p.passive > 0.0:
+        passive = sub(theta_j, p.passive_theta_ref)
+        n_j = sub(sub(n_j, matTvec(b_j, matvec(p.passive_k_r, passive))), matvec(p.passive_l_r, omega_j))
+        rotational += 0.5 * quadratic_form(passive, p.passive_k_r)
+        dissipation += quadratic_form(omega_j, p.passive_l_r)
+    return n_j, rotational, dissipation, power
+
+
+@jit(forceinline=True)
+def _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipation, power):
+    """A universal joint's torque N_j = B' f [N m] (child frame; B its
+    :func:`rbstab.kinematics.universal_rate`, whose rows give its coordinates' rates dq/dt =
+    B Omega_j) of the force on its coordinates f = -K_r (q - q_ref) - L_r dq/dt [N m]
+    (``strain`` = q - q_ref, entries 0-1 of 3-vectors), through its limits [torque_floor,
+    torque_limit] per coordinate, plus its passive torque's of that form, never limited;
+    returns it with v's rotational term, the dissipation [W] and the saturation deficit power [W]
+    accumulated."""
+    rate = matvec(b_j, omega_j)
+    f = sub(neg(matvec(p.k_r, strain)), matvec(p.l_r, rate))
+    if p.saturation > 0.0:
+        commanded = f
+        f = saturate_between(commanded, p.torque_floor, p.torque_limit, p.saturation)
+        power += dot(rate, sub(f, commanded))
+    rotational += 0.5 * quadratic_form(strain, p.k_r)
+    dissipation += quadratic_form(rate, p.l_r)
+    if p.passive > 0.0:
+        passive = sub(theta_j, p.passive_theta_ref)
+        f = sub(f, add(matvec(p.passive_k_r, passive), matvec(p.passive_l_r, rate)))
+        rotational += 0.5 * quadratic_form(passive, p.passive_k_r)
+        dissipation += quadratic_form(rate, p.passive_l_r)
+    return matTvec(b_j, f), rotational, dissipation, power
+
+
 @jit(forceinline=True, _nrt=False)
 def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
@@ -283,33 +333,35 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             omega_j = sub(omega_c, matTvec(rel, omega_p))
         if codes[j] == HINGE:  # its coordinate as the rotation vector q a, whose rate is Omega_j
             axis = vector(p.axis, 0)
-            angle = work.angle[j]
+            angle = work.angle[j, 0]
             if not rotations:
                 angle = _nearest_turn(axis_angle(rel, axis), angle)
-                work.angle[j] = angle
+                work.angle[j, 0] = angle
             theta_j, b_j = (angle * axis[0], angle * axis[1], angle * axis[2]), IDENTITY
+        elif codes[j] == UNIVERSAL:  # its coordinates (q_1, q_2, 0), B maps Omega_j to their rates
+            a_1, a_2 = vector(p.axis, 0), vector(p.axis_2, 0)
+            q_1, q_2 = work.angle[j, 0], work.angle[j, 1]
+            if not rotations:
+                read_1, read_2 = universal_angles(rel, a_1, a_2)
+                q_1, q_2 = _nearest_turn(read_1, q_1), _nearest_turn(read_2, q_2)
+                work.angle[j, 0], work.angle[j, 1] = q_1, q_2
+            theta_j, b_j = (q_1, q_2, 0.0), universal_rate(a_1, a_2, q_2)
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
         strain = sub(theta_j, p.theta_ref)  # the spring's: Theta_j - Theta_ref (eq 23 about the reference posture)
-        n_j = torque_n_command(b_j, strain, omega_j, p)
-        if p.saturation > 0.0:  # through the actuator's limits, [torque_floor, torque_limit] per axis
-            commanded = n_j
-            n_j = saturate_between(commanded, p.torque_floor, p.torque_limit, p.saturation)
-            power += dot(omega_j, sub(n_j, commanded))
-        rotational += 0.5 * quadratic_form(strain, p.k_r)
-        dissipation += quadratic_form(omega_j, p.l_r)
-        if p.passive > 0.0:  # the passive torque, never limited: eq 23's form with its own gains and reference
-            strain = sub(theta_j, p.passive_theta_ref)
-            n_j = sub(sub(n_j, matTvec(b_j, matvec(p.passive_k_r, strain))), matvec(p.passive_l_r, omega_j))
-            rotational += 0.5 * quadratic_form(strain, p.passive_k_r)
-            dissipation += quadratic_form(omega_j, p.passive_l_r)
+        if codes[j] == UNIVERSAL:  # on its coordinates
+            n_j, rotational, dissipation, power = _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational,
+                                                                       dissipation, power)
+        else:
+            n_j, rotational, dissipation, power = _feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipation,
+                                                            power)
         if p.stop > 0.0:  # its range: beyond either end of a coordinate a one-sided spring and damper, never limited
             if codes[j] == HINGE:  # q = a'Theta_j, its rate a'Omega_j, its torque along a
                 axis = vector(p.axis, 0)
                 n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis),
                                                      dot(omega_j, axis), axis, p, 0)
-            else:  # a ball's Euler angle theta_i, its rate (B Omega_j)_i, its torque B' e_i
-                for i in range(3):
+            else:  # a ball's Euler angle theta_i (a universal joint's q_i), its rate (B Omega_j)_i, its torque B' e_i
+                for i in range(2 if codes[j] == UNIVERSAL else 3):
                     n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, theta_j[i],
                                                          dot(b_j[i], omega_j), b_j[i], p, i)
         _acc_add(torque, force, j, n_j, ZERO)
@@ -322,7 +374,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             d = vector(y, d_at[j])
         if codes[j] == PERMANENT:
             n_permanent += 1
-        elif codes[j] != HINGE:
+        elif not POINT_FIXED[codes[j]]:
             lam, d_rate = constraint_force(codes[j], e, f, d, p)
             if p.saturation > 0.0:
                 lam_c, _ = constraint_force_command(codes[j], e, f, d, p)
@@ -376,7 +428,7 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
                                                                        joints, bodies, scalars, work)
     hinged = False
     for j in range(n):
-        hinged = hinged or codes[j] == HINGE
+        hinged = hinged or AXES[codes[j]] > 0
     if n_permanent > 0 and not hinged:
         _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent, work, True)
         for j in range(n):
@@ -599,14 +651,18 @@ def _saturation_flags(y, params, codes, joints, flags):
         _, b_j = rotation_and_rate_of(theta_j)
         if codes[j] == HINGE:  # theta_j = q a: its rate is Omega_j
             b_j = IDENTITY
+        elif codes[j] == UNIVERSAL:  # theta_j = (q_1, q_2, 0): B maps Omega_j to their rates
+            b_j = universal_rate(vector(params[j].axis, 0), vector(params[j].axis_2, 0), theta_j[1])
         strain, omega_j = sub(theta_j, params[j].theta_ref), vector(joints[j, _OMEGA_J], 0)
         _, _, h_flags, lam_flags = saturation_effects(
             codes[j], strain, omega_j, vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
             vector(joints[j, _E], 0), vector(joints[j, _F], 0), vector(joints[j, _D], 0), params[j])
         n_flags = ZERO
         if params[j].saturation > 0.0:  # N_j commanded on Theta_j - Theta_ref, between its two limits
-            n_flags = saturated_between(torque_n_command(b_j, strain, omega_j, params[j]), params[j].torque_floor,
-                                        params[j].torque_limit)
+            commanded = torque_n_command(b_j, strain, omega_j, params[j])
+            if codes[j] == UNIVERSAL:  # on its coordinates: -K_r (q - q_ref) - L_r dq/dt
+                commanded = sub(neg(matvec(params[j].k_r, strain)), matvec(params[j].l_r, matvec(b_j, omega_j)))
+            n_flags = saturated_between(commanded, params[j].torque_floor, params[j].torque_limit)
         _put(flags[j, 0], 0, n_flags)
         _put(flags[j, 1], 0, h_flags)
         _put(flags[j, 2], 0, lam_flags)
@@ -708,12 +764,13 @@ class CompiledChain:
     def independent_columns(self) -> np.ndarray:
         """The full state's entries (3 k,) of the independent coordinates z
         (:func:`independent_coordinates`, in order), int64."""
-        return np.array([at + c for _, _, at in independent_coordinates(self) for c in range(3)], dtype=np.int64)
+        return np.array([at + c for _, _, at, _ in independent_coordinates(self) for c in range(3)], dtype=np.int64)
 
     @functools.cached_property
     def hinged(self) -> bool:
-        """Whether a joint is a hinge (the tree's linearisation is then in its reduced state)."""
-        return bool(np.any(self.codes == HINGE))
+        """Whether a joint turns about axes, a hinge or a universal joint (the tree's
+        linearisation is then in its reduced state)."""
+        return bool(np.any(AXES[self.codes] > 0))
 
     @functools.cached_property
     def permanent(self) -> np.ndarray:
@@ -734,7 +791,7 @@ def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, at
     are the paper's one-body model (one of its five laws) (:func:`is_one_body`): ``points`` (t, 3) their first
     joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame), ``papers`` (t,) whether
     its feedback is the paper's (:func:`papers_feedback`); shape (t,) of bool."""
-    if codes.shape[0] != 1 or parents[0] >= 0 or codes[0] == HINGE:
+    if codes.shape[0] != 1 or parents[0] >= 0 or AXES[codes[0]] > 0:
         return np.zeros(len(points), dtype=bool)
     return np.all(points == attachment, axis=-1) & papers
 
@@ -782,7 +839,7 @@ def _record(chain: Chain, i: int) -> np.ndarray:
     p = parameters(*body_model(chain, i))
     joint = chain.joints[i]
     p["theta_ref"] = joint.theta_ref
-    p["axis"] = joint.axis
+    p["axis"], p["axis_2"] = joint.axis, joint.axis_2
     if joint.passive is not None:
         p["passive"] = 1.0
         p["passive_k_r"], p["passive_l_r"] = joint.passive.k_r, joint.passive.l_r
@@ -859,7 +916,8 @@ def _place_rows(states, params, parents, ppoints, x_placed, v_placed):
 @jit
 def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
     """Fill ``y`` (n_states,) with the state at rest of the configuration ``q``
-    (:func:`rest_coordinates`: each body's Theta_i [rad], a hinge's child's q [rad] instead;
+    (:func:`rest_coordinates`: each body's Theta_i [rad], a hinge's child's q [rad] instead,
+    a universal joint's child's q_1, q_2 [rad];
     then X_i [m, inertial] of the bodies whose joint is not point-fixed, then D [m] of the
     embedded joints); every Omega, V zero; a hinge's child turned by q about its axis from
     its parent (A_c = A_p exp(q [a]x)); X of a point-fixed joint's child placed on its
@@ -869,13 +927,16 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
         y[k] = 0.0
     k = 0
     for i in range(n):
-        if codes[i] == HINGE:
-            rel = axis_rotation(vector(params[i].axis, 0), q[k])
+        if AXES[codes[i]] > 0:
+            if codes[i] == HINGE:
+                rel = axis_rotation(vector(params[i].axis, 0), q[k])
+            else:
+                rel = universal_rotation(vector(params[i].axis, 0), vector(params[i].axis_2, 0), q[k], q[k + 1])
             a = rel
             if parents[i] >= 0:
                 a = compose(rotation_and_rate_of(vector(y, 12 * parents[i]))[0], rel)
             _put(y, 12 * i, euler_angles(a))
-            k += 1
+            k += AXES[codes[i]]
         else:
             for c in range(3):
                 y[12 * i + c] = q[k + c]
@@ -974,7 +1035,7 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
 
     n = compiled.size
     q0 = rest_coordinates(compiled, _place(compiled, reference_posture(compiled)))
-    hinged = bool(np.any(compiled.codes == HINGE))  # the maximal rates leave out a hinge's reactions
+    hinged = compiled.hinged  # the maximal rates leave out the reactions of joints about axes
     y, dy, work = np.empty(compiled.n_states), np.empty(compiled.n_states), chain_work(n)
     args = (_undisturbed(compiled.params), *compiled.args[1:], y, dy, work)
 
@@ -1016,13 +1077,15 @@ _REST_GTOL = 1e-11
 
 def rest_coordinates(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
     """The configuration (:func:`rest_configuration`'s ``q``) of the state ``y``
-    (n_states,): each body's Theta_i [rad] (a hinge's child: its q [rad], in (-pi, pi]),
+    (n_states,): each body's Theta_i [rad] (a hinge's child: its q [rad], in (-pi, pi]; a
+    universal joint's: q_1, q_2),
     X_i [m] of the bodies whose joint is not point-fixed, D [m] of the embedded joints."""
     n, y = compiled.size, np.asarray(y, dtype=float)
     joints = np.empty((n, 7, 3))
     chain_core(0.0, np.ascontiguousarray(y), *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)),
                np.empty(5))
     angles = [[float(compiled.params[i]["axis"] @ joints[i, _THETA_J])] if compiled.codes[i] == HINGE
+              else list(joints[i, _THETA_J, :2]) if compiled.codes[i] == UNIVERSAL
               else list(y[12 * i: 12 * i + 3]) for i in range(n)]
     positions = [list(y[12 * i + 6: 12 * i + 9]) for i in range(n) if not POINT_FIXED[compiled.codes[i]]]
     states = [list(y[d: d + 3]) for d in compiled.d_at if d >= 0]
@@ -1032,7 +1095,8 @@ def rest_coordinates(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
 def reference_posture(compiled: CompiledChain) -> np.ndarray:
     """The state (n_states,) whose bodies hold every joint at its reference posture, Theta_j
     = Theta_ref [rad] (A_c = A_p A(Theta_ref), parents first; the ground's A_p = I; a hinge's
-    A(Theta_ref) the rotation by a . Theta_ref about its axis a), at rest; X, V and D zero
+    A(Theta_ref) the rotation by a . Theta_ref about its axis a, a universal joint's by its
+    q_ref), at rest; X, V and D zero
     (:func:`place` puts the bodies on their joints)."""
     y = np.zeros(compiled.n_states)
     rotations = []
@@ -1041,6 +1105,9 @@ def reference_posture(compiled: CompiledChain) -> np.ndarray:
         if compiled.codes[i] == HINGE:
             axis = compiled.params[i]["axis"]
             a = np.array(axis_rotation(tuple(axis), float(axis @ compiled.params[i]["theta_ref"])))
+        elif compiled.codes[i] == UNIVERSAL:
+            p = compiled.params[i]
+            a = np.array(universal_rotation(tuple(p["axis"]), tuple(p["axis_2"]), *p["theta_ref"][:2]))
         q = int(compiled.parents[i])
         if q >= 0:
             a = rotations[q] @ a
@@ -1076,9 +1143,9 @@ _OFFSETS: dict[bytes, float] = {}
 _MAX_OFFSETS = 1024
 
 
-def independent_coordinates(compiled: CompiledChain) -> list[tuple[str, str, int]]:
+def independent_coordinates(compiled: CompiledChain) -> list[tuple[str, str, int, int]]:
     """The chain's independent coordinates, in the order of :func:`full_state`'s ``z``:
-    (body name, block, index into the full state) for Theta_i, Omega_i of every body, X_i,
+    (body name, block, index into the full state, entries) for Theta_i, Omega_i of every body, X_i,
     V_i of bodies whose joint is not ``permanent`` (a permanent joint's child is placed on
     its parent), and D of embedded joints (block ``controller_state``), 3 entries each (a
     tree with a hinge is linearised in its reduced state instead)."""
@@ -1088,10 +1155,10 @@ def independent_coordinates(compiled: CompiledChain) -> list[tuple[str, str, int
         blocks = [("theta", 0), ("omega", 3)]
         if compiled.codes[i] != PERMANENT:
             blocks += [("position", 6), ("velocity", 9)]
-        out += [(names[i], block, 12 * i + at) for block, at in blocks]
+        out += [(names[i], block, 12 * i + at, 3) for block, at in blocks]
     for j in range(compiled.size):
         if compiled.d_at[j] >= 0:
-            out.append((names[j], "controller_state", int(compiled.d_at[j])))
+            out.append((names[j], "controller_state", int(compiled.d_at[j]), 3))
     return out
 
 
@@ -1201,7 +1268,7 @@ def gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, l
                np.empty((n, 3)), np.empty(5))
     angles, parts = [], []
     for i in range(n):
-        if compiled.codes[i] == HINGE:  # no Euler angles
+        if AXES[compiled.codes[i]] > 0:  # no Euler angles
             continue
         if compiled.codes[i] == PERMANENT:
             angles.append(joints[i, _THETA_J, 1])
@@ -1326,7 +1393,7 @@ def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows, per
     for k in range(_OMEGA_J + 1):
         out[JOINT_OUTPUTS[k]] = joints[:, :, k]
     out["controller_state"][:, first.d_at < 0] = np.nan
-    if np.any(first.codes == HINGE):  # not computed here: rbstab.variants.tree.reaction_samples
+    if np.any(AXES[first.codes] > 0):  # not computed here: rbstab.variants.tree.reaction_samples
         out["constraint_force"][:, first.permanent] = np.nan
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]

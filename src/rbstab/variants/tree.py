@@ -37,8 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..jit import jit
-from ..kinematics import IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, rotation_and_rate_of, sub, vector
-from ..layout import POINT_FIXED, REDUCED_STATES, VELOCITIES
+from ..kinematics import (IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, rotation_and_rate_of, sub,
+                          universal_columns, universal_rate, universal_rotation, vector)
+from ..layout import AXES, POINT_FIXED, REDUCED_STATES, VELOCITIES
 from .chain import (
     _OMEGA_J,
     compose,
@@ -53,7 +54,7 @@ from .chain import (
     euler_angles,
 )
 from .disturbances import IMPULSE, disturbance_wrench
-from .kernels import HINGE, PERMANENT
+from .kernels import HINGE, PERMANENT, UNIVERSAL
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
            "tree_push", "tree_impulses", "range_margin", "tree_reactions", "reaction_samples",
@@ -125,13 +126,38 @@ def tree_work(n, n_states):
 
 
 @jit(forceinline=True)
-def _column(a_i, code, axis, col):
+def _column(a_i, code, p, q_2, col):
     """Column ``col`` of a point-fixed joint's motion subspace in the inertial frame: the
     unit angular velocity A_i e_col of a ball's child (Omega_j's axis col), A_i a of a
-    hinge's (its axis ``axis``)."""
+    hinge's (its axis ``p.axis``), A_i s_col of a universal joint's at its angle ``q_2``
+    (:func:`rbstab.kinematics.universal_columns`); ``p`` the joint's record."""
     if code == HINGE:
-        return matvec(a_i, axis)
+        return matvec(a_i, vector(p.axis, 0))
+    if code == UNIVERSAL:
+        s_1, s_2 = universal_columns(vector(p.axis, 0), vector(p.axis_2, 0), q_2)
+        return matvec(a_i, s_1 if col == 0 else s_2)
     return (a_i[0][col], a_i[1][col], a_i[2][col])
+
+
+@jit(forceinline=True)
+def _joint_rate(p, code, yr, at):
+    """Omega_j [rad/s, child frame] of a joint about axes whose child's reduced states start
+    at ``yr[at]``: a du/dt of a hinge's, s_1 u_1 + s_2 u_2 of a universal joint's."""
+    if code == HINGE:
+        return (yr[at + 1] * p.axis[0], yr[at + 1] * p.axis[1], yr[at + 1] * p.axis[2])
+    s_1, s_2 = universal_columns(vector(p.axis, 0), vector(p.axis_2, 0), yr[at + 1])
+    u_1, u_2 = yr[at + 2], yr[at + 3]
+    return (s_1[0] * u_1 + s_2[0] * u_2, s_1[1] * u_1 + s_2[1] * u_2, s_1[2] * u_1 + s_2[2] * u_2)
+
+
+@jit(forceinline=True)
+def _joint_angles(yr, codes, r_at, angle):
+    """Each joint's coordinates about axes (a hinge's q, a universal joint's q_1, q_2 [rad])
+    from the reduced state ``yr`` into ``angle`` (n, 2), as the state holds them (beyond
+    (-pi, pi] too)."""
+    for i in range(codes.shape[0]):
+        for k in range(AXES[codes[i]]):
+            angle[i, k] = yr[r_at[i] + k]
 
 
 @jit(forceinline=True)
@@ -174,9 +200,12 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
             a, b = rotation_and_rate_of(vector(yr, s))
         else:
             if codes[i] == HINGE:  # A_rel = exp(q [a]x), Omega_j = a dq/dt
-                axis = vector(params[i].axis, 0)
-                rel, b = axis_rotation(axis, yr[s]), IDENTITY
-                omega_j = (yr[s + 1] * axis[0], yr[s + 1] * axis[1], yr[s + 1] * axis[2])
+                rel, b = axis_rotation(vector(params[i].axis, 0), yr[s]), IDENTITY
+                omega_j = _joint_rate(params[i], codes[i], yr, s)
+            elif codes[i] == UNIVERSAL:  # A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x), Omega_j = S dq/dt
+                rel = universal_rotation(vector(params[i].axis, 0), vector(params[i].axis_2, 0), yr[s], yr[s + 1])
+                b = IDENTITY
+                omega_j = _joint_rate(params[i], codes[i], yr, s)
             else:
                 rel, b = rotation_and_rate_of(vector(yr, s))
                 omega_j = vector(yr, s + 3)
@@ -213,15 +242,16 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
 @jit(forceinline=True)
 def range_margin(yr, params, codes, r_at, margin, status, first):
     """(margin, status) after the ranges that are admissible regions (a record's ``region``)
-    of the reduced state ``yr``'s joint coordinates, a hinge's q and a ball's Euler angles
-    Theta_j (entries 0 and 0-2 of its ``range_lower``, ``range_upper``): coordinate - lower
+    of the reduced state ``yr``'s joint coordinates, a hinge's q, a universal joint's q_1,
+    q_2 and a ball's Euler angles Theta_j (entries 0, 0-1 and 0-2 of its ``range_lower``,
+    ``range_upper``): coordinate - lower
     and upper - coordinate [rad] of each, smaller than ``margin``, replace it and ``status``
     with ``first`` + 6 j + 2 i (the lower end of coordinate i of joint j) or ``first`` + 6 j
     + 2 i + 1 (its upper end) (``first``: :data:`rbstab.engine.status.RANGE_LEFT`)."""
     for j in range(codes.shape[0]):
-        if params[j].region == 0.0 or not (codes[j] == HINGE or codes[j] == PERMANENT):
+        if params[j].region == 0.0 or not (AXES[codes[j]] > 0 or codes[j] == PERMANENT):
             continue
-        for i in range(1 if codes[j] == HINGE else 3):
+        for i in range(AXES[codes[j]] if AXES[codes[j]] > 0 else 3):
             q = yr[r_at[j] + i]
             m = q - params[j].range_lower[i]
             if m < margin:
@@ -309,9 +339,7 @@ def tree_rate(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, d
     n = codes.shape[0]
     y, dy, cw = work.y, work.dy, work.chain
     tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, cw.rot, cw.rate, False)
-    for i in range(n):
-        if codes[i] == HINGE:  # its q as the state holds it, beyond (-pi, pi] too
-            cw.angle[i] = yr[r_at[i]]
+    _joint_angles(yr, codes, r_at, cw.angle)
     _, _, work_power, _, _ = chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, cw.joints, cw.bodies,
                                             cw.scalars, cw, True)
     torque, force = cw.torque, cw.force
@@ -357,9 +385,11 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
     _generalised_solve(params, codes, parents, u_at, work)
     for i in range(n):
         at, u = r_at[i], u_at[i]
-        if codes[i] == HINGE:
-            dyr[at] = yr[at + 1]
-            dyr[at + 1] = rhs[u]
+        if AXES[codes[i]] > 0:  # dq/dt = u
+            m = AXES[codes[i]]
+            for k in range(m):
+                dyr[at + k] = yr[at + m + k]
+                dyr[at + m + k] = rhs[u + k]
         elif codes[i] == PERMANENT:
             _put(dyr, at, matvec(_rows(cw.rate, i), vector(yr, at + 3)))
             for k in range(3):
@@ -376,16 +406,22 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
 def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, dw_j, acc):
     """Point-fixed joint i's child's (dOmega_c/dt [rad/s^2, child frame], dV_c/dt [m/s^2,
     inertial]) into ``acc[i]`` (n, 6), its parent's already in ``acc[parents[i]]`` (the
-    ground's zero), its joint's dOmega_j/dt ``dw_j``: the time derivative of
-    :func:`tree_expand`'s Omega_c = A_rel' Omega_p + Omega_j and V_c (kappa_i with dw_j = 0)."""
+    ground's zero), its joint's dOmega_j/dt ``dw_j`` at fixed columns (S du/dt): the time
+    derivative of :func:`tree_expand`'s Omega_c = A_rel' Omega_p + Omega_j and V_c (kappa_i
+    with dw_j = 0); a universal joint's turning column adds u_1 u_2 (s_1 x a_2)."""
     q = parents[i]
     r_c = vector(params[i].attachment_point, 0)
     a_c = _rows(rot, i)
     omega_c = vector(y, 12 * i + 3)
     omega_j = vector(yr, r_at[i] + 3)
-    if codes[i] == HINGE:  # a dq/dt: a is fixed in the child's frame
-        rate_q = yr[r_at[i] + 1]
-        omega_j = (rate_q * params[i].axis[0], rate_q * params[i].axis[1], rate_q * params[i].axis[2])
+    if AXES[codes[i]] > 0:  # S dq/dt
+        omega_j = _joint_rate(params[i], codes[i], yr, r_at[i])
+    if codes[i] == UNIVERSAL:  # ds_1/dt = s_1 x a_2 dq_2/dt: s_1 = exp(-q_2 [a_2]x) a_1
+        at, a_2 = r_at[i], vector(params[i].axis_2, 0)
+        s_1, _ = universal_columns(vector(params[i].axis, 0), a_2, yr[at + 1])
+        bias = cross(s_1, a_2)
+        rates = yr[at + 2] * yr[at + 3]
+        dw_j = add(dw_j, (rates * bias[0], rates * bias[1], rates * bias[2]))
     dw_c = add(dw_j, cross(omega_c, omega_j))
     dv_c = (0.0, 0.0, 0.0)
     if q >= 0:
@@ -460,7 +496,6 @@ def _generalised_solve(params, codes, parents, u_at, work):
     for i in range(n):
         at = u_at[i]
         a_i = _rows(rot, i)
-        axis_i = vector(params[i].axis, 0)
         fixed = POINT_FIXED[codes[i]]
         point = vector(y, 12 * i + 6)
         if fixed:
@@ -474,13 +509,13 @@ def _generalised_solve(params, codes, parents, u_at, work):
         inertia_p = (_moment_row(second, i, 0, cs, point, m, shift), _moment_row(second, i, 1, cs, point, m, shift),
                      _moment_row(second, i, 2, cs, point, m, shift))
         for col in range(VELOCITIES[codes[i]] if fixed else 3):  # the rotational columns
-            e = _column(a_i, codes[i], axis_i, col)
+            e = _column(a_i, codes[i], params[i], cw.angle[i, 1], col)
             f = cross(e, c)
             inertia_e = matvec(inertia_p, e)
             row = at + col
             rhs[row] = dot(e, moment_p)
             for col2 in range(col + 1):
-                matrix[row, at + col2] = dot(_column(a_i, codes[i], axis_i, col2), inertia_e)
+                matrix[row, at + col2] = dot(_column(a_i, codes[i], params[i], cw.angle[i, 1], col2), inertia_e)
             if not fixed:
                 for l in range(3):
                     matrix[at + 3 + l, row] = f[l]
@@ -488,14 +523,13 @@ def _generalised_solve(params, codes, parents, u_at, work):
             while POINT_FIXED[codes[k]] and parents[k] >= 0:
                 k = parents[k]
                 a_k = _rows(rot, k)
-                axis_k = vector(params[k].axis, 0)
                 fixed_k = POINT_FIXED[codes[k]]
                 point_k = vector(y, 12 * k + 6)
                 if fixed_k:
                     point_k = add(point_k, matvec(a_k, vector(params[k].attachment_point, 0)))
                 moment_k = add(inertia_e, cross(sub(point, point_k), f))
                 for col2 in range(VELOCITIES[codes[k]] if fixed_k else 3):
-                    matrix[row, u_at[k] + col2] = dot(_column(a_k, codes[k], axis_k, col2), moment_k)
+                    matrix[row, u_at[k] + col2] = dot(_column(a_k, codes[k], params[k], cw.angle[k, 1], col2), moment_k)
                 if not fixed_k:
                     for l in range(3):
                         matrix[row, u_at[k] + 3 + l] = f[l]
@@ -559,10 +593,13 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
         if not POINT_FIXED[codes[i]]:
             for r in range(6):
                 total[i, r] = rhs[u + r]
-        elif codes[i] == HINGE:  # dOmega_j/dt = a du/dt
-            axis = vector(params[i].axis, 0)
+        elif AXES[codes[i]] > 0:  # dOmega_j/dt = S du/dt (+ a universal joint's turning column's term)
+            m = AXES[codes[i]]
+            for k in range(m):  # S du/dt: Omega_j's form with du/dt for u
+                dyr[k] = yr[r_at[i] + k]
+                dyr[m + k] = rhs[u + k]
             _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot,
-                                   (rhs[u] * axis[0], rhs[u] * axis[1], rhs[u] * axis[2]), total)
+                                   _joint_rate(params[i], codes[i], dyr, 0), total)
         else:
             _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, vector(rhs, u), total)
     for r in range(n):  # the ground's moment on the bodies of each joint to the ground
@@ -650,14 +687,19 @@ def reduced_size_of(codes, d_at):
 def _reduced_from(y, params, codes, d_at, r_at, rd_at, theta_j, omega_j, out):
     """The reduced state ``out`` (n_r,) of the maximal state ``y`` whose joints' Theta_j,
     Omega_j (n, 3) are ``theta_j``, ``omega_j`` (:func:`rbstab.variants.chain.chain_evaluate`'s;
-    a hinge's q the angle it continued): q = a . Theta_j, u = a . Omega_j of a hinge;
-    Theta_j, Omega_j of a ball; every other body's Theta, Omega, X, V; D."""
+    a hinge's q the angle it continued): q = a . Theta_j, u = a . Omega_j of a hinge; q_1,
+    q_2 (entries 0-1 of Theta_j) and u = B Omega_j (rows 0-1) of a universal joint; Theta_j,
+    Omega_j of a ball; every other body's Theta, Omega, X, V; D."""
     for i in range(codes.shape[0]):
         at = r_at[i]
         if codes[i] == HINGE:
             axis = vector(params[i].axis, 0)
             out[at] = dot(axis, vector(theta_j[i], 0))
             out[at + 1] = dot(axis, vector(omega_j[i], 0))
+        elif codes[i] == UNIVERSAL:
+            b = universal_rate(vector(params[i].axis, 0), vector(params[i].axis_2, 0), theta_j[i, 1])
+            out[at], out[at + 1] = theta_j[i, 0], theta_j[i, 1]
+            out[at + 2], out[at + 3] = dot(b[0], vector(omega_j[i], 0)), dot(b[1], vector(omega_j[i], 0))
         elif codes[i] == PERMANENT:
             for c in range(3):
                 out[at + c] = theta_j[i, c]
@@ -687,6 +729,7 @@ def tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, body
     cw.torque[:] = 0.0
     cw.force[:] = 0.0
     kappa[:] = 0.0
+    _joint_angles(yr, codes, r_at, cw.angle)
     v = (value[0], value[1], value[2])
     if torque_push:
         _put(cw.torque[body], 0, v)
@@ -697,8 +740,9 @@ def tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, body
     rhs = work.rhs
     for i in range(n):
         at, u = r_at[i], u_at[i]
-        if codes[i] == HINGE:
-            yr[at + 1] += rhs[u]
+        if AXES[codes[i]] > 0:
+            for k in range(AXES[codes[i]]):
+                yr[at + AXES[codes[i]] + k] += rhs[u + k]
         elif codes[i] == PERMANENT:
             for k in range(3):
                 yr[at + 3 + k] += rhs[u + k]
