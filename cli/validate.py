@@ -54,6 +54,13 @@ def _check_config(path: str, overrides) -> dict:
     return record | {"t_end": sim.t_end, "n_samples": sim.n_samples, "method": sim.method, "warnings": lines}
 
 
+def _listed(end, variant: str):
+    """A range's end as JSON: a hinge's number, a universal joint's 2, a ball's 3 [rad]."""
+    if not hasattr(end, "tolist"):
+        return float(end)
+    return end.tolist()[:2] if variant == "universal" else end.tolist()
+
+
 def _chain_record(chain) -> dict:
     """A chain's bodies and joints, JSON-able, parents by name (``ground``: the inertial frame); a
     hinge's unit axis, its reference angle q_ref [rad] and its range's ends [rad]."""
@@ -66,8 +73,10 @@ def _chain_record(chain) -> dict:
                     "child": names[j.child], "variant": j.variant, "parent_point": j.parent_point.tolist(),
                     "child_point": j.child_point.tolist(),
                     **({"axis": j.axis.tolist(), "theta_ref": float(j.axis @ j.theta_ref)} if j.variant == "hinge"
-                       else {"theta_ref": j.theta_ref.tolist()}),
-                    **({"range": [j.stop.lower, j.stop.upper]} if j.stop is not None else {}),
+                       else {"axis": [j.axis.tolist(), j.axis_2.tolist()], "theta_ref": j.theta_ref[:2].tolist()}
+                       if j.variant == "universal" else {"theta_ref": j.theta_ref.tolist()}),
+                    **({"range": [_listed(end, j.variant) for end in (j.stop.lower, j.stop.upper)]}
+                       if j.stop is not None else {}),
                     "passive": j.passive is not None} for j in chain.joints],
     }
 
@@ -94,12 +103,17 @@ def _tree(chain: dict) -> list[str]:
                 reference = f"{reference:g}" if reference else None
             elif reference is not None:
                 reference = point(reference) if any(reference) else None
-            kind = f"hinge about {point(j['axis'])}" if j["variant"] == "hinge" else j["variant"]
+            span = j.get("range")
+            span = None if span is None else f"[{span[0]:g}, {span[1]:g}]" if isinstance(span[0], (int, float)) else \
+                f"[{point(span[0])}, {point(span[1])}]"
+            kind = (f"hinge about {point(j['axis'])}" if j["variant"] == "hinge" else
+                    f"universal about {point(j['axis'][0])}, then {point(j['axis'][1])}" if j["variant"] == "universal"
+                    else j["variant"])
             lines.append(f"{'  ' * depth}{parent} -> {j['child']} ({mass[j['child']]:g} kg): {j['name']}, "
                          f"{kind}, {point(j['parent_point'])} -> {point(j['child_point'])} m"
                          + (f", theta_ref {reference} rad" if reference else "")
                          + (", passive torque" if j.get("passive") else "")
-                         + (f", range {point(j['range'])} rad (a stop)" if j.get("range") else ""))
+                         + (f", range {span} rad (a stop)" if span else ""))
             walk(j["child"], depth + 1)
 
     walk("ground", 1)

@@ -11,6 +11,7 @@ for bit (all samples and every 3rd), and whether ``simulate(engine="cuda")`` giv
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import time
@@ -93,6 +94,24 @@ def stopped_chain(theta: float):
     return config_from_mapping(data)
 
 
+def universal_chain(rate: float):
+    """:func:`hinged_chain` (tilted 0.2 rad) with the elbow a universal joint about two oblique
+    axes (its second coordinate's feedback clipped, stronger one way; a passive torque; q_2's
+    range [-0.4, 0.3] rad an admissible region), the elbow's q_2 starting at 0.1 rad with the
+    rate ``rate`` [rad/s] (-0.5 stays inside; -8 leaves through the lower end)."""
+    from rbstab.config.loader import config_from_mapping
+
+    data = hinged_chain(0.2).resolved
+    data["name"] = "universal3"
+    data["joints"][1].update(variant="universal", axis=[[1.0, 0.2, 0.0], [0.1, 1.0, 0.3]], k_r=[20.0, 15.0],
+                             l_r=[1.0, 0.8], theta_ref=[0.05, 0.0], saturation={"torque_n": [math.inf, 0.5],
+                                                                                 "torque_n_lower": [-math.inf, -0.2]},
+                             passive={"k_r": [2.0, 1.0], "l_r": 0.1}, range={"lower": [-1.0, -0.4], "upper": [1.0, 0.3],
+                                                                               "kind": "region"})
+    data["initial_state"]["middle"] = {"q": [-0.2, 0.1], "u": [0.3, rate]}
+    return config_from_mapping(data)
+
+
 def cases(root: str):
     """name -> (configs of chains of one structure: its runs)."""
     from rbstab.config.loader import load_config
@@ -121,6 +140,7 @@ def cases(root: str):
         "hinged3": [hinged_chain(theta) for theta in (0.2, 0.4)],
         "ranged3": [ranged_chain(rate) for rate in (-0.5, -1.5)],  # the second leaves
         "stopped3": [stopped_chain(theta) for theta in (0.2, 0.4)],  # both leave: the region, simulation.limits
+        "universal3": [universal_chain(rate) for rate in (-0.5, -8.0)],  # the second leaves q_2's region
     }
 
 

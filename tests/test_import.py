@@ -185,6 +185,61 @@ def test_imported_models_have_mujocos_rest_state_and_eigenvalues(tmp_path, model
         assert np.min(np.abs(ours - s)) <= 1e-4 * abs(s), (s, ours)
 
 
+#: A body on two hinges through one point (a universal joint: a wrist), one with a spring,
+#: a springref and a range, the other with a saturating servo, below an arm on a hinge.
+WRIST = """<mujoco model="wrist">
+  <compiler angle="radian"/>
+  <option gravity="0 0 -9.81" timestep="0.002"/>
+  <worldbody>
+    <body name="arm" pos="0 0 1">
+      <joint name="shoulder" type="hinge" axis="0 1 0" damping="0.1" stiffness="2"/>
+      <inertial pos="0 0 -0.3" mass="1.5" diaginertia="0.05 0.05 0.01"/>
+      <body name="hand" pos="0 0.02 -0.6" euler="0.2 0 0.1">
+        <joint name="wrist_x" type="hinge" axis="1 0 0" pos="0 0 0.05" stiffness="3" springref="0.2" damping="0.05"
+               range="-1.2 1.2" limited="true"/>
+        <joint name="wrist_y" type="hinge" axis="0.1 1 0.3" pos="0 0 0.05" damping="0.08"/>
+        <inertial pos="0.01 0 -0.15" quat="0.9 0.1 0 0.2" mass="0.5" diaginertia="0.01 0.008 0.003"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="flex" joint="wrist_y" kp="5" kv="0.4" forcelimited="true" forcerange="-0.6 1.0"/>
+  </actuator>
+  <keyframe><key name="start" qpos="0.4 0.3 -0.5" qvel="0.2 0.5 -0.3" ctrl="0.2"/></keyframe>
+</mujoco>
+"""
+
+
+def test_a_body_on_two_hinges_through_one_point_imports_as_a_universal_joint(tmp_path):
+    """MJCF's two hinges in one body through one point are rbstab's universal joint: its
+    axes in order, its springs, range and servo per coordinate; run, every centre of mass
+    follows MuJoCo's to 1e-6 m and every reaction its ``cfrc_int``, and ``rbstab analyze``'s
+    rest state and eigenvalues (in q_1, q_2 of the wrist) are MuJoCo's to 1e-4 relative."""
+    path = tmp_path / "wrist.xml"
+    path.write_text(WRIST)
+    imported, config = _imported(path, keyframe="start", n_samples=2001)
+    wrist = config.resolved["joints"][1]
+    assert wrist["variant"] == "universal" and wrist["name"] == "wrist_x"
+    assert wrist["passive"]["k_r"] == [3.0, 0.0] and wrist["k_r"] == [0.0, pytest.approx(5.0)]
+    assert wrist["range"]["upper"] == [1.2, math.inf]
+    result = simulate(config)
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    assert result.outputs["torque_n_saturated"][:, 1, 1].any()  # the servo at its forcerange
+    assert np.abs(result.outputs["joint_theta"][:, 1, 0]).max() < 1.2  # inside the range: the stop idle
+    assert largest_distance(path, config, result, keyframe="start") < 1e-6
+    _reactions_are_mujocos(path, config, result, keyframe="start")
+    analysis = analyze(config, certificate=False, simulate=False)
+    names = analysis.layout.state_names()
+    assert names == ["arm.q", "arm.u", "hand.q_1", "hand.q_2", "hand.u_1", "hand.u_2"]
+    q = analysis.linearisation.equilibrium[[0, 2, 3]]
+    theirs, acceleration = eigenvalues_at(path, q, keyframe="start")
+    assert np.abs(acceleration).max() < 1e-7  # the rest search's 1e-11 N m on the hand's ~0.005 kg m^2
+    ours = analysis.linearisation.eigenvalues
+    assert len(ours) == len(theirs)
+    for s in theirs:
+        assert np.min(np.abs(ours - s)) <= 1e-4 * abs(s), (s, ours)
+
+
 def test_import_writes_a_config_that_runs(tmp_path):
     """The CLI writes the config (refusing to replace it without --overwrite) and notes the
     zero gains on stderr; ``rbstab run`` runs it as written."""
@@ -204,14 +259,16 @@ def test_import_writes_a_config_that_runs(tmp_path):
 @pytest.mark.parametrize("change, element", [
     (('type="hinge" axis="0.2 1 0.5"', 'type="ball"'), '<joint name="jb">'),
     (('type="hinge" axis="0.2 1 0.5"', 'type="slide" axis="0.2 1 0.5"'), '<joint name="jb">'),
-    (('<joint name="jb"', '<joint name="jb2" type="hinge" axis="1 0 0"/><joint name="jb"'), '<body name="b">'),
+    (('<joint name="jb"', '<joint name="jb2" type="hinge" axis="1 0 0" pos="0 0 0.1"/><joint name="jb"'),
+     '<body name="b">'),
     (('</worldbody>', '</worldbody><tendon><fixed name="t"><joint joint="ja" coef="1"/></fixed></tendon>'),
      '<tendon name="t">'),
     (('<motor name="drive" joint="ja"/>', '<muscle name="drive" joint="ja"/>'), '<actuator name="drive">'),
     (('damping="0.05"', 'damping="0.05" armature="0.01"'), '<joint name="jb">'),
 ])
 def test_what_rbstab_cannot_represent_is_refused_in_one_line(tmp_path, change, element):
-    """A ball with a servo, a slide or second joint in a body, a tendon, a muscle, armature:
+    """A ball with a servo, a slide, a second joint in a body through another point (not a
+    universal joint), a tendon, a muscle, armature:
     one line naming the element, exit 1, nothing written."""
     path, out = tmp_path / "model.xml", tmp_path / "config.yaml"
     path.write_text(OBLIQUE.replace(*change).replace('ctrl="0.3 0"', ""))

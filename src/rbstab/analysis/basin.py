@@ -121,7 +121,7 @@ class BasinAxis:
 
     @property
     def index(self) -> int:
-        """The component (0, 1, 2; 0 for a hinge's q or u)."""
+        """The component (0, 1, 2; 0 for a hinge's q or u, 0 or 1 for a universal joint's)."""
         return (*state_entry(self.key).index, 0)[0]
 
     @property
@@ -138,7 +138,7 @@ class BasinAxis:
         """``omega_1 [rad s-1]`` (component numbered from 1, as in the paper; a chain's
         ``legs theta_1 [rad]``)."""
         body = f"{self.body} " if self.body is not None else ""
-        if self.block in HINGE_ENTRIES:
+        if self.block in HINGE_ENTRIES and not state_entry(self.key).index:  # a hinge's q, u
             return f"{body}{self.block} [{self.units}]"
         return f"{body}{self.block}_{self.index + 1} [{self.units}]"
 

@@ -445,22 +445,28 @@ _BODY_OFFSET = {block: 3 * k for k, block in enumerate(_BODY_BLOCKS)}
 
 def _reduced_offset(compiled, axis) -> int:
     """The index in a tree's reduced state (:func:`rbstab.variants.tree.tree_layout`) of a
-    hinge's child's q or u that ``axis`` names; ValueError naming what is allowed where the
-    body is not a hinge's child, or where ``axis`` names another entry of a tree with a hinge."""
-    from ..variants.kernels import HINGE  # heavy: numba
+    hinge's child's q or u (a universal joint's child's q_i or u_i, entry i of the key) that
+    ``axis`` names; ValueError naming what is allowed where the body is not such a child,
+    or where ``axis`` names another entry of a tree with a hinge."""
+    from ..layout import AXES
     from ..variants.tree import tree_layout  # heavy: numba
 
     names = list(compiled.chain.body_names)
-    hinged = [b for b, code in zip(names, compiled.codes) if code == HINGE]
+    hinged = [b for b, code in zip(names, compiled.codes) if AXES[code] > 0]
     allowed = f"initial_state.<{'|'.join(hinged)}>.<q|u>"
     if axis.block not in ("q", "u"):
-        raise ValueError(f"--basin {axis.key!r}: a tree with a hinge maps its basin over its hinges' angles and rates "
+        raise ValueError(f"--basin {axis.key!r}: a tree with a hinge maps its basin over its joints' angles and rates "
                          f"({allowed})")
     if axis.body not in hinged:
-        raise ValueError(f"--basin {axis.key!r}: '{axis.body}' is not a hinge's child (those: {', '.join(hinged)}; "
-                         f"keys {allowed})")
+        raise ValueError(f"--basin {axis.key!r}: '{axis.body}' is not a hinge's or a universal joint's child (those: "
+                         f"{', '.join(hinged)}; keys {allowed})")
     i = names.index(axis.body)
-    return int(tree_layout(compiled).r_at[i]) + (0 if axis.block == "q" else 1)
+    m = int(AXES[compiled.codes[i]])
+    index = axis.index or 0
+    if index >= m:
+        raise ValueError(f"--basin {axis.key!r}: '{axis.body}' has {m} joint angle{'s' if m > 1 else ''}; "
+                         f"keys {allowed}" + (".0 or .1" if m > 1 else ""))
+    return int(tree_layout(compiled).r_at[i]) + (0 if axis.block == "q" else m) + index
 
 
 def _state_offset(compiled, axis) -> int:

@@ -12,7 +12,10 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
 - each ``hinge`` becomes a joint ``variant: hinge`` about its world axis (``xaxis``) at its
   world anchor (``xanchor``): ``parent_point`` and ``child_point`` are the anchor from the
   parent's and the child's centres of mass (from the world origin for the ground);
-  q = qpos - qpos0 (a joint's ``ref`` is rbstab's q = 0);
+  q = qpos - qpos0 (a joint's ``ref`` is rbstab's q = 0); a body's two hinges through one
+  point about axes that are not parallel become one joint ``variant: universal`` (the first
+  hinge's q_1, then the second's q_2, their world axes in order), everything below per
+  coordinate;
 - its passive torque is the joint's ``stiffness``, ``damping`` and ``springref``
   (theta_ref = qpos_spring - qpos0);
 - each ``ball`` becomes a joint ``variant: permanent`` at its anchor (the ball in the relative
@@ -34,7 +37,8 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   keyframe's q, u or the reference pose at rest.
 
 What rbstab cannot represent is refused, one line each naming the model's element: a ball
-with stiffness, a range or an actuator, slide and free joints, two joints in one body,
+with stiffness, a range or an actuator, slide and free joints, two joints in one body that
+are not a universal joint (two hinges through one point) or more,
 tendons, equality constraints, muscles and actuators with activation dynamics, armature, dry
 friction, gravity compensation, fluid forces, a constant actuator torque. Contacts are left
 out with a note.
@@ -185,9 +189,10 @@ def _refusals(mujoco, model, where: str) -> list[str]:
             errors.append(f"model file {where}: {_element('joint', joint)} is a ball joint with a range (a cone of "
                           "its rotation angle); expected none (rbstab's ball ranges bound its Euler angles)")
     for b in range(1, model.nbody):
-        if model.body_jntnum[b] > 1:
+        if model.body_jntnum[b] > 1 and not _universal(mujoco, model, b):
             errors.append(f"model file {where}: {_element('body', model.body(b))} has {int(model.body_jntnum[b])} "
-                          "joints; expected at most one (a universal joint is not a joint kind of rbstab's)")
+                          "joints; expected one, or two hinges about axes that are not parallel through one point (a "
+                          "universal joint)")
         if model.body_gravcomp[b] != 0.0:
             errors.append(f"model file {where}: {_element('body', model.body(b))} has gravcomp="
                           f"{float(model.body_gravcomp[b]):g}; expected 0 (gravity compensation is not modelled)")
@@ -201,6 +206,17 @@ def _refusals(mujoco, model, where: str) -> list[str]:
         errors.append(f"model file {where}: <option density={model.opt.density:g} viscosity={model.opt.viscosity:g}>;"
                       " expected 0 (fluid forces are not modelled)")
     return errors
+
+
+def _universal(mujoco, model, b: int) -> bool:
+    """Whether MuJoCo body ``b`` has two hinges through one point about axes that are not
+    parallel: rbstab's universal joint (the first hinge's q_1, then the second's q_2)."""
+    first = int(model.body_jntadr[b])
+    joints = [first, first + 1]
+    hinge = int(mujoco.mjtJoint.mjJNT_HINGE)
+    return (int(model.body_jntnum[b]) == 2 and all(int(model.jnt_type[j]) == hinge for j in joints)
+            and np.allclose(model.jnt_pos[first], model.jnt_pos[first + 1], rtol=0.0, atol=1e-12)
+            and np.linalg.norm(np.cross(model.jnt_axis[first], model.jnt_axis[first + 1])) > 1e-6)
 
 
 def _ball(model, data, keyed, b: int, jname: str, body: str) -> tuple[list[str], str]:
@@ -421,52 +437,80 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             notes.append(f"{where}: the ball joint {jname} is written in Euler angles (variant permanent): a run "
                          "stops at their gimbal lock, |theta_2| = pi/2, where MuJoCo's quaternion turns on")
             continue
-        qpos0 = float(model.qpos0[model.jnt_qposadr[j]])
-        source = _element("joint", joint, ' type="hinge"')
-        lines_joints += [
-            _line(4, "variant: hinge", "q = qpos - qpos0 [rad]" + (f" (ref {qpos0:g})" if qpos0 else "")),
-            _line(4, f"axis: {_vector(axis)}", "the joint's axis, world frame"),
-        ]
-        servo = feedback.get(j)
-        if servo is not None:
+        js = list(range(j, j + int(model.body_jntnum[b])))  # one hinge, or a universal joint's two
+        universal = len(js) == 2
+        qpos0 = [float(model.qpos0[model.jnt_qposadr[k]]) for k in js]
+        source = " and ".join(_element("joint", model.joint(k), ' type="hinge"') for k in js)
+
+        def numbers(values):  # a hinge's number, a universal joint's 2
+            return f"[{', '.join(_number(v) for v in values)}]" if universal else _number(values[0])
+
+        if universal:
+            lines_joints[-5] = _line(2, f"- name: {jname}", source + ": a universal joint")
             lines_joints += [
-                _line(4, f"k_r: {_number(servo['k_r'])}", f"[N m/rad] {servo['source']}: kp gear^2"),
-                _line(4, f"l_r: {_number(servo['l_r'])}", "[N m s/rad] kv gear^2"),
-                _line(4, f"theta_ref: {_number(servo['theta_ref'])}",
-                      f"[rad] its target at control {servo['ctrl']:g}, gear {servo['gear']:g}")]
-            if math.isfinite(servo["lower"]) or math.isfinite(servo["upper"]):
-                lines_joints.append(_line(4, f"saturation: {{torque_n: {_number(servo['upper'])}, "
-                                             f"torque_n_lower: {_number(servo['lower'])}}}",
+                _line(4, "variant: universal", "q_1, q_2 = qpos - qpos0 [rad] of its two hinges, in order"),
+                _line(4, f"axis: [{_vector(data.xaxis[js[0]])}, {_vector(data.xaxis[js[1]])}]",
+                      "the hinges' axes, world frame"),
+            ]
+        else:
+            lines_joints += [
+                _line(4, "variant: hinge", "q = qpos - qpos0 [rad]" + (f" (ref {qpos0[0]:g})" if qpos0[0] else "")),
+                _line(4, f"axis: {_vector(axis)}", "the joint's axis, world frame"),
+            ]
+        servos = [feedback.get(k) for k in js]
+        if any(servos):
+            named = [servo for servo in servos if servo is not None]
+            none = {"k_r": 0.0, "l_r": 0.0, "theta_ref": 0.0, "lower": -math.inf, "upper": math.inf}
+            servos = [servo or none for servo in servos]
+            lines_joints += [
+                _line(4, f"k_r: {numbers([v['k_r'] for v in servos])}",
+                      f"[N m/rad] {', '.join(v['source'] for v in named)}: kp gear^2"),
+                _line(4, f"l_r: {numbers([v['l_r'] for v in servos])}", "[N m s/rad] kv gear^2"),
+                _line(4, f"theta_ref: {numbers([v['theta_ref'] for v in servos])}",
+                      "[rad] its target at control " + ", ".join(f"{v['ctrl']:g}, gear {v['gear']:g}" for v in named))]
+            if any(math.isfinite(v["lower"]) or math.isfinite(v["upper"]) for v in servos):
+                lines_joints.append(_line(4, f"saturation: {{torque_n: {numbers([v['upper'] for v in servos])}, "
+                                             f"torque_n_lower: {numbers([v['lower'] for v in servos])}}}",
                                           "[N m] forcerange x gear, actuatorfrcrange"))
         else:
-            lines_joints += [_line(4, "k_r: 0.0", "[N m/rad] no servo on this joint"),
-                             _line(4, "l_r: 0.0", "[N m s/rad]")]
+            lines_joints += [_line(4, f"k_r: {numbers([0.0] * len(js))}", "[N m/rad] no servo on this joint"),
+                             _line(4, f"l_r: {numbers([0.0] * len(js))}", "[N m s/rad]")]
             unheld.append(jname)
-        if j in motors:
-            notes.append(f"{where}: {', '.join(motors[j])} on joint {jname}: a motor at zero control, no torque"
-                         + (f" (its limits [{model.jnt_actfrcrange[j, 0]:g}, {model.jnt_actfrcrange[j, 1]:g}] N m)"
-                            if model.jnt_actfrclimited[j] else ""))
-        stiffness, damping = float(model.jnt_stiffness[j]), float(model.dof_damping[dof])
-        if stiffness or damping:
-            spring = float(model.qpos_spring[model.jnt_qposadr[j]]) - qpos0
-            lines_joints.append(_line(4, f"passive: {{k_r: {_number(stiffness)}, l_r: {_number(damping)}, "
-                                         f"theta_ref: {_number(spring)}}}",
+        for k in js:
+            if k in motors:
+                notes.append(f"{where}: {', '.join(motors[k])} on joint {model.joint(k).name or jname}: a motor at zero "
+                             "control, no torque" + (f" (its limits [{model.jnt_actfrcrange[k, 0]:g}, "
+                                                     f"{model.jnt_actfrcrange[k, 1]:g}] N m)"
+                                                     if model.jnt_actfrclimited[k] else ""))
+        stiffness = [float(model.jnt_stiffness[k]) for k in js]
+        damping = [float(model.dof_damping[model.jnt_dofadr[k]]) for k in js]
+        if any(stiffness) or any(damping):
+            spring = [float(model.qpos_spring[model.jnt_qposadr[k]]) - q0 for k, q0 in zip(js, qpos0)]
+            lines_joints.append(_line(4, f"passive: {{k_r: {numbers(stiffness)}, l_r: {numbers(damping)}, "
+                                         f"theta_ref: {numbers(spring)}}}",
                                       "[N m/rad, N m s/rad, rad] stiffness, damping, springref"))
-        if model.jnt_limited[j]:
-            inertia = 1.0 / float(model.dof_invweight0[dof])
-            timeconst, ratio = (float(x) for x in model.jnt_solref[j])
-            k, l = ((inertia / (timeconst * ratio) ** 2, 2.0 * inertia / timeconst) if timeconst > 0
-                    else (-timeconst * inertia, -ratio * inertia))
-            lower, upper = (float(x) - qpos0 for x in model.jnt_range[j])
-            lines_joints.append(_line(4, f"range: {{lower: {_number(lower)}, upper: {_number(upper)}, "
-                                         f"k_r: {_number(k)}, l_r: {_number(l)}}}",
-                                      f"[rad] a stop: solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} kg m^2"))
-        q = float(model.key_qpos[key, model.jnt_qposadr[j]]) - qpos0 if key is not None else 0.0
-        u = float(model.key_qvel[key, dof]) if key is not None else 0.0
-        if not -math.pi < q < math.pi:
-            raise ConfigError([f"model file {where}: keyframe {keyframe!r} puts {source} at q = {q:g} rad from "
-                               "its reference; expected a number in (-pi, pi)"])
-        initial.append(_line(2, f"{name_of[b]}: {{q: {_number(q)}, u: {_number(u)}}}", f"[rad, rad/s] {jname}"))
+        if any(model.jnt_limited[k] for k in js):
+            stops = []
+            for k, q0 in zip(js, qpos0):
+                inertia = 1.0 / float(model.dof_invweight0[model.jnt_dofadr[k]])
+                timeconst, ratio = (float(x) for x in model.jnt_solref[k])
+                stiff, damp = ((inertia / (timeconst * ratio) ** 2, 2.0 * inertia / timeconst) if timeconst > 0
+                               else (-timeconst * inertia, -ratio * inertia))
+                ends = ((float(x) - q0 for x in model.jnt_range[k]) if model.jnt_limited[k]
+                        else (-math.inf, math.inf))
+                stops.append((*ends, stiff, damp, f"solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} kg m^2"))
+            lower, upper, stiff, damp, why = zip(*stops)
+            lines_joints.append(_line(4, f"range: {{lower: {numbers(lower)}, upper: {numbers(upper)}, "
+                                         f"k_r: {numbers(stiff)}, l_r: {numbers(damp)}}}", f"[rad] a stop: {'; '.join(why)}"))
+        q = [float(model.key_qpos[key, model.jnt_qposadr[k]]) - q0 if key is not None else 0.0
+             for k, q0 in zip(js, qpos0)]
+        u = [float(model.key_qvel[key, model.jnt_dofadr[k]]) if key is not None else 0.0 for k in js]
+        for k, value in zip(js, q):
+            if not -math.pi < value < math.pi:
+                element = _element("joint", model.joint(k), ' type="hinge"')
+                raise ConfigError([f"model file {where}: keyframe {keyframe!r} puts {element} at q = {value:g} rad "
+                                   "from its reference; expected a number in (-pi, pi)"])
+        initial.append(_line(2, f"{name_of[b]}: {{q: {numbers(q)}, u: {numbers(u)}}}", f"[rad, rad/s] {jname}"))
     if unheld:
         notes.append(f"{where}: no servo on {', '.join(unheld)}: their k_r and l_r are written as 0 (passive torques "
                      "and gravity only)")

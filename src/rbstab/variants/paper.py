@@ -28,13 +28,13 @@ __all__ = ["paper_form", "has_paper_form", "paper_initial_state", "body_model"]
 
 def has_paper_form(chain: Chain) -> bool:
     """Whether ``chain`` is one body held to the ground at its own point (R_p = R_c) by one of
-    the paper's five laws (not a hinge) with the paper's feedback (its spring relaxed at Theta = 0, no passive torque, symmetric torque
+    the paper's five laws (not a hinge or a universal joint) with the paper's feedback (its spring relaxed at Theta = 0, no passive torque, symmetric torque
     limits)."""
     if chain.size != 1:
         return False
     joint = chain.joints[0]
     lower = None if joint.saturation is None else joint.saturation.torque_n_lower
-    return (joint.variant != "hinge" and joint.parent == GROUND and np.array_equal(joint.parent_point, joint.child_point)
+    return (joint.variant in VARIANTS and joint.parent == GROUND and np.array_equal(joint.parent_point, joint.child_point)
             and not np.any(joint.theta_ref) and joint.passive is None
             and (lower is None or np.array_equal(lower, -np.asarray(joint.saturation.torque_n))))
 
