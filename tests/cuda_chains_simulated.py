@@ -112,6 +112,19 @@ def universal_chain(rate: float):
     return config_from_mapping(data)
 
 
+def ball_chain(theta: float):
+    """:func:`pulsed_chain` with impulses and every joint a quaternion ball (``variant: ball``:
+    the elbow's spring about a reference turn, the wrist's passive torque too; the upper body
+    tilted ``theta`` [rad]: the second run leaves simulation.limits)."""
+    from rbstab.config.loader import config_from_mapping
+
+    data = pulsed_chain(theta, impulses=True).resolved
+    data["name"] = "balls3"
+    for joint in data["joints"]:
+        joint["variant"] = "ball"
+    return config_from_mapping(data)
+
+
 def cases(root: str):
     """name -> (configs of chains of one structure: its runs)."""
     from rbstab.config.loader import load_config
@@ -141,6 +154,7 @@ def cases(root: str):
         "ranged3": [ranged_chain(rate) for rate in (-0.5, -1.5)],  # the second leaves
         "stopped3": [stopped_chain(theta) for theta in (0.2, 0.4)],  # both leave: the region, simulation.limits
         "universal3": [universal_chain(rate) for rate in (-0.5, -8.0)],  # the second leaves q_2's region
+        "balls3": [ball_chain(theta) for theta in (0.2, 0.4)],  # the second leaves simulation.limits
     }
 
 

@@ -34,6 +34,12 @@ __all__ = [
     "axis_rotation",
     "axis_angle",
     "turn_angle",
+    "quaternion_rotation",
+    "quaternion_of_vector",
+    "quaternion_vector",
+    "vector_rotation",
+    "rotation_vector",
+    "right_jacobian_inverse",
     "universal_rotation",
     "universal_angles",
     "universal_columns",
@@ -234,6 +240,81 @@ def universal_rate(a_1, a_2, q_2):
     return ((d * (s_1[0] - c * s_2[0]), d * (s_1[1] - c * s_2[1]), d * (s_1[2] - c * s_2[2])),
             (d * (s_2[0] - c * s_1[0]), d * (s_2[1] - c * s_1[1]), d * (s_2[2] - c * s_1[2])),
             (size * n[0], size * n[1], size * n[2]))
+
+
+@jit(forceinline=True)
+def quaternion_rotation(w, x, y, z):
+    """The rotation (rows) of the quaternion (w, x, y, z), normalised first (a run's
+    quaternion drifts off unit length by its integration error only)."""
+    n = 1.0 / math.sqrt(w * w + x * x + y * y + z * z)
+    w, x, y, z = w * n, x * n, y * n, z * n
+    return ((1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y)),
+            (2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x)),
+            (2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y)))
+
+
+@jit(forceinline=True)
+def quaternion_of_vector(phi):
+    """The unit quaternion (w, x, y, z) of the rotation vector ``phi`` [rad] (the turn by
+    |phi| about phi / |phi|): (cos(|phi|/2), sin(|phi|/2) phi / |phi|)."""
+    angle = math.sqrt(dot(phi, phi))
+    half = 0.5 - angle * angle / 48.0 if angle < 1e-4 else math.sin(0.5 * angle) / angle
+    return math.cos(0.5 * angle), half * phi[0], half * phi[1], half * phi[2]
+
+
+@jit(forceinline=True)
+def vector_rotation(phi):
+    """exp([phi]x) (rows): the rotation by the rotation vector ``phi`` [rad]."""
+    w, x, y, z = quaternion_of_vector(phi)
+    return quaternion_rotation(w, x, y, z)
+
+
+@jit(forceinline=True)
+def rotation_vector(rot):
+    """log of the rotation ``rot`` (rows): its rotation vector phi [rad], |phi| <= pi (the
+    shorter of the two turns), from its quaternion (Shepperd's method, w >= 0)."""
+    trace = rot[0][0] + rot[1][1] + rot[2][2]
+    if trace >= rot[0][0] and trace >= rot[1][1] and trace >= rot[2][2]:
+        s = 2.0 * math.sqrt(max(1.0 + trace, 0.0))
+        w, x, y, z = 0.25 * s, (rot[2][1] - rot[1][2]) / s, (rot[0][2] - rot[2][0]) / s, (rot[1][0] - rot[0][1]) / s
+    elif rot[0][0] >= rot[1][1] and rot[0][0] >= rot[2][2]:
+        s = 2.0 * math.sqrt(max(1.0 + rot[0][0] - rot[1][1] - rot[2][2], 0.0))
+        w, x, y, z = (rot[2][1] - rot[1][2]) / s, 0.25 * s, (rot[0][1] + rot[1][0]) / s, (rot[0][2] + rot[2][0]) / s
+    elif rot[1][1] >= rot[2][2]:
+        s = 2.0 * math.sqrt(max(1.0 - rot[0][0] + rot[1][1] - rot[2][2], 0.0))
+        w, x, y, z = (rot[0][2] - rot[2][0]) / s, (rot[0][1] + rot[1][0]) / s, 0.25 * s, (rot[1][2] + rot[2][1]) / s
+    else:
+        s = 2.0 * math.sqrt(max(1.0 - rot[0][0] - rot[1][1] + rot[2][2], 0.0))
+        w, x, y, z = (rot[1][0] - rot[0][1]) / s, (rot[0][2] + rot[2][0]) / s, (rot[1][2] + rot[2][1]) / s, 0.25 * s
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    return quaternion_vector(w, x, y, z)
+
+
+@jit(forceinline=True)
+def quaternion_vector(w, x, y, z):
+    """The rotation vector phi [rad] of the quaternion (w, x, y, z) (any length, w >= 0:
+    |phi| <= pi): 2 atan2(|v|, w) v / |v|."""
+    size = math.sqrt(x * x + y * y + z * z)
+    scale = 2.0 / w if size < 1e-12 * abs(w) else 2.0 * math.atan2(size, w) / size
+    return scale * x, scale * y, scale * z
+
+
+@jit(forceinline=True)
+def right_jacobian_inverse(phi):
+    """J_r(phi)^-1 (rows): the map of a rotation's angular velocity in its own (rotated)
+    frame to the rate of its rotation vector phi [rad] (|phi| < 2 pi): I + 1/2 [phi]x + (1 /
+    |phi|^2 - (1 + cos|phi|) / (2 |phi| sin|phi|)) [phi]x^2."""
+    angle2 = dot(phi, phi)
+    angle = math.sqrt(angle2)
+    if angle < 1e-4:
+        c = 1.0 / 12.0 + angle2 / 720.0
+    else:
+        c = 1.0 / angle2 - (1.0 + math.cos(angle)) / (2.0 * angle * math.sin(angle))
+    x, y, z = phi[0], phi[1], phi[2]
+    return ((1.0 + c * (-y * y - z * z), -0.5 * z + c * x * y, 0.5 * y + c * x * z),
+            (0.5 * z + c * x * y, 1.0 + c * (-x * x - z * z), -0.5 * x + c * y * z),
+            (-0.5 * y + c * x * z, 0.5 * x + c * y * z, 1.0 + c * (-x * x - y * y)))
 
 
 @jit

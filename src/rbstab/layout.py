@@ -66,6 +66,7 @@ __all__ = [
     "REDUCED_STATES",
     "VELOCITIES",
     "AXES",
+    "BEYOND_PAPER",
     "POINT_FIXED",
     "point_fixed",
 ]
@@ -424,7 +425,8 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
 STATE_BLOCKS = ("theta", "omega", "position", "velocity", "controller_state")
 #: Units of each state block (CF spelling; the files' ``units`` attribute).
 BLOCK_UNITS = {**{b: OUTPUTS[b].units for b in STATE_BLOCKS},  # and the joints' blocks of a tree's reduced state
-               "joint_theta": "rad", "joint_omega": "rad s-1", "q": "rad", "u": "rad s-1"}
+               "joint_theta": "rad", "joint_omega": "rad s-1", "q": "rad", "u": "rad s-1", "quaternion": "1",
+               "joint_phi": "rad"}
 #: The controls an actuator delivers (:class:`rbstab.model.Saturation`'s limits) -> the output
 #: that flags their axes at or beyond the limit and the summary figure of the fraction of the
 #: samples so flagged.
@@ -636,7 +638,7 @@ class JointKind:
 #: The joint kinds by name (docs/physics.md, "Joint kinds"): the one place that says how
 #: many reduced states and generalised velocities a joint's child has.
 JOINT_KINDS = {
-    "ball": JointKind("ball", 3, 3, True,
+    "euler_ball": JointKind("euler_ball", 3, 3, True,
                       "Theta_j [rad], the Euler angles of A_rel = A_p' A_c (eq 2); Omega_j [rad/s], child frame",
                       "|theta_2| < pi/2 - simulation.gimbal_margin", (("joint_theta", 3), ("joint_omega", 3))),
     "free": JointKind("free", 6, 6, False,
@@ -647,6 +649,9 @@ JOINT_KINDS = {
                        "q [rad], the angle of A_rel = exp(q [a]x) about the joint's unit axis a (the parent's and "
                        "the child's frames, which it leaves fixed); u = dq/dt [rad/s]",
                        "every q (a hinge has no singular angle)", (("q", 1), ("u", 1))),
+    "ball": JointKind("ball", 4, 3, True,
+                      "the unit quaternion of A_rel = A_p' A_c (w, x, y, z); Omega_j [rad/s], child frame",
+                      "every orientation (no singular one)", (("quaternion", 4), ("joint_omega", 3))),
     "universal": JointKind("universal", 2, 2, True,
                            "q = (q_1, q_2) [rad], A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x): a turn about the unit axis "
                            "a_1 (the parent's frame), then about the unit axis a_2 (the child's frame); u = dq/dt "
@@ -656,11 +661,12 @@ JOINT_KINDS = {
 }
 #: Each joint's ``variant`` -> its joint kind: the paper's ``permanent`` joint is the ball in
 #: Euler angles, the four point laws pull a free body, ``hinge`` turns the child about an axis.
-JOINT_KIND_OF = {"free": "free", "permanent": "ball", "sliding": "free", "visco_elastic": "free", "embedded": "free",
-                 "hinge": "hinge", "universal": "universal"}
+JOINT_KIND_OF = {"free": "free", "permanent": "euler_ball", "sliding": "free", "visco_elastic": "free",
+                 "embedded": "free", "hinge": "hinge", "universal": "universal", "ball": "ball"}
 #: Each joint's ``variant`` -> its code in the compiled kernels: the paper's laws by their
 #: :data:`VARIANT_CODES`, then the kinds that have no one-body form of the paper (``hinge``).
-JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES), "universal": len(VARIANT_CODES) + 1}
+JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES), "universal": len(VARIANT_CODES) + 1,
+               "ball": len(VARIANT_CODES) + 2}
 #: Each joint code's reduced states and generalised velocities (the compiled kernels read
 #: these; an embedded joint's D comes after the bodies).
 REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].size for v in JOINT_CODES], dtype=np.int64)
@@ -670,6 +676,9 @@ POINT_FIXED = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].point_fixed for v in JOINT
 #: Each joint code's axes: the turns about fixed axes its coordinates are (a hinge's 1, a
 #: universal's 2; 0 for the ball's Euler angles and the free body).
 AXES = np.array([{"hinge": 1, "universal": 2}.get(JOINT_KIND_OF[v], 0) for v in JOINT_CODES], dtype=np.int64)
+#: Whether each joint code is a kind beyond the paper's laws (a hinge, a universal joint, the
+#: quaternion ball): a tree with one runs and is linearised in its reduced state only.
+BEYOND_PAPER = np.array([v not in VARIANT_CODES for v in JOINT_CODES], dtype=np.bool_)
 
 
 def point_fixed(variant: str) -> bool:

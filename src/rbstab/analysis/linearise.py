@@ -37,7 +37,7 @@ import math
 
 import numpy as np
 
-from ..layout import BLOCK_UNITS, JOINT_KIND_OF, JOINT_KINDS
+from ..layout import BLOCK_UNITS, JOINT_KIND_OF, JOINT_KINDS, REDUCED_STATES
 from .derivatives import jacobian
 
 __all__ = [
@@ -291,10 +291,54 @@ def linearise_chain(compiled) -> tuple[Linearisation, list[tuple[str, str, int]]
     if compiled.hinged:  # the reduced state at rest
         from ..variants.tree import reduce_state, tree_layout  # heavy: numba
 
-        z = reduce_state(compiled, tree_layout(compiled), y_rest)
+        z = _polished(compiled, _coordinates_of_reduced(compiled, reduce_state(compiled, tree_layout(compiled),
+                                                                               y_rest)[None])[0], coordinates)
     else:
         z = np.concatenate([y_rest[at: at + 3] for _, _, at, _ in coordinates])
     return linearisation(lambda rows: reduced_rates(compiled, rows), z, compiled.chain.gravity), coordinates
+
+
+def _polished(compiled, z: np.ndarray, coordinates) -> np.ndarray:
+    """The rest point ``z`` of a tree in its reduced coordinates (the minimiser's, to its
+    gradient's tolerance) polished to rounding: its configuration's entries (a joint's angles,
+    a free body's Theta and X, D) moved so that the rates of its velocities (at zero
+    velocities) vanish (scipy's ``root``); ``z`` itself where the polish does not lower them."""
+    from scipy.optimize import root  # heavy: scipy
+
+    rates_of = {"omega", "velocity", "joint_omega", "u"}
+    moved = np.array([k for _, block, at, size in _offsets(coordinates) if block not in rates_of
+                      for k in range(at, at + size)], dtype=np.int64)
+    still = np.array([k for _, block, at, size in _offsets(coordinates) if block in rates_of
+                      for k in range(at, at + size)], dtype=np.int64)
+    if len(moved) != len(still) + sum(size for _, block, _, size in coordinates if block == "controller_state"):
+        return z
+    rated = np.concatenate([still, [k for _, block, at, size in _offsets(coordinates) if block == "controller_state"
+                                    for k in range(at, at + size)]]).astype(np.int64)
+
+    def residual(x):
+        row = z.copy()
+        row[moved] = x
+        return reduced_rates(compiled, row[None])[0, rated]
+
+    start = residual(z[moved])
+    if not np.all(np.isfinite(start)) or not np.any(start):
+        return z
+    with np.errstate(all="ignore"):
+        found = root(residual, z[moved], method="hybr", options={"xtol": 1e-14})
+    if not (np.all(np.isfinite(found.fun)) and np.linalg.norm(found.fun) < np.linalg.norm(start)):
+        return z
+    out = z.copy()
+    out[moved] = found.x
+    return out
+
+
+def _offsets(coordinates) -> list[tuple[str, str, int, int]]:
+    """(body, block, start in z, entries) of each block of the coordinates ``coordinates``."""
+    out, at = [], 0
+    for body, block, _, size in coordinates:
+        out.append((body, block, at, size))
+        at += size
+    return out
 
 
 def coordinates_of(compiled) -> list[tuple[str, str, int, int]]:
@@ -316,6 +360,9 @@ def coordinates_of(compiled) -> list[tuple[str, str, int, int]]:
     layout, names, out = tree_layout(compiled), compiled.chain.body_names, []
     for i, joint in enumerate(compiled.chain.joints):
         at = int(layout.r_at[i])
+        if joint.variant == "ball":  # the rotation vector of A_rel, a chart of its quaternion's tangent directions
+            out += [(names[i], "joint_theta", at, 3), (names[i], "joint_omega", at + 4, 3)]
+            continue
         for block, size in JOINT_KINDS[JOINT_KIND_OF[joint.variant]].blocks:
             out.append((names[i], block, at, size))
             at += size
@@ -335,7 +382,7 @@ def coordinates_state(compiled, z: np.ndarray) -> np.ndarray:
     from ..variants.tree import expand_samples, tree_layout  # heavy: numba
 
     z = np.asarray(z, dtype=float)
-    rows = np.ascontiguousarray(np.atleast_2d(z))
+    rows = np.ascontiguousarray(_reduced_of_coordinates(compiled, np.atleast_2d(z)))
     y = np.empty((1, len(rows), compiled.n_states))
     expand_samples(rows[None], compiled.params[None], compiled.codes, compiled.parents, compiled.ppoints[None],
                    compiled.d_at, *tree_layout(compiled).args, y, np.zeros(1, dtype=np.int64))
@@ -360,13 +407,92 @@ def reduced_rates(compiled, z, t=0.0) -> np.ndarray:
         layout = tree_layout(compiled)
         work = tree_work(compiled.size, compiled.n_states)
         out = np.empty((len(z), layout.n_r + 1))
-        for k, row in enumerate(np.ascontiguousarray(z)):
+        for k, row in enumerate(np.ascontiguousarray(_reduced_of_coordinates(compiled, z))):
             tree_rate(t[k], row, *compiled.args, *layout.args, out[k], work)
-        return out[:, : layout.n_r]
+        return _coordinate_rates(compiled, z, out[:, : layout.n_r])
     y = C.full_state(compiled, z)
     dy = np.empty_like(y)
     C.chain_rates(t, y, *compiled.args, dy)
     return dy[:, compiled.independent_columns]
+
+
+def _ball_entries(compiled) -> tuple[np.ndarray, np.ndarray, list[tuple[int, int]]]:
+    """How a tree's linearisation coordinates z (:func:`coordinates_of`) sit in its reduced
+    state: (the entries of z, the entries of the reduced state they are, one to one; each
+    quaternion ball's (start in z of its rotation vector phi, start in the reduced state of
+    its quaternion), its Omega_j 3 entries after each)."""
+    from ..variants.tree import tree_layout  # heavy: numba
+
+    layout, copied, balls = tree_layout(compiled), [], []
+    z_at = 0
+    for i, joint in enumerate(compiled.chain.joints):
+        r_at = int(layout.r_at[i])
+        size = int(REDUCED_STATES[compiled.codes[i]])
+        if joint.variant == "ball":
+            balls.append((z_at, r_at))
+            copied += [(z_at + 3 + k, r_at + 4 + k) for k in range(3)]
+            z_at += 6
+            continue
+        copied += [(z_at + k, r_at + k) for k in range(size)]
+        z_at += size
+    copied += [(z_at + k, r_at) for k, r_at in enumerate(range(int(layout.r_at[-1]) + int(
+        REDUCED_STATES[compiled.codes[-1]]), layout.n_r))]  # D of embedded joints
+    z_index, r_index = (np.array(v, dtype=np.int64) for v in zip(*copied)) if copied else (np.zeros(0, np.int64),) * 2
+    return z_index, r_index, balls
+
+
+def _reduced_of_coordinates(compiled, z: np.ndarray) -> np.ndarray:
+    """The reduced states (k, n_r) of the coordinates ``z`` (k, m): a quaternion ball's
+    quaternion (cos(|phi|/2), sin(|phi|/2) phi / |phi|) of its rotation vector phi."""
+    z_index, r_index, balls = _ball_entries(compiled)
+    if not balls:
+        return z
+    out = np.empty((len(z), z.shape[1] + len(balls)))
+    out[:, r_index] = z[:, z_index]
+    for z_at, r_at in balls:
+        phi = z[:, z_at: z_at + 3]
+        angle = np.linalg.norm(phi, axis=1)
+        half = np.where(angle < 1e-4, 0.5 - angle**2 / 48.0, np.sin(0.5 * angle) / np.where(angle > 0, angle, 1.0))
+        out[:, r_at] = np.cos(0.5 * angle)
+        out[:, r_at + 1: r_at + 4] = half[:, None] * phi
+    return out
+
+
+def _coordinates_of_reduced(compiled, reduced: np.ndarray) -> np.ndarray:
+    """The coordinates z (k, m) of the reduced states ``reduced`` (k, n_r): a quaternion
+    ball's rotation vector phi (|phi| <= pi) of its quaternion."""
+    z_index, r_index, balls = _ball_entries(compiled)
+    if not balls:
+        return reduced
+    out = np.empty((len(reduced), reduced.shape[1] - len(balls)))
+    out[:, z_index] = reduced[:, r_index]
+    for z_at, r_at in balls:
+        q = reduced[:, r_at: r_at + 4] * np.where(reduced[:, r_at: r_at + 1] < 0, -1.0, 1.0)
+        size = np.linalg.norm(q[:, 1:], axis=1)
+        scale = np.where(size < 1e-12 * np.abs(q[:, 0]), 2.0 / q[:, 0],
+                         2.0 * np.arctan2(size, q[:, 0]) / np.where(size > 0, size, 1.0))
+        out[:, z_at: z_at + 3] = scale[:, None] * q[:, 1:]
+    return out
+
+
+def _coordinate_rates(compiled, z: np.ndarray, rates: np.ndarray) -> np.ndarray:
+    """dz/dt (k, m) at the coordinates ``z`` of the reduced states' rates ``rates`` (k,
+    n_r): a quaternion ball's dphi/dt = J_r(phi)^-1 Omega_j."""
+    z_index, r_index, balls = _ball_entries(compiled)
+    if not balls:
+        return rates
+    out = np.empty_like(z)
+    out[:, z_index] = rates[:, r_index]
+    for z_at, _ in balls:
+        phi, omega = z[:, z_at: z_at + 3], z[:, z_at + 3: z_at + 6]
+        angle2 = np.einsum("ki,ki->k", phi, phi)
+        angle = np.sqrt(angle2)
+        with np.errstate(all="ignore"):
+            c = np.where(angle < 1e-4, 1.0 / 12.0 + angle2 / 720.0,
+                         1.0 / angle2 - (1.0 + np.cos(angle)) / (2.0 * angle * np.sin(angle)))
+        cross = np.cross(phi, omega)
+        out[:, z_at: z_at + 3] = omega + 0.5 * cross + c[:, None] * np.cross(phi, cross)
+    return out
 
 
 @dataclass(frozen=True)

@@ -614,7 +614,7 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
                 None if passive is None else (passive.k_r or 0.0, passive.l_r or 0.0, passive.theta_ref or 0.0),
                 _stop(j.range, 2), _region(j.range, 2)))
             continue
-        used = VARIANTS[j.variant].required_gains
+        used = VARIANTS[j.variant].required_gains if j.variant in VARIANTS else ()  # a quaternion ball: no point law
         joints.append(Joint(
             name=j.name, parent=parent, child=index[j.child],
             parent_point=_array(j.parent_point), child_point=_array(j.child_point), variant=j.variant,
@@ -715,7 +715,8 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
                         f"Theta_j = {short_repr([float(f'{x:.6g}') for x in theta_j])} rad; the range is an "
                         "admissible region (kind: region), and the run would start outside it",
                         source, overrides, ("initial_state", "joints"))
-        if joint.parent != GROUND and joint.variant not in AXES_VARIANTS and abs(theta_2) >= math.pi / 2 - margin:
+        if (joint.parent != GROUND and joint.variant not in (*AXES_VARIANTS, "ball")
+                and abs(theta_2) >= math.pi / 2 - margin):
             _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
                     f"an orientation of '{body.name}' relative to '{parent}' with |theta_2| < pi/2 - gimbal_margin "
                     f"= {math.pi / 2 - margin:.6g}",
@@ -867,7 +868,7 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
                   overrides)
     gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]
     gains += [(f"joints.{i}.", {g: getattr(j, g) for g in (*JOINT_GAINS, "k_s")
-                                if g in VARIANTS[j.variant].required_gains or g in ("k_r", "l_r")})
+                                if g in ("k_r", "l_r") or j.variant in VARIANTS and g in VARIANTS[j.variant].required_gains})
               for i, j in enumerate(run.joints) if j.variant not in AXES_VARIANTS]  # numbers >= 0 per coordinate
     hinged = {j.child for j in run.joints if j.variant in AXES_VARIANTS}
     angles = [(f"initial_state.{b.name}.theta", run.initial_state[b.name].theta) for b in chain.bodies

@@ -18,12 +18,12 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   coordinate;
 - its passive torque is the joint's ``stiffness``, ``damping`` and ``springref``
   (theta_ref = qpos_spring - qpos0);
-- each ``ball`` becomes a joint ``variant: permanent`` at its anchor (the ball in the relative
-  Euler angles Theta_j, zero in the reference pose; a run stops at their gimbal lock), its
-  ``damping`` a passive damper on Omega_j; its child starts at the keyframe's orientation
-  and angular velocity (its Euler angles from the reference pose, body frame). A ball with
-  ``stiffness`` (MuJoCo's spring on the rotation vector), a range (a cone) or an actuator is
-  refused;
+- each ``ball`` becomes a joint ``variant: ball`` at its anchor (its quaternion, free of
+  gimbal lock, the identity in the reference pose), its ``stiffness`` a passive spring on
+  the rotation vector of its turn (MuJoCo's ball spring) and its ``damping`` a passive
+  damper on Omega_j; its child starts at the keyframe's orientation and angular velocity
+  (its Euler angles from the reference pose, body frame). A ball with a range (a cone) or
+  an actuator is refused;
 - its feedback is the ``position`` servo (any affine actuator on the joint: force = kp ctrl
   + b0 + b1 length + b2 velocity, length = gear qpos): k_r = -b1 gear^2, l_r = -b2 gear^2,
   theta_ref from the control (the keyframe's, else 0, within ``ctrlrange``), delivered
@@ -37,7 +37,7 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   keyframe's q, u or the reference pose at rest.
 
 What rbstab cannot represent is refused, one line each naming the model's element: a ball
-with stiffness, a range or an actuator, slide and free joints, two joints in one body that
+with a range or an actuator, slide and free joints, two joints in one body that
 are not a universal joint (two hinges through one point) or more,
 tendons, equality constraints, muscles and actuators with activation dynamics, armature, dry
 friction, gravity compensation, fluid forces, a constant actuator torque. Contacts are left
@@ -181,10 +181,6 @@ def _refusals(mujoco, model, where: str) -> list[str]:
             if np.any(values[dof:dof + (3 if int(model.jnt_type[j]) == ball else 1)] != 0.0):
                 errors.append(f"model file {where}: {_element('joint', joint)} has {attribute}="
                               f"{float(values[dof]):g}; expected 0 ({why} is not modelled)")
-        if int(model.jnt_type[j]) == ball and model.jnt_stiffness[j] != 0.0:
-            errors.append(f"model file {where}: {_element('joint', joint)} is a ball joint with stiffness="
-                          f"{float(model.jnt_stiffness[j]):g}; expected 0 (MuJoCo's ball spring acts on the rotation "
-                          "vector, rbstab's ball on its Euler angles: a ball imports with damping alone)")
         if int(model.jnt_type[j]) == ball and model.jnt_limited[j]:
             errors.append(f"model file {where}: {_element('joint', joint)} is a ball joint with a range (a cone of "
                           "its rotation angle); expected none (rbstab's ball ranges bound its Euler angles)")
@@ -221,19 +217,22 @@ def _universal(mujoco, model, b: int) -> bool:
 
 def _ball(model, data, keyed, b: int, jname: str, body: str) -> tuple[list[str], str]:
     """(the joint's lines after its points, the initial-state line of its child ``body``) of
-    the ball joint of MuJoCo body ``b``: ``variant: permanent`` with no servo, its damping a
-    passive damper on Omega_j (MuJoCo's ``dof_damping`` on the ball's angular velocity, child
-    frame), its child's Euler angles and angular velocity (body frame) at the keyframe
-    (``keyed``, the data at it; ``data`` at the reference pose) or zero (``keyed`` None)."""
-    lines = [_line(4, "variant: permanent", "a ball: Theta_j, the Euler angles of A_parent' A_child [rad], 0 in the "
-                                            "reference pose"),
+    the ball joint of MuJoCo body ``b``: ``variant: ball`` (its quaternion, free of gimbal
+    lock) with no servo, its ``stiffness`` k and ``damping`` a passive spring k I on the
+    rotation vector of its turn from the reference pose (MuJoCo's ball spring) and a damper
+    on Omega_j (``dof_damping``, child frame), its child's Euler angles and angular velocity
+    (body frame) at the keyframe (``keyed``, the data at it; ``data`` at the reference pose)
+    or zero (``keyed`` None)."""
+    lines = [_line(4, "variant: ball", "a ball: the quaternion of A_parent' A_child, identity in the reference pose"),
              _line(4, "k_r: [0.0, 0.0, 0.0]", "[N m/rad] no servo on a ball"),
              _line(4, "l_r: [0.0, 0.0, 0.0]", "[N m s/rad]")]
-    dof = int(model.jnt_dofadr[int(model.body_jntadr[b])])
+    j = int(model.body_jntadr[b])
+    dof = int(model.jnt_dofadr[j])
     damping = np.array(model.dof_damping[dof:dof + 3], dtype=float)
-    if np.any(damping):
-        lines.append(_line(4, f"passive: {{k_r: [0.0, 0.0, 0.0], l_r: {_vector(damping)}}}",
-                           "[N m s/rad] damping on Omega_j (child frame)"))
+    stiffness = float(model.jnt_stiffness[j])
+    if np.any(damping) or stiffness:
+        lines.append(_line(4, f"passive: {{k_r: {_vector(np.full(3, stiffness))}, l_r: {_vector(damping)}}}",
+                           "[N m/rad, N m s/rad] stiffness on the rotation vector, damping on Omega_j (child frame)"))
     if keyed is None:
         theta, omega = np.zeros(3), np.zeros(3)
     else:  # the body's turn from the reference pose, and its angular velocity in its own frame
@@ -434,8 +433,6 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             lines_joints += joint_lines
             initial.append(start)
             unheld.append(jname)
-            notes.append(f"{where}: the ball joint {jname} is written in Euler angles (variant permanent): a run "
-                         "stops at their gimbal lock, |theta_2| = pi/2, where MuJoCo's quaternion turns on")
             continue
         js = list(range(j, j + int(model.body_jntnum[b])))  # one hinge, or a universal joint's two
         universal = len(js) == 2

@@ -428,7 +428,7 @@ def _variant(value: Any) -> str:
 
 #: A tree joint's ``variant``: the paper's laws (:data:`rbstab.variants.VARIANTS`) and the
 #: joint kinds that have no one-body form (:data:`rbstab.layout.JOINT_KIND_OF`).
-JOINT_VARIANTS = (*VARIANTS, "hinge", "universal")
+JOINT_VARIANTS = (*VARIANTS, "hinge", "universal", "ball")
 #: The joint kinds whose coordinates are turns about fixed axes: their child's initial state
 #: is q, u; their gains, references and limits are numbers per coordinate.
 AXES_VARIANTS = ("hinge", "universal")
@@ -488,8 +488,8 @@ def _joint_angles(value: Any) -> Any:
     Euler angles (:func:`_theta`)."""
     if _is_pair(value):
         return _pair(value, _as_number)
-    if isinstance(value, (list, tuple)):
-        return _theta(value)
+    if isinstance(value, (list, tuple)):  # Euler angles (their gimbal lock: the chain's check) or a rotation vector
+        return _vector(value)
     return _as_number(value)
 
 
@@ -1246,7 +1246,7 @@ class _ChainJoint(_Section):
     theta_ref: Annotated[Any, checked(optional(_joint_angles))] = Field(
         None, description="3 numbers (rad; the reference posture Theta_ref, the relative Euler angles at which the "
                           "joint's spring K_r is relaxed); a hinge's: a number, its angle q_ref (rad; optional, "
-                          "default 0)")
+                          "default 0); a ball's: its rotation vector (rad), the relative turn at which K_r is relaxed")
     passive: _JointPassive | None = Field(None, description=_mapping_of(_JointPassive) + " (optional: the "
                                                             "joint's passive torque, added to N_j and never limited)")
     range: _JointRange | None = Field(None, description=_mapping_of(_JointRange) + " (optional, a hinge's: its "
@@ -1299,7 +1299,8 @@ class _ChainJoint(_Section):
             raise PydanticCustomError("rbstab_invalid", "a range", {
                 "subkey": "range", "found": "a range", "expected": "no range",
                 "detail": f"a range is a hinge's (of its angle q), a universal joint's (of q_1, q_2) or a ball's "
-                          f"(permanent: of its Euler angles Theta_j); a '{self.variant}' joint has none"})
+                          f"(permanent: of its Euler angles Theta_j); a '{self.variant}' joint has none"
+                          + (" (a cone of its turn is not modelled)" if self.variant == "ball" else "")})
         for key, value in values:
             if value is None:
                 continue
@@ -1560,9 +1561,10 @@ class ChainSchema(_Section):
         margin = float(self.simulation.gimbal_margin)
         angles = [(f"initial_state.{name}.theta", state.theta) for name, state in self.initial_state.items()]
         angles += [(f"joints.{j.name}.theta_ref", j.theta_ref) for j in self.joints
-                   if j.theta_ref is not None and j.variant not in AXES_VARIANTS]
+                   if j.theta_ref is not None and j.variant not in (*AXES_VARIANTS, "ball")]
         angles += [(f"joints.{j.name}.passive.theta_ref", j.passive.theta_ref) for j in self.joints
-                   if j.passive is not None and j.passive.theta_ref is not None and j.variant not in AXES_VARIANTS]
+                   if j.passive is not None and j.passive.theta_ref is not None
+                   and j.variant not in (*AXES_VARIANTS, "ball")]
         for key, theta in angles:
             if not clear_of_gimbal_lock(theta[1], margin):
                 limit = math.pi / 2 - margin

@@ -29,7 +29,7 @@ from numba.extending import overload
 
 from ..jit import jit
 from ..kinematics import rotation_and_rate_of, vector
-from ..layout import AXES, POINT_FIXED
+from ..layout import BEYOND_PAPER, POINT_FIXED
 from ..model import set_limits
 from ..variants.chain import _relative
 from ..variants.disturbances import apply_impulses, next_breakpoint
@@ -242,7 +242,7 @@ def tree_margin(y, p, limit):
     limited = p.params[0].limited != 0.0
     relative = False
     for i in range(n):
-        if AXES[p.codes[i]] > 0:  # no Euler angles: a hinge's or a universal joint's q has no singular value
+        if BEYOND_PAPER[p.codes[i]]:  # no Euler angles: a hinge's, a universal joint's, a quaternion ball's
             continue
         m = limit - abs(y[p.r_at[i] + 1])
         if m < margin:

@@ -36,9 +36,9 @@ from ..chain import Chain
 from ..jit import jit
 from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec, neg,
                           quadratic_form,
-                          rotation_and_rate_of, rotation_matrix, sub, universal_angles, universal_rate, universal_rotation,
-                          vector)
-from ..layout import AXES, JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES
+                          right_jacobian_inverse, rotation_and_rate_of, rotation_matrix, rotation_vector, sub,
+                          universal_angles, universal_rate, universal_rotation, vector, vector_rotation)
+from ..layout import AXES, BEYOND_PAPER, JOINT_CODES, LEFT_OUT, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, VARIANT_CODES
 from ..model import (
     PARAMETERS,
     force_h,
@@ -50,7 +50,7 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import EMBEDDED, HINGE, PERMANENT, UNIVERSAL, constraint_dissipation, constraint_energy, constraint_force, \
+from .kernels import BALL, EMBEDDED, HINGE, PERMANENT, UNIVERSAL, constraint_dissipation, constraint_energy, constraint_force, \
     constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
 from .registry import record_offset
@@ -208,11 +208,22 @@ def _stop(n_j, energy, dissipation, angle, rate, direction, p, i):
 
 
 @jit(forceinline=True)
-def _feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipation, power):
+def _ball_strain(rel, reference):
+    """(phi, J_r(phi)^-1) of a quaternion ball: phi = log(A(Theta_ref)' A_rel) [rad], the
+    rotation vector of the turn from its reference ``reference`` (a rotation vector) to its
+    relative rotation ``rel``, and the map of Omega_j to dphi/dt."""
+    r = vector_rotation(reference)
+    phi = rotation_vector(_relative(r, rel))
+    return phi, right_jacobian_inverse(phi)
+
+
+@jit(forceinline=True)
+def _feedback(b_j, strain, b_p, passive, omega_j, p, rotational, dissipation, power):
     """A joint's torque N_j [N m] (child frame): eq 23 about the reference posture (``strain``
-    = Theta_j - Theta_ref, ``b_j`` = B(Theta_j); a hinge's written as a ball's, B = I) through
-    its actuators' limits [torque_floor, torque_limit] per axis, plus the passive torque of
-    eq 23's form with its own gains and reference, never limited; returns it with v's
+    = Theta_j - Theta_ref, ``b_j`` = B(Theta_j); a hinge's written as a ball's, B = I; a
+    quaternion ball's phi and J_r(phi)^-1) through its actuators' limits [torque_floor,
+    torque_limit] per axis, plus the passive torque of eq 23's form with its own gains and
+    reference (``passive``, ``b_p`` its strain and B), never limited; returns it with v's
     rotational term, the dissipation [W] and the saturation deficit power [W] accumulated."""
     n_j = torque_n_command(b_j, strain, omega_j, p)
     if p.saturation > 0.0:
@@ -222,8 +233,7 @@ def _feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipation, power):
     rotational += 0.5 * quadratic_form(strain, p.k_r)
     dissipation += quadratic_form(omega_j, p.l_r)
     if p.passive > 0.0:
-        passive = sub(theta_j, p.passive_theta_ref)
-        n_j = sub(sub(n_j, matTvec(b_j, matvec(p.passive_k_r, passive))), matvec(p.passive_l_r, omega_j))
+        n_j = sub(sub(n_j, matTvec(b_p, matvec(p.passive_k_r, passive))), matvec(p.passive_l_r, omega_j))
         rotational += 0.5 * quadratic_form(passive, p.passive_k_r)
         dissipation += quadratic_form(omega_j, p.passive_l_r)
     return n_j, rotational, dissipation, power
@@ -346,15 +356,22 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
                 q_1, q_2 = _nearest_turn(read_1, q_1), _nearest_turn(read_2, q_2)
                 work.angle[j, 0], work.angle[j, 1] = q_1, q_2
             theta_j, b_j = (q_1, q_2, 0.0), universal_rate(a_1, a_2, q_2)
+        elif codes[j] == BALL:  # the rotation vector of A_rel; its feedback on the turn from its reference
+            theta_j = rotation_vector(rel)
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
         strain = sub(theta_j, p.theta_ref)  # the spring's: Theta_j - Theta_ref (eq 23 about the reference posture)
         if codes[j] == UNIVERSAL:  # on its coordinates
             n_j, rotational, dissipation, power = _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational,
                                                                        dissipation, power)
+        elif codes[j] == BALL:  # on the rotation vectors of its turns from its references, B = J_r^-1
+            strain, b_j = _ball_strain(rel, p.theta_ref)
+            passive, b_p = _ball_strain(rel, p.passive_theta_ref)
+            n_j, rotational, dissipation, power = _feedback(b_j, strain, b_p, passive, omega_j, p, rotational,
+                                                            dissipation, power)
         else:
-            n_j, rotational, dissipation, power = _feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipation,
-                                                            power)
+            n_j, rotational, dissipation, power = _feedback(b_j, strain, b_j, sub(theta_j, p.passive_theta_ref),
+                                                            omega_j, p, rotational, dissipation, power)
         if p.stop > 0.0:  # its range: beyond either end of a coordinate a one-sided spring and damper, never limited
             if codes[j] == HINGE:  # q = a'Theta_j, its rate a'Omega_j, its torque along a
                 axis = vector(p.axis, 0)
@@ -428,7 +445,7 @@ def chain_evaluate(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
                                                                        joints, bodies, scalars, work)
     hinged = False
     for j in range(n):
-        hinged = hinged or AXES[codes[j]] > 0
+        hinged = hinged or BEYOND_PAPER[codes[j]]
     if n_permanent > 0 and not hinged:
         _permanent_forces(y, params, codes, parents, ppoints, rot, torque, force, joints, n_permanent, work, True)
         for j in range(n):
@@ -654,6 +671,8 @@ def _saturation_flags(y, params, codes, joints, flags):
         elif codes[j] == UNIVERSAL:  # theta_j = (q_1, q_2, 0): B maps Omega_j to their rates
             b_j = universal_rate(vector(params[j].axis, 0), vector(params[j].axis_2, 0), theta_j[1])
         strain, omega_j = sub(theta_j, params[j].theta_ref), vector(joints[j, _OMEGA_J], 0)
+        if codes[j] == BALL:  # theta_j the rotation vector of A_rel
+            strain, b_j = _ball_strain(vector_rotation(theta_j), params[j].theta_ref)
         _, _, h_flags, lam_flags = saturation_effects(
             codes[j], strain, omega_j, vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
             vector(joints[j, _E], 0), vector(joints[j, _F], 0), vector(joints[j, _D], 0), params[j])
@@ -770,7 +789,7 @@ class CompiledChain:
     def hinged(self) -> bool:
         """Whether a joint turns about axes, a hinge or a universal joint (the tree's
         linearisation is then in its reduced state)."""
-        return bool(np.any(AXES[self.codes] > 0))
+        return bool(np.any(BEYOND_PAPER[self.codes]))
 
     @functools.cached_property
     def permanent(self) -> np.ndarray:
@@ -791,7 +810,7 @@ def one_body_mask(codes: np.ndarray, parents: np.ndarray, points: np.ndarray, at
     are the paper's one-body model (one of its five laws) (:func:`is_one_body`): ``points`` (t, 3) their first
     joint's R_p [m], ``attachment`` (t, 3) its R_c [m] (body frame), ``papers`` (t,) whether
     its feedback is the paper's (:func:`papers_feedback`); shape (t,) of bool."""
-    if codes.shape[0] != 1 or parents[0] >= 0 or AXES[codes[0]] > 0:
+    if codes.shape[0] != 1 or parents[0] >= 0 or BEYOND_PAPER[codes[0]]:
         return np.zeros(len(points), dtype=bool)
     return np.all(points == attachment, axis=-1) & papers
 
@@ -937,6 +956,12 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
                 a = compose(rotation_and_rate_of(vector(y, 12 * parents[i]))[0], rel)
             _put(y, 12 * i, euler_angles(a))
             k += AXES[codes[i]]
+        elif codes[i] == BALL:  # its rotation vector
+            a = vector_rotation((q[k], q[k + 1], q[k + 2]))
+            if parents[i] >= 0:
+                a = compose(rotation_and_rate_of(vector(y, 12 * parents[i]))[0], a)
+            _put(y, 12 * i, euler_angles(a))
+            k += 3
         else:
             for c in range(3):
                 y[12 * i + c] = q[k + c]
@@ -1057,11 +1082,14 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
         if not np.isfinite(value) or np.max(np.abs(result.x - q0)) > 1e3:
             return None, math.nan
         q = result.x
-    residual = np.zeros(1) if hinged else acceleration(q)  # a hinge's tree: the minimiser's rest point
-    if np.any(residual != 0.0):  # a rest point to rounding: the minimiser's gradient tolerance is not
+    # a rest point to rounding: the minimiser's gradient tolerance is not; a tree with a kind beyond the
+    # paper's (whose maximal rates leave out its joints' reactions) polished on the potential's gradient
+    residual_of = (lambda x: potential_and_gradient(x)[1]) if hinged else acceleration
+    residual = residual_of(q)
+    if np.any(residual != 0.0):
         try:
             with np.errstate(all="ignore"):
-                polished = root(acceleration, q, method="hybr", options={"xtol": 1e-13})
+                polished = root(residual_of, q, method="hybr", options={"xtol": 1e-13})
         except (np.linalg.LinAlgError, ValueError):  # the polish left for a singular configuration
             polished = None  # (its rate not finite): the minimiser's rest point stands
         if (polished is not None and np.all(np.isfinite(polished.fun))
@@ -1086,6 +1114,7 @@ def rest_coordinates(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
                np.empty(5))
     angles = [[float(compiled.params[i]["axis"] @ joints[i, _THETA_J])] if compiled.codes[i] == HINGE
               else list(joints[i, _THETA_J, :2]) if compiled.codes[i] == UNIVERSAL
+              else list(joints[i, _THETA_J]) if compiled.codes[i] == BALL
               else list(y[12 * i: 12 * i + 3]) for i in range(n)]
     positions = [list(y[12 * i + 6: 12 * i + 9]) for i in range(n) if not POINT_FIXED[compiled.codes[i]]]
     states = [list(y[d: d + 3]) for d in compiled.d_at if d >= 0]
@@ -1108,6 +1137,8 @@ def reference_posture(compiled: CompiledChain) -> np.ndarray:
         elif compiled.codes[i] == UNIVERSAL:
             p = compiled.params[i]
             a = np.array(universal_rotation(tuple(p["axis"]), tuple(p["axis_2"]), *p["theta_ref"][:2]))
+        elif compiled.codes[i] == BALL:  # its reference a rotation vector
+            a = np.array(vector_rotation(tuple(compiled.params[i]["theta_ref"])))
         q = int(compiled.parents[i])
         if q >= 0:
             a = rotations[q] @ a
@@ -1268,7 +1299,7 @@ def gimbal_angles(compiled: CompiledChain, y: np.ndarray) -> tuple[np.ndarray, l
                np.empty((n, 3)), np.empty(5))
     angles, parts = [], []
     for i in range(n):
-        if AXES[compiled.codes[i]] > 0:  # no Euler angles
+        if BEYOND_PAPER[compiled.codes[i]]:  # no Euler angles
             continue
         if compiled.codes[i] == PERMANENT:
             angles.append(joints[i, _THETA_J, 1])
@@ -1393,7 +1424,7 @@ def _tree_outputs(time, states, params, first: CompiledChain, ppoints, rows, per
     for k in range(_OMEGA_J + 1):
         out[JOINT_OUTPUTS[k]] = joints[:, :, k]
     out["controller_state"][:, first.d_at < 0] = np.nan
-    if np.any(AXES[first.codes] > 0):  # not computed here: rbstab.variants.tree.reaction_samples
+    if np.any(BEYOND_PAPER[first.codes]):  # not computed here: rbstab.variants.tree.reaction_samples
         out["constraint_force"][:, first.permanent] = np.nan
     for k, (name, _) in enumerate(SATURATION_FLAGS.values()):  # N_j, H_j, Lambda_j: _saturation_flags' order
         out[name] = flags[:, :, k]

@@ -37,8 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..jit import jit
-from ..kinematics import (IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, rotation_and_rate_of, sub,
-                          universal_columns, universal_rate, universal_rotation, vector)
+from ..kinematics import (IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, quaternion_of_vector,
+                          quaternion_rotation, rotation_and_rate_of, sub, universal_columns, universal_rate,
+                          universal_rotation, vector)
 from ..layout import AXES, POINT_FIXED, REDUCED_STATES, VELOCITIES
 from .chain import (
     _OMEGA_J,
@@ -54,7 +55,7 @@ from .chain import (
     euler_angles,
 )
 from .disturbances import IMPULSE, disturbance_wrench
-from .kernels import HINGE, PERMANENT, UNIVERSAL
+from .kernels import BALL, HINGE, PERMANENT, UNIVERSAL
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
            "tree_push", "tree_impulses", "range_margin", "tree_reactions", "reaction_samples",
@@ -206,6 +207,9 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
                 rel = universal_rotation(vector(params[i].axis, 0), vector(params[i].axis_2, 0), yr[s], yr[s + 1])
                 b = IDENTITY
                 omega_j = _joint_rate(params[i], codes[i], yr, s)
+            elif codes[i] == BALL:  # A_rel of its quaternion
+                rel, b = quaternion_rotation(yr[s], yr[s + 1], yr[s + 2], yr[s + 3]), IDENTITY
+                omega_j = vector(yr, s + 4)
             else:
                 rel, b = rotation_and_rate_of(vector(yr, s))
                 omega_j = vector(yr, s + 3)
@@ -394,6 +398,15 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
             _put(dyr, at, matvec(_rows(cw.rate, i), vector(yr, at + 3)))
             for k in range(3):
                 dyr[at + 3 + k] = rhs[u + k]
+        elif codes[i] == BALL:  # dq/dt = 1/2 q (0, Omega_j), the quaternion product
+            w, x, y_, z = yr[at], yr[at + 1], yr[at + 2], yr[at + 3]
+            o1, o2, o3 = yr[at + 4], yr[at + 5], yr[at + 6]
+            dyr[at] = -0.5 * (x * o1 + y_ * o2 + z * o3)
+            dyr[at + 1] = 0.5 * (w * o1 + y_ * o3 - z * o2)
+            dyr[at + 2] = 0.5 * (w * o2 + z * o1 - x * o3)
+            dyr[at + 3] = 0.5 * (w * o3 + x * o2 - y_ * o1)
+            for k in range(3):
+                dyr[at + 4 + k] = rhs[u + k]
         else:
             _put(dyr, at, matvec(_rows(cw.rate, i), vector(y, 12 * i + 3)))
             _put(dyr, at + 6, vector(y, 12 * i + 9))
@@ -413,7 +426,7 @@ def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot,
     r_c = vector(params[i].attachment_point, 0)
     a_c = _rows(rot, i)
     omega_c = vector(y, 12 * i + 3)
-    omega_j = vector(yr, r_at[i] + 3)
+    omega_j = vector(yr, r_at[i] + (4 if codes[i] == BALL else 3))
     if AXES[codes[i]] > 0:  # S dq/dt
         omega_j = _joint_rate(params[i], codes[i], yr, r_at[i])
     if codes[i] == UNIVERSAL:  # ds_1/dt = s_1 x a_2 dq_2/dt: s_1 = exp(-q_2 [a_2]x) a_1
@@ -704,6 +717,10 @@ def _reduced_from(y, params, codes, d_at, r_at, rd_at, theta_j, omega_j, out):
             for c in range(3):
                 out[at + c] = theta_j[i, c]
                 out[at + 3 + c] = omega_j[i, c]
+        elif codes[i] == BALL:  # its quaternion of the rotation vector Theta_j
+            out[at], out[at + 1], out[at + 2], out[at + 3] = quaternion_of_vector(vector(theta_j[i], 0))
+            for c in range(3):
+                out[at + 4 + c] = omega_j[i, c]
         else:
             for c in range(12):
                 out[at + c] = y[12 * i + c]
@@ -743,9 +760,9 @@ def tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, body
         if AXES[codes[i]] > 0:
             for k in range(AXES[codes[i]]):
                 yr[at + AXES[codes[i]] + k] += rhs[u + k]
-        elif codes[i] == PERMANENT:
+        elif codes[i] == PERMANENT or codes[i] == BALL:
             for k in range(3):
-                yr[at + 3 + k] += rhs[u + k]
+                yr[at + REDUCED_STATES[codes[i]] - 3 + k] += rhs[u + k]
         else:
             for k in range(3):
                 yr[at + 3 + k] += rhs[u + k]
