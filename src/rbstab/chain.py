@@ -27,8 +27,8 @@ import numpy as np
 
 from .model import Disturbance, Saturation
 
-__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Region", "Joint", "Chain", "single", "hinge", "universal",
-           "hinge_vectors"]
+__all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Region", "Joint", "Chain", "single", "hinge",
+           "universal", "hinge_vectors"]
 
 #: The parent index of a joint to the ground.
 GROUND = -1

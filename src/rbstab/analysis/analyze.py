@@ -417,7 +417,7 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
         theta_j = np.asarray(outputs["joint_theta"], dtype=float)[0, j]
         values = np.atleast_1d(joint.axis @ theta_j if joint.variant == "hinge" else
                                theta_j[:2] if joint.variant == "universal" else theta_j)
-        ends = [np.broadcast_to(np.asarray(end, dtype=float)[..., :values.size], values.shape)
+        ends = [np.broadcast_to(np.atleast_1d(np.asarray(end, dtype=float))[:values.size], values.shape)
                 for end in (joint.region.lower, joint.region.upper)]  # a universal joint's first 2 of 3
         for i, (value, lower, upper) in enumerate(zip(values, *ends)):
             if not lower <= value <= upper:

@@ -498,11 +498,13 @@ def _coordinate_rates(compiled, z: np.ndarray, rates: np.ndarray) -> np.ndarray:
 @dataclass(frozen=True)
 class TreeCoordinates:
     """A chain's independent coordinates (:func:`rbstab.variants.chain.independent_coordinates`)
-    as the layout of its linearisation's state z: each (body, state block) with its entries, the blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has
-    (Theta, Omega of every body; X, V of one whose joint is not ``permanent``; D of an
-    ``embedded`` joint's child), as :class:`rbstab.layout.StateLayout` lays out one body's
-    state; a tree with a hinge: its reduced state's blocks (a hinge's child's q and u, 1
-    entry each; a ball's child's Theta_j, Omega_j; a free body's Theta, Omega, X, V).
+    as the layout of its linearisation's state z: each (body, state block) with its entries,
+    the blocks of :data:`rbstab.layout.STATE_BLOCKS` a body has (Theta, Omega of every body;
+    X, V of one whose joint is not ``permanent``; D of an ``embedded`` joint's child), as
+    :class:`rbstab.layout.StateLayout` lays out one body's state; a tree with a kind beyond
+    the paper's: its reduced state's blocks (a hinge's child's q and u, 1 entry each, a
+    universal joint's 2; an Euler ball's child's Theta_j, Omega_j; a quaternion ball's
+    rotation vector of A_rel and Omega_j; a free body's Theta, Omega, X, V).
 
     Attributes
     ----------

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO, ROUND_OFF
 from ..engine.registry import get_engine
-from ..layout import VARIANT_LAYOUTS, is_chain
+from ..layout import AXES, VARIANT_LAYOUTS, is_chain
 from .linearise import linearise_config
 
 __all__ = ["Runs", "batch_outcomes", "batch_traces", "integrate_batch", "check_entries", "check_axes", "MIN_SLICE",
@@ -448,15 +448,14 @@ def _reduced_offset(compiled, axis) -> int:
     hinge's child's q or u (a universal joint's child's q_i or u_i, entry i of the key) that
     ``axis`` names; ValueError naming what is allowed where the body is not such a child,
     or where ``axis`` names another entry of a tree with a hinge."""
-    from ..layout import AXES
     from ..variants.tree import tree_layout  # heavy: numba
 
     names = list(compiled.chain.body_names)
     hinged = [b for b, code in zip(names, compiled.codes) if AXES[code] > 0]
     allowed = f"initial_state.<{'|'.join(hinged)}>.<q|u>"
     if axis.block not in ("q", "u"):
-        raise ValueError(f"--basin {axis.key!r}: a tree with a hinge maps its basin over its joints' angles and rates "
-                         f"({allowed})")
+        raise ValueError(f"--basin {axis.key!r}: a tree with a hinge maps its basin over its hinges' angles and rates "
+                         f"(and its universal joints'; {allowed})")
     if axis.body not in hinged:
         raise ValueError(f"--basin {axis.key!r}: '{axis.body}' is not a hinge's or a universal joint's child (those: "
                          f"{', '.join(hinged)}; keys {allowed})")

@@ -130,10 +130,10 @@ def verified_model(config):
     NotVerifiable
         For another tree of several bodies (one line: why)."""
     bodies = config.chain.size
-    universal = [j for j in config.chain.joints if j.variant == "universal"]
-    if universal:
-        raise NotVerifiable(f"joints.{universal[0].name}.variant: found 'universal'; --verify covers one body on a "
-                            "permanent joint (the reduced 6-state model, eq 21) or a tree of at most 3 hinges")
+    uncovered = [j for j in config.chain.joints if j.variant in ("universal", "ball")]
+    if uncovered:
+        raise NotVerifiable(f"joints.{uncovered[0].name}.variant: found {uncovered[0].variant!r}; --verify covers one "
+                            "body on a permanent joint (the reduced 6-state model, eq 21) or a tree of at most 3 hinges")
     if _hinged(config):
         others = [j for j in config.chain.joints if j.variant != "hinge"]
         if others:

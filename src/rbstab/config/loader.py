@@ -868,7 +868,8 @@ def _build_tree(data: Any, *, default_name: str | None, source: str | None, over
                   overrides)
     gains = [(f"bodies.{i}.", {g: getattr(b, g) for g in BODY_GAINS}) for i, b in enumerate(run.bodies)]
     gains += [(f"joints.{i}.", {g: getattr(j, g) for g in (*JOINT_GAINS, "k_s")
-                                if g in ("k_r", "l_r") or j.variant in VARIANTS and g in VARIANTS[j.variant].required_gains})
+                                if g in ("k_r", "l_r")
+                                or j.variant in VARIANTS and g in VARIANTS[j.variant].required_gains})
               for i, j in enumerate(run.joints) if j.variant not in AXES_VARIANTS]  # numbers >= 0 per coordinate
     hinged = {j.child for j in run.joints if j.variant in AXES_VARIANTS}
     angles = [(f"initial_state.{b.name}.theta", run.initial_state[b.name].theta) for b in chain.bodies

@@ -212,7 +212,7 @@ def _ball_strain(rel, reference):
     """(phi, J_r(phi)^-1) of a quaternion ball: phi = log(A(Theta_ref)' A_rel) [rad], the
     rotation vector of the turn from its reference ``reference`` (a rotation vector) to its
     relative rotation ``rel``, and the map of Omega_j to dphi/dt."""
-    r = vector_rotation(reference)
+    r = vector_rotation(vector(reference, 0))
     phi = rotation_vector(_relative(r, rel))
     return phi, right_jacobian_inverse(phi)
 
@@ -365,8 +365,13 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             n_j, rotational, dissipation, power = _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational,
                                                                        dissipation, power)
         elif codes[j] == BALL:  # on the rotation vectors of its turns from its references, B = J_r^-1
-            strain, b_j = _ball_strain(rel, p.theta_ref)
-            passive, b_p = _ball_strain(rel, p.passive_theta_ref)
+            passive, b_p = strain, b_j
+            for r in range(2):  # its spring's, then its passive spring's (one copy of the code)
+                phi, b = _ball_strain(rel, p.theta_ref if r == 0 else p.passive_theta_ref)
+                if r == 0:
+                    strain, b_j = phi, b
+                else:
+                    passive, b_p = phi, b
             n_j, rotational, dissipation, power = _feedback(b_j, strain, b_p, passive, omega_j, p, rotational,
                                                             dissipation, power)
         else:

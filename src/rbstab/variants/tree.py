@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..jit import jit
-from ..kinematics import (IDENTITY, add, axis_rotation, cross, dot, matTvec, matvec, quaternion_of_vector,
+from ..kinematics import (IDENTITY, ZERO, add, axis_rotation, cross, dot, matTvec, matvec, quaternion_of_vector,
                           quaternion_rotation, rotation_and_rate_of, sub, universal_columns, universal_rate,
                           universal_rotation, vector)
 from ..layout import AXES, POINT_FIXED, REDUCED_STATES, VELOCITIES
@@ -127,28 +127,24 @@ def tree_work(n, n_states):
 
 
 @jit(forceinline=True)
-def _column(a_i, code, p, q_2, col):
+def _column(a_i, code, rate, i, col):
     """Column ``col`` of a point-fixed joint's motion subspace in the inertial frame: the
-    unit angular velocity A_i e_col of a ball's child (Omega_j's axis col), A_i a of a
-    hinge's (its axis ``p.axis``), A_i s_col of a universal joint's at its angle ``q_2``
-    (:func:`rbstab.kinematics.universal_columns`); ``p`` the joint's record."""
-    if code == HINGE:
-        return matvec(a_i, vector(p.axis, 0))
-    if code == UNIVERSAL:
-        s_1, s_2 = universal_columns(vector(p.axis, 0), vector(p.axis_2, 0), q_2)
-        return matvec(a_i, s_1 if col == 0 else s_2)
+    unit angular velocity A_i e_col of a ball's child (Omega_j's axis col), A_i s_col of a
+    hinge's or a universal joint's (its child-frame column s_col, row col of ``rate[i]``,
+    where :func:`tree_expand` put it)."""
+    if AXES[code] > 0:
+        return matvec(a_i, (rate[i, col, 0], rate[i, col, 1], rate[i, col, 2]))
     return (a_i[0][col], a_i[1][col], a_i[2][col])
 
 
 @jit(forceinline=True)
-def _joint_rate(p, code, yr, at):
-    """Omega_j [rad/s, child frame] of a joint about axes whose child's reduced states start
-    at ``yr[at]``: a du/dt of a hinge's, s_1 u_1 + s_2 u_2 of a universal joint's."""
-    if code == HINGE:
-        return (yr[at + 1] * p.axis[0], yr[at + 1] * p.axis[1], yr[at + 1] * p.axis[2])
-    s_1, s_2 = universal_columns(vector(p.axis, 0), vector(p.axis_2, 0), yr[at + 1])
-    u_1, u_2 = yr[at + 2], yr[at + 3]
-    return (s_1[0] * u_1 + s_2[0] * u_2, s_1[1] * u_1 + s_2[1] * u_2, s_1[2] * u_1 + s_2[2] * u_2)
+def _joint_rate(rate, i, code, u, at):
+    """S u [rad/s, child frame] of joint i about axes: its columns (rows of ``rate[i]``, as
+    :func:`tree_expand` put them) times the entries ``u[at:]`` (its u, or du/dt)."""
+    w = (0.0, 0.0, 0.0)
+    for k in range(AXES[code]):
+        w = add(w, (rate[i, k, 0] * u[at + k], rate[i, k, 1] * u[at + k], rate[i, k, 2] * u[at + k]))
+    return w
 
 
 @jit(forceinline=True)
@@ -191,7 +187,9 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
         X_c = X_p + A_p R_p - A_c R_c,  V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x R_c)
 
     and Theta_c = Theta_j on a permanent joint to the ground, else read from A_c (|theta_2| <= pi/2) where
-    ``angles`` (the rate reads A_c, not Theta_c)."""
+    ``angles`` (the rate reads A_c, not Theta_c). A hinge's and a universal joint's ``rate[i]``
+    holds its motion subspace's columns in the child's frame instead, as rows (its axis a;
+    s_1, s_2: :func:`rbstab.kinematics.universal_columns`), then zero rows."""
     n = codes.shape[0]
     for i in range(n):
         s = r_at[i]
@@ -200,13 +198,17 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
                 y[12 * i + k] = yr[s + k]
             a, b = rotation_and_rate_of(vector(yr, s))
         else:
-            if codes[i] == HINGE:  # A_rel = exp(q [a]x), Omega_j = a dq/dt
-                rel, b = axis_rotation(vector(params[i].axis, 0), yr[s]), IDENTITY
-                omega_j = _joint_rate(params[i], codes[i], yr, s)
+            if codes[i] == HINGE:  # A_rel = exp(q [a]x), Omega_j = a dq/dt; its column a in rate's first row
+                axis = vector(params[i].axis, 0)
+                rel, b = axis_rotation(axis, yr[s]), (axis, ZERO, ZERO)
+                omega_j = (axis[0] * yr[s + 1], axis[1] * yr[s + 1], axis[2] * yr[s + 1])
             elif codes[i] == UNIVERSAL:  # A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x), Omega_j = S dq/dt
-                rel = universal_rotation(vector(params[i].axis, 0), vector(params[i].axis_2, 0), yr[s], yr[s + 1])
-                b = IDENTITY
-                omega_j = _joint_rate(params[i], codes[i], yr, s)
+                a_1, a_2 = vector(params[i].axis, 0), vector(params[i].axis_2, 0)
+                rel = universal_rotation(a_1, a_2, yr[s], yr[s + 1])
+                s_1, _ = universal_columns(a_1, a_2, yr[s + 1])
+                b = (s_1, a_2, ZERO)  # its columns s_1, s_2 in rate's rows
+                omega_j = add((s_1[0] * yr[s + 2], s_1[1] * yr[s + 2], s_1[2] * yr[s + 2]),
+                              (a_2[0] * yr[s + 3], a_2[1] * yr[s + 3], a_2[2] * yr[s + 3]))
             elif codes[i] == BALL:  # A_rel of its quaternion
                 rel, b = quaternion_rotation(yr[s], yr[s + 1], yr[s + 2], yr[s + 3]), IDENTITY
                 omega_j = vector(yr, s + 4)
@@ -385,7 +387,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
             for r in range(6):
                 kappa[i, r] = 0.0
             continue
-        _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, (0.0, 0.0, 0.0), kappa)
+        _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, cw.rate, (0.0, 0.0, 0.0), kappa)
     _generalised_solve(params, codes, parents, u_at, work)
     for i in range(n):
         at, u = r_at[i], u_at[i]
@@ -416,7 +418,7 @@ def _coupled_rate(yr, params, codes, parents, ppoints, r_at, u_at, dyr, work):
 
 
 @jit(forceinline=True)
-def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, dw_j, acc):
+def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, rate, dw_j, acc):
     """Point-fixed joint i's child's (dOmega_c/dt [rad/s^2, child frame], dV_c/dt [m/s^2,
     inertial]) into ``acc[i]`` (n, 6), its parent's already in ``acc[parents[i]]`` (the
     ground's zero), its joint's dOmega_j/dt ``dw_j`` at fixed columns (S du/dt): the time
@@ -428,11 +430,10 @@ def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot,
     omega_c = vector(y, 12 * i + 3)
     omega_j = vector(yr, r_at[i] + (4 if codes[i] == BALL else 3))
     if AXES[codes[i]] > 0:  # S dq/dt
-        omega_j = _joint_rate(params[i], codes[i], yr, r_at[i])
+        omega_j = _joint_rate(rate, i, codes[i], yr, r_at[i] + AXES[codes[i]])
     if codes[i] == UNIVERSAL:  # ds_1/dt = s_1 x a_2 dq_2/dt: s_1 = exp(-q_2 [a_2]x) a_1
-        at, a_2 = r_at[i], vector(params[i].axis_2, 0)
-        s_1, _ = universal_columns(vector(params[i].axis, 0), a_2, yr[at + 1])
-        bias = cross(s_1, a_2)
+        at = r_at[i]
+        bias = cross((rate[i, 0, 0], rate[i, 0, 1], rate[i, 0, 2]), (rate[i, 1, 0], rate[i, 1, 1], rate[i, 1, 2]))
         rates = yr[at + 2] * yr[at + 3]
         dw_j = add(dw_j, (rates * bias[0], rates * bias[1], rates * bias[2]))
     dw_c = add(dw_j, cross(omega_c, omega_j))
@@ -522,13 +523,13 @@ def _generalised_solve(params, codes, parents, u_at, work):
         inertia_p = (_moment_row(second, i, 0, cs, point, m, shift), _moment_row(second, i, 1, cs, point, m, shift),
                      _moment_row(second, i, 2, cs, point, m, shift))
         for col in range(VELOCITIES[codes[i]] if fixed else 3):  # the rotational columns
-            e = _column(a_i, codes[i], params[i], cw.angle[i, 1], col)
+            e = _column(a_i, codes[i], cw.rate, i, col)
             f = cross(e, c)
             inertia_e = matvec(inertia_p, e)
             row = at + col
             rhs[row] = dot(e, moment_p)
             for col2 in range(col + 1):
-                matrix[row, at + col2] = dot(_column(a_i, codes[i], params[i], cw.angle[i, 1], col2), inertia_e)
+                matrix[row, at + col2] = dot(_column(a_i, codes[i], cw.rate, i, col2), inertia_e)
             if not fixed:
                 for l in range(3):
                     matrix[at + 3 + l, row] = f[l]
@@ -542,7 +543,7 @@ def _generalised_solve(params, codes, parents, u_at, work):
                     point_k = add(point_k, matvec(a_k, vector(params[k].attachment_point, 0)))
                 moment_k = add(inertia_e, cross(sub(point, point_k), f))
                 for col2 in range(VELOCITIES[codes[k]] if fixed_k else 3):
-                    matrix[row, u_at[k] + col2] = dot(_column(a_k, codes[k], params[k], cw.angle[k, 1], col2), moment_k)
+                    matrix[row, u_at[k] + col2] = dot(_column(a_k, codes[k], cw.rate, k, col2), moment_k)
                 if not fixed_k:
                     for l in range(3):
                         matrix[row, u_at[k] + 3 + l] = f[l]
@@ -607,14 +608,11 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
             for r in range(6):
                 total[i, r] = rhs[u + r]
         elif AXES[codes[i]] > 0:  # dOmega_j/dt = S du/dt (+ a universal joint's turning column's term)
-            m = AXES[codes[i]]
-            for k in range(m):  # S du/dt: Omega_j's form with du/dt for u
-                dyr[k] = yr[r_at[i] + k]
-                dyr[m + k] = rhs[u + k]
-            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot,
-                                   _joint_rate(params[i], codes[i], dyr, 0), total)
+            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, cw.rate,
+                                   _joint_rate(cw.rate, i, codes[i], rhs, u), total)
         else:
-            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, vector(rhs, u), total)
+            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, cw.rate, vector(rhs, u),
+                                   total)
     for r in range(n):  # the ground's moment on the bodies of each joint to the ground
         if parents[r] < 0 and POINT_FIXED[codes[r]]:
             for k in range(3):
@@ -746,7 +744,6 @@ def tree_push(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, body
     cw.torque[:] = 0.0
     cw.force[:] = 0.0
     kappa[:] = 0.0
-    _joint_angles(yr, codes, r_at, cw.angle)
     v = (value[0], value[1], value[2])
     if torque_push:
         _put(cw.torque[body], 0, v)
