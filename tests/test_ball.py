@@ -157,9 +157,30 @@ def test_a_ball_trees_eigenvalues_are_mujocos_in_the_tangent_directions():
         assert np.min(np.abs(lin.eigenvalues - s)) <= 1e-6 * abs(s), (s, lin.eigenvalues)
 
 
+def test_a_balls_cone_as_a_stop_keeps_the_energy_and_as_a_region_is_a_fall():
+    """MJCF's ball range, a cone [0, upper] of the turn's angle: as an undamped stop the body
+    swinging into it is pushed back with v constant to 1e-6 of its size (the stop's spring
+    in v), its turn past the cone by a little; as an admissible region the run ends where the
+    turn reaches the cone, named."""
+    data = _balls([0.0, 0.0], [0.0, 0.0], [[0.0] * 3] * 2, [[2.0, 1.0, 0.5], [0.0] * 3], n_samples=2001)
+    data["bodies"], data["joints"] = data["bodies"][:1], data["joints"][:1]
+    data["initial_state"] = {"b0": data["initial_state"]["b0"]}
+    data["joints"][0]["range"] = {"lower": 0.0, "upper": 0.3, "k_r": 400.0}
+    stopped = simulate(config_from_mapping(data))
+    turn = np.linalg.norm(stopped.outputs["joint_theta"][:, 0], axis=1)
+    assert stopped.status == "success" and 0.3 < turn.max() < 0.45
+    v = stopped.outputs["lyapunov"]
+    assert np.max(np.abs(v - v[0])) < 1e-6 * abs(v[0])  # the steps across the stop's kink: 2e-7
+    data["joints"][0]["range"] = {"lower": 0.0, "upper": 0.3, "kind": "region"}
+    fell = simulate(config_from_mapping(data))
+    assert fell.status == "failed" and "the turn of joint j0" in fell.message and "0.3 rad" in fell.message
+
+
 @pytest.mark.parametrize("change, key, expected", [
-    (lambda d: d["joints"][0].update(range={"lower": -1.0, "upper": 1.0, "k_r": 10.0}), "joints.j0.range",
-     "a cone of its turn is not modelled"),
+    (lambda d: d["joints"][0].update(range={"lower": -1.0, "upper": 1.0, "k_r": 10.0}), "joints.j0.range.lower",
+     "a ball's range is a cone"),
+    (lambda d: d["joints"][0].update(range={"lower": 0.0, "upper": [1.0, 1.0, 1.0], "k_r": 10.0}),
+     "joints.j0.range.upper", "a ball's range is a cone"),
     (lambda d: d["joints"][0].update(k_r=3.0), "joints.j0.k_r", "3 numbers"),
     (lambda d: d["joints"][0].update(axis=[1, 0, 0]), "joints.j0.axis", "no axis"),
     (lambda d: d["joints"][0].update(theta_ref=[0.1, 0.2]), "joints.j0.theta_ref", "3 numbers"),

@@ -809,6 +809,7 @@ def _range_left(compiled, joint: int, coordinate: int, upper: bool, t: float) ->
     variant = compiled.chain.joints[joint].variant
     what = (f"the angle q of joint {name}" if variant == "hinge" else
             f"the angle q_{coordinate + 1} of joint {name}" if variant == "universal" else
+            f"the turn of joint {name} (its angle from the reference pose)" if variant == "ball" else
             f"theta_{coordinate + 1} of joint {name}'s Euler angles Theta_j")
     return (f"left the admissible region (joints.{name}.range): {what} reached its "
             f"{'upper' if upper else 'lower'} end {end:g} rad at t = {t:.6g} s")

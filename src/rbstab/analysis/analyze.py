@@ -416,12 +416,14 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
             continue
         theta_j = np.asarray(outputs["joint_theta"], dtype=float)[0, j]
         values = np.atleast_1d(joint.axis @ theta_j if joint.variant == "hinge" else
-                               theta_j[:2] if joint.variant == "universal" else theta_j)
+                               theta_j[:2] if joint.variant == "universal" else
+                               np.linalg.norm(theta_j) if joint.variant == "ball" else theta_j)
         ends = [np.broadcast_to(np.atleast_1d(np.asarray(end, dtype=float))[:values.size], values.shape)
                 for end in (joint.region.lower, joint.region.upper)]  # a universal joint's first 2 of 3
         for i, (value, lower, upper) in enumerate(zip(values, *ends)):
             if not lower <= value <= upper:
-                what = {"hinge": "q", "universal": f"q_{i + 1}"}.get(joint.variant, f"theta_{i + 1} of Theta_j")
+                what = {"hinge": "q", "universal": f"q_{i + 1}", "ball": "turn"}.get(joint.variant,
+                                                                                   f"theta_{i + 1} of Theta_j")
                 return (f"the {_REST[one_body]} lies outside joints.{joint.name}.range (an admissible region): its "
                         f"{what} is {'above' if value > upper else 'below'} {upper if value > upper else lower:g} rad")
     if limits is None:

@@ -627,7 +627,8 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
             passive=None if j.passive is None else Passive(
                 k_r=_gain(j.passive.k_r), l_r=_gain(j.passive.l_r),
                 theta_ref=np.zeros(3) if j.passive.theta_ref is None else _array(j.passive.theta_ref)),
-            stop=_stop(j.range, 3), region=_region(j.range, 3)))
+            stop=_stop(j.range, 1 if j.variant == "ball" else 3),
+            region=_region(j.range, 1 if j.variant == "ball" else 3)))
     return Chain(bodies=bodies, joints=tuple(joints), gravity=_array(run.gravity))
 
 
@@ -706,6 +707,14 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
         relative = a_p.T @ a_c  # A_rel = A_p' A_c; with A = Rx Ry Rz, A_rel[0, 2] = sin(theta_2)
         theta_2 = math.asin(max(-1.0, min(1.0, float(relative[0, 2]))))
         region = joint.region
+        if region is not None and joint.variant == "ball":  # a ball's turn inside its cone
+            turn = math.acos(max(-1.0, min(1.0, (float(np.trace(a_p.T @ a_c)) - 1.0) / 2.0)))
+            if turn > region.upper[0]:
+                _refuse(f"initial_state.{body.name}.theta", short_repr(state["theta"].tolist()),
+                        f"an orientation of '{body.name}' relative to '{parent}' turned at most "
+                        f"{region.upper[0]:g} rad (joints.{joint.name}.range)",
+                        f"its turn is {turn:.6g} rad; the range is an admissible region (kind: region), and the run "
+                        "would start outside it", source, overrides, ("initial_state", "joints"))
         if region is not None and joint.variant == "permanent":  # a ball's Theta_j inside its range's region
             theta_j = euler_angles_of(relative)
             if not np.all((region.lower <= theta_j) & (theta_j <= region.upper)):

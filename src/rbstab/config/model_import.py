@@ -22,8 +22,9 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   gimbal lock, the identity in the reference pose), its ``stiffness`` a passive spring on
   the rotation vector of its turn (MuJoCo's ball spring) and its ``damping`` a passive
   damper on Omega_j; its child starts at the keyframe's orientation and angular velocity
-  (its Euler angles from the reference pose, body frame). A ball with a range (a cone) or
-  an actuator is refused;
+  (its Euler angles from the reference pose, body frame); its ``range`` (a cone of its
+  turn's angle) a stop as a hinge's below (on the mean of its three dofs' inertias). A ball
+  with an actuator is refused;
 - its feedback is the ``position`` servo (any affine actuator on the joint: force = kp ctrl
   + b0 + b1 length + b2 velocity, length = gear qpos): k_r = -b1 gear^2, l_r = -b2 gear^2,
   theta_ref from the control (the keyframe's, else 0, within ``ctrlrange``), delivered
@@ -37,7 +38,7 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   keyframe's q, u or the reference pose at rest.
 
 What rbstab cannot represent is refused, one line each naming the model's element: a ball
-with a range or an actuator, slide and free joints, two joints in one body that
+with an actuator, slide and free joints, two joints in one body that
 are not a universal joint (two hinges through one point) or more,
 tendons, equality constraints, muscles and actuators with activation dynamics, armature, dry
 friction, gravity compensation, fluid forces, a constant actuator torque. Contacts are left
@@ -181,9 +182,6 @@ def _refusals(mujoco, model, where: str) -> list[str]:
             if np.any(values[dof:dof + (3 if int(model.jnt_type[j]) == ball else 1)] != 0.0):
                 errors.append(f"model file {where}: {_element('joint', joint)} has {attribute}="
                               f"{float(values[dof]):g}; expected 0 ({why} is not modelled)")
-        if int(model.jnt_type[j]) == ball and model.jnt_limited[j]:
-            errors.append(f"model file {where}: {_element('joint', joint)} is a ball joint with a range (a cone of "
-                          "its rotation angle); expected none (rbstab's ball ranges bound its Euler angles)")
     for b in range(1, model.nbody):
         if model.body_jntnum[b] > 1 and not _universal(mujoco, model, b):
             errors.append(f"model file {where}: {_element('body', model.body(b))} has {int(model.body_jntnum[b])} "
@@ -215,6 +213,18 @@ def _universal(mujoco, model, b: int) -> bool:
             and np.linalg.norm(np.cross(model.jnt_axis[first], model.jnt_axis[first + 1])) > 1e-6)
 
 
+def _stop_gains(model, j: int, invweight: float) -> tuple[float, float, str]:
+    """(k [N m/rad], l [N m s/rad], in words) of joint ``j``'s limit as a stop: MuJoCo's soft
+    limit at full impedance as a spring and damper on the effective inertia I = 1 /
+    ``invweight`` (solref = (timeconst, dampratio): k = I / (timeconst dampratio)^2, l = 2 I /
+    timeconst; solref < 0: k = -solref[0] I, l = -solref[1] I)."""
+    inertia = 1.0 / invweight
+    timeconst, ratio = (float(x) for x in model.jnt_solref[j])
+    k, l = ((inertia / (timeconst * ratio) ** 2, 2.0 * inertia / timeconst) if timeconst > 0
+            else (-timeconst * inertia, -ratio * inertia))
+    return k, l, f"solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} kg m^2"
+
+
 def _ball(model, data, keyed, b: int, jname: str, body: str) -> tuple[list[str], str]:
     """(the joint's lines after its points, the initial-state line of its child ``body``) of
     the ball joint of MuJoCo body ``b``: ``variant: ball`` (its quaternion, free of gimbal
@@ -233,6 +243,10 @@ def _ball(model, data, keyed, b: int, jname: str, body: str) -> tuple[list[str],
     if np.any(damping) or stiffness:
         lines.append(_line(4, f"passive: {{k_r: {_vector(np.full(3, stiffness))}, l_r: {_vector(damping)}}}",
                            "[N m/rad, N m s/rad] stiffness on the rotation vector, damping on Omega_j (child frame)"))
+    if model.jnt_limited[j]:  # a cone of its turn's angle: a stop, MuJoCo's soft limit as for a hinge
+        k, l, why = _stop_gains(model, j, float(np.mean(model.dof_invweight0[dof:dof + 3])))
+        lines.append(_line(4, f"range: {{lower: 0.0, upper: {_number(model.jnt_range[j, 1])}, k_r: {_number(k)}, "
+                              f"l_r: {_number(l)}}}", f"[rad] a stop on the turn's angle (a cone): {why}"))
     if keyed is None:
         theta, omega = np.zeros(3), np.zeros(3)
     else:  # the body's turn from the reference pose, and its angular velocity in its own frame
@@ -489,13 +503,10 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
         if any(model.jnt_limited[k] for k in js):
             stops = []
             for k, q0 in zip(js, qpos0):
-                inertia = 1.0 / float(model.dof_invweight0[model.jnt_dofadr[k]])
-                timeconst, ratio = (float(x) for x in model.jnt_solref[k])
-                stiff, damp = ((inertia / (timeconst * ratio) ** 2, 2.0 * inertia / timeconst) if timeconst > 0
-                               else (-timeconst * inertia, -ratio * inertia))
+                stiff, damp, why = _stop_gains(model, k, float(model.dof_invweight0[model.jnt_dofadr[k]]))
                 ends = ((float(x) - q0 for x in model.jnt_range[k]) if model.jnt_limited[k]
                         else (-math.inf, math.inf))
-                stops.append((*ends, stiff, damp, f"solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} kg m^2"))
+                stops.append((*ends, stiff, damp, why))
             lower, upper, stiff, damp, why = zip(*stops)
             lines_joints.append(_line(4, f"range: {{lower: {numbers(lower)}, upper: {numbers(upper)}, "
                                          f"k_r: {numbers(stiff)}, l_r: {numbers(damp)}}}", f"[rad] a stop: {'; '.join(why)}"))

@@ -1295,12 +1295,21 @@ class _ChainJoint(_Section):
             raise PydanticCustomError("rbstab_invalid", "an axis", {
                 "subkey": "axis", "found": short_repr(self.axis), "expected": "no axis",
                 "detail": f"an axis is a hinge's or a universal joint's; a '{self.variant}' joint turns about all three"})
-        if self.range is not None and self.variant not in ("hinge", "universal", "permanent"):
+        if self.range is not None and self.variant not in ("hinge", "universal", "permanent", "ball"):
             raise PydanticCustomError("rbstab_invalid", "a range", {
                 "subkey": "range", "found": "a range", "expected": "no range",
                 "detail": f"a range is a hinge's (of its angle q), a universal joint's (of q_1, q_2) or a ball's "
-                          f"(permanent: of its Euler angles Theta_j); a '{self.variant}' joint has none"
-                          + (" (a cone of its turn is not modelled)" if self.variant == "ball" else "")})
+                          f"(permanent: of its Euler angles Theta_j; ball: a cone of its turn); a '{self.variant}' "
+                          "joint has none"})
+        if self.range is not None and self.variant == "ball":  # MJCF's cone: lower 0, upper the largest turn
+            for key in ("lower", "upper", "k_r", "l_r"):
+                value = getattr(self.range, key)
+                if isinstance(value, (list, tuple)) or (key == "lower" and value != 0):
+                    raise PydanticCustomError("rbstab_invalid", "a ball's cone", {
+                        "subkey": f"range.{key}", "found": short_repr(value),
+                        "expected": "0" if key == "lower" else "a number",
+                        "detail": "a ball's range is a cone: the angle of its turn from the reference pose within "
+                                  "[0, upper], as MJCF writes it"})
         for key, value in values:
             if value is None:
                 continue

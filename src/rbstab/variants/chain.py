@@ -382,6 +382,10 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
                 axis = vector(p.axis, 0)
                 n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis),
                                                      dot(omega_j, axis), axis, p, 0)
+            elif codes[j] == BALL:  # its cone: the turn's angle |Theta_j|, its rate e'Omega_j, its torque along e
+                angle = math.sqrt(dot(theta_j, theta_j))
+                e = (0.0, 0.0, 1.0) if angle == 0.0 else (theta_j[0] / angle, theta_j[1] / angle, theta_j[2] / angle)
+                n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, angle, dot(e, omega_j), e, p, 0)
             else:  # a ball's Euler angle theta_i (a universal joint's q_i), its rate (B Omega_j)_i, its torque B' e_i
                 for i in range(2 if codes[j] == UNIVERSAL else 3):
                     n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, theta_j[i],

@@ -255,6 +255,13 @@ def range_margin(yr, params, codes, r_at, margin, status, first):
     with ``first`` + 6 j + 2 i (the lower end of coordinate i of joint j) or ``first`` + 6 j
     + 2 i + 1 (its upper end) (``first``: :data:`rbstab.engine.status.RANGE_LEFT`)."""
     for j in range(codes.shape[0]):
+        if params[j].region != 0.0 and codes[j] == BALL:  # its cone: the angle of its quaternion's turn
+            at = r_at[j]
+            size = math.sqrt(yr[at + 1] * yr[at + 1] + yr[at + 2] * yr[at + 2] + yr[at + 3] * yr[at + 3])
+            m = params[j].range_upper[0] - 2.0 * math.atan2(size, abs(yr[at]))
+            if m < margin:
+                margin, status = m, first + 6 * j + 1
+            continue
         if params[j].region == 0.0 or not (AXES[codes[j]] > 0 or codes[j] == PERMANENT):
             continue
         for i in range(AXES[codes[j]] if AXES[codes[j]] > 0 else 3):
