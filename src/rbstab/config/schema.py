@@ -435,14 +435,8 @@ AXES_VARIANTS = ("hinge", "universal")
 
 
 def _pair(value: Any, check: Callable[[Any], Any]) -> list:
-    """``check`` of each of 2 entries (a universal joint's, one per coordinate)."""
-    out = []
-    for i, x in enumerate(value):
-        try:
-            out.append(check(x))
-        except Invalid as exc:
-            raise Invalid(f"entry [{i}] is {exc.detail or _out_of_bounds(x, check)}") from None
-    return out
+    """``check`` of each of 2 entries (a universal joint's, one per coordinate): :func:`_per_axis`'s."""
+    return _per_axis(value, check, (2,))
 
 
 def _is_pair(value: Any) -> bool:

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..chain import Chain
 from ..jit import jit
-from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec, neg,
+from ..kinematics import (IDENTITY, ZERO, add, axis_angle, axis_rotation, cross, euler_angles_of, dot, matTvec, matvec,
                           quadratic_form,
                           right_jacobian_inverse, rotation_and_rate_of, rotation_matrix, rotation_vector, sub,
                           universal_angles, universal_rate, universal_rotation, vector, vector_rotation)
@@ -244,23 +244,12 @@ def _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipati
     """A universal joint's torque N_j = B' f [N m] (child frame; B its
     :func:`rbstab.kinematics.universal_rate`, whose rows give its coordinates' rates dq/dt =
     B Omega_j) of the force on its coordinates f = -K_r (q - q_ref) - L_r dq/dt [N m]
-    (``strain`` = q - q_ref, entries 0-1 of 3-vectors), through its limits [torque_floor,
-    torque_limit] per coordinate, plus its passive torque's of that form, never limited;
-    returns it with v's rotational term, the dissipation [W] and the saturation deficit power [W]
-    accumulated."""
-    rate = matvec(b_j, omega_j)
-    f = sub(neg(matvec(p.k_r, strain)), matvec(p.l_r, rate))
-    if p.saturation > 0.0:
-        commanded = f
-        f = saturate_between(commanded, p.torque_floor, p.torque_limit, p.saturation)
-        power += dot(rate, sub(f, commanded))
-    rotational += 0.5 * quadratic_form(strain, p.k_r)
-    dissipation += quadratic_form(rate, p.l_r)
-    if p.passive > 0.0:
-        passive = sub(theta_j, p.passive_theta_ref)
-        f = sub(f, add(matvec(p.passive_k_r, passive), matvec(p.passive_l_r, rate)))
-        rotational += 0.5 * quadratic_form(passive, p.passive_k_r)
-        dissipation += quadratic_form(rate, p.passive_l_r)
+    (``strain`` = q - q_ref, entries 0-1 of 3-vectors): :func:`_feedback` on the coordinates
+    (B = I there, dq/dt for Omega), its limits and passive torque per coordinate; returns
+    it with v's rotational term, the dissipation [W] and the saturation deficit power [W]
+    accumulated (S'N_j = f: the power on the child is dq/dt' f)."""
+    f, rotational, dissipation, power = _feedback(IDENTITY, strain, IDENTITY, sub(theta_j, p.passive_theta_ref),
+                                                  matvec(b_j, omega_j), p, rotational, dissipation, power)
     return matTvec(b_j, f), rotational, dissipation, power
 
 
@@ -689,7 +678,7 @@ def _saturation_flags(y, params, codes, joints, flags):
         if params[j].saturation > 0.0:  # N_j commanded on Theta_j - Theta_ref, between its two limits
             commanded = torque_n_command(b_j, strain, omega_j, params[j])
             if codes[j] == UNIVERSAL:  # on its coordinates: -K_r (q - q_ref) - L_r dq/dt
-                commanded = sub(neg(matvec(params[j].k_r, strain)), matvec(params[j].l_r, matvec(b_j, omega_j)))
+                commanded = torque_n_command(IDENTITY, strain, matvec(b_j, omega_j), params[j])
             n_flags = saturated_between(commanded, params[j].torque_floor, params[j].torque_limit)
         _put(flags[j, 0], 0, n_flags)
         _put(flags[j, 1], 0, h_flags)
