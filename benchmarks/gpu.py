@@ -71,7 +71,8 @@ worker's seconds a run in a process of its own
 
 ``--ptx-only`` (any machine with numba-cuda's compilers and CUDA's ``ptxas``; no GPU
 needed) compiles one body's kernel (DOP853, an embedded joint) and the tree kernel (DOP853) for
-each tree shape of ``--ptx-trees`` (bodies:permanent joints:embedded joints[:hinges[:universal joints[:balls]]];
+each tree shape of ``--ptx-trees``
+(bodies:permanent joints:embedded joints[:hinges[:universal joints[:balls[:slides]]]];
 default one body on a permanent and on an embedded joint, the stance example's 2:2:0, and
 8 bodies on permanent and on embedded joints; 3:0:0:3 is the hinged stance) to optimised PTX for sm_90 and prints what ``ptxas -v``
 reports for each: the registers, the stack frame (local memory) and the spill stores and
@@ -614,7 +615,8 @@ def chain_sweep_seconds(n: int, axis: str, engine: str, env: dict | None = None)
 
 def ptx_only(shapes) -> None:
     """The ``ptxas -v`` lines of one body's kernel and of the tree kernel of each tree
-    shape of ``shapes`` (bodies, permanent joints, embedded joints[, hinges, universal joints, balls]; module docstring,
+    shape of ``shapes`` (bodies, permanent joints, embedded joints[, hinges, universal joints, balls, slides];
+    module docstring,
     ``--ptx-only``)."""
     import re
 
@@ -635,9 +637,10 @@ def ptx_only(shapes) -> None:
     kernels = {"one body's kernel (DOP853, an embedded joint)": (tree_kernel_function(DOP853, (1, 0, 1), True),
                                                                 tree_launch_signature())}
     for shape in shapes:
-        n, p, e, h, u, b = (*shape, 0, 0, 0)[:6]
-        kernels[f"tree kernel (DOP853, {n} bodies, {p} permanent, {e} embedded, {h} hinge, {u} universal and {b} "
-                f"ball joints)"] = (tree_kernel_function(DOP853, (n, p, e, h, u, b)), tree_launch_signature())
+        n, p, e, h, u, b, s = (*shape, 0, 0, 0, 0)[:7]
+        kernels[f"tree kernel (DOP853, {n} bodies, {p} permanent, {e} embedded, {h} hinge, {u} universal, {b} "
+                f"ball and {s} slide joints)"] = (tree_kernel_function(DOP853, (n, p, e, h, u, b, s)),
+                                                  tree_launch_signature())
     for name, (function, signature) in kernels.items():
         start = time.perf_counter()
         ptx, _ = cuda.compile_ptx(function, signature, cc=(9, 0), opt=True)
@@ -691,7 +694,8 @@ def main() -> None:
     parser.add_argument("--chains-only", action="store_true", help="only the tree kernel's lines")
     parser.add_argument("--one-body-only", action="store_true", help="all but the tree kernel's lines")
     parser.add_argument("--ptx-trees", nargs="+", default=["1:1:0", "1:0:1", "2:2:0", "8:8:0", "8:0:8"],
-                        help="tree shapes of --ptx-only, BODIES:PERMANENT:EMBEDDED[:HINGES[:UNIVERSAL[:BALLS]]]")
+                        help="tree shapes of --ptx-only, "
+                             "BODIES:PERMANENT:EMBEDDED[:HINGES[:UNIVERSAL[:BALLS[:SLIDES]]]]")
     parser.add_argument("--ptx-only", action="store_true",
                         help="no GPU: each kernel's registers and local memory by ptxas (module docstring)")
     args = parser.parse_args()

@@ -73,6 +73,7 @@ def _chain_record(chain) -> dict:
                     "child": names[j.child], "variant": j.variant, "parent_point": j.parent_point.tolist(),
                     "child_point": j.child_point.tolist(),
                     **({"axis": j.axis.tolist(), "theta_ref": float(j.axis @ j.theta_ref)} if j.variant == "hinge"
+                       else {"axis": j.axis.tolist(), "theta_ref": float(j.theta_ref[0])} if j.variant == "slide"
                        else {"axis": [j.axis.tolist(), j.axis_2.tolist()], "theta_ref": j.theta_ref[:2].tolist()}
                        if j.variant == "universal" else {"theta_ref": j.theta_ref.tolist()}),
                     **({"range": [_listed(end, j.variant) for end in (j.stop.lower, j.stop.upper)]}
@@ -83,9 +84,9 @@ def _chain_record(chain) -> dict:
 
 def _tree(chain: dict) -> list[str]:
     """The chain as an indented tree, one line a joint: parent -> child (its mass): the
-    joint's name, variant (a hinge's with its axis) and points (the parent's, the child's C)
-    [m], its reference posture [rad] where it has one, whether it has a passive torque and
-    a hinge's range [rad]."""
+    joint's name, variant (a hinge's or a slide's with its axis) and points (the parent's, the
+    child's C) [m], its reference posture [rad; a slide's m] where it has one, whether it has a
+    passive torque (force) and a hinge's range [rad; a slide's m]."""
     mass = {b["name"]: b["mass"] for b in chain["bodies"]}
     children: dict[str, list[dict]] = {}
     for joint in chain["joints"]:
@@ -103,17 +104,19 @@ def _tree(chain: dict) -> list[str]:
                 reference = f"{reference:g}" if reference else None
             elif reference is not None:
                 reference = point(reference) if any(reference) else None
+            unit = "m" if j["variant"] == "slide" else "rad"
             span = j.get("range")
             span = None if span is None else f"[{span[0]:g}, {span[1]:g}]" if isinstance(span[0], (int, float)) else \
                 f"[{point(span[0])}, {point(span[1])}]"
             kind = (f"hinge about {point(j['axis'])}" if j["variant"] == "hinge" else
+                    f"slide along {point(j['axis'])}" if j["variant"] == "slide" else
                     f"universal about {point(j['axis'][0])}, then {point(j['axis'][1])}" if j["variant"] == "universal"
                     else j["variant"])
             lines.append(f"{'  ' * depth}{parent} -> {j['child']} ({mass[j['child']]:g} kg): {j['name']}, "
                          f"{kind}, {point(j['parent_point'])} -> {point(j['child_point'])} m"
-                         + (f", theta_ref {reference} rad" if reference else "")
-                         + (", passive torque" if j.get("passive") else "")
-                         + (f", range {span} rad (a stop)" if span else ""))
+                         + (f", theta_ref {reference} {unit}" if reference else "")
+                         + (f", passive {'force' if unit == 'm' else 'torque'}" if j.get("passive") else "")
+                         + (f", range {span} {unit} (a stop)" if span else ""))
             walk(j["child"], depth + 1)
 
     walk("ground", 1)

@@ -112,6 +112,22 @@ def universal_chain(rate: float):
     return config_from_mapping(data)
 
 
+def slide_chain(rate: float):
+    """:func:`hinged_chain` (tilted 0.2 rad) with the elbow a slide along an oblique axis (its
+    feedback clipped, stronger one way; a passive spring; its range [-0.5, 0.3] m an
+    admissible region), starting 0.05 m out at ``rate`` [m/s] (-0.2 stays inside, its q down
+    to -0.33 m; -3 leaves through the lower end)."""
+    from rbstab.config.loader import config_from_mapping
+
+    data = hinged_chain(0.2).resolved
+    data["name"] = "slides3"
+    data["joints"][1].update(variant="slide", axis=[0.2, 0.1, 1.0], k_r=200.0, l_r=10.0, theta_ref=0.02,
+                             saturation={"torque_n": 8.0, "torque_n_lower": -3.0}, passive={"k_r": 50.0, "l_r": 1.0},
+                             range={"lower": -0.5, "upper": 0.3, "kind": "region"})
+    data["initial_state"]["middle"] = {"q": 0.05, "u": rate}
+    return config_from_mapping(data)
+
+
 def ball_chain(theta: float):
     """:func:`pulsed_chain` with impulses and every joint a quaternion ball (``variant: ball``:
     the elbow's spring about a reference turn, the wrist's passive torque too; the upper body
@@ -155,6 +171,7 @@ def cases(root: str):
         "stopped3": [stopped_chain(theta) for theta in (0.2, 0.4)],  # both leave: the region, simulation.limits
         "universal3": [universal_chain(rate) for rate in (-0.5, -8.0)],  # the second leaves q_2's region
         "balls3": [ball_chain(theta) for theta in (0.2, 0.4)],  # the second leaves simulation.limits
+        "slides3": [slide_chain(rate) for rate in (-0.2, -3.0)],  # the second leaves the slide's region
     }
 
 

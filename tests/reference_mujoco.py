@@ -39,8 +39,9 @@ def double_pendulum(config, timestep: float):
 
 
 def _coordinates(j) -> list[dict]:
-    """Each coordinate of a hinge or universal joint ``j`` (its resolved section) as one
-    MuJoCo hinge: name, axis, passive stiffness, damping, springref, servo kp, kv, target and
+    """Each coordinate of a hinge, slide or universal joint ``j`` (its resolved section) as one
+    MuJoCo hinge (a slide's: a MuJoCo slide): name, type, axis, passive stiffness, damping,
+    springref, servo kp, kv, target and
     force range, and its index (a universal joint's two hinges, in order, share one body)."""
     universal = j["variant"] == "universal"
     axes = j["axis"] if universal else [j["axis"]]
@@ -50,10 +51,11 @@ def _coordinates(j) -> list[dict]:
         return float(np.broadcast_to(np.asarray(value, dtype=float), (2,))[k]) if universal else float(value)
 
     out = []
+    kind = "slide" if j["variant"] == "slide" else "hinge"
     for k, axis in enumerate(axes):
         passive, limits = j.get("passive") or {}, j.get("saturation") or {}
         upper = entry(limits, "torque_n", k, float("inf"))
-        out.append({"name": f"{j['name']}_{k + 1}" if universal else j["name"], "axis": axis, "index": k,
+        out.append({"name": f"{j['name']}_{k + 1}" if universal else j["name"], "axis": axis, "index": k, "type": kind,
                     "stiffness": entry(passive, "k_r", k, 0.0), "damping": entry(passive, "l_r", k, 0.0),
                     "springref": entry(passive, "theta_ref", k, 0.0), "kp": entry(j, "k_r", k, 0.0),
                     "kv": entry(j, "l_r", k, 0.0), "target": entry(j, "theta_ref", k, 0.0), "upper": upper,
@@ -62,7 +64,7 @@ def _coordinates(j) -> list[dict]:
 
 
 def hinge_tree(config, timestep: float):
-    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges or
+    """(model, data, qpos0, qvel0) of a chain ``config`` whose joints are all hinges, slides or
     universal joints, built from its resolved sections alone: each body's frame at its
     joint's point, unrotated (q = 0 is rbstab's), its centre of mass at -child_point with
     the full inertia; each hinge's ``axis`` (a universal joint's: two hinges in its body, in
@@ -85,14 +87,15 @@ def hinge_tree(config, timestep: float):
 
     def body(name):
         j, b = joints[name], bodies[name]
-        assert j["variant"] in ("hinge", "universal"), j["variant"]
+        assert j["variant"] in ("hinge", "universal", "slide"), j["variant"]
         pos = np.asarray(j["parent_point"], dtype=float)
         if j["parent"] != "ground":  # the parent's frame sits at its own joint's point
             pos = pos - np.asarray(joints[j["parent"]]["child_point"], dtype=float)
         inertia = np.asarray(b["inertia"], dtype=float)
         inertia = np.diag(inertia) if inertia.ndim == 1 else inertia
         inner = "".join(body(c) for c in children.get(name, ()))
-        hinges = "".join(f'<joint name="{c["name"]}" type="hinge" axis="{vec(c["axis"])}" stiffness="{c["stiffness"]}" '
+        hinges = "".join(f'<joint name="{c["name"]}" type="{c["type"]}" axis="{vec(c["axis"])}" '
+                         f'stiffness="{c["stiffness"]}" '
                          f'damping="{c["damping"]}" springref="{c["springref"]}"/>' for c in _coordinates(j))
         return (f'<body name="{name}" pos="{vec(pos)}">{hinges}'
                 f'<inertial pos="{vec(np.negative(j["child_point"]))}" mass="{b["mass"]}" '

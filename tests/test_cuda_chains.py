@@ -26,6 +26,7 @@ def simulated(tmp_path_factory):
     ("hinged3", 3, [0, limit_status(0, 0, 2)]), ("ranged3", 3, [0, range_status(1, 0, False)]),
     ("stopped3", 3, [range_status(0, 0, False), limit_status(0, 0, 2)]),
     ("universal3", 3, [0, range_status(1, 1, False)]), ("balls3", 3, [0, limit_status(0, 0, 2)]),
+    ("slides3", 3, [0, range_status(1, 0, False)]),
     ("locked", 2, [gimbal_status(1, True), gimbal_status(0, True)])])  # the hip's, the ankle's Theta_j
 def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bodies, status):
     """The stance example (permanent joints, saturated torques; one run stopped by its step
@@ -36,7 +37,8 @@ def test_simulated_tree_kernel_is_the_cpu_driver_bit_for_bit(simulated, case, bo
     leaving the elbow's range (an admissible region) at its lower end, and with ball joints'
     ranges (the elbow's stop, the shoulder's region, which one run leaves), and with a
     universal elbow (one coordinate clipped, a passive torque, one run leaving q_2's region), and
-    on quaternion balls with impulses (one run leaving simulation.limits);
+    on quaternion balls with impulses (one run leaving simulation.limits), and with a slide
+    elbow (clipped, a passive spring, one run leaving its range, an admissible region);
     runs of stance chains with other masses, gains, a parent point and an
     admissible region, a tree a run in one call (each run as the run alone): every run's status, t_stop, nfev, n_steps and its state and work W at every
     sample (and every 3rd, stride 3) equal the CPU driver's; simulate(engine="cuda")

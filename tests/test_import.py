@@ -249,6 +249,63 @@ def test_a_body_on_two_hinges_through_one_point_imports_as_a_universal_joint(tmp
         assert np.min(np.abs(ours - s)) <= 1e-4 * abs(s), (s, ours)
 
 
+#: A cart on a slide (a spring about its springref, a damper, a range, a servo that reaches its
+#: forcerange) with a pole upright on a hinge (a damper, a servo that holds it).
+CART_POLE = """<mujoco model="cart_pole">
+  <compiler angle="radian"/>
+  <option gravity="0 0 -9.81" timestep="0.002"/>
+  <worldbody>
+    <body name="cart" pos="0 0 0.5">
+      <joint name="rail" type="slide" axis="1 0.1 0" range="-1 1" limited="true" damping="0.5" stiffness="2"
+             springref="0.1"/>
+      <inertial pos="0 0.01 0" mass="1.0" diaginertia="0.01 0.02 0.02"/>
+      <body name="pole" pos="0.02 0 0.05">
+        <joint name="pivot" type="hinge" axis="0 1 0" damping="0.05"/>
+        <inertial pos="0 0 0.4" mass="0.2" diaginertia="0.01 0.01 0.001"/>
+      </body>
+    </body>
+  </worldbody>
+  <actuator>
+    <position name="push" joint="rail" kp="20" kv="4" forcelimited="true" forcerange="-3 5"/>
+    <position name="balance" joint="pivot" kp="8" kv="1"/>
+  </actuator>
+  <keyframe><key name="start" qpos="0.3 0.2" qvel="-2.5 0.4" ctrl="0.2 0"/></keyframe>
+</mujoco>
+"""
+
+
+def test_a_cart_pole_on_a_slide_imports_and_moves_as_mujoco(tmp_path):
+    """MJCF's slide is rbstab's slide (q [m] from its ref, its servo's kp, kv, target and
+    forcerange, its spring, damper and range along the axis): run, every centre of mass
+    follows MuJoCo's to 1e-6 m and every reaction its ``cfrc_int``; ``rbstab analyze``'s
+    rest state and eigenvalues (in the cart's q and the pole's angle) are MuJoCo's to 1e-4
+    relative."""
+    path = tmp_path / "cart_pole.xml"
+    path.write_text(CART_POLE)
+    imported, config = _imported(path, keyframe="start", n_samples=2001)
+    rail = config.resolved["joints"][0]
+    assert rail["variant"] == "slide" and rail["k_r"] == pytest.approx(20.0)
+    assert rail["theta_ref"] == pytest.approx(0.2)
+    assert rail["saturation"]["torque_n"] == 5.0 and rail["saturation"]["torque_n_lower"] == -3.0
+    assert rail["passive"] == {"k_r": 2.0, "l_r": 0.5, "theta_ref": 0.1} and rail["range"]["upper"] == 1.0
+    assert "[N/m]" in imported.text and "[m, m/s] rail" in imported.text
+    result = simulate(config)
+    assert result.status == "success" and result.summary["lyapunov_rate_check"] == "pass"
+    assert result.outputs["constraint_force_saturated"][:, 0, 0].any()  # the push at its forcerange
+    assert largest_distance(path, config, result, keyframe="start") < 1e-6
+    theirs = interaction_forces(path, config, result, keyframe="start")[0]
+    np.testing.assert_allclose(result.outputs["constraint_force"], theirs, rtol=0, atol=1e-6 * np.abs(theirs).max())
+    analysis = analyze(config, certificate=False, simulate=False)
+    assert analysis.layout.state_names() == ["cart.translation", "cart.translation_rate", "pole.q", "pole.u"]
+    q = analysis.linearisation.equilibrium[[0, 2]]
+    eigenvalues, acceleration = eigenvalues_at(path, q, keyframe="start")
+    assert np.abs(acceleration).max() < 1e-7
+    ours = analysis.linearisation.eigenvalues
+    assert len(ours) == len(eigenvalues)
+    for s in eigenvalues:
+        assert np.min(np.abs(ours - s)) <= 1e-4 * abs(s), (s, ours)
+
+
 def test_import_writes_a_config_that_runs(tmp_path):
     """The CLI writes the config (refusing to replace it without --overwrite) and notes the
     zero gains on stderr; ``rbstab run`` runs it as written."""
@@ -267,7 +324,7 @@ def test_import_writes_a_config_that_runs(tmp_path):
 
 @pytest.mark.parametrize("change, element", [
     (('type="hinge" axis="0.2 1 0.5"', 'type="ball"'), '<joint name="jb">'),
-    (('type="hinge" axis="0.2 1 0.5"', 'type="slide" axis="0.2 1 0.5"'), '<joint name="jb">'),
+    (('quat="0.9 0.1 0.3 -0.2">', 'quat="0.9 0.1 0.3 -0.2"><freejoint name="float"/>'), '<joint name="float">'),
     (('<joint name="jb"', '<joint name="jb2" type="hinge" axis="1 0 0" pos="0 0 0.1"/><joint name="jb"'),
      '<body name="b">'),
     (('</worldbody>', '</worldbody><tendon><fixed name="t"><joint joint="ja" coef="1"/></fixed></tendon>'),
@@ -276,7 +333,7 @@ def test_import_writes_a_config_that_runs(tmp_path):
     (('damping="0.05"', 'damping="0.05" armature="0.01"'), '<joint name="jb">'),
 ])
 def test_what_rbstab_cannot_represent_is_refused_in_one_line(tmp_path, change, element):
-    """A ball with a servo, a slide, a second joint in a body through another point (not a
+    """A ball with a servo, a free joint, a second joint in a body through another point (not a
     universal joint), a tendon, a muscle, armature:
     one line naming the element, exit 1, nothing written."""
     path, out = tmp_path / "model.xml", tmp_path / "config.yaml"

@@ -28,7 +28,7 @@ import numpy as np
 from .model import Disturbance, Saturation
 
 __all__ = ["GROUND", "MAX_BODIES", "Body", "Passive", "Stop", "Region", "Joint", "Chain", "single", "hinge",
-           "universal", "hinge_vectors"]
+           "universal", "slide", "hinge_vectors"]
 
 #: The parent index of a joint to the ground.
 GROUND = -1
@@ -145,7 +145,8 @@ class Joint:
         the point (the paper's variants, E_j = X_c + A_c R_c - X_p - A_p R_p); or ``hinge``:
         the point held and the child turned about ``axis`` only (:func:`hinge`); or
         ``universal``: the point held and the child turned about ``axis`` then ``axis_2``
-        (:func:`universal`).
+        (:func:`universal`); ``slide``: the child's orientation held and its point moved
+        along ``axis`` (:func:`slide`).
     k_r, l_r : ndarray, shape (3, 3)
         N_j = -B(Theta_j)' K_r (Theta_j - Theta_ref) - L_r Omega_j [N m] (eq 23 on the relative
         orientation Theta_j and the relative angular velocity Omega_j, child frame).
@@ -169,8 +170,8 @@ class Joint:
         The joint's passive torque, added to the feedback N_j (which ``saturation`` limits)
         and never limited; None: none, the paper's joint.
     axis : ndarray, shape (3,)
-        A hinge's unit axis a (the parent's and the child's frames), a universal joint's
-        first a_1 (the parent's frame); zero for any other joint.
+        A hinge's or a slide's unit axis a (the parent's and the child's frames), a universal
+        joint's first a_1 (the parent's frame); zero for any other joint.
     axis_2 : ndarray, shape (3,)
         A universal joint's second unit axis a_2 (the child's frame); zero for any other joint.
     stop : Stop or None
@@ -289,6 +290,39 @@ def universal(name: str, parent: int, child: int, parent_point, child_point, axe
                  child_point=np.asarray(child_point, dtype=float), variant="universal", k_r=np.diag(entries(k)),
                  l_r=np.diag(entries(l)), saturation=saturation, theta_ref=entries(q_ref), passive=passive, axis=a[0],
                  axis_2=a[1], stop=stop, region=region)
+
+
+def slide(name: str, parent: int, child: int, parent_point, child_point, axis, k: float = 0.0, l: float = 0.0,
+          q_ref: float = 0.0, limits: tuple[float, float] | None = None, shape: str = "clip",
+          passive: tuple[float, float, float] | None = None, stop: Stop | None = None,
+          region: Region | None = None) -> Joint:
+    """A slide (prismatic) joint (docs/physics.md, "Joint kinds"): the child keeps its
+    parent's orientation and its point C moves by q [m] along the unit axis a = ``axis`` /
+    |axis| (the parent's frame, the child's too) from the parent's point. Its feedback f = -k
+    (q - ``q_ref``) - l dq/dt [N] along a (``k`` [N/m], ``l`` [N s/m]) is delivered between
+    ``limits`` (lower < 0 < upper [N]; None: unlimited), ``passive`` (k, l, q_ref) of that
+    form never limited, its range [m] a ``stop`` (gains [N/m], [N s/m]) or an admissible
+    ``region``. The records hold the coordinate's numbers as entry 0 of the 3-vectors (K_r =
+    diag(k, 0, 0), Theta_ref = (q_ref, 0, 0), the limits). ValueError for an axis of zero
+    length."""
+    a = np.asarray(axis, dtype=float).reshape(3)
+    norm = float(np.linalg.norm(a))
+    if not norm > 0.0:
+        raise ValueError("a slide's axis of zero length")
+
+    def entries(value, fill=0.0):
+        return np.array([float(value), fill, fill])
+
+    saturation = None
+    if limits is not None:
+        infinite = np.full(3, math.inf)
+        saturation = Saturation(entries(limits[1], math.inf), infinite, infinite, shape, entries(limits[0], -math.inf))
+    if passive is not None:
+        passive = Passive(np.diag(entries(passive[0])), np.diag(entries(passive[1])), entries(passive[2]))
+    return Joint(name=name, parent=parent, child=child, parent_point=np.asarray(parent_point, dtype=float),
+                 child_point=np.asarray(child_point, dtype=float), variant="slide", k_r=np.diag(entries(k)),
+                 l_r=np.diag(entries(l)), saturation=saturation, theta_ref=entries(q_ref), passive=passive,
+                 axis=a / norm, stop=stop, region=region)
 
 
 #: |a_1 x a_2| below which a universal joint's axes are parallel (its coordinates degenerate).

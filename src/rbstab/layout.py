@@ -426,7 +426,7 @@ STATE_BLOCKS = ("theta", "omega", "position", "velocity", "controller_state")
 #: Units of each state block (CF spelling; the files' ``units`` attribute).
 BLOCK_UNITS = {**{b: OUTPUTS[b].units for b in STATE_BLOCKS},  # and the joints' blocks of a tree's reduced state
                "joint_theta": "rad", "joint_omega": "rad s-1", "q": "rad", "u": "rad s-1", "quaternion": "1",
-               "joint_phi": "rad"}
+               "joint_phi": "rad", "translation": "m", "translation_rate": "m s-1"}
 #: The controls an actuator delivers (:class:`rbstab.model.Saturation`'s limits) -> the output
 #: that flags their axes at or beyond the limit and the summary figure of the fraction of the
 #: samples so flagged.
@@ -609,9 +609,10 @@ class JointKind:
         Sizes of its coordinates q and of its velocities u (the columns of its motion
         subspace S); the child's reduced states are q, then u (n_q + n_v).
     point_fixed : bool
-        Whether the joint holds the child's point C to its parent's point by construction
-        (E_j = F_j = 0, no point law, its Lambda_j the reaction); else the child keeps its
-        own X, V and a point law pulls C.
+        Whether the joint places the child from its parent by construction: its point C held
+        to the parent's point (E_j = F_j = 0), or moved along an axis by the joint's own
+        coordinate (a slide); no point law, its Lambda_j the reaction. Else the child keeps
+        its own X, V and a point law pulls C.
     coordinates : str
         What q and u are, with units and frames.
     domain : str
@@ -658,24 +659,32 @@ JOINT_KINDS = {
                            "[rad/s]",
                            "every q (a_1 and a_2 not parallel: the joint has no singular angle)",
                            (("q", 2), ("u", 2))),
+    "slide": JointKind("slide", 1, 1, True,
+                       "q [m], the displacement of the child's point C from the parent's point along the joint's "
+                       "unit axis a (the parent's frame; A_rel = I: the child keeps its parent's orientation); u = "
+                       "dq/dt [m/s]",
+                       "every q (a slide has no singular place)", (("translation", 1), ("translation_rate", 1))),
 }
 #: Each joint's ``variant`` -> its joint kind: the paper's ``permanent`` joint is the ball in
 #: Euler angles, the four point laws pull a free body, ``hinge`` turns the child about an axis.
 JOINT_KIND_OF = {"free": "free", "permanent": "euler_ball", "sliding": "free", "visco_elastic": "free",
-                 "embedded": "free", "hinge": "hinge", "universal": "universal", "ball": "ball"}
+                 "embedded": "free", "hinge": "hinge", "universal": "universal", "ball": "ball",
+                 "slide": "slide"}
 #: Each joint's ``variant`` -> its code in the compiled kernels: the paper's laws by their
 #: :data:`VARIANT_CODES`, then the kinds that have no one-body form of the paper (``hinge``).
 JOINT_CODES = {**VARIANT_CODES, "hinge": len(VARIANT_CODES), "universal": len(VARIANT_CODES) + 1,
-               "ball": len(VARIANT_CODES) + 2}
+               "ball": len(VARIANT_CODES) + 2, "slide": len(VARIANT_CODES) + 3}
 #: Each joint code's reduced states and generalised velocities (the compiled kernels read
 #: these; an embedded joint's D comes after the bodies).
 REDUCED_STATES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].size for v in JOINT_CODES], dtype=np.int64)
 VELOCITIES = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].n_v for v in JOINT_CODES], dtype=np.int64)
 #: Whether each joint code's kind holds its child's point by construction (:attr:`JointKind.point_fixed`).
 POINT_FIXED = np.array([JOINT_KINDS[JOINT_KIND_OF[v]].point_fixed for v in JOINT_CODES], dtype=np.bool_)
-#: Each joint code's axes: the turns about fixed axes its coordinates are (a hinge's 1, a
-#: universal's 2; 0 for the ball's Euler angles and the free body).
-AXES = np.array([{"hinge": 1, "universal": 2}.get(JOINT_KIND_OF[v], 0) for v in JOINT_CODES], dtype=np.int64)
+#: Each joint code's coordinates along fixed axes, each with dq/dt = u: the turns about
+#: them (a hinge's 1, a universal's 2), a slide's translation (1); 0 for the balls and the
+#: free body.
+AXES = np.array([{"hinge": 1, "universal": 2, "slide": 1}.get(JOINT_KIND_OF[v], 0) for v in JOINT_CODES],
+                dtype=np.int64)
 #: Whether each joint code is a kind beyond the paper's laws (a hinge, a universal joint, the
 #: quaternion ball): a tree with one runs and is linearised in its reduced state only.
 BEYOND_PAPER = np.array([v not in VARIANT_CODES for v in JOINT_CODES], dtype=np.bool_)

@@ -802,17 +802,19 @@ def _tree_left_region(what: str, t: float) -> str:
 
 def _range_left(compiled, joint: int, coordinate: int, upper: bool, t: float) -> str:
     """The message of a tree's run whose joint ``joint``'s ``coordinate`` (a hinge's q, a
-    universal joint's q_1 or q_2, a ball's Euler angle) reached an end of its range (an admissible region) at t [s], on
+    universal joint's q_1 or q_2, a slide's q, a ball's Euler angle) reached an end of its
+    range (an admissible region) at t [s], on
     every engine."""
     name = compiled.chain.joint_names[joint]
     end = float(compiled.params[joint]["range_upper" if upper else "range_lower"][coordinate])
     variant = compiled.chain.joints[joint].variant
     what = (f"the angle q of joint {name}" if variant == "hinge" else
+            f"the displacement q of joint {name}" if variant == "slide" else
             f"the angle q_{coordinate + 1} of joint {name}" if variant == "universal" else
             f"the turn of joint {name} (its angle from the reference pose)" if variant == "ball" else
             f"theta_{coordinate + 1} of joint {name}'s Euler angles Theta_j")
     return (f"left the admissible region (joints.{name}.range): {what} reached its "
-            f"{'upper' if upper else 'lower'} end {end:g} rad at t = {t:.6g} s")
+            f"{'upper' if upper else 'lower'} end {end:g} {'m' if variant == 'slide' else 'rad'} at t = {t:.6g} s")
 
 
 def run_end(compiled, code: int, t_stop: float, settings: np.ndarray, bounds: np.ndarray,

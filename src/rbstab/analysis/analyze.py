@@ -38,7 +38,7 @@ from ..variants import VARIANTS
 from ..variants.paper import has_paper_form
 from .basin import BasinAxis, BasinMap, basin_map, time_to_converge
 from .basin import DEFAULT_SAMPLES as DEFAULT_BASIN_SAMPLES
-from .certificate import DEFAULT_SAMPLES, Certificate, ChainModel, certify
+from .certificate import DEFAULT_SAMPLES, SLIDE_REACH, Certificate, ChainModel, certify
 from .dataset import analysis_content, analysis_dataset, certificate_record, json_record
 from .evidence import FALSIFICATION_RUNS, check_initial_run, check_runs, falsify
 from .linearise import Linearisation, TreeCoordinates, coordinates_state, linearise_chain, mode_shapes, undisturbed
@@ -134,11 +134,15 @@ class Analysis:
 
     @property
     def domain(self) -> str | None:
-        """The angles that bound the certificate's domain, in its text (None: one body's theta_2)."""
+        """What bounds the certificate's domain, in its text (None: one body's theta_2)."""
         if self.one_body:
             return None
-        hinged = any(j.variant in ("hinge", "universal") for j in self.analysed.chain.joints)
-        return "|theta_2| of a body or joint, or a joint's |q|," if hinged else "|theta_2| of a body or joint"
+        variants = {j.variant for j in self.analysed.chain.joints}
+        if variants == {"slide"}:
+            return f"a slide's |q| = {SLIDE_REACH:g} m: no angle bounds it, the samples reach that far"
+        hinged = bool(variants & {"hinge", "universal"})
+        return (("|theta_2| of a body or joint, or a joint's |q|," if hinged else "|theta_2| of a body or joint")
+                + " = pi/2 - gimbal_margin")
 
     @property
     def verdict(self) -> str:
@@ -218,11 +222,12 @@ class Analysis:
         """(names ``<body>.theta_<i>``, positions in the linearisation's coordinates) of the
         bodies' Euler angles among the independent coordinates; in a tree with a hinge, the
         joints' angles (a hinge's child's ``<body>.q``, a ball's ``<body>.joint_theta_<i>``)
-        and a free body's Euler angles."""
+        and a free body's Euler angles, and a slide's displacement (``<body>.translation``, m):
+        the configuration's coordinates that mode shapes are written on."""
         layout = self.layout
         every = layout.state_names()
         rows = [at + i for (_, block, _, size), at in zip(self.coordinates, layout.offsets())
-                if block in ("theta", "joint_theta", "q") for i in range(size)]
+                if block in ("theta", "joint_theta", "q", "translation") for i in range(size)]
         return [every[r] for r in rows], rows
 
     def _modes(self) -> list[dict]:
@@ -416,16 +421,19 @@ def _outside_limits(compiled, rest: np.ndarray, limits, one_body: bool) -> str |
             continue
         theta_j = np.asarray(outputs["joint_theta"], dtype=float)[0, j]
         values = np.atleast_1d(joint.axis @ theta_j if joint.variant == "hinge" else
+                               C.slide_coordinates(rest, j, compiled.params, compiled.parents, compiled.ppoints)[0]
+                               if joint.variant == "slide" else
                                theta_j[:2] if joint.variant == "universal" else
                                np.linalg.norm(theta_j) if joint.variant == "ball" else theta_j)
         ends = [np.broadcast_to(np.atleast_1d(np.asarray(end, dtype=float))[:values.size], values.shape)
                 for end in (joint.region.lower, joint.region.upper)]  # a universal joint's first 2 of 3
         for i, (value, lower, upper) in enumerate(zip(values, *ends)):
             if not lower <= value <= upper:
-                what = {"hinge": "q", "universal": f"q_{i + 1}", "ball": "turn"}.get(joint.variant,
-                                                                                   f"theta_{i + 1} of Theta_j")
+                what = {"hinge": "q", "universal": f"q_{i + 1}", "ball": "turn", "slide": "q"}.get(
+                    joint.variant, f"theta_{i + 1} of Theta_j")
                 return (f"the {_REST[one_body]} lies outside joints.{joint.name}.range (an admissible region): its "
-                        f"{what} is {'above' if value > upper else 'below'} {upper if value > upper else lower:g} rad")
+                        f"{what} is {'above' if value > upper else 'below'} {upper if value > upper else lower:g} "
+                        f"{'m' if joint.variant == 'slide' else 'rad'}")
     if limits is None:
         return None
     errors = np.asarray(outputs["constraint_error"], dtype=float)[0]

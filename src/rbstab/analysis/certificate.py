@@ -61,6 +61,9 @@ __all__ = ["Certificate", "Model", "ChainModel", "coordinate_boundary_level",
            "checked", "level_states", "DEFINITE_RTOL", "RATE_RTOL", "DEFAULT_SAMPLES",
            "RATE_DEFINITENESS", "SETTLED_RTOL"]
 
+#: [m]: a tree without angles (its joints slides) has no domain boundary; its samples reach the
+#: least v with a slide's q at +-this (at rest, the other coordinates free).
+SLIDE_REACH = 1.0
 #: Eigenvalues of a scaled Hessian within this of zero (relative to the largest) are zero.
 DEFINITE_RTOL = 1e-8
 #: A sampled dv/dt is positive when above this times the state's power scale (and its error).
@@ -246,10 +249,13 @@ class ChainModel:
         else :func:`constrained_boundary_level`."""
         starts = np.cumsum([0] + [size for _, _, _, size in self.coordinates])
         free = [int(at) + a for (_, block, _, size), at in zip(self.coordinates, starts)
-                if block in ("theta", "position", "controller_state", "joint_theta", "q")
+                if block in ("theta", "position", "controller_state", "joint_theta", "q", "translation")
                 for a in range(size)]
         y_e = np.asarray(y_e, dtype=float)
-        if self.angle_matrix is not None:
+        if self.angle_matrix is not None and not self._theta:  # no angle (slides only): no domain boundary;
+            slides = [int(at) for (_, block, _, _), at in zip(self.coordinates, starts) if block == "translation"]
+            return coordinate_boundary_level(self.lyapunov, y_e, hess, SLIDE_REACH, slides, free)  # sampled to
+        if self.angle_matrix is not None:                                                # |q| = SLIDE_REACH
             return coordinate_boundary_level(self.lyapunov, y_e, hess, limit, self._theta, free)
         return constrained_boundary_level(self, y_e, hess, limit, np.array(free))
 
@@ -452,7 +458,8 @@ def coordinate_boundary_level(lyapunov, y_e: np.ndarray, hess: np.ndarray, limit
     """The least v [J] on the domain boundary of a model whose angles are coordinates (the
     indices ``angles`` into y): for each angle and side, v (``lyapunov``, (k, n) -> (k,)) at
     rest with that angle at +-limit, minimised over the other ``configuration`` coordinates
-    (Newton steps from the quadratic model's minimiser; the rest at y_e)."""
+    (Newton steps from the quadratic model's minimiser; the rest at y_e); inf where there is
+    no angle."""
     levels = []
     for a in angles:
         free = np.array([i for i in configuration if i != a], dtype=int)
@@ -470,7 +477,7 @@ def coordinate_boundary_level(lyapunov, y_e: np.ndarray, hess: np.ndarray, limit
             start = y_e[free] - np.linalg.solve(hess[np.ix_(free, free)], hess[free, a] * (side - y_e[a]))
             with np.errstate(all="ignore"):
                 levels.append(_newton_minimum(v_on_boundary, start))
-    return min(levels)
+    return min(levels) if levels else np.inf  # no angle (a tree of slides): the domain has no boundary
 
 
 def constrained_boundary_level(model, y_e: np.ndarray, hess: np.ndarray, limit: float, free: np.ndarray) -> float:

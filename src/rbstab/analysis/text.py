@@ -130,7 +130,7 @@ def certificate_lines(c, domain: str | None = None) -> list[str]:
                  f"eigenvalues zero); LaSalle's condition (PBH test) {'holds' if c.lasalle_observable else 'FAILS'}")
     lines.append(f"    {c.n_samples} sampled states: largest dv/dt {_g(c.worst_rate)} W at v = {_g(c.worst_lyapunov)} J; "
                  f"|numerical - analytic dv/dt| <= {_g(c.rate_mismatch, 2)} of the power scale")
-    boundary = f"domain boundary{f' ({domain} = pi/2 - gimbal_margin)' if domain else ''} at {_g(c.boundary_level)} J"
+    boundary = f"domain boundary{f' ({domain})' if domain else ''} at {_g(c.boundary_level)} J"
     bound = boundary if c.sublevel_bound == BOUNDS[0] else f"{c.sublevel_bound}; {boundary}"
     lines.append(f"    inner estimate of the region of attraction: {{v <= {_g(c.sublevel)} J}}, an {c.evidence}; "
                  f"bounded by: {bound}")

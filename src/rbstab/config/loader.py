@@ -58,7 +58,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ValidationError
 
-from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, single, universal
+from ..chain import GROUND, Body, Chain, Joint, Passive, Region, Stop, hinge, single, slide, universal
 from ..kinematics import axis_rotation, euler_angles_of, rotation_matrix, universal_columns, universal_rotation
 from ..layout import AXES, JOINT_CODES, is_chain, point_fixed
 from ..model import Disturbance, Gains, Limits, RigidBody, Saturation
@@ -591,11 +591,11 @@ def _chain(run: ChainSchema, disturbances: Sequence[Mapping]) -> Chain:
     joints = []
     for j in sorted(run.joints, key=lambda j: index[j.child]):
         parent = GROUND if j.parent == GROUND_NAME else index[j.parent]
-        if j.variant == "hinge":
+        if j.variant in ("hinge", "slide"):  # one coordinate: a turn about the axis, or a translation along it
             sat, passive = j.saturation, j.passive
             upper = math.inf if sat is None or sat.torque_n is None else float(sat.torque_n)
             lower = -upper if sat is None or sat.torque_n_lower is None else float(sat.torque_n_lower)
-            joints.append(hinge(
+            joints.append((hinge if j.variant == "hinge" else slide)(
                 j.name, parent, index[j.child], _array(j.parent_point), _array(j.child_point), _array(j.axis),
                 float(j.k_r or 0.0), float(j.l_r or 0.0), float(j.theta_ref or 0.0),
                 None if sat is None else (lower, upper), "clip" if sat is None else sat.shape,
@@ -675,7 +675,11 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
         if joint.variant in AXES_VARIANTS:
             q = np.broadcast_to(np.asarray(written.get("q", 0.0), dtype=float), (AXES[JOINT_CODES[joint.variant]],))
             u = np.broadcast_to(np.asarray(written.get("u", 0.0), dtype=float), q.shape)
-            if joint.variant == "hinge":
+            slid = np.zeros(3), np.zeros(3)  # a slide's q a, u a (the parent's frame)
+            if joint.variant == "slide":  # turned as its parent, its point moved along the axis
+                rel, columns = np.eye(3), np.zeros((1, 3))
+                slid = joint.axis * float(q[0]), joint.axis * float(u[0])
+            elif joint.variant == "hinge":
                 rel, columns = np.array(axis_rotation(tuple(joint.axis), float(q[0]))), joint.axis[None]
             else:
                 a_1, a_2 = tuple(joint.axis), tuple(joint.axis_2)
@@ -686,8 +690,10 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
             state["theta"] = euler_angles_of(a_c)
             state["omega"] = rel.T @ omega_p + u @ columns
         r_p, r_c = joint.parent_point, joint.child_point
-        point_p = x_p + a_p @ r_p  # the parent's point, inertial frame
-        rate_p = v_p + a_p @ _cross(omega_p, r_p)
+        if joint.variant == "slide":
+            r_p = r_p + slid[0]
+        point_p = x_p + a_p @ r_p  # the parent's point, inertial frame (a slide's moved along its axis)
+        rate_p = v_p + a_p @ (_cross(omega_p, r_p) + (slid[1] if joint.variant == "slide" else 0.0))
         x_placed = point_p - a_c @ r_c
         v_placed = rate_p - a_c @ _cross(state["omega"], r_c)
         for key, block, target, what in (("x", "position", x_placed, "E_j"), ("v", "velocity", v_placed, "dE_j/dt")):

@@ -12,10 +12,11 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
 - each ``hinge`` becomes a joint ``variant: hinge`` about its world axis (``xaxis``) at its
   world anchor (``xanchor``): ``parent_point`` and ``child_point`` are the anchor from the
   parent's and the child's centres of mass (from the world origin for the ground);
-  q = qpos - qpos0 (a joint's ``ref`` is rbstab's q = 0); a body's two hinges through one
-  point about axes that are not parallel become one joint ``variant: universal`` (the first
-  hinge's q_1, then the second's q_2, their world axes in order), everything below per
-  coordinate;
+  q = qpos - qpos0 (a joint's ``ref`` is rbstab's q = 0); each ``slide`` a joint ``variant:
+  slide`` along its world axis the same way (q [m], its gains [N/m], [N s/m], forces [N]); a
+  body's two hinges through one point about axes that are not parallel become one joint
+  ``variant: universal`` (the first hinge's q_1, then the second's q_2, their world axes in
+  order), everything below per coordinate;
 - its passive torque is the joint's ``stiffness``, ``damping`` and ``springref``
   (theta_ref = qpos_spring - qpos0);
 - each ``ball`` becomes a joint ``variant: ball`` at its anchor (its quaternion, free of
@@ -38,7 +39,7 @@ The compiled model is read in its reference pose (``qpos0``, where every hinge's
   keyframe's q, u or the reference pose at rest.
 
 What rbstab cannot represent is refused, one line each naming the model's element: a ball
-with an actuator, slide and free joints, two joints in one body that
+with an actuator, free joints, two joints in one body that
 are not a universal joint (two hinges through one point) or more,
 tendons, equality constraints, muscles and actuators with activation dynamics, armature, dry
 friction, gravity compensation, fluid forces, a constant actuator torque. Contacts are left
@@ -167,14 +168,13 @@ def _refusals(mujoco, model, where: str) -> list[str]:
     """One line per element of the compiled ``model`` rbstab cannot represent (the module
     docstring's list; the actuators: :func:`_servos`)."""
     errors: list[str] = []
-    joint_kind = {int(mujoco.mjtJoint.mjJNT_FREE): "a free joint (a floating base)",
-                  int(mujoco.mjtJoint.mjJNT_SLIDE): "a slide joint (not a joint kind of rbstab's)"}
+    joint_kind = {int(mujoco.mjtJoint.mjJNT_FREE): "a free joint (a floating base)"}
     ball = int(mujoco.mjtJoint.mjJNT_BALL)
     for j in range(model.njnt):
         joint = model.joint(j)
         if int(model.jnt_type[j]) in joint_kind:
             errors.append(f"model file {where}: {_element('joint', joint)} is {joint_kind[int(model.jnt_type[j])]}; "
-                          "rbstab imports hinge and ball joints")
+                          "rbstab imports hinge, slide and ball joints")
             continue
         dof = int(model.jnt_dofadr[j])
         for attribute, values, why in (("armature", model.dof_armature, "rotor inertia"),
@@ -213,16 +213,17 @@ def _universal(mujoco, model, b: int) -> bool:
             and np.linalg.norm(np.cross(model.jnt_axis[first], model.jnt_axis[first + 1])) > 1e-6)
 
 
-def _stop_gains(model, j: int, invweight: float) -> tuple[float, float, str]:
-    """(k [N m/rad], l [N m s/rad], in words) of joint ``j``'s limit as a stop: MuJoCo's soft
-    limit at full impedance as a spring and damper on the effective inertia I = 1 /
+def _stop_gains(model, j: int, invweight: float, units: str = "kg m^2") -> tuple[float, float, str]:
+    """(k [N m/rad], l [N m s/rad]; a slide's [N/m], [N s/m], in words) of joint ``j``'s limit
+    as a stop: MuJoCo's soft limit at full impedance as a spring and damper on the effective
+    inertia I [kg m^2; a slide's: kg] = 1 /
     ``invweight`` (solref = (timeconst, dampratio): k = I / (timeconst dampratio)^2, l = 2 I /
     timeconst; solref < 0: k = -solref[0] I, l = -solref[1] I)."""
     inertia = 1.0 / invweight
     timeconst, ratio = (float(x) for x in model.jnt_solref[j])
     k, l = ((inertia / (timeconst * ratio) ** 2, 2.0 * inertia / timeconst) if timeconst > 0
             else (-timeconst * inertia, -ratio * inertia))
-    return k, l, f"solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} kg m^2"
+    return k, l, f"solref ({timeconst:g}, {ratio:g}) on I {inertia:.6g} {units}"
 
 
 def _ball(model, data, keyed, b: int, jname: str, body: str) -> tuple[list[str], str]:
@@ -283,7 +284,7 @@ def _servos(mujoco, model, where: str, ctrl: np.ndarray, errors: list[str]) -> t
         j = int(model.actuator_trnid[a, 0])
         if int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_BALL):
             errors.append(f"model file {where}: {name} acts on the ball joint {_element('joint', model.joint(j))}; "
-                          "rbstab imports actuators on hinge joints")
+                          "rbstab imports actuators on hinge and slide joints")
             continue
         gear = float(model.actuator_gear[a, 0])
         u = float(ctrl[a])
@@ -448,10 +449,13 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             initial.append(start)
             unheld.append(jname)
             continue
-        js = list(range(j, j + int(model.body_jntnum[b])))  # one hinge, or a universal joint's two
+        js = list(range(j, j + int(model.body_jntnum[b])))  # one hinge or slide, or a universal joint's two
         universal = len(js) == 2
+        slide = int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE)
+        units = {"q": "m", "u": "m/s", "k": "N/m", "l": "N s/m", "force": "N"} if slide else \
+            {"q": "rad", "u": "rad/s", "k": "N m/rad", "l": "N m s/rad", "force": "N m"}
         qpos0 = [float(model.qpos0[model.jnt_qposadr[k]]) for k in js]
-        source = " and ".join(_element("joint", model.joint(k), ' type="hinge"') for k in js)
+        source = " and ".join(_element("joint", model.joint(k), f' type="{"slide" if slide else "hinge"}"') for k in js)
 
         def numbers(values):  # a hinge's number, a universal joint's 2
             return f"[{', '.join(_number(v) for v in values)}]" if universal else _number(values[0])
@@ -464,8 +468,10 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
                       "the hinges' axes, world frame"),
             ]
         else:
+            lines_joints[-5] = _line(2, f"- name: {jname}", source)
             lines_joints += [
-                _line(4, "variant: hinge", "q = qpos - qpos0 [rad]" + (f" (ref {qpos0[0]:g})" if qpos0[0] else "")),
+                _line(4, f"variant: {'slide' if slide else 'hinge'}",
+                      f"q = qpos - qpos0 [{units['q']}]" + (f" (ref {qpos0[0]:g})" if qpos0[0] else "")),
                 _line(4, f"axis: {_vector(axis)}", "the joint's axis, world frame"),
             ]
         servos = [feedback.get(k) for k in js]
@@ -475,17 +481,18 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             servos = [servo or none for servo in servos]
             lines_joints += [
                 _line(4, f"k_r: {numbers([v['k_r'] for v in servos])}",
-                      f"[N m/rad] {', '.join(v['source'] for v in named)}: kp gear^2"),
-                _line(4, f"l_r: {numbers([v['l_r'] for v in servos])}", "[N m s/rad] kv gear^2"),
+                      f"[{units['k']}] {', '.join(v['source'] for v in named)}: kp gear^2"),
+                _line(4, f"l_r: {numbers([v['l_r'] for v in servos])}", f"[{units['l']}] kv gear^2"),
                 _line(4, f"theta_ref: {numbers([v['theta_ref'] for v in servos])}",
-                      "[rad] its target at control " + ", ".join(f"{v['ctrl']:g}, gear {v['gear']:g}" for v in named))]
+                      f"[{units['q']}] its target at control "
+                      + ", ".join(f"{v['ctrl']:g}, gear {v['gear']:g}" for v in named))]
             if any(math.isfinite(v["lower"]) or math.isfinite(v["upper"]) for v in servos):
                 lines_joints.append(_line(4, f"saturation: {{torque_n: {numbers([v['upper'] for v in servos])}, "
                                              f"torque_n_lower: {numbers([v['lower'] for v in servos])}}}",
-                                          "[N m] forcerange x gear, actuatorfrcrange"))
+                                          f"[{units['force']}] forcerange x gear, actuatorfrcrange"))
         else:
-            lines_joints += [_line(4, f"k_r: {numbers([0.0] * len(js))}", "[N m/rad] no servo on this joint"),
-                             _line(4, f"l_r: {numbers([0.0] * len(js))}", "[N m s/rad]")]
+            lines_joints += [_line(4, f"k_r: {numbers([0.0] * len(js))}", f"[{units['k']}] no servo on this joint"),
+                             _line(4, f"l_r: {numbers([0.0] * len(js))}", f"[{units['l']}]")]
             unheld.append(jname)
         for k in js:
             if k in motors:
@@ -499,26 +506,29 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
             spring = [float(model.qpos_spring[model.jnt_qposadr[k]]) - q0 for k, q0 in zip(js, qpos0)]
             lines_joints.append(_line(4, f"passive: {{k_r: {numbers(stiffness)}, l_r: {numbers(damping)}, "
                                          f"theta_ref: {numbers(spring)}}}",
-                                      "[N m/rad, N m s/rad, rad] stiffness, damping, springref"))
+                                      f"[{units['k']}, {units['l']}, {units['q']}] stiffness, damping, springref"))
         if any(model.jnt_limited[k] for k in js):
             stops = []
             for k, q0 in zip(js, qpos0):
-                stiff, damp, why = _stop_gains(model, k, float(model.dof_invweight0[model.jnt_dofadr[k]]))
+                stiff, damp, why = _stop_gains(model, k, float(model.dof_invweight0[model.jnt_dofadr[k]]),
+                                               "kg" if slide else "kg m^2")
                 ends = ((float(x) - q0 for x in model.jnt_range[k]) if model.jnt_limited[k]
                         else (-math.inf, math.inf))
                 stops.append((*ends, stiff, damp, why))
             lower, upper, stiff, damp, why = zip(*stops)
             lines_joints.append(_line(4, f"range: {{lower: {numbers(lower)}, upper: {numbers(upper)}, "
-                                         f"k_r: {numbers(stiff)}, l_r: {numbers(damp)}}}", f"[rad] a stop: {'; '.join(why)}"))
+                                         f"k_r: {numbers(stiff)}, l_r: {numbers(damp)}}}",
+                                      f"[{units['q']}] a stop: {'; '.join(why)}"))
         q = [float(model.key_qpos[key, model.jnt_qposadr[k]]) - q0 if key is not None else 0.0
              for k, q0 in zip(js, qpos0)]
         u = [float(model.key_qvel[key, model.jnt_dofadr[k]]) if key is not None else 0.0 for k in js]
         for k, value in zip(js, q):
-            if not -math.pi < value < math.pi:
+            if not slide and not -math.pi < value < math.pi:
                 element = _element("joint", model.joint(k), ' type="hinge"')
                 raise ConfigError([f"model file {where}: keyframe {keyframe!r} puts {element} at q = {value:g} rad "
                                    "from its reference; expected a number in (-pi, pi)"])
-        initial.append(_line(2, f"{name_of[b]}: {{q: {numbers(q)}, u: {numbers(u)}}}", f"[rad, rad/s] {jname}"))
+        initial.append(_line(2, f"{name_of[b]}: {{q: {numbers(q)}, u: {numbers(u)}}}",
+                             f"[{units['q']}, {units['u']}] {jname}"))
     if unheld:
         notes.append(f"{where}: no servo on {', '.join(unheld)}: their k_r and l_r are written as 0 (passive torques "
                      "and gravity only)")

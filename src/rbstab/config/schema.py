@@ -428,10 +428,12 @@ def _variant(value: Any) -> str:
 
 #: A tree joint's ``variant``: the paper's laws (:data:`rbstab.variants.VARIANTS`) and the
 #: joint kinds that have no one-body form (:data:`rbstab.layout.JOINT_KIND_OF`).
-JOINT_VARIANTS = (*VARIANTS, "hinge", "universal", "ball")
-#: The joint kinds whose coordinates are turns about fixed axes: their child's initial state
-#: is q, u; their gains, references and limits are numbers per coordinate.
-AXES_VARIANTS = ("hinge", "universal")
+JOINT_VARIANTS = (*VARIANTS, "hinge", "universal", "ball", "slide")
+#: The joint kinds whose coordinates are along fixed axes (turns about them, a slide's
+#: translation): their child's initial state is q, u; their gains, references and limits are
+#: numbers per coordinate.
+AXES_VARIANTS = ("hinge", "universal", "slide")
+
 
 
 def _pair(value: Any, check: Callable[[Any], Any]) -> list:
@@ -870,9 +872,9 @@ class InitialStateSchema(_Section):
 
 
 def _joint_coordinate(value: Any) -> Any:
-    """A joint's angle in (-pi, pi) [rad]: a hinge's number, or a universal joint's 2."""
-    check = bounded_number(gt=-math.pi, lt=math.pi)
-    return _pair(value, check) if _is_pair(value) else check(value)
+    """A joint's coordinate: a hinge's or a slide's number, or a universal joint's 2 (a turn's
+    in (-pi, pi) [rad]: the chain's check, which knows the kind)."""
+    return _pair(value, _as_number) if _is_pair(value) else _as_number(value)
 
 
 def _joint_rate(value: Any) -> Any:
@@ -880,7 +882,7 @@ def _joint_rate(value: Any) -> Any:
     return _pair(value, _as_number) if _is_pair(value) else _as_number(value)
 
 
-_joint_coordinate.rule, _joint_coordinate.shape = bounded_number(gt=-math.pi, lt=math.pi).rule, (2,)
+_joint_coordinate.shape = (2,)
 _joint_rate.shape = (2,)
 
 
@@ -889,10 +891,11 @@ class _ChainInitialState(InitialStateSchema):
 
     q: Annotated[Any, checked(optional(_joint_coordinate))] = Field(
         None, description="a number in (-pi, pi) (rad): the angle q of the hinge that holds the body (only for a "
-                          "hinge's child; default 0); a universal joint's child's: 2, q_1 and q_2")
+                          "hinge's child; default 0); a universal joint's child's: 2, q_1 and q_2; a slide's child's: "
+                          "a number (m), its displacement along the axis")
     u: Annotated[Any, checked(optional(_joint_rate))] = Field(
         None, description="a number (rad/s): dq/dt of the hinge that holds the body (only for a hinge's child; "
-                          "default 0); a universal joint's child's: 2")
+                          "default 0); a universal joint's child's: 2; a slide's child's: a number (m/s)")
 
 
 #: A hinge's child's initial-state keys, and the blocks its hinge places instead.
@@ -1270,8 +1273,8 @@ class _ChainJoint(_Section):
         """A hinge's axis, and its gains, reference and torque limits as numbers about it; a
         universal joint's two axes and its numbers per coordinate (one for both, or 2); a
         ball's or a free body's as 3-vectors or 3x3 matrices, and no axis."""
-        hinge, universal = self.variant == "hinge", self.variant == "universal"
-        saturation, passive = self.saturation, self.passive
+        hinge, universal = self.variant in ("hinge", "slide"), self.variant == "universal"  # a slide's numbers: a
+        saturation, passive = self.saturation, self.passive                              # hinge's, along its axis
         values = [("k_r", self.k_r), ("l_r", self.l_r), ("theta_ref", self.theta_ref)]
         values += [] if passive is None else [(f"passive.{k}", getattr(passive, k)) for k in ("k_r", "l_r", "theta_ref")]
         values += [] if saturation is None else [(f"saturation.{k}", getattr(saturation, k))
@@ -1283,18 +1286,19 @@ class _ChainJoint(_Section):
             raise PydanticCustomError("rbstab_missing" if self.axis is None else "rbstab_invalid", "an axis", {
                 "subkey": "axis", **({} if self.axis is None else {"found": short_repr(self.axis)}),
                 "expected": ("2 lists of 3 numbers, not parallel (the universal joint's axes a_1, a_2)" if universal
-                             else "3 numbers, not all zero (the hinge's axis)"),
+                             else f"3 numbers, not all zero (the {self.variant}'s axis)"),
                 "detail": f"required by variant '{self.variant}'"})
         if not (hinge or universal) and self.axis is not None:
             raise PydanticCustomError("rbstab_invalid", "an axis", {
                 "subkey": "axis", "found": short_repr(self.axis), "expected": "no axis",
-                "detail": f"an axis is a hinge's or a universal joint's; a '{self.variant}' joint turns about all three"})
-        if self.range is not None and self.variant not in ("hinge", "universal", "permanent", "ball"):
+                "detail": f"an axis is a hinge's, a universal joint's or a slide's; a '{self.variant}' joint turns "
+                          "about all three"})
+        if self.range is not None and self.variant not in ("hinge", "universal", "permanent", "ball", "slide"):
             raise PydanticCustomError("rbstab_invalid", "a range", {
                 "subkey": "range", "found": "a range", "expected": "no range",
-                "detail": f"a range is a hinge's (of its angle q), a universal joint's (of q_1, q_2) or a ball's "
-                          f"(permanent: of its Euler angles Theta_j; ball: a cone of its turn); a '{self.variant}' "
-                          "joint has none"})
+                "detail": f"a range is a hinge's (of its angle q), a universal joint's (of q_1, q_2), a slide's (of "
+                          f"its displacement q) or a ball's (permanent: of its Euler angles Theta_j; ball: a cone of "
+                          f"its turn); a '{self.variant}' joint has none"})
         if self.range is not None and self.variant == "ball":  # MJCF's cone: lower 0, upper the largest turn
             for key in ("lower", "upper", "k_r", "l_r"):
                 value = getattr(self.range, key)
@@ -1309,10 +1313,14 @@ class _ChainJoint(_Section):
                 continue
             listed = isinstance(value, (list, tuple))
             if hinge and listed:
-                raise PydanticCustomError("rbstab_invalid", "a hinge's number", {
+                along = "along" if self.variant == "slide" else "about"
+                raise PydanticCustomError("rbstab_invalid", f"a {self.variant}'s number", {
                     "subkey": key, "found": short_repr(value),
-                    "expected": "a number: a hinge's range is of its angle q" if key.startswith("range.") else
-                                "a number: a hinge's feedback, reference and limits act about its axis"})
+                    "expected": f"a number: a {self.variant}'s range is of its "
+                                f"{'displacement' if self.variant == 'slide' else 'angle'} q"
+                                if key.startswith("range.")
+                                else f"a number: a {self.variant}'s feedback, reference and limits act {along} its "
+                                     "axis"})
             if universal and listed and not _is_pair(value):
                 raise PydanticCustomError("rbstab_invalid", "a universal joint's numbers", {
                     "subkey": key, "found": short_repr(value),
@@ -1351,8 +1359,11 @@ class _ChainJoint(_Section):
         if point_fixed(self.variant) or (self.variant == "sliding" and float(self.boundary_layer) == 0.0):
             raise PydanticCustomError("rbstab_invalid", "limit on the pin", {
                 "subkey": "saturation.constraint_force", "found": short_repr(limit),
-                "expected": "no limit with variant 'permanent' or the pure sign law (boundary_layer: 0)",
-                "detail": "Lambda is then the pin's reaction or K_s sgn(E), not an actuator's force"})
+                "expected": f"no limit with variant '{self.variant}'" if point_fixed(self.variant) else
+                            "no limit with the pure sign law (boundary_layer: 0)",
+                "detail": "a slide's force along its axis is limited by saturation.torque_n (N), its feedback's "
+                          "limit as for a hinge; Lambda_j is its reaction" if self.variant == "slide" else
+                          "Lambda is then the pin's reaction or K_s sgn(E), not an actuator's force"})
         return self
 
 
@@ -1534,9 +1545,11 @@ class ChainSchema(_Section):
         for name, state in self.initial_state.items():  # a hinge's child: its q, u; any other body: its blocks
             given = state.model_fields_set & (set(HINGE_STATE) if name not in turned else set(INITIAL_STATE_BLOCKS))
             for key in sorted(given):
-                kind = "universal joint" if turned.get(name) == "universal" else "hinge"
+                kind = {"universal": "universal joint", "slide": "slide"}.get(turned.get(name), "hinge")
+                what = "q (m) and u (m/s), its slide's displacement and rate" if kind == "slide" else \
+                    f"q (rad) and u (rad/s), its {kind}'s angle and rate"
                 raise _chain_error(f"initial_state.{name}.{key}", short_repr(getattr(state, key)),
-                                   (f"q (rad) and u (rad/s), its {kind}'s angle and rate" if name in turned else
+                                   (what if name in turned else
                                     f"{', '.join(INITIAL_STATE_BLOCKS)}: the blocks of its state"),
                                    (f"'{name}' is a {kind}'s child; its {kind} places and turns it" if name in turned
                                     else f"'{name}' is not a hinge's child"))
@@ -1545,7 +1558,15 @@ class ChainSchema(_Section):
                 if value is not None and _is_pair(value) != (turned[name] == "universal"):
                     raise _chain_error(f"initial_state.{name}.{key}", short_repr(value),
                                        "2 numbers (a universal joint's q_1, q_2)" if turned[name] == "universal"
-                                       else "a number (a hinge's angle)", f"'{name}' is a {turned[name]} joint's child")
+                                       else "a number (a hinge's angle)" if turned[name] == "hinge"
+                                       else "a number (a slide's displacement, m)",
+                                       f"'{name}' is a {turned[name]} joint's child")
+                turns = np.asarray(0.0 if value is None else value, dtype=float)
+                if key == "q" and turned[name] != "slide" and not np.all(np.abs(turns) < math.pi):
+                    raise _chain_error(f"initial_state.{name}.q", short_repr(value),
+                                       "a number in (-pi, pi) (rad)" if turns.ndim == 0 else
+                                       "2 numbers, each in (-pi, pi) (rad)",
+                                       f"'{name}' is a {turned[name]} joint's child")
         for j in self.joints:  # a start inside the admissible region of its range
             if j.variant not in AXES_VARIANTS or j.range is None or j.range.kind != "region":
                 continue

@@ -212,9 +212,11 @@ class TableFields:
 
 
 def _coordinates(values: np.ndarray, fill: float, diagonal: bool = False) -> np.ndarray:
-    """A universal joint's numbers per coordinate ``values`` (k, 2) as its records' 3-vectors
-    (k, 3), the third ``fill``, or (``diagonal``) the diagonal matrices (k, 3, 3) of those."""
-    out = np.concatenate([values, np.full((len(values), 1), fill)], axis=1)
+    """A joint's numbers per coordinate ``values`` (k, 2) (a universal joint's; a slide's (k, 1)
+    or (k,)) as its records' 3-vectors (k, 3), the rest ``fill``, or (``diagonal``) the
+    diagonal matrices (k, 3, 3) of those."""
+    values = np.asarray(values, dtype=float).reshape(len(values), -1)
+    out = np.concatenate([values, np.full((len(values), 3 - values.shape[1]), fill)], axis=1)
     return out[:, :, None] * np.eye(3) if diagonal else out
 
 
@@ -520,16 +522,17 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
     for name in ("k_t", "l_t"):
         p[name] = of("bodies", name, zero, shape=(3, 3))
     hinged = joint.variant == "hinge"  # its gains, reference and limits numbers about its axis
+    coordinates = {"universal": (2,), "slide": ()}.get(joint.variant)  # numbers per coordinate, entries of 3-vectors
     for name in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d"):
-        if not (joint.variant in ("hinge", "universal") and name in ("k_r", "l_r")):
+        if not (joint.variant in ("hinge", "universal", "slide") and name in ("k_r", "l_r")):
             p[name] = of("joints", name, zero, shape=(3, 3))
     if joint.l_d is not None:
         p["l_d_inv"] = _inverse(p["l_d"])
     p["k_s"] = of("joints", "k_s", 0.0)
     p["boundary_layer"] = of("joints", "boundary_layer", 0.0)
-    if joint.variant not in ("hinge", "universal"):
+    if joint.variant not in ("hinge", "universal", "slide"):
         p["theta_ref"] = of("joints", "theta_ref", zero, shape=(3,))
-    if joint.passive is not None and joint.variant not in ("hinge", "universal"):
+    if joint.passive is not None and joint.variant not in ("hinge", "universal", "slide"):
         p["passive"] = 1.0
         p["passive_k_r"] = of("joints", "passive.k_r", zero, shape=(3, 3))
         p["passive_l_r"] = of("joints", "passive.l_r", zero, shape=(3, 3))
@@ -546,26 +549,32 @@ def _tree_record(p: np.ndarray, f: TableFields, t: int, chain, i: int, gravity: 
             _, p["passive_k_r"], p["passive_l_r"], p["passive_theta_ref"], _, _ = hinge_vectors(
                 axis, of("joints", "passive.k_r", 0.0), of("joints", "passive.l_r", 0.0),
                 of("joints", "passive.theta_ref", 0.0))
-    universal = joint.variant == "universal"  # its numbers per coordinate, entries 0-1 of the records' 3-vectors
+    universal = coordinates is not None  # a universal joint's entries 0-1 of the records' 3-vectors, a slide's 0
     if universal:
-        p["axis"], p["axis_2"] = (a / np.linalg.norm(a, axis=-1, keepdims=True)
-                                  for a in np.moveaxis(of("joints", "axis", shape=(2, 3)), 1, 0))
-        p["k_r"], p["l_r"] = (_coordinates(of("joints", name, 0.0, shape=(2,)), 0.0, True) for name in ("k_r", "l_r"))
-        p["theta_ref"] = _coordinates(of("joints", "theta_ref", 0.0, shape=(2,)), 0.0)
-        upper = of("joints", "saturation.torque_n", math.inf, shape=(2,)) if joint.saturation else np.full(2, math.inf)
-        lower = of("joints", "saturation.torque_n_lower", math.nan, shape=(2,)) if joint.saturation else np.nan
+        if joint.variant == "universal":
+            p["axis"], p["axis_2"] = (a / np.linalg.norm(a, axis=-1, keepdims=True)
+                                      for a in np.moveaxis(of("joints", "axis", shape=(2, 3)), 1, 0))
+        else:
+            axis = of("joints", "axis", shape=(3,))
+            p["axis"] = axis / np.linalg.norm(axis, axis=-1, keepdims=True)
+        p["k_r"], p["l_r"] = (_coordinates(of("joints", name, 0.0, shape=coordinates), 0.0, True)
+                              for name in ("k_r", "l_r"))
+        p["theta_ref"] = _coordinates(of("joints", "theta_ref", 0.0, shape=coordinates), 0.0)
+        upper = (of("joints", "saturation.torque_n", math.inf, shape=coordinates) if joint.saturation
+                 else np.full((len(p), *coordinates), math.inf))
+        lower = of("joints", "saturation.torque_n_lower", math.nan, shape=coordinates) if joint.saturation else np.nan
         limit, floor = _coordinates(upper, math.inf), _coordinates(np.where(np.isnan(lower), -upper, lower), -math.inf)
         if joint.passive is not None:
             p["passive"] = 1.0
-            p["passive_k_r"], p["passive_l_r"] = (_coordinates(of("joints", f"passive.{name}", 0.0, shape=(2,)), 0.0,
-                                                               True) for name in ("k_r", "l_r"))
-            p["passive_theta_ref"] = _coordinates(of("joints", "passive.theta_ref", 0.0, shape=(2,)), 0.0)
+            p["passive_k_r"], p["passive_l_r"] = (_coordinates(of("joints", f"passive.{name}", 0.0, shape=coordinates),
+                                                               0.0, True) for name in ("k_r", "l_r"))
+            p["passive_theta_ref"] = _coordinates(of("joints", "passive.theta_ref", 0.0, shape=coordinates), 0.0)
     if joint.stop is not None or joint.region is not None:  # a hinge's q (entry 0), a universal's q_1, q_2, a ball's
         p["stop" if joint.stop is not None else "region"] = 1.0
         for name, field in (("lower", "range_lower"), ("upper", "range_upper"), ("k_r", "stop_k"),
                             ("l_r", "stop_l"))[:4 if joint.stop is not None else 2]:
             default = 0.0 if name == "l_r" else None
-            if universal:
+            if joint.variant == "universal":
                 p[field] = _coordinates(of("joints", f"range.{name}", default, shape=(2,)),
                                         {"lower": -math.inf, "upper": math.inf}.get(name, 0.0))
             else:

@@ -18,7 +18,7 @@ Every run is a tree of 1 to :data:`MAX_TREE_BODIES` bodies (:func:`tree_kernel_f
 :class:`~rbstab.engine.systems.TreeSystem` through the system's functions
 (:mod:`rbstab.engine.systems`; the physics is :func:`rbstab.variants.tree.tree_rate`,
 compiled as a device function with scratch arrays in thread-local memory sized for the
-tree's shape: a kernel per number of bodies, of permanent joints, of embedded joints and of hinges,
+tree's shape: a kernel per number of bodies and of each joint kind,
 :func:`tree_shape`), or, where every tree of a launch is the paper's one body, on the
 body's record with one body's rate (a kernel of its own, as on the CPU). A launch takes
 trees of one structure (their records passed once, read by every thread), each run with
@@ -90,7 +90,7 @@ from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_w
 from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate, is_one_body
 from ..variants.disturbances import edges_up_to
 from ..variants.tree import TreeWork, reduced_size, tree_expand
-from ..variants.kernels import BALL, FREE, HINGE, PERMANENT, UNIVERSAL, output_row
+from ..variants.kernels import BALL, FREE, HINGE, PERMANENT, SLIDE, UNIVERSAL, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
@@ -250,7 +250,7 @@ def tree_stream_sample(sink, p, j, t, sample, work):
         for k in range(AXES[p.codes[i]]):
             cw.angle[i, k] = sample[p.r_at[i] + k]
     chain_evaluate(t, w.y, p.params, p.codes, p.parents, p.ppoints, p.d_at, w.dy, cw.joints, cw.bodies, cw.scalars, cw)
-    _saturation_flags(w.y, p.params, p.codes, cw.joints, sink.flags)
+    _saturation_flags(w.y, p.params, p.codes, cw.joints, cw.angle, sink.flags)
     row, terms = sink.row, cw.scalars
     edges = 0.0
     for i in range(n):
@@ -436,12 +436,13 @@ def tree_launch_signature() -> tuple:
 
 
 def tree_shape(codes, d_at) -> tuple[int, ...]:
-    """(bodies, permanent joints, embedded joints, hinges, universal joints, quaternion balls) of a tree of joint codes
+    """(bodies, permanent joints, embedded joints, hinges, universal joints, quaternion balls,
+    slides) of a tree of joint codes
     ``codes`` (n,) whose embedded joints' D sit at ``d_at`` (n,; -1: none): what sizes the
     tree kernel's thread-local arrays (:func:`tree_kernel_function`)."""
     codes, d_at = np.asarray(codes), np.asarray(d_at)
     return (int(codes.size), int(np.sum(codes == PERMANENT)), int(np.sum(d_at >= 0)), int(np.sum(codes == HINGE)),
-            int(np.sum(codes == UNIVERSAL)), int(np.sum(codes == BALL)))
+            int(np.sum(codes == UNIVERSAL)), int(np.sum(codes == BALL)), int(np.sum(codes == SLIDE)))
 
 
 #: (module, name) of the compiled functions a CUDA kernel calls as functions of their own:
@@ -480,7 +481,8 @@ def _lower_not_inlined() -> None:
 
 def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = False):
     """The Python function of the CUDA kernel of the runs of trees of ``shape`` (bodies n,
-    permanent joints p, embedded joints e, hinges h, universal joints u, quaternion balls b (0 where left out); :func:`tree_shape`) with method number ``method``
+    permanent joints p, embedded joints e, hinges h, universal joints u, quaternion balls b, slides s (0 where left
+    out); :func:`tree_shape`) with method number ``method``
     (:func:`tree_launch_signature`: one tree, k runs, one thread a run). Its name names
     them, so that each kernel has cache files of its own.
 
@@ -512,18 +514,19 @@ def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = F
     _lower_not_inlined()
     n_rows, q_rows = int(STAGE_ROWS[method]), int(INTERPOLANT_ROWS[method])
     scheme = (method, int(N_STAGES[method]), method == DOP853)
-    bodies, permanent, embedded, hinges, universals, balls = (*(int(x) for x in shape), 0, 0, 0)[:6]
-    free = bodies - permanent - hinges - universals - balls
+    bodies, permanent, embedded, hinges, universals, balls, slides = (*(int(x) for x in shape), 0, 0, 0, 0)[:7]
+    free = bodies - permanent - hinges - universals - balls - slides
     states = 12 * bodies + 3 * embedded  # the maximal image
     rates = states + 1  # its rate, and W's
     # the integrated vector: the reduced state (the joint kinds' sizes, rbstab.layout.JOINT_KINDS) and W
     size = (free * int(REDUCED_STATES[FREE]) + permanent * int(REDUCED_STATES[PERMANENT])
             + hinges * int(REDUCED_STATES[HINGE]) + universals * int(REDUCED_STATES[UNIVERSAL])
-            + balls * int(REDUCED_STATES[BALL]) + 3 * embedded + 1)
+            + balls * int(REDUCED_STATES[BALL]) + slides * int(REDUCED_STATES[SLIDE]) + 3 * embedded + 1)
     n_state = size - 1
     rows = max(1, 3 * permanent)
     columns = (free * int(VELOCITIES[FREE]) + permanent * int(VELOCITIES[PERMANENT]) + hinges * int(VELOCITIES[HINGE])
-               + universals * int(VELOCITIES[UNIVERSAL]) + balls * int(VELOCITIES[BALL]))
+               + universals * int(VELOCITIES[UNIVERSAL]) + balls * int(VELOCITIES[BALL])
+               + slides * int(VELOCITIES[SLIDE]))
 
     def run_tree(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, tree_of, y0s, settings, first,
                  weights, short, stride, ratio, control, limit_ns, status_o, t_stop_o, nfev_o, n_steps_o, acc_o,
@@ -611,7 +614,8 @@ def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = F
     run_tree.__name__ = run_tree.__qualname__ = (f"run_{'body' if one_body else 'tree'}{bodies}_{permanent}p"
                                                  f"{embedded}e{f'{hinges}h' if hinges else ''}"
                                                  f"{f'{universals}u' if universals else ''}"
-                                                 f"{f'{balls}b' if balls else ''}_{METHODS[method]}")
+                                                 f"{f'{balls}b' if balls else ''}{f'{slides}s' if slides else ''}"
+                                                 f"_{METHODS[method]}")
     return run_tree
 
 
@@ -637,13 +641,13 @@ def compiled_tree_kernel(method: int, shape: tuple[int, ...], one_body: bool = F
     from numba.cuda.core import config  # optional: numba-cuda
 
     config.CACHE_DIR = str(CACHE_DIR)
-    n, p, e, h, u, b = (*shape, 0, 0, 0)[:6]
+    n, p, e, h, u, b, s = (*shape, 0, 0, 0, 0)[:7]
     group = (f"cuda-{'body' if one_body else 'tree'}{n}-{p}p{e}e{f'{h}h' if h else ''}{f'{u}u' if u else ''}"
-             f"{f'{b}b' if b else ''}-{METHODS[method]}")
+             f"{f'{b}b' if b else ''}{f'{s}s' if s else ''}-{METHODS[method]}")
     what = (f"the CUDA kernel for one body's {('permanent', 'embedded', 'other')[0 if p else 1 if e else 2]} joint"
             if one_body else f"the CUDA kernel for trees of {n} bodies ({p} permanent joints, {e} embedded"
                              f"{f', {h} hinges' if h else ''}{f', {u} universal joints' if u else ''}"
-                             f"{f', {b} balls' if b else ''})")
+                             f"{f', {b} balls' if b else ''}{f', {s} slides' if s else ''})")
     what += f" with {METHODS[method]}"
     with _compile_lock(group):
         warm = cache_is_warm(group)

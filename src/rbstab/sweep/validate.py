@@ -249,6 +249,8 @@ def _matrix_bad(values: np.ndarray, kind: str) -> np.ndarray:
 
     flat = values.reshape(len(values), -1)
     bad = ~np.isfinite(flat).all(axis=1) | (np.abs(flat) > MAX_MAGNITUDE).any(axis=1)
+    if values.ndim == 1:  # a number a run: a gain on a joint's coordinate
+        return bad | ((values < MIN_INVERTED) if kind == "definite" else (values < 0))
     if values.ndim == 2:  # diagonals
         smallest = values.min(axis=1)
         return bad | ((smallest < MIN_INVERTED) if kind == "definite" else (smallest < 0))

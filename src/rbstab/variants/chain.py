@@ -50,14 +50,14 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import BALL, EMBEDDED, HINGE, PERMANENT, UNIVERSAL, constraint_dissipation, constraint_energy, constraint_force, \
-    constraint_force_command, run_outputs, saturation_effects
+from .kernels import BALL, EMBEDDED, HINGE, PERMANENT, SLIDE, UNIVERSAL, constraint_dissipation, constraint_energy, \
+    constraint_force, constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
 from .registry import record_offset
 
 __all__ = ["CompiledChain", "ChainTrajectory", "compile_chain", "initial_state", "chain_rate", "evaluate",
            "lyapunov", "rest_state", "rest_offset", "reference_posture", "records_of", "is_one_body", "one_body_mask", "papers_feedback", "gimbal_lock_message", "locked_part", "gimbal_part_name", "independent_coordinates", "full_state",
-           "region_margin", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
+           "region_margin", "slide_coordinates", "gimbal_angles", "state_vector", "with_records", "bound_reached", "place", "chain_push", "chain_push_with", "chain_evaluate", "ChainWork", "chain_work", "impulse_times", "disturbance_edges", "BODY_OUTPUTS", "JOINT_OUTPUTS", "SCALAR_OUTPUTS"]
 
 #: Per-body outputs of :func:`evaluate`, each (n_samples, n_bodies, 3).
 BODY_OUTPUTS = ("theta", "omega", "position", "velocity", "force_h", "force_h_saturated")
@@ -350,7 +350,26 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         e = sub(add(x_c, matvec(rot[j], r_c)), point_p)
         f = sub(add(v_c, matvec(rot[j], cross(omega_c, r_c))), rate_p)
         strain = sub(theta_j, p.theta_ref)  # the spring's: Theta_j - Theta_ref (eq 23 about the reference posture)
-        if codes[j] == UNIVERSAL:  # on its coordinates
+        pull = ZERO
+        if codes[j] == SLIDE:  # on its coordinate q = a'E_j, u = a'F_j (a the axis, inertial): the force f a at C
+            axis = vector(p.axis, 0)
+            if q >= 0:
+                axis = matvec(rot[q], axis)
+            s, u = dot(axis, e), dot(axis, f)
+            work.angle[j, 0], work.angle[j, 1] = s, u
+            theta_j, omega_j, n_j = ZERO, ZERO, ZERO
+            coordinate, constraint, dissipation, power = _feedback(
+                IDENTITY, (s - p.theta_ref[0], 0.0, 0.0), IDENTITY, (s - p.passive_theta_ref[0], 0.0, 0.0),
+                (u, 0.0, 0.0), p, constraint, dissipation, power)
+            if p.stop > 0.0:
+                coordinate, constraint, dissipation = _stop(coordinate, constraint, dissipation, s, u, (1.0, 0.0, 0.0),
+                                                            p, 0)
+            pull = (axis[0] * coordinate[0], axis[1] * coordinate[0], axis[2] * coordinate[0])
+            _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], pull)), pull)
+            if q >= 0:  # its reaction on the parent at the same point, R_p + q a in the parent's frame
+                back = cross(add(r_p, (p.axis[0] * s, p.axis[1] * s, p.axis[2] * s)), matTvec(rot[q], pull))
+                _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-pull[0], -pull[1], -pull[2]))
+        elif codes[j] == UNIVERSAL:  # on its coordinates
             n_j, rotational, dissipation, power = _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational,
                                                                        dissipation, power)
         elif codes[j] == BALL:  # on the rotation vectors of its turns from its references, B = J_r^-1
@@ -366,8 +385,8 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
         else:
             n_j, rotational, dissipation, power = _feedback(b_j, strain, b_j, sub(theta_j, p.passive_theta_ref),
                                                             omega_j, p, rotational, dissipation, power)
-        if p.stop > 0.0:  # its range: beyond either end of a coordinate a one-sided spring and damper, never limited
-            if codes[j] == HINGE:  # q = a'Theta_j, its rate a'Omega_j, its torque along a
+        if p.stop > 0.0 and codes[j] != SLIDE:  # its range: beyond either end of a coordinate a one-sided spring
+            if codes[j] == HINGE:  # and damper, never limited  # q = a'Theta_j, its rate a'Omega_j, its torque along a
                 axis = vector(p.axis, 0)
                 n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis),
                                                      dot(omega_j, axis), axis, p, 0)
@@ -384,7 +403,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             reaction = matvec(rel, n_j)
             _acc_add(torque, force, q, (-reaction[0], -reaction[1], -reaction[2]), ZERO)
         d = ZERO
-        lam = ZERO
+        lam = pull  # a slide's force at C (its reaction, from the motion: rbstab.variants.tree.tree_reactions)
         if d_at[j] >= 0:
             d = vector(y, d_at[j])
         if codes[j] == PERMANENT:
@@ -655,12 +674,15 @@ def chain_rates(times, states, params, codes, parents, ppoints, d_at, out):
 
 
 @jit(forceinline=True, _nrt=False)
-def _saturation_flags(y, params, codes, joints, flags):
+def _saturation_flags(y, params, codes, joints, angle, flags):
     """The actuators' saturation flags of one evaluated state into ``flags`` (n, 3, 3): per
     joint j, the axes of N_j, of H of body j (its child) and of Lambda_j commanded at or
     beyond their limits, 1.0 or 0.0 (:func:`rbstab.variants.kernels.saturation_effects`
     of joint j's E_j, F_j, D_j and body j's X, V, as one body's; N_j's from its command on
-    Theta_j - Theta_ref, Omega_j, B(Theta_j) between its lower and upper limits; ``joints`` (n, 7, 3) as :func:`chain_evaluate` filled it)."""
+    Theta_j - Theta_ref, Omega_j, B(Theta_j) between its lower and upper limits; ``joints`` (n,
+    7, 3) as :func:`chain_evaluate` filled it; a slide's force f a, commanded on its q, u
+    (``angle``, :class:`ChainWork`'s, as :func:`chain_wrenches` read them), as Lambda_j's, in
+    entry 0)."""
     for j in range(codes.shape[0]):
         theta_j = vector(joints[j, _THETA_J], 0)
         _, b_j = rotation_and_rate_of(theta_j)
@@ -675,7 +697,13 @@ def _saturation_flags(y, params, codes, joints, flags):
             codes[j], strain, omega_j, vector(y, 12 * j + 6), vector(y, 12 * j + 9), b_j,
             vector(joints[j, _E], 0), vector(joints[j, _F], 0), vector(joints[j, _D], 0), params[j])
         n_flags = ZERO
-        if params[j].saturation > 0.0:  # N_j commanded on Theta_j - Theta_ref, between its two limits
+        if codes[j] == SLIDE:
+            lam_flags = ZERO
+            if params[j].saturation > 0.0:
+                commanded = torque_n_command(IDENTITY, (angle[j, 0] - params[j].theta_ref[0], 0.0, 0.0),
+                                             (angle[j, 1], 0.0, 0.0), params[j])
+                lam_flags = saturated_between(commanded, params[j].torque_floor, params[j].torque_limit)
+        elif params[j].saturation > 0.0:  # N_j commanded on Theta_j - Theta_ref, between its two limits
             commanded = torque_n_command(b_j, strain, omega_j, params[j])
             if codes[j] == UNIVERSAL:  # on its coordinates: -K_r (q - q_ref) - L_r dq/dt
                 commanded = torque_n_command(IDENTITY, strain, matvec(b_j, omega_j), params[j])
@@ -716,7 +744,7 @@ def chain_samples(times, states, params, codes, parents, ppoints, d_at, tree_of,
             chain_evaluate(times[s], states[s], params[t], codes, parents, ppoints[t], d_at, dy, joint, body, scalar,
                            work)
             power[s] = dy[states.shape[1]]
-            _saturation_flags(states[s], params[t], codes, joint, flag)
+            _saturation_flags(states[s], params[t], codes, joint, work.angle, flag)
         _put_sample(s, states[s], joint, body, scalar, flag, joints, bodies, scalars, flags, blocks)
 
 
@@ -901,20 +929,48 @@ def compile_chain(chain: Chain, offset: float | None = None) -> CompiledChain:
 
 # -- rest state and v ---------------------------------------------------------------------------
 @jit(forceinline=True)
-def _place_body(y, i, params, parents, ppoints, x_placed, v_placed):
-    """Place body i of the state ``y`` (n_states,) on its joint (:func:`place`): its X where
-    ``x_placed`` so that the joint's points coincide (E_i = 0), its V where ``v_placed`` so
-    that they move together (F_i = 0), from its parent's X, V, Theta, Omega (ground: X_p =
-    V_p = 0, A_p = I)."""
-    a = rotation_and_rate_of(vector(y, 12 * i))[0]
+def slide_coordinates(y, i, params, parents, ppoints):
+    """(q [m], u [m/s], the axis a [inertial frame]) of the slide that holds body i, read from
+    the maximal state ``y`` (n_states,): q = a'E_i, u = a'F_i, E_i and F_i the offset of
+    body i's point C from its parent's point and its rate (the part of F_i across the axis,
+    A_p (Omega_p x q a), has no component along it)."""
+    a_c = rotation_and_rate_of(vector(y, 12 * i))[0]
     r_c = vector(params[i].attachment_point, 0)
-    point, rate = vector(ppoints[i], 0), ZERO
+    axis, point, rate = vector(params[i].axis, 0), vector(ppoints[i], 0), ZERO
     p = parents[i]
     if p >= 0:
         a_p = rotation_and_rate_of(vector(y, 12 * p))[0]
         r_p = point
+        axis = matvec(a_p, axis)
         point = add(vector(y, 12 * p + 6), matvec(a_p, r_p))
         rate = add(vector(y, 12 * p + 9), matvec(a_p, cross(vector(y, 12 * p + 3), r_p)))
+    e = sub(add(vector(y, 12 * i + 6), matvec(a_c, r_c)), point)
+    f = sub(add(vector(y, 12 * i + 9), matvec(a_c, cross(vector(y, 12 * i + 3), r_c))), rate)
+    return dot(axis, e), dot(axis, f), axis
+
+
+@jit(forceinline=True)
+def _place_body(y, i, params, codes, parents, ppoints, x_placed, v_placed):
+    """Place body i of the state ``y`` (n_states,) on its joint (:func:`place`): its X where
+    ``x_placed`` so that the joint's points coincide (E_i = 0), its V where ``v_placed`` so
+    that they move together (F_i = 0), from its parent's X, V, Theta, Omega (ground: X_p =
+    V_p = 0, A_p = I); on a slide, C kept at its offset q a from the parent's point and its
+    rate u along the axis (:func:`slide_coordinates`)."""
+    a = rotation_and_rate_of(vector(y, 12 * i))[0]
+    r_c = vector(params[i].attachment_point, 0)
+    point, rate = vector(ppoints[i], 0), ZERO
+    p = parents[i]
+    slid, slid_rate = ZERO, ZERO  # a slide's q a, u a (inertial)
+    if codes[i] == SLIDE:
+        s, u, axis = slide_coordinates(y, i, params, parents, ppoints)
+        slid, slid_rate = (axis[0] * s, axis[1] * s, axis[2] * s), (axis[0] * u, axis[1] * u, axis[2] * u)
+    if p >= 0:
+        a_p = rotation_and_rate_of(vector(y, 12 * p))[0]
+        r_p = point
+        omega_p = matvec(a_p, vector(y, 12 * p + 3))  # inertial
+        point = add(vector(y, 12 * p + 6), matvec(a_p, r_p))
+        rate = add(add(vector(y, 12 * p + 9), matvec(a_p, cross(vector(y, 12 * p + 3), r_p))), cross(omega_p, slid))
+    point, rate = add(point, slid), add(rate, slid_rate)
     if x_placed:
         _put(y, 12 * i + 6, sub(point, matvec(a, r_c)))
     if v_placed:
@@ -922,19 +978,20 @@ def _place_body(y, i, params, parents, ppoints, x_placed, v_placed):
 
 
 @jit
-def _place_rows(states, params, parents, ppoints, x_placed, v_placed):
+def _place_rows(states, params, codes, parents, ppoints, x_placed, v_placed):
     """:func:`place` on each row of ``states`` (k, n_states), in place, parents first."""
     for k in range(states.shape[0]):
         for i in range(parents.shape[0]):
             if x_placed[i] or v_placed[i]:
-                _place_body(states[k], i, params, parents, ppoints, x_placed[i], v_placed[i])
+                _place_body(states[k], i, params, codes, parents, ppoints, x_placed[i], v_placed[i])
 
 
 @jit
 def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
     """Fill ``y`` (n_states,) with the state at rest of the configuration ``q``
     (:func:`rest_coordinates`: each body's Theta_i [rad], a hinge's child's q [rad] instead,
-    a universal joint's child's q_1, q_2 [rad];
+    a universal joint's child's q_1, q_2 [rad], a slide's child's q [m] (its child turned as
+    its parent, its point C at q a from the parent's point);
     then X_i [m, inertial] of the bodies whose joint is not point-fixed, then D [m] of the
     embedded joints); every Omega, V zero; a hinge's child turned by q about its axis from
     its parent (A_c = A_p exp(q [a]x)); X of a point-fixed joint's child placed on its
@@ -943,8 +1000,15 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
     for k in range(y.shape[0]):
         y[k] = 0.0
     k = 0
+    slide_at = np.zeros(n, dtype=np.int64)  # each slide's q in q
     for i in range(n):
-        if AXES[codes[i]] > 0:
+        if codes[i] == SLIDE:  # its child turned as its parent
+            slide_at[i] = k
+            if parents[i] >= 0:
+                for c in range(3):
+                    y[12 * i + c] = y[12 * parents[i] + c]
+            k += 1
+        elif AXES[codes[i]] > 0:
             if codes[i] == HINGE:
                 rel = axis_rotation(vector(params[i].axis, 0), q[k])
             else:
@@ -976,7 +1040,11 @@ def rest_configuration(q, params, codes, parents, ppoints, d_at, y):
             k += 3
     for i in range(n):
         if POINT_FIXED[codes[i]]:
-            _place_body(y, i, params, parents, ppoints, True, False)
+            _place_body(y, i, params, codes, parents, ppoints, True, False)
+            if codes[i] == SLIDE:  # then moved to its q along the axis
+                s, _, axis = slide_coordinates(y, i, params, parents, ppoints)
+                for c in range(3):
+                    y[12 * i + 6 + c] += axis[c] * (q[slide_at[i]] - s)
 
 
 @jit
@@ -1057,7 +1125,7 @@ def rest_state(compiled: CompiledChain) -> tuple[np.ndarray | None, float]:
     from scipy.optimize import minimize, root  # heavy: scipy, only where a rest state is sought
 
     n = compiled.size
-    q0 = rest_coordinates(compiled, _place(compiled, reference_posture(compiled)))
+    q0 = rest_coordinates(compiled, reference_posture(compiled))
     hinged = compiled.hinged  # the maximal rates leave out the reactions of joints about axes
     y, dy, work = np.empty(compiled.n_states), np.empty(compiled.n_states), chain_work(n)
     args = (_undisturbed(compiled.params), *compiled.args[1:], y, dy, work)
@@ -1104,13 +1172,15 @@ _REST_GTOL = 1e-11
 def rest_coordinates(compiled: CompiledChain, y: np.ndarray) -> np.ndarray:
     """The configuration (:func:`rest_configuration`'s ``q``) of the state ``y``
     (n_states,): each body's Theta_i [rad] (a hinge's child: its q [rad], in (-pi, pi]; a
-    universal joint's: q_1, q_2),
+    universal joint's: q_1, q_2; a slide's: its q [m]),
     X_i [m] of the bodies whose joint is not point-fixed, D [m] of the embedded joints."""
     n, y = compiled.size, np.asarray(y, dtype=float)
     joints = np.empty((n, 7, 3))
     chain_core(0.0, np.ascontiguousarray(y), *compiled.args, np.empty(compiled.n_states), joints, np.empty((n, 3)),
                np.empty(5))
-    angles = [[float(compiled.params[i]["axis"] @ joints[i, _THETA_J])] if compiled.codes[i] == HINGE
+    angles = [[slide_coordinates(np.ascontiguousarray(y), i, compiled.params, compiled.parents, compiled.ppoints)[0]]
+              if compiled.codes[i] == SLIDE
+              else [float(compiled.params[i]["axis"] @ joints[i, _THETA_J])] if compiled.codes[i] == HINGE
               else list(joints[i, _THETA_J, :2]) if compiled.codes[i] == UNIVERSAL
               else list(joints[i, _THETA_J]) if compiled.codes[i] == BALL
               else list(y[12 * i: 12 * i + 3]) for i in range(n)]
@@ -1123,13 +1193,16 @@ def reference_posture(compiled: CompiledChain) -> np.ndarray:
     """The state (n_states,) whose bodies hold every joint at its reference posture, Theta_j
     = Theta_ref [rad] (A_c = A_p A(Theta_ref), parents first; the ground's A_p = I; a hinge's
     A(Theta_ref) the rotation by a . Theta_ref about its axis a, a universal joint's by its
-    q_ref), at rest; X, V and D zero
-    (:func:`place` puts the bodies on their joints)."""
+    q_ref; a slide's child turned as its parent, A_rel = I), at rest, every body placed on its
+    joint (:func:`place`; a slide's child at its q_ref along the axis, the bodies it carries
+    with it); D zero."""
     y = np.zeros(compiled.n_states)
     rotations = []
     for i in range(compiled.size):
         a = rotation_matrix(compiled.params[i]["theta_ref"])
-        if compiled.codes[i] == HINGE:
+        if compiled.codes[i] == SLIDE:
+            a = np.eye(3)
+        elif compiled.codes[i] == HINGE:
             axis = compiled.params[i]["axis"]
             a = np.array(axis_rotation(tuple(axis), float(axis @ compiled.params[i]["theta_ref"])))
         elif compiled.codes[i] == UNIVERSAL:
@@ -1142,6 +1215,16 @@ def reference_posture(compiled: CompiledChain) -> np.ndarray:
             a = rotations[q] @ a
         rotations.append(a)
         y[12 * i: 12 * i + 3] = euler_angles_of(a)
+    y = _place(compiled, y)
+    for i in np.flatnonzero(compiled.codes == SLIDE):  # parents first: each moved to its q_ref, with its subtree
+        s, _, axis = slide_coordinates(y, int(i), compiled.params, compiled.parents, compiled.ppoints)
+        shift = np.asarray(axis) * (compiled.params[i]["theta_ref"][0] - s)
+        for b in range(i, compiled.size):
+            k = b
+            while k > i:
+                k = int(compiled.parents[k])
+            if k == i:
+                y[12 * b + 6: 12 * b + 9] += shift
     return y
 
 
@@ -1199,7 +1282,8 @@ def full_state(compiled: CompiledChain, z: np.ndarray) -> np.ndarray:
     stack = z.reshape(1, -1) if z.ndim == 1 else z
     y = np.zeros((len(stack), compiled.n_states))
     y[:, compiled.independent_columns] = stack
-    _place_rows(y, compiled.params, compiled.parents, compiled.ppoints, compiled.permanent, compiled.permanent)
+    _place_rows(y, compiled.params, compiled.codes, compiled.parents, compiled.ppoints, compiled.permanent,
+                compiled.permanent)
     return y if z.ndim == 2 else y[0]
 
 
@@ -1215,9 +1299,10 @@ def place(compiled: CompiledChain, y: np.ndarray, x_placed, v_placed) -> np.ndar
     X_i of the bodies i where ``x_placed[i]`` (V_i where ``v_placed[i]``), (n,) booleans,
     placed so that joint i's points coincide (E_i = 0) and move together (F_i = 0), parents
     first: X_c = X_p + A_p R_p - A_c R_c, V_c = V_p + A_p (Omega_p x R_p) - A_c (Omega_c x
-    R_c) (ground: X_p = V_p = 0, A_p = I)."""
+    R_c) (ground: X_p = V_p = 0, A_p = I); a slide's child's C kept at its offset along the
+    axis and its rate along it (:func:`slide_coordinates`)."""
     y = np.array(y, dtype=float)
-    _place_rows(y.reshape(-1, y.shape[-1]), compiled.params, compiled.parents, compiled.ppoints,
+    _place_rows(y.reshape(-1, y.shape[-1]), compiled.params, compiled.codes, compiled.parents, compiled.ppoints,
                 np.asarray(x_placed, dtype=np.bool_), np.asarray(v_placed, dtype=np.bool_))
     return y
 

@@ -25,7 +25,7 @@ from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
 from .disturbances import disturbance_power, disturbance_wrench, edges_up_to, state_power
 
-__all__ = ["FREE", "PERMANENT", "HINGE", "UNIVERSAL", "BALL", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row", "limited_quantities",
+__all__ = ["FREE", "PERMANENT", "HINGE", "UNIVERSAL", "BALL", "SLIDE", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row", "limited_quantities",
            "state_rates", "run_outputs", "state_powers", "STATE_SIZE"]
 
 #: The variants' codes (:data:`rbstab.layout.VARIANT_CODES`); :data:`STATE_SIZE`: their
@@ -34,7 +34,7 @@ FREE, PERMANENT, SLIDING, VISCO_ELASTIC, EMBEDDED = (
     VARIANT_CODES[name] for name in ("free", "permanent", "sliding", "visco_elastic", "embedded"))
 #: The hinge's, the universal joint's and the quaternion ball's codes
 #: (:data:`rbstab.layout.JOINT_CODES`): a tree's joints, no one-body variant.
-HINGE, UNIVERSAL, BALL = JOINT_CODES["hinge"], JOINT_CODES["universal"], JOINT_CODES["ball"]
+HINGE, UNIVERSAL, BALL, SLIDE = (JOINT_CODES[kind] for kind in ("hinge", "universal", "ball", "slide"))
 #: The states' sizes: ``permanent``'s reduced state, the full state (free, sliding,
 #: visco_elastic) and ``embedded``'s (with its controller state D).
 PERMANENT_SIZE, FULL_SIZE, EMBEDDED_SIZE = STATE_SIZE[PERMANENT], STATE_SIZE[FREE], STATE_SIZE[EMBEDDED]

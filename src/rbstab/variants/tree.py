@@ -42,6 +42,7 @@ from ..kinematics import (IDENTITY, ZERO, add, axis_rotation, cross, dot, matTve
                           universal_rotation, vector)
 from ..layout import AXES, POINT_FIXED, REDUCED_STATES, VELOCITIES
 from .chain import (
+    _LAMBDA,
     _OMEGA_J,
     compose,
     _cholesky_solve,
@@ -53,9 +54,10 @@ from .chain import (
     chain_wrenches,
     chain_work,
     euler_angles,
+    slide_coordinates,
 )
 from .disturbances import IMPULSE, disturbance_wrench
-from .kernels import BALL, HINGE, PERMANENT, UNIVERSAL
+from .kernels import BALL, HINGE, PERMANENT, SLIDE, UNIVERSAL
 
 __all__ = ["TreeLayout", "TreeWork", "tree_layout", "tree_work", "tree_expand", "tree_rate",
            "tree_push", "tree_impulses", "range_margin", "tree_reactions", "reaction_samples",
@@ -131,7 +133,7 @@ def _column(a_i, code, rate, i, col):
     """Column ``col`` of a point-fixed joint's motion subspace in the inertial frame: the
     unit angular velocity A_i e_col of a ball's child (Omega_j's axis col), A_i s_col of a
     hinge's or a universal joint's (its child-frame column s_col, row col of ``rate[i]``,
-    where :func:`tree_expand` put it)."""
+    where :func:`tree_expand` put it); a slide's unit velocity A_i a along its axis."""
     if AXES[code] > 0:
         return matvec(a_i, (rate[i, col, 0], rate[i, col, 1], rate[i, col, 2]))
     return (a_i[0][col], a_i[1][col], a_i[2][col])
@@ -142,6 +144,8 @@ def _joint_rate(rate, i, code, u, at):
     """S u [rad/s, child frame] of joint i about axes: its columns (rows of ``rate[i]``, as
     :func:`tree_expand` put them) times the entries ``u[at:]`` (its u, or du/dt)."""
     w = (0.0, 0.0, 0.0)
+    if code == SLIDE:  # it turns nothing
+        return w
     for k in range(AXES[code]):
         w = add(w, (rate[i, k, 0] * u[at + k], rate[i, k, 1] * u[at + k], rate[i, k, 2] * u[at + k]))
     return w
@@ -189,7 +193,9 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
     and Theta_c = Theta_j on a permanent joint to the ground, else read from A_c (|theta_2| <= pi/2) where
     ``angles`` (the rate reads A_c, not Theta_c). A hinge's and a universal joint's ``rate[i]``
     holds its motion subspace's columns in the child's frame instead, as rows (its axis a;
-    s_1, s_2: :func:`rbstab.kinematics.universal_columns`), then zero rows."""
+    s_1, s_2: :func:`rbstab.kinematics.universal_columns`), then zero rows; a slide's its axis
+    a. A slide's child keeps its parent's orientation (A_rel = I, Omega_j = 0) and its point
+    sits at the parent's point moved by q a (the parent's frame), moving at a dq/dt."""
     n = codes.shape[0]
     for i in range(n):
         s = r_at[i]
@@ -212,22 +218,28 @@ def tree_expand(yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y,
             elif codes[i] == BALL:  # A_rel of its quaternion
                 rel, b = quaternion_rotation(yr[s], yr[s + 1], yr[s + 2], yr[s + 3]), IDENTITY
                 omega_j = vector(yr, s + 4)
+            elif codes[i] == SLIDE:  # A_rel = I, Omega_j = 0; its axis in rate's first row
+                rel, b, omega_j = IDENTITY, (vector(params[i].axis, 0), ZERO, ZERO), ZERO
             else:
                 rel, b = rotation_and_rate_of(vector(yr, s))
                 omega_j = vector(yr, s + 3)
             r_c, r_p = vector(params[i].attachment_point, 0), vector(ppoints[i], 0)
+            slid = ZERO  # a slide's a dq/dt (the parent's frame)
+            if codes[i] == SLIDE:  # the parent's point moved by q a
+                r_p = add(r_p, (b[0][0] * yr[s], b[0][1] * yr[s], b[0][2] * yr[s]))
+                slid = (b[0][0] * yr[s + 1], b[0][1] * yr[s + 1], b[0][2] * yr[s + 1])
             q = parents[i]
             if q < 0:
                 a = rel
                 omega = omega_j
-                point, rate_p = r_p, (0.0, 0.0, 0.0)
+                point, rate_p = r_p, slid
             else:
                 a_p = _rows(rot, q)
                 omega_p = vector(y, 12 * q + 3)
                 a = compose(a_p, rel)
                 omega = add(matTvec(rel, omega_p), omega_j)
                 point = add(vector(y, 12 * q + 6), matvec(a_p, r_p))
-                rate_p = add(vector(y, 12 * q + 9), matvec(a_p, cross(omega_p, r_p)))
+                rate_p = add(vector(y, 12 * q + 9), matvec(a_p, add(cross(omega_p, r_p), slid)))
             if q < 0 and codes[i] == PERMANENT:
                 _put(y, 12 * i, vector(yr, s))
             elif angles:
@@ -430,9 +442,26 @@ def _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot,
     inertial]) into ``acc[i]`` (n, 6), its parent's already in ``acc[parents[i]]`` (the
     ground's zero), its joint's dOmega_j/dt ``dw_j`` at fixed columns (S du/dt): the time
     derivative of :func:`tree_expand`'s Omega_c = A_rel' Omega_p + Omega_j and V_c (kappa_i
-    with dw_j = 0); a universal joint's turning column adds u_1 u_2 (s_1 x a_2)."""
+    with dw_j = 0); a universal joint's turning column adds u_1 u_2 (s_1 x a_2). A slide's
+    child turns with its parent, its point at R_p + q a (the parent's frame) moving along a:
+    dV_c/dt = dV_p/dt + A_p (dOmega_p/dt x r + Omega_p x (Omega_p x r) + 2 Omega_p x a u + a
+    du/dt), r = R_p + q a - R_c (``dw_j`` = (du/dt, 0, 0) for a slide)."""
     q = parents[i]
     r_c = vector(params[i].attachment_point, 0)
+    if codes[i] == SLIDE:
+        axis, at = vector(params[i].axis, 0), r_at[i]
+        arm = sub(add(vector(ppoints[i], 0), (axis[0] * yr[at], axis[1] * yr[at], axis[2] * yr[at])), r_c)
+        u, du = yr[at + 1], dw_j[0]
+        lin = (axis[0] * du, axis[1] * du, axis[2] * du)
+        dw_c = ZERO
+        if q >= 0:
+            omega_p, dw_c, dv_p = vector(y, 12 * q + 3), vector(acc[q], 0), vector(acc[q], 3)
+            lin = add(lin, add(add(cross(dw_c, arm), cross(omega_p, cross(omega_p, arm))),
+                               cross(omega_p, (2.0 * u * axis[0], 2.0 * u * axis[1], 2.0 * u * axis[2]))))
+            lin = add(dv_p, matvec(_rows(rot, q), lin))
+        _put(acc[i], 0, dw_c)
+        _put(acc[i], 3, lin)
+        return
     a_c = _rows(rot, i)
     omega_c = vector(y, 12 * i + 3)
     omega_j = vector(yr, r_at[i] + (4 if codes[i] == BALL else 3))
@@ -529,14 +558,19 @@ def _generalised_solve(params, codes, parents, u_at, work):
         moment_p = sub(vector(n_net[i], 0), cross(point, vector(f_net[i], 0)))  # residual moment about P
         inertia_p = (_moment_row(second, i, 0, cs, point, m, shift), _moment_row(second, i, 1, cs, point, m, shift),
                      _moment_row(second, i, 2, cs, point, m, shift))
-        for col in range(VELOCITIES[codes[i]] if fixed else 3):  # the rotational columns
+        for col in range(VELOCITIES[codes[i]] if fixed else 3):  # the rotational columns (a slide's translation)
             e = _column(a_i, codes[i], cw.rate, i, col)
-            f = cross(e, c)
-            inertia_e = matvec(inertia_p, e)
             row = at + col
-            rhs[row] = dot(e, moment_p)
-            for col2 in range(col + 1):
-                matrix[row, at + col2] = dot(_column(a_i, codes[i], cw.rate, i, col2), inertia_e)
+            if codes[i] == SLIDE:  # a unit velocity e: momentum m e, its moment about P c x e
+                f, inertia_e = (m * e[0], m * e[1], m * e[2]), cross(c, e)
+                rhs[row] = dot(e, vector(f_net[i], 0))
+                matrix[row, at] = m
+            else:
+                f = cross(e, c)
+                inertia_e = matvec(inertia_p, e)
+                rhs[row] = dot(e, moment_p)
+                for col2 in range(col + 1):
+                    matrix[row, at + col2] = dot(_column(a_i, codes[i], cw.rate, i, col2), inertia_e)
             if not fixed:
                 for l in range(3):
                     matrix[at + 3 + l, row] = f[l]
@@ -544,6 +578,9 @@ def _generalised_solve(params, codes, parents, u_at, work):
             while POINT_FIXED[codes[k]] and parents[k] >= 0:
                 k = parents[k]
                 a_k = _rows(rot, k)
+                if codes[k] == SLIDE:  # its column a unit velocity: the momentum's projection
+                    matrix[row, u_at[k]] = dot(_column(a_k, codes[k], cw.rate, k, 0), f)
+                    continue
                 fixed_k = POINT_FIXED[codes[k]]
                 point_k = vector(y, 12 * k + 6)
                 if fixed_k:
@@ -614,6 +651,9 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
         if not POINT_FIXED[codes[i]]:
             for r in range(6):
                 total[i, r] = rhs[u + r]
+        elif codes[i] == SLIDE:  # its du/dt along its axis
+            _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, cw.rate, (rhs[u], 0.0, 0.0),
+                                   total)
         elif AXES[codes[i]] > 0:  # dOmega_j/dt = S du/dt (+ a universal joint's turning column's term)
             _carried_accelerations(i, yr, y, params, codes, parents, ppoints, r_at, rot, cw.rate,
                                    _joint_rate(cw.rate, i, codes[i], rhs, u), total)
@@ -644,6 +684,8 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
         arm = sub(vector(y, 12 * b + 6), vector(ppoints[root], 0))
         lin = (p.mass * total[b, 3] - force[b, 0], p.mass * total[b, 4] - force[b, 1],
                p.mass * total[b, 5] - force[b, 2])
+        if b == root and codes[b] == SLIDE:  # its force from the ground (in force[b]) is the ground's
+            lin = add(lin, vector(cw.joints[b, _LAMBDA], 0))
         m_b = add(matvec(a_b, sub(spin, t_b)), cross(arm, lin))
         for k in range(3):
             moment[root, k] += m_b[k]
@@ -651,10 +693,10 @@ def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_
         m = params[i].mass
         for k in range(3):
             total[i, k] = m * total[i, 3 + k] - force[i, k]
-    for i in range(n - 1, -1, -1):
-        if POINT_FIXED[codes[i]]:
+    for i in range(n - 1, -1, -1):  # a slide's reaction with its force along the axis (in force[i], and its
+        if POINT_FIXED[codes[i]]:   # opposite in its parent's: the sum passed up is the whole)
             for k in range(3):
-                out[i, k] = total[i, k]
+                out[i, k] = total[i, k] + (cw.joints[i, _LAMBDA, k] if codes[i] == SLIDE else 0.0)
                 if parents[i] >= 0:
                     total[parents[i], k] += total[i, k]
 
@@ -681,7 +723,8 @@ def reaction_samples(times, states, joint_theta, joint_omega, params, codes, par
             moment[:] = np.nan
         else:
             t = tree_of[s]
-            _reduced_from(states[s], params[t], codes, d_at, r_at, rd_at, joint_theta[s], joint_omega[s], yr)
+            _reduced_from(states[s], params[t], codes, parents, ppoints[t], d_at, r_at, rd_at, joint_theta[s],
+                          joint_omega[s], yr)
             tree_reactions(times[s], yr, params[t], codes, parents, ppoints[t], d_at, r_at, u_at, rd_at, dyr, work,
                            total, sample, moment)
         for i in range(n):
@@ -702,15 +745,18 @@ def reduced_size_of(codes, d_at):
 
 
 @jit(forceinline=True)
-def _reduced_from(y, params, codes, d_at, r_at, rd_at, theta_j, omega_j, out):
+def _reduced_from(y, params, codes, parents, ppoints, d_at, r_at, rd_at, theta_j, omega_j, out):
     """The reduced state ``out`` (n_r,) of the maximal state ``y`` whose joints' Theta_j,
     Omega_j (n, 3) are ``theta_j``, ``omega_j`` (:func:`rbstab.variants.chain.chain_evaluate`'s;
     a hinge's q the angle it continued): q = a . Theta_j, u = a . Omega_j of a hinge; q_1,
     q_2 (entries 0-1 of Theta_j) and u = B Omega_j (rows 0-1) of a universal joint; Theta_j,
-    Omega_j of a ball; every other body's Theta, Omega, X, V; D."""
+    Omega_j of a ball; a slide's q, u from its points (:func:`rbstab.variants.chain.slide_coordinates`);
+    every other body's Theta, Omega, X, V; D."""
     for i in range(codes.shape[0]):
         at = r_at[i]
-        if codes[i] == HINGE:
+        if codes[i] == SLIDE:
+            out[at], out[at + 1], _ = slide_coordinates(y, i, params, parents, ppoints)
+        elif codes[i] == HINGE:
             axis = vector(params[i].axis, 0)
             out[at] = dot(axis, vector(theta_j[i], 0))
             out[at + 1] = dot(axis, vector(omega_j[i], 0))
@@ -853,4 +899,5 @@ def reduce_states(params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, y, t
         if permanent:
             work.angle[:] = 0.0  # a hinge's angle read in (-pi, pi]
             chain_evaluate(0.0, y[a], params[t], codes, parents, ppoints[t], d_at, dy, joints, bodies, scalars, work)
-        _reduced_from(y[a], params[t], codes, d_at, r_at, rd_at, joints[:, _THETA_J], joints[:, _OMEGA_J], out[a])
+        _reduced_from(y[a], params[t], codes, parents, ppoints[t], d_at, r_at, rd_at, joints[:, _THETA_J],
+                      joints[:, _OMEGA_J], out[a])
