@@ -260,7 +260,7 @@ def test_simulated_launches_pass_the_compiled_signature(simulated):
     GPU's kernels are compiled for (and the PTX tests compile): C-contiguous arrays, the
     aligned settings record."""
     found = simulated["signatures"]
-    assert found["kernels"] == [[1, 0, 0, 0, 0, 0, True], [1, 0, 1, 0, 0, 0, True], [1, 1, 0, 0, 0, 0, True]] \
+    assert found["kernels"] == [[1, 0, 0, 0, 0, 0, 0, True], [1, 0, 1, 0, 0, 0, 0, True], [1, 1, 0, 0, 0, 0, 0, True]] \
         and found["launches"] >= 3
     assert found["mismatched"] == []
 

@@ -378,12 +378,14 @@ def test_the_joint_kind_table_gives_each_law_its_reduced_coordinates():
     whose child is carried by eq 21's reduced states (Theta_j, Omega_j: the one-body
     ``permanent`` layout) with its point held; the four point laws pull a free body (its 12
     body states, the one-body layouts less D); the hinge holds its point and has one angle
-    and its rate, the universal joint two, the quaternion ball 4 coordinates and 3 velocities. The sizes a tree's layout reads from the table are checked against the
+    and its rate, the universal joint two, the quaternion ball 4 coordinates and 3 velocities,
+    the slide one displacement and its rate. The sizes a tree's layout reads from the table are checked against the
     reference in test_the_compiled_reduced_rate_is_the_references."""
     from rbstab.layout import JOINT_CODES, JOINT_KIND_OF, JOINT_KINDS, REDUCED_STATES, VARIANT_LAYOUTS, VELOCITIES, \
         point_fixed
 
-    assert set(JOINT_KIND_OF) == set(VARIANT_LAYOUTS) | {"hinge", "universal", "ball"} and set(JOINT_KIND_OF.values()) == set(JOINT_KINDS)
+    assert set(JOINT_KIND_OF) == set(VARIANT_LAYOUTS) | {"hinge", "universal", "ball", "slide"}
+    assert set(JOINT_KIND_OF.values()) == set(JOINT_KINDS)
     for law, layout in VARIANT_LAYOUTS.items():
         kind = JOINT_KINDS[JOINT_KIND_OF[law]]
         assert kind.point_fixed == point_fixed(law) == (law == "permanent")
@@ -398,6 +400,9 @@ def test_the_joint_kind_table_gives_each_law_its_reduced_coordinates():
     ball = JOINT_KINDS["ball"]  # the quaternion ball: 4 coordinates, 3 velocities
     assert (ball.n_q, ball.n_v, ball.point_fixed, point_fixed("ball")) == (4, 3, True, True)
     assert (REDUCED_STATES[JOINT_CODES["ball"]], VELOCITIES[JOINT_CODES["ball"]]) == (7, 3)
+    slide = JOINT_KINDS["slide"]  # a translation along its axis, placed from its parent by q
+    assert (slide.n_q, slide.n_v, slide.point_fixed, point_fixed("slide")) == (1, 1, True, True)
+    assert (REDUCED_STATES[JOINT_CODES["slide"]], VELOCITIES[JOINT_CODES["slide"]]) == (2, 1)
     assert not point_fixed("socket") and not point_fixed(None)
 
 

@@ -354,16 +354,16 @@ def _tree(config: dict) -> tuple[list[BodyShape], list[int], np.ndarray, list[st
 
 
 def _hinge_axes(config: dict) -> np.ndarray:
-    """Each body's joint's unit axis a (n, 3) where it is a hinge (the child's frame; a
-    universal joint's second axis a_2, the one fixed in the child's frame), NaN for any
-    other joint (one body's: NaN)."""
+    """Each body's joint's unit axis a (n, 3) where it is a hinge or a slide (the child's
+    frame; a universal joint's second axis a_2, the one fixed in the child's frame), NaN for
+    any other joint (one body's: NaN)."""
     if "bodies" not in config:
         return np.full((1, 3), np.nan)
     by_child = {j["child"]: j for j in config["joints"]}
     out = np.full((len(config["bodies"]), 3), np.nan)
     for i, body in enumerate(config["bodies"]):
         joint = by_child[body["name"]]
-        if joint.get("variant") in ("hinge", "universal") and joint.get("axis") is not None:
+        if joint.get("variant") in ("hinge", "universal", "slide") and joint.get("axis") is not None:
             axis = np.asarray(joint["axis"], dtype=float).reshape(-1, 3)[-1]
             out[i] = axis / np.linalg.norm(axis)
     return out
