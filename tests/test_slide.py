@@ -232,3 +232,32 @@ def test_a_table_of_slide_runs_has_each_runs_own_records():
         for name in own.dtype.names:
             if name != "limits":
                 np.testing.assert_array_equal(batch.params[run][name], own[name], err_msg=name)
+
+
+def test_a_push_along_a_slide_gives_the_energy_of_its_joint_space_inertia():
+    """A push P along the rail at the cart's centre of mass, a pole upright on a hinge across
+    it: the push analysis's energy is 1/2 P^2 (M^-1)_11 of the cart-pole's joint-space mass
+    matrix M = [[M_c + m, m l], [m l, J + m l^2]] (the pole's mass m, inertia J about its
+    centre of mass, l its height over the hinge), and the work W its run receives."""
+    from rbstab.analysis.push import Pushes
+
+    cart, pole, inertia, height, push = 1.0, 0.2, 0.01, 0.4, 2.0
+    data = {
+        "name": "push_cart", "gravity": [0.0, 0.0, -9.81],
+        "bodies": [{"name": "cart", "mass": cart, "inertia": [0.01, 0.02, 0.02]},
+                   {"name": "pole", "mass": pole, "inertia": [0.01, inertia, 0.001]}],
+        "joints": [{"name": "rail", "parent": "ground", "child": "cart", "variant": "slide", "axis": [1, 0, 0],
+                    "k_r": 20.0, "l_r": 4.0},
+                   {"name": "pivot", "parent": "cart", "child": "pole", "variant": "hinge", "axis": [0, 1, 0],
+                    "child_point": [0, 0, -height], "k_r": 8.0, "l_r": 1.0}],
+        "initial_state": {"cart": {"q": 0.0, "u": 0.0}},
+        "simulation": {"t_end": 0.1, "n_samples": 3},
+    }
+    config = config_from_mapping(data)
+    pushes = Pushes(config, "force", body="cart", point=(0.0, 0.0, 0.0))
+    energy = pushes.energy(np.array([[push, 0.0, 0.0]]))[0]
+    mass = np.array([[cart + pole, pole * height], [pole * height, inertia + pole * height ** 2]])
+    assert energy == pytest.approx(0.5 * push ** 2 * np.linalg.inv(mass)[0, 0], rel=1e-12)
+    entry = {"kind": "impulse", "quantity": "force", "body": "cart", "value": [push, 0.0, 0.0], "start": 0.0}
+    result = simulate(config_from_mapping({**pushes.config.resolved, "disturbances": [entry]}))
+    assert energy == pytest.approx(result.outputs["disturbance_work"][0], rel=1e-12)

@@ -196,8 +196,8 @@ class Pushes:
             raise ValueError(f"{config.name}: disturbances: found {len(own)} entries; a push needs one more and at most "
                              f"{MAX_DISTURBANCES} are allowed")
         joint = chain.joints[self._member]
-        if kind == "force" and point_fixed(joint.variant) and joint.parent < 0 and np.allclose(self.point,
-                                                                                                   joint.child_point):
+        if (kind == "force" and point_fixed(joint.variant) and joint.variant != "slide" and joint.parent < 0
+                and np.allclose(self.point, joint.child_point)):  # a slide's point moves along its axis
             what = f"'{body}' (joint '{joint.name}' holds it to the ground)" if tree else \
                 "this permanent body (body.attachment_point)"
             raise ValueError(f"--push-point: found {','.join(f'{x:g}' for x in self.point)}, the pin of {what}: a force "
@@ -301,6 +301,9 @@ def _rest(config, tree: bool) -> tuple[np.ndarray, dict]:
             m = 1 if calm.codes[i] == C.HINGE else 2
             states[name] = {key: float(reduced[key][i, 0]) if m == 1 else reduced[key][i, :m].tolist()
                             for key in ("q", "u")}
+            continue
+        if calm.codes[i] == C.SLIDE:  # a slide's child from its displacement and rate
+            states[name] = {"q": float(reduced["translation"][i, 0]), "u": float(reduced["translation_rate"][i, 0])}
             continue
         state = dict(zip(("theta", "omega", "x", "v"), np.split(rest[12 * i: 12 * i + 12], 4)))
         if calm.d_at[i] >= 0:

@@ -536,7 +536,7 @@ def _validate_trees(spec: SweepSpec, columns: Mapping[str, np.ndarray], base_ind
     that section); the others are validated by the schema."""
     keys = list(columns)
     hinges = {j.get("name") for t in templates if t for j in t.get("joints") or ()
-              if j.get("variant") in ("hinge", "universal")}
+              if j.get("variant") in ("hinge", "universal", "slide")}
     params = [k for k in keys if _tree_parameter(k, columns[k])
               and not (parse_any_key(k).section == "joints" and parse_any_key(k).steps[1] in hinges)]
     others = [k for k in keys if k not in params]

@@ -386,7 +386,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
             n_j, rotational, dissipation, power = _feedback(b_j, strain, b_j, sub(theta_j, p.passive_theta_ref),
                                                             omega_j, p, rotational, dissipation, power)
         if p.stop > 0.0 and codes[j] != SLIDE:  # its range: beyond either end of a coordinate a one-sided spring
-            if codes[j] == HINGE:  # and damper, never limited  # q = a'Theta_j, its rate a'Omega_j, its torque along a
+            if codes[j] == HINGE:  # and damper, never limited; a hinge's q = a'Theta_j, its rate a'Omega_j, along a
                 axis = vector(p.axis, 0)
                 n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis),
                                                      dot(omega_j, axis), axis, p, 0)
