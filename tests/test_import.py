@@ -249,40 +249,16 @@ def test_a_body_on_two_hinges_through_one_point_imports_as_a_universal_joint(tmp
         assert np.min(np.abs(ours - s)) <= 1e-4 * abs(s), (s, ours)
 
 
-#: A cart on a slide (a spring about its springref, a damper, a range, a servo that reaches its
-#: forcerange) with a pole upright on a hinge (a damper, a servo that holds it).
-CART_POLE = """<mujoco model="cart_pole">
-  <compiler angle="radian"/>
-  <option gravity="0 0 -9.81" timestep="0.002"/>
-  <worldbody>
-    <body name="cart" pos="0 0 0.5">
-      <joint name="rail" type="slide" axis="1 0.1 0" range="-1 1" limited="true" damping="0.5" stiffness="2"
-             springref="0.1"/>
-      <inertial pos="0 0.01 0" mass="1.0" diaginertia="0.01 0.02 0.02"/>
-      <body name="pole" pos="0.02 0 0.05">
-        <joint name="pivot" type="hinge" axis="0 1 0" damping="0.05"/>
-        <inertial pos="0 0 0.4" mass="0.2" diaginertia="0.01 0.01 0.001"/>
-      </body>
-    </body>
-  </worldbody>
-  <actuator>
-    <position name="push" joint="rail" kp="20" kv="4" forcelimited="true" forcerange="-3 5"/>
-    <position name="balance" joint="pivot" kp="8" kv="1"/>
-  </actuator>
-  <keyframe><key name="start" qpos="0.3 0.2" qvel="-2.5 0.4" ctrl="0.2 0"/></keyframe>
-</mujoco>
-"""
-
-
-def test_a_cart_pole_on_a_slide_imports_and_moves_as_mujoco(tmp_path):
-    """MJCF's slide is rbstab's slide (q [m] from its ref, its servo's kp, kv, target and
-    forcerange, its spring, damper and range along the axis): run, every centre of mass
-    follows MuJoCo's to 1e-6 m and every reaction its ``cfrc_int``; ``rbstab analyze``'s
-    rest state and eigenvalues (in the cart's q and the pole's angle) are MuJoCo's to 1e-4
-    relative."""
-    path = tmp_path / "cart_pole.xml"
-    path.write_text(CART_POLE)
+def test_the_shipped_cart_pole_on_a_slide_is_what_import_writes_and_moves_as_mujoco():
+    """configs/examples/cart_pole_imported.yaml is what ``rbstab import`` writes for
+    configs/examples/models/cart_pole.xml at its keyframe: MJCF's slide is rbstab's slide (q
+    [m] from its ref, its servo's kp, kv, target and forcerange, its spring, damper and range
+    along the axis); run, every centre of mass follows MuJoCo's to 1e-6 m and every reaction
+    its ``cfrc_int``; ``rbstab analyze``'s rest state and eigenvalues (in the cart's q and
+    the pole's angle) are MuJoCo's to 1e-4 relative."""
+    path = MODELS / "cart_pole.xml"
     imported, config = _imported(path, keyframe="start", n_samples=2001)
+    assert imported.text == (MODELS.parent / "cart_pole_imported.yaml").read_text()
     rail = config.resolved["joints"][0]
     assert rail["variant"] == "slide" and rail["k_r"] == pytest.approx(20.0)
     assert rail["theta_ref"] == pytest.approx(0.2)
