@@ -186,8 +186,11 @@ def test_a_slides_bad_input_is_refused_in_one_line_naming_its_key(change, key, e
 
 def test_a_sweep_over_a_slides_numbers_gives_each_runs_own_result(tmp_path):
     """A grid over a slide's gain, reference and force limit and over its initial q gives each
-    run the figures its own config gives."""
+    run the figures its own config gives; the sweep's dataset gives those parameters a
+    slide's units."""
     import pandas as pd
+
+    import rbstab
 
     from rbstab.sweep import run_sweep, spec_from_mapping
 
@@ -198,6 +201,11 @@ def test_a_sweep_over_a_slides_numbers_gives_each_runs_own_result(tmp_path):
     run_sweep(spec_from_mapping({"name": "slides", "base": data, "grid": grid}), tmp_path, jobs=1, progress=False)
     index = pd.read_csv(tmp_path / "slides" / "index.csv")
     assert len(index) == 16 and set(index["status"]) == {"success"}
+    dataset = rbstab.open_sweep(tmp_path / "slides")
+    units = {dataset[name].attrs["config_key"]: dataset[name].attrs["units"] for name in dataset.coords
+             if "config_key" in dataset[name].attrs}
+    assert units == {"joints.rail.k_r": "N m-1", "joints.rail.theta_ref": "m", "joints.rail.saturation.torque_n": "N",
+                     "initial_state.cart.q": "m"}
     columns = {key: next(c for c in index.columns if c.endswith(suffix)) for key, suffix in
                (("k", "k_r"), ("ref", "theta_ref"), ("limit", "torque_n"), ("q", "cart_q"))}
     for _, row in index.iloc[::5].iterrows():

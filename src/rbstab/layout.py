@@ -52,6 +52,7 @@ __all__ = [
     "LIMITED",
     "LIMITED_COMPONENTS",
     "parameter_attributes",
+    "slide_parts",
     "StateLayout",
     "FULL_BODY",
     "EMBEDDED",
@@ -238,8 +239,43 @@ _CHAIN_KEYS = {
                                      "reference posture Theta_ref of a joint (relative Euler angles)"),
                "axis": Quantity("joints.axis", "a", "1", "axis a of a hinge (the parent's and the child's frames)"),
                **{g: f"controller.{g}" for g in ("k_r", "l_r", "k_c", "l_c", "k_d", "l_d", "k_s", "boundary_layer")}},
-    "initial_state": {b: f"initial_state.{b}" for b in ("theta", "omega", "x", "v", "d")},
+    "initial_state": {**{b: f"initial_state.{b}" for b in ("theta", "omega", "x", "v", "d")},
+                      "q": Quantity("initial_state.q", "q(0)", "rad", "initial angle q(0) of a hinge or universal joint"),
+                      "u": Quantity("initial_state.u", "u(0)", "rad s-1",
+                                    "initial rate u(0) of a hinge or universal joint")},
 }
+
+
+#: A slide's numbers, written as a hinge's keys, in its own units (``joints.<name>.<key>``,
+#: ``initial_state.<child>.<q|u>``).
+_SLIDE_KEYS = {
+    "k_r": Quantity("joints.k_r", "k", "N m-1", "stiffness k of a slide along its axis"),
+    "l_r": Quantity("joints.l_r", "l", "N s m-1", "damping l of a slide along its axis"),
+    "theta_ref": Quantity("joints.theta_ref", "q_ref", "m", "reference displacement q_ref of a slide"),
+    "saturation.torque_n": Quantity("joints.saturation.torque_n", "f_max", "N", "upper force limit of a slide"),
+    "saturation.torque_n_lower": Quantity("joints.saturation.torque_n_lower", "f_min", "N",
+                                          "lower force limit of a slide"),
+    "range.lower": Quantity("joints.range.lower", "q_min", "m", "lower end of a slide's range"),
+    "range.upper": Quantity("joints.range.upper", "q_max", "m", "upper end of a slide's range"),
+    "range.k_r": Quantity("joints.range.k_r", "K_stop", "N m-1", "stiffness of a slide's stop beyond its range"),
+    "range.l_r": Quantity("joints.range.l_r", "L_stop", "N s m-1", "damping of a slide's stop beyond its range"),
+    "q": Quantity("initial_state.q", "q(0)", "m", "initial displacement q(0) of a slide"),
+    "u": Quantity("initial_state.u", "u(0)", "m s-1", "initial rate u(0) of a slide"),
+}
+
+
+def slide_parts(config: Any) -> frozenset[str]:
+    """The names of a configuration's slides and of their children (a chain's resolved or
+    written mapping, ``joints`` a list of mappings; a sweep spec's: its bases'; empty for any
+    other): the parts whose keys :func:`parameter_attributes` gives a slide's units."""
+    if isinstance(config, Mapping) and "base" in config:
+        bases = config["base"]
+        return frozenset().union(*(slide_parts(b) for b in (bases if isinstance(bases, list) else [bases])))
+    joints = config.get("joints") if isinstance(config, Mapping) else None
+    if not isinstance(joints, list):
+        return frozenset()
+    return frozenset(name for j in joints if isinstance(j, Mapping) and j.get("variant") == "slide"
+                     for name in (j.get("name"), j.get("child")) if isinstance(name, str))
 
 
 #: A joint's range keys (``joints.<name>.range.<field>``, a hinge's q or a ball's Euler
@@ -252,14 +288,19 @@ _RANGE_KEYS = {
 }
 
 
-def _config_quantity(config_key: str) -> tuple[Quantity | None, str]:
+def _config_quantity(config_key: str, slides: frozenset[str] = frozenset()) -> tuple[Quantity | None, str]:
     """(the :data:`CONFIG_QUANTITIES` row of a config key without indices, one body's or a
-    chain's (:data:`_CHAIN_KEYS`), or None; what the long name adds: `` (body trunk)``)."""
+    chain's (:data:`_CHAIN_KEYS`; a slide's own where its joint or child is in ``slides``),
+    or None; what the long name adds: `` (body trunk)``)."""
     if config_key in CONFIG_QUANTITIES:
         return CONFIG_QUANTITIES[config_key], ""
     if config_key == "gravity":
         return CONFIG_QUANTITIES["body.gravity"], ""
     parts = config_key.split(".")
+    if len(parts) >= 3 and parts[1] in slides and ".".join(parts[2:]) in _SLIDE_KEYS:
+        return _SLIDE_KEYS[".".join(parts[2:])], f" ({'joint' if parts[0] == 'joints' else 'body'} {parts[1]})"
+    if len(parts) == 4 and parts[1] in slides and parts[2] == "passive" and parts[3] in _SLIDE_KEYS:
+        return _SLIDE_KEYS[parts[3]], f" (joint {parts[1]}, passive)"
     passive = len(parts) == 4 and parts[0] == "joints" and parts[2] == "passive"  # a joint's passive torque
     if passive and parts[3] in ("k_r", "l_r", "theta_ref"):
         q = _CHAIN_KEYS["joints"][parts[3]]
@@ -274,13 +315,14 @@ def _config_quantity(config_key: str) -> tuple[Quantity | None, str]:
     return None, ""
 
 
-def parameter_attributes(entry: str) -> dict[str, str]:
+def parameter_attributes(entry: str, slides: frozenset[str] = frozenset()) -> dict[str, str]:
     """``units``, ``long_name`` and ``config_key`` (the entry itself, as a store file's
     coordinates give it) of a sweep parameter, from its dotted entry (``controller.k_c.2``,
     ``body.mass:scale``, ``body.inertia.0.0``): the config key's row of
     :data:`CONFIG_QUANTITIES`, the entry's indices in the long name (``constraint stiffness
     K_c [2]``); a scale factor is dimensionless (``"1"``). A key not in the table has no
-    units, its key as long name."""
+    units, its key as long name. ``slides``: the names of the slides and their children
+    (:func:`slide_parts`), whose numbers have a slide's units (N/m, m, N) under a hinge's keys."""
     scale = entry.endswith(":scale")
     key = entry.removesuffix(":scale")
     parts = key.split(".")
@@ -288,7 +330,7 @@ def parameter_attributes(entry: str) -> dict[str, str]:
     while parts and is_index(parts[-1]):
         indices.insert(0, parts.pop())
     config_key = ".".join(parts)
-    q, whose = _config_quantity(config_key)
+    q, whose = _config_quantity(config_key, slides)
     long_name = (q.long_name + whose if q is not None else config_key) + (f" [{', '.join(indices)}]" if indices else "")
     attrs = {"long_name": f"scale factor of the {long_name}" if scale else long_name, "config_key": entry}
     units = "1" if scale else (q.units if q is not None else None)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..layout import display_units, parameter_attributes
+from ..layout import display_units, parameter_attributes, slide_parts
 from .figures import FigureFile, FigureWriter, colour_norm, new_figure, set_scale, value_scale
 from .load import SweepData, safe_filename
 from .tables import REST_AWAY, UNSTABLE_REST, metric_column, metric_label, metric_units
@@ -38,7 +38,7 @@ def parameter_label(sweep: SweepData, name: str) -> str:
     (:func:`rbstab.layout.parameter_attributes`), e.g. ``joints.ankle.k_r.0 [N m/rad]``;
     the entry alone where it has none or is dimensionless (``variant``, ``body.mass:scale``)."""
     entry = sweep.entries.get(name, name)
-    units = display_units(parameter_attributes(entry).get("units"))
+    units = display_units(parameter_attributes(entry, slide_parts(sweep.spec)).get("units"))
     return f"{entry} [{units}]" if units and units != "1" else entry
 
 

@@ -61,7 +61,7 @@ from ..convergence import DEFAULT_LYAPUNOV_RATIO, RULE, converged
 from ..diagnostics import OUTCOMES, outcomes
 from ..engine.status import fell_mask
 from ..io.atomic import atomic_path, write_text_atomic
-from ..layout import is_index, parameter_attributes
+from ..layout import is_index, parameter_attributes, slide_parts
 
 __all__ = [
     "index_outcomes",
@@ -1000,9 +1000,10 @@ def _describe_parameters(ds, parameters: Mapping[str, str], spec: Mapping[str, A
     """Every parameter coordinate (and grid axis) with ``units``, ``long_name`` and
     ``config_key`` from :data:`rbstab.layout.CONFIG_QUANTITIES`; a grid axis of a list-valued
     key numbered by level has the key's ``config_key`` and a long name saying so."""
+    slides = slide_parts(spec)
     for name, entry in parameters.items():
         if name in ds.coords:
-            ds[name].attrs.update(parameter_attributes(entry))
+            ds[name].attrs.update(parameter_attributes(entry, slides))
     for key in (spec.get("grid") or {}):
         name = parameter_name(key)
         if name in ds.coords and name not in parameters:
