@@ -1102,7 +1102,8 @@ class _JointSaturation(_Section):
 
     torque_n: Annotated[Any, checked(optional(_joint_limits))] = Field(
         None, description="|N_i| <= limit (N m, child frame): a number > 0 or 3 of them (a universal joint's: 2, one "
-                          "per coordinate) (.inf: none; with torque_n_lower, the upper limits)")
+                          "per coordinate; a slide's: a number, its force along its axis, N) (.inf: none; with "
+                          "torque_n_lower, the upper limits)")
     torque_n_lower: Annotated[Any, checked(optional(_joint_lower_limits))] = Field(
         None, description="N_i >= lower limit (N m, child frame): a number < 0 or 3 of them (-.inf: none; optional, "
                           "default -torque_n: an actuator stronger one way, as MJCF's forcerange)")
@@ -1160,7 +1161,8 @@ class _JointRange(_Section):
     and damper) or an admissible region (a run that leaves it fell)."""
 
     lower: Annotated[Any, checked(_per_coordinate(allow_inf=True))] = Field(
-        description="a number (rad; the range's lower end, -.inf: none); a ball's: 3, one per Euler angle of Theta_j")
+        description="a number (rad; the range's lower end, -.inf: none); a ball's: 3, one per Euler angle of Theta_j; "
+                    "a slide's: m")
     upper: Annotated[Any, checked(_per_coordinate(allow_inf=True))] = Field(
         description="a number > lower (rad; the range's upper end, .inf: none); a ball's: 3")
     kind: Annotated[Any, checked(_choice(RANGE_KINDS))] = Field(
@@ -1220,17 +1222,19 @@ class _ChainJoint(_Section):
     # ``variant`` before the gains: their validators read it from ``info.data``.
     variant: Annotated[Any, checked(_joint_variant)] = Field(
         description=f"one of {', '.join(JOINT_VARIANTS)} (hinge: the point held, the child turned about axis; "
-                    "universal: about its two axes)")
+                    "universal: about its two axes; slide: the child's orientation held, its point moved along "
+                    "axis)")
     axis: Annotated[Any, checked(optional(_axis))] = Field(
         None, description="a hinge's axis a: 3 numbers, not all zero (the parent's and the child's frames, which "
                           "it leaves fixed; normalised); only with variant hinge; a universal joint's: 2 such lists, "
-                          "a_1 (the parent's frame) and a_2 (the child's frame), not parallel")
+                          "a_1 (the parent's frame) and a_2 (the child's frame), not parallel; a slide's: 3 numbers, "
+                          "the direction its child's point moves in (the parent's frame)")
     k_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
         "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
-        f"about its axis ({GAIN_UNITS['k_r']})"))
+        f"about its axis ({GAIN_UNITS['k_r']}); a slide's: along its axis (N/m)"))
     l_r: _JOINT_GAIN = Field(None, validate_default=True, description=(
         "3 numbers (a diagonal) or a 3x3 list of lists, symmetric positive semi-definite; a hinge's: a number >= 0 "
-        f"about its axis ({GAIN_UNITS['l_r']})"))
+        f"about its axis ({GAIN_UNITS['l_r']}); a slide's: along its axis (N s/m)"))
     k_c: _gain_type("k_c") = _gain("k_c")
     l_c: _gain_type("l_c") = _gain("l_c")
     k_d: _gain_type("k_d") = _gain("k_d")
@@ -1243,7 +1247,8 @@ class _ChainJoint(_Section):
     theta_ref: Annotated[Any, checked(optional(_joint_angles))] = Field(
         None, description="3 numbers (rad; the reference posture Theta_ref, the relative Euler angles at which the "
                           "joint's spring K_r is relaxed); a hinge's: a number, its angle q_ref (rad; optional, "
-                          "default 0); a ball's: its rotation vector (rad), the relative turn at which K_r is relaxed")
+                          "default 0); a ball's: its rotation vector (rad), the relative turn at which K_r is relaxed; "
+                          "a slide's: a number, its displacement q_ref (m)")
     passive: _JointPassive | None = Field(None, description=_mapping_of(_JointPassive) + " (optional: the "
                                                             "joint's passive torque, added to N_j and never limited)")
     range: _JointRange | None = Field(None, description=_mapping_of(_JointRange) + " (optional, a hinge's: its "
