@@ -253,6 +253,58 @@ def _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational, dissipati
     return matTvec(b_j, f), rotational, dissipation, power
 
 
+@jit(forceinline=True)
+def _joint_torque(code, p, rel, theta_j, b_j, strain, omega_j, rotational, dissipation, power):
+    """A turning joint's torque N_j [N m] (child frame) on its coordinates, with its stop: a
+    universal joint's on q_1, q_2 (:func:`_coordinate_feedback`), a quaternion ball's on the
+    rotation vectors of its turns from its references (B = J_r^-1) and its cone, a hinge's,
+    an Euler ball's and a free body's on Theta_j (``strain`` = Theta_j - Theta_ref, ``b_j``
+    its B; a hinge's the rotation vector q a, B = I); returns it with v's rotational term,
+    the dissipation [W] and the saturation deficit power [W] accumulated."""
+    if code == UNIVERSAL:
+        n_j, rotational, dissipation, power = _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational,
+                                                                   dissipation, power)
+    elif code == BALL:
+        passive, b_p = strain, b_j
+        for r in range(2):  # its spring's, then its passive spring's (one copy of the code)
+            phi, b = _ball_strain(rel, p.theta_ref if r == 0 else p.passive_theta_ref)
+            if r == 0:
+                strain, b_j = phi, b
+            else:
+                passive, b_p = phi, b
+        n_j, rotational, dissipation, power = _feedback(b_j, strain, b_p, passive, omega_j, p, rotational,
+                                                        dissipation, power)
+    else:
+        n_j, rotational, dissipation, power = _feedback(b_j, strain, b_j, sub(theta_j, p.passive_theta_ref),
+                                                        omega_j, p, rotational, dissipation, power)
+    if p.stop == 0.0:  # its range: beyond either end of a coordinate a one-sided spring and damper, never limited
+        return n_j, rotational, dissipation, power
+    if code == HINGE:  # q = a'Theta_j, its rate a'Omega_j, its torque along a
+        axis = vector(p.axis, 0)
+        n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis), dot(omega_j, axis),
+                                             axis, p, 0)
+    elif code == BALL:  # its cone: the turn's angle |Theta_j|, its rate e'Omega_j, its torque along e
+        angle = math.sqrt(dot(theta_j, theta_j))
+        e = (0.0, 0.0, 1.0) if angle == 0.0 else (theta_j[0] / angle, theta_j[1] / angle, theta_j[2] / angle)
+        n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, angle, dot(e, omega_j), e, p, 0)
+    else:  # a ball's Euler angle theta_i (a universal joint's q_i), its rate (B Omega_j)_i, its torque B' e_i
+        for i in range(2 if code == UNIVERSAL else 3):
+            n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, theta_j[i], dot(b_j[i], omega_j),
+                                                 b_j[i], p, i)
+    return n_j, rotational, dissipation, power
+
+
+@jit(forceinline=True)
+def _pair_at(torque, force, rot, j, q, r_c, r_p, lam):
+    """Add the force ``lam`` [N, inertial] on body j at its point ``r_c`` (its frame) and
+    -``lam`` on its parent q at ``r_p`` (the parent's frame; none where q < 0, the ground), the
+    same point: the wrench of a point law's or a slide's force."""
+    _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], lam)), lam)
+    if q >= 0:
+        back = cross(r_p, matTvec(rot[q], lam))
+        _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
+
+
 @jit(forceinline=True, _nrt=False)
 def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodies, scalars, work, rotations=False):
     """What :func:`chain_evaluate` computes before the permanent joints' Lambda_j: the
@@ -365,39 +417,10 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
                 coordinate, constraint, dissipation = _stop(coordinate, constraint, dissipation, s, u, (1.0, 0.0, 0.0),
                                                             p, 0)
             pull = (axis[0] * coordinate[0], axis[1] * coordinate[0], axis[2] * coordinate[0])
-            _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], pull)), pull)
-            if q >= 0:  # its reaction on the parent at the same point, R_p + q a in the parent's frame
-                back = cross(add(r_p, (p.axis[0] * s, p.axis[1] * s, p.axis[2] * s)), matTvec(rot[q], pull))
-                _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-pull[0], -pull[1], -pull[2]))
-        elif codes[j] == UNIVERSAL:  # on its coordinates
-            n_j, rotational, dissipation, power = _coordinate_feedback(b_j, strain, theta_j, omega_j, p, rotational,
-                                                                       dissipation, power)
-        elif codes[j] == BALL:  # on the rotation vectors of its turns from its references, B = J_r^-1
-            passive, b_p = strain, b_j
-            for r in range(2):  # its spring's, then its passive spring's (one copy of the code)
-                phi, b = _ball_strain(rel, p.theta_ref if r == 0 else p.passive_theta_ref)
-                if r == 0:
-                    strain, b_j = phi, b
-                else:
-                    passive, b_p = phi, b
-            n_j, rotational, dissipation, power = _feedback(b_j, strain, b_p, passive, omega_j, p, rotational,
-                                                            dissipation, power)
+            _pair_at(torque, force, rot, j, q, r_c, add(r_p, (p.axis[0] * s, p.axis[1] * s, p.axis[2] * s)), pull)
         else:
-            n_j, rotational, dissipation, power = _feedback(b_j, strain, b_j, sub(theta_j, p.passive_theta_ref),
-                                                            omega_j, p, rotational, dissipation, power)
-        if p.stop > 0.0 and codes[j] != SLIDE:  # its range: beyond either end of a coordinate a one-sided spring
-            if codes[j] == HINGE:  # and damper, never limited; a hinge's q = a'Theta_j, its rate a'Omega_j, along a
-                axis = vector(p.axis, 0)
-                n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, dot(theta_j, axis),
-                                                     dot(omega_j, axis), axis, p, 0)
-            elif codes[j] == BALL:  # its cone: the turn's angle |Theta_j|, its rate e'Omega_j, its torque along e
-                angle = math.sqrt(dot(theta_j, theta_j))
-                e = (0.0, 0.0, 1.0) if angle == 0.0 else (theta_j[0] / angle, theta_j[1] / angle, theta_j[2] / angle)
-                n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, angle, dot(e, omega_j), e, p, 0)
-            else:  # a ball's Euler angle theta_i (a universal joint's q_i), its rate (B Omega_j)_i, its torque B' e_i
-                for i in range(2 if codes[j] == UNIVERSAL else 3):
-                    n_j, rotational, dissipation = _stop(n_j, rotational, dissipation, theta_j[i],
-                                                         dot(b_j[i], omega_j), b_j[i], p, i)
+            n_j, rotational, dissipation, power = _joint_torque(codes[j], p, rel, theta_j, b_j, strain, omega_j,
+                                                                rotational, dissipation, power)
         _acc_add(torque, force, j, n_j, ZERO)
         if q >= 0:
             reaction = matvec(rel, n_j)
@@ -415,10 +438,7 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
                 power += dot(f, sub(lam, lam_c))
             constraint += constraint_energy(codes[j], e, d, p)
             dissipation += constraint_dissipation(codes[j], f, d_rate, p)
-            _acc_add(torque, force, j, cross(r_c, matTvec(rot[j], lam)), lam)
-            if q >= 0:
-                back = cross(r_p, matTvec(rot[q], lam))
-                _acc_add(torque, force, q, (-back[0], -back[1], -back[2]), (-lam[0], -lam[1], -lam[2]))
+            _pair_at(torque, force, rot, j, q, r_c, r_p, lam)
             if d_at[j] >= 0:
                 _put(dy, d_at[j], d_rate)
         _put(joints[j, _E], 0, e)
