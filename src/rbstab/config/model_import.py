@@ -331,6 +331,100 @@ def _servos(mujoco, model, where: str, ctrl: np.ndarray, errors: list[str]) -> t
     return feedback, motors
 
 
+def _coordinate_joint(mujoco, model, data, b: int, jname: str, body: str, servo: tuple[dict, dict], key,
+                      keyframe: str | None, where: str, notes: list[str]) -> tuple[str, list[str], str, bool]:
+    """(its source element in words, the joint's lines after its points, the initial-state line
+    of its child ``body``, whether a servo holds it) of MuJoCo body ``b``'s hinge, slide or
+    universal joint (two hinges through one point): its variant and axes, the servo
+    (``servo``: :func:`_servos`' feedback and motors), passive spring and damper, range as a
+    stop and the keyframe's (``key``, its index, or None) q and u, in the kind's units; a
+    motor's note appended to ``notes``. ConfigError for a keyframe's hinge angle outside
+    (-pi, pi) of its reference."""
+    feedback, motors = servo
+    j = int(model.body_jntadr[b])
+    lines: list[str] = []
+    held = True
+    js = list(range(j, j + int(model.body_jntnum[b])))  # one hinge or slide, or a universal joint's two
+    universal = len(js) == 2
+    slide = int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE)
+    units = {"q": "m", "u": "m/s", "k": "N/m", "l": "N s/m", "force": "N"} if slide else \
+        {"q": "rad", "u": "rad/s", "k": "N m/rad", "l": "N m s/rad", "force": "N m"}
+    qpos0 = [float(model.qpos0[model.jnt_qposadr[k]]) for k in js]
+    source = " and ".join(_element("joint", model.joint(k), f' type="{"slide" if slide else "hinge"}"') for k in js)
+
+    def numbers(values):  # a hinge's number, a universal joint's 2
+        return f"[{', '.join(_number(v) for v in values)}]" if universal else _number(values[0])
+
+    if universal:
+        source += ": a universal joint"
+        lines += [
+            _line(4, "variant: universal", "q_1, q_2 = qpos - qpos0 [rad] of its two hinges, in order"),
+            _line(4, f"axis: [{_vector(data.xaxis[js[0]])}, {_vector(data.xaxis[js[1]])}]",
+                  "the hinges' axes, world frame"),
+        ]
+    else:
+        lines += [
+            _line(4, f"variant: {'slide' if slide else 'hinge'}",
+                  f"q = qpos - qpos0 [{units['q']}]" + (f" (ref {qpos0[0]:g})" if qpos0[0] else "")),
+            _line(4, f"axis: {_vector(data.xaxis[j])}", "the joint's axis, world frame"),
+        ]
+    servos = [feedback.get(k) for k in js]
+    if any(servos):
+        named = [servo for servo in servos if servo is not None]
+        none = {"k_r": 0.0, "l_r": 0.0, "theta_ref": 0.0, "lower": -math.inf, "upper": math.inf}
+        servos = [servo or none for servo in servos]
+        lines += [
+            _line(4, f"k_r: {numbers([v['k_r'] for v in servos])}",
+                  f"[{units['k']}] {', '.join(v['source'] for v in named)}: kp gear^2"),
+            _line(4, f"l_r: {numbers([v['l_r'] for v in servos])}", f"[{units['l']}] kv gear^2"),
+            _line(4, f"theta_ref: {numbers([v['theta_ref'] for v in servos])}",
+                  f"[{units['q']}] its target at control "
+                  + ", ".join(f"{v['ctrl']:g}, gear {v['gear']:g}" for v in named))]
+        if any(math.isfinite(v["lower"]) or math.isfinite(v["upper"]) for v in servos):
+            lines.append(_line(4, f"saturation: {{torque_n: {numbers([v['upper'] for v in servos])}, "
+                                         f"torque_n_lower: {numbers([v['lower'] for v in servos])}}}",
+                                      f"[{units['force']}] forcerange x gear, actuatorfrcrange"))
+    else:
+        lines += [_line(4, f"k_r: {numbers([0.0] * len(js))}", f"[{units['k']}] no servo on this joint"),
+                         _line(4, f"l_r: {numbers([0.0] * len(js))}", f"[{units['l']}]")]
+        held = False
+    for k in js:
+        if k in motors:
+            notes.append(f"{where}: {', '.join(motors[k])} on joint {model.joint(k).name or jname}: a motor at zero "
+                         "control, no torque" + (f" (its limits [{model.jnt_actfrcrange[k, 0]:g}, "
+                                                 f"{model.jnt_actfrcrange[k, 1]:g}] N m)"
+                                                 if model.jnt_actfrclimited[k] else ""))
+    stiffness = [float(model.jnt_stiffness[k]) for k in js]
+    damping = [float(model.dof_damping[model.jnt_dofadr[k]]) for k in js]
+    if any(stiffness) or any(damping):
+        spring = [float(model.qpos_spring[model.jnt_qposadr[k]]) - q0 for k, q0 in zip(js, qpos0)]
+        lines.append(_line(4, f"passive: {{k_r: {numbers(stiffness)}, l_r: {numbers(damping)}, "
+                                     f"theta_ref: {numbers(spring)}}}",
+                                  f"[{units['k']}, {units['l']}, {units['q']}] stiffness, damping, springref"))
+    if any(model.jnt_limited[k] for k in js):
+        stops = []
+        for k, q0 in zip(js, qpos0):
+            stiff, damp, why = _stop_gains(model, k, float(model.dof_invweight0[model.jnt_dofadr[k]]),
+                                           "kg" if slide else "kg m^2")
+            ends = ((float(x) - q0 for x in model.jnt_range[k]) if model.jnt_limited[k]
+                    else (-math.inf, math.inf))
+            stops.append((*ends, stiff, damp, why))
+        lower, upper, stiff, damp, why = zip(*stops)
+        lines.append(_line(4, f"range: {{lower: {numbers(lower)}, upper: {numbers(upper)}, "
+                                     f"k_r: {numbers(stiff)}, l_r: {numbers(damp)}}}",
+                                  f"[{units['q']}] a stop: {'; '.join(why)}"))
+    q = [float(model.key_qpos[key, model.jnt_qposadr[k]]) - q0 if key is not None else 0.0
+         for k, q0 in zip(js, qpos0)]
+    u = [float(model.key_qvel[key, model.jnt_dofadr[k]]) if key is not None else 0.0 for k in js]
+    for k, value in zip(js, q):
+        if not slide and not -math.pi < value < math.pi:
+            element = _element("joint", model.joint(k), ' type="hinge"')
+            raise ConfigError([f"model file {where}: keyframe {keyframe!r} puts {element} at q = {value:g} rad "
+                               "from its reference; expected a number in (-pi, pi)"])
+    start = _line(2, f"{body}: {{q: {numbers(q)}, u: {numbers(u)}}}", f"[{units['q']}, {units['u']}] {jname}")
+    return source, lines, start, held
+
+
 def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel:
     """The rbstab config of the MJCF or URDF model at ``path`` (see the module docstring).
 
@@ -432,103 +526,27 @@ def import_model(path: str | Path, keyframe: str | None = None) -> ImportedModel
         joint = model.joint(j)
         jname = joint_names(joint.name, f"joint{j}")
         parent = owner[int(model.body_parentid[b])]
-        anchor, axis = np.array(data.xanchor[j]), np.array(data.xaxis[j])
-        dof = int(model.jnt_dofadr[j])
-        lines_joints += [
-            _line(2, f"- name: {jname}", _element("joint", joint, ' type="ball"' if b in balls else ' type="hinge"')),
-            _line(4, f"parent: {name_of[parent] if parent else 'ground'}"),
-            _line(4, f"parent_point: {_vector(anchor - com[parent], scale=1.0)}",
-                  "[m] the anchor, " + ("inertial frame" if not parent else f"from the centre of mass of {name_of[parent]}")),
-            _line(4, f"child: {name_of[b]}"),
-            _line(4, f"child_point: {_vector(anchor - com[b], scale=1.0)}", f"[m] the anchor, from the centre of mass of "
-                                                                          f"{name_of[b]}"),
-        ]
+        anchor = np.array(data.xanchor[j])
         if b in balls:
             joint_lines, start = _ball(model, data, keyed, b, jname, name_of[b])
-            lines_joints += joint_lines
-            initial.append(start)
-            unheld.append(jname)
-            continue
-        js = list(range(j, j + int(model.body_jntnum[b])))  # one hinge or slide, or a universal joint's two
-        universal = len(js) == 2
-        slide = int(model.jnt_type[j]) == int(mujoco.mjtJoint.mjJNT_SLIDE)
-        units = {"q": "m", "u": "m/s", "k": "N/m", "l": "N s/m", "force": "N"} if slide else \
-            {"q": "rad", "u": "rad/s", "k": "N m/rad", "l": "N m s/rad", "force": "N m"}
-        qpos0 = [float(model.qpos0[model.jnt_qposadr[k]]) for k in js]
-        source = " and ".join(_element("joint", model.joint(k), f' type="{"slide" if slide else "hinge"}"') for k in js)
-
-        def numbers(values):  # a hinge's number, a universal joint's 2
-            return f"[{', '.join(_number(v) for v in values)}]" if universal else _number(values[0])
-
-        if universal:
-            lines_joints[-5] = _line(2, f"- name: {jname}", source + ": a universal joint")
-            lines_joints += [
-                _line(4, "variant: universal", "q_1, q_2 = qpos - qpos0 [rad] of its two hinges, in order"),
-                _line(4, f"axis: [{_vector(data.xaxis[js[0]])}, {_vector(data.xaxis[js[1]])}]",
-                      "the hinges' axes, world frame"),
-            ]
+            source, held = _element("joint", joint, ' type="ball"'), False
         else:
-            lines_joints[-5] = _line(2, f"- name: {jname}", source)
-            lines_joints += [
-                _line(4, f"variant: {'slide' if slide else 'hinge'}",
-                      f"q = qpos - qpos0 [{units['q']}]" + (f" (ref {qpos0[0]:g})" if qpos0[0] else "")),
-                _line(4, f"axis: {_vector(axis)}", "the joint's axis, world frame"),
-            ]
-        servos = [feedback.get(k) for k in js]
-        if any(servos):
-            named = [servo for servo in servos if servo is not None]
-            none = {"k_r": 0.0, "l_r": 0.0, "theta_ref": 0.0, "lower": -math.inf, "upper": math.inf}
-            servos = [servo or none for servo in servos]
-            lines_joints += [
-                _line(4, f"k_r: {numbers([v['k_r'] for v in servos])}",
-                      f"[{units['k']}] {', '.join(v['source'] for v in named)}: kp gear^2"),
-                _line(4, f"l_r: {numbers([v['l_r'] for v in servos])}", f"[{units['l']}] kv gear^2"),
-                _line(4, f"theta_ref: {numbers([v['theta_ref'] for v in servos])}",
-                      f"[{units['q']}] its target at control "
-                      + ", ".join(f"{v['ctrl']:g}, gear {v['gear']:g}" for v in named))]
-            if any(math.isfinite(v["lower"]) or math.isfinite(v["upper"]) for v in servos):
-                lines_joints.append(_line(4, f"saturation: {{torque_n: {numbers([v['upper'] for v in servos])}, "
-                                             f"torque_n_lower: {numbers([v['lower'] for v in servos])}}}",
-                                          f"[{units['force']}] forcerange x gear, actuatorfrcrange"))
-        else:
-            lines_joints += [_line(4, f"k_r: {numbers([0.0] * len(js))}", f"[{units['k']}] no servo on this joint"),
-                             _line(4, f"l_r: {numbers([0.0] * len(js))}", f"[{units['l']}]")]
+            source, joint_lines, start, held = _coordinate_joint(mujoco, model, data, b, jname, name_of[b],
+                                                                 (feedback, motors), key, keyframe, where, notes)
+        lines_joints += [
+            _line(2, f"- name: {jname}", source),
+            _line(4, f"parent: {name_of[parent] if parent else 'ground'}"),
+            _line(4, f"parent_point: {_vector(anchor - com[parent], scale=1.0)}",
+                  "[m] the anchor, " + (f"from the centre of mass of {name_of[parent]}" if parent
+                                        else "inertial frame")),
+            _line(4, f"child: {name_of[b]}"),
+            _line(4, f"child_point: {_vector(anchor - com[b], scale=1.0)}",
+                  f"[m] the anchor, from the centre of mass of {name_of[b]}"),
+            *joint_lines,
+        ]
+        initial.append(start)
+        if not held:
             unheld.append(jname)
-        for k in js:
-            if k in motors:
-                notes.append(f"{where}: {', '.join(motors[k])} on joint {model.joint(k).name or jname}: a motor at zero "
-                             "control, no torque" + (f" (its limits [{model.jnt_actfrcrange[k, 0]:g}, "
-                                                     f"{model.jnt_actfrcrange[k, 1]:g}] N m)"
-                                                     if model.jnt_actfrclimited[k] else ""))
-        stiffness = [float(model.jnt_stiffness[k]) for k in js]
-        damping = [float(model.dof_damping[model.jnt_dofadr[k]]) for k in js]
-        if any(stiffness) or any(damping):
-            spring = [float(model.qpos_spring[model.jnt_qposadr[k]]) - q0 for k, q0 in zip(js, qpos0)]
-            lines_joints.append(_line(4, f"passive: {{k_r: {numbers(stiffness)}, l_r: {numbers(damping)}, "
-                                         f"theta_ref: {numbers(spring)}}}",
-                                      f"[{units['k']}, {units['l']}, {units['q']}] stiffness, damping, springref"))
-        if any(model.jnt_limited[k] for k in js):
-            stops = []
-            for k, q0 in zip(js, qpos0):
-                stiff, damp, why = _stop_gains(model, k, float(model.dof_invweight0[model.jnt_dofadr[k]]),
-                                               "kg" if slide else "kg m^2")
-                ends = ((float(x) - q0 for x in model.jnt_range[k]) if model.jnt_limited[k]
-                        else (-math.inf, math.inf))
-                stops.append((*ends, stiff, damp, why))
-            lower, upper, stiff, damp, why = zip(*stops)
-            lines_joints.append(_line(4, f"range: {{lower: {numbers(lower)}, upper: {numbers(upper)}, "
-                                         f"k_r: {numbers(stiff)}, l_r: {numbers(damp)}}}",
-                                      f"[{units['q']}] a stop: {'; '.join(why)}"))
-        q = [float(model.key_qpos[key, model.jnt_qposadr[k]]) - q0 if key is not None else 0.0
-             for k, q0 in zip(js, qpos0)]
-        u = [float(model.key_qvel[key, model.jnt_dofadr[k]]) if key is not None else 0.0 for k in js]
-        for k, value in zip(js, q):
-            if not slide and not -math.pi < value < math.pi:
-                element = _element("joint", model.joint(k), ' type="hinge"')
-                raise ConfigError([f"model file {where}: keyframe {keyframe!r} puts {element} at q = {value:g} rad "
-                                   "from its reference; expected a number in (-pi, pi)"])
-        initial.append(_line(2, f"{name_of[b]}: {{q: {numbers(q)}, u: {numbers(u)}}}",
-                             f"[{units['q']}, {units['u']}] {jname}"))
     if unheld:
         notes.append(f"{where}: no servo on {', '.join(unheld)}: their k_r and l_r are written as 0 (passive torques "
                      "and gravity only)")
