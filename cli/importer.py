@@ -28,12 +28,13 @@ def import_(model, output, keyframe, overwrite) -> None:
     rbstab run stance.yaml
 
     Bodies (mass, inertia tensor, centre of mass), hinge joints (anchors, axes; a body's two
-    hinges through one point as a universal joint), ball joints (free of gimbal lock), their
-    springs and dampers (stiffness, damping, springref), position servos on hinges (kp, kv,
-    forcerange, gear), ranges (as stops; a ball's as a cone), gravity and the initial state (a
-    keyframe or the reference pose), in the model's world frame; each value commented with its
-    units and its source. A gain the model lacks is written as 0 and named in a note
-    (stderr). What rbstab cannot represent (slide and free joints, actuators on balls,
+    hinges through one point as a universal joint), slide joints (URDF prismatic), ball joints
+    (free of gimbal lock), their springs and dampers (stiffness, damping, springref), position
+    servos on hinges and slides (kp, kv, forcerange, gear), ranges (as stops; a ball's as a
+    cone), gravity and the initial state (a keyframe or the reference pose), in the model's
+    world frame; each value commented with its units and its source. A gain the model lacks is
+    written as 0 and named in a note (stderr). What rbstab cannot represent (free joints,
+    actuators on balls,
     tendons, equality constraints, muscles) is refused in one line naming the element;
     nothing is written then. docs/import.md.
     """
