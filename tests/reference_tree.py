@@ -4,7 +4,9 @@
 What a physicist would write by hand from that section: a ``permanent`` joint (a ball) is
 held by construction, its child carried by the joint's relative orientation Theta_j and
 relative angular velocity Omega_j (child frame); a ``hinge`` likewise by its angle q about
-its unit axis a (A_rel = exp(q [a]x) by Rodrigues' formula, Omega_j = a dq/dt); a body on any
+its unit axis a (A_rel = exp(q [a]x) by Rodrigues' formula, Omega_j = a dq/dt); a ``slide`` by
+its displacement q along its unit axis a (the parent's frame): the child turned as its parent,
+its point C at the parent's point moved by q a, pushed along a by f = -k q - l dq/dt; a body on any
 other joint (here ``free`` or ``visco_elastic``) keeps its own Theta, Omega, X, V. A ball's
 or a hinge's range may be a stop: beyond either end of each coordinate (a ball's Euler
 angles, a hinge's q) a one-sided spring and damper on that coordinate and its rate, as a
@@ -37,8 +39,8 @@ import numpy as np
 from reference import euler_rate, hat, rotation
 
 GROUND = -1
-PERMANENT, FREE, VISCO_ELASTIC, HINGE = "permanent", "free", "visco_elastic", "hinge"
-LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE)
+PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE = "permanent", "free", "visco_elastic", "hinge", "slide"
+LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE)
 
 
 def _zero():
@@ -64,8 +66,9 @@ class Joint:
     clipped to +-``torque_limit`` [N m] axis by axis where given; K_c, L_c: the
     visco-elastic law Lambda_j = -K_c E_j - L_c F_j (eq 40). A ``hinge``: the unit ``axis``
     a, its feedback n = -k q - l dq/dt about a with k = ``k_r``[0, 0], l = ``l_r``[0, 0],
-    clipped to +-``torque_limit``[0]. ``stop``: (lower, upper, k, l) of each coordinate (3 a
-    ball's Euler angles, entry 0 a hinge's q) or None."""
+    clipped to +-``torque_limit``[0]; a ``slide``'s the force f = -k q - l dq/dt along a [N],
+    clipped the same way. ``stop``: (lower, upper, k, l) of each coordinate (3 a ball's Euler
+    angles, entry 0 a hinge's or a slide's q) or None."""
 
     parent: int
     parent_point: np.ndarray
@@ -93,11 +96,18 @@ class Tree:
         return len(self.bodies)
 
     def permanent(self, i):
-        """Whether joint i holds its child's point by construction (a ball or a hinge)."""
-        return self.joints[i].law in (PERMANENT, HINGE)
+        """Whether joint i places its child by construction (a ball, a hinge or a slide)."""
+        return self.joints[i].law in (PERMANENT, HINGE, SLIDE)
 
     def hinge(self, i):
         return self.joints[i].law == HINGE
+
+    def slide(self, i):
+        return self.joints[i].law == SLIDE
+
+    def single(self, i):
+        """Whether joint i has one coordinate (a hinge's angle, a slide's displacement)."""
+        return self.joints[i].law in (HINGE, SLIDE)
 
     def children(self, i):
         return [k for k, joint in enumerate(self.joints) if joint.parent == i]
@@ -110,7 +120,7 @@ def state_blocks(tree):
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 2 if tree.hinge(i) else 6 if tree.permanent(i) else 12
+        at += 2 if tree.single(i) else 6 if tree.permanent(i) else 12
     return starts, at
 
 
@@ -120,7 +130,7 @@ def velocity_blocks(tree):
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 1 if tree.hinge(i) else 3 if tree.permanent(i) else 6
+        at += 1 if tree.single(i) else 3 if tree.permanent(i) else 6
     return starts, at
 
 
@@ -129,7 +139,7 @@ def generalised_velocities(tree, y):
     starts, _ = state_blocks(tree)
     parts = []
     for i, s in enumerate(starts):
-        parts.append(y[s + 1: s + 2] if tree.hinge(i) else y[s + 3: s + 6] if tree.permanent(i)
+        parts.append(y[s + 1: s + 2] if tree.single(i) else y[s + 3: s + 6] if tree.permanent(i)
                      else np.concatenate([y[s + 3: s + 6], y[s + 9: s + 12]]))
     return np.concatenate(parts)
 
@@ -154,12 +164,14 @@ def euler_angles(a):
 # -- kinematics: positions, velocities, accelerations, outward from the ground ------------------
 @dataclass
 class Configuration:
-    """Of each body i: A_i, X_i [m]; of each joint j: Theta_j [rad], A_rel = A_p' A_c."""
+    """Of each body i: A_i, X_i [m]; of each joint j: Theta_j [rad], A_rel = A_p' A_c; of
+    each slide j: its q [m]."""
 
     rot: list
     position: list
     theta_j: list
     rel: list
+    slid: dict = field(default_factory=dict)
 
 
 def parent_frame(tree, conf, j):
@@ -176,7 +188,11 @@ def configuration(tree, y):
     for c, joint in enumerate(tree.joints):
         s = starts[c]
         a_p, x_p = parent_frame(tree, conf, c)
-        if tree.hinge(c):  # Theta_j: the rotation vector q a
+        if tree.slide(c):  # turned as its parent, its point at R_p + q a (the parent's frame)
+            conf.slid[c] = y[s]
+            theta_j, a_rel, a_c = np.zeros(3), np.eye(3), a_p
+            x_c = x_p + a_p @ (joint.parent_point + y[s] * joint.axis) - a_c @ joint.child_point
+        elif tree.hinge(c):  # Theta_j: the rotation vector q a
             theta_j = y[s] * joint.axis
             a_rel = axis_rotation(joint.axis, y[s])
             a_c = a_p @ a_rel
@@ -220,7 +236,13 @@ def motion(tree, conf, u, du):
         else:
             a_p, w_p, v_p, dw_p, dv_p = conf.rot[p], omega[p], v[p], omega_dot[p], v_dot[p]
         a_c, a_rel, r_p, r_c = conf.rot[c], conf.rel[c], joint.parent_point, joint.child_point
-        if tree.permanent(c):
+        if tree.slide(c):  # Omega_j = 0; C moves along a at dq/dt from the parent's point moved by q a
+            r, along, along_dot = r_p + conf.slid[c] * joint.axis, joint.axis * u[s], joint.axis * du[s]
+            omega[c], omega_dot[c] = w_p, dw_p
+            v[c] = v_p + a_p @ (cross(w_p, r) + along) - a_c @ cross(omega[c], r_c)
+            v_dot[c] = (dv_p + a_p @ (cross(dw_p, r) + cross(w_p, cross(w_p, r)) + 2.0 * cross(w_p, along) + along_dot)
+                        - a_c @ (cross(omega_dot[c], r_c) + cross(omega[c], cross(omega[c], r_c))))
+        elif tree.permanent(c):
             hinged = tree.hinge(c)  # Omega_j = a dq/dt, a fixed in the child's frame
             omega_j[c] = joint.axis * u[s] if hinged else u[s: s + 3]
             omega[c] = a_rel.T @ w_p + omega_j[c]
@@ -294,6 +316,15 @@ def joint_torque(joint, theta_j, omega_j):
     return delivered + stop, command + stop
 
 
+def slide_force(joint, q, rate):
+    """(f delivered, f commanded) [N] of a slide at its q [m] and dq/dt [m/s]: -k q - l dq/dt
+    clipped to +-its limit, plus its stop (never limited)."""
+    f = -joint.k_r[0, 0] * q - joint.l_r[0, 0] * rate
+    delivered = f if joint.torque_limit is None else min(max(f, -joint.torque_limit[0]), joint.torque_limit[0])
+    stop = stop_terms(joint, np.array([q]), np.array([rate]))[0][0]
+    return delivered + stop, f + stop
+
+
 def stop_terms(joint, coordinates, rates):
     """(f (k,) [N m] the stop's generalised force on each coordinate, its energy [J], its
     dissipation [W]) of the joint's ``stop`` at its ``coordinates`` and their ``rates``
@@ -335,6 +366,18 @@ def applied_forces(tree, conf, omega, v, omega_j):
         out.force[i] += body.mass * tree.gravity + out.h[i]
     for j, joint in enumerate(tree.joints):
         c, p = j, joint.parent
+        if joint.law == SLIDE:  # f a at C on the child, -f a on the parent at the same point; no torque
+            out.e[j], out.f[j] = point_motion(tree, conf, omega, v, j)
+            a_p = np.eye(3) if p == GROUND else conf.rot[p]
+            delivered, _ = slide_force(joint, conf.slid[j], (a_p @ joint.axis) @ out.f[j])
+            out.lam[j] = delivered * (a_p @ joint.axis)
+            out.torque[c] += cross(joint.child_point, conf.rot[c].T @ out.lam[j])
+            out.force[c] += out.lam[j]
+            if p != GROUND:
+                moved = joint.parent_point + conf.slid[j] * joint.axis
+                out.torque[p] -= cross(moved, conf.rot[p].T @ out.lam[j])
+                out.force[p] -= out.lam[j]
+            continue
         out.n_j[j], out.n_command[j] = joint_torque(joint, conf.theta_j[j], omega_j[j])
         out.torque[c] += out.n_j[j]
         if p != GROUND:
@@ -399,7 +442,7 @@ def evaluate(tree, y):
     dy = np.zeros(size)
     for i, s0 in enumerate(starts):
         k = ustarts[i]
-        if tree.hinge(i):
+        if tree.single(i):
             dy[s0], dy[s0 + 1] = u[k], du[k]
         elif tree.permanent(i):
             dy[s0: s0 + 3] = euler_rate(conf.theta_j[i]) @ omega_j[i]
@@ -429,8 +472,12 @@ def constraint_forces(tree, v_dot, forces):
     for c in reversed(range(tree.size)):
         if not tree.permanent(c):
             continue
-        pulled = sum((lam[k] for k in tree.children(c) if tree.permanent(k)), np.zeros(3))
-        lam[c] = tree.bodies[c].mass * v_dot[c] - forces.force[c] + pulled
+        # a slide's own force along its axis is in ``forces.force`` (on the child, and its opposite on the
+        # parent) and in its Lambda: the whole force its parent applies at C
+        pulled = sum((lam[k] - (forces.lam[k] if tree.slide(k) else 0.0) for k in tree.children(c)
+                      if tree.permanent(k)), np.zeros(3))
+        lam[c] = (tree.bodies[c].mass * v_dot[c] - forces.force[c] + pulled
+                  + (forces.lam[c] if tree.slide(c) else 0.0))
     return lam
 
 
@@ -440,6 +487,8 @@ def coordinates(tree, ev, j):
     joint, theta_j, omega_j = tree.joints[j], ev.conf.theta_j[j], ev.omega_j[j]
     if joint.law == HINGE:
         return np.array([theta_j @ joint.axis]), np.array([omega_j @ joint.axis])
+    if joint.law == SLIDE:
+        return np.array([ev.conf.slid[j]]), np.array([ev.u[velocity_blocks(tree)[0][j]]])
     return theta_j, euler_rate(theta_j) @ omega_j
 
 
@@ -462,6 +511,13 @@ def lyapunov(tree, y):
     constraint = 0.0
     dv_dt = 0.0
     for j, jt in enumerate(tree.joints):
+        if jt.law == SLIDE:  # 1/2 k q^2 (with the point laws' energy), l (dq/dt)^2 along its axis
+            (q,), (rate,) = coordinates(tree, ev, j)
+            delivered, commanded = slide_force(jt, q, rate)
+            _, energy, dissipation = stop_terms(jt, np.array([q]), np.array([rate]))
+            constraint += 0.5 * jt.k_r[0, 0] * q * q + energy
+            dv_dt += -jt.l_r[0, 0] * rate * rate - dissipation + rate * (delivered - commanded)
+            continue
         if jt.law == HINGE:  # 1/2 k q^2, l (dq/dt)^2 about its axis
             q, rate = conf.theta_j[j] @ jt.axis, ev.omega_j[j] @ jt.axis
             _, energy, dissipation = stop_terms(jt, np.array([q]), np.array([rate]))
@@ -500,7 +556,7 @@ def push(tree, y, body, point, impulse):
     ustarts, _ = velocity_blocks(tree)
     for i, s0 in enumerate(starts):
         k = ustarts[i]
-        if tree.hinge(i):
+        if tree.single(i):
             after[s0 + 1] += du[k]
             continue
         after[s0 + 3: s0 + 6] += du[k: k + 3]
@@ -539,6 +595,15 @@ def reduced_state(tree, y12):
         a_p, w_p = (np.eye(3), np.zeros(3)) if p == GROUND else (rot[p], y12[12 * p + 3: 12 * p + 6])
         a_rel = a_p.T @ rot[c]
         omega_j = y12[12 * c + 3: 12 * c + 6] - a_rel.T @ w_p
+        if tree.slide(c):  # q, dq/dt along the axis of its point's offset from its parent's, and their rates
+            x_p, v_p = (np.zeros(3), np.zeros(3)) if p == GROUND else (y12[12 * p + 6: 12 * p + 9],
+                                                                        y12[12 * p + 9: 12 * p + 12])
+            axis = a_p @ joint.axis
+            e = y12[12 * c + 6: 12 * c + 9] + rot[c] @ joint.child_point - x_p - a_p @ joint.parent_point
+            f = (y12[12 * c + 9: 12 * c + 12] + rot[c] @ cross(y12[12 * c + 3: 12 * c + 6], joint.child_point)
+                 - v_p - a_p @ cross(w_p, joint.parent_point))
+            out[s], out[s + 1] = axis @ e, axis @ f
+            continue
         if tree.hinge(c):  # sin q = a . vee(A_rel), cos q = (tr A_rel - 1) / 2
             vee = 0.5 * np.array([a_rel[2, 1] - a_rel[1, 2], a_rel[0, 2] - a_rel[2, 0], a_rel[1, 0] - a_rel[0, 1]])
             out[s] = math.atan2(joint.axis @ vee, 0.5 * (np.trace(a_rel) - 1.0))

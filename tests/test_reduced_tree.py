@@ -21,7 +21,7 @@ from scipy.integrate import solve_ivp
 import reference_tree as T
 from reference import hat, rotation
 from rbstab.variants.paper import paper_form
-from rbstab.chain import Body, Chain, Joint, Stop, hinge
+from rbstab.chain import Body, Chain, Joint, Stop, hinge, slide
 from rbstab.config.loader import load_config
 from rbstab.model import Saturation
 from rbstab.simulator import simulate
@@ -280,47 +280,54 @@ def test_random_trees_have_the_chains_accelerations_forces_and_v(mix, rng):
 
 
 def _jointed_tree(rng, laws):
-    """A random tree of ``laws`` (hinges about random axes, balls, free and visco-elastic
-    joints; body feedback, clipped joint torques, gravity) whose hinges and balls have
-    stops on their coordinates, narrow enough that random states press them."""
-    tree = _random_tree(rng, [T.PERMANENT if law == T.HINGE else law for law in laws])
+    """A random tree of ``laws`` (hinges and slides along random axes, balls, free and
+    visco-elastic joints; body feedback, clipped joint torques, gravity) whose hinges, slides
+    and balls have stops on their coordinates, narrow enough that random states press them."""
+    single = (T.HINGE, T.SLIDE)
+    tree = _random_tree(rng, [T.PERMANENT if law in single else law for law in laws])
     joints = []
     for joint, law in zip(tree.joints, laws):
-        n = 1 if law == T.HINGE else 3
+        n = 1 if law in single else 3
         stop = (-rng.uniform(0.05, 0.3, n), rng.uniform(0.05, 0.3, n), rng.uniform(50.0, 200.0, n),
-                rng.uniform(0.0, 5.0, n)) if law in (T.HINGE, T.PERMANENT) else None
+                rng.uniform(0.0, 5.0, n)) if law in (*single, T.PERMANENT) else None
         axis = rng.normal(size=3)
-        joints.append(dataclasses.replace(joint, law=law, stop=stop, axis=axis / np.linalg.norm(axis) if law == T.HINGE
+        joints.append(dataclasses.replace(joint, law=law, stop=stop, axis=axis / np.linalg.norm(axis) if law in single
                                           else None))
     return dataclasses.replace(tree, joints=tuple(joints))
 
 
 def _jointed_chain(tree):
-    """rbstab's chain of a tree of :func:`_jointed_tree`: a hinge its gains about its axis."""
+    """rbstab's chain of a tree of :func:`_jointed_tree`: a hinge its gains about its axis, a
+    slide's along it."""
+    single = (T.HINGE, T.SLIDE)
     chain = _chain(dataclasses.replace(tree, joints=tuple(dataclasses.replace(j, law=T.PERMANENT)
-                                                          if j.law == T.HINGE else j for j in tree.joints)))
+                                                          if j.law in single else j for j in tree.joints)))
     joints = []
     for i, (joint, mine) in enumerate(zip(tree.joints, chain.joints)):
-        stop = None if joint.stop is None else Stop(*(x if joint.law != T.HINGE else float(x[0]) for x in joint.stop))
-        if joint.law == T.HINGE:
+        stop = None if joint.stop is None else Stop(*(x if joint.law not in single else float(x[0])
+                                                      for x in joint.stop))
+        if joint.law in single:
             limit = None if joint.torque_limit is None else (-float(joint.torque_limit[0]),
                                                              float(joint.torque_limit[0]))
-            joints.append(hinge(mine.name, joint.parent, i, joint.parent_point, joint.child_point, joint.axis,
-                                float(joint.k_r[0, 0]), float(joint.l_r[0, 0]), limits=limit, stop=stop))
+            joints.append((hinge if joint.law == T.HINGE else slide)(
+                mine.name, joint.parent, i, joint.parent_point, joint.child_point, joint.axis, float(joint.k_r[0, 0]),
+                float(joint.l_r[0, 0]), limits=limit, stop=stop))
         else:
             joints.append(dataclasses.replace(mine, stop=stop))
     return dataclasses.replace(chain, joints=tuple(joints))
 
 
 @pytest.mark.parametrize("laws", [[T.HINGE] * 4, [T.HINGE, T.PERMANENT, T.HINGE, T.FREE],
-                                  [T.FREE, T.HINGE, T.VISCO_ELASTIC, T.PERMANENT]],
-                         ids=["hinges", "mixed", "free_root"])
+                                  [T.FREE, T.HINGE, T.VISCO_ELASTIC, T.PERMANENT],
+                                  [T.SLIDE, T.HINGE, T.SLIDE, T.PERMANENT], [T.FREE, T.SLIDE, T.VISCO_ELASTIC, T.SLIDE]],
+                         ids=["hinges", "mixed", "free_root", "slides", "free_slides"])
 def test_random_trees_of_hinges_balls_and_stops_have_the_references_rate_and_v(laws, rng):
-    """At random reduced states of random trees of hinges (random axes), balls, free and
-    visco-elastic joints, the hinges and balls pressing their stops (a ball's on each Euler
-    angle, N_s = B' f), rbstab's reduced-coordinate rate (tree_rate) is the plain-numpy
-    reference's to 1e-11, with its joint torques and the terms of v."""
-    from rbstab.variants.tree import tree_layout, tree_rate, tree_work
+    """At random reduced states of random trees of hinges and slides (random axes), balls,
+    free and visco-elastic joints, the hinges, slides and balls pressing their stops (a ball's
+    on each Euler angle, N_s = B' f), rbstab's reduced-coordinate rate (tree_rate) is the
+    plain-numpy reference's to 1e-11, with its joint torques, a slide's force, the terms of v
+    and every placed joint's reaction, and its maximal image is the reference's."""
+    from rbstab.variants.tree import expand_state, reduce_state, tree_layout, tree_rate, tree_reactions, tree_work
 
     for _ in range(3):
         tree = _jointed_tree(rng, laws)
@@ -331,8 +338,8 @@ def test_random_trees_of_hinges_balls_and_stops_have_the_references_rate_and_v(l
         pressed = 0
         for _ in range(4):
             y = rng.normal(scale=0.3, size=size)
-            for i, s in enumerate(starts):  # angular rates of 2 rad/s
-                if tree.hinge(i):
+            for i, s in enumerate(starts):  # angular rates of 2 rad/s (a slide's 2 m/s)
+                if tree.single(i):
                     y[s + 1] = rng.normal(scale=2.0)
                 else:
                     y[s + 3: s + 6] = rng.normal(scale=2.0, size=3)
@@ -343,6 +350,16 @@ def test_random_trees_of_hinges_balls_and_stops_have_the_references_rate_and_v(l
             np.testing.assert_allclose(dy, ev.dy, rtol=0, atol=1e-11 * np.abs(ev.dy).max())
             n_j = work.chain.joints[:, 3]
             np.testing.assert_allclose(n_j, ev.forces.n_j, rtol=0, atol=1e-11 * (1 + np.abs(ev.forces.n_j).max()))
+            slides = [i for i in range(tree.size) if tree.slide(i)]  # a slide's force at C
+            np.testing.assert_allclose(work.chain.joints[slides, 2], ev.forces.lam[slides], rtol=0,
+                                       atol=1e-11 * (1 + np.abs(ev.forces.lam).max()))
+            out, fixed = np.full((tree.size, 3), 7.0), compiled.permanent  # every placed joint's whole reaction
+            tree_reactions(0.0, y, *compiled.args, *layout.args, np.empty(size + 1), work, np.empty((tree.size, 6)),
+                           out, np.empty((tree.size, 3)))
+            np.testing.assert_allclose(out[fixed], ev.lam[fixed], rtol=0, atol=1e-11 * (1 + np.abs(ev.lam).max()))
+            maximal = T.maximal_state(tree, y)
+            np.testing.assert_allclose(expand_state(compiled, layout, y), maximal, rtol=0, atol=1e-13)
+            np.testing.assert_allclose(reduce_state(compiled, layout, maximal), y, rtol=0, atol=1e-12)
             terms, _ = T.lyapunov(tree, y)
             scalars = work.chain.scalars[:4]
             np.testing.assert_allclose(scalars, terms, rtol=0, atol=1e-11 * (1 + np.abs(terms).max()))
