@@ -6,7 +6,11 @@ held by construction, its child carried by the joint's relative orientation Thet
 relative angular velocity Omega_j (child frame); a ``hinge`` likewise by its angle q about
 its unit axis a (A_rel = exp(q [a]x) by Rodrigues' formula, Omega_j = a dq/dt); a ``slide`` by
 its displacement q along its unit axis a (the parent's frame): the child turned as its parent,
-its point C at the parent's point moved by q a, pushed along a by f = -k q - l dq/dt; a body on any
+its point C at the parent's point moved by q a, pushed along a by f = -k q - l dq/dt; a
+``universal`` joint by q_1 about a_1 (the parent's frame) then q_2 about a_2 (the child's),
+A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x), Omega_j = S dq/dt with S = (exp(-q_2 [a_2]x) a_1, a_2),
+its feedback f_k = -k_k q_k - l_k dq_k/dt on each coordinate delivered as the torque
+N_j = S (S'S)^-1 f (the torque in the span of S whose generalised forces S'N_j are f); a body on any
 other joint (here ``free`` or ``visco_elastic``) keeps its own Theta, Omega, X, V. A ball's
 or a hinge's range may be a stop: beyond either end of each coordinate (a ball's Euler
 angles, a hinge's q) a one-sided spring and damper on that coordinate and its rate, as a
@@ -39,8 +43,11 @@ import numpy as np
 from reference import euler_rate, hat, rotation
 
 GROUND = -1
-PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE = "permanent", "free", "visco_elastic", "hinge", "slide"
-LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE)
+PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE, UNIVERSAL = ("permanent", "free", "visco_elastic", "hinge", "slide",
+                                                           "universal")
+LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE, UNIVERSAL)
+#: The joints on coordinates along axes, by law: their number of coordinates q (and rates).
+COORDINATES = {HINGE: 1, SLIDE: 1, UNIVERSAL: 2}
 
 
 def _zero():
@@ -81,6 +88,7 @@ class Joint:
     torque_limit: np.ndarray | None = None
     axis: np.ndarray | None = None
     stop: tuple | None = None
+    axis_2: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -96,8 +104,9 @@ class Tree:
         return len(self.bodies)
 
     def permanent(self, i):
-        """Whether joint i places its child by construction (a ball, a hinge or a slide)."""
-        return self.joints[i].law in (PERMANENT, HINGE, SLIDE)
+        """Whether joint i places its child by construction (a ball, a hinge, a slide or a
+        universal joint)."""
+        return self.joints[i].law in (PERMANENT, *COORDINATES)
 
     def hinge(self, i):
         return self.joints[i].law == HINGE
@@ -105,9 +114,17 @@ class Tree:
     def slide(self, i):
         return self.joints[i].law == SLIDE
 
+    def universal(self, i):
+        return self.joints[i].law == UNIVERSAL
+
     def single(self, i):
-        """Whether joint i has one coordinate (a hinge's angle, a slide's displacement)."""
-        return self.joints[i].law in (HINGE, SLIDE)
+        """Whether joint i has coordinates along axes (a hinge's angle, a slide's displacement,
+        a universal joint's two angles)."""
+        return self.joints[i].law in COORDINATES
+
+    def m(self, i):
+        """The number of joint i's coordinates along axes (0: none)."""
+        return COORDINATES.get(self.joints[i].law, 0)
 
     def children(self, i):
         return [k for k, joint in enumerate(self.joints) if joint.parent == i]
@@ -120,7 +137,7 @@ def state_blocks(tree):
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 2 if tree.single(i) else 6 if tree.permanent(i) else 12
+        at += 2 * tree.m(i) if tree.single(i) else 6 if tree.permanent(i) else 12
     return starts, at
 
 
@@ -130,7 +147,7 @@ def velocity_blocks(tree):
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 1 if tree.single(i) else 3 if tree.permanent(i) else 6
+        at += tree.m(i) if tree.single(i) else 3 if tree.permanent(i) else 6
     return starts, at
 
 
@@ -139,7 +156,7 @@ def generalised_velocities(tree, y):
     starts, _ = state_blocks(tree)
     parts = []
     for i, s in enumerate(starts):
-        parts.append(y[s + 1: s + 2] if tree.single(i) else y[s + 3: s + 6] if tree.permanent(i)
+        parts.append(y[s + tree.m(i): s + 2 * tree.m(i)] if tree.single(i) else y[s + 3: s + 6] if tree.permanent(i)
                      else np.concatenate([y[s + 3: s + 6], y[s + 9: s + 12]]))
     return np.concatenate(parts)
 
@@ -192,6 +209,11 @@ def configuration(tree, y):
             conf.slid[c] = y[s]
             theta_j, a_rel, a_c = np.zeros(3), np.eye(3), a_p
             x_c = x_p + a_p @ (joint.parent_point + y[s] * joint.axis) - a_c @ joint.child_point
+        elif tree.universal(c):  # Theta_j: (q_1, q_2, 0)
+            theta_j = np.array([y[s], y[s + 1], 0.0])
+            a_rel = axis_rotation(joint.axis, y[s]) @ axis_rotation(joint.axis_2, y[s + 1])
+            a_c = a_p @ a_rel
+            x_c = x_p + a_p @ joint.parent_point - a_c @ joint.child_point
         elif tree.hinge(c):  # Theta_j: the rotation vector q a
             theta_j = y[s] * joint.axis
             a_rel = axis_rotation(joint.axis, y[s])
@@ -243,11 +265,16 @@ def motion(tree, conf, u, du):
             v_dot[c] = (dv_p + a_p @ (cross(dw_p, r) + cross(w_p, cross(w_p, r)) + 2.0 * cross(w_p, along) + along_dot)
                         - a_c @ (cross(omega_dot[c], r_c) + cross(omega[c], cross(omega[c], r_c))))
         elif tree.permanent(c):
-            hinged = tree.hinge(c)  # Omega_j = a dq/dt, a fixed in the child's frame
-            omega_j[c] = joint.axis * u[s] if hinged else u[s: s + 3]
+            if tree.universal(c):  # S dq/dt; d(exp(-q_2 [a_2]x) a_1)/dt = (s_1 x a_2) dq_2/dt
+                columns = motion_subspace(joint, conf.theta_j[c][1])
+                omega_j[c] = columns @ u[s: s + 2]
+                omega_j_dot = columns @ du[s: s + 2] + u[s] * u[s + 1] * cross(columns[:, 0], joint.axis_2)
+            elif tree.hinge(c):  # Omega_j = a dq/dt, a fixed in the child's frame
+                omega_j[c], omega_j_dot = joint.axis * u[s], joint.axis * du[s]
+            else:
+                omega_j[c], omega_j_dot = u[s: s + 3], du[s: s + 3]
             omega[c] = a_rel.T @ w_p + omega_j[c]
             v[c] = v_p + a_p @ cross(w_p, r_p) - a_c @ cross(omega[c], r_c)
-            omega_j_dot = joint.axis * du[s] if hinged else du[s: s + 3]
             omega_dot[c] = a_rel.T @ dw_p + omega_j_dot + cross(omega[c], omega_j[c])
             v_dot[c] = (dv_p + a_p @ (cross(dw_p, r_p) + cross(w_p, cross(w_p, r_p)))
                         - a_c @ (cross(omega_dot[c], r_c) + cross(omega[c], cross(omega[c], r_c))))
@@ -256,6 +283,12 @@ def motion(tree, conf, u, du):
             omega_dot[c], v_dot[c] = du[s: s + 3], du[s + 3: s + 6]
             omega_j[c] = omega[c] - a_rel.T @ w_p
     return omega, v, omega_dot, v_dot, omega_j
+
+
+def motion_subspace(joint, q_2):
+    """A universal joint's S (3, 2) at q_2 [rad]: its columns exp(-q_2 [a_2]x) a_1 and a_2
+    (child frame)."""
+    return np.column_stack([axis_rotation(joint.axis_2, -q_2) @ joint.axis, joint.axis_2])
 
 
 def jacobians(tree, conf):
@@ -301,6 +334,14 @@ def joint_torque(joint, theta_j, omega_j):
     """(N_j delivered, N_j commanded) [N m], child frame: N = -B(Theta_j)' K_r Theta_j - L_r Omega_j
     (eq 23 on the relative motion), clipped to the joint's limits; a hinge's n a, n = -k q - l
     dq/dt clipped to +-its limit; plus its stop (never limited)."""
+    if joint.law == UNIVERSAL:  # f on (q_1, q_2) clipped per coordinate, as the torque S (S'S)^-1 f
+        columns = motion_subspace(joint, theta_j[1])
+        q, rate = theta_j[:2], np.linalg.lstsq(columns, omega_j, rcond=None)[0]
+        f = -np.diag(joint.k_r)[:2] * q - np.diag(joint.l_r)[:2] * rate
+        delivered = f if joint.torque_limit is None else np.clip(f, -joint.torque_limit[:2], joint.torque_limit[:2])
+        stop = stop_terms(joint, q, rate)[0]
+        to_torque = columns @ np.linalg.inv(columns.T @ columns)
+        return to_torque @ (delivered + stop), to_torque @ (f + stop)
     if joint.law == HINGE:
         q, rate = theta_j @ joint.axis, omega_j @ joint.axis
         n = -joint.k_r[0, 0] * q - joint.l_r[0, 0] * rate
@@ -443,7 +484,8 @@ def evaluate(tree, y):
     for i, s0 in enumerate(starts):
         k = ustarts[i]
         if tree.single(i):
-            dy[s0], dy[s0 + 1] = u[k], du[k]
+            m = tree.m(i)
+            dy[s0: s0 + m], dy[s0 + m: s0 + 2 * m] = u[k: k + m], du[k: k + m]
         elif tree.permanent(i):
             dy[s0: s0 + 3] = euler_rate(conf.theta_j[i]) @ omega_j[i]
             dy[s0 + 3: s0 + 6] = du[k: k + 3]
@@ -487,8 +529,9 @@ def coordinates(tree, ev, j):
     joint, theta_j, omega_j = tree.joints[j], ev.conf.theta_j[j], ev.omega_j[j]
     if joint.law == HINGE:
         return np.array([theta_j @ joint.axis]), np.array([omega_j @ joint.axis])
-    if joint.law == SLIDE:
-        return np.array([ev.conf.slid[j]]), np.array([ev.u[velocity_blocks(tree)[0][j]]])
+    if joint.law in (SLIDE, UNIVERSAL):
+        at, m = velocity_blocks(tree)[0][j], tree.m(j)
+        return (np.array([ev.conf.slid[j]]) if joint.law == SLIDE else theta_j[:2]), ev.u[at: at + m]
     return theta_j, euler_rate(theta_j) @ omega_j
 
 
@@ -517,6 +560,13 @@ def lyapunov(tree, y):
             _, energy, dissipation = stop_terms(jt, np.array([q]), np.array([rate]))
             constraint += 0.5 * jt.k_r[0, 0] * q * q + energy
             dv_dt += -jt.l_r[0, 0] * rate * rate - dissipation + rate * (delivered - commanded)
+            continue
+        if jt.law == UNIVERSAL:  # sum 1/2 k_k q_k^2, l_k (dq_k/dt)^2; the torque's power dq/dt'(f - f_command)
+            q, rate = coordinates(tree, ev, j)
+            _, energy, dissipation = stop_terms(jt, q, rate)
+            rotational += 0.5 * np.sum(np.diag(jt.k_r)[:2] * q * q) + energy
+            dv_dt += (-np.sum(np.diag(jt.l_r)[:2] * rate * rate) - dissipation
+                      + ev.omega_j[j] @ (forces.n_j[j] - forces.n_command[j]))
             continue
         if jt.law == HINGE:  # 1/2 k q^2, l (dq/dt)^2 about its axis
             q, rate = conf.theta_j[j] @ jt.axis, ev.omega_j[j] @ jt.axis
@@ -557,7 +607,8 @@ def push(tree, y, body, point, impulse):
     for i, s0 in enumerate(starts):
         k = ustarts[i]
         if tree.single(i):
-            after[s0 + 1] += du[k]
+            m = tree.m(i)
+            after[s0 + m: s0 + 2 * m] += du[k: k + m]
             continue
         after[s0 + 3: s0 + 6] += du[k: k + 3]
         if not tree.permanent(i):
@@ -603,6 +654,14 @@ def reduced_state(tree, y12):
             f = (y12[12 * c + 9: 12 * c + 12] + rot[c] @ cross(y12[12 * c + 3: 12 * c + 6], joint.child_point)
                  - v_p - a_p @ cross(w_p, joint.parent_point))
             out[s], out[s + 1] = axis @ e, axis @ f
+            continue
+        if tree.universal(c):  # A_rel a_2 = exp(q_1 [a_1]x) a_2, A_rel' a_1 = exp(-q_2 [a_2]x) a_1
+            a_1, a_2 = joint.axis, joint.axis_2
+            z, w = a_rel @ a_2, a_rel.T @ a_1
+            q_1 = math.atan2(cross(a_1, a_2) @ z, (a_2 - (a_1 @ a_2) * a_1) @ z)
+            q_2 = math.atan2(-(cross(a_2, a_1) @ w), (a_1 - (a_2 @ a_1) * a_2) @ w)
+            out[s], out[s + 1] = q_1, q_2
+            out[s + 2: s + 4] = np.linalg.lstsq(motion_subspace(joint, q_2), omega_j, rcond=None)[0]
             continue
         if tree.hinge(c):  # sin q = a . vee(A_rel), cos q = (tr A_rel - 1) / 2
             vee = 0.5 * np.array([a_rel[2, 1] - a_rel[1, 2], a_rel[0, 2] - a_rel[2, 0], a_rel[1, 0] - a_rel[0, 1]])

@@ -21,7 +21,7 @@ from scipy.integrate import solve_ivp
 import reference_tree as T
 from reference import hat, rotation
 from rbstab.variants.paper import paper_form
-from rbstab.chain import Body, Chain, Joint, Stop, hinge, slide
+from rbstab.chain import Body, Chain, Joint, Stop, hinge, slide, universal
 from rbstab.config.loader import load_config
 from rbstab.model import Saturation
 from rbstab.simulator import simulate
@@ -283,30 +283,36 @@ def _jointed_tree(rng, laws):
     """A random tree of ``laws`` (hinges and slides along random axes, balls, free and
     visco-elastic joints; body feedback, clipped joint torques, gravity) whose hinges, slides
     and balls have stops on their coordinates, narrow enough that random states press them."""
-    single = (T.HINGE, T.SLIDE)
-    tree = _random_tree(rng, [T.PERMANENT if law in single else law for law in laws])
+    tree = _random_tree(rng, [T.PERMANENT if law in T.COORDINATES else law for law in laws])
     joints = []
     for joint, law in zip(tree.joints, laws):
-        n = 1 if law in single else 3
+        n = T.COORDINATES.get(law, 3)
         stop = (-rng.uniform(0.05, 0.3, n), rng.uniform(0.05, 0.3, n), rng.uniform(50.0, 200.0, n),
-                rng.uniform(0.0, 5.0, n)) if law in (*single, T.PERMANENT) else None
-        axis = rng.normal(size=3)
-        joints.append(dataclasses.replace(joint, law=law, stop=stop, axis=axis / np.linalg.norm(axis) if law in single
-                                          else None))
+                rng.uniform(0.0, 5.0, n)) if law in (*T.COORDINATES, T.PERMANENT) else None
+        axis, axis_2 = rng.normal(size=3), rng.normal(size=3)
+        joints.append(dataclasses.replace(
+            joint, law=law, stop=stop, axis=axis / np.linalg.norm(axis) if law in T.COORDINATES else None,
+            axis_2=axis_2 / np.linalg.norm(axis_2) if law == T.UNIVERSAL else None))
     return dataclasses.replace(tree, joints=tuple(joints))
 
 
 def _jointed_chain(tree):
     """rbstab's chain of a tree of :func:`_jointed_tree`: a hinge its gains about its axis, a
-    slide's along it."""
+    slide's along it, a universal joint's per coordinate."""
     single = (T.HINGE, T.SLIDE)
     chain = _chain(dataclasses.replace(tree, joints=tuple(dataclasses.replace(j, law=T.PERMANENT)
-                                                          if j.law in single else j for j in tree.joints)))
+                                                          if j.law in T.COORDINATES else j for j in tree.joints)))
     joints = []
     for i, (joint, mine) in enumerate(zip(tree.joints, chain.joints)):
         stop = None if joint.stop is None else Stop(*(x if joint.law not in single else float(x[0])
                                                       for x in joint.stop))
-        if joint.law in single:
+        if joint.law == T.UNIVERSAL:  # its numbers per coordinate, entries 0-1 of the stop's 3-vectors
+            stop = Stop(*(np.append(x, fill) for x, fill in zip(joint.stop, (-np.inf, np.inf, 0.0, 0.0))))
+            limit = None if joint.torque_limit is None else (-joint.torque_limit[:2], joint.torque_limit[:2])
+            joints.append(universal(mine.name, joint.parent, i, joint.parent_point, joint.child_point,
+                                    (joint.axis, joint.axis_2), np.diag(joint.k_r)[:2], np.diag(joint.l_r)[:2],
+                                    limits=limit, stop=stop))
+        elif joint.law in single:
             limit = None if joint.torque_limit is None else (-float(joint.torque_limit[0]),
                                                              float(joint.torque_limit[0]))
             joints.append((hinge if joint.law == T.HINGE else slide)(
@@ -319,8 +325,10 @@ def _jointed_chain(tree):
 
 @pytest.mark.parametrize("laws", [[T.HINGE] * 4, [T.HINGE, T.PERMANENT, T.HINGE, T.FREE],
                                   [T.FREE, T.HINGE, T.VISCO_ELASTIC, T.PERMANENT],
-                                  [T.SLIDE, T.HINGE, T.SLIDE, T.PERMANENT], [T.FREE, T.SLIDE, T.VISCO_ELASTIC, T.SLIDE]],
-                         ids=["hinges", "mixed", "free_root", "slides", "free_slides"])
+                                  [T.SLIDE, T.HINGE, T.SLIDE, T.PERMANENT], [T.FREE, T.SLIDE, T.VISCO_ELASTIC, T.SLIDE],
+                                  [T.UNIVERSAL, T.SLIDE, T.UNIVERSAL, T.HINGE], [T.FREE, T.UNIVERSAL, T.PERMANENT,
+                                                                                 T.UNIVERSAL]],
+                         ids=["hinges", "mixed", "free_root", "slides", "free_slides", "universal", "free_universal"])
 def test_random_trees_of_hinges_balls_and_stops_have_the_references_rate_and_v(laws, rng):
     """At random reduced states of random trees of hinges and slides (random axes), balls,
     free and visco-elastic joints, the hinges, slides and balls pressing their stops (a ball's
@@ -340,7 +348,8 @@ def test_random_trees_of_hinges_balls_and_stops_have_the_references_rate_and_v(l
             y = rng.normal(scale=0.3, size=size)
             for i, s in enumerate(starts):  # angular rates of 2 rad/s (a slide's 2 m/s)
                 if tree.single(i):
-                    y[s + 1] = rng.normal(scale=2.0)
+                    m = tree.m(i)
+                    y[s + m: s + 2 * m] = rng.normal(scale=2.0, size=m)
                 else:
                     y[s + 3: s + 6] = rng.normal(scale=2.0, size=3)
             ev = T.evaluate(tree, y)
