@@ -10,7 +10,11 @@ its point C at the parent's point moved by q a, pushed along a by f = -k q - l d
 ``universal`` joint by q_1 about a_1 (the parent's frame) then q_2 about a_2 (the child's),
 A_rel = exp(q_1 [a_1]x) exp(q_2 [a_2]x), Omega_j = S dq/dt with S = (exp(-q_2 [a_2]x) a_1, a_2),
 its feedback f_k = -k_k q_k - l_k dq_k/dt on each coordinate delivered as the torque
-N_j = S (S'S)^-1 f (the torque in the span of S whose generalised forces S'N_j are f); a body on any
+N_j = S (S'S)^-1 f (the torque in the span of S whose generalised forces S'N_j are f); a
+``ball`` (free of gimbal lock) by the unit quaternion of A_rel (scipy's Rotation reads it) and
+Omega_j, its spring the potential 1/2 phi'K_r phi of the rotation vector phi of A_rel, its torque
+minus the potential's gradient under a turn of the child (central differences) less L_r Omega_j,
+clipped axis by axis; a body on any
 other joint (here ``free`` or ``visco_elastic``) keeps its own Theta, Omega, X, V. A ball's
 or a hinge's range may be a stop: beyond either end of each coordinate (a ball's Euler
 angles, a hinge's q) a one-sided spring and damper on that coordinate and its rate, as a
@@ -39,13 +43,14 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from reference import euler_rate, hat, rotation
 
 GROUND = -1
-PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE, UNIVERSAL = ("permanent", "free", "visco_elastic", "hinge", "slide",
-                                                           "universal")
-LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE, UNIVERSAL)
+PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE, UNIVERSAL, BALL = ("permanent", "free", "visco_elastic", "hinge",
+                                                                 "slide", "universal", "ball")
+LAWS = (PERMANENT, FREE, VISCO_ELASTIC, HINGE, SLIDE, UNIVERSAL, BALL)
 #: The joints on coordinates along axes, by law: their number of coordinates q (and rates).
 COORDINATES = {HINGE: 1, SLIDE: 1, UNIVERSAL: 2}
 
@@ -106,7 +111,7 @@ class Tree:
     def permanent(self, i):
         """Whether joint i places its child by construction (a ball, a hinge, a slide or a
         universal joint)."""
-        return self.joints[i].law in (PERMANENT, *COORDINATES)
+        return self.joints[i].law in (PERMANENT, BALL, *COORDINATES)
 
     def hinge(self, i):
         return self.joints[i].law == HINGE
@@ -137,7 +142,7 @@ def state_blocks(tree):
     starts, at = [], 0
     for i in range(tree.size):
         starts.append(at)
-        at += 2 * tree.m(i) if tree.single(i) else 6 if tree.permanent(i) else 12
+        at += 2 * tree.m(i) if tree.single(i) else 7 if tree.joints[i].law == BALL else 6 if tree.permanent(i) else 12
     return starts, at
 
 
@@ -156,7 +161,8 @@ def generalised_velocities(tree, y):
     starts, _ = state_blocks(tree)
     parts = []
     for i, s in enumerate(starts):
-        parts.append(y[s + tree.m(i): s + 2 * tree.m(i)] if tree.single(i) else y[s + 3: s + 6] if tree.permanent(i)
+        parts.append(y[s + tree.m(i): s + 2 * tree.m(i)] if tree.single(i) else y[s + 4: s + 7]
+                     if tree.joints[i].law == BALL else y[s + 3: s + 6] if tree.permanent(i)
                      else np.concatenate([y[s + 3: s + 6], y[s + 9: s + 12]]))
     return np.concatenate(parts)
 
@@ -209,6 +215,11 @@ def configuration(tree, y):
             conf.slid[c] = y[s]
             theta_j, a_rel, a_c = np.zeros(3), np.eye(3), a_p
             x_c = x_p + a_p @ (joint.parent_point + y[s] * joint.axis) - a_c @ joint.child_point
+        elif joint.law == BALL:  # Theta_j: the rotation vector of A_rel, its quaternion's (w, x, y, z)
+            turn = Rotation.from_quat([y[s + 1], y[s + 2], y[s + 3], y[s]])
+            theta_j, a_rel = turn.as_rotvec(), turn.as_matrix()
+            a_c = a_p @ a_rel
+            x_c = x_p + a_p @ joint.parent_point - a_c @ joint.child_point
         elif tree.universal(c):  # Theta_j: (q_1, q_2, 0)
             theta_j = np.array([y[s], y[s + 1], 0.0])
             a_rel = axis_rotation(joint.axis, y[s]) @ axis_rotation(joint.axis_2, y[s + 1])
@@ -330,10 +341,33 @@ def point_motion(tree, conf, omega, v, j):
             f - v[p] - conf.rot[p] @ cross(omega[p], joint.parent_point))
 
 
+def ball_potential(joint, turn):
+    """1/2 phi'K_r phi [J] of a ball turned by the rotation matrix ``turn`` (A_rel), phi its
+    rotation vector."""
+    phi = Rotation.from_matrix(turn).as_rotvec()
+    return 0.5 * phi @ joint.k_r @ phi
+
+
+def ball_torque(joint, theta_j, omega_j):
+    """(N_j delivered, N_j commanded) [N m] of a ball at the rotation vector ``theta_j`` of
+    A_rel: minus the gradient of :func:`ball_potential` under a turn exp([e]x) of the child
+    (its frame: A_rel exp([e]x)), by central differences, less L_r Omega_j; clipped axis by
+    axis."""
+    turn, step = Rotation.from_rotvec(theta_j).as_matrix(), 1e-5
+    gradient = np.array([(ball_potential(joint, turn @ Rotation.from_rotvec(step * e).as_matrix())
+                          - ball_potential(joint, turn @ Rotation.from_rotvec(-step * e).as_matrix())) / (2 * step)
+                         for e in np.eye(3)])
+    command = -gradient - joint.l_r @ omega_j
+    delivered = command if joint.torque_limit is None else np.clip(command, -joint.torque_limit, joint.torque_limit)
+    return delivered, command
+
+
 def joint_torque(joint, theta_j, omega_j):
     """(N_j delivered, N_j commanded) [N m], child frame: N = -B(Theta_j)' K_r Theta_j - L_r Omega_j
     (eq 23 on the relative motion), clipped to the joint's limits; a hinge's n a, n = -k q - l
     dq/dt clipped to +-its limit; plus its stop (never limited)."""
+    if joint.law == BALL:
+        return ball_torque(joint, theta_j, omega_j)
     if joint.law == UNIVERSAL:  # f on (q_1, q_2) clipped per coordinate, as the torque S (S'S)^-1 f
         columns = motion_subspace(joint, theta_j[1])
         q, rate = theta_j[:2], np.linalg.lstsq(columns, omega_j, rcond=None)[0]
@@ -486,6 +520,11 @@ def evaluate(tree, y):
         if tree.single(i):
             m = tree.m(i)
             dy[s0: s0 + m], dy[s0 + m: s0 + 2 * m] = u[k: k + m], du[k: k + m]
+        elif tree.joints[i].law == BALL:  # dq/dt = 1/2 q (0, Omega_j), the quaternion product
+            w, x = y[s0], y[s0 + 1: s0 + 4]
+            dy[s0] = -0.5 * x @ omega_j[i]
+            dy[s0 + 1: s0 + 4] = 0.5 * (w * omega_j[i] + cross(x, omega_j[i]))
+            dy[s0 + 4: s0 + 7] = du[k: k + 3]
         elif tree.permanent(i):
             dy[s0: s0 + 3] = euler_rate(conf.theta_j[i]) @ omega_j[i]
             dy[s0 + 3: s0 + 6] = du[k: k + 3]
@@ -524,14 +563,17 @@ def constraint_forces(tree, v_dot, forces):
 
 
 def coordinates(tree, ev, j):
-    """(joint j's coordinates, their rates) at the evaluation ``ev``: a hinge's q and dq/dt
-    (1,), a ball's or a free body's relative Euler angles Theta_j and dTheta_j/dt (3,)."""
+    """(joint j's coordinates, their rates) at the evaluation ``ev``: a hinge's or a slide's q
+    and dq/dt (1,), a universal joint's (2,), an Euler ball's or a free body's relative Euler
+    angles Theta_j and dTheta_j/dt (3,), a quaternion ball's rotation vector and Omega_j."""
     joint, theta_j, omega_j = tree.joints[j], ev.conf.theta_j[j], ev.omega_j[j]
     if joint.law == HINGE:
         return np.array([theta_j @ joint.axis]), np.array([omega_j @ joint.axis])
     if joint.law in (SLIDE, UNIVERSAL):
         at, m = velocity_blocks(tree)[0][j], tree.m(j)
         return (np.array([ev.conf.slid[j]]) if joint.law == SLIDE else theta_j[:2]), ev.u[at: at + m]
+    if joint.law == BALL:  # its rotation vector and Omega_j
+        return theta_j, omega_j
     return theta_j, euler_rate(theta_j) @ omega_j
 
 
@@ -560,6 +602,10 @@ def lyapunov(tree, y):
             _, energy, dissipation = stop_terms(jt, np.array([q]), np.array([rate]))
             constraint += 0.5 * jt.k_r[0, 0] * q * q + energy
             dv_dt += -jt.l_r[0, 0] * rate * rate - dissipation + rate * (delivered - commanded)
+            continue
+        if jt.law == BALL:  # 1/2 phi'K_r phi, Omega_j'L_r Omega_j
+            rotational += ball_potential(jt, conf.rel[j])
+            dv_dt += -ev.omega_j[j] @ jt.l_r @ ev.omega_j[j] + ev.omega_j[j] @ (forces.n_j[j] - forces.n_command[j])
             continue
         if jt.law == UNIVERSAL:  # sum 1/2 k_k q_k^2, l_k (dq_k/dt)^2; the torque's power dq/dt'(f - f_command)
             q, rate = coordinates(tree, ev, j)
@@ -610,6 +656,9 @@ def push(tree, y, body, point, impulse):
             m = tree.m(i)
             after[s0 + m: s0 + 2 * m] += du[k: k + m]
             continue
+        if tree.joints[i].law == BALL:
+            after[s0 + 4: s0 + 7] += du[k: k + 3]
+            continue
         after[s0 + 3: s0 + 6] += du[k: k + 3]
         if not tree.permanent(i):
             after[s0 + 9: s0 + 12] += du[k + 3: k + 6]
@@ -654,6 +703,11 @@ def reduced_state(tree, y12):
             f = (y12[12 * c + 9: 12 * c + 12] + rot[c] @ cross(y12[12 * c + 3: 12 * c + 6], joint.child_point)
                  - v_p - a_p @ cross(w_p, joint.parent_point))
             out[s], out[s + 1] = axis @ e, axis @ f
+            continue
+        if joint.law == BALL:  # its quaternion (w >= 0) and Omega_j
+            x, y_, z, w = Rotation.from_matrix(a_rel).as_quat()
+            out[s: s + 4] = np.array([w, x, y_, z]) * (1.0 if w >= 0.0 else -1.0)
+            out[s + 4: s + 7] = omega_j
             continue
         if tree.universal(c):  # A_rel a_2 = exp(q_1 [a_1]x) a_2, A_rel' a_1 = exp(-q_2 [a_2]x) a_1
             a_1, a_2 = joint.axis, joint.axis_2
