@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from ..convergence import DEFAULT_LYAPUNOV_RATIO
-from ..layout import parameter_attributes
+from ..layout import parameter_attributes, slide_parts
 
 __all__ = ["Recovery", "recovery_across", "recovery_content", "RECOVERY_SUFFIX"]
 
@@ -74,6 +74,9 @@ class Recovery:
     computed : int
         Configurations computed by this call (the others were read back).
     seconds : float
+    slides : frozenset of str
+        The configurations' slides and their children (:func:`rbstab.layout.slide_parts`),
+        whose keys carry a slide's units.
     """
 
     name: str
@@ -84,6 +87,7 @@ class Recovery:
     folder: Path
     computed: int = 0
     seconds: float = 0.0
+    slides: frozenset = frozenset()
 
     def file_content(self, command_line: str | None = None) -> tuple[dict, dict, dict]:
         """(coordinates, variables, global attributes) of its curves file (:func:`recovery_content`)."""
@@ -301,7 +305,8 @@ def recovery_across(spec, *, push: Mapping[str, Any] | None = None, basin_stabil
                 values[f"{key}.{j}"] = flat[:, j]
     records = [done[rid] for rid in run_ids]
     return Recovery(name=spec.name, keys=list(values), values=values, records=records, options=options,
-                    folder=folder, computed=len(todo), seconds=_time.perf_counter() - start)
+                    folder=folder, computed=len(todo), seconds=_time.perf_counter() - start,
+                    slides=slide_parts(table.resolved(0)) if table.n else frozenset())
 
 
 def _line(record: dict, k: int, n: int) -> str:
@@ -333,7 +338,7 @@ def recovery_content(result: Recovery, command_line: str | None = None) -> tuple
     for key in result.keys:
         values = np.asarray(result.values[key])
         coords[key] = _var(("point",), values if values.dtype.kind in "fiub" else values.astype(object),
-                           parameter_attributes(key).get("units"), f"varied key {key}")
+                           parameter_attributes(key, result.slides).get("units"), f"varied key {key}")
         coords[key][2]["config_key"] = key
     data: dict[str, tuple] = {
         "sublevel": _var(("point",), [r["sublevel"] for r in result.records], "J",
