@@ -53,19 +53,18 @@ def _v_at_rest(compiled, layout, q) -> float:
     return float(scalars[:4].sum() + compiled.offset)
 
 
-def test_the_interval_kernel_holds_the_compiled_v_its_gradient_and_hessian():
-    """The hinged stance (an asymmetric saturating ankle, the knee's passive spring and its
-    stop, gravity): on random small boxes of q, some across the knee's stop, the compiled
-    v at rest lies in P(box), its central-difference gradient and Hessian in the kernel's."""
+def _kernel_holds(config, centres, rng, smooth=lambda lo, hi, x, h: True):
+    """On small random boxes about ``centres`` (k, n) of the coordinates q, the compiled v at
+    rest lies in the kernel's P(box), its central-difference gradient in the kernel's and,
+    where ``smooth`` (lo, hi, x, step) says the second derivative does not jump, its Hessian
+    in the kernel's; v is 0 at the rest state."""
     from flint import arb
 
-    config = load_config(STANCE)
     model, equilibrium = _model(config, arb)
     compiled = C.compile_chain(config.chain)
     layout = tree_layout(compiled)
-    rng = np.random.default_rng(7)
-    h = 1e-4
-    eye = np.eye(3) * h
+    n, h = len(equilibrium), 1e-4
+    eye = np.eye(n) * h
 
     def v(q):
         return _v_at_rest(compiled, layout, q)
@@ -73,25 +72,36 @@ def test_the_interval_kernel_holds_the_compiled_v_its_gradient_and_hessian():
     def inside(ball, x, slack):
         return float(ball.lower()) - slack <= x <= float(ball.upper()) + slack
 
-    centres = [equilibrium + rng.normal(scale=0.3, size=3) for _ in range(8)]
-    centres += [np.array([0.1, upper, -0.2]) for upper in (0.049, 0.051, 0.06)]  # the knee's stop at 0.05 rad
-    for centre in centres:
-        lo = centre - rng.uniform(0.0005, 0.002, 3)
-        hi = centre + rng.uniform(0.0005, 0.002, 3)
+    for centre in centres(equilibrium):
+        lo, hi = centre - rng.uniform(0.0005, 0.002, n), centre + rng.uniform(0.0005, 0.002, n)
         p_box, grad, _, hess = model.evaluate(lo, hi, hessian=True)
-        for x in rng.uniform(lo, hi, (6, 3)):
+        for x in rng.uniform(lo, hi, (6, n)):
             v0 = v(x)
             assert inside(p_box, v0, 1e-9 * (1 + abs(v0)))
-            g = [(v(x + eye[a]) - v(x - eye[a])) / (2 * h) for a in range(3)]
-            for a in range(3):
+            g = [(v(x + eye[a]) - v(x - eye[a])) / (2 * h) for a in range(n)]
+            for a in range(n):
                 assert inside(grad[a], g[a], 1e-5 * (1 + abs(g[a])))
-                for b in range(3):
-                    if lo[1] < 0.05 < hi[1] or abs(x[1] - 0.05) < 2 * h:
-                        continue  # the stop's second derivative jumps there
+                for b in range(n) if smooth(lo, hi, x, h) else ():
                     hs = (v(x + eye[a] + eye[b]) - v(x + eye[a] - eye[b]) - v(x - eye[a] + eye[b])
                           + v(x - eye[a] - eye[b])) / (4 * h * h)
                     assert inside(hess[a][b], hs, 2e-3 * (1 + abs(hs)))
     assert potential(config, equilibrium) == pytest.approx(0.0, abs=1e-9)  # v's zero at the rest state
+
+
+def test_the_interval_kernel_holds_the_compiled_v_its_gradient_and_hessian():
+    """The hinged stance (an asymmetric saturating ankle, the knee's passive spring and its
+    stop, gravity): on random small boxes of q, some across the knee's stop, the compiled
+    v at rest lies in P(box), its central-difference gradient and Hessian in the kernel's."""
+    rng = np.random.default_rng(7)
+
+    def centres(equilibrium):
+        return [equilibrium + rng.normal(scale=0.3, size=3) for _ in range(8)] + [
+            np.array([0.1, upper, -0.2]) for upper in (0.049, 0.051, 0.06)]  # the knee's stop at 0.05 rad
+
+    def smooth(lo, hi, x, h):  # the stop's second derivative jumps at 0.05 rad
+        return not (lo[1] < 0.05 < hi[1] or abs(x[1] - 0.05) < 2 * h)
+
+    _kernel_holds(load_config(STANCE), centres, rng, smooth)
 
 
 def test_one_rods_level_is_where_its_servo_first_reaches_its_limit():
@@ -190,3 +200,70 @@ def test_what_the_hinge_proof_does_not_cover_is_refused_in_one_line(change, expe
     change(data)
     with pytest.raises(NotVerifiable, match=expected):
         verify_sublevel(config_from_mapping(data))
+
+
+# -- slides: a tree of hinges and slides ------------------------------------------------------------
+CART_POLE = ROOT / "configs/examples/cart_pole_imported.yaml"
+
+
+def _block(k=400.0, l=6.0, limit=30.0, mass=2.0, q_ref=0.1):
+    """A block on a vertical slide, a servo k, l about q_ref clipped to +-limit [N]:
+    P(q) = 1/2 k (q - q_ref)^2 + m g q + h."""
+    return {
+        "name": "block", "gravity": [0.0, 0.0, -9.81],
+        "bodies": [{"name": "block", "mass": mass, "inertia": [0.1, 0.2, 0.15]}],
+        "joints": [{"name": "rail", "parent": "ground", "child": "block", "variant": "slide", "axis": [0.0, 0.0, 1.0],
+                    "k_r": k, "l_r": l, "theta_ref": q_ref, "saturation": {"torque_n": limit}}],
+        "initial_state": {"block": {"q": 0.0}},
+        "simulation": {"t_end": 3.0, "n_samples": 101},
+    }
+
+
+def test_a_blocks_level_is_where_its_slides_force_first_reaches_its_limit():
+    """A block held up by a sprung slide: the proof stops where the static force -k (q - q_ref)
+    first reaches its clip, at the level (limit - m g)^2 / (2 k) above the rest state (the
+    closed form), within the search's tolerance, naming the slide and its limits in N; P is
+    1/2 k (q - q_e)^2 there."""
+    k, limit, mass, q_ref = 400.0, 30.0, 2.0, 0.1
+    config = config_from_mapping(_block(k=k, limit=limit, mass=mass, q_ref=q_ref))
+    onset = (limit - mass * 9.81) ** 2 / (2 * k)
+    result = verify_sublevel(config)
+    assert (1 - 0.011) * onset <= result.level <= onset, (result.level, onset)
+    assert "rail" in result.reason and "[-30, 30] N" in result.reason and "force" in result.reason
+    rest = q_ref - mass * 9.81 / k
+    assert potential(config, np.array([0.3])) == pytest.approx(0.5 * k * (0.3 - rest) ** 2, rel=1e-12)
+
+
+def test_the_interval_kernel_holds_a_cart_poles_compiled_v_its_gradient_and_hessian():
+    """The shipped cart-pole (a slide with a spring, a passive spring and a saturating servo,
+    a hinge across it): on random small boxes of (q_cart [m], q_pole [rad]), the compiled v at
+    rest lies in P(box), its central-difference gradient and Hessian in the kernel's."""
+    rng = np.random.default_rng(3)
+    _kernel_holds(load_config(CART_POLE), lambda e: [e + rng.normal(scale=0.3, size=2) for _ in range(8)], rng)
+
+
+def test_the_cart_poles_verified_level_holds_where_its_runs_go():
+    """The cart-pole's verified c lies at or below the sampled certificate's estimate, and runs
+    from states on {v = c} (written as the slide's and the hinge's q and u) never rise above c
+    and come back."""
+    from rbstab.analysis import analyze
+    from rbstab.analysis.certificate import ChainModel, level_states
+
+    config = load_config(CART_POLE, ["simulation.n_samples=301", "simulation.t_end=10"])
+    analysis = analyze(config, samples=300, falsification_runs=0, simulate=False)
+    proven, estimate = verify_sublevel(config, rtol=0.05).level, analysis.certificate.sublevel
+    assert 0.0 < proven <= estimate * (1 + 0.02), (proven, estimate)
+    model = ChainModel(C.compile_chain(config.chain))
+    names = analysis.layout.state_names()
+    key = {"translation": "q", "translation_rate": "u", "q": "q", "u": "u"}
+    at_level = dataclasses.replace(analysis.certificate, sublevel=proven)
+    for z in level_states(model, analysis.linearisation, at_level, 6, seed=5):
+        start = {name.split(".")[0]: {} for name in names}
+        for name, value in zip(names, z):
+            body, block = name.split(".")
+            start[body][key[block]] = float(value)
+        result = simulate(config_from_mapping({**config.resolved, "initial_state": start}))
+        v = result.outputs["lyapunov"]
+        assert result.status == "success", result.message
+        assert v[0] == pytest.approx(proven, rel=1e-6)
+        assert v.max() <= v[0] * (1 + 1e-9) and v[-1] < 0.05 * v[0]

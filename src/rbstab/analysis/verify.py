@@ -33,11 +33,13 @@ Then {v <= c} n D is positively invariant, dv/dt = 0 only where Omega = 0, and t
 largest invariant set there consists of rest points (grad P = 0 with Omega = 0): only the
 equilibrium. By LaSalle's invariance principle every run from the set converges to it.
 
-A tree of at most 3 hinges (:class:`_HingeModel`) is proven the same way over boxes of
-the hinges' angles q: v = 1/2 u' M(q) u + P(q), P the hinges' springs and stops, gravity
-on X_i(q) and h; tau_j = -k_j (q_j - q_ref_j) between the servo's own lower and upper
-limits; the domain half a turn either side of each reference, and every body's Euler
-angles inside ``simulation.limits.theta`` (docs/analysis.md, "The verified bound").
+A tree of at most 3 hinges and slides (:class:`_HingeModel`) is proven the same way over
+boxes of their coordinates q (a hinge's angle [rad], a slide's displacement [m]): v =
+1/2 u' M(q) u + P(q), P the joints' springs and stops, gravity on X_i(q) and h; tau_j =
+-k_j (q_j - q_ref_j) (a slide's force) between the servo's own lower and upper limits; the
+domain half a turn (a slide's :data:`SLIDE_SEARCH`) either side of each reference, and every
+body's Euler angles inside ``simulation.limits.theta`` (docs/analysis.md, "The verified
+bound").
 
 The largest such c is found at once: c is a lower bound of P over the set of Theta that
 fail 1-3, computed by best-first branch and bound (boxes ordered by their lower bound of
@@ -56,7 +58,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import is_chain
+from ..layout import JOINT_CODES, is_chain
 
 __all__ = ["Verification", "NotVerifiable", "verify_sublevel", "verify_analysis", "check_verifiable",
            "potential", "DEFAULT_RTOL"]
@@ -68,6 +70,11 @@ DEFAULT_RTOL = 0.01
 _MIN_WIDTH = 1e-6
 #: The most boxes of one search.
 MAX_BOXES = 400_000
+#: [m]: the search domain of a slide's q, either side of its reference (a hinge's: half a
+#: turn), within its range where that is an admissible region.
+SLIDE_SEARCH = 1.0
+#: A slide's joint code (rbstab.layout.JOINT_CODES).
+SLIDE = JOINT_CODES["slide"]
 
 
 class NotVerifiable(ValueError):
@@ -117,13 +124,15 @@ class Verification:
 
 # -- what is covered ----------------------------------------------------------------------------
 def _hinged(config) -> bool:
-    return any(j.variant == "hinge" for j in config.chain.joints)
+    """Whether the tree has a joint on one coordinate (a hinge or a slide): the proof of a
+    tree of those."""
+    return any(j.variant in ("hinge", "slide") for j in config.chain.joints)
 
 
 def verified_model(config):
     """The configuration the proof is of: ``config`` where its tree is one body held to the
     ground by its joint (in either spelling, the ground point anywhere), or a tree of at
-    most 3 hinges (6 states).
+    most 3 hinges and slides (6 states).
 
     Raises
     ------
@@ -133,19 +142,21 @@ def verified_model(config):
     uncovered = [j for j in config.chain.joints if j.variant in ("universal", "ball")]
     if uncovered:
         raise NotVerifiable(f"joints.{uncovered[0].name}.variant: found {uncovered[0].variant!r}; --verify covers one "
-                            "body on a permanent joint (the reduced 6-state model, eq 21) or a tree of at most 3 hinges")
+                            "body on a permanent joint (the reduced 6-state model, eq 21) or a tree of at most 3 "
+                            "hinges and slides")
     if _hinged(config):
-        others = [j for j in config.chain.joints if j.variant != "hinge"]
+        others = [j for j in config.chain.joints if j.variant not in ("hinge", "slide")]
         if others:
             raise NotVerifiable(f"joints.{others[0].name}.variant: found {others[0].variant!r} in a tree with a "
-                                "hinge; --verify covers a tree whose every joint is a hinge")
+                                "hinge or a slide; --verify covers a tree whose every joint is a hinge or a slide")
         if bodies > 3:
-            raise NotVerifiable(f"this tree has {bodies} hinges ({2 * bodies} states); --verify covers at most 3 "
-                                "(6 states: interval arithmetic over boxes of their angles)")
+            raise NotVerifiable(f"this tree has {bodies} joints ({2 * bodies} states); --verify covers at most 3 "
+                                "hinges or slides (6 states: interval arithmetic over boxes of their coordinates)")
         return config
     if bodies > 1:
         raise NotVerifiable(f"the proof covers one body held to the ground by a permanent joint, the reduced "
-                            f"6-state model of 'permanent' (eq 21), or a tree of at most 3 hinges; this chain has "
+                            f"6-state model of 'permanent' (eq 21), or a tree of at most 3 hinges and slides; this "
+                            "chain has "
                             f"{bodies} bodies")
     return config
 
@@ -217,10 +228,11 @@ def _check_hinges(config) -> None:
     for joint in chain.joints:
         axis = np.asarray(joint.axis, dtype=float)
         axis = axis / np.linalg.norm(axis)
-        l_r = float(axis @ np.asarray(joint.l_r, dtype=float) @ axis)
+        l_r = float(np.asarray(joint.l_r, dtype=float)[0, 0] if joint.variant == "slide"  # along its axis
+                    else axis @ np.asarray(joint.l_r, dtype=float) @ axis)
         if not l_r > 0.0:
-            raise NotVerifiable(f"joints.{joint.name}.l_r: found {l_r:g}; --verify needs every hinge's l_r > 0 "
-                                "(LaSalle's argument: dv/dt = 0 only where every dq/dt = 0)")
+            raise NotVerifiable(f"joints.{joint.name}.l_r: found {l_r:g}; --verify needs every {joint.variant}'s "
+                                "l_r > 0 (LaSalle's argument: dv/dt = 0 only where every dq/dt = 0)")
         if joint.saturation is not None and joint.saturation.shape != "clip":
             raise NotVerifiable(f"joints.{joint.name}.saturation.shape: found {joint.saturation.shape!r}; --verify "
                                 "covers 'clip' (a smooth saturation delivers less than the commanded torque at every "
@@ -291,6 +303,11 @@ def _mv(m, v):
     return [m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
             m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
             m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2]]
+
+
+def _mm(a, b):
+    """The product of two 3x3 matrices (lists of rows)."""
+    return [[a[r][0] * b[0][c] + a[r][1] * b[1][c] + a[r][2] * b[2][c] for c in range(3)] for r in range(3)]
 
 
 def _dot(a, b):
@@ -509,7 +526,8 @@ class _HingeModel:
     q_ref_j) over a box of the hinges' angles q (one per body: a tree of hinges), in arb: v
     at rest is P(q) = sum_j [1/2 k_j (q_j - q_ref_j)^2 + 1/2 kp_j (q_j - qp_j)^2 + the range's
     stop, 1/2 k_s (q_j - end)^2 beyond either end] - sum_i G_i' X_i(q) + h (docs/physics.md,
-    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) parents first
+    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) and the slides' offsets
+    q_j a_j (a slide's q [m], its force [N]) parents first
     (:func:`rbstab.variants.tree.tree_expand`), differentiated forward (:class:`_Jet`). ``compiled``: the chain
     (:class:`rbstab.variants.chain.CompiledChain`), h = its offset."""
 
@@ -522,11 +540,14 @@ class _HingeModel:
         self.names = list(compiled.chain.joint_names)
         self.bodies = list(compiled.chain.body_names)
         self.parents = [int(q) for q in compiled.parents]
+        self.slides = [int(code) == SLIDE for code in compiled.codes]
         axes = [np.asarray(p["axis"], dtype=float) for p in params]
         self.axes = [[arb(float(x)) for x in a] for a in axes]
-        quad = [(float(a @ p["k_r"] @ a), float(a @ p["theta_ref"])) for a, p in zip(axes, params)]
+        # a hinge's numbers about its axis (its records' 3-vectors q a), a slide's in entry 0
+        along = [np.eye(3)[0] if slid else a for a, slid in zip(axes, self.slides)]
+        quad = [(float(a @ p["k_r"] @ a), float(a @ p["theta_ref"])) for a, p in zip(along, params)]
         passive = [(float(a @ p["passive_k_r"] @ a), float(a @ p["passive_theta_ref"])) if p["passive"] > 0
-                   else (0.0, 0.0) for a, p in zip(axes, params)]
+                   else (0.0, 0.0) for a, p in zip(along, params)]
         self.springs = [(k, r, kp, rp) for (k, r), (kp, rp) in zip(quad, passive)]
         total = np.array([k + kp for k, _, kp, _ in self.springs])
         self.k_r = np.diag(total)
@@ -544,7 +565,7 @@ class _HingeModel:
         limits = compiled.params[0]["limits"][0] if compiled.params[0]["limited"] > 0 else np.full(3, np.inf)
         self.theta_limit = np.asarray(limits, dtype=float)  # |theta_i| of each body's Euler angles (eq 2)
         self.upper, self.lower = np.full(n, np.inf), np.full(n, -np.inf)
-        for j, (a, p) in enumerate(zip(axes, params)):
+        for j, (a, p) in enumerate(zip(along, params)):
             if p["saturation"] > 0:  # the per-axis limits a_i [lower, upper] back as numbers about a
                 i = int(np.argmax(np.abs(a)))
                 high, low = float(p["torque_limit"][i]) / a[i], float(p["torque_floor"][i]) / a[i]
@@ -560,18 +581,21 @@ class _HingeModel:
             (np.isfinite(self.lower[i]) and bool(tau[i] < self.arb(self.lower[i])))
 
     def torque_text(self, i: int) -> str:
-        return (f"the commanded torque of {self.names[i]} (at rest) reaches its limits "
-                f"[{self.lower[i]:g}, {self.upper[i]:g}] N m")
+        what, units = ("force", "N") if self.slides[i] else ("torque", "N m")
+        return (f"the commanded {what} of {self.names[i]} (at rest) reaches its limits "
+                f"[{self.lower[i]:g}, {self.upper[i]:g}] {units}")
 
     def scale(self) -> np.ndarray:
         k = np.diag(self.k_r)
         return np.sqrt(np.maximum(k, 1e-9 * max(float(k.max()), 1.0)))
 
     def _outer(self) -> np.ndarray:
-        """The largest box searched: half a turn either side of each hinge's reference, within
-        its range where that is an admissible region."""
-        return np.column_stack([np.maximum(self.reference - math.pi, self.ranges[:, 0]),
-                                np.minimum(self.reference + math.pi, self.ranges[:, 1])])
+        """The largest box searched: half a turn either side of each hinge's reference,
+        :data:`SLIDE_SEARCH` either side of each slide's, within its range where that is an
+        admissible region."""
+        half = np.where(self.slides, SLIDE_SEARCH, math.pi)
+        return np.column_stack([np.maximum(self.reference - half, self.ranges[:, 0]),
+                                np.minimum(self.reference + half, self.ranges[:, 1])])
 
     def level_cap(self, config) -> float:
         """An upper bound of the least P on the largest box's faces (points on each)."""
@@ -588,19 +612,22 @@ class _HingeModel:
         where a spring alone holds every P <= ``level_cap`` inside."""
         g = sum(float(np.linalg.norm([float(x.mid()) for x in w])) for w in self.G)
         reach = sum(float(np.linalg.norm([float(x.mid()) for x in r])) for r in self.R_c + self.R_p)
-        floor = -g * reach + float(self.h.mid())  # |X_i| <= the sum of every |R|: -G'X >= -|G| that
+        outer = self._outer()  # with the slides' largest |q| in the box searched
+        reach += sum(float(np.max(np.abs(outer[j]))) for j in range(self.dim) if self.slides[j])
+        floor = -g * reach + float(self.h.mid())  # |X_i| <= the sum of every |R| (|q|): -G'X >= -|G| that
         k = np.diag(self.k_r)
         with np.errstate(divide="ignore"):
             half = np.where(k > 0, np.sqrt(np.maximum(2.0 * (level_cap - floor) / np.where(k > 0, k, 1.0), 0.0)) * 1.05
                             + 1e-3, np.inf)
-        outer = self._outer()
         return np.column_stack([np.maximum(self.reference - half, outer[:, 0]),
                                 np.minimum(self.reference + half, outer[:, 1])])
 
     def boundary(self, config, a: int, edge: float) -> str:
+        units, search = (("m", f"{SLIDE_SEARCH:g} m from the reference") if self.slides[a]
+                         else ("rad", "half a turn from the reference"))
         if edge in self.ranges[a]:
-            return f"q of {self.names[a]} = {edge:.4g} rad (joints.{self.names[a]}.range, an admissible region)"
-        return f"q of {self.names[a]} = {edge:.4g} rad (the search domain: half a turn from the reference)"
+            return f"q of {self.names[a]} = {edge:.4g} {units} (joints.{self.names[a]}.range, an admissible region)"
+        return f"q of {self.names[a]} = {edge:.4g} {units} (the search domain: {search})"
 
     def _square(self, lo: float, hi: float, centre: float):
         """(x - centre)^2 over [lo, hi], tight (0 where the interval holds the centre)."""
@@ -645,27 +672,33 @@ class _HingeModel:
         rotations, positions = [], []  # each body's A_i and X_i
         for j in range(n):
             total = total + self._spring(j, q[j], lo[j], hi[j], hessian)
-            c, s = q[j].cos(), q[j].sin()
-            g_s, g_c = [zero] * n, [zero] * n
-            g_s[j], g_c[j] = c, -s
-            h_s = h_c = None
-            if hessian:
-                h_s, h_c = [[zero] * n for _ in range(n)], [[zero] * n for _ in range(n)]
-                h_s[j][j], h_c[j][j] = -s, -c
-            sin, cos = _Jet(s, g_s, h_s), _Jet(c, g_c, h_c)
-            vers = one - cos
-            x, y, z = self.axes[j]
-            rel = [[cos + vers * (x * x), vers * (x * y) - sin * z, vers * (x * z) + sin * y],
-                   [vers * (x * y) + sin * z, cos + vers * (y * y), vers * (y * z) - sin * x],
-                   [vers * (x * z) - sin * y, vers * (y * z) + sin * x, cos + vers * (z * z)]]
             parent = self.parents[j]
-            if parent < 0:
-                a, anchor = rel, list(self.R_p[j])
+            if self.slides[j]:  # turned as its parent; its point moved by q a (the parent's frame)
+                g = [zero] * n
+                g[j] = one
+                slid = _Jet(q[j], g, [[zero] * n for _ in range(n)] if hessian else None)
+                point = [self.R_p[j][r] + self.axes[j][r] * slid for r in range(3)]
+                a = [[one if r == col else zero for col in range(3)] for r in range(3)] if parent < 0 \
+                    else rotations[parent]
             else:
-                a_p = rotations[parent]
-                a = [[a_p[r][0] * rel[0][col] + a_p[r][1] * rel[1][col] + a_p[r][2] * rel[2][col] for col in range(3)]
-                     for r in range(3)]
-                offset = _mv(a_p, self.R_p[j])
+                c, s = q[j].cos(), q[j].sin()
+                g_s, g_c = [zero] * n, [zero] * n
+                g_s[j], g_c[j] = c, -s
+                h_s = h_c = None
+                if hessian:
+                    h_s, h_c = [[zero] * n for _ in range(n)], [[zero] * n for _ in range(n)]
+                    h_s[j][j], h_c[j][j] = -s, -c
+                sin, cos = _Jet(s, g_s, h_s), _Jet(c, g_c, h_c)
+                vers = one - cos
+                x, y, z = self.axes[j]
+                rel = [[cos + vers * (x * x), vers * (x * y) - sin * z, vers * (x * z) + sin * y],
+                       [vers * (x * y) + sin * z, cos + vers * (y * y), vers * (y * z) - sin * x],
+                       [vers * (x * z) - sin * y, vers * (y * z) + sin * x, cos + vers * (z * z)]]
+                point, a = list(self.R_p[j]), rel if parent < 0 else _mm(rotations[parent], rel)
+            if parent < 0:
+                anchor = point
+            else:
+                offset = _mv(rotations[parent], point)
                 anchor = [positions[parent][r] + offset[r] for r in range(3)]
             rotations.append(a)
             arm = _mv(a, self.R_c[j])
@@ -694,6 +727,11 @@ class _HingeModel:
         arb, n = self.arb, self.dim
         rotations, inside, outside, text = [], True, False, ""
         for j in range(n):
+            if self.slides[j]:  # turned as its parent
+                parent = self.parents[j]
+                rotations.append([[arb(1) if r == col else arb(0) for col in range(3)] for r in range(3)]
+                                 if parent < 0 else rotations[parent])
+                continue
             x = _ball(arb, lo[j], hi[j])
             c, s = x.cos(), x.sin()
             v = 1 - c
