@@ -656,7 +656,8 @@ def _place_tree(written: Mapping[str, Mapping], chain: Chain, margin: float, sou
     """:func:`_tree_initial_state` of the blocks each body's config gives (``written``: by
     body name, its initial_state keys as written, each (3,), a hinge's child's q and u numbers;
     a block left out is zero, an x or v left out placed from the parent's; a hinge's child
-    turned by q about its axis from its parent, Omega = A_rel' Omega_p + a u)."""
+    turned by q about its axis from its parent, Omega = A_rel' Omega_p + a u; a slide's child
+    turned as its parent, its point at the parent's point moved by q a, moving at a u)."""
     states, placed, errors = {}, [], []
     written_of = [written.get(body.name) or {} for body in chain.bodies]
     given_of = [set(w) for w in written_of]

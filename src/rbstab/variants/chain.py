@@ -82,7 +82,7 @@ _TRANSLATIONAL, _ROTATIONAL, _CONSTRAINT, _GRAVITY, _RATE = range(5)
 #: :func:`chain_core` fills; ``angle`` (n, 2) each hinge's q (column 0), each universal
 #: joint's q_1, q_2 [rad]: given by the caller
 #: (:func:`chain_wrenches`' ``rotations``), else the last one read (0 in a new work: a
-#: new run starts from it). The compiled driver holds one per chain (in its system), so an
+#: new run starts from it); each slide's q [m] and u [m/s], as :func:`chain_wrenches` read them. The compiled driver holds one per chain (in its system), so an
 #: evaluation allocates nothing.
 ChainWork = namedtuple("ChainWork", ["rot", "rate", "torque", "force", "g", "matrix", "rhs",
                                      "which", "joints", "bodies", "scalars", "angle"])
@@ -312,7 +312,8 @@ def chain_wrenches(t, y, params, codes, parents, ppoints, d_at, dy, joints, bodi
     has put A_i there already, B(Theta_j) of each joint to the ground and each hinge's q
     into ``work.angle``; else a hinge's q is read from A_rel, the angle nearest the last one
     read into ``work.angle``, which it replaces: q continued from sample to sample of a run
-    that turns a hinge by less than pi between them); the wrench on each body of
+    that turns a hinge by less than pi between them; a slide's q, u read from its points into
+    ``work.angle`` either way); the wrench on each body of
     everything but those Lambda_j into ``work.torque`` (body frame, the gyroscopic term
     -Omega x J Omega included) and ``work.force`` (inertial); per joint E_j, F_j, Lambda_j
     (point laws; zero for permanent joints), N_j, D_j, Theta_j, Omega_j into ``joints``; H

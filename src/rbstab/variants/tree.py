@@ -22,10 +22,12 @@ together). No constraint force enters the rate and no constraint drifts.
 
 Reduced state layout (``n_r``): body ``i`` at ``y[r_at[i]:]``, the states of its joint's
 kind (:data:`rbstab.layout.JOINT_KINDS`, :data:`rbstab.layout.REDUCED_STATES` by variant
-code): Theta_j, Omega_j (6) where joint i is ``permanent`` (a ball), else Theta, Omega, X, V
-(12, free); then the 3 states D [m] of each ``embedded`` joint, in joint order (``rd_at``).
-Generalised velocities u (``n_u``): Omega_j (3) or (Omega, V) (6) per body
-(:data:`rbstab.layout.VELOCITIES`), at ``u_at[i]``.
+code): Theta_j, Omega_j (6) where joint i is ``permanent`` (a ball), a hinge's or a slide's
+q, u (2), a universal joint's q_1, q_2, u_1, u_2 (4), a quaternion ball's quaternion and
+Omega_j (7), else Theta, Omega, X, V (12, free); then the 3 states D [m] of each ``embedded``
+joint, in joint order (``rd_at``). Generalised velocities u (``n_u``): Omega_j (3), a
+joint's u (1 or 2) or (Omega, V) (6) per body (:data:`rbstab.layout.VELOCITIES`), at
+``u_at[i]``.
 """
 
 from __future__ import annotations
@@ -617,9 +619,9 @@ def _kinetic_energy(y, params):
 
 @jit(_nrt=False)
 def tree_reactions(t, yr, params, codes, parents, ppoints, d_at, r_at, u_at, rd_at, dyr, work, total, out, moment):
-    """Lambda_j [N] (inertial frame) of every point-fixed joint j (a ball's, a hinge's): the
-    force its parent (or the ground) applies to body j at C_j, into ``out[j]`` (n, 3; other
-    rows untouched). From the motion (:func:`tree_rate` at ``t`` [s] and the reduced state
+    """Lambda_j [N] (inertial frame) of every point-fixed joint j (a ball's, a hinge's, a
+    slide's: with its force along the axis): the force its parent (or the ground) applies to
+    body j at C_j, into ``out[j]`` (n, 3; other rows untouched). From the motion (:func:`tree_rate` at ``t`` [s] and the reduced state
     ``yr``: every body's accelerations, an outward recursion from du/dt) and Newton's law on
     the bodies that joint j carries, leaves first:
 
