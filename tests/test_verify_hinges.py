@@ -43,9 +43,10 @@ def _rod(k=60.0, l=8.0, limit=6.0, mass=2.0, d=0.5):
 
 
 def _v_at_rest(compiled, layout, q) -> float:
-    """The compiled model's v [J] at the hinges' angles q (n,) and u = 0."""
+    """The compiled model's v [J] at the joints' coordinates q (a universal joint's two) and u = 0."""
     yr = np.zeros(layout.n_r)
-    yr[layout.r_at] = q
+    yr[[int(layout.r_at[j]) + k for j, joint in enumerate(compiled.chain.joints)
+        for k in range(2 if joint.variant == "universal" else 1)]] = q
     y = expand_state(compiled, layout, yr)
     n = compiled.size
     scalars = np.empty(5)
@@ -267,3 +268,26 @@ def test_the_cart_poles_verified_level_holds_where_its_runs_go():
         assert result.status == "success", result.message
         assert v[0] == pytest.approx(proven, rel=1e-6)
         assert v.max() <= v[0] * (1 + 1e-9) and v[-1] < 0.05 * v[0]
+
+
+def test_a_universal_rods_level_is_where_its_servo_first_reaches_its_limit():
+    """One inverted rod on a universal joint about x then y, a servo k, l on each angle
+    clipped to +-limit: P(q) = 1/2 k (q_1^2 + q_2^2) + m g d (cos q_1 cos q_2 - 1); the proof
+    stops at the rod's closed-form level, where a coordinate's torque first clips (its
+    minimum over q_2 at q_2 = 0, k > m g d), naming the coordinate; the kernel holds the
+    compiled v, its gradient and Hessian."""
+    k, limit, mass, d = 60.0, 6.0, 2.0, 0.5
+    data = _rod(k=k, limit=limit, mass=mass, d=d)
+    data["joints"][0].update(variant="universal", axis=[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], k_r=[k, k], l_r=[8.0, 8.0])
+    data["initial_state"]["rod"] = {"q": [0.0, 0.0]}
+    config = config_from_mapping(data)
+    mgd = mass * 9.81 * d
+    onset = 0.5 * k * (limit / k) ** 2 + mgd * (math.cos(limit / k) - 1.0)
+    result = verify_sublevel(config)
+    assert (1 - 0.011) * onset <= result.level <= onset, (result.level, onset)
+    assert "ankle.q_" in result.reason and "[-6, 6] N m" in result.reason
+    q = np.array([0.3, -0.2])
+    closed = 0.5 * k * q @ q + mgd * (math.cos(q[0]) * math.cos(q[1]) - 1.0)
+    assert potential(config, q) == pytest.approx(closed, rel=1e-12)
+    rng = np.random.default_rng(4)
+    _kernel_holds(config, lambda e: [e + rng.normal(scale=0.3, size=2) for _ in range(6)], rng)

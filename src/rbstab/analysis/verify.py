@@ -33,8 +33,9 @@ Then {v <= c} n D is positively invariant, dv/dt = 0 only where Omega = 0, and t
 largest invariant set there consists of rest points (grad P = 0 with Omega = 0): only the
 equilibrium. By LaSalle's invariance principle every run from the set converges to it.
 
-A tree of at most 3 hinges and slides (:class:`_HingeModel`) is proven the same way over
-boxes of their coordinates q (a hinge's angle [rad], a slide's displacement [m]): v =
+A tree of hinges, slides and universal joints of at most 6 states (:class:`_HingeModel`)
+is proven the same way over boxes of their coordinates q (a hinge's angle [rad], a slide's
+displacement [m], a universal joint's two angles): v =
 1/2 u' M(q) u + P(q), P the joints' springs and stops, gravity on X_i(q) and h; tau_j =
 -k_j (q_j - q_ref_j) (a slide's force) between the servo's own lower and upper limits; the
 domain half a turn (a slide's :data:`SLIDE_SEARCH`) either side of each reference, and every
@@ -123,39 +124,46 @@ class Verification:
 
 
 # -- what is covered ----------------------------------------------------------------------------
+#: The joints on coordinates along axes that the proof of a tree covers, by their coordinates.
+_COVERED = {"hinge": 1, "slide": 1, "universal": 2}
+
+
 def _hinged(config) -> bool:
-    """Whether the tree has a joint on one coordinate (a hinge or a slide): the proof of a
-    tree of those."""
-    return any(j.variant in ("hinge", "slide") for j in config.chain.joints)
+    """Whether the tree has a joint on coordinates along axes (a hinge, a slide, a universal
+    joint): the proof of a tree of those."""
+    return any(j.variant in _COVERED for j in config.chain.joints)
 
 
 def verified_model(config):
     """The configuration the proof is of: ``config`` where its tree is one body held to the
     ground by its joint (in either spelling, the ground point anywhere), or a tree of at
-    most 3 hinges and slides (6 states).
+    hinges, slides and universal joints of at most 6 states.
 
     Raises
     ------
     NotVerifiable
         For another tree of several bodies (one line: why)."""
     bodies = config.chain.size
-    uncovered = [j for j in config.chain.joints if j.variant in ("universal", "ball")]
+    uncovered = [j for j in config.chain.joints if j.variant == "ball"]
     if uncovered:
         raise NotVerifiable(f"joints.{uncovered[0].name}.variant: found {uncovered[0].variant!r}; --verify covers one "
-                            "body on a permanent joint (the reduced 6-state model, eq 21) or a tree of at most 3 "
-                            "hinges and slides")
+                            "body on a permanent joint (the reduced 6-state model, eq 21) or a tree of hinges, slides "
+                            "and universal joints of at most 6 states")
     if _hinged(config):
-        others = [j for j in config.chain.joints if j.variant not in ("hinge", "slide")]
+        others = [j for j in config.chain.joints if j.variant not in _COVERED]
         if others:
             raise NotVerifiable(f"joints.{others[0].name}.variant: found {others[0].variant!r} in a tree with a "
-                                "hinge or a slide; --verify covers a tree whose every joint is a hinge or a slide")
-        if bodies > 3:
-            raise NotVerifiable(f"this tree has {bodies} joints ({2 * bodies} states); --verify covers at most 3 "
-                                "hinges or slides (6 states: interval arithmetic over boxes of their coordinates)")
+                                "hinge, a slide or a universal joint; --verify covers a tree whose every joint is one "
+                                "of those")
+        states = sum(2 * _COVERED[j.variant] for j in config.chain.joints)
+        if states > 6:
+            raise NotVerifiable(f"this tree has {states} states; --verify covers at most 6 (3 hinges or slides, a "
+                                "universal joint counting 2: interval arithmetic over boxes of their coordinates)")
         return config
     if bodies > 1:
         raise NotVerifiable(f"the proof covers one body held to the ground by a permanent joint, the reduced "
-                            f"6-state model of 'permanent' (eq 21), or a tree of at most 3 hinges and slides; this "
+                            f"6-state model of 'permanent' (eq 21), or a tree of hinges, slides and universal joints "
+                            "of at most 6 states; this "
                             "chain has "
                             f"{bodies} bodies")
     return config
@@ -229,6 +237,7 @@ def _check_hinges(config) -> None:
         axis = np.asarray(joint.axis, dtype=float)
         axis = axis / np.linalg.norm(axis)
         l_r = float(np.asarray(joint.l_r, dtype=float)[0, 0] if joint.variant == "slide"  # along its axis
+                    else min(np.diag(joint.l_r)[:2]) if joint.variant == "universal"  # per coordinate
                     else axis @ np.asarray(joint.l_r, dtype=float) @ axis)
         if not l_r > 0.0:
             raise NotVerifiable(f"joints.{joint.name}.l_r: found {l_r:g}; --verify needs every {joint.variant}'s "
@@ -536,28 +545,37 @@ class _HingeModel:
     def __init__(self, compiled, arb) -> None:
         self.arb, self.zero, self.one = arb, arb(0), arb(1)
         params = compiled.params
-        self.dim = n = compiled.size
-        self.names = list(compiled.chain.joint_names)
         self.bodies = list(compiled.chain.body_names)
         self.parents = [int(q) for q in compiled.parents]
-        self.slides = [int(code) == SLIDE for code in compiled.codes]
-        axes = [np.asarray(p["axis"], dtype=float) for p in params]
-        self.axes = [[arb(float(x)) for x in a] for a in axes]
-        # a hinge's numbers about its axis (its records' 3-vectors q a), a slide's in entry 0
-        along = [np.eye(3)[0] if slid else a for a, slid in zip(axes, self.slides)]
-        quad = [(float(a @ p["k_r"] @ a), float(a @ p["theta_ref"])) for a, p in zip(along, params)]
+        self.kinds = [compiled.chain.joints[j].variant for j in range(compiled.size)]
+        # each coordinate's joint and entry (a universal joint's two), and each joint's first coordinate
+        self.joint_of = [(j, k) for j, kind in enumerate(self.kinds) for k in range(2 if kind == "universal" else 1)]
+        self.first = [next(c for c, (i, _) in enumerate(self.joint_of) if i == j) for j in range(compiled.size)]
+        self.dim = n = len(self.joint_of)
+        names = list(compiled.chain.joint_names)
+        self.joint_names = [names[j] for j, _ in self.joint_of]
+        self.names = [f"{names[j]}.q_{k + 1}" if self.kinds[j] == "universal" else names[j] for j, k in self.joint_of]
+        self.slides = [self.kinds[j] == "slide" for j, _ in self.joint_of]
+        self.axes = [[arb(float(x)) for x in p["axis"]] for p in params]
+        self.axes_2 = [[arb(float(x)) for x in p["axis_2"]] for p in params]
+        # a hinge's numbers about its axis (its records' 3-vectors q a), a slide's in entry 0, a universal joint's
+        # in entries 0 and 1
+        along = [np.asarray(params[j]["axis"], dtype=float) if self.kinds[j] == "hinge" else np.eye(3)[k]
+                 for j, k in self.joint_of]
+        coordinate_params = [params[j] for j, _ in self.joint_of]
+        quad = [(float(a @ p["k_r"] @ a), float(a @ p["theta_ref"])) for a, p in zip(along, coordinate_params)]
         passive = [(float(a @ p["passive_k_r"] @ a), float(a @ p["passive_theta_ref"])) if p["passive"] > 0
-                   else (0.0, 0.0) for a, p in zip(along, params)]
+                   else (0.0, 0.0) for a, p in zip(along, coordinate_params)]
         self.springs = [(k, r, kp, rp) for (k, r), (kp, rp) in zip(quad, passive)]
         total = np.array([k + kp for k, _, kp, _ in self.springs])
         self.k_r = np.diag(total)
         self.reference = np.array([(k * r + kp * rp) / (k + kp) if k + kp > 0 else r
                                    for k, r, kp, rp in self.springs])
-        self.stops = [(float(p["range_lower"][0]), float(p["range_upper"][0]), float(p["stop_k"][0]))
-                      if p["stop"] > 0 else None for p in params]
+        self.stops = [(float(params[j]["range_lower"][k]), float(params[j]["range_upper"][k]),
+                       float(params[j]["stop_k"][k])) if params[j]["stop"] > 0 else None for j, k in self.joint_of]
         # a range that is an admissible region: the domain's faces there (a run that reaches one fell)
-        self.ranges = np.array([(p["range_lower"][0], p["range_upper"][0]) if p["region"] > 0 else (-np.inf, np.inf)
-                                for p in params], dtype=float)
+        self.ranges = np.array([(params[j]["range_lower"][k], params[j]["range_upper"][k]) if params[j]["region"] > 0
+                                else (-np.inf, np.inf) for j, k in self.joint_of], dtype=float)
         self.R_c = [[arb(float(x)) for x in p["attachment_point"]] for p in params]
         self.R_p = [[arb(float(x)) for x in r] for r in compiled.ppoints]
         self.G = [[arb(float(x)) for x in p["weight"]] for p in params]
@@ -565,7 +583,7 @@ class _HingeModel:
         limits = compiled.params[0]["limits"][0] if compiled.params[0]["limited"] > 0 else np.full(3, np.inf)
         self.theta_limit = np.asarray(limits, dtype=float)  # |theta_i| of each body's Euler angles (eq 2)
         self.upper, self.lower = np.full(n, np.inf), np.full(n, -np.inf)
-        for j, (a, p) in enumerate(zip(along, params)):
+        for j, (a, p) in enumerate(zip(along, coordinate_params)):
             if p["saturation"] > 0:  # the per-axis limits a_i [lower, upper] back as numbers about a
                 i = int(np.argmax(np.abs(a)))
                 high, low = float(p["torque_limit"][i]) / a[i], float(p["torque_floor"][i]) / a[i]
@@ -626,7 +644,8 @@ class _HingeModel:
         units, search = (("m", f"{SLIDE_SEARCH:g} m from the reference") if self.slides[a]
                          else ("rad", "half a turn from the reference"))
         if edge in self.ranges[a]:
-            return f"q of {self.names[a]} = {edge:.4g} {units} (joints.{self.names[a]}.range, an admissible region)"
+            return (f"q of {self.names[a]} = {edge:.4g} {units} (joints.{self.joint_names[a]}.range, an admissible "
+                    "region)")
         return f"q of {self.names[a]} = {edge:.4g} {units} (the search domain: {search})"
 
     def _square(self, lo: float, hi: float, centre: float):
@@ -663,6 +682,23 @@ class _HingeModel:
             h[j][j] = curvature
         return _Jet(value, g, h)
 
+    def _turn(self, axis, x, c: int, hessian: bool):
+        """exp(q [a]x) (Rodrigues) as a matrix of jets in coordinate c, q in the arb ball x."""
+        zero, one, n = self.zero, self.one, self.dim
+        cos_x, sin_x = x.cos(), x.sin()
+        g_s, g_c = [zero] * n, [zero] * n
+        g_s[c], g_c[c] = cos_x, -sin_x
+        h_s = h_c = None
+        if hessian:
+            h_s, h_c = [[zero] * n for _ in range(n)], [[zero] * n for _ in range(n)]
+            h_s[c][c], h_c[c][c] = -sin_x, -cos_x
+        sin, cos = _Jet(sin_x, g_s, h_s), _Jet(cos_x, g_c, h_c)
+        vers = one - cos
+        x, y, z = axis
+        return [[cos + vers * (x * x), vers * (x * y) - sin * z, vers * (x * z) + sin * y],
+                [vers * (x * y) + sin * z, cos + vers * (y * y), vers * (y * z) - sin * x],
+                [vers * (x * z) - sin * y, vers * (y * z) + sin * x, cos + vers * (z * z)]]
+
     def evaluate(self, lo, hi, hessian: bool = False):
         """(P, grad P, tau) over the box [lo, hi] (arb balls); with ``hessian`` also the
         Hessian of P (dim x dim)."""
@@ -670,30 +706,21 @@ class _HingeModel:
         q = [_ball(arb, lo[j], hi[j]) for j in range(n)]
         total = _Jet(self.h, [zero] * n, [[zero] * n for _ in range(n)] if hessian else None)
         rotations, positions = [], []  # each body's A_i and X_i
-        for j in range(n):
-            total = total + self._spring(j, q[j], lo[j], hi[j], hessian)
-            parent = self.parents[j]
-            if self.slides[j]:  # turned as its parent; its point moved by q a (the parent's frame)
+        for c in range(n):
+            total = total + self._spring(c, q[c], lo[c], hi[c], hessian)
+        for j, parent in enumerate(self.parents):
+            c = self.first[j]
+            if self.kinds[j] == "slide":  # turned as its parent; its point moved by q a (the parent's frame)
                 g = [zero] * n
-                g[j] = one
-                slid = _Jet(q[j], g, [[zero] * n for _ in range(n)] if hessian else None)
+                g[c] = one
+                slid = _Jet(q[c], g, [[zero] * n for _ in range(n)] if hessian else None)
                 point = [self.R_p[j][r] + self.axes[j][r] * slid for r in range(3)]
                 a = [[one if r == col else zero for col in range(3)] for r in range(3)] if parent < 0 \
                     else rotations[parent]
-            else:
-                c, s = q[j].cos(), q[j].sin()
-                g_s, g_c = [zero] * n, [zero] * n
-                g_s[j], g_c[j] = c, -s
-                h_s = h_c = None
-                if hessian:
-                    h_s, h_c = [[zero] * n for _ in range(n)], [[zero] * n for _ in range(n)]
-                    h_s[j][j], h_c[j][j] = -s, -c
-                sin, cos = _Jet(s, g_s, h_s), _Jet(c, g_c, h_c)
-                vers = one - cos
-                x, y, z = self.axes[j]
-                rel = [[cos + vers * (x * x), vers * (x * y) - sin * z, vers * (x * z) + sin * y],
-                       [vers * (x * y) + sin * z, cos + vers * (y * y), vers * (y * z) - sin * x],
-                       [vers * (x * z) - sin * y, vers * (y * z) + sin * x, cos + vers * (z * z)]]
+            else:  # A_rel = exp(q [a]x), a universal joint's exp(q_1 [a_1]x) exp(q_2 [a_2]x)
+                rel = self._turn(self.axes[j], q[c], c, hessian)
+                if self.kinds[j] == "universal":
+                    rel = _mm(rel, self._turn(self.axes_2[j], q[c + 1], c + 1, hessian))
                 point, a = list(self.R_p[j]), rel if parent < 0 else _mm(rotations[parent], rel)
             if parent < 0:
                 anchor = point
@@ -724,24 +751,28 @@ class _HingeModel:
         iff |A_13| < sin(L), |theta_3| < L iff A_11 > 0 and |A_12| < tan(L) A_11."""
         if not np.any(np.isfinite(self.theta_limit)):
             return True, False, ""
-        arb, n = self.arb, self.dim
+        arb = self.arb
         rotations, inside, outside, text = [], True, False, ""
-        for j in range(n):
-            if self.slides[j]:  # turned as its parent
-                parent = self.parents[j]
+
+        def turn(axis, lo_c, hi_c):
+            x = _ball(arb, lo_c, hi_c)
+            c, s = x.cos(), x.sin()
+            v = 1 - c
+            ax, ay, az = axis
+            return [[c + v * ax * ax, v * ax * ay - s * az, v * ax * az + s * ay],
+                    [v * ax * ay + s * az, c + v * ay * ay, v * ay * az - s * ax],
+                    [v * ax * az - s * ay, v * ay * az + s * ax, c + v * az * az]]
+
+        for j, parent in enumerate(self.parents):
+            c = self.first[j]
+            if self.kinds[j] == "slide":  # turned as its parent
                 rotations.append([[arb(1) if r == col else arb(0) for col in range(3)] for r in range(3)]
                                  if parent < 0 else rotations[parent])
                 continue
-            x = _ball(arb, lo[j], hi[j])
-            c, s = x.cos(), x.sin()
-            v = 1 - c
-            ax, ay, az = self.axes[j]
-            rel = [[c + v * ax * ax, v * ax * ay - s * az, v * ax * az + s * ay],
-                   [v * ax * ay + s * az, c + v * ay * ay, v * ay * az - s * ax],
-                   [v * ax * az - s * ay, v * ay * az + s * ax, c + v * az * az]]
-            parent = self.parents[j]
-            a = rel if parent < 0 else [[sum((rotations[parent][r][k] * rel[k][col] for k in range(3)), arb(0))
-                                        for col in range(3)] for r in range(3)]
+            rel = turn(self.axes[j], lo[c], hi[c])
+            if self.kinds[j] == "universal":
+                rel = _mm(rel, turn(self.axes_2[j], lo[c + 1], hi[c + 1]))
+            a = rel if parent < 0 else _mm(rotations[parent], rel)
             rotations.append(a)
             for i, (num, den) in enumerate(((a[1][2], a[2][2]), (a[0][2], None), (a[0][1], a[0][0]))):
                 bound = self.theta_limit[i]
@@ -1013,5 +1044,7 @@ def _model(config, arb):
     if compiled.hinged:
         from ..variants.tree import tree_layout  # heavy: numba
 
-        return _HingeModel(compiled, arb), np.asarray(lin.equilibrium)[tree_layout(compiled).r_at]
+        model = _HingeModel(compiled, arb)
+        r_at = tree_layout(compiled).r_at
+        return model, np.asarray(lin.equilibrium)[[int(r_at[j]) + k for j, k in model.joint_of]]
     return _Model(compiled.params[0], compiled.ppoints[0], compiled.offset, arb), np.asarray(lin.equilibrium[:3])
