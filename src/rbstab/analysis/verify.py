@@ -33,7 +33,7 @@ Then {v <= c} n D is positively invariant, dv/dt = 0 only where Omega = 0, and t
 largest invariant set there consists of rest points (grad P = 0 with Omega = 0): only the
 equilibrium. By LaSalle's invariance principle every run from the set converges to it.
 
-A tree of hinges, slides and universal joints of at most 6 states (:class:`_HingeModel`)
+A tree of hinges, slides and universal joints of at most 6 states (:class:`_TreeModel`)
 is proven the same way over boxes of their coordinates q (a hinge's angle [rad], a slide's
 displacement [m], a universal joint's two angles): v =
 1/2 u' M(q) u + P(q), P the joints' springs and stops, gravity on X_i(q) and h; tau_j =
@@ -59,7 +59,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kinematics import GIMBAL_LOCK_ANGLE
-from ..layout import JOINT_CODES, is_chain
+from ..layout import is_chain
 
 __all__ = ["Verification", "NotVerifiable", "verify_sublevel", "verify_analysis", "check_verifiable",
            "potential", "DEFAULT_RTOL"]
@@ -74,8 +74,6 @@ MAX_BOXES = 400_000
 #: [m]: the search domain of a slide's q, either side of its reference (a hinge's: half a
 #: turn), within its range where that is an admissible region.
 SLIDE_SEARCH = 1.0
-#: A slide's joint code (rbstab.layout.JOINT_CODES).
-SLIDE = JOINT_CODES["slide"]
 
 
 class NotVerifiable(ValueError):
@@ -444,7 +442,7 @@ class _Model:
         p_val = self.evaluate(theta, theta)[0]
         return float(p_val.mid())
 
-    # the search's view of the model (shared with :class:`_HingeModel`)
+    # the search's view of the model (shared with :class:`_TreeModel`)
     dim = 3
     coordinates = "theta"
 
@@ -530,13 +528,15 @@ class _Jet:
     __rmul__ = __mul__
 
 
-class _HingeModel:
-    """P, grad P, its Hessian and each hinge's static commanded torque tau_j = -k_j (q_j -
-    q_ref_j) over a box of the hinges' angles q (one per body: a tree of hinges), in arb: v
+class _TreeModel:
+    """P, grad P, its Hessian and each coordinate's static commanded torque (a slide's force)
+    tau_j = -k_j (q_j - q_ref_j) over a box of the joints' coordinates q (a hinge's or a
+    slide's one, a universal joint's two: a tree of those), in arb: v
     at rest is P(q) = sum_j [1/2 k_j (q_j - q_ref_j)^2 + 1/2 kp_j (q_j - qp_j)^2 + the range's
     stop, 1/2 k_s (q_j - end)^2 beyond either end] - sum_i G_i' X_i(q) + h (docs/physics.md,
-    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) and the slides' offsets
-    q_j a_j (a slide's q [m], its force [N]) parents first
+    "Joint kinds"), X_i from the hinges' rotations exp(q_j [a_j]x) (a universal joint's
+    exp(q_1 [a_1]x) exp(q_2 [a_2]x)) and the slides' offsets q_j a_j (a slide's q [m], its
+    force [N]) parents first
     (:func:`rbstab.variants.tree.tree_expand`), differentiated forward (:class:`_Jet`). ``compiled``: the chain
     (:class:`rbstab.variants.chain.CompiledChain`), h = its offset."""
 
@@ -1034,8 +1034,8 @@ def potential(config, theta: np.ndarray) -> float:
 def _model(config, arb):
     """(the interval kernel of ``config``'s tree, its equilibrium (the tree's rest state,
     :func:`rbstab.analysis.linearise.linearise_chain`, with the tree's h): one body's
-    :class:`_Model` and Theta_e (3,) [rad], or a tree of hinges' :class:`_HingeModel` and
-    each hinge's q at rest (n,) [rad])."""
+    :class:`_Model` and Theta_e (3,) [rad], or a tree of hinges, slides and universal
+    joints' :class:`_TreeModel` and each coordinate q at rest (dim,) [rad; a slide's m])."""
     from ..variants import chain as C  # heavy: numba
     from .linearise import linearise_chain, undisturbed  # heavy: numba
 
@@ -1044,7 +1044,7 @@ def _model(config, arb):
     if compiled.hinged:
         from ..variants.tree import tree_layout  # heavy: numba
 
-        model = _HingeModel(compiled, arb)
+        model = _TreeModel(compiled, arb)
         r_at = tree_layout(compiled).r_at
         return model, np.asarray(lin.equilibrium)[[int(r_at[j]) + k for j, k in model.joint_of]]
     return _Model(compiled.params[0], compiled.ppoints[0], compiled.offset, arb), np.asarray(lin.equilibrium[:3])
