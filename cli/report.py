@@ -11,7 +11,8 @@ from .options import console_options
 # report package; tests/test_report.py checks they equal rbstab.report's.
 _SETTLE_E = 0.005
 _SETTLE_OMEGA = 0.05
-_METRICS = ("settling_time", "peak_sway", "com_excursion", "max_abs_constraint_error", "lyapunov_final")
+_METRICS = ("settling_time", "peak_sway", "com_excursion", "cop_excursion", "max_abs_constraint_error",
+            "lyapunov_final")
 _FIGURE_FORMATS = ("png", "pdf", "svg")
 _DPI = 110
 _DPI_RANGE = (50, 600)

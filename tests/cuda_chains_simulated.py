@@ -224,7 +224,7 @@ def main() -> None:
         ref, got = simulate(configs[-1], engine="compiled"), simulate(configs[-1], engine="cuda")
         found["result"] = [what for what in ("status", "message", "solver") if getattr(ref, what) != getattr(got, what)]
         found["result"] += [key for key in ref.outputs if not same(ref.outputs[key], got.outputs[key])]
-        found["result"] += [key for key in ref.summary if str(ref.summary[key]) != str(got.summary[key])]
+        found["result"] += [key for key in ref.summary if not _same_figure(key, ref.summary[key], got.summary[key])]
         found["streamed"] = streamed_summaries(configs)
         found["seconds"] = round(time.perf_counter() - start, 2)
         report[name] = found
@@ -258,8 +258,25 @@ def streamed_summaries(configs) -> list:
                 continue
             scale = max(1e-300, float(np.nanmax(np.abs(a), initial=0.0)))
             nan_same = bool(np.array_equal(np.isnan(a), np.isnan(b)))
-            differences.append([key, float(np.nanmax(np.abs(a - b), initial=0.0)) / scale if nan_same else "NaN"])
+            relative = float(np.nanmax(np.abs(a - b), initial=0.0)) / scale
+            if not (nan_same and relative <= ROUNDED.get(key, -1.0)):
+                differences.append([key, relative if nan_same else "NaN"])
     return sorted(differences)
+
+
+#: Figures equal to a relative difference, not bit for bit: the centre of pressure's, whose
+#: reactions the device solves from the reduced state its driver holds and the CPU from the
+#: reduced state its samples give back (rbstab.simulator._ground_wrenches).
+ROUNDED = {"cop_excursion": 1e-12}
+
+
+def _same_figure(key: str, a, b) -> bool:
+    """Whether a run's summary figure ``key`` is ``a`` on the CPU and ``b`` on the device:
+    bit for bit, or within :data:`ROUNDED`."""
+    if key not in ROUNDED or a is None or b is None:
+        return str(a) == str(b)
+    a, b = float(a), float(b)
+    return (math.isnan(a) and math.isnan(b)) or abs(a - b) <= ROUNDED[key] * max(abs(a), abs(b))
 
 
 def basin(config) -> dict:

@@ -83,7 +83,7 @@ def test_streamed_summary_of_one_body_is_the_cpus(path, overrides):
     rates = np.full(n, -1.0)
     kept = SampleRows(np.full((n, states.shape[1]), -1.0), np.full(n, -1.0), 1)
     sink = TreeStreamSink(acc, members, np.zeros(N_OUTPUTS), np.empty((1, 3, 3)), last, first, weights, 1e-3, 0.0,
-                          kept, rates)
+                          kept, rates, (np.empty(1), np.empty((1, 6)), np.empty((1, 3)), np.empty((1, 3))))
     keep = jit(lambda sink, code, p, j, t, sample, work: keep_sample(sink, code, p, j, t, sample, work))
     stream_start(acc)
     stream_member_start(members)

@@ -16,6 +16,7 @@ from rbstab.analysis import analyze
 from rbstab.config import config_from_mapping
 from rbstab.config.model_import import import_model
 from rbstab.config.yaml_io import parse_yaml
+from rbstab.layout import summary_stride
 from rbstab.simulator import simulate
 from rbstab_cli.main import cli
 
@@ -65,6 +66,11 @@ def _reactions_are_mujocos(path, config, result, **start):
     np.testing.assert_allclose(result.outputs["constraint_force"], theirs, rtol=0, atol=1e-6 * scale)
     np.testing.assert_allclose(result.outputs["centre_of_pressure"][:, 0], pressure, rtol=0, atol=1e-6)
     assert np.all(np.isnan(result.outputs["centre_of_pressure"][:, 1:]))  # joints off the ground: none
+    # one joint to the ground: the net centre of pressure is its own, its summary figure MuJoCo's largest
+    # distance from the first, at the samples a thinned store keeps
+    np.testing.assert_allclose(result.outputs["net_centre_of_pressure"], pressure, rtol=0, atol=1e-6)
+    excursion = np.linalg.norm(pressure[:: summary_stride(len(result.time))] - pressure[0], axis=1).max()
+    assert result.summary["cop_excursion"] == pytest.approx(excursion, abs=2e-6, nan_ok=True)
     return scale
 
 

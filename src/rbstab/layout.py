@@ -444,6 +444,13 @@ QUANTITIES: dict[str, Quantity] = {q.name: q for q in (
              "P = C - (Lambda h - n x M) / (n . Lambda), n the plane's upward normal, h the height of the joint's "
              "point C, M the moment about C (docs/physics.md); NaN for other joints, without gravity, or where "
              "the ground does not push up", r"P_{cop}", "centre of pressure", 3, member="joint"),
+    Quantity("net_centre_of_pressure", "P_net", "m",
+             "net centre of pressure of the joints to the ground (inertial frame)",
+             "the centre of pressure of the point-fixed joints to the ground together (their forces and moments "
+             "summed, as one force plate under both feet reads them): P = n x M_O / (n . F), F the summed force, "
+             "M_O the summed moment about the origin, n the ground plane's upward normal (docs/physics.md); "
+             "for one such joint its centre_of_pressure; NaN without one, without gravity, or where the ground "
+             "does not push up", r"P_{net}", "net centre of pressure", 3),
     Quantity("lyapunov_rate_numerical", "dv/dt", "W", "numerical derivative dv/dt of the sampled Lyapunov function",
              "dv/dt by differentiating v along the dense-output samples "
              "(7-point finite differences; for the pure sign law on each smooth piece between switchings); "
@@ -484,7 +491,8 @@ OUTPUT_SCALARS = tuple(q.name for q in OUTPUTS.values() if q.size == 1)
 N_OUTPUTS = sum(q.size for q in OUTPUTS.values())
 #: The outputs that neither the summary figures nor a ``thinned`` store read: left out of
 #: the outputs of a sweep that stores no more (``full`` False in
-#: :func:`rbstab.variants.kernels.run_outputs`).
+#: :func:`rbstab.variants.kernels.run_outputs`; a pinned body's Lambda and N are computed
+#: and written still: its centre of pressure reads them).
 LEFT_OUT = ("constraint_rate", "constraint_force", "force_h", "torque_n")
 #: Most samples a ``thinned`` trace keeps (a thinned store, :mod:`rbstab.io.chunk`).
 SUMMARY_MAX_SAMPLES = 201
@@ -537,6 +545,9 @@ SUMMARY_FIGURES: dict[str, Quantity] = {q.name: q for q in (
     Quantity("peak_sway", "peak sway", "m",
              "largest horizontal distance (perpendicular to gravity) of the whole-body centre of mass from its "
              "initial position (NaN without gravity)"),
+    Quantity("cop_excursion", "CoP excursion", "m",
+             "largest distance of the net centre of pressure of the joints to the ground from its initial position "
+             "(NaN: no point-fixed joint to the ground, no gravity, or the ground does not push up at a sample)"),
     Quantity("fraction_saturated_torque_n", "fraction of time N_i saturated", "1",
              "fraction of the samples with N_i commanded at or beyond its limit (body frame)", size=3, member="joint"),
     Quantity("fraction_saturated_force_h", "fraction of time H_i saturated", "1",

@@ -20,7 +20,7 @@ from .kinematics import cross, hat, matTvec, matvec, neg, sub
 
 __all__ = ["RigidBody", "Gains", "Saturation", "SATURATION_SHAPES", "Disturbance", "DISTURBANCE_KINDS",
            "DISTURBANCE_QUANTITIES", "MAX_DISTURBANCES", "NOISE_TONES", "Limits", "PARAMETERS", "parameters",
-           "set_disturbances", "set_limits", "gyroscopic",
+           "set_disturbances", "set_limits", "gyroscopic", "pressure_point",
            "saturate", "saturated", "saturate_between", "saturated_between", "torque_n_command", "force_h_command", "torque_n", "force_h"]
 
 
@@ -412,6 +412,24 @@ def set_disturbances(p: np.ndarray, disturbances) -> None:
 
 
 # -- the feedback, compiled (3-vectors are tuples, see rbstab.kinematics) ---------------------
+@jit(forceinline=True)
+def pressure_point(force, moment, gravity):
+    """The centre of pressure [m] (inertial frame) of a wrench from the ground: its force F
+    [N] and its moment M [N m] about the origin (inertial), on the ground plane through the
+    origin perpendicular to ``gravity`` (its direction): the point P of that plane with
+    M = P x F + tau n (F applied at P plus a free moment about the upward normal n),
+    P = n x M / (n . F); NaN where n . F <= 0 (the ground would have to pull) or g is zero."""
+    g = math.sqrt(gravity[0] * gravity[0] + gravity[1] * gravity[1] + gravity[2] * gravity[2])
+    if not g > 0.0:
+        return math.nan, math.nan, math.nan
+    n = (-gravity[0] / g, -gravity[1] / g, -gravity[2] / g)
+    normal = n[0] * force[0] + n[1] * force[1] + n[2] * force[2]
+    if not normal > 0.0:
+        return math.nan, math.nan, math.nan
+    p = cross(n, moment)
+    return p[0] / normal, p[1] / normal, p[2] / normal
+
+
 @jit(forceinline=True)
 def gyroscopic(inertia, omega):
     """f(Omega) = -Omega x (J Omega) [N m], body frame (eq 1); ``inertia`` J (3, 3)."""

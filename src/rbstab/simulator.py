@@ -47,7 +47,7 @@ from .engine.status import (GIMBAL_LOCK, RANGE_LEFT, STEP_LIMIT, SUCCESS, TIMEOU
 from .engine.switching import integrate_sign_law, sign_law_outputs, switching_message, switching_summary
 from .layout import LIMITED, OUTPUTS, QUANTITIES, SUMMARY_FIGURES, VARIANT_LAYOUTS, is_chain, summary_stride
 from .results import RunBlock, RunResult, row
-from .summary import numerical_rate, summarize, tree_stream_table, tree_summary_table
+from .summary import numerical_rate, pressure_samples, summarize, tree_stream_table, tree_summary_table
 from .variants import Variant
 from .variants.paper import paper_form, paper_initial_state
 from .variants.disturbances import next_breakpoint
@@ -365,6 +365,7 @@ def _as_one_body(outputs: dict, summary: dict, embedded: bool) -> tuple[dict, di
     without the ground joint's Theta_j, Omega_j (the body's Theta, Omega) and D where the
     joint is not ``embedded``."""
     dropped = {"joint_theta", "joint_omega", "com_position", "com_velocity", "centre_of_pressure",  # its X, V
+               "net_centre_of_pressure",
                *(() if embedded else ("controller_state",))}
     order = sorted(set(outputs) - dropped, key=lambda key: _OUTPUT_ORDER.get(key, len(_OUTPUT_ORDER)))  # one body's
     body = {key: outputs[key][:, :, 0] if getattr(QUANTITIES.get(key), "member", None) else outputs[key]
@@ -600,8 +601,17 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
 
     _, first, index = np.unique(tree_of, return_index=True, return_inverse=True)
     outputs = C.evaluate([compiled[i] for i in first], time, states, work, tree_of=index, full=full)
-    if traces and full and (compiled[0].hinged or (tree and np.any(compiled[0].permanent & (compiled[0].parents < 0)))):
-        _reactions(compiled[0], [compiled[i] for i in first], index, time, states, outputs)
+    structure = compiled[0]
+    grounded = bool(np.any(structure.permanent & (structure.parents < 0)) and np.any(structure.chain.gravity))
+    pressure = traces and full and tree  # the centres of pressure as outputs
+    trees = [compiled[i] for i in first]
+    if (traces and full and structure.hinged) or (grounded and pressure):
+        _reactions(structure, trees, index, time, states, outputs)
+    elif grounded and summary and "net_centre_of_pressure" not in outputs:  # at the samples its figure reads
+        stride = summary_stride(len(time))
+        outputs["net_centre_of_pressure"] = np.full((*states.shape[:2], 3), np.nan)
+        outputs["net_centre_of_pressure"][:, ::stride] = _ground_wrenches(structure, trees, index, time, states,
+                                                                           outputs, stride)[2]
     outputs["lyapunov_rate_numerical"] = numerical_rate(time, outputs["lyapunov"])
     if traces and tree:  # the whole body's centre of mass, sum m_i X_i / sum m_i
         mass = C.records_of(compiled)["mass"]  # (k, n)
@@ -609,40 +619,64 @@ def _trees_outputs(compiled: Sequence, tree_of: np.ndarray, time: np.ndarray, st
             outputs[name] = np.einsum("kn,kmnc->kmc", mass, outputs[block]) / mass.sum(axis=1)[:, None, None]
     table = tree_summary_table(time, outputs, embedded=bool(np.any(compiled[0].d_at >= 0)),
                                params=C.records_of(compiled)) if summary else {}
+    if traces and not pressure:  # the net centre of pressure taken for the summary alone
+        for name in ("centre_of_pressure", "net_centre_of_pressure"):
+            outputs.pop(name, None)
     return outputs if traces else {}, table
+
+
+def _ground_wrenches(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
+                     outputs: dict, stride: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """From the reduced motion (:func:`rbstab.variants.tree.reaction_samples`) of k runs of
+    trees with a point-fixed joint (run i's tree ``trees[tree_of[i]]``, of ``structure``'s
+    shape) at every ``stride``-th of their samples ``states`` (k, m, n_states) at ``time``
+    (m,), with their joints' angles and rates (``outputs``' ``joint_theta``,
+    ``joint_omega``): at those m' samples, Lambda_j [N] (k, m', n, 3; NaN for the joints that
+    are not point-fixed), the ground's moment about each joint to the ground's point [N m]
+    (k, m', n, 3; NaN for the others) and the net centre of pressure [m] (k, m', 3;
+    :func:`rbstab.summary.ground_pressure`), inertial frame."""
+    from .variants import chain as C  # heavy: numba
+    from .variants.tree import reaction_samples, tree_layout  # heavy: numba
+
+    states, time = states[:, ::stride], time[::stride]
+    k, m, n = states.shape[0], states.shape[1], structure.size
+    reactions, moments = np.full((n, 3, k * m), np.nan), np.full((n, 3, k * m), np.nan)
+    params, ppoints = C.records_of(trees), np.stack([t.ppoints for t in trees])
+    angles = [np.ascontiguousarray(outputs[name][:, ::stride]).reshape(k * m, n, 3)
+              for name in ("joint_theta", "joint_omega")]
+    sample_tree = np.repeat(np.asarray(tree_of, dtype=np.int64), m)
+    reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), *angles, params,
+                     structure.codes, structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
+                     sample_tree, reactions, moments)
+    net = np.empty((k * m, 3))
+    pressure_samples(reactions, moments, ppoints, structure.codes, structure.parents, params, sample_tree, net)
+    return (reactions.transpose(2, 0, 1).reshape(k, m, n, 3), moments.transpose(2, 0, 1).reshape(k, m, n, 3),
+            net.reshape(k, m, 3))
 
 
 def _reactions(structure, trees: Sequence, tree_of: np.ndarray, time: np.ndarray, states: np.ndarray,
                outputs: dict) -> None:
-    """From the reduced motion (:func:`rbstab.variants.tree.reaction_samples`) of k runs of
-    trees with a point-fixed joint to the ground (run i's tree ``trees[tree_of[i]]``, of
-    ``structure``'s shape) at their samples ``states`` (k, m, n_states) with their joints'
-    angles and rates (``outputs``' ``joint_theta``, ``joint_omega``): Lambda_j [N] of the
-    point-fixed joints where :func:`rbstab.variants.chain.evaluate` leaves them NaN (a tree
-    with a hinge) into ``outputs["constraint_force"]`` (k, m, n, 3), and each joint to the
-    ground's centre of pressure into ``outputs["centre_of_pressure"]`` (k, m, n, 3; NaN for
-    the other joints): on the ground plane through the origin perpendicular to g, the point
-    P = C - (Lambda h - n x M) / (n . Lambda) (n the upward normal, h = n . C the height of
-    the joint's point C, M the ground's moment about C), NaN where n . Lambda <= 0 or g = 0."""
-    from .variants import chain as C  # heavy: numba
-    from .variants.tree import reaction_samples, tree_layout  # heavy: numba
-
-    k, m, n = states.shape[0], states.shape[1], structure.size
-    reactions, moments = np.full((n, 3, k * m), np.nan), np.full((n, 3, k * m), np.nan)
-    params, ppoints = C.records_of(trees), np.stack([t.ppoints for t in trees])
-    angles = [np.ascontiguousarray(outputs[name]).reshape(k * m, n, 3) for name in ("joint_theta", "joint_omega")]
-    reaction_samples(np.tile(time, k), np.ascontiguousarray(states.reshape(k * m, -1)), *angles, params,
-                     structure.codes, structure.parents, ppoints, structure.d_at, *tree_layout(structure).args,
-                     np.repeat(np.asarray(tree_of, dtype=np.int64), m), reactions, moments)
-    force = reactions.transpose(2, 0, 1).reshape(k, m, n, 3)
+    """:func:`_ground_wrenches` at every sample of k runs into their outputs: Lambda_j [N]
+    of the point-fixed joints where :func:`rbstab.variants.chain.evaluate` leaves them NaN
+    (a tree with a hinge) into ``outputs["constraint_force"]`` (k, m, n, 3), each joint to
+    the ground's centre of pressure into ``outputs["centre_of_pressure"]`` (k, m, n, 3; NaN
+    for the other joints): on the ground plane through the origin perpendicular to g, the
+    point P = C - (Lambda h - n x M) / (n . Lambda) (n the upward normal, h = n . C the
+    height of the joint's point C, M the ground's moment about C), NaN where
+    n . Lambda <= 0 or g = 0; their net centre of pressure into
+    ``outputs["net_centre_of_pressure"]`` (k, m, 3) unless it holds one (the paper's one
+    body's, :func:`rbstab.variants.kernels.body_pressure`: the GPU's)."""
+    force, moment, net = _ground_wrenches(structure, trees, tree_of, time, states, outputs)
+    outputs.setdefault("net_centre_of_pressure", net)
     if structure.hinged:
         fixed = structure.permanent
         outputs["constraint_force"][:, :, fixed] = force[:, :, fixed]
-    moment = moments.transpose(2, 0, 1).reshape(k, m, n, 3)
     gravity = np.asarray(structure.chain.gravity, dtype=float)
+    k, m, n = force.shape[:3]
     cop = np.full((k, m, n, 3), np.nan)
     if np.any(gravity):
         up = -gravity / np.linalg.norm(gravity)
+        ppoints = np.stack([t.ppoints for t in trees])
         point = ppoints[np.asarray(tree_of)][:, None]  # (k, 1, n, 3): each joint's point C (the ground's R_p)
         height = point @ up
         normal = force @ up

@@ -15,7 +15,9 @@ import numpy as np
 from .convergence import lyapunov_reference, within_bound
 from .results import row
 from .jit import jit
-from .layout import LYAPUNOV_TERMS, OUTPUTS, SATURATION_FLAGS, SETTLE_E, SETTLE_OMEGA, STATE_BLOCKS
+from .layout import (LYAPUNOV_TERMS, OUTPUTS, POINT_FIXED, SATURATION_FLAGS, SETTLE_E, SETTLE_OMEGA, STATE_BLOCKS,
+                     summary_stride)
+from .model import pressure_point
 
 __all__ = [
     "numerical_rate",
@@ -50,6 +52,11 @@ __all__ = [
     "largest_norm",
     "centre_of_mass",
     "total_weight",
+    "ground_pressure",
+    "grounded",
+    "stream_pressure",
+    "pressure_samples",
+    "pressure_stride",
 ]
 
 #: Relative tolerance of the check "analytic dv/dt agrees with the numerical derivative
@@ -256,7 +263,11 @@ def summarize(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndar
         ``com_excursion`` [m] (the largest distance of the whole-body centre of mass
         sum m_i X_i / sum m_i from its initial position) and ``peak_sway`` [m] (the largest
         horizontal distance of it from its initial position: the part perpendicular to
-        gravity; NaN without gravity), both NaN without ``params``,
+        gravity; NaN without gravity), both NaN without ``params``, ``cop_excursion`` [m]
+        (the largest distance of the net centre of pressure of the point-fixed joints to the
+        ground, ``outputs["net_centre_of_pressure"]``, from its initial position, at every
+        :func:`rbstab.layout.summary_stride`-th sample: a thinned store's; NaN without it,
+        and once the ground would have to pull at such a sample),
         ``fraction_saturated_torque_n``, ``_force_h``, ``_constraint_force`` (3 floats each,
         per axis: the fraction of the samples whose ``<control>_saturated`` flag is set, the
         control commanded at or beyond its limit; 0 without limits),
@@ -335,7 +346,8 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
         runs = np.flatnonzero(last == i)
         parts.append((runs, _table(time[: i + 1], {key: value[runs, : i + 1] for key, value in outputs.items()},
                                    None if checked is None else checked[runs, : i + 1],
-                                   None if params is None else params[runs], complete=False, spacing=_spacing(time))))
+                                   None if params is None else params[runs], complete=False, spacing=_spacing(time),
+                                   grid=n)))
     table = {key: np.empty((k, *value.shape[1:]), dtype=value.dtype) for key, value in parts[0][1].items()}
     for runs, part in parts:
         for key, values in part.items():
@@ -345,12 +357,13 @@ def summary_table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.
 
 def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray | None = None,
            params: np.ndarray | None = None, complete: bool = True,
-           spacing: float | None = None) -> dict[str, np.ndarray]:
+           spacing: float | None = None, grid: int | None = None) -> dict[str, np.ndarray]:
     """The figures of :func:`summarize` over all samples of k runs ((k, n, ...) arrays), as
     columns; the rate check over the ``checked`` samples (k, n) only, when given; the
     centre of mass's figures with the bodies' records ``params`` (k, bodies) only, else
     NaN; ``complete`` False: the runs stopped before the end of their grid (no settling
-    time), whose ``spacing`` [s] is given (a run stopped before its second sample has one)."""
+    time), whose ``spacing`` [s] and ``grid`` (its sample count) are given (a run stopped
+    before its second sample has one)."""
     v = outputs["lyapunov"]
     rate = outputs["lyapunov_rate"]
     k, n = v.shape
@@ -371,6 +384,9 @@ def _table(time: np.ndarray, outputs: dict[str, np.ndarray], checked: np.ndarray
                      acc)
     if params is not None:
         _centre_rows(_per_sample(outputs["position"]), np.ascontiguousarray(params).reshape(k, -1), acc)
+    if "net_centre_of_pressure" in outputs:
+        _pressure_rows(np.ascontiguousarray(outputs["net_centre_of_pressure"], dtype=float),
+                       summary_stride(n if grid is None else grid), acc)
     table.update(balance_columns(time, acc, complete))
     for flags, figure in SATURATION_FLAGS.values():
         if flags in outputs:
@@ -446,7 +462,8 @@ def _energy_scale(outputs: dict[str, np.ndarray]) -> np.ndarray:
 #: largest rise of v so far and its v; -1 for none), the samples with dv/dt > 0, the last
 #: :data:`RATE_STENCIL` values of v, of dv/dt and of the disturbances' edges (rings), then the
 #: balance figures' (:func:`stream_balance`): the last sample not settled (-1 for none), the
-#: largest distance and horizontal distance of the centre of mass from its start, and that start (3).
+#: largest distance and horizontal distance of the centre of mass from its start, and that start (3),
+#: the largest distance of the net centre of pressure from its start, and that start (3).
 V_INITIAL, MAX_RATE, V_MIN, MAX_INCREASE, MAX_MISMATCH, MAX_ABS_RATE, ENERGY, TAKEN, LAST_ABOVE, RISING = range(10)
 _FLAG_SLOTS = 3 * len(SATURATION_FLAGS)
 V_RING = RISING + 1
@@ -454,7 +471,8 @@ RATE_RING = V_RING + RATE_STENCIL
 EDGE_RING = RATE_RING + RATE_STENCIL
 LAST_UNSETTLED = EDGE_RING + RATE_STENCIL
 MAX_EXCURSION, MAX_SWAY, COM_START = LAST_UNSETTLED + 1, LAST_UNSETTLED + 2, LAST_UNSETTLED + 3
-ACCUMULATOR_SIZE = COM_START + 3
+MAX_COP, COP_START = COM_START + 3, COM_START + 4
+ACCUMULATOR_SIZE = COP_START + 3
 _V_AT = OUTPUTS["lyapunov"].offset
 _RATE_AT = OUTPUTS["lyapunov_rate"].offset
 _EDGES_AT = OUTPUTS["disturbance_edges"].offset
@@ -671,6 +689,62 @@ def total_weight(params):
 
 
 @jit(forceinline=True)
+def grounded(codes, parents, params):
+    """Whether a tree (joint codes, parents, records (n,)) has a point-fixed joint to the
+    ground and gravity: a net centre of pressure (:func:`ground_pressure`)."""
+    gx, gy, gz = total_weight(params)
+    if gx == 0.0 and gy == 0.0 and gz == 0.0:
+        return False
+    for j in range(codes.shape[0]):
+        if parents[j] < 0 and POINT_FIXED[codes[j]]:
+            return True
+    return False
+
+
+@jit(forceinline=True)
+def ground_pressure(forces, moments, ppoints, codes, parents, params):
+    """The net centre of pressure (x, y, z) [m] of a tree's point-fixed joints to the ground
+    (:func:`rbstab.model.pressure_point` of their wrenches summed, as one force plate under both feet
+    reads them): ``forces`` (n, 3) each joint's Lambda_j [N] and ``moments`` (n, 3) the
+    ground's moment M_j about its point C_j = ``ppoints[j]`` [N m] (inertial frame;
+    :func:`rbstab.variants.tree.tree_reactions`), the whole wrench about the origin
+    sum (M_j + C_j x Lambda_j); gravity's direction the bodies' weights' (``params``). NaN
+    without such a joint, or where a term is NaN."""
+    fx, fy, fz, mx, my, mz = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    grounded = False
+    for j in range(codes.shape[0]):
+        if parents[j] < 0 and POINT_FIXED[codes[j]]:
+            grounded = True
+            f, c = forces[j], ppoints[j]
+            fx += f[0]
+            fy += f[1]
+            fz += f[2]
+            mx += moments[j, 0] + c[1] * f[2] - c[2] * f[1]
+            my += moments[j, 1] + c[2] * f[0] - c[0] * f[2]
+            mz += moments[j, 2] + c[0] * f[1] - c[1] * f[0]
+    if not grounded:
+        return math.nan, math.nan, math.nan
+    return pressure_point((fx, fy, fz), (mx, my, mz), total_weight(params))
+
+
+#: :func:`rbstab.layout.summary_stride`, compiled: the samples the centre of pressure's figure reads.
+pressure_stride = jit(forceinline=True)(summary_stride)
+
+
+@jit(forceinline=True)
+def stream_pressure(acc, i, px, py, pz):
+    """Take sample i's net centre of pressure (px, py, pz) [m] (NaN: none) into ``acc``: the
+    largest distance of it from its position at sample 0 (NaN once a sample's is NaN). The
+    figure reads every :func:`pressure_stride`-th sample of the run's grid alone (a thinned
+    store's samples): each is a solve of the tree's dynamics (its accelerations), and the
+    dense samples of dv/dt's check would double a sweep's time."""
+    if i == 0:
+        acc[COP_START], acc[COP_START + 1], acc[COP_START + 2] = px, py, pz
+    distance = _norm3(px - acc[COP_START], py - acc[COP_START + 1], pz - acc[COP_START + 2])
+    acc[MAX_COP] = _max(acc[MAX_COP], distance)
+
+
+@jit(forceinline=True)
 def stream_settle(acc, i, largest_error, largest_omega, e_bound, omega_bound):
     """Take sample i into the settling time's slot of ``acc``: the last sample whose largest
     |E_j| [m] or largest |Omega_i| [rad/s] is above its bound (or NaN)."""
@@ -734,6 +808,28 @@ def _settle_rows(error, omega, e_bound, omega_bound, acc):
 
 
 @jit(nogil=True)
+def pressure_samples(forces, moments, ppoints, codes, parents, params, tree_of, out):
+    """:func:`ground_pressure` at every sample s: ``forces``, ``moments`` (n, 3, S) the
+    joints' Lambda_j [N] and the ground's moments [N m] (inertial;
+    :func:`rbstab.variants.tree.reaction_samples`), sample s of the tree ``tree_of[s]``
+    (``ppoints`` (t, n, 3), ``params`` (t, n)); into ``out`` (S, 3) [m]."""
+    for s in range(out.shape[0]):
+        t = tree_of[s]
+        out[s, 0], out[s, 1], out[s, 2] = ground_pressure(forces[:, :, s], moments[:, :, s], ppoints[t], codes,
+                                                          parents, params[t])
+
+
+@jit(nogil=True)
+def _pressure_rows(pressure, stride, acc):
+    """:func:`stream_pressure` of every ``stride``-th sample of k runs: ``pressure`` (k, m, 3)
+    their net centres of pressure [m] (the others not read), into ``acc`` (k, ACCUMULATOR_SIZE)."""
+    for r in range(pressure.shape[0]):
+        acc[r, MAX_COP] = -math.inf
+        for i in range(0, pressure.shape[1], stride):
+            stream_pressure(acc[r], i, pressure[r, i, 0], pressure[r, i, 1], pressure[r, i, 2])
+
+
+@jit(nogil=True)
 def _centre_rows(position, params, acc):
     """:func:`stream_centre` of every sample of k runs: ``position`` (k, n, 3 bodies) [m]
     (C-contiguous), ``params`` (k, bodies) records, into ``acc`` (k, ACCUMULATOR_SIZE)."""
@@ -753,6 +849,7 @@ def warm_up_balance(params: np.ndarray) -> None:
     acc = np.zeros((1, ACCUMULATOR_SIZE))
     _settle_rows(np.zeros((1, 2, 3)), np.zeros((1, 2, 3)), SETTLE_E, SETTLE_OMEGA, acc)
     _centre_rows(np.zeros((1, 2, 3)), np.ascontiguousarray(params).reshape(1, -1), acc)
+    _pressure_rows(np.zeros((1, 2, 3)), 1, acc)
 
 
 def _per_sample(values: np.ndarray) -> np.ndarray:
@@ -805,11 +902,13 @@ def balance_columns(time: np.ndarray, acc: np.ndarray, complete: np.ndarray | bo
     after every sample taken (:func:`stream_settle`, :func:`stream_centre`), ``time`` (n,)
     their grid [s], ``complete`` (k,) whether each reached its end: ``settling_time`` [s]
     (with :data:`rbstab.layout.SETTLE_E`, :data:`rbstab.layout.SETTLE_OMEGA`; NaN unless settled at the end of a
-    complete run), ``com_excursion`` and ``peak_sway`` [m] (NaN for a run without a sample)."""
+    complete run), ``com_excursion`` and ``peak_sway`` [m] (NaN for a run without a sample),
+    ``cop_excursion`` [m] (NaN also where no sample's net centre of pressure was taken)."""
     taken = acc[:, TAKEN] > 0
     return {"settling_time": _settled_at(time, acc[:, LAST_UNSETTLED], np.asarray(complete) & taken),
             "com_excursion": np.where(taken, acc[:, MAX_EXCURSION], np.nan),
-            "peak_sway": np.where(taken, acc[:, MAX_SWAY], np.nan)}
+            "peak_sway": np.where(taken, acc[:, MAX_SWAY], np.nan),
+            "cop_excursion": np.where(taken & (acc[:, MAX_COP] > -math.inf), acc[:, MAX_COP], np.nan)}
 
 
 def tree_stream_table(time: np.ndarray, acc: np.ndarray, members: np.ndarray, last: np.ndarray, n_bodies: int,

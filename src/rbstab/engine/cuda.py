@@ -84,13 +84,13 @@ from ..jit import CACHE_DIR, cache_is_warm, jit, mark_warm
 from ..kinematics import GIMBAL_LOCK_ANGLE
 from ..layout import AXES, LYAPUNOV_TERMS, N_OUTPUTS, OUTPUTS, REDUCED_STATES, SATURATION_FLAGS, VELOCITIES
 from ..model import PARAMETERS
-from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, short_stencils, stencil_weights, stream_body_balance,
-                       stream_finish, stream_member, stream_member_start, stream_sample, stream_start,
-                       stream_tree_balance)
+from ..summary import (ACCUMULATOR_SIZE, MEMBER_SLOTS, ground_pressure, grounded, pressure_stride, short_stencils,
+                       stencil_weights, stream_body_balance, stream_finish, stream_member, stream_member_start,
+                       stream_pressure, stream_sample, stream_start, stream_tree_balance)
 from ..variants.chain import ChainWork, _E, _saturation_flags, chain_evaluate, is_one_body
 from ..variants.disturbances import edges_up_to
-from ..variants.tree import TreeWork, reduced_size, tree_expand
-from ..variants.kernels import BALL, FREE, HINGE, PERMANENT, SLIDE, UNIVERSAL, output_row
+from ..variants.tree import TreeWork, reduced_size, tree_expand, tree_reactions
+from ..variants.kernels import BALL, FREE, HINGE, PERMANENT, SLIDE, UNIVERSAL, body_pressure, output_row
 from .integrate import ChunkSolution, SampleRows, clock_ns, drive_run, keep_sample
 from .rk import DOP853, INTERPOLANT_ROWS, N_STAGES, STAGE_ROWS, method_number
 from .settings import SETTINGS, Work, settings_records
@@ -222,9 +222,11 @@ _register_gpu_clock()
 #: :data:`rbstab.summary.MEMBER_SLOTS`; ``flags`` (n, 3, 3) scratch); ``offset`` is the tree's
 #: h [J] (v's zero: its first record's ``lyapunov_offset``); ``last`` (n_r + 1,) receives the reduced state and W of the sample;
 #: ``rows`` (a :class:`rbstab.engine.integrate.SampleRows`) keeps every ``stride``-th sample
-#: while it has rows, and ``rates`` its numerical dv/dt [W] (:func:`rbstab.summary.stream_sample`).
+#: while it has rows, and ``rates`` its numerical dv/dt [W] (:func:`rbstab.summary.stream_sample`);
+#: ``ground`` the scratch of the joints' reactions at a sample (:func:`rbstab.variants.tree.tree_reactions`:
+#: dyr (n_r + 1,), the bodies' accelerations (n, 6), Lambda_j (n, 3), the ground's moments (n, 3)).
 TreeStreamSink = namedtuple("TreeStreamSink", ["acc", "members", "row", "flags", "last", "first", "weights", "ratio",
-                                               "offset", "rows", "rates"])
+                                               "offset", "rows", "rates", "ground"])
 _V_AT, _RATE_AT, _EDGES_AT = (OUTPUTS[name].offset for name in ("lyapunov", "lyapunov_rate", "disturbance_edges"))
 _TERMS_AT = tuple(OUTPUTS[name].offset for name in LYAPUNOV_TERMS)
 _ERROR_AT = OUTPUTS["constraint_error"].offset
@@ -241,9 +243,18 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     :func:`rbstab.variants.chain.evaluate` of the sample gives them, streamed into the
     accumulators, with the balance figures' (:func:`rbstab.summary.stream_tree_balance`); a
     hinge's angle is the sample's (the host's continues it from sample to sample: the same
-    turn)."""
+    turn), and at every :func:`rbstab.summary.pressure_stride`-th sample the net centre of
+    pressure of its point-fixed joints to the ground (:func:`rbstab.summary.ground_pressure`;
+    NaN without one or without gravity)."""
     w, n = p.work, p.codes.shape[0]
     cw = w.chain
+    taken = j % pressure_stride(sink.first.shape[0]) == 0  # a sample the centre of pressure's figure reads
+    px, py, pz = math.nan, math.nan, math.nan
+    if taken and grounded(p.codes, p.parents, p.params):
+        dyr, accelerations, reactions, moments = sink.ground
+        tree_reactions(t, sample, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, dyr, w,
+                       accelerations, reactions, moments)
+        px, py, pz = ground_pressure(reactions, moments, p.ppoints, p.codes, p.parents, p.params)
     tree_expand(sample, p.params, p.codes, p.parents, p.ppoints, p.d_at, p.r_at, p.u_at, p.rd_at, w.y, cw.rot,
                 cw.rate, True)
     for i in range(n):  # a joint's angles about axes read nearest the sample's own
@@ -264,6 +275,8 @@ def tree_stream_sample(sink, p, j, t, sample, work):
     row[_EDGES_AT] = edges
     stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
     stream_tree_balance(sink.acc, j, w.y, cw.joints[:, _E], p.params)
+    if taken:
+        stream_pressure(sink.acc, j, px, py, pz)
 
 
 @jit(_nrt=False)
@@ -272,7 +285,8 @@ def body_stream_sample(sink, code, p, j, t, sample, work):
     ``code`` its joint's law, :func:`rbstab.variants.chain.is_one_body`): one body's compiled
     outputs (:func:`rbstab.variants.kernels.output_row`, h the record's), as the host's
     :func:`rbstab.variants.chain.evaluate` gives them for such a tree, streamed into the
-    accumulators and the member slots of its one joint."""
+    accumulators and the member slots of its one joint (its centre of pressure
+    :func:`rbstab.variants.kernels.body_pressure`'s)."""
     row, flags = sink.row, sink.flags
     output_row(code, t, sample, p, row, True)
     for k in range(3):
@@ -281,6 +295,9 @@ def body_stream_sample(sink, code, p, j, t, sample, work):
     stream_member(sink.members, 0, row[_ERROR_AT:_ERROR_AT + 3], flags[0])
     stream_sample(sink.acc, j, row, sink.first, sink.weights, sink.ratio, sink.rates, sink.rows.stride)
     stream_body_balance(sink.acc, j, row, p)
+    if j % pressure_stride(sink.first.shape[0]) == 0:
+        px, py, pz = body_pressure(code, row, p)
+        stream_pressure(sink.acc, j, px, py, pz)
 
 
 @overload(keep_sample, target="generic", jit_options={"forceinline": True, "error_model": "numpy", "_nrt": False})
@@ -556,6 +573,8 @@ def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = F
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3, 3), float64),
                            cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64),
                            cuda.local.array(bodies, int64), chain)
+        ground = (cuda.local.array(size, float64), cuda.local.array((bodies, 6), float64),
+                  cuda.local.array((bodies, 3), float64), cuda.local.array((bodies, 3), float64))
         w = Work(K, Q, y_new, scale, work)
         n_runs = y0s.shape[0]
         n_samples, n_kept = first.shape[0], samples_o.shape[1]
@@ -589,7 +608,7 @@ def tree_kernel_function(method: int, shape: tuple[int, ...], one_body: bool = F
                 last[i] = math.nan
             sink = TreeStreamSink(acc, members, row, saturated, last, first, weights, ratio,
                                   params[tree, 0].lyapunov_offset,
-                                  SampleRows(samples_o[k], work_o[k], stride), rates_o[k])
+                                  SampleRows(samples_o[k], work_o[k], stride), rates_o[k], ground)
             status, state = NOT_STARTED, (0.0, s.t_end, s.t_end, 0.0, 0.0, False, 0, 0, 0)
             if globaltimer() <= deadline:
                 for i in range(n_state):

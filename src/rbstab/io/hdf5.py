@@ -393,7 +393,7 @@ def _chain_dimensions(result: "RunResult", outputs: dict[str, np.ndarray]) -> tu
 #: ``joint``, but for :data:`TREE_VARIABLES`).
 BODY_VARIABLES = tuple(q.name for q in QUANTITIES.values() if q.member == "body")
 #: A chain file's vectors of the whole tree: (time, axis).
-TREE_VARIABLES = ("com_position", "com_velocity")
+TREE_VARIABLES = ("com_position", "com_velocity", "net_centre_of_pressure")
 
 
 def write_run(

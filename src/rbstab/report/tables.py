@@ -91,7 +91,8 @@ METRIC_ALIASES = {"nfev": "solver_nfev", **{
     f"{key}_{i}": f"{key}_{axis}" for key in VECTOR_SUMMARY_METRICS for i, axis in zip("123", "xyz")}}
 _AXES = ("x", "y", "z")
 #: Metrics plotted against the varied parameters of a sweep when no ``--metric`` is given.
-DEFAULT_METRICS = ("settling_time", "peak_sway", "com_excursion", "max_abs_constraint_error", "lyapunov_final")
+DEFAULT_METRICS = ("settling_time", "peak_sway", "com_excursion", "cop_excursion", "max_abs_constraint_error",
+                   "lyapunov_final")
 
 
 @dataclass(frozen=True)

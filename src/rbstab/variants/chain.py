@@ -50,8 +50,8 @@ from ..model import (
     torque_n_command,
 )
 from .disturbances import IMPULSE, PULSE, disturbance_power, disturbance_wrench
-from .kernels import BALL, EMBEDDED, HINGE, PERMANENT, SLIDE, UNIVERSAL, constraint_dissipation, constraint_energy, \
-    constraint_force, constraint_force_command, run_outputs, saturation_effects
+from .kernels import BALL, EMBEDDED, HINGE, PERMANENT, SLIDE, UNIVERSAL, body_pressures, constraint_dissipation, \
+    constraint_energy, constraint_force, constraint_force_command, run_outputs, saturation_effects
 from .paper import body_model
 from .registry import record_offset
 
@@ -1544,7 +1544,8 @@ def _one_body_outputs(code, time, states, params, lead, tree_of, full) -> dict[s
     ``tree_of[i]``) of trees that are the paper's one-body model (:func:`is_one_body`; ``code``
     their joint's law): :func:`rbstab.variants.kernels.run_outputs` (eqs 20-25, an output a
     row; v's terms without h where the records' h is 0), each (m, 1, 3) or (m,) a view of its
-    rows; a permanent joint's state is Theta, Omega."""
+    rows; a permanent joint's state is Theta, Omega; with gravity, a permanent joint's
+    ``net_centre_of_pressure`` (m, 3) (:func:`rbstab.variants.kernels.body_pressure`)."""
     m, per_run = states.shape[0], lead[-1]
     runs = m // per_run
     records = (np.repeat(params[:1, 0], runs) if tree_of is None else
@@ -1556,6 +1557,10 @@ def _one_body_outputs(code, time, states, params, lead, tree_of, full) -> dict[s
     columns = columns.reshape(N_OUTPUTS, m)
     out = {name: columns[at].T[:, None] if vector else columns[at] for name, at, vector in _ONE_BODY_ROWS[full]}
     out["joint_theta"], out["joint_omega"] = out["theta"], out["omega"]  # the ground joint's: A_p = I, Omega_p = 0
+    if code == PERMANENT and np.any(records["weight"]):  # its net centre of pressure, as the GPU's stream takes it
+        pressure = np.empty((runs, per_run, 3))
+        body_pressures(code, records, columns.reshape(N_OUTPUTS, runs, per_run), pressure)
+        out["net_centre_of_pressure"] = pressure.reshape(m, 3)
     if code != EMBEDDED:
         out["controller_state"] = np.full((m, 1, 3), np.nan)
     return out
@@ -1627,7 +1632,8 @@ def evaluate(compiled: CompiledChain | Sequence[CompiledChain], time: np.ndarray
         if np.any(tree.params["disturbance_count"] > 0):  # a tree with disturbances
             at = rows == t
             out["disturbance_edges"][at] = disturbance_edges(tree, time[at])
-    keys = _EVALUATED if full or not one_body else _EVALUATED_BRIEF
+    keys = (*(_EVALUATED if full or not one_body else _EVALUATED_BRIEF),
+            *(("net_centre_of_pressure",) if "net_centre_of_pressure" in out else ()))
     if len(lead) == 1:
         return {key: out[key] for key in keys}
     return {key: out[key].reshape(*lead, *out[key].shape[1:]) for key in keys}

@@ -18,15 +18,15 @@ from __future__ import annotations
 import math
 
 from ..jit import jit
-from ..kinematics import ZERO, add, dot, matvec, rotation_and_rate_of, sub, vector
+from ..kinematics import ZERO, add, cross, dot, matvec, rotation_and_rate_of, sub, vector
 from ..layout import JOINT_CODES, OUTPUTS, STATE_SIZE, VARIANT_CODES
-from ..model import force_h, force_h_command, saturate, saturated, torque_n, torque_n_command
+from ..model import force_h, force_h_command, pressure_point, saturate, saturated, torque_n, torque_n_command
 from . import embedded, free, permanent, sliding, visco_elastic
 from .body import body_dissipation, body_energy, body_rates, constraint_error, constraint_rate
 from .disturbances import disturbance_power, disturbance_wrench, edges_up_to, state_power
 
 __all__ = ["FREE", "PERMANENT", "HINGE", "UNIVERSAL", "BALL", "SLIDE", "SLIDING", "VISCO_ELASTIC", "EMBEDDED", "state_rate", "output_row", "limited_quantities",
-           "state_rates", "run_outputs", "state_powers", "STATE_SIZE"]
+           "state_rates", "run_outputs", "state_powers", "STATE_SIZE", "body_pressure", "body_pressures"]
 
 #: The variants' codes (:data:`rbstab.layout.VARIANT_CODES`); :data:`STATE_SIZE`: their
 #: scalar states, by code.
@@ -271,11 +271,12 @@ def output_row(code, t, y, p, out, full):
     _put(out, VELOCITY_AT, v)
     _put(out, CONTROLLER_STATE_AT, d)
     _put(out, CONSTRAINT_ERROR_AT, e)
-    if full:  # rbstab.layout.LEFT_OUT
-        _put(out, CONSTRAINT_RATE_AT, f)
-        _put(out, CONSTRAINT_FORCE_AT, lam)
-        _put(out, FORCE_H_AT, h)
+    if full or code == PERMANENT:  # rbstab.layout.LEFT_OUT, but a pinned body's Lambda and N (computed: its
+        _put(out, CONSTRAINT_FORCE_AT, lam)  # centre of pressure reads them, body_pressure)
         _put(out, TORQUE_N_AT, n)
+    if full:
+        _put(out, CONSTRAINT_RATE_AT, f)
+        _put(out, FORCE_H_AT, h)
     power = 0.0
     if p.disturbance_count > 0.0:
         power = disturbance_power(force_d, torque_d, omega, v)
@@ -302,6 +303,31 @@ def state_rates(code, t, y, params, out):
     ``params`` has 1 or m records."""
     for k in range(y.shape[0]):
         state_rate(code, t[min(k, t.shape[0] - 1)], y[k], params[min(k, params.shape[0] - 1)], out[k])
+
+
+@jit(forceinline=True)
+def body_pressure(code, row, p):
+    """The centre of pressure [m] (inertial frame; :func:`rbstab.model.pressure_point`) of
+    one body of law ``code`` at one row of outputs ``row`` (:func:`output_row`; read: Theta,
+    Lambda, N): for ``permanent`` the ground's force Lambda at C = R and its moment A N about
+    C (eq 20), about the origin A N + R x Lambda; NaN for the other laws (no point the ground
+    holds). ``p`` the body's record (R, its weight's direction)."""
+    if code != PERMANENT:
+        return math.nan, math.nan, math.nan
+    lam = vector(row, CONSTRAINT_FORCE_AT)
+    a, _ = rotation_and_rate_of(vector(row, THETA_AT))
+    moment = add(matvec(a, vector(row, TORQUE_N_AT)), cross(p.attachment_point, lam))
+    return pressure_point(lam, moment, p.weight)
+
+
+@jit(nogil=True)
+def body_pressures(code, params, columns, out):
+    """:func:`body_pressure` of every sample of k runs of law ``code``: ``columns``
+    (N_OUTPUTS, k, m) their outputs (:func:`run_outputs`), ``params`` (k,) their records;
+    into ``out`` (k, m, 3) [m]."""
+    for k in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            out[k, j, 0], out[k, j, 1], out[k, j, 2] = body_pressure(code, columns[:, k, j], params[k])
 
 
 @jit(nogil=True)  # no Python object inside: threads run it in parallel
