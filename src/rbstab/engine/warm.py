@@ -20,12 +20,12 @@ from ..jit import CACHE_DIR, cache_is_warm, mark_warm
 from ..kinematics import rotation_matrix
 from ..chain import GROUND, Body, Joint, single
 from ..model import PARAMETERS
-from ..summary import numerical_rate, warm_up_balance
+from ..summary import numerical_rate, pressure_samples, warm_up_balance
 from ..variants import chain as C
 from ..variants.base import N_OUTPUTS
 from ..variants.paper import has_paper_form
 from ..variants.tree import reaction_samples, tree_layout
-from ..variants.kernels import STATE_SIZE, run_outputs, state_rates
+from ..variants.kernels import PERMANENT, STATE_SIZE, body_pressures, run_outputs, state_rates
 from .integrate import admissible, integrate_chain_runs, integrate_runs
 from .switching import warm_up as warm_up_sign_law
 from .systems import tree_system
@@ -94,6 +94,8 @@ def _warm_up_chains() -> None:
     reaction_samples(np.zeros(1), y[None], angles, angles, C.records_of([compiled]), compiled.codes, compiled.parents,
                      compiled.ppoints[None], compiled.d_at, *tree_layout(compiled).args, np.zeros(1, np.int64),
                      reactions, reactions.copy())
+    pressure_samples(reactions, reactions.copy(), np.stack([compiled.ppoints]), compiled.codes, compiled.parents,
+                     C.records_of([compiled]), np.zeros(1, np.int64), np.empty((1, 3)))  # their centre of pressure
     _warm_up_states(compiled, y[None])
 
 
@@ -155,6 +157,8 @@ def warm_up(parts: str = "rates,outputs,summary,switching,driver,chains,rest") -
             fixed.setflags(write=False)
             for times in (np.zeros((1, 1)), fixed):
                 run_outputs(np.array([code]), params, times, y[None], np.empty((N_OUTPUTS, 1, 1)), True)
+            if code == PERMANENT:  # a pinned body's centre of pressure
+                body_pressures(code, params, np.zeros((N_OUTPUTS, 1, 1)), np.empty((1, 1, 3)))
     if "summary" in wanted:
         numerical_rate(np.linspace(0.0, 1.0, 8), np.zeros((1, 8)))
         warm_up_balance(params)  # the summary's settling time and centre of mass
